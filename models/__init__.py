@@ -1,0 +1,13 @@
+"""Pure model cores of sblsim's four FMI components (no FMI or orchestrator imports).
+
+``COMPONENTS`` maps each component name to its core class.
+"""
+
+from models.acoustics import AcousticsCore
+from models.platform import PlatformCore
+from models.receiver import ReceiverCore
+from models.target import TargetCore
+
+COMPONENTS = {c.name: c for c in (PlatformCore, AcousticsCore, TargetCore, ReceiverCore)}
+
+__all__ = ["COMPONENTS", "AcousticsCore", "PlatformCore", "ReceiverCore", "TargetCore"]
