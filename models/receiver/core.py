@@ -130,11 +130,8 @@ class ReceiverCore(ComponentCore):
             keep = ~slot
             self.ekf.x[keep], self.ekf.P[keep], self.ekf.nis[keep] = (a[keep] for a in before)
         p = self.params
-        guess = np.where(self.fix_valid[:, None], self.fix,
-                         np.column_stack([np.nanmean(np.where(np.isfinite(self.beacons[..., :2]),
-                                                              self.beacons[..., :2], np.nan), axis=1)
-                                          if np.any(np.isfinite(self.beacons)) else np.zeros((self.batch, 2)),
-                                          depth]))
+        # start from the last fix, else from the filter's position (a start point only)
+        guess = np.where(self.fix_valid[:, None], self.fix, self.ekf.x[:, ::2])
         fix, valid = multilaterate(self.ranges, self.beacons, depth, guess, p["sigma_range"], p["sigma_depth"])
         self.fix = np.where(slot[:, None], fix, self.fix)
         self.fix_valid = np.where(slot, valid, self.fix_valid)

@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 STATE_SIZE = 6
-POSITION_INDEX = (0, 2, 4)
+POSITION_INDEX = [0, 2, 4]
 
 
 @lru_cache(maxsize=1)

@@ -58,5 +58,5 @@ def multilaterate(ranges: np.ndarray, beacons: np.ndarray, depth: np.ndarray, gu
         J = np.concatenate([J, np.broadcast_to([0.0, 0.0, w_d], (p.shape[0], 1, 3))], axis=1)
         res = np.concatenate([res, ((depth - p[:, 2]) * w_d)[:, None]], axis=1)
         JtJ = np.swapaxes(J, 1, 2) @ J + 1e-9 * np.eye(3)
-        p = p + np.linalg.solve(JtJ, np.einsum("bki,bk->bi", J, np.nan_to_num(res)))
+        p = p + np.linalg.solve(JtJ, np.einsum("bki,bk->bi", J, res)[:, :, None])[:, :, 0]
     return np.where(valid[:, None], p, np.nan), valid
