@@ -1,0 +1,105 @@
+"""Command line: ``sblsim run``, ``sblsim fmus build`` and ``sblsim fmus validate``.
+
+Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
+field and the allowed range, exit status 2, and nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from models.core import ModelError
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit 2 (argparse prints usage too)
+        self.exit(EXIT_USAGE, f"sblsim: error: {message}\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="sblsim", description="SBL acoustic underwater positioning co-simulation")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("run", help="run one scenario or configuration file")
+    r.add_argument("scenario", help="built-in scenario (semicircle, spiral, random, square, harbour) or CONFIG.toml")
+    r.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    r.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
+    r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key, e.g. platform.baseline=3 (repeatable)")
+    r.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (fmu engine)")
+
+    f = sub.add_parser("fmus", help="build or validate the four FMI 2.0 Co-Simulation FMUs")
+    fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
+    b = fsub.add_parser("build", help="build the FMUs with pythonfmu")
+    b.add_argument("--out", type=Path, default=None, help="output directory (default fmus/build)")
+    v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
+    v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
+    return p
+
+
+def _run(args: argparse.Namespace) -> int:
+    from orchestrator.config import load_config
+    from orchestrator.run import run, summary, write_run
+
+    if args.seed is not None and not 0 <= args.seed <= 2**31 - 1:
+        raise ModelError(f"--seed: {args.seed} is outside the allowed range [0, 2147483647]")
+    cfg = load_config(args.scenario, args.overrides, args.seed)
+    out = args.out or Path("results") / cfg["run"]["scenario"]
+    if out.exists() and not out.is_dir():
+        raise ModelError(f"--out: {str(out)!r} exists and is not a directory")
+    result = run(cfg, args.engine, fmu_dir=args.fmu_dir, progress=sys.stderr.isatty())
+    write_run(result, out)
+    s = summary(result)
+    print(f"{s['scenario']} on the {s['engine']} engine, seed {s['seed']}: {s['steps']} steps in "
+          f"{s['wall_time']:.2f} s")
+    print(f"  EKF:             e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
+          f"std {s['e_tot_std']:.3f} m")
+    print(f"  instrumentation: e_tot mean {s['instr_e_tot_mean']:.3f} m, RMS {s['instr_e_tot_rms']:.3f} m, "
+          f"std {s['instr_e_tot_std']:.3f} m")
+    print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
+    return 0
+
+
+def _fmus(args: argparse.Namespace) -> int:
+    from fmus.build import DEFAULT_DIR, build_all, fmu_path, validate
+    from models import COMPONENTS
+
+    if args.fmus_command == "build":
+        out = args.out or DEFAULT_DIR
+        for path in build_all(out):
+            print(f"built {path}")
+        return 0
+    directory = args.dir or DEFAULT_DIR
+    failures = 0
+    for name in COMPONENTS:
+        path = fmu_path(directory, name)
+        if not path.is_file():
+            raise ModelError(f"fmus validate: {name} FMU not found at {str(path)!r}; run `sblsim fmus build`")
+        problems = validate(path)
+        failures += bool(problems)
+        print(f"{path}: {len(problems)} problems")
+        for problem in problems:
+            print(f"  {problem}")
+    return 1 if failures else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``sblsim`` console script."""
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "run":
+            return _run(args)
+        return _fmus(args)
+    except (ModelError, KeyboardInterrupt) as exc:
+        message = str(exc) if isinstance(exc, ModelError) else "interrupted"
+        print(f"sblsim: error: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,212 @@
+"""Run configuration: built-in scenarios, TOML files, ``--set`` overrides, validation.
+
+A configuration has one table per section: ``run`` (scenario name and the
+seed tree keys), ``simulation`` (sampling time T, EKF rate ratio, duration),
+and one table per component whose keys are exactly that component's declared
+parameters (:mod:`models`). Every value is validated against its declaration,
+so errors name the field and its allowed range. The resolved configuration
+holds every parameter explicitly and reproduces a run on its own.
+
+Ties (applied only where the user did not set the key):
+``receiver.sigma_range`` ← ``acoustics.sigma_range`` and
+``receiver.sigma_depth`` ← ``target.depth_sigma`` (both floored at 1 mm: R must
+be positive), ``receiver.x0_*`` ← the diver's start state, and
+``simulation.duration`` ← one pass of the trajectory.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any, Iterable
+
+import tomli_w
+
+from models import COMPONENTS
+from models.core import SEED_PARAMETERS, ModelError, Variable, resolve_parameters
+from models.target import natural_duration, start_state
+
+BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour")
+SECTIONS = ("run", "simulation", *COMPONENTS)
+MIN_SIGMA = 1e-3  # floor of the tied R standard deviations [m]
+
+
+class ConfigError(ModelError):
+    """Invalid configuration; the message names the field and the allowed range."""
+
+
+RUN_VARIABLES: tuple[Variable, ...] = (
+    Variable("scenario", "parameter", "String", "custom", description="Scenario name"),
+) + SEED_PARAMETERS
+
+SIMULATION_VARIABLES: tuple[Variable, ...] = (
+    Variable("sampling_time", "parameter", "Real", 0.1, "s",
+             "Sampling time T: round-robin slot and communication step of the physics", min=0.001, max=60.0),
+    Variable("ekf_rate_ratio", "parameter", "Integer", 1, description="EKF steps per measurement slot",
+             min=1, max=1000),
+    Variable("duration", "parameter", "Real", 0.0, "s", "Simulated time (0: one pass of the trajectory)",
+             min=0.0, max=1e6),
+    Variable("master", "parameter", "String", "gauss-seidel", description="Master algorithm",
+             choices=("gauss-seidel",)),
+)
+
+
+def section_variables(section: str) -> tuple[Variable, ...]:
+    """Declarations of a configuration section (component parameters without the seed keys).
+
+    Raises
+    ------
+    ConfigError
+        If the section is unknown.
+    """
+    if section == "run":
+        return RUN_VARIABLES
+    if section == "simulation":
+        return SIMULATION_VARIABLES
+    if section in COMPONENTS:
+        seed_names = {v.name for v in SEED_PARAMETERS}
+        return tuple(v for v in COMPONENTS[section].variables() if v.causality == "parameter"
+                     and v.name not in seed_names)
+    raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
+
+
+def scenario_source(name: str) -> dict[str, Any]:
+    """Raw table of a built-in scenario.
+
+    Raises
+    ------
+    ConfigError
+        If ``name`` is not a built-in scenario.
+    """
+    if name not in BUILTIN_SCENARIOS:
+        raise ConfigError(f"scenario: unknown scenario {name!r}; one of {', '.join(BUILTIN_SCENARIOS)} "
+                          "or a path to a .toml file")
+    text = (resources.files("orchestrator") / "scenarios" / f"{name}.toml").read_text()
+    return tomllib.loads(text)
+
+
+def read_source(source: str | Path) -> dict[str, Any]:
+    """Raw table from a built-in scenario name or a TOML file path.
+
+    Raises
+    ------
+    ConfigError
+        Unknown scenario, missing file or invalid TOML.
+    """
+    path = Path(source)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ConfigError(f"config: no such file {str(source)!r}")
+        try:
+            raw = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"config: {str(source)!r} is not valid TOML ({exc})") from None
+        return raw
+    return scenario_source(str(source))
+
+
+def parse_override(item: str) -> tuple[str, str, Any]:
+    """Split ``section.key=value``; the value is read as a TOML value, else as text.
+
+    Raises
+    ------
+    ConfigError
+        If the item has no ``=`` or no dotted key.
+    """
+    if "=" not in item:
+        raise ConfigError(f"--set: expected key=value, got {item!r}")
+    key, text = (s.strip() for s in item.split("=", 1))
+    if key.count(".") != 1:
+        raise ConfigError(f"--set: expected a dotted key section.name, got {key!r}; sections: {', '.join(SECTIONS)}")
+    section, name = key.split(".")
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return section, name, value
+
+
+def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, dict]:
+    """Resolved configuration of a scenario or file with ``--set`` overrides and seed.
+
+    Parameters
+    ----------
+    source : str or Path
+        Built-in scenario name or TOML file.
+    overrides : iterable of str
+        ``section.key=value`` items.
+    seed : int, optional
+        Campaign seed (``run.seed``).
+
+    Returns
+    -------
+    dict
+        Section -> parameter -> value, every parameter present.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        On any invalid input; nothing has been written.
+    """
+    raw = copy.deepcopy(read_source(source))
+    if str(source) in BUILTIN_SCENARIOS:
+        raw.setdefault("run", {})["scenario"] = str(source)
+    for item in overrides:
+        section, name, value = parse_override(item)
+        names = {v.name for v in section_variables(section)}
+        if name not in names:
+            raise ConfigError(f"{section}.{name}: unknown key; known: {', '.join(sorted(names))}")
+        raw.setdefault(section, {})[name] = value
+    if seed is not None:
+        raw.setdefault("run", {})["seed"] = seed
+    return resolve(raw)
+
+
+def resolve(raw: dict[str, Any]) -> dict[str, dict]:
+    """Validate a raw configuration and fill defaults and ties.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        Unknown section or key, or a value outside its allowed range.
+    """
+    for section, table in raw.items():
+        section_variables(section)
+        if not isinstance(table, dict):
+            raise ConfigError(f"{section}: expected a table of keys, got {table!r}")
+    cfg = {s: resolve_parameters(section_variables(s), raw.get(s, {}), s) for s in SECTIONS}
+    given = {s: set(raw.get(s, {})) for s in SECTIONS}
+    rx = cfg["receiver"]
+    if "sigma_range" not in given["receiver"]:
+        rx["sigma_range"] = max(cfg["acoustics"]["sigma_range"], MIN_SIGMA)
+    if "sigma_depth" not in given["receiver"]:
+        rx["sigma_depth"] = max(cfg["target"]["depth_sigma"], MIN_SIGMA)
+    pos, vel = start_state(cfg["target"])
+    for k, name in enumerate(("x", "y", "z")):
+        if f"x0_{name}" not in given["receiver"]:
+            rx[f"x0_{name}"] = float(pos[k])
+        if f"x0_v{name}" not in given["receiver"]:
+            rx[f"x0_v{name}"] = float(vel[k])
+    sim = cfg["simulation"]
+    if sim["duration"] == 0.0:
+        sim["duration"] = natural_duration(cfg["target"])
+    if sim["duration"] < sim["sampling_time"]:
+        raise ConfigError(f"simulation.duration: {sim['duration']!r} s is shorter than one sampling time "
+                          f"({sim['sampling_time']} s); allowed [sampling_time, 1e6] s")
+    return cfg
+
+
+def component_params(cfg: dict[str, dict], component: str) -> dict[str, Any]:
+    """Parameters of one component: its section plus the seed keys it declares."""
+    declared = {v.name for v in COMPONENTS[component].variables() if v.causality == "parameter"}
+    params = dict(cfg[component])
+    params.update({k: v for k, v in cfg["run"].items() if k in declared})
+    return params
+
+
+def to_toml(cfg: dict[str, dict]) -> str:
+    """The resolved configuration as TOML text (readable back by :func:`load_config`)."""
+    header = "# sblsim resolved configuration: every parameter, the seed, Q, P0 and the initial state.\n"
+    return header + tomli_w.dumps(cfg)

@@ -1,0 +1,110 @@
+"""Connections between components, declared as data and checked at load time.
+
+A connection copies one output to one input at every communication point:
+``from_component.variable -> to_component.variable``. Before a run the
+orchestrator checks every connection against the variables the engine
+actually exposes (the core declarations, or an FMU's model description):
+existence, causality, type and unit; and that every input is fed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+from models.acoustics.core import TARGET_INPUTS
+from models.core import ModelError, Variable
+from models.platform.core import beacon_names
+
+PACKET_FIELDS = ("packet_seq", "beacon_id", "packet_valid", "tx_time", "range", "beacon_x", "beacon_y", "beacon_z")
+
+
+class ConnectionError_(ModelError):
+    """A connection does not match the components' variables."""
+
+
+@dataclass(frozen=True)
+class Connection:
+    """``source.output -> destination.input``."""
+
+    source: str
+    output: str
+    destination: str
+    input: str
+
+    def __str__(self) -> str:
+        return f"{self.source}.{self.output} -> {self.destination}.{self.input}"
+
+
+def default_connections(n_beacons: int = 4) -> list[Connection]:
+    """The SBL system: platform and target feed the channel; channel and target feed the receiver."""
+    conns = [Connection("platform", n, "acoustics", n)
+             for kind in ("true", "broadcast") for n in beacon_names(n_beacons, kind)]
+    conns += [Connection("target", out, "acoustics", inp)
+              for out, inp in zip(("pos_x", "pos_y", "pos_z", "vel_x", "vel_y", "vel_z"), TARGET_INPUTS)]
+    conns += [Connection("acoustics", n, "receiver", n) for n in PACKET_FIELDS]
+    conns.append(Connection("target", "depth_measured", "receiver", "depth"))
+    return conns
+
+
+def check_connections(connections: Sequence[Connection], interfaces: Mapping[str, Sequence[Variable]]) -> None:
+    """Check connections against the components' variables.
+
+    Parameters
+    ----------
+    connections : sequence of Connection
+    interfaces : mapping
+        Component name -> its variables (as the engine exposes them).
+
+    Raises
+    ------
+    ConnectionError_
+        Naming the first connection with a missing component or variable, a
+        wrong causality, a type or unit mismatch, or an input fed twice or never.
+    """
+    by_name = {c: {v.name: v for v in vs} for c, vs in interfaces.items()}
+    fed: dict[tuple[str, str], Connection] = {}
+    for conn in connections:
+        ends = []
+        for comp, name, causality in ((conn.source, conn.output, "output"), (conn.destination, conn.input, "input")):
+            if comp not in by_name:
+                raise ConnectionError_(f"connection {conn}: no component {comp!r}; have {', '.join(by_name)}")
+            var = by_name[comp].get(name)
+            if var is None:
+                raise ConnectionError_(f"connection {conn}: {comp} has no variable {name!r}")
+            if var.causality != causality:
+                raise ConnectionError_(f"connection {conn}: {comp}.{name} has causality {var.causality}, "
+                                       f"expected {causality}")
+            ends.append(var)
+        out, inp = ends
+        if out.type != inp.type:
+            raise ConnectionError_(f"connection {conn}: type {out.type} does not match {inp.type}")
+        if out.unit != inp.unit:
+            raise ConnectionError_(f"connection {conn}: unit {out.unit!r} does not match {inp.unit!r}")
+        key = (conn.destination, conn.input)
+        if key in fed:
+            raise ConnectionError_(f"connection {conn}: {conn.destination}.{conn.input} is already fed by {fed[key]}")
+        fed[key] = conn
+    for comp, variables in by_name.items():
+        for name, var in variables.items():
+            if var.causality == "input" and (comp, name) not in fed:
+                raise ConnectionError_(f"{comp}.{name}: input is not connected")
+
+
+def execution_order(components: Sequence[str], connections: Sequence[Connection]) -> list[str]:
+    """Gauss-Seidel order: a topological order of the connection graph (ties keep ``components`` order).
+
+    Raises
+    ------
+    ConnectionError_
+        If the connections form an algebraic loop.
+    """
+    deps = {c: {k.source for k in connections if k.destination == c and k.source != c} for c in components}
+    order: list[str] = []
+    while len(order) < len(components):
+        ready = [c for c in components if c not in order and deps[c] <= set(order)]
+        if not ready:
+            raise ConnectionError_("connections: algebraic loop between " + ", ".join(
+                c for c in components if c not in order))
+        order.append(ready[0])
+    return order

@@ -1,0 +1,159 @@
+"""Component handles: the two engines behind one master algorithm.
+
+Both handles share one small interface (``setup``, ``set_inputs``,
+``do_step``, ``get_outputs``, ``terminate``) and expose their variables as
+``ports`` for the connection checks:
+
+* :class:`LocalHandle` steps a core in-process, batched over replicates;
+* :class:`FmuHandle` steps a real FMU through fmpy's ``FMU2Slave``,
+  instantiated once and reset between runs (B = 1).
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections import namedtuple
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from models import COMPONENTS
+from models.core import ModelError
+
+#: A variable as an engine exposes it (what the connection checks need).
+Port = namedtuple("Port", "name causality type unit")
+
+_DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
+
+
+class LocalHandle:
+    """A component core stepped in-process (the fast, batched path).
+
+    Parameters
+    ----------
+    component : str
+        Component name (a key of :data:`models.COMPONENTS`).
+    n_beacons : int
+        Beacons of the interface.
+    """
+
+    def __init__(self, component: str, n_beacons: int = 4) -> None:
+        self.component = component
+        self.core_class = COMPONENTS[component]
+        self.n_beacons = n_beacons
+        self.ports = [Port(v.name, v.causality, v.type, v.unit) for v in self.core_class.variables(n_beacons)]
+        self.core = None
+
+    def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
+        """Create the core for a batch of replicates and initialize it at ``t0`` [s]."""
+        self.core = self.core_class(params, replicates, self.n_beacons)
+        self.core.initialize(t0)
+
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        self.core.set_inputs(values)
+
+    def do_step(self, t: float, h: float) -> None:
+        self.core.step(t, h)
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        return self.core.outputs
+
+    def terminate(self) -> None:
+        self.core = None
+
+
+class FmuHandle:
+    """A component FMU stepped through fmpy (the interoperability path, B = 1).
+
+    Parameters
+    ----------
+    component : str
+        Component name used in connections.
+    path : path
+        The ``.fmu`` file.
+
+    Raises
+    ------
+    ModelError
+        If the file does not exist or is not an FMI 2.0 Co-Simulation FMU.
+    """
+
+    def __init__(self, component: str, path: Path | str) -> None:
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        path = Path(path)
+        if not path.is_file():
+            raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+        try:
+            md = read_model_description(str(path), validate=False)
+        except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
+            raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
+        if md.fmiVersion != "2.0" or md.coSimulation is None:
+            raise ModelError(f"fmu: {str(path)!r} must be an FMI 2.0 Co-Simulation FMU")
+        self.component = component
+        self.path = path
+        self.variables = {v.name: v for v in md.modelVariables}
+        self.ports = [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
+        self._unzipdir = extract(str(path))
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
+                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=component)
+        self.fmu.instantiate()
+        self._fresh = True
+        self._outputs = {t: [(v.name, v.valueReference) for v in md.modelVariables
+                             if v.causality == "output" and v.type == t] for t in ("Real", "Integer", "Boolean")}
+
+    def _set(self, values: Mapping[str, Any]) -> None:
+        groups: dict[str, tuple[list, list]] = {}
+        for name, value in values.items():
+            var = self.variables[name]
+            vrs, vals = groups.setdefault(var.type, ([], []))
+            vrs.append(var.valueReference)
+            vals.append(np.asarray(value).reshape(-1)[0].item() if not isinstance(value, str) else value)
+        for typ, (vrs, vals) in groups.items():
+            getattr(self.fmu, f"set{typ}")(vrs, vals)
+
+    def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
+        """Reset (after the first run), set parameters and initialize at ``t0`` [s].
+
+        Raises
+        ------
+        ModelError
+            If more than one replicate is asked for, or a parameter is not in the FMU.
+        """
+        if len(replicates) != 1:
+            raise ModelError("engine: the fmu engine steps one replicate at a time (B = 1)")
+        missing = [n for n in params if n not in self.variables]
+        if missing:
+            raise ModelError(f"fmu: {self.path.name} has no parameter {missing[0]!r}")
+        if not self._fresh:
+            self.fmu.reset()
+        self._fresh = False
+        self.fmu.setupExperiment(startTime=t0)
+        self.fmu.enterInitializationMode()
+        self._set({**params, "replicate": int(replicates[0])} if "replicate" in self.variables else params)
+        self.fmu.exitInitializationMode()
+
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        self._set(values)
+
+    def do_step(self, t: float, h: float) -> None:
+        self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        for typ, items in self._outputs.items():
+            if items:
+                values = getattr(self.fmu, f"get{typ}")([vr for _, vr in items])
+                out.update({name: np.array([val], dtype=_DTYPES[typ]) for (name, _), val in zip(items, values)})
+        return out
+
+    def terminate(self) -> None:
+        """Terminate and free the instance and remove its unpacked files."""
+        if self.fmu is not None:
+            if not self._fresh:
+                self.fmu.terminate()
+            self.fmu.freeInstance()
+            self.fmu = None
+            shutil.rmtree(self._unzipdir, ignore_errors=True)

@@ -1,0 +1,233 @@
+"""One scenario run: build the system on an engine, simulate, compute metrics, write results."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import pandas as pd
+
+from models import COMPONENTS
+from models.core import ModelError
+from orchestrator.config import component_params, to_toml
+from orchestrator.connections import check_connections, default_connections
+from orchestrator.engines import FmuHandle, LocalHandle
+from orchestrator.master import simulate
+from orchestrator.metrics import errors, summarize
+
+ENGINES = ("local", "fmu")
+
+#: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
+TIMESERIES_COLUMNS = {
+    **{f"true_{a}": f"target.pos_{a}" for a in "xyz"},
+    **{f"true_v{a}": f"target.vel_{a}" for a in "xyz"},
+    **{f"est_{a}": f"receiver.est_{a}" for a in "xyz"},
+    **{f"est_v{a}": f"receiver.est_v{a}" for a in "xyz"},
+    **{f"instr_{a}": f"receiver.instr_{a}" for a in "xyz"},
+    "instr_valid": "receiver.instr_valid",
+    "packet_seq": "acoustics.packet_seq",
+    "beacon_id": "acoustics.beacon_id",
+    "packet_valid": "acoustics.packet_valid",
+    "tx_time": "acoustics.tx_time",
+    "range": "acoustics.range",
+    **{f"beacon_{a}": f"acoustics.beacon_{a}" for a in "xyz"},
+    "depth": "target.depth_measured",
+    "range_true": "acoustics.range_true",
+    "travel_time": "acoustics.travel_time",
+    "outlier": "acoustics.outlier",
+    "nis": "receiver.nis",
+    "pos_std": "receiver.pos_std",
+    "roll": "platform.roll",
+    "pitch": "platform.pitch",
+    "yaw": "platform.yaw",
+}
+
+
+@dataclass
+class RunResult:
+    """Outcome of one (batched) run.
+
+    Attributes
+    ----------
+    config : dict
+        Resolved configuration.
+    engine : str
+        ``local`` or ``fmu``.
+    timeseries : pandas.DataFrame
+        One row per replicate and step (columns :data:`TIMESERIES_COLUMNS`,
+        ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
+    metrics : pandas.DataFrame
+        One row per replicate: the metrics of :mod:`orchestrator.metrics`.
+    steps : int
+        Macro steps per replicate.
+    wall_time : float
+        Wall-clock time of the simulation [s].
+    """
+
+    config: dict
+    engine: str
+    timeseries: pd.DataFrame
+    metrics: pd.DataFrame
+    steps: int
+    wall_time: float
+
+
+def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4) -> dict[str, Any]:
+    """One handle per component for an engine.
+
+    Raises
+    ------
+    ModelError
+        Unknown engine or a missing FMU.
+    """
+    if engine == "local":
+        return {name: LocalHandle(name, n_beacons) for name in COMPONENTS}
+    if engine == "fmu":
+        from fmus.build import DEFAULT_DIR, fmu_path
+
+        directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
+        paths = {name: fmu_path(directory, name) for name in COMPONENTS}
+        for name, path in paths.items():
+            if not path.is_file():
+                raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+        handles = {}
+        try:
+            for name, path in paths.items():
+                handles[name] = FmuHandle(name, path)
+        except Exception:
+            close_handles(handles)
+            raise
+        return handles
+    raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+
+
+def close_handles(handles: dict[str, Any]) -> None:
+    """Terminate every handle."""
+    for handle in handles.values():
+        handle.terminate()
+
+
+def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = None,
+        fmu_dir: Path | str | None = None, handles: dict[str, Any] | None = None,
+        progress: bool = False) -> RunResult:
+    """Simulate a resolved configuration on an engine.
+
+    Parameters
+    ----------
+    cfg : dict
+        Resolved configuration (:func:`orchestrator.config.load_config`).
+    engine : {'local', 'fmu'}
+    replicates : sequence of int, optional
+        Replicates stepped together (local engine); default ``[run.replicate]``.
+    fmu_dir : path, optional
+        Directory of the built FMUs (fmu engine).
+    handles : dict, optional
+        Re-usable handles from :func:`make_handles` (FMUs are then reset, not
+        re-instantiated); closed by the caller.
+    progress : bool
+        Show a progress bar on a terminal.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    ModelError
+        On a connection that does not match the components, or invalid parameters.
+    """
+    sim = cfg["simulation"]
+    replicates = list(replicates) if replicates is not None else [cfg["run"]["replicate"]]
+    own = handles is None
+    if own:
+        handles = make_handles(engine, fmu_dir)
+    try:
+        connections = default_connections()
+        check_connections(connections, {name: h.ports for name, h in handles.items()})
+        for name, handle in handles.items():
+            handle.setup(component_params(cfg, name), replicates)
+        T = sim["sampling_time"]
+        n_steps = int(math.floor(sim["duration"] / T + 1e-9))
+        rates = {"receiver": sim["ekf_rate_ratio"]}
+        start = time.perf_counter()
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=n_steps, unit="step", desc=f"{cfg['run']['scenario']} ({engine})", leave=False)
+        try:
+            rec = simulate(handles, connections, rates, T, n_steps, progress=bar.update if bar else None)
+        finally:
+            if bar is not None:
+                bar.close()
+        wall = time.perf_counter() - start
+    finally:
+        if own:
+            close_handles(handles)
+    return _result(cfg, engine, rec, replicates, n_steps, wall)
+
+
+def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float) -> RunResult:
+    batch = len(replicates)
+    cols = {name: rec[key] for name, key in TIMESERIES_COLUMNS.items()}
+    truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
+    est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
+    instr_err = errors(truth, np.stack([cols[f"instr_{a}"] for a in "xyz"], axis=-1))
+    table = {"replicate": np.repeat(np.asarray(replicates)[None, :], n_steps, axis=0),
+             "time": np.repeat(rec["time"][:, None], batch, axis=1)}
+    table.update(cols)
+    for k, name in enumerate(("e_x", "e_y", "e_z", "e_tot")):
+        table[name] = est_err[..., k]
+        table[f"instr_{name}"] = instr_err[..., k]
+    # replicate-major rows: all steps of replicate 0, then replicate 1, ...
+    frame = pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in table.items()})
+    metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_")})
+    return RunResult(cfg, engine, frame, metrics, n_steps, wall)
+
+
+def summary(result: RunResult) -> dict[str, Any]:
+    """``summary.json`` content of a single-replicate run (keys of DESIGN.md)."""
+    row = result.metrics.iloc[0]
+    out: dict[str, Any] = {k: float(row[k]) for k in result.metrics.columns if k != "replicate"}
+    out.update(engine=result.engine, seed=int(result.config["run"]["seed"]), steps=int(result.steps),
+               scenario=result.config["run"]["scenario"], replicate=int(row["replicate"]),
+               duration=float(result.steps * result.config["simulation"]["sampling_time"]),
+               wall_time=round(result.wall_time, 3))
+    return out
+
+
+def write_run(result: RunResult, out_dir: Path | str) -> Path:
+    """Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and figures atomically.
+
+    Everything is written into a temporary directory beside ``out_dir`` and
+    moved into place only when complete, so an error leaves nothing
+    half-written.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+    """
+    from orchestrator.plots import save_run_figures
+
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2) + "\n")
+        (tmp / "config.toml").write_text(to_toml(result.config))
+        result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
+        save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']} ({result.engine})")
+        out_dir.mkdir(exist_ok=True)
+        for item in tmp.iterdir():
+            os.replace(item, out_dir / item.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out_dir
