@@ -24,7 +24,7 @@ def plot_trajectory_xy(ts: pd.DataFrame, ax) -> plt.Figure:
     ax.set_ylabel("North [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
     return ax.figure
 
 

@@ -1,0 +1,20 @@
+"""Shared fixtures of the sblsim test suite."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def fmu_dir(tmp_path_factory):
+    """Directory holding the four FMUs freshly built with ``fmus.build.build_all``.
+
+    Session-scoped and lazy: the FMUs are built once, and only when a test
+    asks for this fixture.
+    """
+    from fmus.build import build_all
+
+    directory = tmp_path_factory.mktemp("fmus")
+    paths = build_all(directory)
+    assert len(paths) == 4 and all(p.is_file() for p in paths)
+    return directory
