@@ -33,6 +33,23 @@ SECTIONS = ("run", "simulation", *COMPONENTS)
 MIN_SIGMA = 1e-3  # floor of the tied R standard deviations [m]
 
 
+#: Keys holding file paths: relative paths are taken from the TOML file's folder
+#: (or the working directory for ``--set``) and stored absolute in the resolved config.
+PATH_KEYS = (("target", "trajectory_file"), ("acoustics", "sound_speed_profile"))
+
+
+def _is_path(section: str, value: Any) -> bool:
+    special = section == "acoustics" and (value in ("", "constant", "teos10") or str(value).startswith("ctd:"))
+    return isinstance(value, str) and bool(value) and not special
+
+
+def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
+    for section, name in PATH_KEYS:
+        value = raw.get(section, {}).get(name) if isinstance(raw.get(section), dict) else None
+        if _is_path(section, value):
+            raw[section][name] = str((base / Path(value).expanduser()).resolve())
+
+
 class ConfigError(ModelError):
     """Invalid configuration; the message names the field and the allowed range."""
 
@@ -103,6 +120,7 @@ def read_source(source: str | Path) -> dict[str, Any]:
             raw = tomllib.loads(path.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ConfigError(f"config: {str(source)!r} is not valid TOML ({exc})") from None
+        _absolute_paths(raw, path.resolve().parent)
         return raw
     return scenario_source(str(source))
 
@@ -161,6 +179,7 @@ def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | N
         raw.setdefault(section, {})[name] = value
     if seed is not None:
         raw.setdefault("run", {})["seed"] = seed
+    _absolute_paths(raw, Path.cwd())
     return resolve(raw)
 
 
