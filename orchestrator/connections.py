@@ -12,11 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from models.acoustics.core import TARGET_INPUTS
+from models.acoustics.core import PACKET, TARGET_INPUTS
 from models.core import ModelError, Variable
 from models.platform.core import beacon_names
 
-PACKET_FIELDS = ("packet_seq", "beacon_id", "packet_valid", "tx_time", "range", "beacon_x", "beacon_y", "beacon_z")
+PACKET_FIELDS = tuple(v.name for v in PACKET)
 
 
 class ConnectionError_(ModelError):

@@ -32,6 +32,17 @@ from models.acoustics.sound_speed import load_profile
 from models.platform.core import AXES, beacon_names, beacon_variables
 
 _CHANNEL_UNIFORM, _RANGE_NOISE = range(2)
+#: The packet a slot delivers: outputs of the channel, inputs of every receiver.
+PACKET: tuple[Variable, ...] = (
+    Variable("packet_seq", "output", "Integer", 0, description="Slot counter k (0: no packet yet)"),
+    Variable("beacon_id", "output", "Integer", 0, description="Transmitting beacon (1-based; 0: none)"),
+    Variable("packet_valid", "output", "Boolean", False, description="Packet received (not lost)"),
+    Variable("tx_time", "output", "Real", 0.0, "s", "Transmit epoch t_k of the packet"),
+    Variable("range", "output", "Real", 0.0, "m", "Measured OWTT range (NaN when lost)"),
+    Variable("beacon_x", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, North"),
+    Variable("beacon_y", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, East"),
+    Variable("beacon_z", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, Down"),
+)
 TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "target_vz")
 
 
@@ -76,15 +87,7 @@ class AcousticsCore(ComponentCore):
             for n, unit, what, axis in zip(
                 TARGET_INPUTS, ("m",) * 3 + ("m/s",) * 3, ("position",) * 3 + ("velocity",) * 3,
                 ("North", "East", "Down") * 2))
-        outputs = (
-            Variable("packet_seq", "output", "Integer", 0, description="Slot counter k (0: no packet yet)"),
-            Variable("beacon_id", "output", "Integer", 0, description="Transmitting beacon (1-based; 0: none)"),
-            Variable("packet_valid", "output", "Boolean", False, description="Packet received (not lost)"),
-            Variable("tx_time", "output", "Real", 0.0, "s", "Transmit epoch t_k of the packet"),
-            Variable("range", "output", "Real", 0.0, "m", "Measured OWTT range (NaN when lost)"),
-            Variable("beacon_x", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, North"),
-            Variable("beacon_y", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, East"),
-            Variable("beacon_z", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, Down"),
+        outputs = PACKET + (
             Variable("travel_time", "output", "Real", 0.0, "s", "True one-way travel time"),
             Variable("range_true", "output", "Real", 0.0, "m",
                      "True distance from beacon at transmit to target at reception"),

@@ -17,8 +17,11 @@ Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Section 4.3.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from models.acoustics.core import PACKET
 from models.core import ComponentCore, Variable
 from models.receiver.ekf import ExtendedKalmanFilter
 from models.receiver.multilateration import multilaterate
@@ -29,15 +32,7 @@ _AXES = {"x": "North", "y": "East", "z": "Down"}
 
 def receiver_interface() -> tuple[Variable, ...]:
     """Inputs and outputs every receiver shares (EKF, least squares, a user's FMU)."""
-    inputs = (
-        Variable("packet_seq", "input", "Integer", 0, description="Slot counter of the latest packet"),
-        Variable("beacon_id", "input", "Integer", 0, description="Beacon of the latest packet (1-based)"),
-        Variable("packet_valid", "input", "Boolean", False, description="Latest packet received (not lost)"),
-        Variable("tx_time", "input", "Real", 0.0, "s", "Transmit epoch of the latest packet"),
-        Variable("range", "input", "Real", 0.0, "m", "OWTT range of the latest packet"),
-        Variable("beacon_x", "input", "Real", 0.0, "m", "Broadcast beacon position of the packet, North"),
-        Variable("beacon_y", "input", "Real", 0.0, "m", "Broadcast beacon position of the packet, East"),
-        Variable("beacon_z", "input", "Real", 0.0, "m", "Broadcast beacon position of the packet, Down"),
+    inputs = tuple(replace(v, causality="input") for v in PACKET) + (
         Variable("depth", "input", "Real", 0.0, "m", "Depth-sensor reading"),
     )
     outputs = tuple(
