@@ -157,9 +157,9 @@ def read_trajectory_file(path: str | Path) -> Waypoints:
     if not str(path) or not Path(path).is_file():
         raise ModelError(f"{field}: no such file {str(path)!r}")
     try:
-        first = Path(path).read_text().lstrip().split("\n", 1)[0]
-        header = 0 if any(ch.isalpha() for ch in first.replace("e-", "").replace("e+", "")) else None
-        table = pd.read_csv(path, header=header, comment="#")
+        table = pd.read_csv(path, header=None, comment="#", skip_blank_lines=True, dtype=str)
+        if table.shape[0] and pd.to_numeric(table.iloc[0], errors="coerce").isna().any():
+            table = table.iloc[1:]  # a header line
         data = table.apply(pd.to_numeric, errors="raise").to_numpy(float)
     except (ValueError, OSError, pd.errors.ParserError) as exc:
         raise ModelError(f"{field}: {str(path)!r} is not a CSV of numbers time, N, E, D ({exc.__class__.__name__})") from None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import zipfile
 from xml.etree import ElementTree as ET
 
@@ -97,11 +99,23 @@ def test_fmu_variables_equal_core_declarations(fmu_dir, name):
 
 
 # --------------------------------------------------------------------------- local versus fmu engine
+#
+# pythonfmu 0.7.0 FMUs crash (SIGSEGV in fmi2Instantiate) when a model is
+# instantiated a second time in the same process, so every in-process FMU run
+# below shares ONE set of handles; the own-handles path of ``run`` is exercised
+# in subprocesses, which also shows the crash without taking pytest down.
 
-def test_engines_agree_on_full_semicircle(fmu_dir):
+@pytest.fixture(scope="module")
+def fmu_handles(fmu_dir):
+    handles = make_handles("fmu", fmu_dir)
+    yield handles
+    close_handles(handles)
+
+
+def test_engines_agree_on_full_semicircle(fmu_handles):
     cfg = load_config("semicircle", seed=1)
     local = run(cfg, "local")
-    fmu = run(cfg, "fmu", fmu_dir=fmu_dir)
+    fmu = run(cfg, "fmu", handles=fmu_handles)
     expected_steps = int(np.floor(np.pi * cfg["target"]["radius"] / cfg["target"]["speed"]
                                   / cfg["simulation"]["sampling_time"] + 1e-9))
     assert local.steps == fmu.steps == expected_steps
@@ -112,32 +126,76 @@ def test_engines_agree_on_full_semicircle(fmu_dir):
     assert local.metrics["e_tot_mean"].iloc[0] < 5.0
 
 
-def test_engines_agree_with_loss_and_outliers(fmu_dir):
+def test_engines_agree_with_loss_and_outliers(fmu_handles):
     """Lost packets (NaN ranges) and outliers go through both engines identically."""
     cfg = load_config("semicircle", ["simulation.duration=20", "acoustics.loss_pct=40",
                                      "acoustics.outlier_pct=20"], seed=7)
     local = run(cfg, "local")
-    fmu = run(cfg, "fmu", fmu_dir=fmu_dir)
+    fmu = run(cfg, "fmu", handles=fmu_handles)
     assert local.steps == fmu.steps == 200
     assert not local.timeseries["packet_valid"].all()  # some packets lost: the NaN path is exercised
+    assert local.timeseries["outlier"].any()
     assert_same_frames(local.timeseries, fmu.timeseries)
 
 
-def test_fmu_handles_reset_between_runs(fmu_dir):
+@pytest.mark.parametrize("name, overrides", [
+    ("harbour", ["simulation.duration=10", "simulation.ekf_rate_ratio=3"]),
+    ("random", ["simulation.duration=10"]),
+    ("spiral", ["simulation.duration=10", "platform.gps_model=gauss-markov", "acoustics.clock_drift_ppm=50",
+                "acoustics.sound_speed_profile=teos10"]),
+])
+def test_engines_agree_on_other_scenarios(fmu_handles, name, overrides):
+    cfg = load_config(name, overrides, seed=5)
+    local = run(cfg, "local")
+    fmu = run(cfg, "fmu", handles=fmu_handles)
+    assert local.steps == fmu.steps == 100
+    assert_same_frames(local.timeseries, fmu.timeseries)
+
+
+def test_fmu_handles_reset_between_runs(fmu_handles):
     first = load_config("semicircle", ["simulation.duration=15"], seed=1)
     other = load_config("semicircle", ["simulation.duration=15"], seed=2)
-    handles = make_handles("fmu", fmu_dir)
-    try:
-        a = run(first, "fmu", handles=handles)
-        b = run(other, "fmu", handles=handles)
-        c = run(first, "fmu", handles=handles)
-    finally:
-        close_handles(handles)
+    a = run(first, "fmu", handles=fmu_handles)
+    b = run(other, "fmu", handles=fmu_handles)
+    c = run(first, "fmu", handles=fmu_handles)
     # the second seed gives different noise, so the comparison below can fail
     assert not np.allclose(a.timeseries["range"], b.timeseries["range"], equal_nan=True)
     assert_same_frames(a.timeseries, c.timeseries, atol=0.0)
     # and the reused handles reproduce a fresh local run
     assert_same_frames(run(first, "local").timeseries, c.timeseries)
+
+
+_OWN_HANDLES_SCRIPT = """
+import sys
+from orchestrator.config import load_config
+from orchestrator.run import run
+cfg = load_config("semicircle", ["simulation.duration=%s"], seed=1)
+for k in range(int(sys.argv[2])):
+    run(cfg, "fmu", fmu_dir=sys.argv[1]).timeseries.to_parquet(f"{sys.argv[3]}/fmu{k}.parquet")
+    print("run", k, "done", flush=True)
+"""
+
+
+def _own_handles_runs(fmu_dir, out, runs, duration):
+    return subprocess.run([sys.executable, "-c", _OWN_HANDLES_SCRIPT % duration, str(fmu_dir), str(runs), str(out)],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_fmu_engine_own_handles_full_semicircle(fmu_dir, tmp_path):
+    """``run(cfg, 'fmu', fmu_dir=...)`` (handles made and closed by run) equals the local engine."""
+    proc = _own_handles_runs(fmu_dir, tmp_path, 1, 0)  # duration 0: one full pass
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    local = run(load_config("semicircle", seed=1), "local").timeseries
+    assert_same_frames(local, pd.read_parquet(tmp_path / "fmu0.parquet"))
+
+
+def test_fmu_engine_runs_twice_in_one_process(fmu_dir, tmp_path):
+    """Two ``run(cfg, 'fmu', fmu_dir=...)`` calls in one process give the same result (no crash)."""
+    proc = _own_handles_runs(fmu_dir, tmp_path, 2, 2)
+    assert proc.returncode == 0, (f"second fmu run in the same process died with status {proc.returncode}; "
+                                  f"stdout {proc.stdout!r}; stderr tail {proc.stderr[-600:]!r}")
+    assert_same_frames(pd.read_parquet(tmp_path / "fmu0.parquet"), pd.read_parquet(tmp_path / "fmu1.parquet"),
+                       atol=0.0)
 
 
 def test_missing_fmu_directory_raises(tmp_path):
@@ -147,6 +205,18 @@ def test_missing_fmu_directory_raises(tmp_path):
     cfg = load_config("semicircle", ["simulation.duration=1"], seed=1)
     with pytest.raises(ModelError, match="sblsim fmus build"):
         run(cfg, "fmu", fmu_dir=missing)
+
+
+def test_missing_single_fmu_raises(fmu_dir, tmp_path):
+    """A directory holding only some of the FMUs names the missing one."""
+    import shutil
+
+    partial = tmp_path / "partial"
+    partial.mkdir()
+    for name in ("platform", "acoustics", "target"):
+        shutil.copy(fmu_path(fmu_dir, name), partial)
+    with pytest.raises(ModelError, match=r"receiver FMU not found.*sblsim fmus build"):
+        make_handles("fmu", partial)
 
 
 def test_unknown_engine_raises():

@@ -1,0 +1,92 @@
+"""Error metrics against hand-computed values."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from orchestrator.metrics import METRIC_NAMES, errors, summarize
+
+NAN = float("nan")
+
+
+def test_errors_hand_computed():
+    truth = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0], [10.0, -4.0, 2.0]])
+    est = np.array([[3.0, 4.0, 0.0], [-1.0, 2.0, 4.0], [10.0, -4.0, 2.0]])
+    e = errors(truth, est)
+    assert e.shape == (3, 4)
+    np.testing.assert_allclose(e[0], [3.0, 4.0, 0.0, 5.0])
+    np.testing.assert_allclose(e[1], [2.0, 0.0, 1.0, math.sqrt(5.0)])
+    np.testing.assert_allclose(e[2], [0.0, 0.0, 0.0, 0.0])
+
+
+def test_errors_are_absolute_and_batched():
+    rng = np.random.default_rng(0)
+    truth = rng.normal(size=(7, 3, 3))
+    est = rng.normal(size=(7, 3, 3))
+    e = errors(truth, est)
+    assert e.shape == (7, 3, 4)
+    np.testing.assert_allclose(e[..., :3], np.abs(truth - est))
+    np.testing.assert_allclose(e[..., 3], np.linalg.norm(truth - est, axis=-1))
+    np.testing.assert_allclose(errors(est, truth), e)  # symmetric
+
+
+def test_errors_nan_estimate_gives_nan_total():
+    e = errors(np.zeros((1, 3)), np.array([[NAN, 1.0, 1.0]]))
+    assert math.isnan(e[0, 0]) and math.isnan(e[0, 3])
+    assert e[0, 1] == 1.0 and e[0, 2] == 1.0
+
+
+def test_summarize_hand_computed_with_nan_steps():
+    # steps of replicate 0: (3,4,0) -> 5, a step with no estimate, (5,12,0) -> 13, a partial NaN, (0,0,0) -> 0
+    # replicate 1: a single valid step (0, 0, 2) -> 2, the rest NaN
+    # replicate 2: no valid step at all
+    est_r0 = [[3, 4, 0, 5], [NAN] * 4, [5, 12, 0, 13], [1, NAN, 1, NAN], [0, 0, 0, 0]]
+    est_r1 = [[NAN] * 4, [0, 0, 2, 2], [NAN] * 4, [NAN] * 4, [NAN] * 4]
+    est_r2 = [[NAN] * 4] * 5
+    err = np.stack([np.array(est_r0, float), np.array(est_r1, float), np.array(est_r2, float)], axis=1)
+    assert err.shape == (5, 3, 4)
+    m = summarize(err)
+    assert list(m) == list(METRIC_NAMES)
+    for v in m.values():
+        assert v.shape == (3,)
+    # replicate 0: the valid steps are 5, 13 and 0
+    assert m["e_x_mean"][0] == pytest.approx(8 / 3)
+    assert m["e_y_mean"][0] == pytest.approx(16 / 3)
+    assert m["e_z_mean"][0] == pytest.approx(0.0)
+    assert m["e_tot_mean"][0] == pytest.approx(6.0)
+    assert m["e_tot_rms"][0] == pytest.approx(math.sqrt((25 + 169 + 0) / 3))
+    assert m["e_tot_std"][0] == pytest.approx(math.sqrt(((5 - 6) ** 2 + (13 - 6) ** 2 + (0 - 6) ** 2) / 3))
+    # replicate 1: one valid step, zero spread
+    assert (m["e_x_mean"][1], m["e_y_mean"][1], m["e_z_mean"][1]) == (0.0, 0.0, 2.0)
+    assert m["e_tot_mean"][1] == 2.0 and m["e_tot_rms"][1] == 2.0 and m["e_tot_std"][1] == 0.0
+    # replicate 2: NaN everywhere
+    for name in METRIC_NAMES:
+        assert math.isnan(m[name][2]), name
+
+
+def test_summarize_prefix():
+    err = np.array([[[3.0, 4.0, 0.0, 5.0]]])
+    m = summarize(err, "instr_")
+    assert list(m) == ["instr_" + n for n in METRIC_NAMES]
+    assert m["instr_e_tot_mean"][0] == 5.0 and m["instr_e_tot_rms"][0] == 5.0 and m["instr_e_tot_std"][0] == 0.0
+
+
+def test_summarize_matches_numpy_on_random_errors():
+    rng = np.random.default_rng(1)
+    truth = rng.normal(size=(50, 4, 3))
+    est = truth + rng.normal(scale=0.3, size=truth.shape)
+    est[rng.random(size=(50, 4)) < 0.2] = NAN
+    err = errors(truth, est)
+    m = summarize(err)
+    for b in range(4):
+        ok = np.isfinite(err[:, b, 3])
+        e = err[ok, b]
+        assert m["e_x_mean"][b] == pytest.approx(e[:, 0].mean())
+        assert m["e_y_mean"][b] == pytest.approx(e[:, 1].mean())
+        assert m["e_z_mean"][b] == pytest.approx(e[:, 2].mean())
+        assert m["e_tot_mean"][b] == pytest.approx(e[:, 3].mean())
+        assert m["e_tot_rms"][b] == pytest.approx(np.sqrt(np.mean(e[:, 3] ** 2)))
+        assert m["e_tot_std"][b] == pytest.approx(np.std(e[:, 3], ddof=0))
