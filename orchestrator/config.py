@@ -112,6 +112,8 @@ def read_source(source: str | Path) -> dict[str, Any]:
     ConfigError
         Unknown scenario, missing file or invalid TOML.
     """
+    if str(source) in BUILTIN_SCENARIOS:  # built-in names win over files of the same name
+        return scenario_source(str(source))
     path = Path(source)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():

@@ -12,6 +12,7 @@ Both handles share one small interface (``setup``, ``set_inputs``,
 from __future__ import annotations
 
 import shutil
+import sys
 from collections import namedtuple
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -25,6 +26,20 @@ from models.core import ModelError
 Port = namedtuple("Port", "name causality type unit")
 
 _DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
+
+
+def _forget_slave_module(unzipdir: Path) -> None:
+    """Drop a pythonfmu FMU's Python module from ``sys.modules`` before instantiating it.
+
+    A pythonfmu FMU imports its slave module into the host's interpreter; a
+    second copy of the FMU (a later run, or two instances) would otherwise get
+    the module object imported by the first copy's library and crash the
+    process (pythonfmu 0.7, cf. NTNU-IHB/PythonFMU#228). Importing it afresh
+    from the copy's own resources avoids that.
+    """
+    marker = unzipdir / "resources" / "slavemodule.txt"
+    if marker.is_file():
+        sys.modules.pop(marker.read_text().strip(), None)
 
 
 class LocalHandle:
@@ -99,6 +114,7 @@ class FmuHandle:
         self._unzipdir = extract(str(path))
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=component)
+        _forget_slave_module(Path(self._unzipdir))
         self.fmu.instantiate()
         self._fresh = True
         self._outputs = {t: [(v.name, v.valueReference) for v in md.modelVariables
