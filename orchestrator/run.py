@@ -17,6 +17,7 @@ import pandas as pd
 
 from models import COMPONENTS
 from models.core import ModelError
+from models.platform.geometry import parse_offsets
 from orchestrator.config import component_params, to_toml
 from orchestrator.connections import check_connections, default_connections
 from orchestrator.engines import FmuHandle, LocalHandle
@@ -109,6 +110,14 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
 
 
+def beacon_count(cfg: dict) -> int:
+    """Number of beacons of a configuration: 4 for the cross, the offsets' count for a custom layout."""
+    platform = cfg["platform"]
+    if platform["layout"] == "custom":
+        return parse_offsets(platform["beacon_offsets"]).shape[0]
+    return 4
+
+
 def close_handles(handles: dict[str, Any]) -> None:
     """Terminate every handle."""
     for handle in handles.values():
@@ -146,11 +155,12 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
     """
     sim = cfg["simulation"]
     replicates = list(replicates) if replicates is not None else [cfg["run"]["replicate"]]
+    n_beacons = beacon_count(cfg)
     own = handles is None
     if own:
-        handles = make_handles(engine, fmu_dir)
+        handles = make_handles(engine, fmu_dir, n_beacons)
     try:
-        connections = default_connections()
+        connections = default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
         for name, handle in handles.items():
             handle.setup(component_params(cfg, name), replicates)
