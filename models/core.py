@@ -115,14 +115,14 @@ class Variable:
             return bool(value)
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
             raise ModelError(f"{label}: expected a number in {self.allowed()}, got {value!r}")
+        if not math.isfinite(float(value)):
+            raise ModelError(f"{label}: {value!r} is not finite; allowed {self.allowed()}")
         if self.type == "Integer":
             if float(value) != int(value):
                 raise ModelError(f"{label}: expected a whole number in {self.allowed()}, got {value!r}")
             value = int(value)
         else:
             value = float(value)
-            if not math.isfinite(value):
-                raise ModelError(f"{label}: {value!r} is not finite; allowed {self.allowed()}")
         below = self.min is not None and (value < self.min or (self.min_exclusive and value == self.min))
         above = self.max is not None and value > self.max
         if below or above:

@@ -19,7 +19,7 @@ from models.platform.core import beacon_names
 PACKET_FIELDS = tuple(v.name for v in PACKET)
 
 
-class ConnectionError_(ModelError):
+class ConnectionMismatch(ModelError):
     """A connection does not match the components' variables."""
 
 
@@ -58,7 +58,7 @@ def check_connections(connections: Sequence[Connection], interfaces: Mapping[str
 
     Raises
     ------
-    ConnectionError_
+    ConnectionMismatch
         Naming the first connection with a missing component or variable, a
         wrong causality, a type or unit mismatch, or an input fed twice or never.
     """
@@ -68,27 +68,27 @@ def check_connections(connections: Sequence[Connection], interfaces: Mapping[str
         ends = []
         for comp, name, causality in ((conn.source, conn.output, "output"), (conn.destination, conn.input, "input")):
             if comp not in by_name:
-                raise ConnectionError_(f"connection {conn}: no component {comp!r}; have {', '.join(by_name)}")
+                raise ConnectionMismatch(f"connection {conn}: no component {comp!r}; have {', '.join(by_name)}")
             var = by_name[comp].get(name)
             if var is None:
-                raise ConnectionError_(f"connection {conn}: {comp} has no variable {name!r}")
+                raise ConnectionMismatch(f"connection {conn}: {comp} has no variable {name!r}")
             if var.causality != causality:
-                raise ConnectionError_(f"connection {conn}: {comp}.{name} has causality {var.causality}, "
+                raise ConnectionMismatch(f"connection {conn}: {comp}.{name} has causality {var.causality}, "
                                        f"expected {causality}")
             ends.append(var)
         out, inp = ends
         if out.type != inp.type:
-            raise ConnectionError_(f"connection {conn}: type {out.type} does not match {inp.type}")
+            raise ConnectionMismatch(f"connection {conn}: type {out.type} does not match {inp.type}")
         if out.unit != inp.unit:
-            raise ConnectionError_(f"connection {conn}: unit {out.unit!r} does not match {inp.unit!r}")
+            raise ConnectionMismatch(f"connection {conn}: unit {out.unit!r} does not match {inp.unit!r}")
         key = (conn.destination, conn.input)
         if key in fed:
-            raise ConnectionError_(f"connection {conn}: {conn.destination}.{conn.input} is already fed by {fed[key]}")
+            raise ConnectionMismatch(f"connection {conn}: {conn.destination}.{conn.input} is already fed by {fed[key]}")
         fed[key] = conn
     for comp, variables in by_name.items():
         for name, var in variables.items():
             if var.causality == "input" and (comp, name) not in fed:
-                raise ConnectionError_(f"{comp}.{name}: input is not connected")
+                raise ConnectionMismatch(f"{comp}.{name}: input is not connected")
 
 
 def execution_order(components: Sequence[str], connections: Sequence[Connection]) -> list[str]:
@@ -96,7 +96,7 @@ def execution_order(components: Sequence[str], connections: Sequence[Connection]
 
     Raises
     ------
-    ConnectionError_
+    ConnectionMismatch
         If the connections form an algebraic loop.
     """
     deps = {c: {k.source for k in connections if k.destination == c and k.source != c} for c in components}
@@ -104,7 +104,7 @@ def execution_order(components: Sequence[str], connections: Sequence[Connection]
     while len(order) < len(components):
         ready = [c for c in components if c not in order and deps[c] <= set(order)]
         if not ready:
-            raise ConnectionError_("connections: algebraic loop between " + ", ".join(
+            raise ConnectionMismatch("connections: algebraic loop between " + ", ".join(
                 c for c in components if c not in order))
         order.append(ready[0])
     return order

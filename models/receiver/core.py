@@ -119,11 +119,11 @@ class ReceiverCore(ComponentCore):
 
     def _update(self, slot: np.ndarray, depth: np.ndarray) -> None:
         """EKF update and instrumentation fix for the replicates with a new slot."""
-        before = (self.ekf.x.copy(), self.ekf.P.copy(), self.ekf.nis.copy())
+        keep = ~slot  # replicates without a new slot keep their state
+        before = (self.ekf.x[keep], self.ekf.P[keep], self.ekf.nis[keep]) if keep.any() else None
         self.ekf.update(self.ranges, self.beacons, depth)
-        if not np.all(slot):  # only replicates with a new slot take the update
-            keep = ~slot
-            self.ekf.x[keep], self.ekf.P[keep], self.ekf.nis[keep] = (a[keep] for a in before)
+        if before is not None:
+            self.ekf.x[keep], self.ekf.P[keep], self.ekf.nis[keep] = before
         p = self.params
         # start from the last fix, else from the filter's position (a start point only)
         guess = np.where(self.fix_valid[:, None], self.fix, self.ekf.x[:, ::2])
