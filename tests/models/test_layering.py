@@ -1,0 +1,25 @@
+"""models/ is the pure numeric core: it never imports the FMI layer or the orchestrator."""
+
+import ast
+from pathlib import Path
+
+import models
+
+FORBIDDEN = ("orchestrator", "fmus", "fmpy", "pythonfmu", "sblsim_slave")
+
+
+def _imported_modules(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_models_do_not_import_fmi_or_orchestrator():
+    files = sorted(Path(models.__file__).parent.rglob("*.py"))
+    assert len(files) >= 10
+    offenders = {str(f): sorted(_imported_modules(f) & set(FORBIDDEN)) for f in files}
+    assert {f: m for f, m in offenders.items() if m} == {}
