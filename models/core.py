@@ -228,11 +228,6 @@ class RandomStreams:
         self.component = int(component)
         self._buffers: dict[tuple[int, str], list] = {}
 
-    @property
-    def batch(self) -> int:
-        """Number of replicates B."""
-        return self.keys.shape[0]
-
     def generators(self, purpose: int) -> list[np.random.Generator]:
         """One fresh generator per replicate for a purpose index."""
         return [

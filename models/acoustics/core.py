@@ -99,6 +99,9 @@ class AcousticsCore(ComponentCore):
         super().__init__(params, replicates, n_beacons)
         p = self.params
         self.profile = load_profile(p["sound_speed_profile"], p["sound_speed_true"], p["temperature"], p["salinity"])
+        true, sent = beacon_names(self.n_beacons, "true"), beacon_names(self.n_beacons, "broadcast")
+        # per beacon: names of its true and broadcast (x, y, z) inputs
+        self._beacon_inputs = [(true[3 * i:3 * i + 3], sent[3 * i:3 * i + 3]) for i in range(self.n_beacons)]
 
     def _initialize(self, t0: float) -> None:
         self.rng = self.streams()
@@ -142,8 +145,7 @@ class AcousticsCore(ComponentCore):
         t_tx = t + dt
         self.seq += 1
         i = (self.seq - 1) % self.n_beacons
-        true_names = beacon_names(self.n_beacons, "true")[3 * i:3 * i + 3]
-        sent_names = beacon_names(self.n_beacons, "broadcast")[3 * i:3 * i + 3]
+        true_names, sent_names = self._beacon_inputs[i]
         beacon = np.column_stack([u[n] for n in true_names]).astype(float)
         position = np.column_stack([u[n] for n in TARGET_INPUTS[:3]]).astype(float)
         velocity = np.column_stack([u[n] for n in TARGET_INPUTS[3:]]).astype(float)

@@ -126,11 +126,9 @@ def start_state(params: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
 
     Deterministic for every trajectory (the random path starts at (r, 0)).
     """
-    p = resolve_parameters(TargetCore.variables(), params, "target")
-    kind = p["trajectory"]
-    if kind == "random":
+    core = TargetCore(params)  # validates, and reads a trajectory file once
+    p = core.params
+    if p["trajectory"] == "random":
         return np.array([p["radius"], 0.0, p["depth"]]), np.zeros(3)
-    core = TargetCore(p)
-    path = read_trajectory_file(p["trajectory_file"]) if kind == "file" else core._make_path()
-    pos, vel = path.state(0.0, 1)
+    pos, vel = core._make_path().state(0.0, 1)
     return pos[0], vel[0]
