@@ -11,8 +11,8 @@ Both handles share one small interface (``setup``, ``set_inputs``,
 
 from __future__ import annotations
 
+import atexit
 import shutil
-import sys
 from collections import namedtuple
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -26,20 +26,6 @@ from models.core import ModelError
 Port = namedtuple("Port", "name causality type unit")
 
 _DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
-
-
-def _forget_slave_module(unzipdir: Path) -> None:
-    """Drop a pythonfmu FMU's Python module from ``sys.modules`` before instantiating it.
-
-    A pythonfmu FMU imports its slave module into the host's interpreter; a
-    second copy of the FMU (a later run, or two instances) would otherwise get
-    the module object imported by the first copy's library and crash the
-    process (pythonfmu 0.7, cf. NTNU-IHB/PythonFMU#228). Importing it afresh
-    from the copy's own resources avoids that.
-    """
-    marker = unzipdir / "resources" / "slavemodule.txt"
-    if marker.is_file():
-        sys.modules.pop(marker.read_text().strip(), None)
 
 
 class LocalHandle:
@@ -78,8 +64,59 @@ class LocalHandle:
         self.core = None
 
 
+#: FMUs loaded in this process, by model identifier: (file signature, handle).
+_LOADED: dict[str, tuple[tuple, "FmuHandle"]] = {}
+
+
+def open_fmu(component: str, path: Path | str) -> "FmuHandle":
+    """The process's handle of an FMU, loaded and instantiated on first use.
+
+    A pythonfmu FMU embeds its model in the host's Python interpreter, and
+    loading a second copy of it in one process (a later run, or two
+    instances) crashes the process (pythonfmu 0.7, cf. NTNU-IHB/PythonFMU#228).
+    So each FMU is loaded once per process and re-used, reset between runs,
+    as DESIGN.md asks ("instantiated once and reset between runs"); it is
+    freed when the process ends.
+
+    Raises
+    ------
+    ModelError
+        If the file is missing or unreadable, if the FMU is in use by another
+        run, or if another file with the same model identifier (or a rebuilt
+        file) was already loaded in this process.
+    """
+    from fmpy import read_model_description
+
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
+        raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
+    if md.fmiVersion != "2.0" or md.coSimulation is None:
+        raise ModelError(f"fmu: {str(path)!r} must be an FMI 2.0 Co-Simulation FMU")
+    stat = path.resolve().stat()
+    signature = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, md.guid)
+    identifier = md.coSimulation.modelIdentifier
+    if identifier in _LOADED:
+        loaded_signature, handle = _LOADED[identifier]
+        if loaded_signature != signature:
+            raise ModelError(f"fmu: {identifier} is already loaded in this process from {loaded_signature[0]!r} "
+                             "(a pythonfmu FMU loads once per process); use that file or a new process")
+        if handle.in_use:
+            raise ModelError(f"fmu: {identifier} is in use by another run in this process")
+    else:
+        handle = FmuHandle(component, path, md)
+        _LOADED[identifier] = (signature, handle)
+    handle.in_use = True
+    return handle
+
+
 class FmuHandle:
     """A component FMU stepped through fmpy (the interoperability path, B = 1).
+
+    Create it with :func:`open_fmu`, which loads each FMU once per process.
 
     Parameters
     ----------
@@ -87,36 +124,25 @@ class FmuHandle:
         Component name used in connections.
     path : path
         The ``.fmu`` file.
-
-    Raises
-    ------
-    ModelError
-        If the file does not exist or is not an FMI 2.0 Co-Simulation FMU.
+    md : fmpy.model_description.ModelDescription
+        Its model description.
     """
 
-    def __init__(self, component: str, path: Path | str) -> None:
-        from fmpy import extract, read_model_description
+    def __init__(self, component: str, path: Path, md: Any) -> None:
+        from fmpy import extract
         from fmpy.fmi2 import FMU2Slave
 
-        path = Path(path)
-        if not path.is_file():
-            raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
-        try:
-            md = read_model_description(str(path), validate=False)
-        except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
-            raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
-        if md.fmiVersion != "2.0" or md.coSimulation is None:
-            raise ModelError(f"fmu: {str(path)!r} must be an FMI 2.0 Co-Simulation FMU")
         self.component = component
         self.path = path
         self.variables = {v.name: v for v in md.modelVariables}
         self.ports = [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
         self._unzipdir = extract(str(path))
+        atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=component)
-        _forget_slave_module(Path(self._unzipdir))
         self.fmu.instantiate()
         self._fresh = True
+        self.in_use = False
         self._outputs = {t: [(v.name, v.valueReference) for v in md.modelVariables
                              if v.causality == "output" and v.type == t] for t in ("Real", "Integer", "Boolean")}
 
@@ -166,10 +192,5 @@ class FmuHandle:
         return out
 
     def terminate(self) -> None:
-        """Terminate and free the instance and remove its unpacked files."""
-        if self.fmu is not None:
-            if not self._fresh:
-                self.fmu.terminate()
-            self.fmu.freeInstance()
-            self.fmu = None
-            shutil.rmtree(self._unzipdir, ignore_errors=True)
+        """Release the handle for the next run; the instance stays loaded (see :func:`open_fmu`)."""
+        self.in_use = False

@@ -20,7 +20,7 @@ from models.core import ModelError
 from models.platform.geometry import parse_offsets
 from orchestrator.config import component_params, to_toml
 from orchestrator.connections import check_connections, default_connections
-from orchestrator.engines import FmuHandle, LocalHandle
+from orchestrator.engines import LocalHandle, open_fmu
 from orchestrator.master import simulate
 from orchestrator.metrics import errors, summarize
 
@@ -102,7 +102,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
         handles = {}
         try:
             for name, path in paths.items():
-                handles[name] = FmuHandle(name, path)
+                handles[name] = open_fmu(name, path)
         except Exception:
             close_handles(handles)
             raise
