@@ -285,6 +285,8 @@ class ComponentCore:
     params : mapping
         Parameter values by name; missing ones take their declared start,
         and all are validated (:func:`resolve_parameters`).
+        The names in :attr:`batched_parameters` may also be arrays of shape
+        (B,), one value per replicate (a batch spanning several design cells).
     replicates : sequence of int, optional
         Replicate indices of the batch (B = ``len(replicates)``); default the
         single replicate ``params['replicate']``.
@@ -294,11 +296,15 @@ class ComponentCore:
     Raises
     ------
     ModelError
-        If a parameter is unknown or outside its allowed range.
+        If a parameter is unknown or outside its allowed range, or an array is
+        given for a parameter that is not in :attr:`batched_parameters`.
     """
 
     name: ClassVar[str] = ""
     component_index: ClassVar[int] = 0
+    #: Parameters that may differ between the replicates of one batch (arrays
+    #: of shape (B,)): the batch then spans several design cells.
+    batched_parameters: ClassVar[frozenset[str]] = frozenset({"cell"})
 
     def __init__(self, params: Mapping[str, Any], replicates: Sequence[int] | None = None,
                  n_beacons: int = 4) -> None:
@@ -306,11 +312,13 @@ class ComponentCore:
             raise ModelError(f"n_beacons: {n_beacons} is outside the allowed range [1, inf)")
         self.n_beacons = int(n_beacons)
         self.declarations = self.variables(self.n_beacons)
-        self.params = resolve_parameters(self.declarations, params, self.name)
         if replicates is None:
-            replicates = [self.params.get("replicate", 0)]
+            replicates = [params.get("replicate", 0)]
         self.replicates = np.asarray(replicates, dtype=np.int64).reshape(-1)
         self.batch = self.replicates.size
+        scalars, arrays = self._split_batched(params)
+        self.params = resolve_parameters(self.declarations, scalars, self.name)
+        self.params.update(arrays)
         self.inputs: dict[str, np.ndarray] = {
             v.name: np.full(self.batch, v.start) for v in self.declarations if v.causality == "input"}
         self.outputs: dict[str, np.ndarray] = {}
@@ -321,11 +329,43 @@ class ComponentCore:
         """The component's declarations for ``n_beacons`` beacons."""
         raise NotImplementedError
 
+    def _split_batched(self, params: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """Separate per-replicate parameter arrays from scalar values and validate them.
+
+        An array of shape (B,) gives each replicate of the batch its own value;
+        only the names in :attr:`batched_parameters` may be arrays. An array
+        whose values are all equal is taken as that scalar.
+        """
+        declared = parameters(self.declarations)
+        scalars: dict[str, Any] = {}
+        arrays: dict[str, np.ndarray] = {}
+        for name, value in params.items():
+            if not isinstance(value, np.ndarray) or value.ndim == 0:
+                scalars[name] = value
+                continue
+            if name not in self.batched_parameters:
+                raise ModelError(f"{self.name}.{name}: must be the same for every replicate of a batch; "
+                                 f"per-replicate values are allowed for {', '.join(sorted(self.batched_parameters))}")
+            if value.shape != (self.batch,):
+                raise ModelError(f"{self.name}.{name}: {value.shape[0]} per-replicate values for a batch of "
+                                 f"{self.batch}")
+            var = declared.get(name)
+            if var is None:
+                scalars[name] = value  # reported as unknown by resolve_parameters
+                continue
+            for item in np.unique(value):
+                var.coerce(item.item(), f"{self.name}.{name}")
+            if np.all(value == value[0]):
+                scalars[name] = value[0].item()
+            else:
+                arrays[name] = value.astype(np.int64 if var.type == "Integer" else float)
+        return scalars, arrays
+
     def streams(self) -> RandomStreams:
         """Random streams of this component for the batch (needs the seed parameters)."""
         keys = np.column_stack([
-            np.full(self.batch, self.params["scenario_key"]),
-            np.full(self.batch, self.params["cell"]),
+            np.broadcast_to(self.params["scenario_key"], self.batch),
+            np.broadcast_to(self.params["cell"], self.batch),
             self.replicates,
         ])
         return RandomStreams(self.params["seed"], keys, self.component_index)

@@ -25,7 +25,8 @@ from orchestrator.connections import Connection, execution_order
 
 def simulate(handles: Mapping[str, object], connections: Sequence[Connection], rates: Mapping[str, int],
              macro_step: float, n_steps: int, t0: float = 0.0,
-             progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+             progress: Callable[[int], None] | None = None,
+             record: Sequence[str] | None = None) -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
     Parameters
@@ -44,17 +45,26 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         Start time [s].
     progress : callable, optional
         Called with 1 after every macro step.
+    record : sequence of str, optional
+        The ``"component.variable"`` outputs to record; default all of them.
 
     Returns
     -------
     dict
-        ``"component.variable"`` -> array of shape (n_steps, B), and
+        ``"component.variable"`` -> array of shape (n_steps, B) for each
+        recorded output, and
         ``"time"`` -> array of shape (n_steps,) [s] (the end of each macro step).
     """
     order = execution_order(list(handles), connections)
     incoming = {c: [k for k in connections if k.destination == c] for c in handles}
     outputs = {c: handles[c].get_outputs() for c in handles}
-    records: dict[str, list] = {f"{c}.{n}": [] for c in handles for n in outputs[c]}
+    recorded = [(c, n) for c in handles for n in outputs[c]]
+    if record is not None:
+        unknown = sorted(set(record) - {f"{c}.{n}" for c, n in recorded})
+        if unknown:
+            raise KeyError(f"record: {unknown[0]} is not an output of the system")
+        recorded = [(c, n) for c, n in recorded if f"{c}.{n}" in set(record)]
+    records: dict[str, list] = {f"{c}.{n}": [] for c, n in recorded}
     for k in range(n_steps):
         t = t0 + k * macro_step
         for c in order:
@@ -66,9 +76,8 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
             for j in range(ratio):
                 handle.do_step(t + j * sub, sub)
             outputs[c] = handle.get_outputs()
-        for c in handles:
-            for n, value in outputs[c].items():
-                records[f"{c}.{n}"].append(np.array(value, copy=True))
+        for c, n in recorded:
+            records[f"{c}.{n}"].append(np.array(outputs[c][n], copy=True))
         if progress is not None:
             progress(1)
     result = {key: np.stack(values) for key, values in records.items()}

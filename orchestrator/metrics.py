@@ -45,12 +45,14 @@ def summarize(err: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
     dict
         Metric name -> array of shape (B,) [m]; NaN for a run with no valid step.
     """
-    valid = np.all(np.isfinite(err), axis=-1)
-    count = valid.sum(axis=0)
-    safe = np.where(valid[..., None], err, 0.0)
+    # run-major, time contiguous: every run is summed in the same order whatever B is
+    err = np.ascontiguousarray(np.moveaxis(np.asarray(err, dtype=float), 0, -1))  # (B, 4, N)
+    valid = np.all(np.isfinite(err), axis=1)  # (B, N)
+    count = valid.sum(axis=-1)
+    safe = np.where(valid[:, None, :], err, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = safe.sum(axis=0) / count[:, None]
-        rms = np.sqrt((safe[..., 3] ** 2).sum(axis=0) / count)
-        var = (np.where(valid, (safe[..., 3] - mean[None, :, 3]) ** 2, 0.0)).sum(axis=0) / count
+        mean = safe.sum(axis=-1) / count[:, None]
+        rms = np.sqrt((safe[:, 3] ** 2).sum(axis=-1) / count)
+        var = np.where(valid, (safe[:, 3] - mean[:, 3:4]) ** 2, 0.0).sum(axis=-1) / count
     values = (mean[:, 0], mean[:, 1], mean[:, 2], mean[:, 3], rms, np.sqrt(var))
     return {prefix + name: v for name, v in zip(METRIC_NAMES, values)}

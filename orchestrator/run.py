@@ -124,6 +124,39 @@ def close_handles(handles: dict[str, Any]) -> None:
         handle.terminate()
 
 
+#: Recorded outputs the metrics need (the truth, the EKF estimate and the instrumentation fix).
+METRIC_COLUMNS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz")
+
+
+def merge_params(cfgs: Sequence[dict], component: str) -> tuple[dict[str, Any], np.ndarray]:
+    """Parameters of one component for a batch of runs, one resolved configuration per run.
+
+    Values equal in every run stay scalars; values that differ (factors of a
+    batch spanning several design cells) become arrays of shape (B,).
+
+    Returns
+    -------
+    params : dict
+        Parameters without ``replicate``.
+    replicates : ndarray of int, shape (B,)
+        ``run.replicate`` of each run.
+    """
+    per_run = [component_params(c, component) for c in cfgs]
+    replicates = np.array([c["run"]["replicate"] for c in cfgs], dtype=np.int64)
+    params: dict[str, Any] = {}
+    for name, first in per_run[0].items():
+        if name == "replicate":
+            continue
+        values = [p[name] for p in per_run]
+        params[name] = first if all(v == first for v in values) else np.asarray(values)
+    return params, replicates
+
+
+def with_replicates(cfg: dict, replicates: Sequence[int]) -> list[dict]:
+    """One configuration per replicate (``run.replicate`` set), sharing everything else."""
+    return [{**cfg, "run": {**cfg["run"], "replicate": int(r)}} for r in replicates]
+
+
 def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = None,
         fmu_dir: Path | str | None = None, handles: dict[str, Any] | None = None,
         progress: bool = False) -> RunResult:
@@ -135,7 +168,8 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
         Resolved configuration (:func:`orchestrator.config.load_config`).
     engine : {'local', 'fmu'}
     replicates : sequence of int, optional
-        Replicates stepped together (local engine); default ``[run.replicate]``.
+        Replicates to run (stepped together on the local engine, one after the
+        other on the fmu engine); default ``[run.replicate]``.
     fmu_dir : path, optional
         Directory of the built FMUs (fmu engine).
     handles : dict, optional
@@ -153,27 +187,72 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
     ModelError
         On a connection that does not match the components, or invalid parameters.
     """
-    sim = cfg["simulation"]
     replicates = list(replicates) if replicates is not None else [cfg["run"]["replicate"]]
-    n_beacons = beacon_count(cfg)
+    return run_batch(with_replicates(cfg, replicates), engine, fmu_dir, handles, progress)
+
+
+def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str | None = None,
+              handles: dict[str, Any] | None = None, progress: bool = False,
+              timeseries: bool = True) -> RunResult:
+    """Simulate a batch of runs, one resolved configuration each.
+
+    The runs may differ in the seed keys (cell, replicate) and in the
+    parameters the cores accept per replicate (``batched_parameters``); they
+    must share the simulation section and everything else. The local engine
+    steps them all together; the fmu engine steps them one at a time (B = 1).
+    Each run's numbers are the same whatever batch it is part of.
+
+    Parameters
+    ----------
+    cfgs : sequence of dict
+        Resolved configurations, B ≥ 1.
+    engine, fmu_dir, handles, progress
+        As for :func:`run`.
+    timeseries : bool
+        Build the per-step time series (else only the metrics' inputs are
+        recorded and :attr:`RunResult.timeseries` is empty).
+
+    Returns
+    -------
+    RunResult
+        For the first configuration, with one metrics row per run (in order).
+
+    Raises
+    ------
+    ModelError
+        If the runs differ where a batch cannot, or as for :func:`run`.
+    """
+    cfgs = list(cfgs)
+    sim = cfgs[0]["simulation"]
+    if any(c["simulation"] != sim for c in cfgs):
+        raise ModelError("simulation: every run of a batch needs the same simulation settings")
+    n_beacons = beacon_count(cfgs[0])
     own = handles is None
     if own:
         handles = make_handles(engine, fmu_dir, n_beacons)
     try:
         connections = default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
-        for name, handle in handles.items():
-            handle.setup(component_params(cfg, name), replicates)
         T = sim["sampling_time"]
         n_steps = int(math.floor(sim["duration"] / T + 1e-9))
         rates = {"receiver": sim["ekf_rate_ratio"]}
-        start = time.perf_counter()
+        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_COLUMNS]
+        groups = [cfgs] if engine == "local" else [[c] for c in cfgs]
         bar = None
         if progress:
             from tqdm import tqdm
-            bar = tqdm(total=n_steps, unit="step", desc=f"{cfg['run']['scenario']} ({engine})", leave=False)
+            bar = tqdm(total=n_steps * len(groups), unit="step", leave=False,
+                       desc=f"{cfgs[0]['run']['scenario']} ({engine})")
+        start = time.perf_counter()
+        recs, replicates = [], []
         try:
-            rec = simulate(handles, connections, rates, T, n_steps, progress=bar.update if bar else None)
+            for group in groups:
+                for name, handle in handles.items():
+                    params, reps = merge_params(group, name)
+                    handle.setup(params, reps)
+                recs.append(simulate(handles, connections, rates, T, n_steps, record=record,
+                                     progress=bar.update if bar else None))
+                replicates.extend(reps.tolist())
         finally:
             if bar is not None:
                 bar.close()
@@ -181,15 +260,22 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
     finally:
         if own:
             close_handles(handles)
-    return _result(cfg, engine, rec, replicates, n_steps, wall)
+    rec = recs[0] if len(recs) == 1 else {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1))
+                                          for k in recs[0]}
+    return _result(cfgs[0], engine, rec, replicates, n_steps, wall, timeseries)
 
 
-def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float) -> RunResult:
+def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
+            timeseries: bool = True) -> RunResult:
     batch = len(replicates)
-    cols = {name: rec[key] for name, key in TIMESERIES_COLUMNS.items()}
+    names = TIMESERIES_COLUMNS if timeseries else METRIC_COLUMNS
+    cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in names}
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
     instr_err = errors(truth, np.stack([cols[f"instr_{a}"] for a in "xyz"], axis=-1))
+    metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_")})
+    if not timeseries:
+        return RunResult(cfg, engine, pd.DataFrame(), metrics, n_steps, wall)
     table = {"replicate": np.repeat(np.asarray(replicates)[None, :], n_steps, axis=0),
              "time": np.repeat(rec["time"][:, None], batch, axis=1)}
     table.update(cols)
@@ -198,7 +284,6 @@ def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: i
         table[f"instr_{name}"] = instr_err[..., k]
     # replicate-major rows: all steps of replicate 0, then replicate 1, ...
     frame = pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in table.items()})
-    metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_")})
     return RunResult(cfg, engine, frame, metrics, n_steps, wall)
 
 

@@ -59,6 +59,8 @@ class AcousticsCore(ComponentCore):
 
     name = "acoustics"
     component_index = 1
+    batched_parameters = frozenset({"cell", "sound_speed_assumed", "clock_drift_ppm", "sigma_range", "loss_pct",
+                                    "outlier_pct", "outlier_excess"})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:

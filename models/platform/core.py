@@ -9,8 +9,6 @@ Systems", Sensors 21(3):762, 2021, doi:10.3390/s21030762, Sections 3-4
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from models.core import SEED_PARAMETERS, ComponentCore, ModelError, Variable
@@ -43,6 +41,11 @@ def beacon_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
         for i in range(1, n_beacons + 1) for a, axis in zip(AXES, ("North", "East", "Down")))
 
 
+def _column(value):
+    """A per-replicate parameter as a column (B, 1) for (B, 3) arrays; scalars unchanged."""
+    return value[:, None] if isinstance(value, np.ndarray) and value.ndim == 1 else value
+
+
 class PlatformCore(ComponentCore):
     """SBL platform: beacon cross, Beaufort wave motion, GPS, IMU and broadcast positions.
 
@@ -57,8 +60,9 @@ class PlatformCore(ComponentCore):
 
     Attributes
     ----------
-    offsets : ndarray, shape (n, 3)
-        Body-frame beacon offsets [m].
+    offsets : ndarray, shape (n, 3) or (B, n, 3)
+        Body-frame beacon offsets [m] (per replicate when the baseline or
+        transducer depth differ across the batch).
     phases : ndarray, shape (B, 4)
         Random phases of roll, pitch, yaw and heave [rad].
     gps_error : ndarray, shape (B, 3)
@@ -67,6 +71,8 @@ class PlatformCore(ComponentCore):
 
     name = "platform"
     component_index = 0
+    batched_parameters = frozenset({"cell", "baseline", "transducer_depth", "heading_deg", "gps_sigma", "gps_tau",
+                                    "imu_sigma_deg", "imu_bias_deg", "imu_gyro_bias"})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
@@ -120,7 +126,7 @@ class PlatformCore(ComponentCore):
     def _initialize(self, t0: float) -> None:
         self.rng = self.streams()
         self.phases = 2.0 * np.pi * self.rng.draw(_PHASES, "uniform", 4)
-        self.gps_error = self.params["gps_sigma"] * self.rng.draw(_GPS_INIT, "normal", 3)
+        self.gps_error = _column(self.params["gps_sigma"]) * self.rng.draw(_GPS_INIT, "normal", 3)
         self._outputs(t0, None)
 
     def _step(self, t: float, dt: float) -> None:
@@ -132,7 +138,7 @@ class PlatformCore(ComponentCore):
         w = 2.0 * np.pi * m.frequency * t
         roll = m.tilt_amplitude * np.sin(w + ph[:, 0])
         pitch = m.tilt_amplitude * np.sin(w + ph[:, 1])
-        yaw = math.radians(self.params["heading_deg"]) + m.yaw_amplitude * np.sin(0.5 * w + ph[:, 2])
+        yaw = np.radians(self.params["heading_deg"]) + m.yaw_amplitude * np.sin(0.5 * w + ph[:, 2])
         depth = -m.heave_amplitude * np.sin(w + ph[:, 3])
         return roll, pitch, yaw, depth
 
@@ -144,16 +150,17 @@ class PlatformCore(ComponentCore):
         true = beacon_positions(position, rotation_ned(roll, pitch, yaw), self.offsets)
 
         white = self.rng.draw(_GPS, "normal", 3)
+        sigma = _column(p["gps_sigma"])
         if p["gps_model"] == "white":
-            self.gps_error = p["gps_sigma"] * white
+            self.gps_error = sigma * white
         elif dt is not None:
-            phi = math.exp(-dt / p["gps_tau"])
-            self.gps_error = phi * self.gps_error + p["gps_sigma"] * math.sqrt(1.0 - phi * phi) * white
+            phi = np.exp(-dt / _column(p["gps_tau"]))
+            self.gps_error = phi * self.gps_error + sigma * np.sqrt(1.0 - phi * phi) * white
         gps = position + self.gps_error
 
-        bias = math.radians(p["imu_bias_deg"]) + p["imu_gyro_bias"] * t
+        bias = _column(np.radians(p["imu_bias_deg"]) + p["imu_gyro_bias"] * t)
         imu = (np.stack([roll, pitch, yaw], axis=-1) + bias
-               + math.radians(p["imu_sigma_deg"]) * self.rng.draw(_IMU, "normal", 3))
+               + _column(np.radians(p["imu_sigma_deg"])) * self.rng.draw(_IMU, "normal", 3))
         broadcast = beacon_positions(gps, rotation_ned(imu[:, 0], imu[:, 1], imu[:, 2]), self.offsets)
 
         out = {}

@@ -14,7 +14,7 @@ import numpy as np
 from models.core import ModelError
 
 
-def cross_offsets(baseline: float, transducer_depth: float, n_beacons: int = 4) -> np.ndarray:
+def cross_offsets(baseline, transducer_depth, n_beacons: int = 4) -> np.ndarray:
     """Body-frame offsets of beacons on a cross (equally spaced arms).
 
     ``a_i = L (cos θ_i, sin θ_i, 0) + (0, 0, h)`` with θ_i = 2π i / n
@@ -22,23 +22,25 @@ def cross_offsets(baseline: float, transducer_depth: float, n_beacons: int = 4) 
 
     Parameters
     ----------
-    baseline : float
-        Support-arm length L [m].
-    transducer_depth : float
+    baseline : float or ndarray, shape (B,)
+        Support-arm length L [m], one per replicate if an array.
+    transducer_depth : float or ndarray, shape (B,)
         Depth h of the transducers below the platform reference [m].
     n_beacons : int
         Number of arms.
 
     Returns
     -------
-    ndarray, shape (n_beacons, 3)
+    ndarray, shape (n_beacons, 3) or (B, n_beacons, 3)
         Offsets in the body frame (x forward/North, y East, z down) [m].
     """
     theta = 2.0 * np.pi * np.arange(n_beacons) / n_beacons
-    offsets = np.column_stack([baseline * np.cos(theta), baseline * np.sin(theta),
-                               np.full(n_beacons, float(transducer_depth))])
-    offsets[np.abs(offsets) < 1e-15] = 0.0
-    return offsets
+    cos, sin = np.cos(theta), np.sin(theta)
+    cos[np.abs(cos) < 1e-15] = 0.0  # exact zeros on the axes
+    sin[np.abs(sin) < 1e-15] = 0.0
+    arm, depth = np.broadcast_arrays(np.asarray(baseline, dtype=float)[..., None],
+                                     np.asarray(transducer_depth, dtype=float)[..., None])
+    return np.stack([arm * cos, arm * sin, np.broadcast_to(depth, arm.shape[:-1] + (n_beacons,))], axis=-1)
 
 
 def parse_offsets(text: str, field: str = "platform.beacon_offsets") -> np.ndarray:
@@ -95,12 +97,13 @@ def beacon_positions(position: np.ndarray, rotation: np.ndarray, offsets: np.nda
         Platform reference position [m].
     rotation : ndarray, shape (B, 3, 3)
         Body-to-NED rotation.
-    offsets : ndarray, shape (n, 3)
-        Body-frame beacon offsets [m].
+    offsets : ndarray, shape (n, 3) or (B, n, 3)
+        Body-frame beacon offsets [m], shared or one set per replicate.
 
     Returns
     -------
     ndarray, shape (B, n, 3)
         Beacon positions [m].
     """
-    return position[:, None, :] + np.einsum("bij,nj->bni", rotation, offsets)
+    offsets = np.broadcast_to(offsets, (position.shape[0],) + offsets.shape[-2:])
+    return position[:, None, :] + np.einsum("bij,bnj->bni", rotation, offsets)

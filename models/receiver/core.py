@@ -65,6 +65,8 @@ class ReceiverCore(ComponentCore):
 
     name = "receiver"
     component_index = 3
+    batched_parameters = frozenset({"sigma_range", "sigma_depth", "q_horizontal", "q_vertical", "p0_position",
+                                    "p0_velocity", *(f"x0_{n}" for n in STATE_NAMES)})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
@@ -90,9 +92,13 @@ class ReceiverCore(ComponentCore):
 
     def _initialize(self, t0: float) -> None:
         p = self.params
-        x0 = np.array([p[f"x0_{n}"] for n in STATE_NAMES])
-        P0 = np.diag(np.tile([p["p0_position"] ** 2, p["p0_velocity"] ** 2], 3))
-        self.ekf = ExtendedKalmanFilter(np.tile(x0, (self.batch, 1)), P0, p["q_horizontal"], p["q_vertical"],
+        x0 = np.column_stack([np.broadcast_to(p[f"x0_{n}"], self.batch) for n in STATE_NAMES])
+        variances = np.broadcast_arrays(np.asarray(p["p0_position"], float) ** 2,
+                                        np.asarray(p["p0_velocity"], float) ** 2)
+        P0 = np.zeros(variances[0].shape + (6, 6))
+        for k in range(6):
+            P0[..., k, k] = variances[k % 2]
+        self.ekf = ExtendedKalmanFilter(x0, P0, p["q_horizontal"], p["q_vertical"],
                                         p["sigma_range"], p["sigma_depth"])
         self.ranges = np.full((self.batch, self.n_beacons), np.nan)
         self.beacons = np.full((self.batch, self.n_beacons, 3), np.nan)

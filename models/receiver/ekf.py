@@ -35,12 +35,17 @@ def transition(dt: float) -> np.ndarray:
     return phi
 
 
-def process_noise(dt: float, q_horizontal: float, q_vertical: float) -> np.ndarray:
-    """White-noise-acceleration process noise Q, shape (6, 6) [m², m²/s, m²/s²]."""
+def process_noise(dt: float, q_horizontal, q_vertical) -> np.ndarray:
+    """White-noise-acceleration process noise Q [m², m²/s, m²/s²].
+
+    Returns shape (6, 6) for scalar densities [m²/s³], or (B, 6, 6) when
+    they are arrays of shape (B,).
+    """
     block = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
-    q = np.zeros((STATE_SIZE, STATE_SIZE))
-    for axis, density in enumerate((q_horizontal, q_horizontal, q_vertical)):
-        q[2 * axis:2 * axis + 2, 2 * axis:2 * axis + 2] = density * block
+    q_h, q_v = np.broadcast_arrays(np.asarray(q_horizontal, dtype=float), np.asarray(q_vertical, dtype=float))
+    q = np.zeros(q_h.shape + (STATE_SIZE, STATE_SIZE))
+    for axis, density in enumerate((q_h, q_h, q_v)):
+        q[..., 2 * axis:2 * axis + 2, 2 * axis:2 * axis + 2] = density[..., None, None] * block
     return q
 
 
@@ -51,11 +56,11 @@ class ExtendedKalmanFilter:
     ----------
     x0 : ndarray, shape (B, 6)
         Initial state [m, m/s].
-    P0 : ndarray, shape (6, 6)
-        Initial covariance, the same for every replicate.
-    q_horizontal, q_vertical : float
+    P0 : ndarray, shape (6, 6) or (B, 6, 6)
+        Initial covariance, shared or per replicate.
+    q_horizontal, q_vertical : float or ndarray, shape (B,)
         Acceleration noise spectral densities [m²/s³].
-    sigma_range, sigma_depth : float
+    sigma_range, sigma_depth : float or ndarray, shape (B,)
         Measurement standard deviations in R [m].
 
     Attributes
@@ -72,18 +77,22 @@ class ExtendedKalmanFilter:
         Normalized innovation squared ``yᵀ S⁻¹ y`` of the last update.
     """
 
-    def __init__(self, x0: np.ndarray, P0: np.ndarray, q_horizontal: float, q_vertical: float,
-                 sigma_range: float, sigma_depth: float) -> None:
+    def __init__(self, x0: np.ndarray, P0: np.ndarray, q_horizontal, q_vertical,
+                 sigma_range, sigma_depth) -> None:
         self.x = np.array(x0, dtype=float)
-        self.P = np.broadcast_to(P0, (self.x.shape[0], STATE_SIZE, STATE_SIZE)).copy()
+        batch = self.x.shape[0]
+        self.P = np.broadcast_to(P0, (batch, STATE_SIZE, STATE_SIZE)).copy()
         self.q_horizontal, self.q_vertical = q_horizontal, q_vertical
-        self.sigma_range, self.sigma_depth = sigma_range, sigma_depth
-        self.nis = np.full(self.x.shape[0], np.nan)
+        self.sigma_range = np.broadcast_to(np.asarray(sigma_range, dtype=float), (batch,))
+        self.sigma_depth = np.broadcast_to(np.asarray(sigma_depth, dtype=float), (batch,))
+        self.nis = np.full(batch, np.nan)
 
     def predict(self, dt: float) -> None:
         """Propagate state and covariance by ``dt`` [s]: ``x ← Φx``, ``P ← ΦPΦᵀ + Q``."""
         phi = transition(dt)
-        self.x = self.x @ phi.T
+        # stacked (B, 6, 1) product: the same arithmetic for every batch size (a 2-D
+        # ``x @ phi.T`` switches between BLAS gemv and gemm with B)
+        self.x = (phi @ self.x[:, :, None])[:, :, 0]
         self.P = phi @ self.P @ phi.T + process_noise(dt, self.q_horizontal, self.q_vertical)
 
     def update(self, ranges: np.ndarray, beacons: np.ndarray, depth: np.ndarray) -> None:
@@ -106,7 +115,10 @@ class ExtendedKalmanFilter:
         z = np.concatenate([ranges, depth[:, None]], axis=1)
         H = np.where(have[:, :, None], H, 0.0)
         y = np.where(have, z - predicted, 0.0)
-        R = np.diag(np.r_[np.full(n, self.sigma_range**2), self.sigma_depth**2])
+        R = np.zeros((batch, n + 1, n + 1))
+        diagonal = np.arange(n + 1)
+        R[:, diagonal, diagonal] = np.column_stack([np.repeat(self.sigma_range[:, None] ** 2, n, axis=1),
+                                                    self.sigma_depth**2])
         PHt = self.P @ np.swapaxes(H, 1, 2)
         S = H @ PHt + R
         K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, 1, 2)), 1, 2)

@@ -20,8 +20,14 @@ from models.receiver.jacobian import POSITION_INDEX, STATE_SIZE, range_and_jacob
 
 
 def multilaterate(ranges: np.ndarray, beacons: np.ndarray, depth: np.ndarray, guess: np.ndarray,
-                  sigma_range: float, sigma_depth: float, iterations: int = 8) -> tuple[np.ndarray, np.ndarray]:
+                  sigma_range, sigma_depth, iterations: int = 8,
+                  tolerance: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares position from ranges and depth.
+
+    Each replicate iterates until its own Gauss-Newton step is below
+    ``tolerance`` (or ``iterations`` steps); the replicates still moving are
+    the only ones evaluated, and a replicate's result does not depend on the
+    others of the batch.
 
     Parameters
     ----------
@@ -32,9 +38,13 @@ def multilaterate(ranges: np.ndarray, beacons: np.ndarray, depth: np.ndarray, gu
     depth : ndarray, shape (B,)
         Depth reading [m].
     guess : ndarray, shape (B, 3)
-        Starting point [m].
-    sigma_range, sigma_depth : float
-        Weights [m]; zero values are floored at 1 mm.
+        Starting point [m] (e.g. the previous fix).
+    sigma_range, sigma_depth : float or ndarray, shape (B,)
+        Weights [m]; values below 1 mm are floored at 1 mm.
+    iterations : int
+        Maximum Gauss-Newton steps.
+    tolerance : float
+        Convergence threshold on the largest coordinate of a step [m].
 
     Returns
     -------
@@ -42,21 +52,30 @@ def multilaterate(ranges: np.ndarray, beacons: np.ndarray, depth: np.ndarray, gu
         Fix [m]; NaN where fewer than 3 ranges are available.
     valid : ndarray of bool, shape (B,)
     """
+    batch = ranges.shape[0]
     have = np.isfinite(ranges)
     valid = (have.sum(axis=1) >= 3) & np.isfinite(depth)
-    w_r = 1.0 / max(sigma_range, 1e-3)
-    w_d = 1.0 / max(sigma_depth, 1e-3)
+    w_r = 1.0 / np.maximum(np.broadcast_to(np.asarray(sigma_range, dtype=float), (batch,)), 1e-3)
+    w_d = 1.0 / np.maximum(np.broadcast_to(np.asarray(sigma_depth, dtype=float), (batch,)), 1e-3)
     b = np.where(np.isfinite(beacons), beacons, 0.0)
     r = np.where(have, ranges, 0.0)
     p = np.where(np.isfinite(guess), guess, 0.0).astype(float)
-    state = np.zeros((p.shape[0], STATE_SIZE))
+    active = np.flatnonzero(valid)
     for _ in range(iterations):
-        state[:, POSITION_INDEX] = p
-        h, H = range_and_jacobian(state, b)
-        J = np.where(have[:, :, None], H[:, :, POSITION_INDEX] * w_r, 0.0)
-        res = np.where(have, (r - h) * w_r, 0.0)
-        J = np.concatenate([J, np.broadcast_to([0.0, 0.0, w_d], (p.shape[0], 1, 3))], axis=1)
-        res = np.concatenate([res, ((depth - p[:, 2]) * w_d)[:, None]], axis=1)
+        if active.size == 0:
+            break
+        pa, ha, wa, da = p[active], have[active], w_r[active, None], w_d[active]
+        state = np.zeros((active.size, STATE_SIZE))
+        state[:, POSITION_INDEX] = pa
+        h, H = range_and_jacobian(state, b[active])
+        J = np.where(ha[:, :, None], H[:, :, POSITION_INDEX] * wa[:, :, None], 0.0)
+        res = np.where(ha, (r[active] - h) * wa, 0.0)
+        depth_row = np.zeros((active.size, 1, 3))
+        depth_row[:, 0, 2] = da
+        J = np.concatenate([J, depth_row], axis=1)
+        res = np.concatenate([res, ((depth[active] - pa[:, 2]) * da)[:, None]], axis=1)
         JtJ = np.swapaxes(J, 1, 2) @ J + 1e-9 * np.eye(3)
-        p = p + np.linalg.solve(JtJ, np.einsum("bki,bk->bi", J, res)[:, :, None])[:, :, 0]
+        step = np.linalg.solve(JtJ, np.einsum("bki,bk->bi", J, res)[:, :, None])[:, :, 0]
+        p[active] = pa + step
+        active = active[np.max(np.abs(step), axis=1) > tolerance]
     return np.where(valid[:, None], p, np.nan), valid

@@ -34,6 +34,7 @@ class TargetCore(ComponentCore):
 
     name = "target"
     component_index = 2
+    batched_parameters = frozenset({"cell", "depth_sigma"})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
