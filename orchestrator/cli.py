@@ -1,4 +1,4 @@
-"""Command line: ``sblsim run``, ``sblsim fmus build`` and ``sblsim fmus validate``.
+"""Command line: ``sblsim run``, ``sblsim campaign``, ``sblsim fmus build`` and ``sblsim fmus validate``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
@@ -7,12 +7,14 @@ field and the allowed range, exit status 2, and nothing written.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from models.core import ModelError
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -32,6 +34,20 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key, e.g. platform.baseline=3 (repeatable)")
     r.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (fmu engine)")
+
+    c = sub.add_parser("campaign", help="run a factorial Monte Carlo study (built-in: paper)")
+    c.add_argument("study", help="built-in study (paper) or STUDY.toml")
+    c.add_argument("--workers", type=int, default=None, help="worker processes (default: all cores)")
+    c.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="Dask distributed scheduler, e.g. tcp://host:8786 (instead of local workers)")
+    c.add_argument("--out", type=Path, default=None, help="campaign directory (default results/STUDYNAME)")
+    c.add_argument("--resume", action="store_true", help="finish the campaign in --out (missing chunks only)")
+    c.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    c.add_argument("--seed", type=int, default=None, help="campaign seed (default: the study's)")
+    c.add_argument("--batch", type=int, default=None,
+                   help="runs per chunk (default 800 local, 50 fmu); does not change the results")
+    c.add_argument("--save-timeseries", action="store_true", help="also write every run's per-step time series")
+    c.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (fmu engine)")
 
     f = sub.add_parser("fmus", help="build or validate the four FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
@@ -65,6 +81,30 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _campaign(args: argparse.Namespace) -> int:
+    from orchestrator.campaign import CampaignInterrupted, run_campaign
+    from orchestrator.study import load_study
+
+    study = load_study(args.study, seed=args.seed)
+    out = args.out or Path("results") / study.name
+    where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.workers or os.cpu_count()} workers"
+    print(f"{study.name}: {len(study.scenarios)} scenarios x {study.cells} cells x {study.replicates} replicates "
+          f"= {study.runs} runs on the {args.engine} engine, {where}", file=sys.stderr)
+    try:
+        result = run_campaign(study, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+                              engine=args.engine, batch=args.batch, fmu_dir=args.fmu_dir,
+                              save_timeseries=args.save_timeseries)
+    except CampaignInterrupted as exc:
+        print(f"sblsim: {exc}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if result.computed:
+        print(f"{result.computed} runs in {result.wall_time:.1f} s ({result.runs_per_second:.0f} runs/s); "
+              f"{len(result.runs)} runs in {out / 'runs.parquet'}")
+    else:
+        print(f"nothing to do: {len(result.runs)} runs already in {out / 'runs.parquet'}")
+    return 0
+
+
 def _fmus(args: argparse.Namespace) -> int:
     from fmus.build import DEFAULT_DIR, build_all, fmu_path, validate
     from models import COMPONENTS
@@ -94,6 +134,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "campaign":
+            return _campaign(args)
         return _fmus(args)
     except (ModelError, KeyboardInterrupt) as exc:
         message = str(exc) if isinstance(exc, ModelError) else "interrupted"

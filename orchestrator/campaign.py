@@ -1,0 +1,466 @@
+"""Campaigns: run a study's scenarios × design cells × replicates, resumably, locally or on Dask.
+
+Work is split into **chunks**: consecutive design cells of one scenario that
+share every setting a batch cannot vary (e.g. the sampling time), up to
+``batch`` runs. On the ``local`` engine a chunk is one batch: all its runs
+are stepped together, the cells' factor levels given per replicate
+(``batched_parameters`` of the cores). On the ``fmu`` engine a chunk's runs
+are stepped one at a time through the FMUs, loaded once per worker process.
+Chunks run in worker processes (``--workers``) or on a Dask distributed
+cluster (``--scheduler``); only this process writes files.
+
+Every run draws its random numbers from its own branch of the seed tree
+``SeedSequence(seed, spawn_key=(scenario_key, cell, replicate, component, purpose))``,
+and a run's arithmetic does not depend on the batch it is stepped in, so
+``runs.parquet`` is the same whatever the worker count, batch size,
+scheduler or order of execution.
+
+Campaign directory::
+
+    study.toml          the resolved study (written first)
+    chunks/ID.parquet   finished chunks, each written atomically
+    timeseries/ID.parquet  per-step series (``--save-timeseries`` only)
+    runs.parquet        all runs, sorted by scenario_key, cell, replicate
+
+``--resume`` runs only the chunks that have no file yet.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import numpy as np
+import pandas as pd
+
+from models import COMPONENTS
+from models.core import ModelError
+from orchestrator.metrics import METRIC_NAMES
+from orchestrator.study import Study
+
+log = logging.getLogger("sblsim.campaign")
+
+ENGINES = ("local", "fmu")
+#: Default runs per chunk on each engine.
+DEFAULT_BATCH = {"local": 800, "fmu": 50}
+IDENTITY_COLUMNS = ("scenario", "scenario_key", "cell", "replicate", "seed")
+METRIC_COLUMNS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
+
+
+class CampaignError(ModelError):
+    """Invalid campaign request (output directory, scheduler, engine)."""
+
+
+class CampaignInterrupted(Exception):
+    """The campaign was interrupted; finished chunks are on disk."""
+
+    def __init__(self, done: int, total: int, out: Path) -> None:
+        super().__init__(f"interrupted: {done} of {total} runs saved in {out}; finish with --resume")
+        self.done, self.total, self.out = done, total, out
+
+
+@dataclass
+class Chunk:
+    """Consecutive design cells of one scenario, stepped as one batch.
+
+    Attributes
+    ----------
+    id : str
+        File stem, ``SCENARIOKEY-FIRSTCELL-LASTCELL``.
+    scenario : str
+    cells : list of int
+    configs : list of dict
+        Resolved configuration of each cell (replicate 0).
+    replicates : int
+    steps : int
+        Macro steps per run (cost estimate).
+    """
+
+    id: str
+    scenario: str
+    cells: list[int]
+    configs: list[dict] = field(repr=False)
+    replicates: int = 1
+    steps: int = 0
+
+    @property
+    def runs(self) -> int:
+        return len(self.cells) * self.replicates
+
+
+def batch_key(cfg: dict) -> tuple:
+    """What the runs of one batch must share: everything but the per-replicate parameters."""
+    key = []
+    for section, table in cfg.items():
+        if section == "run":
+            continue
+        allowed = COMPONENTS[section].batched_parameters if section in COMPONENTS else frozenset()
+        key.extend((section, name, value) for name, value in sorted(table.items()) if name not in allowed)
+    return tuple(key)
+
+
+def cell_configs(study: Study) -> dict[str, list[dict]]:
+    """Resolved configuration of every design cell of every scenario (replicate 0).
+
+    Raises
+    ------
+    ConfigError, ModelError
+        If a design cell does not make a valid configuration.
+    """
+    return {scenario: [study.cell_config(scenario, c) for c in range(study.cells)] for scenario in study.scenarios}
+
+
+def plan(study: Study, batch: int, configs: dict[str, list[dict]] | None = None) -> list[Chunk]:
+    """Split a study into chunks of at most ``batch`` runs (at least one cell each).
+
+    Cells are grouped by :func:`batch_key` in design order; the plan depends
+    only on the study and ``batch``.
+    """
+    configs = configs if configs is not None else cell_configs(study)
+    chunks = []
+    per_chunk = max(1, batch // study.replicates)
+    for scenario in study.scenarios:
+        groups: dict[tuple, list[int]] = {}
+        for c, cfg in enumerate(configs[scenario]):
+            groups.setdefault(batch_key(cfg), []).append(c)
+        for cells in groups.values():
+            for start in range(0, len(cells), per_chunk):
+                part = cells[start:start + per_chunk]
+                cfg = configs[scenario][part[0]]
+                sim = cfg["simulation"]
+                steps = int(math.floor(sim["duration"] / sim["sampling_time"] + 1e-9)) * sim["ekf_rate_ratio"]
+                chunks.append(Chunk(f"{cfg['run']['scenario_key']:03d}-{part[0]:05d}-{part[-1]:05d}", scenario,
+                                    part, [configs[scenario][c] for c in part], study.replicates, steps))
+    return chunks
+
+
+def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | None = None,
+              timeseries: bool = False) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """Simulate one chunk (in a worker) and return its result rows.
+
+    Returns
+    -------
+    rows : pandas.DataFrame
+        One row per run: identity, factor levels (coded and physical) and metrics.
+    series : pandas.DataFrame or None
+        Per-step time series with ``cell`` and ``replicate`` columns, if asked.
+    """
+    from orchestrator.run import make_handles, close_handles, run_batch, with_replicates
+
+    cfgs = [cfg for base in chunk.configs for cfg in with_replicates(base, range(chunk.replicates))]
+    handles = make_handles(engine, fmu_dir)
+    try:
+        result = run_batch(cfgs, engine, handles=handles, timeseries=timeseries)
+    finally:
+        close_handles(handles)
+    cells = np.repeat(chunk.cells, chunk.replicates)
+    first = chunk.configs[0]["run"]
+    rows: dict[str, Any] = {
+        "scenario": first["scenario"], "scenario_key": np.int64(first["scenario_key"]),
+        "cell": cells.astype(np.int64), "replicate": result.metrics["replicate"].to_numpy(np.int64),
+        "seed": np.int64(study.seed),
+    }
+    for k, factor in enumerate(study.factors):
+        coded = study.matrix[cells, k]
+        rows[factor.name] = coded.astype(np.int64)
+        rows[f"{factor.name}_value"] = np.where(coded < 0, factor.low, factor.high)
+    rows.update({m: result.metrics[m].to_numpy() for m in METRIC_COLUMNS})
+    series = None
+    if timeseries:
+        series = result.timeseries
+        series.insert(0, "cell", np.repeat(cells, result.steps))
+        series.insert(0, "scenario_key", np.int64(first["scenario_key"]))
+    return pd.DataFrame(rows), series
+
+
+def _write_atomic(frame: pd.DataFrame, path: Path) -> None:
+    """Write a Parquet file through a temporary file in the same folder and an atomic rename."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        frame.to_parquet(tmp, index=False)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@dataclass
+class CampaignResult:
+    """Outcome of :func:`run_campaign`.
+
+    Attributes
+    ----------
+    out : Path
+        Campaign directory.
+    runs : pandas.DataFrame
+        ``runs.parquet``.
+    computed : int
+        Runs simulated by this call (0 when a finished campaign is resumed).
+    wall_time : float
+        Wall-clock time of this call's simulation [s].
+    """
+
+    out: Path
+    runs: pd.DataFrame
+    computed: int
+    wall_time: float
+
+    @property
+    def runs_per_second(self) -> float:
+        return self.computed / self.wall_time if self.wall_time > 0 else float("nan")
+
+
+def check_fmus(fmu_dir: str | Path | None) -> None:
+    """Refuse the fmu engine early when an FMU is missing."""
+    from fmus.build import DEFAULT_DIR, fmu_path
+
+    directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
+    for name in COMPONENTS:
+        if not fmu_path(directory, name).is_file():
+            raise CampaignError(f"--engine fmu: {name} FMU not found in {str(directory)!r}; "
+                                "build them with `sblsim fmus build`")
+
+
+def connect(scheduler: str, timeout: float = 10.0):
+    """A Dask distributed client of a scheduler address.
+
+    Raises
+    ------
+    CampaignError
+        If no scheduler answers at the address.
+    """
+    try:
+        from distributed import Client
+    except ImportError:  # pragma: no cover - dask[distributed] is a dependency
+        raise CampaignError("--scheduler: dask.distributed is not installed") from None
+    try:
+        return Client(scheduler, timeout=f"{timeout}s", set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CampaignError(f"--scheduler: no Dask scheduler reachable at {scheduler!r} ({reason})") from None
+
+
+def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch: int) -> int:
+    """Check or create the campaign directory; return the batch size to use.
+
+    A new directory gets ``study.toml`` (with the engine and batch size in an
+    ``[execution]`` table). ``--resume`` requires the same study and engine
+    and re-uses the recorded batch size, so the chunk plan is unchanged.
+
+    Raises
+    ------
+    CampaignError
+        If the directory holds another campaign, or a campaign without
+        ``--resume``, or is a non-empty folder without a campaign.
+    """
+    import tomllib
+
+    study_file = out / "study.toml"
+    text = study.to_toml()
+    if out.exists() and not out.is_dir():
+        raise CampaignError(f"--out: {str(out)!r} exists and is not a directory")
+    if study_file.is_file():
+        if not resume:
+            raise CampaignError(f"--out: {str(out)!r} already holds a campaign; add --resume to finish it "
+                                "or choose another directory")
+        recorded = tomllib.loads(study_file.read_text())
+        execution = recorded.pop("execution", {})
+        if recorded != tomllib.loads(text):
+            raise CampaignError(f"--resume: {str(out)!r} holds a different study; choose another --out")
+        if execution.get("engine", engine) != engine:
+            raise CampaignError(f"--engine: {str(out)!r} was run on the {execution['engine']} engine; "
+                                "resume it with the same engine")
+        return int(execution.get("batch", batch))
+    if out.is_dir() and any(out.iterdir()):
+        raise CampaignError(f"--out: {str(out)!r} is not empty and holds no campaign; choose another directory")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "chunks").mkdir(exist_ok=True)
+    import tomli_w
+    execution = "\n# how the campaign is executed (does not change the results)\n" + tomli_w.dumps(
+        {"execution": {"engine": engine, "batch": batch}})
+    tmp = out / ".study.toml.tmp"
+    tmp.write_text(text + execution)
+    os.replace(tmp, study_file)
+    return batch
+
+
+def run_campaign(study: Study, out: Path | str, workers: int | None = None, scheduler: str | None = None,
+                 resume: bool = False, engine: str = "local", batch: int | None = None,
+                 fmu_dir: str | Path | None = None, save_timeseries: bool = False,
+                 progress: bool | None = None) -> CampaignResult:
+    """Run (or finish) a campaign and write ``runs.parquet``.
+
+    Parameters
+    ----------
+    study : Study
+        Validated study (:func:`orchestrator.study.load_study`).
+    out : path
+        Campaign directory.
+    workers : int, optional
+        Worker processes (default: all cores); 1 runs in this process.
+        Ignored with a scheduler.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (``tcp://host:port``).
+    resume : bool
+        Finish the campaign in ``out``, computing only missing chunks.
+    engine : {'local', 'fmu'}
+    batch : int, optional
+        Runs per chunk (default :data:`DEFAULT_BATCH` of the engine).
+    fmu_dir : path, optional
+        Directory of the built FMUs (fmu engine).
+    save_timeseries : bool
+        Also write the per-step time series of every run.
+    progress : bool, optional
+        Progress bar (default: when stderr is a terminal; else log lines).
+
+    Returns
+    -------
+    CampaignResult
+
+    Raises
+    ------
+    CampaignError, ModelError
+        Bad input; nothing is written.
+    CampaignInterrupted
+        On Ctrl-C; finished chunks are kept for ``--resume``.
+    """
+    out = Path(out)
+    if engine not in ENGINES:
+        raise CampaignError(f"--engine: {engine!r} is not one of {', '.join(ENGINES)}")
+    if workers is not None and workers < 1:
+        raise CampaignError(f"--workers: {workers} is outside the allowed range [1, inf)")
+    if batch is not None and batch < 1:
+        raise CampaignError(f"--batch: {batch} is outside the allowed range [1, inf)")
+    batch = batch or DEFAULT_BATCH[engine]
+    if engine == "fmu":
+        check_fmus(fmu_dir)
+        fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
+    configs = cell_configs(study)  # every cell resolves before anything is written
+    client = connect(scheduler) if scheduler else None
+    try:
+        batch = prepare_directory(out, study, resume, engine, batch)
+        chunks = plan(study, batch, configs)
+        chunk_dir, series_dir = out / "chunks", out / "timeseries"
+        chunk_dir.mkdir(exist_ok=True)
+        if save_timeseries:
+            series_dir.mkdir(exist_ok=True)
+        for stale in chunk_dir.glob(".*.tmp"):  # left by a killed process
+            stale.unlink()
+        todo = [c for c in chunks if not (chunk_dir / f"{c.id}.parquet").is_file()
+                or (save_timeseries and not (series_dir / f"{c.id}.parquet").is_file())]
+        total = study.runs
+        done = total - sum(c.runs for c in todo)
+        start = time.perf_counter()
+        computed = 0
+        if todo:
+            todo.sort(key=lambda c: -c.steps * c.runs)  # longest first: better load balance
+            reporter = _Progress(total, done, progress)
+            try:
+                for chunk, (rows, series) in _execute(todo, study, engine, fmu_dir, save_timeseries,
+                                                      workers, client):
+                    if series is not None:
+                        _write_atomic(series, series_dir / f"{chunk.id}.parquet")
+                    _write_atomic(rows, chunk_dir / f"{chunk.id}.parquet")
+                    computed += chunk.runs
+                    reporter.update(chunk.runs)
+            except KeyboardInterrupt:
+                reporter.close()
+                raise CampaignInterrupted(done + computed, total, out) from None
+            reporter.close()
+        wall = time.perf_counter() - start
+        runs = collect(out, chunks)
+        if computed or not (out / "runs.parquet").is_file():
+            _write_atomic(runs, out / "runs.parquet")
+        return CampaignResult(out, runs, computed, wall)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def collect(out: Path, chunks: list[Chunk]) -> pd.DataFrame:
+    """All chunk files of a campaign as one table sorted by scenario_key, cell, replicate."""
+    frames = [pd.read_parquet(out / "chunks" / f"{c.id}.parquet") for c in chunks]
+    runs = pd.concat(frames, ignore_index=True)
+    return runs.sort_values(["scenario_key", "cell", "replicate"], kind="stable").reset_index(drop=True)
+
+
+def _execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries: bool, workers: int | None,
+             client) -> Iterator[tuple[Chunk, tuple[pd.DataFrame, pd.DataFrame | None]]]:
+    """Yield each chunk with its result as soon as it is finished."""
+    if client is not None:
+        from distributed import as_completed
+
+        futures = {client.submit(run_chunk, c, study, engine, fmu_dir, timeseries, pure=False,
+                                 key=f"sblsim-{study.name}-{c.id}-{os.getpid()}-{time.time_ns()}"): c
+                   for c in chunks}
+        try:
+            for future in as_completed(futures):
+                yield futures[future], future.result()
+        finally:
+            for future in futures:
+                future.cancel()
+        return
+    workers = workers or os.cpu_count() or 1
+    if workers == 1 or len(chunks) == 1:
+        for c in chunks:
+            yield c, run_chunk(c, study, engine, fmu_dir, timeseries)
+        return
+    import multiprocessing
+
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
+                               mp_context=multiprocessing.get_context("spawn"))
+    try:
+        pending = {pool.submit(run_chunk, c, study, engine, fmu_dir, timeseries): c for c in chunks}
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                yield pending.pop(future), future.result()
+    finally:
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+class _Progress:
+    """Runs done, runs per second and time left: a tqdm bar on a terminal, log lines otherwise."""
+
+    def __init__(self, total: int, done: int, bar: bool | None, every: float = 10.0) -> None:
+        self.total, self.done, self.every = total, done, every
+        self.start = self.last = time.perf_counter()
+        self.first = done
+        if bar is None:
+            bar = sys.stderr.isatty()
+        self.bar = None
+        if bar:
+            from tqdm import tqdm
+            self.bar = tqdm(total=total, initial=done, unit="run", desc="campaign", smoothing=0.1)
+        else:
+            self._log(force=True)
+
+    def update(self, runs: int) -> None:
+        self.done += runs
+        if self.bar is not None:
+            self.bar.update(runs)
+        else:
+            self._log(force=self.done >= self.total)
+
+    def _log(self, force: bool = False) -> None:
+        now = time.perf_counter()
+        if not force and now - self.last < self.every:
+            return
+        self.last = now
+        rate = (self.done - self.first) / (now - self.start) if now > self.start else 0.0
+        left = f", about {(self.total - self.done) / rate:.0f} s left" if rate > 0 and self.done < self.total else ""
+        print(f"campaign: {self.done}/{self.total} runs ({100.0 * self.done / self.total:.0f} %), "
+              f"{rate:.1f} runs/s{left}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

@@ -1,0 +1,371 @@
+"""Factorial Monte Carlo studies: scenarios × 2-level design cells × replicates.
+
+A study file (TOML) names the scenarios, the factors (any configuration key
+with its LOW and HIGH level), the design, the replicates and the campaign
+seed::
+
+    [study]
+    name = "paper"
+    scenarios = ["semicircle", "spiral", "random"]   # built-in names or TOML files
+    replicates = 50
+    seed = 1
+    design = "full"          # 2-level full factorial, or "fractional"
+    resolution = 4           # fractional: the lowest resolution wanted (pyDOE3)
+    generators = ""          # fractional: or explicit generators, e.g. "a b c d abc"
+    set = []                 # overrides applied to every scenario ("section.key=value")
+
+    [[factors]]
+    name = "baseline"
+    key = "platform.baseline"
+    low = 0.4
+    high = 3.0
+
+Design cell ``c`` is row ``c`` of the design matrix of pyDOE3 (``ff2n`` for
+the full factorial: the first factor changes slowest; ``fracfact_by_res`` or
+``fracfact`` for a fractional one), coded −1 (LOW) and +1 (HIGH). Every
+value is validated against the declaration of its key before anything runs,
+so a bad level gets a one-line error naming the factor and the allowed range.
+
+References
+----------
+Montgomery, Design and Analysis of Experiments, 9th ed., Wiley 2017,
+chapters 6 (2^k designs) and 8 (2^(k-p) fractional designs). Cario et al.,
+Sensors 21(3):762, 2021, doi:10.3390/s21030762, Table 3 (the paper study).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from models.core import ModelError, Variable
+from orchestrator.config import SECTIONS, load_config, read_source, section_variables
+
+BUILTIN_STUDIES = ("paper",)
+DESIGNS = ("full", "fractional")
+_STUDY_KEYS = {"name", "scenarios", "replicates", "seed", "design", "resolution", "generators", "set"}
+_FACTOR_KEYS = {"name", "key", "low", "high"}
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+
+
+class StudyError(ModelError):
+    """Invalid study; the message names the field and the allowed range."""
+
+
+@dataclass(frozen=True)
+class Factor:
+    """One 2-level factor.
+
+    Attributes
+    ----------
+    name : str
+        Identifier used in result columns and model terms.
+    key : str
+        Configuration key ``section.name`` it sets.
+    low, high : Any
+        Levels in the key's unit (coded −1 and +1).
+    variable : Variable
+        The key's declaration (type, unit, allowed range).
+    """
+
+    name: str
+    key: str
+    low: Any
+    high: Any
+    variable: Variable
+
+    @property
+    def section(self) -> str:
+        return self.key.split(".", 1)[0]
+
+    def level(self, coded: int) -> Any:
+        """Physical level of a coded level (−1 or +1)."""
+        return self.low if coded < 0 else self.high
+
+
+@dataclass
+class Study:
+    """A validated, resolved study.
+
+    Attributes
+    ----------
+    name : str
+    scenarios : list of str
+        Built-in scenario names or absolute paths of TOML files.
+    replicates : int
+        Runs per design cell and scenario.
+    seed : int
+        Campaign seed (root of the seed tree).
+    design : {'full', 'fractional'}
+    resolution : int
+        Requested resolution of a fractional design (0: not used).
+    generators : str
+        Explicit generators of a fractional design ('' : not used).
+    overrides : list of str
+        ``section.key=value`` applied to every scenario before the factors.
+    factors : list of Factor
+    matrix : ndarray of int, shape (cells, k)
+        Coded design matrix (−1/+1); row ``c`` is design cell ``c``.
+    """
+
+    name: str
+    scenarios: list[str]
+    replicates: int
+    seed: int
+    design: str
+    resolution: int
+    generators: str
+    overrides: list[str]
+    factors: list[Factor]
+    matrix: np.ndarray = field(repr=False)
+
+    @property
+    def cells(self) -> int:
+        return int(self.matrix.shape[0])
+
+    @property
+    def runs(self) -> int:
+        return len(self.scenarios) * self.cells * self.replicates
+
+    def cell_overrides(self, cell: int) -> list[str]:
+        """``--set`` items of the factors' levels in a design cell."""
+        return [f"{f.key}={json.dumps(f.level(int(c)))}" for f, c in zip(self.factors, self.matrix[cell])]
+
+    def cell_config(self, scenario: str, cell: int) -> dict:
+        """Resolved configuration of one design cell (``run.cell`` set, replicate 0).
+
+        Raises
+        ------
+        ConfigError, ModelError
+            If the levels do not make a valid configuration for the scenario.
+        """
+        return load_config(scenario, [*self.overrides, *self.cell_overrides(cell), f"run.cell={cell}"],
+                           seed=self.seed)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The resolved study as a TOML-ready table (``study.toml``)."""
+        return {
+            "study": {"name": self.name, "scenarios": list(self.scenarios), "replicates": self.replicates,
+                      "seed": self.seed, "design": self.design, "resolution": self.resolution,
+                      "generators": self.generators, "set": list(self.overrides)},
+            "factors": [{"name": f.name, "key": f.key, "low": f.low, "high": f.high, "unit": f.variable.unit,
+                         "description": f.variable.description} for f in self.factors],
+            "design": {"cells": self.cells, "matrix": self.matrix.tolist()},
+        }
+
+    def to_toml(self) -> str:
+        header = "# sblsim resolved study: scenarios, factors with their levels, the design matrix (row = cell).\n"
+        return header + tomli_w.dumps(self.to_dict())
+
+
+def design_matrix(k: int, design: str = "full", resolution: int = 0, generators: str = "") -> np.ndarray:
+    """Coded 2-level design matrix from pyDOE3.
+
+    Parameters
+    ----------
+    k : int
+        Number of factors.
+    design : {'full', 'fractional'}
+    resolution : int
+        Fractional: lowest resolution wanted (pyDOE3 ``fracfact_by_res``).
+    generators : str
+        Fractional: explicit generator string (pyDOE3 ``fracfact``, e.g.
+        ``"a b c abc"``); takes precedence over ``resolution``.
+
+    Returns
+    -------
+    ndarray of int, shape (cells, k)
+
+    Raises
+    ------
+    StudyError
+        If the design cannot be built.
+    """
+    import pyDOE3
+
+    if design == "full":
+        return pyDOE3.ff2n(k).astype(np.int64)
+    if generators:
+        words = generators.split()
+        if len(words) != k:
+            raise StudyError(f"study.generators: {len(words)} generators for {k} factors; give one per factor")
+        try:
+            matrix = pyDOE3.fracfact(generators)
+        except Exception as exc:  # pyDOE3 raises plain exceptions on bad strings
+            raise StudyError(f"study.generators: {generators!r} is not a valid generator string ({exc})") from None
+        return np.asarray(matrix).astype(np.int64)
+    if resolution < 3:
+        raise StudyError(f"study.resolution: {resolution} is outside the allowed range [3, {k}] "
+                         "(or give study.generators)")
+    try:
+        return np.asarray(pyDOE3.fracfact_by_res(k, resolution)).astype(np.int64)
+    except ValueError as exc:
+        raise StudyError(f"study.resolution: no 2-level design of resolution {resolution} for {k} factors "
+                         f"({exc})") from None
+
+
+def _check_type(table: dict, key: str, kinds: tuple[type, ...], what: str, where: str) -> Any:
+    value = table[key]
+    if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
+        raise StudyError(f"{where}.{key}: expected {what}, got {value!r}")
+    return value
+
+
+def study_source(name: str) -> tuple[dict[str, Any], Path | None]:
+    """Raw table of a built-in study or a study file, and the file's folder.
+
+    Raises
+    ------
+    StudyError
+        Unknown study, missing file or invalid TOML.
+    """
+    if name in BUILTIN_STUDIES:
+        text = (resources.files("orchestrator") / "studies" / f"{name}.toml").read_text()
+        return tomllib.loads(text), None
+    path = Path(name)
+    if not path.is_file():
+        raise StudyError(f"study: unknown study {name!r}; one of {', '.join(BUILTIN_STUDIES)} or a study .toml file")
+    try:
+        return tomllib.loads(path.read_text()), path.resolve().parent
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise StudyError(f"study: {name!r} is not valid TOML ({exc})") from None
+
+
+def load_study(source: str | Path | dict[str, Any], seed: int | None = None) -> Study:
+    """Validate and resolve a study: built-in name, TOML file or raw table.
+
+    Parameters
+    ----------
+    source : str, Path or dict
+        ``paper``, a study file, or its parsed table.
+    seed : int, optional
+        Overrides ``study.seed``.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    StudyError, ModelError
+        On any invalid field (one line naming it and the allowed range).
+    """
+    if isinstance(source, dict):
+        raw, base = copy.deepcopy(source), None
+    else:
+        raw, base = study_source(str(source))
+    unknown = sorted(set(raw) - {"study", "factors"})
+    if unknown:
+        raise StudyError(f"{unknown[0]}: unknown table; a study has [study] and [[factors]]")
+    table = raw.get("study")
+    if not isinstance(table, dict):
+        raise StudyError("study: missing [study] table")
+    bad = sorted(set(table) - _STUDY_KEYS)
+    if bad:
+        raise StudyError(f"study.{bad[0]}: unknown key; known: {', '.join(sorted(_STUDY_KEYS))}")
+    for key in ("scenarios", "replicates"):
+        if key not in table:
+            raise StudyError(f"study.{key}: missing")
+    name = str(table.get("name", "study"))
+    scenarios = _check_type(table, "scenarios", (list,), "a list of scenario names or files", "study")
+    if not scenarios or not all(isinstance(s, str) for s in scenarios):
+        raise StudyError("study.scenarios: expected a non-empty list of scenario names or .toml files")
+    scenarios = [s if (base is None or s in _builtin_scenarios()) else str((base / s).resolve())
+                 for s in scenarios]
+    replicates = _check_type(table, "replicates", (int,), "a whole number of replicates", "study")
+    if not 1 <= replicates <= 1_000_000:
+        raise StudyError(f"study.replicates: {replicates} is outside the allowed range [1, 1000000]")
+    if seed is None:
+        seed = table.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= 2**31 - 1:
+        raise StudyError(f"study.seed: {seed!r} is outside the allowed range [0, 2147483647]")
+    design = table.get("design", "full")
+    if design not in DESIGNS:
+        raise StudyError(f"study.design: {design!r} is not allowed; one of {', '.join(DESIGNS)}")
+    resolution = table.get("resolution", 0)
+    generators = table.get("generators", "")
+    if isinstance(resolution, bool) or not isinstance(resolution, int) or not isinstance(generators, str):
+        raise StudyError("study.resolution/generators: expected a whole number and a text")
+    overrides = table.get("set", [])
+    if not isinstance(overrides, list) or not all(isinstance(o, str) for o in overrides):
+        raise StudyError("study.set: expected a list of 'section.key=value' items")
+
+    factors = _factors(raw.get("factors"))
+    matrix = design_matrix(len(factors), design, resolution, generators)
+    study = Study(name, scenarios, replicates, int(seed), design, resolution if design == "fractional" else 0,
+                  generators if design == "fractional" else "", overrides, factors, matrix)
+    _check_scenarios(study)
+    return study
+
+
+def _builtin_scenarios() -> tuple[str, ...]:
+    from orchestrator.config import BUILTIN_SCENARIOS
+    return BUILTIN_SCENARIOS
+
+
+def _factors(items: Any) -> list[Factor]:
+    if not isinstance(items, list) or not items:
+        raise StudyError("factors: expected at least one [[factors]] table")
+    factors, names, keys = [], set(), set()
+    for k, item in enumerate(items):
+        where = f"factors[{k}]"
+        if not isinstance(item, dict):
+            raise StudyError(f"{where}: expected a table with {', '.join(sorted(_FACTOR_KEYS))}")
+        bad = sorted(set(item) - _FACTOR_KEYS - {"unit", "description"})
+        if bad:
+            raise StudyError(f"{where}.{bad[0]}: unknown key; known: {', '.join(sorted(_FACTOR_KEYS))}")
+        missing = sorted(_FACTOR_KEYS - set(item))
+        if missing:
+            raise StudyError(f"{where}.{missing[0]}: missing")
+        name, key = item["name"], item["key"]
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise StudyError(f"{where}.name: {name!r} is not an identifier (letters, digits, underscore)")
+        if name in names:
+            raise StudyError(f"{where}.name: {name!r} is used by two factors")
+        if not isinstance(key, str) or key.count(".") != 1:
+            raise StudyError(f"factors.{name}.key: expected section.name, got {key!r}; sections: "
+                             f"{', '.join(s for s in SECTIONS if s != 'run')}")
+        section, var_name = key.split(".")
+        if section == "run":
+            raise StudyError(f"factors.{name}.key: {key!r} is set by the campaign (seed tree), not a factor")
+        try:
+            declared = {v.name: v for v in section_variables(section)}
+        except ModelError:
+            raise StudyError(f"factors.{name}.key: unknown section {section!r}; one of "
+                             f"{', '.join(s for s in SECTIONS if s != 'run')}") from None
+        if var_name not in declared:
+            raise StudyError(f"factors.{name}.key: unknown key {key!r}; known in {section}: "
+                             f"{', '.join(sorted(declared))}")
+        if key in keys:
+            raise StudyError(f"factors.{name}.key: {key!r} is set by two factors")
+        var = declared[var_name]
+        low = var.coerce(item["low"], f"factors.{name}.low")
+        high = var.coerce(item["high"], f"factors.{name}.high")
+        if low == high:
+            raise StudyError(f"factors.{name}: LOW and HIGH are both {low!r}; a factor needs two levels")
+        names.add(name)
+        keys.add(key)
+        factors.append(Factor(name, key, low, high, var))
+    return factors
+
+
+def _check_scenarios(study: Study) -> None:
+    """Every scenario resolves with its overrides, and scenario keys are distinct."""
+    keys: dict[int, str] = {}
+    for scenario in study.scenarios:
+        read_source(scenario)  # unknown scenario / missing file
+        cfg = load_config(scenario, study.overrides, seed=study.seed)
+        key = cfg["run"]["scenario_key"]
+        if key in keys:
+            raise StudyError(f"study.scenarios: {keys[key]!r} and {scenario!r} share run.scenario_key {key}; "
+                             "give each scenario its own key (seed tree)")
+        keys[key] = scenario
