@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
@@ -219,9 +220,14 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     return cfg
 
 
+@lru_cache(maxsize=None)
+def _declared_parameters(component: str) -> frozenset[str]:
+    return frozenset(v.name for v in COMPONENTS[component].variables() if v.causality == "parameter")
+
+
 def component_params(cfg: dict[str, dict], component: str) -> dict[str, Any]:
     """Parameters of one component: its section plus the seed keys it declares."""
-    declared = {v.name for v in COMPONENTS[component].variables() if v.causality == "parameter"}
+    declared = _declared_parameters(component)
     params = dict(cfg[component])
     params.update({k: v for k, v in cfg["run"].items() if k in declared})
     return params

@@ -121,9 +121,11 @@ class ExtendedKalmanFilter:
                                                     self.sigma_depth**2])
         PHt = self.P @ np.swapaxes(H, 1, 2)
         S = H @ PHt + R
-        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, 1, 2)), 1, 2)
+        # one factorization of S for the gain and the NIS: S⁻¹ [H P, y]
+        solved = np.linalg.solve(S, np.concatenate([np.swapaxes(PHt, 1, 2), y[:, :, None]], axis=2))
+        K = np.swapaxes(solved[:, :, :STATE_SIZE], 1, 2)
         self.x = self.x + np.einsum("bij,bj->bi", K, y)
         I_KH = np.eye(STATE_SIZE) - K @ H
         self.P = I_KH @ self.P @ np.swapaxes(I_KH, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
         self.y, self.S = y, S
-        self.nis = np.einsum("bi,bi->b", y, np.linalg.solve(S, y[:, :, None])[:, :, 0])
+        self.nis = np.einsum("bi,bi->b", y, solved[:, :, STATE_SIZE])

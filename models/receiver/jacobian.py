@@ -120,21 +120,41 @@ def _stack(values: list) -> np.ndarray:
     return np.stack(arrays)
 
 
+def _range_model(name: str, size: int, position_index: list[int]) -> ca.Function:
+    """casadi Function ``(x[size], b[3]) -> (‖p(x) − b‖, ∂h/∂x [size])`` with ``p = x[position_index]``."""
+    x = ca.SX.sym("x", size)
+    b = ca.SX.sym("b", 3)
+    p = ca.vertcat(*[x[i] for i in position_index])
+    h = ca.norm_2(p - b)
+    return ca.Function(name, [x, b], [h, ca.jacobian(h, x).T], ["x", "b"], ["h", "H"])
+
+
 @lru_cache(maxsize=1)
 def range_function() -> ca.Function:
-    """casadi Function ``(x[6], b[3]) -> (h, Hᵀ[6])`` of one range."""
-    x = ca.SX.sym("x", STATE_SIZE)
-    b = ca.SX.sym("b", 3)
-    p = ca.vertcat(x[0], x[2], x[4])
-    h = ca.norm_2(p - b)
-    jac = ca.jacobian(h, x)
-    return ca.Function("range_model", [x, b], [h, jac.T], ["x", "b"], ["h", "H"])
+    """casadi Function ``(x[6], b[3]) -> (h, Hᵀ[6])`` of one range, x the EKF state."""
+    return _range_model("range_model", STATE_SIZE, POSITION_INDEX)
+
+
+@lru_cache(maxsize=1)
+def position_range_function() -> ca.Function:
+    """casadi Function ``(p[3], b[3]) -> (h, ∂h/∂p [3])`` of one range, p a position."""
+    return _range_model("position_range_model", 3, [0, 1, 2])
 
 
 @lru_cache(maxsize=1)
 def range_numpy() -> Callable[..., list[np.ndarray]]:
     """:func:`range_function` translated by :func:`numpy_function`."""
     return numpy_function(range_function())
+
+
+@lru_cache(maxsize=1)
+def position_range_numpy() -> Callable[..., list[np.ndarray]]:
+    """:func:`position_range_function` translated by :func:`numpy_function`.
+
+    Called with components first: ``p`` of shape (3, B, 1) and ``b`` of
+    shape (3, B, n) give ``h`` (1, B, n) and ``∂h/∂p`` (3, B, n).
+    """
+    return numpy_function(position_range_function())
 
 
 def range_and_jacobian(states: np.ndarray, beacons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
