@@ -403,7 +403,7 @@ def _execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries
                                  key=f"sblsim-{study.name}-{c.id}-{os.getpid()}-{time.time_ns()}"): c
                    for c in chunks}
         try:
-            for future in as_completed(futures):
+            for future in as_completed(futures, loop=client.loop):
                 yield futures[future], future.result()
         finally:
             for future in futures:
