@@ -1,4 +1,4 @@
-"""Command line: ``sblsim run``, ``sblsim campaign``, ``sblsim fmus build`` and ``sblsim fmus validate``.
+"""Command line: ``sblsim run``, ``campaign``, ``analyze``, ``fmus build`` and ``fmus validate``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
@@ -48,6 +48,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="runs per chunk (default 800 local, 50 fmu); does not change the results")
     c.add_argument("--save-timeseries", action="store_true", help="also write every run's per-step time series")
     c.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (fmu engine)")
+    c.add_argument("--analyze", action="store_true", help="run `sblsim analyze` on the results at the end")
+
+    a = sub.add_parser("analyze", help="factorial analysis and report of a campaign directory")
+    a.add_argument("dir", type=Path, help="campaign directory (with runs.parquet)")
+    a.add_argument("--out", type=Path, default=None, help="output directory (default: the campaign directory)")
+    a.add_argument("--metric", default="e_tot_rms", help="response column (default e_tot_rms)")
+    a.add_argument("--order", type=int, default=2, help="highest interaction order in the model (default 2)")
 
     f = sub.add_parser("fmus", help="build or validate the four FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
@@ -102,6 +109,24 @@ def _campaign(args: argparse.Namespace) -> int:
               f"{len(result.runs)} runs in {out / 'runs.parquet'}")
     else:
         print(f"nothing to do: {len(result.runs)} runs already in {out / 'runs.parquet'}")
+    if args.analyze:
+        return _analyze_dir(out)
+    return 0
+
+
+def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_rms", order: int = 2) -> int:
+    from orchestrator.analysis import compute, write
+
+    analysis = compute(directory, metric, order)
+    for note in analysis.warnings:
+        print(f"note: {note}", file=sys.stderr)
+    target = write(analysis, out or directory)
+    for scenario, result in analysis.fits.items():
+        effects = result.effects
+        significant = effects[effects["p_value"] < analysis.alpha].sort_values("t", key=abs, ascending=False)
+        terms = ", ".join(significant["term"].head(5)) or "none"
+        print(f"{scenario}: significant terms, largest first: {terms}")
+    print(f"analysis written to {target}/ (report.html, report.md, effects.csv, anova.csv, tables.csv, figures)")
     return 0
 
 
@@ -136,6 +161,8 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "campaign":
             return _campaign(args)
+        if args.command == "analyze":
+            return _analyze_dir(args.dir, args.out, args.metric, args.order)
         return _fmus(args)
     except (ModelError, KeyboardInterrupt) as exc:
         message = str(exc) if isinstance(exc, ModelError) else "interrupted"
