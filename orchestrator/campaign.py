@@ -348,42 +348,56 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     client = connect(scheduler) if scheduler else None
     try:
         batch = prepare_directory(out, study, resume, engine, batch)
-        chunks = plan(study, batch, configs)
-        chunk_dir, series_dir = out / "chunks", out / "timeseries"
-        chunk_dir.mkdir(exist_ok=True)
-        if save_timeseries:
-            series_dir.mkdir(exist_ok=True)
-        for stale in chunk_dir.glob(".*.tmp"):  # left by a killed process
-            stale.unlink()
-        todo = [c for c in chunks if not (chunk_dir / f"{c.id}.parquet").is_file()
-                or (save_timeseries and not (series_dir / f"{c.id}.parquet").is_file())]
-        total = study.runs
-        done = total - sum(c.runs for c in todo)
-        start = time.perf_counter()
-        computed = 0
-        if todo:
-            todo.sort(key=lambda c: -c.steps * c.runs)  # longest first: better load balance
-            reporter = _Progress(total, done, progress)
-            try:
-                for chunk, (rows, series) in _execute(todo, study, engine, fmu_dir, save_timeseries,
-                                                      workers, client):
-                    if series is not None:
-                        _write_atomic(series, series_dir / f"{chunk.id}.parquet")
-                    _write_atomic(rows, chunk_dir / f"{chunk.id}.parquet")
-                    computed += chunk.runs
-                    reporter.update(chunk.runs)
-            except KeyboardInterrupt:
-                reporter.close()
-                raise CampaignInterrupted(done + computed, total, out) from None
-            reporter.close()
-        wall = time.perf_counter() - start
-        runs = collect(out, chunks)
-        if computed or not (out / "runs.parquet").is_file():
-            _write_atomic(runs, out / "runs.parquet")
-        return CampaignResult(out, runs, computed, wall)
+    except BaseException:
+        if client is not None:
+            client.close()
+        raise
+    try:
+        return _run_prepared(study, out, batch, configs, workers, client, engine, fmu_dir, save_timeseries,
+                             progress)
+    except KeyboardInterrupt:
+        done = sum(len(pd.read_parquet(f, columns=["cell"])) for f in (out / "chunks").glob("*.parquet"))
+        raise CampaignInterrupted(done, study.runs, out) from None
     finally:
         if client is not None:
             client.close()
+
+
+def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, client, engine: str, fmu_dir,
+                  save_timeseries: bool, progress: bool | None) -> CampaignResult:
+    """Run the missing chunks of a prepared campaign directory and write ``runs.parquet``."""
+    chunks = plan(study, batch, configs)
+    chunk_dir, series_dir = out / "chunks", out / "timeseries"
+    chunk_dir.mkdir(exist_ok=True)
+    if save_timeseries:
+        series_dir.mkdir(exist_ok=True)
+    for folder in (out, chunk_dir, series_dir):  # temporary files left by a killed process
+        for stale in folder.glob(".*.tmp"):
+            stale.unlink()
+    todo = [c for c in chunks if not (chunk_dir / f"{c.id}.parquet").is_file()
+            or (save_timeseries and not (series_dir / f"{c.id}.parquet").is_file())]
+    total = study.runs
+    done = total - sum(c.runs for c in todo)
+    start = time.perf_counter()
+    computed = 0
+    if todo:
+        todo.sort(key=lambda c: -c.steps * c.runs)  # longest first: better load balance
+        reporter = _Progress(total, done, progress)
+        try:
+            for chunk, (rows, series) in _execute(todo, study, engine, fmu_dir, save_timeseries,
+                                                  workers, client):
+                if series is not None:
+                    _write_atomic(series, series_dir / f"{chunk.id}.parquet")
+                _write_atomic(rows, chunk_dir / f"{chunk.id}.parquet")
+                computed += chunk.runs
+                reporter.update(chunk.runs)
+        finally:
+            reporter.close()
+    wall = time.perf_counter() - start
+    runs = collect(out, chunks)
+    if computed or not (out / "runs.parquet").is_file():
+        _write_atomic(runs, out / "runs.parquet")
+    return CampaignResult(out, runs, computed, wall)
 
 
 def collect(out: Path, chunks: list[Chunk]) -> pd.DataFrame:

@@ -94,9 +94,10 @@ def _campaign(args: argparse.Namespace) -> int:
 
     study = load_study(args.study, seed=args.seed)
     out = args.out or Path("results") / study.name
-    where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{args.workers or os.cpu_count()} workers"
+    workers = args.workers if args.workers is not None else os.cpu_count()
+    where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{workers} worker process(es)"
     print(f"{study.name}: {len(study.scenarios)} scenarios x {study.cells} cells x {study.replicates} replicates "
-          f"= {study.runs} runs on the {args.engine} engine, {where}", file=sys.stderr)
+          f"= {study.runs} runs on the {args.engine} engine, {where}")
     try:
         result = run_campaign(study, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                               engine=args.engine, batch=args.batch, fmu_dir=args.fmu_dir,
@@ -164,10 +165,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "analyze":
             return _analyze_dir(args.dir, args.out, args.metric, args.order)
         return _fmus(args)
-    except (ModelError, KeyboardInterrupt) as exc:
-        message = str(exc) if isinstance(exc, ModelError) else "interrupted"
-        print(f"sblsim: error: {message}", file=sys.stderr)
+    except ModelError as exc:
+        print(f"sblsim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("sblsim: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

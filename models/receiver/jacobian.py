@@ -62,20 +62,24 @@ def numpy_function(function: ca.Function) -> Callable[..., list[np.ndarray]]:
     -------
     callable
         ``f(*inputs) -> [outputs]``: input ``j`` is a sequence of
-        ``function.size1_in(j)`` arrays (all broadcastable to one shape S);
-        output ``k`` is an array of shape ``(function.size1_out(k), *S)``
-        with zeros at the structural zeros.
+        ``function.size1_in(j)`` arrays (broadcastable to one shape S);
+        output ``k`` is an array of shape ``(function.size1_out(k), *S')``
+        with zeros at the structural zeros, S' the broadcast shape of the
+        inputs it depends on (``()`` for a constant output).
 
     Raises
     ------
     ValueError
-        If an input is not a dense column vector or an operation has no
-        numpy counterpart.
+        If an input is not a dense column vector, an output is not a column
+        vector, or an operation has no numpy counterpart.
     """
     for j in range(function.n_in()):
         sp = function.sparsity_in(j)
         if sp.size2() != 1 or not sp.is_dense():
             raise ValueError(f"{function.name()}: input {j} is not a dense column vector")
+    for k in range(function.n_out()):
+        if function.sparsity_out(k).size2() != 1:
+            raise ValueError(f"{function.name()}: output {k} is not a column vector")
     lines = [f"def {function.name()}({', '.join(f'in{j}' for j in range(function.n_in()))}):"]
     names = [f"in{j}" for j in range(function.n_in())]
     outputs = {}
@@ -83,11 +87,12 @@ def numpy_function(function: ca.Function) -> Callable[..., list[np.ndarray]]:
         op, i, o = function.instruction_id(k), function.instruction_input(k), function.instruction_output(k)
         if op == ca.OP_INPUT:
             expr = f"{names[i[0]]}[{i[1]}]"
-        elif op == ca.OP_OUTPUT:
-            outputs[(o[0], o[1])] = f"w{i[0]}"
+        elif op == ca.OP_OUTPUT:  # copy now: casadi may re-use the work slot afterwards
+            outputs[(o[0], o[1])] = f"out{o[0]}_{o[1]}"
+            lines.append(f"    out{o[0]}_{o[1]} = w{i[0]}")
             continue
         elif op == ca.OP_CONST:
-            expr = repr(float(function.instruction_constant(k)))
+            expr = f"float('{float(function.instruction_constant(k))!r}')"
         elif op in _UNARY:
             expr = _UNARY[op].format(a=f"w{i[0]}")
         elif op in _BINARY:
@@ -95,19 +100,14 @@ def numpy_function(function: ca.Function) -> Callable[..., list[np.ndarray]]:
         else:
             raise ValueError(f"{function.name()}: casadi operation {op} has no numpy translation")
         lines.append(f"    w{o[0]} = {expr}")
-    # outputs: stack the nonzeros into dense rows (column vectors only)
+    # outputs: the nonzeros stacked into dense rows, zeros elsewhere
     result = []
     for k in range(function.n_out()):
         sp = function.sparsity_out(k)
-        rows = sp.row()
-        exprs = [outputs.get((k, nz), "0.0") for nz in range(sp.nnz())]
-        if sp.is_dense():
-            result.append(f"_stack([{', '.join(exprs)}])")
-        else:
-            dense = ["0.0"] * sp.size1()
-            for nz, row in enumerate(rows):
-                dense[row] = exprs[nz]
-            result.append(f"_stack([{', '.join(dense)}])")
+        dense = ["0.0"] * sp.size1()
+        for nz, row in enumerate(sp.row()):
+            dense[row] = outputs.get((k, nz), "0.0")
+        result.append(f"_stack([{', '.join(dense)}])")
     lines.append(f"    return [{', '.join(result)}]")
     namespace = {"np": np, "_stack": _stack}
     exec(compile("\n".join(lines), f"<casadi {function.name()}>", "exec"), namespace)  # noqa: S102

@@ -1,0 +1,436 @@
+"""Campaigns: results independent of execution, resume after a kill or Ctrl-C, designs, engines, errors.
+
+The studies are small (two scenarios, three factors, a few replicates, 10 s
+runs) so that every campaign takes a second or two.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import tomli_w
+
+from orchestrator.campaign import METRIC_COLUMNS, plan, run_campaign
+from orchestrator.config import load_config
+from orchestrator.run import run
+from orchestrator.study import design_matrix, load_study
+
+REPLICATES = 3
+#: Two scenarios; factors on the platform, the acoustics (tied to the receiver's R) and the
+#: sampling time (a setting a batch cannot vary, so the cells split into two batch groups).
+STUDY = {
+    "study": {"name": "tiny", "scenarios": ["semicircle", "spiral"], "replicates": REPLICATES, "seed": 11,
+              "set": ["simulation.duration=10", "acoustics.loss_pct=10"]},
+    "factors": [
+        {"name": "baseline", "key": "platform.baseline", "low": 0.4, "high": 3.0},
+        {"name": "range", "key": "acoustics.sigma_range", "low": 0.1, "high": 1.0},
+        {"name": "T", "key": "simulation.sampling_time", "low": 0.1, "high": 0.5},
+    ],
+}
+
+
+def study_table(**changes) -> dict:
+    table = {"study": {**STUDY["study"]}, "factors": [dict(f) for f in STUDY["factors"]]}
+    table["study"].update(changes)
+    return table
+
+
+def write_study(path: Path, table: dict) -> Path:
+    path.write_text(tomli_w.dumps(table))
+    return path
+
+
+def sblsim(*args, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def start_sblsim(*args, cwd: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def assert_usage_error(proc: subprocess.CompletedProcess, *needles: str) -> str:
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, proc.stderr
+    line = lines[0]
+    assert line.startswith("sblsim: error:"), line
+    for needle in needles:
+        assert needle in line, (needle, line)
+    return line
+
+
+def read_runs(out: Path) -> pd.DataFrame:
+    return pd.read_parquet(out / "runs.parquet")
+
+
+def assert_same_runs(got: pd.DataFrame, want: pd.DataFrame) -> None:
+    pd.testing.assert_frame_equal(got, want, check_exact=True)
+
+
+def chunk_files(out: Path) -> list[Path]:
+    return sorted((out / "chunks").glob("*.parquet"))
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The tiny study run in this process, one worker, default batch (a chunk spans every cell it can)."""
+    out = tmp_path_factory.mktemp("reference") / "campaign"
+    study = load_study(study_table())
+    result = run_campaign(study, out, workers=1, progress=False)
+    return study, result
+
+
+# --------------------------------------------------------------------------- same results however run
+
+def test_reference_campaign_layout(reference):
+    study, result = reference
+    runs = result.runs
+    assert study.cells == 8 and study.runs == 2 * 8 * REPLICATES
+    assert result.computed == study.runs and len(runs) == study.runs
+    assert_same_runs(read_runs(result.out), runs)
+    # sorted by scenario_key, cell, replicate; every run once
+    keys = list(zip(runs["scenario_key"], runs["cell"], runs["replicate"]))
+    assert keys == sorted(keys) == [(s, c, r) for s in (1, 2) for c in range(8) for r in range(REPLICATES)]
+    # factor levels of each row follow pyDOE3's ff2n (first factor slowest)
+    for k, factor in enumerate(study.factors):
+        coded = 2 * ((runs["cell"].to_numpy() >> (2 - k)) & 1) - 1
+        np.testing.assert_array_equal(runs[factor.name].to_numpy(), coded)
+        np.testing.assert_array_equal(runs[f"{factor.name}_value"].to_numpy(),
+                                      np.where(coded < 0, factor.low, factor.high))
+    assert np.all(np.isfinite(runs["e_tot_rms"])) and runs["e_tot_rms"].nunique() == len(runs)
+    # default batch: the sampling time splits each scenario's cells into two chunks
+    assert len(chunk_files(result.out)) == 4
+    assert (result.out / "study.toml").is_file()
+
+
+def test_same_runs_with_two_worker_processes(reference, tmp_path):
+    study, ref = reference
+    result = run_campaign(study, tmp_path / "w2", workers=2, progress=False)
+    assert result.computed == study.runs
+    assert_same_runs(read_runs(tmp_path / "w2"), ref.runs)
+
+
+def test_same_runs_with_one_cell_per_chunk(reference, tmp_path):
+    study, ref = reference
+    out = tmp_path / "b"
+    result = run_campaign(study, out, workers=1, batch=REPLICATES, progress=False)
+    assert len(chunk_files(out)) == 2 * study.cells == len(plan(study, REPLICATES))
+    assert result.computed == study.runs
+    assert_same_runs(read_runs(out), ref.runs)
+
+
+def test_same_runs_on_a_dask_cluster(reference, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    study, ref = reference
+    out = tmp_path / "dask"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        result = run_campaign(study, out, scheduler=cluster.scheduler_address, batch=2 * REPLICATES,
+                              progress=False)
+    assert len(chunk_files(out)) == study.cells  # two cells per chunk
+    assert result.computed == study.runs
+    assert_same_runs(read_runs(out), ref.runs)
+
+
+# --------------------------------------------------------------------------- resume
+
+#: One scenario, 8 cells of 4 replicates, 30 s runs, one cell per chunk: 8 chunks of some 0.3 s each.
+KILL_TABLE = {
+    "study": {"name": "killme", "scenarios": ["semicircle"], "replicates": 4, "seed": 5,
+              "set": ["simulation.duration=30"]},
+    "factors": [
+        {"name": "baseline", "key": "platform.baseline", "low": 0.4, "high": 3.0},
+        {"name": "range", "key": "acoustics.sigma_range", "low": 0.1, "high": 1.0},
+        {"name": "gps", "key": "platform.gps_sigma", "low": 0.1, "high": 3.5},
+    ],
+}
+KILL_BATCH = 4
+KILL_CHUNKS = 8
+
+
+@pytest.fixture(scope="module")
+def kill_reference(tmp_path_factory):
+    """The uninterrupted campaign (in this process, all cells in one batch)."""
+    out = tmp_path_factory.mktemp("kill_reference") / "campaign"
+    study = load_study(KILL_TABLE)
+    assert len(plan(study, KILL_BATCH)) == KILL_CHUNKS
+    return run_campaign(study, out, workers=1, progress=False).runs
+
+
+def _start_and_stop_part_way(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, Path, str, str]:
+    study_file = write_study(tmp_path / "killme.toml", KILL_TABLE)
+    out = tmp_path / "out"
+    proc = start_sblsim("campaign", study_file, "--workers", "1", "--batch", KILL_BATCH, "--out", out,
+                        cwd=tmp_path)
+    deadline = time.monotonic() + 120
+    try:
+        while not ((out / "chunks").is_dir() and chunk_files(out)):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no chunk written in 120 s"
+            time.sleep(0.005)
+        assert not (out / "runs.parquet").exists()
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc, out, stdout, stderr
+
+
+def _resume(tmp_path: Path, out: Path, saved_chunks: int) -> None:
+    proc = sblsim("campaign", tmp_path / "killme.toml", "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    # only the missing chunks were computed
+    computed = (KILL_CHUNKS - saved_chunks) * KILL_BATCH
+    assert proc.stdout.splitlines()[-1].startswith(f"{computed} runs in "), proc.stdout
+    assert len(chunk_files(out)) == KILL_CHUNKS
+    assert not list((out / "chunks").glob(".*.tmp"))
+
+
+def test_resume_after_kill_gives_the_uninterrupted_result(kill_reference, tmp_path):
+    proc, out, _, _ = _start_and_stop_part_way(tmp_path, signal.SIGKILL)
+    assert proc.returncode == -signal.SIGKILL
+    saved = len(chunk_files(out))
+    assert 1 <= saved < KILL_CHUNKS, saved  # really interrupted part-way
+    assert not (out / "runs.parquet").exists()
+    # a temporary file a killed writer would leave behind is cleaned up
+    (out / "chunks" / ".001-00007-00007.parquet.dead.tmp").write_bytes(b"half a parquet file")
+    _resume(tmp_path, out, saved)
+    assert_same_runs(read_runs(out), kill_reference)
+
+
+def test_ctrl_c_exits_130_and_resume_gives_the_uninterrupted_result(kill_reference, tmp_path):
+    proc, out, _, stderr = _start_and_stop_part_way(tmp_path, signal.SIGINT)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    last = stderr.splitlines()[-1]
+    assert "interrupted" in last and "--resume" in last, stderr
+    saved = len(chunk_files(out))
+    assert 1 <= saved < KILL_CHUNKS, saved
+    assert f"{saved * KILL_BATCH} of {KILL_CHUNKS * KILL_BATCH} runs" in last, last
+    assert not (out / "runs.parquet").exists()
+    _resume(tmp_path, out, saved)
+    assert_same_runs(read_runs(out), kill_reference)
+
+
+def test_resume_of_a_finished_campaign_does_nothing(tmp_path):
+    study = load_study(study_table(scenarios=["semicircle"]))
+    out = tmp_path / "done"
+    first = run_campaign(study, out, workers=1, batch=2 * REPLICATES, progress=False)
+    files = [out / "runs.parquet", out / "study.toml", *chunk_files(out)]
+    stamps = {p: p.stat().st_mtime_ns for p in files}
+    listing = sorted(p.relative_to(out) for p in out.rglob("*"))
+    time.sleep(0.05)  # a rewrite would get a later time stamp
+
+    again = run_campaign(study, out, workers=1, resume=True, progress=False)
+    assert again.computed == 0
+    assert_same_runs(again.runs, first.runs)
+    proc = sblsim("campaign", write_study(tmp_path / "done.toml", study_table(scenarios=["semicircle"])),
+                  "--out", out, "--resume", "--workers", "1", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.splitlines()[-1].startswith("nothing to do"), proc.stdout
+    assert {p: p.stat().st_mtime_ns for p in files} == stamps
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == listing
+
+    # without --resume: a one-line error, nothing written
+    proc = sblsim("campaign", tmp_path / "done.toml", "--out", out, "--workers", "1", cwd=tmp_path)
+    assert_usage_error(proc, "--resume")
+    assert {p: p.stat().st_mtime_ns for p in files} == stamps
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == listing
+
+
+# --------------------------------------------------------------------------- fractional designs
+
+def _products(columns: np.ndarray, exclude: int) -> list[np.ndarray]:
+    """Products of two distinct columns other than ``exclude``."""
+    others = [j for j in range(columns.shape[1]) if j != exclude]
+    return [columns[:, a] * columns[:, b] for a, b in itertools.combinations(others, 2)]
+
+
+def main_effects_clear_of_each_other(m: np.ndarray) -> bool:
+    return not any(np.array_equal(m[:, i], s * m[:, j])
+                   for i, j in itertools.combinations(range(m.shape[1]), 2) for s in (1, -1))
+
+
+def main_effects_clear_of_two_factor_interactions(m: np.ndarray) -> bool:
+    return not any(np.array_equal(m[:, i], s * p)
+                   for i in range(m.shape[1]) for p in _products(m, i) for s in (1, -1))
+
+
+def _check_two_level_balanced(m: np.ndarray, k: int) -> None:
+    assert m.ndim == 2 and m.shape[1] == k
+    assert set(np.unique(m)) == {-1, 1}
+    assert np.all(m.sum(axis=0) == 0)
+    assert len({tuple(r) for r in m}) == m.shape[0]  # no repeated run
+
+
+def test_fractional_design_resolution_four():
+    m = design_matrix(7, "fractional", resolution=4)
+    _check_two_level_balanced(m, 7)
+    assert m.shape[0] == 16  # 2^(7-3): the smallest resolution IV design of 7 factors
+    assert main_effects_clear_of_each_other(m)
+    assert main_effects_clear_of_two_factor_interactions(m)
+    # orthogonal main effects
+    np.testing.assert_array_equal(m.T @ m, m.shape[0] * np.eye(7, dtype=int))
+
+
+def test_fractional_design_resolution_three_aliases_main_effects_with_interactions():
+    m = design_matrix(7, "fractional", resolution=3)
+    _check_two_level_balanced(m, 7)
+    # pyDOE3's fracfact_by_res(7, 3) builds 7 factors on 4 base factors (16 runs), not the
+    # saturated 2^(7-4) of 8 runs; either way it is resolution III
+    assert m.shape[0] in (8, 16)
+    assert main_effects_clear_of_each_other(m)
+    assert not main_effects_clear_of_two_factor_interactions(m)  # the check can fail
+
+
+def test_saturated_resolution_three_design_from_generators():
+    m = design_matrix(7, "fractional", generators="a b c ab ac bc abc")
+    _check_two_level_balanced(m, 7)
+    assert m.shape[0] == 8
+    assert main_effects_clear_of_each_other(m)
+    assert not main_effects_clear_of_two_factor_interactions(m)
+    # in the saturated 2^(7-4) every main effect is aliased with three 2FIs
+    for i in range(7):
+        aliases = sum(np.array_equal(m[:, i], s * p) for p in _products(m, i) for s in (1, -1))
+        assert aliases == 3, (i, aliases)
+
+
+def test_full_design_and_explicit_generators():
+    full = design_matrix(3, "full")
+    np.testing.assert_array_equal(full, [[s0, s1, s2] for s0 in (-1, 1) for s1 in (-1, 1) for s2 in (-1, 1)])
+    m = design_matrix(4, "fractional", generators="a b c abc")
+    _check_two_level_balanced(m, 4)
+    np.testing.assert_array_equal(m[:, 3], m[:, 0] * m[:, 1] * m[:, 2])
+
+
+# --------------------------------------------------------------------------- engines, run(), time series
+
+def test_engines_agree(fmu_dir, tmp_path):
+    table = {"study": {"name": "engines", "scenarios": ["semicircle"], "replicates": 2, "seed": 3,
+                       "set": ["simulation.duration=5", "acoustics.loss_pct=20"]},
+             "factors": [{"name": "range", "key": "acoustics.sigma_range", "low": 0.1, "high": 1.0}]}
+    study = load_study(table)
+    local = run_campaign(study, tmp_path / "local", workers=1, progress=False).runs
+    fmu = run_campaign(study, tmp_path / "fmu", workers=1, engine="fmu", fmu_dir=fmu_dir, progress=False).runs
+    assert len(local) == len(fmu) == 4
+    identity = [c for c in local.columns if c not in METRIC_COLUMNS]
+    pd.testing.assert_frame_equal(fmu[identity], local[identity], check_exact=True)
+    for name in METRIC_COLUMNS:
+        np.testing.assert_allclose(fmu[name], local[name], rtol=1e-9, atol=1e-9, err_msg=name)
+    assert np.all(np.isfinite(local["e_tot_rms"]))
+
+
+def test_campaign_row_equals_a_single_run(reference):
+    _, result = reference
+    runs = result.runs
+    rng = np.random.default_rng(0)
+    picks = [0, len(runs) - 1, *rng.choice(len(runs), size=4, replace=False)]
+    for k in picks:
+        row = runs.iloc[k]
+        overrides = list(STUDY["study"]["set"])
+        overrides += [f"{f['key']}={float(row[f['name'] + '_value'])!r}" for f in STUDY["factors"]]
+        overrides += [f"run.cell={int(row['cell'])}", f"run.replicate={int(row['replicate'])}"]
+        cfg = load_config(row["scenario"], overrides, seed=int(row["seed"]))
+        assert cfg["run"]["scenario_key"] == row["scenario_key"]
+        single = run(cfg, "local").metrics.iloc[0]
+        assert single["replicate"] == row["replicate"]
+        for name in METRIC_COLUMNS:
+            assert single[name] == row[name] or (math.isnan(single[name]) and math.isnan(row[name])), \
+                (k, name, single[name], row[name])
+
+
+def test_save_timeseries(reference, tmp_path):
+    study, ref = reference
+    out = tmp_path / "series"
+    result = run_campaign(study, out, workers=1, batch=2 * REPLICATES, save_timeseries=True, progress=False)
+    assert_same_runs(result.runs, ref.runs)  # saving the series does not change the results
+    series_files = sorted((out / "timeseries").glob("*.parquet"))
+    assert [p.name for p in series_files] == [p.name for p in chunk_files(out)]
+    series = pd.concat([pd.read_parquet(p) for p in series_files], ignore_index=True)
+    runs = result.runs.set_index(["scenario_key", "cell", "replicate"])
+    groups = series.groupby(["scenario_key", "cell", "replicate"], sort=True)
+    assert len(groups) == len(runs)
+    for key, g in groups:
+        row = runs.loc[key]
+        steps = round(10.0 / row["T_value"])  # duration / sampling time
+        assert len(g) == steps, (key, len(g))
+        np.testing.assert_allclose(g["time"].to_numpy(), row["T_value"] * np.arange(1, steps + 1), rtol=1e-12)
+        e = np.sqrt(sum((g[f"true_{a}"].to_numpy() - g[f"est_{a}"].to_numpy()) ** 2 for a in "xyz"))
+        np.testing.assert_allclose(g["e_tot"].to_numpy(), e, rtol=1e-14)
+        ok = np.isfinite(e)
+        rms = math.sqrt(np.mean(e[ok] ** 2))
+        assert rms == pytest.approx(row["e_tot_rms"], rel=1e-12), key
+        ie = np.sqrt(sum((g[f"true_{a}"].to_numpy() - g[f"instr_{a}"].to_numpy()) ** 2 for a in "xyz"))
+        ok = np.isfinite(ie)
+        assert math.sqrt(np.mean(ie[ok] ** 2)) == pytest.approx(row["instr_e_tot_rms"], rel=1e-12), key
+
+
+# --------------------------------------------------------------------------- bad input
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _bad_factor_key(table):
+    table["factors"][0]["key"] = "platform.nokey"
+    return ["factors.baseline.key", "platform.nokey"]
+
+
+def _level_out_of_range(table):
+    table["factors"][1] = {"name": "loss", "key": "acoustics.loss_pct", "low": 0.0, "high": 150.0}
+    return ["factors.loss.high", "[0, 100]"]
+
+
+def _zero_replicates(table):
+    table["study"]["replicates"] = 0
+    return ["study.replicates", "[1, 1000000]"]
+
+
+BAD_STUDIES = {"unknown factor key": _bad_factor_key, "level out of range": _level_out_of_range,
+               "zero replicates": _zero_replicates}
+
+
+@pytest.mark.parametrize("case", list(BAD_STUDIES))
+def test_bad_study_is_one_line_and_writes_nothing(tmp_path, case):
+    table = study_table()
+    needles = BAD_STUDIES[case](table)
+    study_file = write_study(tmp_path / "bad.toml", table)
+    out = tmp_path / "out"
+    proc = sblsim("campaign", study_file, "--out", out, "--workers", "1", cwd=tmp_path)
+    assert_usage_error(proc, *needles)
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
+def test_unknown_study_name(tmp_path):
+    out = tmp_path / "out"
+    proc = sblsim("campaign", "nosuchstudy", "--out", out, cwd=tmp_path)
+    assert_usage_error(proc, "'nosuchstudy'", "paper")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unreachable_scheduler(tmp_path):
+    study_file = write_study(tmp_path / "s.toml", study_table())
+    out = tmp_path / "out"
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    proc = sblsim("campaign", study_file, "--out", out, "--scheduler", address, cwd=tmp_path, timeout=120)
+    assert_usage_error(proc, "--scheduler", address)
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
