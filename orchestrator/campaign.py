@@ -27,7 +27,6 @@ Campaign directory::
 
 from __future__ import annotations
 
-import logging
 import math
 import os
 import sys
@@ -36,7 +35,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Iterator
 
 import numpy as np
 import pandas as pd
@@ -46,7 +45,6 @@ from models.core import ModelError
 from orchestrator.metrics import METRIC_NAMES
 from orchestrator.study import Study
 
-log = logging.getLogger("sblsim.campaign")
 
 ENGINES = ("local", "fmu")
 #: Default runs per chunk on each engine.

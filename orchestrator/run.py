@@ -125,7 +125,7 @@ def close_handles(handles: dict[str, Any]) -> None:
 
 
 #: Recorded outputs the metrics need (the truth, the EKF estimate and the instrumentation fix).
-METRIC_COLUMNS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz")
+METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz")
 
 
 def merge_params(cfgs: Sequence[dict], component: str) -> tuple[dict[str, Any], np.ndarray]:
@@ -236,7 +236,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         T = sim["sampling_time"]
         n_steps = int(math.floor(sim["duration"] / T + 1e-9))
         rates = {"receiver": sim["ekf_rate_ratio"]}
-        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_COLUMNS]
+        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
         groups = [cfgs] if engine == "local" else [[c] for c in cfgs]
         bar = None
         if progress:
@@ -268,7 +268,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
 def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
             timeseries: bool = True) -> RunResult:
     batch = len(replicates)
-    names = TIMESERIES_COLUMNS if timeseries else METRIC_COLUMNS
+    names = TIMESERIES_COLUMNS if timeseries else METRIC_INPUTS
     cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in names}
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
