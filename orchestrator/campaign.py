@@ -43,13 +43,12 @@ import pandas as pd
 from models import COMPONENTS
 from models.core import ModelError
 from orchestrator.metrics import METRIC_NAMES
+from orchestrator.run import ENGINES, fmu_paths, run_batch, with_replicates
 from orchestrator.study import Study
 
 
-ENGINES = ("local", "fmu")
 #: Default runs per chunk on each engine.
 DEFAULT_BATCH = {"local": 800, "fmu": 50}
-IDENTITY_COLUMNS = ("scenario", "scenario_key", "cell", "replicate", "seed")
 METRIC_COLUMNS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
 
 
@@ -151,14 +150,8 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
     series : pandas.DataFrame or None
         Per-step time series with ``cell`` and ``replicate`` columns, if asked.
     """
-    from orchestrator.run import make_handles, close_handles, run_batch, with_replicates
-
     cfgs = [cfg for base in chunk.configs for cfg in with_replicates(base, range(chunk.replicates))]
-    handles = make_handles(engine, fmu_dir)
-    try:
-        result = run_batch(cfgs, engine, handles=handles, timeseries=timeseries)
-    finally:
-        close_handles(handles)
+    result = run_batch(cfgs, engine, fmu_dir=fmu_dir, timeseries=timeseries)
     cells = np.repeat(chunk.cells, chunk.replicates)
     first = chunk.configs[0]["run"]
     rows: dict[str, Any] = {
@@ -215,17 +208,6 @@ class CampaignResult:
     @property
     def runs_per_second(self) -> float:
         return self.computed / self.wall_time if self.wall_time > 0 else float("nan")
-
-
-def check_fmus(fmu_dir: str | Path | None) -> None:
-    """Refuse the fmu engine early when an FMU is missing."""
-    from fmus.build import DEFAULT_DIR, fmu_path
-
-    directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
-    for name in COMPONENTS:
-        if not fmu_path(directory, name).is_file():
-            raise CampaignError(f"--engine fmu: {name} FMU not found in {str(directory)!r}; "
-                                "build them with `sblsim fmus build`")
 
 
 def connect(scheduler: str, timeout: float = 10.0):
@@ -340,7 +322,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         raise CampaignError(f"--batch: {batch} is outside the allowed range [1, inf)")
     batch = batch or DEFAULT_BATCH[engine]
     if engine == "fmu":
-        check_fmus(fmu_dir)
+        fmu_paths(fmu_dir)  # refuse missing FMUs before anything is written
         fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
     configs = cell_configs(study)  # every cell resolves before anything is written
     client = connect(scheduler) if scheduler else None

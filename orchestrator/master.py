@@ -63,7 +63,8 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         unknown = sorted(set(record) - {f"{c}.{n}" for c, n in recorded})
         if unknown:
             raise KeyError(f"record: {unknown[0]} is not an output of the system")
-        recorded = [(c, n) for c, n in recorded if f"{c}.{n}" in set(record)]
+        wanted = set(record)
+        recorded = [(c, n) for c, n in recorded if f"{c}.{n}" in wanted]
     records: dict[str, list] = {f"{c}.{n}": [] for c, n in recorded}
     for k in range(n_steps):
         t = t0 + k * macro_step

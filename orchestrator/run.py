@@ -81,6 +81,24 @@ class RunResult:
     wall_time: float
 
 
+def fmu_paths(fmu_dir: Path | str | None = None) -> dict[str, Path]:
+    """The built FMU of every component in ``fmu_dir`` (default ``fmus/build``).
+
+    Raises
+    ------
+    ModelError
+        If an FMU is missing.
+    """
+    from fmus.build import DEFAULT_DIR, fmu_path
+
+    directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
+    paths = {name: fmu_path(directory, name) for name in COMPONENTS}
+    for name, path in paths.items():
+        if not path.is_file():
+            raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+    return paths
+
+
 def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4) -> dict[str, Any]:
     """One handle per component for an engine.
 
@@ -92,13 +110,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     if engine == "local":
         return {name: LocalHandle(name, n_beacons) for name in COMPONENTS}
     if engine == "fmu":
-        from fmus.build import DEFAULT_DIR, fmu_path
-
-        directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
-        paths = {name: fmu_path(directory, name) for name in COMPONENTS}
-        for name, path in paths.items():
-            if not path.is_file():
-                raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+        paths = fmu_paths(fmu_dir)
         handles = {}
         try:
             for name, path in paths.items():
