@@ -48,7 +48,7 @@ import numpy as np
 import tomli_w
 
 from models.core import ModelError, Variable
-from orchestrator.config import SECTIONS, load_config, read_source, section_variables
+from orchestrator.config import BUILTIN_SCENARIOS, SECTIONS, load_config, read_source, section_variables
 
 BUILTIN_STUDIES = ("paper",)
 DESIGNS = ("full", "fractional")
@@ -279,7 +279,7 @@ def load_study(source: str | Path | dict[str, Any], seed: int | None = None) -> 
     scenarios = _check_type(table, "scenarios", (list,), "a list of scenario names or files", "study")
     if not scenarios or not all(isinstance(s, str) for s in scenarios):
         raise StudyError("study.scenarios: expected a non-empty list of scenario names or .toml files")
-    scenarios = [s if (base is None or s in _builtin_scenarios()) else str((base / s).resolve())
+    scenarios = [s if (base is None or s in BUILTIN_SCENARIOS) else str((base / s).resolve())
                  for s in scenarios]
     replicates = _check_type(table, "replicates", (int,), "a whole number of replicates", "study")
     if not 1 <= replicates <= 1_000_000:
@@ -305,11 +305,6 @@ def load_study(source: str | Path | dict[str, Any], seed: int | None = None) -> 
                   generators if design == "fractional" else "", overrides, factors, matrix)
     _check_scenarios(study)
     return study
-
-
-def _builtin_scenarios() -> tuple[str, ...]:
-    from orchestrator.config import BUILTIN_SCENARIOS
-    return BUILTIN_SCENARIOS
 
 
 def _factors(items: Any) -> list[Factor]:
