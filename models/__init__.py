@@ -9,5 +9,7 @@ from models.receiver import ReceiverCore
 from models.target import TargetCore
 
 COMPONENTS = {c.name: c for c in (PlatformCore, AcousticsCore, TargetCore, ReceiverCore)}
+#: Every core by its own name: the four components and the alternative receivers.
+CORES = dict(COMPONENTS)
 
-__all__ = ["COMPONENTS", "AcousticsCore", "PlatformCore", "ReceiverCore", "TargetCore"]
+__all__ = ["COMPONENTS", "CORES", "AcousticsCore", "PlatformCore", "ReceiverCore", "TargetCore"]

@@ -43,7 +43,7 @@ import pandas as pd
 from models import COMPONENTS
 from models.core import ModelError
 from orchestrator.metrics import METRIC_NAMES
-from orchestrator.run import ENGINES, fmu_paths, run_batch, with_replicates
+from orchestrator.run import ENGINES, fmu_paths, run_batch, system_sources, with_replicates
 from orchestrator.study import Study
 
 
@@ -321,10 +321,11 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     if batch is not None and batch < 1:
         raise CampaignError(f"--batch: {batch} is outside the allowed range [1, inf)")
     batch = batch or DEFAULT_BATCH[engine]
-    if engine == "fmu":
-        fmu_paths(fmu_dir)  # refuse missing FMUs before anything is written
-        fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
     configs = cell_configs(study)  # every cell resolves before anything is written
+    if engine == "fmu":  # refuse missing FMUs before anything is written
+        for sources in {tuple(system_sources(cfg).items()) for cfgs in configs.values() for cfg in cfgs}:
+            fmu_paths(fmu_dir, dict(sources))
+        fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
     client = connect(scheduler) if scheduler else None
     try:
         batch = prepare_directory(out, study, resume, engine, batch)

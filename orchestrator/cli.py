@@ -1,4 +1,4 @@
-"""Command line: ``sblsim run``, ``campaign``, ``analyze``, ``fmus build`` and ``fmus validate``.
+"""Command line: ``sblsim run``, ``campaign``, ``analyze``, ``ssp export``, ``fmus build`` and ``fmus validate``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
@@ -26,9 +26,15 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sblsim", description="SBL acoustic underwater positioning co-simulation")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    r = sub.add_parser("run", help="run one scenario or configuration file")
-    r.add_argument("scenario", help="built-in scenario (semicircle, spiral, random, square, harbour) or CONFIG.toml")
-    r.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    r = sub.add_parser("run", help="run one scenario, configuration file or SSP package")
+    r.add_argument("scenario", nargs="?", default=None,
+                   help="built-in scenario (semicircle, spiral, random, square, harbour) or CONFIG.toml")
+    r.add_argument("--ssp", type=Path, default=None, metavar="FILE.ssp",
+                   help="run an SSP package instead: its FMUs, connections and parameter sets")
+    r.add_argument("--engine", choices=("local", "fmu"), default=None,
+                   help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
+    r.add_argument("--master", choices=("gauss-seidel", "jacobi"), default=None,
+                   help="master algorithm (default: the configuration's, gauss-seidel)")
     r.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
     r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -50,6 +56,16 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (fmu engine)")
     c.add_argument("--analyze", action="store_true", help="run `sblsim analyze` on the results at the end")
 
+    s = sub.add_parser("ssp", help="export the system as an SSP 1.0 package for other FMI hosts")
+    ssub = s.add_subparsers(dest="ssp_command", required=True, parser_class=_Parser)
+    e = ssub.add_parser("export", help="write SystemStructure.ssd, the FMUs and the parameter sets as FILE.ssp")
+    e.add_argument("scenario", help="built-in scenario or CONFIG.toml")
+    e.add_argument("--out", type=Path, required=True, help="the .ssp file to write")
+    e.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
+    e.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key (repeatable)")
+    e.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+
     a = sub.add_parser("analyze", help="factorial analysis and report of a campaign directory")
     a.add_argument("dir", type=Path, help="campaign directory (with runs.parquet)")
     a.add_argument("--out", type=Path, default=None, help="output directory (default: the campaign directory)")
@@ -65,26 +81,62 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_seed(seed: int | None) -> None:
+    if seed is not None and not 0 <= seed <= 2**31 - 1:
+        raise ModelError(f"--seed: {seed} is outside the allowed range [0, 2147483647]")
+
+
 def _run(args: argparse.Namespace) -> int:
     from orchestrator.config import load_config
-    from orchestrator.run import run, summary, write_run
+    from orchestrator.run import beacon_count, close_handles, make_handles, run, summary, system_sources, write_run
 
-    if args.seed is not None and not 0 <= args.seed <= 2**31 - 1:
-        raise ModelError(f"--seed: {args.seed} is outside the allowed range [0, 2147483647]")
-    cfg = load_config(args.scenario, args.overrides, args.seed)
+    _check_seed(args.seed)
+    if (args.scenario is None) == (args.ssp is None):
+        raise ModelError("run: give either a scenario (or CONFIG.toml) or --ssp FILE.ssp")
+    overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else [])
+    connections, handles = None, None
+    if args.ssp is not None:
+        from orchestrator.ssp import read_ssp
+
+        engine = args.engine or "fmu"
+        system = read_ssp(args.ssp, overrides, args.seed)
+        cfg, connections = system.config, system.connections
+        handles = make_handles(engine, None, beacon_count(cfg), system_sources(cfg),
+                               fmu_files=system.fmu_files if engine == "fmu" else None)
+    else:
+        engine = args.engine or "local"
+        cfg = load_config(args.scenario, overrides, args.seed)
     out = args.out or Path("results") / cfg["run"]["scenario"]
     if out.exists() and not out.is_dir():
         raise ModelError(f"--out: {str(out)!r} exists and is not a directory")
-    result = run(cfg, args.engine, fmu_dir=args.fmu_dir, progress=sys.stderr.isatty())
+    try:
+        result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
+                     connections=connections)
+    finally:
+        if handles is not None:
+            close_handles(handles)
     write_run(result, out)
     s = summary(result)
-    print(f"{s['scenario']} on the {s['engine']} engine, seed {s['seed']}: {s['steps']} steps in "
-          f"{s['wall_time']:.2f} s")
+    sim = cfg["simulation"]
+    print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {sim['receiver']}), "
+          f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
     print(f"  EKF:             e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
           f"std {s['e_tot_std']:.3f} m")
     print(f"  instrumentation: e_tot mean {s['instr_e_tot_mean']:.3f} m, RMS {s['instr_e_tot_rms']:.3f} m, "
           f"std {s['instr_e_tot_std']:.3f} m")
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
+    return 0
+
+
+def _ssp(args: argparse.Namespace) -> int:
+    from orchestrator.config import load_config
+    from orchestrator.ssp import export_ssp
+
+    _check_seed(args.seed)
+    cfg = load_config(args.scenario, args.overrides, args.seed)
+    path = export_ssp(cfg, args.out, args.fmu_dir)
+    print(f"wrote {path} ({cfg['run']['scenario']}, seed {cfg['run']['seed']}, receiver "
+          f"{cfg['simulation']['receiver']}); it validates against the SSP 1.0 schemas")
     return 0
 
 
@@ -162,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "campaign":
             return _campaign(args)
+        if args.command == "ssp":
+            return _ssp(args)
         if args.command == "analyze":
             return _analyze_dir(args.dir, args.out, args.metric, args.order)
         return _fmus(args)

@@ -49,6 +49,11 @@ def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
         value = raw.get(section, {}).get(name) if isinstance(raw.get(section), dict) else None
         if _is_path(section, value):
             raw[section][name] = str((base / Path(value).expanduser()).resolve())
+    sim = raw.get("simulation")
+    receiver = sim.get("receiver") if isinstance(sim, dict) else None
+    if isinstance(receiver, str) and receiver.startswith(EXTERNAL_PREFIX):
+        path = (base / Path(receiver[len(EXTERNAL_PREFIX):]).expanduser()).resolve()
+        sim["receiver"] = f"{EXTERNAL_PREFIX}{path}"
 
 
 class ConfigError(ModelError):
@@ -66,9 +71,22 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              min=1, max=1000),
     Variable("duration", "parameter", "Real", 0.0, "s", "Simulated time (0: one pass of the trajectory)",
              min=0.0, max=1e6),
-    Variable("master", "parameter", "String", "gauss-seidel", description="Master algorithm",
-             choices=("gauss-seidel",)),
+    Variable("master", "parameter", "String", "gauss-seidel",
+             description="Master algorithm: gauss-seidel, or jacobi as FMI hosts step an SSP",
+             choices=("gauss-seidel", "jacobi")),
+    Variable("receiver", "parameter", "String", "ekf",
+             description="Receiver component: ekf (the paper's), lsq (per-step least squares) or fmu:PATH"),
 )
+
+#: Built-in receivers: configuration value -> core name (:data:`models.CORES`).
+RECEIVERS = {"ekf": "receiver", "lsq": "receiver_lsq"}
+EXTERNAL_PREFIX = "fmu:"
+
+
+def receiver_source(cfg: dict[str, dict]) -> str | Path:
+    """The receiver of a configuration: a built-in core name, or the path of a user's FMU."""
+    value = cfg["simulation"]["receiver"]
+    return RECEIVERS[value] if value in RECEIVERS else Path(value[len(EXTERNAL_PREFIX):])
 
 
 def section_variables(section: str) -> tuple[Variable, ...]:
@@ -131,16 +149,22 @@ def read_source(source: str | Path) -> dict[str, Any]:
 def parse_override(item: str) -> tuple[str, str, Any]:
     """Split ``section.key=value``; the value is read as a TOML value, else as text.
 
+    A key without a section names a key of the ``simulation`` section, so
+    ``receiver=lsq`` is ``simulation.receiver=lsq``.
+
     Raises
     ------
     ConfigError
-        If the item has no ``=`` or no dotted key.
+        If the item has no ``=``, or a key is neither dotted nor a simulation key.
     """
     if "=" not in item:
         raise ConfigError(f"--set: expected key=value, got {item!r}")
     key, text = (s.strip() for s in item.split("=", 1))
+    if "." not in key and key in {v.name for v in SIMULATION_VARIABLES}:
+        key = f"simulation.{key}"
     if key.count(".") != 1:
-        raise ConfigError(f"--set: expected a dotted key section.name, got {key!r}; sections: {', '.join(SECTIONS)}")
+        raise ConfigError(f"--set: expected a dotted key section.name (or a simulation key), got {key!r}; "
+                          f"sections: {', '.join(SECTIONS)}")
     section, name = key.split(".")
     try:
         value = tomllib.loads(f"v = {text}")["v"]
@@ -174,6 +198,22 @@ def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | N
     raw = copy.deepcopy(read_source(source))
     if str(source) in BUILTIN_SCENARIOS:
         raw.setdefault("run", {})["scenario"] = str(source)
+    return resolve(apply_overrides(raw, overrides, seed))
+
+
+def apply_overrides(raw: dict[str, Any], overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
+    """Apply ``section.key=value`` overrides and the seed to a raw configuration (in place).
+
+    Returns
+    -------
+    dict
+        ``raw``, with paths made absolute (from the working directory).
+
+    Raises
+    ------
+    ConfigError
+        On an unknown section or key.
+    """
     for item in overrides:
         section, name, value = parse_override(item)
         names = {v.name for v in section_variables(section)}
@@ -183,7 +223,7 @@ def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | N
     if seed is not None:
         raw.setdefault("run", {})["seed"] = seed
     _absolute_paths(raw, Path.cwd())
-    return resolve(raw)
+    return raw
 
 
 def resolve(raw: dict[str, Any]) -> dict[str, dict]:
@@ -212,6 +252,14 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         if f"x0_v{name}" not in given["receiver"]:
             rx[f"x0_v{name}"] = float(vel[k])
     sim = cfg["simulation"]
+    receiver = sim["receiver"]
+    if receiver not in RECEIVERS:
+        path = receiver[len(EXTERNAL_PREFIX):] if receiver.startswith(EXTERNAL_PREFIX) else ""
+        if not path:
+            raise ConfigError(f"simulation.receiver: {receiver!r} is not allowed; one of "
+                              f"{', '.join(RECEIVERS)} or fmu:PATH")
+        if not Path(path).is_file():
+            raise ConfigError(f"simulation.receiver: no FMU file at {path!r}")
     if sim["duration"] == 0.0:
         sim["duration"] = natural_duration(cfg["target"])
     if sim["duration"] < sim["sampling_time"]:
@@ -225,10 +273,15 @@ def _declared_parameters(component: str) -> frozenset[str]:
     return frozenset(v.name for v in COMPONENTS[component].variables() if v.causality == "parameter")
 
 
-def component_params(cfg: dict[str, dict], component: str) -> dict[str, Any]:
-    """Parameters of one component: its section plus the seed keys it declares."""
-    declared = _declared_parameters(component)
-    params = dict(cfg[component])
+def component_params(cfg: dict[str, dict], component: str,
+                     accepted: frozenset[str] | None = None) -> dict[str, Any]:
+    """Parameters of one component: its section plus the seed keys it declares.
+
+    With ``accepted`` (the parameters of the core or FMU that implements the
+    component, e.g. the least-squares receiver), only those keys are kept.
+    """
+    declared = _declared_parameters(component) if accepted is None else accepted
+    params = {k: v for k, v in cfg[component].items() if accepted is None or k in accepted}
     params.update({k: v for k, v in cfg["run"].items() if k in declared})
     return params
 

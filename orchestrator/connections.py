@@ -91,6 +91,45 @@ def check_connections(connections: Sequence[Connection], interfaces: Mapping[str
                 raise ConnectionMismatch(f"{comp}.{name}: input is not connected")
 
 
+def check_interface(component: str, ports: Sequence[Variable], expected: Sequence[Variable], where: object) -> None:
+    """Check that a user's FMU offers a component's inputs and outputs (name, causality, type, unit).
+
+    Parameters
+    ----------
+    component : str
+        The component it stands in for (e.g. ``receiver``).
+    ports : sequence
+        The FMU's variables (``name``, ``causality``, ``type``, ``unit``).
+    expected : sequence of Variable
+        The component's declarations; its parameters are not required.
+    where : object
+        The FMU (named in the message).
+
+    Raises
+    ------
+    ConnectionMismatch
+        Listing every missing variable and every causality, type or unit
+        that differs, and every extra input (it would stay unconnected).
+    """
+    have = {p.name: p for p in ports}
+    wanted = [v for v in expected if v.causality != "parameter"]
+    names = {v.name for v in wanted}
+    problems = []
+    for v in wanted:
+        p = have.get(v.name)
+        if p is None:
+            problems.append(f"missing {v.causality} {v.name!r} ({v.type}{', ' + v.unit if v.unit else ''})")
+            continue
+        for field in ("causality", "type", "unit"):
+            got, exp = getattr(p, field) or "", getattr(v, field)
+            if got != exp:
+                problems.append(f"{v.name!r} has {field} {got!r}, expected {exp!r}")
+    problems += [f"extra input {p.name!r}" for p in ports if p.causality == "input" and p.name not in names]
+    if problems:
+        raise ConnectionMismatch(f"{component}: {where} does not match the {component} interface: "
+                                 + "; ".join(problems))
+
+
 def execution_order(components: Sequence[str], connections: Sequence[Connection]) -> list[str]:
     """Gauss-Seidel order: a topological order of the connection graph (ties keep ``components`` order).
 

@@ -34,16 +34,23 @@ class LocalHandle:
     Parameters
     ----------
     component : str
-        Component name (a key of :data:`models.COMPONENTS`).
+        Component name in the system (a key of :data:`models.COMPONENTS`).
+    core_class : type, optional
+        The core that implements it (default the paper's, ``COMPONENTS[component]``).
     n_beacons : int
         Beacons of the interface.
     """
 
-    def __init__(self, component: str, n_beacons: int = 4) -> None:
+    #: Steps a batch of replicates at once.
+    batched = True
+
+    def __init__(self, component: str, core_class: type | None = None, n_beacons: int = 4) -> None:
         self.component = component
-        self.core_class = COMPONENTS[component]
+        self.core_class = core_class or COMPONENTS[component]
         self.n_beacons = n_beacons
-        self.ports = [Port(v.name, v.causality, v.type, v.unit) for v in self.core_class.variables(n_beacons)]
+        declarations = self.core_class.variables(n_beacons)
+        self.ports = [Port(v.name, v.causality, v.type, v.unit) for v in declarations]
+        self.parameters = frozenset(v.name for v in declarations if v.causality == "parameter")
         self.core = None
 
     def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
@@ -128,6 +135,9 @@ class FmuHandle:
         Its model description.
     """
 
+    #: Steps one replicate at a time.
+    batched = False
+
     def __init__(self, component: str, path: Path, md: Any) -> None:
         from fmpy import extract
         from fmpy.fmi2 import FMU2Slave
@@ -136,6 +146,7 @@ class FmuHandle:
         self.path = path
         self.variables = {v.name: v for v in md.modelVariables}
         self.ports = [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
+        self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
         self._unzipdir = extract(str(path))
         atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,

@@ -1,11 +1,20 @@
-"""The master algorithm: fixed-step, multi-rate, Gauss-Seidel co-simulation.
+"""The master algorithm: fixed-step, multi-rate co-simulation, Gauss-Seidel or Jacobi.
 
-Every macro step of length T the components are stepped in the order of the
-connection graph (platform and target, then the channel, then the receiver).
-Before a component steps, each of its inputs takes the latest value of the
-output it is connected to; a component with rate ratio r then takes r
-communication steps of T / r with its inputs held (zero-order hold). After
-each macro step every output of every component is recorded.
+Every macro step of length T each component with rate ratio r takes r
+communication steps (doStep) of T / r with its inputs held (zero-order hold).
+The two algorithms differ in where an input's value comes from:
+
+* **Gauss-Seidel** steps the components in the order of the connection graph
+  (platform and target, then the channel, then the receiver); before a
+  component steps, each input takes the output it is connected to as it is
+  now, so the channel already sees the platform and target at the end of the
+  macro step.
+* **Jacobi** sets every input from the outputs at the start of the macro step
+  (the initial outputs at the first one), then steps all components; no
+  component sees another's output of the same macro step. This is what FMI
+  hosts such as libcosim's fixed-step algorithm and fmpy's SSP simulator do.
+
+After each macro step every output of every component is recorded.
 
 References
 ----------
@@ -22,11 +31,14 @@ import numpy as np
 
 from orchestrator.connections import Connection, execution_order
 
+#: Master algorithms of :func:`simulate`.
+ALGORITHMS = ("gauss-seidel", "jacobi")
+
 
 def simulate(handles: Mapping[str, object], connections: Sequence[Connection], rates: Mapping[str, int],
              macro_step: float, n_steps: int, t0: float = 0.0,
              progress: Callable[[int], None] | None = None,
-             record: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+             record: Sequence[str] | None = None, algorithm: str = "gauss-seidel") -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
     Parameters
@@ -47,6 +59,8 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         Called with 1 after every macro step.
     record : sequence of str, optional
         The ``"component.variable"`` outputs to record; default all of them.
+    algorithm : {'gauss-seidel', 'jacobi'}
+        Where inputs come from (see the module).
 
     Returns
     -------
@@ -54,7 +68,17 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         ``"component.variable"`` -> array of shape (n_steps, B) for each
         recorded output, and
         ``"time"`` -> array of shape (n_steps,) [s] (the end of each macro step).
+
+    Raises
+    ------
+    ValueError
+        If ``algorithm`` is unknown.
+    KeyError
+        If a recorded name is not an output of the system.
     """
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"simulation.master: {algorithm!r} is not one of {', '.join(ALGORITHMS)}")
+    jacobi = algorithm == "jacobi"
     order = execution_order(list(handles), connections)
     incoming = {c: [k for k in connections if k.destination == c] for c in handles}
     outputs = {c: handles[c].get_outputs() for c in handles}
@@ -68,9 +92,14 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
     records: dict[str, list] = {f"{c}.{n}": [] for c, n in recorded}
     for k in range(n_steps):
         t = t0 + k * macro_step
+        if jacobi:  # every input from the outputs at the start of the macro step (copied: a core
+            for c in order:  # may update its output arrays in place while it steps)
+                if incoming[c]:
+                    handles[c].set_inputs({conn.input: np.array(outputs[conn.source][conn.output], copy=True)
+                                           for conn in incoming[c]})
         for c in order:
             handle = handles[c]
-            if incoming[c]:
+            if incoming[c] and not jacobi:
                 handle.set_inputs({conn.input: outputs[conn.source][conn.output] for conn in incoming[c]})
             ratio = rates.get(c, 1)
             sub = macro_step / ratio

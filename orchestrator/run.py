@@ -15,11 +15,11 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from models import COMPONENTS
+from models import COMPONENTS, CORES
 from models.core import ModelError
 from models.platform.geometry import parse_offsets
-from orchestrator.config import component_params, to_toml
-from orchestrator.connections import check_connections, default_connections
+from orchestrator.config import component_params, receiver_source, to_toml
+from orchestrator.connections import Connection, check_connections, check_interface, default_connections
 from orchestrator.engines import LocalHandle, open_fmu
 from orchestrator.master import simulate
 from orchestrator.metrics import errors, summarize
@@ -81,8 +81,24 @@ class RunResult:
     wall_time: float
 
 
-def fmu_paths(fmu_dir: Path | str | None = None) -> dict[str, Path]:
-    """The built FMU of every component in ``fmu_dir`` (default ``fmus/build``).
+def system_sources(cfg: dict | None = None) -> dict[str, str | Path]:
+    """What implements each component of a configuration's system.
+
+    Returns
+    -------
+    dict
+        Component name -> the name of a built-in core (:data:`models.CORES`,
+        e.g. ``receiver_lsq`` for ``simulation.receiver = "lsq"``) or the path
+        of a user's FMU (``receiver = "fmu:PATH"``). Default: the paper's system.
+    """
+    sources: dict[str, str | Path] = {name: name for name in COMPONENTS}
+    if cfg is not None:
+        sources["receiver"] = receiver_source(cfg)
+    return sources
+
+
+def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, str | Path] | None = None) -> dict[str, Path]:
+    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), or a user's.
 
     Raises
     ------
@@ -92,34 +108,59 @@ def fmu_paths(fmu_dir: Path | str | None = None) -> dict[str, Path]:
     from fmus.build import DEFAULT_DIR, fmu_path
 
     directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
-    paths = {name: fmu_path(directory, name) for name in COMPONENTS}
+    sources = sources or system_sources()
+    paths = {name: src if isinstance(src, Path) else fmu_path(directory, src) for name, src in sources.items()}
     for name, path in paths.items():
         if not path.is_file():
             raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
     return paths
 
 
-def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4) -> dict[str, Any]:
+def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4,
+                 sources: dict[str, str | Path] | None = None,
+                 fmu_files: dict[str, Path] | None = None) -> dict[str, Any]:
     """One handle per component for an engine.
+
+    Parameters
+    ----------
+    engine : {'local', 'fmu'}
+    fmu_dir : path, optional
+        Directory of the built FMUs (fmu engine).
+    n_beacons : int
+    sources : dict, optional
+        :func:`system_sources` of the configuration (default: the paper's system).
+        A user's FMU is loaded on either engine and checked against the
+        component's interface.
+    fmu_files : dict, optional
+        Component -> FMU file, overriding ``fmu_dir`` (an SSP package's FMUs).
 
     Raises
     ------
     ModelError
-        Unknown engine or a missing FMU.
+        Unknown engine, a missing FMU, or a user's FMU that does not match
+        the interface (the message lists every mismatch).
     """
-    if engine == "local":
-        return {name: LocalHandle(name, n_beacons) for name in COMPONENTS}
+    if engine not in ENGINES:
+        raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+    sources = sources or system_sources()
     if engine == "fmu":
-        paths = fmu_paths(fmu_dir)
-        handles = {}
-        try:
-            for name, path in paths.items():
-                handles[name] = open_fmu(name, path)
-        except Exception:
-            close_handles(handles)
-            raise
-        return handles
-    raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}),
+                 **(fmu_files or {})}
+    else:
+        paths = {name: src for name, src in sources.items() if isinstance(src, Path)}
+    handles: dict[str, Any] = {}
+    try:
+        for name, src in sources.items():
+            if name not in paths:
+                handles[name] = LocalHandle(name, CORES[src], n_beacons)
+                continue
+            handles[name] = open_fmu(name, paths[name])
+            if isinstance(src, Path):
+                check_interface(name, handles[name].ports, COMPONENTS[name].variables(n_beacons), paths[name])
+    except Exception:
+        close_handles(handles)
+        raise
+    return handles
 
 
 def beacon_count(cfg: dict) -> int:
@@ -140,11 +181,14 @@ def close_handles(handles: dict[str, Any]) -> None:
 METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz")
 
 
-def merge_params(cfgs: Sequence[dict], component: str) -> tuple[dict[str, Any], np.ndarray]:
+def merge_params(cfgs: Sequence[dict], component: str,
+                 accepted: frozenset[str] | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """Parameters of one component for a batch of runs, one resolved configuration per run.
 
     Values equal in every run stay scalars; values that differ (factors of a
     batch spanning several design cells) become arrays of shape (B,).
+    ``accepted`` names the parameters the component's handle takes (default:
+    the paper's core); the configuration's other keys of the section are left out.
 
     Returns
     -------
@@ -153,7 +197,7 @@ def merge_params(cfgs: Sequence[dict], component: str) -> tuple[dict[str, Any], 
     replicates : ndarray of int, shape (B,)
         ``run.replicate`` of each run.
     """
-    per_run = [component_params(c, component) for c in cfgs]
+    per_run = [component_params(c, component, accepted) for c in cfgs]
     replicates = np.array([c["run"]["replicate"] for c in cfgs], dtype=np.int64)
     params: dict[str, Any] = {}
     for name, first in per_run[0].items():
@@ -171,7 +215,7 @@ def with_replicates(cfg: dict, replicates: Sequence[int]) -> list[dict]:
 
 def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = None,
         fmu_dir: Path | str | None = None, handles: dict[str, Any] | None = None,
-        progress: bool = False) -> RunResult:
+        progress: bool = False, connections: Sequence[Connection] | None = None) -> RunResult:
     """Simulate a resolved configuration on an engine.
 
     Parameters
@@ -189,6 +233,8 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
         re-instantiated); closed by the caller.
     progress : bool
         Show a progress bar on a terminal.
+    connections : sequence of Connection, optional
+        As for :func:`run_batch`.
 
     Returns
     -------
@@ -200,18 +246,19 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
         On a connection that does not match the components, or invalid parameters.
     """
     replicates = list(replicates) if replicates is not None else [cfg["run"]["replicate"]]
-    return run_batch(with_replicates(cfg, replicates), engine, fmu_dir, handles, progress)
+    return run_batch(with_replicates(cfg, replicates), engine, fmu_dir, handles, progress, connections=connections)
 
 
 def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str | None = None,
               handles: dict[str, Any] | None = None, progress: bool = False,
-              timeseries: bool = True) -> RunResult:
+              timeseries: bool = True, connections: Sequence[Connection] | None = None) -> RunResult:
     """Simulate a batch of runs, one resolved configuration each.
 
     The runs may differ in the seed keys (cell, replicate) and in the
     parameters the cores accept per replicate (``batched_parameters``); they
     must share the simulation section and everything else. The local engine
-    steps them all together; the fmu engine steps them one at a time (B = 1).
+    steps them all together; FMUs (the fmu engine, or a user's receiver FMU)
+    step them one at a time (B = 1).
     Each run's numbers are the same whatever batch it is part of.
 
     Parameters
@@ -223,6 +270,9 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     timeseries : bool
         Build the per-step time series (else only the metrics' inputs are
         recorded and :attr:`RunResult.timeseries` is empty).
+    connections : sequence of Connection, optional
+        The system's connections (default :func:`default_connections`; an
+        SSP package brings its own).
 
     Returns
     -------
@@ -241,15 +291,16 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     n_beacons = beacon_count(cfgs[0])
     own = handles is None
     if own:
-        handles = make_handles(engine, fmu_dir, n_beacons)
+        handles = make_handles(engine, fmu_dir, n_beacons, system_sources(cfgs[0]))
     try:
-        connections = default_connections(n_beacons)
+        connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
         T = sim["sampling_time"]
         n_steps = int(math.floor(sim["duration"] / T + 1e-9))
         rates = {"receiver": sim["ekf_rate_ratio"]}
         record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
-        groups = [cfgs] if engine == "local" else [[c] for c in cfgs]
+        batched = all(h.batched for h in handles.values())
+        groups = [cfgs] if batched else [[c] for c in cfgs]
         bar = None
         if progress:
             from tqdm import tqdm
@@ -260,10 +311,10 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         try:
             for group in groups:
                 for name, handle in handles.items():
-                    params, reps = merge_params(group, name)
+                    params, reps = merge_params(group, name, handle.parameters)
                     handle.setup(params, reps)
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record,
-                                     progress=bar.update if bar else None))
+                                     progress=bar.update if bar else None, algorithm=sim["master"]))
                 replicates.extend(reps.tolist())
         finally:
             if bar is not None:
