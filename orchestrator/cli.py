@@ -120,7 +120,8 @@ def _run(args: argparse.Namespace) -> int:
     sim = cfg["simulation"]
     print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {sim['receiver']}), "
           f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
-    print(f"  EKF:             e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
+    label = "EKF:" if sim["receiver"] == "ekf" else "estimate:"
+    print(f"  {label:<17}e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
           f"std {s['e_tot_std']:.3f} m")
     print(f"  instrumentation: e_tot mean {s['instr_e_tot_mean']:.3f} m, RMS {s['instr_e_tot_rms']:.3f} m, "
           f"std {s['instr_e_tot_std']:.3f} m")

@@ -75,6 +75,39 @@ class LocalHandle:
 _LOADED: dict[str, tuple[tuple, "FmuHandle"]] = {}
 
 
+def read_description(component: str, path: Path) -> Any:
+    """The model description of an FMI 2.0 Co-Simulation FMU.
+
+    Raises
+    ------
+    ModelError
+        If the file is missing or unreadable, or not FMI 2.0 Co-Simulation.
+    """
+    from fmpy import read_model_description
+
+    if not path.is_file():
+        raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
+        raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
+    if md.fmiVersion != "2.0" or md.coSimulation is None:
+        raise ModelError(f"fmu: {str(path)!r} must be an FMI 2.0 Co-Simulation FMU")
+    return md
+
+
+def fmu_ports(component: str, path: Path | str) -> list[Port]:
+    """An FMU's variables as :class:`Port` records, read without loading it.
+
+    Raises
+    ------
+    ModelError
+        As :func:`read_description`.
+    """
+    md = read_description(component, Path(path))
+    return [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
+
+
 def open_fmu(component: str, path: Path | str) -> "FmuHandle":
     """The process's handle of an FMU, loaded and instantiated on first use.
 
@@ -92,17 +125,8 @@ def open_fmu(component: str, path: Path | str) -> "FmuHandle":
         run, or if another file with the same model identifier (or a rebuilt
         file) was already loaded in this process.
     """
-    from fmpy import read_model_description
-
     path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
-    try:
-        md = read_model_description(str(path), validate=False)
-    except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
-        raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
-    if md.fmiVersion != "2.0" or md.coSimulation is None:
-        raise ModelError(f"fmu: {str(path)!r} must be an FMI 2.0 Co-Simulation FMU")
+    md = read_description(component, path)
     stat = path.resolve().stat()
     signature = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, md.guid)
     identifier = md.coSimulation.modelIdentifier
@@ -145,7 +169,7 @@ class FmuHandle:
         self.component = component
         self.path = path
         self.variables = {v.name: v for v in md.modelVariables}
-        self.ports = [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
+        self.ports = fmu_ports(component, path)
         self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
         self._unzipdir = extract(str(path))
         atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)

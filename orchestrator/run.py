@@ -20,7 +20,7 @@ from models.core import ModelError
 from models.platform.geometry import parse_offsets
 from orchestrator.config import component_params, receiver_source, to_toml
 from orchestrator.connections import Connection, check_connections, check_interface, default_connections
-from orchestrator.engines import LocalHandle, open_fmu
+from orchestrator.engines import LocalHandle, fmu_ports, open_fmu
 from orchestrator.master import simulate
 from orchestrator.metrics import errors, summarize
 
@@ -154,9 +154,9 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
             if name not in paths:
                 handles[name] = LocalHandle(name, CORES[src], n_beacons)
                 continue
+            if isinstance(src, Path):  # a user's FMU: check its interface before loading it
+                check_interface(name, fmu_ports(name, src), COMPONENTS[name].variables(n_beacons), src)
             handles[name] = open_fmu(name, paths[name])
-            if isinstance(src, Path):
-                check_interface(name, handles[name].ports, COMPONENTS[name].variables(n_beacons), paths[name])
     except Exception:
         close_handles(handles)
         raise
