@@ -122,7 +122,11 @@ def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4) -> Path:
     script = HERE / f"sblsim_{component}.py"
     target = fmu_path(out_dir, component)
     with tempfile.TemporaryDirectory(prefix="sblsim_fmu_") as tmp:
-        built = Path(FmuBuilder.build_FMU(script, dest=tmp, project_files=[MODELS_DIR, HERE / "sblsim_slave.py"]))
+        # FMU state get/set is supported (CoreSlave deep-copies the core); serialization is not. A
+        # pythonfmu FMU loads once per process (NTNU-IHB/PythonFMU#228): declared, and one instance each.
+        built = Path(FmuBuilder.build_FMU(script, dest=tmp, project_files=[MODELS_DIR, HERE / "sblsim_slave.py"],
+                                          canGetAndSetFMUstate=True, canSerializeFMUstate=False,
+                                          canBeInstantiatedOnlyOncePerProcess=True))
         declarations = COMPONENTS[component].variables(n_beacons)
         partial = out_dir / f".{target.name}.partial"
         with zipfile.ZipFile(built) as src, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as dst:

@@ -4,10 +4,20 @@ A component's FMU script subclasses :class:`CoreSlave` and names its core
 class; everything else comes from the core's declarations. The wrapper copies
 parameters into the core at the end of initialization, inputs before each
 doStep, and outputs back after it. There is no physics here.
+
+FMU state (``canGetAndSetFMUstate``): pythonfmu's C wrapper keeps the object
+returned by ``_get_fmu_state`` as the ``fmi2FMUstate`` (a reference, released
+by ``fmi2FreeFMUstate``) and passes that same object to ``_set_fmu_state``.
+So the state is a deep copy of everything that evolves (variable values,
+start time, and the core with its random generators, filter and held values),
+and restoring copies it again, so that one state can be restored many times.
+It is not serializable (``canSerializeFMUstate`` stays false): pythonfmu
+serializes with JSON, which cannot hold the core.
 """
 
 from __future__ import annotations
 
+import copy
 from typing import Any, ClassVar
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability
@@ -70,6 +80,15 @@ class CoreSlave(Fmi2Slave):
         self.core.step(current_time, step_size)
         self._publish()
         return True
+
+    def _get_fmu_state(self) -> dict[str, Any]:
+        """fmi2GetFMUstate: a deep copy of the full state (the wrapper holds it until fmi2FreeFMUstate)."""
+        return copy.deepcopy({"values": self.values, "start_time": self.start_time, "core": self.core})
+
+    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        """fmi2SetFMUstate: restore a copy of a saved state, leaving it intact for further restores."""
+        state = copy.deepcopy(state)
+        self.values, self.start_time, self.core = state["values"], state["start_time"], state["core"]
 
     def _publish(self) -> None:
         for name, value in self.core.outputs.items():
