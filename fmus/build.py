@@ -15,7 +15,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from models import COMPONENTS
+from models import CORES
 from models.core import UNITS, Variable
 
 HERE = Path(__file__).resolve().parent
@@ -104,7 +104,7 @@ def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4) -> Path:
     Parameters
     ----------
     component : str
-        ``platform``, ``acoustics``, ``target`` or ``receiver``.
+        A core name: ``platform``, ``acoustics``, ``target``, ``receiver`` or ``receiver_lsq``.
     out_dir : path
         Destination directory (created if missing).
     n_beacons : int
@@ -127,7 +127,7 @@ def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4) -> Path:
         built = Path(FmuBuilder.build_FMU(script, dest=tmp, project_files=[MODELS_DIR, HERE / "sblsim_slave.py"],
                                           canGetAndSetFMUstate=True, canSerializeFMUstate=False,
                                           canBeInstantiatedOnlyOncePerProcess=True))
-        declarations = COMPONENTS[component].variables(n_beacons)
+        declarations = CORES[component].variables(n_beacons)
         partial = out_dir / f".{target.name}.partial"
         with zipfile.ZipFile(built) as src, zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as dst:
             for item in src.infolist():
@@ -142,8 +142,8 @@ def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4) -> Path:
 
 
 def build_all(out_dir: Path | str = DEFAULT_DIR) -> list[Path]:
-    """Build the four FMUs into ``out_dir``; returns their paths."""
-    return [build_fmu(name, out_dir) for name in COMPONENTS]
+    """Build every FMU into ``out_dir`` (the four components and the least-squares receiver); returns their paths."""
+    return [build_fmu(name, out_dir) for name in CORES]
 
 
 def validate(path: Path | str) -> list[str]:

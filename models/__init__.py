@@ -5,11 +5,11 @@
 
 from models.acoustics import AcousticsCore
 from models.platform import PlatformCore
-from models.receiver import ReceiverCore
+from models.receiver import LeastSquaresReceiverCore, ReceiverCore
 from models.target import TargetCore
 
 COMPONENTS = {c.name: c for c in (PlatformCore, AcousticsCore, TargetCore, ReceiverCore)}
 #: Every core by its own name: the four components and the alternative receivers.
-CORES = dict(COMPONENTS)
+CORES = {**COMPONENTS, LeastSquaresReceiverCore.name: LeastSquaresReceiverCore}
 
 __all__ = ["COMPONENTS", "CORES", "AcousticsCore", "PlatformCore", "ReceiverCore", "TargetCore"]

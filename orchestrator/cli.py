@@ -72,10 +72,11 @@ def _parser() -> argparse.ArgumentParser:
     a.add_argument("--metric", default="e_tot_rms", help="response column (default e_tot_rms)")
     a.add_argument("--order", type=int, default=2, help="highest interaction order in the model (default 2)")
 
-    f = sub.add_parser("fmus", help="build or validate the four FMI 2.0 Co-Simulation FMUs")
+    f = sub.add_parser("fmus", help="build, validate or list the FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
-    b = fsub.add_parser("build", help="build the FMUs with pythonfmu")
+    b = fsub.add_parser("build", help="build the FMUs (four components, least-squares receiver) with pythonfmu")
     b.add_argument("--out", type=Path, default=None, help="output directory (default fmus/build)")
+    fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
     return p
@@ -186,8 +187,13 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
 
 def _fmus(args: argparse.Namespace) -> int:
     from fmus.build import DEFAULT_DIR, build_all, fmu_path, validate
-    from models import COMPONENTS
+    from models import CORES
 
+    if args.fmus_command == "variables":
+        from fmus.variables import markdown_tables
+
+        print(markdown_tables())
+        return 0
     if args.fmus_command == "build":
         out = args.out or DEFAULT_DIR
         for path in build_all(out):
@@ -195,7 +201,7 @@ def _fmus(args: argparse.Namespace) -> int:
         return 0
     directory = args.dir or DEFAULT_DIR
     failures = 0
-    for name in COMPONENTS:
+    for name in CORES:
         path = fmu_path(directory, name)
         if not path.is_file():
             raise ModelError(f"fmus validate: {name} FMU not found at {str(path)!r}; run `sblsim fmus build`")

@@ -7,7 +7,7 @@ import pytest
 
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory):
-    """Directory holding the four FMUs freshly built with ``fmus.build.build_all``.
+    """Directory holding the FMUs (four components, least-squares receiver) freshly built with ``build_all``.
 
     Session-scoped and lazy: the FMUs are built once, and only when a test
     asks for this fixture.
@@ -16,5 +16,5 @@ def fmu_dir(tmp_path_factory):
 
     directory = tmp_path_factory.mktemp("fmus")
     paths = build_all(directory)
-    assert len(paths) == 4 and all(p.is_file() for p in paths)
+    assert len(paths) == 5 and all(p.is_file() for p in paths)
     return directory

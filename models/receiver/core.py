@@ -1,14 +1,18 @@
-"""Receiver core: the paper's EKF fed by round-robin OWTT packets and depth.
+"""Receiver cores fed by round-robin OWTT packets and depth; the paper's EKF receiver.
 
-The receiver runs at its own communication step Δt = T / (EKF rate ratio):
-every step it predicts; when a new packet whose transmit epoch it has reached
-arrives (``packet_seq`` changed and ``t + Δt ≥ tx_time``), it stores the range
-and broadcast beacon position of that beacon (if the packet was not lost) and
-runs one EKF update with the latest range of every beacon heard so far plus
-the depth reading. Held ranges are re-used at later slots: their staleness is
-part of the error, as in the paper. The raw instrumentation fix
-(multilateration of the same held ranges and depth, no filter) is computed at
-the same instants.
+:class:`PacketReceiverCore` is the packet handling every built-in receiver
+shares. The receiver runs at its own communication step Δt = T / (EKF rate
+ratio): every step it calls :meth:`~PacketReceiverCore._predict`; when a new
+packet whose transmit epoch it has reached arrives (``packet_seq`` changed and
+``t + Δt ≥ tx_time``), it stores the range and broadcast beacon position of
+that beacon (if the packet was not lost) and calls
+:meth:`~PacketReceiverCore._update` with the latest range of every beacon
+heard so far plus the depth reading. Held ranges are re-used at later slots:
+their staleness is part of the error, as in the paper.
+
+:class:`ReceiverCore` is the paper's EKF: one update per slot, and the raw
+instrumentation fix (multilateration of the same held ranges and depth, no
+filter) computed at the same instants.
 
 References
 ----------
@@ -50,17 +54,98 @@ def receiver_interface() -> tuple[Variable, ...]:
     return inputs + outputs
 
 
-class ReceiverCore(ComponentCore):
+class PacketReceiverCore(ComponentCore):
+    """Base of the receivers: slot detection and the held range of each beacon.
+
+    Every step calls :meth:`_predict`; a replicate has a new *slot* when
+    ``packet_seq`` differs from the last one it used and the end of the step
+    has reached the packet's transmit epoch, ``t + Δt ≥ tx_time − 1e-9`` [s].
+    At a slot a packet that was received (``packet_valid``) with a beacon id
+    in ``1 … n`` replaces the held range and broadcast beacon position of that
+    beacon; then, if any replicate of the batch has a new slot,
+    :meth:`_update` runs with the mask of those replicates. :meth:`_outputs`
+    refreshes :attr:`outputs` after initialization and after every step.
+
+    Subclasses declare :meth:`~models.core.ComponentCore.variables` (with
+    :func:`receiver_interface` among them) and implement
+    :meth:`_initial_state`, :meth:`_update` and :meth:`_outputs`;
+    :meth:`_predict` is optional.
+
+    Attributes
+    ----------
+    ranges : ndarray, shape (B, n)
+        Latest range of each beacon [m] (NaN: not heard yet).
+    beacons : ndarray, shape (B, n, 3)
+        Broadcast beacon positions carried with those ranges [m].
+    last_seq : ndarray of int, shape (B,)
+        ``packet_seq`` of the latest slot (0: none yet).
+    slot_time : ndarray, shape (B,)
+        Transmit epoch ``tx_time`` of the latest slot [s] (NaN: none yet).
+    """
+
+    def _initialize(self, t0: float) -> None:
+        self._initial_state(t0)
+        self.ranges = np.full((self.batch, self.n_beacons), np.nan)
+        self.beacons = np.full((self.batch, self.n_beacons, 3), np.nan)
+        self.last_seq = np.zeros(self.batch, dtype=np.int64)
+        self.slot_time = np.full(self.batch, np.nan)
+        self._outputs()
+
+    def _step(self, t: float, dt: float) -> None:
+        u = self.inputs
+        self._predict(dt)
+        seq = np.asarray(u["packet_seq"], dtype=np.int64)
+        tx_time = np.asarray(u["tx_time"], float)
+        slot = (seq != self.last_seq) & (t + dt >= tx_time - 1e-9)
+        if np.any(slot):
+            self.last_seq = np.where(slot, seq, self.last_seq)
+            self.slot_time = np.where(slot, tx_time, self.slot_time)
+            ids = np.asarray(u["beacon_id"], dtype=np.int64) - 1
+            fresh = slot & np.asarray(u["packet_valid"], bool) & (ids >= 0) & (ids < self.n_beacons)
+            rows = np.flatnonzero(fresh)
+            self.ranges[rows, ids[rows]] = np.asarray(u["range"], float)[rows]
+            self.beacons[rows, ids[rows]] = np.column_stack(
+                [np.asarray(u[f"beacon_{a}"], float) for a in ("x", "y", "z")])[rows]
+            self._update(slot, np.asarray(u["depth"], float))
+        self._outputs()
+
+    def _initial_state(self, t0: float) -> None:
+        """Set the receiver's own initial state at ``t0`` [s] (before the first :meth:`_outputs`)."""
+        raise NotImplementedError
+
+    def _predict(self, dt: float) -> None:
+        """Advance the receiver's own state by one step ``dt`` [s]; called every step (default: nothing)."""
+
+    def _update(self, slot: np.ndarray, depth: np.ndarray) -> None:
+        """Use the held ranges at a slot.
+
+        Parameters
+        ----------
+        slot : ndarray of bool, shape (B,)
+            Replicates with a new slot this step; the others must keep their state.
+        depth : ndarray, shape (B,)
+            Depth reading [m] (NaN: missing).
+        """
+        raise NotImplementedError
+
+    def _outputs(self) -> None:
+        """Refresh :attr:`outputs` from the state (after initialization and every step)."""
+        raise NotImplementedError
+
+
+class ReceiverCore(PacketReceiverCore):
     """The paper's EKF receiver with the raw instrumentation fix.
 
     Attributes
     ----------
     ekf : ExtendedKalmanFilter
         The filter (batched).
-    ranges : ndarray, shape (B, n)
-        Latest range of each beacon [m] (NaN: not heard yet).
-    beacons : ndarray, shape (B, n, 3)
-        Broadcast beacon positions carried with those ranges [m].
+    fix : ndarray, shape (B, 3)
+        Instrumentation fix of the latest slot [m] (NaN: none).
+    fix_valid : ndarray of bool, shape (B,)
+        The latest slot gave a fix.
+
+    The held ranges and slot bookkeeping are those of :class:`PacketReceiverCore`.
     """
 
     name = "receiver"
@@ -90,7 +175,7 @@ class ReceiverCore(ComponentCore):
             for n in ("x", "y", "z", "vx", "vy", "vz"))
         return params + receiver_interface()
 
-    def _initialize(self, t0: float) -> None:
+    def _initial_state(self, t0: float) -> None:
         p = self.params
         x0 = np.column_stack([np.broadcast_to(p[f"x0_{n}"], self.batch) for n in STATE_NAMES])
         variances = np.broadcast_arrays(np.asarray(p["p0_position"], float) ** 2,
@@ -100,28 +185,11 @@ class ReceiverCore(ComponentCore):
             P0[..., k, k] = variances[k % 2]
         self.ekf = ExtendedKalmanFilter(x0, P0, p["q_horizontal"], p["q_vertical"],
                                         p["sigma_range"], p["sigma_depth"])
-        self.ranges = np.full((self.batch, self.n_beacons), np.nan)
-        self.beacons = np.full((self.batch, self.n_beacons, 3), np.nan)
-        self.last_seq = np.zeros(self.batch, dtype=np.int64)
         self.fix = np.full((self.batch, 3), np.nan)
         self.fix_valid = np.zeros(self.batch, dtype=bool)
-        self._outputs()
 
-    def _step(self, t: float, dt: float) -> None:
-        u = self.inputs
+    def _predict(self, dt: float) -> None:
         self.ekf.predict(dt)
-        seq = np.asarray(u["packet_seq"], dtype=np.int64)
-        slot = (seq != self.last_seq) & (t + dt >= np.asarray(u["tx_time"], float) - 1e-9)
-        if np.any(slot):
-            self.last_seq = np.where(slot, seq, self.last_seq)
-            ids = np.asarray(u["beacon_id"], dtype=np.int64) - 1
-            fresh = slot & np.asarray(u["packet_valid"], bool) & (ids >= 0) & (ids < self.n_beacons)
-            rows = np.flatnonzero(fresh)
-            self.ranges[rows, ids[rows]] = np.asarray(u["range"], float)[rows]
-            self.beacons[rows, ids[rows]] = np.column_stack(
-                [np.asarray(u[f"beacon_{a}"], float) for a in ("x", "y", "z")])[rows]
-            self._update(slot, np.asarray(u["depth"], float))
-        self._outputs()
 
     def _update(self, slot: np.ndarray, depth: np.ndarray) -> None:
         """EKF update and instrumentation fix for the replicates with a new slot."""

@@ -1,0 +1,374 @@
+"""Tests of the least-squares receiver core and of the packet handling it shares with the EKF.
+
+Reference values are computed independently in this file: exact geometry,
+``scipy.optimize.least_squares`` on the same weighted cost, finite-difference
+Jacobians in plain numpy, and hand-built target motions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from models.core import SEED_PARAMETERS, ModelError
+from models.receiver import LeastSquaresReceiverCore, PacketReceiverCore, ReceiverCore, receiver_interface
+
+AXES = ("x", "y", "z")
+OUTPUTS = [v.name for v in receiver_interface() if v.causality == "output"]
+LSQ = dict(sigma_range=0.3, sigma_depth=0.05, x0_x=2.0, x0_y=-1.0, x0_z=4.0)
+
+
+# ----------------------------------------------------------------------------
+# Independent references and helpers
+# ----------------------------------------------------------------------------
+
+def cross(L=20.0, h=1.0):
+    """4 beacons L(cos θ, sin θ, 0) + (0, 0, h), θ = 0, 90, 180, 270 deg."""
+    return np.array([[L, 0.0, h], [0.0, L, h], [-L, 0.0, h], [0.0, -L, h]])
+
+
+def weighted_residuals(p, ranges, beacons, depth, sr, sd):
+    """(r_i − ‖p − b_i‖)/σ_r for the finite ranges, then (d − p_z)/σ_d."""
+    have = np.isfinite(ranges)
+    rho = np.sqrt(np.sum((p[None, :] - beacons[have]) ** 2, axis=1))
+    return np.append((ranges[have] - rho) / sr, (depth - p[2]) / sd)
+
+
+def scipy_fix(ranges, beacons, depth, sr, sd, start):
+    sol = least_squares(weighted_residuals, start, args=(ranges, beacons, depth, sr, sd), method="lm",
+                        xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=10000)
+    return sol.x
+
+
+def fd_spread(p, ranges, beacons, depth, sr, sd, eps=1e-6):
+    """sqrt(trace(inv(JᵀWJ))) with J from central differences of the weighted residuals (W absorbed)."""
+    J = np.empty((np.isfinite(ranges).sum() + 1, 3))
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = eps
+        J[:, k] = -(weighted_residuals(p + e, ranges, beacons, depth, sr, sd)
+                    - weighted_residuals(p - e, ranges, beacons, depth, sr, sd)) / (2 * eps)
+    return float(np.sqrt(np.trace(np.linalg.inv(J.T @ J))))
+
+
+def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True):
+    """Receiver inputs of one packet; values are scalars or arrays of shape (B,)."""
+    beacon = np.asarray(beacon, dtype=float)
+    return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time, range=range_value,
+                beacon_x=beacon[..., 0], beacon_y=beacon[..., 1], beacon_z=beacon[..., 2], depth=depth)
+
+
+def snapshot(core):
+    return {name: np.array(value, copy=True) for name, value in core.outputs.items()}
+
+
+def position(out, prefix="est_"):
+    """The (B, 3) vector of outputs ``prefix + x, y, z``."""
+    return np.column_stack([out[f"{prefix}{a}"] for a in AXES])
+
+
+def noisy_case(seed, B, sr=0.3, sd=0.05):
+    """Random targets around a perturbed 20 m cross, noisy ranges and depth (one range of replicate 1 lost)."""
+    rng = np.random.default_rng(seed)
+    truth = np.column_stack([rng.uniform(-30, 30, B), rng.uniform(-30, 30, B), rng.uniform(4, 25, B)])
+    beacons = cross()[None] + rng.normal(scale=0.5, size=(B, 4, 3))
+    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1) + sr * rng.normal(size=(B, 4))
+    depth = truth[:, 2] + sd * rng.normal(size=B)
+    valid = np.ones((B, 4), dtype=bool)
+    valid[1, 2] = False
+    return truth, beacons, ranges, depth, valid
+
+
+def feed_round(core, beacons, ranges, depth, valid=None, t0=0.0, seq0=0, T=1.0):
+    """One packet per beacon (ids 1 … n), one slot of length T each, per-replicate values."""
+    B, n = ranges.shape
+    valid = np.ones((B, n), dtype=bool) if valid is None else valid
+    t, seq = t0, seq0
+    for i in range(n):
+        seq += 1
+        core.set_inputs(packet(seq, i + 1, t + T, np.where(valid[:, i], ranges[:, i], np.nan), beacons[:, i],
+                               depth, valid[:, i]))
+        core.step(t, T)
+        t += T
+    return t, seq
+
+
+# ----------------------------------------------------------------------------
+# Fixes
+# ----------------------------------------------------------------------------
+
+def test_lsq_noise_free_fix_is_the_true_position_and_nis_vanishes():
+    truth = np.array([[8.0, -3.0, 5.0], [-12.0, 6.5, 9.0], [0.5, 15.0, 3.0]])
+    B = truth.shape[0]
+    beacons = np.broadcast_to(cross(), (B, 4, 3))
+    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1)
+    core = LeastSquaresReceiverCore(LSQ, replicates=[0, 1, 2], n_beacons=4)
+    core.initialize(0.0)
+    x0 = np.array([LSQ["x0_x"], LSQ["x0_y"], LSQ["x0_z"]])
+
+    def check_no_fix():
+        np.testing.assert_array_equal(position(core.outputs), np.tile(x0, (B, 1)))
+        np.testing.assert_array_equal(position(core.outputs, "est_v"), 0.0)
+        assert np.all(np.isnan(position(core.outputs, "instr_")))
+        assert not core.outputs["instr_valid"].any()
+        assert np.all(np.isnan(core.outputs["nis"])) and np.all(np.isnan(core.outputs["pos_std"]))
+
+    check_no_fix()
+    t = 0.0
+    for i in range(4):
+        core.set_inputs(packet(i + 1, i + 1, t + 1.0, ranges[:, i], beacons[:, i], truth[:, 2]))
+        core.step(t, 1.0)
+        t += 1.0
+        if i < 2:
+            check_no_fix()  # fewer than 3 ranges: no fix, the estimate stays at x0
+            continue
+        out = core.outputs
+        assert out["instr_valid"].all()
+        np.testing.assert_allclose(position(out), truth, rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(position(out, "instr_"), position(out))
+        assert np.all(out["nis"] >= 0.0) and np.all(out["nis"] < 1e-10)
+        assert np.all(np.isfinite(out["pos_std"])) and np.all(out["pos_std"] > 0.0)
+        # a static target: the two fixes agree, so the velocity is zero
+        np.testing.assert_allclose(position(out, "est_v"), 0.0, atol=1e-6)
+
+
+def test_lsq_fix_and_nis_match_scipy_least_squares_on_noisy_data():
+    """Converged fixes: multilaterate's default stopping rule (8 iterations, 1e-3 σ) misses 1e-6 m on
+    several of these replicates; the receiver's tighter settings do not."""
+    B = 40
+    truth, beacons, ranges, depth, valid = noisy_case(5, B)
+    sr, sd = LSQ["sigma_range"], LSQ["sigma_depth"]
+    core = LeastSquaresReceiverCore(LSQ, replicates=range(B))
+    core.initialize(0.0)
+    feed_round(core, beacons, ranges, depth, valid)
+    out = core.outputs
+    assert out["instr_valid"].all()
+    held = np.where(valid, ranges, np.nan)
+    for b in range(B):
+        ref = scipy_fix(held[b], beacons[b], depth[b], sr, sd, truth[b])
+        np.testing.assert_allclose(position(out)[b], ref, rtol=0, atol=1e-6, err_msg=f"replicate {b}")
+        rss = np.sum(weighted_residuals(ref, held[b], beacons[b], depth[b], sr, sd) ** 2)
+        assert out["nis"][b] == pytest.approx(rss, rel=1e-6, abs=1e-9)
+    # the noise matters: the fixes are not the truth and the residuals are not zero
+    assert np.all(np.linalg.norm(position(out) - truth, axis=1) > 1e-3)
+    assert np.all(out["nis"] > 1e-4)
+
+
+def test_lsq_pos_std_is_the_gauss_newton_covariance_at_the_fix():
+    B = 6
+    _, beacons, ranges, depth, _ = noisy_case(9, B)
+    params = dict(LSQ, sigma_range=np.linspace(0.1, 1.0, B))  # per-replicate weights
+    core = LeastSquaresReceiverCore(params, replicates=range(B))
+    core.initialize(0.0)
+    feed_round(core, beacons[:, :3], ranges[:, :3], depth)  # 3 ranges
+    held = ranges.copy()
+    held[:, 3] = np.nan
+    for stage in ("three ranges", "four ranges"):
+        out = core.outputs
+        fix = position(out)
+        for b in range(B):
+            ref = fd_spread(fix[b], held[b], beacons[b], depth[b], params["sigma_range"][b], LSQ["sigma_depth"])
+            assert out["pos_std"][b] == pytest.approx(ref, rel=1e-6), (stage, b)
+        if stage == "three ranges":
+            before = out["pos_std"].copy()
+            core.set_inputs(packet(4, 4, 4.0, ranges[:, 3], beacons[:, 3], depth))
+            core.step(3.0, 1.0)
+            held = ranges
+    assert np.all(core.outputs["pos_std"] < before)  # a fourth range sharpens the fix
+
+
+# ----------------------------------------------------------------------------
+# Velocity and timing
+# ----------------------------------------------------------------------------
+
+def test_lsq_velocity_of_a_constant_velocity_target_with_fresh_ranges():
+    """Snapshot ranging: the 4 ranges of a cycle all refer to the target at the cycle's last slot, and
+    only that slot carries a depth reading, so every valid fix uses fresh ranges. The fixes are 4 slots
+    apart: a velocity over the slot spacing instead of the time between fixes would be 4 times too big."""
+    T = 0.5
+    p0, v = np.array([[-10.0, 6.0, 8.0]]), np.array([[0.6, -0.35, 0.05]])
+    beacons = cross()[None]
+    core = LeastSquaresReceiverCore(LSQ, replicates=[0])
+    core.initialize(0.0)
+    t, seq = 0.0, 0
+    previous = None
+    for cycle in range(4):
+        epoch = t + 4 * T  # transmit epoch of the cycle's last slot
+        target = p0 + v * epoch
+        ranges = np.linalg.norm(target[:, None, :] - beacons, axis=-1)
+        for i in range(4):
+            seq += 1
+            depth = target[:, 2] if i == 3 else np.array([np.nan])
+            core.set_inputs(packet(seq, i + 1, t + T, ranges[:, i], beacons[:, i], depth))
+            core.step(t, T)
+            t += T
+            out = snapshot(core)
+            if i < 3:  # no depth: no fix; the estimate and velocity are held
+                assert not out["instr_valid"][0] and np.isnan(out["nis"][0]) and np.isnan(out["pos_std"][0])
+                assert np.all(np.isnan(position(out, "instr_")))
+                if previous is not None:
+                    np.testing.assert_array_equal(position(out), position(previous))
+                    np.testing.assert_array_equal(position(out, "est_v"), position(previous, "est_v"))
+        assert t == pytest.approx(epoch)
+        assert out["instr_valid"][0]
+        np.testing.assert_allclose(position(out), target, rtol=0, atol=1e-6)
+        if cycle == 0:
+            np.testing.assert_array_equal(position(out, "est_v"), 0.0)  # one fix only
+        else:
+            np.testing.assert_allclose(position(out, "est_v"), v, rtol=0, atol=1e-6)
+        previous = out
+
+
+def test_lsq_velocity_is_the_difference_of_the_last_two_fixes_over_their_slot_times():
+    """Round-robin at slot T with the receiver stepping at T/4: the outputs change only at the steps
+    that reach a transmit epoch, and est_v = Δ(est) / Δ(tx_time) of the last two fixes."""
+    T, r = 1.0, 4
+    dt = T / r
+    rng = np.random.default_rng(3)
+    p0, v = np.array([[-10.0, 6.0, 8.0], [15.0, 2.0, 12.0]]), np.array([[0.6, -0.35, 0.05], [-0.2, 0.4, 0.0]])
+    beacons = np.broadcast_to(cross(), (2, 4, 3))
+    core = LeastSquaresReceiverCore(LSQ, replicates=[0, 1])
+    core.initialize(0.0)
+    fixes = []  # (tx_time, fix) of every valid fix
+    t, before = 0.0, snapshot(core)
+    for seq in range(1, 14):
+        i = (seq - 1) % 4
+        tx = seq * T
+        target = p0 + v * tx
+        core.set_inputs(packet(seq, i + 1, tx, np.linalg.norm(target - beacons[:, i], axis=-1)
+                               + 0.1 * rng.normal(size=2), beacons[:, i], target[:, 2]))
+        for j in range(r):
+            core.step(t, dt)
+            t += dt
+            out = snapshot(core)
+            if j < r - 1:
+                for name in OUTPUTS:
+                    np.testing.assert_array_equal(out[name], before[name], err_msg=name)
+                continue
+            assert t == pytest.approx(tx)
+            if seq >= 3:
+                assert out["instr_valid"].all()
+                fixes.append((tx, position(out)))
+            if len(fixes) >= 2:
+                (t1, f1), (t2, f2) = fixes[-2:]
+                np.testing.assert_allclose(position(out, "est_v"), (f2 - f1) / (t2 - t1), rtol=1e-12, atol=1e-15)
+            else:
+                np.testing.assert_array_equal(position(out, "est_v"), 0.0)
+        before = out
+    assert len(fixes) == 11
+    assert np.all(np.abs(position(before, "est_v")) > 1e-3)  # the check above is not a trivial zero
+
+
+# ----------------------------------------------------------------------------
+# Batching, interface, shared packet handling
+# ----------------------------------------------------------------------------
+
+def _random_run(params, replicates, seed=11, steps=80, T=1.0, r=4):
+    """A packet stream with per-replicate noise, losses, missing depth and a bad beacon id."""
+    rng = np.random.default_rng(seed)
+    reps = np.asarray(replicates)
+    core = LeastSquaresReceiverCore(params, replicates=replicates)
+    core.initialize(0.0)
+    out = [snapshot(core)]
+    dt, t, seq = T / r, 0.0, 0
+    all_reps = 6  # random numbers are drawn for every replicate, then picked: the same in every batch
+    for k in range(steps):
+        if k % r == 0:
+            seq += 1
+        tx = seq * T
+        i = (seq - 1) % 4
+        target = np.column_stack([8.0 + 0.3 * tx + np.arange(all_reps), np.full(all_reps, -3.0 - 0.2 * tx),
+                                  6.0 + 0.5 * np.arange(all_reps)])
+        b = cross()[i] + rng.normal(scale=0.3, size=(all_reps, 3))
+        ranges = np.linalg.norm(target - b, axis=1) + rng.normal(scale=0.3, size=all_reps)
+        valid = rng.uniform(size=all_reps) > 0.2
+        depth = target[:, 2] + rng.normal(scale=0.05, size=all_reps)
+        depth[rng.uniform(size=all_reps) < 0.05] = np.nan
+        ids = np.where(rng.uniform(size=all_reps) < 0.03, 9, i + 1)
+        core.set_inputs(packet(seq, ids[reps], tx, np.where(valid, ranges, np.nan)[reps], b[reps], depth[reps],
+                               valid[reps]))
+        core.step(t, dt)
+        t += dt
+        out.append(snapshot(core))
+    return {name: np.stack([o[name] for o in out]) for name in out[0]}  # (steps + 1, B)
+
+
+def test_lsq_batch_equals_single_replicate_runs_bit_for_bit():
+    replicates = [0, 1, 2, 3, 4, 5]
+    per_rep = dict(sigma_range=np.array([0.1, 0.3, 1.0, 0.2, 0.5, 2.0]),
+                   sigma_depth=np.array([0.01, 0.05, 0.2, 0.05, 0.01, 0.1]),
+                   x0_x=np.array([0.0, 5.0, -5.0, 30.0, 1.0, 2.0]),
+                   x0_y=np.array([0.0, -5.0, 5.0, 30.0, 1.0, 2.0]),
+                   x0_z=np.array([1.0, 3.0, 5.0, 20.0, 1.0, 2.0]),
+                   cell=np.array([0, 0, 1, 1, 2, 2]))
+    batch = _random_run(per_rep, replicates)
+    for k, rep in enumerate(replicates):
+        single = _random_run({name: value[k].item() for name, value in per_rep.items()}, [rep])
+        for name in OUTPUTS:
+            np.testing.assert_array_equal(batch[name][:, k], single[name][:, 0], err_msg=f"{name}, replicate {rep}",
+                                          strict=True)
+    # the run exercises fixes, lost fixes (missing depth) and non-zero velocities
+    assert batch["instr_valid"].any() and not batch["instr_valid"][-20:].all()
+    assert np.all(np.abs(batch["est_vx"][-1]) > 0.0)
+
+
+def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
+    def key(v):
+        return (v.name, v.causality, v.type, v.unit)
+
+    lsq, ekf = LeastSquaresReceiverCore.variables(4), ReceiverCore.variables(4)
+    signals = [key(v) for v in lsq if v.causality != "parameter"]
+    assert signals == [key(v) for v in ekf if v.causality != "parameter"]
+    assert signals == [key(v) for v in receiver_interface()]
+    assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface()
+    # parameters: the EKF's own declarations of the shared ones, then the seed keys
+    ekf_params = {v.name: v for v in ekf if v.causality == "parameter"}
+    params = [v for v in lsq if v.causality == "parameter"]
+    shared = ["sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z"]
+    assert params == [ekf_params[n] for n in shared] + list(SEED_PARAMETERS)
+    assert LeastSquaresReceiverCore.name == "receiver_lsq" and LeastSquaresReceiverCore.component_index == 3
+    assert LeastSquaresReceiverCore.batched_parameters == {"cell", *shared}
+    core = LeastSquaresReceiverCore({"seed": 3, "scenario_key": 1, "cell": 2, "replicate": 4}, n_beacons=4)
+    core.initialize(0.0)
+    assert list(core.outputs) == OUTPUTS
+    assert list(core.inputs) == [v.name for v in receiver_interface() if v.causality == "input"]
+    with pytest.raises(ModelError, match=r"^receiver_lsq\.q_horizontal: unknown parameter"):
+        LeastSquaresReceiverCore({"q_horizontal": 0.1})
+
+
+def test_both_receivers_share_the_packet_handling():
+    """Same packet stream (late tx epochs, a lost packet, a repeated packet, a bad id): same held state."""
+    assert issubclass(ReceiverCore, PacketReceiverCore) and issubclass(LeastSquaresReceiverCore, PacketReceiverCore)
+    x0 = dict(x0_x=3.0, x0_y=-2.0, x0_z=5.0)  # not at a missing beacon's placeholder (0, 0, 0)
+    ekf = ReceiverCore(x0, replicates=[0, 1])
+    lsq = LeastSquaresReceiverCore(x0, replicates=[0, 1])
+    beacons = cross()
+    for core in (ekf, lsq):
+        core.initialize(0.0)
+    stream = [  # (seq, beacon_id, tx_time, range, valid), each on the inputs for 4 steps of 0.25 s
+        (1, 1, 0.75, [20.0, 21.0], [True, True]),
+        (2, 2, 1.75, [22.0, 23.0], [True, False]),
+        (2, 2, 1.75, [22.0, 23.0], [True, False]),  # the same packet again: no new slot
+        (3, 9, 3.75, [5.0, 5.0], [True, True]),  # no such beacon: a slot that stores nothing
+        (4, 3, 4.6, [24.0, 25.0], [True, True]),  # epoch between step ends: used at 4.75 s
+    ]
+    expected_ranges = np.full((2, 4), np.nan)
+    t, dt = 0.0, 0.25
+    for seq, bid, tx, rng_value, valid in stream:
+        for core in (ekf, lsq):
+            core.set_inputs(packet(seq, bid, tx, np.array(rng_value), beacons[min(bid, 4) - 1], 6.0,
+                                   np.array(valid)))
+        for _ in range(4):
+            reached = t + dt >= tx - 1e-9
+            for core in (ekf, lsq):
+                core.step(t, dt)
+            t += dt
+            if reached and bid <= 4:
+                expected_ranges[valid, bid - 1] = np.array(rng_value)[valid]
+            for name in ("ranges", "beacons", "last_seq", "slot_time"):
+                np.testing.assert_array_equal(getattr(ekf, name), getattr(lsq, name), err_msg=name)
+            np.testing.assert_array_equal(ekf.ranges, expected_ranges)
+    assert ekf.last_seq.tolist() == [4, 4]
+    assert ekf.slot_time.tolist() == [4.6, 4.6]  # the packet's epoch, not the step end
+    assert lsq.outputs["instr_valid"].tolist() == [True, False]  # replicate 1 lost beacon 2: two ranges

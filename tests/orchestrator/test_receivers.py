@@ -1,0 +1,97 @@
+"""Swappable receivers: the least-squares receiver, and a user's FMU built outside the package."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.core import ModelError
+from orchestrator.cli import main
+from orchestrator.config import ConfigError, load_config
+from orchestrator.run import run
+
+USER_SCRIPT = Path(__file__).parents[1] / "data" / "user_receiver.py"
+SHORT = ["simulation.duration=20"]
+
+
+def build_user_fmu(script: Path, dest: Path) -> Path:
+    from pythonfmu import FmuBuilder
+
+    return Path(FmuBuilder.build_FMU(script, dest=dest))
+
+
+@pytest.fixture(scope="module")
+def user_fmu(tmp_path_factory):
+    return build_user_fmu(USER_SCRIPT, tmp_path_factory.mktemp("user"))
+
+
+def test_lsq_receiver_runs_the_same_on_both_engines(fmu_dir):
+    cfg = load_config("semicircle", ["receiver=lsq", "acoustics.loss_pct=20", *SHORT], seed=2)
+    assert cfg["simulation"]["receiver"] == "lsq"
+    local, fmu = run(cfg).timeseries, run(cfg, "fmu", fmu_dir=fmu_dir).timeseries
+    for col in ("est_x", "est_y", "est_z", "est_vx", "nis", "pos_std"):
+        np.testing.assert_allclose(fmu[col], local[col], rtol=0, atol=1e-9, equal_nan=True)
+    # it is the instrumentation fix, with no filter: not the EKF's estimate
+    valid = local["instr_valid"].to_numpy()
+    assert valid[-100:].all()
+    np.testing.assert_array_equal(local.loc[valid, "est_x"], local.loc[valid, "instr_x"])
+    ekf = run(load_config("semicircle", ["acoustics.loss_pct=20", *SHORT], seed=2)).timeseries
+    assert np.abs(ekf["est_x"] - local["est_x"]).max() > 1e-3
+
+
+def test_cli_set_receiver_lsq(tmp_path, capsys):
+    assert main(["run", "semicircle", "--set", "receiver=lsq", "--set", "simulation.duration=5",
+                 "--out", str(tmp_path / "r")]) == 0
+    assert "receiver lsq" in capsys.readouterr().out
+
+
+def test_a_users_receiver_fmu_is_swapped_in(user_fmu):
+    cfg = load_config("semicircle", [f"receiver=fmu:{user_fmu}", *SHORT], seed=1)
+    ts = run(cfg).timeseries
+    # the user's algorithm, checked from what it was fed: depth straight from the sensor, and the
+    # horizontal point on the circle of radius sqrt(r² − Δz²) around the transmitting beacon
+    np.testing.assert_array_equal(ts["est_z"].iloc[1:], ts["depth"].iloc[1:])
+    fresh = (ts["packet_valid"] & (ts["packet_seq"].diff() != 0)).to_numpy().copy()
+    fresh[0] = False
+    rows = ts[fresh]
+    horizontal = np.hypot(rows["est_x"] - rows["beacon_x"], rows["est_y"] - rows["beacon_y"])
+    expected = np.sqrt(np.maximum(rows["range"] ** 2 - (rows["depth"] - rows["beacon_z"]) ** 2, 0))
+    assert len(rows) > 150
+    np.testing.assert_allclose(horizontal, expected, rtol=0, atol=1e-9)
+    ekf = run(load_config("semicircle", SHORT, seed=1)).timeseries
+    assert np.abs(ekf["est_x"] - ts["est_x"]).max() > 0.1
+
+
+def test_a_mismatching_fmu_is_rejected_naming_every_variable(tmp_path, capsys):
+    text = USER_SCRIPT.read_text()
+    bad = (text.replace('("est_x", "Real", "m")', '("est_x", "Real", "cm")')
+               .replace(', ("depth", "Real", "m")]', "]")
+               .replace('("nis", "Real", "1")', '("nis", "Integer", "")')
+               .replace("class UserReceiver", "class BadReceiver"))
+    assert bad.count("BadReceiver") == 1 and '"cm"' in bad
+    script = tmp_path / "bad_receiver.py"
+    script.write_text(bad)
+    fmu = build_user_fmu(script, tmp_path)
+    with pytest.raises(ModelError) as info:
+        load_cfg = load_config("semicircle", [f"receiver=fmu:{fmu}", *SHORT])
+        run(load_cfg)
+    message = str(info.value)
+    assert "does not match the receiver interface" in message
+    assert "missing input 'depth'" in message
+    assert "'est_x' has unit 'cm', expected 'm'" in message
+    assert "'nis' has type 'Integer', expected 'Real'" in message
+    assert "\n" not in message
+    assert main(["run", "semicircle", "--set", f"receiver=fmu:{fmu}", "--out", str(tmp_path / "out")]) == 2
+    assert "missing input 'depth'" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_receiver_values_are_refused(tmp_path):
+    with pytest.raises(ConfigError, match="simulation.receiver: 'kalman' is not allowed; one of ekf, lsq or fmu:PATH"):
+        load_config("semicircle", ["receiver=kalman"])
+    with pytest.raises(ConfigError, match="simulation.receiver: no FMU file at"):
+        load_config("semicircle", [f"receiver=fmu:{tmp_path / 'none.fmu'}"])
+    with pytest.raises(ModelError, match="simulation.master: .newton. is not allowed"):
+        load_config("semicircle", ["master=newton"])
