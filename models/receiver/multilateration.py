@@ -86,7 +86,8 @@ def multilaterate(ranges: np.ndarray, beacons: np.ndarray, depth: np.ndarray, gu
     def evaluate(points, rows):
         """Normal matrix JᵀWJ (k, 3, 3), gradient JᵀW res (k, 3) and cost (k,) at ``points`` (3, k)."""
         (h,), J = model(points[:, :, None], b[:, rows])  # (k, n), (3, k, n)
-        J = np.moveaxis(J, 0, 1)  # (k, 3, n)
+        # a missing beacon sits at the origin: its gradient is 0/0 at a point there, so mask it
+        J = np.where(have[rows][:, None, :], np.moveaxis(J, 0, 1), 0.0)  # (k, 3, n)
         w = weights[rows]
         res = r[rows] - h
         dres = d[rows] - points[2]

@@ -372,3 +372,4 @@ def test_both_receivers_share_the_packet_handling():
     assert ekf.last_seq.tolist() == [4, 4]
     assert ekf.slot_time.tolist() == [4.6, 4.6]  # the packet's epoch, not the step end
     assert lsq.outputs["instr_valid"].tolist() == [True, False]  # replicate 1 lost beacon 2: two ranges
+
