@@ -36,7 +36,7 @@ from typing import Any, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
 from models import COMPONENTS
-from models.core import SEED_PARAMETERS, ModelError
+from models.core import SEED_PARAMETERS, UNITS, ModelError
 from orchestrator.config import (EXTERNAL_PREFIX, RECEIVERS, apply_overrides, component_params, resolve,
                                  section_variables)
 from orchestrator.connections import Connection, default_connections
@@ -89,19 +89,42 @@ def _annotations(parent: ET.Element, content: ET.Element) -> None:
     note.append(content)
 
 
-def _unit(parent: ET.Element, unit: Any) -> None:
-    element = ET.SubElement(parent, _q("ssc:Unit"), name=unit.name)
+_BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+
+def _unit_definition(unit: Any) -> dict[str, str]:
+    """``ssc:BaseUnit`` attributes of an FMU's unit definition."""
     base = unit.baseUnit
-    attrs = {k: str(getattr(base, k)) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-             if base is not None and getattr(base, k, 0)}
-    if base is not None and base.factor != 1.0:
+    if base is None:
+        return {}
+    attrs = {k: str(getattr(base, k)) for k in _BASE if getattr(base, k, 0)}
+    if base.factor != 1.0:
         attrs["factor"] = repr(float(base.factor))
-    if base is not None and base.offset != 0.0:
+    if base.offset != 0.0:
         attrs["offset"] = repr(float(base.offset))
-    ET.SubElement(element, _q("ssc:BaseUnit"), attrs)
+    return attrs
 
 
-def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any], units: dict) -> bytes:
+def _units(parent: ET.Element, tag: str, names: set[str], definitions: dict[str, dict[str, str]]) -> None:
+    """A ``Units`` element defining ``names``: from the FMUs' definitions, else sblsim's table
+    (:data:`models.core.UNITS`); a unit neither defines is left undefined."""
+    known = [n for n in sorted(names) if n in definitions or n in UNITS]
+    if not known:
+        return
+    units = ET.SubElement(parent, _q(tag))
+    for name in known:
+        if name in definitions:
+            attrs = definitions[name]
+        else:
+            exponents, factor = UNITS[name]
+            attrs = {k: str(e) for k, e in exponents.items()}
+            if factor != 1.0:
+                attrs["factor"] = repr(float(factor))
+        ET.SubElement(ET.SubElement(units, _q("ssc:Unit"), name=name), _q("ssc:BaseUnit"), attrs)
+
+
+def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any],
+                   units: dict[str, dict[str, str]]) -> bytes:
     root = ET.Element(_q("ssv:ParameterSet"), version="1.0", name=name)
     plist = ET.SubElement(root, _q("ssv:Parameters"))
     used = set()
@@ -113,10 +136,7 @@ def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any],
             attrs["unit"] = var.unit
             used.add(var.unit)
         ET.SubElement(p, _q(f"ssv:{var.type}"), attrs)
-    if used:
-        ulist = ET.SubElement(root, _q("ssv:Units"))
-        for unit in sorted(used):
-            _unit(ulist, units[unit])
+    _units(root, "ssv:Units", used, units)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
@@ -154,7 +174,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
         raise SspError(f"--out: {str(out)!r} must end in .ssp")
     n_beacons = beacon_count(cfg)
     connections = list(connections) if connections is not None else default_connections(n_beacons)
-    paths = fmu_paths(None if fmu_dir is None else fmu_dir, system_sources(cfg))
+    paths = fmu_paths(fmu_dir, system_sources(cfg))
     sim = cfg["simulation"]
     T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
     n_steps = int(math.floor(sim["duration"] / T + 1e-9))
@@ -169,7 +189,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     used_units: set[str] = set()
     for name, path in paths.items():
         md = read_model_description(str(path), validate=False)
-        units.update({u.name: u for u in md.unitDefinitions})
+        units.update({u.name: _unit_definition(u) for u in md.unitDefinitions})
         variables = {v.name: v for v in md.modelVariables}
         source = f"resources/{path.name}"
         files[source] = path
@@ -194,10 +214,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     for c in connections:
         ET.SubElement(wires, _q("ssd:Connection"), startElement=c.source, startConnector=c.output,
                       endElement=c.destination, endConnector=c.input)
-    if used_units:
-        ulist = ET.SubElement(root, _q("ssd:Units"))
-        for unit in sorted(used_units):
-            _unit(ulist, units[unit])
+    _units(root, "ssd:Units", used_units, units)
     experiment = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(n_steps * T))
     algorithm = ET.Element(_q("osp:Algorithm"))
     ET.SubElement(algorithm, _q("osp:FixedStepAlgorithm"), baseStepSize=repr(min(steps.values())))

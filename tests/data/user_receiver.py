@@ -12,7 +12,6 @@ units, so ``RealWithUnit`` adds the ``unit`` attribute itself.
 """
 
 import math
-from xml.etree.ElementTree import SubElement
 
 from pythonfmu import Fmi2Causality, Fmi2Slave
 from pythonfmu.variables import Boolean, Integer, Real

@@ -95,3 +95,17 @@ def test_bad_receiver_values_are_refused(tmp_path):
         load_config("semicircle", [f"receiver=fmu:{tmp_path / 'none.fmu'}"])
     with pytest.raises(ModelError, match="simulation.master: .newton. is not allowed"):
         load_config("semicircle", ["master=newton"])
+
+
+def test_a_users_receiver_travels_in_the_ssp_package(user_fmu, fmu_dir, tmp_path):
+    from orchestrator.ssp import export_ssp, read_ssp
+
+    cfg = load_config("semicircle", [f"receiver=fmu:{user_fmu}", *SHORT], seed=3)
+    path = export_ssp(cfg, tmp_path / "user.ssp", fmu_dir)
+    system = read_ssp(path)
+    receiver = system.config["simulation"]["receiver"]
+    assert receiver.startswith("fmu:") and receiver.endswith("UserReceiver.fmu")
+    assert system.fmu_files["receiver"].read_bytes() == user_fmu.read_bytes()
+    # the user's FMU declares no parameters: its parameter set is empty, sblsim's keys keep their values
+    assert {k: v for k, v in system.config.items() if k != "simulation"} == \
+        {k: v for k, v in cfg.items() if k != "simulation"}
