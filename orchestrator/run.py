@@ -108,7 +108,7 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, str | Path] 
     from fmus.build import DEFAULT_DIR, fmu_path
 
     directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
-    sources = sources or system_sources()
+    sources = sources if sources is not None else system_sources()
     paths = {name: src if isinstance(src, Path) else fmu_path(directory, src) for name, src in sources.items()}
     for name, path in paths.items():
         if not path.is_file():
@@ -142,7 +142,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     """
     if engine not in ENGINES:
         raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
-    sources = sources or system_sources()
+    sources = sources if sources is not None else system_sources()
     if engine == "fmu":
         paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}),
                  **(fmu_files or {})}
