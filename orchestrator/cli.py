@@ -22,6 +22,14 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"sblsim: error: {message}\n")
 
 
+def _config_options(p: argparse.ArgumentParser) -> None:
+    """``--seed``, ``--set`` and ``--fmu-dir``: the options of a command that resolves a configuration."""
+    p.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key, e.g. platform.baseline=3 or receiver=lsq (repeatable)")
+    p.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sblsim", description="SBL acoustic underwater positioning co-simulation")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -35,11 +43,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
     r.add_argument("--master", choices=("gauss-seidel", "jacobi"), default=None,
                    help="master algorithm (default: the configuration's, gauss-seidel)")
-    r.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
     r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
-    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a configuration key, e.g. platform.baseline=3 (repeatable)")
-    r.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (fmu engine)")
+    _config_options(r)
 
     c = sub.add_parser("campaign", help="run a factorial Monte Carlo study (built-in: paper)")
     c.add_argument("study", help="built-in study (paper) or STUDY.toml")
@@ -61,10 +66,7 @@ def _parser() -> argparse.ArgumentParser:
     e = ssub.add_parser("export", help="write SystemStructure.ssd, the FMUs and the parameter sets as FILE.ssp")
     e.add_argument("scenario", help="built-in scenario or CONFIG.toml")
     e.add_argument("--out", type=Path, required=True, help="the .ssp file to write")
-    e.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
-    e.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a configuration key (repeatable)")
-    e.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+    _config_options(e)
 
     a = sub.add_parser("analyze", help="factorial analysis and report of a campaign directory")
     a.add_argument("dir", type=Path, help="campaign directory (with runs.parquet)")
