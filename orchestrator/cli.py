@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from models.core import ModelError
+from orchestrator.master import ALGORITHMS
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -41,7 +42,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="run an SSP package instead: its FMUs, connections and parameter sets")
     r.add_argument("--engine", choices=("local", "fmu"), default=None,
                    help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
-    r.add_argument("--master", choices=("gauss-seidel", "jacobi"), default=None,
+    r.add_argument("--master", choices=ALGORITHMS, default=None,
                    help="master algorithm (default: the configuration's, gauss-seidel)")
     r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
     _config_options(r)

@@ -28,6 +28,7 @@ import tomli_w
 from models import COMPONENTS
 from models.core import SEED_PARAMETERS, ModelError, Variable, resolve_parameters
 from models.target import natural_duration, start_state
+from orchestrator.master import ALGORITHMS
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour")
 SECTIONS = ("run", "simulation", *COMPONENTS)
@@ -50,10 +51,9 @@ def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
         if _is_path(section, value):
             raw[section][name] = str((base / Path(value).expanduser()).resolve())
     sim = raw.get("simulation")
-    receiver = sim.get("receiver") if isinstance(sim, dict) else None
-    if isinstance(receiver, str) and receiver.startswith(EXTERNAL_PREFIX):
-        path = (base / Path(receiver[len(EXTERNAL_PREFIX):]).expanduser()).resolve()
-        sim["receiver"] = f"{EXTERNAL_PREFIX}{path}"
+    path = external_path(sim.get("receiver")) if isinstance(sim, dict) else ""
+    if path:
+        sim["receiver"] = f"{EXTERNAL_PREFIX}{(base / Path(path).expanduser()).resolve()}"
 
 
 class ConfigError(ModelError):
@@ -73,7 +73,7 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              min=0.0, max=1e6),
     Variable("master", "parameter", "String", "gauss-seidel",
              description="Master algorithm: gauss-seidel, or jacobi as FMI hosts step an SSP",
-             choices=("gauss-seidel", "jacobi")),
+             choices=ALGORITHMS),
     Variable("receiver", "parameter", "String", "ekf",
              description="Receiver component: ekf (the paper's), lsq (per-step least squares) or fmu:PATH"),
 )
@@ -83,10 +83,15 @@ RECEIVERS = {"ekf": "receiver", "lsq": "receiver_lsq"}
 EXTERNAL_PREFIX = "fmu:"
 
 
+def external_path(value: Any) -> str:
+    """The path of ``fmu:PATH`` (empty for any other value)."""
+    return value[len(EXTERNAL_PREFIX):] if isinstance(value, str) and value.startswith(EXTERNAL_PREFIX) else ""
+
+
 def receiver_source(cfg: dict[str, dict]) -> str | Path:
     """The receiver of a configuration: a built-in core name, or the path of a user's FMU."""
     value = cfg["simulation"]["receiver"]
-    return RECEIVERS[value] if value in RECEIVERS else Path(value[len(EXTERNAL_PREFIX):])
+    return RECEIVERS[value] if value in RECEIVERS else Path(external_path(value))
 
 
 def section_variables(section: str) -> tuple[Variable, ...]:
@@ -254,7 +259,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     sim = cfg["simulation"]
     receiver = sim["receiver"]
     if receiver not in RECEIVERS:
-        path = receiver[len(EXTERNAL_PREFIX):] if receiver.startswith(EXTERNAL_PREFIX) else ""
+        path = external_path(receiver)
         if not path:
             raise ConfigError(f"simulation.receiver: {receiver!r} is not allowed; one of "
                               f"{', '.join(RECEIVERS)} or fmu:PATH")

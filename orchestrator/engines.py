@@ -104,7 +104,10 @@ def fmu_ports(component: str, path: Path | str) -> list[Port]:
     ModelError
         As :func:`read_description`.
     """
-    md = read_description(component, Path(path))
+    return _ports(read_description(component, Path(path)))
+
+
+def _ports(md: Any) -> list[Port]:
     return [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
 
 
@@ -169,7 +172,7 @@ class FmuHandle:
         self.component = component
         self.path = path
         self.variables = {v.name: v for v in md.modelVariables}
-        self.ports = fmu_ports(component, path)
+        self.ports = _ports(md)
         self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
         self._unzipdir = extract(str(path))
         atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)

@@ -90,17 +90,23 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         wanted = set(record)
         recorded = [(c, n) for c, n in recorded if f"{c}.{n}" in wanted]
     records: dict[str, list] = {f"{c}.{n}": [] for c, n in recorded}
+
+    def feed(c: str) -> None:
+        """Set a component's inputs from the latest outputs (copied under Jacobi: a core may update
+        its output arrays in place while it steps, after the copy was handed on)."""
+        if incoming[c]:
+            handles[c].set_inputs({conn.input: np.array(outputs[conn.source][conn.output], copy=True) if jacobi
+                                   else outputs[conn.source][conn.output] for conn in incoming[c]})
+
     for k in range(n_steps):
         t = t0 + k * macro_step
-        if jacobi:  # every input from the outputs at the start of the macro step (copied: a core
-            for c in order:  # may update its output arrays in place while it steps)
-                if incoming[c]:
-                    handles[c].set_inputs({conn.input: np.array(outputs[conn.source][conn.output], copy=True)
-                                           for conn in incoming[c]})
+        if jacobi:  # every input from the outputs at the start of the macro step
+            for c in order:
+                feed(c)
         for c in order:
             handle = handles[c]
-            if incoming[c] and not jacobi:
-                handle.set_inputs({conn.input: outputs[conn.source][conn.output] for conn in incoming[c]})
+            if not jacobi:
+                feed(c)
             ratio = rates.get(c, 1)
             sub = macro_step / ratio
             for j in range(ratio):

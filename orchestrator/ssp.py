@@ -204,7 +204,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
             if v.type == "Real" and v.unit:
                 used_units.add(v.unit)
         accepted = frozenset(n for n, v in variables.items() if v.causality == "parameter")
-        params = {k: v for k, v in component_params(cfg, name, accepted).items() if k in accepted}
+        params = component_params(cfg, name, accepted)
         ssv = f"resources/{name}.ssv"
         files[ssv] = _parameter_set(name, params, variables, units)
         bindings = ET.SubElement(comp, _q("ssd:ParameterBindings"))
