@@ -1,15 +1,17 @@
-"""Pure model cores of sblsim's four FMI components (no FMI or orchestrator imports).
+"""Pure model code of sblsim's FMI components (no FMI or orchestrator imports).
 
-``COMPONENTS`` maps each component name to its core class.
+``COMPONENTS`` maps each component of the system to its model class (the
+paper's EKF for ``receiver``); ``MODELS`` maps every model by its own name,
+the alternative receivers included.
 """
 
-from models.acoustics import AcousticsCore
-from models.platform import PlatformCore
-from models.receiver import LeastSquaresReceiverCore, ReceiverCore
-from models.target import TargetCore
+from models.acoustics import Acoustics
+from models.platform import Platform
+from models.receiver import LeastSquaresReceiver, Receiver
+from models.target import Target
 
-COMPONENTS = {c.name: c for c in (PlatformCore, AcousticsCore, TargetCore, ReceiverCore)}
-#: Every core by its own name: the four components and the alternative receivers.
-CORES = {**COMPONENTS, LeastSquaresReceiverCore.name: LeastSquaresReceiverCore}
+COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, Receiver)}
+#: Every model by its own name: the four components and the alternative receivers.
+MODELS = {**COMPONENTS, LeastSquaresReceiver.name: LeastSquaresReceiver}
 
-__all__ = ["COMPONENTS", "CORES", "AcousticsCore", "PlatformCore", "ReceiverCore", "TargetCore"]
+__all__ = ["COMPONENTS", "MODELS", "Acoustics", "LeastSquaresReceiver", "Platform", "Receiver", "Target"]

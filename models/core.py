@@ -1,34 +1,159 @@
-"""Shared machinery of the component cores: variable declarations and random streams.
+"""Shared machinery of the component models: declarations, the model program, random streams.
 
-Every component core declares its interface once, as a tuple of
-:class:`Variable`. The same declarations generate the FMU model description,
-validate configuration values, and drive the orchestrator's connection checks.
+Every component declares its interface once, as a tuple of :class:`Variable`,
+and its per-step math once, as casadi functions gathered in a
+:class:`Program`. From these two come the FMU model description, the
+configuration checks, the connection checks, the C code of the native FMUs
+and of the batched local engine, and the docs' variable tables.
+
+The program of a component (what the generated C runs, in this order):
+
+* ``prepare(p) -> d``: quantities derived once from the parameters (e.g. a
+  padded, interpolation-ready table), at the end of initialization;
+* ``init(p, d, w, t0) -> x``: the state at the start time ``t0`` [s];
+* every communication step ``doStep(t, h)``:
+
+  1. ``step(x, u, p, d, w, t, h) -> x`` once (if the program has one);
+  2. each :class:`Event` in order: while ``guard(x, u, p, d, t, h)`` is
+     true, ``handler(x, u, p, d, w, t, h) -> x`` (a sample of a sensor, an
+     acoustic slot, a packet, one iteration of a least-squares fix);
+
+* ``output(x, p, d, t) -> y`` after initialization and after every step, at
+  the end time ``t`` of the step (outputs never depend on inputs directly).
+
+``p`` holds the FMU parameters in declaration order (Real, Integer, Boolean,
+the index of a String choice, the entries of table columns), ``u`` the
+inputs and ``y`` the outputs in declaration order, ``w`` the random numbers
+the function declares (:class:`Stream`). Integer and Boolean values travel
+as doubles. The FMUs have no String variables, so that every SSP host can set
+every parameter.
+
+Randomness (DESIGN.md, "Randomness"). Draw ``n`` of purpose ``s`` of
+component ``c`` in run ``(seed, scenario_key, cell, replicate)`` takes its
+uniforms from the Philox-4×64-10 counter-based generator (Salmon et al.,
+"Parallel random numbers: as easy as 1, 2, 3", SC'11; ``numpy.random.Philox``)
+with key ``(seed, scenario_key·2³² + c·2¹⁶ + s)`` and counters
+``(j, n, cell, replicate)``, j = 0, 1, ... the block of four 64-bit words
+within the draw. A uniform is ``(word >> 11)·2⁻⁵³`` as numpy makes it; a
+standard normal takes two consecutive uniforms ``(u₁, u₂)`` by one
+Box-Muller branch, ``sqrt(−2 ln(1 − u₁)) cos(2π u₂)``. The C runtime
+(``fmus/c``) implements the same; :func:`uniforms` and :func:`normals` are
+the reference the tests pin it against. A run's numbers therefore do not
+depend on batch size, engine, host step or execution order.
+
 This module imports nothing from the FMI or orchestrator layers.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, ClassVar, Mapping, Sequence
 
+import casadi as ca
 import numpy as np
 
 CAUSALITIES = ("parameter", "input", "output")
 TYPES = ("Real", "Integer", "Boolean", "String")
+SCOPES = ("both", "fmu", "config")
 
 
 class ModelError(ValueError):
-    """A parameter or input of a component core is invalid.
+    """A parameter or input of a component is invalid.
 
     The message is one line and names the offending field and its allowed
     range, so the command line can show it as it is.
     """
 
 
+#: FMI unit definitions used by the declarations: name -> (SI base-unit exponents, factor).
+#: Exponents are over (m, s, rad); the factor converts to SI (deg -> rad, % -> 1).
+UNITS: dict[str, tuple[dict[str, int], float]] = {
+    "1": ({}, 1.0),
+    "m": ({"m": 1}, 1.0),
+    "s": ({"s": 1}, 1.0),
+    "m/s": ({"m": 1, "s": -1}, 1.0),
+    "rad": ({"rad": 1}, 1.0),
+    "rad/s": ({"rad": 1, "s": -1}, 1.0),
+    "deg": ({"rad": 1}, math.pi / 180.0),
+    "%": ({}, 0.01),
+    "ppm": ({}, 1e-6),
+    "m2/s3": ({"m": 2, "s": -3}, 1.0),
+    "degC": ({"K": 1}, 1.0),
+    "g/kg": ({}, 1e-3),
+}
+
+
+def _format_bound(value: float) -> str:
+    return f"{value:g}"
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of a table parameter: the name of its FMU array, unit and allowed closed range."""
+
+    name: str
+    unit: str = ""
+    description: str = ""
+    min: float | None = None
+    max: float | None = None
+
+    def allowed(self) -> str:
+        lo = "-inf" if self.min is None else _format_bound(self.min)
+        hi = "inf" if self.max is None else _format_bound(self.max)
+        unit = f" {self.unit}" if self.unit and self.unit != "1" else ""
+        return f"[{lo}, {hi}]{unit}"
+
+
+@dataclass(frozen=True)
+class Table:
+    """A numeric table carried by FMU parameters: a row count and one Real array per column.
+
+    The Integer parameter that declares the table holds the number of rows
+    in use; column ``c`` is the Real parameters ``c.name[1]`` …
+    ``c.name[max_rows]`` (FMI 2.0 names; the rows beyond the count are
+    ignored). In a configuration the same table is text, rows separated by
+    ``;`` and values by blanks or commas (:func:`parse_table`).
+
+    Attributes
+    ----------
+    columns : tuple of Column
+    max_rows : int
+        Largest number of rows.
+    increasing : bool
+        The first column must be strictly increasing.
+    """
+
+    columns: tuple[Column, ...]
+    max_rows: int
+    increasing: bool = False
+
+    def array_variables(self) -> tuple["Variable", ...]:
+        """The Real parameters of the columns, column by column."""
+        return tuple(
+            Variable(f"{col.name}[{k}]", "parameter", "Real", 0.0, col.unit, f"{col.description}, row {k}",
+                     min=col.min, max=col.max, in_table=True)
+            for col in self.columns for k in range(1, self.max_rows + 1))
+
+    def values(self, rows: np.ndarray, name: str) -> dict[str, Any]:
+        """FMU parameter values of a parsed table: the row count ``name`` and the used array entries."""
+        out: dict[str, Any] = {name: int(rows.shape[0])}
+        for j, col in enumerate(self.columns):
+            out.update({f"{col.name}[{k + 1}]": float(rows[k, j]) for k in range(rows.shape[0])})
+        return out
+
+    def rows(self, values: Mapping[str, Any], name: str) -> np.ndarray:
+        """The table held by FMU parameter values (the inverse of :meth:`values`)."""
+        n = int(values.get(name, 0))
+        return np.array([[float(values.get(f"{col.name}[{k}]", 0.0)) for col in self.columns]
+                         for k in range(1, n + 1)]).reshape(n, len(self.columns))
+
+
 @dataclass(frozen=True)
 class Variable:
-    """One declared variable of a component (an FMI 2.0 ScalarVariable).
+    """One declared variable of a component (an FMI 2.0 ScalarVariable), or a configuration key.
 
     Parameters
     ----------
@@ -37,7 +162,8 @@ class Variable:
     causality : {'parameter', 'input', 'output'}
         FMI causality.
     type : {'Real', 'Integer', 'Boolean', 'String'}
-        FMI base type.
+        Base type in the configuration. A String with ``choices`` is an
+        Integer in the FMU: the index of the choice (:attr:`fmi_type`).
     start : Any
         Start value (default of a parameter, initial value of an input).
     unit : str
@@ -51,6 +177,20 @@ class Variable:
         The lower bound itself is not allowed (e.g. a zero baseline).
     choices : tuple of str, optional
         Allowed values of a String variable (None: free text such as a path).
+    discrete : bool
+        A Real input or output that changes only at communication points (a
+        sampled signal: a packet, a sensor reading, an estimate): FMI
+        variability ``discrete``, so hosts hold it instead of interpolating.
+    scope : {'both', 'fmu', 'config'}
+        ``both``: an FMU variable and, for a parameter, a configuration key;
+        ``fmu``: an FMU parameter the orchestrator fills from other keys
+        (e.g. a sound-speed table from a CTD cast); ``config``: a
+        configuration key only (e.g. a file path), turned into FMU parameters.
+    table : Table, optional
+        This Integer parameter is the row count of a table whose columns are
+        FMU arrays (:meth:`Table.array_variables`).
+    in_table : bool
+        An entry of a table column (checked only in the rows in use).
     """
 
     name: str
@@ -63,6 +203,10 @@ class Variable:
     max: float | None = None
     min_exclusive: bool = False
     choices: tuple[str, ...] | None = None
+    discrete: bool = False
+    scope: str = "both"
+    table: Table | None = None
+    in_table: bool = False
 
     def __post_init__(self) -> None:
         if self.causality not in CAUSALITIES:
@@ -71,14 +215,41 @@ class Variable:
             raise ValueError(f"{self.name}: type {self.type!r} not in {TYPES}")
         if self.type == "Real" and self.unit not in UNITS:
             raise ValueError(f"{self.name}: unit {self.unit!r} is not declared in models.core.UNITS")
+        if self.scope not in SCOPES:
+            raise ValueError(f"{self.name}: scope {self.scope!r} not in {SCOPES}")
+        if self.type == "String" and self.in_fmu and self.choices is None:
+            raise ValueError(f"{self.name}: a free-text String can only be a configuration key (scope='config')")
+        if self.table is not None and self.type != "Integer":
+            raise ValueError(f"{self.name}: the row count of a table is an Integer")
 
     @property
     def variability(self) -> str:
-        """FMI variability: ``fixed`` for parameters, ``continuous`` for Real
-        signals, ``discrete`` for the others."""
+        """FMI variability: ``fixed`` for parameters, ``discrete`` for sampled
+        signals and non-Real ones, ``continuous`` for the other Real signals."""
         if self.causality == "parameter":
             return "fixed"
-        return "continuous" if self.type == "Real" else "discrete"
+        return "discrete" if (self.discrete or self.type != "Real") else "continuous"
+
+    @property
+    def in_fmu(self) -> bool:
+        """The variable is part of the FMU (not a configuration-only key)."""
+        return self.scope != "config"
+
+    @property
+    def fmi_type(self) -> str:
+        """FMI base type in the FMU: a String choice is the Integer index of the choice."""
+        return "Integer" if self.type == "String" else self.type
+
+    @property
+    def fmi_start(self) -> Any:
+        """Start value in the FMU (a choice's index)."""
+        return self.choices.index(self.start) if self.type == "String" else self.start
+
+    def fmi_description(self) -> str:
+        """The description, with the codes of a choice (``0: semicircle, 1: spiral, ...``)."""
+        if self.type == "String":
+            return f"{self.description} ({', '.join(f'{k}: {c}' for k, c in enumerate(self.choices))})"
+        return self.description
 
     def allowed(self) -> str:
         """Human-readable allowed range, e.g. ``(0, inf) m`` or ``one of a, b``."""
@@ -86,8 +257,8 @@ class Variable:
             return "one of " + ", ".join(self.choices) if self.choices else "text"
         if self.type == "Boolean":
             return "true or false"
-        lo = "-inf" if self.min is None else f"{self.min:g}"
-        hi = "inf" if self.max is None else f"{self.max:g}"
+        lo = "-inf" if self.min is None else _format_bound(self.min)
+        hi = "inf" if self.max is None else _format_bound(self.max)
         left = "(" if (self.min is None or self.min_exclusive) else "["
         right = "]" if self.max is not None else ")"
         unit = f" {self.unit}" if self.unit and self.unit != "1" else ""
@@ -115,41 +286,109 @@ class Variable:
             return bool(value)
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
             raise ModelError(f"{label}: expected a number in {self.allowed()}, got {value!r}")
-        if not math.isfinite(float(value)):
+        try:
+            number = float(value)
+        except OverflowError:
+            raise ModelError(f"{label}: {str(value)[:12]}... is outside the allowed range {self.allowed()}") from None
+        if not math.isfinite(number):
             raise ModelError(f"{label}: {value!r} is not finite; allowed {self.allowed()}")
         if self.type == "Integer":
-            if float(value) != int(value):
+            if number != int(value):
                 raise ModelError(f"{label}: expected a whole number in {self.allowed()}, got {value!r}")
             value = int(value)
         else:
-            value = float(value)
+            value = number
         below = self.min is not None and (value < self.min or (self.min_exclusive and value == self.min))
         above = self.max is not None and value > self.max
         if below or above:
             raise ModelError(f"{label}: {value!r} is outside the allowed range {self.allowed()}")
         return value
 
+    def code(self, value: Any) -> float:
+        """The value as it travels in ``p``: the number, 0/1, or the index of a String choice."""
+        if self.type == "String":
+            return float(self.choices.index(value))
+        return float(value)
 
-#: FMI unit definitions used by the declarations: name -> (SI base-unit exponents, factor).
-#: Exponents are over (m, s, rad); the factor converts to SI (deg -> rad, % -> 1).
-UNITS: dict[str, tuple[dict[str, int], float]] = {
-    "1": ({}, 1.0),
-    "m": ({"m": 1}, 1.0),
-    "s": ({"s": 1}, 1.0),
-    "m/s": ({"m": 1, "s": -1}, 1.0),
-    "rad": ({"rad": 1}, 1.0),
-    "rad/s": ({"rad": 1, "s": -1}, 1.0),
-    "deg": ({"rad": 1}, math.pi / 180.0),
-    "%": ({}, 0.01),
-    "ppm": ({}, 1e-6),
-    "m2/s3": ({"m": 2, "s": -3}, 1.0),
-    "degC": ({"K": 1}, 1.0),
-    "g/kg": ({}, 1e-3),
-}
+
+_ROW_SPLIT = re.compile(r"[\s,]+")
+
+
+def parse_table(text: str, table: Table, where: str) -> np.ndarray:
+    """Parse a table given as text ``"a b; a b; ..."`` and check it.
+
+    Returns
+    -------
+    ndarray, shape (rows, len(table.columns))
+        The values; 0 rows for a blank text.
+
+    Raises
+    ------
+    ModelError
+        On a non-numeric or non-finite value (naming the row and column), a
+        wrong number of values in a row, more rows than the table holds, a
+        value outside its column's range, or a first column that is not
+        strictly increasing when it must be.
+    """
+    ncol = len(table.columns)
+    rows = [r.strip() for r in text.split(";")]
+    if rows and not rows[-1]:
+        rows = rows[:-1]  # a trailing ';'
+    if not any(rows):
+        return np.zeros((0, ncol))
+    if len(rows) > table.max_rows:
+        raise ModelError(f"{where}: {len(rows)} rows; at most {table.max_rows}")
+    values = np.empty((len(rows), ncol))
+    for i, row in enumerate(rows, start=1):
+        items = [s for s in _ROW_SPLIT.split(row) if s]
+        if len(items) != ncol:
+            raise ModelError(f"{where}: row {i} has {len(items)} values, expected {ncol} "
+                             f"({' '.join(c.name for c in table.columns)})")
+        for j, (item, col) in enumerate(zip(items, table.columns)):
+            try:
+                number = float(item)
+            except ValueError:
+                raise ModelError(f"{where}: row {i}, column {col.name}: {item!r} is not a number") from None
+            check_entry(number, col, f"{where}: row {i}, column {col.name}")
+            values[i - 1, j] = number
+    check_increasing(values, table, where)
+    return values
+
+
+def check_entry(number: float, col: Column, label: str) -> None:
+    """Check one table value against its column (finite, in range).
+
+    Raises
+    ------
+    ModelError
+        Naming ``label`` and the column's allowed range.
+    """
+    if not math.isfinite(number):
+        raise ModelError(f"{label}: {number!r} is not finite; allowed {col.allowed()}")
+    if (col.min is not None and number < col.min) or (col.max is not None and number > col.max):
+        raise ModelError(f"{label}: {number:g} is outside the allowed range {col.allowed()}")
+
+
+def check_increasing(values: np.ndarray, table: Table, where: str) -> None:
+    """Check that the first column is strictly increasing where the table asks for it.
+
+    Raises
+    ------
+    ModelError
+        Naming the first row that is not greater than the row before.
+    """
+    if table.increasing and values.shape[0] > 1 and np.any(np.diff(values[:, 0]) <= 0.0):
+        i = int(np.flatnonzero(np.diff(values[:, 0]) <= 0.0)[0]) + 2
+        raise ModelError(f"{where}: row {i}, column {table.columns[0].name}: must be greater than the row before")
+
+
+def format_table(values: np.ndarray) -> str:
+    """A table as text, every value with 17 significant digits (read back exactly)."""
+    return "; ".join(" ".join(repr(float(v)) for v in row) for row in np.asarray(values, float))
 
 
 #: Integer parameters that every stochastic component takes to seed its
-#: random streams (DESIGN.md, "Randomness").
+#: random streams (module docstring, "Randomness").
 SEED_PARAMETERS: tuple[Variable, ...] = (
     Variable("seed", "parameter", "Integer", 0, description="Campaign seed", min=0, max=2**31 - 1),
     Variable("scenario_key", "parameter", "Integer", 0, description="Scenario index in the seed tree",
@@ -159,6 +398,7 @@ SEED_PARAMETERS: tuple[Variable, ...] = (
     Variable("replicate", "parameter", "Integer", 0, description="Replicate index in the seed tree",
              min=0, max=2**31 - 1),
 )
+SEED_NAMES = tuple(v.name for v in SEED_PARAMETERS)
 
 
 def parameters(variables: Sequence[Variable]) -> dict[str, Variable]:
@@ -200,201 +440,438 @@ def resolve_parameters(variables: Sequence[Variable], values: Mapping[str, Any],
     return out
 
 
-class RandomStreams:
-    """Independent, block-drawn random streams for a batch of replicates.
+# --------------------------------------------------------------------------------------------
+# The model program
 
-    Replicate ``b`` and purpose ``s`` draw from
-    ``Generator(PCG64(SeedSequence(seed, spawn_key=(scenario, cell, replicate, component, s))))``,
-    so a replicate's numbers do not depend on the batch it is stepped in,
-    the engine, or the order of execution. Draws are taken ``BLOCK`` steps
-    at a time per replicate, which keeps per-step cost independent of the
-    generator call overhead while leaving the sequence unchanged.
 
-    Parameters
+@dataclass(frozen=True)
+class Stream:
+    """Random numbers a program function takes in its ``w`` input, one draw per call.
+
+    Attributes
     ----------
-    seed : int
-        Campaign seed.
-    keys : ndarray of int, shape (B, 3)
-        ``(scenario_key, cell, replicate)`` of each replicate of the batch.
-    component : int
-        Component index in the seed tree.
+    purpose : int
+        Stream index inside the component (0 … 65535); its draws are counted
+        across every function that uses it.
+    kind : {'uniform', 'normal'}
+        Uniform on [0, 1) or standard normal.
+    width : int
+        Numbers per draw.
     """
 
-    BLOCK: ClassVar[int] = 256
+    purpose: int
+    kind: str
+    width: int
 
-    def __init__(self, seed: int, keys: np.ndarray, component: int) -> None:
-        self.seed = int(seed)
-        self.keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3)
-        self.component = int(component)
-        self._buffers: dict[tuple[int, str], list] = {}
-
-    def generators(self, purpose: int) -> list[np.random.Generator]:
-        """One fresh generator per replicate for a purpose index."""
-        return [
-            np.random.Generator(np.random.PCG64(np.random.SeedSequence(
-                self.seed, spawn_key=(int(k[0]), int(k[1]), int(k[2]), self.component, int(purpose)))))
-            for k in self.keys
-        ]
-
-    def draw(self, purpose: int, kind: str, width: int) -> np.ndarray:
-        """This step's draws of one stream.
-
-        Parameters
-        ----------
-        purpose : int
-            Stream index inside the component; each purpose must always be
-            called with the same ``kind`` and ``width``.
-        kind : {'normal', 'uniform'}
-            Standard normal or uniform on [0, 1).
-        width : int
-            Numbers per replicate and step.
-
-        Returns
-        -------
-        ndarray, shape (B, width)
-        """
-        key = (purpose, kind)
-        entry = self._buffers.get(key)
-        if entry is None:
-            entry = [self.generators(purpose), None, self.BLOCK]
-            self._buffers[key] = entry
-        gens, block, pos = entry
-        if pos >= self.BLOCK:
-            if kind == "normal":
-                block = np.stack([g.standard_normal((self.BLOCK, width)) for g in gens])
-            elif kind == "uniform":
-                block = np.stack([g.random((self.BLOCK, width)) for g in gens])
-            else:
-                raise ValueError(f"kind: {kind!r} is not 'normal' or 'uniform'")
-            entry[1] = block
-            pos = 0
-        entry[2] = pos + 1
-        return block[:, pos, :]
+    def __post_init__(self) -> None:
+        if self.kind not in ("uniform", "normal"):
+            raise ValueError(f"stream {self.purpose}: kind {self.kind!r} is not 'uniform' or 'normal'")
 
 
-class ComponentCore:
-    """Base of the component cores: an FMI-shaped life cycle on batched state.
+@dataclass(frozen=True)
+class Event:
+    """A handler run while its guard holds, after the step function of a ``doStep``.
 
-    Subclasses set :attr:`name` and :attr:`component_index` and implement
-    :meth:`variables`, :meth:`_initialize` and :meth:`_step`. Inputs and
-    outputs are dictionaries of arrays of shape (B,), one entry per declared
-    variable.
+    Attributes
+    ----------
+    name : str
+    guard : casadi.Function
+        ``(x, u, p, d, t, h) -> g``; the handler runs while ``g > 0.5``.
+    handler : casadi.Function
+        ``(x, u, p, d, w, t, h) -> x``.
+    streams : tuple of Stream
+        Random numbers of the handler.
+    """
+
+    name: str
+    guard: ca.Function
+    handler: ca.Function
+    streams: tuple[Stream, ...] = ()
+
+
+@dataclass(frozen=True)
+class Program:
+    """A component's per-step math as casadi functions (see the module docstring).
+
+    Attributes
+    ----------
+    states : tuple of (str, int)
+        Named blocks of the state vector ``x`` and their sizes.
+    prepare, init, output : casadi.Function
+    step : casadi.Function or None
+        None: nothing happens every step but the events.
+    init_streams, step_streams : tuple of Stream
+    events : tuple of Event
+    """
+
+    states: tuple[tuple[str, int], ...]
+    prepare: ca.Function
+    init: ca.Function
+    step: ca.Function | None
+    output: ca.Function
+    init_streams: tuple[Stream, ...] = ()
+    step_streams: tuple[Stream, ...] = ()
+    events: tuple[Event, ...] = ()
+
+    @property
+    def state_size(self) -> int:
+        return sum(n for _, n in self.states)
+
+    @property
+    def derived_size(self) -> int:
+        return int(self.prepare.numel_out(0))
+
+    def state_slices(self) -> dict[str, slice]:
+        """Where each named state block lies in ``x``."""
+        out, k = {}, 0
+        for name, n in self.states:
+            out[name] = slice(k, k + n)
+            k += n
+        return out
+
+    def functions(self) -> list[ca.Function]:
+        """Every casadi function of the program (for code generation)."""
+        funcs = [self.prepare, self.init, self.output] + ([self.step] if self.step is not None else [])
+        for ev in self.events:
+            funcs += [ev.guard, ev.handler]
+        return funcs
+
+    def purposes(self) -> list[int]:
+        """The stream purposes the program draws from, sorted."""
+        streams = list(self.init_streams) + list(self.step_streams) + [s for e in self.events for s in e.streams]
+        return sorted({s.purpose for s in streams})
+
+
+class Blocks:
+    """Named blocks of a casadi vector: ``Blocks([('x', 6), ('P', 36)])``.
+
+    ``unpack(v)`` gives a dict of sub-vectors, ``pack(dict)`` concatenates
+    them back in declaration order; missing names keep the values of
+    ``default`` (a dict from :meth:`unpack`).
+    """
+
+    def __init__(self, blocks: Sequence[tuple[str, int]]) -> None:
+        self.blocks = tuple((str(n), int(s)) for n, s in blocks)
+        self.size = sum(s for _, s in self.blocks)
+
+    def names(self) -> list[str]:
+        return [n for n, _ in self.blocks]
+
+    def sym(self, name: str) -> ca.SX:
+        return ca.SX.sym(name, self.size)
+
+    def unpack(self, v: ca.SX) -> dict[str, ca.SX]:
+        out, k = {}, 0
+        for name, n in self.blocks:
+            out[name] = v[k:k + n]
+            k += n
+        return out
+
+    def pack(self, values: Mapping[str, Any], default: Mapping[str, Any] | None = None) -> ca.SX:
+        parts = []
+        for name, n in self.blocks:
+            value = values[name] if name in values else default[name]
+            value = ca.SX(value) if not isinstance(value, ca.SX) else value
+            if value.numel() != n:
+                raise ValueError(f"block {name}: {value.numel()} values, expected {n}")
+            parts.append(ca.reshape(value, n, 1))
+        return ca.vertcat(*parts)
+
+
+class ProgramBuilder:
+    """Builds a component's :class:`Program` from Python functions of named blocks.
+
+    The functions receive the parameters, derived quantities, state, inputs
+    and random numbers as dictionaries of casadi SX values (by variable,
+    block or stream name) and return dictionaries; the builder packs them
+    into the vectors of the standard signatures (module docstring).
 
     Parameters
     ----------
-    params : mapping
-        Parameter values by name; missing ones take their declared start,
-        and all are validated (:func:`resolve_parameters`).
-        The names in :attr:`batched_parameters` may also be arrays of shape
-        (B,), one value per replicate (a batch spanning several design cells).
-    replicates : sequence of int, optional
-        Replicate indices of the batch (B = ``len(replicates)``); default the
-        single replicate ``params['replicate']``.
+    component : type
+        The :class:`Component` subclass.
     n_beacons : int
-        Number of beacons of the interface (4 for the SBL cross).
+    states : sequence of (str, int)
+        Named blocks of the state ``x``.
+    derived : sequence of (str, int)
+        Named blocks of ``d`` (what ``prepare`` computes).
+    """
 
-    Raises
-    ------
-    ModelError
-        If a parameter is unknown or outside its allowed range, or an array is
-        given for a parameter that is not in :attr:`batched_parameters`.
+    def __init__(self, component: type, n_beacons: int, states: Sequence[tuple[str, int]],
+                 derived: Sequence[tuple[str, int]] = ()) -> None:
+        self.component, self.n = component, n_beacons
+        self.prefix = f"sblsim_{component.name}"
+        self.X = Blocks(states)
+        self.D = Blocks(derived if derived else [("none", 1)])
+        params = component.fmu_parameters_declared(n_beacons)
+        self.param_vars = params
+        self.input_vars = component.inputs(n_beacons)
+        self.output_vars = component.outputs(n_beacons)
+        self.x = ca.SX.sym("x", self.X.size)
+        self.u = ca.SX.sym("u", len(self.input_vars))
+        self.p = ca.SX.sym("p", len(params))
+        self.d = ca.SX.sym("d", self.D.size)
+        self.t = ca.SX.sym("t")
+        self.h = ca.SX.sym("h")
+
+    # named views -------------------------------------------------------------------------
+    def params(self) -> dict[str, ca.SX]:
+        """Parameters by name; a table's columns also as vectors under their column names."""
+        out = {v.name: self.p[k] for k, v in enumerate(self.param_vars)}
+        for v in self.param_vars:
+            if v.table is not None:
+                for col in v.table.columns:
+                    out[col.name] = ca.vertcat(*[out[f"{col.name}[{k}]"] for k in range(1, v.table.max_rows + 1)])
+        return out
+
+    def inputs(self) -> dict[str, ca.SX]:
+        return {v.name: self.u[k] for k, v in enumerate(self.input_vars)}
+
+    def _streams(self, streams: Sequence[Stream]) -> tuple[ca.SX, dict[int, ca.SX]]:
+        width = sum(s.width for s in streams)
+        w = ca.SX.sym("w", width)
+        out, k = {}, 0
+        for s in streams:
+            out[s.purpose] = w[k:k + s.width]
+            k += s.width
+        return w, out
+
+    # functions ----------------------------------------------------------------------------
+    def prepare(self, body) -> ca.Function:
+        """``prepare(p) -> d`` from ``body(p) -> {block: value}``."""
+        values = body(self.params()) if self.D.names() != ["none"] else {"none": 0}
+        return ca.Function(f"{self.prefix}_prepare", [self.p], [self.D.pack(values)], ["p"], ["d"])
+
+    def init(self, body, streams: Sequence[Stream] = ()) -> tuple[ca.Function, tuple[Stream, ...]]:
+        """``init(p, d, w, t0) -> x`` from ``body(p, d, w, t0) -> {block: value}`` (every block)."""
+        w, ws = self._streams(streams)
+        values = body(self.params(), self.D.unpack(self.d), ws, self.t)
+        f = ca.Function(f"{self.prefix}_init", [self.p, self.d, w, self.t], [self.X.pack(values)],
+                        ["p", "d", "w", "t"], ["x"])
+        return f, tuple(streams)
+
+    def step(self, body, streams: Sequence[Stream] = ()) -> tuple[ca.Function, tuple[Stream, ...]]:
+        """``step(x, u, p, d, w, t, h) -> x`` from ``body(x, u, p, d, w, t, h) -> {changed block: value}``."""
+        w, ws = self._streams(streams)
+        x = self.X.unpack(self.x)
+        values = body(x, self.inputs(), self.params(), self.D.unpack(self.d), ws, self.t, self.h)
+        f = ca.Function(f"{self.prefix}_step", [self.x, self.u, self.p, self.d, w, self.t, self.h],
+                        [self.X.pack(values, x)], ["x", "u", "p", "d", "w", "t", "h"], ["x_next"])
+        return f, tuple(streams)
+
+    def event(self, name: str, guard, handler, streams: Sequence[Stream] = ()) -> Event:
+        """An :class:`Event` from ``guard(x, u, p, d, t, h) -> bool expression`` and
+        ``handler(x, u, p, d, w, t, h) -> {changed block: value}``."""
+        x = self.X.unpack(self.x)
+        u, p, d = self.inputs(), self.params(), self.D.unpack(self.d)
+        g = ca.Function(f"{self.prefix}_{name}_guard", [self.x, self.u, self.p, self.d, self.t, self.h],
+                        [guard(x, u, p, d, self.t, self.h)], ["x", "u", "p", "d", "t", "h"], ["g"])
+        w, ws = self._streams(streams)
+        values = handler(x, u, p, d, ws, self.t, self.h)
+        f = ca.Function(f"{self.prefix}_{name}", [self.x, self.u, self.p, self.d, w, self.t, self.h],
+                        [self.X.pack(values, x)], ["x", "u", "p", "d", "w", "t", "h"], ["x_next"])
+        return Event(name, g, f, tuple(streams))
+
+    def output(self, body) -> ca.Function:
+        """``output(x, p, d, t) -> y`` from ``body(x, p, d, t) -> {output name: value}`` (every output)."""
+        values = body(self.X.unpack(self.x), self.params(), self.D.unpack(self.d), self.t)
+        missing = [v.name for v in self.output_vars if v.name not in values]
+        if missing:
+            raise ValueError(f"{self.component.name}: outputs without a value: {', '.join(missing)}")
+        y = ca.vertcat(*[ca.SX(values[v.name]) for v in self.output_vars])
+        return ca.Function(f"{self.prefix}_output", [self.x, self.p, self.d, self.t], [y],
+                           ["x", "p", "d", "t"], ["y"])
+
+    def program(self, prepare: ca.Function, init, output: ca.Function, step=None,
+                events: Sequence[Event] = ()) -> Program:
+        init_f, init_streams = init
+        step_f, step_streams = step if step is not None else (None, ())
+        return Program(self.X.blocks, prepare, init_f, step_f, output, init_streams, step_streams, tuple(events))
+
+
+class Component:
+    """Base of the component models: declarations and the program.
+
+    Subclasses set :attr:`name` and :attr:`component_index` and implement
+    :meth:`variables` and :meth:`build`; :meth:`fmu_parameters` turns
+    configuration keys into FMU parameters where they differ.
     """
 
     name: ClassVar[str] = ""
     component_index: ClassVar[int] = 0
-    #: Parameters that may differ between the replicates of one batch (arrays
-    #: of shape (B,)): the batch then spans several design cells.
-    batched_parameters: ClassVar[frozenset[str]] = frozenset({"cell"})
-
-    def __init__(self, params: Mapping[str, Any], replicates: Sequence[int] | None = None,
-                 n_beacons: int = 4) -> None:
-        if n_beacons < 1:
-            raise ModelError(f"n_beacons: {n_beacons} is outside the allowed range [1, inf)")
-        self.n_beacons = int(n_beacons)
-        self.declarations = self.variables(self.n_beacons)
-        if replicates is None:
-            replicates = [params.get("replicate", 0)]
-        self.replicates = np.asarray(replicates, dtype=np.int64).reshape(-1)
-        self.batch = self.replicates.size
-        scalars, arrays = self._split_batched(params)
-        self.params = resolve_parameters(self.declarations, scalars, self.name)
-        self.params.update(arrays)
-        self.inputs: dict[str, np.ndarray] = {
-            v.name: np.full(self.batch, v.start) for v in self.declarations if v.causality == "input"}
-        self.outputs: dict[str, np.ndarray] = {}
-        self.time = 0.0
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        """The component's declarations for ``n_beacons`` beacons."""
+        """The declarations: FMU variables (tables as their row count) and configuration-only keys."""
         raise NotImplementedError
 
-    def _split_batched(self, params: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        """Separate per-replicate parameter arrays from scalar values and validate them.
+    @classmethod
+    def fmu_variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        """The FMU's variables in value-reference order: tables expanded, configuration-only keys left out."""
+        return _fmu_variables(cls, int(n_beacons))
 
-        An array of shape (B,) gives each replicate of the batch its own value;
-        only the names in :attr:`batched_parameters` may be arrays. An array
-        whose values are all equal is taken as that scalar.
-        """
-        declared = parameters(self.declarations)
-        scalars: dict[str, Any] = {}
-        arrays: dict[str, np.ndarray] = {}
-        for name, value in params.items():
-            if not isinstance(value, np.ndarray) or value.ndim == 0:
-                scalars[name] = value
-                continue
-            if name not in self.batched_parameters:
-                raise ModelError(f"{self.name}.{name}: must be the same for every replicate of a batch; "
-                                 f"per-replicate values are allowed for {', '.join(sorted(self.batched_parameters))}")
-            if value.shape != (self.batch,):
-                raise ModelError(f"{self.name}.{name}: {value.shape[0]} per-replicate values for a batch of "
-                                 f"{self.batch}")
-            var = declared.get(name)
-            if var is None:
-                scalars[name] = value  # reported as unknown by resolve_parameters
-                continue
-            for item in np.unique(value):
-                var.coerce(item.item(), f"{self.name}.{name}")
-            if np.all(value == value[0]):
-                scalars[name] = value[0].item()
-            else:
-                arrays[name] = value.astype(np.int64 if var.type == "Integer" else float)
-        return scalars, arrays
+    @classmethod
+    def config_parameters(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        """The parameters a configuration section may set (those the orchestrator fills left out)."""
+        return tuple(v for v in cls.variables(n_beacons) if v.causality == "parameter" and v.scope != "fmu")
 
-    def streams(self) -> RandomStreams:
-        """Random streams of this component for the batch (needs the seed parameters)."""
-        keys = np.column_stack([
-            np.broadcast_to(self.params["scenario_key"], self.batch),
-            np.broadcast_to(self.params["cell"], self.batch),
-            self.replicates,
-        ])
-        return RandomStreams(self.params["seed"], keys, self.component_index)
+    @classmethod
+    def fmu_parameters_declared(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        """The FMU parameters, in the order they travel in ``p``."""
+        return tuple(v for v in cls.fmu_variables(n_beacons) if v.causality == "parameter")
 
-    def initialize(self, t0: float = 0.0) -> None:
-        """Enter the initial state at ``t0`` [s] and compute the initial outputs."""
-        self.time = float(t0)
-        self._initialize(float(t0))
+    @classmethod
+    def inputs(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        return tuple(v for v in cls.fmu_variables(n_beacons) if v.causality == "input")
 
-    def set_inputs(self, values: Mapping[str, Any]) -> None:
-        """Set input values, each an array of shape (B,) or a scalar.
+    @classmethod
+    def outputs(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        return tuple(v for v in cls.fmu_variables(n_beacons) if v.causality == "output")
+
+    @classmethod
+    def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """FMU parameter values from a resolved configuration section (default: the same keys).
 
         Raises
         ------
-        KeyError
-            If a name is not a declared input.
+        ModelError
+            If a configuration key cannot be turned into FMU parameters (e.g. an unreadable file).
         """
-        for name, value in values.items():
-            if name not in self.inputs:
-                raise KeyError(f"{self.name}.{name}: not an input")
-            self.inputs[name] = np.broadcast_to(np.asarray(value), (self.batch,))
+        names = {v.name for v in cls.fmu_parameters_declared(n_beacons)}
+        return {k: v for k, v in values.items() if k in names}
 
-    def step(self, t: float, dt: float) -> None:
-        """Advance from ``t`` to ``t + dt`` [s] (one communication step, doStep)."""
-        self._step(float(t), float(dt))
-        self.time = float(t) + float(dt)
+    @classmethod
+    def program(cls, n_beacons: int = 4) -> Program:
+        """The component's program for ``n_beacons`` beacons (built once, then cached)."""
+        return _program(cls, int(n_beacons))
 
-    def _initialize(self, t0: float) -> None:
+    @classmethod
+    def build(cls, n_beacons: int) -> Program:
         raise NotImplementedError
 
-    def _step(self, t: float, dt: float) -> None:
-        raise NotImplementedError
+    @classmethod
+    def parameter_vector(cls, values: Mapping[str, Any], n_beacons: int = 4) -> np.ndarray:
+        """The ``p`` vector of FMU parameter values; missing ones take their declared start.
+
+        Raises
+        ------
+        ModelError
+            On an unknown name, or a value outside its allowed range.
+        """
+        declared = cls.fmu_parameters_declared(n_beacons)
+        known = {v.name: v for v in declared}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ModelError(f"{cls.name}.{unknown[0]}: not a parameter of the {cls.name} FMU")
+        out = np.empty(len(declared))
+        for k, v in enumerate(declared):
+            value = values.get(v.name, v.start)
+            out[k] = v.code(value if v.in_table else v.coerce(value, f"{cls.name}.{v.name}"))
+        return out
+
+
+@lru_cache(maxsize=None)
+def _fmu_variables(cls: type, n_beacons: int) -> tuple[Variable, ...]:
+    out: list[Variable] = []
+    for v in cls.variables(n_beacons):
+        if not v.in_fmu:
+            continue
+        out.append(v)
+        if v.table is not None:
+            out.extend(v.table.array_variables())
+    return tuple(out)
+
+
+@lru_cache(maxsize=None)
+def _program(cls: type, n_beacons: int) -> Program:
+    return cls.build(n_beacons)
+
+
+# --------------------------------------------------------------------------------------------
+# casadi helpers shared by the models
+
+
+def sample_due(index, start, period, t, h):
+    """Guard of a periodic sample: the next sample ``start + (index + 1)·period`` has been reached by
+    the end ``t + h`` of the step (to within 1e-6 periods, so that a host's rounded communication
+    points neither miss nor add a sample) [s]."""
+    return start + (index + 1.0) * period <= t + h + 1e-6 * period
+
+
+def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
+    """``rows[index]`` for a symbolic integer-valued ``index`` (zero if out of range).
+
+    Sums ``if_else(index == k, rows[k], 0)``: exact, since the other
+    terms are exact zeros.
+    """
+    total = 0
+    for k, row in enumerate(rows):
+        total = total + ca.if_else(index == k, row, 0)
+    return total
+
+
+def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
+    """A constant table indexed by a symbolic integer (zero if out of range)."""
+    return select(index, [ca.SX(v) for v in values])
+
+
+# --------------------------------------------------------------------------------------------
+# Philox-4x64-10 reference (numpy), the definition the C runtime is tested against
+
+_MASK64 = (1 << 64) - 1
+
+
+def philox_key(seed: int, scenario_key: int, component: int, purpose: int) -> tuple[int, int]:
+    """Philox key of a stream: ``(seed, scenario_key·2³² + component·2¹⁶ + purpose)``."""
+    return int(seed) & _MASK64, ((int(scenario_key) << 32) | (int(component) << 16) | int(purpose)) & _MASK64
+
+
+def philox_words(key: tuple[int, int], counter: Sequence[int]) -> np.ndarray:
+    """The four 64-bit words of Philox-4×64-10 at ``counter`` (numpy's ``Philox`` bit generator).
+
+    numpy advances the counter before it ciphers, so its state is set one
+    below ``counter``.
+    """
+    value = sum((int(c) & _MASK64) << (64 * i) for i, c in enumerate(counter))
+    value = (value - 1) % (1 << 256)
+    before = np.array([(value >> (64 * i)) & _MASK64 for i in range(4)], dtype=np.uint64)
+    gen = np.random.Philox(counter=before, key=np.array(key, dtype=np.uint64))
+    return gen.random_raw(4)
+
+
+def uniforms(seed: int, scenario_key: int, cell: int, replicate: int, component: int, purpose: int,
+             draw: int, count: int) -> np.ndarray:
+    """The uniforms on [0, 1) of one draw of a stream (module docstring, "Randomness").
+
+    Returns
+    -------
+    ndarray, shape (count,)
+    """
+    key = philox_key(seed, scenario_key, component, purpose)
+    blocks = [philox_words(key, (j, draw, cell, replicate)) for j in range((count + 3) // 4)]
+    words = np.concatenate(blocks)[:count] if blocks else np.zeros(0, dtype=np.uint64)
+    return (words >> np.uint64(11)).astype(float) * (1.0 / 9007199254740992.0)
+
+
+def normals(seed: int, scenario_key: int, cell: int, replicate: int, component: int, purpose: int,
+            draw: int, count: int) -> np.ndarray:
+    """The standard normals of one draw: Box-Muller on consecutive uniform pairs.
+
+    Uses :mod:`math` (the C library's ``log``, ``sqrt`` and ``cos``), as the C runtime does.
+    """
+    u = uniforms(seed, scenario_key, cell, replicate, component, purpose, draw, 2 * count)
+    return np.array([math.sqrt(-2.0 * math.log(1.0 - u[2 * i])) * math.cos(2.0 * math.pi * u[2 * i + 1])
+                     for i in range(count)])
+
+
+def draw_stream(stream: Stream, keys: Sequence[int], component: int, draw: int) -> np.ndarray:
+    """One draw of a :class:`Stream` for the seed keys ``(seed, scenario_key, cell, replicate)``."""
+    seed, scenario_key, cell, replicate = (int(k) for k in keys)
+    make = uniforms if stream.kind == "uniform" else normals
+    return make(seed, scenario_key, cell, replicate, component, stream.purpose, draw, stream.width)
+
+
+__all__ = ["Blocks", "Column", "Component", "Event", "ModelError", "Program", "SEED_NAMES", "SEED_PARAMETERS",
+           "Stream", "Table", "UNITS", "Variable", "check_entry", "check_increasing", "draw_stream", "format_table",
+           "lookup", "normals", "ProgramBuilder", "parameters", "parse_table", "philox_key", "philox_words",
+           "resolve_parameters", "sample_due", "select", "uniforms"]

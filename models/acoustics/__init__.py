@@ -1,6 +1,6 @@
 """Acoustic channel component: round-robin OWTT ranging, sound speed, loss and multipath."""
 
-from models.acoustics.core import AcousticsCore
-from models.acoustics.sound_speed import SoundSpeedProfile, load_profile
+from models.acoustics.core import PACKET, Acoustics
+from models.acoustics.sound_speed import profile_table
 
-__all__ = ["AcousticsCore", "SoundSpeedProfile", "load_profile"]
+__all__ = ["PACKET", "Acoustics", "profile_table"]

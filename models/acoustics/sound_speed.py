@@ -3,10 +3,18 @@
 Along a straight ray between depths z1 and z2 (ray bending is negligible over
 the tens of metres of an SBL system) the travel time is
 ``τ = (ρ / |z2 - z1|) ∫ dz / c(z)``: the range ρ over the harmonic mean of
-c(z) between the two depths. :class:`SoundSpeedProfile` precomputes the
-cumulative slowness ``S(z) = ∫_0^z dz / c`` on the cast's depths (trapezoid
-rule, constant extrapolation outside the cast) and evaluates the harmonic mean
-in O(1) per path.
+c(z) between the two depths. The model holds the profile as a table of
+depths and speeds (at most :data:`MAX_PROFILE_ROWS` rows; an empty table is
+the constant ``sound_speed_true``), extends it to the surface and far below
+with its end speeds, integrates the slowness ``S(z) = ∫ dz / c`` at the
+table's depths by the trapezoid rule, and interpolates S linearly between
+them (:func:`harmonic_mean`, a casadi expression).
+
+The configuration's ``acoustics.sound_speed_profile`` chooses where the table
+comes from (:func:`profile_table`): ``constant``, ``teos10`` (uniform water
+of the given temperature and salinity through TEOS-10), ``ctd:NAME`` (a real
+cast shipped with sblsim), ``table`` (``acoustics.sound_speed_table`` as
+text), or a path to a CSV cast.
 
 References
 ----------
@@ -17,119 +25,176 @@ thermodynamic equation of seawater - 2010 (TEOS-10), via the ``gsw`` package.
 
 from __future__ import annotations
 
+import csv
 from importlib import resources
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
-from models.core import ModelError
+from models.core import Column, ModelError, Table, check_entry, check_increasing, parse_table, select
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md).
 BUILTIN_CASTS = ("11E101663_20120821_122817", "11E101663_20120821_145912")
+#: Largest number of rows of a sound-speed table.
+MAX_PROFILE_ROWS = 256
+#: How far above the first and below the last depth the end speeds are extended [m].
+EXTENSION = 1e4
+PROFILE = Table(
+    columns=(Column("sound_speed_depth", "m", "Sound-speed table depth", 0.0, 11000.0),
+             Column("sound_speed", "m/s", "Sound-speed table speed", 1300.0, 1700.0)),
+    max_rows=MAX_PROFILE_ROWS, increasing=True)
+#: Sizes of the padded profile the model derives: depths, speeds and cumulative slowness at each node.
+NODES = MAX_PROFILE_ROWS + 2
 
 
-class SoundSpeedProfile:
-    """A sound-speed profile c(z) and harmonic means over depth intervals.
+def profile_nodes(count, depth: ca.SX, speed: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The padded profile: nodes at the table's depths, extended above and below.
+
+    Nodes: ``z_1 − 10 km``, the table's depths, ``z_n + 10 km``, then one
+    metre apart (padding, never reached); speeds: the end speeds outside
+    the table; cumulative slowness by the trapezoid rule.
 
     Parameters
     ----------
-    depth : ndarray, shape (n,)
-        Strictly increasing depths [m].
-    speed : ndarray, shape (n,)
-        Sound speed at those depths [m/s].
+    count : casadi.SX
+        Rows in use, n ≥ 1.
+    depth, speed : casadi.SX, shape (MAX_PROFILE_ROWS, 1)
+        The table columns [m, m/s] (rows beyond n ignored).
+
+    Returns
+    -------
+    nodes, speeds, slowness : casadi.SX, each (NODES, 1)
+        [m], [m/s], [s/m · m = s/m]: depth, speed and ``S(z) = ∫ dz / c`` from the first node.
+    """
+    last_depth = select(count - 1, [depth[k] for k in range(MAX_PROFILE_ROWS)])
+    last_speed = select(count - 1, [speed[k] for k in range(MAX_PROFILE_ROWS)])
+    nodes, speeds = [depth[0] - EXTENSION], [speed[0]]
+    for k in range(MAX_PROFILE_ROWS):
+        used = k < count
+        nodes.append(ca.if_else(used, depth[k], last_depth + EXTENSION + (k - count)))
+        speeds.append(ca.if_else(used, speed[k], last_speed))
+    nodes.append(ca.if_else(count >= MAX_PROFILE_ROWS, last_depth + EXTENSION, nodes[-1] + 1.0))
+    speeds.append(last_speed)
+    speeds = [ca.fmax(c, 1.0) for c in speeds]  # an empty table (speeds 0) stays finite; it is not used
+    slowness = [ca.SX(0.0)]
+    for k in range(1, NODES):
+        slowness.append(slowness[-1] + 0.5 * (1.0 / speeds[k] + 1.0 / speeds[k - 1]) * (nodes[k] - nodes[k - 1]))
+    return ca.vertcat(*nodes), ca.vertcat(*speeds), ca.vertcat(*slowness)
+
+
+def harmonic_mean(z1, z2, constant, count, nodes, values) -> ca.SX:
+    """Harmonic-mean sound speed between depths ``z1`` and ``z2`` [m/s].
+
+    Parameters
+    ----------
+    z1, z2 : casadi.SX
+        End depths of the path [m].
+    constant : casadi.SX
+        The sound speed when the table is empty [m/s].
+    count : casadi.SX
+        Rows of the table in use.
+    nodes : casadi.SX, shape (NODES, 1)
+        Node depths [m] (:func:`profile_nodes`).
+    values : casadi.SX, shape (2 NODES, 1)
+        Speed and cumulative slowness at each node, node after node.
+
+    Returns
+    -------
+    casadi.SX
+        ``|z2 − z1| / |S(z2) − S(z1)|``, or ``c((z1 + z2) / 2)`` where the path is level
+        (|z2 − z1| < 1 nm); the constant for an empty table.
+    """
+    f = _profile_interpolant()
+    c1s1, c2s2 = f(z1, nodes, values), f(z2, nodes, values)
+    mid = f(0.5 * (z1 + z2), nodes, values)
+    dz = z2 - z1
+    level = ca.fabs(dz) < 1e-9
+    table = ca.if_else(level, mid[0], dz / ca.if_else(level, 1.0, c2s2[1] - c1s1[1]))
+    return ca.if_else(count > 0, table, constant)
+
+
+def _profile_interpolant() -> ca.Function:
+    return ca.interpolant("sblsim_sound_speed", "linear", [NODES], 2)
+
+
+def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile") -> np.ndarray:
+    """Read a sound-speed cast: a Castaway CTD processed file or a plain CSV ``depth, sound_speed``.
+
+    Lines starting with ``%`` or ``#`` are comments. The first other line
+    is the header: the depth column is the one whose name starts with
+    ``depth``; the speed column is the one whose name contains ``sound``
+    or ``velocity``. Every cell of those columns must be a finite number
+    inside the table's ranges; repeated depths are averaged.
+
+    Returns
+    -------
+    ndarray, shape (rows, 2)
+        Depth [m], sound speed [m/s], depths strictly increasing.
 
     Raises
     ------
     ModelError
-        If the arrays are empty, not finite, depths not increasing or speeds
-        not positive.
+        If the file is missing, a directory, has no such columns, or a cell
+        is not a valid number (naming the line and column).
     """
-
-    def __init__(self, depth: np.ndarray, speed: np.ndarray) -> None:
-        depth = np.asarray(depth, dtype=float).reshape(-1)
-        speed = np.asarray(speed, dtype=float).reshape(-1)
-        if depth.size < 1 or depth.size != speed.size or not (np.all(np.isfinite(depth)) and np.all(np.isfinite(speed))):
-            raise ModelError("acoustics.sound_speed_profile: needs matching finite depth and speed columns")
-        if np.any(np.diff(depth) <= 0.0):
-            raise ModelError("acoustics.sound_speed_profile: depths must be strictly increasing")
-        if np.any(speed <= 0.0):
-            raise ModelError("acoustics.sound_speed_profile: sound speeds must be positive [m/s]")
-        # Extend to the surface and far below with the end values (constant extrapolation).
-        self.depth = np.concatenate([[min(depth[0], 0.0) - 1e4], depth, [depth[-1] + 1e4]])
-        self.speed = np.concatenate([[speed[0]], speed, [speed[-1]]])
-        slowness = 1.0 / self.speed
-        steps = 0.5 * (slowness[1:] + slowness[:-1]) * np.diff(self.depth)
-        self._cumulative = np.concatenate([[0.0], np.cumsum(steps)])
-
-    @classmethod
-    def constant(cls, speed: float) -> "SoundSpeedProfile":
-        """A depth-independent sound speed [m/s]."""
-        return cls(np.array([0.0]), np.array([speed]))
-
-    def speed_at(self, z: np.ndarray) -> np.ndarray:
-        """Sound speed at depth ``z`` [m], linear interpolation [m/s]."""
-        return np.interp(z, self.depth, self.speed)
-
-    def slowness_integral(self, z: np.ndarray) -> np.ndarray:
-        """``S(z) = ∫ dz / c`` from the profile's top to ``z`` [s]."""
-        z = np.asarray(z, dtype=float)
-        k = np.clip(np.searchsorted(self.depth, z) - 1, 0, self.depth.size - 2)
-        z0, c0 = self.depth[k], self.speed[k]
-        gradient = (self.speed[k + 1] - c0) / (self.depth[k + 1] - z0)
-        c = c0 + gradient * (z - z0)
-        # trapezoid within the segment, consistent with the cumulative table
-        return self._cumulative[k] + 0.5 * (1.0 / c0 + 1.0 / c) * (z - z0)
-
-    def harmonic_mean(self, z1: np.ndarray, z2: np.ndarray) -> np.ndarray:
-        """Harmonic-mean sound speed between depths ``z1`` and ``z2`` [m/s].
-
-        Parameters
-        ----------
-        z1, z2 : ndarray, broadcastable
-            End depths of the path [m].
-
-        Returns
-        -------
-        ndarray
-            ``|z2 - z1| / |S(z2) - S(z1)|``, or ``c(z1)`` where the path is level.
-        """
-        z1, z2 = np.broadcast_arrays(np.asarray(z1, float), np.asarray(z2, float))
-        dz = z2 - z1
-        level = np.abs(dz) < 1e-9
-        ds = self.slowness_integral(z2) - self.slowness_integral(z1)
-        safe = np.where(level, 1.0, ds)
-        return np.where(level, self.speed_at(0.5 * (z1 + z2)), dz / safe)
-
-
-def read_castaway_csv(path: str | Path) -> SoundSpeedProfile:
-    """Read a Castaway CTD processed cast (``%`` header lines, then CSV).
-
-    Uses the columns ``Depth (Meter)`` and ``Sound velocity (Meters per Second)``;
-    a plain two-column CSV ``depth, sound_speed`` (with a header line) is read too.
-    Repeated depths are averaged.
-
-    Raises
-    ------
-    ModelError
-        If the file is missing or has no usable depth and sound-speed columns.
-    """
-    import pandas as pd
-
+    path = Path(path)
+    if path.is_dir():
+        raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
+    if not path.is_file():
+        raise ModelError(f"{field}: no such file {str(path)!r}; use constant, teos10, table, ctd:NAME or a CSV path")
     try:
-        table = pd.read_csv(path, comment="%")
-    except (OSError, ValueError) as exc:
-        raise ModelError(f"acoustics.sound_speed_profile: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
-    depth_col = next((c for c in table.columns if c.lower().startswith("depth")), None)
-    speed_col = next((c for c in table.columns if "sound" in c.lower() or "velocity" in c.lower()), None)
+        with open(path, newline="", encoding="utf-8-sig") as handle:
+            lines = [(i, row) for i, row in enumerate(csv.reader(handle), start=1)
+                     if row and not row[0].lstrip().startswith(("%", "#")) and any(c.strip() for c in row)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
+    if not lines:
+        raise ModelError(f"{field}: {str(path)!r} holds no header and no data")
+    header = [c.strip().lower() for c in lines[0][1]]
+    depth_col = next((k for k, c in enumerate(header) if c.startswith("depth")), None)
+    speed_col = next((k for k, c in enumerate(header) if "sound" in c or "velocity" in c), None)
     if depth_col is None or speed_col is None:
-        raise ModelError(f"acoustics.sound_speed_profile: {str(path)!r} needs a depth and a sound-speed column")
-    grouped = table[[depth_col, speed_col]].apply(pd.to_numeric, errors="coerce").dropna().groupby(depth_col).mean()
-    return SoundSpeedProfile(grouped.index.to_numpy(), grouped[speed_col].to_numpy())
+        raise ModelError(f"{field}: {str(path)!r} needs a header line naming a depth column and a sound-speed "
+                         "column (e.g. 'depth,sound_speed')")
+    rows: dict[float, list[float]] = {}
+    for i, row in lines[1:]:
+        values = []
+        for k, col in ((depth_col, PROFILE.columns[0]), (speed_col, PROFILE.columns[1])):
+            cell = row[k].strip() if k < len(row) else ""
+            try:
+                number = float(cell)
+            except ValueError:
+                raise ModelError(f"{field}: {str(path)!r} line {i}, column {lines[0][1][k].strip()!r}: "
+                                 f"{cell!r} is not a number") from None
+            check_entry(number, col, f"{field}: {str(path)!r} line {i}, column {lines[0][1][k].strip()!r}")
+            values.append(number)
+        rows.setdefault(values[0], []).append(values[1])
+    if not rows:
+        raise ModelError(f"{field}: {str(path)!r} holds no data rows")
+    depths = np.array(sorted(rows))
+    table = np.column_stack([depths, [np.mean(rows[z]) for z in depths]])
+    return fit_rows(table, field, str(path))
 
 
-def teos10_profile(temperature: float, salinity: float, max_depth: float = 100.0,
-                   latitude: float = 43.0) -> SoundSpeedProfile:
-    """Sound-speed profile of a uniform water column from TEOS-10 (``gsw``).
+def fit_rows(table: np.ndarray, field: str, what: str) -> np.ndarray:
+    """A profile within :data:`MAX_PROFILE_ROWS` rows: a longer one is resampled linearly on evenly spaced depths.
+
+    Raises
+    ------
+    ModelError
+        If depths are not strictly increasing.
+    """
+    check_increasing(table, PROFILE, f"{field}: {what}")
+    if table.shape[0] <= MAX_PROFILE_ROWS:
+        return table
+    depths = np.linspace(table[0, 0], table[-1, 0], MAX_PROFILE_ROWS)
+    return np.column_stack([depths, np.interp(depths, table[:, 0], table[:, 1])])
+
+
+def teos10_table(temperature: float, salinity: float, max_depth: float = 100.0,
+                 latitude: float = 43.0) -> np.ndarray:
+    """Sound-speed table of a uniform water column from TEOS-10 (``gsw``).
 
     Parameters
     ----------
@@ -138,45 +203,67 @@ def teos10_profile(temperature: float, salinity: float, max_depth: float = 100.0
     salinity : float
         Practical salinity [g/kg] (PSS-78, taken as absolute salinity).
     max_depth : float
-        Deepest depth of the profile [m].
+        Deepest depth of the table [m].
     latitude : float
         Latitude for the depth-to-pressure conversion [deg].
+
+    Returns
+    -------
+    ndarray, shape (101, 2)
+        Depth [m], sound speed [m/s].
     """
     import gsw
 
     depth = np.linspace(0.0, max_depth, 101)
     pressure = gsw.p_from_z(-depth, latitude)
     conservative = gsw.CT_from_t(salinity, temperature, pressure)
-    return SoundSpeedProfile(depth, gsw.sound_speed(salinity, conservative, pressure))
+    return np.column_stack([depth, gsw.sound_speed(salinity, conservative, pressure)])
 
 
-def load_profile(spec: str, constant_speed: float, temperature: float, salinity: float) -> SoundSpeedProfile:
-    """Profile from the ``acoustics.sound_speed_profile`` setting.
+PROFILE_SOURCES = ("constant", "teos10", "table")
+
+
+def profile_table(spec: str, text: str, temperature: float, salinity: float) -> np.ndarray:
+    """The sound-speed table of an ``acoustics.sound_speed_profile`` setting.
 
     Parameters
     ----------
     spec : str
-        ``""`` or ``"constant"``: ``constant_speed``; ``"teos10"``: uniform
-        water of the given temperature and salinity; ``"ctd:NAME"``: a cast
-        shipped with sblsim (:data:`BUILTIN_CASTS`); anything else: a path to
-        a CSV cast.
+        ``constant`` (0 rows: the constant true speed), ``teos10``,
+        ``table`` (the text ``text``), ``ctd:NAME`` (:data:`BUILTIN_CASTS`)
+        or a path to a CSV cast.
+    text : str
+        ``acoustics.sound_speed_table``: rows ``depth speed; ...`` [m, m/s].
+    temperature, salinity : float
+        Water properties for ``teos10`` [degC, g/kg].
+
+    Returns
+    -------
+    ndarray, shape (rows, 2)
 
     Raises
     ------
     ModelError
-        On an unknown built-in cast or an unreadable file.
+        On an unknown built-in cast, an unreadable or malformed file or text.
     """
+    field = "acoustics.sound_speed_profile"
     if spec in ("", "constant"):
-        return SoundSpeedProfile.constant(constant_speed)
+        return np.zeros((0, 2))
     if spec == "teos10":
-        return teos10_profile(temperature, salinity)
+        return teos10_table(temperature, salinity)
+    if spec == "table":
+        rows = parse_table(text, PROFILE, "acoustics.sound_speed_table")
+        if rows.shape[0] == 0:
+            raise ModelError("acoustics.sound_speed_table: sound_speed_profile = table needs rows 'depth speed; ...'")
+        return rows
     if spec.startswith("ctd:"):
         name = spec[4:]
         if name not in BUILTIN_CASTS:
-            raise ModelError(f"acoustics.sound_speed_profile: unknown cast {name!r}; one of "
-                             + ", ".join(f"ctd:{c}" for c in BUILTIN_CASTS))
-        return read_castaway_csv(resources.files("models.acoustics") / "data" / f"{name}.csv")
-    if not Path(spec).is_file():
-        raise ModelError(f"acoustics.sound_speed_profile: no such file {spec!r}; use constant, teos10, "
-                         "ctd:NAME or a CSV path")
-    return read_castaway_csv(spec)
+            raise ModelError(f"{field}: unknown cast {name!r}; one of " + ", ".join(f"ctd:{c}" for c in BUILTIN_CASTS))
+        with resources.as_file(resources.files("models.acoustics") / "data" / f"{name}.csv") as path:
+            return read_cast_csv(path, field)
+    return read_cast_csv(spec, field)
+
+
+__all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean",
+           "profile_nodes", "profile_table", "read_cast_csv", "teos10_table"]

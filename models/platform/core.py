@@ -1,4 +1,15 @@
-"""Platform core: the floating SBL base with its beacons, wave motion, GPS and IMU.
+"""Platform: the floating SBL base with its beacons, wave motion, GPS and IMU.
+
+True beacon positions ``b_i(t) = p(t) + R(roll, pitch, yaw) a_i`` at any
+time; the broadcast ones are *sampled* every ``sample_period`` T_s at
+``t_k = t0 + k T_s`` from the GPS position and IMU attitude,
+``b̃_i = p̃_k + R(roll~_k, pitch~_k, yaw~_k) a_i``, and held until the next
+sample, so they do not depend on how a host steps the component. The platform
+is moored at the NED origin and heaves with the waves. GPS error is white or
+first-order Gauss-Markov with correlation time τ (exact discretization
+``e_k+1 = e^(-T_s/τ) e_k + σ sqrt(1 - e^(-2T_s/τ)) w_k``, stationary start);
+IMU error is white with standard deviation σ_IMU plus a constant bias and a
+gyro-bias drift ``ω_b t``.
 
 References
 ----------
@@ -9,16 +20,22 @@ Systems", Sensors 21(3):762, 2021, doi:10.3390/s21030762, Sections 3-4
 
 from __future__ import annotations
 
-import numpy as np
+import math
+from typing import Any, Mapping
 
-from models.core import SEED_PARAMETERS, ComponentCore, ModelError, Variable
+import casadi as ca
+
+from models.core import (SEED_PARAMETERS, Component, ModelError, ProgramBuilder, Stream, Variable,
+                         sample_due)
 from models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
 from models.platform.waves import wave_motion
 
 AXES = ("x", "y", "z")
+LAYOUTS = ("cross", "custom")
+GPS_MODELS = ("white", "gauss-markov")
 
-# Purposes of the platform's random streams (see models.core.RandomStreams).
-_PHASES, _GPS, _IMU, _GPS_INIT = range(4)
+# Stream purposes (models.core, "Randomness").
+_PHASES, _GPS, _IMU = range(3)
 
 
 def beacon_names(n_beacons: int, kind: str) -> list[str]:
@@ -33,58 +50,36 @@ def beacon_names(n_beacons: int, kind: str) -> list[str]:
 
 def beacon_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
     """Declarations of the true and broadcast beacon positions (outputs of the
-    platform, inputs of the channel), in the order of :func:`beacon_names`."""
+    platform, inputs of the channel), in the order of :func:`beacon_names`.
+    The true positions are continuous; the broadcast ones are sampled (discrete)."""
     return tuple(
         Variable(f"beacon{i}{infix}_{a}", causality, "Real", 0.0, "m",
-                 f"{label} position of beacon {i}, {axis} [NED]")
+                 f"{label} position of beacon {i}, {axis} [NED]", discrete=(infix == ""))
         for infix, label in (("_true", "True"), ("", "Broadcast (GPS and IMU)"))
         for i in range(1, n_beacons + 1) for a, axis in zip(AXES, ("North", "East", "Down")))
 
 
-def _column(value):
-    """A per-replicate parameter as a column (B, 1) for (B, 3) arrays; scalars unchanged."""
-    return value[:, None] if isinstance(value, np.ndarray) and value.ndim == 1 else value
-
-
-class PlatformCore(ComponentCore):
-    """SBL platform: beacon cross, Beaufort wave motion, GPS, IMU and broadcast positions.
-
-    True beacon positions ``b_i(t) = p(t) + R(roll, pitch, yaw) a_i``; the
-    broadcast ones use the GPS position and IMU attitude,
-    ``b̃_i = p̃ + R(roll~, pitch~, yaw~) a_i``. The platform is moored at the
-    NED origin and heaves with the waves. GPS error is white or first-order
-    Gauss-Markov with correlation time τ (exact discretization
-    ``e_k+1 = e^(-Δt/τ) e_k + σ sqrt(1 - e^(-2Δt/τ)) w_k``, stationary start).
-    IMU error is white with standard deviation σ_IMU plus a constant bias and
-    a gyro-bias drift ``ω_b t``.
-
-    Attributes
-    ----------
-    offsets : ndarray, shape (n, 3) or (B, n, 3)
-        Body-frame beacon offsets [m] (per replicate when the baseline or
-        transducer depth differ across the batch).
-    phases : ndarray, shape (B, 4)
-        Random phases of roll, pitch, yaw and heave [rad].
-    gps_error : ndarray, shape (B, 3)
-        Current GPS error [m].
-    """
+class Platform(Component):
+    """SBL platform: beacon cross, Beaufort wave motion, GPS, IMU and broadcast positions."""
 
     name = "platform"
     component_index = 0
-    batched_parameters = frozenset({"cell", "baseline", "transducer_depth", "heading_deg", "gps_sigma", "gps_tau",
-                                    "imu_sigma_deg", "imu_bias_deg", "imu_gyro_bias"})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        offsets = tuple(
+            Variable(f"beacon{i}_offset_{a}", "parameter", "Real", 0.0, "m",
+                     f"Custom layout: body-frame offset of beacon {i}, {a}", min=-1000.0, max=1000.0, scope="fmu")
+            for i in range(1, n_beacons + 1) for a in AXES)
         params = (
-            Variable("layout", "parameter", "String", "cross", description="Beacon layout",
-                     choices=("cross", "custom")),
+            Variable("layout", "parameter", "String", "cross", description="Beacon layout", choices=LAYOUTS),
             Variable("baseline", "parameter", "Real", 1.0, "m", "Support-arm length L of each beacon",
                      min=0.0, max=1000.0, min_exclusive=True),
             Variable("transducer_depth", "parameter", "Real", 1.0, "m",
                      "Transducer depth h below the platform reference", min=0.0, max=1000.0),
             Variable("beacon_offsets", "parameter", "String", "",
-                     description="Custom layout body offsets 'x y z; ...' [m] (layout = custom)"),
+                     description="Custom layout body offsets 'x y z; ...' [m] (layout = custom)", scope="config"),
+        ) + offsets + (
             Variable("heading_deg", "parameter", "Real", 0.0, "deg", "Mean platform heading",
                      min=-180.0, max=180.0),
             Variable("beaufort", "parameter", "Integer", 2, description="Sea state on the Beaufort scale",
@@ -94,7 +89,7 @@ class PlatformCore(ComponentCore):
             Variable("gps_sigma", "parameter", "Real", 0.1, "m", "GPS error standard deviation per axis",
                      min=0.0, max=1000.0),
             Variable("gps_model", "parameter", "String", "white", description="GPS error model",
-                     choices=("white", "gauss-markov")),
+                     choices=GPS_MODELS),
             Variable("gps_tau", "parameter", "Real", 60.0, "s", "GPS Gauss-Markov correlation time",
                      min=0.0, max=1e6, min_exclusive=True),
             Variable("imu_sigma_deg", "parameter", "Real", 1.0, "deg",
@@ -103,70 +98,100 @@ class PlatformCore(ComponentCore):
                      min=-180.0, max=180.0),
             Variable("imu_gyro_bias", "parameter", "Real", 0.0, "rad/s",
                      "Gyro bias: attitude error drift rate (all axes)", min=-1.0, max=1.0),
+            Variable("sample_period", "parameter", "Real", 0.1, "s",
+                     "GPS and IMU sampling period T_s (the sampling time T)", min=0.001, max=60.0, scope="fmu"),
         )
         outputs = beacon_variables(n_beacons, "output")
         attitude = tuple(Variable(a, "output", "Real", 0.0, "rad", f"True platform {a}")
                          for a in ("roll", "pitch", "yaw"))
-        gps = tuple(Variable(f"gps_{a}", "output", "Real", 0.0, "m", f"GPS-measured platform {a}")
+        gps = tuple(Variable(f"gps_{a}", "output", "Real", 0.0, "m", f"GPS-measured platform {a}", discrete=True)
                     for a in AXES)
         return params + SEED_PARAMETERS + outputs + attitude + gps
 
-    def __init__(self, params, replicates=None, n_beacons: int = 4) -> None:
-        super().__init__(params, replicates, n_beacons)
-        p = self.params
-        if p["layout"] == "cross":
-            self.offsets = cross_offsets(p["baseline"], p["transducer_depth"], self.n_beacons)
-        else:
-            self.offsets = parse_offsets(p["beacon_offsets"])
-            if self.offsets.shape[0] != self.n_beacons:
-                raise ModelError(f"platform.beacon_offsets: {self.offsets.shape[0]} beacons given, "
-                                 f"the interface has {self.n_beacons}")
-        self.motion = wave_motion(p["beaufort"], p["hull_length"])
+    @classmethod
+    def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """FMU parameters of a configuration section: a custom layout's text becomes the offset parameters.
 
-    def _initialize(self, t0: float) -> None:
-        self.rng = self.streams()
-        self.phases = 2.0 * np.pi * self.rng.draw(_PHASES, "uniform", 4)
-        self.gps_error = _column(self.params["gps_sigma"]) * self.rng.draw(_GPS_INIT, "normal", 3)
-        self._outputs(t0, None)
+        Raises
+        ------
+        ModelError
+            If a custom layout's offsets are malformed or their number differs from ``n_beacons``.
+        """
+        out = super().fmu_parameters(values, n_beacons)
+        if values.get("layout") == "custom":
+            offsets = parse_offsets(values.get("beacon_offsets", ""))
+            if offsets.shape[0] != n_beacons:
+                raise ModelError(f"platform.beacon_offsets: {offsets.shape[0]} beacons given, "
+                                 f"the interface has {n_beacons}")
+            out.update({f"beacon{i + 1}_offset_{a}": float(offsets[i, k])
+                        for i in range(n_beacons) for k, a in enumerate(AXES)})
+        return out
 
-    def _step(self, t: float, dt: float) -> None:
-        self._outputs(t + dt, dt)
+    @classmethod
+    def build(cls, n_beacons: int):
+        n = n_beacons
+        b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phases", 4), ("gps_error", 3),
+                                            ("gps", 3), ("broadcast", 3 * n)],
+                           derived=[("offsets", 3 * n), ("motion", 4)])
 
-    def attitude(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """True roll, pitch, yaw [rad] and heave-induced depth of the reference [m], each (B,)."""
-        m, ph = self.motion, self.phases
-        w = 2.0 * np.pi * m.frequency * t
-        roll = m.tilt_amplitude * np.sin(w + ph[:, 0])
-        pitch = m.tilt_amplitude * np.sin(w + ph[:, 1])
-        yaw = np.radians(self.params["heading_deg"]) + m.yaw_amplitude * np.sin(0.5 * w + ph[:, 2])
-        depth = -m.heave_amplitude * np.sin(w + ph[:, 3])
-        return roll, pitch, yaw, depth
+        def prepare(p):
+            cross = cross_offsets(p["baseline"], p["transducer_depth"], n)
+            custom = [ca.vertcat(*[p[f"beacon{i + 1}_offset_{a}"] for a in AXES]) for i in range(n)]
+            offsets = [ca.if_else(p["layout"] == LAYOUTS.index("custom"), c, a) for a, c in zip(cross, custom)]
+            return {"offsets": ca.vertcat(*offsets), "motion": ca.vertcat(*wave_motion(p["beaufort"],
+                                                                                      p["hull_length"]))}
 
-    def _outputs(self, t: float, dt: float | None) -> None:
-        p = self.params
-        roll, pitch, yaw, depth = self.attitude(t)
-        position = np.zeros((self.batch, 3))
-        position[:, 2] = depth
-        true = beacon_positions(position, rotation_ned(roll, pitch, yaw), self.offsets)
+        def attitude(p, d, phases, t):
+            """True roll, pitch, yaw [rad] and platform depth (heave) [m] at ``t``."""
+            tilt, yaw_amp, heave, freq = (d["motion"][k] for k in range(4))
+            w = 2.0 * math.pi * freq * t
+            roll = tilt * ca.sin(w + phases[0])
+            pitch = tilt * ca.sin(w + phases[1])
+            yaw = p["heading_deg"] * (math.pi / 180.0) + yaw_amp * ca.sin(0.5 * w + phases[2])
+            return roll, pitch, yaw, -heave * ca.sin(w + phases[3])
 
-        white = self.rng.draw(_GPS, "normal", 3)
-        sigma = _column(p["gps_sigma"])
-        if p["gps_model"] == "white":
-            self.gps_error = sigma * white
-        elif dt is not None:
-            phi = np.exp(-dt / _column(p["gps_tau"]))
-            self.gps_error = phi * self.gps_error + sigma * np.sqrt(1.0 - phi * phi) * white
-        gps = position + self.gps_error
+        def offsets(d):
+            return [d["offsets"][3 * i:3 * i + 3] for i in range(n)]
 
-        bias = _column(np.radians(p["imu_bias_deg"]) + p["imu_gyro_bias"] * t)
-        imu = (np.stack([roll, pitch, yaw], axis=-1) + bias
-               + _column(np.radians(p["imu_sigma_deg"])) * self.rng.draw(_IMU, "normal", 3))
-        broadcast = beacon_positions(gps, rotation_ned(imu[:, 0], imu[:, 1], imu[:, 2]), self.offsets)
+        def sample(p, d, phases, gps_error, imu_noise, t_k):
+            """GPS position and broadcast beacon positions sampled at ``t_k``."""
+            roll, pitch, yaw, depth = attitude(p, d, phases, t_k)
+            gps = ca.vertcat(0.0, 0.0, depth) + gps_error
+            bias = p["imu_bias_deg"] * (math.pi / 180.0) + p["imu_gyro_bias"] * t_k
+            sigma = p["imu_sigma_deg"] * (math.pi / 180.0)
+            imu = [a + bias + sigma * imu_noise[k] for k, a in enumerate((roll, pitch, yaw))]
+            broadcast = beacon_positions(gps, rotation_ned(*imu), offsets(d))
+            return {"gps": gps, "broadcast": ca.vertcat(*broadcast)}
 
-        out = {}
-        for kind, values in (("true", true), ("broadcast", broadcast)):
-            flat = values.reshape(self.batch, -1)
-            out.update({n: flat[:, k] for k, n in enumerate(beacon_names(self.n_beacons, kind))})
-        out.update(roll=roll, pitch=pitch, yaw=yaw)
-        out.update({f"gps_{a}": gps[:, k] for k, a in enumerate(AXES)})
-        self.outputs = out
+        def init(p, d, w, t0):
+            phases = 2.0 * math.pi * w[_PHASES]
+            gps_error = p["gps_sigma"] * w[_GPS]  # stationary start of either model
+            return {"t0": t0, "k": 0, "phases": phases, "gps_error": gps_error,
+                    **sample(p, d, phases, gps_error, w[_IMU], t0)}
+
+        def due(x, u, p, d, t, h):
+            return sample_due(x["k"], x["t0"], p["sample_period"], t, h)
+
+        def take_sample(x, u, p, d, w, t, h):
+            k = x["k"] + 1
+            t_k = x["t0"] + k * p["sample_period"]
+            phi = ca.exp(-p["sample_period"] / p["gps_tau"])
+            markov = phi * x["gps_error"] + p["gps_sigma"] * ca.sqrt(1.0 - phi * phi) * w[_GPS]
+            gps_error = ca.if_else(p["gps_model"] == GPS_MODELS.index("white"), p["gps_sigma"] * w[_GPS], markov)
+            return {"k": k, "gps_error": gps_error, **sample(p, d, x["phases"], gps_error, w[_IMU], t_k)}
+
+        def output(x, p, d, t):
+            roll, pitch, yaw, depth = attitude(p, d, x["phases"], t)
+            true = beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw), offsets(d))
+            out = {name: ca.vertcat(*true)[k] for k, name in enumerate(beacon_names(n, "true"))}
+            out.update({name: x["broadcast"][k] for k, name in enumerate(beacon_names(n, "broadcast"))})
+            out.update(roll=roll, pitch=pitch, yaw=yaw)
+            out.update({f"gps_{a}": x["gps"][k] for k, a in enumerate(AXES)})
+            return out
+
+        noise = (Stream(_GPS, "normal", 3), Stream(_IMU, "normal", 3))
+        return b.program(b.prepare(prepare), b.init(init, (Stream(_PHASES, "uniform", 4),) + noise),
+                         b.output(output), events=[b.event("sample", due, take_sample, noise)])
+
+
+__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "Platform", "beacon_names", "beacon_variables"]

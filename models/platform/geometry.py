@@ -1,4 +1,4 @@
-"""Beacon geometry of the SBL platform and attitude rotations.
+"""Beacon geometry of the SBL platform and attitude rotations (casadi expressions).
 
 References
 ----------
@@ -9,12 +9,25 @@ doi:10.3390/s21030762 (Section 3, the SBL cross).
 
 from __future__ import annotations
 
+import math
+
+import casadi as ca
 import numpy as np
 
 from models.core import ModelError
 
 
-def cross_offsets(baseline, transducer_depth, n_beacons: int = 4) -> np.ndarray:
+def cross_directions(n_beacons: int = 4) -> list[tuple[float, float]]:
+    """Unit arm directions ``(cos θ_i, sin θ_i)`` of a cross, θ_i = 2π i / n, with exact zeros on the axes."""
+    out = []
+    for i in range(n_beacons):
+        theta = 2.0 * math.pi * i / n_beacons
+        c, s = math.cos(theta), math.sin(theta)
+        out.append((0.0 if abs(c) < 1e-15 else c, 0.0 if abs(s) < 1e-15 else s))
+    return out
+
+
+def cross_offsets(baseline, transducer_depth, n_beacons: int = 4) -> list[ca.SX]:
     """Body-frame offsets of beacons on a cross (equally spaced arms).
 
     ``a_i = L (cos θ_i, sin θ_i, 0) + (0, 0, h)`` with θ_i = 2π i / n
@@ -22,25 +35,19 @@ def cross_offsets(baseline, transducer_depth, n_beacons: int = 4) -> np.ndarray:
 
     Parameters
     ----------
-    baseline : float or ndarray, shape (B,)
-        Support-arm length L [m], one per replicate if an array.
-    transducer_depth : float or ndarray, shape (B,)
+    baseline : casadi.SX or float
+        Support-arm length L [m].
+    transducer_depth : casadi.SX or float
         Depth h of the transducers below the platform reference [m].
     n_beacons : int
         Number of arms.
 
     Returns
     -------
-    ndarray, shape (n_beacons, 3) or (B, n_beacons, 3)
+    list of casadi.SX, each (3, 1)
         Offsets in the body frame (x forward/North, y East, z down) [m].
     """
-    theta = 2.0 * np.pi * np.arange(n_beacons) / n_beacons
-    cos, sin = np.cos(theta), np.sin(theta)
-    cos[np.abs(cos) < 1e-15] = 0.0  # exact zeros on the axes
-    sin[np.abs(sin) < 1e-15] = 0.0
-    arm, depth = np.broadcast_arrays(np.asarray(baseline, dtype=float)[..., None],
-                                     np.asarray(transducer_depth, dtype=float)[..., None])
-    return np.stack([arm * cos, arm * sin, np.broadcast_to(depth, arm.shape[:-1] + (n_beacons,))], axis=-1)
+    return [ca.vertcat(baseline * c, baseline * s, transducer_depth) for c, s in cross_directions(n_beacons)]
 
 
 def parse_offsets(text: str, field: str = "platform.beacon_offsets") -> np.ndarray:
@@ -65,45 +72,32 @@ def parse_offsets(text: str, field: str = "platform.beacon_offsets") -> np.ndarr
     return offsets
 
 
-def rotation_ned(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+def rotation_ned(roll, pitch, yaw) -> ca.SX:
     """Body-to-NED rotation ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (ZYX Tait-Bryan).
 
     Parameters
     ----------
-    roll, pitch, yaw : ndarray, shape (B,)
+    roll, pitch, yaw : casadi.SX or float
         Attitude angles [rad].
 
     Returns
     -------
-    ndarray, shape (B, 3, 3)
-        Rotation matrices mapping body vectors to NED.
+    casadi.SX, shape (3, 3)
+        Rotation mapping body vectors to NED.
     """
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    return np.stack([
-        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], axis=-1),
-        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], axis=-1),
-        np.stack([-sp, cp * sr, cp * cr], axis=-1),
-    ], axis=-2)
+    cr, sr = ca.cos(roll), ca.sin(roll)
+    cp, sp = ca.cos(pitch), ca.sin(pitch)
+    cy, sy = ca.cos(yaw), ca.sin(yaw)
+    return ca.vertcat(
+        ca.horzcat(cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
+        ca.horzcat(sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
+        ca.horzcat(-sp, cp * sr, cp * cr),
+    )
 
 
-def beacon_positions(position: np.ndarray, rotation: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Beacon positions ``b_i = p + R a_i`` in NED.
+def beacon_positions(position: ca.SX, rotation: ca.SX, offsets: list[ca.SX]) -> list[ca.SX]:
+    """Beacon positions ``b_i = p + R a_i`` in NED [m], one (3, 1) vector per beacon."""
+    return [position + ca.mtimes(rotation, a) for a in offsets]
 
-    Parameters
-    ----------
-    position : ndarray, shape (B, 3)
-        Platform reference position [m].
-    rotation : ndarray, shape (B, 3, 3)
-        Body-to-NED rotation.
-    offsets : ndarray, shape (n, 3) or (B, n, 3)
-        Body-frame beacon offsets [m], shared or one set per replicate.
 
-    Returns
-    -------
-    ndarray, shape (B, n, 3)
-        Beacon positions [m].
-    """
-    offsets = np.broadcast_to(offsets, (position.shape[0],) + offsets.shape[-2:])
-    return position[:, None, :] + np.einsum("bij,bnj->bni", rotation, offsets)
+__all__ = ["beacon_positions", "cross_directions", "cross_offsets", "parse_offsets", "rotation_ned"]

@@ -1,7 +1,7 @@
-"""Sea state (Beaufort scale) to platform wave motion.
+"""Sea state (Beaufort scale) to platform wave motion (casadi expressions).
 
-The SPEC fixes the probable wave height per Beaufort level; the rest is
-sblsim's documented choice:
+The probable wave height per Beaufort level is the WMO table (docs/model.md);
+the rest is sblsim's documented choice:
 
 * dominant wave period from the Pierson-Moskowitz spectrum of a fully
   developed sea, ``T_p = 2π U / (0.877 g)``, with U the mid-range wind speed
@@ -23,55 +23,45 @@ WMO-No. 558 (Beaufort scale).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+
+import casadi as ca
+
+from models.core import lookup
 
 G = 9.80665  # standard gravity [m/s^2]
 
-#: Probable wave height [m] per Beaufort level 0..8 (SPEC.md).
+#: Probable wave height [m] per Beaufort level 0..8.
 WAVE_HEIGHT = (0.0, 0.1, 0.2, 0.6, 1.0, 2.0, 3.0, 4.0, 5.5)
 #: Mid-range 10 m wind speed [m/s] per Beaufort level 0..8 (WMO).
 WIND_SPEED = (0.1, 0.9, 2.5, 4.4, 6.7, 9.35, 12.3, 15.5, 18.95)
 
 
-@dataclass(frozen=True)
-class WaveMotion:
-    """Sinusoidal platform motion for one sea state.
-
-    Attributes
-    ----------
-    tilt_amplitude : float
-        Roll and pitch amplitude [rad].
-    yaw_amplitude : float
-        Yaw amplitude [rad].
-    heave_amplitude : float
-        Heave amplitude [m].
-    frequency : float
-        Roll, pitch and heave frequency [Hz]; yaw at half of it.
-    """
-
-    tilt_amplitude: float
-    yaw_amplitude: float
-    heave_amplitude: float
-    frequency: float
-
-
-def wave_motion(beaufort: int, hull_length: float) -> WaveMotion:
+def wave_motion(beaufort, hull_length) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     """Wave-motion amplitudes and frequency for a Beaufort level.
 
     Parameters
     ----------
-    beaufort : int
+    beaufort : casadi.SX or int
         Beaufort level, 0 (calm) to 8.
-    hull_length : float
+    hull_length : casadi.SX or float
         Platform hull length ℓ [m].
 
     Returns
     -------
-    WaveMotion
+    tilt_amplitude : casadi.SX
+        Roll and pitch amplitude [rad].
+    yaw_amplitude : casadi.SX
+        Yaw amplitude [rad].
+    heave_amplitude : casadi.SX
+        Heave amplitude [m].
+    frequency : casadi.SX
+        Roll, pitch and heave frequency [Hz]; yaw at half of it.
     """
-    height = WAVE_HEIGHT[beaufort]
-    period = 2.0 * math.pi * WIND_SPEED[beaufort] / (0.877 * G)
+    height = lookup(beaufort, WAVE_HEIGHT)
+    period = 2.0 * math.pi * lookup(beaufort, WIND_SPEED) / (0.877 * G)
     wavelength = G * period**2 / (2.0 * math.pi)
-    tilt = min(math.pi * height / wavelength, math.atan(height / hull_length))
-    return WaveMotion(tilt_amplitude=tilt, yaw_amplitude=0.5 * tilt,
-                      heave_amplitude=0.5 * height, frequency=1.0 / period)
+    tilt = ca.fmin(math.pi * height / wavelength, ca.atan(height / hull_length))
+    return tilt, 0.5 * tilt, 0.5 * height, 1.0 / period
+
+
+__all__ = ["G", "WAVE_HEIGHT", "WIND_SPEED", "wave_motion"]

@@ -1,18 +1,21 @@
-"""Receiver cores fed by round-robin OWTT packets and depth; the paper's EKF receiver.
+"""Receivers fed by round-robin OWTT packets and depth; the paper's EKF receiver.
 
-:class:`PacketReceiverCore` is the packet handling every built-in receiver
-shares. The receiver runs at its own communication step Δt = T / (EKF rate
-ratio): every step it calls :meth:`~PacketReceiverCore._predict`; when a new
-packet whose transmit epoch it has reached arrives (``packet_seq`` changed and
-``t + Δt ≥ tx_time``), it stores the range and broadcast beacon position of
-that beacon (if the packet was not lost) and calls
-:meth:`~PacketReceiverCore._update` with the latest range of every beacon
-heard so far plus the depth reading. Held ranges are re-used at later slots:
-their staleness is part of the error, as in the paper.
+Every receiver runs at its own communication step Δt = T / (EKF rate ratio)
+and shares the packet handling (:func:`packet_event`): a replicate has a new
+*slot* when ``packet_seq`` differs from the last one it used and the end of
+the step has reached the packet's transmit epoch, ``t + Δt ≥ tx_time − 1 ns``.
+At a slot a packet that was received (``packet_valid``) with a beacon id in
+``1 … n`` replaces the held range and broadcast beacon position of that
+beacon; then the receiver uses the latest range of every beacon heard so far
+plus the depth reading. Held ranges are re-used at later slots: their
+staleness is part of the error, as in the paper.
 
-:class:`ReceiverCore` is the paper's EKF: one update per slot, and the raw
-instrumentation fix (multilateration of the same held ranges and depth, no
-filter) computed at the same instants.
+:class:`Receiver` is the paper's EKF: a prediction every step, one update per
+slot, and the raw instrumentation fix (a least-squares multilateration of the
+same held ranges and depth, no filter) computed at the same instants.
+
+No output is ever NaN: before its first update the filter reports its
+initial state, ``nis`` is 0 and ``instr_valid`` is false with ``instr_*`` 0.
 
 References
 ----------
@@ -23,135 +26,106 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
+import casadi as ca
 
 from models.acoustics.core import PACKET
-from models.core import ComponentCore, Variable
-from models.receiver.ekf import ExtendedKalmanFilter
-from models.receiver.multilateration import multilaterate
+from models.core import Component, ProgramBuilder, Variable
+from models.receiver import ekf
+from models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 
 STATE_NAMES = ("x", "vx", "y", "vy", "z", "vz")
 _AXES = {"x": "North", "y": "East", "z": "Down"}
+#: Iteration cap and step tolerance [standard deviations of the fix] of the instrumentation fix.
+INSTRUMENT_ITERATIONS, INSTRUMENT_TOLERANCE = 8, 1e-3
+#: Slack of the slot test ``t + Δt ≥ tx_time − SLOT_SLACK`` [s].
+SLOT_SLACK = 1e-9
 
 
 def receiver_interface() -> tuple[Variable, ...]:
     """Inputs and outputs every receiver shares (EKF, least squares, a user's FMU)."""
     inputs = tuple(replace(v, causality="input") for v in PACKET) + (
-        Variable("depth", "input", "Real", 0.0, "m", "Depth-sensor reading"),
+        Variable("depth", "input", "Real", 0.0, "m", "Depth-sensor reading", discrete=True),
     )
     outputs = tuple(
         Variable(f"est_{n}", "output", "Real", 0.0, "m" if n[0] != "v" else "m/s",
-                 f"Estimated {'position' if n[0] != 'v' else 'velocity'}, {_AXES[n[-1]]}")
+                 f"Estimated {'position' if n[0] != 'v' else 'velocity'}, {_AXES[n[-1]]}", discrete=True)
         for n in ("x", "y", "z", "vx", "vy", "vz")
     ) + tuple(
-        Variable(f"instr_{a}", "output", "Real", 0.0, "m", f"Instrumentation (multilateration) fix, {_AXES[a]}")
+        Variable(f"instr_{a}", "output", "Real", 0.0, "m",
+                 f"Instrumentation (multilateration) fix, {_AXES[a]} (0 without a fix)", discrete=True)
         for a in ("x", "y", "z")
     ) + (
         Variable("instr_valid", "output", "Boolean", False, description="Instrumentation fix available"),
-        Variable("nis", "output", "Real", 0.0, "1", "Normalized innovation squared of the last update"),
-        Variable("pos_std", "output", "Real", 0.0, "m", "sqrt(trace) of the position covariance"),
+        Variable("nis", "output", "Real", 0.0, "1", "Normalized innovation squared of the last update (0: none)",
+                 discrete=True),
+        Variable("pos_std", "output", "Real", 0.0, "m", "sqrt(trace) of the position covariance", discrete=True),
     )
     return inputs + outputs
 
 
-class PacketReceiverCore(ComponentCore):
-    """Base of the receivers: slot detection and the held range of each beacon.
-
-    Every step calls :meth:`_predict`; a replicate has a new *slot* when
-    ``packet_seq`` differs from the last one it used and the end of the step
-    has reached the packet's transmit epoch, ``t + Δt ≥ tx_time − 1e-9`` [s].
-    At a slot a packet that was received (``packet_valid``) with a beacon id
-    in ``1 … n`` replaces the held range and broadcast beacon position of that
-    beacon; then, if any replicate of the batch has a new slot,
-    :meth:`_update` runs with the mask of those replicates. :meth:`_outputs`
-    refreshes :attr:`outputs` after initialization and after every step.
-
-    Subclasses declare :meth:`~models.core.ComponentCore.variables` (with
-    :func:`receiver_interface` among them) and implement
-    :meth:`_initial_state`, :meth:`_update` and :meth:`_outputs`;
-    :meth:`_predict` is optional.
-
-    Attributes
-    ----------
-    ranges : ndarray, shape (B, n)
-        Latest range of each beacon [m] (NaN: not heard yet).
-    beacons : ndarray, shape (B, n, 3)
-        Broadcast beacon positions carried with those ranges [m].
-    last_seq : ndarray of int, shape (B,)
-        ``packet_seq`` of the latest slot (0: none yet).
-    slot_time : ndarray, shape (B,)
-        Transmit epoch ``tx_time`` of the latest slot [s] (NaN: none yet).
-    """
-
-    def _initialize(self, t0: float) -> None:
-        self._initial_state(t0)
-        self.ranges = np.full((self.batch, self.n_beacons), np.nan)
-        self.beacons = np.full((self.batch, self.n_beacons, 3), np.nan)
-        self.last_seq = np.zeros(self.batch, dtype=np.int64)
-        self.slot_time = np.full(self.batch, np.nan)
-        self._outputs()
-
-    def _step(self, t: float, dt: float) -> None:
-        u = self.inputs
-        self._predict(dt)
-        seq = np.asarray(u["packet_seq"], dtype=np.int64)
-        tx_time = np.asarray(u["tx_time"], float)
-        slot = (seq != self.last_seq) & (t + dt >= tx_time - 1e-9)
-        if np.any(slot):
-            self.last_seq = np.where(slot, seq, self.last_seq)
-            self.slot_time = np.where(slot, tx_time, self.slot_time)
-            ids = np.asarray(u["beacon_id"], dtype=np.int64) - 1
-            fresh = slot & np.asarray(u["packet_valid"], bool) & (ids >= 0) & (ids < self.n_beacons)
-            rows = np.flatnonzero(fresh)
-            self.ranges[rows, ids[rows]] = np.asarray(u["range"], float)[rows]
-            self.beacons[rows, ids[rows]] = np.column_stack(
-                [np.asarray(u[f"beacon_{a}"], float) for a in ("x", "y", "z")])[rows]
-            self._update(slot, np.asarray(u["depth"], float))
-        self._outputs()
-
-    def _initial_state(self, t0: float) -> None:
-        """Set the receiver's own initial state at ``t0`` [s] (before the first :meth:`_outputs`)."""
-        raise NotImplementedError
-
-    def _predict(self, dt: float) -> None:
-        """Advance the receiver's own state by one step ``dt`` [s]; called every step (default: nothing)."""
-
-    def _update(self, slot: np.ndarray, depth: np.ndarray) -> None:
-        """Use the held ranges at a slot.
-
-        Parameters
-        ----------
-        slot : ndarray of bool, shape (B,)
-            Replicates with a new slot this step; the others must keep their state.
-        depth : ndarray, shape (B,)
-            Depth reading [m] (NaN: missing).
-        """
-        raise NotImplementedError
-
-    def _outputs(self) -> None:
-        """Refresh :attr:`outputs` from the state (after initialization and every step)."""
-        raise NotImplementedError
+def packet_states(n_beacons: int) -> list[tuple[str, int]]:
+    """State blocks of the packet handling: held ranges and beacon positions, heard flags, the last slot."""
+    return [("ranges", n_beacons), ("beacons", 3 * n_beacons), ("heard", n_beacons), ("last_seq", 1),
+            ("slot_time", 1)]
 
 
-class ReceiverCore(PacketReceiverCore):
-    """The paper's EKF receiver with the raw instrumentation fix.
+def packet_init(n_beacons: int) -> dict[str, ca.SX]:
+    return {"ranges": ca.SX.zeros(n_beacons), "beacons": ca.SX.zeros(3 * n_beacons),
+            "heard": ca.SX.zeros(n_beacons), "last_seq": 0, "slot_time": 0}
 
-    Attributes
-    ----------
-    ekf : ExtendedKalmanFilter
-        The filter (batched).
-    fix : ndarray, shape (B, 3)
-        Instrumentation fix of the latest slot [m] (NaN: none).
-    fix_valid : ndarray of bool, shape (B,)
-        The latest slot gave a fix.
 
-    The held ranges and slot bookkeeping are those of :class:`PacketReceiverCore`.
-    """
+def slot_due(x, u, t, h) -> ca.SX:
+    """A new packet whose transmit epoch the end of the step has reached."""
+    return ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["tx_time"] - SLOT_SLACK)
+
+
+def take_packet(x, u, n_beacons: int) -> dict[str, ca.SX]:
+    """The held ranges after a slot: a received packet replaces its beacon's range and position."""
+    index = u["beacon_id"] - 1
+    fresh = ca.logic_and(u["packet_valid"], ca.logic_and(index >= 0, index < n_beacons))
+    position = ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
+    ranges, beacons, heard = [], [], []
+    for j in range(n_beacons):
+        mine = ca.logic_and(fresh, index == j)
+        ranges.append(ca.if_else(mine, u["range"], x["ranges"][j]))
+        beacons.append(ca.if_else(mine, position, x["beacons"][3 * j:3 * j + 3]))
+        heard.append(ca.if_else(mine, 1.0, x["heard"][j]))
+    return {"ranges": ca.vertcat(*ranges), "beacons": ca.vertcat(*beacons), "heard": ca.vertcat(*heard),
+            "last_seq": u["packet_seq"], "slot_time": u["tx_time"]}
+
+
+def lm_active(x, u, p, d, t, h) -> ca.SX:
+    """Guard of the least-squares iteration event: a fix is still moving."""
+    return x["lm_active"] > 0.5
+
+
+def lm_step(x, p, iterations: int, tolerance: float) -> dict[str, ca.SX]:
+    """One iteration of the least-squares fix in progress (after :func:`lm_begin`)."""
+    w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
+    return lm_iteration(x, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d, iterations, tolerance)
+
+
+def lm_states() -> list[tuple[str, int]]:
+    """State blocks of a least-squares fix in progress (:data:`LM_STATE` and the depth it uses)."""
+    return list(LM_STATE) + [("lm_depth", 1)]
+
+
+def lm_begin(x, guess, depth, p) -> dict[str, ca.SX]:
+    """Start a least-squares fix of the held ranges (after :func:`take_packet`) at a slot."""
+    w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
+    valid = ca.sum1(x["heard"]) >= 3
+    return {**lm_start(guess, x["ranges"], x["beacons"], x["heard"], depth, w_r, w_d, valid), "lm_depth": depth}
+
+
+def lm_idle() -> dict[str, ca.SX]:
+    return {"lm_point": ca.SX.zeros(3), "lm_cost": 0, "lm_mu": 1e-3, "lm_iter": 0, "lm_active": 0, "lm_depth": 0}
+
+
+class Receiver(Component):
+    """The paper's EKF receiver with the raw instrumentation fix."""
 
     name = "receiver"
     component_index = 3
-    batched_parameters = frozenset({"sigma_range", "sigma_depth", "q_horizontal", "q_vertical", "p0_position",
-                                    "p0_velocity", *(f"x0_{n}" for n in STATE_NAMES)})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
@@ -175,40 +149,49 @@ class ReceiverCore(PacketReceiverCore):
             for n in ("x", "y", "z", "vx", "vy", "vz"))
         return params + receiver_interface()
 
-    def _initial_state(self, t0: float) -> None:
-        p = self.params
-        x0 = np.column_stack([np.broadcast_to(p[f"x0_{n}"], self.batch) for n in STATE_NAMES])
-        variances = np.broadcast_arrays(np.asarray(p["p0_position"], float) ** 2,
-                                        np.asarray(p["p0_velocity"], float) ** 2)
-        P0 = np.zeros(variances[0].shape + (6, 6))
-        for k in range(6):
-            P0[..., k, k] = variances[k % 2]
-        self.ekf = ExtendedKalmanFilter(x0, P0, p["q_horizontal"], p["q_vertical"],
-                                        p["sigma_range"], p["sigma_depth"])
-        self.fix = np.full((self.batch, 3), np.nan)
-        self.fix_valid = np.zeros(self.batch, dtype=bool)
+    @classmethod
+    def build(cls, n_beacons: int):
+        n = n_beacons
+        b = ProgramBuilder(cls, n, states=[("x", 6), ("P", 36)] + packet_states(n) + [
+            ("fix", 3), ("fix_valid", 1), ("nis", 1)] + lm_states())
 
-    def _predict(self, dt: float) -> None:
-        self.ekf.predict(dt)
+        def init(p, d, w, t0):
+            x0 = ca.vertcat(*[p[f"x0_{name}"] for name in ("x", "vx", "y", "vy", "z", "vz")])
+            P0 = ca.diag(ca.vertcat(*[p["p0_position"] ** 2, p["p0_velocity"] ** 2] * 3))
+            return {"x": x0, "P": ca.vec(P0), **packet_init(n), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
+                    **lm_idle()}
 
-    def _update(self, slot: np.ndarray, depth: np.ndarray) -> None:
-        """EKF update and instrumentation fix for the replicates with a new slot."""
-        keep = ~slot  # replicates without a new slot keep their state
-        before = (self.ekf.x[keep], self.ekf.P[keep], self.ekf.nis[keep]) if keep.any() else None
-        self.ekf.update(self.ranges, self.beacons, depth)
-        if before is not None:
-            self.ekf.x[keep], self.ekf.P[keep], self.ekf.nis[keep] = before
-        p = self.params
-        # start from the last fix, else from the filter's position (a start point only)
-        guess = np.where(self.fix_valid[:, None], self.fix, self.ekf.x[:, ::2])
-        fix, valid = multilaterate(self.ranges, self.beacons, depth, guess, p["sigma_range"], p["sigma_depth"])
-        self.fix = np.where(slot[:, None], fix, self.fix)
-        self.fix_valid = np.where(slot, valid, self.fix_valid)
+        def step(x, u, p, d, w, t, h):
+            state, P = ekf.predict(x["x"], ca.reshape(x["P"], 6, 6), h, p["q_horizontal"], p["q_vertical"])
+            return {"x": state, "P": ca.vec(P)}
 
-    def _outputs(self) -> None:
-        x = self.ekf.x
-        self.outputs = {f"est_{n}": x[:, k] for k, n in enumerate(STATE_NAMES)}
-        self.outputs.update({f"instr_{a}": self.fix[:, k] for k, a in enumerate(("x", "y", "z"))})
-        self.outputs["instr_valid"] = self.fix_valid.copy()
-        self.outputs["nis"] = self.ekf.nis.copy()
-        self.outputs["pos_std"] = np.sqrt(np.trace(self.ekf.P[:, ::2, ::2], axis1=1, axis2=2))
+        def due(x, u, p, d, t, h):
+            return slot_due(x, u, t, h)
+
+        def slot(x, u, p, d, w, t, h):
+            held = {**x, **take_packet(x, u, n)}
+            state, P, nis = ekf.update(x["x"], ca.reshape(x["P"], 6, 6), held["ranges"], held["beacons"],
+                                       held["heard"], u["depth"], p["sigma_range"], p["sigma_depth"])
+            # start from the last fix, else from the filter's position (a start point only)
+            guess = ca.if_else(x["fix_valid"], x["fix"], state[0::2])
+            fix = lm_begin(held, guess, u["depth"], p)
+            return {**held, "x": state, "P": ca.vec(P), "nis": nis, **fix,
+                    "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
+
+        def iterate(x, u, p, d, w, t, h):
+            out = lm_step(x, p, INSTRUMENT_ITERATIONS, INSTRUMENT_TOLERANCE)
+            return {**out, "fix": out["lm_point"]}
+
+        def output(x, p, d, t):
+            P = ca.reshape(x["P"], 6, 6)
+            out = {f"est_{name}": x["x"][k] for k, name in enumerate(STATE_NAMES)}
+            out.update({f"instr_{a}": ca.if_else(x["fix_valid"], x["fix"][k], 0.0) for k, a in enumerate("xyz")})
+            out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[2, 2] + P[4, 4]))
+            return out
+
+        return b.program(b.prepare(None), b.init(init), b.output(output), step=b.step(step),
+                         events=[b.event("slot", due, slot), b.event("lm", lm_active, iterate)])
+
+
+__all__ = ["INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "Receiver", "STATE_NAMES", "lm_active", "lm_begin",
+           "lm_idle", "lm_step", "lm_states", "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet"]

@@ -1,4 +1,11 @@
-"""Target core: the diver's reference trajectory and depth (pressure) sensor.
+"""Target: the diver's reference trajectory and depth (pressure) sensor.
+
+The depth sensor is sampled every ``sample_period`` T_s at ``t_k = t0 + k T_s``,
+``d̃_k = z(t_k) + σ_depth w_k``, and the reading is held until the next
+sample. The random path turns every ``turn_interval`` from the start time:
+at each turn the diver takes a new heading drawn uniformly in [0, 2π), or,
+when the next leg would leave the disc of radius ``max_radius``, within ±60°
+of the bearing to the centre.
 
 References
 ----------
@@ -10,39 +17,53 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+import casadi as ca
 import numpy as np
 
-from models.core import SEED_PARAMETERS, ComponentCore, Variable, resolve_parameters
-from models.target.trajectories import (OPEN_DURATION, Semicircle, Spiral, random_path,
-                                        read_trajectory_file, square)
+from models.core import (SEED_PARAMETERS, Column, Component, ModelError, ProgramBuilder, Stream, Table, Variable,
+                         parse_table, resolve_parameters, sample_due, select)
+from models.target.trajectories import (OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows,
+                                        waypoints)
+
+TRAJECTORIES = ("semicircle", "spiral", "random", "square", "file")
+#: Largest number of waypoints of a trajectory file.
+MAX_WAYPOINTS = 512
+WAYPOINTS = Table(
+    columns=(Column("waypoint_time", "s", "Waypoint time", -1e7, 1e7),
+             Column("waypoint_north", "m", "Waypoint North", -1e6, 1e6),
+             Column("waypoint_east", "m", "Waypoint East", -1e6, 1e6),
+             Column("waypoint_down", "m", "Waypoint depth", 0.0, 11000.0)),
+    max_rows=MAX_WAYPOINTS, increasing=True)
 
 _DEPTH_NOISE, _RANDOM_PATH = range(2)
-TRAJECTORIES = ("semicircle", "spiral", "random", "square", "file")
 
 
-class TargetCore(ComponentCore):
-    """Diver following a reference trajectory, with a depth sensor.
+def _leg_direction(uniforms, start, leg, max_radius):
+    """Heading of a random-path leg from its start: uniform, or toward the centre when it would leave the disc."""
+    heading = 2.0 * math.pi * uniforms[0]
+    nxt = start + leg * ca.vertcat(ca.cos(heading), ca.sin(heading))
+    home = ca.atan2(-start[1], -start[0]) + (2.0 * math.pi / 3.0) * (uniforms[1] - 0.5)
+    heading = ca.if_else(ca.norm_2(nxt) > max_radius, home, heading)
+    return ca.vertcat(ca.cos(heading), ca.sin(heading))
 
-    The depth sensor reads ``d̃ = z + σ_depth w`` at every communication point.
 
-    Attributes
-    ----------
-    path : object
-        The trajectory; ``path.state(t, B)`` gives position [m] and velocity
-        [m/s], each (B, 3).
-    """
+class Target(Component):
+    """Diver following a reference trajectory, with a depth sensor."""
 
     name = "target"
     component_index = 2
-    batched_parameters = frozenset({"cell", "depth_sigma"})
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         params = (
             Variable("trajectory", "parameter", "String", "semicircle", description="Reference trajectory",
                      choices=TRAJECTORIES),
-            Variable("trajectory_file", "parameter", "String", "",
-                     description="CSV time [s], N, E, D [m] (trajectory = file)"),
+            Variable("trajectory_file", "parameter", "String", "", scope="config",
+                     description="CSV of time [s], N, E, D [m] (trajectory = file)"),
+            Variable("waypoints", "parameter", "String", "", scope="config",
+                     description="Waypoints 'time N E D; ...' [s, m] (trajectory = file, instead of a file)"),
+            Variable("waypoint_rows", "parameter", "Integer", 0, scope="fmu", table=WAYPOINTS,
+                     description="Waypoints in use (trajectory = file)", min=0, max=MAX_WAYPOINTS),
             Variable("speed", "parameter", "Real", 0.5, "m/s", "Swimming speed", min=0.0, max=10.0,
                      min_exclusive=True),
             Variable("depth", "parameter", "Real", 5.0, "m", "Swimming depth", min=0.0, max=11000.0),
@@ -60,49 +81,128 @@ class TargetCore(ComponentCore):
                      min=0.0, max=1e5, min_exclusive=True),
             Variable("depth_sigma", "parameter", "Real", 0.01, "m", "Depth sensor standard deviation",
                      min=0.0, max=1000.0),
+            Variable("sample_period", "parameter", "Real", 0.1, "s",
+                     "Depth-sensor sampling period T_s (the sampling time T)", min=0.001, max=60.0, scope="fmu"),
         )
         outputs = tuple(
             Variable(n, "output", "Real", 0.0, u, f"True target {what}, {axis} [NED]")
             for n, u, what, axis in zip(("pos_x", "pos_y", "pos_z", "vel_x", "vel_y", "vel_z"),
                                         ("m",) * 3 + ("m/s",) * 3, ("position",) * 3 + ("velocity",) * 3,
                                         ("North", "East", "Down") * 2)
-        ) + (Variable("depth_measured", "output", "Real", 0.0, "m", "Depth-sensor reading"),)
+        ) + (Variable("depth_measured", "output", "Real", 0.0, "m", "Depth-sensor reading", discrete=True),)
         return params + SEED_PARAMETERS + outputs
 
-    def __init__(self, params, replicates=None, n_beacons: int = 4) -> None:
-        super().__init__(params, replicates, n_beacons)
-        if self.params["trajectory"] == "file":
-            self.file_path = read_trajectory_file(self.params["trajectory_file"])
+    @classmethod
+    def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """FMU parameters of a configuration section: a trajectory file or waypoint text becomes the table.
 
-    def _make_path(self):
-        p = self.params
-        kind = p["trajectory"]
-        if kind == "semicircle":
-            return Semicircle(p["radius"], p["speed"], p["depth"])
-        if kind == "spiral":
-            return Spiral(p["spiral_start_radius"], p["spiral_pitch"], p["speed"], p["depth"])
-        if kind == "square":
-            return square(p["square_side"], p["speed"], p["depth"])
-        if kind == "file":
-            return self.file_path
-        legs = int(math.ceil(OPEN_DURATION * 10.0 / p["turn_interval"])) + 1
-        uniforms = np.stack([self.rng.draw(_RANDOM_PATH, "uniform", 2) for _ in range(legs)], axis=1)
-        return random_path(uniforms, np.array([p["radius"], 0.0]), p["speed"], p["turn_interval"],
-                           p["max_radius"], p["depth"])
+        Raises
+        ------
+        ModelError
+            If the file or text is malformed, or ``trajectory = file`` has neither.
+        """
+        out = super().fmu_parameters(values, n_beacons)
+        if values.get("trajectory") == "file":
+            out.update(WAYPOINTS.values(file_waypoints(values), "waypoint_rows"))
+        return out
 
-    def _initialize(self, t0: float) -> None:
-        self.rng = self.streams()
-        self.path = self._make_path()
-        self._outputs(t0)
+    @classmethod
+    def build(cls, n_beacons: int):
+        N = MAX_WAYPOINTS
+        b = ProgramBuilder(cls, n_beacons,
+                           states=[("t0", 1), ("k", 1), ("reading", 1), ("leg", 1), ("start", 2), ("direction", 2)],
+                           derived=[("times", N), ("points", 3 * N), ("first", 1), ("last", 1)])
 
-    def _step(self, t: float, dt: float) -> None:
-        self._outputs(t + dt)
+        def prepare(p):
+            square = square_rows(p["square_side"], p["speed"], p["depth"])
+            is_square = p["trajectory"] == TRAJECTORIES.index("square")
+            count = ca.if_else(is_square, len(square), p["waypoint_rows"])
+            cols = [p[c.name] for c in WAYPOINTS.columns]
+            table = [[ca.if_else(is_square, square[k][j], cols[j][k]) if k < len(square) else cols[j][k]
+                      for j in range(4)] for k in range(N)]
+            last_row = [select(count - 1, [row[j] for row in table]) for j in range(4)]
+            times, points = [], []
+            for k, row in enumerate(table):
+                used = k < count
+                times.append(ca.if_else(used, row[0], last_row[0] + (k - count + 1)))  # padding keeps it increasing
+                points += [ca.if_else(used, row[j], last_row[j]) for j in range(1, 4)]
+            return {"times": ca.vertcat(*times), "points": ca.vertcat(*points), "first": times[0],
+                    "last": last_row[0]}
 
-    def _outputs(self, t: float) -> None:
-        pos, vel = self.path.state(t, self.batch)
-        depth = pos[:, 2] + self.params["depth_sigma"] * self.rng.draw(_DEPTH_NOISE, "normal", 1)[:, 0]
-        self.outputs = dict(pos_x=pos[:, 0], pos_y=pos[:, 1], pos_z=pos[:, 2],
-                            vel_x=vel[:, 0], vel_y=vel[:, 1], vel_z=vel[:, 2], depth_measured=depth)
+        def path(x, p, d, t):
+            """Position and velocity of the configured trajectory at ``t``."""
+            choice = p["trajectory"]
+            options = {
+                "semicircle": semicircle(t, p["radius"], p["speed"], p["depth"]),
+                "spiral": spiral(t, p["spiral_start_radius"], p["spiral_pitch"], p["speed"], p["depth"]),
+                "random": (ca.vertcat(x["start"] + p["speed"] * (t - x["t0"] - x["leg"] * p["turn_interval"])
+                                      * x["direction"], p["depth"]),
+                           ca.vertcat(p["speed"] * x["direction"], 0.0)),
+                "waypoints": waypoints(t, d["times"], d["points"], d["first"], d["last"]),
+            }
+            index = ca.if_else(choice == TRAJECTORIES.index("square"), TRAJECTORIES.index("file"), choice)
+            pos = select(index, [options[k][0] for k in ("semicircle", "spiral", "random")] + [0, options["waypoints"][0]])
+            vel = select(index, [options[k][1] for k in ("semicircle", "spiral", "random")] + [0, options["waypoints"][1]])
+            return pos, vel
+
+        def init(p, d, w, t0):
+            start = ca.vertcat(p["radius"], 0.0)
+            direction = _leg_direction(w[_RANDOM_PATH], start, p["speed"] * p["turn_interval"], p["max_radius"])
+            x = {"t0": t0, "k": 0, "leg": 0, "start": start, "direction": direction}
+            pos, _ = path(x, p, d, t0)
+            return {**x, "reading": pos[2] + p["depth_sigma"] * w[_DEPTH_NOISE][0]}
+
+        def turn_due(x, u, p, d, t, h):
+            return ca.logic_and(p["trajectory"] == TRAJECTORIES.index("random"),
+                                sample_due(x["leg"], x["t0"], p["turn_interval"], t, h))
+
+        def turn(x, u, p, d, w, t, h):
+            leg = p["speed"] * p["turn_interval"]
+            start = x["start"] + leg * x["direction"]
+            return {"leg": x["leg"] + 1, "start": start,
+                    "direction": _leg_direction(w[_RANDOM_PATH], start, leg, p["max_radius"])}
+
+        def sample_due_(x, u, p, d, t, h):
+            return sample_due(x["k"], x["t0"], p["sample_period"], t, h)
+
+        def sample(x, u, p, d, w, t, h):
+            k = x["k"] + 1
+            pos, _ = path(x, p, d, x["t0"] + k * p["sample_period"])
+            return {"k": k, "reading": pos[2] + p["depth_sigma"] * w[_DEPTH_NOISE][0]}
+
+        def output(x, p, d, t):
+            pos, vel = path(x, p, d, t)
+            out = {f"pos_{a}": pos[k] for k, a in enumerate("xyz")}
+            out.update({f"vel_{a}": vel[k] for k, a in enumerate("xyz")})
+            out["depth_measured"] = x["reading"]
+            return out
+
+        depth, legs = Stream(_DEPTH_NOISE, "normal", 1), Stream(_RANDOM_PATH, "uniform", 2)
+        return b.program(b.prepare(prepare), b.init(init, (depth, legs)), b.output(output),
+                         events=[b.event("turn", turn_due, turn, (legs,)),
+                                 b.event("sample", sample_due_, sample, (depth,))])
+
+
+def file_waypoints(values: Mapping[str, Any]) -> np.ndarray:
+    """The waypoints of ``trajectory = file``: from ``trajectory_file``, else from the ``waypoints`` text.
+
+    Returns
+    -------
+    ndarray, shape (rows, 4)
+        time [s], N, E, D [m].
+
+    Raises
+    ------
+    ModelError
+        If neither is given, or the file or text is malformed.
+    """
+    if values.get("trajectory_file"):
+        return read_trajectory_file(values["trajectory_file"], WAYPOINTS)
+    rows = parse_table(values.get("waypoints", ""), WAYPOINTS, "target.waypoints")
+    if rows.shape[0] < 2:
+        raise ModelError("target.trajectory_file: trajectory = file needs a trajectory_file (or at least 2 "
+                         "waypoints 'time N E D; ...')")
+    return rows
 
 
 def natural_duration(params: Mapping[str, Any]) -> float:
@@ -111,25 +211,35 @@ def natural_duration(params: Mapping[str, Any]) -> float:
     Semicircle: π r / v; square: 4 s / v; file: its last time; spiral and
     random: :data:`~models.target.trajectories.OPEN_DURATION`.
     """
-    p = resolve_parameters(TargetCore.variables(), params, "target")
+    p = resolve_parameters(Target.config_parameters(), params, "target")
     kind = p["trajectory"]
     if kind == "semicircle":
         return math.pi * p["radius"] / p["speed"]
     if kind == "square":
         return 4.0 * p["square_side"] / p["speed"]
     if kind == "file":
-        return read_trajectory_file(p["trajectory_file"]).duration
+        return float(file_waypoints(p)[-1, 0])
     return OPEN_DURATION
 
 
 def start_state(params: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """Position [m] and velocity [m/s] of the diver at t = 0, each (3,).
+    """Position [m] and velocity [m/s] of the diver at t = 0, each (3,), from the model itself.
 
-    Deterministic for every trajectory (the random path starts at (r, 0)).
+    Deterministic for every trajectory (the random path starts at (r, 0),
+    and its first heading is random, so its velocity is given as zero).
     """
-    core = TargetCore(params)  # validates, and reads a trajectory file once
-    p = core.params
-    if p["trajectory"] == "random":
-        return np.array([p["radius"], 0.0, p["depth"]]), np.zeros(3)
-    pos, vel = core._make_path().state(0.0, 1)
-    return pos[0], vel[0]
+    p = resolve_parameters(Target.config_parameters(), params, "target")
+    program = Target.program()
+    vector = Target.parameter_vector(Target.fmu_parameters(p))
+    d = program.prepare(vector)
+    width = sum(s.width for s in program.init_streams)
+    x = program.init(vector, d, np.zeros(width), 0.0)
+    y = np.asarray(program.output(x, vector, d, 0.0)).reshape(-1)
+    names = [v.name for v in Target.outputs()]
+    pos = np.array([y[names.index(f"pos_{a}")] for a in "xyz"])
+    vel = np.array([y[names.index(f"vel_{a}")] for a in "xyz"])
+    return pos, (np.zeros(3) if p["trajectory"] == "random" else vel)
+
+
+__all__ = ["MAX_WAYPOINTS", "TRAJECTORIES", "Target", "WAYPOINTS", "file_waypoints", "natural_duration",
+           "start_state"]

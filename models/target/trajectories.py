@@ -1,6 +1,6 @@
-"""Reference trajectories of the diver (target), exact in continuous time.
+"""Reference trajectories of the diver (target), exact in continuous time (casadi expressions).
 
-Every trajectory returns the position [m] and velocity [m/s] at any time, so
+Every trajectory gives the position [m] and velocity [m/s] at any time t, so
 the target does not depend on the communication step. Scenario geometry
 (sblsim's choice, after the paper's scenarios): the semicircle and the spiral
 are centred on the SBL cross; the diver swims at constant speed and holds
@@ -14,159 +14,178 @@ Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Section 5
 
 from __future__ import annotations
 
+import csv
 import math
+from functools import lru_cache
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
-from models.core import ModelError
+from models.core import ModelError, Table, check_entry, check_increasing
 
 #: Simulated duration of the open-ended trajectories (spiral, random) [s].
 OPEN_DURATION = 100.0
+#: Newton iterations of the spiral's arc-length inversion (quadratic convergence from the asymptotic start).
+SPIRAL_ITERATIONS = 8
 
 
-class Semicircle:
-    """Half circle of radius r around the origin, from (0, -r) through (r, 0) to (0, r)."""
+def semicircle(t, radius, speed, depth) -> tuple[ca.SX, ca.SX]:
+    """Half circle of radius r around the origin, from (0, -r) through (r, 0) to (0, r), then holding.
 
-    def __init__(self, radius: float, speed: float, depth: float) -> None:
-        self.radius, self.speed, self.depth = radius, speed, depth
-        self.duration = math.pi * radius / speed
-
-    def state(self, t: float, batch: int) -> tuple[np.ndarray, np.ndarray]:
-        tc = min(t, self.duration)
-        theta = -0.5 * math.pi + self.speed * tc / self.radius
-        moving = self.speed if t < self.duration else 0.0
-        pos = [self.radius * math.cos(theta), self.radius * math.sin(theta), self.depth]
-        vel = [-moving * math.sin(theta), moving * math.cos(theta), 0.0]
-        return np.tile(pos, (batch, 1)), np.tile(vel, (batch, 1))
-
-
-class Spiral:
-    """Archimedean spiral ``ρ = ρ0 + k θ`` (k = pitch / 2π), swum at constant speed.
-
-    Arc length ``s(θ) = (k/2)[u √(1+u²) + asinh u]`` with ``u = ρ/k`` is inverted
-    on a dense table.
+    Returns position [m] and velocity [m/s], each (3, 1).
     """
-
-    def __init__(self, start_radius: float, pitch: float, speed: float, depth: float) -> None:
-        self.k = pitch / (2.0 * math.pi)
-        self.start_radius, self.speed, self.depth = start_radius, speed, depth
-        self.duration = OPEN_DURATION
-
-        def arc(rho: np.ndarray) -> np.ndarray:
-            u = rho / self.k
-            return 0.5 * self.k * (u * np.sqrt(1.0 + u * u) + np.arcsinh(u))
-
-        length = speed * self.duration * 1.5 + 1.0
-        rho_max = math.sqrt(start_radius**2 + 2.0 * self.k * length) + self.k
-        self._rho = np.linspace(start_radius, rho_max, 200_001)
-        self._s = arc(self._rho) - arc(np.array(start_radius))
-
-    def state(self, t: float, batch: int) -> tuple[np.ndarray, np.ndarray]:
-        rho = float(np.interp(self.speed * t, self._s, self._rho))
-        theta = (rho - self.start_radius) / self.k
-        c, s = math.cos(theta), math.sin(theta)
-        tangent = np.array([self.k * c - rho * s, self.k * s + rho * c])
-        tangent *= self.speed / np.linalg.norm(tangent)
-        return (np.tile([rho * c, rho * s, self.depth], (batch, 1)),
-                np.tile([tangent[0], tangent[1], 0.0], (batch, 1)))
+    duration = math.pi * radius / speed
+    theta = -0.5 * math.pi + speed * ca.fmin(t, duration) / radius
+    moving = ca.if_else(t < duration, speed, 0.0)
+    pos = ca.vertcat(radius * ca.cos(theta), radius * ca.sin(theta), depth)
+    vel = ca.vertcat(-moving * ca.sin(theta), moving * ca.cos(theta), 0.0)
+    return pos, vel
 
 
-class Waypoints:
-    """Piecewise-linear path through timed waypoints, shared by all replicates or per replicate.
+def spiral_arc(rho, k):
+    """Arc length of the spiral ρ = ρ0 + kθ from the centre to radius ρ,
+    ``(k/2)[u √(1+u²) + asinh u]`` with u = ρ/k [m]."""
+    u = rho / k
+    return 0.5 * k * (u * ca.sqrt(1.0 + u * u) + ca.asinh(u))
+
+
+def spiral(t, start_radius, pitch, speed, depth) -> tuple[ca.SX, ca.SX]:
+    """Archimedean spiral ``ρ = ρ0 + k θ`` (k = pitch / 2π), swum at constant speed from θ = 0.
+
+    The radius reached after the arc length ``s = v t`` solves
+    ``arc(ρ) − arc(ρ0) = s`` by Newton's method (``d arc / dρ = sqrt(1 + (ρ/k)²)``)
+    from the large-radius solution ``ρ = sqrt(ρ0² + 2 k s)``.
+
+    Returns position [m] and velocity [m/s], each (3, 1).
+    """
+    k = pitch / (2.0 * math.pi)
+    target = spiral_arc(start_radius, k) + speed * t
+    rho = ca.sqrt(start_radius * start_radius + 2.0 * k * speed * t)
+    for _ in range(SPIRAL_ITERATIONS):
+        rho = rho - (spiral_arc(rho, k) - target) / ca.sqrt(1.0 + (rho / k) ** 2)
+    theta = (rho - start_radius) / k
+    c, s = ca.cos(theta), ca.sin(theta)
+    tx, ty = k * c - rho * s, k * s + rho * c
+    scale = speed / ca.sqrt(tx * tx + ty * ty)
+    return ca.vertcat(rho * c, rho * s, depth), ca.vertcat(scale * tx, scale * ty, 0.0)
+
+
+def waypoint_interpolant(max_rows: int) -> ca.Function:
+    """Parametric piecewise-linear interpolant ``(t, times[max_rows], points[3·max_rows]) -> (N, E, D)``."""
+    return ca.interpolant("sblsim_waypoints", "linear", [max_rows], 3)
+
+
+def waypoints(t, times, points, first, last) -> tuple[ca.SX, ca.SX]:
+    """Piecewise-linear path through timed waypoints; before the first and after the last it holds.
 
     Parameters
     ----------
-    times : ndarray, shape (n,)
-        Strictly increasing waypoint times [s].
-    points : ndarray, shape (n, 3) or (B, n, 3)
-        Waypoints [m] (NED).
+    t : casadi.SX
+        Time [s].
+    times : casadi.SX, shape (n, 1)
+        Strictly increasing waypoint times [s] (padded beyond ``last``).
+    points : casadi.SX, shape (3 n, 1)
+        Waypoints (N, E, D) row after row [m].
+    first, last : casadi.SX
+        Times of the first and last waypoint in use [s].
+
+    Returns
+    -------
+    position, velocity : casadi.SX, each (3, 1)
+        The velocity is the slope of the segment t lies in (at a waypoint,
+        the segment that starts there; the derivative of the casadi
+        interpolant), zero outside [first, last).
     """
-
-    def __init__(self, times: np.ndarray, points: np.ndarray) -> None:
-        self.times = np.asarray(times, float)
-        self.points = np.asarray(points, float)
-        self.duration = float(self.times[-1])
-
-    def state(self, t: float, batch: int) -> tuple[np.ndarray, np.ndarray]:
-        pts = self.points if self.points.ndim == 3 else np.broadcast_to(self.points, (batch,) + self.points.shape)
-        if t >= self.times[-1]:
-            return pts[:, -1, :].copy(), np.zeros((batch, 3))
-        if t < self.times[0]:
-            return pts[:, 0, :].copy(), np.zeros((batch, 3))
-        k = int(np.searchsorted(self.times, t, side="right") - 1)
-        span = self.times[k + 1] - self.times[k]
-        vel = (pts[:, k + 1, :] - pts[:, k, :]) / span
-        return pts[:, k, :] + vel * (t - self.times[k]), vel
+    pos, vel = _waypoint_function(times.numel())(t, times, points, first, last)
+    return pos, vel
 
 
-def square(side: float, speed: float, depth: float) -> Waypoints:
-    """Square of the given side centred on the origin, from its SW corner N, E, S, W."""
+@lru_cache(maxsize=None)
+def _waypoint_function(max_rows: int) -> ca.Function:
+    f = waypoint_interpolant(max_rows)
+    t, first, last = ca.SX.sym("t"), ca.SX.sym("first"), ca.SX.sym("last")
+    times, points = ca.SX.sym("times", max_rows), ca.SX.sym("points", 3 * max_rows)
+    pos = f(ca.fmin(ca.fmax(t, first), last), times, points)
+    slope = ca.jacobian(f(t, times, points), t)
+    vel = ca.if_else(ca.logic_and(t >= first, t < last), slope, ca.SX.zeros(3))
+    return ca.Function("sblsim_waypoint_state", [t, times, points, first, last], [pos, vel])
+
+
+def square_rows(side, speed, depth) -> list[list]:
+    """Waypoints (t, N, E, D) of a square of the given side centred on the origin, from its SW corner N, E, S, W."""
     h = 0.5 * side
-    corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h], [-h, -h]])
-    times = np.arange(5) * side / speed
-    return Waypoints(times, np.column_stack([corners, np.full(5, depth)]))
+    corners = [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)]
+    return [[k * side / speed, n, e, depth] for k, (n, e) in enumerate(corners)]
 
 
-def random_path(uniforms: np.ndarray, start: np.ndarray, speed: float, interval: float,
-                max_radius: float, depth: float) -> Waypoints:
-    """Random path with sudden changes of direction, one per replicate.
-
-    Each ``interval`` the diver turns to a new heading drawn uniformly in
-    [0, 2π); when a leg would leave the disc of radius ``max_radius`` the
-    heading is drawn within ±60° of the bearing to the centre instead.
-
-    Parameters
-    ----------
-    uniforms : ndarray, shape (B, n_legs, 2)
-        Uniform [0, 1) draws, two per leg.
-    start : ndarray, shape (2,)
-        Start position (N, E) [m].
-    """
-    batch, legs, _ = uniforms.shape
-    leg = speed * interval
-    points = np.empty((batch, legs + 1, 2))
-    points[:, 0] = start
-    for j in range(legs):
-        p = points[:, j]
-        heading = 2.0 * np.pi * uniforms[:, j, 0]
-        nxt = p + leg * np.column_stack([np.cos(heading), np.sin(heading)])
-        outside = np.linalg.norm(nxt, axis=1) > max_radius
-        home = np.arctan2(-p[:, 1], -p[:, 0]) + np.deg2rad(120.0) * (uniforms[:, j, 1] - 0.5)
-        heading = np.where(outside, home, heading)
-        points[:, j + 1] = p + leg * np.column_stack([np.cos(heading), np.sin(heading)])
-    xyz = np.concatenate([points, np.full((batch, legs + 1, 1), depth)], axis=2)
-    return Waypoints(np.arange(legs + 1) * interval, xyz)
-
-
-def read_trajectory_file(path: str | Path) -> Waypoints:
+def read_trajectory_file(path: str | Path, table: Table, field: str = "target.trajectory_file") -> np.ndarray:
     """Read a trajectory CSV with columns time [s], N [m], E [m], D [m].
 
-    A header line is allowed; at least two rows with strictly increasing,
-    finite times.
+    A first line is a header if it holds names and no number; a line
+    starting with ``#`` is a comment. Every other cell must be a finite
+    number inside its column's range (``table``), times strictly increasing.
+
+    Returns
+    -------
+    ndarray, shape (rows, 4)
 
     Raises
     ------
     ModelError
-        If the file is missing or malformed; the message names
-        ``target.trajectory_file``.
+        If the file is missing or malformed; the message names the field,
+        and the row and column of a bad cell.
     """
-    import pandas as pd
-
-    field = "target.trajectory_file"
     if not str(path) or not Path(path).is_file():
+        if Path(path).is_dir():
+            raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
         raise ModelError(f"{field}: no such file {str(path)!r}")
     try:
-        table = pd.read_csv(path, header=None, comment="#", skip_blank_lines=True, dtype=str)
-        if table.shape[0] and pd.to_numeric(table.iloc[0], errors="coerce").isna().any():
-            table = table.iloc[1:]  # a header line
-        data = table.apply(pd.to_numeric, errors="raise").to_numpy(float)
-    except (ValueError, OSError, pd.errors.ParserError) as exc:
-        raise ModelError(f"{field}: {str(path)!r} is not a CSV of numbers time, N, E, D ({exc.__class__.__name__})") from None
-    if data.ndim != 2 or data.shape[1] != 4:
-        raise ModelError(f"{field}: {str(path)!r} must have 4 columns time [s], N, E, D [m]; found {data.shape[-1]}")
-    if data.shape[0] < 2 or not np.all(np.isfinite(data)):
-        raise ModelError(f"{field}: {str(path)!r} needs at least 2 rows of finite numbers")
-    if np.any(np.diff(data[:, 0]) <= 0):
-        raise ModelError(f"{field}: times in {str(path)!r} must be strictly increasing")
-    return Waypoints(data[:, 0], data[:, 1:])
+        with open(path, newline="") as handle:
+            lines = [(i, row) for i, row in enumerate(csv.reader(handle), start=1)
+                     if row and not row[0].lstrip().startswith("#") and any(c.strip() for c in row)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
+    if lines and _is_header(lines[0][1]):
+        lines = lines[1:]
+    rows = []
+    names = [c.name for c in table.columns]
+    for i, row in lines:
+        if len(row) != len(names):
+            raise ModelError(f"{field}: {str(path)!r} line {i} has {len(row)} columns; expected {len(names)} "
+                             "(time, N, E, D)")
+        values = []
+        for cell, col in zip(row, table.columns):
+            try:
+                number = float(cell)
+            except ValueError:
+                raise ModelError(f"{field}: {str(path)!r} line {i}, column {col.name}: {cell.strip()!r} "
+                                 "is not a number") from None
+            check_entry(number, col, f"{field}: {str(path)!r} line {i}, column {col.name}")
+            values.append(number)
+        rows.append(values)
+    if len(rows) < 2:
+        raise ModelError(f"{field}: {str(path)!r} needs at least 2 rows time, N, E, D")
+    if len(rows) > table.max_rows:
+        raise ModelError(f"{field}: {str(path)!r} has {len(rows)} rows; at most {table.max_rows}")
+    data = np.array(rows)
+    check_increasing(data, table, f"{field}: {str(path)!r}")
+    return data
+
+
+def _is_header(row: list[str]) -> bool:
+    """A header row: every cell is a name (starts with a letter and is not a number such as 'nan' or 'inf')."""
+    def is_name(cell: str) -> bool:
+        cell = cell.strip()
+        if not cell or not cell[0].isalpha():
+            return False
+        try:
+            float(cell)
+        except ValueError:
+            return True
+        return False
+    return all(is_name(c) for c in row)
+
+
+__all__ = ["OPEN_DURATION", "read_trajectory_file", "semicircle", "spiral", "spiral_arc", "square_rows",
+           "waypoint_interpolant", "waypoints"]
