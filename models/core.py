@@ -106,6 +106,13 @@ class Column:
         unit = f" {self.unit}" if self.unit and self.unit != "1" else ""
         return f"[{lo}, {hi}]{unit}"
 
+    @property
+    def start(self) -> float:
+        """Start value of the unused entries: 0, or the nearest allowed value."""
+        lo = -math.inf if self.min is None else self.min
+        hi = math.inf if self.max is None else self.max
+        return float(min(max(0.0, lo), hi))
+
 
 @dataclass(frozen=True)
 class Table:
@@ -124,16 +131,21 @@ class Table:
         Largest number of rows.
     increasing : bool
         The first column must be strictly increasing.
+    min_rows : int
+        Rows needed when the String choice ``when = (name, choice)`` holds (always, if None).
+    when : tuple of (str, str), optional
     """
 
     columns: tuple[Column, ...]
     max_rows: int
     increasing: bool = False
+    min_rows: int = 0
+    when: tuple[str, str] | None = None
 
     def array_variables(self) -> tuple["Variable", ...]:
         """The Real parameters of the columns, column by column."""
         return tuple(
-            Variable(f"{col.name}[{k}]", "parameter", "Real", 0.0, col.unit, f"{col.description}, row {k}",
+            Variable(f"{col.name}[{k}]", "parameter", "Real", col.start, col.unit, f"{col.description}, row {k}",
                      min=col.min, max=col.max, in_table=True)
             for col in self.columns for k in range(1, self.max_rows + 1))
 
@@ -536,6 +548,22 @@ class Program:
             funcs += [ev.guard, ev.handler]
         return funcs
 
+    def check_dense(self) -> None:
+        """Every function's inputs and outputs are dense vectors (what the C runtime reads and writes).
+
+        Raises
+        ------
+        ValueError
+            Naming a function with a sparse input or output.
+        """
+        for f in self.functions():
+            for k in range(f.n_out()):
+                if not f.sparsity_out(k).is_dense():
+                    raise ValueError(f"{f.name()}: output {k} is sparse; the runtime writes dense vectors")
+            for k in range(f.n_in()):
+                if not f.sparsity_in(k).is_dense():
+                    raise ValueError(f"{f.name()}: input {k} is sparse; the runtime reads dense vectors")
+
     def purposes(self) -> list[int]:
         """The stream purposes the program draws from, sorted."""
         streams = list(self.init_streams) + list(self.step_streams) + [s for e in self.events for s in e.streams]
@@ -575,7 +603,7 @@ class Blocks:
             if value.numel() != n:
                 raise ValueError(f"block {name}: {value.numel()} values, expected {n}")
             parts.append(ca.reshape(value, n, 1))
-        return ca.vertcat(*parts)
+        return ca.densify(ca.vertcat(*parts))  # the runtime reads and writes dense vectors
 
 
 class ProgramBuilder:
@@ -615,13 +643,19 @@ class ProgramBuilder:
         self.h = ca.SX.sym("h")
 
     # named views -------------------------------------------------------------------------
-    def params(self) -> dict[str, ca.SX]:
-        """Parameters by name; a table's columns also as vectors under their column names."""
-        out = {v.name: self.p[k] for k, v in enumerate(self.param_vars)}
+    def params(self, p=None) -> dict[str, Any]:
+        """Parameters by name; a table's columns also as vectors under their column names.
+
+        ``p`` is the parameter vector to view (default the SX symbol; ``prepare`` views an MX one).
+        """
+        p = self.p if p is None else p
+        out = {v.name: p[k] for k, v in enumerate(self.param_vars)}
+        index = {v.name: k for k, v in enumerate(self.param_vars)}
         for v in self.param_vars:
             if v.table is not None:
                 for col in v.table.columns:
-                    out[col.name] = ca.vertcat(*[out[f"{col.name}[{k}]"] for k in range(1, v.table.max_rows + 1)])
+                    first = index[f"{col.name}[1]"]
+                    out[col.name] = p[first:first + v.table.max_rows]
         return out
 
     def inputs(self) -> dict[str, ca.SX]:
@@ -638,9 +672,15 @@ class ProgramBuilder:
 
     # functions ----------------------------------------------------------------------------
     def prepare(self, body) -> ca.Function:
-        """``prepare(p) -> d`` from ``body(p) -> {block: value}``."""
-        values = body(self.params()) if self.D.names() != ["none"] else {"none": 0}
-        return ca.Function(f"{self.prefix}_prepare", [self.p], [self.D.pack(values)], ["p"], ["d"])
+        """``prepare(p) -> d`` from ``body(p) -> {block: value}`` (None: nothing derived).
+
+        Built on MX symbols, so that table work can use casadi's ``mapaccum``
+        (compact loops in the generated C) rather than one statement per row.
+        """
+        p = ca.MX.sym("p", self.p.numel())
+        values = body(self.params(p)) if body is not None else {"none": 0}
+        parts = [ca.reshape(ca.MX(values[name]), n, 1) for name, n in self.D.blocks]
+        return ca.Function(f"{self.prefix}_prepare", [p], [ca.densify(ca.vertcat(*parts))], ["p"], ["d"])
 
     def init(self, body, streams: Sequence[Stream] = ()) -> tuple[ca.Function, tuple[Stream, ...]]:
         """``init(p, d, w, t0) -> x`` from ``body(p, d, w, t0) -> {block: value}`` (every block)."""
@@ -665,7 +705,7 @@ class ProgramBuilder:
         x = self.X.unpack(self.x)
         u, p, d = self.inputs(), self.params(), self.D.unpack(self.d)
         g = ca.Function(f"{self.prefix}_{name}_guard", [self.x, self.u, self.p, self.d, self.t, self.h],
-                        [guard(x, u, p, d, self.t, self.h)], ["x", "u", "p", "d", "t", "h"], ["g"])
+                        [ca.densify(ca.SX(guard(x, u, p, d, self.t, self.h)))], ["x", "u", "p", "d", "t", "h"], ["g"])
         w, ws = self._streams(streams)
         values = handler(x, u, p, d, ws, self.t, self.h)
         f = ca.Function(f"{self.prefix}_{name}", [self.x, self.u, self.p, self.d, w, self.t, self.h],
@@ -678,7 +718,7 @@ class ProgramBuilder:
         missing = [v.name for v in self.output_vars if v.name not in values]
         if missing:
             raise ValueError(f"{self.component.name}: outputs without a value: {', '.join(missing)}")
-        y = ca.vertcat(*[ca.SX(values[v.name]) for v in self.output_vars])
+        y = ca.densify(ca.vertcat(*[ca.SX(values[v.name]) for v in self.output_vars]))
         return ca.Function(f"{self.prefix}_output", [self.x, self.p, self.d, self.t], [y],
                            ["x", "p", "d", "t"], ["y"])
 
@@ -769,6 +809,49 @@ class Component:
             out[k] = v.code(value if v.in_table else v.coerce(value, f"{cls.name}.{v.name}"))
         return out
 
+    @classmethod
+    def parameter_matrix(cls, values: Mapping[str, Any], batch: int, n_beacons: int = 4) -> np.ndarray:
+        """The ``p`` vectors of a batch: one row per replicate.
+
+        Parameters
+        ----------
+        values : mapping
+            FMU parameter values: a scalar for every replicate, or an array
+            of shape (B,) with one value per replicate (a batch spanning
+            design cells). Missing ones take their declared start.
+        batch : int
+            B.
+
+        Returns
+        -------
+        ndarray, shape (B, n_p)
+
+        Raises
+        ------
+        ModelError
+            On an unknown name, a value outside its allowed range, or an array of the wrong length.
+        """
+        arrays = {k: np.asarray(v) for k, v in values.items() if isinstance(v, np.ndarray) and v.ndim > 0}
+        first = {k: (v.reshape(-1)[0].item() if k in arrays else v) for k, v in values.items()}
+        base = cls.parameter_vector(first, n_beacons)
+        out = np.tile(base, (batch, 1))
+        declared = {v.name: (k, v) for k, v in enumerate(cls.fmu_parameters_declared(n_beacons))}
+        for name, array in arrays.items():
+            k, var = declared[name]
+            if array.shape != (batch,):
+                raise ModelError(f"{cls.name}.{name}: {array.size} per-replicate values for a batch of {batch}")
+            for item in np.unique(array):
+                var.coerce(item.item(), f"{cls.name}.{name}")
+            out[:, k] = [var.code(x.item()) for x in array] if var.type == "String" else array.astype(float)
+        return out
+
+    @classmethod
+    def fmi_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """Parameter values as an FMU takes them: a String choice becomes the index of the choice."""
+        declared = {v.name: v for v in cls.fmu_parameters_declared(n_beacons)}
+        return {k: (declared[k].choices.index(v) if k in declared and declared[k].type == "String" else v)
+                for k, v in values.items()}
+
 
 @lru_cache(maxsize=None)
 def _fmu_variables(cls: type, n_beacons: int) -> tuple[Variable, ...]:
@@ -784,7 +867,9 @@ def _fmu_variables(cls: type, n_beacons: int) -> tuple[Variable, ...]:
 
 @lru_cache(maxsize=None)
 def _program(cls: type, n_beacons: int) -> Program:
-    return cls.build(n_beacons)
+    program = cls.build(n_beacons)
+    program.check_dense()
+    return program
 
 
 # --------------------------------------------------------------------------------------------
@@ -796,6 +881,50 @@ def sample_due(index, start, period, t, h):
     the end ``t + h`` of the step (to within 1e-6 periods, so that a host's rounded communication
     points neither miss nor add a sample) [s]."""
     return start + (index + 1.0) * period <= t + h + 1e-6 * period
+
+
+def padded_rows(count, columns: Sequence[Any], gap: float) -> tuple[list[Any], list[Any]]:
+    """A table's rows padded for interpolation: the used rows, then rows that keep the grid increasing.
+
+    Rows ``k < count`` are kept; a row ``k ≥ count`` repeats the last used row,
+    its first column continuing ``last + gap + (k − count)``. Built with
+    casadi's ``mapaccum`` (one loop in the generated C).
+
+    Parameters
+    ----------
+    count : casadi.MX
+        Rows in use.
+    columns : sequence of casadi.MX, each (N, 1)
+        The columns.
+    gap : float
+        Step from the last used value of the first column to the first padding row.
+
+    Returns
+    -------
+    padded : list of casadi.MX, each (N, 1)
+    last : list of casadi.MX
+        The last used row (zeros if ``count`` is 0).
+    """
+    m, N = len(columns), int(columns[0].numel())
+    acc = ca.SX.sym("acc", 2 + m)
+    row = [ca.SX.sym(f"c{j}") for j in range(m)]
+    k, n, last = acc[0], acc[1], acc[2:]
+    used = k < n
+    first = ca.if_else(used, row[0], last[0] + gap + (k - n))
+    out = [first] + [ca.if_else(used, row[j], last[j]) for j in range(1, m)]
+    kept = ca.vertcat(*[ca.if_else(used, row[j], last[j]) for j in range(m)])
+    pad = ca.Function("sblsim_pad_row", [acc] + row, [ca.vertcat(k + 1, n, kept)] + out).mapaccum("sblsim_pad", N)
+    result = pad(ca.vertcat(0, count, ca.MX.zeros(m)), *[ca.reshape(c, 1, N) for c in columns])
+    final = result[0][:, N - 1]
+    return [ca.reshape(r, N, 1) for r in result[1:]], [final[2 + j] for j in range(m)]
+
+
+def cumulative_sum(values: Any) -> Any:
+    """Running sum of an (N, 1) casadi.MX vector (``mapaccum``), starting with the first value."""
+    N = int(values.numel())
+    acc, v = ca.SX.sym("acc"), ca.SX.sym("v")
+    total = ca.Function("sblsim_add", [acc, v], [acc + v, acc + v]).mapaccum("sblsim_cumsum", N)
+    return ca.reshape(total(0, ca.reshape(values, 1, N))[1], N, 1)
 
 
 def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
@@ -812,7 +941,7 @@ def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
 
 def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
     """A constant table indexed by a symbolic integer (zero if out of range)."""
-    return select(index, [ca.SX(v) for v in values])
+    return select(index, [float(v) for v in values])
 
 
 # --------------------------------------------------------------------------------------------
@@ -874,4 +1003,4 @@ def draw_stream(stream: Stream, keys: Sequence[int], component: int, draw: int) 
 __all__ = ["Blocks", "Column", "Component", "Event", "ModelError", "Program", "SEED_NAMES", "SEED_PARAMETERS",
            "Stream", "Table", "UNITS", "Variable", "check_entry", "check_increasing", "draw_stream", "format_table",
            "lookup", "normals", "ProgramBuilder", "parameters", "parse_table", "philox_key", "philox_words",
-           "resolve_parameters", "sample_due", "select", "uniforms"]
+           "cumulative_sum", "padded_rows", "resolve_parameters", "sample_due", "select", "uniforms"]

@@ -11,22 +11,24 @@ Ties (applied only where the user did not set the key):
 ``receiver.sigma_range`` ← ``acoustics.sigma_range`` and
 ``receiver.sigma_depth`` ← ``target.depth_sigma`` (both floored at 1 mm: R must
 be positive), ``receiver.x0_*`` ← the diver's start state, and
-``simulation.duration`` ← one pass of the trajectory.
+``simulation.duration`` ← one pass of the trajectory. The FMU parameters the
+orchestrator fills (:data:`SAMPLING_TIES`: the slot and sensor sampling
+periods ← ``simulation.sampling_time``; tables from files) are not
+configuration keys.
 """
 
 from __future__ import annotations
 
 import copy
 import tomllib
-from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
 
 import tomli_w
 
-from models import COMPONENTS
-from models.core import SEED_PARAMETERS, ModelError, Variable, resolve_parameters
+from models import COMPONENTS, MODELS
+from models.core import SEED_NAMES, SEED_PARAMETERS, ModelError, Variable, resolve_parameters
 from models.target import natural_duration, start_state
 from orchestrator.master import ALGORITHMS
 
@@ -41,7 +43,7 @@ PATH_KEYS = (("target", "trajectory_file"), ("acoustics", "sound_speed_profile")
 
 
 def _is_path(section: str, value: Any) -> bool:
-    special = section == "acoustics" and (value in ("", "constant", "teos10") or str(value).startswith("ctd:"))
+    special = section == "acoustics" and (value in ("", "constant", "teos10", "table") or str(value).startswith("ctd:"))
     return isinstance(value, str) and bool(value) and not special
 
 
@@ -61,7 +63,7 @@ class ConfigError(ModelError):
 
 
 RUN_VARIABLES: tuple[Variable, ...] = (
-    Variable("scenario", "parameter", "String", "custom", description="Scenario name"),
+    Variable("scenario", "parameter", "String", "custom", description="Scenario name", scope="config"),
 ) + SEED_PARAMETERS
 
 SIMULATION_VARIABLES: tuple[Variable, ...] = (
@@ -73,13 +75,15 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              min=0.0, max=1e6),
     Variable("master", "parameter", "String", "gauss-seidel",
              description="Master algorithm: gauss-seidel, or jacobi as FMI hosts step an SSP",
-             choices=ALGORITHMS),
-    Variable("receiver", "parameter", "String", "ekf",
+             choices=ALGORITHMS, scope="config"),
+    Variable("receiver", "parameter", "String", "ekf", scope="config",
              description="Receiver component: ekf (the paper's), lsq (per-step least squares) or fmu:PATH"),
 )
 
-#: Built-in receivers: configuration value -> core name (:data:`models.CORES`).
+#: Built-in receivers: configuration value -> model name (:data:`models.MODELS`).
 RECEIVERS = {"ekf": "receiver", "lsq": "receiver_lsq"}
+#: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
+SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
 EXTERNAL_PREFIX = "fmu:"
 
 
@@ -89,9 +93,15 @@ def external_path(value: Any) -> str:
 
 
 def receiver_source(cfg: dict[str, dict]) -> str | Path:
-    """The receiver of a configuration: a built-in core name, or the path of a user's FMU."""
+    """The receiver of a configuration: a built-in model name, or the path of a user's FMU."""
     value = cfg["simulation"]["receiver"]
     return RECEIVERS[value] if value in RECEIVERS else Path(external_path(value))
+
+
+def component_model(cfg: dict[str, dict], component: str) -> type | None:
+    """The sblsim model that implements a component of a configuration (None: a user's FMU)."""
+    source = receiver_source(cfg) if component == "receiver" else component
+    return None if isinstance(source, Path) else MODELS[source]
 
 
 def section_variables(section: str) -> tuple[Variable, ...]:
@@ -107,9 +117,7 @@ def section_variables(section: str) -> tuple[Variable, ...]:
     if section == "simulation":
         return SIMULATION_VARIABLES
     if section in COMPONENTS:
-        seed_names = {v.name for v in SEED_PARAMETERS}
-        return tuple(v for v in COMPONENTS[section].variables() if v.causality == "parameter"
-                     and v.name not in seed_names)
+        return tuple(v for v in COMPONENTS[section].config_parameters() if v.name not in SEED_NAMES)
     raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
 
 
@@ -265,6 +273,9 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
                               f"{', '.join(RECEIVERS)} or fmu:PATH")
         if not Path(path).is_file():
             raise ConfigError(f"simulation.receiver: no FMU file at {path!r}")
+    for name, model in COMPONENTS.items():  # files and tables are read and checked now
+        if name != "receiver":
+            model.fmu_parameters(cfg[name], _beacons(cfg))
     if sim["duration"] == 0.0:
         sim["duration"] = natural_duration(cfg["target"])
     if sim["duration"] < sim["sampling_time"]:
@@ -273,21 +284,51 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     return cfg
 
 
-@lru_cache(maxsize=None)
-def _declared_parameters(component: str) -> frozenset[str]:
-    return frozenset(v.name for v in COMPONENTS[component].variables() if v.causality == "parameter")
+def _beacons(cfg: dict[str, dict]) -> int:
+    from models.platform.geometry import parse_offsets
+
+    platform = cfg["platform"]
+    return parse_offsets(platform["beacon_offsets"]).shape[0] if platform["layout"] == "custom" else 4
 
 
-def component_params(cfg: dict[str, dict], component: str,
-                     accepted: frozenset[str] | None = None) -> dict[str, Any]:
-    """Parameters of one component: its section plus the seed keys it declares.
+def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[str] | None = None,
+                     model: type | None = None) -> dict[str, Any]:
+    """The FMU parameter values of one component of a resolved configuration.
 
-    With ``accepted`` (the parameters of the core or FMU that implements the
-    component, e.g. the least-squares receiver), only those keys are kept.
+    The component's section turned into FMU parameters by its model
+    (:meth:`models.core.Component.fmu_parameters`: tables from files, custom
+    offsets), the sampling ties (:data:`SAMPLING_TIES`) and the seed keys it
+    declares. String choices stay text (each engine encodes them).
+
+    Parameters
+    ----------
+    cfg : dict
+    component : str
+    accepted : frozenset of str, optional
+        The parameters of the FMU or model that implements the component
+        (e.g. a user's receiver FMU); only those keys are kept.
+    model : type, optional
+        The model (default :func:`component_model`; None for a user's FMU).
+
+    Raises
+    ------
+    ModelError
+        If a file or table of the section cannot be read.
     """
-    declared = _declared_parameters(component) if accepted is None else accepted
-    params = {k: v for k, v in cfg[component].items() if accepted is None or k in accepted}
+    model = model if model is not None else component_model(cfg, component)
+    section = cfg[component]
+    if model is None:
+        params = dict(section)
+        declared = accepted or frozenset()
+    else:
+        params = model.fmu_parameters(section, _beacons(cfg))
+        declared = frozenset(v.name for v in model.fmu_parameters_declared(_beacons(cfg)))
+    for owner, name in SAMPLING_TIES:
+        if owner == component and name in declared:
+            params[name] = cfg["simulation"]["sampling_time"]
     params.update({k: v for k, v in cfg["run"].items() if k in declared})
+    if accepted is not None:
+        params = {k: v for k, v in params.items() if k in accepted}
     return params
 
 

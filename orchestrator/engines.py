@@ -4,14 +4,19 @@ Both handles share one small interface (``setup``, ``set_inputs``,
 ``do_step``, ``get_outputs``, ``terminate``) and expose their variables as
 ``ports`` for the connection checks:
 
-* :class:`LocalHandle` steps a core in-process, batched over replicates;
-* :class:`FmuHandle` steps a real FMU through fmpy's ``FMU2Slave``,
-  instantiated once and reset between runs (B = 1).
+* :class:`LocalHandle` steps a model's generated C in-process, batched over
+  replicates (:class:`fmus.native.NativeBatch`: one call per component and
+  step for the whole batch);
+* :class:`FmuHandle` steps a real FMU through fmpy (B = 1), instantiated once
+  per process and reset between runs.
+
+The two run the same generated code and runtime, so they give the same numbers.
 """
 
 from __future__ import annotations
 
 import atexit
+import ctypes
 import shutil
 from collections import namedtuple
 from pathlib import Path
@@ -29,14 +34,14 @@ _DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
 
 
 class LocalHandle:
-    """A component core stepped in-process (the fast, batched path).
+    """A model's compiled code stepped in-process for a batch of replicates (the fast path).
 
     Parameters
     ----------
     component : str
         Component name in the system (a key of :data:`models.COMPONENTS`).
-    core_class : type, optional
-        The core that implements it (default the paper's, ``COMPONENTS[component]``).
+    model : type, optional
+        The model that implements it (default the paper's, ``COMPONENTS[component]``).
     n_beacons : int
         Beacons of the interface.
     """
@@ -44,34 +49,68 @@ class LocalHandle:
     #: Steps a batch of replicates at once.
     batched = True
 
-    def __init__(self, component: str, core_class: type | None = None, n_beacons: int = 4) -> None:
+    def __init__(self, component: str, model: type | None = None, n_beacons: int = 4) -> None:
         self.component = component
-        self.core_class = core_class or COMPONENTS[component]
+        self.model = model or COMPONENTS[component]
         self.n_beacons = n_beacons
-        declarations = self.core_class.variables(n_beacons)
-        self.ports = [Port(v.name, v.causality, v.type, v.unit) for v in declarations]
-        self.parameters = frozenset(v.name for v in declarations if v.causality == "parameter")
-        self.core = None
+        variables = self.model.fmu_variables(n_beacons)
+        self.ports = [Port(v.name, v.causality, v.fmi_type, v.unit) for v in variables]
+        self.parameters = frozenset(v.name for v in self.model.fmu_parameters_declared(n_beacons))
+        self._inputs = {v.name: k for k, v in enumerate(self.model.inputs(n_beacons))}
+        self._outputs = [(v.name, k, _DTYPES[v.fmi_type]) for k, v in enumerate(self.model.outputs(n_beacons))]
+        self.batch = None
 
     def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
-        """Create the core for a batch of replicates and initialize it at ``t0`` [s]."""
-        self.core = self.core_class(params, replicates, self.n_beacons)
-        self.core.initialize(t0)
+        """Create the batch for the replicates, set its parameters and initialize it at ``t0`` [s].
+
+        Raises
+        ------
+        ModelError
+            On a parameter outside its declared range.
+        """
+        from fmus.native import NativeBatch
+
+        replicates = np.asarray(replicates, dtype=np.int64)
+        values = dict(params)
+        if "replicate" in self.parameters:
+            values["replicate"] = replicates
+        matrix = self.model.parameter_matrix(values, replicates.size, self.n_beacons)
+        if self.batch is None or self.batch.batch != replicates.size:
+            self.close()
+            self.batch = NativeBatch(self.model, replicates.size, self.n_beacons)
+        self.batch.p[:] = matrix
+        self.batch.u[:] = [v.start for v in self.model.inputs(self.n_beacons)] or 0.0
+        self.batch.initialize(t0)
 
     def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
-        self.core.set_inputs(values)
+        u = self.batch.u
+        for name, value in values.items():
+            u[:, self._inputs[name]] = value
 
     def do_step(self, t: float, h: float) -> None:
-        self.core.step(t, h)
+        self.batch.do_step(t, h)
 
     def get_outputs(self) -> dict[str, np.ndarray]:
-        return self.core.outputs
+        y = self.batch.y.copy()
+        return {name: (y[:, k] if dtype is float else (y[:, k] > 0.5 if dtype is bool else
+                                                         np.rint(y[:, k]).astype(np.int64)))
+                for name, k, dtype in self._outputs}
+
+    def states(self) -> dict[str, np.ndarray]:
+        """The current state by block name, each (B, size) (for inspection and tests)."""
+        x = self.batch.states()
+        return {name: x[:, s] for name, s in self.model.program(self.n_beacons).state_slices().items()}
 
     def terminate(self) -> None:
-        self.core = None
+        """Keep the batch for the next run of the same size (its memory is re-used)."""
+
+    def close(self) -> None:
+        if self.batch is not None:
+            self.batch.close()
+            self.batch = None
 
 
-#: FMUs loaded in this process, by model identifier: (file signature, handle).
+#: FMUs loaded in this process, by path: (file signature, handle).
 _LOADED: dict[str, tuple[tuple, "FmuHandle"]] = {}
 
 
@@ -85,6 +124,8 @@ def read_description(component: str, path: Path) -> Any:
     """
     from fmpy import read_model_description
 
+    if path.is_dir():
+        raise ModelError(f"fmu: {str(path)!r} is a directory, not an FMU file")
     if not path.is_file():
         raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
     try:
@@ -111,38 +152,40 @@ def _ports(md: Any) -> list[Port]:
     return [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
 
 
-def open_fmu(component: str, path: Path | str) -> "FmuHandle":
-    """The process's handle of an FMU, loaded and instantiated on first use.
+def open_fmu(component: str, path: Path | str, model: type | None = None) -> "FmuHandle":
+    """The process's handle of an FMU file, loaded and instantiated on first use.
 
-    A pythonfmu FMU embeds its model in the host's Python interpreter, and
-    loading a second copy of it in one process (a later run, or two
-    instances) crashes the process (pythonfmu 0.7, cf. NTNU-IHB/PythonFMU#228).
-    So each FMU is loaded once per process and re-used, reset between runs,
-    as DESIGN.md asks ("instantiated once and reset between runs"); it is
-    freed when the process ends.
+    Each FMU file is loaded once per process and its instance re-used, reset
+    between runs, as DESIGN.md asks ("instantiated once and reset between
+    runs"). sblsim's own FMUs could be loaded any number of times; a user's
+    pythonfmu FMU cannot (a second copy crashes the interpreter,
+    NTNU-IHB/PythonFMU#228), so every FMU is treated the same way.
+
+    Parameters
+    ----------
+    component : str
+    path : path
+    model : type, optional
+        The sblsim model the FMU was built from (its String choices are sent as their indices).
 
     Raises
     ------
     ModelError
-        If the file is missing or unreadable, if the FMU is in use by another
-        run, or if another file with the same model identifier (or a rebuilt
-        file) was already loaded in this process.
+        If the file is missing or unreadable, or the FMU is in use by another run.
     """
     path = Path(path)
     md = read_description(component, path)
     stat = path.resolve().stat()
-    signature = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, md.guid)
-    identifier = md.coSimulation.modelIdentifier
-    if identifier in _LOADED:
-        loaded_signature, handle = _LOADED[identifier]
-        if loaded_signature != signature:
-            raise ModelError(f"fmu: {identifier} is already loaded in this process from {loaded_signature[0]!r} "
-                             "(a pythonfmu FMU loads once per process); use that file or a new process")
+    signature = (stat.st_size, stat.st_mtime_ns, md.guid)
+    key = str(path.resolve())
+    if key in _LOADED and _LOADED[key][0] == signature:
+        handle = _LOADED[key][1]
         if handle.in_use:
-            raise ModelError(f"fmu: {identifier} is in use by another run in this process")
+            raise ModelError(f"fmu: {path.name} is in use by another run in this process")
     else:
-        handle = FmuHandle(component, path, md)
-        _LOADED[identifier] = (signature, handle)
+        handle = FmuHandle(component, path, md, model)
+        _LOADED[key] = (signature, handle)
+    handle.component, handle.model = component, model
     handle.in_use = True
     return handle
 
@@ -150,7 +193,8 @@ def open_fmu(component: str, path: Path | str) -> "FmuHandle":
 class FmuHandle:
     """A component FMU stepped through fmpy (the interoperability path, B = 1).
 
-    Create it with :func:`open_fmu`, which loads each FMU once per process.
+    Create it with :func:`open_fmu`. Inputs and outputs go through fmpy's
+    ctypes bindings with value-reference arrays prepared once.
 
     Parameters
     ----------
@@ -160,17 +204,18 @@ class FmuHandle:
         The ``.fmu`` file.
     md : fmpy.model_description.ModelDescription
         Its model description.
+    model : type, optional
+        The sblsim model it was built from.
     """
 
     #: Steps one replicate at a time.
     batched = False
 
-    def __init__(self, component: str, path: Path, md: Any) -> None:
+    def __init__(self, component: str, path: Path, md: Any, model: type | None = None) -> None:
         from fmpy import extract
         from fmpy.fmi2 import FMU2Slave
 
-        self.component = component
-        self.path = path
+        self.component, self.path, self.model = component, path, model
         self.variables = {v.name: v for v in md.modelVariables}
         self.ports = _ports(md)
         self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
@@ -181,8 +226,14 @@ class FmuHandle:
         self.fmu.instantiate()
         self._fresh = True
         self.in_use = False
-        self._outputs = {t: [(v.name, v.valueReference) for v in md.modelVariables
-                             if v.causality == "output" and v.type == t] for t in ("Real", "Integer", "Boolean")}
+        self._outputs = {}
+        for typ in ("Real", "Integer", "Boolean"):
+            items = [(v.name, v.valueReference) for v in md.modelVariables if v.causality == "output" and v.type == typ]
+            if items:
+                ctype = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}[typ]
+                vrs = (ctypes.c_uint * len(items))(*[vr for _, vr in items])
+                self._outputs[typ] = ([n for n, _ in items], vrs, (ctype * len(items))())
+        self._input_plan: tuple | None = None
 
     def _set(self, values: Mapping[str, Any]) -> None:
         groups: dict[str, tuple[list, list]] = {}
@@ -200,33 +251,67 @@ class FmuHandle:
         Raises
         ------
         ModelError
-            If more than one replicate is asked for, or a parameter is not in the FMU.
+            If more than one replicate is asked for, a parameter is not in the
+            FMU, or the FMU refuses a call (its log message is given).
         """
         if len(replicates) != 1:
             raise ModelError("engine: the fmu engine steps one replicate at a time (B = 1)")
         missing = [n for n in params if n not in self.variables]
         if missing:
             raise ModelError(f"fmu: {self.path.name} has no parameter {missing[0]!r}")
+        values = dict(params)
+        if self.model is not None:
+            values = self.model.fmi_values(values)
+        if "replicate" in self.variables:
+            values["replicate"] = int(replicates[0])
+        self._call(self._initialize, values, t0)
+
+    def _initialize(self, values: Mapping[str, Any], t0: float) -> None:
         if not self._fresh:
             self.fmu.reset()
         self._fresh = False
         self.fmu.setupExperiment(startTime=t0)
         self.fmu.enterInitializationMode()
-        self._set({**params, "replicate": int(replicates[0])} if "replicate" in self.variables else params)
+        self._set(values)
         self.fmu.exitInitializationMode()
 
+    def _call(self, function, *args) -> Any:
+        """Call into fmpy; an FMU error becomes a one-line ModelError."""
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            return function(*args)
+        except FMICallException as exc:
+            raise ModelError(f"fmu: {self.path.name} ({self.component}) refused a call: {exc}") from None
+
     def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
-        self._set(values)
+        if self._input_plan is None or self._input_plan[0] != tuple(values):
+            self._input_plan = (tuple(values), self._plan(values))
+        for typ, (names, vrs, buffer) in self._input_plan[1].items():
+            for k, name in enumerate(names):
+                buffer[k] = np.asarray(values[name]).reshape(-1)[0].item()
+            self._call(getattr(self.fmu, f"fmi2Set{typ}"), self.fmu.component, vrs, len(names), buffer)
+
+    def _plan(self, values: Mapping[str, Any]) -> dict[str, tuple]:
+        plan: dict[str, list] = {}
+        for name in values:
+            plan.setdefault(self.variables[name].type, []).append(name)
+        out = {}
+        for typ, names in plan.items():
+            ctype = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}[typ]
+            vrs = (ctypes.c_uint * len(names))(*[self.variables[n].valueReference for n in names])
+            out[typ] = (names, vrs, (ctype * len(names))())
+        return out
 
     def do_step(self, t: float, h: float) -> None:
-        self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        self._call(self.fmu.doStep, t, h)
 
     def get_outputs(self) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
-        for typ, items in self._outputs.items():
-            if items:
-                values = getattr(self.fmu, f"get{typ}")([vr for _, vr in items])
-                out.update({name: np.array([val], dtype=_DTYPES[typ]) for (name, _), val in zip(items, values)})
+        for typ, (names, vrs, buffer) in self._outputs.items():
+            self._call(getattr(self.fmu, f"fmi2Get{typ}"), self.fmu.component, vrs, len(names), buffer)
+            values = np.array(buffer[:], dtype=_DTYPES[typ])
+            out.update({name: values[k:k + 1] for k, name in enumerate(names)})
         return out
 
     def terminate(self) -> None:

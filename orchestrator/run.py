@@ -15,10 +15,10 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from models import COMPONENTS, CORES
+from models import COMPONENTS, MODELS
 from models.core import ModelError
 from models.platform.geometry import parse_offsets
-from orchestrator.config import component_params, receiver_source, to_toml
+from orchestrator.config import component_model, component_params, receiver_source, to_toml
 from orchestrator.connections import Connection, check_connections, check_interface, default_connections
 from orchestrator.engines import LocalHandle, fmu_ports, open_fmu
 from orchestrator.master import simulate
@@ -87,7 +87,7 @@ def system_sources(cfg: dict | None = None) -> dict[str, str | Path]:
     Returns
     -------
     dict
-        Component name -> the name of a built-in core (:data:`models.CORES`,
+        Component name -> the name of a built-in model (:data:`models.MODELS`,
         e.g. ``receiver_lsq`` for ``simulation.receiver = "lsq"``) or the path
         of a user's FMU (``receiver = "fmu:PATH"``). Default: the paper's system.
     """
@@ -152,11 +152,11 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     try:
         for name, src in sources.items():
             if name not in paths:
-                handles[name] = LocalHandle(name, CORES[src], n_beacons)
+                handles[name] = LocalHandle(name, MODELS[src], n_beacons)
                 continue
             if isinstance(src, Path):  # a user's FMU: check its interface before loading it
-                check_interface(name, fmu_ports(name, src), COMPONENTS[name].variables(n_beacons), src)
-            handles[name] = open_fmu(name, paths[name])
+                check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)
+            handles[name] = open_fmu(name, paths[name], None if isinstance(src, Path) else MODELS[src])
     except Exception:
         close_handles(handles)
         raise
@@ -177,18 +177,20 @@ def close_handles(handles: dict[str, Any]) -> None:
         handle.terminate()
 
 
-#: Recorded outputs the metrics need (the truth, the EKF estimate and the instrumentation fix).
-METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz")
+#: Recorded outputs the metrics need (the truth, the estimate and the instrumentation fix with its flag).
+METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + ("instr_valid",)
 
 
 def merge_params(cfgs: Sequence[dict], component: str,
                  accepted: frozenset[str] | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """Parameters of one component for a batch of runs, one resolved configuration per run.
 
-    Values equal in every run stay scalars; values that differ (factors of a
-    batch spanning several design cells) become arrays of shape (B,).
-    ``accepted`` names the parameters the component's handle takes (default:
-    the paper's core); the configuration's other keys of the section are left out.
+    The FMU parameters of the first run (:func:`orchestrator.config.component_params`);
+    a numeric key whose value differs between runs (a factor of a batch
+    spanning several design cells) becomes an array of shape (B,). Only the
+    seed keys and numeric FMU parameters may differ; text, tables and
+    configuration-only keys must be the same in every run of a batch.
+    ``accepted`` names the parameters of the handle (default: the model's).
 
     Returns
     -------
@@ -196,15 +198,23 @@ def merge_params(cfgs: Sequence[dict], component: str,
         Parameters without ``replicate``.
     replicates : ndarray of int, shape (B,)
         ``run.replicate`` of each run.
+
+    Raises
+    ------
+    ModelError
+        If the runs differ in a key a batch must share.
     """
-    per_run = [component_params(c, component, accepted) for c in cfgs]
+    first = cfgs[0]
+    params = component_params(first, component, accepted)
+    params.pop("replicate", None)
     replicates = np.array([c["run"]["replicate"] for c in cfgs], dtype=np.int64)
-    params: dict[str, Any] = {}
-    for name, first in per_run[0].items():
-        if name == "replicate":
-            continue
-        values = [p[name] for p in per_run]
-        params[name] = first if all(v == first for v in values) else np.asarray(values)
+    for section in (component, "run"):
+        for key, value in first[section].items():
+            if key == "replicate" or all(c[section][key] == value for c in cfgs):
+                continue
+            if key not in params or isinstance(value, str):
+                raise ModelError(f"{component}.{key}: must be the same for every run of a batch")
+            params[key] = np.asarray([c[section][key] for c in cfgs])
     return params, replicates
 
 
@@ -335,7 +345,10 @@ def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: i
     cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in names}
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
-    instr_err = errors(truth, np.stack([cols[f"instr_{a}"] for a in "xyz"], axis=-1))
+    # no fix at a step (instr_valid false, instr_* 0): the step is left out of the instrumentation metrics
+    fix = np.where(np.asarray(cols["instr_valid"], bool)[..., None],
+                   np.stack([cols[f"instr_{a}"] for a in "xyz"], axis=-1), np.nan)
+    instr_err = errors(truth, fix)
     metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_")})
     if not timeseries:
         return RunResult(cfg, engine, pd.DataFrame(), metrics, n_steps, wall)

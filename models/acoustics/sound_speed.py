@@ -26,13 +26,15 @@ thermodynamic equation of seawater - 2010 (TEOS-10), via the ``gsw`` package.
 from __future__ import annotations
 
 import csv
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from models.core import Column, ModelError, Table, check_entry, check_increasing, parse_table, select
+from models.core import (Column, ModelError, Table, check_entry, check_increasing, cumulative_sum, padded_rows,
+                         parse_table)
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md).
 BUILTIN_CASTS = ("11E101663_20120821_122817", "11E101663_20120821_145912")
@@ -48,7 +50,7 @@ PROFILE = Table(
 NODES = MAX_PROFILE_ROWS + 2
 
 
-def profile_nodes(count, depth: ca.SX, speed: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX, ca.MX]:
     """The padded profile: nodes at the table's depths, extended above and below.
 
     Nodes: ``z_1 − 10 km``, the table's depths, ``z_n + 10 km``, then one
@@ -57,30 +59,23 @@ def profile_nodes(count, depth: ca.SX, speed: ca.SX) -> tuple[ca.SX, ca.SX, ca.S
 
     Parameters
     ----------
-    count : casadi.SX
-        Rows in use, n ≥ 1.
-    depth, speed : casadi.SX, shape (MAX_PROFILE_ROWS, 1)
+    count : casadi.MX
+        Rows in use, n ≥ 1 (0 gives a finite, unused profile).
+    depth, speed : casadi.MX, shape (MAX_PROFILE_ROWS, 1)
         The table columns [m, m/s] (rows beyond n ignored).
 
     Returns
     -------
-    nodes, speeds, slowness : casadi.SX, each (NODES, 1)
-        [m], [m/s], [s/m · m = s/m]: depth, speed and ``S(z) = ∫ dz / c`` from the first node.
+    nodes, speeds, slowness : casadi.MX, each (NODES, 1)
+        Depth [m], speed [m/s] and ``S(z) = ∫ dz / c`` from the first node [s/m · m].
     """
-    last_depth = select(count - 1, [depth[k] for k in range(MAX_PROFILE_ROWS)])
-    last_speed = select(count - 1, [speed[k] for k in range(MAX_PROFILE_ROWS)])
-    nodes, speeds = [depth[0] - EXTENSION], [speed[0]]
-    for k in range(MAX_PROFILE_ROWS):
-        used = k < count
-        nodes.append(ca.if_else(used, depth[k], last_depth + EXTENSION + (k - count)))
-        speeds.append(ca.if_else(used, speed[k], last_speed))
-    nodes.append(ca.if_else(count >= MAX_PROFILE_ROWS, last_depth + EXTENSION, nodes[-1] + 1.0))
-    speeds.append(last_speed)
-    speeds = [ca.fmax(c, 1.0) for c in speeds]  # an empty table (speeds 0) stays finite; it is not used
-    slowness = [ca.SX(0.0)]
-    for k in range(1, NODES):
-        slowness.append(slowness[-1] + 0.5 * (1.0 / speeds[k] + 1.0 / speeds[k - 1]) * (nodes[k] - nodes[k - 1]))
-    return ca.vertcat(*nodes), ca.vertcat(*speeds), ca.vertcat(*slowness)
+    (pad_depth, pad_speed), (last_depth, last_speed) = padded_rows(count, [depth, speed], EXTENSION)
+    final = ca.if_else(count >= MAX_PROFILE_ROWS, last_depth + EXTENSION, pad_depth[MAX_PROFILE_ROWS - 1] + 1.0)
+    nodes = ca.vertcat(depth[0] - EXTENSION, pad_depth, final)
+    # an empty table (speeds 0) stays finite; it is not used
+    speeds = ca.fmax(ca.vertcat(speed[0], pad_speed, last_speed), 1.0)
+    steps = 0.5 * (1.0 / speeds[1:] + 1.0 / speeds[:-1]) * (nodes[1:] - nodes[:-1])
+    return nodes, speeds, ca.vertcat(0.0, cumulative_sum(steps))
 
 
 def harmonic_mean(z1, z2, constant, count, nodes, values) -> ca.SX:
@@ -224,6 +219,19 @@ PROFILE_SOURCES = ("constant", "teos10", "table")
 
 
 def profile_table(spec: str, text: str, temperature: float, salinity: float) -> np.ndarray:
+    """The sound-speed table of an ``acoustics.sound_speed_profile`` setting (read once per file version).
+
+    See :func:`_profile_table` for the parameters.
+    """
+    stamp = None
+    if spec not in PROFILE_SOURCES and spec not in ("",) and not spec.startswith("ctd:") and Path(spec).is_file():
+        info = Path(spec).stat()
+        stamp = (info.st_size, info.st_mtime_ns)
+    return _profile_table(spec, text, float(temperature), float(salinity), stamp).copy()
+
+
+@lru_cache(maxsize=64)
+def _profile_table(spec: str, text: str, temperature: float, salinity: float, stamp) -> np.ndarray:
     """The sound-speed table of an ``acoustics.sound_speed_profile`` setting.
 
     Parameters

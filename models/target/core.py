@@ -15,13 +15,15 @@ Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Sections 4-5.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
+from pathlib import Path
 from typing import Any, Mapping
 
 import casadi as ca
 import numpy as np
 
 from models.core import (SEED_PARAMETERS, Column, Component, ModelError, ProgramBuilder, Stream, Table, Variable,
-                         parse_table, resolve_parameters, sample_due, select)
+                         padded_rows, parse_table, resolve_parameters, sample_due, select)
 from models.target.trajectories import (OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows,
                                         waypoints)
 
@@ -33,7 +35,7 @@ WAYPOINTS = Table(
              Column("waypoint_north", "m", "Waypoint North", -1e6, 1e6),
              Column("waypoint_east", "m", "Waypoint East", -1e6, 1e6),
              Column("waypoint_down", "m", "Waypoint depth", 0.0, 11000.0)),
-    max_rows=MAX_WAYPOINTS, increasing=True)
+    max_rows=MAX_WAYPOINTS, increasing=True, min_rows=2, when=("trajectory", "file"))
 
 _DEPTH_NOISE, _RANDOM_PATH = range(2)
 
@@ -114,20 +116,14 @@ class Target(Component):
                            derived=[("times", N), ("points", 3 * N), ("first", 1), ("last", 1)])
 
         def prepare(p):
-            square = square_rows(p["square_side"], p["speed"], p["depth"])
             is_square = p["trajectory"] == TRAJECTORIES.index("square")
+            square = square_rows(p["square_side"], p["speed"], p["depth"])
             count = ca.if_else(is_square, len(square), p["waypoint_rows"])
-            cols = [p[c.name] for c in WAYPOINTS.columns]
-            table = [[ca.if_else(is_square, square[k][j], cols[j][k]) if k < len(square) else cols[j][k]
-                      for j in range(4)] for k in range(N)]
-            last_row = [select(count - 1, [row[j] for row in table]) for j in range(4)]
-            times, points = [], []
-            for k, row in enumerate(table):
-                used = k < count
-                times.append(ca.if_else(used, row[0], last_row[0] + (k - count + 1)))  # padding keeps it increasing
-                points += [ca.if_else(used, row[j], last_row[j]) for j in range(1, 4)]
-            return {"times": ca.vertcat(*times), "points": ca.vertcat(*points), "first": times[0],
-                    "last": last_row[0]}
+            columns = [ca.if_else(is_square, ca.vertcat(*[row[j] for row in square], ca.MX.zeros(N - len(square))),
+                                  p[col.name]) for j, col in enumerate(WAYPOINTS.columns)]
+            padded, last = padded_rows(count, columns, 1.0)
+            return {"times": padded[0], "points": ca.vec(ca.horzcat(*padded[1:]).T), "first": padded[0][0],
+                    "last": last[0]}
 
         def path(x, p, d, t):
             """Position and velocity of the configured trajectory at ``t``."""
@@ -197,12 +193,19 @@ def file_waypoints(values: Mapping[str, Any]) -> np.ndarray:
         If neither is given, or the file or text is malformed.
     """
     if values.get("trajectory_file"):
-        return read_trajectory_file(values["trajectory_file"], WAYPOINTS)
+        path = Path(values["trajectory_file"])
+        stamp = (path.stat().st_size, path.stat().st_mtime_ns) if path.is_file() else None
+        return _read_file(str(path), stamp).copy()
     rows = parse_table(values.get("waypoints", ""), WAYPOINTS, "target.waypoints")
     if rows.shape[0] < 2:
         raise ModelError("target.trajectory_file: trajectory = file needs a trajectory_file (or at least 2 "
                          "waypoints 'time N E D; ...')")
     return rows
+
+
+@lru_cache(maxsize=64)
+def _read_file(path: str, stamp) -> np.ndarray:
+    return read_trajectory_file(path, WAYPOINTS)
 
 
 def natural_duration(params: Mapping[str, Any]) -> float:

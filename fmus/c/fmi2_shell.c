@@ -1,0 +1,599 @@
+/* FMI 2.0 Co-Simulation interface over the sblsim runtime, generic over the model tables.
+ *
+ * Compile with -DSBLSIM_MODEL=<model symbol> (e.g. sblsim_platform_model) together with the
+ * model's generated sources and sblsim_runtime.c. Everything the FMU needs is in these
+ * sources: no Python, no environment variables, no resource files; any number of instances.
+ *
+ * FMI semantics (docs/model.md, "FMI semantics"):
+ *  - parameters are fixed: set in the instantiated or initialization mode, checked against
+ *    their declared ranges at fmi2ExitInitializationMode (fmi2Error and a log line otherwise);
+ *  - fmi2DoStep refuses h <= 0, a communication point other than the FMU's time (a gap or
+ *    an overlap), and any call before initialization, with fmi2Error and a log line;
+ *  - errors are always logged (whatever fmi2SetDebugLogging says);
+ *  - the state (every vector, the draw counters, the time) can be got, set and serialized.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "sblsim_runtime.h"
+
+#ifndef SBLSIM_MODEL
+#error "define SBLSIM_MODEL as the model symbol, e.g. -DSBLSIM_MODEL=sblsim_platform_model"
+#endif
+
+extern const sblsim_model SBLSIM_MODEL;
+
+typedef enum { INSTANTIATED, INITIALIZATION, STEPPING, TERMINATED, FAILED } Phase;
+
+typedef struct {
+    sblsim_instance run;
+    sblsim_work* work;
+    double *p, *d, *x, *x_next, *u, *y;
+    uint64_t* draws;
+    Phase phase;
+    double start_time;
+    int logging;
+    char* name;
+    fmi2CallbackFunctions callbacks;
+} Instance;
+
+/* What a saved FMU state holds (a flat copy). */
+typedef struct {
+    Phase phase;
+    double start_time, t0, t;
+    double* values; /* p, d, x, u, y */
+    uint64_t* draws;
+} Saved;
+
+static const sblsim_model* model(void) { return &SBLSIM_MODEL; }
+
+static void logf_(Instance* s, fmi2Status status, const char* category, const char* format, ...) {
+    char text[1024];
+    va_list args;
+    if (s == NULL || s->callbacks.logger == NULL) return;
+    if (status == fmi2OK && !s->logging) return;
+    va_start(args, format);
+    vsnprintf(text, sizeof text, format, args);
+    va_end(args);
+    s->callbacks.logger(s->callbacks.componentEnvironment, s->name, status, category, "%s", text);
+}
+
+#define FAIL(s, ...)                                              \
+    do {                                                          \
+        logf_((s), fmi2Error, "logStatusError", __VA_ARGS__);     \
+        return fmi2Error;                                         \
+    } while (0)
+
+static size_t value_count(void) {
+    const sblsim_model* m = model();
+    return (size_t)(m->n_p + m->n_d + m->n_x + m->n_u + m->n_y);
+}
+
+static void set_defaults(Instance* s) {
+    const sblsim_model* m = model();
+    memcpy(s->p, m->p_start, sizeof(double) * (size_t)m->n_p);
+    memcpy(s->u, m->u_start, sizeof(double) * (size_t)m->n_u);
+    memset(s->y, 0, sizeof(double) * (size_t)m->n_y);
+    memset(s->x, 0, sizeof(double) * (size_t)m->n_x);
+    memset(s->d, 0, sizeof(double) * (size_t)m->n_d);
+    s->run.x = s->x;
+    s->run.x_next = s->x_next;
+    s->phase = INSTANTIATED;
+    s->start_time = 0.0;
+    s->run.t0 = s->run.t = 0.0;
+}
+
+static void free_instance(Instance* s) {
+    if (s == NULL) return;
+    free(s->p);
+    free(s->d);
+    free(s->x);
+    free(s->x_next);
+    free(s->u);
+    free(s->y);
+    free(s->draws);
+    free(s->name);
+    sblsim_work_free(s->work);
+    free(s);
+}
+
+static double* vector(int n) { return (double*)calloc((size_t)(n > 0 ? n : 1), sizeof(double)); }
+
+/* ---------------------------------------------------------------------------------------- */
+
+const char* fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char* fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
+    Instance* s = (Instance*)c;
+    (void)nCategories;
+    (void)categories;
+    if (s == NULL) return fmi2Error;
+    s->logging = loggingOn ? 1 : 0;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions* functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn) {
+    const sblsim_model* m = model();
+    Instance* s;
+    (void)fmuResourceLocation; /* the FMU needs no resources */
+    (void)visible;
+    s = (Instance*)calloc(1, sizeof(Instance));
+    if (s == NULL) return NULL;
+    if (functions != NULL) s->callbacks = *functions;
+    s->logging = loggingOn ? 1 : 0;
+    s->name = (char*)malloc(strlen(instanceName ? instanceName : "") + 1);
+    if (s->name != NULL) strcpy(s->name, instanceName ? instanceName : "");
+    if (fmuType != fmi2CoSimulation) {
+        logf_(s, fmi2Error, "logStatusError", "%s supports Co-Simulation only (fmuType %d)", m->name, (int)fmuType);
+        free_instance(s);
+        return NULL;
+    }
+    if (fmuGUID == NULL || strcmp(fmuGUID, m->guid) != 0) {
+        logf_(s, fmi2Error, "logStatusError", "GUID %s does not match this binary's %s", fmuGUID ? fmuGUID : "(null)",
+              m->guid);
+        free_instance(s);
+        return NULL;
+    }
+    s->p = vector(m->n_p);
+    s->d = vector(m->n_d);
+    s->x = vector(m->n_x);
+    s->x_next = vector(m->n_x);
+    s->u = vector(m->n_u);
+    s->y = vector(m->n_y);
+    s->draws = (uint64_t*)calloc((size_t)(m->n_purposes > 0 ? m->n_purposes : 1), sizeof(uint64_t));
+    s->work = sblsim_work_new(m);
+    if (!s->name || !s->p || !s->d || !s->x || !s->x_next || !s->u || !s->y || !s->draws || !s->work) {
+        logf_(s, fmi2Error, "logStatusError", "out of memory");
+        free_instance(s);
+        return NULL;
+    }
+    s->run.model = m;
+    s->run.p = s->p;
+    s->run.d = s->d;
+    s->run.u = s->u;
+    s->run.y = s->y;
+    s->run.draws = s->draws;
+    s->run.work = s->work;
+    set_defaults(s);
+    return s;
+}
+
+void fmi2FreeInstance(fmi2Component c) { free_instance((Instance*)c); }
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    Instance* s = (Instance*)c;
+    (void)toleranceDefined;
+    (void)tolerance;
+    (void)stopTimeDefined;
+    (void)stopTime;
+    if (s == NULL) return fmi2Error;
+    if (s->phase != INSTANTIATED) FAIL(s, "fmi2SetupExperiment: only allowed before initialization");
+    if (!isfinite(startTime)) FAIL(s, "fmi2SetupExperiment: startTime %g is not finite", startTime);
+    s->start_time = startTime;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+    Instance* s = (Instance*)c;
+    if (s == NULL) return fmi2Error;
+    if (s->phase != INSTANTIATED) FAIL(s, "fmi2EnterInitializationMode: only allowed after instantiation or reset");
+    s->phase = INITIALIZATION;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    Instance* s = (Instance*)c;
+    char message[SBLSIM_MESSAGE];
+    if (s == NULL) return fmi2Error;
+    if (s->phase != INITIALIZATION) FAIL(s, "fmi2ExitInitializationMode: not in initialization mode");
+    if (sblsim_check_parameters(model(), s->p, message, sizeof message)) {
+        s->phase = FAILED;
+        FAIL(s, "%s", message);
+    }
+    s->run.x = s->x;
+    s->run.x_next = s->x_next;
+    if (sblsim_initialize(&s->run, s->start_time, message, sizeof message)) {
+        s->phase = FAILED;
+        FAIL(s, "%s", message);
+    }
+    s->phase = STEPPING;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) {
+    Instance* s = (Instance*)c;
+    if (s == NULL) return fmi2Error;
+    s->phase = TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c) {
+    Instance* s = (Instance*)c;
+    if (s == NULL) return fmi2Error;
+    set_defaults(s);
+    return fmi2OK;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Get and set                                                                              */
+
+static const sblsim_variable* find(Instance* s, fmi2ValueReference vr, int type, const char* caller) {
+    const sblsim_model* m = model();
+    if (vr >= (fmi2ValueReference)m->n_variables || m->variables[vr].type != type) {
+        logf_(s, fmi2Error, "logStatusError", "%s: no variable of this type with value reference %u", caller,
+              (unsigned)vr);
+        return NULL;
+    }
+    return &m->variables[vr];
+}
+
+static double* slot(Instance* s, const sblsim_variable* v) {
+    if (v->causality == SBLSIM_PARAMETER) return &s->p[v->index];
+    if (v->causality == SBLSIM_INPUT) return &s->u[v->index];
+    return &s->y[v->index];
+}
+
+static fmi2Status check_set(Instance* s, const sblsim_variable* v, const char* caller) {
+    if (v->causality == SBLSIM_OUTPUT) FAIL(s, "%s: %s is an output and cannot be set", caller, v->name);
+    if (v->causality == SBLSIM_PARAMETER && s->phase != INSTANTIATED && s->phase != INITIALIZATION)
+        FAIL(s, "%s: %s is a fixed parameter; set it before fmi2ExitInitializationMode", caller, v->name);
+    if (s->phase == TERMINATED || s->phase == FAILED) FAIL(s, "%s: the instance is terminated or failed", caller);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+    Instance* s = (Instance*)c;
+    size_t i;
+    if (s == NULL) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const sblsim_variable* v = find(s, vr[i], SBLSIM_REAL, "fmi2GetReal");
+        if (v == NULL) return fmi2Error;
+        value[i] = *slot(s, v);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+    Instance* s = (Instance*)c;
+    size_t i;
+    if (s == NULL) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2GetInteger");
+        if (v == NULL) return fmi2Error;
+        value[i] = (fmi2Integer)floor(*slot(s, v) + 0.5);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+    Instance* s = (Instance*)c;
+    size_t i;
+    if (s == NULL) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const sblsim_variable* v = find(s, vr[i], SBLSIM_BOOLEAN, "fmi2GetBoolean");
+        if (v == NULL) return fmi2Error;
+        value[i] = *slot(s, v) > 0.5 ? fmi2True : fmi2False;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    Instance* s = (Instance*)c;
+    (void)vr;
+    (void)value;
+    if (s == NULL) return fmi2Error;
+    if (nvr == 0) return fmi2OK;
+    FAIL(s, "fmi2GetString: this FMU has no String variables");
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+    Instance* s = (Instance*)c;
+    size_t i;
+    if (s == NULL) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const sblsim_variable* v = find(s, vr[i], SBLSIM_REAL, "fmi2SetReal");
+        if (v == NULL || check_set(s, v, "fmi2SetReal") != fmi2OK) return fmi2Error;
+        if (!isfinite(value[i])) FAIL(s, "fmi2SetReal: %s = %g is not finite", v->name, value[i]);
+        *slot(s, v) = value[i];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+    Instance* s = (Instance*)c;
+    size_t i;
+    if (s == NULL) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2SetInteger");
+        if (v == NULL || check_set(s, v, "fmi2SetInteger") != fmi2OK) return fmi2Error;
+        *slot(s, v) = (double)value[i];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+    Instance* s = (Instance*)c;
+    size_t i;
+    if (s == NULL) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const sblsim_variable* v = find(s, vr[i], SBLSIM_BOOLEAN, "fmi2SetBoolean");
+        if (v == NULL || check_set(s, v, "fmi2SetBoolean") != fmi2OK) return fmi2Error;
+        *slot(s, v) = value[i] ? 1.0 : 0.0;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+    Instance* s = (Instance*)c;
+    (void)vr;
+    (void)value;
+    if (s == NULL) return fmi2Error;
+    if (nvr == 0) return fmi2OK;
+    FAIL(s, "fmi2SetString: this FMU has no String variables");
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* FMU state                                                                                */
+
+static double* value_block(Instance* s, int k) {
+    double* blocks[5];
+    blocks[0] = s->p;
+    blocks[1] = s->d;
+    blocks[2] = s->run.x; /* the current state (x and x_next swap while stepping) */
+    blocks[3] = s->u;
+    blocks[4] = s->y;
+    return blocks[k];
+}
+
+static int block_size(int k) {
+    const sblsim_model* m = model();
+    int sizes[5];
+    sizes[0] = m->n_p;
+    sizes[1] = m->n_d;
+    sizes[2] = m->n_x;
+    sizes[3] = m->n_u;
+    sizes[4] = m->n_y;
+    return sizes[k];
+}
+
+static void save(Instance* s, Saved* to) {
+    size_t offset = 0;
+    int k;
+    to->phase = s->phase;
+    to->start_time = s->start_time;
+    to->t0 = s->run.t0;
+    to->t = s->run.t;
+    for (k = 0; k < 5; k++) {
+        memcpy(to->values + offset, value_block(s, k), sizeof(double) * (size_t)block_size(k));
+        offset += (size_t)block_size(k);
+    }
+    memcpy(to->draws, s->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+}
+
+static void restore(Instance* s, const Saved* from) {
+    size_t offset = 0;
+    int k;
+    s->run.x = s->x;
+    s->run.x_next = s->x_next;
+    s->phase = from->phase;
+    s->start_time = from->start_time;
+    s->run.t0 = from->t0;
+    s->run.t = from->t;
+    for (k = 0; k < 5; k++) {
+        memcpy(value_block(s, k), from->values + offset, sizeof(double) * (size_t)block_size(k));
+        offset += (size_t)block_size(k);
+    }
+    memcpy(s->draws, from->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+}
+
+static Saved* new_saved(void) {
+    Saved* out = (Saved*)calloc(1, sizeof(Saved));
+    if (out == NULL) return NULL;
+    out->values = vector((int)value_count());
+    out->draws = (uint64_t*)calloc((size_t)(model()->n_purposes > 0 ? model()->n_purposes : 1), sizeof(uint64_t));
+    if (out->values == NULL || out->draws == NULL) {
+        free(out->values);
+        free(out->draws);
+        free(out);
+        return NULL;
+    }
+    return out;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
+    Instance* s = (Instance*)c;
+    if (s == NULL || state == NULL) return fmi2Error;
+    if (*state == NULL) {
+        *state = (fmi2FMUstate)new_saved();
+        if (*state == NULL) FAIL(s, "fmi2GetFMUstate: out of memory");
+    }
+    save(s, (Saved*)*state);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
+    Instance* s = (Instance*)c;
+    if (s == NULL) return fmi2Error;
+    if (state == NULL) FAIL(s, "fmi2SetFMUstate: no state");
+    restore(s, (const Saved*)state);
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
+    Saved* saved;
+    (void)c;
+    if (state == NULL || *state == NULL) return fmi2OK;
+    saved = (Saved*)*state;
+    free(saved->values);
+    free(saved->draws);
+    free(saved);
+    *state = NULL;
+    return fmi2OK;
+}
+
+/* Serialized layout: magic, value count, purposes, phase, then start_time, t0, t, the values
+   and the draw counters, all as 8-byte words in the machine's byte order. */
+#define SBLSIM_MAGIC 0x53424c53494d3032ULL /* "SBLSIM02" */
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
+    (void)c;
+    (void)state;
+    *size = sizeof(uint64_t) * (4 + 3 + value_count() + (size_t)model()->n_purposes);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
+    Instance* s = (Instance*)c;
+    const Saved* saved = (const Saved*)state;
+    size_t needed;
+    uint64_t header[4];
+    double times[3];
+    char* out = (char*)bytes;
+    fmi2SerializedFMUstateSize(c, state, &needed);
+    if (s == NULL || saved == NULL || size < needed) FAIL(s, "fmi2SerializeFMUstate: buffer of %lu bytes, %lu needed",
+                                                          (unsigned long)size, (unsigned long)needed);
+    header[0] = SBLSIM_MAGIC;
+    header[1] = (uint64_t)value_count();
+    header[2] = (uint64_t)model()->n_purposes;
+    header[3] = (uint64_t)saved->phase;
+    times[0] = saved->start_time;
+    times[1] = saved->t0;
+    times[2] = saved->t;
+    memcpy(out, header, sizeof header);
+    out += sizeof header;
+    memcpy(out, times, sizeof times);
+    out += sizeof times;
+    memcpy(out, saved->values, sizeof(double) * value_count());
+    out += sizeof(double) * value_count();
+    memcpy(out, saved->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state) {
+    Instance* s = (Instance*)c;
+    size_t needed;
+    uint64_t header[4];
+    double times[3];
+    const char* in = (const char*)bytes;
+    Saved* saved;
+    fmi2SerializedFMUstateSize(c, NULL, &needed);
+    if (s == NULL || state == NULL) return fmi2Error;
+    if (size != needed) FAIL(s, "fmi2DeSerializeFMUstate: %lu bytes, expected %lu", (unsigned long)size,
+                             (unsigned long)needed);
+    memcpy(header, in, sizeof header);
+    in += sizeof header;
+    if (header[0] != SBLSIM_MAGIC || header[1] != (uint64_t)value_count() || header[2] != (uint64_t)model()->n_purposes)
+        FAIL(s, "fmi2DeSerializeFMUstate: not a serialized state of %s", model()->name);
+    saved = (Saved*)*state;
+    if (saved == NULL) saved = new_saved();
+    if (saved == NULL) FAIL(s, "fmi2DeSerializeFMUstate: out of memory");
+    memcpy(times, in, sizeof times);
+    in += sizeof times;
+    saved->phase = (Phase)header[3];
+    saved->start_time = times[0];
+    saved->t0 = times[1];
+    saved->t = times[2];
+    memcpy(saved->values, in, sizeof(double) * value_count());
+    in += sizeof(double) * value_count();
+    memcpy(saved->draws, in, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    *state = (fmi2FMUstate)saved;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
+    (void)vUnknown_ref;
+    (void)nUnknown;
+    (void)vKnown_ref;
+    (void)nKnown;
+    (void)dvKnown;
+    (void)dvUnknown;
+    FAIL((Instance*)c, "fmi2GetDirectionalDerivative: not provided (providesDirectionalDerivative=false)");
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Co-Simulation                                                                            */
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[]) {
+    (void)vr;
+    (void)nvr;
+    (void)order;
+    (void)value;
+    FAIL((Instance*)c, "fmi2SetRealInputDerivatives: not supported (canInterpolateInputs=false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[]) {
+    (void)vr;
+    (void)nvr;
+    (void)order;
+    (void)value;
+    FAIL((Instance*)c, "fmi2GetRealOutputDerivatives: not supported (maxOutputDerivativeOrder=0)");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    Instance* s = (Instance*)c;
+    char message[SBLSIM_MESSAGE];
+    double t = currentCommunicationPoint, h = communicationStepSize;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (s == NULL) return fmi2Error;
+    if (s->phase != STEPPING) FAIL(s, "fmi2DoStep: the instance is not initialized (call fmi2ExitInitializationMode)");
+    if (!(h > 0.0) || !isfinite(h)) FAIL(s, "fmi2DoStep: communicationStepSize %g must be positive and finite", h);
+    if (!isfinite(t) || fabs(t - s->run.t) > 1e-9 * (1.0 + fabs(t)))
+        FAIL(s, "fmi2DoStep: currentCommunicationPoint %.17g s differs from the FMU's time %.17g s (a gap or an "
+                "overlap between steps)", t, s->run.t);
+    if (sblsim_do_step(&s->run, t, h, message, sizeof message)) {
+        s->phase = FAILED;
+        FAIL(s, "%s", message);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) {
+    FAIL((Instance*)c, "fmi2CancelStep: doStep never runs asynchronously");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Status* value) {
+    (void)kind;
+    (void)value;
+    FAIL((Instance*)c, "fmi2GetStatus: doStep never returns fmi2Pending");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real* value) {
+    Instance* s = (Instance*)c;
+    if (s != NULL && kind == fmi2LastSuccessfulTime) {
+        *value = s->run.t;
+        return fmi2OK;
+    }
+    FAIL(s, "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Integer* value) {
+    (void)kind;
+    (void)value;
+    FAIL((Instance*)c, "fmi2GetIntegerStatus: not available");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Boolean* value) {
+    (void)kind;
+    (void)value;
+    FAIL((Instance*)c, "fmi2GetBooleanStatus: not available");
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind kind, fmi2String* value) {
+    (void)kind;
+    (void)value;
+    FAIL((Instance*)c, "fmi2GetStringStatus: not available");
+}

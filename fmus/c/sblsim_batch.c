@@ -1,0 +1,150 @@
+/* A batch of instances of one model stepped together: the local engine's compiled path.
+ *
+ * The caller fills the parameters (B x n_p, row per replicate) and inputs (B x n_u), and
+ * reads the outputs (B x n_y) through the pointers this API returns; one call steps every
+ * replicate, with the same runtime (and so the same numbers) as the FMUs.
+ */
+#include <stdlib.h>
+#include <string.h>
+
+#include "sblsim_runtime.h"
+
+#if defined(_WIN32)
+#define SBLSIM_EXPORT __declspec(dllexport)
+#else
+#define SBLSIM_EXPORT __attribute__((visibility("default")))
+#endif
+
+/* Generated: the models compiled into this library. */
+extern const sblsim_model* const sblsim_models[];
+
+typedef struct {
+    const sblsim_model* m;
+    int B;
+    double* vectors[6]; /* p, d, x, u, y, x_next */
+    uint64_t* draws;
+    sblsim_instance* instances;
+    sblsim_work* work;
+    char message[SBLSIM_MESSAGE];
+} sblsim_batch;
+
+static int length(const sblsim_model* m, int which) {
+    switch (which) {
+        case 0: return m->n_p;
+        case 1: return m->n_d;
+        case 2: return m->n_x;
+        case 3: return m->n_u;
+        case 4: return m->n_y;
+        case 5: return m->n_x;
+        default: return m->n_purposes;
+    }
+}
+
+SBLSIM_EXPORT const sblsim_model* sblsim_find_model(const char* name) {
+    int k;
+    for (k = 0; sblsim_models[k] != NULL; k++)
+        if (strcmp(sblsim_models[k]->name, name) == 0) return sblsim_models[k];
+    return NULL;
+}
+
+/* Length per replicate of vector `which` (0 p, 1 d, 2 x, 3 u, 4 y, 6 draw counters); -1: no such model. */
+SBLSIM_EXPORT int sblsim_model_size(const char* name, int which) {
+    const sblsim_model* m = sblsim_find_model(name);
+    return m == NULL ? -1 : length(m, which);
+}
+
+SBLSIM_EXPORT void sblsim_batch_free(sblsim_batch* b) {
+    int k;
+    if (b == NULL) return;
+    for (k = 0; k < 6; k++) free(b->vectors[k]);
+    free(b->draws);
+    free(b->instances);
+    sblsim_work_free(b->work);
+    free(b);
+}
+
+SBLSIM_EXPORT sblsim_batch* sblsim_batch_new(const char* name, int B) {
+    const sblsim_model* m = sblsim_find_model(name);
+    sblsim_batch* b;
+    int k, i;
+    if (m == NULL || B < 1) return NULL;
+    b = (sblsim_batch*)calloc(1, sizeof(sblsim_batch));
+    if (b == NULL) return NULL;
+    b->m = m;
+    b->B = B;
+    for (k = 0; k < 6; k++) {
+        int n = length(m, k);
+        b->vectors[k] = (double*)calloc((size_t)B * (size_t)(n > 0 ? n : 1), sizeof(double));
+        if (b->vectors[k] == NULL) goto failed;
+    }
+    b->draws = (uint64_t*)calloc((size_t)B * (size_t)(m->n_purposes > 0 ? m->n_purposes : 1), sizeof(uint64_t));
+    b->instances = (sblsim_instance*)calloc((size_t)B, sizeof(sblsim_instance));
+    b->work = sblsim_work_new(m);
+    if (b->draws == NULL || b->instances == NULL || b->work == NULL) goto failed;
+    for (i = 0; i < B; i++) {
+        sblsim_instance* s = &b->instances[i];
+        s->model = m;
+        s->p = b->vectors[0] + (size_t)i * m->n_p;
+        s->d = b->vectors[1] + (size_t)i * m->n_d;
+        s->x = b->vectors[2] + (size_t)i * m->n_x;
+        s->u = b->vectors[3] + (size_t)i * m->n_u;
+        s->y = b->vectors[4] + (size_t)i * m->n_y;
+        s->x_next = b->vectors[5] + (size_t)i * m->n_x;
+        s->draws = b->draws + (size_t)i * m->n_purposes;
+        s->work = b->work;
+    }
+    for (i = 0; i < B; i++) {
+        memcpy(b->instances[i].p, m->p_start, sizeof(double) * (size_t)m->n_p);
+        memcpy(b->instances[i].u, m->u_start, sizeof(double) * (size_t)m->n_u);
+    }
+    return b;
+failed:
+    sblsim_batch_free(b);
+    return NULL;
+}
+
+/* The batch's vector `which` (0 p, 1 d, 3 u, 4 y), B rows of length sblsim_model_size. */
+SBLSIM_EXPORT double* sblsim_batch_vector(sblsim_batch* b, int which) {
+    return (which >= 0 && which < 5 && which != 2) ? b->vectors[which] : NULL;
+}
+
+/* Copy the current states (B x n_x) into `out` (the state buffers swap while stepping). */
+SBLSIM_EXPORT void sblsim_batch_states(sblsim_batch* b, double* out) {
+    int i;
+    for (i = 0; i < b->B; i++)
+        memcpy(out + (size_t)i * b->m->n_x, b->instances[i].x, sizeof(double) * (size_t)b->m->n_x);
+}
+
+SBLSIM_EXPORT const char* sblsim_batch_message(sblsim_batch* b) { return b->message; }
+
+/* Check every replicate's parameters, then prepare, init and output at t0. 0 on success,
+   else 1 + the index of the first failing replicate (the message names the parameter). */
+SBLSIM_EXPORT int sblsim_batch_initialize(sblsim_batch* b, double t0) {
+    int i;
+    for (i = 0; i < b->B; i++) {
+        if (sblsim_check_parameters(b->m, b->instances[i].p, b->message, sizeof b->message)) return 1 + i;
+    }
+    for (i = 0; i < b->B; i++) {
+        if (sblsim_initialize(&b->instances[i], t0, b->message, sizeof b->message)) return 1 + i;
+    }
+    return 0;
+}
+
+SBLSIM_EXPORT int sblsim_batch_do_step(sblsim_batch* b, double t, double h) {
+    int i;
+    for (i = 0; i < b->B; i++) {
+        if (sblsim_do_step(&b->instances[i], t, h, b->message, sizeof b->message)) return 1 + i;
+    }
+    return 0;
+}
+
+/* The random streams, for the tests that pin them against numpy's Philox. */
+SBLSIM_EXPORT void sblsim_stream_uniforms(const uint64_t keys[4], int component, int purpose, uint64_t draw,
+                                          int count, double* out) {
+    sblsim_uniforms(keys, component, purpose, draw, count, out);
+}
+
+SBLSIM_EXPORT void sblsim_stream_normals(const uint64_t keys[4], int component, int purpose, uint64_t draw,
+                                         int count, double* out) {
+    sblsim_normals(keys, component, purpose, draw, count, out);
+}

@@ -1,0 +1,164 @@
+"""The C compiler: the system's when there is one, else zig from the ``ziglang`` package.
+
+Every build uses the same flags, which keep the arithmetic IEEE-exact and
+identical between the FMUs and the local engine: ``-O2`` without
+``-ffast-math``, and ``-ffp-contract=off`` so that no compiler fuses a
+multiply and an add (``fma``) on one platform and not on another. zig also
+cross-compiles the FMU binaries for Windows and macOS.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from models.core import ModelError
+
+FLAGS = ("-O2", "-std=c99", "-ffp-contract=off", "-fvisibility=hidden", "-fPIC", "-shared")
+
+#: FMI 2.0 platform folder -> (zig target, library suffix).
+PLATFORMS = {
+    "linux64": ("x86_64-linux-gnu", ".so"),
+    "win64": ("x86_64-windows-gnu", ".dll"),
+    "darwin64": ("x86_64-macos", ".dylib"),
+    "aarch64-darwin": ("aarch64-macos", ".dylib"),
+}
+CROSS_PLATFORMS = ("win64", "darwin64", "aarch64-darwin")
+COMPILERS = ("auto", "system", "zig")
+
+
+class CompileError(ModelError):
+    """The C compiler failed or is missing; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class Compiler:
+    """A C compiler command.
+
+    Attributes
+    ----------
+    command : tuple of str
+        The command (``('cc',)`` or ``(python, '-m', 'ziglang', 'cc')``).
+    zig : bool
+        It is zig (it can cross-compile).
+    """
+
+    command: tuple[str, ...]
+    zig: bool
+
+    def describe(self) -> str:
+        return "zig (ziglang package)" if self.zig else " ".join(self.command)
+
+
+def zig() -> Compiler | None:
+    """zig from the ``ziglang`` package, if installed."""
+    try:
+        import ziglang  # noqa: F401
+    except ImportError:
+        return None
+    return Compiler((sys.executable, "-m", "ziglang", "cc"), True)
+
+
+def find_compiler(kind: str = "auto") -> Compiler:
+    """The compiler to use.
+
+    Parameters
+    ----------
+    kind : {'auto', 'system', 'zig'}
+        ``auto``: ``$CC``, else ``cc``, ``gcc`` or ``clang`` on the PATH, else zig;
+        ``system``: one of those only; ``zig``: zig only.
+
+    Raises
+    ------
+    CompileError
+        If no such compiler is found.
+    """
+    if kind not in COMPILERS:
+        raise CompileError(f"--compiler: {kind!r} is not one of {', '.join(COMPILERS)}")
+    if kind in ("auto", "system"):
+        if os.environ.get("CC"):
+            return Compiler(tuple(shlex.split(os.environ["CC"])), False)
+        for name in ("cc", "gcc", "clang"):
+            if shutil.which(name):
+                return Compiler((name,), False)
+        if kind == "system":
+            raise CompileError("--compiler: no system C compiler (cc, gcc, clang or $CC) on the PATH")
+    found = zig()
+    if found is None:
+        raise CompileError("compiler: no C compiler found; install one (e.g. gcc) or `pip install ziglang`")
+    return found
+
+
+def host_platform() -> str:
+    """FMI 2.0 platform folder of this machine.
+
+    Raises
+    ------
+    CompileError
+        On a platform sblsim does not build for.
+    """
+    import platform
+
+    machine = platform.machine().lower()
+    if sys.platform.startswith("linux") and machine in ("x86_64", "amd64"):
+        return "linux64"
+    if sys.platform == "win32" and machine in ("x86_64", "amd64"):
+        return "win64"
+    if sys.platform == "darwin":
+        return "aarch64-darwin" if machine in ("arm64", "aarch64") else "darwin64"
+    raise CompileError(f"compiler: no FMI 2.0 platform folder for {sys.platform}/{machine}")
+
+
+def compile_library(compiler: Compiler, sources: Sequence[Path], output: Path, include: Sequence[Path] = (),
+                    defines: Sequence[str] = (), platform: str | None = None) -> Path:
+    """Compile C sources into a shared library.
+
+    Parameters
+    ----------
+    compiler : Compiler
+    sources : sequence of path
+    output : path
+        The library to write.
+    include : sequence of path
+        Include directories.
+    defines : sequence of str
+        ``NAME=VALUE`` macros.
+    platform : str, optional
+        FMI platform folder to build for (default: this machine); other
+        platforms need zig.
+
+    Raises
+    ------
+    CompileError
+        If the compiler fails (the message carries its first error lines).
+    """
+    target = platform or host_platform()
+    command = list(compiler.command)
+    if target != host_platform():
+        if not compiler.zig:
+            raise CompileError(f"compiler: cross-compiling for {target} needs zig (`pip install ziglang`)")
+        command += ["-target", PLATFORMS[target][0]]
+    elif compiler.zig:
+        command += ["-target", PLATFORMS[target][0]]
+    command += list(FLAGS) + [f"-I{p}" for p in include] + [f"-D{d}" for d in defines]
+    command += [str(s) for s in sources] + ["-o", str(output)]
+    if not target.startswith("win"):
+        command.append("-lm")
+    result = subprocess.run(command, capture_output=True, text=True)
+    if result.returncode != 0 or not output.is_file():
+        errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
+        detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
+        raise CompileError(f"compiler: {compiler.describe()} failed for {output.name} ({target}): {detail}")
+    for extra in output.parent.glob(output.stem + ".pdb"):  # zig's Windows debug database
+        extra.unlink()
+    return output
+
+
+__all__ = ["COMPILERS", "CROSS_PLATFORMS", "CompileError", "Compiler", "FLAGS", "PLATFORMS", "compile_library",
+           "find_compiler", "host_platform", "zig"]

@@ -1,0 +1,194 @@
+"""The local engine's compiled path: every model's generated C and the runtime in one library.
+
+The library holds the same generated code and runtime as the FMUs, plus a
+batch API (``fmus/c/sblsim_batch.c``) that steps B replicates of a model in
+one call. It is built on first use for a beacon count (about ten seconds)
+into a cache folder, keyed by a hash of its sources and the compiler flags,
+and re-used by every later process: ``$SBLSIM_CACHE_DIR`` or the user's
+cache folder (``platformdirs``).
+
+:class:`NativeBatch` wraps one batch: parameter, input and output matrices
+are numpy views of the library's memory (B rows each).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import tempfile
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from fmus.codegen import BATCH, C_DIR, stem, write_sources
+from fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
+from models import MODELS
+from models.core import ModelError
+
+_VECTORS = {"p": 0, "d": 1, "x": 2, "u": 3, "y": 4, "draws": 6}
+
+
+def cache_dir() -> Path:
+    """Where compiled libraries are kept: ``$SBLSIM_CACHE_DIR`` or the user's cache folder."""
+    if os.environ.get("SBLSIM_CACHE_DIR"):
+        return Path(os.environ["SBLSIM_CACHE_DIR"])
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("sblsim"))
+
+
+def _registry(n_beacons: int) -> str:
+    symbols = [f"{stem(model, n_beacons)}_model" for model in MODELS.values()]
+    lines = ['#include <stddef.h>', '#include "sblsim_runtime.h"']
+    lines += [f"extern const sblsim_model {s};" for s in symbols]
+    lines.append("const sblsim_model* const sblsim_models[] = {" + ", ".join(f"&{s}" for s in symbols) + ", NULL};")
+    return "\n".join(lines) + "\n"
+
+
+def write_library_sources(n_beacons: int, directory: Path) -> list[Path]:
+    """Every model's sources, the runtime, the registry and the batch API into ``directory``; the C files."""
+    directory.mkdir(parents=True, exist_ok=True)
+    for model in MODELS.values():
+        write_sources(model, n_beacons, directory, shell="")
+    (directory / "sblsim_models.c").write_text(_registry(n_beacons))
+    (directory / BATCH).write_text((C_DIR / BATCH).read_text())
+    return sorted(directory.glob("*.c"))
+
+
+@lru_cache(maxsize=None)
+def library_path(n_beacons: int = 4, compiler: str = "auto") -> Path:
+    """The compiled batch library for ``n_beacons`` beacons, built into the cache if missing.
+
+    Raises
+    ------
+    CompileError
+        If no compiler is found or it fails.
+    """
+    cc = find_compiler(compiler)
+    with tempfile.TemporaryDirectory(prefix="sblsim_native_") as tmp:
+        files = write_library_sources(n_beacons, Path(tmp))
+        digest = hashlib.sha256()
+        for path in sorted(Path(tmp).iterdir()):
+            digest.update(path.name.encode() + path.read_bytes())
+        digest.update(" ".join(FLAGS + cc.command[-1:]).encode())
+        key = digest.hexdigest()[:16]
+        target = cache_dir() / f"libsblsim-{key}-n{n_beacons}{PLATFORMS[host_platform()][1]}"
+        if target.is_file():
+            return target
+        target.parent.mkdir(parents=True, exist_ok=True)
+        partial = target.parent / f".{target.name}.{os.getpid()}.partial"
+        try:
+            compile_library(cc, files, partial, [Path(tmp)])
+            os.replace(partial, target)
+        finally:
+            partial.unlink(missing_ok=True)
+    return target
+
+
+@lru_cache(maxsize=None)
+def load(n_beacons: int = 4) -> ctypes.CDLL:
+    """The batch library for ``n_beacons`` beacons, loaded (built first if needed)."""
+    lib = ctypes.CDLL(str(library_path(n_beacons)))
+    lib.sblsim_batch_new.restype = ctypes.c_void_p
+    lib.sblsim_batch_new.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    lib.sblsim_batch_free.argtypes = [ctypes.c_void_p]
+    lib.sblsim_batch_vector.restype = ctypes.POINTER(ctypes.c_double)
+    lib.sblsim_batch_vector.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    lib.sblsim_batch_states.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)]
+    lib.sblsim_batch_message.restype = ctypes.c_char_p
+    lib.sblsim_batch_message.argtypes = [ctypes.c_void_p]
+    lib.sblsim_batch_initialize.argtypes = [ctypes.c_void_p, ctypes.c_double]
+    lib.sblsim_batch_do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
+    lib.sblsim_model_size.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    for name in ("sblsim_stream_uniforms", "sblsim_stream_normals"):
+        getattr(lib, name).argtypes = [ctypes.POINTER(ctypes.c_uint64), ctypes.c_int, ctypes.c_int, ctypes.c_uint64,
+                                       ctypes.c_int, ctypes.POINTER(ctypes.c_double)]
+    return lib
+
+
+class NativeBatch:
+    """B replicates of one model stepped together by the compiled runtime.
+
+    Parameters
+    ----------
+    model : type
+        A :class:`models.core.Component`.
+    batch : int
+        Number of replicates B.
+    n_beacons : int
+
+    Attributes
+    ----------
+    p : ndarray, shape (B, n_p)
+        Parameters, one row per replicate (filled before :meth:`initialize`).
+    u : ndarray, shape (B, n_u)
+        Inputs (set before every :meth:`do_step`).
+    y : ndarray, shape (B, n_y)
+        Outputs (after :meth:`initialize` and every :meth:`do_step`).
+    """
+
+    def __init__(self, model: type, batch: int, n_beacons: int = 4) -> None:
+        self.lib = load(n_beacons)
+        self.model, self.batch = model, int(batch)
+        name = model.name.encode()
+        self._handle = self.lib.sblsim_batch_new(name, self.batch)
+        if not self._handle:
+            raise ModelError(f"engine: the compiled library has no model {model.name!r} or is out of memory")
+        sizes = {k: self.lib.sblsim_model_size(name, v) for k, v in _VECTORS.items()}
+        self.sizes = sizes
+        self.p = self._view("p", sizes["p"])
+        self.d = self._view("d", sizes["d"])
+        self.u = self._view("u", sizes["u"])
+        self.y = self._view("y", sizes["y"])
+
+    def _view(self, which: str, n: int) -> np.ndarray:
+        pointer = self.lib.sblsim_batch_vector(self._handle, _VECTORS[which])
+        return np.ctypeslib.as_array(pointer, shape=(self.batch, max(n, 1)))[:, :n]
+
+    def _check(self, status: int, what: str) -> None:
+        if status:
+            message = self.lib.sblsim_batch_message(self._handle).decode()
+            raise ModelError(f"{self.model.name}: {message} (replicate {status - 1} of the batch, {what})")
+
+    def initialize(self, t0: float = 0.0) -> None:
+        """Check every replicate's parameters, then prepare, init and output at ``t0`` [s].
+
+        Raises
+        ------
+        ModelError
+            Naming the first parameter outside its declared range.
+        """
+        self._check(self.lib.sblsim_batch_initialize(self._handle, float(t0)), "initialization")
+
+    def do_step(self, t: float, h: float) -> None:
+        """One communication step of every replicate from ``t`` to ``t + h`` [s]."""
+        self._check(self.lib.sblsim_batch_do_step(self._handle, float(t), float(h)), f"step at t = {t:g} s")
+
+    def states(self) -> np.ndarray:
+        """A copy of the current states, shape (B, n_x)."""
+        out = np.empty((self.batch, max(self.sizes["x"], 1)))
+        self.lib.sblsim_batch_states(self._handle, out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        return out[:, :self.sizes["x"]]
+
+    def close(self) -> None:
+        if self._handle:
+            self.lib.sblsim_batch_free(self._handle)
+            self._handle = None
+
+    def __del__(self) -> None:
+        self.close()
+
+
+def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int, n_beacons: int = 4) -> np.ndarray:
+    """One draw of a random stream as the C runtime makes it (for the tests against numpy's Philox)."""
+    lib = load(n_beacons)
+    out = np.empty(count)
+    key_array = (ctypes.c_uint64 * 4)(*[int(k) for k in keys])
+    getattr(lib, f"sblsim_stream_{kind}s")(key_array, component, purpose, draw, count,
+                                            out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+    return out
+
+
+__all__ = ["NativeBatch", "cache_dir", "library_path", "load", "stream", "write_library_sources"]
