@@ -13,5 +13,7 @@ from models.target import Target
 COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, Receiver)}
 #: Every model by its own name: the four components and the alternative receivers.
 MODELS = {**COMPONENTS, LeastSquaresReceiver.name: LeastSquaresReceiver}
+#: Built-in receivers: ``simulation.receiver`` value -> model name.
+RECEIVERS = {"ekf": Receiver.name, "lsq": LeastSquaresReceiver.name}
 
-__all__ = ["COMPONENTS", "MODELS", "Acoustics", "LeastSquaresReceiver", "Platform", "Receiver", "Target"]
+__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "Acoustics", "LeastSquaresReceiver", "Platform", "Receiver", "Target"]

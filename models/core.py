@@ -781,6 +781,20 @@ class Component:
         return {k: v for k, v in values.items() if k in names}
 
     @classmethod
+    def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """Configuration keys from FMU parameter values (the inverse of :meth:`fmu_parameters`).
+
+        A choice's index becomes its text; FMU parameters the orchestrator
+        fills are left out (subclasses turn their tables back into text).
+        """
+        out = {}
+        for v in cls.config_parameters(n_beacons):
+            if v.name in values and v.in_fmu:
+                value = values[v.name]
+                out[v.name] = v.choices[int(value)] if v.type == "String" and not isinstance(value, str) else value
+        return out
+
+    @classmethod
     def program(cls, n_beacons: int = 4) -> Program:
         """The component's program for ``n_beacons`` beacons (built once, then cached)."""
         return _program(cls, int(n_beacons))

@@ -1,4 +1,5 @@
-"""Command line: ``sblsim run``, ``campaign``, ``analyze``, ``ssp export``, ``fmus build`` and ``fmus validate``.
+"""Command line: ``sblsim run``, ``campaign``, ``analyze``, ``ssp export``, ``fmus build|validate|variables``
+and ``codegen receiver``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
@@ -11,6 +12,7 @@ import os
 import sys
 from pathlib import Path
 
+from fmus.compiler import COMPILERS
 from models.core import ModelError
 from orchestrator.master import ALGORITHMS
 
@@ -77,11 +79,20 @@ def _parser() -> argparse.ArgumentParser:
 
     f = sub.add_parser("fmus", help="build, validate or list the FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
-    b = fsub.add_parser("build", help="build the FMUs (four components, least-squares receiver) with pythonfmu")
+    b = fsub.add_parser("build", help="build the native FMUs (four components, least-squares receiver)")
     b.add_argument("--out", type=Path, default=None, help="output directory (default fmus/build)")
+    b.add_argument("--compiler", choices=COMPILERS, default="auto",
+                   help="C compiler: auto (the system's, else zig), system or zig")
+    b.add_argument("--cross", action=argparse.BooleanOptionalAction, default=None,
+                   help="also build Windows and macOS binaries with zig (default: when the compiler is zig)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
+    g = sub.add_parser("codegen", help="write embeddable C code of a component (no FMI, no Python)")
+    gsub = g.add_subparsers(dest="codegen_command", required=True, parser_class=_Parser)
+    r = gsub.add_parser("receiver", help="the receiver's C source, header and an example main.c")
+    r.add_argument("--receiver", default="ekf", help="built-in receiver: ekf (default) or lsq")
+    r.add_argument("--out", type=Path, required=True, help="directory to write (created; must be empty or new)")
     return p
 
 
@@ -189,8 +200,8 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
 
 
 def _fmus(args: argparse.Namespace) -> int:
-    from fmus.build import DEFAULT_DIR, build_all, fmu_path, validate
-    from models import CORES
+    from fmus.build import DEFAULT_DIR, build_fmu, fmu_path, validate
+    from models import MODELS
 
     if args.fmus_command == "variables":
         from fmus.variables import markdown_tables
@@ -199,12 +210,13 @@ def _fmus(args: argparse.Namespace) -> int:
         return 0
     if args.fmus_command == "build":
         out = args.out or DEFAULT_DIR
-        for path in build_all(out):
-            print(f"built {path}")
+        _check_writable(out)
+        for name in MODELS:
+            print(f"built {build_fmu(name, out, compiler=args.compiler, cross=args.cross)}", flush=True)
         return 0
     directory = args.dir or DEFAULT_DIR
     failures = 0
-    for name in CORES:
+    for name in MODELS:
         path = fmu_path(directory, name)
         if not path.is_file():
             raise ModelError(f"fmus validate: {name} FMU not found at {str(path)!r}; run `sblsim fmus build`")
@@ -214,6 +226,31 @@ def _fmus(args: argparse.Namespace) -> int:
         for problem in problems:
             print(f"  {problem}")
     return 1 if failures else 0
+
+
+def _check_writable(directory: Path) -> None:
+    """Refuse an output directory that cannot be created or written, before any work.
+
+    Raises
+    ------
+    ModelError
+        Naming the directory and why.
+    """
+    if directory.exists() and not directory.is_dir():
+        raise ModelError(f"--out: {str(directory)!r} exists and is not a directory")
+    probe = directory
+    while not probe.exists():
+        probe = probe.parent
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ModelError(f"--out: {str(directory)!r} cannot be written (no write permission in {str(probe)!r})")
+
+
+def _codegen(args: argparse.Namespace) -> int:
+    from fmus.embedded import write_receiver
+
+    files = write_receiver(args.receiver, args.out)
+    print(f"wrote {len(files)} files to {args.out}/ ({', '.join(p.name for p in files)}); see its README.md")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -228,6 +265,8 @@ def main(argv: list[str] | None = None) -> int:
             return _ssp(args)
         if args.command == "analyze":
             return _analyze_dir(args.dir, args.out, args.metric, args.order)
+        if args.command == "codegen":
+            return _codegen(args)
         return _fmus(args)
     except ModelError as exc:
         print(f"sblsim: error: {exc}", file=sys.stderr)

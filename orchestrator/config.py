@@ -27,7 +27,7 @@ from typing import Any, Iterable
 
 import tomli_w
 
-from models import COMPONENTS, MODELS
+from models import COMPONENTS, MODELS, RECEIVERS
 from models.core import SEED_NAMES, SEED_PARAMETERS, ModelError, Variable, resolve_parameters
 from models.target import natural_duration, start_state
 from orchestrator.master import ALGORITHMS
@@ -80,8 +80,6 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              description="Receiver component: ekf (the paper's), lsq (per-step least squares) or fmu:PATH"),
 )
 
-#: Built-in receivers: configuration value -> model name (:data:`models.MODELS`).
-RECEIVERS = {"ekf": "receiver", "lsq": "receiver_lsq"}
 #: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
 SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
 EXTERNAL_PREFIX = "fmu:"

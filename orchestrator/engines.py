@@ -1,8 +1,10 @@
 """Component handles: the two engines behind one master algorithm.
 
-Both handles share one small interface (``setup``, ``set_inputs``,
-``do_step``, ``get_outputs``, ``terminate``) and expose their variables as
-``ports`` for the connection checks:
+Both handles share one small interface (``setup``, ``set_input_vector``,
+``do_step``, ``output_vector``, ``terminate``; ``set_inputs`` and
+``get_outputs`` by name for convenience), name their inputs and outputs
+(``input_names``, ``output_names``: the order of those vectors) and expose
+their variables as ``ports`` for the connection checks:
 
 * :class:`LocalHandle` steps a model's generated C in-process, batched over
   replicates (:class:`fmus.native.NativeBatch`: one call per component and
@@ -56,8 +58,9 @@ class LocalHandle:
         variables = self.model.fmu_variables(n_beacons)
         self.ports = [Port(v.name, v.causality, v.fmi_type, v.unit) for v in variables]
         self.parameters = frozenset(v.name for v in self.model.fmu_parameters_declared(n_beacons))
-        self._inputs = {v.name: k for k, v in enumerate(self.model.inputs(n_beacons))}
-        self._outputs = [(v.name, k, _DTYPES[v.fmi_type]) for k, v in enumerate(self.model.outputs(n_beacons))]
+        self.input_names = [v.name for v in self.model.inputs(n_beacons)]
+        self.output_names = [v.name for v in self.model.outputs(n_beacons)]
+        self._types = [_DTYPES[v.fmi_type] for v in self.model.outputs(n_beacons)]
         self.batch = None
 
     def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
@@ -82,19 +85,23 @@ class LocalHandle:
         self.batch.u[:] = [v.start for v in self.model.inputs(self.n_beacons)] or 0.0
         self.batch.initialize(t0)
 
+    def set_input_vector(self, values: np.ndarray) -> None:
+        """Every input at once, shape (n_in, B) in the order of :attr:`input_names`."""
+        self.batch.u[:] = values.T
+
+    def output_vector(self) -> np.ndarray:
+        """Every output at once, shape (n_out, B) in the order of :attr:`output_names` (a new array)."""
+        return self.batch.y.T.copy()
+
     def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
-        u = self.batch.u
         for name, value in values.items():
-            u[:, self._inputs[name]] = value
+            self.batch.u[:, self.input_names.index(name)] = value
 
     def do_step(self, t: float, h: float) -> None:
         self.batch.do_step(t, h)
 
     def get_outputs(self) -> dict[str, np.ndarray]:
-        y = self.batch.y.copy()
-        return {name: (y[:, k] if dtype is float else (y[:, k] > 0.5 if dtype is bool else
-                                                         np.rint(y[:, k]).astype(np.int64)))
-                for name, k, dtype in self._outputs}
+        return typed_outputs(self.output_names, self._types, self.output_vector())
 
     def states(self) -> dict[str, np.ndarray]:
         """The current state by block name, each (B, size) (for inspection and tests)."""
@@ -108,6 +115,20 @@ class LocalHandle:
         if self.batch is not None:
             self.batch.close()
             self.batch = None
+
+
+def typed_outputs(names: Sequence[str], types: Sequence[type], vector: np.ndarray) -> dict[str, np.ndarray]:
+    """Outputs by name from an output matrix (n_out, B), Integer and Boolean ones cast to their type."""
+    return {name: cast_column(vector[k], dtype) for k, (name, dtype) in enumerate(zip(names, types))}
+
+
+def cast_column(values: np.ndarray, dtype: type) -> np.ndarray:
+    """A column of an output matrix as its FMI type (floats carry Integer and Boolean values)."""
+    if dtype is bool:
+        return values > 0.5
+    if dtype is np.int64:
+        return np.rint(values).astype(np.int64)
+    return values
 
 
 #: FMUs loaded in this process, by path: (file signature, handle).
@@ -226,14 +247,24 @@ class FmuHandle:
         self.fmu.instantiate()
         self._fresh = True
         self.in_use = False
-        self._outputs = {}
+        inputs = [v for v in md.modelVariables if v.causality == "input"]
+        outputs = [v for v in md.modelVariables if v.causality == "output"]
+        self.input_names = [v.name for v in inputs]
+        self.output_names = [v.name for v in outputs]
+        self._types = [_DTYPES[v.type] for v in outputs]
+        self._in, self._out = self._groups(inputs), self._groups(outputs)
+
+    def _groups(self, variables: Sequence[Any]) -> list[tuple]:
+        """Per FMI type: (raw setter/getter suffix, positions in the vector, value-reference array, buffer)."""
+        groups = []
         for typ in ("Real", "Integer", "Boolean"):
-            items = [(v.name, v.valueReference) for v in md.modelVariables if v.causality == "output" and v.type == typ]
-            if items:
-                ctype = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}[typ]
-                vrs = (ctypes.c_uint * len(items))(*[vr for _, vr in items])
-                self._outputs[typ] = ([n for n, _ in items], vrs, (ctype * len(items))())
-        self._input_plan: tuple | None = None
+            rows = [k for k, v in enumerate(variables) if v.type == typ]
+            if rows:
+                vrs = (ctypes.c_uint * len(rows))(*[variables[k].valueReference for k in rows])
+                buffer = np.zeros(len(rows), dtype=np.float64 if typ == "Real" else np.int32)
+                groups.append((typ, np.array(rows), vrs, buffer,
+                               buffer.ctypes.data_as(ctypes.POINTER(ctypes.c_double if typ == "Real" else ctypes.c_int))))
+        return groups
 
     def _set(self, values: Mapping[str, Any]) -> None:
         groups: dict[str, tuple[list, list]] = {}
@@ -284,35 +315,35 @@ class FmuHandle:
         except FMICallException as exc:
             raise ModelError(f"fmu: {self.path.name} ({self.component}) refused a call: {exc}") from None
 
-    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
-        if self._input_plan is None or self._input_plan[0] != tuple(values):
-            self._input_plan = (tuple(values), self._plan(values))
-        for typ, (names, vrs, buffer) in self._input_plan[1].items():
-            for k, name in enumerate(names):
-                buffer[k] = np.asarray(values[name]).reshape(-1)[0].item()
-            self._call(getattr(self.fmu, f"fmi2Set{typ}"), self.fmu.component, vrs, len(names), buffer)
+    def _raw(self, name: str, *args) -> None:
+        """Call an FMI function directly (no fmpy wrapper); a status above fmi2Warning is an error."""
+        status = getattr(self.fmu.dll, name)(self.fmu.component, *args)
+        if status > 1:
+            raise ModelError(f"fmu: {self.path.name} ({self.component}): {name} returned status {status} "
+                             "(the FMU's log has the reason)")
 
-    def _plan(self, values: Mapping[str, Any]) -> dict[str, tuple]:
-        plan: dict[str, list] = {}
-        for name in values:
-            plan.setdefault(self.variables[name].type, []).append(name)
-        out = {}
-        for typ, names in plan.items():
-            ctype = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}[typ]
-            vrs = (ctypes.c_uint * len(names))(*[self.variables[n].valueReference for n in names])
-            out[typ] = (names, vrs, (ctype * len(names))())
+    def set_input_vector(self, values: np.ndarray) -> None:
+        """Every input at once, shape (n_in, 1) in the order of :attr:`input_names`."""
+        for typ, rows, vrs, buffer, pointer in self._in:
+            buffer[:] = values[rows, 0]
+            self._raw(f"fmi2Set{typ}", vrs, len(rows), pointer)
+
+    def output_vector(self) -> np.ndarray:
+        """Every output at once, shape (n_out, 1) in the order of :attr:`output_names` (a new array)."""
+        out = np.empty((len(self.output_names), 1))
+        for typ, rows, vrs, buffer, pointer in self._out:
+            self._raw(f"fmi2Get{typ}", vrs, len(rows), pointer)
+            out[rows, 0] = buffer
         return out
 
-    def do_step(self, t: float, h: float) -> None:
-        self._call(self.fmu.doStep, t, h)
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        self._set(values)
 
     def get_outputs(self) -> dict[str, np.ndarray]:
-        out: dict[str, np.ndarray] = {}
-        for typ, (names, vrs, buffer) in self._outputs.items():
-            self._call(getattr(self.fmu, f"fmi2Get{typ}"), self.fmu.component, vrs, len(names), buffer)
-            values = np.array(buffer[:], dtype=_DTYPES[typ])
-            out.update({name: values[k:k + 1] for k, name in enumerate(names)})
-        return out
+        return typed_outputs(self.output_names, self._types, self.output_vector())
+
+    def do_step(self, t: float, h: float) -> None:
+        self._raw("fmi2DoStep", ctypes.c_double(t), ctypes.c_double(h), 1)
 
     def terminate(self) -> None:
         """Release the handle for the next run; the instance stays loaded (see :func:`open_fmu`)."""

@@ -41,10 +41,17 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
              record: Sequence[str] | None = None, algorithm: str = "gauss-seidel") -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
+    A handle (:mod:`orchestrator.engines`) names its inputs and outputs
+    (``input_names``, ``output_names``), takes its inputs as one matrix
+    (``set_input_vector``, shape (n_in, B)), gives its outputs as one matrix
+    (``output_vector``, shape (n_out, B), numbers as floats) and steps
+    (``do_step``). The connections are resolved once into index arrays, so
+    a macro step moves whole vectors.
+
     Parameters
     ----------
     handles : mapping
-        Component name -> set-up handle (:mod:`orchestrator.engines`).
+        Component name -> set-up handle.
     connections : sequence of Connection
         Checked connections.
     rates : mapping
@@ -66,7 +73,7 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
     -------
     dict
         ``"component.variable"`` -> array of shape (n_steps, B) for each
-        recorded output, and
+        recorded output (float; the caller casts Integer and Boolean ones), and
         ``"time"`` -> array of shape (n_steps,) [s] (the end of each macro step).
 
     Raises
@@ -80,23 +87,33 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         raise ValueError(f"simulation.master: {algorithm!r} is not one of {', '.join(ALGORITHMS)}")
     jacobi = algorithm == "jacobi"
     order = execution_order(list(handles), connections)
-    incoming = {c: [k for k in connections if k.destination == c] for c in handles}
-    outputs = {c: handles[c].get_outputs() for c in handles}
-    recorded = [(c, n) for c in handles for n in outputs[c]]
+    known = {f"{c}.{n}" for c in handles for n in handles[c].output_names}
     if record is not None:
-        unknown = sorted(set(record) - {f"{c}.{n}" for c, n in recorded})
+        unknown = sorted(set(record) - known)
         if unknown:
             raise KeyError(f"record: {unknown[0]} is not an output of the system")
-        wanted = set(record)
-        recorded = [(c, n) for c, n in recorded if f"{c}.{n}" in wanted]
-    records: dict[str, list] = {f"{c}.{n}": [] for c, n in recorded}
+    # per destination: for each source, (source rows, destination rows)
+    plans: dict[str, list[tuple[str, np.ndarray, np.ndarray]]] = {}
+    for c in handles:
+        inputs = {n: k for k, n in enumerate(handles[c].input_names)}
+        by_source: dict[str, tuple[list, list]] = {}
+        for conn in connections:
+            if conn.destination == c:
+                rows = by_source.setdefault(conn.source, ([], []))
+                rows[0].append(handles[conn.source].output_names.index(conn.output))
+                rows[1].append(inputs[conn.input])
+        plans[c] = [(src, np.array(a), np.array(b)) for src, (a, b) in by_source.items()]
+    outputs = {c: handles[c].output_vector() for c in handles}
+    buffers = {c: np.zeros((len(handles[c].input_names), outputs[c].shape[1])) for c in handles}
+    history: dict[str, list[np.ndarray]] = {c: [] for c in handles}
 
     def feed(c: str) -> None:
-        """Set a component's inputs from the latest outputs (copied under Jacobi: a core may update
-        its output arrays in place while it steps, after the copy was handed on)."""
-        if incoming[c]:
-            handles[c].set_inputs({conn.input: np.array(outputs[conn.source][conn.output], copy=True) if jacobi
-                                   else outputs[conn.source][conn.output] for conn in incoming[c]})
+        """Set a component's inputs from the latest outputs of its sources."""
+        if plans[c]:
+            u = buffers[c]
+            for src, rows, into in plans[c]:
+                u[into] = outputs[src][rows]
+            handles[c].set_input_vector(u)
 
     for k in range(n_steps):
         t = t0 + k * macro_step
@@ -111,11 +128,16 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
             sub = macro_step / ratio
             for j in range(ratio):
                 handle.do_step(t + j * sub, sub)
-            outputs[c] = handle.get_outputs()
-        for c, n in recorded:
-            records[f"{c}.{n}"].append(np.array(outputs[c][n], copy=True))
+            outputs[c] = handle.output_vector()
+            history[c].append(outputs[c])
         if progress is not None:
             progress(1)
-    result = {key: np.stack(values) for key, values in records.items()}
+    result: dict[str, np.ndarray] = {}
+    for c in handles:
+        stacked = np.stack(history[c]) if history[c] else np.zeros((0,) + outputs[c].shape)  # (n_steps, n_out, B)
+        for k, name in enumerate(handles[c].output_names):
+            key = f"{c}.{name}"
+            if record is None or key in record:
+                result[key] = stacked[:, k, :]
     result["time"] = t0 + macro_step * np.arange(1, n_steps + 1)
     return result

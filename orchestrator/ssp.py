@@ -5,16 +5,26 @@ An SSP archive (Modelica Association, *System Structure and Parameterization*
 
 * ``SystemStructure.ssd``: one ``Component`` per FMU with its connectors
   (type and unit), every connection of the scenario, the units, and a default
-  experiment (start, stop) whose step is the Open Simulation Platform's
-  ``FixedStepAlgorithm`` annotation (libcosim reads the step nowhere else);
-  each component carries an OSP ``StepSizeHint`` (its communication step: T
-  for the physics, T / EKF rate ratio for the receiver);
+  experiment (start, stop);
 * ``resources/sblsim_*.fmu``: the FMUs;
-* ``resources/<component>.ssv``: the scenario's parameter values, one
-  parameter set per component, bound to it by a ``ParameterBinding`` whose
-  parameter names are the FMU's variable names (no prefix). libcosim reads
-  only component-level bindings and ignores a binding's ``prefix``, so this
-  is the form both libcosim and fmpy's reader accept.
+* ``resources/<component>.ssv``: the scenario's parameter values for that
+  component, bound to it by a ``ParameterBinding`` of type
+  ``application/x-ssp-parameter-set`` with the FMU's own variable names.
+  Every set carries the same name (the system's), so they form **one
+  parameter set for the whole system**: ecos applies it by that name,
+  libcosim applies the first set of each component, OMSimulator every
+  binding.
+
+What the package avoids, because one of the hosts it was run in rejects it
+(the README lists the hosts): names that are not identifiers
+(``[A-Za-z][A-Za-z0-9_]*``), String parameters (the FMUs have none: choices
+are Integer indices, tables are Real arrays), and annotations on a component.
+Every component runs at one step, the base step ``T / ekf_rate_ratio``: the
+FMUs sample and slot on their own clocks, so a finer step changes nothing but
+the receiver's prediction rate. The step is given where each host reads it:
+OMSimulator's ``oms:FixedStepMaster`` annotation on the system, the Open
+Simulation Platform's ``osp:FixedStepAlgorithm`` on the default experiment
+(libcosim), and ``step_size`` for ecos.
 
 :func:`read_ssp` reads a package back (components, connections, parameter
 sets, experiment) into a resolved configuration, the connections and the
@@ -35,8 +45,8 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
-from models import COMPONENTS
-from models.core import SEED_PARAMETERS, UNITS, ModelError
+from models import COMPONENTS, MODELS
+from models.core import SEED_NAMES, UNITS, ModelError
 from orchestrator.config import (EXTERNAL_PREFIX, RECEIVERS, apply_overrides, component_params, resolve,
                                  section_variables)
 from orchestrator.connections import Connection, default_connections
@@ -47,8 +57,11 @@ NS = {
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
     "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+    "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
 }
 OSP_ANNOTATION = "com.opensimulationplatform"
+OMS_ANNOTATION = "org.openmodelica"
+PARAMETER_SET_TYPE = "application/x-ssp-parameter-set"
 SSD_NAME = "SystemStructure.ssd"
 for _prefix, _uri in NS.items():
     ET.register_namespace(_prefix, _uri)
@@ -83,10 +96,18 @@ def _value(text: str, type_: str) -> Any:
     return text
 
 
-def _annotations(parent: ET.Element, content: ET.Element) -> None:
+def _annotations(parent: ET.Element, kind: str, content: ET.Element) -> None:
     notes = ET.SubElement(parent, _q("ssd:Annotations"))
-    note = ET.SubElement(notes, _q("ssc:Annotation"), type=OSP_ANNOTATION)
+    note = ET.SubElement(notes, _q("ssc:Annotation"), type=kind)
     note.append(content)
+
+
+def identifier(text: str) -> str:
+    """``text`` as an identifier every SSP host accepts: ``[A-Za-z][A-Za-z0-9_]*``."""
+    import re
+
+    out = re.sub(r"[^A-Za-z0-9_]", "_", text)
+    return out if out[:1].isalpha() else f"s_{out}"
 
 
 _BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -130,6 +151,8 @@ def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any],
     used = set()
     for pname, value in params.items():
         var = variables[pname]
+        if var.type == "String":
+            raise SspError(f"ssp: {pname} is a String parameter, which OMSimulator cannot set from an SSP")
         p = ET.SubElement(plist, _q("ssv:Parameter"), name=pname)
         attrs = {"value": _text(value, var.type)}
         if var.type == "Real" and var.unit:
@@ -174,26 +197,27 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
         raise SspError(f"--out: {str(out)!r} must end in .ssp")
     n_beacons = beacon_count(cfg)
     connections = list(connections) if connections is not None else default_connections(n_beacons)
-    paths = fmu_paths(fmu_dir, system_sources(cfg))
+    sources = system_sources(cfg)
+    paths = fmu_paths(fmu_dir, sources)
     sim = cfg["simulation"]
     T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
     n_steps = int(math.floor(sim["duration"] / T + 1e-9))
-    steps = {name: T / ratio if name == "receiver" else T for name in paths}
+    base = T / ratio
+    name = identifier(cfg["run"]["scenario"])
 
-    root = ET.Element(_q("ssd:SystemStructureDescription"), version="1.0", name=f"sblsim {cfg['run']['scenario']}")
-    system = ET.SubElement(root, _q("ssd:System"), name=cfg["run"]["scenario"],
-                           description="sblsim SBL acoustic positioning system")
+    root = ET.Element(_q("ssd:SystemStructureDescription"), version="1.0", name=f"sblsim_{name}")
+    system = ET.SubElement(root, _q("ssd:System"), name=name, description="sblsim SBL acoustic positioning system")
     elements = ET.SubElement(system, _q("ssd:Elements"))
     files: dict[str, bytes | Path] = {}
     units: dict[str, Any] = {}
     used_units: set[str] = set()
-    for name, path in paths.items():
+    for component, path in paths.items():
         md = read_model_description(str(path), validate=False)
         units.update({u.name: _unit_definition(u) for u in md.unitDefinitions})
         variables = {v.name: v for v in md.modelVariables}
         source = f"resources/{path.name}"
         files[source] = path
-        comp = ET.SubElement(elements, _q("ssd:Component"), name=name, source=source,
+        comp = ET.SubElement(elements, _q("ssd:Component"), name=component, source=source,
                              type="application/x-fmu-sharedlibrary")
         connectors = ET.SubElement(comp, _q("ssd:Connectors"))
         for v in md.modelVariables:
@@ -204,21 +228,28 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
             if v.type == "Real" and v.unit:
                 used_units.add(v.unit)
         accepted = frozenset(n for n, v in variables.items() if v.causality == "parameter")
-        params = component_params(cfg, name, accepted)
-        ssv = f"resources/{name}.ssv"
+        model = None if isinstance(sources[component], Path) else MODELS[sources[component]]
+        params = component_params(cfg, component, accepted)
+        if model is not None:
+            params = model.fmi_values(params, n_beacons)
+        ssv = f"resources/{component}.ssv"
         files[ssv] = _parameter_set(name, params, variables, units)
         bindings = ET.SubElement(comp, _q("ssd:ParameterBindings"))
-        ET.SubElement(bindings, _q("ssd:ParameterBinding"), source=ssv)
-        _annotations(comp, ET.Element(_q("osp:StepSizeHint"), value=repr(steps[name])))
+        ET.SubElement(bindings, _q("ssd:ParameterBinding"), type=PARAMETER_SET_TYPE, source=ssv)
     wires = ET.SubElement(system, _q("ssd:Connections"))
     for c in connections:
         ET.SubElement(wires, _q("ssd:Connection"), startElement=c.source, startConnector=c.output,
                       endElement=c.destination, endConnector=c.input)
+    info = ET.Element(_q("oms:Annotations"))
+    master = ET.SubElement(ET.SubElement(info, _q("oms:SimulationInformation")), _q("oms:FixedStepMaster"),
+                           description="oms-ma", stepSize=repr(base), relativeTolerance="0.0001")
+    del master
+    _annotations(system, OMS_ANNOTATION, info)
     _units(root, "ssd:Units", used_units, units)
     experiment = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(n_steps * T))
     algorithm = ET.Element(_q("osp:Algorithm"))
-    ET.SubElement(algorithm, _q("osp:FixedStepAlgorithm"), baseStepSize=repr(min(steps.values())))
-    _annotations(experiment, algorithm)
+    ET.SubElement(algorithm, _q("osp:FixedStepAlgorithm"), baseStepSize=repr(base))
+    _annotations(experiment, OSP_ANNOTATION, algorithm)
     ET.indent(root)
     files[SSD_NAME] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
@@ -283,8 +314,8 @@ class SspSystem:
     fmu_files: dict[str, Path]
 
 
-def _experiment(ssd_xml: bytes) -> tuple[float, float | None, float | None, dict[str, float]]:
-    """Start, stop, base step and per-component step hints from the ``.ssd`` text."""
+def _experiment(ssd_xml: bytes) -> tuple[float, float | None, float | None]:
+    """Start, stop and base step of the ``.ssd`` (the OSP or OMSimulator annotation)."""
     root = ET.fromstring(ssd_xml)
     start, stop, base = 0.0, None, None
     experiment = root.find("ssd:DefaultExperiment", NS)
@@ -294,12 +325,11 @@ def _experiment(ssd_xml: bytes) -> tuple[float, float | None, float | None, dict
         fixed = experiment.find(".//osp:FixedStepAlgorithm", NS)
         if fixed is not None:
             base = float(fixed.get("baseStepSize"))
-    hints = {}
-    for comp in root.findall("ssd:System/ssd:Elements/ssd:Component", NS):
-        hint = comp.find(".//osp:StepSizeHint", NS)
-        if hint is not None:
-            hints[comp.get("name")] = float(hint.get("value"))
-    return start, stop, base, hints
+    if base is None:
+        master = root.find(".//oms:FixedStepMaster", NS)
+        if master is not None:
+            base = float(master.get("stepSize"))
+    return start, stop, base
 
 
 def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None = None) -> SspSystem:
@@ -307,13 +337,12 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
 
     The package's components must be named ``platform``, ``acoustics``,
     ``target`` and ``receiver``; each one's parameter set fills that section
-    of the configuration (the seed keys fill ``run``). The sampling time is
-    the physics components' step hint (else the base step), the EKF rate
-    ratio is T over the receiver's step, the duration is stop − start. A
-    receiver FMU other than sblsim's EKF or least-squares receiver becomes
-    ``receiver = "fmu:PATH"``; of its parameter set, the keys of sblsim's
-    ``[receiver]`` section are kept and its own other parameters keep their
-    FMU start values.
+    of the configuration (the seed keys fill ``run``; choices, tables and
+    custom offsets are turned back into configuration text). The sampling time
+    is the channel's ``slot_period``, the EKF rate ratio is T over the base
+    step, the duration is stop − start. A receiver FMU other than sblsim's
+    EKF or least-squares receiver becomes ``receiver = "fmu:PATH"``; of its
+    parameter set, the keys of sblsim's ``[receiver]`` section are kept.
 
     Parameters
     ----------
@@ -325,12 +354,14 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     Raises
     ------
     SspError, ModelError
-        Invalid package, unknown component, or parameter values outside
-        their allowed range.
+        Invalid package, unknown component, a missing FMU, or parameter values
+        outside their allowed range.
     """
     from fmpy import read_model_description
 
     path = Path(path)
+    if path.is_dir():
+        raise SspError(f"--ssp: {str(path)!r} is a directory, not an .ssp file")
     if not path.is_file():
         raise SspError(f"--ssp: no such file {str(path)!r}")
     ssd = validate_ssp(path)
@@ -342,30 +373,37 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     atexit.register(shutil.rmtree, unzipdir, ignore_errors=True)
     with zipfile.ZipFile(path) as archive:
         archive.extractall(unzipdir)
-        start, stop, base, hints = _experiment(archive.read(SSD_NAME))
+        start, stop, base = _experiment(archive.read(SSD_NAME))
 
-    seed_names = {v.name for v in SEED_PARAMETERS}
     raw: dict[str, dict] = {"run": {"scenario": system.name}, "simulation": {}}
     fmu_files: dict[str, Path] = {}
+    values: dict[str, dict[str, Any]] = {}
     for comp in system.elements:
         fmu_files[comp.name] = unzipdir / comp.source
-        section = raw.setdefault(comp.name, {})
+        if not fmu_files[comp.name].is_file():
+            raise SspError(f"ssp: component {comp.name}: no FMU {comp.source!r} in the package")
+        found = values.setdefault(comp.name, {})
         for binding in comp.parameterBindings:
             for pset in binding.parameterValues:
                 for p in pset.parameters:
-                    target = raw["run"] if p.name in seed_names else section
-                    target[p.name] = _value(p.value, p.type)
-    identifier = read_model_description(str(fmu_files["receiver"]), validate=False).coSimulation.modelIdentifier
-    builtin = {f"sblsim_{core}": key for key, core in RECEIVERS.items()}
-    raw["simulation"]["receiver"] = builtin.get(identifier, f"{EXTERNAL_PREFIX}{fmu_files['receiver']}")
-    if identifier not in builtin:  # a user's receiver: keep the keys sblsim's receiver section knows
-        known = {v.name for v in section_variables("receiver")}
-        raw["receiver"] = {k: v for k, v in raw["receiver"].items() if k in known}
-    T = hints.get("platform", base)
+                    found[p.name] = _value(p.value, p.type)
+    identifier_ = read_model_description(str(fmu_files["receiver"]), validate=False).coSimulation.modelIdentifier
+    builtin = {f"sblsim_{model}": key for key, model in RECEIVERS.items()}
+    raw["simulation"]["receiver"] = builtin.get(identifier_, f"{EXTERNAL_PREFIX}{fmu_files['receiver']}")
+    for comp, found in values.items():
+        raw["run"].update({k: v for k, v in found.items() if k in SEED_NAMES})
+        model = COMPONENTS[comp] if comp != "receiver" or identifier_ in builtin else None
+        if model is None:  # a user's receiver: keep the keys sblsim's receiver section knows
+            known = {v.name for v in section_variables("receiver")}
+            raw[comp] = {k: v for k, v in found.items() if k in known}
+        else:
+            known = {v.name for v in section_variables(comp)}
+            raw[comp] = {k: v for k, v in model.config_values(found).items() if k in known}
+    T = values["acoustics"].get("slot_period", base)
     if T is None:
-        raise SspError("ssp: no step size (osp:StepSizeHint of the platform or osp:FixedStepAlgorithm baseStepSize)")
+        raise SspError("ssp: no sampling time (the channel's slot_period, or a base step annotation)")
     raw["simulation"]["sampling_time"] = T
-    raw["simulation"]["ekf_rate_ratio"] = max(1, round(T / hints.get("receiver", base or T)))
+    raw["simulation"]["ekf_rate_ratio"] = max(1, round(T / (base or T)))
     if stop is not None:
         raw["simulation"]["duration"] = stop - start
     if start != 0.0:

@@ -34,7 +34,8 @@ from typing import Any, Mapping
 import casadi as ca
 
 from models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
-from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Stream, Variable, sample_due, select
+from models.core import (SEED_PARAMETERS, Component, ProgramBuilder, Stream, Variable, format_table, sample_due,
+                         select)
 from models.platform.core import AXES, beacon_names, beacon_variables
 
 _CHANNEL_UNIFORM, _RANGE_NOISE = range(2)
@@ -119,6 +120,15 @@ class Acoustics(Component):
         rows = profile_table(values.get("sound_speed_profile", "constant"), values.get("sound_speed_table", ""),
                              values.get("temperature", 15.0), values.get("salinity", 35.0))
         out.update(PROFILE.values(rows, "sound_speed_rows"))
+        return out
+
+    @classmethod
+    def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """Configuration keys from FMU parameters: a sound-speed table becomes ``sound_speed_profile = table``."""
+        out = super().config_values(values, n_beacons)
+        rows = PROFILE.rows(values, "sound_speed_rows")
+        out["sound_speed_profile"] = "table" if rows.shape[0] else "constant"
+        out["sound_speed_table"] = format_table(rows)
         return out
 
     @classmethod

@@ -24,8 +24,9 @@ import math
 from typing import Any, Mapping
 
 import casadi as ca
+import numpy as np
 
-from models.core import (SEED_PARAMETERS, Component, ModelError, ProgramBuilder, Stream, Variable,
+from models.core import (SEED_PARAMETERS, Component, ModelError, ProgramBuilder, Stream, Variable, format_table,
                          sample_due)
 from models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
 from models.platform.waves import wave_motion
@@ -125,6 +126,15 @@ class Platform(Component):
                                  f"the interface has {n_beacons}")
             out.update({f"beacon{i + 1}_offset_{a}": float(offsets[i, k])
                         for i in range(n_beacons) for k, a in enumerate(AXES)})
+        return out
+
+    @classmethod
+    def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """Configuration keys from FMU parameters: a custom layout's offsets become the ``beacon_offsets`` text."""
+        out = super().config_values(values, n_beacons)
+        if out.get("layout") == "custom":
+            out["beacon_offsets"] = format_table(np.array(
+                [[float(values.get(f"beacon{i}_offset_{a}", 0.0)) for a in AXES] for i in range(1, n_beacons + 1)]))
         return out
 
     @classmethod

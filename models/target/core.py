@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from models.core import (SEED_PARAMETERS, Column, Component, ModelError, ProgramBuilder, Stream, Table, Variable,
-                         padded_rows, parse_table, resolve_parameters, sample_due, select)
+                         format_table, padded_rows, parse_table, resolve_parameters, sample_due, select)
 from models.target.trajectories import (OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows,
                                         waypoints)
 
@@ -106,6 +106,14 @@ class Target(Component):
         out = super().fmu_parameters(values, n_beacons)
         if values.get("trajectory") == "file":
             out.update(WAYPOINTS.values(file_waypoints(values), "waypoint_rows"))
+        return out
+
+    @classmethod
+    def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
+        """Configuration keys from FMU parameters: the waypoint table becomes the ``waypoints`` text."""
+        out = super().config_values(values, n_beacons)
+        if out.get("trajectory") == "file":
+            out["waypoints"] = format_table(WAYPOINTS.rows(values, "waypoint_rows"))
         return out
 
     @classmethod
