@@ -1,16 +1,18 @@
-"""The variable tables of the FMUs, generated from the core declarations (for the README)."""
+"""The variable tables of the FMUs, generated from the declarations (docs/variables.md)."""
 
 from __future__ import annotations
 
 from tabulate import tabulate
 
-from models import CORES
+from models import MODELS
 
 BEGIN, END = "<!-- fmu-variables:begin -->", "<!-- fmu-variables:end -->"
 
 
 def markdown_tables(n_beacons: int = 4) -> str:
-    """One Markdown table per FMU: every variable with causality, type, unit, start and description.
+    """One Markdown table per FMU: every variable with causality, variability, type, unit, start and description.
+
+    The columns of a table parameter are one row each (``waypoint_time[1..512]``).
 
     Returns
     -------
@@ -18,23 +20,32 @@ def markdown_tables(n_beacons: int = 4) -> str:
         The tables, between the :data:`BEGIN` and :data:`END` markers.
     """
     parts = [BEGIN]
-    for name, core in CORES.items():
-        doc = (core.__doc__ or "").strip().splitlines()[0]
-        rows = [(f"`{v.name}`", v.causality, v.type, v.unit, _start(v), v.description)
-                for v in core.variables(n_beacons)]
+    for name, model in MODELS.items():
+        doc = (model.__doc__ or "").strip().splitlines()[0]
+        rows = []
+        for v in model.fmu_variables(n_beacons):
+            if v.in_table:
+                continue
+            rows.append((f"`{v.name}`", v.causality, v.variability, v.fmi_type, v.unit, _start(v), v.fmi_description()))
+            if v.table is not None:
+                rows += [(f"`{c.name}[1..{v.table.max_rows}]`", "parameter", "fixed", "Real", c.unit, _number(c.start),
+                          f"{c.description} (rows 1..{v.name} are used), allowed {c.allowed()}")
+                         for c in v.table.columns]
         parts += [f"**`sblsim_{name}.fmu`** — {doc}", "",
-                  tabulate(rows, headers=("Variable", "Causality", "Type", "Unit", "Start", "Description"),
-                           tablefmt="github"), ""]
+                  tabulate(rows, headers=("Variable", "Causality", "Variability", "Type", "Unit", "Start",
+                                          "Description"), tablefmt="github"), ""]
     parts.append(END)
     return "\n".join(parts)
 
 
+def _number(value) -> str:
+    return f"{value:g}"
+
+
 def _start(v) -> str:
-    if v.type == "String":
-        return f'"{v.start}"'
-    if v.type == "Boolean":
+    if v.fmi_type == "Boolean":
         return "true" if v.start else "false"
-    return f"{v.start:g}"
+    return _number(v.fmi_start)
 
 
 __all__ = ["BEGIN", "END", "markdown_tables"]

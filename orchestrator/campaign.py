@@ -4,14 +4,14 @@ Work is split into **chunks**: consecutive design cells of one scenario that
 share every setting a batch cannot vary (e.g. the sampling time), up to
 ``batch`` runs. On the ``local`` engine a chunk is one batch: all its runs
 are stepped together, the cells' factor levels given per replicate
-(``batched_parameters`` of the cores). On the ``fmu`` engine a chunk's runs
+(any numeric FMU parameter may differ per run). On the ``fmu`` engine a chunk's runs
 are stepped one at a time through the FMUs, loaded once per worker process.
 Chunks run in worker processes (``--workers``) or on a Dask distributed
 cluster (``--scheduler``); only this process writes files.
 
-Every run draws its random numbers from its own branch of the seed tree
-``SeedSequence(seed, spawn_key=(scenario_key, cell, replicate, component, purpose))``,
-and a run's arithmetic does not depend on the batch it is stepped in, so
+Every run draws its random numbers from its own Philox streams, keyed by
+(seed, scenario_key, cell, replicate, component, purpose) (docs/model.md), and
+a run's arithmetic does not depend on the batch it is stepped in, so
 ``runs.parquet`` is the same whatever the worker count, batch size,
 scheduler or order of execution.
 
@@ -94,13 +94,13 @@ class Chunk:
 
 
 def batch_key(cfg: dict) -> tuple:
-    """What the runs of one batch must share: everything but the per-replicate parameters."""
-    key = []
-    for section, table in cfg.items():
-        if section == "run":
-            continue
-        allowed = COMPONENTS[section].batched_parameters if section in COMPONENTS else frozenset()
-        key.extend((section, name, value) for name, value in sorted(table.items()) if name not in allowed)
+    """What the runs of one batch must share: the simulation settings, every text value and every
+    configuration-only key (they make tables or files); numeric FMU parameters may differ per run."""
+    key = [("simulation", name, value) for name, value in sorted(cfg["simulation"].items())]
+    for section, model in COMPONENTS.items():
+        fmu = {v.name for v in model.fmu_parameters_declared()}
+        key.extend((section, name, value) for name, value in sorted(cfg[section].items())
+                   if isinstance(value, str) or name not in fmu)
     return tuple(key)
 
 

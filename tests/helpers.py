@@ -1,0 +1,76 @@
+"""Test helpers: step one model's compiled code directly, as the local engine does.
+
+``Core(model, params, replicates)`` takes configuration keys (e.g.
+``trajectory_file``, ``sound_speed_profile``, ``beacon_offsets``) or FMU
+parameters (e.g. ``sample_period``), fills the rest with their declared
+starts, and steps a batch of replicates through :class:`fmus.native.NativeBatch`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from models.core import resolve_parameters
+from orchestrator.engines import LocalHandle
+
+
+def fmu_values(model: type, params: Mapping[str, Any] | None = None, n_beacons: int = 4) -> dict[str, Any]:
+    """FMU parameter values of a mix of configuration keys and FMU parameters."""
+    params = dict(params or {})
+    config_names = {v.name for v in model.config_parameters(n_beacons)}
+    config = {k: v for k, v in params.items() if k in config_names}
+    extra = {k: v for k, v in params.items() if k not in config_names}
+    values = model.fmu_parameters(resolve_parameters(model.config_parameters(n_beacons), config, model.name),
+                                  n_beacons)
+    values.update(extra)
+    return values
+
+
+class Core:
+    """A batch of replicates of one model, stepped by hand.
+
+    Parameters
+    ----------
+    model : type
+        A :class:`models.core.Component`.
+    params : mapping, optional
+        Configuration keys and/or FMU parameters (arrays of shape (B,) per replicate).
+    replicates : sequence of int
+        ``replicate`` of each row of the batch.
+    n_beacons : int
+    """
+
+    def __init__(self, model: type, params: Mapping[str, Any] | None = None, replicates: Sequence[int] = (0,),
+                 n_beacons: int = 4) -> None:
+        self.model = model
+        self.replicates = list(replicates)
+        self.values = fmu_values(model, params, n_beacons)
+        self.handle = LocalHandle(model.name, model, n_beacons)
+        self.outputs: dict[str, np.ndarray] = {}
+
+    @property
+    def batch(self) -> int:
+        return len(self.replicates)
+
+    def initialize(self, t0: float = 0.0) -> "Core":
+        self.handle.setup(self.values, self.replicates, t0)
+        self.outputs = self.handle.get_outputs()
+        return self
+
+    def set_inputs(self, values: Mapping[str, Any]) -> None:
+        self.handle.set_inputs({k: np.broadcast_to(np.asarray(v, float), (self.batch,)) for k, v in values.items()})
+
+    def step(self, t: float, h: float) -> dict[str, np.ndarray]:
+        self.handle.do_step(t, h)
+        self.outputs = self.handle.get_outputs()
+        return self.outputs
+
+    @property
+    def state(self) -> dict[str, np.ndarray]:
+        """The current state by block name, each (B, size)."""
+        return self.handle.states()
+
+
+__all__ = ["Core", "fmu_values"]
