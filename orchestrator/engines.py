@@ -131,8 +131,8 @@ def cast_column(values: np.ndarray, dtype: type) -> np.ndarray:
     return values
 
 
-#: FMUs loaded in this process, by path: (file signature, handle).
-_LOADED: dict[str, tuple[tuple, "FmuHandle"]] = {}
+#: FMU instances made in this process, by file: (file signature, handles).
+_LOADED: dict[str, tuple[tuple, list["FmuHandle"]]] = {}
 
 
 def read_description(component: str, path: Path) -> Any:
@@ -174,13 +174,13 @@ def _ports(md: Any) -> list[Port]:
 
 
 def open_fmu(component: str, path: Path | str, model: type | None = None) -> "FmuHandle":
-    """The process's handle of an FMU file, loaded and instantiated on first use.
+    """An instance of an FMU file for a run: an idle one made earlier in this process, else a new one.
 
-    Each FMU file is loaded once per process and its instance re-used, reset
-    between runs, as DESIGN.md asks ("instantiated once and reset between
-    runs"). sblsim's own FMUs could be loaded any number of times; a user's
-    pythonfmu FMU cannot (a second copy crashes the interpreter,
-    NTNU-IHB/PythonFMU#228), so every FMU is treated the same way.
+    Instances are made once and reset between runs (DESIGN.md: "instantiated
+    once and reset between runs"). A run that needs an FMU while all its
+    instances are busy gets a new instance, unless the FMU declares
+    ``canBeInstantiatedOnlyOncePerProcess`` (a user's pythonfmu FMU should:
+    a second copy crashes the interpreter, NTNU-IHB/PythonFMU#228).
 
     Parameters
     ----------
@@ -192,20 +192,23 @@ def open_fmu(component: str, path: Path | str, model: type | None = None) -> "Fm
     Raises
     ------
     ModelError
-        If the file is missing or unreadable, or the FMU is in use by another run.
+        If the file is missing or unreadable, or a once-per-process FMU is in use by another run.
     """
     path = Path(path)
     md = read_description(component, path)
     stat = path.resolve().stat()
     signature = (stat.st_size, stat.st_mtime_ns, md.guid)
     key = str(path.resolve())
-    if key in _LOADED and _LOADED[key][0] == signature:
-        handle = _LOADED[key][1]
-        if handle.in_use:
-            raise ModelError(f"fmu: {path.name} is in use by another run in this process")
-    else:
+    if key not in _LOADED or _LOADED[key][0] != signature:
+        _LOADED[key] = (signature, [])
+    pool = _LOADED[key][1]
+    handle = next((h for h in pool if not h.in_use), None)
+    if handle is None:
+        if pool and md.coSimulation.canBeInstantiatedOnlyOncePerProcess:
+            raise ModelError(f"fmu: {path.name} is in use by another run in this process and can be instantiated "
+                             "only once per process")
         handle = FmuHandle(component, path, md, model)
-        _LOADED[key] = (signature, handle)
+        pool.append(handle)
     handle.component, handle.model = component, model
     handle.in_use = True
     return handle

@@ -212,6 +212,8 @@ def merge_params(cfgs: Sequence[dict], component: str,
         for key, value in first[section].items():
             if key == "replicate" or all(c[section][key] == value for c in cfgs):
                 continue
+            if section == "run" and key not in params:
+                continue  # a seed key the component does not take (e.g. the EKF draws no random numbers)
             if key not in params or isinstance(value, str):
                 raise ModelError(f"{component}.{key}: must be the same for every run of a batch")
             params[key] = np.asarray([c[section][key] for c in cfgs])

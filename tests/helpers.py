@@ -20,11 +20,13 @@ def fmu_values(model: type, params: Mapping[str, Any] | None = None, n_beacons: 
     """FMU parameter values of a mix of configuration keys and FMU parameters."""
     params = dict(params or {})
     config_names = {v.name for v in model.config_parameters(n_beacons)}
-    config = {k: v for k, v in params.items() if k in config_names}
+    arrays = {k: v for k, v in params.items() if isinstance(v, np.ndarray) and v.ndim > 0}
+    config = {k: (v.reshape(-1)[0].item() if k in arrays else v) for k, v in params.items() if k in config_names}
     extra = {k: v for k, v in params.items() if k not in config_names}
     values = model.fmu_parameters(resolve_parameters(model.config_parameters(n_beacons), config, model.name),
                                   n_beacons)
     values.update(extra)
+    values.update(arrays)  # per-replicate values (checked by Component.parameter_matrix)
     return values
 
 

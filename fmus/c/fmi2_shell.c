@@ -51,15 +51,24 @@ typedef struct {
 
 static const sblsim_model* model(void) { return &SBLSIM_MODEL; }
 
+/* Log a message. The FMI logger takes a printf format; the text is passed as that format with
+   every '%' doubled, so that hosts which format it (C hosts) and hosts which print it as it is
+   (fmpy) both show the whole message. */
 static void logf_(Instance* s, fmi2Status status, const char* category, const char* format, ...) {
-    char text[1024];
+    char text[1024], escaped[2048];
+    size_t i, j = 0;
     va_list args;
     if (s == NULL || s->callbacks.logger == NULL) return;
     if (status == fmi2OK && !s->logging) return;
     va_start(args, format);
     vsnprintf(text, sizeof text, format, args);
     va_end(args);
-    s->callbacks.logger(s->callbacks.componentEnvironment, s->name, status, category, "%s", text);
+    for (i = 0; text[i] != 0 && j + 2 < sizeof escaped; i++) {
+        if (text[i] == '%') escaped[j++] = '%';
+        escaped[j++] = text[i];
+    }
+    escaped[j] = 0;
+    s->callbacks.logger(s->callbacks.componentEnvironment, s->name, status, category, escaped);
 }
 
 #define FAIL(s, ...)                                              \

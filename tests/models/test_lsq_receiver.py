@@ -1,8 +1,9 @@
-"""Tests of the least-squares receiver core and of the packet handling it shares with the EKF.
+"""Tests of the least-squares receiver and of the packet handling it shares with the EKF receiver.
 
+The compiled receivers are stepped through :class:`tests.helpers.Core`.
 Reference values are computed independently in this file: exact geometry,
 ``scipy.optimize.least_squares`` on the same weighted cost, finite-difference
-Jacobians in plain numpy, and hand-built target motions.
+Jacobians in plain numpy, and hand-built packet streams.
 """
 
 from __future__ import annotations
@@ -12,7 +13,9 @@ import pytest
 from scipy.optimize import least_squares
 
 from models.core import SEED_PARAMETERS, ModelError
-from models.receiver import LeastSquaresReceiverCore, PacketReceiverCore, ReceiverCore, receiver_interface
+from models.receiver import LeastSquaresReceiver, Receiver, receiver_interface
+from models.receiver.lsq import SHARED_PARAMETERS
+from tests.helpers import Core
 
 AXES = ("x", "y", "z")
 OUTPUTS = [v.name for v in receiver_interface() if v.causality == "output"]
@@ -53,10 +56,14 @@ def fd_spread(p, ranges, beacons, depth, sr, sd, eps=1e-6):
 
 
 def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True):
-    """Receiver inputs of one packet; values are scalars or arrays of shape (B,)."""
+    """Receiver inputs of one packet; values are scalars or arrays of shape (B,). A lost packet carries
+    range 0 and beacon position 0, as the acoustics component sends it."""
     beacon = np.asarray(beacon, dtype=float)
-    return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time, range=range_value,
-                beacon_x=beacon[..., 0], beacon_y=beacon[..., 1], beacon_z=beacon[..., 2], depth=depth)
+    valid_b = np.asarray(valid, dtype=bool)
+    return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time,
+                range=np.where(valid_b, range_value, 0.0),
+                beacon_x=np.where(valid_b, beacon[..., 0], 0.0), beacon_y=np.where(valid_b, beacon[..., 1], 0.0),
+                beacon_z=np.where(valid_b, beacon[..., 2], 0.0), depth=depth)
 
 
 def snapshot(core):
@@ -66,6 +73,13 @@ def snapshot(core):
 def position(out, prefix="est_"):
     """The (B, 3) vector of outputs ``prefix + x, y, z``."""
     return np.column_stack([out[f"{prefix}{a}"] for a in AXES])
+
+
+def lsq_core(params, replicates, per_replicate=None):
+    """A least-squares receiver; per-replicate FMU values (arrays of shape (B,)) set directly."""
+    core = Core(LeastSquaresReceiver, params, replicates=replicates)
+    core.values.update(per_replicate or {})
+    return core.initialize(0.0)
 
 
 def noisy_case(seed, B, sr=0.3, sd=0.05):
@@ -87,11 +101,21 @@ def feed_round(core, beacons, ranges, depth, valid=None, t0=0.0, seq0=0, T=1.0):
     t, seq = t0, seq0
     for i in range(n):
         seq += 1
-        core.set_inputs(packet(seq, i + 1, t + T, np.where(valid[:, i], ranges[:, i], np.nan), beacons[:, i],
-                               depth, valid[:, i]))
+        core.set_inputs(packet(seq, i + 1, t + T, ranges[:, i], beacons[:, i], depth, valid[:, i]))
         core.step(t, T)
         t += T
     return t, seq
+
+
+def check_no_fix(out, x0):
+    """Before the first fix: the estimate is x0, no velocity, and every fit output is 0 (never NaN)."""
+    B = out["nis"].shape[0]
+    np.testing.assert_array_equal(position(out), np.tile(x0, (B, 1)))
+    np.testing.assert_array_equal(position(out, "est_v"), 0.0)
+    np.testing.assert_array_equal(position(out, "instr_"), 0.0)
+    assert not out["instr_valid"].any()
+    np.testing.assert_array_equal(out["nis"], 0.0)
+    np.testing.assert_array_equal(out["pos_std"], 0.0)
 
 
 # ----------------------------------------------------------------------------
@@ -103,25 +127,16 @@ def test_lsq_noise_free_fix_is_the_true_position_and_nis_vanishes():
     B = truth.shape[0]
     beacons = np.broadcast_to(cross(), (B, 4, 3))
     ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1)
-    core = LeastSquaresReceiverCore(LSQ, replicates=[0, 1, 2], n_beacons=4)
-    core.initialize(0.0)
+    core = lsq_core(LSQ, [0, 1, 2])
     x0 = np.array([LSQ["x0_x"], LSQ["x0_y"], LSQ["x0_z"]])
-
-    def check_no_fix():
-        np.testing.assert_array_equal(position(core.outputs), np.tile(x0, (B, 1)))
-        np.testing.assert_array_equal(position(core.outputs, "est_v"), 0.0)
-        assert np.all(np.isnan(position(core.outputs, "instr_")))
-        assert not core.outputs["instr_valid"].any()
-        assert np.all(np.isnan(core.outputs["nis"])) and np.all(np.isnan(core.outputs["pos_std"]))
-
-    check_no_fix()
+    check_no_fix(core.outputs, x0)
     t = 0.0
     for i in range(4):
         core.set_inputs(packet(i + 1, i + 1, t + 1.0, ranges[:, i], beacons[:, i], truth[:, 2]))
         core.step(t, 1.0)
         t += 1.0
         if i < 2:
-            check_no_fix()  # fewer than 3 ranges: no fix, the estimate stays at x0
+            check_no_fix(core.outputs, x0)  # fewer than 3 ranges: no fix, the estimate stays at x0
             continue
         out = core.outputs
         assert out["instr_valid"].all()
@@ -134,22 +149,28 @@ def test_lsq_noise_free_fix_is_the_true_position_and_nis_vanishes():
 
 
 def test_lsq_fix_and_nis_match_scipy_least_squares_on_noisy_data():
-    """Converged fixes: multilaterate's default stopping rule (8 iterations, 1e-3 σ) misses 1e-6 m on
-    several of these replicates; the receiver's tighter settings do not."""
+    """Converged fixes (50 iterations, 1e-6 σ): within 1e-6 m of scipy, after three and after four ranges."""
     B = 40
     truth, beacons, ranges, depth, valid = noisy_case(5, B)
     sr, sd = LSQ["sigma_range"], LSQ["sigma_depth"]
-    core = LeastSquaresReceiverCore(LSQ, replicates=range(B))
-    core.initialize(0.0)
-    feed_round(core, beacons, ranges, depth, valid)
+    core = lsq_core(LSQ, range(B))
+    feed_round(core, beacons[:, :3], ranges[:, :3], depth, valid[:, :3])
+    three = snapshot(core)
+    core.set_inputs(packet(4, 4, 4.0, ranges[:, 3], beacons[:, 3], depth))
+    core.step(3.0, 1.0)
     out = core.outputs
-    assert out["instr_valid"].all()
     held = np.where(valid, ranges, np.nan)
+    assert out["instr_valid"].all()
+    assert three["instr_valid"].tolist() == [b != 1 for b in range(B)]  # replicate 1 lost beacon 3
     for b in range(B):
         ref = scipy_fix(held[b], beacons[b], depth[b], sr, sd, truth[b])
         np.testing.assert_allclose(position(out)[b], ref, rtol=0, atol=1e-6, err_msg=f"replicate {b}")
         rss = np.sum(weighted_residuals(ref, held[b], beacons[b], depth[b], sr, sd) ** 2)
         assert out["nis"][b] == pytest.approx(rss, rel=1e-6, abs=1e-9)
+        if b != 1:
+            held3 = np.append(held[b, :3], np.nan)
+            ref3 = scipy_fix(held3, beacons[b], depth[b], sr, sd, truth[b])
+            np.testing.assert_allclose(position(three)[b], ref3, rtol=0, atol=1e-6, err_msg=f"replicate {b}, 3")
     # the noise matters: the fixes are not the truth and the residuals are not zero
     assert np.all(np.linalg.norm(position(out) - truth, axis=1) > 1e-3)
     assert np.all(out["nis"] > 1e-4)
@@ -158,9 +179,8 @@ def test_lsq_fix_and_nis_match_scipy_least_squares_on_noisy_data():
 def test_lsq_pos_std_is_the_gauss_newton_covariance_at_the_fix():
     B = 6
     _, beacons, ranges, depth, _ = noisy_case(9, B)
-    params = dict(LSQ, sigma_range=np.linspace(0.1, 1.0, B))  # per-replicate weights
-    core = LeastSquaresReceiverCore(params, replicates=range(B))
-    core.initialize(0.0)
+    sigma_range = np.linspace(0.1, 1.0, B)
+    core = lsq_core(LSQ, range(B), dict(sigma_range=sigma_range))  # per-replicate weights
     feed_round(core, beacons[:, :3], ranges[:, :3], depth)  # 3 ranges
     held = ranges.copy()
     held[:, 3] = np.nan
@@ -168,7 +188,7 @@ def test_lsq_pos_std_is_the_gauss_newton_covariance_at_the_fix():
         out = core.outputs
         fix = position(out)
         for b in range(B):
-            ref = fd_spread(fix[b], held[b], beacons[b], depth[b], params["sigma_range"][b], LSQ["sigma_depth"])
+            ref = fd_spread(fix[b], held[b], beacons[b], depth[b], sigma_range[b], LSQ["sigma_depth"])
             assert out["pos_std"][b] == pytest.approx(ref, rel=1e-6), (stage, b)
         if stage == "three ranges":
             before = out["pos_std"].copy()
@@ -182,42 +202,55 @@ def test_lsq_pos_std_is_the_gauss_newton_covariance_at_the_fix():
 # Velocity and timing
 # ----------------------------------------------------------------------------
 
-def test_lsq_velocity_of_a_constant_velocity_target_with_fresh_ranges():
-    """Snapshot ranging: the 4 ranges of a cycle all refer to the target at the cycle's last slot, and
-    only that slot carries a depth reading, so every valid fix uses fresh ranges. The fixes are 4 slots
-    apart: a velocity over the slot spacing instead of the time between fixes would be 4 times too big."""
-    T = 0.5
-    p0, v = np.array([[-10.0, 6.0, 8.0]]), np.array([[0.6, -0.35, 0.05]])
-    beacons = cross()[None]
-    core = LeastSquaresReceiverCore(LSQ, replicates=[0])
-    core.initialize(0.0)
-    t, seq = 0.0, 0
-    previous = None
-    for cycle in range(4):
-        epoch = t + 4 * T  # transmit epoch of the cycle's last slot
-        target = p0 + v * epoch
-        ranges = np.linalg.norm(target[:, None, :] - beacons, axis=-1)
-        for i in range(4):
-            seq += 1
-            depth = target[:, 2] if i == 3 else np.array([np.nan])
-            core.set_inputs(packet(seq, i + 1, t + T, ranges[:, i], beacons[:, i], depth))
-            core.step(t, T)
-            t += T
-            out = snapshot(core)
-            if i < 3:  # no depth: no fix; the estimate and velocity are held
-                assert not out["instr_valid"][0] and np.isnan(out["nis"][0]) and np.isnan(out["pos_std"][0])
-                assert np.all(np.isnan(position(out, "instr_")))
-                if previous is not None:
-                    np.testing.assert_array_equal(position(out), position(previous))
-                    np.testing.assert_array_equal(position(out, "est_v"), position(previous, "est_v"))
-        assert t == pytest.approx(epoch)
+def test_lsq_velocity_is_the_difference_of_scipy_fixes_over_their_transmit_epochs():
+    """A constant-velocity target, noise-free ranges, irregular transmit epochs that fall between the
+    receiver's step ends, a lost packet: each fix is scipy's fit of the held ranges (fresh and stale), and
+    est_v = Δfix / Δtx_time of the last two fixes (not over the step ends or a nominal slot length)."""
+    h = 0.5
+    p0, v = np.array([-10.0, 6.0, 8.0]), np.array([0.6, -0.35, 0.05])
+    beacons = cross()
+    sr, sd = LSQ["sigma_range"], LSQ["sigma_depth"]
+    core = lsq_core(LSQ, [0])
+    x0 = np.array([LSQ["x0_x"], LSQ["x0_y"], LSQ["x0_z"]])
+    rng = np.random.default_rng(23)
+    epochs = np.cumsum(rng.uniform(0.3, 1.7, size=14)) + 0.13  # never on a step end (multiples of h)
+    lost = {7}
+    held = np.full(4, np.nan)
+    fixes, previous_fix = [], x0
+    t = 0.0
+    for seq, tx in enumerate(epochs, start=1):
+        i = (seq - 1) % 4
+        target = p0 + v * tx
+        valid = seq not in lost
+        core.set_inputs(packet(seq, i + 1, tx, np.linalg.norm(target - beacons[i]), beacons[i], target[2], valid))
+        while t + h < tx - 1e-9:  # steps before the epoch: outputs held
+            before = snapshot(core)
+            core.step(t, h)
+            t += h
+            for name in OUTPUTS:
+                np.testing.assert_array_equal(core.outputs[name], before[name], err_msg=name)
+        core.step(t, h)
+        t += h
+        assert tx <= t < tx + h
+        if valid:
+            held[i] = np.linalg.norm(target - beacons[i])
+        out = core.outputs
+        if np.isfinite(held).sum() < 3:
+            check_no_fix(out, x0)
+            continue
+        ref = scipy_fix(held, beacons, target[2], sr, sd, previous_fix)
+        previous_fix = ref
+        fixes.append((tx, ref))
         assert out["instr_valid"][0]
-        np.testing.assert_allclose(position(out), target, rtol=0, atol=1e-6)
-        if cycle == 0:
+        np.testing.assert_allclose(position(out)[0], ref, rtol=0, atol=1e-6, err_msg=f"seq {seq}")
+        if len(fixes) == 1:
             np.testing.assert_array_equal(position(out, "est_v"), 0.0)  # one fix only
         else:
-            np.testing.assert_allclose(position(out, "est_v"), v, rtol=0, atol=1e-6)
-        previous = out
+            (t1, f1), (t2, f2) = fixes[-2:]
+            np.testing.assert_allclose(position(out, "est_v")[0], (f2 - f1) / (t2 - t1), rtol=0,
+                                       atol=2e-6 / (t2 - t1), err_msg=f"seq {seq}")
+    assert len(fixes) == len(epochs) - 2
+    assert np.linalg.norm(position(out, "est_v")[0]) > 1e-2  # the check above is not a trivial zero
 
 
 def test_lsq_velocity_is_the_difference_of_the_last_two_fixes_over_their_slot_times():
@@ -228,8 +261,7 @@ def test_lsq_velocity_is_the_difference_of_the_last_two_fixes_over_their_slot_ti
     rng = np.random.default_rng(3)
     p0, v = np.array([[-10.0, 6.0, 8.0], [15.0, 2.0, 12.0]]), np.array([[0.6, -0.35, 0.05], [-0.2, 0.4, 0.0]])
     beacons = np.broadcast_to(cross(), (2, 4, 3))
-    core = LeastSquaresReceiverCore(LSQ, replicates=[0, 1])
-    core.initialize(0.0)
+    core = lsq_core(LSQ, [0, 1])
     fixes = []  # (tx_time, fix) of every valid fix
     t, before = 0.0, snapshot(core)
     for seq in range(1, 14):
@@ -264,12 +296,11 @@ def test_lsq_velocity_is_the_difference_of_the_last_two_fixes_over_their_slot_ti
 # Batching, interface, shared packet handling
 # ----------------------------------------------------------------------------
 
-def _random_run(params, replicates, seed=11, steps=80, T=1.0, r=4):
-    """A packet stream with per-replicate noise, losses, missing depth and a bad beacon id."""
+def _random_run(params, per_replicate, replicates, seed=11, steps=80, T=1.0, r=4):
+    """A packet stream with per-replicate noise, losses and a bad beacon id."""
     rng = np.random.default_rng(seed)
     reps = np.asarray(replicates)
-    core = LeastSquaresReceiverCore(params, replicates=replicates)
-    core.initialize(0.0)
+    core = lsq_core(params, replicates, per_replicate)
     out = [snapshot(core)]
     dt, t, seq = T / r, 0.0, 0
     all_reps = 6  # random numbers are drawn for every replicate, then picked: the same in every batch
@@ -284,10 +315,8 @@ def _random_run(params, replicates, seed=11, steps=80, T=1.0, r=4):
         ranges = np.linalg.norm(target - b, axis=1) + rng.normal(scale=0.3, size=all_reps)
         valid = rng.uniform(size=all_reps) > 0.2
         depth = target[:, 2] + rng.normal(scale=0.05, size=all_reps)
-        depth[rng.uniform(size=all_reps) < 0.05] = np.nan
         ids = np.where(rng.uniform(size=all_reps) < 0.03, 9, i + 1)
-        core.set_inputs(packet(seq, ids[reps], tx, np.where(valid, ranges, np.nan)[reps], b[reps], depth[reps],
-                               valid[reps]))
+        core.set_inputs(packet(seq, ids[reps], tx, ranges[reps], b[reps], depth[reps], valid[reps]))
         core.step(t, dt)
         t += dt
         out.append(snapshot(core))
@@ -302,22 +331,23 @@ def test_lsq_batch_equals_single_replicate_runs_bit_for_bit():
                    x0_y=np.array([0.0, -5.0, 5.0, 30.0, 1.0, 2.0]),
                    x0_z=np.array([1.0, 3.0, 5.0, 20.0, 1.0, 2.0]),
                    cell=np.array([0, 0, 1, 1, 2, 2]))
-    batch = _random_run(per_rep, replicates)
+    batch = _random_run({}, per_rep, replicates)
     for k, rep in enumerate(replicates):
-        single = _random_run({name: value[k].item() for name, value in per_rep.items()}, [rep])
+        single = _random_run({name: value[k].item() for name, value in per_rep.items()}, {}, [rep])
         for name in OUTPUTS:
             np.testing.assert_array_equal(batch[name][:, k], single[name][:, 0], err_msg=f"{name}, replicate {rep}",
                                           strict=True)
-    # the run exercises fixes, lost fixes (missing depth) and non-zero velocities
-    assert batch["instr_valid"].any() and not batch["instr_valid"][-20:].all()
+    # the run exercises fixes and non-zero velocities, and the replicates differ
+    assert batch["instr_valid"][-20:].all() and not batch["instr_valid"][:8].any()
     assert np.all(np.abs(batch["est_vx"][-1]) > 0.0)
+    assert len(np.unique(batch["est_x"][-1])) == len(replicates)
 
 
 def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     def key(v):
         return (v.name, v.causality, v.type, v.unit)
 
-    lsq, ekf = LeastSquaresReceiverCore.variables(4), ReceiverCore.variables(4)
+    lsq, ekf = LeastSquaresReceiver.variables(4), Receiver.variables(4)
     signals = [key(v) for v in lsq if v.causality != "parameter"]
     assert signals == [key(v) for v in ekf if v.causality != "parameter"]
     assert signals == [key(v) for v in receiver_interface()]
@@ -326,26 +356,22 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     ekf_params = {v.name: v for v in ekf if v.causality == "parameter"}
     params = [v for v in lsq if v.causality == "parameter"]
     shared = ["sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z"]
+    assert list(SHARED_PARAMETERS) == shared
     assert params == [ekf_params[n] for n in shared] + list(SEED_PARAMETERS)
-    assert LeastSquaresReceiverCore.name == "receiver_lsq" and LeastSquaresReceiverCore.component_index == 3
-    assert LeastSquaresReceiverCore.batched_parameters == {"cell", *shared}
-    core = LeastSquaresReceiverCore({"seed": 3, "scenario_key": 1, "cell": 2, "replicate": 4}, n_beacons=4)
-    core.initialize(0.0)
+    assert LeastSquaresReceiver.name == "receiver_lsq" and LeastSquaresReceiver.component_index == 3
+    core = Core(LeastSquaresReceiver, {"seed": 3, "scenario_key": 1, "cell": 2, "replicate": 4}).initialize(0.0)
     assert list(core.outputs) == OUTPUTS
-    assert list(core.inputs) == [v.name for v in receiver_interface() if v.causality == "input"]
-    with pytest.raises(ModelError, match=r"^receiver_lsq\.q_horizontal: unknown parameter"):
-        LeastSquaresReceiverCore({"q_horizontal": 0.1})
+    assert core.handle.input_names == [v.name for v in receiver_interface() if v.causality == "input"]
+    with pytest.raises(ModelError, match=r"^receiver_lsq\.q_horizontal: not a parameter"):
+        Core(LeastSquaresReceiver, {"q_horizontal": 0.1}).initialize(0.0)
 
 
 def test_both_receivers_share_the_packet_handling():
     """Same packet stream (late tx epochs, a lost packet, a repeated packet, a bad id): same held state."""
-    assert issubclass(ReceiverCore, PacketReceiverCore) and issubclass(LeastSquaresReceiverCore, PacketReceiverCore)
-    x0 = dict(x0_x=3.0, x0_y=-2.0, x0_z=5.0)  # not at a missing beacon's placeholder (0, 0, 0)
-    ekf = ReceiverCore(x0, replicates=[0, 1])
-    lsq = LeastSquaresReceiverCore(x0, replicates=[0, 1])
+    x0 = dict(x0_x=3.0, x0_y=-2.0, x0_z=5.0)
+    ekf = Core(Receiver, x0, replicates=[0, 1]).initialize(0.0)
+    lsq = Core(LeastSquaresReceiver, x0, replicates=[0, 1]).initialize(0.0)
     beacons = cross()
-    for core in (ekf, lsq):
-        core.initialize(0.0)
     stream = [  # (seq, beacon_id, tx_time, range, valid), each on the inputs for 4 steps of 0.25 s
         (1, 1, 0.75, [20.0, 21.0], [True, True]),
         (2, 2, 1.75, [22.0, 23.0], [True, False]),
@@ -353,23 +379,31 @@ def test_both_receivers_share_the_packet_handling():
         (3, 9, 3.75, [5.0, 5.0], [True, True]),  # no such beacon: a slot that stores nothing
         (4, 3, 4.6, [24.0, 25.0], [True, True]),  # epoch between step ends: used at 4.75 s
     ]
-    expected_ranges = np.full((2, 4), np.nan)
+    expected_ranges, expected_beacons, expected_heard = np.zeros((2, 4)), np.zeros((2, 12)), np.zeros((2, 4))
+    expected_seq = np.zeros(2)
     t, dt = 0.0, 0.25
     for seq, bid, tx, rng_value, valid in stream:
+        valid = np.array(valid)
         for core in (ekf, lsq):
-            core.set_inputs(packet(seq, bid, tx, np.array(rng_value), beacons[min(bid, 4) - 1], 6.0,
-                                   np.array(valid)))
+            core.set_inputs(packet(seq, bid, tx, np.array(rng_value), beacons[min(bid, 4) - 1], 6.0, valid))
         for _ in range(4):
             reached = t + dt >= tx - 1e-9
             for core in (ekf, lsq):
                 core.step(t, dt)
             t += dt
-            if reached and bid <= 4:
-                expected_ranges[valid, bid - 1] = np.array(rng_value)[valid]
-            for name in ("ranges", "beacons", "last_seq", "slot_time"):
-                np.testing.assert_array_equal(getattr(ekf, name), getattr(lsq, name), err_msg=name)
-            np.testing.assert_array_equal(ekf.ranges, expected_ranges)
-    assert ekf.last_seq.tolist() == [4, 4]
-    assert ekf.slot_time.tolist() == [4.6, 4.6]  # the packet's epoch, not the step end
+            if reached:
+                expected_seq[:] = seq
+                if bid <= 4:
+                    expected_ranges[valid, bid - 1] = np.array(rng_value)[valid]
+                    expected_beacons[valid, 3 * (bid - 1):3 * bid] = beacons[bid - 1]
+                    expected_heard[valid, bid - 1] = 1.0
+            e, s = ekf.state, lsq.state
+            for name in ("ranges", "beacons", "heard", "last_seq", "slot_time"):
+                np.testing.assert_array_equal(e[name], s[name], err_msg=name)
+            np.testing.assert_array_equal(e["ranges"], expected_ranges)
+            np.testing.assert_array_equal(e["beacons"], expected_beacons)
+            np.testing.assert_array_equal(e["heard"], expected_heard)
+            np.testing.assert_array_equal(e["last_seq"][:, 0], expected_seq)
+    assert ekf.state["slot_time"][:, 0].tolist() == [4.6, 4.6]  # the packet's epoch, not the step end
     assert lsq.outputs["instr_valid"].tolist() == [True, False]  # replicate 1 lost beacon 2: two ranges
-
+    assert ekf.outputs["instr_valid"].tolist() == [True, False]

@@ -1,53 +1,68 @@
-"""Tests of the receiver: casadi range Jacobian, EKF, multilateration and the core's timing.
+"""Tests of the EKF receiver: casadi range model, EKF expressions, multilateration, compiled receiver.
 
-Every reference value is computed independently in plain numpy in this file
-(finite differences, the textbook Kalman equations, hand-built geometry).
+The casadi expressions (:mod:`models.receiver.measurement`, ``ekf``,
+``multilateration``) are evaluated directly through casadi Functions; the
+compiled receiver is stepped through :class:`tests.helpers.Core`. Every
+reference is computed independently in this file: central finite
+differences, a textbook numpy EKF (explicit inverse of S, only the available
+rows), numpy's Cholesky and solvers, a numpy Levenberg-Marquardt,
+``scipy.optimize.least_squares`` and hand-worked geometry.
 """
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
 
-from models.receiver.core import ReceiverCore
-from models.receiver.ekf import ExtendedKalmanFilter
-from models.receiver.jacobian import range_and_jacobian
-from models.receiver.multilateration import multilaterate
+from models.receiver import Receiver, position_range_function, range_function
+from models.receiver import ekf
+from models.receiver import multilateration as ml
+from tests.helpers import Core
 
-POS = [0, 2, 4]  # position columns of the state [x, vx, y, vy, z, vz]
+POS = [0, 2, 4]  # position entries of the state [x, vx, y, vy, z, vz]
+STATE = ("x", "vx", "y", "vy", "z", "vz")
 
 
 # ----------------------------------------------------------------------------
-# Independent reference implementations
+# Independent references and helpers
 # ----------------------------------------------------------------------------
 
-def np_range(state: np.ndarray, beacon: np.ndarray) -> float:
-    """Range from one 6-state to one beacon, in plain numpy."""
-    p = np.array([state[0], state[2], state[4]])
-    return float(np.sqrt(np.sum((p - beacon) ** 2)))
+def casadi_function(builder, *shapes):
+    """A casadi Function of ``builder(*SX symbols)`` (a tuple of outputs or one output)."""
+    syms = [ca.SX.sym(f"a{k}", *shape) for k, shape in enumerate(shapes)]
+    out = builder(*syms)
+    out = list(out) if isinstance(out, (tuple, list)) else [out]
+    return ca.Function("under_test", syms, [ca.densify(ca.SX(o)) for o in out])
 
 
-def ref_phi(dt: float) -> np.ndarray:
-    block = np.array([[1.0, dt], [0.0, 1.0]])
-    phi = np.zeros((6, 6))
+def evaluate(f, *args):
+    return [np.array(v) for v in f.call([ca.DM(np.asarray(a, float)) for a in args])]
+
+
+def np_range(state, beacon):
+    return float(np.linalg.norm(np.asarray(state)[POS] - beacon))
+
+
+def ref_phi(dt):
+    phi = np.eye(6)
     for a in range(3):
-        phi[2 * a:2 * a + 2, 2 * a:2 * a + 2] = block
+        phi[2 * a, 2 * a + 1] = dt
     return phi
 
 
-def ref_q(dt: float, qh: float, qv: float) -> np.ndarray:
+def ref_q(dt, qh, qv):
     q = np.zeros((6, 6))
     for a, dens in enumerate((qh, qh, qv)):
-        q[2 * a:2 * a + 2, 2 * a:2 * a + 2] = dens * np.array(
-            [[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        q[2 * a:2 * a + 2, 2 * a:2 * a + 2] = dens * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
     return q
 
 
 def ref_update(x, P, ranges, beacons, depth, sr, sd):
-    """Plain EKF update of one replicate using only the available measurements.
+    """Textbook EKF update with only the available ranges (NaN: no row at all) and the depth.
 
-    ``ranges`` (n,) with NaN = missing (the row is removed entirely), ``depth``
-    a float (NaN = missing). Returns x, P (Joseph form) and NIS.
+    Returns x, P (Joseph form) and the NIS ``yᵀ S⁻¹ y`` (explicit inverse).
     """
     p = x[POS]
     rows, z, hx, rvar = [], [], [], []
@@ -62,21 +77,17 @@ def ref_update(x, P, ranges, beacons, depth, sr, sd):
         z.append(r)
         hx.append(rho)
         rvar.append(sr**2)
-    if np.isfinite(depth):
-        rows.append(np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0]))
-        z.append(depth)
-        hx.append(x[4])
-        rvar.append(sd**2)
-    H = np.array(rows)
-    R = np.diag(rvar)
+    rows.append(np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0]))
+    z.append(depth)
+    hx.append(x[4])
+    rvar.append(sd**2)
+    H, R = np.array(rows), np.diag(rvar)
     y = np.array(z) - np.array(hx)
     S = H @ P @ H.T + R
     Sinv = np.linalg.inv(S)
     K = P @ H.T @ Sinv
-    x_new = x + K @ y
     A = np.eye(6) - K @ H
-    P_new = A @ P @ A.T + K @ R @ K.T
-    return x_new, P_new, float(y @ Sinv @ y)
+    return x + K @ y, A @ P @ A.T + K @ R @ K.T, float(y @ Sinv @ y)
 
 
 def cross(L=1.0, h=1.0):
@@ -89,228 +100,469 @@ def random_spd(rng, n=6, scale=1.0):
     return scale * (A @ A.T / n + 0.5 * np.eye(n))
 
 
+def np_cost(p, ranges, beacons, heard, depth, wr, wd):
+    """F(p) = Σ_heard w_r (r_i − ‖p − b_i‖)² + w_d (d − p_z)², written out in numpy."""
+    total = 0.0
+    for r, b, k in zip(ranges, beacons, heard):
+        if k:
+            total += wr * (r - np.linalg.norm(p - b)) ** 2
+    return total + wd * (depth - p[2]) ** 2
+
+
+def fd_residual_jacobian(p, ranges, beacons, heard, depth, wr, wd, eps=1e-6):
+    """Jacobian of the weighted residuals sqrt(w)(‖p − b_i‖, p_z) by central differences, (m, 3)."""
+    def model(q):
+        return np.append([np.sqrt(wr) * np.linalg.norm(q - b) for b, k in zip(beacons, heard) if k], np.sqrt(wd) * q[2])
+    J = np.empty((int(np.sum(heard)) + 1, 3))
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = eps
+        J[:, k] = (model(p + e) - model(p - e)) / (2 * eps)
+    return J
+
+
+def weighted_residuals(p, ranges, beacons, depth, sr, sd):
+    """(r_i − ‖p − b_i‖)/σ_r for the finite ranges, then (d − p_z)/σ_d."""
+    have = np.isfinite(ranges)
+    rho = np.linalg.norm(p[None, :] - beacons[have], axis=1)
+    return np.append((ranges[have] - rho) / sr, (depth - p[2]) / sd)
+
+
+def scipy_fix(ranges, beacons, depth, sr, sd, start):
+    return least_squares(weighted_residuals, start, args=(ranges, beacons, depth, sr, sd), method="lm",
+                         xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=10000).x
+
+
+def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True):
+    """Receiver inputs of one packet; values are scalars or arrays of shape (B,)."""
+    beacon = np.asarray(beacon, dtype=float)
+    return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time, range=range_value,
+                beacon_x=beacon[..., 0], beacon_y=beacon[..., 1], beacon_z=beacon[..., 2], depth=depth)
+
+
+def est(out):
+    """The (B, 6) estimated state from the outputs, in state order."""
+    return np.column_stack([out[f"est_{n}"] for n in STATE])
+
+
+def instr(out):
+    return np.column_stack([out[f"instr_{a}"] for a in "xyz"])
+
+
+def covariance(core, b=0):
+    """The receiver's 6 × 6 covariance of replicate b (the state block is column-major)."""
+    return core.state["P"][b].reshape(6, 6, order="F")
+
+
 # ----------------------------------------------------------------------------
-# casadi range Jacobian
+# casadi range model
 # ----------------------------------------------------------------------------
 
-def test_range_and_jacobian_match_numpy_and_central_differences():
+def test_range_function_matches_numpy_and_central_differences():
     rng = np.random.default_rng(12345)
-    B, n = 7, 4
-    states = rng.normal(scale=10.0, size=(B, 6))
-    beacons = rng.normal(scale=3.0, size=(B, n, 3))
-    h, H = range_and_jacobian(states, beacons)
-    assert h.shape == (B, n) and H.shape == (B, n, 6)
-
+    f, fp = range_function(), position_range_function()
     eps = 1e-6
-    for b in range(B):
-        for i in range(n):
-            assert h[b, i] == pytest.approx(np.linalg.norm(states[b, POS] - beacons[b, i]), rel=1e-12)
-            fd = np.empty(6)
-            for k in range(6):
-                e = np.zeros(6)
-                e[k] = eps
-                fd[k] = (np_range(states[b] + e, beacons[b, i]) - np_range(states[b] - e, beacons[b, i])) / (2 * eps)
-            np.testing.assert_allclose(H[b, i], fd, atol=1e-6, rtol=0)
-            # velocity columns are exactly zero, the position part is a unit vector
-            assert np.all(H[b, i, [1, 3, 5]] == 0.0)
-            assert np.linalg.norm(H[b, i, POS]) == pytest.approx(1.0, abs=1e-12)
+    for _ in range(20):
+        state = rng.normal(scale=10.0, size=6)
+        beacon = rng.normal(scale=3.0, size=3)
+        h, H = (np.array(v).ravel() for v in f(state, beacon))
+        assert h[0] == pytest.approx(np.linalg.norm(state[POS] - beacon), rel=1e-14)
+        fd = np.array([(np_range(state + e, beacon) - np_range(state - e, beacon)) / (2 * eps)
+                       for e in np.eye(6) * eps])
+        np.testing.assert_allclose(H, fd, atol=1e-8, rtol=0)
+        assert np.all(H[[1, 3, 5]] == 0.0)  # velocities do not enter a range
+        assert np.linalg.norm(H[POS]) == pytest.approx(1.0, abs=1e-14)
+        # the position form is the same model in position coordinates
+        hp, Hp = (np.array(v).ravel() for v in fp(state[POS], beacon))
+        assert hp[0] == h[0]
+        np.testing.assert_array_equal(Hp, H[POS])
 
 
-def test_range_and_jacobian_single_beacon_batch_ordering():
-    """Different beacons per replicate are not mixed up by the flattening."""
-    states = np.array([[3.0, 9.0, 4.0, 9.0, 0.0, 9.0], [0.0, 0.0, 0.0, 0.0, 12.0, 0.0]])
-    beacons = np.array([[[0.0, 0.0, 0.0]], [[0.0, 0.0, 7.0]]])
-    h, H = range_and_jacobian(states, beacons)
-    np.testing.assert_allclose(h, [[5.0], [5.0]], rtol=1e-14)
-    np.testing.assert_allclose(H[0, 0], [0.6, 0, 0.8, 0, 0, 0], atol=1e-14)
-    np.testing.assert_allclose(H[1, 0], [0, 0, 0, 0, 1.0, 0], atol=1e-14)
+def test_range_function_hand_worked_and_batched_without_mixing():
+    """A 3-4-5 triangle and a vertical range; two replicates through casadi's map keep their beacons."""
+    states = np.array([[3.0, 9.0, 4.0, 9.0, 0.0, 9.0], [0.0, 0.0, 0.0, 0.0, 12.0, 0.0]]).T
+    beacons = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 7.0]]).T
+    h, H = (np.array(v) for v in range_function().map(2)(states, beacons))
+    np.testing.assert_allclose(h, [[5.0, 5.0]], rtol=1e-15)
+    np.testing.assert_allclose(H[:, 0], [0.6, 0, 0.8, 0, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(H[:, 1], [0, 0, 0, 0, 1.0, 0], atol=1e-15)
 
 
 # ----------------------------------------------------------------------------
-# EKF
+# EKF expressions
 # ----------------------------------------------------------------------------
 
 EKF_PARAMS = dict(q_horizontal=0.03, q_vertical=0.004, sigma_range=0.15, sigma_depth=0.02)
 
 
-def _ekf_case(seed=7, B=3):
+def _ekf_case(seed=7):
     rng = np.random.default_rng(seed)
-    x0 = np.column_stack([
-        rng.uniform(5, 15, B), rng.normal(0, 0.5, B),
-        rng.uniform(-10, 10, B), rng.normal(0, 0.5, B),
-        rng.uniform(3, 8, B), rng.normal(0, 0.1, B)])
+    x0 = np.array([rng.uniform(5, 15), rng.normal(0, 0.5), rng.uniform(-10, 10), rng.normal(0, 0.5),
+                   rng.uniform(3, 8), rng.normal(0, 0.1)])
     P0 = random_spd(rng, scale=0.5)
-    beacons = cross(1.0, 1.0)[None] + rng.normal(scale=0.05, size=(B, 4, 3))
-    truth = x0[:, POS] + rng.normal(scale=0.7, size=(B, 3))
-    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1) + rng.normal(scale=0.15, size=(B, 4))
-    depth = truth[:, 2] + rng.normal(scale=0.02, size=B)
+    beacons = cross(1.0, 1.0) + rng.normal(scale=0.05, size=(4, 3))
+    truth = x0[POS] + rng.normal(scale=0.7, size=3)
+    ranges = np.linalg.norm(truth - beacons, axis=-1) + rng.normal(scale=0.15, size=4)
+    depth = truth[2] + rng.normal(scale=0.02)
     return x0, P0, beacons, ranges, depth
 
 
-def test_ekf_predict_matches_numpy():
+def _predict_function():
+    return casadi_function(lambda x, P, dt, qh, qv: ekf.predict(x, P, dt, qh, qv), (6, 1), (6, 6), (1, 1), (1, 1),
+                           (1, 1))
+
+
+def _update_function(n):
+    return casadi_function(lambda x, P, r, b, heard, d, sr, sd: ekf.update(x, P, r, b, heard, d, sr, sd),
+                           (6, 1), (6, 6), (n, 1), (3 * n, 1), (n, 1), (1, 1), (1, 1), (1, 1))
+
+
+def test_predict_matches_numpy():
     x0, P0, *_ = _ekf_case()
-    ekf = ExtendedKalmanFilter(x0, P0, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"],
-                               EKF_PARAMS["sigma_range"], EKF_PARAMS["sigma_depth"])
+    qh, qv = EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"]
     dt = 0.7
-    ekf.predict(dt)
-    phi, Q = ref_phi(dt), ref_q(dt, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"])
-    for b in range(x0.shape[0]):
-        np.testing.assert_allclose(ekf.x[b], phi @ x0[b], rtol=1e-13, atol=1e-13)
-        np.testing.assert_allclose(ekf.P[b], phi @ P0 @ phi.T + Q, rtol=1e-12, atol=1e-14)
-    # hand check of one element: position x moves by v dt
-    assert ekf.x[0, 0] == pytest.approx(x0[0, 0] + dt * x0[0, 1], rel=1e-14)
+    x, P = evaluate(_predict_function(), x0, P0, dt, qh, qv)
+    np.testing.assert_allclose(x.ravel(), ref_phi(dt) @ x0, rtol=1e-15, atol=1e-15)
+    np.testing.assert_allclose(P, ref_phi(dt) @ P0 @ ref_phi(dt).T + ref_q(dt, qh, qv), rtol=1e-14, atol=1e-15)
+    # hand checks: position x moves by v dt; Q of the Down axis for dt = 2 s is q_v [[8/3, 2], [2, 2]]
+    assert x[0, 0] == pytest.approx(x0[0] + dt * x0[1], rel=1e-15)
+    Q = np.array(ca.DM(ekf.process_noise(2.0, qh, qv)))
+    np.testing.assert_allclose(Q[4:, 4:], qv * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
+    np.testing.assert_allclose(Q[:2, :2], qh * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
+    assert np.all(Q[:2, 2:] == 0.0) and np.all(Q[2:4, 4:] == 0.0)
+    np.testing.assert_array_equal(np.array(ca.DM(ekf.transition(2.0))), ref_phi(2.0))
 
 
-def test_ekf_predict_update_matches_numpy():
+def test_cholesky_and_solve_spd_match_numpy():
+    rng = np.random.default_rng(4)
+    S = random_spd(rng, n=5, scale=3.0)
+    B = rng.normal(size=(5, 3))
+    chol = casadi_function(ekf.cholesky, (5, 5))
+    solve = casadi_function(ekf.solve_spd, (5, 5), (5, 3))
+    (L,) = evaluate(chol, S)
+    np.testing.assert_allclose(L, np.linalg.cholesky(S), rtol=1e-13, atol=1e-15)
+    (X,) = evaluate(solve, S, B)
+    np.testing.assert_allclose(X, np.linalg.solve(S, B), rtol=1e-12, atol=1e-14)
+
+
+def test_predict_update_matches_textbook_numpy_ekf():
     x0, P0, beacons, ranges, depth = _ekf_case()
     sr, sd = EKF_PARAMS["sigma_range"], EKF_PARAMS["sigma_depth"]
-    ekf = ExtendedKalmanFilter(x0, P0, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"], sr, sd)
     dt = 1.0
-    ekf.predict(dt)
-    ekf.update(ranges, beacons, depth)
-
-    phi, Q = ref_phi(dt), ref_q(dt, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"])
-    for b in range(x0.shape[0]):
-        xp, Pp = phi @ x0[b], phi @ P0 @ phi.T + Q
-        x_ref, P_ref, nis_ref = ref_update(xp, Pp, ranges[b], beacons[b], depth[b], sr, sd)
-        np.testing.assert_allclose(ekf.x[b], x_ref, rtol=1e-10, atol=1e-10)
-        np.testing.assert_allclose(ekf.P[b], P_ref, rtol=1e-8, atol=1e-12)
-        assert ekf.nis[b] == pytest.approx(nis_ref, rel=1e-9)
-        # the update actually moved the state (the test would catch a no-op)
-        assert np.linalg.norm(ekf.x[b] - xp) > 1e-3
-    # the updated covariance is symmetric positive definite
-    assert np.allclose(ekf.P, np.swapaxes(ekf.P, 1, 2), atol=1e-14)
-    assert np.all(np.linalg.eigvalsh(ekf.P) > 0)
+    xp, Pp = (v.ravel() if v.shape[1] == 1 else v for v in evaluate(
+        _predict_function(), x0, P0, dt, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"]))
+    x, P, nis = evaluate(_update_function(4), xp, Pp, ranges, beacons.ravel(), np.ones(4), depth, sr, sd)
+    x = x.ravel()
+    x_pred = ref_phi(dt) @ x0
+    P_pred = ref_phi(dt) @ P0 @ ref_phi(dt).T + ref_q(dt, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"])
+    x_ref, P_ref, nis_ref = ref_update(x_pred, P_pred, ranges, beacons, depth, sr, sd)
+    np.testing.assert_allclose(x, x_ref, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-10, atol=1e-14)
+    assert nis[0, 0] == pytest.approx(nis_ref, rel=1e-10)
+    assert np.linalg.norm(x - x_pred) > 1e-3  # the update moved the state
+    np.testing.assert_allclose(P, P.T, atol=1e-15)
+    assert np.all(np.linalg.eigvalsh(P) > 0)
 
 
-@pytest.mark.parametrize("missing", [0, 1, 2, 3, "depth"])
-def test_ekf_missing_measurement_equals_update_without_that_row(missing):
-    x0, P0, beacons, ranges, depth = _ekf_case(seed=21, B=2)
-    ranges = ranges.copy()
-    depth = depth.copy()
-    if missing == "depth":
-        depth[0] = np.nan
-    else:
-        ranges[0, missing] = np.nan
-        beacons = beacons.copy()
-        beacons[0, missing] = np.nan  # a beacon never heard has no position either
+@pytest.mark.parametrize("missing", [(0,), (1,), (2,), (3,), (0, 2), (0, 1, 2, 3)])
+def test_unheard_beacons_are_left_out_exactly(missing):
+    """An unheard beacon (placeholder range 0 at (0, 0, 0)) changes nothing: the update equals the
+    textbook one without that row, and bit for bit the update built for the heard beacons only."""
+    x0, P0, beacons, ranges, depth = _ekf_case(seed=21)
     sr, sd = EKF_PARAMS["sigma_range"], EKF_PARAMS["sigma_depth"]
-    ekf = ExtendedKalmanFilter(x0, P0, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"], sr, sd)
-    ekf.predict(0.5)
-    ekf.update(ranges, beacons, depth)
-    phi, Q = ref_phi(0.5), ref_q(0.5, EKF_PARAMS["q_horizontal"], EKF_PARAMS["q_vertical"])
-    for b in range(2):
-        xp, Pp = phi @ x0[b], phi @ P0 @ phi.T + Q
-        x_ref, P_ref, nis_ref = ref_update(xp, Pp, ranges[b], beacons[b], depth[b], sr, sd)
-        np.testing.assert_allclose(ekf.x[b], x_ref, rtol=1e-10, atol=1e-10)
-        np.testing.assert_allclose(ekf.P[b], P_ref, rtol=1e-8, atol=1e-12)
-        assert ekf.nis[b] == pytest.approx(nis_ref, rel=1e-9)
-    assert np.all(np.isfinite(ekf.x)) and np.all(np.isfinite(ekf.P))
+    heard = np.ones(4)
+    heard[list(missing)] = 0.0
+    held_r = np.where(heard > 0, ranges, 0.0)
+    held_b = np.where(heard[:, None] > 0, beacons, 0.0)
+    x, P, nis = evaluate(_update_function(4), x0, P0, held_r, held_b.ravel(), heard, depth, sr, sd)
+    x_ref, P_ref, nis_ref = ref_update(x0, P0, np.where(heard > 0, ranges, np.nan), beacons, depth, sr, sd)
+    np.testing.assert_allclose(x.ravel(), x_ref, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-10, atol=1e-14)
+    assert nis[0, 0] == pytest.approx(nis_ref, rel=1e-10)
+    keep = heard > 0
+    m = int(keep.sum())
+    if m:
+        x_m, P_m, nis_m = evaluate(_update_function(m), x0, P0, ranges[keep], beacons[keep].ravel(), np.ones(m),
+                                   depth, sr, sd)
+        np.testing.assert_array_equal(x, x_m)
+        np.testing.assert_array_equal(P, P_m)
+        np.testing.assert_array_equal(nis, nis_m)
+
+
+def test_unheard_beacon_at_the_state_position_gives_no_nan():
+    """The placeholder (0, 0, 0) of an unheard beacon coinciding with the estimate (a 0/0 Jacobian)."""
+    _, P0, beacons, ranges, depth = _ekf_case(seed=3)
+    x0 = np.array([0.0, 0.2, 0.0, -0.1, 0.0, 0.0])
+    heard = np.array([1.0, 1.0, 0.0, 1.0])
+    sr, sd = EKF_PARAMS["sigma_range"], EKF_PARAMS["sigma_depth"]
+    held_b = np.where(heard[:, None] > 0, beacons, 0.0)
+    x, P, nis = evaluate(_update_function(4), x0, P0, ranges * heard, held_b.ravel(), heard, depth, sr, sd)
+    x_ref, P_ref, nis_ref = ref_update(x0, P0, np.where(heard > 0, ranges, np.nan), beacons, depth, sr, sd)
+    np.testing.assert_allclose(x.ravel(), x_ref, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-10, atol=1e-14)
+    assert nis[0, 0] == pytest.approx(nis_ref, rel=1e-10)
 
 
 # ----------------------------------------------------------------------------
-# Multilateration
+# Multilateration expressions
 # ----------------------------------------------------------------------------
 
-def test_multilaterate_recovers_true_position_from_noiseless_ranges():
-    truth = np.array([[8.0, -3.0, 5.0], [-12.0, 6.5, 9.0], [0.5, 15.0, 3.0]])
-    B = truth.shape[0]
-    beacons = np.broadcast_to(cross(1.0, 1.0), (B, 4, 3)).copy()
-    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1)
-    depth = truth[:, 2].copy()
-    guess = truth + np.array([[1.5, -1.0, 1.0], [-2.0, 2.0, -1.0], [1.0, 1.0, 1.0]])
-    fix, valid = multilaterate(ranges, beacons, depth, guess, 0.1, 0.01)
-    assert valid.tolist() == [True] * B
-    np.testing.assert_allclose(fix, truth, atol=1e-6)
+def _multilateration_case(seed, n=4, sr=0.3, sd=0.05):
+    rng = np.random.default_rng(seed)
+    truth = np.array([rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(4, 20)])
+    beacons = cross(20.0, 1.0) + rng.normal(scale=0.5, size=(4, 3))
+    ranges = np.linalg.norm(truth - beacons, axis=1) + sr * rng.normal(size=4)
+    depth = truth[2] + sd * rng.normal()
+    return truth, beacons[:n], ranges[:n], depth
 
 
-def test_multilaterate_three_ranges_enough_two_not():
-    truth = np.array([[6.0, 4.0, 7.0], [6.0, 4.0, 7.0], [6.0, 4.0, 7.0]])
-    beacons = np.broadcast_to(cross(2.0, 1.0), (3, 4, 3)).copy()
-    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1)
-    ranges[0, 3] = np.nan                 # 3 ranges: valid
-    ranges[1, [1, 3]] = np.nan            # 2 ranges: invalid
-    ranges[2, :] = np.nan                 # none: invalid
-    fix, valid = multilaterate(ranges, beacons, truth[:, 2].copy(), truth + 1.0, 0.1, 0.01)
-    assert valid.tolist() == [True, False, False]
-    np.testing.assert_allclose(fix[0], truth[0], atol=1e-6)
-    assert np.all(np.isnan(fix[1])) and np.all(np.isnan(fix[2]))
+def _normal_function(n):
+    return casadi_function(lambda p, r, b, k, d, wr, wd: ml.normal_equations(p, r, b, k, d, wr, wd),
+                           (3, 1), (n, 1), (3 * n, 1), (n, 1), (1, 1), (1, 1), (1, 1))
 
 
-def test_multilaterate_nan_depth_is_invalid():
-    truth = np.array([[6.0, 4.0, 7.0]])
-    beacons = cross()[None]
-    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1)
-    fix, valid = multilaterate(ranges, beacons, np.array([np.nan]), truth, 0.1, 0.01)
-    assert not valid[0] and np.all(np.isnan(fix))
+def test_weights_are_inverse_variances_with_a_one_millimetre_floor():
+    f = casadi_function(lambda a, b: ml.weights(a, b), (1, 1), (1, 1))
+    wr, wd = evaluate(f, 0.1, 1e-5)
+    assert wr[0, 0] == pytest.approx(100.0, rel=1e-15) and wd[0, 0] == pytest.approx(1e6, rel=1e-15)
+
+
+@pytest.mark.parametrize("heard", [(1, 1, 1, 1), (1, 0, 1, 1)])
+def test_normal_equations_match_finite_differences(heard):
+    truth, beacons, ranges, depth = _multilateration_case(2)
+    heard = np.array(heard, float)
+    wr, wd = 1 / 0.3**2, 1 / 0.05**2
+    point = truth + np.array([1.5, -2.0, 0.7])
+    held_b = np.where(heard[:, None] > 0, beacons, 0.0)
+    A, g, cost = evaluate(_normal_function(4), point, ranges * heard, held_b.ravel(), heard, depth, wr, wd)
+    args = (ranges, beacons, heard, depth, wr, wd)
+    assert cost[0, 0] == pytest.approx(np_cost(point, *args), rel=1e-13)
+    grad = np.array([(np_cost(point + e, *args) - np_cost(point - e, *args)) / 2e-6 for e in np.eye(3) * 1e-6])
+    np.testing.assert_allclose(g.ravel(), -0.5 * grad, rtol=1e-6, atol=1e-6)  # g = JᵀW res = −∇F / 2
+    J = fd_residual_jacobian(point, *args)
+    np.testing.assert_allclose(A, J.T @ J, rtol=1e-7, atol=1e-6)
+
+
+def test_solve_damped3_matches_numpy_solve():
+    rng = np.random.default_rng(8)
+    A = random_spd(rng, n=3, scale=50.0)
+    g = rng.normal(size=3)
+    f = casadi_function(ml.solve_damped3, (3, 3), (3, 1), (1, 1))
+    for mu in (0.0, 1e-3, 10.0):
+        (step,) = evaluate(f, A, g, mu)
+        ref = np.linalg.solve(A + mu * np.diag(np.diag(A)) + ml.EPS * np.eye(3), g)
+        np.testing.assert_allclose(step.ravel(), ref, rtol=1e-12)
+
+
+def test_linear_fix_is_exact_for_consistent_ranges_and_the_least_squares_solution_otherwise():
+    f = casadi_function(ml.linear_fix, (4, 1), (12, 1), (4, 1), (1, 1))
+    rng = np.random.default_rng(5)
+    beacons = cross(20.0, 1.0) + rng.normal(scale=[0.5, 0.5, 2.0], size=(4, 3))  # beacons at different depths
+    truth = np.array([7.0, -11.0, 9.0])
+    exact = np.linalg.norm(truth - beacons, axis=1)
+    for heard in ((1, 1, 1, 1), (1, 1, 0, 1)):
+        heard = np.array(heard, float)
+        held_b = np.where(heard[:, None] > 0, beacons, 0.0)
+        (p,) = evaluate(f, exact * heard, held_b.ravel(), heard, truth[2])
+        np.testing.assert_allclose(p.ravel(), truth, rtol=0, atol=1e-9)
+    # noisy ranges: the least-squares solution of ‖p − b_i‖² = r_i² (p_z = d) differenced about the mean
+    noisy = exact + 0.3 * rng.normal(size=4)
+    (p,) = evaluate(f, noisy, beacons.ravel(), np.ones(4), truth[2])
+    rows = 2.0 * (beacons[:, :2] - beacons[:, :2].mean(axis=0))
+    c = (np.sum(beacons**2, axis=1) - noisy**2 - 2.0 * beacons[:, 2] * truth[2])
+    ref = np.linalg.lstsq(rows, c - c.mean(), rcond=None)[0]
+    np.testing.assert_allclose(p.ravel(), [*ref, truth[2]], rtol=1e-10, atol=1e-10)
+    assert np.linalg.norm(p.ravel()[:2] - truth[:2]) > 1e-3  # the noise moved it
+    # collinear beacons: no horizontal solution, (0, 0, d)
+    line = np.column_stack([np.linspace(-3, 3, 4), np.zeros(4), np.ones(4)])
+    (p,) = evaluate(f, np.linalg.norm(truth - line, axis=1), line.ravel(), np.ones(4), truth[2])
+    np.testing.assert_array_equal(p.ravel(), [0.0, 0.0, truth[2]])
+
+
+def test_fit_statistics_match_numpy():
+    truth, beacons, ranges, depth = _multilateration_case(6)
+    wr, wd = 1 / 0.3**2, 1 / 0.05**2
+    f = casadi_function(lambda p, r, b, k, d, a, c: ml.fit_statistics(p, r, b, k, d, a, c),
+                        (3, 1), (4, 1), (12, 1), (4, 1), (1, 1), (1, 1), (1, 1))
+    heard = np.ones(4)
+    rss, spread = evaluate(f, truth, ranges, beacons.ravel(), heard, depth, wr, wd)
+    assert rss[0, 0] == pytest.approx(np_cost(truth, ranges, beacons, heard, depth, wr, wd), rel=1e-13)
+    J = fd_residual_jacobian(truth, ranges, beacons, heard, depth, wr, wd)
+    assert spread[0, 0] == pytest.approx(np.sqrt(np.trace(np.linalg.inv(J.T @ J))), rel=1e-6)
+    # nothing heard: JᵀWJ = diag(0, 0, w_d) is singular, the spread is reported as 0
+    rss, spread = evaluate(f, truth, np.zeros(4), np.zeros(12), np.zeros(4), depth, wr, wd)
+    assert spread[0, 0] == 0.0 and rss[0, 0] == pytest.approx(wd * (depth - truth[2]) ** 2, rel=1e-13)
+
+
+def _lm_functions(n, iterations, tolerance):
+    start = casadi_function(
+        lambda guess, r, b, k, d, wr, wd, valid: tuple(ml.lm_start(guess, r, b, k, d, wr, wd, valid)[key] for key in
+                                                       ("lm_point", "lm_cost", "lm_mu", "lm_iter", "lm_active")),
+        (3, 1), (n, 1), (3 * n, 1), (n, 1), (1, 1), (1, 1), (1, 1), (1, 1))
+
+    def iteration(point, cost, mu, it, r, b, k, d, wr, wd):
+        out = ml.lm_iteration({"lm_point": point, "lm_cost": cost, "lm_mu": mu, "lm_iter": it}, r, b, k, d, wr, wd,
+                              iterations, tolerance)
+        return tuple(out[key] for key in ("lm_point", "lm_cost", "lm_mu", "lm_iter", "lm_active"))
+
+    step = casadi_function(iteration, (3, 1), (1, 1), (1, 1), (1, 1), (n, 1), (3 * n, 1), (n, 1), (1, 1), (1, 1),
+                           (1, 1))
+    return start, step
+
+
+def np_lm_iteration(point, cost, mu, ranges, beacons, heard, depth, wr, wd):
+    """A textbook Levenberg-Marquardt iteration with Marquardt's diagonal scaling (numpy)."""
+    A, g = np.zeros((3, 3)), np.zeros(3)
+    for r, b, k in zip(ranges, beacons, heard):
+        if k:
+            u = (point - b) / np.linalg.norm(point - b)
+            A += wr * np.outer(u, u)
+            g += wr * u * (r - np.linalg.norm(point - b))
+    A[2, 2] += wd
+    g[2] += wd * (depth - point[2])
+    step = np.linalg.solve(A + mu * np.diag(np.diag(A)) + ml.EPS * np.eye(3), g)
+    trial_cost = np_cost(point + step, ranges, beacons, heard, depth, wr, wd)
+    better = trial_cost < cost
+    return (point + step if better else point), min(trial_cost, cost), (mu * 0.1 if better else mu * 10.0), \
+        float(step @ A @ step), better, trial_cost
+
+
+def _lm_run(start_f, step_f, guess, ranges, beacons, depth, wr, wd, cap, via_start=False):
+    """Run the casadi iteration and a numpy LM side by side; (point, iterations, clear rejections)."""
+    heard = np.ones(len(ranges))
+    args = (ranges, beacons.ravel(), heard, depth, wr, wd)
+    if via_start:
+        point, cost, mu, it, active = evaluate(start_f, guess, *args, 1.0)
+        assert active[0, 0] == 1.0 and mu[0, 0] == 1e-3 and it[0, 0] == 0.0
+    else:
+        cost = np.array([[np_cost(np.asarray(guess, float), ranges, beacons, heard, depth, wr, wd)]])
+        point, mu, it, active = np.asarray(guess, float), np.array([[1e-3]]), np.array([[0.0]]), np.array([[1.0]])
+    point = point.ravel()
+    rejected = 0
+    while active[0, 0]:
+        ref_point, ref_cost, ref_mu, size, better, trial = np_lm_iteration(point, cost[0, 0], mu[0, 0], ranges,
+                                                                           beacons, heard, depth, wr, wd)
+        new_point, cost, mu, it, active = evaluate(step_f, point, cost, mu, it, *args)
+        new_point = new_point.ravel()
+        if abs(trial - ref_cost) > 1e-9 * ref_cost or not better:  # a clear decision, not a round-off tie
+            assert mu[0, 0] == pytest.approx(ref_mu, rel=1e-12)
+            rejected += trial > 1.000001 * cost[0, 0]
+        np.testing.assert_allclose(new_point, ref_point, rtol=0, atol=1e-8)
+        assert active[0, 0] == float(size > 1e-12 and it[0, 0] < cap)
+        point = new_point
+    return point, int(it[0, 0]), rejected
+
+
+def test_lm_iteration_follows_a_numpy_levenberg_marquardt_and_converges_to_scipy():
+    """Short baseline (the ring valley, where some Gauss-Newton steps overshoot and are rejected) and a
+    20 m cross from a poor start: the casadi iteration takes the numpy LM's steps and damping decisions;
+    stopped by its tolerance (1e-6 σ) it lies within 1e-6 σ (Mahalanobis) of scipy's converged fit."""
+    cap = 50
+    start_f, step_f = _lm_functions(4, cap, 1e-6)
+    wr, wd = 1 / 0.3**2, 1 / 0.05**2
+    rejected = converged = 0
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        truth = np.array([rng.uniform(10, 30), rng.uniform(-10, 10), rng.uniform(4, 10)])
+        beacons = cross(1.5, 1.0) + rng.normal(scale=0.05, size=(4, 3))
+        ranges = np.linalg.norm(truth - beacons, axis=1) + 0.3 * rng.normal(size=4)
+        depth = truth[2] + 0.05 * rng.normal()
+        ref = scipy_fix(ranges, beacons, depth, 0.3, 0.05, truth)
+        J = -fd_residual_jacobian(ref, ranges, beacons, np.ones(4), depth, wr, wd)
+        for guess in ([0.0, 25.0, depth], [5.0, 5.0, depth]):
+            point, iterations, clear = _lm_run(start_f, step_f, guess, ranges, beacons, depth, wr, wd, cap)
+            rejected += clear
+            if iterations < cap:
+                converged += 1
+                d = point - ref
+                assert np.sqrt(d @ J.T @ J @ d) <= 1e-6, (seed, guess)
+    assert rejected > 10 and converged >= 12
+    for seed in range(4):  # a 20 m cross: converged to 1e-6 m, from the start rule
+        truth, beacons, ranges, depth = _multilateration_case(seed)
+        point, iterations, _ = _lm_run(start_f, step_f, [0.5, -0.3, 40.0], ranges, beacons, depth, wr, wd, cap,
+                                       via_start=True)
+        assert iterations < cap
+        np.testing.assert_allclose(point, scipy_fix(ranges, beacons, depth, 0.3, 0.05, truth), rtol=0, atol=1e-6)
+
+
+def test_lm_start_takes_the_guess_or_the_linear_fix_whichever_costs_less():
+    truth, beacons, ranges, depth = _multilateration_case(9, sr=0.0, sd=0.0)
+    wr, wd = 1 / 0.3**2, 1 / 0.05**2
+    start_f, _ = _lm_functions(4, 8, 1e-3)
+    args = (ranges, beacons.ravel(), np.ones(4), depth, wr, wd)
+    point, cost, *_ , active = evaluate(start_f, truth, *args, 1.0)  # the exact position: cost 0, kept
+    np.testing.assert_array_equal(point.ravel(), truth)
+    assert cost[0, 0] < 1e-20 and active[0, 0] == 1.0
+    far = np.array([200.0, -150.0, 3.0])
+    point, cost, *_, active = evaluate(start_f, far, *args, 0.0)  # far away: the linear fix (the truth here)
+    np.testing.assert_allclose(point.ravel(), truth, rtol=0, atol=1e-9)
+    assert cost[0, 0] == pytest.approx(np_cost(point.ravel(), ranges, beacons, np.ones(4), depth, wr, wd), abs=1e-12)
+    assert active[0, 0] == 0.0  # not enough ranges: no iterations follow
 
 
 # ----------------------------------------------------------------------------
-# ReceiverCore timing
+# The compiled receiver
 # ----------------------------------------------------------------------------
 
-RX = dict(sigma_range=0.2, sigma_depth=0.05, q_horizontal=0.02, q_vertical=0.002,
-          p0_position=2.0, p0_velocity=0.4,
+RX = dict(sigma_range=0.2, sigma_depth=0.05, q_horizontal=0.02, q_vertical=0.002, p0_position=2.0, p0_velocity=0.4,
           x0_x=10.0, x0_y=-4.0, x0_z=6.0, x0_vx=0.3, x0_vy=-0.2, x0_vz=0.05)
 
 
-def _x0_P0():
-    x = np.array([RX["x0_x"], RX["x0_vx"], RX["x0_y"], RX["x0_vy"], RX["x0_z"], RX["x0_vz"]])
-    P = np.diag([RX["p0_position"] ** 2, RX["p0_velocity"] ** 2] * 3)
+def _x0_P0(params=RX):
+    x = np.array([params[f"x0_{n}"] for n in STATE], dtype=float)
+    P = np.diag([params["p0_position"] ** 2, params["p0_velocity"] ** 2] * 3).astype(float)
     return x, P
 
 
-def _packet(seq, beacon_id, tx_time, rng_value, beacon, depth, valid=True):
-    return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time,
-                range=rng_value, beacon_x=beacon[0], beacon_y=beacon[1], beacon_z=beacon[2], depth=depth)
+def test_initial_outputs_are_the_prior_and_never_nan():
+    core = Core(Receiver, RX, replicates=[0, 1])
+    core.initialize(0.0)
+    out = core.outputs
+    x0, P0 = _x0_P0()
+    np.testing.assert_array_equal(est(out), np.tile(x0, (2, 1)))
+    np.testing.assert_array_equal(covariance(core), P0)
+    assert out["pos_std"][0] == pytest.approx(np.sqrt(3.0) * RX["p0_position"], rel=1e-15)
+    assert out["nis"].tolist() == [0.0, 0.0] and out["instr_valid"].tolist() == [False, False]
+    np.testing.assert_array_equal(instr(out), 0.0)
 
 
-def test_receiver_core_uses_packet_only_when_step_end_reaches_tx_time():
+def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_tx_time():
     T, r = 1.0, 4
     dt = T / r
-    core = ReceiverCore(RX, replicates=[0])
+    core = Core(Receiver, RX, replicates=[0])
     core.initialize(0.0)
     x_ref, P_ref = _x0_P0()
     phi, Q = ref_phi(dt), ref_q(dt, RX["q_horizontal"], RX["q_vertical"])
     held = np.full(4, np.nan)
-    held_b = np.full((4, 3), np.nan)
     beacons = cross(1.0, 1.0)
 
     def check_no_update():
-        np.testing.assert_allclose([core.outputs[f"est_{n}"][0] for n in ("x", "vx", "y", "vy", "z", "vz")],
-                                   x_ref, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(covariance(core), P_ref, rtol=1e-12, atol=1e-15)
         assert core.outputs["pos_std"][0] == pytest.approx(np.sqrt(P_ref[0, 0] + P_ref[2, 2] + P_ref[4, 4]),
                                                            rel=1e-12)
 
-    # initial outputs: no update yet
-    check_no_update()
-    assert np.isnan(core.outputs["nis"][0]) and not core.outputs["instr_valid"][0]
-
-    packets = [  # (seq, beacon_id, range, depth); each sent at the start of a slot of length T
-        (1, 2, 12.3, 6.4),
-        (2, 3, 13.1, 6.5),
-    ]
+    packets = [(1, 2, 12.3, 6.4), (2, 3, 13.1, 6.5)]  # (seq, beacon_id, range, depth), one slot of length T each
     t = 0.0
     for seq, bid, rng_value, depth in packets:
         tx = t + T
-        core.set_inputs(_packet(seq, bid, tx, rng_value, beacons[bid - 1], depth))
+        core.set_inputs(packet(seq, bid, tx, rng_value, beacons[bid - 1], depth))
         for j in range(r):
             core.step(t, dt)
             t += dt
             x_ref, P_ref = phi @ x_ref, phi @ P_ref @ phi.T + Q
             if j < r - 1:
                 assert t < tx - 1e-9
-                check_no_update()   # packet not reached yet: a pure prediction
+                check_no_update()  # the packet's epoch not reached yet: a pure prediction
+                assert core.outputs["nis"][0] == (0.0 if seq == 1 else nis_before)
                 continue
             assert t == pytest.approx(tx)
             held[bid - 1] = rng_value
-            held_b[bid - 1] = beacons[bid - 1]
-            x_ref, P_ref, nis = ref_update(x_ref, P_ref, held, held_b, depth, RX["sigma_range"],
-                                           RX["sigma_depth"])
-            np.testing.assert_allclose([core.outputs[f"est_{n}"][0] for n in ("x", "vx", "y", "vy", "z", "vz")],
-                                       x_ref, rtol=1e-10, atol=1e-10)
-            np.testing.assert_allclose(core.ekf.P[0], P_ref, rtol=1e-8, atol=1e-12)
+            x_ref, P_ref, nis = ref_update(x_ref, P_ref, held, beacons, depth, RX["sigma_range"], RX["sigma_depth"])
+            np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-10, atol=1e-10)
+            np.testing.assert_allclose(covariance(core), P_ref, rtol=1e-8, atol=1e-12)
             assert core.outputs["nis"][0] == pytest.approx(nis, rel=1e-9)
+            assert core.state["slot_time"][0, 0] == tx and core.state["last_seq"][0, 0] == seq
         # a whole further slot with the same packet still on the inputs: no second update
         nis_before = core.outputs["nis"][0]
         for _ in range(r):
@@ -319,31 +571,170 @@ def test_receiver_core_uses_packet_only_when_step_end_reaches_tx_time():
             x_ref, P_ref = phi @ x_ref, phi @ P_ref @ phi.T + Q
             check_no_update()
             assert core.outputs["nis"][0] == nis_before
-    # two beacons heard only: no instrumentation fix
+    # two beacons heard only: no instrumentation fix, and its outputs are 0, not NaN
     assert not core.outputs["instr_valid"][0]
+    np.testing.assert_array_equal(instr(core.outputs), 0.0)
 
 
-def test_receiver_core_lost_packet_keeps_held_range_and_fix():
-    """A lost packet (valid False) stores nothing; the update re-uses the held ranges."""
+def test_lost_packet_and_unknown_beacon_keep_the_held_ranges():
+    """A lost packet (valid false, range 0) or an id outside 1…4 stores nothing, but its slot still
+    updates the filter with the held ranges and the depth (numpy reference), and the fix stays valid."""
     truth = np.array([7.0, -5.0, 6.0])
     beacons = cross(1.0, 1.0)
     true_ranges = np.linalg.norm(truth - beacons, axis=1)
     params = dict(RX, x0_x=6.5, x0_y=-4.5, x0_z=6.2, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0)
-    core = ReceiverCore(params, replicates=[0, 1])
+    core = Core(Receiver, params, replicates=[0, 1])
     core.initialize(0.0)
+    x_ref, P_ref = _x0_P0(params)
+    phi, Q = ref_phi(1.0), ref_q(1.0, RX["q_horizontal"], RX["q_vertical"])
+    held = np.full(4, np.nan)
     t = 0.0
     for k in range(4):
-        core.set_inputs(_packet(k + 1, k + 1, t + 1.0, true_ranges[k], beacons[k], truth[2]))
+        core.set_inputs(packet(k + 1, k + 1, t + 1.0, true_ranges[k], beacons[k], truth[2]))
         core.step(t, 1.0)
         t += 1.0
+        held[k] = true_ranges[k]
+        x_ref, P_ref, _ = ref_update(phi @ x_ref, phi @ P_ref @ phi.T + Q, held, beacons, truth[2],
+                                     RX["sigma_range"], RX["sigma_depth"])
     assert core.outputs["instr_valid"].tolist() == [True, True]
-    np.testing.assert_allclose(np.column_stack([core.outputs[f"instr_{a}"] for a in "xyz"]),
-                               np.tile(truth, (2, 1)), atol=1e-6)
-    np.testing.assert_allclose(core.ranges, np.tile(true_ranges, (2, 1)))
-    # replicate 0 loses the next packet of beacon 1 (range NaN); replicate 1 hears 99 m
-    core.set_inputs(dict(_packet(5, 1, t + 1.0, np.array([np.nan, 99.0]), beacons[0], truth[2]),
+    np.testing.assert_allclose(instr(core.outputs), np.tile(truth, (2, 1)), atol=1e-6)
+    np.testing.assert_allclose(core.state["ranges"], np.tile(true_ranges, (2, 1)))
+    # replicate 0 loses the next packet of beacon 1 (range 0, position 0); replicate 1 hears 99 m
+    core.set_inputs(dict(packet(5, 1, t + 1.0, np.array([0.0, 99.0]), np.array([[0.0] * 3, beacons[0]]), truth[2]),
                          packet_valid=np.array([False, True])))
     core.step(t, 1.0)
-    assert core.ranges[0, 0] == pytest.approx(true_ranges[0])
-    assert core.ranges[1, 0] == 99.0
-    assert np.isfinite(core.outputs["nis"][0])
+    t += 1.0
+    x_ref, P_ref, nis_ref = ref_update(phi @ x_ref, phi @ P_ref @ phi.T + Q, held, beacons, truth[2],
+                                       RX["sigma_range"], RX["sigma_depth"])
+    assert core.state["ranges"][0, 0] == true_ranges[0]
+    np.testing.assert_array_equal(core.state["beacons"][0, :3], beacons[0])
+    assert core.state["ranges"][1, 0] == 99.0
+    np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-10, atol=1e-10)
+    assert core.outputs["nis"][0] == pytest.approx(nis_ref, rel=1e-9)
+    assert core.outputs["instr_valid"].tolist() == [True, True]
+    np.testing.assert_allclose(instr(core.outputs)[0], truth, atol=1e-6)
+    assert np.linalg.norm(instr(core.outputs)[1] - truth) > 1.0  # the 99 m range moved replicate 1's fix
+    # ids 9 and 0: a slot each (the sequence advances, the filter updates), nothing stored
+    for seq, bid in ((6, 9), (7, 0)):
+        before = core.state
+        core.set_inputs(packet(seq, bid, t + 1.0, 3.0, beacons[1], truth[2]))
+        core.step(t, 1.0)
+        t += 1.0
+        x_ref, P_ref, nis_ref = ref_update(phi @ x_ref, phi @ P_ref @ phi.T + Q, held, beacons, truth[2],
+                                           RX["sigma_range"], RX["sigma_depth"])
+        for name in ("ranges", "beacons", "heard"):
+            np.testing.assert_array_equal(core.state[name], before[name], err_msg=name)
+        assert core.state["last_seq"][:, 0].tolist() == [seq, seq]
+        np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-10, atol=1e-10)
+        assert core.outputs["nis"][0] == pytest.approx(nis_ref, rel=1e-9)
+
+
+def test_instrumentation_fix_needs_three_ranges():
+    truth = np.array([6.0, 4.0, 7.0])
+    beacons = cross(20.0, 1.0)
+    ranges = np.linalg.norm(truth - beacons, axis=1)
+    core = Core(Receiver, dict(RX, x0_x=0.0, x0_y=0.0, x0_z=0.0, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0),
+                replicates=[0])  # the estimate sits at the unheard beacons' placeholder (0, 0, 0)
+    core.initialize(0.0)
+    for k in range(4):
+        core.set_inputs(packet(k + 1, k + 1, k + 1.0, ranges[k], beacons[k], truth[2]))
+        core.step(float(k), 1.0)
+        out = core.outputs
+        assert all(np.all(np.isfinite(v)) for v in out.values())
+        if k < 2:
+            assert not out["instr_valid"][0]
+            np.testing.assert_array_equal(instr(out), 0.0)
+        else:
+            assert out["instr_valid"][0]
+            np.testing.assert_allclose(instr(out)[0], truth, rtol=0, atol=1e-6)
+
+
+def test_instrumentation_fix_matches_scipy_within_its_stopping_tolerance():
+    """The fix stops once a step is below 1e-3 standard deviations (δᵀ JᵀWJ δ ≤ 1e-6) or after 8
+    iterations: it lies within 1e-3 σ (Mahalanobis, JᵀWJ at scipy's solution) of the converged fit."""
+    B = 24
+    rng = np.random.default_rng(17)
+    sr, sd = RX["sigma_range"], RX["sigma_depth"]
+    truth = np.column_stack([rng.uniform(-25, 25, B), rng.uniform(-25, 25, B), rng.uniform(4, 20, B)])
+    beacons = cross(20.0, 1.0)[None] + rng.normal(scale=0.5, size=(B, 4, 3))
+    ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1) + sr * rng.normal(size=(B, 4))
+    depth = truth[:, 2] + sd * rng.normal(size=B)
+    start = truth + rng.normal(scale=2.0, size=(B, 3))
+    core = Core(Receiver, RX, replicates=range(B))
+    core.values.update(x0_x=start[:, 0], x0_y=start[:, 1], x0_z=start[:, 2])  # per-replicate FMU values
+    core.initialize(0.0)
+    lost = rng.uniform(size=B) < 0.3  # some replicates lose beacon 4: the fix uses three ranges
+    for k in range(4):
+        valid = ~lost if k == 3 else np.ones(B, bool)
+        core.set_inputs(packet(k + 1, k + 1, k + 1.0, np.where(valid, ranges[:, k], 0.0), beacons[:, k], depth, valid))
+        core.step(float(k), 1.0)
+    out = core.outputs
+    assert out["instr_valid"].all() and lost.any() and not lost.all()
+    np.testing.assert_array_equal(instr(out), core.state["fix"])
+    iterations = core.state["lm_iter"][:, 0]
+    assert np.all(iterations < 8)  # stopped by the tolerance in this geometry
+    for b in range(B):
+        held = np.where([True, True, True, not lost[b]], ranges[b], np.nan)
+        ref = scipy_fix(held, beacons[b], depth[b], sr, sd, truth[b])
+        J = -fd_residual_jacobian(ref, held, beacons[b], np.isfinite(held), depth[b], 1 / sr**2, 1 / sd**2)
+        d = instr(out)[b] - ref
+        assert np.sqrt(d @ (J.T @ J) @ d) <= 1e-3, b
+        assert np.linalg.norm(ref - truth[b]) > 1e-3  # the noise matters
+
+
+def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parameters():
+    """A packet stream at T = 1 s stepped at T/4 with epochs between step ends, losses, repeats and a
+    bad id; three replicates with their own parameters, each against a numpy EKF of its own."""
+    B, T, r = 3, 1.0, 4
+    dt = T / r
+    rng = np.random.default_rng(29)
+    per = dict(sigma_range=np.array([0.1, 0.4, 1.0]), sigma_depth=np.array([0.01, 0.05, 0.2]),
+               q_horizontal=np.array([0.01, 0.1, 0.0]), q_vertical=np.array([0.001, 0.02, 0.0]),
+               p0_position=np.array([1.0, 3.0, 0.5]), p0_velocity=np.array([0.5, 0.1, 1.0]),
+               x0_x=np.array([2.0, -5.0, 9.0]), x0_y=np.array([-14.0, 3.0, 1.0]), x0_z=np.array([5.0, 8.0, 2.0]),
+               x0_vx=np.array([0.4, 0.0, -0.2]), x0_vy=np.array([0.0, 0.1, 0.3]), x0_vz=np.array([0.0, 0.0, 0.05]))
+    core = Core(Receiver, RX, replicates=range(B))
+    core.values.update(per)  # per-replicate FMU values
+    core.initialize(0.0)
+    ref = []
+    for b in range(B):
+        p = {k: v[b] for k, v in per.items()}
+        x, P = _x0_P0(p)
+        ref.append(dict(p=p, x=x, P=P, held=np.full(4, np.nan), beacons=np.zeros((4, 3)), seq=0, nis=0.0))
+    beacons = cross(3.0, 1.0)
+    t, seq, tx = 0.0, 0, 0.0
+    updates = 0
+    for k in range(40):
+        if k % 5 != 3:  # every fifth slot repeats the previous packet (no new slot)
+            seq += 1
+            tx = (seq + rng.uniform(-0.9, 0.0)) * T  # an epoch anywhere in the slot's last step or before
+        bid = 9 if seq == 17 else (seq - 1) % 4 + 1
+        target = np.column_stack([0.3 * tx + np.arange(B), -14.0 + 0.1 * tx * np.ones(B), 5.0 + np.arange(B)])
+        b_pos = beacons[min(bid, 4) - 1] + rng.normal(scale=0.05, size=(B, 3))
+        rng_value = np.linalg.norm(target - b_pos, axis=1) + per["sigma_range"] * rng.normal(size=B)
+        valid = rng.uniform(size=B) > 0.25
+        depth = target[:, 2] + per["sigma_depth"] * rng.normal(size=B)
+        core.set_inputs(packet(seq, bid, tx, np.where(valid, rng_value, 0.0), np.where(valid[:, None], b_pos, 0.0),
+                               depth, valid))
+        for _ in range(r):
+            core.step(t, dt)
+            for b, s in enumerate(ref):
+                p = s["p"]
+                s["x"], s["P"] = ref_phi(dt) @ s["x"], ref_phi(dt) @ s["P"] @ ref_phi(dt).T + ref_q(
+                    dt, p["q_horizontal"], p["q_vertical"])
+                if seq != s["seq"] and t + dt >= tx - 1e-9:
+                    s["seq"] = seq
+                    if valid[b] and 1 <= bid <= 4:
+                        s["held"][bid - 1], s["beacons"][bid - 1] = rng_value[b], b_pos[b]
+                    s["x"], s["P"], s["nis"] = ref_update(s["x"], s["P"], s["held"], s["beacons"], depth[b],
+                                                          p["sigma_range"], p["sigma_depth"])
+                    updates += 1
+            t += dt
+            out = core.outputs
+            for b, s in enumerate(ref):
+                np.testing.assert_allclose(est(out)[b], s["x"], rtol=1e-9, atol=1e-9, err_msg=f"t={t}, b={b}")
+                np.testing.assert_allclose(covariance(core, b), s["P"], rtol=1e-8, atol=1e-12)
+                assert out["nis"][b] == pytest.approx(s["nis"], rel=1e-8, abs=1e-12)
+                assert out["pos_std"][b] == pytest.approx(np.sqrt(s["P"][0, 0] + s["P"][2, 2] + s["P"][4, 4]),
+                                                          rel=1e-12)
+    assert updates > 60 and all(s["nis"] > 0 for s in ref)

@@ -1,4 +1,4 @@
-"""Integration tests of the four FMUs and of the two engines (local versus fmu)."""
+"""Integration tests of the five native FMUs' model descriptions and of the two engines (local versus fmu)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ import pandas as pd
 import pytest
 
 from fmus.build import fmu_path, validate
-from models import COMPONENTS
+from models import MODELS
 from models.core import UNITS, ModelError
 from orchestrator.config import load_config
 from orchestrator.run import close_handles, make_handles, run
 
-COMPONENT_NAMES = list(COMPONENTS)
+COMPONENT_NAMES = list(MODELS)
 
 
 def model_description(path) -> ET.Element:
@@ -83,27 +83,50 @@ def test_fmu_lists_every_output_as_initial_unknown(fmu_dir, name):
 
 
 @pytest.mark.parametrize("name", COMPONENT_NAMES)
-def test_fmu_variables_equal_core_declarations(fmu_dir, name):
+def test_fmu_variables_equal_the_declarations(fmu_dir, name):
     root = model_description(fmu_path(fmu_dir, name))
-    got = [(sv.get("name"), sv.get("causality")) for sv in root.findall("ModelVariables/ScalarVariable")]
-    expected = [(v.name, v.causality) for v in COMPONENTS[name].variables()]
-    assert got == expected
-    # the FMI type and the unit of each variable match too
-    types = {v.name: (v.type, v.unit) for v in COMPONENTS[name].variables()}
-    for sv in root.findall("ModelVariables/ScalarVariable"):
+    svs = root.findall("ModelVariables/ScalarVariable")
+    got = [(sv.get("name"), sv.get("causality"), sv.get("variability"), int(sv.get("valueReference")))
+           for sv in svs]
+    declared = MODELS[name].fmu_variables()
+    assert got == [(v.name, v.causality, v.variability, k) for k, v in enumerate(declared)]
+    # the FMI type, unit and range of each variable match too; no String variable (SSP hosts cannot set them)
+    for sv, v in zip(svs, declared):
         typed = sv[0]
-        declared_type, declared_unit = types[sv.get("name")]
-        assert typed.tag == declared_type
-        if declared_type == "Real":
-            assert typed.get("unit") == declared_unit
+        assert typed.tag == v.fmi_type != "String"
+        if v.fmi_type == "Real":
+            assert typed.get("unit") == v.unit
+        if v.causality == "parameter" and v.type == "String":  # a choice: its index, with the choices described
+            assert (typed.get("min"), typed.get("max")) == ("0", str(len(v.choices) - 1))
+            assert all(f"{k}: {c}" in sv.get("description") for k, c in enumerate(v.choices))
+
+
+@pytest.mark.parametrize("name", COMPONENT_NAMES)
+def test_sampled_signals_are_discrete_and_the_fmu_is_honest_about_itself(fmu_dir, name):
+    root = model_description(fmu_path(fmu_dir, name))
+    cs = root.find("CoSimulation").attrib
+    assert cs["needsExecutionTool"] == "false"
+    assert cs["canBeInstantiatedOnlyOncePerProcess"] == "false"
+    assert cs["canHandleVariableCommunicationStepSize"] == "true"
+    assert cs["canGetAndSetFMUstate"] == cs["canSerializeFMUstate"] == "true"
+    variability = {sv.get("name"): sv.get("variability") for sv in root.findall("ModelVariables/ScalarVariable")
+                   if sv.get("causality") != "parameter"}
+    sampled = {"packet_seq", "beacon_id", "packet_valid", "tx_time", "range", "beacon_x", "beacon_y", "beacon_z",
+               "depth", "depth_measured", "est_x", "instr_x", "instr_valid", "nis", "gps_x", "beacon1_x"}
+    for signal in sampled & set(variability):
+        assert variability[signal] == "discrete", signal
+    for signal in {"pos_x", "vel_x", "beacon1_true_x", "roll", "target_x"} & set(variability):
+        assert variability[signal] == "continuous", signal
+    # the sources it was built from travel with it, and the model description lists them
+    with zipfile.ZipFile(fmu_path(fmu_dir, name)) as archive:
+        names = set(archive.namelist())
+    listed = {f.get("name") for f in root.findall("CoSimulation/SourceFiles/File")}
+    assert listed and {f"sources/{f}" for f in listed} <= names
+    assert f"binaries/linux64/sblsim_{name}.so" in names
 
 
 # --------------------------------------------------------------------------- local versus fmu engine
-#
-# pythonfmu 0.7.0 FMUs crash (SIGSEGV in fmi2Instantiate) when a model is
-# instantiated a second time in the same process, so every in-process FMU run
-# below shares ONE set of handles; the own-handles path of ``run`` is exercised
-# in subprocesses, which also shows the crash without taking pytest down.
+
 
 @pytest.fixture(scope="module")
 def fmu_handles(fmu_dir):
@@ -126,28 +149,30 @@ def test_engines_agree_on_full_semicircle(fmu_handles):
     assert local.metrics["e_tot_mean"].iloc[0] < 5.0
 
 
-def test_engines_agree_with_loss_and_outliers(fmu_handles):
-    """Lost packets (NaN ranges) and outliers go through both engines identically."""
-    cfg = load_config("semicircle", ["simulation.duration=20", "acoustics.loss_pct=40",
-                                     "acoustics.outlier_pct=20"], seed=7)
+@pytest.mark.parametrize("name", ["semicircle", "spiral", "random", "square", "harbour"])
+def test_engines_agree_on_every_scenario_with_loss_and_multipath(fmu_handles, name):
+    """20 % loss and 5 % multipath through both engines: every output equal to 1e-9 (they run the same C)."""
+    cfg = load_config(name, ["simulation.duration=30", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"],
+                      seed=7)
     local = run(cfg, "local")
     fmu = run(cfg, "fmu", handles=fmu_handles)
-    assert local.steps == fmu.steps == 200
-    assert not local.timeseries["packet_valid"].all()  # some packets lost: the NaN path is exercised
-    assert local.timeseries["outlier"].any()
+    assert local.steps == fmu.steps == 300
+    series = local.timeseries
+    assert not series["packet_valid"].all() and series["outlier"].any()  # the loss and multipath paths run
+    assert np.all(np.isfinite(series.select_dtypes("number").drop(columns=["instr_e_x", "instr_e_y", "instr_e_z",
+                                                                           "instr_e_tot"])))
     assert_same_frames(local.timeseries, fmu.timeseries)
 
 
 @pytest.mark.parametrize("name, overrides", [
     ("harbour", ["simulation.duration=10", "simulation.ekf_rate_ratio=3"]),
-    ("random", ["simulation.duration=10"]),
     ("spiral", ["simulation.duration=10", "platform.gps_model=gauss-markov", "acoustics.clock_drift_ppm=50",
-                "acoustics.sound_speed_profile=teos10"]),
+                "acoustics.sound_speed_profile=teos10", "simulation.receiver=lsq"]),
 ])
-def test_engines_agree_on_other_scenarios(fmu_handles, name, overrides):
+def test_engines_agree_on_other_settings(fmu_dir, name, overrides):
     cfg = load_config(name, overrides, seed=5)
     local = run(cfg, "local")
-    fmu = run(cfg, "fmu", handles=fmu_handles)
+    fmu = run(cfg, "fmu", fmu_dir=fmu_dir)
     assert local.steps == fmu.steps == 100
     assert_same_frames(local.timeseries, fmu.timeseries)
 
@@ -159,7 +184,7 @@ def test_fmu_handles_reset_between_runs(fmu_handles):
     b = run(other, "fmu", handles=fmu_handles)
     c = run(first, "fmu", handles=fmu_handles)
     # the second seed gives different noise, so the comparison below can fail
-    assert not np.allclose(a.timeseries["range"], b.timeseries["range"], equal_nan=True)
+    assert not np.allclose(a.timeseries["range"], b.timeseries["range"])
     assert_same_frames(a.timeseries, c.timeseries, atol=0.0)
     # and the reused handles reproduce a fresh local run
     assert_same_frames(run(first, "local").timeseries, c.timeseries)
@@ -190,7 +215,7 @@ def test_fmu_engine_own_handles_full_semicircle(fmu_dir, tmp_path):
 
 
 def test_fmu_engine_runs_twice_in_one_process(fmu_dir, tmp_path):
-    """Two ``run(cfg, 'fmu', fmu_dir=...)`` calls in one process give the same result (no crash)."""
+    """Two ``run(cfg, 'fmu', fmu_dir=...)`` calls in one process give the same result."""
     proc = _own_handles_runs(fmu_dir, tmp_path, 2, 2)
     assert proc.returncode == 0, (f"second fmu run in the same process died with status {proc.returncode}; "
                                   f"stdout {proc.stdout!r}; stderr tail {proc.stderr[-600:]!r}")

@@ -1,0 +1,231 @@
+"""The FMU binaries where FMI users live: a plain C host, valgrind, their dynamic dependencies,
+an independent FMU checker, other platforms, another compiler, and the random streams in C."""
+
+from __future__ import annotations
+
+import shutil
+import struct
+import subprocess
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import read_model_description
+
+from fmus.build import build_fmu, fmu_path
+from fmus.codegen import fmi_headers_dir
+from fmus.compiler import find_compiler
+from fmus.native import stream
+from models import MODELS
+from models.core import normals, uniforms
+
+HOST = Path(__file__).with_name("c_host.c")
+NAMES = list(MODELS)
+
+
+@pytest.fixture(scope="module")
+def c_host(tmp_path_factory) -> Path:
+    """The plain C host, compiled with the system compiler and the FMI headers fmpy ships."""
+    exe = tmp_path_factory.mktemp("host") / "c_host"
+    cc = find_compiler("system")
+    subprocess.run([*cc.command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(HOST), "-o", str(exe), "-ldl"],
+                   check=True, capture_output=True)
+    return exe
+
+
+def unpack(fmu: Path, into: Path) -> tuple[Path, str, list[int]]:
+    """Extract an FMU; its linux64 binary, GUID and the value references of its Real outputs."""
+    with zipfile.ZipFile(fmu) as archive:
+        archive.extractall(into)
+    md = read_model_description(str(fmu))
+    outputs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    return into / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so", md.guid, outputs
+
+
+#: A Real parameter per FMU that changes its outputs even with all inputs at zero, and a value for it.
+CHANGED = {"platform": ("baseline", 2.5), "acoustics": ("sigma_range", 0.7), "target": ("radius", 12.0),
+           "receiver": ("x0_x", 3.0), "receiver_lsq": ("x0_x", 3.0)}
+
+
+def first_real_parameter(name: str) -> tuple[int, float]:
+    """Value reference and value of the parameter :data:`CHANGED` sets for an FMU."""
+    parameter, value = CHANGED[name]
+    return [v.name for v in MODELS[name].fmu_variables()].index(parameter), value
+
+
+def run_host(c_host: Path, binary: Path, guid: str, uri: str, outputs: list[int], params: str,
+             wrapper: list[str] = ()) -> subprocess.CompletedProcess:
+    return subprocess.run([*wrapper, str(c_host), str(binary), guid, uri, "30", "0.1", params],
+                          input="\n".join(map(str, outputs)), capture_output=True, text=True, env={}, timeout=300)
+
+
+def parse(stdout: str) -> dict[str, np.ndarray]:
+    rows = {"a": [], "b": []}
+    for line in stdout.splitlines():
+        parts = line.split()
+        rows[parts[0]].append([float(x) for x in parts[2:]])
+    return {k: np.array(v) for k, v in rows.items()}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_plain_c_host_with_an_empty_environment_two_instances_and_both_uri_forms(fmu_dir, c_host, tmp_path, name):
+    binary, guid, outputs = unpack(fmu_path(fmu_dir, name), tmp_path)
+    vr, value = first_real_parameter(name)
+    results = []
+    for uri in (f"file:{tmp_path}/resources", f"file://{tmp_path}/resources"):
+        proc = run_host(c_host, binary, guid, uri, outputs, f"{vr}={value!r}")
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        results.append(parse(proc.stdout))
+    a, b = results[0]["a"], results[0]["b"]
+    assert a.shape == (30, len(outputs)) and np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+    np.testing.assert_array_equal(results[1]["a"], a)  # the URI form changes nothing
+    assert not np.array_equal(a, b)  # instance b carries its own parameter value
+    # instance a equals a run of the same FMU through fmpy (another host, another process state); the two hosts
+    # compute the communication points differently (k h against t + h), hence round-off in the time
+    from fmpy import simulate_fmu
+
+    ref = simulate_fmu(str(fmu_path(fmu_dir, name)), stop_time=3.0, output_interval=0.1)
+    names = [v.name for v in read_model_description(str(fmu_path(fmu_dir, name))).modelVariables
+             if v.causality == "output" and v.type == "Real"]
+    np.testing.assert_allclose(np.column_stack([ref[n][1:] for n in names]), a, rtol=0, atol=1e-12)
+
+
+def test_a_wrong_guid_is_refused_with_a_log_line(fmu_dir, c_host, tmp_path):
+    binary, guid, outputs = unpack(fmu_path(fmu_dir, "target"), tmp_path)
+    proc = run_host(c_host, binary, "{not-the-guid}", f"file://{tmp_path}", outputs, "")
+    assert proc.returncode == 3 and "does not match" in proc.stderr and "NULL" in proc.stderr
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+@pytest.mark.parametrize("name", NAMES)
+def test_memcheck_finds_no_error_and_no_leak(fmu_dir, c_host, tmp_path, name):
+    binary, guid, outputs = unpack(fmu_path(fmu_dir, name), tmp_path)
+    vr, value = first_real_parameter(name)
+    proc = run_host(c_host, binary, guid, f"file://{tmp_path}", outputs, f"{vr}={value!r}",
+                    wrapper=[shutil.which("valgrind"), "--error-exitcode=9", "--leak-check=full",
+                             "--errors-for-leak-kinds=definite"])
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "ERROR SUMMARY: 0 errors" in proc.stderr
+    assert "definitely lost" not in proc.stderr or "definitely lost: 0 bytes" in proc.stderr
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_the_binary_needs_only_the_c_library(fmu_dir, tmp_path, name):
+    """The ELF dynamic section lists libc and libm only: no libpython, nothing else to install."""
+    from elftools.elf.dynamic import DynamicSection
+    from elftools.elf.elffile import ELFFile
+
+    binary, _, _ = unpack(fmu_path(fmu_dir, name), tmp_path)
+    with open(binary, "rb") as handle:
+        elf = ELFFile(handle)
+        needed = [tag.needed for section in elf.iter_sections() if isinstance(section, DynamicSection)
+                  for tag in section.iter_tags() if tag.entry.d_tag == "DT_NEEDED"]
+        exported = {s.name for s in elf.get_section_by_name(".dynsym").iter_symbols()
+                    if s.entry.st_info.bind == "STB_GLOBAL" and s.entry.st_shndx != "SHN_UNDEF"}
+    assert needed and all(n.split(".so")[0] in ("libc", "libm") for n in needed), needed
+    assert not any("python" in n for n in needed)
+    assert {"fmi2Instantiate", "fmi2DoStep", "fmi2GetFMUstate"} <= exported
+    assert not any(s.startswith(("sblsim_", "casadi_")) for s in exported)  # nothing else leaks out
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmu_manipulation_toolbox_checker_reports_compliance(fmu_dir, name):
+    from fmu_manipulation_toolbox.checker import get_checkers
+    from fmu_manipulation_toolbox.operations import FMU
+
+    with FMU(str(fmu_path(fmu_dir, name))) as fmu:
+        checkers = [c() for c in get_checkers()]
+        for checker in checkers:
+            fmu.apply_operation(checker)
+    generic = next(c for c in checkers if hasattr(c, "compliant_with_version"))
+    assert generic.compliant_with_version == "2.0"
+    assert all(not getattr(c, "errors", 0) for c in checkers)
+
+
+# --------------------------------------------------------------------------- other platforms and compilers
+
+def binary_format(path: Path) -> tuple[str, str]:
+    """(format, machine) read from a binary's header: ELF, PE or Mach-O."""
+    data = path.read_bytes()[:4096]
+    if data[:4] == b"\x7fELF":
+        return "ELF", {62: "x86_64", 183: "aarch64"}[struct.unpack_from("<H", data, 18)[0]]
+    if data[:2] == b"MZ":
+        offset = struct.unpack_from("<I", data, 0x3C)[0]
+        assert data[offset:offset + 4] == b"PE\0\0"
+        return "PE", {0x8664: "x86_64", 0xAA64: "aarch64"}[struct.unpack_from("<H", data, offset + 4)[0]]
+    if struct.unpack_from("<I", data, 0)[0] == 0xFEEDFACF:
+        cpu = struct.unpack_from("<I", data, 4)[0]
+        return "Mach-O", {0x01000007: "x86_64", 0x0100000C: "aarch64"}[cpu]
+    raise AssertionError(f"{path.name}: unknown binary format")
+
+
+def test_zig_cross_compiles_windows_and_macos_binaries(tmp_path):
+    """With zig (the ziglang package) an FMU also carries win64, darwin64 and aarch64-darwin binaries."""
+    fmu = build_fmu("target", tmp_path, cross=True)
+    with zipfile.ZipFile(fmu) as archive:
+        archive.extractall(tmp_path / "x")
+    expected = {"linux64/sblsim_target.so": ("ELF", "x86_64"), "win64/sblsim_target.dll": ("PE", "x86_64"),
+                "darwin64/sblsim_target.dylib": ("Mach-O", "x86_64"),
+                "aarch64-darwin/sblsim_target.dylib": ("Mach-O", "aarch64")}
+    for relative, (fmt, machine) in expected.items():
+        assert binary_format(tmp_path / "x" / "binaries" / relative) == (fmt, machine), relative
+
+
+def test_zig_and_the_system_compiler_give_the_same_numbers(tmp_path):
+    """A machine without a C compiler builds with zig; its FMU computes the same outputs to the bit."""
+    from fmpy import simulate_fmu
+
+    results = []
+    for compiler in ("system", "zig"):
+        fmu = build_fmu("acoustics", tmp_path / compiler, compiler=compiler, cross=False)
+        results.append(simulate_fmu(str(fmu), stop_time=2.0, output_interval=0.1,
+                                    start_values={"sigma_range": 0.5, "loss_pct": 30.0}))
+    for column in results[0].dtype.names:
+        np.testing.assert_array_equal(results[0][column], results[1][column])
+
+
+def test_the_fmu_rebuilds_from_its_own_sources(fmu_dir, c_host, tmp_path):
+    """sources/ holds everything: compiling it gives a binary with the same outputs."""
+    binary, guid, outputs = unpack(fmu_path(fmu_dir, "receiver_lsq"), tmp_path)
+    rebuilt = tmp_path / "rebuilt.so"
+    cc = find_compiler("system")
+    sources = sorted((tmp_path / "sources").glob("*.c"))
+    subprocess.run([*cc.command, "-shared", "-fPIC", "-O2", "-std=c99", "-ffp-contract=off",
+                    "-DSBLSIM_MODEL=sblsim_receiver_lsq_model", f"-I{tmp_path / 'sources'}", *map(str, sources),
+                    "-o", str(rebuilt), "-lm"], check=True, capture_output=True)
+    vr, value = first_real_parameter("receiver_lsq")
+    shipped = run_host(c_host, binary, guid, f"file://{tmp_path}", outputs, f"{vr}={value!r}")
+    own = run_host(c_host, rebuilt, guid, f"file://{tmp_path}", outputs, f"{vr}={value!r}")
+    assert shipped.returncode == own.returncode == 0
+    assert shipped.stdout == own.stdout
+
+
+# --------------------------------------------------------------------------- the random streams
+
+@pytest.mark.parametrize("keys, component, purpose, draw", [
+    ((0, 0, 0, 0), 0, 0, 0), ((1, 2, 3, 4), 1, 0, 5), ((2**31 - 1, 7, 127, 49), 3, 2, 123456),
+])
+def test_philox_streams_are_the_same_in_c_and_numpy(keys, component, purpose, draw):
+    """The first numbers of a stream: the C runtime equals numpy's Philox bit generator (uniforms exactly;
+    normals through the same Box-Muller with the C library's log, sqrt and cos)."""
+    seed, scenario, cell, replicate = keys
+    np.testing.assert_array_equal(stream("uniform", keys, component, purpose, draw, 9),
+                                  uniforms(seed, scenario, cell, replicate, component, purpose, draw, 9))
+    np.testing.assert_array_equal(stream("normal", keys, component, purpose, draw, 5),
+                                  normals(seed, scenario, cell, replicate, component, purpose, draw, 5))
+
+
+def test_philox_reference_is_numpys_bit_generator():
+    """models.core.uniforms is numpy.random.Philox with the documented key and counter, and its
+    streams are distinct: another purpose, draw, cell or replicate gives other numbers."""
+    gen = np.random.Philox(key=np.array([5, (1 << 32) | (2 << 16) | 3], dtype=np.uint64),
+                           counter=np.array([2**64 - 1, 6, 7, 8], dtype=np.uint64))  # = counter (0, 7, 7, 8) - 1
+    words = gen.random_raw(4)
+    np.testing.assert_array_equal(uniforms(5, 1, 7, 8, 2, 3, 7, 4), (words >> np.uint64(11)) * 2.0**-53)
+    base = uniforms(5, 1, 7, 8, 2, 3, 7, 8)
+    for other in (uniforms(5, 1, 7, 8, 2, 4, 7, 8), uniforms(5, 1, 7, 8, 2, 3, 8, 8),
+                  uniforms(5, 1, 6, 8, 2, 3, 7, 8), uniforms(5, 1, 7, 9, 2, 3, 7, 8)):
+        assert not np.any(other == base)
+    big = uniforms(1, 0, 0, 0, 0, 0, 0, 40000)
+    assert 0.0 <= big.min() and big.max() < 1.0 and abs(big.mean() - 0.5) < 0.01

@@ -1,0 +1,252 @@
+"""The native FMUs as an FMI host sees them through fmpy: repeated use, instances, step rules, state, no NaN.
+
+Each test is a promise of fmus/c/fmi2_shell.c that a host relies on; the
+expected values come from an independent run (another instance, another
+process, another step pattern) or from the FMI 2.0 standard.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import fmpy
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+
+from fmus.build import fmu_path
+from models import MODELS
+
+T = 0.1
+
+
+class Slave:
+    """One instance of a built FMU, driven by name, recording what the FMU logs."""
+
+    def __init__(self, fmu: str, name: str = "instance") -> None:
+        self.md = read_model_description(fmu)
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.log: list[str] = []
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=extract(fmu),
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.fmu.instantiate(callbacks=self._callbacks())
+
+    def _callbacks(self):
+        """FMI callbacks whose logger keeps each message in :attr:`log` (the FMU logs errors always)."""
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                               fmi2CallbackLoggerTYPE)
+        from fmpy.fmi1 import calloc, free
+
+        def logger(env, instance, status, category, message):
+            self.log.append(message.decode())
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._keep = callbacks
+        return callbacks
+
+    def set(self, **values) -> None:
+        for name, value in values.items():
+            v = self.vars[name]
+            getattr(self.fmu, f"set{v.type}")([v.valueReference], [value])
+
+    def get(self, *names) -> list:
+        return [getattr(self.fmu, f"get{self.vars[n].type}")([self.vars[n].valueReference])[0] for n in names]
+
+    def start(self, t0: float = 0.0, **params) -> "Slave":
+        self.fmu.setupExperiment(startTime=t0)
+        self.fmu.enterInitializationMode()
+        self.set(**params)
+        self.fmu.exitInitializationMode()
+        return self
+
+    def outputs(self) -> np.ndarray:
+        names = [v.name for v in self.md.modelVariables if v.causality == "output"]
+        return np.array(self.get(*names), dtype=float)
+
+
+def run_channel(fmu: str, steps: list[float], **params) -> list[tuple]:
+    """The packets an acoustics instance emits for a sequence of host step sizes (constant inputs)."""
+    s = Slave(fmu).start(**params)
+    s.set(**{f"beacon{i}_true_x": 3.0 * i for i in range(1, 5)}, target_x=10.0, target_y=5.0, target_z=5.0)
+    t, packets = 0.0, []
+    for h in steps:
+        s.fmu.doStep(t, h)
+        t += h
+        packet = tuple(s.get("packet_seq", "beacon_id", "packet_valid", "tx_time", "range"))
+        if packet[0] > 0 and (not packets or packet[0] != packets[-1][0]):
+            packets.append(packet)
+    return packets
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_simulate_fmu_three_times_in_one_process(fmu_dir, name):
+    """A notebook calling fmpy again and again: the same numbers each time, no crash, no NaN."""
+    results = [fmpy.simulate_fmu(str(fmu_path(fmu_dir, name)), stop_time=3.0, output_interval=T)
+               for _ in range(3)]
+    for r in results[1:]:
+        for column in r.dtype.names:
+            np.testing.assert_array_equal(r[column], results[0][column])
+    numbers = np.array([list(row)[1:] for row in results[0]], dtype=float)
+    assert numbers.shape[0] == 31 and np.all(np.isfinite(numbers))
+
+
+_ALONE = """
+import sys, numpy as np
+sys.path.insert(0, {tests!r})
+from fmus.test_fmi_semantics import Slave
+s = Slave(sys.argv[1]).start(**{{k: float(v) for k, v in (a.split("=") for a in sys.argv[2:])}})
+rows = []
+for k in range(40):
+    s.fmu.doStep(k * 0.1, 0.1)
+    rows.append(s.outputs())
+np.save(sys.stdout.buffer, np.array(rows))
+"""
+
+
+def test_two_instances_side_by_side_equal_runs_in_their_own_process(fmu_dir, tmp_path):
+    """Two platforms with different baselines stepped in turn, each equal to a run alone in another process."""
+    import io
+    from pathlib import Path
+
+    fmu = str(fmu_path(fmu_dir, "platform"))
+    a, b = Slave(fmu, "a").start(baseline=0.4), Slave(fmu, "b").start(baseline=3.0, gps_sigma=2.0)
+    rows_a, rows_b = [], []
+    for k in range(40):
+        a.fmu.doStep(k * T, T)
+        b.fmu.doStep(k * T, T)
+        rows_a.append(a.outputs())
+        rows_b.append(b.outputs())
+    tests = str(Path(__file__).resolve().parents[1])
+    for rows, args in ((rows_a, ["baseline=0.4"]), (rows_b, ["baseline=3.0", "gps_sigma=2.0"])):
+        proc = subprocess.run([sys.executable, "-c", _ALONE.format(tests=tests), fmu, *args], capture_output=True)
+        assert proc.returncode == 0, proc.stderr.decode()[-1500:]
+        np.testing.assert_array_equal(np.array(rows), np.load(io.BytesIO(proc.stdout)))
+    assert not np.allclose(rows_a, rows_b)  # the two instances really hold different parameters
+
+
+@pytest.mark.parametrize("steps", [
+    [T / 4] * 80,                                   # four host steps per slot
+    [T] * 20,                                       # one per slot
+    [0.03, 0.07, 0.25, 0.05, 0.6, 0.1, 0.9],        # irregular, some spanning several slots
+], ids=["quarter", "slot", "irregular"])
+def test_slots_do_not_depend_on_the_host_step(fmu_dir, steps):
+    """The channel emits slot k at t_k = k T of its own clock, whatever the host's steps (2 s of slots)."""
+    fmu = str(fmu_path(fmu_dir, "acoustics"))
+    reference = run_channel(fmu, [T] * 20, sigma_range=0.3, loss_pct=20.0)
+    got = run_channel(fmu, steps, sigma_range=0.3, loss_pct=20.0)
+    assert len(reference) == 20 and [p[3] for p in reference] == pytest.approx([T * k for k in range(1, 21)])
+    if steps[0] == 0.03:  # the irregular steps show only the last packet of a step that spans several
+        shown = {p[0]: p for p in reference}
+        assert all(shown[p[0]] == p for p in got) and got[-1] == reference[-1]
+    else:
+        assert got == reference
+
+
+def test_a_tiny_closing_step_adds_no_packet(fmu_dir):
+    """OMSimulator's closing step of 2e-15 s after the last slot must not emit one more packet."""
+    fmu = str(fmu_path(fmu_dir, "acoustics"))
+    packets = run_channel(fmu, [T] * 10 + [2e-15])
+    assert [p[0] for p in packets] == list(range(1, 11))
+
+
+def call_fails(slave: Slave, call, *args, match: str) -> None:
+    before = len(slave.log)
+    with pytest.raises(FMICallException):
+        call(*args)
+    assert any(match in line for line in slave.log[before:]), slave.log[before:]
+
+
+def test_bad_step_calls_return_fmi2error_and_log_why(fmu_dir):
+    fmu = str(fmu_path(fmu_dir, "target"))
+    s = Slave(fmu)
+    call_fails(s, s.fmu.doStep, 0.0, T, match="not initialized")
+    s.start()
+    call_fails(s, s.fmu.doStep, 0.0, 0.0, match="must be positive")
+    call_fails(s, s.fmu.doStep, 0.0, -T, match="must be positive")
+    s.fmu.doStep(0.0, T)
+    call_fails(s, s.fmu.doStep, 0.5, T, match="differs from the FMU's time")  # a gap
+    call_fails(s, s.fmu.doStep, 0.0, T, match="differs from the FMU's time")  # a step back
+    s.fmu.doStep(T, T)  # the right time still works
+    assert s.get("pos_x")[0] == pytest.approx(15.0 * np.cos(-np.pi / 2 + 0.5 * 2 * T / 15.0))
+
+
+@pytest.mark.parametrize("name, params, match", [
+    ("platform", dict(baseline=0.0), "baseline: 0 is outside the allowed range (0, 1000] m"),
+    ("platform", dict(beaufort=9), "beaufort: 9 is outside the allowed range [0, 8]"),
+    ("target", dict(trajectory=4), "waypoint_rows: 0 rows in use; this setting needs at least 2"),
+    ("acoustics", {"sound_speed_rows": 2, "sound_speed[1]": 1500.0, "sound_speed[2]": 1.5},
+     "sound_speed[2]: 1.5 is outside the allowed range [1300, 1700] m/s"),
+    ("acoustics", {"sound_speed_rows": 2, "sound_speed_depth[1]": 5.0, "sound_speed_depth[2]": 1.0,
+                   "sound_speed[1]": 1500.0, "sound_speed[2]": 1500.0}, "must be greater than row 1"),
+    ("receiver", dict(sigma_range=0.0), "sigma_range: 0 is outside the allowed range (0, 1000] m"),
+])
+def test_a_parameter_outside_its_range_fails_initialization(fmu_dir, name, params, match):
+    s = Slave(str(fmu_path(fmu_dir, name)))
+    s.fmu.setupExperiment(startTime=0.0)
+    s.fmu.enterInitializationMode()
+    s.set(**params)
+    call_fails(s, s.fmu.exitInitializationMode, match=match)
+
+
+def test_parameters_are_fixed_after_initialization_and_outputs_cannot_be_set(fmu_dir):
+    s = Slave(str(fmu_path(fmu_dir, "platform"))).start()
+    call_fails(s, lambda: s.set(baseline=2.0), match="fixed parameter")
+    call_fails(s, lambda: s.set(roll=1.0), match="is an output")
+
+
+def test_get_and_set_state_and_serialization_replay_the_same_steps(fmu_dir):
+    fmu = str(fmu_path(fmu_dir, "platform"))
+    s = Slave(fmu).start(gps_model=1)  # Gauss-Markov: the state carries the GPS error
+    for k in range(5):
+        s.fmu.doStep(k * T, T)
+    state = s.fmu.getFMUstate()
+    blob = s.fmu.serializeFMUstate(state)
+    ahead = []
+    for k in range(5, 12):
+        s.fmu.doStep(k * T, T)
+        ahead.append(s.outputs())
+    for restore in ("state", "serialized", "state"):  # a state can be restored many times
+        s.fmu.setFMUstate(state if restore == "state" else s.fmu.deSerializeFMUstate(blob))
+        again = []
+        for k in range(5, 12):
+            s.fmu.doStep(k * T, T)
+            again.append(s.outputs())
+        np.testing.assert_array_equal(np.array(again), np.array(ahead))
+    s.fmu.freeFMUstate(state)
+
+
+def test_reset_gives_the_first_run_again(fmu_dir):
+    s = Slave(str(fmu_path(fmu_dir, "acoustics"))).start(loss_pct=30.0)
+    s.set(target_x=10.0)
+    first = []
+    for k in range(12):
+        s.fmu.doStep(k * T, T)
+        first.append(s.outputs())
+    s.fmu.reset()
+    s.start(loss_pct=30.0)
+    s.set(target_x=10.0)
+    for k in range(12):
+        s.fmu.doStep(k * T, T)
+        np.testing.assert_array_equal(s.outputs(), first[k])
+
+
+def test_no_output_is_nan_with_lost_packets_and_no_fix(fmu_dir):
+    """A lost packet has packet_valid false and range 0; a missing fix has instr_valid false and instr_* 0."""
+    channel = Slave(str(fmu_path(fmu_dir, "acoustics"))).start(loss_pct=100.0)
+    channel.set(target_x=10.0)
+    receiver = Slave(str(fmu_path(fmu_dir, "receiver"))).start()
+    for k in range(8):
+        channel.fmu.doStep(k * T, T)
+        packet = dict(zip(("packet_seq", "beacon_id", "packet_valid", "tx_time", "range", "beacon_x"),
+                          channel.get("packet_seq", "beacon_id", "packet_valid", "tx_time", "range", "beacon_x")))
+        assert not packet["packet_valid"] and packet["range"] == 0.0 and packet["beacon_x"] == 0.0
+        receiver.set(**packet)
+        receiver.fmu.doStep(k * T, T)
+        assert np.all(np.isfinite(receiver.outputs()))
+        assert [bool(receiver.get("instr_valid")[0])] + receiver.get("instr_x", "nis") == [False, 0.0, 0.0]
