@@ -305,7 +305,7 @@ class Variable:
         if not math.isfinite(number):
             raise ModelError(f"{label}: {value!r} is not finite; allowed {self.allowed()}")
         if self.type == "Integer":
-            if number != int(value):
+            if not isinstance(value, (int, np.integer)) and not number.is_integer():
                 raise ModelError(f"{label}: expected a whole number in {self.allowed()}, got {value!r}")
             value = int(value)
         else:
@@ -381,8 +381,16 @@ def check_entry(number: float, col: Column, label: str) -> None:
         raise ModelError(f"{label}: {number:g} is outside the allowed range {col.allowed()}")
 
 
-def check_increasing(values: np.ndarray, table: Table, where: str) -> None:
+def check_increasing(values: np.ndarray, table: Table, where: str, lines: Sequence[int] | None = None,
+                     unit: str = "row") -> None:
     """Check that the first column is strictly increasing where the table asks for it.
+
+    Parameters
+    ----------
+    lines : sequence of int, optional
+        The file line (or row) number of each row, for the message (default 1, 2, ...).
+    unit : str
+        What the numbers are called in the message (``row`` or ``line``).
 
     Raises
     ------
@@ -390,8 +398,10 @@ def check_increasing(values: np.ndarray, table: Table, where: str) -> None:
         Naming the first row that is not greater than the row before.
     """
     if table.increasing and values.shape[0] > 1 and np.any(np.diff(values[:, 0]) <= 0.0):
-        i = int(np.flatnonzero(np.diff(values[:, 0]) <= 0.0)[0]) + 2
-        raise ModelError(f"{where}: row {i}, column {table.columns[0].name}: must be greater than the row before")
+        k = int(np.flatnonzero(np.diff(values[:, 0]) <= 0.0)[0]) + 1
+        number = lines[k] if lines is not None else k + 1
+        raise ModelError(f"{where}: {unit} {number}, column {table.columns[0].name}: must be greater than the "
+                         f"{unit} before")
 
 
 def format_table(values: np.ndarray) -> str:

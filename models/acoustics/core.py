@@ -9,8 +9,8 @@ at ``t_k + τ``; the one-way travel time τ solves
 ``τ = ‖p + v τ − b_i‖ / c̄`` (three fixed-point iterations; c̄ the
 harmonic-mean sound speed along the path, p and v the target's position and
 velocity inputs), so **the true range refers to the target's position at
-reception**. The receiver, synchronized to GPS time at power-on, measures
-``τ_m = τ + δ (t_k + τ)`` with clock drift δ and turns it into a range with
+reception**. The receiver, synchronized to GPS time at power-on (the start
+time t0), measures ``τ_m = τ + δ (t_k − t0 + τ)`` with clock drift δ and turns it into a range with
 the assumed sound speed, ``r = c_assumed τ_m + σ_r w + e_mp``, where
 ``e_mp > 0`` (exponential, mean ``outlier_excess``) is added with probability
 ``p_out`` (reflected path) and the packet is lost with probability
@@ -136,13 +136,13 @@ class Acoustics(Component):
         n = n_beacons
         packet = [v.name for v in cls.outputs(n)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet],
-                           derived=[("nodes", NODES), ("values", 2 * NODES)])
+                           derived=[("nodes", NODES), ("slowness", NODES)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
 
         def prepare(p):
             depth, speed = p[PROFILE.columns[0].name], p[PROFILE.columns[1].name]
-            nodes, speeds, slowness = profile_nodes(p["sound_speed_rows"], depth, speed)
-            return {"nodes": nodes, "values": ca.vec(ca.horzcat(speeds, slowness).T)}
+            nodes, slowness = profile_nodes(p["sound_speed_rows"], depth, speed)
+            return {"nodes": nodes, "slowness": slowness}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -164,7 +164,7 @@ class Acoustics(Component):
                 receive = position + velocity * tau
                 distance = ca.norm_2(receive - beacon)
                 speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
-                                      d["nodes"], d["values"])
+                                      d["nodes"], d["slowness"])
                 return distance / speed, distance
 
             tau = 0.0
@@ -176,7 +176,7 @@ class Acoustics(Component):
             valid = draws[0] >= p["loss_pct"] / 100.0
             outlier = draws[1] < p["outlier_pct"] / 100.0
             excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
-            measured = tau + p["clock_drift_ppm"] * 1e-6 * (t_k + tau)
+            measured = tau + p["clock_drift_ppm"] * 1e-6 * (t_k - x["t0"] + tau)
             rng = p["sound_speed_assumed"] * measured + p["sigma_range"] * noise + excess
             out = {"k": k, "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
                    "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,

@@ -50,12 +50,15 @@ PROFILE = Table(
 NODES = MAX_PROFILE_ROWS + 2
 
 
-def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX, ca.MX]:
-    """The padded profile: nodes at the table's depths, extended above and below.
+def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX]:
+    """The padded profile: nodes at the table's depths, extended above and below, and the slowness integral.
 
     Nodes: ``z_1 − 10 km``, the table's depths, ``z_n + 10 km``, then one
-    metre apart (padding, never reached); speeds: the end speeds outside
-    the table; cumulative slowness by the trapezoid rule.
+    metre apart (padding, never reached); the speeds outside the table are
+    its end speeds. ``S(z) = ∫_{z_1}^{z} dz / c`` at each node by the
+    trapezoid rule, counted from the first depth of the table, so that S
+    stays small near the table and a difference ``S(z2) − S(z1)`` keeps its
+    precision for nearly level paths.
 
     Parameters
     ----------
@@ -66,8 +69,8 @@ def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX, ca.MX]:
 
     Returns
     -------
-    nodes, speeds, slowness : casadi.MX, each (NODES, 1)
-        Depth [m], speed [m/s] and ``S(z) = ∫ dz / c`` from the first node [s/m · m].
+    nodes, slowness : casadi.MX, each (NODES, 1)
+        Depth [m] and ``S`` [s/m · m] at each node.
     """
     (pad_depth, pad_speed), (last_depth, last_speed) = padded_rows(count, [depth, speed], EXTENSION)
     final = ca.if_else(count >= MAX_PROFILE_ROWS, last_depth + EXTENSION, pad_depth[MAX_PROFILE_ROWS - 1] + 1.0)
@@ -75,10 +78,11 @@ def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX, ca.MX]:
     # an empty table (speeds 0) stays finite; it is not used
     speeds = ca.fmax(ca.vertcat(speed[0], pad_speed, last_speed), 1.0)
     steps = 0.5 * (1.0 / speeds[1:] + 1.0 / speeds[:-1]) * (nodes[1:] - nodes[:-1])
-    return nodes, speeds, ca.vertcat(0.0, cumulative_sum(steps))
+    slowness = ca.vertcat(0.0, cumulative_sum(steps))
+    return nodes, slowness - slowness[1]
 
 
-def harmonic_mean(z1, z2, constant, count, nodes, values) -> ca.SX:
+def harmonic_mean(z1, z2, constant, count, nodes, slowness) -> ca.SX:
     """Harmonic-mean sound speed between depths ``z1`` and ``z2`` [m/s].
 
     Parameters
@@ -89,28 +93,31 @@ def harmonic_mean(z1, z2, constant, count, nodes, values) -> ca.SX:
         The sound speed when the table is empty [m/s].
     count : casadi.SX
         Rows of the table in use.
-    nodes : casadi.SX, shape (NODES, 1)
-        Node depths [m] (:func:`profile_nodes`).
-    values : casadi.SX, shape (2 NODES, 1)
-        Speed and cumulative slowness at each node, node after node.
+    nodes, slowness : casadi.SX, shape (NODES, 1)
+        Node depths [m] and the slowness integral at them (:func:`profile_nodes`).
 
     Returns
     -------
     casadi.SX
-        ``|z2 − z1| / |S(z2) − S(z1)|``, or ``c((z1 + z2) / 2)`` where the path is level
-        (|z2 − z1| < 1 nm); the constant for an empty table.
+        ``(z2 − z1) / (S(z2) − S(z1))`` with S interpolated linearly between
+        the nodes; where the path is level (|z2 − z1| < 1 nm) its limit,
+        ``1 / S'`` at the mid depth; the constant for an empty table.
     """
-    f = _profile_interpolant()
-    c1s1, c2s2 = f(z1, nodes, values), f(z2, nodes, values)
-    mid = f(0.5 * (z1 + z2), nodes, values)
+    level_speed, f = _profile_functions()
     dz = z2 - z1
     level = ca.fabs(dz) < 1e-9
-    table = ca.if_else(level, mid[0], dz / ca.if_else(level, 1.0, c2s2[1] - c1s1[1]))
+    slanted = dz / ca.if_else(level, 1.0, f(z2, nodes, slowness) - f(z1, nodes, slowness))
+    table = ca.if_else(level, level_speed(0.5 * (z1 + z2), nodes, slowness), slanted)
     return ca.if_else(count > 0, table, constant)
 
 
-def _profile_interpolant() -> ca.Function:
-    return ca.interpolant("sblsim_sound_speed", "linear", [NODES], 2)
+@lru_cache(maxsize=1)
+def _profile_functions() -> tuple[ca.Function, ca.Function]:
+    """The slowness interpolant S(z) and the speed 1 / S'(z) of a level path."""
+    f = ca.interpolant("sblsim_slowness", "linear", [NODES], 1)
+    z, nodes, slowness = ca.SX.sym("z"), ca.SX.sym("nodes", NODES), ca.SX.sym("slowness", NODES)
+    speed = 1.0 / ca.jacobian(f(z, nodes, slowness), z)
+    return ca.Function("sblsim_level_speed", [z, nodes, slowness], [speed]), f
 
 
 def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile") -> np.ndarray:

@@ -79,10 +79,16 @@ def slot_due(x, u, t, h) -> ca.SX:
     return ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["tx_time"] - SLOT_SLACK)
 
 
+def fresh_packet(u, n_beacons: int) -> ca.SX:
+    """The slot's packet was received and names a beacon of the array."""
+    index = u["beacon_id"] - 1
+    return ca.logic_and(u["packet_valid"], ca.logic_and(index >= 0, index < n_beacons))
+
+
 def take_packet(x, u, n_beacons: int) -> dict[str, ca.SX]:
     """The held ranges after a slot: a received packet replaces its beacon's range and position."""
     index = u["beacon_id"] - 1
-    fresh = ca.logic_and(u["packet_valid"], ca.logic_and(index >= 0, index < n_beacons))
+    fresh = fresh_packet(u, n_beacons)
     position = ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
     ranges, beacons, heard = [], [], []
     for j in range(n_beacons):
@@ -193,5 +199,5 @@ class Receiver(Component):
                          events=[b.event("slot", due, slot), b.event("lm", lm_active, iterate)])
 
 
-__all__ = ["INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "Receiver", "STATE_NAMES", "lm_active", "lm_begin",
+__all__ = ["INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "Receiver", "STATE_NAMES", "fresh_packet", "lm_active", "lm_begin",
            "lm_idle", "lm_step", "lm_states", "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet"]

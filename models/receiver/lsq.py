@@ -9,9 +9,11 @@ the depth reading by weighted least squares,
 with the Levenberg-Marquardt iteration of :mod:`models.receiver.multilateration`
 (damped Gauss-Newton) started from the previous fix, to a tighter tolerance
 than the instrumentation's (the fix is this receiver's estimate). Nothing is
-filtered: the estimate is the latest valid fix (the initial guess x0 until the
-first one), and the velocity is the finite difference of the last two valid
-fixes over the time between their slots. The receiver is its own
+filtered: the estimate is the latest valid fix of a slot that brought a fresh
+range (the initial guess x0 until the first one), and the velocity is the
+finite difference of the last two such fixes over the time between their
+slots (a slot whose packet was lost refits the same held ranges: it changes
+neither). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
 
@@ -34,8 +36,8 @@ from __future__ import annotations
 import casadi as ca
 
 from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Variable
-from models.receiver.core import (Receiver, lm_active, lm_begin, lm_idle, lm_states, lm_step, packet_init,
-                                  packet_states, receiver_interface, slot_due, take_packet)
+from models.receiver.core import (Receiver, fresh_packet, lm_active, lm_begin, lm_idle, lm_states, lm_step,
+                                  packet_init, packet_states, receiver_interface, slot_due, take_packet)
 from models.receiver.multilateration import fit_statistics, weights
 
 #: Parameters taken from :class:`Receiver`'s declarations (declared once, there).
@@ -60,19 +62,19 @@ class LeastSquaresReceiver(Component):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=packet_states(n) + [
             ("fix", 3), ("has_fix", 1), ("fix_time", 1), ("velocity", 3), ("instr", 3), ("instr_valid", 1),
-            ("nis", 1), ("pos_std", 1), ("pending", 1)] + lm_states())
+            ("nis", 1), ("pos_std", 1), ("pending", 1), ("fresh", 1)] + lm_states())
 
         def init(p, d, w, t0):
             return {**packet_init(n), "fix": ca.vertcat(p["x0_x"], p["x0_y"], p["x0_z"]), "has_fix": 0,
                     "fix_time": 0, "velocity": ca.SX.zeros(3), "instr": ca.SX.zeros(3), "instr_valid": 0, "nis": 0,
-                    "pos_std": 0, "pending": 0, **lm_idle()}
+                    "pos_std": 0, "pending": 0, "fresh": 0, **lm_idle()}
 
         def due(x, u, p, d, t, h):
             return slot_due(x, u, t, h)
 
         def slot(x, u, p, d, w, t, h):
             held = {**x, **take_packet(x, u, n)}
-            return {**held, **lm_begin(held, x["fix"], u["depth"], p), "pending": 1}
+            return {**held, **lm_begin(held, x["fix"], u["depth"], p), "pending": 1, "fresh": fresh_packet(u, n)}
 
         def iterate(x, u, p, d, w, t, h):
             return lm_step(x, p, ITERATIONS, TOLERANCE)
@@ -83,18 +85,19 @@ class LeastSquaresReceiver(Component):
         def finish(x, u, p, d, w, t, h):
             """Fit statistics and finite-difference velocity of the slot's fix."""
             valid = ca.sum1(x["heard"]) >= 3
+            new = ca.logic_and(valid, x["fresh"])  # a fix with new information
             point = x["lm_point"]
             w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
             rss, spread = fit_statistics(point, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d)
             elapsed = x["slot_time"] - x["fix_time"]
-            differentiate = ca.logic_and(valid, ca.logic_and(x["has_fix"], elapsed > 0.0))
+            differentiate = ca.logic_and(new, ca.logic_and(x["has_fix"], elapsed > 0.0))
             rate = (point - x["fix"]) / ca.if_else(differentiate, elapsed, 1.0)
             return {"pending": 0, "instr_valid": valid, "instr": ca.if_else(valid, point, ca.SX.zeros(3)),
                     "nis": ca.if_else(valid, rss, 0.0), "pos_std": ca.if_else(valid, spread, 0.0),
                     "velocity": ca.if_else(differentiate, rate, x["velocity"]),
-                    "fix": ca.if_else(valid, point, x["fix"]),
-                    "fix_time": ca.if_else(valid, x["slot_time"], x["fix_time"]),
-                    "has_fix": ca.logic_or(x["has_fix"], valid)}
+                    "fix": ca.if_else(new, point, x["fix"]),
+                    "fix_time": ca.if_else(new, x["slot_time"], x["fix_time"]),
+                    "has_fix": ca.logic_or(x["has_fix"], new)}
 
         def output(x, p, d, t):
             out = {f"est_{a}": x["fix"][k] for k, a in enumerate("xyz")}

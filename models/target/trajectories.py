@@ -136,9 +136,9 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
         If the file is missing or malformed; the message names the field,
         and the row and column of a bad cell.
     """
+    if str(path) and Path(path).is_dir():
+        raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
     if not str(path) or not Path(path).is_file():
-        if Path(path).is_dir():
-            raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
         raise ModelError(f"{field}: no such file {str(path)!r}")
     try:
         with open(path, newline="") as handle:
@@ -148,7 +148,7 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
         raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
     if lines and _is_header(lines[0][1]):
         lines = lines[1:]
-    rows = []
+    rows, numbers = [], []
     names = [c.name for c in table.columns]
     for i, row in lines:
         if len(row) != len(names):
@@ -164,12 +164,13 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
             check_entry(number, col, f"{field}: {str(path)!r} line {i}, column {col.name}")
             values.append(number)
         rows.append(values)
+        numbers.append(i)
     if len(rows) < 2:
         raise ModelError(f"{field}: {str(path)!r} needs at least 2 rows time, N, E, D")
     if len(rows) > table.max_rows:
         raise ModelError(f"{field}: {str(path)!r} has {len(rows)} rows; at most {table.max_rows}")
     data = np.array(rows)
-    check_increasing(data, table, f"{field}: {str(path)!r}")
+    check_increasing(data, table, f"{field}: {str(path)!r}", numbers, "line")
     return data
 
 

@@ -334,8 +334,8 @@ def read_cast_raw():
 
 def _harmonic_mean_function() -> ca.Function:
     z1, z2, c0, n = (ca.SX.sym(s) for s in ("z1", "z2", "c0", "n"))
-    nodes, values = ca.SX.sym("nodes", NODES), ca.SX.sym("values", 2 * NODES)
-    return ca.Function("hm", [z1, z2, c0, n, nodes, values], [harmonic_mean(z1, z2, c0, n, nodes, values)])
+    nodes, slowness = ca.SX.sym("nodes", NODES), ca.SX.sym("slowness", NODES)
+    return ca.Function("hm", [z1, z2, c0, n, nodes, slowness], [harmonic_mean(z1, z2, c0, n, nodes, slowness)])
 
 
 HM = _harmonic_mean_function()
@@ -354,16 +354,18 @@ def model_harmonic_mean(params, z1, z2):
 
 def reference_harmonic_mean(depth, speed, z1, z2):
     """Independent numpy form of the documented scheme: nodes extended by 10 km with the end speeds,
-    trapezoid slowness at the nodes, S linear between them; a level path takes c at its mid depth."""
+    trapezoid slowness at the nodes, S linear between them; a level path takes the limit 1 / S' at its
+    mid depth (the interval starting at a node when the depth is one)."""
     nodes = np.concatenate([[depth[0] - 1e4], depth, [depth[-1] + 1e4]])
     speeds = np.concatenate([[speed[0]], speed, [speed[-1]]])
     S = np.concatenate([[0.0], np.cumsum(0.5 * (1 / speeds[1:] + 1 / speeds[:-1]) * np.diff(nodes))])
     z1, z2 = np.broadcast_arrays(np.asarray(z1, float), np.asarray(z2, float))
     dz = z2 - z1
     level = np.abs(dz) < 1e-9
-    mid = np.interp(0.5 * (z1 + z2), nodes, speeds)
+    k = np.clip(np.searchsorted(nodes, 0.5 * (z1 + z2), side="right") - 1, 0, nodes.size - 2)
+    limit = 2.0 / (1.0 / speeds[k] + 1.0 / speeds[k + 1])
     ds = np.interp(z2, nodes, S) - np.interp(z1, nodes, S)
-    return np.where(level, mid, dz / np.where(level, 1.0, ds))
+    return np.where(level, limit, dz / np.where(level, 1.0, ds))
 
 
 def slowness_quad(depth, speed, z1, z2):
@@ -394,13 +396,16 @@ def test_cast_table_is_the_csv_columns_and_matches_data_readme():
     assert np.all(np.diff(depth) > 0) and depth.size <= MAX_PROFILE_ROWS
     table = profile_table(f"ctd:{CAST}", "", 15.0, 35.0)
     np.testing.assert_array_equal(table, np.column_stack([depth, speed]))
-    # "Sound speed falls from about 1512.6 m/s at the surface to about 1491.5 m/s at 22 m" (level paths)
+    # "Sound speed falls from about 1512.6 m/s at the surface to about 1491.5 m/s at 22 m"
+    assert np.interp(0.0, depth, speed) == pytest.approx(1512.6, abs=0.1)
+    assert np.interp(22.0, depth, speed) == pytest.approx(1491.5, abs=0.2)
+    # and the channel's level paths there see it (the limit over the interval below each depth)
     c = model_harmonic_mean({"sound_speed_profile": f"ctd:{CAST}"}, [0.0, 22.0], [0.0, 22.0])
     assert c[0] == pytest.approx(1512.6, abs=0.1)
-    assert c[1] == pytest.approx(1491.5, abs=0.1)
-    # a level path takes the linearly interpolated speed at the table's depths
-    np.testing.assert_allclose(model_harmonic_mean({"sound_speed_profile": f"ctd:{CAST}"}, depth[::7], depth[::7]),
-                               speed[::7], rtol=1e-14)
+    assert c[1] == pytest.approx(1491.5, abs=0.2)
+    # a level path at a table depth takes the limit over the interval below it: 2 / (1/c_k + 1/c_k+1)
+    np.testing.assert_allclose(model_harmonic_mean({"sound_speed_profile": f"ctd:{CAST}"}, depth[:-1:7], depth[:-1:7]),
+                               2.0 / (1.0 / speed[:-1:7] + 1.0 / speed[1::7]), rtol=1e-10)  # S differenced
 
 
 @pytest.mark.parametrize("z1,z2", [(0.0, 22.0), (1.0, 8.0), (15.3, 3.7), (0.5, 0.9), (2.0, 30.0), (-1.0, 5.0),
@@ -412,8 +417,9 @@ def test_harmonic_mean_matches_numpy_scheme_and_quadrature(z1, z2):
     assert got == pytest.approx(float(reference_harmonic_mean(depth, speed, z1, z2)), rel=1e-11)
     # symmetric in its ends
     assert model_harmonic_mean({"sound_speed_profile": f"ctd:{CAST}"}, z2, z1)[0] == pytest.approx(got, rel=1e-11)
-    if z1 == z2:
-        assert got == pytest.approx(float(np.interp(z1, depth, speed)), rel=1e-14)
+    if z1 == z2:  # the level limit lies between the speeds of the interval
+        k = np.searchsorted(depth, z1, side="right") - 1
+        assert min(speed[k], speed[k + 1]) <= got <= max(speed[k], speed[k + 1])
         return
     # the exact slowness integral, within the trapezoid and interpolation error of the scheme
     exact = slowness_quad(depth, speed, z1, z2)
@@ -438,9 +444,9 @@ def test_harmonic_mean_hand_worked_linear_profile():
         assert abs((z2[k] - z1[k]) / got[k] - exact[k]) <= bound
         assert bound / abs(exact[k]) < 1e-4
     np.testing.assert_allclose(got, (z2 - z1) / exact, rtol=1e-4)
-    # a level path takes the local speed
-    assert model_harmonic_mean(params, 25.0, 25.0)[0] == pytest.approx(1525.0, rel=1e-15)
-    assert model_harmonic_mean(params, 25.25, 25.25)[0] == pytest.approx(1525.25, rel=1e-14)
+    # a level path takes the limit of the interval it lies in: 2 / (1/1525 + 1/1525.5)
+    assert model_harmonic_mean(params, 25.0, 25.0)[0] == pytest.approx(2.0 / (1 / 1525.0 + 1 / 1525.5), rel=1e-12)
+    assert model_harmonic_mean(params, 25.25, 25.25)[0] == pytest.approx(2.0 / (1 / 1525.0 + 1 / 1525.5), rel=1e-12)
 
 
 def test_constant_profile_harmonic_mean_is_the_constant_exactly():
@@ -490,10 +496,11 @@ def test_teos10_profile_against_mackenzie_equation():
                      + 1.675e-7 * D**2 - 1.025e-2 * T * (S - 35) - 7.139e-13 * T * D**3)
         np.testing.assert_allclose(table[:, 1], mackenzie, rtol=0, atol=0.5)
         assert D[0] == 0.0 and np.all(np.diff(D) > 0)
-    # the channel uses it: a level path at 50 m takes the TEOS-10 speed there
+    # the channel uses it: a level path at 50 m takes the limit over the TEOS-10 interval [50, 51] m
     table = profile_table("teos10", "", 10.0, 34.0)
     c = model_harmonic_mean({"sound_speed_profile": "teos10", "temperature": 10.0, "salinity": 34.0}, 50.0, 50.0)
-    assert c[0] == pytest.approx(float(np.interp(50.0, table[:, 0], table[:, 1])), rel=1e-14)
+    k = int(np.flatnonzero(table[:, 0] == 50.0)[0])
+    assert c[0] == pytest.approx(2.0 / (1.0 / table[k, 1] + 1.0 / table[k + 1, 1]), rel=1e-12)
 
 
 def test_config_values_round_trip_the_table():

@@ -277,13 +277,7 @@ def _assert_batch_equals_separate_runs(low, high):
     assert alone.timeseries.equals(ref_b.timeseries.iloc[steps:2 * steps].reset_index(drop=True))
 
 
-@pytest.mark.parametrize("receiver", [
-    "lsq",
-    pytest.param("ekf", marks=pytest.mark.xfail(
-        raises=ModelError, strict=True,
-        reason="production bug: merge_params refuses a differing run.cell for a component without seed "
-               "parameters (the EKF receiver): 'receiver.cell: must be the same for every run of a batch'")),
-])
+@pytest.mark.parametrize("receiver", ["lsq", "ekf"])
 def test_run_batch_spanning_two_cells_equals_one_cell_batches(receiver):
     """The whole system (all four components, receiver included) on a batch mixing two cells."""
     extra = EKF_ONLY if receiver == "ekf" else {"low": [], "high": []}

@@ -263,8 +263,6 @@ def test_component_parameter_vectors_of_the_real_models():
     assert q[declared.index("trajectory")] == choices.index("file")
 
 
-@pytest.mark.xfail(strict=True, reason="suspected bug: float(2**53 + 1) rounds, so a whole number beyond 2**53 "
-                                       "is reported as 'expected a whole number' instead of out of range")
 def test_a_whole_number_beyond_double_precision_is_a_range_error():
     with pytest.raises(ModelError, match=r"is outside the allowed range \[0, 8\]"):
         INTEGER.coerce(2**53 + 1, "k")

@@ -403,8 +403,8 @@ def test_trajectory_file_comment_lines_keep_every_data_row(tmp_path):
     ("time,N,E,D\n0,0,0,1\n10,nan,0,1\n", r"line 3, column waypoint_north: nan is not finite"),
     ("time,N,E,D\n0,0,0,1\n10,1,inf,1\n", r"line 3, column waypoint_east: inf is not finite"),
     ("time,N,E,1\n0,0,0,1\n10,1,0,1\n", r"line 1, column waypoint_time: 'time' is not a number"),  # not a header
-    ("time,N,E,D\n0,0,0,1\n10,1,0,1\n5,2,0,1\n", r"column waypoint_time: must be greater than the row before"),
-    ("time,N,E,D\n0,0,0,1\n0,1,0,1\n", r"column waypoint_time: must be greater than the row before"),
+    ("time,N,E,D\n0,0,0,1\n10,1,0,1\n5,2,0,1\n", r"line 4, column waypoint_time: must be greater than the line before"),
+    ("time,N,E,D\n0,0,0,1\n0,1,0,1\n", r"line 3, column waypoint_time: must be greater than the line before"),
     ("time,N,E,D\n0,0,0,1\n", r"at least 2 rows"),                               # one row
     ("", r"at least 2 rows"),                                                     # empty file
     ("# only a comment\ntime,N,E,D\n", r"at least 2 rows"),
@@ -418,8 +418,6 @@ def test_trajectory_file_malformed_raises_model_error(tmp_path, content, where):
         Core(Target, dict(trajectory="file", trajectory_file=str(f)))
 
 
-@pytest.mark.xfail(strict=True, reason="suspected bug: the increasing-time error counts data rows ('row 3'), "
-                                       "not file lines like the other errors (line 5 here)")
 def test_trajectory_file_time_order_error_names_the_file_line(tmp_path):
     f = tmp_path / "bad.csv"
     f.write_text("time,N,E,D\n# comment\n0,0,0,1\n10,1,0,1\n5,2,0,1\n")
@@ -427,8 +425,6 @@ def test_trajectory_file_time_order_error_names_the_file_line(tmp_path):
         read_trajectory_file(f, WAYPOINTS)
 
 
-@pytest.mark.xfail(strict=True, reason="suspected bug: an empty path is reported as \"'' is a directory\" "
-                                       "(Path('') is '.')")
 def test_trajectory_file_empty_path_is_not_called_a_directory():
     with pytest.raises(ModelError, match=r"no such file"):
         read_trajectory_file("", WAYPOINTS)
