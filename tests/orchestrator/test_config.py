@@ -17,7 +17,7 @@ def declared_parameters(section: str) -> set[str]:
     """Parameter names a section must hold, computed from the declarations."""
     if section in COMPONENTS:
         seed = {"seed", "scenario_key", "cell", "replicate"}
-        return {v.name for v in COMPONENTS[section].variables() if v.causality == "parameter"} - seed
+        return {v.name for v in COMPONENTS[section].variables() if v.causality == "parameter" and v.scope != "fmu"} - seed
     return {v.name for v in section_variables(section)}
 
 

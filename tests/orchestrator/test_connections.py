@@ -119,7 +119,7 @@ def test_run_checks_connections_before_stepping():
     cfg = load_config("semicircle", ["simulation.duration=1"])
     with pytest.raises(ModelError, match="tx_time"):
         run(cfg, "local", handles=handles)
-    assert handles["receiver"].core is None  # nothing was set up
+    assert handles["receiver"].batch is None  # nothing was set up
 
 
 # --------------------------------------------------------------------------- execution order

@@ -1,36 +1,50 @@
-"""Each FMU is loaded once per process and re-used (pythonfmu FMUs cannot be loaded twice)."""
+"""FMU instances are made once per process and re-used between runs; concurrent runs get their own."""
 
-import shutil
+import zipfile
 
 import pytest
 
 from models.core import ModelError
 from orchestrator.config import load_config
+from orchestrator.engines import open_fmu
 from orchestrator.run import close_handles, make_handles, run
 
 
-def test_handles_are_reused_and_not_shared_between_concurrent_runs(fmu_dir):
+def test_instances_are_reused_and_concurrent_runs_get_their_own(fmu_dir):
     first = make_handles("fmu", fmu_dir)
     try:
-        with pytest.raises(ModelError, match="in use by another run"):
-            make_handles("fmu", fmu_dir)
+        second = make_handles("fmu", fmu_dir)  # native FMUs: any number of instances
+        try:
+            assert all(second[name] is not first[name] for name in first)
+        finally:
+            close_handles(second)
     finally:
         close_handles(first)
     again = make_handles("fmu", fmu_dir)
     try:
-        assert all(again[name] is first[name] for name in first)
+        assert all(again[name] is first[name] or again[name] is second[name] for name in first)
     finally:
         close_handles(again)
-    # and a run on its own handles still works after that
+    # and a run on its own handles still works after that, with the same numbers
     cfg = load_config("semicircle", ["simulation.duration=2"], seed=4)
     assert run(cfg, "fmu", fmu_dir=fmu_dir).timeseries.equals(run(cfg, "fmu", fmu_dir=fmu_dir).timeseries)
 
 
-def test_another_file_of_a_loaded_fmu_is_refused_clearly(fmu_dir, tmp_path):
-    close_handles(make_handles("fmu", fmu_dir))  # make sure this process has loaded them
-    copy = tmp_path / "copy"
-    shutil.copytree(fmu_dir, copy)
-    with pytest.raises(ModelError, match="already loaded in this process"):
-        make_handles("fmu", copy)
-    # the failed attempt released what it had opened
-    close_handles(make_handles("fmu", fmu_dir))
+def test_an_fmu_that_declares_one_instance_per_process_is_not_instantiated_twice(fmu_dir, tmp_path):
+    """A user's FMU that can be instantiated only once per process (e.g. one built with pythonfmu)."""
+    once = tmp_path / "once.fmu"
+    with zipfile.ZipFile(fmu_dir / "sblsim_receiver.fmu") as src, zipfile.ZipFile(once, "w") as dst:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "modelDescription.xml":
+                data = data.replace(b'canBeInstantiatedOnlyOncePerProcess="false"',
+                                    b'canBeInstantiatedOnlyOncePerProcess="true"')
+            dst.writestr(item, data)
+    handle = open_fmu("receiver", once)
+    try:
+        with pytest.raises(ModelError, match="can be instantiated only once per process"):
+            open_fmu("receiver", once)
+    finally:
+        handle.terminate()
+    assert open_fmu("receiver", once) is handle  # released: the same instance again
+    handle.terminate()

@@ -10,26 +10,31 @@ from orchestrator.master import simulate
 
 
 class Counter:
-    """Output ``n``: the number of doSteps taken; input ``u`` copied to output ``seen`` at each step."""
+    """Output ``n``: the number of doSteps taken; input ``u`` copied to output ``seen`` at each step.
+
+    A handle as the master sees it: named inputs and outputs, one vector each.
+    """
+
+    input_names = ["u"]
+    output_names = ["n", "seen"]
 
     def __init__(self):
-        self.n, self.u, self.seen = 0, np.zeros(1), np.zeros(1)
+        self.n, self.u, self.seen = 0, 0.0, 0.0
 
-    def set_inputs(self, values):
-        self.u = np.asarray(values["u"], float)
+    def set_input_vector(self, values):
+        self.u = float(values[0, 0])
 
     def do_step(self, t, h):
         self.n += 1
-        self.seen = self.u.copy()
+        self.seen = self.u
 
-    def get_outputs(self):
-        return {"n": np.array([float(self.n)]), "seen": self.seen}
+    def output_vector(self):
+        return np.array([[float(self.n)], [self.seen]])
 
 
 def chain(algorithm, rates=None, steps=3):
     # a -> b -> c: b sees a's count, c sees b's count
     handles = {"a": Counter(), "b": Counter(), "c": Counter()}
-    handles["a"].set_inputs({"u": [0.0]})
     conns = [Connection("a", "n", "b", "u"), Connection("b", "n", "c", "u")]
     return simulate(handles, conns, rates or {}, 1.0, steps, algorithm=algorithm)
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import re
 import zipfile
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.ssp.ssd import read_ssd, read_ssv
 
+from models import MODELS
 from orchestrator.cli import main
 from orchestrator.config import component_params, load_config
 from orchestrator.connections import default_connections
@@ -70,45 +73,85 @@ def test_components_connectors_units_and_fmus(exported, fmu_dir):
 
 
 def test_parameter_sets_hold_the_scenarios_values(exported):
+    """One system-wide set (every .ssv has the system's name), numbers only (no String: OMSimulator cannot
+    set one), each value the FMU value of the configuration (choices as their index)."""
     cfg, path = exported
     system = read_ssd(str(path)).system
+    names = set()
     for comp in system.elements:
         (binding,) = comp.parameterBindings
+        assert binding.type == "application/x-ssp-parameter-set"
         pset = read_ssv(str(path), resource=binding.source)  # read again, on its own, validated
+        names.add(pset.name)
         got = {p.name: p for p in pset.parameters}
-        want = component_params(cfg, comp.name)
+        model = MODELS[comp.name]
+        want = model.fmi_values(component_params(cfg, comp.name))
         assert set(got) == set(want)
         for name, value in want.items():
             p = got[name]
+            assert p.type in ("Real", "Integer", "Boolean")
             if p.type == "Real":
                 assert float(p.value) == float(value)
             elif p.type == "Integer":
                 assert int(p.value) == value
-            elif p.type == "Boolean":
-                assert p.value == ("true" if value else "false")
             else:
-                assert p.value == value
+                assert p.value == ("true" if value else "false")
+    assert names == {system.name} == {"semicircle"}
     assert {p.name: p.value for p in read_ssv(str(path), resource="resources/acoustics.ssv").parameters}[
         "loss_pct"] == "10.0"
+    target = {p.name: p.value for p in read_ssv(str(path), resource="resources/target.ssv").parameters}
+    assert target["trajectory"] == str(["semicircle", "spiral", "random", "square", "file"].index("semicircle"))
 
 
-def test_default_experiment_and_step_hints(exported):
+def test_names_annotations_and_default_experiment_suit_every_host(exported):
+    """Identifiers as names, the base step where OMSimulator and libcosim read it, no component annotation."""
     cfg, path = exported
     with zipfile.ZipFile(path) as archive:
         text = archive.read("SystemStructure.ssd").decode()
+    root = ET.fromstring(text)
+    ns = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription"}
+    ident = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+    assert ident.match(root.get("name")) and ident.match(root.find("ssd:System", ns).get("name"))
+    assert all(ident.match(c.get("name")) for c in root.findall(".//ssd:Component", ns))
+    assert all(c.find("ssd:Annotations", ns) is None for c in root.findall(".//ssd:Component", ns))
+    assert "StepSizeHint" not in text
     assert '<ssd:DefaultExperiment startTime="0.0" stopTime="20.0">' in text
     assert '<osp:FixedStepAlgorithm baseStepSize="0.1" />' in text
-    assert text.count('<osp:StepSizeHint value="0.1" />') == 4
+    assert 'type="org.openmodelica"' in text and '<oms:FixedStepMaster description="oms-ma" stepSize="0.1"' in text
 
 
-def test_multi_rate_package_gives_the_receiver_its_own_step(fmu_dir, tmp_path):
+def test_multi_rate_package_steps_every_component_at_the_receivers_step(fmu_dir, tmp_path):
     cfg = load_config("semicircle", ["simulation.duration=2", "simulation.ekf_rate_ratio=4"])
     path = export_ssp(cfg, tmp_path / "m.ssp", fmu_dir)
     with zipfile.ZipFile(path) as archive:
         text = archive.read("SystemStructure.ssd").decode()
-    assert '<osp:FixedStepAlgorithm baseStepSize="0.025" />' in text
-    assert text.count('<osp:StepSizeHint value="0.1" />') == 3 and '<osp:StepSizeHint value="0.025" />' in text
-    assert read_ssp(path).config["simulation"]["ekf_rate_ratio"] == 4
+    assert '<osp:FixedStepAlgorithm baseStepSize="0.025" />' in text and 'stepSize="0.025"' in text
+    back = read_ssp(path).config["simulation"]
+    assert (back["ekf_rate_ratio"], back["sampling_time"]) == (4, 0.1)  # T from the channel's slot period
+
+
+def test_a_scenario_name_that_is_not_an_identifier_is_made_one(fmu_dir, tmp_path):
+    cfg = load_config("semicircle", ["simulation.duration=1", "run.scenario=my semicircle 2"])
+    path = export_ssp(cfg, tmp_path / "n.ssp", fmu_dir)
+    system = read_ssd(str(path)).system
+    assert system.name == "my_semicircle_2"
+
+
+def test_tables_travel_in_the_package_as_numbers(fmu_dir, tmp_path):
+    """The harbour's CTD cast and a file trajectory are parameter arrays in the set, and come back."""
+    track = tmp_path / "track.csv"
+    track.write_text("time,N,E,D\n0,0,0,2\n20,10,0,2.5\n40,10,10,3\n")
+    cfg = load_config("harbour", ["simulation.duration=5", "target.trajectory=file",
+                                  f"target.trajectory_file={track}"])
+    path = export_ssp(cfg, tmp_path / "h.ssp", fmu_dir)
+    acoustics = {p.name: p.value for p in read_ssv(str(path), resource="resources/acoustics.ssv").parameters}
+    rows = int(acoustics["sound_speed_rows"])
+    assert rows > 50 and float(acoustics["sound_speed[1]"]) == pytest.approx(1512.6, abs=0.1)
+    back = read_ssp(path).config
+    assert back["acoustics"]["sound_speed_profile"] == "table"
+    assert back["target"]["trajectory"] == "file" and back["target"]["trajectory_file"] == ""
+    a, b = run(cfg), run(back)
+    np.testing.assert_array_equal(a.timeseries["est_x"], b.timeseries["est_x"])
 
 
 def test_read_back_gives_the_same_configuration_and_connections(exported):
