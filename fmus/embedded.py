@@ -19,9 +19,9 @@ from models import MODELS, RECEIVERS
 from models.core import ModelError
 
 MAIN = """/* Feed a packet sequence to the {name} and print its estimates.
-   stdin, one line per step: t h {inputs}
-   stdout, one line per step: t+h est_x est_y est_z
-   arguments: parameters as NAME=VALUE (e.g. x0_y=-15); build: cc -O2 -std=c99 *.c -lm -o receiver */
+ * stdin, one line per step: t h {inputs}
+ * stdout, one line per step: t+h est_x est_y est_z
+ * arguments: parameters as NAME=VALUE (e.g. x0_y=-15); build: cc -O2 -std=c99 *.c -lm -o receiver */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -30,25 +30,21 @@ extern const sblsim_model {symbol};
 static const char* inputs[] = {{{quoted}}};
 int main(int argc, char** argv) {{
     sblsim_handle* r = sblsim_new(&{symbol});
-    double t, h, v[{count}];
-    int k, n = 0, started = 0;
-    for (k = 1; k < argc; k++) {{
+    double t, h, v;
+    int k, n, ok = r != NULL;
+    for (k = 1; k < argc && ok; k++) {{
         char* eq = strchr(argv[k], '=');
-        if (eq != NULL) {{ *eq = 0; if (sblsim_set(r, argv[k], atof(eq + 1))) goto fail; }}
+        ok = eq != NULL && (*eq = 0, sblsim_set(r, argv[k], atof(eq + 1)) == 0);
     }}
-    while (scanf("%lf %lf", &t, &h) == 2) {{
-        for (k = 0; k < {count}; k++) n = scanf("%lf", &v[k]);
-        if (n != 1 || (!started && sblsim_start(r, t))) goto fail;
-        started = 1;
-        for (k = 0; k < {count}; k++) sblsim_set(r, inputs[k], v[k]);
-        if (sblsim_step(r, t, h)) goto fail;
-        printf("%.17g %.17g %.17g %.17g\\n", t + h, sblsim_get(r, "est_x"), sblsim_get(r, "est_y"), sblsim_get(r, "est_z"));
+    for (n = 0; ok && scanf("%lf %lf", &t, &h) == 2; n++) {{
+        for (k = 0; k < {count} && ok; k++) ok = scanf("%lf", &v) == 1 && sblsim_set(r, inputs[k], v) == 0;
+        ok = ok && (n > 0 || sblsim_start(r, t) == 0) && sblsim_step(r, t, h) == 0;
+        if (ok) printf("%.17g %.17g %.17g %.17g\\n", t + h, sblsim_get(r, "est_x"), sblsim_get(r, "est_y"),
+                       sblsim_get(r, "est_z"));
     }}
+    if (!ok) fprintf(stderr, "%s\\n", r && *sblsim_error(r) ? sblsim_error(r) : "bad argument or input line");
     sblsim_free(r);
-    return 0;
-fail:
-    fprintf(stderr, "%s\\n", n == 1 ? sblsim_error(r) : "bad input line");
-    return 1;
+    return ok ? 0 : 1;
 }}
 """
 
