@@ -8,22 +8,21 @@ Measures in one run, on this machine:
    one at T = 1 s, ``--replicates`` runs each) stepped three ways in this
    process: the local engine one replicate at a time (B = 1, the baseline),
    the local engine batched (all sample runs in one batch), and the fmu
-   engine (the four FMUs through fmpy, built into a temporary directory);
-   runs per second and the ratio to B = 1; the three must give the same
-   metrics (checked: to 1e-9 for the fmu engine, bit for bit for batching);
+   engine (the four native FMUs through fmpy, built into a temporary
+   directory); runs per second and the ratio to B = 1; the three must give
+   the same metrics (checked: bit for bit);
 2. the whole `paper` study (19,200 runs) with ``sblsim campaign`` on the
    local engine with ``--workers`` processes: wall time and runs per second;
 3. the largest chunk of the study (800 runs in one batch, as the campaign
-   steps it): cost per replicate-step and speed-up over B = 1, then a profile
-   of it: where the time goes by component, and the numpy calls per step.
+   steps it): cost per replicate-step and speed-up over B = 1, then where its
+   time goes: each component's compiled step (the whole batch in one call)
+   and the master's Python (data exchange, recording).
 """
 
 from __future__ import annotations
 
 import argparse
-import cProfile
 import os
-import pstats
 import sys
 import tempfile
 import time
@@ -72,7 +71,8 @@ def engines(study, replicates: int) -> float:
             rows.append(("fmu (B = 1, through fmpy)", time.perf_counter() - start))
         finally:
             close_handles(fmu)
-    np.testing.assert_allclose(via_fmu[list(METRIC_COLUMNS)], batched[list(METRIC_COLUMNS)], rtol=1e-9, atol=1e-9)
+    assert np.array_equal(via_fmu[list(METRIC_COLUMNS)].to_numpy(), batched[list(METRIC_COLUMNS)].to_numpy(),
+                          equal_nan=True), "fmu and local metrics differ"
     print(f"sample of the paper study: semicircle, one cell at T = 0.1 s and one at T = 1 s, {replicates} "
           f"replicates each ({len(cfgs)} runs, {steps} replicate-steps), one process")
     print(f"{'engine':36s} {'wall [s]':>9s} {'runs/s':>8s} {'us/replicate-step':>18s} {'speed-up':>9s}")
@@ -90,7 +90,7 @@ def paper(study, workers: int) -> float:
 
 
 def profile(study, baseline: float) -> None:
-    """Time and profile the largest chunk of the study (B = 800 on the local engine)."""
+    """Time the largest chunk of the study (B = 800 on the local engine) and split it by component."""
     chunk = max(plan(study, 800), key=lambda c: c.runs * c.steps)
     start = time.perf_counter()
     run_chunk(chunk, study)
@@ -98,33 +98,24 @@ def profile(study, baseline: float) -> None:
     per_step = wall / chunk.runs / chunk.steps
     print(f"\nlargest chunk of the study ({chunk.runs} runs x {chunk.steps} steps, local engine, one batch): "
           f"{wall:.2f} s, {per_step * 1e6:.2f} us per replicate-step, speed-up over B = 1: {baseline / per_step:.0f}x")
-    profiler = cProfile.Profile()
-    profiler.enable()
-    run_chunk(chunk, study)
-    profiler.disable()
-    stats = pstats.Stats(profiler)
-    groups = {
-        "receiver: instrumentation fix (multilaterate)": ("multilateration.py", ("multilaterate",)),
-        "receiver: EKF predict and update": ("ekf.py", ("predict", "update")),
-        "platform (waves, GPS, IMU, beacons)": ("platform/core.py", ("_step",)),
-        "acoustics (OWTT, sound speed, loss)": ("acoustics/core.py", ("_step",)),
-        "target (trajectory, depth sensor)": ("target/core.py", ("_step",)),
-        "master (inputs, outputs, recording)": ("master.py", ("simulate",)),
-    }
-    cumulative = {label: 0.0 for label in groups}
-    numpy_calls = 0
-    for (filename, _, func), (_, calls, _, ct, _) in stats.stats.items():
-        for label, (key, funcs) in groups.items():
-            if filename.endswith(key) and func in funcs:
-                cumulative[label] += ct
-        if "numpy" in filename or "numpy" in func:
-            numpy_calls += calls
-    simulate = cumulative.pop("master (inputs, outputs, recording)")
-    cumulative["master (inputs, outputs, recording)"] = simulate - sum(cumulative.values())
-    print("where the time of a step goes (cProfile, cumulative per part, share of the simulation):")
-    for label, seconds in sorted(cumulative.items(), key=lambda kv: -kv[1]):
-        print(f"  {label:48s} {100 * seconds / simulate:5.1f} %")
-    print(f"  numpy calls per macro step (all replicates at once): about {numpy_calls / chunk.steps:.0f}")
+    cfgs = [cfg for base in chunk.configs for cfg in with_replicates(base, range(chunk.replicates))]
+    handles = make_handles("local")
+    spent = dict.fromkeys(handles, 0.0)
+    for name, handle in handles.items():
+        def timed(t, h, _step=handle.do_step, _name=name):
+            begin = time.perf_counter()
+            _step(t, h)
+            spent[_name] += time.perf_counter() - begin
+        handle.do_step = timed
+    start = time.perf_counter()
+    run_batch(cfgs, "local", handles=handles, timeseries=False)
+    total = time.perf_counter() - start
+    print("where the time goes (each component's compiled step for the whole batch; the rest is Python):")
+    parts = {f"{name} (compiled step)": seconds for name, seconds in spent.items()}
+    parts["master, set-up and metrics (Python)"] = total - sum(spent.values())
+    for label, seconds in sorted(parts.items(), key=lambda kv: -kv[1]):
+        print(f"  {label:48s} {100 * seconds / total:5.1f} %  ({seconds / chunk.runs / chunk.steps * 1e6:.2f} us "
+              "per replicate-step)")
 
 
 def main() -> None:

@@ -1,24 +1,53 @@
-"""Cost of one co-simulation step (macro step T: four components, connections, recording).
+"""Cost of one co-simulation macro step (four components, 39 connections, recording).
 
-Run:  python benchmarks/bench_step.py [--duration 30] [--repeat 3]
+Run:  python benchmarks/bench_step.py [--duration 30] [--repeat 3] [--pythonfmu REV]
 
 Measures, in one process and one run, the `semicircle` scenario on
 * the local engine, one replicate (B = 1): the baseline;
 * the local engine, 50 replicates stepped together (cost per replicate-step);
-* the fmu engine (the four built FMUs through fmpy, B = 1).
-Prints the best of ``--repeat`` wall-clock times per step and ratios to the baseline.
-The FMUs are built into a temporary directory first.
+* the fmu engine: the four native FMUs through fmpy, B = 1;
+* with ``--pythonfmu REV``: the fmu engine of an earlier git revision whose
+  FMUs embedded Python (pythonfmu; e.g. ``9903b13``), built and timed in a
+  subprocess from a temporary git worktree of this repository (needs
+  ``pip install pythonfmu``).
+Prints the best of ``--repeat`` wall-clock times per macro step and the ratio
+to the baseline. The FMUs are built into a temporary directory first.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 from fmus.build import build_all
 from orchestrator.config import load_config
 from orchestrator.run import close_handles, make_handles, run
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Timed in the earlier revision's own code (its ``run`` and ``make_handles`` had the same signatures).
+OLD = """
+import sys, tempfile, time
+from fmus.build import build_all
+from orchestrator.config import load_config
+from orchestrator.run import make_handles, run
+duration, repeat = float(sys.argv[1]), int(sys.argv[2])
+cfg = load_config("semicircle", [f"simulation.duration={duration}"], seed=1)
+with tempfile.TemporaryDirectory() as tmp:
+    build_all(tmp)
+    handles = make_handles("fmu", tmp)
+    best = float("inf")
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = run(cfg, "fmu", handles=handles)
+        best = min(best, time.perf_counter() - start)
+print(best / result.steps)
+"""
 
 
 def best_time(fn, repeat: int) -> float:
@@ -30,16 +59,34 @@ def best_time(fn, repeat: int) -> float:
     return best
 
 
+def pythonfmu_step(revision: str, duration: float, repeat: int) -> float:
+    """Seconds per macro step of the fmu engine at an earlier revision (its pythonfmu FMUs)."""
+    with tempfile.TemporaryDirectory(prefix="sblsim_old_") as tmp:
+        tree = Path(tmp) / "tree"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), revision], check=True,
+                       capture_output=True)
+        try:
+            env = {**os.environ, "PYTHONPATH": str(tree)}
+            done = subprocess.run([sys.executable, "-c", OLD, str(duration), str(repeat)], cwd=tree, env=env,
+                                  capture_output=True, text=True, check=True)
+            return float(done.stdout.split()[-1])
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], capture_output=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=30.0, help="simulated time per run [s]")
     parser.add_argument("--repeat", type=int, default=3, help="repetitions (best is kept)")
+    parser.add_argument("--pythonfmu", metavar="REV", default=None,
+                        help="also time the pythonfmu FMUs of an earlier git revision (e.g. 9903b13)")
     args = parser.parse_args()
     cfg = load_config("semicircle", [f"simulation.duration={args.duration}"], seed=1)
     steps = int(round(args.duration / cfg["simulation"]["sampling_time"]))
 
     rows = []
     local = make_handles("local")
+    run(cfg, "local", handles=local)  # warm-up: the compiled library is built or loaded once
     t_local = best_time(lambda: run(cfg, "local", handles=local), args.repeat) / steps
     rows.append(("local, B = 1", t_local))
     batch = 50
@@ -49,14 +96,19 @@ def main() -> None:
         build_all(tmp)
         fmu = make_handles("fmu", tmp)
         try:
-            rows.append(("fmu, B = 1", best_time(lambda: run(cfg, "fmu", handles=fmu), args.repeat) / steps))
+            run(cfg, "fmu", handles=fmu)
+            rows.append(("fmu, B = 1 (native FMUs through fmpy)",
+                         best_time(lambda: run(cfg, "fmu", handles=fmu), args.repeat) / steps))
         finally:
             close_handles(fmu)
+    if args.pythonfmu:
+        rows.append((f"fmu, B = 1, pythonfmu FMUs of {args.pythonfmu}",
+                     pythonfmu_step(args.pythonfmu, args.duration, args.repeat)))
 
     print(f"semicircle, {steps} macro steps of T = {cfg['simulation']['sampling_time']} s, best of {args.repeat}")
-    print(f"{'engine':40s} {'per step [ms]':>14s} {'ratio to local B=1':>20s}")
+    print(f"{'engine':48s} {'per step [us]':>14s} {'ratio to local B=1':>20s}")
     for name, seconds in rows:
-        print(f"{name:40s} {seconds * 1e3:14.3f} {seconds / t_local:20.2f}")
+        print(f"{name:48s} {seconds * 1e6:14.1f} {seconds / t_local:20.2f}")
 
 
 if __name__ == "__main__":

@@ -105,6 +105,11 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         plans[c] = [(src, np.array(a), np.array(b)) for src, (a, b) in by_source.items()]
     outputs = {c: handles[c].output_vector() for c in handles}
     buffers = {c: np.zeros((len(handles[c].input_names), outputs[c].shape[1])) for c in handles}
+    # the output rows recorded of each component (all, or those asked for)
+    kept = {c: [k for k, n in enumerate(handles[c].output_names) if record is None or f"{c}.{n}" in record]
+            for c in handles}
+    rows = {c: (slice(None) if len(kept[c]) == len(handles[c].output_names) else np.array(kept[c], dtype=int))
+            for c in handles}
     history: dict[str, list[np.ndarray]] = {c: [] for c in handles}
 
     def feed(c: str) -> None:
@@ -129,15 +134,17 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
             for j in range(ratio):
                 handle.do_step(t + j * sub, sub)
             outputs[c] = handle.output_vector()
-            history[c].append(outputs[c])
+            if kept[c]:
+                history[c].append(outputs[c][rows[c]])
         if progress is not None:
             progress(1)
     result: dict[str, np.ndarray] = {}
     for c in handles:
-        stacked = np.stack(history[c]) if history[c] else np.zeros((0,) + outputs[c].shape)  # (n_steps, n_out, B)
-        for k, name in enumerate(handles[c].output_names):
-            key = f"{c}.{name}"
-            if record is None or key in record:
-                result[key] = stacked[:, k, :]
+        if not kept[c]:
+            continue
+        batch = outputs[c].shape[1]
+        stacked = np.stack(history[c]) if history[c] else np.zeros((0, len(kept[c]), batch))  # (n_steps, kept, B)
+        for j, k in enumerate(kept[c]):
+            result[f"{c}.{handles[c].output_names[k]}"] = stacked[:, j, :]
     result["time"] = t0 + macro_step * np.arange(1, n_steps + 1)
     return result
