@@ -28,7 +28,7 @@ the function declares (:class:`Stream`). Integer and Boolean values travel
 as doubles. The FMUs have no String variables, so that every SSP host can set
 every parameter.
 
-Randomness (DESIGN.md, "Randomness"). Draw ``n`` of purpose ``s`` of
+Randomness (docs/model.md, "Time and randomness"). Draw ``n`` of purpose ``s`` of
 component ``c`` in run ``(seed, scenario_key, cell, replicate)`` takes its
 uniforms from the Philox-4×64-10 counter-based generator (Salmon et al.,
 "Parallel random numbers: as easy as 1, 2, 3", SC'11; ``numpy.random.Philox``)

@@ -10,7 +10,7 @@ Chunks run in worker processes (``--workers``) or on a Dask distributed
 cluster (``--scheduler``); only this process writes files.
 
 Every run draws its random numbers from its own Philox streams, keyed by
-(seed, scenario_key, cell, replicate, component, purpose) (docs/model.md), and
+(seed, scenario_key, cell, replicate, component, purpose) (docs/model.md, "Time and randomness"), and
 a run's arithmetic does not depend on the batch it is stepped in, so
 ``runs.parquet`` is the same whatever the worker count, batch size,
 scheduler or order of execution.

@@ -176,8 +176,7 @@ def _ports(md: Any) -> list[Port]:
 def open_fmu(component: str, path: Path | str, model: type | None = None) -> "FmuHandle":
     """An instance of an FMU file for a run: an idle one made earlier in this process, else a new one.
 
-    Instances are made once and reset between runs (DESIGN.md: "instantiated
-    once and reset between runs"). A run that needs an FMU while all its
+    Instances are made once and reset between runs. A run that needs an FMU while all its
     instances are busy gets a new instance, unless the FMU declares
     ``canBeInstantiatedOnlyOncePerProcess`` (a user's pythonfmu FMU should:
     a second copy crashes the interpreter, NTNU-IHB/PythonFMU#228).

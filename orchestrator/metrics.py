@@ -1,4 +1,4 @@
-"""Position-error metrics of SPEC.md ("Error metrics").
+"""Position-error metrics (docs/model.md, "Metrics").
 
 Per step: ``e_x = |x − x̂|``, ``e_y``, ``e_z`` and
 ``e_tot = sqrt(e_x² + e_y² + e_z²)``; per run: the time-average of each, the

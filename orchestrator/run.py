@@ -368,7 +368,7 @@ def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: i
 
 
 def summary(result: RunResult) -> dict[str, Any]:
-    """``summary.json`` content of a single-replicate run (keys of DESIGN.md)."""
+    """``summary.json`` content of a single-replicate run (the keys the README lists)."""
     row = result.metrics.iloc[0]
     out: dict[str, Any] = {k: float(row[k]) for k in result.metrics.columns if k != "replicate"}
     out.update(engine=result.engine, seed=int(result.config["run"]["seed"]), steps=int(result.steps),
