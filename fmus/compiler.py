@@ -14,6 +14,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -147,16 +148,18 @@ def compile_library(compiler: Compiler, sources: Sequence[Path], output: Path, i
     elif compiler.zig:
         command += ["-target", PLATFORMS[target][0]]
     command += list(FLAGS) + [f"-I{p}" for p in include] + [f"-D{d}" for d in defines]
-    command += [str(s) for s in sources] + ["-o", str(output)]
-    if not target.startswith("win"):
-        command.append("-lm")
-    result = subprocess.run(command, capture_output=True, text=True)
-    if result.returncode != 0 or not output.is_file():
-        errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
-        detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
-        raise CompileError(f"compiler: {compiler.describe()} failed for {output.name} ({target}): {detail}")
-    for extra in output.parent.glob(output.stem + ".pdb"):  # zig's Windows debug database
-        extra.unlink()
+    with tempfile.TemporaryDirectory(prefix="sblsim_cc_") as tmp:
+        # in a folder of its own: some linkers leave companions (a .pdb, an import .lib) beside the library
+        built = Path(tmp) / output.name
+        command += [str(s) for s in sources] + ["-o", str(built)]
+        if not target.startswith("win"):
+            command.append("-lm")
+        result = subprocess.run(command, capture_output=True, text=True, cwd=tmp)
+        if result.returncode != 0 or not built.is_file():
+            errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
+            detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
+            raise CompileError(f"compiler: {compiler.describe()} failed for {output.name} ({target}): {detail}")
+        shutil.move(str(built), str(output))
     return output
 
 

@@ -170,6 +170,9 @@ def test_zig_cross_compiles_windows_and_macos_binaries(tmp_path):
                 "aarch64-darwin/sblsim_target.dylib": ("Mach-O", "aarch64")}
     for relative, (fmt, machine) in expected.items():
         assert binary_format(tmp_path / "x" / "binaries" / relative) == (fmt, machine), relative
+    found = {p.relative_to(tmp_path / "x" / "binaries").as_posix() for p in (tmp_path / "x" / "binaries").rglob("*")
+             if p.is_file()}
+    assert found == set(expected)  # the libraries only: no debug database, no import library
 
 
 def test_zig_and_the_system_compiler_give_the_same_numbers(tmp_path):
