@@ -47,43 +47,40 @@ void sblsim_philox4x64_10(const uint64_t counter[4], const uint64_t key[2], uint
     out[3] = c3;
 }
 
-/* keys: seed, scenario_key, cell, replicate */
-void sblsim_uniforms(const uint64_t keys[4], int component, int purpose, uint64_t draw, int count, double* out) {
-    uint64_t key[2], counter[4], words[4];
-    int i;
+/* The four 64-bit words of block `block` of draw `draw` of a stream.
+   keys: seed, scenario_key, cell, replicate; key (seed, scenario_key 2^32 + component 2^16 + purpose),
+   counter (block, draw, cell, replicate). */
+static void stream_block(const uint64_t keys[4], int component, int purpose, uint64_t draw, uint64_t block,
+                         uint64_t words[4]) {
+    uint64_t key[2], counter[4];
     key[0] = keys[0];
     key[1] = (keys[1] << 32) | ((uint64_t)component << 16) | (uint64_t)purpose;
+    counter[0] = block;
     counter[1] = draw;
     counter[2] = keys[2];
     counter[3] = keys[3];
+    sblsim_philox4x64_10(counter, key, words);
+}
+
+static double uniform(uint64_t word) { return (double)(word >> 11) * (1.0 / 9007199254740992.0); }
+
+void sblsim_uniforms(const uint64_t keys[4], int component, int purpose, uint64_t draw, int count, double* out) {
+    uint64_t words[4];
+    int i;
     for (i = 0; i < count; i++) {
-        if (i % 4 == 0) {
-            counter[0] = (uint64_t)(i / 4);
-            sblsim_philox4x64_10(counter, key, words);
-        }
-        out[i] = (double)(words[i % 4] >> 11) * (1.0 / 9007199254740992.0);
+        if (i % 4 == 0) stream_block(keys, component, purpose, draw, (uint64_t)(i / 4), words);
+        out[i] = uniform(words[i % 4]);
     }
 }
 
 void sblsim_normals(const uint64_t keys[4], int component, int purpose, uint64_t draw, int count, double* out) {
     /* normal i from uniforms 2i and 2i + 1 of the draw, which lie in the same block of four */
-    uint64_t key[2], counter[4], words[4];
+    uint64_t words[4];
     int i;
-    key[0] = keys[0];
-    key[1] = (keys[1] << 32) | ((uint64_t)component << 16) | (uint64_t)purpose;
-    counter[1] = draw;
-    counter[2] = keys[2];
-    counter[3] = keys[3];
     for (i = 0; i < count; i++) {
         int j = 2 * i;
-        double u1, u2;
-        if (j % 4 == 0) {
-            counter[0] = (uint64_t)(j / 4);
-            sblsim_philox4x64_10(counter, key, words);
-        }
-        u1 = (double)(words[j % 4] >> 11) * (1.0 / 9007199254740992.0);
-        u2 = (double)(words[j % 4 + 1] >> 11) * (1.0 / 9007199254740992.0);
-        out[i] = sqrt(-2.0 * log(1.0 - u1)) * cos(2.0 * M_PI * u2);
+        if (j % 4 == 0) stream_block(keys, component, purpose, draw, (uint64_t)(j / 4), words);
+        out[i] = sqrt(-2.0 * log(1.0 - uniform(words[j % 4]))) * cos(2.0 * M_PI * uniform(words[j % 4 + 1]));
     }
 }
 
