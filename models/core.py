@@ -592,12 +592,6 @@ class Blocks:
         self.blocks = tuple((str(n), int(s)) for n, s in blocks)
         self.size = sum(s for _, s in self.blocks)
 
-    def names(self) -> list[str]:
-        return [n for n, _ in self.blocks]
-
-    def sym(self, name: str) -> ca.SX:
-        return ca.SX.sym(name, self.size)
-
     def unpack(self, v: ca.SX) -> dict[str, ca.SX]:
         out, k = {}, 0
         for name, n in self.blocks:
@@ -1017,14 +1011,7 @@ def normals(seed: int, scenario_key: int, cell: int, replicate: int, component: 
                      for i in range(count)])
 
 
-def draw_stream(stream: Stream, keys: Sequence[int], component: int, draw: int) -> np.ndarray:
-    """One draw of a :class:`Stream` for the seed keys ``(seed, scenario_key, cell, replicate)``."""
-    seed, scenario_key, cell, replicate = (int(k) for k in keys)
-    make = uniforms if stream.kind == "uniform" else normals
-    return make(seed, scenario_key, cell, replicate, component, stream.purpose, draw, stream.width)
-
-
 __all__ = ["Blocks", "Column", "Component", "Event", "ModelError", "Program", "SEED_NAMES", "SEED_PARAMETERS",
-           "Stream", "Table", "UNITS", "Variable", "check_entry", "check_increasing", "draw_stream", "format_table",
+           "Stream", "Table", "UNITS", "Variable", "check_entry", "check_increasing", "format_table",
            "lookup", "normals", "ProgramBuilder", "parameters", "parse_table", "philox_key", "philox_words",
            "cumulative_sum", "padded_rows", "resolve_parameters", "sample_due", "select", "uniforms"]

@@ -18,7 +18,7 @@ import pandas as pd
 from models import COMPONENTS, MODELS
 from models.core import ModelError
 from models.platform.geometry import parse_offsets
-from orchestrator.config import component_model, component_params, receiver_source, to_toml
+from orchestrator.config import component_params, receiver_source, to_toml
 from orchestrator.connections import Connection, check_connections, check_interface, default_connections
 from orchestrator.engines import _DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
 from orchestrator.master import simulate

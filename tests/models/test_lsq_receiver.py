@@ -218,7 +218,7 @@ def test_lsq_velocity_is_the_difference_of_scipy_fixes_over_their_transmit_epoch
     epochs = np.cumsum(rng.uniform(0.3, 1.7, size=14)) + 0.13  # never on a step end (multiples of h)
     lost = {7}
     held = np.full(4, np.nan)
-    fixes, previous_fix = [], x0
+    fixes, previous_fix, last = [], x0, None
     t = 0.0
     for seq, tx in enumerate(epochs, start=1):
         i = (seq - 1) % 4

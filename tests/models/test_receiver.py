@@ -543,7 +543,7 @@ def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_tx_time():
                                                            rel=1e-12)
 
     packets = [(1, 2, 12.3, 6.4), (2, 3, 13.1, 6.5)]  # (seq, beacon_id, range, depth), one slot of length T each
-    t = 0.0
+    t, nis_before = 0.0, 0.0
     for seq, bid, rng_value, depth in packets:
         tx = t + T
         core.set_inputs(packet(seq, bid, tx, rng_value, beacons[bid - 1], depth))
