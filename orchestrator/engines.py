@@ -32,7 +32,8 @@ from models.core import ModelError
 #: A variable as an engine exposes it (what the connection checks need).
 Port = namedtuple("Port", "name causality type unit")
 
-_DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
+#: numpy type of each FMI type, as the engines return outputs.
+DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
 
 
 class LocalHandle:
@@ -60,7 +61,7 @@ class LocalHandle:
         self.parameters = frozenset(v.name for v in self.model.fmu_parameters_declared(n_beacons))
         self.input_names = [v.name for v in self.model.inputs(n_beacons)]
         self.output_names = [v.name for v in self.model.outputs(n_beacons)]
-        self._types = [_DTYPES[v.fmi_type] for v in self.model.outputs(n_beacons)]
+        self._types = [DTYPES[v.fmi_type] for v in self.model.outputs(n_beacons)]
         self.batch = None
 
     def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
@@ -253,7 +254,7 @@ class FmuHandle:
         outputs = [v for v in md.modelVariables if v.causality == "output"]
         self.input_names = [v.name for v in inputs]
         self.output_names = [v.name for v in outputs]
-        self._types = [_DTYPES[v.type] for v in outputs]
+        self._types = [DTYPES[v.type] for v in outputs]
         self._in, self._out = self._groups(inputs), self._groups(outputs)
 
     def _groups(self, variables: Sequence[Any]) -> list[tuple]:

@@ -20,7 +20,7 @@ from models.core import ModelError
 from models.platform.geometry import parse_offsets
 from orchestrator.config import component_params, receiver_source, to_toml
 from orchestrator.connections import Connection, check_connections, check_interface, default_connections
-from orchestrator.engines import _DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
+from orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
 from orchestrator.master import simulate
 from orchestrator.metrics import errors, summarize
 
@@ -338,7 +338,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     rec = recs[0] if len(recs) == 1 else {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1))
                                           for k in recs[0]}
     types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
-    rec = {k: (v if k == "time" else cast_column(v, _DTYPES[types[k]])) for k, v in rec.items()}
+    rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
     return _result(cfgs[0], engine, rec, replicates, n_steps, wall, timeseries)
 
 

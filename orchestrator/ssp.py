@@ -241,9 +241,8 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
         ET.SubElement(wires, _q("ssd:Connection"), startElement=c.source, startConnector=c.output,
                       endElement=c.destination, endConnector=c.input)
     info = ET.Element(_q("oms:Annotations"))
-    master = ET.SubElement(ET.SubElement(info, _q("oms:SimulationInformation")), _q("oms:FixedStepMaster"),
-                           description="oms-ma", stepSize=repr(base), relativeTolerance="0.0001")
-    del master
+    ET.SubElement(ET.SubElement(info, _q("oms:SimulationInformation")), _q("oms:FixedStepMaster"),
+                  description="oms-ma", stepSize=repr(base), relativeTolerance="0.0001")
     _annotations(system, OMS_ANNOTATION, info)
     _units(root, "ssd:Units", used_units, units)
     experiment = ET.SubElement(root, _q("ssd:DefaultExperiment"), startTime="0.0", stopTime=repr(n_steps * T))
