@@ -7,13 +7,17 @@ the alternative receivers included.
 
 from models.acoustics import Acoustics
 from models.platform import Platform
-from models.receiver import LeastSquaresReceiver, Receiver
+from models.receiver import LeastSquaresReceiver, Receiver, SequentialReceiver, UnscentedReceiver
 from models.target import Target
 
 COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, Receiver)}
-#: Every model by its own name: the four components and the alternative receivers.
-MODELS = {**COMPONENTS, LeastSquaresReceiver.name: LeastSquaresReceiver}
+#: Built-in receivers: ``simulation.receiver`` value -> model.
+RECEIVER_MODELS = {"ekf": Receiver, "ekf-seq": SequentialReceiver, "ukf": UnscentedReceiver,
+                   "lsq": LeastSquaresReceiver}
 #: Built-in receivers: ``simulation.receiver`` value -> model name.
-RECEIVERS = {"ekf": Receiver.name, "lsq": LeastSquaresReceiver.name}
+RECEIVERS = {key: model.name for key, model in RECEIVER_MODELS.items()}
+#: Every model by its own name: the four components and the alternative receivers.
+MODELS = {**COMPONENTS, **{model.name: model for model in RECEIVER_MODELS.values()}}
 
-__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "Acoustics", "LeastSquaresReceiver", "Platform", "Receiver", "Target"]
+__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "RECEIVER_MODELS", "Acoustics", "LeastSquaresReceiver", "Platform", "Receiver",
+           "SequentialReceiver", "Target", "UnscentedReceiver"]

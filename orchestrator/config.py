@@ -25,10 +25,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
 
+import numpy as np
 import tomli_w
 
-from models import COMPONENTS, MODELS, RECEIVERS
-from models.core import SEED_NAMES, SEED_PARAMETERS, ModelError, Variable, resolve_parameters
+from models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
+from models.core import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from models.target import natural_duration, start_state
 from orchestrator.master import ALGORITHMS
 
@@ -77,7 +78,7 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              description="Master algorithm: gauss-seidel, or jacobi as FMI hosts step an SSP",
              choices=ALGORITHMS, scope="config"),
     Variable("receiver", "parameter", "String", "ekf", scope="config",
-             description="Receiver component: ekf (the paper's), lsq (per-step least squares) or fmu:PATH"),
+             description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq or fmu:PATH"),
 )
 
 #: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
@@ -102,8 +103,14 @@ def component_model(cfg: dict[str, dict], component: str) -> type | None:
     return None if isinstance(source, Path) else MODELS[source]
 
 
-def section_variables(section: str) -> tuple[Variable, ...]:
+def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ...]:
     """Declarations of a configuration section (component parameters without the seed keys).
+
+    Parameters
+    ----------
+    section : str
+    receiver : str
+        The ``simulation.receiver`` whose declarations the ``receiver`` section holds.
 
     Raises
     ------
@@ -114,9 +121,46 @@ def section_variables(section: str) -> tuple[Variable, ...]:
         return RUN_VARIABLES
     if section == "simulation":
         return SIMULATION_VARIABLES
+    if section == "receiver":
+        if receiver in RECEIVER_MODELS:
+            return tuple(v for v in RECEIVER_MODELS[receiver].config_parameters() if v.name not in SEED_NAMES)
+        return external_receiver_variables(Path(external_path(receiver)))
     if section in COMPONENTS:
         return tuple(v for v in COMPONENTS[section].config_parameters() if v.name not in SEED_NAMES)
     raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
+
+
+def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
+    """The parameters of a user's receiver FMU as declarations (name, type, unit, start, range).
+
+    Raises
+    ------
+    ConfigError
+        If the FMU cannot be read.
+    """
+    from fmpy import read_model_description
+
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
+        raise ConfigError(f"simulation.receiver: {str(path)!r} is not a readable FMU ({exc})") from None
+    out = []
+    for v in md.modelVariables:
+        if v.causality != "parameter" or v.type not in ("Real", "Integer", "Boolean") or v.name in SEED_NAMES:
+            continue
+        start = {"Real": float, "Integer": int, "Boolean": lambda x: str(x).lower() in ("true", "1")}[v.type](
+            v.start if v.start is not None else 0)
+        number = (lambda x: None if x is None else float(x))
+        out.append(Variable(v.name, "parameter", v.type, start, v.unit or ("1" if v.type == "Real" else "")
+                            if (v.unit or "1") in UNITS else "1", v.description or "",
+                            min=number(v.min), max=number(v.max)))
+    return tuple(out)
+
+
+def receiver_label(cfg: dict[str, dict]) -> str:
+    """What a figure or table calls the receiver that ran: ``ekf``, ``ekf-seq``, ``ukf``, ``lsq`` or the FMU's name."""
+    value = cfg["simulation"]["receiver"]
+    return value if value in RECEIVER_MODELS else Path(external_path(value)).stem
 
 
 def scenario_source(name: str) -> dict[str, Any]:
@@ -227,9 +271,10 @@ def apply_overrides(raw: dict[str, Any], overrides: Iterable[str] = (), seed: in
     """
     for item in overrides:
         section, name, value = parse_override(item)
-        names = {v.name for v in section_variables(section)}
-        if name not in names:
-            raise ConfigError(f"{section}.{name}: unknown key; known: {', '.join(sorted(names))}")
+        if section != "receiver":  # the receiver's keys depend on the receiver: checked by resolve()
+            names = {v.name for v in section_variables(section)}
+            if name not in names:
+                raise ConfigError(f"{section}.{name}: unknown key; known: {', '.join(sorted(names))}")
         raw.setdefault(section, {})[name] = value
     if seed is not None:
         raw.setdefault("run", {})["seed"] = seed
@@ -246,31 +291,29 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         Unknown section or key, or a value outside its allowed range.
     """
     for section, table in raw.items():
-        section_variables(section)
+        if section not in SECTIONS:
+            raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
         if not isinstance(table, dict):
             raise ConfigError(f"{section}: expected a table of keys, got {table!r}")
-    cfg = {s: resolve_parameters(section_variables(s), raw.get(s, {}), s) for s in SECTIONS}
-    given = {s: set(raw.get(s, {})) for s in SECTIONS}
-    rx = cfg["receiver"]
-    if "sigma_range" not in given["receiver"]:
-        rx["sigma_range"] = max(cfg["acoustics"]["sigma_range"], MIN_SIGMA)
-    if "sigma_depth" not in given["receiver"]:
-        rx["sigma_depth"] = max(cfg["target"]["depth_sigma"], MIN_SIGMA)
-    pos, vel = start_state(cfg["target"])
-    for k, name in enumerate(("x", "y", "z")):
-        if f"x0_{name}" not in given["receiver"]:
-            rx[f"x0_{name}"] = float(pos[k])
-        if f"x0_v{name}" not in given["receiver"]:
-            rx[f"x0_v{name}"] = float(vel[k])
-    sim = cfg["simulation"]
+    sim = resolve_parameters(SIMULATION_VARIABLES, raw.get("simulation", {}), "simulation")
     receiver = sim["receiver"]
-    if receiver not in RECEIVERS:
+    if receiver not in RECEIVER_MODELS:
         path = external_path(receiver)
         if not path:
             raise ConfigError(f"simulation.receiver: {receiver!r} is not allowed; one of "
-                              f"{', '.join(RECEIVERS)} or fmu:PATH")
+                              f"{', '.join(RECEIVER_MODELS)} or fmu:PATH")
+        if Path(path).is_dir():
+            raise ConfigError(f"simulation.receiver: {path!r} is a directory, not an FMU file")
         if not Path(path).is_file():
             raise ConfigError(f"simulation.receiver: no FMU file at {path!r}")
+    receiver_keys = section_variables("receiver", receiver)
+    unknown = sorted(set(raw.get("receiver", {})) - {v.name for v in receiver_keys})
+    if unknown:
+        raise ConfigError(f"receiver.{unknown[0]}: not a parameter of the {receiver_label({'simulation': sim})} "
+                          f"receiver; its keys: {', '.join(sorted(v.name for v in receiver_keys))}")
+    cfg = {s: (sim if s == "simulation" else resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s))
+           for s in SECTIONS}
+    _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
             model.fmu_parameters(cfg[name], _beacons(cfg))
@@ -280,6 +323,35 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         raise ConfigError(f"simulation.duration: {sim['duration']!r} s is shorter than one sampling time "
                           f"({sim['sampling_time']} s); allowed [sampling_time, 1e6] s")
     return cfg
+
+
+def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
+    """Fill the receiver keys the user did not set from the rest of the configuration (where it declares them).
+
+    ``sigma_range`` ← ``acoustics.sigma_range`` and ``sigma_depth`` ←
+    ``target.depth_sigma`` (floored at 1 mm: R must be positive); ``x0_*`` ←
+    the diver's start state; ``beacon_gps_sigma`` ← ``platform.gps_sigma``,
+    ``beacon_attitude_sigma_deg`` ← ``platform.imu_sigma_deg``,
+    ``beacon_arm`` ← the largest distance of a beacon from the platform
+    reference.
+    """
+    from models.platform.geometry import parse_offsets
+
+    rx, platform = cfg["receiver"], cfg["platform"]
+    pos, vel = start_state(cfg["target"])
+    if platform["layout"] == "custom":
+        arm = float(max(np.linalg.norm(parse_offsets(platform["beacon_offsets"]), axis=1)))
+    else:
+        arm = float(np.hypot(platform["baseline"], platform["transducer_depth"]))
+    ties = {"sigma_range": max(cfg["acoustics"]["sigma_range"], MIN_SIGMA),
+            "sigma_depth": max(cfg["target"]["depth_sigma"], MIN_SIGMA),
+            **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
+            **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
+            "beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
+            "beacon_arm": arm}
+    for key, value in ties.items():
+        if key in rx and key not in given:
+            rx[key] = value
 
 
 def _beacons(cfg: dict[str, dict]) -> int:

@@ -7,14 +7,15 @@ import pytest
 
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory):
-    """Directory holding the FMUs (four components, least-squares receiver) freshly built with ``build_all``.
+    """Directory holding the FMUs (one per model of ``models.MODELS``) freshly built with ``build_all``.
 
     Session-scoped and lazy: the FMUs are built once, and only when a test
     asks for this fixture.
     """
     from fmus.build import build_all
+    from models import MODELS
 
     directory = tmp_path_factory.mktemp("fmus")
     paths = build_all(directory)
-    assert len(paths) == 5 and all(p.is_file() for p in paths)
+    assert sorted(p.name for p in paths) == sorted(f"sblsim_{n}.fmu" for n in MODELS) and all(p.is_file() for p in paths)
     return directory

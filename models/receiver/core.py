@@ -1,21 +1,21 @@
-"""Receivers fed by round-robin OWTT packets and depth; the paper's EKF receiver.
+"""What every receiver shares: the interface, the packet handling, the instrumentation fix,
+and :class:`KalmanReceiver`, the base of the Kalman-type receivers.
 
 Every receiver runs at its own communication step Δt = T / (EKF rate ratio)
-and shares the packet handling (:func:`packet_event`): a replicate has a new
-*slot* when ``packet_seq`` differs from the last one it used and the end of
-the step has reached the packet's transmit epoch, ``t + Δt ≥ tx_time − 1 ns``.
-At a slot a packet that was received (``packet_valid``) with a beacon id in
-``1 … n`` replaces the held range and broadcast beacon position of that
-beacon; then the receiver uses the latest range of every beacon heard so far
-plus the depth reading. Held ranges are re-used at later slots: their
-staleness is part of the error, as in the paper.
+and shares the packet handling (:func:`slot_due`, :func:`take_packet`): a
+replicate has a new *slot* when ``packet_seq`` differs from the last one it
+used and the end of the step has reached the packet's transmit epoch,
+``t + Δt ≥ tx_time − 1 ns``. At a slot a packet that was received
+(``packet_valid``) with a beacon id in ``1 … n`` is the *fresh* range.
 
-:class:`Receiver` is the paper's EKF: a prediction every step, one update per
-slot, and the raw instrumentation fix (a least-squares multilateration of the
-same held ranges and depth, no filter) computed at the same instants.
-
-No output is ever NaN: before its first update the filter reports its
-initial state, ``nis`` is 0 and ``instr_valid`` is false with ``instr_*`` 0.
+A Kalman-type receiver is one class: its parameter declarations, a
+``predict`` and a ``correct`` step as casadi expressions
+(:class:`KalmanReceiver`); the base class makes the program: a prediction
+every step, the correction at every slot, the raw instrumentation fix (a
+least-squares multilateration of the latest range of every beacon and the
+depth, no filter) at the same instants, and the outputs. No output is ever
+NaN: before the first update the filter reports its initial state, ``nis``
+is 0, and ``instr_valid`` is false with ``instr_*`` 0.
 
 References
 ----------
@@ -30,7 +30,8 @@ import casadi as ca
 
 from models.acoustics.core import PACKET
 from models.core import Component, ProgramBuilder, Variable
-from models.receiver import ekf
+from models.receiver import kalman
+from models.receiver.measurement import RangeDepthModel
 from models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 
 STATE_NAMES = ("x", "vx", "y", "vy", "z", "vz")
@@ -59,8 +60,23 @@ def receiver_interface() -> tuple[Variable, ...]:
         Variable("nis", "output", "Real", 0.0, "1", "Normalized innovation squared of the last update (0: none)",
                  discrete=True),
         Variable("pos_std", "output", "Real", 0.0, "m", "sqrt(trace) of the position covariance", discrete=True),
+    ) + tuple(
+        Variable(f"cov_{ab}", "output", "Real", 0.0, "m2", f"Position covariance, {_AXES[ab[0]]}-{_AXES[ab[1]]}",
+                 discrete=True) for ab in COVARIANCE
+    ) + (
+        Variable("gated", "output", "Boolean", False, description="The last slot's range was rejected by the NIS gate"),
     )
     return inputs + outputs
+
+
+#: The six unique entries of the position covariance, by axis pair.
+COVARIANCE = ("xx", "xy", "xz", "yy", "yz", "zz")
+
+
+def covariance_outputs(P) -> dict[str, ca.SX]:
+    """The ``cov_*`` outputs of a 3 × 3 position covariance [m²]."""
+    index = {"x": 0, "y": 1, "z": 2}
+    return {f"cov_{ab}": P[index[ab[0]], index[ab[1]]] for ab in COVARIANCE}
 
 
 def packet_states(n_beacons: int) -> list[tuple[str, int]]:
@@ -127,61 +143,122 @@ def lm_idle() -> dict[str, ca.SX]:
     return {"lm_point": ca.SX.zeros(3), "lm_cost": 0, "lm_mu": 1e-3, "lm_iter": 0, "lm_active": 0, "lm_depth": 0}
 
 
-class Receiver(Component):
-    """The paper's EKF receiver with the raw instrumentation fix."""
+def filter_parameters() -> tuple[Variable, ...]:
+    """The parameters every Kalman-type receiver takes: R, the motion model, the initial state and covariance."""
+    return (
+        Variable("sigma_range", "parameter", "Real", 0.1, "m", "Range standard deviation in R",
+                 min=0.0, max=1000.0, min_exclusive=True),
+        Variable("sigma_depth", "parameter", "Real", 0.01, "m", "Depth standard deviation in R",
+                 min=0.0, max=1000.0, min_exclusive=True),
+        Variable("q_horizontal", "parameter", "Real", 0.01, "m2/s3",
+                 "Process noise: horizontal acceleration spectral density", min=0.0, max=1e6),
+        Variable("q_vertical", "parameter", "Real", 0.001, "m2/s3",
+                 "Process noise: vertical acceleration spectral density", min=0.0, max=1e6),
+        Variable("p0_position", "parameter", "Real", 1.0, "m", "Initial position standard deviation",
+                 min=0.0, max=1e6, min_exclusive=True),
+        Variable("p0_velocity", "parameter", "Real", 0.5, "m/s", "Initial velocity standard deviation",
+                 min=0.0, max=1e6, min_exclusive=True),
+    ) + tuple(
+        Variable(f"x0_{n}", "parameter", "Real", 0.0, "m" if n[0] != "v" else "m/s",
+                 f"Initial {'position' if n[0] != 'v' else 'velocity'} estimate, {_AXES[n[-1]]}",
+                 min=-1e6, max=1e6)
+        for n in ("x", "y", "z", "vx", "vy", "vz"))
 
-    name = "receiver"
+
+def gate_parameter(default: float) -> Variable:
+    """The NIS gate: the probability a correct range passes it (1: no gate)."""
+    return Variable("gate_probability", "parameter", "Real", default, "1",
+                    "NIS gate: probability that a correct range passes (chi-square, 1 dof); 1: no gate",
+                    min=0.5, max=1.0)
+
+
+def beacon_parameters() -> tuple[Variable, ...]:
+    """The uncertainty of the broadcast beacon positions a receiver adds to R (defaults from the platform)."""
+    return (
+        Variable("beacon_gps_sigma", "parameter", "Real", 0.1, "m",
+                 "Beacon position error from GPS, per axis (default: platform.gps_sigma)", min=0.0, max=1000.0),
+        Variable("beacon_attitude_sigma_deg", "parameter", "Real", 1.0, "deg",
+                 "Beacon attitude error (default: platform.imu_sigma_deg)", min=0.0, max=180.0),
+        Variable("beacon_arm", "parameter", "Real", 1.0, "m",
+                 "Distance of a beacon from the platform reference (default: from the layout)", min=0.0, max=1000.0),
+    )
+
+
+class KalmanReceiver(Component):
+    """Base of the Kalman-type receivers (state ``[posX, velX, posY, velY, posZ, velZ]``).
+
+    Subclasses set :attr:`name`, declare :meth:`parameters` and implement
+    :meth:`correct`; :meth:`predict` defaults to the constant-velocity model
+    with white-noise acceleration (:func:`models.receiver.kalman.predict`).
+    """
+
     component_index = 3
+    #: The measurement model (ranges to broadcast beacons plus depth).
+    measurement = RangeDepthModel()
+
+    @classmethod
+    def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
+        """The receiver's own parameters."""
+        raise NotImplementedError
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        params = (
-            Variable("sigma_range", "parameter", "Real", 0.1, "m", "Range standard deviation in R",
-                     min=0.0, max=1000.0, min_exclusive=True),
-            Variable("sigma_depth", "parameter", "Real", 0.01, "m", "Depth standard deviation in R",
-                     min=0.0, max=1000.0, min_exclusive=True),
-            Variable("q_horizontal", "parameter", "Real", 0.01, "m2/s3",
-                     "Process noise: horizontal acceleration spectral density", min=0.0, max=1e6),
-            Variable("q_vertical", "parameter", "Real", 0.001, "m2/s3",
-                     "Process noise: vertical acceleration spectral density", min=0.0, max=1e6),
-            Variable("p0_position", "parameter", "Real", 1.0, "m", "Initial position standard deviation",
-                     min=0.0, max=1e6, min_exclusive=True),
-            Variable("p0_velocity", "parameter", "Real", 0.5, "m/s", "Initial velocity standard deviation",
-                     min=0.0, max=1e6, min_exclusive=True),
-        ) + tuple(
-            Variable(f"x0_{n}", "parameter", "Real", 0.0, "m" if n[0] != "v" else "m/s",
-                     f"Initial {'position' if n[0] != 'v' else 'velocity'} estimate, {_AXES[n[-1]]}",
-                     min=-1e6, max=1e6)
-            for n in ("x", "y", "z", "vx", "vy", "vz"))
-        return params + receiver_interface()
+        return cls.parameters(n_beacons) + receiver_interface()
+
+    @classmethod
+    def predict(cls, x: ca.SX, P: ca.SX, h, p: dict) -> tuple[ca.SX, ca.SX]:
+        """State and covariance after a step of ``h`` [s] (default: constant velocity, white-noise acceleration)."""
+        return kalman.predict(x, P, h, p["q_horizontal"], p["q_vertical"])
+
+    @classmethod
+    def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
+        """The update at a slot.
+
+        Parameters
+        ----------
+        x : dict
+            The state blocks before the slot: ``x`` (6), ``P`` (6, 6), the held
+            ranges (``ranges``, ``beacons``, ``heard``), ...
+        u : dict
+            The inputs (the packet and the depth reading).
+        p : dict
+            The parameters.
+
+        Returns
+        -------
+        dict
+            ``x``, ``P`` (6, 6), ``nis``, ``gated``, and the held ranges the
+            instrumentation fix uses (``ranges``, ``beacons``, ``heard``,
+            ``last_seq``, ``slot_time``: usually :func:`take_packet`).
+        """
+        raise NotImplementedError
 
     @classmethod
     def build(cls, n_beacons: int):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("x", 6), ("P", 36)] + packet_states(n) + [
-            ("fix", 3), ("fix_valid", 1), ("nis", 1)] + lm_states())
+            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1)] + lm_states())
 
         def init(p, d, w, t0):
             x0 = ca.vertcat(*[p[f"x0_{name}"] for name in ("x", "vx", "y", "vy", "z", "vz")])
             P0 = ca.diag(ca.vertcat(*[p["p0_position"] ** 2, p["p0_velocity"] ** 2] * 3))
             return {"x": x0, "P": ca.vec(P0), **packet_init(n), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
-                    **lm_idle()}
+                    "gated": 0, **lm_idle()}
 
         def step(x, u, p, d, w, t, h):
-            state, P = ekf.predict(x["x"], ca.reshape(x["P"], 6, 6), h, p["q_horizontal"], p["q_vertical"])
+            state, P = cls.predict(x["x"], ca.reshape(x["P"], 6, 6), h, p)
             return {"x": state, "P": ca.vec(P)}
 
         def due(x, u, p, d, t, h):
             return slot_due(x, u, t, h)
 
         def slot(x, u, p, d, w, t, h):
-            held = {**x, **take_packet(x, u, n)}
-            state, P, nis = ekf.update(x["x"], ca.reshape(x["P"], 6, 6), held["ranges"], held["beacons"],
-                                       held["heard"], u["depth"], p["sigma_range"], p["sigma_depth"])
-            # start from the last fix, else from the filter's position (a start point only)
-            guess = ca.if_else(x["fix_valid"], x["fix"], state[0::2])
+            out = cls.correct({**x, "P": ca.reshape(x["P"], 6, 6)}, u, p, n)
+            held = {**x, **{k: out[k] for k in ("ranges", "beacons", "heard", "last_seq", "slot_time")}}
+            # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
+            guess = ca.if_else(x["fix_valid"], x["fix"], out["x"][0::2])
             fix = lm_begin(held, guess, u["depth"], p)
-            return {**held, "x": state, "P": ca.vec(P), "nis": nis, **fix,
+            return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"], **fix,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
         def iterate(x, u, p, d, w, t, h):
@@ -189,15 +266,23 @@ class Receiver(Component):
             return {**out, "fix": out["lm_point"]}
 
         def output(x, p, d, t):
-            P = ca.reshape(x["P"], 6, 6)
+            P = ca.reshape(x["P"], 6, 6)[0::2, 0::2]
             out = {f"est_{name}": x["x"][k] for k, name in enumerate(STATE_NAMES)}
             out.update({f"instr_{a}": ca.if_else(x["fix_valid"], x["fix"][k], 0.0) for k, a in enumerate("xyz")})
-            out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[2, 2] + P[4, 4]))
+            out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[1, 1] + P[2, 2]),
+                       gated=x["gated"], **covariance_outputs(P))
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output), step=b.step(step),
                          events=[b.event("slot", due, slot), b.event("lm", lm_active, iterate)])
 
 
-__all__ = ["INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "Receiver", "STATE_NAMES", "fresh_packet", "lm_active", "lm_begin",
-           "lm_idle", "lm_step", "lm_states", "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet"]
+def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The slot's fresh range: whether there is one, its value and its broadcast beacon position (3, 1)."""
+    return fresh_packet(u, n_beacons), u["range"], ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
+
+
+__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "STATE_NAMES",
+           "beacon_parameters", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range",
+           "gate_parameter", "lm_active", "lm_begin", "lm_idle", "lm_step", "lm_states", "packet_init",
+           "packet_states", "receiver_interface", "slot_due", "take_packet"]

@@ -36,11 +36,11 @@ from __future__ import annotations
 import casadi as ca
 
 from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Variable
-from models.receiver.core import (Receiver, fresh_packet, lm_active, lm_begin, lm_idle, lm_states, lm_step,
+from models.receiver.core import (covariance_outputs, filter_parameters, fresh_packet, lm_active, lm_begin, lm_idle, lm_states, lm_step,
                                   packet_init, packet_states, receiver_interface, slot_due, take_packet)
-from models.receiver.multilateration import fit_statistics, weights
+from models.receiver.multilateration import fix_covariance, weights
 
-#: Parameters taken from :class:`Receiver`'s declarations (declared once, there).
+#: The Kalman receivers' parameters this receiver takes (declared once, in models.receiver.core).
 SHARED_PARAMETERS = ("sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z")
 #: Iteration cap and step tolerance [standard deviations of the fix].
 ITERATIONS, TOLERANCE = 50, 1e-6
@@ -54,20 +54,20 @@ class LeastSquaresReceiver(Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        ekf = {v.name: v for v in Receiver.variables(n_beacons) if v.causality == "parameter"}
-        return tuple(ekf[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
+        shared = {v.name: v for v in filter_parameters()}
+        return tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
 
     @classmethod
     def build(cls, n_beacons: int):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=packet_states(n) + [
             ("fix", 3), ("has_fix", 1), ("fix_time", 1), ("velocity", 3), ("instr", 3), ("instr_valid", 1),
-            ("nis", 1), ("pos_std", 1), ("pending", 1), ("fresh", 1)] + lm_states())
+            ("nis", 1), ("pos_std", 1), ("cov", 9), ("pending", 1), ("fresh", 1)] + lm_states())
 
         def init(p, d, w, t0):
             return {**packet_init(n), "fix": ca.vertcat(p["x0_x"], p["x0_y"], p["x0_z"]), "has_fix": 0,
                     "fix_time": 0, "velocity": ca.SX.zeros(3), "instr": ca.SX.zeros(3), "instr_valid": 0, "nis": 0,
-                    "pos_std": 0, "pending": 0, "fresh": 0, **lm_idle()}
+                    "pos_std": 0, "cov": ca.SX.zeros(9), "pending": 0, "fresh": 0, **lm_idle()}
 
         def due(x, u, p, d, t, h):
             return slot_due(x, u, t, h)
@@ -88,12 +88,14 @@ class LeastSquaresReceiver(Component):
             new = ca.logic_and(valid, x["fresh"])  # a fix with new information
             point = x["lm_point"]
             w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
-            rss, spread = fit_statistics(point, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d)
+            rss, covariance, _ = fix_covariance(point, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d)
+            spread = ca.sqrt(ca.fmax(ca.trace(covariance), 0.0))
             elapsed = x["slot_time"] - x["fix_time"]
             differentiate = ca.logic_and(new, ca.logic_and(x["has_fix"], elapsed > 0.0))
             rate = (point - x["fix"]) / ca.if_else(differentiate, elapsed, 1.0)
             return {"pending": 0, "instr_valid": valid, "instr": ca.if_else(valid, point, ca.SX.zeros(3)),
                     "nis": ca.if_else(valid, rss, 0.0), "pos_std": ca.if_else(valid, spread, 0.0),
+                    "cov": ca.if_else(valid, ca.vec(covariance), ca.SX.zeros(9)),
                     "velocity": ca.if_else(differentiate, rate, x["velocity"]),
                     "fix": ca.if_else(new, point, x["fix"]),
                     "fix_time": ca.if_else(new, x["slot_time"], x["fix_time"]),
@@ -103,7 +105,8 @@ class LeastSquaresReceiver(Component):
             out = {f"est_{a}": x["fix"][k] for k, a in enumerate("xyz")}
             out.update({f"est_v{a}": x["velocity"][k] for k, a in enumerate("xyz")})
             out.update({f"instr_{a}": x["instr"][k] for k, a in enumerate("xyz")})
-            out.update(instr_valid=x["instr_valid"], nis=x["nis"], pos_std=x["pos_std"])
+            out.update(instr_valid=x["instr_valid"], nis=x["nis"], pos_std=x["pos_std"], gated=0,
+                       **covariance_outputs(ca.reshape(x["cov"], 3, 3)))
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output),

@@ -174,26 +174,44 @@ def lm_iteration(x, ranges, beacons, heard, depth, w_r, w_d, iterations: int, to
             "lm_active": ca.logic_and(moving, x["lm_iter"] + 1 < iterations)}
 
 
+def fix_covariance(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """Gauss-Newton covariance ``(JᵀWJ)⁻¹`` of a fix (by the adjugate), with the fit's cost.
+
+    Returns
+    -------
+    rss : casadi.SX
+        F at the fix [1] (chi-square with n + 1 − 3 degrees of freedom for correct weights).
+    covariance : casadi.SX, (3, 3)
+        [m²]; zeros where ``JᵀWJ`` is singular.
+    positive : casadi.SX
+        ``JᵀWJ`` is positive-definite.
+    """
+    A, _, rss = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d)
+    c = ca.SX.zeros(3, 3)
+    c[0, 0] = A[1, 1] * A[2, 2] - A[1, 2] * A[1, 2]
+    c[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[0, 2]
+    c[2, 2] = A[0, 0] * A[1, 1] - A[0, 1] * A[0, 1]
+    c[0, 1] = c[1, 0] = A[0, 2] * A[1, 2] - A[0, 1] * A[2, 2]
+    c[0, 2] = c[2, 0] = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    c[1, 2] = c[2, 1] = A[0, 1] * A[0, 2] - A[0, 0] * A[1, 2]
+    det = A[0, 0] * c[0, 0] + A[0, 1] * c[0, 1] + A[0, 2] * c[0, 2]
+    positive = det > 0.0
+    return rss, ca.if_else(positive, c / ca.if_else(positive, det, 1.0), ca.SX.zeros(3, 3)), positive
+
+
 def fit_statistics(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.SX, ca.SX]:
     """Weighted residual sum of squares F and Gauss-Newton spread ``sqrt(trace((JᵀWJ)⁻¹))`` at a fix.
 
     Returns
     -------
     rss : casadi.SX
-        F at the fix [1] (chi-square with n + 1 − 3 degrees of freedom for correct weights).
+        F at the fix [1].
     spread : casadi.SX
         [m]; 0 where ``JᵀWJ`` is singular.
     """
-    A, _, rss = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d)
-    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[1, 2]
-    c11 = A[0, 0] * A[2, 2] - A[0, 2] * A[0, 2]
-    c22 = A[0, 0] * A[1, 1] - A[0, 1] * A[0, 1]
-    det = A[0, 0] * c00 + A[0, 1] * (A[0, 2] * A[1, 2] - A[0, 1] * A[2, 2]) + A[0, 2] * (
-        A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1])
-    positive = det > 0.0
-    spread = ca.if_else(positive, ca.sqrt(ca.fmax((c00 + c11 + c22) / ca.if_else(positive, det, 1.0), 0.0)), 0.0)
-    return rss, spread
+    rss, covariance, _ = fix_covariance(point, ranges, beacons, heard, depth, w_r, w_d)
+    return rss, ca.sqrt(ca.fmax(ca.trace(covariance), 0.0))
 
 
-__all__ = ["EPS", "LM_STATE", "SIGMA_FLOOR", "fit_statistics", "linear_fix", "lm_iteration", "lm_start",
+__all__ = ["EPS", "LM_STATE", "SIGMA_FLOOR", "fit_statistics", "fix_covariance", "linear_fix", "lm_iteration", "lm_start",
            "normal_equations", "solve_damped3", "weights"]

@@ -7,6 +7,15 @@ at each turn the diver takes a new heading drawn uniformly in [0, 2π), or,
 when the next leg would leave the disc of radius ``max_radius``, within ±60°
 of the bearing to the centre.
 
+The random walk (``random-walk``) is drawn from the receivers' own motion
+model: white-noise acceleration with spectral densities ``walk_q_horizontal``
+and ``walk_q_vertical`` [m²/s³], discretized exactly at every sample
+(``x_k+1 = Φ x_k + w_k``, ``w_k ~ N(0, Q(T_s))`` per axis), moving at
+constant velocity between samples, from a start drawn from
+``N([r, 0, depth, 0, v, 0], diag(p0_position², p0_velocity²))``. With the
+receiver's q and P0 equal to these, the posterior Cramér-Rao bound
+(:mod:`models.receiver.bound`) is a true bound on its mean squared error.
+
 References
 ----------
 Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Sections 4-5.
@@ -27,7 +36,7 @@ from models.core import (SEED_PARAMETERS, Column, Component, ModelError, Program
 from models.target.trajectories import (OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows,
                                         waypoints)
 
-TRAJECTORIES = ("semicircle", "spiral", "random", "square", "file")
+TRAJECTORIES = ("semicircle", "spiral", "random", "square", "file", "random-walk")
 #: Largest number of waypoints of a trajectory file.
 MAX_WAYPOINTS = 512
 WAYPOINTS = Table(
@@ -37,7 +46,7 @@ WAYPOINTS = Table(
              Column("waypoint_down", "m", "Waypoint depth", 0.0, 11000.0)),
     max_rows=MAX_WAYPOINTS, increasing=True, min_rows=2, when=("trajectory", "file"))
 
-_DEPTH_NOISE, _RANDOM_PATH = range(2)
+_DEPTH_NOISE, _RANDOM_PATH, _WALK_START, _WALK = range(4)
 
 
 def _leg_direction(uniforms, start, leg, max_radius):
@@ -83,6 +92,14 @@ class Target(Component):
                      min=0.0, max=1e5, min_exclusive=True),
             Variable("depth_sigma", "parameter", "Real", 0.01, "m", "Depth sensor standard deviation",
                      min=0.0, max=1000.0),
+            Variable("walk_q_horizontal", "parameter", "Real", 0.01, "m2/s3",
+                     "Random walk: horizontal acceleration spectral density", min=0.0, max=100.0),
+            Variable("walk_q_vertical", "parameter", "Real", 0.001, "m2/s3",
+                     "Random walk: vertical acceleration spectral density", min=0.0, max=100.0),
+            Variable("walk_p0_position", "parameter", "Real", 1.0, "m",
+                     "Random walk: standard deviation of the start position", min=0.0, max=1e4),
+            Variable("walk_p0_velocity", "parameter", "Real", 0.5, "m/s",
+                     "Random walk: standard deviation of the start velocity", min=0.0, max=100.0),
             Variable("sample_period", "parameter", "Real", 0.1, "s",
                      "Depth-sensor sampling period T_s (the sampling time T)", min=0.001, max=60.0, scope="fmu"),
         )
@@ -120,7 +137,8 @@ class Target(Component):
     def build(cls, n_beacons: int):
         N = MAX_WAYPOINTS
         b = ProgramBuilder(cls, n_beacons,
-                           states=[("t0", 1), ("k", 1), ("reading", 1), ("leg", 1), ("start", 2), ("direction", 2)],
+                           states=[("t0", 1), ("k", 1), ("reading", 1), ("leg", 1), ("start", 2), ("direction", 2),
+                                   ("walk", 6), ("walk_time", 1)],
                            derived=[("times", N), ("points", 3 * N), ("first", 1), ("last", 1)])
 
         def prepare(p):
@@ -142,17 +160,24 @@ class Target(Component):
                 "random": (ca.vertcat(x["start"] + p["speed"] * (t - x["t0"] - x["leg"] * p["turn_interval"])
                                       * x["direction"], p["depth"]),
                            ca.vertcat(p["speed"] * x["direction"], 0.0)),
+                "random-walk": (x["walk"][0:3] + x["walk"][3:6] * (t - x["walk_time"]), x["walk"][3:6]),
                 "waypoints": waypoints(t, d["times"], d["points"], d["first"], d["last"]),
             }
             index = ca.if_else(choice == TRAJECTORIES.index("square"), TRAJECTORIES.index("file"), choice)
-            pos = select(index, [options[k][0] for k in ("semicircle", "spiral", "random")] + [0, options["waypoints"][0]])
-            vel = select(index, [options[k][1] for k in ("semicircle", "spiral", "random")] + [0, options["waypoints"][1]])
+            order = ("semicircle", "spiral", "random", None, "waypoints", "random-walk")
+            pos = select(index, [options[k][0] if k else 0 for k in order])
+            vel = select(index, [options[k][1] if k else 0 for k in order])
             return pos, vel
+
+        def walk_mean(p):
+            return ca.vertcat(p["radius"], 0.0, p["depth"], 0.0, p["speed"], 0.0)
 
         def init(p, d, w, t0):
             start = ca.vertcat(p["radius"], 0.0)
             direction = _leg_direction(w[_RANDOM_PATH], start, p["speed"] * p["turn_interval"], p["max_radius"])
-            x = {"t0": t0, "k": 0, "leg": 0, "start": start, "direction": direction}
+            spread = ca.vertcat(*([p["walk_p0_position"]] * 3), *([p["walk_p0_velocity"]] * 3))
+            x = {"t0": t0, "k": 0, "leg": 0, "start": start, "direction": direction,
+                 "walk": walk_mean(p) + spread * w[_WALK_START], "walk_time": t0}
             pos, _ = path(x, p, d, t0)
             return {**x, "reading": pos[2] + p["depth_sigma"] * w[_DEPTH_NOISE][0]}
 
@@ -171,8 +196,12 @@ class Target(Component):
 
         def sample(x, u, p, d, w, t, h):
             k = x["k"] + 1
-            pos, _ = path(x, p, d, x["t0"] + k * p["sample_period"])
-            return {"k": k, "reading": pos[2] + p["depth_sigma"] * w[_DEPTH_NOISE][0]}
+            t_k = x["t0"] + k * p["sample_period"]
+            walk = walk_step(x["walk"], p["sample_period"], p["walk_q_horizontal"], p["walk_q_vertical"], w[_WALK])
+            x = {**x, "walk": walk, "walk_time": t_k}
+            pos, _ = path(x, p, d, t_k)
+            return {"k": k, "walk": walk, "walk_time": t_k,
+                    "reading": pos[2] + p["depth_sigma"] * w[_DEPTH_NOISE][0]}
 
         def output(x, p, d, t):
             pos, vel = path(x, p, d, t)
@@ -182,9 +211,27 @@ class Target(Component):
             return out
 
         depth, legs = Stream(_DEPTH_NOISE, "normal", 1), Stream(_RANDOM_PATH, "uniform", 2)
-        return b.program(b.prepare(prepare), b.init(init, (depth, legs)), b.output(output),
+        walk_start, walk = Stream(_WALK_START, "normal", 6), Stream(_WALK, "normal", 6)
+        return b.program(b.prepare(prepare), b.init(init, (depth, legs, walk_start)), b.output(output),
                          events=[b.event("turn", turn_due, turn, (legs,)),
-                                 b.event("sample", sample_due_, sample, (depth,))])
+                                 b.event("sample", sample_due_, sample, (depth, walk))])
+
+
+def walk_step(walk, dt, q_horizontal, q_vertical, noise) -> ca.SX:
+    """One exact step of white-noise acceleration: ``[p, v] ← Φ(dt) [p, v] + w``, ``w ~ N(0, Q(dt))`` per axis.
+
+    ``walk`` is (p_x, p_y, p_z, v_x, v_y, v_z); ``noise`` six standard normals; the
+    Cholesky factor of ``q [[dt³/3, dt²/2], [dt²/2, dt]]`` is
+    ``sqrt(q) [[sqrt(dt³/3), 0], [sqrt(3 dt)/2, sqrt(dt/4)]]``.
+    """
+    out = []
+    l00, l10, l11 = ca.sqrt(dt**3 / 3.0), ca.sqrt(3.0 * dt) / 2.0, ca.sqrt(dt / 4.0)
+    for axis, q in enumerate((q_horizontal, q_horizontal, q_vertical)):
+        s = ca.sqrt(q)
+        position = walk[axis] + dt * walk[axis + 3] + s * l00 * noise[2 * axis]
+        velocity = walk[axis + 3] + s * (l10 * noise[2 * axis] + l11 * noise[2 * axis + 1])
+        out.append((position, velocity))
+    return ca.vertcat(*[p for p, _ in out], *[v for _, v in out])
 
 
 def file_waypoints(values: Mapping[str, Any]) -> np.ndarray:
@@ -219,8 +266,8 @@ def _read_file(path: str, stamp) -> np.ndarray:
 def natural_duration(params: Mapping[str, Any]) -> float:
     """Duration of one pass of the configured trajectory [s].
 
-    Semicircle: π r / v; square: 4 s / v; file: its last time; spiral and
-    random: :data:`~models.target.trajectories.OPEN_DURATION`.
+    Semicircle: π r / v; square: 4 s / v; file: its last time; spiral, random
+    and random-walk: :data:`~models.target.trajectories.OPEN_DURATION`.
     """
     p = resolve_parameters(Target.config_parameters(), params, "target")
     kind = p["trajectory"]
@@ -237,7 +284,8 @@ def start_state(params: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Position [m] and velocity [m/s] of the diver at t = 0, each (3,), from the model itself.
 
     Deterministic for every trajectory (the random path starts at (r, 0),
-    and its first heading is random, so its velocity is given as zero).
+    and its first heading is random, so its velocity is given as zero; the
+    random walk gives the mean of its start, (r, 0, depth) at (0, v, 0)).
     """
     p = resolve_parameters(Target.config_parameters(), params, "target")
     program = Target.program()

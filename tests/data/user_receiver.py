@@ -5,7 +5,7 @@ names, causalities and units as sblsim's EKF), and estimates the diver's
 position from each new range and the depth alone: straight below the
 horizontal circle of radius sqrt(r² − Δz²) around the transmitting beacon,
 at the point of that circle nearest to the previous estimate. The velocity
-is the difference of consecutive estimates.
+is the difference of consecutive estimates. It claims a fixed covariance.
 
 Built with ``pythonfmu build -f user_receiver.py``; pythonfmu writes no
 units, so ``RealWithUnit`` adds the ``unit`` attribute itself.
@@ -34,7 +34,11 @@ INPUTS = [("packet_seq", "Integer", ""), ("beacon_id", "Integer", ""), ("packet_
 OUTPUTS = [("est_x", "Real", "m"), ("est_y", "Real", "m"), ("est_z", "Real", "m"),
            ("est_vx", "Real", "m/s"), ("est_vy", "Real", "m/s"), ("est_vz", "Real", "m/s"),
            ("instr_x", "Real", "m"), ("instr_y", "Real", "m"), ("instr_z", "Real", "m"),
-           ("instr_valid", "Boolean", ""), ("nis", "Real", "1"), ("pos_std", "Real", "m")]
+           ("instr_valid", "Boolean", ""), ("nis", "Real", "1"), ("pos_std", "Real", "m"),
+           ("cov_xx", "Real", "m2"), ("cov_xy", "Real", "m2"), ("cov_xz", "Real", "m2"),
+           ("cov_yy", "Real", "m2"), ("cov_yz", "Real", "m2"), ("cov_zz", "Real", "m2"), ("gated", "Boolean", "")]
+#: The accuracy it claims, fixed: 1 m horizontally, 1 cm in depth [m²].
+COVARIANCE = {"cov_xx": 1.0, "cov_yy": 1.0, "cov_zz": 1e-4}
 
 
 class UserReceiver(Fmi2Slave):
@@ -51,6 +55,9 @@ class UserReceiver(Fmi2Slave):
             else:
                 self.register_variable({"Integer": Integer, "Boolean": Boolean}[kind](name, causality=causality))
         self.last_seq = 0
+        for name, value in COVARIANCE.items():
+            setattr(self, name, value)
+        self.pos_std = math.sqrt(sum(COVARIANCE.values()))
 
     def do_step(self, current_time, step_size):
         if self.packet_seq != self.last_seq and self.packet_valid:

@@ -17,7 +17,7 @@ from fmus.build import build_fmu, fmu_path
 from fmus.codegen import fmi_headers_dir
 from fmus.compiler import find_compiler
 from fmus.native import stream
-from models import MODELS
+from models import MODELS, RECEIVERS
 from models.core import normals, uniforms
 
 HOST = Path(__file__).with_name("c_host.c")
@@ -45,7 +45,7 @@ def unpack(fmu: Path, into: Path) -> tuple[Path, str, list[int]]:
 
 #: A Real parameter per FMU that changes its outputs even with all inputs at zero, and a value for it.
 CHANGED = {"platform": ("baseline", 2.5), "acoustics": ("sigma_range", 0.7), "target": ("radius", 12.0),
-           "receiver": ("x0_x", 3.0), "receiver_lsq": ("x0_x", 3.0)}
+           **{name: ("x0_x", 3.0) for name in RECEIVERS.values()}}
 
 
 def first_real_parameter(name: str) -> tuple[int, float]:

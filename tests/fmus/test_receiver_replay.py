@@ -23,7 +23,7 @@ import pytest
 from fmus.build import fmu_path
 from fmus.compiler import find_compiler
 from fmus.embedded import write_receiver
-from models import MODELS
+from models import MODELS, RECEIVERS
 from orchestrator.config import load_config
 from orchestrator.run import run
 
@@ -31,7 +31,7 @@ INPUTS = [v.name for v in MODELS["receiver"].inputs()]
 TOL = 1e-9  # [m]
 
 
-@pytest.fixture(scope="module", params=["ekf", "lsq"])
+@pytest.fixture(scope="module", params=list(RECEIVERS))
 def recorded(request):
     cfg = load_config("semicircle", ["simulation.duration=40", "acoustics.loss_pct=25", "acoustics.outlier_pct=5",
                                      f"receiver={request.param}"], seed=9)
@@ -42,7 +42,7 @@ def recorded(request):
 
 
 def receiver_parameters(cfg, receiver):
-    model = MODELS["receiver" if receiver == "ekf" else "receiver_lsq"]
+    model = MODELS[RECEIVERS[receiver]]
     names = {v.name for v in model.fmu_parameters_declared()}
     return model, {k: v for k, v in cfg["receiver"].items() if k in names}
 
@@ -98,8 +98,8 @@ def test_codegen_receiver_example_reproduces_the_recorded_estimate(recorded, tmp
 def test_codegen_refuses_a_bad_receiver_and_a_used_directory(tmp_path):
     from models.core import ModelError
 
-    with pytest.raises(ModelError, match="--receiver: 'ukf' is not one of ekf, lsq"):
-        write_receiver("ukf", tmp_path / "a")
+    with pytest.raises(ModelError, match="--receiver: 'kalman' is not one of ekf, ekf-seq, ukf, lsq"):
+        write_receiver("kalman", tmp_path / "a")
     (tmp_path / "b").mkdir()
     (tmp_path / "b" / "keep.txt").write_text("mine")
     with pytest.raises(ModelError, match="not an empty directory"):

@@ -17,7 +17,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from models.receiver import Receiver, position_range_function, range_function
-from models.receiver import ekf
+from models.receiver import ekf, kalman
 from models.receiver import multilateration as ml
 from tests.helpers import Core
 
@@ -208,7 +208,7 @@ def _ekf_case(seed=7):
 
 
 def _predict_function():
-    return casadi_function(lambda x, P, dt, qh, qv: ekf.predict(x, P, dt, qh, qv), (6, 1), (6, 6), (1, 1), (1, 1),
+    return casadi_function(lambda x, P, dt, qh, qv: kalman.predict(x, P, dt, qh, qv), (6, 1), (6, 6), (1, 1), (1, 1),
                            (1, 1))
 
 
@@ -226,19 +226,19 @@ def test_predict_matches_numpy():
     np.testing.assert_allclose(P, ref_phi(dt) @ P0 @ ref_phi(dt).T + ref_q(dt, qh, qv), rtol=1e-14, atol=1e-15)
     # hand checks: position x moves by v dt; Q of the Down axis for dt = 2 s is q_v [[8/3, 2], [2, 2]]
     assert x[0, 0] == pytest.approx(x0[0] + dt * x0[1], rel=1e-15)
-    Q = np.array(ca.DM(ekf.process_noise(2.0, qh, qv)))
+    Q = np.array(ca.DM(kalman.process_noise(2.0, qh, qv)))
     np.testing.assert_allclose(Q[4:, 4:], qv * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
     np.testing.assert_allclose(Q[:2, :2], qh * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
     assert np.all(Q[:2, 2:] == 0.0) and np.all(Q[2:4, 4:] == 0.0)
-    np.testing.assert_array_equal(np.array(ca.DM(ekf.transition(2.0))), ref_phi(2.0))
+    np.testing.assert_array_equal(np.array(ca.DM(kalman.transition(2.0))), ref_phi(2.0))
 
 
 def test_cholesky_and_solve_spd_match_numpy():
     rng = np.random.default_rng(4)
     S = random_spd(rng, n=5, scale=3.0)
     B = rng.normal(size=(5, 3))
-    chol = casadi_function(ekf.cholesky, (5, 5))
-    solve = casadi_function(ekf.solve_spd, (5, 5), (5, 3))
+    chol = casadi_function(kalman.cholesky, (5, 5))
+    solve = casadi_function(kalman.solve_spd, (5, 5), (5, 3))
     (L,) = evaluate(chol, S)
     np.testing.assert_allclose(L, np.linalg.cholesky(S), rtol=1e-13, atol=1e-15)
     (X,) = evaluate(solve, S, B)

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from models import MODELS
 from orchestrator.cli import main
 from orchestrator.config import load_config
 
@@ -214,10 +215,10 @@ def test_fmu_engine_run_matches_local(short_run, fmu_dir):
 def test_fmus_validate(fmu_dir, tmp_path):
     proc = sblsim("fmus", "validate", fmu_dir, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.count("0 problems") == 5
+    assert proc.stdout.count("0 problems") == len(MODELS)
     lines = [line for line in proc.stdout.splitlines() if line.endswith("problems")]
     assert sorted(Path(line.split(":")[0]).name for line in lines) == sorted(
-        f"sblsim_{n}.fmu" for n in ("platform", "acoustics", "target", "receiver", "receiver_lsq"))
+        f"sblsim_{n}.fmu" for n in MODELS)
 
 
 def test_fmus_validate_missing_dir(tmp_path):

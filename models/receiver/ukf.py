@@ -1,0 +1,88 @@
+"""``ukf``: an unscented Kalman filter with the measurement model and gate of ``ekf-seq``.
+
+Scaled sigma points (α, β, κ; van der Merwe) of the predicted state carry the
+measurement ``z = [‖p − b‖, d]`` of the fresh range and the depth through
+the same :class:`~models.receiver.measurement.RangeDepthModel`; the range's
+variance adds the broadcast beacon's uncertainty as in ``ekf-seq``. The range
+is gated on its own NIS (its marginal ``y_r² / S_rr``, χ²(1)); a gated or
+lost range leaves the depth update only. The motion model is linear, so the
+prediction is the Kalman prediction (the unscented transform of a linear map
+is exact). The covariance update is ``P − K S Kᵀ``, symmetrized.
+
+References
+----------
+Julier, Uhlmann, "Unscented filtering and nonlinear estimation", Proc. IEEE
+92(3), 2004. Wan, van der Merwe, "The unscented Kalman filter for nonlinear
+estimation", Proc. IEEE AS-SPCC, 2000.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from models.core import Variable
+from models.receiver import kalman
+from models.receiver.core import (KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, gate_parameter,
+                                  take_packet)
+from models.receiver.ekf_seq import fresh_range_variance
+
+
+def unscented_update(x, P, points, wm, wc, z_points, z, R) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """Unscented update from the sigma points and their predicted measurements.
+
+    Returns
+    -------
+    x, P : casadi.SX
+        Updated state and covariance (``P − K S Kᵀ``, symmetrized).
+    y, S : casadi.SX
+        Innovation and its covariance.
+    nis : casadi.SX
+        ``yᵀ S⁻¹ y``.
+    """
+    m = len(points)
+    z_mean = sum(wm[i] * z_points[i] for i in range(m))
+    S = R + sum(wc[i] * ca.mtimes(z_points[i] - z_mean, (z_points[i] - z_mean).T) for i in range(m))
+    Pxz = sum(wc[i] * ca.mtimes(points[i] - x, (z_points[i] - z_mean).T) for i in range(m))
+    y = z - z_mean
+    solved = kalman.solve_spd(S, ca.horzcat(Pxz.T, y))
+    K = solved[:, :x.shape[0]].T
+    P_new = P - ca.mtimes([K, S, K.T])
+    return x + ca.mtimes(K, y), 0.5 * (P_new + P_new.T), y, S, ca.dot(y, solved[:, x.shape[0]])
+
+
+class UnscentedReceiver(KalmanReceiver):
+    """Unscented Kalman filter: fresh range and depth, beacon uncertainty in R, NIS gate."""
+
+    name = "receiver_ukf"
+    label = "ukf"
+
+    @classmethod
+    def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
+        return filter_parameters() + beacon_parameters() + (gate_parameter(0.999),) + (
+            Variable("alpha", "parameter", "Real", 1.0, "1", "Sigma-point spread alpha", min=1e-4, max=1.0),
+            Variable("beta", "parameter", "Real", 2.0, "1", "Prior-distribution weight beta (2: Gaussian)",
+                     min=0.0, max=10.0),
+            Variable("kappa", "parameter", "Real", 0.0, "1", "Secondary scaling kappa", min=-5.0, max=10.0),
+        )
+
+    @classmethod
+    def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
+        fresh, rng, beacon = fresh_range(x, u, n_beacons)
+        m = cls.measurement
+        state, P = x["x"], x["P"]
+        wm, wc, lam = kalman.unscented_weights(6, p["alpha"], p["beta"], p["kappa"])
+        points = kalman.sigma_points(state, P, lam)
+        variance = fresh_range_variance(cls, state, beacon, p)
+        joint = unscented_update(state, P, points, wm, wc, [m.h(c, [beacon]) for c in points],
+                                 ca.vertcat(rng, u["depth"]), ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
+        depth = unscented_update(state, P, points, wm, wc, [c[4] for c in points], u["depth"],
+                                 ca.SX(p["sigma_depth"] ** 2))
+        y, S = joint[2], joint[3]
+        passes = y[0] * y[0] / S[0, 0] <= kalman.gate_threshold(p["gate_probability"])
+        use = ca.logic_and(fresh, passes)
+        return {**take_packet(x, u, n_beacons), "x": ca.if_else(use, joint[0], depth[0]),
+                "P": ca.if_else(use, joint[1], depth[1]), "nis": ca.if_else(use, joint[4], depth[4]),
+                "gated": ca.logic_and(fresh, ca.logic_not(passes))}
+
+
+__all__ = ["UnscentedReceiver", "unscented_update"]
