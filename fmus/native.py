@@ -20,12 +20,14 @@ import tempfile
 from functools import lru_cache
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
 from fmus.codegen import BATCH, C_DIR, stem, write_sources
 from fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from models import MODELS
 from models.core import ModelError
+from models.receiver.bound import FIXED, STEP_SIZE, bound_step
 
 _VECTORS = {"p": 0, "d": 1, "x": 2, "u": 3, "y": 4, "draws": 6}
 
@@ -53,6 +55,10 @@ def write_library_sources(n_beacons: int, directory: Path) -> list[Path]:
     for model in MODELS.values():
         write_sources(model, n_beacons, directory, shell="")
     (directory / "sblsim_models.c").write_text(_registry(n_beacons))
+    cg = ca.CodeGenerator("sblsim_bound_casadi.c", {"with_header": True, "casadi_real": "double",
+                                                    "casadi_int": "long long int"})
+    cg.add(bound_step())
+    cg.generate(str(directory) + "/")
     (directory / BATCH).write_text((C_DIR / BATCH).read_text())
     return sorted(directory.glob("*.c"))
 
@@ -102,6 +108,7 @@ def load(n_beacons: int = 4) -> ctypes.CDLL:
     lib.sblsim_batch_initialize.argtypes = [ctypes.c_void_p, ctypes.c_double]
     lib.sblsim_batch_do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
     lib.sblsim_model_size.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    lib.sblsim_bound_series.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.POINTER(ctypes.c_double)] * 3
     for name in ("sblsim_stream_uniforms", "sblsim_stream_normals"):
         getattr(lib, name).argtypes = [ctypes.POINTER(ctypes.c_uint64), ctypes.c_int, ctypes.c_int, ctypes.c_uint64,
                                        ctypes.c_int, ctypes.POINTER(ctypes.c_double)]
@@ -173,12 +180,39 @@ class NativeBatch:
         return out[:, :self.sizes["x"]]
 
     def close(self) -> None:
-        if self._handle:
+        if getattr(self, "_handle", None):
             self.lib.sblsim_batch_free(self._handle)
             self._handle = None
 
     def __del__(self) -> None:
         self.close()
+
+
+def bound_series(fixed: np.ndarray, steps: np.ndarray, n_beacons: int = 4) -> np.ndarray:
+    """The position PCRB of :func:`models.receiver.bound.pcrb`, compiled: same inputs, same numbers.
+
+    Parameters
+    ----------
+    fixed : ndarray, shape (B, 8)
+    steps : ndarray, shape (N, B, 11)
+        From :func:`models.receiver.bound.pcrb_inputs`.
+
+    Returns
+    -------
+    ndarray, shape (N, B)
+        ``sqrt(trace)`` of the position bound at each step [m].
+    """
+    n, b = steps.shape[:2]
+    fixed = np.ascontiguousarray(fixed, dtype=float)
+    steps = np.ascontiguousarray(steps, dtype=float)
+    if fixed.shape != (b, len(FIXED)) or steps.shape[2] != STEP_SIZE:
+        raise ValueError(f"bound_series: fixed {fixed.shape} and steps {steps.shape} do not fit")
+    out = np.empty((n, b))
+    pointer = ctypes.POINTER(ctypes.c_double)
+    if load(n_beacons).sblsim_bound_series(n, b, fixed.ctypes.data_as(pointer), steps.ctypes.data_as(pointer),
+                                           out.ctypes.data_as(pointer)):
+        raise MemoryError("bound_series: out of memory")
+    return out
 
 
 def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int, n_beacons: int = 4) -> np.ndarray:
@@ -191,4 +225,4 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 
-__all__ = ["NativeBatch", "cache_dir", "library_path", "load", "stream", "write_library_sources"]
+__all__ = ["NativeBatch", "bound_series", "cache_dir", "library_path", "load", "stream", "write_library_sources"]

@@ -228,6 +228,8 @@ class Variable:
             raise ValueError(f"{self.name}: type {self.type!r} not in {TYPES}")
         if self.type == "Real" and self.unit not in UNITS:
             raise ValueError(f"{self.name}: unit {self.unit!r} is not declared in models.core.UNITS")
+        if self.type != "Real" and self.unit:
+            raise ValueError(f"{self.name}: an FMI {self.type} has no unit")
         if self.scope not in SCOPES:
             raise ValueError(f"{self.name}: scope {self.scope!r} not in {SCOPES}")
         if self.type == "String" and self.in_fmu and self.choices is None:

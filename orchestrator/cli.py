@@ -102,8 +102,8 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from orchestrator.config import load_config
-    from orchestrator.run import beacon_count, close_handles, make_handles, run, summary, system_sources, write_run
+    from orchestrator.config import beacon_count, load_config
+    from orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
 
     _check_seed(args.seed)
     if (args.scenario is None) == (args.ssp is None):

@@ -33,7 +33,7 @@ from models.core import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable
 from models.target import natural_duration, start_state
 from orchestrator.master import ALGORITHMS
 
-BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour")
+BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
 SECTIONS = ("run", "simulation", *COMPONENTS)
 MIN_SIGMA = 1e-3  # floor of the tied R standard deviations [m]
 
@@ -316,7 +316,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
-            model.fmu_parameters(cfg[name], _beacons(cfg))
+            model.fmu_parameters(cfg[name], beacon_count(cfg))
     if sim["duration"] == 0.0:
         sim["duration"] = natural_duration(cfg["target"])
     if sim["duration"] < sim["sampling_time"]:
@@ -333,32 +333,49 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     the diver's start state; ``beacon_gps_sigma`` ← ``platform.gps_sigma``,
     ``beacon_attitude_sigma_deg`` ← ``platform.imu_sigma_deg``,
     ``beacon_arm`` ← the largest distance of a beacon from the platform
-    reference.
+    reference; for the ``random-walk`` trajectory, ``q_horizontal``,
+    ``q_vertical``, ``p0_position``, ``p0_velocity`` ← the walk's.
     """
-    from models.platform.geometry import parse_offsets
-
     rx, platform = cfg["receiver"], cfg["platform"]
     pos, vel = start_state(cfg["target"])
-    if platform["layout"] == "custom":
-        arm = float(max(np.linalg.norm(parse_offsets(platform["beacon_offsets"]), axis=1)))
-    else:
-        arm = float(np.hypot(platform["baseline"], platform["transducer_depth"]))
+    arm = beacon_arm(platform)
     ties = {"sigma_range": max(cfg["acoustics"]["sigma_range"], MIN_SIGMA),
             "sigma_depth": max(cfg["target"]["depth_sigma"], MIN_SIGMA),
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
             "beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
             "beacon_arm": arm}
+    target = cfg["target"]
+    if target["trajectory"] == "random-walk":  # the receiver's motion model and prior are the walk's
+        ties.update({k: target[f"walk_{k}"] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")})
     for key, value in ties.items():
         if key in rx and key not in given:
             rx[key] = value
 
 
-def _beacons(cfg: dict[str, dict]) -> int:
-    from models.platform.geometry import parse_offsets
+def beacon_offsets(platform: dict[str, Any]) -> np.ndarray:
+    """Body-frame offsets of the beacons of a ``[platform]`` section, (n, 3) [m]."""
+    from models.platform.geometry import layout_offsets
 
-    platform = cfg["platform"]
-    return parse_offsets(platform["beacon_offsets"]).shape[0] if platform["layout"] == "custom" else 4
+    return layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
+                          platform["beacon_offsets"])
+
+
+def beacon_arms(platform: dict[str, Any]) -> np.ndarray:
+    """Lever arms of the beacons in NED at the mean heading (level platform), (n, 3) [m]."""
+    heading = np.radians(platform["heading_deg"])
+    c, s = np.cos(heading), np.sin(heading)
+    return beacon_offsets(platform) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+
+
+def beacon_arm(platform: dict[str, Any]) -> float:
+    """The largest distance of a beacon from the platform reference [m]."""
+    return float(max(np.linalg.norm(beacon_offsets(platform), axis=1)))
+
+
+def beacon_count(cfg: dict[str, dict]) -> int:
+    """Number of beacons of a configuration: 4 for the cross, the offsets' count for a custom layout."""
+    return beacon_offsets(cfg["platform"]).shape[0]
 
 
 def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[str] | None = None,
@@ -391,8 +408,8 @@ def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[s
         params = dict(section)
         declared = accepted or frozenset()
     else:
-        params = model.fmu_parameters(section, _beacons(cfg))
-        declared = frozenset(v.name for v in model.fmu_parameters_declared(_beacons(cfg)))
+        params = model.fmu_parameters(section, beacon_count(cfg))
+        declared = frozenset(v.name for v in model.fmu_parameters_declared(beacon_count(cfg)))
     for owner, name in SAMPLING_TIES:
         if owner == component and name in declared:
             params[name] = cfg["simulation"]["sampling_time"]

@@ -1,16 +1,33 @@
-"""Position-error metrics (docs/model.md, "Metrics").
+"""Position-error and consistency metrics (docs/model.md, "Metrics").
 
 Per step: ``e_x = |x − x̂|``, ``e_y``, ``e_z`` and
 ``e_tot = sqrt(e_x² + e_y² + e_z²)``; per run: the time-average of each, the
 RMS of e_tot and its standard deviation (population, ddof = 0). Steps where an
 estimate is not available (NaN, e.g. no instrumentation fix yet) are left out.
+
+Consistency (Bar-Shalom, Li, Kirubarajan, Estimation with Applications to
+Tracking and Navigation, Wiley 2001, Section 5.4): the position NEES
+``ε = eᵀ P⁻¹ e`` (3 degrees of freedom, e = truth − estimate, P the reported
+position covariance) per step, its mean ``nees_mean`` (3 for a consistent
+filter) and ``coverage_95``, the share of steps with ε ≤ χ²₃(0.95) = 7.815
+(the truth inside the 95 % ellipsoid; 0.95 for a consistent filter); steps
+where P is not positive-definite are left out. ``nis_mean`` is the mean of
+the receiver's ``nis`` output from the first slot on; ``gated_pct`` the share
+of received slots whose range the gate rejected [%]; ``pcrb_rms`` the RMS of
+the position PCRB along the run (:mod:`models.receiver.bound`), comparable
+with ``e_tot_rms``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2
 
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
+#: Per-run consistency metrics and the bound.
+CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms")
+#: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
+NEES_95 = float(chi2.ppf(0.95, 3))
 
 
 def errors(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:
@@ -56,3 +73,92 @@ def summarize(err: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
         var = np.where(valid, (safe[:, 3] - mean[:, 3:4]) ** 2, 0.0).sum(axis=-1) / count
     values = (mean[:, 0], mean[:, 1], mean[:, 2], mean[:, 3], rms, np.sqrt(var))
     return {prefix + name: v for name, v in zip(METRIC_NAMES, values)}
+
+
+def nees(err: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Position NEES ``eᵀ P⁻¹ e`` per step.
+
+    Parameters
+    ----------
+    err : ndarray, shape (..., 3)
+        Signed errors truth − estimate [m].
+    cov : ndarray, shape (..., 6)
+        Reported covariance ``xx, xy, xz, yy, yz, zz`` [m²].
+
+    Returns
+    -------
+    ndarray, shape (...)
+        NEES [1]; NaN where the covariance is not positive-definite (e.g. a
+        receiver reporting zeros before its first fix).
+    """
+    err = np.asarray(err, dtype=float)
+    xx, xy, xz, yy, yz, zz = np.moveaxis(np.asarray(cov, dtype=float), -1, 0)
+    # Sylvester's criterion: every leading principal minor positive
+    minor2 = xx * yy - xy * xy
+    det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz)
+    pd = (xx > 0) & (minor2 > 0) & (det > 0)
+    P = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
+    P = np.where(pd[..., None, None], P, np.eye(3))
+    out = np.einsum("...i,...i->...", err, np.linalg.solve(P, err[..., None])[..., 0])
+    return np.where(pd, out, np.nan)
+
+
+def slots(packet_seq: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Steps with a new acoustic slot, and those whose packet was received.
+
+    Parameters
+    ----------
+    packet_seq : ndarray, shape (N, B)
+        The acoustic channel's slot counter at each step (0: none yet).
+    received : ndarray of bool, shape (N, B)
+        Packet valid with a beacon of the array.
+
+    Returns
+    -------
+    slot, fresh : ndarray of bool, shape (N, B)
+    """
+    seq = np.asarray(packet_seq)
+    previous = np.concatenate([np.zeros_like(seq[:1]), seq[:-1]])
+    slot = seq != previous
+    return slot, slot & np.asarray(received, bool)
+
+
+def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: np.ndarray, fresh: np.ndarray,
+                gated: np.ndarray, bound: np.ndarray) -> dict[str, np.ndarray]:
+    """Consistency metrics of B runs (:data:`CONSISTENCY_NAMES`).
+
+    Parameters
+    ----------
+    err : ndarray, shape (N, B, 3)
+        Signed errors truth − estimate [m].
+    cov : ndarray, shape (N, B, 6)
+        Reported position covariance [m²].
+    nis : ndarray, shape (N, B)
+        The receiver's ``nis`` output.
+    packet_seq : ndarray, shape (N, B)
+        Slot counter (0 before the first slot).
+    fresh : ndarray of bool, shape (N, B)
+        Steps with a new, received slot (:func:`slots`).
+    gated : ndarray of bool, shape (N, B)
+        The receiver's ``gated`` output.
+    bound : ndarray, shape (N, B)
+        Position PCRB ``sqrt(trace)`` [m] (NaN: not available).
+
+    Returns
+    -------
+    dict
+        Name -> array (B,); NaN where a metric has no step to average.
+    """
+    e = nees(err, cov)
+    valid = np.isfinite(e)
+    count = valid.sum(axis=0)
+    started = np.asarray(packet_seq) > 0
+    fresh = np.asarray(fresh, bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return {
+            "nees_mean": np.where(valid, e, 0.0).sum(axis=0) / count,
+            "coverage_95": (valid & (e <= NEES_95)).sum(axis=0) / count,
+            "nis_mean": np.where(started, nis, 0.0).sum(axis=0) / started.sum(axis=0),
+            "gated_pct": 100.0 * (fresh & np.asarray(gated, bool)).sum(axis=0) / fresh.sum(axis=0),
+            "pcrb_rms": np.sqrt(np.mean(np.asarray(bound, dtype=float) ** 2, axis=0)),
+        }

@@ -17,12 +17,14 @@ import pandas as pd
 
 from models import COMPONENTS, MODELS
 from models.core import ModelError
-from models.platform.geometry import parse_offsets
-from orchestrator.config import component_params, receiver_source, to_toml
+from fmus.native import bound_series
+from models.receiver.bound import pcrb_inputs
+from models.receiver.core import COVARIANCE, filter_parameters
+from orchestrator.config import MIN_SIGMA, beacon_arms, beacon_count, component_params, receiver_source, to_toml
 from orchestrator.connections import Connection, check_connections, check_interface, default_connections
 from orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
 from orchestrator.master import simulate
-from orchestrator.metrics import errors, summarize
+from orchestrator.metrics import consistency, errors, slots, summarize
 
 ENGINES = ("local", "fmu")
 
@@ -46,6 +48,8 @@ TIMESERIES_COLUMNS = {
     "outlier": "acoustics.outlier",
     "nis": "receiver.nis",
     "pos_std": "receiver.pos_std",
+    **{f"cov_{ab}": f"receiver.cov_{ab}" for ab in COVARIANCE},
+    "gated": "receiver.gated",
     "roll": "platform.roll",
     "pitch": "platform.pitch",
     "yaw": "platform.yaw",
@@ -163,14 +167,6 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     return handles
 
 
-def beacon_count(cfg: dict) -> int:
-    """Number of beacons of a configuration: 4 for the cross, the offsets' count for a custom layout."""
-    platform = cfg["platform"]
-    if platform["layout"] == "custom":
-        return parse_offsets(platform["beacon_offsets"]).shape[0]
-    return 4
-
-
 def close_handles(handles: dict[str, Any]) -> None:
     """Terminate every handle."""
     for handle in handles.values():
@@ -178,7 +174,32 @@ def close_handles(handles: dict[str, Any]) -> None:
 
 
 #: Recorded outputs the metrics need (the truth, the estimate and the instrumentation fix with its flag).
-METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + ("instr_valid",)
+METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + (
+    "instr_valid", "nis", "gated", "packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z",
+    *(f"cov_{ab}" for ab in COVARIANCE))
+
+
+def bound_parameters(cfg: dict) -> dict[str, float]:
+    """The parameters of the position PCRB of a configuration (:func:`models.receiver.bound.pcrb`).
+
+    The motion model and prior are the random walk's for ``random-walk`` (the
+    bound is then a true bound), else the receiver's (``q_horizontal``,
+    ``q_vertical``, ``p0_position``, ``p0_velocity``; the defaults of the
+    Kalman-type receivers for one that has none). The measurement variances
+    are the configured white error sources: ``acoustics.sigma_range² +
+    platform.gps_sigma²``, ``platform.imu_sigma_deg`` [rad]², and
+    ``target.depth_sigma²`` (floored at 1 mm).
+    """
+    target, platform = cfg["target"], cfg["platform"]
+    defaults = {v.name: v.start for v in filter_parameters()}
+    names = ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")
+    if target["trajectory"] == "random-walk":
+        motion = {k: target[f"walk_{k}"] for k in names}
+    else:
+        motion = {k: cfg["receiver"].get(k, defaults[k]) for k in names}
+    return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + platform["gps_sigma"] ** 2,
+            "attitude_variance": math.radians(platform["imu_sigma_deg"]) ** 2,
+            "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2}
 
 
 def merge_params(cfgs: Sequence[dict], component: str,
@@ -339,26 +360,40 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                                           for k in recs[0]}
     types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
     rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
-    return _result(cfgs[0], engine, rec, replicates, n_steps, wall, timeseries)
+    return _result(cfgs, engine, rec, replicates, n_steps, wall, timeseries)
 
 
-def _result(cfg: dict, engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
+def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
             timeseries: bool = True) -> RunResult:
-    batch = len(replicates)
+    cfg, batch = cfgs[0], len(replicates)
     names = TIMESERIES_COLUMNS if timeseries else METRIC_INPUTS
     cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in names}
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
-    est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
+    estimate = np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1)
+    est_err = errors(truth, estimate)
     # no fix at a step (instr_valid false, instr_* 0): the step is left out of the instrumentation metrics
     fix = np.where(np.asarray(cols["instr_valid"], bool)[..., None],
                    np.stack([cols[f"instr_{a}"] for a in "xyz"], axis=-1), np.nan)
     instr_err = errors(truth, fix)
-    metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_")})
+    n_beacons = beacon_count(cfg)
+    received = np.asarray(cols["packet_valid"], bool) & (cols["beacon_id"] >= 1) & (cols["beacon_id"] <= n_beacons)
+    slot, fresh = slots(cols["packet_seq"], received)
+    params = pd.DataFrame([bound_parameters(c) for c in cfgs])
+    arms = np.stack([beacon_arms(c["platform"]) for c in cfgs], axis=0)  # (B, n, 3)
+    beacon = np.clip(np.asarray(cols["beacon_id"], dtype=int) - 1, 0, n_beacons - 1)
+    bound = bound_series(*pcrb_inputs(truth, slot, fresh, np.stack([cols[f"beacon_{a}"] for a in "xyz"], axis=-1),
+                                      arms[np.arange(batch)[None, :], beacon], dt=cfg["simulation"]["sampling_time"],
+                                      **{k: params[k].to_numpy() for k in params}), n_beacons)
+    checks = consistency(truth - estimate, np.stack([cols[f"cov_{ab}"] for ab in COVARIANCE], axis=-1),
+                         cols["nis"], cols["packet_seq"], fresh, cols["gated"], bound)
+    metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_"),
+                            **checks})
     if not timeseries:
         return RunResult(cfg, engine, pd.DataFrame(), metrics, n_steps, wall)
     table = {"replicate": np.repeat(np.asarray(replicates)[None, :], n_steps, axis=0),
              "time": np.repeat(rec["time"][:, None], batch, axis=1)}
     table.update(cols)
+    table["pcrb"] = bound
     for k, name in enumerate(("e_x", "e_y", "e_z", "e_tot")):
         table[name] = est_err[..., k]
         table[f"instr_{name}"] = instr_err[..., k]

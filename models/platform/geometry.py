@@ -72,6 +72,21 @@ def parse_offsets(text: str, field: str = "platform.beacon_offsets") -> np.ndarr
     return offsets
 
 
+def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon_offsets: str = "",
+                   n_beacons: int = 4) -> np.ndarray:
+    """Body-frame beacon offsets of a platform configuration, (n, 3) [m]: the cross or a custom layout.
+
+    Raises
+    ------
+    ModelError
+        If a custom layout's offsets are malformed.
+    """
+    if layout == "custom":
+        return parse_offsets(beacon_offsets)
+    return np.array([[float(v) for v in ca.DM(a).full().ravel()]
+                     for a in cross_offsets(baseline, transducer_depth, n_beacons)])
+
+
 def rotation_ned(roll, pitch, yaw) -> ca.SX:
     """Body-to-NED rotation ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (ZYX Tait-Bryan).
 
@@ -100,4 +115,5 @@ def beacon_positions(position: ca.SX, rotation: ca.SX, offsets: list[ca.SX]) -> 
     return [position + ca.mtimes(rotation, a) for a in offsets]
 
 
-__all__ = ["beacon_positions", "cross_directions", "cross_offsets", "parse_offsets", "rotation_ned"]
+__all__ = ["beacon_positions", "cross_directions", "cross_offsets", "layout_offsets", "parse_offsets",
+           "rotation_ned"]

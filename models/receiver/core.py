@@ -165,11 +165,44 @@ def filter_parameters() -> tuple[Variable, ...]:
         for n in ("x", "y", "z", "vx", "vy", "vz"))
 
 
-def gate_parameter(default: float) -> Variable:
-    """The NIS gate: the probability a correct range passes it (1: no gate)."""
-    return Variable("gate_probability", "parameter", "Real", default, "1",
-                    "NIS gate: probability that a correct range passes (chi-square, 1 dof); 1: no gate",
-                    min=0.5, max=1.0)
+def gate_parameters(probability: float) -> tuple[Variable, ...]:
+    """The NIS gate: the probability a correct range passes it (1: no gate), and its lockout guard."""
+    return (
+        Variable("gate_probability", "parameter", "Real", probability, "1",
+                 "NIS gate on long ranges: probability that a correct range passes (chi-square, 1 dof); 1: no gate",
+                 min=0.5, max=1.0),
+        Variable("gate_max_rejections", "parameter", "Integer", 2,
+                 description="NIS gate: when this many beacons' latest ranges failed the test, ranges are used "
+                             "(no lock-out)", min=1, max=1000),
+    )
+
+
+def gate(innovation, variance, fresh, x: dict, u: dict, p: dict) -> dict[str, ca.SX]:
+    """The NIS gate on a fresh range of innovation ``innovation`` and innovation variance ``variance``.
+
+    A fresh range passes the test when it is not longer than predicted
+    (multipath and non-line-of-sight arrivals are late: the direct path is the
+    shortest) or its NIS ``innovation² / variance`` is within the χ²(1)
+    quantile of ``gate_probability``; each beacon remembers whether its latest
+    range failed. A range is used when it passes, or when at least
+    ``gate_max_rejections`` beacons' latest ranges failed: a multipath outlier
+    is isolated, but when the estimate has drifted (a sudden turn, a long
+    loss, a mirror solution) the ranges of several beacons fail together, and
+    a gate that kept rejecting them would never recover (gate lock-out).
+
+    Returns
+    -------
+    dict
+        ``use`` (update with the range), ``gated`` (rejected) and ``failed``
+        (n: each beacon's latest test failed, after this slot).
+    """
+    test = ca.logic_or(innovation <= 0.0,
+                       innovation * innovation / variance <= kalman.gate_threshold(p["gate_probability"]))
+    use = ca.logic_and(fresh, ca.logic_or(test, ca.sum1(x["failed"]) >= p["gate_max_rejections"]))
+    index = u["beacon_id"] - 1
+    failed = ca.vertcat(*[ca.if_else(ca.logic_and(fresh, index == j), ca.logic_not(test), x["failed"][j])
+                          for j in range(x["failed"].numel())])
+    return {"use": use, "gated": ca.logic_and(fresh, ca.logic_not(use)), "failed": failed}
 
 
 def beacon_parameters() -> tuple[Variable, ...]:
@@ -227,7 +260,7 @@ class KalmanReceiver(Component):
         Returns
         -------
         dict
-            ``x``, ``P`` (6, 6), ``nis``, ``gated``, and the held ranges the
+            ``x``, ``P`` (6, 6), ``nis``, ``gated``, ``failed`` (:func:`gate`), and the held ranges the
             instrumentation fix uses (``ranges``, ``beacons``, ``heard``,
             ``last_seq``, ``slot_time``: usually :func:`take_packet`).
         """
@@ -237,13 +270,13 @@ class KalmanReceiver(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("x", 6), ("P", 36)] + packet_states(n) + [
-            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1)] + lm_states())
+            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states())
 
         def init(p, d, w, t0):
             x0 = ca.vertcat(*[p[f"x0_{name}"] for name in ("x", "vx", "y", "vy", "z", "vz")])
             P0 = ca.diag(ca.vertcat(*[p["p0_position"] ** 2, p["p0_velocity"] ** 2] * 3))
             return {"x": x0, "P": ca.vec(P0), **packet_init(n), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
-                    "gated": 0, **lm_idle()}
+                    "gated": 0, "failed": ca.SX.zeros(n), **lm_idle()}
 
         def step(x, u, p, d, w, t, h):
             state, P = cls.predict(x["x"], ca.reshape(x["P"], 6, 6), h, p)
@@ -258,7 +291,8 @@ class KalmanReceiver(Component):
             # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
             guess = ca.if_else(x["fix_valid"], x["fix"], out["x"][0::2])
             fix = lm_begin(held, guess, u["depth"], p)
-            return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"], **fix,
+            return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"],
+                    "failed": out["failed"], **fix,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
         def iterate(x, u, p, d, w, t, h):
@@ -284,5 +318,5 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "STATE_NAMES",
            "beacon_parameters", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range",
-           "gate_parameter", "lm_active", "lm_begin", "lm_idle", "lm_step", "lm_states", "packet_init",
+           "gate", "gate_parameters", "lm_active", "lm_begin", "lm_idle", "lm_step", "lm_states", "packet_init",
            "packet_states", "receiver_interface", "slot_due", "take_packet"]

@@ -21,7 +21,7 @@ import casadi as ca
 
 from models.core import Variable
 from models.receiver import kalman
-from models.receiver.core import KalmanReceiver, filter_parameters, fresh_range, gate_parameter, take_packet
+from models.receiver.core import KalmanReceiver, filter_parameters, fresh_range, gate, gate_parameters, take_packet
 from models.receiver.measurement import RangeDepthModel
 
 
@@ -73,18 +73,18 @@ class Receiver(KalmanReceiver):
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
-        return filter_parameters() + (gate_parameter(1.0),)
+        return filter_parameters() + gate_parameters(1.0)
 
     @classmethod
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         h, H = cls.measurement.range_row(x["x"], beacon)
         S = ca.mtimes([H, x["P"], H.T]) + p["sigma_range"] ** 2
-        passes = (rng - h) ** 2 / S <= kalman.gate_threshold(p["gate_probability"])
-        held = take_packet(x, {**u, "packet_valid": ca.logic_and(fresh, passes)}, n_beacons)
+        checked = gate(rng - h, S, fresh, x, u, p)
+        held = take_packet(x, {**u, "packet_valid": checked["use"]}, n_beacons)
         state, P, nis = update(x["x"], x["P"], held["ranges"], held["beacons"], held["heard"], u["depth"],
                                p["sigma_range"], p["sigma_depth"], cls.measurement)
-        return {**held, "x": state, "P": P, "nis": nis, "gated": ca.logic_and(fresh, ca.logic_not(passes))}
+        return {**held, "x": state, "P": P, "nis": nis, "gated": checked["gated"], "failed": checked["failed"]}
 
 
 __all__ = ["Receiver", "update"]

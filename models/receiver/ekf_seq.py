@@ -26,8 +26,8 @@ import casadi as ca
 
 from models.core import Variable
 from models.receiver import kalman
-from models.receiver.core import (KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, gate_parameter,
-                                  take_packet)
+from models.receiver.core import (KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, gate,
+                                  gate_parameters, take_packet)
 
 
 def fresh_range_variance(cls, x, beacon, p) -> ca.SX:
@@ -45,7 +45,7 @@ class SequentialReceiver(KalmanReceiver):
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
-        return filter_parameters() + beacon_parameters() + (gate_parameter(0.999),)
+        return filter_parameters() + beacon_parameters() + gate_parameters(0.999)
 
     @classmethod
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
@@ -56,12 +56,13 @@ class SequentialReceiver(KalmanReceiver):
         h, H = m.range_row(state, beacon)
         variance = fresh_range_variance(cls, state, beacon, p)
         y = rng - h
-        nis_range = y * y / (ca.mtimes([H, P, H.T]) + variance)
-        passes = nis_range <= kalman.gate_threshold(p["gate_probability"])
-        use = ca.logic_and(fresh, passes)
-        state, P, _ = kalman.scalar_update(state, P, y, H, variance, use)
+        S = ca.mtimes([H, P, H.T]) + variance
+        nis_range = y * y / S
+        checked = gate(y, S, fresh, x, u, p)
+        state, P, _ = kalman.scalar_update(state, P, y, H, variance, checked["use"])
         return {**take_packet(x, u, n_beacons), "x": state, "P": P,
-                "nis": nis_depth + ca.if_else(use, nis_range, 0.0), "gated": ca.logic_and(fresh, ca.logic_not(passes))}
+                "nis": nis_depth + ca.if_else(checked["use"], nis_range, 0.0), "gated": checked["gated"],
+                "failed": checked["failed"]}
 
 
 __all__ = ["SequentialReceiver", "fresh_range_variance"]

@@ -98,6 +98,15 @@ class RangeDepthModel:
         return variance * ca.dot(g, g)
 
     @staticmethod
+    def attitude_variance(position, beacon, arm, variance) -> ca.SX:
+        """Variance a range inherits from an attitude error of ``variance`` [rad²] per axis, the beacon at
+        lever arm ``arm`` (3, 1) [m] from the platform reference: the beacon moves by ``δθ × arm``, so
+        ``variance · ‖arm × (∂h/∂b)ᵀ‖²`` (small angles; ∂h/∂b from casadi)."""
+        g = beacon_range_function()(position, beacon)
+        moved = ca.cross(ca.vertcat(arm[0], arm[1], arm[2]), g)
+        return variance * ca.dot(moved, moved)
+
+    @staticmethod
     def range_variance(sigma_range, position, beacon, gps_sigma, attitude_sigma, arm) -> ca.SX:
         """Effective variance of a range from an uncertain broadcast beacon [m²].
 

@@ -22,8 +22,8 @@ import casadi as ca
 
 from models.core import Variable
 from models.receiver import kalman
-from models.receiver.core import (KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, gate_parameter,
-                                  take_packet)
+from models.receiver.core import (KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, gate,
+                                  gate_parameters, take_packet)
 from models.receiver.ekf_seq import fresh_range_variance
 
 
@@ -58,7 +58,7 @@ class UnscentedReceiver(KalmanReceiver):
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
-        return filter_parameters() + beacon_parameters() + (gate_parameter(0.999),) + (
+        return filter_parameters() + beacon_parameters() + gate_parameters(0.999) + (
             Variable("alpha", "parameter", "Real", 1.0, "1", "Sigma-point spread alpha", min=1e-4, max=1.0),
             Variable("beta", "parameter", "Real", 2.0, "1", "Prior-distribution weight beta (2: Gaussian)",
                      min=0.0, max=10.0),
@@ -78,11 +78,11 @@ class UnscentedReceiver(KalmanReceiver):
         depth = unscented_update(state, P, points, wm, wc, [c[4] for c in points], u["depth"],
                                  ca.SX(p["sigma_depth"] ** 2))
         y, S = joint[2], joint[3]
-        passes = y[0] * y[0] / S[0, 0] <= kalman.gate_threshold(p["gate_probability"])
-        use = ca.logic_and(fresh, passes)
+        checked = gate(y[0], S[0, 0], fresh, x, u, p)
+        use = checked["use"]
         return {**take_packet(x, u, n_beacons), "x": ca.if_else(use, joint[0], depth[0]),
                 "P": ca.if_else(use, joint[1], depth[1]), "nis": ca.if_else(use, joint[4], depth[4]),
-                "gated": ca.logic_and(fresh, ca.logic_not(passes))}
+                "gated": checked["gated"], "failed": checked["failed"]}
 
 
 __all__ = ["UnscentedReceiver", "unscented_update"]

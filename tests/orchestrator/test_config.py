@@ -23,6 +23,14 @@ def declared_parameters(section: str) -> set[str]:
 
 # --------------------------------------------------------------------------- built-in scenarios
 
+def raw_trajectory(name: str) -> str:
+    """The trajectory a built-in scenario file names (the harbour runs the square)."""
+    from importlib import resources
+
+    raw = tomllib.loads((resources.files("orchestrator") / "scenarios" / f"{name}.toml").read_text())
+    return raw["target"]["trajectory"]
+
+
 @pytest.mark.parametrize("name", BUILTIN_SCENARIOS)
 def test_builtin_scenario_resolves(name):
     cfg = load_config(name)
@@ -30,7 +38,7 @@ def test_builtin_scenario_resolves(name):
     for section in SECTIONS:
         assert set(cfg[section]) == declared_parameters(section), section
     assert cfg["run"]["scenario"] == name
-    assert cfg["target"]["trajectory"] in ("semicircle", "spiral", "random", "square")
+    assert cfg["target"]["trajectory"] == raw_trajectory(name)
     assert cfg["simulation"]["duration"] >= cfg["simulation"]["sampling_time"]
     # the scenario file's own values are applied (read independently with tomllib)
     from importlib import resources
