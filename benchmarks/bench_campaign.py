@@ -32,7 +32,8 @@ import numpy as np
 import pandas as pd
 
 from fmus.build import build_all
-from orchestrator.campaign import METRIC_COLUMNS, plan, run_campaign, run_chunk
+from orchestrator.campaign import plan, run_campaign, run_chunk
+from orchestrator.metrics import RUN_METRICS
 from orchestrator.run import close_handles, make_handles, run_batch, with_replicates
 from orchestrator.study import load_study
 
@@ -60,7 +61,7 @@ def engines(study, replicates: int) -> float:
     start = time.perf_counter()
     batched = pd.concat([run_batch(g, "local", handles=local, timeseries=False).metrics for g in groups])
     rows.append((f"local, batched (B = {replicates} per cell)", time.perf_counter() - start))
-    assert np.array_equal(single[list(METRIC_COLUMNS)].to_numpy(), batched[list(METRIC_COLUMNS)].to_numpy(),
+    assert np.array_equal(single[list(RUN_METRICS)].to_numpy(), batched[list(RUN_METRICS)].to_numpy(),
                           equal_nan=True), "batched and B = 1 metrics differ"
     with tempfile.TemporaryDirectory() as tmp:
         build_all(tmp)
@@ -71,7 +72,7 @@ def engines(study, replicates: int) -> float:
             rows.append(("fmu (B = 1, through fmpy)", time.perf_counter() - start))
         finally:
             close_handles(fmu)
-    assert np.array_equal(via_fmu[list(METRIC_COLUMNS)].to_numpy(), batched[list(METRIC_COLUMNS)].to_numpy(),
+    assert np.array_equal(via_fmu[list(RUN_METRICS)].to_numpy(), batched[list(RUN_METRICS)].to_numpy(),
                           equal_nan=True), "fmu and local metrics differ"
     print(f"sample of the paper study: semicircle, one cell at T = 0.1 s and one at T = 1 s, {replicates} "
           f"replicates each ({len(cfgs)} runs, {steps} replicate-steps), one process")

@@ -3,7 +3,7 @@
 Input: a campaign directory holding ``runs.parquet`` (one row per Monte Carlo
 run: ``scenario``, ``scenario_key``, ``cell``, ``replicate``, ``seed``, per
 factor ``NAME`` coded −1/+1 and ``NAME_value`` physical level, and the
-metrics of :mod:`orchestrator.metrics` for the EKF and, prefixed ``instr_``,
+metrics of :mod:`orchestrator.metrics` for the receiver and, prefixed ``instr_``,
 for the instrumentation fix) and ``study.toml`` (the resolved study: design,
 replicates, seed, scenarios and one ``[[factors]]`` table per factor). Without
 ``study.toml`` the factors are the columns that have a ``NAME_value`` partner.
@@ -44,8 +44,10 @@ Outputs (written atomically into ``out``):
     ``table = errors``: mean over runs of ``e_x_mean, e_y_mean, e_z_mean,
     e_tot_mean`` (statistics ``e_x, e_y, e_z, e_tot`` [m]) for the subsets
     ``all runs`` and ``best cell`` (the design cell with the lowest mean
-    response; its index in ``cell``) and the estimators ``EKF`` and
-    ``instrumentation``. ``table = ekf_vs_instr``: ``mean``, ``std``
+    response; its index in ``cell``) and the estimators: the receiver that
+    ran (its name from the ``receiver`` column, e.g. ``ekf``; names joined
+    by ``+`` where the subset mixes receivers) and ``instrumentation``.
+    ``table = receiver_vs_instr``: ``mean``, ``std``
     (ddof = 1) [m] and ``n`` [-] over runs of ``e_tot_mean`` per estimator
     (subset ``all runs``). Runs with a NaN metric are left out.
 ``report.html``, ``report.md``, ``figures/<scenario>_{pareto,main_effects,interactions,residuals}.png``
@@ -85,7 +87,7 @@ from scipy import stats
 from models.core import ModelError
 from orchestrator.metrics import METRIC_NAMES
 
-#: Metric columns a response may be taken from (EKF, then instrumentation).
+#: Metric columns a response may be taken from (the receiver's, then the instrumentation's).
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
 #: Columns ``runs.parquet`` must hold besides the factors and the metrics.
 REQUIRED_COLUMNS = ("scenario", "cell", "replicate")
@@ -93,7 +95,10 @@ REQUIRED_COLUMNS = ("scenario", "cell", "replicate")
 FIGURES = ("pareto", "main_effects", "interactions", "residuals")
 ANOVA_TYPE = 2
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-_ESTIMATORS = (("EKF", ""), ("instrumentation", "instr_"))
+def _estimators(frame: pd.DataFrame) -> tuple[tuple[str, str], ...]:
+    """(name, metric prefix) of the receiver that ran in ``frame`` and of the instrumentation."""
+    names = sorted(frame["receiver"].dropna().unique()) if "receiver" in frame.columns else []
+    return (("+".join(names) or "receiver", ""), ("instrumentation", "instr_"))
 
 
 class AnalysisError(ModelError):
@@ -108,8 +113,8 @@ class Factor:
     ----------
     name : str
         Identifier; the coded column of ``runs.parquet``.
-    low, high : float
-        Physical levels at coded −1 and +1 [unit].
+    low, high : float or str
+        Physical levels at coded −1 and +1 [unit] (text for a text key, e.g. a receiver).
     unit : str
         Unit of the levels, e.g. ``m``, ``deg``, ``s``, ``%``.
     key : str
@@ -118,8 +123,8 @@ class Factor:
     """
 
     name: str
-    low: float
-    high: float
+    low: float | str
+    high: float | str
     unit: str = ""
     key: str = ""
     description: str = ""
@@ -301,7 +306,7 @@ def infer_factors(runs: pd.DataFrame) -> list[Factor]:
         levels = []
         for code in (-1, 1):
             values = runs.loc[runs[col] == code, f"{col}_value"]
-            levels.append(float(values.iloc[0]) if len(values) else math.nan)
+            levels.append(level_value(values.iloc[0]) if len(values) else math.nan)
         factors.append(Factor(col, levels[0], levels[1]))
     return factors
 
@@ -340,7 +345,7 @@ def load_study(directory: Path | str, runs: pd.DataFrame) -> tuple[Study, list[s
             raise AnalysisError(f"study.toml: cannot parse {str(path)!r} ({exc})") from None
         s = raw.get("study", {})
         try:
-            factors = [Factor(name=str(f["name"]), low=float(f["low"]), high=float(f["high"]),
+            factors = [Factor(name=str(f["name"]), low=level_value(f["low"]), high=level_value(f["high"]),
                               unit=str(f.get("unit", "")), key=str(f.get("key", "")),
                               description=str(f.get("description", "")))
                        for f in raw.get("factors", [])]
@@ -624,19 +629,19 @@ def tables(frame: pd.DataFrame, metric: str = "e_tot_rms", scenario: str = "") -
     cell = best_cell(frame, metric)
     rows = []
     for subset, part, c in (("all runs", frame, pd.NA), ("best cell", frame[frame["cell"] == cell], cell)):
-        for estimator, prefix in _ESTIMATORS:
+        for estimator, prefix in _estimators(part):
             for a in ("e_x", "e_y", "e_z", "e_tot"):
                 col = f"{prefix}{a}_mean"
                 if col in part.columns:
                     rows.append((scenario, "errors", subset, c, estimator, a, float(part[col].mean())))
-    for estimator, prefix in _ESTIMATORS:
+    for estimator, prefix in _estimators(frame):
         col = f"{prefix}e_tot_mean"
         if col in frame.columns:
             v = frame[col].dropna()
-            rows += [(scenario, "ekf_vs_instr", "all runs", pd.NA, estimator, "mean", float(v.mean())),
-                     (scenario, "ekf_vs_instr", "all runs", pd.NA, estimator, "std",
+            rows += [(scenario, "receiver_vs_instr", "all runs", pd.NA, estimator, "mean", float(v.mean())),
+                     (scenario, "receiver_vs_instr", "all runs", pd.NA, estimator, "std",
                       float(v.std(ddof=1)) if len(v) > 1 else math.nan),
-                     (scenario, "ekf_vs_instr", "all runs", pd.NA, estimator, "n", float(len(v)))]
+                     (scenario, "receiver_vs_instr", "all runs", pd.NA, estimator, "n", float(len(v)))]
     out = pd.DataFrame(rows, columns=["scenario", "table", "subset", "cell", "estimator", "statistic", "value"])
     out["cell"] = out["cell"].astype("Int64")
     return out
@@ -793,10 +798,21 @@ def metric_label(metric: str) -> str:
     return _METRIC_WORDS.get(metric, metric)
 
 
-def _level(value: float, unit: str) -> str:
+def level_value(value: Any) -> float | str:
+    """A factor level as read from a file: a number, or the text of a text key (e.g. ``ekf-seq``)."""
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return float(value)
+
+
+def format_level(value: float | str | None, unit: str = "") -> str:
+    """A level for tables and figures: ``3 m``, ``ekf-seq``, or ``?`` when unknown."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "?"
-    text = f"{value:g}"
+    text = value if isinstance(value, str) else f"{value:g}"
     return f"{text} {unit}" if unit else text
 
 
@@ -823,15 +839,15 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
             f = by_name[names[0]]
             verb = "raises" if e > 0 else "lowers"
             better = "low" if e > 0 else "high"
-            parts.append(f"{row.term} (effect {e:+.3g} m: going from {_level(f.low, f.unit)} to "
-                         f"{_level(f.high, f.unit)} {verb} {what} by {abs(e):.3g} m; the {better} level "
-                         f"({_level(f.low if better == 'low' else f.high, f.unit)}) is better)")
+            parts.append(f"{row.term} (effect {e:+.3g} m: going from {format_level(f.low, f.unit)} to "
+                         f"{format_level(f.high, f.unit)} {verb} {what} by {abs(e):.3g} m; the {better} level "
+                         f"({format_level(f.low if better == 'low' else f.high, f.unit)}) is better)")
         elif len(names) == 2:
             a, b = names
             more = "larger" if e > 0 else "smaller"
             parts.append(f"{row.term} (interaction effect {e:+.3g} m: the effect of {a} is {abs(2 * e):.3g} m "
-                         f"{more} at high {b} ({_level(by_name[b].high, by_name[b].unit)}) than at low {b} "
-                         f"({_level(by_name[b].low, by_name[b].unit)}))")
+                         f"{more} at high {b} ({format_level(by_name[b].high, by_name[b].unit)}) than at low {b} "
+                         f"({format_level(by_name[b].low, by_name[b].unit)}))")
         else:
             parts.append(f"{row.term} (interaction effect {e:+.3g} m)")
     return (head + f"the significant terms (alpha = {result.alpha:g}, {test}), largest first: "
@@ -874,8 +890,8 @@ def _settings(analysis: Analysis) -> list[tuple[str, str]]:
 
 
 def _factor_table(study: Study) -> pd.DataFrame:
-    return pd.DataFrame([{"factor": f.name, "key": f.key, "low (-1)": _level(f.low, f.unit),
-                          "high (+1)": _level(f.high, f.unit), "description": f.description}
+    return pd.DataFrame([{"factor": f.name, "key": f.key, "low (-1)": format_level(f.low, f.unit),
+                          "high (+1)": format_level(f.high, f.unit), "description": f.description}
                          for f in study.factors])
 
 
@@ -888,7 +904,7 @@ def _error_table(tab: pd.DataFrame, scenario: str) -> pd.DataFrame:
 
 
 def _comparison_table(tab: pd.DataFrame, scenario: str) -> pd.DataFrame:
-    t = tab[(tab["scenario"] == scenario) & (tab["table"] == "ekf_vs_instr")]
+    t = tab[(tab["scenario"] == scenario) & (tab["table"] == "receiver_vs_instr")]
     wide = t.pivot_table(index="estimator", columns="statistic", values="value", sort=False)
     wide = wide.rename(columns={"mean": "mean e_tot_mean [m]", "std": "std e_tot_mean [m]", "n": "runs"})
     if "runs" in wide.columns:
@@ -905,7 +921,7 @@ def _best_cell_text(analysis: Analysis, scenario: str) -> str:
     for f in analysis.study.factors:
         code = int(row[f.name])
         value = f.low if code < 0 else f.high
-        levels.append(f"{f.name} = {_level(value, f.unit)} ({code:+d})")
+        levels.append(f"{f.name} = {format_level(value, f.unit)} ({code:+d})")
     mean = frame.loc[frame["cell"] == cell, analysis.metric].mean()
     return (f"best cell: {cell} (lowest mean {analysis.metric} = {mean:.4g} m): " + ", ".join(levels))
 
@@ -949,7 +965,7 @@ def report_markdown(analysis: Analysis, figures: dict[str, dict[str, str]]) -> s
     for scenario, result in analysis.fits.items():
         lines += [f"## Scenario {scenario}", "", ranking(result, analysis.study.factors), "",
                   _method_text(result), "", "### Errors", "", _best_cell_text(analysis, scenario), "",
-                  table(_error_table(analysis.tables, scenario)), "", "### EKF versus instrumentation", "",
+                  table(_error_table(analysis.tables, scenario)), "", "### Receiver versus instrumentation", "",
                   table(_comparison_table(analysis.tables, scenario)), "", "### Effects", "",
                   table(_effects_view(result)), "", f"### ANOVA ({result.anova_type})", "",
                   table(result.anova), "", "### Figures", ""]
@@ -991,7 +1007,7 @@ def report_html(analysis: Analysis, figures: dict[str, dict[str, str]], root: Pa
         body += [f"<h2>Scenario {esc(scenario)}</h2>", f"<p>{esc(ranking(result, analysis.study.factors))}</p>",
                  f"<p>{esc(_method_text(result))}</p>", "<h3>Errors</h3>",
                  f"<p>{esc(_best_cell_text(analysis, scenario))}</p>", table(_error_table(analysis.tables, scenario)),
-                 "<h3>EKF versus instrumentation</h3>", table(_comparison_table(analysis.tables, scenario)),
+                 "<h3>Receiver versus instrumentation</h3>", table(_comparison_table(analysis.tables, scenario)),
                  "<h3>Effects</h3>", table(_effects_view(result)),
                  f"<h3>ANOVA ({esc(result.anova_type)})</h3>", table(result.anova), "<h3>Figures</h3>"]
         body += [image(path, f"{scenario}: {_FIGURE_TITLES[kind]}") for kind, path in figures.get(scenario, {}).items()]

@@ -23,6 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
+from orchestrator.analysis import format_level  # noqa: E402
 
 LOW_COLOR, HIGH_COLOR = "tab:blue", "tab:red"
 
@@ -36,11 +37,8 @@ def _tick(factor: Any, code: int) -> str:
     label = f"{code:+d}"
     if isinstance(factor, str):
         return label
-    value = factor.low if code < 0 else factor.high
-    if value is None or np.isnan(value):
-        return label
-    unit = f" {factor.unit}" if factor.unit else ""
-    return f"{label}\n({value:g}{unit})"
+    text = format_level(factor.low if code < 0 else factor.high, factor.unit)
+    return label if text == "?" else f"{label}\n({text})"
 
 
 def plot_pareto(result, ax) -> plt.Figure:

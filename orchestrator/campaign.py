@@ -42,14 +42,14 @@ import pandas as pd
 
 from models import COMPONENTS
 from models.core import ModelError
-from orchestrator.metrics import METRIC_NAMES
+from orchestrator.config import receiver_label
+from orchestrator.metrics import RUN_METRICS
 from orchestrator.run import ENGINES, fmu_paths, run_batch, system_sources, with_replicates
 from orchestrator.study import Study
 
 
 #: Default runs per chunk on each engine.
 DEFAULT_BATCH = {"local": 800, "fmu": 50}
-METRIC_COLUMNS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
 
 
 class CampaignError(ModelError):
@@ -163,7 +163,8 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
         coded = study.matrix[cells, k]
         rows[factor.name] = coded.astype(np.int64)
         rows[f"{factor.name}_value"] = np.where(coded < 0, factor.low, factor.high)
-    rows.update({m: result.metrics[m].to_numpy() for m in METRIC_COLUMNS})
+    rows["receiver"] = receiver_label(chunk.configs[0])  # a chunk shares its receiver (batch_key)
+    rows.update({m: result.metrics[m].to_numpy() for m in RUN_METRICS})
     series = None
     if timeseries:
         series = result.timeseries

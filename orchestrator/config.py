@@ -157,6 +157,25 @@ def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
     return tuple(out)
 
 
+def check_receiver(receiver: str, where: str = "simulation.receiver") -> str:
+    """A ``simulation.receiver`` value: a built-in receiver or ``fmu:PATH`` of an existing file.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where``, the value and what is allowed.
+    """
+    if receiver not in RECEIVER_MODELS:
+        path = external_path(receiver)
+        if not path:
+            raise ConfigError(f"{where}: {receiver!r} is not allowed; one of {', '.join(RECEIVER_MODELS)} or fmu:PATH")
+        if Path(path).is_dir():
+            raise ConfigError(f"{where}: {path!r} is a directory, not an FMU file")
+        if not Path(path).is_file():
+            raise ConfigError(f"{where}: no FMU file at {path!r}")
+    return receiver
+
+
 def receiver_label(cfg: dict[str, dict]) -> str:
     """What a figure or table calls the receiver that ran: ``ekf``, ``ekf-seq``, ``ukf``, ``lsq`` or the FMU's name."""
     value = cfg["simulation"]["receiver"]
@@ -296,16 +315,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         if not isinstance(table, dict):
             raise ConfigError(f"{section}: expected a table of keys, got {table!r}")
     sim = resolve_parameters(SIMULATION_VARIABLES, raw.get("simulation", {}), "simulation")
-    receiver = sim["receiver"]
-    if receiver not in RECEIVER_MODELS:
-        path = external_path(receiver)
-        if not path:
-            raise ConfigError(f"simulation.receiver: {receiver!r} is not allowed; one of "
-                              f"{', '.join(RECEIVER_MODELS)} or fmu:PATH")
-        if Path(path).is_dir():
-            raise ConfigError(f"simulation.receiver: {path!r} is a directory, not an FMU file")
-        if not Path(path).is_file():
-            raise ConfigError(f"simulation.receiver: no FMU file at {path!r}")
+    receiver = check_receiver(sim["receiver"])
     receiver_keys = section_variables("receiver", receiver)
     unknown = sorted(set(raw.get("receiver", {})) - {v.name for v in receiver_keys})
     if unknown:

@@ -26,6 +26,8 @@ from scipy.stats import chi2
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
 #: Per-run consistency metrics and the bound.
 CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms")
+#: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound.
+RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
 NEES_95 = float(chi2.ppf(0.95, 3))
 

@@ -48,7 +48,9 @@ import numpy as np
 import tomli_w
 
 from models.core import ModelError, Variable
-from orchestrator.config import BUILTIN_SCENARIOS, SECTIONS, load_config, read_source, section_variables
+from models import RECEIVER_MODELS
+from orchestrator.config import (BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source,
+                                 section_variables)
 
 BUILTIN_STUDIES = ("paper",)
 DESIGNS = ("full", "fractional")
@@ -333,7 +335,7 @@ def _factors(items: Any) -> list[Factor]:
         if section == "run":
             raise StudyError(f"factors.{name}.key: {key!r} is set by the campaign (seed tree), not a factor")
         try:
-            declared = {v.name: v for v in section_variables(section)}
+            declared = _declared(section)
         except ModelError:
             raise StudyError(f"factors.{name}.key: unknown section {section!r}; one of "
                              f"{', '.join(s for s in SECTIONS if s != 'run')}") from None
@@ -345,6 +347,8 @@ def _factors(items: Any) -> list[Factor]:
         var = declared[var_name]
         low = var.coerce(item["low"], f"factors.{name}.low")
         high = var.coerce(item["high"], f"factors.{name}.high")
+        if key == "simulation.receiver":
+            low, high = (check_receiver(v, f"factors.{name}.{w}") for v, w in ((low, "low"), (high, "high")))
         if low == high:
             raise StudyError(f"factors.{name}: LOW and HIGH are both {low!r}; a factor needs two levels")
         names.add(name)
@@ -353,12 +357,40 @@ def _factors(items: Any) -> list[Factor]:
     return factors
 
 
+def _declared(section: str) -> dict[str, Variable]:
+    """The keys a factor may set in a section; for ``receiver``, those of any built-in receiver
+    (:func:`_check_receiver_factors` then checks them against the receiver each scenario and cell runs)."""
+    if section != "receiver":
+        return {v.name: v for v in section_variables(section)}
+    declared: dict[str, Variable] = {}
+    for receiver in RECEIVER_MODELS:
+        for v in section_variables(section, receiver):
+            declared.setdefault(v.name, v)
+    return declared
+
+
+def _check_receiver_factors(study: Study, scenario: str, cfg: dict) -> None:
+    """Every ``receiver.*`` factor is a parameter of each receiver the scenario runs (its own, or the
+    levels of a ``simulation.receiver`` factor)."""
+    chosen = [f for f in study.factors if f.key == "simulation.receiver"]
+    receivers = [chosen[0].low, chosen[0].high] if chosen else [cfg["simulation"]["receiver"]]
+    for factor in study.factors:
+        if factor.section != "receiver":
+            continue
+        for receiver in receivers:
+            names = [v.name for v in section_variables("receiver", receiver)]
+            if factor.key.split(".")[1] not in names:
+                raise StudyError(f"factors.{factor.name}.key: {factor.key!r} is not a parameter of the {receiver} "
+                                 f"receiver ({scenario}); its keys: {', '.join(names)}")
+
+
 def _check_scenarios(study: Study) -> None:
     """Every scenario resolves with its overrides, and scenario keys are distinct."""
     keys: dict[int, str] = {}
     for scenario in study.scenarios:
         read_source(scenario)  # unknown scenario / missing file
         cfg = load_config(scenario, study.overrides, seed=study.seed)
+        _check_receiver_factors(study, scenario, cfg)
         key = cfg["run"]["scenario_key"]
         if key in keys:
             raise StudyError(f"study.scenarios: {keys[key]!r} and {scenario!r} share run.scenario_key {key}; "

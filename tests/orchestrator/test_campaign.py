@@ -20,7 +20,8 @@ import pandas as pd
 import pytest
 import tomli_w
 
-from orchestrator.campaign import METRIC_COLUMNS, plan, run_campaign
+from orchestrator.campaign import plan, run_campaign
+from orchestrator.metrics import RUN_METRICS
 from orchestrator.config import load_config
 from orchestrator.run import run
 from orchestrator.study import design_matrix, load_study
@@ -348,7 +349,7 @@ def test_campaign_row_equals_a_single_run(reference):
         assert cfg["run"]["scenario_key"] == row["scenario_key"]
         single = run(cfg, "local").metrics.iloc[0]
         assert single["replicate"] == row["replicate"]
-        for name in METRIC_COLUMNS:
+        for name in RUN_METRICS:
             assert single[name] == row[name] or (math.isnan(single[name]) and math.isnan(row[name])), \
                 (k, name, single[name], row[name])
 
