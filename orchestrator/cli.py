@@ -133,13 +133,18 @@ def _run(args: argparse.Namespace) -> int:
     write_run(result, out)
     s = summary(result)
     sim = cfg["simulation"]
-    print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {sim['receiver']}), "
+    print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {s['receiver']}), "
           f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
-    label = "EKF:" if sim["receiver"] == "ekf" else "estimate:"
-    print(f"  {label:<17}e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
+    label = f"{s['receiver']}:"
+    width = max(len(label), len("instrumentation:")) + 1
+    print(f"  {label:<{width}}e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
           f"std {s['e_tot_std']:.3f} m")
-    print(f"  instrumentation: e_tot mean {s['instr_e_tot_mean']:.3f} m, RMS {s['instr_e_tot_rms']:.3f} m, "
-          f"std {s['instr_e_tot_std']:.3f} m")
+    print(f"  {'instrumentation:':<{width}}e_tot mean {s['instr_e_tot_mean']:.3f} m, "
+          f"RMS {s['instr_e_tot_rms']:.3f} m, std {s['instr_e_tot_std']:.3f} m")
+    print(f"  {'consistency:':<{width}}NEES {s['nees_mean']:.2f} (3 if consistent), truth inside the 95 % "
+          f"ellipsoid {100 * s['coverage_95']:.1f} % of steps, mean NIS {s['nis_mean']:.2f}, "
+          f"gated {s['gated_pct']:.1f} % of ranges")
+    print(f"  {'accuracy limit:':<{width}}PCRB RMS {s['pcrb_rms']:.3f} m")
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     return 0
 

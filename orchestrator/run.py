@@ -20,7 +20,8 @@ from models.core import ModelError
 from fmus.native import bound_series
 from models.receiver.bound import pcrb_inputs
 from models.receiver.core import COVARIANCE, filter_parameters
-from orchestrator.config import MIN_SIGMA, beacon_arms, beacon_count, component_params, receiver_source, to_toml
+from orchestrator.config import (MIN_SIGMA, beacon_arms, beacon_count, component_params, receiver_label,
+                                 receiver_source, to_toml)
 from orchestrator.connections import Connection, check_connections, check_interface, default_connections
 from orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
 from orchestrator.master import simulate
@@ -406,7 +407,8 @@ def summary(result: RunResult) -> dict[str, Any]:
     """``summary.json`` content of a single-replicate run (the keys the README lists)."""
     row = result.metrics.iloc[0]
     out: dict[str, Any] = {k: float(row[k]) for k in result.metrics.columns if k != "replicate"}
-    out.update(engine=result.engine, seed=int(result.config["run"]["seed"]), steps=int(result.steps),
+    out.update(engine=result.engine, receiver=receiver_label(result.config), seed=int(result.config["run"]["seed"]),
+               steps=int(result.steps),
                scenario=result.config["run"]["scenario"], replicate=int(row["replicate"]),
                duration=float(result.steps * result.config["simulation"]["sampling_time"]),
                wall_time=round(result.wall_time, 3))
@@ -434,7 +436,9 @@ def write_run(result: RunResult, out_dir: Path | str) -> Path:
         (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2) + "\n")
         (tmp / "config.toml").write_text(to_toml(result.config))
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
-        save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']} ({result.engine})")
+        receiver = receiver_label(result.config)
+        save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']}, {receiver} "
+                         f"({result.engine})", receiver=receiver)
         out_dir.mkdir(exist_ok=True)
         for item in tmp.iterdir():
             os.replace(item, out_dir / item.name)
