@@ -70,10 +70,7 @@ import base64
 import html
 import itertools
 import math
-import os
 import re
-import shutil
-import tempfile
 import tomllib
 import warnings as _warnings
 from dataclasses import dataclass, field
@@ -86,6 +83,7 @@ from scipy import stats
 
 from models.core import ModelError
 from orchestrator.metrics import METRIC_NAMES
+from orchestrator.output import staged_directory
 
 #: Metric columns a response may be taken from (the receiver's, then the instrumentation's).
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
@@ -742,9 +740,7 @@ def write(analysis: Analysis, out: Path | str) -> Path:
     from orchestrator.analysis_plots import save_figures
 
     out = Path(out).absolute()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with staged_directory(out) as tmp:
         fig_dir = tmp / "figures"
         fig_dir.mkdir()
         factors = analysis.study.factors
@@ -763,15 +759,6 @@ def write(analysis: Analysis, out: Path | str) -> Path:
         analysis.tables.to_csv(tmp / "tables.csv", index=False)
         (tmp / "report.md").write_text(report_markdown(analysis, figures), encoding="utf-8")
         (tmp / "report.html").write_text(report_html(analysis, figures, tmp), encoding="utf-8")
-        out.mkdir(exist_ok=True)
-        for item in list(tmp.iterdir()):
-            target = out / item.name
-            if item.is_dir() and target.is_dir():  # os.replace cannot overwrite a non-empty directory
-                old = tmp / f".old.{item.name}"
-                os.replace(target, old)
-            os.replace(item, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 

@@ -1,5 +1,5 @@
-"""Command line: ``sblsim run``, ``campaign``, ``analyze``, ``ssp export``, ``fmus build|validate|variables``
-and ``codegen receiver``.
+"""Command line: ``sblsim run``, ``compare``, ``map``, ``campaign``, ``analyze``, ``ssp export``,
+``fmus build|validate|variables`` and ``codegen receiver``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
@@ -11,6 +11,8 @@ import argparse
 import os
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from fmus.compiler import COMPILERS
 from models.core import ModelError
@@ -39,7 +41,7 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run one scenario, configuration file or SSP package")
     r.add_argument("scenario", nargs="?", default=None,
-                   help="built-in scenario (semicircle, spiral, random, square, harbour) or CONFIG.toml")
+                   help="built-in scenario (semicircle, spiral, random, square, harbour, random-walk) or CONFIG.toml")
     r.add_argument("--ssp", type=Path, default=None, metavar="FILE.ssp",
                    help="run an SSP package instead: its FMUs, connections and parameter sets")
     r.add_argument("--engine", choices=("local", "fmu"), default=None,
@@ -48,6 +50,27 @@ def _parser() -> argparse.ArgumentParser:
                    help="master algorithm (default: the configuration's, gauss-seidel)")
     r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
     _config_options(r)
+
+    m = sub.add_parser("compare", help="run several receivers on the same replicates of a scenario")
+    m.add_argument("scenario", help="built-in scenario or CONFIG.toml")
+    m.add_argument("--receivers", default="ekf,ekf-seq,ukf,lsq",
+                   help="comma-separated receivers (default ekf,ekf-seq,ukf,lsq; fmu:PATH for your own)")
+    m.add_argument("--replicates", type=int, default=20, help="runs per receiver (default 20)")
+    m.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    m.add_argument("--out", type=Path, default=None, help="output directory (default results/compare_SCENARIO)")
+    _config_options(m)
+
+    g = sub.add_parser("map", help="accuracy map: horizontal standard deviation of a fix around the platform")
+    g.add_argument("scenario", help="built-in scenario or CONFIG.toml (geometry and error levels)")
+    g.add_argument("--extent", type=float, default=30.0, help="half-width of the square grid [m] (default 30)")
+    g.add_argument("--step", type=float, default=0.5, help="grid spacing [m] (default 0.5)")
+    g.add_argument("--levels", default="0.5,1,2", help="accuracy prescriptions to contour [m] (default 0.5,1,2)")
+    g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
+                   help="one map per value, side by side, e.g. platform.baseline=0.4,1,3")
+    g.add_argument("--out", type=Path, default=None, help="output directory (default results/map_SCENARIO)")
+    g.add_argument("--seed", type=int, default=None, help=argparse.SUPPRESS)
+    g.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key (repeatable)")
 
     c = sub.add_parser("campaign", help="run a factorial Monte Carlo study (built-in: paper)")
     c.add_argument("study", help="built-in study (paper) or STUDY.toml")
@@ -79,7 +102,7 @@ def _parser() -> argparse.ArgumentParser:
 
     f = sub.add_parser("fmus", help="build, validate or list the FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
-    b = fsub.add_parser("build", help="build the native FMUs (four components, least-squares receiver)")
+    b = fsub.add_parser("build", help="build the native FMUs (four components and the alternative receivers)")
     b.add_argument("--out", type=Path, default=None, help="output directory (default fmus/build)")
     b.add_argument("--compiler", choices=COMPILERS, default="auto",
                    help="C compiler: auto (the system's, else zig), system or zig")
@@ -91,7 +114,7 @@ def _parser() -> argparse.ArgumentParser:
     g = sub.add_parser("codegen", help="write embeddable C code of a component (no FMI, no Python)")
     gsub = g.add_subparsers(dest="codegen_command", required=True, parser_class=_Parser)
     r = gsub.add_parser("receiver", help="the receiver's C source, header and an example main.c")
-    r.add_argument("--receiver", default="ekf", help="built-in receiver: ekf (default) or lsq")
+    r.add_argument("--receiver", default="ekf", help="built-in receiver: ekf (default), ekf-seq, ukf or lsq")
     r.add_argument("--out", type=Path, required=True, help="directory to write (created; must be empty or new)")
     return p
 
@@ -158,6 +181,49 @@ def _ssp(args: argparse.Namespace) -> int:
     path = export_ssp(cfg, args.out, args.fmu_dir)
     print(f"wrote {path} ({cfg['run']['scenario']}, seed {cfg['run']['seed']}, receiver "
           f"{cfg['simulation']['receiver']}); it validates against the SSP 1.0 schemas")
+    return 0
+
+
+def _output_name(scenario: str) -> str:
+    return Path(scenario).stem if scenario.endswith(".toml") else scenario
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from orchestrator.compare import compare, markdown, parse_receivers, write
+
+    _check_seed(args.seed)
+    receivers = parse_receivers(args.receivers)
+    out = args.out or Path("results") / f"compare_{_output_name(args.scenario)}"
+    _check_writable(out)
+    table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
+                    args.fmu_dir, progress=sys.stderr.isatty())
+    title = (f"{args.scenario}: {args.replicates} replicates per receiver, seed "
+             f"{args.seed if args.seed is not None else 'from the configuration'}"
+             + (f", {' '.join(args.overrides)}" if args.overrides else ""))
+    print(title)
+    print(markdown(table), end="")
+    write(table, out, title)
+    print(f"written to {out}/ (compare.csv, compare.md, compare.png)")
+    return 0
+
+
+def _map(args: argparse.Namespace) -> int:
+    from orchestrator.maps import make_maps, parse_compare, parse_levels, write
+
+    _check_seed(args.seed)
+    levels = parse_levels(args.levels)
+    compare = parse_compare(args.compare) if args.compare else None
+    out = args.out or Path("results") / f"map_{_output_name(args.scenario)}"
+    _check_writable(out)
+    labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
+                                                   compare)
+    for label, m in zip(labels, maps):
+        cells = m.size
+        shares = ", ".join(f"{100 * float((m <= v).sum()) / cells:.0f} % within {v:g} m" for v in levels)
+        print(f"{label}: horizontal DRMS {np.nanmin(m):.3f} … {np.nanmax(m[np.isfinite(m)]):.3f} m over "
+              f"±{args.extent:g} m; {shares}")
+    write(labels, configs, east, north, maps, levels, out, compare)
+    print(f"written to {out}/ (map.csv, map.png)")
     return 0
 
 
@@ -266,6 +332,10 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "campaign":
             return _campaign(args)
+        if args.command == "compare":
+            return _compare(args)
+        if args.command == "map":
+            return _map(args)
         if args.command == "ssp":
             return _ssp(args)
         if args.command == "analyze":

@@ -4,28 +4,38 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
 
+from fmus.native import bound_series
 from models import COMPONENTS, MODELS
 from models.core import ModelError
-from fmus.native import bound_series
 from models.receiver.bound import pcrb_inputs
 from models.receiver.core import COVARIANCE, filter_parameters
-from orchestrator.config import (MIN_SIGMA, beacon_arms, beacon_count, component_params, receiver_label,
-                                 receiver_source, to_toml)
-from orchestrator.connections import Connection, check_connections, check_interface, default_connections
+from orchestrator.config import (
+    MIN_SIGMA,
+    beacon_arms,
+    beacon_count,
+    component_params,
+    receiver_label,
+    receiver_source,
+    to_toml,
+)
+from orchestrator.connections import (
+    Connection,
+    check_connections,
+    check_interface,
+    default_connections,
+)
 from orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
 from orchestrator.master import simulate
 from orchestrator.metrics import consistency, errors, slots, summarize
+from orchestrator.output import staged_directory
 
 ENGINES = ("local", "fmu")
 
@@ -76,6 +86,8 @@ class RunResult:
         Macro steps per replicate.
     wall_time : float
         Wall-clock time of the simulation [s].
+    step_time : dict
+        Component -> wall-clock time spent in its ``doStep`` calls [s], all runs of the batch.
     """
 
     config: dict
@@ -84,6 +96,7 @@ class RunResult:
     metrics: pd.DataFrame
     steps: int
     wall_time: float
+    step_time: dict[str, float] = field(default_factory=dict)
 
 
 def system_sources(cfg: dict | None = None) -> dict[str, str | Path]:
@@ -341,13 +354,13 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
             bar = tqdm(total=n_steps * len(groups), unit="step", leave=False,
                        desc=f"{cfgs[0]['run']['scenario']} ({engine})")
         start = time.perf_counter()
-        recs, replicates = [], []
+        recs, replicates, timing = [], [], {}
         try:
             for group in groups:
                 for name, handle in handles.items():
                     params, reps = merge_params(group, name, handle.parameters)
                     handle.setup(params, reps)
-                recs.append(simulate(handles, connections, rates, T, n_steps, record=record,
+                recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
                                      progress=bar.update if bar else None, algorithm=sim["master"]))
                 replicates.extend(reps.tolist())
         finally:
@@ -361,7 +374,9 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                                           for k in recs[0]}
     types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
     rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
-    return _result(cfgs, engine, rec, replicates, n_steps, wall, timeseries)
+    result = _result(cfgs, engine, rec, replicates, n_steps, wall, timeseries)
+    result.step_time = timing
+    return result
 
 
 def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
@@ -430,18 +445,11 @@ def write_run(result: RunResult, out_dir: Path | str) -> Path:
     from orchestrator.plots import save_run_figures
 
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with staged_directory(out_dir) as tmp:
         (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2) + "\n")
         (tmp / "config.toml").write_text(to_toml(result.config))
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
         receiver = receiver_label(result.config)
         save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']}, {receiver} "
                          f"({result.engine})", receiver=receiver)
-        out_dir.mkdir(exist_ok=True)
-        for item in tmp.iterdir():
-            os.replace(item, out_dir / item.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return out_dir

@@ -1,0 +1,148 @@
+"""``sblsim compare``: several receivers on the same runs of one scenario.
+
+Every receiver sees the same replicates (same seeds, so the same diver path,
+platform motion, ranges, losses and outliers: the receiver draws no random
+numbers). Per receiver, over all steps of all replicates:
+
+* ``rms_e_tot``: RMS of e_tot [m] (``sqrt(mean(e_tot_rms²))``, every run having
+  the same number of steps);
+* ``mean_e_tot``: mean e_tot [m];
+* ``nees``, ``coverage_95``, ``nis``, ``gated_pct``: means over runs of the
+  consistency metrics (:mod:`orchestrator.metrics`);
+* ``pcrb_rms`` [m] and ``ratio_to_pcrb = rms_e_tot / pcrb_rms``;
+* ``us_per_step``: wall-clock time of the receiver's doStep per run and
+  communication step [µs], the runs stepped together on the local engine.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from models import RECEIVER_MODELS
+from models.core import ModelError
+from orchestrator.config import check_receiver, load_config, receiver_label
+from orchestrator.output import staged_directory
+from orchestrator.run import run_batch, with_replicates
+
+COLUMNS = ("receiver", "runs", "rms_e_tot", "mean_e_tot", "nees", "coverage_95", "nis", "gated_pct", "pcrb_rms",
+           "ratio_to_pcrb", "us_per_step")
+
+
+def parse_receivers(text: str) -> list[str]:
+    """``ekf,ekf-seq,ukf`` -> the list, each checked.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``--receivers`` and what is allowed.
+    """
+    receivers = [r.strip() for r in text.split(",") if r.strip()]
+    if not receivers:
+        raise ModelError(f"--receivers: expected a comma-separated list of {', '.join(RECEIVER_MODELS)} or fmu:PATH")
+    if len(set(receivers)) != len(receivers):
+        raise ModelError(f"--receivers: {text!r} names a receiver twice")
+    return [check_receiver(r, "--receivers") for r in receivers]
+
+
+def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overrides: Sequence[str] = (),
+            seed: int | None = None, engine: str = "local", fmu_dir: Path | str | None = None,
+            progress: bool = False) -> pd.DataFrame:
+    """Run every receiver on the same replicates of a scenario and tabulate them.
+
+    Parameters
+    ----------
+    scenario : str
+        Built-in scenario or configuration file.
+    receivers : sequence of str
+        ``simulation.receiver`` values.
+    replicates : int
+        Runs per receiver (replicates 0 … N − 1), 1 … 100000.
+    overrides, seed, engine, fmu_dir
+        As for ``sblsim run``.
+    progress : bool
+        Show a progress bar per receiver.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per receiver, the columns of :data:`COLUMNS`.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        On a bad receiver, override or replicate count (nothing is run).
+    """
+    if not 1 <= replicates <= 100_000:
+        raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
+    configs = [load_config(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
+    rows = []
+    for cfg in configs:
+        result = run_batch(with_replicates(cfg, range(replicates)), engine, fmu_dir=fmu_dir, timeseries=False,
+                           progress=progress)
+        m = result.metrics
+        rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
+        bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))
+        rows.append({"receiver": receiver_label(cfg), "runs": replicates, "rms_e_tot": rms,
+                     "mean_e_tot": float(m["e_tot_mean"].mean()), "nees": float(m["nees_mean"].mean()),
+                     "coverage_95": float(m["coverage_95"].mean()), "nis": float(m["nis_mean"].mean()),
+                     "gated_pct": float(m["gated_pct"].mean()), "pcrb_rms": bound, "ratio_to_pcrb": rms / bound,
+                     "us_per_step": 1e6 * result.step_time.get("receiver", math.nan) / (result.steps * replicates)})
+    return pd.DataFrame(rows, columns=list(COLUMNS))
+
+
+def markdown(table: pd.DataFrame) -> str:
+    """The comparison as a Markdown table (units in the header)."""
+    head = ("| receiver | RMS e_tot [m] | mean e_tot [m] | NEES (3) | coverage 95 % | gated [%] | PCRB RMS [m] "
+            "| RMS / PCRB | µs per step |")
+    lines = [head, "|---|---|---|---|---|---|---|---|---|"]
+    for r in table.itertuples():
+        lines.append(f"| {r.receiver} | {r.rms_e_tot:.3f} | {r.mean_e_tot:.3f} | {r.nees:.2f} | {r.coverage_95:.3f} "
+                     f"| {r.gated_pct:.2f} | {r.pcrb_rms:.3f} | {r.ratio_to_pcrb:.2f} | {r.us_per_step:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(table: pd.DataFrame, title: str):
+    """Bar charts: RMS e_tot with the PCRB, and NEES with its consistent value 3 (log scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    x = np.arange(len(table))
+    ax1.bar(x, table["rms_e_tot"], color="tab:red", alpha=0.8, label="RMS e_tot")
+    ax1.plot(x, table["pcrb_rms"], "k_", ms=30, mew=2, label="PCRB RMS")
+    ax1.set_xticks(x, table["receiver"])
+    ax1.set_ylabel("[m]")
+    ax1.grid(True, axis="y", alpha=0.3)
+    ax1.legend(fontsize=8)
+    ax2.bar(x, table["nees"], color="tab:blue", alpha=0.8, label="mean NEES")
+    ax2.axhline(3.0, color="k", ls="--", lw=1, label="consistent (3)")
+    ax2.set_yscale("log")
+    ax2.set_xticks(x, table["receiver"])
+    ax2.grid(True, axis="y", alpha=0.3)
+    ax2.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def write(table: pd.DataFrame, out: Path | str, title: str) -> Path:
+    """Write ``compare.csv``, ``compare.md`` and ``compare.png`` into ``out`` atomically; return ``out``."""
+    import matplotlib.pyplot as plt
+
+    with staged_directory(out) as tmp:
+        table.to_csv(tmp / "compare.csv", index=False)
+        (tmp / "compare.md").write_text(f"{title}\n\n{markdown(table)}", encoding="utf-8")
+        fig = plot(table, title)
+        fig.savefig(tmp / "compare.png", dpi=120, bbox_inches="tight")
+        plt.close(fig)
+    return Path(out)
+
+
+__all__ = ["COLUMNS", "compare", "markdown", "parse_receivers", "plot", "write"]

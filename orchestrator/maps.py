@@ -1,0 +1,190 @@
+"""``sblsim map``: where the system meets an accuracy prescription.
+
+For a configuration, the horizontal standard deviation (DRMS) of a position
+fix from one round of fresh ranges (one per beacon) plus the depth, from
+their Fisher information (:func:`models.receiver.bound.horizontal_std`), on a
+grid around the platform at the diver's depth: the platform level at its
+mean heading, its reference at the origin, the beacons at their lever arms,
+with the configured range noise, GPS, IMU and depth-sensor errors
+(:func:`orchestrator.run.bound_parameters`). It is the accuracy of one
+round of ranges without a motion model (a filter does better by averaging;
+the PCRB of a run says how much), and it is the design question of the
+paper: which baseline and sensors keep the diver within a required accuracy
+over the working area.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from models.core import ModelError
+from models.receiver.bound import horizontal_std
+from orchestrator.config import beacon_arms, load_config
+from orchestrator.output import staged_directory
+from orchestrator.run import bound_parameters
+
+MAX_POINTS = 1_000_000
+
+
+def parse_levels(text: str) -> list[float]:
+    """``0.5,1,2`` -> increasing positive accuracy levels [m].
+
+    Raises
+    ------
+    ModelError
+        Naming ``--levels`` and what is allowed.
+    """
+    try:
+        levels = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ModelError(f"--levels: expected comma-separated accuracies in metres, e.g. 0.5,1,2; got {text!r}") \
+            from None
+    if not levels or not all(np.isfinite(v) and v > 0 for v in levels):
+        raise ModelError(f"--levels: expected positive accuracies in metres, e.g. 0.5,1,2; got {text!r}")
+    return sorted(set(levels))
+
+
+def parse_compare(text: str) -> tuple[str, list[str]]:
+    """``platform.baseline=0.4,1,3`` -> the key and its values (as text, checked when a map is made).
+
+    Raises
+    ------
+    ModelError
+        Naming ``--compare`` and the expected form.
+    """
+    key, _, values = text.partition("=")
+    key = key.strip()
+    items = [v.strip() for v in values.split(",") if v.strip()]
+    if not items or key.count(".") != 1:
+        raise ModelError(f"--compare: expected SECTION.KEY=V1,V2,..., e.g. platform.baseline=0.4,1,3; got {text!r}")
+    return key, items
+
+
+def grid(extent: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """East and North coordinates of the grid, ``−extent … extent`` every ``step`` [m].
+
+    Raises
+    ------
+    ModelError
+        If the extent or step is out of range or the grid too large.
+    """
+    if not (np.isfinite(extent) and 0 < extent <= 1e4):
+        raise ModelError(f"--extent: {extent!r} m is outside the allowed range (0, 10000]")
+    if not (np.isfinite(step) and 0 < step <= extent):
+        raise ModelError(f"--step: {step!r} m is outside the allowed range (0, extent = {extent:g}]")
+    n = int(np.floor(2 * extent / step + 1e-9)) + 1
+    if n * n > MAX_POINTS:
+        raise ModelError(f"--step: {step:g} m gives {n}×{n} points over ±{extent:g} m; at most {MAX_POINTS} "
+                         f"(use a step of at least {2 * extent / (np.sqrt(MAX_POINTS) - 1):.3g} m)")
+    axis = -extent + step * np.arange(n)
+    return axis, axis.copy()
+
+
+def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray) -> np.ndarray:
+    """Horizontal DRMS [m] of one round of fresh ranges plus depth, shape (len(north), len(east)).
+
+    Parameters
+    ----------
+    cfg : dict
+        Resolved configuration (geometry and error levels; the diver at ``target.depth``).
+    east, north : ndarray
+        Grid coordinates [m].
+    """
+    arms = beacon_arms(cfg["platform"])
+    params = bound_parameters(cfg)
+    E, N = np.meshgrid(east, north)
+    points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, float(cfg["target"]["depth"]))])
+    drms = horizontal_std(points, arms, arms, params["noise_variance"], params["attitude_variance"],
+                          params["depth_variance"])
+    return drms.reshape(E.shape)
+
+
+def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
+              step: float = 0.5, compare: tuple[str, list[str]] | None = None) -> tuple[list[str], list[dict],
+                                                                                        np.ndarray, np.ndarray,
+                                                                                        list[np.ndarray]]:
+    """The accuracy map of a configuration, or one per value of a compared key.
+
+    Returns
+    -------
+    labels : list of str
+        Panel titles (``platform.baseline = 1`` or the scenario).
+    configs : list of dict
+    east, north : ndarray
+    maps : list of ndarray, each (len(north), len(east)) [m]
+
+    Raises
+    ------
+    ConfigError, ModelError
+        On a bad option or configuration value (nothing is computed).
+    """
+    east, north = grid(extent, step)
+    if compare is None:
+        configs, labels = [load_config(scenario, overrides, seed=seed)], [str(scenario)]
+    else:
+        key, values = compare
+        configs = [load_config(scenario, [*overrides, f"{key}={v}"], seed=seed) for v in values]
+        labels = [f"{key} = {v}" for v in values]
+    return labels, configs, east, north, [accuracy_map(c, east, north) for c in configs]
+
+
+def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,
+          maps: Sequence[np.ndarray], compare: tuple[str, list[str]] | None = None) -> pd.DataFrame:
+    """Long table of the maps: (compared value,) east, north, depth [m], drms [m]."""
+    E, N = np.meshgrid(east, north)
+    frames = []
+    for label, cfg, m in zip(labels, configs, maps):
+        frame = pd.DataFrame({"east": E.ravel(), "north": N.ravel(), "depth": float(cfg["target"]["depth"]),
+                              "drms": m.ravel()})
+        if compare is not None:
+            frame.insert(0, compare[0], label.split(" = ", 1)[1])
+        frames.append(frame)
+    return pd.concat(frames, ignore_index=True)
+
+
+def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,
+         maps: Sequence[np.ndarray], levels: Sequence[float]):
+    """Heat maps (shared logarithmic colour scale) with contours at the accuracy prescriptions."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    finite = np.concatenate([m[np.isfinite(m)] for m in maps])
+    norm = LogNorm(vmin=max(float(finite.min()), 1e-4), vmax=float(finite.max()))
+    fig, axes = plt.subplots(1, len(maps), figsize=(5.2 * len(maps) + 0.8, 4.8), squeeze=False)
+    for k, (ax, label, cfg, m) in enumerate(zip(axes[0], labels, configs, maps)):
+        mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
+        lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
+        ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
+        arms = beacon_arms(cfg["platform"])
+        ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="beacons")
+        ax.set_aspect("equal")
+        ax.set_xlabel("East [m]")
+        if k == 0:
+            ax.set_ylabel("North [m]")
+        ax.set_title(f"{label}\n(diver at {cfg['target']['depth']:g} m depth)", fontsize=9)
+    axes[0][0].legend(loc="upper right", fontsize=8)
+    fig.colorbar(mesh, ax=axes[0].tolist(), label="horizontal DRMS of one round of ranges + depth [m]")
+    return fig
+
+
+def write(labels, configs, east, north, maps, levels, out: Path | str,
+          compare: tuple[str, list[str]] | None = None) -> Path:
+    """Write ``map.csv`` and ``map.png`` into ``out`` atomically; return ``out``."""
+    import matplotlib.pyplot as plt
+
+    with staged_directory(out) as tmp:
+        table(labels, configs, east, north, maps, compare).to_csv(tmp / "map.csv", index=False)
+        fig = plot(labels, configs, east, north, maps, levels)
+        fig.savefig(tmp / "map.png", dpi=120, bbox_inches="tight")
+        plt.close(fig)
+    return Path(out)
+
+
+__all__ = ["accuracy_map", "grid", "make_maps", "parse_compare", "parse_levels", "plot", "table", "write"]
