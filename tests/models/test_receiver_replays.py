@@ -1,0 +1,199 @@
+"""``ekf-seq`` and ``ukf`` replayed independently with FilterPy on recorded packet sequences.
+
+A short co-simulation (semicircle, 20 % packet loss, 10 % multipath outliers,
+the receiver at three steps per sampling time on one of the two runs)
+records the receiver's inputs and outputs at every macro step. The replays
+feed the same inputs to FilterPy:
+
+* ``ekf-seq``: ``filterpy.kalman.ExtendedKalmanFilter``, one ``predict()`` per
+  receiver step and, at each new slot, one scalar ``update()`` with the depth
+  and then, for a received packet that passes the gate, one with the fresh
+  range, its variance ``σ_r² + σ_GPS² + (σ_att · arm)²`` (the beacon's
+  isotropic position error through the unit vector ∂h/∂b, whose norm is 1);
+* ``ukf``: ``filterpy.kalman.UnscentedKalmanFilter`` with
+  ``MerweScaledSigmaPoints(6, alpha, beta, kappa)``; sigma points are redrawn
+  from the predicted mean and covariance before each update, as the receiver
+  does; the joint update (range, depth) when the range is used, else the
+  depth alone.
+
+The slot rule, the one-sided NIS gate (χ²(1) quantile from scipy) and its
+lock-out guard are re-implemented here in plain Python. Tolerances as in
+``test_receiver_filterpy.py``: round-off of backward-stable arithmetic in a
+contracting filter.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from scipy.stats import chi2
+
+from orchestrator.config import load_config
+from orchestrator.run import run
+from tests.models.test_receiver_filterpy import N_BEACONS, SLACK, phi, white_noise_q
+
+STATE = ("x", "vx", "y", "vy", "z", "vz")
+DEPTH_ROW = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+
+
+def range_row(x, beacon):
+    p = np.asarray(x).reshape(-1)[[0, 2, 4]]
+    d = p - beacon
+    H = np.zeros((1, 6))
+    H[0, [0, 2, 4]] = d / np.linalg.norm(d)
+    return np.linalg.norm(d), H
+
+
+class Gate:
+    """The one-sided NIS gate with its lock-out guard, in plain Python."""
+
+    def __init__(self, rc):
+        self.threshold = chi2.ppf(rc["gate_probability"], 1) if rc["gate_probability"] < 1 else np.inf
+        self.max_failed = rc["gate_max_rejections"]
+        self.failed = np.zeros(N_BEACONS, bool)
+
+    def __call__(self, beacon_id, y, S):
+        test = y <= 0 or y * y / S <= self.threshold
+        use = test or self.failed.sum() >= self.max_failed
+        self.failed[beacon_id - 1] = not test
+        return use
+
+
+def range_variance(rc):
+    return (rc["sigma_range"] ** 2 + rc["beacon_gps_sigma"] ** 2
+            + (np.radians(rc["beacon_attitude_sigma_deg"]) * rc["beacon_arm"]) ** 2)
+
+
+def slots(ts, cfg, ratio):
+    """Yield (macro step k, is_slot, row) for every receiver step, with the slot rule applied."""
+    T = cfg["simulation"]["sampling_time"]
+    dt = T / ratio
+    last = 0
+    for k, row in enumerate(ts.itertuples()):
+        for j in range(ratio):
+            t = k * T + j * dt
+            slot = row.packet_seq != last and t + dt >= row.tx_time - SLACK
+            if slot:
+                last = row.packet_seq
+            yield k, j == ratio - 1, slot, row
+
+
+def fresh(row):
+    return bool(row.packet_valid) and 1 <= row.beacon_id <= N_BEACONS
+
+
+def replay_ekf_seq(ts, cfg, ratio):
+    rc = cfg["receiver"]
+    dt = cfg["simulation"]["sampling_time"] / ratio
+    ekf = ExtendedKalmanFilter(dim_x=6, dim_z=1)
+    ekf.x = np.array([[rc[f"x0_{n}"]] for n in STATE], dtype=float)
+    ekf.P = np.diag([rc["p0_position"] ** 2, rc["p0_velocity"] ** 2] * 3)
+    ekf.F, ekf.Q = phi(dt), white_noise_q(dt, rc["q_horizontal"], rc["q_vertical"])
+    gate, var = Gate(rc), range_variance(rc)
+    out = {k: [] for k in (*STATE, "P", "nis", "gated")}
+    nis, gated = 0.0, False
+    for k, last_substep, slot, row in slots(ts, cfg, ratio):
+        ekf.predict()
+        if slot:
+            ekf.update(np.array([[row.depth]]), lambda x: DEPTH_ROW, lambda x: x[4:5], R=rc["sigma_depth"] ** 2)
+            nis = (ekf.y.T @ ekf.SI @ ekf.y).item()
+            gated = False
+            if fresh(row):
+                b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
+                h, H = range_row(ekf.x, b)
+                y, S = row.range - h, (H @ ekf.P @ H.T).item() + var
+                if gate(row.beacon_id, y, S):
+                    ekf.update(np.array([[row.range]]), lambda x: range_row(x, b)[1],
+                               lambda x: np.array([[range_row(x, b)[0]]]), R=var)
+                    nis += y * y / S
+                else:
+                    gated = True
+        if last_substep:
+            for i, n in enumerate(STATE):
+                out[n].append(ekf.x[i, 0])
+            out["P"].append(ekf.P[np.ix_([0, 2, 4], [0, 2, 4])].copy())
+            out["nis"].append(nis)
+            out["gated"].append(gated)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def replay_ukf(ts, cfg, ratio):
+    rc = cfg["receiver"]
+    dt = cfg["simulation"]["sampling_time"] / ratio
+    points = MerweScaledSigmaPoints(6, alpha=rc["alpha"], beta=rc["beta"], kappa=rc["kappa"])
+    ukf = UnscentedKalmanFilter(dim_x=6, dim_z=2, dt=dt, fx=lambda x, dt: phi(dt) @ x, hx=None, points=points)
+    ukf.x = np.array([rc[f"x0_{n}"] for n in STATE], dtype=float)
+    ukf.P = np.diag([rc["p0_position"] ** 2, rc["p0_velocity"] ** 2] * 3)
+    ukf.Q = white_noise_q(dt, rc["q_horizontal"], rc["q_vertical"])
+    gate, var, sd2 = Gate(rc), range_variance(rc), rc["sigma_depth"] ** 2
+    out = {k: [] for k in (*STATE, "P", "nis", "gated")}
+    nis, gated = 0.0, False
+    for k, last_substep, slot, row in slots(ts, cfg, ratio):
+        ukf.predict()
+        if slot:
+            ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # redrawn from the predicted mean and covariance
+            gated = False
+            use = False
+            if fresh(row):
+                b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
+                joint = copy.deepcopy(ukf)
+                joint.update(np.array([row.range, row.depth]), R=np.diag([var, sd2]),
+                             hx=lambda x: np.array([np.linalg.norm(x[[0, 2, 4]] - b), x[4]]))
+                use = gate(row.beacon_id, joint.y[0], joint.S[0, 0])
+                gated = not use
+            if use:
+                ukf = joint
+            else:
+                ukf.update(np.array([row.depth]), R=np.array([[sd2]]), hx=lambda x: x[4:5])
+            nis = float(ukf.y @ np.linalg.solve(ukf.S, ukf.y))
+        if last_substep:
+            for i, n in enumerate(STATE):
+                out[n].append(ukf.x[i])
+            out["P"].append(ukf.P[np.ix_([0, 2, 4], [0, 2, 4])].copy())
+            out["nis"].append(nis)
+            out["gated"].append(gated)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+@pytest.fixture(scope="module", params=[("ekf-seq", 1), ("ekf-seq", 3), ("ukf", 1), ("ukf", 3)],
+                ids=["ekf-seq-ratio1", "ekf-seq-ratio3", "ukf-ratio1", "ukf-ratio3"])
+def recorded(request):
+    receiver, ratio = request.param
+    overrides = ["simulation.duration=30", "acoustics.loss_pct=20", "acoustics.outlier_pct=10",
+                 f"simulation.ekf_rate_ratio={ratio}", f"receiver={receiver}", "receiver.gate_probability=0.99"]
+    if receiver == "ukf":  # scaling other than the defaults
+        overrides += ["receiver.alpha=0.8", "receiver.kappa=1"]
+    cfg = load_config("semicircle", overrides, seed=5)
+    return receiver, ratio, run(cfg, "local", replicates=[0, 1])
+
+
+def covariance(ts):
+    c = {ab: ts[f"cov_{ab}"].to_numpy() for ab in ("xx", "xy", "xz", "yy", "yz", "zz")}
+    return np.stack([np.stack([c["xx"], c["xy"], c["xz"]], -1), np.stack([c["xy"], c["yy"], c["yz"]], -1),
+                     np.stack([c["xz"], c["yz"], c["zz"]], -1)], -2)
+
+
+def test_receiver_equals_an_independent_filterpy_replay(recorded):
+    receiver, ratio, result = recorded
+    cfg = result.config
+    assert cfg["simulation"]["receiver"] == receiver and cfg["simulation"]["ekf_rate_ratio"] == ratio
+    replay = replay_ekf_seq if receiver == "ekf-seq" else replay_ukf
+    for rep, ts in result.timeseries.groupby("replicate"):
+        ts = ts.sort_values("time")
+        ref = replay(ts, cfg, ratio)
+        # what the recording exercises: losses, outliers, ranges gated and ranges used
+        assert (~ts["packet_valid"].astype(bool)).sum() > 10 and ts["outlier"].astype(bool).sum() > 10
+        assert 5 < ref["gated"].sum() < 0.5 * ts["packet_valid"].astype(bool).sum()
+        np.testing.assert_array_equal(ts["gated"].to_numpy(bool), ref["gated"], err_msg=f"gated, replicate {rep}")
+        for n in STATE:
+            np.testing.assert_allclose(ts[f"est_{n}"].to_numpy(), ref[n], rtol=0, atol=1e-9,
+                                       err_msg=f"est_{n}, replicate {rep}")
+        np.testing.assert_allclose(covariance(ts), ref["P"], rtol=1e-8, atol=1e-14, err_msg=f"cov, replicate {rep}")
+        np.testing.assert_allclose(ts["nis"].to_numpy(), ref["nis"], rtol=1e-8, atol=1e-12,
+                                   err_msg=f"nis, replicate {rep}")
+        # the gate caught the multipath: most gated ranges are outliers
+        outlier = ts["outlier"].to_numpy(bool)
+        assert outlier[ref["gated"]].mean() > 0.8
