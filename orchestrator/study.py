@@ -49,6 +49,7 @@ import tomli_w
 
 from models.core import ModelError, Variable
 from models import RECEIVER_MODELS
+from orchestrator.metrics import RUN_METRICS
 from orchestrator.config import (BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source,
                                  section_variables)
 
@@ -57,6 +58,8 @@ DESIGNS = ("full", "fractional")
 _STUDY_KEYS = {"name", "scenarios", "replicates", "seed", "design", "resolution", "generators", "set"}
 _FACTOR_KEYS = {"name", "key", "low", "high"}
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+#: Columns of ``runs.parquet`` besides the factors and the metrics (a factor may not take their names).
+RESULT_COLUMNS = ("scenario", "scenario_key", "cell", "replicate", "seed", "receiver")
 
 
 class StudyError(ModelError):
@@ -328,6 +331,9 @@ def _factors(items: Any) -> list[Factor]:
             raise StudyError(f"{where}.name: {name!r} is not an identifier (letters, digits, underscore)")
         if name in names:
             raise StudyError(f"{where}.name: {name!r} is used by two factors")
+        if name in RESULT_COLUMNS or name.endswith("_value") or name in RUN_METRICS:
+            raise StudyError(f"{where}.name: {name!r} is a column of the results ({', '.join(RESULT_COLUMNS)}, "
+                             f"the metrics, NAME_value); choose another, e.g. {name + '_factor'!r}")
         if not isinstance(key, str) or key.count(".") != 1:
             raise StudyError(f"factors.{name}.key: expected section.name, got {key!r}; sections: "
                              f"{', '.join(s for s in SECTIONS if s != 'run')}")

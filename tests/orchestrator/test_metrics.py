@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.metrics import METRIC_NAMES, errors, summarize
+from orchestrator.metrics import METRIC_NAMES, NEES_95, consistency, errors, nees, slots, summarize
 
 NAN = float("nan")
 
@@ -90,3 +90,54 @@ def test_summarize_matches_numpy_on_random_errors():
         assert m["e_tot_mean"][b] == pytest.approx(e[:, 3].mean())
         assert m["e_tot_rms"][b] == pytest.approx(np.sqrt(np.mean(e[:, 3] ** 2)))
         assert m["e_tot_std"][b] == pytest.approx(np.std(e[:, 3], ddof=0))
+
+
+def test_nees_hand_computed():
+    # diagonal: e = (1, 2, 0), P = diag(1, 4, 1) -> 1 + 1 + 0
+    assert nees(np.array([1.0, 2.0, 0.0]), np.array([1.0, 0.0, 0.0, 4.0, 0.0, 1.0])) == pytest.approx(2.0)
+    # correlated in the plane: P = [[2, 1], [1, 2]] (⊕ 1): P⁻¹ = [[2, -1], [-1, 2]] / 3; e = (1, 1, 3) -> 2/3 + 9
+    assert nees(np.array([1.0, 1.0, 3.0]), np.array([2.0, 1.0, 0.0, 2.0, 0.0, 1.0])) == pytest.approx(2.0 / 3.0 + 9.0)
+    # not positive-definite (a receiver reporting zeros, or a negative determinant): NaN, not a huge number
+    bad = np.array([[0.0] * 6, [1.0, 2.0, 0.0, 1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.0, 0.0, -1e-9]])
+    assert np.all(np.isnan(nees(np.ones((3, 3)), bad)))
+
+
+def test_nees_matches_numpy_on_random_covariances():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(40, 3, 3))
+    P = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(3)
+    e = rng.normal(size=(40, 3))
+    packed = P[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
+    expected = np.einsum("ni,nij,nj->n", e, np.linalg.inv(P), e)
+    np.testing.assert_allclose(nees(e, packed), expected, rtol=1e-10)
+
+
+def test_slots_from_the_packet_counter():
+    seq = np.array([[0], [1], [1], [2], [3], [3]])
+    received = np.array([[False], [True], [True], [False], [True], [True]])
+    slot, fresh = slots(seq, received)
+    assert slot[:, 0].tolist() == [False, True, False, True, True, False]
+    assert fresh[:, 0].tolist() == [False, True, False, False, True, False]
+
+
+def test_consistency_hand_counted():
+    # 5 steps, 2 runs; run 0: NEES 1, 9, 4, NaN (P zero), 0 -> mean 3.5 over 4 valid, 3 of 4 within 7.815
+    sigma = np.array([1.0, 1.0, 2.0, 0.0, 1.0])
+    err0 = np.array([[1.0, 0, 0], [3.0, 0, 0], [4.0, 0, 0], [1.0, 0, 0], [0.0, 0, 0]])
+    cov0 = np.array([[s * s, 0, 0, 1.0, 0, 1.0] for s in sigma])
+    cov0[3] = 0.0
+    # run 1: identity covariance, errors (0,0,1): NEES 1 at every step
+    err = np.stack([err0, np.tile([0.0, 0.0, 1.0], (5, 1))], axis=1)
+    cov = np.stack([cov0, np.tile([1.0, 0, 0, 1.0, 0, 1.0], (5, 1))], axis=1)
+    seq = np.array([[0, 1], [1, 1], [2, 2], [3, 3], [4, 4]])
+    nis = np.array([[7.0, 2.0], [2.0, 2.0], [4.0, 4.0], [6.0, 0.0], [0.0, 0.0]])
+    fresh = np.array([[False, True], [True, False], [True, True], [True, True], [True, True]])
+    gated = np.array([[True, False], [False, False], [True, False], [False, False], [True, False]])
+    bound = np.array([[3.0, 1.0], [4.0, 1.0], [0.0, 1.0], [0.0, 1.0], [0.0, 1.0]])
+    out = consistency(err, cov, nis, seq, fresh, gated, bound)
+    assert 9.0 > NEES_95 > 4.0
+    np.testing.assert_allclose(out["nees_mean"], [(1 + 9 + 4 + 0) / 4, 1.0])
+    np.testing.assert_allclose(out["coverage_95"], [3 / 4, 1.0])
+    np.testing.assert_allclose(out["nis_mean"], [(2 + 4 + 6 + 0) / 4, (2 + 2 + 4 + 0 + 0) / 5])  # from the first slot
+    np.testing.assert_allclose(out["gated_pct"], [100 * 2 / 4, 0.0])  # the gated step without a slot does not count
+    np.testing.assert_allclose(out["pcrb_rms"], [np.sqrt((9 + 16) / 5), 1.0])

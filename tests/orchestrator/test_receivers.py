@@ -111,3 +111,32 @@ def test_a_users_receiver_travels_in_the_ssp_package(user_fmu, fmu_dir, tmp_path
     # the user's FMU declares no parameters: its parameter set is empty, sblsim's keys keep their values
     assert {k: v for k, v in system.config.items() if k != "simulation"} == \
         {k: v for k, v in cfg.items() if k != "simulation"}
+
+
+@pytest.mark.parametrize("receiver, key", [("lsq", "q_horizontal"), ("ekf", "alpha"), ("ekf", "beacon_arm"),
+                                           ("ukf", "no_such_key")])
+def test_a_key_the_chosen_receiver_does_not_declare_stops_with_one_line(receiver, key, tmp_path, capsys):
+    with pytest.raises(ConfigError) as info:
+        load_config("semicircle", [f"receiver={receiver}", f"receiver.{key}=0.5"])
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(f"receiver.{key}: not a parameter of the {receiver} receiver")
+    from models import RECEIVER_MODELS
+
+    declared = [v.name for v in RECEIVER_MODELS[receiver].config_parameters() if v.causality == "parameter"]
+    assert all(name in message for name in ("sigma_range", "x0_x")) and "seed" not in message
+    assert set(message.split("its keys: ")[1].split(", ")) <= set(declared)
+    # the command line says the same, exits 2 and writes nothing
+    code = main(["run", "semicircle", "--set", f"receiver={receiver}", "--set", f"receiver.{key}=0.5",
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.strip() == f"sblsim: error: {message}" and not (tmp_path / "out").exists()
+
+
+def test_the_same_key_in_a_file_is_checked_against_the_receiver_the_file_chooses(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('[simulation]\nreceiver = "ukf"\n[receiver]\nalpha = 0.5\nq_horizontal = 0.02\n')
+    cfg = load_config(str(path))
+    assert cfg["receiver"]["alpha"] == 0.5 and cfg["receiver"]["q_horizontal"] == 0.02
+    path.write_text('[simulation]\nreceiver = "ekf"\n[receiver]\nalpha = 0.5\n')
+    with pytest.raises(ConfigError, match="receiver.alpha: not a parameter of the ekf receiver"):
+        load_config(str(path))

@@ -1,0 +1,160 @@
+"""The accuracy limit (models/receiver/bound.py) against independent computations.
+
+* Linear-Gaussian case: with the measurement Jacobians fixed along a given
+  path, the system is linear and Gaussian, and the PCRB recursion must equal
+  the Kalman filter's covariance exactly; checked against FilterPy's
+  ``KalmanFilter`` (covariance form) and against Tichavský's information
+  recursion ``J_k+1 = D22 − D21 (J_k + D11)⁻¹ D12`` written here in numpy,
+  with the Jacobians by central differences.
+* The effective range variance against finite differences of the range under
+  small rotations of the beacon's lever arm.
+* The Fisher information of one round of ranges: a hand-worked case and a
+  numpy build with finite-difference gradients.
+* The compiled bound equals the casadi evaluation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from fmus.native import bound_series
+from models.receiver.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
+from tests.models.test_receiver_filterpy import phi, white_noise_q
+
+EPS = 1e-6
+
+
+def fd_range_row(position, beacon):
+    """∂‖p − b‖/∂x of the 6-state by central differences."""
+    H = np.zeros((1, 6))
+    for k, i in enumerate((0, 2, 4)):
+        d = np.zeros(3)
+        d[k] = EPS
+        H[0, i] = (np.linalg.norm(position + d - beacon) - np.linalg.norm(position - d - beacon)) / (2 * EPS)
+    return H
+
+
+def fd_attitude_variance(position, beacon, arm, variance):
+    """σ² Σ_k (∂r/∂θ_k)², the range's sensitivities to small rotations δθ × arm by central differences."""
+    total = 0.0
+    for k in range(3):
+        d = np.zeros(3)
+        d[k] = EPS
+        plus = np.linalg.norm(position - (beacon + np.cross(d, arm)))
+        minus = np.linalg.norm(position - (beacon - np.cross(d, arm)))
+        total += ((plus - minus) / (2 * EPS)) ** 2
+    return variance * total
+
+
+def case(seed=3, n=300, b=3):
+    rng = np.random.default_rng(seed)
+    t = 0.2 * np.arange(1, n + 1)
+    truth = np.stack([np.stack([12 * np.cos(0.05 * t + j), 12 * np.sin(0.05 * t + j), 5 + 0.01 * t], -1)
+                      for j in range(b)], axis=1)  # (N, B, 3)
+    beacons = rng.normal(scale=3.0, size=(n, b, 3)) * [1, 1, 0.2] + [0, 0, 1]
+    arms = rng.normal(scale=2.0, size=(n, b, 3))
+    slot = rng.uniform(size=(n, b)) < 0.7
+    received = slot & (rng.uniform(size=(n, b)) < 0.8)
+    fixed = dict(dt=0.2, q_horizontal=np.array([0.01, 0.1, 0.002]), q_vertical=np.array([1e-3, 1e-2, 1e-4]),
+                 p0_position=np.array([1.0, 2.0, 0.5]), p0_velocity=np.array([0.5, 0.2, 0.3]),
+                 noise_variance=np.array([0.02, 0.5, 0.01]), attitude_variance=np.radians([1.0, 5.0, 0.5]) ** 2,
+                 depth_variance=np.array([1e-4, 1e-2, 1e-6]))
+    return truth, slot, received, beacons, arms, fixed
+
+
+def range_variance(position, beacon, arm, noise, attitude):
+    return noise + fd_attitude_variance(position, beacon, arm, attitude)
+
+
+def test_pcrb_equals_a_kalman_filter_covariance_and_tichavsky_information_recursion():
+    truth, slot, received, beacons, arms, fixed = case()
+    n, b = slot.shape
+    bound = pcrb(*pcrb_inputs(truth, slot, received, beacons, arms, **fixed))
+    assert slot.sum() > 300 and (slot & ~received).sum() > 50  # depth-only slots and range slots
+    for r in range(b):
+        f = {k: (v[r] if isinstance(v, np.ndarray) else v) for k, v in fixed.items()}
+        F, Q = phi(f["dt"]), white_noise_q(f["dt"], f["q_horizontal"], f["q_vertical"])
+        kf = KalmanFilter(dim_x=6, dim_z=1)
+        kf.x, kf.F, kf.Q = np.zeros((6, 1)), F, Q
+        kf.P = np.diag([f["p0_position"] ** 2, f["p0_velocity"] ** 2] * 3)
+        J = np.linalg.inv(kf.P)
+        Qi = np.linalg.inv(Q)
+        D11, D12 = F.T @ Qi @ F, -F.T @ Qi
+        for k in range(n):
+            kf.predict()
+            info = np.zeros((6, 6))
+            if slot[k, r]:
+                H = np.array([[0, 0, 0, 0, 1.0, 0]])
+                kf.update(np.zeros((1, 1)), R=f["depth_variance"], H=H)
+                info += H.T @ H / f["depth_variance"]
+                if received[k, r]:
+                    H = fd_range_row(truth[k, r], beacons[k, r])
+                    var = range_variance(truth[k, r], beacons[k, r], arms[k, r], f["noise_variance"],
+                                         f["attitude_variance"])
+                    kf.update(np.zeros((1, 1)), R=var, H=H)
+                    info += H.T @ H / var
+            J = Qi + info - D12.T @ np.linalg.solve(J + D11, D12)
+            expected = np.sqrt(kf.P[0, 0] + kf.P[2, 2] + kf.P[4, 4])
+            from_information = np.linalg.inv(J)
+            assert bound[k, r] == pytest.approx(expected, rel=1e-6), (k, r)
+            assert bound[k, r] == pytest.approx(np.sqrt(np.trace(from_information[np.ix_([0, 2, 4], [0, 2, 4])])),
+                                                rel=1e-6), (k, r)
+    # the bound settles where measurements keep coming, and grows without them
+    assert np.all(bound[-1] < bound[0])
+
+
+def test_compiled_bound_equals_the_casadi_evaluation():
+    truth, slot, received, beacons, arms, fixed = case(seed=11, n=200)
+    packed = pcrb_inputs(truth, slot, received, beacons, arms, **fixed)
+    np.testing.assert_allclose(bound_series(*packed), pcrb(*packed), rtol=1e-13, atol=0)
+
+
+def test_bound_without_measurements_is_the_prediction_of_the_prior():
+    """No slot at all: the bound is ΦᵏP0Φᵏᵀ + Σ Q, the open-loop covariance (hand-worked for one axis)."""
+    n, dt, q, s0, v0 = 50, 0.5, 0.01, 1.0, 0.5
+    zeros = np.zeros((n, 1, 3))
+    bound = pcrb(*pcrb_inputs(zeros + [10, 0, 5], np.zeros((n, 1), bool), np.zeros((n, 1), bool), zeros, zeros,
+                              dt=dt, q_horizontal=q, q_vertical=q, p0_position=s0, p0_velocity=v0,
+                              noise_variance=0.01, attitude_variance=0.0, depth_variance=1e-4))
+    t = dt * np.arange(1, n + 1)
+    per_axis = s0**2 + (v0 * t) ** 2 + q * t**3 / 3.0  # position variance of a constant-velocity walk
+    np.testing.assert_allclose(bound[:, 0], np.sqrt(3 * per_axis), rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_effective_range_variance_matches_finite_differences_of_a_rotated_arm(seed):
+    rng = np.random.default_rng(seed)
+    position, beacon, arm = rng.normal(scale=10, size=3), rng.normal(scale=2, size=3), rng.normal(scale=3, size=3)
+    value = float(effective_range_variance(position, beacon, arm, 0.03, 2e-4))
+    assert value == pytest.approx(0.03 + fd_attitude_variance(position, beacon, arm, 2e-4), rel=1e-7)
+    # an arm along the line of sight does not move the range
+    along = (position - beacon) / np.linalg.norm(position - beacon)
+    assert float(effective_range_variance(position, beacon, 2.0 * along, 0.03, 2e-4)) == pytest.approx(0.03, rel=1e-12)
+
+
+def test_horizontal_std_hand_worked_and_against_a_numpy_fisher_matrix():
+    # the diver at the centre of a level cross at its own depth: J = diag(2/σ², 2/σ², 1/σ_d²), DRMS = σ
+    L, sigma2 = 3.0, 0.04
+    beacons = np.array([[L, 0, 5.0], [0, L, 5.0], [-L, 0, 5.0], [0, -L, 5.0]])
+    drms = horizontal_std(np.array([[0.0, 0.0, 5.0]]), beacons, np.zeros((4, 3)), sigma2, 0.0, 1e-4)
+    assert drms[0] == pytest.approx(np.sqrt(sigma2), rel=1e-12)
+    # anywhere else, against finite-difference gradients and numpy's inverse
+    rng = np.random.default_rng(4)
+    beacons = np.array([[L, 0, 1.0], [0, L, 1.0], [-L, 0, 1.0], [0, -L, 1.0]])
+    arms = beacons.copy()
+    points = np.column_stack([rng.uniform(-30, 30, size=(20, 2)), np.full(20, 5.0)])
+    got = horizontal_std(points, beacons, arms, 0.02, np.radians(1.0) ** 2, 1e-4)
+    for p, value in zip(points, got):
+        J = np.zeros((3, 3))
+        for b, a in zip(beacons, arms):
+            g = fd_range_row(p, b)[0, [0, 2, 4]]
+            J += np.outer(g, g) / range_variance(p, b, a, 0.02, np.radians(1.0) ** 2)
+        J[2, 2] += 1e4
+        inverse = np.linalg.inv(J)
+        assert value == pytest.approx(np.sqrt(inverse[0, 0] + inverse[1, 1]), rel=1e-6)
+    # and the Function reports the information matrix itself
+    J = np.asarray(fix_information(4)(points[0], beacons.reshape(-1), arms.reshape(-1), 0.02,
+                                      np.radians(1.0) ** 2, 1e-4)[0])
+    assert np.allclose(J, J.T) and np.all(np.linalg.eigvalsh(J) > 0)
