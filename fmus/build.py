@@ -37,15 +37,16 @@ def fmu_path(directory: Path | str, component: str) -> Path:
     return Path(directory) / f"sblsim_{component}.fmu"
 
 
-def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4, compiler: str = "auto",
+def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, compiler: str = "auto",
               cross: bool | None = None) -> Path:
     """Build one model's FMU into ``out_dir``.
 
     Parameters
     ----------
-    component : str
+    component : str or type
         A model name (:data:`models.MODELS`): ``platform``, ``acoustics``,
-        ``target``, ``receiver`` or ``receiver_lsq``.
+        ``target``, ``receiver``, ``receiver_ekf_seq``, ``receiver_ukf`` or
+        ``receiver_lsq``; or a model class (e.g. a user's receiver).
     out_dir : path
         Destination directory (created if missing).
     n_beacons : int
@@ -66,7 +67,8 @@ def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4, compiler:
     CompileError
         If the compiler is missing or fails.
     """
-    model = MODELS[component]
+    model = component if isinstance(component, type) else MODELS[component]
+    component = model.name
     cc = find_compiler(compiler)
     cross = cc.zig if cross is None else cross
     platforms = [host_platform()] + ([p for p in CROSS_PLATFORMS if p != host_platform()] if cross else [])
@@ -96,6 +98,22 @@ def build_fmu(component: str, out_dir: Path | str, n_beacons: int = 4, compiler:
         finally:
             partial.unlink(missing_ok=True)
     return target
+
+
+def cached_fmu(model: type, n_beacons: int = 4) -> Path:
+    """A model's FMU built once into the cache (``$SBLSIM_CACHE_DIR`` or the user's cache folder), keyed by
+    its GUID: the fmu engine's FMU of a user's model (``simulation.receiver = "model:PATH.py"``)."""
+    import hashlib
+
+    from fmus.codegen import C_DIR, model_guid
+    from fmus.native import cache_dir
+
+    digest = hashlib.sha256(model_guid(model, n_beacons).encode())
+    for source in sorted(C_DIR.iterdir()):  # and the runtime it is built with
+        digest.update(source.name.encode() + source.read_bytes())
+    directory = cache_dir() / "fmus" / digest.hexdigest()[:16]
+    path = fmu_path(directory, model.name)
+    return path if path.is_file() else build_fmu(model, directory, n_beacons, cross=False)
 
 
 def build_all(out_dir: Path | str = DEFAULT_DIR, compiler: str = "auto", cross: bool | None = None,

@@ -41,20 +41,22 @@ def cache_dir() -> Path:
     return Path(platformdirs.user_cache_dir("sblsim"))
 
 
-def _registry(n_beacons: int) -> str:
-    symbols = [f"{stem(model, n_beacons)}_model" for model in MODELS.values()]
+def _registry(n_beacons: int, models: tuple[type, ...]) -> str:
+    symbols = [f"{stem(model, n_beacons)}_model" for model in models]
     lines = ['#include <stddef.h>', '#include "sblsim_runtime.h"']
     lines += [f"extern const sblsim_model {s};" for s in symbols]
     lines.append("const sblsim_model* const sblsim_models[] = {" + ", ".join(f"&{s}" for s in symbols) + ", NULL};")
     return "\n".join(lines) + "\n"
 
 
-def write_library_sources(n_beacons: int, directory: Path) -> list[Path]:
-    """Every model's sources, the runtime, the registry and the batch API into ``directory``; the C files."""
+def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, ...] | None = None) -> list[Path]:
+    """The models' sources (default every built-in), the runtime, the registry, the bound and the batch API
+    into ``directory``; the C files."""
+    models = tuple(MODELS.values()) if models is None else models
     directory.mkdir(parents=True, exist_ok=True)
-    for model in MODELS.values():
+    for model in models:
         write_sources(model, n_beacons, directory, shell="")
-    (directory / "sblsim_models.c").write_text(_registry(n_beacons))
+    (directory / "sblsim_models.c").write_text(_registry(n_beacons, models))
     cg = ca.CodeGenerator("sblsim_bound_casadi.c", {"with_header": True, "casadi_real": "double",
                                                     "casadi_int": "long long int"})
     cg.add(bound_step())
@@ -64,8 +66,15 @@ def write_library_sources(n_beacons: int, directory: Path) -> list[Path]:
 
 
 @lru_cache(maxsize=None)
-def library_path(n_beacons: int = 4, compiler: str = "auto") -> Path:
+def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type, ...] | None = None) -> Path:
     """The compiled batch library for ``n_beacons`` beacons, built into the cache if missing.
+
+    Parameters
+    ----------
+    n_beacons : int
+    compiler : {'auto', 'system', 'zig'}
+    models : tuple of type, optional
+        The models compiled in (default every built-in; a user's model gets a library of its own).
 
     Raises
     ------
@@ -74,7 +83,7 @@ def library_path(n_beacons: int = 4, compiler: str = "auto") -> Path:
     """
     cc = find_compiler(compiler)
     with tempfile.TemporaryDirectory(prefix="sblsim_native_") as tmp:
-        files = write_library_sources(n_beacons, Path(tmp))
+        files = write_library_sources(n_beacons, Path(tmp), models)
         digest = hashlib.sha256()
         for path in sorted(Path(tmp).iterdir()):
             digest.update(path.name.encode() + path.read_bytes())
@@ -94,9 +103,10 @@ def library_path(n_beacons: int = 4, compiler: str = "auto") -> Path:
 
 
 @lru_cache(maxsize=None)
-def load(n_beacons: int = 4) -> ctypes.CDLL:
-    """The batch library for ``n_beacons`` beacons, loaded (built first if needed)."""
-    lib = ctypes.CDLL(str(library_path(n_beacons)))
+def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.CDLL:
+    """The batch library for ``n_beacons`` beacons (and ``models``, default the built-ins), loaded (built first
+    if needed)."""
+    lib = ctypes.CDLL(str(library_path(n_beacons, models=models)))
     lib.sblsim_batch_new.restype = ctypes.c_void_p
     lib.sblsim_batch_new.argtypes = [ctypes.c_char_p, ctypes.c_int]
     lib.sblsim_batch_free.argtypes = [ctypes.c_void_p]
@@ -137,7 +147,7 @@ class NativeBatch:
     """
 
     def __init__(self, model: type, batch: int, n_beacons: int = 4) -> None:
-        self.lib = load(n_beacons)
+        self.lib = load(n_beacons, None if model in MODELS.values() else (model,))
         self.model, self.batch = model, int(batch)
         name = model.name.encode()
         self._handle = self.lib.sblsim_batch_new(name, self.batch)

@@ -108,6 +108,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="C compiler: auto (the system's, else zig), system or zig")
     b.add_argument("--cross", action=argparse.BooleanOptionalAction, default=None,
                    help="also build Windows and macOS binaries with zig (default: when the compiler is zig)")
+    b.add_argument("--model", type=Path, default=None, metavar="PATH.py",
+                   help="build only the receiver model this Python file defines (see README, Write your own receiver)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
@@ -282,6 +284,13 @@ def _fmus(args: argparse.Namespace) -> int:
     if args.fmus_command == "build":
         out = args.out or DEFAULT_DIR
         _check_writable(out)
+        if args.model is not None:
+            from orchestrator.config import MODEL_PREFIX, check_receiver, user_model
+
+            check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
+            model = user_model(args.model)
+            print(f"built {build_fmu(model, out, compiler=args.compiler, cross=args.cross)}", flush=True)
+            return 0
         for name in MODELS:
             print(f"built {build_fmu(name, out, compiler=args.compiler, cross=args.cross)}", flush=True)
         return 0

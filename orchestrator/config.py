@@ -20,7 +20,10 @@ configuration keys.
 from __future__ import annotations
 
 import copy
+import hashlib
+import re
 import tomllib
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
@@ -54,9 +57,10 @@ def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
         if _is_path(section, value):
             raw[section][name] = str((base / Path(value).expanduser()).resolve())
     sim = raw.get("simulation")
-    path = external_path(sim.get("receiver")) if isinstance(sim, dict) else ""
-    if path:
-        sim["receiver"] = f"{EXTERNAL_PREFIX}{(base / Path(path).expanduser()).resolve()}"
+    for prefix in (EXTERNAL_PREFIX, MODEL_PREFIX):
+        path = external_path(sim.get("receiver"), prefix) if isinstance(sim, dict) else ""
+        if path:
+            sim["receiver"] = f"{prefix}{(base / Path(path).expanduser()).resolve()}"
 
 
 class ConfigError(ModelError):
@@ -78,29 +82,100 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              description="Master algorithm: gauss-seidel, or jacobi as FMI hosts step an SSP",
              choices=ALGORITHMS, scope="config"),
     Variable("receiver", "parameter", "String", "ekf", scope="config",
-             description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq or fmu:PATH"),
+             description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH"),
 )
 
 #: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
 SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
 EXTERNAL_PREFIX = "fmu:"
+MODEL_PREFIX = "model:"
 
 
-def external_path(value: Any) -> str:
-    """The path of ``fmu:PATH`` (empty for any other value)."""
-    return value[len(EXTERNAL_PREFIX):] if isinstance(value, str) and value.startswith(EXTERNAL_PREFIX) else ""
+def external_path(value: Any, prefix: str = EXTERNAL_PREFIX) -> str:
+    """The path of ``fmu:PATH`` (or of ``model:PATH`` with that prefix); empty for any other value."""
+    return value[len(prefix):] if isinstance(value, str) and value.startswith(prefix) else ""
 
 
-def receiver_source(cfg: dict[str, dict]) -> str | Path:
-    """The receiver of a configuration: a built-in model name, or the path of a user's FMU."""
+@lru_cache(maxsize=None)
+def _user_model(path: str, stamp: tuple[int, int]) -> type:
+    import importlib.util
+
+    from models.core import Component
+    from orchestrator.connections import check_interface
+    from orchestrator.engines import Port
+
+    where = "simulation.receiver"
+    name = "sblsim_user_" + hashlib.sha256(path.encode()).hexdigest()[:12]
+    try:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    except Exception as exc:  # a user's module may raise anything on import
+        raise ConfigError(f"{where}: cannot import {path!r} ({type(exc).__name__}: {exc})") from None
+    found = [c for c in vars(module).values()
+             if isinstance(c, type) and issubclass(c, Component) and c.__module__ == name]
+    if len(found) != 1:
+        raise ConfigError(f"{where}: {path!r} defines {len(found)} model classes "
+                          f"({', '.join(c.__name__ for c in found) or 'none'}); it must define exactly one receiver")
+    model = found[0]
+    if not re.fullmatch(r"receiver_[A-Za-z0-9_]+", str(getattr(model, "name", ""))) or model.name in MODELS:
+        raise ConfigError(f"{where}: {model.__name__}.name = {getattr(model, 'name', None)!r} must be 'receiver_' + "
+                          f"letters, digits or '_', and not a built-in's ({', '.join(RECEIVERS.values())})")
+    try:
+        variables = model.fmu_variables()
+        model.program()
+    except Exception as exc:
+        raise ConfigError(f"{where}: {model.__name__} in {path!r} does not build ({type(exc).__name__}: {exc})") \
+            from None
+    try:
+        check_interface("receiver", [Port(v.name, v.causality, v.fmi_type, v.unit) for v in variables],
+                        COMPONENTS["receiver"].fmu_variables(), f"{model.__name__} in {path!r}")
+    except ModelError as exc:
+        raise ConfigError(f"{where}: {str(exc).split(': ', 1)[1]}") from None
+    return model
+
+
+def user_model(path: str | Path) -> type:
+    """The receiver model (a :class:`models.core.Component`) that a user's Python file defines.
+
+    The file must define exactly one model class whose ``name`` is
+    ``receiver_…`` (not a built-in's) and whose inputs and outputs are the
+    receiver interface. Loaded once per file version.
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing, does not import, or its model is not a receiver.
+    """
+    path = Path(path)
+    if not path.is_file() or path.suffix != ".py":
+        raise ConfigError(f"simulation.receiver: no Python file at {str(path)!r} (model:PATH.py)")
+    st = path.stat()
+    return _user_model(str(path.resolve()), (st.st_mtime_ns, st.st_size))
+
+
+def receiver_model(value: str) -> type | Path:
+    """What a ``simulation.receiver`` value names: a model class (built-in or a user's file), or an FMU path."""
+    if value in RECEIVER_MODELS:
+        return RECEIVER_MODELS[value]
+    if external_path(value, MODEL_PREFIX):
+        return user_model(external_path(value, MODEL_PREFIX))
+    return Path(external_path(value))
+
+
+def receiver_source(cfg: dict[str, dict]) -> str | Path | type:
+    """The receiver of a configuration: a built-in model name, a user's model class, or a user's FMU path."""
     value = cfg["simulation"]["receiver"]
-    return RECEIVERS[value] if value in RECEIVERS else Path(external_path(value))
+    source = receiver_model(value)
+    return RECEIVERS[value] if value in RECEIVERS else source
 
 
 def component_model(cfg: dict[str, dict], component: str) -> type | None:
-    """The sblsim model that implements a component of a configuration (None: a user's FMU)."""
+    """The model that implements a component of a configuration (None: a user's FMU)."""
     source = receiver_source(cfg) if component == "receiver" else component
-    return None if isinstance(source, Path) else MODELS[source]
+    if isinstance(source, Path):
+        return None
+    return source if isinstance(source, type) else MODELS[source]
 
 
 def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ...]:
@@ -122,9 +197,10 @@ def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ..
     if section == "simulation":
         return SIMULATION_VARIABLES
     if section == "receiver":
-        if receiver in RECEIVER_MODELS:
-            return tuple(v for v in RECEIVER_MODELS[receiver].config_parameters() if v.name not in SEED_NAMES)
-        return external_receiver_variables(Path(external_path(receiver)))
+        model = receiver_model(receiver)
+        if isinstance(model, Path):
+            return external_receiver_variables(model)
+        return tuple(v for v in model.config_parameters() if v.name not in SEED_NAMES)
     if section in COMPONENTS:
         return tuple(v for v in COMPONENTS[section].config_parameters() if v.name not in SEED_NAMES)
     raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
@@ -158,28 +234,41 @@ def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
 
 
 def check_receiver(receiver: str, where: str = "simulation.receiver") -> str:
-    """A ``simulation.receiver`` value: a built-in receiver or ``fmu:PATH`` of an existing file.
+    """A ``simulation.receiver`` value: a built-in receiver, ``model:PATH.py`` of a user's receiver model,
+    or ``fmu:PATH`` of an existing FMU file.
 
     Raises
     ------
     ConfigError
         Naming ``where``, the value and what is allowed.
     """
-    if receiver not in RECEIVER_MODELS:
-        path = external_path(receiver)
-        if not path:
-            raise ConfigError(f"{where}: {receiver!r} is not allowed; one of {', '.join(RECEIVER_MODELS)} or fmu:PATH")
-        if Path(path).is_dir():
-            raise ConfigError(f"{where}: {path!r} is a directory, not an FMU file")
-        if not Path(path).is_file():
-            raise ConfigError(f"{where}: no FMU file at {path!r}")
+    if receiver in RECEIVER_MODELS:
+        return receiver
+    if external_path(receiver, MODEL_PREFIX):
+        try:
+            user_model(external_path(receiver, MODEL_PREFIX))
+        except ConfigError as exc:
+            raise ConfigError(str(exc).replace("simulation.receiver", where, 1)) from None
+        return receiver
+    path = external_path(receiver)
+    if not path:
+        raise ConfigError(f"{where}: {receiver!r} is not allowed; one of {', '.join(RECEIVER_MODELS)}, "
+                          "model:PATH.py or fmu:PATH")
+    if Path(path).is_dir():
+        raise ConfigError(f"{where}: {path!r} is a directory, not an FMU file")
+    if not Path(path).is_file():
+        raise ConfigError(f"{where}: no FMU file at {path!r}")
     return receiver
 
 
 def receiver_label(cfg: dict[str, dict]) -> str:
-    """What a figure or table calls the receiver that ran: ``ekf``, ``ekf-seq``, ``ukf``, ``lsq`` or the FMU's name."""
+    """What a figure or table calls the receiver that ran: ``ekf``, ``ekf-seq``, ``ukf``, ``lsq``, a user
+    model's ``label`` (else its name) or the FMU's file name."""
     value = cfg["simulation"]["receiver"]
-    return value if value in RECEIVER_MODELS else Path(external_path(value)).stem
+    if value in RECEIVER_MODELS:
+        return value
+    model = receiver_model(value)
+    return Path(model).stem if isinstance(model, Path) else str(getattr(model, "label", model.name))
 
 
 def scenario_source(name: str) -> dict[str, Any]:

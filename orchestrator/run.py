@@ -99,35 +99,48 @@ class RunResult:
     step_time: dict[str, float] = field(default_factory=dict)
 
 
-def system_sources(cfg: dict | None = None) -> dict[str, str | Path]:
+Source = str | Path | type
+
+
+def system_sources(cfg: dict | None = None) -> dict[str, Source]:
     """What implements each component of a configuration's system.
 
     Returns
     -------
     dict
         Component name -> the name of a built-in model (:data:`models.MODELS`,
-        e.g. ``receiver_lsq`` for ``simulation.receiver = "lsq"``) or the path
-        of a user's FMU (``receiver = "fmu:PATH"``). Default: the paper's system.
+        e.g. ``receiver_lsq`` for ``simulation.receiver = "lsq"``), a user's
+        model class (``receiver = "model:PATH.py"``) or the path of a user's
+        FMU (``receiver = "fmu:PATH"``). Default: the paper's system.
     """
-    sources: dict[str, str | Path] = {name: name for name in COMPONENTS}
+    sources: dict[str, Source] = {name: name for name in COMPONENTS}
     if cfg is not None:
         sources["receiver"] = receiver_source(cfg)
     return sources
 
 
-def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, str | Path] | None = None) -> dict[str, Path]:
-    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), or a user's.
+def source_model(source: Source) -> type | None:
+    """The model class of a source (None for a user's FMU)."""
+    if isinstance(source, Path):
+        return None
+    return source if isinstance(source, type) else MODELS[source]
+
+
+def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None) -> dict[str, Path]:
+    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
+    a user's model built into the cache (:func:`fmus.build.cached_fmu`).
 
     Raises
     ------
     ModelError
         If an FMU is missing.
     """
-    from fmus.build import DEFAULT_DIR, fmu_path
+    from fmus.build import DEFAULT_DIR, cached_fmu, fmu_path
 
     directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
     sources = sources if sources is not None else system_sources()
-    paths = {name: src if isinstance(src, Path) else fmu_path(directory, src) for name, src in sources.items()}
+    paths = {name: src if isinstance(src, Path) else cached_fmu(src) if isinstance(src, type)
+             else fmu_path(directory, src) for name, src in sources.items()}
     for name, path in paths.items():
         if not path.is_file():
             raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
@@ -135,7 +148,7 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, str | Path] 
 
 
 def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4,
-                 sources: dict[str, str | Path] | None = None,
+                 sources: dict[str, Source] | None = None,
                  fmu_files: dict[str, Path] | None = None) -> dict[str, Any]:
     """One handle per component for an engine.
 
@@ -170,11 +183,11 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     try:
         for name, src in sources.items():
             if name not in paths:
-                handles[name] = LocalHandle(name, MODELS[src], n_beacons)
+                handles[name] = LocalHandle(name, source_model(src), n_beacons)
                 continue
             if isinstance(src, Path):  # a user's FMU: check its interface before loading it
                 check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)
-            handles[name] = open_fmu(name, paths[name], None if isinstance(src, Path) else MODELS[src])
+            handles[name] = open_fmu(name, paths[name], source_model(src))
     except Exception:
         close_handles(handles)
         raise

@@ -220,9 +220,14 @@ def beacon_parameters() -> tuple[Variable, ...]:
 class KalmanReceiver(Component):
     """Base of the Kalman-type receivers (state ``[posX, velX, posY, velY, posZ, velZ]``).
 
-    Subclasses set :attr:`name`, declare :meth:`parameters` and implement
-    :meth:`correct`; :meth:`predict` defaults to the constant-velocity model
-    with white-noise acceleration (:func:`models.receiver.kalman.predict`).
+    Subclasses set :attr:`name` (the FMU's, ``receiver_*``) and :attr:`label`
+    (what ``simulation.receiver`` and the reports call it), declare
+    :meth:`parameters` and implement :meth:`correct`; :meth:`initial` and
+    :meth:`predict` default to the constant-velocity model with white-noise
+    acceleration (:func:`models.receiver.kalman.predict`) and the
+    :func:`filter_parameters`. Everything else (the packet handling, the
+    instrumentation fix, the outputs, the FMU, the batched engine, the
+    embeddable C) comes from these.
     """
 
     component_index = 3
@@ -237,6 +242,12 @@ class KalmanReceiver(Component):
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         return cls.parameters(n_beacons) + receiver_interface()
+
+    @classmethod
+    def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
+        """State (6, 1) and covariance (6, 6) at the start (default: ``x0_*``, ``p0_position``, ``p0_velocity``)."""
+        x0 = ca.vertcat(*[p[f"x0_{name}"] for name in STATE_NAMES])
+        return x0, ca.diag(ca.vertcat(*[p["p0_position"] ** 2, p["p0_velocity"] ** 2] * 3))
 
     @classmethod
     def predict(cls, x: ca.SX, P: ca.SX, h, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -273,8 +284,7 @@ class KalmanReceiver(Component):
             ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states())
 
         def init(p, d, w, t0):
-            x0 = ca.vertcat(*[p[f"x0_{name}"] for name in ("x", "vx", "y", "vy", "z", "vz")])
-            P0 = ca.diag(ca.vertcat(*[p["p0_position"] ** 2, p["p0_velocity"] ** 2] * 3))
+            x0, P0 = cls.initial(p)
             return {"x": x0, "P": ca.vec(P0), **packet_init(n), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
                     "gated": 0, "failed": ca.SX.zeros(n), **lm_idle()}
 
