@@ -151,16 +151,19 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
     dict
         Name -> array (B,); NaN where a metric has no step to average.
     """
-    e = nees(err, cov)
+    def runs(values, dtype=float):  # run-major, time contiguous: each run summed in the same order whatever B is
+        return np.ascontiguousarray(np.asarray(values, dtype=dtype).T)
+
+    e = runs(nees(err, cov))
     valid = np.isfinite(e)
-    count = valid.sum(axis=0)
-    started = np.asarray(packet_seq) > 0
-    fresh = np.asarray(fresh, bool)
+    count = valid.sum(axis=-1)
+    started = runs(packet_seq) > 0
+    fresh = runs(fresh, bool)
     with np.errstate(invalid="ignore", divide="ignore"):
         return {
-            "nees_mean": np.where(valid, e, 0.0).sum(axis=0) / count,
-            "coverage_95": (valid & (e <= NEES_95)).sum(axis=0) / count,
-            "nis_mean": np.where(started, nis, 0.0).sum(axis=0) / started.sum(axis=0),
-            "gated_pct": 100.0 * (fresh & np.asarray(gated, bool)).sum(axis=0) / fresh.sum(axis=0),
-            "pcrb_rms": np.sqrt(np.mean(np.asarray(bound, dtype=float) ** 2, axis=0)),
+            "nees_mean": np.where(valid, e, 0.0).sum(axis=-1) / count,
+            "coverage_95": (valid & (e <= NEES_95)).sum(axis=-1) / count,
+            "nis_mean": np.where(started, runs(nis), 0.0).sum(axis=-1) / started.sum(axis=-1),
+            "gated_pct": 100.0 * (fresh & runs(gated, bool)).sum(axis=-1) / fresh.sum(axis=-1),
+            "pcrb_rms": np.sqrt(np.mean(runs(bound) ** 2, axis=-1)),
         }

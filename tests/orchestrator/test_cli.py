@@ -17,7 +17,7 @@ from orchestrator.cli import main
 from orchestrator.config import load_config
 
 SUMMARY_METRICS = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
-FIGURES = ("trajectory_xy.png", "trajectory_3d.png", "errors.png")
+FIGURES = ("trajectory_xy.png", "trajectory_3d.png", "errors.png", "error_bounds.png")
 
 
 def sblsim(*args, cwd: Path) -> subprocess.CompletedProcess:
