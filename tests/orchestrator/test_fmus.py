@@ -149,7 +149,7 @@ def test_engines_agree_on_full_semicircle(fmu_handles):
     assert local.metrics["e_tot_mean"].iloc[0] < 5.0
 
 
-@pytest.mark.parametrize("name", ["semicircle", "spiral", "random", "square", "harbour"])
+@pytest.mark.parametrize("name", ["semicircle", "spiral", "random", "square", "harbour", "random-walk"])
 def test_engines_agree_on_every_scenario_with_loss_and_multipath(fmu_handles, name):
     """20 % loss and 5 % multipath through both engines: every output equal to 1e-9 (they run the same C)."""
     cfg = load_config(name, ["simulation.duration=30", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"],
@@ -162,6 +162,20 @@ def test_engines_agree_on_every_scenario_with_loss_and_multipath(fmu_handles, na
     assert np.all(np.isfinite(series.select_dtypes("number").drop(columns=["instr_e_x", "instr_e_y", "instr_e_z",
                                                                            "instr_e_tot"])))
     assert_same_frames(local.timeseries, fmu.timeseries)
+
+
+@pytest.mark.parametrize("receiver", ["ekf-seq", "ukf", "lsq"])
+@pytest.mark.parametrize("name", ["random", "random-walk"])
+def test_engines_agree_for_every_receiver(fmu_dir, receiver, name):
+    """Each alternative receiver on both engines, with loss, multipath and its gate at work: equal to 1e-9."""
+    cfg = load_config(name, ["simulation.duration=30", "acoustics.loss_pct=20", "acoustics.outlier_pct=10",
+                             f"receiver={receiver}", "simulation.ekf_rate_ratio=2"], seed=8)
+    local = run(cfg, "local", replicates=[0, 1])
+    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
+    if receiver != "lsq":
+        assert local.timeseries["gated"].any()
+    assert_same_frames(local.timeseries, fmu.timeseries)
+    assert_same_frames(local.metrics, fmu.metrics)
 
 
 @pytest.mark.parametrize("name, overrides", [
