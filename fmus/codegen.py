@@ -105,8 +105,8 @@ def _function(name: str, f: ca.Function | None, streams: tuple[Stream, ...], slo
     table = "NULL"
     if streams:
         table = f"{name}_streams"
-        items = ", ".join(f"{{{s.purpose}, {slots[s.purpose]}, {'SBLSIM_UNIFORM' if s.kind == 'uniform' else 'SBLSIM_NORMAL'}, "
-                          f"{s.width}}}" for s in streams)
+        kinds = {"uniform": "SBLSIM_UNIFORM", "normal": "SBLSIM_NORMAL"}
+        items = ", ".join(f"{{{s.purpose}, {slots[s.purpose]}, {kinds[s.kind]}, {s.width}}}" for s in streams)
         lines.append(f"static const sblsim_stream {table}[] = {{{items}}};")
     return f"{{{f.name()}, {f.name()}_work, {table}, {len(streams)}}}"
 
@@ -135,7 +135,7 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
         if v.table.when is not None:
             choice = next(x for x in params if x.name == v.table.when[0])
             when_index, when_value = p_index[choice.name], float(choice.choices.index(v.table.when[1]))
-        for j, col in enumerate(v.table.columns):
+        for col in v.table.columns:
             for r in range(1, v.table.max_rows + 1):
                 table_of[f"{col.name}[{r}]"] = (len(tables), r)
         tables.append(f"{{{p_index[v.name]}, {v.table.max_rows}, {len(v.table.columns)}, {first}, "
@@ -169,8 +169,8 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     for ev in program.events:
         handler = _function(f"event_{ev.name}", ev.handler, ev.streams, slots, lines)
         events.append(f"{{{_cstr(ev.name)}, {ev.guard.name()}, {ev.guard.name()}_work, {handler}}}")
-    lines.append("static const sblsim_event events[] = {" + (", ".join(events) or "{NULL, NULL, NULL, {NULL, NULL, NULL, 0}}")
-                 + "};")
+    empty = "{NULL, NULL, NULL, {NULL, NULL, NULL, 0}}"
+    lines.append("static const sblsim_event events[] = {" + (", ".join(events) or empty) + "};")
     seeds = ", ".join(str(p_index.get(name, -1)) for name in SEED_NAMES)
     lines += ["", f"const sblsim_model {symbol} = {{",
               f"    {_cstr(model.name)}, {_cstr(guid)}, {model.component_index},",

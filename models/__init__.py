@@ -19,5 +19,5 @@ RECEIVERS = {key: model.name for key, model in RECEIVER_MODELS.items()}
 #: Every model by its own name: the four components and the alternative receivers.
 MODELS = {**COMPONENTS, **{model.name: model for model in RECEIVER_MODELS.values()}}
 
-__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "RECEIVER_MODELS", "Acoustics", "LeastSquaresReceiver", "Platform", "Receiver",
-           "SequentialReceiver", "Target", "UnscentedReceiver"]
+__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "RECEIVER_MODELS", "Acoustics", "LeastSquaresReceiver", "Platform",
+           "Receiver", "SequentialReceiver", "Target", "UnscentedReceiver"]

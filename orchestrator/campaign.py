@@ -47,7 +47,6 @@ from orchestrator.metrics import RUN_METRICS
 from orchestrator.run import ENGINES, fmu_paths, run_batch, system_sources, with_replicates
 from orchestrator.study import Study
 
-
 #: Default runs per chunk on each engine.
 DEFAULT_BATCH = {"local": 800, "fmu": 50}
 

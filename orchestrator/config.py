@@ -220,13 +220,15 @@ def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
         raise ConfigError(f"simulation.receiver: {str(path)!r} is not a readable FMU ({exc})") from None
+    def number(x):
+        return None if x is None else float(x)
+
     out = []
     for v in md.modelVariables:
         if v.causality != "parameter" or v.type not in ("Real", "Integer", "Boolean") or v.name in SEED_NAMES:
             continue
         start = {"Real": float, "Integer": int, "Boolean": lambda x: str(x).lower() in ("true", "1")}[v.type](
             v.start if v.start is not None else 0)
-        number = (lambda x: None if x is None else float(x))
         out.append(Variable(v.name, "parameter", v.type, start, v.unit or ("1" if v.type == "Real" else "")
                             if (v.unit or "1") in UNITS else "1", v.description or "",
                             min=number(v.min), max=number(v.max)))

@@ -265,8 +265,8 @@ class FmuHandle:
             if rows:
                 vrs = (ctypes.c_uint * len(rows))(*[variables[k].valueReference for k in rows])
                 buffer = np.zeros(len(rows), dtype=np.float64 if typ == "Real" else np.int32)
-                groups.append((typ, np.array(rows), vrs, buffer,
-                               buffer.ctypes.data_as(ctypes.POINTER(ctypes.c_double if typ == "Real" else ctypes.c_int))))
+                pointer = ctypes.POINTER(ctypes.c_double if typ == "Real" else ctypes.c_int)
+                groups.append((typ, np.array(rows), vrs, buffer, buffer.ctypes.data_as(pointer)))
         return groups
 
     def _set(self, values: Mapping[str, Any]) -> None:

@@ -26,7 +26,6 @@ algorithms, multi-rate stepping).
 from __future__ import annotations
 
 import time
-
 from typing import Callable, Mapping, Sequence
 
 import numpy as np

@@ -383,8 +383,10 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     finally:
         if own:
             close_handles(handles)
-    rec = recs[0] if len(recs) == 1 else {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1))
-                                          for k in recs[0]}
+    if len(recs) == 1:
+        rec = recs[0]
+    else:
+        rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
     types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
     rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
     result = _result(cfgs, engine, rec, replicates, n_steps, wall, timeseries)

@@ -47,8 +47,15 @@ from xml.etree import ElementTree as ET
 
 from models import COMPONENTS, MODELS
 from models.core import SEED_NAMES, UNITS, ModelError
-from orchestrator.config import (EXTERNAL_PREFIX, RECEIVERS, apply_overrides, beacon_count, component_params, resolve,
-                                 section_variables)
+from orchestrator.config import (
+    EXTERNAL_PREFIX,
+    RECEIVERS,
+    apply_overrides,
+    beacon_count,
+    component_params,
+    resolve,
+    section_variables,
+)
 from orchestrator.connections import Connection, default_connections
 from orchestrator.run import fmu_paths, system_sources
 

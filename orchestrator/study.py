@@ -47,11 +47,10 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from models.core import ModelError, Variable
 from models import RECEIVER_MODELS
+from models.core import ModelError, Variable
+from orchestrator.config import BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source, section_variables
 from orchestrator.metrics import RUN_METRICS
-from orchestrator.config import (BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source,
-                                 section_variables)
 
 BUILTIN_STUDIES = ("paper",)
 DESIGNS = ("full", "fractional")

@@ -17,5 +17,6 @@ def fmu_dir(tmp_path_factory):
 
     directory = tmp_path_factory.mktemp("fmus")
     paths = build_all(directory)
-    assert sorted(p.name for p in paths) == sorted(f"sblsim_{n}.fmu" for n in MODELS) and all(p.is_file() for p in paths)
+    assert sorted(p.name for p in paths) == sorted(f"sblsim_{n}.fmu" for n in MODELS)
+    assert all(p.is_file() for p in paths)
     return directory

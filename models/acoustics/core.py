@@ -34,8 +34,7 @@ from typing import Any, Mapping
 import casadi as ca
 
 from models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
-from models.core import (SEED_PARAMETERS, Component, ProgramBuilder, Stream, Variable, format_table, sample_due,
-                         select)
+from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Stream, Variable, format_table, sample_due, select
 from models.platform.core import AXES, beacon_names, beacon_variables
 
 _CHANNEL_UNIFORM, _RANGE_NOISE = range(2)

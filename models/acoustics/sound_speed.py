@@ -33,8 +33,16 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from models.core import (Column, ModelError, Table, check_entry, check_increasing, cumulative_sum, padded_rows,
-                         parse_table)
+from models.core import (
+    Column,
+    ModelError,
+    Table,
+    check_entry,
+    check_increasing,
+    cumulative_sum,
+    padded_rows,
+    parse_table,
+)
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md).
 BUILTIN_CASTS = ("11E101663_20120821_122817", "11E101663_20120821_145912")

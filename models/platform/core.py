@@ -26,8 +26,16 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from models.core import (SEED_PARAMETERS, Component, ModelError, ProgramBuilder, Stream, Variable, format_table,
-                         sample_due)
+from models.core import (
+    SEED_PARAMETERS,
+    Component,
+    ModelError,
+    ProgramBuilder,
+    Stream,
+    Variable,
+    format_table,
+    sample_due,
+)
 from models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
 from models.platform.waves import wave_motion
 

@@ -26,7 +26,7 @@ from models.receiver.measurement import RangeDepthModel
 
 
 def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, depth, sigma_range, sigma_depth,
-           model: RangeDepthModel = RangeDepthModel()) -> tuple[ca.SX, ca.SX, ca.SX]:
+           model: RangeDepthModel | None = None) -> tuple[ca.SX, ca.SX, ca.SX]:
     """The paper's EKF update with the latest range of each beacon heard so far and the depth.
 
     Parameters
@@ -45,14 +45,15 @@ def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, dept
         Depth reading [m].
     sigma_range, sigma_depth : casadi.SX
         Standard deviations in R [m].
-    model : RangeDepthModel
-        The measurement model.
+    model : RangeDepthModel, optional
+        The measurement model (default a :class:`RangeDepthModel`).
 
     Returns
     -------
     x, P, nis : casadi.SX
         Updated state and covariance, and ``yᵀ S⁻¹ y`` [1].
     """
+    model = model or RangeDepthModel()
     n = ranges.numel()
     rows, y = [], []
     for i in range(n):

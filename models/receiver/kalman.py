@@ -1,4 +1,4 @@
-"""Kalman-filter arithmetic as casadi expressions: the paper's EKF, scalar updates, the NIS gate, the unscented transform.
+"""Kalman-filter arithmetic as casadi expressions: predict, joint and scalar updates, the NIS gate, sigma points.
 
 State ``x = [posX, velX, posY, velY, posZ, velZ]`` (NED) [m, m/s] with the
 constant-velocity transition ``Φ = blockdiag([[1, Δt], [0, 1]] × 3)`` and
@@ -35,6 +35,7 @@ import math
 import casadi as ca
 
 from models.receiver.measurement import STATE_SIZE
+
 
 def transition(dt) -> ca.SX:
     """Constant-velocity transition matrix Φ, (6, 6), for a step ``dt`` [s]."""

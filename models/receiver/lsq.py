@@ -36,8 +36,21 @@ from __future__ import annotations
 import casadi as ca
 
 from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Variable
-from models.receiver.core import (covariance_outputs, filter_parameters, fresh_packet, lm_active, lm_begin, lm_idle, lm_states, lm_step,
-                                  packet_init, packet_states, receiver_interface, slot_due, take_packet)
+from models.receiver.core import (
+    covariance_outputs,
+    filter_parameters,
+    fresh_packet,
+    lm_active,
+    lm_begin,
+    lm_idle,
+    lm_states,
+    lm_step,
+    packet_init,
+    packet_states,
+    receiver_interface,
+    slot_due,
+    take_packet,
+)
 from models.receiver.multilateration import fix_covariance, weights
 
 #: The Kalman receivers' parameters this receiver takes (declared once, in models.receiver.core).

@@ -213,5 +213,5 @@ def fit_statistics(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.S
     return rss, ca.sqrt(ca.fmax(ca.trace(covariance), 0.0))
 
 
-__all__ = ["EPS", "LM_STATE", "SIGMA_FLOOR", "fit_statistics", "fix_covariance", "linear_fix", "lm_iteration", "lm_start",
-           "normal_equations", "solve_damped3", "weights"]
+__all__ = ["EPS", "LM_STATE", "SIGMA_FLOOR", "fit_statistics", "fix_covariance", "linear_fix", "lm_iteration",
+           "lm_start", "normal_equations", "solve_damped3", "weights"]

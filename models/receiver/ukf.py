@@ -22,8 +22,15 @@ import casadi as ca
 
 from models.core import Variable
 from models.receiver import kalman
-from models.receiver.core import (KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, gate,
-                                  gate_parameters, take_packet)
+from models.receiver.core import (
+    KalmanReceiver,
+    beacon_parameters,
+    filter_parameters,
+    fresh_range,
+    gate,
+    gate_parameters,
+    take_packet,
+)
 from models.receiver.ekf_seq import fresh_range_variance
 
 

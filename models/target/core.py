@@ -31,10 +31,23 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from models.core import (SEED_PARAMETERS, Column, Component, ModelError, ProgramBuilder, Stream, Table, Variable,
-                         format_table, padded_rows, parse_table, resolve_parameters, sample_due, select)
-from models.target.trajectories import (OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows,
-                                        waypoints)
+from models.core import (
+    SEED_PARAMETERS,
+    Column,
+    Component,
+    ModelError,
+    ProgramBuilder,
+    Stream,
+    Table,
+    Variable,
+    format_table,
+    padded_rows,
+    parse_table,
+    resolve_parameters,
+    sample_due,
+    select,
+)
+from models.target.trajectories import OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows, waypoints
 
 TRAJECTORIES = ("semicircle", "spiral", "random", "square", "file", "random-walk")
 #: Largest number of waypoints of a trajectory file.

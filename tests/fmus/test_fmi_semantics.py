@@ -36,9 +36,13 @@ class Slave:
 
     def _callbacks(self):
         """FMI callbacks whose logger keeps each message in :attr:`log` (the FMU logs errors always)."""
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                               fmi2CallbackLoggerTYPE)
         from fmpy.fmi1 import calloc, free
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+        )
 
         def logger(env, instance, status, category, message):
             self.log.append(message.decode())

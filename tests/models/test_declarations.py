@@ -10,8 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from models.core import (Column, Component, ModelError, Table, Variable, format_table, parse_table,
-                         resolve_parameters)
+from models.core import Column, Component, ModelError, Table, Variable, format_table, parse_table, resolve_parameters
 from models.platform import Platform
 from models.target import Target
 from models.target.core import WAYPOINTS

@@ -18,8 +18,7 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from models.core import ModelError, normals, uniforms
-from models.platform import (Platform, beacon_names, beacon_positions, cross_offsets, parse_offsets,
-                             rotation_ned)
+from models.platform import Platform, beacon_names, beacon_positions, cross_offsets, parse_offsets, rotation_ned
 from models.platform.waves import WIND_SPEED, wave_motion
 from tests.helpers import Core
 

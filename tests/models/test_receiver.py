@@ -16,8 +16,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from models.receiver import Receiver, position_range_function, range_function
-from models.receiver import ekf, kalman
+from models.receiver import Receiver, ekf, kalman, position_range_function, range_function
 from models.receiver import multilateration as ml
 from tests.helpers import Core
 

@@ -68,7 +68,7 @@ def range_variance(rc):
 
 
 def slots(ts, cfg, ratio):
-    """Yield (macro step k, is_slot, row) for every receiver step, with the slot rule applied."""
+    """Yield (last sub-step of the macro step, is_slot, row) for every receiver step, with the slot rule applied."""
     T = cfg["simulation"]["sampling_time"]
     dt = T / ratio
     last = 0
@@ -78,7 +78,7 @@ def slots(ts, cfg, ratio):
             slot = row.packet_seq != last and t + dt >= row.tx_time - SLACK
             if slot:
                 last = row.packet_seq
-            yield k, j == ratio - 1, slot, row
+            yield j == ratio - 1, slot, row
 
 
 def fresh(row):
@@ -95,7 +95,7 @@ def replay_ekf_seq(ts, cfg, ratio):
     gate, var = Gate(rc), range_variance(rc)
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
     nis, gated = 0.0, False
-    for k, last_substep, slot, row in slots(ts, cfg, ratio):
+    for last_substep, slot, row in slots(ts, cfg, ratio):
         ekf.predict()
         if slot:
             ekf.update(np.array([[row.depth]]), lambda x: DEPTH_ROW, lambda x: x[4:5], R=rc["sigma_depth"] ** 2)
@@ -106,8 +106,8 @@ def replay_ekf_seq(ts, cfg, ratio):
                 h, H = range_row(ekf.x, b)
                 y, S = row.range - h, (H @ ekf.P @ H.T).item() + var
                 if gate(row.beacon_id, y, S):
-                    ekf.update(np.array([[row.range]]), lambda x: range_row(x, b)[1],
-                               lambda x: np.array([[range_row(x, b)[0]]]), R=var)
+                    ekf.update(np.array([[row.range]]), lambda x, b=b: range_row(x, b)[1],
+                               lambda x, b=b: np.array([[range_row(x, b)[0]]]), R=var)
                     nis += y * y / S
                 else:
                     gated = True
@@ -131,7 +131,7 @@ def replay_ukf(ts, cfg, ratio):
     gate, var, sd2 = Gate(rc), range_variance(rc), rc["sigma_depth"] ** 2
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
     nis, gated = 0.0, False
-    for k, last_substep, slot, row in slots(ts, cfg, ratio):
+    for last_substep, slot, row in slots(ts, cfg, ratio):
         ukf.predict()
         if slot:
             ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # redrawn from the predicted mean and covariance
@@ -141,7 +141,7 @@ def replay_ukf(ts, cfg, ratio):
                 b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
                 joint = copy.deepcopy(ukf)
                 joint.update(np.array([row.range, row.depth]), R=np.diag([var, sd2]),
-                             hx=lambda x: np.array([np.linalg.norm(x[[0, 2, 4]] - b), x[4]]))
+                             hx=lambda x, b=b: np.array([np.linalg.norm(x[[0, 2, 4]] - b), x[4]]))
                 use = gate(row.beacon_id, joint.y[0], joint.S[0, 0])
                 gated = not use
             if use:

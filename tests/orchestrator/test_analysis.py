@@ -18,10 +18,8 @@ from scipy import stats  # noqa: E402
 
 from models.core import ModelError  # noqa: E402
 from orchestrator import analysis_plots  # noqa: E402
-from orchestrator.analysis import (AnalysisError, analyze, compute, fit, lenth_pse,  # noqa: E402
-                                   tables)
-from orchestrator.analysis_plots import (plot_interactions, plot_main_effects, plot_pareto,  # noqa: E402
-                                         plot_residuals)
+from orchestrator.analysis import AnalysisError, analyze, compute, fit, lenth_pse, tables  # noqa: E402
+from orchestrator.analysis_plots import plot_interactions, plot_main_effects, plot_pareto, plot_residuals  # noqa: E402
 from orchestrator.metrics import METRIC_NAMES  # noqa: E402
 
 # Names chosen to clash with formula syntax and Python builtins.
@@ -258,7 +256,8 @@ def test_tables_against_pandas(tmp_path):
     assert (tab.loc[tab["subset"] == "best cell", "cell"] == cell).all()
     assert value(table="receiver_vs_instr", estimator="instrumentation", statistic="std") == pytest.approx(
         frame["instr_e_tot_mean"].std(ddof=1))
-    assert value(table="receiver_vs_instr", estimator=ESTIMATOR, statistic="mean") == pytest.approx(frame["e_tot_mean"].mean())
+    assert value(table="receiver_vs_instr", estimator=ESTIMATOR, statistic="mean") == pytest.approx(
+        frame["e_tot_mean"].mean())
 
 
 def test_unreplicated_campaign_states_lenth_in_report(tmp_path):

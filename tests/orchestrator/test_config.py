@@ -9,15 +9,23 @@ import pytest
 
 from models import COMPONENTS
 from models.core import ModelError
-from orchestrator.config import (BUILTIN_SCENARIOS, MIN_SIGMA, SECTIONS, load_config, parse_override,
-                                 section_variables, to_toml)
+from orchestrator.config import (
+    BUILTIN_SCENARIOS,
+    MIN_SIGMA,
+    SECTIONS,
+    load_config,
+    parse_override,
+    section_variables,
+    to_toml,
+)
 
 
 def declared_parameters(section: str) -> set[str]:
     """Parameter names a section must hold, computed from the declarations."""
     if section in COMPONENTS:
         seed = {"seed", "scenario_key", "cell", "replicate"}
-        return {v.name for v in COMPONENTS[section].variables() if v.causality == "parameter" and v.scope != "fmu"} - seed
+        declared = COMPONENTS[section].variables()
+        return {v.name for v in declared if v.causality == "parameter" and v.scope != "fmu"} - seed
     return {v.name for v in section_variables(section)}
 
 
