@@ -93,16 +93,16 @@ def nees(err: np.ndarray, cov: np.ndarray) -> np.ndarray:
         NEES [1]; NaN where the covariance is not positive-definite (e.g. a
         receiver reporting zeros before its first fix).
     """
-    err = np.asarray(err, dtype=float)
+    e0, e1, e2 = np.moveaxis(np.asarray(err, dtype=float), -1, 0)
     xx, xy, xz, yy, yz, zz = np.moveaxis(np.asarray(cov, dtype=float), -1, 0)
-    # Sylvester's criterion: every leading principal minor positive
-    minor2 = xx * yy - xy * xy
-    det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz)
-    pd = (xx > 0) & (minor2 > 0) & (det > 0)
-    P = np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
-    P = np.where(pd[..., None, None], P, np.eye(3))
-    out = np.einsum("...i,...i->...", err, np.linalg.solve(P, err[..., None])[..., 0])
-    return np.where(pd, out, np.nan)
+    # P⁻¹ = adj(P) / det(P) by cofactors; Sylvester's criterion: every leading principal minor positive
+    c00, c11, c22 = yy * zz - yz * yz, xx * zz - xz * xz, xx * yy - xy * xy
+    c01, c02, c12 = xz * yz - xy * zz, xy * yz - xz * yy, xy * xz - xx * yz
+    det = xx * c00 + xy * c01 + xz * c02
+    pd = (xx > 0) & (c22 > 0) & (det > 0)
+    quadratic = e0 * e0 * c00 + e1 * e1 * c11 + e2 * e2 * c22 + 2.0 * (e0 * e1 * c01 + e0 * e2 * c02 + e1 * e2 * c12)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(pd, quadratic / det, np.nan)
 
 
 def slots(packet_seq: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -83,8 +83,8 @@ def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon
     """
     if layout == "custom":
         return parse_offsets(beacon_offsets)
-    return np.array([[float(v) for v in ca.DM(a).full().ravel()]
-                     for a in cross_offsets(baseline, transducer_depth, n_beacons)])
+    return np.array([[baseline * c, baseline * s, transducer_depth] for c, s in cross_directions(n_beacons)],
+                    dtype=float)  # cross_offsets with numbers
 
 
 def rotation_ned(roll, pitch, yaw) -> ca.SX:

@@ -529,3 +529,12 @@ def test_per_replicate_parameters():
 def test_out_of_range_parameters_are_refused(params, field):
     with pytest.raises(ModelError, match=f"^{field}: "):
         Core(Platform, params).initialize(0.0)
+
+
+@pytest.mark.parametrize("n", [3, 4, 6])
+def test_layout_offsets_of_a_cross_are_the_casadi_offsets(n):
+    from models.platform.geometry import cross_offsets, layout_offsets
+
+    expected = np.array([np.array(ca.DM(a)).ravel() for a in cross_offsets(2.5, 0.7, n)])
+    np.testing.assert_array_equal(layout_offsets("cross", 2.5, 0.7, "", n), expected)
+    np.testing.assert_array_equal(layout_offsets("custom", 0, 0, "1 2 3; 4 5 6"), [[1, 2, 3], [4, 5, 6]])
