@@ -128,6 +128,7 @@ def _check_seed(seed: int | None) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from orchestrator.config import beacon_count, load_config
+    from orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_NIS, DIVERGENCE_SLOTS
     from orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
 
     _check_seed(args.seed)
@@ -158,18 +159,25 @@ def _run(args: argparse.Namespace) -> int:
     write_run(result, out)
     s = summary(result)
     sim = cfg["simulation"]
+
+    def v(key: str, spec: str = ".3f", scale: float = 1.0) -> str:  # a metric, or n/a when it has no value
+        return "n/a" if s[key] is None else format(scale * s[key], spec)
+
     print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {s['receiver']}), "
           f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
     label = f"{s['receiver']}:"
     width = max(len(label), len("instrumentation:")) + 1
-    print(f"  {label:<{width}}e_tot mean {s['e_tot_mean']:.3f} m, RMS {s['e_tot_rms']:.3f} m, "
-          f"std {s['e_tot_std']:.3f} m")
-    print(f"  {'instrumentation:':<{width}}e_tot mean {s['instr_e_tot_mean']:.3f} m, "
-          f"RMS {s['instr_e_tot_rms']:.3f} m, std {s['instr_e_tot_std']:.3f} m")
-    print(f"  {'consistency:':<{width}}NEES {s['nees_mean']:.2f} (3 if consistent), truth inside the 95 % "
-          f"ellipsoid {100 * s['coverage_95']:.1f} % of steps, mean NIS {s['nis_mean']:.2f}, "
-          f"gated {s['gated_pct']:.1f} % of ranges")
-    print(f"  {'accuracy limit:':<{width}}PCRB RMS {s['pcrb_rms']:.3f} m")
+    print(f"  {label:<{width}}e_tot mean {v('e_tot_mean')} m, RMS {v('e_tot_rms')} m, std {v('e_tot_std')} m")
+    print(f"  {'instrumentation:':<{width}}e_tot mean {v('instr_e_tot_mean')} m, "
+          f"RMS {v('instr_e_tot_rms')} m, std {v('instr_e_tot_std')} m")
+    print(f"  {'consistency:':<{width}}NEES {v('nees_mean', '.2f')} (3 if consistent), truth inside the 95 % "
+          f"ellipsoid {v('coverage_95', '.1f', 100)} % of steps, mean NIS {v('nis_mean', '.2f')}, "
+          f"gated {v('gated_pct', '.1f')} % of ranges")
+    print(f"  {'accuracy limit:':<{width}}PCRB RMS {v('pcrb_rms')} m")
+    if s["diverged"]:
+        print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
+              f"{DIVERGENCE_DISTANCE:g} m off, or its NIS above {DIVERGENCE_NIS:g} for {DIVERGENCE_SLOTS} slots in a "
+              "row): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     return 0
 
@@ -251,6 +259,10 @@ def _campaign(args: argparse.Namespace) -> int:
               f"{len(result.runs)} runs in {out / 'runs.parquet'}")
     else:
         print(f"nothing to do: {len(result.runs)} runs already in {out / 'runs.parquet'}")
+    diverged = int(result.runs["diverged"].sum()) if "diverged" in result.runs else 0
+    if diverged:
+        print(f"sblsim: warning: the receiver diverged in {diverged} of {len(result.runs)} runs (column diverged of "
+              "runs.parquet): their numbers mean nothing", file=sys.stderr)
     if args.analyze:
         return _analyze_dir(out)
     return 0

@@ -11,7 +11,8 @@ numbers). Per receiver, over all steps of all replicates:
   consistency metrics (:mod:`orchestrator.metrics`);
 * ``pcrb_rms`` [m] and ``ratio_to_pcrb = rms_e_tot / pcrb_rms``;
 * ``us_per_step``: wall-clock time of the receiver's doStep per run and
-  communication step [µs], the runs stepped together on the local engine.
+  communication step [µs], the runs stepped together on the local engine;
+* ``diverged``: the number of runs whose receiver diverged.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from orchestrator.output import staged_directory
 from orchestrator.run import run_batch, with_replicates
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "mean_e_tot", "nees", "coverage_95", "nis", "gated_pct", "pcrb_rms",
-           "ratio_to_pcrb", "us_per_step")
+           "ratio_to_pcrb", "us_per_step", "diverged")
 
 
 def parse_receivers(text: str) -> list[str]:
@@ -91,18 +92,20 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
                      "mean_e_tot": float(m["e_tot_mean"].mean()), "nees": float(m["nees_mean"].mean()),
                      "coverage_95": float(m["coverage_95"].mean()), "nis": float(m["nis_mean"].mean()),
                      "gated_pct": float(m["gated_pct"].mean()), "pcrb_rms": bound, "ratio_to_pcrb": rms / bound,
-                     "us_per_step": 1e6 * result.step_time.get("receiver", math.nan) / (result.steps * replicates)})
+                     "us_per_step": 1e6 * result.step_time.get("receiver", math.nan) / (result.steps * replicates),
+                     "diverged": int(m["diverged"].sum())})
     return pd.DataFrame(rows, columns=list(COLUMNS))
 
 
 def markdown(table: pd.DataFrame) -> str:
     """The comparison as a Markdown table (units in the header)."""
     head = ("| receiver | RMS e_tot [m] | mean e_tot [m] | NEES (3) | coverage 95 % | gated [%] | PCRB RMS [m] "
-            "| RMS / PCRB | µs per step |")
-    lines = [head, "|---|---|---|---|---|---|---|---|---|"]
+            "| RMS / PCRB | µs per step | diverged runs |")
+    lines = [head, "|---|---|---|---|---|---|---|---|---|---|"]
     for r in table.itertuples():
         lines.append(f"| {r.receiver} | {r.rms_e_tot:.3f} | {r.mean_e_tot:.3f} | {r.nees:.2f} | {r.coverage_95:.3f} "
-                     f"| {r.gated_pct:.2f} | {r.pcrb_rms:.3f} | {r.ratio_to_pcrb:.2f} | {r.us_per_step:.2f} |")
+                     f"| {r.gated_pct:.2f} | {r.pcrb_rms:.3f} | {r.ratio_to_pcrb:.2f} | {r.us_per_step:.2f} "
+                     f"| {r.diverged} |")
     return "\n".join(lines) + "\n"
 
 

@@ -15,7 +15,10 @@ where P is not positive-definite are left out. ``nis_mean`` is the mean of
 the receiver's ``nis`` output from the first slot on; ``gated_pct`` the share
 of received slots whose range the gate rejected [%]; ``pcrb_rms`` the RMS of
 the position PCRB along the run (:mod:`models.receiver.bound`), comparable
-with ``e_tot_rms``.
+with ``e_tot_rms``. ``diverged`` flags a run whose receiver lost the diver: an
+estimate that is not finite or more than :data:`DIVERGENCE_DISTANCE` from
+the truth, or a NIS above :data:`DIVERGENCE_NIS` on :data:`DIVERGENCE_SLOTS`
+slots in a row; its other numbers then mean nothing.
 """
 
 from __future__ import annotations
@@ -24,8 +27,12 @@ import numpy as np
 from scipy.stats import chi2
 
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
-#: Per-run consistency metrics and the bound.
-CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms")
+#: Per-run consistency metrics, the bound and the divergence flag.
+CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms", "diverged")
+#: A receiver has diverged when its estimate is this far from the truth [m] at some step ...
+DIVERGENCE_DISTANCE = 1000.0
+#: ... or when its NIS exceeds this for this many slots in a row (or any estimate is not finite).
+DIVERGENCE_NIS, DIVERGENCE_SLOTS = 1e4, 20
 #: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound.
 RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
@@ -155,6 +162,15 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
         return np.ascontiguousarray(np.asarray(values, dtype=dtype).T)
 
     e = runs(nees(err, cov))
+    distance = runs(np.sqrt(np.sum(np.asarray(err, dtype=float) ** 2, axis=-1)))
+    lost = ~np.isfinite(distance) | (distance > DIVERGENCE_DISTANCE)
+    slot = runs(slots(packet_seq, fresh)[0], bool)
+    high = runs(nis) > DIVERGENCE_NIS
+    run_length = np.zeros(high.shape[0])
+    longest = np.zeros(high.shape[0])
+    for k in range(high.shape[1]):  # consecutive slots with a NIS beyond the limit
+        run_length = np.where(slot[:, k], np.where(high[:, k], run_length + 1, 0), run_length)
+        longest = np.maximum(longest, run_length)
     valid = np.isfinite(e)
     count = valid.sum(axis=-1)
     started = runs(packet_seq) > 0
@@ -166,4 +182,5 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
             "nis_mean": np.where(started, runs(nis), 0.0).sum(axis=-1) / started.sum(axis=-1),
             "gated_pct": 100.0 * (fresh & runs(gated, bool)).sum(axis=-1) / fresh.sum(axis=-1),
             "pcrb_rms": np.sqrt(np.mean(runs(bound) ** 2, axis=-1)),
+            "diverged": lost.any(axis=-1) | (longest >= DIVERGENCE_SLOTS),
         }

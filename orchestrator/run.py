@@ -434,9 +434,11 @@ def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int],
 
 
 def summary(result: RunResult) -> dict[str, Any]:
-    """``summary.json`` content of a single-replicate run (the keys the README lists)."""
+    """``summary.json`` content of a single-replicate run (the keys the README lists); strict JSON: a metric
+    without a value (e.g. no instrumentation fix at all) is ``None`` (``null``), never NaN."""
     row = result.metrics.iloc[0]
-    out: dict[str, Any] = {k: float(row[k]) for k in result.metrics.columns if k != "replicate"}
+    out: dict[str, Any] = {k: (bool(row[k]) if k == "diverged" else None if math.isnan(row[k]) else float(row[k]))
+                           for k in result.metrics.columns if k != "replicate"}
     out.update(engine=result.engine, receiver=receiver_label(result.config), seed=int(result.config["run"]["seed"]),
                steps=int(result.steps),
                scenario=result.config["run"]["scenario"], replicate=int(row["replicate"]),
@@ -461,7 +463,7 @@ def write_run(result: RunResult, out_dir: Path | str) -> Path:
 
     out_dir = Path(out_dir)
     with staged_directory(out_dir) as tmp:
-        (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2) + "\n")
+        (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2, allow_nan=False) + "\n")
         (tmp / "config.toml").write_text(to_toml(result.config))
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
         receiver = receiver_label(result.config)

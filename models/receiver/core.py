@@ -146,18 +146,19 @@ def lm_idle() -> dict[str, ca.SX]:
 def filter_parameters() -> tuple[Variable, ...]:
     """The parameters every Kalman-type receiver takes: R, the motion model, the initial state and covariance."""
     return (
-        Variable("sigma_range", "parameter", "Real", 0.1, "m", "Range standard deviation in R",
-                 min=0.0, max=1000.0, min_exclusive=True),
-        Variable("sigma_depth", "parameter", "Real", 0.01, "m", "Depth standard deviation in R",
-                 min=0.0, max=1000.0, min_exclusive=True),
+        Variable("sigma_range", "parameter", "Real", 0.1, "m",
+                 "Range standard deviation in R (at least 1 mm: below, R no longer regularizes the update)",
+                 min=1e-3, max=1000.0),
+        Variable("sigma_depth", "parameter", "Real", 0.01, "m", "Depth standard deviation in R (at least 1 mm)",
+                 min=1e-3, max=1000.0),
         Variable("q_horizontal", "parameter", "Real", 0.01, "m2/s3",
                  "Process noise: horizontal acceleration spectral density", min=0.0, max=1e6),
         Variable("q_vertical", "parameter", "Real", 0.001, "m2/s3",
                  "Process noise: vertical acceleration spectral density", min=0.0, max=1e6),
         Variable("p0_position", "parameter", "Real", 1.0, "m", "Initial position standard deviation",
-                 min=0.0, max=1e6, min_exclusive=True),
+                 min=1e-3, max=1e6),
         Variable("p0_velocity", "parameter", "Real", 0.5, "m/s", "Initial velocity standard deviation",
-                 min=0.0, max=1e6, min_exclusive=True),
+                 min=1e-3, max=1e6),
     ) + tuple(
         Variable(f"x0_{n}", "parameter", "Real", 0.0, "m" if n[0] != "v" else "m/s",
                  f"Initial {'position' if n[0] != 'v' else 'velocity'} estimate, {_AXES[n[-1]]}",

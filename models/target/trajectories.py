@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from functools import lru_cache
 from pathlib import Path
 
@@ -122,7 +123,8 @@ def square_rows(side, speed, depth) -> list[list]:
 def read_trajectory_file(path: str | Path, table: Table, field: str = "target.trajectory_file") -> np.ndarray:
     """Read a trajectory CSV with columns time [s], N [m], E [m], D [m].
 
-    A first line is a header if it holds names and no number; a line
+    A first line is a header if it names the columns (``time, north, east,
+    down``, or ``t, n, e, d``, ``x, y, z``; units in brackets allowed); a line
     starting with ``#`` is a comment. Every other cell must be a finite
     number inside its column's range (``table``), times strictly increasing.
 
@@ -146,7 +148,7 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
                      if row and not row[0].lstrip().startswith("#") and any(c.strip() for c in row)]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
-    if lines and _is_header(lines[0][1]):
+    if lines and _is_header(lines[0][1], f"{field}: {str(path)!r}"):
         lines = lines[1:]
     rows, numbers = [], []
     names = [c.name for c in table.columns]
@@ -174,18 +176,30 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
     return data
 
 
-def _is_header(row: list[str]) -> bool:
-    """A header row: every cell is a name (starts with a letter and is not a number such as 'nan' or 'inf')."""
-    def is_name(cell: str) -> bool:
-        cell = cell.strip()
-        if not cell or not cell[0].isalpha():
-            return False
+#: Header names of the four columns of a trajectory file (case-insensitive; a unit in brackets is ignored).
+HEADER_NAMES = ({"time", "t"}, {"north", "n", "x"}, {"east", "e", "y"}, {"down", "d", "z", "depth"})
+
+
+def _is_header(row: list[str], where: str) -> bool:
+    """Whether the first line is a header: it names the columns (time, north, east, down, see
+    :data:`HEADER_NAMES`). A first line of names that are not these is an error, not a header.
+
+    Raises
+    ------
+    ModelError
+        If the first line holds no number and does not name the columns.
+    """
+    names = [re.sub(r"[\[(].*$", "", cell).strip().lower() for cell in row]
+    if len(names) == len(HEADER_NAMES) and all(n in allowed for n, allowed in zip(names, HEADER_NAMES)):
+        return True
+    for cell in row:
         try:
             float(cell)
+            return False  # a data line (its cells are checked one by one)
         except ValueError:
-            return True
-        return False
-    return all(is_name(c) for c in row)
+            continue
+    raise ModelError(f"{where} line 1: {','.join(c.strip() for c in row)!r} is neither numbers nor a header "
+                     "naming the columns time, north, east, down")
 
 
 __all__ = ["OPEN_DURATION", "read_trajectory_file", "semicircle", "spiral", "spiral_arc", "square_rows",

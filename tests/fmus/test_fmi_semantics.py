@@ -188,7 +188,7 @@ def test_bad_step_calls_return_fmi2error_and_log_why(fmu_dir):
      "sound_speed[2]: 1.5 is outside the allowed range [1300, 1700] m/s"),
     ("acoustics", {"sound_speed_rows": 2, "sound_speed_depth[1]": 5.0, "sound_speed_depth[2]": 1.0,
                    "sound_speed[1]": 1500.0, "sound_speed[2]": 1500.0}, "must be greater than row 1"),
-    ("receiver", dict(sigma_range=0.0), "sigma_range: 0 is outside the allowed range (0, 1000] m"),
+    ("receiver", dict(sigma_range=0.0), "sigma_range: 0 is outside the allowed range [0.001, 1000] m"),
 ])
 def test_a_parameter_outside_its_range_fails_initialization(fmu_dir, name, params, match):
     s = Slave(str(fmu_path(fmu_dir, name)))

@@ -396,7 +396,9 @@ def test_trajectory_file_comment_lines_keep_every_data_row(tmp_path):
 
 
 @pytest.mark.parametrize("content,where", [
-    ("time,N,E\n0,0,0\n10,1,1\n", r"line 2 has 3 columns"),                       # 3 columns
+    ("time,N,E,D\n0,0,0\n10,1,1\n", r"line 2 has 3 columns"),                     # 3 columns
+    ("time,N,E\n0,0,0\n10,1,1\n", r"line 1: 'time,N,E' is neither numbers nor a header"),  # header of 3
+    ("a,b,c,d\n0,0,0,5\n10,1,1,5\n", r"line 1: 'a,b,c,d' is neither numbers nor a header"),  # not the names
     ("0,0,0\n10,1,1\n", r"line 1 has 3 columns"),                                 # 3 columns, no header
     ("time,N,E,D\n0,0,0,1\n10,abc,0,1\n", r"line 3, column waypoint_north: 'abc' is not a number"),
     ("time,N,E,D\n0,0,0,1\n10,1,0,-1\n", r"line 3, column waypoint_down: -1 is outside the allowed range \[0, "),

@@ -143,7 +143,7 @@ def test_malformed_set_item(item):
     ("acoustics.loss_pct=101", "acoustics.loss_pct", "[0, 100] %"),
     ("acoustics.loss_pct=-1", "acoustics.loss_pct", "[0, 100] %"),
     ("target.depth_sigma=-0.1", "target.depth_sigma", "[0, 1000] m"),
-    ("receiver.sigma_range=0", "receiver.sigma_range", "(0, 1000] m"),
+    ("receiver.sigma_range=0", "receiver.sigma_range", "[0.001, 1000] m"),
     ("platform.beaufort=9", "platform.beaufort", "[0, 8]"),
     ("target.speed=0", "target.speed", "(0, 10] m/s"),
     ("simulation.sampling_time=0", "simulation.sampling_time", "[0.001, 60] s"),
