@@ -19,18 +19,26 @@ Campaign directory::
 
     study.toml          the resolved study (written first)
     chunks/ID.parquet   finished chunks, each written atomically
+    manifest.json       each finished chunk's rows, cells, replicates and SHA-256, rewritten atomically after it
     timeseries/ID.parquet  per-step series (``--save-timeseries`` only)
     runs.parquet        all runs, sorted by scenario_key, cell, replicate
 
-``--resume`` runs only the chunks that have no file yet.
+``--resume`` keeps only the chunks that verify: the manifest's checksum, and
+the rows, cells and replicates the plan expects; a missing, damaged,
+foreign or incomplete chunk is recomputed, with a line saying so. Without a
+manifest (deleted by the user) every chunk is checked by its content alone.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
+import shutil
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -184,6 +192,76 @@ def _write_atomic(frame: pd.DataFrame, path: Path) -> None:
         raise
 
 
+MANIFEST = "manifest.json"
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def read_manifest(out: Path) -> dict[str, dict] | None:
+    """The campaign's manifest (chunk id -> entry), or None when there is none.
+
+    Raises
+    ------
+    CampaignError
+        If it cannot be read, saying what to do.
+    """
+    path = out / MANIFEST
+    if not path.is_file():
+        return None
+    try:
+        manifest = json.loads(path.read_text())
+        if not isinstance(manifest, dict) or not all(isinstance(v, dict) for v in manifest.values()):
+            raise ValueError("not a table of chunks")
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise CampaignError(f"--resume: {str(path)!r} is damaged ({str(exc).splitlines()[0]}); delete it and "
+                            "resume again: every chunk is then checked by its content") from None
+    return manifest
+
+
+def write_manifest(out: Path, manifest: dict[str, dict]) -> None:
+    """Write the manifest atomically."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST}.", suffix=".tmp", dir=out)
+    with os.fdopen(fd, "w") as handle:
+        json.dump(manifest, handle, indent=1, sort_keys=True)
+    os.replace(tmp, out / MANIFEST)
+
+
+def manifest_entry(chunk: "Chunk", path: Path, series: Path | None = None) -> dict[str, Any]:
+    """What the manifest records of a finished chunk."""
+    entry = {"rows": chunk.runs, "cells": list(chunk.cells), "replicates": chunk.replicates,
+             "sha256": file_digest(path)}
+    if series is not None:
+        entry["series_sha256"] = file_digest(series)
+    return entry
+
+
+def verify_chunk(chunk: "Chunk", path: Path, entry: dict | None, scenario_key: int) -> str:
+    """Why a chunk file cannot be kept ('' if it can): checksum, rows, cells, replicates, scenario."""
+    if not path.is_file():
+        return "missing"
+    if entry is not None:
+        if entry.get("sha256") != file_digest(path):
+            return "its checksum differs from the manifest's"
+        if entry.get("cells") != list(chunk.cells) or entry.get("rows") != chunk.runs:
+            return "the manifest records other cells"
+    try:
+        frame = pd.read_parquet(path, columns=["scenario_key", "cell", "replicate"])
+    except Exception as exc:  # pyarrow raises several kinds on a damaged file
+        return f"unreadable ({type(exc).__name__})"
+    expected = {(c, r) for c in chunk.cells for r in range(chunk.replicates)}
+    got = set(zip(frame["cell"].tolist(), frame["replicate"].tolist()))
+    if len(frame) != chunk.runs or got != expected or set(frame["scenario_key"].tolist()) != {scenario_key}:
+        return "it holds other runs than the plan's"
+    return ""
+
+
 @dataclass
 class CampaignResult:
     """Outcome of :func:`run_campaign`.
@@ -252,8 +330,15 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
         if not resume:
             raise CampaignError(f"--out: {str(out)!r} already holds a campaign; add --resume to finish it "
                                 "or choose another directory")
-        recorded = tomllib.loads(study_file.read_text())
+        try:
+            recorded = tomllib.loads(study_file.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise CampaignError(f"--resume: {str(study_file)!r} is damaged ({str(exc).splitlines()[0]}); the "
+                                "campaign cannot be resumed: restore the file or run it again in another --out") \
+                from None
         execution = recorded.pop("execution", {})
+        if not isinstance(execution, dict):
+            execution = {}
         if recorded != tomllib.loads(text):
             raise CampaignError(f"--resume: {str(out)!r} holds a different study; choose another --out")
         if execution.get("engine", engine) != engine:
@@ -327,6 +412,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
             fmu_paths(fmu_dir, dict(sources))
         fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
     client = connect(scheduler) if scheduler else None
+    new = not out.exists()
     try:
         batch = prepare_directory(out, study, resume, engine, batch)
     except BaseException:
@@ -337,8 +423,13 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         return _run_prepared(study, out, batch, configs, workers, client, engine, fmu_dir, save_timeseries,
                              progress)
     except KeyboardInterrupt:
-        done = sum(len(pd.read_parquet(f, columns=["cell"])) for f in (out / "chunks").glob("*.parquet"))
+        manifest = read_manifest(out) or {}
+        done = sum(entry.get("rows", 0) for entry in manifest.values())
         raise CampaignInterrupted(done, study.runs, out) from None
+    except Exception:
+        if new and not any((out / "chunks").glob("*.parquet")):  # nothing done: leave no half-made folder
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     finally:
         if client is not None:
             client.close()
@@ -355,8 +446,28 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
     for folder in (out, chunk_dir, series_dir):  # temporary files left by a killed process
         for stale in folder.glob(".*.tmp"):
             stale.unlink()
-    todo = [c for c in chunks if not (chunk_dir / f"{c.id}.parquet").is_file()
-            or (save_timeseries and not (series_dir / f"{c.id}.parquet").is_file())]
+    manifest = read_manifest(out)
+    rebuilt = manifest is None
+    manifest = manifest or {}
+    todo = []
+    for c in chunks:
+        path, series = chunk_dir / f"{c.id}.parquet", series_dir / f"{c.id}.parquet"
+        entry = manifest.get(c.id)
+        reason = verify_chunk(c, path, entry, c.configs[0]["run"]["scenario_key"])
+        if not reason and save_timeseries:
+            if not series.is_file():
+                reason = "its time series are missing"
+            elif entry is not None and entry.get("series_sha256") not in (None, file_digest(series)):
+                reason = "its time series' checksum differs from the manifest's"
+        if reason:
+            if reason != "missing":
+                print(f"campaign: chunk {c.id} is recomputed: {reason}", file=sys.stderr, flush=True)
+            manifest.pop(c.id, None)
+            todo.append(c)
+        elif entry is None:  # a chunk that verifies by its content, without a manifest entry
+            manifest[c.id] = manifest_entry(c, path, series if save_timeseries else None)
+    if rebuilt and manifest:
+        write_manifest(out, manifest)
     total = study.runs
     done = total - sum(c.runs for c in todo)
     start = time.perf_counter()
@@ -367,9 +478,13 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
         try:
             for chunk, (rows, series) in _execute(todo, study, engine, fmu_dir, save_timeseries,
                                                   workers, client):
+                path = chunk_dir / f"{chunk.id}.parquet"
                 if series is not None:
                     _write_atomic(series, series_dir / f"{chunk.id}.parquet")
-                _write_atomic(rows, chunk_dir / f"{chunk.id}.parquet")
+                _write_atomic(rows, path)
+                manifest[chunk.id] = manifest_entry(chunk, path, series_dir / f"{chunk.id}.parquet"
+                                                    if series is not None else None)
+                write_manifest(out, manifest)
                 computed += chunk.runs
                 reporter.update(chunk.runs)
         finally:
@@ -412,7 +527,8 @@ def _execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries
     import multiprocessing
 
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
-                               mp_context=multiprocessing.get_context("spawn"))
+                               mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
+                               initargs=(os.getpid(),))
     try:
         pending = {pool.submit(run_chunk, c, study, engine, fmu_dir, timeseries): c for c in chunks}
         while pending:
@@ -421,6 +537,22 @@ def _execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries
                 yield pending.pop(future), future.result()
     finally:
         pool.shutdown(wait=False, cancel_futures=True)
+
+
+def watch_parent(parent: int, every: float = 0.5) -> None:
+    """In a worker process: exit as soon as the campaign's process is gone (killed, even by SIGKILL).
+
+    A daemon thread compares the parent's process id with ``parent`` every
+    ``every`` seconds; the pool's own shutdown covers a parent that exits
+    normally.
+    """
+    def watch() -> None:
+        while True:
+            time.sleep(every)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="sblsim-parent-watch", daemon=True).start()
 
 
 class _Progress:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -253,7 +254,7 @@ def _campaign(args: argparse.Namespace) -> int:
                               save_timeseries=args.save_timeseries)
     except CampaignInterrupted as exc:
         print(f"sblsim: {exc}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _interrupted_status()
     if result.computed:
         print(f"{result.computed} runs in {result.wall_time:.1f} s ({result.runs_per_second:.0f} runs/s); "
               f"{len(result.runs)} runs in {out / 'runs.parquet'}")
@@ -345,9 +346,38 @@ def _codegen(args: argparse.Namespace) -> int:
     return 0
 
 
+_SIGNAL: list[int] = []
+
+
+def _terminate(signum: int, frame) -> None:
+    """SIGTERM or SIGHUP: stop as Ctrl-C does (finished work is kept, the same message), exit 128 + signal."""
+    _SIGNAL.append(signum)
+    raise KeyboardInterrupt
+
+
+def _interrupted_status() -> int:
+    return 128 + _SIGNAL[-1] if _SIGNAL else EXIT_INTERRUPTED
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sblsim`` console script."""
+    import signal
+
     args = _parser().parse_args(argv)
+    _SIGNAL.clear()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for name in ("SIGTERM", "SIGHUP"):
+            if hasattr(signal, name):
+                previous[name] = signal.signal(getattr(signal, name), _terminate)
+    try:
+        return _command(args)
+    finally:
+        for name, handler in previous.items():
+            signal.signal(getattr(signal, name), handler)
+
+
+def _command(args: argparse.Namespace) -> int:
     try:
         if args.command == "run":
             return _run(args)
@@ -369,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("sblsim: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _interrupted_status()
 
 
 if __name__ == "__main__":

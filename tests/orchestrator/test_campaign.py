@@ -7,6 +7,7 @@ runs) so that every campaign takes a second or two.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import signal
 import socket
@@ -226,6 +227,117 @@ def test_ctrl_c_exits_130_and_resume_gives_the_uninterrupted_result(kill_referen
     assert not (out / "runs.parquet").exists()
     _resume(tmp_path, out, saved)
     assert_same_runs(read_runs(out), kill_reference)
+
+
+def test_sigterm_keeps_the_work_and_says_how_to_finish(kill_reference, tmp_path):
+    proc, out, _, stderr = _start_and_stop_part_way(tmp_path, signal.SIGTERM)
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "Traceback" not in stderr
+    last = stderr.splitlines()[-1]
+    saved = len(chunk_files(out))
+    assert f"{saved * KILL_BATCH} of {KILL_CHUNKS * KILL_BATCH} runs" in last and "--resume" in last, stderr
+    _resume(tmp_path, out, saved)
+    assert_same_runs(read_runs(out), kill_reference)
+
+
+def _finished(tmp_path: Path) -> tuple[Path, Path]:
+    study_file = write_study(tmp_path / "killme.toml", KILL_TABLE)
+    out = tmp_path / "out"
+    proc = sblsim("campaign", study_file, "--workers", "1", "--batch", KILL_BATCH, "--out", out, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    return study_file, out
+
+
+def test_resume_recomputes_damaged_foreign_and_missing_chunks(kill_reference, tmp_path):
+    study_file, out = _finished(tmp_path)
+    files = chunk_files(out)
+    assert len(files) == KILL_CHUNKS and (out / "manifest.json").is_file()
+    (out / "runs.parquet").unlink()
+    files[0].write_bytes(files[0].read_bytes()[: files[0].stat().st_size // 2])  # cut in half
+    files[1].write_bytes(b"")  # zeroed
+    a, b = files[2].read_bytes(), files[3].read_bytes()  # two chunks swapped
+    files[2].write_bytes(b)
+    files[3].write_bytes(a)
+    files[4].unlink()  # missing
+    proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    recomputed = [line for line in proc.stderr.splitlines() if "is recomputed" in line]
+    assert sorted(line.split()[2] for line in recomputed) == sorted(f.stem for f in files[:4]), proc.stderr
+    assert proc.stdout.splitlines()[-1].startswith(f"{5 * KILL_BATCH} runs in "), proc.stdout
+    assert_same_runs(read_runs(out), kill_reference)
+
+
+def test_resume_without_a_manifest_checks_the_chunks_by_content(kill_reference, tmp_path):
+    study_file, out = _finished(tmp_path)
+    files = chunk_files(out)
+    (out / "manifest.json").write_text("{ not json")
+    proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert_usage_error(proc, "manifest.json", "is damaged", "delete it")
+    (out / "manifest.json").unlink()
+    a, b = files[2].read_bytes(), files[3].read_bytes()  # swapped: other cells than the plan's
+    files[2].write_bytes(b)
+    files[3].write_bytes(a)
+    proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.count("holds other runs than the plan's") == 2, proc.stderr
+    assert_same_runs(read_runs(out), kill_reference)
+    assert set(json.loads((out / "manifest.json").read_text())) == {f.stem for f in files}
+
+
+def test_a_damaged_study_file_stops_resume_with_one_line(tmp_path):
+    study_file, out = _finished(tmp_path)
+    (out / "study.toml").write_text("[study\nname = ")
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert_usage_error(proc, "study.toml", "is damaged")
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="needs /proc to find the worker processes")
+def test_workers_do_not_outlive_a_killed_campaign(tmp_path):
+    table = {**KILL_TABLE, "study": {**KILL_TABLE["study"], "replicates": 40, "set": ["simulation.duration=200"]}}
+    study_file = write_study(tmp_path / "long.toml", table)
+    proc = start_sblsim("campaign", study_file, "--workers", "2", "--batch", 40, "--out", tmp_path / "out",
+                        cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        workers: list[int] = []
+        while len(workers) < 2:  # the pool's processes (and its resource tracker)
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no worker started in 120 s"
+            time.sleep(0.2)
+            workers = [p for p in _children(proc.pid) if "multiprocessing" in Path(f"/proc/{p}/cmdline").read_text()]
+        time.sleep(1.0)  # the workers are busy with their chunks
+        proc.kill()
+        proc.wait()
+        deadline = time.monotonic() + 10
+        while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not [p for p in workers if _alive(p)], "workers outlived the killed campaign by 10 s"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
 
 
 def test_resume_of_a_finished_campaign_does_nothing(tmp_path):
