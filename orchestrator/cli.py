@@ -50,6 +50,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--master", choices=ALGORITHMS, default=None,
                    help="master algorithm (default: the configuration's, gauss-seidel)")
     r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
+    r.add_argument("--force", action="store_true", help="replace an earlier run in --out")
     _config_options(r)
 
     m = sub.add_parser("compare", help="run several receivers on the same replicates of a scenario")
@@ -59,6 +60,7 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--replicates", type=int, default=20, help="runs per receiver (default 20)")
     m.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
     m.add_argument("--out", type=Path, default=None, help="output directory (default results/compare_SCENARIO)")
+    m.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
     _config_options(m)
 
     g = sub.add_parser("map", help="accuracy map: horizontal standard deviation of a fix around the platform")
@@ -69,6 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
                    help="one map per value, side by side, e.g. platform.baseline=0.4,1,3")
     g.add_argument("--out", type=Path, default=None, help="output directory (default results/map_SCENARIO)")
+    g.add_argument("--force", action="store_true", help="replace an earlier map in --out")
     g.add_argument("--seed", type=int, default=None, help=argparse.SUPPRESS)
     g.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key (repeatable)")
@@ -93,6 +96,7 @@ def _parser() -> argparse.ArgumentParser:
     e = ssub.add_parser("export", help="write SystemStructure.ssd, the FMUs and the parameter sets as FILE.ssp")
     e.add_argument("scenario", help="built-in scenario or CONFIG.toml")
     e.add_argument("--out", type=Path, required=True, help="the .ssp file to write")
+    e.add_argument("--force", action="store_true", help="replace an existing package")
     _config_options(e)
 
     a = sub.add_parser("analyze", help="factorial analysis and report of a campaign directory")
@@ -149,8 +153,7 @@ def _run(args: argparse.Namespace) -> int:
         engine = args.engine or "local"
         cfg = load_config(args.scenario, overrides, args.seed)
     out = args.out or Path("results") / cfg["run"]["scenario"]
-    if out.exists() and not out.is_dir():
-        raise ModelError(f"--out: {str(out)!r} exists and is not a directory")
+    _check_output(out, args.force, "summary.json", "run")
     try:
         result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
                      connections=connections)
@@ -189,6 +192,11 @@ def _ssp(args: argparse.Namespace) -> int:
 
     _check_seed(args.seed)
     cfg = load_config(args.scenario, args.overrides, args.seed)
+    _check_writable(args.out.parent if str(args.out.parent) else Path("."))
+    if args.out.is_dir():
+        raise ModelError(f"--out: {str(args.out)!r} is a directory; give the .ssp file to write")
+    if args.out.exists() and not args.force:
+        raise ModelError(f"--out: {str(args.out)!r} exists; add --force to replace it or choose another file")
     path = export_ssp(cfg, args.out, args.fmu_dir)
     print(f"wrote {path} ({cfg['run']['scenario']}, seed {cfg['run']['seed']}, receiver "
           f"{cfg['simulation']['receiver']}); it validates against the SSP 1.0 schemas")
@@ -205,7 +213,7 @@ def _compare(args: argparse.Namespace) -> int:
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
     out = args.out or Path("results") / f"compare_{_output_name(args.scenario)}"
-    _check_writable(out)
+    _check_output(out, args.force, "compare.csv", "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
                     args.fmu_dir, progress=sys.stderr.isatty())
     title = (f"{args.scenario}: {args.replicates} replicates per receiver, seed "
@@ -225,7 +233,7 @@ def _map(args: argparse.Namespace) -> int:
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
     out = args.out or Path("results") / f"map_{_output_name(args.scenario)}"
-    _check_writable(out)
+    _check_output(out, args.force, "map.csv", "map")
     labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
                                                    compare)
     for label, m in zip(labels, maps):
@@ -244,6 +252,7 @@ def _campaign(args: argparse.Namespace) -> int:
 
     study = load_study(args.study, seed=args.seed)
     out = args.out or Path("results") / study.name
+    _check_writable(out)
     workers = args.workers if args.workers is not None else os.cpu_count()
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{workers} worker process(es)"
     print(f"{study.name}: {len(study.scenarios)} scenarios x {study.cells} cells x {study.replicates} replicates "
@@ -272,6 +281,7 @@ def _campaign(args: argparse.Namespace) -> int:
 def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_rms", order: int = 2) -> int:
     from orchestrator.analysis import compute, write
 
+    _check_writable(out or directory)
     analysis = compute(directory, metric, order)
     for note in analysis.warnings:
         print(f"note: {note}", file=sys.stderr)
@@ -321,6 +331,21 @@ def _fmus(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
+def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
+    """Refuse an output directory that cannot be written, or that holds an earlier result (its ``marker``
+    file) unless ``force``: before any work.
+
+    Raises
+    ------
+    ModelError
+        Naming ``--out`` and what to do.
+    """
+    _check_writable(out)
+    if (out / marker).exists() and not force:
+        raise ModelError(f"--out: {str(out)!r} holds an earlier {what}; add --force to replace it or choose "
+                         "another --out")
+
+
 def _check_writable(directory: Path) -> None:
     """Refuse an output directory that cannot be created or written, before any work.
 
@@ -341,6 +366,7 @@ def _check_writable(directory: Path) -> None:
 def _codegen(args: argparse.Namespace) -> int:
     from fmus.embedded import write_receiver
 
+    _check_writable(args.out)
     files = write_receiver(args.receiver, args.out)
     print(f"wrote {len(files)} files to {args.out}/ ({', '.join(p.name for p in files)}); see its README.md")
     return 0

@@ -16,7 +16,9 @@ def staged_directory(out: Path | str) -> Iterator[Path]:
 
     Files of ``out`` with other names are kept. If the body raises, nothing
     in ``out`` changes (a new ``out`` is not even created) and the staging
-    folder is removed.
+    folder is removed. The staging folder's name holds this process's id,
+    so that the folders of a killed process are found and removed the next
+    time (:func:`remove_stale`).
 
     Yields
     ------
@@ -25,7 +27,8 @@ def staged_directory(out: Path | str) -> Iterator[Path]:
     """
     out = Path(out).absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    remove_stale(out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", dir=out.parent))
     try:
         yield tmp
         out.mkdir(exist_ok=True)
@@ -38,4 +41,29 @@ def staged_directory(out: Path | str) -> Iterator[Path]:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-__all__ = ["staged_directory"]
+def remove_stale(out: Path) -> list[Path]:
+    """Remove the staging folders of ``out`` that a killed process left behind (their process is gone)."""
+    removed = []
+    for folder in out.parent.glob(f".{out.name}.*"):
+        parts = folder.name[len(out.name) + 2:].split(".")
+        if not folder.is_dir() or not parts[0].isdigit() or _alive(int(parts[0])):
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        removed.append(folder)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process with this id exists (a pid reused since is taken as alive: its folder stays)."""
+    if pid == os.getpid() or os.name == "nt":  # on Windows os.kill(pid, 0) would end the process
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+__all__ = ["remove_stale", "staged_directory"]
