@@ -89,7 +89,15 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
 
 
 def _format_bound(value: float) -> str:
+    if float(value).is_integer() and abs(value) < 1e15 and abs(value) >= 1e6:
+        return str(int(value))  # e.g. 2147483647, not 2.14748e+09
     return f"{value:g}"
+
+
+def shown(value: Any) -> str:
+    """A value for a message: its repr, shortened when it is very long (a 400-digit number)."""
+    text = repr(value)
+    return text if len(text) <= 24 else f"{text[:12]}... ({len(text)} characters)"
 
 
 @dataclass(frozen=True)
@@ -305,7 +313,7 @@ class Variable:
         try:
             number = float(value)
         except OverflowError:
-            raise ModelError(f"{label}: {str(value)[:12]}... is outside the allowed range {self.allowed()}") from None
+            raise ModelError(f"{label}: {shown(value)} is outside the allowed range {self.allowed()}") from None
         if not math.isfinite(number):
             raise ModelError(f"{label}: {value!r} is not finite; allowed {self.allowed()}")
         if self.type == "Integer":
@@ -317,7 +325,7 @@ class Variable:
         below = self.min is not None and (value < self.min or (self.min_exclusive and value == self.min))
         above = self.max is not None and value > self.max
         if below or above:
-            raise ModelError(f"{label}: {value!r} is outside the allowed range {self.allowed()}")
+            raise ModelError(f"{label}: {shown(value)} is outside the allowed range {self.allowed()}")
         return value
 
     def code(self, value: Any) -> float:

@@ -389,6 +389,9 @@ def check_metric(metric: str, frame: pd.DataFrame) -> None:
     """Raise :class:`AnalysisError` unless ``metric`` is a metric column of ``frame``."""
     allowed = allowed_metrics(frame)
     if metric not in allowed:
+        if metric in METRICS:
+            raise AnalysisError(f"runs.parquet: has no {metric!r} column (not written by a finished campaign?); "
+                                f"--metric can be one of {', '.join(allowed) or '(no metric column)'}")
         raise AnalysisError(f"metric: {metric!r} is not one of {', '.join(allowed) or '(no metric column)'}")
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fmus.compiler import COMPILERS
-from models.core import ModelError
+from models.core import ModelError, shown
 from orchestrator.master import ALGORITHMS
 
 EXIT_USAGE = 2
@@ -128,7 +128,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _check_seed(seed: int | None) -> None:
     if seed is not None and not 0 <= seed <= 2**31 - 1:
-        raise ModelError(f"--seed: {seed} is outside the allowed range [0, 2147483647]")
+        raise ModelError(f"--seed: {shown(seed)} is outside the allowed range [0, 2147483647]")
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -300,6 +300,9 @@ def read_source(source: str | Path) -> dict[str, Any]:
         return scenario_source(str(source))
     path = Path(source)
     if path.suffix == ".toml" or path.exists():
+        if path.is_dir():
+            raise ConfigError(f"config: {str(source)!r} is a directory; give a configuration file (.toml) or a "
+                              f"built-in scenario ({', '.join(BUILTIN_SCENARIOS)})")
         if not path.is_file():
             raise ConfigError(f"config: no such file {str(source)!r}")
         try:

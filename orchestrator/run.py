@@ -38,6 +38,8 @@ from orchestrator.metrics import consistency, errors, slots, summarize
 from orchestrator.output import staged_directory
 
 ENGINES = ("local", "fmu")
+#: Beacons of the built FMUs' interfaces.
+FMU_BEACONS = 4
 
 #: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
 TIMESERIES_COLUMNS = {
@@ -173,6 +175,9 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     """
     if engine not in ENGINES:
         raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+    if engine == "fmu" and n_beacons != FMU_BEACONS:
+        raise ModelError(f"platform.beacon_offsets: {n_beacons} beacons, but the FMUs carry {FMU_BEACONS}; run it "
+                         "on the local engine, which takes any number")
     sources = sources if sources is not None else system_sources()
     if engine == "fmu":
         paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}),

@@ -48,7 +48,7 @@ import numpy as np
 import tomli_w
 
 from models import RECEIVER_MODELS
-from models.core import ModelError, Variable
+from models.core import ModelError, Variable, shown
 from orchestrator.config import BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source, section_variables
 from orchestrator.metrics import RUN_METRICS
 
@@ -291,7 +291,7 @@ def load_study(source: str | Path | dict[str, Any], seed: int | None = None) -> 
     if seed is None:
         seed = table.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= 2**31 - 1:
-        raise StudyError(f"study.seed: {seed!r} is outside the allowed range [0, 2147483647]")
+        raise StudyError(f"study.seed: {shown(seed)} is outside the allowed range [0, 2147483647]")
     design = table.get("design", "full")
     if design not in DESIGNS:
         raise StudyError(f"study.design: {design!r} is not allowed; one of {', '.join(DESIGNS)}")
@@ -356,6 +356,9 @@ def _factors(items: Any) -> list[Factor]:
             low, high = (check_receiver(v, f"factors.{name}.{w}") for v, w in ((low, "low"), (high, "high")))
         if low == high:
             raise StudyError(f"factors.{name}: LOW and HIGH are both {low!r}; a factor needs two levels")
+        if var.type in ("Real", "Integer") and low > high:
+            raise StudyError(f"factors.{name}: LOW ({low!r}) is above HIGH ({high!r}); swap them (an effect is the "
+                             "change from LOW to HIGH)")
         names.add(name)
         keys.add(key)
         factors.append(Factor(name, key, low, high, var))
