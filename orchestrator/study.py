@@ -74,18 +74,23 @@ class Factor:
     name : str
         Identifier used in result columns and model terms.
     key : str
-        Configuration key ``section.name`` it sets.
-    low, high : Any
-        Levels in the key's unit (coded −1 and +1).
-    variable : Variable
-        The key's declaration (type, unit, allowed range).
+        Configuration key ``section.name`` it sets ('' when unknown: inferred from results).
+    low, high : float or str
+        Levels in the key's unit (coded −1 and +1); text for a text key (e.g. a receiver).
+    unit : str
+        Unit of the levels, e.g. ``m``, ``deg``, ``s``, ``%``.
+    description : str
+    variable : Variable or None
+        The key's declaration (type, unit, allowed range), when the study was validated.
     """
 
     name: str
     key: str
     low: Any
     high: Any
-    variable: Variable
+    unit: str = ""
+    description: str = ""
+    variable: Variable | None = field(default=None, compare=False, repr=False)
 
     @property
     def section(self) -> str:
@@ -161,14 +166,100 @@ class Study:
             "study": {"name": self.name, "scenarios": list(self.scenarios), "replicates": self.replicates,
                       "seed": self.seed, "design": self.design, "resolution": self.resolution,
                       "generators": self.generators, "set": list(self.overrides)},
-            "factors": [{"name": f.name, "key": f.key, "low": f.low, "high": f.high, "unit": f.variable.unit,
-                         "description": f.variable.description} for f in self.factors],
+            "factors": [{"name": f.name, "key": f.key, "low": f.low, "high": f.high, "unit": f.unit,
+                         "description": f.description} for f in self.factors],
             "design": {"cells": self.cells, "matrix": self.matrix.tolist()},
         }
 
     def to_toml(self) -> str:
         header = "# sblsim resolved study: scenarios, factors with their levels, the design matrix (row = cell).\n"
         return header + tomli_w.dumps(self.to_dict())
+
+
+@dataclass
+class StudyRecord:
+    """A study as its results record it (``study.toml`` of a campaign), or as inferred from ``runs.parquet``.
+
+    Unlike :class:`Study` it is not validated against the scenarios (they may
+    live on another machine); it is what the analysis needs.
+
+    Attributes
+    ----------
+    name : str
+    seed : int or None
+        Campaign seed.
+    replicates : int or None
+        Runs per design cell.
+    design : str
+        ``full``, ``fractional`` or ``unknown`` (inferred).
+    resolution : int
+        Resolution of a fractional design (0 otherwise).
+    generators : str
+        Generators of a fractional design.
+    scenarios : list of str
+    engine : str
+    factors : list of Factor
+        In design order.
+    inferred : bool
+        True when there was no ``study.toml``.
+    """
+
+    name: str
+    seed: int | None
+    replicates: int | None
+    design: str
+    resolution: int
+    generators: str
+    scenarios: list[str]
+    engine: str
+    factors: list[Factor]
+    inferred: bool = False
+
+
+def level_value(value: Any) -> float | str:
+    """A factor level as read from a file: a number, or the text of a text key (e.g. ``ekf-seq``)."""
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return float(value)
+
+
+def read_record(path: Path | str, name: str = "study", scenarios: list[str] | None = None) -> StudyRecord:
+    """Read a campaign's ``study.toml`` (the table :meth:`Study.to_dict` writes, with its ``[execution]``).
+
+    Parameters
+    ----------
+    path : path
+    name, scenarios
+        Defaults for a file that does not record them.
+
+    Raises
+    ------
+    StudyError
+        If the file cannot be parsed or an entry is malformed (one line naming the file).
+    """
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise StudyError(f"study.toml: cannot parse {str(path)!r} ({str(exc).splitlines()[0]})") from None
+    s = raw.get("study", {})
+    try:
+        factors = [Factor(name=str(f["name"]), key=str(f.get("key", "")), low=level_value(f["low"]),
+                          high=level_value(f["high"]), unit=str(f.get("unit", "")),
+                          description=str(f.get("description", "")))
+                   for f in raw.get("factors", [])]
+        return StudyRecord(name=str(s.get("name", name)), seed=int(s["seed"]) if "seed" in s else None,
+                           replicates=int(s["replicates"]) if "replicates" in s else None,
+                           design=str(s.get("design", "full")), resolution=int(s.get("resolution", 0)),
+                           generators=str(s.get("generators", "")),
+                           scenarios=[str(x) for x in s.get("scenarios", scenarios or [])],
+                           engine=str(raw.get("execution", {}).get("engine", s.get("engine", ""))),
+                           factors=factors)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise StudyError(f"study.toml: invalid entry in {str(path)!r} ({type(exc).__name__}: {exc})") from None
 
 
 def design_matrix(k: int, design: str = "full", resolution: int = 0, generators: str = "") -> np.ndarray:
@@ -361,7 +452,7 @@ def _factors(items: Any) -> list[Factor]:
                              "change from LOW to HIGH)")
         names.add(name)
         keys.add(key)
-        factors.append(Factor(name, key, low, high, var))
+        factors.append(Factor(name, key, low, high, var.unit, var.description, var))
     return factors
 
 

@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from orchestrator.analysis import format_level  # noqa: E402
+from orchestrator.analysis.report import format_level  # noqa: E402
 
 LOW_COLOR, HIGH_COLOR = "tab:blue", "tab:red"
 

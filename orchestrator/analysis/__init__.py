@@ -1,0 +1,253 @@
+"""Factorial analysis of a campaign: effects, ANOVA, tables and the report.
+
+Input: a campaign directory holding ``runs.parquet`` (one row per Monte Carlo
+run: ``scenario``, ``scenario_key``, ``cell``, ``replicate``, ``seed``, per
+factor ``NAME`` coded −1/+1 and ``NAME_value`` physical level, and the
+metrics of :mod:`orchestrator.metrics` for the receiver and, prefixed ``instr_``,
+for the instrumentation fix) and ``study.toml`` (the resolved study: design,
+replicates, seed, scenarios and one ``[[factors]]`` table per factor). Without
+``study.toml`` the factors are the columns that have a ``NAME_value`` partner.
+
+Per scenario, the response (``e_tot_rms`` by default) is regressed by ordinary
+least squares on the coded factors with every interaction up to ``order``
+(default 2: main effects and two-factor interactions). With the −1/+1 coding
+the effect of a term is twice its coefficient, i.e. the mean response where
+the term's contrast column is +1 minus the mean where it is −1 (Yates'
+contrast; Montgomery 2017, ch. 6). The standardized effect is
+``t = coefficient / standard error``; a term is significant when its two-sided
+p-value is below ``alpha``, i.e. ``|t|`` exceeds ``t_{1−α/2, df_resid}``.
+
+A model with no residual degrees of freedom (saturated, e.g. an unreplicated
+design with the full model) has no error estimate: the t values and the
+significance line then use Lenth's pseudo standard error (Lenth 1989) and the
+analysis says so. Terms aliased with an earlier term (fractional designs) are
+left out of the model, with a warning naming the alias.
+
+Outputs (written atomically into ``out``):
+
+``effects.csv``
+    ``scenario, term, effect, coefficient, std_err, t, p_value``: one row per
+    model term, in model order (main effects, then two-factor interactions,
+    ...); terms are factor names joined with ``:``. The Intercept is *not* a
+    row (it is no effect; the grand mean of the response is in the report).
+    ``effect`` and ``coefficient`` are in the response's unit [m]; ``std_err``
+    is the standard error of the coefficient [m] (Lenth: PSE / 2); ``t`` is
+    the standardized effect [-].
+``anova.csv``
+    ``scenario, term, df, sum_sq, mean_sq, F, p_value`` with a ``Residual``
+    row per scenario: Type II sums of squares (statsmodels ``anova_lm``,
+    ``typ=2``), equal to the sequential (Type I) ones and to ``N·β²`` for the
+    orthogonal −1/+1 columns of a balanced two-level design. A saturated model
+    gets the sequential sums of squares and no F test.
+``tables.csv``
+    Tidy: ``scenario, table, subset, cell, estimator, statistic, value``.
+    ``table = errors``: mean over runs of ``e_x_mean, e_y_mean, e_z_mean,
+    e_tot_mean`` (statistics ``e_x, e_y, e_z, e_tot`` [m]) for the subsets
+    ``all runs`` and ``best cell`` (the design cell with the lowest mean
+    response; its index in ``cell``) and the estimators: the receiver that
+    ran (its name from the ``receiver`` column, e.g. ``ekf``; names joined
+    by ``+`` where the subset mixes receivers) and ``instrumentation``.
+    ``table = receiver_vs_instr``: ``mean``, ``std``
+    (ddof = 1) [m] and ``n`` [-] over runs of ``e_tot_mean`` per estimator
+    (subset ``all runs``). Runs with a NaN metric are left out.
+``report.html``, ``report.md``, ``figures/<scenario>_{pareto,main_effects,interactions,residuals}.png``
+    The study's settings, warnings, the ranking of the significant terms in
+    plain language, the tables and the figures (embedded as base64 data URIs
+    in the HTML, referenced as relative PNG paths in the Markdown).
+
+References
+----------
+.. [1] D. C. Montgomery, *Design and Analysis of Experiments*, 9th ed.,
+   Wiley, 2017 (ch. 6: the 2^k factorial design, effects, Yates' algorithm;
+   ch. 8: two-level fractional factorial designs).
+.. [2] R. V. Lenth, "Quick and easy analysis of unreplicated factorials",
+   *Technometrics*, 31(4), pp. 469-473, 1989.
+"""
+
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from orchestrator.analysis.data import (
+    METRICS,
+    REQUIRED_COLUMNS,
+    AnalysisError,
+    allowed_metrics,
+    check_metric,
+    check_order,
+    infer_factors,
+    load_runs,
+    load_study,
+    scenario_order,
+)
+from orchestrator.analysis.fit import ANOVA_TYPE, FitResult, fit, lenth_pse, model_matrix, model_terms, term_name
+from orchestrator.analysis.report import format_level, metric_label, ranking, report_html, report_markdown
+from orchestrator.analysis.tables import best_cell, tables
+from orchestrator.output import staged_directory
+from orchestrator.study import Factor, StudyRecord
+
+
+@dataclass
+@dataclass
+class Analysis:
+    """Everything the report shows.
+
+    Attributes
+    ----------
+    study : StudyRecord
+    runs : pandas.DataFrame
+    metric : str
+    order : int
+    alpha : float
+    fits : dict
+        Scenario -> :class:`FitResult`, in scenario order.
+    tables : pandas.DataFrame
+        Tidy tables (layout of ``tables.csv``).
+    warnings : list of str
+        Study-level and per-scenario warnings (``scenario: ...``).
+    """
+
+    study: StudyRecord
+    runs: pd.DataFrame
+    metric: str
+    order: int
+    alpha: float
+    fits: dict[str, FitResult]
+    tables: pd.DataFrame
+    warnings: list[str]
+
+
+def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, alpha: float = 0.05) -> Analysis:
+    """Read a campaign directory and fit every scenario (nothing is written).
+
+    Parameters
+    ----------
+    directory : path
+        Campaign directory with ``runs.parquet`` (and ``study.toml``).
+    metric : str
+        Response column, one of :data:`METRICS` [m].
+    order : int
+        Highest interaction order, 1 .. number of factors.
+    alpha : float
+        Significance level [-].
+
+    Returns
+    -------
+    Analysis
+
+    Raises
+    ------
+    AnalysisError
+        Missing or corrupt ``runs.parquet``, corrupt ``study.toml``, unknown
+        metric, bad order or alpha.
+    """
+    runs = load_runs(directory)
+    study, notes = load_study(directory, runs)
+    check_metric(metric, runs)
+    names = [f.name for f in study.factors]
+    order = check_order(order, len(names))
+    if not 0.0 < alpha < 1.0:
+        raise AnalysisError(f"alpha: {alpha!r} is outside the allowed range (0, 1)")
+    present = scenario_order(runs)
+    scenarios = [s for s in study.scenarios if s in present] + [s for s in present if s not in study.scenarios]
+    fits, parts = {}, []
+    if study.replicates == 1 or (runs.groupby(["scenario", "cell"]).size() == 1).all():
+        notes.append("no replicates: there is no pure error; the residual error (if any) comes from the terms "
+                     "left out of the model")
+    for scenario in scenarios:
+        frame = runs[runs["scenario"] == scenario]
+        result = fit(frame, names, metric, order, alpha, scenario)
+        fits[scenario] = result
+        notes += [f"{scenario}: {w}" for w in result.warnings]
+        parts.append(tables(frame, metric, scenario))
+    return Analysis(study=study, runs=runs, metric=metric, order=order, alpha=alpha, fits=fits,
+                    tables=pd.concat(parts, ignore_index=True), warnings=notes)
+
+
+def analyze(directory: Path | str, out: Path | str | None = None, metric: str = "e_tot_rms", order: int = 2,
+            alpha: float = 0.05) -> Path:
+    """Analyse a campaign and write the effects, ANOVA, tables, figures and report.
+
+    Parameters
+    ----------
+    directory : path
+        Campaign directory with ``runs.parquet`` and ``study.toml``.
+    out : path, optional
+        Output directory (default ``directory``).
+    metric : str
+        Response column, one of :data:`METRICS` [m]; default ``e_tot_rms``.
+    order : int
+        Highest interaction order of the model, 1 .. number of factors;
+        default 2 (main effects and two-factor interactions).
+    alpha : float
+        Significance level [-]; default 0.05.
+
+    Returns
+    -------
+    Path
+        ``out``, holding ``effects.csv``, ``anova.csv``, ``tables.csv``,
+        ``report.html``, ``report.md`` and ``figures/*.png``. Everything is
+        built in a temporary directory beside ``out`` and moved into place only
+        when complete, so an error leaves nothing half-written.
+
+    Raises
+    ------
+    AnalysisError
+        Bad input (see :func:`compute`); the message is one line.
+
+    References
+    ----------
+    .. [1] D. C. Montgomery, Design and Analysis of Experiments, 9th ed., Wiley, 2017.
+    .. [2] R. V. Lenth, Technometrics, 31(4), pp. 469-473, 1989.
+    """
+    analysis = compute(directory, metric, order, alpha)
+    return write(analysis, Path(out) if out is not None else Path(directory))
+
+
+def write(analysis: Analysis, out: Path | str) -> Path:
+    """Write the outputs of an :class:`Analysis` into ``out`` atomically; return ``out``."""
+    from orchestrator.analysis.plots import save_figures
+
+    out = Path(out).absolute()
+    with staged_directory(out) as tmp:
+        fig_dir = tmp / "figures"
+        fig_dir.mkdir()
+        factors = analysis.study.factors
+        figures: dict[str, dict[str, str]] = {}
+        used: set[str] = set()
+        for scenario, result in analysis.fits.items():
+            stem = _file_stem(scenario, used)
+            frame = analysis.runs[analysis.runs["scenario"] == scenario]
+            paths = save_figures(result, frame, factors, fig_dir, stem)
+            figures[scenario] = {kind: f"figures/{p.name}" for kind, p in paths.items()}
+        effects = pd.concat([r.effects.assign(scenario=s) for s, r in analysis.fits.items()], ignore_index=True)
+        effects[["scenario", "term", "effect", "coefficient", "std_err", "t", "p_value"]].to_csv(
+            tmp / "effects.csv", index=False)
+        anova = pd.concat([r.anova.assign(scenario=s) for s, r in analysis.fits.items()], ignore_index=True)
+        anova[["scenario", "term", "df", "sum_sq", "mean_sq", "F", "p_value"]].to_csv(tmp / "anova.csv", index=False)
+        analysis.tables.to_csv(tmp / "tables.csv", index=False)
+        (tmp / "report.md").write_text(report_markdown(analysis, figures), encoding="utf-8")
+        (tmp / "report.html").write_text(report_html(analysis, figures, tmp), encoding="utf-8")
+    return out
+
+
+def _file_stem(scenario: str, used: set[str]) -> str:
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", scenario).strip("._") or "scenario"
+    base, i = stem, 1
+    while stem in used:
+        i += 1
+        stem = f"{base}_{i}"
+    used.add(stem)
+    return stem
+
+
+__all__ = ["ANOVA_TYPE", "METRICS", "REQUIRED_COLUMNS", "Analysis", "AnalysisError", "Factor", "FitResult",
+           "StudyRecord", "allowed_metrics", "analyze", "best_cell", "check_metric", "check_order", "compute",
+           "fit", "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
+           "model_matrix", "model_terms", "ranking", "report_html", "report_markdown", "scenario_order", "tables",
+           "term_name", "write"]
