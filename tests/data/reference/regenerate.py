@@ -1,0 +1,35 @@
+"""Write the reference results: ``summary.json`` of every built-in scenario at seed 1 (local engine).
+
+Run ``python tests/data/reference/regenerate.py`` after a change that is meant to change the numbers, and say
+why in the commit; ``tests/orchestrator/test_reference.py`` compares fresh runs and the README's Results table
+with these files.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parents[2]))
+
+from orchestrator.config import BUILTIN_SCENARIOS, load_config  # noqa: E402
+from orchestrator.run import run, summary  # noqa: E402
+
+#: What a reference keeps of summary.json (not the wall time, which is the machine's).
+VOLATILE = ("wall_time",)
+SEED = 1
+
+
+def reference(name: str) -> dict:
+    """The reference summary of a built-in scenario at :data:`SEED`."""
+    result = run(load_config(name, seed=SEED), "local")
+    return {k: v for k, v in summary(result).items() if k not in VOLATILE}
+
+
+if __name__ == "__main__":
+    for name in BUILTIN_SCENARIOS:
+        path = HERE / f"{name}.json"
+        path.write_text(json.dumps(reference(name), indent=2, allow_nan=False) + "\n")
+        print(f"wrote {path}")
