@@ -1,0 +1,278 @@
+"""The bad-input corpus: every command, configuration file, trajectory and sound-speed file and study file
+given something wrong, run as a user runs it (a subprocess).
+
+Each case must end with exit status 2, no traceback, one line ``sblsim: error: ...`` naming the field (or
+argparse's one line for a malformed option), and the working folder unchanged byte for byte: the output of
+an earlier run kept, nothing new written, no temporary folder left. The cases run two at a time; each has
+a folder of its own holding the files it needs and an earlier result that must survive.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import zipfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+BIG = "1" + "0" * 400
+
+#: Files a case may refer to (written into its folder before it runs).
+FILES = {
+    "bad.toml": "[platform\nbaseline = 3\n",
+    "typed.toml": '[platform]\nbaseline = "three"\n',
+    "section.toml": "[sonar]\ngain = 1\n",
+    "receiver.toml": '[simulation]\nreceiver = "ekf"\n[receiver]\nalpha = 0.5\n',
+    "nan_row.csv": "time,north,east,down\n0,0,0,5\nnan,1,1,5\n10,5,5,5\n",
+    "typo_row.csv": "0,1x,0,5\n1,1,1,5\n10,5,5,5\n",
+    "back_in_time.csv": "0,0,0,5\n5,1,1,5\n4,2,2,5\n",
+    "names.csv": "a,b,c,d\n0,0,0,5\n10,5,5,5\n",
+    "three.csv": "time,north,east,down\n0,0,0\n10,5,5\n",
+    "above_surface.csv": "0,0,0,-5\n10,5,5,5\n",
+    "one_row.csv": "0,0,0,5\n",
+    "ssp_text.csv": "depth,sound_speed\n0,1500\n10,abc\n",
+    "ssp_slow.csv": "depth,sound_speed\n0,1.5\n10,1500\n",
+    "ssp_negative.csv": "depth,sound_speed\n-5,1500\n10,1500\n",
+    "ssp_noheader.csv": "0,1500\n10,1490\n",
+    "ssp_nan.csv": "depth,sound_speed\n0,1500\n10,nan\n",
+    "nomodel.py": "x = 1\n",
+    "broken.py": "import no_such_module\n",
+    "notzip.ssp": "this is not a zip file",
+    "study_bad.toml": "[study\n",
+    "study_key.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\ncolour = "red"\n'
+                      '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_level.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                        '[[factors]]\nname = "loss"\nkey = "acoustics.loss_pct"\nlow = 0\nhigh = 150\n',
+    "study_ok.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                     '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_same.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                       '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 1\n',
+    "study_swapped.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                          '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 3\nhigh = 1\n',
+    "study_unknown_key.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                              '[[factors]]\nname = "b"\nkey = "platform.arm"\nlow = 1\nhigh = 3\n',
+    "study_replicates.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 0\n'
+                             '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_noscenario.toml": '[study]\nreplicates = 2\n'
+                             '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_seed.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\nseed = -4\n'
+                       '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_design.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\ndesign = "weird"\n'
+                         '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_resolution.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\ndesign = "fractional"\n'
+                             'resolution = 9\n[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\n'
+                             'high = 3\n[[factors]]\nname = "g"\nkey = "platform.gps_sigma"\nlow = 0.1\nhigh = 1\n',
+    "study_generators.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\ndesign = "fractional"\n'
+                             'generators = "a b c"\n[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\n'
+                             'high = 3\n',
+    "study_scenario.toml": '[study]\nscenarios = ["atlantis"]\nreplicates = 2\n'
+                           '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_set.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                      'set = ["acoustics.sound_speed_profile=ssp_slow.csv"]\n'
+                      '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_alpha.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                        '[[factors]]\nname = "a"\nkey = "receiver.alpha"\nlow = 0.5\nhigh = 1\n',
+    "study_reserved.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                           '[[factors]]\nname = "cell"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
+    "study_receiver.toml": '[study]\nscenarios = ["semicircle"]\nreplicates = 2\n'
+                           '[[factors]]\nname = "rx"\nkey = "simulation.receiver"\nlow = "ekf"\nhigh = "kalman"\n',
+    "campaign/runs.parquet": "PAR1 not a parquet file",
+    "campaign/study.toml": "[study\n",
+    "nonempty/notes.txt": "mine",
+    "earlier_run/summary.json": "{}",
+    "earlier_map/map.csv": "east,north\n",
+    "earlier.ssp": "an earlier package",
+    "afile": "not a directory",
+    "emptyfmus/.keep": "",
+    "adir/.keep": "",
+}
+
+T = ["--set", "target.trajectory=file", "--set"]
+S = ["--set"]
+#: id -> (arguments, text the one line must hold)
+CASES = {
+    # run: values
+    "run zero baseline": (["run", "semicircle", "--set", "platform.baseline=0"], "platform.baseline"),
+    "run text baseline": (["run", "semicircle", "--set", "platform.baseline=abc"], "platform.baseline"),
+    "run infinite baseline": (["run", "semicircle", "--set", "platform.baseline=1e400"], "platform.baseline"),
+    "run 400-digit integer": (["run", "semicircle", "--set", f"platform.beaufort={BIG}"], "platform.beaufort"),
+    "run 400-digit seed": (["run", "semicircle", "--seed", BIG], "--seed"),
+    "run negative seed": (["run", "semicircle", "--seed", "-1"], "--seed"),
+    "run unknown section": (["run", "semicircle", "--set", "sonar.gain=1"], "sonar"),
+    "run unknown key": (["run", "semicircle", "--set", "platform.arm=1"], "platform.arm"),
+    "run no equals": (["run", "semicircle", "--set", "platform.baseline"], "platform.baseline"),
+    "run loss above 100": (["run", "semicircle", "--set", "acoustics.loss_pct=101"], "acoustics.loss_pct"),
+    "run negative sigma": (["run", "semicircle", "--set", "acoustics.sigma_range=-1"], "acoustics.sigma_range"),
+    "run beaufort 9": (["run", "semicircle", "--set", "platform.beaufort=9"], "platform.beaufort"),
+    "run beaufort 2.5": (["run", "semicircle", "--set", "platform.beaufort=2.5"], "platform.beaufort"),
+    "run sampling time 0": (["run", "semicircle", "--set", "simulation.sampling_time=0"],
+                            "simulation.sampling_time"),
+    "run duration below T": (["run", "semicircle", "--set", "simulation.duration=0.01"], "simulation.duration"),
+    "run ratio 0": (["run", "semicircle", "--set", "simulation.ekf_rate_ratio=0"], "simulation.ekf_rate_ratio"),
+    "run master newton": (["run", "semicircle", "--set", "simulation.master=newton"], "simulation.master"),
+    "run trajectory choice": (["run", "semicircle", "--set", "target.trajectory=zigzag"], "target.trajectory"),
+    "run tiny sigma_range": (["run", "semicircle", "--set", "receiver.sigma_range=1e-9"], "receiver.sigma_range"),
+    "run layout offsets": (["run", "semicircle", "--set", "platform.layout=custom",
+                            "--set", "platform.beacon_offsets=1 2; 3"], "platform.beacon_offsets"),
+    # run: scenarios and configuration files
+    "run unknown scenario": (["run", "atlantis"], "scenario"),
+    "run missing config": (["run", "missing.toml"], "config"),
+    "run directory config": (["run", "adir"], "is a directory"),
+    "run invalid toml": (["run", "bad.toml"], "not valid TOML"),
+    "run typed toml": (["run", "typed.toml"], "platform.baseline"),
+    "run unknown section file": (["run", "section.toml"], "sonar"),
+    "run receiver key in file": (["run", "receiver.toml"], "receiver.alpha"),
+    # run: receivers
+    "run unknown receiver": (["run", "semicircle", "--set", "receiver=kalman"], "simulation.receiver"),
+    "run key of another receiver": (["run", "semicircle", "--set", "receiver=lsq",
+                                     "--set", "receiver.q_horizontal=5"], "receiver.q_horizontal"),
+    "run missing fmu receiver": (["run", "semicircle", "--set", "receiver=fmu:none.fmu"], "simulation.receiver"),
+    "run missing model receiver": (["run", "semicircle", "--set", "receiver=model:none.py"], "simulation.receiver"),
+    "run model without a class": (["run", "semicircle", "--set", "receiver=model:nomodel.py"],
+                                  "simulation.receiver"),
+    "run model that fails": (["run", "semicircle", "--set", "receiver=model:broken.py"], "simulation.receiver"),
+    # run: trajectory files
+    "trajectory missing": (["run", "semicircle", *T, "target.trajectory_file=none.csv"], "target.trajectory_file"),
+    "trajectory nan": (["run", "semicircle", *T, "target.trajectory_file=nan_row.csv"], "target.trajectory_file"),
+    "trajectory typo": (["run", "semicircle", *T, "target.trajectory_file=typo_row.csv"], "target.trajectory_file"),
+    "trajectory backwards": (["run", "semicircle", *T, "target.trajectory_file=back_in_time.csv"],
+                             "target.trajectory_file"),
+    "trajectory header": (["run", "semicircle", *T, "target.trajectory_file=names.csv"], "target.trajectory_file"),
+    "trajectory columns": (["run", "semicircle", *T, "target.trajectory_file=three.csv"], "target.trajectory_file"),
+    "trajectory above surface": (["run", "semicircle", *T, "target.trajectory_file=above_surface.csv"],
+                                 "target.trajectory_file"),
+    "trajectory one row": (["run", "semicircle", *T, "target.trajectory_file=one_row.csv"],
+                           "target.trajectory_file"),
+    "trajectory directory": (["run", "semicircle", *T, "target.trajectory_file=adir"], "target.trajectory_file"),
+    "waypoints text": (["run", "semicircle", *T, "target.waypoints=0 0 0 5; 1 x 1 5"], "target.waypoints"),
+    # run: sound-speed profiles
+    "profile text": (["run", "semicircle", *S, "acoustics.sound_speed_profile=ssp_text.csv"],
+                     "acoustics.sound_speed_profile"),
+    "profile too slow": (["run", "semicircle", *S, "acoustics.sound_speed_profile=ssp_slow.csv"],
+                         "acoustics.sound_speed_profile"),
+    "profile negative depth": (["run", "semicircle", *S, "acoustics.sound_speed_profile=ssp_negative.csv"],
+                               "acoustics.sound_speed_profile"),
+    "profile without header": (["run", "semicircle", *S, "acoustics.sound_speed_profile=ssp_noheader.csv"],
+                               "acoustics.sound_speed_profile"),
+    "profile nan": (["run", "semicircle", *S, "acoustics.sound_speed_profile=ssp_nan.csv"],
+                    "acoustics.sound_speed_profile"),
+    "profile unknown cast": (["run", "semicircle", *S, "acoustics.sound_speed_profile=ctd:nosuch"],
+                             "acoustics.sound_speed_profile"),
+    "profile table": (["run", "semicircle", *S, "acoustics.sound_speed_profile=table",
+                       *S, "acoustics.sound_speed_table=0 1500; 10"], "acoustics.sound_speed_table"),
+    # run: engines, outputs, packages
+    "run fmu engine without fmus": (["run", "semicircle", "--engine", "fmu", "--fmu-dir", "emptyfmus"], "fmu"),
+    "run fewer beacons on fmus": (["run", "semicircle", "--engine", "fmu", "--set", "platform.layout=custom",
+                                   "--set", "platform.beacon_offsets=1 0 1; 0 1 1; -1 0 1"],
+                                  "platform.beacon_offsets"),
+    "run out is a file": (["run", "semicircle", "--out", "afile"], "--out"),
+    "run over an earlier run": (["run", "semicircle", "--out", "earlier_run"], "--force"),
+    "run engine choice": (["run", "semicircle", "--engine", "matlab"], "--engine"),
+    "run scenario and ssp": (["run", "semicircle", "--ssp", "notzip.ssp"], "run:"),
+    "run missing ssp": (["run", "--ssp", "none.ssp"], "ssp"),
+    "run ssp not a zip": (["run", "--ssp", "notzip.ssp"], "ssp"),
+    # campaign and studies
+    "campaign missing study": (["campaign", "none.toml"], "study"),
+    "campaign invalid study": (["campaign", "study_bad.toml"], "study"),
+    "campaign unknown study key": (["campaign", "study_key.toml"], "study.colour"),
+    "campaign level out of range": (["campaign", "study_level.toml"], "factors.loss.high"),
+    "campaign equal levels": (["campaign", "study_same.toml"], "factors.b"),
+    "campaign swapped levels": (["campaign", "study_swapped.toml"], "factors.b"),
+    "campaign unknown factor key": (["campaign", "study_unknown_key.toml"], "factors.b.key"),
+    "campaign zero replicates": (["campaign", "study_replicates.toml"], "study.replicates"),
+    "campaign no scenarios": (["campaign", "study_noscenario.toml"], "study.scenarios"),
+    "campaign negative seed": (["campaign", "study_seed.toml"], "study.seed"),
+    "campaign design": (["campaign", "study_design.toml"], "study.design"),
+    "campaign resolution": (["campaign", "study_resolution.toml"], "study.resolution"),
+    "campaign generators": (["campaign", "study_generators.toml"], "study.generators"),
+    "campaign unknown scenario": (["campaign", "study_scenario.toml"], "scenario"),
+    "campaign bad profile in set": (["campaign", "study_set.toml"], "acoustics.sound_speed_profile"),
+    "campaign receiver factor key": (["campaign", "study_alpha.toml"], "factors.a.key"),
+    "campaign reserved factor name": (["campaign", "study_reserved.toml"], "factors[0].name"),
+    "campaign receiver level": (["campaign", "study_receiver.toml"], "factors.rx.high"),
+    "campaign zero workers": (["campaign", "paper", "--workers", "0"], "--workers"),
+    "campaign zero batch": (["campaign", "paper", "--batch", "0"], "--batch"),
+    "campaign into a used folder": (["campaign", "study_ok.toml", "--out", "nonempty"], "--out"),
+    "campaign paper into a used folder": (["campaign", "paper", "--out", "nonempty"], "--out"),
+    "campaign resume damaged study": (["campaign", "paper", "--out", "campaign", "--resume"], "study.toml"),
+    # analyze
+    "analyze nothing": (["analyze", "adir"], "runs.parquet"),
+    "analyze corrupt runs": (["analyze", "campaign"], "runs.parquet"),
+    "analyze missing folder": (["analyze", "nowhere"], "runs.parquet"),
+    # ssp
+    "ssp out not .ssp": (["ssp", "export", "semicircle", "--out", "package.zip"], "--out"),
+    "ssp over a package": (["ssp", "export", "semicircle", "--out", "earlier.ssp"], "--force"),
+    "ssp bad value": (["ssp", "export", "semicircle", "--out", "new.ssp", "--set", "platform.baseline=-1"],
+                      "platform.baseline"),
+    # fmus and codegen
+    "fmus validate empty": (["fmus", "validate", "emptyfmus"], "FMU not found"),
+    "fmus build missing model": (["fmus", "build", "--model", "none.py", "--out", "newfmus"], "--model"),
+    "fmus build model without class": (["fmus", "build", "--model", "nomodel.py", "--out", "newfmus"], "--model"),
+    "fmus build out is a file": (["fmus", "build", "--out", "afile"], "--out"),
+    "codegen unknown receiver": (["codegen", "receiver", "--receiver", "kalman", "--out", "code"], "--receiver"),
+    "codegen used folder": (["codegen", "receiver", "--out", "nonempty"], "not an empty directory"),
+    # compare and map
+    "compare unknown receiver": (["compare", "semicircle", "--receivers", "ekf,kalman"], "--receivers"),
+    "compare zero replicates": (["compare", "semicircle", "--replicates", "0"], "--replicates"),
+    "compare foreign key": (["compare", "semicircle", "--set", "receiver.alpha=0.5"], "receiver.alpha"),
+    "map negative extent": (["map", "semicircle", "--extent", "-1"], "--extent"),
+    "map huge grid": (["map", "semicircle", "--step", "0.001"], "--step"),
+    "map levels": (["map", "semicircle", "--levels", "1,x"], "--levels"),
+    "map compare form": (["map", "semicircle", "--compare", "baseline=1,3"], "--compare"),
+    "map compare value": (["map", "semicircle", "--compare", "platform.baseline=1,-3"], "platform.baseline"),
+    "map over an earlier map": (["map", "semicircle", "--out", "earlier_map"], "--force"),
+}
+
+
+def _snapshot(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): (hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir")
+            for p in sorted(folder.rglob("*"))}
+
+
+def _prepare(folder: Path) -> None:
+    folder.mkdir(parents=True)
+    for name, text in FILES.items():
+        path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    with zipfile.ZipFile(folder / "emptyfmus" / "sblsim_platform.fmu.bak", "w"):
+        pass
+
+
+def _run(case: str, folder: Path) -> tuple[subprocess.CompletedProcess, dict, dict]:
+    _prepare(folder)
+    before = _snapshot(folder)
+    args, _ = CASES[case]
+    env = {**os.environ, "SBLSIM_FMU_DIR": str(folder / "emptyfmus")}
+    proc = subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], cwd=folder, capture_output=True,
+                          text=True, timeout=600, check=False, env=env)
+    return proc, before, _snapshot(folder)
+
+
+@pytest.fixture(scope="module")
+def outcomes(tmp_path_factory):
+    """Every case, run two at a time (each in a folder of its own)."""
+    root = tmp_path_factory.mktemp("corpus")
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        futures = {case: pool.submit(_run, case, root / f"case{k:03d}") for k, case in enumerate(CASES)}
+        return {case: f.result() for case, f in futures.items()}
+
+
+def test_the_corpus_is_large():
+    assert len(CASES) >= 60
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_bad_input_is_one_line_exit_2_and_changes_nothing(outcomes, case):
+    proc, before, after = outcomes[case]
+    _, needle = CASES[case]
+    assert proc.returncode == 2, (proc.returncode, proc.stdout[-500:], proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("sblsim: error:"), proc.stderr
+    assert needle in lines[0], (needle, lines[0])
+    assert after == before, "the folder changed"
