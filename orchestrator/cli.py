@@ -133,7 +133,7 @@ def _check_seed(seed: int | None) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from orchestrator.config import beacon_count, load_config
-    from orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_NIS, DIVERGENCE_SLOTS
+    from orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
     from orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
 
     _check_seed(args.seed)
@@ -180,8 +180,8 @@ def _run(args: argparse.Namespace) -> int:
     print(f"  {'accuracy limit:':<{width}}PCRB RMS {v('pcrb_rms')} m")
     if s["diverged"]:
         print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
-              f"{DIVERGENCE_DISTANCE:g} m off, or its NIS above {DIVERGENCE_NIS:g} for {DIVERGENCE_SLOTS} slots in a "
-              "row): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
+              f"{DIVERGENCE_DISTANCE:g} m and {DIVERGENCE_RATIO:g} times the diver's distance from the platform "
+              "off the truth): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     return 0
 

@@ -16,9 +16,10 @@ the receiver's ``nis`` output from the first slot on; ``gated_pct`` the share
 of received slots whose range the gate rejected [%]; ``pcrb_rms`` the RMS of
 the position PCRB along the run (:mod:`models.receiver.bound`), comparable
 with ``e_tot_rms``. ``diverged`` flags a run whose receiver lost the diver: an
-estimate that is not finite or more than :data:`DIVERGENCE_DISTANCE` from
-the truth, or a NIS above :data:`DIVERGENCE_NIS` on :data:`DIVERGENCE_SLOTS`
-slots in a row; its other numbers then mean nothing.
+estimate that is not finite, or farther from the truth than both
+:data:`DIVERGENCE_DISTANCE` and :data:`DIVERGENCE_RATIO` times the diver's
+distance from the platform; its other numbers then mean nothing (an
+overconfident but tracking receiver is not flagged: its NEES says so).
 """
 
 from __future__ import annotations
@@ -29,10 +30,9 @@ from scipy.stats import chi2
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
 #: Per-run consistency metrics, the bound and the divergence flag.
 CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms", "diverged")
-#: A receiver has diverged when its estimate is this far from the truth [m] at some step ...
-DIVERGENCE_DISTANCE = 1000.0
-#: ... or when its NIS exceeds this for this many slots in a row (or any estimate is not finite).
-DIVERGENCE_NIS, DIVERGENCE_SLOTS = 1e4, 20
+#: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
+#: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference.
+DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
 #: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound.
 RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
@@ -133,7 +133,7 @@ def slots(packet_seq: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: np.ndarray, fresh: np.ndarray,
-                gated: np.ndarray, bound: np.ndarray) -> dict[str, np.ndarray]:
+                gated: np.ndarray, bound: np.ndarray, truth: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Consistency metrics of B runs (:data:`CONSISTENCY_NAMES`).
 
     Parameters
@@ -152,6 +152,8 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
         The receiver's ``gated`` output.
     bound : ndarray, shape (N, B)
         Position PCRB ``sqrt(trace)`` [m] (NaN: not available).
+    truth : ndarray, shape (N, B, 3), optional
+        True positions relative to the platform reference [m] (for the divergence test; default: at it).
 
     Returns
     -------
@@ -162,15 +164,9 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
         return np.ascontiguousarray(np.asarray(values, dtype=dtype).T)
 
     e = runs(nees(err, cov))
-    distance = runs(np.sqrt(np.sum(np.asarray(err, dtype=float) ** 2, axis=-1)))
-    lost = ~np.isfinite(distance) | (distance > DIVERGENCE_DISTANCE)
-    slot = runs(slots(packet_seq, fresh)[0], bool)
-    high = runs(nis) > DIVERGENCE_NIS
-    run_length = np.zeros(high.shape[0])
-    longest = np.zeros(high.shape[0])
-    for k in range(high.shape[1]):  # consecutive slots with a NIS beyond the limit
-        run_length = np.where(slot[:, k], np.where(high[:, k], run_length + 1, 0), run_length)
-        longest = np.maximum(longest, run_length)
+    error = runs(np.sqrt(np.sum(np.asarray(err, dtype=float) ** 2, axis=-1)))
+    reach = 0.0 if truth is None else runs(np.sqrt(np.sum(np.asarray(truth, dtype=float) ** 2, axis=-1)))
+    lost = ~np.isfinite(error) | ((error > DIVERGENCE_DISTANCE) & (error > DIVERGENCE_RATIO * reach))
     valid = np.isfinite(e)
     count = valid.sum(axis=-1)
     started = runs(packet_seq) > 0
@@ -182,5 +178,5 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
             "nis_mean": np.where(started, runs(nis), 0.0).sum(axis=-1) / started.sum(axis=-1),
             "gated_pct": 100.0 * (fresh & runs(gated, bool)).sum(axis=-1) / fresh.sum(axis=-1),
             "pcrb_rms": np.sqrt(np.mean(runs(bound) ** 2, axis=-1)),
-            "diverged": lost.any(axis=-1) | (longest >= DIVERGENCE_SLOTS),
+            "diverged": lost.any(axis=-1),
         }

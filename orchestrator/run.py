@@ -421,7 +421,7 @@ def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int],
                                       arms[np.arange(batch)[None, :], beacon], dt=cfg["simulation"]["sampling_time"],
                                       **{k: params[k].to_numpy() for k in params}), n_beacons)
     checks = consistency(truth - estimate, np.stack([cols[f"cov_{ab}"] for ab in COVARIANCE], axis=-1),
-                         cols["nis"], cols["packet_seq"], fresh, cols["gated"], bound)
+                         cols["nis"], cols["packet_seq"], fresh, cols["gated"], bound, truth)
     metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_"),
                             **checks})
     if not timeseries:
