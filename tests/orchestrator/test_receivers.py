@@ -141,3 +141,19 @@ def test_the_same_key_in_a_file_is_checked_against_the_receiver_the_file_chooses
     path.write_text('[simulation]\nreceiver = "ekf"\n[receiver]\nalpha = 0.5\n')
     with pytest.raises(ConfigError, match="receiver.alpha: not a parameter of the ekf receiver"):
         load_config(str(path))
+
+
+def test_a_users_fmu_that_fails_in_a_run_stops_with_one_line(tmp_path, capsys):
+    """Its doStep reports an error after 2 s: the run stops with one line naming the FMU, nothing written."""
+    script = tmp_path / "FailingReceiver.py"
+    text = USER_SCRIPT.read_text().replace("class UserReceiver(Fmi2Slave):", "class FailingReceiver(Fmi2Slave):")
+    script.write_text(text
+                      .replace("    def do_step(self, current_time, step_size):\n",
+                               "    def do_step(self, current_time, step_size):\n"
+                               "        if current_time > 2.0:\n            return False\n"))
+    fmu = build_user_fmu(script, tmp_path)
+    code = main(["run", "semicircle", "--set", f"receiver=fmu:{fmu}", *[a for s in SHORT for a in ("--set", s)],
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "FailingReceiver.fmu" in err and "fmi2DoStep" in err, err
+    assert "Traceback" not in err and not (tmp_path / "out").exists()
