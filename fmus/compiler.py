@@ -21,7 +21,7 @@ from typing import Sequence
 
 from models.core import ModelError
 
-FLAGS = ("-O2", "-std=c99", "-ffp-contract=off", "-fvisibility=hidden", "-fPIC", "-shared")
+FLAGS = ("-O3", "-std=c99", "-ffp-contract=off", "-fno-math-errno", "-fvisibility=hidden", "-fPIC", "-shared")
 
 #: FMI 2.0 platform folder -> (zig target, library suffix).
 PLATFORMS = {

@@ -491,11 +491,17 @@ class Stream:
         Uniform on [0, 1) or standard normal.
     width : int
         Numbers per draw.
+    when : (str, str), optional
+        ``(choice parameter, choice)``: draw only when the parameter holds that
+        choice (e.g. ``("trajectory", "random-walk")``); otherwise the numbers
+        are zeros and the stream's draw counter stays, so a run draws what it
+        uses and nothing else.
     """
 
     purpose: int
     kind: str
     width: int
+    when: tuple[str, str] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in ("uniform", "normal"):
@@ -957,11 +963,29 @@ def cumulative_sum(values: Any) -> Any:
     return ca.reshape(total(0, ca.reshape(values, 1, N))[1], N, 1)
 
 
+def switch(name: str, branches: Sequence[ca.Function]) -> ca.Function:
+    """``f(index, *args) = branches[index](*args)``, only that branch evaluated in the generated C.
+
+    A casadi ``Switch`` called through a never-inlined wrapper: an SX
+    expression that calls it holds one call, and the C it generates runs the
+    selected branch alone (an ``if_else`` of the branches would evaluate them
+    all). ``index`` is rounded toward zero; outside ``[0, n)`` it takes the
+    last branch. The branches share one signature.
+    """
+    first = branches[0]
+    switch_f = ca.Function.conditional(f"{name}_switch", list(branches[:-1]), branches[-1])
+    index = ca.MX.sym("index")
+    args = [ca.MX.sym(first.name_in(k), first.sparsity_in(k)) for k in range(first.n_in())]
+    return ca.Function(name, [index, *args], switch_f.call([index, *args]), ["index", *first.name_in()],
+                       first.name_out(), {"never_inline": True})
+
+
 def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
     """``rows[index]`` for a symbolic integer-valued ``index`` (zero if out of range).
 
     Sums ``if_else(index == k, rows[k], 0)``: exact, since the other
-    terms are exact zeros.
+    terms are exact zeros. Every row is computed; for costly alternatives use
+    :func:`switch`.
     """
     total = 0
     for k, row in enumerate(rows):

@@ -221,7 +221,13 @@ static const double* draw(sblsim_instance* s, const sblsim_function* f) {
     for (k = 0; k < 4; k++) keys[k] = key_of(s, k);
     for (k = 0; k < f->n_streams; k++) {
         const sblsim_stream* st = &f->streams[k];
-        uint64_t n = s->draws[st->slot]++;
+        uint64_t n;
+        if (st->when_index >= 0 && s->p[st->when_index] != st->when_value) {
+            memset(noise + offset, 0, sizeof(double) * (size_t)st->width);
+            offset += st->width;
+            continue;
+        }
+        n = s->draws[st->slot]++;
         if (st->kind == SBLSIM_UNIFORM)
             sblsim_uniforms(keys, s->model->component, st->purpose, n, st->width, noise + offset);
         else

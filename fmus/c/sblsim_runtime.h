@@ -29,6 +29,8 @@ typedef struct {
     int slot;
     int kind;
     int width;
+    int when_index;    /* p index of a choice parameter: draw only when it equals when_value (-1: always) */
+    double when_value;
 } sblsim_stream;
 
 /* A generated function and the random numbers it takes. */

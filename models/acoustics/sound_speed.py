@@ -42,6 +42,7 @@ from models.core import (
     cumulative_sum,
     padded_rows,
     parse_table,
+    switch,
 )
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md).
@@ -111,12 +112,23 @@ def harmonic_mean(z1, z2, constant, count, nodes, slowness) -> ca.SX:
         the nodes; where the path is level (|z2 − z1| < 1 nm) its limit,
         ``1 / S'`` at the mid depth; the constant for an empty table.
     """
+    return _harmonic_mean()(count > 0, z1, z2, constant, nodes, slowness)
+
+
+@lru_cache(maxsize=1)
+def _harmonic_mean() -> ca.Function:
+    """``(use_table, z1, z2, constant, nodes, slowness) -> speed``: the table's harmonic mean or the constant,
+    only the one in use evaluated (a constant profile costs no table lookup)."""
     level_speed, f = _profile_functions()
+    z1, z2, constant = ca.SX.sym("z1"), ca.SX.sym("z2"), ca.SX.sym("constant")
+    nodes, slowness = ca.SX.sym("nodes", NODES), ca.SX.sym("slowness", NODES)
     dz = z2 - z1
     level = ca.fabs(dz) < 1e-9
     slanted = dz / ca.if_else(level, 1.0, f(z2, nodes, slowness) - f(z1, nodes, slowness))
     table = ca.if_else(level, level_speed(0.5 * (z1 + z2), nodes, slowness), slanted)
-    return ca.if_else(count > 0, table, constant)
+    args, names = [z1, z2, constant, nodes, slowness], ["z1", "z2", "constant", "nodes", "slowness"]
+    return switch("sblsim_harmonic_mean", [ca.Function("sblsim_harmonic_constant", args, [constant], names, ["c"]),
+                                           ca.Function("sblsim_harmonic_table", args, [table], names, ["c"])])
 
 
 @lru_cache(maxsize=1)

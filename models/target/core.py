@@ -45,7 +45,7 @@ from models.core import (
     parse_table,
     resolve_parameters,
     sample_due,
-    select,
+    switch,
 )
 from models.target.trajectories import OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows, waypoints
 
@@ -164,22 +164,28 @@ class Target(Component):
             return {"times": padded[0], "points": ca.vec(ca.horzcat(*padded[1:]).T), "first": padded[0][0],
                     "last": last[0]}
 
+        t = ca.SX.sym("t")
+        xs, ps, ds = b.X.unpack(b.x), b.params(), b.D.unpack(b.d)
+        branches = {
+            "semicircle": lambda: semicircle(t, ps["radius"], ps["speed"], ps["depth"]),
+            "spiral": lambda: spiral(t, ps["spiral_start_radius"], ps["spiral_pitch"], ps["speed"], ps["depth"]),
+            "random": lambda: (ca.vertcat(xs["start"] + ps["speed"] * (t - xs["t0"] - xs["leg"] * ps["turn_interval"])
+                                          * xs["direction"], ps["depth"]),
+                               ca.vertcat(ps["speed"] * xs["direction"], 0.0)),
+            "waypoints": lambda: waypoints(t, ds["times"], ds["points"], ds["first"], ds["last"]),
+            "random-walk": lambda: (xs["walk"][0:3] + xs["walk"][3:6] * (t - xs["walk_time"]), xs["walk"][3:6]),
+        }
+        functions = {name: ca.Function(f"{b.prefix}_path_{name.replace('-', '_')}", [b.x, b.p, b.d, t],
+                                       list(body()), ["x", "p", "d", "t"], ["pos", "vel"])
+                     for name, body in branches.items()}
+        # by trajectory index; the square and a file are waypoint paths
+        tabled = {"square": "waypoints", "file": "waypoints"}
+        path_switch = switch(f"{b.prefix}_path", [functions[tabled.get(name, name)] for name in TRAJECTORIES])
+        zeros = {name: ca.SX.zeros(n) for name, n in b.X.blocks}
+
         def path(x, p, d, t):
-            """Position and velocity of the configured trajectory at ``t``."""
-            choice = p["trajectory"]
-            options = {
-                "semicircle": semicircle(t, p["radius"], p["speed"], p["depth"]),
-                "spiral": spiral(t, p["spiral_start_radius"], p["spiral_pitch"], p["speed"], p["depth"]),
-                "random": (ca.vertcat(x["start"] + p["speed"] * (t - x["t0"] - x["leg"] * p["turn_interval"])
-                                      * x["direction"], p["depth"]),
-                           ca.vertcat(p["speed"] * x["direction"], 0.0)),
-                "random-walk": (x["walk"][0:3] + x["walk"][3:6] * (t - x["walk_time"]), x["walk"][3:6]),
-                "waypoints": waypoints(t, d["times"], d["points"], d["first"], d["last"]),
-            }
-            index = ca.if_else(choice == TRAJECTORIES.index("square"), TRAJECTORIES.index("file"), choice)
-            order = ("semicircle", "spiral", "random", None, "waypoints", "random-walk")
-            pos = select(index, [options[k][0] if k else 0 for k in order])
-            vel = select(index, [options[k][1] if k else 0 for k in order])
+            """Position and velocity of the configured trajectory at ``t`` (only its branch runs)."""
+            pos, vel = path_switch(p["trajectory"], b.X.pack(x, zeros), b.p, b.d, t)
             return pos, vel
 
         def walk_mean(p):
@@ -224,7 +230,8 @@ class Target(Component):
             return out
 
         depth, legs = Stream(_DEPTH_NOISE, "normal", 1), Stream(_RANDOM_PATH, "uniform", 2)
-        walk_start, walk = Stream(_WALK_START, "normal", 6), Stream(_WALK, "normal", 6)
+        walk_start = Stream(_WALK_START, "normal", 6, when=("trajectory", "random-walk"))
+        walk = Stream(_WALK, "normal", 6, when=("trajectory", "random-walk"))
         return b.program(b.prepare(prepare), b.init(init, (depth, legs, walk_start)), b.output(output),
                          events=[b.event("turn", turn_due, turn, (legs,)),
                                  b.event("sample", sample_due_, sample, (depth, walk))])
