@@ -47,6 +47,7 @@ from typing import Any, Iterator
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 
 from models import COMPONENTS
 from models.core import ModelError
@@ -422,9 +423,8 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     try:
         return _run_prepared(study, out, batch, configs, workers, client, engine, fmu_dir, save_timeseries,
                              progress)
-    except KeyboardInterrupt:
-        manifest = read_manifest(out) or {}
-        done = sum(entry.get("rows", 0) for entry in manifest.values())
+    except KeyboardInterrupt:  # chunk files are written whole (then renamed): each one present is kept
+        done = sum(pq.ParquetFile(f).metadata.num_rows for f in (out / "chunks").glob("*.parquet"))
         raise CampaignInterrupted(done, study.runs, out) from None
     except Exception:
         if new and not any((out / "chunks").glob("*.parquet")):  # nothing done: leave no half-made folder
