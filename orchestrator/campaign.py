@@ -194,6 +194,8 @@ def _write_atomic(frame: pd.DataFrame, path: Path) -> None:
 
 
 MANIFEST = "manifest.json"
+#: The manifest's entry recording the chunk plan (engine, batch size), beside the chunks' entries.
+PLAN = "_plan"
 
 
 def file_digest(path: Path) -> str:
@@ -243,8 +245,9 @@ def manifest_entry(chunk: "Chunk", path: Path, series: Path | None = None) -> di
     return entry
 
 
-def verify_chunk(chunk: "Chunk", path: Path, entry: dict | None, scenario_key: int) -> str:
-    """Why a chunk file cannot be kept ('' if it can): checksum, rows, cells, replicates, scenario."""
+def verify_chunk(chunk: "Chunk", path: Path, entry: dict | None, scenario_key: int, study: Study) -> str:
+    """Why a chunk file cannot be kept ('' if it can): checksum, rows, cells, replicates, scenario, and the
+    seed and factor levels of its rows (a chunk of another study is refused even with the same cells)."""
     if not path.is_file():
         return "missing"
     if entry is not None:
@@ -252,14 +255,20 @@ def verify_chunk(chunk: "Chunk", path: Path, entry: dict | None, scenario_key: i
             return "its checksum differs from the manifest's"
         if entry.get("cells") != list(chunk.cells) or entry.get("rows") != chunk.runs:
             return "the manifest records other cells"
+    levels = [f"{f.name}_value" for f in study.factors]
     try:
-        frame = pd.read_parquet(path, columns=["scenario_key", "cell", "replicate"])
+        frame = pd.read_parquet(path, columns=["scenario_key", "cell", "replicate", "seed", *levels])
     except Exception as exc:  # pyarrow raises several kinds on a damaged file
         return f"unreadable ({type(exc).__name__})"
     expected = {(c, r) for c in chunk.cells for r in range(chunk.replicates)}
     got = set(zip(frame["cell"].tolist(), frame["replicate"].tolist()))
     if len(frame) != chunk.runs or got != expected or set(frame["scenario_key"].tolist()) != {scenario_key}:
         return "it holds other runs than the plan's"
+    cells = frame["cell"].to_numpy()
+    for k, (factor, column) in enumerate(zip(study.factors, levels)):
+        want = np.where(study.matrix[cells, k] < 0, factor.low, factor.high)
+        if not np.array_equal(frame[column].to_numpy(), want) or not (frame["seed"] == study.seed).all():
+            return "its rows belong to another study (seed or factor levels)"
     return ""
 
 
@@ -334,9 +343,9 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
         try:
             recorded = tomllib.loads(study_file.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise CampaignError(f"--resume: {str(study_file)!r} is damaged ({str(exc).splitlines()[0]}); the "
-                                "campaign cannot be resumed: restore the file or run it again in another --out") \
-                from None
+            raise CampaignError(f"--resume: {str(study_file)!r} is damaged ({str(exc).splitlines()[0]}); delete it "
+                                "and resume again: it is rewritten from the study you give, and every chunk is "
+                                "checked against that study") from None
         execution = recorded.pop("execution", {})
         if not isinstance(execution, dict):
             execution = {}
@@ -347,7 +356,15 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
                                 "resume it with the same engine")
         return int(execution.get("batch", batch))
     if out.is_dir() and any(out.iterdir()):
-        raise CampaignError(f"--out: {str(out)!r} is not empty and holds no campaign; choose another directory")
+        if not (resume and (out / "chunks").is_dir()):
+            raise CampaignError(f"--out: {str(out)!r} is not empty and holds no campaign; choose another directory")
+        # a campaign whose study.toml was deleted: rewritten from the study given, with the recorded plan
+        plan_record = (read_manifest(out) or {}).get(PLAN, {})
+        if plan_record.get("engine", engine) != engine:
+            raise CampaignError(f"--engine: {str(out)!r} was run on the {plan_record['engine']} engine; "
+                                "resume it with the same engine")
+        batch = int(plan_record.get("batch", batch))
+        print(f"campaign: {str(study_file)!r} was missing; written again from the study given", file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
     (out / "chunks").mkdir(exist_ok=True)
     import tomli_w
@@ -449,11 +466,12 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
     manifest = read_manifest(out)
     rebuilt = manifest is None
     manifest = manifest or {}
+    manifest[PLAN] = {"engine": engine, "batch": batch}
     todo = []
     for c in chunks:
         path, series = chunk_dir / f"{c.id}.parquet", series_dir / f"{c.id}.parquet"
         entry = manifest.get(c.id)
-        reason = verify_chunk(c, path, entry, c.configs[0]["run"]["scenario_key"])
+        reason = verify_chunk(c, path, entry, c.configs[0]["run"]["scenario_key"], study)
         if not reason and save_timeseries:
             if not series.is_file():
                 reason = "its time series are missing"

@@ -281,16 +281,39 @@ def test_resume_without_a_manifest_checks_the_chunks_by_content(kill_reference, 
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.count("holds other runs than the plan's") == 2, proc.stderr
     assert_same_runs(read_runs(out), kill_reference)
-    assert set(json.loads((out / "manifest.json").read_text())) == {f.stem for f in files}
+    assert set(json.loads((out / "manifest.json").read_text())) == {f.stem for f in files} | {"_plan"}
 
 
-def test_a_damaged_study_file_stops_resume_with_one_line(tmp_path):
+def test_a_damaged_study_file_stops_resume_with_one_line_and_deleting_it_recovers(kill_reference, tmp_path):
     study_file, out = _finished(tmp_path)
     (out / "study.toml").write_text("[study\nname = ")
+    (out / "runs.parquet").unlink()
+    chunk_files(out)[5].write_bytes(b"")
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
-    assert_usage_error(proc, "study.toml", "is damaged")
+    assert_usage_error(proc, "study.toml", "is damaged", "delete it and resume again")
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    (out / "study.toml").unlink()  # as the message says
+    proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "written again" in proc.stderr and proc.stderr.count("is recomputed") == 1, proc.stderr
+    assert proc.stdout.splitlines()[-1].startswith(f"{KILL_BATCH} runs in "), proc.stdout  # the same plan
+    assert_same_runs(read_runs(out), kill_reference)
+
+
+def test_a_chunk_of_another_study_with_the_same_cells_is_recomputed(kill_reference, tmp_path):
+    study_file, out = _finished(tmp_path)
+    other = {**KILL_TABLE, "study": {**KILL_TABLE["study"], "seed": 6}}  # same plan, other seed
+    other_file, other_out = write_study(tmp_path / "other.toml", other), tmp_path / "other"
+    proc = sblsim("campaign", other_file, "--workers", "1", "--batch", KILL_BATCH, "--out", other_out, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    (out / "manifest.json").unlink()  # no checksum to catch it: the content must
+    (out / "runs.parquet").unlink()
+    chunk_files(out)[1].write_bytes(chunk_files(other_out)[1].read_bytes())
+    proc = sblsim("campaign", study_file, "--workers", "1", "--out", out, "--resume", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "belong to another study" in proc.stderr, proc.stderr
+    assert_same_runs(read_runs(out), kill_reference)
 
 
 def _children(pid: int) -> list[int]:
