@@ -119,6 +119,10 @@ def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.C
     lib.sblsim_batch_do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
     lib.sblsim_model_size.argtypes = [ctypes.c_char_p, ctypes.c_int]
     lib.sblsim_bound_series.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.POINTER(ctypes.c_double)] * 3
+    ints, doubles = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
+    lib.sblsim_system_run.argtypes = [ctypes.c_int, ctypes.POINTER(ctypes.c_void_p), ints, ints, ints, ints, ints,
+                                      ctypes.c_int, ints, ints, doubles, ctypes.c_double, ctypes.c_double,
+                                      ctypes.c_int, ctypes.c_int, ctypes.c_int, doubles, ints]
     for name in ("sblsim_stream_uniforms", "sblsim_stream_normals"):
         getattr(lib, name).argtypes = [ctypes.POINTER(ctypes.c_uint64), ctypes.c_int, ctypes.c_int, ctypes.c_uint64,
                                        ctypes.c_int, ctypes.POINTER(ctypes.c_double)]
@@ -198,6 +202,62 @@ class NativeBatch:
         self.close()
 
 
+class NativeSystem:
+    """Several batches of one library stepped together by the compiled master loop (``sblsim_system_run``).
+
+    Parameters
+    ----------
+    batches : sequence of NativeBatch
+        In execution order, the same batch size and library.
+    rates : sequence of int
+        Communication steps per macro step of each.
+    links : sequence of (int, int, int, int)
+        ``(source batch, source output, destination batch, destination input)``.
+    record : sequence of (int, int)
+        ``(batch, output)`` recorded after every macro step.
+    """
+
+    def __init__(self, batches, rates, links, record) -> None:
+        self.batches = list(batches)
+        self.lib = self.batches[0].lib
+        n = len(self.batches)
+        self.n, self.B = n, self.batches[0].batch
+        self._pointers = (ctypes.c_void_p * n)(*[b._handle for b in self.batches])
+        by_destination = sorted(links, key=lambda link: link[2])
+        offsets = np.searchsorted([link[2] for link in by_destination], np.arange(n + 1)).astype(np.int32)
+        self._arrays = {
+            "rates": np.asarray(rates, dtype=np.int32), "offsets": offsets,
+            "src": np.array([link[0] for link in by_destination] or [0], dtype=np.int32),
+            "out": np.array([link[1] for link in by_destination] or [0], dtype=np.int32),
+            "in": np.array([link[3] for link in by_destination] or [0], dtype=np.int32),
+            "rec_comp": np.array([r[0] for r in record] or [0], dtype=np.int32),
+            "rec_out": np.array([r[1] for r in record] or [0], dtype=np.int32),
+        }
+        self.n_record = len(record)
+        self.timing = np.zeros(n)
+
+    def run(self, t0: float, T: float, k0: int, n_steps: int, jacobi: bool, into: np.ndarray) -> None:
+        """Macro steps ``k0 … k0 + n_steps − 1``; the records into ``into`` (n_steps, n_record, B), C order.
+
+        Raises
+        ------
+        ModelError
+            As :meth:`NativeBatch.do_step`, naming the component and the replicate.
+        """
+        ints = ctypes.POINTER(ctypes.c_int)
+        a = {k: v.ctypes.data_as(ints) for k, v in self._arrays.items()}
+        failed = ctypes.c_int(0)
+        status = self.lib.sblsim_system_run(
+            self.n, self._pointers, a["rates"], a["offsets"], a["src"], a["out"], a["in"], self.n_record,
+            a["rec_comp"], a["rec_out"], into.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), float(t0), float(T),
+            int(k0), int(n_steps), int(jacobi), self.timing.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
+            ctypes.byref(failed))
+        if status:
+            batch = self.batches[status - 1]
+            t = t0 + k0 * T
+            batch._check(1 + failed.value, f"step between t = {t:g} s and {t0 + (k0 + n_steps) * T:g} s")
+
+
 def bound_series(fixed: np.ndarray, steps: np.ndarray, n_beacons: int = 4) -> np.ndarray:
     """The position PCRB of :func:`models.receiver.bound.pcrb`, compiled: same inputs, same numbers.
 
@@ -235,4 +295,5 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 
-__all__ = ["NativeBatch", "bound_series", "cache_dir", "library_path", "load", "stream", "write_library_sources"]
+__all__ = ["NativeBatch", "NativeSystem", "bound_series", "cache_dir", "library_path", "load", "stream",
+           "write_library_sources"]

@@ -775,20 +775,20 @@ class Component:
     @classmethod
     def config_parameters(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         """The parameters a configuration section may set (those the orchestrator fills left out)."""
-        return tuple(v for v in cls.variables(n_beacons) if v.causality == "parameter" and v.scope != "fmu")
+        return _config_parameters(cls, int(n_beacons))
 
     @classmethod
     def fmu_parameters_declared(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         """The FMU parameters, in the order they travel in ``p``."""
-        return tuple(v for v in cls.fmu_variables(n_beacons) if v.causality == "parameter")
+        return _by_causality(cls, int(n_beacons), "parameter")
 
     @classmethod
     def inputs(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return tuple(v for v in cls.fmu_variables(n_beacons) if v.causality == "input")
+        return _by_causality(cls, int(n_beacons), "input")
 
     @classmethod
     def outputs(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return tuple(v for v in cls.fmu_variables(n_beacons) if v.causality == "output")
+        return _by_causality(cls, int(n_beacons), "output")
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -887,6 +887,16 @@ class Component:
         declared = {v.name: v for v in cls.fmu_parameters_declared(n_beacons)}
         return {k: (declared[k].choices.index(v) if k in declared and declared[k].type == "String" else v)
                 for k, v in values.items()}
+
+
+@lru_cache(maxsize=None)
+def _config_parameters(cls: type, n_beacons: int) -> tuple[Variable, ...]:
+    return tuple(v for v in cls.variables(n_beacons) if v.causality == "parameter" and v.scope != "fmu")
+
+
+@lru_cache(maxsize=None)
+def _by_causality(cls: type, n_beacons: int, causality: str) -> tuple[Variable, ...]:
+    return tuple(v for v in _fmu_variables(cls, n_beacons) if v.causality == causality)
 
 
 @lru_cache(maxsize=None)

@@ -158,6 +158,7 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
     series : pandas.DataFrame or None
         Per-step time series with ``cell`` and ``replicate`` columns, if asked.
     """
+    start = time.perf_counter()
     cfgs = [cfg for base in chunk.configs for cfg in with_replicates(base, range(chunk.replicates))]
     result = run_batch(cfgs, engine, fmu_dir=fmu_dir, timeseries=timeseries)
     cells = np.repeat(chunk.cells, chunk.replicates)
@@ -178,7 +179,9 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
         series = result.timeseries
         series.insert(0, "cell", np.repeat(cells, result.steps))
         series.insert(0, "scenario_key", np.int64(first["scenario_key"]))
-    return pd.DataFrame(rows), series
+    frame = pd.DataFrame(rows)
+    frame.attrs["seconds"] = time.perf_counter() - start  # the worker's time for the chunk (in the manifest)
+    return frame, series
 
 
 def _write_atomic(frame: pd.DataFrame, path: Path) -> None:
@@ -236,10 +239,13 @@ def write_manifest(out: Path, manifest: dict[str, dict]) -> None:
     os.replace(tmp, out / MANIFEST)
 
 
-def manifest_entry(chunk: "Chunk", path: Path, series: Path | None = None) -> dict[str, Any]:
-    """What the manifest records of a finished chunk."""
+def manifest_entry(chunk: "Chunk", path: Path, series: Path | None = None, seconds: float | None = None
+                   ) -> dict[str, Any]:
+    """What the manifest records of a finished chunk (with the worker's seconds for it, when known)."""
     entry = {"rows": chunk.runs, "cells": list(chunk.cells), "replicates": chunk.replicates,
              "sha256": file_digest(path)}
+    if seconds is not None:
+        entry["seconds"] = round(float(seconds), 3)
     if series is not None:
         entry["series_sha256"] = file_digest(series)
     return entry
@@ -497,11 +503,12 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
             for chunk, (rows, series) in _execute(todo, study, engine, fmu_dir, save_timeseries,
                                                   workers, client):
                 path = chunk_dir / f"{chunk.id}.parquet"
+                seconds = rows.attrs.pop("seconds", None)  # not into the file: its bytes depend on the results only
                 if series is not None:
                     _write_atomic(series, series_dir / f"{chunk.id}.parquet")
                 _write_atomic(rows, path)
                 manifest[chunk.id] = manifest_entry(chunk, path, series_dir / f"{chunk.id}.parquet"
-                                                    if series is not None else None)
+                                                    if series is not None else None, seconds)
                 write_manifest(out, manifest)
                 computed += chunk.runs
                 reporter.update(chunk.runs)

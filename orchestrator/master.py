@@ -40,7 +40,7 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
              macro_step: float, n_steps: int, t0: float = 0.0,
              progress: Callable[[int], None] | None = None,
              record: Sequence[str] | None = None, algorithm: str = "gauss-seidel",
-             timing: dict[str, float] | None = None) -> dict[str, np.ndarray]:
+             timing: dict[str, float] | None = None, buffer: list | None = None) -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
     A handle (:mod:`orchestrator.engines`) names its inputs and outputs
@@ -72,6 +72,9 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         Where inputs come from (see the module).
     timing : dict, optional
         Filled with the wall-clock time [s] spent in each component's ``do_step`` calls (added to).
+    buffer : list, optional
+        A one-element list holding a record array to re-use (or None), updated with the one used: a caller
+        that is done with the previous result's arrays saves their allocation (the compiled loop only).
 
     Returns
     -------
@@ -114,6 +117,10 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
             for c in handles}
     rows = {c: (slice(None) if len(kept[c]) == len(handles[c].output_names) else np.array(kept[c], dtype=int))
             for c in handles}
+    system = _native_system(handles, order, plans, kept, rates)
+    if system is not None:
+        return _simulate_native(system, handles, order, kept, macro_step, n_steps, t0, progress, jacobi, timing,
+                                buffer)
     history: dict[str, list[np.ndarray]] = {c: [] for c in handles}
 
     def feed(c: str) -> None:
@@ -153,5 +160,61 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         stacked = np.stack(history[c]) if history[c] else np.zeros((0, len(kept[c]), batch))  # (n_steps, kept, B)
         for j, k in enumerate(kept[c]):
             result[f"{c}.{handles[c].output_names[k]}"] = stacked[:, j, :]
+    result["time"] = t0 + macro_step * np.arange(1, n_steps + 1)
+    return result
+
+
+def _native_system(handles: Mapping[str, object], order: Sequence[str], plans: dict, kept: dict,
+                   rates: Mapping[str, int]):
+    """The compiled master loop for these handles, when every one is a compiled batch of the same library
+    with every input connected (else None: the Python loop above runs)."""
+    from orchestrator.engines import LocalHandle
+
+    if not all(type(handles[c]) is LocalHandle for c in order):  # exactly: a wrapper may change what is exchanged
+        return None
+    batches = [handles[c].batch for c in order]
+    if len({id(b.lib) for b in batches}) != 1:
+        return None
+    if len({b.batch for b in batches}) != 1:
+        return None
+    index = {c: k for k, c in enumerate(order)}
+    links = []
+    for c in order:
+        connected = sum(len(into) for _, _, into in plans[c])
+        if connected != len(handles[c].input_names):
+            return None
+        links += [(index[src], int(out), index[c], int(into_k)) for src, rows_, into in plans[c]
+                  for out, into_k in zip(rows_, into)]
+    from fmus.native import NativeSystem
+
+    record = [(index[c], k) for c in order for k in kept[c]]
+    return NativeSystem(batches, [rates.get(c, 1) for c in order], links, record)
+
+
+def _simulate_native(system, handles: Mapping[str, object], order: Sequence[str], kept: dict, macro_step: float,
+                     n_steps: int, t0: float, progress, jacobi: bool, timing, buffer) -> dict[str, np.ndarray]:
+    """:func:`simulate` by the compiled master loop: the same operations in the same order, in C."""
+    shape = (n_steps, system.n_record, system.B)
+    size = int(np.prod(shape))
+    spare = buffer[0] if buffer else None
+    flat = spare[:size] if spare is not None and spare.size >= size else np.empty(size)
+    if buffer is not None and flat.base is not spare:
+        buffer[0] = flat
+    record = flat.reshape(shape)
+    chunk = max(1, n_steps // 100) if progress is not None else n_steps
+    for k0 in range(0, n_steps, chunk):
+        count = min(chunk, n_steps - k0)
+        system.run(t0, macro_step, k0, count, jacobi, record[k0:k0 + count])
+        if progress is not None:
+            progress(count)
+    if timing is not None:
+        for c, seconds in zip(order, system.timing):
+            timing[c] = timing.get(c, 0.0) + float(seconds)
+    result: dict[str, np.ndarray] = {}
+    j = 0
+    for c in order:
+        for k in kept[c]:
+            result[f"{c}.{handles[c].output_names[k]}"] = record[:, j, :]
+            j += 1
     result["time"] = t0 + macro_step * np.arange(1, n_steps + 1)
     return result

@@ -40,6 +40,9 @@ from orchestrator.output import staged_directory
 ENGINES = ("local", "fmu")
 #: Beacons of the built FMUs' interfaces.
 FMU_BEACONS = 4
+#: The compiled master loop's record array, re-used from batch to batch in this process (run_batch is done
+#: with it when it returns: the time series and metrics are copies).
+_RECORD: list = [None]
 
 #: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
 TIMESERIES_COLUMNS = {
@@ -379,7 +382,8 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                     params, reps = merge_params(group, name, handle.parameters)
                     handle.setup(params, reps)
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
-                                     progress=bar.update if bar else None, algorithm=sim["master"]))
+                                     progress=bar.update if bar else None, algorithm=sim["master"],
+                                     buffer=_RECORD if len(groups) == 1 else None))
                 replicates.extend(reps.tolist())
         finally:
             if bar is not None:

@@ -4,9 +4,17 @@
  * reads the outputs (B x n_y) through the pointers this API returns; one call steps every
  * replicate, with the same runtime (and so the same numbers) as the FMUs.
  */
+#if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
+#define _POSIX_C_SOURCE 199309L /* clock_gettime under -std=c99 */
+#endif
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(_WIN32)
+#include <windows.h>
+#else
+#include <time.h>
+#endif
 
 #include "sblsim_bound_casadi.h"
 #include "sblsim_runtime.h"
@@ -190,5 +198,74 @@ SBLSIM_EXPORT int sblsim_bound_series(int n, int b, const double* fixed, const d
     }
     free(w);
     free(iw);
+    return 0;
+}
+
+/* Seconds on a monotonic clock (for the per-component timing of sblsim_system_run). */
+static double now(void) {
+#if defined(_WIN32)
+    LARGE_INTEGER count, frequency;
+    QueryPerformanceCounter(&count);
+    QueryPerformanceFrequency(&frequency);
+    return (double)count.QuadPart / (double)frequency.QuadPart;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+static void feed(sblsim_batch** batches, int c, const int* link_offsets, const int* link_src, const int* link_out,
+                 const int* link_in) {
+    sblsim_batch* dst = batches[c];
+    int i, k, n_u = dst->m->n_u;
+    for (i = 0; i < dst->B; i++) { /* replicate by replicate: each touches a few cache lines */
+        double* u = dst->vectors[3] + (size_t)i * n_u;
+        for (k = link_offsets[c]; k < link_offsets[c + 1]; k++) {
+            const sblsim_batch* src = batches[link_src[k]];
+            u[link_in[k]] = src->vectors[4][(size_t)i * src->m->n_y + link_out[k]];
+        }
+    }
+}
+
+/* The master loop of the local engine in C (orchestrator/master.py, simulate, is the reference: the same
+   operations in the same order). `batches` in execution order, all with B replicates; the links of component c
+   (source component, its output index, c's input index) are link_offsets[c] .. link_offsets[c + 1] - 1.
+   Macro steps k0 .. k0 + n_steps - 1 of size T from t0; component c takes rates[c] communication steps per macro
+   step. After each macro step the outputs (rec_comp[j], rec_out[j]) go to record[(k - k0) x n_record x B].
+   timing[c] accumulates the seconds of c's steps. 0 on success, else 1 + the failing component's index (its
+   batch message says why, `failed_replicate` which replicate). */
+SBLSIM_EXPORT int sblsim_system_run(int n, sblsim_batch** batches, const int* rates, const int* link_offsets,
+                                    const int* link_src, const int* link_out, const int* link_in, int n_record,
+                                    const int* rec_comp, const int* rec_out, double* record, double t0, double T,
+                                    int k0, int n_steps, int jacobi, double* timing, int* failed_replicate) {
+    int k, c, j, i;
+    int B = batches[0]->B;
+    for (k = k0; k < k0 + n_steps; k++) {
+        double t = t0 + k * T;
+        if (jacobi)
+            for (c = 0; c < n; c++) feed(batches, c, link_offsets, link_src, link_out, link_in);
+        for (c = 0; c < n; c++) {
+            double sub = T / rates[c], start;
+            if (!jacobi) feed(batches, c, link_offsets, link_src, link_out, link_in);
+            start = now();
+            for (j = 0; j < rates[c]; j++) {
+                int status = sblsim_batch_do_step(batches[c], t + j * sub, sub);
+                if (status) {
+                    *failed_replicate = status - 1;
+                    return 1 + c;
+                }
+            }
+            timing[c] += now() - start;
+        }
+        {
+            double* step = record + (size_t)(k - k0) * (size_t)n_record * (size_t)B; /* record[k - k0][j][i] */
+            for (i = 0; i < B; i++) /* replicate by replicate: reads one output row, writes n_record cache lines */
+                for (j = 0; j < n_record; j++) {
+                    const sblsim_batch* b = batches[rec_comp[j]];
+                    step[(size_t)j * (size_t)B + (size_t)i] = b->vectors[4][(size_t)i * b->m->n_y + rec_out[j]];
+                }
+        }
+    }
     return 0;
 }

@@ -64,6 +64,14 @@ def effective_range_variance(position, beacon, arm, noise_variance, attitude_var
     return noise_variance + MODEL.attitude_variance(position, beacon, arm, attitude_variance)
 
 
+def information_update(P: ca.SX, H: ca.SX, variance, use) -> ca.SX:
+    """``(P⁻¹ + Hᵀ H / variance)⁻¹ = P − g gᵀ / (H g + variance)``, ``g = P Hᵀ``, for a scalar measurement
+    (where ``use`` is 0, P unchanged): the bound's information added, in covariance form (symmetric by
+    construction; no gain is applied to an estimate, so the Joseph form's robustness is not needed)."""
+    g = ca.mtimes(P, H.T)
+    return ca.if_else(use > 0.5, P - ca.mtimes(g, g.T) / (ca.mtimes(H, g) + variance), P)
+
+
 @lru_cache(maxsize=1)
 def bound_step() -> ca.Function:
     """One step of the bound in covariance form, as a casadi Function.
@@ -84,10 +92,10 @@ def bound_step() -> ca.Function:
     for k, i in enumerate((0, 2, 4)):
         x[i] = position[k]
     _, P = kalman.predict(x, ca.reshape(B, STATE_SIZE, STATE_SIZE), dt, qh, qv)
-    _, P, _ = kalman.scalar_update(x, P, 0.0, MODEL.depth_jacobian(), d_var, slot)
+    P = information_update(P, MODEL.depth_jacobian(), d_var, slot)
     _, H = MODEL.range_row(x, beacon)
     r_var = effective_range_variance(position, beacon, arm, noise, attitude)
-    _, P, _ = kalman.scalar_update(x, P, 0.0, H, r_var, ca.logic_and(slot, received))
+    P = information_update(P, H, r_var, ca.logic_and(slot, received))
     names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
              "depth_variance", "slot", "received"]
     return ca.Function("sblsim_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var, slot,
@@ -226,4 +234,5 @@ def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, no
 
 
 __all__ = ["FIXED", "STEP_SIZE", "bound_step", "effective_range_variance", "fix_information", "horizontal_std",
+           "information_update",
            "pcrb", "pcrb_inputs"]

@@ -308,6 +308,13 @@ def start_state(params: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     random walk gives the mean of its start, (r, 0, depth) at (0, v, 0)).
     """
     p = resolve_parameters(Target.config_parameters(), params, "target")
+    pos, vel = _start_state(tuple(sorted(p.items())))
+    return pos.copy(), vel.copy()
+
+
+@lru_cache(maxsize=256)
+def _start_state(items: tuple) -> tuple[np.ndarray, np.ndarray]:
+    p = dict(items)
     program = Target.program()
     vector = Target.parameter_vector(Target.fmu_parameters(p))
     d = program.prepare(vector)
