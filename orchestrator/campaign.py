@@ -286,8 +286,8 @@ class CampaignResult:
     ----------
     out : Path
         Campaign directory.
-    runs : pandas.DataFrame
-        ``runs.parquet``.
+    total : int
+        Runs in ``runs.parquet``.
     computed : int
         Runs simulated by this call (0 when a finished campaign is resumed).
     wall_time : float
@@ -295,17 +295,34 @@ class CampaignResult:
     """
 
     out: Path
-    runs: pd.DataFrame
+    total: int
     computed: int
     wall_time: float
+    _runs: pd.DataFrame | None = field(default=None, repr=False)
+
+    @property
+    def runs(self) -> pd.DataFrame:
+        """``runs.parquet``, read when first asked for (a large study's table is not kept in memory)."""
+        if self._runs is None:
+            self._runs = pd.read_parquet(self.out / "runs.parquet")
+        return self._runs
+
+    def column(self, name: str) -> np.ndarray:
+        """One column of ``runs.parquet`` (read alone)."""
+        return pq.read_table(self.out / "runs.parquet", columns=[name]).column(name).to_numpy()
 
     @property
     def runs_per_second(self) -> float:
         return self.computed / self.wall_time if self.wall_time > 0 else float("nan")
 
 
-def connect(scheduler: str, timeout: float = 10.0):
-    """A Dask distributed client of a scheduler address.
+#: ``--scheduler`` value that starts a Dask ``LocalCluster`` on this machine.
+LOCAL_CLUSTER = "local"
+
+
+def connect(scheduler: str, timeout: float = 10.0, workers: int | None = None):
+    """A Dask distributed client of a scheduler address, or of a new ``LocalCluster`` (:data:`LOCAL_CLUSTER`:
+    ``workers`` processes of one thread each, closed with the client).
 
     Raises
     ------
@@ -313,14 +330,28 @@ def connect(scheduler: str, timeout: float = 10.0):
         If no scheduler answers at the address.
     """
     try:
-        from distributed import Client
+        from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - dask[distributed] is a dependency
         raise CampaignError("--scheduler: dask.distributed is not installed") from None
+    if scheduler == LOCAL_CLUSTER:
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster, set_as_default=False)
+        client.cluster_owned = cluster  # closed with the client (close_client)
+        return client
     try:
         return Client(scheduler, timeout=f"{timeout}s", set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise CampaignError(f"--scheduler: no Dask scheduler reachable at {scheduler!r} ({reason})") from None
+
+
+def close_client(client) -> None:
+    """Close a Dask client, and the LocalCluster it started."""
+    client.close()
+    cluster = getattr(client, "cluster_owned", None)
+    if cluster is not None:
+        cluster.close()
 
 
 def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch: int) -> int:
@@ -435,13 +466,13 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         for sources in {tuple(system_sources(cfg).items()) for cfgs in configs.values() for cfg in cfgs}:
             fmu_paths(fmu_dir, dict(sources))
         fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
-    client = connect(scheduler) if scheduler else None
+    client = connect(scheduler, workers=workers) if scheduler else None
     new = not out.exists()
     try:
         batch = prepare_directory(out, study, resume, engine, batch)
     except BaseException:
         if client is not None:
-            client.close()
+            close_client(client)
         raise
     try:
         return _run_prepared(study, out, batch, configs, workers, client, engine, fmu_dir, save_timeseries,
@@ -455,7 +486,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         raise
     finally:
         if client is not None:
-            client.close()
+            close_client(client)
 
 
 def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, client, engine: str, fmu_dir,
@@ -515,17 +546,62 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
         finally:
             reporter.close()
     wall = time.perf_counter() - start
-    runs = collect(out, chunks)
     if computed or not (out / "runs.parquet").is_file():
-        _write_atomic(runs, out / "runs.parquet")
-    return CampaignResult(out, runs, computed, wall)
+        collect(out, chunks, out / "runs.parquet")
+    return CampaignResult(out, pq.ParquetFile(out / "runs.parquet").metadata.num_rows, computed, wall)
 
 
-def collect(out: Path, chunks: list[Chunk]) -> pd.DataFrame:
-    """All chunk files of a campaign as one table sorted by scenario_key, cell, replicate."""
-    frames = [pd.read_parquet(out / "chunks" / f"{c.id}.parquet") for c in chunks]
-    runs = pd.concat(frames, ignore_index=True)
-    return runs.sort_values(["scenario_key", "cell", "replicate"], kind="stable").reset_index(drop=True)
+#: Rows per row group of runs.parquet (and what collect holds at once, besides a few chunks).
+ROW_GROUP = 65536
+
+
+def collect(out: Path, chunks: list[Chunk], path: Path, cached: int = 8) -> None:
+    """Write the chunk files of a campaign as one table sorted by scenario_key, cell, replicate, atomically.
+
+    A streaming merge: each design cell's runs lie in one chunk, in replicate order, so the cells are taken in
+    order from their chunks, holding only the few chunks in use (``cached``) and one row group: the memory
+    is bounded by the chunk size, not by the study's.
+    """
+    from collections import OrderedDict
+
+    import pyarrow as pa
+
+    order = sorted((c.configs[0]["run"]["scenario_key"], cell, c.id, k, c.replicates)
+                   for c in chunks for k, cell in enumerate(c.cells))
+    tables: OrderedDict[str, pa.Table] = OrderedDict()
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    writer, parts, rows = None, [], 0
+    try:
+        for _, _, chunk_id, k, replicates in order:
+            if chunk_id not in tables:
+                tables[chunk_id] = pq.read_table(out / "chunks" / f"{chunk_id}.parquet")
+                if len(tables) > cached:
+                    tables.popitem(last=False)
+            tables.move_to_end(chunk_id)
+            parts.append(tables[chunk_id].slice(k * replicates, replicates))
+            rows += replicates
+            if rows >= ROW_GROUP:
+                writer = _write_parts(writer, tmp, parts)
+                parts, rows = [], 0
+        if parts or writer is None:
+            writer = _write_parts(writer, tmp, parts)
+        writer.close()
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _write_parts(writer, tmp: str, parts: list):
+    import pyarrow as pa
+
+    table = pa.concat_tables(parts) if parts else None
+    if writer is None:
+        writer = pq.ParquetWriter(tmp, table.schema)
+    if table is not None:
+        writer.write_table(table, row_group_size=ROW_GROUP)
+    return writer
 
 
 def _execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries: bool, workers: int | None,

@@ -80,7 +80,8 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("study", help="built-in study (paper) or STUDY.toml")
     c.add_argument("--workers", type=int, default=None, help="worker processes (default: all cores)")
     c.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="Dask distributed scheduler, e.g. tcp://host:8786 (instead of local workers)")
+                   help="Dask distributed scheduler, e.g. tcp://host:8786, or 'local' for a Dask LocalCluster of "
+                        "--workers processes (instead of a process pool)")
     c.add_argument("--out", type=Path, default=None, help="campaign directory (default results/STUDYNAME)")
     c.add_argument("--resume", action="store_true", help="finish the campaign in --out (missing chunks only)")
     c.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
@@ -266,12 +267,12 @@ def _campaign(args: argparse.Namespace) -> int:
         return _interrupted_status()
     if result.computed:
         print(f"{result.computed} runs in {result.wall_time:.1f} s ({result.runs_per_second:.0f} runs/s); "
-              f"{len(result.runs)} runs in {out / 'runs.parquet'}")
+              f"{result.total} runs in {out / 'runs.parquet'}")
     else:
-        print(f"nothing to do: {len(result.runs)} runs already in {out / 'runs.parquet'}")
-    diverged = int(result.runs["diverged"].sum()) if "diverged" in result.runs else 0
+        print(f"nothing to do: {result.total} runs already in {out / 'runs.parquet'}")
+    diverged = int(result.column("diverged").sum())
     if diverged:
-        print(f"sblsim: warning: the receiver diverged in {diverged} of {len(result.runs)} runs (column diverged of "
+        print(f"sblsim: warning: the receiver diverged in {diverged} of {result.total} runs (column diverged of "
               "runs.parquet): their numbers mean nothing", file=sys.stderr)
     if args.analyze:
         return _analyze_dir(out)

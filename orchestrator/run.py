@@ -6,6 +6,7 @@ import json
 import math
 import time
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -214,6 +215,10 @@ METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a i
     *(f"cov_{ab}" for ab in COVARIANCE))
 
 
+#: The Kalman-type receivers' parameter defaults (the bound's motion model for a receiver without one).
+_FILTER_DEFAULTS = {v.name: v.start for v in filter_parameters()}
+
+
 def bound_parameters(cfg: dict) -> dict[str, float]:
     """The parameters of the position PCRB of a configuration (:func:`models.receiver.bound.pcrb`).
 
@@ -226,7 +231,7 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
     ``target.depth_sigma²`` (floored at 1 mm).
     """
     target, platform = cfg["target"], cfg["platform"]
-    defaults = {v.name: v.start for v in filter_parameters()}
+    defaults = _FILTER_DEFAULTS
     names = ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")
     if target["trajectory"] == "random-walk":
         motion = {k: target[f"walk_{k}"] for k in names}
@@ -403,6 +408,11 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     return result
 
 
+@lru_cache(maxsize=64)
+def _arms(platform: tuple) -> np.ndarray:
+    return beacon_arms(dict(platform))
+
+
 def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
             timeseries: bool = True) -> RunResult:
     cfg, batch = cfgs[0], len(replicates)
@@ -419,7 +429,7 @@ def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int],
     received = np.asarray(cols["packet_valid"], bool) & (cols["beacon_id"] >= 1) & (cols["beacon_id"] <= n_beacons)
     slot, fresh = slots(cols["packet_seq"], received)
     params = pd.DataFrame([bound_parameters(c) for c in cfgs])
-    arms = np.stack([beacon_arms(c["platform"]) for c in cfgs], axis=0)  # (B, n, 3)
+    arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
     beacon = np.clip(np.asarray(cols["beacon_id"], dtype=int) - 1, 0, n_beacons - 1)
     bound = bound_series(*pcrb_inputs(truth, slot, fresh, np.stack([cols[f"beacon_{a}"] for a in "xyz"], axis=-1),
                                       arms[np.arange(batch)[None, :], beacon], dt=cfg["simulation"]["sampling_time"],

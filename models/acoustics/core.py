@@ -141,7 +141,10 @@ class Acoustics(Component):
         def prepare(p):
             depth, speed = p[PROFILE.columns[0].name], p[PROFILE.columns[1].name]
             nodes, slowness = profile_nodes(p["sound_speed_rows"], depth, speed)
-            return {"nodes": nodes, "slowness": slowness}
+            # a constant profile (no rows) never reads them: skip the table work (a short-circuit conditional)
+            values = ca.vertcat(nodes, slowness)
+            values = ca.if_else(p["sound_speed_rows"] > 0, values, ca.MX.zeros(values.shape), True)
+            return {"nodes": values[:NODES], "slowness": values[NODES:]}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}

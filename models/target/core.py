@@ -161,8 +161,11 @@ class Target(Component):
             columns = [ca.if_else(is_square, ca.vertcat(*[row[j] for row in square], ca.MX.zeros(N - len(square))),
                                   p[col.name]) for j, col in enumerate(WAYPOINTS.columns)]
             padded, last = padded_rows(count, columns, 1.0)
-            return {"times": padded[0], "points": ca.vec(ca.horzcat(*padded[1:]).T), "first": padded[0][0],
-                    "last": last[0]}
+            values = ca.vertcat(padded[0], ca.vec(ca.horzcat(*padded[1:]).T), padded[0][0], last[0])
+            # only a waypoint path reads them: the others skip the table work (a short-circuit conditional)
+            tabled = ca.logic_or(is_square, p["trajectory"] == TRAJECTORIES.index("file"))
+            values = ca.if_else(tabled, values, ca.MX.zeros(values.shape), True)
+            return {"times": values[0:N], "points": values[N:4 * N], "first": values[4 * N], "last": values[4 * N + 1]}
 
         t = ca.SX.sym("t")
         xs, ps, ds = b.X.unpack(b.x), b.params(), b.D.unpack(b.d)
