@@ -552,7 +552,7 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
 
 
 #: Rows per row group of runs.parquet (and what collect holds at once, besides a few chunks).
-ROW_GROUP = 65536
+ROW_GROUP = 8192
 
 
 def collect(out: Path, chunks: list[Chunk], path: Path, cached: int = 8) -> None:
