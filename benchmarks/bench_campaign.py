@@ -1,22 +1,22 @@
-"""Campaign throughput: the whole `paper` study, both engines, and batching against B = 1.
+"""Campaign throughput, with every ratio measured in this one run on this machine.
 
-Run:  python benchmarks/bench_campaign.py [--workers N] [--skip-paper]
+Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--skip-paper] [--skip-scaling]
 
-Measures in one run, on this machine:
-
-1. a sample of the `paper` study (semicircle, one design cell at T = 0.1 s and
-   one at T = 1 s, ``--replicates`` runs each) stepped three ways in this
-   process: the local engine one replicate at a time (B = 1, the baseline),
-   the local engine batched (all sample runs in one batch), and the fmu
-   engine (the four native FMUs through fmpy, built into a temporary
-   directory); runs per second and the ratio to B = 1; the three must give
-   the same metrics (checked: bit for bit);
-2. the whole `paper` study (19,200 runs) with ``sblsim campaign`` on the
-   local engine with ``--workers`` processes: wall time and runs per second;
-3. the largest chunk of the study (800 runs in one batch, as the campaign
-   steps it): cost per replicate-step and speed-up over B = 1, then where its
-   time goes: each component's compiled step (the whole batch in one call)
-   and the master's Python (data exchange, recording).
+1. **Engines**: a sample of the `paper` study (semicircle, one design cell at T = 0.1 s and one at
+   T = 1 s, ``--replicates`` runs each) stepped three ways in this process: the local engine one
+   replicate at a time (B = 1, the baseline), batched, and the fmu engine (the four native FMUs through
+   fmpy, built into a temporary directory); the three must give the same metrics (checked, bit for bit).
+2. **The largest chunk** of the study (800 runs in one batch, as a campaign worker steps it, timed the
+   second time in the process): µs per replicate-step, its ratio to **one FilterPy
+   ``ExtendedKalmanFilter`` predict + update** (6 states, four ranges and the depth, the paper's EKF
+   step) timed here, and where the time goes (each component's compiled step, the compiled master loop,
+   the metrics and the bound).
+3. With ``--numpy REV``: the same chunk on the batched numpy engine of an earlier revision (e.g.
+   ``9903b13``), timed in a subprocess from a temporary git worktree: the compiled batch against it.
+4. **The whole `paper` study** (19,200 runs) with 1 and with ``--workers`` processes: wall time, runs/s
+   and the speed-up.
+5. **Time against study size**: the `million` study cut to 1×, 2× and 4× ``--scale`` replicates per cell
+   on ``--workers`` processes: wall time and its ratio to the 1× one (linear growth expected).
 """
 
 from __future__ import annotations
@@ -32,10 +32,29 @@ import numpy as np
 import pandas as pd
 
 from fmus.build import build_all
-from orchestrator.campaign import plan, run_campaign, run_chunk
+from orchestrator.campaign import plan, run_campaign
 from orchestrator.metrics import RUN_METRICS
 from orchestrator.run import close_handles, make_handles, run_batch, with_replicates
-from orchestrator.study import load_study
+from orchestrator.study import load_study, study_source
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from revision import run_at  # noqa: E402
+
+#: The largest chunk, timed in an earlier revision's own code (its run_batch had the same signature).
+OLD_CHUNK = """
+import sys, time
+from orchestrator.config import load_config
+from orchestrator.run import run_batch, with_replicates
+cfg = load_config("semicircle", ["simulation.duration=" + sys.argv[1]], seed=1)
+cfgs = with_replicates(cfg, range(int(sys.argv[2])))
+run_batch(cfgs[:10], timeseries=False)
+best = float("inf")
+for _ in range(2):
+    start = time.perf_counter()
+    result = run_batch(cfgs, timeseries=False)
+    best = min(best, time.perf_counter() - start)
+print(best / len(cfgs) / result.steps)
+"""
 
 
 def sample_configs(study, replicates: int) -> tuple[list[list[dict]], int]:
@@ -48,8 +67,8 @@ def sample_configs(study, replicates: int) -> tuple[list[list[dict]], int]:
     return groups, sum(chunk.steps * replicates for chunk in picked.values())
 
 
-def engines(study, replicates: int) -> float:
-    """Time the sample on each engine; return the B = 1 cost per replicate-step [s]."""
+def engines(study, replicates: int) -> None:
+    """Time the sample on each engine (B = 1, batched, FMUs); the metrics must agree bit for bit."""
     groups, steps = sample_configs(study, replicates)
     cfgs = [c for group in groups for c in group]
     rows = []
@@ -61,8 +80,9 @@ def engines(study, replicates: int) -> float:
     start = time.perf_counter()
     batched = pd.concat([run_batch(g, "local", handles=local, timeseries=False).metrics for g in groups])
     rows.append((f"local, batched (B = {replicates} per cell)", time.perf_counter() - start))
-    assert np.array_equal(single[list(RUN_METRICS)].to_numpy(), batched[list(RUN_METRICS)].to_numpy(),
-                          equal_nan=True), "batched and B = 1 metrics differ"
+    columns = list(RUN_METRICS)
+    single, batched = single[columns].reset_index(drop=True), batched[columns].reset_index(drop=True)
+    pd.testing.assert_frame_equal(single, batched, check_exact=True)  # bit for bit
     with tempfile.TemporaryDirectory() as tmp:
         build_all(tmp)
         fmu = make_handles("fmu", tmp)
@@ -72,65 +92,127 @@ def engines(study, replicates: int) -> float:
             rows.append(("fmu (B = 1, through fmpy)", time.perf_counter() - start))
         finally:
             close_handles(fmu)
-    assert np.array_equal(via_fmu[list(RUN_METRICS)].to_numpy(), batched[list(RUN_METRICS)].to_numpy(),
-                          equal_nan=True), "fmu and local metrics differ"
-    print(f"sample of the paper study: semicircle, one cell at T = 0.1 s and one at T = 1 s, {replicates} "
+    pd.testing.assert_frame_equal(via_fmu[columns].reset_index(drop=True), batched, check_exact=True)
+    print(f"1. sample of the paper study: semicircle, one cell at T = 0.1 s and one at T = 1 s, {replicates} "
           f"replicates each ({len(cfgs)} runs, {steps} replicate-steps), one process")
-    print(f"{'engine':36s} {'wall [s]':>9s} {'runs/s':>8s} {'us/replicate-step':>18s} {'speed-up':>9s}")
+    print(f"   {'engine':36s} {'wall [s]':>9s} {'runs/s':>8s} {'us/replicate-step':>18s} {'speed-up':>9s}")
     for name, wall in rows:
-        print(f"{name:36s} {wall:9.2f} {len(cfgs) / wall:8.2f} {wall / steps * 1e6:18.1f} {t_single / wall:9.2f}")
-    return t_single / steps
+        print(f"   {name:36s} {wall:9.2f} {len(cfgs) / wall:8.2f} {wall / steps * 1e6:18.1f} {t_single / wall:9.2f}")
 
 
-def paper(study, workers: int) -> float:
-    with tempfile.TemporaryDirectory() as tmp:
-        result = run_campaign(study, Path(tmp) / "paper", workers=workers, progress=False)
-    print(f"\nwhole paper study: {result.computed} runs on the local engine, {workers} workers: "
-          f"{result.wall_time:.1f} s, {result.runs_per_second:.0f} runs/s")
-    return result.wall_time
+def filterpy_step(repeat: int = 5000) -> float:
+    """Seconds of one FilterPy ExtendedKalmanFilter predict + update: 6 states, 4 ranges and the depth."""
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    beacons = np.array([[3.0, 0, 1], [0, 3.0, 1], [-3.0, 0, 1], [0, -3.0, 1]])
+
+    def hx(x):
+        p = x[[0, 2, 4], 0]
+        return np.append(np.linalg.norm(p - beacons, axis=1), x[4, 0]).reshape(-1, 1)
+
+    def jacobian(x):
+        p = x[[0, 2, 4], 0]
+        H = np.zeros((5, 6))
+        d = p - beacons
+        H[:4][:, [0, 2, 4]] = d / np.linalg.norm(d, axis=1)[:, None]
+        H[4, 4] = 1.0
+        return H
+
+    ekf = ExtendedKalmanFilter(dim_x=6, dim_z=5)
+    ekf.x = np.array([[15.0], [0.0], [0.0], [0.5], [5.0], [0.0]])
+    ekf.F = np.eye(6) + np.diag([0.1, 0, 0.1, 0, 0.1], 1)
+    ekf.Q = np.eye(6) * 1e-4
+    R = np.diag([0.01] * 4 + [1e-4])
+    z = hx(ekf.x) + 0.01
+    for _ in range(200):
+        ekf.predict()
+        ekf.update(z, jacobian, hx, R=R)
+    start = time.perf_counter()
+    for _ in range(repeat):
+        ekf.predict()
+        ekf.update(z, jacobian, hx, R=R)
+    return (time.perf_counter() - start) / repeat
 
 
-def profile(study, baseline: float) -> None:
-    """Time the largest chunk of the study (B = 800 on the local engine) and split it by component."""
+def largest_chunk(study) -> tuple[float, int, int]:
+    """The largest chunk timed the second time in this process; its profile. Returns (s per replicate-step,
+    runs, steps)."""
     chunk = max(plan(study, 800), key=lambda c: c.runs * c.steps)
-    start = time.perf_counter()
-    run_chunk(chunk, study)
-    wall = time.perf_counter() - start
-    per_step = wall / chunk.runs / chunk.steps
-    print(f"\nlargest chunk of the study ({chunk.runs} runs x {chunk.steps} steps, local engine, one batch): "
-          f"{wall:.2f} s, {per_step * 1e6:.2f} us per replicate-step, speed-up over B = 1: {baseline / per_step:.0f}x")
     cfgs = [cfg for base in chunk.configs for cfg in with_replicates(base, range(chunk.replicates))]
-    handles = make_handles("local")
-    spent = dict.fromkeys(handles, 0.0)
-    for name, handle in handles.items():
-        def timed(t, h, _step=handle.do_step, _name=name):
-            begin = time.perf_counter()
-            _step(t, h)
-            spent[_name] += time.perf_counter() - begin
-        handle.do_step = timed
+    run_batch(cfgs, timeseries=False)  # first time: the library loaded, memory first touched
     start = time.perf_counter()
-    run_batch(cfgs, "local", handles=handles, timeseries=False)
-    total = time.perf_counter() - start
-    print("where the time goes (each component's compiled step for the whole batch; the rest is Python):")
-    parts = {f"{name} (compiled step)": seconds for name, seconds in spent.items()}
-    parts["master, set-up and metrics (Python)"] = total - sum(spent.values())
+    result = run_batch(cfgs, timeseries=False)
+    wall = time.perf_counter() - start
+    n = chunk.runs * result.steps
+    per_step = wall / n
+    print(f"\n2. largest chunk of the study ({chunk.runs} runs x {result.steps} steps, local engine, one batch): "
+          f"{wall:.2f} s, {per_step * 1e6:.2f} us per replicate-step")
+    parts = {f"{name} (compiled step)": seconds for name, seconds in result.step_time.items()}
+    parts["master loop (compiled: exchange, recording)"] = result.wall_time - sum(result.step_time.values())
+    parts["set-up, metrics and the bound (Python, numpy, compiled bound)"] = wall - result.wall_time
+    print("   where the time goes:")
     for label, seconds in sorted(parts.items(), key=lambda kv: -kv[1]):
-        print(f"  {label:48s} {100 * seconds / total:5.1f} %  ({seconds / chunk.runs / chunk.steps * 1e6:.2f} us "
-              "per replicate-step)")
+        print(f"     {label:62s} {100 * seconds / wall:5.1f} %  ({seconds / n * 1e6:.2f} us per replicate-step)")
+    return per_step, chunk.runs, result.steps
+
+
+def paper(study, workers: int) -> None:
+    replicate_steps = sum(chunk.runs * chunk.steps for chunk in plan(study, 800))
+    walls = {}
+    for count in sorted({1, workers}):
+        with tempfile.TemporaryDirectory() as tmp:
+            result = run_campaign(study, Path(tmp) / "paper", workers=count, progress=False)
+        walls[count] = result.wall_time
+        print(f"   {count} worker(s): {result.wall_time:.1f} s, {result.runs_per_second:.0f} runs/s, "
+              f"{result.wall_time * count / replicate_steps * 1e6:.2f} us per replicate-step per core")
+    if len(walls) == 2:
+        print(f"   speed-up of {workers} workers over 1: {walls[1] / walls[workers]:.2f}x")
+
+
+def scaling(workers: int, scale: int) -> None:
+    raw, _ = study_source("million")
+    walls = []
+    for factor in (1, 2, 4):
+        table = {**raw, "study": {**raw["study"], "replicates": scale * factor}}
+        study = load_study(table)
+        with tempfile.TemporaryDirectory() as tmp:
+            result = run_campaign(study, Path(tmp) / "m", workers=workers, progress=False)
+        walls.append(result.wall_time)
+        print(f"   {factor}x: {study.runs} runs in {result.wall_time:.1f} s ({result.runs_per_second:.0f} runs/s), "
+              f"{result.wall_time / walls[0]:.2f}x the 1x time")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes for the paper study")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes for the studies")
     parser.add_argument("--replicates", type=int, default=5, help="replicates per cell of the engine sample")
-    parser.add_argument("--skip-paper", action="store_true", help="skip the whole-study run")
+    parser.add_argument("--numpy", default=None, metavar="REV", help="also time the numpy engine of revision REV")
+    parser.add_argument("--scale", type=int, default=32, help="replicates per cell of the 1x million-study cut")
+    parser.add_argument("--skip-paper", action="store_true", help="skip the whole-study runs")
+    parser.add_argument("--skip-scaling", action="store_true", help="skip the study-size runs")
     args = parser.parse_args()
     study = load_study("paper")
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, numpy {np.__version__}\n")
-    baseline = engines(study, args.replicates)
+    engines(study, args.replicates)
+    per_step, runs, steps = largest_chunk(study)
+    try:
+        ekf = filterpy_step()
+        print(f"   one FilterPy ExtendedKalmanFilter predict + update (6 states, 4 ranges + depth): "
+              f"{ekf * 1e6:.1f} us; a whole replicate-step here (platform, channel, diver, EKF, fix, metrics, "
+              f"bound) takes {ekf / per_step:.1f}x less")
+    except ImportError:
+        print("   (FilterPy not installed: pip install filterpy, or the test extra)")
+    if args.numpy:
+        old = float(run_at(args.numpy, OLD_CHUNK, str(steps * 0.1), str(runs)).split()[-1])
+        print(f"\n3. the same chunk on the batched numpy engine of revision {args.numpy}: {old * 1e6:.2f} us per "
+              f"replicate-step; the compiled batch is {old / per_step:.1f}x faster")
     if not args.skip_paper:
+        print(f"\n4. whole paper study: {study.runs} runs on the local engine")
         paper(study, args.workers)
-    profile(study, baseline)
+    if not args.skip_scaling:
+        print(f"\n5. time against study size: the million study cut to {args.scale}, {2 * args.scale} and "
+              f"{4 * args.scale} replicates per cell, {args.workers} workers")
+        scaling(args.workers, args.scale)
 
 
 if __name__ == "__main__":

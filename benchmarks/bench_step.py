@@ -17,8 +17,6 @@ to the baseline. The FMUs are built into a temporary directory first.
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -27,6 +25,9 @@ from pathlib import Path
 from fmus.build import build_all
 from orchestrator.config import load_config
 from orchestrator.run import close_handles, make_handles, run
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from revision import run_at  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -61,17 +62,7 @@ def best_time(fn, repeat: int) -> float:
 
 def pythonfmu_step(revision: str, duration: float, repeat: int) -> float:
     """Seconds per macro step of the fmu engine at an earlier revision (its pythonfmu FMUs)."""
-    with tempfile.TemporaryDirectory(prefix="sblsim_old_") as tmp:
-        tree = Path(tmp) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), revision], check=True,
-                       capture_output=True)
-        try:
-            env = {**os.environ, "PYTHONPATH": str(tree)}
-            done = subprocess.run([sys.executable, "-c", OLD, str(duration), str(repeat)], cwd=tree, env=env,
-                                  capture_output=True, text=True, check=True)
-            return float(done.stdout.split()[-1])
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], capture_output=True)
+    return float(run_at(revision, OLD, str(duration), str(repeat)).split()[-1])
 
 
 def main() -> None:

@@ -52,7 +52,7 @@ from models.core import ModelError, Variable, shown
 from orchestrator.config import BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source, section_variables
 from orchestrator.metrics import RUN_METRICS
 
-BUILTIN_STUDIES = ("paper",)
+BUILTIN_STUDIES = ("paper", "million")
 DESIGNS = ("full", "fractional")
 _STUDY_KEYS = {"name", "scenarios", "replicates", "seed", "design", "resolution", "generators", "set"}
 _FACTOR_KEYS = {"name", "key", "low", "high"}
