@@ -266,12 +266,12 @@ def main() -> None:
     if not args.skip_paper:
         print(f"\n4. whole paper study: {study.runs} runs on the local engine")
         paper(study, args.workers)
-    print("\n6. threads inside a process")
-    threads(per_step)
     if not args.skip_scaling:
         print(f"\n5. time against study size: the million study cut to {args.scale}, {2 * args.scale} and "
               f"{4 * args.scale} replicates per cell, {args.workers} workers")
         scaling(args.workers, args.scale)
+    print("\n6. threads inside a process")
+    threads(per_step)
 
 
 if __name__ == "__main__":
