@@ -31,6 +31,8 @@ C_DIR = Path(__file__).resolve().parent / "c"
 RUNTIME = ("sblsim_runtime.h", "sblsim_runtime.c")
 FMI_SHELL = "fmi2_shell.c"
 BATCH = "sblsim_batch.c"
+#: The compiled per-run metrics of the local engine (orchestrator/metrics.py is their reference).
+METRICS = "sblsim_metrics.c"
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 _TYPES = {"Real": "SBLSIM_REAL", "Integer": "SBLSIM_INTEGER", "Boolean": "SBLSIM_BOOLEAN"}
 _CAUSALITIES = {"parameter": "SBLSIM_PARAMETER", "input": "SBLSIM_INPUT", "output": "SBLSIM_OUTPUT"}
@@ -242,5 +244,5 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     return Sources(model, n_beacons, f"{base}_model", tuple(files), guid)
 
 
-__all__ = ["BATCH", "C_DIR", "FMI_HEADERS", "FMI_SHELL", "RUNTIME", "Sources", "casadi_code", "fmi_headers_dir",
-           "model_guid", "model_record", "stem", "write_sources"]
+__all__ = ["BATCH", "C_DIR", "FMI_HEADERS", "FMI_SHELL", "METRICS", "RUNTIME", "Sources", "casadi_code",
+           "fmi_headers_dir", "model_guid", "model_record", "stem", "write_sources"]

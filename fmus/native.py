@@ -23,7 +23,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from fmus.codegen import BATCH, C_DIR, stem, write_sources
+from fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from models import MODELS
 from models.core import ModelError
@@ -61,7 +61,8 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
                                                     "casadi_int": "long long int"})
     cg.add(bound_step())
     cg.generate(str(directory) + "/")
-    (directory / BATCH).write_text((C_DIR / BATCH).read_text())
+    for name in (BATCH, METRICS):
+        (directory / name).write_text((C_DIR / name).read_text())
     return sorted(directory.glob("*.c"))
 
 
@@ -119,6 +120,8 @@ def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.C
     lib.sblsim_batch_do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
     lib.sblsim_model_size.argtypes = [ctypes.c_char_p, ctypes.c_int]
     lib.sblsim_bound_series.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.POINTER(ctypes.c_double)] * 3
+    lib.sblsim_run_metrics.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_void_p),
+                                       ctypes.POINTER(ctypes.c_longlong), ctypes.c_int] + [ctypes.c_void_p] * 5
     ints, doubles = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
     lib.sblsim_system_run.argtypes = [ctypes.c_int, ctypes.POINTER(ctypes.c_void_p), ints, ints, ints, ints, ints,
                                       ctypes.c_int, ints, ints, doubles, ctypes.c_double, ctypes.c_double,
@@ -285,6 +288,57 @@ def bound_series(fixed: np.ndarray, steps: np.ndarray, n_beacons: int = 4) -> np
     return out
 
 
+def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float],
+                with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
+    """The per-run metrics of :mod:`orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
+
+    Parameters
+    ----------
+    columns : sequence of ndarray, shape (N, B) each
+        The recorded outputs in the order of :data:`orchestrator.metrics.METRIC_INPUTS`, as floats; any
+        step stride, replicates contiguous (a column of the master's record array is used in place).
+    fixed : ndarray, shape (B, 8)
+        The bound's per-run inputs (:data:`models.receiver.bound.FIXED`).
+    arms : ndarray, shape (B, n_beacons, 3)
+        Each run's beacon lever arms in NED [m].
+    limits : (float, float, float)
+        χ²₃(0.95), the divergence distance [m] and ratio.
+    with_bound : bool
+        Also return the position PCRB at every step.
+
+    Returns
+    -------
+    metrics : ndarray, shape (B, 18)
+        :data:`orchestrator.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
+    bound : ndarray, shape (N, B), or None
+        ``sqrt(trace)`` of the position PCRB [m].
+
+    Raises
+    ------
+    ValueError
+        If the arrays do not fit together.
+    """
+    n, b = columns[0].shape
+    views = [c if c.dtype == np.float64 and c.strides[1] == 8 else np.ascontiguousarray(c, dtype=float)
+             for c in columns]
+    if any(c.shape != (n, b) for c in views):
+        raise ValueError("run_metrics: every column must have the shape (N, B)")
+    fixed = np.ascontiguousarray(fixed, dtype=float)
+    arms = np.ascontiguousarray(arms, dtype=float)
+    if fixed.shape != (b, len(FIXED)) or arms.shape != (b, n_beacons, 3):
+        raise ValueError(f"run_metrics: fixed {fixed.shape} and arms {arms.shape} do not fit {b} runs")
+    pointers = (ctypes.c_void_p * len(views))(*[c.ctypes.data for c in views])
+    strides = (ctypes.c_longlong * len(views))(*[c.strides[0] // 8 for c in views])
+    out = np.empty((b, 18))
+    bound = np.empty((n, b)) if with_bound else None
+    limit = np.asarray(limits, dtype=float)
+    if load(n_beacons).sblsim_run_metrics(n, b, pointers, strides, n_beacons, fixed.ctypes.data, arms.ctypes.data,
+                                          limit.ctypes.data, out.ctypes.data,
+                                          None if bound is None else bound.ctypes.data):
+        raise MemoryError("run_metrics: out of memory")
+    return out, bound
+
+
 def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int, n_beacons: int = 4) -> np.ndarray:
     """One draw of a random stream as the C runtime makes it (for the tests against numpy's Philox)."""
     lib = load(n_beacons)
@@ -295,5 +349,5 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 
-__all__ = ["NativeBatch", "NativeSystem", "bound_series", "cache_dir", "library_path", "load", "stream",
+__all__ = ["NativeBatch", "NativeSystem", "bound_series", "cache_dir", "library_path", "load", "run_metrics", "stream",
            "write_library_sources"]

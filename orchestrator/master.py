@@ -197,9 +197,12 @@ def _simulate_native(system, handles: Mapping[str, object], order: Sequence[str]
     shape = (n_steps, system.n_record, system.B)
     size = int(np.prod(shape))
     spare = buffer[0] if buffer else None
-    flat = spare[:size] if spare is not None and spare.size >= size else np.empty(size)
-    if buffer is not None and flat.base is not spare:
-        buffer[0] = flat
+    if spare is not None and spare.size >= size:
+        flat = spare[:size]
+    else:
+        flat = np.empty(size)
+        if buffer is not None:
+            buffer[0] = flat
     record = flat.reshape(shape)
     chunk = max(1, n_steps // 100) if progress is not None else n_steps
     for k0 in range(0, n_steps, chunk):

@@ -20,12 +20,22 @@ estimate that is not finite, or farther from the truth than both
 :data:`DIVERGENCE_DISTANCE` and :data:`DIVERGENCE_RATIO` times the diver's
 distance from the platform; its other numbers then mean nothing (an
 overconfident but tracking receiver is not flagged: its NEES says so).
+
+The numpy functions here define the metrics and are the reference;
+:func:`run_metrics` computes every per-run metric (and the PCRB) of a batch
+in one compiled pass over the recorded outputs (``fmus/c/sblsim_metrics.c``),
+without numpy's temporaries: the engines use it, a test holds it to these.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from scipy.stats import chi2
+
+from fmus import native
+from models.receiver.core import COVARIANCE
 
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
 #: Per-run consistency metrics, the bound and the divergence flag.
@@ -37,6 +47,43 @@ DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
 RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
 NEES_95 = float(chi2.ppf(0.95, 3))
+#: Recorded outputs the metrics read (truth, estimate, instrumentation fix, NIS, gate, slot, packet, beacon,
+#: covariance), in the order of the compiled pass.
+METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + (
+    "instr_valid", "nis", "gated", "packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z",
+    *(f"cov_{ab}" for ab in COVARIANCE))
+
+
+def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.ndarray,
+                with_bound: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """Every per-run metric of B runs (:data:`RUN_METRICS`) in one compiled pass, and the PCRB.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray, shape (N, B)
+        Every name of :data:`METRIC_INPUTS` -> its recorded values as floats (Boolean and Integer outputs
+        as the master records them: 0/1 and whole numbers).
+    fixed : ndarray, shape (B, 8)
+        The bound's per-run inputs (:data:`models.receiver.bound.FIXED`).
+    arms : ndarray, shape (B, n_beacons, 3)
+        Each run's beacon lever arms in NED [m].
+    with_bound : bool
+        Also return the position PCRB at every step.
+
+    Returns
+    -------
+    metrics : dict
+        Name -> array (B,), as :func:`summarize` (receiver and ``instr_``) and :func:`consistency` give them
+        (equal to rounding: each run is summed in time order).
+    bound : ndarray, shape (N, B), or None
+        ``sqrt(trace)`` of the position PCRB [m] (:func:`models.receiver.bound.pcrb`).
+    """
+    values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS], fixed, arms,
+                                       (NEES_95, DIVERGENCE_DISTANCE, DIVERGENCE_RATIO), with_bound,
+                                       n_beacons=arms.shape[1])
+    out = {name: values[:, k] for k, name in enumerate(RUN_METRICS)}
+    out["diverged"] = out["diverged"] > 0.5
+    return out, bound
 
 
 def errors(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:

@@ -13,10 +13,9 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from fmus.native import bound_series
 from models import COMPONENTS, MODELS
 from models.core import ModelError
-from models.receiver.bound import pcrb_inputs
+from models.receiver.bound import FIXED
 from models.receiver.core import COVARIANCE, filter_parameters
 from orchestrator.config import (
     MIN_SIGMA,
@@ -35,7 +34,7 @@ from orchestrator.connections import (
 )
 from orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
 from orchestrator.master import simulate
-from orchestrator.metrics import consistency, errors, slots, summarize
+from orchestrator.metrics import METRIC_INPUTS, errors, run_metrics
 from orchestrator.output import staged_directory
 
 ENGINES = ("local", "fmu")
@@ -207,12 +206,6 @@ def close_handles(handles: dict[str, Any]) -> None:
     """Terminate every handle."""
     for handle in handles.values():
         handle.terminate()
-
-
-#: Recorded outputs the metrics need (the truth, the estimate and the instrumentation fix with its flag).
-METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + (
-    "instr_valid", "nis", "gated", "packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z",
-    *(f"cov_{ab}" for ab in COVARIANCE))
 
 
 #: The Kalman-type receivers' parameter defaults (the bound's motion model for a receiver without one).
@@ -402,8 +395,13 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     else:
         rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
     types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
-    rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
-    result = _result(cfgs, engine, rec, replicates, n_steps, wall, timeseries)
+    metrics, bound = _metrics(cfgs, rec, replicates, with_bound=timeseries)
+    if timeseries:
+        rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
+        frame = _timeseries(rec, replicates, n_steps, bound)
+    else:
+        frame = pd.DataFrame()
+    result = RunResult(cfgs[0], engine, frame, metrics, n_steps, wall)
     result.step_time = timing
     return result
 
@@ -413,33 +411,28 @@ def _arms(platform: tuple) -> np.ndarray:
     return beacon_arms(dict(platform))
 
 
-def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int], n_steps: int, wall: float,
-            timeseries: bool = True) -> RunResult:
-    cfg, batch = cfgs[0], len(replicates)
-    names = TIMESERIES_COLUMNS if timeseries else METRIC_INPUTS
-    cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in names}
+def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
+             with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
+    """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass."""
+    params = pd.DataFrame([bound_parameters(c) for c in cfgs])
+    fixed = np.column_stack([np.full(len(cfgs), cfgs[0]["simulation"]["sampling_time"])]
+                            + [params[k].to_numpy() for k in FIXED[1:]])
+    arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
+    values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
+                                with_bound)
+    return pd.DataFrame({"replicate": replicates, **values}), bound
+
+
+def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:
+    """The per-step table, replicate-major (all steps of replicate 0, then replicate 1, ...)."""
+    batch = len(replicates)
+    cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in TIMESERIES_COLUMNS}
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
-    estimate = np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1)
-    est_err = errors(truth, estimate)
-    # no fix at a step (instr_valid false, instr_* 0): the step is left out of the instrumentation metrics
+    est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
+    # no fix at a step (instr_valid false, instr_* 0): the step has no instrumentation error
     fix = np.where(np.asarray(cols["instr_valid"], bool)[..., None],
                    np.stack([cols[f"instr_{a}"] for a in "xyz"], axis=-1), np.nan)
     instr_err = errors(truth, fix)
-    n_beacons = beacon_count(cfg)
-    received = np.asarray(cols["packet_valid"], bool) & (cols["beacon_id"] >= 1) & (cols["beacon_id"] <= n_beacons)
-    slot, fresh = slots(cols["packet_seq"], received)
-    params = pd.DataFrame([bound_parameters(c) for c in cfgs])
-    arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
-    beacon = np.clip(np.asarray(cols["beacon_id"], dtype=int) - 1, 0, n_beacons - 1)
-    bound = bound_series(*pcrb_inputs(truth, slot, fresh, np.stack([cols[f"beacon_{a}"] for a in "xyz"], axis=-1),
-                                      arms[np.arange(batch)[None, :], beacon], dt=cfg["simulation"]["sampling_time"],
-                                      **{k: params[k].to_numpy() for k in params}), n_beacons)
-    checks = consistency(truth - estimate, np.stack([cols[f"cov_{ab}"] for ab in COVARIANCE], axis=-1),
-                         cols["nis"], cols["packet_seq"], fresh, cols["gated"], bound, truth)
-    metrics = pd.DataFrame({"replicate": replicates, **summarize(est_err), **summarize(instr_err, "instr_"),
-                            **checks})
-    if not timeseries:
-        return RunResult(cfg, engine, pd.DataFrame(), metrics, n_steps, wall)
     table = {"replicate": np.repeat(np.asarray(replicates)[None, :], n_steps, axis=0),
              "time": np.repeat(rec["time"][:, None], batch, axis=1)}
     table.update(cols)
@@ -447,9 +440,7 @@ def _result(cfgs: Sequence[dict], engine: str, rec: dict, replicates: list[int],
     for k, name in enumerate(("e_x", "e_y", "e_z", "e_tot")):
         table[name] = est_err[..., k]
         table[f"instr_{name}"] = instr_err[..., k]
-    # replicate-major rows: all steps of replicate 0, then replicate 1, ...
-    frame = pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in table.items()})
-    return RunResult(cfg, engine, frame, metrics, n_steps, wall)
+    return pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in table.items()})
 
 
 def summary(result: RunResult) -> dict[str, Any]:

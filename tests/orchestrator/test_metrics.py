@@ -141,3 +141,66 @@ def test_consistency_hand_counted():
     np.testing.assert_allclose(out["nis_mean"], [(2 + 4 + 6 + 0) / 4, (2 + 2 + 4 + 0 + 0) / 5])  # from the first slot
     np.testing.assert_allclose(out["gated_pct"], [100 * 2 / 4, 0.0])  # the gated step without a slot does not count
     np.testing.assert_allclose(out["pcrb_rms"], [np.sqrt((9 + 16) / 5), 1.0])
+
+
+def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
+    """run_metrics (one compiled pass, sblsim_metrics.c) against summarize, consistency and the bound's casadi
+    reference on a record with everything the metrics skip: estimates missing, no fix, covariances not
+    positive-definite, lost packets, foreign beacon ids, the gate at work and a diverged run; the columns are
+    strided views of one (N, 24, B) array, as the compiled master records them."""
+    from models.receiver.bound import FIXED, pcrb, pcrb_inputs
+    from orchestrator.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
+
+    rng = np.random.default_rng(7)
+    n, b = 300, 5
+    record = np.zeros((n, len(METRIC_INPUTS), b))
+    col = {name: record[:, k, :] for k, name in enumerate(METRIC_INPUTS)}  # views: writing them fills record
+    truth = np.cumsum(rng.normal(0.0, 0.3, (n, b, 3)), axis=0) + [20.0, 5.0, 10.0]
+    estimate = truth + rng.normal(0.0, 0.5, (n, b, 3))
+    estimate[rng.random(n) < 0.05, 2] = np.nan  # run 2: steps without an estimate (left out; and so diverged)
+    estimate[150:, 4] += [400.0, 0.0, 0.0]  # run 4 loses the diver
+    fix = truth + rng.normal(0.0, 0.8, (n, b, 3))
+    for k, a in enumerate("xyz"):
+        col[f"true_{a}"][:] = truth[..., k]
+        col[f"est_{a}"][:] = estimate[..., k]
+        col[f"instr_{a}"][:] = fix[..., k]
+    col["instr_valid"][:] = rng.random((n, b)) < 0.8
+    col["instr_valid"][:, 3] = 0.0  # run 3: no fix at all (its instrumentation metrics are NaN)
+    A = rng.normal(0.0, 0.6, (n, b, 3, 3))
+    P = A @ np.swapaxes(A, -1, -2) + 0.05 * np.eye(3)
+    P[rng.random((n, b)) < 0.1] = 0.0  # before the first fix: zeros
+    P[rng.random((n, b)) < 0.05] *= -1.0  # not positive-definite
+    for name, (i, j) in zip(("xx", "xy", "xz", "yy", "yz", "zz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        col[f"cov_{name}"][:] = P[..., i, j]
+    col["packet_seq"][:] = np.minimum(np.cumsum(rng.random((n, b)) < 0.6, axis=0), 10 ** 6)
+    col["packet_valid"][:] = rng.random((n, b)) < 0.7
+    col["beacon_id"][:] = rng.integers(0, 6, (n, b))  # 0 and 5 name no beacon of four
+    col["gated"][:] = rng.random((n, b)) < 0.2
+    col["nis"][:] = rng.chisquare(1, (n, b))
+    beacons = rng.normal(0.0, 2.0, (n, b, 3))
+    for k, a in enumerate("xyz"):
+        col[f"beacon_{a}"][:] = beacons[..., k]
+    arms = rng.normal(0.0, 1.5, (b, 4, 3))
+    fixed = np.column_stack([np.full(b, 0.1), rng.uniform(0.01, 0.1, b), rng.uniform(0.001, 0.01, b),
+                             rng.uniform(1.0, 10.0, b), rng.uniform(0.5, 2.0, b), rng.uniform(0.01, 0.1, b),
+                             rng.uniform(1e-5, 1e-3, b), rng.uniform(1e-4, 1e-2, b)])
+
+    got, bound = run_metrics(col, fixed, arms, with_bound=True)
+
+    instr = np.where(col["instr_valid"][..., None] > 0.5, fix, np.nan)
+    received = (col["packet_valid"] > 0.5) & (col["beacon_id"] >= 1) & (col["beacon_id"] <= 4)
+    slot, fresh = slots(col["packet_seq"], received)
+    index = np.clip(col["beacon_id"].astype(int) - 1, 0, 3)
+    want_bound = pcrb(*pcrb_inputs(truth, slot, fresh, beacons, arms[np.arange(b)[None, :], index],
+                                   **{k: fixed[:, i] for i, k in enumerate(FIXED)}))
+    cov = np.stack([col[f"cov_{ab}"] for ab in ("xx", "xy", "xz", "yy", "yz", "zz")], axis=-1)
+    want = {**summarize(errors(truth, estimate)), **summarize(errors(truth, instr), "instr_"),
+            **consistency(truth - estimate, cov, col["nis"], col["packet_seq"], fresh, col["gated"] > 0.5,
+                          want_bound, truth)}
+    assert list(got) == list(RUN_METRICS)
+    np.testing.assert_allclose(bound, want_bound, rtol=1e-13, atol=0)
+    for name in RUN_METRICS:
+        np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=0, err_msg=name)
+    assert got["diverged"].tolist() == [False, False, True, False, True]
+    assert np.isnan(got["instr_e_tot_rms"][3]) and np.all(np.isfinite(got["e_tot_rms"]))
+    assert 0 < got["gated_pct"].min() and got["coverage_95"].max() < 1.0  # every branch exercised
