@@ -846,7 +846,8 @@ class Component:
         return out
 
     @classmethod
-    def parameter_matrix(cls, values: Mapping[str, Any], batch: int, n_beacons: int = 4) -> np.ndarray:
+    def parameter_matrix(cls, values: Mapping[str, Any], batch: int, n_beacons: int = 4,
+                         out: np.ndarray | None = None) -> np.ndarray:
         """The ``p`` vectors of a batch: one row per replicate.
 
         Parameters
@@ -857,6 +858,8 @@ class Component:
             design cells). Missing ones take their declared start.
         batch : int
             B.
+        out : ndarray, shape (B, n_p), optional
+            Where to write them (e.g. a compiled batch's parameter memory), else a new array.
 
         Returns
         -------
@@ -870,7 +873,9 @@ class Component:
         arrays = {k: np.asarray(v) for k, v in values.items() if isinstance(v, np.ndarray) and v.ndim > 0}
         first = {k: (v.reshape(-1)[0].item() if k in arrays else v) for k, v in values.items()}
         base = cls.parameter_vector(first, n_beacons)
-        out = np.tile(base, (batch, 1))
+        if out is None:
+            out = np.empty((batch, base.size))
+        out[:] = base
         declared = {v.name: (k, v) for k, v in enumerate(cls.fmu_parameters_declared(n_beacons))}
         for name, array in arrays.items():
             k, var = declared[name]

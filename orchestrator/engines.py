@@ -78,11 +78,10 @@ class LocalHandle:
         values = dict(params)
         if "replicate" in self.parameters:
             values["replicate"] = replicates
-        matrix = self.model.parameter_matrix(values, replicates.size, self.n_beacons)
         if self.batch is None or self.batch.batch != replicates.size:
             self.close()
             self.batch = NativeBatch(self.model, replicates.size, self.n_beacons)
-        self.batch.p[:] = matrix
+        self.model.parameter_matrix(values, replicates.size, self.n_beacons, out=self.batch.p)
         self.batch.u[:] = [v.start for v in self.model.inputs(self.n_beacons)] or 0.0
         self.batch.initialize(t0)
 
