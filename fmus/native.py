@@ -27,7 +27,7 @@ from fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from models import MODELS
 from models.core import ModelError
-from models.receiver.bound import FIXED, STEP_SIZE, bound_step
+from models.receiver.bound import FIXED, bound_step
 
 _VECTORS = {"p": 0, "d": 1, "x": 2, "u": 3, "y": 4, "draws": 6}
 
@@ -119,7 +119,6 @@ def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.C
     lib.sblsim_batch_initialize.argtypes = [ctypes.c_void_p, ctypes.c_double]
     lib.sblsim_batch_do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
     lib.sblsim_model_size.argtypes = [ctypes.c_char_p, ctypes.c_int]
-    lib.sblsim_bound_series.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.POINTER(ctypes.c_double)] * 3
     lib.sblsim_run_metrics.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_void_p),
                                        ctypes.POINTER(ctypes.c_longlong), ctypes.c_int] + [ctypes.c_void_p] * 5
     ints, doubles = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
@@ -261,33 +260,6 @@ class NativeSystem:
             batch._check(1 + failed.value, f"step between t = {t:g} s and {t0 + (k0 + n_steps) * T:g} s")
 
 
-def bound_series(fixed: np.ndarray, steps: np.ndarray, n_beacons: int = 4) -> np.ndarray:
-    """The position PCRB of :func:`models.receiver.bound.pcrb`, compiled: same inputs, same numbers.
-
-    Parameters
-    ----------
-    fixed : ndarray, shape (B, 8)
-    steps : ndarray, shape (N, B, 11)
-        From :func:`models.receiver.bound.pcrb_inputs`.
-
-    Returns
-    -------
-    ndarray, shape (N, B)
-        ``sqrt(trace)`` of the position bound at each step [m].
-    """
-    n, b = steps.shape[:2]
-    fixed = np.ascontiguousarray(fixed, dtype=float)
-    steps = np.ascontiguousarray(steps, dtype=float)
-    if fixed.shape != (b, len(FIXED)) or steps.shape[2] != STEP_SIZE:
-        raise ValueError(f"bound_series: fixed {fixed.shape} and steps {steps.shape} do not fit")
-    out = np.empty((n, b))
-    pointer = ctypes.POINTER(ctypes.c_double)
-    if load(n_beacons).sblsim_bound_series(n, b, fixed.ctypes.data_as(pointer), steps.ctypes.data_as(pointer),
-                                           out.ctypes.data_as(pointer)):
-        raise MemoryError("bound_series: out of memory")
-    return out
-
-
 def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float],
                 with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
     """The per-run metrics of :mod:`orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
@@ -349,5 +321,5 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 
-__all__ = ["NativeBatch", "NativeSystem", "bound_series", "cache_dir", "library_path", "load", "run_metrics", "stream",
+__all__ = ["NativeBatch", "NativeSystem", "cache_dir", "library_path", "load", "run_metrics", "stream",
            "write_library_sources"]

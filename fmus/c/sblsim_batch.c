@@ -16,7 +16,6 @@
 #include <time.h>
 #endif
 
-#include "sblsim_bound_casadi.h"
 #include "sblsim_runtime.h"
 
 #if defined(_WIN32)
@@ -157,48 +156,6 @@ SBLSIM_EXPORT void sblsim_stream_uniforms(const uint64_t keys[4], int component,
 SBLSIM_EXPORT void sblsim_stream_normals(const uint64_t keys[4], int component, int purpose, uint64_t draw,
                                          int count, double* out) {
     sblsim_normals(keys, component, purpose, draw, count, out);
-}
-
-/* The position PCRB along B trajectories (models/receiver/bound.py, pcrb): `fixed` is B x 8 (dt, q_h, q_v,
-   p0_position, p0_velocity, noise_variance, attitude_variance, depth_variance), `steps` N x B x 11 (position,
-   beacon, arm, slot, received), `out` N x B: sqrt(trace) of the position bound. 0 on success, 1 out of memory. */
-SBLSIM_EXPORT int sblsim_bound_series(int n, int b, const double* fixed, const double* steps, double* out) {
-    casadi_int sz_arg, sz_res, sz_iw, sz_w;
-    const double* arg[12];
-    double *res[1], *w, bound[36], next[36];
-    casadi_int* iw;
-    int r, k, i;
-    sblsim_bound_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-    w = (double*)malloc(sizeof(double) * (size_t)(sz_w > 0 ? sz_w : 1));
-    iw = (casadi_int*)malloc(sizeof(casadi_int) * (size_t)(sz_iw > 0 ? sz_iw : 1));
-    if (w == NULL || iw == NULL || sz_arg > 12 || sz_res > 1) {
-        free(w);
-        free(iw);
-        return 1;
-    }
-    for (r = 0; r < b; r++) {
-        const double* f = fixed + (size_t)r * 8;
-        memset(bound, 0, sizeof bound);
-        for (i = 0; i < 6; i += 2) {
-            bound[i * 7] = f[3] * f[3];
-            bound[(i + 1) * 7] = f[4] * f[4];
-        }
-        for (k = 0; k < n; k++) {
-            const double* s = steps + ((size_t)k * (size_t)b + (size_t)r) * 11;
-            arg[0] = bound;
-            arg[1] = f; arg[2] = f + 1; arg[3] = f + 2;
-            arg[4] = s; arg[5] = s + 3; arg[6] = s + 6;
-            arg[7] = f + 5; arg[8] = f + 6; arg[9] = f + 7;
-            arg[10] = s + 9; arg[11] = s + 10;
-            res[0] = next;
-            sblsim_bound_step(arg, res, iw, w, 0);
-            memcpy(bound, next, sizeof bound);
-            out[(size_t)k * (size_t)b + (size_t)r] = sqrt(bound[0] + bound[14] + bound[28]);
-        }
-    }
-    free(w);
-    free(iw);
-    return 0;
 }
 
 /* Seconds on a monotonic clock (for the per-component timing of sblsim_system_run). */

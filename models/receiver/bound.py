@@ -149,7 +149,7 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """Position PCRB along B true trajectories: ``sqrt(trace)`` of the position block of ``J_k⁻¹``.
 
     The reference evaluation (casadi's virtual machine); the local engine runs
-    the same function compiled (``fmus.native.bound_series``).
+    the same function compiled, in the metrics pass (``fmus.native.run_metrics``).
 
     Parameters
     ----------

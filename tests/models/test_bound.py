@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from fmus.native import bound_series
 from models.receiver.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
 from tests.models.test_receiver_filterpy import phi, white_noise_q
 
@@ -103,12 +102,6 @@ def test_pcrb_equals_a_kalman_filter_covariance_and_tichavsky_information_recurs
                                                 rel=1e-6), (k, r)
     # the bound settles where measurements keep coming, and grows without them
     assert np.all(bound[-1] < bound[0])
-
-
-def test_compiled_bound_equals_the_casadi_evaluation():
-    truth, slot, received, beacons, arms, fixed = case(seed=11, n=200)
-    packed = pcrb_inputs(truth, slot, received, beacons, arms, **fixed)
-    np.testing.assert_allclose(bound_series(*packed), pcrb(*packed), rtol=1e-13, atol=0)
 
 
 def test_bound_without_measurements_is_the_prediction_of_the_prior():
