@@ -105,8 +105,6 @@ def bound_step() -> ca.Function:
 #: Per-replicate inputs of the bound, in the order of :func:`pcrb`'s ``fixed`` columns.
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance", "attitude_variance",
          "depth_variance")
-#: Per-step inputs of the bound: position (3), beacon (3), arm (3), slot, received.
-STEP_SIZE = 11
 
 
 def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, beacons: np.ndarray, arms: np.ndarray,
@@ -233,6 +231,5 @@ def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, no
     return np.where(np.isfinite(drms), drms, np.inf)
 
 
-__all__ = ["FIXED", "STEP_SIZE", "bound_step", "effective_range_variance", "fix_information", "horizontal_std",
-           "information_update",
-           "pcrb", "pcrb_inputs"]
+__all__ = ["FIXED", "bound_step", "effective_range_variance", "fix_information", "horizontal_std",
+           "information_update", "pcrb", "pcrb_inputs"]
