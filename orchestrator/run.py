@@ -394,9 +394,9 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         rec = recs[0]
     else:
         rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
-    types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
     metrics, bound = _metrics(cfgs, rec, replicates, with_bound=timeseries)
     if timeseries:
+        types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
         rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
         frame = _timeseries(rec, replicates, n_steps, bound)
     else:
@@ -414,9 +414,8 @@ def _arms(platform: tuple) -> np.ndarray:
 def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
              with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
     """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass."""
-    params = pd.DataFrame([bound_parameters(c) for c in cfgs])
-    fixed = np.column_stack([np.full(len(cfgs), cfgs[0]["simulation"]["sampling_time"])]
-                            + [params[k].to_numpy() for k in FIXED[1:]])
+    dt = cfgs[0]["simulation"]["sampling_time"]
+    fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in map(bound_parameters, cfgs)])  # (B, 8)
     arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
     values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
                                 with_bound)
