@@ -2,7 +2,8 @@
 
 At every slot it updates with the **latest range of every beacon heard so
 far** plus the depth, ``z = [r_1 … r_n, d]`` with ``h_i(x) = ‖p − b̃_i‖``
-(casadi Jacobian) and ``R = diag(σ_r², …, σ_r², σ_d²)``: one range is
+(casadi Jacobian) and ``R = diag(σ_r², …, σ_r², σ_d²)`` (the joint update,
+computed row after row: :func:`models.receiver.kalman.update`): one range is
 fresh, the others are held from earlier slots, and their staleness is part
 of the error, as in the paper. A beacon not heard yet gets a zero Jacobian
 row and a zero innovation (an exact no-op). An optional NIS gate (off by
@@ -62,8 +63,7 @@ def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, dept
         y.append(ca.if_else(heard[i], ranges[i] - h, 0.0))
     H = ca.vertcat(*rows, model.depth_jacobian())
     y = ca.vertcat(*y, depth - x[4])
-    R = ca.diag(ca.vertcat(*([sigma_range**2] * n), sigma_depth**2))
-    return kalman.update(x, P, y, H, R)
+    return kalman.update(x, P, y, H, ca.vertcat(*([sigma_range**2] * n), sigma_depth**2))
 
 
 class Receiver(KalmanReceiver):

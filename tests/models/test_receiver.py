@@ -236,12 +236,31 @@ def test_cholesky_and_solve_spd_match_numpy():
     rng = np.random.default_rng(4)
     S = random_spd(rng, n=5, scale=3.0)
     B = rng.normal(size=(5, 3))
-    chol = casadi_function(kalman.cholesky, (5, 5))
-    solve = casadi_function(kalman.solve_spd, (5, 5), (5, 3))
-    (L,) = evaluate(chol, S)
+    (L,) = evaluate(casadi_function(kalman.cholesky, (5, 5)), S)
     np.testing.assert_allclose(L, np.linalg.cholesky(S), rtol=1e-13, atol=1e-15)
-    (X,) = evaluate(solve, S, B)
+    (X,) = evaluate(casadi_function(kalman.solve_spd, (5, 5), (5, 3)), S, B)
     np.testing.assert_allclose(X, np.linalg.solve(S, B), rtol=1e-12, atol=1e-14)
+
+
+def test_scalar_update_is_the_joseph_form_of_the_textbook_gain():
+    """The rank-one evaluation on the upper triangle equals ``(I − k h) P (I − k h)ᵀ + k r kᵀ`` with
+    ``k = P hᵀ / (h P hᵀ + r)`` in numpy, is exactly symmetric, and ``use = 0`` changes nothing."""
+    rng = np.random.default_rng(11)
+    P, x, h = random_spd(rng, scale=2.0), rng.normal(size=6), rng.normal(size=(1, 6))
+    y, r = 0.7, 0.04
+    f = casadi_function(lambda x, P, y, h, r, use: kalman.scalar_update(x, P, y, h, r, use),
+                        (6, 1), (6, 6), (1, 1), (1, 6), (1, 1), (1, 1))
+    x_new, P_new, nis = evaluate(f, x, P, y, h, r, 1.0)
+    s = (h @ P @ h.T).item() + r
+    k = P @ h.T / s
+    I_kh = np.eye(6) - k @ h
+    np.testing.assert_allclose(P_new, I_kh @ P @ I_kh.T + r * k @ k.T, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(x_new.ravel(), x + k.ravel() * y, rtol=1e-14)
+    assert nis.item() == pytest.approx(y * y / s, rel=1e-14)
+    np.testing.assert_array_equal(P_new, P_new.T)
+    x_kept, P_kept, _ = evaluate(f, x, P, y, h, r, 0.0)
+    np.testing.assert_array_equal(x_kept.ravel(), x)
+    np.testing.assert_array_equal(P_kept, P)
 
 
 def test_predict_update_matches_textbook_numpy_ekf():
