@@ -66,10 +66,10 @@ def effective_range_variance(position, beacon, arm, noise_variance, attitude_var
 
 def information_update(P: ca.SX, H: ca.SX, variance, use) -> ca.SX:
     """``(P⁻¹ + Hᵀ H / variance)⁻¹ = P − g gᵀ / (H g + variance)``, ``g = P Hᵀ``, for a scalar measurement
-    (where ``use`` is 0, P unchanged): the bound's information added, in covariance form (symmetric by
-    construction; no gain is applied to an estimate, so the Joseph form's robustness is not needed)."""
+    (where ``use`` is 0, P unchanged): the bound's information added, in covariance form (its upper triangle
+    computed, mirrored; no gain is applied to an estimate, so the Joseph form's robustness is not needed)."""
     g = ca.mtimes(P, H.T)
-    return ca.if_else(use > 0.5, P - ca.mtimes(g, g.T) / (ca.mtimes(H, g) + variance), P)
+    return ca.if_else(use > 0.5, kalman.symmetric(P - ca.mtimes(g, g.T) / (ca.mtimes(H, g) + variance)), P)
 
 
 @lru_cache(maxsize=1)

@@ -54,9 +54,10 @@ def process_noise(dt, q_horizontal, q_vertical) -> ca.SX:
 
 
 def predict(x: ca.SX, P: ca.SX, dt, q_horizontal, q_vertical) -> tuple[ca.SX, ca.SX]:
-    """``x ← Φx``, ``P ← ΦPΦᵀ + Q`` for a step ``dt`` [s]."""
+    """``x ← Φx``, ``P ← ΦPΦᵀ + Q`` for a step ``dt`` [s] (P's upper triangle computed, mirrored: exactly
+    symmetric)."""
     phi = transition(dt)
-    return ca.mtimes(phi, x), ca.mtimes([phi, P, phi.T]) + process_noise(dt, q_horizontal, q_vertical)
+    return ca.mtimes(phi, x), symmetric(ca.mtimes([phi, P, phi.T]) + process_noise(dt, q_horizontal, q_vertical))
 
 
 def cholesky(S: ca.SX) -> ca.SX:
