@@ -148,7 +148,8 @@ class Platform(Component):
     @classmethod
     def build(cls, n_beacons: int):
         n = n_beacons
-        b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phases", 4), ("gps_error", 3),
+        b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phase_sin", 4), ("phase_cos", 4),
+                                            ("gps_error", 3),
                                             ("gps", 3), ("broadcast", 3 * n)],
                            derived=[("offsets", 3 * n), ("motion", 4)])
 
@@ -159,21 +160,27 @@ class Platform(Component):
             return {"offsets": ca.vertcat(*offsets), "motion": ca.vertcat(*wave_motion(p["beaufort"],
                                                                                       p["hull_length"]))}
 
-        def attitude(p, d, phases, t):
+        def attitude(p, d, x, t):
             """True roll, pitch, yaw [rad] and platform depth (heave) [m] at ``t``."""
             tilt, yaw_amp, heave, freq = (d["motion"][k] for k in range(4))
             w = 2.0 * math.pi * freq * t
-            roll = tilt * ca.sin(w + phases[0])
-            pitch = tilt * ca.sin(w + phases[1])
-            yaw = p["heading_deg"] * (math.pi / 180.0) + yaw_amp * ca.sin(0.5 * w + phases[2])
-            return roll, pitch, yaw, -heave * ca.sin(w + phases[3])
+
+            full, half = (ca.sin(w), ca.cos(w)), (ca.sin(0.5 * w), ca.cos(0.5 * w))
+
+            def wave(angle, k):  # sin(angle + φ_k) = sin(angle) cos φ_k + cos(angle) sin φ_k
+                return angle[0] * x["phase_cos"][k] + angle[1] * x["phase_sin"][k]
+
+            roll = tilt * wave(full, 0)
+            pitch = tilt * wave(full, 1)
+            yaw = p["heading_deg"] * (math.pi / 180.0) + yaw_amp * wave(half, 2)
+            return roll, pitch, yaw, -heave * wave(full, 3)
 
         def offsets(d):
             return [d["offsets"][3 * i:3 * i + 3] for i in range(n)]
 
-        def sample(p, d, phases, gps_error, imu_noise, t_k):
-            """GPS position and broadcast beacon positions sampled at ``t_k``."""
-            roll, pitch, yaw, depth = attitude(p, d, phases, t_k)
+        def sample(p, d, x, gps_error, imu_noise, t_k):
+            """GPS position and broadcast beacon positions sampled at ``t_k`` (``x``: the phases)."""
+            roll, pitch, yaw, depth = attitude(p, d, x, t_k)
             gps = ca.vertcat(0.0, 0.0, depth) + gps_error
             bias = p["imu_bias_deg"] * (math.pi / 180.0) + p["imu_gyro_bias"] * t_k
             sigma = p["imu_sigma_deg"] * (math.pi / 180.0)
@@ -183,9 +190,10 @@ class Platform(Component):
 
         def init(p, d, w, t0):
             phases = 2.0 * math.pi * w[_PHASES]
+            wave_phases = {"phase_sin": ca.sin(phases), "phase_cos": ca.cos(phases)}
             gps_error = p["gps_sigma"] * w[_GPS]  # stationary start of either model
-            return {"t0": t0, "k": 0, "phases": phases, "gps_error": gps_error,
-                    **sample(p, d, phases, gps_error, w[_IMU], t0)}
+            return {"t0": t0, "k": 0, **wave_phases, "gps_error": gps_error,
+                    **sample(p, d, wave_phases, gps_error, w[_IMU], t0)}
 
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["sample_period"], t, h)
@@ -196,10 +204,10 @@ class Platform(Component):
             phi = ca.exp(-p["sample_period"] / p["gps_tau"])
             markov = phi * x["gps_error"] + p["gps_sigma"] * ca.sqrt(1.0 - phi * phi) * w[_GPS]
             gps_error = ca.if_else(p["gps_model"] == GPS_MODELS.index("white"), p["gps_sigma"] * w[_GPS], markov)
-            return {"k": k, "gps_error": gps_error, **sample(p, d, x["phases"], gps_error, w[_IMU], t_k)}
+            return {"k": k, "gps_error": gps_error, **sample(p, d, x, gps_error, w[_IMU], t_k)}
 
         def output(x, p, d, t):
-            roll, pitch, yaw, depth = attitude(p, d, x["phases"], t)
+            roll, pitch, yaw, depth = attitude(p, d, x, t)
             true = beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw), offsets(d))
             out = {name: ca.vertcat(*true)[k] for k, name in enumerate(beacon_names(n, "true"))}
             out.update({name: x["broadcast"][k] for k, name in enumerate(beacon_names(n, "broadcast"))})

@@ -68,7 +68,8 @@ def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca
     w_r, w_d : casadi.SX
         Weights [1/m²].
     """
-    A = ca.SX.zeros(3, 3)
+    upper = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+    a = [0] * len(upper)  # the upper triangle of A (it is symmetric)
     g = ca.SX.zeros(3, 1)
     cost = 0
     for i in range(ranges.numel()):
@@ -76,12 +77,16 @@ def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca
         J = ca.if_else(heard[i], J, ca.SX.zeros(3))  # an unheard beacon may give 0/0 at its placeholder
         res = ca.if_else(heard[i], ranges[i] - h, 0.0)
         w = w_r * heard[i]
-        A = A + w * ca.mtimes(J, J.T)
-        g = g + w * J * res
+        wJ = w * J
+        a = [a[k] + wJ[r] * J[c] for k, (r, c) in enumerate(upper)]
+        g = g + wJ * res
         cost = cost + w * res * res
     dres = depth - point[2]
-    A[2, 2] = A[2, 2] + w_d
+    a[-1] = a[-1] + w_d
     g[2] = g[2] + w_d * dres
+    A = ca.SX.zeros(3, 3)
+    for value, (r, c) in zip(a, upper):
+        A[r, c] = A[c, r] = value
     return A, g, cost + w_d * dres * dres
 
 

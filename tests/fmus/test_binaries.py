@@ -211,12 +211,15 @@ def test_the_fmu_rebuilds_from_its_own_sources(fmu_dir, c_host, tmp_path):
 ])
 def test_philox_streams_are_the_same_in_c_and_numpy(keys, component, purpose, draw):
     """The first numbers of a stream: the C runtime equals numpy's Philox bit generator (uniforms exactly;
-    normals through the same Box-Muller with the C library's log, sqrt and cos)."""
+    normals through the same Box-Muller with the C library's log, sqrt and cos), for counts of one block,
+    several, and ending part-way through a block."""
     seed, scenario, cell, replicate = keys
-    np.testing.assert_array_equal(stream("uniform", keys, component, purpose, draw, 9),
-                                  uniforms(seed, scenario, cell, replicate, component, purpose, draw, 9))
-    np.testing.assert_array_equal(stream("normal", keys, component, purpose, draw, 5),
-                                  normals(seed, scenario, cell, replicate, component, purpose, draw, 5))
+    for count in (1, 9, 37):
+        np.testing.assert_array_equal(stream("uniform", keys, component, purpose, draw, count),
+                                      uniforms(seed, scenario, cell, replicate, component, purpose, draw, count))
+    for count in (1, 5, 19):
+        np.testing.assert_array_equal(stream("normal", keys, component, purpose, draw, count),
+                                      normals(seed, scenario, cell, replicate, component, purpose, draw, count))
 
 
 def test_philox_reference_is_numpys_bit_generator():
