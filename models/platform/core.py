@@ -149,8 +149,7 @@ class Platform(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phase_sin", 4), ("phase_cos", 4),
-                                            ("gps_error", 3),
-                                            ("gps", 3), ("broadcast", 3 * n)],
+                                            ("gps_error", 3), ("gps", 3), ("broadcast", 3 * n)],
                            derived=[("offsets", 3 * n), ("motion", 4)])
 
         def prepare(p):
@@ -164,7 +163,6 @@ class Platform(Component):
             """True roll, pitch, yaw [rad] and platform depth (heave) [m] at ``t``."""
             tilt, yaw_amp, heave, freq = (d["motion"][k] for k in range(4))
             w = 2.0 * math.pi * freq * t
-
             full, half = (ca.sin(w), ca.cos(w)), (ca.sin(0.5 * w), ca.cos(0.5 * w))
 
             def wave(angle, k):  # sin(angle + φ_k) = sin(angle) cos φ_k + cos(angle) sin φ_k
