@@ -121,7 +121,7 @@ def update(x: ca.SX, P: ca.SX, y: ca.SX, H: ca.SX, variances: ca.SX) -> tuple[ca
     nis : casadi.SX
         ``yᵀ S⁻¹ y`` [1].
     """
-    dx, P_k, nis = ca.SX.zeros(x.shape[0]), symmetric(P), 0.0  # dx: the correction so far
+    dx, P_k, nis = ca.SX.zeros(x.shape[0]), P, 0.0  # dx: the correction so far (each row reads P symmetric)
     for k in range(H.shape[0]):
         row = H[k, :]
         dx, P_k, nis_k = scalar_update(dx, P_k, y[k] - ca.mtimes(row, dx), row, variances[k])
