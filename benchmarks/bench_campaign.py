@@ -34,12 +34,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fmus.build import build_all
-from orchestrator.campaign import plan, run_campaign
-from orchestrator.config import load_config
-from orchestrator.metrics import RUN_METRICS
-from orchestrator.run import close_handles, make_handles, run_batch, with_replicates
-from orchestrator.study import load_study, study_source
+from sblsim.fmus.build import build_all
+from sblsim.orchestrator.campaign import plan, run_campaign
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.metrics import RUN_METRICS
+from sblsim.orchestrator.run import close_handles, make_handles, run_batch, with_replicates
+from sblsim.orchestrator.study import load_study, study_source
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from revision import run_at  # noqa: E402
@@ -47,8 +47,8 @@ from revision import run_at  # noqa: E402
 #: The largest chunk, timed in an earlier revision's own code (its run_batch had the same signature).
 OLD_CHUNK = """
 import sys, time
-from orchestrator.config import load_config
-from orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run_batch, with_replicates
 cfg = load_config("semicircle", ["simulation.duration=" + sys.argv[1]], seed=1)
 cfgs = with_replicates(cfg, range(int(sys.argv[2])))
 run_batch(cfgs[:10], timeseries=False)
@@ -176,9 +176,9 @@ def threads(per_step: float) -> None:
     """The chunk's master loop: one batch against two half-batches in two threads."""
     import threading
 
-    from orchestrator.connections import default_connections
-    from orchestrator.master import simulate
-    from orchestrator.run import METRIC_INPUTS, TIMESERIES_COLUMNS, merge_params
+    from sblsim.orchestrator.connections import default_connections
+    from sblsim.orchestrator.master import simulate
+    from sblsim.orchestrator.run import METRIC_INPUTS, TIMESERIES_COLUMNS, merge_params
 
     cfgs = with_replicates(load_config("semicircle", [f"simulation.duration={CHUNK_DURATION}"], seed=1),
                            range(CHUNK_RUNS))

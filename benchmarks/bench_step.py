@@ -22,9 +22,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from fmus.build import build_all
-from orchestrator.config import load_config
-from orchestrator.run import close_handles, make_handles, run
+from sblsim.fmus.build import build_all
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import close_handles, make_handles, run
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from revision import run_at  # noqa: E402
@@ -34,9 +34,9 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Timed in the earlier revision's own code (its ``run`` and ``make_handles`` had the same signatures).
 OLD = """
 import sys, tempfile, time
-from fmus.build import build_all
-from orchestrator.config import load_config
-from orchestrator.run import make_handles, run
+from sblsim.fmus.build import build_all
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import make_handles, run
 duration, repeat = float(sys.argv[1]), int(sys.argv[2])
 cfg = load_config("semicircle", [f"simulation.duration={duration}"], seed=1)
 with tempfile.TemporaryDirectory() as tmp:

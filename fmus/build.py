@@ -2,7 +2,7 @@
 
 Each FMU holds
 
-* ``modelDescription.xml`` (:mod:`fmus.description`);
+* ``modelDescription.xml`` (:mod:`sblsim.fmus.description`);
 * ``sources/``: every C file it was built from (the casadi-generated model,
   the model record, the runtime, the FMI shell and the FMI headers), so any
   user can rebuild it, e.g. ``cc -shared -fPIC -O2 -ffp-contract=off
@@ -22,10 +22,10 @@ import zipfile
 from pathlib import Path
 from typing import Sequence
 
-from fmus.codegen import write_sources
-from fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
-from fmus.description import model_description
-from models import MODELS
+from sblsim.fmus.codegen import write_sources
+from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
+from sblsim.fmus.description import model_description
+from sblsim.models import MODELS
 
 HERE = Path(__file__).resolve().parent
 #: Where ``sblsim fmus build`` writes and the ``fmu`` engine looks by default.
@@ -52,7 +52,7 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
     n_beacons : int
         Beacons of the interface.
     compiler : {'auto', 'system', 'zig'}
-        See :func:`fmus.compiler.find_compiler`.
+        See :func:`sblsim.fmus.compiler.find_compiler`.
     cross : bool, optional
         Also build the Windows and macOS binaries (needs zig); default: when
         the compiler is zig.
@@ -105,8 +105,8 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
     its GUID: the fmu engine's FMU of a user's model (``simulation.receiver = "model:PATH.py"``)."""
     import hashlib
 
-    from fmus.codegen import C_DIR, model_guid
-    from fmus.native import cache_dir
+    from sblsim.fmus.codegen import C_DIR, model_guid
+    from sblsim.fmus.native import cache_dir
 
     digest = hashlib.sha256(model_guid(model, n_beacons).encode())
     for source in sorted(C_DIR.iterdir()):  # and the runtime it is built with

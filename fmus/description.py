@@ -1,6 +1,6 @@
 """The FMI 2.0 model description of a component, written from its declarations.
 
-Every variable comes from :meth:`models.core.Component.fmu_variables`
+Every variable comes from :meth:`sblsim.models.component.Component.fmu_variables`
 (value reference = position in that list): name, causality, variability
 (``fixed`` parameters, ``discrete`` sampled signals, ``continuous`` physical
 ones), type, unit, start and the declared range. Outputs depend on no input
@@ -13,7 +13,7 @@ from xml.etree import ElementTree as ET
 
 import casadi as ca
 
-from models.core import UNITS
+from sblsim.models.declarations import UNITS
 
 VERSION = "0.2.0"
 
@@ -33,10 +33,10 @@ def model_description(model: type, n_beacons: int, guid: str, source_files: list
     Parameters
     ----------
     model : type
-        A :class:`models.core.Component`.
+        A :class:`sblsim.models.component.Component`.
     n_beacons : int
     guid : str
-        The GUID compiled into the binary (:func:`fmus.codegen.model_guid`).
+        The GUID compiled into the binary (:func:`sblsim.fmus.codegen.model_guid`).
     source_files : list of str
         The C files of ``sources/`` (listed for hosts that compile from source).
     step_size : float

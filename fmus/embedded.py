@@ -14,9 +14,9 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from fmus.codegen import C_DIR, stem, write_sources
-from models import MODELS, RECEIVERS
-from models.core import ModelError
+from sblsim.fmus.codegen import C_DIR, stem, write_sources
+from sblsim.models import MODELS, RECEIVERS
+from sblsim.models.declarations import ModelError
 
 MAIN = """/* Feed a packet sequence to the {name} and print its estimates.
  * stdin, one line per step: t h {inputs}

@@ -23,11 +23,11 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
-from fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
-from models import MODELS
-from models.core import ModelError
-from models.receiver.bound import FIXED, bound_step
+from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
+from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
+from sblsim.models import MODELS
+from sblsim.models.declarations import ModelError
+from sblsim.models.receiver.bound import FIXED, bound_step
 
 _VECTORS = {"p": 0, "d": 1, "x": 2, "u": 3, "y": 4, "draws": 6}
 
@@ -137,7 +137,7 @@ class NativeBatch:
     Parameters
     ----------
     model : type
-        A :class:`models.core.Component`.
+        A :class:`sblsim.models.component.Component`.
     batch : int
         Number of replicates B.
     n_beacons : int
@@ -262,15 +262,15 @@ class NativeSystem:
 
 def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float],
                 with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
-    """The per-run metrics of :mod:`orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
+    """The per-run metrics of :mod:`sblsim.orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
 
     Parameters
     ----------
     columns : sequence of ndarray, shape (N, B) each
-        The recorded outputs in the order of :data:`orchestrator.metrics.METRIC_INPUTS`, as floats; any
+        The recorded outputs in the order of :data:`sblsim.orchestrator.metrics.METRIC_INPUTS`, as floats; any
         step stride, replicates contiguous (a column of the master's record array is used in place).
     fixed : ndarray, shape (B, 8)
-        The bound's per-run inputs (:data:`models.receiver.bound.FIXED`).
+        The bound's per-run inputs (:data:`sblsim.models.receiver.bound.FIXED`).
     arms : ndarray, shape (B, n_beacons, 3)
         Each run's beacon lever arms in NED [m].
     limits : (float, float, float)
@@ -281,7 +281,7 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
     Returns
     -------
     metrics : ndarray, shape (B, 18)
-        :data:`orchestrator.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
+        :data:`sblsim.orchestrator.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
     bound : ndarray, shape (N, B), or None
         ``sqrt(trace)`` of the position PCRB [m].
 

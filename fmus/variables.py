@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from tabulate import tabulate
 
-from models import MODELS
+from sblsim.models import MODELS
 
 BEGIN, END = "<!-- fmu-variables:begin -->", "<!-- fmu-variables:end -->"
 

@@ -5,10 +5,10 @@ paper's EKF for ``receiver``); ``MODELS`` maps every model by its own name,
 the alternative receivers included.
 """
 
-from models.acoustics import Acoustics
-from models.platform import Platform
-from models.receiver import LeastSquaresReceiver, Receiver, SequentialReceiver, UnscentedReceiver
-from models.target import Target
+from sblsim.models.acoustics import Acoustics
+from sblsim.models.platform import Platform
+from sblsim.models.receiver import LeastSquaresReceiver, Receiver, SequentialReceiver, UnscentedReceiver
+from sblsim.models.target import Target
 
 COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, Receiver)}
 #: Built-in receivers: ``simulation.receiver`` value -> model.

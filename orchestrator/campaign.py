@@ -49,12 +49,12 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 
-from models import COMPONENTS
-from models.core import ModelError
-from orchestrator.config import receiver_label
-from orchestrator.metrics import RUN_METRICS
-from orchestrator.run import ENGINES, fmu_paths, run_batch, system_sources, with_replicates
-from orchestrator.study import Study
+from sblsim.models import COMPONENTS
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import receiver_label
+from sblsim.orchestrator.metrics import RUN_METRICS
+from sblsim.orchestrator.run import ENGINES, fmu_paths, run_batch, system_sources, with_replicates
+from sblsim.orchestrator.study import Study
 
 #: Default runs per chunk on each engine.
 DEFAULT_BATCH = {"local": 800, "fmu": 50}
@@ -422,7 +422,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     Parameters
     ----------
     study : Study
-        Validated study (:func:`orchestrator.study.load_study`).
+        Validated study (:func:`sblsim.orchestrator.study.load_study`).
     out : path
         Campaign directory.
     workers : int, optional

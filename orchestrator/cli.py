@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fmus.compiler import COMPILERS
-from models.core import ModelError, shown
-from orchestrator.master import ALGORITHMS
+from sblsim.fmus.compiler import COMPILERS
+from sblsim.models.declarations import ModelError, shown
+from sblsim.orchestrator.master import ALGORITHMS
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -26,6 +26,16 @@ EXIT_INTERRUPTED = 130
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # one line, exit 2 (argparse prints usage too)
         self.exit(EXIT_USAGE, f"sblsim: error: {message}\n")
+
+
+def _version() -> str:
+    """The installed distribution's version (``pip show sblsim``)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("sblsim")
+    except PackageNotFoundError:  # run from a checkout that was never installed
+        return "unknown (not installed)"
 
 
 def _config_options(p: argparse.ArgumentParser) -> None:
@@ -38,6 +48,7 @@ def _config_options(p: argparse.ArgumentParser) -> None:
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sblsim", description="SBL acoustic underwater positioning co-simulation")
+    p.add_argument("--version", action="version", version=f"sblsim {_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="run one scenario, configuration file or SSP package")
@@ -133,9 +144,9 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from orchestrator.config import beacon_count, load_config
-    from orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
-    from orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
+    from sblsim.orchestrator.config import beacon_count, load_config
+    from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
+    from sblsim.orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
 
     _check_seed(args.seed)
     if (args.scenario is None) == (args.ssp is None):
@@ -143,7 +154,7 @@ def _run(args: argparse.Namespace) -> int:
     overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else [])
     connections, handles = None, None
     if args.ssp is not None:
-        from orchestrator.ssp import read_ssp
+        from sblsim.orchestrator.ssp import read_ssp
 
         engine = args.engine or "fmu"
         system = read_ssp(args.ssp, overrides, args.seed)
@@ -188,8 +199,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _ssp(args: argparse.Namespace) -> int:
-    from orchestrator.config import load_config
-    from orchestrator.ssp import export_ssp
+    from sblsim.orchestrator.config import load_config
+    from sblsim.orchestrator.ssp import export_ssp
 
     _check_seed(args.seed)
     cfg = load_config(args.scenario, args.overrides, args.seed)
@@ -209,7 +220,7 @@ def _output_name(scenario: str) -> str:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from orchestrator.compare import compare, markdown, parse_receivers, write
+    from sblsim.orchestrator.compare import compare, markdown, parse_receivers, write
 
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
@@ -228,7 +239,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from orchestrator.maps import make_maps, parse_compare, parse_levels, write
+    from sblsim.orchestrator.maps import make_maps, parse_compare, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
@@ -248,8 +259,8 @@ def _map(args: argparse.Namespace) -> int:
 
 
 def _campaign(args: argparse.Namespace) -> int:
-    from orchestrator.campaign import CampaignInterrupted, run_campaign
-    from orchestrator.study import load_study
+    from sblsim.orchestrator.campaign import CampaignInterrupted, run_campaign
+    from sblsim.orchestrator.study import load_study
 
     study = load_study(args.study, seed=args.seed)
     out = args.out or Path("results") / study.name
@@ -280,7 +291,7 @@ def _campaign(args: argparse.Namespace) -> int:
 
 
 def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_rms", order: int = 2) -> int:
-    from orchestrator.analysis import compute, write
+    from sblsim.orchestrator.analysis import compute, write
 
     _check_writable(out or directory)
     analysis = compute(directory, metric, order)
@@ -297,11 +308,11 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
 
 
 def _fmus(args: argparse.Namespace) -> int:
-    from fmus.build import DEFAULT_DIR, build_fmu, fmu_path, validate
-    from models import MODELS
+    from sblsim.fmus.build import DEFAULT_DIR, build_fmu, fmu_path, validate
+    from sblsim.models import MODELS
 
     if args.fmus_command == "variables":
-        from fmus.variables import markdown_tables
+        from sblsim.fmus.variables import markdown_tables
 
         print(markdown_tables())
         return 0
@@ -309,7 +320,7 @@ def _fmus(args: argparse.Namespace) -> int:
         out = args.out or DEFAULT_DIR
         _check_writable(out)
         if args.model is not None:
-            from orchestrator.config import MODEL_PREFIX, check_receiver, user_model
+            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver, user_model
 
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
@@ -365,7 +376,7 @@ def _check_writable(directory: Path) -> None:
 
 
 def _codegen(args: argparse.Namespace) -> int:
-    from fmus.embedded import write_receiver
+    from sblsim.fmus.embedded import write_receiver
 
     _check_writable(args.out)
     files = write_receiver(args.receiver, args.out)

@@ -8,7 +8,7 @@ numbers). Per receiver, over all steps of all replicates:
   the same number of steps);
 * ``mean_e_tot``: mean e_tot [m];
 * ``nees``, ``coverage_95``, ``nis``, ``gated_pct``: means over runs of the
-  consistency metrics (:mod:`orchestrator.metrics`);
+  consistency metrics (:mod:`sblsim.orchestrator.metrics`);
 * ``pcrb_rms`` [m] and ``ratio_to_pcrb = rms_e_tot / pcrb_rms``;
 * ``us_per_step``: wall-clock time of the receiver's doStep per run and
   communication step [µs], the runs stepped together on the local engine;
@@ -24,11 +24,11 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from models import RECEIVER_MODELS
-from models.core import ModelError
-from orchestrator.config import check_receiver, load_config, receiver_label
-from orchestrator.output import staged_directory
-from orchestrator.run import run_batch, with_replicates
+from sblsim.models import RECEIVER_MODELS
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import check_receiver, load_config, receiver_label
+from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.run import run_batch, with_replicates
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "mean_e_tot", "nees", "coverage_95", "nis", "gated_pct", "pcrb_rms",
            "ratio_to_pcrb", "us_per_step", "diverged")

@@ -31,10 +31,10 @@ from typing import Any, Iterable
 import numpy as np
 import tomli_w
 
-from models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
-from models.core import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
-from models.target import natural_duration, start_state
-from orchestrator.master import ALGORITHMS
+from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
+from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
+from sblsim.models.target import natural_duration, start_state
+from sblsim.orchestrator.master import ALGORITHMS
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
 SECTIONS = ("run", "simulation", *COMPONENTS)
@@ -100,9 +100,9 @@ def external_path(value: Any, prefix: str = EXTERNAL_PREFIX) -> str:
 def _user_model(path: str, stamp: tuple[int, int]) -> type:
     import importlib.util
 
-    from models.core import Component
-    from orchestrator.connections import check_interface
-    from orchestrator.engines import Port
+    from sblsim.models.component import Component
+    from sblsim.orchestrator.connections import check_interface
+    from sblsim.orchestrator.engines import Port
 
     where = "simulation.receiver"
     name = "sblsim_user_" + hashlib.sha256(path.encode()).hexdigest()[:12]
@@ -136,7 +136,7 @@ def _user_model(path: str, stamp: tuple[int, int]) -> type:
 
 
 def user_model(path: str | Path) -> type:
-    """The receiver model (a :class:`models.core.Component`) that a user's Python file defines.
+    """The receiver model (a :class:`sblsim.models.component.Component`) that a user's Python file defines.
 
     The file must define exactly one model class whose ``name`` is
     ``receiver_…`` (not a built-in's) and whose inputs and outputs are the
@@ -284,7 +284,7 @@ def scenario_source(name: str) -> dict[str, Any]:
     if name not in BUILTIN_SCENARIOS:
         raise ConfigError(f"scenario: unknown scenario {name!r}; one of {', '.join(BUILTIN_SCENARIOS)} "
                           "or a path to a .toml file")
-    text = (resources.files("orchestrator") / "scenarios" / f"{name}.toml").read_text()
+    text = (resources.files("sblsim.orchestrator") / "scenarios" / f"{name}.toml").read_text()
     return tomllib.loads(text)
 
 
@@ -459,7 +459,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
 
 def beacon_offsets(platform: dict[str, Any]) -> np.ndarray:
     """Body-frame offsets of the beacons of a ``[platform]`` section, (n, 3) [m]."""
-    from models.platform.geometry import layout_offsets
+    from sblsim.models.platform.geometry import layout_offsets
 
     return layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
                           platform["beacon_offsets"])
@@ -487,7 +487,7 @@ def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[s
     """The FMU parameter values of one component of a resolved configuration.
 
     The component's section turned into FMU parameters by its model
-    (:meth:`models.core.Component.fmu_parameters`: tables from files, custom
+    (:meth:`sblsim.models.component.Component.fmu_parameters`: tables from files, custom
     offsets), the sampling ties (:data:`SAMPLING_TIES`) and the seed keys it
     declares. String choices stay text (each engine encodes them).
 

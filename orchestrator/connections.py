@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from models.acoustics.core import PACKET, TARGET_INPUTS
-from models.core import ModelError, Variable
-from models.platform.core import beacon_names
+from sblsim.models.acoustics.core import PACKET, TARGET_INPUTS
+from sblsim.models.declarations import ModelError, Variable
+from sblsim.models.platform.core import beacon_names
 
 PACKET_FIELDS = tuple(v.name for v in PACKET)
 

@@ -7,7 +7,7 @@ Both handles share one small interface (``setup``, ``set_input_vector``,
 their variables as ``ports`` for the connection checks:
 
 * :class:`LocalHandle` steps a model's generated C in-process, batched over
-  replicates (:class:`fmus.native.NativeBatch`: one call per component and
+  replicates (:class:`sblsim.fmus.native.NativeBatch`: one call per component and
   step for the whole batch);
 * :class:`FmuHandle` steps a real FMU through fmpy (B = 1), instantiated once
   per process and reset between runs.
@@ -26,8 +26,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from models import COMPONENTS
-from models.core import ModelError
+from sblsim.models import COMPONENTS
+from sblsim.models.declarations import ModelError
 
 #: A variable as an engine exposes it (what the connection checks need).
 Port = namedtuple("Port", "name causality type unit")
@@ -72,7 +72,7 @@ class LocalHandle:
         ModelError
             On a parameter outside its declared range.
         """
-        from fmus.native import NativeBatch
+        from sblsim.fmus.native import NativeBatch
 
         replicates = np.asarray(replicates, dtype=np.int64)
         values = dict(params)

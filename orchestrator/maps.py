@@ -2,11 +2,11 @@
 
 For a configuration, the horizontal standard deviation (DRMS) of a position
 fix from one round of fresh ranges (one per beacon) plus the depth, from
-their Fisher information (:func:`models.receiver.bound.horizontal_std`), on a
+their Fisher information (:func:`sblsim.models.receiver.bound.horizontal_std`), on a
 grid around the platform at the diver's depth: the platform level at its
 mean heading, its reference at the origin, the beacons at their lever arms,
 with the configured range noise, GPS, IMU and depth-sensor errors
-(:func:`orchestrator.run.bound_parameters`). It is the accuracy of one
+(:func:`sblsim.orchestrator.run.bound_parameters`). It is the accuracy of one
 round of ranges without a motion model (a filter does better by averaging;
 the PCRB of a run says how much), and it is the design question of the
 paper: which baseline and sensors keep the diver within a required accuracy
@@ -21,11 +21,11 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from models.core import ModelError
-from models.receiver.bound import horizontal_std
-from orchestrator.config import beacon_arms, load_config
-from orchestrator.output import staged_directory
-from orchestrator.run import bound_parameters
+from sblsim.models.declarations import ModelError
+from sblsim.models.receiver.bound import horizontal_std
+from sblsim.orchestrator.config import beacon_arms, load_config
+from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.run import bound_parameters
 
 MAX_POINTS = 1_000_000
 

@@ -30,7 +30,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from orchestrator.connections import Connection, execution_order
+from sblsim.orchestrator.connections import Connection, execution_order
 
 #: Master algorithms of :func:`simulate`.
 ALGORITHMS = ("gauss-seidel", "jacobi")
@@ -43,7 +43,7 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
              timing: dict[str, float] | None = None, buffer: list | None = None) -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
-    A handle (:mod:`orchestrator.engines`) names its inputs and outputs
+    A handle (:mod:`sblsim.orchestrator.engines`) names its inputs and outputs
     (``input_names``, ``output_names``), takes its inputs as one matrix
     (``set_input_vector``, shape (n_in, B)), gives its outputs as one matrix
     (``output_vector``, shape (n_out, B), numbers as floats) and steps
@@ -168,7 +168,7 @@ def _native_system(handles: Mapping[str, object], order: Sequence[str], plans: d
                    rates: Mapping[str, int]):
     """The compiled master loop for these handles, when every one is a compiled batch of the same library
     with every input connected (else None: the Python loop above runs)."""
-    from orchestrator.engines import LocalHandle
+    from sblsim.orchestrator.engines import LocalHandle
 
     if not all(type(handles[c]) is LocalHandle for c in order):  # exactly: a wrapper may change what is exchanged
         return None
@@ -185,7 +185,7 @@ def _native_system(handles: Mapping[str, object], order: Sequence[str], plans: d
             return None
         links += [(index[src], int(out), index[c], int(into_k)) for src, rows_, into in plans[c]
                   for out, into_k in zip(rows_, into)]
-    from fmus.native import NativeSystem
+    from sblsim.fmus.native import NativeSystem
 
     record = [(index[c], k) for c in order for k in kept[c]]
     return NativeSystem(batches, [rates.get(c, 1) for c in order], links, record)

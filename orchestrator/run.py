@@ -13,11 +13,11 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from models import COMPONENTS, MODELS
-from models.core import ModelError
-from models.receiver.bound import FIXED
-from models.receiver.core import COVARIANCE, filter_parameters
-from orchestrator.config import (
+from sblsim.models import COMPONENTS, MODELS
+from sblsim.models.declarations import ModelError
+from sblsim.models.receiver.bound import FIXED
+from sblsim.models.receiver.core import COVARIANCE, filter_parameters
+from sblsim.orchestrator.config import (
     MIN_SIGMA,
     beacon_arms,
     beacon_count,
@@ -26,16 +26,16 @@ from orchestrator.config import (
     receiver_source,
     to_toml,
 )
-from orchestrator.connections import (
+from sblsim.orchestrator.connections import (
     Connection,
     check_connections,
     check_interface,
     default_connections,
 )
-from orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
-from orchestrator.master import simulate
-from orchestrator.metrics import METRIC_INPUTS, errors, run_metrics
-from orchestrator.output import staged_directory
+from sblsim.orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
+from sblsim.orchestrator.master import simulate
+from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_metrics
+from sblsim.orchestrator.output import staged_directory
 
 ENGINES = ("local", "fmu")
 #: Beacons of the built FMUs' interfaces.
@@ -86,7 +86,7 @@ class RunResult:
         One row per replicate and step (columns :data:`TIMESERIES_COLUMNS`,
         ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
     metrics : pandas.DataFrame
-        One row per replicate: the metrics of :mod:`orchestrator.metrics`.
+        One row per replicate: the metrics of :mod:`sblsim.orchestrator.metrics`.
     steps : int
         Macro steps per replicate.
     wall_time : float
@@ -133,14 +133,14 @@ def source_model(source: Source) -> type | None:
 
 def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None) -> dict[str, Path]:
     """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
-    a user's model built into the cache (:func:`fmus.build.cached_fmu`).
+    a user's model built into the cache (:func:`sblsim.fmus.build.cached_fmu`).
 
     Raises
     ------
     ModelError
         If an FMU is missing.
     """
-    from fmus.build import DEFAULT_DIR, cached_fmu, fmu_path
+    from sblsim.fmus.build import DEFAULT_DIR, cached_fmu, fmu_path
 
     directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
     sources = sources if sources is not None else system_sources()
@@ -213,7 +213,7 @@ _FILTER_DEFAULTS = {v.name: v.start for v in filter_parameters()}
 
 
 def bound_parameters(cfg: dict) -> dict[str, float]:
-    """The parameters of the position PCRB of a configuration (:func:`models.receiver.bound.pcrb`).
+    """The parameters of the position PCRB of a configuration (:func:`sblsim.models.receiver.bound.pcrb`).
 
     The motion model and prior are the random walk's for ``random-walk`` (the
     bound is then a true bound), else the receiver's (``q_horizontal``,
@@ -239,7 +239,7 @@ def merge_params(cfgs: Sequence[dict], component: str,
                  accepted: frozenset[str] | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """Parameters of one component for a batch of runs, one resolved configuration per run.
 
-    The FMU parameters of the first run (:func:`orchestrator.config.component_params`);
+    The FMU parameters of the first run (:func:`sblsim.orchestrator.config.component_params`);
     a numeric key whose value differs between runs (a factor of a batch
     spanning several design cells) becomes an array of shape (B,). Only the
     seed keys and numeric FMU parameters may differ; text, tables and
@@ -287,7 +287,7 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
     Parameters
     ----------
     cfg : dict
-        Resolved configuration (:func:`orchestrator.config.load_config`).
+        Resolved configuration (:func:`sblsim.orchestrator.config.load_config`).
     engine : {'local', 'fmu'}
     replicates : sequence of int, optional
         Replicates to run (stepped together on the local engine, one after the
@@ -468,7 +468,7 @@ def write_run(result: RunResult, out_dir: Path | str) -> Path:
     Path
         ``out_dir``.
     """
-    from orchestrator.plots import save_run_figures
+    from sblsim.orchestrator.plots import save_run_figures
 
     out_dir = Path(out_dir)
     with staged_directory(out_dir) as tmp:

@@ -45,9 +45,9 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
-from models import COMPONENTS, MODELS
-from models.core import SEED_NAMES, UNITS, ModelError
-from orchestrator.config import (
+from sblsim.models import COMPONENTS, MODELS
+from sblsim.models.declarations import SEED_NAMES, UNITS, ModelError
+from sblsim.orchestrator.config import (
     EXTERNAL_PREFIX,
     RECEIVERS,
     apply_overrides,
@@ -56,8 +56,8 @@ from orchestrator.config import (
     resolve,
     section_variables,
 )
-from orchestrator.connections import Connection, default_connections
-from orchestrator.run import fmu_paths, system_sources
+from sblsim.orchestrator.connections import Connection, default_connections
+from sblsim.orchestrator.run import fmu_paths, system_sources
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -135,7 +135,7 @@ def _unit_definition(unit: Any) -> dict[str, str]:
 
 def _units(parent: ET.Element, tag: str, names: set[str], definitions: dict[str, dict[str, str]]) -> None:
     """A ``Units`` element defining ``names``: from the FMUs' definitions, else sblsim's table
-    (:data:`models.core.UNITS`); a unit neither defines is left undefined."""
+    (:data:`sblsim.models.declarations.UNITS`); a unit neither defines is left undefined."""
     known = [n for n in sorted(names) if n in definitions or n in UNITS]
     if not known:
         return
@@ -178,7 +178,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     Parameters
     ----------
     cfg : dict
-        Resolved configuration (:func:`orchestrator.config.load_config`).
+        Resolved configuration (:func:`sblsim.orchestrator.config.load_config`).
     out : path
         The ``.ssp`` file to write (replaced atomically).
     fmu_dir : path, optional
@@ -355,7 +355,7 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     path : path
         The ``.ssp`` archive.
     overrides, seed
-        As for :func:`orchestrator.config.load_config` (e.g. ``master=jacobi``).
+        As for :func:`sblsim.orchestrator.config.load_config` (e.g. ``master=jacobi``).
 
     Raises
     ------

@@ -47,10 +47,17 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from models import RECEIVER_MODELS
-from models.core import ModelError, Variable, shown
-from orchestrator.config import BUILTIN_SCENARIOS, SECTIONS, check_receiver, load_config, read_source, section_variables
-from orchestrator.metrics import RUN_METRICS
+from sblsim.models import RECEIVER_MODELS
+from sblsim.models.declarations import ModelError, Variable, shown
+from sblsim.orchestrator.config import (
+    BUILTIN_SCENARIOS,
+    SECTIONS,
+    check_receiver,
+    load_config,
+    read_source,
+    section_variables,
+)
+from sblsim.orchestrator.metrics import RUN_METRICS
 
 BUILTIN_STUDIES = ("paper", "million")
 DESIGNS = ("full", "fractional")
@@ -324,7 +331,7 @@ def study_source(name: str) -> tuple[dict[str, Any], Path | None]:
         Unknown study, missing file or invalid TOML.
     """
     if name in BUILTIN_STUDIES:
-        text = (resources.files("orchestrator") / "studies" / f"{name}.toml").read_text()
+        text = (resources.files("sblsim.orchestrator") / "studies" / f"{name}.toml").read_text()
         return tomllib.loads(text), None
     path = Path(name)
     if not path.is_file():

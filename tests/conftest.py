@@ -12,8 +12,8 @@ def fmu_dir(tmp_path_factory):
     Session-scoped and lazy: the FMUs are built once, and only when a test
     asks for this fixture.
     """
-    from fmus.build import build_all
-    from models import MODELS
+    from sblsim.fmus.build import build_all
+    from sblsim.models import MODELS
 
     directory = tmp_path_factory.mktemp("fmus")
     paths = build_all(directory)

@@ -3,7 +3,7 @@
 ``Core(model, params, replicates)`` takes configuration keys (e.g.
 ``trajectory_file``, ``sound_speed_profile``, ``beacon_offsets``) or FMU
 parameters (e.g. ``sample_period``), fills the rest with their declared
-starts, and steps a batch of replicates through :class:`fmus.native.NativeBatch`.
+starts, and steps a batch of replicates through :class:`sblsim.fmus.native.NativeBatch`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from models.core import resolve_parameters
-from orchestrator.engines import LocalHandle
+from sblsim.models.declarations import resolve_parameters
+from sblsim.orchestrator.engines import LocalHandle
 
 
 def fmu_values(model: type, params: Mapping[str, Any] | None = None, n_beacons: int = 4) -> dict[str, Any]:
@@ -36,7 +36,7 @@ class Core:
     Parameters
     ----------
     model : type
-        A :class:`models.core.Component`.
+        A :class:`sblsim.models.component.Component`.
     params : mapping, optional
         Configuration keys and/or FMU parameters (arrays of shape (B,) per replicate).
     replicates : sequence of int

@@ -248,7 +248,7 @@ def _run(case: str, folder: Path) -> tuple[subprocess.CompletedProcess, dict, di
     before = _snapshot(folder)
     args, _ = CASES[case]
     env = {**os.environ, "SBLSIM_FMU_DIR": str(folder / "emptyfmus")}
-    proc = subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], cwd=folder, capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", *args], cwd=folder, capture_output=True,
                           text=True, timeout=600, check=False, env=env)
     return proc, before, _snapshot(folder)
 

@@ -19,9 +19,9 @@ build --model constant_position.py``.
 
 import casadi as ca
 
-from models.core import Variable
-from models.receiver import KalmanReceiver, kalman
-from models.receiver.core import fresh_range, take_packet
+from sblsim.models.declarations import Variable
+from sblsim.models.receiver import KalmanReceiver, kalman
+from sblsim.models.receiver.core import fresh_range, take_packet
 
 
 class ConstantPositionReceiver(KalmanReceiver):

@@ -17,14 +17,14 @@
 #define SBLSIM_EXPORT __attribute__((visibility("default")))
 #endif
 
-/* The recorded columns, in the order of orchestrator.metrics.METRIC_INPUTS. */
+/* The recorded columns, in the order of sblsim.orchestrator.metrics.METRIC_INPUTS. */
 enum {
     TRUE_X, TRUE_Y, TRUE_Z, EST_X, EST_Y, EST_Z, INSTR_X, INSTR_Y, INSTR_Z, INSTR_VALID, NIS, GATED, PACKET_SEQ,
     PACKET_VALID, BEACON_ID, BEACON_X, BEACON_Y, BEACON_Z, COV_XX, COV_XY, COV_XZ, COV_YY, COV_YZ, COV_ZZ,
     N_COLUMNS
 };
 
-/* The outputs per run, in the order of orchestrator.metrics.RUN_METRICS. */
+/* The outputs per run, in the order of sblsim.orchestrator.metrics.RUN_METRICS. */
 enum { N_ERROR = 6, N_METRICS = 2 * N_ERROR + 6 };
 
 /* The bound's per-run inputs (models/receiver/bound.py, FIXED). */
@@ -43,7 +43,7 @@ typedef struct {
     double bound[36];
 } run_acc;
 
-/* |truth - position| per axis and their norm; 1 when all four are finite (orchestrator.metrics.errors). */
+/* |truth - position| per axis and their norm; 1 when all four are finite (sblsim.orchestrator.metrics.errors). */
 static int errors(const double* truth, const double* position, double e[4]) {
     int a;
     for (a = 0; a < 3; a++) e[a] = fabs(truth[a] - position[a]);
@@ -66,7 +66,7 @@ static void put_errors(const errors_acc* acc, double* out) {
     out[5] = sqrt(acc->spread / n);
 }
 
-/* Position NEES e' P^-1 e by cofactors; NaN where P is not positive-definite (orchestrator.metrics.nees). */
+/* Position NEES e' P^-1 e by cofactors; NaN where P is not positive-definite (sblsim.orchestrator.metrics.nees). */
 static double nees(const double e[3], const double* cov) {
     double xx = cov[0], xy = cov[1], xz = cov[2], yy = cov[3], yz = cov[4], zz = cov[5];
     double c00 = yy * zz - yz * yz, c11 = xx * zz - xz * xz, c22 = xx * yy - xy * xy;
@@ -133,7 +133,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
                 s->nis_sum += v[NIS];
                 s->started++;
             }
-            /* a new slot, and whether its packet names a beacon of the array (orchestrator.metrics.slots) */
+            /* a new slot, and whether its packet names a beacon of the array (sblsim.orchestrator.metrics.slots) */
             id = (int)rint(v[BEACON_ID]);
             slot = rint(v[PACKET_SEQ]) != s->previous_seq ? 1.0 : 0.0;
             s->previous_seq = rint(v[PACKET_SEQ]);

@@ -33,9 +33,12 @@ from typing import Any, Mapping
 
 import casadi as ca
 
-from models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
-from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Stream, Variable, format_table, sample_due, select
-from models.platform.core import AXES, beacon_names, beacon_variables
+from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
+from sblsim.models.component import Component
+from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table
+from sblsim.models.expressions import sample_due, select
+from sblsim.models.platform.core import AXES, beacon_names, beacon_variables
+from sblsim.models.program import ProgramBuilder, Stream
 
 _CHANNEL_UNIFORM, _RANGE_NOISE = range(2)
 #: The packet a slot delivers: outputs of the channel, inputs of every receiver.

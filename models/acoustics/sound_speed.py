@@ -33,17 +33,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from models.core import (
-    Column,
-    ModelError,
-    Table,
-    check_entry,
-    check_increasing,
-    cumulative_sum,
-    padded_rows,
-    parse_table,
-    switch,
-)
+from sblsim.models.declarations import Column, ModelError, Table, check_entry, check_increasing, parse_table
+from sblsim.models.expressions import cumulative_sum, padded_rows, switch
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md).
 BUILTIN_CASTS = ("11E101663_20120821_122817", "11E101663_20120821_145912")
@@ -295,7 +286,7 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
         name = spec[4:]
         if name not in BUILTIN_CASTS:
             raise ModelError(f"{field}: unknown cast {name!r}; one of " + ", ".join(f"ctd:{c}" for c in BUILTIN_CASTS))
-        with resources.as_file(resources.files("models.acoustics") / "data" / f"{name}.csv") as path:
+        with resources.as_file(resources.files("sblsim.models.acoustics") / "data" / f"{name}.csv") as path:
             return read_cast_csv(path, field)
     return read_cast_csv(spec, field)
 

@@ -1,7 +1,7 @@
 """Platform component: SBL base with beacons, wave motion, GPS and IMU."""
 
-from models.platform.core import Platform, beacon_names, beacon_variables
-from models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
+from sblsim.models.platform.core import Platform, beacon_names, beacon_variables
+from sblsim.models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
 
 __all__ = ["Platform", "beacon_names", "beacon_positions", "beacon_variables", "cross_offsets", "parse_offsets",
            "rotation_ned"]

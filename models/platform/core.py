@@ -26,24 +26,18 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from models.core import (
-    SEED_PARAMETERS,
-    Component,
-    ModelError,
-    ProgramBuilder,
-    Stream,
-    Variable,
-    format_table,
-    sample_due,
-)
-from models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
-from models.platform.waves import wave_motion
+from sblsim.models.component import Component
+from sblsim.models.declarations import SEED_PARAMETERS, ModelError, Variable, format_table
+from sblsim.models.expressions import sample_due
+from sblsim.models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
+from sblsim.models.platform.waves import wave_motion
+from sblsim.models.program import ProgramBuilder, Stream
 
 AXES = ("x", "y", "z")
 LAYOUTS = ("cross", "custom")
 GPS_MODELS = ("white", "gauss-markov")
 
-# Stream purposes (models.core, "Randomness").
+# Stream purposes (sblsim.models.philox, "Randomness").
 _PHASES, _GPS, _IMU = range(3)
 
 

@@ -14,7 +14,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from models.core import ModelError
+from sblsim.models.declarations import ModelError
 
 
 def cross_directions(n_beacons: int = 4) -> list[tuple[float, float]]:

@@ -26,7 +26,7 @@ import math
 
 import casadi as ca
 
-from models.core import lookup
+from sblsim.models.expressions import lookup
 
 G = 9.80665  # standard gravity [m/s^2]
 

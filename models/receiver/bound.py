@@ -3,7 +3,7 @@ Fisher information of one round of fresh ranges plus depth (the accuracy maps).
 
 **PCRB.** For the receivers' motion model, a constant velocity driven by
 white-noise acceleration (``x_k+1 = Φ x_k + w_k``, ``w_k ~ N(0, Q(Δt))`` with
-densities q_h, q_v, :mod:`models.receiver.kalman`), and measurements
+densities q_h, q_v, :mod:`sblsim.models.receiver.kalman`), and measurements
 ``z = h(x) + v`` with Gaussian ``v``, the information matrix ``J_k`` of any
 estimator's error obeys (Tichavský, Muravchik, Nehorai, "Posterior
 Cramér-Rao bounds for discrete-time nonlinear filtering", IEEE Trans.
@@ -22,7 +22,7 @@ with the receiver's q and P0 equal to the walk's); on a deterministic path it
 is the accuracy of an ideal filter using the same motion model.
 
 The measurement model is the fresh-range-plus-depth model of ``ekf-seq``
-(:class:`~models.receiver.measurement.RangeDepthModel`): at every slot the
+(:class:`~sblsim.models.receiver.measurement.RangeDepthModel`): at every slot the
 depth (variance σ_d²), and the fresh range of a received packet with its
 effective variance (:func:`effective_range_variance`)
 ``σ_r² + σ_GPS² ‖∂h/∂b‖² + σ_att² ‖a × ∂h/∂b‖²``, a the transmitting beacon's
@@ -48,8 +48,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from models.receiver import kalman
-from models.receiver.measurement import STATE_SIZE, RangeDepthModel, position_range_function
+from sblsim.models.receiver import kalman
+from sblsim.models.receiver.measurement import STATE_SIZE, RangeDepthModel, position_range_function
 
 MODEL = RangeDepthModel()
 
@@ -147,7 +147,7 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """Position PCRB along B true trajectories: ``sqrt(trace)`` of the position block of ``J_k⁻¹``.
 
     The reference evaluation (casadi's virtual machine); the local engine runs
-    the same function compiled, in the metrics pass (``fmus.native.run_metrics``).
+    the same function compiled, in the metrics pass (``sblsim.fmus.native.run_metrics``).
 
     Parameters
     ----------

@@ -28,11 +28,13 @@ from dataclasses import replace
 
 import casadi as ca
 
-from models.acoustics.core import PACKET
-from models.core import Component, ProgramBuilder, Variable
-from models.receiver import kalman
-from models.receiver.measurement import RangeDepthModel
-from models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
+from sblsim.models.acoustics.core import PACKET
+from sblsim.models.component import Component
+from sblsim.models.declarations import Variable
+from sblsim.models.program import ProgramBuilder
+from sblsim.models.receiver import kalman
+from sblsim.models.receiver.measurement import RangeDepthModel
+from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 
 STATE_NAMES = ("x", "vx", "y", "vy", "z", "vz")
 _AXES = {"x": "North", "y": "East", "z": "Down"}
@@ -225,7 +227,7 @@ class KalmanReceiver(Component):
     (what ``simulation.receiver`` and the reports call it), declare
     :meth:`parameters` and implement :meth:`correct`; :meth:`initial` and
     :meth:`predict` default to the constant-velocity model with white-noise
-    acceleration (:func:`models.receiver.kalman.predict`) and the
+    acceleration (:func:`sblsim.models.receiver.kalman.predict`) and the
     :func:`filter_parameters`. Everything else (the packet handling, the
     instrumentation fix, the outputs, the FMU, the batched engine, the
     embeddable C) comes from these.

@@ -3,7 +3,7 @@
 At every slot it updates with the **latest range of every beacon heard so
 far** plus the depth, ``z = [r_1 … r_n, d]`` with ``h_i(x) = ‖p − b̃_i‖``
 (casadi Jacobian) and ``R = diag(σ_r², …, σ_r², σ_d²)`` (the joint update,
-computed row after row: :func:`models.receiver.kalman.update`): one range is
+computed row after row: :func:`sblsim.models.receiver.kalman.update`): one range is
 fresh, the others are held from earlier slots, and their staleness is part
 of the error, as in the paper. A beacon not heard yet gets a zero Jacobian
 row and a zero innovation (an exact no-op). An optional NIS gate (off by
@@ -20,10 +20,17 @@ from __future__ import annotations
 
 import casadi as ca
 
-from models.core import Variable
-from models.receiver import kalman
-from models.receiver.core import KalmanReceiver, filter_parameters, fresh_range, gate, gate_parameters, take_packet
-from models.receiver.measurement import RangeDepthModel
+from sblsim.models.declarations import Variable
+from sblsim.models.receiver import kalman
+from sblsim.models.receiver.core import (
+    KalmanReceiver,
+    filter_parameters,
+    fresh_range,
+    gate,
+    gate_parameters,
+    take_packet,
+)
+from sblsim.models.receiver.measurement import RangeDepthModel
 
 
 def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, depth, sigma_range, sigma_depth,

@@ -24,9 +24,9 @@ import math
 
 import casadi as ca
 
-from models.core import Variable
-from models.receiver import kalman
-from models.receiver.core import (
+from sblsim.models.declarations import Variable
+from sblsim.models.receiver import kalman
+from sblsim.models.receiver.core import (
     KalmanReceiver,
     beacon_parameters,
     filter_parameters,

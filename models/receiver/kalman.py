@@ -5,7 +5,7 @@ constant-velocity transition ``Φ = blockdiag([[1, Δt], [0, 1]] × 3)`` and
 white-noise-acceleration process noise
 ``Q = q · [[Δt³/3, Δt²/2], [Δt²/2, Δt]]`` per axis (q_h for North and East,
 q_v for Down) [m²/s³]. The measurement model comes from
-:mod:`models.receiver.measurement`. A scalar update (:func:`scalar_update`)
+:mod:`sblsim.models.receiver.measurement`. A scalar update (:func:`scalar_update`)
 processes one measurement with independent noise, its covariance in Joseph
 form; the update with several independent measurements (:func:`update`) is
 the sequence of them at the joint update's linearization point, equal to the
@@ -33,7 +33,7 @@ import math
 
 import casadi as ca
 
-from models.receiver.measurement import STATE_SIZE
+from sblsim.models.receiver.measurement import STATE_SIZE
 
 
 def transition(dt) -> ca.SX:

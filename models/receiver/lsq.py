@@ -1,12 +1,12 @@
 """Least-squares receiver: a per-slot Gauss-Newton multilateration fix, no filter.
 
-At every new slot (the packet handling of :mod:`models.receiver.core`) the
+At every new slot (the packet handling of :mod:`sblsim.models.receiver.core`) the
 receiver fits its position to the held range of every beacon heard so far and
 the depth reading by weighted least squares,
 
 ``F(p) = Σ_i ((r_i − ‖p − b_i‖) / σ_r)² + ((d − p_z) / σ_d)²``,
 
-with the Levenberg-Marquardt iteration of :mod:`models.receiver.multilateration`
+with the Levenberg-Marquardt iteration of :mod:`sblsim.models.receiver.multilateration`
 (damped Gauss-Newton) started from the previous fix, to a tighter tolerance
 than the instrumentation's (the fix is this receiver's estimate). Nothing is
 filtered: the estimate is the latest valid fix of a slot that brought a fresh
@@ -35,8 +35,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from models.core import SEED_PARAMETERS, Component, ProgramBuilder, Variable
-from models.receiver.core import (
+from sblsim.models.component import Component
+from sblsim.models.declarations import SEED_PARAMETERS, Variable
+from sblsim.models.program import ProgramBuilder
+from sblsim.models.receiver.core import (
     covariance_outputs,
     filter_parameters,
     fresh_packet,
@@ -51,9 +53,9 @@ from models.receiver.core import (
     slot_due,
     take_packet,
 )
-from models.receiver.multilateration import fix_covariance, weights
+from sblsim.models.receiver.multilateration import fix_covariance, weights
 
-#: The Kalman receivers' parameters this receiver takes (declared once, in models.receiver.core).
+#: The Kalman receivers' parameters this receiver takes (declared once, in sblsim.models.receiver.core).
 SHARED_PARAMETERS = ("sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z")
 #: Iteration cap and step tolerance [standard deviations of the fix].
 ITERATIONS, TOLERANCE = 50, 1e-6

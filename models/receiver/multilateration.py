@@ -2,7 +2,7 @@
 
 Weighted least squares (Levenberg-Marquardt) on
 ``F(p) = Σ_i w_r (r_i − ‖p − b_i‖)² + w_d (d − p_z)²`` with the
-casadi-derived range gradient (:mod:`models.receiver.measurement`). The
+casadi-derived range gradient (:mod:`sblsim.models.receiver.measurement`). The
 depth term resolves the mirror ambiguity of a surface array. The iteration
 is a state machine the generated code steps as an event (one iteration per
 call, :data:`LM_STATE`), so each replicate stops on its own.
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from models.receiver.measurement import position_range_function
+from sblsim.models.receiver.measurement import position_range_function
 
 #: Smallest standard deviation used in the weights [m].
 SIGMA_FLOOR = 1e-3

@@ -2,7 +2,7 @@
 
 Scaled sigma points (α, β, κ; van der Merwe) of the predicted state carry the
 measurement ``z = [‖p − b‖, d]`` of the fresh range and the depth through
-the same :class:`~models.receiver.measurement.RangeDepthModel`; the range's
+the same :class:`~sblsim.models.receiver.measurement.RangeDepthModel`; the range's
 variance adds the broadcast beacon's uncertainty as in ``ekf-seq``. The range
 is gated on its own NIS (its marginal ``y_r² / S_rr``, χ²(1)); a gated or
 lost range leaves the depth update only. The motion model is linear, so the
@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import casadi as ca
 
-from models.core import Variable
-from models.receiver import kalman
-from models.receiver.core import (
+from sblsim.models.declarations import Variable
+from sblsim.models.receiver import kalman
+from sblsim.models.receiver.core import (
     KalmanReceiver,
     beacon_parameters,
     filter_parameters,
@@ -31,7 +31,7 @@ from models.receiver.core import (
     gate_parameters,
     take_packet,
 )
-from models.receiver.ekf_seq import fresh_range_variance
+from sblsim.models.receiver.ekf_seq import fresh_range_variance
 
 
 def unscented_update(x, P, points, wm, wc, z_points, z, R) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:

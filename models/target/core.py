@@ -14,7 +14,7 @@ and ``walk_q_vertical`` [m²/s³], discretized exactly at every sample
 constant velocity between samples, from a start drawn from
 ``N([r, 0, depth, 0, v, 0], diag(p0_position², p0_velocity²))``. With the
 receiver's q and P0 equal to these, the posterior Cramér-Rao bound
-(:mod:`models.receiver.bound`) is a true bound on its mean squared error.
+(:mod:`sblsim.models.receiver.bound`) is a true bound on its mean squared error.
 
 References
 ----------
@@ -31,23 +31,27 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from models.core import (
+from sblsim.models.component import Component
+from sblsim.models.declarations import (
     SEED_PARAMETERS,
     Column,
-    Component,
     ModelError,
-    ProgramBuilder,
-    Stream,
     Table,
     Variable,
     format_table,
-    padded_rows,
     parse_table,
     resolve_parameters,
-    sample_due,
-    switch,
 )
-from models.target.trajectories import OPEN_DURATION, read_trajectory_file, semicircle, spiral, square_rows, waypoints
+from sblsim.models.expressions import padded_rows, sample_due, switch
+from sblsim.models.program import ProgramBuilder, Stream
+from sblsim.models.target.trajectories import (
+    OPEN_DURATION,
+    read_trajectory_file,
+    semicircle,
+    spiral,
+    square_rows,
+    waypoints,
+)
 
 TRAJECTORIES = ("semicircle", "spiral", "random", "square", "file", "random-walk")
 #: Largest number of waypoints of a trajectory file.
@@ -290,7 +294,7 @@ def natural_duration(params: Mapping[str, Any]) -> float:
     """Duration of one pass of the configured trajectory [s].
 
     Semicircle: π r / v; square: 4 s / v; file: its last time; spiral, random
-    and random-walk: :data:`~models.target.trajectories.OPEN_DURATION`.
+    and random-walk: :data:`~sblsim.models.target.trajectories.OPEN_DURATION`.
     """
     p = resolve_parameters(Target.config_parameters(), params, "target")
     kind = p["trajectory"]

@@ -3,7 +3,7 @@
 Input: a campaign directory holding ``runs.parquet`` (one row per Monte Carlo
 run: ``scenario``, ``scenario_key``, ``cell``, ``replicate``, ``seed``, per
 factor ``NAME`` coded −1/+1 and ``NAME_value`` physical level, and the
-metrics of :mod:`orchestrator.metrics` for the receiver and, prefixed ``instr_``,
+metrics of :mod:`sblsim.orchestrator.metrics` for the receiver and, prefixed ``instr_``,
 for the instrumentation fix) and ``study.toml`` (the resolved study: design,
 replicates, seed, scenarios and one ``[[factors]]`` table per factor). Without
 ``study.toml`` the factors are the columns that have a ``NAME_value`` partner.
@@ -73,7 +73,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from orchestrator.analysis.data import (
+from sblsim.orchestrator.analysis.data import (
     METRICS,
     REQUIRED_COLUMNS,
     AnalysisError,
@@ -85,11 +85,11 @@ from orchestrator.analysis.data import (
     load_study,
     scenario_order,
 )
-from orchestrator.analysis.fit import ANOVA_TYPE, FitResult, fit, lenth_pse, model_matrix, model_terms, term_name
-from orchestrator.analysis.report import format_level, metric_label, ranking, report_html, report_markdown
-from orchestrator.analysis.tables import best_cell, tables
-from orchestrator.output import staged_directory
-from orchestrator.study import Factor, StudyRecord
+from sblsim.orchestrator.analysis.fit import ANOVA_TYPE, FitResult, fit, lenth_pse, model_matrix, model_terms, term_name
+from sblsim.orchestrator.analysis.report import format_level, metric_label, ranking, report_html, report_markdown
+from sblsim.orchestrator.analysis.tables import best_cell, tables
+from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.study import Factor, StudyRecord
 
 
 @dataclass
@@ -211,7 +211,7 @@ def analyze(directory: Path | str, out: Path | str | None = None, metric: str = 
 
 def write(analysis: Analysis, out: Path | str) -> Path:
     """Write the outputs of an :class:`Analysis` into ``out`` atomically; return ``out``."""
-    from orchestrator.analysis.plots import save_figures
+    from sblsim.orchestrator.analysis.plots import save_figures
 
     out = Path(out).absolute()
     with staged_directory(out) as tmp:

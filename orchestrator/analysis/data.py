@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from models.core import ModelError
-from orchestrator.metrics import METRIC_NAMES
-from orchestrator.study import Factor, StudyError, StudyRecord, level_value, read_record
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.metrics import METRIC_NAMES
+from sblsim.orchestrator.study import Factor, StudyError, StudyRecord, level_value, read_record
 
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
 #: Columns ``runs.parquet`` must hold besides the factors and the metrics.
@@ -74,7 +74,7 @@ def infer_factors(runs: pd.DataFrame) -> list[Factor]:
 
 
 def load_study(directory: Path | str, runs: pd.DataFrame) -> tuple[StudyRecord, list[str]]:
-    """Read ``DIR/study.toml`` (:func:`orchestrator.study.read_record`), or infer the study from ``runs``
+    """Read ``DIR/study.toml`` (:func:`sblsim.orchestrator.study.read_record`), or infer the study from ``runs``
     when it is missing.
 
     Returns

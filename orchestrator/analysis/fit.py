@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from orchestrator.analysis.data import AnalysisError, check_metric, check_order
+from sblsim.orchestrator.analysis.data import AnalysisError, check_metric, check_order
 
 ANOVA_TYPE = 2
 

@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from orchestrator.analysis.report import format_level  # noqa: E402
+from sblsim.orchestrator.analysis.report import format_level  # noqa: E402
 
 LOW_COLOR, HIGH_COLOR = "tab:blue", "tab:red"
 
@@ -47,7 +47,7 @@ def plot_pareto(result, ax) -> plt.Figure:
 
     Parameters
     ----------
-    result : orchestrator.analysis.FitResult
+    result : sblsim.orchestrator.analysis.FitResult
         Fit of one scenario.
     ax : matplotlib.axes.Axes
 
@@ -90,7 +90,7 @@ def plot_main_effects(frame: pd.DataFrame, factors: Sequence[Any], metric: str, 
     frame : pandas.DataFrame
         Runs of one scenario (coded factor columns and ``metric``).
     factors : sequence of Factor or str
-        Factors in design order (a :class:`~orchestrator.analysis.Factor`
+        Factors in design order (a :class:`~sblsim.orchestrator.analysis.Factor`
         adds the physical levels to the tick labels).
     metric : str
         Response column [m].
@@ -200,7 +200,7 @@ def plot_residuals(result, axes) -> plt.Figure:
 
     Parameters
     ----------
-    result : orchestrator.analysis.FitResult
+    result : sblsim.orchestrator.analysis.FitResult
     axes : ndarray of matplotlib.axes.Axes, shape (2, 2)
 
     Returns

@@ -11,12 +11,12 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 import pandas as pd
 
-from orchestrator.analysis.fit import FitResult
-from orchestrator.analysis.tables import best_cell
-from orchestrator.study import Factor, StudyRecord
+from sblsim.orchestrator.analysis.fit import FitResult
+from sblsim.orchestrator.analysis.tables import best_cell
+from sblsim.orchestrator.study import Factor, StudyRecord
 
 if TYPE_CHECKING:
-    from orchestrator.analysis import Analysis
+    from sblsim.orchestrator.analysis import Analysis
 
 _METRIC_WORDS = {"e_x_mean": "mean e_x", "e_y_mean": "mean e_y", "e_z_mean": "mean e_z",
                  "e_tot_mean": "mean e_tot", "e_tot_rms": "RMS e_tot", "e_tot_std": "std of e_tot"}

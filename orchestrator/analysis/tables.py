@@ -6,7 +6,7 @@ import math
 
 import pandas as pd
 
-from orchestrator.analysis.data import AnalysisError
+from sblsim.orchestrator.analysis.data import AnalysisError
 
 
 def _estimators(frame: pd.DataFrame) -> tuple[tuple[str, str], ...]:

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from fmus.build import build_fmu, fmu_path
-from fmus.codegen import fmi_headers_dir
-from fmus.compiler import find_compiler
-from fmus.native import stream
-from models import MODELS, RECEIVERS
-from models.core import normals, uniforms
+from sblsim.fmus.build import build_fmu, fmu_path
+from sblsim.fmus.codegen import fmi_headers_dir
+from sblsim.fmus.compiler import find_compiler
+from sblsim.fmus.native import stream
+from sblsim.models import MODELS, RECEIVERS
+from sblsim.models.philox import normals, uniforms
 
 HOST = Path(__file__).with_name("c_host.c")
 NAMES = list(MODELS)
@@ -223,7 +223,7 @@ def test_philox_streams_are_the_same_in_c_and_numpy(keys, component, purpose, dr
 
 
 def test_philox_reference_is_numpys_bit_generator():
-    """models.core.uniforms is numpy.random.Philox with the documented key and counter, and its
+    """sblsim.models.philox.uniforms is numpy.random.Philox with the documented key and counter, and its
     streams are distinct: another purpose, draw, cell or replicate gives other numbers."""
     gen = np.random.Philox(key=np.array([5, (1 << 32) | (2 << 16) | 3], dtype=np.uint64),
                            counter=np.array([2**64 - 1, 6, 7, 8], dtype=np.uint64))  # = counter (0, 7, 7, 8) - 1

@@ -17,8 +17,8 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
-from fmus.build import fmu_path
-from models import MODELS
+from sblsim.fmus.build import fmu_path
+from sblsim.models import MODELS
 
 T = 0.1
 
@@ -103,7 +103,7 @@ def test_simulate_fmu_three_times_in_one_process(fmu_dir, name):
 _ALONE = """
 import sys, numpy as np
 sys.path.insert(0, {tests!r})
-from fmus.test_fmi_semantics import Slave
+from sblsim.fmus.test_fmi_semantics import Slave
 s = Slave(sys.argv[1]).start(**{{k: float(v) for k, v in (a.split("=") for a in sys.argv[2:])}})
 rows = []
 for k in range(40):

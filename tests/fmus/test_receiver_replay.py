@@ -20,12 +20,12 @@ import subprocess
 import numpy as np
 import pytest
 
-from fmus.build import fmu_path
-from fmus.compiler import find_compiler
-from fmus.embedded import write_receiver
-from models import MODELS, RECEIVERS
-from orchestrator.config import load_config
-from orchestrator.run import run
+from sblsim.fmus.build import fmu_path
+from sblsim.fmus.compiler import find_compiler
+from sblsim.fmus.embedded import write_receiver
+from sblsim.models import MODELS, RECEIVERS
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run
 
 INPUTS = [v.name for v in MODELS["receiver"].inputs()]
 TOL = 1e-9  # [m]
@@ -96,7 +96,7 @@ def test_codegen_receiver_example_reproduces_the_recorded_estimate(recorded, tmp
 
 
 def test_codegen_refuses_a_bad_receiver_and_a_used_directory(tmp_path):
-    from models.core import ModelError
+    from sblsim.models.declarations import ModelError
 
     with pytest.raises(ModelError, match="--receiver: 'kalman' is not one of ekf, ekf-seq, ukf, lsq"):
         write_receiver("kalman", tmp_path / "a")

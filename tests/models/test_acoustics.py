@@ -2,7 +2,7 @@
 
 The channel is stepped through its compiled program (:class:`tests.helpers.Core`).
 References are independent: numpy distances, the numpy Philox reference of
-:mod:`models.core` (the random numbers of each slot, so that ranges, losses
+:mod:`sblsim.models.philox` (the random numbers of each slot, so that ranges, losses
 and outliers are checked exactly), chi-square / binomial confidence
 intervals, a numpy piecewise-linear slowness integral, scipy quadrature of
 the CTD cast read straight from its CSV (with an error bound derived from
@@ -22,10 +22,11 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from models.acoustics import Acoustics, profile_table
-from models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
-from models.core import ModelError, normals, uniforms
-from models.platform.core import beacon_names
+from sblsim.models.acoustics import Acoustics, profile_table
+from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
+from sblsim.models.declarations import ModelError
+from sblsim.models.philox import normals, uniforms
+from sblsim.models.platform.core import beacon_names
 from tests.helpers import Core
 
 CONF = 0.999
@@ -36,7 +37,7 @@ SENT_BEACONS = TRUE_BEACONS + np.array([[0.05, -0.02, 0.01], [0.03, 0.04, -0.02]
                                         [-0.01, 0.02, 0.03], [0.02, -0.03, 0.0]])
 TARGET = np.array([12.0, -5.0, 8.0])
 TARGET_NAMES = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "target_vz")
-COMPONENT = 1  # the channel's component index in the seed tree (models.core, "Randomness")
+COMPONENT = 1  # the channel's component index in the seed tree (sblsim.models.philox, "Randomness")
 CAST = "11E101663_20120821_122817"
 
 
@@ -322,7 +323,7 @@ def test_channel_replicate_alone_equals_replicate_in_batch():
 
 def read_cast_raw():
     """Depth and sound-speed columns of the shipped cast, parsed with the csv module."""
-    text = (resources.files("models.acoustics") / "data" / f"{CAST}.csv").read_text()
+    text = (resources.files("sblsim.models.acoustics") / "data" / f"{CAST}.csv").read_text()
     rows = [r for r in csv.reader(line for line in text.splitlines() if not line.startswith("%"))]
     header, data = rows[0], rows[1:]
     i_depth = header.index("Depth (Meter)")

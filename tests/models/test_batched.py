@@ -1,7 +1,7 @@
 """Batch invariance of the compiled engine and per-replicate parameters.
 
 A replicate's numbers must not depend on the batch it is stepped in
-(models.core, "Randomness"): for every model, a replicate stepped alone
+(sblsim.models.philox, "Randomness"): for every model, a replicate stepped alone
 (B = 1) equals the same replicate inside a batch, bit for bit; a batch whose
 parameters differ per replicate (a batch spanning two design cells) equals
 separate batches of one parameter value each; and the whole system run by
@@ -16,10 +16,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from models import Acoustics, LeastSquaresReceiver, Platform, Receiver, Target
-from models.core import ModelError
-from orchestrator.config import load_config
-from orchestrator.run import run_batch, with_replicates
+from sblsim.models import Acoustics, LeastSquaresReceiver, Platform, Receiver, Target
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run_batch, with_replicates
 from tests.helpers import Core
 
 SEEDS = {"seed": 3, "scenario_key": 1, "cell": 2}
@@ -79,7 +79,7 @@ def _core(model, params, replicates, arrays=None):
     """A batch of the compiled model; ``arrays`` are per-replicate FMU parameter values, shape (B,).
 
     They are set on the FMU parameters the helper resolved from the scalar ``params``, as
-    ``orchestrator.run.merge_params`` does (the helper resolves configuration keys one value each).
+    ``sblsim.orchestrator.run.merge_params`` does (the helper resolves configuration keys one value each).
     """
     core = Core(model, params, replicates=replicates)
     core.values.update(arrays or {})

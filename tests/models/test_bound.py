@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from models.receiver.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
+from sblsim.models.receiver.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
 from tests.models.test_receiver_filterpy import phi, white_noise_q
 
 EPS = 1e-6

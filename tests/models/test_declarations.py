@@ -10,10 +10,19 @@ import math
 import numpy as np
 import pytest
 
-from models.core import Column, Component, ModelError, Table, Variable, format_table, parse_table, resolve_parameters
-from models.platform import Platform
-from models.target import Target
-from models.target.core import WAYPOINTS
+from sblsim.models.component import Component
+from sblsim.models.declarations import (
+    Column,
+    ModelError,
+    Table,
+    Variable,
+    format_table,
+    parse_table,
+    resolve_parameters,
+)
+from sblsim.models.platform import Platform
+from sblsim.models.target import Target
+from sblsim.models.target.core import WAYPOINTS
 
 REAL = Variable("baseline", "parameter", "Real", 1.0, "m", min=0.0, max=10.0, min_exclusive=True)
 INTEGER = Variable("beaufort", "parameter", "Integer", 2, min=0, max=8)

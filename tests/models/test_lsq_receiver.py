@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from models.core import SEED_PARAMETERS, ModelError
-from models.receiver import LeastSquaresReceiver, Receiver, receiver_interface
-from models.receiver.lsq import SHARED_PARAMETERS
+from sblsim.models.declarations import SEED_PARAMETERS, ModelError
+from sblsim.models.receiver import LeastSquaresReceiver, Receiver, receiver_interface
+from sblsim.models.receiver.lsq import SHARED_PARAMETERS
 from tests.helpers import Core
 
 AXES = ("x", "y", "z")

@@ -3,7 +3,7 @@
 References are independent: scipy's Rotation, hand-worked rotations by 90°,
 the WMO Beaufort table and the Pierson-Moskowitz closed form for the waves, a
 numpy re-implementation of the sampled sensors fed by the Philox reference
-streams of :mod:`models.core` (``uniforms``/``normals``), and chi-square /
+streams of :mod:`sblsim.models.philox` (``uniforms``/``normals``), and chi-square /
 Fisher-z confidence intervals for the noise statistics.
 """
 
@@ -17,15 +17,16 @@ import pytest
 from scipy import stats
 from scipy.spatial.transform import Rotation
 
-from models.core import ModelError, normals, uniforms
-from models.platform import Platform, beacon_names, beacon_positions, cross_offsets, parse_offsets, rotation_ned
-from models.platform.waves import WIND_SPEED, wave_motion
+from sblsim.models.declarations import ModelError
+from sblsim.models.philox import normals, uniforms
+from sblsim.models.platform import Platform, beacon_names, beacon_positions, cross_offsets, parse_offsets, rotation_ned
+from sblsim.models.platform.waves import WIND_SPEED, wave_motion
 from tests.helpers import Core
 
 CONF = 0.999  # confidence level of the statistical checks
 G = 9.80665  # standard gravity [m/s^2]
 COMPONENT = 0  # the platform's component index in the seed tree
-PHASES, GPS, IMU = 0, 1, 2  # stream purposes (models.core docstring, "Randomness")
+PHASES, GPS, IMU = 0, 1, 2  # stream purposes (sblsim.models.philox docstring, "Randomness")
 
 # WMO-No. 558 Beaufort scale: 10 m wind-speed ranges [m/s] and probable wave heights [m], levels 0..8.
 WMO_WIND_RANGES = [(0.0, 0.2), (0.3, 1.5), (1.6, 3.3), (3.4, 5.4), (5.5, 7.9), (8.0, 10.7), (10.8, 13.8),
@@ -535,7 +536,7 @@ def test_out_of_range_parameters_are_refused(params, field):
 
 @pytest.mark.parametrize("n", [3, 4, 6])
 def test_layout_offsets_of_a_cross_are_the_casadi_offsets(n):
-    from models.platform.geometry import cross_offsets, layout_offsets
+    from sblsim.models.platform.geometry import cross_offsets, layout_offsets
 
     expected = np.array([np.array(ca.DM(a)).ravel() for a in cross_offsets(2.5, 0.7, n)])
     np.testing.assert_array_equal(layout_offsets("cross", 2.5, 0.7, "", n), expected)

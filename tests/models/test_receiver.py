@@ -1,6 +1,6 @@
 """Tests of the EKF receiver: casadi range model, EKF expressions, multilateration, compiled receiver.
 
-The casadi expressions (:mod:`models.receiver.measurement`, ``ekf``,
+The casadi expressions (:mod:`sblsim.models.receiver.measurement`, ``ekf``,
 ``multilateration``) are evaluated directly through casadi Functions; the
 compiled receiver is stepped through :class:`tests.helpers.Core`. Every
 reference is computed independently in this file: central finite
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from models.receiver import Receiver, ekf, kalman, position_range_function, range_function
-from models.receiver import multilateration as ml
+from sblsim.models.receiver import Receiver, ekf, kalman, position_range_function, range_function
+from sblsim.models.receiver import multilateration as ml
 from tests.helpers import Core
 
 POS = [0, 2, 4]  # position entries of the state [x, vx, y, vy, z, vz]

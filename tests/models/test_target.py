@@ -3,7 +3,7 @@
 References are independent: circle/square geometry worked by hand, the spiral's
 arc length integrated as an ODE by scipy, finite differences of positions for
 speeds, np.interp for file paths, a numpy rebuild of the random path and of the
-depth noise from the Philox reference streams (``models.core.uniforms`` /
+depth noise from the Philox reference streams (``sblsim.models.philox.uniforms`` /
 ``normals``), and chi-square / Fisher-z intervals for the noise statistics.
 """
 
@@ -16,15 +16,16 @@ import pytest
 from scipy import stats
 from scipy.integrate import solve_ivp
 
-from models.core import ModelError, normals, parse_table, uniforms
-from models.target import Target, natural_duration, start_state
-from models.target.core import MAX_WAYPOINTS, WAYPOINTS
-from models.target.trajectories import OPEN_DURATION, read_trajectory_file
+from sblsim.models.declarations import ModelError, parse_table
+from sblsim.models.philox import normals, uniforms
+from sblsim.models.target import Target, natural_duration, start_state
+from sblsim.models.target.core import MAX_WAYPOINTS, WAYPOINTS
+from sblsim.models.target.trajectories import OPEN_DURATION, read_trajectory_file
 from tests.helpers import Core
 
 CONF = 0.999
 COMPONENT = 2  # the target's component index in the seed tree
-DEPTH_NOISE, RANDOM_PATH = 0, 1  # stream purposes (models.core docstring, "Randomness")
+DEPTH_NOISE, RANDOM_PATH = 0, 1  # stream purposes (sblsim.models.philox docstring, "Randomness")
 
 
 def run(params, times, replicates=(0,)):

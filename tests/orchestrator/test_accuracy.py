@@ -9,14 +9,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from models.receiver.bound import horizontal_std
-from orchestrator.analysis import compute
-from orchestrator.campaign import run_campaign
-from orchestrator.cli import main
-from orchestrator.config import beacon_arms, load_config
-from orchestrator.maps import accuracy_map, grid
-from orchestrator.run import bound_parameters, run, run_batch, with_replicates
-from orchestrator.study import load_study
+from sblsim.models.receiver.bound import horizontal_std
+from sblsim.orchestrator.analysis import compute
+from sblsim.orchestrator.campaign import run_campaign
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.config import beacon_arms, load_config
+from sblsim.orchestrator.maps import accuracy_map, grid
+from sblsim.orchestrator.run import bound_parameters, run, run_batch, with_replicates
+from sblsim.orchestrator.study import load_study
 
 
 @pytest.mark.parametrize("receiver", ["ekf", "ekf-seq", "ukf", "lsq"])
@@ -148,7 +148,7 @@ def test_a_campaign_with_the_receiver_as_a_factor_runs_and_analyses(tmp_path):
     assert (factor.low, factor.high) == ("ekf", "ekf-seq")
     estimators = set(analysis.tables["estimator"])
     assert "ekf+ekf-seq" in estimators and "instrumentation" in estimators
-    from orchestrator.analysis import write
+    from sblsim.orchestrator.analysis import write
 
     written = write(analysis, tmp_path / "report")
     report = (written / "report.md").read_text()
@@ -158,7 +158,7 @@ def test_a_campaign_with_the_receiver_as_a_factor_runs_and_analyses(tmp_path):
 def test_a_factor_on_a_receiver_key_is_checked_against_each_receiver_of_the_study():
     study = json.loads(json.dumps(STUDY))
     study["factors"].append({"name": "alpha", "key": "receiver.alpha", "low": 0.5, "high": 1.0})
-    from orchestrator.study import StudyError
+    from sblsim.orchestrator.study import StudyError
 
     with pytest.raises(StudyError, match="factors.alpha.key: 'receiver.alpha' is not a parameter of the ekf receiver"):
         load_study(study)

@@ -16,11 +16,11 @@ import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from models.core import ModelError  # noqa: E402
-from orchestrator.analysis import AnalysisError, analyze, compute, fit, lenth_pse, tables  # noqa: E402
-from orchestrator.analysis import plots as analysis_plots  # noqa: E402
-from orchestrator.analysis.plots import plot_interactions, plot_main_effects, plot_pareto, plot_residuals  # noqa: E402
-from orchestrator.metrics import METRIC_NAMES  # noqa: E402
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.analysis import AnalysisError, analyze, compute, fit, lenth_pse, tables  # noqa: E402
+from sblsim.orchestrator.analysis import plots as analysis_plots  # noqa: E402
+from sblsim.orchestrator.analysis.plots import plot_interactions, plot_main_effects, plot_pareto, plot_residuals  # noqa: E402
+from sblsim.orchestrator.metrics import METRIC_NAMES  # noqa: E402
 
 # Names chosen to clash with formula syntax and Python builtins.
 FACTORS = ("baseline", "range", "T", "gps")

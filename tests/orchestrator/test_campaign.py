@@ -21,11 +21,11 @@ import pandas as pd
 import pytest
 import tomli_w
 
-from orchestrator.campaign import plan, run_campaign
-from orchestrator.config import load_config
-from orchestrator.metrics import RUN_METRICS
-from orchestrator.run import run
-from orchestrator.study import design_matrix, load_study
+from sblsim.orchestrator.campaign import plan, run_campaign
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.metrics import RUN_METRICS
+from sblsim.orchestrator.run import run
+from sblsim.orchestrator.study import design_matrix, load_study
 
 ROOT = Path(__file__).resolve().parents[2]
 REPLICATES = 3
@@ -54,12 +54,12 @@ def write_study(path: Path, table: dict) -> Path:
 
 
 def sblsim(*args, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, timeout=timeout, check=False)
 
 
 def start_sblsim(*args, cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=cwd,
+    return subprocess.Popen([sys.executable, "-m", "sblsim.orchestrator.cli", *map(str, args)], cwd=cwd,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -585,10 +585,10 @@ def test_scheduler_local_starts_a_dask_local_cluster(reference, tmp_path):
 
 PEAK = """
 import resource, sys
-from orchestrator.campaign import run_campaign
-from orchestrator.config import load_config
-from orchestrator.run import run_batch, with_replicates
-from orchestrator.study import load_study
+from sblsim.orchestrator.campaign import run_campaign
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.study import load_study
 run_batch(with_replicates(load_config("semicircle", ["simulation.duration=2"]), range(500)), timeseries=False)
 base = int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0])  # after a chunk's worth of warm-up
 levels = [("platform.baseline", 1.0, 3.0), ("platform.gps_sigma", 0.1, 1.0), ("acoustics.sigma_range", 0.1, 0.5),

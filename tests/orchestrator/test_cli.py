@@ -12,16 +12,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from models import MODELS
-from orchestrator.cli import main
-from orchestrator.config import load_config
+from sblsim.models import MODELS
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.config import load_config
 
 SUMMARY_METRICS = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
 FIGURES = ("trajectory_xy.png", "trajectory_3d.png", "errors.png", "error_bounds.png")
 
 
 def sblsim(*args, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, timeout=300)
 
 

@@ -7,9 +7,9 @@ import tomllib
 
 import pytest
 
-from models import COMPONENTS
-from models.core import ModelError
-from orchestrator.config import (
+from sblsim.models import COMPONENTS
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     MIN_SIGMA,
     SECTIONS,
@@ -35,7 +35,7 @@ def raw_trajectory(name: str) -> str:
     """The trajectory a built-in scenario file names (the harbour runs the square)."""
     from importlib import resources
 
-    raw = tomllib.loads((resources.files("orchestrator") / "scenarios" / f"{name}.toml").read_text())
+    raw = tomllib.loads((resources.files("sblsim.orchestrator") / "scenarios" / f"{name}.toml").read_text())
     return raw["target"]["trajectory"]
 
 
@@ -51,7 +51,7 @@ def test_builtin_scenario_resolves(name):
     # the scenario file's own values are applied (read independently with tomllib)
     from importlib import resources
 
-    raw = tomllib.loads((resources.files("orchestrator") / "scenarios" / f"{name}.toml").read_text())
+    raw = tomllib.loads((resources.files("sblsim.orchestrator") / "scenarios" / f"{name}.toml").read_text())
     for section, table in raw.items():
         for key, value in table.items():
             assert cfg[section][key] == value, f"{section}.{key}"

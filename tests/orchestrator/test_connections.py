@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from models import COMPONENTS
-from models.core import ModelError
-from orchestrator.config import load_config
-from orchestrator.connections import Connection, check_connections, default_connections, execution_order
-from orchestrator.engines import LocalHandle, Port
-from orchestrator.run import make_handles, run
+from sblsim.models import COMPONENTS
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.connections import Connection, check_connections, default_connections, execution_order
+from sblsim.orchestrator.engines import LocalHandle, Port
+from sblsim.orchestrator.run import make_handles, run
 
 
 @pytest.fixture
@@ -42,7 +42,7 @@ def test_default_connections_pass_on_fmu_ports(fmu_dir):
     """The ports read from the built FMUs' model descriptions (no instantiation) pass the checks too."""
     from fmpy import read_model_description
 
-    from fmus.build import fmu_path
+    from sblsim.fmus.build import fmu_path
 
     fmu_ports = {}
     for name in COMPONENTS:

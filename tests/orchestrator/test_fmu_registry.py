@@ -4,10 +4,10 @@ import zipfile
 
 import pytest
 
-from models.core import ModelError
-from orchestrator.config import load_config
-from orchestrator.engines import open_fmu
-from orchestrator.run import close_handles, make_handles, run
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.engines import open_fmu
+from sblsim.orchestrator.run import close_handles, make_handles, run
 
 
 def test_instances_are_reused_and_concurrent_runs_get_their_own(fmu_dir):

@@ -1,7 +1,7 @@
 """FMI 2.0 FMU state (fmi2GetFMUstate / fmi2SetFMUstate / fmi2FreeFMUstate, serialization) of the four FMUs.
 
 The whole system is stepped through fmpy by the real master
-(:func:`orchestrator.master.simulate`, Gauss-Seidel over the default
+(:func:`sblsim.orchestrator.master.simulate`, Gauss-Seidel over the default
 connections); states are taken and restored on every component at once.
 """
 
@@ -13,12 +13,12 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from fmus.build import fmu_path
-from models import COMPONENTS
-from orchestrator.config import load_config
-from orchestrator.connections import default_connections
-from orchestrator.master import simulate
-from orchestrator.run import close_handles, make_handles, merge_params
+from sblsim.fmus.build import fmu_path
+from sblsim.models import COMPONENTS
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.connections import default_connections
+from sblsim.orchestrator.master import simulate
+from sblsim.orchestrator.run import close_handles, make_handles, merge_params
 
 N_BEFORE = 20  # macro steps before the state is saved
 N_AFTER = 30   # macro steps replayed from the saved state

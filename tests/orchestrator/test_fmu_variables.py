@@ -2,8 +2,8 @@
 
 from pathlib import Path
 
-from fmus.variables import BEGIN, END, markdown_tables
-from models import MODELS
+from sblsim.fmus.variables import BEGIN, END, markdown_tables
+from sblsim.models import MODELS
 
 PAGE = Path(__file__).parents[2] / "docs" / "variables.md"
 

@@ -11,11 +11,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fmus.build import fmu_path, validate
-from models import MODELS
-from models.core import UNITS, ModelError
-from orchestrator.config import load_config
-from orchestrator.run import close_handles, make_handles, run
+from sblsim.fmus.build import fmu_path, validate
+from sblsim.models import MODELS
+from sblsim.models.declarations import UNITS, ModelError
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import close_handles, make_handles, run
 
 COMPONENT_NAMES = list(MODELS)
 
@@ -206,8 +206,8 @@ def test_fmu_handles_reset_between_runs(fmu_handles):
 
 _OWN_HANDLES_SCRIPT = """
 import sys
-from orchestrator.config import load_config
-from orchestrator.run import run
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run
 cfg = load_config("semicircle", ["simulation.duration=%s"], seed=1)
 for k in range(int(sys.argv[2])):
     run(cfg, "fmu", fmu_dir=sys.argv[1]).timeseries.to_parquet(f"{sys.argv[3]}/fmu{k}.parquet")

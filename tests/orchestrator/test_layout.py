@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from models.core import ModelError
-from orchestrator.config import load_config
-from orchestrator.run import beacon_count, run
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import beacon_count, run
 
 SIX = "10 0 1; 0 10 1; -10 0 1; 0 -10 1; 0 0 15; 7 7 1"
 

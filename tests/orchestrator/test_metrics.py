@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.metrics import METRIC_NAMES, NEES_95, consistency, errors, nees, slots, summarize
+from sblsim.orchestrator.metrics import METRIC_NAMES, NEES_95, consistency, errors, nees, slots, summarize
 
 NAN = float("nan")
 
@@ -148,8 +148,8 @@ def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     reference on a record with everything the metrics skip: estimates missing, no fix, covariances not
     positive-definite, lost packets, foreign beacon ids, the gate at work and a diverged run; the columns are
     strided views of one (N, 24, B) array, as the compiled master records them."""
-    from models.receiver.bound import FIXED, pcrb, pcrb_inputs
-    from orchestrator.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
+    from sblsim.models.receiver.bound import FIXED, pcrb, pcrb_inputs
+    from sblsim.orchestrator.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
 
     rng = np.random.default_rng(7)
     n, b = 300, 5

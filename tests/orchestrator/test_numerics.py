@@ -15,9 +15,9 @@ import os
 import numpy as np
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.config import load_config
-from orchestrator.run import run
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run
 
 COV = ("cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz")
 

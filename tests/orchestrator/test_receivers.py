@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models.core import ModelError
-from orchestrator.cli import main
-from orchestrator.config import ConfigError, load_config
-from orchestrator.run import run
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.config import ConfigError, load_config
+from sblsim.orchestrator.run import run
 
 USER_SCRIPT = Path(__file__).parents[1] / "data" / "user_receiver.py"
 SHORT = ["simulation.duration=20"]
@@ -101,7 +101,7 @@ def test_bad_receiver_values_are_refused(tmp_path):
 
 
 def test_a_users_receiver_travels_in_the_ssp_package(user_fmu, fmu_dir, tmp_path):
-    from orchestrator.ssp import export_ssp, read_ssp
+    from sblsim.orchestrator.ssp import export_ssp, read_ssp
 
     cfg = load_config("semicircle", [f"receiver=fmu:{user_fmu}", *SHORT], seed=3)
     path = export_ssp(cfg, tmp_path / "user.ssp", fmu_dir)
@@ -121,7 +121,7 @@ def test_a_key_the_chosen_receiver_does_not_declare_stops_with_one_line(receiver
         load_config("semicircle", [f"receiver={receiver}", f"receiver.{key}=0.5"])
     message = str(info.value)
     assert "\n" not in message and message.startswith(f"receiver.{key}: not a parameter of the {receiver} receiver")
-    from models import RECEIVER_MODELS
+    from sblsim.models import RECEIVER_MODELS
 
     declared = [v.name for v in RECEIVER_MODELS[receiver].config_parameters() if v.causality == "parameter"]
     assert all(name in message for name in ("sigma_range", "x0_x")) and "seed" not in message

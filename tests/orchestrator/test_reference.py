@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.config import BUILTIN_SCENARIOS
+from sblsim.orchestrator.config import BUILTIN_SCENARIOS
 from tests.data.reference.regenerate import reference
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,12 +11,12 @@ import pytest
 from fmpy import read_model_description
 from fmpy.ssp.ssd import read_ssd, read_ssv
 
-from models import MODELS
-from orchestrator.cli import main
-from orchestrator.config import component_params, load_config
-from orchestrator.connections import default_connections
-from orchestrator.run import run
-from orchestrator.ssp import SspError, export_ssp, read_ssp, validate_ssp
+from sblsim.models import MODELS
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.config import component_params, load_config
+from sblsim.orchestrator.connections import default_connections
+from sblsim.orchestrator.run import run
+from sblsim.orchestrator.ssp import SspError, export_ssp, read_ssp, validate_ssp
 
 
 @pytest.fixture(scope="module")

@@ -29,12 +29,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.config import load_config
-from orchestrator.connections import default_connections
-from orchestrator.engines import LocalHandle
-from orchestrator.master import simulate
-from orchestrator.run import merge_params, run
-from orchestrator.ssp import export_ssp
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.connections import default_connections
+from sblsim.orchestrator.engines import LocalHandle
+from sblsim.orchestrator.master import simulate
+from sblsim.orchestrator.run import merge_params, run
+from sblsim.orchestrator.ssp import export_ssp
 
 HOSTS = Path(__file__).with_name("ssp_hosts.py")
 TOL = 1e-9  # [m]
@@ -133,8 +133,9 @@ def test_fmpy_runs_the_package_like_the_jacobi_master(package):
 
 def test_run_ssp_on_the_fmu_engine_equals_the_jacobi_master(package, jacobi_fmu, tmp_path):
     cfg, ssp = package
-    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", "--ssp", str(ssp), "--master", "jacobi",
-                           "--out", str(tmp_path / "r")], capture_output=True, text=True, timeout=600)
+    done = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "run", "--ssp", str(ssp),
+                           "--master", "jacobi", "--out", str(tmp_path / "r")], capture_output=True, text=True,
+                          timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "fmu engine (jacobi" in done.stdout
     import pandas as pd

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.config import ConfigError, load_config, receiver_label
-from orchestrator.run import run
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.config import ConfigError, load_config, receiver_label
+from sblsim.orchestrator.run import run
 
 EXAMPLE = Path(__file__).parents[2] / "docs" / "examples" / "constant_position.py"
 OVERRIDES = ["simulation.duration=30", "acoustics.loss_pct=20", f"receiver=model:{EXAMPLE}",
@@ -82,9 +82,9 @@ def test_the_example_is_the_filter_its_docstring_describes(local):
 @pytest.mark.parametrize("text, message", [
     ("x = 1\n", "defines 0 model classes (none); it must define exactly one receiver"),
     ("import no_such_module\n", "cannot import"),
-    ("from models.receiver import Receiver\nclass A(Receiver):\n    name = 'receiver'\n",
+    ("from sblsim.models.receiver import Receiver\nclass A(Receiver):\n    name = 'receiver'\n",
      "must be 'receiver_' + letters, digits or '_', and not a built-in's"),
-    ("from models.target import Target\nclass A(Target):\n    name = 'receiver_target'\n",
+    ("from sblsim.models.target import Target\nclass A(Target):\n    name = 'receiver_target'\n",
      "does not match the receiver interface: missing input 'packet_seq'"),
 ])
 def test_a_bad_model_file_stops_with_one_line(text, message, tmp_path, capsys):

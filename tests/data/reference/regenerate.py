@@ -14,8 +14,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[2]))
 
-from orchestrator.config import BUILTIN_SCENARIOS, load_config  # noqa: E402
-from orchestrator.run import run, summary  # noqa: E402
+from sblsim.orchestrator.config import BUILTIN_SCENARIOS, load_config  # noqa: E402
+from sblsim.orchestrator.run import run, summary  # noqa: E402
 
 #: What a reference keeps of summary.json (not the wall time, which is the machine's).
 VOLATILE = ("wall_time",)

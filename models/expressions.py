@@ -1,0 +1,100 @@
+"""casadi expression helpers shared by the component models: sample clocks, padded tables,
+branch selection and table lookups.
+
+This module imports nothing from the FMI or orchestrator layers.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import casadi as ca
+
+
+def sample_due(index, start, period, t, h):
+    """Guard of a periodic sample: the next sample ``start + (index + 1)·period`` has been reached by
+    the end ``t + h`` of the step (to within 1e-6 periods, so that a host's rounded communication
+    points neither miss nor add a sample) [s]."""
+    return start + (index + 1.0) * period <= t + h + 1e-6 * period
+
+
+def padded_rows(count, columns: Sequence[Any], gap: float) -> tuple[list[Any], list[Any]]:
+    """A table's rows padded for interpolation: the used rows, then rows that keep the grid increasing.
+
+    Rows ``k < count`` are kept; a row ``k ≥ count`` repeats the last used row,
+    its first column continuing ``last + gap + (k − count)``. Built with
+    casadi's ``mapaccum`` (one loop in the generated C).
+
+    Parameters
+    ----------
+    count : casadi.MX
+        Rows in use.
+    columns : sequence of casadi.MX, each (N, 1)
+        The columns.
+    gap : float
+        Step from the last used value of the first column to the first padding row.
+
+    Returns
+    -------
+    padded : list of casadi.MX, each (N, 1)
+    last : list of casadi.MX
+        The last used row (zeros if ``count`` is 0).
+    """
+    m, N = len(columns), int(columns[0].numel())
+    acc = ca.SX.sym("acc", 2 + m)
+    row = [ca.SX.sym(f"c{j}") for j in range(m)]
+    k, n, last = acc[0], acc[1], acc[2:]
+    used = k < n
+    first = ca.if_else(used, row[0], last[0] + gap + (k - n))
+    out = [first] + [ca.if_else(used, row[j], last[j]) for j in range(1, m)]
+    kept = ca.vertcat(*[ca.if_else(used, row[j], last[j]) for j in range(m)])
+    pad = ca.Function("sblsim_pad_row", [acc] + row, [ca.vertcat(k + 1, n, kept)] + out).mapaccum("sblsim_pad", N)
+    result = pad(ca.vertcat(0, count, ca.MX.zeros(m)), *[ca.reshape(c, 1, N) for c in columns])
+    final = result[0][:, N - 1]
+    return [ca.reshape(r, N, 1) for r in result[1:]], [final[2 + j] for j in range(m)]
+
+
+def cumulative_sum(values: Any) -> Any:
+    """Running sum of an (N, 1) casadi.MX vector (``mapaccum``), starting with the first value."""
+    N = int(values.numel())
+    acc, v = ca.SX.sym("acc"), ca.SX.sym("v")
+    total = ca.Function("sblsim_add", [acc, v], [acc + v, acc + v]).mapaccum("sblsim_cumsum", N)
+    return ca.reshape(total(0, ca.reshape(values, 1, N))[1], N, 1)
+
+
+def switch(name: str, branches: Sequence[ca.Function]) -> ca.Function:
+    """``f(index, *args) = branches[index](*args)``, only that branch evaluated in the generated C.
+
+    A casadi ``Switch`` called through a never-inlined wrapper: an SX
+    expression that calls it holds one call, and the C it generates runs the
+    selected branch alone (an ``if_else`` of the branches would evaluate them
+    all). ``index`` is rounded toward zero; outside ``[0, n)`` it takes the
+    last branch. The branches share one signature.
+    """
+    first = branches[0]
+    switch_f = ca.Function.conditional(f"{name}_switch", list(branches[:-1]), branches[-1])
+    index = ca.MX.sym("index")
+    args = [ca.MX.sym(first.name_in(k), first.sparsity_in(k)) for k in range(first.n_in())]
+    return ca.Function(name, [index, *args], switch_f.call([index, *args]), ["index", *first.name_in()],
+                       first.name_out(), {"never_inline": True})
+
+
+def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
+    """``rows[index]`` for a symbolic integer-valued ``index`` (zero if out of range).
+
+    Sums ``if_else(index == k, rows[k], 0)``: exact, since the other
+    terms are exact zeros. Every row is computed; for costly alternatives use
+    :func:`switch`.
+    """
+    total = 0
+    for k, row in enumerate(rows):
+        total = total + ca.if_else(index == k, row, 0)
+    return total
+
+
+def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
+    """A constant table indexed by a symbolic integer (zero if out of range)."""
+    return select(index, [float(v) for v in values])
+
+
+__all__ = ["cumulative_sum", "lookup", "padded_rows", "sample_due", "select", "switch"]
