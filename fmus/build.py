@@ -118,7 +118,7 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
 
 def build_all(out_dir: Path | str = DEFAULT_DIR, compiler: str = "auto", cross: bool | None = None,
               names: Sequence[str] | None = None) -> list[Path]:
-    """Build every FMU into ``out_dir`` (the four components and the least-squares receiver); returns their paths."""
+    """Build every FMU into ``out_dir`` (the four components and the alternative receivers); returns their paths."""
     return [build_fmu(name, out_dir, compiler=compiler, cross=cross) for name in (names or MODELS)]
 
 

@@ -19,7 +19,7 @@ def markdown_tables(n_beacons: int = 4) -> str:
     str
         The tables, between the :data:`BEGIN` and :data:`END` markers.
     """
-    parts = [BEGIN]
+    parts = [BEGIN, f"{len(MODELS)} FMUs: " + ", ".join(f"`sblsim_{name}.fmu`" for name in MODELS) + ".", ""]
     for name, model in MODELS.items():
         doc = (model.__doc__ or "").strip().splitlines()[0]
         rows = []

@@ -1,4 +1,4 @@
-"""FMI 2.0 FMU state (fmi2GetFMUstate / fmi2SetFMUstate / fmi2FreeFMUstate, serialization) of the four FMUs.
+"""FMI 2.0 FMU state (fmi2GetFMUstate / fmi2SetFMUstate / fmi2FreeFMUstate, serialization) of the four components' FMUs.
 
 The whole system is stepped through fmpy by the real master
 (:func:`sblsim.orchestrator.master.simulate`, Gauss-Seidel over the default

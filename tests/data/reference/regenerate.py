@@ -8,14 +8,12 @@ with these files.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[2]))
+from sblsim.orchestrator.config import BUILTIN_SCENARIOS, load_config
+from sblsim.orchestrator.run import run, summary
 
-from sblsim.orchestrator.config import BUILTIN_SCENARIOS, load_config  # noqa: E402
-from sblsim.orchestrator.run import run, summary  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 #: What a reference keeps of summary.json (not the wall time, which is the machine's).
 VOLATILE = ("wall_time",)

@@ -1,0 +1,95 @@
+"""An installed sblsim is one namespaced package: ``sblsim.models``, ``sblsim.orchestrator``,
+``sblsim.fmus``, and nothing top-level named ``models``, ``fmus`` or ``orchestrator``.
+
+The project is built into a wheel (from a copy of its sources, so that the checkout is not
+written to) and installed, not editable, into a fresh virtual environment. The checks then run
+from a folder outside the checkout. The fresh environment takes the dependencies from the test
+environment's site-packages through a path entry, which adds that folder to ``sys.path`` without
+running its ``.pth`` files: the editable install of the checkout is therefore not seen.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import site
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SOURCES = ("models", "orchestrator", "fmus", "pyproject.toml", "README.md")
+
+PROBE = """
+import importlib.util, json, sys
+import sblsim.models, sblsim.orchestrator.cli, sblsim.fmus.build
+found = {name: importlib.util.find_spec(name) is not None for name in ("models", "fmus", "orchestrator")}
+print(json.dumps({"top_level": found, "models_file": sblsim.models.__file__,
+                  "scenarios": sorted(p.name for p in __import__("importlib.resources").resources.files(
+                      "sblsim.orchestrator").joinpath("scenarios").iterdir()),
+                  "c_sources": sorted(p.name for p in __import__("importlib.resources").resources.files(
+                      "sblsim.fmus").joinpath("c").iterdir() if p.name.endswith(".c"))}))
+"""
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """A fresh virtual environment with sblsim installed from a wheel; returns its folder."""
+    work = tmp_path_factory.mktemp("packaging")
+    source = work / "source"
+    source.mkdir()
+    for name in SOURCES:
+        path = ROOT / name
+        if path.is_dir():
+            shutil.copytree(path, source / name, ignore=shutil.ignore_patterns("__pycache__", "build", "*.fmu"))
+        else:
+            shutil.copy2(path, source / name)
+    wheels = work / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
+                    "-w", str(wheels), str(source)], check=True, capture_output=True, timeout=600)
+    env = work / "env"
+    venv.EnvBuilder(with_pip=True).create(env)
+    python = env / "bin" / "python"
+    (wheel,) = wheels.glob("sblsim-*.whl")
+    subprocess.run([str(python), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True,
+                   capture_output=True, timeout=600)
+    purelib = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                             check=True, capture_output=True, text=True).stdout.strip()
+    # the dependencies: the test environment's site-packages as a plain path entry (its .pth files do not run)
+    Path(purelib, "dependencies.pth").write_text("\n".join(site.getsitepackages()) + "\n")
+    outside = work / "elsewhere"
+    outside.mkdir()
+    return env, outside, wheel
+
+
+def test_installed_names_are_namespaced(installed):
+    env, outside, _ = installed
+    done = subprocess.run([str(env / "bin" / "python"), "-c", PROBE], cwd=outside, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    found = json.loads(done.stdout)
+    assert found["top_level"] == {"models": False, "fmus": False, "orchestrator": False}
+    assert Path(found["models_file"]).is_relative_to(env), "sblsim.models came from outside the environment"
+    assert "semicircle.toml" in found["scenarios"] and "fmi2_shell.c" in found["c_sources"]
+
+
+def test_wheel_holds_only_the_sblsim_package(installed):
+    _, _, wheel = installed
+    import zipfile
+
+    with zipfile.ZipFile(wheel) as z:
+        tops = {name.split("/")[0] for name in z.namelist()}
+    assert {t for t in tops if not t.endswith(".dist-info")} == {"sblsim"}
+
+
+def test_console_script_answers_its_version(installed):
+    env, outside, _ = installed
+    done = subprocess.run([str(env / "bin" / "sblsim"), "--version"], cwd=outside, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    from importlib.metadata import version
+
+    assert done.stdout.strip() == f"sblsim {version('sblsim')}"
