@@ -1,6 +1,7 @@
 """Campaign throughput, with every ratio measured in this one run on this machine.
 
-Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--skip-paper] [--skip-scaling]
+Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against REV] [--skip-paper]
+                                             [--skip-scaling]
 
 1. **Engines**: a sample of the `paper` study (semicircle, one design cell at T = 0.1 s and one at
    T = 1 s, ``--replicates`` runs each) stepped three ways in this process: the local engine one
@@ -13,6 +14,8 @@ Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--skip-pa
    goes (each component's compiled step, the compiled master loop, the metrics and the bound).
 3. With ``--numpy REV``: the same chunk on the batched numpy engine of an earlier revision (e.g.
    ``9903b13``), timed the same way in a subprocess from a temporary git worktree.
+   With ``--against REV``: the same chunk on the compiled engine of an earlier revision, timed the same
+   way (e.g. to check that a refactoring kept the speed).
 4. **The whole `paper` study** (19,200 runs) with 1 and with ``--workers`` processes: wall time, runs/s
    and the speed-up.
 5. **Time against study size**: the `million` study cut to 1×, 2× and 4× ``--scale`` replicates per cell
@@ -44,7 +47,7 @@ from sblsim.orchestrator.study import load_study, study_source
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from revision import run_at  # noqa: E402
 
-#: The largest chunk, timed in an earlier revision's own code (its run_batch had the same signature).
+#: The chunk, timed in an earlier revision's own code (its run_batch had the same signature).
 OLD_CHUNK = """
 import sys, time
 from sblsim.orchestrator.config import load_config
@@ -248,6 +251,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes for the studies")
     parser.add_argument("--replicates", type=int, default=5, help="replicates per cell of the engine sample")
     parser.add_argument("--numpy", default=None, metavar="REV", help="also time the numpy engine of revision REV")
+    parser.add_argument("--against", default=None, metavar="REV",
+                        help="also time the chunk on the compiled engine of an earlier revision REV")
     parser.add_argument("--scale", type=int, default=128, help="replicates per cell of the 1x million-study cut")
     parser.add_argument("--skip-paper", action="store_true", help="skip the whole-study runs")
     parser.add_argument("--skip-scaling", action="store_true", help="skip the study-size runs")
@@ -267,6 +272,10 @@ def main() -> None:
         old = float(run_at(args.numpy, OLD_CHUNK, str(CHUNK_DURATION), str(CHUNK_RUNS)).split()[-1])
         print(f"\n3. the same chunk on the batched numpy engine of revision {args.numpy}: {old * 1e6:.2f} us per "
               f"replicate-step; the compiled batch is {old / per_step:.1f}x faster")
+    if args.against:
+        then = float(run_at(args.against, OLD_CHUNK, str(CHUNK_DURATION), str(CHUNK_RUNS)).split()[-1])
+        print(f"   the same chunk on the compiled engine of revision {args.against}: {then * 1e6:.2f} us per "
+              f"replicate-step; this revision takes {per_step / then:.2f}x its time")
     if not args.skip_paper:
         print(f"\n4. whole paper study: {study.runs} runs on the local engine")
         paper(study, args.workers)

@@ -1,6 +1,10 @@
 """Run a snippet of Python in an earlier git revision of this repository (a temporary worktree).
 
-Used by the benchmarks to time an earlier engine in the same run as today's.
+Used by the benchmarks to time an earlier engine in the same run as today's. Snippets import the
+package by its installed names (``sblsim.orchestrator``, ...). The revision's own folders are put
+first on the path under those names, so the snippet runs the revision's code, not this checkout's;
+for revisions from before the ``sblsim`` namespace, the snippet's ``sblsim.`` prefixes are dropped
+(their folders were imported as top-level ``models``, ``orchestrator`` and ``fmus``).
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("models", "orchestrator", "fmus")
 
 
 def run_at(revision: str, code: str, *args: str) -> str:
@@ -27,7 +32,15 @@ def run_at(revision: str, code: str, *args: str) -> str:
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), revision], check=True,
                        capture_output=True)
         try:
-            env = {**os.environ, "PYTHONPATH": str(tree)}
+            if "sblsim.models" in (tree / "pyproject.toml").read_text():
+                shim = Path(tmp) / "shim"
+                (shim / "sblsim").mkdir(parents=True)
+                for name in PACKAGES:
+                    (shim / "sblsim" / name).symlink_to(tree / name, target_is_directory=True)
+                path = str(shim)
+            else:
+                code, path = code.replace("sblsim.", ""), str(tree)
+            env = {**os.environ, "PYTHONPATH": path}
             done = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True,
                                   text=True, check=True)
             return done.stdout
