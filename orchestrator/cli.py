@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import threading
 from pathlib import Path
@@ -361,18 +362,33 @@ def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
 def _check_writable(directory: Path) -> None:
     """Refuse an output directory that cannot be created or written, before any work.
 
+    Checked by doing, not by asking (``os.access`` says yes to root everywhere, even under
+    ``/proc``): a probe folder with a probe file is created in the deepest existing folder on the
+    way to ``directory`` and removed again, so nothing stays on disk.
+
     Raises
     ------
     ModelError
         Naming the directory and why.
     """
+    import tempfile
+
     if directory.exists() and not directory.is_dir():
         raise ModelError(f"--out: {str(directory)!r} exists and is not a directory")
-    probe = directory
+    probe = directory.absolute()
     while not probe.exists():
         probe = probe.parent
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise ModelError(f"--out: {str(directory)!r} cannot be written (no write permission in {str(probe)!r})")
+    if not probe.is_dir():
+        raise ModelError(f"--out: {str(directory)!r} cannot be created ({str(probe)!r} is not a directory)")
+    try:
+        folder = Path(tempfile.mkdtemp(prefix=".sblsim-probe.", dir=probe))
+        try:
+            (folder / "probe").write_bytes(b"sblsim")
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise ModelError(f"--out: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
 
 
 def _codegen(args: argparse.Namespace) -> int:
@@ -434,6 +450,12 @@ def _command(args: argparse.Namespace) -> int:
         return _fmus(args)
     except ModelError as exc:
         print(f"sblsim: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:  # a full disk or a folder that refused a write during the work: one line, no traceback
+        reason = os.strerror(exc.errno) if exc.errno else str(exc)
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced (a campaign keeps its "
+              "finished chunks: run it again with --resume)", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("sblsim: interrupted", file=sys.stderr)

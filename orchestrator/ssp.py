@@ -47,6 +47,7 @@ from xml.etree import ElementTree as ET
 
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import SEED_NAMES, UNITS, ModelError
+from sblsim.orchestrator.archives import check_members, inside, safe_extract
 from sblsim.orchestrator.config import (
     EXTERNAL_PREFIX,
     RECEIVERS,
@@ -370,6 +371,12 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
         raise SspError(f"--ssp: {str(path)!r} is a directory, not an .ssp file")
     if not path.is_file():
         raise SspError(f"--ssp: no such file {str(path)!r}")
+    label = f"--ssp: {path.name}"
+    try:  # refuse a hostile archive before fmpy reads anything of it
+        with zipfile.ZipFile(path) as archive:
+            check_members(archive, label)
+    except zipfile.BadZipFile:
+        raise SspError(f"{label} is not a zip archive (an SSP package is one)") from None
     ssd = validate_ssp(path)
     system = ssd.system
     names = [c.name for c in system.elements]
@@ -377,16 +384,18 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
         raise SspError(f"ssp: components {', '.join(names)}; sblsim runs exactly {', '.join(COMPONENTS)}")
     unzipdir = Path(tempfile.mkdtemp(prefix="sblsim_ssp_"))
     atexit.register(shutil.rmtree, unzipdir, ignore_errors=True)
-    with zipfile.ZipFile(path) as archive:
-        archive.extractall(unzipdir)
-        start, stop, base = _experiment(archive.read(SSD_NAME))
+    safe_extract(path, unzipdir, label)
+    start, stop, base = _experiment((unzipdir / SSD_NAME).read_bytes())
 
     raw: dict[str, dict] = {"run": {"scenario": system.name}, "simulation": {}}
     fmu_files: dict[str, Path] = {}
     values: dict[str, dict[str, Any]] = {}
     for comp in system.elements:
-        fmu_files[comp.name] = unzipdir / comp.source
-        if not fmu_files[comp.name].is_file():
+        fmu = inside(unzipdir, comp.source or "")
+        if fmu is None:
+            raise SspError(f"ssp: component {comp.name}: source {comp.source!r} is not a file inside the package")
+        fmu_files[comp.name] = fmu
+        if not fmu.is_file():
             raise SspError(f"ssp: component {comp.name}: no FMU {comp.source!r} in the package")
         found = values.setdefault(comp.name, {})
         for binding in comp.parameterBindings:

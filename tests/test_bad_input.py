@@ -170,6 +170,9 @@ CASES = {
                                    "--set", "platform.beacon_offsets=1 0 1; 0 1 1; -1 0 1"],
                                   "platform.beacon_offsets"),
     "run out is a file": (["run", "semicircle", "--out", "afile"], "--out"),
+    # as root os.access says yes under /proc and /sys: the check must try a write
+    "run out under /proc": (["run", "semicircle", "--out", "/proc/sblsim-run"], "--out"),
+    "analyze out under /sys": (["analyze", "campaign", "--out", "/sys/sblsim-report"], "--out"),
     "run over an earlier run": (["run", "semicircle", "--out", "earlier_run"], "--force"),
     "run engine choice": (["run", "semicircle", "--engine", "matlab"], "--engine"),
     "run scenario and ssp": (["run", "semicircle", "--ssp", "notzip.ssp"], "run:"),
@@ -199,6 +202,7 @@ CASES = {
     "campaign into a used folder": (["campaign", "study_ok.toml", "--out", "nonempty"], "--out"),
     "campaign paper into a used folder": (["campaign", "paper", "--out", "nonempty"], "--out"),
     "campaign resume damaged study": (["campaign", "paper", "--out", "campaign", "--resume"], "study.toml"),
+    "campaign out under /proc": (["campaign", "study_ok.toml", "--out", "/proc/sblsim-campaign"], "--out"),
     # analyze
     "analyze nothing": (["analyze", "adir"], "runs.parquet"),
     "analyze corrupt runs": (["analyze", "campaign"], "runs.parquet"),
@@ -206,6 +210,7 @@ CASES = {
     # ssp
     "ssp out not .ssp": (["ssp", "export", "semicircle", "--out", "package.zip"], "--out"),
     "ssp over a package": (["ssp", "export", "semicircle", "--out", "earlier.ssp"], "--force"),
+    "ssp out under /sys": (["ssp", "export", "semicircle", "--out", "/sys/kernel/sblsim/s.ssp"], "--out"),
     "ssp bad value": (["ssp", "export", "semicircle", "--out", "new.ssp", "--set", "platform.baseline=-1"],
                       "platform.baseline"),
     # fmus and codegen

@@ -1,0 +1,85 @@
+"""A full disk during the work: one line, exit 2, nothing half-written; a campaign resumes afterwards.
+
+The disk is a small tmpfs mounted for the test; where the machine does not allow mounting (not root,
+or no privilege in the container) the test is skipped.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+STUDY = """[study]
+name = "tiny"
+scenarios = ["semicircle"]
+replicates = 40
+seed = 3
+set = ["simulation.duration=5"]
+[[factors]]
+name = "gps"
+key = "platform.gps_sigma"
+low = 0.1
+high = 3.5
+"""
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A tmpfs of 64 KiB at ``tmp_path/disk``; yields (path, resize)."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip("this machine does not allow mounting a tmpfs")
+
+    def resize(size: str) -> None:
+        subprocess.run(["mount", "-o", f"remount,size={size}", str(disk)], check=True, capture_output=True)
+
+    try:
+        yield disk, resize
+    finally:
+        subprocess.run(["umount", str(disk)], capture_output=True)
+
+
+def _sblsim(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+def _one_line(proc) -> str:
+    assert proc.returncode == 2, (proc.returncode, proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if not line.startswith("campaign: ")]  # progress lines
+    assert len(lines) == 1 and lines[0].startswith("sblsim: error:"), proc.stderr
+    return lines[0]
+
+
+def test_run_on_a_full_disk_writes_nothing(small_disk, tmp_path):
+    disk, _ = small_disk
+    line = _one_line(_sblsim("run", "semicircle", "--out", disk / "r", cwd=tmp_path))
+    assert "No space left on device" in line
+    assert list(disk.iterdir()) == []  # no half-written results, no staging folder
+
+
+def test_campaign_on_a_full_disk_resumes_to_the_same_runs(small_disk, tmp_path):
+    disk, resize = small_disk
+    (tmp_path / "tiny.toml").write_text(STUDY)
+    line = _one_line(_sblsim("campaign", "tiny.toml", "--out", disk / "c", "--workers", "1", "--batch", "10",
+                             cwd=tmp_path))
+    assert "--resume" in line
+    resize("64m")
+    resumed = _sblsim("campaign", "tiny.toml", "--out", disk / "c", "--workers", "1", "--batch", "10", "--resume",
+                      cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    whole = _sblsim("campaign", "tiny.toml", "--out", tmp_path / "whole", "--workers", "1", "--batch", "10",
+                    cwd=tmp_path)
+    assert whole.returncode == 0, whole.stderr[-2000:]
+    a = pd.read_parquet(disk / "c" / "runs.parquet").drop(columns=["wall_time"], errors="ignore")
+    b = pd.read_parquet(tmp_path / "whole" / "runs.parquet").drop(columns=["wall_time"], errors="ignore")
+    pd.testing.assert_frame_equal(a.sort_values(list(a.columns[:4])).reset_index(drop=True),
+                                  b.sort_values(list(b.columns[:4])).reset_index(drop=True))
+    assert not [p.name for p in Path(disk / "c").iterdir() if p.name.endswith(".tmp")]
