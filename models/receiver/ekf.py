@@ -73,7 +73,7 @@ def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, dept
     return kalman.update(x, P, y, H, ca.vertcat(*([sigma_range**2] * n), sigma_depth**2))
 
 
-class Receiver(KalmanReceiver):
+class PaperEKF(KalmanReceiver):
     """The paper's EKF receiver with the raw instrumentation fix."""
 
     name = "receiver"
@@ -95,4 +95,4 @@ class Receiver(KalmanReceiver):
         return {**held, "x": state, "P": P, "nis": nis, "gated": checked["gated"], "failed": checked["failed"]}
 
 
-__all__ = ["Receiver", "update"]
+__all__ = ["PaperEKF", "update"]

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from sblsim.models.receiver import Receiver, ekf, kalman, position_range_function, range_function
+from sblsim.models.receiver import PaperEKF, ekf, kalman, position_range_function, range_function
 from sblsim.models.receiver import multilateration as ml
 from tests.helpers import Core
 
@@ -533,7 +533,7 @@ def _x0_P0(params=RX):
 
 
 def test_initial_outputs_are_the_prior_and_never_nan():
-    core = Core(Receiver, RX, replicates=[0, 1])
+    core = Core(PaperEKF, RX, replicates=[0, 1])
     core.initialize(0.0)
     out = core.outputs
     x0, P0 = _x0_P0()
@@ -547,7 +547,7 @@ def test_initial_outputs_are_the_prior_and_never_nan():
 def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_tx_time():
     T, r = 1.0, 4
     dt = T / r
-    core = Core(Receiver, RX, replicates=[0])
+    core = Core(PaperEKF, RX, replicates=[0])
     core.initialize(0.0)
     x_ref, P_ref = _x0_P0()
     phi, Q = ref_phi(dt), ref_q(dt, RX["q_horizontal"], RX["q_vertical"])
@@ -601,7 +601,7 @@ def test_lost_packet_and_unknown_beacon_keep_the_held_ranges():
     beacons = cross(1.0, 1.0)
     true_ranges = np.linalg.norm(truth - beacons, axis=1)
     params = dict(RX, x0_x=6.5, x0_y=-4.5, x0_z=6.2, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0)
-    core = Core(Receiver, params, replicates=[0, 1])
+    core = Core(PaperEKF, params, replicates=[0, 1])
     core.initialize(0.0)
     x_ref, P_ref = _x0_P0(params)
     phi, Q = ref_phi(1.0), ref_q(1.0, RX["q_horizontal"], RX["q_vertical"])
@@ -651,7 +651,7 @@ def test_instrumentation_fix_needs_three_ranges():
     truth = np.array([6.0, 4.0, 7.0])
     beacons = cross(20.0, 1.0)
     ranges = np.linalg.norm(truth - beacons, axis=1)
-    core = Core(Receiver, dict(RX, x0_x=0.0, x0_y=0.0, x0_z=0.0, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0),
+    core = Core(PaperEKF, dict(RX, x0_x=0.0, x0_y=0.0, x0_z=0.0, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0),
                 replicates=[0])  # the estimate sits at the unheard beacons' placeholder (0, 0, 0)
     core.initialize(0.0)
     for k in range(4):
@@ -678,7 +678,7 @@ def test_instrumentation_fix_matches_scipy_within_its_stopping_tolerance():
     ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1) + sr * rng.normal(size=(B, 4))
     depth = truth[:, 2] + sd * rng.normal(size=B)
     start = truth + rng.normal(scale=2.0, size=(B, 3))
-    core = Core(Receiver, RX, replicates=range(B))
+    core = Core(PaperEKF, RX, replicates=range(B))
     core.values.update(x0_x=start[:, 0], x0_y=start[:, 1], x0_z=start[:, 2])  # per-replicate FMU values
     core.initialize(0.0)
     lost = rng.uniform(size=B) < 0.3  # some replicates lose beacon 4: the fix uses three ranges
@@ -711,7 +711,7 @@ def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parame
                p0_position=np.array([1.0, 3.0, 0.5]), p0_velocity=np.array([0.5, 0.1, 1.0]),
                x0_x=np.array([2.0, -5.0, 9.0]), x0_y=np.array([-14.0, 3.0, 1.0]), x0_z=np.array([5.0, 8.0, 2.0]),
                x0_vx=np.array([0.4, 0.0, -0.2]), x0_vy=np.array([0.0, 0.1, 0.3]), x0_vz=np.array([0.0, 0.0, 0.05]))
-    core = Core(Receiver, RX, replicates=range(B))
+    core = Core(PaperEKF, RX, replicates=range(B))
     core.values.update(per)  # per-replicate FMU values
     core.initialize(0.0)
     ref = []
