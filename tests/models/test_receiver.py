@@ -18,6 +18,7 @@ from scipy.optimize import least_squares
 
 from sblsim.models.receiver import PaperEKF, ekf, kalman, position_range_function, range_function
 from sblsim.models.receiver import multilateration as ml
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from tests.helpers import Core
 
 POS = [0, 2, 4]  # position entries of the state [x, vx, y, vy, z, vz]
@@ -207,7 +208,7 @@ def _ekf_case(seed=7):
 
 
 def _predict_function():
-    return casadi_function(lambda x, P, dt, qh, qv: kalman.predict(x, P, dt, qh, qv), (6, 1), (6, 6), (1, 1), (1, 1),
+    return casadi_function(CONSTANT_VELOCITY.predict, (6, 1), (6, 6), (1, 1), (1, 1),
                            (1, 1))
 
 
@@ -225,11 +226,11 @@ def test_predict_matches_numpy():
     np.testing.assert_allclose(P, ref_phi(dt) @ P0 @ ref_phi(dt).T + ref_q(dt, qh, qv), rtol=1e-14, atol=1e-15)
     # hand checks: position x moves by v dt; Q of the Down axis for dt = 2 s is q_v [[8/3, 2], [2, 2]]
     assert x[0, 0] == pytest.approx(x0[0] + dt * x0[1], rel=1e-15)
-    Q = np.array(ca.DM(kalman.process_noise(2.0, qh, qv)))
+    Q = np.array(ca.DM(CONSTANT_VELOCITY.process_noise(2.0, qh, qv)))
     np.testing.assert_allclose(Q[4:, 4:], qv * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
     np.testing.assert_allclose(Q[:2, :2], qh * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
     assert np.all(Q[:2, 2:] == 0.0) and np.all(Q[2:4, 4:] == 0.0)
-    np.testing.assert_array_equal(np.array(ca.DM(kalman.transition(2.0))), ref_phi(2.0))
+    np.testing.assert_array_equal(np.array(ca.DM(CONSTANT_VELOCITY.transition(2.0))), ref_phi(2.0))
 
 
 def test_cholesky_and_solve_spd_match_numpy():
