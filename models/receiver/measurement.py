@@ -154,8 +154,16 @@ class RangeDepthModel(MeasurementModel):
     receivers that account for the broadcast beacons' uncertainty use
     :meth:`range_variance` for a range instead.
 
-    Only the built-in state layout is supported (the range Function is
-    compiled for :data:`~sblsim.models.receiver.motion.CONSTANT_VELOCITY`).
+    Parameters
+    ----------
+    motion : ConstantVelocity, optional
+        The state layout; only the built-in one (the range Function is
+        compiled for :data:`~sblsim.models.receiver.motion.CONSTANT_VELOCITY`).
+
+    Raises
+    ------
+    ValueError
+        If ``motion`` lays the state out differently.
 
     References
     ----------
@@ -164,6 +172,12 @@ class RangeDepthModel(MeasurementModel):
 
     state_size = STATE_SIZE
     depth_row = (0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+    def __init__(self, motion=CONSTANT_VELOCITY) -> None:
+        if motion.state_size != STATE_SIZE or tuple(motion.position_index) != POSITION_INDEX:
+            raise ValueError(f"RangeDepthModel: the state must be laid out as {STATE_SIZE} entries with the "
+                             f"position at {POSITION_INDEX}, got {motion.state_size} and {motion.position_index}")
+        super().__init__(motion)
 
     def dimension(self, context) -> int:
         """m + 1: the ranges and the depth."""

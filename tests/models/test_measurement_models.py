@@ -278,3 +278,22 @@ def test_sigma_points_and_weights_equal_filterpy(kind):
 def test_gate_threshold_is_the_chi_square_quantile(probability):
     assert float(gate_threshold(probability)) == pytest.approx(chi2.ppf(probability, 1), rel=1e-12)
     assert math.isinf(float(gate_threshold(1.0)))
+
+
+def test_models_refuse_a_state_layout_they_cannot_read():
+    class PositionOnly:  # a motion model of three positions, no velocities
+        state_names, state_size, position_index = ("x", "y", "z"), 3, (0, 1, 2)
+
+    class Planar:
+        state_names, state_size, position_index = ("x", "y"), 2, (0, 1)
+
+    with pytest.raises(ValueError, match="RangeDepthModel"):
+        RangeDepthModel(PositionOnly())
+    with pytest.raises(ValueError, match="3 entries"):
+        RangeBearingModel(Planar())
+    # the range + bearing model reads any layout with a 3-D position
+    m = RangeBearingModel(PositionOnly())
+    s, b = ca.SX.sym("x", 3), ca.SX.sym("b", 3)
+    h, H = (np.array(v) for v in ca.Function("f", [s, b], list(m.linearize(s, b)))([3.0, 4.0, 0.0], [0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(h.ravel(), [5.0, math.atan2(4, 3), 0.0], rtol=1e-15)
+    assert H.shape == (3, 3) and m.state_size == 3
