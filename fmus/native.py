@@ -26,8 +26,8 @@ import numpy as np
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.models import MODELS
+from sblsim.models.bound import FIXED, bound_step
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.bound import FIXED, bound_step
 
 _VECTORS = {"p": 0, "d": 1, "x": 2, "u": 3, "y": 4, "draws": 6}
 
@@ -270,7 +270,7 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
         The recorded outputs in the order of :data:`sblsim.orchestrator.metrics.METRIC_INPUTS`, as floats; any
         step stride, replicates contiguous (a column of the master's record array is used in place).
     fixed : ndarray, shape (B, 8)
-        The bound's per-run inputs (:data:`sblsim.models.receiver.bound.FIXED`).
+        The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
     arms : ndarray, shape (B, n_beacons, 3)
         Each run's beacon lever arms in NED [m].
     limits : (float, float, float)

@@ -7,12 +7,12 @@ the alternative receivers included.
 
 from sblsim.models.acoustics import Acoustics
 from sblsim.models.platform import Platform
-from sblsim.models.receiver import LeastSquaresReceiver, Receiver, SequentialReceiver, UnscentedReceiver
+from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, SequentialReceiver, UnscentedReceiver
 from sblsim.models.target import Target
 
-COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, Receiver)}
+COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, PaperEKF)}
 #: Built-in receivers: ``simulation.receiver`` value -> model.
-RECEIVER_MODELS = {"ekf": Receiver, "ekf-seq": SequentialReceiver, "ukf": UnscentedReceiver,
+RECEIVER_MODELS = {"ekf": PaperEKF, "ekf-seq": SequentialReceiver, "ukf": UnscentedReceiver,
                    "lsq": LeastSquaresReceiver}
 #: Built-in receivers: ``simulation.receiver`` value -> model name.
 RECEIVERS = {key: model.name for key, model in RECEIVER_MODELS.items()}

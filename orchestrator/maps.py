@@ -2,7 +2,7 @@
 
 For a configuration, the horizontal standard deviation (DRMS) of a position
 fix from one round of fresh ranges (one per beacon) plus the depth, from
-their Fisher information (:func:`sblsim.models.receiver.bound.horizontal_std`), on a
+their Fisher information (:func:`sblsim.models.bound.horizontal_std`), on a
 grid around the platform at the diver's depth: the platform level at its
 mean heading, its reference at the origin, the beacons at their lever arms,
 with the configured range noise, GPS, IMU and depth-sensor errors
@@ -21,8 +21,8 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from sblsim.models.bound import horizontal_std
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.bound import horizontal_std
 from sblsim.orchestrator.config import beacon_arms, load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters

@@ -14,7 +14,7 @@ filter) and ``coverage_95``, the share of steps with ε ≤ χ²₃(0.95) = 7.81
 where P is not positive-definite are left out. ``nis_mean`` is the mean of
 the receiver's ``nis`` output from the first slot on; ``gated_pct`` the share
 of received slots whose range the gate rejected [%]; ``pcrb_rms`` the RMS of
-the position PCRB along the run (:mod:`sblsim.models.receiver.bound`), comparable
+the position PCRB along the run (:mod:`sblsim.models.bound`), comparable
 with ``e_tot_rms``. ``diverged`` flags a run whose receiver lost the diver: an
 estimate that is not finite, or farther from the truth than both
 :data:`DIVERGENCE_DISTANCE` and :data:`DIVERGENCE_RATIO` times the diver's
@@ -64,7 +64,7 @@ def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.n
         Every name of :data:`METRIC_INPUTS` -> its recorded values as floats (Boolean and Integer outputs
         as the master records them: 0/1 and whole numbers).
     fixed : ndarray, shape (B, 8)
-        The bound's per-run inputs (:data:`sblsim.models.receiver.bound.FIXED`).
+        The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
     arms : ndarray, shape (B, n_beacons, 3)
         Each run's beacon lever arms in NED [m].
     with_bound : bool
@@ -76,7 +76,7 @@ def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.n
         Name -> array (B,), as :func:`summarize` (receiver and ``instr_``) and :func:`consistency` give them
         (equal to rounding: each run is summed in time order).
     bound : ndarray, shape (N, B), or None
-        ``sqrt(trace)`` of the position PCRB [m] (:func:`sblsim.models.receiver.bound.pcrb`).
+        ``sqrt(trace)`` of the position PCRB [m] (:func:`sblsim.models.bound.pcrb`).
     """
     values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS], fixed, arms,
                                        (NEES_95, DIVERGENCE_DISTANCE, DIVERGENCE_RATIO), with_bound,

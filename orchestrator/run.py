@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models import COMPONENTS, MODELS
+from sblsim.models.bound import FIXED
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.bound import FIXED
 from sblsim.models.receiver.core import COVARIANCE, filter_parameters
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
@@ -213,7 +213,7 @@ _FILTER_DEFAULTS = {v.name: v.start for v in filter_parameters()}
 
 
 def bound_parameters(cfg: dict) -> dict[str, float]:
-    """The parameters of the position PCRB of a configuration (:func:`sblsim.models.receiver.bound.pcrb`).
+    """The parameters of the position PCRB of a configuration (:func:`sblsim.models.bound.pcrb`).
 
     The motion model and prior are the random walk's for ``random-walk`` (the
     bound is then a true bound), else the receiver's (``q_horizontal``,

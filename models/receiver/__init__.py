@@ -2,15 +2,29 @@
 
 Every receiver is one module: its declarations and its casadi predict and
 update steps (:class:`sblsim.models.receiver.core.KalmanReceiver`), sharing the
-measurement model (:mod:`sblsim.models.receiver.measurement`).
+motion model (:mod:`sblsim.models.receiver.motion`), the measurement models
+(:mod:`sblsim.models.receiver.measurement`,
+:mod:`sblsim.models.receiver.range_bearing`), the Kalman arithmetic
+(:mod:`sblsim.models.receiver.kalman`), the sigma points
+(:mod:`sblsim.models.receiver.sigma_points`) and the NIS gate
+(:mod:`sblsim.models.receiver.gate`). The accuracy bound is
+:mod:`sblsim.models.bound`.
 """
 
 from sblsim.models.receiver.core import KalmanReceiver, receiver_interface
-from sblsim.models.receiver.ekf import Receiver
+from sblsim.models.receiver.ekf import PaperEKF
 from sblsim.models.receiver.ekf_seq import SequentialReceiver
 from sblsim.models.receiver.lsq import LeastSquaresReceiver
-from sblsim.models.receiver.measurement import RangeDepthModel, position_range_function, range_function
+from sblsim.models.receiver.measurement import (
+    MeasurementModel,
+    RangeDepthModel,
+    position_range_function,
+    range_function,
+)
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY, ConstantVelocity
+from sblsim.models.receiver.range_bearing import RangeBearingModel
 from sblsim.models.receiver.ukf import UnscentedReceiver
 
-__all__ = ["KalmanReceiver", "LeastSquaresReceiver", "RangeDepthModel", "Receiver", "SequentialReceiver",
-           "UnscentedReceiver", "position_range_function", "range_function", "receiver_interface"]
+__all__ = ["CONSTANT_VELOCITY", "ConstantVelocity", "KalmanReceiver", "LeastSquaresReceiver", "MeasurementModel",
+           "PaperEKF", "RangeBearingModel", "RangeDepthModel", "SequentialReceiver", "UnscentedReceiver",
+           "position_range_function", "range_function", "receiver_interface"]

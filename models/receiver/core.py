@@ -32,11 +32,12 @@ from sblsim.models.acoustics.core import PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable
 from sblsim.models.program import ProgramBuilder
-from sblsim.models.receiver import kalman
 from sblsim.models.receiver.measurement import RangeDepthModel
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 
-STATE_NAMES = ("x", "vx", "y", "vy", "z", "vz")
+#: The state entries of the built-in motion model, as the ``x0_*`` parameters and ``est_*`` outputs name them.
+STATE_NAMES = CONSTANT_VELOCITY.state_names
 _AXES = {"x": "North", "y": "East", "z": "Down"}
 #: Iteration cap and step tolerance [standard deviations of the fix] of the instrumentation fix.
 INSTRUMENT_ITERATIONS, INSTRUMENT_TOLERANCE = 8, 1e-3
@@ -168,46 +169,6 @@ def filter_parameters() -> tuple[Variable, ...]:
         for n in ("x", "y", "z", "vx", "vy", "vz"))
 
 
-def gate_parameters(probability: float) -> tuple[Variable, ...]:
-    """The NIS gate: the probability a correct range passes it (1: no gate), and its lockout guard."""
-    return (
-        Variable("gate_probability", "parameter", "Real", probability, "1",
-                 "NIS gate on long ranges: probability that a correct range passes (chi-square, 1 dof); 1: no gate",
-                 min=0.5, max=1.0),
-        Variable("gate_max_rejections", "parameter", "Integer", 2,
-                 description="NIS gate: when this many beacons' latest ranges failed the test, ranges are used "
-                             "(no lock-out)", min=1, max=1000),
-    )
-
-
-def gate(innovation, variance, fresh, x: dict, u: dict, p: dict) -> dict[str, ca.SX]:
-    """The NIS gate on a fresh range of innovation ``innovation`` and innovation variance ``variance``.
-
-    A fresh range passes the test when it is not longer than predicted
-    (multipath and non-line-of-sight arrivals are late: the direct path is the
-    shortest) or its NIS ``innovation² / variance`` is within the χ²(1)
-    quantile of ``gate_probability``; each beacon remembers whether its latest
-    range failed. A range is used when it passes, or when at least
-    ``gate_max_rejections`` beacons' latest ranges failed: a multipath outlier
-    is isolated, but when the estimate has drifted (a sudden turn, a long
-    loss, a mirror solution) the ranges of several beacons fail together, and
-    a gate that kept rejecting them would never recover (gate lock-out).
-
-    Returns
-    -------
-    dict
-        ``use`` (update with the range), ``gated`` (rejected) and ``failed``
-        (n: each beacon's latest test failed, after this slot).
-    """
-    test = ca.logic_or(innovation <= 0.0,
-                       innovation * innovation / variance <= kalman.gate_threshold(p["gate_probability"]))
-    use = ca.logic_and(fresh, ca.logic_or(test, ca.sum1(x["failed"]) >= p["gate_max_rejections"]))
-    index = u["beacon_id"] - 1
-    failed = ca.vertcat(*[ca.if_else(ca.logic_and(fresh, index == j), ca.logic_not(test), x["failed"][j])
-                          for j in range(x["failed"].numel())])
-    return {"use": use, "gated": ca.logic_and(fresh, ca.logic_not(use)), "failed": failed}
-
-
 def beacon_parameters() -> tuple[Variable, ...]:
     """The uncertainty of the broadcast beacon positions a receiver adds to R (defaults from the platform)."""
     return (
@@ -221,21 +182,26 @@ def beacon_parameters() -> tuple[Variable, ...]:
 
 
 class KalmanReceiver(Component):
-    """Base of the Kalman-type receivers (state ``[posX, velX, posY, velY, posZ, velZ]``).
+    """Base of the Kalman-type receivers: a motion model, a measurement model, ``predict`` and ``correct``.
 
     Subclasses set :attr:`name` (the FMU's, ``receiver_*``) and :attr:`label`
     (what ``simulation.receiver`` and the reports call it), declare
     :meth:`parameters` and implement :meth:`correct`; :meth:`initial` and
-    :meth:`predict` default to the constant-velocity model with white-noise
-    acceleration (:func:`sblsim.models.receiver.kalman.predict`) and the
-    :func:`filter_parameters`. Everything else (the packet handling, the
-    instrumentation fix, the outputs, the FMU, the batched engine, the
-    embeddable C) comes from these.
+    :meth:`predict` default to the :attr:`motion` model (constant velocity
+    with white-noise acceleration,
+    :class:`~sblsim.models.receiver.motion.ConstantVelocity`, state
+    ``[posX, velX, posY, velY, posZ, velZ]``) and the
+    :func:`filter_parameters`. The state size, the state names and where the
+    position sits come from :attr:`motion`. Everything else (the packet
+    handling, the instrumentation fix, the outputs, the FMU, the batched
+    engine, the embeddable C) comes from these.
     """
 
     component_index = 3
+    #: The motion model (state layout, Φ, Q).
+    motion = CONSTANT_VELOCITY
     #: The measurement model (ranges to broadcast beacons plus depth).
-    measurement = RangeDepthModel()
+    measurement = RangeDepthModel(CONSTANT_VELOCITY)
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
@@ -248,14 +214,14 @@ class KalmanReceiver(Component):
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
-        """State (6, 1) and covariance (6, 6) at the start (default: ``x0_*``, ``p0_position``, ``p0_velocity``)."""
-        x0 = ca.vertcat(*[p[f"x0_{name}"] for name in STATE_NAMES])
-        return x0, ca.diag(ca.vertcat(*[p["p0_position"] ** 2, p["p0_velocity"] ** 2] * 3))
+        """State (n, 1) and covariance (n, n) at the start (default: ``x0_*``, ``p0_position``, ``p0_velocity``)."""
+        x0 = ca.vertcat(*[p[f"x0_{name}"] for name in cls.motion.state_names])
+        return x0, cls.motion.initial_covariance(p["p0_position"], p["p0_velocity"])
 
     @classmethod
     def predict(cls, x: ca.SX, P: ca.SX, h, p: dict) -> tuple[ca.SX, ca.SX]:
         """State and covariance after a step of ``h`` [s] (default: constant velocity, white-noise acceleration)."""
-        return kalman.predict(x, P, h, p["q_horizontal"], p["q_vertical"])
+        return cls.motion.predict(x, P, h, p["q_horizontal"], p["q_vertical"])
 
     @classmethod
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
@@ -264,7 +230,7 @@ class KalmanReceiver(Component):
         Parameters
         ----------
         x : dict
-            The state blocks before the slot: ``x`` (6), ``P`` (6, 6), the held
+            The state blocks before the slot: ``x`` (n), ``P`` (n, n), the held
             ranges (``ranges``, ``beacons``, ``heard``), ...
         u : dict
             The inputs (the packet and the depth reading).
@@ -274,7 +240,8 @@ class KalmanReceiver(Component):
         Returns
         -------
         dict
-            ``x``, ``P`` (6, 6), ``nis``, ``gated``, ``failed`` (:func:`gate`), and the held ranges the
+            ``x``, ``P`` (n, n), ``nis``, ``gated``, ``failed``
+            (:func:`~sblsim.models.receiver.gate.gate`), and the held ranges the
             instrumentation fix uses (``ranges``, ``beacons``, ``heard``,
             ``last_seq``, ``slot_time``: usually :func:`take_packet`).
         """
@@ -283,7 +250,8 @@ class KalmanReceiver(Component):
     @classmethod
     def build(cls, n_beacons: int):
         n = n_beacons
-        b = ProgramBuilder(cls, n, states=[("x", 6), ("P", 36)] + packet_states(n) + [
+        size, position = cls.motion.state_size, list(cls.motion.position_index)
+        b = ProgramBuilder(cls, n, states=[("x", size), ("P", size * size)] + packet_states(n) + [
             ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states())
 
         def init(p, d, w, t0):
@@ -292,17 +260,17 @@ class KalmanReceiver(Component):
                     "gated": 0, "failed": ca.SX.zeros(n), **lm_idle()}
 
         def step(x, u, p, d, w, t, h):
-            state, P = cls.predict(x["x"], ca.reshape(x["P"], 6, 6), h, p)
+            state, P = cls.predict(x["x"], ca.reshape(x["P"], size, size), h, p)
             return {"x": state, "P": ca.vec(P)}
 
         def due(x, u, p, d, t, h):
             return slot_due(x, u, t, h)
 
         def slot(x, u, p, d, w, t, h):
-            out = cls.correct({**x, "P": ca.reshape(x["P"], 6, 6)}, u, p, n)
+            out = cls.correct({**x, "P": ca.reshape(x["P"], size, size)}, u, p, n)
             held = {**x, **{k: out[k] for k in ("ranges", "beacons", "heard", "last_seq", "slot_time")}}
             # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
-            guess = ca.if_else(x["fix_valid"], x["fix"], out["x"][0::2])
+            guess = ca.if_else(x["fix_valid"], x["fix"], cls.motion.position(out["x"]))
             fix = lm_begin(held, guess, u["depth"], p)
             return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"],
                     "failed": out["failed"], **fix,
@@ -313,8 +281,8 @@ class KalmanReceiver(Component):
             return {**out, "fix": out["lm_point"]}
 
         def output(x, p, d, t):
-            P = ca.reshape(x["P"], 6, 6)[0::2, 0::2]
-            out = {f"est_{name}": x["x"][k] for k, name in enumerate(STATE_NAMES)}
+            P = ca.reshape(x["P"], size, size)[position, position]
+            out = {f"est_{name}": x["x"][k] for k, name in enumerate(cls.motion.state_names)}
             out.update({f"instr_{a}": ca.if_else(x["fix_valid"], x["fix"][k], 0.0) for k, a in enumerate("xyz")})
             out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[1, 1] + P[2, 2]),
                        gated=x["gated"], **covariance_outputs(P))
@@ -330,6 +298,6 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "STATE_NAMES",
-           "beacon_parameters", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range",
-           "gate", "gate_parameters", "lm_active", "lm_begin", "lm_idle", "lm_step", "lm_states", "packet_init",
-           "packet_states", "receiver_interface", "slot_due", "take_packet"]
+           "beacon_parameters", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "lm_active",
+           "lm_begin", "lm_idle", "lm_step", "lm_states", "packet_init", "packet_states", "receiver_interface",
+           "slot_due", "take_packet"]

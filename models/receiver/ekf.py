@@ -3,7 +3,8 @@
 At every slot it updates with the **latest range of every beacon heard so
 far** plus the depth, ``z = [r_1 … r_n, d]`` with ``h_i(x) = ‖p − b̃_i‖``
 (casadi Jacobian) and ``R = diag(σ_r², …, σ_r², σ_d²)`` (the joint update,
-computed row after row: :func:`sblsim.models.receiver.kalman.update`): one range is
+computed row after row: :func:`sblsim.models.receiver.kalman.ekf_update` with the
+:class:`~sblsim.models.receiver.measurement.RangeDepthModel`): one range is
 fresh, the others are held from earlier slots, and their staleness is part
 of the error, as in the paper. A beacon not heard yet gets a zero Jacobian
 row and a zero innovation (an exact no-op). An optional NIS gate (off by
@@ -22,14 +23,8 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import (
-    KalmanReceiver,
-    filter_parameters,
-    fresh_range,
-    gate,
-    gate_parameters,
-    take_packet,
-)
+from sblsim.models.receiver.core import KalmanReceiver, filter_parameters, fresh_range, take_packet
+from sblsim.models.receiver.gate import gate, gate_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
 
 
@@ -63,17 +58,12 @@ def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, dept
     """
     model = model or RangeDepthModel()
     n = ranges.numel()
-    rows, y = [], []
-    for i in range(n):
-        h, H = model.range_row(x, beacons[3 * i:3 * i + 3])
-        rows.append(ca.if_else(heard[i], H, ca.SX.zeros(1, x.shape[0])))
-        y.append(ca.if_else(heard[i], ranges[i] - h, 0.0))
-    H = ca.vertcat(*rows, model.depth_jacobian())
-    y = ca.vertcat(*y, depth - x[4])
-    return kalman.update(x, P, y, H, ca.vertcat(*([sigma_range**2] * n), sigma_depth**2))
+    return kalman.ekf_update(x, P, ca.vertcat(ranges, depth), model, [beacons[3 * i:3 * i + 3] for i in range(n)],
+                             ca.vertcat(*([sigma_range**2] * n), sigma_depth**2),
+                             available=[heard[i] for i in range(n)] + [None])
 
 
-class Receiver(KalmanReceiver):
+class PaperEKF(KalmanReceiver):
     """The paper's EKF receiver with the raw instrumentation fix."""
 
     name = "receiver"
@@ -95,4 +85,4 @@ class Receiver(KalmanReceiver):
         return {**held, "x": state, "P": P, "nis": nis, "gated": checked["gated"], "failed": checked["failed"]}
 
 
-__all__ = ["Receiver", "update"]
+__all__ = ["PaperEKF", "update"]

@@ -5,7 +5,7 @@ depth reading and then with the **fresh range of the transmitting beacon**;
 ranges held from earlier slots are never re-used (the paper's conclusion:
 "an old measurement is not as effective as a new one"). The range's variance
 adds the uncertainty of the broadcast beacon position, propagated through
-``∂h/∂b`` by casadi (:meth:`RangeDepthModel.range_variance`): the GPS error
+``∂h/∂b`` by casadi (:meth:`RangeDepthModel.fresh_range_variance`): the GPS error
 per axis and the attitude error times the beacon's arm, whose defaults come
 from the platform's configured GPS and IMU errors. A χ² NIS gate (1 dof,
 ``gate_probability``) refuses a range that a multipath outlier lengthened;
@@ -15,33 +15,17 @@ References
 ----------
 Bar-Shalom, Li, Kirubarajan, Estimation with Applications to Tracking and
 Navigation, Wiley 2001, Sections 3.6 (sequential processing), 5.4 (NIS and
-its gate).
+its gate: :mod:`sblsim.models.receiver.gate`).
 """
 
 from __future__ import annotations
-
-import math
 
 import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import (
-    KalmanReceiver,
-    beacon_parameters,
-    filter_parameters,
-    fresh_range,
-    gate,
-    gate_parameters,
-    take_packet,
-)
-
-
-def fresh_range_variance(cls, x, beacon, p) -> ca.SX:
-    """The fresh range's variance in R: σ_r² plus the broadcast beacon's uncertainty [m²]."""
-    return cls.measurement.range_variance(p["sigma_range"], cls.measurement.position(x), beacon,
-                                          p["beacon_gps_sigma"], p["beacon_attitude_sigma_deg"] * math.pi / 180.0,
-                                          p["beacon_arm"])
+from sblsim.models.receiver.core import KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, take_packet
+from sblsim.models.receiver.gate import gate, gate_parameters
 
 
 class SequentialReceiver(KalmanReceiver):
@@ -58,10 +42,10 @@ class SequentialReceiver(KalmanReceiver):
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
-        state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - x["x"][4], m.depth_jacobian(),
+        state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - m.depth(x["x"]), m.depth_jacobian(),
                                                    p["sigma_depth"] ** 2)
         h, H = m.range_row(state, beacon)
-        variance = fresh_range_variance(cls, state, beacon, p)
+        variance = m.fresh_range_variance(state, beacon, p)
         y = rng - h
         S = ca.mtimes([H, P, H.T]) + variance
         nis_range = y * y / S
@@ -72,4 +56,4 @@ class SequentialReceiver(KalmanReceiver):
                 "failed": checked["failed"]}
 
 
-__all__ = ["SequentialReceiver", "fresh_range_variance"]
+__all__ = ["SequentialReceiver"]

@@ -1,63 +1,48 @@
-"""Kalman-filter arithmetic as casadi expressions: predict, joint and scalar updates, the NIS gate, sigma points.
+"""Kalman-filter arithmetic as casadi expressions: linear prediction, joint and scalar updates, the EKF update.
 
-State ``x = [posX, velX, posY, velY, posZ, velZ]`` (NED) [m, m/s] with the
-constant-velocity transition ``Φ = blockdiag([[1, Δt], [0, 1]] × 3)`` and
-white-noise-acceleration process noise
-``Q = q · [[Δt³/3, Δt²/2], [Δt²/2, Δt]]`` per axis (q_h for North and East,
-q_v for Down) [m²/s³]. The measurement model comes from
-:mod:`sblsim.models.receiver.measurement`. A scalar update (:func:`scalar_update`)
+Nothing here knows the state layout or the measurement: the motion model
+(:mod:`sblsim.models.receiver.motion`) gives Φ and Q to
+:func:`linear_predict`, a measurement model
+(:mod:`sblsim.models.receiver.measurement`) gives ``h``, its Jacobian, R and
+the residual to :func:`ekf_update`. A scalar update (:func:`scalar_update`)
 processes one measurement with independent noise, its covariance in Joseph
 form; the update with several independent measurements (:func:`update`) is
 the sequence of them at the joint update's linearization point, equal to the
-joint update with ``S = H P Hᵀ + R`` without factoring S. The NIS gate
-(:func:`gate_threshold`) rejects a scalar innovation whose NIS exceeds the
-χ²(1) quantile of the gate probability. The unscented transform
-(:func:`sigma_points`, :func:`unscented_weights`) uses the scaled sigma points
-of van der Merwe (α, β, κ).
+joint update with ``S = H P Hᵀ + R`` without factoring S. The NIS gate is in
+:mod:`sblsim.models.receiver.gate`, the sigma points of the unscented
+transform in :mod:`sblsim.models.receiver.sigma_points`.
 
 References
 ----------
 Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Section 4.3.
 Bar-Shalom, Li, Kirubarajan, Estimation with Applications to Tracking and
-Navigation, Wiley 2001, Sections 5.2 (Joseph form), 6.2 (white-noise
-acceleration model), 5.4 (NIS), 3.6 (sequential processing of independent
-measurements). Julier, Uhlmann, "Unscented filtering and nonlinear
-estimation", Proc. IEEE 92(3), 2004; van der Merwe, Sigma-point Kalman
-filters for probabilistic inference in dynamic state-space models, PhD
-thesis, OGI 2004 (scaled sigma points).
+Navigation, Wiley 2001, Sections 5.2 (Joseph form), 3.6 (sequential
+processing of independent measurements), 10.3 (extended Kalman filter).
 """
 
 from __future__ import annotations
 
-import math
-
 import casadi as ca
 
-from sblsim.models.receiver.measurement import STATE_SIZE
 
+def linear_predict(x: ca.SX, P: ca.SX, phi: ca.SX, Q: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Prediction of a linear motion model: ``x ← Φx``, ``P ← ΦPΦᵀ + Q`` (P's upper triangle computed, mirrored:
+    exactly symmetric).
 
-def transition(dt) -> ca.SX:
-    """Constant-velocity transition matrix Φ, (6, 6), for a step ``dt`` [s]."""
-    phi = ca.SX.eye(STATE_SIZE)
-    for k in (0, 2, 4):
-        phi[k, k + 1] = dt
-    return phi
+    Parameters
+    ----------
+    x : casadi.SX, (n, 1)
+    P : casadi.SX, (n, n)
+    phi, Q : casadi.SX, (n, n)
+        Transition matrix and process noise of the step (e.g. from
+        :class:`~sblsim.models.receiver.motion.ConstantVelocity`).
 
-
-def process_noise(dt, q_horizontal, q_vertical) -> ca.SX:
-    """White-noise-acceleration process noise Q, (6, 6) [m², m²/s, m²/s²], densities in [m²/s³]."""
-    q = ca.SX.zeros(STATE_SIZE, STATE_SIZE)
-    block = ca.vertcat(ca.horzcat(dt**3 / 3.0, dt**2 / 2.0), ca.horzcat(dt**2 / 2.0, dt))
-    for axis, density in enumerate((q_horizontal, q_horizontal, q_vertical)):
-        q[2 * axis:2 * axis + 2, 2 * axis:2 * axis + 2] = density * block
-    return q
-
-
-def predict(x: ca.SX, P: ca.SX, dt, q_horizontal, q_vertical) -> tuple[ca.SX, ca.SX]:
-    """``x ← Φx``, ``P ← ΦPΦᵀ + Q`` for a step ``dt`` [s] (P's upper triangle computed, mirrored: exactly
-    symmetric)."""
-    phi = transition(dt)
-    return ca.mtimes(phi, x), symmetric(ca.mtimes([phi, P, phi.T]) + process_noise(dt, q_horizontal, q_vertical))
+    Returns
+    -------
+    x, P : casadi.SX
+        (n, 1) and (n, n).
+    """
+    return ca.mtimes(phi, x), symmetric(ca.mtimes([phi, P, phi.T]) + Q)
 
 
 def cholesky(S: ca.SX) -> ca.SX:
@@ -175,42 +160,52 @@ def scalar_update(x: ca.SX, P: ca.SX, innovation, H: ca.SX, variance, use=1.0) -
     return ca.if_else(keep, x_new, x), ca.if_else(keep, P_new, P), nis
 
 
-def erfinv(y) -> ca.SX:
-    """Inverse error function for 0 ≤ y < 1 as a plain expression (the generated C has no ``erfinv``).
+def ekf_update(x: ca.SX, P: ca.SX, z: ca.SX, model, context, variances: ca.SX,
+               available=None) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """Extended Kalman update with a measurement model: ``z`` against ``model.h(x, context)``.
 
-    Winitzki's closed-form approximation (relative error about 2·10⁻³) refined
-    by three Newton steps on ``erf``: about 10⁻¹⁴ relative for y ≤ 1 − 10⁻⁴.
+    The model linearizes at ``x`` (``h`` and its casadi Jacobian ``H``), its
+    ``residual`` gives the innovation (angles wrapped), and :func:`update`
+    applies the rows with independent noises of variances ``variances``.
+
+    Parameters
+    ----------
+    x : casadi.SX, (n, 1)
+        Predicted state.
+    P : casadi.SX, (n, n)
+        Predicted covariance, symmetric.
+    z : casadi.SX, (m, 1)
+        Measurement.
+    model : MeasurementModel
+        A :class:`~sblsim.models.receiver.measurement.MeasurementModel`.
+    context
+        What ``model.h`` needs besides the state (the beacons, a transceiver position, ...).
+    variances : casadi.SX, (m, 1)
+        Diagonal of R (e.g. ``model.variances(x, context, p)``).
+    available : sequence of casadi.SX or None, optional
+        Per row, a flag (1: use the row; 0: the row becomes a zero row with a
+        zero innovation, an exact no-op) or None (always used). Default: every
+        row is used.
+
+    Returns
+    -------
+    x, P : casadi.SX
+        (n, 1) and (n, n), P exactly symmetric.
+    nis : casadi.SX
+        ``yᵀ S⁻¹ y`` of the rows used [1].
+
+    References
+    ----------
+    Bar-Shalom, Li, Kirubarajan 2001, Section 10.3 (the extended Kalman filter).
     """
-    a = 0.147
-    log_term = ca.log(1.0 - y * y)
-    t = 2.0 / (math.pi * a) + 0.5 * log_term
-    x = ca.sqrt(ca.sqrt(t * t - log_term / a) - t)
-    for _ in range(3):
-        x = x - (ca.erf(x) - y) * (0.5 * math.sqrt(math.pi)) * ca.exp(x * x)
-    return x
+    h, H = model.linearize(x, context)
+    y = model.residual(z, h)
+    if available is not None:
+        n = x.shape[0]
+        rows = [H[k, :] if a is None else ca.if_else(a, H[k, :], ca.SX.zeros(1, n)) for k, a in enumerate(available)]
+        y = ca.vertcat(*[y[k] if a is None else ca.if_else(a, y[k], 0.0) for k, a in enumerate(available)])
+        H = ca.vertcat(*rows)
+    return update(x, P, y, H, variances)
 
 
-def gate_threshold(probability) -> ca.SX:
-    """χ²(1) quantile of ``probability``: ``2 erfinv(probability)²``; infinite (no gate) for probability ≥ 1."""
-    q = 2.0 * erfinv(ca.fmin(probability, 1.0 - 1e-12)) ** 2
-    return ca.if_else(probability >= 1.0, ca.inf, q)
-
-
-def unscented_weights(n: int, alpha, beta, kappa) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """Scaled unscented weights: λ = α²(n + κ) − n; mean and covariance weights, each (2n + 1, 1)."""
-    lam = alpha**2 * (n + kappa) - n
-    rest = 0.5 / (n + lam)
-    wm = ca.vertcat(lam / (n + lam), *([rest] * (2 * n)))
-    wc = ca.vertcat(lam / (n + lam) + (1.0 - alpha**2 + beta), *([rest] * (2 * n)))
-    return wm, wc, lam
-
-
-def sigma_points(x: ca.SX, P: ca.SX, lam) -> list[ca.SX]:
-    """The 2n + 1 scaled sigma points ``x, x ± col_i(chol((n + λ) P))`` (lower Cholesky factor's columns)."""
-    n = x.shape[0]
-    L = cholesky((n + lam) * P)
-    return [x] + [x + L[:, i] for i in range(n)] + [x - L[:, i] for i in range(n)]
-
-
-__all__ = ["cholesky", "erfinv", "gate_threshold", "predict", "process_noise", "scalar_update", "sigma_points",
-           "solve_spd", "symmetric", "transition", "unscented_weights", "update"]
+__all__ = ["cholesky", "ekf_update", "linear_predict", "scalar_update", "solve_spd", "symmetric", "update"]

@@ -1,4 +1,4 @@
-"""Least-squares receiver: a per-slot Gauss-Newton multilateration fix, no filter.
+"""Least-squares receiver: a per-slot Levenberg-Marquardt multilateration fix, no filter.
 
 At every new slot (the packet handling of :mod:`sblsim.models.receiver.core`) the
 receiver fits its position to the held range of every beacon heard so far and
@@ -62,7 +62,7 @@ ITERATIONS, TOLERANCE = 50, 1e-6
 
 
 class LeastSquaresReceiver(Component):
-    """Per-slot weighted least-squares (Gauss-Newton) multilateration receiver."""
+    """Per-slot weighted least-squares (Levenberg-Marquardt) multilateration receiver."""
 
     name = "receiver_lsq"
     component_index = 3

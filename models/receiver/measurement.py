@@ -1,33 +1,119 @@
-"""The measurement model of the receivers: ranges to broadcast beacons plus depth.
+"""Measurement models: what a receiver measures, as objects the filters, the gate and the bound share.
 
-``h(x, b) = ‖p − b‖`` with ``p = (x[0], x[2], x[4])`` taken from the filter
-state ``x = [posX, velX, posY, velY, posZ, velZ]`` and ``b`` a broadcast
-beacon position; the depth reading measures ``x[4]``. The Jacobians
-``H = ∂h/∂x`` and ``∂h/∂b`` are never written by hand: casadi differentiates
-the expression, and the generated C evaluates it. The same model in position
-coordinates, ``h(p, b)`` with ``∂h/∂p``, serves the least-squares fixes.
+A measurement model describes ``z = h(x, context) + v``, ``v ~ N(0, R)``
+with R diagonal, for a filter state x laid out by a motion model
+(:mod:`sblsim.models.receiver.motion`) and a *context*: what h needs besides
+the state (the broadcast beacon positions of the ranges, the position of a
+transceiver, ...). Like FilterPy's ``Hx``, ``HJacobian`` and ``residual``
+arguments, or Stone Soup's measurement models, it gives (:class:`MeasurementModel`):
 
-:class:`RangeDepthModel` gathers it as the object the Kalman-type receivers,
-the accuracy bound and the accuracy maps share (as FilterPy passes ``Hx`` and
-``HJacobian``, or Stone Soup a measurement model): ``h``, its Jacobian and R,
-including the variance a range inherits from an uncertain beacon position.
+* ``dimension(context)``: m, the size of z;
+* ``h(x, context)``: the predicted measurement, (m, 1);
+* ``jacobian(x, context)`` and ``linearize(x, context)``: ``H = ∂h/∂x``,
+  (m, n), never written by hand: casadi differentiates the expression, and
+  the generated C evaluates it;
+* ``variances(x, context, p)``: the diagonal of R, (m, 1), from the
+  receiver's parameters ``p``;
+* ``residual(z, h)``: ``z − h`` with the angle rows wrapped to (−π, π].
+
+Two implementations: :class:`RangeDepthModel`, ranges to broadcast beacons
+plus depth (every built-in receiver, the accuracy bound and the accuracy
+maps), and :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`,
+slant range, azimuth and elevation from a transceiver (USBL). The variance a
+range inherits from an uncertain beacon position is written once,
+:meth:`RangeDepthModel.range_variance`.
 
 References
 ----------
 Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Eqs. for the
-EKF measurement model. Andersson, Gillis, Horn, Rawlings, Diehl, "CasADi: a
-software framework for nonlinear optimization and optimal control",
-Math. Prog. Comp. 11, 2019.
+EKF measurement model. Bar-Shalom, Li, Kirubarajan, Estimation with
+Applications to Tracking and Navigation, Wiley 2001, Section 10.3.
+Andersson, Gillis, Horn, Rawlings, Diehl, "CasADi: a software framework for
+nonlinear optimization and optimal control", Math. Prog. Comp. 11, 2019.
 """
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import casadi as ca
 
-STATE_SIZE = 6
-POSITION_INDEX = (0, 2, 4)
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
+
+#: State size and position entries of the receivers' motion model
+#: (:data:`~sblsim.models.receiver.motion.CONSTANT_VELOCITY`).
+STATE_SIZE = CONSTANT_VELOCITY.state_size
+POSITION_INDEX = CONSTANT_VELOCITY.position_index
+
+
+def wrap_angle(a):
+    """Angle ``a`` [rad] wrapped to (−π, π]: ``a − 2π ⌈(a − π) / 2π⌉`` (numbers or casadi expressions)."""
+    return a - 2.0 * math.pi * ca.ceil((a - math.pi) / (2.0 * math.pi))
+
+
+class MeasurementModel:
+    """Base of the measurement models (see the module documentation for the interface).
+
+    Subclasses implement :meth:`dimension`, :meth:`h` and :meth:`variances`,
+    and set :attr:`angles` (the rows that are angles); :meth:`linearize`
+    defaults to casadi's Jacobian of :meth:`h`, which a subclass may replace
+    by a cached casadi Function of both (the expression built once).
+
+    Parameters
+    ----------
+    motion : ConstantVelocity, optional
+        The motion model that lays out the state (default: the receivers').
+    """
+
+    #: Indices of the rows of z that are angles [rad] (wrapped by :meth:`residual`).
+    angles: tuple[int, ...] = ()
+
+    def __init__(self, motion=CONSTANT_VELOCITY) -> None:
+        self.motion = motion
+
+    @property
+    def state_size(self) -> int:
+        """n, the size of the state h reads (from the motion model)."""
+        return self.motion.state_size
+
+    def position(self, x) -> ca.SX:
+        """The position part of a state, (3, 1) [m] (from the motion model)."""
+        return self.motion.position(x)
+
+    def dimension(self, context) -> int:
+        """m, the size of z for this context."""
+        raise NotImplementedError
+
+    def h(self, x, context) -> ca.SX:
+        """Predicted measurement, (m, 1)."""
+        raise NotImplementedError
+
+    def linearize(self, x, context) -> tuple[ca.SX, ca.SX]:
+        """``h(x, context)`` (m, 1) and ``∂h/∂x`` (m, n) at ``x`` (casadi's derivative of :meth:`h`)."""
+        s = ca.SX.sym("x", self.state_size)
+        hs = self.h(s, context)
+        h, H = ca.substitute([hs, ca.jacobian(hs, s)], [s], [ca.SX(x)])
+        return h, H
+
+    def jacobian(self, x, context) -> ca.SX:
+        """``∂h/∂x``, (m, n)."""
+        return self.linearize(x, context)[1]
+
+    def variances(self, x, context, p: dict) -> ca.SX:
+        """Diagonal of R, (m, 1), from the receiver's parameters ``p``."""
+        raise NotImplementedError
+
+    def covariance(self, x, context, p: dict) -> ca.SX:
+        """R, (m, m), diagonal."""
+        return ca.diag(self.variances(x, context, p))
+
+    def residual(self, z, h):
+        """``z − h``, (m, 1), the rows in :attr:`angles` wrapped to (−π, π] [rad]."""
+        y = z - h
+        if not self.angles:
+            return y
+        return ca.vertcat(*[wrap_angle(y[k]) if k in self.angles else y[k] for k in range(y.shape[0])])
 
 
 def _range_model(name: str, size: int, position_index: tuple[int, ...]) -> ca.Function:
@@ -58,31 +144,65 @@ def beacon_range_function() -> ca.Function:
     return ca.Function("sblsim_beacon_range", [p, b], [ca.jacobian(ca.norm_2(p - b), b).T], ["p", "b"], ["dh_db"])
 
 
-class RangeDepthModel:
-    """Ranges to broadcast beacons plus depth: ``z = [‖p − b_1‖, …, ‖p − b_m‖, d]``.
+class RangeDepthModel(MeasurementModel):
+    """Ranges to broadcast beacons plus depth: ``z = [‖p − b_1‖, …, ‖p − b_m‖, d]`` [m].
 
-    Methods take casadi values (SX or MX) or numbers; beacons are (3, 1)
-    vectors, one per range.
+    The context is the sequence of beacon positions, each (3, 1) [m] NED, one
+    per range; the depth reading measures the Down position. Methods take
+    casadi values (SX) or numbers. R is ``diag(σ_r², …, σ_r², σ_d²)`` from
+    the parameters ``sigma_range`` and ``sigma_depth`` (the paper's); the
+    receivers that account for the broadcast beacons' uncertainty use
+    :meth:`range_variance` for a range instead.
+
+    Parameters
+    ----------
+    motion : ConstantVelocity, optional
+        The state layout; only the built-in one (the range Function is
+        compiled for :data:`~sblsim.models.receiver.motion.CONSTANT_VELOCITY`).
+
+    Raises
+    ------
+    ValueError
+        If ``motion`` lays the state out differently.
+
+    References
+    ----------
+    Cario et al., Sensors 21(3):762, 2021, Section 4.3.
     """
 
     state_size = STATE_SIZE
     depth_row = (0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
 
-    @staticmethod
-    def position(x):
-        """The position part of a filter state, (3, 1)."""
-        return ca.vertcat(*[x[i] for i in POSITION_INDEX])
+    def __init__(self, motion=CONSTANT_VELOCITY) -> None:
+        if motion.state_size != STATE_SIZE or tuple(motion.position_index) != POSITION_INDEX:
+            raise ValueError(f"RangeDepthModel: the state must be laid out as {STATE_SIZE} entries with the "
+                             f"position at {POSITION_INDEX}, got {motion.state_size} and {motion.position_index}")
+        super().__init__(motion)
+
+    def dimension(self, context) -> int:
+        """m + 1: the ranges and the depth."""
+        return len(context) + 1
+
+    def depth(self, x) -> ca.SX:
+        """Predicted depth reading: the Down position of the state [m]."""
+        return x[self.motion.position_index[2]]
 
     def h(self, x, beacons) -> ca.SX:
         """Predicted measurement ``[‖p − b_i‖ …, p_z]``, (m + 1, 1) [m]."""
-        return ca.vertcat(*[range_function()(x, b)[0] for b in beacons], x[4])
+        return ca.vertcat(*[range_function()(x, b)[0] for b in beacons], self.depth(x))
+
+    def linearize(self, x, beacons) -> tuple[ca.SX, ca.SX]:
+        """``h`` (m + 1, 1) and ``∂h/∂x`` (m + 1, 6): one casadi range Function call per beacon, the depth row."""
+        rows = [self.range_row(x, b) for b in beacons]
+        return (ca.vertcat(*[r[0] for r in rows], self.depth(x)),
+                ca.vertcat(*[r[1] for r in rows], self.depth_jacobian()))
 
     def jacobian(self, x, beacons) -> ca.SX:
         """``∂h/∂x``, (m + 1, 6): the casadi-derived range rows and the depth row."""
         return ca.vertcat(*[range_function()(x, b)[1].T for b in beacons], self.depth_jacobian())
 
     def range_row(self, x, beacon) -> tuple[ca.SX, ca.SX]:
-        """One range: its prediction and its Jacobian row (1, 6)."""
+        """One range: its prediction [m] and its Jacobian row (1, 6)."""
         h, H = range_function()(x, beacon)
         return h, H.T
 
@@ -90,33 +210,69 @@ class RangeDepthModel:
         """``∂d/∂x``, (1, 6)."""
         return ca.horzcat(*self.depth_row)
 
-    @staticmethod
-    def beacon_variance(position, beacon, variance) -> ca.SX:
-        """Variance a range inherits from an isotropic beacon-position error of ``variance`` per axis [m²]:
-        ``(∂h/∂b) (variance I) (∂h/∂b)ᵀ``, the Jacobian from casadi (= variance, for a unit vector)."""
-        g = beacon_range_function()(position, beacon)
-        return variance * ca.dot(g, g)
+    def variances(self, x, beacons, p: dict) -> ca.SX:
+        """``[σ_r², …, σ_r², σ_d²]``, (m + 1, 1) [m²], from ``p["sigma_range"]`` and ``p["sigma_depth"]``."""
+        return ca.vertcat(*([p["sigma_range"] ** 2] * len(beacons)), p["sigma_depth"] ** 2)
 
     @staticmethod
-    def attitude_variance(position, beacon, arm, variance) -> ca.SX:
-        """Variance a range inherits from an attitude error of ``variance`` [rad²] per axis, the beacon at
-        lever arm ``arm`` (3, 1) [m] from the platform reference: the beacon moves by ``δθ × arm``, so
-        ``variance · ‖arm × (∂h/∂b)ᵀ‖²`` (small angles; ∂h/∂b from casadi)."""
-        g = beacon_range_function()(position, beacon)
-        moved = ca.cross(ca.vertcat(arm[0], arm[1], arm[2]), g)
-        return variance * ca.dot(moved, moved)
+    def range_variance(position, beacon, noise_variance, position_variance=None, attitude_variance=None,
+                       arm=None) -> ca.SX:
+        """Variance of a range from a beacon whose broadcast position is uncertain [m²].
 
-    @staticmethod
-    def range_variance(sigma_range, position, beacon, gps_sigma, attitude_sigma, arm) -> ca.SX:
-        """Effective variance of a range from an uncertain broadcast beacon [m²].
+        A beacon position error δb moves the range by ``g δb``, ``g = ∂h/∂b``
+        (casadi); the errors are an isotropic position error of
+        ``position_variance`` per axis (GPS, or any isotropic stand-in) and a
+        small platform rotation δθ of ``attitude_variance`` per axis, which
+        moves the beacon at lever arm ``a`` by ``δθ × a``, so the range by
+        ``δθ · (a × gᵀ)``:
 
-        ``σ_r² + (∂h/∂b) Σ_b (∂h/∂b)ᵀ`` with ``Σ_b = (σ_GPS² + (σ_att · arm)²) I``:
-        the GPS error of the platform and the attitude error (small angles, [rad])
-        times the beacon's arm, taken isotropic per axis.
+        ``noise_variance + position_variance ‖g‖² + attitude_variance ‖a × gᵀ‖²``
+
+        (a term whose variance is None is left out). ``‖g‖ = 1`` away from
+        the beacon.
+
+        Parameters
+        ----------
+        position, beacon : casadi.SX or array, (3, 1)
+            Diver and beacon positions [m], NED.
+        noise_variance : casadi.SX or float
+            Variance of the range itself [m²] (σ_r², or σ_r² + σ_GPS² when the GPS term is folded in).
+        position_variance : casadi.SX or float, optional
+            Isotropic beacon-position variance per axis [m²].
+        attitude_variance : casadi.SX or float, optional
+            Attitude variance per axis [rad²]; needs ``arm``.
+        arm : casadi.SX or array, (3, 1), optional
+            The beacon's lever arm in NED [m].
+
+        Returns
+        -------
+        casadi.SX
+            The range's variance [m²].
+
+        Raises
+        ------
+        ValueError
+            If ``attitude_variance`` is given without ``arm``.
         """
-        return sigma_range**2 + RangeDepthModel.beacon_variance(position, beacon,
-                                                                gps_sigma**2 + (attitude_sigma * arm) ** 2)
+        g = beacon_range_function()(position, beacon)
+        total = noise_variance
+        if position_variance is not None:
+            total = total + position_variance * ca.dot(g, g)
+        if attitude_variance is not None:
+            if arm is None:
+                raise ValueError("range_variance: an attitude variance needs the beacon's lever arm")
+            moved = ca.cross(ca.vertcat(arm[0], arm[1], arm[2]), g)
+            total = total + attitude_variance * ca.dot(moved, moved)
+        return total
+
+    def fresh_range_variance(self, x, beacon, p: dict) -> ca.SX:
+        """A fresh range's variance in R [m²] from the receiver's parameters: :meth:`range_variance` with σ_r²
+        and an isotropic beacon error ``σ_GPS² + (σ_att · arm)²`` per axis (``beacon_gps_sigma`` [m],
+        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m]: the attitude error taken isotropic)."""
+        attitude = p["beacon_attitude_sigma_deg"] * math.pi / 180.0
+        return self.range_variance(self.position(x), beacon, p["sigma_range"] ** 2,
+                                   p["beacon_gps_sigma"] ** 2 + (attitude * p["beacon_arm"]) ** 2)
 
 
-__all__ = ["POSITION_INDEX", "RangeDepthModel", "STATE_SIZE", "beacon_range_function", "position_range_function",
-           "range_function"]
+__all__ = ["MeasurementModel", "POSITION_INDEX", "RangeDepthModel", "STATE_SIZE", "beacon_range_function",
+           "position_range_function", "range_function", "wrap_angle"]

@@ -1,6 +1,7 @@
 """``ukf``: an unscented Kalman filter with the measurement model and gate of ``ekf-seq``.
 
-Scaled sigma points (α, β, κ; van der Merwe) of the predicted state carry the
+Scaled sigma points (α, β, κ; van der Merwe:
+:class:`~sblsim.models.receiver.sigma_points.MerweScaledSigmaPoints`) of the predicted state carry the
 measurement ``z = [‖p − b‖, d]`` of the fresh range and the depth through
 the same :class:`~sblsim.models.receiver.measurement.RangeDepthModel`; the range's
 variance adds the broadcast beacon's uncertainty as in ``ekf-seq``. The range
@@ -22,16 +23,9 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import (
-    KalmanReceiver,
-    beacon_parameters,
-    filter_parameters,
-    fresh_range,
-    gate,
-    gate_parameters,
-    take_packet,
-)
-from sblsim.models.receiver.ekf_seq import fresh_range_variance
+from sblsim.models.receiver.core import KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, take_packet
+from sblsim.models.receiver.gate import gate, gate_parameters
+from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 
 
 def unscented_update(x, P, points, wm, wc, z_points, z, R) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
@@ -77,12 +71,13 @@ class UnscentedReceiver(KalmanReceiver):
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
         state, P = x["x"], x["P"]
-        wm, wc, lam = kalman.unscented_weights(6, p["alpha"], p["beta"], p["kappa"])
-        points = kalman.sigma_points(state, P, lam)
-        variance = fresh_range_variance(cls, state, beacon, p)
+        sigma = MerweScaledSigmaPoints(cls.motion.state_size, p["alpha"], p["beta"], p["kappa"])
+        wm, wc = sigma.weights()
+        points = sigma.points(state, P)
+        variance = m.fresh_range_variance(state, beacon, p)
         joint = unscented_update(state, P, points, wm, wc, [m.h(c, [beacon]) for c in points],
                                  ca.vertcat(rng, u["depth"]), ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
-        depth = unscented_update(state, P, points, wm, wc, [c[4] for c in points], u["depth"],
+        depth = unscented_update(state, P, points, wm, wc, [m.depth(c) for c in points], u["depth"],
                                  ca.SX(p["sigma_depth"] ** 2))
         y, S = joint[2], joint[3]
         checked = gate(y[0], S[0, 0], fresh, x, u, p)

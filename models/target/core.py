@@ -14,7 +14,7 @@ and ``walk_q_vertical`` [m²/s³], discretized exactly at every sample
 constant velocity between samples, from a start drawn from
 ``N([r, 0, depth, 0, v, 0], diag(p0_position², p0_velocity²))``. With the
 receiver's q and P0 equal to these, the posterior Cramér-Rao bound
-(:mod:`sblsim.models.receiver.bound`) is a true bound on its mean squared error.
+(:mod:`sblsim.models.bound`) is a true bound on its mean squared error.
 
 References
 ----------

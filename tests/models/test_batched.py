@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sblsim.models import Acoustics, LeastSquaresReceiver, Platform, Receiver, Target
+from sblsim.models import Acoustics, LeastSquaresReceiver, PaperEKF, Platform, Target
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.run import run_batch, with_replicates
@@ -60,7 +60,7 @@ def _packet_inputs(t, reps):
             "depth": diver[:, 2] + 0.01 * np.cos(k + reps)}
 
 
-INPUTS = {Platform: None, Target: None, Acoustics: _acoustics_inputs, Receiver: _packet_inputs,
+INPUTS = {Platform: None, Target: None, Acoustics: _acoustics_inputs, PaperEKF: _packet_inputs,
           LeastSquaresReceiver: _packet_inputs}
 #: Scalar parameters of the invariance runs (the stochastic and event-driven paths exercised).
 COMMON = {
@@ -69,7 +69,7 @@ COMMON = {
              "depth_sigma": 0.05},
     Acoustics: {**SEEDS, "sigma_range": 0.5, "loss_pct": 25.0, "outlier_pct": 30.0, "slot_period": 0.2,
                 "sound_speed_profile": "ctd:11E101663_20120821_122817"},
-    Receiver: {"x0_x": 14.0, "x0_z": 5.0},
+    PaperEKF: {"x0_x": 14.0, "x0_z": 5.0},
     LeastSquaresReceiver: {**SEEDS, "x0_x": 14.0, "x0_z": 5.0},
 }
 MODELS = list(INPUTS)
@@ -148,7 +148,7 @@ LEVELS = {
         {"cell": 2, "speed": 0.5, "depth": 5.0, "radius": 15.0, "depth_sigma": 0.01, "turn_interval": 1.0},
         {"cell": 5, "speed": 1.5, "depth": 12.0, "radius": 8.0, "depth_sigma": 0.2, "turn_interval": 0.5},
     ],
-    Receiver: [
+    PaperEKF: [
         {"sigma_range": 0.1, "sigma_depth": 0.01, "q_horizontal": 0.01, "q_vertical": 0.001, "p0_position": 1.0,
          "p0_velocity": 0.5, "x0_x": 14.0},
         {"sigma_range": 1.0, "sigma_depth": 0.1, "q_horizontal": 0.5, "q_vertical": 0.01, "p0_position": 5.0,
@@ -161,7 +161,7 @@ LEVELS = {
 }
 CASES = [(Platform, {"gps_model": "white"}), (Platform, {"gps_model": "gauss-markov"}),
          (Acoustics, {}), (Target, {"trajectory": "random"}), (Target, {"trajectory": "spiral"}),
-         (Receiver, {}), (LeastSquaresReceiver, {})]
+         (PaperEKF, {}), (LeastSquaresReceiver, {})]
 
 
 @pytest.mark.parametrize("model,extra", CASES, ids=lambda c: getattr(c, "name", None) or "-".join(map(str, c.values())))
@@ -214,7 +214,7 @@ def test_parameter_matrix_columns_are_the_scalar_vectors():
     (Platform, {"baseline": np.array([1.0, 0.0])}, 2, r"platform\.baseline.*\(0, 1000\]"),
     (Platform, {"beaufort": np.array([2, 9])}, 2, r"platform\.beaufort.*\[0, 8\]"),
     (Platform, {"beaufort": np.array([2.0, 2.5])}, 2, r"platform\.beaufort: expected a whole number"),
-    (Receiver, {"sigma_range": np.array([0.1, np.nan])}, 2, r"receiver\.sigma_range.*not finite"),
+    (PaperEKF, {"sigma_range": np.array([0.1, np.nan])}, 2, r"receiver\.sigma_range.*not finite"),
     (Target, {"depth": np.array([5.0, -1.0, 5.0])}, 3, r"target\.depth.*\[0, 11000\]"),
     (LeastSquaresReceiver, {"cell": np.array([1, -1])}, 2, r"receiver_lsq\.cell"),
 ])

@@ -1,4 +1,4 @@
-"""The accuracy limit (models/receiver/bound.py) against independent computations.
+"""The accuracy limit (models/bound.py) against independent computations.
 
 * Linear-Gaussian case: with the measurement Jacobians fixed along a given
   path, the system is linear and Gaussian, and the PCRB recursion must equal
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from sblsim.models.receiver.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
+from sblsim.models.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
 from tests.models.test_receiver_filterpy import phi, white_noise_q
 
 EPS = 1e-6

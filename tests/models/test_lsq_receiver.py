@@ -13,7 +13,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
-from sblsim.models.receiver import LeastSquaresReceiver, Receiver, receiver_interface
+from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
 from tests.helpers import Core
 
@@ -355,7 +355,7 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     def key(v):
         return (v.name, v.causality, v.type, v.unit)
 
-    lsq, ekf = LeastSquaresReceiver.variables(4), Receiver.variables(4)
+    lsq, ekf = LeastSquaresReceiver.variables(4), PaperEKF.variables(4)
     signals = [key(v) for v in lsq if v.causality != "parameter"]
     assert signals == [key(v) for v in ekf if v.causality != "parameter"]
     assert signals == [key(v) for v in receiver_interface()]
@@ -377,7 +377,7 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
 def test_both_receivers_share_the_packet_handling():
     """Same packet stream (late tx epochs, a lost packet, a repeated packet, a bad id): same held state."""
     x0 = dict(x0_x=3.0, x0_y=-2.0, x0_z=5.0)
-    ekf = Core(Receiver, x0, replicates=[0, 1]).initialize(0.0)
+    ekf = Core(PaperEKF, x0, replicates=[0, 1]).initialize(0.0)
     lsq = Core(LeastSquaresReceiver, x0, replicates=[0, 1]).initialize(0.0)
     beacons = cross()
     stream = [  # (seq, beacon_id, tx_time, range, valid), each on the inputs for 4 steps of 0.25 s

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from sblsim.models.receiver import Receiver, ekf, kalman, position_range_function, range_function
+from sblsim.models.receiver import PaperEKF, ekf, kalman, position_range_function, range_function
 from sblsim.models.receiver import multilateration as ml
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from tests.helpers import Core
 
 POS = [0, 2, 4]  # position entries of the state [x, vx, y, vy, z, vz]
@@ -207,7 +208,7 @@ def _ekf_case(seed=7):
 
 
 def _predict_function():
-    return casadi_function(lambda x, P, dt, qh, qv: kalman.predict(x, P, dt, qh, qv), (6, 1), (6, 6), (1, 1), (1, 1),
+    return casadi_function(CONSTANT_VELOCITY.predict, (6, 1), (6, 6), (1, 1), (1, 1),
                            (1, 1))
 
 
@@ -225,11 +226,11 @@ def test_predict_matches_numpy():
     np.testing.assert_allclose(P, ref_phi(dt) @ P0 @ ref_phi(dt).T + ref_q(dt, qh, qv), rtol=1e-14, atol=1e-15)
     # hand checks: position x moves by v dt; Q of the Down axis for dt = 2 s is q_v [[8/3, 2], [2, 2]]
     assert x[0, 0] == pytest.approx(x0[0] + dt * x0[1], rel=1e-15)
-    Q = np.array(ca.DM(kalman.process_noise(2.0, qh, qv)))
+    Q = np.array(ca.DM(CONSTANT_VELOCITY.process_noise(2.0, qh, qv)))
     np.testing.assert_allclose(Q[4:, 4:], qv * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
     np.testing.assert_allclose(Q[:2, :2], qh * np.array([[8 / 3, 2.0], [2.0, 2.0]]), rtol=1e-15)
     assert np.all(Q[:2, 2:] == 0.0) and np.all(Q[2:4, 4:] == 0.0)
-    np.testing.assert_array_equal(np.array(ca.DM(kalman.transition(2.0))), ref_phi(2.0))
+    np.testing.assert_array_equal(np.array(ca.DM(CONSTANT_VELOCITY.transition(2.0))), ref_phi(2.0))
 
 
 def test_cholesky_and_solve_spd_match_numpy():
@@ -533,7 +534,7 @@ def _x0_P0(params=RX):
 
 
 def test_initial_outputs_are_the_prior_and_never_nan():
-    core = Core(Receiver, RX, replicates=[0, 1])
+    core = Core(PaperEKF, RX, replicates=[0, 1])
     core.initialize(0.0)
     out = core.outputs
     x0, P0 = _x0_P0()
@@ -547,7 +548,7 @@ def test_initial_outputs_are_the_prior_and_never_nan():
 def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_tx_time():
     T, r = 1.0, 4
     dt = T / r
-    core = Core(Receiver, RX, replicates=[0])
+    core = Core(PaperEKF, RX, replicates=[0])
     core.initialize(0.0)
     x_ref, P_ref = _x0_P0()
     phi, Q = ref_phi(dt), ref_q(dt, RX["q_horizontal"], RX["q_vertical"])
@@ -601,7 +602,7 @@ def test_lost_packet_and_unknown_beacon_keep_the_held_ranges():
     beacons = cross(1.0, 1.0)
     true_ranges = np.linalg.norm(truth - beacons, axis=1)
     params = dict(RX, x0_x=6.5, x0_y=-4.5, x0_z=6.2, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0)
-    core = Core(Receiver, params, replicates=[0, 1])
+    core = Core(PaperEKF, params, replicates=[0, 1])
     core.initialize(0.0)
     x_ref, P_ref = _x0_P0(params)
     phi, Q = ref_phi(1.0), ref_q(1.0, RX["q_horizontal"], RX["q_vertical"])
@@ -651,7 +652,7 @@ def test_instrumentation_fix_needs_three_ranges():
     truth = np.array([6.0, 4.0, 7.0])
     beacons = cross(20.0, 1.0)
     ranges = np.linalg.norm(truth - beacons, axis=1)
-    core = Core(Receiver, dict(RX, x0_x=0.0, x0_y=0.0, x0_z=0.0, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0),
+    core = Core(PaperEKF, dict(RX, x0_x=0.0, x0_y=0.0, x0_z=0.0, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0),
                 replicates=[0])  # the estimate sits at the unheard beacons' placeholder (0, 0, 0)
     core.initialize(0.0)
     for k in range(4):
@@ -678,7 +679,7 @@ def test_instrumentation_fix_matches_scipy_within_its_stopping_tolerance():
     ranges = np.linalg.norm(truth[:, None, :] - beacons, axis=-1) + sr * rng.normal(size=(B, 4))
     depth = truth[:, 2] + sd * rng.normal(size=B)
     start = truth + rng.normal(scale=2.0, size=(B, 3))
-    core = Core(Receiver, RX, replicates=range(B))
+    core = Core(PaperEKF, RX, replicates=range(B))
     core.values.update(x0_x=start[:, 0], x0_y=start[:, 1], x0_z=start[:, 2])  # per-replicate FMU values
     core.initialize(0.0)
     lost = rng.uniform(size=B) < 0.3  # some replicates lose beacon 4: the fix uses three ranges
@@ -711,7 +712,7 @@ def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parame
                p0_position=np.array([1.0, 3.0, 0.5]), p0_velocity=np.array([0.5, 0.1, 1.0]),
                x0_x=np.array([2.0, -5.0, 9.0]), x0_y=np.array([-14.0, 3.0, 1.0]), x0_z=np.array([5.0, 8.0, 2.0]),
                x0_vx=np.array([0.4, 0.0, -0.2]), x0_vy=np.array([0.0, 0.1, 0.3]), x0_vz=np.array([0.0, 0.0, 0.05]))
-    core = Core(Receiver, RX, replicates=range(B))
+    core = Core(PaperEKF, RX, replicates=range(B))
     core.values.update(per)  # per-replicate FMU values
     core.initialize(0.0)
     ref = []

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.models.receiver.bound import horizontal_std
+from sblsim.models.bound import horizontal_std
 from sblsim.orchestrator.analysis import compute
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.cli import main

@@ -148,7 +148,7 @@ def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     reference on a record with everything the metrics skip: estimates missing, no fix, covariances not
     positive-definite, lost packets, foreign beacon ids, the gate at work and a diverged run; the columns are
     strided views of one (N, 24, B) array, as the compiled master records them."""
-    from sblsim.models.receiver.bound import FIXED, pcrb, pcrb_inputs
+    from sblsim.models.bound import FIXED, pcrb, pcrb_inputs
     from sblsim.orchestrator.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
 
     rng = np.random.default_rng(7)

@@ -82,7 +82,7 @@ def test_the_example_is_the_filter_its_docstring_describes(local):
 @pytest.mark.parametrize("text, message", [
     ("x = 1\n", "defines 0 model classes (none); it must define exactly one receiver"),
     ("import no_such_module\n", "cannot import"),
-    ("from sblsim.models.receiver import Receiver\nclass A(Receiver):\n    name = 'receiver'\n",
+    ("from sblsim.models.receiver import PaperEKF\nclass A(PaperEKF):\n    name = 'receiver'\n",
      "must be 'receiver_' + letters, digits or '_', and not a built-in's"),
     ("from sblsim.models.target import Target\nclass A(Target):\n    name = 'receiver_target'\n",
      "does not match the receiver interface: missing input 'packet_seq'"),

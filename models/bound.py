@@ -3,7 +3,7 @@ Fisher information of one round of fresh ranges plus depth (the accuracy maps).
 
 **PCRB.** For the receivers' motion model, a constant velocity driven by
 white-noise acceleration (``x_k+1 = Φ x_k + w_k``, ``w_k ~ N(0, Q(Δt))`` with
-densities q_h, q_v, :mod:`sblsim.models.receiver.kalman`), and measurements
+densities q_h, q_v, :class:`~sblsim.models.receiver.motion.ConstantVelocity`), and measurements
 ``z = h(x) + v`` with Gaussian ``v``, the information matrix ``J_k`` of any
 estimator's error obeys (Tichavský, Muravchik, Nehorai, "Posterior
 Cramér-Rao bounds for discrete-time nonlinear filtering", IEEE Trans.
@@ -49,19 +49,25 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.measurement import STATE_SIZE, RangeDepthModel, position_range_function
+from sblsim.models.receiver.measurement import RangeDepthModel, position_range_function
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 
-MODEL = RangeDepthModel()
+#: The motion model of the bound (the receivers').
+MOTION = CONSTANT_VELOCITY
+#: The measurement model of the bound: a fresh range and the depth.
+MODEL = RangeDepthModel(MOTION)
+STATE_SIZE = MOTION.state_size
 
 
 def effective_range_variance(position, beacon, arm, noise_variance, attitude_variance):
-    """Variance of a fresh range from a beacon whose position is broadcast with GPS and attitude errors [m²].
+    """Variance of a fresh range from a beacon whose position is broadcast with GPS and attitude errors [m²]:
+    :meth:`RangeDepthModel.range_variance` with the GPS term folded into ``noise_variance``.
 
     ``noise_variance`` is ``σ_r² + σ_GPS²`` (an isotropic GPS error adds σ_GPS²
-    whatever the direction), ``attitude_variance`` σ_att² [rad²] per axis, ``arm``
+    whatever the direction: ``‖∂h/∂b‖ = 1``), ``attitude_variance`` σ_att² [rad²] per axis, ``arm``
     (3) the beacon's lever arm in NED [m].
     """
-    return noise_variance + MODEL.attitude_variance(position, beacon, arm, attitude_variance)
+    return MODEL.range_variance(position, beacon, noise_variance, attitude_variance=attitude_variance, arm=arm)
 
 
 def information_update(P: ca.SX, H: ca.SX, variance, use) -> ca.SX:
@@ -89,9 +95,9 @@ def bound_step() -> ca.Function:
     noise, attitude, d_var, slot, received = (ca.SX.sym(n) for n in ("noise_variance", "attitude_variance",
                                                                        "depth_variance", "slot", "received"))
     x = ca.SX.zeros(STATE_SIZE)
-    for k, i in enumerate((0, 2, 4)):
+    for k, i in enumerate(MOTION.position_index):
         x[i] = position[k]
-    _, P = kalman.predict(x, ca.reshape(B, STATE_SIZE, STATE_SIZE), dt, qh, qv)
+    _, P = MOTION.predict(x, ca.reshape(B, STATE_SIZE, STATE_SIZE), dt, qh, qv)
     P = information_update(P, MODEL.depth_jacobian(), d_var, slot)
     _, H = MODEL.range_row(x, beacon)
     r_var = effective_range_variance(position, beacon, arm, noise, attitude)
@@ -174,7 +180,7 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
         s = steps[k].T
         bound = step(bound, f["dt"], f["q_horizontal"], f["q_vertical"], s[0:3], s[3:6], s[6:9], f["noise_variance"],
                      f["attitude_variance"], f["depth_variance"], s[9:10], s[10:11]).full()
-        out[k] = np.sqrt(bound[0] + bound[2 * STATE_SIZE + 2] + bound[4 * STATE_SIZE + 4])
+        out[k] = np.sqrt(sum(bound[i * (STATE_SIZE + 1)] for i in MOTION.position_index))
     return out
 
 
