@@ -165,8 +165,7 @@ def _run(args: argparse.Namespace) -> int:
     else:
         engine = args.engine or "local"
         cfg = load_config(args.scenario, overrides, args.seed)
-    out = args.out or Path("results") / cfg["run"]["scenario"]
-    _check_output(out, args.force, "summary.json", "run")
+    out = _output(args.out, Path("results") / cfg["run"]["scenario"], args.force, "summary.json", "run")
     try:
         result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
                      connections=connections)
@@ -225,8 +224,8 @@ def _compare(args: argparse.Namespace) -> int:
 
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
-    out = args.out or Path("results") / f"compare_{_output_name(args.scenario)}"
-    _check_output(out, args.force, "compare.csv", "comparison")
+    out = _output(args.out, Path("results") / f"compare_{_output_name(args.scenario)}", args.force, "compare.csv",
+                  "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
                     args.fmu_dir, progress=sys.stderr.isatty())
     title = (f"{args.scenario}: {args.replicates} replicates per receiver, seed "
@@ -245,8 +244,7 @@ def _map(args: argparse.Namespace) -> int:
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
-    out = args.out or Path("results") / f"map_{_output_name(args.scenario)}"
-    _check_output(out, args.force, "map.csv", "map")
+    out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map")
     labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
                                                    compare)
     for label, m in zip(labels, maps):
@@ -342,6 +340,25 @@ def _fmus(args: argparse.Namespace) -> int:
         for problem in problems:
             print(f"  {problem}")
     return 1 if failures else 0
+
+
+def _output(given: Path | None, default: Path, force: bool, marker: str, what: str) -> Path:
+    """The output folder of a command: ``--out`` as given, or the default folder.
+
+    An earlier result is never replaced silently. A folder given with ``--out`` that holds one (its
+    ``marker`` file) needs ``--force``; the default folder, when it holds one, is kept and the next free
+    numbered folder beside it is used (``results/semicircle-2``), said on the command line, so that the
+    documented commands run one after the other. Checked before any work (:func:`_check_output`).
+    """
+    if given is not None or force or not (default / marker).exists():
+        out = given or default
+    else:
+        out = next(default.with_name(f"{default.name}-{k}") for k in range(2, 1_000_000)
+                   if not (default.with_name(f"{default.name}-{k}") / marker).exists())
+        print(f"note: {default}/ holds an earlier {what} (kept); writing to {out}/ (--out DIR to choose, --force "
+              "to replace)", file=sys.stderr)
+    _check_output(out, force, marker, what)
+    return out
 
 
 def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
