@@ -293,10 +293,13 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
     from sblsim.orchestrator.analysis import compute, write
 
     _check_writable(out or directory)
-    analysis = compute(directory, metric, order)
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    analysis = compute(directory, metric, order, progress=say)
     for note in analysis.warnings:
         print(f"note: {note}", file=sys.stderr)
-    target = write(analysis, out or directory)
+    target = write(analysis, out or directory, progress=say)
     for scenario, result in analysis.fits.items():
         effects = result.effects
         significant = effects[effects["p_value"] < analysis.alpha].sort_values("t", key=abs, ascending=False)

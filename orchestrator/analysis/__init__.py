@@ -70,6 +70,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import pandas as pd
 
@@ -122,7 +123,8 @@ class Analysis:
     warnings: list[str]
 
 
-def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, alpha: float = 0.05) -> Analysis:
+def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, alpha: float = 0.05,
+            progress: Callable[[str], None] | None = None) -> Analysis:
     """Read a campaign directory and fit every scenario (nothing is written).
 
     Parameters
@@ -135,6 +137,8 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
         Highest interaction order, 1 .. number of factors.
     alpha : float
         Significance level [-].
+    progress : callable, optional
+        Called with one line per step of the work (the fits take seconds each on a large study).
 
     Returns
     -------
@@ -159,7 +163,10 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
     if study.replicates == 1 or (runs.groupby(["scenario", "cell"]).size() == 1).all():
         notes.append("no replicates: there is no pure error; the residual error (if any) comes from the terms "
                      "left out of the model")
-    for scenario in scenarios:
+    for k, scenario in enumerate(scenarios, 1):
+        if progress:
+            progress(f"analyze: fitting {scenario} ({k}/{len(scenarios)}, {int((runs['scenario'] == scenario).sum())} "
+                     "runs)")
         frame = runs[runs["scenario"] == scenario]
         result = fit(frame, names, metric, order, alpha, scenario)
         fits[scenario] = result
@@ -209,8 +216,10 @@ def analyze(directory: Path | str, out: Path | str | None = None, metric: str = 
     return write(analysis, Path(out) if out is not None else Path(directory))
 
 
-def write(analysis: Analysis, out: Path | str) -> Path:
-    """Write the outputs of an :class:`Analysis` into ``out`` atomically; return ``out``."""
+def write(analysis: Analysis, out: Path | str, progress: Callable[[str], None] | None = None) -> Path:
+    """Write the outputs of an :class:`Analysis` into ``out`` atomically; return ``out``.
+
+    ``progress``, if given, is called with one line per scenario's figures."""
     from sblsim.orchestrator.analysis.plots import save_figures
 
     out = Path(out).absolute()
@@ -220,7 +229,9 @@ def write(analysis: Analysis, out: Path | str) -> Path:
         factors = analysis.study.factors
         figures: dict[str, dict[str, str]] = {}
         used: set[str] = set()
-        for scenario, result in analysis.fits.items():
+        for k, (scenario, result) in enumerate(analysis.fits.items(), 1):
+            if progress:
+                progress(f"analyze: figures of {scenario} ({k}/{len(analysis.fits)})")
             stem = _file_stem(scenario, used)
             frame = analysis.runs[analysis.runs["scenario"] == scenario]
             paths = save_figures(result, frame, factors, fig_dir, stem)
