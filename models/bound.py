@@ -1,5 +1,5 @@
 """The accuracy limit: the posterior Cramér-Rao bound (PCRB) along a trajectory, and the
-Fisher information of one round of fresh ranges plus depth (the accuracy maps).
+Fisher information of one measurement (the accuracy maps), both over a measurement model.
 
 **PCRB.** For the receivers' motion model, a constant velocity driven by
 white-noise acceleration (``x_k+1 = Φ x_k + w_k``, ``w_k ~ N(0, Q(Δt))`` with
@@ -21,10 +21,22 @@ It is a true bound on a trajectory drawn from the model (``random-walk``
 with the receiver's q and P0 equal to the walk's); on a deterministic path it
 is the accuracy of an ideal filter using the same motion model.
 
-The measurement model is the fresh-range-plus-depth model of ``ekf-seq``
-(:class:`~sblsim.models.receiver.measurement.RangeDepthModel`): at every slot the
-depth (variance σ_d²), and the fresh range of a received packet with its
-effective variance (:func:`effective_range_variance`)
+**Written over models.** The bound and the maps take the measurement model
+as an object (:mod:`sblsim.models.receiver.measurement`), and its motion
+model (``model.motion``) sets the state size, the prediction and where the
+position sits. :func:`fisher_information` is ``Hᵀ R⁻¹ H = Σ_k H_kᵀ H_k / r_k``
+with H from ``model.jacobian`` (casadi's derivative of h);
+:func:`measurement_information` adds the same rows to the bound in
+covariance form, one scalar row at a time (:func:`information_update`), with
+H at the true state (:func:`state_at`). A model with another context (a
+USBL transceiver's position, :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`)
+goes through the same functions (:func:`model_horizontal_std`).
+
+The bound's measurement model is the fresh-range-plus-depth model of ``ekf-seq``
+(:class:`~sblsim.models.receiver.measurement.RangeDepthModel`, :data:`MODEL`):
+at every slot the depth row (variance σ_d²), then, for a received packet, the
+range row of the transmitting beacon with its effective variance
+(:func:`effective_range_variance`)
 ``σ_r² + σ_GPS² ‖∂h/∂b‖² + σ_att² ‖a × ∂h/∂b‖²``, a the transmitting beacon's
 lever arm in NED, the derivatives from casadi. Error sources that are not
 white noise (a sound-speed mismatch, clock drift, a Gauss-Markov GPS error,
@@ -32,13 +44,21 @@ multipath outliers, platform motion between a sample and a transmission,
 the staleness of held ranges) are not in the bound.
 
 **Accuracy map.** The Fisher information of the position from one round of
-fresh ranges (one per beacon) plus depth,
+fresh ranges (one per beacon) plus depth, :func:`position_information` of
+:data:`MODEL` with the beacons as context,
 ``J = Σ_i g_i g_iᵀ / σ_i² + e_z e_zᵀ / σ_d²`` with ``g_i = ∂‖p − b_i‖/∂p``
 (casadi) and σ_i² the effective variance of beacon i's range, gives the
 horizontal standard deviation (DRMS)
 ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` of an unbiased fix at ``p``
-(Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
-Prentice Hall 1993, Section 3.7).
+(:func:`horizontal_drms`; Kay, Fundamentals of Statistical Signal
+Processing: Estimation Theory, Prentice Hall 1993, Section 3.7).
+
+References
+----------
+Tichavský, Muravchik, Nehorai, "Posterior Cramér-Rao bounds for
+discrete-time nonlinear filtering", IEEE Trans. Signal Processing 46(5),
+1998. Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
+Prentice Hall 1993, Section 3.7.
 """
 
 from __future__ import annotations
@@ -49,25 +69,26 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.measurement import RangeDepthModel, position_range_function
+from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 
 #: The motion model of the bound (the receivers').
 MOTION = CONSTANT_VELOCITY
-#: The measurement model of the bound: a fresh range and the depth.
+#: The measurement model of the bound and the maps: fresh ranges and the depth.
 MODEL = RangeDepthModel(MOTION)
+#: n, the size of the bound's state (from its motion model).
 STATE_SIZE = MOTION.state_size
 
 
-def effective_range_variance(position, beacon, arm, noise_variance, attitude_variance):
+def effective_range_variance(position, beacon, arm, noise_variance, attitude_variance, model=MODEL):
     """Variance of a fresh range from a beacon whose position is broadcast with GPS and attitude errors [m²]:
     :meth:`RangeDepthModel.range_variance` with the GPS term folded into ``noise_variance``.
 
     ``noise_variance`` is ``σ_r² + σ_GPS²`` (an isotropic GPS error adds σ_GPS²
     whatever the direction: ``‖∂h/∂b‖ = 1``), ``attitude_variance`` σ_att² [rad²] per axis, ``arm``
-    (3) the beacon's lever arm in NED [m].
+    (3) the beacon's lever arm in NED [m]; ``model`` the range model (default the bound's).
     """
-    return MODEL.range_variance(position, beacon, noise_variance, attitude_variance=attitude_variance, arm=arm)
+    return model.range_variance(position, beacon, noise_variance, attitude_variance=attitude_variance, arm=arm)
 
 
 def information_update(P: ca.SX, H: ca.SX, variance, use) -> ca.SX:
@@ -78,30 +99,91 @@ def information_update(P: ca.SX, H: ca.SX, variance, use) -> ca.SX:
     return ca.if_else(use > 0.5, kalman.symmetric(P - ca.mtimes(g, g.T) / (ca.mtimes(H, g) + variance)), P)
 
 
-@lru_cache(maxsize=1)
-def bound_step() -> ca.Function:
+def state_at(motion, position) -> ca.SX:
+    """A state of ``motion`` with ``position`` (3) [m] at its position entries and zeros elsewhere, (n, 1).
+
+    The bound and the maps evaluate the Jacobians at the true position; the
+    measurement models read only the position (a model whose h depends on the
+    velocity would need the true velocity here).
+    """
+    x = ca.SX.zeros(motion.state_size)
+    for k, i in enumerate(motion.position_index):
+        x[i] = position[k]
+    return x
+
+
+def measurement_information(P: ca.SX, model, x, context, variances, use, rows=None) -> ca.SX:
+    """The information of a measurement model's rows added to a bound in covariance form, one scalar row at a time.
+
+    ``P ← (P⁻¹ + H_kᵀ H_k / r_k)⁻¹`` (:func:`information_update`) for each row k
+    in ``rows``, ``H = model.jacobian(x, context)`` taken at the true state;
+    with R diagonal this is the Fisher term ``E[Hᵀ R⁻¹ H]`` of the PCRB
+    recursion added row by row (Tichavský et al. 1998, Eq. (21)).
+
+    Parameters
+    ----------
+    P : casadi.SX, (n, n)
+        The bound after the prediction [m², m²/s, m²/s²], n from ``model.motion``.
+    model : MeasurementModel
+        The measurement model (:mod:`sblsim.models.receiver.measurement`).
+    x : casadi.SX, (n, 1)
+        The true state (:func:`state_at`).
+    context
+        What ``model.h`` needs besides the state (the beacons of the ranges, a transceiver, ...).
+    variances : casadi.SX, (m, 1)
+        The rows' noise variances, the diagonal of R [units of z squared]:
+        ``model.variances(x, context, p)``, or effective variances (the bound's
+        ranges, :func:`effective_range_variance`).
+    use : sequence of casadi.SX, length m
+        Per row, 1 where the row is measured, 0 where it is not (then it changes nothing).
+    rows : sequence of int, optional
+        The order in which the rows are added (default 0 … m − 1). The order
+        does not change the result in exact arithmetic; it fixes the rounding.
+
+    Returns
+    -------
+    casadi.SX, (n, n)
+    """
+    H = model.jacobian(x, context)
+    for k in range(H.shape[0]) if rows is None else rows:
+        P = information_update(P, H[k, :], variances[k], use[k])
+    return P
+
+
+@lru_cache(maxsize=None)
+def bound_step(model=MODEL) -> ca.Function:
     """One step of the bound in covariance form, as a casadi Function.
 
-    Inputs ``B (36: the 6 × 6 bound, column-major), dt [s], q_h, q_v [m²/s³],
-    position (3) [m], beacon (3) [m], arm (3) [m], noise_variance [m²],
-    attitude_variance [rad²], depth_variance [m²], slot, received (0 or 1)``;
-    output the bound after the prediction over ``dt`` and, at a slot, the depth
-    update and (for a received packet) the range update with H at the true
-    position.
+    Inputs ``B (n²: the n × n bound, column-major; n = 6 for the receivers'
+    motion model), dt [s], q_h, q_v [m²/s³], position (3) [m], beacon (3) [m],
+    arm (3) [m], noise_variance [m²], attitude_variance [rad²],
+    depth_variance [m²], slot, received (0 or 1)``; output the bound after the
+    prediction over ``dt`` with ``model.motion`` and, at a slot, the
+    information of ``model``'s rows for the transmitting beacon
+    (:func:`measurement_information`): the depth row, then (for a received
+    packet) the range row with its effective variance, H at the true position.
+
+    Parameters
+    ----------
+    model : RangeDepthModel, optional
+        The measurement model (its motion model gives the state size and the prediction).
+
+    References
+    ----------
+    Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998, Eq. (21).
     """
-    B = ca.SX.sym("B", STATE_SIZE * STATE_SIZE)
+    motion = model.motion
+    n = motion.state_size
+    B = ca.SX.sym("B", n * n)
     dt, qh, qv = ca.SX.sym("dt"), ca.SX.sym("q_h"), ca.SX.sym("q_v")
     position, beacon, arm = ca.SX.sym("position", 3), ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
-    noise, attitude, d_var, slot, received = (ca.SX.sym(n) for n in ("noise_variance", "attitude_variance",
-                                                                       "depth_variance", "slot", "received"))
-    x = ca.SX.zeros(STATE_SIZE)
-    for k, i in enumerate(MOTION.position_index):
-        x[i] = position[k]
-    _, P = MOTION.predict(x, ca.reshape(B, STATE_SIZE, STATE_SIZE), dt, qh, qv)
-    P = information_update(P, MODEL.depth_jacobian(), d_var, slot)
-    _, H = MODEL.range_row(x, beacon)
-    r_var = effective_range_variance(position, beacon, arm, noise, attitude)
-    P = information_update(P, H, r_var, ca.logic_and(slot, received))
+    noise, attitude, d_var, slot, received = (ca.SX.sym(name) for name in ("noise_variance", "attitude_variance",
+                                                                          "depth_variance", "slot", "received"))
+    x = state_at(motion, position)
+    _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv)
+    variances = ca.vertcat(effective_range_variance(position, beacon, arm, noise, attitude, model), d_var)
+    # rows of the model for one beacon: 0 the range, 1 the depth; the depth is added first
+    P = measurement_information(P, model, x, [beacon], variances, (ca.logic_and(slot, received), slot), rows=(1, 0))
     names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
              "depth_variance", "slot", "received"]
     return ca.Function("sblsim_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var, slot,
@@ -149,7 +231,7 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, beaco
     return np.ascontiguousarray(columns), np.ascontiguousarray(steps)
 
 
-def pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
+def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
     """Position PCRB along B true trajectories: ``sqrt(trace)`` of the position block of ``J_k⁻¹``.
 
     The reference evaluation (casadi's virtual machine); the local engine runs
@@ -159,6 +241,9 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
     ----------
     fixed, steps : ndarray
         From :func:`pcrb_inputs`.
+    model : RangeDepthModel, optional
+        The measurement model of :func:`bound_step` (default the receivers'); its
+        motion model gives the state size and where the position and velocity sit.
 
     Returns
     -------
@@ -170,44 +255,122 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998.
     """
     n, b = steps.shape[:2]
+    motion = model.motion
+    size = motion.state_size
     f = {k: fixed[:, i][None, :] for i, k in enumerate(FIXED)}
-    step = bound_step().map(b)
-    bound = np.zeros((STATE_SIZE * STATE_SIZE, b))
-    bound[np.arange(STATE_SIZE) * (STATE_SIZE + 1)] = np.concatenate([f["p0_position"] ** 2,
-                                                                      f["p0_velocity"] ** 2] * 3)
+    step = bound_step(model).map(b)
+    bound = np.zeros((size * size, b))
+    for index, key in ((motion.position_index, "p0_position"), (motion.velocity_index, "p0_velocity")):
+        bound[np.asarray(index) * (size + 1)] = f[key] ** 2
     out = np.empty((n, b))
     for k in range(n):
         s = steps[k].T
         bound = step(bound, f["dt"], f["q_horizontal"], f["q_vertical"], s[0:3], s[3:6], s[6:9], f["noise_variance"],
                      f["attitude_variance"], f["depth_variance"], s[9:10], s[10:11]).full()
-        out[k] = np.sqrt(sum(bound[i * (STATE_SIZE + 1)] for i in MOTION.position_index))
+        out[k] = np.sqrt(sum(bound[i * (size + 1)] for i in motion.position_index))
     return out
 
 
+def fisher_information(model, x, context, variances) -> ca.SX:
+    """Fisher information of one measurement of a model about the state: ``Σ_k H_kᵀ H_k / r_k = Hᵀ R⁻¹ H``.
+
+    For ``z = h(x) + v``, ``v ~ N(0, R)`` with R diagonal, the information
+    is ``Hᵀ R⁻¹ H`` with ``H = ∂h/∂x`` (Kay 1993, Section 3.7, the vector
+    parameter, for a Gaussian whose covariance does not depend on x; the
+    information of the linearized model); H is ``model.jacobian`` (casadi's
+    derivative of h), the rows added in order.
+
+    Parameters
+    ----------
+    model : MeasurementModel
+        The measurement model (:mod:`sblsim.models.receiver.measurement`); its
+        motion model sets n.
+    x : casadi.SX or array, (n, 1)
+        The state at which H is taken (:func:`state_at` for a position).
+    context
+        What ``model.h`` needs besides the state (beacon positions, a transceiver position, ...).
+    variances : casadi.SX or array, (m, 1)
+        The diagonal of R [units of z squared]: ``model.variances(x, context, p)``
+        or effective variances; all > 0.
+
+    Returns
+    -------
+    casadi.SX, (n, n)
+        The information matrix [1/units of x squared]; with numbers in,
+        ``casadi.evalf`` gives its value.
+
+    References
+    ----------
+    Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
+    Prentice Hall 1993, Section 3.7.
+    """
+    H = model.jacobian(x, context)
+    n = model.motion.state_size
+    J = ca.SX.zeros(n, n)
+    for k in range(H.shape[0]):
+        J += ca.mtimes(H[k, :].T, H[k, :]) / variances[k]
+    return J
+
+
+def position_information(model, position, context, variances) -> ca.SX:
+    """Fisher information about the position, (3, 3) [1/m²]: the position block of :func:`fisher_information` at
+    the state :func:`state_at` ``(model.motion, position)`` (the models read only the position, so the other
+    entries do not enter).
+
+    Parameters
+    ----------
+    model : MeasurementModel
+    position : casadi.SX or array, (3, 1)
+        North, East, Down [m].
+    context, variances
+        As for :func:`fisher_information`.
+
+    References
+    ----------
+    Kay 1993, Section 3.7.
+    """
+    index = list(model.motion.position_index)
+    J = fisher_information(model, state_at(model.motion, position), context, variances)
+    return J[index, index]
+
+
+def horizontal_drms(J):
+    """Horizontal standard deviation (DRMS) of an unbiased fix with position information ``J`` (3, 3) [1/m²]:
+    ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m] (Kay 1993, Section 3.7: ``cov ≥ J⁻¹``)."""
+    inverse = ca.inv(J)
+    return ca.sqrt(inverse[0, 0] + inverse[1, 1])
+
+
 @lru_cache(maxsize=None)
-def fix_information(n_beacons: int) -> ca.Function:
+def fix_information(n_beacons: int, model=MODEL) -> ca.Function:
     """casadi Function of the Fisher information of one round of fresh ranges plus depth.
 
     ``(p[3], beacons[3 n], arms[3 n], noise_variance, attitude_variance, depth_variance) -> (J (3, 3), drms)``,
-    ``drms = sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m].
+    ``drms = sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m]: :func:`position_information` of
+    ``model`` with the beacons as context and the variances
+    ``[σ_1², …, σ_n², σ_d²]``, σ_i² the effective variance of beacon i's range
+    (:func:`effective_range_variance`).
+
+    Parameters
+    ----------
+    n_beacons : int
+    model : RangeDepthModel, optional
+        The measurement model (default the receivers').
     """
     p, b, a = ca.SX.sym("p", 3), ca.SX.sym("beacons", 3 * n_beacons), ca.SX.sym("arms", 3 * n_beacons)
     noise, attitude, d_var = ca.SX.sym("noise_variance"), ca.SX.sym("attitude_variance"), ca.SX.sym("depth_variance")
-    J = ca.SX.zeros(3, 3)
-    for i in range(n_beacons):
-        beacon = b[3 * i:3 * i + 3]
-        g = position_range_function()(p, beacon)[1]
-        J += ca.mtimes(g, g.T) / effective_range_variance(p, beacon, a[3 * i:3 * i + 3], noise, attitude)
-    J[2, 2] += 1.0 / d_var
-    inverse = ca.inv(J)
+    beacons = [b[3 * i:3 * i + 3] for i in range(n_beacons)]
+    variances = ca.vertcat(*[effective_range_variance(p, beacon, a[3 * i:3 * i + 3], noise, attitude, model)
+                             for i, beacon in enumerate(beacons)], d_var)
+    J = position_information(model, p, beacons, variances)
     return ca.Function(f"sblsim_fix_information_{n_beacons}", [p, b, a, noise, attitude, d_var],
-                       [J, ca.sqrt(inverse[0, 0] + inverse[1, 1])],
+                       [J, horizontal_drms(J)],
                        ["p", "beacons", "arms", "noise_variance", "attitude_variance", "depth_variance"],
                        ["J", "drms"])
 
 
 def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, noise_variance: float,
-                   attitude_variance: float, depth_variance: float) -> np.ndarray:
+                   attitude_variance: float, depth_variance: float, model=MODEL) -> np.ndarray:
     """Horizontal standard deviation (DRMS) of a fix from one round of fresh ranges plus depth.
 
     Parameters
@@ -222,6 +385,8 @@ def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, no
         σ_att² [rad²].
     depth_variance : float
         σ_d² [m²], > 0.
+    model : RangeDepthModel, optional
+        The measurement model (:func:`fix_information`).
 
     Returns
     -------
@@ -231,11 +396,47 @@ def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, no
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
     beacons, arms = np.asarray(beacons, dtype=float), np.asarray(arms, dtype=float)
-    f = fix_information(beacons.shape[0]).map(points.shape[0])
+    f = fix_information(beacons.shape[0], model).map(points.shape[0])
     drms = np.asarray(f(points.T, beacons.reshape(-1, 1), arms.reshape(-1, 1), float(noise_variance),
                         float(attitude_variance), float(depth_variance))[1]).ravel()
     return np.where(np.isfinite(drms), drms, np.inf)
 
 
-__all__ = ["FIXED", "bound_step", "effective_range_variance", "fix_information", "horizontal_std",
-           "information_update", "pcrb", "pcrb_inputs"]
+def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.ndarray:
+    """Horizontal DRMS [m] of a fix from one measurement of any model with a fixed context (an accuracy map).
+
+    :func:`horizontal_drms` of :func:`position_information` at each point, the
+    model's Jacobian from casadi. For the range + bearing model
+    (:class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`) the
+    context is the transceiver's position and ``variances`` ``[σ_r², σ_α², σ_ε²]``.
+
+    Parameters
+    ----------
+    model : MeasurementModel
+    points : ndarray, shape (M, 3)
+        Target positions, NED [m].
+    context
+        The model's context, numbers (beacon positions, a transceiver position, ...).
+    variances : array, (m,)
+        The diagonal of R [units of z squared], > 0.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Infinite where the information is singular.
+
+    References
+    ----------
+    Kay 1993, Section 3.7.
+    """
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    p = ca.SX.sym("p", 3)
+    J = position_information(model, p, context, ca.DM(np.asarray(variances, dtype=float).reshape(-1, 1)))
+    f = ca.Function("sblsim_model_fix", [p], [horizontal_drms(J)]).map(points.shape[0])
+    drms = np.asarray(f(points.T)).ravel()
+    return np.where(np.isfinite(drms), drms, np.inf)
+
+
+__all__ = ["FIXED", "MODEL", "MOTION", "bound_step", "effective_range_variance", "fisher_information",
+           "fix_information", "horizontal_drms", "horizontal_std", "information_update", "measurement_information",
+           "model_horizontal_std", "pcrb", "pcrb_inputs", "position_information", "state_at"]

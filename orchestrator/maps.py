@@ -2,7 +2,11 @@
 
 For a configuration, the horizontal standard deviation (DRMS) of a position
 fix from one round of fresh ranges (one per beacon) plus the depth, from
-their Fisher information (:func:`sblsim.models.bound.horizontal_std`), on a
+their Fisher information ``Σ_k H_kᵀ H_k / r_k`` over the rows of the
+measurement model (:func:`sblsim.models.bound.fisher_information`, H from the
+model's casadi Jacobian; the model is the receivers' ranges-plus-depth
+:class:`~sblsim.models.receiver.measurement.RangeDepthModel`, given to
+:func:`sblsim.models.bound.horizontal_std` as an object), on a
 grid around the platform at the diver's depth: the platform level at its
 mean heading, its reference at the origin, the beacons at their lever arms,
 with the configured range noise, GPS, IMU and depth-sensor errors
@@ -21,7 +25,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.bound import horizontal_std
+from sblsim.models.bound import MODEL, horizontal_std
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import beacon_arms, load_config
 from sblsim.orchestrator.output import staged_directory
@@ -84,7 +88,7 @@ def grid(extent: float, step: float) -> tuple[np.ndarray, np.ndarray]:
     return axis, axis.copy()
 
 
-def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray) -> np.ndarray:
+def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL) -> np.ndarray:
     """Horizontal DRMS [m] of one round of fresh ranges plus depth, shape (len(north), len(east)).
 
     Parameters
@@ -93,13 +97,21 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray) -> np.ndarray:
         Resolved configuration (geometry and error levels; the diver at ``target.depth``).
     east, north : ndarray
         Grid coordinates [m].
+    model : RangeDepthModel, optional
+        The measurement model whose Fisher information is mapped (default the
+        receivers'; its context is the beacons, its motion model the state layout).
+
+    References
+    ----------
+    Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
+    Prentice Hall 1993, Section 3.7.
     """
     arms = beacon_arms(cfg["platform"])
     params = bound_parameters(cfg)
     E, N = np.meshgrid(east, north)
     points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, float(cfg["target"]["depth"]))])
     drms = horizontal_std(points, arms, arms, params["noise_variance"], params["attitude_variance"],
-                          params["depth_variance"])
+                          params["depth_variance"], model=model)
     return drms.reshape(E.shape)
 
 

@@ -11,6 +11,9 @@
 * The Fisher information of one round of ranges: a hand-worked case and a
   numpy build with finite-difference gradients.
 * The compiled bound equals the casadi evaluation.
+* The same generic Fisher information for the range + bearing (USBL) model:
+  against analytic gradients and finite differences, and the closed form of
+  its horizontal DRMS along a line at fixed depth.
 """
 
 from __future__ import annotations
@@ -151,3 +154,66 @@ def test_horizontal_std_hand_worked_and_against_a_numpy_fisher_matrix():
     J = np.asarray(fix_information(4)(points[0], beacons.reshape(-1), arms.reshape(-1), 0.02,
                                       np.radians(1.0) ** 2, 1e-4)[0])
     assert np.allclose(J, J.T) and np.all(np.linalg.eigvalsh(J) > 0)
+
+
+def usbl_h(p, transceiver):
+    """Range, azimuth, elevation (numpy): NED, the elevation below the horizontal."""
+    d = p - transceiver
+    return np.array([np.linalg.norm(d), np.arctan2(d[1], d[0]), np.arctan2(d[2], np.hypot(d[0], d[1]))])
+
+
+def usbl_information(p, transceiver, variances):
+    """Fisher information of range, azimuth, elevation about the position, from the analytic gradients (numpy)."""
+    dn, de, dd = p - transceiver
+    rho2 = dn**2 + de**2
+    rho, r2 = np.sqrt(rho2), rho2 + dd**2
+    gradients = (np.array([dn, de, dd]) / np.sqrt(r2),  # ∂r/∂p
+                 np.array([-de, dn, 0.0]) / rho2,  # ∂α/∂p, α = atan2(d_E, d_N)
+                 np.array([-dd * dn / rho, -dd * de / rho, rho]) / r2)  # ∂ε/∂p, ε = atan2(d_D, ρ)
+    return sum(np.outer(g, g) / v for g, v in zip(gradients, variances))
+
+
+def test_range_bearing_fisher_information_through_the_generic_map_function():
+    """The map's Fisher information for a USBL transceiver (range + bearing model) through the same generic function
+    as the ranges-plus-depth map, against analytic gradients; its horizontal DRMS grows linearly with the horizontal
+    distance at fixed depth (cross-range σ = ρ σ_α exactly; DRMS² = ρ²σ_α² + σ_r² cos²ε + D²σ_ε²)."""
+    import casadi as ca
+
+    from sblsim.models.bound import horizontal_drms, model_horizontal_std, position_information
+    from sblsim.models.receiver.range_bearing import RangeBearingModel
+
+    model = RangeBearingModel()
+    transceiver = np.array([1.0, -2.0, 0.5])
+    s_r, s_a, s_e = 0.1, np.radians(0.5), np.radians(0.7)
+    variances = np.array([s_r**2, s_a**2, s_e**2])
+    rng = np.random.default_rng(7)
+    for p in rng.normal(scale=[40, 40, 10], size=(10, 3)) + [0, 0, 20]:
+        J = np.array(ca.evalf(position_information(model, p, transceiver, variances)))
+        expected = usbl_information(p, transceiver, variances)
+        np.testing.assert_allclose(J, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+        # and the finite-difference Jacobian of the numpy measurement
+        H = np.zeros((3, 3))
+        for k in range(3):
+            d = np.zeros(3)
+            d[k] = EPS
+            H[:, k] = (usbl_h(p + d, transceiver) - usbl_h(p - d, transceiver)) / (2 * EPS)
+        np.testing.assert_allclose(J, H.T @ np.diag(1 / variances) @ H, rtol=1e-6)
+        inverse = np.linalg.inv(expected)
+        assert float(ca.evalf(horizontal_drms(ca.DM(J)))) == pytest.approx(np.sqrt(inverse[0, 0] + inverse[1, 1]),
+                                                                           rel=1e-10)
+    # along a horizontal line at fixed depth D below the transceiver
+    depth = 20.0
+    rho = np.linspace(50.0, 2000.0, 40)
+    bearing = np.radians(130.0)
+    points = transceiver + np.column_stack([rho * np.cos(bearing), rho * np.sin(bearing), np.full(rho.size, depth)])
+    drms = model_horizontal_std(model, points, transceiver, variances)
+    cos2 = rho**2 / (rho**2 + depth**2)
+    np.testing.assert_allclose(drms, np.sqrt((rho * s_a) ** 2 + s_r**2 * cos2 + (depth * s_e) ** 2), rtol=1e-10)
+    for p, r in zip(points, rho):  # the cross-range (azimuth) component alone: ρ σ_α
+        across = np.array([-np.sin(bearing), np.cos(bearing), 0.0])
+        J = np.array(ca.evalf(position_information(model, p, transceiver, variances)))
+        assert np.sqrt(across @ np.linalg.solve(J, across)) == pytest.approx(r * s_a, rel=1e-10)
+    slope = np.diff(drms) / np.diff(rho)
+    np.testing.assert_allclose(slope[rho[1:] > 500], s_a, rtol=1e-2)  # linear: about range · σ_angle
+    # straight below the transceiver the azimuth is undefined: no finite fix
+    assert np.isinf(model_horizontal_std(model, transceiver + [[0, 0, 10.0]], transceiver, variances)).all()
