@@ -20,12 +20,36 @@ import pandas as pd  # noqa: E402
 _AXES = (("x", "North"), ("y", "East"), ("z", "Down"))
 
 
+def _beacons(ts: pd.DataFrame) -> pd.DataFrame:
+    """The mean broadcast position of each beacon heard (N, E, D) [m], one row per beacon id."""
+    heard = ts[ts["packet_valid"].astype(bool)] if "packet_valid" in ts else ts.iloc[:0]
+    return heard.groupby("beacon_id")[["beacon_x", "beacon_y", "beacon_z"]].mean()
+
+
+def _direction(ax, east, north, count: int = 6) -> None:
+    """Arrows along a path at ``count`` evenly spaced samples, showing the direction of travel."""
+    east, north = np.asarray(east), np.asarray(north)
+    if len(east) < 3:
+        return
+    for k in np.linspace(0, len(east) - 2, count + 2, dtype=int)[1:-1]:
+        ax.annotate("", xy=(east[k + 1], north[k + 1]), xytext=(east[k], north[k]),
+                    arrowprops={"arrowstyle": "-|>", "color": "k", "lw": 0.8, "mutation_scale": 14})
+
+
 def plot_trajectory_xy(ts: pd.DataFrame, ax, receiver: str = "receiver") -> plt.Figure:
-    """Truth, estimate and instrumentation fixes in the horizontal plane (East right, North up)."""
+    """Truth (start, end and direction marked), estimate and instrumentation fixes in the horizontal plane
+    (East right, North up), with the platform and the beacons' mean broadcast positions."""
     ax.plot(ts["instr_y"], ts["instr_x"], ".", ms=2, color="0.6", label="instrumentation (multilateration)")
     ax.plot(ts["true_y"], ts["true_x"], "-", color="k", lw=1.5, label="truth")
     ax.plot(ts["est_y"], ts["est_x"], "-", color="tab:red", lw=1.0, label=f"{receiver} estimate")
-    ax.plot([0], [0], "^", color="tab:blue", ms=8, label="SBL platform")
+    _direction(ax, ts["true_y"], ts["true_x"])
+    ax.plot(ts["true_y"].iloc[:1], ts["true_x"].iloc[:1], "o", color="tab:green", ms=7, label="start")
+    ax.plot(ts["true_y"].iloc[-1:], ts["true_x"].iloc[-1:], "s", color="k", ms=6, mfc="none", label="end")
+    ax.plot([0], [0], "^", color="tab:blue", ms=9, label="platform (mooring point)")
+    beacons = _beacons(ts)
+    if len(beacons):
+        ax.plot(beacons["beacon_y"], beacons["beacon_x"], "x", color="tab:blue", ms=6, mew=1.5,
+                label="beacons (mean broadcast position)")
     ax.set_xlabel("East [m]")
     ax.set_ylabel("North [m]")
     ax.set_aspect("equal", adjustable="datalim")
@@ -35,13 +59,22 @@ def plot_trajectory_xy(ts: pd.DataFrame, ax, receiver: str = "receiver") -> plt.
 
 
 def plot_trajectory_3d(ts: pd.DataFrame, ax, receiver: str = "receiver") -> plt.Figure:
-    """Truth and estimate in 3D (depth axis pointing down). ``ax`` must be a 3D axes."""
+    """Truth and estimate in 3D (depth axis pointing down). ``ax`` must be a 3D axes.
+
+    The depth axis spans at least a quarter of the horizontal extent, so that centimetres of depth noise
+    at a constant depth do not look like metres."""
     ax.plot(ts["true_y"], ts["true_x"], ts["true_z"], color="k", lw=1.5, label="truth")
     ax.plot(ts["est_y"], ts["est_x"], ts["est_z"], color="tab:red", lw=1.0, label=f"{receiver} estimate")
+    ax.scatter(ts["true_y"].iloc[:1], ts["true_x"].iloc[:1], ts["true_z"].iloc[:1], color="tab:green", s=30,
+               label="start")
+    horizontal = max(float(np.ptp(ts[c])) for c in ("true_x", "true_y", "est_x", "est_y"))
+    depth = pd.concat([ts["true_z"], ts["est_z"]])
+    half = max(0.55 * float(np.ptp(depth)), 0.125 * horizontal, 0.5)
+    middle = 0.5 * (float(depth.min()) + float(depth.max()))
+    ax.set_zlim(middle + half, middle - half)  # depth grows downwards
     ax.set_xlabel("East [m]")
     ax.set_ylabel("North [m]")
     ax.set_zlabel("Depth [m]")
-    ax.invert_zaxis()
     ax.legend(loc="best", fontsize=8)
     return ax.figure
 
@@ -67,22 +100,33 @@ def plot_error_bounds(ts: pd.DataFrame, axes, receiver: str = "receiver") -> plt
     accuracy limit").
     """
     t = ts["time"]
+    settled = slice(len(ts) // 20, None)  # the scale leaves out the first 5 % of the run (P0's wide start)
     for ax, (a, axis) in zip(axes, _AXES):
         sigma = 2.0 * np.sqrt(np.clip(ts[f"cov_{a}{a}"], 0.0, None))
+        error = ts[f"true_{a}"] - ts[f"est_{a}"]
         ax.fill_between(t, -sigma, sigma, color="tab:blue", alpha=0.2, lw=0, label=f"{receiver} ±2σ")
-        ax.plot(t, ts[f"true_{a}"] - ts[f"est_{a}"], color="tab:red", lw=0.9, label="error (truth − estimate)")
+        ax.plot(t, error, color="tab:red", lw=0.9, label="error (truth − estimate)")
+        ax.set_ylim(*_limits(np.abs(error.iloc[settled]), sigma.iloc[settled], symmetric=True))
         ax.set_ylabel(f"{axis} [m]")
         ax.grid(True, alpha=0.3)
     ax = axes[3]
     ax.plot(t, ts["e_tot"], color="tab:red", lw=0.9, label="e_tot")
     ax.plot(t, ts["pos_std"], color="tab:blue", lw=1.0, label=f"{receiver} sqrt(trace P)")
     ax.plot(t, ts["pcrb"], color="k", lw=1.0, ls="--", label="PCRB sqrt(trace)")
+    ax.set_ylim(*_limits(ts["e_tot"].iloc[settled], ts["pos_std"].iloc[settled], ts["pcrb"].iloc[settled]))
     ax.set_ylabel("e_tot [m]")
     ax.grid(True, alpha=0.3)
     ax.set_xlabel("time [s]")
     axes[0].legend(loc="upper right", fontsize=8)
     ax.legend(loc="upper right", fontsize=8)
     return axes[0].figure
+
+
+def _limits(*series, symmetric: bool = False) -> tuple[float, float]:
+    """Axis limits that show the settled values (the 99th percentile of each series, with a margin)."""
+    top = max((float(np.nanpercentile(np.asarray(v, dtype=float), 99)) for v in series if len(v)), default=1.0)
+    top = 1.15 * top if np.isfinite(top) and top > 0 else 1.0
+    return (-top, top) if symmetric else (0.0, top)
 
 
 def save_run_figures(ts: pd.DataFrame, out_dir: Path | str, title: str = "", receiver: str = "receiver") -> list[Path]:
@@ -106,6 +150,7 @@ def save_run_figures(ts: pd.DataFrame, out_dir: Path | str, title: str = "", rec
     plot_errors(ts, axes, receiver).suptitle(f"Position errors, {title}")
     save(fig, "errors.png")
     fig, axes = plt.subplots(4, 1, sharex=True, figsize=(8, 8))
-    plot_error_bounds(ts, axes, receiver).suptitle(f"Errors against ±2σ and the PCRB, {title}")
+    plot_error_bounds(ts, axes, receiver).suptitle(f"Errors against ±2σ and the PCRB, {title}\n"
+                                                   "(scales fit the run after its first 5 %)", fontsize=10)
     save(fig, "error_bounds.png")
     return paths
