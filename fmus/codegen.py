@@ -9,7 +9,9 @@ For a model (:class:`sblsim.models.component.Component`) and a beacon count, :fu
   FMU variable table, start values and the GUID), generated from the
   declarations;
 
-and copies the runtime (``fmus/c``). Nothing here is specific to one component.
+and copies the runtime (``fmus/c``) with the header of the counts and indices it
+shares with Python (:mod:`sblsim.fmus.contract`). Nothing here is specific to one
+component.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 
 import casadi as ca
 
+from sblsim.fmus.contract import CONTRACT, contract_header
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.program import Stream
@@ -208,7 +211,8 @@ def model_guid(model: type, n_beacons: int) -> str:
 
 
 def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str = FMI_SHELL) -> Sources:
-    """Write a model's C sources, the runtime and (for the FMI shell) the FMI headers into ``directory``.
+    """Write a model's C sources, the runtime, its shared header and (for the FMI shell) the FMI headers into
+    ``directory``.
 
     Parameters
     ----------
@@ -236,7 +240,8 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     (directory / files[2]).write_text(model_record(model, n_beacons, guid))
     for name in RUNTIME:
         shutil.copyfile(C_DIR / name, directory / name)
-    files += list(RUNTIME)
+    (directory / CONTRACT).write_text(contract_header())
+    files += [*RUNTIME, CONTRACT]
     if shell:
         shutil.copyfile(C_DIR / shell, directory / shell)
         files.append(shell)

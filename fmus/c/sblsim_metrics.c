@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "sblsim_bound_casadi.h"
+#include "sblsim_contract.h"
 
 #if defined(_WIN32)
 #define SBLSIM_EXPORT __declspec(dllexport)
@@ -17,18 +18,10 @@
 #define SBLSIM_EXPORT __attribute__((visibility("default")))
 #endif
 
-/* The recorded columns, in the order of sblsim.orchestrator.metrics.METRIC_INPUTS. */
-enum {
-    TRUE_X, TRUE_Y, TRUE_Z, EST_X, EST_Y, EST_Z, INSTR_X, INSTR_Y, INSTR_Z, INSTR_VALID, NIS, GATED, PACKET_SEQ,
-    PACKET_VALID, BEACON_ID, BEACON_X, BEACON_Y, BEACON_Z, COV_XX, COV_XY, COV_XZ, COV_YY, COV_YZ, COV_ZZ,
-    N_COLUMNS
-};
-
-/* The outputs per run, in the order of sblsim.orchestrator.metrics.RUN_METRICS. */
-enum { N_ERROR = 6, N_METRICS = 2 * N_ERROR + 6 };
-
-/* The bound's per-run inputs (models/receiver/bound.py, FIXED). */
-enum { DT, Q_H, Q_V, P0_POSITION, P0_VELOCITY, NOISE_VARIANCE, ATTITUDE_VARIANCE, DEPTH_VARIANCE, N_FIXED };
+/* The recorded columns (SBLSIM_COLUMN_*), the metrics (SBLSIM_METRIC_*), the bound's per-run inputs
+   (SBLSIM_FIXED_*) and its step's inputs (SBLSIM_BOUND_IN_*) are numbered in sblsim_contract.h, generated
+   from the Python tuples that name them. */
+#define N_BOUND (SBLSIM_BOUND_STATE * SBLSIM_BOUND_STATE)
 
 typedef struct {
     double sum[4], sum_sq, spread; /* e_x, e_y, e_z, e_tot; e_tot²; (e_tot - mean)² */
@@ -40,8 +33,13 @@ typedef struct {
     double nees_sum, nis_sum, trace_sum, previous_seq;
     long nees_count, covered, started, fresh, gated;
     int lost;
-    double bound[36];
+    double bound[N_BOUND];
 } run_acc;
+
+/* Column c at step k of run r. */
+static double at(const double* const* columns, const long long* strides, int c, int k, int r) {
+    return columns[c][(size_t)k * (size_t)strides[c] + (size_t)r];
+}
 
 /* |truth - position| per axis and their norm; 1 when all four are finite (sblsim.orchestrator.metrics.errors). */
 static int errors(const double* truth, const double* position, double e[4]) {
@@ -58,6 +56,7 @@ static void add_errors(errors_acc* acc, const double e[4]) {
     acc->count++;
 }
 
+/* The six error metrics of a run, in the order of sblsim.orchestrator.metrics.METRIC_NAMES. */
 static void put_errors(const errors_acc* acc, double* out) {
     double n = (double)acc->count;
     int a;
@@ -77,18 +76,25 @@ static double nees(const double e[3], const double* cov) {
     return (xx > 0 && c22 > 0 && det > 0) ? quadratic / det : NAN;
 }
 
+/* The counts this library was built with: columns, metrics and the bound's per-run inputs. */
+SBLSIM_EXPORT void sblsim_metrics_sizes(int sizes[3]) {
+    sizes[0] = SBLSIM_N_COLUMNS;
+    sizes[1] = SBLSIM_N_METRICS;
+    sizes[2] = SBLSIM_N_FIXED;
+}
+
 /* Metrics of B runs of N steps: column c's value at step k of run r is columns[c][k * strides[c] + r].
-   `fixed` B x 8 (the bound's per-run inputs), `arms` B x n_beacons x 3 (lever arms in NED [m]);
+   `fixed` B x SBLSIM_N_FIXED (the bound's per-run inputs), `arms` B x n_beacons x 3 (lever arms in NED [m]);
    `limits` = (chi-square 95 % quantile of 3 dof, divergence distance [m], divergence ratio).
-   `out` B x 18 in RUN_METRICS order (diverged as 0 or 1); `bound`, if not NULL, N x B: sqrt(trace) of the
+   `out` B x SBLSIM_N_METRICS in RUN_METRICS order (diverged as 0 or 1); `bound`, if not NULL, N x B: sqrt(trace) of the
    position PCRB at each step. 0 on success, 1 out of memory. */
 SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns, const long long* strides,
                                      int n_beacons, const double* fixed, const double* arms, const double* limits,
                                      double* out, double* bound) {
     casadi_int sz_arg, sz_res, sz_iw, sz_w;
-    const double* arg[12];
+    const double* arg[SBLSIM_BOUND_N_IN];
     double* res[1];
-    double *w, next[36];
+    double *w, next[N_BOUND];
     casadi_int* iw;
     run_acc* acc;
     int k, r, a, i;
@@ -96,30 +102,33 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
     w = (double*)malloc(sizeof(double) * (size_t)(sz_w > 0 ? sz_w : 1));
     iw = (casadi_int*)malloc(sizeof(casadi_int) * (size_t)(sz_iw > 0 ? sz_iw : 1));
     acc = (run_acc*)calloc((size_t)(b > 0 ? b : 1), sizeof(run_acc));
-    if (w == NULL || iw == NULL || acc == NULL || sz_arg > 12 || sz_res > 1) {
+    if (w == NULL || iw == NULL || acc == NULL || sz_arg > SBLSIM_BOUND_N_IN || sz_res > 1) {
         free(w);
         free(iw);
         free(acc);
         return 1;
     }
     for (r = 0; r < b; r++) {
-        const double* f = fixed + (size_t)r * N_FIXED;
-        for (i = 0; i < 6; i += 2) {
-            acc[r].bound[i * 7] = f[P0_POSITION] * f[P0_POSITION];
-            acc[r].bound[(i + 1) * 7] = f[P0_VELOCITY] * f[P0_VELOCITY];
+        const double* f = fixed + (size_t)r * SBLSIM_N_FIXED;
+        /* the prior on the diagonal: position and velocity of each axis in turn */
+        for (i = 0; i < SBLSIM_BOUND_STATE; i += 2) {
+            acc[r].bound[i * (SBLSIM_BOUND_STATE + 1)] = f[SBLSIM_FIXED_P0_POSITION] * f[SBLSIM_FIXED_P0_POSITION];
+            acc[r].bound[(i + 1) * (SBLSIM_BOUND_STATE + 1)] =
+                f[SBLSIM_FIXED_P0_VELOCITY] * f[SBLSIM_FIXED_P0_VELOCITY];
         }
     }
     for (k = 0; k < n; k++) {
         for (r = 0; r < b; r++) {
             run_acc* s = &acc[r];
-            const double* f = fixed + (size_t)r * N_FIXED;
-            double v[N_COLUMNS], e[4], signed_error[3], slot, fresh, epsilon, error, reach;
+            const double* f = fixed + (size_t)r * SBLSIM_N_FIXED;
+            double v[SBLSIM_N_COLUMNS], e[4], signed_error[3], slot, fresh, epsilon, error, reach;
             int c, id;
-            for (c = 0; c < N_COLUMNS; c++) v[c] = columns[c][(size_t)k * (size_t)strides[c] + (size_t)r];
-            if (errors(&v[TRUE_X], &v[EST_X], e)) add_errors(&s->est, e);
-            if (v[INSTR_VALID] > 0.5 && errors(&v[TRUE_X], &v[INSTR_X], e)) add_errors(&s->instr, e);
-            for (a = 0; a < 3; a++) signed_error[a] = v[TRUE_X + a] - v[EST_X + a];
-            epsilon = nees(signed_error, &v[COV_XX]);
+            for (c = 0; c < SBLSIM_N_COLUMNS; c++) v[c] = at(columns, strides, c, k, r);
+            if (errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_EST_X], e)) add_errors(&s->est, e);
+            if (v[SBLSIM_COLUMN_INSTR_VALID] > 0.5 && errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_INSTR_X], e))
+                add_errors(&s->instr, e);
+            for (a = 0; a < 3; a++) signed_error[a] = v[SBLSIM_COLUMN_TRUE_X + a] - v[SBLSIM_COLUMN_EST_X + a];
+            epsilon = nees(signed_error, &v[SBLSIM_COLUMN_COV_XX]);
             if (isfinite(epsilon)) {
                 s->nees_sum += epsilon;
                 s->nees_count++;
@@ -127,38 +136,40 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             }
             error = sqrt(signed_error[0] * signed_error[0] + signed_error[1] * signed_error[1] +
                          signed_error[2] * signed_error[2]);
-            reach = sqrt(v[TRUE_X] * v[TRUE_X] + v[TRUE_Y] * v[TRUE_Y] + v[TRUE_Z] * v[TRUE_Z]);
+            reach = sqrt(v[SBLSIM_COLUMN_TRUE_X] * v[SBLSIM_COLUMN_TRUE_X] +
+                         v[SBLSIM_COLUMN_TRUE_Y] * v[SBLSIM_COLUMN_TRUE_Y] +
+                         v[SBLSIM_COLUMN_TRUE_Z] * v[SBLSIM_COLUMN_TRUE_Z]);
             if (!isfinite(error) || (error > limits[1] && error > limits[2] * reach)) s->lost = 1;
-            if (rint(v[PACKET_SEQ]) > 0) {
-                s->nis_sum += v[NIS];
+            if (rint(v[SBLSIM_COLUMN_PACKET_SEQ]) > 0) {
+                s->nis_sum += v[SBLSIM_COLUMN_NIS];
                 s->started++;
             }
             /* a new slot, and whether its packet names a beacon of the array (sblsim.orchestrator.metrics.slots) */
-            id = (int)rint(v[BEACON_ID]);
-            slot = rint(v[PACKET_SEQ]) != s->previous_seq ? 1.0 : 0.0;
-            s->previous_seq = rint(v[PACKET_SEQ]);
-            fresh = (slot > 0 && v[PACKET_VALID] > 0.5 && id >= 1 && id <= n_beacons) ? 1.0 : 0.0;
+            id = (int)rint(v[SBLSIM_COLUMN_BEACON_ID]);
+            slot = rint(v[SBLSIM_COLUMN_PACKET_SEQ]) != s->previous_seq ? 1.0 : 0.0;
+            s->previous_seq = rint(v[SBLSIM_COLUMN_PACKET_SEQ]);
+            fresh = (slot > 0 && v[SBLSIM_COLUMN_PACKET_VALID] > 0.5 && id >= 1 && id <= n_beacons) ? 1.0 : 0.0;
             if (fresh > 0) {
                 s->fresh++;
-                if (v[GATED] > 0.5) s->gated++;
+                if (v[SBLSIM_COLUMN_GATED] > 0.5) s->gated++;
             }
             id = id < 1 ? 1 : (id > n_beacons ? n_beacons : id);
-            arg[0] = s->bound;
-            arg[1] = f + DT;
-            arg[2] = f + Q_H;
-            arg[3] = f + Q_V;
-            arg[4] = &v[TRUE_X];
-            arg[5] = &v[BEACON_X];
-            arg[6] = arms + ((size_t)r * (size_t)n_beacons + (size_t)(id - 1)) * 3;
-            arg[7] = f + NOISE_VARIANCE;
-            arg[8] = f + ATTITUDE_VARIANCE;
-            arg[9] = f + DEPTH_VARIANCE;
-            arg[10] = &slot;
-            arg[11] = &fresh;
+            arg[SBLSIM_BOUND_IN_B] = s->bound;
+            arg[SBLSIM_BOUND_IN_DT] = f + SBLSIM_FIXED_DT;
+            arg[SBLSIM_BOUND_IN_Q_H] = f + SBLSIM_FIXED_Q_HORIZONTAL;
+            arg[SBLSIM_BOUND_IN_Q_V] = f + SBLSIM_FIXED_Q_VERTICAL;
+            arg[SBLSIM_BOUND_IN_POSITION] = &v[SBLSIM_COLUMN_TRUE_X];
+            arg[SBLSIM_BOUND_IN_BEACON] = &v[SBLSIM_COLUMN_BEACON_X];
+            arg[SBLSIM_BOUND_IN_ARM] = arms + ((size_t)r * (size_t)n_beacons + (size_t)(id - 1)) * 3;
+            arg[SBLSIM_BOUND_IN_NOISE_VARIANCE] = f + SBLSIM_FIXED_NOISE_VARIANCE;
+            arg[SBLSIM_BOUND_IN_ATTITUDE_VARIANCE] = f + SBLSIM_FIXED_ATTITUDE_VARIANCE;
+            arg[SBLSIM_BOUND_IN_DEPTH_VARIANCE] = f + SBLSIM_FIXED_DEPTH_VARIANCE;
+            arg[SBLSIM_BOUND_IN_SLOT] = &slot;
+            arg[SBLSIM_BOUND_IN_RECEIVED] = &fresh;
             res[0] = next;
             sblsim_bound_step(arg, res, iw, w, 0);
             memcpy(s->bound, next, sizeof next);
-            error = sqrt(next[0] + next[14] + next[28]);
+            error = sqrt(next[0] + next[2 * (SBLSIM_BOUND_STATE + 1)] + next[4 * (SBLSIM_BOUND_STATE + 1)]);
             s->trace_sum += error * error;
             if (bound != NULL) bound[(size_t)k * (size_t)b + (size_t)r] = error;
         }
@@ -169,16 +180,16 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             run_acc* s = &acc[r];
             double t[3], p[3], e[4], mean;
             for (a = 0; a < 3; a++) {
-                t[a] = columns[TRUE_X + a][(size_t)k * (size_t)strides[TRUE_X + a] + (size_t)r];
-                p[a] = columns[EST_X + a][(size_t)k * (size_t)strides[EST_X + a] + (size_t)r];
+                t[a] = at(columns, strides, SBLSIM_COLUMN_TRUE_X + a, k, r);
+                p[a] = at(columns, strides, SBLSIM_COLUMN_EST_X + a, k, r);
             }
             if (errors(t, p, e)) {
                 mean = s->est.sum[3] / (double)s->est.count;
                 s->est.spread += (e[3] - mean) * (e[3] - mean);
             }
-            if (columns[INSTR_VALID][(size_t)k * (size_t)strides[INSTR_VALID] + (size_t)r] > 0.5) {
+            if (at(columns, strides, SBLSIM_COLUMN_INSTR_VALID, k, r) > 0.5) {
                 for (a = 0; a < 3; a++)
-                    p[a] = columns[INSTR_X + a][(size_t)k * (size_t)strides[INSTR_X + a] + (size_t)r];
+                    p[a] = at(columns, strides, SBLSIM_COLUMN_INSTR_X + a, k, r);
                 if (errors(t, p, e)) {
                     mean = s->instr.sum[3] / (double)s->instr.count;
                     s->instr.spread += (e[3] - mean) * (e[3] - mean);
@@ -188,15 +199,15 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
     }
     for (r = 0; r < b; r++) {
         const run_acc* s = &acc[r];
-        double* o = out + (size_t)r * N_METRICS;
-        put_errors(&s->est, o);
-        put_errors(&s->instr, o + N_ERROR);
-        o[2 * N_ERROR] = s->nees_sum / (double)s->nees_count;
-        o[2 * N_ERROR + 1] = (double)s->covered / (double)s->nees_count;
-        o[2 * N_ERROR + 2] = s->nis_sum / (double)s->started;
-        o[2 * N_ERROR + 3] = 100.0 * (double)s->gated / (double)s->fresh;
-        o[2 * N_ERROR + 4] = sqrt(s->trace_sum / (double)n);
-        o[2 * N_ERROR + 5] = s->lost ? 1.0 : 0.0;
+        double* o = out + (size_t)r * SBLSIM_N_METRICS;
+        put_errors(&s->est, o + SBLSIM_METRIC_E_X_MEAN);
+        put_errors(&s->instr, o + SBLSIM_METRIC_INSTR_E_X_MEAN);
+        o[SBLSIM_METRIC_NEES_MEAN] = s->nees_sum / (double)s->nees_count;
+        o[SBLSIM_METRIC_COVERAGE_95] = (double)s->covered / (double)s->nees_count;
+        o[SBLSIM_METRIC_NIS_MEAN] = s->nis_sum / (double)s->started;
+        o[SBLSIM_METRIC_GATED_PCT] = 100.0 * (double)s->gated / (double)s->fresh;
+        o[SBLSIM_METRIC_PCRB_RMS] = sqrt(s->trace_sum / (double)n);
+        o[SBLSIM_METRIC_DIVERGED] = s->lost ? 1.0 : 0.0;
     }
     free(w);
     free(iw);
