@@ -1,4 +1,5 @@
-"""The counts and indices the C sources share with Python come from the Python tuples only.
+"""The counts and indices the C sources share with Python come from the Python tuples only; the model
+record names the fields it sets.
 
 ``sblsim_contract.h`` is generated from the tuples (:mod:`sblsim.fmus.contract`): an edit by hand on the
 C side (a name defined again in ``fmus/c``, a header kept in the sources) or a header that no longer
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 import re
 
-from sblsim.fmus.codegen import C_DIR, write_sources
+from sblsim.fmus.codegen import C_DIR, model_record, write_sources
 from sblsim.fmus.contract import CONTRACT, contract_header, contract_tables
 from sblsim.fmus.native import VECTORS, load, metrics_sizes
 from sblsim.models import MODELS
@@ -66,3 +67,14 @@ def test_the_compiled_library_reports_the_tuples_counts():
                 "u": len(model.inputs(4)), "y": len(model.outputs(4)), "x_next": program.state_size,
                 "draws": len(program.purposes())}
     assert {v: lib.sblsim_model_size(model.name.encode(), k) for k, v in enumerate(VECTORS)} == expected
+
+
+def test_the_model_record_names_every_field_it_sets():
+    """The generated ``sblsim_model`` record uses designated initializers: every field of the struct in
+    ``sblsim_runtime.h`` appears once as ``.field =``, in any order a reader need not count."""
+    struct = re.search(r"typedef struct \{([^}]*)\} sblsim_model;", (C_DIR / "sblsim_runtime.h").read_text())
+    declarations = re.sub(r"/\*.*?\*/", "", struct.group(1), flags=re.S)
+    fields = re.findall(r"\**(\w+)(?:\[\w+\])?\s*[,;]", declarations)
+    text = model_record(MODELS["target"], 4, "{guid}")
+    body = text[text.index("const sblsim_model sblsim_target_model = {"):]
+    assert fields and all(body.count(f"    .{name} = ") == 1 for name in fields), fields
