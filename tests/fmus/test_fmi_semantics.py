@@ -103,7 +103,7 @@ def test_simulate_fmu_three_times_in_one_process(fmu_dir, name):
 _ALONE = """
 import sys, numpy as np
 sys.path.insert(0, {tests!r})
-from sblsim.fmus.test_fmi_semantics import Slave
+from fmus.test_fmi_semantics import Slave
 s = Slave(sys.argv[1]).start(**{{k: float(v) for k, v in (a.split("=") for a in sys.argv[2:])}})
 rows = []
 for k in range(40):
@@ -169,7 +169,7 @@ def call_fails(slave: Slave, call, *args, match: str) -> None:
 def test_bad_step_calls_return_fmi2error_and_log_why(fmu_dir):
     fmu = str(fmu_path(fmu_dir, "target"))
     s = Slave(fmu)
-    call_fails(s, s.fmu.doStep, 0.0, T, match="not initialized")
+    call_fails(s, s.fmu.doStep, 0.0, T, match="fmi2DoStep: not allowed in state Instantiated")
     s.start()
     call_fails(s, s.fmu.doStep, 0.0, 0.0, match="must be positive")
     call_fails(s, s.fmu.doStep, 0.0, -T, match="must be positive")
