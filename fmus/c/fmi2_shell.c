@@ -38,6 +38,7 @@ typedef enum { INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED, ERR
 static const char* const state_names[N_STATES] = {"Instantiated", "InitializationMode", "StepComplete",
                                                   "Terminated", "Error"};
 
+/* Sets of states, as bits; the groups the standard's table repeats (restricted to the states above). */
 #define IN(state) (1u << (state))
 #define ANY_STATE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_COMPLETE) | IN(TERMINATED) | IN(ERROR_STATE))
 #define SETTABLE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_COMPLETE))
@@ -150,8 +151,8 @@ static int allowed(fmi2Component c, Call call) {
 }
 
 /* The entry check of every FMI function with an instance: fmi2Error unless `call` is allowed. */
-#define ENTER(c, call)                         \
-    do {                                       \
+#define ENTER(c, call)                               \
+    do {                                             \
         if (!allowed((c), (call))) return fmi2Error; \
     } while (0)
 
