@@ -4,7 +4,8 @@ Each FMU holds
 
 * ``modelDescription.xml`` (:mod:`sblsim.fmus.description`);
 * ``sources/``: every C file it was built from (the casadi-generated model,
-  the model record, the runtime, the FMI shell and the FMI headers), so any
+  the model record, the runtime and its generated header, the FMI shell and
+  the FMI headers), so any
   user can rebuild it, e.g. ``cc -shared -fPIC -O2 -ffp-contract=off
   -DSBLSIM_MODEL=sblsim_platform_model sources/*.c -lm``;
 * ``binaries/<platform>/sblsim_<name>.<so|dll|dylib>``: the host's binary,
@@ -106,11 +107,13 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
     import hashlib
 
     from sblsim.fmus.codegen import C_DIR, model_guid
+    from sblsim.fmus.contract import contract_header
     from sblsim.fmus.native import cache_dir
 
     digest = hashlib.sha256(model_guid(model, n_beacons).encode())
     for source in sorted(C_DIR.iterdir()):  # and the runtime it is built with
         digest.update(source.name.encode() + source.read_bytes())
+    digest.update(contract_header().encode())
     directory = cache_dir() / "fmus" / digest.hexdigest()[:16]
     path = fmu_path(directory, model.name)
     return path if path.is_file() else build_fmu(model, directory, n_beacons, cross=False)

@@ -9,7 +9,9 @@ For a model (:class:`sblsim.models.component.Component`) and a beacon count, :fu
   FMU variable table, start values and the GUID), generated from the
   declarations;
 
-and copies the runtime (``fmus/c``). Nothing here is specific to one component.
+and copies the runtime (``fmus/c``) with the header of the counts and indices it
+shares with Python (:mod:`sblsim.fmus.contract`). Nothing here is specific to one
+component.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 
 import casadi as ca
 
+from sblsim.fmus.contract import CONTRACT, contract_header
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.program import Stream
@@ -108,7 +111,7 @@ def _function(name: str, f: ca.Function | None, streams: tuple[Stream, ...], slo
     ``choices`` maps a choice parameter's name to its index in ``p`` and its choices (for a stream's ``when``).
     """
     if f is None:
-        return "{NULL, NULL, NULL, 0}"
+        return "{.f = NULL, .work = NULL, .streams = NULL, .n_streams = 0}"
     table = "NULL"
     if streams:
         table = f"{name}_streams"
@@ -119,10 +122,10 @@ def _function(name: str, f: ca.Function | None, streams: tuple[Stream, ...], slo
             if s.when is not None:
                 when_index, options = choices[s.when[0]]
                 when_value = float(options.index(s.when[1]))
-            items.append(f"{{{s.purpose}, {slots[s.purpose]}, {kinds[s.kind]}, {s.width}, {when_index}, "
-                         f"{_num(when_value)}}}")
-        lines.append(f"static const sblsim_stream {table}[] = {{{', '.join(items)}}};")
-    return f"{{{f.name()}, {f.name()}_work, {table}, {len(streams)}}}"
+            items.append(f"{{.purpose = {s.purpose}, .slot = {slots[s.purpose]}, .kind = {kinds[s.kind]}, "
+                         f".width = {s.width}, .when_index = {when_index}, .when_value = {_num(when_value)}}}")
+        lines.append(f"static const sblsim_stream {table}[] = {{\n    " + ",\n    ".join(items) + "\n};")
+    return f"{{.f = {f.name()}, .work = {f.name()}_work, .streams = {table}, .n_streams = {len(streams)}}}"
 
 
 def model_record(model: type, n_beacons: int, guid: str) -> str:
@@ -153,26 +156,31 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
         for col in v.table.columns:
             for r in range(1, v.table.max_rows + 1):
                 table_of[f"{col.name}[{r}]"] = (len(tables), r)
-        tables.append(f"{{{p_index[v.name]}, {v.table.max_rows}, {len(v.table.columns)}, {first}, "
-                      f"{int(v.table.increasing)}, {v.table.min_rows}, {when_index}, {_num(when_value)}}}")
+        tables.append(f"{{.rows_index = {p_index[v.name]}, .max_rows = {v.table.max_rows}, "
+                      f".n_columns = {len(v.table.columns)}, .first_index = {first}, "
+                      f".increasing = {int(v.table.increasing)}, .min_rows = {v.table.min_rows}, "
+                      f".when_index = {when_index}, .when_value = {_num(when_value)}}}")
 
     rows = []
     for v in params:
         lo, hi = (0.0, float(len(v.choices) - 1)) if v.type == "String" else (v.min, v.max)
         table, row = table_of.get(v.name, (-1, 0))
-        rows.append(f"{{{_cstr(v.name)}, {_TYPES[v.fmi_type]}, {int(lo is not None)}, {int(hi is not None)}, "
-                    f"{int(v.min_exclusive)}, {_num(lo if lo is not None else 0.0)}, "
-                    f"{_num(hi if hi is not None else 0.0)}, {table}, {row}, {_cstr(v.unit)}}}")
+        rows.append(f"{{.name = {_cstr(v.name)}, .type = {_TYPES[v.fmi_type]}, .has_min = {int(lo is not None)}, "
+                    f".has_max = {int(hi is not None)}, .min_exclusive = {int(v.min_exclusive)}, "
+                    f".min = {_num(lo if lo is not None else 0.0)}, .max = {_num(hi if hi is not None else 0.0)}, "
+                    f".table = {table}, .row = {row}, .unit = {_cstr(v.unit)}}}")
     lines.append("static const sblsim_parameter parameters[] = {\n    " + ",\n    ".join(rows) + "\n};")
     lines.append("static const double p_start[] = {" + ", ".join(_num(float(v.fmi_start)) for v in params) + "};")
     lines.append("static const double u_start[] = {" + (", ".join(_num(float(v.start)) for v in inputs) or "0.0")
                  + "};")
-    lines.append(f"static const sblsim_table tables[] = {{{', '.join(tables) or '{0, 0, 0, 0, 0, 0, -1, 0.0}'}}};")
+    # an empty table list still needs one element (C has no empty arrays); n_tables says none is used
+    lines.append(f"static const sblsim_table tables[] = {{{', '.join(tables) or '{.when_index = -1}'}}};")
 
     index = {"parameter": p_index, "input": {v.name: k for k, v in enumerate(inputs)},
              "output": {v.name: k for k, v in enumerate(outputs)}}
-    entries = [f"{{{_cstr(v.name)}, {vr}, {_TYPES[v.fmi_type]}, {_CAUSALITIES[v.causality]}, "
-               f"{index[v.causality][v.name]}}}" for vr, v in enumerate(variables)]
+    entries = [f"{{.name = {_cstr(v.name)}, .vr = {vr}, .type = {_TYPES[v.fmi_type]}, "
+               f".causality = {_CAUSALITIES[v.causality]}, .index = {index[v.causality][v.name]}}}"
+               for vr, v in enumerate(variables)]
     lines.append("static const sblsim_variable variables[] = {\n    " + ",\n    ".join(entries) + "\n};")
     lines.append("static const int purposes[] = {" + (", ".join(str(p) for p in purposes) or "0") + "};")
 
@@ -183,19 +191,36 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     events = []
     for ev in program.events:
         handler = _function(f"event_{ev.name}", ev.handler, ev.streams, slots, lines, choices)
-        events.append(f"{{{_cstr(ev.name)}, {ev.guard.name()}, {ev.guard.name()}_work, {handler}}}")
-    empty = "{NULL, NULL, NULL, {NULL, NULL, NULL, 0}}"
-    lines.append("static const sblsim_event events[] = {" + (", ".join(events) or empty) + "};")
+        events.append(f"{{.name = {_cstr(ev.name)}, .guard = {ev.guard.name()}, "
+                      f".guard_work = {ev.guard.name()}_work, .handler = {handler}}}")
+    empty = "{.name = NULL}"
+    lines.append("static const sblsim_event events[] = {\n    " + (",\n    ".join(events) or empty) + "\n};")
     seeds = ", ".join(str(p_index.get(name, -1)) for name in SEED_NAMES)
     lines += ["", f"const sblsim_model {symbol} = {{",
-              f"    {_cstr(model.name)}, {_cstr(guid)}, {model.component_index},",
-              f"    {len(params)}, {program.derived_size}, {program.state_size}, {len(inputs)}, {len(outputs)}, "
-              f"{len(purposes)}, purposes,",
-              "    p_start, u_start, parameters, tables, " + f"{sum(1 for v in params if v.table is not None)},",
-              f"    variables, {len(variables)},",
-              f"    {{{seeds}}},",
-              f"    {prepare}, {init}, {step}, {output},",
-              f"    events, {len(program.events)}",
+              f"    .name = {_cstr(model.name)},",
+              f"    .guid = {_cstr(guid)},",
+              f"    .component = {model.component_index},",
+              f"    .n_p = {len(params)},",
+              f"    .n_d = {program.derived_size},",
+              f"    .n_x = {program.state_size},",
+              f"    .n_u = {len(inputs)},",
+              f"    .n_y = {len(outputs)},",
+              f"    .n_purposes = {len(purposes)},",
+              "    .purposes = purposes,",
+              "    .p_start = p_start,",
+              "    .u_start = u_start,",
+              "    .parameters = parameters,",
+              "    .tables = tables,",
+              f"    .n_tables = {sum(1 for v in params if v.table is not None)},",
+              "    .variables = variables,",
+              f"    .n_variables = {len(variables)},",
+              f"    .seed_index = {{{seeds}}},",
+              f"    .prepare = {prepare},",
+              f"    .init = {init},",
+              f"    .step = {step},",
+              f"    .output = {output},",
+              "    .events = events,",
+              f"    .n_events = {len(program.events)}",
               "};", ""]
     return "\n".join(lines)
 
@@ -208,7 +233,8 @@ def model_guid(model: type, n_beacons: int) -> str:
 
 
 def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str = FMI_SHELL) -> Sources:
-    """Write a model's C sources, the runtime and (for the FMI shell) the FMI headers into ``directory``.
+    """Write a model's C sources, the runtime, its shared header and (for the FMI shell) the FMI headers into
+    ``directory``.
 
     Parameters
     ----------
@@ -236,7 +262,8 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     (directory / files[2]).write_text(model_record(model, n_beacons, guid))
     for name in RUNTIME:
         shutil.copyfile(C_DIR / name, directory / name)
-    files += list(RUNTIME)
+    (directory / CONTRACT).write_text(contract_header())
+    files += [*RUNTIME, CONTRACT]
     if shell:
         shutil.copyfile(C_DIR / shell, directory / shell)
         files.append(shell)

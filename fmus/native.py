@@ -26,10 +26,12 @@ import numpy as np
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.models import MODELS
-from sblsim.models.bound import FIXED, bound_step
+from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
 
-_VECTORS = {"p": 0, "d": 1, "x": 2, "u": 3, "y": 4, "draws": 6}
+#: The vectors of a batch, in the order the C API numbers them (``sblsim_batch_vector``, ``sblsim_model_size``):
+#: every double vector of a replicate, then its draw counters.
+VECTORS = ("p", "d", "x", "u", "y", "x_next", "draws")
 
 
 def cache_dir() -> Path:
@@ -119,6 +121,7 @@ def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.C
     lib.sblsim_batch_initialize.argtypes = [ctypes.c_void_p, ctypes.c_double]
     lib.sblsim_batch_do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double]
     lib.sblsim_model_size.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    lib.sblsim_metrics_sizes.argtypes = [ctypes.POINTER(ctypes.c_int)]
     lib.sblsim_run_metrics.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_void_p),
                                        ctypes.POINTER(ctypes.c_longlong), ctypes.c_int] + [ctypes.c_void_p] * 5
     ints, doubles = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
@@ -159,7 +162,7 @@ class NativeBatch:
         self._handle = self.lib.sblsim_batch_new(name, self.batch)
         if not self._handle:
             raise ModelError(f"engine: the compiled library has no model {model.name!r} or is out of memory")
-        sizes = {k: self.lib.sblsim_model_size(name, v) for k, v in _VECTORS.items()}
+        sizes = {k: self.lib.sblsim_model_size(name, VECTORS.index(k)) for k in ("p", "d", "x", "u", "y", "draws")}
         self.sizes = sizes
         self.p = self._view("p", sizes["p"])
         self.d = self._view("d", sizes["d"])
@@ -167,7 +170,7 @@ class NativeBatch:
         self.y = self._view("y", sizes["y"])
 
     def _view(self, which: str, n: int) -> np.ndarray:
-        pointer = self.lib.sblsim_batch_vector(self._handle, _VECTORS[which])
+        pointer = self.lib.sblsim_batch_vector(self._handle, VECTORS.index(which))
         return np.ctypeslib.as_array(pointer, shape=(self.batch, max(n, 1)))[:, :n]
 
     def _check(self, status: int, what: str) -> None:
@@ -260,6 +263,13 @@ class NativeSystem:
             batch._check(1 + failed.value, f"step between t = {t:g} s and {t0 + (k0 + n_steps) * T:g} s")
 
 
+def metrics_sizes(n_beacons: int = 4) -> tuple[int, int, int]:
+    """The compiled metrics pass's column, metric and per-run bound input counts (``sblsim_contract.h``)."""
+    sizes = (ctypes.c_int * 3)()
+    load(n_beacons).sblsim_metrics_sizes(sizes)
+    return tuple(sizes)
+
+
 def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float],
                 with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
     """The per-run metrics of :mod:`sblsim.orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
@@ -269,7 +279,7 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
     columns : sequence of ndarray, shape (N, B) each
         The recorded outputs in the order of :data:`sblsim.orchestrator.metrics.METRIC_INPUTS`, as floats; any
         step stride, replicates contiguous (a column of the master's record array is used in place).
-    fixed : ndarray, shape (B, 8)
+    fixed : ndarray, shape (B, len(FIXED))
         The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
     arms : ndarray, shape (B, n_beacons, 3)
         Each run's beacon lever arms in NED [m].
@@ -280,7 +290,7 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
 
     Returns
     -------
-    metrics : ndarray, shape (B, 18)
+    metrics : ndarray, shape (B, len(RUN_METRICS))
         :data:`sblsim.orchestrator.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
     bound : ndarray, shape (N, B), or None
         ``sqrt(trace)`` of the position PCRB [m].
@@ -290,21 +300,23 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
     ValueError
         If the arrays do not fit together.
     """
+    lib = load(n_beacons)
+    n_columns, n_metrics, n_fixed = metrics_sizes(n_beacons)
     n, b = columns[0].shape
     views = [c if c.dtype == np.float64 and c.strides[1] == 8 else np.ascontiguousarray(c, dtype=float)
              for c in columns]
-    if any(c.shape != (n, b) for c in views):
-        raise ValueError("run_metrics: every column must have the shape (N, B)")
+    if len(views) != n_columns or any(c.shape != (n, b) for c in views):
+        raise ValueError(f"run_metrics: {n_columns} columns of the shape (N, B) are needed")
     fixed = np.ascontiguousarray(fixed, dtype=float)
     arms = np.ascontiguousarray(arms, dtype=float)
-    if fixed.shape != (b, len(FIXED)) or arms.shape != (b, n_beacons, 3):
+    if fixed.shape != (b, n_fixed) or arms.shape != (b, n_beacons, 3):
         raise ValueError(f"run_metrics: fixed {fixed.shape} and arms {arms.shape} do not fit {b} runs")
     pointers = (ctypes.c_void_p * len(views))(*[c.ctypes.data for c in views])
     strides = (ctypes.c_longlong * len(views))(*[c.strides[0] // 8 for c in views])
-    out = np.empty((b, 18))
+    out = np.empty((b, n_metrics))
     bound = np.empty((n, b)) if with_bound else None
     limit = np.asarray(limits, dtype=float)
-    if load(n_beacons).sblsim_run_metrics(n, b, pointers, strides, n_beacons, fixed.ctypes.data, arms.ctypes.data,
+    if lib.sblsim_run_metrics(n, b, pointers, strides, n_beacons, fixed.ctypes.data, arms.ctypes.data,
                                           limit.ctypes.data, out.ctypes.data,
                                           None if bound is None else bound.ctypes.data):
         raise MemoryError("run_metrics: out of memory")
@@ -321,5 +333,5 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 
-__all__ = ["NativeBatch", "NativeSystem", "cache_dir", "library_path", "load", "run_metrics", "stream",
-           "write_library_sources"]
+__all__ = ["NativeBatch", "NativeSystem", "VECTORS", "cache_dir", "library_path", "load", "metrics_sizes",
+           "run_metrics", "stream", "write_library_sources"]

@@ -190,7 +190,8 @@ def bound_step(model=MODEL) -> ca.Function:
                                              received], [ca.vec(P)], names, ["B_next"])
 
 
-#: Per-replicate inputs of the bound, in the order of :func:`pcrb`'s ``fixed`` columns.
+#: Per-replicate inputs of the bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled metrics pass
+#: numbers them from this tuple: :mod:`sblsim.fmus.contract`).
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance", "attitude_variance",
          "depth_variance")
 

@@ -68,7 +68,8 @@ def _parser() -> argparse.ArgumentParser:
     m = sub.add_parser("compare", help="run several receivers on the same replicates of a scenario")
     m.add_argument("scenario", help="built-in scenario or CONFIG.toml")
     m.add_argument("--receivers", default="ekf,ekf-seq,ukf,lsq",
-                   help="comma-separated receivers (default ekf,ekf-seq,ukf,lsq; model:PATH.py or fmu:PATH for your own)")
+                   help="comma-separated receivers (default ekf,ekf-seq,ukf,lsq; model:PATH.py or fmu:PATH for "
+                        "your own)")
     m.add_argument("--replicates", type=int, default=20, help="runs per receiver (default 20)")
     m.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
     m.add_argument("--out", type=Path, default=None, help="output directory (default results/compare_SCENARIO)")

@@ -43,12 +43,13 @@ CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_
 #: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
 #: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference.
 DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
-#: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound.
+#: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound (the compiled
+#: pass numbers its outputs from this tuple: :mod:`sblsim.fmus.contract`).
 RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
 NEES_95 = float(chi2.ppf(0.95, 3))
 #: Recorded outputs the metrics read (truth, estimate, instrumentation fix, NIS, gate, slot, packet, beacon,
-#: covariance), in the order of the compiled pass.
+#: covariance), in the order of the compiled pass (which numbers them from this tuple: :mod:`sblsim.fmus.contract`).
 METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + (
     "instr_valid", "nis", "gated", "packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z",
     *(f"cov_{ab}" for ab in COVARIANCE))

@@ -5,10 +5,13 @@
  * sources: no Python, no environment variables, no resource files; any number of instances.
  *
  * FMI semantics (docs/model.md, "FMI semantics"):
+ *  - every function first checks the instance's state against one table of the states it is
+ *    allowed in (the FMI 2.0 Co-Simulation state machine); a call in another state returns
+ *    fmi2Error and logs "<function>: not allowed in state <state>";
  *  - parameters are fixed: set in the instantiated or initialization mode, checked against
  *    their declared ranges at fmi2ExitInitializationMode (fmi2Error and a log line otherwise);
- *  - fmi2DoStep refuses h <= 0, a communication point other than the FMU's time (a gap or
- *    an overlap), and any call before initialization, with fmi2Error and a log line;
+ *  - fmi2DoStep refuses h <= 0 and a communication point other than the FMU's time (a gap or
+ *    an overlap) with fmi2Error and a log line;
  *  - errors are always logged (whatever fmi2SetDebugLogging says);
  *  - the state (every vector, the draw counters, the time) can be got, set and serialized.
  */
@@ -27,14 +30,75 @@
 
 extern const sblsim_model SBLSIM_MODEL;
 
-typedef enum { INSTANTIATED, INITIALIZATION, STEPPING, TERMINATED, FAILED } Phase;
+/* The states of the FMI 2.0 Co-Simulation state machine (FMI 2.0.4, section 4.2.4) this FMU can be in.
+   doStep always runs to its end (never fmi2Pending) and a failed step returns fmi2Error (never fmi2Discard),
+   so stepInProgress, stepFailed and stepCanceled are never entered; no call returns fmi2Fatal. Saved states
+   store the number: append only. */
+typedef enum { INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED, ERROR_STATE, N_STATES } State;
+static const char* const state_names[N_STATES] = {"Instantiated", "InitializationMode", "StepComplete",
+                                                  "Terminated", "Error"};
+
+/* Sets of states, as bits; the groups the standard's table repeats (restricted to the states above). */
+#define IN(state) (1u << (state))
+#define ANY_STATE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_COMPLETE) | IN(TERMINATED) | IN(ERROR_STATE))
+#define SETTABLE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_COMPLETE))
+#define INITIALIZED (IN(INITIALIZATION_MODE) | IN(STEP_COMPLETE) | IN(TERMINATED) | IN(ERROR_STATE))
+#define STEPPED (IN(STEP_COMPLETE) | IN(TERMINATED))
+
+/* Every FMI function with an instance, and the states it may be called in. */
+typedef enum {
+    SET_DEBUG_LOGGING, FREE_INSTANCE, SETUP_EXPERIMENT, ENTER_INITIALIZATION_MODE, EXIT_INITIALIZATION_MODE,
+    TERMINATE, RESET, GET_REAL, GET_INTEGER, GET_BOOLEAN, GET_STRING, SET_REAL, SET_INTEGER, SET_BOOLEAN,
+    SET_STRING, GET_FMU_STATE, SET_FMU_STATE, FREE_FMU_STATE, SERIALIZED_FMU_STATE_SIZE, SERIALIZE_FMU_STATE,
+    DESERIALIZE_FMU_STATE, GET_DIRECTIONAL_DERIVATIVE, SET_REAL_INPUT_DERIVATIVES, GET_REAL_OUTPUT_DERIVATIVES,
+    DO_STEP, CANCEL_STEP, GET_STATUS, GET_REAL_STATUS, GET_INTEGER_STATUS, GET_BOOLEAN_STATUS, GET_STRING_STATUS,
+    N_CALLS
+} Call;
+
+static const struct {
+    const char* name;
+    unsigned states;
+} calls[N_CALLS] = {
+    [SET_DEBUG_LOGGING] = {"fmi2SetDebugLogging", ANY_STATE},
+    [FREE_INSTANCE] = {"fmi2FreeInstance", ANY_STATE},
+    [SETUP_EXPERIMENT] = {"fmi2SetupExperiment", IN(INSTANTIATED)},
+    [ENTER_INITIALIZATION_MODE] = {"fmi2EnterInitializationMode", IN(INSTANTIATED)},
+    [EXIT_INITIALIZATION_MODE] = {"fmi2ExitInitializationMode", IN(INITIALIZATION_MODE)},
+    [TERMINATE] = {"fmi2Terminate", IN(STEP_COMPLETE)},
+    [RESET] = {"fmi2Reset", ANY_STATE},
+    [GET_REAL] = {"fmi2GetReal", INITIALIZED},
+    [GET_INTEGER] = {"fmi2GetInteger", INITIALIZED},
+    [GET_BOOLEAN] = {"fmi2GetBoolean", INITIALIZED},
+    [GET_STRING] = {"fmi2GetString", INITIALIZED},
+    [SET_REAL] = {"fmi2SetReal", SETTABLE},
+    [SET_INTEGER] = {"fmi2SetInteger", SETTABLE},
+    [SET_BOOLEAN] = {"fmi2SetBoolean", SETTABLE},
+    [SET_STRING] = {"fmi2SetString", SETTABLE},
+    [GET_FMU_STATE] = {"fmi2GetFMUstate", ANY_STATE},
+    [SET_FMU_STATE] = {"fmi2SetFMUstate", ANY_STATE},
+    [FREE_FMU_STATE] = {"fmi2FreeFMUstate", ANY_STATE},
+    [SERIALIZED_FMU_STATE_SIZE] = {"fmi2SerializedFMUstateSize", ANY_STATE},
+    [SERIALIZE_FMU_STATE] = {"fmi2SerializeFMUstate", ANY_STATE},
+    [DESERIALIZE_FMU_STATE] = {"fmi2DeSerializeFMUstate", ANY_STATE},
+    [GET_DIRECTIONAL_DERIVATIVE] = {"fmi2GetDirectionalDerivative", INITIALIZED},
+    [SET_REAL_INPUT_DERIVATIVES] = {"fmi2SetRealInputDerivatives", SETTABLE},
+    [GET_REAL_OUTPUT_DERIVATIVES] = {"fmi2GetRealOutputDerivatives", IN(STEP_COMPLETE) | IN(TERMINATED) |
+                                                                     IN(ERROR_STATE)},
+    [DO_STEP] = {"fmi2DoStep", IN(STEP_COMPLETE)},
+    [CANCEL_STEP] = {"fmi2CancelStep", 0u}, /* only while a step is in progress: never here */
+    [GET_STATUS] = {"fmi2GetStatus", STEPPED},
+    [GET_REAL_STATUS] = {"fmi2GetRealStatus", STEPPED},
+    [GET_INTEGER_STATUS] = {"fmi2GetIntegerStatus", STEPPED},
+    [GET_BOOLEAN_STATUS] = {"fmi2GetBooleanStatus", STEPPED},
+    [GET_STRING_STATUS] = {"fmi2GetStringStatus", STEPPED},
+};
 
 typedef struct {
     sblsim_instance run;
     sblsim_work* work;
     double *p, *d, *x, *x_next, *u, *y;
     uint64_t* draws;
-    Phase phase;
+    State state;
     double start_time;
     int logging;
     char* name;
@@ -43,7 +107,7 @@ typedef struct {
 
 /* What a saved FMU state holds (a flat copy). */
 typedef struct {
-    Phase phase;
+    State state;
     double start_time, t0, t;
     double* values; /* p, d, x, u, y */
     uint64_t* draws;
@@ -77,6 +141,21 @@ static void logf_(Instance* s, fmi2Status status, const char* category, const ch
         return fmi2Error;                                         \
     } while (0)
 
+/* Whether `call` may be called on instance `c` in its state (a log line says why not). */
+static int allowed(fmi2Component c, Call call) {
+    Instance* s = (Instance*)c;
+    if (s == NULL) return 0;
+    if (calls[call].states & IN(s->state)) return 1;
+    logf_(s, fmi2Error, "logStatusError", "%s: not allowed in state %s", calls[call].name, state_names[s->state]);
+    return 0;
+}
+
+/* The entry check of every FMI function with an instance: fmi2Error unless `call` is allowed. */
+#define ENTER(c, call)                               \
+    do {                                             \
+        if (!allowed((c), (call))) return fmi2Error; \
+    } while (0)
+
 static size_t value_count(void) {
     const sblsim_model* m = model();
     return (size_t)(m->n_p + m->n_d + m->n_x + m->n_u + m->n_y);
@@ -91,7 +170,7 @@ static void set_defaults(Instance* s) {
     memset(s->d, 0, sizeof(double) * (size_t)m->n_d);
     s->run.x = s->x;
     s->run.x_next = s->x_next;
-    s->phase = INSTANTIATED;
+    s->state = INSTANTIATED;
     s->start_time = 0.0;
     s->run.t0 = s->run.t = 0.0;
 }
@@ -122,7 +201,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     Instance* s = (Instance*)c;
     (void)nCategories;
     (void)categories;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, SET_DEBUG_LOGGING);
     s->logging = loggingOn ? 1 : 0;
     return fmi2OK;
 }
@@ -175,7 +254,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return s;
 }
 
-void fmi2FreeInstance(fmi2Component c) { free_instance((Instance*)c); }
+void fmi2FreeInstance(fmi2Component c) {
+    if (allowed(c, FREE_INSTANCE)) free_instance((Instance*)c);
+}
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
@@ -184,8 +265,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     (void)tolerance;
     (void)stopTimeDefined;
     (void)stopTime;
-    if (s == NULL) return fmi2Error;
-    if (s->phase != INSTANTIATED) FAIL(s, "fmi2SetupExperiment: only allowed before initialization");
+    ENTER(c, SETUP_EXPERIMENT);
     if (!isfinite(startTime)) FAIL(s, "fmi2SetupExperiment: startTime %g is not finite", startTime);
     s->start_time = startTime;
     return fmi2OK;
@@ -193,41 +273,39 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     Instance* s = (Instance*)c;
-    if (s == NULL) return fmi2Error;
-    if (s->phase != INSTANTIATED) FAIL(s, "fmi2EnterInitializationMode: only allowed after instantiation or reset");
-    s->phase = INITIALIZATION;
+    ENTER(c, ENTER_INITIALIZATION_MODE);
+    s->state = INITIALIZATION_MODE;
     return fmi2OK;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Instance* s = (Instance*)c;
     char message[SBLSIM_MESSAGE];
-    if (s == NULL) return fmi2Error;
-    if (s->phase != INITIALIZATION) FAIL(s, "fmi2ExitInitializationMode: not in initialization mode");
+    ENTER(c, EXIT_INITIALIZATION_MODE);
     if (sblsim_check_parameters(model(), s->p, message, sizeof message)) {
-        s->phase = FAILED;
+        s->state = ERROR_STATE;
         FAIL(s, "%s", message);
     }
     s->run.x = s->x;
     s->run.x_next = s->x_next;
     if (sblsim_initialize(&s->run, s->start_time, message, sizeof message)) {
-        s->phase = FAILED;
+        s->state = ERROR_STATE;
         FAIL(s, "%s", message);
     }
-    s->phase = STEPPING;
+    s->state = STEP_COMPLETE;
     return fmi2OK;
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
     Instance* s = (Instance*)c;
-    if (s == NULL) return fmi2Error;
-    s->phase = TERMINATED;
+    ENTER(c, TERMINATE);
+    s->state = TERMINATED;
     return fmi2OK;
 }
 
 fmi2Status fmi2Reset(fmi2Component c) {
     Instance* s = (Instance*)c;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, RESET);
     set_defaults(s);
     return fmi2OK;
 }
@@ -253,16 +331,15 @@ static double* slot(Instance* s, const sblsim_variable* v) {
 
 static fmi2Status check_set(Instance* s, const sblsim_variable* v, const char* caller) {
     if (v->causality == SBLSIM_OUTPUT) FAIL(s, "%s: %s is an output and cannot be set", caller, v->name);
-    if (v->causality == SBLSIM_PARAMETER && s->phase != INSTANTIATED && s->phase != INITIALIZATION)
+    if (v->causality == SBLSIM_PARAMETER && s->state != INSTANTIATED && s->state != INITIALIZATION_MODE)
         FAIL(s, "%s: %s is a fixed parameter; set it before fmi2ExitInitializationMode", caller, v->name);
-    if (s->phase == TERMINATED || s->phase == FAILED) FAIL(s, "%s: the instance is terminated or failed", caller);
     return fmi2OK;
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     Instance* s = (Instance*)c;
     size_t i;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, GET_REAL);
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_REAL, "fmi2GetReal");
         if (v == NULL) return fmi2Error;
@@ -274,7 +351,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
     Instance* s = (Instance*)c;
     size_t i;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, GET_INTEGER);
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2GetInteger");
         if (v == NULL) return fmi2Error;
@@ -286,7 +363,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
     Instance* s = (Instance*)c;
     size_t i;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, GET_BOOLEAN);
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_BOOLEAN, "fmi2GetBoolean");
         if (v == NULL) return fmi2Error;
@@ -299,7 +376,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     Instance* s = (Instance*)c;
     (void)vr;
     (void)value;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, GET_STRING);
     if (nvr == 0) return fmi2OK;
     FAIL(s, "fmi2GetString: this FMU has no String variables");
 }
@@ -307,7 +384,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     Instance* s = (Instance*)c;
     size_t i;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, SET_REAL);
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_REAL, "fmi2SetReal");
         if (v == NULL || check_set(s, v, "fmi2SetReal") != fmi2OK) return fmi2Error;
@@ -320,7 +397,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
     Instance* s = (Instance*)c;
     size_t i;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, SET_INTEGER);
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2SetInteger");
         if (v == NULL || check_set(s, v, "fmi2SetInteger") != fmi2OK) return fmi2Error;
@@ -332,7 +409,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
     Instance* s = (Instance*)c;
     size_t i;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, SET_BOOLEAN);
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_BOOLEAN, "fmi2SetBoolean");
         if (v == NULL || check_set(s, v, "fmi2SetBoolean") != fmi2OK) return fmi2Error;
@@ -345,7 +422,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     Instance* s = (Instance*)c;
     (void)vr;
     (void)value;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, SET_STRING);
     if (nvr == 0) return fmi2OK;
     FAIL(s, "fmi2SetString: this FMU has no String variables");
 }
@@ -377,7 +454,7 @@ static int block_size(int k) {
 static void save(Instance* s, Saved* to) {
     size_t offset = 0;
     int k;
-    to->phase = s->phase;
+    to->state = s->state;
     to->start_time = s->start_time;
     to->t0 = s->run.t0;
     to->t = s->run.t;
@@ -393,7 +470,7 @@ static void restore(Instance* s, const Saved* from) {
     int k;
     s->run.x = s->x;
     s->run.x_next = s->x_next;
-    s->phase = from->phase;
+    s->state = from->state;
     s->start_time = from->start_time;
     s->run.t0 = from->t0;
     s->run.t = from->t;
@@ -420,7 +497,8 @@ static Saved* new_saved(void) {
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
     Instance* s = (Instance*)c;
-    if (s == NULL || state == NULL) return fmi2Error;
+    ENTER(c, GET_FMU_STATE);
+    if (state == NULL) FAIL(s, "fmi2GetFMUstate: no place for the state");
     if (*state == NULL) {
         *state = (fmi2FMUstate)new_saved();
         if (*state == NULL) FAIL(s, "fmi2GetFMUstate: out of memory");
@@ -431,7 +509,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     Instance* s = (Instance*)c;
-    if (s == NULL) return fmi2Error;
+    ENTER(c, SET_FMU_STATE);
     if (state == NULL) FAIL(s, "fmi2SetFMUstate: no state");
     restore(s, (const Saved*)state);
     return fmi2OK;
@@ -439,7 +517,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
     Saved* saved;
-    (void)c;
+    ENTER(c, FREE_FMU_STATE);
     if (state == NULL || *state == NULL) return fmi2OK;
     saved = (Saved*)*state;
     free(saved->values);
@@ -449,31 +527,35 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
     return fmi2OK;
 }
 
-/* Serialized layout: magic, value count, purposes, phase, then start_time, t0, t, the values
+/* Serialized layout: magic, value count, purposes, state, then start_time, t0, t, the values
    and the draw counters, all as 8-byte words in the machine's byte order. */
 #define SBLSIM_MAGIC 0x53424c53494d3032ULL /* "SBLSIM02" */
 
+static size_t serialized_size(void) {
+    return sizeof(uint64_t) * (4 + 3 + value_count() + (size_t)model()->n_purposes);
+}
+
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
-    (void)c;
     (void)state;
-    *size = sizeof(uint64_t) * (4 + 3 + value_count() + (size_t)model()->n_purposes);
+    ENTER(c, SERIALIZED_FMU_STATE_SIZE);
+    *size = serialized_size();
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
     Instance* s = (Instance*)c;
     const Saved* saved = (const Saved*)state;
-    size_t needed;
+    size_t needed = serialized_size();
     uint64_t header[4];
     double times[3];
     char* out = (char*)bytes;
-    fmi2SerializedFMUstateSize(c, state, &needed);
-    if (s == NULL || saved == NULL || size < needed) FAIL(s, "fmi2SerializeFMUstate: buffer of %lu bytes, %lu needed",
+    ENTER(c, SERIALIZE_FMU_STATE);
+    if (saved == NULL || size < needed) FAIL(s, "fmi2SerializeFMUstate: buffer of %lu bytes, %lu needed",
                                                           (unsigned long)size, (unsigned long)needed);
     header[0] = SBLSIM_MAGIC;
     header[1] = (uint64_t)value_count();
     header[2] = (uint64_t)model()->n_purposes;
-    header[3] = (uint64_t)saved->phase;
+    header[3] = (uint64_t)saved->state;
     times[0] = saved->start_time;
     times[1] = saved->t0;
     times[2] = saved->t;
@@ -489,25 +571,26 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state) {
     Instance* s = (Instance*)c;
-    size_t needed;
+    size_t needed = serialized_size();
     uint64_t header[4];
     double times[3];
     const char* in = (const char*)bytes;
     Saved* saved;
-    fmi2SerializedFMUstateSize(c, NULL, &needed);
-    if (s == NULL || state == NULL) return fmi2Error;
+    ENTER(c, DESERIALIZE_FMU_STATE);
+    if (state == NULL) FAIL(s, "fmi2DeSerializeFMUstate: no place for the state");
     if (size != needed) FAIL(s, "fmi2DeSerializeFMUstate: %lu bytes, expected %lu", (unsigned long)size,
                              (unsigned long)needed);
     memcpy(header, in, sizeof header);
     in += sizeof header;
-    if (header[0] != SBLSIM_MAGIC || header[1] != (uint64_t)value_count() || header[2] != (uint64_t)model()->n_purposes)
+    if (header[0] != SBLSIM_MAGIC || header[1] != (uint64_t)value_count() ||
+        header[2] != (uint64_t)model()->n_purposes || header[3] >= (uint64_t)N_STATES)
         FAIL(s, "fmi2DeSerializeFMUstate: not a serialized state of %s", model()->name);
     saved = (Saved*)*state;
     if (saved == NULL) saved = new_saved();
     if (saved == NULL) FAIL(s, "fmi2DeSerializeFMUstate: out of memory");
     memcpy(times, in, sizeof times);
     in += sizeof times;
-    saved->phase = (Phase)header[3];
+    saved->state = (State)header[3];
     saved->start_time = times[0];
     saved->t0 = times[1];
     saved->t = times[2];
@@ -527,6 +610,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     (void)nKnown;
     (void)dvKnown;
     (void)dvUnknown;
+    ENTER(c, GET_DIRECTIONAL_DERIVATIVE);
     FAIL((Instance*)c, "fmi2GetDirectionalDerivative: not provided (providesDirectionalDerivative=false)");
 }
 
@@ -539,6 +623,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     (void)nvr;
     (void)order;
     (void)value;
+    ENTER(c, SET_REAL_INPUT_DERIVATIVES);
     FAIL((Instance*)c, "fmi2SetRealInputDerivatives: not supported (canInterpolateInputs=false)");
 }
 
@@ -548,6 +633,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     (void)nvr;
     (void)order;
     (void)value;
+    ENTER(c, GET_REAL_OUTPUT_DERIVATIVES);
     FAIL((Instance*)c, "fmi2GetRealOutputDerivatives: not supported (maxOutputDerivativeOrder=0)");
 }
 
@@ -557,52 +643,55 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     char message[SBLSIM_MESSAGE];
     double t = currentCommunicationPoint, h = communicationStepSize;
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (s == NULL) return fmi2Error;
-    if (s->phase != STEPPING) FAIL(s, "fmi2DoStep: the instance is not initialized (call fmi2ExitInitializationMode)");
+    ENTER(c, DO_STEP);
     if (!(h > 0.0) || !isfinite(h)) FAIL(s, "fmi2DoStep: communicationStepSize %g must be positive and finite", h);
     if (!isfinite(t) || fabs(t - s->run.t) > 1e-9 * (1.0 + fabs(t)))
         FAIL(s, "fmi2DoStep: currentCommunicationPoint %.17g s differs from the FMU's time %.17g s (a gap or an "
                 "overlap between steps)", t, s->run.t);
     if (sblsim_do_step(&s->run, t, h, message, sizeof message)) {
-        s->phase = FAILED;
+        s->state = ERROR_STATE;
         FAIL(s, "%s", message);
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
+    ENTER(c, CANCEL_STEP);
     FAIL((Instance*)c, "fmi2CancelStep: doStep never runs asynchronously");
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Status* value) {
     (void)kind;
     (void)value;
+    ENTER(c, GET_STATUS);
     FAIL((Instance*)c, "fmi2GetStatus: doStep never returns fmi2Pending");
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real* value) {
     Instance* s = (Instance*)c;
-    if (s != NULL && kind == fmi2LastSuccessfulTime) {
-        *value = s->run.t;
-        return fmi2OK;
-    }
-    FAIL(s, "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+    ENTER(c, GET_REAL_STATUS);
+    if (kind != fmi2LastSuccessfulTime) FAIL(s, "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+    *value = s->run.t;
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Integer* value) {
     (void)kind;
     (void)value;
+    ENTER(c, GET_INTEGER_STATUS);
     FAIL((Instance*)c, "fmi2GetIntegerStatus: not available");
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Boolean* value) {
     (void)kind;
     (void)value;
+    ENTER(c, GET_BOOLEAN_STATUS);
     FAIL((Instance*)c, "fmi2GetBooleanStatus: not available");
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind kind, fmi2String* value) {
     (void)kind;
     (void)value;
+    ENTER(c, GET_STRING_STATUS);
     FAIL((Instance*)c, "fmi2GetStringStatus: not available");
 }

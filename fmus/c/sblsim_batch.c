@@ -30,7 +30,7 @@ extern const sblsim_model* const sblsim_models[];
 typedef struct {
     const sblsim_model* m;
     int B;
-    double* vectors[6]; /* p, d, x, u, y, x_next */
+    double* vectors[SBLSIM_VECTOR_DRAWS]; /* every vector but the draw counters (numbered last) */
     uint64_t* draws;
     sblsim_instance* instances;
     sblsim_work* work;
@@ -39,12 +39,12 @@ typedef struct {
 
 static int length(const sblsim_model* m, int which) {
     switch (which) {
-        case 0: return m->n_p;
-        case 1: return m->n_d;
-        case 2: return m->n_x;
-        case 3: return m->n_u;
-        case 4: return m->n_y;
-        case 5: return m->n_x;
+        case SBLSIM_VECTOR_P: return m->n_p;
+        case SBLSIM_VECTOR_D: return m->n_d;
+        case SBLSIM_VECTOR_X: return m->n_x;
+        case SBLSIM_VECTOR_U: return m->n_u;
+        case SBLSIM_VECTOR_Y: return m->n_y;
+        case SBLSIM_VECTOR_X_NEXT: return m->n_x;
         default: return m->n_purposes;
     }
 }
@@ -56,7 +56,7 @@ SBLSIM_EXPORT const sblsim_model* sblsim_find_model(const char* name) {
     return NULL;
 }
 
-/* Length per replicate of vector `which` (0 p, 1 d, 2 x, 3 u, 4 y, 6 draw counters); -1: no such model. */
+/* Length per replicate of vector `which` (SBLSIM_VECTOR_*); -1: no such model. */
 SBLSIM_EXPORT int sblsim_model_size(const char* name, int which) {
     const sblsim_model* m = sblsim_find_model(name);
     return m == NULL ? -1 : length(m, which);
@@ -65,7 +65,7 @@ SBLSIM_EXPORT int sblsim_model_size(const char* name, int which) {
 SBLSIM_EXPORT void sblsim_batch_free(sblsim_batch* b) {
     int k;
     if (b == NULL) return;
-    for (k = 0; k < 6; k++) free(b->vectors[k]);
+    for (k = 0; k < SBLSIM_VECTOR_DRAWS; k++) free(b->vectors[k]);
     free(b->draws);
     free(b->instances);
     sblsim_work_free(b->work);
@@ -81,7 +81,7 @@ SBLSIM_EXPORT sblsim_batch* sblsim_batch_new(const char* name, int B) {
     if (b == NULL) return NULL;
     b->m = m;
     b->B = B;
-    for (k = 0; k < 6; k++) {
+    for (k = 0; k < SBLSIM_VECTOR_DRAWS; k++) {
         int n = length(m, k);
         b->vectors[k] = (double*)calloc((size_t)B * (size_t)(n > 0 ? n : 1), sizeof(double));
         if (b->vectors[k] == NULL) goto failed;
@@ -93,12 +93,12 @@ SBLSIM_EXPORT sblsim_batch* sblsim_batch_new(const char* name, int B) {
     for (i = 0; i < B; i++) {
         sblsim_instance* s = &b->instances[i];
         s->model = m;
-        s->p = b->vectors[0] + (size_t)i * m->n_p;
-        s->d = b->vectors[1] + (size_t)i * m->n_d;
-        s->x = b->vectors[2] + (size_t)i * m->n_x;
-        s->u = b->vectors[3] + (size_t)i * m->n_u;
-        s->y = b->vectors[4] + (size_t)i * m->n_y;
-        s->x_next = b->vectors[5] + (size_t)i * m->n_x;
+        s->p = b->vectors[SBLSIM_VECTOR_P] + (size_t)i * m->n_p;
+        s->d = b->vectors[SBLSIM_VECTOR_D] + (size_t)i * m->n_d;
+        s->x = b->vectors[SBLSIM_VECTOR_X] + (size_t)i * m->n_x;
+        s->u = b->vectors[SBLSIM_VECTOR_U] + (size_t)i * m->n_u;
+        s->y = b->vectors[SBLSIM_VECTOR_Y] + (size_t)i * m->n_y;
+        s->x_next = b->vectors[SBLSIM_VECTOR_X_NEXT] + (size_t)i * m->n_x;
         s->draws = b->draws + (size_t)i * m->n_purposes;
         s->work = b->work;
     }
@@ -112,9 +112,11 @@ failed:
     return NULL;
 }
 
-/* The batch's vector `which` (0 p, 1 d, 3 u, 4 y), B rows of length sblsim_model_size. */
+/* The batch's vector `which` (p, d, u or y), B rows of length sblsim_model_size (the states swap while
+   stepping: sblsim_batch_states copies them). */
 SBLSIM_EXPORT double* sblsim_batch_vector(sblsim_batch* b, int which) {
-    return (which >= 0 && which < 5 && which != 2) ? b->vectors[which] : NULL;
+    return (which == SBLSIM_VECTOR_P || which == SBLSIM_VECTOR_D || which == SBLSIM_VECTOR_U ||
+            which == SBLSIM_VECTOR_Y) ? b->vectors[which] : NULL;
 }
 
 /* Copy the current states (B x n_x) into `out` (the state buffers swap while stepping). */
@@ -177,10 +179,10 @@ static void feed(sblsim_batch** batches, int c, const int* link_offsets, const i
     sblsim_batch* dst = batches[c];
     int i, k, n_u = dst->m->n_u;
     for (i = 0; i < dst->B; i++) { /* replicate by replicate: each touches a few cache lines */
-        double* u = dst->vectors[3] + (size_t)i * n_u;
+        double* u = dst->vectors[SBLSIM_VECTOR_U] + (size_t)i * n_u;
         for (k = link_offsets[c]; k < link_offsets[c + 1]; k++) {
             const sblsim_batch* src = batches[link_src[k]];
-            u[link_in[k]] = src->vectors[4][(size_t)i * src->m->n_y + link_out[k]];
+            u[link_in[k]] = src->vectors[SBLSIM_VECTOR_Y][(size_t)i * src->m->n_y + link_out[k]];
         }
     }
 }
@@ -220,7 +222,8 @@ SBLSIM_EXPORT int sblsim_system_run(int n, sblsim_batch** batches, const int* ra
             for (i = 0; i < B; i++) /* replicate by replicate: reads one output row, writes n_record cache lines */
                 for (j = 0; j < n_record; j++) {
                     const sblsim_batch* b = batches[rec_comp[j]];
-                    step[(size_t)j * (size_t)B + (size_t)i] = b->vectors[4][(size_t)i * b->m->n_y + rec_out[j]];
+                    const double* y = b->vectors[SBLSIM_VECTOR_Y];
+                    step[(size_t)j * (size_t)B + (size_t)i] = y[(size_t)i * b->m->n_y + rec_out[j]];
                 }
         }
     }

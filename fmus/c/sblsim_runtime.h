@@ -12,6 +12,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "sblsim_contract.h" /* generated: the counts shared with Python */
+
 #ifndef casadi_int
 #define casadi_int long long int
 #endif
@@ -93,7 +95,7 @@ typedef struct {
     int n_tables;
     const sblsim_variable* variables;
     int n_variables;
-    int seed_index[4];  /* p index of seed, scenario_key, cell, replicate (-1: absent) */
+    int seed_index[SBLSIM_N_SEEDS]; /* p index of seed, scenario_key, cell, replicate (-1: absent) */
     sblsim_function prepare, init, step, output;
     const sblsim_event* events;
     int n_events;

@@ -169,7 +169,7 @@ def call_fails(slave: Slave, call, *args, match: str) -> None:
 def test_bad_step_calls_return_fmi2error_and_log_why(fmu_dir):
     fmu = str(fmu_path(fmu_dir, "target"))
     s = Slave(fmu)
-    call_fails(s, s.fmu.doStep, 0.0, T, match="not initialized")
+    call_fails(s, s.fmu.doStep, 0.0, T, match="fmi2DoStep: not allowed in state Instantiated")
     s.start()
     call_fails(s, s.fmu.doStep, 0.0, 0.0, match="must be positive")
     call_fails(s, s.fmu.doStep, 0.0, -T, match="must be positive")
