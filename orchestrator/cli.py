@@ -229,8 +229,10 @@ def _compare(args: argparse.Namespace) -> int:
                   "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
                     args.fmu_dir, progress=sys.stderr.isatty())
-    title = (f"{args.scenario}: {args.replicates} replicates per receiver, seed "
-             f"{args.seed if args.seed is not None else 'from the configuration'}"
+    from sblsim.orchestrator.config import load_config
+
+    seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
+    title = (f"{args.scenario}: {args.replicates} replicates per receiver, seed {seed}"
              + (f", {' '.join(args.overrides)}" if args.overrides else ""))
     print(title)
     print(markdown(table), end="")

@@ -5,13 +5,19 @@ platform motion, ranges, losses and outliers: the receiver draws no random
 numbers). Per receiver, over all steps of all replicates:
 
 * ``rms_e_tot``: RMS of e_tot [m] (``sqrt(mean(e_tot_rms²))``, every run having
-  the same number of steps);
+  the same number of steps), and ``rms_e_tot_sd``, the standard deviation of
+  the runs' RMS e_tot over the replicates [m] (the spread a designer sees from
+  run to run);
 * ``mean_e_tot``: mean e_tot [m];
 * ``nees``, ``coverage_95``, ``nis``, ``gated_pct``: means over runs of the
-  consistency metrics (:mod:`sblsim.orchestrator.metrics`);
+  consistency metrics (:mod:`sblsim.orchestrator.metrics`), and ``nees_sd``
+  the standard deviation of the runs' mean NEES;
 * ``pcrb_rms`` [m] and ``ratio_to_pcrb = rms_e_tot / pcrb_rms``;
 * ``us_per_step``: wall-clock time of the receiver's doStep per run and
-  communication step [µs], the runs stepped together on the local engine;
+  communication step [µs], the runs stepped together on the local engine. It
+  includes the per-call cost of a batch step, shared by the replicates, and it
+  moves with the machine's load: an indication of the receivers' relative cost
+  (shown to two significant digits), not a benchmark (``benchmarks/`` has those);
 * ``diverged``: the number of runs whose receiver diverged.
 """
 
@@ -30,8 +36,8 @@ from sblsim.orchestrator.config import check_receiver, load_config, receiver_lab
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
 
-COLUMNS = ("receiver", "runs", "rms_e_tot", "mean_e_tot", "nees", "coverage_95", "nis", "gated_pct", "pcrb_rms",
-           "ratio_to_pcrb", "us_per_step", "diverged")
+COLUMNS = ("receiver", "runs", "rms_e_tot", "rms_e_tot_sd", "mean_e_tot", "nees", "nees_sd", "coverage_95", "nis",
+           "gated_pct", "pcrb_rms", "ratio_to_pcrb", "us_per_step", "diverged")
 
 
 def parse_receivers(text: str) -> list[str]:
@@ -89,7 +95,9 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
         rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
         bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))
         rows.append({"receiver": receiver_label(cfg), "runs": replicates, "rms_e_tot": rms,
+                     "rms_e_tot_sd": float(np.std(m["e_tot_rms"], ddof=1)) if replicates > 1 else math.nan,
                      "mean_e_tot": float(m["e_tot_mean"].mean()), "nees": float(m["nees_mean"].mean()),
+                     "nees_sd": float(np.std(m["nees_mean"], ddof=1)) if replicates > 1 else math.nan,
                      "coverage_95": float(m["coverage_95"].mean()), "nis": float(m["nis_mean"].mean()),
                      "gated_pct": float(m["gated_pct"].mean()), "pcrb_rms": bound, "ratio_to_pcrb": rms / bound,
                      "us_per_step": 1e6 * result.step_time.get("receiver", math.nan) / (result.steps * replicates),
@@ -99,36 +107,54 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
 
 def markdown(table: pd.DataFrame) -> str:
     """The comparison as a Markdown table (units in the header)."""
-    head = ("| receiver | RMS e_tot [m] | mean e_tot [m] | NEES (3) | coverage 95 % | gated [%] | PCRB RMS [m] "
-            "| RMS / PCRB | µs per step | diverged runs |")
+    head = ("| receiver | RMS e_tot [m] (± sd over runs) | mean e_tot [m] | NEES (3) | coverage 95 % | gated [%] "
+            "| PCRB RMS [m] | RMS / PCRB | µs per step | diverged runs |")
     lines = [head, "|---|---|---|---|---|---|---|---|---|---|"]
     for r in table.itertuples():
-        lines.append(f"| {r.receiver} | {r.rms_e_tot:.3f} | {r.mean_e_tot:.3f} | {r.nees:.2f} | {r.coverage_95:.3f} "
-                     f"| {r.gated_pct:.2f} | {r.pcrb_rms:.3f} | {r.ratio_to_pcrb:.2f} | {r.us_per_step:.2f} "
-                     f"| {r.diverged} |")
+        spread = f" ± {r.rms_e_tot_sd:.3f}" if math.isfinite(r.rms_e_tot_sd) else ""
+        lines.append(f"| {r.receiver} | {r.rms_e_tot:.3f}{spread} | {r.mean_e_tot:.3f} | {r.nees:.2f} "
+                     f"| {r.coverage_95:.3f} | {r.gated_pct:.2f} | {r.pcrb_rms:.3f} | {r.ratio_to_pcrb:.2f} "
+                     f"| {r.us_per_step:.2g} | {r.diverged} |")
     return "\n".join(lines) + "\n"
 
 
 def plot(table: pd.DataFrame, title: str):
-    """Bar charts: RMS e_tot with the PCRB, and NEES with its consistent value 3 (log scale)."""
+    """RMS e_tot per receiver with its spread over the runs and the PCRB; mean NEES per receiver with its spread
+    and the consistent value 3 (log scale: an overconfident receiver's NEES is tens)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
     x = np.arange(len(table))
-    ax1.bar(x, table["rms_e_tot"], color="tab:red", alpha=0.8, label="RMS e_tot")
-    ax1.plot(x, table["pcrb_rms"], "k_", ms=30, mew=2, label="PCRB RMS")
+    sd = table["rms_e_tot_sd"].fillna(0.0)
+    ax1.bar(x, table["rms_e_tot"], yerr=sd, capsize=4, color="tab:red", alpha=0.8,
+            label="RMS e_tot (± sd over runs)")
+    ax1.plot(x, table["pcrb_rms"], "k_", ms=30, mew=2, label="PCRB RMS (the limit)")
     ax1.set_xticks(x, table["receiver"])
-    ax1.set_ylabel("[m]")
+    ax1.set_xlabel("receiver")
+    ax1.set_ylabel("position error, RMS e_tot [m]")
+    ax1.set_ylim(0, None)
     ax1.grid(True, axis="y", alpha=0.3)
     ax1.legend(fontsize=8)
-    ax2.bar(x, table["nees"], color="tab:blue", alpha=0.8, label="mean NEES")
-    ax2.axhline(3.0, color="k", ls="--", lw=1, label="consistent (3)")
+    nees = table["nees"].to_numpy(dtype=float)
+    spread = table["nees_sd"].fillna(0.0).to_numpy(dtype=float)
+    low = np.minimum(spread, 0.9 * nees)  # a log axis cannot show the bar below zero
+    ax2.errorbar(x, nees, yerr=[low, spread], fmt="o", color="tab:blue", capsize=4, ms=7,
+                 label="mean NEES (± sd over runs)")
+    for k, value in enumerate(nees):
+        ax2.annotate(f"{value:.1f}", (x[k], value), textcoords="offset points", xytext=(8, 4), fontsize=8)
+    ax2.axhline(3.0, color="k", ls="--", lw=1, label="consistent: 3 (3 dof)")
     ax2.set_yscale("log")
+    ax2.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax2.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:g}"[0] in "235" else ""))
     ax2.set_xticks(x, table["receiver"])
-    ax2.grid(True, axis="y", alpha=0.3)
+    ax2.set_xlim(-0.5, len(table) - 0.5)
+    ax2.set_xlabel("receiver")
+    ax2.set_ylabel("position NEES (above 3: overconfident)")
+    ax2.grid(True, axis="y", which="both", alpha=0.3)
     ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()

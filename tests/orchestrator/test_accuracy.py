@@ -54,11 +54,14 @@ def test_compare_tabulates_each_receiver_as_its_own_runs_do(tmp_path, capsys):
         cfg = load_config("semicircle", ["simulation.duration=20", f"receiver={row.receiver}"], seed=2)
         m = run(cfg, replicates=range(3)).metrics  # each replicate on its own
         assert row.rms_e_tot == pytest.approx(np.sqrt(np.mean(m["e_tot_rms"] ** 2)), rel=1e-12)
+        assert row.rms_e_tot_sd == pytest.approx(np.std(m["e_tot_rms"], ddof=1), rel=1e-12)
         assert row.nees == pytest.approx(m["nees_mean"].mean(), rel=1e-12)
+        assert row.nees_sd == pytest.approx(np.std(m["nees_mean"], ddof=1), rel=1e-12)
         assert row.ratio_to_pcrb == pytest.approx(row.rms_e_tot / np.sqrt(np.mean(m["pcrb_rms"] ** 2)), rel=1e-12)
         assert row.us_per_step > 0
     printed = capsys.readouterr().out
     assert "RMS / PCRB" in printed and "| lsq |" in printed
+    assert "seed 2" in printed.splitlines()[0]
 
 
 @pytest.mark.parametrize("args, message", [
