@@ -83,6 +83,9 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--levels", default="0.5,1,2", help="accuracy prescriptions to contour [m] (default 0.5,1,2)")
     g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
                    help="one map per value, side by side, e.g. platform.baseline=0.4,1,3")
+    g.add_argument("--depth", type=float, default=None,
+                   help="the diver's depth of the maps [m] (default target.depth, or the median depth of a "
+                        "trajectory file)")
     g.add_argument("--out", type=Path, default=None, help="output directory (default results/map_SCENARIO)")
     g.add_argument("--force", action="store_true", help="replace an earlier map in --out")
     g.add_argument("--seed", type=int, default=None, help=argparse.SUPPRESS)
@@ -242,14 +245,18 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.maps import make_maps, parse_compare, parse_levels, write
+    from sblsim.orchestrator.config import load_config
+    from sblsim.orchestrator.maps import diver_depth, make_maps, parse_compare, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
     out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map")
     labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
-                                                   compare)
+                                                   compare, args.depth)
+    depth = configs[0]["target"]["depth"]
+    where = "--depth" if args.depth is not None else diver_depth(load_config(args.scenario, args.overrides))[1]
+    print(f"maps at {depth:g} m depth ({where}; --depth D to choose)")
     for label, m in zip(labels, maps):
         cells = m.size
         shares = ", ".join(f"{100 * float((m <= v).sum()) / cells:.0f} % within {v:g} m" for v in levels)

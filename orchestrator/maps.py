@@ -27,6 +27,7 @@ import pandas as pd
 
 from sblsim.models.bound import MODEL, horizontal_std
 from sblsim.models.declarations import ModelError
+from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import beacon_arms, load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters
@@ -88,18 +89,32 @@ def grid(extent: float, step: float) -> tuple[np.ndarray, np.ndarray]:
     return axis, axis.copy()
 
 
-def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL) -> np.ndarray:
+def diver_depth(cfg: dict) -> tuple[float, str]:
+    """The depth a map is drawn at when none is given [m], and where it comes from.
+
+    ``target.depth`` for the built-in paths; for a trajectory file (or waypoints) the median depth of its
+    waypoints, since ``target.depth`` does not apply to it.
+    """
+    target = cfg["target"]
+    if target.get("trajectory") == "file":
+        return float(np.median(file_waypoints(target)[:, 3])), "the median depth of the trajectory's waypoints"
+    return float(target["depth"]), "target.depth"
+
+
+def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, depth: float | None = None) -> np.ndarray:
     """Horizontal DRMS [m] of one round of fresh ranges plus depth, shape (len(north), len(east)).
 
     Parameters
     ----------
     cfg : dict
-        Resolved configuration (geometry and error levels; the diver at ``target.depth``).
+        Resolved configuration (geometry and error levels).
     east, north : ndarray
         Grid coordinates [m].
     model : RangeDepthModel, optional
         The measurement model whose Fisher information is mapped (default the
         receivers'; its context is the beacons, its motion model the state layout).
+    depth : float, optional
+        The diver's depth [m]; default :func:`diver_depth`.
 
     References
     ----------
@@ -109,17 +124,20 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL) ->
     arms = beacon_arms(cfg["platform"])
     params = bound_parameters(cfg)
     E, N = np.meshgrid(east, north)
-    points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, float(cfg["target"]["depth"]))])
+    depth = diver_depth(cfg)[0] if depth is None else float(depth)
+    points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, depth)])
     drms = horizontal_std(points, arms, arms, params["noise_variance"], params["attitude_variance"],
                           params["depth_variance"], model=model)
     return drms.reshape(E.shape)
 
 
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
-              step: float = 0.5, compare: tuple[str, list[str]] | None = None) -> tuple[list[str], list[dict],
-                                                                                        np.ndarray, np.ndarray,
-                                                                                        list[np.ndarray]]:
+              step: float = 0.5, compare: tuple[str, list[str]] | None = None,
+              depth: float | None = None) -> tuple[list[str], list[dict], np.ndarray, np.ndarray, list[np.ndarray]]:
     """The accuracy map of a configuration, or one per value of a compared key.
+
+    ``depth`` [m] is the diver's depth of every map (default :func:`diver_depth` of each configuration); the
+    configurations returned hold it as ``target.depth``, which the table and the figure show.
 
     Returns
     -------
@@ -141,7 +159,11 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
         key, values = compare
         configs = [load_config(scenario, [*overrides, f"{key}={v}"], seed=seed) for v in values]
         labels = [f"{key} = {v}" for v in values]
-    return labels, configs, east, north, [accuracy_map(c, east, north) for c in configs]
+    if depth is not None and not 0.0 <= depth <= 11000.0:
+        raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")
+    for cfg in configs:
+        cfg["target"]["depth"] = diver_depth(cfg)[0] if depth is None else float(depth)
+    return labels, configs, east, north, [accuracy_map(c, east, north, depth=c["target"]["depth"]) for c in configs]
 
 
 def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,
@@ -166,6 +188,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
+    from matplotlib.ticker import LogLocator, ScalarFormatter
 
     finite = np.concatenate([m[np.isfinite(m)] for m in maps])
     norm = LogNorm(vmin=max(float(finite.min()), 1e-4), vmax=float(finite.max()))
@@ -182,7 +205,10 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
             ax.set_ylabel("North [m]")
         ax.set_title(f"{label}\n(diver at {cfg['target']['depth']:g} m depth)", fontsize=9)
     axes[0][0].legend(loc="upper right", fontsize=8)
-    fig.colorbar(mesh, ax=axes[0].tolist(), label="horizontal DRMS of one round of ranges + depth [m]")
+    bar = fig.colorbar(mesh, ax=axes[0].tolist(), label="horizontal DRMS of one round of ranges + depth [m]")
+    bar.locator = LogLocator(subs=(1.0, 2.0, 5.0))  # 0.1, 0.2, 0.5, 1, 2, 5 ... labelled, not only the decades
+    bar.formatter = ScalarFormatter()
+    bar.update_ticks()
     return fig
 
 

@@ -108,7 +108,28 @@ def test_map_accuracy_grows_with_distance_and_is_symmetric_for_the_cross():
     np.testing.assert_allclose(m, m.T, rtol=1e-9)  # the cross at heading 0 is symmetric about the diagonal
 
 
+def test_map_of_a_trajectory_file_is_drawn_at_the_files_depth(tmp_path, capsys):
+    """target.depth does not apply to a trajectory file: the map takes its waypoints' median depth (8 m), and a
+    deeper diver is farther from the beacons, so its fix below the platform is worse than at 5 m."""
+    (tmp_path / "path.csv").write_text("time,north,east,down\n0,5,0,8\n30,5,10,8\n60,5,20,8\n")
+    overrides = ["target.trajectory=file", f"target.trajectory_file={tmp_path / 'path.csv'}"]
+    code = main(["map", "semicircle", *(a for o in overrides for a in ("--set", o)), "--extent", "10", "--step",
+                 "1", "--out", str(tmp_path / "m")])
+    assert code == 0, capsys.readouterr().err
+    assert "maps at 8 m depth (the median depth" in capsys.readouterr().out
+    frame = pd.read_csv(tmp_path / "m" / "map.csv")
+    assert set(frame["depth"]) == {8.0}
+    cfg = load_config("semicircle", overrides)
+    east, north = grid(10.0, 1.0)
+    np.testing.assert_allclose(frame["drms"].to_numpy(), accuracy_map(cfg, east, north, depth=8.0).ravel())
+    assert not np.allclose(accuracy_map(cfg, east, north, depth=5.0), accuracy_map(cfg, east, north, depth=8.0))
+    code = main(["map", "semicircle", *(a for o in overrides for a in ("--set", o)), "--extent", "10", "--step",
+                 "1", "--depth", "3", "--out", str(tmp_path / "m3")])
+    assert code == 0 and set(pd.read_csv(tmp_path / "m3" / "map.csv")["depth"]) == {3.0}
+
+
 @pytest.mark.parametrize("args, message", [
+    (["--depth", "-1"], "--depth: -1.0 is outside the allowed range [0, 11000] m"),
     (["--extent", "0"], "--extent: 0.0 m is outside the allowed range (0, 10000]"),
     (["--step", "50"], "--step: 50.0 m is outside the allowed range (0, extent = 30]"),
     (["--step", "0.01"], "--step: 0.01 m gives"),
