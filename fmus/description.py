@@ -27,7 +27,7 @@ def _number(value: float, fmi_type: str) -> str:
 
 
 def model_description(model: type, n_beacons: int, guid: str, source_files: list[str],
-                      step_size: float = 0.1) -> bytes:
+                      step_size: float = 0.1, stop_time: float = 100.0) -> bytes:
     """``modelDescription.xml`` of a component's FMU.
 
     Parameters
@@ -41,6 +41,9 @@ def model_description(model: type, n_beacons: int, guid: str, source_files: list
         The C files of ``sources/`` (listed for hosts that compile from source).
     step_size : float
         Default communication step [s].
+    stop_time : float
+        Default stop time [s]: about one pass of the default path (the semicircle takes 94.2 s), so that a
+        host's plain "simulate" (``fmpy simulate``) runs a whole scenario rather than its default 1 s.
 
     Returns
     -------
@@ -74,7 +77,7 @@ def model_description(model: type, n_beacons: int, guid: str, source_files: list
         ET.SubElement(ET.SubElement(units, "Unit", name=name), "BaseUnit", base)
     categories = ET.SubElement(root, "LogCategories")
     ET.SubElement(categories, "Category", name="logStatusError", description="Errors: bad calls, bad parameters")
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stepSize=repr(step_size))
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(stop_time), stepSize=repr(step_size))
 
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(variables):

@@ -125,6 +125,16 @@ def test_sampled_signals_are_discrete_and_the_fmu_is_honest_about_itself(fmu_dir
     assert f"binaries/linux64/sblsim_{name}.so" in names
 
 
+def test_a_plain_simulate_runs_a_whole_scenario(fmu_dir):
+    """The default experiment has a stop time, so a host's plain simulate runs the default path's pass (the
+    semicircle's 94.2 s), not a host's own default of 1 s."""
+    from fmpy import simulate_fmu
+
+    result = simulate_fmu(str(fmu_path(fmu_dir, "target")), output=["pos_y"])
+    assert result["time"][-1] == pytest.approx(100.0)
+    assert result["pos_y"][-1] == pytest.approx(15.0, abs=0.05)  # the semicircle ends at East 15 m
+
+
 # --------------------------------------------------------------------------- local versus fmu engine
 
 
