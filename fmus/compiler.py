@@ -23,14 +23,17 @@ from sblsim.models.declarations import ModelError
 
 FLAGS = ("-O3", "-std=c99", "-ffp-contract=off", "-fno-math-errno", "-fvisibility=hidden", "-fPIC", "-shared")
 
-#: FMI 2.0 platform folder -> (zig target, library suffix).
+#: FMI 2.0 platform folder -> (zig targets, library suffix). FMI 2.0 knows one macOS folder, ``darwin64``, and
+#: its hosts (fmpy, OMSimulator) read it on Intel and Apple silicon alike, so its library is a universal Mach-O
+#: file holding both slices (as ``lipo`` makes it: :func:`universal_macho`).
 PLATFORMS = {
-    "linux64": ("x86_64-linux-gnu", ".so"),
-    "win64": ("x86_64-windows-gnu", ".dll"),
-    "darwin64": ("x86_64-macos", ".dylib"),
-    "aarch64-darwin": ("aarch64-macos", ".dylib"),
+    "linux64": (("x86_64-linux-gnu",), ".so"),
+    "win64": (("x86_64-windows-gnu",), ".dll"),
+    "darwin64": (("x86_64-macos", "aarch64-macos"), ".dylib"),
 }
-CROSS_PLATFORMS = ("win64", "darwin64", "aarch64-darwin")
+CROSS_PLATFORMS = ("win64", "darwin64")
+#: Mach-O CPU types of the zig targets' architectures, and the alignment (log2) of their slices.
+_MACHO_CPU = {"x86_64": (0x01000007, 3, 12), "aarch64": (0x0100000C, 0, 14)}
 COMPILERS = ("auto", "system", "zig")
 
 
@@ -111,8 +114,8 @@ def host_platform() -> str:
         return "linux64"
     if sys.platform == "win32" and machine in ("x86_64", "amd64"):
         return "win64"
-    if sys.platform == "darwin":
-        return "aarch64-darwin" if machine in ("arm64", "aarch64") else "darwin64"
+    if sys.platform == "darwin" and machine in ("x86_64", "amd64", "arm64", "aarch64"):
+        return "darwin64"
     raise CompileError(f"compiler: no FMI 2.0 platform folder for {sys.platform}/{machine}")
 
 
@@ -140,28 +143,75 @@ def compile_library(compiler: Compiler, sources: Sequence[Path], output: Path, i
         If the compiler fails (the message carries its first error lines).
     """
     target = platform or host_platform()
-    command = list(compiler.command)
-    if target != host_platform():
-        if not compiler.zig:
-            raise CompileError(f"compiler: cross-compiling for {target} needs zig (`pip install ziglang`)")
-        command += ["-target", PLATFORMS[target][0]]
-    elif compiler.zig:
-        command += ["-target", PLATFORMS[target][0]]
-    command += list(FLAGS) + [f"-I{p}" for p in include] + [f"-D{d}" for d in defines]
+    if target != host_platform() and not compiler.zig:
+        raise CompileError(f"compiler: cross-compiling for {target} needs zig (`pip install ziglang`)")
+    if compiler.zig:  # one compilation per slice
+        slices = [["-target", zig_target] for zig_target in PLATFORMS[target][0]]
+    else:  # the host's own compiler; Apple's makes a universal library itself
+        slices = [["-arch", "x86_64", "-arch", "arm64"] if target == "darwin64" else []]
     with tempfile.TemporaryDirectory(prefix="sblsim_cc_") as tmp:
-        # in a folder of its own: some linkers leave companions (a .pdb, an import .lib) beside the library
-        built = Path(tmp) / output.name
-        command += [str(s) for s in sources] + ["-o", str(built)]
-        if not target.startswith("win"):
-            command.append("-lm")
-        result = subprocess.run(command, capture_output=True, text=True, cwd=tmp)
-        if result.returncode != 0 or not built.is_file():
-            errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
-            detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
-            raise CompileError(f"compiler: {compiler.describe()} failed for {output.name} ({target}): {detail}")
-        shutil.move(str(built), str(output))
+        built = []
+        for k, options in enumerate(slices):
+            # in a folder of its own: some linkers leave companions (a .pdb, an import .lib) beside the library
+            folder = Path(tmp) / str(k)
+            folder.mkdir()
+            built.append(_compile(compiler, [*compiler.command, *options], sources, folder / output.name, include,
+                                  defines, target))
+        if len(built) > 1:
+            universal_macho(built, Path(tmp) / output.name)
+            built = [Path(tmp) / output.name]
+        shutil.move(str(built[0]), str(output))
     return output
 
 
+def _compile(compiler: Compiler, command: list[str], sources: Sequence[Path], built: Path, include: Sequence[Path],
+             defines: Sequence[str], target: str) -> Path:
+    """One compiler run into ``built``; raises CompileError with the compiler's first error lines."""
+    command = [*command, *FLAGS, *(f"-I{p}" for p in include), *(f"-D{d}" for d in defines),
+               *(str(s) for s in sources), "-o", str(built)]
+    if not target.startswith("win"):
+        command.append("-lm")
+    result = subprocess.run(command, capture_output=True, text=True, cwd=built.parent)
+    if result.returncode != 0 or not built.is_file():
+        errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
+        detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
+        raise CompileError(f"compiler: {compiler.describe()} failed for {built.name} ({target}): {detail}")
+    return built
+
+
+def universal_macho(slices: Sequence[Path], output: Path) -> Path:
+    """Join thin Mach-O libraries into one universal ("fat") file, as Apple's ``lipo -create`` does.
+
+    The file is a big-endian header (magic ``0xCAFEBABE``, the number of slices), one record per slice
+    (CPU type, CPU subtype, offset, size, alignment as a power of 2), then the slices, each at an offset
+    aligned to its page size (Apple, ``<mach-o/fat.h>``).
+
+    Raises
+    ------
+    CompileError
+        If a slice is not a 64-bit little-endian Mach-O file of a known architecture.
+    """
+    import struct
+
+    cpus = {cpu: (cpu, sub, align) for cpu, sub, align in _MACHO_CPU.values()}
+    blobs, records = [p.read_bytes() for p in slices], []
+    offset = 8 + 20 * len(blobs)
+    for path, blob in zip(slices, blobs):
+        magic, cpu = struct.unpack_from("<II", blob, 0)
+        if magic != 0xFEEDFACF or cpu not in cpus:
+            raise CompileError(f"compiler: {path.name} is not a 64-bit Mach-O library of x86_64 or arm64")
+        _, sub, align = cpus[cpu]
+        offset = -(-offset // (1 << align)) * (1 << align)
+        records.append((cpu, sub, offset, len(blob), align))
+        offset += len(blob)
+    with open(output, "wb") as out:
+        out.write(struct.pack(">II", 0xCAFEBABE, len(blobs)))
+        for record in records:
+            out.write(struct.pack(">IIIII", *record))
+        for (_, _, at, _, _), blob in zip(records, blobs):
+            out.write(bytes(at - out.tell()))
+            out.write(blob)
+    return output
+
 __all__ = ["COMPILERS", "CROSS_PLATFORMS", "CompileError", "Compiler", "FLAGS", "PLATFORMS", "compile_library",
-           "find_compiler", "host_platform", "zig"]
+           "find_compiler", "host_platform", "universal_macho", "zig"]
