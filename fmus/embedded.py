@@ -13,6 +13,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Mapping
 
 from sblsim.fmus.codegen import C_DIR, stem, write_sources
 from sblsim.models import MODELS, RECEIVERS
@@ -21,7 +22,7 @@ from sblsim.models.declarations import ModelError
 MAIN = """/* Feed a packet sequence to the {name} and print its estimates.
  * stdin, one line per step: t h {inputs}
  * stdout, one line per step: t+h est_x est_y est_z
- * arguments: parameters as NAME=VALUE (e.g. x0_y=-15); build: cc -O2 -std=c99 *.c -lm -o receiver */
+ * arguments: parameters as NAME=VALUE (e.g. x0_y=-15); build: cc -O2 -std=c99 -ffp-contract=off *.c -lm -o receiver */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -58,11 +59,13 @@ after `sblsim_new`.
 Build and run the example:
 
     cc -O2 -std=c99 -ffp-contract=off *.c -lm -o receiver
-    ./receiver x0_x=0 x0_y=-15 x0_z=5 < packets.txt
+    ./receiver $(cat parameters.txt) < packets.txt > estimates.txt
 
+{example}
 Each input line is `t h {inputs}`: the step from t to t + h [s] and the receiver's
 inputs during it (the packet of the acoustic channel and the depth reading, SI units,
-booleans as 0/1). Each output line is `t+h est_x est_y est_z` [m].
+booleans as 0/1). Each output line is `t+h est_x est_y est_z` [m]. Parameters are
+`NAME=VALUE` arguments; the ones not given keep their start values.
 
 In your own code, see `sblsim_embedded.h`: `sblsim_new`, `sblsim_set` (parameters by
 name before `sblsim_start`, inputs before each `sblsim_step`), `sblsim_get`.
@@ -71,16 +74,21 @@ docs/variables.md.
 """
 
 
-def write_receiver(receiver: str, out: Path | str, n_beacons: int = 4) -> list[Path]:
+def write_receiver(receiver: str, out: Path | str, n_beacons: int = 4, example: Mapping[str, str] | None = None,
+                   about: str = "") -> list[Path]:
     """Write a receiver's embeddable C into a new (or empty) directory.
 
     Parameters
     ----------
     receiver : str
-        A built-in receiver (``ekf``, ``lsq``).
+        A built-in receiver (``ekf``, ``ekf-seq``, ``ukf``, ``lsq``).
     out : path
         The directory; created, and must not hold files already.
     n_beacons : int
+    example : mapping of str to str, optional
+        Example files written beside the code (``parameters.txt``, ``packets.txt``, ``expected.txt``: a
+        recorded run's parameters, inputs and estimates, made by the orchestrator), with ``about`` the
+        README's paragraph on them.
 
     Returns
     -------
@@ -112,7 +120,9 @@ def write_receiver(receiver: str, out: Path | str, n_beacons: int = 4) -> list[P
                                                 quoted=", ".join(f'"{n}"' for n in inputs), count=len(inputs)))
         (tmp / "README.md").write_text(README.format(title=model.__doc__.strip().splitlines()[0].rstrip("."),
                                                      receiver=receiver, model=model.name, inputs=" ".join(inputs),
-                                                     model_file=f"{base}_model.c"))
+                                                     model_file=f"{base}_model.c", example=about))
+        for name, text in (example or {}).items():
+            (tmp / name).write_text(text)
         if out.exists():
             out.rmdir()
         os.replace(tmp, out)

@@ -423,9 +423,14 @@ def _check_writable(directory: Path) -> None:
 
 def _codegen(args: argparse.Namespace) -> int:
     from sblsim.fmus.embedded import write_receiver
+    from sblsim.models import RECEIVERS
+    from sblsim.orchestrator.codegen import example_files
 
     _check_writable(args.out)
-    files = write_receiver(args.receiver, args.out)
+    if args.receiver not in RECEIVERS:
+        raise ModelError(f"--receiver: {args.receiver!r} is not one of {', '.join(RECEIVERS)}")
+    example, about = example_files(args.receiver)
+    files = write_receiver(args.receiver, args.out, example=example, about=about)
     print(f"wrote {len(files)} files to {args.out}/ ({', '.join(p.name for p in files)}); see its README.md")
     return 0
 

@@ -105,3 +105,23 @@ def test_codegen_refuses_a_bad_receiver_and_a_used_directory(tmp_path):
     with pytest.raises(ModelError, match="not an empty directory"):
         write_receiver("ekf", tmp_path / "b")
     assert (tmp_path / "b" / "keep.txt").read_text() == "mine" and len(list((tmp_path / "b").iterdir())) == 1
+
+
+def test_codegen_readme_run_line_reproduces_its_example(tmp_path):
+    """The generated folder's own example, as its README runs it: ./receiver $(cat parameters.txt) < packets.txt
+    gives the recorded run's estimates (expected.txt)."""
+    from sblsim.orchestrator.cli import main
+
+    out = tmp_path / "receiver_c"
+    assert main(["codegen", "receiver", "--receiver", "ukf", "--out", str(out)]) == 0
+    readme = (out / "README.md").read_text()
+    build = next(line.strip() for line in readme.splitlines() if line.strip().startswith("cc "))
+    run_line = next(line.strip() for line in readme.splitlines() if line.strip().startswith("./receiver"))
+    cc = " ".join(find_compiler("system").command)
+    done = subprocess.run(f"{cc} {build[3:]} && {run_line}", shell=True, cwd=out, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    estimates, expected = np.loadtxt(out / "estimates.txt"), np.loadtxt(out / "expected.txt")
+    assert estimates.shape == expected.shape and len(expected) == 200
+    np.testing.assert_allclose(estimates, expected, rtol=0, atol=TOL)
+    assert "x0_vx=" in (out / "parameters.txt").read_text()  # every parameter of the run, the velocity too
