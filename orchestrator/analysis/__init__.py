@@ -42,7 +42,7 @@ Outputs (written atomically into ``out``):
 ``diagnostics.csv``
     One row per scenario: ``scenario, metric, transform, lambda,
     lambda_ci_low, lambda_ci_high, n, df_resid, r2, r2_adj, bp_stat, bp_p,
-    jb_stat, jb_p, skew, kurtosis, share_fitted_nonpositive, warning``: the
+    cell_sd_ratio, jb_stat, jb_p, skew, kurtosis, share_fitted_nonpositive, warning``: the
     checks of the model's assumptions (see
     :func:`~sblsim.orchestrator.analysis.fit.diagnose`); ``warning`` names the
     failed ones (Breusch-Pagan or Jarque-Bera p < 0.01, fitted values <= 0 of
@@ -232,24 +232,14 @@ def analyze(directory: Path | str, out: Path | str | None = None, metric: str = 
         default 2 (main effects and two-factor interactions).
     alpha : float
         Significance level [-]; default 0.05.
+    transform : str
+        ``none`` (default), ``log`` or ``boxcox``: fit the model to the
+        metric, its logarithm (effects read as factors) or its Box-Cox transform.
 
     Returns
     -------
     Path
-        ``out``, holding ``effects.csv``,     With ``transform = "log"`` the effects are differences of mean log
-    response and a last column ``ratio = exp(effect)`` [-] is the factor by
-    which the term multiplies the response: for a main effect, the ratio
-    HIGH/LOW of the geometric means; with ``boxcox`` they are on the
-    Box-Cox scale.
-``diagnostics.csv``
-    One row per scenario: ``scenario, metric, transform, lambda,
-    lambda_ci_low, lambda_ci_high, n, df_resid, r2, r2_adj, bp_stat, bp_p,
-    jb_stat, jb_p, skew, kurtosis, share_fitted_nonpositive, warning``: the
-    checks of the model's assumptions (see
-    :func:`~sblsim.orchestrator.analysis.fit.diagnose`); ``warning`` names the
-    failed ones (Breusch-Pagan or Jarque-Bera p < 0.01, fitted values <= 0 of
-    a positive response) and is also among the report's warnings.
-``anova.csv``, ``tables.csv``,
+        ``out``, holding ``effects.csv``, ``diagnostics.csv``, ``anova.csv``, ``tables.csv``,
         ``report.html``, ``report.md`` and ``figures/*.png``. Everything is
         built in a temporary directory beside ``out`` and moved into place only
         when complete, so an error leaves nothing half-written.
@@ -312,6 +302,7 @@ def _file_stem(scenario: str, used: set[str]) -> str:
 
 __all__ = ["ANOVA_TYPE", "DIAGNOSTIC_COLUMNS", "METRICS", "REQUIRED_COLUMNS", "TRANSFORMS", "Analysis", "AnalysisError",
            "Factor", "FitResult", "StudyRecord", "allowed_metrics", "analyze", "best_cell", "boxcox_lambda",
-           "check_metric", "check_order", "check_transform", "compute", "diagnose", "fit", "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
+           "check_metric", "check_order", "check_transform", "compute", "diagnose", "fit",
+           "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
            "model_matrix", "model_terms", "ranking", "report_html", "report_markdown", "scenario_order", "tables",
            "term_name", "write"]

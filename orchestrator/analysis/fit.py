@@ -19,8 +19,8 @@ ANOVA_TYPE = 2
 DIAGNOSTIC_P = 0.01
 #: Columns of ``diagnostics.csv`` after ``scenario`` (:func:`diagnose`).
 DIAGNOSTIC_COLUMNS = ("metric", "transform", "lambda", "lambda_ci_low", "lambda_ci_high", "n", "df_resid", "r2",
-                      "r2_adj", "bp_stat", "bp_p", "jb_stat", "jb_p", "skew", "kurtosis", "share_fitted_nonpositive",
-                      "warning")
+                      "r2_adj", "bp_stat", "bp_p", "cell_sd_ratio", "jb_stat", "jb_p", "skew", "kurtosis",
+                      "share_fitted_nonpositive", "warning")
 
 
 @dataclass
@@ -237,7 +237,8 @@ def boxcox_lambda(y: np.ndarray, X: np.ndarray, bounds: tuple[float, float] = (-
     return lam, (ends[0], ends[1])
 
 
-def diagnose(model, y_raw: np.ndarray, transform: str = "none", lmbda: float | None = None) -> dict:
+def diagnose(model, y_raw: np.ndarray, transform: str = "none", lmbda: float | None = None,
+             cells: np.ndarray | None = None) -> dict:
     """Checks of the OLS model's assumptions: fit, constant variance, normality, impossible fitted values.
 
     Parameters
@@ -250,13 +251,18 @@ def diagnose(model, y_raw: np.ndarray, transform: str = "none", lmbda: float | N
         ``none``, ``log`` or ``boxcox``.
     lmbda : float, optional
         Box-Cox λ [-].
+    cells : ndarray, optional
+        Design cell of each row fitted (for ``cell_sd_ratio``).
 
     Returns
     -------
     dict
         ``r2``, ``r2_adj``; ``bp_stat``, ``bp_p``: Breusch-Pagan test of a
         variance that changes with the model's terms (statsmodels
-        ``het_breuschpagan``, Koenker's studentized form); ``jb_stat``,
+        ``het_breuschpagan``, Koenker's studentized form); ``cell_sd_ratio``:
+        largest over smallest standard deviation of the residuals within a
+        design cell (the size of the unequal variance that the test detects;
+        NaN unless every cell has 2 runs or more); ``jb_stat``,
         ``jb_p``, ``skew``, ``kurtosis`` (3 for a normal law): Jarque-Bera test
         of normal residuals (statsmodels ``jarque_bera``);
         ``share_fitted_nonpositive``: share of the fitted values that stand for
@@ -278,6 +284,12 @@ def diagnose(model, y_raw: np.ndarray, transform: str = "none", lmbda: float | N
                    kurtosis=float(kurt))
     else:
         out.update(bp_stat=np.nan, bp_p=np.nan, jb_stat=np.nan, jb_p=np.nan, skew=np.nan, kurtosis=np.nan)
+    out["cell_sd_ratio"] = np.nan
+    if cells is not None:
+        groups = pd.Series(resid).groupby(np.asarray(cells))
+        sd = groups.std(ddof=1)
+        if (groups.size() >= 2).all() and sd.min() > 0:
+            out["cell_sd_ratio"] = float(sd.max() / sd.min())
     if not (np.asarray(y_raw) > 0).all():
         share = np.nan
     elif transform == "none":
@@ -300,7 +312,10 @@ def assumption_warning(diag: dict, transform: str, metric: str) -> str:
     """
     parts = []
     if diag.get("bp_p", np.nan) < DIAGNOSTIC_P:
-        parts.append(f"the residuals' variance changes with the terms (Breusch-Pagan p = {diag['bp_p']:.2g})")
+        ratio = diag.get("cell_sd_ratio", np.nan)
+        size = (f"; the largest residual std of a cell is {ratio:.3g} times the smallest" if np.isfinite(ratio)
+                else "")
+        parts.append(f"the residuals' variance changes with the terms (Breusch-Pagan p = {diag['bp_p']:.2g}{size})")
     if diag.get("jb_p", np.nan) < DIAGNOSTIC_P:
         parts.append(f"the residuals are not normal (Jarque-Bera p = {diag['jb_p']:.2g}, skew "
                      f"{diag['skew']:.2f}, kurtosis {diag['kurtosis']:.2f} against 3)")
@@ -450,7 +465,7 @@ def fit(frame: pd.DataFrame, factors: Sequence[str], metric: str = "e_tot_rms", 
     anova["p_value"] = table["PR(>F)"].to_numpy(dtype=float)
     if transform == "log":
         effects["ratio"] = np.exp(effect)
-    diag = diagnose(model, y, transform, lmbda)
+    diag = diagnose(model, y, transform, lmbda, data["cell"].to_numpy() if "cell" in data.columns else None)
     diag.update(metric=metric, transform=transform, n=len(y), df_resid=df_resid,
                 **{"lambda": np.nan if lmbda is None else lmbda,
                    "lambda_ci_low": np.nan if lmbda_ci is None else lmbda_ci[0],

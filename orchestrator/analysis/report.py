@@ -77,9 +77,9 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
         elif len(names) == 2:
             a, b = names
             more = "larger" if e > 0 else "smaller"
+            hi, lo = format_level(by_name[b].high, by_name[b].unit), format_level(by_name[b].low, by_name[b].unit)
             parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{scale}: the effect of {a} is "
-                         f"{abs(2 * e):.3g}{unit} {more} at high {b} ({format_level(by_name[b].high, by_name[b].unit)}) "
-                         f"than at low {b} ({format_level(by_name[b].low, by_name[b].unit)}))")
+                         f"{abs(2 * e):.3g}{unit} {more} at high {b} ({hi}) than at low {b} ({lo}))")
         else:
             on = f" on log({result.metric})" if result.transform == "log" else scale
             parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{on})")
@@ -164,8 +164,9 @@ def _diagnostics_table(analysis: Analysis) -> pd.DataFrame:
 
 
 _DIAGNOSTICS_TEXT = ("Checks of the model's assumptions: R², Breusch-Pagan test of a residual variance that changes "
-                     "with the terms (bp, Koenker's form), Jarque-Bera test of normal residuals (jb; kurtosis 3 for "
-                     "a normal law), share of fitted values that stand for a response <= 0. A p-value below "
+                     "with the terms (bp, Koenker's form) and the ratio of the largest to the smallest residual "
+                     "standard deviation within a design cell, Jarque-Bera test of normal residuals (jb; kurtosis 3 "
+                     "for a normal law), share of fitted values that stand for a response <= 0. A p-value below "
                      "0.01 or any such fitted value is listed under Warnings.")
 
 
