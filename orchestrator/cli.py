@@ -121,6 +121,9 @@ def _parser() -> argparse.ArgumentParser:
     a.add_argument("--out", type=Path, default=None, help="output directory (default: the campaign directory)")
     a.add_argument("--metric", default="e_tot_rms", help="response column (default e_tot_rms)")
     a.add_argument("--order", type=int, default=2, help="highest interaction order in the model (default 2)")
+    a.add_argument("--transform", choices=("none", "log", "boxcox"), default="none",
+                   help="fit the model to the metric (none, default), its logarithm (log: effects as factors) or "
+                        "its Box-Cox transform (boxcox: lambda by maximum likelihood); see diagnostics.csv")
 
     f = sub.add_parser("fmus", help="build, validate or list the FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
@@ -299,23 +302,31 @@ def _campaign(args: argparse.Namespace) -> int:
     return 0
 
 
-def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_rms", order: int = 2) -> int:
+def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_rms", order: int = 2,
+                 transform: str = "none") -> int:
     from sblsim.orchestrator.analysis import compute, write
 
     _check_writable(out or directory)
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    analysis = compute(directory, metric, order, progress=say)
+    analysis = compute(directory, metric, order, progress=say, transform=transform)
     for note in analysis.warnings:
         print(f"note: {note}", file=sys.stderr)
     target = write(analysis, out or directory, progress=say)
     for scenario, result in analysis.fits.items():
         effects = result.effects
         significant = effects[effects["p_value"] < analysis.alpha].sort_values("t", key=abs, ascending=False)
-        terms = ", ".join(significant["term"].head(5)) or "none"
-        print(f"{scenario}: significant terms, largest first: {terms}")
-    print(f"analysis written to {target}/ (report.html, report.md, effects.csv, anova.csv, tables.csv, figures)")
+        if "ratio" in significant.columns:  # log: the factor by which each term multiplies the metric
+            names = [f"{t} (x{r:.3g})" for t, r in zip(significant["term"].head(5), significant["ratio"].head(5))]
+        else:
+            names = list(significant["term"].head(5))
+        print(f"{scenario}: significant terms, largest first: {', '.join(names) or 'none'}")
+        if result.lmbda is not None:
+            low, high = result.lmbda_ci
+            print(f"{scenario}: Box-Cox lambda = {result.lmbda:.3g} (95 % CI {low:.3g} to {high:.3g})")
+    print(f"analysis written to {target}/ (report.html, report.md, effects.csv, diagnostics.csv, anova.csv, "
+          "tables.csv, figures)")
     return 0
 
 
@@ -479,7 +490,7 @@ def _command(args: argparse.Namespace) -> int:
         if args.command == "ssp":
             return _ssp(args)
         if args.command == "analyze":
-            return _analyze_dir(args.dir, args.out, args.metric, args.order)
+            return _analyze_dir(args.dir, args.out, args.metric, args.order, args.transform)
         if args.command == "codegen":
             return _codegen(args)
         return _fmus(args)

@@ -207,6 +207,7 @@ CASES = {
     "analyze nothing": (["analyze", "adir"], "runs.parquet"),
     "analyze corrupt runs": (["analyze", "campaign"], "runs.parquet"),
     "analyze missing folder": (["analyze", "nowhere"], "runs.parquet"),
+    "analyze unknown transform": (["analyze", "campaign", "--transform", "sqrt"], "--transform"),
     # ssp
     "ssp out not .ssp": (["ssp", "export", "semicircle", "--out", "package.zip"], "--out"),
     "ssp over a package": (["ssp", "export", "semicircle", "--out", "earlier.ssp"], "--force"),

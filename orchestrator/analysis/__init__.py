@@ -8,8 +8,9 @@ for the instrumentation fix) and ``study.toml`` (the resolved study: design,
 replicates, seed, scenarios and one ``[[factors]]`` table per factor). Without
 ``study.toml`` the factors are the columns that have a ``NAME_value`` partner.
 
-Per scenario, the response (``e_tot_rms`` by default) is regressed by ordinary
-least squares on the coded factors with every interaction up to ``order``
+Per scenario, the response (``e_tot_rms`` by default; with ``transform`` its
+natural logarithm or its Box-Cox transform, λ by maximum likelihood) is
+regressed by ordinary least squares on the coded factors with every interaction up to ``order``
 (default 2: main effects and two-factor interactions). With the −1/+1 coding
 the effect of a term is twice its coefficient, i.e. the mean response where
 the term's contrast column is +1 minus the mean where it is −1 (Yates'
@@ -33,6 +34,19 @@ Outputs (written atomically into ``out``):
     ``effect`` and ``coefficient`` are in the response's unit [m]; ``std_err``
     is the standard error of the coefficient [m] (Lenth: PSE / 2); ``t`` is
     the standardized effect [-].
+    With ``transform = "log"`` the effects are differences of mean log
+    response and a last column ``ratio = exp(effect)`` [-] is the factor by
+    which the term multiplies the response: for a main effect, the ratio
+    HIGH/LOW of the geometric means; with ``boxcox`` they are on the
+    Box-Cox scale.
+``diagnostics.csv``
+    One row per scenario: ``scenario, metric, transform, lambda,
+    lambda_ci_low, lambda_ci_high, n, df_resid, r2, r2_adj, bp_stat, bp_p,
+    cell_sd_ratio, jb_stat, jb_p, skew, kurtosis, share_fitted_nonpositive, warning``: the
+    checks of the model's assumptions (see
+    :func:`~sblsim.orchestrator.analysis.fit.diagnose`); ``warning`` names the
+    failed ones (Breusch-Pagan or Jarque-Bera p < 0.01, fitted values <= 0 of
+    a positive response) and is also among the report's warnings.
 ``anova.csv``
     ``scenario, term, df, sum_sq, mean_sq, F, p_value`` with a ``Residual``
     row per scenario: Type II sums of squares (statsmodels ``anova_lm``,
@@ -77,23 +91,35 @@ import pandas as pd
 from sblsim.orchestrator.analysis.data import (
     METRICS,
     REQUIRED_COLUMNS,
+    TRANSFORMS,
     AnalysisError,
     allowed_metrics,
     check_metric,
     check_order,
+    check_transform,
     infer_factors,
     load_runs,
     load_study,
     scenario_order,
 )
-from sblsim.orchestrator.analysis.fit import ANOVA_TYPE, FitResult, fit, lenth_pse, model_matrix, model_terms, term_name
+from sblsim.orchestrator.analysis.fit import (
+    ANOVA_TYPE,
+    DIAGNOSTIC_COLUMNS,
+    FitResult,
+    boxcox_lambda,
+    diagnose,
+    fit,
+    lenth_pse,
+    model_matrix,
+    model_terms,
+    term_name,
+)
 from sblsim.orchestrator.analysis.report import format_level, metric_label, ranking, report_html, report_markdown
 from sblsim.orchestrator.analysis.tables import best_cell, tables
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.study import Factor, StudyRecord
 
 
-@dataclass
 @dataclass
 class Analysis:
     """Everything the report shows.
@@ -111,6 +137,8 @@ class Analysis:
         Tidy tables (layout of ``tables.csv``).
     warnings : list of str
         Study-level and per-scenario warnings (``scenario: ...``).
+    transform : str
+        Transform of the response: ``none``, ``log`` or ``boxcox``.
     """
 
     study: StudyRecord
@@ -121,10 +149,17 @@ class Analysis:
     fits: dict[str, FitResult]
     tables: pd.DataFrame
     warnings: list[str]
+    transform: str = "none"
+
+    @property
+    def diagnostics(self) -> pd.DataFrame:
+        """One row per scenario: the layout of ``diagnostics.csv``."""
+        rows = [{"scenario": s, **r.diagnostics} for s, r in self.fits.items()]
+        return pd.DataFrame(rows, columns=["scenario", *DIAGNOSTIC_COLUMNS])
 
 
 def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, alpha: float = 0.05,
-            progress: Callable[[str], None] | None = None) -> Analysis:
+            progress: Callable[[str], None] | None = None, transform: str = "none") -> Analysis:
     """Read a campaign directory and fit every scenario (nothing is written).
 
     Parameters
@@ -139,6 +174,9 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
         Significance level [-].
     progress : callable, optional
         Called with one line per step of the work (the fits take seconds each on a large study).
+    transform : str
+        ``none`` (default), ``log`` or ``boxcox``: the scale of the response
+        the model is fitted on (see :func:`~sblsim.orchestrator.analysis.fit.fit`).
 
     Returns
     -------
@@ -148,11 +186,12 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
     ------
     AnalysisError
         Missing or corrupt ``runs.parquet``, corrupt ``study.toml``, unknown
-        metric, bad order or alpha.
+        metric or transform, a value <= 0 for ``log`` / ``boxcox``, bad order or alpha.
     """
     runs = load_runs(directory)
     study, notes = load_study(directory, runs)
     check_metric(metric, runs)
+    check_transform(transform, runs, metric)
     names = [f.name for f in study.factors]
     order = check_order(order, len(names))
     if not 0.0 < alpha < 1.0:
@@ -168,16 +207,16 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
             progress(f"analyze: fitting {scenario} ({k}/{len(scenarios)}, {int((runs['scenario'] == scenario).sum())} "
                      "runs)")
         frame = runs[runs["scenario"] == scenario]
-        result = fit(frame, names, metric, order, alpha, scenario)
+        result = fit(frame, names, metric, order, alpha, scenario, transform)
         fits[scenario] = result
         notes += [f"{scenario}: {w}" for w in result.warnings]
         parts.append(tables(frame, metric, scenario))
     return Analysis(study=study, runs=runs, metric=metric, order=order, alpha=alpha, fits=fits,
-                    tables=pd.concat(parts, ignore_index=True), warnings=notes)
+                    tables=pd.concat(parts, ignore_index=True), warnings=notes, transform=transform)
 
 
 def analyze(directory: Path | str, out: Path | str | None = None, metric: str = "e_tot_rms", order: int = 2,
-            alpha: float = 0.05) -> Path:
+            alpha: float = 0.05, transform: str = "none") -> Path:
     """Analyse a campaign and write the effects, ANOVA, tables, figures and report.
 
     Parameters
@@ -193,11 +232,14 @@ def analyze(directory: Path | str, out: Path | str | None = None, metric: str = 
         default 2 (main effects and two-factor interactions).
     alpha : float
         Significance level [-]; default 0.05.
+    transform : str
+        ``none`` (default), ``log`` or ``boxcox``: fit the model to the
+        metric, its logarithm (effects read as factors) or its Box-Cox transform.
 
     Returns
     -------
     Path
-        ``out``, holding ``effects.csv``, ``anova.csv``, ``tables.csv``,
+        ``out``, holding ``effects.csv``, ``diagnostics.csv``, ``anova.csv``, ``tables.csv``,
         ``report.html``, ``report.md`` and ``figures/*.png``. Everything is
         built in a temporary directory beside ``out`` and moved into place only
         when complete, so an error leaves nothing half-written.
@@ -212,7 +254,7 @@ def analyze(directory: Path | str, out: Path | str | None = None, metric: str = 
     .. [1] D. C. Montgomery, Design and Analysis of Experiments, 9th ed., Wiley, 2017.
     .. [2] R. V. Lenth, Technometrics, 31(4), pp. 469-473, 1989.
     """
-    analysis = compute(directory, metric, order, alpha)
+    analysis = compute(directory, metric, order, alpha, transform=transform)
     return write(analysis, Path(out) if out is not None else Path(directory))
 
 
@@ -237,8 +279,9 @@ def write(analysis: Analysis, out: Path | str, progress: Callable[[str], None] |
             paths = save_figures(result, frame, factors, fig_dir, stem)
             figures[scenario] = {kind: f"figures/{p.name}" for kind, p in paths.items()}
         effects = pd.concat([r.effects.assign(scenario=s) for s, r in analysis.fits.items()], ignore_index=True)
-        effects[["scenario", "term", "effect", "coefficient", "std_err", "t", "p_value"]].to_csv(
-            tmp / "effects.csv", index=False)
+        columns = ["scenario", "term", "effect", "coefficient", "std_err", "t", "p_value"]
+        effects[columns + (["ratio"] if "ratio" in effects.columns else [])].to_csv(tmp / "effects.csv", index=False)
+        analysis.diagnostics.to_csv(tmp / "diagnostics.csv", index=False)
         anova = pd.concat([r.anova.assign(scenario=s) for s, r in analysis.fits.items()], ignore_index=True)
         anova[["scenario", "term", "df", "sum_sq", "mean_sq", "F", "p_value"]].to_csv(tmp / "anova.csv", index=False)
         analysis.tables.to_csv(tmp / "tables.csv", index=False)
@@ -257,8 +300,9 @@ def _file_stem(scenario: str, used: set[str]) -> str:
     return stem
 
 
-__all__ = ["ANOVA_TYPE", "METRICS", "REQUIRED_COLUMNS", "Analysis", "AnalysisError", "Factor", "FitResult",
-           "StudyRecord", "allowed_metrics", "analyze", "best_cell", "check_metric", "check_order", "compute",
-           "fit", "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
+__all__ = ["ANOVA_TYPE", "DIAGNOSTIC_COLUMNS", "METRICS", "REQUIRED_COLUMNS", "TRANSFORMS", "Analysis", "AnalysisError",
+           "Factor", "FitResult", "StudyRecord", "allowed_metrics", "analyze", "best_cell", "boxcox_lambda",
+           "check_metric", "check_order", "check_transform", "compute", "diagnose", "fit",
+           "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
            "model_matrix", "model_terms", "ranking", "report_html", "report_markdown", "scenario_order", "tables",
            "term_name", "write"]

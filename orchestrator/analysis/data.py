@@ -19,7 +19,9 @@ METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
 
 
 REQUIRED_COLUMNS = ("scenario", "cell", "replicate")
-#: Figure kinds written per scenario, in report order.
+
+#: Transforms of the response before the fit: none, the natural logarithm, Box-Cox with λ by maximum likelihood.
+TRANSFORMS = ("none", "log", "boxcox")
 
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -151,3 +153,37 @@ def check_order(order: Any, k: int) -> int:
         raise AnalysisError(f"order: {order!r} is outside the allowed range [1, {k}] (1 = main effects, "
                             f"{k} = full model with {k} factors)")
     return int(order)
+
+
+def check_transform(transform: str, frame: pd.DataFrame | None = None, metric: str = "e_tot_rms") -> str:
+    """Validate a response transform; for ``log`` and ``boxcox`` the metric must be positive.
+
+    Parameters
+    ----------
+    transform : str
+        One of :data:`TRANSFORMS`.
+    frame : pandas.DataFrame, optional
+        Runs holding ``metric``; when given, its finite values must be > 0
+        for ``log`` and ``boxcox`` (non-finite runs are left out of the fit anyway).
+    metric : str
+        Response column.
+
+    Returns
+    -------
+    str
+        ``transform``.
+
+    Raises
+    ------
+    AnalysisError
+        Unknown transform, or a value <= 0 for ``log`` / ``boxcox``.
+    """
+    if transform not in TRANSFORMS:
+        raise AnalysisError(f"transform: {transform!r} is not one of {', '.join(TRANSFORMS)}")
+    if transform != "none" and frame is not None and metric in frame.columns:
+        y = frame[metric].to_numpy(dtype=float)
+        bad = int((np.isfinite(y) & (y <= 0.0)).sum())
+        if bad:
+            raise AnalysisError(f"--transform {transform}: metric {metric} has {bad} value{'s' if bad > 1 else ''} "
+                                "<= 0 (the log and Box-Cox transforms need a positive response; use --transform none)")
+    return transform

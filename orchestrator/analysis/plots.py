@@ -24,9 +24,15 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
+from sblsim.orchestrator.analysis.data import METRICS  # noqa: E402
 from sblsim.orchestrator.analysis.report import format_level  # noqa: E402
 
 LOW_COLOR, HIGH_COLOR = "tab:blue", "tab:red"
+
+
+def _unit(response: str) -> str:
+    """`` [m]`` for a metric, nothing for a transformed response such as ``log(e_tot_rms)``."""
+    return " [m]" if response in METRICS else ""
 
 
 def _name(factor: Any) -> str:
@@ -71,7 +77,7 @@ def plot_pareto(result, ax) -> plt.Figure:
         label = f"t(1-α/2, {result.df_resid}) = {result.critical:.3g}"
         ax.set_xlabel("|standardized effect| = |t|")
     ax.axvline(result.critical, color="k", ls="--", lw=1.2, label=label)
-    ax.set_title(f"{result.scenario}: Pareto chart, {result.metric}, α = {result.alpha:g}")
+    ax.set_title(f"{result.scenario}: Pareto chart, {result.response}, α = {result.alpha:g}")
     ax.legend(loc="lower right", fontsize=8)
     ax.grid(True, axis="x", alpha=0.3)
     return ax.figure
@@ -93,7 +99,7 @@ def plot_main_effects(frame: pd.DataFrame, factors: Sequence[Any], metric: str, 
         Factors in design order (a :class:`~sblsim.orchestrator.analysis.Factor`
         adds the physical levels to the tick labels).
     metric : str
-        Response column [m].
+        Response column [m] (or a transformed one, e.g. ``log(e_tot_rms)``).
     axes : sequence of matplotlib.axes.Axes
         One axes per factor (flattened); extra axes are removed from the figure.
 
@@ -123,7 +129,7 @@ def plot_main_effects(frame: pd.DataFrame, factors: Sequence[Any], metric: str, 
     for i, ax in enumerate(axes[:len(factors)]):
         spec = ax.get_subplotspec()
         if i == 0 or (spec is not None and spec.is_first_col()):
-            ax.set_ylabel(f"mean {metric} [m]")
+            ax.set_ylabel(f"mean {metric}{_unit(metric)}")
     fig = axes[0].figure
     for ax in axes[len(factors):]:
         ax.remove()
@@ -143,7 +149,7 @@ def plot_interactions(frame: pd.DataFrame, factors: Sequence[Any], metric: str, 
         Runs of one scenario.
     factors : sequence of Factor or str
     metric : str
-        Response column [m].
+        Response column [m] (or a transformed one, e.g. ``log(e_tot_rms)``).
     axes : ndarray of matplotlib.axes.Axes, shape (k, k)
 
     Returns
@@ -209,6 +215,7 @@ def plot_residuals(result, axes) -> plt.Figure:
     """
     axes = np.asarray(axes).reshape(2, 2)
     resid, fitted = np.asarray(result.resid), np.asarray(result.fitted)
+    unit = _unit(result.response)
     saturated = result.df_resid == 0
     ax = axes[0, 0]
     if saturated:
@@ -221,27 +228,27 @@ def plot_residuals(result, axes) -> plt.Figure:
         ax.get_lines()[1].set(color="tab:red")
     ax.set_title("Normal probability plot")
     ax.set_xlabel("theoretical quantile [-]")
-    ax.set_ylabel("residual [m]")
+    ax.set_ylabel(f"residual{unit}")
     ax = axes[0, 1]
     if not saturated:
         ax.hist(resid, bins=max(5, min(30, int(np.sqrt(len(resid))) + 1)), color="tab:blue", edgecolor="w")
     ax.set_title("Histogram")
-    ax.set_xlabel("residual [m]")
+    ax.set_xlabel(f"residual{unit}")
     ax.set_ylabel("count")
     ax = axes[1, 0]
     if not saturated:
         ax.plot(fitted, resid, ".", color="tab:blue")
         ax.axhline(0.0, color="k", lw=0.8)
     ax.set_title("Versus fits")
-    ax.set_xlabel(f"fitted {result.metric} [m]")
-    ax.set_ylabel("residual [m]")
+    ax.set_xlabel(f"fitted {result.response}{unit}")
+    ax.set_ylabel(f"residual{unit}")
     ax = axes[1, 1]
     if not saturated:
         ax.plot(np.arange(1, len(resid) + 1), resid, ".-", color="tab:blue", lw=0.5)
         ax.axhline(0.0, color="k", lw=0.8)
     ax.set_title("Versus order")
     ax.set_xlabel("observation order")
-    ax.set_ylabel("residual [m]")
+    ax.set_ylabel(f"residual{unit}")
     for a in axes.ravel():
         a.grid(True, alpha=0.3)
     return axes[0, 0].figure
@@ -260,6 +267,13 @@ def save_figures(result, frame: pd.DataFrame, factors: Sequence[Any], out_dir: P
     out_dir = Path(out_dir)
     stem = stem or result.scenario
     k = len(factors)
+    metric = result.response  # main effects and interactions on the scale of the fit
+    if result.transform != "none":
+        from scipy.special import boxcox
+
+        y = frame[result.metric].to_numpy(dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frame = frame.assign(**{metric: np.log(y) if result.transform == "log" else boxcox(y, result.lmbda)})
     paths = {}
 
     def save(fig, kind):
@@ -272,14 +286,13 @@ def save_figures(result, frame: pd.DataFrame, factors: Sequence[Any], out_dir: P
     ncol = min(k, 4)
     nrow = -(-k // ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(2.4 * ncol, 2.6 * nrow), squeeze=False, layout="constrained")
-    plot_main_effects(frame, factors, result.metric, axes).suptitle(f"{result.scenario}: main effects, "
-                                                                    f"{result.metric}")
+    plot_main_effects(frame, factors, metric, axes).suptitle(f"{result.scenario}: main effects, {metric}")
     save(fig, "main_effects")
     fig, axes = plt.subplots(k, k, figsize=(1.9 * k + 1, 1.7 * k + 0.8), squeeze=False, layout="constrained")
-    plot_interactions(frame, factors, result.metric, axes).suptitle(
-        f"{result.scenario}: interactions, mean {result.metric} [m]")
+    plot_interactions(frame, factors, metric, axes).suptitle(
+        f"{result.scenario}: interactions, mean {metric}{_unit(metric)}")
     save(fig, "interactions")
     fig, axes = plt.subplots(2, 2, figsize=(9, 7), layout="constrained")
-    plot_residuals(result, axes).suptitle(f"{result.scenario}: residuals, {result.metric}")
+    plot_residuals(result, axes).suptitle(f"{result.scenario}: residuals, {result.response}")
     save(fig, "residuals")
     return paths

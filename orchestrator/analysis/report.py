@@ -44,6 +44,11 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
     response and which level is better (lower error); two-factor
     interactions say how much the first factor's effect changes between the
     levels of the second (twice the interaction effect, Montgomery 2017, §6.2).
+    With ``transform = "log"`` effects read as factors: a main effect
+    multiplies the response by ``exp(effect)`` (the ratio HIGH/LOW of the
+    geometric means) and an interaction multiplies the first factor's ratio
+    by ``exp(2·effect)`` at the high level of the second; with ``boxcox`` the
+    effects are on the Box-Cox scale (no unit).
     """
     by_name = {f.name: f for f in factors}
     what = metric_label(result.metric)
@@ -53,26 +58,53 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
     if sig.empty:
         return head + f"no term is significant at alpha = {result.alpha:g} ({test})."
     parts = []
+    # none: effects in metres; boxcox: on the transformed scale (no unit); log: factors (_ratio_text)
+    unit = " m" if result.transform == "none" else ""
+    scale = f" on the Box-Cox scale, lambda = {result.lmbda:.3g}" if result.transform == "boxcox" else ""
     for row in sig.itertuples():
         names = row.term.split(":")
         e = row.effect
-        if len(names) == 1:
+        if result.transform == "log" and len(names) <= 2:
+            parts.append(_ratio_text(row.term, e, by_name, what))
+        elif len(names) == 1:
             f = by_name[names[0]]
             verb = "raises" if e > 0 else "lowers"
+            by = f" by {abs(e):.3g} m" if result.transform == "none" else ""
             better = "low" if e > 0 else "high"
-            parts.append(f"{row.term} (effect {e:+.3g} m: going from {format_level(f.low, f.unit)} to "
-                         f"{format_level(f.high, f.unit)} {verb} {what} by {abs(e):.3g} m; the {better} level "
+            parts.append(f"{row.term} (effect {e:+.3g}{unit}{scale}: going from {format_level(f.low, f.unit)} to "
+                         f"{format_level(f.high, f.unit)} {verb} {what}{by}; the {better} level "
                          f"({format_level(f.low if better == 'low' else f.high, f.unit)}) is better)")
         elif len(names) == 2:
             a, b = names
             more = "larger" if e > 0 else "smaller"
-            parts.append(f"{row.term} (interaction effect {e:+.3g} m: the effect of {a} is {abs(2 * e):.3g} m "
-                         f"{more} at high {b} ({format_level(by_name[b].high, by_name[b].unit)}) than at low {b} "
-                         f"({format_level(by_name[b].low, by_name[b].unit)}))")
+            hi, lo = format_level(by_name[b].high, by_name[b].unit), format_level(by_name[b].low, by_name[b].unit)
+            parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{scale}: the effect of {a} is "
+                         f"{abs(2 * e):.3g}{unit} {more} at high {b} ({hi}) than at low {b} ({lo}))")
         else:
-            parts.append(f"{row.term} (interaction effect {e:+.3g} m)")
+            on = f" on log({result.metric})" if result.transform == "log" else scale
+            parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{on})")
     return (head + f"the significant terms (alpha = {result.alpha:g}, {test}), largest first: "
             + "; ".join(parts) + ".")
+
+
+def _ratio_text(term: str, e: float, by_name: dict[str, Factor], what: str) -> str:
+    """A term of a log fit in plain words: the factor by which it multiplies the response."""
+    names = term.split(":")
+    if len(names) == 1:
+        f = by_name[names[0]]
+        better = "low" if e > 0 else "high"
+        return (f"{term} (x{math.exp(e):.3g}: going from {format_level(f.low, f.unit)} to "
+                f"{format_level(f.high, f.unit)} multiplies {what} by {math.exp(e):.3g} ({_percent(e)}); the "
+                f"{better} level ({format_level(f.low if better == 'low' else f.high, f.unit)}) is better)")
+    a, b = names
+    return (f"{term} (x{math.exp(e):.3g}: the factor of {a} is {math.exp(2 * e):.3g} times as large at high {b} "
+            f"({format_level(by_name[b].high, by_name[b].unit)}) as at low {b} "
+            f"({format_level(by_name[b].low, by_name[b].unit)}))")
+
+
+def _percent(log_ratio: float) -> str:
+    change = 100.0 * (math.exp(log_ratio) - 1.0)
+    return f"{change:+.3g} %"
 
 
 def _design_text(study: StudyRecord, runs: pd.DataFrame) -> str:
@@ -104,10 +136,38 @@ def _settings(analysis: Analysis) -> list[tuple[str, str]]:
         ("engine", s.engine or "?"),
         ("runs", str(len(analysis.runs))),
         ("response", f"{analysis.metric} ({metric_label(analysis.metric)}) [m]"),
+        ("transform", _transform_text(analysis)),
         ("model", f"OLS on the coded factors (-1/+1), interactions up to order {analysis.order}"),
         ("significance", f"alpha = {analysis.alpha:g}, two-sided"),
         ("ANOVA", "Type II sums of squares (Type I for a saturated model; equal for an orthogonal design)"),
     ]
+
+
+def _transform_text(analysis: Analysis) -> str:
+    if analysis.transform == "log":
+        return (f"log: the model is fitted to log({analysis.metric}); an effect is a difference of mean logs and "
+                "exp(effect) (column ratio) the factor by which the term multiplies the response (main effect: "
+                "ratio HIGH/LOW of the geometric means)")
+    if analysis.transform == "boxcox":
+        lams = ", ".join(f"{s} {r.lmbda:.3g} (95 % CI {r.lmbda_ci[0]:.3g} to {r.lmbda_ci[1]:.3g})"
+                         for s, r in analysis.fits.items())
+        return (f"Box-Cox, lambda by maximum likelihood of the factorial model per scenario: {lams}; effects are "
+                "on the transformed scale (y^lambda - 1) / lambda")
+    return "none (the effects are in metres; see the diagnostics before reading the t and p values)"
+
+
+def _diagnostics_table(analysis: Analysis) -> pd.DataFrame:
+    d = analysis.diagnostics.drop(columns=["metric", "warning"])
+    if analysis.transform != "boxcox":
+        d = d.drop(columns=["lambda", "lambda_ci_low", "lambda_ci_high"])
+    return d
+
+
+_DIAGNOSTICS_TEXT = ("Checks of the model's assumptions: R², Breusch-Pagan test of a residual variance that changes "
+                     "with the terms (bp, Koenker's form) and the ratio of the largest to the smallest residual "
+                     "standard deviation within a design cell, Jarque-Bera test of normal residuals (jb; kurtosis 3 "
+                     "for a normal law), share of fitted values that stand for a response <= 0. A p-value below "
+                     "0.01 or any such fitted value is listed under Warnings.")
 
 
 def _factor_table(study: StudyRecord) -> pd.DataFrame:
@@ -154,12 +214,19 @@ def _effects_view(result: FitResult) -> pd.DataFrame:
 
 
 def _method_text(result: FitResult) -> str:
+    if result.transform == "log":
+        mean = f"geometric mean {math.exp(result.intercept):.4g} m"
+    elif result.transform == "boxcox":
+        mean = f"grand mean {result.intercept:.4g} on the Box-Cox scale (lambda = {result.lmbda:.3g})"
+    else:
+        mean = f"grand mean {result.intercept:.4g} m"
+    unit = " m" if result.transform == "none" else ""
     if result.method == "lenth":
         return (f"{result.n} runs, no residual degrees of freedom: Lenth's pseudo standard error "
-                f"PSE = {result.pse:.4g} m, t = effect / PSE, significance line t(1-alpha/2, m/3) = "
-                f"{result.critical:.4g}; grand mean {result.intercept:.4g} m.")
+                f"PSE = {result.pse:.4g}{unit}, t = effect / PSE, significance line t(1-alpha/2, m/3) = "
+                f"{result.critical:.4g}; {mean}.")
     return (f"{result.n} runs, {result.df_resid} residual degrees of freedom, significance line "
-            f"t(1-alpha/2, {result.df_resid}) = {result.critical:.4g}; grand mean {result.intercept:.4g} m.")
+            f"t(1-alpha/2, {result.df_resid}) = {result.critical:.4g}; {mean}.")
 
 
 _FIGURE_TITLES = {"pareto": "Pareto chart of the standardized effects",
@@ -185,6 +252,7 @@ def report_markdown(analysis: Analysis, figures: dict[str, dict[str, str]]) -> s
     lines += ["", "### Factors", "", table(_factor_table(analysis.study)), ""]
     if analysis.warnings:
         lines += ["## Warnings", ""] + [f"- {w}" for w in analysis.warnings] + [""]
+    lines += ["## Diagnostics", "", _DIAGNOSTICS_TEXT, "", table(_diagnostics_table(analysis)), ""]
     lines += ["## Significant factors", ""]
     lines += [f"- {ranking(r, analysis.study.factors)}" for r in analysis.fits.values()] + [""]
     for scenario, result in analysis.fits.items():
@@ -226,6 +294,7 @@ def report_html(analysis: Analysis, figures: dict[str, dict[str, str]], root: Pa
     if analysis.warnings:
         body += ["<h2>Warnings</h2>", '<ul class="warn">'] + [f"<li>{esc(w)}</li>" for w in analysis.warnings]
         body += ["</ul>"]
+    body += ["<h2>Diagnostics</h2>", f"<p>{esc(_DIAGNOSTICS_TEXT)}</p>", table(_diagnostics_table(analysis))]
     body += ["<h2>Significant factors</h2>", "<ul>"]
     body += [f"<li>{esc(ranking(r, analysis.study.factors))}</li>" for r in analysis.fits.values()] + ["</ul>"]
     for scenario, result in analysis.fits.items():

@@ -330,3 +330,142 @@ def test_error_while_writing_leaves_nothing(tmp_path, monkeypatch):
         analyze(src, out=out)
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c"]
+
+
+# --------------------------------------------------------------------------- transforms and diagnostics
+
+#: Planted effects on log(response) [-]: exp(effect) is the ratio HIGH/LOW of the geometric means.
+LOG_PLANTED = {"range": 2.0, "T": -1.2, "baseline:T": 0.6}
+LOG_NOISE = 0.3  # standard deviation of log(response) [-]
+
+
+def _multiplicative(replicates: int = 8, seed: int = 3, scenario: str = "semicircle", key: int = 0) -> pd.DataFrame:
+    """Runs of a full 2^4 design whose metrics are exp(log 2 + planted effects / 2 · contrast + noise)."""
+    rng = np.random.default_rng(seed)
+    frame = _design(replicates, seed=seed, scenario=scenario, key=key)
+    log_y = math.log(2.0) + sum(e / 2 * np.prod([frame[f].to_numpy() for f in t.split(":")], axis=0)
+                                for t, e in LOG_PLANTED.items())
+    for prefix in ("", "instr_"):
+        for m in METRIC_NAMES:
+            frame[prefix + m] = np.exp(log_y + rng.normal(0.0, LOG_NOISE, len(frame)))
+    return frame
+
+
+def _multiplicative_campaign(path: Path, scenarios=("semicircle",)) -> Path:
+    path.mkdir(parents=True, exist_ok=True)
+    frame = pd.concat([_multiplicative(seed=20 + k, scenario=s, key=k) for k, s in enumerate(scenarios)],
+                      ignore_index=True)
+    frame.to_parquet(path / "runs.parquet", index=False)
+    (path / "study.toml").write_text(_study_toml(8, scenarios))
+    return path
+
+
+def _log_contrast(frame: pd.DataFrame, term: str, metric: str = "e_tot_rms") -> float:
+    """Mean of log(metric) where the term's column is + minus the mean where it is −."""
+    sign = np.prod([frame[f].to_numpy() for f in term.split(":")], axis=0)
+    z = np.log(frame[metric].to_numpy())
+    return z[sign > 0].mean() - z[sign < 0].mean()
+
+
+def test_log_effects_are_contrasts_of_the_log_and_ratios_of_geometric_means(tmp_path):
+    src = _multiplicative_campaign(tmp_path / "c")
+    runs = pd.read_parquet(src / "runs.parquet")
+    out = analyze(src, out=tmp_path / "out", transform="log")
+    effects = pd.read_csv(out / "effects.csv").set_index("term")
+    assert list(effects.columns)[-1] == "ratio"
+    for term in _all_terms(2):
+        assert effects.loc[term, "effect"] == pytest.approx(_log_contrast(runs, term), abs=1e-10)
+    y = runs["e_tot_rms"].to_numpy()
+    high, low = y[runs["range"] > 0], y[runs["range"] < 0]
+    geometric = np.exp(np.log(high).mean()) / np.exp(np.log(low).mean())
+    assert effects.loc["range", "ratio"] == pytest.approx(geometric, rel=1e-10)
+    assert effects.loc["range", "ratio"] == pytest.approx(math.exp(2.0), rel=0.15)  # planted x7.4
+    md = (out / "report.md").read_text()
+    ratio = effects.loc["range", "ratio"]
+    assert f"going from 0.1 m to 1 m multiplies RMS e_tot by {ratio:.3g}" in md
+    t_ratio = effects.loc["T", "ratio"]
+    assert f"going from 0.1 s to 1 s multiplies RMS e_tot by {t_ratio:.3g}" in md
+    assert "the high level (1 s) is better" in md
+
+
+def test_diagnostics_flag_the_untransformed_fit_of_a_multiplicative_response(tmp_path, capsys):
+    from sblsim.orchestrator.cli import main
+
+    src = _multiplicative_campaign(tmp_path / "c")
+    assert main(["analyze", str(src), "--out", str(tmp_path / "raw")]) == 0
+    raw_err = capsys.readouterr().err
+    assert main(["analyze", str(src), "--out", str(tmp_path / "log"), "--transform", "log"]) == 0
+    captured = capsys.readouterr()
+    log_err = captured.err
+    assert "semicircle: significant terms, largest first: range (x" in captured.out
+    raw = pd.read_csv(tmp_path / "raw" / "diagnostics.csv", keep_default_na=False).iloc[0]
+    log = pd.read_csv(tmp_path / "log" / "diagnostics.csv", keep_default_na=False).iloc[0]
+    assert (raw["transform"], log["transform"]) == ("none", "log")
+    assert raw["bp_p"] < 1e-3 and raw["cell_sd_ratio"] > 10  # the spread grows with the response
+    assert log["bp_p"] > 0.05 and log["jb_p"] > 0.05 and log["cell_sd_ratio"] < 4
+    assert log["r2"] > raw["r2"]
+    assert log["share_fitted_nonpositive"] == 0.0
+    assert "Breusch-Pagan" in raw["warning"] and "--transform log" in raw["warning"]
+    assert log["warning"] == ""
+    note = [ln for ln in raw_err.splitlines() if ln.startswith("note: semicircle: model assumptions fail")]
+    assert len(note) == 1 and "try --transform log" in note[0]
+    assert "model assumptions fail" not in log_err
+    assert "model assumptions fail" in (tmp_path / "raw" / "report.md").read_text()
+    assert "## Diagnostics" in (tmp_path / "log" / "report.md").read_text()
+
+
+def test_negative_fitted_values_of_a_positive_response_are_counted():
+    frame = _design(replicates=2)
+    frame["e_tot_rms"] = np.where(frame["range"] > 0, 10.0, 0.05) * np.where(frame["T"] > 0, 1.0, 0.02)
+    frame["e_tot_rms"] += np.random.default_rng(0).uniform(0.0, 0.01, len(frame))
+    result = fit(frame, FACTORS, "e_tot_rms", order=1)
+    share = float((result.fitted <= 0).mean())
+    assert share > 0 and result.diagnostics["share_fitted_nonpositive"] == pytest.approx(share)
+    assert any("of the fitted values are <= 0" in w for w in result.warnings)
+    assert fit(frame, FACTORS, "e_tot_rms", order=1, transform="log").diagnostics["share_fitted_nonpositive"] == 0
+
+
+def test_boxcox_lambda_is_the_maximum_likelihood_of_the_model_and_near_zero_for_a_log_normal_response():
+    frame = _multiplicative()
+    result = fit(frame, FACTORS, "e_tot_rms", order=2, transform="boxcox")
+    lam = result.lmbda
+    assert abs(lam) < 0.15 and result.lmbda_ci[0] < 0.0 < result.lmbda_ci[1]
+    # independent profile likelihood on a grid (numpy least squares)
+    y = frame["e_tot_rms"].to_numpy()
+    X = np.column_stack([np.ones(len(frame))] + [np.prod([frame[f] for f in t.split(":")], axis=0)
+                                                 for t in _all_terms(2)])
+    grid = np.linspace(-0.3, 0.3, 6001)  # step 1e-4
+
+    def loglik(g):
+        z = np.log(y) if g == 0 else (y ** g - 1) / g
+        rss = np.sum((z - X @ np.linalg.lstsq(X, z, rcond=None)[0]) ** 2)
+        return -len(y) / 2 * np.log(rss / len(y)) + (g - 1) * np.log(y).sum()
+
+    # the λ of the model's residuals, not scipy's λ of the response alone (1.2e-3 away here)
+    assert lam == pytest.approx(grid[np.argmax([loglik(g) for g in grid])], abs=2e-4)
+    assert abs(lam - stats.boxcox(y)[1]) > 5e-4
+    effects = result.effects.set_index("term")["effect"]
+    z = stats.boxcox(y, lmbda=lam)
+    sign = frame["range"].to_numpy()
+    assert effects["range"] == pytest.approx(z[sign > 0].mean() - z[sign < 0].mean(), abs=1e-10)
+    assert result.diagnostics["lambda"] == lam and result.response == "boxcox(e_tot_rms)"
+
+
+@pytest.mark.parametrize("transform", ["log", "boxcox"])
+def test_transform_of_a_non_positive_metric_is_one_line(tmp_path, transform):
+    src = _campaign(tmp_path / "c", replicates=2, scenarios=("semicircle",))
+    runs = pd.read_parquet(src / "runs.parquet")
+    runs.loc[[0, 5, 9], "e_tot_rms"] = [0.0, -1.0, -0.5]
+    runs.to_parquet(src / "runs.parquet", index=False)
+    with pytest.raises(AnalysisError) as excinfo:
+        analyze(src, out=tmp_path / "out", transform=transform)
+    assert _one_line_error(excinfo).startswith(f"--transform {transform}: metric e_tot_rms has 3 values <= 0")
+    assert not (tmp_path / "out").exists()
+    analyze(src, out=tmp_path / "out", metric="e_tot_mean", transform=transform)  # another, positive metric
+
+
+def test_unknown_transform(tmp_path):
+    src = _campaign(tmp_path / "c", replicates=2, scenarios=("semicircle",))
+    with pytest.raises(AnalysisError) as excinfo:
+        analyze(src, out=tmp_path / "out", transform="sqrt")
+    assert _one_line_error(excinfo).startswith("transform: 'sqrt' is not one of none, log, boxcox")
