@@ -87,6 +87,13 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
             + "; ".join(parts) + ".")
 
 
+def _summary_line(result: FitResult) -> str:
+    """One short line per scenario for the report's overview: the significant terms, largest ``|t|`` first (the
+    scenario's own section says what each does)."""
+    terms = ", ".join(result.significant["term"]) if not result.significant.empty else "none"
+    return f"{result.scenario}: {terms}"
+
+
 def _ratio_text(term: str, e: float, by_name: dict[str, Factor], what: str) -> str:
     """A term of a log fit in plain words: the factor by which it multiplies the response."""
     names = term.split(":")
@@ -254,7 +261,7 @@ def report_markdown(analysis: Analysis, figures: dict[str, dict[str, str]]) -> s
         lines += ["## Warnings", ""] + [f"- {w}" for w in analysis.warnings] + [""]
     lines += ["## Diagnostics", "", _DIAGNOSTICS_TEXT, "", table(_diagnostics_table(analysis)), ""]
     lines += ["## Significant factors", ""]
-    lines += [f"- {ranking(r, analysis.study.factors)}" for r in analysis.fits.values()] + [""]
+    lines += [f"- {_summary_line(r)}" for r in analysis.fits.values()] + [""]
     for scenario, result in analysis.fits.items():
         lines += [f"## Scenario {scenario}", "", ranking(result, analysis.study.factors), "",
                   _method_text(result), "", "### Errors", "", _best_cell_text(analysis, scenario), "",
@@ -269,7 +276,8 @@ def report_markdown(analysis: Analysis, figures: dict[str, dict[str, str]]) -> s
 
 
 _CSS = """body{font-family:sans-serif;max-width:75em;margin:2em auto;padding:0 1em;color:#222}
-table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}
+table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 8px}
+.num{text-align:right}.text{text-align:left}
 th{background:#eee}img{max-width:100%;display:block;margin:0.5em 0}.warn{color:#a40}"""
 
 
@@ -281,7 +289,21 @@ def report_html(analysis: Analysis, figures: dict[str, dict[str, str]], root: Pa
     esc = html.escape
 
     def table(frame: pd.DataFrame) -> str:
-        return frame.to_html(index=False, float_format=_FLOAT, na_rep="", border=0)
+        """A table whose number columns are right-aligned and text columns left-aligned."""
+        numeric = [pd.api.types.is_numeric_dtype(frame[c]) and not pd.api.types.is_bool_dtype(frame[c])
+                   for c in frame.columns]
+
+        def cell(value, number: bool) -> str:
+            if number and isinstance(value, float):
+                return "" if math.isnan(value) else _FLOAT(value)
+            return esc(str(value))
+
+        head = "".join(f'<th class="{"num" if n else "text"}">{esc(str(c))}</th>'
+                       for c, n in zip(frame.columns, numeric))
+        rows = ["<tr>" + "".join(f'<td class="{"num" if n else "text"}">{cell(v, n)}</td>'
+                                 for v, n in zip(values, numeric)) + "</tr>"
+                for values in frame.itertuples(index=False, name=None)]
+        return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
 
     def image(path: str, title: str) -> str:
         data = base64.b64encode((Path(root) / path).read_bytes()).decode("ascii")
@@ -296,7 +318,7 @@ def report_html(analysis: Analysis, figures: dict[str, dict[str, str]], root: Pa
         body += ["</ul>"]
     body += ["<h2>Diagnostics</h2>", f"<p>{esc(_DIAGNOSTICS_TEXT)}</p>", table(_diagnostics_table(analysis))]
     body += ["<h2>Significant factors</h2>", "<ul>"]
-    body += [f"<li>{esc(ranking(r, analysis.study.factors))}</li>" for r in analysis.fits.values()] + ["</ul>"]
+    body += [f"<li>{esc(_summary_line(r))}</li>" for r in analysis.fits.values()] + ["</ul>"]
     for scenario, result in analysis.fits.items():
         body += [f"<h2>Scenario {esc(scenario)}</h2>", f"<p>{esc(ranking(result, analysis.study.factors))}</p>",
                  f"<p>{esc(_method_text(result))}</p>", "<h3>Errors</h3>",
