@@ -145,8 +145,9 @@ def _check_seed(seed: int | None) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.config import beacon_count, load_config
+    from sblsim.orchestrator.engines import close_handles, make_handles
     from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
-    from sblsim.orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
+    from sblsim.orchestrator.run import run, summary, system_sources, write_run
 
     _check_seed(args.seed)
     if (args.scenario is None) == (args.ssp is None):
