@@ -321,7 +321,8 @@ def _fmus(args: argparse.Namespace) -> int:
         out = args.out or DEFAULT_DIR
         _check_writable(out)
         if args.model is not None:
-            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver, user_model
+            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver
+            from sblsim.orchestrator.plugins import user_model
 
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)

@@ -187,6 +187,34 @@ def cast_column(values: np.ndarray, dtype: type) -> np.ndarray:
     return values
 
 
+#: The FMI 2.0 status values (``fmi2Status``) by number.
+FMI2_STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
+#: The last status that is not a failure.
+FMI2_WARNING = 1
+
+
+def check_status(status: int, function: str, where: str) -> None:
+    """Raise if an FMI 2.0 function's status is a failure (above ``fmi2Warning``, as fmpy's checked calls).
+
+    Parameters
+    ----------
+    status : int
+        What the function returned.
+    function : str
+        Its name, e.g. ``fmi2DoStep``.
+    where : str
+        The FMU file and component instance, for the message.
+
+    Raises
+    ------
+    ModelError
+        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3)``.
+    """
+    if status > FMI2_WARNING:
+        name = FMI2_STATUS[status] if 0 <= status < len(FMI2_STATUS) else "an unknown status"
+        raise ModelError(f"fmu: {where}: {function} returned {name} ({status}); the FMU's log has the reason")
+
+
 #: FMU instances made in this process, by file: (file signature, handles).
 _LOADED: dict[str, tuple[tuple, list["FmuHandle"]]] = {}
 
@@ -374,11 +402,11 @@ class FmuHandle:
             raise ModelError(f"fmu: {self.path.name} ({self.component}) refused a call: {exc}") from None
 
     def _raw(self, name: str, *args) -> None:
-        """Call an FMI function directly (no fmpy wrapper); a status above fmi2Warning is an error."""
+        """Call an FMI function directly with prepared arguments (fmpy's wrapper costs more than the call);
+        its status is checked as fmpy checks it (:func:`check_status`)."""
         status = getattr(self.fmu.dll, name)(self.fmu.component, *args)
-        if status > 1:
-            raise ModelError(f"fmu: {self.path.name} ({self.component}): {name} returned status {status} "
-                             "(the FMU's log has the reason)")
+        if status > FMI2_WARNING:
+            check_status(status, name, f"{self.path.name} ({self.component})")
 
     def set_input_vector(self, values: np.ndarray) -> None:
         """Every input at once, shape (n_in, 1) in the order of :attr:`input_names`."""

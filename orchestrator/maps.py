@@ -22,8 +22,9 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.receiver.bound import horizontal_std
-from sblsim.orchestrator.config import beacon_arms, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters
 
@@ -94,7 +95,7 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray) -> np.ndarray:
     east, north : ndarray
         Grid coordinates [m].
     """
-    arms = beacon_arms(cfg["platform"])
+    arms = lever_arms(cfg["platform"])
     params = bound_parameters(cfg)
     E, N = np.meshgrid(east, north)
     points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, float(cfg["target"]["depth"]))])
@@ -162,7 +163,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
         lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
-        arms = beacon_arms(cfg["platform"])
+        arms = lever_arms(cfg["platform"])
         ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="beacons")
         ax.set_aspect("equal")
         ax.set_xlabel("East [m]")

@@ -14,11 +14,11 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.receiver.bound import FIXED
 from sblsim.models.receiver.core import COVARIANCE, filter_parameters
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
-    beacon_arms,
     beacon_count,
     component_params,
     receiver_label,
@@ -325,7 +325,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
 
 @lru_cache(maxsize=64)
 def _arms(platform: tuple) -> np.ndarray:
-    return beacon_arms(dict(platform))
+    return lever_arms(dict(platform))
 
 
 def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
