@@ -205,9 +205,14 @@ def _native_system(handles: Mapping[str, ComponentHandle], order: Sequence[str],
 
 
 def _native_batch(handle: ComponentHandle):
-    """A handle's compiled batch, or None (also for a handle without ``native_batch``, e.g. a wrapper)."""
-    ask = getattr(handle, "native_batch", None)
-    return ask() if ask is not None else None
+    """A handle's compiled batch, or None.
+
+    Asked of the handle's class: a wrapper that passes other attributes on to a compiled handle
+    (``__getattr__``) may change what is exchanged, so it is stepped by the Python loop unless its class
+    defines ``native_batch`` itself.
+    """
+    ask = getattr(type(handle), "native_batch", None)
+    return ask(handle) if ask is not None else None
 
 
 def _simulate_native(system, handles: Mapping[str, ComponentHandle], order: Sequence[str], kept: dict,

@@ -59,3 +59,18 @@ def test_a_record_buffer_re_uses_its_memory():
     assert np.shares_memory(records.take(600), first)  # smaller: the same memory
     larger = records.take(2000)
     assert not np.shares_memory(larger, first) and np.shares_memory(records.take(2000), larger)
+
+
+def test_a_wrapper_that_passes_attributes_on_is_not_a_compiled_batch():
+    from sblsim.orchestrator.master import _native_batch
+
+    class Passing:
+        def __init__(self, handle):
+            self.handle = handle
+
+        def __getattr__(self, name):
+            return getattr(self.handle, name)
+
+    handle = LocalHandle("target")
+    handle.batch = object()
+    assert _native_batch(handle) is handle.batch and _native_batch(Passing(handle)) is None
