@@ -27,7 +27,8 @@ from pathlib import Path
 
 from sblsim.fmus.build import build_all
 from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import close_handles, make_handles, run
+from sblsim.orchestrator.engines import close_handles, make_handles
+from sblsim.orchestrator.run import run
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from revision import run_at  # noqa: E402

@@ -153,8 +153,9 @@ def _check_seed(seed: int | None) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.config import beacon_count, load_config
+    from sblsim.orchestrator.engines import close_handles, make_handles
     from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
-    from sblsim.orchestrator.run import close_handles, make_handles, run, summary, system_sources, write_run
+    from sblsim.orchestrator.run import run, summary, system_sources, write_run
 
     _check_seed(args.seed)
     if (args.scenario is None) == (args.ssp is None):
@@ -343,7 +344,8 @@ def _fmus(args: argparse.Namespace) -> int:
         out = args.out or DEFAULT_DIR
         _check_writable(out)
         if args.model is not None:
-            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver, user_model
+            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver
+            from sblsim.orchestrator.plugins import user_model
 
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)

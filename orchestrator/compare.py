@@ -33,6 +33,7 @@ import pandas as pd
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import check_receiver, load_config, receiver_label
+from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
 
@@ -88,9 +89,10 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
         raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
     configs = [load_config(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
     rows = []
+    records = RecordBuffer()  # one record memory for the receivers' batches, one after the other
     for cfg in configs:
         result = run_batch(with_replicates(cfg, range(replicates)), engine, fmu_dir=fmu_dir, timeseries=False,
-                           progress=progress)
+                           progress=progress, records=records)
         m = result.metrics
         rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
         bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))

@@ -20,19 +20,16 @@ configuration keys.
 from __future__ import annotations
 
 import copy
-import hashlib
-import re
 import tomllib
-from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
 
-import numpy as np
 import tomli_w
 
 from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
+from sblsim.models.platform.geometry import largest_arm, platform_offsets
 from sblsim.models.target import natural_duration, start_state
 from sblsim.orchestrator.master import ALGORITHMS
 
@@ -96,69 +93,13 @@ def external_path(value: Any, prefix: str = EXTERNAL_PREFIX) -> str:
     return value[len(prefix):] if isinstance(value, str) and value.startswith(prefix) else ""
 
 
-@lru_cache(maxsize=None)
-def _user_model(path: str, stamp: tuple[int, int]) -> type:
-    import importlib.util
-
-    from sblsim.models.component import Component
-    from sblsim.orchestrator.connections import check_interface
-    from sblsim.orchestrator.engines import Port
-
-    where = "simulation.receiver"
-    name = "sblsim_user_" + hashlib.sha256(path.encode()).hexdigest()[:12]
-    try:
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    except Exception as exc:  # a user's module may raise anything on import
-        raise ConfigError(f"{where}: cannot import {path!r} ({type(exc).__name__}: {exc})") from None
-    found = [c for c in vars(module).values()
-             if isinstance(c, type) and issubclass(c, Component) and c.__module__ == name]
-    if len(found) != 1:
-        raise ConfigError(f"{where}: {path!r} defines {len(found)} model classes "
-                          f"({', '.join(c.__name__ for c in found) or 'none'}); it must define exactly one receiver")
-    model = found[0]
-    if not re.fullmatch(r"receiver_[A-Za-z0-9_]+", str(getattr(model, "name", ""))) or model.name in MODELS:
-        raise ConfigError(f"{where}: {model.__name__}.name = {getattr(model, 'name', None)!r} must be 'receiver_' + "
-                          f"letters, digits or '_', and not a built-in's ({', '.join(RECEIVERS.values())})")
-    try:
-        variables = model.fmu_variables()
-        model.program()
-    except Exception as exc:
-        raise ConfigError(f"{where}: {model.__name__} in {path!r} does not build ({type(exc).__name__}: {exc})") \
-            from None
-    try:
-        check_interface("receiver", [Port(v.name, v.causality, v.fmi_type, v.unit) for v in variables],
-                        COMPONENTS["receiver"].fmu_variables(), f"{model.__name__} in {path!r}")
-    except ModelError as exc:
-        raise ConfigError(f"{where}: {str(exc).split(': ', 1)[1]}") from None
-    return model
-
-
-def user_model(path: str | Path) -> type:
-    """The receiver model (a :class:`sblsim.models.component.Component`) that a user's Python file defines.
-
-    The file must define exactly one model class whose ``name`` is
-    ``receiver_…`` (not a built-in's) and whose inputs and outputs are the
-    receiver interface. Loaded once per file version.
-
-    Raises
-    ------
-    ConfigError
-        If the file is missing, does not import, or its model is not a receiver.
-    """
-    path = Path(path)
-    if not path.is_file() or path.suffix != ".py":
-        raise ConfigError(f"simulation.receiver: no Python file at {str(path)!r} (model:PATH.py)")
-    st = path.stat()
-    return _user_model(str(path.resolve()), (st.st_mtime_ns, st.st_size))
-
-
 def receiver_model(value: str) -> type | Path:
     """What a ``simulation.receiver`` value names: a model class (built-in or a user's file), or an FMU path."""
     if value in RECEIVER_MODELS:
         return RECEIVER_MODELS[value]
     if external_path(value, MODEL_PREFIX):
+        from sblsim.orchestrator.plugins import user_model
+
         return user_model(external_path(value, MODEL_PREFIX))
     return Path(external_path(value))
 
@@ -247,6 +188,8 @@ def check_receiver(receiver: str, where: str = "simulation.receiver") -> str:
     if receiver in RECEIVER_MODELS:
         return receiver
     if external_path(receiver, MODEL_PREFIX):
+        from sblsim.orchestrator.plugins import user_model
+
         try:
             user_model(external_path(receiver, MODEL_PREFIX))
         except ConfigError as exc:
@@ -442,7 +385,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     """
     rx, platform = cfg["receiver"], cfg["platform"]
     pos, vel = start_state(cfg["target"])
-    arm = beacon_arm(platform)
+    arm = largest_arm(platform)
     ties = {"sigma_range": max(cfg["acoustics"]["sigma_range"], MIN_SIGMA),
             "sigma_depth": max(cfg["target"]["depth_sigma"], MIN_SIGMA),
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
@@ -457,29 +400,9 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
             rx[key] = value
 
 
-def beacon_offsets(platform: dict[str, Any]) -> np.ndarray:
-    """Body-frame offsets of the beacons of a ``[platform]`` section, (n, 3) [m]."""
-    from sblsim.models.platform.geometry import layout_offsets
-
-    return layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
-                          platform["beacon_offsets"])
-
-
-def beacon_arms(platform: dict[str, Any]) -> np.ndarray:
-    """Lever arms of the beacons in NED at the mean heading (level platform), (n, 3) [m]."""
-    heading = np.radians(platform["heading_deg"])
-    c, s = np.cos(heading), np.sin(heading)
-    return beacon_offsets(platform) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
-
-
-def beacon_arm(platform: dict[str, Any]) -> float:
-    """The largest distance of a beacon from the platform reference [m]."""
-    return float(max(np.linalg.norm(beacon_offsets(platform), axis=1)))
-
-
 def beacon_count(cfg: dict[str, dict]) -> int:
     """Number of beacons of a configuration: 4 for the cross, the offsets' count for a custom layout."""
-    return beacon_offsets(cfg["platform"]).shape[0]
+    return platform_offsets(cfg["platform"]).shape[0]
 
 
 def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[str] | None = None,

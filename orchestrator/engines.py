@@ -1,10 +1,12 @@
 """Component handles: the two engines behind one master algorithm.
 
-Both handles share one small interface (``setup``, ``set_input_vector``,
-``do_step``, ``output_vector``, ``terminate``; ``set_inputs`` and
-``get_outputs`` by name for convenience), name their inputs and outputs
-(``input_names``, ``output_names``: the order of those vectors) and expose
-their variables as ``ports`` for the connection checks:
+Both handles follow one interface, :class:`ComponentHandle` (``setup``,
+``set_input_vector``, ``do_step``, ``output_vector``, ``terminate``,
+``native_batch``; ``set_inputs`` and ``get_outputs`` by name for
+convenience), name their inputs and outputs (``input_names``,
+``output_names``: the order of those vectors) and expose their variables as
+``ports`` for the connection checks; :func:`make_handles` makes one per
+component of a system:
 
 * :class:`LocalHandle` steps a model's generated C in-process, batched over
   replicates (:class:`sblsim.fmus.native.NativeBatch`: one call per component and
@@ -22,18 +24,67 @@ import ctypes
 import shutil
 from collections import namedtuple
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from sblsim.models import COMPONENTS
+from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.connections import check_interface
+
+#: The engines of :func:`make_handles`.
+ENGINES = ("local", "fmu")
+#: Beacons of the built FMUs' interfaces.
+FMU_BEACONS = 4
 
 #: A variable as an engine exposes it (what the connection checks need).
 Port = namedtuple("Port", "name causality type unit")
 
 #: numpy type of each FMI type, as the engines return outputs.
 DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
+
+
+class ComponentHandle(Protocol):
+    """What the master algorithm and a run ask of a component, on any engine.
+
+    Attributes
+    ----------
+    input_names, output_names : list of str
+        The inputs and outputs, in the order of the vectors below.
+    ports : list of Port
+        Every variable (for the connection checks).
+    parameters : frozenset of str
+        The parameters it takes.
+    batched : bool
+        Whether it steps a batch of replicates at once (else one at a time, B = 1).
+    """
+
+    input_names: list[str]
+    output_names: list[str]
+    ports: list[Port]
+    parameters: frozenset[str]
+    batched: bool
+
+    def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
+        """(Re)start for a run: set the parameters of the replicates and initialize at ``t0`` [s]."""
+
+    def set_input_vector(self, values: np.ndarray) -> None:
+        """Every input at once, shape (n_in, B) in the order of ``input_names``."""
+
+    def do_step(self, t: float, h: float) -> None:
+        """One communication step from ``t`` [s] of length ``h`` [s]."""
+
+    def output_vector(self) -> np.ndarray:
+        """Every output at once, shape (n_out, B) in the order of ``output_names`` (a new array, floats)."""
+
+    def terminate(self) -> None:
+        """End the run (the handle may be set up again)."""
+
+    def native_batch(self) -> Any | None:
+        """The compiled batch the handle steps, for the compiled master loop (:func:`native_system`), or None.
+
+        A handle that changes what is exchanged (a wrapper or subclass of a compiled one) returns None.
+        """
 
 
 class LocalHandle:
@@ -108,6 +159,11 @@ class LocalHandle:
         x = self.batch.states()
         return {name: x[:, s] for name, s in self.model.program(self.n_beacons).state_slices().items()}
 
+    def native_batch(self) -> Any | None:
+        """The compiled batch (:class:`sblsim.fmus.native.NativeBatch`) if this is exactly a LocalHandle, else None
+        (a subclass may change what is exchanged: the master's Python loop steps it)."""
+        return self.batch if type(self) is LocalHandle else None
+
     def terminate(self) -> None:
         """Keep the batch for the next run of the same size (its memory is re-used)."""
 
@@ -129,6 +185,34 @@ def cast_column(values: np.ndarray, dtype: type) -> np.ndarray:
     if dtype is np.int64:
         return np.rint(values).astype(np.int64)
     return values
+
+
+#: The FMI 2.0 status values (``fmi2Status``) by number.
+FMI2_STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
+#: The last status that is not a failure.
+FMI2_WARNING = 1
+
+
+def check_status(status: int, function: str, where: str) -> None:
+    """Raise if an FMI 2.0 function's status is a failure (above ``fmi2Warning``, as fmpy's checked calls).
+
+    Parameters
+    ----------
+    status : int
+        What the function returned.
+    function : str
+        Its name, e.g. ``fmi2DoStep``.
+    where : str
+        The FMU file and component instance, for the message.
+
+    Raises
+    ------
+    ModelError
+        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3)``.
+    """
+    if status > FMI2_WARNING:
+        name = FMI2_STATUS[status] if 0 <= status < len(FMI2_STATUS) else "an unknown status"
+        raise ModelError(f"fmu: {where}: {function} returned {name} ({status}); the FMU's log has the reason")
 
 
 #: FMU instances made in this process, by file: (file signature, handles).
@@ -318,11 +402,11 @@ class FmuHandle:
             raise ModelError(f"fmu: {self.path.name} ({self.component}) refused a call: {exc}") from None
 
     def _raw(self, name: str, *args) -> None:
-        """Call an FMI function directly (no fmpy wrapper); a status above fmi2Warning is an error."""
+        """Call an FMI function directly with prepared arguments (fmpy's wrapper costs more than the call);
+        its status is checked as fmpy checks it (:func:`check_status`)."""
         status = getattr(self.fmu.dll, name)(self.fmu.component, *args)
-        if status > 1:
-            raise ModelError(f"fmu: {self.path.name} ({self.component}): {name} returned status {status} "
-                             "(the FMU's log has the reason)")
+        if status > FMI2_WARNING:
+            check_status(status, name, f"{self.path.name} ({self.component})")
 
     def set_input_vector(self, values: np.ndarray) -> None:
         """Every input at once, shape (n_in, 1) in the order of :attr:`input_names`."""
@@ -347,6 +431,126 @@ class FmuHandle:
     def do_step(self, t: float, h: float) -> None:
         self._raw("fmi2DoStep", ctypes.c_double(t), ctypes.c_double(h), 1)
 
+    def native_batch(self) -> None:
+        """None: an FMU is stepped through its FMI functions."""
+        return None
+
     def terminate(self) -> None:
         """Release the handle for the next run; the instance stays loaded (see :func:`open_fmu`)."""
         self.in_use = False
+
+
+def native_system(batches: Sequence[Any], rates: Sequence[int], links: Sequence[tuple[int, int, int, int]],
+                  record: Sequence[tuple[int, int]]) -> Any | None:
+    """The compiled master loop over compiled batches (:class:`sblsim.fmus.native.NativeSystem`), or None when
+    the batches are not of one library and one size (the master's Python loop then steps them).
+
+    Parameters
+    ----------
+    batches : sequence
+        The components' compiled batches (:meth:`ComponentHandle.native_batch`), in execution order.
+    rates : sequence of int
+        Communication steps per macro step of each.
+    links : sequence of tuple
+        (source, output row, destination, input row) of every connection, by position in ``batches``.
+    record : sequence of tuple
+        (component, output row) of every recorded output.
+    """
+    if len({id(b.lib) for b in batches}) != 1 or len({b.batch for b in batches}) != 1:
+        return None
+    from sblsim.fmus.native import NativeSystem
+
+    return NativeSystem(list(batches), list(rates), list(links), list(record))
+
+
+#: What implements a component: a built-in model's name, a user's model class or the path of a user's FMU.
+Source = str | Path | type
+
+
+def source_model(source: Source) -> type | None:
+    """The model class of a source (None for a user's FMU)."""
+    if isinstance(source, Path):
+        return None
+    return source if isinstance(source, type) else MODELS[source]
+
+
+def paper_sources() -> dict[str, Source]:
+    """The paper's system: each component by its built-in model."""
+    return {name: name for name in COMPONENTS}
+
+
+def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None) -> dict[str, Path]:
+    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
+    a user's model built into the cache (:func:`sblsim.fmus.build.cached_fmu`).
+
+    Raises
+    ------
+    ModelError
+        If an FMU is missing.
+    """
+    from sblsim.fmus.build import DEFAULT_DIR, cached_fmu, fmu_path
+
+    directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
+    sources = sources if sources is not None else paper_sources()
+    paths = {name: src if isinstance(src, Path) else cached_fmu(src) if isinstance(src, type)
+             else fmu_path(directory, src) for name, src in sources.items()}
+    for name, path in paths.items():
+        if not path.is_file():
+            raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+    return paths
+
+
+def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4,
+                 sources: dict[str, Source] | None = None,
+                 fmu_files: dict[str, Path] | None = None) -> dict[str, ComponentHandle]:
+    """One handle per component for an engine.
+
+    Parameters
+    ----------
+    engine : {'local', 'fmu'}
+    fmu_dir : path, optional
+        Directory of the built FMUs (fmu engine).
+    n_beacons : int
+    sources : dict, optional
+        What implements each component (:func:`sblsim.orchestrator.run.system_sources` of a configuration;
+        default :func:`paper_sources`). A user's FMU is loaded on either engine and checked against the
+        component's interface.
+    fmu_files : dict, optional
+        Component -> FMU file, overriding ``fmu_dir`` (an SSP package's FMUs).
+
+    Raises
+    ------
+    ModelError
+        Unknown engine, a missing FMU, or a user's FMU that does not match
+        the interface (the message lists every mismatch).
+    """
+    if engine not in ENGINES:
+        raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+    if engine == "fmu" and n_beacons != FMU_BEACONS:
+        raise ModelError(f"platform.beacon_offsets: {n_beacons} beacons, but the FMUs carry {FMU_BEACONS}; run it "
+                         "on the local engine, which takes any number")
+    sources = sources if sources is not None else paper_sources()
+    if engine == "fmu":
+        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}),
+                 **(fmu_files or {})}
+    else:
+        paths = {name: src for name, src in sources.items() if isinstance(src, Path)}
+    handles: dict[str, ComponentHandle] = {}
+    try:
+        for name, src in sources.items():
+            if name not in paths:
+                handles[name] = LocalHandle(name, source_model(src), n_beacons)
+                continue
+            if isinstance(src, Path):  # a user's FMU: check its interface before loading it
+                check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)
+            handles[name] = open_fmu(name, paths[name], source_model(src))
+    except Exception:
+        close_handles(handles)
+        raise
+    return handles
+
+
+def close_handles(handles: Mapping[str, ComponentHandle]) -> None:
+    """Terminate every handle."""
+    for handle in handles.values():
+        handle.terminate()

@@ -27,8 +27,9 @@ import pandas as pd
 
 from sblsim.models.bound import MODEL, horizontal_std
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator.config import beacon_arms, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters
 
@@ -121,7 +122,7 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
     Prentice Hall 1993, Section 3.7.
     """
-    arms = beacon_arms(cfg["platform"])
+    arms = lever_arms(cfg["platform"])
     params = bound_parameters(cfg)
     E, N = np.meshgrid(east, north)
     depth = diver_depth(cfg)[0] if depth is None else float(depth)
@@ -197,7 +198,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
         lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
-        arms = beacon_arms(cfg["platform"])
+        arms = lever_arms(cfg["platform"])
         ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="beacons")
         ax.set_aspect("equal")
         ax.set_xlabel("East [m]")

@@ -31,24 +31,45 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from sblsim.orchestrator.connections import Connection, execution_order
+from sblsim.orchestrator.engines import ComponentHandle, native_system
 
 #: Master algorithms of :func:`simulate`.
 ALGORITHMS = ("gauss-seidel", "jacobi")
 
 
-def simulate(handles: Mapping[str, object], connections: Sequence[Connection], rates: Mapping[str, int],
+class RecordBuffer:
+    """Memory for the compiled master loop's record array, re-used from one simulation to the next.
+
+    Allocating and first touching a large batch's record (150 MB for a campaign chunk) costs time; a
+    caller that is done with the previous result's arrays before the next simulation hands the same
+    buffer to :func:`simulate` each time (the Python loop does not use it).
+    """
+
+    def __init__(self) -> None:
+        self._flat: np.ndarray | None = None
+
+    def take(self, size: int) -> np.ndarray:
+        """A flat float array of ``size`` elements: a view of the kept one if it is large enough, else a new
+        one, kept for the next call. Its previous contents are overwritten by the caller."""
+        if self._flat is None or self._flat.size < size:
+            self._flat = np.empty(size)
+        return self._flat[:size]
+
+
+def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Connection], rates: Mapping[str, int],
              macro_step: float, n_steps: int, t0: float = 0.0,
              progress: Callable[[int], None] | None = None,
              record: Sequence[str] | None = None, algorithm: str = "gauss-seidel",
-             timing: dict[str, float] | None = None, buffer: list | None = None) -> dict[str, np.ndarray]:
+             timing: dict[str, float] | None = None, buffer: RecordBuffer | None = None) -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
-    A handle (:mod:`sblsim.orchestrator.engines`) names its inputs and outputs
+    A handle (:class:`sblsim.orchestrator.engines.ComponentHandle`) names its inputs and outputs
     (``input_names``, ``output_names``), takes its inputs as one matrix
     (``set_input_vector``, shape (n_in, B)), gives its outputs as one matrix
     (``output_vector``, shape (n_out, B), numbers as floats) and steps
     (``do_step``). The connections are resolved once into index arrays, so
-    a macro step moves whole vectors.
+    a macro step moves whole vectors. When every handle has a compiled batch
+    (``native_batch``) of one library, the compiled master loop steps them.
 
     Parameters
     ----------
@@ -72,9 +93,9 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
         Where inputs come from (see the module).
     timing : dict, optional
         Filled with the wall-clock time [s] spent in each component's ``do_step`` calls (added to).
-    buffer : list, optional
-        A one-element list holding a record array to re-use (or None), updated with the one used: a caller
-        that is done with the previous result's arrays saves their allocation (the compiled loop only).
+    buffer : RecordBuffer, optional
+        Memory for the record, re-used from a previous call (the compiled loop only): the arrays of the
+        previous result taken from the same buffer are overwritten. Default: new memory.
 
     Returns
     -------
@@ -164,18 +185,12 @@ def simulate(handles: Mapping[str, object], connections: Sequence[Connection], r
     return result
 
 
-def _native_system(handles: Mapping[str, object], order: Sequence[str], plans: dict, kept: dict,
+def _native_system(handles: Mapping[str, ComponentHandle], order: Sequence[str], plans: dict, kept: dict,
                    rates: Mapping[str, int]):
     """The compiled master loop for these handles, when every one is a compiled batch of the same library
     with every input connected (else None: the Python loop above runs)."""
-    from sblsim.orchestrator.engines import LocalHandle
-
-    if not all(type(handles[c]) is LocalHandle for c in order):  # exactly: a wrapper may change what is exchanged
-        return None
-    batches = [handles[c].batch for c in order]
-    if len({id(b.lib) for b in batches}) != 1:
-        return None
-    if len({b.batch for b in batches}) != 1:
+    batches = [_native_batch(handles[c]) for c in order]
+    if any(b is None for b in batches):
         return None
     index = {c: k for k, c in enumerate(order)}
     links = []
@@ -185,24 +200,28 @@ def _native_system(handles: Mapping[str, object], order: Sequence[str], plans: d
             return None
         links += [(index[src], int(out), index[c], int(into_k)) for src, rows_, into in plans[c]
                   for out, into_k in zip(rows_, into)]
-    from sblsim.fmus.native import NativeSystem
-
     record = [(index[c], k) for c in order for k in kept[c]]
-    return NativeSystem(batches, [rates.get(c, 1) for c in order], links, record)
+    return native_system(batches, [rates.get(c, 1) for c in order], links, record)
 
 
-def _simulate_native(system, handles: Mapping[str, object], order: Sequence[str], kept: dict, macro_step: float,
-                     n_steps: int, t0: float, progress, jacobi: bool, timing, buffer) -> dict[str, np.ndarray]:
+def _native_batch(handle: ComponentHandle):
+    """A handle's compiled batch, or None.
+
+    Asked of the handle's class: a wrapper that passes other attributes on to a compiled handle
+    (``__getattr__``) may change what is exchanged, so it is stepped by the Python loop unless its class
+    defines ``native_batch`` itself.
+    """
+    ask = getattr(type(handle), "native_batch", None)
+    return ask(handle) if ask is not None else None
+
+
+def _simulate_native(system, handles: Mapping[str, ComponentHandle], order: Sequence[str], kept: dict,
+                     macro_step: float, n_steps: int, t0: float, progress, jacobi: bool, timing,
+                     buffer: RecordBuffer | None) -> dict[str, np.ndarray]:
     """:func:`simulate` by the compiled master loop: the same operations in the same order, in C."""
     shape = (n_steps, system.n_record, system.B)
     size = int(np.prod(shape))
-    spare = buffer[0] if buffer else None
-    if spare is not None and spare.size >= size:
-        flat = spare[:size]
-    else:
-        flat = np.empty(size)
-        if buffer is not None:
-            buffer[0] = flat
+    flat = buffer.take(size) if buffer is not None else np.empty(size)
     record = flat.reshape(shape)
     chunk = max(1, n_steps // 100) if progress is not None else n_steps
     for k0 in range(0, n_steps, chunk):

@@ -13,13 +13,12 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.bound import FIXED
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.receiver.core import COVARIANCE, filter_parameters
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
-    beacon_arms,
     beacon_count,
     component_params,
     receiver_label,
@@ -29,20 +28,20 @@ from sblsim.orchestrator.config import (
 from sblsim.orchestrator.connections import (
     Connection,
     check_connections,
-    check_interface,
     default_connections,
 )
-from sblsim.orchestrator.engines import DTYPES, LocalHandle, cast_column, fmu_ports, open_fmu
-from sblsim.orchestrator.master import simulate
+from sblsim.orchestrator.engines import (
+    DTYPES,
+    ComponentHandle,
+    Source,
+    cast_column,
+    close_handles,
+    make_handles,
+    paper_sources,
+)
+from sblsim.orchestrator.master import RecordBuffer, simulate
 from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_metrics
 from sblsim.orchestrator.output import staged_directory
-
-ENGINES = ("local", "fmu")
-#: Beacons of the built FMUs' interfaces.
-FMU_BEACONS = 4
-#: The compiled master loop's record array, re-used from batch to batch in this process (run_batch is done
-#: with it when it returns: the time series and metrics are copies).
-_RECORD: list = [None]
 
 #: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
 TIMESERIES_COLUMNS = {
@@ -104,9 +103,6 @@ class RunResult:
     step_time: dict[str, float] = field(default_factory=dict)
 
 
-Source = str | Path | type
-
-
 def system_sources(cfg: dict | None = None) -> dict[str, Source]:
     """What implements each component of a configuration's system.
 
@@ -118,94 +114,10 @@ def system_sources(cfg: dict | None = None) -> dict[str, Source]:
         model class (``receiver = "model:PATH.py"``) or the path of a user's
         FMU (``receiver = "fmu:PATH"``). Default: the paper's system.
     """
-    sources: dict[str, Source] = {name: name for name in COMPONENTS}
+    sources = paper_sources()
     if cfg is not None:
         sources["receiver"] = receiver_source(cfg)
     return sources
-
-
-def source_model(source: Source) -> type | None:
-    """The model class of a source (None for a user's FMU)."""
-    if isinstance(source, Path):
-        return None
-    return source if isinstance(source, type) else MODELS[source]
-
-
-def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None) -> dict[str, Path]:
-    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
-    a user's model built into the cache (:func:`sblsim.fmus.build.cached_fmu`).
-
-    Raises
-    ------
-    ModelError
-        If an FMU is missing.
-    """
-    from sblsim.fmus.build import DEFAULT_DIR, cached_fmu, fmu_path
-
-    directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
-    sources = sources if sources is not None else system_sources()
-    paths = {name: src if isinstance(src, Path) else cached_fmu(src) if isinstance(src, type)
-             else fmu_path(directory, src) for name, src in sources.items()}
-    for name, path in paths.items():
-        if not path.is_file():
-            raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
-    return paths
-
-
-def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4,
-                 sources: dict[str, Source] | None = None,
-                 fmu_files: dict[str, Path] | None = None) -> dict[str, Any]:
-    """One handle per component for an engine.
-
-    Parameters
-    ----------
-    engine : {'local', 'fmu'}
-    fmu_dir : path, optional
-        Directory of the built FMUs (fmu engine).
-    n_beacons : int
-    sources : dict, optional
-        :func:`system_sources` of the configuration (default: the paper's system).
-        A user's FMU is loaded on either engine and checked against the
-        component's interface.
-    fmu_files : dict, optional
-        Component -> FMU file, overriding ``fmu_dir`` (an SSP package's FMUs).
-
-    Raises
-    ------
-    ModelError
-        Unknown engine, a missing FMU, or a user's FMU that does not match
-        the interface (the message lists every mismatch).
-    """
-    if engine not in ENGINES:
-        raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
-    if engine == "fmu" and n_beacons != FMU_BEACONS:
-        raise ModelError(f"platform.beacon_offsets: {n_beacons} beacons, but the FMUs carry {FMU_BEACONS}; run it "
-                         "on the local engine, which takes any number")
-    sources = sources if sources is not None else system_sources()
-    if engine == "fmu":
-        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}),
-                 **(fmu_files or {})}
-    else:
-        paths = {name: src for name, src in sources.items() if isinstance(src, Path)}
-    handles: dict[str, Any] = {}
-    try:
-        for name, src in sources.items():
-            if name not in paths:
-                handles[name] = LocalHandle(name, source_model(src), n_beacons)
-                continue
-            if isinstance(src, Path):  # a user's FMU: check its interface before loading it
-                check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)
-            handles[name] = open_fmu(name, paths[name], source_model(src))
-    except Exception:
-        close_handles(handles)
-        raise
-    return handles
-
-
-def close_handles(handles: dict[str, Any]) -> None:
-    """Terminate every handle."""
-    for handle in handles.values():
-        handle.terminate()
 
 
 #: The Kalman-type receivers' parameter defaults (the bound's motion model for a receiver without one).
@@ -280,7 +192,7 @@ def with_replicates(cfg: dict, replicates: Sequence[int]) -> list[dict]:
 
 
 def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = None,
-        fmu_dir: Path | str | None = None, handles: dict[str, Any] | None = None,
+        fmu_dir: Path | str | None = None, handles: dict[str, ComponentHandle] | None = None,
         progress: bool = False, connections: Sequence[Connection] | None = None) -> RunResult:
     """Simulate a resolved configuration on an engine.
 
@@ -316,8 +228,9 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
 
 
 def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str | None = None,
-              handles: dict[str, Any] | None = None, progress: bool = False,
-              timeseries: bool = True, connections: Sequence[Connection] | None = None) -> RunResult:
+              handles: dict[str, ComponentHandle] | None = None, progress: bool = False,
+              timeseries: bool = True, connections: Sequence[Connection] | None = None,
+              records: RecordBuffer | None = None) -> RunResult:
     """Simulate a batch of runs, one resolved configuration each.
 
     The runs may differ in the seed keys (cell, replicate) and in the
@@ -339,6 +252,10 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     connections : sequence of Connection, optional
         The system's connections (default :func:`default_connections`; an
         SSP package brings its own).
+    records : RecordBuffer, optional
+        Memory for the compiled master loop's record, kept by a caller that runs batch after batch (a
+        campaign worker): re-used, it saves allocating and first touching it each time. The result does
+        not refer to it (its tables are copies). Default: new memory.
 
     Returns
     -------
@@ -381,7 +298,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                     handle.setup(params, reps)
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
                                      progress=bar.update if bar else None, algorithm=sim["master"],
-                                     buffer=_RECORD if len(groups) == 1 else None))
+                                     buffer=records if len(groups) == 1 else None))
                 replicates.extend(reps.tolist())
         finally:
             if bar is not None:
@@ -408,7 +325,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
 
 @lru_cache(maxsize=64)
 def _arms(platform: tuple) -> np.ndarray:
-    return beacon_arms(dict(platform))
+    return lever_arms(dict(platform))
 
 
 def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],

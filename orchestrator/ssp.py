@@ -58,7 +58,8 @@ from sblsim.orchestrator.config import (
     section_variables,
 )
 from sblsim.orchestrator.connections import Connection, default_connections
-from sblsim.orchestrator.run import fmu_paths, system_sources
+from sblsim.orchestrator.engines import fmu_paths
+from sblsim.orchestrator.run import system_sources
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",

@@ -10,6 +10,7 @@ doi:10.3390/s21030762 (Section 3, the SBL cross).
 from __future__ import annotations
 
 import math
+from typing import Any, Mapping
 
 import casadi as ca
 import numpy as np
@@ -85,6 +86,25 @@ def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon
         return parse_offsets(beacon_offsets)
     return np.array([[baseline * c, baseline * s, transducer_depth] for c, s in cross_directions(n_beacons)],
                     dtype=float)  # cross_offsets with numbers
+
+
+def platform_offsets(platform: Mapping[str, Any]) -> np.ndarray:
+    """Body-frame offsets of the beacons of a ``[platform]`` configuration section, (n, 3) [m]."""
+    return layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
+                          platform["beacon_offsets"])
+
+
+def lever_arms(platform: Mapping[str, Any]) -> np.ndarray:
+    """Lever arms of the beacons of a ``[platform]`` section in NED at the mean heading (level platform),
+    (n, 3) [m]."""
+    heading = np.radians(platform["heading_deg"])
+    c, s = np.cos(heading), np.sin(heading)
+    return platform_offsets(platform) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+
+
+def largest_arm(platform: Mapping[str, Any]) -> float:
+    """The largest distance of a beacon of a ``[platform]`` section from the platform reference [m]."""
+    return float(max(np.linalg.norm(platform_offsets(platform), axis=1)))
 
 
 def rotation_ned(roll, pitch, yaw) -> ca.SX:

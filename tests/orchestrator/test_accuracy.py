@@ -10,10 +10,11 @@ import pandas as pd
 import pytest
 
 from sblsim.models.bound import horizontal_std
+from sblsim.models.platform.geometry import lever_arms
 from sblsim.orchestrator.analysis import compute
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import beacon_arms, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.maps import accuracy_map, grid
 from sblsim.orchestrator.run import bound_parameters, run, run_batch, with_replicates
 from sblsim.orchestrator.study import load_study
@@ -86,7 +87,7 @@ def test_map_writes_the_fisher_map_of_each_compared_value(tmp_path, capsys):
     assert (out / "map.png").stat().st_size > 20_000
     for value, part in frame.groupby("platform.baseline"):
         cfg = load_config("semicircle", [f"platform.baseline={value}"])
-        arms = beacon_arms(cfg["platform"])
+        arms = lever_arms(cfg["platform"])
         p = bound_parameters(cfg)
         row = part.sample(1, random_state=0).iloc[0]
         expected = horizontal_std(np.array([[row.north, row.east, row.depth]]), arms, arms, p["noise_variance"],

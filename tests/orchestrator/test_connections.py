@@ -8,8 +8,8 @@ from sblsim.models import COMPONENTS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import Connection, check_connections, default_connections, execution_order
-from sblsim.orchestrator.engines import LocalHandle, Port
-from sblsim.orchestrator.run import make_handles, run
+from sblsim.orchestrator.engines import LocalHandle, Port, make_handles
+from sblsim.orchestrator.run import run
 
 
 @pytest.fixture

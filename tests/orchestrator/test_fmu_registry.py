@@ -6,8 +6,8 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import open_fmu
-from sblsim.orchestrator.run import close_handles, make_handles, run
+from sblsim.orchestrator.engines import close_handles, make_handles, open_fmu
+from sblsim.orchestrator.run import run
 
 
 def test_instances_are_reused_and_concurrent_runs_get_their_own(fmu_dir):

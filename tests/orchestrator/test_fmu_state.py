@@ -17,8 +17,9 @@ from sblsim.fmus.build import fmu_path
 from sblsim.models import COMPONENTS
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import default_connections
+from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.master import simulate
-from sblsim.orchestrator.run import close_handles, make_handles, merge_params
+from sblsim.orchestrator.run import merge_params
 
 N_BEFORE = 20  # macro steps before the state is saved
 N_AFTER = 30   # macro steps replayed from the saved state

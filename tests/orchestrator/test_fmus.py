@@ -15,7 +15,8 @@ from sblsim.fmus.build import fmu_path, validate
 from sblsim.models import MODELS
 from sblsim.models.declarations import UNITS, ModelError
 from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import close_handles, make_handles, run
+from sblsim.orchestrator.engines import close_handles, make_handles
+from sblsim.orchestrator.run import run
 
 COMPONENT_NAMES = list(MODELS)
 

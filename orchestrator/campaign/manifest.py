@@ -1,0 +1,171 @@
+"""The campaign directory's records: ``study.toml``, the manifest of finished chunks, and their checks."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.orchestrator.campaign.errors import CampaignError
+from sblsim.orchestrator.campaign.plan import Chunk
+from sblsim.orchestrator.study import Study
+
+
+def write_atomic(frame: pd.DataFrame, path: Path) -> None:
+    """Write a Parquet file through a temporary file in the same folder and an atomic rename."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        frame.to_parquet(tmp, index=False)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+MANIFEST = "manifest.json"
+#: The manifest's entry recording the chunk plan (engine, batch size), beside the chunks' entries.
+PLAN = "_plan"
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def read_manifest(out: Path) -> dict[str, dict] | None:
+    """The campaign's manifest (chunk id -> entry), or None when there is none.
+
+    Raises
+    ------
+    CampaignError
+        If it cannot be read, saying what to do.
+    """
+    path = out / MANIFEST
+    if not path.is_file():
+        return None
+    try:
+        manifest = json.loads(path.read_text())
+        if not isinstance(manifest, dict) or not all(isinstance(v, dict) for v in manifest.values()):
+            raise ValueError("not a table of chunks")
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise CampaignError(f"--resume: {str(path)!r} is damaged ({str(exc).splitlines()[0]}); delete it and "
+                            "resume again: every chunk is then checked by its content") from None
+    return manifest
+
+
+def write_manifest(out: Path, manifest: dict[str, dict]) -> None:
+    """Write the manifest atomically."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST}.", suffix=".tmp", dir=out)
+    with os.fdopen(fd, "w") as handle:
+        json.dump(manifest, handle, indent=1, sort_keys=True)
+    os.replace(tmp, out / MANIFEST)
+
+
+def manifest_entry(chunk: Chunk, path: Path, series: Path | None = None, seconds: float | None = None
+                   ) -> dict[str, Any]:
+    """What the manifest records of a finished chunk (with the worker's seconds for it, when known)."""
+    entry = {"rows": chunk.runs, "cells": list(chunk.cells), "replicates": chunk.replicates,
+             "sha256": file_digest(path)}
+    if seconds is not None:
+        entry["seconds"] = round(float(seconds), 3)
+    if series is not None:
+        entry["series_sha256"] = file_digest(series)
+    return entry
+
+
+def verify_chunk(chunk: Chunk, path: Path, entry: dict | None, scenario_key: int, study: Study) -> str:
+    """Why a chunk file cannot be kept ('' if it can): checksum, rows, cells, replicates, scenario, and the
+    seed and factor levels of its rows (a chunk of another study is refused even with the same cells)."""
+    if not path.is_file():
+        return "missing"
+    if entry is not None:
+        if entry.get("sha256") != file_digest(path):
+            return "its checksum differs from the manifest's"
+        if entry.get("cells") != list(chunk.cells) or entry.get("rows") != chunk.runs:
+            return "the manifest records other cells"
+    levels = [f"{f.name}_value" for f in study.factors]
+    try:
+        frame = pd.read_parquet(path, columns=["scenario_key", "cell", "replicate", "seed", *levels])
+    except Exception as exc:  # pyarrow raises several kinds on a damaged file
+        return f"unreadable ({type(exc).__name__})"
+    expected = {(c, r) for c in chunk.cells for r in range(chunk.replicates)}
+    got = set(zip(frame["cell"].tolist(), frame["replicate"].tolist()))
+    if len(frame) != chunk.runs or got != expected or set(frame["scenario_key"].tolist()) != {scenario_key}:
+        return "it holds other runs than the plan's"
+    cells = frame["cell"].to_numpy()
+    for k, (factor, column) in enumerate(zip(study.factors, levels)):
+        want = np.where(study.matrix[cells, k] < 0, factor.low, factor.high)
+        if not np.array_equal(frame[column].to_numpy(), want) or not (frame["seed"] == study.seed).all():
+            return "its rows belong to another study (seed or factor levels)"
+    return ""
+
+
+def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch: int) -> int:
+    """Check or create the campaign directory; return the batch size to use.
+
+    A new directory gets ``study.toml`` (with the engine and batch size in an
+    ``[execution]`` table). ``--resume`` requires the same study and engine
+    and re-uses the recorded batch size, so the chunk plan is unchanged.
+
+    Raises
+    ------
+    CampaignError
+        If the directory holds another campaign, or a campaign without
+        ``--resume``, or is a non-empty folder without a campaign.
+    """
+    import tomllib
+
+    study_file = out / "study.toml"
+    text = study.to_toml()
+    if out.exists() and not out.is_dir():
+        raise CampaignError(f"--out: {str(out)!r} exists and is not a directory")
+    if study_file.is_file():
+        if not resume:
+            raise CampaignError(f"--out: {str(out)!r} already holds a campaign; add --resume to finish it "
+                                "or choose another directory")
+        try:
+            recorded = tomllib.loads(study_file.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise CampaignError(f"--resume: {str(study_file)!r} is damaged ({str(exc).splitlines()[0]}); delete it "
+                                "and resume again: it is rewritten from the study you give, and every chunk is "
+                                "checked against that study") from None
+        execution = recorded.pop("execution", {})
+        if not isinstance(execution, dict):
+            execution = {}
+        if recorded != tomllib.loads(text):
+            raise CampaignError(f"--resume: {str(out)!r} holds a different study; choose another --out")
+        if execution.get("engine", engine) != engine:
+            raise CampaignError(f"--engine: {str(out)!r} was run on the {execution['engine']} engine; "
+                                "resume it with the same engine")
+        return int(execution.get("batch", batch))
+    if out.is_dir() and any(out.iterdir()):
+        if not (resume and (out / "chunks").is_dir()):
+            raise CampaignError(f"--out: {str(out)!r} is not empty and holds no campaign; choose another directory")
+        # a campaign whose study.toml was deleted: rewritten from the study given, with the recorded plan
+        plan_record = (read_manifest(out) or {}).get(PLAN, {})
+        if plan_record.get("engine", engine) != engine:
+            raise CampaignError(f"--engine: {str(out)!r} was run on the {plan_record['engine']} engine; "
+                                "resume it with the same engine")
+        batch = int(plan_record.get("batch", batch))
+        print(f"campaign: {str(study_file)!r} was missing; written again from the study given", file=sys.stderr)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "chunks").mkdir(exist_ok=True)
+    import tomli_w
+    execution = "\n# how the campaign is executed (does not change the results)\n" + tomli_w.dumps(
+        {"execution": {"engine": engine, "batch": batch}})
+    tmp = out / ".study.toml.tmp"
+    tmp.write_text(text + execution)
+    os.replace(tmp, study_file)
+    return batch

@@ -1,0 +1,87 @@
+"""Planning a campaign: the study's design cells split into chunks, each stepped as one batch."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from sblsim.models import COMPONENTS
+from sblsim.orchestrator.study import Study
+
+#: Default runs per chunk on each engine.
+DEFAULT_BATCH = {"local": 800, "fmu": 50}
+
+
+@dataclass
+class Chunk:
+    """Consecutive design cells of one scenario, stepped as one batch.
+
+    Attributes
+    ----------
+    id : str
+        File stem, ``SCENARIOKEY-FIRSTCELL-LASTCELL``.
+    scenario : str
+    cells : list of int
+    configs : list of dict
+        Resolved configuration of each cell (replicate 0).
+    replicates : int
+    steps : int
+        Macro steps per run (cost estimate).
+    """
+
+    id: str
+    scenario: str
+    cells: list[int]
+    configs: list[dict] = field(repr=False)
+    replicates: int = 1
+    steps: int = 0
+
+    @property
+    def runs(self) -> int:
+        return len(self.cells) * self.replicates
+
+
+def batch_key(cfg: dict) -> tuple:
+    """What the runs of one batch must share: the simulation settings, every text value and every
+    configuration-only key (they make tables or files); numeric FMU parameters may differ per run."""
+    key = [("simulation", name, value) for name, value in sorted(cfg["simulation"].items())]
+    for section, model in COMPONENTS.items():
+        fmu = {v.name for v in model.fmu_parameters_declared()}
+        key.extend((section, name, value) for name, value in sorted(cfg[section].items())
+                   if isinstance(value, str) or name not in fmu)
+    return tuple(key)
+
+
+def cell_configs(study: Study) -> dict[str, list[dict]]:
+    """Resolved configuration of every design cell of every scenario (replicate 0).
+
+    Raises
+    ------
+    ConfigError, ModelError
+        If a design cell does not make a valid configuration.
+    """
+    return {scenario: [study.cell_config(scenario, c) for c in range(study.cells)] for scenario in study.scenarios}
+
+
+def plan(study: Study, batch: int, configs: dict[str, list[dict]] | None = None) -> list[Chunk]:
+    """Split a study into chunks of at most ``batch`` runs (at least one cell each).
+
+    Cells are grouped by :func:`batch_key` in design order; the plan depends
+    only on the study and ``batch``.
+    """
+    configs = configs if configs is not None else cell_configs(study)
+    chunks = []
+    per_chunk = max(1, batch // study.replicates)
+    for scenario in study.scenarios:
+        groups: dict[tuple, list[int]] = {}
+        for c, cfg in enumerate(configs[scenario]):
+            groups.setdefault(batch_key(cfg), []).append(c)
+        for cells in groups.values():
+            for start in range(0, len(cells), per_chunk):
+                part = cells[start:start + per_chunk]
+                cfg = configs[scenario][part[0]]
+                sim = cfg["simulation"]
+                steps = int(math.floor(sim["duration"] / sim["sampling_time"] + 1e-9)) * sim["ekf_rate_ratio"]
+                chunks.append(Chunk(f"{cfg['run']['scenario_key']:03d}-{part[0]:05d}-{part[-1]:05d}", scenario,
+                                    part, [configs[scenario][c] for c in part], study.replicates, steps))
+    return chunks

@@ -1,0 +1,53 @@
+"""The orchestrator's boundaries: the master algorithm knows handles only by their interface, the
+configuration does not load code, and the model knows nothing of the orchestrator (tests/models)."""
+
+import ast
+from pathlib import Path
+
+import sblsim.orchestrator
+from sblsim.orchestrator import engines
+
+ORCHESTRATOR = Path(sblsim.orchestrator.__file__).parent
+
+#: The handle classes of the engines (the master must not know them).
+HANDLE_CLASSES = {name for name, value in vars(engines).items()
+                  if isinstance(value, type) and value.__module__ == engines.__name__ and name.endswith("Handle")}
+
+
+def _imports(path: Path) -> list[tuple[str, str | None]]:
+    """Every import of a file, at any depth: (module, imported name or None)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out += [(alias.name, None) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            out += [(node.module, alias.name) for alias in node.names]
+    return out
+
+
+def test_the_handle_classes_are_found():
+    assert {"LocalHandle", "FmuHandle", "ComponentHandle"} <= HANDLE_CLASSES
+
+
+def test_the_master_imports_neither_the_fmi_layer_nor_handle_classes():
+    imports = _imports(ORCHESTRATOR / "master.py")
+    assert imports
+    fmi = [m for m, _ in imports if m.split(".")[:2] == ["sblsim", "fmus"] or m.split(".")[0] in ("fmus", "fmpy")]
+    assert fmi == []
+    classes = [name for m, name in imports if m.endswith("engines") and name in HANDLE_CLASSES - {"ComponentHandle"}]
+    assert classes == []
+
+
+def test_the_configuration_loads_no_code():
+    imports = _imports(ORCHESTRATOR / "config.py")
+    assert not [m for m, _ in imports if m in ("importlib.util", "importlib.machinery", "runpy")]
+    assert ("importlib", "util") not in imports
+    text = (ORCHESTRATOR / "config.py").read_text()
+    assert "spec_from_file_location" not in text and "exec_module" not in text
+
+
+def test_the_configuration_computes_no_geometry():
+    """The platform's beacon geometry is model code (models/platform/geometry.py)."""
+    tree = ast.parse((ORCHESTRATOR / "config.py").read_text())
+    defined = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+    assert not defined & {"beacon_offsets", "beacon_arms", "beacon_arm", "platform_offsets", "lever_arms"}
