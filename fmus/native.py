@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import sys
 import tempfile
 from functools import lru_cache
 from pathlib import Path
@@ -97,6 +98,9 @@ def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type,
             return target
         target.parent.mkdir(parents=True, exist_ok=True)
         partial = target.parent / f".{target.name}.{os.getpid()}.partial"
+        if sys.stderr.isatty():  # the first run on a machine waits seconds for this: say so at a terminal
+            print(f"sblsim: compiling the local engine for {n_beacons} beacons with {cc.describe()} (once; cached "
+                  f"in {target.parent})", file=sys.stderr, flush=True)
         try:
             compile_library(cc, files, partial, [Path(tmp)])
             os.replace(partial, target)

@@ -8,6 +8,7 @@ holding the repository's files and nothing else. What is changed, and why:
   is this test's own environment (installing takes minutes and the network), the rest of the line runs;
 * the test command (it would run this test again) and the Dask-cluster line (its address is a placeholder
   for the user's own scheduler) are not run;
+* the shell is one session: after the block that activates ``.venv``, the later blocks run activated;
 * the built-in studies ``paper`` and ``million`` run as the paper's factors with 2 replicates of 10 s
   (the same commands, the same code paths, a minute instead of an hour).
 """
@@ -80,8 +81,11 @@ def test_readme_blocks_run_in_order(fresh_copy):
     env["SBLSIM_FMU_DIR"] = str(fresh_copy / "fmus" / "build")  # where a checkout's own install builds them
     env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep) if Path(sys.prefix) not in
                                   Path(p).parents and p != str(Path(sys.prefix) / "bin"))
+    session = ""  # what the user's shell keeps from one block to the next: the activated environment
     for line, body in bash_blocks((fresh_copy / "README.md").read_text()):
         script = as_run(body, "short-paper.toml")
-        done = subprocess.run(["bash", "-e", "-x", "-c", script], cwd=fresh_copy, env=env, capture_output=True,
+        done = subprocess.run(["bash", "-e", "-x", "-c", session + script], cwd=fresh_copy, env=env, capture_output=True,
                               text=True, timeout=1200)
         assert done.returncode == 0, f"README block at line {line} failed:\n{done.stderr[-4000:]}"
+        if "source .venv/bin/activate" in script:
+            session = "source .venv/bin/activate\n"
