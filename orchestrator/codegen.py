@@ -12,7 +12,7 @@ packet the receiver used in its step from t_(k−1) to t_k.
 from __future__ import annotations
 
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.config import component_params, load_config
 from sblsim.orchestrator.run import run
 
 #: The recorded run: the semicircle's first 20 s at seed 1, with 10 % packet loss so that lost slots show.
@@ -32,14 +32,15 @@ def example_files(receiver: str) -> tuple[dict[str, str], str]:
     cfg = load_config(scenario, [*overrides, f"simulation.receiver={receiver}"], seed=seed)
     series = run(cfg).timeseries
     model = MODELS[RECEIVERS[receiver]]
-    declared = {v.name for v in model.fmu_parameters_declared()}
+    params = component_params(cfg, "receiver")  # the [receiver] section and what the orchestrator sets (the clock)
+    seeds = {"seed", "scenario_key", "cell", "replicate"}
     inputs = [v.name for v in model.inputs()]
     T = cfg["simulation"]["sampling_time"]
     packets = [" ".join(repr(float(x)) for x in [k * T, T, *(getattr(row, n) for n in inputs)])
                for k, row in enumerate(series.itertuples(index=False))]
     expected = [" ".join(repr(float(getattr(row, c))) for c in ("time", "est_x", "est_y", "est_z"))
                 for row in series.itertuples(index=False)]
-    files = {"parameters.txt": " ".join(f"{k}={v!r}" for k, v in cfg["receiver"].items() if k in declared) + "\n",
+    files = {"parameters.txt": " ".join(f"{k}={v!r}" for k, v in params.items() if k not in seeds) + "\n",
              "packets.txt": "\n".join(packets) + "\n", "expected.txt": "\n".join(expected) + "\n"}
     about = (f"The example files are a recorded run (`sblsim run {scenario} --seed {seed} "
              f"{' '.join('--set ' + o for o in overrides)} --set receiver={receiver}`): its parameters "

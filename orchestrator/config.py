@@ -440,6 +440,8 @@ def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[s
     for owner, name in SAMPLING_TIES:
         if owner == component and name in declared:
             params[name] = cfg["simulation"]["sampling_time"]
+    if component == "receiver" and "communication_step" in declared:  # the receiver's own clock: T / ratio
+        params["communication_step"] = cfg["simulation"]["sampling_time"] / cfg["simulation"]["ekf_rate_ratio"]
     params.update({k: v for k, v in cfg["run"].items() if k in declared})
     if accepted is not None:
         params = {k: v for k, v in params.items() if k in accepted}

@@ -2,11 +2,19 @@
 and :class:`KalmanReceiver`, the base of the Kalman-type receivers.
 
 Every receiver runs at its own communication step Δt = T / (EKF rate ratio)
-and shares the packet handling (:func:`slot_due`, :func:`take_packet`): a
-replicate has a new *slot* when ``packet_seq`` differs from the last one it
-used and the end of the step has reached the packet's transmit epoch,
-``t + Δt ≥ tx_time − 1 ns``. At a slot a packet that was received
-(``packet_valid``) with a beacon id in ``1 … n`` is the *fresh* range.
+(the ``communication_step`` parameter, set by the orchestrator) and shares
+the packet handling (:func:`slot_due`, :func:`take_packet`): a replicate has
+a new *slot* when ``packet_seq`` differs from the last one it used, the end
+of the step has reached the packet's transmit epoch,
+``t + h ≥ tx_time − 1 ns``, and the step has reached a new tick
+``t0 + k·Δt`` of the receiver's own clock (:func:`clock_tick`). The last
+condition changes nothing when a host steps at Δt, as every host of sblsim
+does; it keeps the receiver on its own clock when a host takes other steps:
+a host that adds its steps up in floating point ends a run a picosecond
+short and then takes a step of 1e-12 s, in which no tick falls, so the
+packet it shows then waits for the next tick instead of being used at once.
+At a slot a packet that was received (``packet_valid``) with a beacon id in
+``1 … n`` is the *fresh* range.
 
 A Kalman-type receiver is one class: its parameter declarations, a
 ``predict`` and a ``correct`` step as casadi expressions
@@ -31,6 +39,7 @@ import casadi as ca
 from sblsim.models.acoustics.core import PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable
+from sblsim.models.expressions import sample_due
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
@@ -82,20 +91,43 @@ def covariance_outputs(P) -> dict[str, ca.SX]:
     return {f"cov_{ab}": P[index[ab[0]], index[ab[1]]] for ab in COVARIANCE}
 
 
+def clock_parameters() -> tuple[Variable, ...]:
+    """The receiver's own clock: declared after the receiver interface, so that the value references of every
+    earlier variable stay what they were before the clock existed."""
+    return (Variable("communication_step", "parameter", "Real", 0.1, "s",
+                     "The receiver's own communication step T / EKF rate ratio: new packets are taken at its ticks "
+                     "t0 + k*step, whatever steps a host takes", min=1e-6, max=60.0, min_exclusive=True,
+                     scope="fmu"),)
+
+
 def packet_states(n_beacons: int) -> list[tuple[str, int]]:
-    """State blocks of the packet handling: held ranges and beacon positions, heard flags, the last slot."""
+    """State blocks of the packet handling: held ranges and beacon positions, heard flags, the last slot, and the
+    receiver's clock (ticks reached since ``tick_t0``)."""
     return [("ranges", n_beacons), ("beacons", 3 * n_beacons), ("heard", n_beacons), ("last_seq", 1),
-            ("slot_time", 1)]
+            ("slot_time", 1), ("tick", 1), ("tick_t0", 1)]
 
 
-def packet_init(n_beacons: int) -> dict[str, ca.SX]:
+def packet_init(n_beacons: int, t0) -> dict[str, ca.SX]:
     return {"ranges": ca.SX.zeros(n_beacons), "beacons": ca.SX.zeros(3 * n_beacons),
-            "heard": ca.SX.zeros(n_beacons), "last_seq": 0, "slot_time": 0}
+            "heard": ca.SX.zeros(n_beacons), "last_seq": 0, "slot_time": 0, "tick": 0, "tick_t0": t0}
 
 
-def slot_due(x, u, t, h) -> ca.SX:
-    """A new packet whose transmit epoch the end of the step has reached."""
-    return ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["tx_time"] - SLOT_SLACK)
+def clock_due(x, u, p, d, t, h) -> ca.SX:
+    """Guard of the clock event: the end of the step has reached the receiver's next tick."""
+    return sample_due(x["tick"], x["tick_t0"], p["communication_step"], t, h)
+
+
+def clock_tick(x, u, p, d, w, t, h) -> dict[str, ca.SX]:
+    """Handler of the clock event: one more tick reached."""
+    return {"tick": x["tick"] + 1}
+
+
+def slot_due(x, u, p, t, h) -> ca.SX:
+    """A new packet whose transmit epoch the end of the step has reached, in a step that reached a tick of the
+    receiver's clock (the last tick lies after the step's start; the clock event runs first)."""
+    ticked = x["tick_t0"] + x["tick"] * p["communication_step"] > t + 1e-6 * p["communication_step"]
+    new = ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["tx_time"] - SLOT_SLACK)
+    return ca.logic_and(new, ticked)
 
 
 def fresh_packet(u, n_beacons: int) -> ca.SX:
@@ -210,7 +242,7 @@ class KalmanReceiver(Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return cls.parameters(n_beacons) + receiver_interface()
+        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters()
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -256,7 +288,7 @@ class KalmanReceiver(Component):
 
         def init(p, d, w, t0):
             x0, P0 = cls.initial(p)
-            return {"x": x0, "P": ca.vec(P0), **packet_init(n), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
+            return {"x": x0, "P": ca.vec(P0), **packet_init(n, t0), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
                     "gated": 0, "failed": ca.SX.zeros(n), **lm_idle()}
 
         def step(x, u, p, d, w, t, h):
@@ -264,7 +296,7 @@ class KalmanReceiver(Component):
             return {"x": state, "P": ca.vec(P)}
 
         def due(x, u, p, d, t, h):
-            return slot_due(x, u, t, h)
+            return slot_due(x, u, p, t, h)
 
         def slot(x, u, p, d, w, t, h):
             out = cls.correct({**x, "P": ca.reshape(x["P"], size, size)}, u, p, n)
@@ -289,7 +321,8 @@ class KalmanReceiver(Component):
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output), step=b.step(step),
-                         events=[b.event("slot", due, slot), b.event("lm", lm_active, iterate)])
+                         events=[b.event("clock", clock_due, clock_tick), b.event("slot", due, slot),
+                                 b.event("lm", lm_active, iterate)])
 
 
 def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
@@ -297,7 +330,7 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
     return fresh_packet(u, n_beacons), u["range"], ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
 
 
-__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "STATE_NAMES",
-           "beacon_parameters", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "lm_active",
-           "lm_begin", "lm_idle", "lm_step", "lm_states", "packet_init", "packet_states", "receiver_interface",
-           "slot_due", "take_packet"]
+__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "beacon_parameters",
+           "clock_due", "clock_parameters", "clock_tick", "covariance_outputs", "filter_parameters", "fresh_packet",
+           "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
+           "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet"]

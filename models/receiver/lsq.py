@@ -39,6 +39,9 @@ from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.core import (
+    clock_due,
+    clock_parameters,
+    clock_tick,
     covariance_outputs,
     filter_parameters,
     fresh_packet,
@@ -70,7 +73,7 @@ class LeastSquaresReceiver(Component):
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         shared = {v.name: v for v in filter_parameters()}
-        return tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
+        return tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface() + clock_parameters()
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -80,12 +83,12 @@ class LeastSquaresReceiver(Component):
             ("nis", 1), ("pos_std", 1), ("cov", 9), ("pending", 1), ("fresh", 1)] + lm_states())
 
         def init(p, d, w, t0):
-            return {**packet_init(n), "fix": ca.vertcat(p["x0_x"], p["x0_y"], p["x0_z"]), "has_fix": 0,
+            return {**packet_init(n, t0), "fix": ca.vertcat(p["x0_x"], p["x0_y"], p["x0_z"]), "has_fix": 0,
                     "fix_time": 0, "velocity": ca.SX.zeros(3), "instr": ca.SX.zeros(3), "instr_valid": 0, "nis": 0,
                     "pos_std": 0, "cov": ca.SX.zeros(9), "pending": 0, "fresh": 0, **lm_idle()}
 
         def due(x, u, p, d, t, h):
-            return slot_due(x, u, t, h)
+            return slot_due(x, u, p, t, h)
 
         def slot(x, u, p, d, w, t, h):
             held = {**x, **take_packet(x, u, n)}
@@ -125,7 +128,8 @@ class LeastSquaresReceiver(Component):
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output),
-                         events=[b.event("slot", due, slot), b.event("lm", lm_active, iterate),
+                         events=[b.event("clock", clock_due, clock_tick), b.event("slot", due, slot),
+                                 b.event("lm", lm_active, iterate),
                                  b.event("finish", finished, finish)])
 
 
