@@ -74,7 +74,7 @@ typedef struct {
 } sblsim_table;
 
 /* An FMU variable: value reference, type, causality and its index in p, u or y; an input's declared range
-   (fmi2SetReal and fmi2SetInteger refuse a value outside it; parameters are checked by sblsim_check_parameters). */
+   (the FMI shell refuses to set a value outside it; parameters are checked by sblsim_check_parameters). */
 typedef struct {
     const char* name;
     unsigned int vr;
