@@ -331,14 +331,16 @@ class FmuHandle:
 
     #: Steps one replicate at a time.
     batched = False
+    #: What the FMU logged (warnings and errors, the latest last); each instance keeps its own from loading on,
+    #: this empty one (it holds nothing) stands for a handle that has loaded no FMU.
+    log: deque[str] = deque(maxlen=0)
 
     def __init__(self, component: str, path: Path, md: Any, model: type | None = None) -> None:
         self.component, self.path, self.model = component, path, model
         self.variables = {v.name: v for v in md.modelVariables}
         self.ports = _ports(md)
         self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
-        #: What the FMU logged (warnings and errors, the latest last), for the one-line messages.
-        self.log: deque[str] = deque(maxlen=LOG_LINES)
+        self.log = deque(maxlen=LOG_LINES)
         self._unzipdir = tempfile.mkdtemp(prefix="sblsim_fmu_")
         try:
             # an FMU may come from anyone: unpacked only after every check of archives.safe_extract
