@@ -24,6 +24,7 @@ import ctypes
 import os
 import shutil
 import tempfile
+import zipfile
 from collections import deque, namedtuple
 from pathlib import Path
 from typing import Any, Mapping, Protocol, Sequence
@@ -32,7 +33,7 @@ import numpy as np
 
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.archives import safe_extract
+from sblsim.orchestrator.archives import check_members, safe_extract
 from sblsim.orchestrator.connections import check_interface
 
 #: The engines of :func:`make_handles`.
@@ -239,7 +240,8 @@ def read_description(component: str, path: Path) -> Any:
     Raises
     ------
     ModelError
-        If the file is missing or unreadable, or not FMI 2.0 Co-Simulation.
+        If the file is missing or unreadable, not FMI 2.0 Co-Simulation, or an archive that is not safe to
+        unpack (:func:`sblsim.orchestrator.archives.check_members`: checked before its description is read).
     """
     from fmpy import read_model_description
 
@@ -248,7 +250,11 @@ def read_description(component: str, path: Path) -> Any:
     if not path.is_file():
         raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
     try:
+        with zipfile.ZipFile(path) as archive:
+            check_members(archive, f"fmu: {path.name} ({component})")
         md = read_model_description(str(path), validate=False)
+    except ModelError:
+        raise
     except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
         raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
     if md.fmiVersion != "2.0" or md.coSimulation is None:
