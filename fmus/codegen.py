@@ -128,6 +128,16 @@ def _function(name: str, f: ca.Function | None, streams: tuple[Stream, ...], slo
     return f"{{.f = {f.name()}, .work = {f.name()}_work, .streams = {table}, .n_streams = {len(streams)}}}"
 
 
+def _input_range(v) -> str:
+    """The range fields of a variable record: an input's declared range (fmi2SetReal and fmi2SetInteger refuse a
+    value outside it), none for a parameter (checked at the end of initialization) or an output."""
+    ranged = v.causality == "input" and v.fmi_type in ("Real", "Integer")
+    lo, hi = (v.min, v.max) if ranged else (None, None)
+    return (f".has_min = {int(lo is not None)}, .has_max = {int(hi is not None)}, "
+            f".min = {_num(lo if lo is not None else 0.0)}, .max = {_num(hi if hi is not None else 0.0)}, "
+            f".unit = {_cstr(v.unit)}")
+
+
 def model_record(model: type, n_beacons: int, guid: str) -> str:
     """The C source of a model's ``sblsim_model`` record (everything the runtime needs but the math)."""
     program = model.program(n_beacons)
@@ -179,8 +189,8 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     index = {"parameter": p_index, "input": {v.name: k for k, v in enumerate(inputs)},
              "output": {v.name: k for k, v in enumerate(outputs)}}
     entries = [f"{{.name = {_cstr(v.name)}, .vr = {vr}, .type = {_TYPES[v.fmi_type]}, "
-               f".causality = {_CAUSALITIES[v.causality]}, .index = {index[v.causality][v.name]}}}"
-               for vr, v in enumerate(variables)]
+               f".causality = {_CAUSALITIES[v.causality]}, .index = {index[v.causality][v.name]}, "
+               f"{_input_range(v)}}}" for vr, v in enumerate(variables)]
     lines.append("static const sblsim_variable variables[] = {\n    " + ",\n    ".join(entries) + "\n};")
     lines.append("static const int purposes[] = {" + (", ".join(str(p) for p in purposes) or "0") + "};")
 

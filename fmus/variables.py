@@ -12,7 +12,8 @@ BEGIN, END = "<!-- fmu-variables:begin -->", "<!-- fmu-variables:end -->"
 def markdown_tables(n_beacons: int = 4) -> str:
     """One Markdown table per FMU: every variable with causality, variability, type, unit, start and description.
 
-    The columns of a table parameter are one row each (``waypoint_time[1..512]``).
+    The columns of a table parameter are one row each (``waypoint_time[1..512]``); an input's description
+    ends with its allowed range.
 
     Returns
     -------
@@ -26,7 +27,10 @@ def markdown_tables(n_beacons: int = 4) -> str:
         for v in model.fmu_variables(n_beacons):
             if v.in_table:
                 continue
-            rows.append((f"`{v.name}`", v.causality, v.variability, v.fmi_type, v.unit, _start(v), v.fmi_description()))
+            description = v.fmi_description()
+            if v.causality == "input" and v.fmi_type != "Boolean":  # the FMU refuses a value outside the range
+                description += f", allowed {v.allowed()}"
+            rows.append((f"`{v.name}`", v.causality, v.variability, v.fmi_type, v.unit, _start(v), description))
             if v.table is not None:
                 rows += [(f"`{c.name}[1..{v.table.max_rows}]`", "parameter", "fixed", "Real", c.unit, _number(c.start),
                           f"{c.description} (rows 1..{v.name} are used), allowed {c.allowed()}")

@@ -385,6 +385,35 @@ def format_table(values: np.ndarray) -> str:
     return "; ".join(" ".join(repr(float(v)) for v in row) for row in np.asarray(values, float))
 
 
+#: Allowed closed ranges of the signals that travel between components, by kind: the declared ranges of
+#: the FMU inputs (an FMU refuses a value outside them with fmi2Error and a log line). Wide enough for every
+#: real deployment, narrow enough that every output stays finite (squares and sums of these values are far
+#: from overflow):
+#:
+#: * ``position`` [m]: ±1e7 m, more than an Earth radius from the local origin of the NED frame;
+#: * ``velocity`` [m/s]: ±1e4 m/s, well above the speed of sound (a diver swims at a few m/s);
+#: * ``range`` [m]: ±1e7 m, like a position; a short measured range can be negative (range noise);
+#: * ``time`` [s]: ±1e9 s (about 31 years) around the host's clock origin, which may lie before the start;
+#: * ``depth`` [m]: [-1e4, 2e4] m, the deepest ocean (11 km) plus nine standard deviations of the
+#:   noisiest depth sensor the target allows (1 km), and as far above the surface;
+#: * ``counter``: a slot counter or a beacon id, [0, 2^31 - 1] (the range of an FMI Integer).
+SIGNAL_RANGES: dict[str, tuple[float, float]] = {
+    "position": (-1e7, 1e7),
+    "velocity": (-1e4, 1e4),
+    "range": (-1e7, 1e7),
+    "time": (-1e9, 1e9),
+    "depth": (-1e4, 2e4),
+    "counter": (0, 2**31 - 1),
+}
+
+
+def signal_range(kind: str) -> dict[str, float]:
+    """The ``min`` and ``max`` of a :class:`Variable` for a kind of :data:`SIGNAL_RANGES`, e.g.
+    ``Variable("depth", "input", "Real", **signal_range("depth"))``."""
+    lo, hi = SIGNAL_RANGES[kind]
+    return {"min": lo, "max": hi}
+
+
 #: Integer parameters that every stochastic component takes to seed its
 #: random streams (module docstring, "Randomness").
 SEED_PARAMETERS: tuple[Variable, ...] = (
@@ -439,5 +468,5 @@ def resolve_parameters(variables: Sequence[Variable], values: Mapping[str, Any],
 
 
 __all__ = ["CAUSALITIES", "Column", "ModelError", "SCOPES", "SEED_NAMES", "SEED_PARAMETERS", "TYPES", "Table", "UNITS",
-           "Variable", "check_entry", "check_increasing", "format_table", "parameters", "parse_table",
-           "resolve_parameters", "shown"]
+           "SIGNAL_RANGES", "Variable", "check_entry", "check_increasing", "format_table", "parameters",
+           "parse_table", "resolve_parameters", "shown", "signal_range"]

@@ -21,8 +21,11 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import os
 import shutil
-from collections import namedtuple
+import tempfile
+import zipfile
+from collections import deque, namedtuple
 from pathlib import Path
 from typing import Any, Mapping, Protocol, Sequence
 
@@ -30,6 +33,7 @@ import numpy as np
 
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.archives import check_members, safe_extract
 from sblsim.orchestrator.connections import check_interface
 
 #: The engines of :func:`make_handles`.
@@ -189,11 +193,13 @@ def cast_column(values: np.ndarray, dtype: type) -> np.ndarray:
 
 #: The FMI 2.0 status values (``fmi2Status``) by number.
 FMI2_STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
-#: The last status that is not a failure.
-FMI2_WARNING = 1
+#: The last status that is not a failure, and the one before it.
+FMI2_OK, FMI2_WARNING = 0, 1
+#: Log messages an FMU handle keeps (the latest explains a refused call).
+LOG_LINES = 20
 
 
-def check_status(status: int, function: str, where: str) -> None:
+def check_status(status: int, function: str, where: str, reason: str = "") -> None:
     """Raise if an FMI 2.0 function's status is a failure (above ``fmi2Warning``, as fmpy's checked calls).
 
     Parameters
@@ -204,15 +210,24 @@ def check_status(status: int, function: str, where: str) -> None:
         Its name, e.g. ``fmi2DoStep``.
     where : str
         The FMU file and component instance, for the message.
+    reason : str
+        What the FMU logged about it (empty: it logged nothing we kept).
 
     Raises
     ------
     ModelError
-        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3)``.
+        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3): <the FMU's message>``.
     """
     if status > FMI2_WARNING:
         name = FMI2_STATUS[status] if 0 <= status < len(FMI2_STATUS) else "an unknown status"
-        raise ModelError(f"fmu: {where}: {function} returned {name} ({status}); the FMU's log has the reason")
+        raise ModelError(f"fmu: {where}: {function} returned {name} ({status}): "
+                         f"{reason or 'the FMU logged no reason'}")
+
+
+def one_line(text: str, limit: int = 400) -> str:
+    """A message on one line (blanks and line breaks collapsed), shortened past ``limit`` characters."""
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[:limit] + " ..."
 
 
 #: FMU instances made in this process, by file: (file signature, handles).
@@ -225,7 +240,8 @@ def read_description(component: str, path: Path) -> Any:
     Raises
     ------
     ModelError
-        If the file is missing or unreadable, or not FMI 2.0 Co-Simulation.
+        If the file is missing or unreadable, not FMI 2.0 Co-Simulation, or an archive that is not safe to
+        unpack (:func:`sblsim.orchestrator.archives.check_members`: checked before its description is read).
     """
     from fmpy import read_model_description
 
@@ -234,7 +250,11 @@ def read_description(component: str, path: Path) -> Any:
     if not path.is_file():
         raise ModelError(f"fmu: {component} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
     try:
+        with zipfile.ZipFile(path) as archive:
+            check_members(archive, f"fmu: {path.name} ({component})")
         md = read_model_description(str(path), validate=False)
+    except ModelError:
+        raise
     except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
         raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
     if md.fmiVersion != "2.0" or md.coSimulation is None:
@@ -317,20 +337,25 @@ class FmuHandle:
 
     #: Steps one replicate at a time.
     batched = False
+    #: What the FMU logged (warnings and errors, the latest last); each instance keeps its own from loading on,
+    #: this empty one (it holds nothing) stands for a handle that has loaded no FMU.
+    log: deque[str] = deque(maxlen=0)
 
     def __init__(self, component: str, path: Path, md: Any, model: type | None = None) -> None:
-        from fmpy import extract
-        from fmpy.fmi2 import FMU2Slave
-
         self.component, self.path, self.model = component, path, model
         self.variables = {v.name: v for v in md.modelVariables}
         self.ports = _ports(md)
         self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
-        self._unzipdir = extract(str(path))
+        self.log = deque(maxlen=LOG_LINES)
+        self._unzipdir = tempfile.mkdtemp(prefix="sblsim_fmu_")
+        try:
+            # an FMU may come from anyone: unpacked only after every check of archives.safe_extract
+            safe_extract(path, self._unzipdir, f"fmu: {path.name} ({component})")
+            self.fmu = self._load(md)
+        except BaseException:
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            raise
         atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=component)
-        self.fmu.instantiate()
         self._fresh = True
         self.in_use = False
         inputs = [v for v in md.modelVariables if v.causality == "input"]
@@ -339,6 +364,76 @@ class FmuHandle:
         self.output_names = [v.name for v in outputs]
         self._types = [DTYPES[v.type] for v in outputs]
         self._in, self._out = self._groups(inputs), self._groups(outputs)
+
+    @property
+    def where(self) -> str:
+        """The FMU file and component, as the messages name them."""
+        return f"{self.path.name} ({self.component})"
+
+    def _load(self, md: Any) -> Any:
+        """Load the unpacked FMU's library and instantiate it, with a logger that keeps what the FMU says.
+
+        Raises
+        ------
+        ModelError
+            One line naming the FMU: no binaries for this platform, a ``modelIdentifier`` that names no
+            library, a library that does not load, or an instantiation the FMU refused (with its log message,
+            e.g. a GUID that does not match the binary).
+        """
+        from fmpy import platform, sharedLibraryExtension
+        from fmpy.fmi2 import FMU2Slave
+
+        identifier = md.coSimulation.modelIdentifier
+        folder = Path(self._unzipdir, "binaries", platform)
+        if not folder.is_dir():
+            raise ModelError(f"fmu: {self.where}: the FMU has no binaries/{platform} (it was not built for this "
+                             "platform)")
+        library = folder / f"{identifier}{sharedLibraryExtension}"
+        if not library.is_file():
+            present = sorted(p.name for p in folder.iterdir())
+            raise ModelError(f"fmu: {self.where}: modelIdentifier {identifier!r} names no library: binaries/"
+                             f"{platform} holds {', '.join(present) if present else 'nothing'}")
+        cwd = os.getcwd()
+        try:
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir, modelIdentifier=identifier,
+                            instanceName=self.component)
+        except Exception as exc:  # fmpy raises plain exceptions: a library that does not load or lacks functions
+            raise ModelError(f"fmu: {self.where}: its library {library.name} cannot be loaded "
+                             f"({one_line(str(exc))})") from None
+        finally:
+            os.chdir(cwd)  # fmpy changes into the library's folder and does not come back when loading fails
+        try:
+            fmu.instantiate(callbacks=self._callbacks())
+        except Exception:
+            fmu.freeLibrary()
+            raise ModelError(f"fmu: {self.where}: fmi2Instantiate failed: {self.reason()}") from None
+        return fmu
+
+    def _callbacks(self) -> Any:
+        """FMI callbacks whose logger keeps the FMU's warnings and errors in :attr:`log` (none is printed)."""
+        from fmpy.fmi1 import calloc, free
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+        )
+
+        def logger(environment, instance, status, category, message):
+            if status > FMI2_OK and message:
+                # sblsim's FMUs double every '%' (the message is a printf format); shown as meant
+                self.log.append(one_line(message.decode("utf-8", "replace").replace("%%", "%")))
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._keep_callbacks = callbacks  # alive as long as the instance
+        return callbacks
+
+    def reason(self) -> str:
+        """The FMU's latest log message (what it said when it refused a call), or that it said nothing."""
+        return self.log[-1] if self.log else "the FMU logged no reason"
 
     def _groups(self, variables: Sequence[Any]) -> list[tuple]:
         """Per FMI type: (raw setter/getter suffix, positions in the vector, value-reference array, buffer)."""
@@ -396,17 +491,19 @@ class FmuHandle:
         """Call into fmpy; an FMU error becomes a one-line ModelError."""
         from fmpy.fmi1 import FMICallException
 
+        self.log.clear()
         try:
             return function(*args)
         except FMICallException as exc:
-            raise ModelError(f"fmu: {self.path.name} ({self.component}) refused a call: {exc}") from None
+            raise ModelError(f"fmu: {self.where} refused a call: {exc}: {self.reason()}") from None
 
     def _raw(self, name: str, *args) -> None:
         """Call an FMI function directly with prepared arguments (fmpy's wrapper costs more than the call);
-        its status is checked as fmpy checks it (:func:`check_status`)."""
+        its status is checked as fmpy checks it (:func:`check_status`), the FMU's log message in the error."""
+        self.log.clear()
         status = getattr(self.fmu.dll, name)(self.fmu.component, *args)
         if status > FMI2_WARNING:
-            check_status(status, name, f"{self.path.name} ({self.component})")
+            check_status(status, name, self.where, self.log[-1] if self.log else "")
 
     def set_input_vector(self, values: np.ndarray) -> None:
         """Every input at once, shape (n_in, 1) in the order of :attr:`input_names`."""

@@ -10,10 +10,15 @@
  *    fmi2Error and logs "<function>: not allowed in state <state>";
  *  - parameters are fixed: set in the instantiated or initialization mode, checked against
  *    their declared ranges at fmi2ExitInitializationMode (fmi2Error and a log line otherwise);
+ *  - fmi2SetReal and fmi2SetInteger refuse a value outside an input's declared range (and any value that is
+ *    not finite) with fmi2Error and a log line;
  *  - fmi2DoStep refuses h <= 0 and a communication point other than the FMU's time (a gap or
  *    an overlap) with fmi2Error and a log line;
  *  - errors are always logged (whatever fmi2SetDebugLogging says);
- *  - the state (every vector, the draw counters, the time) can be got, set and serialized.
+ *  - the state (every vector, the draw counters, the time) can be got, set and serialized; a serialized
+ *    state is checked before it is taken (times finite and ordered, every value finite, parameters and
+ *    inputs within their ranges past initialization, a known state number): fmi2Error and a log line
+ *    otherwise, and the caller's state object is left as it was.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -329,6 +334,27 @@ static double* slot(Instance* s, const sblsim_variable* v) {
     return &s->y[v->index];
 }
 
+/* The declared range of a variable as text, e.g. "[0, 1e+07] m". */
+static void describe_range(const sblsim_variable* v, char* text, size_t size) {
+    char lo[32], hi[32];
+    if (v->has_min) snprintf(lo, sizeof lo, "%g", v->min); else snprintf(lo, sizeof lo, "-inf");
+    if (v->has_max) snprintf(hi, sizeof hi, "%g", v->max); else snprintf(hi, sizeof hi, "inf");
+    snprintf(text, size, "%s%s, %s%s%s%s", v->has_min ? "[" : "(", lo, hi, v->has_max ? "]" : ")",
+             (v->unit && v->unit[0] && strcmp(v->unit, "1") != 0) ? " " : "", v->unit ? v->unit : "");
+}
+
+/* Whether `value` lies in the declared range of `v` (a variable without one takes any value). */
+static int in_range(const sblsim_variable* v, double value) {
+    return !(v->has_min && !(value >= v->min)) && !(v->has_max && !(value <= v->max));
+}
+
+static fmi2Status check_range(Instance* s, const sblsim_variable* v, double value, const char* caller) {
+    char range[96];
+    if (in_range(v, value)) return fmi2OK;
+    describe_range(v, range, sizeof range);
+    FAIL(s, "%s: %s = %g is outside the allowed range %s", caller, v->name, value, range);
+}
+
 static fmi2Status check_set(Instance* s, const sblsim_variable* v, const char* caller) {
     if (v->causality == SBLSIM_OUTPUT) FAIL(s, "%s: %s is an output and cannot be set", caller, v->name);
     if (v->causality == SBLSIM_PARAMETER && s->state != INSTANTIATED && s->state != INITIALIZATION_MODE)
@@ -389,6 +415,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         const sblsim_variable* v = find(s, vr[i], SBLSIM_REAL, "fmi2SetReal");
         if (v == NULL || check_set(s, v, "fmi2SetReal") != fmi2OK) return fmi2Error;
         if (!isfinite(value[i])) FAIL(s, "fmi2SetReal: %s = %g is not finite", v->name, value[i]);
+        if (check_range(s, v, value[i], "fmi2SetReal") != fmi2OK) return fmi2Error;
         *slot(s, v) = value[i];
     }
     return fmi2OK;
@@ -401,6 +428,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2SetInteger");
         if (v == NULL || check_set(s, v, "fmi2SetInteger") != fmi2OK) return fmi2Error;
+        if (check_range(s, v, (double)value[i], "fmi2SetInteger") != fmi2OK) return fmi2Error;
         *slot(s, v) = (double)value[i];
     }
     return fmi2OK;
@@ -515,14 +543,17 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     return fmi2OK;
 }
 
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
-    Saved* saved;
-    ENTER(c, FREE_FMU_STATE);
-    if (state == NULL || *state == NULL) return fmi2OK;
-    saved = (Saved*)*state;
+static void free_saved(Saved* saved) {
+    if (saved == NULL) return;
     free(saved->values);
     free(saved->draws);
     free(saved);
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
+    ENTER(c, FREE_FMU_STATE);
+    if (state == NULL || *state == NULL) return fmi2OK;
+    free_saved((Saved*)*state);
     *state = NULL;
     return fmi2OK;
 }
@@ -569,35 +600,110 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
     return fmi2OK;
 }
 
+/* The FMU variable of causality `causality` at `index` of its vector (NULL if none: a table row, say). */
+static const sblsim_variable* variable_at(int causality, int index) {
+    const sblsim_model* m = model();
+    int k;
+    for (k = 0; k < m->n_variables; k++)
+        if (m->variables[k].causality == causality && m->variables[k].index == index) return &m->variables[k];
+    return NULL;
+}
+
+/* Why a deserialized state cannot be taken: 0 if it can, else -1 with a message naming what is wrong. */
+static int check_saved(const Saved* v, char* message, size_t size) {
+    static const char* const blocks[5] = {"p", "d", "x", "u", "y"};
+    const sblsim_model* m = model();
+    const double* u = v->values + m->n_p + m->n_d + m->n_x;
+    int past_init = v->state == STEP_COMPLETE || v->state == TERMINATED;
+    size_t offset = 0;
+    int k, i;
+    if (!isfinite(v->start_time) || !isfinite(v->t0) || !isfinite(v->t)) {
+        snprintf(message, size, "its times are not finite (start %g s, t0 %g s, t %g s)", v->start_time, v->t0, v->t);
+        return -1;
+    }
+    if (v->t < v->t0 || (past_init && v->t0 < v->start_time)) {
+        snprintf(message, size, "its times are out of order (start %.17g s, t0 %.17g s, t %.17g s)", v->start_time,
+                 v->t0, v->t);
+        return -1;
+    }
+    for (k = 0; k < 5; k++) {
+        for (i = 0; i < block_size(k); i++) {
+            double value = v->values[offset + (size_t)i];
+            if (!isfinite(value)) {
+                const sblsim_variable* named = k == 3 ? variable_at(SBLSIM_INPUT, i)
+                                               : k == 4 ? variable_at(SBLSIM_OUTPUT, i) : NULL;
+                if (k == 0)
+                    snprintf(message, size, "parameter %s = %g is not finite", m->parameters[i].name, value);
+                else if (named != NULL)
+                    snprintf(message, size, "%s = %g is not finite", named->name, value);
+                else
+                    snprintf(message, size, "%s[%d] = %g is not finite", blocks[k], i, value);
+                return -1;
+            }
+        }
+        offset += (size_t)block_size(k);
+    }
+    if (past_init && sblsim_check_parameters(m, v->values, message, size)) return -1;
+    for (k = 0; k < m->n_variables; k++) {
+        const sblsim_variable* in = &m->variables[k];
+        if (in->causality == SBLSIM_INPUT && !in_range(in, u[in->index])) {
+            char range[96];
+            describe_range(in, range, sizeof range);
+            snprintf(message, size, "%s = %g is outside the allowed range %s", in->name, u[in->index], range);
+            return -1;
+        }
+    }
+    return 0;
+}
+
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state) {
     Instance* s = (Instance*)c;
     size_t needed = serialized_size();
     uint64_t header[4];
     double times[3];
+    char message[SBLSIM_MESSAGE];
     const char* in = (const char*)bytes;
-    Saved* saved;
+    Saved *fresh, *saved;
     ENTER(c, DESERIALIZE_FMU_STATE);
     if (state == NULL) FAIL(s, "fmi2DeSerializeFMUstate: no place for the state");
-    if (size != needed) FAIL(s, "fmi2DeSerializeFMUstate: %lu bytes, expected %lu", (unsigned long)size,
-                             (unsigned long)needed);
+    if (bytes == NULL || size != needed)
+        FAIL(s, "fmi2DeSerializeFMUstate: %lu bytes, expected %lu", (unsigned long)size, (unsigned long)needed);
     memcpy(header, in, sizeof header);
     in += sizeof header;
     if (header[0] != SBLSIM_MAGIC || header[1] != (uint64_t)value_count() ||
-        header[2] != (uint64_t)model()->n_purposes || header[3] >= (uint64_t)N_STATES)
+        header[2] != (uint64_t)model()->n_purposes)
         FAIL(s, "fmi2DeSerializeFMUstate: not a serialized state of %s", model()->name);
-    saved = (Saved*)*state;
-    if (saved == NULL) saved = new_saved();
-    if (saved == NULL) FAIL(s, "fmi2DeSerializeFMUstate: out of memory");
+    if (header[3] >= (uint64_t)N_STATES)
+        FAIL(s, "fmi2DeSerializeFMUstate: state number %llu is not one of the %d states; the state is refused",
+             (unsigned long long)header[3], (int)N_STATES);
+    /* read into a new state object and check it: the caller's object changes only if it is taken */
+    fresh = new_saved();
+    if (fresh == NULL) FAIL(s, "fmi2DeSerializeFMUstate: out of memory");
     memcpy(times, in, sizeof times);
     in += sizeof times;
-    saved->state = (State)header[3];
-    saved->start_time = times[0];
-    saved->t0 = times[1];
-    saved->t = times[2];
-    memcpy(saved->values, in, sizeof(double) * value_count());
+    fresh->state = (State)header[3];
+    fresh->start_time = times[0];
+    fresh->t0 = times[1];
+    fresh->t = times[2];
+    memcpy(fresh->values, in, sizeof(double) * value_count());
     in += sizeof(double) * value_count();
-    memcpy(saved->draws, in, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    *state = (fmi2FMUstate)saved;
+    memcpy(fresh->draws, in, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    if (check_saved(fresh, message, sizeof message)) {
+        free_saved(fresh);
+        FAIL(s, "fmi2DeSerializeFMUstate: %s; the state is refused", message);
+    }
+    saved = (Saved*)*state;
+    if (saved == NULL) {
+        *state = (fmi2FMUstate)fresh;
+        return fmi2OK;
+    }
+    saved->state = fresh->state;
+    saved->start_time = fresh->start_time;
+    saved->t0 = fresh->t0;
+    saved->t = fresh->t;
+    memcpy(saved->values, fresh->values, sizeof(double) * value_count());
+    memcpy(saved->draws, fresh->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    free_saved(fresh);
     return fmi2OK;
 }
 
@@ -645,7 +751,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     (void)noSetFMUStatePriorToCurrentPoint;
     ENTER(c, DO_STEP);
     if (!(h > 0.0) || !isfinite(h)) FAIL(s, "fmi2DoStep: communicationStepSize %g must be positive and finite", h);
-    if (!isfinite(t) || fabs(t - s->run.t) > 1e-9 * (1.0 + fabs(t)))
+    if (!isfinite(t) || !(fabs(t - s->run.t) <= 1e-9 * (1.0 + fabs(t)))) /* a NaN time is a gap too */
         FAIL(s, "fmi2DoStep: currentCommunicationPoint %.17g s differs from the FMU's time %.17g s (a gap or an "
                 "overlap between steps)", t, s->run.t);
     if (sblsim_do_step(&s->run, t, h, message, sizeof message)) {

@@ -73,13 +73,17 @@ typedef struct {
     double when_value;
 } sblsim_table;
 
-/* An FMU variable: value reference, type, causality and its index in p, u or y. */
+/* An FMU variable: value reference, type, causality and its index in p, u or y; an input's declared range
+   (the FMI shell refuses to set a value outside it; parameters are checked by sblsim_check_parameters). */
 typedef struct {
     const char* name;
     unsigned int vr;
     int type;
     int causality;
     int index;
+    int has_min, has_max;
+    double min, max;
+    const char* unit;
 } sblsim_variable;
 
 typedef struct {

@@ -35,25 +35,30 @@ import casadi as ca
 
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
 from sblsim.models.component import Component
-from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table
+from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.expressions import sample_due, select
 from sblsim.models.platform.core import AXES, beacon_names, beacon_variables
 from sblsim.models.program import ProgramBuilder, Stream
 
 _CHANNEL_UNIFORM, _RANGE_NOISE = range(2)
-#: The packet a slot delivers: outputs of the channel, inputs of every receiver.
+#: The packet a slot delivers: outputs of the channel, inputs of every receiver (whose FMUs refuse a value outside
+#: the declared ranges, :data:`sblsim.models.declarations.SIGNAL_RANGES`).
 PACKET: tuple[Variable, ...] = (
-    Variable("packet_seq", "output", "Integer", 0, description="Slot counter k (0: no packet yet)"),
-    Variable("beacon_id", "output", "Integer", 0, description="Transmitting beacon (1-based; 0: none)"),
+    Variable("packet_seq", "output", "Integer", 0, description="Slot counter k (0: no packet yet)",
+             **signal_range("counter")),
+    Variable("beacon_id", "output", "Integer", 0, description="Transmitting beacon (1-based; 0: none)",
+             **signal_range("counter")),
     Variable("packet_valid", "output", "Boolean", False, description="Packet received (not lost)"),
-    Variable("tx_time", "output", "Real", 0.0, "s", "Transmit epoch t_k of the packet", discrete=True),
-    Variable("range", "output", "Real", 0.0, "m", "Measured OWTT range (0 when the packet is lost)", discrete=True),
+    Variable("tx_time", "output", "Real", 0.0, "s", "Transmit epoch t_k of the packet", discrete=True,
+             **signal_range("time")),
+    Variable("range", "output", "Real", 0.0, "m", "Measured OWTT range (0 when the packet is lost)", discrete=True,
+             **signal_range("range")),
     Variable("beacon_x", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, North (0 when lost)",
-             discrete=True),
+             discrete=True, **signal_range("position")),
     Variable("beacon_y", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, East (0 when lost)",
-             discrete=True),
+             discrete=True, **signal_range("position")),
     Variable("beacon_z", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, Down (0 when lost)",
-             discrete=True),
+             discrete=True, **signal_range("position")),
 )
 TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "target_vz")
 #: Fixed-point iterations of the travel time (before the final evaluation).
@@ -97,7 +102,7 @@ class Acoustics(Component):
                      "Round-robin slot length T (the sampling time)", min=0.001, max=60.0, scope="fmu"),
         )
         inputs = beacon_variables(n_beacons, "input") + tuple(
-            Variable(n, "input", "Real", 0.0, unit, f"True target {what}, {axis} [NED]")
+            Variable(n, "input", "Real", 0.0, unit, f"True target {what}, {axis} [NED]", **signal_range(what))
             for n, unit, what, axis in zip(
                 TARGET_INPUTS, ("m",) * 3 + ("m/s",) * 3, ("position",) * 3 + ("velocity",) * 3,
                 ("North", "East", "Down") * 2))

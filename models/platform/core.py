@@ -27,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.component import Component
-from sblsim.models.declarations import SEED_PARAMETERS, ModelError, Variable, format_table
+from sblsim.models.declarations import SEED_PARAMETERS, ModelError, Variable, format_table, signal_range
 from sblsim.models.expressions import sample_due
 from sblsim.models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
 from sblsim.models.platform.waves import wave_motion
@@ -57,7 +57,7 @@ def beacon_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
     The true positions are continuous; the broadcast ones are sampled (discrete)."""
     return tuple(
         Variable(f"beacon{i}{infix}_{a}", causality, "Real", 0.0, "m",
-                 f"{label} position of beacon {i}, {axis} [NED]", discrete=(infix == ""))
+                 f"{label} position of beacon {i}, {axis} [NED]", discrete=(infix == ""), **signal_range("position"))
         for infix, label in (("_true", "True"), ("", "Broadcast (GPS and IMU)"))
         for i in range(1, n_beacons + 1) for a, axis in zip(AXES, ("North", "East", "Down")))
 

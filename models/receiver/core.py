@@ -38,7 +38,7 @@ import casadi as ca
 
 from sblsim.models.acoustics.core import PACKET
 from sblsim.models.component import Component
-from sblsim.models.declarations import Variable
+from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import sample_due
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.measurement import RangeDepthModel
@@ -57,7 +57,8 @@ SLOT_SLACK = 1e-9
 def receiver_interface() -> tuple[Variable, ...]:
     """Inputs and outputs every receiver shares (EKF, least squares, a user's FMU)."""
     inputs = tuple(replace(v, causality="input") for v in PACKET) + (
-        Variable("depth", "input", "Real", 0.0, "m", "Depth-sensor reading", discrete=True),
+        Variable("depth", "input", "Real", 0.0, "m", "Depth-sensor reading", discrete=True,
+                 **signal_range("depth")),
     )
     outputs = tuple(
         Variable(f"est_{n}", "output", "Real", 0.0, "m" if n[0] != "v" else "m/s",
