@@ -84,8 +84,8 @@ def test_readme_blocks_run_in_order(fresh_copy):
     session = ""  # what the user's shell keeps from one block to the next: the activated environment
     for line, body in bash_blocks((fresh_copy / "README.md").read_text()):
         script = as_run(body, "short-paper.toml")
-        done = subprocess.run(["bash", "-e", "-x", "-c", session + script], cwd=fresh_copy, env=env, capture_output=True,
-                              text=True, timeout=1200)
+        done = subprocess.run(["bash", "-e", "-x", "-c", session + script], cwd=fresh_copy, env=env,
+                              capture_output=True, text=True, timeout=1200)
         assert done.returncode == 0, f"README block at line {line} failed:\n{done.stderr[-4000:]}"
         if "source .venv/bin/activate" in script:
             session = "source .venv/bin/activate\n"
