@@ -39,6 +39,7 @@ from sblsim.orchestrator.engines import (
     make_handles,
     paper_sources,
 )
+from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import RecordBuffer, simulate
 from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_metrics
 from sblsim.orchestrator.output import staged_directory
@@ -265,21 +266,22 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     Raises
     ------
     ModelError
-        If the runs differ where a batch cannot, or as for :func:`run`.
+        If the runs differ where a batch cannot, their record would not fit in memory
+        (:func:`sblsim.orchestrator.limits.check_steps`), or as for :func:`run`.
     """
     cfgs = list(cfgs)
     sim = cfgs[0]["simulation"]
     if any(c["simulation"] != sim for c in cfgs):
         raise ModelError("simulation: every run of a batch needs the same simulation settings")
     n_beacons = beacon_count(cfgs[0])
+    T = sim["sampling_time"]
+    n_steps = check_steps(sim["duration"], T, len(cfgs), timeseries)  # before any work: the record must fit
     own = handles is None
     if own:
         handles = make_handles(engine, fmu_dir, n_beacons, system_sources(cfgs[0]))
     try:
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
-        T = sim["sampling_time"]
-        n_steps = int(math.floor(sim["duration"] / T + 1e-9))
         rates = {"receiver": sim["ekf_rate_ratio"]}
         record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
         batched = all(h.batched for h in handles.values())
