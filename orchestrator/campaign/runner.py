@@ -14,7 +14,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from sblsim.orchestrator.campaign.errors import CampaignError, CampaignInterrupted
-from sblsim.orchestrator.campaign.executors import close_client, connect, execute
+from sblsim.orchestrator.campaign.executors import check_address, close_client, connect, execute
 from sblsim.orchestrator.campaign.manifest import (
     PLAN,
     file_digest,
@@ -119,6 +119,8 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         raise CampaignError(f"--workers: {workers} is outside the allowed range [1, inf)")
     if batch is not None and batch < 1:
         raise CampaignError(f"--batch: {batch} is outside the allowed range [1, inf)")
+    if scheduler:
+        check_address(scheduler)
     batch = batch or DEFAULT_BATCH[engine]
     configs = cell_configs(study)  # every cell resolves before anything is written
     if engine == "fmu":  # refuse missing FMUs before anything is written
