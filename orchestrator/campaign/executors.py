@@ -160,6 +160,7 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
                                mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
                                initargs=(os.getpid(),))
+    pending: dict = {}
     try:
         pending = {pool.submit(run_chunk, c, study, engine, fmu_dir, timeseries): c for c in chunks}
         while pending:
@@ -167,4 +168,21 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
             for future in finished:
                 yield pending.pop(future), future.result()
     finally:
-        pool.shutdown(wait=False, cancel_futures=True)
+        if pending:  # interrupted or failed: stop the chunks under way too (their results would be dropped)
+            stop_pool(pool)
+        else:
+            pool.shutdown(wait=False, cancel_futures=True)
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a process pool at once: cancel the chunks not started and terminate the worker processes, so an
+    interrupted campaign exits promptly (a running chunk, in compiled code, would otherwise finish first and
+    the exit would wait for it). The finished chunks are already saved; the stopped ones are recomputed by
+    ``--resume``."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=5.0)
