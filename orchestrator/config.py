@@ -373,9 +373,10 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
 
 def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
     """Fill ``simulation.duration`` = 0 with one pass of the trajectory (cut to whole sampling times, as
-    documented), and refuse a duration that is not a whole number of sampling times (it would be cut
-    without a word) or whose record would not fit in memory (:func:`sblsim.orchestrator.limits.check_steps`;
-    a trajectory file's natural duration too).
+    documented; a resolved configuration holds that duration, which is accepted again as one pass), and
+    refuse any other duration that is not a whole number of sampling times (it would be cut without a word)
+    or whose record would not fit in memory (:func:`sblsim.orchestrator.limits.check_steps`; a trajectory
+    file's natural duration too).
 
     Raises
     ------
@@ -390,7 +391,8 @@ def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
             what = f"0 (one pass of target.trajectory_file, {sim['duration']:.10g} s)"
     elif sim["duration"] >= T:
         ratio = sim["duration"] / T
-        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+        one_pass = math.isclose(sim["duration"], natural_duration(target), rel_tol=1e-12)  # a resolved config's
+        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio) and not one_pass:
             below = math.floor(ratio) * T
             raise ConfigError(f"simulation.duration: {sim['duration']:g} s is not a whole number of sampling "
                               f"times (T = {T:g} s; the run would stop at {below:.10g} s); give "
