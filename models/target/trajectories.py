@@ -157,8 +157,8 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
     if lines and _is_header(lines[0][1], f"{field}: {str(path)!r}"):
         lines = lines[1:]
     if len(lines) > table.max_rows:
-        raise ModelError(f"{field}: {str(path)!r} has at least {table.max_rows + 1} rows (read up to line "
-                         f"{lines[table.max_rows][0]}); at most {table.max_rows}")
+        raise ModelError(f"{field}: {str(path)!r} has at least {table.max_rows + 1} rows; at most {table.max_rows} "
+                         f"(reading stopped at line {lines[table.max_rows][0]})")
     rows, numbers = [], []
     names = [c.name for c in table.columns]
     for i, row in lines:
