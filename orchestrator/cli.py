@@ -202,8 +202,36 @@ def _run(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
               f"{DIVERGENCE_DISTANCE:g} m and {DIVERGENCE_RATIO:g} times the diver's distance from the platform "
               "off the truth): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
+    for line in _run_warnings(s, cfg):
+        print(f"sblsim: warning: {line}", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     return 0
+
+
+def _run_warnings(s: dict, cfg: dict) -> list[str]:
+    """What a run's numbers do not say by themselves: a receiver that never made a fix, and a diver beyond
+    what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
+    from sblsim.models.platform.geometry import horizontal_spread
+    from sblsim.orchestrator.metrics import REACH_RATIO
+
+    out = []
+    if s["updates"] == 0:
+        out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
+                   "(every packet lost or gated); its numbers measure its starting guess (receiver.x0_*) and what "
+                   "its motion model predicts from it (summary.json: updates = 0)")
+    elif s["fix_steps"] == 0:
+        out.append("no multilateration fix was ever made (never ranges of three beacons): the instr_ metrics have "
+                   "no value, and a receiver that reports that fix (lsq) never left its starting guess "
+                   "(summary.json: fix_steps = 0)")
+    if s["beyond_geometry"]:
+        spread = horizontal_spread(cfg["platform"])
+        ratio = f"{s['max_distance'] / spread:.0f} times" if spread > 0 else "infinitely many times"
+        bound = "n/a" if s["pcrb_rms"] is None else f"{s['pcrb_rms']:.3f}"
+        out.append(f"the diver went {s['max_distance']:.6g} m from the platform, {ratio} the beacons' horizontal "
+                   f"spread ({spread:.4g} m; the geometry serves up to {REACH_RATIO:g} times): the errors are the "
+                   f"system's real accuracy there (PCRB RMS {bound} m), not a divergence "
+                   "(summary.json: beyond_geometry)")
+    return out
 
 
 def _ssp(args: argparse.Namespace) -> int:

@@ -20,6 +20,7 @@ configuration keys.
 from __future__ import annotations
 
 import copy
+import math
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -29,8 +30,9 @@ import tomli_w
 
 from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
-from sblsim.models.platform.geometry import largest_arm, platform_offsets
+from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
 from sblsim.models.target import natural_duration, start_state
+from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
@@ -364,12 +366,44 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
             model.fmu_parameters(cfg[name], beacon_count(cfg))
-    if sim["duration"] == 0.0:
-        sim["duration"] = natural_duration(cfg["target"])
-    if sim["duration"] < sim["sampling_time"]:
-        raise ConfigError(f"simulation.duration: {sim['duration']!r} s is shorter than one sampling time "
-                          f"({sim['sampling_time']} s); allowed [sampling_time, 1e6] s")
+    check_geometry(cfg["platform"])
+    _check_duration(sim, cfg["target"])
     return cfg
+
+
+def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
+    """Fill ``simulation.duration`` = 0 with one pass of the trajectory (cut to whole sampling times, as
+    documented; a resolved configuration holds that duration, which is accepted again as one pass), and
+    refuse any other duration that is not a whole number of sampling times (it would be cut without a word)
+    or whose record would not fit in memory (:func:`sblsim.orchestrator.limits.check_steps`; a trajectory
+    file's natural duration too).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``simulation.duration``, the nearest multiples of T, or the most steps that fit.
+    """
+    T = sim["sampling_time"]
+    what = ""
+    if sim["duration"] == 0.0:
+        sim["duration"] = natural_duration(target)
+        if target["trajectory"] == "file":
+            what = f"0 (one pass of target.trajectory_file, {sim['duration']:.10g} s)"
+    elif sim["duration"] >= T:
+        ratio = sim["duration"] / T
+        one_pass = math.isclose(sim["duration"], natural_duration(target), rel_tol=1e-12)  # a resolved config's
+        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio) and not one_pass:
+            below = math.floor(ratio) * T
+            raise ConfigError(f"simulation.duration: {sim['duration']:g} s is not a whole number of sampling "
+                              f"times (T = {T:g} s; the run would stop at {below:.10g} s); give "
+                              f"{below:.10g} or {below + T:.10g} s")
+    if sim["duration"] < T:
+        raise ConfigError(f"simulation.duration: {sim['duration']!r} s is shorter than one sampling time "
+                          f"({T} s); allowed [sampling_time, 1e6] s")
+    try:
+        check_steps(sim["duration"], T, what=what)
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:

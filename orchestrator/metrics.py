@@ -21,6 +21,19 @@ estimate that is not finite, or farther from the truth than both
 distance from the platform; its other numbers then mean nothing (an
 overconfident but tracking receiver is not flagged: its NEES says so).
 
+Two flags say when the numbers are not what they seem (:func:`run_flags`):
+``updates`` counts the slots whose received range the receiver used (new,
+received, not gated) and ``fix_steps`` the steps with a multilateration fix
+(``instr_valid``); with no update the receiver never made a fix and reports
+its starting guess (and what its motion model predicts from it). And
+``beyond_geometry`` flags a diver farther from the platform reference
+(``max_distance``, horizontal) than :data:`REACH_RATIO` times the beacons'
+horizontal spread: the horizontal position comes from range differences
+across that spread, so its error grows about as σ_r · distance / spread: at
+100 times the spread a centimetre of range noise is a metre across, and the
+run measures the limit of the geometry (its ``pcrb_rms`` says how large),
+not a divergence of the receiver.
+
 The numpy functions here define the metrics and are the reference;
 :func:`run_metrics` computes every per-run metric (and the PCRB) of a batch
 in one compiled pass over the recorded outputs (``fmus/c/sblsim_metrics.c``),
@@ -43,6 +56,12 @@ CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_
 #: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
 #: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference.
 DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
+#: A diver farther from the platform reference (horizontally) than this many times the beacons' horizontal
+#: spread is beyond what the geometry serves (``beyond_geometry``; the command line warns).
+REACH_RATIO = 100.0
+#: Per-run flags computed besides the compiled pass (:func:`run_flags`): in ``summary.json``, not in a campaign's
+#: rows.
+FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry")
 #: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound (the compiled
 #: pass numbers its outputs from this tuple: :mod:`sblsim.fmus.contract`).
 RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
@@ -228,3 +247,35 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
             "pcrb_rms": np.sqrt(np.mean(runs(bound) ** 2, axis=-1)),
             "diverged": lost.any(axis=-1),
         }
+
+
+def run_flags(columns: Mapping[str, np.ndarray], spread: np.ndarray, n_beacons: int) -> dict[str, np.ndarray]:
+    """Per-run flags (:data:`FLAG_NAMES`) of B runs from their recorded outputs.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray, shape (N, B)
+        ``packet_seq``, ``packet_valid``, ``beacon_id``, ``gated``, ``instr_valid``, ``true_x`` and
+        ``true_y`` as recorded (floats).
+    spread : ndarray, shape (B,)
+        Each run's largest horizontal distance between two beacons [m]
+        (:func:`sblsim.models.platform.geometry.horizontal_spread`).
+    n_beacons : int
+        Beacons of the array (ids 1 … n).
+
+    Returns
+    -------
+    dict
+        ``updates`` (int, slots whose received range the receiver used), ``fix_steps`` (int, steps with a
+        multilateration fix), ``max_distance`` (largest horizontal distance of the diver from the platform
+        reference [m]) and ``beyond_geometry`` (bool, ``max_distance > REACH_RATIO · spread``), each (B,).
+    """
+    beacon = np.asarray(columns["beacon_id"])
+    received = (np.asarray(columns["packet_valid"]) > 0.5) & (beacon >= 1) & (beacon <= n_beacons)
+    _, fresh = slots(columns["packet_seq"], received)
+    updates = (fresh & ~(np.asarray(columns["gated"]) > 0.5)).sum(axis=0)
+    fix_steps = (np.asarray(columns["instr_valid"]) > 0.5).sum(axis=0)
+    distance = np.hypot(np.asarray(columns["true_x"], dtype=float), np.asarray(columns["true_y"], dtype=float))
+    reach = distance.max(axis=0) if distance.shape[0] else np.zeros(distance.shape[1:])
+    return {"updates": updates.astype(np.int64), "fix_steps": fix_steps.astype(np.int64), "max_distance": reach,
+            "beyond_geometry": reach > REACH_RATIO * np.asarray(spread, dtype=float)}

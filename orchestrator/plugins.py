@@ -24,8 +24,8 @@ def _user_model(path: str, stamp: tuple[int, int]) -> type:
         spec = importlib.util.spec_from_file_location(name, path)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
-    except Exception as exc:  # a user's module may raise anything on import
-        raise ConfigError(f"{where}: cannot import {path!r} ({type(exc).__name__}: {exc})") from None
+    except (Exception, SystemExit) as exc:  # a user's module may raise anything on import, even sys.exit(0)
+        raise ConfigError(f"{where}: cannot import {path!r} (it raised {type(exc).__name__}: {exc})") from None
     found = [c for c in vars(module).values()
              if isinstance(c, type) and issubclass(c, Component) and c.__module__ == name]
     if len(found) != 1:
@@ -38,7 +38,7 @@ def _user_model(path: str, stamp: tuple[int, int]) -> type:
     try:
         variables = model.fmu_variables()
         model.program()
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:
         raise ConfigError(f"{where}: {model.__name__} in {path!r} does not build ({type(exc).__name__}: {exc})") \
             from None
     try:
@@ -59,7 +59,8 @@ def user_model(path: str | Path) -> type:
     Raises
     ------
     ConfigError
-        If the file is missing, does not import, or its model is not a receiver.
+        If the file is missing, does not import (any exception, or ``SystemExit``, raised while importing
+        it), or its model is not a receiver.
     """
     path = Path(path)
     if not path.is_file() or path.suffix != ".py":

@@ -15,7 +15,7 @@ import pandas as pd
 
 from sblsim.models.bound import FIXED
 from sblsim.models.declarations import ModelError
-from sblsim.models.platform.geometry import lever_arms
+from sblsim.models.platform.geometry import horizontal_spread, lever_arms
 from sblsim.models.receiver.core import COVARIANCE, filter_parameters
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
@@ -39,8 +39,9 @@ from sblsim.orchestrator.engines import (
     make_handles,
     paper_sources,
 )
+from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import RecordBuffer, simulate
-from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_metrics
+from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics
 from sblsim.orchestrator.output import staged_directory
 
 #: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
@@ -265,21 +266,22 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     Raises
     ------
     ModelError
-        If the runs differ where a batch cannot, or as for :func:`run`.
+        If the runs differ where a batch cannot, their record would not fit in memory
+        (:func:`sblsim.orchestrator.limits.check_steps`), or as for :func:`run`.
     """
     cfgs = list(cfgs)
     sim = cfgs[0]["simulation"]
     if any(c["simulation"] != sim for c in cfgs):
         raise ModelError("simulation: every run of a batch needs the same simulation settings")
     n_beacons = beacon_count(cfgs[0])
+    T = sim["sampling_time"]
+    n_steps = check_steps(sim["duration"], T, len(cfgs), timeseries)  # before any work: the record must fit
     own = handles is None
     if own:
         handles = make_handles(engine, fmu_dir, n_beacons, system_sources(cfgs[0]))
     try:
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
-        T = sim["sampling_time"]
-        n_steps = int(math.floor(sim["duration"] / T + 1e-9))
         rates = {"receiver": sim["ekf_rate_ratio"]}
         record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
         batched = all(h.batched for h in handles.values())
@@ -328,6 +330,15 @@ def _arms(platform: tuple) -> np.ndarray:
     return lever_arms(dict(platform))
 
 
+@lru_cache(maxsize=64)
+def _spread(platform: tuple) -> float:
+    return horizontal_spread(dict(platform))
+
+
+#: The recorded outputs :func:`sblsim.orchestrator.metrics.run_flags` reads (all among the metrics' inputs).
+FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid", "true_x", "true_y")
+
+
 def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
              with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
     """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass."""
@@ -336,7 +347,9 @@ def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
     arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
     values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
                                 with_bound)
-    return pd.DataFrame({"replicate": replicates, **values}), bound
+    spread = np.array([_spread(tuple(sorted(c["platform"].items()))) for c in cfgs])
+    flags = run_flags({name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, spread, arms.shape[1])
+    return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
 
 
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:
@@ -363,8 +376,14 @@ def summary(result: RunResult) -> dict[str, Any]:
     """``summary.json`` content of a single-replicate run (the keys the README lists); strict JSON: a metric
     without a value (e.g. no instrumentation fix at all) is ``None`` (``null``), never NaN."""
     row = result.metrics.iloc[0]
-    out: dict[str, Any] = {k: (bool(row[k]) if k == "diverged" else None if math.isnan(row[k]) else float(row[k]))
-                           for k in result.metrics.columns if k != "replicate"}
+    def value(k: str) -> Any:
+        if k in ("diverged", "beyond_geometry"):
+            return bool(row[k])
+        if k in ("updates", "fix_steps"):
+            return int(row[k])
+        return None if math.isnan(row[k]) else float(row[k])
+
+    out: dict[str, Any] = {k: value(k) for k in result.metrics.columns if k != "replicate"}
     out.update(engine=result.engine, receiver=receiver_label(result.config), seed=int(result.config["run"]["seed"]),
                steps=int(result.steps),
                scenario=result.config["run"]["scenario"], replicate=int(row["replicate"]),

@@ -107,6 +107,54 @@ def largest_arm(platform: Mapping[str, Any]) -> float:
     return float(max(np.linalg.norm(platform_offsets(platform), axis=1)))
 
 
+#: Smallest distance between two beacons [m]: closer ones are refused (:func:`check_geometry`).
+MIN_SEPARATION = 1e-3
+
+
+def check_geometry(platform: Mapping[str, Any], field: str = "") -> np.ndarray:
+    """The body-frame beacon offsets of a ``[platform]`` section, (n, 3) [m], refused when two beacons are
+    closer than :data:`MIN_SEPARATION` to each other.
+
+    Two beacons that close (four at one point, or a cross of a 1e-300 m baseline) are one point for the
+    fix: their ranges differ by less than the acoustic noise of any real system, so the position is
+    ill-conditioned in every direction whatever the diver's distance, and the receivers still return
+    finite numbers that look like an answer. That is a configuration mistake, so it is refused, not
+    warned about. A spread that is merely small against the diver's distance is real geometry (the fix
+    degrades with distance, the numbers are the system's true accuracy) and is warned about after the
+    run instead (:data:`sblsim.orchestrator.run.REACH_RATIO`).
+
+    Parameters
+    ----------
+    platform : mapping
+        A resolved ``[platform]`` section.
+    field : str
+        The key named in the message (default ``platform.beacon_offsets`` for a custom layout,
+        ``platform.baseline`` for the cross).
+
+    Raises
+    ------
+    ModelError
+        Naming the field, the two beacons, their distance and the allowed minimum.
+    """
+    offsets = platform_offsets(platform)
+    field = field or ("platform.beacon_offsets" if platform["layout"] == "custom" else "platform.baseline")
+    for i in range(len(offsets)):
+        gaps = np.linalg.norm(offsets[i + 1:] - offsets[i], axis=1)
+        if gaps.size and gaps.min() < MIN_SEPARATION:
+            j = i + 1 + int(np.argmin(gaps))
+            raise ModelError(f"{field}: beacons {i} and {j} are {gaps.min():.3g} m apart; at least "
+                             f"{MIN_SEPARATION * 1e3:g} mm between any two beacons (closer ones are one point and "
+                             "the fix is ill-conditioned)")
+    return offsets
+
+
+def horizontal_spread(platform: Mapping[str, Any]) -> float:
+    """The largest horizontal distance between two beacons of a ``[platform]`` section [m] (the aperture
+    that resolves the diver's horizontal position)."""
+    xy = platform_offsets(platform)[:, :2]
+    return float(max(np.linalg.norm(xy[i + 1:] - xy[i], axis=1).max(initial=0.0) for i in range(len(xy))))
+
+
 def rotation_ned(roll, pitch, yaw) -> ca.SX:
     """Body-to-NED rotation ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (ZYX Tait-Bryan).
 
@@ -135,5 +183,5 @@ def beacon_positions(position: ca.SX, rotation: ca.SX, offsets: list[ca.SX]) -> 
     return [position + ca.mtimes(rotation, a) for a in offsets]
 
 
-__all__ = ["beacon_positions", "cross_directions", "cross_offsets", "layout_offsets", "parse_offsets",
-           "rotation_ned"]
+__all__ = ["MIN_SEPARATION", "beacon_positions", "check_geometry", "cross_directions", "cross_offsets",
+           "horizontal_spread", "layout_offsets", "parse_offsets", "rotation_ned"]

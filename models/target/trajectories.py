@@ -127,6 +127,8 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
     down``, or ``t, n, e, d``, ``x, y, z``; units in brackets allowed); a line
     starting with ``#`` is a comment. Every other cell must be a finite
     number inside its column's range (``table``), times strictly increasing.
+    Reading stops at the first row beyond ``table.max_rows``: a huge file is
+    refused after a few hundred lines, not parsed whole.
 
     Returns
     -------
@@ -142,14 +144,21 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
         raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
     if not str(path) or not Path(path).is_file():
         raise ModelError(f"{field}: no such file {str(path)!r}")
+    lines = []
     try:
         with open(path, newline="") as handle:
-            lines = [(i, row) for i, row in enumerate(csv.reader(handle), start=1)
-                     if row and not row[0].lstrip().startswith("#") and any(c.strip() for c in row)]
+            for i, row in enumerate(csv.reader(handle), start=1):
+                if row and not row[0].lstrip().startswith("#") and any(c.strip() for c in row):
+                    lines.append((i, row))
+                    if len(lines) > table.max_rows + 1:  # a header and max_rows + 1 rows: too many, stop reading
+                        break
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
     if lines and _is_header(lines[0][1], f"{field}: {str(path)!r}"):
         lines = lines[1:]
+    if len(lines) > table.max_rows:
+        raise ModelError(f"{field}: {str(path)!r} has at least {table.max_rows + 1} rows; at most {table.max_rows} "
+                         f"(reading stopped at line {lines[table.max_rows][0]})")
     rows, numbers = [], []
     names = [c.name for c in table.columns]
     for i, row in lines:
@@ -169,8 +178,6 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
         numbers.append(i)
     if len(rows) < 2:
         raise ModelError(f"{field}: {str(path)!r} needs at least 2 rows time, N, E, D")
-    if len(rows) > table.max_rows:
-        raise ModelError(f"{field}: {str(path)!r} has {len(rows)} rows; at most {table.max_rows}")
     data = np.array(rows)
     check_increasing(data, table, f"{field}: {str(path)!r}", numbers, "line")
     return data

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import logging
 import os
+import re
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Iterator
@@ -18,15 +22,90 @@ from sblsim.orchestrator.study import Study
 LOCAL_CLUSTER = "local"
 
 
-def connect(scheduler: str, timeout: float = 10.0, workers: int | None = None):
-    """A Dask distributed client of a scheduler address, or of a new ``LocalCluster`` (:data:`LOCAL_CLUSTER`:
-    ``workers`` processes of one thread each, closed with the client).
+#: How long :func:`connect` waits for a scheduler to answer [s].
+CONNECT_TIMEOUT = 5.0
+#: The form of a scheduler address: ``tcp://``, a host name, IPv4 address or [IPv6] address, a port.
+ADDRESS = re.compile(r"(tcp)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9]([A-Za-z0-9.-]{0,252}[A-Za-z0-9])?):([0-9]{1,5})")
+
+
+def check_address(scheduler: str) -> str:
+    """A ``--scheduler`` value of the allowed form: :data:`LOCAL_CLUSTER`, or ``tcp://HOST:PORT`` with a port in
+    [1, 65535].
 
     Raises
     ------
     CampaignError
-        If no scheduler answers at the address.
+        Naming ``--scheduler``, the value and the allowed forms.
     """
+    if scheduler == LOCAL_CLUSTER:
+        return scheduler
+    match = ADDRESS.fullmatch(scheduler)
+    if match is None or not 1 <= int(match.group(4)) <= 65535:
+        raise CampaignError(f"--scheduler: {scheduler!r} is not a scheduler address; give tcp://HOST:PORT "
+                            f"(port 1 to 65535, e.g. tcp://127.0.0.1:8786) or {LOCAL_CLUSTER!r}")
+    return scheduler
+
+
+async def _identity(address: str, timeout: float) -> dict:
+    """What answers at a scheduler address: one ``identity`` request over a comm of its own, closed after."""
+    from distributed.comm import connect as open_comm
+
+    comm = await open_comm(address, timeout=f"{timeout}s")
+    try:
+        await asyncio.wait_for(comm.write({"op": "identity", "reply": True}), timeout)
+        return await asyncio.wait_for(comm.read(), timeout)
+    finally:
+        comm.abort()
+
+
+def probe(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Check that a Dask scheduler answers at ``address`` within ``timeout`` [s], before a client is made (a
+    client that fails half-way blocks the exit and logs dozens of lines).
+
+    Raises
+    ------
+    CampaignError
+        Naming ``--scheduler``, the address and what happened instead.
+    """
+    try:
+        with _quiet_dask():
+            answer = asyncio.run(asyncio.wait_for(_identity(address, timeout), 2 * timeout))
+    except Exception as exc:  # refused, timed out, or something else answered (garbage frames: any error)
+        reason = str(exc).splitlines()[0] if str(exc) else ""
+        raise CampaignError(f"--scheduler: no Dask scheduler answered at {address!r} within {timeout:g} s "
+                            f"({type(exc).__name__}{': ' + reason[:200] if reason else ''})") from None
+    if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+        shown = repr(answer)[:100]
+        raise CampaignError(f"--scheduler: what answered at {address!r} is not a Dask scheduler (it said {shown})")
+
+
+@contextlib.contextmanager
+def _quiet_dask():
+    """Silence distributed's log lines (a failed handshake logs dozens) while connecting."""
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
+
+
+def connect(scheduler: str, timeout: float = CONNECT_TIMEOUT, workers: int | None = None):
+    """A Dask distributed client of a scheduler address, or of a new ``LocalCluster`` (:data:`LOCAL_CLUSTER`:
+    ``workers`` processes of one thread each, closed with the client).
+
+    The address is checked first (:func:`check_address`), then a scheduler must answer within ``timeout``
+    [s]; anything else that answers (or fails in any way while connecting) is one error.
+
+    Raises
+    ------
+    CampaignError
+        If the address is malformed, or no Dask scheduler answers at it.
+    """
+    check_address(scheduler)
     try:
         from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - dask[distributed] is a dependency
@@ -37,11 +116,14 @@ def connect(scheduler: str, timeout: float = 10.0, workers: int | None = None):
         client = Client(cluster, set_as_default=False)
         client.cluster_owned = cluster  # closed with the client (close_client)
         return client
+    probe(scheduler, timeout)
     try:
-        return Client(scheduler, timeout=f"{timeout}s", set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as exc:
+        with _quiet_dask():
+            return Client(scheduler, timeout=f"{timeout}s", set_as_default=False)
+    except Exception as exc:  # refused, timed out, or something else answered (garbage frames: any error)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise CampaignError(f"--scheduler: no Dask scheduler reachable at {scheduler!r} ({reason})") from None
+        raise CampaignError(f"--scheduler: no Dask scheduler answered at {scheduler!r} within {timeout:g} s "
+                            f"({type(exc).__name__}: {reason[:200]})") from None
 
 
 def close_client(client) -> None:
@@ -78,6 +160,7 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
                                mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
                                initargs=(os.getpid(),))
+    pending: dict = {}
     try:
         pending = {pool.submit(run_chunk, c, study, engine, fmu_dir, timeseries): c for c in chunks}
         while pending:
@@ -85,4 +168,21 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
             for future in finished:
                 yield pending.pop(future), future.result()
     finally:
-        pool.shutdown(wait=False, cancel_futures=True)
+        if pending:  # interrupted or failed: stop the chunks under way too (their results would be dropped)
+            stop_pool(pool)
+        else:
+            pool.shutdown(wait=False, cancel_futures=True)
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a process pool at once: cancel the chunks not started and terminate the worker processes, so an
+    interrupted campaign exits promptly (a running chunk, in compiled code, would otherwise finish first and
+    the exit would wait for it). The finished chunks are already saved; the stopped ones are recomputed by
+    ``--resume``."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=5.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import sys
 import time
@@ -13,7 +14,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from sblsim.orchestrator.campaign.errors import CampaignError, CampaignInterrupted
-from sblsim.orchestrator.campaign.executors import close_client, connect, execute
+from sblsim.orchestrator.campaign.executors import check_address, close_client, connect, execute
 from sblsim.orchestrator.campaign.manifest import (
     PLAN,
     file_digest,
@@ -28,6 +29,7 @@ from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
 from sblsim.orchestrator.campaign.progress import Progress
 from sblsim.orchestrator.engines import ENGINES, fmu_paths
+from sblsim.orchestrator.limits import check_steps, step_count
 from sblsim.orchestrator.run import system_sources
 from sblsim.orchestrator.study import Study
 
@@ -117,12 +119,15 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         raise CampaignError(f"--workers: {workers} is outside the allowed range [1, inf)")
     if batch is not None and batch < 1:
         raise CampaignError(f"--batch: {batch} is outside the allowed range [1, inf)")
+    if scheduler:
+        check_address(scheduler)
     batch = batch or DEFAULT_BATCH[engine]
     configs = cell_configs(study)  # every cell resolves before anything is written
     if engine == "fmu":  # refuse missing FMUs before anything is written
         for sources in {tuple(system_sources(cfg).items()) for cfgs in configs.values() for cfg in cfgs}:
             fmu_paths(fmu_dir, dict(sources))
         fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
+    _check_memory(plan(study, batch, configs), workers, scheduler, save_timeseries)
     client = connect(scheduler, workers=workers) if scheduler else None
     new = not out.exists()
     try:
@@ -144,6 +149,26 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     finally:
         if client is not None:
             close_client(client)
+
+
+def _check_memory(chunks: list, workers: int | None, scheduler: str | None, save_timeseries: bool) -> None:
+    """Refuse, before anything is written, a campaign whose chunks' records would not fit in memory: each
+    worker process of this machine holds one chunk's record (a scheduler's workers are counted one each).
+
+    Raises
+    ------
+    ModelError
+        As :func:`sblsim.orchestrator.limits.check_steps`.
+    """
+    concurrent = 1 if scheduler else min(workers or os.cpu_count() or 1, len(chunks))
+    def need(chunk) -> int:
+        sim = chunk.configs[0]["simulation"]
+        return chunk.runs * step_count(sim["duration"], sim["sampling_time"])
+
+    if chunks:
+        largest = max(chunks, key=need)
+        sim = largest.configs[0]["simulation"]
+        check_steps(sim["duration"], sim["sampling_time"], largest.runs, save_timeseries, concurrent)
 
 
 def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, client, engine: str, fmu_dir,

@@ -13,6 +13,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -571,6 +572,83 @@ def test_unreachable_scheduler(tmp_path):
     assert_usage_error(proc, "--scheduler", address)
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_something_else_answering_at_the_scheduler_address(tmp_path):
+    """A server on 127.0.0.1 that answers with garbage: one line naming --scheduler, in seconds, nothing written."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    port = server.getsockname()[1]
+
+    def serve():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            with conn:
+                try:
+                    conn.sendall(b"\xff" * 64 + b"HTTP/1.1 200 OK\r\n\r\nnot a Dask scheduler\n" * 20)
+                except OSError:
+                    pass
+
+    threading.Thread(target=serve, daemon=True).start()
+    study_file = write_study(tmp_path / "s.toml", study_table())
+    address = f"tcp://127.0.0.1:{port}"
+    try:
+        start = time.monotonic()
+        proc = sblsim("campaign", study_file, "--out", tmp_path / "out", "--scheduler", address, cwd=tmp_path,
+                      timeout=120)
+        seconds = time.monotonic() - start
+    finally:
+        server.close()
+    assert_usage_error(proc, "--scheduler", address)
+    assert seconds < 30, seconds
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
+#: Long chunks (about 4 s each on two cores): an interrupt arrives while the workers are in the middle of them.
+LONG_TABLE = {
+    "study": {"name": "long", "scenarios": ["semicircle"], "replicates": 20, "seed": 5,
+              "set": ["simulation.duration=1500"]},
+    "factors": [{"name": "baseline", "key": "platform.baseline", "low": 1.0, "high": 3.0},
+                {"name": "gps", "key": "platform.gps_sigma", "low": 0.1, "high": 1.0}],
+}
+
+
+def test_ctrl_c_stops_the_worker_processes_at_once(tmp_path):
+    """Ctrl-C with two worker processes busy: exit 130 within seconds (the chunks under way are dropped, not
+    finished), and --resume finishes the campaign as an uninterrupted one."""
+    study_file = write_study(tmp_path / "long.toml", LONG_TABLE)
+    out = tmp_path / "out"
+    proc = start_sblsim("campaign", study_file, "--workers", "2", "--batch", 20, "--out", out, cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "chunks").is_dir():
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        time.sleep(2.0)  # the workers are started and inside their first chunks
+        assert proc.poll() is None
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+        delay = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert "interrupted" in stderr.splitlines()[-1], stderr
+    assert delay < 3.0, delay
+    saved = len(chunk_files(out))
+    resumed = sblsim("campaign", study_file, "--workers", "2", "--out", out, "--resume", cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr
+    assert resumed.stdout.splitlines()[-1].startswith(f"{(4 - saved) * 20} runs in "), resumed.stdout
+    want = run_campaign(load_study(LONG_TABLE), tmp_path / "whole", workers=1, batch=20, progress=False).runs
+    assert_same_runs(read_runs(out), want)
 
 
 def test_scheduler_local_starts_a_dask_local_cluster(reference, tmp_path):

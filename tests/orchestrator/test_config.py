@@ -265,3 +265,20 @@ def test_to_toml_round_trip(tmp_path, name, overrides):
             assert type(again[section][key]) is type(value), f"{section}.{key}"
     # and the text is plain TOML holding every section
     assert set(tomllib.loads(path.read_text())) == set(SECTIONS)
+
+
+def test_duration_limits_say_what_fits(monkeypatch):
+    """The longest run is what fits in the memory available here; a duration is a whole number of T."""
+    from sblsim.orchestrator import limits
+
+    monkeypatch.setattr(limits, "available_memory", lambda: 2**30)
+    most = limits.max_steps()
+    assert most == int(0.75 * 2**30 // limits.bytes_per_step())
+    assert load_config("semicircle", [f"simulation.duration={most // 10}"])["simulation"]["duration"] == most // 10
+    with pytest.raises(ModelError, match=rf"^simulation\.duration: {most // 10 + 1} s at T = 0\.1 s is "
+                                          rf"{10 * (most // 10 + 1)} steps; at most {most} steps fit"):
+        load_config("semicircle", [f"simulation.duration={most // 10 + 1}"])
+    with pytest.raises(ModelError, match=r"give 4\.8 or 5\.1 s$"):
+        load_config("semicircle", ["simulation.duration=5", "simulation.sampling_time=0.3"])
+    # 0 is one pass, cut to whole sampling times (documented)
+    assert load_config("semicircle", ["simulation.sampling_time=0.3"])["simulation"]["duration"] > 0

@@ -87,3 +87,35 @@ def test_force_replaces_an_earlier_run_and_stale_staging_folders_are_removed(tmp
     assert main([*args[:-2], "--set", "simulation.duration=3", "--out", str(out), "--force"]) == 0
     assert json.loads((out / "summary.json").read_text())["steps"] == 30
     assert not dead.exists() and alive.exists()
+
+
+def test_a_receiver_that_never_made_a_fix_is_flagged(tmp_path, capsys):
+    """Every packet lost: lsq reports its starting guess; summary.json counts no update and the CLI says so."""
+    out = tmp_path / "lost"
+    assert main(["run", "semicircle", "--set", "receiver=lsq", "--set", "simulation.duration=5",
+                 "--set", "acoustics.loss_pct=100", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["updates"] == 0 and summary["fix_steps"] == 0
+    assert "sblsim: warning: the lsq receiver never made a fix" in err, err
+    good = tmp_path / "good"
+    assert main(["run", "semicircle", "--set", "receiver=lsq", "--set", "simulation.duration=5",
+                 "--out", str(good)]) == 0
+    assert "never made a fix" not in capsys.readouterr().err
+    assert json.loads((good / "summary.json").read_text())["updates"] > 0
+
+
+def test_a_diver_beyond_the_geometry_is_flagged_not_diverged(tmp_path, capsys):
+    """A diver 10 km from a 6 m array: the real accuracy there, not a divergence; flagged and warned."""
+    out = tmp_path / "far"
+    assert main(["run", "semicircle", "--set", "target.radius=10000", "--set", "simulation.duration=20",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["beyond_geometry"] is True and summary["diverged"] is False
+    assert summary["max_distance"] == pytest.approx(10000.0)
+    assert "sblsim: warning: the diver went 10000 m from the platform, 1667 times" in err, err
+    near = tmp_path / "near"
+    assert main(["run", "semicircle", "--set", "simulation.duration=20", "--out", str(near)]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert json.loads((near / "summary.json").read_text())["beyond_geometry"] is False
