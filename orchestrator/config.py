@@ -157,12 +157,13 @@ def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
     ConfigError
         If the FMU cannot be read.
     """
-    from fmpy import read_model_description
+    from sblsim.orchestrator.engines import read_description  # checks the archive before fmpy reads it
 
     try:
-        md = read_model_description(str(path), validate=False)
-    except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
-        raise ConfigError(f"simulation.receiver: {str(path)!r} is not a readable FMU ({exc})") from None
+        md = read_description("receiver", Path(path))
+    except ModelError as exc:  # it names the FMU and what is wrong with it
+        raise ConfigError(str(exc)) from None
+
     def number(x):
         return None if x is None else float(x)
 

@@ -58,7 +58,7 @@ from sblsim.orchestrator.config import (
     section_variables,
 )
 from sblsim.orchestrator.connections import Connection, default_connections
-from sblsim.orchestrator.engines import fmu_paths
+from sblsim.orchestrator.engines import fmu_paths, read_description
 from sblsim.orchestrator.run import system_sources
 
 NS = {
@@ -199,8 +199,6 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
         If an FMU is missing, or the written package fails the SSP schemas
         (then nothing is left on disk).
     """
-    from fmpy import read_model_description
-
     out = Path(out)
     if out.suffix != ".ssp":
         raise SspError(f"--out: {str(out)!r} must end in .ssp")
@@ -221,7 +219,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     units: dict[str, Any] = {}
     used_units: set[str] = set()
     for component, path in paths.items():
-        md = read_model_description(str(path), validate=False)
+        md = read_description(component, Path(path))  # a user's FMU too: its archive checked first
         units.update({u.name: _unit_definition(u) for u in md.unitDefinitions})
         variables = {v.name: v for v in md.modelVariables}
         source = f"resources/{path.name}"
@@ -365,8 +363,6 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
         Invalid package, unknown component, a missing FMU, or parameter values
         outside their allowed range.
     """
-    from fmpy import read_model_description
-
     path = Path(path)
     if path.is_dir():
         raise SspError(f"--ssp: {str(path)!r} is a directory, not an .ssp file")
@@ -403,7 +399,7 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
             for pset in binding.parameterValues:
                 for p in pset.parameters:
                     found[p.name] = _value(p.value, p.type)
-    identifier_ = read_model_description(str(fmu_files["receiver"]), validate=False).coSimulation.modelIdentifier
+    identifier_ = read_description("receiver", fmu_files["receiver"]).coSimulation.modelIdentifier
     builtin = {f"sblsim_{model}": key for key, model in RECEIVERS.items()}
     raw["simulation"]["receiver"] = builtin.get(identifier_, f"{EXTERNAL_PREFIX}{fmu_files['receiver']}")
     for comp, found in values.items():
