@@ -67,8 +67,7 @@ def beacon_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
 
 
 class Platform(Component):
-    """SBL platform: beacons (cross, circle or custom layout), Beaufort wave motion, GPS, IMU and broadcast
-    positions."""
+    """SBL platform: beacons (cross, circle or custom), Beaufort wave motion, GPS, IMU and broadcast positions."""
 
     name = "platform"
     component_index = 0
@@ -80,8 +79,7 @@ class Platform(Component):
                      f"Custom layout: body-frame offset of beacon {i}, {a}", min=-1000.0, max=1000.0, scope="fmu")
             for i in range(1, n_beacons + 1) for a in AXES)
         params = (
-            Variable("layout", "parameter", "String", "cross", choices=LAYOUTS,
-                     description="Beacon layout: the paper's cross of 4, N on a circle, or custom offsets"),
+            Variable("layout", "parameter", "String", "cross", description="Beacon layout", choices=LAYOUTS),
             Variable("beacons", "parameter", "Integer", 4, min=MIN_BEACONS, max=MAX_BEACONS, scope="config",
                      description="Number of beacons N (circle; 4 for the cross, the offsets' count for custom)"),
             Variable("baseline", "parameter", "Real", 1.0, "m", "Support-arm length L of each beacon",
