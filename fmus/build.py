@@ -11,6 +11,11 @@ Each FMU holds
 * ``binaries/<platform>/sblsim_<name>.<so|dll|dylib>``: the host's binary,
   and with zig the Windows and macOS ones too.
 
+The FMUs of the paper's 4 beacons are ``DIR/sblsim_<name>.fmu``; those of
+another number N of beacons (the interface carries N beacon positions) sit in
+a folder per N, ``DIR/beacons<N>/sblsim_<name>.fmu``
+(:func:`beacons_dir`), with the same file and model names.
+
 It needs nothing else at run time: no Python, no environment variables, no
 resource files.
 """
@@ -36,6 +41,12 @@ DEFAULT_DIR = Path(os.environ.get("SBLSIM_FMU_DIR", HERE / "build"))
 def fmu_path(directory: Path | str, component: str) -> Path:
     """Path of a model's FMU in a directory: ``DIR/sblsim_<name>.fmu``."""
     return Path(directory) / f"sblsim_{component}.fmu"
+
+
+def beacons_dir(directory: Path | str, n_beacons: int = 4) -> Path:
+    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, else
+    ``directory/beacons<N>``."""
+    return Path(directory) if int(n_beacons) == 4 else Path(directory) / f"beacons{int(n_beacons)}"
 
 
 def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, compiler: str = "auto",
@@ -103,7 +114,9 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
 
 def cached_fmu(model: type, n_beacons: int = 4) -> Path:
     """A model's FMU built once into the cache (``$SBLSIM_CACHE_DIR`` or the user's cache folder), keyed by
-    its GUID: the fmu engine's FMU of a user's model (``simulation.receiver = "model:PATH.py"``)."""
+    its GUID (which carries the number of beacons): the fmu engine's FMU of a user's model
+    (``simulation.receiver = "model:PATH.py"``), and of a built-in model for a number of beacons that was not
+    built with ``sblsim fmus build --beacons N``."""
     import hashlib
 
     from sblsim.fmus.codegen import C_DIR, model_guid
@@ -120,9 +133,11 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
 
 
 def build_all(out_dir: Path | str = DEFAULT_DIR, compiler: str = "auto", cross: bool | None = None,
-              names: Sequence[str] | None = None) -> list[Path]:
-    """Build every FMU into ``out_dir`` (the four components and the alternative receivers); returns their paths."""
-    return [build_fmu(name, out_dir, compiler=compiler, cross=cross) for name in (names or MODELS)]
+              names: Sequence[str] | None = None, n_beacons: int = 4) -> list[Path]:
+    """Build every FMU for ``n_beacons`` beacons into :func:`beacons_dir` of ``out_dir`` (the four components and
+    the alternative receivers); returns their paths."""
+    return [build_fmu(name, beacons_dir(out_dir, n_beacons), n_beacons, compiler=compiler, cross=cross)
+            for name in (names or MODELS)]
 
 
 def validate(path: Path | str) -> list[str]:
@@ -132,4 +147,5 @@ def validate(path: Path | str) -> list[str]:
     return list(validate_fmu(str(path)))
 
 
-__all__ = ["CompileError", "DEFAULT_DIR", "build_all", "build_fmu", "fmu_path", "validate"]
+__all__ = ["CompileError", "DEFAULT_DIR", "beacons_dir", "build_all", "build_fmu", "cached_fmu", "fmu_path",
+           "validate"]

@@ -135,9 +135,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="also build Windows and macOS binaries with zig (default: when the compiler is zig)")
     b.add_argument("--model", type=Path, default=None, metavar="PATH.py",
                    help="build only the receiver model this Python file defines (see README, Write your own receiver)")
+    b.add_argument("--beacons", type=int, default=4, metavar="N",
+                   help="beacons of the interfaces (default 4; other N go to the folder beacons<N> of the output)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
+    v.add_argument("--beacons", type=int, default=4, metavar="N",
+                   help="validate the FMUs built for N beacons (default 4: the folder beacons<N> for others)")
     g = sub.add_parser("codegen", help="write embeddable C code of a component (no FMI, no Python)")
     gsub = g.add_subparsers(dest="codegen_command", required=True, parser_class=_Parser)
     r = gsub.add_parser("receiver", help="the receiver's C source, header and an example main.c")
@@ -360,16 +364,20 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
 
 
 def _fmus(args: argparse.Namespace) -> int:
-    from sblsim.fmus.build import DEFAULT_DIR, build_fmu, fmu_path, validate
+    from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, build_fmu, fmu_path, validate
     from sblsim.models import MODELS
+    from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 
+    n_beacons = getattr(args, "beacons", 4)
+    if not MIN_BEACONS <= n_beacons <= MAX_BEACONS:
+        raise ModelError(f"--beacons: {n_beacons} is outside the allowed range [{MIN_BEACONS}, {MAX_BEACONS}]")
     if args.fmus_command == "variables":
         from sblsim.fmus.variables import markdown_tables
 
         print(markdown_tables())
         return 0
     if args.fmus_command == "build":
-        out = args.out or DEFAULT_DIR
+        out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
         _check_writable(out)
         if args.model is not None:
             from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver
@@ -377,12 +385,12 @@ def _fmus(args: argparse.Namespace) -> int:
 
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
-            print(f"built {build_fmu(model, out, compiler=args.compiler, cross=args.cross)}", flush=True)
+            print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
             return 0
         for name in MODELS:
-            print(f"built {build_fmu(name, out, compiler=args.compiler, cross=args.cross)}", flush=True)
+            print(f"built {build_fmu(name, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
         return 0
-    directory = args.dir or DEFAULT_DIR
+    directory = beacons_dir(args.dir or DEFAULT_DIR, n_beacons)
     failures = 0
     for name in MODELS:
         path = fmu_path(directory, name)

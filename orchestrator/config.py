@@ -30,6 +30,7 @@ import tomli_w
 
 from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
+from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
 from sblsim.models.target import natural_duration, start_state
 from sblsim.orchestrator.limits import check_steps
@@ -363,6 +364,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
                           f"receiver; its keys: {', '.join(sorted(v.name for v in receiver_keys))}")
     cfg = {s: (sim if s == "simulation" else resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s))
            for s in SECTIONS}
+    _check_beacons(cfg["platform"], set(raw.get("platform", {})))
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
@@ -407,6 +409,29 @@ def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
         raise ConfigError(str(exc)) from None
 
 
+def _check_beacons(platform: dict[str, Any], given: set[str]) -> None:
+    """Tie ``platform.beacons`` to the layout: the cross has the paper's 4 beacons, a custom layout as many
+    as its offsets list (the key is filled with that count when the user did not set it), the circle the key's.
+
+    Raises
+    ------
+    ConfigError
+        ``beacons`` other than 4 with the cross, a custom layout whose count differs from a given
+        ``beacons`` or lies outside [3, 16].
+    """
+    layout, n = platform["layout"], platform["beacons"]
+    if layout == "cross" and n != 4:
+        raise ConfigError(f"platform.beacons: {n} with platform.layout = 'cross' (the paper's 4 beacons); use "
+                          "platform.layout = 'circle' for N equally spaced beacons")
+    if layout == "custom":
+        count = platform_offsets(platform).shape[0]
+        if "beacons" in given and count != n:
+            raise ConfigError(f"platform.beacons: {n}, but platform.beacon_offsets lists {count} beacons")
+        if not MIN_BEACONS <= count <= MAX_BEACONS:
+            raise ConfigError(f"platform.beacon_offsets: {count} beacons; allowed [{MIN_BEACONS}, {MAX_BEACONS}]")
+        platform["beacons"] = count
+
+
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     """Fill the receiver keys the user did not set from the rest of the configuration (where it declares them).
 
@@ -436,7 +461,8 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
 
 
 def beacon_count(cfg: dict[str, dict]) -> int:
-    """Number of beacons of a configuration: 4 for the cross, the offsets' count for a custom layout."""
+    """Number of beacons of a configuration: 4 for the cross, ``platform.beacons`` for the circle, the offsets'
+    count for a custom layout."""
     return platform_offsets(cfg["platform"]).shape[0]
 
 

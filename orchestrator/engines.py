@@ -38,7 +38,7 @@ from sblsim.orchestrator.connections import check_interface
 
 #: The engines of :func:`make_handles`.
 ENGINES = ("local", "fmu")
-#: Beacons of the built FMUs' interfaces.
+#: Beacons of the FMUs ``sblsim fmus build`` writes by default (other numbers: a folder per number, or the cache).
 FMU_BEACONS = 4
 
 #: A variable as an engine exposes it (what the connection checks need).
@@ -576,21 +576,35 @@ def paper_sources() -> dict[str, Source]:
     return {name: name for name in COMPONENTS}
 
 
-def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None) -> dict[str, Path]:
+def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None,
+              n_beacons: int = FMU_BEACONS) -> dict[str, Path]:
     """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
     a user's model built into the cache (:func:`sblsim.fmus.build.cached_fmu`).
+
+    For a number of beacons other than :data:`FMU_BEACONS`, a built-in model's FMU is the one
+    ``sblsim fmus build --beacons N`` wrote (:func:`sblsim.fmus.build.beacons_dir`) when it is there, else it
+    is built once into the cache and reused.
 
     Raises
     ------
     ModelError
         If an FMU is missing.
+    CompileError
+        If an FMU must be built and the compiler is missing or fails.
     """
-    from sblsim.fmus.build import DEFAULT_DIR, cached_fmu, fmu_path
+    from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path
 
-    directory = Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR
+    directory = beacons_dir(Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR, n_beacons)
     sources = sources if sources is not None else paper_sources()
-    paths = {name: src if isinstance(src, Path) else cached_fmu(src) if isinstance(src, type)
-             else fmu_path(directory, src) for name, src in sources.items()}
+    paths = {}
+    for name, src in sources.items():
+        if isinstance(src, Path):
+            paths[name] = src
+        elif isinstance(src, type):
+            paths[name] = cached_fmu(src, n_beacons)
+        else:
+            built = fmu_path(directory, src)
+            paths[name] = built if built.is_file() or n_beacons == FMU_BEACONS else cached_fmu(MODELS[src], n_beacons)
     for name, path in paths.items():
         if not path.is_file():
             raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
@@ -623,12 +637,9 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
     """
     if engine not in ENGINES:
         raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
-    if engine == "fmu" and n_beacons != FMU_BEACONS:
-        raise ModelError(f"platform.beacon_offsets: {n_beacons} beacons, but the FMUs carry {FMU_BEACONS}; run it "
-                         "on the local engine, which takes any number")
     sources = sources if sources is not None else paper_sources()
     if engine == "fmu":
-        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}),
+        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}, n_beacons),
                  **(fmu_files or {})}
     else:
         paths = {name: src for name, src in sources.items() if isinstance(src, Path)}

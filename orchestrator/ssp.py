@@ -37,6 +37,7 @@ from __future__ import annotations
 import atexit
 import math
 import os
+import re
 import shutil
 import tempfile
 import zipfile
@@ -205,7 +206,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     n_beacons = beacon_count(cfg)
     connections = list(connections) if connections is not None else default_connections(n_beacons)
     sources = system_sources(cfg)
-    paths = fmu_paths(fmu_dir, sources)
+    paths = fmu_paths(fmu_dir, sources, n_beacons)
     sim = cfg["simulation"]
     T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
     n_steps = int(math.floor(sim["duration"] / T + 1e-9))
@@ -399,6 +400,8 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
             for pset in binding.parameterValues:
                 for p in pset.parameters:
                     found[p.name] = _value(p.value, p.type)
+    platform_md = read_description("platform", fmu_files["platform"])
+    n_beacons = sum(1 for v in platform_md.modelVariables if re.fullmatch(r"beacon\d+_x", v.name))
     identifier_ = read_description("receiver", fmu_files["receiver"]).coSimulation.modelIdentifier
     builtin = {f"sblsim_{model}": key for key, model in RECEIVERS.items()}
     raw["simulation"]["receiver"] = builtin.get(identifier_, f"{EXTERNAL_PREFIX}{fmu_files['receiver']}")
@@ -410,7 +413,7 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
             raw[comp] = {k: v for k, v in found.items() if k in known}
         else:
             known = {v.name for v in section_variables(comp)}
-            raw[comp] = {k: v for k, v in model.config_values(found).items() if k in known}
+            raw[comp] = {k: v for k, v in model.config_values(found, n_beacons).items() if k in known}
     T = values["acoustics"].get("slot_period", base)
     if T is None:
         raise SspError("ssp: no sampling time (the channel's slot_period, or a base step annotation)")

@@ -34,7 +34,11 @@ from sblsim.models.platform.waves import wave_motion
 from sblsim.models.program import ProgramBuilder, Stream
 
 AXES = ("x", "y", "z")
-LAYOUTS = ("cross", "custom")
+#: Beacon layouts: the paper's cross of 4, any given offsets, N equally spaced on a circle (appended: the
+#: FMUs and the local engine encode a choice by its index).
+LAYOUTS = ("cross", "custom", "circle")
+#: Allowed numbers of beacons (``platform.beacons``).
+MIN_BEACONS, MAX_BEACONS = 3, 16
 GPS_MODELS = ("white", "gauss-markov")
 
 # Stream purposes (sblsim.models.philox, "Randomness").
@@ -63,7 +67,7 @@ def beacon_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
 
 
 class Platform(Component):
-    """SBL platform: beacon cross, Beaufort wave motion, GPS, IMU and broadcast positions."""
+    """SBL platform: beacons (cross, circle or custom), Beaufort wave motion, GPS, IMU and broadcast positions."""
 
     name = "platform"
     component_index = 0
@@ -76,6 +80,8 @@ class Platform(Component):
             for i in range(1, n_beacons + 1) for a in AXES)
         params = (
             Variable("layout", "parameter", "String", "cross", description="Beacon layout", choices=LAYOUTS),
+            Variable("beacons", "parameter", "Integer", 4, min=MIN_BEACONS, max=MAX_BEACONS, scope="config",
+                     description="Number of beacons N (circle; 4 for the cross, the offsets' count for custom)"),
             Variable("baseline", "parameter", "Real", 1.0, "m", "Support-arm length L of each beacon",
                      min=0.0, max=1000.0, min_exclusive=True),
             Variable("transducer_depth", "parameter", "Real", 1.0, "m",
@@ -134,6 +140,7 @@ class Platform(Component):
     def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
         """Configuration keys from FMU parameters: a custom layout's offsets become the ``beacon_offsets`` text."""
         out = super().config_values(values, n_beacons)
+        out["beacons"] = int(n_beacons)
         if out.get("layout") == "custom":
             out["beacon_offsets"] = format_table(np.array(
                 [[float(values.get(f"beacon{i}_offset_{a}", 0.0)) for a in AXES] for i in range(1, n_beacons + 1)]))
@@ -212,4 +219,5 @@ class Platform(Component):
                          b.output(output), events=[b.event("sample", due, take_sample, noise)])
 
 
-__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "Platform", "beacon_names", "beacon_variables"]
+__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "beacon_names",
+           "beacon_variables"]

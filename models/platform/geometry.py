@@ -75,7 +75,22 @@ def parse_offsets(text: str, field: str = "platform.beacon_offsets") -> np.ndarr
 
 def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon_offsets: str = "",
                    n_beacons: int = 4) -> np.ndarray:
-    """Body-frame beacon offsets of a platform configuration, (n, 3) [m]: the cross or a custom layout.
+    """Body-frame beacon offsets of a platform configuration, (n, 3) [m].
+
+    Parameters
+    ----------
+    layout : {'cross', 'circle', 'custom'}
+        ``cross`` and ``circle`` put ``n_beacons`` beacons equally spaced on a circle of radius
+        ``baseline`` at depth ``transducer_depth`` (beacon i at 2π(i-1)/n from North, towards East:
+        :func:`cross_offsets` with numbers); ``custom`` parses ``beacon_offsets``.
+    baseline : float
+        Support-arm length L, the radius of the circle [m].
+    transducer_depth : float
+        Depth h of the transducers below the platform reference [m].
+    beacon_offsets : str
+        A custom layout's offsets ``"x y z; ..."`` [m].
+    n_beacons : int
+        Beacons of the cross or circle (ignored for ``custom``).
 
     Raises
     ------
@@ -89,9 +104,14 @@ def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon
 
 
 def platform_offsets(platform: Mapping[str, Any]) -> np.ndarray:
-    """Body-frame offsets of the beacons of a ``[platform]`` configuration section, (n, 3) [m]."""
+    """Body-frame offsets of the beacons of a ``[platform]`` configuration section, (n, 3) [m].
+
+    The cross has the paper's 4 beacons, the circle ``platform.beacons`` (default 4), a custom layout
+    as many as ``beacon_offsets`` lists.
+    """
+    n = int(platform.get("beacons", 4)) if platform["layout"] == "circle" else 4
     return layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
-                          platform["beacon_offsets"])
+                          platform["beacon_offsets"], n)
 
 
 def lever_arms(platform: Mapping[str, Any]) -> np.ndarray:

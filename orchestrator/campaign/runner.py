@@ -30,7 +30,7 @@ from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
 from sblsim.orchestrator.campaign.progress import Progress
 from sblsim.orchestrator.engines import ENGINES, fmu_paths
 from sblsim.orchestrator.limits import check_steps, step_count
-from sblsim.orchestrator.run import system_sources
+from sblsim.orchestrator.run import beacon_count, system_sources
 from sblsim.orchestrator.study import Study
 
 
@@ -124,8 +124,9 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     batch = batch or DEFAULT_BATCH[engine]
     configs = cell_configs(study)  # every cell resolves before anything is written
     if engine == "fmu":  # refuse missing FMUs before anything is written
-        for sources in {tuple(system_sources(cfg).items()) for cfgs in configs.values() for cfg in cfgs}:
-            fmu_paths(fmu_dir, dict(sources))
+        for sources, n_beacons in {(tuple(system_sources(cfg).items()), beacon_count(cfg))
+                                   for cfgs in configs.values() for cfg in cfgs}:
+            fmu_paths(fmu_dir, dict(sources), n_beacons)
         fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
     _check_memory(plan(study, batch, configs), workers, scheduler, save_timeseries)
     client = connect(scheduler, workers=workers) if scheduler else None
