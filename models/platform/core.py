@@ -11,11 +11,20 @@ first-order Gauss-Markov with correlation time τ (exact discretization
 IMU error is white with standard deviation σ_IMU plus a constant bias and a
 gyro-bias drift ``ω_b t``.
 
+Errors fixed for a run (drawn once, at initialization, from streams of their
+own): each beacon's true body offset is ``a_i + δ_i``, ``δ_i ~ N(0, σ_inst² I)``
+(transducer installation error), while the platform broadcasts the nominal
+``a_i``; the IMU measures each angle θ as ``(1 + s) θ + m + bias + noise``
+with a per-axis scale-factor error ``s ~ N(0, σ_s²)`` and a per-axis
+misalignment ``m ~ N(0, σ_m²)``.
+
 References
 ----------
 Cario et al., "Accurate Localization in Acoustic Underwater Localization
 Systems", Sensors 21(3):762, 2021, doi:10.3390/s21030762, Sections 3-4
-(platform model, GPS and IMU errors, broadcast beacon positions).
+(platform model, GPS and IMU errors, broadcast beacon positions); Figure 4 and
+Table 1 (the error sources, among them installation, IMU scale factor and
+misalignment, and the IMU grades).
 """
 
 from __future__ import annotations
@@ -42,7 +51,7 @@ MIN_BEACONS, MAX_BEACONS = 3, 16
 GPS_MODELS = ("white", "gauss-markov")
 
 # Stream purposes (sblsim.models.philox, "Randomness").
-_PHASES, _GPS, _IMU = range(3)
+_PHASES, _GPS, _IMU, _INSTALLATION, _IMU_SCALE, _IMU_MISALIGNMENT = range(6)
 
 
 def beacon_names(n_beacons: int, kind: str) -> list[str]:
@@ -107,6 +116,13 @@ class Platform(Component):
                      min=-180.0, max=180.0),
             Variable("imu_gyro_bias", "parameter", "Real", 0.0, "rad/s",
                      "Gyro bias: attitude error drift rate (all axes)", min=-1.0, max=1.0),
+            Variable("installation_sigma", "parameter", "Real", 0.0, "m",
+                     "Transducer installation error: std of each beacon's offset error per axis, fixed per run",
+                     min=0.0, max=10.0),
+            Variable("imu_scale_factor_ppm", "parameter", "Real", 0.0, "ppm",
+                     "IMU scale-factor error std per axis, fixed per run", min=0.0, max=1e5),
+            Variable("imu_misalignment_deg", "parameter", "Real", 0.0, "deg",
+                     "IMU axis misalignment std per axis, fixed per run", min=0.0, max=10.0),
             Variable("sample_period", "parameter", "Real", 0.1, "s",
                      "GPS and IMU sampling period T_s (the sampling time T)", min=0.001, max=60.0, scope="fmu"),
         )
@@ -150,7 +166,8 @@ class Platform(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phase_sin", 4), ("phase_cos", 4),
-                                            ("gps_error", 3), ("gps", 3), ("broadcast", 3 * n)],
+                                            ("gps_error", 3), ("gps", 3), ("broadcast", 3 * n),
+                                            ("installation", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3)],
                            derived=[("offsets", 3 * n), ("motion", 4)])
 
         def prepare(p):
@@ -178,12 +195,15 @@ class Platform(Component):
             return [d["offsets"][3 * i:3 * i + 3] for i in range(n)]
 
         def sample(p, d, x, gps_error, imu_noise, t_k):
-            """GPS position and broadcast beacon positions sampled at ``t_k`` (``x``: the phases)."""
+            """GPS position and broadcast beacon positions sampled at ``t_k`` (``x``: the phases and the
+            IMU's scale-factor and misalignment errors)."""
             roll, pitch, yaw, depth = attitude(p, d, x, t_k)
             gps = ca.vertcat(0.0, 0.0, depth) + gps_error
             bias = p["imu_bias_deg"] * (math.pi / 180.0) + p["imu_gyro_bias"] * t_k
             sigma = p["imu_sigma_deg"] * (math.pi / 180.0)
-            imu = [a + bias + sigma * imu_noise[k] for k, a in enumerate((roll, pitch, yaw))]
+            scale, misalignment = x["imu_scale"], x["imu_misalignment"]
+            imu = [(1.0 + scale[k]) * a + bias + sigma * imu_noise[k] + misalignment[k]
+                   for k, a in enumerate((roll, pitch, yaw))]
             broadcast = beacon_positions(gps, rotation_ned(*imu), offsets(d))
             return {"gps": gps, "broadcast": ca.vertcat(*broadcast)}
 
@@ -191,8 +211,11 @@ class Platform(Component):
             phases = 2.0 * math.pi * w[_PHASES]
             wave_phases = {"phase_sin": ca.sin(phases), "phase_cos": ca.cos(phases)}
             gps_error = p["gps_sigma"] * w[_GPS]  # stationary start of either model
-            return {"t0": t0, "k": 0, **wave_phases, "gps_error": gps_error,
-                    **sample(p, d, wave_phases, gps_error, w[_IMU], t0)}
+            fixed = {"installation": p["installation_sigma"] * w[_INSTALLATION],  # per run: zeros when σ = 0
+                     "imu_scale": p["imu_scale_factor_ppm"] * 1e-6 * w[_IMU_SCALE],
+                     "imu_misalignment": p["imu_misalignment_deg"] * (math.pi / 180.0) * w[_IMU_MISALIGNMENT]}
+            return {"t0": t0, "k": 0, **wave_phases, "gps_error": gps_error, **fixed,
+                    **sample(p, d, {**wave_phases, **fixed}, gps_error, w[_IMU], t0)}
 
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["sample_period"], t, h)
@@ -207,7 +230,8 @@ class Platform(Component):
 
         def output(x, p, d, t):
             roll, pitch, yaw, depth = attitude(p, d, x, t)
-            true = beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw), offsets(d))
+            installed = [a + x["installation"][3 * i:3 * i + 3] for i, a in enumerate(offsets(d))]
+            true = beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw), installed)
             out = {name: ca.vertcat(*true)[k] for k, name in enumerate(beacon_names(n, "true"))}
             out.update({name: x["broadcast"][k] for k, name in enumerate(beacon_names(n, "broadcast"))})
             out.update(roll=roll, pitch=pitch, yaw=yaw)
@@ -215,7 +239,10 @@ class Platform(Component):
             return out
 
         noise = (Stream(_GPS, "normal", 3), Stream(_IMU, "normal", 3))
-        return b.program(b.prepare(prepare), b.init(init, (Stream(_PHASES, "uniform", 4),) + noise),
+        # drawn once per run, each from a stream of its own, so that the other streams keep their numbers
+        fixed = (Stream(_INSTALLATION, "normal", 3 * n), Stream(_IMU_SCALE, "normal", 3),
+                 Stream(_IMU_MISALIGNMENT, "normal", 3))
+        return b.program(b.prepare(prepare), b.init(init, (Stream(_PHASES, "uniform", 4),) + noise + fixed),
                          b.output(output), events=[b.event("sample", due, take_sample, noise)])
 
 

@@ -134,9 +134,11 @@ def test_replicate_order_in_batch_does_not_matter():
 LEVELS = {
     Platform: [
         {"cell": 2, "baseline": 0.4, "transducer_depth": 0.5, "heading_deg": -30.0, "gps_sigma": 0.1,
-         "imu_sigma_deg": 1.0, "imu_bias_deg": 0.0, "imu_gyro_bias": 0.0, "gps_tau": 20.0, "beaufort": 1},
+         "imu_sigma_deg": 1.0, "imu_bias_deg": 0.0, "imu_gyro_bias": 0.0, "gps_tau": 20.0, "beaufort": 1,
+         "installation_sigma": 0.0, "imu_scale_factor_ppm": 0.0, "imu_misalignment_deg": 0.0},
         {"cell": 5, "baseline": 3.0, "transducer_depth": 2.0, "heading_deg": 45.0, "gps_sigma": 3.5,
-         "imu_sigma_deg": 10.0, "imu_bias_deg": 2.0, "imu_gyro_bias": 0.01, "gps_tau": 90.0, "beaufort": 5},
+         "imu_sigma_deg": 10.0, "imu_bias_deg": 2.0, "imu_gyro_bias": 0.01, "gps_tau": 90.0, "beaufort": 5,
+         "installation_sigma": 0.2, "imu_scale_factor_ppm": 3000.0, "imu_misalignment_deg": 1.0},
     ],
     Acoustics: [
         {"cell": 2, "sigma_range": 0.1, "loss_pct": 0.0, "outlier_pct": 0.0, "outlier_excess": 2.0,

@@ -9,7 +9,9 @@ Fisher-z confidence intervals for the noise statistics.
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -27,6 +29,9 @@ CONF = 0.999  # confidence level of the statistical checks
 G = 9.80665  # standard gravity [m/s^2]
 COMPONENT = 0  # the platform's component index in the seed tree
 PHASES, GPS, IMU = 0, 1, 2  # stream purposes (sblsim.models.philox docstring, "Randomness")
+INSTALLATION, IMU_SCALE, IMU_MISALIGNMENT = 3, 4, 5  # the per-run errors' streams, drawn once at initialization
+#: Outputs of a platform run by the code before the per-run errors existed (hexadecimal floats).
+PINNED = Path(__file__).resolve().parents[1] / "data" / "platform_pinned.json"
 
 # WMO-No. 558 Beaufort scale: 10 m wind-speed ranges [m/s] and probable wave heights [m], levels 0..8.
 WMO_WIND_RANGES = [(0.0, 0.2), (0.3, 1.5), (1.6, 3.3), (3.4, 5.4), (5.5, 7.9), (8.0, 10.7), (10.8, 13.8),
@@ -498,6 +503,151 @@ def test_many_samples_in_one_step_use_consecutive_draws():
 
 
 # ----------------------------------------------------------------------------
+# Errors fixed per run: transducer installation, IMU scale factor and misalignment
+# ----------------------------------------------------------------------------
+
+FIXED = dict(beaufort=0, gps_sigma=0.0, imu_sigma_deg=0.0, baseline=2.0, transducer_depth=0.0, seed=6,
+             scenario_key=2, cell=1)
+
+
+def test_zero_per_run_errors_give_the_numbers_from_before_them_bit_for_bit():
+    """σ = 0 for the three per-run errors (their defaults): every output equals, bit for bit, what the
+    platform gave before they existed (every other error on, Gauss-Markov GPS, waves)."""
+    pinned = json.loads(PINNED.read_text())
+    core = Core(Platform, pinned["params"], replicates=pinned["replicates"]).initialize(0.0)
+    for k, want in enumerate(pinned["outputs"]):
+        assert sorted(core.outputs) == sorted(want)
+        for name, values in want.items():
+            assert [float(v).hex() for v in core.outputs[name]] == values, (k, name)
+        core.step(pinned["step"] * k, pinned["step"])
+
+
+def test_installation_error_is_fixed_per_run_different_per_replicate_and_the_reference_stream():
+    """Calm sea, exact GPS and IMU: the broadcast beacons are the nominal cross, the true ones are the cross
+    plus δ_i, constant over the run, other in each replicate, σ times the installation stream."""
+    sigma, B = 0.05, 3
+    core = Core(Platform, dict(FIXED, installation_sigma=sigma), replicates=range(B)).initialize(0.0)
+    nominal = cross_reference(2.0, 0.0)
+    ref = np.array([sigma * normals(6, 2, 1, r, COMPONENT, INSTALLATION, 0, 12).reshape(4, 3) for r in range(B)])
+    first = beacons_of(core, "true") - beacons_of(core, "broadcast")
+    for k in range(12):
+        np.testing.assert_allclose(beacons_of(core, "broadcast"), np.broadcast_to(nominal, (B, 4, 3)), atol=1e-15)
+        np.testing.assert_array_equal(beacons_of(core, "true") - beacons_of(core, "broadcast"), first)
+        core.step(0.25 * k, 0.25)
+    np.testing.assert_allclose(first, ref, atol=1e-15)
+    assert np.abs(first).min() > 0.0
+    assert np.unique(first[:, 0, 0]).size == B  # each replicate installs its own errors
+
+
+def test_installation_error_rotates_with_the_platform():
+    """In a sea, the true beacons are b_i = p + R (a_i + δ_i): the installation error moves with the attitude."""
+    sigma = 0.2
+    core = Core(Platform, dict(FIXED, beaufort=5, installation_sigma=sigma), replicates=[0, 1]).initialize(0.0)
+    delta = np.array([sigma * normals(6, 2, 1, r, COMPONENT, INSTALLATION, 0, 12).reshape(4, 3) for r in (0, 1)])
+    nominal = cross_reference(2.0, 0.0)
+    for k in range(8):
+        core.step(0.3 * k, 0.3)
+        for b in range(2):
+            R = scipy_rot(*(core.outputs[a][b] for a in ("roll", "pitch", "yaw")))
+            heave = np.array([0.0, 0.0, core.outputs["gps_z"][b]])  # exact GPS, on the host step: same instant
+            np.testing.assert_allclose(beacons_of(core, "true")[b], heave + (nominal + delta[b]) @ R.T, atol=1e-12)
+
+
+def test_installation_error_spread_is_sigma():
+    sigma, B = 0.3, 200
+    core = Core(Platform, dict(FIXED, installation_sigma=sigma), replicates=range(B)).initialize(0.0)
+    delta = beacons_of(core, "true") - beacons_of(core, "broadcast")
+    ok, est = std_ci_contains(delta, sigma)
+    assert ok, f"installation error std {est} m vs {sigma}"
+    assert abs(float(delta.mean())) < 4 * sigma / math.sqrt(delta.size)
+
+
+def _imu_errors(core: Core) -> tuple[np.ndarray, np.ndarray]:
+    """Scale-factor errors [-] and misalignments [rad] of each replicate, (B, 3) each."""
+    return core.state["imu_scale"], core.state["imu_misalignment"]
+
+
+def test_imu_scale_factor_and_misalignment_enter_the_broadcast_attitude():
+    """In a sea with exact GPS and no IMU noise, on the sample grid: the broadcast cross is
+    R((1 + s) θ + m) a_i for each angle θ of the true attitude."""
+    ppm, deg = 5000.0, 0.8
+    core = Core(Platform, dict(FIXED, beaufort=5, heading_deg=30.0, imu_scale_factor_ppm=ppm,
+                               imu_misalignment_deg=deg, sample_period=0.25), replicates=[0, 1]).initialize(0.0)
+    scale = np.array([ppm * 1e-6 * normals(6, 2, 1, r, COMPONENT, IMU_SCALE, 0, 3) for r in (0, 1)])
+    mis = np.array([math.radians(deg) * normals(6, 2, 1, r, COMPONENT, IMU_MISALIGNMENT, 0, 3) for r in (0, 1)])
+    nominal = cross_reference(2.0, 0.0)
+    for k in range(8):
+        s, m = _imu_errors(core)
+        np.testing.assert_allclose(s, scale, rtol=1e-15)
+        np.testing.assert_allclose(m, mis, rtol=1e-15)
+        for b in range(2):
+            true = np.array([core.outputs[a][b] for a in ("roll", "pitch", "yaw")])
+            gps = np.array([core.outputs[f"gps_{a}"][b] for a in "xyz"])
+            want = gps + nominal @ scipy_rot(*((1.0 + scale[b]) * true + mis[b])).T
+            np.testing.assert_allclose(beacons_of(core, "broadcast")[b], want, atol=1e-12, err_msg=f"k={k}")
+            np.testing.assert_allclose(beacons_of(core, "true")[b], gps + nominal @ scipy_rot(*true).T, atol=1e-12)
+        core.step(0.25 * k, 0.25)
+
+
+def test_imu_scale_factor_is_fixed_per_run_and_scales_the_heading():
+    """Calm sea at heading 40°: the broadcast heading is (1 + s_yaw) 40° at every sample, s_yaw its own per
+    replicate."""
+    ppm, heading = 20000.0, 40.0
+    core = Core(Platform, dict(FIXED, heading_deg=heading, imu_scale_factor_ppm=ppm),
+                replicates=range(3)).initialize(0.0)
+    ref = np.array([ppm * 1e-6 * normals(6, 2, 1, r, COMPONENT, IMU_SCALE, 0, 3)[2] for r in range(3)])
+    for k in range(10):
+        sent = beacons_of(core, "broadcast")
+        yaw = np.arctan2(sent[:, 0, 1], sent[:, 0, 0])  # beacon 1 at (L, 0, 0)
+        np.testing.assert_allclose(yaw, (1.0 + ref) * math.radians(heading), rtol=1e-13)
+        core.step(0.5 * k, 0.5)
+    assert np.unique(ref).size == 3 and np.abs(ref).min() > 0.0
+
+
+def test_imu_misalignment_is_fixed_per_run_and_rotates_the_broadcast_cross():
+    """Calm sea at heading 0: the broadcast cross is the cross rotated by the misalignment angles, the same at
+    every sample and other in each replicate."""
+    deg = 1.5
+    core = Core(Platform, dict(FIXED, imu_misalignment_deg=deg), replicates=range(3)).initialize(0.0)
+    ref = np.array([math.radians(deg) * normals(6, 2, 1, r, COMPONENT, IMU_MISALIGNMENT, 0, 3) for r in range(3)])
+    want = np.array([cross_reference(2.0, 0.0) @ scipy_rot(*ref[b]).T for b in range(3)])
+    for k in range(10):
+        np.testing.assert_allclose(beacons_of(core, "broadcast"), want, atol=1e-13)
+        np.testing.assert_allclose(beacons_of(core, "true"), np.broadcast_to(cross_reference(2.0, 0.0), (3, 4, 3)),
+                                   atol=1e-15)
+        core.step(0.5 * k, 0.5)
+    assert np.unique(ref[:, 2]).size == 3
+
+
+@pytest.mark.parametrize("key,block,factor,sigma", [
+    ("imu_scale_factor_ppm", "imu_scale", 1e-6, 3000.0),
+    ("imu_misalignment_deg", "imu_misalignment", math.pi / 180.0, 0.5),
+])
+def test_imu_per_run_error_spread_is_sigma(key, block, factor, sigma):
+    """200 replicates × 3 axes: the sample std of the per-run errors lies in the chi-square CI of σ."""
+    core = Core(Platform, dict(FIXED, **{key: sigma}), replicates=range(200)).initialize(0.0)
+    values = core.state[block]
+    ok, est = std_ci_contains(values, sigma * factor)
+    assert ok, f"{key}: std {est / factor} vs {sigma}"
+    assert abs(float(values.mean())) < 4 * sigma * factor / math.sqrt(values.size)
+
+
+def test_per_run_errors_do_not_shift_the_other_streams():
+    """The per-run errors on: GPS, IMU noise and wave phases keep their numbers (their own streams)."""
+    base = dict(REFERENCE_PARAMS, gps_model="white")
+    off = Core(Platform, base, replicates=[0, 1]).initialize(0.0)
+    on = Core(Platform, dict(base, installation_sigma=0.5, imu_scale_factor_ppm=1e4, imu_misalignment_deg=2.0),
+              replicates=[0, 1]).initialize(0.0)
+    for k in range(10):
+        for name in ("gps_x", "gps_y", "gps_z", "roll", "pitch", "yaw"):
+            np.testing.assert_array_equal(on.outputs[name], off.outputs[name], err_msg=name)
+        assert not np.array_equal(on.outputs["beacon1_x"], off.outputs["beacon1_x"])
+        assert not np.array_equal(on.outputs["beacon1_true_x"], off.outputs["beacon1_true_x"])
+        for core in (on, off):
+            core.step(0.25 * k, 0.25)
+
+
+# ----------------------------------------------------------------------------
 # Parameters
 # ----------------------------------------------------------------------------
 
@@ -528,6 +678,10 @@ def test_per_replicate_parameters():
     (dict(gps_model="pink"), "platform.gps_model"),
     (dict(sample_period=0.0), "platform.sample_period"),
     (dict(gps_tau=0.0), "platform.gps_tau"),
+    (dict(installation_sigma=-0.1), "platform.installation_sigma"),
+    (dict(installation_sigma=10.5), "platform.installation_sigma"),
+    (dict(imu_scale_factor_ppm=-1.0), "platform.imu_scale_factor_ppm"),
+    (dict(imu_misalignment_deg=-1.0), "platform.imu_misalignment_deg"),
 ])
 def test_out_of_range_parameters_are_refused(params, field):
     with pytest.raises(ModelError, match=f"^{field}: "):

@@ -202,6 +202,21 @@ def test_engines_agree_on_other_settings(fmu_dir, name, overrides):
     assert_same_frames(local.timeseries, fmu.timeseries)
 
 
+def test_engines_agree_with_the_per_run_platform_errors(fmu_handles):
+    """Installation error, IMU scale factor and misalignment on: both engines equal to 1e-9, and the errors
+    do change the run (against the same run without them)."""
+    errors = ["platform.installation_sigma=0.3", "platform.imu_scale_factor_ppm=5000",
+              "platform.imu_misalignment_deg=2"]
+    cfg = load_config("random", ["simulation.duration=20"] + errors, seed=9)
+    local = run(cfg, "local", replicates=[0, 1, 2])
+    fmu = run(cfg, "fmu", handles=fmu_handles, replicates=[0, 1, 2])
+    assert_same_frames(local.timeseries, fmu.timeseries)
+    assert_same_frames(local.metrics, fmu.metrics)
+    without = run(load_config("random", ["simulation.duration=20"], seed=9), "local", replicates=[0, 1, 2])
+    for name in ("beacon_x", "e_tot"):
+        assert not np.allclose(local.timeseries[name], without.timeseries[name]), name
+
+
 def test_fmu_handles_reset_between_runs(fmu_handles):
     first = load_config("semicircle", ["simulation.duration=15"], seed=1)
     other = load_config("semicircle", ["simulation.duration=15"], seed=2)
