@@ -35,7 +35,6 @@ SSP tool.
 from __future__ import annotations
 
 import atexit
-import math
 import os
 import re
 import shutil
@@ -60,6 +59,7 @@ from sblsim.orchestrator.config import (
 )
 from sblsim.orchestrator.connections import Connection, default_connections
 from sblsim.orchestrator.engines import fmu_paths, read_description
+from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.run import system_sources
 
 NS = {
@@ -209,7 +209,7 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     paths = fmu_paths(fmu_dir, sources, n_beacons)
     sim = cfg["simulation"]
     T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
-    n_steps = int(math.floor(sim["duration"] / T + 1e-9))
+    n_steps = step_count(sim["duration"], T)
     base = T / ratio
     name = identifier(cfg["run"]["scenario"])
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from sblsim.models import COMPONENTS
+from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.study import Study
 
 #: Default runs per chunk on each engine.
@@ -81,7 +81,7 @@ def plan(study: Study, batch: int, configs: dict[str, list[dict]] | None = None)
                 part = cells[start:start + per_chunk]
                 cfg = configs[scenario][part[0]]
                 sim = cfg["simulation"]
-                steps = int(math.floor(sim["duration"] / sim["sampling_time"] + 1e-9)) * sim["ekf_rate_ratio"]
+                steps = step_count(sim["duration"], sim["sampling_time"]) * sim["ekf_rate_ratio"]
                 chunks.append(Chunk(f"{cfg['run']['scenario_key']:03d}-{part[0]:05d}-{part[-1]:05d}", scenario,
                                     part, [configs[scenario][c] for c in part], study.replicates, steps))
     return chunks
