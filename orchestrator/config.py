@@ -87,6 +87,8 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
 
 #: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
 SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
+#: FMU parameters filled from a configuration key of another section: (component, parameter) <- (section, key).
+KEY_TIES = ((("acoustics", "usbl_angle_sigma_deg"), ("platform", "usbl_angle_sigma_deg")),)
 EXTERNAL_PREFIX = "fmu:"
 MODEL_PREFIX = "model:"
 
@@ -365,6 +367,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     cfg = {s: (sim if s == "simulation" else resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s))
            for s in SECTIONS}
     _check_beacons(cfg["platform"], set(raw.get("platform", {})))
+    _check_ranging(cfg, set(raw.get("acoustics", {})))
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
@@ -420,6 +423,11 @@ def _check_beacons(platform: dict[str, Any], given: set[str]) -> None:
         ``beacons`` or lies outside [3, 16].
     """
     layout, n = platform["layout"], platform["beacons"]
+    if platform["system"] == "usbl":  # one transceiver: the layout's count does not apply
+        if layout == "custom" and platform_offsets(platform).shape[0] != 1:
+            raise ConfigError(f"platform.beacon_offsets: {platform_offsets(platform).shape[0]} offsets with "
+                              "platform.system = 'usbl'; give the transceiver's one lever arm 'x y z'")
+        return
     if layout == "cross" and n != 4:
         raise ConfigError(f"platform.beacons: {n} with platform.layout = 'cross' (the paper's 4 beacons); use "
                           "platform.layout = 'circle' for N equally spaced beacons")
@@ -432,6 +440,22 @@ def _check_beacons(platform: dict[str, Any], given: set[str]) -> None:
         platform["beacons"] = count
 
 
+def _check_ranging(cfg: dict[str, dict], given: set[str]) -> None:
+    """USBL measures its slant range by interrogation: ``acoustics.ranging`` is ``twtt`` (filled when not given).
+
+    Raises
+    ------
+    ConfigError
+        ``acoustics.ranging = 'owtt'`` given with ``platform.system = 'usbl'``.
+    """
+    if cfg["platform"]["system"] != "usbl":
+        return
+    if "ranging" in given and cfg["acoustics"]["ranging"] != "twtt":
+        raise ConfigError("acoustics.ranging: 'owtt' with platform.system = 'usbl'; a USBL transceiver measures "
+                          "the slant range by two-way travel time ('twtt')")
+    cfg["acoustics"]["ranging"] = "twtt"
+
+
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     """Fill the receiver keys the user did not set from the rest of the configuration (where it declares them).
 
@@ -440,7 +464,9 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     the diver's start state; ``beacon_gps_sigma`` ← ``platform.gps_sigma``,
     ``beacon_attitude_sigma_deg`` ← ``platform.imu_sigma_deg``,
     ``beacon_arm`` ← the largest distance of a beacon from the platform
-    reference; for the ``random-walk`` trajectory, ``q_horizontal``,
+    reference (LBL: ``beacon_gps_sigma`` ← ``platform.survey_sigma``, no
+    attitude: 0 and 0); ``sigma_angle_deg`` ← ``platform.usbl_angle_sigma_deg``
+    (floored at 1 mdeg); for the ``random-walk`` trajectory, ``q_horizontal``,
     ``q_vertical``, ``p0_position``, ``p0_velocity`` ← the walk's.
     """
     rx, platform = cfg["receiver"], cfg["platform"]
@@ -451,7 +477,9 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
             "beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
-            "beacon_arm": arm}
+            "beacon_arm": arm, "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], 1e-3)}
+    if platform["system"] == "lbl":  # surveyed transponders: no GPS, no attitude
+        ties.update(beacon_gps_sigma=platform["survey_sigma"], beacon_attitude_sigma_deg=0.0, beacon_arm=0.0)
     target = cfg["target"]
     if target["trajectory"] == "random-walk":  # the receiver's motion model and prior are the walk's
         ties.update({k: target[f"walk_{k}"] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")})
@@ -461,8 +489,8 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
 
 
 def beacon_count(cfg: dict[str, dict]) -> int:
-    """Number of beacons of a configuration: 4 for the cross, ``platform.beacons`` for the circle, the offsets'
-    count for a custom layout."""
+    """Number of beacons of a configuration (the size of its components' interfaces): 4 for the cross,
+    ``platform.beacons`` for the circle, the offsets' count for a custom layout; 1 for USBL (its transceiver)."""
     return platform_offsets(cfg["platform"]).shape[0]
 
 
@@ -501,6 +529,9 @@ def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[s
     for owner, name in SAMPLING_TIES:
         if owner == component and name in declared:
             params[name] = cfg["simulation"]["sampling_time"]
+    for (owner, name), (section, key) in KEY_TIES:
+        if owner == component and name in declared:
+            params[name] = cfg[section][key]
     if component == "receiver" and "communication_step" in declared:  # the receiver's own clock: T / ratio
         params["communication_step"] = cfg["simulation"]["sampling_time"] / cfg["simulation"]["ekf_rate_ratio"]
     params.update({k: v for k, v in cfg["run"].items() if k in declared})

@@ -133,7 +133,8 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
     ``q_vertical``, ``p0_position``, ``p0_velocity``; the defaults of the
     Kalman-type receivers for one that has none). The measurement variances
     are the configured white error sources: ``acoustics.sigma_range² +
-    platform.gps_sigma²``, ``platform.imu_sigma_deg`` [rad]², and
+    platform.gps_sigma²`` (LBL: ``+ platform.survey_sigma²``),
+    ``platform.imu_sigma_deg`` [rad]² (LBL: 0), and
     ``target.depth_sigma²`` (floored at 1 mm).
     """
     target, platform = cfg["target"], cfg["platform"]
@@ -143,8 +144,10 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
         motion = {k: target[f"walk_{k}"] for k in names}
     else:
         motion = {k: cfg["receiver"].get(k, defaults[k]) for k in names}
-    return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + platform["gps_sigma"] ** 2,
-            "attitude_variance": math.radians(platform["imu_sigma_deg"]) ** 2,
+    lbl = platform["system"] == "lbl"  # surveyed transponders: the survey error, no attitude
+    position = platform["survey_sigma"] if lbl else platform["gps_sigma"]
+    return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + position ** 2,
+            "attitude_variance": 0.0 if lbl else math.radians(platform["imu_sigma_deg"]) ** 2,
             "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2}
 
 

@@ -1,4 +1,4 @@
-"""Acoustic channel: round-robin OWTT ranging with loss and multipath.
+"""Acoustic channel: round-robin OWTT or TWTT ranging with loss and multipath; USBL range and direction of arrival.
 
 Timing model (sblsim's documented choice). Slot k (k = 1, 2, ...) ends at
 ``t_k = t0 + k T`` of the component's own clock (T = ``slot_period``,
@@ -19,6 +19,37 @@ the beacon's broadcast position; a lost packet has ``packet_valid = false``
 and range and position 0. A step that reaches several slot epochs emits each
 of them in turn (the outputs show the last).
 
+Two-way travel time (``ranging = "twtt"``, SBL and LBL). At ``t_k`` the
+diver's transceiver interrogates the beacon of the slot from its position
+``p`` then (the up leg, ``τ_u = ‖p − b_i‖ / c̄``); the beacon replies after
+its turnaround ``t_ta + σ_ta w``; the reply reaches the diver at
+``t_k + τ_u + t_ta + σ_ta w + τ_d`` (the down leg to the diver's position at
+reception, solved as above). The receiver measures the round trip
+``Δt_m = (τ_u + t_ta + σ_ta w + τ_d)(1 + δ)`` on its own clock and
+subtracts the nominal turnaround: ``r = c_assumed (Δt_m − t_ta) / 2 +
+σ_r w + e_mp``. Clock offsets cancel and a drift acts only over Δt; the
+turnaround jitter enters the range as ``c σ_ta / 2``; the range is the mean
+of the two legs (``range_true``), so it refers to the diver's positions at
+interrogation and at reception (their mean, to first order).
+
+USBL (the interface of one beacon: the platform's transceiver). At ``t_k``
+the transceiver interrogates the diver's transponder (up leg to the diver at
+reception), which replies after its turnaround from where it is then; the
+slant range is the TWTT range above, and the array measures the reply's
+**direction of arrival** in its own frame (attitude ``array_*``: the
+platform's plus the mounting misalignment): azimuth and elevation with
+noise ``σ_θ / cos φ`` each, ``σ_θ = usbl_angle_sigma_deg`` on the array's
+axis (body down) and φ the ray's angle off that axis (cos φ floored at
+:data:`USBL_COS_FLOOR`: a phase-difference array resolves the direction
+cosines across it, so its angles degrade as the ray leaves the axis). The
+surface turns the measured direction into NED with the IMU's attitude
+(``imu_*``) and sends range, azimuth, elevation (NED,
+:class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`'s
+convention) and its transceiver position (GPS and IMU) down to the diver on
+the acoustic link: the packet is lost when the reply or the downlink is lost
+(two draws of ``p_loss``), and it is delivered at the slot like every packet;
+the measurement refers to the diver's position at the reply.
+
 References
 ----------
 Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Section 4
@@ -37,10 +68,22 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, p
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.expressions import sample_due, select
-from sblsim.models.platform.core import AXES, beacon_names, beacon_variables
+from sblsim.models.platform.core import (
+    AXES,
+    USBL_ATTITUDES,
+    attitude_variables,
+    beacon_names,
+    beacon_variables,
+    is_usbl,
+)
+from sblsim.models.platform.geometry import rotation_ned
 from sblsim.models.program import ProgramBuilder, Stream
 
-_CHANNEL_UNIFORM, _RANGE_NOISE = range(2)
+_CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK = range(5)
+#: Ranging modes: one-way travel time (synchronized clocks) or two-way (interrogation and reply).
+RANGING = ("owtt", "twtt")
+#: Smallest cosine of a ray's angle off the USBL array's axis the angle noise is scaled with (84°).
+USBL_COS_FLOOR = 0.1
 #: The packet a slot delivers: outputs of the channel, inputs of every receiver (whose FMUs refuse a value outside
 #: the declared ranges, :data:`sblsim.models.declarations.SIGNAL_RANGES`).
 PACKET: tuple[Variable, ...] = (
@@ -59,6 +102,16 @@ PACKET: tuple[Variable, ...] = (
              discrete=True, **signal_range("position")),
     Variable("beacon_z", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, Down (0 when lost)",
              discrete=True, **signal_range("position")),
+)
+#: The direction of arrival a USBL packet adds (outputs of the channel and inputs of the receivers of a USBL
+#: interface).
+DIRECTION: tuple[Variable, ...] = (
+    Variable("azimuth", "output", "Real", 0.0, "rad",
+             "USBL: measured azimuth of the diver from the transceiver, clockwise from North (0 when lost)",
+             discrete=True, min=-10.0, max=10.0),
+    Variable("elevation", "output", "Real", 0.0, "rad",
+             "USBL: measured elevation of the diver below the horizontal (0 when lost)", discrete=True,
+             min=-10.0, max=10.0),
 )
 TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "target_vz")
 #: Fixed-point iterations of the travel time (before the final evaluation).
@@ -112,7 +165,22 @@ class Acoustics(Component):
                      "True distance from beacon at transmit to target at reception", discrete=True),
             Variable("outlier", "output", "Boolean", False, description="Range lengthened by multipath"),
         )
-        return params + SEED_PARAMETERS + inputs + outputs
+        # declared after the OWTT ones, so that their value references stay what they were
+        ranging = (
+            Variable("ranging", "parameter", "String", "owtt", description="Ranging: one-way or two-way travel time",
+                     choices=RANGING),
+            Variable("turnaround", "parameter", "Real", 0.05, "s",
+                     "TWTT: the replying transponder's nominal turnaround time", min=0.0, max=10.0),
+            Variable("turnaround_sigma", "parameter", "Real", 0.0, "s", "TWTT: turnaround time jitter std",
+                     min=0.0, max=1.0),
+        )
+        if not is_usbl(n_beacons):
+            return params + SEED_PARAMETERS + inputs + outputs + ranging
+        usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
+                         "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
+                         min=0.0, max=45.0, scope="fmu"),) + tuple(
+            v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
+        return params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -170,36 +238,84 @@ class Acoustics(Component):
             position = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]])
             velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
 
-            def path(tau):
-                receive = position + velocity * tau
-                distance = ca.norm_2(receive - beacon)
-                speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
-                                      d["nodes"], d["slowness"])
-                return distance / speed, distance
+            def leg(offset, solve):
+                """Travel time and length between the beacon and the diver at ``t_k + offset`` [s] (None: 0),
+                plus the travel time itself when ``solve`` (fixed-point iterations)."""
+                def path(tau):
+                    receive = position + velocity * (tau if offset is None else offset + tau)
+                    distance = ca.norm_2(receive - beacon)
+                    speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
+                                          d["nodes"], d["slowness"])
+                    return distance / speed, distance, receive
 
-            tau = 0.0
-            for _ in range(OWTT_ITERATIONS):
-                tau, _ = path(tau)
-            tau, distance = path(tau)
+                tau, distance, receive = path(0.0)
+                for _ in range(OWTT_ITERATIONS if solve else 0):
+                    tau, distance, receive = path(tau)
+                return tau, distance, receive
 
             draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
             valid = draws[0] >= p["loss_pct"] / 100.0
             outlier = draws[1] < p["outlier_pct"] / 100.0
             excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
-            measured = tau + p["clock_drift_ppm"] * 1e-6 * (t_k - x["t0"] + tau)
-            rng = p["sound_speed_assumed"] * measured + p["sigma_range"] * noise + excess
+            drift = p["clock_drift_ppm"] * 1e-6
+            turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
+
+            def two_way(up, down):
+                """Range, true range and round trip of a two-way exchange: ``up`` and ``down`` are the legs."""
+                trip = up[0] + turnaround + down[0]
+                measured = trip * (1.0 + drift)
+                return p["sound_speed_assumed"] * (measured - p["turnaround"]) / 2.0, (up[1] + down[1]) / 2.0, trip
+
+            usbl = is_usbl(n)
+            if usbl:  # the transceiver interrogates; the diver replies from where it is then
+                up = leg(None, True)
+                reply = leg(up[0] + turnaround, False)
+                rng, distance, tau = two_way(up, reply)
+                valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # the reply, the downlink
+            else:
+                tau, distance, _ = leg(None, True)
+                measured = tau + drift * (t_k - x["t0"] + tau)
+                rng = p["sound_speed_assumed"] * measured
+                # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
+                up = leg(None, False)
+                twtt = two_way(up, leg(up[0] + turnaround, True))
+                is_twtt = p["ranging"] == RANGING.index("twtt")
+                rng, distance, tau = (ca.if_else(is_twtt, a, b) for a, b in zip(twtt, (rng, distance, tau)))
+            rng = rng + p["sigma_range"] * noise + excess
             out = {"k": k, "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
                    "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
                    "outlier": ca.logic_and(outlier, valid)}
             out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
+            if usbl:
+                direction = reply[2] - beacon
+                out.update(zip(("azimuth", "elevation"),
+                    (ca.if_else(valid, a, 0.0) for a in arrival(direction, u, p, w[_ANGLE_NOISE]))))
             return out
+
+
+        def arrival(direction, u, p, w_angle):
+            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1)."""
+            array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
+            seen = ca.mtimes(array.T, direction / ca.norm_2(direction))  # in the array's frame, axis = body down
+            sigma = p["usbl_angle_sigma_deg"] * (ca.pi / 180.0) / ca.fmax(seen[2], USBL_COS_FLOOR)
+            azimuth = ca.atan2(seen[1], seen[0]) + sigma * w_angle[0]
+            elevation = ca.atan2(seen[2], ca.sqrt(seen[0] ** 2 + seen[1] ** 2)) + sigma * w_angle[1]
+            measured = ca.vertcat(ca.cos(elevation) * ca.cos(azimuth), ca.cos(elevation) * ca.sin(azimuth),
+                                  ca.sin(elevation))
+            ned = ca.mtimes(rotation_ned(*[u[f"imu_{a}"] for a in ("roll", "pitch", "yaw")]), measured)
+            return ca.atan2(ned[1], ned[0]), ca.atan2(ned[2], ca.sqrt(ned[0] ** 2 + ned[1] ** 2))
 
         def output(x, p, d, t):
             return {name: x[name] for name in packet}
 
         streams = (Stream(_CHANNEL_UNIFORM, "uniform", 3), Stream(_RANGE_NOISE, "normal", 1))
+        if is_usbl(n):
+            streams += (Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2),
+                        Stream(_DOWNLINK, "uniform", 1))
+        else:
+            streams += (Stream(_TURNAROUND, "normal", 1, when=("ranging", "twtt")),)
         return b.program(b.prepare(prepare), b.init(init), b.output(output),
                          events=[b.event("slot", due, slot, streams)])
 
 
-__all__ = ["Acoustics", "OWTT_ITERATIONS", "PACKET", "TARGET_INPUTS"]
+__all__ = ["Acoustics", "DIRECTION", "OWTT_ITERATIONS", "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

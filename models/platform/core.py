@@ -1,4 +1,5 @@
-"""Platform: the floating SBL base with its beacons, wave motion, GPS and IMU.
+"""Platform: the floating SBL base with its beacons, wave motion, GPS and IMU; an LBL seafloor array; a USBL
+transceiver.
 
 True beacon positions ``b_i(t) = p(t) + R(roll, pitch, yaw) a_i`` at any
 time; the broadcast ones are *sampled* every ``sample_period`` T_s at
@@ -17,6 +18,18 @@ own): each beacon's true body offset is ``a_i + δ_i``, ``δ_i ~ N(0, σ_inst² 
 ``a_i``; the IMU measures each angle θ as ``(1 + s) θ + m + bias + noise``
 with a per-axis scale-factor error ``s ~ N(0, σ_s²)`` and a per-axis
 misalignment ``m ~ N(0, σ_m²)``.
+
+Systems (``system``, docs/model.md "Systems"). ``sbl``: the above. ``lbl``:
+the transponders stand on the seafloor, transponder i at NED
+``(a_ix, a_iy, seafloor_depth)`` (a custom layout's offsets are the NED
+positions themselves); they do not move, need no GPS or IMU, and the
+positions the packets carry are the *surveyed* ones, ``b_i + s_i``,
+``s_i ~ N(0, σ_survey² I)`` drawn once per run (a bias, not a noise).
+``usbl``: one transceiver (the interface of one beacon) at lever arm ``a_1``
+from the GPS antenna, whose array is mounted with a misalignment
+``μ ~ N(0, σ_μ² I)`` per axis, drawn once per run: the array's attitude is the
+platform's plus μ (``array_*`` outputs), while the surface converts the
+array's angles with the IMU's measured attitude (``imu_*`` outputs).
 
 References
 ----------
@@ -49,9 +62,31 @@ LAYOUTS = ("cross", "custom", "circle")
 #: Allowed numbers of beacons (``platform.beacons``).
 MIN_BEACONS, MAX_BEACONS = 3, 16
 GPS_MODELS = ("white", "gauss-markov")
+#: Positioning systems: short baseline (beacons on the platform), long baseline (seafloor transponders), ultra-short
+#: baseline (one transceiver measuring range and direction of arrival).
+SYSTEMS = ("sbl", "lbl", "usbl")
+#: Interface size of a USBL system: its one transceiver takes the place of the beacons.
+USBL_BEACONS = 1
 
 # Stream purposes (sblsim.models.philox, "Randomness").
-_PHASES, _GPS, _IMU, _INSTALLATION, _IMU_SCALE, _IMU_MISALIGNMENT = range(6)
+_PHASES, _GPS, _IMU, _INSTALLATION, _IMU_SCALE, _IMU_MISALIGNMENT, _SURVEY, _USBL_MISALIGNMENT = range(8)
+
+
+def is_usbl(n_beacons: int) -> bool:
+    """Whether an interface of ``n_beacons`` is the USBL system's (its one transceiver)."""
+    return n_beacons == USBL_BEACONS
+
+
+def attitude_variables(prefix: str, causality: str, what: str, discrete: bool) -> tuple[Variable, ...]:
+    """Roll, pitch and yaw [rad] named ``<prefix>_roll`` ... (the USBL array's and the IMU's attitude)."""
+    return tuple(Variable(f"{prefix}_{a}", causality, "Real", 0.0, "rad", f"{what} {a}", discrete=discrete,
+                          min=-10.0, max=10.0) for a in ("roll", "pitch", "yaw"))
+
+
+#: The USBL attitudes the platform outputs and the channel reads: the array's true one, the IMU's measured one.
+USBL_ATTITUDES = (("array", "True attitude of the USBL array (platform attitude plus mounting misalignment),",
+                   False),
+                  ("imu", "IMU-measured platform attitude as sampled,", True))
 
 
 def beacon_names(n_beacons: int, kind: str) -> list[str]:
@@ -131,7 +166,24 @@ class Platform(Component):
                          for a in ("roll", "pitch", "yaw"))
         gps = tuple(Variable(f"gps_{a}", "output", "Real", 0.0, "m", f"GPS-measured platform {a}", discrete=True)
                     for a in AXES)
-        return params + SEED_PARAMETERS + outputs + attitude + gps
+        # declared after the SBL ones, so that their value references stay what they were
+        systems = (
+            Variable("system", "parameter", "String", "sbl", description="Positioning system", choices=SYSTEMS),
+            Variable("seafloor_depth", "parameter", "Real", 50.0, "m", "LBL: depth of the seafloor transponders",
+                     min=0.0, max=12000.0, min_exclusive=True),
+            Variable("survey_sigma", "parameter", "Real", 0.0, "m",
+                     "LBL: survey error std of each transponder's position per axis, fixed per run",
+                     min=0.0, max=100.0),
+            Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
+                     "USBL: direction-of-arrival error std on the array's axis (grows off axis)",
+                     min=0.0, max=45.0, scope="config"),
+            Variable("usbl_misalignment_deg", "parameter", "Real", 0.0, "deg",
+                     "USBL: array mounting misalignment std per axis against the IMU, fixed per run",
+                     min=0.0, max=10.0),
+        )
+        usbl = tuple(v for prefix, what, discrete in USBL_ATTITUDES
+                     for v in attitude_variables(prefix, "output", what, discrete))
+        return params + SEED_PARAMETERS + outputs + attitude + gps + systems + usbl
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -167,15 +219,22 @@ class Platform(Component):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phase_sin", 4), ("phase_cos", 4),
                                             ("gps_error", 3), ("gps", 3), ("broadcast", 3 * n),
-                                            ("installation", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3)],
-                           derived=[("offsets", 3 * n), ("motion", 4)])
+                                            ("installation", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3),
+                                            ("survey", 3 * n), ("usbl_misalignment", 3), ("imu", 3)],
+                           derived=[("offsets", 3 * n), ("motion", 4), ("seafloor", 3 * n)])
+        lbl = SYSTEMS.index("lbl")
 
         def prepare(p):
             cross = cross_offsets(p["baseline"], p["transducer_depth"], n)
             custom = [ca.vertcat(*[p[f"beacon{i + 1}_offset_{a}"] for a in AXES]) for i in range(n)]
             offsets = [ca.if_else(p["layout"] == LAYOUTS.index("custom"), c, a) for a, c in zip(cross, custom)]
+            # LBL: the layout's points on the seafloor, a custom layout's offsets as NED positions
+            seafloor = [ca.if_else(p["layout"] == LAYOUTS.index("custom"), a, ca.vertcat(a[0], a[1],
+                                                                                          p["seafloor_depth"]))
+                        for a in offsets]
             return {"offsets": ca.vertcat(*offsets), "motion": ca.vertcat(*wave_motion(p["beaufort"],
-                                                                                      p["hull_length"]))}
+                                                                                      p["hull_length"])),
+                    "seafloor": ca.vertcat(*seafloor)}
 
         def attitude(p, d, x, t):
             """True roll, pitch, yaw [rad] and platform depth (heave) [m] at ``t``."""
@@ -204,8 +263,10 @@ class Platform(Component):
             scale, misalignment = x["imu_scale"], x["imu_misalignment"]
             imu = [(1.0 + scale[k]) * a + bias + sigma * imu_noise[k] + misalignment[k]
                    for k, a in enumerate((roll, pitch, yaw))]
-            broadcast = beacon_positions(gps, rotation_ned(*imu), offsets(d))
-            return {"gps": gps, "broadcast": ca.vertcat(*broadcast)}
+            broadcast = ca.vertcat(*beacon_positions(gps, rotation_ned(*imu), offsets(d)))
+            surveyed = d["seafloor"] + x["survey"]  # LBL: the surveyed transponder positions
+            return {"gps": gps, "broadcast": ca.if_else(p["system"] == lbl, surveyed, broadcast),
+                    "imu": ca.vertcat(*imu)}
 
         def init(p, d, w, t0):
             phases = 2.0 * math.pi * w[_PHASES]
@@ -213,7 +274,9 @@ class Platform(Component):
             gps_error = p["gps_sigma"] * w[_GPS]  # stationary start of either model
             fixed = {"installation": p["installation_sigma"] * w[_INSTALLATION],  # per run: zeros when σ = 0
                      "imu_scale": p["imu_scale_factor_ppm"] * 1e-6 * w[_IMU_SCALE],
-                     "imu_misalignment": p["imu_misalignment_deg"] * (math.pi / 180.0) * w[_IMU_MISALIGNMENT]}
+                     "imu_misalignment": p["imu_misalignment_deg"] * (math.pi / 180.0) * w[_IMU_MISALIGNMENT],
+                     "survey": p["survey_sigma"] * w[_SURVEY],
+                     "usbl_misalignment": p["usbl_misalignment_deg"] * (math.pi / 180.0) * w[_USBL_MISALIGNMENT]}
             return {"t0": t0, "k": 0, **wave_phases, "gps_error": gps_error, **fixed,
                     **sample(p, d, {**wave_phases, **fixed}, gps_error, w[_IMU], t0)}
 
@@ -231,20 +294,26 @@ class Platform(Component):
         def output(x, p, d, t):
             roll, pitch, yaw, depth = attitude(p, d, x, t)
             installed = [a + x["installation"][3 * i:3 * i + 3] for i, a in enumerate(offsets(d))]
-            true = beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw), installed)
-            out = {name: ca.vertcat(*true)[k] for k, name in enumerate(beacon_names(n, "true"))}
+            true = ca.vertcat(*beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw),
+                                                installed))
+            true = ca.if_else(p["system"] == lbl, d["seafloor"], true)
+            out = {name: true[k] for k, name in enumerate(beacon_names(n, "true"))}
             out.update({name: x["broadcast"][k] for k, name in enumerate(beacon_names(n, "broadcast"))})
             out.update(roll=roll, pitch=pitch, yaw=yaw)
             out.update({f"gps_{a}": x["gps"][k] for k, a in enumerate(AXES)})
+            for k, a in enumerate(("roll", "pitch", "yaw")):
+                out[f"array_{a}"] = (roll, pitch, yaw)[k] + x["usbl_misalignment"][k]
+                out[f"imu_{a}"] = x["imu"][k]
             return out
 
         noise = (Stream(_GPS, "normal", 3), Stream(_IMU, "normal", 3))
         # drawn once per run, each from a stream of its own, so that the other streams keep their numbers
         fixed = (Stream(_INSTALLATION, "normal", 3 * n), Stream(_IMU_SCALE, "normal", 3),
-                 Stream(_IMU_MISALIGNMENT, "normal", 3))
+                 Stream(_IMU_MISALIGNMENT, "normal", 3), Stream(_SURVEY, "normal", 3 * n),
+                 Stream(_USBL_MISALIGNMENT, "normal", 3))
         return b.program(b.prepare(prepare), b.init(init, (Stream(_PHASES, "uniform", 4),) + noise + fixed),
                          b.output(output), events=[b.event("sample", due, take_sample, noise)])
 
 
-__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "beacon_names",
-           "beacon_variables"]
+__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "SYSTEMS", "USBL_ATTITUDES",
+           "USBL_BEACONS", "attitude_variables", "beacon_names", "beacon_variables", "is_usbl"]

@@ -36,11 +36,13 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import PACKET
+from sblsim.models.acoustics.core import DIRECTION, PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import sample_due
+from sblsim.models.platform.core import is_usbl
 from sblsim.models.program import ProgramBuilder
+from sblsim.models.receiver import usbl
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
@@ -90,6 +92,13 @@ def covariance_outputs(P) -> dict[str, ca.SX]:
     """The ``cov_*`` outputs of a 3 × 3 position covariance [m²]."""
     index = {"x": 0, "y": 1, "z": 2}
     return {f"cov_{ab}": P[index[ab[0]], index[ab[1]]] for ab in COVARIANCE}
+
+
+def usbl_interface(n_beacons: int) -> tuple[Variable, ...]:
+    """What a receiver of ``n_beacons`` declares after its clock: for a USBL interface the direction-of-arrival
+    inputs; every receiver the USBL angle parameter (a configuration key whatever the system)."""
+    inputs = tuple(replace(v, causality="input") for v in DIRECTION) if is_usbl(n_beacons) else ()
+    return usbl.usbl_parameters() + inputs
 
 
 def clock_parameters() -> tuple[Variable, ...]:
@@ -243,7 +252,7 @@ class KalmanReceiver(Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters()
+        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + usbl_interface(n_beacons)
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -281,6 +290,13 @@ class KalmanReceiver(Component):
         raise NotImplementedError
 
     @classmethod
+    def correct_usbl(cls, x: dict, u: dict, p: dict) -> dict:
+        """The update at a slot of a USBL interface (default: the EKF's, :func:`sblsim.models.receiver.usbl.
+        kalman_correct`); returns what :meth:`correct` returns."""
+        out = usbl.kalman_correct(x, u, p, fresh_packet(u, 1), cls.motion)
+        return {**take_packet(x, u, 1), **out}
+
+    @classmethod
     def build(cls, n_beacons: int):
         n = n_beacons
         size, position = cls.motion.state_size, list(cls.motion.position_index)
@@ -300,6 +316,8 @@ class KalmanReceiver(Component):
             return slot_due(x, u, p, t, h)
 
         def slot(x, u, p, d, w, t, h):
+            if is_usbl(n):
+                return usbl_slot(x, u, p)
             out = cls.correct({**x, "P": ca.reshape(x["P"], size, size)}, u, p, n)
             held = {**x, **{k: out[k] for k in ("ranges", "beacons", "heard", "last_seq", "slot_time")}}
             # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
@@ -308,6 +326,13 @@ class KalmanReceiver(Component):
             return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"],
                     "failed": out["failed"], **fix,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
+
+        def usbl_slot(x, u, p):
+            """A USBL slot: the receiver's update and the polar fix of a fresh packet (no iteration)."""
+            out = cls.correct_usbl({**x, "P": ca.reshape(x["P"], size, size)}, u, p)
+            fresh = fresh_packet(u, 1)
+            return {**x, **out, "P": ca.vec(out["P"]), "fix": ca.if_else(fresh, usbl.polar_fix(u), x["fix"]),
+                    "fix_valid": ca.logic_or(x["fix_valid"], fresh)}
 
         def iterate(x, u, p, d, w, t, h):
             out = lm_step(x, p, INSTRUMENT_ITERATIONS, INSTRUMENT_TOLERANCE)
@@ -334,4 +359,4 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "beacon_parameters",
            "clock_due", "clock_parameters", "clock_tick", "covariance_outputs", "filter_parameters", "fresh_packet",
            "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
-           "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet"]
+           "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet", "usbl_interface"]

@@ -13,7 +13,9 @@ filtered: the estimate is the latest valid fix of a slot that brought a fresh
 range (the initial guess x0 until the first one), and the velocity is the
 finite difference of the last two such fixes over the time between their
 slots (a slot whose packet was lost refits the same held ranges: it changes
-neither). The receiver is its own
+neither). With a USBL interface the fix is the packet's polar fix, no iteration, with
+the covariance of its range and angles (:mod:`sblsim.models.receiver.usbl`),
+and ``nis`` is 0 (three measurements, three unknowns). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
 
@@ -37,7 +39,9 @@ import casadi as ca
 
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
+from sblsim.models.platform.core import is_usbl
 from sblsim.models.program import ProgramBuilder
+from sblsim.models.receiver import usbl
 from sblsim.models.receiver.core import (
     clock_due,
     clock_parameters,
@@ -55,6 +59,7 @@ from sblsim.models.receiver.core import (
     receiver_interface,
     slot_due,
     take_packet,
+    usbl_interface,
 )
 from sblsim.models.receiver.multilateration import fix_covariance, weights
 
@@ -73,7 +78,8 @@ class LeastSquaresReceiver(Component):
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         shared = {v.name: v for v in filter_parameters()}
-        return tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface() + clock_parameters()
+        return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
+                + clock_parameters() + usbl_interface(n_beacons))
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -92,7 +98,11 @@ class LeastSquaresReceiver(Component):
 
         def slot(x, u, p, d, w, t, h):
             held = {**x, **take_packet(x, u, n)}
-            return {**held, **lm_begin(held, x["fix"], u["depth"], p), "pending": 1, "fresh": fresh_packet(u, n)}
+            fresh = fresh_packet(u, n)
+            if is_usbl(n):  # the polar fix: no iteration
+                point = ca.if_else(fresh, usbl.polar_fix(u), x["lm_point"])
+                return {**held, **lm_idle(), "lm_point": point, "pending": 1, "fresh": fresh}
+            return {**held, **lm_begin(held, x["fix"], u["depth"], p), "pending": 1, "fresh": fresh}
 
         def iterate(x, u, p, d, w, t, h):
             return lm_step(x, p, ITERATIONS, TOLERANCE)
@@ -102,11 +112,16 @@ class LeastSquaresReceiver(Component):
 
         def finish(x, u, p, d, w, t, h):
             """Fit statistics and finite-difference velocity of the slot's fix."""
-            valid = ca.sum1(x["heard"]) >= 3
-            new = ca.logic_and(valid, x["fresh"])  # a fix with new information
             point = x["lm_point"]
-            w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
-            rss, covariance, _ = fix_covariance(point, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d)
+            if is_usbl(n):
+                valid = x["heard"][0] > 0.5
+                rss, covariance = 0.0, usbl.fix_covariance(point, x["beacons"], p)
+            else:
+                valid = ca.sum1(x["heard"]) >= 3
+                w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
+                rss, covariance, _ = fix_covariance(point, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r,
+                                                    w_d)
+            new = ca.logic_and(valid, x["fresh"])  # a fix with new information
             spread = ca.sqrt(ca.fmax(ca.trace(covariance), 0.0))
             elapsed = x["slot_time"] - x["fix_time"]
             differentiate = ca.logic_and(new, ca.logic_and(x["has_fix"], elapsed > 0.0))

@@ -22,8 +22,15 @@ from __future__ import annotations
 import casadi as ca
 
 from sblsim.models.declarations import Variable
-from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, take_packet
+from sblsim.models.receiver import kalman, usbl
+from sblsim.models.receiver.core import (
+    KalmanReceiver,
+    beacon_parameters,
+    filter_parameters,
+    fresh_packet,
+    fresh_range,
+    take_packet,
+)
 from sblsim.models.receiver.gate import gate, gate_parameters
 from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 
@@ -70,13 +77,33 @@ class UnscentedReceiver(KalmanReceiver):
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
+        variance = m.fresh_range_variance(x["x"], beacon, p)
+        return cls._update(x, u, p, n_beacons, fresh, lambda c: m.h(c, [beacon]), rng,
+                           ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
+
+    @classmethod
+    def correct_usbl(cls, x: dict, u: dict, p: dict) -> dict:
+        """The unscented update with range, azimuth, elevation and depth; each sigma point's angles are taken
+        within π of the measured ones, so that their mean does not straddle ±π."""
+        beacon, z = usbl.transceiver(u), usbl.measurement(u)
+        model = usbl.MODEL
+
+        def predicted(c):
+            return ca.vertcat(z - model.residual(z, model.h(c, beacon)), cls.measurement.depth(c))
+
+        R = ca.diag(ca.vertcat(usbl.variances(cls.motion.position(x["x"]), beacon, p), p["sigma_depth"] ** 2))
+        return cls._update(x, u, p, 1, fresh_packet(u, 1), predicted, z, R)
+
+    @classmethod
+    def _update(cls, x: dict, u: dict, p: dict, n_beacons: int, fresh, h, z, R) -> dict:
+        """The unscented update with the packet's rows ``z`` (predicted by ``h``) and the depth (their noise
+        ``R``), the first row through the gate; the depth alone when the packet is not used."""
+        m = cls.measurement
         state, P = x["x"], x["P"]
         sigma = MerweScaledSigmaPoints(cls.motion.state_size, p["alpha"], p["beta"], p["kappa"])
         wm, wc = sigma.weights()
         points = sigma.points(state, P)
-        variance = m.fresh_range_variance(state, beacon, p)
-        joint = unscented_update(state, P, points, wm, wc, [m.h(c, [beacon]) for c in points],
-                                 ca.vertcat(rng, u["depth"]), ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
+        joint = unscented_update(state, P, points, wm, wc, [h(c) for c in points], ca.vertcat(z, u["depth"]), R)
         depth = unscented_update(state, P, points, wm, wc, [m.depth(c) for c in points], u["depth"],
                                  ca.SX(p["sigma_depth"] ** 2))
         y, S = joint[2], joint[3]
