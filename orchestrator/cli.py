@@ -146,6 +146,9 @@ def _parser() -> argparse.ArgumentParser:
     gsub = g.add_subparsers(dest="codegen_command", required=True, parser_class=_Parser)
     r = gsub.add_parser("receiver", help="the receiver's C source, header and an example main.c")
     r.add_argument("--receiver", default="ekf", help="built-in receiver: ekf (default), ekf-seq, ukf or lsq")
+    r.add_argument("--system", default="sbl", choices=("sbl", "lbl", "usbl"),
+                   help="the positioning system whose packets the receiver takes (default sbl; usbl: range and "
+                        "direction of arrival from one transceiver)")
     r.add_argument("--out", type=Path, required=True, help="directory to write (created; must be empty or new)")
     return p
 
@@ -478,8 +481,8 @@ def _codegen(args: argparse.Namespace) -> int:
     _check_writable(args.out)
     if args.receiver not in RECEIVERS:
         raise ModelError(f"--receiver: {args.receiver!r} is not one of {', '.join(RECEIVERS)}")
-    example, about = example_files(args.receiver)
-    files = write_receiver(args.receiver, args.out, example=example, about=about)
+    example, about, n_beacons = example_files(args.receiver, args.system)
+    files = write_receiver(args.receiver, args.out, n_beacons, example=example, about=about)
     print(f"wrote {len(files)} files to {args.out}/ ({', '.join(p.name for p in files)}); see its README.md")
     return 0
 

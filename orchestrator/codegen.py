@@ -12,29 +12,40 @@ packet the receiver used in its step from t_(k−1) to t_k.
 from __future__ import annotations
 
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.orchestrator.config import component_params, load_config
+from sblsim.orchestrator.config import beacon_count, component_params, load_config
 from sblsim.orchestrator.run import run
 
 #: The recorded run: the semicircle's first 20 s at seed 1, with 10 % packet loss so that lost slots show.
 EXAMPLE = ("semicircle", ["simulation.duration=20", "acoustics.loss_pct=10"], 1)
 
 
-def example_files(receiver: str) -> tuple[dict[str, str], str]:
+def example_files(receiver: str, system: str = "sbl") -> tuple[dict[str, str], str, int]:
     """The example files of a built-in receiver and the README paragraph that says what they are.
+
+    Parameters
+    ----------
+    receiver : str
+        A built-in receiver.
+    system : {'sbl', 'lbl', 'usbl'}
+        The positioning system of the recorded run (``platform.system``).
 
     Returns
     -------
     files : dict
         ``parameters.txt``, ``packets.txt``, ``expected.txt`` -> their text.
     about : str
+    n_beacons : int
+        The size of the receiver's interface (1 for USBL).
     """
     scenario, overrides, seed = EXAMPLE
+    overrides = [*overrides, f"platform.system={system}"] if system != "sbl" else overrides
     cfg = load_config(scenario, [*overrides, f"simulation.receiver={receiver}"], seed=seed)
     series = run(cfg).timeseries
     model = MODELS[RECEIVERS[receiver]]
+    n_beacons = beacon_count(cfg)
     params = component_params(cfg, "receiver")  # the [receiver] section and what the orchestrator sets (the clock)
     seeds = {"seed", "scenario_key", "cell", "replicate"}
-    inputs = [v.name for v in model.inputs()]
+    inputs = [v.name for v in model.inputs(n_beacons)]
     T = cfg["simulation"]["sampling_time"]
     packets = [" ".join(repr(float(x)) for x in [k * T, T, *(getattr(row, n) for n in inputs)])
                for k, row in enumerate(series.itertuples(index=False))]
@@ -46,7 +57,7 @@ def example_files(receiver: str) -> tuple[dict[str, str], str]:
              f"{' '.join('--set ' + o for o in overrides)} --set receiver={receiver}`): its parameters "
              "(`parameters.txt`), the receiver's inputs at every step (`packets.txt`) and the run's own estimates "
              "(`expected.txt`); `estimates.txt` equals `expected.txt` to about 1e-12 m.\n")
-    return files, about
+    return files, about, n_beacons
 
 
 __all__ = ["EXAMPLE", "example_files"]

@@ -70,6 +70,8 @@ TIMESERIES_COLUMNS = {
     "pitch": "platform.pitch",
     "yaw": "platform.yaw",
 }
+#: Columns a USBL run adds to the time series: the packet's direction of arrival [rad].
+USBL_COLUMNS = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation"}
 
 
 @dataclass
@@ -359,6 +361,7 @@ def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarra
     """The per-step table, replicate-major (all steps of replicate 0, then replicate 1, ...)."""
     batch = len(replicates)
     cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in TIMESERIES_COLUMNS}
+    cols.update({name: rec[column] for name, column in USBL_COLUMNS.items() if column in rec})
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
     # no fix at a step (instr_valid false, instr_* 0): the step has no instrumentation error
