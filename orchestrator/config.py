@@ -367,7 +367,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     cfg = {s: (sim if s == "simulation" else resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s))
            for s in SECTIONS}
     _check_beacons(cfg["platform"], set(raw.get("platform", {})))
-    _check_ranging(cfg, set(raw.get("acoustics", {})))
+    _check_ranging(cfg)
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
@@ -440,20 +440,12 @@ def _check_beacons(platform: dict[str, Any], given: set[str]) -> None:
         platform["beacons"] = count
 
 
-def _check_ranging(cfg: dict[str, dict], given: set[str]) -> None:
-    """USBL measures its slant range by interrogation: ``acoustics.ranging`` is ``twtt`` (filled when not given).
-
-    Raises
-    ------
-    ConfigError
-        ``acoustics.ranging = 'owtt'`` given with ``platform.system = 'usbl'``.
-    """
-    if cfg["platform"]["system"] != "usbl":
-        return
-    if "ranging" in given and cfg["acoustics"]["ranging"] != "twtt":
-        raise ConfigError("acoustics.ranging: 'owtt' with platform.system = 'usbl'; a USBL transceiver measures "
-                          "the slant range by two-way travel time ('twtt')")
-    cfg["acoustics"]["ranging"] = "twtt"
+def _check_ranging(cfg: dict[str, dict]) -> None:
+    """USBL measures its slant range by interrogation: ``acoustics.ranging`` is ``twtt`` whatever is given (the
+    key chooses between one- and two-way ranging of SBL and LBL; a study that crosses it with the system sees no
+    effect of it on USBL)."""
+    if cfg["platform"]["system"] == "usbl":
+        cfg["acoustics"]["ranging"] = "twtt"
 
 
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
