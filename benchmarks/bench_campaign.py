@@ -11,7 +11,8 @@ Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against
    campaign worker steps them, timed after a first run in the process (best of three): µs per
    replicate-step, its ratio to **one FilterPy ``ExtendedKalmanFilter`` predict + update** (6 states, four
    ranges and the depth, the paper's EKF step; the best of seven rounds) timed here, and where the time
-   goes (each component's compiled step, the compiled master loop, the metrics and the bound).
+   goes (each component's compiled step, the compiled master loop, the metrics and the bound); then the
+   same chunk for SBL with TWTT ranging, LBL and USBL, against the SBL chunk.
 3. With ``--numpy REV``: the same chunk on the batched numpy engine of an earlier revision (e.g.
    ``9903b13``), timed the same way in a subprocess from a temporary git worktree.
    With ``--against REV``: the same chunk on the compiled engine of an earlier revision, timed the same
@@ -151,10 +152,10 @@ def filterpy_step(repeat: int = 1000, rounds: int = 7) -> float:
 CHUNK_RUNS, CHUNK_DURATION = 800, 100.0
 
 
-def chunk_timing() -> float:
-    """The benchmark chunk timed after a first run in this process (best of three), and its profile; s per
-    replicate-step."""
-    cfgs = with_replicates(load_config("semicircle", [f"simulation.duration={CHUNK_DURATION}"], seed=1),
+def time_chunk(overrides: tuple[str, ...] = ()):
+    """The benchmark chunk with ``--set`` overrides, timed after a first run in this process (best of three):
+    the wall time [s] and the run's result."""
+    cfgs = with_replicates(load_config("semicircle", [f"simulation.duration={CHUNK_DURATION}", *overrides], seed=1),
                            range(CHUNK_RUNS))
     records = RecordBuffer()  # re-used from batch to batch, as a campaign worker does
     run_batch(cfgs, timeseries=False, records=records)  # first time: the library loaded, memory first touched
@@ -164,7 +165,29 @@ def chunk_timing() -> float:
         result = run_batch(cfgs, timeseries=False, records=records)
         wall = time.perf_counter() - start
         best = (wall, result) if best is None or wall < best[0] else best
-    wall, result = best
+    return best
+
+
+#: The systems timed against the SBL chunk: their ``--set`` overrides (the defaults ``sblsim compare`` starts from).
+SYSTEM_CHUNKS = {"SBL with TWTT ranging": ("acoustics.ranging=twtt",),
+                 "LBL (4 transponders on a 50 m circle)": ("platform.system=lbl", "platform.layout=circle",
+                                                           "platform.baseline=50"),
+                 "USBL (range and direction of arrival)": ("platform.system=usbl",)}
+
+
+def system_timing(per_step: float) -> None:
+    """The chunk of each system of :data:`SYSTEM_CHUNKS`, per replicate-step and against the SBL chunk."""
+    print("   other systems, the same chunk:")
+    for label, overrides in SYSTEM_CHUNKS.items():
+        wall, result = time_chunk(overrides)
+        cost = wall / (CHUNK_RUNS * result.steps)
+        print(f"     {label:44s} {cost * 1e6:.2f} us per replicate-step, {cost / per_step:.2f}x the SBL chunk")
+
+
+def chunk_timing() -> float:
+    """The benchmark chunk timed after a first run in this process (best of three), and its profile; s per
+    replicate-step."""
+    wall, result = time_chunk()
     n = CHUNK_RUNS * result.steps
     per_step = wall / n
     print(f"\n2. a campaign chunk ({CHUNK_RUNS} semicircle runs x {result.steps} steps, local engine, one batch): "
@@ -264,6 +287,7 @@ def main() -> None:
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, numpy {np.__version__}\n")
     engines(study, args.replicates)
     per_step = chunk_timing()
+    system_timing(per_step)
     try:
         ekf = filterpy_step()
         print(f"   one FilterPy ExtendedKalmanFilter predict + update (6 states, 4 ranges + depth): "
