@@ -13,8 +13,9 @@ Each FMU holds
 
 The FMUs of the paper's 4 beacons are ``DIR/sblsim_<name>.fmu``; those of
 another number N of beacons (the interface carries N beacon positions) sit in
-a folder per N, ``DIR/beacons<N>/sblsim_<name>.fmu``
-(:func:`beacons_dir`), with the same file and model names.
+a folder per N, ``DIR/beacons<N>/sblsim_<name>.fmu``, and those of the USBL
+interface (one transceiver) in ``DIR/usbl/`` (:func:`beacons_dir`), with the
+same file and model names.
 
 It needs nothing else at run time: no Python, no environment variables, no
 resource files.
@@ -32,6 +33,7 @@ from sblsim.fmus.codegen import write_sources
 from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
 from sblsim.fmus.description import model_description
 from sblsim.models import MODELS
+from sblsim.models.platform.core import is_usbl
 
 HERE = Path(__file__).resolve().parent
 #: Where ``sblsim fmus build`` writes and the ``fmu`` engine looks by default.
@@ -44,8 +46,10 @@ def fmu_path(directory: Path | str, component: str) -> Path:
 
 
 def beacons_dir(directory: Path | str, n_beacons: int = 4) -> Path:
-    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, else
-    ``directory/beacons<N>``."""
+    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, ``directory/usbl`` for the
+    USBL interface (one transceiver), else ``directory/beacons<N>``."""
+    if is_usbl(int(n_beacons)):
+        return Path(directory) / "usbl"
     return Path(directory) if int(n_beacons) == 4 else Path(directory) / f"beacons{int(n_beacons)}"
 
 

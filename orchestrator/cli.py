@@ -137,11 +137,16 @@ def _parser() -> argparse.ArgumentParser:
                    help="build only the receiver model this Python file defines (see README, Write your own receiver)")
     b.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="beacons of the interfaces (default 4; other N go to the folder beacons<N> of the output)")
+    b.add_argument("--system", choices=("sbl", "usbl"), default="sbl",
+                   help="usbl: the interfaces of one USBL transceiver, in the folder usbl of the output (LBL "
+                        "uses the SBL interfaces of --beacons N)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
     v.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="validate the FMUs built for N beacons (default 4: the folder beacons<N> for others)")
+    v.add_argument("--system", choices=("sbl", "usbl"), default="sbl",
+                   help="usbl: validate the USBL interfaces' FMUs (the folder usbl)")
     g = sub.add_parser("codegen", help="write embeddable C code of a component (no FMI, no Python)")
     gsub = g.add_subparsers(dest="codegen_command", required=True, parser_class=_Parser)
     r = gsub.add_parser("receiver", help="the receiver's C source, header and an example main.c")
@@ -374,6 +379,12 @@ def _fmus(args: argparse.Namespace) -> int:
     n_beacons = getattr(args, "beacons", 4)
     if not MIN_BEACONS <= n_beacons <= MAX_BEACONS:
         raise ModelError(f"--beacons: {n_beacons} is outside the allowed range [{MIN_BEACONS}, {MAX_BEACONS}]")
+    if getattr(args, "system", "sbl") == "usbl":
+        from sblsim.models.platform.core import USBL_BEACONS
+
+        if n_beacons != 4:
+            raise ModelError(f"--beacons: {n_beacons} with --system usbl, which has one transceiver")
+        n_beacons = USBL_BEACONS
     if args.fmus_command == "variables":
         from sblsim.fmus.variables import markdown_tables
 
