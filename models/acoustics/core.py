@@ -297,7 +297,8 @@ class Acoustics(Component):
         def arrival(direction, u, p, w_angle):
             """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1)."""
             array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
-            seen = ca.mtimes(array.T, direction / ca.norm_2(direction))  # in the array's frame, axis = body down
+            # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
+            seen = ca.mtimes(array.T, direction / ca.fmax(ca.norm_2(direction), 1e-9))
             sigma = p["usbl_angle_sigma_deg"] * (ca.pi / 180.0) / ca.fmax(seen[2], USBL_COS_FLOOR)
             azimuth = ca.atan2(seen[1], seen[0]) + sigma * w_angle[0]
             elevation = ca.atan2(seen[2], ca.sqrt(seen[0] ** 2 + seen[1] ** 2)) + sigma * w_angle[1]

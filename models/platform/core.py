@@ -208,7 +208,8 @@ class Platform(Component):
     def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
         """Configuration keys from FMU parameters: a custom layout's offsets become the ``beacon_offsets`` text."""
         out = super().config_values(values, n_beacons)
-        out["beacons"] = int(n_beacons)
+        if not is_usbl(n_beacons):  # USBL's one transceiver is not a count of beacons
+            out["beacons"] = int(n_beacons)
         if out.get("layout") == "custom":
             out["beacon_offsets"] = format_table(np.array(
                 [[float(values.get(f"beacon{i}_offset_{a}", 0.0)) for a in AXES] for i in range(1, n_beacons + 1)]))

@@ -190,3 +190,80 @@ def test_the_pcrb_of_a_run_takes_n_beacons():
     rms = {n: run(load_config("semicircle", base + [f"platform.beacons={n}"], seed=2)).metrics["pcrb_rms"][0]
            for n in (3, 8)}
     assert np.isfinite(rms[3]) and np.isfinite(rms[8]) and rms[3] > 0 and rms[8] > 0 and rms[3] != rms[8]
+
+
+@pytest.fixture(scope="module")
+def usbl_fmus(tmp_path_factory) -> Path:
+    """The four components' FMUs of the USBL interface (one transceiver), in the folder ``usbl``."""
+    directory = tmp_path_factory.mktemp("usbl_fmus")
+    build_all(directory, names=list(COMPONENTS), n_beacons=1)
+    assert beacons_dir(directory, 1) == directory / "usbl"
+    return directory
+
+
+def _libcosim_against_jacobi(cfg: dict, fmu_dir: Path, tmp_path: Path) -> None:
+    """The configuration's SSP stepped by libcosim gives the fmu engine's Jacobi numbers (≤ 1e-9 m)."""
+    pytest.importorskip("libcosimpy")
+    ssp = export_ssp(cfg, tmp_path / "system.ssp", fmu_dir)
+    assert read_ssp(ssp).config["platform"]["system"] == cfg["platform"]["system"]
+    out = tmp_path / "libcosim.npz"
+    done = subprocess.run([sys.executable, str(Path(__file__).with_name("ssp_hosts.py")), "libcosim", str(ssp),
+                           str(out)], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    data = dict(np.load(out))
+    jacobi = run({**cfg, "simulation": {**cfg["simulation"], "master": "jacobi"}}, "fmu", fmu_dir=fmu_dir).timeseries
+    assert len(data["time"]) == len(jacobi)
+    np.testing.assert_allclose(np.column_stack([data[f"est_{a}"] for a in "xyz"]),
+                               jacobi[["est_x", "est_y", "est_z"]].to_numpy(), rtol=0, atol=1e-9)
+
+
+def test_a_six_transponder_lbl_ssp_runs_in_libcosim_like_the_jacobi_master(beacon_fmus, tmp_path):
+    cfg = load_config("semicircle", LAYOUTS["circle6"][0] + ["platform.system=lbl", "platform.baseline=40",
+                                                             "platform.survey_sigma=0.2", "acoustics.ranging=twtt",
+                                                             "simulation.duration=5"], seed=3)
+    _libcosim_against_jacobi(cfg, beacon_fmus, tmp_path)
+
+
+def test_a_usbl_ssp_runs_in_libcosim_like_the_jacobi_master(usbl_fmus, tmp_path):
+    cfg = load_config("semicircle", ["platform.system=usbl", "platform.usbl_misalignment_deg=1",
+                                     "simulation.duration=5"], seed=3)
+    _libcosim_against_jacobi(cfg, usbl_fmus, tmp_path)
+
+
+def test_usbl_fmus_run_in_a_plain_c_host_with_an_empty_environment(usbl_fmus, tmp_path):
+    """Each USBL FMU in the plain C host (no Python, empty environment): 30 finite steps; the channel declares
+    the direction of arrival and the attitudes it reads, the platform one transceiver."""
+    import zipfile
+
+    from fmpy import read_model_description
+
+    from sblsim.fmus.codegen import fmi_headers_dir
+    from sblsim.fmus.compiler import find_compiler
+
+    host = Path(__file__).parents[1] / "fmus" / "c_host.c"
+    exe = tmp_path / "c_host"
+    subprocess.run([*find_compiler("system").command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(host), "-o",
+                    str(exe), "-ldl"], check=True, capture_output=True)
+    for name in COMPONENTS:
+        fmu, folder = fmu_path(beacons_dir(usbl_fmus, 1), name), tmp_path / name
+        with zipfile.ZipFile(fmu) as archive:
+            archive.extractall(folder)
+        md = read_model_description(str(fmu))
+        names = {v.name: v.causality for v in md.modelVariables}
+        if name == "acoustics":
+            assert names["azimuth"] == names["elevation"] == "output" and names["array_roll"] == "input"
+        if name == "platform":
+            assert "beacon1_true_x" in names and "beacon2_true_x" not in names
+        outputs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        binary = folder / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
+        proc = subprocess.run([str(exe), str(binary), md.guid, f"file://{folder}/resources", "30", "0.1", ""],
+                              input="\n".join(map(str, outputs)), capture_output=True, text=True, env={}, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        rows = np.array([[float(x) for x in line.split()[2:]] for line in proc.stdout.splitlines()
+                         if line.startswith("a")])
+        assert rows.shape == (30, len(outputs)) and np.all(np.isfinite(rows))
+
+
+def test_fmus_build_refuses_beacons_with_the_usbl_system(capsys):
+    assert main(["fmus", "build", "--system", "usbl", "--beacons", "6", "--out", "unused"]) != 0
+    assert "--beacons: 6 with --system usbl" in capsys.readouterr().err
