@@ -16,6 +16,7 @@ from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
 from sblsim.models.receiver.core import clock_parameters
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
+from sblsim.models.receiver.usbl import usbl_parameters
 from tests.helpers import Core
 
 AXES = ("x", "y", "z")
@@ -361,13 +362,16 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     assert signals == [key(v) for v in ekf if v.causality != "parameter"]
     assert signals == [key(v) for v in receiver_interface()]
     assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface()
-    # parameters: the EKF's own declarations of the shared ones, then the seed keys, then the receiver's clock
+    # parameters: the EKF's own declarations of the shared ones, then the seed keys, then the receiver's clock and
+    # the USBL angle (declared after it)
     ekf_params = {v.name: v for v in ekf if v.causality == "parameter"}
     params = [v for v in lsq if v.causality == "parameter"]
     shared = ["sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z"]
     assert list(SHARED_PARAMETERS) == shared
-    assert params == [ekf_params[n] for n in shared] + list(SEED_PARAMETERS) + list(clock_parameters())
-    assert ekf[-1] == clock_parameters()[0]  # declared last: the earlier value references stay
+    assert params == ([ekf_params[n] for n in shared] + list(SEED_PARAMETERS) + list(clock_parameters())
+                      + list(usbl_parameters()))
+    # declared last: the earlier value references stay
+    assert ekf[-2:] == clock_parameters() + usbl_parameters()
     assert LeastSquaresReceiver.name == "receiver_lsq" and LeastSquaresReceiver.component_index == 3
     core = Core(LeastSquaresReceiver, {"seed": 3, "scenario_key": 1, "cell": 2, "replicate": 4}).initialize(0.0)
     assert list(core.outputs) == OUTPUTS
