@@ -52,6 +52,9 @@ horizontal standard deviation (DRMS)
 ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` of an unbiased fix at ``p``
 (:func:`horizontal_drms`; Kay, Fundamentals of Statistical Signal
 Processing: Estimation Theory, Prentice Hall 1993, Section 3.7).
+For USBL the map's measurement is one packet, slant range, azimuth and
+elevation from the transceiver (:data:`RANGE_BEARING`), with the
+receivers' R of it, plus the depth (:func:`usbl_fix_information`).
 
 References
 ----------
@@ -68,9 +71,10 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from sblsim.models.receiver import kalman
+from sblsim.models.receiver import kalman, usbl
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
+from sblsim.models.receiver.range_bearing import RangeBearingModel
 
 #: The motion model of the bound (the receivers').
 MOTION = CONSTANT_VELOCITY
@@ -438,6 +442,69 @@ def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.nd
     return np.where(np.isfinite(drms), drms, np.inf)
 
 
-__all__ = ["FIXED", "MODEL", "MOTION", "bound_step", "effective_range_variance", "fisher_information",
+#: The USBL maps' measurement model: slant range, azimuth and elevation from the transceiver (the receivers').
+RANGE_BEARING = RangeBearingModel(MOTION)
+
+
+@lru_cache(maxsize=None)
+def usbl_fix_information() -> ca.Function:
+    """casadi Function of the Fisher information of one USBL packet (range, azimuth, elevation) plus depth.
+
+    ``(p[3], transceiver[3], sigma_range, gps_sigma, attitude_sigma_deg, sigma_angle_deg, depth_variance) ->
+    (J (3, 3), drms)``: :func:`position_information` of :data:`RANGE_BEARING`
+    with the transceiver as context and the receivers' R of a USBL packet
+    (:func:`sblsim.models.receiver.usbl.variances`: ``σ_r² + σ_GPS²`` for the
+    range, ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for each angle, φ the line of
+    sight's angle off the vertical), plus the depth row of :data:`MODEL`
+    (variance σ_d²); ``drms = sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m]. Straight below
+    the transceiver the azimuth's derivative is not finite (J and drms not
+    finite there).
+
+    References
+    ----------
+    Kay 1993, Section 3.7. Bar-Shalom, Li, Kirubarajan 2001, Section 10.3.
+    """
+    p, b = ca.SX.sym("p", 3), ca.SX.sym("transceiver", 3)
+    names = ("sigma_range", "gps_sigma", "attitude_sigma_deg", "sigma_angle_deg", "depth_variance")
+    sigma_range, gps, attitude, angle, d_var = (ca.SX.sym(n) for n in names)
+    R = usbl.variances(p, b, {"sigma_range": sigma_range, "beacon_gps_sigma": gps,
+                              "beacon_attitude_sigma_deg": attitude, "sigma_angle_deg": angle})
+    J = position_information(RANGE_BEARING, p, b, R) + position_information(MODEL, p, [], ca.vertcat(d_var))
+    return ca.Function("sblsim_usbl_fix_information", [p, b, sigma_range, gps, attitude, angle, d_var],
+                       [J, horizontal_drms(J)], ["p", "transceiver", *names], ["J", "drms"])
+
+
+def usbl_horizontal_std(points: np.ndarray, transceiver: np.ndarray, sigma_range: float, gps_sigma: float,
+                        attitude_sigma_deg: float, sigma_angle_deg: float, depth_variance: float) -> np.ndarray:
+    """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth (:func:`usbl_fix_information`).
+
+    Parameters
+    ----------
+    points : ndarray, shape (M, 3)
+        Target positions, NED [m].
+    transceiver : ndarray, shape (3,)
+        The transceiver's position, NED [m].
+    sigma_range, gps_sigma : float
+        Range noise and GPS error std [m].
+    attitude_sigma_deg, sigma_angle_deg : float
+        IMU attitude error std and direction-of-arrival std on the array's axis [deg].
+    depth_variance : float
+        σ_d² [m²], > 0.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Infinite where the information is singular or not finite (straight below the transceiver).
+    """
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    f = usbl_fix_information().map(points.shape[0])
+    drms = np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), float(sigma_range),
+                        float(gps_sigma), float(attitude_sigma_deg), float(sigma_angle_deg),
+                        float(depth_variance))[1]).ravel()
+    return np.where(np.isfinite(drms), drms, np.inf)
+
+
+__all__ = ["FIXED", "MODEL", "MOTION", "RANGE_BEARING", "bound_step", "effective_range_variance", "fisher_information",
            "fix_information", "horizontal_drms", "horizontal_std", "information_update", "measurement_information",
-           "model_horizontal_std", "pcrb", "pcrb_inputs", "position_information", "state_at"]
+           "model_horizontal_std", "pcrb", "pcrb_inputs", "position_information", "state_at", "usbl_fix_information",
+           "usbl_horizontal_std"]

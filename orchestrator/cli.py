@@ -19,6 +19,7 @@ import numpy as np
 from sblsim.fmus.compiler import COMPILERS
 from sblsim.models.declarations import ModelError, shown
 from sblsim.orchestrator.master import ALGORITHMS
+from sblsim.orchestrator.systems import describe_defaults
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -65,11 +66,16 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="replace an earlier run in --out")
     _config_options(r)
 
-    m = sub.add_parser("compare", help="run several receivers on the same replicates of a scenario")
+    m = sub.add_parser("compare", help="run several receivers (or positioning systems) on the same replicates of a "
+                                       "scenario")
     m.add_argument("scenario", help="built-in scenario or CONFIG.toml")
     m.add_argument("--receivers", default="ekf,ekf-seq,ukf,lsq",
                    help="comma-separated receivers (default ekf,ekf-seq,ukf,lsq; model:PATH.py or fmu:PATH for "
                         "your own)")
+    m.add_argument("--systems", default=None, metavar="SYSTEMS",
+                   help="compare positioning systems, e.g. sbl,lbl,usbl: every system, with every receiver, "
+                        "on the same diver paths, replicates and error levels, each from its defaults, your --set "
+                        f"over them: {describe_defaults()}")
     m.add_argument("--replicates", type=int, default=20, help="runs per receiver (default 20)")
     m.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
     m.add_argument("--out", type=Path, default=None, help="output directory (default results/compare_SCENARIO)")
@@ -82,7 +88,8 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--step", type=float, default=0.5, help="grid spacing [m] (default 0.5)")
     g.add_argument("--levels", default="0.5,1,2", help="accuracy prescriptions to contour [m] (default 0.5,1,2)")
     g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
-                   help="one map per value, side by side, e.g. platform.baseline=0.4,1,3")
+                   help="one map per value, side by side, e.g. platform.baseline=0.4,1,3; platform.system=sbl,lbl,usbl "
+                        "maps each system from the defaults of compare --systems, your --set over them")
     g.add_argument("--depth", type=float, default=None,
                    help="the diver's depth of the maps [m] (default target.depth, or the median depth of a "
                         "trajectory file)")
@@ -269,21 +276,30 @@ def _output_name(scenario: str) -> str:
 
 def _compare(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.compare import compare, markdown, parse_receivers, write
+    from sblsim.orchestrator.systems import parse_systems, system_overrides
 
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
+    systems = parse_systems(args.systems) if args.systems is not None else None
+    if systems is not None:
+        system_overrides(systems[0], args.overrides)  # refuses a --set platform.system before any work
     out = _output(args.out, Path("results") / f"compare_{_output_name(args.scenario)}", args.force, "compare.csv",
                   "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
-                    args.fmu_dir, progress=sys.stderr.isatty())
+                    args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
     from sblsim.orchestrator.config import load_config
 
     seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
-    title = (f"{args.scenario}: {args.replicates} replicates per receiver, seed {seed}"
+    per = "receiver" if systems is None else "system and receiver"
+    title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
              + (f", {' '.join(args.overrides)}" if args.overrides else ""))
+    note = "" if systems is None else f"systems: {describe_defaults(systems)}" + (
+        "; then --set " + " ".join(args.overrides) if args.overrides else "")
     print(title)
+    if note:
+        print(note)
     print(markdown(table), end="")
-    write(table, out, title)
+    write(table, out, title, note)
     print(f"written to {out}/ (compare.csv, compare.md, compare.png)")
     return 0
 

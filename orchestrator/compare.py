@@ -1,8 +1,21 @@
-"""``sblsim compare``: several receivers on the same runs of one scenario.
+"""``sblsim compare``: several receivers, or several positioning systems, on the same runs of one scenario.
 
 Every receiver sees the same replicates (same seeds, so the same diver path,
 platform motion, ranges, losses and outliers: the receiver draws no random
-numbers). Per receiver, over all steps of all replicates:
+numbers).
+
+With ``systems`` (``sblsim compare --systems sbl,lbl,usbl``) every system
+runs with every receiver on the same replicates, diver paths and error
+levels (the target's random numbers do not depend on the system), each
+system from its :data:`~sblsim.orchestrator.systems.SYSTEM_DEFAULTS` with
+the user's ``--set`` over them (:mod:`sblsim.orchestrator.systems`); the
+table gains a ``system`` column, one row per system and receiver.
+
+The ``pcrb_rms`` of a USBL configuration is left empty (NaN): the runs'
+PCRB is that of ranges plus depth (:mod:`sblsim.models.bound`) and holds no
+bearing, so it bounds no USBL receiver.
+
+Per receiver (and system), over all steps of all replicates:
 
 * ``rms_e_tot``: RMS of e_tot [m] (``sqrt(mean(e_tot_rms²))``, every run having
   the same number of steps), and ``rms_e_tot_sd``, the standard deviation of
@@ -36,6 +49,7 @@ from sblsim.orchestrator.config import check_receiver, load_config, receiver_lab
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.systems import SYSTEM_DEFAULTS, check_seafloor, system_overrides
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "rms_e_tot_sd", "mean_e_tot", "nees", "nees_sd", "coverage_95", "nis",
            "gated_pct", "pcrb_rms", "ratio_to_pcrb", "us_per_step", "diverged")
@@ -59,8 +73,8 @@ def parse_receivers(text: str) -> list[str]:
 
 def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overrides: Sequence[str] = (),
             seed: int | None = None, engine: str = "local", fmu_dir: Path | str | None = None,
-            progress: bool = False) -> pd.DataFrame:
-    """Run every receiver on the same replicates of a scenario and tabulate them.
+            progress: bool = False, systems: Sequence[str] | None = None) -> pd.DataFrame:
+    """Run every receiver (of every system) on the same replicates of a scenario and tabulate them.
 
     Parameters
     ----------
@@ -74,11 +88,16 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
         As for ``sblsim run``.
     progress : bool
         Show a progress bar per receiver.
+    systems : sequence of str, optional
+        ``platform.system`` values, each run from its :data:`SYSTEM_DEFAULTS`
+        with ``overrides`` over them (:func:`system_overrides`); default: the
+        scenario's system as configured, and no ``system`` column.
 
     Returns
     -------
     pandas.DataFrame
-        One row per receiver, the columns of :data:`COLUMNS`.
+        One row per receiver (per system, then receiver), the columns of
+        :data:`COLUMNS` (after ``system`` when systems are given).
 
     Raises
     ------
@@ -87,7 +106,13 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
     """
     if not 1 <= replicates <= 100_000:
         raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
-    configs = [load_config(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
+    if systems is None:
+        configs = [load_config(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
+    else:
+        configs = [load_config(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"]), seed=seed)
+                   for s in systems for r in receivers]
+        for cfg in configs:
+            check_seafloor(cfg)
     rows = []
     records = RecordBuffer()  # one record memory for the receivers' batches, one after the other
     for cfg in configs:
@@ -96,7 +121,10 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
         m = result.metrics
         rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
         bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))
-        rows.append({"receiver": receiver_label(cfg), "runs": replicates, "rms_e_tot": rms,
+        if cfg["platform"]["system"] == "usbl":
+            bound = math.nan  # the runs' PCRB holds ranges and depth, no bearing: no bound for USBL
+        rows.append({"system": cfg["platform"]["system"], "receiver": receiver_label(cfg), "runs": replicates,
+                     "rms_e_tot": rms,
                      "rms_e_tot_sd": float(np.std(m["e_tot_rms"], ddof=1)) if replicates > 1 else math.nan,
                      "mean_e_tot": float(m["e_tot_mean"].mean()), "nees": float(m["nees_mean"].mean()),
                      "nees_sd": float(np.std(m["nees_mean"], ddof=1)) if replicates > 1 else math.nan,
@@ -104,20 +132,36 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
                      "gated_pct": float(m["gated_pct"].mean()), "pcrb_rms": bound, "ratio_to_pcrb": rms / bound,
                      "us_per_step": 1e6 * result.step_time.get("receiver", math.nan) / (result.steps * replicates),
                      "diverged": int(m["diverged"].sum())})
-    return pd.DataFrame(rows, columns=list(COLUMNS))
+    return pd.DataFrame(rows, columns=list(COLUMNS) if systems is None else ["system", *COLUMNS])
+
+
+def _number(value: float, digits: str) -> str:
+    return format(value, digits) if math.isfinite(value) else "n/a"
 
 
 def markdown(table: pd.DataFrame) -> str:
-    """The comparison as a Markdown table (units in the header)."""
-    head = ("| receiver | RMS e_tot [m] (± sd over runs) | mean e_tot [m] | NEES (3) | coverage 95 % | gated [%] "
-            "| PCRB RMS [m] | RMS / PCRB | µs per step | diverged runs |")
-    lines = [head, "|---|---|---|---|---|---|---|---|---|---|"]
+    """The comparison as a Markdown table (units in the header; a ``system`` column first when it has one)."""
+    systems = "system" in table.columns
+    head = (("| system " if systems else "") + "| receiver | RMS e_tot [m] (± sd over runs) | mean e_tot [m] "
+            "| NEES (3) | coverage 95 % | gated [%] | PCRB RMS [m] | RMS / PCRB | µs per step | diverged runs |")
+    lines = [head, "|---" * (10 + systems) + "|"]
     for r in table.itertuples():
         spread = f" ± {r.rms_e_tot_sd:.3f}" if math.isfinite(r.rms_e_tot_sd) else ""
-        lines.append(f"| {r.receiver} | {r.rms_e_tot:.3f}{spread} | {r.mean_e_tot:.3f} | {r.nees:.2f} "
-                     f"| {r.coverage_95:.3f} | {r.gated_pct:.2f} | {r.pcrb_rms:.3f} | {r.ratio_to_pcrb:.2f} "
-                     f"| {r.us_per_step:.2g} | {r.diverged} |")
+        lines.append((f"| {r.system} " if systems else "")
+                     + f"| {r.receiver} | {r.rms_e_tot:.3f}{spread} | {r.mean_e_tot:.3f} | {r.nees:.2f} "
+                     f"| {r.coverage_95:.3f} | {r.gated_pct:.2f} | {_number(r.pcrb_rms, '.3f')} "
+                     f"| {_number(r.ratio_to_pcrb, '.2f')} | {r.us_per_step:.2g} | {r.diverged} |")
     return "\n".join(lines) + "\n"
+
+
+def labels(table: pd.DataFrame) -> list[str]:
+    """The figure's label of each row: the receiver, or the system and receiver (the system alone when every
+    row has the same receiver)."""
+    if "system" not in table.columns:
+        return list(table["receiver"])
+    if table["receiver"].nunique() == 1:
+        return list(table["system"])
+    return [f"{s}\n{r}" for s, r in zip(table["system"], table["receiver"])]
 
 
 def plot(table: pd.DataFrame, title: str):
@@ -129,14 +173,17 @@ def plot(table: pd.DataFrame, title: str):
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(max(11, 1.1 * len(table) + 4), 4.5))
     x = np.arange(len(table))
+    names = labels(table)
+    what = "receiver" if "system" not in table.columns else (
+        "system" if table["receiver"].nunique() == 1 else "system and receiver")
     sd = table["rms_e_tot_sd"].fillna(0.0)
     ax1.bar(x, table["rms_e_tot"], yerr=sd, capsize=4, color="tab:red", alpha=0.8,
             label="RMS e_tot (± sd over runs)")
     ax1.plot(x, table["pcrb_rms"], "k_", ms=30, mew=2, label="PCRB RMS (the limit)")
-    ax1.set_xticks(x, table["receiver"])
-    ax1.set_xlabel("receiver")
+    ax1.set_xticks(x, names)
+    ax1.set_xlabel(what)
     ax1.set_ylabel("position error, RMS e_tot [m]")
     ax1.set_ylim(0, None)
     ax1.grid(True, axis="y", alpha=0.3)
@@ -152,9 +199,9 @@ def plot(table: pd.DataFrame, title: str):
     ax2.set_yscale("log")
     ax2.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax2.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:g}"[0] in "235" else ""))
-    ax2.set_xticks(x, table["receiver"])
+    ax2.set_xticks(x, names)
     ax2.set_xlim(-0.5, len(table) - 0.5)
-    ax2.set_xlabel("receiver")
+    ax2.set_xlabel(what)
     ax2.set_ylabel("position NEES (above 3: overconfident)")
     ax2.grid(True, axis="y", which="both", alpha=0.3)
     ax2.legend(fontsize=8)
@@ -163,17 +210,21 @@ def plot(table: pd.DataFrame, title: str):
     return fig
 
 
-def write(table: pd.DataFrame, out: Path | str, title: str) -> Path:
-    """Write ``compare.csv``, ``compare.md`` and ``compare.png`` into ``out`` atomically; return ``out``."""
+def write(table: pd.DataFrame, out: Path | str, title: str, note: str = "") -> Path:
+    """Write ``compare.csv``, ``compare.md`` and ``compare.png`` into ``out`` atomically; return ``out``.
+
+    ``note``, a line under the title of ``compare.md`` (the compared systems' defaults).
+    """
     import matplotlib.pyplot as plt
 
     with staged_directory(out) as tmp:
         table.to_csv(tmp / "compare.csv", index=False)
-        (tmp / "compare.md").write_text(f"{title}\n\n{markdown(table)}", encoding="utf-8")
+        (tmp / "compare.md").write_text(f"{title}\n\n" + (f"{note}\n\n" if note else "") + markdown(table),
+                                        encoding="utf-8")
         fig = plot(table, title)
         fig.savefig(tmp / "compare.png", dpi=120, bbox_inches="tight")
         plt.close(fig)
     return Path(out)
 
 
-__all__ = ["COLUMNS", "compare", "markdown", "parse_receivers", "plot", "write"]
+__all__ = ["COLUMNS", "SYSTEM_DEFAULTS", "compare", "labels", "markdown", "parse_receivers", "plot", "write"]

@@ -15,6 +15,21 @@ round of ranges without a motion model (a filter does better by averaging;
 the PCRB of a run says how much), and it is the design question of the
 paper: which baseline and sensors keep the diver within a required accuracy
 over the working area.
+
+The systems (``platform.system``): LBL maps the same way, the beacons the
+seafloor transponders (their positions, :func:`~sblsim.models.platform.geometry.lever_arms`),
+with the survey error in place of the GPS and no attitude term
+(:func:`~sblsim.orchestrator.run.bound_parameters`). USBL maps one packet
+of slant range, azimuth and elevation from the transceiver plus the depth
+(:func:`sblsim.models.bound.usbl_horizontal_std`), with the receivers' R:
+``σ_r² + σ_GPS²`` for the range, ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for
+each angle (φ the line of sight's angle off the vertical); straight below the
+transceiver the azimuth is undefined and the map has no value (as on an SBL
+beacon). What no receiver's R holds is not in a map either (the USBL array's
+misalignment, the TWTT turnaround jitter). ``--compare
+platform.system=sbl,lbl,usbl`` maps each system from the defaults of
+``sblsim compare --systems`` (:data:`~sblsim.orchestrator.systems.SYSTEM_DEFAULTS`),
+the user's ``--set`` over them.
 """
 
 from __future__ import annotations
@@ -25,15 +40,18 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.bound import MODEL, horizontal_std
+from sblsim.models.bound import MODEL, horizontal_std, usbl_horizontal_std
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters
+from sblsim.orchestrator.systems import check_seafloor, parse_systems, system_overrides
 
 MAX_POINTS = 1_000_000
+#: What a map marks at the lever arms, per system.
+_MARKERS = {"sbl": "beacons", "lbl": "transponders", "usbl": "transceiver"}
 
 
 def parse_levels(text: str) -> list[float]:
@@ -103,7 +121,7 @@ def diver_depth(cfg: dict) -> tuple[float, str]:
 
 
 def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, depth: float | None = None) -> np.ndarray:
-    """Horizontal DRMS [m] of one round of fresh ranges plus depth, shape (len(north), len(east)).
+    """Horizontal DRMS [m] of one round of fresh ranges (USBL: one packet) plus depth, shape (len(north), len(east)).
 
     Parameters
     ----------
@@ -114,6 +132,7 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     model : RangeDepthModel, optional
         The measurement model whose Fisher information is mapped (default the
         receivers'; its context is the beacons, its motion model the state layout).
+        Not used for USBL (:func:`sblsim.models.bound.usbl_horizontal_std`).
     depth : float, optional
         The diver's depth [m]; default :func:`diver_depth`.
 
@@ -127,9 +146,27 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     E, N = np.meshgrid(east, north)
     depth = diver_depth(cfg)[0] if depth is None else float(depth)
     points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, depth)])
+    platform = cfg["platform"]
+    if platform["system"] == "usbl":
+        drms = usbl_horizontal_std(points, arms[0], cfg["acoustics"]["sigma_range"], platform["gps_sigma"],
+                                   platform["imu_sigma_deg"], max(platform["usbl_angle_sigma_deg"], 1e-3),
+                                   params["depth_variance"])
+        return drms.reshape(E.shape)
     drms = horizontal_std(points, arms, arms, params["noise_variance"], params["attitude_variance"],
                           params["depth_variance"], model=model)
     return drms.reshape(E.shape)
+
+
+def system_line(cfg: dict) -> str:
+    """The geometry of a configuration's system in a few words (a panel's title)."""
+    platform = cfg["platform"]
+    n, system = len(lever_arms(platform)), platform["system"]
+    layout = "custom layout" if platform["layout"] == "custom" else f"{platform['baseline']:g} m {platform['layout']}"
+    if system == "lbl":
+        return f"{n} transponders, {layout}, seafloor at {platform['seafloor_depth']:g} m"
+    if system == "usbl":
+        return f"one transceiver, {platform['usbl_angle_sigma_deg']:g}° on axis"
+    return f"{n} beacons, {layout}"
 
 
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
@@ -156,6 +193,10 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     east, north = grid(extent, step)
     if compare is None:
         configs, labels = [load_config(scenario, overrides, seed=seed)], [str(scenario)]
+    elif compare[0] == "platform.system":  # each system from its defaults, the user's --set over them
+        systems = parse_systems(",".join(compare[1]), "--compare")
+        configs = [load_config(scenario, system_overrides(s, overrides, "--compare"), seed=seed) for s in systems]
+        labels = [f"platform.system = {s}" for s in systems]
     else:
         key, values = compare
         configs = [load_config(scenario, [*overrides, f"{key}={v}"], seed=seed) for v in values]
@@ -164,6 +205,8 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
         raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")
     for cfg in configs:
         cfg["target"]["depth"] = diver_depth(cfg)[0] if depth is None else float(depth)
+        if compare is not None and compare[0] == "platform.system":
+            check_seafloor(cfg, cfg["target"]["depth"])
     return labels, configs, east, north, [accuracy_map(c, east, north, depth=c["target"]["depth"]) for c in configs]
 
 
@@ -194,19 +237,30 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
     finite = np.concatenate([m[np.isfinite(m)] for m in maps])
     norm = LogNorm(vmin=max(float(finite.min()), 1e-4), vmax=float(finite.max()))
     fig, axes = plt.subplots(1, len(maps), figsize=(5.2 * len(maps) + 0.8, 4.8), squeeze=False)
+    systems = [cfg["platform"]["system"] for cfg in configs]
+    step = float(east[1] - east[0]) if len(east) > 1 else 1.0
     for k, (ax, label, cfg, m) in enumerate(zip(axes[0], labels, configs, maps)):
         mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
         lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
         arms = lever_arms(cfg["platform"])
-        ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="beacons")
+        inside = (np.abs(arms[:, 1]) <= east.max()) & (np.abs(arms[:, 0]) <= north.max())
+        ax.plot(arms[inside, 1], arms[inside, 0], "r^", ms=6, label=_MARKERS[systems[k]])
+        if not inside.all():  # the grid, not the far markers, sets the axes
+            ax.set_xlim(east.min() - step / 2, east.max() + step / 2)
+            ax.set_ylim(north.min() - step / 2, north.max() + step / 2)
         ax.set_aspect("equal")
         ax.set_xlabel("East [m]")
         if k == 0:
             ax.set_ylabel("North [m]")
-        ax.set_title(f"{label}\n(diver at {cfg['target']['depth']:g} m depth)", fontsize=9)
-    axes[0][0].legend(loc="upper right", fontsize=8)
-    bar = fig.colorbar(mesh, ax=axes[0].tolist(), label="horizontal DRMS of one round of ranges + depth [m]")
+        what = f"{system_line(cfg)}\n" if label.startswith("platform.system = ") else ""
+        off = ("" if inside.all() else f", the {_MARKERS[systems[k]]} off the map" if not inside.any()
+               else f", {int((~inside).sum())} of the {len(arms)} {_MARKERS[systems[k]]} off the map")
+        ax.set_title(f"{label}\n({what}diver at {cfg['target']['depth']:g} m depth{off})", fontsize=9)
+        if inside.any() and (k == 0 or systems[k] != systems[0]):
+            ax.legend(loc="upper right", fontsize=8)
+    what = "ranges" if "usbl" not in systems else "measurements"
+    bar = fig.colorbar(mesh, ax=axes[0].tolist(), label=f"horizontal DRMS of one round of {what} + depth [m]")
     bar.locator = LogLocator(subs=(1.0, 2.0, 5.0))  # 0.1, 0.2, 0.5, 1, 2, 5 ... labelled, not only the decades
     bar.formatter = ScalarFormatter()
     bar.update_ticks()
@@ -226,4 +280,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["accuracy_map", "grid", "make_maps", "parse_compare", "parse_levels", "plot", "table", "write"]
+__all__ = ["accuracy_map", "grid", "make_maps", "parse_compare", "parse_levels", "plot", "system_line", "table",
+           "write"]
