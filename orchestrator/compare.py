@@ -49,7 +49,7 @@ from sblsim.orchestrator.config import check_receiver, load_config, receiver_lab
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
-from sblsim.orchestrator.systems import SYSTEM_DEFAULTS, check_seafloor, system_overrides
+from sblsim.orchestrator.systems import SYSTEM_DEFAULTS, system_overrides
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "rms_e_tot_sd", "mean_e_tot", "nees", "nees_sd", "coverage_95", "nis",
            "gated_pct", "pcrb_rms", "ratio_to_pcrb", "us_per_step", "diverged")
@@ -111,8 +111,6 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
     else:
         configs = [load_config(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"]), seed=seed)
                    for s in systems for r in receivers]
-        for cfg in configs:
-            check_seafloor(cfg)
     rows = []
     records = RecordBuffer()  # one record memory for the receivers' batches, one after the other
     for cfg in configs:

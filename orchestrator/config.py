@@ -35,6 +35,7 @@ from sblsim.models.platform.geometry import check_geometry, largest_arm, platfor
 from sblsim.models.target import natural_duration, start_state
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
+from sblsim.orchestrator.systems import check_seafloor
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
 SECTIONS = ("run", "simulation", *COMPONENTS)
@@ -373,6 +374,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         if name != "receiver":
             model.fmu_parameters(cfg[name], beacon_count(cfg))
     check_geometry(cfg["platform"])
+    check_seafloor(cfg)
     _check_duration(sim, cfg["target"])
     return cfg
 
