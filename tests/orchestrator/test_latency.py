@@ -8,6 +8,8 @@ refuses a latency above 0. The runs are short (5 s).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -29,6 +31,8 @@ RECEIVER_COLUMNS = ["est_x", "est_y", "est_z", "est_vx", "est_vy", "est_vz", "in
                     "instr_valid", "nis", "pos_std", "cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz",
                     "gated"]
 STEPS = 7  # the latency in sampling times (T = 0.1 s)
+#: A user's receiver model (``model:PATH.py``): the README's example.
+EXAMPLE_MODEL = Path(__file__).parents[2] / "docs" / "examples" / "constant_position.py"
 
 
 def config(latency: float = 0.0, extra: tuple[str, ...] = ()) -> dict:
@@ -128,12 +132,8 @@ def test_the_command_line_says_the_same_and_writes_nothing(tmp_path, capsys):
     assert err.startswith("sblsim: error: receiver.latency:") and "\n" not in err and not out.exists()
 
 
-def test_the_receiver_component_never_receives_the_key(tmp_path):
-    example = "docs/examples/constant_position.py"
-    from pathlib import Path
-
-    path = Path(__file__).parents[2] / example
-    for receiver in ("ekf", "ekf-seq", "ukf", "lsq", f"model:{path}"):
+def test_the_receiver_component_never_receives_the_key():
+    for receiver in ("ekf", "ekf-seq", "ukf", "lsq", f"model:{EXAMPLE_MODEL}"):
         cfg = load_config("semicircle", [f"receiver={receiver}", "receiver.latency=1"])
         assert cfg["receiver"]["latency"] == 1.0
         assert "latency" not in component_params(cfg, "receiver")
