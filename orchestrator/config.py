@@ -7,6 +7,10 @@ parameters (:mod:`models`). Every value is validated against its declaration,
 so errors name the field and its allowed range. The resolved configuration
 holds every parameter explicitly and reproduces a run on its own.
 
+The ``receiver`` section also holds the keys the orchestrator implements for
+every receiver (:data:`RECEIVER_KEYS`: ``latency``); they are never passed to
+the receiver component.
+
 Ties (applied only where the user did not set the key):
 ``receiver.sigma_range`` ← ``acoustics.sigma_range`` and
 ``receiver.sigma_depth`` ← ``target.depth_sigma`` (both floored at 1 mm: R must
@@ -86,6 +90,15 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH"),
 )
 
+#: Keys of the ``receiver`` section that the orchestrator implements for every receiver (built-in, a user's model
+#: or FMU): configuration keys only, never parameters of the receiver component (:func:`component_params`).
+RECEIVER_KEYS: tuple[Variable, ...] = (
+    Variable("latency", "parameter", "Real", 0.0, "s",
+             "Processing latency: the estimate a diver sees is the one the receiver computed this long ago "
+             "(a whole number of sampling times)", min=0.0, max=60.0, scope="config"),
+)
+RECEIVER_KEY_NAMES = frozenset(v.name for v in RECEIVER_KEYS)
+
 #: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
 SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
 #: FMU parameters filled from a configuration key of another section: (component, parameter) <- (section, key).
@@ -137,7 +150,8 @@ def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ..
     Raises
     ------
     ConfigError
-        If the section is unknown.
+        If the section is unknown, or the receiver declares a parameter named like one of
+        :data:`RECEIVER_KEYS`.
     """
     if section == "run":
         return RUN_VARIABLES
@@ -146,8 +160,14 @@ def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ..
     if section == "receiver":
         model = receiver_model(receiver)
         if isinstance(model, Path):
-            return external_receiver_variables(model)
-        return tuple(v for v in model.config_parameters() if v.name not in SEED_NAMES)
+            own = external_receiver_variables(model)
+        else:
+            own = tuple(v for v in model.config_parameters() if v.name not in SEED_NAMES)
+        clash = sorted(RECEIVER_KEY_NAMES & {v.name for v in own})
+        if clash:
+            raise ConfigError(f"receiver.{clash[0]}: the {receiver} receiver declares a parameter {clash[0]!r}, "
+                              "a key the orchestrator keeps for every receiver; rename the receiver's parameter")
+        return own + RECEIVER_KEYS
     if section in COMPONENTS:
         return tuple(v for v in COMPONENTS[section].config_parameters() if v.name not in SEED_NAMES)
     raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
@@ -365,8 +385,17 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     if unknown:
         raise ConfigError(f"receiver.{unknown[0]}: not a parameter of the {receiver_label({'simulation': sim})} "
                           f"receiver; its keys: {', '.join(sorted(v.name for v in receiver_keys))}")
-    cfg = {s: (sim if s == "simulation" else resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s))
-           for s in SECTIONS}
+    given = raw.get("receiver", {})
+    own = tuple(v for v in receiver_keys if v.name not in RECEIVER_KEY_NAMES)
+    cfg: dict[str, dict] = {}
+    for s in SECTIONS:
+        if s == "simulation":
+            cfg[s] = sim
+        elif s == "receiver":  # the receiver's own parameters, then the orchestrator's keys
+            cfg[s] = resolve_parameters(own, {k: v for k, v in given.items() if k not in RECEIVER_KEY_NAMES}, s)
+            cfg[s].update(_orchestrator_receiver_keys(given, sim))
+        else:
+            cfg[s] = resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s)
     _check_beacons(cfg["platform"], set(raw.get("platform", {})))
     _check_ranging(cfg)
     _receiver_ties(cfg, set(raw.get("receiver", {})))
@@ -377,6 +406,37 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     check_seafloor(cfg)
     _check_duration(sim, cfg["target"])
     return cfg
+
+
+def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
+    """The :data:`RECEIVER_KEYS` of a receiver section, validated: ``latency`` within [0, 60] s and a whole
+    number of sampling times T (:func:`latency_steps`).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``receiver.latency``, its allowed range or the nearest multiples of T.
+    """
+    try:
+        keys = resolve_parameters(RECEIVER_KEYS, {k: v for k, v in given.items() if k in RECEIVER_KEY_NAMES},
+                                  "receiver")
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+    latency, T = keys["latency"], sim["sampling_time"]
+    ratio = latency / T
+    if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+        below = math.floor(ratio) * T
+        nearest = [f"{v:.10g}" for v in (below, below + T) if float(f"{v:.10g}") <= RECEIVER_KEYS[0].max]
+        ekf = sim["ekf_rate_ratio"]
+        note = f"; the record holds the receiver's outputs once per T, not per T / {ekf}" if ekf > 1 else ""
+        raise ConfigError(f"receiver.latency: {latency:g} s is not a whole number of sampling times "
+                          f"(T = {T:g} s{note}); give {' or '.join(nearest)} s")
+    return keys
+
+
+def latency_steps(cfg: dict[str, dict]) -> int:
+    """``receiver.latency`` of a resolved configuration in steps of the record (sampling times T)."""
+    return int(round(cfg["receiver"]["latency"] / cfg["simulation"]["sampling_time"]))
 
 
 def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
@@ -495,7 +555,9 @@ def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[s
     The component's section turned into FMU parameters by its model
     (:meth:`sblsim.models.component.Component.fmu_parameters`: tables from files, custom
     offsets), the sampling ties (:data:`SAMPLING_TIES`) and the seed keys it
-    declares. String choices stay text (each engine encodes them).
+    declares. String choices stay text (each engine encodes them). The
+    orchestrator's receiver keys (:data:`RECEIVER_KEYS`, e.g. ``latency``) are
+    never among them.
 
     Parameters
     ----------
@@ -514,6 +576,8 @@ def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[s
     """
     model = model if model is not None else component_model(cfg, component)
     section = cfg[component]
+    if component == "receiver":  # the orchestrator's keys are not the receiver's parameters
+        section = {k: v for k, v in section.items() if k not in RECEIVER_KEY_NAMES}
     if model is None:
         params = dict(section)
         declared = accepted or frozenset()

@@ -21,6 +21,7 @@ from sblsim.orchestrator.config import (
     MIN_SIGMA,
     beacon_count,
     component_params,
+    latency_steps,
     receiver_label,
     receiver_source,
     to_toml,
@@ -244,7 +245,10 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     must share the simulation section and everything else. The local engine
     steps them all together; FMUs (the fmu engine, or a user's receiver FMU)
     step them one at a time (B = 1).
-    Each run's numbers are the same whatever batch it is part of.
+    Each run's numbers are the same whatever batch it is part of. The
+    receiver's recorded outputs are delayed by ``receiver.latency``
+    (:func:`apply_latency`, which the runs of a batch share) before the
+    metrics and the time series are computed from them.
 
     Parameters
     ----------
@@ -318,6 +322,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         rec = recs[0]
     else:
         rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
+    rec = apply_latency(rec, latency_steps(cfgs[0]))  # what the diver sees; the runs of a batch share it
     metrics, bound = _metrics(cfgs, rec, replicates, with_bound=timeseries)
     if timeseries:
         types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
@@ -328,6 +333,32 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     result = RunResult(cfgs[0], engine, frame, metrics, n_steps, wall)
     result.step_time = timing
     return result
+
+
+def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.ndarray]:
+    """The record as the diver sees it with the receiver's processing latency (``receiver.latency``).
+
+    Every recorded output of the receiver (``receiver.*``: estimates, covariance, NIS, gate, fix) at step k
+    is replaced by the one at step k − ``steps``; before step ``steps`` the diver sees the receiver's
+    first recorded row. The other components' outputs and ``time`` are left as they are.
+
+    Parameters
+    ----------
+    columns : dict
+        ``"component.variable"`` -> array of shape (n_steps, B), and ``"time"`` (:func:`simulate`'s record).
+    steps : int
+        The latency in steps of the record (:func:`sblsim.orchestrator.config.latency_steps`), ≥ 0.
+
+    Returns
+    -------
+    dict
+        A new dict with new arrays for the receiver's outputs (``columns`` itself when ``steps`` is 0).
+    """
+    if steps <= 0:
+        return columns
+    n_steps = len(columns["time"])
+    source = np.maximum(np.arange(n_steps) - steps, 0)  # the row each step shows
+    return {k: (v[source] if k.startswith("receiver.") else v) for k, v in columns.items()}
 
 
 @lru_cache(maxsize=64)

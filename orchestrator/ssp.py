@@ -19,6 +19,10 @@ What the package avoids, because one of the hosts it was run in rejects it
 (the README lists the hosts): names that are not identifiers
 (``[A-Za-z][A-Za-z0-9_]*``), String parameters (the FMUs have none: choices
 are Integer indices, tables are Real arrays), and annotations on a component.
+A configuration with ``receiver.latency`` > 0 is not exported: the
+orchestrator delays the receiver's recorded outputs after a run, and an FMI
+host stepping the package would show them undelayed (other numbers than
+``sblsim run``).
 Every component runs at one step, the base step ``T / ekf_rate_ratio``: the
 FMUs sample and slot on their own clocks, so a finer step changes nothing but
 the receiver's prediction rate. The step is given where each host reads it:
@@ -197,12 +201,17 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     Raises
     ------
     ModelError
-        If an FMU is missing, or the written package fails the SSP schemas
-        (then nothing is left on disk).
+        If an FMU is missing, the written package fails the SSP schemas
+        (then nothing is left on disk), or ``receiver.latency`` is not 0 (the
+        orchestrator applies it after a run; an FMI host would not).
     """
     out = Path(out)
     if out.suffix != ".ssp":
         raise SspError(f"--out: {str(out)!r} must end in .ssp")
+    if cfg["receiver"].get("latency", 0.0) > 0.0:
+        raise SspError(f"receiver.latency: {cfg['receiver']['latency']:g} s cannot be exported: the orchestrator "
+                       "delays the receiver's outputs after a run, an FMI host would show them undelayed; "
+                       "export with receiver.latency = 0")
     n_beacons = beacon_count(cfg)
     connections = list(connections) if connections is not None else default_connections(n_beacons)
     sources = system_sources(cfg)

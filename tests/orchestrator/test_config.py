@@ -12,6 +12,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     MIN_SIGMA,
+    RECEIVER_KEYS,
     SECTIONS,
     load_config,
     parse_override,
@@ -21,11 +22,13 @@ from sblsim.orchestrator.config import (
 
 
 def declared_parameters(section: str) -> set[str]:
-    """Parameter names a section must hold, computed from the declarations."""
+    """Parameter names a section must hold, computed from the declarations (the receiver's section also holds
+    the orchestrator's receiver keys)."""
     if section in COMPONENTS:
         seed = {"seed", "scenario_key", "cell", "replicate"}
         declared = COMPONENTS[section].variables()
-        return {v.name for v in declared if v.causality == "parameter" and v.scope != "fmu"} - seed
+        extra = {v.name for v in RECEIVER_KEYS} if section == "receiver" else set()
+        return ({v.name for v in declared if v.causality == "parameter" and v.scope != "fmu"} - seed) | extra
     return {v.name for v in section_variables(section)}
 
 
