@@ -335,12 +335,18 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     return result
 
 
+#: The receiver's outputs a latency does not delay: diagnostics of the slot they judge, not what a diver sees.
+UNDELAYED = ("receiver.nis", "receiver.gated")
+
+
 def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.ndarray]:
     """The record as the diver sees it with the receiver's processing latency (``receiver.latency``).
 
-    Every recorded output of the receiver (``receiver.*``: estimates, covariance, NIS, gate, fix) at step k
-    is replaced by the one at step k − ``steps``; before step ``steps`` the diver sees the receiver's
-    first recorded row. The other components' outputs and ``time`` are left as they are.
+    Every recorded output of the receiver the diver sees (``receiver.*``: estimates, covariance, the
+    instrumentation fix) at step k is replaced by the one at step k − ``steps``; before step ``steps`` the
+    diver sees the receiver's first recorded row. The receiver's own diagnostics of each slot
+    (:data:`UNDELAYED`: its NIS and gate decision) stay paired with the slot they judged, and the other
+    components' outputs and ``time`` are left as they are.
 
     Parameters
     ----------
@@ -358,7 +364,7 @@ def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.nd
         return columns
     n_steps = len(columns["time"])
     source = np.maximum(np.arange(n_steps) - steps, 0)  # the row each step shows
-    return {k: (v[source] if k.startswith("receiver.") else v) for k, v in columns.items()}
+    return {k: (v[source] if k.startswith("receiver.") and k not in UNDELAYED else v) for k, v in columns.items()}
 
 
 @lru_cache(maxsize=64)

@@ -26,10 +26,10 @@ from sblsim.orchestrator.ssp import SspError, export_ssp
 from sblsim.orchestrator.study import load_study
 
 SHORT = ["simulation.duration=5", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"]
-#: Every recorded output of the receiver in the time series.
+#: Every recorded output of the receiver a diver sees, in the time series (its slot diagnostics nis and gated
+#: are not delayed).
 RECEIVER_COLUMNS = ["est_x", "est_y", "est_z", "est_vx", "est_vy", "est_vz", "instr_x", "instr_y", "instr_z",
-                    "instr_valid", "nis", "pos_std", "cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz",
-                    "gated"]
+                    "instr_valid", "pos_std", "cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"]
 STEPS = 7  # the latency in sampling times (T = 0.1 s)
 #: A user's receiver model (``model:PATH.py``): the README's example.
 EXAMPLE_MODEL = Path(__file__).parents[2] / "docs" / "examples" / "constant_position.py"
@@ -195,3 +195,12 @@ def test_ssp_export_refuses_a_latency(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("sblsim: error: receiver.latency:") and "\n" not in err
     assert not list(tmp_path.glob("*.ssp*"))
+
+
+def test_the_slot_diagnostics_stay_with_their_slots(pair):
+    """NIS and gate judge a slot, not what the diver sees: a latency changes neither them nor their statistics."""
+    plain, delayed = pair
+    np.testing.assert_array_equal(plain.timeseries["nis"], delayed.timeseries["nis"])
+    for name in ("nis_mean", "gated_pct", "updates"):
+        np.testing.assert_array_equal(plain.metrics[name], delayed.metrics[name], err_msg=name)
+    assert (plain.metrics["e_tot_mean"] != delayed.metrics["e_tot_mean"]).all()
