@@ -13,8 +13,9 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.bound import FIXED
+from sblsim.models.bound import FIXED, USBL_FIXED, usbl_pcrb, usbl_pcrb_inputs
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.core import USBL_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms
 from sblsim.models.receiver.core import COVARIANCE, filter_parameters
 from sblsim.orchestrator.config import (
@@ -42,7 +43,7 @@ from sblsim.orchestrator.engines import (
 )
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import RecordBuffer, simulate
-from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics
+from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
 from sblsim.orchestrator.output import staged_directory
 
 #: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
@@ -71,8 +72,10 @@ TIMESERIES_COLUMNS = {
     "pitch": "platform.pitch",
     "yaw": "platform.yaw",
 }
-#: Columns a USBL run adds to the time series: the packet's direction of arrival [rad].
-USBL_COLUMNS = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation"}
+#: What a USBL run's time series adds (after :data:`TIMESERIES_COLUMNS`): the direction of arrival the packet
+#: carries and the true attitude of the transceiver's array (the platform's plus the mounting misalignment).
+USBL_COLUMNS = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation",
+                **{f"array_{a}": f"platform.array_{a}" for a in ("roll", "pitch", "yaw")}}
 
 
 @dataclass
@@ -86,8 +89,8 @@ class RunResult:
     engine : str
         ``local`` or ``fmu``.
     timeseries : pandas.DataFrame
-        One row per replicate and step (columns :data:`TIMESERIES_COLUMNS`,
-        ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
+        One row per replicate and step (columns :data:`TIMESERIES_COLUMNS`, a USBL run's
+        :data:`USBL_COLUMNS`, ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
     metrics : pandas.DataFrame
         One row per replicate: the metrics of :mod:`sblsim.orchestrator.metrics`.
     steps : int
@@ -124,6 +127,8 @@ def system_sources(cfg: dict | None = None) -> dict[str, Source]:
     return sources
 
 
+#: The smallest USBL angle std of the bound [deg] (the receivers' ``sigma_angle_deg`` is floored alike).
+MIN_ANGLE_SIGMA_DEG = 1e-3
 #: The Kalman-type receivers' parameter defaults (the bound's motion model for a receiver without one).
 _FILTER_DEFAULTS = {v.name: v.start for v in filter_parameters()}
 
@@ -138,7 +143,10 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
     are the configured white error sources: ``acoustics.sigma_range² +
     platform.gps_sigma²`` (LBL: ``+ platform.survey_sigma²``),
     ``platform.imu_sigma_deg`` [rad]² (LBL: 0), and
-    ``target.depth_sigma²`` (floored at 1 mm).
+    ``target.depth_sigma²`` (floored at 1 mm); ``angle_sigma_deg``, the USBL
+    direction-of-arrival std on the array's axis, ``platform.usbl_angle_sigma_deg``
+    [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
+    :func:`sblsim.models.bound.usbl_pcrb`).
     """
     target, platform = cfg["target"], cfg["platform"]
     defaults = _FILTER_DEFAULTS
@@ -151,7 +159,8 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
     position = platform["survey_sigma"] if lbl else platform["gps_sigma"]
     return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + position ** 2,
             "attitude_variance": 0.0 if lbl else math.radians(platform["imu_sigma_deg"]) ** 2,
-            "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2}
+            "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
+            "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
 
 
 def merge_params(cfgs: Sequence[dict], component: str,
@@ -383,22 +392,44 @@ FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid"
 
 def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
              with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
-    """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass."""
+    """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass
+    (a USBL system's bound, :func:`_usbl_bound`, replaces the pass's range-only one)."""
     dt = cfgs[0]["simulation"]["sampling_time"]
-    fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in map(bound_parameters, cfgs)])  # (B, 8)
+    parameters = [bound_parameters(c) for c in cfgs]
+    fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in parameters])  # (B, 8)
     arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
+    usbl = cfgs[0]["platform"]["system"] == "usbl"
     values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
-                                with_bound)
+                                with_bound and not usbl)
+    if usbl:
+        bound = _usbl_bound(rec, dt, parameters)
+        values["pcrb_rms"] = np.sqrt(np.mean(np.ascontiguousarray(bound.T) ** 2, axis=-1))
+        bound = bound if with_bound else None
     spread = np.array([_spread(tuple(sorted(c["platform"].items()))) for c in cfgs])
     flags = run_flags({name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, spread, arms.shape[1])
     return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
+
+
+def _usbl_bound(rec: dict, dt: float, parameters: Sequence[dict]) -> np.ndarray:
+    """The position PCRB (N, B) [m] of USBL runs (:func:`sblsim.models.bound.usbl_pcrb`): the range, azimuth and
+    elevation of each received packet from the transceiver position it carries, and the depth at every slot."""
+    column = {name: np.asarray(rec[TIMESERIES_COLUMNS[name]], dtype=float)
+              for name in ("true_x", "true_y", "true_z", "packet_seq", "packet_valid", "beacon_id", "beacon_x",
+                           "beacon_y", "beacon_z")}
+    received = (column["packet_valid"] > 0.5) & (np.rint(column["beacon_id"]) == USBL_BEACONS)
+    slot, fresh = slots(np.rint(column["packet_seq"]), received)
+    truth = np.stack([column[f"true_{a}"] for a in "xyz"], axis=-1)
+    transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], axis=-1)
+    fixed = {k: np.array([p[k] for p in parameters]) for k in USBL_FIXED[1:]}
+    return usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=dt, **fixed))
 
 
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:
     """The per-step table, replicate-major (all steps of replicate 0, then replicate 1, ...)."""
     batch = len(replicates)
     cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in TIMESERIES_COLUMNS}
-    cols.update({name: rec[column] for name, column in USBL_COLUMNS.items() if column in rec})
+    if USBL_COLUMNS["azimuth"] in rec:  # a USBL interface
+        cols.update({name: rec[source] for name, source in USBL_COLUMNS.items()})
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
     # no fix at a step (instr_valid false, instr_* 0): the step has no instrumentation error

@@ -65,7 +65,8 @@ def gate(innovation, variance, fresh, x: dict, u: dict, p: dict) -> dict[str, ca
     shortest) or its NIS ``innovation² / variance`` is within the χ²(1)
     quantile of ``gate_probability``; each beacon remembers whether its latest
     range failed. A range is used when it passes, or when at least
-    ``gate_max_rejections`` beacons' latest ranges failed: a multipath outlier
+    ``gate_max_rejections`` beacons' latest ranges failed (or every beacon's, when
+    the interface has fewer: a USBL interface has one, its transceiver): a multipath outlier
     is isolated, but when the estimate has drifted (a sudden turn, a long
     loss, a mirror solution) the ranges of several beacons fail together, and
     a gate that kept rejecting them would never recover (gate lock-out).
@@ -89,10 +90,12 @@ def gate(innovation, variance, fresh, x: dict, u: dict, p: dict) -> dict[str, ca
     """
     test = ca.logic_or(innovation <= 0.0,
                        innovation * innovation / variance <= gate_threshold(p["gate_probability"]))
-    use = ca.logic_and(fresh, ca.logic_or(test, ca.sum1(x["failed"]) >= p["gate_max_rejections"]))
+    beacons = x["failed"].numel()
+    guard = ca.sum1(x["failed"]) >= ca.fmin(p["gate_max_rejections"], beacons)  # fewer beacons: all of them failed
+    use = ca.logic_and(fresh, ca.logic_or(test, guard))
     index = u["beacon_id"] - 1
     failed = ca.vertcat(*[ca.if_else(ca.logic_and(fresh, index == j), ca.logic_not(test), x["failed"][j])
-                          for j in range(x["failed"].numel())])
+                          for j in range(beacons)])
     return {"use": use, "gated": ca.logic_and(fresh, ca.logic_not(use)), "failed": failed}
 
 

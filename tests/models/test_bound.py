@@ -217,3 +217,67 @@ def test_range_bearing_fisher_information_through_the_generic_map_function():
     np.testing.assert_allclose(slope[rho[1:] > 500], s_a, rtol=1e-2)  # linear: about range · σ_angle
     # straight below the transceiver the azimuth is undefined: no finite fix
     assert np.isinf(model_horizontal_std(model, transceiver + [[0, 0, 10.0]], transceiver, variances)).all()
+
+
+def usbl_gradients(p, transceiver):
+    """∂[r, α, ε]/∂p (3, 3), analytic (numpy)."""
+    dn, de, dd = p - transceiver
+    rho2 = dn**2 + de**2
+    rho, r2 = np.sqrt(rho2), rho2 + dd**2
+    return np.array([np.array([dn, de, dd]) / np.sqrt(r2), np.array([-de, dn, 0.0]) / rho2,
+                     np.array([-dd * dn / rho, -dd * de / rho, rho]) / r2])
+
+
+def usbl_case(seed=4, n=200, b=3):
+    """Three runs: a diver circling 8-20 m from a transceiver that heaves, one run passing almost under it (the
+    angle noise at its floor, cos φ ≥ 0.1 off the vertical, and far off it)."""
+    rng = np.random.default_rng(seed)
+    t = 0.5 * np.arange(1, n + 1)
+    radius = np.array([8.0, 20.0, 3.0])
+    depth = np.array([6.0, 2.5, 40.0])  # cos φ ≈ 0.6, ≈ 0.07 (floored at 0.1) and ≈ 1
+    truth = np.stack([np.stack([radius[j] * np.cos(0.03 * t + j), radius[j] * np.sin(0.03 * t + j),
+                                depth[j] + 0.01 * t], -1) for j in range(b)], axis=1)
+    transceivers = rng.normal(scale=0.2, size=(n, b, 3)) + [0, 0, 1.0]
+    slot = rng.uniform(size=(n, b)) < 0.8
+    received = slot & (rng.uniform(size=(n, b)) < 0.8)
+    fixed = dict(dt=0.5, q_horizontal=np.array([0.01, 0.002, 0.05]), q_vertical=np.array([1e-3, 1e-4, 1e-2]),
+                 p0_position=np.array([1.0, 2.0, 0.5]), p0_velocity=np.array([0.5, 0.2, 0.3]),
+                 noise_variance=np.array([0.02, 0.5, 0.01]), angle_sigma_deg=np.array([0.5, 1.0, 0.2]),
+                 attitude_variance=np.radians([1.0, 0.0, 0.5]) ** 2, depth_variance=np.array([1e-4, 1e-2, 1e-6]))
+    return truth, slot, received, transceivers, fixed
+
+
+def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elevation():
+    """The USBL bound (models/bound.py usbl_pcrb) against FilterPy's KalmanFilter covariance with the linearized
+    range, azimuth and elevation rows at the true position (analytic gradients, numpy) and the variances written
+    out here: ``σ_r² + σ_GPS²``, and ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for each angle (φ off the vertical)."""
+    from sblsim.models.bound import usbl_pcrb, usbl_pcrb_inputs
+
+    truth, slot, received, transceivers, fixed = usbl_case()
+    n, b = slot.shape
+    bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, received, transceivers, **fixed))
+    floored = 0
+    for r in range(b):
+        f = {k: v[r] if isinstance(v, np.ndarray) else v for k, v in fixed.items()}
+        kf = KalmanFilter(dim_x=6, dim_z=1)
+        kf.x, kf.F, kf.Q = np.zeros((6, 1)), phi(f["dt"]), white_noise_q(f["dt"], f["q_horizontal"], f["q_vertical"])
+        kf.P = np.diag([f["p0_position"] ** 2, f["p0_velocity"] ** 2] * 3)
+        for k in range(n):
+            kf.predict()
+            if slot[k, r]:
+                kf.update(np.zeros((1, 1)), R=f["depth_variance"], H=np.array([[0, 0, 0, 0, 1.0, 0]]))
+                if received[k, r]:
+                    d = truth[k, r] - transceivers[k, r]
+                    cos_phi = d[2] / np.linalg.norm(d)
+                    floored += cos_phi < 0.1
+                    angle = (np.radians(f["angle_sigma_deg"]) / max(cos_phi, 0.1)) ** 2 + f["attitude_variance"]
+                    H = np.zeros((3, 6))
+                    H[:, [0, 2, 4]] = usbl_gradients(truth[k, r], transceivers[k, r])
+                    kf.update(np.zeros((3, 1)), R=np.diag([f["noise_variance"], angle, angle]), H=H)
+            assert bound[k, r] == pytest.approx(np.sqrt(kf.P[0, 0] + kf.P[2, 2] + kf.P[4, 4]), rel=1e-7), (k, r)
+    assert floored > 50 and received.sum() > 300  # the floor of the angle noise is exercised
+    # the angles carry the horizontal position: far below the range-only bound of the same packets
+    zeros = np.zeros_like(transceivers)
+    range_only = pcrb(*pcrb_inputs(truth, slot, received, transceivers, zeros, **{
+        k: v for k, v in fixed.items() if k != "angle_sigma_deg"}))
+    assert np.all(bound[-1] < 0.5 * range_only[-1])

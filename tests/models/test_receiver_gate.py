@@ -79,6 +79,27 @@ def test_no_lock_out_after_failures_on_several_beacons():
     assert core.state["failed"][0].tolist() == [1.0, 1.0, 1.0, 1.0]
 
 
+@pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
+def test_no_lock_out_with_the_one_transceiver_of_a_usbl_interface(model):
+    """USBL: one "beacon", so ``gate_max_rejections`` (2) beacons can never have failed; the guard counts every
+    beacon of a smaller interface: after one failed packet the next ones are used, though they fail as well, until
+    one passes again (without it the gate refused every packet after a drift: an ekf-seq run on random-walk gated
+    its packets for 9 s while its error grew to 4 m)."""
+    transceiver = np.array([0.0, 0.0, 1.0])
+    core = Core(model, GATE, n_beacons=1).initialize(0.0)
+    t, gated = 0.0, []
+    for seq in range(1, 5):  # every range 20 m long: all fail the test
+        x = core.state["x"][0]
+        d = x[[0, 2, 4]] - transceiver
+        inputs = packet(seq, 1, t + 0.5, np.linalg.norm(d) + 20.0, transceiver, x[4])
+        inputs.update(azimuth=np.arctan2(d[1], d[0]), elevation=np.arctan2(d[2], np.hypot(d[0], d[1])))
+        core.set_inputs(inputs)
+        gated.append(bool(core.step(t, 0.5)["gated"][0]))
+        t += 0.5
+    assert gated == [True, False, False, False]
+    assert core.state["failed"][0].tolist() == [1.0]
+
+
 def test_gate_off_uses_every_range():
     core = Core(SequentialReceiver, dict(GATE, gate_probability=1.0)).initialize(0.0)
     h, S, depth = predicted_range()

@@ -1,0 +1,285 @@
+"""The three positioning systems (SBL, LBL, USBL) in runs: the accuracy limit, two-way ranging, per-run errors and
+the two engines.
+
+* The bound (``pcrb_rms``; USBL: range, azimuth and elevation, :func:`sblsim.models.bound.usbl_pcrb`) on
+  ``random-walk``, a trajectory drawn from the receivers' motion model, with only white error sources: ``ekf-seq``
+  reaches it and no receiver beats it beyond the sampling error.
+* TWTT cancels a clock drift that ruins OWTT; the turnaround jitter enters the range as ``c σ / 2``.
+* The errors drawn once per run (LBL survey, SBL installation, USBL mounting misalignment) are constant within a
+  run and differ between runs.
+* The local and fmu engines give the same numbers for every system, for 3 to 8 beacons and with TWTT.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from sblsim.models.bound import usbl_pcrb, usbl_pcrb_inputs
+from sblsim.models.platform.geometry import platform_offsets
+from sblsim.orchestrator.config import beacon_count, load_config
+from sblsim.orchestrator.connections import default_connections
+from sblsim.orchestrator.engines import close_handles, make_handles
+from sblsim.orchestrator.limits import step_count
+from sblsim.orchestrator.master import simulate
+from sblsim.orchestrator.metrics import slots
+from sblsim.orchestrator.run import bound_parameters, merge_params, run, run_batch, system_sources, with_replicates
+from tests.orchestrator.test_fmus import assert_same_frames
+
+SYSTEMS = ("sbl", "lbl", "usbl")
+RECEIVERS = ("ekf-seq", "ekf", "ukf", "lsq")
+SPEED = 1500.0  # the scenarios' assumed and true sound speed [m/s]
+
+
+def new_packets(ts):
+    """Rows of one replicate's time series (in time order) whose step brought a new, received packet."""
+    seq = ts["packet_seq"].to_numpy()
+    new = seq != np.concatenate([[0], seq[:-1]])
+    return ts[new & ts["packet_valid"].to_numpy(bool)]
+
+
+def every_output(cfg, replicates):
+    """Every output of every component at each step (the master's record, ``component.variable`` -> (N, B)), of a
+    batch of replicates on the local engine: what a run records before it keeps its time-series columns."""
+    cfgs = with_replicates(cfg, replicates)
+    n, sim = beacon_count(cfg), cfg["simulation"]
+    handles = make_handles("local", None, n, system_sources(cfg))
+    try:
+        for name, handle in handles.items():
+            handle.setup(*merge_params(cfgs, name, handle.parameters))
+        return simulate(handles, default_connections(n), {"receiver": sim["ekf_rate_ratio"]}, sim["sampling_time"],
+                        step_count(sim["duration"], sim["sampling_time"]), algorithm=sim["master"])
+    finally:
+        close_handles(handles)
+
+
+# --------------------------------------------------------------------------- the accuracy limit
+
+#: White error sources only, none drawn per run: range noise, depth noise, the wave motion. The GPS and IMU errors
+#: are off as well: a USBL packet's angles are taken from the broadcast transceiver position, and neither the GPS
+#: error's shift of that origin nor the lever arm turned by the attitude error is in the bound (or in the receivers'
+#: R); the SBL bound with them is the subject of test_accuracy.py.
+WHITE = ["simulation.sampling_time=0.5", "simulation.duration=60", "platform.gps_sigma=0", "platform.imu_sigma_deg=0",
+         "platform.survey_sigma=0", "platform.installation_sigma=0", "platform.usbl_misalignment_deg=0"]
+RUNS = 200
+
+
+@pytest.fixture(scope="module", params=SYSTEMS)
+def bounded(request):
+    """system -> receiver -> the metrics of 200 random-walk runs (the same paths and noises for every receiver)."""
+    system = request.param
+    metrics = {}
+    for receiver in RECEIVERS:
+        cfg = load_config("random-walk", WHITE + [f"platform.system={system}", f"receiver={receiver}"], seed=4)
+        metrics[receiver] = run_batch(with_replicates(cfg, range(RUNS)), timeseries=False).metrics
+    return system, metrics
+
+
+def normalized(m):
+    """Each run's mean squared error over its squared bound, ``q = e_tot_rms² / pcrb_rms²``, their mean and its
+    standard error. The bound changes a lot from run to run (USBL: with the diver's angle off the vertical), the
+    ratio much less: per run, an ideal filter's expected squared error is the bound of that path."""
+    q = (m["e_tot_rms"] / m["pcrb_rms"]).to_numpy() ** 2
+    return q.mean(), q.std(ddof=1) / math.sqrt(q.size)
+
+
+def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded):
+    """ekf-seq: sqrt(mean q) within 10 % of 1. Over 200 runs the standard error of mean q is ≈ 0.03-0.04 (that of
+    its square root half that, ≤ 0.019): the band is ≥ 4 standard errors wide (the test checks it), so sampling alone
+    does not fail it, while a bound off by 10 % (a missing or wrong measurement row: the range-only bound of a USBL
+    run is several times larger) does. Seen: SBL 1.018, LBL 1.015, USBL 1.038. No receiver has mean q below
+    1 − 3 standard errors (seen: ekf-seq and ukf ≈ 1.03-1.08, ekf 1.08 (USBL) to 2.4 (SBL: its held ranges), lsq
+    ≥ 16)."""
+    system, metrics = bounded
+    m = metrics["ekf-seq"]
+    assert not m["diverged"].any() and (m["pcrb_rms"] > 0).all()
+    q, se = normalized(m)
+    ratio, se_ratio = math.sqrt(q), se / (2 * math.sqrt(q))
+    assert se_ratio < 0.025, f"{system}: standard error {se_ratio:.3f} of the ratio: too few runs for the tolerance"
+    assert abs(ratio - 1.0) < 0.1, f"{system}: ekf-seq RMS / PCRB = {ratio:.3f} ± {se_ratio:.3f}"
+    for receiver, m in metrics.items():
+        np.testing.assert_array_equal(m["pcrb_rms"], metrics["ekf-seq"]["pcrb_rms"])  # the bound of the path
+        q, se = normalized(m)
+        assert q > 1.0 - 3.0 * se, f"{system}: {receiver} beats the bound: mean q = {q:.3f} ± {se:.3f}"
+
+
+def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
+    """The per-step ``pcrb`` of a USBL run is the range-azimuth-elevation bound (casadi) of the recorded packets at
+    the recorded true positions, ``pcrb_rms`` its RMS, the same whatever the batch; far below the range-only bound
+    of the same packets."""
+    from sblsim.models.bound import pcrb, pcrb_inputs
+
+    cfg = load_config("random-walk", ["platform.system=usbl", "simulation.duration=20", "acoustics.loss_pct=20"],
+                      seed=2)
+    result = run(cfg, replicates=[0, 1])
+    ts = result.timeseries
+    n = result.steps
+    column = {c: ts[c].to_numpy().reshape(2, n).T for c in ("true_x", "true_y", "true_z", "packet_seq",
+                                                           "packet_valid", "beacon_id", "beacon_x", "beacon_y",
+                                                           "beacon_z", "pcrb")}
+    slot, fresh = slots(column["packet_seq"], column["packet_valid"].astype(bool) & (column["beacon_id"] == 1))
+    assert (slot & ~fresh).sum() > 10  # lost packets: depth-only slots
+    truth = np.stack([column[f"true_{a}"] for a in "xyz"], -1)
+    transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], -1)
+    p = bound_parameters(cfg)
+    fixed = {k: p[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance",
+                               "angle_sigma_deg", "attitude_variance", "depth_variance")}
+    bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=0.1, **fixed))
+    np.testing.assert_array_equal(column["pcrb"], bound)
+    np.testing.assert_allclose(result.metrics["pcrb_rms"], np.sqrt(np.mean(bound**2, axis=0)), rtol=1e-14)
+    fixed.pop("angle_sigma_deg")
+    range_only = pcrb(*pcrb_inputs(truth, slot, fresh, transceiver, np.zeros_like(truth), dt=0.1, **fixed))
+    assert np.all(np.sqrt(np.mean(range_only**2, axis=0)) > 3 * result.metrics["pcrb_rms"])
+    alone = run(cfg, replicates=[1])  # a run's bound whatever batch it is part of
+    np.testing.assert_array_equal(alone.timeseries["pcrb"], column["pcrb"][:, 1])
+    assert alone.metrics["pcrb_rms"][0] == result.metrics["pcrb_rms"][1]
+
+
+# --------------------------------------------------------------------------- two-way ranging
+
+@pytest.mark.parametrize("system", SYSTEMS)
+def test_twtt_cancels_a_clock_drift_that_ruins_owtt(system):
+    """100 ppm of clock drift. OWTT: the range grows by ``c δ (t_k − t0 + τ)`` (0.45 m after 30 s) and e_tot_mean
+    by a factor ≥ 5 in every run (seen 7.7-16). TWTT: the drift acts on the round trip Δt only, ``c δ Δt / 2`` (about
+    5 mm for SBL, 9 mm for LBL's 50 m deep transponders: the 0.05 s turnaround counts), each range exactly that
+    longer, and e_tot_mean within 2 cm and 3 % of the run without drift (seen ≤ 6 mm, 1.7 %). USBL has TWTT only."""
+    base = ["simulation.duration=30", f"platform.system={system}", "receiver=ekf-seq"]
+    for ranging in ("owtt", "twtt") if system != "usbl" else ("twtt",):
+        runs = [run(load_config("random-walk", base + [f"acoustics.ranging={ranging}",
+                                                       f"acoustics.clock_drift_ppm={ppm}"], seed=3),
+                    replicates=range(4)) for ppm in (0, 100)]
+        steady, drift = (r.metrics["e_tot_mean"].to_numpy() for r in runs)
+        ts0, ts1 = runs[0].timeseries, runs[1].timeseries
+        valid = ts0["packet_valid"].to_numpy(bool)
+        longer = (ts1["range"] - ts0["range"]).to_numpy()[valid]
+        if ranging == "owtt":
+            elapsed = (ts0["tx_time"] + ts0["travel_time"]).to_numpy()[valid]
+            np.testing.assert_allclose(longer, SPEED * 1e-4 * elapsed, rtol=1e-9, atol=1e-9)
+            assert np.all(drift > 5.0 * steady), (system, drift / steady)
+        else:
+            trip = ts0["travel_time"].to_numpy()[valid]  # TWTT: the round trip, turnaround included
+            np.testing.assert_allclose(longer, SPEED * 1e-4 * trip / 2.0, rtol=1e-9, atol=1e-10)
+            assert 0.05 < trip.min() and trip.max() < 0.2
+            np.testing.assert_allclose(drift, steady, rtol=0.03, atol=0.0)
+            assert np.abs(drift - steady).max() < 0.02
+
+
+@pytest.mark.parametrize("system", SYSTEMS)
+def test_turnaround_jitter_enters_the_range_as_c_sigma_over_two(system):
+    """TWTT with a 1 ms turnaround jitter and every other error off (range noise 1 µm): over 600 packets,
+    ``range − range_true`` has std 1500 · 1e-3 / 2 = 0.75 m, inside the 99.9 % χ² interval of the sample std
+    (± about 7 %), and mean 0 within 4 standard errors (0.12 m); without the jitter it is below 1e-5 m."""
+    base = ["simulation.duration=60", f"platform.system={system}", "acoustics.ranging=twtt",
+            "acoustics.sigma_range=1e-6", "platform.gps_sigma=0", "platform.imu_sigma_deg=0", "target.depth_sigma=0"]
+    sigma = SPEED * 1e-3 / 2.0
+    ts = new_packets(run(load_config("random-walk", base + ["acoustics.turnaround_sigma=1e-3"], seed=3)).timeseries)
+    error = (ts["range"] - ts["range_true"]).to_numpy()
+    n = error.size
+    assert n == 600
+    low, high = (sigma * math.sqrt(chi2.ppf(p, n - 1) / (n - 1)) for p in (0.0005, 0.9995))
+    assert low < error.std(ddof=1) < high, (error.std(ddof=1), low, high)
+    assert abs(error.mean()) < 4.0 * sigma / math.sqrt(n)
+    ts = new_packets(run(load_config("random-walk", base, seed=3)).timeseries)
+    assert np.abs(ts["range"] - ts["range_true"]).max() < 1e-5
+
+
+# --------------------------------------------------------------------------- errors drawn once per run
+
+def test_lbl_survey_error_is_constant_within_a_run_and_differs_between_runs():
+    """The position a packet of transponder 1 carries minus its true position (the seafloor point of the layout;
+    the platform's own output too) is the same at every packet of a run, nonzero, and another in each replicate."""
+    sigma = 0.5
+    cfg = load_config("random-walk", ["platform.system=lbl", f"platform.survey_sigma={sigma}",
+                                      "simulation.duration=10"], seed=5)
+    true = platform_offsets(cfg["platform"])[0]
+    assert true[2] == cfg["platform"]["seafloor_depth"]
+    result = run(cfg, replicates=range(4))
+    surveys = []
+    for rep, ts in result.timeseries.groupby("replicate"):
+        packets = new_packets(ts.sort_values("time"))
+        first = packets[packets["beacon_id"] == 1]
+        assert len(first) == 25
+        offset = first[["beacon_x", "beacon_y", "beacon_z"]].to_numpy() - true
+        assert np.all(offset == offset[0]), rep
+        surveys.append(offset[0])
+    surveys = np.array(surveys)
+    assert np.all(np.abs(surveys) > 1e-6) and np.all(np.abs(surveys) < 5 * sigma)
+    assert len({tuple(s) for s in surveys}) == 4
+    outputs = every_output(cfg, range(4))
+    for k, a in enumerate("xyz"):
+        np.testing.assert_array_equal(outputs[f"platform.beacon1_true_{a}"], true[k])
+        np.testing.assert_allclose(outputs[f"platform.beacon1_{a}"] - true[k], np.broadcast_to(surveys[:, k], (100, 4)),
+                                   rtol=0, atol=1e-12)
+
+
+def test_sbl_installation_error_is_constant_within_a_run_and_differs_between_runs():
+    """In a Beaufort 4 sea with exact GPS and IMU, the true beacon i is the broadcast one plus R δ_i (R the platform's
+    attitude): ``Rᵀ (b_i − b̃_i)`` is the same at every step of a run, nonzero, and another in each replicate."""
+    sigma = 0.05
+    cfg = load_config("random-walk", [f"platform.installation_sigma={sigma}", "platform.gps_sigma=0",
+                                      "platform.imu_sigma_deg=0", "platform.beaufort=4", "simulation.duration=5"],
+                      seed=5)
+    out = every_output(cfg, range(3))
+    attitude = np.stack([out[f"platform.{a}"] for a in ("yaw", "pitch", "roll")], -1)  # (N, B, 3)
+    assert np.ptp(attitude[..., 2]) > 0.01  # the platform rolls
+    for i in range(1, 5):
+        true = np.stack([out[f"platform.beacon{i}_true_{a}"] for a in "xyz"], -1)
+        sent = np.stack([out[f"platform.beacon{i}_{a}"] for a in "xyz"], -1)
+        delta = np.array([[Rotation.from_euler("ZYX", attitude[k, b]).as_matrix().T @ (true[k, b] - sent[k, b])
+                           for b in range(3)] for k in range(attitude.shape[0])])
+        np.testing.assert_allclose(delta, np.broadcast_to(delta[0], delta.shape), rtol=0, atol=1e-12)
+        assert np.all(np.abs(delta[0]) > 1e-6) and np.all(np.abs(delta[0]) < 5 * sigma)
+        assert len({tuple(d) for d in delta[0]}) == 3, i
+
+
+def test_usbl_misalignment_is_constant_within_a_run_and_differs_between_runs():
+    """``array_* − roll/pitch/yaw`` (the array's true attitude less the platform's) is the mounting misalignment:
+    the same at every step of a run, another in each replicate, 0 without it."""
+    sigma = 2.0
+    cfg = load_config("random-walk", ["platform.system=usbl", f"platform.usbl_misalignment_deg={sigma}",
+                                      "simulation.duration=10"], seed=5)
+    ts = run(cfg, replicates=range(4)).timeseries
+    angles = ("roll", "pitch", "yaw")
+    misalignment = []
+    for rep, series in ts.groupby("replicate"):
+        mu = np.stack([series[f"array_{a}"] - series[a] for a in angles], -1)
+        np.testing.assert_allclose(mu, np.broadcast_to(mu[0], mu.shape), rtol=0, atol=1e-12, err_msg=str(rep))
+        misalignment.append(mu[0])
+    misalignment = np.array(misalignment)
+    assert np.all(np.abs(misalignment) > 1e-8) and np.all(np.abs(misalignment) < math.radians(5 * sigma))
+    assert len({tuple(m) for m in misalignment}) == 4
+    assert np.ptp(ts["roll"]) > 0.01  # the platform moves; the difference does not
+    aligned = run(load_config("random-walk", ["platform.system=usbl", "simulation.duration=10"], seed=5)).timeseries
+    for a in angles:
+        np.testing.assert_array_equal(aligned[f"array_{a}"], aligned[a])
+
+
+# --------------------------------------------------------------------------- the two engines
+
+#: id -> overrides: SBL and LBL on a circle of N beacons with TWTT (and LBL with OWTT), USBL (one transceiver)
+ENGINE_CASES = {
+    **{f"{system}-circle{n}-twtt": [f"platform.system={system}", "platform.layout=circle", f"platform.beacons={n}",
+                                    "acoustics.ranging=twtt", "acoustics.turnaround_sigma=1e-4"]
+       for system in ("sbl", "lbl") for n in (3, 4, 6, 8)},
+    "lbl-cross-owtt": ["platform.system=lbl", "platform.survey_sigma=0.2"],
+    "usbl-ekf": ["platform.system=usbl", "platform.usbl_misalignment_deg=1", "acoustics.turnaround_sigma=1e-4"],
+    "usbl-ekf-seq": ["platform.system=usbl", "receiver=ekf-seq", "acoustics.outlier_pct=10"],
+}
+
+
+@pytest.mark.parametrize("overrides", ENGINE_CASES.values(), ids=ENGINE_CASES.keys())
+def test_engines_agree_for_every_system(fmu_dir, overrides):
+    """5 s with 10 % loss through both engines: every time-series column (est_x … and the bound) and every metric
+    equal to 1e-9. The FMUs for 4 beacons are the suite's; other numbers (and USBL's one transceiver) are built into
+    the cache once."""
+    cfg = load_config("random-walk", overrides + ["simulation.duration=5", "acoustics.loss_pct=10"], seed=9)
+    local = run(cfg, "local", replicates=[0, 1])
+    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
+    assert local.steps == fmu.steps == 50
+    assert not local.timeseries["packet_valid"].all()
+    assert_same_frames(local.timeseries, fmu.timeseries)
+    assert_same_frames(local.metrics, fmu.metrics)
