@@ -11,9 +11,8 @@ system from its :data:`~sblsim.orchestrator.systems.SYSTEM_DEFAULTS` with
 the user's ``--set`` over them (:mod:`sblsim.orchestrator.systems`); the
 table gains a ``system`` column, one row per system and receiver.
 
-The ``pcrb_rms`` of a USBL configuration is left empty (NaN): the runs'
-PCRB is that of ranges plus depth (:mod:`sblsim.models.bound`) and holds no
-bearing, so it bounds no USBL receiver.
+The ``pcrb_rms`` of each system is its own: ranges and depth for SBL and
+LBL, range, azimuth, elevation and depth for USBL (:mod:`sblsim.models.bound`).
 
 Per receiver (and system), over all steps of all replicates:
 
@@ -119,8 +118,6 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
         m = result.metrics
         rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
         bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))
-        if cfg["platform"]["system"] == "usbl":
-            bound = math.nan  # the runs' PCRB holds ranges and depth, no bearing: no bound for USBL
         rows.append({"system": cfg["platform"]["system"], "receiver": receiver_label(cfg), "runs": replicates,
                      "rms_e_tot": rms,
                      "rms_e_tot_sd": float(np.std(m["e_tot_rms"], ddof=1)) if replicates > 1 else math.nan,
