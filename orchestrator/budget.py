@@ -197,6 +197,12 @@ class Budget:
         return out
 
 
+def _pm(value: float, se: float, total: float, spec: str = ".3g") -> str:
+    """``value ± se`` [m²]; a standard error at rounding level (below 1e-12 of the total) shows as 0."""
+    shown = 0.0 if abs(se) <= 1e-12 * abs(total) else se
+    return f"{value:{spec}} ± {shown:.2g}"
+
+
 def _se(values: np.ndarray) -> float:
     return float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else math.nan
 
@@ -357,13 +363,13 @@ def lines(b: Budget) -> list[str]:
         elif r.status == NO_EFFECT:
             out.append(f"  {r.source + ':':<{width}} 0 (no effect: every run unchanged)")
         else:
-            out.append(f"  {r.source + ':':<{width}} {r.contribution:.3g} ± {r.se:.2g} m² ({share(r.contribution)}), "
-                       f"RMS {r.rms:.3f} m")
-    out.append(f"  {'floor:':<{width}} {b.floor:.3g} ± {b.floor_se:.2g} m² ({share(b.floor)}): the receiver with "
-               "every source off")
-    out.append(f"  {'remainder:':<{width}} {b.remainder:.3g} ± {b.remainder_se:.2g} m² ({share(b.remainder)}): "
+            out.append(f"  {r.source + ':':<{width}} {_pm(r.contribution, r.se, b.total)} m² "
+                       f"({share(r.contribution)}), RMS {r.rms:.3f} m")
+    out.append(f"  {'floor:':<{width}} {_pm(b.floor, b.floor_se, b.total)} m² ({share(b.floor)}): the receiver "
+               "with every source off")
+    out.append(f"  {'remainder:':<{width}} {_pm(b.remainder, b.remainder_se, b.total)} m² ({share(b.remainder)}): "
                "interactions")
-    out.append(f"  {'total:':<{width}} {b.total:.3g} ± {b.total_se:.2g} m² (RMS e_tot {math.sqrt(b.total):.3f} m)")
+    out.append(f"  {'total:':<{width}} {_pm(b.total, b.total_se, b.total)} m² (RMS e_tot {math.sqrt(b.total):.3f} m)")
     return out
 
 
@@ -408,7 +414,7 @@ def _cell(row: Any, total: float) -> str:
         return "off"
     if row["status"] == NO_EFFECT:
         return "0 (no effect)"
-    return f"{row['contribution']:.3g} ± {row['se']:.2g} ({100 * row['contribution'] / total:.1f} %)"
+    return f"{_pm(row['contribution'], row['se'], total)} ({100 * row['contribution'] / total:.1f} %)"
 
 
 def markdown(budgets: Sequence[Budget], key: str | None = None) -> str:
@@ -419,8 +425,9 @@ def markdown(budgets: Sequence[Budget], key: str | None = None) -> str:
         lines_ = ["| source | what | contribution [m²] (± se) | share | RMS [m] |", "|---|---|---|---|---|"]
         for _, r in b.table.iterrows():
             if r["status"] == ON:
-                lines_.append(f"| {r['source']} | {r['description']} | {r['contribution']:.4g} ± {r['se']:.2g} "
-                              f"| {100 * r['share']:.1f} % | {r['rms']:.3f} |")
+                value = _pm(r["contribution"], r["se"], b.total, ".4g")
+                lines_.append(f"| {r['source']} | {r['description']} | {value} | {100 * r['share']:.1f} % "
+                              f"| {r['rms']:.3f} |")
             else:
                 lines_.append(f"| {r['source']} | {r['description']} | {r['status']} | 0 % | 0 |")
         lines_ += ["", *_summary(b), "", advice(b)]
@@ -433,7 +440,7 @@ def markdown(budgets: Sequence[Budget], key: str | None = None) -> str:
         cells = [_cell(b.table[b.table["source"] == name].iloc[0], b.total) for b in budgets]
         lines_.append(f"| {name} | " + " | ".join(cells) + " |")
     for what, attr in (("floor", "floor"), ("remainder", "remainder"), ("total", "total")):
-        cells = [f"{getattr(b, attr):.3g} ± {getattr(b, attr + '_se'):.2g}"
+        cells = [_pm(getattr(b, attr), getattr(b, attr + "_se"), b.total)
                  + (f" ({100 * getattr(b, attr) / b.total:.1f} %)" if what != "total" else
                     f" (RMS {math.sqrt(b.total):.3f} m)") for b in budgets]
         lines_.append(f"| **{what}** | " + " | ".join(cells) + " |")
@@ -444,11 +451,12 @@ def markdown(budgets: Sequence[Budget], key: str | None = None) -> str:
 
 def _summary(b: Budget) -> list[str]:
     share = (lambda v: f"{100 * v / b.total:.1f} %") if b.total > 0 else (lambda v: "n/a")
-    return [f"* total: {b.total:.4g} ± {b.total_se:.2g} m² (RMS e_tot {math.sqrt(b.total):.3f} m), every source on",
-            f"* floor: {b.floor:.4g} ± {b.floor_se:.2g} m² ({share(b.floor)}), every source off: the receiver's "
-            "own lag, start-up and the staleness of held ranges",
-            f"* remainder: {b.remainder:.4g} ± {b.remainder_se:.2g} m² ({share(b.remainder)}): interactions, "
-            "total − floor − Σ contributions"]
+    return [f"* total: {_pm(b.total, b.total_se, b.total, '.4g')} m² (RMS e_tot {math.sqrt(b.total):.3f} m), every "
+            "source on",
+            f"* floor: {_pm(b.floor, b.floor_se, b.total, '.4g')} m² ({share(b.floor)}), every source off: the "
+            "receiver's own lag, start-up and the staleness of held ranges",
+            f"* remainder: {_pm(b.remainder, b.remainder_se, b.total, '.4g')} m² ({share(b.remainder)}): "
+            "interactions, total − floor − Σ contributions"]
 
 
 def _order(budgets: Sequence[Budget]) -> list[str]:
@@ -477,22 +485,24 @@ def plot(budgets: Sequence[Budget], title: str):
     y = np.arange(len(names))[::-1]
     for ax, b in zip(axes[0], budgets):
         scale = 100.0 / b.total if b.total > 0 else math.nan
-        values, errors, colors = [], [], []
+        values, errors, colors, notes = [], [], [], []
         for n in names:
             if n in ("remainder", "floor"):
                 values.append(getattr(b, n) * scale)
                 errors.append(2.0 * getattr(b, f"{n}_se") * scale)
                 colors.append("0.6")
+                notes.append(f"{values[-1]:.1f} %")
             else:
                 r = b.table[b.table["source"] == n].iloc[0]
                 values.append(r["contribution"] * scale)
                 errors.append(2.0 * r["se"] * scale)
-                colors.append("tab:red" if r["status"] == ON else "0.85")
+                colors.append("tab:red")
+                notes.append(f"{values[-1]:.1f} %" if r["status"] == ON else {OFF: "off"}.get(r["status"], r["status"]))
         ax.barh(y, values, xerr=errors, color=colors, capsize=3, alpha=0.85)
-        for k, (value, error) in enumerate(zip(values, errors)):
+        for k, (value, error, note) in enumerate(zip(values, errors, notes)):
             if math.isfinite(value):
-                ax.annotate(f"{value:.1f} %", (max(value, 0.0) + error, y[k]), textcoords="offset points",
-                            xytext=(4, -3), fontsize=7)
+                ax.annotate(note, (max(value, 0.0) + error, y[k]), textcoords="offset points", xytext=(4, -3),
+                            fontsize=7, color="k" if note.endswith("%") else "0.5")
         ax.margins(x=0.12)
         ax.axvline(0.0, color="k", lw=0.8)
         ax.set_yticks(y, names)
