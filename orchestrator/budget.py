@@ -232,8 +232,7 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
     check_replicates(replicates)
     start = time.perf_counter()
     names = sources(cfg)
-    off = {name: switched_off(cfg, overrides) for name, (_, overrides) in names.items()}
-    floor_cfg = switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
+    off, floor_cfg = _switches(cfg)
     records = records if records is not None else RecordBuffer()
     done: list[tuple[dict, np.ndarray, int]] = []  # (configuration, per-replicate MSE, diverged runs)
 
@@ -274,6 +273,24 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
     return Budget(label or str(cfg["run"]["scenario"]), cfg, replicates, total, _se(on), floor_mean, _se(floor),
                   remainder, _se(per_replicate), table, sum(d for _, _, d in done), len(done) * replicates,
                   time.perf_counter() - start, differences)
+
+
+def _switches(cfg: dict[str, dict]) -> tuple[dict[str, dict], dict]:
+    """Each source's switched-off configuration, and the floor's (every source off)."""
+    names = sources(cfg)
+    off = {name: switched_off(cfg, overrides) for name, (_, overrides) in names.items()}
+    return off, switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
+
+
+def planned(cfg: dict[str, dict]) -> int:
+    """How many configurations a budget of ``cfg`` runs: all on, the floor and each source that is on, the
+    same configuration once."""
+    off, floor = _switches(cfg)
+    distinct: list[dict] = []
+    for c in (cfg, floor, *(c for c in off.values() if c != cfg)):
+        if not any(c == d for d in distinct):
+            distinct.append(c)
+    return len(distinct)
 
 
 def check_replicates(replicates: int) -> None:
@@ -325,10 +342,7 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
             start = SYSTEM_DEFAULTS.get(value, ()) if key == "platform.system" else ()
             out.append((f"{key} = {value}", load_config(scenario, [*start, *items, f"{key}={value}"], seed=seed)))
     for _, cfg in out:  # every switch is checked before any run
-        names = sources(cfg)
-        switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
-        for _, overrides in names.values():
-            switched_off(cfg, overrides)
+        _switches(cfg)
     return out
 
 
@@ -340,7 +354,8 @@ def budgets(configs: Sequence[tuple[str, dict]], replicates: int = DEFAULT_REPLI
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=None, unit="run", leave=False, desc="budget")
+        bar = tqdm(total=replicates * sum(planned(cfg) for _, cfg in configs), unit="run", leave=False,
+                   desc="budget")
     records = RecordBuffer()
     try:
         return [budget(cfg, replicates, label, bar, records) for label, cfg in configs]
@@ -546,5 +561,5 @@ def title(scenario: str, budgets: Sequence[Budget], overrides: Sequence[str] = (
 
 
 __all__ = ["COLUMNS", "DEFAULT_REPLICATES", "LATENCY", "SOURCES", "SYSTEM_DEFAULTS", "Budget", "advice", "budget",
-           "budgets", "check_replicates", "configurations", "lines", "markdown", "parse_compare", "plot", "sources",
-           "switched_off", "table", "title", "write"]
+           "budgets", "check_replicates", "configurations", "lines", "markdown", "parse_compare", "planned", "plot",
+           "sources", "switched_off", "table", "title", "write"]

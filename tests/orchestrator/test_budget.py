@@ -20,6 +20,7 @@ from sblsim.orchestrator.budget import (
     SYSTEM_DEFAULTS,
     budget,
     configurations,
+    planned,
     sources,
     switched_off,
 )
@@ -90,6 +91,7 @@ def test_the_budget_adds_up_to_the_total():
     assert (b.table["share"] * b.total).to_numpy() == pytest.approx(b.table["contribution"].to_numpy(), rel=1e-12)
     assert (b.table.loc[b.table["status"] != ON, "contribution"] == 0).all()
     assert b.runs == 20 * (2 + len(on) + 1)  # all on, all off, each source on, usbl_angle (no effect)
+    assert b.runs == 20 * planned(cfg)
     assert b.diverged == 0
 
 
