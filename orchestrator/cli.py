@@ -1,4 +1,4 @@
-"""Command line: ``sblsim run``, ``compare``, ``map``, ``campaign``, ``analyze``, ``ssp export``,
+"""Command line: ``sblsim run``, ``compare``, ``budget``, ``map``, ``campaign``, ``analyze``, ``ssp export``,
 ``fmus build|validate|variables`` and ``codegen receiver``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
@@ -81,6 +81,22 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--out", type=Path, default=None, help="output directory (default results/compare_SCENARIO)")
     m.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
     _config_options(m)
+
+    u = sub.add_parser("budget", help="error budget: each error source's share of the position error")
+    u.add_argument("scenario", help="built-in scenario or CONFIG.toml")
+    u.add_argument("--replicates", type=int, default=None,
+                   help="runs per configuration: the all-on one, the all-off one and one per source switched off "
+                        "(default 500)")
+    u.add_argument("--receiver", default=None,
+                   help="the receiver (default: the configuration's); ekf, ekf-seq, ukf, lsq, model:PATH.py or "
+                        "fmu:PATH")
+    u.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
+                   help="one budget per value, side by side, e.g. platform.system=sbl,lbl,usbl")
+    u.add_argument("--out", type=Path, default=None, help="output directory (default results/budget_SCENARIO)")
+    u.add_argument("--force", action="store_true", help="replace an earlier budget in --out")
+    u.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
+    u.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key (repeatable)")
 
     g = sub.add_parser("map", help="accuracy map: horizontal standard deviation of a fix around the platform")
     g.add_argument("scenario", help="built-in scenario or CONFIG.toml (geometry and error levels)")
@@ -301,6 +317,47 @@ def _compare(args: argparse.Namespace) -> int:
     print(markdown(table), end="")
     write(table, out, title, note)
     print(f"written to {out}/ (compare.csv, compare.md, compare.png)")
+    return 0
+
+
+def _budget(args: argparse.Namespace) -> int:
+    from sblsim.orchestrator.budget import (
+        DEFAULT_REPLICATES,
+        advice,
+        budgets,
+        check_replicates,
+        configurations,
+        lines,
+        parse_compare,
+        title,
+        write,
+    )
+
+    _check_seed(args.seed)
+    replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
+    check_replicates(replicates)
+    compare = parse_compare(args.compare) if args.compare else None
+    if args.receiver is not None:
+        from sblsim.orchestrator.config import check_receiver
+
+        check_receiver(args.receiver, "--receiver")
+    configs = configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)
+    out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
+                  "budget")
+    results = budgets(configs, replicates, progress=sys.stderr.isatty())
+    heading = title(args.scenario, results, args.overrides)
+    print(heading)
+    for b in results:
+        if compare is not None:
+            print(f"{b.label}:")
+        print("\n".join(lines(b)))
+        print(f"  {advice(b)}")
+        if b.diverged:
+            print(f"sblsim: warning: the receiver diverged in {b.diverged} of {b.runs} runs of {b.label}: the budget "
+                  "means nothing", file=sys.stderr)
+    write(results, out, heading, compare[0] if compare else None)
+    print(f"{sum(b.runs for b in results)} runs in {sum(b.wall_time for b in results):.1f} s; written to {out}/ "
+          "(budget.csv, budget.md, budget.png, config.toml)")
     return 0
 
 
@@ -553,6 +610,8 @@ def _command(args: argparse.Namespace) -> int:
             return _campaign(args)
         if args.command == "compare":
             return _compare(args)
+        if args.command == "budget":
+            return _budget(args)
         if args.command == "map":
             return _map(args)
         if args.command == "ssp":

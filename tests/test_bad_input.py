@@ -92,6 +92,7 @@ FILES = {
     "nonempty/notes.txt": "mine",
     "earlier_run/summary.json": "{}",
     "earlier_map/map.csv": "east,north\n",
+    "earlier_budget/budget.csv": "source,contribution\n",
     "earlier.ssp": "an earlier package",
     "afile": "not a directory",
     "emptyfmus/.keep": "",
@@ -267,6 +268,14 @@ CASES = {
     "map compare form": (["map", "semicircle", "--compare", "baseline=1,3"], "--compare"),
     "map compare value": (["map", "semicircle", "--compare", "platform.baseline=1,-3"], "platform.baseline"),
     "map over an earlier map": (["map", "semicircle", "--out", "earlier_map"], "--force"),
+    # budget
+    "budget one replicate": (["budget", "semicircle", "--replicates", "1"], "--replicates"),
+    "budget unknown receiver": (["budget", "semicircle", "--receiver", "kalman"], "--receiver"),
+    "budget compare form": (["budget", "semicircle", "--compare", "sigma_range=0.1,1"], "--compare"),
+    "budget compare unknown key": (["budget", "semicircle", "--compare", "acoustics.sigma=0.1,1"],
+                                   "acoustics.sigma"),
+    "budget compare value": (["budget", "semicircle", "--compare", "platform.system=sbl,xbl"], "platform.system"),
+    "budget over an earlier budget": (["budget", "semicircle", "--out", "earlier_budget"], "--force"),
 }
 
 
