@@ -57,7 +57,7 @@ from sblsim.orchestrator.config import (
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
-from sblsim.orchestrator.systems import system_overrides
+from sblsim.orchestrator.systems import parse_systems, system_overrides
 
 #: Error source -> (what it is, the ``--set`` overrides that switch it off). A value ``{section.key}`` is that
 #: key's value in the configured (all-on) configuration.
@@ -81,9 +81,8 @@ SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
     "turnaround_jitter": ("two-way ranging: turnaround jitter", ("acoustics.turnaround_sigma=0",)),
     "usbl_angle": ("USBL direction-of-arrival noise", ("platform.usbl_angle_sigma_deg=0",)),
     "usbl_misalignment": ("USBL array misalignment", ("platform.usbl_misalignment_deg=0",)),
+    "latency": ("the receiver's processing latency (the diver sees an older estimate)", ("receiver.latency=0",)),
 }
-#: The receiver's latency, a source where the receiver declares it (``receiver.latency``).
-LATENCY: tuple[str, tuple[str, ...]] = ("latency of the measurements reaching the receiver", ("receiver.latency=0",))
 
 DEFAULT_REPLICATES = 500
 MAX_REPLICATES = 100_000
@@ -92,15 +91,6 @@ ON, NO_EFFECT, OFF = "on", "no effect", "off in this configuration"
 COLUMNS = ("source", "description", "status", "contribution", "se", "share", "rms")
 
 _REFERENCE = re.compile(r"^\{(\w+)\.(\w+)\}$")
-
-
-def sources(cfg: dict[str, dict]) -> dict[str, tuple[str, tuple[str, ...]]]:
-    """The error sources of a resolved configuration: :data:`SOURCES`, and ``latency`` where the receiver
-    has the key ``receiver.latency``."""
-    out = dict(SOURCES)
-    if "latency" in cfg["receiver"]:
-        out["latency"] = LATENCY
-    return out
 
 
 def switched_off(cfg: dict[str, dict], overrides: Sequence[str]) -> dict[str, dict]:
@@ -223,7 +213,7 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
     """
     check_replicates(replicates)
     start = time.perf_counter()
-    names = sources(cfg)
+    names = SOURCES
     off, floor_cfg = _switches(cfg)
     records = records if records is not None else RecordBuffer()
     done: list[tuple[dict, np.ndarray, int]] = []  # (configuration, per-replicate MSE, diverged runs)
@@ -269,7 +259,7 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
 
 def _switches(cfg: dict[str, dict]) -> tuple[dict[str, dict], dict]:
     """Each source's switched-off configuration, and the floor's (every source off)."""
-    names = sources(cfg)
+    names = SOURCES
     off = {name: switched_off(cfg, overrides) for name, (_, overrides) in names.items()}
     return off, switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
 
@@ -330,6 +320,8 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
         out = [(Path(str(scenario)).stem, load_config(scenario, items, seed=seed))]
     else:
         key, values = compare
+        if key == "platform.system":
+            parse_systems(",".join(values), "platform.system")
         out = []
         for value in values:
             if key == "platform.system":
@@ -556,6 +548,6 @@ def title(scenario: str, budgets: Sequence[Budget], overrides: Sequence[str] = (
             f"per configuration, seed {cfg['run']['seed']}" + (f", {' '.join(overrides)}" if overrides else ""))
 
 
-__all__ = ["COLUMNS", "DEFAULT_REPLICATES", "LATENCY", "SOURCES", "Budget", "advice", "budget",
+__all__ = ["COLUMNS", "DEFAULT_REPLICATES", "SOURCES", "Budget", "advice", "budget",
            "budgets", "check_replicates", "configurations", "lines", "markdown", "parse_compare", "planned", "plot",
-           "sources", "switched_off", "table", "title", "write"]
+           "switched_off", "table", "title", "write"]
