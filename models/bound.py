@@ -81,6 +81,7 @@ Prentice Hall 1993, Section 3.7.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import lru_cache
 
 import casadi as ca
@@ -276,19 +277,28 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
     ----------
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998.
     """
+    return _stepped(bound_step(model), model.motion, FIXED, fixed, steps,
+                    lambda f, s: (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"],
+                                  f["depth_variance"], s[9:10], s[10:11]))
+
+
+def _stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, steps: np.ndarray,
+             inputs) -> np.ndarray:
+    """A bound step Function stepped along B runs (casadi's virtual machine, mapped over B): the prior from
+    ``p0_position`` and ``p0_velocity``, then at each row ``step(B, dt, q_h, q_v, *inputs(f, s))`` with ``f``
+    the fixed columns by name (``names``) and ``s`` the row's step columns (transposed, (columns, B));
+    ``sqrt(trace)`` of the position block at each step, (N, B) [m]."""
     n, b = steps.shape[:2]
-    motion = model.motion
     size = motion.state_size
-    f = {k: fixed[:, i][None, :] for i, k in enumerate(FIXED)}
-    step = bound_step(model).map(b)
+    f = {k: fixed[:, i][None, :] for i, k in enumerate(names)}
+    step = step.map(b)
     bound = np.zeros((size * size, b))
     for index, key in ((motion.position_index, "p0_position"), (motion.velocity_index, "p0_velocity")):
         bound[np.asarray(index) * (size + 1)] = f[key] ** 2
     out = np.empty((n, b))
     for k in range(n):
         s = steps[k].T
-        bound = step(bound, f["dt"], f["q_horizontal"], f["q_vertical"], s[0:3], s[3:6], s[6:9], f["noise_variance"],
-                     f["attitude_variance"], f["depth_variance"], s[9:10], s[10:11]).full()
+        bound = step(bound, f["dt"], f["q_horizontal"], f["q_vertical"], *inputs(f, s)).full()
         out[k] = np.sqrt(sum(bound[i * (size + 1)] for i in motion.position_index))
     return out
 
@@ -400,21 +410,9 @@ def usbl_pcrb(fixed: np.ndarray, steps: np.ndarray, model=USBL_MODEL) -> np.ndar
     ----------
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998.
     """
-    n, b = steps.shape[:2]
-    motion = model.motion
-    size = motion.state_size
-    f = {k: fixed[:, i][None, :] for i, k in enumerate(USBL_FIXED)}
-    step = usbl_bound_step(model).map(b)
-    bound = np.zeros((size * size, b))
-    for index, key in ((motion.position_index, "p0_position"), (motion.velocity_index, "p0_velocity")):
-        bound[np.asarray(index) * (size + 1)] = f[key] ** 2
-    out = np.empty((n, b))
-    for k in range(n):
-        s = steps[k].T
-        bound = step(bound, f["dt"], f["q_horizontal"], f["q_vertical"], s[0:3], s[3:6], f["noise_variance"],
-                     f["angle_sigma_deg"], f["attitude_variance"], f["depth_variance"], s[6:7], s[7:8]).full()
-        out[k] = np.sqrt(sum(bound[i * (size + 1)] for i in motion.position_index))
-    return out
+    return _stepped(usbl_bound_step(model), model.motion, USBL_FIXED, fixed, steps,
+                    lambda f, s: (s[0:3], s[3:6], f["noise_variance"], f["angle_sigma_deg"], f["attitude_variance"],
+                                  f["depth_variance"], s[6:7], s[7:8]))
 
 
 def fisher_information(model, x, context, variances) -> ca.SX:

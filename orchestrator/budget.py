@@ -281,25 +281,6 @@ def check_replicates(replicates: int) -> None:
                          "standard errors need two)")
 
 
-def parse_compare(text: str) -> tuple[str, list[str]]:
-    """``platform.system=sbl,lbl,usbl`` -> the key and its values (as text, checked when loaded).
-
-    Raises
-    ------
-    ModelError
-        Naming ``--compare`` and the expected form.
-    """
-    key, _, values = text.partition("=")
-    key = key.strip()
-    items = [v.strip() for v in values.split(",") if v.strip()]
-    if not items or key.count(".") != 1:
-        raise ModelError(f"--compare: expected SECTION.KEY=V1,V2,..., e.g. platform.system=sbl,lbl,usbl; got "
-                         f"{text!r}")
-    if len(set(items)) != len(items):
-        raise ModelError(f"--compare: {text!r} names a value twice")
-    return key, items
-
-
 def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: int | None = None,
                    receiver: str | None = None,
                    compare: tuple[str, list[str]] | None = None) -> list[tuple[str, dict]]:
@@ -549,5 +530,5 @@ def title(scenario: str, budgets: Sequence[Budget], overrides: Sequence[str] = (
 
 
 __all__ = ["COLUMNS", "DEFAULT_REPLICATES", "SOURCES", "Budget", "advice", "budget",
-           "budgets", "check_replicates", "configurations", "lines", "markdown", "parse_compare", "planned", "plot",
+           "budgets", "check_replicates", "configurations", "lines", "markdown", "planned", "plot",
            "switched_off", "table", "title", "write"]

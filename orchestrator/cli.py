@@ -328,15 +328,15 @@ def _budget(args: argparse.Namespace) -> int:
         check_replicates,
         configurations,
         lines,
-        parse_compare,
         title,
         write,
     )
+    from sblsim.orchestrator.config import parse_compare
 
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
     check_replicates(replicates)
-    compare = parse_compare(args.compare) if args.compare else None
+    compare = parse_compare(args.compare, "platform.system=sbl,lbl,usbl") if args.compare else None
     if args.receiver is not None:
         from sblsim.orchestrator.config import check_receiver
 
@@ -362,8 +362,8 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import load_config
-    from sblsim.orchestrator.maps import diver_depth, make_maps, parse_compare, parse_levels, write
+    from sblsim.orchestrator.config import load_config, parse_compare
+    from sblsim.orchestrator.maps import diver_depth, make_maps, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)

@@ -311,6 +311,24 @@ def parse_override(item: str) -> tuple[str, str, Any]:
     return section, name, value
 
 
+def parse_compare(text: str, example: str = "platform.baseline=0.4,1,3") -> tuple[str, list[str]]:
+    """``--compare KEY=V1,V2,...`` -> the key and its values (as text, checked when each configuration loads).
+
+    Raises
+    ------
+    ModelError
+        Naming ``--compare`` and the expected form (with ``example``), or a value given twice.
+    """
+    key, _, values = text.partition("=")
+    key = key.strip()
+    items = [v.strip() for v in values.split(",") if v.strip()]
+    if not items or key.count(".") != 1:
+        raise ModelError(f"--compare: expected SECTION.KEY=V1,V2,..., e.g. {example}; got {text!r}")
+    if len(set(items)) != len(items):
+        raise ModelError(f"--compare: {text!r} names a value twice")
+    return key, items
+
+
 def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, dict]:
     """Resolved configuration of a scenario or file with ``--set`` overrides and seed.
 

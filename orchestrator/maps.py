@@ -72,22 +72,6 @@ def parse_levels(text: str) -> list[float]:
     return sorted(set(levels))
 
 
-def parse_compare(text: str) -> tuple[str, list[str]]:
-    """``platform.baseline=0.4,1,3`` -> the key and its values (as text, checked when a map is made).
-
-    Raises
-    ------
-    ModelError
-        Naming ``--compare`` and the expected form.
-    """
-    key, _, values = text.partition("=")
-    key = key.strip()
-    items = [v.strip() for v in values.split(",") if v.strip()]
-    if not items or key.count(".") != 1:
-        raise ModelError(f"--compare: expected SECTION.KEY=V1,V2,..., e.g. platform.baseline=0.4,1,3; got {text!r}")
-    return key, items
-
-
 def grid(extent: float, step: float) -> tuple[np.ndarray, np.ndarray]:
     """East and North coordinates of the grid, ``−extent … extent`` every ``step`` [m].
 
@@ -280,5 +264,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["accuracy_map", "grid", "make_maps", "parse_compare", "parse_levels", "plot", "system_line", "table",
+__all__ = ["accuracy_map", "grid", "make_maps", "parse_levels", "plot", "system_line", "table",
            "write"]
