@@ -27,8 +27,12 @@ import numpy as np
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.models import MODELS
-from sblsim.models.bound import bound_step
+from sblsim.models.bound import USBL_FIXED, bound_step, usbl_bound_step
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.core import USBL_BEACONS, is_usbl
+
+#: The compiled USBL bound's loop (the library of the USBL interface only).
+USBL_BOUND = "sblsim_usbl_bound.c"
 
 #: The vectors of a batch, in the order the C API numbers them (``sblsim_batch_vector``, ``sblsim_model_size``):
 #: every double vector of a replicate, then its draw counters.
@@ -63,8 +67,11 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     cg = ca.CodeGenerator("sblsim_bound_casadi.c", {"with_header": True, "casadi_real": "double",
                                                     "casadi_int": "long long int"})
     cg.add(bound_step())
+    usbl = is_usbl(n_beacons)
+    if usbl:  # the USBL interface's library also steps its own bound (range, azimuth, elevation)
+        cg.add(usbl_bound_step())
     cg.generate(str(directory) + "/")
-    for name in (BATCH, METRICS):
+    for name in (BATCH, METRICS) + ((USBL_BOUND,) if usbl else ()):
         (directory / name).write_text((C_DIR / name).read_text())
     return sorted(directory.glob("*.c"))
 
@@ -325,6 +332,38 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
                                           None if bound is None else bound.ctypes.data):
         raise MemoryError("run_metrics: out of memory")
     return out, bound
+
+
+def usbl_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """:func:`sblsim.models.bound.usbl_pcrb` compiled (``fmus/c/sblsim_usbl_bound.c``, in the USBL interface's
+    library): the position PCRB of B USBL runs.
+
+    Parameters
+    ----------
+    fixed, steps : ndarray
+        From :func:`sblsim.models.bound.usbl_pcrb_inputs`, shapes (B, 9) and (N, B, 8).
+
+    Returns
+    -------
+    ndarray, shape (N, B)
+        ``sqrt(trace)`` of the position PCRB at each step [m].
+
+    Raises
+    ------
+    ValueError
+        If the arrays do not fit together.
+    """
+    fixed = np.ascontiguousarray(fixed, dtype=float)
+    steps = np.ascontiguousarray(steps, dtype=float)
+    n, b = steps.shape[:2]
+    if fixed.shape != (b, len(USBL_FIXED)) or steps.shape != (n, b, 8):
+        raise ValueError(f"usbl_pcrb: fixed {fixed.shape} and steps {steps.shape} do not fit together")
+    lib = load(USBL_BEACONS)
+    lib.sblsim_usbl_pcrb.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.c_void_p] * 3
+    out = np.empty((n, b))
+    if lib.sblsim_usbl_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, out.ctypes.data):
+        raise MemoryError("usbl_pcrb: out of memory")
+    return out
 
 
 def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int, n_beacons: int = 4) -> np.ndarray:

@@ -13,7 +13,8 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.bound import FIXED, USBL_FIXED, usbl_pcrb, usbl_pcrb_inputs
+from sblsim.fmus import native
+from sblsim.models.bound import FIXED, USBL_FIXED, usbl_pcrb_inputs
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.core import USBL_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms
@@ -411,8 +412,9 @@ def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
 
 
 def _usbl_bound(rec: dict, dt: float, parameters: Sequence[dict]) -> np.ndarray:
-    """The position PCRB (N, B) [m] of USBL runs (:func:`sblsim.models.bound.usbl_pcrb`): the range, azimuth and
-    elevation of each received packet from the transceiver position it carries, and the depth at every slot."""
+    """The position PCRB (N, B) [m] of USBL runs (:func:`sblsim.models.bound.usbl_pcrb`, compiled): the range,
+    azimuth and elevation of each received packet from the transceiver position it carries, and the depth at
+    every slot."""
     column = {name: np.asarray(rec[TIMESERIES_COLUMNS[name]], dtype=float)
               for name in ("true_x", "true_y", "true_z", "packet_seq", "packet_valid", "beacon_id", "beacon_x",
                            "beacon_y", "beacon_z")}
@@ -421,7 +423,7 @@ def _usbl_bound(rec: dict, dt: float, parameters: Sequence[dict]) -> np.ndarray:
     truth = np.stack([column[f"true_{a}"] for a in "xyz"], axis=-1)
     transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], axis=-1)
     fixed = {k: np.array([p[k] for p in parameters]) for k in USBL_FIXED[1:]}
-    return usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=dt, **fixed))
+    return native.usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=dt, **fixed))
 
 
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:

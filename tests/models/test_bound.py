@@ -281,3 +281,24 @@ def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elev
     range_only = pcrb(*pcrb_inputs(truth, slot, received, transceivers, zeros, **{
         k: v for k, v in fixed.items() if k != "angle_sigma_deg"}))
     assert np.all(bound[-1] < 0.5 * range_only[-1])
+
+
+def test_the_compiled_usbl_bound_is_the_reference_one():
+    """The USBL interface's library steps the USBL bound in C (what runs use); casadi's virtual machine is the
+    reference: equal to round-off on random tracks, packets, losses and transceiver motion."""
+    from sblsim.fmus import native
+    from sblsim.models.bound import usbl_pcrb, usbl_pcrb_inputs
+
+    rng = np.random.default_rng(11)
+    n, b = 300, 5
+    truth = rng.normal(size=(n, b, 3)) * 10.0 + np.array([0.0, 0.0, 5.0])
+    transceiver = rng.normal(size=(n, b, 3)) * 0.1 + np.array([0.0, 0.0, 1.0])
+    slot = rng.random((n, b)) < 0.5
+    received = slot & (rng.random((n, b)) < 0.8)
+    fixed, steps = usbl_pcrb_inputs(truth, slot, received, transceiver, dt=0.1, q_horizontal=0.01,
+                                    q_vertical=0.001, p0_position=1.0, p0_velocity=np.linspace(0.2, 1.0, b),
+                                    noise_variance=0.02, angle_sigma_deg=0.5, attitude_variance=1e-4,
+                                    depth_variance=1e-4)
+    reference = usbl_pcrb(fixed, steps)
+    np.testing.assert_allclose(native.usbl_pcrb(fixed, steps), reference, rtol=1e-12, atol=0)
+    assert np.ptp(reference[-1]) > 0  # the runs differ: each is stepped with its own inputs
