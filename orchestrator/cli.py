@@ -277,9 +277,10 @@ def _replay(args: argparse.Namespace) -> int:
     print(f"  log: {c['rows']} rows, {c['used']} used ({c['depth_only']} depth readings only), {skipped} skipped "
           f"({c['duplicate']} duplicated, {c['unknown_beacon']} with an unknown beacon id, {c['same_step']} in a step "
           f"that used another row" + (f", {c['not_reached']} after the last step" if c["not_reached"] else "")
-          + f"), {c['out_of_order']} out of order (sorted); longest gap {c['longest_gap_s']:.6g} s (before its "
-          f"{c['longest_gap_before']})" + (f"; ignored columns: {', '.join(c['ignored_columns'])}"
-                                           if c["ignored_columns"] else ""))
+          + f"), {c['out_of_order']} out of order (sorted); rows every {c['typical_gap_s']:.6g} s (median), the "
+          f"longest gap {c['longest_gap_s']:.6g} s"
+          + (f" (before its {c['longest_gap_before']})" if c["longest_gap_s"] > 1.5 * c["typical_gap_s"] else "")
+          + (f"; ignored columns: {', '.join(c['ignored_columns'])}" if c["ignored_columns"] else ""))
     if truth is not None:
         t = s["truth"]
         print(f"  truth: {args.truth}, interpolated at {t['steps']} of {s['steps']} steps"

@@ -58,6 +58,7 @@ from sblsim.orchestrator.config import (
     ConfigError,
     apply_overrides,
     beacon_count,
+    check_receiver,
     parse_override,
     read_source,
     receiver_label,
@@ -258,6 +259,8 @@ class Log:
         ``rows`` (data rows read), ``duplicate``, ``unknown_beacon`` (skipped), ``out_of_order`` (sorted).
     longest_gap : tuple
         (seconds, where the row after the gap is) of the longest time between two rows.
+    typical_gap : float
+        The median time between two rows [s] (0 for one row).
     ignored : list of str
         Columns the replay does not use.
     config : str
@@ -274,6 +277,7 @@ class Log:
     where: list[str]
     counts: dict[str, int]
     longest_gap: tuple[float, str]
+    typical_gap: float = 0.0
     ignored: list[str] = field(default_factory=list)
     config: str = ""
 
@@ -406,7 +410,8 @@ def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: 
                range=np.array([r[2] for r in rows]), beacon_ned=np.array([r[3] for r in rows], dtype=float),
                depth=np.array([r[4] for r in rows]),
                angles=np.array([r[5] for r in rows], dtype=float) if usbl else None,
-               where=[r[6] for r in rows], counts=counts, longest_gap=gap, ignored=ignored, config=table.config)
+               where=[r[6] for r in rows], counts=counts, longest_gap=gap,
+               typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config)
 
 
 def _beacon(text: str, n_beacons: int) -> int:
@@ -511,9 +516,13 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
                          f"T = {T:g} s; at most {most} fit in memory here. Its longest gap is {gap:.6g} s, before "
                          f"its {where} (a clock jump forward?): replay the rows before and from there as two logs, "
                          "or give a larger simulation.sampling_time")
-    while _step_ends(steps, T, ratio)[-1] < last - SLOT_SLACK:
+    def end(n: int) -> float:  # the end of the last communication step of n macro steps, as the master has it
+        sub = T / ratio
+        return ((0.0 + (n - 1) * T) + (ratio - 1) * sub) + sub
+
+    while end(steps) < last - SLOT_SLACK:
         steps += 1
-    while steps > 1 and _step_ends(steps - 1, T, ratio)[-1] >= last - SLOT_SLACK:
+    while steps > 1 and end(steps - 1) >= last - SLOT_SLACK:
         steps -= 1
     ends = _step_ends(steps, T, ratio)
     # newest row the end of each communication step has reached (the receiver's slot test, in its arithmetic)
@@ -570,11 +579,13 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
     import copy
 
     overrides = list(overrides)
+    where = "--receiver" if receiver is not None else "simulation.receiver"
     for item in overrides:
         section, name, value = parse_override(item)
         if (section, name) == ("simulation", "receiver") and receiver is None:
             receiver = str(value)
     if receiver is not None:
+        check_receiver(receiver, where)
         overrides = [o for o in overrides if parse_override(o)[:2] != ("simulation", "receiver")]
     embedded = "" if config is not None else log_config(log_path)
     if config is not None:
@@ -758,7 +769,8 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     s["log"] = {"file": log.path.name, **log.counts, "used": int(plan.used.size),
                 "depth_only": int((log.beacon[plan.used] == 0).sum()),
                 "same_step": plan.same_step, "not_reached": plan.not_reached,
-                "longest_gap_s": log.longest_gap[0], "longest_gap_before": log.longest_gap[1],
+                "typical_gap_s": log.typical_gap, "longest_gap_s": log.longest_gap[0],
+                "longest_gap_before": log.longest_gap[1],
                 "ignored_columns": log.ignored}
     s["truth"] = None if truth is None else {"steps": int(truth_steps), "steps_without": int(plan.steps - truth_steps)}
     return ReplayResult(cfg, engine, frame, s)

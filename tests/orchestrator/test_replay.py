@@ -384,12 +384,14 @@ def test_skipped_and_sorted_rows_are_counted(tmp_path, capsys):
     assert main(["replay", str(log), "--config", "harbour", "--out", str(out)]) == 0
     captured = capsys.readouterr()
     assert "1 duplicated, 4 with an unknown beacon id, 1 in a step that used another row" in captured.out
-    assert "1 out of order (sorted)" in captured.out and "longest gap 4.9 s" in captured.out
+    assert "1 out of order (sorted)" in captured.out
+    assert "rows every 0.1 s (median), the longest gap 4.9 s (before its line 49)" in captured.out
     assert "ignored columns: temperature_c" in captured.out
     assert "smaller simulation.sampling_time" in captured.err
     s = json.loads((out / "summary.json").read_text())["log"]
     assert s == {"file": "flawed.csv", "rows": 48, "unknown_beacon": 4, "duplicate": 1, "out_of_order": 1,
-                 "used": 42, "depth_only": 0, "same_step": 1, "not_reached": 0, "longest_gap_s": pytest.approx(4.9),
+                 "used": 42, "depth_only": 0, "same_step": 1, "not_reached": 0,
+                 "typical_gap_s": pytest.approx(0.1), "longest_gap_s": pytest.approx(4.9),
                  "longest_gap_before": "line 49", "ignored_columns": ["temperature_c"]}
     ts = pd.read_parquet(out / "timeseries.parquet")
     assert len(ts) == 90 and ts["time"].iloc[-1] == pytest.approx(9.0)
@@ -419,3 +421,27 @@ def test_a_usbl_log_needs_its_angles(tmp_path, capsys):
     assert main(["replay", str(log), "--config", "harbour", "--set", "platform.system=usbl",
                  "--out", str(tmp_path / "out")]) == 2
     assert "has no column azimuth_rad (a USBL log)" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the README's worked example
+
+def test_the_readme_table_2_comparison_is_what_the_replays_give(tmp_path):
+    """The README's Table-2-style rows (harbour, seed 1, a log replayed with each receiver against its truth)."""
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme[readme.index("## Replay a recorded log"):]
+    section = section[:section.index("\n## ")]
+    table = {line.split("|")[1].strip(): [float(v) for v in line.split("|")[2:4]]
+             for line in section.splitlines() if line.startswith("| ") and line.count("|") == 4
+             and line.split("|")[2].strip()[:1].isdigit()}
+    assert set(table) == {"instrumentation (raw multilateration fix)", "ekf (the paper's filter)", "ekf-seq", "ukf",
+                          "lsq"}
+    result = run(load_config("harbour", seed=1))
+    path = tmp_path / "harbour.csv"
+    export_log(result, path)
+    assert f"{int((~result.timeseries['packet_valid']).sum())} of 800 packets lost" in section
+    for receiver in RECEIVERS:
+        s = replay_file(path, receiver=receiver).summary
+        label = "ekf (the paper's filter)" if receiver == "ekf" else receiver
+        assert table[label] == [round(s["e_tot_mean"], 3), round(s["e_tot_std"], 3)], receiver
+        assert table["instrumentation (raw multilateration fix)"] == [round(s["instr_e_tot_mean"], 3),
+                                                                      round(s["instr_e_tot_std"], 3)]
