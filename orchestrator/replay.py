@@ -45,7 +45,7 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
@@ -756,7 +756,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     columns.update({n: out[n] for n in names if n not in columns})
     frame = pd.DataFrame(columns)
     result = RunResult(cfg, engine, frame, pd.DataFrame(), plan.steps, wall)
-    metrics, truth_steps = _replay_metrics(cfg, frame, out)
+    metrics, truth_steps = _replay_metrics(cfg, frame)
     frame["pcrb"] = metrics.pop("__pcrb")
     for name in ("e_x", "e_y", "e_z", "e_tot"):
         frame[name] = metrics.pop(f"__{name}")
@@ -776,7 +776,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     return ReplayResult(cfg, engine, frame, s)
 
 
-def _replay_metrics(cfg: dict, frame: pd.DataFrame, out: dict) -> tuple[dict, int]:
+def _replay_metrics(cfg: dict, frame: pd.DataFrame) -> tuple[dict, int]:
     """The metrics of a replay: a run's, over the steps the truth track covers (contiguous), and the per-step
     PCRB and errors (keys ``__*``, NaN outside); without truth only those that need none."""
     n = len(frame)
@@ -973,12 +973,6 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
         _write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
         _write_atomic(target, lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
     return path, target
-
-
-def iter_log_columns() -> Iterator[tuple[str, str, str, str]]:
-    """(column, unit, meaning, required) of every log column, for the documentation's table."""
-    for name, (unit, meaning, required) in LOG_COLUMNS.items():
-        yield name, unit, meaning, required
 
 
 __all__ = ["DEFAULT_CONFIG", "FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "ReplayResult", "Schedule",

@@ -445,3 +445,11 @@ def test_the_readme_table_2_comparison_is_what_the_replays_give(tmp_path):
         assert table[label] == [round(s["e_tot_mean"], 3), round(s["e_tot_std"], 3)], receiver
         assert table["instrumentation (raw multilateration fix)"] == [round(s["instr_e_tot_mean"], 3),
                                                                       round(s["instr_e_tot_std"], 3)]
+
+
+def test_the_log_format_document_lists_every_column():
+    from sblsim.orchestrator.replay import LOG_COLUMNS, TRUTH_COLUMNS
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
+    for name in [*LOG_COLUMNS, *TRUTH_COLUMNS]:
+        assert f"`{name}`" in text, name
