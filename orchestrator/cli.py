@@ -1,5 +1,5 @@
-"""Command line: ``sblsim run``, ``compare``, ``budget``, ``map``, ``campaign``, ``analyze``, ``ssp export``,
-``fmus build|validate|variables`` and ``codegen receiver``.
+"""Command line: ``sblsim run``, ``replay``, ``compare``, ``budget``, ``map``, ``campaign``, ``analyze``,
+``ssp export``, ``fmus build|validate|variables`` and ``codegen receiver``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
@@ -63,8 +63,27 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--master", choices=ALGORITHMS, default=None,
                    help="master algorithm (default: the configuration's, gauss-seidel)")
     r.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
-    r.add_argument("--force", action="store_true", help="replace an earlier run in --out")
+    r.add_argument("--force", action="store_true", help="replace an earlier run in --out (and --export-log files)")
+    r.add_argument("--export-log", type=Path, default=None, metavar="FILE",
+                   help="also write the receiver's inputs as a log (.csv or .parquet; docs/log-format.md) and the "
+                        "truth track beside it (FILE's stem + _truth): `sblsim replay FILE` reproduces the receiver")
     _config_options(r)
+
+    y = sub.add_parser("replay", help="run a receiver on a recorded log (docs/log-format.md)")
+    y.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one)")
+    y.add_argument("--receiver", default=None,
+                   help="ekf, ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH (default: the configuration's)")
+    y.add_argument("--config", default=None, metavar="CONFIG",
+                   help="the receiver's parameters, T and rate ratio: a built-in scenario or CONFIG.toml (default: "
+                        "the configuration an exported log carries, else the semicircle scenario's)")
+    y.add_argument("--truth", type=Path, default=None, metavar="FILE",
+                   help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures")
+    y.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    y.add_argument("--out", type=Path, default=None, help="output directory (default results/replay_LOGNAME)")
+    y.add_argument("--force", action="store_true", help="replace an earlier replay in --out")
+    y.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key, e.g. receiver.q_horizontal=0.05 (repeatable)")
+    y.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
 
     m = sub.add_parser("compare", help="run several receivers (or positioning systems) on the same replicates of a "
                                        "scenario")
@@ -208,6 +227,11 @@ def _run(args: argparse.Namespace) -> int:
     else:
         engine = args.engine or "local"
         cfg = load_config(args.scenario, overrides, args.seed)
+    if args.export_log is not None:
+        from sblsim.orchestrator.replay import check_export
+
+        check_export(args.export_log, args.force)
+        _check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."))
     out = _output(args.out, Path("results") / cfg["run"]["scenario"], args.force, "summary.json", "run")
     try:
         result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
@@ -218,27 +242,83 @@ def _run(args: argparse.Namespace) -> int:
     write_run(result, out)
     s = summary(result)
     sim = cfg["simulation"]
-
-    def v(key: str, spec: str = ".3f", scale: float = 1.0) -> str:  # a metric, or n/a when it has no value
-        return "n/a" if s[key] is None else format(scale * s[key], spec)
-
     print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {s['receiver']}), "
           f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
-    label = f"{s['receiver']}:"
-    width = max(len(label), len("instrumentation:")) + 1
-    print(f"  {label:<{width}}e_tot mean {v('e_tot_mean')} m, RMS {v('e_tot_rms')} m, std {v('e_tot_std')} m")
-    print(f"  {'instrumentation:':<{width}}e_tot mean {v('instr_e_tot_mean')} m, "
-          f"RMS {v('instr_e_tot_rms')} m, std {v('instr_e_tot_std')} m")
-    print(f"  {'consistency:':<{width}}NEES {v('nees_mean', '.2f')} (3 if consistent), truth inside the 95 % "
-          f"ellipsoid {v('coverage_95', '.1f', 100)} % of steps, mean NIS {v('nis_mean', '.2f')}, "
-          f"gated {v('gated_pct', '.1f')} % of ranges")
-    print(f"  {'accuracy limit:':<{width}}PCRB RMS {v('pcrb_rms')} m")
+    _print_metrics(s)
     if s["diverged"]:
         print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
               f"{DIVERGENCE_DISTANCE:g} m and {DIVERGENCE_RATIO:g} times the diver's distance from the platform "
               "off the truth): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
     for line in _run_warnings(s, cfg):
         print(f"sblsim: warning: {line}", file=sys.stderr)
+    print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
+    if args.export_log is not None:
+        from sblsim.orchestrator.replay import export_log
+
+        log, truth = export_log(result, args.export_log)
+        print(f"  log of the receiver's inputs: {log} (replay it: sblsim replay {log} --truth {truth})")
+    return 0
+
+
+def _print_metrics(s: dict, truth: bool = True) -> None:
+    """The metric lines of ``run`` and ``replay`` from a summary (``n/a`` for a metric without a value)."""
+    def v(key: str, spec: str = ".3f", scale: float = 1.0) -> str:
+        return "n/a" if s[key] is None else format(scale * s[key], spec)
+
+    label = f"{s['receiver']}:"
+    width = max(len(label), len("instrumentation:")) + 1
+    if truth:
+        print(f"  {label:<{width}}e_tot mean {v('e_tot_mean')} m, RMS {v('e_tot_rms')} m, std {v('e_tot_std')} m")
+        print(f"  {'instrumentation:':<{width}}e_tot mean {v('instr_e_tot_mean')} m, "
+              f"RMS {v('instr_e_tot_rms')} m, std {v('instr_e_tot_std')} m")
+        print(f"  {'consistency:':<{width}}NEES {v('nees_mean', '.2f')} (3 if consistent), truth inside the 95 % "
+              f"ellipsoid {v('coverage_95', '.1f', 100)} % of steps, mean NIS {v('nis_mean', '.2f')}, "
+              f"gated {v('gated_pct', '.1f')} % of ranges")
+        print(f"  {'accuracy limit:':<{width}}PCRB RMS {v('pcrb_rms')} m")
+    else:
+        print(f"  {label:<{width}}no truth track (--truth FILE for errors and consistency): {s['updates']} "
+              f"updates, {s['fix_steps']} steps with a multilateration fix, mean NIS {v('nis_mean', '.2f')}, "
+              f"gated {v('gated_pct', '.1f')} % of ranges")
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from sblsim.orchestrator.config import beacon_count
+    from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
+
+    cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides)
+    log = read_log(args.log, beacon_count(cfg), cfg["platform"]["system"] == "usbl",
+                   cfg["acoustics"]["sound_speed_assumed"])
+    truth = read_truth(args.truth) if args.truth is not None else None
+    out = _output(args.out, Path("results") / f"replay_{args.log.stem}", args.force, "summary.json", "replay")
+    result = replay(log, cfg, args.engine, args.fmu_dir, truth)
+    write_replay(result, out)
+    s, c = result.summary, result.summary["log"]
+    sim = cfg["simulation"]
+    print(f"replay of {args.log} on the {s['engine']} engine (receiver {s['receiver']}, configuration {source}): "
+          f"{s['steps']} steps of {sim['sampling_time']:g} s from {s['start_time']:.10g} s in {s['wall_time']:.2f} s")
+    skipped = c["duplicate"] + c["unknown_beacon"] + c["same_step"] + c["not_reached"]
+    print(f"  log: {c['rows']} rows, {c['used']} used ({c['depth_only']} depth readings only), {skipped} skipped "
+          f"({c['duplicate']} duplicated, {c['unknown_beacon']} with an unknown beacon id, {c['same_step']} in a step "
+          f"that used another row" + (f", {c['not_reached']} after the last step" if c["not_reached"] else "")
+          + f"), {c['out_of_order']} out of order (sorted); rows every {c['typical_gap_s']:.6g} s (median), the "
+          f"longest gap {c['longest_gap_s']:.6g} s"
+          + (f" (before its {c['longest_gap_before']})" if c["longest_gap_s"] > 1.5 * c["typical_gap_s"] else "")
+          + (f"; ignored columns: {', '.join(c['ignored_columns'])}" if c["ignored_columns"] else ""))
+    if truth is not None:
+        t = s["truth"]
+        print(f"  truth: {args.truth}, interpolated at {t['steps']} of {s['steps']} steps"
+              + (f" ({t['steps_without']} outside its span: no errors there)" if t["steps_without"] else ""))
+    _print_metrics(s, truth is not None)
+    if c["same_step"]:
+        print(f"sblsim: warning: {c['same_step']} rows of the log fell in a step whose other row was used (one row "
+              f"per step of {sim['sampling_time'] / sim['ekf_rate_ratio']:g} s): a smaller simulation.sampling_time "
+              "or a larger simulation.ekf_rate_ratio (--set) uses them", file=sys.stderr)
+    if truth is not None and s["diverged"]:
+        print(f"sblsim: warning: the {s['receiver']} receiver diverged: its numbers mean nothing; see "
+              "error_bounds.png", file=sys.stderr)
+    if s["updates"] == 0:
+        print(f"sblsim: warning: the {s['receiver']} receiver never made a fix: no row of the log brought a range "
+              "it used", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     return 0
 
@@ -606,6 +686,8 @@ def _command(args: argparse.Namespace) -> int:
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "replay":
+            return _replay(args)
         if args.command == "campaign":
             return _campaign(args)
         if args.command == "compare":

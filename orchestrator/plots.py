@@ -38,13 +38,17 @@ def _direction(ax, east, north, count: int = 6) -> None:
 
 def plot_trajectory_xy(ts: pd.DataFrame, ax, receiver: str = "receiver") -> plt.Figure:
     """Truth (start, end and direction marked), estimate and instrumentation fixes in the horizontal plane
-    (East right, North up), with the platform and the beacons' mean broadcast positions."""
+    (East right, North up), with the platform and the beacons' mean broadcast positions. Without a truth
+    (no ``true_*`` columns, or all NaN: a replayed log) the estimate's start, end and direction are marked."""
     ax.plot(ts["instr_y"], ts["instr_x"], ".", ms=2, color="0.6", label="instrumentation (multilateration)")
-    ax.plot(ts["true_y"], ts["true_x"], "-", color="k", lw=1.5, label="truth")
+    truth = "true_x" in ts and bool(np.isfinite(ts["true_x"].to_numpy(dtype=float)).any())
+    if truth:
+        ax.plot(ts["true_y"], ts["true_x"], "-", color="k", lw=1.5, label="truth")
     ax.plot(ts["est_y"], ts["est_x"], "-", color="tab:red", lw=1.0, label=f"{receiver} estimate")
-    _direction(ax, ts["true_y"], ts["true_x"])
-    ax.plot(ts["true_y"].iloc[:1], ts["true_x"].iloc[:1], "o", color="tab:green", ms=7, label="start")
-    ax.plot(ts["true_y"].iloc[-1:], ts["true_x"].iloc[-1:], "s", color="k", ms=6, mfc="none", label="end")
+    track = "true" if truth else "est"
+    _direction(ax, ts[f"{track}_y"], ts[f"{track}_x"])
+    ax.plot(ts[f"{track}_y"].iloc[:1], ts[f"{track}_x"].iloc[:1], "o", color="tab:green", ms=7, label="start")
+    ax.plot(ts[f"{track}_y"].iloc[-1:], ts[f"{track}_x"].iloc[-1:], "s", color="k", ms=6, mfc="none", label="end")
     ax.plot([0], [0], "^", color="tab:blue", ms=9, label="platform (mooring point)")
     beacons = _beacons(ts)
     if len(beacons):

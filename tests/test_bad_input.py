@@ -84,6 +84,14 @@ FILES = {
                          'set = ["simulation.duration=100", "simulation.sampling_time=0.001"]\n'
                          '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
     "exits.py": "import sys\nsys.exit(0)\n",
+    "good_log.csv": "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n0.1,1,6,1,0,1,2\n"
+                    "0.2,,,,,,2\n0.3,3,6,-1,0,1,2\n",
+    "jump_log.csv": "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n5,1,6,1,0,1,2\n"
+                    "1,2,6,0,1,1,2\n",
+    "typo_log.csv": "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n0.1,1,6,1,0,1,2\n"
+                    "0.2,2,6,0,1x,1,2\n",
+    "truth_back.csv": "time_s,n_m,e_m,d_m\n0,0,0,2\n1,0,0,2\n0.5,0,0,2\n",
+    "exported.csv": "an earlier export",
     "long_pass.csv": "0,0,0,5\n1e7,10,10,5\n",
     # 513 good rows, then a line that would be an error if it were read: reading stops at row 513
     "many_rows.csv": "".join(f"{k},0,0,5\n" for k in range(513)) + "x,y\n",
@@ -210,6 +218,15 @@ CASES = {
     "run scenario and ssp": (["run", "semicircle", "--ssp", "notzip.ssp"], "run:"),
     "run missing ssp": (["run", "--ssp", "none.ssp"], "ssp"),
     "run ssp not a zip": (["run", "--ssp", "notzip.ssp"], "ssp"),
+    "run export-log suffix": (["run", "semicircle", "--export-log", "log.txt"], "--export-log"),
+    "run export-log over a file": (["run", "semicircle", "--export-log", "exported.csv"], "--force"),
+    # replay
+    "replay missing log": (["replay", "none.csv"], "log: no such file"),
+    "replay clock jump": (["replay", "jump_log.csv"], "line 3: time_s 1 s is 4 s before line 2's 5 s"),
+    "replay unparsable line": (["replay", "typo_log.csv"], "line 3: beacon_e_m: '1x' is not a number"),
+    "replay unknown receiver": (["replay", "good_log.csv", "--receiver", "kalman"], "--receiver"),
+    "replay truth backwards": (["replay", "good_log.csv", "--truth", "truth_back.csv"], "line 4: time_s 0.5 s"),
+    "replay over an earlier replay": (["replay", "good_log.csv", "--out", "earlier_run"], "--force"),
     # campaign and studies
     "campaign missing study": (["campaign", "none.toml"], "study"),
     "campaign invalid study": (["campaign", "study_bad.toml"], "study"),

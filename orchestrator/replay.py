@@ -1,0 +1,980 @@
+"""``sblsim replay``: a receiver run on a recorded log, and ``sblsim run --export-log``, the log of a run.
+
+A log (docs/log-format.md) holds, per received packet, its epoch, the beacon
+id, the range (or the travel time), the beacon position the packet carried
+and the depth reading; for USBL the direction of arrival. A row without a
+beacon id is a depth reading only (a slot whose packet was lost, or a depth
+sensor's sample). :func:`read_log` reads a CSV or Parquet log and decides
+what to do with every kind of flaw a real log has (:func:`read_log`,
+"Flaws"); :func:`replay` steps a receiver on it as the master steps it in a
+run; :func:`export_log` writes a run's receiver inputs in that format, so
+that a replay of the export equals the run.
+
+Timing (the slot rule of the receivers, :func:`sblsim.models.receiver.core.slot_due`).
+The replay runs on the grid of the configuration: macro steps of T =
+``simulation.sampling_time``, each of ``simulation.ekf_rate_ratio``
+communication steps of the receiver. It starts at the last multiple of T
+before the first row's time (``start_time``) and ends with the macro step
+that reaches the last row. In each communication step ``[t, t + Δt]`` the
+receiver is shown the newest row whose time the step's end has reached
+(``t + Δt ≥ time_s − 1 ns``, the receiver's own slot test), so it uses each
+row in the step that reaches the row's time, as it uses a packet in a run.
+When several rows fall in one step only one can be used: the last row that
+carries a packet, else the last depth reading; the others are skipped and
+counted. With ``simulation.master = "jacobi"`` a row is shown one macro step
+later, as the Jacobi master hands the receiver its inputs (so that the log
+of a Jacobi run replays to the run; the rows of the last macro step are then
+not used). The receiver's times are taken from the start time (a log with
+Unix times runs as one starting near 0); the time series records them as
+the log has them.
+
+A truth track (``time_s, n_m, e_m, d_m``) is interpolated linearly at the
+end of every macro step, as a run records its truth; steps outside its span
+have no truth and no errors (they are counted).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.acoustics.core import Acoustics
+from sblsim.models.declarations import SIGNAL_RANGES, ModelError
+from sblsim.models.receiver.core import SLOT_SLACK
+from sblsim.orchestrator.config import (
+    BUILTIN_SCENARIOS,
+    ConfigError,
+    apply_overrides,
+    beacon_count,
+    check_receiver,
+    parse_override,
+    read_source,
+    receiver_label,
+    receiver_source,
+    resolve,
+    section_variables,
+    to_toml,
+)
+from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make_handles
+from sblsim.orchestrator.limits import max_steps
+from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, slots
+from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.run import TIMESERIES_COLUMNS, RunResult, _metrics, merge_params, summary
+
+#: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
+FORMAT = 1
+LOG_TITLE = f"sblsim log, format {FORMAT}"
+TRUTH_TITLE = f"sblsim truth track, format {FORMAT}"
+#: Comment lines of an exported CSV log that hold the run's resolved configuration (TOML), one line each.
+CONFIG_PREFIX = "#% "
+#: Parquet schema metadata keys of an exported log: its title and the run's configuration.
+META_TITLE, META_CONFIG = b"sblsim.title", b"sblsim.config"
+#: Rows that come up to this much earlier than a row before them are sorted into place (counted); a row
+#: further back is a clock jump and the log is refused [s].
+REORDER_WINDOW = 1.0
+#: Suffixes of the formats read and written.
+SUFFIXES = (".csv", ".parquet")
+#: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
+DEFAULT_CONFIG = "semicircle"
+
+#: The log's columns: name -> (unit, meaning, when required).
+LOG_COLUMNS = {
+    "time_s": ("s", "the packet's epoch (its transmit time, the slot's tx_time); for a depth reading, its time",
+               "always"),
+    "beacon_id": ("1", "the beacon the packet came from, 1 … N (USBL: 1); empty: the row is a depth reading only",
+                  "always (the column)"),
+    "range_m": ("m", "the measured range (one-way: c · travel time; two-way: c · (round trip − turnaround) / 2)",
+                "one of range_m, travel_time_s"),
+    "travel_time_s": ("s", "the one-way travel time (two-way ranging: (round trip − turnaround) / 2); range = "
+                      "sound speed · travel time", "one of range_m, travel_time_s"),
+    "sound_speed_mps": ("m/s", "the sound speed the hardware used to turn travel time into range (empty: the "
+                        "configuration's acoustics.sound_speed_assumed)", "optional, with travel_time_s"),
+    "beacon_n_m": ("m", "the beacon position the packet carried, North", "always"),
+    "beacon_e_m": ("m", "the beacon position the packet carried, East", "always"),
+    "beacon_d_m": ("m", "the beacon position the packet carried, Down", "always"),
+    "depth_m": ("m", "the depth reading at time_s", "always"),
+    "azimuth_rad": ("rad", "USBL: the direction of arrival's azimuth, clockwise from North (NED)", "USBL"),
+    "elevation_rad": ("rad", "USBL: the direction of arrival's elevation below the horizontal", "USBL"),
+}
+#: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
+TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
+_PACKET_COLUMNS = ("beacon_n_m", "beacon_e_m", "beacon_d_m")
+_ANGLES = ("azimuth_rad", "elevation_rad")
+
+
+# --------------------------------------------------------------------------- reading tables
+
+def _cell(value: Any) -> str:
+    """A Parquet cell as the text a CSV cell would hold ('' for a missing value)."""
+    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    return str(value)
+
+
+@dataclass
+class _Table:
+    """A CSV or Parquet file as text cells: its header, its rows (where, cells) and its metadata."""
+
+    path: Path
+    header: list[str]
+    rows: list[tuple[str, list[str]]]
+    config: str = ""
+    title: str = ""
+
+
+def _read_table(path: Path, what: str) -> _Table:
+    """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
+
+    Raises
+    ------
+    ModelError
+        ``what: ...`` for a missing or unreadable file, a suffix other than .csv or .parquet, no header, or
+        a line whose field count differs from the header's (with its line number).
+    """
+    name = str(path)
+    if path.suffix.lower() not in SUFFIXES:
+        raise ModelError(f"{what}: {name!r} must be a .csv or .parquet file")
+    if path.is_dir():
+        raise ModelError(f"{what}: {name!r} is a directory")
+    if not path.is_file():
+        raise ModelError(f"{what}: no such file {name!r}")
+    if path.suffix.lower() == ".parquet":
+        try:
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+        except Exception as exc:  # pyarrow raises its own errors on a damaged file
+            raise ModelError(f"{what}: {name!r} is not a readable Parquet file ({' '.join(str(exc).split())})") \
+                from None
+        meta = table.schema.metadata or {}
+        frame = table.to_pandas()
+        header = [str(c).strip() for c in frame.columns]
+        rows = [(f"row {k + 1}", [_cell(v) for v in values])
+                for k, values in enumerate(frame.itertuples(index=False, name=None))]
+        return _Table(path, header, rows, meta.get(META_CONFIG, b"").decode("utf-8", "replace"),
+                      meta.get(META_TITLE, b"").decode("utf-8", "replace"))
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
+    header: list[str] | None = None
+    rows: list[tuple[str, list[str]]] = []
+    config: list[str] = []
+    title = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            if header is None and line.startswith(CONFIG_PREFIX.rstrip()):
+                config.append(line[len(CONFIG_PREFIX):] if line.startswith(CONFIG_PREFIX) else "")
+            elif header is None and not title:
+                title = stripped.lstrip("#").strip()
+            continue
+        try:
+            cells = [c.strip() for c in next(csv.reader([line]))]
+        except csv.Error as exc:
+            raise ModelError(f"{what}: {name!r} line {number} does not parse ({exc})") from None
+        if header is None:
+            header = cells
+            continue
+        if len(cells) != len(header):
+            raise ModelError(f"{what}: {name!r} line {number} has {len(cells)} fields, the header "
+                             f"{len(header)} ({','.join(header)})")
+        rows.append((f"line {number}", cells))
+    if header is None:
+        raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
+    return _Table(path, header, rows, "\n".join(config), title)
+
+
+def _columns(table: _Table, what: str) -> dict[str, int]:
+    """Column name -> position; a name given twice is refused."""
+    index: dict[str, int] = {}
+    for k, name in enumerate(table.header):
+        if name in index:
+            raise ModelError(f"{what}: {str(table.path)!r}: the column {name!r} is given twice")
+        index[name] = k
+    return index
+
+
+def _number(text: str, where: str, column: str, low: float, high: float) -> float:
+    """A cell as a finite number within [low, high].
+
+    Raises
+    ------
+    ModelError
+        Naming the line, the column and the value.
+    """
+    if not text:
+        raise ModelError(f"{where}: {column} is empty")
+    try:
+        value = float(text)
+    except ValueError:
+        raise ModelError(f"{where}: {column}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ModelError(f"{where}: {column}: {text!r} is not a finite number")
+    if not low <= value <= high:
+        raise ModelError(f"{where}: {column}: {value:.10g} is outside the allowed range [{low:g}, {high:g}]")
+    return value
+
+
+# --------------------------------------------------------------------------- the log
+
+@dataclass
+class Log:
+    """A log read and checked (:func:`read_log`): its usable rows in time order and what was done to the others.
+
+    Attributes
+    ----------
+    path : Path
+    time : ndarray, shape (N,)
+        Each row's time [s], non-decreasing.
+    beacon : ndarray of int, shape (N,)
+        Beacon id 1 … n; 0 for a depth reading only.
+    range : ndarray, shape (N,)
+        Range [m] (0 on a depth-only row).
+    beacon_ned : ndarray, shape (N, 3)
+        The beacon position the packet carried [m] (0 on a depth-only row).
+    depth : ndarray, shape (N,)
+        Depth reading [m].
+    angles : ndarray, shape (N, 2), or None
+        USBL azimuth and elevation [rad] (0 on a depth-only row).
+    where : list of str
+        Each row's place in the file (``line 12``, ``row 11``).
+    counts : dict
+        ``rows`` (data rows read), ``duplicate``, ``unknown_beacon`` (skipped), ``out_of_order`` (sorted).
+    longest_gap : tuple
+        (seconds, where the row after the gap is) of the longest time between two rows.
+    typical_gap : float
+        The median time between two rows [s] (0 for one row).
+    ignored : list of str
+        Columns the replay does not use.
+    config : str
+        The configuration an exported log carries (TOML; empty for another log).
+    """
+
+    path: Path
+    time: np.ndarray
+    beacon: np.ndarray
+    range: np.ndarray
+    beacon_ned: np.ndarray
+    depth: np.ndarray
+    angles: np.ndarray | None
+    where: list[str]
+    counts: dict[str, int]
+    longest_gap: tuple[float, str]
+    typical_gap: float = 0.0
+    ignored: list[str] = field(default_factory=list)
+    config: str = ""
+
+
+def log_config(path: Path | str) -> str:
+    """The configuration (TOML text) an exported log carries, or '' (read without checking its rows).
+
+    Raises
+    ------
+    ModelError
+        As :func:`read_log` for a file that cannot be read.
+    """
+    return _read_table(Path(path), "log").config
+
+
+def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: float = 1500.0) -> Log:
+    """Read and check a log (docs/log-format.md).
+
+    Parameters
+    ----------
+    path : path
+        A ``.csv`` or ``.parquet`` file.
+    n_beacons : int
+        Beacons of the configuration (ids 1 … n_beacons are known).
+    usbl : bool
+        A USBL interface: ``azimuth_rad`` and ``elevation_rad`` are required.
+    sound_speed : float
+        The sound speed that turns ``travel_time_s`` into range where the log gives none [m/s].
+
+    Flaws (each a clear decision; a refusal is one line naming the file, the line and the column):
+
+    * a line that does not parse (field count, a number that is not one, a required value that is empty or
+      not finite, or outside the receiver's declared input range), a missing required column, or both
+      ``range_m`` and ``travel_time_s``: **refused**;
+    * a beacon id that is not a whole number in 1 … n_beacons: the row is **skipped** (``unknown_beacon``);
+    * a row with the same time and beacon id as an earlier one: **skipped** (``duplicate``);
+    * a row up to :data:`REORDER_WINDOW` earlier than a row before it: **sorted** into place
+      (``out_of_order``); further back, a clock jump: **refused** with the line;
+    * a gap forward: **stepped through** (the receiver predicts), the longest reported; a gap so long that
+      the replay would not fit in memory: refused with the line after it;
+    * columns the replay does not know or use: **ignored** and listed.
+
+    Returns
+    -------
+    Log
+
+    Raises
+    ------
+    ModelError
+        As listed above.
+    """
+    path = Path(path)
+    table = _read_table(path, "log")
+    index = _columns(table, "log")
+    name = str(path)
+    doc = "see docs/log-format.md"
+    required = ["time_s", "beacon_id", *_PACKET_COLUMNS, "depth_m"] + (list(_ANGLES) if usbl else [])
+    missing = [c for c in required if c not in index]
+    if missing:
+        system = " (a USBL log)" if usbl and set(missing) <= set(_ANGLES) else ""
+        raise ModelError(f"log: {name!r} has no column {missing[0]}{system}; its columns: "
+                         f"{','.join(table.header)}; {doc}")
+    has_range, has_travel = "range_m" in index, "travel_time_s" in index
+    if has_range == has_travel:
+        which = "both" if has_range else "neither of"
+        raise ModelError(f"log: {name!r} has {which} range_m and travel_time_s; give one of them; {doc}")
+    used = set(required) | {"range_m" if has_range else "travel_time_s"}
+    if has_travel and "sound_speed_mps" in index:
+        used.add("sound_speed_mps")
+    ignored = [c for c in table.header if c not in used]
+    speeds = next(v for v in Acoustics.variables() if v.name == "sound_speed_assumed")
+    t_lo, t_hi = -1e12, 1e12  # any clock; the receiver runs on times from the log's start
+    r_lo, r_hi = 0.0, SIGNAL_RANGES["range"][1]
+    p_lo, p_hi = SIGNAL_RANGES["position"]
+    d_lo, d_hi = SIGNAL_RANGES["depth"]
+
+    counts = {"rows": len(table.rows), "unknown_beacon": 0, "duplicate": 0, "out_of_order": 0}
+    kept: list[tuple[float, int, float, tuple, float, tuple, str]] = []
+    latest, latest_where = -math.inf, ""
+    for where_short, cells in table.rows:
+        where = f"log: {name!r} {where_short}"
+        t = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
+        beacon = _beacon(cells[index["beacon_id"]], n_beacons)
+        if beacon < 0:
+            counts["unknown_beacon"] += 1
+            continue
+        if t < latest - REORDER_WINDOW:
+            raise ModelError(f"{where}: time_s {t:.10g} s is {latest - t:.6g} s before {latest_where}'s "
+                             f"{latest:.10g} s: a clock jump back (rows up to {REORDER_WINDOW:g} s out of order "
+                             f"are sorted); replay the rows before and from {where_short} as two logs, or "
+                             "correct the clock")
+        if t < latest:
+            counts["out_of_order"] += 1
+        elif t > latest:
+            latest, latest_where = t, where_short
+        depth = _number(cells[index["depth_m"]], where, "depth_m", d_lo, d_hi)
+        if beacon == 0:
+            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0, 0.0), where_short))
+            continue
+        if has_range:
+            rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
+        else:
+            travel = _number(cells[index["travel_time_s"]], where, "travel_time_s", 0.0, 1e3)
+            speed = sound_speed
+            if "sound_speed_mps" in index and cells[index["sound_speed_mps"]]:
+                speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)
+            rng = speed * travel
+        position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
+        angles = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in _ANGLES) if usbl else (0.0, 0.0)
+        kept.append((t, beacon, rng, position, depth, angles, where_short))
+
+    # in time order (stable: rows of one time keep the file's order), then without duplicates
+    kept.sort(key=lambda row: row[0])
+    seen: set[tuple[float, int]] = set()
+    rows = []
+    for row in kept:
+        key = (row[0], row[1])
+        if key in seen:
+            counts["duplicate"] += 1
+            continue
+        seen.add(key)
+        rows.append(row)
+    if not rows:
+        raise ModelError(f"log: {name!r} has no row to replay ({counts['rows']} rows; {counts['unknown_beacon']} "
+                         f"with a beacon id outside 1 … {n_beacons}); {doc}")
+    times = np.array([r[0] for r in rows])
+    gaps = np.diff(times)
+    gap = (float(gaps.max()), rows[int(gaps.argmax()) + 1][6]) if gaps.size else (0.0, rows[0][6])
+    return Log(path=path, time=times, beacon=np.array([r[1] for r in rows], dtype=np.int64),
+               range=np.array([r[2] for r in rows]), beacon_ned=np.array([r[3] for r in rows], dtype=float),
+               depth=np.array([r[4] for r in rows]),
+               angles=np.array([r[5] for r in rows], dtype=float) if usbl else None,
+               where=[r[6] for r in rows], counts=counts, longest_gap=gap,
+               typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config)
+
+
+def _beacon(text: str, n_beacons: int) -> int:
+    """A beacon id cell: 1 … n_beacons, 0 when empty (a depth reading), −1 when it names no beacon of the array."""
+    if not text:
+        return 0
+    try:
+        value = float(text)
+    except ValueError:
+        return -1
+    if not math.isfinite(value) or value != round(value) or not 1 <= value <= n_beacons:
+        return -1
+    return int(value)
+
+
+def read_truth(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
+    """Read a truth track: ``time_s, n_m, e_m, d_m`` (CSV or Parquet), times strictly increasing.
+
+    Returns
+    -------
+    time : ndarray, shape (M,)
+        [s], M ≥ 2.
+    ned : ndarray, shape (M, 3)
+        [m].
+
+    Raises
+    ------
+    ModelError
+        ``--truth: ...`` naming the line: a missing column, a value that is not a finite number, a time
+        that does not increase, fewer than two rows.
+    """
+    path = Path(path)
+    table = _read_table(path, "--truth")
+    index = _columns(table, "--truth")
+    name = str(path)
+    missing = [c for c in TRUTH_COLUMNS if c not in index]
+    if missing:
+        raise ModelError(f"--truth: {name!r} has no column {missing[0]}; its columns: {','.join(table.header)}; "
+                         f"a truth track has the columns {','.join(TRUTH_COLUMNS)} (docs/log-format.md)")
+    values = np.empty((len(table.rows), 4))
+    p_lo, p_hi = SIGNAL_RANGES["position"]
+    for k, (where_short, cells) in enumerate(table.rows):
+        where = f"--truth: {name!r} {where_short}"
+        for j, column in enumerate(TRUTH_COLUMNS):
+            low, high = (-1e12, 1e12) if j == 0 else (p_lo, p_hi)
+            values[k, j] = _number(cells[index[column]], where, column, low, high)
+        if k and values[k, 0] <= values[k - 1, 0]:
+            raise ModelError(f"{where}: time_s {values[k, 0]:.10g} s does not come after the row before "
+                             f"({values[k - 1, 0]:.10g} s): a truth track's times must increase")
+    if len(values) < 2:
+        raise ModelError(f"--truth: {name!r} has {len(values)} row(s); a track needs at least two")
+    return values[:, 0], values[:, 1:]
+
+
+# --------------------------------------------------------------------------- the schedule
+
+@dataclass
+class Schedule:
+    """Which row the receiver is shown in each communication step (:func:`schedule`)."""
+
+    #: The replay's start time on the log's clock [s] (a multiple of T).
+    start: float
+    #: Macro steps.
+    steps: int
+    #: Row shown in each communication step, shape (steps · ratio,); −1: none yet.
+    fed: np.ndarray
+    #: Row the time series records at each macro step (the newest one reached), shape (steps,); −1: none.
+    shown: np.ndarray
+    #: The rows the receiver is shown (in order).
+    used: np.ndarray
+    #: Rows skipped because another row of the same step was used.
+    same_step: int
+    #: Rows not reached (a Jacobi replay: the rows of the last macro step).
+    not_reached: int
+
+
+def _step_ends(n_steps: int, T: float, ratio: int) -> np.ndarray:
+    """The end ``t + h`` of every communication step, computed as the master computes t and h."""
+    sub = T / ratio
+    k = np.repeat(np.arange(n_steps), ratio)
+    j = np.tile(np.arange(ratio), n_steps)
+    t = (0.0 + k * T) + j * sub
+    return t + sub
+
+
+def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
+    """The replay's start, length and the row of every communication step (module docstring, "Timing").
+
+    Raises
+    ------
+    ModelError
+        When the log's span is more macro steps than fit in memory (naming its longest gap).
+    """
+    start = T * (math.ceil(log.time[0] / T - 1e-9) - 1)
+    rel = log.time - start
+    last = float(rel[-1])
+    steps = max(1, math.ceil(last / T - 1e-9))
+    most = max_steps(1, True)
+    if steps > most:
+        gap, where = log.longest_gap
+        raise ModelError(f"log: {str(log.path)!r} spans {log.time[-1] - log.time[0]:.6g} s, {steps} steps of "
+                         f"T = {T:g} s; at most {most} fit in memory here. Its longest gap is {gap:.6g} s, before "
+                         f"its {where} (a clock jump forward?): replay the rows before and from there as two logs, "
+                         "or give a larger simulation.sampling_time")
+    def end(n: int) -> float:  # the end of the last communication step of n macro steps, as the master has it
+        sub = T / ratio
+        return ((0.0 + (n - 1) * T) + (ratio - 1) * sub) + sub
+
+    while end(steps) < last - SLOT_SLACK:
+        steps += 1
+    while steps > 1 and end(steps - 1) >= last - SLOT_SLACK:
+        steps -= 1
+    ends = _step_ends(steps, T, ratio)
+    # newest row the end of each communication step has reached (the receiver's slot test, in its arithmetic)
+    newest = np.searchsorted(rel - SLOT_SLACK, ends, side="right") - 1
+    has_packet = log.beacon > 0
+    chosen = np.full(ends.size, -1, dtype=np.int64)
+    previous = -1
+    for m, top in enumerate(newest):
+        if top > previous:
+            packets = np.flatnonzero(has_packet[previous + 1:top + 1])
+            chosen[m] = previous + 1 + int(packets[-1]) if packets.size else top
+            previous = top
+        else:
+            chosen[m] = chosen[m - 1] if m else -1
+    shown = chosen[ratio - 1::ratio]
+    if jacobi:  # each macro step shows what the last one reached, in all its communication steps
+        fed = np.repeat(np.concatenate([[-1], shown[:-1]]), ratio)
+    else:
+        fed = chosen
+    used = np.unique(fed[fed >= 0])
+    if jacobi:  # the rows the end of the last macro step but one reached
+        reached = int(newest[-ratio - 1] + 1) if ends.size > ratio else 0
+    else:
+        reached = len(rel)
+    return Schedule(start=start, steps=steps, fed=fed, shown=shown, used=used, same_step=reached - used.size,
+                    not_reached=len(rel) - reached)
+
+
+# --------------------------------------------------------------------------- configuration
+
+def replay_config(log_path: Path | str, config: str | None = None, receiver: str | None = None,
+                  overrides: Sequence[str] = ()) -> tuple[dict, str]:
+    """The resolved configuration of a replay and where it came from.
+
+    The source is ``config`` (a built-in scenario or a TOML file) when given, else the configuration an
+    exported log carries, else the built-in scenario :data:`DEFAULT_CONFIG`. A ``receiver`` (or a
+    ``--set receiver=...``) other than the configuration's takes the keys of the configuration's
+    ``[receiver]`` section that it declares and that were set (differ from the old receiver's default),
+    and its own defaults and ties for the rest (a resolved ``config.toml`` holds every key of its receiver,
+    e.g. the ekf's ``gate_probability = 1``, which is not a choice made for another receiver).
+
+    Returns
+    -------
+    cfg : dict
+    source : str
+        What the configuration is, for the messages.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        As :func:`sblsim.orchestrator.config.load_config`; a log's configuration that does not resolve is
+        named as the log's.
+    """
+    import copy
+
+    overrides = list(overrides)
+    where = "--receiver" if receiver is not None else "simulation.receiver"
+    for item in overrides:
+        section, name, value = parse_override(item)
+        if (section, name) == ("simulation", "receiver") and receiver is None:
+            receiver = str(value)
+    if receiver is not None:
+        check_receiver(receiver, where)
+        overrides = [o for o in overrides if parse_override(o)[:2] != ("simulation", "receiver")]
+    embedded = "" if config is not None else log_config(log_path)
+    if config is not None:
+        raw = copy.deepcopy(read_source(config))
+        if str(config) in BUILTIN_SCENARIOS:
+            raw.setdefault("run", {})["scenario"] = str(config)
+        source = f"--config {config}"
+    elif embedded:
+        try:
+            raw = tomllib.loads(embedded)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"log: the configuration {str(log_path)!r} carries is not valid TOML ({exc}); give "
+                              "--config") from None
+        source = "the log's own (its run's configuration)"
+    else:
+        raw = copy.deepcopy(read_source(DEFAULT_CONFIG))
+        raw.setdefault("run", {})["scenario"] = DEFAULT_CONFIG
+        source = f"the built-in {DEFAULT_CONFIG} scenario's (the log carries none; --config to choose)"
+    if receiver is not None:
+        _switch_receiver(raw, receiver)
+    raw = apply_overrides(raw, overrides)
+    try:
+        cfg = resolve(raw)
+    except ModelError as exc:
+        if embedded:
+            raise type(exc)(f"log: the configuration {str(log_path)!r} carries: {exc}; give --config") from None
+        raise
+    return cfg, source
+
+
+def _switch_receiver(raw: dict, receiver: str) -> None:
+    """Set ``simulation.receiver`` of a raw configuration, keeping the receiver keys that were chosen
+    (:func:`replay_config`)."""
+    sim = raw.setdefault("simulation", {})
+    old = sim.get("receiver", "ekf")
+    sim["receiver"] = receiver
+    if old == receiver or "receiver" not in raw or not isinstance(raw["receiver"], dict):
+        return
+    try:
+        defaults = {v.name: v.start for v in section_variables("receiver", str(old))}
+        declared = {v.name for v in section_variables("receiver", receiver)}
+    except ModelError:
+        return  # an unknown receiver: resolve() names it
+    raw["receiver"] = {k: v for k, v in raw["receiver"].items()
+                       if k in declared and not (k in defaults and v == defaults[k])}
+
+
+# --------------------------------------------------------------------------- the replay
+
+@dataclass
+class ReplayResult:
+    """Outcome of a replay.
+
+    Attributes
+    ----------
+    config : dict
+        The resolved configuration the receiver ran with.
+    engine : str
+    timeseries : pandas.DataFrame
+        One row per macro step: ``time`` [s] (the log's clock), ``log_row`` (where in the log the row the
+        step shows is), the receiver's inputs and outputs as a run records them, and with a truth track
+        ``true_*``, ``pcrb`` and the errors ``e_*``, ``instr_e_*`` (NaN outside its span).
+    summary : dict
+        ``summary.json``: a run's keys (errors ``null`` without a truth track), ``log`` and ``truth``.
+    """
+
+    config: dict
+    engine: str
+    timeseries: pd.DataFrame
+    summary: dict[str, Any]
+
+
+def _inputs(log: Log, names: Sequence[str], start: float) -> np.ndarray:
+    """The receiver's input vector of every row, shape (N, n_in)."""
+    rel = log.time - start
+    packet = log.beacon > 0
+    angles = log.angles if log.angles is not None else np.zeros((len(rel), 2))
+    values = {"packet_seq": np.arange(1, len(rel) + 1, dtype=float), "beacon_id": log.beacon.astype(float),
+              "packet_valid": packet.astype(float), "tx_time": rel, "range": log.range,
+              "beacon_x": log.beacon_ned[:, 0], "beacon_y": log.beacon_ned[:, 1], "beacon_z": log.beacon_ned[:, 2],
+              "depth": log.depth, "azimuth": angles[:, 0], "elevation": angles[:, 1]}
+    unknown = [n for n in names if n not in values]
+    if unknown:
+        raise ModelError(f"receiver: input {unknown[0]!r} is not in a log")
+    return np.stack([values[n] for n in names], axis=1)
+
+
+def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | None = None,
+           truth: tuple[np.ndarray, np.ndarray] | None = None) -> ReplayResult:
+    """Step the configuration's receiver on a log (module docstring).
+
+    Parameters
+    ----------
+    log : Log
+        From :func:`read_log` with the configuration's beacon count.
+    cfg : dict
+        Resolved configuration (the receiver, its parameters, T, the rate ratio, the master).
+    engine : {'local', 'fmu'}
+    fmu_dir : path, optional
+    truth : (time, ned), optional
+        From :func:`read_truth`.
+
+    Raises
+    ------
+    ModelError
+        A truth track that covers no step; as :func:`schedule` and :func:`sblsim.orchestrator.engines.make_handles`.
+    """
+    sim = cfg["simulation"]
+    T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
+    plan = schedule(log, T, ratio, sim["master"] == "jacobi")
+    rel_times = 0.0 + T * np.arange(1, plan.steps + 1)  # the end of each macro step, as the master records it
+    times = plan.start + rel_times
+    true = np.full((plan.steps, 3), np.nan)
+    if truth is not None:
+        t_truth = truth[0] - plan.start
+        true = np.stack([np.interp(rel_times, t_truth, truth[1][:, a], left=np.nan, right=np.nan)
+                         for a in range(3)], axis=1)
+        if not np.isfinite(true[:, 0]).any():
+            raise ModelError(f"--truth: its times ({truth[0][0]:.10g} … {truth[0][-1]:.10g} s) cover no step of "
+                             f"the log ({times[0]:.10g} … {times[-1]:.10g} s); are they on the log's clock?")
+    n_beacons = beacon_count(cfg)
+    handles = make_handles(engine, fmu_dir, n_beacons, {"receiver": receiver_source(cfg)})
+    handle = handles["receiver"]
+    start = time.perf_counter()
+    try:
+        params, replicates = merge_params([cfg], "receiver", handle.parameters)
+        handle.setup(params, replicates, 0.0)
+        inputs = _inputs(log, handle.input_names, plan.start)
+        outputs = np.empty((plan.steps, len(handle.output_names)))
+        sub = T / ratio
+        current = -1
+        for k in range(plan.steps):
+            t = 0.0 + k * T
+            for j in range(ratio):
+                row = plan.fed[k * ratio + j]
+                if row != current:
+                    handle.set_input_vector(inputs[row][:, None])
+                    current = row
+                handle.do_step(t + j * sub, sub)
+            outputs[k] = handle.output_vector()[:, 0]
+        types = {p.name: p.type for p in handle.ports}
+        names = list(handle.output_names)
+    finally:
+        close_handles(handles)
+    wall = time.perf_counter() - start
+    out = {n: cast_column(outputs[:, k], DTYPES[types[n]]) for k, n in enumerate(names)}
+    shown = plan.shown
+    rows = np.where(shown >= 0, shown, 0)
+    none = shown < 0
+
+    def packet(values: np.ndarray, empty: float = 0.0) -> np.ndarray:
+        return np.where(none, empty, values[rows])
+
+    angles = log.angles
+    columns: dict[str, np.ndarray] = {
+        "time": times, "replicate": np.zeros(plan.steps, dtype=np.int64),
+        "log_row": np.array([log.where[r] if r >= 0 else "" for r in shown], dtype=object),
+        **{f"true_{a}": true[:, k] for k, a in enumerate("xyz")},
+        **{n: out[n] for n in names if n.startswith(("est_", "instr_"))},
+        "packet_seq": np.where(none, 0, shown + 1).astype(np.int64),
+        "beacon_id": packet(log.beacon).astype(np.int64), "packet_valid": packet(log.beacon > 0, False),
+        "tx_time": packet(log.time), "range": packet(log.range),
+        **{f"beacon_{a}": packet(log.beacon_ned[:, k]) for k, a in enumerate("xyz")},
+        "depth": packet(log.depth),
+    }
+    if angles is not None:
+        columns.update(azimuth=packet(angles[:, 0]), elevation=packet(angles[:, 1]))
+    columns.update({n: out[n] for n in names if n not in columns})
+    frame = pd.DataFrame(columns)
+    result = RunResult(cfg, engine, frame, pd.DataFrame(), plan.steps, wall)
+    metrics, truth_steps = _replay_metrics(cfg, frame)
+    frame["pcrb"] = metrics.pop("__pcrb")
+    for name in ("e_x", "e_y", "e_z", "e_tot"):
+        frame[name] = metrics.pop(f"__{name}")
+        frame[f"instr_{name}"] = metrics.pop(f"__instr_{name}")
+    result.metrics = pd.DataFrame([{"replicate": 0, **metrics}])
+    s = summary(result)
+    if truth is None:
+        s.update({k: None for k in ("diverged", "beyond_geometry", "max_distance")})
+    s.update(duration=float(plan.steps * T), start_time=float(plan.start), end_time=float(times[-1]))
+    s["log"] = {"file": log.path.name, **log.counts, "used": int(plan.used.size),
+                "depth_only": int((log.beacon[plan.used] == 0).sum()),
+                "same_step": plan.same_step, "not_reached": plan.not_reached,
+                "typical_gap_s": log.typical_gap, "longest_gap_s": log.longest_gap[0],
+                "longest_gap_before": log.longest_gap[1],
+                "ignored_columns": log.ignored}
+    s["truth"] = None if truth is None else {"steps": int(truth_steps), "steps_without": int(plan.steps - truth_steps)}
+    return ReplayResult(cfg, engine, frame, s)
+
+
+def _replay_metrics(cfg: dict, frame: pd.DataFrame) -> tuple[dict, int]:
+    """The metrics of a replay: a run's, over the steps the truth track covers (contiguous), and the per-step
+    PCRB and errors (keys ``__*``, NaN outside); without truth only those that need none."""
+    n = len(frame)
+    covered = np.flatnonzero(np.isfinite(frame["true_x"].to_numpy()))
+    values: dict[str, Any] = {k: math.nan for k in RUN_METRICS}
+    values.update({k: math.nan for k in FLAG_NAMES})
+    for name in ("__pcrb", "__e_x", "__e_y", "__e_z", "__e_tot", "__instr_e_x", "__instr_e_y", "__instr_e_z",
+                 "__instr_e_tot"):
+        values[name] = np.full(n, np.nan)
+    received = frame["packet_valid"].to_numpy(bool) & (frame["beacon_id"].to_numpy() >= 1)
+    _, fresh = slots(frame["packet_seq"].to_numpy()[:, None], received[:, None])
+    gated = frame["gated"].to_numpy(bool)
+    started = frame["packet_seq"].to_numpy() > 0
+    values["updates"] = int((fresh[:, 0] & ~gated).sum())
+    values["fix_steps"] = int(frame["instr_valid"].to_numpy(bool).sum())
+    values["nis_mean"] = float(frame["nis"].to_numpy()[started].mean()) if started.any() else math.nan
+    values["gated_pct"] = 100.0 * float((fresh[:, 0] & gated).sum()) / fresh.sum() if fresh.any() else math.nan
+    if covered.size == 0:
+        return values, 0
+    block = slice(int(covered[0]), int(covered[-1]) + 1)
+    rec = {column: frame[name].to_numpy()[block, None].astype(float) for name, column in TIMESERIES_COLUMNS.items()
+           if name in frame}
+    metrics, bound = _metrics([cfg], rec, [0], with_bound=True)
+    row = metrics.iloc[0]
+    values.update({k: row[k] for k in metrics.columns if k != "replicate"})
+    values["__pcrb"][block] = bound[:, 0]
+    truth = frame[["true_x", "true_y", "true_z"]].to_numpy()
+    est = frame[["est_x", "est_y", "est_z"]].to_numpy()
+    fix = np.where(frame["instr_valid"].to_numpy(bool)[:, None], frame[["instr_x", "instr_y", "instr_z"]].to_numpy(),
+                   np.nan)
+    from sblsim.orchestrator.metrics import errors
+
+    e, ie = errors(truth, est), errors(truth, fix)
+    for k, name in enumerate(("e_x", "e_y", "e_z", "e_tot")):
+        values[f"__{name}"] = e[:, k]
+        values[f"__instr_{name}"] = ie[:, k]
+    return values, covered.size
+
+
+def write_replay(result: ReplayResult, out_dir: Path | str) -> Path:
+    """Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and the figures atomically.
+
+    With a truth track the figures of a run (over the steps it covers); without, ``trajectory_xy.png`` of
+    the estimate and the instrumentation fixes.
+    """
+    import matplotlib.pyplot as plt
+
+    from sblsim.orchestrator.plots import plot_trajectory_xy, save_run_figures
+
+    out_dir = Path(out_dir)
+    receiver = receiver_label(result.config)
+    title = f"replay of {result.summary['log']['file']}, {receiver} ({result.engine})"
+    with staged_directory(out_dir) as tmp:
+        (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, allow_nan=False) + "\n")
+        (tmp / "config.toml").write_text(to_toml(result.config))
+        result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
+        ts = result.timeseries
+        covered = ts[np.isfinite(ts["true_x"].to_numpy())]
+        if len(covered):
+            save_run_figures(covered, tmp, title=title, receiver=receiver)
+        else:
+            fig, ax = plt.subplots(figsize=(6.5, 6))
+            plot_trajectory_xy(ts, ax, receiver).suptitle(f"Track, {title} (no truth track)")
+            fig.savefig(tmp / "trajectory_xy.png", dpi=120, bbox_inches="tight")
+            plt.close(fig)
+    return out_dir
+
+
+# --------------------------------------------------------------------------- export
+
+def truth_path(log_path: Path | str) -> Path:
+    """Where ``--export-log FILE`` writes the truth track: ``FILE``'s stem with ``_truth``, the same suffix."""
+    path = Path(log_path)
+    return path.with_name(f"{path.stem}_truth{path.suffix}")
+
+
+def check_export(path: Path, force: bool) -> None:
+    """Refuse an ``--export-log`` file before any work: a suffix other than .csv or .parquet, a directory,
+    or an existing log or truth file without ``force``.
+
+    Raises
+    ------
+    ModelError
+        Naming ``--export-log``.
+    """
+    if path.suffix.lower() not in SUFFIXES:
+        raise ModelError(f"--export-log: {str(path)!r} must end in .csv or .parquet")
+    for target in (path, truth_path(path)):
+        if target.is_dir():
+            raise ModelError(f"--export-log: {str(target)!r} is a directory")
+        if target.exists() and not force:
+            raise ModelError(f"--export-log: {str(target)!r} exists; add --force to replace it or choose another "
+                             "file")
+
+
+def log_frames(ts: pd.DataFrame, usbl: bool) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """A run's time series (one replicate) as a log, one row per slot, and its truth track (every step).
+
+    A slot whose packet was lost is a depth-only row (``beacon_id`` missing); ``time_s`` is the packet's
+    epoch (``tx_time``). Values are the receiver's inputs as the run recorded them.
+    """
+    seq = ts["packet_seq"].to_numpy()
+    previous = np.concatenate([[0], seq[:-1]])
+    slot = ts[(seq != previous) & (seq > 0)]
+    valid = slot["packet_valid"].to_numpy(bool)
+
+    def packet(column: str) -> np.ndarray:
+        return np.where(valid, slot[column].to_numpy(dtype=float), np.nan)
+
+    log = pd.DataFrame({"time_s": slot["tx_time"].to_numpy(dtype=float),
+                        "beacon_id": pd.array(np.where(valid, slot["beacon_id"].to_numpy(), 0), dtype="Int64"),
+                        "range_m": packet("range"), "beacon_n_m": packet("beacon_x"),
+                        "beacon_e_m": packet("beacon_y"), "beacon_d_m": packet("beacon_z"),
+                        "depth_m": slot["depth"].to_numpy(dtype=float)})
+    log.loc[~valid, "beacon_id"] = pd.NA
+    if usbl:
+        log["azimuth_rad"] = packet("azimuth")
+        log["elevation_rad"] = packet("elevation")
+    truth = pd.DataFrame({"time_s": ts["time"].to_numpy(dtype=float), "n_m": ts["true_x"].to_numpy(dtype=float),
+                          "e_m": ts["true_y"].to_numpy(dtype=float), "d_m": ts["true_z"].to_numpy(dtype=float)})
+    return log, truth
+
+
+def _csv_text(frame: pd.DataFrame, comments: Sequence[str]) -> str:
+    """A frame as CSV text: numbers as Python writes them (they read back exactly), missing values empty."""
+    buffer = io.StringIO()
+    for line in comments:
+        buffer.write(f"{line}\n")
+    buffer.write(",".join(frame.columns) + "\n")
+    columns = [frame[c].to_numpy(dtype=object) for c in frame.columns]
+    for values in zip(*columns):
+        buffer.write(",".join("" if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v))
+                              else (repr(float(v)) if isinstance(v, (float, np.floating)) else str(v))
+                              for v in values) + "\n")
+    return buffer.getvalue()
+
+
+def _write_atomic(path: Path, write) -> None:
+    """Write a file through a temporary file beside it, moved into place when complete."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
+    """Write a run's receiver inputs as a log (``path``) and its truth track beside it (:func:`truth_path`).
+
+    The log carries the run's resolved configuration (CSV: ``#%`` comment lines; Parquet: schema
+    metadata), which ``sblsim replay`` takes unless it is given ``--config``.
+
+    Returns
+    -------
+    (Path, Path)
+        The log and the truth track.
+    """
+    path = Path(path)
+    cfg = result.config
+    ts = result.timeseries
+    ts = ts[ts["replicate"] == ts["replicate"].iloc[0]]
+    log, truth = log_frames(ts, cfg["platform"]["system"] == "usbl")
+    origin = (f"exported from: sblsim run {cfg['run']['scenario']} (seed {cfg['run']['seed']}, "
+              f"platform.system {cfg['platform']['system']}, receiver {receiver_label(cfg)}, {result.engine} engine)")
+    config = to_toml(cfg)
+    lost = int(log["beacon_id"].isna().sum())
+    comments = [f"# {LOG_TITLE}",
+                "# columns, units and the replay's rules: docs/log-format.md; time_s is the packet's epoch, a row "
+                "without beacon_id a depth reading only",
+                f"# {origin}; {len(log)} slots, {lost} packets lost",
+                "# the run's resolved configuration, which `sblsim replay` uses unless given --config:",
+                *[f"{CONFIG_PREFIX}{line}" if line else CONFIG_PREFIX.rstrip() for line in config.splitlines()]]
+    target = truth_path(path)
+    if path.suffix.lower() == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        def parquet(frame: pd.DataFrame, meta: dict[bytes, bytes]):
+            def write(tmp: Path) -> None:
+                table = pa.Table.from_pandas(frame, preserve_index=False)
+                pq.write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **meta}), tmp)
+            return write
+
+        _write_atomic(path, parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}))
+        _write_atomic(target, parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
+    else:
+        text = _csv_text(log, comments)
+        truth_text = _csv_text(truth, [f"# {TRUTH_TITLE}", f"# {origin}; the diver's true position at the end "
+                                       "of every step (N, E, D in the platform's frame)"])
+        _write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        _write_atomic(target, lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
+    return path, target
+
+
+__all__ = ["DEFAULT_CONFIG", "FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "ReplayResult", "Schedule",
+           "TRUTH_COLUMNS", "check_export", "export_log", "log_config", "log_frames", "read_log", "read_truth",
+           "replay", "replay_config", "schedule", "truth_path", "write_replay"]
