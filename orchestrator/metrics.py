@@ -59,7 +59,7 @@ DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
 #: A diver farther from the platform reference (horizontally) than this many times the beacons' horizontal
 #: spread is beyond what the geometry serves (``beyond_geometry``; the command line warns).
 REACH_RATIO = 100.0
-#: Per-run flags computed besides the compiled pass (:func:`run_flags`): in ``summary.json``, not in a campaign's
+#: Per-run flags computed besides the compiled pass (:func:`run_flags`): in ``summary.json`` and in a campaign's
 #: rows.
 FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry")
 #: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound (the compiled

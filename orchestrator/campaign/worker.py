@@ -14,7 +14,7 @@ import pandas as pd
 from sblsim.orchestrator.campaign.plan import Chunk
 from sblsim.orchestrator.config import receiver_label
 from sblsim.orchestrator.master import RecordBuffer
-from sblsim.orchestrator.metrics import RUN_METRICS
+from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.run import run_batch, with_replicates
 from sblsim.orchestrator.study import Study
 
@@ -52,7 +52,7 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
         rows[factor.name] = coded.astype(np.int64)
         rows[f"{factor.name}_value"] = np.where(coded < 0, factor.low, factor.high)
     rows["receiver"] = receiver_label(chunk.configs[0])  # a chunk shares its receiver (batch_key)
-    rows.update({m: result.metrics[m].to_numpy() for m in RUN_METRICS})
+    rows.update({m: result.metrics[m].to_numpy() for m in RUN_METRICS + FLAG_NAMES})
     series = None
     if timeseries:
         series = result.timeseries
