@@ -172,6 +172,18 @@ def measurement_information(P: ca.SX, model, x, context, variances, use, rows=No
     return P
 
 
+def _predicted(motion) -> tuple[tuple[ca.SX, ...], ca.SX, ca.SX]:
+    """What every bound step shares: its first inputs ``(B (n²), dt, q_h, q_v, position (3))`` as symbols, the
+    state at the true position, and the bound after the prediction over ``dt`` with ``motion``, (n, n)."""
+    n = motion.state_size
+    B = ca.SX.sym("B", n * n)
+    dt, qh, qv = ca.SX.sym("dt"), ca.SX.sym("q_h"), ca.SX.sym("q_v")
+    position = ca.SX.sym("position", 3)
+    x = state_at(motion, position)
+    _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv)
+    return (B, dt, qh, qv, position), x, P
+
+
 @lru_cache(maxsize=None)
 def bound_step(model=MODEL) -> ca.Function:
     """One step of the bound in covariance form, as a casadi Function.
@@ -194,15 +206,10 @@ def bound_step(model=MODEL) -> ca.Function:
     ----------
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998, Eq. (21).
     """
-    motion = model.motion
-    n = motion.state_size
-    B = ca.SX.sym("B", n * n)
-    dt, qh, qv = ca.SX.sym("dt"), ca.SX.sym("q_h"), ca.SX.sym("q_v")
-    position, beacon, arm = ca.SX.sym("position", 3), ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
+    (B, dt, qh, qv, position), x, P = _predicted(model.motion)
+    beacon, arm = ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
     noise, attitude, d_var, slot, received = (ca.SX.sym(name) for name in ("noise_variance", "attitude_variance",
                                                                           "depth_variance", "slot", "received"))
-    x = state_at(motion, position)
-    _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv)
     variances = ca.vertcat(effective_range_variance(position, beacon, arm, noise, attitude, model), d_var)
     # rows of the model for one beacon: 0 the range, 1 the depth; the depth is added first
     P = measurement_information(P, model, x, [beacon], variances, (ca.logic_and(slot, received), slot), rows=(1, 0))
@@ -335,16 +342,12 @@ def usbl_bound_step(model=USBL_MODEL) -> ca.Function:
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998, Eq. (21).
     """
     motion = model.motion
-    n = motion.state_size
-    B = ca.SX.sym("B", n * n)
-    dt, qh, qv = ca.SX.sym("dt"), ca.SX.sym("q_h"), ca.SX.sym("q_v")
-    position, transceiver = ca.SX.sym("position", 3), ca.SX.sym("transceiver", 3)
+    (B, dt, qh, qv, position), x, P = _predicted(motion)
+    transceiver = ca.SX.sym("transceiver", 3)
     noise, angle, attitude, d_var, slot, received = (
         ca.SX.sym(name) for name in ("noise_variance", "angle_sigma_deg", "attitude_variance", "depth_variance",
                                      "slot", "received"))
-    x = state_at(motion, position)
-    _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv)
-    depth_row = ca.SX.zeros(1, n)
+    depth_row = ca.SX.zeros(1, motion.state_size)
     depth_row[motion.position_index[2]] = 1.0
     P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
     use = ca.logic_and(slot, received)
