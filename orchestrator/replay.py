@@ -39,8 +39,6 @@ import csv
 import io
 import json
 import math
-import os
-import tempfile
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -70,7 +68,7 @@ from sblsim.orchestrator.config import (
 from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make_handles
 from sblsim.orchestrator.limits import max_steps
 from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, slots
-from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.output import staged_directory, write_atomic
 from sblsim.orchestrator.run import TIMESERIES_COLUMNS, RunResult, _metrics, merge_params, summary
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
@@ -914,19 +912,6 @@ def _csv_text(frame: pd.DataFrame, comments: Sequence[str]) -> str:
     return buffer.getvalue()
 
 
-def _write_atomic(path: Path, write) -> None:
-    """Write a file through a temporary file beside it, moved into place when complete."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     """Write a run's receiver inputs as a log (``path``) and its truth track beside it (:func:`truth_path`).
 
@@ -954,6 +939,7 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
                 "# the run's resolved configuration, which `sblsim replay` uses unless given --config:",
                 *[f"{CONFIG_PREFIX}{line}" if line else CONFIG_PREFIX.rstrip() for line in config.splitlines()]]
     target = truth_path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".parquet":
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -964,14 +950,14 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
                 pq.write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **meta}), tmp)
             return write
 
-        _write_atomic(path, parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}))
-        _write_atomic(target, parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
+        write_atomic(path, parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}))
+        write_atomic(target, parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
     else:
         text = _csv_text(log, comments)
         truth_text = _csv_text(truth, [f"# {TRUTH_TITLE}", f"# {origin}; the diver's true position at the end "
                                        "of every step (N, E, D in the platform's frame)"])
-        _write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-        _write_atomic(target, lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
+        write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        write_atomic(target, lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
     return path, target
 
 

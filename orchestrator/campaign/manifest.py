@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -15,19 +13,13 @@ import pandas as pd
 
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
+from sblsim.orchestrator.output import write_atomic as write_file
 from sblsim.orchestrator.study import Study
 
 
 def write_atomic(frame: pd.DataFrame, path: Path) -> None:
     """Write a Parquet file through a temporary file in the same folder and an atomic rename."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        frame.to_parquet(tmp, index=False)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_file(path, lambda tmp: frame.to_parquet(tmp, index=False))
 
 
 MANIFEST = "manifest.json"
@@ -67,10 +59,7 @@ def read_manifest(out: Path) -> dict[str, dict] | None:
 
 def write_manifest(out: Path, manifest: dict[str, dict]) -> None:
     """Write the manifest atomically."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST}.", suffix=".tmp", dir=out)
-    with os.fdopen(fd, "w") as handle:
-        json.dump(manifest, handle, indent=1, sort_keys=True)
-    os.replace(tmp, out / MANIFEST)
+    write_file(out / MANIFEST, lambda tmp: tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True)))
 
 
 def manifest_entry(chunk: Chunk, path: Path, series: Path | None = None, seconds: float | None = None
@@ -165,7 +154,5 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
     import tomli_w
     execution = "\n# how the campaign is executed (does not change the results)\n" + tomli_w.dumps(
         {"execution": {"engine": engine, "batch": batch}})
-    tmp = out / ".study.toml.tmp"
-    tmp.write_text(text + execution)
-    os.replace(tmp, study_file)
+    write_file(study_file, lambda tmp: tmp.write_text(text + execution))
     return batch
