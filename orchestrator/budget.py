@@ -57,7 +57,7 @@ from sblsim.orchestrator.config import (
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
-from sblsim.orchestrator.systems import parse_systems, system_overrides
+from sblsim.orchestrator.systems import compared
 
 #: Error source -> (what it is, the ``--set`` overrides that switch it off). A value ``{section.key}`` is that
 #: key's value in the configured (all-on) configuration.
@@ -301,15 +301,8 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
         out = [(Path(str(scenario)).stem, load_config(scenario, items, seed=seed))]
     else:
         key, values = compare
-        if key == "platform.system":
-            parse_systems(",".join(values), "platform.system")
-        out = []
-        for value in values:
-            if key == "platform.system":
-                items_of = system_overrides(value, items, option="--compare")
-            else:
-                items_of = [*items, f"{key}={value}"]
-            out.append((f"{key} = {value}", load_config(scenario, items_of, seed=seed)))
+        out = [(f"{key} = {value}", load_config(scenario, items_of, seed=seed))
+               for value, items_of in zip(values, compared(key, values, items))]
     for _, cfg in out:  # every switch is checked before any run
         _switches(cfg)
     return out

@@ -36,6 +36,7 @@ from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
+from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
@@ -549,7 +550,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
             "beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
-            "beacon_arm": arm, "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], 1e-3)}
+            "beacon_arm": arm, "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
     if platform["system"] == "lbl":  # surveyed transponders: no GPS, no attitude
         ties.update(beacon_gps_sigma=platform["survey_sigma"], beacon_attitude_sigma_deg=0.0, beacon_arm=0.0)
     target = cfg["target"]

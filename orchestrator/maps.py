@@ -47,7 +47,7 @@ from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters
-from sblsim.orchestrator.systems import check_seafloor, parse_systems, system_overrides
+from sblsim.orchestrator.systems import check_seafloor, compared
 
 MAX_POINTS = 1_000_000
 #: What a map marks at the lever arms, per system.
@@ -133,7 +133,7 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     platform = cfg["platform"]
     if platform["system"] == "usbl":
         drms = usbl_horizontal_std(points, arms[0], cfg["acoustics"]["sigma_range"], platform["gps_sigma"],
-                                   platform["imu_sigma_deg"], max(platform["usbl_angle_sigma_deg"], 1e-3),
+                                   platform["imu_sigma_deg"], params["angle_sigma_deg"],
                                    params["depth_variance"])
         return drms.reshape(E.shape)
     drms = horizontal_std(points, arms, arms, params["noise_variance"], params["attitude_variance"],
@@ -177,13 +177,9 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     east, north = grid(extent, step)
     if compare is None:
         configs, labels = [load_config(scenario, overrides, seed=seed)], [str(scenario)]
-    elif compare[0] == "platform.system":  # each system from its defaults, the user's --set over them
-        systems = parse_systems(",".join(compare[1]), "--compare")
-        configs = [load_config(scenario, system_overrides(s, overrides, "--compare"), seed=seed) for s in systems]
-        labels = [f"platform.system = {s}" for s in systems]
-    else:
+    else:  # a compared system starts from its defaults, the user's --set over them
         key, values = compare
-        configs = [load_config(scenario, [*overrides, f"{key}={v}"], seed=seed) for v in values]
+        configs = [load_config(scenario, items, seed=seed) for items in compared(key, values, overrides)]
         labels = [f"{key} = {v}" for v in values]
     if depth is not None and not 0.0 <= depth <= 11000.0:
         raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")

@@ -19,6 +19,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.platform.core import USBL_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms
 from sblsim.models.receiver.core import COVARIANCE, filter_parameters
+from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
     beacon_count,
@@ -128,8 +129,6 @@ def system_sources(cfg: dict | None = None) -> dict[str, Source]:
     return sources
 
 
-#: The smallest USBL angle std of the bound [deg] (the receivers' ``sigma_angle_deg`` is floored alike).
-MIN_ANGLE_SIGMA_DEG = 1e-3
 #: The Kalman-type receivers' parameter defaults (the bound's motion model for a receiver without one).
 _FILTER_DEFAULTS = {v.name: v.start for v in filter_parameters()}
 

@@ -89,6 +89,23 @@ def system_overrides(system: str, overrides: Sequence[str] = (), option: str = "
     return [f"platform.system={system}", *SYSTEM_DEFAULTS[system], *overrides]
 
 
+def compared(key: str, values: Sequence[str], overrides: Sequence[str] = ()) -> list[list[str]]:
+    """The overrides of each value of ``--compare KEY=V1,V2,...`` (``sblsim map``, ``sblsim budget``): a compared
+    ``platform.system`` starts from its :data:`SYSTEM_DEFAULTS` with ``overrides`` over them
+    (:func:`system_overrides`), as ``sblsim compare --systems`` does; any other key is set over ``overrides``.
+
+    Raises
+    ------
+    ModelError
+        A compared system that is not one of :data:`~sblsim.models.platform.core.SYSTEMS`, named twice, or
+        ``overrides`` that set ``platform.system`` themselves.
+    """
+    if key != "platform.system":
+        return [[*overrides, f"{key}={value}"] for value in values]
+    option = "--compare platform.system"
+    return [system_overrides(s, overrides, option) for s in parse_systems(",".join(values), option)]
+
+
 def check_seafloor(cfg: dict, depth: float | None = None) -> None:
     """Refuse an LBL configuration whose diver is not above its seafloor transponders.
 
@@ -115,5 +132,5 @@ def check_seafloor(cfg: dict, depth: float | None = None) -> None:
                          "site's depth, below the diver")
 
 
-__all__ = ["SYSTEMS", "SYSTEM_DEFAULTS", "SYSTEM_WORDS", "check_seafloor", "describe_defaults", "parse_systems",
-           "system_overrides"]
+__all__ = ["SYSTEMS", "SYSTEM_DEFAULTS", "SYSTEM_WORDS", "check_seafloor", "compared", "describe_defaults",
+           "parse_systems", "system_overrides"]

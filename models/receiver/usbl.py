@@ -41,6 +41,9 @@ from sblsim.models.receiver import kalman
 from sblsim.models.receiver.gate import gate
 from sblsim.models.receiver.range_bearing import RangeBearingModel
 
+#: The smallest direction-of-arrival std in R [deg] (the ``sigma_angle_deg`` parameter's minimum; the ties and
+#: the bound floor the platform's value at it).
+MIN_ANGLE_SIGMA_DEG = 1e-3
 #: The USBL measurement model of the receivers.
 MODEL = RangeBearingModel()
 
@@ -63,7 +66,7 @@ def usbl_parameters() -> tuple[Variable, ...]:
     """The receivers' USBL parameter (declared after the clock, so that earlier value references stay)."""
     return (Variable("sigma_angle_deg", "parameter", "Real", 0.5, "deg",
                      "USBL: direction-of-arrival std on the array's axis in R (default: platform.usbl_angle_sigma_deg)",
-                     min=1e-3, max=45.0),)
+                     min=MIN_ANGLE_SIGMA_DEG, max=45.0),)
 
 
 def transceiver(u: dict) -> ca.SX:
@@ -139,5 +142,5 @@ def fix_covariance(position, beacon, p: dict) -> ca.SX:
 
 
 
-__all__ = ["MODEL", "fix_covariance", "kalman_correct", "measurement", "polar_fix", "transceiver",
-           "usbl_parameters", "variances"]
+__all__ = ["MIN_ANGLE_SIGMA_DEG", "MODEL", "fix_covariance", "kalman_correct", "measurement", "polar_fix",
+           "transceiver", "usbl_parameters", "variances"]
