@@ -9,14 +9,54 @@ for revisions from before the ``sblsim`` namespace, the snippet's ``sblsim.`` pr
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("models", "orchestrator", "fmus")
+
+
+@contextlib.contextmanager
+def checkout(revision: str) -> Iterator[Callable[..., str]]:
+    """A temporary worktree of ``revision`` for as long as the context lasts; yields ``run(code, *args)``,
+    which runs ``code`` there (its own modules first) and returns its stdout.
+
+    Raises
+    ------
+    subprocess.CalledProcessError
+        If the checkout or a snippet fails.
+    """
+    with tempfile.TemporaryDirectory(prefix="sblsim_old_") as tmp:
+        tree = Path(tmp) / "tree"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), revision], check=True,
+                       capture_output=True)
+        try:
+            namespaced = "sblsim.models" in (tree / "pyproject.toml").read_text()
+            if namespaced:
+                shim = Path(tmp) / "shim"
+                (shim / "sblsim").mkdir(parents=True)
+                for name in PACKAGES:
+                    (shim / "sblsim" / name).symlink_to(tree / name, target_is_directory=True)
+                path = str(shim)
+            else:
+                path = str(tree)
+            env = {**os.environ, "PYTHONPATH": path}
+
+            def run(code: str, *args: str) -> str:
+                if not namespaced:
+                    code = code.replace("sblsim.", "")
+                done = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True,
+                                      text=True, check=True)
+                return done.stdout
+
+            yield run
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], capture_output=True)
 
 
 def run_at(revision: str, code: str, *args: str) -> str:
@@ -27,22 +67,5 @@ def run_at(revision: str, code: str, *args: str) -> str:
     subprocess.CalledProcessError
         If the checkout or the snippet fails.
     """
-    with tempfile.TemporaryDirectory(prefix="sblsim_old_") as tmp:
-        tree = Path(tmp) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), revision], check=True,
-                       capture_output=True)
-        try:
-            if "sblsim.models" in (tree / "pyproject.toml").read_text():
-                shim = Path(tmp) / "shim"
-                (shim / "sblsim").mkdir(parents=True)
-                for name in PACKAGES:
-                    (shim / "sblsim" / name).symlink_to(tree / name, target_is_directory=True)
-                path = str(shim)
-            else:
-                code, path = code.replace("sblsim.", ""), str(tree)
-            env = {**os.environ, "PYTHONPATH": path}
-            done = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True,
-                                  text=True, check=True)
-            return done.stdout
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], capture_output=True)
+    with checkout(revision) as run:
+        return run(code, *args)
