@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import CompileError
 
 FLAGS = ("-O3", "-std=c99", "-ffp-contract=off", "-fno-math-errno", "-fvisibility=hidden", "-fPIC", "-shared")
 
@@ -35,10 +35,6 @@ CROSS_PLATFORMS = ("win64", "darwin64")
 #: Mach-O CPU types of the zig targets' architectures, and the alignment (log2) of their slices.
 _MACHO_CPU = {"x86_64": (0x01000007, 3, 12), "aarch64": (0x0100000C, 0, 14)}
 COMPILERS = ("auto", "system", "zig")
-
-
-class CompileError(ModelError):
-    """The C compiler failed or is missing; the message says which and why."""
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numpy as np
 
 from sblsim.fmus.compiler import COMPILERS
 from sblsim.models.declarations import ModelError, shown
+from sblsim.models.errors import SblsimError
 from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.systems import describe_defaults
 
@@ -703,7 +704,7 @@ def _command(args: argparse.Namespace) -> int:
         if args.command == "codegen":
             return _codegen(args)
         return _fmus(args)
-    except ModelError as exc:
+    except SblsimError as exc:  # every kind of sblsim's errors (sblsim.models.errors): one line, exit 2
         print(f"sblsim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # a full disk or a folder that refused a write during the work: one line, no traceback

@@ -34,6 +34,7 @@ import tomli_w
 
 from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
+from sblsim.models.errors import ConfigError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
 from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
@@ -67,10 +68,6 @@ def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
         path = external_path(sim.get("receiver"), prefix) if isinstance(sim, dict) else ""
         if path:
             sim["receiver"] = f"{prefix}{(base / Path(path).expanduser()).resolve()}"
-
-
-class ConfigError(ModelError):
-    """Invalid configuration; the message names the field and the allowed range."""
 
 
 RUN_VARIABLES: tuple[Variable, ...] = (

@@ -33,6 +33,7 @@ import numpy as np
 
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
+from sblsim.models.errors import FMICallError, SblsimError
 from sblsim.orchestrator.archives import check_members, safe_extract
 from sblsim.orchestrator.connections import check_interface
 
@@ -215,13 +216,14 @@ def check_status(status: int, function: str, where: str, reason: str = "") -> No
 
     Raises
     ------
-    ModelError
-        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3): <the FMU's message>``.
+    FMICallError
+        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3): <the FMU's message>`` (its
+        ``function``, ``status`` and ``log`` as given).
     """
     if status > FMI2_WARNING:
         name = FMI2_STATUS[status] if 0 <= status < len(FMI2_STATUS) else "an unknown status"
-        raise ModelError(f"fmu: {where}: {function} returned {name} ({status}): "
-                         f"{reason or 'the FMU logged no reason'}")
+        raise FMICallError(f"fmu: {where}: {function} returned {name} ({status}): "
+                           f"{reason or 'the FMU logged no reason'}", function, status, reason)
 
 
 def one_line(text: str, limit: int = 400) -> str:
@@ -253,7 +255,7 @@ def read_description(component: str, path: Path) -> Any:
         with zipfile.ZipFile(path) as archive:
             check_members(archive, f"fmu: {path.name} ({component})")
         md = read_model_description(str(path), validate=False)
-    except ModelError:
+    except SblsimError:  # an ArchiveError of check_members
         raise
     except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
         raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
@@ -377,8 +379,9 @@ class FmuHandle:
         ------
         ModelError
             One line naming the FMU: no binaries for this platform, a ``modelIdentifier`` that names no
-            library, a library that does not load, or an instantiation the FMU refused (with its log message,
-            e.g. a GUID that does not match the binary).
+            library, a library that does not load.
+        FMICallError
+            An instantiation the FMU refused (with its log message, e.g. a GUID that does not match the binary).
         """
         from fmpy import platform, sharedLibraryExtension
         from fmpy.fmi2 import FMU2Slave
@@ -406,7 +409,8 @@ class FmuHandle:
             fmu.instantiate(callbacks=self._callbacks())
         except Exception:
             fmu.freeLibrary()
-            raise ModelError(f"fmu: {self.where}: fmi2Instantiate failed: {self.reason()}") from None
+            raise FMICallError(f"fmu: {self.where}: fmi2Instantiate failed: {self.reason()}", "fmi2Instantiate",
+                               None, self.log[-1] if self.log else "") from None
         return fmu
 
     def _callbacks(self) -> Any:
@@ -463,8 +467,9 @@ class FmuHandle:
         Raises
         ------
         ModelError
-            If more than one replicate is asked for, a parameter is not in the
-            FMU, or the FMU refuses a call (its log message is given).
+            If more than one replicate is asked for, or a parameter is not in the FMU.
+        FMICallError
+            If the FMU refuses a call (its log message is given).
         """
         if len(replicates) != 1:
             raise ModelError("engine: the fmu engine steps one replicate at a time (B = 1)")
@@ -488,14 +493,15 @@ class FmuHandle:
         self.fmu.exitInitializationMode()
 
     def _call(self, function, *args) -> Any:
-        """Call into fmpy; an FMU error becomes a one-line ModelError."""
+        """Call into fmpy; an FMU error becomes a one-line :class:`FMICallError`."""
         from fmpy.fmi1 import FMICallException
 
         self.log.clear()
         try:
             return function(*args)
         except FMICallException as exc:
-            raise ModelError(f"fmu: {self.where} refused a call: {exc}: {self.reason()}") from None
+            raise FMICallError(f"fmu: {self.where} refused a call: {exc}: {self.reason()}", exc.function, exc.status,
+                               self.log[-1] if self.log else "") from None
 
     def _raw(self, name: str, *args) -> None:
         """Call an FMI function directly with prepared arguments (fmpy's wrapper costs more than the call);

@@ -49,6 +49,7 @@ import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError, Variable, shown
+from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     SECTIONS,
@@ -68,7 +69,7 @@ _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 RESULT_COLUMNS = ("scenario", "scenario_key", "cell", "replicate", "seed", "receiver")
 
 
-class StudyError(ModelError):
+class StudyError(ConfigError):
     """Invalid study; the message names the field and the allowed range."""
 
 
