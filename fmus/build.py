@@ -23,15 +23,18 @@ resource files.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 import zipfile
 from pathlib import Path
 from typing import Sequence
 
-from sblsim.fmus.codegen import write_sources
+from sblsim.fmus.codegen import C_DIR, model_guid, write_sources
 from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
+from sblsim.fmus.contract import contract_header
 from sblsim.fmus.description import model_description
+from sblsim.fmus.native import cache_dir
 from sblsim.models import MODELS
 from sblsim.models.platform.core import is_usbl
 
@@ -121,12 +124,6 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
     its GUID (which carries the number of beacons): the fmu engine's FMU of a user's model
     (``simulation.receiver = "model:PATH.py"``), and of a built-in model for a number of beacons that was not
     built with ``sblsim fmus build --beacons N``."""
-    import hashlib
-
-    from sblsim.fmus.codegen import C_DIR, model_guid
-    from sblsim.fmus.contract import contract_header
-    from sblsim.fmus.native import cache_dir
-
     digest = hashlib.sha256(model_guid(model, n_beacons).encode())
     for source in sorted(C_DIR.iterdir()):  # and the runtime it is built with
         digest.update(source.name.encode() + source.read_bytes())

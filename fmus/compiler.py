@@ -10,8 +10,10 @@ cross-compiles the FMU binaries for Windows and macOS.
 from __future__ import annotations
 
 import os
+import platform
 import shlex
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
@@ -103,8 +105,6 @@ def host_platform() -> str:
     CompileError
         On a platform sblsim does not build for.
     """
-    import platform
-
     machine = platform.machine().lower()
     if sys.platform.startswith("linux") and machine in ("x86_64", "amd64"):
         return "linux64"
@@ -187,8 +187,6 @@ def universal_macho(slices: Sequence[Path], output: Path) -> Path:
     CompileError
         If a slice is not a 64-bit little-endian Mach-O file of a known architecture.
     """
-    import struct
-
     cpus = {cpu: (cpu, sub, align) for cpu, sub, align in _MACHO_CPU.values()}
     blobs, records = [p.read_bytes() for p in slices], []
     offset = 8 + 20 * len(blobs)

@@ -3,6 +3,12 @@
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
+
+Each command imports the module that runs it when it runs (``run``, ``metrics``,
+``compare``, ``budget``, ``maps``, ``replay``, ``ssp``, ``campaign``, ``study``,
+``analysis``, ``codegen``): they load scipy.stats, pandas or matplotlib, which
+``sblsim --help`` and a usage error do not need. Everything else is imported
+here; ``tests/test_import_graph.py`` holds both rules.
 """
 
 from __future__ import annotations
@@ -10,17 +16,29 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import sys
+import tempfile
 import threading
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
 
+from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, build_fmu, fmu_path, validate
 from sblsim.fmus.compiler import COMPILERS
+from sblsim.fmus.embedded import write_receiver
+from sblsim.fmus.variables import markdown_tables
+from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.declarations import ModelError, shown
 from sblsim.models.errors import SblsimError
+from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS, USBL_BEACONS
+from sblsim.models.platform.geometry import horizontal_spread
+from sblsim.orchestrator.config import MODEL_PREFIX, beacon_count, check_receiver, load_config, parse_compare
+from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.systems import describe_defaults
+from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -33,8 +51,6 @@ class _Parser(argparse.ArgumentParser):
 
 def _version() -> str:
     """The installed distribution's version (``pip show sblsim``)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version("sblsim")
     except PackageNotFoundError:  # run from a checkout that was never installed
@@ -207,8 +223,6 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import beacon_count, load_config
-    from sblsim.orchestrator.engines import close_handles, make_handles
     from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
     from sblsim.orchestrator.run import run, summary, system_sources, write_run
 
@@ -283,7 +297,6 @@ def _print_metrics(s: dict, truth: bool = True) -> None:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import beacon_count
     from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
 
     cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides)
@@ -327,7 +340,6 @@ def _replay(args: argparse.Namespace) -> int:
 def _run_warnings(s: dict, cfg: dict) -> list[str]:
     """What a run's numbers do not say by themselves: a receiver that never made a fix, and a diver beyond
     what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
-    from sblsim.models.platform.geometry import horizontal_spread
     from sblsim.orchestrator.metrics import REACH_RATIO
 
     out = []
@@ -351,7 +363,6 @@ def _run_warnings(s: dict, cfg: dict) -> list[str]:
 
 
 def _ssp(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import load_config
     from sblsim.orchestrator.ssp import export_ssp
 
     _check_seed(args.seed)
@@ -373,7 +384,6 @@ def _output_name(scenario: str) -> str:
 
 def _compare(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.compare import compare, markdown, parse_receivers, write
-    from sblsim.orchestrator.systems import parse_systems, system_overrides
 
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
@@ -384,8 +394,6 @@ def _compare(args: argparse.Namespace) -> int:
                   "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
                     args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
-    from sblsim.orchestrator.config import load_config
-
     seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
     title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
@@ -412,15 +420,11 @@ def _budget(args: argparse.Namespace) -> int:
         title,
         write,
     )
-    from sblsim.orchestrator.config import parse_compare
-
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
     check_replicates(replicates)
     compare = parse_compare(args.compare, "platform.system=sbl,lbl,usbl") if args.compare else None
     if args.receiver is not None:
-        from sblsim.orchestrator.config import check_receiver
-
         check_receiver(args.receiver, "--receiver")
     configs = configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)
     out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
@@ -443,7 +447,6 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import load_config, parse_compare
     from sblsim.orchestrator.maps import diver_depth, make_maps, parse_levels, write
 
     _check_seed(args.seed)
@@ -526,31 +529,20 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
 
 
 def _fmus(args: argparse.Namespace) -> int:
-    from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, build_fmu, fmu_path, validate
-    from sblsim.models import MODELS
-    from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
-
     n_beacons = getattr(args, "beacons", 4)
     if not MIN_BEACONS <= n_beacons <= MAX_BEACONS:
         raise ModelError(f"--beacons: {n_beacons} is outside the allowed range [{MIN_BEACONS}, {MAX_BEACONS}]")
     if getattr(args, "system", "sbl") == "usbl":
-        from sblsim.models.platform.core import USBL_BEACONS
-
         if n_beacons != 4:
             raise ModelError(f"--beacons: {n_beacons} with --system usbl, which has one transceiver")
         n_beacons = USBL_BEACONS
     if args.fmus_command == "variables":
-        from sblsim.fmus.variables import markdown_tables
-
         print(markdown_tables())
         return 0
     if args.fmus_command == "build":
         out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
         _check_writable(out)
         if args.model is not None:
-            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver
-            from sblsim.orchestrator.plugins import user_model
-
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
             print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
@@ -618,8 +610,6 @@ def _check_writable(directory: Path) -> None:
     ModelError
         Naming the directory and why.
     """
-    import tempfile
-
     if directory.exists() and not directory.is_dir():
         raise ModelError(f"--out: {str(directory)!r} exists and is not a directory")
     probe = directory.absolute()
@@ -639,8 +629,6 @@ def _check_writable(directory: Path) -> None:
 
 
 def _codegen(args: argparse.Namespace) -> int:
-    from sblsim.fmus.embedded import write_receiver
-    from sblsim.models import RECEIVERS
     from sblsim.orchestrator.codegen import example_files
 
     _check_writable(args.out)
@@ -667,8 +655,6 @@ def _interrupted_status() -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sblsim`` console script."""
-    import signal
-
     args = _parser().parse_args(argv)
     _SIGNAL.clear()
     previous = {}

@@ -31,6 +31,8 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
+from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path
+from sblsim.fmus.native import NativeBatch, NativeSystem
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import FMICallError, SblsimError
@@ -128,8 +130,6 @@ class LocalHandle:
         ModelError
             On a parameter outside its declared range.
         """
-        from sblsim.fmus.native import NativeBatch
-
         replicates = np.asarray(replicates, dtype=np.int64)
         values = dict(params)
         if "replicate" in self.parameters:
@@ -561,8 +561,6 @@ def native_system(batches: Sequence[Any], rates: Sequence[int], links: Sequence[
     """
     if len({id(b.lib) for b in batches}) != 1 or len({b.batch for b in batches}) != 1:
         return None
-    from sblsim.fmus.native import NativeSystem
-
     return NativeSystem(list(batches), list(rates), list(links), list(record))
 
 
@@ -598,8 +596,6 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
     CompileError
         If an FMU must be built and the compiler is missing or fails.
     """
-    from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path
-
     directory = beacons_dir(Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR, n_beacons)
     sources = sources if sources is not None else paper_sources()
     paths = {}

@@ -119,8 +119,6 @@ def _annotations(parent: ET.Element, kind: str, content: ET.Element) -> None:
 
 def identifier(text: str) -> str:
     """``text`` as an identifier every SSP host accepts: ``[A-Za-z][A-Za-z0-9_]*``."""
-    import re
-
     out = re.sub(r"[^A-Za-z0-9_]", "_", text)
     return out if out[:1].isalpha() else f"s_{out}"
 

@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyDOE3
 import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
@@ -293,8 +294,6 @@ def design_matrix(k: int, design: str = "full", resolution: int = 0, generators:
     StudyError
         If the design cannot be built.
     """
-    import pyDOE3
-
     if design == "full":
         return pyDOE3.ff2n(k).astype(np.int64)
     if generators:
