@@ -41,6 +41,9 @@ from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 EXIT_USAGE = 2
+#: --fmu-dir: where the fmu engine looks when it is not given (fmus/build of a checkout, else the user cache).
+FMU_DIR_HELP = (f"directory of the built FMUs (default {DEFAULT_DIR}; FMUs missing there are built into the "
+                "user cache)")
 EXIT_INTERRUPTED = 130
 
 
@@ -62,7 +65,7 @@ def _config_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key, e.g. platform.baseline=3 or receiver=lsq (repeatable)")
-    p.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+    p.add_argument("--fmu-dir", type=Path, default=None, help=FMU_DIR_HELP)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -100,7 +103,7 @@ def _parser() -> argparse.ArgumentParser:
     y.add_argument("--force", action="store_true", help="replace an earlier replay in --out")
     y.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key, e.g. receiver.q_horizontal=0.05 (repeatable)")
-    y.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+    y.add_argument("--fmu-dir", type=Path, default=None, help=FMU_DIR_HELP)
 
     m = sub.add_parser("compare", help="run several receivers (or positioning systems) on the same replicates of a "
                                        "scenario")
@@ -187,7 +190,7 @@ def _parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fmus", help="build, validate or list the FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
     b = fsub.add_parser("build", help="build the native FMUs (four components and the alternative receivers)")
-    b.add_argument("--out", type=Path, default=None, help="output directory (default fmus/build)")
+    b.add_argument("--out", type=Path, default=None, help=f"output directory (default {DEFAULT_DIR})")
     b.add_argument("--compiler", choices=COMPILERS, default="auto",
                    help="C compiler: auto (the system's, else zig), system or zig")
     b.add_argument("--cross", action=argparse.BooleanOptionalAction, default=None,
@@ -201,7 +204,7 @@ def _parser() -> argparse.ArgumentParser:
                         "uses the SBL interfaces of --beacons N)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
-    v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
+    v.add_argument("dir", type=Path, nargs="?", default=None, help=f"directory of the FMUs (default {DEFAULT_DIR})")
     v.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="validate the FMUs built for N beacons (default 4: the folder beacons<N> for others)")
     v.add_argument("--system", choices=("sbl", "usbl"), default="sbl",

@@ -582,12 +582,15 @@ def paper_sources() -> dict[str, Source]:
 
 def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None,
               n_beacons: int = FMU_BEACONS) -> dict[str, Path]:
-    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
-    a user's model built into the cache (:func:`sblsim.fmus.build.cached_fmu`).
+    """The FMU file of every component: built ones in ``fmu_dir``, a user's FMU, or a model built into the
+    cache (:func:`sblsim.fmus.build.cached_fmu`).
 
-    For a number of beacons other than :data:`FMU_BEACONS`, a built-in model's FMU is the one
-    ``sblsim fmus build --beacons N`` wrote (:func:`sblsim.fmus.build.beacons_dir`) when it is there, else it
-    is built once into the cache and reused.
+    Without ``fmu_dir``, a built-in model's FMU is the one ``sblsim fmus build`` wrote into
+    :data:`sblsim.fmus.build.DEFAULT_DIR` (:func:`sblsim.fmus.build.beacons_dir` for the number of beacons)
+    when it is there, else it is built once into the user's cache and reused: the ``fmu`` engine runs
+    every configuration out of the box, and writes nothing into the installed package. With ``fmu_dir``, the
+    paper's 4-beacon FMUs must be there (a folder given is a folder meant); another number of beacons is
+    built into the cache when that folder does not hold it.
 
     Raises
     ------
@@ -606,7 +609,8 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
             paths[name] = cached_fmu(src, n_beacons)
         else:
             built = fmu_path(directory, src)
-            paths[name] = built if built.is_file() or n_beacons == FMU_BEACONS else cached_fmu(MODELS[src], n_beacons)
+            given = fmu_dir is not None and n_beacons == FMU_BEACONS
+            paths[name] = built if built.is_file() or given else cached_fmu(MODELS[src], n_beacons)
     for name, path in paths.items():
         if not path.is_file():
             raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
