@@ -23,21 +23,53 @@ resource files.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 import zipfile
 from pathlib import Path
 from typing import Sequence
 
-from sblsim.fmus.codegen import write_sources
+from sblsim.fmus.codegen import C_DIR, model_guid, write_sources
 from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
+from sblsim.fmus.contract import contract_header
 from sblsim.fmus.description import model_description
+from sblsim.fmus.native import cache_dir
 from sblsim.models import MODELS
 from sblsim.models.platform.core import is_usbl
 
 HERE = Path(__file__).resolve().parent
-#: Where ``sblsim fmus build`` writes and the ``fmu`` engine looks by default.
-DEFAULT_DIR = Path(os.environ.get("SBLSIM_FMU_DIR", HERE / "build"))
+#: Whether this package is the ``fmus/`` folder of a checkout (an editable install, or run from the checkout):
+#: the checkout's ``pyproject.toml`` sits beside it. In an installed wheel it is ``site-packages/sblsim/fmus``.
+IN_CHECKOUT = (HERE.parent / "pyproject.toml").is_file()
+
+
+def _installed_digest() -> str:
+    """A digest of the installed package's sources (Python and C): a new install gets a new FMU folder."""
+    digest = hashlib.sha256()
+    root = HERE.parent
+    for path in sorted(p for p in root.rglob("*") if p.suffix in (".py", ".c", ".h") and p.is_file()):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def default_dir() -> Path:
+    """Where ``sblsim fmus build`` writes without ``--out`` and the ``fmu`` engine looks first.
+
+    ``$SBLSIM_FMU_DIR`` when set; else the checkout's ``fmus/build/`` in an editable install; else (an
+    installed wheel, whose site-packages may be read-only) a folder of the user's cache keyed by the
+    installed sources, ``<cache>/fmus/build-<digest>`` (:func:`sblsim.fmus.native.cache_dir`: ``$SBLSIM_CACHE_DIR``
+    or platformdirs' user cache, e.g. ``~/.cache/sblsim`` on Linux).
+    """
+    if os.environ.get("SBLSIM_FMU_DIR"):
+        return Path(os.environ["SBLSIM_FMU_DIR"])
+    if IN_CHECKOUT:
+        return HERE / "build"
+    return cache_dir() / "fmus" / f"build-{_installed_digest()}"
+
+
+#: Where ``sblsim fmus build`` writes and the ``fmu`` engine looks by default (:func:`default_dir`, read once).
+DEFAULT_DIR = default_dir()
 
 
 def fmu_path(directory: Path | str, component: str) -> Path:
@@ -121,12 +153,6 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
     its GUID (which carries the number of beacons): the fmu engine's FMU of a user's model
     (``simulation.receiver = "model:PATH.py"``), and of a built-in model for a number of beacons that was not
     built with ``sblsim fmus build --beacons N``."""
-    import hashlib
-
-    from sblsim.fmus.codegen import C_DIR, model_guid
-    from sblsim.fmus.contract import contract_header
-    from sblsim.fmus.native import cache_dir
-
     digest = hashlib.sha256(model_guid(model, n_beacons).encode())
     for source in sorted(C_DIR.iterdir()):  # and the runtime it is built with
         digest.update(source.name.encode() + source.read_bytes())
@@ -151,5 +177,5 @@ def validate(path: Path | str) -> list[str]:
     return list(validate_fmu(str(path)))
 
 
-__all__ = ["CompileError", "DEFAULT_DIR", "beacons_dir", "build_all", "build_fmu", "cached_fmu", "fmu_path",
-           "validate"]
+__all__ = ["CompileError", "DEFAULT_DIR", "IN_CHECKOUT", "beacons_dir", "build_all", "build_fmu", "cached_fmu",
+           "default_dir", "fmu_path", "validate"]

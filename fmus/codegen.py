@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import math
 import shutil
+import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
@@ -97,8 +98,6 @@ def casadi_code(model: type, n_beacons: int) -> tuple[str, str]:
                                         "casadi_int": "long long int"})
     for f in program.functions():
         cg.add(f)
-    import tempfile
-
     with tempfile.TemporaryDirectory(prefix="sblsim_casadi_") as tmp:
         cg.generate(tmp + "/")
         return (Path(tmp, f"{name}.c").read_text(), Path(tmp, f"{name}.h").read_text())

@@ -10,8 +10,10 @@ cross-compiles the FMU binaries for Windows and macOS.
 from __future__ import annotations
 
 import os
+import platform
 import shlex
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
@@ -19,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import CompileError
 
 FLAGS = ("-O3", "-std=c99", "-ffp-contract=off", "-fno-math-errno", "-fvisibility=hidden", "-fPIC", "-shared")
 
@@ -35,10 +37,6 @@ CROSS_PLATFORMS = ("win64", "darwin64")
 #: Mach-O CPU types of the zig targets' architectures, and the alignment (log2) of their slices.
 _MACHO_CPU = {"x86_64": (0x01000007, 3, 12), "aarch64": (0x0100000C, 0, 14)}
 COMPILERS = ("auto", "system", "zig")
-
-
-class CompileError(ModelError):
-    """The C compiler failed or is missing; the message says which and why."""
 
 
 @dataclass(frozen=True)
@@ -107,8 +105,6 @@ def host_platform() -> str:
     CompileError
         On a platform sblsim does not build for.
     """
-    import platform
-
     machine = platform.machine().lower()
     if sys.platform.startswith("linux") and machine in ("x86_64", "amd64"):
         return "linux64"
@@ -191,8 +187,6 @@ def universal_macho(slices: Sequence[Path], output: Path) -> Path:
     CompileError
         If a slice is not a 64-bit little-endian Mach-O file of a known architecture.
     """
-    import struct
-
     cpus = {cpu: (cpu, sub, align) for cpu, sub, align in _MACHO_CPU.values()}
     blobs, records = [p.read_bytes() for p in slices], []
     offset = 8 + 20 * len(blobs)

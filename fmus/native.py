@@ -23,9 +23,11 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+import platformdirs
 
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
+from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
 from sblsim.models.bound import USBL_FIXED, bound_step, usbl_bound_step
 from sblsim.models.declarations import ModelError
@@ -34,17 +36,12 @@ from sblsim.models.platform.core import USBL_BEACONS, is_usbl
 #: The compiled USBL bound's loop (the library of the USBL interface only).
 USBL_BOUND = "sblsim_usbl_bound.c"
 
-#: The vectors of a batch, in the order the C API numbers them (``sblsim_batch_vector``, ``sblsim_model_size``):
-#: every double vector of a replicate, then its draw counters.
-VECTORS = ("p", "d", "x", "u", "y", "x_next", "draws")
 
 
 def cache_dir() -> Path:
     """Where compiled libraries are kept: ``$SBLSIM_CACHE_DIR`` or the user's cache folder."""
     if os.environ.get("SBLSIM_CACHE_DIR"):
         return Path(os.environ["SBLSIM_CACHE_DIR"])
-    import platformdirs
-
     return Path(platformdirs.user_cache_dir("sblsim"))
 
 

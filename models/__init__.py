@@ -2,10 +2,20 @@
 
 ``COMPONENTS`` maps each component of the system to its model class (the
 paper's EKF for ``receiver``); ``MODELS`` maps every model by its own name,
-the alternative receivers included.
+the alternative receivers included. The error kinds of :mod:`sblsim.models.errors`
+are re-exported here (``from sblsim.models import SblsimError``).
 """
 
 from sblsim.models.acoustics import Acoustics
+from sblsim.models.errors import (
+    ArchiveError,
+    CampaignError,
+    CompileError,
+    ConfigError,
+    FMICallError,
+    ModelError,
+    SblsimError,
+)
 from sblsim.models.platform import Platform
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, SequentialReceiver, UnscentedReceiver
 from sblsim.models.target import Target
@@ -19,5 +29,6 @@ RECEIVERS = {key: model.name for key, model in RECEIVER_MODELS.items()}
 #: Every model by its own name: the four components and the alternative receivers.
 MODELS = {**COMPONENTS, **{model.name: model for model in RECEIVER_MODELS.values()}}
 
-__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "RECEIVER_MODELS", "Acoustics", "LeastSquaresReceiver", "Platform",
-           "Receiver", "SequentialReceiver", "Target", "UnscentedReceiver"]
+__all__ = ["COMPONENTS", "MODELS", "RECEIVERS", "RECEIVER_MODELS", "Acoustics", "ArchiveError", "CampaignError",
+           "CompileError", "ConfigError", "FMICallError", "LeastSquaresReceiver", "ModelError", "PaperEKF", "Platform",
+           "SblsimError", "SequentialReceiver", "Target", "UnscentedReceiver"]

@@ -4,7 +4,7 @@ A component declares its interface as a tuple of :class:`Variable` (name,
 causality, variability, type, unit, start, description, allowed range, and
 for a parameter its :class:`Table` or choices). From these come the FMU model
 description, the configuration checks and their one-line messages
-(:class:`ModelError`), the connection checks, the C variable tables of the
+(:class:`~sblsim.models.errors.ModelError`), the connection checks, the C variable tables of the
 native FMUs, the SSP export and the docs' variable tables.
 
 This module imports nothing from the FMI or orchestrator layers.
@@ -19,17 +19,11 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from sblsim.models.errors import ModelError
+
 CAUSALITIES = ("parameter", "input", "output")
 TYPES = ("Real", "Integer", "Boolean", "String")
 SCOPES = ("both", "fmu", "config")
-
-
-class ModelError(ValueError):
-    """A parameter or input of a component is invalid.
-
-    The message is one line and names the offending field and its allowed
-    range, so the command line can show it as it is.
-    """
 
 
 #: FMI unit definitions used by the declarations: name -> (SI base-unit exponents, factor).

@@ -16,7 +16,7 @@ import stat
 import zipfile
 from pathlib import Path, PurePosixPath
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import ArchiveError
 
 #: At most this many entries in one archive.
 MAX_ENTRIES = 10_000
@@ -25,10 +25,6 @@ MAX_BYTES = 1 << 30
 #: An entry larger than :data:`RATIO_FROM` bytes may be at most this many times its compressed size.
 MAX_RATIO = 200
 RATIO_FROM = 1 << 20
-
-
-class ArchiveError(ModelError):
-    """An archive that is not safe or not valid to unpack; the message is one line."""
 
 
 def check_members(archive: zipfile.ZipFile, label: str) -> list[zipfile.ZipInfo]:

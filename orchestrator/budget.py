@@ -44,6 +44,7 @@ from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
+from tqdm import tqdm
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import (
@@ -314,8 +315,6 @@ def budgets(configs: Sequence[tuple[str, dict]], replicates: int = DEFAULT_REPLI
     check_replicates(replicates)
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=replicates * sum(planned(cfg) for _, cfg in configs), unit="run", leave=False,
                    desc="budget")
     records = RecordBuffer()

@@ -3,6 +3,12 @@
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
+
+Each command imports the module that runs it when it runs (``run``, ``metrics``,
+``compare``, ``budget``, ``maps``, ``replay``, ``ssp``, ``campaign``, ``study``,
+``analysis``, ``codegen``): they load scipy.stats, pandas or matplotlib, which
+``sblsim --help`` and a usage error do not need. Everything else is imported
+here; ``tests/test_import_graph.py`` holds both rules.
 """
 
 from __future__ import annotations
@@ -10,18 +16,34 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import sys
+import tempfile
 import threading
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
 
+from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, build_fmu, fmu_path, validate
 from sblsim.fmus.compiler import COMPILERS
+from sblsim.fmus.embedded import write_receiver
+from sblsim.fmus.variables import markdown_tables
+from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.declarations import ModelError, shown
+from sblsim.models.errors import SblsimError
+from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS, USBL_BEACONS
+from sblsim.models.platform.geometry import horizontal_spread
+from sblsim.orchestrator.config import MODEL_PREFIX, beacon_count, check_receiver, load_config, parse_compare
+from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.systems import describe_defaults
+from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 EXIT_USAGE = 2
+#: --fmu-dir: where the fmu engine looks when it is not given (fmus/build of a checkout, else the user cache).
+FMU_DIR_HELP = (f"directory of the built FMUs (default {DEFAULT_DIR}; FMUs missing there are built into the "
+                "user cache)")
 EXIT_INTERRUPTED = 130
 
 
@@ -32,8 +54,6 @@ class _Parser(argparse.ArgumentParser):
 
 def _version() -> str:
     """The installed distribution's version (``pip show sblsim``)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version("sblsim")
     except PackageNotFoundError:  # run from a checkout that was never installed
@@ -45,7 +65,7 @@ def _config_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key, e.g. platform.baseline=3 or receiver=lsq (repeatable)")
-    p.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+    p.add_argument("--fmu-dir", type=Path, default=None, help=FMU_DIR_HELP)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -83,7 +103,7 @@ def _parser() -> argparse.ArgumentParser:
     y.add_argument("--force", action="store_true", help="replace an earlier replay in --out")
     y.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key, e.g. receiver.q_horizontal=0.05 (repeatable)")
-    y.add_argument("--fmu-dir", type=Path, default=None, help="directory of the built FMUs (default fmus/build)")
+    y.add_argument("--fmu-dir", type=Path, default=None, help=FMU_DIR_HELP)
 
     m = sub.add_parser("compare", help="run several receivers (or positioning systems) on the same replicates of a "
                                        "scenario")
@@ -170,7 +190,7 @@ def _parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fmus", help="build, validate or list the FMI 2.0 Co-Simulation FMUs")
     fsub = f.add_subparsers(dest="fmus_command", required=True, parser_class=_Parser)
     b = fsub.add_parser("build", help="build the native FMUs (four components and the alternative receivers)")
-    b.add_argument("--out", type=Path, default=None, help="output directory (default fmus/build)")
+    b.add_argument("--out", type=Path, default=None, help=f"output directory (default {DEFAULT_DIR})")
     b.add_argument("--compiler", choices=COMPILERS, default="auto",
                    help="C compiler: auto (the system's, else zig), system or zig")
     b.add_argument("--cross", action=argparse.BooleanOptionalAction, default=None,
@@ -184,7 +204,7 @@ def _parser() -> argparse.ArgumentParser:
                         "uses the SBL interfaces of --beacons N)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
-    v.add_argument("dir", type=Path, nargs="?", default=None, help="directory of the FMUs (default fmus/build)")
+    v.add_argument("dir", type=Path, nargs="?", default=None, help=f"directory of the FMUs (default {DEFAULT_DIR})")
     v.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="validate the FMUs built for N beacons (default 4: the folder beacons<N> for others)")
     v.add_argument("--system", choices=("sbl", "usbl"), default="sbl",
@@ -206,8 +226,6 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import beacon_count, load_config
-    from sblsim.orchestrator.engines import close_handles, make_handles
     from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
     from sblsim.orchestrator.run import run, summary, system_sources, write_run
 
@@ -282,7 +300,6 @@ def _print_metrics(s: dict, truth: bool = True) -> None:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import beacon_count
     from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
 
     cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides)
@@ -326,7 +343,6 @@ def _replay(args: argparse.Namespace) -> int:
 def _run_warnings(s: dict, cfg: dict) -> list[str]:
     """What a run's numbers do not say by themselves: a receiver that never made a fix, and a diver beyond
     what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
-    from sblsim.models.platform.geometry import horizontal_spread
     from sblsim.orchestrator.metrics import REACH_RATIO
 
     out = []
@@ -350,7 +366,6 @@ def _run_warnings(s: dict, cfg: dict) -> list[str]:
 
 
 def _ssp(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import load_config
     from sblsim.orchestrator.ssp import export_ssp
 
     _check_seed(args.seed)
@@ -372,7 +387,6 @@ def _output_name(scenario: str) -> str:
 
 def _compare(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.compare import compare, markdown, parse_receivers, write
-    from sblsim.orchestrator.systems import parse_systems, system_overrides
 
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
@@ -383,8 +397,6 @@ def _compare(args: argparse.Namespace) -> int:
                   "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
                     args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
-    from sblsim.orchestrator.config import load_config
-
     seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
     title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
@@ -411,15 +423,11 @@ def _budget(args: argparse.Namespace) -> int:
         title,
         write,
     )
-    from sblsim.orchestrator.config import parse_compare
-
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
     check_replicates(replicates)
     compare = parse_compare(args.compare, "platform.system=sbl,lbl,usbl") if args.compare else None
     if args.receiver is not None:
-        from sblsim.orchestrator.config import check_receiver
-
         check_receiver(args.receiver, "--receiver")
     configs = configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)
     out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
@@ -442,7 +450,6 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import load_config, parse_compare
     from sblsim.orchestrator.maps import diver_depth, make_maps, parse_levels, write
 
     _check_seed(args.seed)
@@ -525,31 +532,20 @@ def _analyze_dir(directory: Path, out: Path | None = None, metric: str = "e_tot_
 
 
 def _fmus(args: argparse.Namespace) -> int:
-    from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, build_fmu, fmu_path, validate
-    from sblsim.models import MODELS
-    from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
-
     n_beacons = getattr(args, "beacons", 4)
     if not MIN_BEACONS <= n_beacons <= MAX_BEACONS:
         raise ModelError(f"--beacons: {n_beacons} is outside the allowed range [{MIN_BEACONS}, {MAX_BEACONS}]")
     if getattr(args, "system", "sbl") == "usbl":
-        from sblsim.models.platform.core import USBL_BEACONS
-
         if n_beacons != 4:
             raise ModelError(f"--beacons: {n_beacons} with --system usbl, which has one transceiver")
         n_beacons = USBL_BEACONS
     if args.fmus_command == "variables":
-        from sblsim.fmus.variables import markdown_tables
-
         print(markdown_tables())
         return 0
     if args.fmus_command == "build":
         out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
         _check_writable(out)
         if args.model is not None:
-            from sblsim.orchestrator.config import MODEL_PREFIX, check_receiver
-            from sblsim.orchestrator.plugins import user_model
-
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
             print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
@@ -617,8 +613,6 @@ def _check_writable(directory: Path) -> None:
     ModelError
         Naming the directory and why.
     """
-    import tempfile
-
     if directory.exists() and not directory.is_dir():
         raise ModelError(f"--out: {str(directory)!r} exists and is not a directory")
     probe = directory.absolute()
@@ -638,8 +632,6 @@ def _check_writable(directory: Path) -> None:
 
 
 def _codegen(args: argparse.Namespace) -> int:
-    from sblsim.fmus.embedded import write_receiver
-    from sblsim.models import RECEIVERS
     from sblsim.orchestrator.codegen import example_files
 
     _check_writable(args.out)
@@ -666,8 +658,6 @@ def _interrupted_status() -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sblsim`` console script."""
-    import signal
-
     args = _parser().parse_args(argv)
     _SIGNAL.clear()
     previous = {}
@@ -703,7 +693,7 @@ def _command(args: argparse.Namespace) -> int:
         if args.command == "codegen":
             return _codegen(args)
         return _fmus(args)
-    except ModelError as exc:
+    except SblsimError as exc:  # every kind of sblsim's errors (sblsim.models.errors): one line, exit 2
         print(f"sblsim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # a full disk or a folder that refused a write during the work: one line, no traceback

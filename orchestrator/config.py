@@ -34,12 +34,15 @@ import tomli_w
 
 from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
+from sblsim.models.errors import ConfigError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
 from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
+from sblsim.orchestrator.engines import read_description
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
+from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.systems import check_seafloor
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
@@ -67,10 +70,6 @@ def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
         path = external_path(sim.get("receiver"), prefix) if isinstance(sim, dict) else ""
         if path:
             sim["receiver"] = f"{prefix}{(base / Path(path).expanduser()).resolve()}"
-
-
-class ConfigError(ModelError):
-    """Invalid configuration; the message names the field and the allowed range."""
 
 
 RUN_VARIABLES: tuple[Variable, ...] = (
@@ -118,8 +117,6 @@ def receiver_model(value: str) -> type | Path:
     if value in RECEIVER_MODELS:
         return RECEIVER_MODELS[value]
     if external_path(value, MODEL_PREFIX):
-        from sblsim.orchestrator.plugins import user_model
-
         return user_model(external_path(value, MODEL_PREFIX))
     return Path(external_path(value))
 
@@ -181,9 +178,9 @@ def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
     ------
     ConfigError
         If the FMU cannot be read.
+    ArchiveError
+        If the FMU's archive is not safe to read (checked before fmpy reads it).
     """
-    from sblsim.orchestrator.engines import read_description  # checks the archive before fmpy reads it
-
     try:
         md = read_description("receiver", Path(path))
     except ModelError as exc:  # it names the FMU and what is wrong with it
@@ -216,8 +213,6 @@ def check_receiver(receiver: str, where: str = "simulation.receiver") -> str:
     if receiver in RECEIVER_MODELS:
         return receiver
     if external_path(receiver, MODEL_PREFIX):
-        from sblsim.orchestrator.plugins import user_model
-
         try:
             user_model(external_path(receiver, MODEL_PREFIX))
         except ConfigError as exc:

@@ -31,8 +31,11 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
+from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path
+from sblsim.fmus.native import NativeBatch, NativeSystem
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
+from sblsim.models.errors import FMICallError, SblsimError
 from sblsim.orchestrator.archives import check_members, safe_extract
 from sblsim.orchestrator.connections import check_interface
 
@@ -127,8 +130,6 @@ class LocalHandle:
         ModelError
             On a parameter outside its declared range.
         """
-        from sblsim.fmus.native import NativeBatch
-
         replicates = np.asarray(replicates, dtype=np.int64)
         values = dict(params)
         if "replicate" in self.parameters:
@@ -215,13 +216,14 @@ def check_status(status: int, function: str, where: str, reason: str = "") -> No
 
     Raises
     ------
-    ModelError
-        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3): <the FMU's message>``.
+    FMICallError
+        E.g. ``fmu: receiver.fmu (receiver): fmi2DoStep returned fmi2Error (3): <the FMU's message>`` (its
+        ``function``, ``status`` and ``log`` as given).
     """
     if status > FMI2_WARNING:
         name = FMI2_STATUS[status] if 0 <= status < len(FMI2_STATUS) else "an unknown status"
-        raise ModelError(f"fmu: {where}: {function} returned {name} ({status}): "
-                         f"{reason or 'the FMU logged no reason'}")
+        raise FMICallError(f"fmu: {where}: {function} returned {name} ({status}): "
+                           f"{reason or 'the FMU logged no reason'}", function, status, reason)
 
 
 def one_line(text: str, limit: int = 400) -> str:
@@ -253,7 +255,7 @@ def read_description(component: str, path: Path) -> Any:
         with zipfile.ZipFile(path) as archive:
             check_members(archive, f"fmu: {path.name} ({component})")
         md = read_model_description(str(path), validate=False)
-    except ModelError:
+    except SblsimError:  # an ArchiveError of check_members
         raise
     except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
         raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
@@ -377,8 +379,9 @@ class FmuHandle:
         ------
         ModelError
             One line naming the FMU: no binaries for this platform, a ``modelIdentifier`` that names no
-            library, a library that does not load, or an instantiation the FMU refused (with its log message,
-            e.g. a GUID that does not match the binary).
+            library, a library that does not load.
+        FMICallError
+            An instantiation the FMU refused (with its log message, e.g. a GUID that does not match the binary).
         """
         from fmpy import platform, sharedLibraryExtension
         from fmpy.fmi2 import FMU2Slave
@@ -406,7 +409,8 @@ class FmuHandle:
             fmu.instantiate(callbacks=self._callbacks())
         except Exception:
             fmu.freeLibrary()
-            raise ModelError(f"fmu: {self.where}: fmi2Instantiate failed: {self.reason()}") from None
+            raise FMICallError(f"fmu: {self.where}: fmi2Instantiate failed: {self.reason()}", "fmi2Instantiate",
+                               None, self.log[-1] if self.log else "") from None
         return fmu
 
     def _callbacks(self) -> Any:
@@ -463,8 +467,9 @@ class FmuHandle:
         Raises
         ------
         ModelError
-            If more than one replicate is asked for, a parameter is not in the
-            FMU, or the FMU refuses a call (its log message is given).
+            If more than one replicate is asked for, or a parameter is not in the FMU.
+        FMICallError
+            If the FMU refuses a call (its log message is given).
         """
         if len(replicates) != 1:
             raise ModelError("engine: the fmu engine steps one replicate at a time (B = 1)")
@@ -488,14 +493,15 @@ class FmuHandle:
         self.fmu.exitInitializationMode()
 
     def _call(self, function, *args) -> Any:
-        """Call into fmpy; an FMU error becomes a one-line ModelError."""
+        """Call into fmpy; an FMU error becomes a one-line :class:`FMICallError`."""
         from fmpy.fmi1 import FMICallException
 
         self.log.clear()
         try:
             return function(*args)
         except FMICallException as exc:
-            raise ModelError(f"fmu: {self.where} refused a call: {exc}: {self.reason()}") from None
+            raise FMICallError(f"fmu: {self.where} refused a call: {exc}: {self.reason()}", exc.function, exc.status,
+                               self.log[-1] if self.log else "") from None
 
     def _raw(self, name: str, *args) -> None:
         """Call an FMI function directly with prepared arguments (fmpy's wrapper costs more than the call);
@@ -555,8 +561,6 @@ def native_system(batches: Sequence[Any], rates: Sequence[int], links: Sequence[
     """
     if len({id(b.lib) for b in batches}) != 1 or len({b.batch for b in batches}) != 1:
         return None
-    from sblsim.fmus.native import NativeSystem
-
     return NativeSystem(list(batches), list(rates), list(links), list(record))
 
 
@@ -578,12 +582,15 @@ def paper_sources() -> dict[str, Source]:
 
 def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None,
               n_beacons: int = FMU_BEACONS) -> dict[str, Path]:
-    """The FMU file of every component: built ones in ``fmu_dir`` (default ``fmus/build``), a user's FMU, or
-    a user's model built into the cache (:func:`sblsim.fmus.build.cached_fmu`).
+    """The FMU file of every component: built ones in ``fmu_dir``, a user's FMU, or a model built into the
+    cache (:func:`sblsim.fmus.build.cached_fmu`).
 
-    For a number of beacons other than :data:`FMU_BEACONS`, a built-in model's FMU is the one
-    ``sblsim fmus build --beacons N`` wrote (:func:`sblsim.fmus.build.beacons_dir`) when it is there, else it
-    is built once into the cache and reused.
+    Without ``fmu_dir``, a built-in model's FMU is the one ``sblsim fmus build`` wrote into
+    :data:`sblsim.fmus.build.DEFAULT_DIR` (:func:`sblsim.fmus.build.beacons_dir` for the number of beacons)
+    when it is there, else it is built once into the user's cache and reused: the ``fmu`` engine runs
+    every configuration out of the box, and writes nothing into the installed package. With ``fmu_dir``, the
+    paper's 4-beacon FMUs must be there (a folder given is a folder meant); another number of beacons is
+    built into the cache when that folder does not hold it.
 
     Raises
     ------
@@ -592,8 +599,6 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
     CompileError
         If an FMU must be built and the compiler is missing or fails.
     """
-    from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path
-
     directory = beacons_dir(Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR, n_beacons)
     sources = sources if sources is not None else paper_sources()
     paths = {}
@@ -604,7 +609,8 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
             paths[name] = cached_fmu(src, n_beacons)
         else:
             built = fmu_path(directory, src)
-            paths[name] = built if built.is_file() or n_beacons == FMU_BEACONS else cached_fmu(MODELS[src], n_beacons)
+            given = fmu_dir is not None and n_beacons == FMU_BEACONS
+            paths[name] = built if built.is_file() or given else cached_fmu(MODELS[src], n_beacons)
     for name, path in paths.items():
         if not path.is_file():
             raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")

@@ -18,6 +18,8 @@ from __future__ import annotations
 import math
 import os
 
+from sblsim.models import COMPONENTS
+from sblsim.models.columns import METRIC_INPUTS, TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 
 #: Bytes of one recorded value (a float64).
@@ -48,15 +50,11 @@ def available_memory() -> int:
 
 
 def _system_outputs() -> int:
-    from sblsim.models import COMPONENTS
-
     return sum(len(model.outputs()) for model in COMPONENTS.values())
 
 
 def timeseries_columns() -> int:
     """Columns of a run's time-series table: the recorded ones, time, replicate, the bound and 8 errors."""
-    from sblsim.orchestrator.run import TIMESERIES_COLUMNS
-
     return len(TIMESERIES_COLUMNS) + 11
 
 
@@ -64,8 +62,6 @@ def bytes_per_step(timeseries: bool = True) -> int:
     """Estimated peak memory of one replicate's step [bytes]: the record of every output and, with a time
     series, :data:`TABLE_COPIES` copies of its columns; without, the metrics' inputs only."""
     if not timeseries:
-        from sblsim.orchestrator.metrics import METRIC_INPUTS
-
         return VALUE_BYTES * len(METRIC_INPUTS)
     return VALUE_BYTES * (_system_outputs() + TABLE_COPIES * timeseries_columns())
 

@@ -38,6 +38,9 @@ The numpy functions here define the metrics and are the reference;
 :func:`run_metrics` computes every per-run metric (and the PCRB) of a batch
 in one compiled pass over the recorded outputs (``fmus/c/sblsim_metrics.c``),
 without numpy's temporaries: the engines use it, a test holds it to these.
+The names of the metrics and of the columns they read (``METRIC_NAMES``,
+``RUN_METRICS``, ``METRIC_INPUTS``) are defined in :mod:`sblsim.models.columns`,
+which the FMU build reads too.
 """
 
 from __future__ import annotations
@@ -48,11 +51,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from sblsim.fmus import native
-from sblsim.models.receiver.core import COVARIANCE
+from sblsim.models.columns import METRIC_INPUTS, METRIC_NAMES, RUN_METRICS
 
-METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
-#: Per-run consistency metrics, the bound and the divergence flag.
-CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms", "diverged")
 #: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
 #: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference.
 DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
@@ -62,16 +62,8 @@ REACH_RATIO = 100.0
 #: Per-run flags computed besides the compiled pass (:func:`run_flags`): in ``summary.json`` and in a campaign's
 #: rows.
 FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry")
-#: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound (the compiled
-#: pass numbers its outputs from this tuple: :mod:`sblsim.fmus.contract`).
-RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position.
 NEES_95 = float(chi2.ppf(0.95, 3))
-#: Recorded outputs the metrics read (truth, estimate, instrumentation fix, NIS, gate, slot, packet, beacon,
-#: covariance), in the order of the compiled pass (which numbers them from this tuple: :mod:`sblsim.fmus.contract`).
-METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + (
-    "instr_valid", "nis", "gated", "packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z",
-    *(f"cov_{ab}" for ab in COVARIANCE))
 
 
 def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.ndarray,

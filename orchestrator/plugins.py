@@ -11,7 +11,7 @@ from pathlib import Path
 from sblsim.models import COMPONENTS, MODELS, RECEIVERS
 from sblsim.models.component import Component
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import ConfigError
+from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.connections import check_interface
 from sblsim.orchestrator.engines import Port
 

@@ -35,6 +35,7 @@ have no truth and no errors (they are counted).
 
 from __future__ import annotations
 
+import copy
 import csv
 import io
 import json
@@ -67,7 +68,7 @@ from sblsim.orchestrator.config import (
 )
 from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make_handles
 from sblsim.orchestrator.limits import max_steps
-from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, slots
+from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
 from sblsim.orchestrator.output import staged_directory, write_atomic
 from sblsim.orchestrator.run import TIMESERIES_COLUMNS, RunResult, _metrics, merge_params, summary
 
@@ -574,8 +575,6 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
         As :func:`sblsim.orchestrator.config.load_config`; a log's configuration that does not resolve is
         named as the log's.
     """
-    import copy
-
     overrides = list(overrides)
     where = "--receiver" if receiver is not None else "simulation.receiver"
     for item in overrides:
@@ -805,8 +804,6 @@ def _replay_metrics(cfg: dict, frame: pd.DataFrame) -> tuple[dict, int]:
     est = frame[["est_x", "est_y", "est_z"]].to_numpy()
     fix = np.where(frame["instr_valid"].to_numpy(bool)[:, None], frame[["instr_x", "instr_y", "instr_z"]].to_numpy(),
                    np.nan)
-    from sblsim.orchestrator.metrics import errors
-
     e, ie = errors(truth, est), errors(truth, fix)
     for k, name in enumerate(("e_x", "e_y", "e_z", "e_tot")):
         values[f"__{name}"] = e[:, k]

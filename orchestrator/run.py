@@ -12,13 +12,15 @@ from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
+from tqdm import tqdm
 
 from sblsim.fmus import native
 from sblsim.models.bound import FIXED, USBL_FIXED, usbl_pcrb_inputs
+from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.core import USBL_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms
-from sblsim.models.receiver.core import COVARIANCE, filter_parameters
+from sblsim.models.receiver.core import filter_parameters
 from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
@@ -48,32 +50,6 @@ from sblsim.orchestrator.master import RecordBuffer, simulate
 from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
 from sblsim.orchestrator.output import staged_directory
 
-#: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
-TIMESERIES_COLUMNS = {
-    **{f"true_{a}": f"target.pos_{a}" for a in "xyz"},
-    **{f"true_v{a}": f"target.vel_{a}" for a in "xyz"},
-    **{f"est_{a}": f"receiver.est_{a}" for a in "xyz"},
-    **{f"est_v{a}": f"receiver.est_v{a}" for a in "xyz"},
-    **{f"instr_{a}": f"receiver.instr_{a}" for a in "xyz"},
-    "instr_valid": "receiver.instr_valid",
-    "packet_seq": "acoustics.packet_seq",
-    "beacon_id": "acoustics.beacon_id",
-    "packet_valid": "acoustics.packet_valid",
-    "tx_time": "acoustics.tx_time",
-    "range": "acoustics.range",
-    **{f"beacon_{a}": f"acoustics.beacon_{a}" for a in "xyz"},
-    "depth": "target.depth_measured",
-    "range_true": "acoustics.range_true",
-    "travel_time": "acoustics.travel_time",
-    "outlier": "acoustics.outlier",
-    "nis": "receiver.nis",
-    "pos_std": "receiver.pos_std",
-    **{f"cov_{ab}": f"receiver.cov_{ab}" for ab in COVARIANCE},
-    "gated": "receiver.gated",
-    "roll": "platform.roll",
-    "pitch": "platform.pitch",
-    "yaw": "platform.yaw",
-}
 #: What a USBL run's time series adds (after :data:`TIMESERIES_COLUMNS`): the direction of arrival the packet
 #: carries and the true attitude of the transceiver's array (the platform's plus the mounting misalignment).
 USBL_COLUMNS = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation",
@@ -306,7 +282,6 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         groups = [cfgs] if batched else [[c] for c in cfgs]
         bar = None
         if progress:
-            from tqdm import tqdm
             bar = tqdm(total=n_steps * len(groups), unit="step", leave=False,
                        desc=f"{cfgs[0]['run']['scenario']} ({engine})")
         start = time.perf_counter()

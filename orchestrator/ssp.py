@@ -50,7 +50,8 @@ from typing import Any, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
 from sblsim.models import COMPONENTS, MODELS
-from sblsim.models.declarations import SEED_NAMES, UNITS, ModelError
+from sblsim.models.declarations import SEED_NAMES, UNITS
+from sblsim.models.errors import ArchiveError
 from sblsim.orchestrator.archives import check_members, inside, safe_extract
 from sblsim.orchestrator.config import (
     EXTERNAL_PREFIX,
@@ -81,7 +82,7 @@ for _prefix, _uri in NS.items():
     ET.register_namespace(_prefix, _uri)
 
 
-class SspError(ModelError):
+class SspError(ArchiveError):
     """An SSP package that cannot be written or read; the message names the element."""
 
 
@@ -118,8 +119,6 @@ def _annotations(parent: ET.Element, kind: str, content: ET.Element) -> None:
 
 def identifier(text: str) -> str:
     """``text`` as an identifier every SSP host accepts: ``[A-Za-z][A-Za-z0-9_]*``."""
-    import re
-
     out = re.sub(r"[^A-Za-z0-9_]", "_", text)
     return out if out[:1].isalpha() else f"s_{out}"
 

@@ -45,10 +45,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyDOE3
 import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError, Variable, shown
+from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     SECTIONS,
@@ -68,7 +70,7 @@ _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 RESULT_COLUMNS = ("scenario", "scenario_key", "cell", "replicate", "seed", "receiver")
 
 
-class StudyError(ModelError):
+class StudyError(ConfigError):
     """Invalid study; the message names the field and the allowed range."""
 
 
@@ -292,8 +294,6 @@ def design_matrix(k: int, design: str = "full", resolution: int = 0, generators:
     StudyError
         If the design cannot be built.
     """
-    import pyDOE3
-
     if design == "full":
         return pyDOE3.ff2n(k).astype(np.int64)
     if generators:

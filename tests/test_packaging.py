@@ -6,11 +6,18 @@ written to) and installed, not editable, into a fresh virtual environment. The c
 from a folder outside the checkout. The fresh environment takes the dependencies from the test
 environment's site-packages through a path entry, which adds that folder to ``sys.path`` without
 running its ``.pth`` files: the editable install of the checkout is therefore not seen.
+
+The installed copy runs ``sblsim run semicircle --engine fmu`` with nothing built beforehand: the FMUs are
+built into the user's cache, and nothing is written under the environment's site-packages. The tests run
+as root, for whom a read-only folder is writable anyway, so instead of ``chmod`` the test compares the
+site-packages tree (every file's size, time stamp and content digest) before and after the runs.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import shutil
 import site
 import subprocess
@@ -93,3 +100,47 @@ def test_console_script_answers_its_version(installed):
     from importlib.metadata import version
 
     assert done.stdout.strip() == f"sblsim {version('sblsim')}"
+
+
+def _tree(folder: Path) -> dict[str, tuple]:
+    """Every entry under ``folder``: relative path -> (size, modification time, SHA-256) of a file, or a folder."""
+    out = {}
+    for path in sorted(folder.rglob("*")):
+        st = path.lstat()
+        key = str(path.relative_to(folder))
+        out[key] = (st.st_size, st.st_mtime_ns, hashlib.sha256(path.read_bytes()).hexdigest()) if path.is_file() \
+            else ("dir",)
+    return out
+
+
+def test_the_fmu_engine_runs_from_a_wheel_without_writing_into_site_packages(installed):
+    """``sblsim run semicircle --engine fmu --seed 1`` from a non-editable install, no FMU built beforehand:
+    the FMUs are built into the user's cache, site-packages is left as it was, and the numbers are the
+    local engine's."""
+    env, outside, _ = installed
+    python = env / "bin" / "python"
+    purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                                  check=True, capture_output=True, text=True).stdout.strip())
+    cache = outside.parent / "user-cache"
+    run_env = {k: v for k, v in os.environ.items() if not k.startswith(("SBLSIM_", "VIRTUAL_ENV", "PYTHONPATH"))}
+    run_env.update(XDG_CACHE_HOME=str(cache), HOME=str(outside.parent / "home"))
+    before = _tree(purelib)
+    assert any(k.startswith("sblsim/fmus/") for k in before)
+    summaries = {}
+    for engine in ("fmu", "local"):
+        out = outside / f"run-{engine}"
+        done = subprocess.run([str(env / "bin" / "sblsim"), "run", "semicircle", "--engine", engine, "--seed", "1",
+                               "--out", str(out)], cwd=outside, env=run_env, capture_output=True, text=True,
+                              timeout=1200)
+        assert done.returncode == 0, done.stderr[-3000:]
+        summaries[engine] = json.loads((out / "summary.json").read_text())
+    after = _tree(purelib)
+    assert {k: v for k, v in after.items() if before.get(k) != v} == {}, "written under site-packages"
+    assert set(before) == set(after)
+    built = sorted(p.name for p in cache.glob("sblsim/fmus/*/sblsim_*.fmu"))
+    assert built == ["sblsim_acoustics.fmu", "sblsim_platform.fmu", "sblsim_receiver.fmu", "sblsim_target.fmu"]
+    fmu, local = summaries["fmu"], summaries["local"]
+    assert (fmu["engine"], local["engine"]) == ("fmu", "local")
+    numbers = [k for k, v in local.items() if isinstance(v, (int, float)) and k != "wall_time"]
+    assert {"e_tot_rms", "nees_mean", "pcrb_rms", "steps"} <= set(numbers)
+    assert {k: fmu[k] for k in numbers} == {k: local[k] for k in numbers}

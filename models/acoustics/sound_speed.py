@@ -31,6 +31,7 @@ from importlib import resources
 from pathlib import Path
 
 import casadi as ca
+import gsw
 import numpy as np
 
 from sblsim.models.declarations import Column, ModelError, Table, check_entry, check_increasing, parse_table
@@ -225,8 +226,6 @@ def teos10_table(temperature: float, salinity: float, max_depth: float = 100.0,
     ndarray, shape (101, 2)
         Depth [m], sound speed [m/s].
     """
-    import gsw
-
     depth = np.linspace(0.0, max_depth, 101)
     pressure = gsw.p_from_z(-depth, latitude)
     conservative = gsw.CT_from_t(salinity, temperature, pressure)

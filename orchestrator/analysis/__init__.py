@@ -82,7 +82,6 @@ References
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -114,48 +113,17 @@ from sblsim.orchestrator.analysis.fit import (
     model_terms,
     term_name,
 )
-from sblsim.orchestrator.analysis.report import format_level, metric_label, ranking, report_html, report_markdown
+from sblsim.orchestrator.analysis.report import (
+    Analysis,
+    format_level,
+    metric_label,
+    ranking,
+    report_html,
+    report_markdown,
+)
 from sblsim.orchestrator.analysis.tables import best_cell, tables
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.study import Factor, StudyRecord
-
-
-@dataclass
-class Analysis:
-    """Everything the report shows.
-
-    Attributes
-    ----------
-    study : StudyRecord
-    runs : pandas.DataFrame
-    metric : str
-    order : int
-    alpha : float
-    fits : dict
-        Scenario -> :class:`FitResult`, in scenario order.
-    tables : pandas.DataFrame
-        Tidy tables (layout of ``tables.csv``).
-    warnings : list of str
-        Study-level and per-scenario warnings (``scenario: ...``).
-    transform : str
-        Transform of the response: ``none``, ``log`` or ``boxcox``.
-    """
-
-    study: StudyRecord
-    runs: pd.DataFrame
-    metric: str
-    order: int
-    alpha: float
-    fits: dict[str, FitResult]
-    tables: pd.DataFrame
-    warnings: list[str]
-    transform: str = "none"
-
-    @property
-    def diagnostics(self) -> pd.DataFrame:
-        """One row per scenario: the layout of ``diagnostics.csv``."""
-        rows = [{"scenario": s, **r.diagnostics} for s, r in self.fits.items()]
-        return pd.DataFrame(rows, columns=["scenario", *DIAGNOSTIC_COLUMNS])
 
 
 def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, alpha: float = 0.05,

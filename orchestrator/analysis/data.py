@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import CampaignError
 from sblsim.orchestrator.metrics import METRIC_NAMES
 from sblsim.orchestrator.study import Factor, StudyError, StudyRecord, level_value, read_record
 
@@ -27,7 +27,7 @@ TRANSFORMS = ("none", "log", "boxcox")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
-class AnalysisError(ModelError):
+class AnalysisError(CampaignError):
     """Bad analysis input; the one-line message names the file or option at fault."""
 
 

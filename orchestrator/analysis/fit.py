@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import optimize, stats
 
 from sblsim.orchestrator.analysis.data import AnalysisError, check_metric, check_order, check_transform
 
@@ -215,7 +215,6 @@ def boxcox_lambda(y: np.ndarray, X: np.ndarray, bounds: tuple[float, float] = (-
        J. R. Stat. Soc. B, 26(2), pp. 211-252, 1964.
     """
     import statsmodels.api as sm
-    from scipy import optimize
 
     y = np.asarray(y, dtype=float)
     n, log_sum = len(y), float(np.log(y).sum())

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import matplotlib
+from scipy.special import boxcox
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -269,8 +270,6 @@ def save_figures(result, frame: pd.DataFrame, factors: Sequence[Any], out_dir: P
     k = len(factors)
     metric = result.response  # main effects and interactions on the scale of the fit
     if result.transform != "none":
-        from scipy.special import boxcox
-
         y = frame[result.metric].to_numpy(dtype=float)
         with np.errstate(invalid="ignore", divide="ignore"):
             frame = frame.assign(**{metric: np.log(y) if result.transform == "log" else boxcox(y, result.lmbda)})

@@ -5,21 +5,57 @@ from __future__ import annotations
 import base64
 import html
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
 
-from sblsim.orchestrator.analysis.fit import FitResult
+from sblsim.orchestrator.analysis.fit import DIAGNOSTIC_COLUMNS, FitResult
 from sblsim.orchestrator.analysis.tables import best_cell
 from sblsim.orchestrator.study import Factor, StudyRecord
 
-if TYPE_CHECKING:
-    from sblsim.orchestrator.analysis import Analysis
-
 _METRIC_WORDS = {"e_x_mean": "mean e_x", "e_y_mean": "mean e_y", "e_z_mean": "mean e_z",
                  "e_tot_mean": "mean e_tot", "e_tot_rms": "RMS e_tot", "e_tot_std": "std of e_tot"}
+
+
+@dataclass
+class Analysis:
+    """Everything the report shows.
+
+    Attributes
+    ----------
+    study : StudyRecord
+    runs : pandas.DataFrame
+    metric : str
+    order : int
+    alpha : float
+    fits : dict
+        Scenario -> :class:`FitResult`, in scenario order.
+    tables : pandas.DataFrame
+        Tidy tables (layout of ``tables.csv``).
+    warnings : list of str
+        Study-level and per-scenario warnings (``scenario: ...``).
+    transform : str
+        Transform of the response: ``none``, ``log`` or ``boxcox``.
+    """
+
+    study: StudyRecord
+    runs: pd.DataFrame
+    metric: str
+    order: int
+    alpha: float
+    fits: dict[str, FitResult]
+    tables: pd.DataFrame
+    warnings: list[str]
+    transform: str = "none"
+
+    @property
+    def diagnostics(self) -> pd.DataFrame:
+        """One row per scenario: the layout of ``diagnostics.csv``."""
+        rows = [{"scenario": s, **r.diagnostics} for s, r in self.fits.items()]
+        return pd.DataFrame(rows, columns=["scenario", *DIAGNOSTIC_COLUMNS])
 
 
 def metric_label(metric: str) -> str:

@@ -1,14 +1,11 @@
-"""The campaign's exceptions."""
+"""The campaign's exceptions: :class:`CampaignError` (the error kind of :mod:`sblsim.models.errors`) and
+:class:`CampaignInterrupted` (an interruption, not an error: finished work is kept)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from sblsim.models.declarations import ModelError
-
-
-class CampaignError(ModelError):
-    """Invalid campaign request (output directory, scheduler, engine)."""
+from sblsim.models.errors import CampaignError
 
 
 class CampaignInterrupted(Exception):
@@ -17,3 +14,6 @@ class CampaignInterrupted(Exception):
     def __init__(self, done: int, total: int, out: Path) -> None:
         super().__init__(f"interrupted: {done} of {total} runs saved in {out}; finish with --resume")
         self.done, self.total, self.out = done, total, out
+
+
+__all__ = ["CampaignError", "CampaignInterrupted"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import multiprocessing
 import os
 import re
 import time
@@ -155,8 +156,6 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
         for c in chunks:
             yield c, run_chunk(c, study, engine, fmu_dir, timeseries)
         return
-    import multiprocessing
-
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
                                mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
                                initargs=(os.getpid(),))

@@ -5,11 +5,13 @@ from __future__ import annotations
 import hashlib
 import json
 import sys
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+import tomli_w
 
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
@@ -114,8 +116,6 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
         If the directory holds another campaign, or a campaign without
         ``--resume``, or is a non-empty folder without a campaign.
     """
-    import tomllib
-
     study_file = out / "study.toml"
     text = study.to_toml()
     if out.exists() and not out.is_dir():
@@ -151,7 +151,6 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
         print(f"campaign: {str(study_file)!r} was missing; written again from the study given", file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
     (out / "chunks").mkdir(exist_ok=True)
-    import tomli_w
     execution = "\n# how the campaign is executed (does not change the results)\n" + tomli_w.dumps(
         {"execution": {"engine": engine, "batch": batch}})
     write_file(study_file, lambda tmp: tmp.write_text(text + execution))

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections import OrderedDict
 from pathlib import Path
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sblsim.orchestrator.campaign.plan import Chunk
@@ -21,10 +23,6 @@ def collect(out: Path, chunks: list[Chunk], path: Path, cached: int = 8) -> None
     order from their chunks, holding only the few chunks in use (``cached``) and one row group: the memory
     is bounded by the chunk size, not by the study's.
     """
-    from collections import OrderedDict
-
-    import pyarrow as pa
-
     order = sorted((c.configs[0]["run"]["scenario_key"], cell, c.id, k, c.replicates)
                    for c in chunks for k, cell in enumerate(c.cells))
     tables: OrderedDict[str, pa.Table] = OrderedDict()
@@ -53,8 +51,6 @@ def collect(out: Path, chunks: list[Chunk], path: Path, cached: int = 8) -> None
 
 
 def _write_parts(writer, tmp: str, parts: list):
-    import pyarrow as pa
-
     table = pa.concat_tables(parts) if parts else None
     if writer is None:
         writer = pq.ParquetWriter(tmp, table.schema)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 import time
 
+from tqdm import tqdm
+
 
 class Progress:
     """Runs done, runs per second and time left: a tqdm bar on a terminal, log lines otherwise."""
@@ -17,7 +19,6 @@ class Progress:
             bar = sys.stderr.isatty()
         self.bar = None
         if bar:
-            from tqdm import tqdm
             self.bar = tqdm(total=total, initial=done, unit="run", desc="campaign", smoothing=0.1)
         else:
             self._log(force=True)

@@ -16,7 +16,7 @@ import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import CampaignError  # noqa: E402
 from sblsim.orchestrator.analysis import AnalysisError, analyze, compute, fit, lenth_pse, tables  # noqa: E402
 from sblsim.orchestrator.analysis import plots as analysis_plots  # noqa: E402
 from sblsim.orchestrator.analysis.plots import plot_interactions, plot_main_effects, plot_pareto, plot_residuals  # noqa: E402
@@ -283,7 +283,7 @@ def test_missing_study_infers_factors(tmp_path):
 
 def _one_line_error(excinfo) -> str:
     message = str(excinfo.value)
-    assert isinstance(excinfo.value, ModelError) and "\n" not in message
+    assert isinstance(excinfo.value, CampaignError) and "\n" not in message  # the kind of an analysis's errors
     return message
 
 

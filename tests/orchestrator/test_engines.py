@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import FMICallError, ModelError, SblsimError
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.engines import ComponentHandle, FmuHandle, LocalHandle, check_status
 from sblsim.orchestrator.master import RecordBuffer
@@ -37,8 +37,12 @@ def test_a_local_handle_gives_its_batch_and_a_subclass_none():
 @pytest.mark.parametrize("status, name", [(2, "fmi2Discard"), (3, "fmi2Error"), (4, "fmi2Fatal"),
                                           (5, "fmi2Pending"), (9, "an unknown status")])
 def test_a_failed_fmi_call_names_the_function_and_the_status(status, name):
-    with pytest.raises(ModelError, match=rf"^fmu: r\.fmu \(receiver\): fmi2DoStep returned {name} \({status}\)"):
-        check_status(status, "fmi2DoStep", "r.fmu (receiver)")
+    with pytest.raises(FMICallError, match=rf"^fmu: r\.fmu \(receiver\): fmi2DoStep returned {name} \({status}\)") \
+            as caught:
+        check_status(status, "fmi2DoStep", "r.fmu (receiver)", "slot_period is outside [0.001, 60]")
+    assert (caught.value.function, caught.value.status, caught.value.log) == \
+        ("fmi2DoStep", status, "slot_period is outside [0.001, 60]")
+    assert isinstance(caught.value, SblsimError) and not isinstance(caught.value, ModelError)
     check_status(0, "fmi2DoStep", "r.fmu (receiver)")
     check_status(1, "fmi2DoStep", "r.fmu (receiver)")  # a warning is not a failure (as fmpy)
 
@@ -48,7 +52,7 @@ def test_the_raw_calls_of_an_fmu_handle_are_checked():
     handle = object.__new__(FmuHandle)
     handle.fmu = SimpleNamespace(component=None, dll=SimpleNamespace(fmi2DoStep=lambda *args: 3))
     handle.path, handle.component = SimpleNamespace(name="receiver.fmu"), "receiver"
-    with pytest.raises(ModelError, match=r"receiver\.fmu \(receiver\): fmi2DoStep returned fmi2Error \(3\)"):
+    with pytest.raises(FMICallError, match=r"receiver\.fmu \(receiver\): fmi2DoStep returned fmi2Error \(3\)"):
         handle.do_step(0.0, 0.1)
 
 

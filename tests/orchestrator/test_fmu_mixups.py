@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from sblsim.fmus.build import fmu_path
-from sblsim.models.declarations import ModelError
+from sblsim.models.errors import FMICallError
 from sblsim.orchestrator.engines import open_fmu
 
 SHORT = ["--set", "simulation.duration=2"]
@@ -106,9 +106,11 @@ def test_a_refused_call_carries_the_fmus_own_message(fmu_dir):
         handle.setup({}, [0])
         values = np.zeros((len(handle.input_names), 1))
         values[handle.input_names.index("range"), 0] = 1e300
-        with pytest.raises(ModelError) as info:
+        with pytest.raises(FMICallError) as info:
             handle.set_input_vector(values)
         message = str(info.value)
+        assert (info.value.function, info.value.status) == ("fmi2SetReal", 3)
+        assert info.value.log.endswith("range = 1e+300 is outside the allowed range [-1e+07, 1e+07] m")
         assert message.startswith("fmu: sblsim_receiver.fmu (receiver): fmi2SetReal returned fmi2Error (3): ")
         assert message.endswith("fmi2SetReal: range = 1e+300 is outside the allowed range [-1e+07, 1e+07] m")
         assert "\n" not in message

@@ -101,7 +101,7 @@ def test_fmu_declares_get_set_and_serialized_state(fmu_dir, name):
     with zipfile.ZipFile(fmu_path(fmu_dir, name)) as archive:
         cosim = ET.fromstring(archive.read("modelDescription.xml")).find("CoSimulation")
     assert cosim.get("canGetAndSetFMUstate") == "true"
-    assert cosim.get("canSerializeFMUstate") == "true"  # the state is plain numbers (tests/fmus)
+    assert cosim.get("canSerializeFMUstate") == "true"  # the state is plain numbers (tests/fmus_tests)
 
 
 @pytest.mark.parametrize("system", list(SCENARIOS), indirect=True)

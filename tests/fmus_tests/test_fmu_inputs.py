@@ -14,7 +14,7 @@ from fmpy.fmi1 import FMICallException
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models import MODELS
-from tests.fmus.test_fmi_semantics import Slave
+from tests.fmus_tests.test_fmi_semantics import Slave
 
 T = 0.1
 WITH_INPUTS = [name for name, model in MODELS.items() if model.inputs(4)]

@@ -103,7 +103,7 @@ def test_simulate_fmu_three_times_in_one_process(fmu_dir, name):
 _ALONE = """
 import sys, numpy as np
 sys.path.insert(0, {tests!r})
-from fmus.test_fmi_semantics import Slave
+from fmus_tests.test_fmi_semantics import Slave
 s = Slave(sys.argv[1]).start(**{{k: float(v) for k, v in (a.split("=") for a in sys.argv[2:])}})
 rows = []
 for k in range(40):

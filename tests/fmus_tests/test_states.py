@@ -17,7 +17,7 @@ from fmpy import read_model_description
 from sblsim.fmus.build import fmu_path
 from sblsim.fmus.codegen import fmi_headers_dir
 from sblsim.fmus.compiler import find_compiler
-from tests.fmus.test_binaries import unpack
+from tests.fmus_tests.test_binaries import unpack
 
 STATES_HOST = Path(__file__).with_name("c_states.c")
 OK, ERROR = 0, 3

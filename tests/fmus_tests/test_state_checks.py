@@ -16,7 +16,7 @@ from fmpy.fmi1 import FMICallException
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models import MODELS
-from tests.fmus.test_fmi_semantics import Slave
+from tests.fmus_tests.test_fmi_semantics import Slave
 
 T = 0.1
 #: Words before the values: magic, value count, purposes, state number, start time, t0, t (fmi2_shell.c).

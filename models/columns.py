@@ -1,0 +1,54 @@
+"""The names of a run's recorded columns and per-run metrics, shared by every layer that reads them.
+
+The compiled metrics pass numbers its inputs and outputs from these tuples
+(:mod:`sblsim.fmus.contract` generates the C enums), the orchestrator's
+metrics, run, limits and campaigns name their columns with them. They live
+here, below both, so that neither the FMU build nor the orchestrator has to
+import the other for a list of names.
+"""
+
+from __future__ import annotations
+
+from sblsim.models.receiver.core import COVARIANCE
+
+#: Per-run error metrics of an estimator (the receiver's; prefixed ``instr_`` for the instrumentation fix) [m].
+METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
+#: Per-run consistency metrics, the bound and the divergence flag.
+CONSISTENCY_NAMES = ("nees_mean", "coverage_95", "nis_mean", "gated_pct", "pcrb_rms", "diverged")
+#: Every per-run metric: the receiver's errors, the instrumentation's, consistency and the bound (the compiled
+#: pass numbers its outputs from this tuple: :mod:`sblsim.fmus.contract`).
+RUN_METRICS = METRIC_NAMES + tuple(f"instr_{m}" for m in METRIC_NAMES) + CONSISTENCY_NAMES
+#: Recorded outputs the metrics read (truth, estimate, instrumentation fix, NIS, gate, slot, packet, beacon,
+#: covariance), in the order of the compiled pass (which numbers them from this tuple: :mod:`sblsim.fmus.contract`).
+METRIC_INPUTS = tuple(f"{kind}_{a}" for kind in ("true", "est", "instr") for a in "xyz") + (
+    "instr_valid", "nis", "gated", "packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z",
+    *(f"cov_{ab}" for ab in COVARIANCE))
+
+#: Time-series columns: name -> recorded ``component.variable`` (besides time and the errors).
+TIMESERIES_COLUMNS = {
+    **{f"true_{a}": f"target.pos_{a}" for a in "xyz"},
+    **{f"true_v{a}": f"target.vel_{a}" for a in "xyz"},
+    **{f"est_{a}": f"receiver.est_{a}" for a in "xyz"},
+    **{f"est_v{a}": f"receiver.est_v{a}" for a in "xyz"},
+    **{f"instr_{a}": f"receiver.instr_{a}" for a in "xyz"},
+    "instr_valid": "receiver.instr_valid",
+    "packet_seq": "acoustics.packet_seq",
+    "beacon_id": "acoustics.beacon_id",
+    "packet_valid": "acoustics.packet_valid",
+    "tx_time": "acoustics.tx_time",
+    "range": "acoustics.range",
+    **{f"beacon_{a}": f"acoustics.beacon_{a}" for a in "xyz"},
+    "depth": "target.depth_measured",
+    "range_true": "acoustics.range_true",
+    "travel_time": "acoustics.travel_time",
+    "outlier": "acoustics.outlier",
+    "nis": "receiver.nis",
+    "pos_std": "receiver.pos_std",
+    **{f"cov_{ab}": f"receiver.cov_{ab}" for ab in COVARIANCE},
+    "gated": "receiver.gated",
+    "roll": "platform.roll",
+    "pitch": "platform.pitch",
+    "yaw": "platform.yaw",
+}
+
+__all__ = ["CONSISTENCY_NAMES", "METRIC_INPUTS", "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]
