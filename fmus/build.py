@@ -33,7 +33,7 @@ from sblsim.fmus.codegen import write_sources
 from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
 from sblsim.fmus.description import model_description
 from sblsim.models import MODELS
-from sblsim.models.platform.core import is_usbl
+from sblsim.models.systems import interface_system
 
 HERE = Path(__file__).resolve().parent
 #: Where ``sblsim fmus build`` writes and the ``fmu`` engine looks by default.
@@ -46,10 +46,11 @@ def fmu_path(directory: Path | str, component: str) -> Path:
 
 
 def beacons_dir(directory: Path | str, n_beacons: int = 4) -> Path:
-    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, ``directory/usbl`` for the
-    USBL interface (one transceiver), else ``directory/beacons<N>``."""
-    if is_usbl(int(n_beacons)):
-        return Path(directory) / "usbl"
+    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, ``directory/<system>`` for the
+    interface of a system of a fixed size (``usbl``: one transceiver), else ``directory/beacons<N>``."""
+    system = interface_system(int(n_beacons))
+    if system.interface_beacons is not None:
+        return Path(directory) / system.name
     return Path(directory) if int(n_beacons) == 4 else Path(directory) / f"beacons{int(n_beacons)}"
 
 

@@ -8,6 +8,7 @@ the alternative receivers included.
 from sblsim.models.acoustics import Acoustics
 from sblsim.models.platform import Platform
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, SequentialReceiver, UnscentedReceiver
+from sblsim.models.systems import SYSTEMS, lbl, sbl, usbl  # noqa: F401 (each system module registers itself)
 from sblsim.models.target import Target
 
 COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, PaperEKF)}
