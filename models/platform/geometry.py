@@ -16,7 +16,7 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.systems import system
+from sblsim.models.systems import SYSTEMS, system
 
 
 def cross_directions(n_beacons: int = 4) -> list[tuple[float, float]]:
@@ -104,18 +104,24 @@ def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon
                     dtype=float)  # cross_offsets with numbers
 
 
+def _system(platform: Mapping[str, Any]):
+    """The system of a ``[platform]`` section (without a ``system`` key: the first registered, SBL, the platform's
+    default)."""
+    return system(platform["system"]) if "system" in platform else next(iter(SYSTEMS.values()))
+
+
 def platform_offsets(platform: Mapping[str, Any]) -> np.ndarray:
     """Offsets of the transducers of a ``[platform]`` configuration section, (n, 3) [m]: its system's
     (:meth:`sblsim.models.systems.System.offsets`: SBL body-frame offsets, LBL seafloor positions, the USBL
     transceiver's lever arm)."""
-    return system(platform["system"]).offsets(platform)
+    return _system(platform).offsets(platform)
 
 
 def lever_arms(platform: Mapping[str, Any]) -> np.ndarray:
     """Lever arms of the transducers of a ``[platform]`` section in NED at the mean heading (level platform),
     (n, 3) [m]: their positions when the platform reference is at the NED origin
     (:meth:`sblsim.models.systems.System.lever_arms`)."""
-    return system(platform["system"]).lever_arms(platform)
+    return _system(platform).lever_arms(platform)
 
 
 def largest_arm(platform: Mapping[str, Any]) -> float:
@@ -167,7 +173,7 @@ def check_geometry(platform: Mapping[str, Any], field: str = "") -> np.ndarray:
 def horizontal_spread(platform: Mapping[str, Any]) -> float:
     """The largest horizontal distance between two transducers of a ``[platform]`` section [m] (the aperture that
     resolves the diver's horizontal position; :meth:`sblsim.models.systems.System.horizontal_spread`)."""
-    return system(platform["system"]).horizontal_spread(platform)
+    return _system(platform).horizontal_spread(platform)
 
 
 def rotation_ned(roll, pitch, yaw) -> ca.SX:
