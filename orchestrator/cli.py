@@ -293,7 +293,7 @@ def _replay(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
 
     cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides)
-    log = read_log(args.log, beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]].log_columns,
+    log = read_log(args.log, beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]],
                    cfg["acoustics"]["sound_speed_assumed"])
     truth = read_truth(args.truth) if args.truth is not None else None
     out = _output(args.out, Path("results") / f"replay_{args.log.stem}", args.force, "summary.json", "replay")
