@@ -19,17 +19,20 @@ own): each beacon's true body offset is ``a_i + δ_i``, ``δ_i ~ N(0, σ_inst² 
 with a per-axis scale-factor error ``s ~ N(0, σ_s²)`` and a per-axis
 misalignment ``m ~ N(0, σ_m²)``.
 
-Systems (``system``, docs/model.md "Systems"). ``sbl``: the above. ``lbl``:
-the transponders stand on the seafloor, transponder i at NED
-``(a_ix, a_iy, seafloor_depth)`` (a custom layout's offsets are the NED
-positions themselves); they do not move, need no GPS or IMU, and the
-positions the packets carry are the *surveyed* ones, ``b_i + s_i``,
-``s_i ~ N(0, σ_survey² I)`` drawn once per run (a bias, not a noise).
-``usbl``: one transceiver (the interface of one beacon) at lever arm ``a_1``
-from the GPS antenna, whose array is mounted with a misalignment
-``μ ~ N(0, σ_μ² I)`` per axis, drawn once per run: the array's attitude is the
-platform's plus μ (``array_*`` outputs), while the surface converts the
-array's angles with the IMU's measured attitude (``imu_*`` outputs).
+Systems (``system``, docs/model.md "Systems"; each is an object of
+:mod:`sblsim.models.systems`, which this program asks where the transducers
+are). ``sbl``: the above. ``lbl``: the transponders stand on the seafloor,
+transponder i at NED ``(a_ix, a_iy, seafloor_depth)`` (a custom layout's
+offsets are the NED positions themselves); they do not move, need no GPS or
+IMU, and the positions the packets carry are the *surveyed* ones,
+``b_i + s_i``, ``s_i ~ N(0, σ_survey² I)`` drawn once per run (a bias, not a
+noise). ``usbl``: one transceiver (the interface of one beacon) at the lever
+arm ``(0, 0, transducer_depth)`` below the GPS antenna whatever ``baseline``
+(a custom layout's one offset instead), whose array is mounted with a
+misalignment ``μ ~ N(0, σ_μ² I)`` per axis, drawn once per run: the array's
+attitude is the platform's plus μ (``array_*`` outputs), while the surface
+converts the array's angles with the IMU's measured attitude (``imu_*``
+outputs).
 
 References
 ----------
@@ -160,7 +163,7 @@ class Platform(Component):
         # declared after the SBL ones, so that their value references stay what they were
         systems = (
             Variable("system", "parameter", "String", interface_system(n_beacons).name,
-                     description="Positioning system (sblsim.models.systems)", choices=tuple(SYSTEMS)),
+                     description="Positioning system", choices=tuple(SYSTEMS)),
             Variable("seafloor_depth", "parameter", "Real", 50.0, "m", "LBL: depth of the seafloor transponders",
                      min=0.0, max=12000.0, min_exclusive=True),
             Variable("survey_sigma", "parameter", "Real", 0.0, "m",
