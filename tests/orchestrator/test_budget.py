@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from sblsim.models.platform.geometry import lever_arms
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.budget import (
     DEFAULT_REPLICATES,
     NO_EFFECT,
@@ -25,7 +26,6 @@ from sblsim.orchestrator.budget import (
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.run import run
-from sblsim.models.systems import SYSTEMS
 
 SHORT = "simulation.duration=20"
 

@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.models.systems import SYSTEMS
 from sblsim.models.platform.geometry import lever_arms
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.maps import accuracy_map, make_maps, plot
