@@ -197,6 +197,14 @@ class System:
         """
         raise NotImplementedError
 
+    def measurement_model(self):
+        """What one packet measures: the receivers' measurement model (:mod:`sblsim.models.receiver.measurement`)."""
+        raise NotImplementedError
+
+    def bound_step(self):
+        """One step of the system's PCRB in covariance form, a casadi Function (Tichavský et al. 1998, Eq. (21))."""
+        raise NotImplementedError
+
     def bound_function(self):
         """The system's own PCRB step for the compiled pass, or None (the metrics pass's range bound)."""
         return None

@@ -24,7 +24,7 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.bound import MODEL, horizontal_std
+from sblsim.models.bound import MODEL, bound_step, horizontal_std
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import cross_offsets, layout_offsets, parse_offsets
@@ -82,6 +82,14 @@ class SBL(System):
                 raise ModelError(f"platform.beacon_offsets: {count} beacons; allowed [{MIN_BEACONS}, "
                                  f"{MAX_BEACONS}]")
             platform["beacons"] = count
+
+    def measurement_model(self):
+        """Fresh ranges plus the depth (:class:`~sblsim.models.receiver.measurement.RangeDepthModel`, the bound's)."""
+        return MODEL
+
+    def bound_step(self):
+        """The range bound's step (:func:`sblsim.models.bound.bound_step`), which the compiled metrics pass steps."""
+        return bound_step()
 
     def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
                        sigma_range: float, model=None) -> np.ndarray:

@@ -404,6 +404,14 @@ class USBL(System):
         return horizontal_std(points, self.lever_arms(platform)[0], sigma_range, platform["gps_sigma"],
                               platform["imu_sigma_deg"], parameters["angle_sigma_deg"], parameters["depth_variance"])
 
+    def measurement_model(self):
+        """Range, azimuth and elevation from the transceiver (:data:`MODEL_RB`), with the depth."""
+        return MODEL_RB
+
+    def bound_step(self):
+        """:func:`bound_step` (module function)."""
+        return bound_step()
+
     def bound_function(self):
         return compiled_bound()
 
