@@ -36,7 +36,7 @@ from sblsim.fmus.contract import contract_header
 from sblsim.fmus.description import model_description
 from sblsim.fmus.native import cache_dir
 from sblsim.models import MODELS
-from sblsim.models.platform.core import is_usbl
+from sblsim.models.systems import interface_system
 
 HERE = Path(__file__).resolve().parent
 #: Whether this package is the ``fmus/`` folder of a checkout (an editable install, or run from the checkout):
@@ -78,10 +78,11 @@ def fmu_path(directory: Path | str, component: str) -> Path:
 
 
 def beacons_dir(directory: Path | str, n_beacons: int = 4) -> Path:
-    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, ``directory/usbl`` for the
-    USBL interface (one transceiver), else ``directory/beacons<N>``."""
-    if is_usbl(int(n_beacons)):
-        return Path(directory) / "usbl"
+    """The folder of the FMUs for ``n_beacons`` beacons: ``directory`` itself for 4, ``directory/<system>`` for the
+    interface of a system of a fixed size (``usbl``: one transceiver), else ``directory/beacons<N>``."""
+    system = interface_system(int(n_beacons))
+    if system.interface_beacons is not None:
+        return Path(directory) / system.name
     return Path(directory) if int(n_beacons) == 4 else Path(directory) / f"beacons{int(n_beacons)}"
 
 

@@ -4,7 +4,8 @@ The Python tuples are the single source: the recorded columns the metrics
 pass reads (:data:`sblsim.models.columns.METRIC_INPUTS`), the per-run
 metrics it writes (:data:`~sblsim.models.columns.RUN_METRICS`), the
 bound's per-run inputs (:data:`sblsim.models.bound.FIXED`) and the
-inputs of its casadi function, the batch vectors of the local engine
+inputs of its casadi function, the packed inputs of every system's own bound
+(:attr:`sblsim.models.systems.System.bound_fixed` and ``bound_steps``: USBL's), the batch vectors of the local engine
 (:data:`VECTORS`, defined here) and the seed parameters of a model
 record (:data:`sblsim.models.declarations.SEED_NAMES`). :func:`contract_header`
 writes them as C enums and defines (``sblsim_contract.h``, included by
@@ -21,6 +22,7 @@ from sblsim.models.bound import FIXED, bound_step
 from sblsim.models.columns import METRIC_INPUTS, RUN_METRICS
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.receiver.measurement import STATE_SIZE
+from sblsim.models.systems import SYSTEMS
 
 #: File name of the generated header.
 CONTRACT = "sblsim_contract.h"
@@ -49,6 +51,17 @@ def _enum(prefix: str, names, count: str, what: str) -> list[str]:
 @lru_cache(maxsize=None)
 def contract_tables() -> dict[str, tuple[str, tuple[str, ...], str, str]]:
     """Every shared list: key -> (C prefix, names in order, C name of their count, where it is defined)."""
+    systems = {}
+    for system in SYSTEMS.values():  # the layouts of every system's own bound (USBL's)
+        if system.bound_fixed:
+            name = _identifier(system.name)
+            where = f"sblsim.models.systems.{system.name}"
+            systems[f"{system.name}_fixed"] = (
+                f"SBLSIM_{name}_FIXED_", system.bound_fixed, f"SBLSIM_{name}_N_FIXED",
+                f"The per-run inputs of the {system.name} bound, packed ({where}: bound_fixed).")
+            systems[f"{system.name}_steps"] = (
+                f"SBLSIM_{name}_STEP_", system.bound_steps, f"SBLSIM_{name}_N_STEPS",
+                f"The per-step inputs of the {system.name} bound, packed ({where}: bound_steps).")
     return {
         "seeds": ("SBLSIM_SEED_", SEED_NAMES, "SBLSIM_N_SEEDS",
                   "The seed parameters of a model record (sblsim.models.declarations.SEED_NAMES)."),
@@ -62,6 +75,7 @@ def contract_tables() -> dict[str, tuple[str, tuple[str, ...], str, str]]:
                   "The bound's per-run inputs (sblsim.models.bound.FIXED)."),
         "bound_in": ("SBLSIM_BOUND_IN_", tuple(bound_step().name_in()), "SBLSIM_BOUND_N_IN",
                      "The inputs of the bound's step (sblsim.models.bound.bound_step)."),
+        **systems,
     }
 
 

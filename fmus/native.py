@@ -29,12 +29,12 @@ from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
-from sblsim.models.bound import USBL_FIXED, bound_step, usbl_bound_step
+from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
-from sblsim.models.platform.core import USBL_BEACONS, is_usbl
+from sblsim.models.systems import interface_system
 
-#: The compiled USBL bound's loop (the library of the USBL interface only).
-USBL_BOUND = "sblsim_usbl_bound.c"
+#: The compiled loop of a system's own bound (the library of that system's interface only).
+SYSTEM_BOUND = "sblsim_system_bound.c"
 
 
 
@@ -64,11 +64,11 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     cg = ca.CodeGenerator("sblsim_bound_casadi.c", {"with_header": True, "casadi_real": "double",
                                                     "casadi_int": "long long int"})
     cg.add(bound_step())
-    usbl = is_usbl(n_beacons)
-    if usbl:  # the USBL interface's library also steps its own bound (range, azimuth, elevation)
-        cg.add(usbl_bound_step())
+    own = interface_system(n_beacons).bound_function()
+    for function in own or ():  # the interface's system steps a bound of its own (USBL: range, azimuth, elevation)
+        cg.add(function)
     cg.generate(str(directory) + "/")
-    for name in (BATCH, METRICS) + ((USBL_BOUND,) if usbl else ()):
+    for name in (BATCH, METRICS) + ((SYSTEM_BOUND,) if own else ()):
         (directory / name).write_text((C_DIR / name).read_text())
     return sorted(directory.glob("*.c"))
 
@@ -331,14 +331,25 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
     return out, bound
 
 
-def usbl_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """:func:`sblsim.models.bound.usbl_pcrb` compiled (``fmus/c/sblsim_usbl_bound.c``, in the USBL interface's
-    library): the position PCRB of B USBL runs.
+def system_bound_sizes(n_beacons: int) -> tuple[int, int, int]:
+    """The sizes the library of an interface with a system's own bound was built with: (per-run inputs, per-step
+    inputs, entries of the bound)."""
+    sizes = (ctypes.c_int * 3)()
+    load(n_beacons).sblsim_system_bound_sizes(sizes)
+    return int(sizes[0]), int(sizes[1]), int(sizes[2])
+
+
+def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """The PCRB of the system of the interface of ``n_beacons`` compiled (its
+    :meth:`~sblsim.models.systems.System.bound_function` stepped by ``fmus/c/sblsim_system_bound.c``, in that
+    interface's library): the position PCRB of B runs (USBL: :func:`sblsim.models.systems.usbl.pcrb`).
 
     Parameters
     ----------
-    fixed, steps : ndarray
-        From :func:`sblsim.models.bound.usbl_pcrb_inputs`, shapes (B, 9) and (N, B, 8).
+    n_beacons : int
+        The interface (1: USBL).
+    fixed, steps : ndarray, shapes (B, len(bound_fixed)) and (N, B, len(bound_steps))
+        The system's per-run and per-step inputs (USBL: :func:`sblsim.models.systems.usbl.pcrb_inputs`).
 
     Returns
     -------
@@ -348,18 +359,21 @@ def usbl_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
     Raises
     ------
     ValueError
-        If the arrays do not fit together.
+        If the interface's system has no bound of its own, or the arrays do not fit together.
     """
+    system = interface_system(n_beacons)
+    if not system.bound_fixed:
+        raise ValueError(f"system_pcrb: the {system.name} interface of {n_beacons} has no bound of its own")
     fixed = np.ascontiguousarray(fixed, dtype=float)
     steps = np.ascontiguousarray(steps, dtype=float)
     n, b = steps.shape[:2]
-    if fixed.shape != (b, len(USBL_FIXED)) or steps.shape != (n, b, 8):
-        raise ValueError(f"usbl_pcrb: fixed {fixed.shape} and steps {steps.shape} do not fit together")
-    lib = load(USBL_BEACONS)
-    lib.sblsim_usbl_pcrb.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.c_void_p] * 3
+    if fixed.shape != (b, len(system.bound_fixed)) or steps.shape != (n, b, len(system.bound_steps)):
+        raise ValueError(f"system_pcrb: fixed {fixed.shape} and steps {steps.shape} do not fit together")
+    lib = load(n_beacons)
+    lib.sblsim_system_pcrb.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.c_void_p] * 3
     out = np.empty((n, b))
-    if lib.sblsim_usbl_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, out.ctypes.data):
-        raise MemoryError("usbl_pcrb: out of memory")
+    if lib.sblsim_system_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, out.ctypes.data):
+        raise MemoryError("system_pcrb: out of memory")
     return out
 
 
@@ -373,5 +387,5 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 
-__all__ = ["NativeBatch", "NativeSystem", "VECTORS", "cache_dir", "library_path", "load", "metrics_sizes",
-           "run_metrics", "stream", "write_library_sources"]
+__all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "cache_dir", "library_path", "load",
+           "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb", "write_library_sources"]

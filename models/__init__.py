@@ -6,6 +6,10 @@ the alternative receivers included. The error kinds of :mod:`sblsim.models.error
 are re-exported here (``from sblsim.models import SblsimError``).
 """
 
+import importlib
+import pkgutil
+
+from sblsim.models import systems as _systems
 from sblsim.models.acoustics import Acoustics
 from sblsim.models.errors import (
     ArchiveError,
@@ -19,6 +23,11 @@ from sblsim.models.errors import (
 from sblsim.models.platform import Platform
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, SequentialReceiver, UnscentedReceiver
 from sblsim.models.target import Target
+
+# Every module of sblsim.models.systems registers its system on import (docs/systems.md): a new system is a new
+# module there, found here, listed by sblsim.models.systems.SYSTEMS in the order of the systems' codes.
+for _module in pkgutil.iter_modules(_systems.__path__):
+    importlib.import_module(f"{_systems.__name__}.{_module.name}")
 
 COMPONENTS = {c.name: c for c in (Platform, Acoustics, Target, PaperEKF)}
 #: Built-in receivers: ``simulation.receiver`` value -> model.

@@ -43,19 +43,10 @@ white noise (a sound-speed mismatch, clock drift, a Gauss-Markov GPS error,
 multipath outliers, platform motion between a sample and a transmission,
 the staleness of held ranges) are not in the bound.
 
-**USBL.** A USBL interface (one transceiver on the platform,
-:func:`sblsim.models.platform.core.is_usbl`) has its own step,
-:func:`usbl_bound_step`: the same prediction, then at a slot the depth row
-and, for a received packet, the range, azimuth and elevation rows of the
-receivers' :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`
-(:data:`USBL_MODEL`) with the transceiver position the packet carries, H at
-the true position, the variances of the receivers' R
-(:func:`sblsim.models.receiver.usbl.variances` at the true position):
-``σ_r² + σ_GPS²`` for the range and ``(σ_θ / max(cos φ, 0.1))² + σ_att²``
-for each angle. :func:`usbl_pcrb` evaluates it with casadi's virtual machine
-(not in the compiled metrics pass). The transceiver's lever arm rotated by
-the attitude error, the GPS error's shift of the angles' origin and a mounting
-misalignment (a bias) are not in it.
+**Other systems.** These are the bounds of the ranging systems (SBL, LBL);
+a system whose packet measures something else brings its own step built from
+the same functions (:func:`predicted`, :func:`measurement_information`,
+:func:`stepped`): the USBL one, :mod:`sblsim.models.systems.usbl`.
 
 **Accuracy map.** The Fisher information of the position from one round of
 fresh ranges (one per beacon) plus depth, :func:`position_information` of
@@ -66,9 +57,7 @@ horizontal standard deviation (DRMS)
 ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` of an unbiased fix at ``p``
 (:func:`horizontal_drms`; Kay, Fundamentals of Statistical Signal
 Processing: Estimation Theory, Prentice Hall 1993, Section 3.7).
-For USBL the map's measurement is one packet, slant range, azimuth and
-elevation from the transceiver (:data:`USBL_MODEL`), with the
-receivers' R of it, plus the depth (:func:`usbl_fix_information`).
+A system's map is its object's (:meth:`sblsim.models.systems.System.horizontal_std`).
 
 References
 ----------
@@ -80,17 +69,15 @@ Prentice Hall 1993, Section 3.7.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
-from sblsim.models.receiver import kalman, usbl
+from sblsim.models.receiver import kalman
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
-from sblsim.models.receiver.range_bearing import RangeBearingModel
 
 #: The motion model of the bound (the receivers').
 MOTION = CONSTANT_VELOCITY
@@ -98,8 +85,6 @@ MOTION = CONSTANT_VELOCITY
 MODEL = RangeDepthModel(MOTION)
 #: n, the size of the bound's state (from its motion model).
 STATE_SIZE = MOTION.state_size
-#: The measurement model of a USBL interface's bound and map: range, azimuth and elevation from the transceiver.
-USBL_MODEL = RangeBearingModel(MOTION)
 
 
 def effective_range_variance(position, beacon, arm, noise_variance, attitude_variance, model=MODEL):
@@ -172,7 +157,7 @@ def measurement_information(P: ca.SX, model, x, context, variances, use, rows=No
     return P
 
 
-def _predicted(motion) -> tuple[tuple[ca.SX, ...], ca.SX, ca.SX]:
+def predicted(motion) -> tuple[tuple[ca.SX, ...], ca.SX, ca.SX]:
     """What every bound step shares: its first inputs ``(B (n²), dt, q_h, q_v, position (3))`` as symbols, the
     state at the true position, and the bound after the prediction over ``dt`` with ``motion``, (n, n)."""
     n = motion.state_size
@@ -206,7 +191,7 @@ def bound_step(model=MODEL) -> ca.Function:
     ----------
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998, Eq. (21).
     """
-    (B, dt, qh, qv, position), x, P = _predicted(model.motion)
+    (B, dt, qh, qv, position), x, P = predicted(model.motion)
     beacon, arm = ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
     noise, attitude, d_var, slot, received = (ca.SX.sym(name) for name in ("noise_variance", "attitude_variance",
                                                                           "depth_variance", "slot", "received"))
@@ -284,12 +269,12 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
     ----------
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998.
     """
-    return _stepped(bound_step(model), model.motion, FIXED, fixed, steps,
+    return stepped(bound_step(model), model.motion, FIXED, fixed, steps,
                     lambda f, s: (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"],
                                   f["depth_variance"], s[9:10], s[10:11]))
 
 
-def _stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, steps: np.ndarray,
+def stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, steps: np.ndarray,
              inputs) -> np.ndarray:
     """A bound step Function stepped along B runs (casadi's virtual machine, mapped over B): the prior from
     ``p0_position`` and ``p0_velocity``, then at each row ``step(B, dt, q_h, q_v, *inputs(f, s))`` with ``f``
@@ -308,114 +293,6 @@ def _stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray,
         bound = step(bound, f["dt"], f["q_horizontal"], f["q_vertical"], *inputs(f, s)).full()
         out[k] = np.sqrt(sum(bound[i * (size + 1)] for i in motion.position_index))
     return out
-
-
-def usbl_variances(position, transceiver, noise_variance, angle_sigma_deg, attitude_variance) -> ca.SX:
-    """Variances of a USBL packet's range, azimuth and elevation at ``position`` (3, 1) [m], (3, 1):
-    :func:`sblsim.models.receiver.usbl.variances` (the receivers' R) with ``noise_variance = σ_r² + σ_GPS²``
-    [m²], the angle std on the array's axis ``angle_sigma_deg`` [deg] and ``attitude_variance = σ_att²``
-    [rad²]: ``[σ_r² + σ_GPS², σ_α², σ_α²]``, ``σ_α² = (σ_θ / max(cos φ, 0.1))² + σ_att²``."""
-    p = {"sigma_range": ca.sqrt(noise_variance), "sigma_angle_deg": angle_sigma_deg,
-         "beacon_attitude_sigma_deg": ca.sqrt(attitude_variance) * (180.0 / math.pi)}
-    return usbl.variances(position, transceiver, p)
-
-
-@lru_cache(maxsize=None)
-def usbl_bound_step(model=USBL_MODEL) -> ca.Function:
-    """One step of the bound of a USBL interface in covariance form, as a casadi Function.
-
-    Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m],
-    noise_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²], depth_variance [m²], slot,
-    received (0 or 1)``; output the bound after the prediction over ``dt`` with ``model.motion`` and, at a
-    slot, the depth row, then (for a received packet) the range, azimuth and elevation rows of ``model``
-    seen from the transceiver the packet carries (:func:`measurement_information`, H at the true position)
-    with the variances :func:`usbl_variances` at the true position: what :func:`bound_step` does for a
-    range, for the three rows of a USBL packet.
-
-    Parameters
-    ----------
-    model : RangeBearingModel, optional
-        The measurement model (its motion model gives the state size and the prediction).
-
-    References
-    ----------
-    Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998, Eq. (21).
-    """
-    motion = model.motion
-    (B, dt, qh, qv, position), x, P = _predicted(motion)
-    transceiver = ca.SX.sym("transceiver", 3)
-    noise, angle, attitude, d_var, slot, received = (
-        ca.SX.sym(name) for name in ("noise_variance", "angle_sigma_deg", "attitude_variance", "depth_variance",
-                                     "slot", "received"))
-    depth_row = ca.SX.zeros(1, motion.state_size)
-    depth_row[motion.position_index[2]] = 1.0
-    P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
-    use = ca.logic_and(slot, received)
-    P = measurement_information(P, model, x, transceiver,
-                                usbl_variances(position, transceiver, noise, angle, attitude), (use,) * 3)
-    names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "noise_variance", "angle_sigma_deg",
-             "attitude_variance", "depth_variance", "slot", "received"]
-    return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, transceiver, noise, angle, attitude,
-                                                  d_var, slot, received], [ca.vec(P)], names, ["B_next"])
-
-
-#: Per-replicate inputs of the USBL bound, in the order of :func:`usbl_pcrb`'s ``fixed`` columns.
-USBL_FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance", "angle_sigma_deg",
-              "attitude_variance", "depth_variance")
-
-
-def usbl_pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, transceivers: np.ndarray,
-                     **fixed) -> tuple[np.ndarray, np.ndarray]:
-    """Pack the inputs of :func:`usbl_pcrb`.
-
-    Parameters
-    ----------
-    truth : ndarray, shape (N, B, 3)
-        True positions at the steps t_1 … t_N [m].
-    slot, received : ndarray of bool, shape (N, B)
-        As for :func:`pcrb_inputs`.
-    transceivers : ndarray, shape (N, B, 3)
-        The transceiver position the packet carries [m] (used where received).
-    **fixed : float or ndarray (B,)
-        Every name of :data:`USBL_FIXED` (as for :func:`pcrb_inputs`, and ``angle_sigma_deg``, the
-        direction-of-arrival std on the array's axis [deg], > 0).
-
-    Returns
-    -------
-    fixed : ndarray, shape (B, 9)
-    steps : ndarray, shape (N, B, 8)
-    """
-    truth = np.asarray(truth, dtype=float)
-    b = truth.shape[1]
-    columns = np.stack([np.broadcast_to(np.asarray(fixed[k], dtype=float), (b,)) for k in USBL_FIXED], axis=1)
-    steps = np.concatenate([truth, np.asarray(transceivers, dtype=float), np.asarray(slot, dtype=float)[..., None],
-                            np.asarray(received, dtype=float)[..., None]], axis=-1)
-    return np.ascontiguousarray(columns), np.ascontiguousarray(steps)
-
-
-def usbl_pcrb(fixed: np.ndarray, steps: np.ndarray, model=USBL_MODEL) -> np.ndarray:
-    """Position PCRB of a USBL interface along B true trajectories: ``sqrt(trace)`` of the position block of
-    ``J_k⁻¹`` (:func:`usbl_bound_step`, stepped with casadi's virtual machine, mapped over the B runs).
-
-    Parameters
-    ----------
-    fixed, steps : ndarray
-        From :func:`usbl_pcrb_inputs`.
-    model : RangeBearingModel, optional
-        The measurement model of :func:`usbl_bound_step`.
-
-    Returns
-    -------
-    ndarray, shape (N, B)
-        ``sqrt(B_xx + B_yy + B_zz)`` at each step [m].
-
-    References
-    ----------
-    Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998.
-    """
-    return _stepped(usbl_bound_step(model), model.motion, USBL_FIXED, fixed, steps,
-                    lambda f, s: (s[0:3], s[3:6], f["noise_variance"], f["angle_sigma_deg"], f["attitude_variance"],
-                                  f["depth_variance"], s[6:7], s[7:8]))
 
 
 def fisher_information(model, x, context, variances) -> ca.SX:
@@ -584,66 +461,6 @@ def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.nd
     return np.where(np.isfinite(drms), drms, np.inf)
 
 
-@lru_cache(maxsize=None)
-def usbl_fix_information() -> ca.Function:
-    """casadi Function of the Fisher information of one USBL packet (range, azimuth, elevation) plus depth.
-
-    ``(p[3], transceiver[3], sigma_range, gps_sigma, attitude_sigma_deg, sigma_angle_deg, depth_variance) ->
-    (J (3, 3), drms)``: :func:`position_information` of :data:`USBL_MODEL`
-    with the transceiver as context and the receivers' R of a USBL packet
-    (:func:`sblsim.models.receiver.usbl.variances`: ``σ_r² + σ_GPS²`` for the
-    range, ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for each angle, φ the line of
-    sight's angle off the vertical), plus the depth row of :data:`MODEL`
-    (variance σ_d²); ``drms = sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m]. Straight below
-    the transceiver the azimuth's derivative is not finite (J and drms not
-    finite there).
-
-    References
-    ----------
-    Kay 1993, Section 3.7. Bar-Shalom, Li, Kirubarajan 2001, Section 10.3.
-    """
-    p, b = ca.SX.sym("p", 3), ca.SX.sym("transceiver", 3)
-    names = ("sigma_range", "gps_sigma", "attitude_sigma_deg", "sigma_angle_deg", "depth_variance")
-    sigma_range, gps, attitude, angle, d_var = (ca.SX.sym(n) for n in names)
-    R = usbl.variances(p, b, {"sigma_range": sigma_range, "beacon_gps_sigma": gps,
-                              "beacon_attitude_sigma_deg": attitude, "sigma_angle_deg": angle})
-    J = position_information(USBL_MODEL, p, b, R) + position_information(MODEL, p, [], ca.vertcat(d_var))
-    return ca.Function("sblsim_usbl_fix_information", [p, b, sigma_range, gps, attitude, angle, d_var],
-                       [J, horizontal_drms(J)], ["p", "transceiver", *names], ["J", "drms"])
-
-
-def usbl_horizontal_std(points: np.ndarray, transceiver: np.ndarray, sigma_range: float, gps_sigma: float,
-                        attitude_sigma_deg: float, sigma_angle_deg: float, depth_variance: float) -> np.ndarray:
-    """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth (:func:`usbl_fix_information`).
-
-    Parameters
-    ----------
-    points : ndarray, shape (M, 3)
-        Target positions, NED [m].
-    transceiver : ndarray, shape (3,)
-        The transceiver's position, NED [m].
-    sigma_range, gps_sigma : float
-        Range noise and GPS error std [m].
-    attitude_sigma_deg, sigma_angle_deg : float
-        IMU attitude error std and direction-of-arrival std on the array's axis [deg].
-    depth_variance : float
-        σ_d² [m²], > 0.
-
-    Returns
-    -------
-    ndarray, shape (M,)
-        Infinite where the information is singular or not finite (straight below the transceiver).
-    """
-    points = np.atleast_2d(np.asarray(points, dtype=float))
-    f = usbl_fix_information().map(points.shape[0])
-    drms = np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), float(sigma_range),
-                        float(gps_sigma), float(attitude_sigma_deg), float(sigma_angle_deg),
-                        float(depth_variance))[1]).ravel()
-    return np.where(np.isfinite(drms), drms, np.inf)
-
-
-__all__ = ["FIXED", "MODEL", "MOTION", "USBL_FIXED", "USBL_MODEL", "bound_step",
-           "effective_range_variance", "fisher_information", "fix_information", "horizontal_drms", "horizontal_std",
-           "information_update", "measurement_information", "model_horizontal_std", "pcrb", "pcrb_inputs",
-           "position_information", "state_at", "usbl_bound_step", "usbl_fix_information", "usbl_horizontal_std",
-           "usbl_pcrb", "usbl_pcrb_inputs", "usbl_variances"]
+__all__ = ["FIXED", "MODEL", "MOTION", "bound_step", "effective_range_variance", "fisher_information",
+           "fix_information", "horizontal_drms", "horizontal_std", "information_update", "measurement_information",
+           "model_horizontal_std", "pcrb", "pcrb_inputs", "position_information", "predicted", "state_at", "stepped"]

@@ -288,7 +288,7 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
     """The resolved configurations of a budget, or of one budget per compared value: (label, configuration).
 
     ``receiver`` sets ``simulation.receiver``; a compared ``platform.system`` starts, as in ``sblsim compare
-    --systems``, from :data:`~sblsim.orchestrator.systems.SYSTEM_DEFAULTS` with the overrides over them
+    --systems``, from its :attr:`~sblsim.models.systems.System.compare_defaults` with the overrides over them
     (:func:`~sblsim.orchestrator.systems.system_overrides`).
 
     Raises

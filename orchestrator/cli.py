@@ -32,8 +32,9 @@ from sblsim.fmus.variables import markdown_tables
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.declarations import ModelError, shown
 from sblsim.models.errors import SblsimError
-from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS, USBL_BEACONS
+from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread
+from sblsim.models.systems import SYSTEMS, interface_owners
 from sblsim.orchestrator.config import MODEL_PREFIX, beacon_count, check_receiver, load_config, parse_compare
 from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
@@ -44,6 +45,11 @@ EXIT_USAGE = 2
 #: --fmu-dir: where the fmu engine looks when it is not given (fmus/build of a checkout, else the user cache).
 FMU_DIR_HELP = (f"directory of the built FMUs (default {DEFAULT_DIR}; FMUs missing there are built into the "
                 "user cache)")
+#: The registered systems (the command line's words: :data:`sblsim.models.systems.SYSTEMS`).
+_ALL_SYSTEMS = ",".join(SYSTEMS)
+#: The systems that own components' interfaces (``fmus build --system``): the layout-sized one first.
+_OWNERS = tuple(s.name for s in interface_owners())
+_FIXED = ", ".join(name for name in _OWNERS if SYSTEMS[name].interface_beacons is not None)
 EXIT_INTERRUPTED = 130
 
 
@@ -112,7 +118,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="comma-separated receivers (default ekf,ekf-seq,ukf,lsq; model:PATH.py or fmu:PATH for "
                         "your own)")
     m.add_argument("--systems", default=None, metavar="SYSTEMS",
-                   help="compare positioning systems, e.g. sbl,lbl,usbl: every system, with every receiver, "
+                   help=f"compare positioning systems, e.g. {_ALL_SYSTEMS}: every system, with every receiver, "
                         "on the same diver paths, replicates and error levels, each from its defaults, your --set "
                         f"over them: {describe_defaults()}")
     m.add_argument("--replicates", type=int, default=20, help="runs per receiver (default 20)")
@@ -130,7 +136,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="the receiver (default: the configuration's); ekf, ekf-seq, ukf, lsq, model:PATH.py or "
                         "fmu:PATH")
     u.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
-                   help="one budget per value, side by side, e.g. platform.system=sbl,lbl,usbl")
+                   help=f"one budget per value, side by side, e.g. platform.system={_ALL_SYSTEMS}")
     u.add_argument("--out", type=Path, default=None, help="output directory (default results/budget_SCENARIO)")
     u.add_argument("--force", action="store_true", help="replace an earlier budget in --out")
     u.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
@@ -143,7 +149,8 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--step", type=float, default=0.5, help="grid spacing [m] (default 0.5)")
     g.add_argument("--levels", default="0.5,1,2", help="accuracy prescriptions to contour [m] (default 0.5,1,2)")
     g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
-                   help="one map per value, side by side, e.g. platform.baseline=0.4,1,3; platform.system=sbl,lbl,usbl "
+                   help="one map per value, side by side, e.g. platform.baseline=0.4,1,3; "
+                        f"platform.system={_ALL_SYSTEMS} "
                         "maps each system from the defaults of compare --systems, your --set over them")
     g.add_argument("--depth", type=float, default=None,
                    help="the diver's depth of the maps [m] (default target.depth, or the median depth of a "
@@ -199,23 +206,23 @@ def _parser() -> argparse.ArgumentParser:
                    help="build only the receiver model this Python file defines (see README, Write your own receiver)")
     b.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="beacons of the interfaces (default 4; other N go to the folder beacons<N> of the output)")
-    b.add_argument("--system", choices=("sbl", "usbl"), default="sbl",
-                   help="usbl: the interfaces of one USBL transceiver, in the folder usbl of the output (LBL "
-                        "uses the SBL interfaces of --beacons N)")
+    b.add_argument("--system", choices=_OWNERS, default=_OWNERS[0],
+                   help=f"{_FIXED}: the interfaces of that system (its folder of the output); the others use the "
+                        f"{_OWNERS[0]} interfaces of --beacons N (default {_OWNERS[0]})")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help=f"directory of the FMUs (default {DEFAULT_DIR})")
     v.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="validate the FMUs built for N beacons (default 4: the folder beacons<N> for others)")
-    v.add_argument("--system", choices=("sbl", "usbl"), default="sbl",
-                   help="usbl: validate the USBL interfaces' FMUs (the folder usbl)")
+    v.add_argument("--system", choices=_OWNERS, default=_OWNERS[0],
+                   help=f"{_FIXED}: validate that system's interfaces' FMUs (its folder)")
     g = sub.add_parser("codegen", help="write embeddable C code of a component (no FMI, no Python)")
     gsub = g.add_subparsers(dest="codegen_command", required=True, parser_class=_Parser)
     r = gsub.add_parser("receiver", help="the receiver's C source, header and an example main.c")
     r.add_argument("--receiver", default="ekf", help="built-in receiver: ekf (default), ekf-seq, ukf or lsq")
-    r.add_argument("--system", default="sbl", choices=("sbl", "lbl", "usbl"),
-                   help="the positioning system whose packets the receiver takes (default sbl; usbl: range and "
-                        "direction of arrival from one transceiver)")
+    r.add_argument("--system", default=next(iter(SYSTEMS)), choices=tuple(SYSTEMS),
+                   help=f"the positioning system whose packets the receiver takes (default {next(iter(SYSTEMS))}): "
+                        + "; ".join(f"{s.name}: {s.title}" for s in SYSTEMS.values()))
     r.add_argument("--out", type=Path, required=True, help="directory to write (created; must be empty or new)")
     return p
 
@@ -303,7 +310,7 @@ def _replay(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
 
     cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides)
-    log = read_log(args.log, beacon_count(cfg), cfg["platform"]["system"] == "usbl",
+    log = read_log(args.log, beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]],
                    cfg["acoustics"]["sound_speed_assumed"])
     truth = read_truth(args.truth) if args.truth is not None else None
     out = _output(args.out, Path("results") / f"replay_{args.log.stem}", args.force, "summary.json", "replay")
@@ -426,7 +433,7 @@ def _budget(args: argparse.Namespace) -> int:
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
     check_replicates(replicates)
-    compare = parse_compare(args.compare, "platform.system=sbl,lbl,usbl") if args.compare else None
+    compare = parse_compare(args.compare, f"platform.system={_ALL_SYSTEMS}") if args.compare else None
     if args.receiver is not None:
         check_receiver(args.receiver, "--receiver")
     configs = configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)
@@ -535,10 +542,12 @@ def _fmus(args: argparse.Namespace) -> int:
     n_beacons = getattr(args, "beacons", 4)
     if not MIN_BEACONS <= n_beacons <= MAX_BEACONS:
         raise ModelError(f"--beacons: {n_beacons} is outside the allowed range [{MIN_BEACONS}, {MAX_BEACONS}]")
-    if getattr(args, "system", "sbl") == "usbl":
+    system = SYSTEMS[getattr(args, "system", _OWNERS[0])]
+    if system.interface_beacons is not None:  # a system of a fixed interface (USBL's one transceiver)
         if n_beacons != 4:
-            raise ModelError(f"--beacons: {n_beacons} with --system usbl, which has one transceiver")
-        n_beacons = USBL_BEACONS
+            raise ModelError(f"--beacons: {n_beacons} with --system {system.name}, whose interface has "
+                             f"{system.interface_beacons}")
+        n_beacons = system.interface_beacons
     if args.fmus_command == "variables":
         print(markdown_tables())
         return 0

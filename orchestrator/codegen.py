@@ -12,6 +12,7 @@ packet the receiver used in its step from t_(k−1) to t_k.
 from __future__ import annotations
 
 from sblsim.models import MODELS, RECEIVERS
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.config import beacon_count, component_params, load_config
 from sblsim.orchestrator.run import run
 
@@ -19,15 +20,16 @@ from sblsim.orchestrator.run import run
 EXAMPLE = ("semicircle", ["simulation.duration=20", "acoustics.loss_pct=10"], 1)
 
 
-def example_files(receiver: str, system: str = "sbl") -> tuple[dict[str, str], str, int]:
+def example_files(receiver: str, system: str | None = None) -> tuple[dict[str, str], str, int]:
     """The example files of a built-in receiver and the README paragraph that says what they are.
 
     Parameters
     ----------
     receiver : str
         A built-in receiver.
-    system : {'sbl', 'lbl', 'usbl'}
-        The positioning system of the recorded run (``platform.system``).
+    system : str, optional
+        The positioning system of the recorded run (``platform.system``, one of
+        :data:`sblsim.models.systems.SYSTEMS`; default, or the first of them: the scenario's).
 
     Returns
     -------
@@ -38,7 +40,8 @@ def example_files(receiver: str, system: str = "sbl") -> tuple[dict[str, str], s
         The size of the receiver's interface (1 for USBL).
     """
     scenario, overrides, seed = EXAMPLE
-    overrides = [*overrides, f"platform.system={system}"] if system != "sbl" else overrides
+    if system is not None and system != next(iter(SYSTEMS)):  # the scenario's own is the first
+        overrides = [*overrides, f"platform.system={system}"]
     cfg = load_config(scenario, [*overrides, f"simulation.receiver={receiver}"], seed=seed)
     series = run(cfg).timeseries
     model = MODELS[RECEIVERS[receiver]]

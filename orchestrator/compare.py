@@ -7,7 +7,7 @@ numbers).
 With ``systems`` (``sblsim compare --systems sbl,lbl,usbl``) every system
 runs with every receiver on the same replicates, diver paths and error
 levels (the target's random numbers do not depend on the system), each
-system from its :data:`~sblsim.orchestrator.systems.SYSTEM_DEFAULTS` with
+system from its :attr:`~sblsim.models.systems.System.compare_defaults` with
 the user's ``--set`` over them (:mod:`sblsim.orchestrator.systems`); the
 table gains a ``system`` column, one row per system and receiver.
 
@@ -48,7 +48,7 @@ from sblsim.orchestrator.config import check_receiver, load_config, receiver_lab
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import run_batch, with_replicates
-from sblsim.orchestrator.systems import SYSTEM_DEFAULTS, system_overrides
+from sblsim.orchestrator.systems import system_overrides
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "rms_e_tot_sd", "mean_e_tot", "nees", "nees_sd", "coverage_95", "nis",
            "gated_pct", "pcrb_rms", "ratio_to_pcrb", "us_per_step", "diverged")
@@ -88,7 +88,7 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
     progress : bool
         Show a progress bar per receiver.
     systems : sequence of str, optional
-        ``platform.system`` values, each run from its :data:`SYSTEM_DEFAULTS`
+        ``platform.system`` values, each run from its compare defaults
         with ``overrides`` over them (:func:`system_overrides`); default: the
         scenario's system as configured, and no ``system`` column.
 
@@ -222,4 +222,4 @@ def write(table: pd.DataFrame, out: Path | str, title: str, note: str = "") -> P
     return Path(out)
 
 
-__all__ = ["COLUMNS", "SYSTEM_DEFAULTS", "compare", "labels", "markdown", "parse_receivers", "plot", "write"]
+__all__ = ["COLUMNS", "compare", "labels", "markdown", "parse_receivers", "plot", "write"]

@@ -35,15 +35,15 @@ import tomli_w
 from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
-from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
-from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
-from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
+from sblsim.models.platform.geometry import check_geometry, platform_offsets
+from sblsim.models.systems import SYSTEMS
+from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
 from sblsim.orchestrator.engines import read_description
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.plugins import user_model
-from sblsim.orchestrator.systems import check_seafloor
+from sblsim.orchestrator.systems import check_diver
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
 SECTIONS = ("run", "simulation", *COMPONENTS)
@@ -410,14 +410,13 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
             cfg[s].update(_orchestrator_receiver_keys(given, sim))
         else:
             cfg[s] = resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s)
-    _check_beacons(cfg["platform"], set(raw.get("platform", {})))
-    _check_ranging(cfg)
+    _check_system(cfg, set(raw.get("platform", {})))
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
             model.fmu_parameters(cfg[name], beacon_count(cfg))
     check_geometry(cfg["platform"])
-    check_seafloor(cfg)
+    check_diver(cfg)
     _check_duration(sim, cfg["target"])
     return cfg
 
@@ -488,40 +487,27 @@ def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
         raise ConfigError(str(exc)) from None
 
 
-def _check_beacons(platform: dict[str, Any], given: set[str]) -> None:
-    """Tie ``platform.beacons`` to the layout: the cross has the paper's 4 beacons, a custom layout as many
-    as its offsets list (the key is filled with that count when the user did not set it), the circle the key's.
+def _check_system(cfg: dict[str, dict], given: set[str]) -> None:
+    """The system's checks of the ``[platform]`` section (:meth:`sblsim.models.systems.System.check`: the
+    beacons' count against the layout, a USBL custom layout's one lever arm), and its ranging: a system that
+    allows one ranging has it whatever ``acoustics.ranging`` says (USBL interrogates: ``twtt``; the key chooses
+    between one- and two-way ranging of SBL and LBL, so a study that crosses it with the system sees no effect
+    of it on USBL).
 
     Raises
     ------
     ConfigError
-        ``beacons`` other than 4 with the cross, a custom layout whose count differs from a given
-        ``beacons`` or lies outside [3, 16].
+        Naming the field and what is allowed.
     """
-    layout, n = platform["layout"], platform["beacons"]
-    if platform["system"] == "usbl":  # one transceiver: the layout's count does not apply
-        if layout == "custom" and platform_offsets(platform).shape[0] != 1:
-            raise ConfigError(f"platform.beacon_offsets: {platform_offsets(platform).shape[0]} offsets with "
-                              "platform.system = 'usbl'; give the transceiver's one lever arm 'x y z'")
-        return
-    if layout == "cross" and n != 4:
-        raise ConfigError(f"platform.beacons: {n} with platform.layout = 'cross' (the paper's 4 beacons); use "
-                          "platform.layout = 'circle' for N equally spaced beacons")
-    if layout == "custom":
-        count = platform_offsets(platform).shape[0]
-        if "beacons" in given and count != n:
-            raise ConfigError(f"platform.beacons: {n}, but platform.beacon_offsets lists {count} beacons")
-        if not MIN_BEACONS <= count <= MAX_BEACONS:
-            raise ConfigError(f"platform.beacon_offsets: {count} beacons; allowed [{MIN_BEACONS}, {MAX_BEACONS}]")
-        platform["beacons"] = count
-
-
-def _check_ranging(cfg: dict[str, dict]) -> None:
-    """USBL measures its slant range by interrogation: ``acoustics.ranging`` is ``twtt`` whatever is given (the
-    key chooses between one- and two-way ranging of SBL and LBL; a study that crosses it with the system sees no
-    effect of it on USBL)."""
-    if cfg["platform"]["system"] == "usbl":
-        cfg["acoustics"]["ranging"] = "twtt"
+    system = SYSTEMS[cfg["platform"]["system"]]
+    try:
+        system.check(cfg["platform"], given)
+    except ConfigError:
+        raise
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+    if len(system.ranging) == 1:
+        cfg["acoustics"]["ranging"] = system.ranging[0]
 
 
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
@@ -532,22 +518,19 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     the diver's start state; ``beacon_gps_sigma`` ← ``platform.gps_sigma``,
     ``beacon_attitude_sigma_deg`` ← ``platform.imu_sigma_deg``,
     ``beacon_arm`` ← the largest distance of a beacon from the platform
-    reference (LBL: ``beacon_gps_sigma`` ← ``platform.survey_sigma``, no
-    attitude: 0 and 0); ``sigma_angle_deg`` ← ``platform.usbl_angle_sigma_deg``
-    (floored at 1 mdeg); for the ``random-walk`` trajectory, ``q_horizontal``,
+    reference (the system's :meth:`~sblsim.models.systems.System.receiver_ties`; LBL:
+    ``beacon_gps_sigma`` ← ``platform.survey_sigma``, no attitude: 0 and 0); ``sigma_angle_deg`` ←
+    ``platform.usbl_angle_sigma_deg`` (floored at 1 mdeg); for the ``random-walk`` trajectory, ``q_horizontal``,
     ``q_vertical``, ``p0_position``, ``p0_velocity`` ← the walk's.
     """
     rx, platform = cfg["receiver"], cfg["platform"]
     pos, vel = start_state(cfg["target"])
-    arm = largest_arm(platform)
     ties = {"sigma_range": max(cfg["acoustics"]["sigma_range"], MIN_SIGMA),
             "sigma_depth": max(cfg["target"]["depth_sigma"], MIN_SIGMA),
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
-            "beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
-            "beacon_arm": arm, "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
-    if platform["system"] == "lbl":  # surveyed transponders: no GPS, no attitude
-        ties.update(beacon_gps_sigma=platform["survey_sigma"], beacon_attitude_sigma_deg=0.0, beacon_arm=0.0)
+            **SYSTEMS[platform["system"]].receiver_ties(platform),
+            "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
     target = cfg["target"]
     if target["trajectory"] == "random-walk":  # the receiver's motion model and prior are the walk's
         ties.update({k: target[f"walk_{k}"] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")})

@@ -14,7 +14,8 @@ from typing import Mapping, Sequence
 
 from sblsim.models.acoustics.core import DIRECTION, PACKET, TARGET_INPUTS
 from sblsim.models.declarations import ModelError, Variable
-from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names, is_usbl
+from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
+from sblsim.models.systems import interface_system
 
 PACKET_FIELDS = tuple(v.name for v in PACKET)
 
@@ -37,15 +38,16 @@ class Connection:
 
 
 def default_connections(n_beacons: int = 4) -> list[Connection]:
-    """The system: platform and target feed the channel; channel and target feed the receiver (a USBL interface
-    adds the array's and the IMU's attitude to the channel and the direction of arrival to the receiver)."""
+    """The system: platform and target feed the channel; channel and target feed the receiver (the interface of a
+    system that measures a direction, USBL's, adds the array's and the IMU's attitude to the channel and the
+    direction of arrival to the receiver)."""
     conns = [Connection("platform", n, "acoustics", n)
              for kind in ("true", "broadcast") for n in beacon_names(n_beacons, kind)]
     conns += [Connection("target", out, "acoustics", inp)
               for out, inp in zip(("pos_x", "pos_y", "pos_z", "vel_x", "vel_y", "vel_z"), TARGET_INPUTS)]
     conns += [Connection("acoustics", n, "receiver", n) for n in PACKET_FIELDS]
     conns.append(Connection("target", "depth_measured", "receiver", "depth"))
-    if is_usbl(n_beacons):
+    if interface_system(n_beacons).measures_direction:
         conns += [Connection("platform", f"{prefix}_{a}", "acoustics", f"{prefix}_{a}")
                   for prefix, _, _ in USBL_ATTITUDES for a in ("roll", "pitch", "yaw")]
         conns += [Connection("acoustics", v.name, "receiver", v.name) for v in DIRECTION]

@@ -21,15 +21,16 @@ seafloor transponders (their positions, :func:`~sblsim.models.platform.geometry.
 with the survey error in place of the GPS and no attitude term
 (:func:`~sblsim.orchestrator.run.bound_parameters`). USBL maps one packet
 of slant range, azimuth and elevation from the transceiver plus the depth
-(:func:`sblsim.models.bound.usbl_horizontal_std`), with the receivers' R:
+(:func:`sblsim.models.systems.usbl.horizontal_std`), with the receivers' R:
 ``σ_r² + σ_GPS²`` for the range, ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for
 each angle (φ the line of sight's angle off the vertical); straight below the
 transceiver the azimuth is undefined and the map has no value (as on an SBL
 beacon). What no receiver's R holds is not in a map either (the USBL array's
 misalignment, the TWTT turnaround jitter). ``--compare
 platform.system=sbl,lbl,usbl`` maps each system from the defaults of
-``sblsim compare --systems`` (:data:`~sblsim.orchestrator.systems.SYSTEM_DEFAULTS`),
-the user's ``--set`` over them.
+``sblsim compare --systems`` (each system object's
+:attr:`~sblsim.models.systems.System.compare_defaults`), the user's ``--set`` over them. Each
+system's map is its object's :meth:`~sblsim.models.systems.System.horizontal_std`.
 """
 
 from __future__ import annotations
@@ -40,18 +41,17 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.bound import MODEL, horizontal_std, usbl_horizontal_std
+from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.geometry import lever_arms
+from sblsim.models.systems import SYSTEMS
 from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.run import bound_parameters
-from sblsim.orchestrator.systems import check_seafloor, compared
+from sblsim.orchestrator.systems import check_diver, compared
 
 MAX_POINTS = 1_000_000
-#: What a map marks at the lever arms, per system.
-_MARKERS = {"sbl": "beacons", "lbl": "transponders", "usbl": "transceiver"}
 
 
 def parse_levels(text: str) -> list[float]:
@@ -116,7 +116,7 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     model : RangeDepthModel, optional
         The measurement model whose Fisher information is mapped (default the
         receivers'; its context is the beacons, its motion model the state layout).
-        Not used for USBL (:func:`sblsim.models.bound.usbl_horizontal_std`).
+        Not used for a system whose packet is not ranges (USBL: :func:`sblsim.models.systems.usbl.horizontal_std`).
     depth : float, optional
         The diver's depth [m]; default :func:`diver_depth`.
 
@@ -125,32 +125,19 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
     Prentice Hall 1993, Section 3.7.
     """
-    arms = lever_arms(cfg["platform"])
     params = bound_parameters(cfg)
     E, N = np.meshgrid(east, north)
     depth = diver_depth(cfg)[0] if depth is None else float(depth)
     points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, depth)])
     platform = cfg["platform"]
-    if platform["system"] == "usbl":
-        drms = usbl_horizontal_std(points, arms[0], cfg["acoustics"]["sigma_range"], platform["gps_sigma"],
-                                   platform["imu_sigma_deg"], params["angle_sigma_deg"],
-                                   params["depth_variance"])
-        return drms.reshape(E.shape)
-    drms = horizontal_std(points, arms, arms, params["noise_variance"], params["attitude_variance"],
-                          params["depth_variance"], model=model)
+    drms = SYSTEMS[platform["system"]].horizontal_std(points, platform, params, cfg["acoustics"]["sigma_range"],
+                                                      model=model)
     return drms.reshape(E.shape)
 
 
 def system_line(cfg: dict) -> str:
     """The geometry of a configuration's system in a few words (a panel's title)."""
-    platform = cfg["platform"]
-    n, system = len(lever_arms(platform)), platform["system"]
-    layout = "custom layout" if platform["layout"] == "custom" else f"{platform['baseline']:g} m {platform['layout']}"
-    if system == "lbl":
-        return f"{n} transponders, {layout}, seafloor at {platform['seafloor_depth']:g} m"
-    if system == "usbl":
-        return f"one transceiver, {platform['usbl_angle_sigma_deg']:g}° on axis"
-    return f"{n} beacons, {layout}"
+    return SYSTEMS[cfg["platform"]["system"]].describe(cfg["platform"])
 
 
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
@@ -186,7 +173,7 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     for cfg in configs:
         cfg["target"]["depth"] = diver_depth(cfg)[0] if depth is None else float(depth)
         if compare is not None and compare[0] == "platform.system":
-            check_seafloor(cfg, cfg["target"]["depth"])
+            check_diver(cfg, cfg["target"]["depth"])
     return labels, configs, east, north, [accuracy_map(c, east, north, depth=c["target"]["depth"]) for c in configs]
 
 
@@ -217,7 +204,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
     finite = np.concatenate([m[np.isfinite(m)] for m in maps])
     norm = LogNorm(vmin=max(float(finite.min()), 1e-4), vmax=float(finite.max()))
     fig, axes = plt.subplots(1, len(maps), figsize=(5.2 * len(maps) + 0.8, 4.8), squeeze=False)
-    systems = [cfg["platform"]["system"] for cfg in configs]
+    systems = [SYSTEMS[cfg["platform"]["system"]] for cfg in configs]
     step = float(east[1] - east[0]) if len(east) > 1 else 1.0
     for k, (ax, label, cfg, m) in enumerate(zip(axes[0], labels, configs, maps)):
         mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
@@ -225,7 +212,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
         arms = lever_arms(cfg["platform"])
         inside = (np.abs(arms[:, 1]) <= east.max()) & (np.abs(arms[:, 0]) <= north.max())
-        ax.plot(arms[inside, 1], arms[inside, 0], "r^", ms=6, label=_MARKERS[systems[k]])
+        ax.plot(arms[inside, 1], arms[inside, 0], "r^", ms=6, label=systems[k].marker)
         if not inside.all():  # the grid, not the far markers, sets the axes
             ax.set_xlim(east.min() - step / 2, east.max() + step / 2)
             ax.set_ylim(north.min() - step / 2, north.max() + step / 2)
@@ -234,12 +221,12 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         if k == 0:
             ax.set_ylabel("North [m]")
         what = f"{system_line(cfg)}\n" if label.startswith("platform.system = ") else ""
-        off = ("" if inside.all() else f", the {_MARKERS[systems[k]]} off the map" if not inside.any()
-               else f", {int((~inside).sum())} of the {len(arms)} {_MARKERS[systems[k]]} off the map")
+        off = ("" if inside.all() else f", the {systems[k].marker} off the map" if not inside.any()
+               else f", {int((~inside).sum())} of the {len(arms)} {systems[k].marker} off the map")
         ax.set_title(f"{label}\n({what}diver at {cfg['target']['depth']:g} m depth{off})", fontsize=9)
         if inside.any() and (k == 0 or systems[k] != systems[0]):
             ax.legend(loc="upper right", fontsize=8)
-    what = "ranges" if "usbl" not in systems else "measurements"
+    what = "measurements" if any(not s.takes_ranges for s in systems) else "ranges"
     bar = fig.colorbar(mesh, ax=axes[0].tolist(), label=f"horizontal DRMS of one round of {what} + depth [m]")
     bar.locator = LogLocator(subs=(1.0, 2.0, 5.0))  # 0.1, 0.2, 0.5, 1, 2, 5 ... labelled, not only the decades
     bar.formatter = ScalarFormatter()

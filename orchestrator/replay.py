@@ -52,6 +52,7 @@ import pandas as pd
 from sblsim.models.acoustics.core import Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
+from sblsim.models.systems import SYSTEMS, System
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     ConfigError,
@@ -110,7 +111,6 @@ LOG_COLUMNS = {
 #: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
 TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
 _PACKET_COLUMNS = ("beacon_n_m", "beacon_e_m", "beacon_d_m")
-_ANGLES = ("azimuth_rad", "elevation_rad")
 
 
 # --------------------------------------------------------------------------- reading tables
@@ -292,7 +292,7 @@ def log_config(path: Path | str) -> str:
     return _read_table(Path(path), "log").config
 
 
-def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: float = 1500.0) -> Log:
+def read_log(path: Path | str, n_beacons: int, system: System | None = None, sound_speed: float = 1500.0) -> Log:
     """Read and check a log (docs/log-format.md).
 
     Parameters
@@ -301,8 +301,10 @@ def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: 
         A ``.csv`` or ``.parquet`` file.
     n_beacons : int
         Beacons of the configuration (ids 1 … n_beacons are known).
-    usbl : bool
-        A USBL interface: ``azimuth_rad`` and ``elevation_rad`` are required.
+    system : System, optional
+        The configuration's positioning system (:mod:`sblsim.models.systems`): the columns it adds to a log
+        (:attr:`~sblsim.models.systems.System.log_columns`: USBL's ``azimuth_rad`` and ``elevation_rad``) are
+        required. Default: none added.
     sound_speed : float
         The sound speed that turns ``travel_time_s`` into range where the log gives none [m/s].
 
@@ -333,11 +335,12 @@ def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: 
     index = _columns(table, "log")
     name = str(path)
     doc = "see docs/log-format.md"
-    required = ["time_s", "beacon_id", *_PACKET_COLUMNS, "depth_m"] + (list(_ANGLES) if usbl else [])
+    extra = tuple(system.log_columns) if system is not None else ()  # the system's angles (USBL)
+    required = ["time_s", "beacon_id", *_PACKET_COLUMNS, "depth_m", *extra]
     missing = [c for c in required if c not in index]
     if missing:
-        system = " (a USBL log)" if usbl and set(missing) <= set(_ANGLES) else ""
-        raise ModelError(f"log: {name!r} has no column {missing[0]}{system}; its columns: "
+        kind = f" (a {system.name.upper()} log)" if extra and set(missing) <= set(extra) else ""
+        raise ModelError(f"log: {name!r} has no column {missing[0]}{kind}; its columns: "
                          f"{','.join(table.header)}; {doc}")
     has_range, has_travel = "range_m" in index, "travel_time_s" in index
     if has_range == has_travel:
@@ -385,7 +388,7 @@ def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: 
                 speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)
             rng = speed * travel
         position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
-        angles = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in _ANGLES) if usbl else (0.0, 0.0)
+        angles = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra) if extra else (0.0, 0.0)
         kept.append((t, beacon, rng, position, depth, angles, where_short))
 
     # in time order (stable: rows of one time keep the file's order), then without duplicates
@@ -408,7 +411,7 @@ def read_log(path: Path | str, n_beacons: int, usbl: bool = False, sound_speed: 
     return Log(path=path, time=times, beacon=np.array([r[1] for r in rows], dtype=np.int64),
                range=np.array([r[2] for r in rows]), beacon_ned=np.array([r[3] for r in rows], dtype=float),
                depth=np.array([r[4] for r in rows]),
-               angles=np.array([r[5] for r in rows], dtype=float) if usbl else None,
+               angles=np.array([r[5] for r in rows], dtype=float) if extra else None,
                where=[r[6] for r in rows], counts=counts, longest_gap=gap,
                typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config)
 
@@ -867,11 +870,12 @@ def check_export(path: Path, force: bool) -> None:
                              "file")
 
 
-def log_frames(ts: pd.DataFrame, usbl: bool) -> tuple[pd.DataFrame, pd.DataFrame]:
+def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """A run's time series (one replicate) as a log, one row per slot, and its truth track (every step).
 
     A slot whose packet was lost is a depth-only row (``beacon_id`` missing); ``time_s`` is the packet's
-    epoch (``tx_time``). Values are the receiver's inputs as the run recorded them.
+    epoch (``tx_time``). Values are the receiver's inputs as the run recorded them, with the columns the
+    run's ``system`` adds (:attr:`~sblsim.models.systems.System.log_columns`: USBL's angles).
     """
     seq = ts["packet_seq"].to_numpy()
     previous = np.concatenate([[0], seq[:-1]])
@@ -887,9 +891,8 @@ def log_frames(ts: pd.DataFrame, usbl: bool) -> tuple[pd.DataFrame, pd.DataFrame
                         "beacon_e_m": packet("beacon_y"), "beacon_d_m": packet("beacon_z"),
                         "depth_m": slot["depth"].to_numpy(dtype=float)})
     log.loc[~valid, "beacon_id"] = pd.NA
-    if usbl:
-        log["azimuth_rad"] = packet("azimuth")
-        log["elevation_rad"] = packet("elevation")
+    for column, source in (system.log_columns if system is not None else {}).items():
+        log[column] = packet(source)
     truth = pd.DataFrame({"time_s": ts["time"].to_numpy(dtype=float), "n_m": ts["true_x"].to_numpy(dtype=float),
                           "e_m": ts["true_y"].to_numpy(dtype=float), "d_m": ts["true_z"].to_numpy(dtype=float)})
     return log, truth
@@ -924,7 +927,7 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     cfg = result.config
     ts = result.timeseries
     ts = ts[ts["replicate"] == ts["replicate"].iloc[0]]
-    log, truth = log_frames(ts, cfg["platform"]["system"] == "usbl")
+    log, truth = log_frames(ts, SYSTEMS[cfg["platform"]["system"]])
     origin = (f"exported from: sblsim run {cfg['run']['scenario']} (seed {cfg['run']['seed']}, "
               f"platform.system {cfg['platform']['system']}, receiver {receiver_label(cfg)}, {result.engine} engine)")
     config = to_toml(cfg)

@@ -15,13 +15,13 @@ import pandas as pd
 from tqdm import tqdm
 
 from sblsim.fmus import native
-from sblsim.models.bound import FIXED, USBL_FIXED, usbl_pcrb_inputs
+from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
-from sblsim.models.platform.core import USBL_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms
 from sblsim.models.receiver.core import filter_parameters
-from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
+from sblsim.models.systems import SYSTEMS
+from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.orchestrator.config import (
     MIN_SIGMA,
     beacon_count,
@@ -50,10 +50,8 @@ from sblsim.orchestrator.master import RecordBuffer, simulate
 from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
 from sblsim.orchestrator.output import staged_directory
 
-#: What a USBL run's time series adds (after :data:`TIMESERIES_COLUMNS`): the direction of arrival the packet
-#: carries and the true attitude of the transceiver's array (the platform's plus the mounting misalignment).
-USBL_COLUMNS = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation",
-                **{f"array_{a}": f"platform.array_{a}" for a in ("roll", "pitch", "yaw")}}
+#: A system's time series adds its own columns after :data:`TIMESERIES_COLUMNS`
+#: (:attr:`sblsim.models.systems.System.timeseries_columns`: USBL's direction of arrival and array attitude).
 
 
 @dataclass
@@ -68,7 +66,7 @@ class RunResult:
         ``local`` or ``fmu``.
     timeseries : pandas.DataFrame
         One row per replicate and step (columns :data:`TIMESERIES_COLUMNS`, a USBL run's
-        :data:`USBL_COLUMNS`, ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
+        a system's own columns, ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
     metrics : pandas.DataFrame
         One row per replicate: the metrics of :mod:`sblsim.orchestrator.metrics`.
     steps : int
@@ -116,13 +114,14 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
     bound is then a true bound), else the receiver's (``q_horizontal``,
     ``q_vertical``, ``p0_position``, ``p0_velocity``; the defaults of the
     Kalman-type receivers for one that has none). The measurement variances
-    are the configured white error sources: ``acoustics.sigma_range² +
-    platform.gps_sigma²`` (LBL: ``+ platform.survey_sigma²``),
-    ``platform.imu_sigma_deg`` [rad]² (LBL: 0), and
+    are the configured white error sources: ``acoustics.sigma_range²`` plus the
+    broadcast position's variance and the attitude variance of the system
+    (:meth:`~sblsim.models.systems.System.position_errors`: ``platform.gps_sigma²``
+    and ``platform.imu_sigma_deg`` [rad]²; LBL: ``platform.survey_sigma²`` and 0), and
     ``target.depth_sigma²`` (floored at 1 mm); ``angle_sigma_deg``, the USBL
     direction-of-arrival std on the array's axis, ``platform.usbl_angle_sigma_deg``
     [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
-    :func:`sblsim.models.bound.usbl_pcrb`).
+    :func:`sblsim.models.systems.usbl.pcrb`).
     """
     target, platform = cfg["target"], cfg["platform"]
     defaults = _FILTER_DEFAULTS
@@ -131,10 +130,9 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
         motion = {k: target[f"walk_{k}"] for k in names}
     else:
         motion = {k: cfg["receiver"].get(k, defaults[k]) for k in names}
-    lbl = platform["system"] == "lbl"  # surveyed transponders: the survey error, no attitude
-    position = platform["survey_sigma"] if lbl else platform["gps_sigma"]
+    position, attitude = SYSTEMS[platform["system"]].position_errors(platform)
     return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + position ** 2,
-            "attitude_variance": 0.0 if lbl else math.radians(platform["imu_sigma_deg"]) ** 2,
+            "attitude_variance": attitude ** 2,
             "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
             "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
 
@@ -368,16 +366,17 @@ FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid"
 def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
              with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
     """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass
-    (a USBL system's bound, :func:`_usbl_bound`, replaces the pass's range-only one)."""
+    (a system with a bound of its own, :func:`_system_bound`, replaces the pass's range-only one)."""
     dt = cfgs[0]["simulation"]["sampling_time"]
     parameters = [bound_parameters(c) for c in cfgs]
     fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in parameters])  # (B, 8)
     arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
-    usbl = cfgs[0]["platform"]["system"] == "usbl"
+    system = SYSTEMS[cfgs[0]["platform"]["system"]]
+    own = bool(system.bound_fixed)  # the system steps a bound of its own
     values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
-                                with_bound and not usbl)
-    if usbl:
-        bound = _usbl_bound(rec, dt, parameters)
+                                with_bound and not own)
+    if own:
+        bound = _system_bound(system, rec, dt, parameters, arms.shape[1])
         values["pcrb_rms"] = np.sqrt(np.mean(np.ascontiguousarray(bound.T) ** 2, axis=-1))
         bound = bound if with_bound else None
     spread = np.array([_spread(tuple(sorted(c["platform"].items()))) for c in cfgs])
@@ -385,27 +384,34 @@ def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
     return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
 
 
-def _usbl_bound(rec: dict, dt: float, parameters: Sequence[dict]) -> np.ndarray:
-    """The position PCRB (N, B) [m] of USBL runs (:func:`sblsim.models.bound.usbl_pcrb`, compiled): the range,
-    azimuth and elevation of each received packet from the transceiver position it carries, and the depth at
-    every slot."""
+def _system_bound(system, rec: dict, dt: float, parameters: Sequence[dict], n_beacons: int) -> np.ndarray:
+    """The position PCRB (N, B) [m] of a system with a bound of its own (USBL:
+    :func:`sblsim.models.systems.usbl.pcrb`), compiled (:func:`sblsim.fmus.native.system_pcrb`): its
+    per-run inputs :attr:`~sblsim.models.systems.System.bound_fixed` from the bound's parameters, its per-step
+    inputs :attr:`~sblsim.models.systems.System.bound_steps` from the record (``true_*``, the position the
+    packet carries, the slot and whether the packet was received)."""
     column = {name: np.asarray(rec[TIMESERIES_COLUMNS[name]], dtype=float)
               for name in ("true_x", "true_y", "true_z", "packet_seq", "packet_valid", "beacon_id", "beacon_x",
                            "beacon_y", "beacon_z")}
-    received = (column["packet_valid"] > 0.5) & (np.rint(column["beacon_id"]) == USBL_BEACONS)
+    received = (column["packet_valid"] > 0.5) & (np.rint(column["beacon_id"]) >= 1)
     slot, fresh = slots(np.rint(column["packet_seq"]), received)
-    truth = np.stack([column[f"true_{a}"] for a in "xyz"], axis=-1)
-    transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], axis=-1)
-    fixed = {k: np.array([p[k] for p in parameters]) for k in USBL_FIXED[1:]}
-    return native.usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=dt, **fixed))
+    sources = {**{f"true_{a}": column[f"true_{a}"] for a in "xyz"},
+               **{f"transceiver_{a}": column[f"beacon_{a}"] for a in "xyz"}, "slot": slot, "received": fresh}
+    steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
+                                          axis=-1))
+    per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])
+                                                      for k in system.bound_fixed[1:]}}
+    fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
+    return native.system_pcrb(n_beacons, fixed, steps)
 
 
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:
     """The per-step table, replicate-major (all steps of replicate 0, then replicate 1, ...)."""
     batch = len(replicates)
     cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in TIMESERIES_COLUMNS}
-    if USBL_COLUMNS["azimuth"] in rec:  # a USBL interface
-        cols.update({name: rec[source] for name, source in USBL_COLUMNS.items()})
+    for system in SYSTEMS.values():  # a system's own columns (USBL's direction of arrival), where recorded
+        if system.timeseries_columns and all(source in rec for source in system.timeseries_columns.values()):
+            cols.update({name: rec[source] for name, source in system.timeseries_columns.items()})
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
     # no fix at a step (instr_valid false, instr_* 0): the step has no instrumentation error

@@ -17,9 +17,6 @@ PACKAGES = {"sblsim.models": sblsim.models, "sblsim.fmus": sblsim.fmus, "sblsim.
 #: Which layers a layer may import (besides itself): models at the bottom, then fmus, then the orchestrator.
 MAY_IMPORT = {"sblsim.models": set(), "sblsim.fmus": {"sblsim.models"},
               "sblsim.orchestrator": {"sblsim.models", "sblsim.fmus"}}
-#: Edges left out of the cycle check. The systems change removes this one (orchestrator/systems.py then reads
-#: its override parsing from below the configuration): delete the entry with it.
-ALLOWED_EDGES = {("sblsim.orchestrator.systems", "sblsim.orchestrator.config")}
 #: Libraries heavy enough to import only when used (seconds, or a process's worth of threads): a function-level
 #: import is allowed where it defers one of these, directly or through the sblsim module it imports.
 HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats")
@@ -78,12 +75,12 @@ def _own(module: str) -> str | None:
     return module or None
 
 
-def _graph(skip: set[tuple[str, str]] = frozenset()) -> dict[str, set[str]]:
+def _graph() -> dict[str, set[str]]:
     graph = {name: set() for name in MODULES}
     for name, imports in IMPORTS.items():
         for module, _, _ in imports:
             target = _own(module)
-            if target and target != name and (name, target) not in skip:
+            if target and target != name:
                 graph[name].add(target)
     return graph
 
@@ -142,7 +139,7 @@ def test_the_graph_is_read():
     assert len(MODULES) > 60
     graph = _graph()
     assert "sblsim.orchestrator.config" in graph["sblsim.orchestrator.run"]
-    assert "sblsim.models.receiver.usbl" in graph["sblsim.models.receiver.core"]  # from package import submodule
+    assert "sblsim.models.receiver.kalman" in graph["sblsim.models.bound"]  # from package import submodule
     lazy = [(m, line) for m, line, nested in IMPORTS["sblsim.orchestrator.cli"] if nested and _own(m)]
     assert ("sblsim.orchestrator.run" in {m for m, _ in lazy}) and all(line > 0 for _, line in lazy)
 
@@ -154,16 +151,10 @@ def test_the_cycle_finder_finds_a_cycle():
 
 
 def test_no_import_cycle():
-    cycles = _cycles(_graph(ALLOWED_EDGES))
+    cycles = _cycles(_graph())
     for cycle in cycles:
         print("import cycle:", " -> ".join(cycle))
     assert cycles == [], "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
-
-
-def test_the_allowed_edges_exist():
-    """An exception that no longer exists is deleted (the list stays exactly what the code needs)."""
-    graph = _graph()
-    assert all(b in graph[a] for a, b in ALLOWED_EDGES)
 
 
 def test_no_arrow_from_a_lower_layer_up():
@@ -201,7 +192,7 @@ def test_a_function_level_import_defers_a_heavy_library(name):
     loaded = _heavy_at_load(name)
     wrong = []
     for module, line, nested in IMPORTS[name]:
-        if not nested or module.split(".")[0] in PROBES or (name, _own(module)) in ALLOWED_EDGES:
+        if not nested or module.split(".")[0] in PROBES:
             continue
         own = _own(module)
         deferred = _heavy_at_load(own) if own else {h for h in HEAVY if module == h or module.startswith(h + ".")}

@@ -74,10 +74,10 @@ from sblsim.models.platform.core import (
     attitude_variables,
     beacon_names,
     beacon_variables,
-    is_usbl,
 )
 from sblsim.models.platform.geometry import rotation_ned
 from sblsim.models.program import ProgramBuilder, Stream
+from sblsim.models.systems import interface_system
 
 _CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK = range(5)
 #: Ranging modes: one-way travel time (synchronized clocks) or two-way (interrogation and reply).
@@ -175,7 +175,7 @@ class Acoustics(Component):
             Variable("turnaround_sigma", "parameter", "Real", 0.0, "s", "TWTT: turnaround time jitter std",
                      min=0.0, max=1.0),
         )
-        if not is_usbl(n_beacons):
+        if not interface_system(n_beacons).measures_direction:
             return params + SEED_PARAMETERS + inputs + outputs + ranging
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
@@ -214,6 +214,8 @@ class Acoustics(Component):
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet],
                            derived=[("nodes", NODES), ("slowness", NODES)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
+        # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
+        direction = interface_system(n).measures_direction
 
         def prepare(p):
             depth, speed = p[PROFILE.columns[0].name], p[PROFILE.columns[1].name]
@@ -267,8 +269,7 @@ class Acoustics(Component):
                 measured = trip * (1.0 + drift)
                 return p["sound_speed_assumed"] * (measured - p["turnaround"]) / 2.0, (up[1] + down[1]) / 2.0, trip
 
-            usbl = is_usbl(n)
-            if usbl:  # the transceiver interrogates; the diver replies from where it is then
+            if direction:  # the transceiver interrogates; the diver replies from where it is then
                 up = leg(None, True)
                 reply = leg(up[0] + turnaround, False)
                 rng, distance, tau = two_way(up, reply)
@@ -287,10 +288,9 @@ class Acoustics(Component):
                    "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
                    "outlier": ca.logic_and(outlier, valid)}
             out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
-            if usbl:
-                direction = reply[2] - beacon
+            if direction:
                 out.update(zip(("azimuth", "elevation"),
-                    (ca.if_else(valid, a, 0.0) for a in arrival(direction, u, p, w[_ANGLE_NOISE]))))
+                    (ca.if_else(valid, a, 0.0) for a in arrival(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
             return out
 
 
@@ -311,7 +311,7 @@ class Acoustics(Component):
             return {name: x[name] for name in packet}
 
         streams = (Stream(_CHANNEL_UNIFORM, "uniform", 3), Stream(_RANGE_NOISE, "normal", 1))
-        if is_usbl(n):
+        if direction:
             streams += (Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2),
                         Stream(_DOWNLINK, "uniform", 1))
         else:

@@ -19,17 +19,20 @@ own): each beacon's true body offset is ``a_i + δ_i``, ``δ_i ~ N(0, σ_inst² 
 with a per-axis scale-factor error ``s ~ N(0, σ_s²)`` and a per-axis
 misalignment ``m ~ N(0, σ_m²)``.
 
-Systems (``system``, docs/model.md "Systems"). ``sbl``: the above. ``lbl``:
-the transponders stand on the seafloor, transponder i at NED
-``(a_ix, a_iy, seafloor_depth)`` (a custom layout's offsets are the NED
-positions themselves); they do not move, need no GPS or IMU, and the
-positions the packets carry are the *surveyed* ones, ``b_i + s_i``,
-``s_i ~ N(0, σ_survey² I)`` drawn once per run (a bias, not a noise).
-``usbl``: one transceiver (the interface of one beacon) at lever arm ``a_1``
-from the GPS antenna, whose array is mounted with a misalignment
-``μ ~ N(0, σ_μ² I)`` per axis, drawn once per run: the array's attitude is the
-platform's plus μ (``array_*`` outputs), while the surface converts the
-array's angles with the IMU's measured attitude (``imu_*`` outputs).
+Systems (``system``, docs/model.md "Systems"; each is an object of
+:mod:`sblsim.models.systems`, which this program asks where the transducers
+are). ``sbl``: the above. ``lbl``: the transponders stand on the seafloor,
+transponder i at NED ``(a_ix, a_iy, seafloor_depth)`` (a custom layout's
+offsets are the NED positions themselves); they do not move, need no GPS or
+IMU, and the positions the packets carry are the *surveyed* ones,
+``b_i + s_i``, ``s_i ~ N(0, σ_survey² I)`` drawn once per run (a bias, not a
+noise). ``usbl``: one transceiver (the interface of one beacon) at the lever
+arm ``(0, 0, transducer_depth)`` below the GPS antenna whatever ``baseline``
+(a custom layout's one offset instead), whose array is mounted with a
+misalignment ``μ ~ N(0, σ_μ² I)`` per axis, drawn once per run: the array's
+attitude is the platform's plus μ (``array_*`` outputs), while the surface
+converts the array's angles with the IMU's measured attitude (``imu_*``
+outputs).
 
 References
 ----------
@@ -51,9 +54,10 @@ import numpy as np
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError, Variable, format_table, signal_range
 from sblsim.models.expressions import sample_due
-from sblsim.models.platform.geometry import beacon_positions, cross_offsets, parse_offsets, rotation_ned
+from sblsim.models.platform.geometry import beacon_positions, parse_offsets, rotation_ned
 from sblsim.models.platform.waves import wave_motion
 from sblsim.models.program import ProgramBuilder, Stream
+from sblsim.models.systems import SYSTEMS, interface_system, interface_systems
 
 AXES = ("x", "y", "z")
 #: Beacon layouts: the paper's cross of 4, any given offsets, N equally spaced on a circle (appended: the
@@ -62,19 +66,9 @@ LAYOUTS = ("cross", "custom", "circle")
 #: Allowed numbers of beacons (``platform.beacons``).
 MIN_BEACONS, MAX_BEACONS = 3, 16
 GPS_MODELS = ("white", "gauss-markov")
-#: Positioning systems: short baseline (beacons on the platform), long baseline (seafloor transponders), ultra-short
-#: baseline (one transceiver measuring range and direction of arrival).
-SYSTEMS = ("sbl", "lbl", "usbl")
-#: Interface size of a USBL system: its one transceiver takes the place of the beacons.
-USBL_BEACONS = 1
 
 # Stream purposes (sblsim.models.philox, "Randomness").
 _PHASES, _GPS, _IMU, _INSTALLATION, _IMU_SCALE, _IMU_MISALIGNMENT, _SURVEY, _USBL_MISALIGNMENT = range(8)
-
-
-def is_usbl(n_beacons: int) -> bool:
-    """Whether an interface of ``n_beacons`` is the USBL system's (its one transceiver)."""
-    return n_beacons == USBL_BEACONS
 
 
 def attitude_variables(prefix: str, causality: str, what: str, discrete: bool) -> tuple[Variable, ...]:
@@ -168,7 +162,8 @@ class Platform(Component):
                     for a in AXES)
         # declared after the SBL ones, so that their value references stay what they were
         systems = (
-            Variable("system", "parameter", "String", "sbl", description="Positioning system", choices=SYSTEMS),
+            Variable("system", "parameter", "String", interface_system(n_beacons).name,
+                     description="Positioning system", choices=tuple(SYSTEMS)),
             Variable("seafloor_depth", "parameter", "Real", 50.0, "m", "LBL: depth of the seafloor transponders",
                      min=0.0, max=12000.0, min_exclusive=True),
             Variable("survey_sigma", "parameter", "Real", 0.0, "m",
@@ -208,7 +203,7 @@ class Platform(Component):
     def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
         """Configuration keys from FMU parameters: a custom layout's offsets become the ``beacon_offsets`` text."""
         out = super().config_values(values, n_beacons)
-        if not is_usbl(n_beacons):  # USBL's one transceiver is not a count of beacons
+        if interface_system(n_beacons).interface_beacons is None:  # a fixed interface is not a count of beacons
             out["beacons"] = int(n_beacons)
         if out.get("layout") == "custom":
             out["beacon_offsets"] = format_table(np.array(
@@ -223,13 +218,13 @@ class Platform(Component):
                                             ("installation", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3),
                                             ("survey", 3 * n), ("usbl_misalignment", 3), ("imu", 3)],
                            derived=[("offsets", 3 * n), ("motion", 4), ("seafloor", 3 * n)])
-        lbl = SYSTEMS.index("lbl")
+        # the systems of this interface: the first places the transducers on the platform, the others (LBL) may
+        # place them elsewhere where the ``system`` parameter names them
+        own, systems = interface_system(n), interface_systems(n)
 
         def prepare(p):
-            cross = cross_offsets(p["baseline"], p["transducer_depth"], n)
-            custom = [ca.vertcat(*[p[f"beacon{i + 1}_offset_{a}"] for a in AXES]) for i in range(n)]
-            offsets = [ca.if_else(p["layout"] == LAYOUTS.index("custom"), c, a) for a, c in zip(cross, custom)]
-            # LBL: the layout's points on the seafloor, a custom layout's offsets as NED positions
+            offsets = own.body_offsets(p, n, LAYOUTS)
+            # fixed arrays: the layout's points on the seafloor, a custom layout's offsets as NED positions
             seafloor = [ca.if_else(p["layout"] == LAYOUTS.index("custom"), a, ca.vertcat(a[0], a[1],
                                                                                           p["seafloor_depth"]))
                         for a in offsets]
@@ -265,9 +260,9 @@ class Platform(Component):
             imu = [(1.0 + scale[k]) * a + bias + sigma * imu_noise[k] + misalignment[k]
                    for k, a in enumerate((roll, pitch, yaw))]
             broadcast = ca.vertcat(*beacon_positions(gps, rotation_ned(*imu), offsets(d)))
-            surveyed = d["seafloor"] + x["survey"]  # LBL: the surveyed transponder positions
-            return {"gps": gps, "broadcast": ca.if_else(p["system"] == lbl, surveyed, broadcast),
-                    "imu": ca.vertcat(*imu)}
+            for system in systems:  # LBL: the surveyed transponder positions
+                broadcast = system.placed_broadcast(p, d, x, broadcast)
+            return {"gps": gps, "broadcast": broadcast, "imu": ca.vertcat(*imu)}
 
         def init(p, d, w, t0):
             phases = 2.0 * math.pi * w[_PHASES]
@@ -297,7 +292,8 @@ class Platform(Component):
             installed = [a + x["installation"][3 * i:3 * i + 3] for i, a in enumerate(offsets(d))]
             true = ca.vertcat(*beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw),
                                                 installed))
-            true = ca.if_else(p["system"] == lbl, d["seafloor"], true)
+            for system in systems:  # LBL: the transponders on the seafloor
+                true = system.placed_true(p, d, true)
             out = {name: true[k] for k, name in enumerate(beacon_names(n, "true"))}
             out.update({name: x["broadcast"][k] for k, name in enumerate(beacon_names(n, "broadcast"))})
             out.update(roll=roll, pitch=pitch, yaw=yaw)
@@ -316,5 +312,5 @@ class Platform(Component):
                          b.output(output), events=[b.event("sample", due, take_sample, noise)])
 
 
-__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "SYSTEMS", "USBL_ATTITUDES",
-           "USBL_BEACONS", "attitude_variables", "beacon_names", "beacon_variables", "is_usbl"]
+__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "USBL_ATTITUDES",
+           "attitude_variables", "beacon_names", "beacon_variables"]

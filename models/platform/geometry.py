@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.systems import SYSTEMS, system
 
 
 def cross_directions(n_beacons: int = 4) -> list[tuple[float, float]]:
@@ -103,37 +104,24 @@ def layout_offsets(layout: str, baseline: float, transducer_depth: float, beacon
                     dtype=float)  # cross_offsets with numbers
 
 
-def platform_offsets(platform: Mapping[str, Any]) -> np.ndarray:
-    """Offsets of the beacons of a ``[platform]`` configuration section, (n, 3) [m].
+def _system(platform: Mapping[str, Any]):
+    """The system of a ``[platform]`` section (without a ``system`` key: the first registered, SBL, the platform's
+    default)."""
+    return system(platform["system"]) if "system" in platform else next(iter(SYSTEMS.values()))
 
-    SBL: body-frame offsets; the cross has the paper's 4 beacons, the circle
-    ``platform.beacons`` (default 4), a custom layout as many as
-    ``beacon_offsets`` lists. LBL (``system = "lbl"``): the transponders' NED
-    positions relative to the mooring point, the layout's points at
-    ``seafloor_depth`` (a custom layout's offsets as given). USBL: the one
-    transceiver's body-frame lever arm, ``(0, 0, transducer_depth)`` or a custom
-    layout's one offset.
-    """
-    system = platform.get("system", "sbl")
-    if system == "usbl" and platform["layout"] != "custom":
-        return np.array([[0.0, 0.0, platform["transducer_depth"]]])
-    n = int(platform.get("beacons", 4)) if platform["layout"] == "circle" else 4
-    offsets = layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
-                             platform["beacon_offsets"], n)
-    if system == "lbl" and platform["layout"] != "custom":
-        offsets[:, 2] = platform["seafloor_depth"]
-    return offsets
+
+def platform_offsets(platform: Mapping[str, Any]) -> np.ndarray:
+    """Offsets of the transducers of a ``[platform]`` configuration section, (n, 3) [m]: its system's
+    (:meth:`sblsim.models.systems.System.offsets`: SBL body-frame offsets, LBL seafloor positions, the USBL
+    transceiver's lever arm)."""
+    return _system(platform).offsets(platform)
 
 
 def lever_arms(platform: Mapping[str, Any]) -> np.ndarray:
-    """Lever arms of the beacons of a ``[platform]`` section in NED at the mean heading (level platform),
-    (n, 3) [m]: the beacons' positions when the platform reference is at the NED origin (LBL: the
-    transponders' positions, which no heading turns)."""
-    if platform.get("system", "sbl") == "lbl":
-        return platform_offsets(platform)
-    heading = np.radians(platform["heading_deg"])
-    c, s = np.cos(heading), np.sin(heading)
-    return platform_offsets(platform) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+    """Lever arms of the transducers of a ``[platform]`` section in NED at the mean heading (level platform),
+    (n, 3) [m]: their positions when the platform reference is at the NED origin
+    (:meth:`sblsim.models.systems.System.lever_arms`)."""
+    return _system(platform).lever_arms(platform)
 
 
 def largest_arm(platform: Mapping[str, Any]) -> float:
@@ -183,13 +171,9 @@ def check_geometry(platform: Mapping[str, Any], field: str = "") -> np.ndarray:
 
 
 def horizontal_spread(platform: Mapping[str, Any]) -> float:
-    """The largest horizontal distance between two beacons of a ``[platform]`` section [m] (the aperture
-    that resolves the diver's horizontal position); infinite for USBL, which measures a direction, not range
-    differences across an aperture."""
-    if platform.get("system", "sbl") == "usbl":
-        return math.inf
-    xy = platform_offsets(platform)[:, :2]
-    return float(max(np.linalg.norm(xy[i + 1:] - xy[i], axis=1).max(initial=0.0) for i in range(len(xy))))
+    """The largest horizontal distance between two transducers of a ``[platform]`` section [m] (the aperture that
+    resolves the diver's horizontal position; :meth:`sblsim.models.systems.System.horizontal_spread`)."""
+    return _system(platform).horizontal_spread(platform)
 
 
 def rotation_ned(roll, pitch, yaw) -> ca.SX:

@@ -36,16 +36,17 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import DIRECTION, PACKET
+from sblsim.models.acoustics.core import PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import sample_due
-from sblsim.models.platform.core import is_usbl
 from sblsim.models.program import ProgramBuilder
-from sblsim.models.receiver import usbl
+from sblsim.models.receiver import kalman
+from sblsim.models.receiver.gate import gate
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
+from sblsim.models.systems import SYSTEMS, interface_system
 
 #: The state entries of the built-in motion model, as the ``x0_*`` parameters and ``est_*`` outputs name them.
 STATE_NAMES = CONSTANT_VELOCITY.state_names
@@ -94,11 +95,12 @@ def covariance_outputs(P) -> dict[str, ca.SX]:
     return {f"cov_{ab}": P[index[ab[0]], index[ab[1]]] for ab in COVARIANCE}
 
 
-def usbl_interface(n_beacons: int) -> tuple[Variable, ...]:
-    """What a receiver of ``n_beacons`` declares after its clock: for a USBL interface the direction-of-arrival
-    inputs; every receiver the USBL angle parameter (a configuration key whatever the system)."""
-    inputs = tuple(replace(v, causality="input") for v in DIRECTION) if is_usbl(n_beacons) else ()
-    return usbl.usbl_parameters() + inputs
+def system_interface(n_beacons: int) -> tuple[Variable, ...]:
+    """What a receiver of ``n_beacons`` declares after its clock: every system's receiver parameters (configuration
+    keys whatever the system: the USBL angle std), then the inputs the interface's system adds to the packet (the
+    USBL direction of arrival)."""
+    parameters = tuple(v for s in SYSTEMS.values() for v in s.receiver_parameters())
+    return parameters + interface_system(n_beacons).receiver_inputs()
 
 
 def clock_parameters() -> tuple[Variable, ...]:
@@ -252,7 +254,7 @@ class KalmanReceiver(Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + usbl_interface(n_beacons)
+        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -290,11 +292,46 @@ class KalmanReceiver(Component):
         raise NotImplementedError
 
     @classmethod
-    def correct_usbl(cls, x: dict, u: dict, p: dict) -> dict:
-        """The update at a slot of a USBL interface (default: the EKF's, :func:`sblsim.models.receiver.usbl.
-        kalman_correct`); returns what :meth:`correct` returns."""
-        out = usbl.kalman_correct(x, u, p, fresh_packet(u, 1), cls.motion)
-        return {**take_packet(x, u, 1), **out}
+    def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, variances) -> dict:
+        """The update at a slot with a packet of a measurement model's rows (a system whose packet is not one range,
+        :meth:`sblsim.models.systems.System.receiver_update`): the depth, then the rows of a fresh packet, the
+        first through the NIS gate (default: the EKF's, angle residuals by ``model.residual``).
+
+        Parameters
+        ----------
+        x : dict
+            ``x`` (n, 1), ``P`` (n, n), ``failed`` and the held packet states.
+        u, p : dict
+            The inputs (packet, depth) and parameters (with ``gate_probability``).
+        fresh : casadi.SX
+            The packet is fresh (received, known beacon).
+        model : MeasurementModel
+            The packet's measurement model (:mod:`sblsim.models.receiver.measurement`).
+        context
+            What ``model.h`` needs besides the state (a transceiver's position).
+        z : casadi.SX, (m, 1)
+            The packet's measurement.
+        variances : callable
+            The diagonal of R (m, 1) at a position (3, 1) [units of z squared].
+
+        Returns
+        -------
+        dict
+            What :meth:`correct` returns.
+        """
+        motion = cls.motion
+        depth_row = ca.SX.zeros(1, motion.state_size)
+        depth_row[motion.position_index[2]] = 1.0
+        state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - motion.position(x["x"])[2],
+                                                   depth_row, p["sigma_depth"] ** 2)
+        R = variances(motion.position(state))
+        h, H = model.linearize(state, context)
+        y = model.residual(z, h)
+        checked = gate(y[0], ca.mtimes([H[0, :], P, H[0, :].T]) + R[0], fresh, x, u, p)
+        updated, P_new, nis = kalman.update(state, P, y, H, R)
+        use = checked["use"]
+        return {**take_packet(x, u, 1), "x": ca.if_else(use, updated, state), "P": ca.if_else(use, P_new, P),
+                "nis": nis_depth + ca.if_else(use, nis, 0.0), "gated": checked["gated"], "failed": checked["failed"]}
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -315,9 +352,11 @@ class KalmanReceiver(Component):
         def due(x, u, p, d, t, h):
             return slot_due(x, u, p, t, h)
 
+        system = interface_system(n)
+
         def slot(x, u, p, d, w, t, h):
-            if is_usbl(n):
-                return usbl_slot(x, u, p)
+            if not system.takes_ranges:
+                return packet_slot(x, u, p)
             out = cls.correct({**x, "P": ca.reshape(x["P"], size, size)}, u, p, n)
             held = {**x, **{k: out[k] for k in ("ranges", "beacons", "heard", "last_seq", "slot_time")}}
             # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
@@ -327,11 +366,12 @@ class KalmanReceiver(Component):
                     "failed": out["failed"], **fix,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
-        def usbl_slot(x, u, p):
-            """A USBL slot: the receiver's update and the polar fix of a fresh packet (no iteration)."""
-            out = cls.correct_usbl({**x, "P": ca.reshape(x["P"], size, size)}, u, p)
+        def packet_slot(x, u, p):
+            """A slot of a system whose packet is not one range (USBL): the receiver's update and the system's fix
+            of a fresh packet (no iteration)."""
             fresh = fresh_packet(u, 1)
-            return {**x, **out, "P": ca.vec(out["P"]), "fix": ca.if_else(fresh, usbl.polar_fix(u), x["fix"]),
+            out = system.receiver_update(cls, {**x, "P": ca.reshape(x["P"], size, size)}, u, p, fresh)
+            return {**x, **out, "P": ca.vec(out["P"]), "fix": ca.if_else(fresh, system.polar_fix(u), x["fix"]),
                     "fix_valid": ca.logic_or(x["fix_valid"], fresh)}
 
         def iterate(x, u, p, d, w, t, h):
@@ -359,4 +399,4 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "beacon_parameters",
            "clock_due", "clock_parameters", "clock_tick", "covariance_outputs", "filter_parameters", "fresh_packet",
            "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
-           "packet_init", "packet_states", "receiver_interface", "slot_due", "take_packet", "usbl_interface"]
+           "packet_init", "packet_states", "receiver_interface", "slot_due", "system_interface", "take_packet"]

@@ -14,7 +14,7 @@ range (the initial guess x0 until the first one), and the velocity is the
 finite difference of the last two such fixes over the time between their
 slots (a slot whose packet was lost refits the same held ranges: it changes
 neither). With a USBL interface the fix is the packet's polar fix, no iteration, with
-the covariance of its range and angles (:mod:`sblsim.models.receiver.usbl`),
+the covariance of its range and angles (:mod:`sblsim.models.systems.usbl`),
 and ``nis`` is 0 (three measurements, three unknowns). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
@@ -39,9 +39,7 @@ import casadi as ca
 
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
-from sblsim.models.platform.core import is_usbl
 from sblsim.models.program import ProgramBuilder
-from sblsim.models.receiver import usbl
 from sblsim.models.receiver.core import (
     clock_due,
     clock_parameters,
@@ -58,10 +56,11 @@ from sblsim.models.receiver.core import (
     packet_states,
     receiver_interface,
     slot_due,
+    system_interface,
     take_packet,
-    usbl_interface,
 )
 from sblsim.models.receiver.multilateration import fix_covariance, weights
+from sblsim.models.systems import interface_system
 
 #: The Kalman receivers' parameters this receiver takes (declared once, in sblsim.models.receiver.core).
 SHARED_PARAMETERS = ("sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z")
@@ -79,7 +78,7 @@ class LeastSquaresReceiver(Component):
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
-                + clock_parameters() + usbl_interface(n_beacons))
+                + clock_parameters() + system_interface(n_beacons))
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -96,11 +95,13 @@ class LeastSquaresReceiver(Component):
         def due(x, u, p, d, t, h):
             return slot_due(x, u, p, t, h)
 
+        system = interface_system(n)
+
         def slot(x, u, p, d, w, t, h):
             held = {**x, **take_packet(x, u, n)}
             fresh = fresh_packet(u, n)
-            if is_usbl(n):  # the polar fix: no iteration
-                point = ca.if_else(fresh, usbl.polar_fix(u), x["lm_point"])
+            if not system.takes_ranges:  # the system's fix of one packet (USBL's polar fix): no iteration
+                point = ca.if_else(fresh, system.polar_fix(u), x["lm_point"])
                 return {**held, **lm_idle(), "lm_point": point, "pending": 1, "fresh": fresh}
             return {**held, **lm_begin(held, x["fix"], u["depth"], p), "pending": 1, "fresh": fresh}
 
@@ -113,9 +114,9 @@ class LeastSquaresReceiver(Component):
         def finish(x, u, p, d, w, t, h):
             """Fit statistics and finite-difference velocity of the slot's fix."""
             point = x["lm_point"]
-            if is_usbl(n):
+            if not system.takes_ranges:
                 valid = x["heard"][0] > 0.5
-                rss, covariance = 0.0, usbl.fix_covariance(point, x["beacons"], p)
+                rss, covariance = 0.0, system.fix_covariance(point, x["beacons"], p)
             else:
                 valid = ca.sum1(x["heard"]) >= 3
                 w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])

@@ -22,12 +22,11 @@ from __future__ import annotations
 import casadi as ca
 
 from sblsim.models.declarations import Variable
-from sblsim.models.receiver import kalman, usbl
+from sblsim.models.receiver import kalman
 from sblsim.models.receiver.core import (
     KalmanReceiver,
     beacon_parameters,
     filter_parameters,
-    fresh_packet,
     fresh_range,
     take_packet,
 )
@@ -82,17 +81,15 @@ class UnscentedReceiver(KalmanReceiver):
                            ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
 
     @classmethod
-    def correct_usbl(cls, x: dict, u: dict, p: dict) -> dict:
-        """The unscented update with range, azimuth, elevation and depth; each sigma point's angles are taken
-        within π of the measured ones, so that their mean does not straddle ±π."""
-        beacon, z = usbl.transceiver(u), usbl.measurement(u)
-        model = usbl.MODEL
-
+    def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, variances) -> dict:
+        """The unscented update with the packet's rows (range, azimuth, elevation) and the depth; each sigma
+        point's predicted rows are taken within ``model.residual`` of the measured ones (angles within π, so
+        that their mean does not straddle ±π); R from ``variances`` at the predicted position."""
         def predicted(c):
-            return ca.vertcat(z - model.residual(z, model.h(c, beacon)), cls.measurement.depth(c))
+            return ca.vertcat(z - model.residual(z, model.h(c, context)), cls.measurement.depth(c))
 
-        R = ca.diag(ca.vertcat(usbl.variances(cls.motion.position(x["x"]), beacon, p), p["sigma_depth"] ** 2))
-        return cls._update(x, u, p, 1, fresh_packet(u, 1), predicted, z, R)
+        R = ca.diag(ca.vertcat(variances(cls.motion.position(x["x"])), p["sigma_depth"] ** 2))
+        return cls._update(x, u, p, 1, fresh, predicted, z, R)
 
     @classmethod
     def _update(cls, x: dict, u: dict, p: dict, n_beacons: int, fresh, h, z, R) -> dict:

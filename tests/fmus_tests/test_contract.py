@@ -12,10 +12,12 @@ import re
 
 from sblsim.fmus.codegen import C_DIR, model_record, write_sources
 from sblsim.fmus.contract import CONTRACT, contract_header, contract_tables
-from sblsim.fmus.native import VECTORS, load, metrics_sizes
+from sblsim.fmus.native import VECTORS, load, metrics_sizes, system_bound_sizes
 from sblsim.models import MODELS
 from sblsim.models.bound import FIXED, bound_step
 from sblsim.models.declarations import SEED_NAMES
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.metrics import METRIC_INPUTS, RUN_METRICS
 
 
@@ -34,6 +36,12 @@ def test_the_header_lists_every_tuple_in_order():
                 (METRIC_INPUTS, "SBLSIM_COLUMN_", "SBLSIM_N_COLUMNS"),
                 (RUN_METRICS, "SBLSIM_METRIC_", "SBLSIM_N_METRICS"), (FIXED, "SBLSIM_FIXED_", "SBLSIM_N_FIXED"),
                 (tuple(bound_step().name_in()), "SBLSIM_BOUND_IN_", "SBLSIM_BOUND_N_IN")]
+    for system in SYSTEMS.values():  # every system's own bound: its packed layouts
+        if system.bound_fixed:
+            name = system.name.upper()
+            expected += [(system.bound_fixed, f"SBLSIM_{name}_FIXED_", f"SBLSIM_{name}_N_FIXED"),
+                         (system.bound_steps, f"SBLSIM_{name}_STEP_", f"SBLSIM_{name}_N_STEPS")]
+    assert any(s.bound_fixed for s in SYSTEMS.values())  # USBL has one: the loop above is not empty
     enums = header_enums(contract_header())
     assert len(enums) == len(expected) == len(contract_tables())
     for names, (source, prefix, count) in zip(enums, expected):
@@ -78,3 +86,20 @@ def test_the_model_record_names_every_field_it_sets():
     text = model_record(MODELS["target"], 4, "{guid}")
     body = text[text.index("const sblsim_model sblsim_target_model = {"):]
     assert fields and all(body.count(f"    .{name} = ") == 1 for name in fields), fields
+
+
+def test_every_compiled_system_bound_reports_its_systems_layouts():
+    """The library of the interface of each system with a bound of its own (USBL) compiles the system's casadi
+    prior and step with the packed layouts of its tuples: the sizes it reports are the tuples' lengths, and the
+    bound's entries the receivers' state size squared."""
+    checked = 0
+    for system in SYSTEMS.values():
+        if system.bound_fixed:
+            n = system.interface_beacons
+            assert system_bound_sizes(n) == (len(system.bound_fixed), len(system.bound_steps),
+                                             CONSTANT_VELOCITY.state_size ** 2)
+            prior, step = system.bound_function()
+            assert step.size1_in(1) == len(system.bound_fixed) and step.size1_in(2) == len(system.bound_steps)
+            assert prior.size1_in(0) == len(system.bound_fixed)
+            checked += 1
+    assert checked >= 1

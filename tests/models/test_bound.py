@@ -248,10 +248,11 @@ def usbl_case(seed=4, n=200, b=3):
 
 
 def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elevation():
-    """The USBL bound (models/bound.py usbl_pcrb) against FilterPy's KalmanFilter covariance with the linearized
+    """The USBL bound (models/systems/usbl.py pcrb) against FilterPy's KalmanFilter covariance with the linearized
     range, azimuth and elevation rows at the true position (analytic gradients, numpy) and the variances written
     out here: ``σ_r² + σ_GPS²``, and ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for each angle (φ off the vertical)."""
-    from sblsim.models.bound import usbl_pcrb, usbl_pcrb_inputs
+    from sblsim.models.systems.usbl import pcrb as usbl_pcrb
+    from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 
     truth, slot, received, transceivers, fixed = usbl_case()
     n, b = slot.shape
@@ -287,7 +288,8 @@ def test_the_compiled_usbl_bound_is_the_reference_one():
     """The USBL interface's library steps the USBL bound in C (what runs use); casadi's virtual machine is the
     reference: equal to round-off on random tracks, packets, losses and transceiver motion."""
     from sblsim.fmus import native
-    from sblsim.models.bound import usbl_pcrb, usbl_pcrb_inputs
+    from sblsim.models.systems.usbl import pcrb as usbl_pcrb
+    from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 
     rng = np.random.default_rng(11)
     n, b = 300, 5
@@ -300,5 +302,5 @@ def test_the_compiled_usbl_bound_is_the_reference_one():
                                     noise_variance=0.02, angle_sigma_deg=0.5, attitude_variance=1e-4,
                                     depth_variance=1e-4)
     reference = usbl_pcrb(fixed, steps)
-    np.testing.assert_allclose(native.usbl_pcrb(fixed, steps), reference, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(native.system_pcrb(1, fixed, steps), reference, rtol=1e-12, atol=0)
     assert np.ptp(reference[-1]) > 0  # the runs differ: each is stepped with its own inputs

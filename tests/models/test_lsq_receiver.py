@@ -16,7 +16,7 @@ from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
 from sblsim.models.receiver.core import clock_parameters
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
-from sblsim.models.receiver.usbl import usbl_parameters
+from sblsim.models.systems.usbl import receiver_parameters as usbl_parameters
 from tests.helpers import Core
 
 AXES = ("x", "y", "z")

@@ -14,7 +14,7 @@ written out in numpy (``test_measurement_models.py``), the angle residuals
 wrapped to (−π, π], and R = diag(σ_r² + σ_GPS², σ_α², σ_α²) with
 ``σ_α² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` at the position after the
 depth update (numpy; checked here against
-:func:`sblsim.models.receiver.usbl.variances` as numbers). The ``ekf``
+:func:`sblsim.models.systems.usbl.variances` as numbers). The ``ekf``
 receiver has no gate (gate probability 1).
 
 Tolerance. FilterPy inverts the 3 × 3 S where the receiver adds the rows one
@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from sblsim.models.receiver import usbl
+from sblsim.models.systems import usbl
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.run import run
 from tests.models.test_measurement_models import np_jacobian, np_range_bearing, np_wrap

@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 
 from sblsim.models import RECEIVERS
+from sblsim.models.systems import SYSTEMS as SYSTEMS_BY_NAME
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.config import beacon_count, load_config, to_toml
 from sblsim.orchestrator.replay import (
@@ -42,7 +43,7 @@ SYSTEMS = {"sbl": [], "lbl": ["platform.system=lbl"], "usbl": ["platform.system=
 def replay_file(path: Path, engine: str = "local", receiver: str | None = None, fmu_dir=None, truth=True,
                 config=None):
     cfg, _ = replay_config(path, config, receiver)
-    log = read_log(path, beacon_count(cfg), cfg["platform"]["system"] == "usbl",
+    log = read_log(path, beacon_count(cfg), SYSTEMS_BY_NAME[cfg["platform"]["system"]],
                    cfg["acoustics"]["sound_speed_assumed"])
     return replay(log, cfg, engine, fmu_dir, read_truth(truth_path(path)) if truth else None)
 

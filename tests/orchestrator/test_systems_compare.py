@@ -9,23 +9,23 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.models.platform.core import SYSTEMS
 from sblsim.models.platform.geometry import lever_arms
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.maps import accuracy_map, make_maps, plot
 from sblsim.orchestrator.run import run_batch, with_replicates
-from sblsim.orchestrator.systems import SYSTEM_DEFAULTS, system_overrides
+from sblsim.orchestrator.systems import system_overrides
 
 #: The LBL defaults of compare, set by hand as a user would.
 LBL_BY_HAND = ["platform.system=lbl", "platform.layout=circle", "platform.beacons=4", "platform.baseline=50"]
 
 
 def test_the_defaults_table_names_every_system_and_the_documented_values():
-    assert tuple(SYSTEM_DEFAULTS) == SYSTEMS
-    assert SYSTEM_DEFAULTS["sbl"] == ()
-    assert set(LBL_BY_HAND[1:]) == set(SYSTEM_DEFAULTS["lbl"])
-    assert "platform.usbl_angle_sigma_deg=0.5" in SYSTEM_DEFAULTS["usbl"]
+    assert tuple(SYSTEMS) == ("sbl", "lbl", "usbl")
+    assert SYSTEMS["sbl"].compare_defaults == ()
+    assert set(LBL_BY_HAND[1:]) == set(SYSTEMS["lbl"].compare_defaults)
+    assert "platform.usbl_angle_sigma_deg=0.5" in SYSTEMS["usbl"].compare_defaults
 
 
 @pytest.mark.parametrize("scenario", ["semicircle", "spiral", "random", "square", "harbour", "random-walk"])

@@ -1,0 +1,269 @@
+"""Positioning systems: one object per system, one module each, listed by :data:`SYSTEMS`.
+
+A system owns what makes it that system: where its transducers are and how
+they move (:meth:`System.offsets`, :meth:`System.lever_arms`, the platform
+program's :meth:`System.body_offsets`), which ranging it allows
+(:attr:`System.ranging`), what one packet measures (its measurement model,
+:mod:`sblsim.models.receiver.measurement`) and the receivers' update with it,
+the Fisher information of one cycle (:meth:`System.horizontal_std`, the
+accuracy map) and its PCRB, where ``sblsim compare`` starts it
+(:attr:`System.compare_defaults`), its time-series and log columns and its
+words. Everything outside the system modules asks the object; nothing else
+names a system.
+
+* :mod:`~sblsim.models.systems.sbl`: short baseline, beacons on the platform;
+* :mod:`~sblsim.models.systems.lbl`: long baseline, surveyed seafloor transponders;
+* :mod:`~sblsim.models.systems.usbl`: ultra-short baseline, one transceiver measuring range and direction.
+
+This module holds only the base class and the registry, and imports no model:
+the components' programs ask the registry (:func:`interface_system`) when they
+are built, and ``sblsim.models`` imports the system modules, which register
+themselves (:func:`register`). Adding a system is its module (a
+:class:`System` subclass, registered), its test and its doc page
+(docs/systems.md).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+
+#: The registry: ``platform.system`` value -> system, in the order of :attr:`System.code` (the platform's
+#: ``system`` parameter is the index of its value in this order: the FMUs and the local engine encode it so).
+SYSTEMS: dict[str, System] = {}
+
+
+class System:
+    """A positioning system (base class; a subclass per system, registered with :func:`register`).
+
+    Attributes
+    ----------
+    name : str
+        The ``platform.system`` value and the word of the command line.
+    code : int
+        The index of ``name`` in the platform's ``system`` choice (the FMU parameter's encoding), unique.
+    title : str
+        The system's name in words (docs, help).
+    words : str
+        What :attr:`compare_defaults` give, in words (``sblsim compare`` help, tables, figures).
+    compare_defaults : tuple of str
+        ``--set`` overrides applied over the scenario when systems are compared, before the user's.
+    marker : str
+        What the map calls its transducers ("beacons", "transponders", "transceiver").
+    interface_beacons : int or None
+        The size of the components' interface (the number of beacon positions the platform broadcasts);
+        None: the layout's count (``platform.beacons``).
+    ranging : tuple of str
+        The ``acoustics.ranging`` values the system allows; the first is forced when only one is allowed.
+    measures_direction : bool
+        A packet carries a direction of arrival (the channel's azimuth and elevation outputs, the
+        receivers' inputs, the platform's array attitude).
+    takes_ranges : bool
+        A packet is one range, which each receiver takes with its own update (its ``correct``); else the
+        receivers take the packet through :meth:`receiver_update` and the fix is :meth:`polar_fix`.
+    timeseries_columns : dict
+        Time-series columns the system adds: name -> recorded ``component.variable``.
+    log_columns : dict
+        Columns a replay log of the system adds: log column -> time-series column.
+    bound_fixed, bound_steps : tuple of str
+        The per-run and per-step inputs of the system's own compiled PCRB (:meth:`bound_function`); empty
+        for a system whose bound is the metrics pass's range bound.
+    """
+
+    name: ClassVar[str] = ""
+    code: ClassVar[int] = -1
+    title: ClassVar[str] = ""
+    words: ClassVar[str] = ""
+    compare_defaults: ClassVar[tuple[str, ...]] = ()
+    marker: ClassVar[str] = "beacons"
+    interface_beacons: ClassVar[int | None] = None
+    ranging: ClassVar[tuple[str, ...]] = ("owtt", "twtt")
+    measures_direction: ClassVar[bool] = False
+    takes_ranges: ClassVar[bool] = True
+    timeseries_columns: ClassVar[dict[str, str]] = {}
+    log_columns: ClassVar[dict[str, str]] = {}
+    bound_fixed: ClassVar[tuple[str, ...]] = ()
+    bound_steps: ClassVar[tuple[str, ...]] = ()
+
+    def __repr__(self) -> str:
+        return f"<positioning system {self.name}>"
+
+    # ---- geometry (numbers, from a resolved ``[platform]`` section) ----
+    def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
+        """Offsets of the transducers, (n, 3) [m] (body frame, or NED positions for a fixed array)."""
+        raise NotImplementedError
+
+    def lever_arms(self, platform: Mapping[str, Any]) -> np.ndarray:
+        """Lever arms of the transducers in NED at the mean heading (level platform), (n, 3) [m]: their positions
+        when the platform reference is at the NED origin (default: :meth:`offsets` turned by the heading)."""
+        heading = np.radians(platform["heading_deg"])
+        c, s = np.cos(heading), np.sin(heading)
+        return self.offsets(platform) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+
+    def horizontal_spread(self, platform: Mapping[str, Any]) -> float:
+        """The largest horizontal distance between two transducers [m] (the aperture that resolves the diver's
+        horizontal position)."""
+        xy = self.offsets(platform)[:, :2]
+        return float(max(np.linalg.norm(xy[i + 1:] - xy[i], axis=1).max(initial=0.0) for i in range(len(xy))))
+
+    def beacon_count(self, platform: Mapping[str, Any]) -> int:
+        """The size of the components' interface of a ``[platform]`` section."""
+        return int(self.interface_beacons) if self.interface_beacons is not None else int(platform["beacons"])
+
+    def describe(self, platform: Mapping[str, Any]) -> str:
+        """The geometry in a few words (a map panel's title)."""
+        raise NotImplementedError
+
+    # ---- the platform program (casadi) ----
+    def body_offsets(self, p: Mapping[str, Any], n_beacons: int, layouts: Sequence[str]) -> list:
+        """Body-frame offsets of the transducers as casadi expressions of the platform's parameters ``p``, one
+        (3, 1) each (the platform program of the system's interface)."""
+        raise NotImplementedError
+
+    def placed_true(self, p: Mapping[str, Any], d: Mapping[str, Any], true):
+        """The true transducer positions (3 n, 1) of the platform program where ``p["system"]`` is this system,
+        given the platform-mounted ones ``true`` (default: those)."""
+        return true
+
+    def placed_broadcast(self, p: Mapping[str, Any], d: Mapping[str, Any], x: Mapping[str, Any], broadcast):
+        """The broadcast transducer positions (3 n, 1) where ``p["system"]`` is this system, given the ones
+        computed from GPS and IMU ``broadcast`` (default: those)."""
+        return broadcast
+
+    # ---- the receivers (casadi) ----
+    def receiver_parameters(self) -> tuple:
+        """Parameters every receiver declares for this system (whatever its interface, so that value references
+        stay), after the clock's (default none)."""
+        return ()
+
+    def receiver_inputs(self) -> tuple:
+        """Inputs a receiver of this system's interface adds to the packet (default none)."""
+        return ()
+
+    def receiver_update(self, receiver, x: dict, u: dict, p: dict, fresh) -> dict:
+        """A receiver's update with this system's packet (systems whose packet is not one range)."""
+        raise NotImplementedError
+
+    def polar_fix(self, u: dict):
+        """The diver's position from one packet (systems whose packet is not one range)."""
+        raise NotImplementedError
+
+    def fix_covariance(self, position, beacon, p: dict):
+        """The covariance of :meth:`polar_fix` (3, 3) [m²]."""
+        raise NotImplementedError
+
+    # ---- configuration ----
+    def check(self, platform: dict[str, Any], given: set[str]) -> None:
+        """Check (and complete) a ``[platform]`` section for this system.
+
+        Raises
+        ------
+        ModelError
+            Naming the field and what is allowed.
+        """
+
+    def check_diver(self, cfg: Mapping[str, Any], depth: float | None = None) -> None:
+        """Check the diver against the system's geometry (default: nothing to check).
+
+        Raises
+        ------
+        ModelError
+        """
+
+    def receiver_ties(self, platform: Mapping[str, Any]) -> dict[str, float]:
+        """What the receivers' beacon-uncertainty parameters are tied to: ``beacon_gps_sigma`` [m],
+        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m] (default: GPS, IMU, the largest arm)."""
+        return {"beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
+                "beacon_arm": float(max(np.linalg.norm(self.offsets(platform), axis=1)))}
+
+    def position_errors(self, platform: Mapping[str, Any]) -> tuple[float, float]:
+        """Standard deviations of the broadcast transducer position, (position per axis [m], attitude [rad]):
+        the bound's and the map's (default: GPS and IMU)."""
+        return platform["gps_sigma"], math.radians(platform["imu_sigma_deg"])
+
+    # ---- the accuracy limit ----
+    def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
+                       sigma_range: float, model=None) -> np.ndarray:
+        """Horizontal DRMS [m] of a fix from one cycle plus the depth at ``points`` (M, 3) NED [m], (M,): the
+        Fisher information of the system's measurements (Kay 1993, Section 3.7).
+
+        ``parameters`` are the bound's (``noise_variance``, ``attitude_variance``, ``depth_variance``,
+        ``angle_sigma_deg``), ``sigma_range`` the range noise std [m], ``model`` a measurement model in place of
+        the system's (where it takes one; default the system's).
+        """
+        raise NotImplementedError
+
+    def measurement_model(self):
+        """What one packet measures: the receivers' measurement model (:mod:`sblsim.models.receiver.measurement`)."""
+        raise NotImplementedError
+
+    def bound_step(self):
+        """One step of the system's PCRB in covariance form, a casadi Function (Tichavský et al. 1998, Eq. (21))."""
+        raise NotImplementedError
+
+    def bound_function(self):
+        """The system's own PCRB step for the compiled pass, or None (the metrics pass's range bound)."""
+        return None
+
+
+def register(system: type[System]) -> type[System]:
+    """Add a system class to :data:`SYSTEMS` (a class decorator); the registry stays in the order of the codes.
+
+    Raises
+    ------
+    ValueError
+        If its name or code is taken.
+    """
+    instance = system()
+    for other in SYSTEMS.values():
+        if other.name == instance.name or other.code == instance.code:
+            raise ValueError(f"system {instance.name!r} (code {instance.code}) clashes with {other.name!r}")
+    ordered = sorted([*SYSTEMS.values(), instance], key=lambda s: s.code)
+    SYSTEMS.clear()
+    SYSTEMS.update({s.name: s for s in ordered})
+    return system
+
+
+def system(name: str, field: str = "platform.system") -> System:
+    """The registered system called ``name``.
+
+    Raises
+    ------
+    ModelError
+        Naming ``field`` and the registry's systems.
+    """
+    try:
+        return SYSTEMS[name]
+    except (KeyError, TypeError):
+        raise ModelError(f"{field}: {name!r} is not one of {', '.join(SYSTEMS)}") from None
+
+
+def interface_system(n_beacons: int) -> System:
+    """The system whose components' interface has ``n_beacons`` beacon positions: a system of a fixed interface
+    size (USBL's one transceiver) where it is that size, else the first of a layout-sized interface (SBL, whose
+    interface LBL shares)."""
+    for s in SYSTEMS.values():
+        if s.interface_beacons == n_beacons:
+            return s
+    return next(s for s in SYSTEMS.values() if s.interface_beacons is None)
+
+
+def interface_owners() -> list[System]:
+    """The systems that own a components' interface: the first of a layout-sized one (SBL), then each of a fixed
+    size (USBL); the others run on their owner's (LBL on SBL's)."""
+    layout = next(s for s in SYSTEMS.values() if s.interface_beacons is None)
+    return [layout] + [s for s in SYSTEMS.values() if s.interface_beacons is not None]
+
+
+def interface_systems(n_beacons: int) -> list[System]:
+    """Every system that runs on the components' interface of ``n_beacons`` (the platform's ``system``
+    parameter chooses among them at run time)."""
+    own = interface_system(n_beacons)
+    return [s for s in SYSTEMS.values() if s is own or (own.interface_beacons is None and s.interface_beacons is None)]
+
+
+__all__ = ["SYSTEMS", "System", "interface_owners", "interface_system", "interface_systems", "register", "system"]

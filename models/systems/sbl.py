@@ -1,0 +1,107 @@
+"""Short baseline (SBL): beacons on the floating platform, each broadcasting its position (GPS and IMU).
+
+The beacons sit on a cross of the paper's 4 arms (``platform.layout = "cross"``),
+N equally spaced on a circle (``circle``, ``platform.beacons`` N in [3, 16]) or at
+given body-frame offsets (``custom``), all at ``platform.transducer_depth`` below
+the platform reference, which the waves move; the platform broadcasts
+``b̃_i = p̃ + R(θ̃) a_i`` from the GPS position and the IMU attitude
+(:mod:`sblsim.models.platform.core`). One packet measures one range (OWTT or
+TWTT); the receivers take ranges plus the depth
+(:class:`~sblsim.models.receiver.measurement.RangeDepthModel`); the bound and
+the accuracy map are the range bound of :mod:`sblsim.models.bound`.
+
+References
+----------
+Cario, Casavola, Gagliardi, Lupia, Severino, "Accurate Localization in
+Acoustic Underwater Localization Systems", Sensors 21(3):762, 2021,
+doi:10.3390/s21030762 (Section 3, the SBL cross).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from sblsim.models.bound import MODEL, bound_step, horizontal_std
+from sblsim.models.declarations import ModelError
+from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
+from sblsim.models.platform.geometry import cross_offsets, layout_offsets, parse_offsets
+from sblsim.models.systems import System, register
+
+
+@register
+class SBL(System):
+    """Short baseline: N beacons on the platform (docs/model.md, "Systems")."""
+
+    name = "sbl"
+    code = 0
+    title = "short baseline"
+    words = "the scenario's platform"
+    compare_defaults = ()  # the scenario's own platform (the paper's cross)
+    marker = "beacons"
+
+    def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
+        """Body-frame offsets (n, 3) [m]: the cross has the paper's 4 beacons, the circle ``platform.beacons``
+        (default 4), a custom layout as many as ``beacon_offsets`` lists (:func:`layout_offsets`)."""
+        n = int(platform.get("beacons", 4)) if platform["layout"] == "circle" else 4
+        return layout_offsets(platform["layout"], platform["baseline"], platform["transducer_depth"],
+                              platform["beacon_offsets"], n)
+
+    def describe(self, platform: Mapping[str, Any]) -> str:
+        return f"{len(self.offsets(platform))} beacons, {_layout_words(platform)}"
+
+    def body_offsets(self, p: Mapping[str, Any], n_beacons: int, layouts: Sequence[str]) -> list:
+        """The cross (or circle) of ``baseline`` at ``transducer_depth``, or the custom offsets
+        (``beacon<i>_offset_<a>``)."""
+        cross = cross_offsets(p["baseline"], p["transducer_depth"], n_beacons)
+        custom = [ca.vertcat(*[p[f"beacon{i + 1}_offset_{a}"] for a in "xyz"]) for i in range(n_beacons)]
+        return [ca.if_else(p["layout"] == layouts.index("custom"), c, a) for a, c in zip(cross, custom)]
+
+    def check(self, platform: dict[str, Any], given: set[str]) -> None:
+        """Tie ``platform.beacons`` to the layout: the cross has the paper's 4 beacons, a custom layout as many
+        as its offsets list (the key is filled with that count when the user did not set it), the circle the
+        key's.
+
+        Raises
+        ------
+        ModelError
+            ``beacons`` other than 4 with the cross, a custom layout whose count differs from a given
+            ``beacons`` or lies outside [3, 16].
+        """
+        layout, n = platform["layout"], platform["beacons"]
+        if layout == "cross" and n != 4:
+            raise ModelError(f"platform.beacons: {n} with platform.layout = 'cross' (the paper's 4 beacons); use "
+                             "platform.layout = 'circle' for N equally spaced beacons")
+        if layout == "custom":
+            count = parse_offsets(platform["beacon_offsets"]).shape[0]
+            if "beacons" in given and count != n:
+                raise ModelError(f"platform.beacons: {n}, but platform.beacon_offsets lists {count} beacons")
+            if not MIN_BEACONS <= count <= MAX_BEACONS:
+                raise ModelError(f"platform.beacon_offsets: {count} beacons; allowed [{MIN_BEACONS}, "
+                                 f"{MAX_BEACONS}]")
+            platform["beacons"] = count
+
+    def measurement_model(self):
+        """Fresh ranges plus the depth (:class:`~sblsim.models.receiver.measurement.RangeDepthModel`, the bound's)."""
+        return MODEL
+
+    def bound_step(self):
+        """The range bound's step (:func:`sblsim.models.bound.bound_step`), which the compiled metrics pass steps."""
+        return bound_step()
+
+    def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
+                       sigma_range: float, model=None) -> np.ndarray:
+        """One round of fresh ranges (one per beacon) plus the depth (:func:`sblsim.models.bound.horizontal_std`,
+        ``model`` the range model, default the receivers')."""
+        arms = self.lever_arms(platform)
+        return horizontal_std(points, arms, arms, parameters["noise_variance"], parameters["attitude_variance"],
+                              parameters["depth_variance"], model=MODEL if model is None else model)
+
+
+def _layout_words(platform: Mapping[str, Any]) -> str:
+    return "custom layout" if platform["layout"] == "custom" else f"{platform['baseline']:g} m {platform['layout']}"
+
+
+__all__ = ["SBL"]
