@@ -38,6 +38,7 @@ from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import check_geometry, largest_arm, platform_offsets
 from sblsim.models.receiver.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
+from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.systems import check_seafloor
@@ -256,7 +257,7 @@ def scenario_source(name: str) -> dict[str, Any]:
         raise ConfigError(f"scenario: unknown scenario {name!r}; one of {', '.join(BUILTIN_SCENARIOS)} "
                           "or a path to a .toml file")
     text = (resources.files("sblsim.orchestrator") / "scenarios" / f"{name}.toml").read_text()
-    return tomllib.loads(text)
+    return tomlfile.loads(text)
 
 
 def read_source(source: str | Path) -> dict[str, Any]:
@@ -277,7 +278,7 @@ def read_source(source: str | Path) -> dict[str, Any]:
         if not path.is_file():
             raise ConfigError(f"config: no such file {str(source)!r}")
         try:
-            raw = tomllib.loads(path.read_text())
+            raw = tomlfile.loads(path.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ConfigError(f"config: {str(source)!r} is not valid TOML ({exc})") from None
         _absolute_paths(raw, path.resolve().parent)
@@ -306,7 +307,7 @@ def parse_override(item: str) -> tuple[str, str, Any]:
                           f"sections: {', '.join(SECTIONS)}")
     section, name = key.split(".")
     try:
-        value = tomllib.loads(f"v = {text}")["v"]
+        value = tomlfile.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text
     return section, name, value

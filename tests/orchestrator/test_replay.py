@@ -110,9 +110,10 @@ def test_a_log_replayed_with_another_receiver_equals_a_run_with_it(tmp_path, rec
 
 
 def test_a_user_model_receiver_replays_its_run(tmp_path):
+    """A log never names the program a replay runs: the user's model is given again (--receiver)."""
     model = f"model:{Path(__file__).resolve().parents[2] / 'docs' / 'examples' / 'constant_position.py'}"
     result, path = export(tmp_path, [f"receiver={model}"])
-    assert_same_receiver(result.timeseries, replay_file(path).timeseries)
+    assert_same_receiver(result.timeseries, replay_file(path, receiver=model).timeseries)
 
 
 @pytest.mark.parametrize("system", list(SYSTEMS))
@@ -129,7 +130,7 @@ def test_export_then_replay_equals_the_run_on_the_fmu_engine(tmp_path, fmu_dir, 
 def test_a_receiver_fmu_replays_its_run(tmp_path, fmu_dir):
     fmu = fmu_dir / "sblsim_receiver_ekf_seq.fmu"
     result, path = export(tmp_path, [f"receiver=fmu:{fmu}"])
-    assert_same_receiver(result.timeseries, replay_file(path).timeseries)
+    assert_same_receiver(result.timeseries, replay_file(path, receiver=f"fmu:{fmu}").timeseries)
 
 
 def test_a_log_on_another_clock_replays_the_same(tmp_path):
