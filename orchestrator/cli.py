@@ -437,7 +437,10 @@ def _compare(args: argparse.Namespace) -> int:
                     args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
     from sblsim.orchestrator.config import load_config
 
-    seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
+    # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
+    # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
+    first = system_overrides(systems[0], args.overrides) if systems is not None else args.overrides
+    seed = load_config(args.scenario, first, args.seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
     title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
              + (f", {' '.join(args.overrides)}" if args.overrides else ""))
@@ -494,7 +497,7 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.config import load_config, parse_compare
+    from sblsim.orchestrator.config import parse_compare
     from sblsim.orchestrator.maps import diver_depth, make_maps, parse_levels, write
 
     _check_seed(args.seed)
@@ -504,7 +507,7 @@ def _map(args: argparse.Namespace) -> int:
     labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
                                                    compare, args.depth)
     depth = configs[0]["target"]["depth"]
-    where = "--depth" if args.depth is not None else diver_depth(load_config(args.scenario, args.overrides))[1]
+    where = "--depth" if args.depth is not None else diver_depth(configs[0])[1]  # (compared systems' defaults)
     print(f"maps at {depth:g} m depth ({where}; --depth D to choose)")
     for label, m in zip(labels, maps):
         cells = m.size

@@ -276,6 +276,8 @@ def read_source(source: str | Path) -> dict[str, Any]:
             raise ConfigError(f"config: {str(source)!r} is a directory; give a configuration file (.toml) or a "
                               f"built-in scenario ({', '.join(BUILTIN_SCENARIOS)})")
         if not path.is_file():
+            if path.exists():  # a pipe or a device: never opened (reading a FIFO would wait for a writer)
+                raise ConfigError(f"config: {str(source)!r} is not a regular file; give a configuration file (.toml)")
             raise ConfigError(f"config: no such file {str(source)!r}")
         try:
             raw = tomlfile.loads(path.read_text())
@@ -399,6 +401,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         if not isinstance(table, dict):
             raise ConfigError(f"{section}: expected a table of keys, got {table!r}")
     sim = resolve_parameters(SIMULATION_VARIABLES, raw.get("simulation", {}), "simulation")
+    _check_receiver_step(sim)
     receiver = check_receiver(sim["receiver"])
     receiver_keys = section_variables("receiver", receiver)
     unknown = sorted(set(raw.get("receiver", {})) - {v.name for v in receiver_keys})
@@ -416,6 +419,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
             cfg[s].update(_orchestrator_receiver_keys(given, sim))
         else:
             cfg[s] = resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s)
+    _check_trajectory_file(cfg["target"])
     _check_beacons(cfg["platform"], set(raw.get("platform", {})))
     _check_ranging(cfg)
     _receiver_ties(cfg, set(raw.get("receiver", {})))
@@ -426,6 +430,44 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     check_seafloor(cfg)
     _check_duration(sim, cfg["target"])
     return cfg
+
+
+def _check_receiver_step(sim: dict[str, Any]) -> None:
+    """Refuse a sampling time and rate ratio whose receiver step T / ratio is outside the receiver clock's
+    range (:func:`sblsim.models.receiver.core.clock_parameters`), naming the two keys the user sets.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``simulation.ekf_rate_ratio``, ``simulation.sampling_time`` and the largest ratio allowed.
+    """
+    from sblsim.models.receiver.core import clock_parameters
+
+    clock = clock_parameters()[0]
+    T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
+    if T / ratio > clock.min:
+        return
+    largest = max(1, math.ceil(T / clock.min) - 1)
+    while largest > 1 and not T / largest > clock.min:
+        largest -= 1
+    raise ConfigError(f"simulation.ekf_rate_ratio: {ratio} at simulation.sampling_time = {T:g} s gives the receiver "
+                      f"steps of T / ratio = {T / ratio:.3g} s; they must be longer than {clock.min:g} s: a ratio of "
+                      f"at most {largest} at this sampling time, or a longer sampling time")
+
+
+def _check_trajectory_file(target: dict[str, Any]) -> None:
+    """Refuse a ``target.trajectory_file`` that the trajectory would not read (``trajectory`` is not ``file``):
+    it would be ignored without a word.
+
+    Raises
+    ------
+    ConfigError
+        Naming both keys.
+    """
+    if target.get("trajectory_file") and target["trajectory"] != "file":
+        raise ConfigError(f"target.trajectory_file: given, but target.trajectory = {target['trajectory']!r} does "
+                          "not read a file; set target.trajectory = 'file' as well (--set target.trajectory=file), "
+                          "or leave trajectory_file out")
 
 
 def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
