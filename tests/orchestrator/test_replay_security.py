@@ -223,3 +223,17 @@ def test_a_scenario_name_never_leaves_results(tmp_path, name):
     written = next(f[1] for f in folders if len(f) == 2)
     assert "/" not in written and "\\" not in written and not written.startswith(".")
     assert os.path.isfile(work / "results" / written / "summary.json")
+
+
+def test_a_study_name_never_leaves_results(tmp_path):
+    work = tmp_path / "deep" / "work"
+    work.mkdir(parents=True)
+    (work / "s.toml").write_text('[study]\nname = "../../escape"\nscenarios = ["semicircle"]\nreplicates = 1\n'
+                                 'set = ["simulation.duration=1"]\n[[factors]]\nname = "b"\n'
+                                 'key = "platform.baseline"\nlow = 1\nhigh = 3\n')
+    proc = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "campaign", "s.toml", "--workers", "1"],
+                          cwd=work, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["deep"] and sorted(p.name for p in work.iterdir()) == [
+        "results", "s.toml"]
+    assert [p.name for p in (work / "results").iterdir()] == ["_.._escape"]
