@@ -19,6 +19,8 @@ that reaches the last row. In each communication step ``[t, t + Δt]`` the
 receiver is shown the newest row whose time the step's end has reached
 (``t + Δt ≥ time_s − 1 ns``, the receiver's own slot test), so it uses each
 row in the step that reaches the row's time, as it uses a packet in a run.
+A row's time within its float resolution of a slot epoch k T is taken as that
+epoch (:func:`stamp_tolerance`), so that Unix-time stamps replay as times from 0.
 When several rows fall in one step only one can be used: the last row that
 carries a packet, else the last depth reading; the others are skipped and
 counted. With ``simulation.master = "jacobi"`` a row is shown one macro step
@@ -26,7 +28,8 @@ later, as the Jacobi master hands the receiver its inputs (so that the log
 of a Jacobi run replays to the run; the rows of the last macro step are then
 not used). The receiver's times are taken from the start time (a log with
 Unix times runs as one starting near 0); the time series records them as
-the log has them.
+the log has them. ``receiver.latency`` delays the receiver's recorded outputs
+as a run's (:func:`sblsim.orchestrator.run.apply_latency`).
 
 A truth track (``time_s, n_m, e_m, d_m``) is interpolated linearly at the
 end of every macro step, as a run records its truth; steps outside its span
@@ -766,17 +769,20 @@ def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
             del table[key]
             if not named:
                 continue
+            changed = f"{section}.{key} = ''"
             if table.get("trajectory") == "file":
                 table["trajectory"] = instead
+                changed = f"{section}.{switch} = {instead!r}"
                 if isinstance(sim, dict):
                     sim["duration"] = 0.0  # one pass of it: a replay's length is the log's
         elif not _is_path(section, named):
             continue
         else:
             table[key] = instead
+            changed = f"{section}.{switch} = {instead!r}"
         notes.append(f"the log's configuration names a file in {section}.{key}, which a replay does not open (it "
                      f"needs no {'diver track' if section == 'target' else 'sound-speed profile'}: the log holds "
-                     f"what the receiver was given); its config.toml has {section}.{switch} = {instead!r}")
+                     f"what the receiver was given); its config.toml has {changed}")
     return notes
 
 
