@@ -22,6 +22,7 @@ import tempfile
 import threading
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -35,9 +36,18 @@ from sblsim.models.errors import SblsimError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread
 from sblsim.models.systems import SYSTEMS, interface_owners
-from sblsim.orchestrator.config import MODEL_PREFIX, beacon_count, check_receiver, load_config, parse_compare
+from sblsim.orchestrator.config import (
+    MODEL_PREFIX,
+    beacon_count,
+    check_receiver,
+    external_path,
+    latency_steps,
+    load_config,
+    parse_compare,
+)
 from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
+from sblsim.orchestrator.output import OutputLock, folder_name
 from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
@@ -256,8 +266,9 @@ def _run(args: argparse.Namespace) -> int:
         from sblsim.orchestrator.replay import check_export
 
         check_export(args.export_log, args.force)
-        _check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."))
-    out = _output(args.out, Path("results") / cfg["run"]["scenario"], args.force, "summary.json", "run")
+        _check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
+    out = _output(args.out, Path("results") / folder_name(cfg["run"]["scenario"]), args.force, "summary.json",
+                  "run", before=lambda out: _check_export_apart(args.export_log, out))
     try:
         result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
                      connections=connections)
@@ -280,9 +291,35 @@ def _run(args: argparse.Namespace) -> int:
     if args.export_log is not None:
         from sblsim.orchestrator.replay import export_log
 
-        log, truth = export_log(result, args.export_log)
+        try:
+            log, truth = export_log(result, args.export_log)
+        except ModelError as exc:  # e.g. a full disk: the run's own files are written, say so
+            raise ModelError(f"{exc}; the run's results were written to {out}/") from None
         print(f"  log of the receiver's inputs: {log} (replay it: sblsim replay {log} --truth {truth})")
     return 0
+
+
+#: The files ``sblsim run`` writes into its output folder that an ``--export-log`` file could replace.
+RUN_FILES = ("summary.json", "config.toml", "timeseries.parquet")
+
+
+def _check_export_apart(export: Path | None, out: Path) -> None:
+    """Refuse an ``--export-log`` file (or its truth track) that is one of the run's own files in ``out``.
+
+    Raises
+    ------
+    ModelError
+        Naming ``--export-log`` and the file.
+    """
+    if export is None:
+        return
+    from sblsim.orchestrator.replay import truth_path
+
+    folder = out.resolve()
+    for target in (export, truth_path(export)):
+        if target.resolve().parent == folder and target.name.lower() in RUN_FILES:
+            raise ModelError(f"--export-log: {str(target)!r} is the run's own {target.name} in --out {str(out)!r}; "
+                             "give the log another name or folder")
 
 
 def _print_metrics(s: dict, truth: bool = True) -> None:
@@ -309,11 +346,20 @@ def _print_metrics(s: dict, truth: bool = True) -> None:
 def _replay(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
 
-    cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides)
+    notes: list[str] = []
+    cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides, notes)
+    receiver = cfg["simulation"]["receiver"]
+    if external_path(receiver, MODEL_PREFIX) or external_path(receiver):
+        given = "--receiver" if args.receiver else "--set" if any("receiver=" in o for o in args.overrides) \
+            else "--config"
+        notes.append(f"the receiver is your own program, {receiver} ({given}): it runs as you")
     log = read_log(args.log, beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]],
                    cfg["acoustics"]["sound_speed_assumed"])
     truth = read_truth(args.truth) if args.truth is not None else None
-    out = _output(args.out, Path("results") / f"replay_{args.log.stem}", args.force, "summary.json", "replay")
+    out = _output(args.out, Path("results") / f"replay_{folder_name(args.log.stem)}", args.force, "summary.json",
+                  "replay")
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
     result = replay(log, cfg, args.engine, args.fmu_dir, truth)
     write_replay(result, out)
     s, c = result.summary, result.summary["log"]
@@ -357,6 +403,17 @@ def _run_warnings(s: dict, cfg: dict) -> list[str]:
         out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
                    "(every packet lost or gated); its numbers measure its starting guess (receiver.x0_*) and what "
                    "its motion model predicts from it (summary.json: updates = 0)")
+    elif s["fix_steps"] == 0 and latency_steps(cfg) > 0:
+        # the record shows what the diver sees: the receiver's outputs receiver.latency late
+        latency = f"receiver.latency = {cfg['receiver']['latency']:g} s"
+        if latency_steps(cfg) >= s["steps"]:
+            what = (f"{latency} is as long as the run: the diver never sees an output the receiver computed from a "
+                    f"packet (every recorded estimate is its starting guess), though it used {s['updates']} ranges")
+        else:
+            what = (f"no multilateration fix reached the diver within the run (none was made, or {latency} delayed "
+                    "every one past its end)")
+        out.append(f"{what}; the instr_ metrics have no value (summary.json: fix_steps = 0 counts the steps the "
+                   "diver saw a fix)")
     elif s["fix_steps"] == 0:
         out.append("no multilateration fix was ever made (never ranges of three beacons): the instr_ metrics have "
                    "no value, and a receiver that reports that fix (lsq) never left its starting guess "
@@ -389,7 +446,9 @@ def _ssp(args: argparse.Namespace) -> int:
 
 
 def _output_name(scenario: str) -> str:
-    return Path(scenario).stem if scenario.endswith(".toml") else scenario
+    """The name a default output folder takes from a scenario argument: a file's stem, a built-in's name (any
+    character that is not a plain file-name character replaced: :func:`sblsim.orchestrator.output.folder_name`)."""
+    return folder_name(Path(scenario).stem if scenario.endswith(".toml") else Path(scenario).name)
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -404,7 +463,10 @@ def _compare(args: argparse.Namespace) -> int:
                   "comparison")
     table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
                     args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
-    seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
+    # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
+    # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
+    first = system_overrides(systems[0], args.overrides) if systems is not None else args.overrides
+    seed = load_config(args.scenario, first, args.seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
     title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
              + (f", {' '.join(args.overrides)}" if args.overrides else ""))
@@ -466,7 +528,7 @@ def _map(args: argparse.Namespace) -> int:
     labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
                                                    compare, args.depth)
     depth = configs[0]["target"]["depth"]
-    where = "--depth" if args.depth is not None else diver_depth(load_config(args.scenario, args.overrides))[1]
+    where = "--depth" if args.depth is not None else diver_depth(configs[0])[1]  # (compared systems' defaults)
     print(f"maps at {depth:g} m depth ({where}; --depth D to choose)")
     for label, m in zip(labels, maps):
         cells = m.size
@@ -483,7 +545,7 @@ def _campaign(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.study import load_study
 
     study = load_study(args.study, seed=args.seed)
-    out = args.out or Path("results") / study.name
+    out = args.out or Path("results") / folder_name(study.name)
     _check_writable(out)
     workers = args.workers if args.workers is not None else os.cpu_count()
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else f"{workers} worker process(es)"
@@ -576,13 +638,16 @@ def _fmus(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
-def _output(given: Path | None, default: Path, force: bool, marker: str, what: str) -> Path:
+def _output(given: Path | None, default: Path, force: bool, marker: str, what: str,
+            before: Callable[[Path], None] | None = None) -> Path:
     """The output folder of a command: ``--out`` as given, or the default folder.
 
     An earlier result is never replaced silently. A folder given with ``--out`` that holds one (its
     ``marker`` file) needs ``--force``; the default folder, when it holds one, is kept and the next free
     numbered folder beside it is used (``results/semicircle-2``), said on the command line, so that the
-    documented commands run one after the other. Checked before any work (:func:`_check_output`).
+    documented commands run one after the other. Checked before any work (:func:`_check_output`, then
+    ``before(out)``). The folder is then locked until the command ends (:class:`sblsim.orchestrator.output.OutputLock`):
+    a second command into it meanwhile is refused.
     """
     if given is not None or force or not (default / marker).exists():
         out = given or default
@@ -592,6 +657,9 @@ def _output(given: Path | None, default: Path, force: bool, marker: str, what: s
         print(f"note: {default}/ holds an earlier {what} (kept); writing to {out}/ (--out DIR to choose, --force "
               "to replace)", file=sys.stderr)
     _check_output(out, force, marker, what)
+    if before is not None:
+        before(out)
+    _LOCKS.append(OutputLock(out).acquire())
     return out
 
 
@@ -610,7 +678,7 @@ def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
                          "another --out")
 
 
-def _check_writable(directory: Path) -> None:
+def _check_writable(directory: Path, option: str = "--out") -> None:
     """Refuse an output directory that cannot be created or written, before any work.
 
     Checked by doing, not by asking (``os.access`` says yes to root everywhere, even under
@@ -620,15 +688,15 @@ def _check_writable(directory: Path) -> None:
     Raises
     ------
     ModelError
-        Naming the directory and why.
+        Naming ``option`` (default ``--out``), the directory and why.
     """
     if directory.exists() and not directory.is_dir():
-        raise ModelError(f"--out: {str(directory)!r} exists and is not a directory")
+        raise ModelError(f"{option}: {str(directory)!r} exists and is not a directory")
     probe = directory.absolute()
     while not probe.exists():
         probe = probe.parent
     if not probe.is_dir():
-        raise ModelError(f"--out: {str(directory)!r} cannot be created ({str(probe)!r} is not a directory)")
+        raise ModelError(f"{option}: {str(directory)!r} cannot be created ({str(probe)!r} is not a directory)")
     try:
         folder = Path(tempfile.mkdtemp(prefix=".sblsim-probe.", dir=probe))
         try:
@@ -637,7 +705,7 @@ def _check_writable(directory: Path) -> None:
             shutil.rmtree(folder, ignore_errors=True)
     except OSError as exc:
         reason = exc.strerror or str(exc)
-        raise ModelError(f"--out: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
+        raise ModelError(f"{option}: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
 
 
 def _codegen(args: argparse.Namespace) -> int:
@@ -653,6 +721,51 @@ def _codegen(args: argparse.Namespace) -> int:
 
 
 _SIGNAL: list[int] = []
+#: The output folders this command holds locked (released when it ends).
+_LOCKS: list[OutputLock] = []
+
+
+class _PipeSafeStream:
+    """Standard output that a closed pipe does not stop (``sblsim run ... | head -1``).
+
+    When the reader goes away, the first write or flush that fails with :class:`BrokenPipeError` points the
+    stream's file descriptor at ``os.devnull`` (as Python's documentation of SIGPIPE recommends, so that
+    nothing fails again at exit) and drops the rest: the command finishes its work (every result written)
+    and exits with its own status, without an error about a pipe nobody reads.
+    """
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self.broken = False
+
+    def _closed_pipe(self) -> None:
+        self.broken = True
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, AttributeError):  # a stream without a descriptor (a test's capture)
+            pass
+
+    def write(self, text: str) -> int:
+        if self.broken:
+            return len(text)
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._closed_pipe()
+            return len(text)
+
+    def flush(self) -> None:
+        if self.broken:
+            return
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._closed_pipe()
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 def _terminate(signum: int, frame) -> None:
@@ -674,9 +787,14 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("SIGTERM", "SIGHUP"):
             if hasattr(signal, name):
                 previous[name] = signal.signal(getattr(signal, name), _terminate)
+    stdout = sys.stdout
+    sys.stdout = _PipeSafeStream(stdout)
     try:
-        return _command(args)
+        status = _command(args)
+        sys.stdout.flush()
+        return status
     finally:
+        sys.stdout = stdout
         for name, handler in previous.items():
             signal.signal(getattr(signal, name), handler)
 
@@ -714,6 +832,9 @@ def _command(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("sblsim: interrupted", file=sys.stderr)
         return _interrupted_status()
+    finally:
+        while _LOCKS:
+            _LOCKS.pop().release()
 
 
 if __name__ == "__main__":

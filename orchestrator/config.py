@@ -36,9 +36,11 @@ from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
+from sblsim.models.receiver.core import clock_parameters
 from sblsim.models.systems import SYSTEMS
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
+from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.engines import read_description
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import ALGORITHMS
@@ -251,7 +253,7 @@ def scenario_source(name: str) -> dict[str, Any]:
         raise ConfigError(f"scenario: unknown scenario {name!r}; one of {', '.join(BUILTIN_SCENARIOS)} "
                           "or a path to a .toml file")
     text = (resources.files("sblsim.orchestrator") / "scenarios" / f"{name}.toml").read_text()
-    return tomllib.loads(text)
+    return tomlfile.loads(text)
 
 
 def read_source(source: str | Path) -> dict[str, Any]:
@@ -270,9 +272,11 @@ def read_source(source: str | Path) -> dict[str, Any]:
             raise ConfigError(f"config: {str(source)!r} is a directory; give a configuration file (.toml) or a "
                               f"built-in scenario ({', '.join(BUILTIN_SCENARIOS)})")
         if not path.is_file():
+            if path.exists():  # a pipe or a device: never opened (reading a FIFO would wait for a writer)
+                raise ConfigError(f"config: {str(source)!r} is not a regular file; give a configuration file (.toml)")
             raise ConfigError(f"config: no such file {str(source)!r}")
         try:
-            raw = tomllib.loads(path.read_text())
+            raw = tomlfile.loads(path.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ConfigError(f"config: {str(source)!r} is not valid TOML ({exc})") from None
         _absolute_paths(raw, path.resolve().parent)
@@ -301,7 +305,7 @@ def parse_override(item: str) -> tuple[str, str, Any]:
                           f"sections: {', '.join(SECTIONS)}")
     section, name = key.split(".")
     try:
-        value = tomllib.loads(f"v = {text}")["v"]
+        value = tomlfile.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         value = text
     return section, name, value
@@ -393,6 +397,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
         if not isinstance(table, dict):
             raise ConfigError(f"{section}: expected a table of keys, got {table!r}")
     sim = resolve_parameters(SIMULATION_VARIABLES, raw.get("simulation", {}), "simulation")
+    _check_receiver_step(sim)
     receiver = check_receiver(sim["receiver"])
     receiver_keys = section_variables("receiver", receiver)
     unknown = sorted(set(raw.get("receiver", {})) - {v.name for v in receiver_keys})
@@ -410,6 +415,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
             cfg[s].update(_orchestrator_receiver_keys(given, sim))
         else:
             cfg[s] = resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s)
+    _check_trajectory_file(cfg["target"])
     _check_system(cfg, set(raw.get("platform", {})))
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
@@ -419,6 +425,42 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     check_diver(cfg)
     _check_duration(sim, cfg["target"])
     return cfg
+
+
+def _check_receiver_step(sim: dict[str, Any]) -> None:
+    """Refuse a sampling time and rate ratio whose receiver step T / ratio is outside the receiver clock's
+    range (:func:`sblsim.models.receiver.core.clock_parameters`), naming the two keys the user sets.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``simulation.ekf_rate_ratio``, ``simulation.sampling_time`` and the largest ratio allowed.
+    """
+    clock = clock_parameters()[0]
+    T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
+    if T / ratio > clock.min:
+        return
+    largest = max(1, math.ceil(T / clock.min) - 1)
+    while largest > 1 and not T / largest > clock.min:
+        largest -= 1
+    raise ConfigError(f"simulation.ekf_rate_ratio: {ratio} at simulation.sampling_time = {T:g} s gives the receiver "
+                      f"steps of T / ratio = {T / ratio:.3g} s; they must be longer than {clock.min:g} s: a ratio of "
+                      f"at most {largest} at this sampling time, or a longer sampling time")
+
+
+def _check_trajectory_file(target: dict[str, Any]) -> None:
+    """Refuse a ``target.trajectory_file`` that the trajectory would not read (``trajectory`` is not ``file``):
+    it would be ignored without a word.
+
+    Raises
+    ------
+    ConfigError
+        Naming both keys.
+    """
+    if target.get("trajectory_file") and target["trajectory"] != "file":
+        raise ConfigError(f"target.trajectory_file: given, but target.trajectory = {target['trajectory']!r} does "
+                          "not read a file; set target.trajectory = 'file' as well (--set target.trajectory=file), "
+                          "or leave trajectory_file out")
 
 
 def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:

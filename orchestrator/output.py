@@ -3,25 +3,66 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
 
+from sblsim.models.declarations import ModelError
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows: OutputLock takes no lock
+    fcntl = None
+
 
 def write_atomic(path: Path | str, write: Callable[[Path], object]) -> None:
     """Write one file through a temporary file in its folder, moved into place when ``write(temporary)``
-    returns; if it raises, ``path`` is left as it was and the temporary file is removed."""
+    returns; if it raises, ``path`` is left as it was and the temporary file is removed.
+
+    The file gets the mode a file created with :func:`open` gets (0666 without the process's umask), like
+    the other files of a command, not the private 0600 of :func:`tempfile.mkstemp`.
+    """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
+        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's file is 0600: the mode any other file written here has
         write(Path(tmp))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def current_umask() -> int:
+    """The process's file-mode creation mask: from ``/proc/self/status`` where Linux gives it, else read by
+    setting it and setting it back."""
+    try:
+        with open("/proc/self/status") as handle:
+            for line in handle:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: Characters a scenario name keeps in a default output folder's name; any other becomes ``_``.
+_NAME_CHARACTERS = re.compile(r"[^A-Za-z0-9._+-]")
+
+
+def folder_name(name: str, fallback: str = "run") -> str:
+    """A scenario name (a configuration file's or an SSP system's ``run.scenario``: anyone's text) as one
+    folder name: letters, digits, ``. _ + -`` kept, any other character (``/``, ``\\``, ``:``, spaces, control
+    characters) ``_``, leading dots removed, at most 100 characters; ``fallback`` when nothing is left. The
+    default output folder ``results/<name>`` therefore always lies inside ``results/``."""
+    cleaned = _NAME_CHARACTERS.sub("_", str(name)).lstrip(".")[:100]
+    return cleaned or fallback
 
 
 @contextmanager
@@ -80,4 +121,77 @@ def _alive(pid: int) -> bool:
     return True
 
 
-__all__ = ["remove_stale", "staged_directory"]
+class OutputLock:
+    """An exclusive lock on an output folder while a command writes it (:meth:`acquire`, :meth:`release`).
+
+    The lock is ``fcntl.flock`` on the file ``.<name>.lock`` beside the folder, taken without waiting: a
+    second command into the same folder while the first runs is refused (its results would silently replace
+    the first's). The lock file is removed on release, and any folder created to hold it when nothing was
+    written into it; the kernel releases the lock of a killed process. Where ``fcntl`` does not exist
+    (Windows) no lock is taken.
+    """
+
+    def __init__(self, out: Path | str, option: str = "--out") -> None:
+        self.out = Path(out).absolute()
+        self.path = self.out.parent / f".{self.out.name}.lock"
+        self.option = option
+        self._fd: int | None = None
+        self._created: list[Path] = []
+
+    def acquire(self) -> "OutputLock":
+        """Take the lock.
+
+        Raises
+        ------
+        ModelError
+            Naming the option and the folder, when another command holds it.
+        """
+        if fcntl is None:  # pragma: no cover - Windows
+            return self
+        folder = self.out.parent
+        missing = []
+        while not folder.exists():
+            missing.append(folder)
+            folder = folder.parent
+        for item in reversed(missing):
+            item.mkdir()
+            self._created.append(item)
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                self._remove_created()
+                raise ModelError(f"{self.option}: {str(self.out)!r} is being written by another sblsim command "
+                                 "right now; wait until it ends or choose another folder") from None
+            try:  # the holder before may have removed the file between our open and our lock: lock the new one
+                same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                self._fd = fd
+                return self
+            os.close(fd)
+
+    def release(self) -> None:
+        """Remove the lock file and release the lock (and remove folders created for it that stayed empty)."""
+        if self._fd is not None:
+            try:
+                os.unlink(self.path)
+            except FileNotFoundError:
+                pass
+            os.close(self._fd)
+            self._fd = None
+        self._remove_created()
+
+    def _remove_created(self) -> None:
+        for item in reversed(self._created):  # the deepest first
+            try:
+                item.rmdir()
+            except OSError:  # it holds something now (the results): kept
+                pass
+        self._created = []
+
+
+__all__ = ["OutputLock", "current_umask", "folder_name", "remove_stale", "staged_directory", "write_atomic"]

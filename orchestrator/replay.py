@@ -19,6 +19,8 @@ that reaches the last row. In each communication step ``[t, t + Δt]`` the
 receiver is shown the newest row whose time the step's end has reached
 (``t + Δt ≥ time_s − 1 ns``, the receiver's own slot test), so it uses each
 row in the step that reaches the row's time, as it uses a packet in a run.
+A row's time within its float resolution of a slot epoch k T is taken as that
+epoch (:func:`stamp_tolerance`), so that Unix-time stamps replay as times from 0.
 When several rows fall in one step only one can be used: the last row that
 carries a packet, else the last depth reading; the others are skipped and
 counted. With ``simulation.master = "jacobi"`` a row is shown one macro step
@@ -26,7 +28,8 @@ later, as the Jacobi master hands the receiver its inputs (so that the log
 of a Jacobi run replays to the run; the rows of the last macro step are then
 not used). The receiver's times are taken from the start time (a log with
 Unix times runs as one starting near 0); the time series records them as
-the log has them.
+the log has them. ``receiver.latency`` delays the receiver's recorded outputs
+as a run's (:func:`sblsim.orchestrator.run.apply_latency`).
 
 A truth track (``time_s, n_m, e_m, d_m``) is interpolated linearly at the
 end of every macro step, as a run records its truth; steps outside its span
@@ -40,6 +43,9 @@ import csv
 import io
 import json
 import math
+import os
+import re
+import stat
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -49,16 +55,22 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
+from sblsim.models import RECEIVER_MODELS
 from sblsim.models.acoustics.core import Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
 from sblsim.models.systems import SYSTEMS, System
+from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
+    EXTERNAL_PREFIX,
+    MODEL_PREFIX,
     ConfigError,
+    _is_path,
     apply_overrides,
     beacon_count,
     check_receiver,
+    latency_steps,
     parse_override,
     read_source,
     receiver_label,
@@ -71,7 +83,7 @@ from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make
 from sblsim.orchestrator.limits import max_steps
 from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
 from sblsim.orchestrator.output import staged_directory, write_atomic
-from sblsim.orchestrator.run import TIMESERIES_COLUMNS, RunResult, _metrics, merge_params, summary
+from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _metrics, merge_params, summary
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
 FORMAT = 1
@@ -88,6 +100,12 @@ REORDER_WINDOW = 1.0
 SUFFIXES = (".csv", ".parquet")
 #: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
 DEFAULT_CONFIG = "semicircle"
+#: The largest log read [bytes] and the most rows (a log is read whole, checked before reading it).
+MAX_LOG_BYTES = 256 * 2**20
+MAX_LOG_ROWS = 2_000_000
+#: A number in a log: ASCII digits, an optional sign, point and exponent, or inf / nan (refused as not finite
+#: where a finite number is needed); not what else Python's float() takes (``1_0.0``, other scripts' digits).
+NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", re.IGNORECASE)
 
 #: The log's columns: name -> (unit, meaning, when required).
 LOG_COLUMNS = {
@@ -135,46 +153,107 @@ class _Table:
     title: str = ""
 
 
-def _read_table(path: Path, what: str) -> _Table:
-    """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
+def _regular_file(path: Path, what: str) -> int:
+    """The size of a file that is a regular file [bytes] (checked without opening it: a FIFO would block).
 
     Raises
     ------
     ModelError
-        ``what: ...`` for a missing or unreadable file, a suffix other than .csv or .parquet, no header, or
-        a line whose field count differs from the header's (with its line number).
+        ``what: ...`` for a missing file, a directory or anything that is not a regular file.
+    """
+    name = str(path)
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise ModelError(f"{what}: no such file {name!r}") from None
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise ModelError(f"{what}: {name!r} is a directory")
+    if not stat.S_ISREG(info.st_mode):
+        raise ModelError(f"{what}: {name!r} is not a regular file (a pipe, a device or a socket); give a file")
+    return info.st_size
+
+
+def _too_large(name: str, what: str, amount: str) -> ModelError:
+    return ModelError(f"{what}: {name!r} {amount}; a log is read whole, at most {MAX_LOG_ROWS:,} rows and "
+                      f"{MAX_LOG_BYTES // 2**20} MiB (docs/log-format.md): replay it in parts")
+
+
+def _text_lines(text: str) -> list[str]:
+    """The lines of a text, split at ``\\n`` only (a ``\\r\\n`` ending loses its ``\\r``): not at the other line
+    boundaries :meth:`str.splitlines` knows (U+2028, form feed, ...), which a comment may hold and which no CSV
+    writer takes as a new line, so that line numbers are the ones an editor shows."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return [line[:-1] if line.endswith("\r") else line for line in lines]
+
+
+def _read_parquet(path: Path, what: str) -> _Table:
+    """A Parquet file's columns as text cells (:func:`_read_table`); its pandas metadata is not used."""
+    name = str(path)
+    try:
+        import pyarrow.parquet as pq
+
+        rows = pq.ParquetFile(path).metadata.num_rows
+        if rows > MAX_LOG_ROWS:
+            raise _too_large(name, what, f"has {rows:,} rows")
+        table = pq.read_table(path)
+        meta = table.schema.metadata or {}
+        header = [str(c).strip() for c in table.column_names]
+        columns = [[_cell(v) for v in table.column(k).to_pylist()] for k in range(table.num_columns)]
+    except ModelError:
+        raise
+    except Exception as exc:  # pyarrow raises its own errors on a damaged file
+        raise ModelError(f"{what}: {name!r} is not a readable Parquet file ({' '.join(str(exc).split())[:200]})") \
+            from None
+    cells = [list(values) for values in zip(*columns)] if columns else []
+    return _Table(path, header, [(f"row {k + 1}", c) for k, c in enumerate(cells)],
+                  meta.get(META_CONFIG, b"").decode("utf-8", "replace"),
+                  meta.get(META_TITLE, b"").decode("utf-8", "replace"))
+
+
+def _read_table(path: Path, what: str) -> _Table:
+    """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
+
+    Lines end at ``\\n`` (or ``\\r\\n``) only. A file larger than :data:`MAX_LOG_BYTES` or with more than
+    :data:`MAX_LOG_ROWS` rows is refused before it is read whole.
+
+    Raises
+    ------
+    ModelError
+        ``what: ...`` for a missing or unreadable file, one that is not a regular file, a suffix other than
+        .csv or .parquet, a file too large, no header, or a line whose field count differs from the header's
+        (with its line number).
     """
     name = str(path)
     if path.suffix.lower() not in SUFFIXES:
         raise ModelError(f"{what}: {name!r} must be a .csv or .parquet file")
-    if path.is_dir():
-        raise ModelError(f"{what}: {name!r} is a directory")
-    if not path.is_file():
-        raise ModelError(f"{what}: no such file {name!r}")
+    size = _regular_file(path, what)
+    if size > MAX_LOG_BYTES:
+        raise _too_large(name, what, f"is {size / 2**20:.0f} MiB")
     if path.suffix.lower() == ".parquet":
-        try:
-            import pyarrow.parquet as pq
-
-            table = pq.read_table(path)
-        except Exception as exc:  # pyarrow raises its own errors on a damaged file
-            raise ModelError(f"{what}: {name!r} is not a readable Parquet file ({' '.join(str(exc).split())})") \
-                from None
-        meta = table.schema.metadata or {}
-        frame = table.to_pandas()
-        header = [str(c).strip() for c in frame.columns]
-        rows = [(f"row {k + 1}", [_cell(v) for v in values])
-                for k, values in enumerate(frame.itertuples(index=False, name=None))]
-        return _Table(path, header, rows, meta.get(META_CONFIG, b"").decode("utf-8", "replace"),
-                      meta.get(META_TITLE, b"").decode("utf-8", "replace"))
+        return _read_parquet(path, what)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_LOG_BYTES + 1)
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > MAX_LOG_BYTES:
+        raise _too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
+    lines = data.count(b"\n")
+    if lines > MAX_LOG_ROWS + 10_000:  # a header and comment lines besides the rows
+        raise _too_large(name, what, f"has {lines:,} lines")
+    try:
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
     header: list[str] | None = None
     rows: list[tuple[str, list[str]]] = []
     config: list[str] = []
     title = ""
-    for number, line in enumerate(text.splitlines(), start=1):
+    for number, line in enumerate(_text_lines(text), start=1):
         stripped = line.strip()
         if not stripped:
             continue
@@ -195,6 +274,8 @@ def _read_table(path: Path, what: str) -> _Table:
             raise ModelError(f"{what}: {name!r} line {number} has {len(cells)} fields, the header "
                              f"{len(header)} ({','.join(header)})")
         rows.append((f"line {number}", cells))
+        if len(rows) > MAX_LOG_ROWS:
+            raise _too_large(name, what, f"has more than {MAX_LOG_ROWS:,} rows (line {number})")
     if header is None:
         raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
     return _Table(path, header, rows, "\n".join(config), title)
@@ -220,10 +301,9 @@ def _number(text: str, where: str, column: str, low: float, high: float) -> floa
     """
     if not text:
         raise ModelError(f"{where}: {column} is empty")
-    try:
-        value = float(text)
-    except ValueError:
-        raise ModelError(f"{where}: {column}: {text!r} is not a number") from None
+    if not NUMBER.fullmatch(text):
+        raise ModelError(f"{where}: {column}: {text[:40]!r} is not a number") from None
+    value = float(text)
     if not math.isfinite(value):
         raise ModelError(f"{where}: {column}: {text!r} is not a finite number")
     if not low <= value <= high:
@@ -420,10 +500,9 @@ def _beacon(text: str, n_beacons: int) -> int:
     """A beacon id cell: 1 … n_beacons, 0 when empty (a depth reading), −1 when it names no beacon of the array."""
     if not text:
         return 0
-    try:
-        value = float(text)
-    except ValueError:
+    if not NUMBER.fullmatch(text):
         return -1
+    value = float(text)
     if not math.isfinite(value) or value != round(value) or not 1 <= value <= n_beacons:
         return -1
     return int(value)
@@ -488,6 +567,8 @@ class Schedule:
     same_step: int
     #: Rows not reached (a Jacobi replay: the rows of the last macro step).
     not_reached: int
+    #: Each row's time from the start [s]: a time within :func:`stamp_tolerance` of a slot epoch k T is that epoch.
+    rel: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _step_ends(n_steps: int, T: float, ratio: int) -> np.ndarray:
@@ -507,8 +588,11 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
     ModelError
         When the log's span is more macro steps than fit in memory (naming its longest gap).
     """
-    start = T * (math.ceil(log.time[0] / T - 1e-9) - 1)
+    tol = stamp_tolerance(log, T)
+    start = T * (math.ceil(log.time[0] / T - max(1e-9, tol / T)) - 1)
     rel = log.time - start
+    slot = 0.0 + np.rint(rel / T) * T  # the slot epochs k T as the channel computes them (t0 + k T, t0 = 0)
+    rel = np.where(np.abs(rel - slot) <= tol, slot, rel)
     last = float(rel[-1])
     steps = max(1, math.ceil(last / T - 1e-9))
     most = max_steps(1, True)
@@ -550,21 +634,50 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
     else:
         reached = len(rel)
     return Schedule(start=start, steps=steps, fed=fed, shown=shown, used=used, same_step=reached - used.size,
-                    not_reached=len(rel) - reached)
+                    not_reached=len(rel) - reached, rel=rel)
+
+
+def stamp_tolerance(log: Log, T: float) -> float:
+    """How far a row's time may lie from a slot epoch and still be taken as it [s]: the slot test's slack
+    (:data:`sblsim.models.receiver.core.SLOT_SLACK`), or four times the resolution of a float64 at the log's
+    times where that is coarser (Unix times near 1.7e9 s are resolved to 2.4e-7 s only).
+
+    Raises
+    ------
+    ModelError
+        When that resolution is coarser than a tenth of the sampling time.
+    """
+    largest = float(max(abs(log.time[0]), abs(log.time[-1])))
+    tol = max(SLOT_SLACK, 4.0 * float(np.spacing(largest)))
+    if tol > T / 10:
+        raise ModelError(f"log: {str(log.path)!r}: its times (up to {largest:.6g} s) are resolved to "
+                         f"{float(np.spacing(largest)):.3g} s only, too coarse for simulation.sampling_time = {T:g} s; "
+                         "subtract a start time from time_s")
+    return tol
 
 
 # --------------------------------------------------------------------------- configuration
 
 def replay_config(log_path: Path | str, config: str | None = None, receiver: str | None = None,
-                  overrides: Sequence[str] = ()) -> tuple[dict, str]:
+                  overrides: Sequence[str] = (), notes: list[str] | None = None) -> tuple[dict, str]:
     """The resolved configuration of a replay and where it came from.
 
     The source is ``config`` (a built-in scenario or a TOML file) when given, else the configuration an
     exported log carries, else the built-in scenario :data:`DEFAULT_CONFIG`. A ``receiver`` (or a
     ``--set receiver=...``) other than the configuration's takes the keys of the configuration's
-    ``[receiver]`` section that it declares and that were set (differ from the old receiver's default),
-    and its own defaults and ties for the rest (a resolved ``config.toml`` holds every key of its receiver,
-    e.g. the ekf's ``gate_probability = 1``, which is not a choice made for another receiver).
+    ``[receiver]`` section that it declares and that were set (differ from the old receiver's default; the
+    keys it declares when the old receiver is not a built-in one, which is never imported to learn its
+    defaults), and its own defaults and ties for the rest (a resolved ``config.toml`` holds every key of its
+    receiver, e.g. the ekf's ``gate_probability = 1``, which is not a choice made for another receiver).
+
+    A log is data (:func:`_as_data`): of the configuration it carries only plain numbers and names are
+    used. A receiver it names as ``model:PATH.py`` or ``fmu:PATH`` is refused unless ``receiver`` replaces
+    it, and the files it names (:data:`sblsim.orchestrator.config.PATH_KEYS`) are neither opened nor kept.
+
+    Parameters
+    ----------
+    notes : list of str, optional
+        Gets one line for every key of the log's configuration that was not used.
 
     Returns
     -------
@@ -575,8 +688,8 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
     Raises
     ------
     ConfigError, ModelError
-        As :func:`sblsim.orchestrator.config.load_config`; a log's configuration that does not resolve is
-        named as the log's.
+        As :func:`sblsim.orchestrator.config.load_config`; a log's configuration that does not resolve, or
+        names a receiver program, is named as the log's.
     """
     overrides = list(overrides)
     where = "--receiver" if receiver is not None else "simulation.receiver"
@@ -595,10 +708,13 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
         source = f"--config {config}"
     elif embedded:
         try:
-            raw = tomllib.loads(embedded)
+            raw = tomlfile.loads(embedded)
         except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"log: the configuration {str(log_path)!r} carries is not valid TOML ({exc}); give "
-                              "--config") from None
+            raise ConfigError(f"log: the configuration {str(log_path)!r} carries is not valid TOML "
+                              f"({' '.join(str(exc).split())[:200]}); give --config") from None
+        said = _as_data(raw, str(log_path), receiver is not None)
+        if notes is not None:
+            notes.extend(said)
         source = "the log's own (its run's configuration)"
     else:
         raw = copy.deepcopy(read_source(DEFAULT_CONFIG))
@@ -616,16 +732,74 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
     return cfg, source
 
 
+#: What a replay uses instead of a file a log's configuration names: (section, key) -> (key, value) to set.
+_INSTEAD = {("target", "trajectory_file"): ("trajectory", "semicircle"),
+            ("acoustics", "sound_speed_profile"): ("sound_speed_profile", "constant")}
+
+
+def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
+    """Make the configuration a log carries plain data, in place (:func:`replay_config`); returns the notes.
+
+    * ``simulation.receiver`` naming a program (``model:PATH.py``, ``fmu:PATH``: anything but a built-in
+      receiver) is refused, unless the user's ``--receiver`` replaces it (it is then never imported);
+    * a file named by :data:`sblsim.orchestrator.config.PATH_KEYS` is not opened: a replay needs neither the
+      diver's track nor the channel (the log holds what the receiver was given), so ``target.trajectory =
+      file`` becomes the semicircle (and the duration one pass of it) and a profile file a constant sound
+      speed, said in a note.
+
+    Raises
+    ------
+    ConfigError
+        A receiver program without ``--receiver``.
+    """
+
+    sim = raw.get("simulation")
+    value = sim.get("receiver") if isinstance(sim, dict) else None
+    if isinstance(value, str) and value not in RECEIVER_MODELS and not receiver_given:
+        kind = "a Python file" if value.startswith(MODEL_PREFIX) else "an FMU" if value.startswith(EXTERNAL_PREFIX) \
+            else "a receiver"
+        raise ConfigError(f"log: the configuration {log!r} carries names simulation.receiver = {value[:80]!r}, "
+                          f"{kind} a replay never imports or loads from a log; give --receiver (one of "
+                          f"{', '.join(RECEIVER_MODELS)}, or model:PATH.py or fmu:PATH of your own) or --config")
+    notes = []
+    for (section, key), (switch, instead) in _INSTEAD.items():
+        table = raw.get(section)
+        if not isinstance(table, dict) or key not in table:
+            continue
+        named = table[key]
+        if section == "target":
+            del table[key]
+            if not named:
+                continue
+            changed = f"{section}.{key} = ''"
+            if table.get("trajectory") == "file":
+                table["trajectory"] = instead
+                changed = f"{section}.{switch} = {instead!r}"
+                if isinstance(sim, dict):
+                    sim["duration"] = 0.0  # one pass of it: a replay's length is the log's
+        elif not _is_path(section, named):
+            continue
+        else:
+            table[key] = instead
+            changed = f"{section}.{switch} = {instead!r}"
+        notes.append(f"the log's configuration names a file in {section}.{key}, which a replay does not open (it "
+                     f"needs no {'diver track' if section == 'target' else 'sound-speed profile'}: the log holds "
+                     f"what the receiver was given); its config.toml has {changed}")
+    return notes
+
+
 def _switch_receiver(raw: dict, receiver: str) -> None:
     """Set ``simulation.receiver`` of a raw configuration, keeping the receiver keys that were chosen
-    (:func:`replay_config`)."""
+    (:func:`replay_config`). A receiver that is not a built-in one (a user's model or FMU, perhaps named by a
+    log) is never imported to learn its defaults: the keys the new receiver declares are kept."""
     sim = raw.setdefault("simulation", {})
     old = sim.get("receiver", "ekf")
     sim["receiver"] = receiver
     if old == receiver or "receiver" not in raw or not isinstance(raw["receiver"], dict):
         return
     try:
-        defaults = {v.name: v.start for v in section_variables("receiver", str(old))}
+        defaults = ({v.name: v.start for v in section_variables("receiver", str(old))}
+                    if old in RECEIVER_MODELS else {})
         declared = {v.name for v in section_variables("receiver", receiver)}
     except ModelError:
         return  # an unknown receiver: resolve() names it
@@ -658,9 +832,8 @@ class ReplayResult:
     summary: dict[str, Any]
 
 
-def _inputs(log: Log, names: Sequence[str], start: float) -> np.ndarray:
-    """The receiver's input vector of every row, shape (N, n_in)."""
-    rel = log.time - start
+def _inputs(log: Log, names: Sequence[str], rel: np.ndarray) -> np.ndarray:
+    """The receiver's input vector of every row, shape (N, n_in); ``rel`` the rows' times from the start."""
     packet = log.beacon > 0
     angles = log.angles if log.angles is not None else np.zeros((len(rel), 2))
     values = {"packet_seq": np.arange(1, len(rel) + 1, dtype=float), "beacon_id": log.beacon.astype(float),
@@ -713,7 +886,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     try:
         params, replicates = merge_params([cfg], "receiver", handle.parameters)
         handle.setup(params, replicates, 0.0)
-        inputs = _inputs(log, handle.input_names, plan.start)
+        inputs = _inputs(log, handle.input_names, plan.rel)
         outputs = np.empty((plan.steps, len(handle.output_names)))
         sub = T / ratio
         current = -1
@@ -731,6 +904,12 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     finally:
         close_handles(handles)
     wall = time.perf_counter() - start
+    delay = latency_steps(cfg)
+    if delay:  # what the diver sees, as a run records it (sblsim.orchestrator.run.apply_latency)
+        source = np.maximum(np.arange(plan.steps) - delay, 0)
+        for k, name in enumerate(names):
+            if f"receiver.{name}" not in UNDELAYED:
+                outputs[:, k] = outputs[source, k]
     out = {n: cast_column(outputs[:, k], DTYPES[types[n]]) for k, n in enumerate(names)}
     shown = plan.shown
     rows = np.where(shown >= 0, shown, 0)
@@ -922,6 +1101,11 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     -------
     (Path, Path)
         The log and the truth track.
+
+    Raises
+    ------
+    ModelError
+        ``--export-log: ...`` when a write fails (a full disk), saying which of the two files was written.
     """
     path = Path(path)
     cfg = result.config
@@ -950,14 +1134,24 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
                 pq.write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **meta}), tmp)
             return write
 
-        write_atomic(path, parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}))
-        write_atomic(target, parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
+        writers = (parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}),
+                   parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
     else:
         text = _csv_text(log, comments)
         truth_text = _csv_text(truth, [f"# {TRUTH_TITLE}", f"# {origin}; the diver's true position at the end "
                                        "of every step (N, E, D in the platform's frame)"])
-        write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-        write_atomic(target, lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
+        writers = (lambda tmp: tmp.write_text(text, encoding="utf-8"),
+                   lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
+    written = []
+    try:
+        for file, writer in zip((path, target), writers):
+            write_atomic(file, writer)
+            written.append(file)
+    except OSError as exc:  # e.g. a full disk: say what was written (each file is whole or not there)
+        reason = os.strerror(exc.errno) if exc.errno else str(exc)
+        done = (f"the log {str(path)!r} was written, its truth track {str(target)!r} not" if written else
+                f"neither the log nor its truth track was written ({str(path)!r} is as it was)")
+        raise ModelError(f"--export-log: {reason}; {done}") from None
     return path, target
 
 

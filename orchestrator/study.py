@@ -51,6 +51,7 @@ import tomli_w
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError, Variable, shown
 from sblsim.models.errors import ConfigError
+from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     SECTIONS,
@@ -251,7 +252,7 @@ def read_record(path: Path | str, name: str = "study", scenarios: list[str] | No
     """
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text())
+        raw = tomlfile.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise StudyError(f"study.toml: cannot parse {str(path)!r} ({str(exc).splitlines()[0]})") from None
     s = raw.get("study", {})
@@ -332,12 +333,12 @@ def study_source(name: str) -> tuple[dict[str, Any], Path | None]:
     """
     if name in BUILTIN_STUDIES:
         text = (resources.files("sblsim.orchestrator") / "studies" / f"{name}.toml").read_text()
-        return tomllib.loads(text), None
+        return tomlfile.loads(text), None
     path = Path(name)
     if not path.is_file():
         raise StudyError(f"study: unknown study {name!r}; one of {', '.join(BUILTIN_STUDIES)} or a study .toml file")
     try:
-        return tomllib.loads(path.read_text()), path.resolve().parent
+        return tomlfile.loads(path.read_text()), path.resolve().parent
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise StudyError(f"study: {name!r} is not valid TOML ({exc})") from None
 

@@ -20,6 +20,12 @@ from pathlib import Path
 import pytest
 
 BIG = "1" + "0" * 400
+LOG_HEADER = "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n"
+#: Parquet logs (name -> schema metadata: the configuration an exported log carries).
+PARQUET = {"model_log.parquet": '[simulation]\nreceiver = "model:exits.py"\n',
+           "deep_log.parquet": "[platform]\nbaseline = " + "[" * 30000 + "]" * 30000 + "\n"}
+#: Named pipes: a reader that opened one would wait for a writer (the case's timeout).
+FIFOS = ("fifo_log.csv", "fifo.toml")
 
 #: Files a case may refer to (written into its folder before it runs).
 FILES = {
@@ -84,6 +90,15 @@ FILES = {
                          'set = ["simulation.duration=100", "simulation.sampling_time=0.001"]\n'
                          '[[factors]]\nname = "b"\nkey = "platform.baseline"\nlow = 1\nhigh = 3\n',
     "exits.py": "import sys\nsys.exit(0)\n",
+    "deep.toml": "[platform]\nbaseline = " + "[" * 30000 + "]" * 30000 + "\n",
+    "deep_log.csv": "# sblsim log, format 1\n#% [platform]\n#% baseline = " + "[" * 30000 + "]" * 30000 + "\n"
+                    + LOG_HEADER + "0.1,1,6,1,0,1,2\n",
+    "model_log.csv": '#% [simulation]\n#% receiver = "model:exits.py"\n' + LOG_HEADER + "0.1,1,6,1,0,1,2\n",
+    "fmu_log.csv": '#% [simulation]\n#% receiver = "fmu:emptyfmus/sblsim_platform.fmu.bak"\n' + LOG_HEADER
+                   + "0.1,1,6,1,0,1,2\n",
+    "underscore_log.csv": LOG_HEADER + "0.1,1,6,1,0,1,2\n0.2,2,1_0.0,0,1,1,2\n",
+    "arabic_log.csv": LOG_HEADER + "0.1,1,6,1,0,1,2\n0.2,2,\u0666,0,1,1,2\n",
+    "traj.csv": "0,0,0,5\n10,5,5,5\n",
     "good_log.csv": "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n0.1,1,6,1,0,1,2\n"
                     "0.2,,,,,,2\n0.3,3,6,-1,0,1,2\n",
     "jump_log.csv": "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n5,1,6,1,0,1,2\n"
@@ -227,6 +242,27 @@ CASES = {
     "replay unknown receiver": (["replay", "good_log.csv", "--receiver", "kalman"], "--receiver"),
     "replay truth backwards": (["replay", "good_log.csv", "--truth", "truth_back.csv"], "line 4: time_s 0.5 s"),
     "replay over an earlier replay": (["replay", "good_log.csv", "--out", "earlier_run"], "--force"),
+    "replay a number with an underscore": (["replay", "underscore_log.csv"],
+                                           "line 3: range_m: '1_0.0' is not a number"),
+    "replay arabic-indic digits": (["replay", "arabic_log.csv"], "line 3: range_m: '\u0666' is not a number"),
+    "replay a named pipe": (["replay", "fifo_log.csv"], "is not a regular file"),
+    "replay a log naming a model": (["replay", "model_log.csv"], "simulation.receiver = 'model:exits.py'"),
+    "replay a log naming an fmu": (["replay", "fmu_log.csv"], "never imports or loads from a log"),
+    "replay a parquet log naming a model": (["replay", "model_log.parquet"], "simulation.receiver = 'model:exits.py'"),
+    "replay nested config lines": (["replay", "deep_log.csv"], "nested deeper than"),
+    "replay nested parquet metadata": (["replay", "deep_log.parquet"], "nested deeper than"),
+    "replay nested --config": (["replay", "good_log.csv", "--config", "deep.toml"], "nested deeper than"),
+    "replay a named pipe as --config": (["replay", "good_log.csv", "--config", "fifo.toml"], "not a regular file"),
+    "run nested config": (["run", "deep.toml"], "nested deeper than"),
+    "run a named pipe as config": (["run", "fifo.toml"], "not a regular file"),
+    "run trajectory_file without trajectory file": (["run", "semicircle", "--set", "target.trajectory_file=traj.csv"],
+                                                    "target.trajectory_file: given, but target.trajectory"),
+    "run receiver step too short": (["run", "semicircle", "--set", "simulation.sampling_time=0.001",
+                                     "--set", "simulation.ekf_rate_ratio=1000"],
+                                    "simulation.ekf_rate_ratio: 1000 at simulation.sampling_time = 0.001 s"),
+    "run export-log under /proc": (["run", "semicircle", "--export-log", "/proc/x.csv"], "--export-log"),
+    "run export-log over its own time series": (["run", "semicircle", "--out", "o", "--export-log",
+                                                 "o/timeseries.parquet"], "--export-log: 'o/timeseries.parquet'"),
     # campaign and studies
     "campaign missing study": (["campaign", "none.toml"], "study"),
     "campaign invalid study": (["campaign", "study_bad.toml"], "study"),
@@ -309,6 +345,15 @@ def _prepare(folder: Path) -> None:
         path.write_text(text)
     with zipfile.ZipFile(folder / "emptyfmus" / "sblsim_platform.fmu.bak", "w"):
         pass
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    for name, config in PARQUET.items():
+        table = pa.table({"time_s": [0.1], "beacon_id": [1], "range_m": [6.0], "beacon_n_m": [1.0],
+                          "beacon_e_m": [0.0], "beacon_d_m": [1.0], "depth_m": [2.0]})
+        pq.write_table(table.replace_schema_metadata({b"sblsim.config": config.encode()}), folder / name)
+    for name in FIFOS:
+        os.mkfifo(folder / name)
 
 
 def _run(case: str, folder: Path) -> tuple[subprocess.CompletedProcess, dict, dict]:

@@ -1,4 +1,5 @@
-"""The README's command blocks run top to bottom, as written, in a fresh copy of the repository.
+"""The README's command and Python blocks run top to bottom, as written, in a fresh copy of the repository;
+then the Python blocks of every page of docs/.
 
 A new user copies the ``bash`` blocks in order; this test does the same, each block in one shell
 (``set -e``: the first failing command fails the test, and the shell's trace names it), in a folder
@@ -11,6 +12,10 @@ holding the repository's files and nothing else. What is changed, and why:
 * the shell is one session: after the block that activates ``.venv``, the later blocks run activated;
 * the built-in studies ``paper`` and ``million`` run as the paper's factors with 2 replicates of 10 s
   (the same commands, the same code paths, a minute instead of an hour).
+
+A ``python`` block runs with the environment's Python in the copy's folder, after the blocks above it (it
+reads what they wrote). A page may keep a block from running only by saying why in the page itself: its first
+line is a comment ``# not run: <reason>`` (an excerpt, say); every other block runs.
 """
 
 from __future__ import annotations
@@ -33,10 +38,28 @@ NOT_RUN = {
 PLACEHOLDER = "SCHEDULER-HOST"
 
 
+NOT_RUN_MARK = "# not run:"
+
+
+def fenced_blocks(text: str, languages: tuple[str, ...] = ("bash",)) -> list[tuple[int, str, str]]:
+    """The fenced blocks of a Markdown text in those languages, in order: (line number, language, body)."""
+    names = "|".join(map(re.escape, languages))
+    return [(text[:m.start()].count("\n") + 1, m.group(1), m.group(2))
+            for m in re.finditer(rf"^```({names})\n(.*?)^```$", text, flags=re.S | re.M)]
+
+
 def bash_blocks(text: str) -> list[tuple[int, str]]:
     """The ``bash`` fenced blocks of a Markdown text: (line number, body)."""
-    return [(text[:m.start()].count("\n") + 1, m.group(1))
-            for m in re.finditer(r"^```bash\n(.*?)^```$", text, flags=re.S | re.M)]
+    return [(line, body) for line, _, body in fenced_blocks(text)]
+
+
+def not_run(body: str) -> str | None:
+    """The reason a Python block gives for not running (its first line ``# not run: <reason>``), else None."""
+    first = body.split("\n", 1)[0].strip()
+    return first[len(NOT_RUN_MARK):].strip() if first.startswith(NOT_RUN_MARK) else None
+
+
+PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
 
 
 def as_run(body: str, study: str) -> str:
@@ -56,6 +79,25 @@ def test_the_readme_has_the_blocks_this_test_knows():
     assert len(blocks) >= 5
     first = blocks[0][1].splitlines()
     assert len(first) == 2 and first[0].startswith(SETUP_INSTALL) and first[1] in NOT_RUN
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_every_python_block_runs_or_says_why_not(page):
+    """A block kept from running names its reason in the page; every other one is Python that compiles (the
+    run itself is :func:`test_readme_blocks_run_in_order`)."""
+    for line, _, body in fenced_blocks((ROOT / page).read_text(), ("python",)):
+        reason = not_run(body)
+        if reason is not None:
+            assert len(reason) >= 10, f"{page} block at line {line}: '# not run:' without a reason"
+            continue
+        compile(body, f"{page}:{line}", "exec")
+
+
+def test_the_pages_have_python_blocks_that_run():
+    runnable = [(page, line) for page in PAGES for line, _, body in fenced_blocks((ROOT / page).read_text(),
+                                                                                    ("python",))
+                if not_run(body) is None]
+    assert len(runnable) >= 2, runnable
 
 
 @pytest.fixture(scope="module")
@@ -82,10 +124,20 @@ def test_readme_blocks_run_in_order(fresh_copy):
     env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep) if Path(sys.prefix) not in
                                   Path(p).parents and p != str(Path(sys.prefix) / "bin"))
     session = ""  # what the user's shell keeps from one block to the next: the activated environment
-    for line, body in bash_blocks((fresh_copy / "README.md").read_text()):
-        script = as_run(body, "short-paper.toml")
-        done = subprocess.run(["bash", "-e", "-x", "-c", session + script], cwd=fresh_copy, env=env,
-                              capture_output=True, text=True, timeout=1200)
-        assert done.returncode == 0, f"README block at line {line} failed:\n{done.stderr[-4000:]}"
-        if "source .venv/bin/activate" in script:
-            session = "source .venv/bin/activate\n"
+    python = str(fresh_copy / ".venv" / "bin" / "python")
+    for page in PAGES:  # the README first: the docs' blocks may read what its commands wrote
+        languages = ("bash", "python") if page == "README.md" else ("python",)
+        for line, language, body in fenced_blocks((fresh_copy / page).read_text(), languages):
+            if language == "python":
+                if not_run(body) is not None:
+                    continue
+                done = subprocess.run([python, "-c", body], cwd=fresh_copy, env=env, capture_output=True, text=True,
+                                      timeout=1200)
+                assert done.returncode == 0, f"{page}: Python block at line {line} failed:\n{done.stderr[-4000:]}"
+                continue
+            script = as_run(body, "short-paper.toml")
+            done = subprocess.run(["bash", "-e", "-x", "-c", session + script], cwd=fresh_copy, env=env,
+                                  capture_output=True, text=True, timeout=1200)
+            assert done.returncode == 0, f"{page}: block at line {line} failed:\n{done.stderr[-4000:]}"
+            if "source .venv/bin/activate" in script:
+                session = "source .venv/bin/activate\n"

@@ -205,8 +205,9 @@ def _is_header(row: list[str], where: str) -> bool:
             return False  # a data line (its cells are checked one by one)
         except ValueError:
             continue
-    raise ModelError(f"{where} line 1: {','.join(c.strip() for c in row)!r} is neither numbers nor a header "
-                     "naming the columns time, north, east, down")
+    # the line itself is not repeated: the file may be anyone's (a path a configuration names), its text a secret
+    raise ModelError(f"{where} line 1 ({len(row)} fields, no number) is neither numbers nor a header naming the "
+                     "columns time, north, east, down")
 
 
 __all__ = ["OPEN_DURATION", "read_trajectory_file", "semicircle", "spiral", "spiral_arc", "square_rows",

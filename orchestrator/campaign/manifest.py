@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
+from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
 from sblsim.orchestrator.output import write_atomic as write_file
@@ -125,7 +126,7 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
             raise CampaignError(f"--out: {str(out)!r} already holds a campaign; add --resume to finish it "
                                 "or choose another directory")
         try:
-            recorded = tomllib.loads(study_file.read_text())
+            recorded = tomlfile.loads(study_file.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise CampaignError(f"--resume: {str(study_file)!r} is damaged ({str(exc).splitlines()[0]}); delete it "
                                 "and resume again: it is rewritten from the study you give, and every chunk is "
@@ -133,7 +134,7 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
         execution = recorded.pop("execution", {})
         if not isinstance(execution, dict):
             execution = {}
-        if recorded != tomllib.loads(text):
+        if recorded != tomlfile.loads(text):
             raise CampaignError(f"--resume: {str(out)!r} holds a different study; choose another --out")
         if execution.get("engine", engine) != engine:
             raise CampaignError(f"--engine: {str(out)!r} was run on the {execution['engine']} engine; "

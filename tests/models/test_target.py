@@ -398,8 +398,8 @@ def test_trajectory_file_comment_lines_keep_every_data_row(tmp_path):
 
 @pytest.mark.parametrize("content,where", [
     ("time,N,E,D\n0,0,0\n10,1,1\n", r"line 2 has 3 columns"),                     # 3 columns
-    ("time,N,E\n0,0,0\n10,1,1\n", r"line 1: 'time,N,E' is neither numbers nor a header"),  # header of 3
-    ("a,b,c,d\n0,0,0,5\n10,1,1,5\n", r"line 1: 'a,b,c,d' is neither numbers nor a header"),  # not the names
+    ("time,N,E\n0,0,0\n10,1,1\n", r"line 1 \(3 fields, no number\) is neither numbers nor a header"),  # 3 names
+    ("a,b,c,d\n0,0,0,5\n10,1,1,5\n", r"line 1 \(4 fields, no number\) is neither numbers nor a header"),  # names
     ("0,0,0\n10,1,1\n", r"line 1 has 3 columns"),                                 # 3 columns, no header
     ("time,N,E,D\n0,0,0,1\n10,abc,0,1\n", r"line 3, column waypoint_north: 'abc' is not a number"),
     ("time,N,E,D\n0,0,0,1\n10,1,0,-1\n", r"line 3, column waypoint_down: -1 is outside the allowed range \[0, "),
@@ -419,6 +419,16 @@ def test_trajectory_file_malformed_raises_model_error(tmp_path, content, where):
         read_trajectory_file(f, WAYPOINTS)
     with pytest.raises(ModelError, match=r"^target\.trajectory_file: .*" + where):
         Core(Target, dict(trajectory="file", trajectory_file=str(f)))
+
+
+def test_a_file_that_is_not_a_trajectory_is_not_echoed(tmp_path):
+    """A path a configuration names may be any file (a password file): the error names it, not its text."""
+    f = tmp_path / "shadow"
+    f.write_text("root:$6$secrethash:19000:0:99999:7:::\nbin:*:19000:0:99999:7:::\n")
+    with pytest.raises(ModelError) as error:
+        read_trajectory_file(f, WAYPOINTS)
+    assert "secrethash" not in str(error.value) and "99999" not in str(error.value)
+    assert str(error.value).startswith(f"target.trajectory_file: {str(f)!r} line 1 (1 fields, no number)")
 
 
 def test_trajectory_file_time_order_error_names_the_file_line(tmp_path):

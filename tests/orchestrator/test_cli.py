@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -150,3 +151,80 @@ def test_fmus_validate(fmu_dir, tmp_path):
 def test_fmus_validate_missing_dir(tmp_path):
     proc = sblsim("fmus", "validate", tmp_path / "nothing", cwd=tmp_path)
     assert_usage_error(proc, "FMU not found", "sblsim fmus build")
+
+
+# --------------------------------------------------------------------------- outputs
+
+def test_exported_log_and_truth_have_the_mode_of_the_run_s_files(tmp_path):
+    """0666 less the umask, as every other file of the run (not mkstemp's 0600); under two umasks."""
+    for umask in (0o022, 0o027):
+        out = tmp_path / f"o{umask:o}"
+        proc = subprocess.run([sys.executable, "-c", f"import os, sys; os.umask({umask}); "
+                               "from sblsim.orchestrator.cli import main; sys.exit(main(sys.argv[1:]))",
+                               "run", "semicircle", "--set", "simulation.duration=2", "--out", str(out),
+                               "--export-log", str(out / "log" / "l.csv")], capture_output=True, text=True,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        modes = {p.name: p.stat().st_mode & 0o777 for p in [*out.iterdir(), *(out / "log").iterdir()] if p.is_file()}
+        assert modes["l.csv"] == modes["l_truth.csv"] == modes["summary.json"] == 0o666 & ~umask, modes
+
+
+def test_a_closed_pipe_does_not_fail_a_finished_run(tmp_path):
+    """``sblsim run ... | head -1``: every result is written, no error about the pipe, exit status 0."""
+    command = (f"{sys.executable} -m sblsim.orchestrator.cli run semicircle --set simulation.duration=3 --out o "
+               "--export-log l.csv | head -c 0; echo \"status ${PIPESTATUS[0]}\" >&2")
+    proc = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.stderr.strip() == "status 0", proc.stderr
+    assert (tmp_path / "o" / "summary.json").is_file() and (tmp_path / "l_truth.csv").is_file()
+    proc = subprocess.run(["bash", "-c", command.replace("head -c 0", "head -1 >/dev/null").replace(
+        "l.csv", "l.csv --force")], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.stderr.strip() == "status 0", proc.stderr
+
+
+@pytest.mark.parametrize("command", [["budget", "semicircle", "--replicates", "40"],
+                                     ["compare", "semicircle", "--replicates", "30", "--receivers", "ekf,ukf"]],
+                         ids=["budget", "compare"])
+def test_a_second_command_into_the_same_folder_is_refused_while_the_first_runs(tmp_path, command):
+    first = subprocess.Popen([sys.executable, "-m", "sblsim.orchestrator.cli", *command, "--out", "c"],
+                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lock = tmp_path / ".c.lock"
+        for _ in range(600):
+            if lock.exists() or first.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert lock.exists(), first.communicate()
+        second = sblsim(*command, "--out", "c", cwd=tmp_path)
+        assert first.poll() is None, "the first command ended before the second was refused: make it longer"
+        assert_usage_error(second, "--out:", "is being written by another sblsim command")
+    finally:
+        out, err = first.communicate(timeout=900)
+    assert first.returncode == 0, err[-2000:]
+    assert "written to c/" in out and not lock.exists()
+    third = sblsim(*command[:2], "--replicates", "2", "--out", "c", "--force", cwd=tmp_path)
+    assert third.returncode == 0, third.stderr[-2000:]  # the lock went with the first
+
+
+def test_a_latency_as_long_as_the_run_is_said_so(tmp_path, capsys):
+    assert main(["run", "semicircle", "--set", "simulation.duration=5", "--set", "receiver.latency=5",
+                 "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "receiver.latency = 5 s is as long as the run" in err and "though it used 50 ranges" in err, err
+    assert "no multilateration fix was ever made" not in err
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["fix_steps"] == 0 and summary["updates"] == 50
+
+
+def test_set_applies_over_the_compared_systems_defaults(tmp_path, capsys):
+    """README: --set applies over each system's defaults (the LBL circle takes platform.beacons = 3), in
+    compare --systems and in map --compare platform.system, though the scenario's cross would refuse it."""
+    assert main(["compare", "semicircle", "--systems", "lbl", "--receivers", "ekf", "--replicates", "2",
+                 "--set", "platform.beacons=3", "--set", "simulation.duration=3", "--out", str(tmp_path / "c")]) == 0
+    assert main(["map", "semicircle", "--compare", "platform.system=lbl,usbl", "--set", "platform.beacons=3",
+                 "--extent", "4", "--step", "1", "--out", str(tmp_path / "m")]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "c" / "compare.csv").is_file() and (tmp_path / "m" / "map.csv").is_file()
+    with pytest.raises(Exception, match="platform.beacons"):
+        load_config("semicircle", ["platform.beacons=3"])  # what refused them before
+    assert load_config("semicircle", ["platform.system=lbl", "platform.layout=circle", "platform.beacons=3"])[
+        "platform"]["beacons"] == 3

@@ -111,9 +111,10 @@ def test_a_log_replayed_with_another_receiver_equals_a_run_with_it(tmp_path, rec
 
 
 def test_a_user_model_receiver_replays_its_run(tmp_path):
+    """A log never names the program a replay runs: the user's model is given again (--receiver)."""
     model = f"model:{Path(__file__).resolve().parents[2] / 'docs' / 'examples' / 'constant_position.py'}"
     result, path = export(tmp_path, [f"receiver={model}"])
-    assert_same_receiver(result.timeseries, replay_file(path).timeseries)
+    assert_same_receiver(result.timeseries, replay_file(path, receiver=model).timeseries)
 
 
 @pytest.mark.parametrize("system", list(SYSTEMS))
@@ -130,7 +131,7 @@ def test_export_then_replay_equals_the_run_on_the_fmu_engine(tmp_path, fmu_dir, 
 def test_a_receiver_fmu_replays_its_run(tmp_path, fmu_dir):
     fmu = fmu_dir / "sblsim_receiver_ekf_seq.fmu"
     result, path = export(tmp_path, [f"receiver=fmu:{fmu}"])
-    assert_same_receiver(result.timeseries, replay_file(path).timeseries)
+    assert_same_receiver(result.timeseries, replay_file(path, receiver=f"fmu:{fmu}").timeseries)
 
 
 def test_a_log_on_another_clock_replays_the_same(tmp_path):
@@ -454,3 +455,111 @@ def test_the_log_format_document_lists_every_column():
     text = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
     for name in [*LOG_COLUMNS, *TRUTH_COLUMNS]:
         assert f"`{name}`" in text, name
+
+
+# --------------------------------------------------------------------------- latency, clocks, the text itself
+
+@pytest.mark.parametrize("latency", [0.1, 1.0, 2.5])
+def test_a_log_of_a_run_with_latency_replays_to_the_run(tmp_path, latency):
+    """The replay delays the receiver's outputs by receiver.latency as the run does (the log's configuration
+    carries it): the time series and the metrics are the run's."""
+    result, path = export(tmp_path, [f"receiver.latency={latency}", "receiver=ekf-seq"])
+    undelayed = run(load_config("harbour", [*HARBOUR, "receiver=ekf-seq"], seed=3))
+    assert np.abs(undelayed.timeseries["est_x"] - result.timeseries["est_x"]).max() > 1e-3  # the delay shows
+    replayed = replay_file(path)
+    assert replayed.config["receiver"]["latency"] == latency
+    assert_same_receiver(result.timeseries, replayed.timeseries)
+    for key in ("e_tot_mean", "nees_mean", "coverage_95", "fix_steps", "updates"):
+        assert replayed.summary[key] == pytest.approx(result.metrics.iloc[0][key], rel=0, abs=1e-12), key
+
+
+@pytest.mark.parametrize("offset", [1.7e9, 1_700_000_123.4, 3.0e10])
+def test_a_log_in_unix_time_replays_to_the_run(tmp_path, offset):
+    """Stamps near 1.7e9 s are resolved to 2.4e-7 s only (float64): no row is dropped or moved a step, and the
+    receiver's outputs are the run's."""
+    result, path = export(tmp_path, ["receiver=ekf-seq"])
+    lines = path.read_text().split("\n")
+    header = next(k for k, line in enumerate(lines) if line and not line.startswith("#"))
+    shifted = lines[:header + 1] + [f"{float(line.split(',', 1)[0]) + offset!r},{line.split(',', 1)[1]}"
+                                    for line in lines[header + 1:] if line]
+    moved = tmp_path / "unix.csv"
+    moved.write_text("\n".join(shifted) + "\n")
+    replayed = replay_file(moved, truth=False)
+    log = replayed.summary["log"]
+    assert log["used"] == log["rows"] == len(result.timeseries) and log["same_step"] == 0
+    assert len(replayed.timeseries) == len(result.timeseries)
+    np.testing.assert_allclose(replayed.timeseries["time"].to_numpy() - offset, result.timeseries["time"].to_numpy(),
+                               rtol=0, atol=1e-5)
+    for name in OUTPUTS:
+        np.testing.assert_allclose(replayed.timeseries[name].to_numpy(dtype=float),
+                                   result.timeseries[name].to_numpy(dtype=float), rtol=0, atol=TOL, err_msg=name)
+
+
+def test_stamps_too_coarse_for_the_sampling_time_are_refused(tmp_path, capsys):
+    log = tmp_path / "coarse.csv"
+    log.write_text(HEADER + "".join(f"{2e11 + 0.001 * k!r},1,6,1,0,1,2\n" for k in range(5)))
+    assert main(["replay", str(log), "--set", "simulation.sampling_time=0.001", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "too coarse for simulation.sampling_time = 0.001 s" in err, err
+
+
+def test_a_line_separator_in_a_comment_does_not_split_the_line(tmp_path, capsys):
+    """U+2028 (and other boundaries str.splitlines knows) inside a comment: one line, as an editor shows it,
+    so a valid log replays and a bad line is named by its real number."""
+    text = f"# a comment\u2028with a line separator\x0cand a form feed\n{HEADER}" + "".join(f"{g}\n" for g in GOOD[:20])
+    good = tmp_path / "sep.csv"
+    good.write_text(text)
+    assert main(["replay", str(good), "--out", str(tmp_path / "o")]) == 0
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["log"]["rows"] == 20
+    bad = tmp_path / "sep_bad.csv"
+    cells = GOOD[4].split(",")
+    bad.write_text(text.replace(GOOD[4], ",".join([*cells[:2], "6x", *cells[3:]])), newline="\r\n")
+    capsys.readouterr()
+    assert main(["replay", str(bad), "--out", str(tmp_path / "o2")]) == 2
+    assert "line 7: range_m: '6x' is not a number" in capsys.readouterr().err  # comment, header, 5th row
+
+
+def test_a_parquet_log_whose_pandas_metadata_disagrees_reads_its_cells(tmp_path):
+    """beacon_id stored as text while the pandas metadata says int64: the cells are read as a CSV's are."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    result, path = export(tmp_path, ["receiver=ekf-seq"], suffix=".parquet")
+    table = pq.read_table(path)
+    ids = pa.array([None if v is None else str(v) for v in table.column("beacon_id").to_pylist()], pa.string())
+    text = table.set_column(table.column_names.index("beacon_id"), "beacon_id", ids)
+    meta = json.loads(table.schema.metadata[b"pandas"])
+    assert any(c["name"] == "beacon_id" and c["pandas_type"] != "unicode" for c in meta["columns"])
+    strings = tmp_path / "strings.parquet"
+    pq.write_table(text.replace_schema_metadata(table.schema.metadata), strings)
+    with pytest.raises(TypeError):  # what reading it through pandas did
+        pq.read_table(strings).to_pandas()
+    assert_same_receiver(result.timeseries, replay_file(strings, truth=False).timeseries)
+
+
+def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path, capsys, monkeypatch):
+    """The limits of docs/log-format.md, made small: rows of a CSV and of a Parquet file, and bytes."""
+    import sblsim.orchestrator.replay as module
+
+    log = tmp_path / "many.csv"
+    log.write_text(HEADER + "".join(f"{0.1 * k!r},1,6,1,0,1,2\n" for k in range(1, 12)))
+    monkeypatch.setattr(module, "MAX_LOG_ROWS", 10)
+    assert main(["replay", str(log), "--out", str(tmp_path / "o")]) == 2
+    assert "has more than 10 rows (line 12)" in capsys.readouterr().err
+    parquet = tmp_path / "many.parquet"
+    pd.read_csv(log).to_parquet(parquet)
+    assert main(["replay", str(parquet), "--out", str(tmp_path / "o")]) == 2
+    assert "has 11 rows; a log is read whole, at most 10 rows" in capsys.readouterr().err
+    monkeypatch.setattr(module, "MAX_LOG_ROWS", 100)
+    monkeypatch.setattr(module, "MAX_LOG_BYTES", 100)
+    assert main(["replay", str(log), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "MiB" in err and "a log is read whole" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_documented_log_limits_are_the_code_s():
+    from sblsim.orchestrator.replay import MAX_LOG_BYTES, MAX_LOG_ROWS
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
+    assert f"{MAX_LOG_ROWS:,}" in doc and f"{MAX_LOG_BYTES // 2**20} MiB" in doc
