@@ -752,7 +752,6 @@ def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
     ConfigError
         A receiver program without ``--receiver``.
     """
-
     sim = raw.get("simulation")
     value = sim.get("receiver") if isinstance(sim, dict) else None
     if isinstance(value, str) and value not in RECEIVER_MODELS and not receiver_given:
