@@ -118,7 +118,11 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
     broadcast position's variance and the attitude variance of the system
     (:meth:`~sblsim.models.systems.System.position_errors`: ``platform.gps_sigma²``
     and ``platform.imu_sigma_deg`` [rad]²; LBL: ``platform.survey_sigma²`` and 0), and
-    ``target.depth_sigma²`` (floored at 1 mm); ``angle_sigma_deg``, the USBL
+    ``target.depth_sigma²`` (floored at 1 mm). The USBL bound takes the range's and the transceiver
+    position's apart: ``range_variance = acoustics.sigma_range²`` and ``position_variance``, the broadcast
+    position's isotropic variance per axis as the receivers' R takes it, the position error's plus the largest
+    lever arm turned by the attitude error (``σ² + (σ_att a)²``, a the receivers' ``beacon_arm`` tie,
+    :meth:`~sblsim.models.systems.System.receiver_ties`); ``angle_sigma_deg``, the USBL
     direction-of-arrival std on the array's axis, ``platform.usbl_angle_sigma_deg``
     [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
     :func:`sblsim.models.systems.usbl.pcrb`).
@@ -130,8 +134,12 @@ def bound_parameters(cfg: dict) -> dict[str, float]:
         motion = {k: target[f"walk_{k}"] for k in names}
     else:
         motion = {k: cfg["receiver"].get(k, defaults[k]) for k in names}
-    position, attitude = SYSTEMS[platform["system"]].position_errors(platform)
+    system = SYSTEMS[platform["system"]]
+    position, attitude = system.position_errors(platform)
+    arm = system.receiver_ties(platform)["beacon_arm"]
     return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + position ** 2,
+            "range_variance": cfg["acoustics"]["sigma_range"] ** 2,
+            "position_variance": position ** 2 + (attitude * arm) ** 2,
             "attitude_variance": attitude ** 2,
             "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
             "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}

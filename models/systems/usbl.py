@@ -66,27 +66,30 @@ import numpy as np
 
 from sblsim.models.acoustics.core import DIRECTION, USBL_COS_FLOOR
 from sblsim.models.bound import (
-    MODEL,
     MOTION,
-    horizontal_drms,
     information_update,
     measurement_information,
-    position_information,
     predicted,
     stepped,
 )
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.geometry import parse_offsets
+from sblsim.models.receiver import kalman
 from sblsim.models.receiver.range_bearing import RangeBearingModel
 from sblsim.models.systems import System, register
 
 #: The smallest direction-of-arrival std in R [deg] (the ``sigma_angle_deg`` parameter's minimum; the ties and
 #: the bound floor the platform's value at it).
 MIN_ANGLE_SIGMA_DEG = 1e-3
+#: ρ_min [m]: the receivers' and the bound's derivatives of the packet and the azimuth's transceiver term of R
+#: (``σ_b² / ρ²``) take the diver at least this far from the vertical through the transceiver
+#: (:func:`~sblsim.models.receiver.range_bearing.off_axis_point`), where the azimuth is undefined: below any GPS
+#: error, so that near the vertical R's ``σ_b² / ρ_min²`` leaves the azimuth without weight, and finite.
+RHO_FLOOR = 1e-3
 #: The USBL measurement model of the receivers.
-MODEL_RB = RangeBearingModel()
-#: The measurement model of the bound and the map: range, azimuth and elevation from the transceiver.
-BOUND_MODEL = RangeBearingModel(MOTION)
+MODEL_RB = RangeBearingModel(floor=RHO_FLOOR)
+#: The measurement model of the bound: range, azimuth and elevation from the transceiver.
+BOUND_MODEL = RangeBearingModel(MOTION, floor=RHO_FLOOR)
 
 
 class _PositionState:
@@ -100,7 +103,7 @@ class _PositionState:
         return x
 
 
-_POSITION_MODEL = RangeBearingModel(_PositionState())
+_POSITION_MODEL = RangeBearingModel(_PositionState(), floor=RHO_FLOOR)
 
 
 def receiver_parameters() -> tuple[Variable, ...]:
@@ -126,35 +129,96 @@ def polar_fix(u: dict) -> ca.SX:
     return transceiver(u) + r * ca.vertcat(ca.cos(e) * ca.cos(a), ca.cos(e) * ca.sin(a), ca.sin(e))
 
 
-def variances(position, beacon, p: dict) -> ca.SX:
-    """Diagonal of R, ``[σ_r² + σ_GPS², σ_α², σ_ε²]`` (3, 1), at the predicted position (3, 1) [m].
-
-    ``beacon_gps_sigma`` and ``beacon_attitude_sigma_deg`` count where the
-    receiver declares them (``p`` is read with ``get``).
-    """
-    gps = p.get("beacon_gps_sigma", 0.0)
-    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+def sensor_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance) -> ca.SX:
+    """What the packet's own measurement adds to R, ``[σ_r², σ_a², σ_a²]`` (3, 1) [m², rad², rad²], at
+    ``position`` (3, 1) [m] seen from ``beacon`` (3, 1) [m]: the range noise ``range_variance = σ_r²``, and for
+    each angle ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` (``angle_sigma_deg = σ_θ`` [deg] on the array's
+    axis, φ the line of sight's angle off the vertical, ``attitude_variance = σ_att²`` [rad²] of the IMU that turns
+    the array's angles into NED; the channel's model, :mod:`sblsim.models.acoustics.core`)."""
     d = position - beacon
     off_axis = ca.fmax(d[2] / ca.fmax(ca.norm_2(d), 1e-9), USBL_COS_FLOOR)  # cos of the angle off the vertical
-    angle = (p["sigma_angle_deg"] * (math.pi / 180.0) / off_axis) ** 2 + attitude ** 2
-    return ca.vertcat(p["sigma_range"] ** 2 + gps ** 2, angle, angle)
+    angle = (angle_sigma_deg * (math.pi / 180.0) / off_axis) ** 2 + attitude_variance
+    return ca.vertcat(range_variance, angle, angle)
+
+
+def packet_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance,
+                     position_variance) -> ca.SX:
+    """Diagonal of R of a USBL packet (3, 1) [m², rad², rad²] at ``position`` (3, 1) [m]: :func:`sensor_variances`
+    plus what an isotropic error of ``position_variance = σ_b²`` [m²] per axis in the broadcast transceiver position
+    adds, ``H_b σ_b² I H_bᵀ = σ_b² [1, 1 / ρ², 1 / r²]``
+    (:meth:`~sblsim.models.receiver.range_bearing.RangeBearingModel.transceiver_variances`, ρ floored at
+    :data:`RHO_FLOOR`):
+
+    ``[σ_r² + σ_b², σ_a² + σ_b² / ρ², σ_a² + σ_b² / r²]``.
+    """
+    return (sensor_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance)
+            + _POSITION_MODEL.transceiver_variances(position, beacon, position_variance))
+
+
+def transceiver_variance(p: dict):
+    """``σ_b² = σ_GPS² + (σ_att a)²`` [m²]: the receivers' isotropic per-axis variance of the broadcast transceiver
+    position, the GPS error and the lever arm ``a`` turned by the attitude error (taken isotropic), as for a
+    range (:meth:`~sblsim.models.receiver.measurement.RangeDepthModel.fresh_range_variance`); from
+    ``beacon_gps_sigma`` [m], ``beacon_attitude_sigma_deg`` [deg] and ``beacon_arm`` [m], each 0 where the receiver
+    does not declare it (``p`` is read with ``get``)."""
+    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+    return p.get("beacon_gps_sigma", 0.0) ** 2 + (attitude * p.get("beacon_arm", 0.0)) ** 2
+
+
+def variances(position, beacon, p: dict) -> ca.SX:
+    """Diagonal of the receivers' R (3, 1) at the predicted position (3, 1) [m]: :func:`packet_variances` with
+    ``σ_r = sigma_range``, ``σ_θ = sigma_angle_deg``, ``σ_att = beacon_attitude_sigma_deg`` and
+    ``σ_b² =`` :func:`transceiver_variance` (a receiver that declares no beacon uncertainty: σ_att = σ_b = 0)."""
+    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+    return packet_variances(position, beacon, p["sigma_range"] ** 2, p["sigma_angle_deg"], attitude ** 2,
+                            transceiver_variance(p))
+
+
+@lru_cache(maxsize=None)
+def polar_jacobian() -> ca.Function:
+    """casadi Function ``z[3] -> ∂f/∂z`` (3, 3) of the polar fix ``f = b + r (cos ε cos α, cos ε sin α, sin ε)``,
+    ``z = [r, α, ε]`` (casadi's derivative; it does not depend on b): the columns ``u``,
+    ``r cos ε (−sin α, cos α, 0)`` and ``r (−sin ε cos α, −sin ε sin α, cos ε)``, finite everywhere."""
+    z = ca.SX.sym("z", 3)
+    fix = polar_fix({"range": z[0], "azimuth": z[1], "elevation": z[2], "beacon_x": 0.0, "beacon_y": 0.0,
+                     "beacon_z": 0.0})
+    return ca.Function("sblsim_usbl_polar_jacobian", [z], [ca.jacobian(fix, z)], ["z"], ["J"])
+
+
+def packet_covariance(position, beacon, range_variance, angle_sigma_deg, attitude_variance,
+                      position_variance) -> ca.SX:
+    """Covariance of the polar fix of one packet (3, 3) [m²] for a diver at ``position`` (3, 1) [m]:
+
+    ``C = J diag(σ_r², σ_a², σ_a²) Jᵀ + σ_b² I``,
+
+    J = :func:`polar_jacobian` at ``z = h(position)``, the :func:`sensor_variances` and the isotropic transceiver
+    position error ``position_variance = σ_b²`` [m²]. Where ``H = ∂h/∂p`` is invertible ``J = H⁻¹`` and
+    ``H_b = −H``, so C is ``(Hᵀ R⁻¹ H)⁻¹`` with the receivers' R (:func:`packet_variances`); unlike that inverse
+    it is finite straight below the transceiver (the azimuth's column is ``∝ ρ``), where it tells that the
+    azimuth carries nothing.
+    """
+    z = _POSITION_MODEL.h(position, beacon)
+    J = polar_jacobian()(z)
+    R = sensor_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance)
+    return ca.mtimes([J, ca.diag(R), J.T]) + position_variance * ca.SX.eye(3)
 
 
 def fix_covariance(position, beacon, p: dict) -> ca.SX:
-    """Covariance of the polar fix, ``(Hᵀ R⁻¹ H)⁻¹`` (3, 3) [m²], H = ∂[r, α, ε]/∂p at ``position``."""
-    H = _POSITION_MODEL.linearize(position, beacon)[1]
-    information = ca.mtimes([H.T, ca.diag(1.0 / variances(position, beacon, p)), H])
-    return ca.solve(information, ca.SX.eye(3))
+    """Covariance of the polar fix (3, 3) [m²] at ``position``: :func:`packet_covariance` with the receivers'
+    parameters (as :func:`variances`)."""
+    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+    return packet_covariance(position, beacon, p["sigma_range"] ** 2, p["sigma_angle_deg"], attitude ** 2,
+                             transceiver_variance(p))
 
 
-def bound_variances(position, transceiver, noise_variance, angle_sigma_deg, attitude_variance) -> ca.SX:
-    """Variances of a USBL packet's range, azimuth and elevation at ``position`` (3, 1) [m], (3, 1):
-    :func:`variances` (the receivers' R) with ``noise_variance = σ_r² + σ_GPS²`` [m²], the angle std on the
-    array's axis ``angle_sigma_deg`` [deg] and ``attitude_variance = σ_att²`` [rad²]:
-    ``[σ_r² + σ_GPS², σ_α², σ_α²]``, ``σ_α² = (σ_θ / max(cos φ, 0.1))² + σ_att²``."""
-    p = {"sigma_range": ca.sqrt(noise_variance), "sigma_angle_deg": angle_sigma_deg,
-         "beacon_attitude_sigma_deg": ca.sqrt(attitude_variance) * (180.0 / math.pi)}
-    return variances(position, transceiver, p)
+def bound_variances(position, transceiver, range_variance, position_variance, angle_sigma_deg,
+                    attitude_variance) -> ca.SX:
+    """Variances of a USBL packet's range, azimuth and elevation at ``position`` (3, 1) [m], (3, 1): the receivers'
+    R (:func:`packet_variances`) with ``range_variance = σ_r²`` [m²], ``position_variance = σ_b²`` [m²] (the
+    broadcast transceiver position's, per axis), the angle std on the array's axis ``angle_sigma_deg`` [deg] and
+    ``attitude_variance = σ_att²`` [rad²]."""
+    return packet_variances(position, transceiver, range_variance, angle_sigma_deg, attitude_variance,
+                            position_variance)
 
 
 @lru_cache(maxsize=None)
@@ -162,8 +226,8 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     """One step of the USBL bound in covariance form, as a casadi Function.
 
     Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m],
-    noise_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²], depth_variance [m²], slot,
-    received (0 or 1)``; output the bound after the prediction over ``dt`` with ``model.motion`` and, at a
+    range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
+    depth_variance [m²], slot, received (0 or 1)``; output the bound after the prediction over ``dt`` with ``model.motion`` and, at a
     slot, the depth row, then (for a received packet) the range, azimuth and elevation rows of ``model``
     seen from the transceiver the packet carries (:func:`sblsim.models.bound.measurement_information`, H at
     the true position) with the variances :func:`bound_variances` at the true position: what
@@ -181,25 +245,25 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     motion = model.motion
     (B, dt, qh, qv, position), x, P = predicted(motion)
     beacon = ca.SX.sym("transceiver", 3)
-    noise, angle, attitude, d_var, slot, received = (
-        ca.SX.sym(name) for name in ("noise_variance", "angle_sigma_deg", "attitude_variance", "depth_variance",
-                                     "slot", "received"))
+    noise, position_var, angle, attitude, d_var, slot, received = (
+        ca.SX.sym(name) for name in ("range_variance", "position_variance", "angle_sigma_deg", "attitude_variance",
+                                     "depth_variance", "slot", "received"))
     depth_row = ca.SX.zeros(1, motion.state_size)
     depth_row[motion.position_index[2]] = 1.0
     P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
     use = ca.logic_and(slot, received)
-    P = measurement_information(P, model, x, beacon, bound_variances(position, beacon, noise, angle, attitude),
-                                (use,) * 3)
-    names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "noise_variance", "angle_sigma_deg",
-             "attitude_variance", "depth_variance", "slot", "received"]
-    return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, beacon, noise, angle, attitude,
-                                                  d_var, slot, received], [ca.vec(P)], names, ["B_next"])
+    P = measurement_information(P, model, x, beacon,
+                                bound_variances(position, beacon, noise, position_var, angle, attitude), (use,) * 3)
+    names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "range_variance", "position_variance",
+             "angle_sigma_deg", "attitude_variance", "depth_variance", "slot", "received"]
+    return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, beacon, noise, position_var, angle,
+                                                  attitude, d_var, slot, received], [ca.vec(P)], names, ["B_next"])
 
 
 #: Per-replicate inputs of the USBL bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled bound
 #: numbers them from this tuple: :func:`compiled_bound`, :mod:`sblsim.fmus.contract`).
-FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance", "angle_sigma_deg",
-         "attitude_variance", "depth_variance")
+FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance", "position_variance",
+         "angle_sigma_deg", "attitude_variance", "depth_variance")
 #: Per-step inputs of the USBL bound, in the order of :func:`pcrb`'s ``steps`` columns.
 STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transceiver_z", "slot", "received")
 
@@ -207,8 +271,8 @@ STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transc
 def _step_inputs(f, s):
     """The inputs of :func:`bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name ``f`` and the
     step columns ``s`` (in :data:`STEPS` order)."""
-    return (s[0:3], s[3:6], f["noise_variance"], f["angle_sigma_deg"], f["attitude_variance"], f["depth_variance"],
-            s[6:7], s[7:8])
+    return (s[0:3], s[3:6], f["range_variance"], f["position_variance"], f["angle_sigma_deg"], f["attitude_variance"],
+            f["depth_variance"], s[6:7], s[7:8])
 
 
 def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, transceivers: np.ndarray,
@@ -224,8 +288,10 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, trans
     transceivers : ndarray, shape (N, B, 3)
         The transceiver position the packet carries [m] (used where received).
     **fixed : float or ndarray (B,)
-        Every name of :data:`FIXED` (as for :func:`sblsim.models.bound.pcrb_inputs`, and ``angle_sigma_deg``,
-        the direction-of-arrival std on the array's axis [deg], > 0).
+        Every name of :data:`FIXED` (as for :func:`sblsim.models.bound.pcrb_inputs`; ``range_variance = σ_r²``
+        [m²] the range noise alone, ``position_variance = σ_b²`` [m²] the broadcast transceiver position's error
+        per axis (GPS and the lever arm turned by the attitude error, :func:`transceiver_variance`) and
+        ``angle_sigma_deg`` the direction-of-arrival std on the array's axis [deg], > 0).
 
     Returns
     -------
@@ -288,32 +354,33 @@ def compiled_bound() -> tuple[ca.Function, ca.Function]:
 
 @lru_cache(maxsize=None)
 def fix_information() -> ca.Function:
-    """casadi Function of the Fisher information of one USBL packet (range, azimuth, elevation) plus depth.
+    """casadi Function of the accuracy of one USBL packet (range, azimuth, elevation) plus the depth (the map).
 
-    ``(p[3], transceiver[3], sigma_range, gps_sigma, attitude_sigma_deg, sigma_angle_deg, depth_variance) ->
-    (J (3, 3), drms)``: :func:`sblsim.models.bound.position_information` of :data:`BOUND_MODEL`
-    with the transceiver as context and the receivers' R of a USBL packet
-    (:func:`variances`: ``σ_r² + σ_GPS²`` for the range, ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for each
-    angle, φ the line of sight's angle off the vertical), plus the depth row of the range model
-    (variance σ_d²); ``drms = sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m]. Straight below the transceiver the azimuth's
-    derivative is not finite (J and drms not finite there).
+    ``(p[3], transceiver[3], range_variance, position_variance, angle_sigma_deg, attitude_variance,
+    depth_variance) -> (C (3, 3), drms)``: the covariance of the packet's polar fix with the receivers' R,
+    :func:`packet_covariance` ``C_p = J diag(σ_r², σ_a², σ_a²) Jᵀ + σ_b² I`` (the Cartesian form of the Fisher
+    information ``Hᵀ R⁻¹ H`` of :data:`BOUND_MODEL` with R = :func:`packet_variances`, Kay 1993, Section 3.7:
+    ``C_p = (Hᵀ R⁻¹ H)⁻¹`` wherever H is invertible), the depth reading (variance σ_d²) added in covariance form,
+    ``C = C_p − C_p e_z e_zᵀ C_p / (e_zᵀ C_p e_z + σ_d²)`` (the same as ``(C_p⁻¹ + e_z e_zᵀ / σ_d²)⁻¹``), and
+    ``drms = sqrt(C_NN + C_EE)`` [m]. Finite everywhere, straight below the transceiver too (there the azimuth
+    carries nothing and the transceiver's error remains: with a GPS error of σ per axis, DRMS ≥ √2 σ).
 
     References
     ----------
     Kay 1993, Section 3.7. Bar-Shalom, Li, Kirubarajan 2001, Section 10.3.
     """
     p, b = ca.SX.sym("p", 3), ca.SX.sym("transceiver", 3)
-    names = ("sigma_range", "gps_sigma", "attitude_sigma_deg", "sigma_angle_deg", "depth_variance")
-    sigma_range, gps, attitude, angle, d_var = (ca.SX.sym(n) for n in names)
-    R = variances(p, b, {"sigma_range": sigma_range, "beacon_gps_sigma": gps,
-                         "beacon_attitude_sigma_deg": attitude, "sigma_angle_deg": angle})
-    J = position_information(BOUND_MODEL, p, b, R) + position_information(MODEL, p, [], ca.vertcat(d_var))
-    return ca.Function("sblsim_usbl_fix_information", [p, b, sigma_range, gps, attitude, angle, d_var],
-                       [J, horizontal_drms(J)], ["p", "transceiver", *names], ["J", "drms"])
+    names = ("range_variance", "position_variance", "angle_sigma_deg", "attitude_variance", "depth_variance")
+    range_var, position_var, angle, attitude, d_var = (ca.SX.sym(n) for n in names)
+    C = packet_covariance(p, b, range_var, angle, attitude, position_var)
+    g = C[:, 2]
+    C = kalman.symmetric(C - ca.mtimes(g, g.T) / (C[2, 2] + d_var))
+    return ca.Function("sblsim_usbl_fix_information", [p, b, *(range_var, position_var, angle, attitude, d_var)],
+                       [C, ca.sqrt(C[0, 0] + C[1, 1])], ["p", "transceiver", *names], ["C", "drms"])
 
 
-def horizontal_std(points: np.ndarray, transceiver: np.ndarray, sigma_range: float, gps_sigma: float,
-                   attitude_sigma_deg: float, sigma_angle_deg: float, depth_variance: float) -> np.ndarray:
+def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: float, position_variance: float,
+                   angle_sigma_deg: float, attitude_variance: float, depth_variance: float) -> np.ndarray:
     """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth (:func:`fix_information`).
 
     Parameters
@@ -322,24 +389,25 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, sigma_range: flo
         Target positions, NED [m].
     transceiver : ndarray, shape (3,)
         The transceiver's position, NED [m].
-    sigma_range, gps_sigma : float
-        Range noise and GPS error std [m].
-    attitude_sigma_deg, sigma_angle_deg : float
-        IMU attitude error std and direction-of-arrival std on the array's axis [deg].
+    range_variance, position_variance : float
+        σ_r², the range noise, and σ_b², the broadcast transceiver position's error per axis [m²].
+    angle_sigma_deg : float
+        Direction-of-arrival std on the array's axis [deg].
+    attitude_variance : float
+        σ_att², the IMU attitude error [rad²].
     depth_variance : float
         σ_d² [m²], > 0.
 
     Returns
     -------
     ndarray, shape (M,)
-        Infinite where the information is singular or not finite (straight below the transceiver).
+        [m], finite everywhere (straight below the transceiver too).
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
     f = fix_information().map(points.shape[0])
-    drms = np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), float(sigma_range),
-                        float(gps_sigma), float(attitude_sigma_deg), float(sigma_angle_deg),
+    return np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), float(range_variance),
+                        float(position_variance), float(angle_sigma_deg), float(attitude_variance),
                         float(depth_variance))[1]).ravel()
-    return np.where(np.isfinite(drms), drms, np.inf)
 
 
 @register
@@ -401,8 +469,9 @@ class USBL(System):
                        sigma_range: float, model=None) -> np.ndarray:
         """One packet (range, azimuth, elevation) plus the depth (:func:`horizontal_std`; ``model`` is not used:
         the packet's model is :data:`BOUND_MODEL`)."""
-        return horizontal_std(points, self.lever_arms(platform)[0], sigma_range, platform["gps_sigma"],
-                              platform["imu_sigma_deg"], parameters["angle_sigma_deg"], parameters["depth_variance"])
+        return horizontal_std(points, self.lever_arms(platform)[0], sigma_range ** 2, parameters["position_variance"],
+                              parameters["angle_sigma_deg"], parameters["attitude_variance"],
+                              parameters["depth_variance"])
 
     def measurement_model(self):
         """Range, azimuth and elevation from the transceiver (:data:`MODEL_RB`), with the depth."""
@@ -437,6 +506,7 @@ class USBL(System):
                                       lambda position: variances(position, beacon, p))
 
 
-__all__ = ["BOUND_MODEL", "FIXED", "MIN_ANGLE_SIGMA_DEG", "MODEL_RB", "STEPS", "USBL", "bound_step",
+__all__ = ["BOUND_MODEL", "FIXED", "MIN_ANGLE_SIGMA_DEG", "MODEL_RB", "RHO_FLOOR", "STEPS", "USBL", "bound_step",
            "bound_variances", "compiled_bound", "fix_covariance", "fix_information", "horizontal_std", "measurement",
-           "pcrb", "pcrb_inputs", "polar_fix", "receiver_parameters", "transceiver", "variances"]
+           "packet_covariance", "packet_variances", "pcrb", "pcrb_inputs", "polar_fix", "polar_jacobian",
+           "receiver_parameters", "sensor_variances", "transceiver", "transceiver_variance", "variances"]
