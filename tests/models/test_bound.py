@@ -242,7 +242,8 @@ def usbl_case(seed=4, n=200, b=3):
     received = slot & (rng.uniform(size=(n, b)) < 0.8)
     fixed = dict(dt=0.5, q_horizontal=np.array([0.01, 0.002, 0.05]), q_vertical=np.array([1e-3, 1e-4, 1e-2]),
                  p0_position=np.array([1.0, 2.0, 0.5]), p0_velocity=np.array([0.5, 0.2, 0.3]),
-                 noise_variance=np.array([0.02, 0.5, 0.01]), angle_sigma_deg=np.array([0.5, 1.0, 0.2]),
+                 range_variance=np.array([0.01, 0.49, 0.01]), position_variance=np.array([0.01, 1.0, 0.0]),
+                 angle_sigma_deg=np.array([0.5, 1.0, 0.2]),
                  attitude_variance=np.radians([1.0, 0.0, 0.5]) ** 2, depth_variance=np.array([1e-4, 1e-2, 1e-6]))
     return truth, slot, received, transceivers, fixed
 
@@ -250,7 +251,9 @@ def usbl_case(seed=4, n=200, b=3):
 def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elevation():
     """The USBL bound (models/systems/usbl.py pcrb) against FilterPy's KalmanFilter covariance with the linearized
     range, azimuth and elevation rows at the true position (analytic gradients, numpy) and the variances written
-    out here: ``σ_r² + σ_GPS²``, and ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for each angle (φ off the vertical)."""
+    out here: ``σ_r² + σ_b²``, ``σ_a² + σ_b² / ρ²`` and ``σ_a² + σ_b² / r²``, ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²``
+    (φ off the vertical) and σ_b² the transceiver position's variance per axis (its error seen along the range and
+    across the angles)."""
     from sblsim.models.systems.usbl import pcrb as usbl_pcrb
     from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 
@@ -272,15 +275,18 @@ def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elev
                     cos_phi = d[2] / np.linalg.norm(d)
                     floored += cos_phi < 0.1
                     angle = (np.radians(f["angle_sigma_deg"]) / max(cos_phi, 0.1)) ** 2 + f["attitude_variance"]
+                    b2, rho2 = f["position_variance"], d[0] ** 2 + d[1] ** 2
                     H = np.zeros((3, 6))
                     H[:, [0, 2, 4]] = usbl_gradients(truth[k, r], transceivers[k, r])
-                    kf.update(np.zeros((3, 1)), R=np.diag([f["noise_variance"], angle, angle]), H=H)
+                    R = np.diag([f["range_variance"] + b2, angle + b2 / rho2, angle + b2 / (rho2 + d[2] ** 2)])
+                    kf.update(np.zeros((3, 1)), R=R, H=H)
             assert bound[k, r] == pytest.approx(np.sqrt(kf.P[0, 0] + kf.P[2, 2] + kf.P[4, 4]), rel=1e-7), (k, r)
     assert floored > 50 and received.sum() > 300  # the floor of the angle noise is exercised
     # the angles carry the horizontal position: far below the range-only bound of the same packets
     zeros = np.zeros_like(transceivers)
-    range_only = pcrb(*pcrb_inputs(truth, slot, received, transceivers, zeros, **{
-        k: v for k, v in fixed.items() if k != "angle_sigma_deg"}))
+    ranges = {k: v for k, v in fixed.items() if k not in ("angle_sigma_deg", "range_variance", "position_variance")}
+    range_only = pcrb(*pcrb_inputs(truth, slot, received, transceivers, zeros,
+                                   noise_variance=fixed["range_variance"] + fixed["position_variance"], **ranges))
     assert np.all(bound[-1] < 0.5 * range_only[-1])
 
 
@@ -299,7 +305,8 @@ def test_the_compiled_usbl_bound_is_the_reference_one():
     received = slot & (rng.random((n, b)) < 0.8)
     fixed, steps = usbl_pcrb_inputs(truth, slot, received, transceiver, dt=0.1, q_horizontal=0.01,
                                     q_vertical=0.001, p0_position=1.0, p0_velocity=np.linspace(0.2, 1.0, b),
-                                    noise_variance=0.02, angle_sigma_deg=0.5, attitude_variance=1e-4,
+                                    range_variance=0.01, position_variance=np.linspace(0.0, 1.0, b),
+                                    angle_sigma_deg=0.5, attitude_variance=1e-4,
                                     depth_variance=1e-4)
     reference = usbl_pcrb(fixed, steps)
     np.testing.assert_allclose(native.system_pcrb(1, fixed, steps), reference, rtol=1e-12, atol=0)

@@ -11,11 +11,12 @@ one ``predict()`` per receiver step and, at each new slot (the slot rule
 re-implemented there), one scalar ``update()`` with the depth and then, for a
 received packet, one ``update()`` with ``[r, α, ε]``: h and its Jacobian
 written out in numpy (``test_measurement_models.py``), the angle residuals
-wrapped to (−π, π], and R = diag(σ_r² + σ_GPS², σ_α², σ_α²) with
-``σ_α² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` at the position after the
-depth update (numpy; checked here against
-:func:`sblsim.models.systems.usbl.variances` as numbers). The ``ekf``
-receiver has no gate (gate probability 1).
+wrapped to (−π, π], and R = diag(σ_r² + σ_b², σ_a² + σ_b² / ρ², σ_a² + σ_b² / r²)
+with ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` and the transceiver position's
+error ``σ_b² = σ_GPS² + (σ_att a)²`` at the position after the depth update
+(numpy; checked here against :func:`sblsim.models.systems.usbl.variances` as
+numbers; the ``ekf`` declares no GPS, attitude or lever arm: σ_att = σ_b = 0).
+The ``ekf`` receiver has no gate (gate probability 1).
 
 Tolerance. FilterPy inverts the 3 × 3 S where the receiver adds the rows one
 at a time (the same update in exact arithmetic); both are backward stable and
@@ -43,13 +44,17 @@ DEPTH_ROW = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
 
 
 def usbl_variances(position, transceiver, rc):
-    """``[σ_r² + σ_GPS², σ_α², σ_α²]`` (numpy), the receiver's parameters ``rc`` (GPS and attitude: 0 where it has
-    none)."""
+    """The receiver's R (numpy): ``[σ_r² + σ_b², σ_a² + σ_b² / ρ², σ_a² + σ_b² / r²]`` with the channel's angle noise
+    ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` and the transceiver position's error ``σ_b² = σ_GPS² + (σ_att a)²``
+    seen along the range and across the two angles (ρ at least 1 mm, r its slant range); the GPS, attitude and lever
+    arm 0 where the receiver has none."""
     d = position - transceiver
     off_axis = max(d[2] / max(np.linalg.norm(d), 1e-9), 0.1)
-    angle = (math.radians(rc["sigma_angle_deg"]) / off_axis) ** 2 + math.radians(
-        rc.get("beacon_attitude_sigma_deg", 0.0)) ** 2
-    return np.array([rc["sigma_range"] ** 2 + rc.get("beacon_gps_sigma", 0.0) ** 2, angle, angle])
+    attitude = math.radians(rc.get("beacon_attitude_sigma_deg", 0.0))
+    angle = (math.radians(rc["sigma_angle_deg"]) / off_axis) ** 2 + attitude ** 2
+    b2 = rc.get("beacon_gps_sigma", 0.0) ** 2 + (attitude * rc.get("beacon_arm", 0.0)) ** 2
+    rho = max(math.hypot(d[0], d[1]), 1e-3)
+    return np.array([rc["sigma_range"] ** 2 + b2, angle + b2 / rho ** 2, angle + b2 / (rho ** 2 + d[2] ** 2)])
 
 
 def wrapped(a, b):
@@ -93,12 +98,19 @@ def replay(ts, cfg, ratio):
 
 def test_the_numpy_variances_are_the_receivers():
     p_sym, b_sym = ca.SX.sym("p", 3), ca.SX.sym("b", 3)
-    rc = {"sigma_range": 0.1, "sigma_angle_deg": 0.7, "beacon_gps_sigma": 0.2, "beacon_attitude_sigma_deg": 1.5}
+    rc = {"sigma_range": 0.1, "sigma_angle_deg": 0.7, "beacon_gps_sigma": 0.2, "beacon_attitude_sigma_deg": 1.5,
+          "beacon_arm": 2.0}
     f = ca.Function("v", [p_sym, b_sym], [usbl.variances(p_sym, b_sym, rc)])
     rng = np.random.default_rng(3)
     for p in rng.normal(scale=[20, 20, 4], size=(20, 3)) + [0, 0, 3]:  # some above the transceiver: the floor
         b = np.array([0.1, -0.2, 1.0])
-        np.testing.assert_allclose(np.array(f(p, b)).ravel(), usbl_variances(p, b, rc), rtol=1e-14)
+        np.testing.assert_allclose(np.array(f(p, b)).ravel(), usbl_variances(p, b, rc), rtol=1e-13)
+    for p in ([0.1, -0.2, 5.0], [0.1 + 2e-4, -0.2, 5.0]):  # straight below it, and within the 1 mm floor
+        np.testing.assert_allclose(np.array(f(p, b)).ravel(), usbl_variances(np.array(p), b, rc), rtol=1e-13)
+    without = {k: v for k, v in rc.items() if not k.startswith("beacon_")}  # the ekf: no transceiver error
+    f = ca.Function("v", [p_sym, b_sym], [usbl.variances(p_sym, b_sym, without)])
+    np.testing.assert_allclose(np.array(f([3.0, 4.0, 5.0], b)).ravel(),
+                               usbl_variances(np.array([3.0, 4.0, 5.0]), b, without), rtol=1e-14)
 
 
 @pytest.fixture(scope="module", params=[1, 3], ids=["ratio1", "ratio3"])
