@@ -127,13 +127,20 @@ def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
     truth = np.stack([column[f"true_{a}"] for a in "xyz"], -1)
     transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], -1)
     p = bound_parameters(cfg)
-    fixed = {k: p[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance",
-                               "angle_sigma_deg", "attitude_variance", "depth_variance")}
+    fixed = {k: p[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance",
+                               "position_variance", "angle_sigma_deg", "attitude_variance", "depth_variance")}
+    # the transceiver position's error per axis: the GPS error and the lever arm turned by the attitude error
+    platform = cfg["platform"]
+    assert fixed["position_variance"] == pytest.approx(
+        platform["gps_sigma"] ** 2 + (math.radians(platform["imu_sigma_deg"]) * platform["transducer_depth"]) ** 2,
+        rel=1e-12)
     bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=0.1, **fixed))
     np.testing.assert_array_equal(column["pcrb"], bound)
     np.testing.assert_allclose(result.metrics["pcrb_rms"], np.sqrt(np.mean(bound**2, axis=0)), rtol=1e-14)
-    fixed.pop("angle_sigma_deg")
-    range_only = pcrb(*pcrb_inputs(truth, slot, fresh, transceiver, np.zeros_like(truth), dt=0.1, **fixed))
+    for k in ("angle_sigma_deg", "range_variance", "position_variance"):
+        fixed.pop(k)
+    range_only = pcrb(*pcrb_inputs(truth, slot, fresh, transceiver, np.zeros_like(truth), dt=0.1,
+                                   noise_variance=p["noise_variance"], **fixed))
     assert np.all(np.sqrt(np.mean(range_only**2, axis=0)) > 3 * result.metrics["pcrb_rms"])
     alone = run(cfg, replicates=[1])  # a run's bound whatever batch it is part of
     np.testing.assert_array_equal(alone.timeseries["pcrb"], column["pcrb"][:, 1])

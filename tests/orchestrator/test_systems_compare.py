@@ -129,23 +129,25 @@ def test_the_lbl_map_at_the_centre_of_the_circle_is_the_closed_form(n):
 
 
 def _usbl_closed_form(rho: float, dz: float, sigma_range: float, gps: float, attitude_deg: float,
-                      angle_deg: float) -> float:
+                      angle_deg: float, arm: float) -> float:
     """Horizontal DRMS of one USBL packet at horizontal distance ρ, depth difference Δz, the depth known.
 
     Frame at the diver: u the horizontal direction away from the transceiver, t across it. With
-    ``r = sqrt(ρ² + Δz²)``, elevation ε (``cos ε = ρ / r``) and the angle noise
-    ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` (``cos φ = Δz / r``, φ off the vertical):
-    the range's gradient is ``(cos ε) u + (sin ε) down``, the azimuth's ``t / ρ``, the elevation's
-    ``(−sin ε u + cos ε down) / r``. With the depth known (σ_d → 0) the horizontal information is
-    diagonal in (u, t): ``cos² ε / σ_R² + sin² ε / (r² σ_a²)`` along u (σ_R² = σ_r² + σ_GPS²) and
-    ``1 / (ρ² σ_a²)`` across, so ``DRMS² = ρ² σ_a² + 1 / (cos² ε / σ_R² + sin² ε / (r² σ_a²))``. Far away
-    and at a shallow angle the across term dominates: ``DRMS ≈ ρ σ_a``, linear in the distance.
+    ``r = sqrt(ρ² + Δz²)``, elevation ε (``cos ε = ρ / r``), the angle noise
+    ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` (``cos φ = Δz / r``, φ off the vertical) and the transceiver
+    position's error ``σ_b² = σ_GPS² + (σ_att a)²`` per axis (a the lever arm): the packet's fix has the errors
+    ``σ_r² + σ_b²`` along the line of sight, ``ρ² σ_a² + σ_b²`` across it (t) and ``r² σ_a² + σ_b²`` up its
+    vertical plane, independent. With the depth known (σ_d → 0) the variance along u is
+    ``1 / (cos² ε / (σ_r² + σ_b²) + sin² ε / (r² σ_a² + σ_b²))``, so
+    ``DRMS² = ρ² σ_a² + σ_b² + 1 / (cos² ε / (σ_r² + σ_b²) + sin² ε / (r² σ_a² + σ_b²))``. Far away and at a
+    shallow angle the across term dominates: ``DRMS ≈ ρ σ_a``, linear in the distance.
     """
     r = math.hypot(rho, dz)
     sa2 = (math.radians(angle_deg) / max(dz / r, 0.1)) ** 2 + math.radians(attitude_deg) ** 2
+    b2 = gps ** 2 + (math.radians(attitude_deg) * arm) ** 2
     cos_e, sin_e = rho / r, dz / r
-    along = 1.0 / (cos_e ** 2 / (sigma_range ** 2 + gps ** 2) + sin_e ** 2 / (r ** 2 * sa2))
-    return math.sqrt(rho ** 2 * sa2 + along)
+    along = 1.0 / (cos_e ** 2 / (sigma_range ** 2 + b2) + sin_e ** 2 / (r ** 2 * sa2 + b2))
+    return math.sqrt(rho ** 2 * sa2 + b2 + along)
 
 
 def test_the_usbl_map_grows_linearly_far_from_the_transceiver_as_distance_times_the_angle_noise():
@@ -161,7 +163,7 @@ def test_the_usbl_map_grows_linearly_far_from_the_transceiver_as_distance_times_
     east = accuracy_map(cfg, distances, np.array([0.0]))[0]
     north = accuracy_map(cfg, np.array([0.0]), distances)[:, 0]
     np.testing.assert_allclose(east, north, rtol=1e-9)  # the map is round
-    closed = [_usbl_closed_form(rho, 4.0, sigma_range, gps, attitude, angle) for rho in distances]
+    closed = [_usbl_closed_form(rho, 4.0, sigma_range, gps, attitude, angle, 1.0) for rho in distances]
     np.testing.assert_allclose(east, closed, rtol=1e-4)
     sigma_a = math.hypot(math.radians(angle) / 0.1, math.radians(attitude))
     np.testing.assert_allclose(east[2:], distances[2:] * sigma_a, rtol=0.01)
