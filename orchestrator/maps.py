@@ -22,11 +22,13 @@ with the survey error in place of the GPS and no attitude term
 (:func:`~sblsim.orchestrator.run.bound_parameters`). USBL maps one packet
 of slant range, azimuth and elevation from the transceiver plus the depth
 (:func:`sblsim.models.systems.usbl.horizontal_std`), with the receivers' R:
-``σ_r² + σ_GPS²`` for the range, ``(σ_θ / max(cos φ, 0.1))² + σ_att²`` for
-each angle (φ the line of sight's angle off the vertical); straight below the
-transceiver the azimuth is undefined and the map has no value (as on an SBL
-beacon). What no receiver's R holds is not in a map either (the USBL array's
-misalignment, the TWTT turnaround jitter). ``--compare
+``σ_r²`` for the range, ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` for each
+angle (φ the line of sight's angle off the vertical), plus the transceiver
+position's error ``σ_b² = σ_GPS² + (σ_att h)²`` per axis along the range and
+across both angles; computed from the packet's polar-fix covariance
+``J diag(σ_r², σ_a², σ_a²) Jᵀ + σ_b² I``, finite everywhere (straight below the
+transceiver too) and never below ``√2 σ_b``. What no receiver's R holds is not
+in a map either (the USBL array's misalignment, the TWTT turnaround jitter). ``--compare
 platform.system=sbl,lbl,usbl`` maps each system from the defaults of
 ``sblsim compare --systems`` (each system object's
 :attr:`~sblsim.models.systems.System.compare_defaults`), the user's ``--set`` over them. Each

@@ -21,7 +21,9 @@ plus depth (every built-in receiver, the accuracy bound and the accuracy
 maps), and :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`,
 slant range, azimuth and elevation from a transceiver (USBL). The variance a
 range inherits from an uncertain beacon position is written once,
-:meth:`RangeDepthModel.range_variance`.
+:meth:`RangeDepthModel.range_variance`; what an uncertain transceiver adds to
+a range-bearing packet's R, ``H_b Σ_b H_bᵀ``, likewise
+(:meth:`~sblsim.models.receiver.range_bearing.RangeBearingModel.transceiver_covariance`).
 
 References
 ----------

@@ -16,7 +16,18 @@ from the parameters ``sigma_range`` [m], ``sigma_azimuth`` and
 a diver due South (α near ±π) is not seen 2π away. The Jacobian comes from
 casadi; it is singular straight above or below the transceiver
 (``d_N = d_E = 0``: the azimuth is undefined there, the derivatives not finite)
-and at the transceiver itself.
+and at the transceiver itself. With ``floor = ρ_min > 0`` the derivatives are
+taken at the point pushed out to ρ_min from the vertical (:func:`off_axis_point`),
+finite there.
+
+**The transceiver's uncertainty.** The packet is measured from the true
+transceiver and predicted from the broadcast one: an error δb moves z by
+``H_b δb``, ``H_b = ∂h/∂b`` (casadi, :meth:`RangeBearingModel.transceiver_jacobian`),
+and R gains ``H_b Σ_b H_bᵀ`` (:meth:`RangeBearingModel.transceiver_covariance`),
+``σ_b² [1, 1 / ρ², 1 / r²]`` on the diagonal for an isotropic ``Σ_b = σ_b² I``
+(:meth:`RangeBearingModel.transceiver_variances`; the rows of ``H_b`` are
+orthogonal), as a range's variance inherits a beacon's
+(:meth:`sblsim.models.receiver.measurement.RangeDepthModel.range_variance`).
 
 This module is the worked example of ``docs/measurement-models.md``: a
 measurement model is one file, its test and its documentation.

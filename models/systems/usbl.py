@@ -26,23 +26,29 @@ reading:
   fix ``b + r (cos ε cos α, cos ε sin α, sin ε)`` (:func:`polar_fix`), with
   the covariance ``(Hᵀ R⁻¹ H)⁻¹`` of the position (:func:`fix_covariance`).
 
-R: ``σ_r² + σ_GPS²`` for the range (the transceiver's position error along
-the line of sight) and ``(σ_θ / max(cos φ, floor))² + σ_att²`` for each
-angle (σ_θ = ``sigma_angle_deg`` on the array's axis, φ the predicted ray's
-angle off the vertical, σ_att the attitude error; the channel's model,
-:mod:`sblsim.models.acoustics.core`).
+R (:func:`variances`): the channel's noise, ``σ_r²`` on the range and
+``σ_a² = (σ_θ / max(cos φ, floor))² + σ_att²`` on each angle (σ_θ =
+``sigma_angle_deg`` on the array's axis, φ the predicted ray's angle off the
+vertical, σ_att the attitude error; :mod:`sblsim.models.acoustics.core`), plus
+the transceiver position's error ``H_b Σ_b H_bᵀ`` with ``Σ_b = σ_b² I``,
+``σ_b² = σ_GPS² + (σ_att a)²`` (GPS, and the lever arm a turned by the
+attitude error, as for an SBL range): ``σ_b²`` on the range, ``σ_b² / ρ²`` on
+the azimuth, ``σ_b² / r²`` on the elevation
+(:meth:`~sblsim.models.receiver.range_bearing.RangeBearingModel.transceiver_variances`).
+Straight below the transceiver the azimuth is undefined: the derivatives and
+ρ are taken at least :data:`RHO_FLOOR` off the vertical.
 
 **Bound.** :func:`bound_step`: the receivers' prediction, then at a slot the
 depth row and, for a received packet, the range, azimuth and elevation rows
 of :data:`BOUND_MODEL` with the transceiver position the packet carries, H at
 the true position, the variances of the receivers' R at the true position
-(:func:`bound_variances`). :func:`pcrb` evaluates it with casadi's virtual
-machine; :func:`compiled_bound` is the same step with the packed inputs of
-:data:`FIXED` and :data:`STEPS`, which the local engine's library of the USBL
-interface compiles (``sblsim.fmus.native``). The transceiver's lever arm
-rotated by the attitude error, the GPS error's shift of the angles' origin and
-a mounting misalignment (a bias) are not in it. **Map**: one packet plus the
-depth (:func:`fix_information`).
+(:func:`bound_variances`, the transceiver's error included). :func:`pcrb`
+evaluates it with casadi's virtual machine; :func:`compiled_bound` is the same
+step with the packed inputs of :data:`FIXED` and :data:`STEPS`, which the local
+engine's library of the USBL interface compiles (``sblsim.fmus.native``). A
+mounting misalignment (a bias) is not in it. **Map**: one packet plus the depth
+(:func:`fix_information`), from the covariance of the packet's polar fix
+(:func:`packet_covariance`, the same R in Cartesian form: finite everywhere).
 
 References
 ----------
@@ -227,9 +233,9 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
 
     Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m],
     range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
-    depth_variance [m²], slot, received (0 or 1)``; output the bound after the prediction over ``dt`` with ``model.motion`` and, at a
-    slot, the depth row, then (for a received packet) the range, azimuth and elevation rows of ``model``
-    seen from the transceiver the packet carries (:func:`sblsim.models.bound.measurement_information`, H at
+    depth_variance [m²], slot, received (0 or 1)``; output the bound after the prediction over ``dt`` with
+    ``model.motion`` and, at a slot, the depth row, then (for a received packet) the range, azimuth and elevation
+    rows of ``model`` seen from the transceiver the packet carries (:func:`sblsim.models.bound.measurement_information`, H at
     the true position) with the variances :func:`bound_variances` at the true position: what
     :func:`sblsim.models.bound.bound_step` does for a range, for the three rows of a USBL packet.
 

@@ -251,9 +251,9 @@ def usbl_case(seed=4, n=200, b=3):
 def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elevation():
     """The USBL bound (models/systems/usbl.py pcrb) against FilterPy's KalmanFilter covariance with the linearized
     range, azimuth and elevation rows at the true position (analytic gradients, numpy) and the variances written
-    out here: ``σ_r² + σ_b²``, ``σ_a² + σ_b² / ρ²`` and ``σ_a² + σ_b² / r²``, ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²``
-    (φ off the vertical) and σ_b² the transceiver position's variance per axis (its error seen along the range and
-    across the angles)."""
+    out here: ``σ_r² + σ_b²``, ``σ_a² + σ_b² / ρ²`` and ``σ_a² + σ_b² / r²``,
+    ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` (φ off the vertical) and σ_b² the transceiver position's variance
+    per axis (its error seen along the range and across the angles)."""
     from sblsim.models.systems.usbl import pcrb as usbl_pcrb
     from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 

@@ -1,5 +1,5 @@
-"""What the USBL transceiver's position error (GPS, the lever arm turned by the attitude error) does to a packet, against
-independent computations.
+"""What the USBL transceiver's position error (GPS, the lever arm turned by the attitude error) does to a packet,
+against independent computations.
 
 * R's transceiver term ``H_b Σ_b H_bᵀ`` (:meth:`RangeBearingModel.transceiver_covariance`, and its diagonal for an
   isotropic Σ_b, ``σ_b² [1, 1 / ρ², 1 / r²]``) against a Monte Carlo of the transceiver position error pushed through
@@ -10,8 +10,8 @@ independent computations.
   are finite too.
 * The map's covariance of one packet plus the depth (:func:`sblsim.models.systems.usbl.fix_information`, the
   Cartesian form) is the inverse of the bound's information of the same packet (the bound's step from a wide
-  prior, whose information is taken off; H and R of the receivers): the map and the bound use one R; below the transceiver the map is
-  finite and keeps the GPS error (DRMS ≥ √2 σ_GPS).
+  prior, whose information is taken off; H and R of the receivers): the map and the bound use one R; below the
+  transceiver the map is finite and keeps the GPS error (DRMS ≥ √2 σ_GPS).
 """
 
 from __future__ import annotations
