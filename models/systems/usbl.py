@@ -235,9 +235,10 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
     depth_variance [m²], slot, received (0 or 1)``; output the bound after the prediction over ``dt`` with
     ``model.motion`` and, at a slot, the depth row, then (for a received packet) the range, azimuth and elevation
-    rows of ``model`` seen from the transceiver the packet carries (:func:`sblsim.models.bound.measurement_information`, H at
-    the true position) with the variances :func:`bound_variances` at the true position: what
-    :func:`sblsim.models.bound.bound_step` does for a range, for the three rows of a USBL packet.
+    rows of ``model`` seen from the transceiver the packet carries
+    (:func:`sblsim.models.bound.measurement_information`, H at the true position) with the variances
+    :func:`bound_variances` at the true position: what :func:`sblsim.models.bound.bound_step` does for a range, for
+    the three rows of a USBL packet.
 
     Parameters
     ----------
