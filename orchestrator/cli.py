@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
 import threading
 from pathlib import Path
@@ -591,50 +590,17 @@ def _output(given: Path | None, default: Path, force: bool, marker: str, what: s
 
 
 def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
-    """Refuse an output directory that cannot be written, or that holds an earlier result (its ``marker``
-    file) unless ``force``: before any work.
+    """:func:`sblsim.orchestrator.output.check_output` naming ``--out``."""
+    from sblsim.orchestrator.output import check_output
 
-    Raises
-    ------
-    ModelError
-        Naming ``--out`` and what to do.
-    """
-    _check_writable(out)
-    if (out / marker).exists() and not force:
-        raise ModelError(f"--out: {str(out)!r} holds an earlier {what}; add --force to replace it or choose "
-                         "another --out")
+    check_output(out, force, marker, what)
 
 
-def _check_writable(directory: Path) -> None:
-    """Refuse an output directory that cannot be created or written, before any work.
+def _check_writable(directory: Path, option: str = "--out") -> None:
+    """:func:`sblsim.orchestrator.output.check_writable` naming ``option``."""
+    from sblsim.orchestrator.output import check_writable
 
-    Checked by doing, not by asking (``os.access`` says yes to root everywhere, even under
-    ``/proc``): a probe folder with a probe file is created in the deepest existing folder on the
-    way to ``directory`` and removed again, so nothing stays on disk.
-
-    Raises
-    ------
-    ModelError
-        Naming the directory and why.
-    """
-    import tempfile
-
-    if directory.exists() and not directory.is_dir():
-        raise ModelError(f"--out: {str(directory)!r} exists and is not a directory")
-    probe = directory.absolute()
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ModelError(f"--out: {str(directory)!r} cannot be created ({str(probe)!r} is not a directory)")
-    try:
-        folder = Path(tempfile.mkdtemp(prefix=".sblsim-probe.", dir=probe))
-        try:
-            (folder / "probe").write_bytes(b"sblsim")
-        finally:
-            shutil.rmtree(folder, ignore_errors=True)
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise ModelError(f"--out: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
+    check_writable(directory, option)
 
 
 def _codegen(args: argparse.Namespace) -> int:
