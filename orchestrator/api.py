@@ -418,7 +418,7 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
 
     _check_seed(seed)
     _check_engine(engine)
-    _check_count(replicates, "replicates", 1, 100_000)
+    _check_count(replicates, "replicates", -2**63, 2**63)  # an integer; its range is checked by the comparison
     items = _override_items(set)
     source = _source(scenario)
     names = parse_receivers(_listed(receivers, "receivers") or "")
@@ -576,7 +576,7 @@ def accuracy_map(scenario: str | Path, *, extent: float = 30.0, step: float = 0.
     _check_seed(seed)
     source = _source(scenario)
     try:
-        level_text = ",".join(format(float(v), "r") for v in levels)
+        level_text = ",".join(repr(float(v)) for v in levels)
     except (TypeError, ValueError):
         raise ConfigError(f"levels: expected numbers [m], got {levels!r}") from None
     parsed = parse_levels(level_text)

@@ -233,8 +233,7 @@ def _run(args: argparse.Namespace) -> int:
         _check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."))
     out = _output(args.out, Path("results") / cfg["run"]["scenario"], args.force, "summary.json", "run")
     try:
-        result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
-                     connections=connections)
+        result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress="auto", connections=connections)
     finally:
         if handles is not None:
             close_handles(handles)
@@ -370,7 +369,8 @@ def _output_name(scenario: str) -> str:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.compare import compare, markdown, parse_receivers, write
+    from sblsim.orchestrator import api
+    from sblsim.orchestrator.compare import markdown, parse_receivers, write
     from sblsim.orchestrator.systems import parse_systems, system_overrides
 
     _check_seed(args.seed)
@@ -380,36 +380,21 @@ def _compare(args: argparse.Namespace) -> int:
         system_overrides(systems[0], args.overrides)  # refuses a --set platform.system before any work
     out = _output(args.out, Path("results") / f"compare_{_output_name(args.scenario)}", args.force, "compare.csv",
                   "comparison")
-    table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
-                    args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
-    from sblsim.orchestrator.config import load_config
-
-    seed = load_config(args.scenario, args.overrides, args.seed)["run"]["seed"]
-    per = "receiver" if systems is None else "system and receiver"
-    title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
-             + (f", {' '.join(args.overrides)}" if args.overrides else ""))
-    note = "" if systems is None else f"systems: {describe_defaults(systems)}" + (
-        "; then --set " + " ".join(args.overrides) if args.overrides else "")
-    print(title)
-    if note:
-        print(note)
-    print(markdown(table), end="")
-    write(table, out, title, note)
+    result = api.compare(args.scenario, receivers=receivers, systems=systems, replicates=args.replicates,
+                         seed=args.seed, set=args.overrides, engine=args.engine, fmu_dir=args.fmu_dir,
+                         progress="auto")
+    print(result.title)
+    if result.note:
+        print(result.note)
+    print(markdown(result.table), end="")
+    write(result.table, out, result.title, result.note)
     print(f"written to {out}/ (compare.csv, compare.md, compare.png)")
     return 0
 
 
 def _budget(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.budget import (
-        DEFAULT_REPLICATES,
-        advice,
-        budgets,
-        check_replicates,
-        configurations,
-        lines,
-        title,
-        write,
-    )
+    from sblsim.orchestrator import api
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, configurations, write
     from sblsim.orchestrator.config import parse_compare
 
     _check_seed(args.seed)
@@ -420,17 +405,15 @@ def _budget(args: argparse.Namespace) -> int:
         from sblsim.orchestrator.config import check_receiver
 
         check_receiver(args.receiver, "--receiver")
-    configs = configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)
+    configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)  # every check before any output
     out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
                   "budget")
-    results = budgets(configs, replicates, progress=sys.stderr.isatty())
-    heading = title(args.scenario, results, args.overrides)
+    result = api.budget(args.scenario, replicates=replicates, receiver=args.receiver, compare=compare,
+                        seed=args.seed, set=args.overrides, progress="auto")
+    results, heading = result.budgets, result.title
     print(heading)
+    print("\n".join(result.lines()))
     for b in results:
-        if compare is not None:
-            print(f"{b.label}:")
-        print("\n".join(lines(b)))
-        print(f"  {advice(b)}")
         if b.diverged:
             print(f"sblsim: warning: the receiver diverged in {b.diverged} of {b.runs} runs of {b.label}: the budget "
                   "means nothing", file=sys.stderr)
@@ -441,15 +424,17 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
+    from sblsim.orchestrator import api
     from sblsim.orchestrator.config import load_config, parse_compare
-    from sblsim.orchestrator.maps import diver_depth, make_maps, parse_levels, write
+    from sblsim.orchestrator.maps import diver_depth, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
     out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map")
-    labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
-                                                   compare, args.depth)
+    result = api.accuracy_map(args.scenario, extent=args.extent, step=args.step, levels=levels, compare=compare,
+                              depth=args.depth, seed=args.seed, set=args.overrides, progress="auto")
+    labels, configs, east, north, maps = result.labels, result.configs, result.east, result.north, result.maps
     depth = configs[0]["target"]["depth"]
     where = "--depth" if args.depth is not None else diver_depth(load_config(args.scenario, args.overrides))[1]
     print(f"maps at {depth:g} m depth ({where}; --depth D to choose)")
@@ -543,6 +528,9 @@ def _fmus(args: argparse.Namespace) -> int:
         print(markdown_tables())
         return 0
     if args.fmus_command == "build":
+        def say(line: str) -> None:  # each target's binary takes seconds (cross: a minute): progress lines
+            print(f"sblsim: {line}", file=sys.stderr, flush=True)
+
         out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
         _check_writable(out)
         if args.model is not None:
@@ -551,10 +539,12 @@ def _fmus(args: argparse.Namespace) -> int:
 
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
-            print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
+            print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross, report=say)}",
+                  flush=True)
             return 0
         for name in MODELS:
-            print(f"built {build_fmu(name, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
+            print(f"built {build_fmu(name, out, n_beacons, compiler=args.compiler, cross=args.cross, report=say)}",
+                  flush=True)
         return 0
     directory = beacons_dir(args.dir or DEFAULT_DIR, n_beacons)
     failures = 0
