@@ -166,7 +166,8 @@ def test_every_public_name_exists_and_importing_sblsim_is_cheap():
     assert all(hasattr(sblsim, name) for name in sblsim.__all__)
     for name in ("load", "run", "compare", "accuracy_map", "budget", "replay", "campaign", "analyze"):
         assert callable(getattr(sblsim, name)) and getattr(sblsim, name).__doc__
-    probe = "import sys, sblsim; print(sorted(m for m in ('numpy', 'pandas', 'casadi', 'matplotlib') if m in sys.modules))"
+    probe = ("import sys, sblsim; "
+             "print(sorted(m for m in ('numpy', 'pandas', 'casadi', 'matplotlib') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True)
     assert done.stdout.strip() == "[]"
 
