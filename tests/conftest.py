@@ -6,7 +6,7 @@ import pytest
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(tmp_path_factory):
+def fmu_dir(tmp_path_factory, request):
     """Directory holding the FMUs (one per model of ``models.MODELS``) freshly built with ``build_all``.
 
     Session-scoped and lazy: the FMUs are built once, and only when a test
@@ -24,7 +24,7 @@ def fmu_dir(tmp_path_factory):
         (directory / "complete").write_text("built\n")
         return directory
 
-    if not hasattr(tmp_path_factory.config, "workerinput"):  # one process: its own folder
+    if not hasattr(request.config, "workerinput"):  # one process: its own folder
         return build(tmp_path_factory.mktemp("fmus"))
     # pytest-xdist: the workers of this run share one build (their temporary folders have one parent per run)
     shared = tmp_path_factory.getbasetemp().parent / "fmus"
