@@ -25,10 +25,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
 import tempfile
+import time
 import zipfile
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from sblsim.fmus.codegen import C_DIR, model_guid, write_sources
 from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
@@ -87,7 +89,7 @@ def beacons_dir(directory: Path | str, n_beacons: int = 4) -> Path:
 
 
 def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, compiler: str = "auto",
-              cross: bool | None = None) -> Path:
+              cross: bool | None = None, report: Callable[[str], object] | None = None) -> Path:
     """Build one model's FMU into ``out_dir``.
 
     Parameters
@@ -105,6 +107,9 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
     cross : bool, optional
         Also build the Windows and macOS binaries (needs zig); default: when
         the compiler is zig.
+    report : callable, optional
+        Called with one line before each platform's binary is compiled (which platform, how many are left
+        and, after the first, the time left) [default: silent].
 
     Returns
     -------
@@ -129,7 +134,12 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
         root = Path(tmp)
         sources = write_sources(model, n_beacons, root / "sources")
         c_files = [root / "sources" / f for f in sources.files if f.endswith(".c")]
-        for platform in platforms:
+        start = time.perf_counter()
+        for k, platform in enumerate(platforms):
+            if report is not None:
+                elapsed = time.perf_counter() - start
+                left = f", about {elapsed / k * (len(platforms) - k):.0f} s left" if k else ""
+                report(f"building the {component} FMU: {platform} ({k + 1}/{len(platforms)}{left})")
             folder = root / "binaries" / platform
             folder.mkdir(parents=True)
             compile_library(cc if platform == host_platform() else zig_cc, c_files,
@@ -137,7 +147,7 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
                             [f"SBLSIM_MODEL={sources.symbol}"], platform)
         (root / "modelDescription.xml").write_bytes(
             model_description(model, n_beacons, sources.guid, list(sources.files)))
-        partial = out_dir / f".{target.name}.partial"
+        partial = out_dir / f".{target.name}.{os.getpid()}.partial"  # builds of the same FMU may run at once
         try:
             with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as archive:
                 for path in sorted(root.rglob("*")):
@@ -160,7 +170,16 @@ def cached_fmu(model: type, n_beacons: int = 4) -> Path:
     digest.update(contract_header().encode())
     directory = cache_dir() / "fmus" / digest.hexdigest()[:16]
     path = fmu_path(directory, model.name)
-    return path if path.is_file() else build_fmu(model, directory, n_beacons, cross=False)
+    if path.is_file():
+        return path
+    report = _say if sys.stderr.isatty() else None  # the first use waits seconds for this: say so at a terminal
+    if report is not None:
+        report(f"building the {model.name} FMU for {n_beacons} beacons (once; cached in {directory})")
+    return build_fmu(model, directory, n_beacons, cross=False)
+
+
+def _say(line: str) -> None:
+    print(f"sblsim: {line}", file=sys.stderr, flush=True)
 
 
 def build_all(out_dir: Path | str = DEFAULT_DIR, compiler: str = "auto", cross: bool | None = None,

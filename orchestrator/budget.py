@@ -44,7 +44,6 @@ from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import (
@@ -55,8 +54,10 @@ from sblsim.orchestrator.config import (
     resolve,
     to_toml,
 )
+from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.progress import Progress, ProgressSpec
 from sblsim.orchestrator.run import run_batch, with_replicates
 from sblsim.orchestrator.systems import compared
 
@@ -202,8 +203,9 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
         Runs per configuration (replicates 0 … N − 1 of ``run.seed``).
     label : str, optional
         Default the scenario.
-    bar : tqdm, optional
-        A progress bar, advanced by ``replicates`` after every configuration run.
+    bar : Progress, optional
+        Advanced by every step of every replicate of every configuration run
+        (:class:`sblsim.orchestrator.progress.Progress`).
     records : RecordBuffer, optional
         Record memory re-used from batch to batch.
 
@@ -223,12 +225,11 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
         for other, values, _ in done:
             if other == c:  # the same configuration: the same runs
                 return values
-        result = run_batch(with_replicates(c, range(replicates)), "local", timeseries=False, records=records)
+        result = run_batch(with_replicates(c, range(replicates)), "local", timeseries=False, records=records,
+                           progress=bar if bar is not None else False)
         m = result.metrics
         values = m["e_tot_rms"].to_numpy(dtype=float) ** 2
         done.append((c, values, int(m["diverged"].sum())))
-        if bar is not None:
-            bar.update(replicates)
         return values
 
     on = mse(cfg)
@@ -310,19 +311,17 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
 
 
 def budgets(configs: Sequence[tuple[str, dict]], replicates: int = DEFAULT_REPLICATES,
-            progress: bool = False) -> list[Budget]:
-    """The budget of every configuration (:func:`configurations`), each of the replicates 0 … N − 1."""
+            progress: ProgressSpec = False) -> list[Budget]:
+    """The budget of every configuration (:func:`configurations`), each of the replicates 0 … N − 1.
+
+    ``progress`` reports the steps of every run (:class:`sblsim.orchestrator.progress.Progress`); default
+    silent."""
     check_replicates(replicates)
-    bar = None
-    if progress:
-        bar = tqdm(total=replicates * sum(planned(cfg) for _, cfg in configs), unit="run", leave=False,
-                   desc="budget")
+    steps = sum(planned(cfg) * step_count(cfg["simulation"]["duration"], cfg["simulation"]["sampling_time"])
+                for _, cfg in configs)
     records = RecordBuffer()
-    try:
+    with Progress(steps * replicates, "budget", "step", progress) as bar:
         return [budget(cfg, replicates, label, bar, records) for label, cfg in configs]
-    finally:
-        if bar is not None:
-            bar.close()
 
 
 def lines(b: Budget) -> list[str]:

@@ -15,10 +15,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import sys
-import tempfile
 import threading
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -45,9 +43,9 @@ from sblsim.orchestrator.config import (
     load_config,
     parse_compare,
 )
-from sblsim.orchestrator.engines import close_handles, make_handles
+from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.output import OutputLock, folder_name
+from sblsim.orchestrator.output import OutputLock, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
@@ -94,7 +92,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="built-in scenario (semicircle, spiral, random, square, harbour, random-walk) or CONFIG.toml")
     r.add_argument("--ssp", type=Path, default=None, metavar="FILE.ssp",
                    help="run an SSP package instead: its FMUs, connections and parameter sets")
-    r.add_argument("--engine", choices=("local", "fmu"), default=None,
+    r.add_argument("--engine", choices=ENGINES, default=None,
                    help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
     r.add_argument("--master", choices=ALGORITHMS, default=None,
                    help="master algorithm (default: the configuration's, gauss-seidel)")
@@ -114,7 +112,7 @@ def _parser() -> argparse.ArgumentParser:
                         "the configuration an exported log carries, else the semicircle scenario's)")
     y.add_argument("--truth", type=Path, default=None, metavar="FILE",
                    help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures")
-    y.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    y.add_argument("--engine", choices=ENGINES, default="local", help="component engine (default local)")
     y.add_argument("--out", type=Path, default=None, help="output directory (default results/replay_LOGNAME)")
     y.add_argument("--force", action="store_true", help="replace an earlier replay in --out")
     y.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -132,7 +130,7 @@ def _parser() -> argparse.ArgumentParser:
                         "on the same diver paths, replicates and error levels, each from its defaults, your --set "
                         f"over them: {describe_defaults()}")
     m.add_argument("--replicates", type=int, default=20, help="runs per receiver (default 20)")
-    m.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    m.add_argument("--engine", choices=ENGINES, default="local", help="component engine (default local)")
     m.add_argument("--out", type=Path, default=None, help="output directory (default results/compare_SCENARIO)")
     m.add_argument("--force", action="store_true", help="replace an earlier comparison in --out")
     _config_options(m)
@@ -179,7 +177,7 @@ def _parser() -> argparse.ArgumentParser:
                         "--workers processes (instead of a process pool)")
     c.add_argument("--out", type=Path, default=None, help="campaign directory (default results/STUDYNAME)")
     c.add_argument("--resume", action="store_true", help="finish the campaign in --out (missing chunks only)")
-    c.add_argument("--engine", choices=("local", "fmu"), default="local", help="component engine (default local)")
+    c.add_argument("--engine", choices=ENGINES, default="local", help="component engine (default local)")
     c.add_argument("--seed", type=int, default=None, help="campaign seed (default: the study's)")
     c.add_argument("--batch", type=int, default=None,
                    help="runs per chunk (default 800 local, 50 fmu); does not change the results")
@@ -270,8 +268,7 @@ def _run(args: argparse.Namespace) -> int:
     out = _output(args.out, Path("results") / folder_name(cfg["run"]["scenario"]), args.force, "summary.json",
                   "run", before=lambda out: _check_export_apart(args.export_log, out))
     try:
-        result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress=sys.stderr.isatty(),
-                     connections=connections)
+        result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress="auto", connections=connections)
     finally:
         if handles is not None:
             close_handles(handles)
@@ -452,7 +449,8 @@ def _output_name(scenario: str) -> str:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.compare import compare, markdown, parse_receivers, write
+    from sblsim.orchestrator import api
+    from sblsim.orchestrator.compare import markdown, parse_receivers, write
 
     _check_seed(args.seed)
     receivers = parse_receivers(args.receivers)
@@ -461,54 +459,37 @@ def _compare(args: argparse.Namespace) -> int:
         system_overrides(systems[0], args.overrides)  # refuses a --set platform.system before any work
     out = _output(args.out, Path("results") / f"compare_{_output_name(args.scenario)}", args.force, "compare.csv",
                   "comparison")
-    table = compare(args.scenario, receivers, args.replicates, args.overrides, args.seed, args.engine,
-                    args.fmu_dir, progress=sys.stderr.isatty(), systems=systems)
-    # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
-    # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
-    first = system_overrides(systems[0], args.overrides) if systems is not None else args.overrides
-    seed = load_config(args.scenario, first, args.seed)["run"]["seed"]
-    per = "receiver" if systems is None else "system and receiver"
-    title = (f"{args.scenario}: {args.replicates} replicates per {per}, seed {seed}"
-             + (f", {' '.join(args.overrides)}" if args.overrides else ""))
-    note = "" if systems is None else f"systems: {describe_defaults(systems)}" + (
-        "; then --set " + " ".join(args.overrides) if args.overrides else "")
-    print(title)
-    if note:
-        print(note)
-    print(markdown(table), end="")
-    write(table, out, title, note)
+    result = api.compare(args.scenario, receivers=receivers, systems=systems, replicates=args.replicates,
+                         seed=args.seed, set=args.overrides, engine=args.engine, fmu_dir=args.fmu_dir,
+                         progress="auto")
+    print(result.title)
+    if result.note:
+        print(result.note)
+    print(markdown(result.table), end="")
+    write(result.table, out, result.title, result.note)
     print(f"written to {out}/ (compare.csv, compare.md, compare.png)")
     return 0
 
 
 def _budget(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.budget import (
-        DEFAULT_REPLICATES,
-        advice,
-        budgets,
-        check_replicates,
-        configurations,
-        lines,
-        title,
-        write,
-    )
+    from sblsim.orchestrator import api
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, configurations, write
+
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
     check_replicates(replicates)
     compare = parse_compare(args.compare, f"platform.system={_ALL_SYSTEMS}") if args.compare else None
     if args.receiver is not None:
         check_receiver(args.receiver, "--receiver")
-    configs = configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)
+    configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)  # every check before any output
     out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
                   "budget")
-    results = budgets(configs, replicates, progress=sys.stderr.isatty())
-    heading = title(args.scenario, results, args.overrides)
+    result = api.budget(args.scenario, replicates=replicates, receiver=args.receiver, compare=compare,
+                        seed=args.seed, set=args.overrides, progress="auto")
+    results, heading = result.budgets, result.title
     print(heading)
+    print("\n".join(result.lines()))
     for b in results:
-        if compare is not None:
-            print(f"{b.label}:")
-        print("\n".join(lines(b)))
-        print(f"  {advice(b)}")
         if b.diverged:
             print(f"sblsim: warning: the receiver diverged in {b.diverged} of {b.runs} runs of {b.label}: the budget "
                   "means nothing", file=sys.stderr)
@@ -519,14 +500,16 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.maps import diver_depth, make_maps, parse_levels, write
+    from sblsim.orchestrator import api
+    from sblsim.orchestrator.maps import diver_depth, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
     out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map")
-    labels, configs, east, north, maps = make_maps(args.scenario, args.overrides, args.seed, args.extent, args.step,
-                                                   compare, args.depth)
+    result = api.accuracy_map(args.scenario, extent=args.extent, step=args.step, levels=levels, compare=compare,
+                              depth=args.depth, seed=args.seed, set=args.overrides, progress="auto")
+    labels, configs, east, north, maps = result.labels, result.configs, result.east, result.north, result.maps
     depth = configs[0]["target"]["depth"]
     where = "--depth" if args.depth is not None else diver_depth(configs[0])[1]  # (compared systems' defaults)
     print(f"maps at {depth:g} m depth ({where}; --depth D to choose)")
@@ -614,15 +597,20 @@ def _fmus(args: argparse.Namespace) -> int:
         print(markdown_tables())
         return 0
     if args.fmus_command == "build":
+        def say(line: str) -> None:  # each target's binary takes seconds (cross: a minute): progress lines
+            print(f"sblsim: {line}", file=sys.stderr, flush=True)
+
         out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
         _check_writable(out)
         if args.model is not None:
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
-            print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
+            print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross, report=say)}",
+                  flush=True)
             return 0
         for name in MODELS:
-            print(f"built {build_fmu(name, out, n_beacons, compiler=args.compiler, cross=args.cross)}", flush=True)
+            print(f"built {build_fmu(name, out, n_beacons, compiler=args.compiler, cross=args.cross, report=say)}",
+                  flush=True)
         return 0
     directory = beacons_dir(args.dir or DEFAULT_DIR, n_beacons)
     failures = 0
@@ -664,48 +652,15 @@ def _output(given: Path | None, default: Path, force: bool, marker: str, what: s
 
 
 def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
-    """Refuse an output directory that cannot be written, or that holds an earlier result (its ``marker``
-    file) unless ``force``: before any work.
+    """:func:`sblsim.orchestrator.output.check_output` naming ``--out``."""
+    from sblsim.orchestrator.output import check_output
 
-    Raises
-    ------
-    ModelError
-        Naming ``--out`` and what to do.
-    """
-    _check_writable(out)
-    if (out / marker).exists() and not force:
-        raise ModelError(f"--out: {str(out)!r} holds an earlier {what}; add --force to replace it or choose "
-                         "another --out")
+    check_output(out, force, marker, what)
 
 
 def _check_writable(directory: Path, option: str = "--out") -> None:
-    """Refuse an output directory that cannot be created or written, before any work.
-
-    Checked by doing, not by asking (``os.access`` says yes to root everywhere, even under
-    ``/proc``): a probe folder with a probe file is created in the deepest existing folder on the
-    way to ``directory`` and removed again, so nothing stays on disk.
-
-    Raises
-    ------
-    ModelError
-        Naming ``option`` (default ``--out``), the directory and why.
-    """
-    if directory.exists() and not directory.is_dir():
-        raise ModelError(f"{option}: {str(directory)!r} exists and is not a directory")
-    probe = directory.absolute()
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ModelError(f"{option}: {str(directory)!r} cannot be created ({str(probe)!r} is not a directory)")
-    try:
-        folder = Path(tempfile.mkdtemp(prefix=".sblsim-probe.", dir=probe))
-        try:
-            (folder / "probe").write_bytes(b"sblsim")
-        finally:
-            shutil.rmtree(folder, ignore_errors=True)
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise ModelError(f"{option}: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
+    """:func:`sblsim.orchestrator.output.check_writable` naming ``option``."""
+    check_writable(directory, option)
 
 
 def _codegen(args: argparse.Namespace) -> int:

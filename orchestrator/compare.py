@@ -45,8 +45,10 @@ import pandas as pd
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import check_receiver, load_config, receiver_label
+from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.progress import ProgressSpec, progress_of
 from sblsim.orchestrator.run import run_batch, with_replicates
 from sblsim.orchestrator.systems import system_overrides
 
@@ -72,7 +74,7 @@ def parse_receivers(text: str) -> list[str]:
 
 def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overrides: Sequence[str] = (),
             seed: int | None = None, engine: str = "local", fmu_dir: Path | str | None = None,
-            progress: bool = False, systems: Sequence[str] | None = None) -> pd.DataFrame:
+            progress: ProgressSpec = False, systems: Sequence[str] | None = None) -> pd.DataFrame:
     """Run every receiver (of every system) on the same replicates of a scenario and tabulate them.
 
     Parameters
@@ -85,8 +87,9 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
         Runs per receiver (replicates 0 … N − 1), 1 … 100000.
     overrides, seed, engine, fmu_dir
         As for ``sblsim run``.
-    progress : bool
-        Show a progress bar per receiver.
+    progress : bool, 'auto' or callable
+        Report the steps done over every receiver's runs (:class:`sblsim.orchestrator.progress.Progress`; a
+        unit is one step of one replicate); default silent.
     systems : sequence of str, optional
         ``platform.system`` values, each run from its compare defaults
         with ``overrides`` over them (:func:`system_overrides`); default: the
@@ -112,9 +115,15 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
                    for s in systems for r in receivers]
     rows = []
     records = RecordBuffer()  # one record memory for the receivers' batches, one after the other
-    for cfg in configs:
-        result = run_batch(with_replicates(cfg, range(replicates)), engine, fmu_dir=fmu_dir, timeseries=False,
-                           progress=progress, records=records)
+    steps = sum(step_count(c["simulation"]["duration"], c["simulation"]["sampling_time"]) for c in configs)
+    bar, own = progress_of(progress, steps * replicates, "compare")
+    try:
+        results = [run_batch(with_replicates(cfg, range(replicates)), engine, fmu_dir=fmu_dir, timeseries=False,
+                             progress=bar, records=records) for cfg in configs]
+    finally:
+        if own:
+            bar.close()
+    for cfg, result in zip(configs, results):
         m = result.metrics
         rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
         bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))

@@ -50,6 +50,7 @@ from sblsim.models.systems import SYSTEMS
 from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.progress import Progress, ProgressSpec
 from sblsim.orchestrator.run import bound_parameters
 from sblsim.orchestrator.systems import check_diver, compared
 
@@ -144,8 +145,11 @@ def system_line(cfg: dict) -> str:
 
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
               step: float = 0.5, compare: tuple[str, list[str]] | None = None,
-              depth: float | None = None) -> tuple[list[str], list[dict], np.ndarray, np.ndarray, list[np.ndarray]]:
+              depth: float | None = None, progress: ProgressSpec = False
+              ) -> tuple[list[str], list[dict], np.ndarray, np.ndarray, list[np.ndarray]]:
     """The accuracy map of a configuration, or one per value of a compared key.
+
+    ``progress`` reports each map made (:class:`sblsim.orchestrator.progress.Progress`); default silent.
 
     ``depth`` [m] is the diver's depth of every map (default :func:`diver_depth` of each configuration); the
     configurations returned hold it as ``target.depth``, which the table and the figure show.
@@ -176,7 +180,12 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
         cfg["target"]["depth"] = diver_depth(cfg)[0] if depth is None else float(depth)
         if compare is not None and compare[0] == "platform.system":
             check_diver(cfg, cfg["target"]["depth"])
-    return labels, configs, east, north, [accuracy_map(c, east, north, depth=c["target"]["depth"]) for c in configs]
+    with Progress(len(configs), "map", "map", progress) as bar:
+        maps = []
+        for c in configs:
+            maps.append(accuracy_map(c, east, north, depth=c["target"]["depth"]))
+            bar.update(1)
+    return labels, configs, east, north, maps
 
 
 def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,

@@ -194,4 +194,55 @@ class OutputLock:
         self._created = []
 
 
-__all__ = ["OutputLock", "current_umask", "folder_name", "remove_stale", "staged_directory", "write_atomic"]
+
+
+def check_output(out: Path, force: bool, marker: str, what: str, where: str = "--out") -> None:
+    """Refuse an output directory that cannot be written, or that holds an earlier result (its ``marker``
+    file) unless ``force``: before any work.
+
+    Raises
+    ------
+    ModelError
+        Naming ``where`` (the option or argument) and what to do.
+    """
+    out = Path(out)
+    check_writable(out, where)
+    if (out / marker).exists() and not force:
+        hint = ("add --force to replace it or choose another --out" if where.startswith("--")
+                else f"pass force=True to replace it or choose another {where}")
+        raise ModelError(f"{where}: {str(out)!r} holds an earlier {what}; {hint}")
+
+
+def check_writable(directory: Path, where: str = "--out") -> None:
+    """Refuse an output directory that cannot be created or written, before any work.
+
+    Checked by doing, not by asking (``os.access`` says yes to root everywhere, even under
+    ``/proc``): a probe folder with a probe file is created in the deepest existing folder on the
+    way to ``directory`` and removed again, so nothing stays on disk.
+
+    Raises
+    ------
+    ModelError
+        Naming the directory and why.
+    """
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise ModelError(f"{where}: {str(directory)!r} exists and is not a directory")
+    probe = directory.absolute()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ModelError(f"{where}: {str(directory)!r} cannot be created ({str(probe)!r} is not a directory)")
+    try:
+        folder = Path(tempfile.mkdtemp(prefix=".sblsim-probe.", dir=probe))
+        try:
+            (folder / "probe").write_bytes(b"sblsim")
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise ModelError(f"{where}: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
+
+
+__all__ = ["OutputLock", "check_output", "check_writable", "current_umask", "folder_name", "remove_stale",
+           "staged_directory", "write_atomic"]

@@ -133,28 +133,34 @@ def _limits(*series, symmetric: bool = False) -> tuple[float, float]:
     return (-top, top) if symmetric else (0.0, top)
 
 
-def save_run_figures(ts: pd.DataFrame, out_dir: Path | str, title: str = "", receiver: str = "receiver") -> list[Path]:
-    """Write ``trajectory_xy.png``, ``trajectory_3d.png``, ``errors.png`` and ``error_bounds.png`` of replicate 0."""
-    out_dir = Path(out_dir)
+def run_figures(ts: pd.DataFrame, title: str = "", receiver: str = "receiver") -> dict[str, plt.Figure]:
+    """The figures of replicate 0 of a run: ``trajectory_xy``, ``trajectory_3d``, ``errors`` and ``error_bounds``
+    (name -> matplotlib figure; the caller closes them)."""
     ts = ts[ts["replicate"] == ts["replicate"].iloc[0]]
-    paths = []
-
-    def save(fig, name):
-        paths.append(out_dir / name)
-        fig.savefig(paths[-1], dpi=120, bbox_inches="tight")
-        plt.close(fig)
-
+    figures = {}
     fig, ax = plt.subplots(figsize=(6.5, 6))
     plot_trajectory_xy(ts, ax, receiver).suptitle(f"Trajectory, {title}")
-    save(fig, "trajectory_xy.png")
+    figures["trajectory_xy"] = fig
     fig = plt.figure(figsize=(7, 6))
     plot_trajectory_3d(ts, fig.add_subplot(projection="3d"), receiver).suptitle(f"Trajectory 3D, {title}")
-    save(fig, "trajectory_3d.png")
+    figures["trajectory_3d"] = fig
     fig, axes = plt.subplots(4, 1, sharex=True, figsize=(8, 8))
     plot_errors(ts, axes, receiver).suptitle(f"Position errors, {title}")
-    save(fig, "errors.png")
+    figures["errors"] = fig
     fig, axes = plt.subplots(4, 1, sharex=True, figsize=(8, 8))
     plot_error_bounds(ts, axes, receiver).suptitle(f"Errors against ±2σ and the PCRB, {title}\n"
                                                    "(scales fit the run after its first 5 %)", fontsize=10)
-    save(fig, "error_bounds.png")
+    figures["error_bounds"] = fig
+    return figures
+
+
+def save_run_figures(ts: pd.DataFrame, out_dir: Path | str, title: str = "", receiver: str = "receiver") -> list[Path]:
+    """Write ``trajectory_xy.png``, ``trajectory_3d.png``, ``errors.png`` and ``error_bounds.png`` of replicate 0
+    (:func:`run_figures`)."""
+    out_dir = Path(out_dir)
+    paths = []
+    for name, fig in run_figures(ts, title, receiver).items():
+        paths.append(out_dir / f"{name}.png")
+        fig.savefig(paths[-1], dpi=120, bbox_inches="tight")
+        plt.close(fig)
     return paths

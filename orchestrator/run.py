@@ -6,13 +6,12 @@ import json
 import math
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from sblsim.fmus import native
 from sblsim.models.bound import FIXED
@@ -49,6 +48,7 @@ from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import RecordBuffer, simulate
 from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.progress import Progress, ProgressSpec, progress_of
 
 #: A system's time series adds its own columns after :data:`TIMESERIES_COLUMNS`
 #: (:attr:`sblsim.models.systems.System.timeseries_columns`: USBL's direction of arrival and array attitude).
@@ -191,7 +191,7 @@ def with_replicates(cfg: dict, replicates: Sequence[int]) -> list[dict]:
 
 def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = None,
         fmu_dir: Path | str | None = None, handles: dict[str, ComponentHandle] | None = None,
-        progress: bool = False, connections: Sequence[Connection] | None = None) -> RunResult:
+        progress: ProgressSpec | Progress = False, connections: Sequence[Connection] | None = None) -> RunResult:
     """Simulate a resolved configuration on an engine.
 
     Parameters
@@ -207,8 +207,9 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
     handles : dict, optional
         Re-usable handles from :func:`make_handles` (FMUs are then reset, not
         re-instantiated); closed by the caller.
-    progress : bool
-        Show a progress bar on a terminal.
+    progress : bool, 'auto', callable or Progress
+        Report the steps done (:class:`sblsim.orchestrator.progress.Progress`; a unit is one step of one
+        replicate); default silent.
     connections : sequence of Connection, optional
         As for :func:`run_batch`.
 
@@ -226,7 +227,7 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
 
 
 def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str | None = None,
-              handles: dict[str, ComponentHandle] | None = None, progress: bool = False,
+              handles: dict[str, ComponentHandle] | None = None, progress: ProgressSpec | Progress = False,
               timeseries: bool = True, connections: Sequence[Connection] | None = None,
               records: RecordBuffer | None = None) -> RunResult:
     """Simulate a batch of runs, one resolved configuration each.
@@ -286,10 +287,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
         batched = all(h.batched for h in handles.values())
         groups = [cfgs] if batched else [[c] for c in cfgs]
-        bar = None
-        if progress:
-            bar = tqdm(total=n_steps * len(groups), unit="step", leave=False,
-                       desc=f"{cfgs[0]['run']['scenario']} ({engine})")
+        bar, own_bar = progress_of(progress, n_steps * len(cfgs), f"{cfgs[0]['run']['scenario']} ({engine})")
         start = time.perf_counter()
         recs, replicates, timing = [], [], {}
         try:
@@ -297,12 +295,13 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                 for name, handle in handles.items():
                     params, reps = merge_params(group, name, handle.parameters)
                     handle.setup(params, reps)
+                advance = partial(_advance, bar, len(group)) if bar.active else None
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
-                                     progress=bar.update if bar else None, algorithm=sim["master"],
+                                     progress=advance, algorithm=sim["master"],
                                      buffer=records if len(groups) == 1 else None))
                 replicates.extend(reps.tolist())
         finally:
-            if bar is not None:
+            if own_bar:
                 bar.close()
         wall = time.perf_counter() - start
     finally:
@@ -323,6 +322,11 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     result = RunResult(cfgs[0], engine, frame, metrics, n_steps, wall)
     result.step_time = timing
     return result
+
+
+def _advance(bar: Progress, width: int, steps: int) -> None:
+    """``steps`` macro steps of ``width`` replicates stepped together are done."""
+    bar.update(steps * width)
 
 
 #: The receiver's outputs a latency does not delay: diagnostics of the slot they judge, not what a diver sees.

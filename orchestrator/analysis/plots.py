@@ -255,9 +255,36 @@ def plot_residuals(result, axes) -> plt.Figure:
     return axes[0, 0].figure
 
 
+def figures(result, frame: pd.DataFrame, factors: Sequence[Any]) -> dict[str, plt.Figure]:
+    """The four figures of one scenario's fit: ``pareto``, ``main_effects``, ``interactions``, ``residuals``
+    (kind -> matplotlib figure; the caller closes them)."""
+    k = len(factors)
+    metric = result.response  # main effects and interactions on the scale of the fit
+    if result.transform != "none":
+        y = frame[result.metric].to_numpy(dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frame = frame.assign(**{metric: np.log(y) if result.transform == "log" else boxcox(y, result.lmbda)})
+    out = {}
+    fig, ax = plt.subplots(figsize=(7, 1.2 + 0.3 * len(result.effects)), layout="constrained")
+    out["pareto"] = plot_pareto(result, ax)
+    ncol = min(k, 4)
+    nrow = -(-k // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(2.4 * ncol, 2.6 * nrow), squeeze=False, layout="constrained")
+    plot_main_effects(frame, factors, metric, axes).suptitle(f"{result.scenario}: main effects, {metric}")
+    out["main_effects"] = fig
+    fig, axes = plt.subplots(k, k, figsize=(1.9 * k + 1, 1.7 * k + 0.8), squeeze=False, layout="constrained")
+    plot_interactions(frame, factors, metric, axes).suptitle(
+        f"{result.scenario}: interactions, mean {metric}{_unit(metric)}")
+    out["interactions"] = fig
+    fig, axes = plt.subplots(2, 2, figsize=(9, 7), layout="constrained")
+    plot_residuals(result, axes).suptitle(f"{result.scenario}: residuals, {result.response}")
+    out["residuals"] = fig
+    return out
+
+
 def save_figures(result, frame: pd.DataFrame, factors: Sequence[Any], out_dir: Path | str,
                  stem: str | None = None) -> dict[str, Path]:
-    """Write the four PNGs of one scenario into ``out_dir``.
+    """Write the four PNGs of one scenario into ``out_dir`` (:func:`figures`).
 
     Returns
     -------
@@ -267,31 +294,9 @@ def save_figures(result, frame: pd.DataFrame, factors: Sequence[Any], out_dir: P
     """
     out_dir = Path(out_dir)
     stem = stem or result.scenario
-    k = len(factors)
-    metric = result.response  # main effects and interactions on the scale of the fit
-    if result.transform != "none":
-        y = frame[result.metric].to_numpy(dtype=float)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            frame = frame.assign(**{metric: np.log(y) if result.transform == "log" else boxcox(y, result.lmbda)})
     paths = {}
-
-    def save(fig, kind):
+    for kind, fig in figures(result, frame, factors).items():
         paths[kind] = out_dir / f"{stem}_{kind}.png"
         fig.savefig(paths[kind], dpi=110, bbox_inches="tight")
         plt.close(fig)
-
-    fig, ax = plt.subplots(figsize=(7, 1.2 + 0.3 * len(result.effects)), layout="constrained")
-    save(plot_pareto(result, ax), "pareto")
-    ncol = min(k, 4)
-    nrow = -(-k // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(2.4 * ncol, 2.6 * nrow), squeeze=False, layout="constrained")
-    plot_main_effects(frame, factors, metric, axes).suptitle(f"{result.scenario}: main effects, {metric}")
-    save(fig, "main_effects")
-    fig, axes = plt.subplots(k, k, figsize=(1.9 * k + 1, 1.7 * k + 0.8), squeeze=False, layout="constrained")
-    plot_interactions(frame, factors, metric, axes).suptitle(
-        f"{result.scenario}: interactions, mean {metric}{_unit(metric)}")
-    save(fig, "interactions")
-    fig, axes = plt.subplots(2, 2, figsize=(9, 7), layout="constrained")
-    plot_residuals(result, axes).suptitle(f"{result.scenario}: residuals, {result.response}")
-    save(fig, "residuals")
     return paths

@@ -1,0 +1,983 @@
+"""The Python API of sblsim: ``import sblsim``.
+
+Every name in :data:`__all__` is public and stable; it is re-exported by the package ``sblsim`` itself
+(``sblsim.run``, ``sblsim.load``, ...). Everything else in the project is private by convention, however it
+is reached.
+
+Each function does what the command of the same name does (``sblsim run``, ``compare``, ``map``, ``budget``,
+``replay``, ``campaign``, ``analyze``), with the same numbers: both call the same functions of the
+orchestrator. Unlike a command, a function
+
+- returns its results as Python objects: tables as :class:`pandas.DataFrame`, figures as
+  :class:`matplotlib.figure.Figure` (made when asked for, by the results' ``plot`` methods);
+- writes nothing unless ``out`` is given (then the files the command writes; a campaign always writes its
+  directory);
+- raises an exception on bad input, never :class:`SystemExit`: :class:`SblsimError` or one of its
+  subclasses, the message naming the field and the allowed range (the command's one-line error);
+- is silent unless asked: ``progress=True`` shows a tqdm bar on standard error, ``progress=callable``
+  calls ``callable(done, total)`` as the work advances (in the units the function documents).
+
+Examples
+--------
+>>> import sblsim
+>>> r = sblsim.run("semicircle", seed=1)                        # doctest: +SKIP
+>>> r.summary["e_tot_rms"]                                      # doctest: +SKIP
+>>> cfg = sblsim.load("semicircle", set={"platform.baseline": 0.4})
+>>> cfg["platform"]["baseline"]
+0.4
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Union
+
+from sblsim.models.errors import SblsimError
+from sblsim.orchestrator.config import BUILTIN_SCENARIOS, ConfigError
+from sblsim.orchestrator.engines import ENGINES
+
+if TYPE_CHECKING:  # the heavy modules are imported when a function runs
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "load", "run", "compare", "accuracy_map", "budget", "replay", "campaign", "analyze",
+    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "ReplayResult", "CampaignResult",
+    "AnalysisResult", "SblsimError", "ConfigError", "ENGINES", "BUILTIN_SCENARIOS",
+]
+
+#: What a ``progress`` argument may be: False or None (silent, the default), True (a tqdm bar on standard
+#: error), or a callable ``progress(done, total)`` called as the work advances.
+Progress = Union[bool, None, Callable[[float, float], object]]
+
+#: What a ``set`` argument may be: a mapping ``{"section.key": value}`` (e.g. ``{"platform.baseline": 0.4,
+#: "receiver": "lsq"}``) or a sequence of ``"section.key=value"`` texts as ``--set`` takes them.
+Overrides = Union[Mapping[str, Any], Sequence[str], None]
+
+MAX_SEED = 2**31 - 1
+
+
+# --------------------------------------------------------------------------- configurations
+
+class Config(dict):
+    """A resolved, validated configuration: section -> key -> value, every key present.
+
+    A :class:`dict` (``cfg["platform"]["baseline"]`` [m]) with the sections ``run``, ``simulation``,
+    ``platform``, ``acoustics``, ``target`` and ``receiver`` (the keys and their units: the model page and
+    ``sblsim fmus variables``). Made by :func:`load`; any function that takes a scenario takes one. A
+    changed copy is made by ``sblsim.load(cfg, set={...})``, which validates it again.
+    """
+
+    @property
+    def scenario(self) -> str:
+        """``run.scenario``: the scenario's name."""
+        return str(self["run"]["scenario"])
+
+    def to_toml(self) -> str:
+        """The configuration as TOML text (what ``config.toml`` of a run holds; ``sblsim run FILE`` reads it)."""
+        from sblsim.orchestrator.config import to_toml
+
+        return to_toml(self)
+
+
+def _check_seed(seed: Any, where: str = "seed") -> None:
+    from sblsim.models.declarations import shown
+
+    if seed is None:
+        return
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"{where}: {shown(seed)} is outside the allowed range [0, {MAX_SEED}] (an integer)")
+
+
+def _override_items(overrides: Overrides) -> list[str]:
+    """``set`` as the ``section.key=value`` items of ``--set``: a mapping's values written as TOML values
+    (a text stays a text, a number keeps every digit)."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, str):
+        raise ConfigError(f"set: expected a mapping {{'section.key': value}} or a list of 'section.key=value', "
+                          f"got the text {overrides!r}")
+    if isinstance(overrides, Mapping):
+        import tomli_w
+
+        items = []
+        for key, value in overrides.items():
+            if not isinstance(key, str) or "=" in key:
+                raise ConfigError(f"set: a key must be a text 'section.key', got {key!r}")
+            try:
+                text = tomli_w.dumps({"v": value}).split("=", 1)[1].strip()
+            except TypeError:
+                raise ConfigError(f"set: {key}: {value!r} is not a number, text, boolean or list") from None
+            items.append(f"{key}={text}")
+        return items
+    items = list(overrides)
+    for item in items:
+        if not isinstance(item, str):
+            raise ConfigError(f"set: expected 'section.key=value' texts, got {item!r}")
+    return items
+
+
+def _config(source: Any, seed: int | None = None, overrides: Overrides = None) -> Config:
+    """A :class:`Config` from a scenario name, a TOML file or a configuration (re-validated with the
+    overrides and seed)."""
+    from sblsim.orchestrator.config import apply_overrides, load_config, resolve
+
+    _check_seed(seed)
+    items = _override_items(overrides)
+    if isinstance(source, Mapping):
+        return Config(resolve(apply_overrides(copy.deepcopy(dict(source)), items, seed)))
+    if not isinstance(source, (str, Path)):
+        raise ConfigError(f"scenario: expected a built-in scenario ({', '.join(BUILTIN_SCENARIOS)}), a TOML file "
+                          f"or a configuration, got {type(source).__name__}")
+    return Config(load_config(source, items, seed))
+
+
+def load(scenario_or_path: str | Path | Mapping, *, seed: int | None = None, set: Overrides = None) -> Config:
+    """The resolved, validated configuration of a scenario (``sblsim run``'s first step).
+
+    Parameters
+    ----------
+    scenario_or_path : str, Path or mapping
+        A built-in scenario (:data:`BUILTIN_SCENARIOS`), a configuration file ``CONFIG.toml`` (its relative
+        paths taken from its own folder), or a configuration (e.g. a :class:`Config`; validated again).
+    seed : int, optional
+        The campaign seed ``run.seed`` [0, 2147483647]; default the configuration's (0).
+    set : mapping or sequence of str, optional
+        Overrides, ``{"platform.baseline": 0.4, "receiver": "lsq"}`` or ``["platform.baseline=0.4"]`` (as
+        ``--set``; a key without a section is a ``simulation`` key).
+
+    Returns
+    -------
+    Config
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        An unknown scenario, section or key, a value outside its range (the message names it and the range),
+        a file that is not valid TOML.
+    """
+    return _config(scenario_or_path, seed, set)
+
+
+def _check_engine(engine: str) -> None:
+    if engine not in ENGINES:
+        raise ConfigError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+
+
+def _check_count(value: Any, where: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ConfigError(f"{where}: {value!r} is outside the allowed range [{low}, {high}] (an integer)")
+    return value
+
+
+def _prepare_out(out: str | Path | None, force: bool, marker: str, what: str) -> Path | None:
+    """``out`` checked before any work (writable; an earlier result only with ``force``)."""
+    if out is None:
+        return None
+    from sblsim.orchestrator.output import check_output
+
+    out = Path(out)
+    check_output(out, force, marker, what, "out")
+    return out
+
+
+# --------------------------------------------------------------------------- run
+
+@dataclass
+class RunResult:
+    """The outcome of :func:`run`.
+
+    Attributes
+    ----------
+    config : Config
+        The resolved configuration that ran.
+    engine : str
+        ``local`` or ``fmu``.
+    timeseries : pandas.DataFrame
+        One row per replicate and macro step: the columns of ``timeseries.parquet`` (``replicate``,
+        ``time`` [s], ``true_*``, ``est_*``, ``instr_*`` [m], [m/s], the acoustic packet, the errors
+        ``e_x``, ``e_y``, ``e_z``, ``e_tot`` [m], the receiver's covariance [m²] and the bound ``pcrb`` [m];
+        the log-format page lists them).
+    metrics : pandas.DataFrame
+        One row per replicate: the metrics of ``summary.json`` (errors [m], NEES, NIS, coverage, ...).
+    steps : int
+        Macro steps per replicate.
+    wall_time : float
+        Wall-clock time of the simulation [s].
+    out : Path or None
+        Where the run was written (``out`` of :func:`run`), else None.
+    """
+
+    config: Config
+    engine: str
+    timeseries: pd.DataFrame
+    metrics: pd.DataFrame
+    steps: int
+    wall_time: float
+    out: Path | None = None
+    _result: Any = field(default=None, repr=False)
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """``summary.json`` of the first replicate (``run.replicate``): the keys ``sblsim run`` writes
+        (``e_tot_rms`` [m], ``nees_mean``, ``coverage_95``, ``pcrb_rms`` [m], ``steps``, ``seed``, ...); a
+        metric without a value is None."""
+        return self.summaries[0]
+
+    @property
+    def summaries(self) -> list[dict[str, Any]]:
+        """``summary.json`` of every replicate, in order."""
+        from sblsim.orchestrator.run import RunResult as _Result
+        from sblsim.orchestrator.run import summary
+
+        r = self._result
+        out = []
+        for k in range(len(r.metrics)):
+            row = r.metrics.iloc[[k]].reset_index(drop=True)
+            cfg = {**r.config, "run": {**r.config["run"], "replicate": int(row["replicate"].iloc[0])}}
+            out.append(summary(_Result(cfg, r.engine, r.timeseries, row, r.steps, r.wall_time)))
+        return out
+
+    def plot(self, replicate: int | None = None) -> dict[str, Figure]:
+        """The figures ``sblsim run`` writes, of one replicate (default the first).
+
+        Returns
+        -------
+        dict
+            ``trajectory_xy``, ``trajectory_3d``, ``errors``, ``error_bounds`` -> matplotlib Figure (close
+            them with ``matplotlib.pyplot.close`` when done).
+
+        Raises
+        ------
+        ConfigError
+            A replicate the run does not have.
+        """
+        from sblsim.orchestrator.config import receiver_label
+        from sblsim.orchestrator.plots import run_figures
+
+        ts = self.timeseries
+        if replicate is not None:
+            if replicate not in set(ts["replicate"].unique().tolist()):
+                raise ConfigError(f"replicate: {replicate!r} is not one of the run's "
+                                  f"{sorted(ts['replicate'].unique().tolist())}")
+            ts = ts[ts["replicate"] == replicate]
+        receiver = receiver_label(self.config)
+        return run_figures(ts, f"{self.config.scenario}, {receiver} ({self.engine})", receiver)
+
+
+def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", replicates: int = 1,
+        seed: int | None = None, set: Overrides = None, out: str | Path | None = None, force: bool = False,
+        fmu_dir: str | Path | None = None, progress: Progress = False) -> RunResult:
+    """Simulate a scenario: the numbers of ``sblsim run``.
+
+    Parameters
+    ----------
+    config_or_scenario : str, Path or mapping
+        A built-in scenario, a ``CONFIG.toml`` or a configuration (:func:`load`).
+    engine : {'local', 'fmu'}
+        The component engine (:data:`ENGINES`); ``fmu`` needs the FMUs (``sblsim fmus build``, or built on
+        demand for other beacon counts).
+    replicates : int
+        Replicates to run, ``run.replicate`` … ``run.replicate + replicates - 1`` [1, 100000] (stepped
+        together on the local engine; each replicate's numbers are those of a run of it alone).
+    seed : int, optional
+        The campaign seed ``run.seed``; default the configuration's.
+    set : mapping or sequence of str, optional
+        Overrides, as for :func:`load`.
+    out : str or Path, optional
+        Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and the figures there (one
+        replicate only), atomically; default: nothing is written.
+    force : bool
+        Replace an earlier run in ``out``.
+    fmu_dir : str or Path, optional
+        The built FMUs (fmu engine; default ``fmus/build``).
+    progress : bool or callable
+        Report the steps done, a unit being one macro step of one replicate (:data:`Progress`).
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        Bad input of any kind (nothing is run or written).
+    """
+    from sblsim.orchestrator.run import run as _run
+    from sblsim.orchestrator.run import write_run
+
+    cfg = _config(config_or_scenario, seed, set)
+    _check_engine(engine)
+    _check_count(replicates, "replicates", 1, 100_000)
+    if out is not None and replicates != 1:
+        raise ConfigError(f"out: writes one run (the files of sblsim run); replicates is {replicates}")
+    target = _prepare_out(out, force, "summary.json", "run")
+    first = int(cfg["run"]["replicate"])
+    result = _run(cfg, engine, range(first, first + replicates), fmu_dir=fmu_dir, progress=progress)
+    if target is not None:
+        write_run(result, target)
+    return RunResult(Config(result.config), result.engine, result.timeseries, result.metrics, result.steps,
+                     result.wall_time, target, result)
+
+
+# --------------------------------------------------------------------------- compare
+
+@dataclass
+class CompareResult:
+    """The outcome of :func:`compare`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per receiver (per system, then receiver): ``compare.csv`` (``rms_e_tot``, ``pcrb_rms`` [m],
+        ``nees``, ``coverage_95``, ``us_per_step`` [µs], ...).
+    title : str
+        The heading ``sblsim compare`` prints.
+    note : str
+        The compared systems' defaults (empty without ``systems``).
+    out : Path or None
+    """
+
+    table: pd.DataFrame
+    title: str
+    note: str = ""
+    out: Path | None = None
+
+    def markdown(self) -> str:
+        """The table as ``compare.md`` shows it."""
+        from sblsim.orchestrator.compare import markdown
+
+        return markdown(self.table)
+
+    def plot(self) -> Figure:
+        """The figure ``compare.png``."""
+        from sblsim.orchestrator.compare import plot
+
+        return plot(self.table, self.title)
+
+
+def _listed(value: str | Sequence[str] | None, what: str) -> str | None:
+    if value is None or isinstance(value, str):
+        return value
+    if not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{what}: expected names, got {list(value)!r}")
+    return ",".join(value)
+
+
+def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = ("ekf", "ekf-seq", "ukf", "lsq"),
+            systems: str | Sequence[str] | None = None, replicates: int = 20, seed: int | None = None,
+            set: Overrides = None, engine: str = "local", fmu_dir: str | Path | None = None,
+            out: str | Path | None = None, force: bool = False, progress: Progress = False) -> CompareResult:
+    """Several receivers (of several positioning systems) on the same replicates: ``sblsim compare``.
+
+    Parameters
+    ----------
+    scenario : str, Path or mapping
+        A built-in scenario or ``CONFIG.toml`` (a configuration: its TOML is compared).
+    receivers : str or sequence of str
+        ``ekf``, ``ekf-seq``, ``ukf``, ``lsq``, ``model:PATH.py`` or ``fmu:PATH``.
+    systems : str or sequence of str, optional
+        ``sbl``, ``lbl``, ``usbl``: every system with every receiver, each from its defaults with ``set``
+        over them.
+    replicates : int
+        Runs per receiver, replicates 0 … N − 1 [1, 100000].
+    seed, set, engine, fmu_dir
+        As for :func:`run`.
+    out : str or Path, optional
+        Write ``compare.csv``, ``compare.md`` and ``compare.png`` there.
+    force : bool
+        Replace an earlier comparison in ``out``.
+    progress : bool or callable
+        Report the steps done, a unit being one macro step of one replicate of one receiver.
+
+    Returns
+    -------
+    CompareResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        Bad input (nothing is run or written).
+    """
+    from sblsim.orchestrator.compare import compare as _compare
+    from sblsim.orchestrator.compare import parse_receivers, write
+    from sblsim.orchestrator.systems import parse_systems, system_overrides
+
+    _check_seed(seed)
+    _check_engine(engine)
+    _check_count(replicates, "replicates", -2**63, 2**63)  # an integer; its range is checked by the comparison
+    items = _override_items(set)
+    source = _source(scenario)
+    names = parse_receivers(_listed(receivers, "receivers") or "")
+    chosen = parse_systems(_listed(systems, "systems")) if systems is not None else None
+    if chosen is not None:
+        system_overrides(chosen[0], items)  # refuses a platform.system override before any work
+    target = _prepare_out(out, force, "compare.csv", "comparison")
+    table = _compare(source, names, replicates, items, seed, engine, fmu_dir, progress=progress, systems=chosen)
+    title, note = compare_title(source, replicates, items, seed, chosen)
+    if target is not None:
+        write(table, target, title, note)
+    return CompareResult(table, title, note, target)
+
+
+def compare_title(scenario: str | Path, replicates: int, overrides: Sequence[str], seed: int | None,
+                  systems: Sequence[str] | None) -> tuple[str, str]:
+    """The heading and note of a comparison (``sblsim compare`` prints them, ``compare.md`` holds them)."""
+    from sblsim.orchestrator.config import load_config
+    from sblsim.orchestrator.systems import describe_defaults, system_overrides
+
+    # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
+    # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
+    first = system_overrides(systems[0], overrides) if systems is not None else list(overrides)
+    run_seed = load_config(scenario, first, seed)["run"]["seed"]
+    per = "receiver" if systems is None else "system and receiver"
+    title = (f"{scenario}: {replicates} replicates per {per}, seed {run_seed}"
+             + (f", {' '.join(overrides)}" if overrides else ""))
+    note = "" if systems is None else f"systems: {describe_defaults(systems)}" + (
+        "; then --set " + " ".join(overrides) if overrides else "")
+    return title, note
+
+
+def _source(scenario: Any) -> str | Path:
+    """A scenario argument of the functions that take a name or file (a configuration: written to a
+    temporary TOML file is not wanted; its scenario must be named)."""
+    if isinstance(scenario, Mapping):
+        raise ConfigError("scenario: this function takes a built-in scenario or a CONFIG.toml; write a "
+                          "configuration with Config.to_toml() and give the file")
+    if not isinstance(scenario, (str, Path)):
+        raise ConfigError(f"scenario: expected a built-in scenario or a TOML file, got {type(scenario).__name__}")
+    return str(scenario)
+
+
+# --------------------------------------------------------------------------- accuracy map
+
+@dataclass
+class MapResult:
+    """The outcome of :func:`accuracy_map`.
+
+    Attributes
+    ----------
+    labels : list of str
+        One per map: the scenario, or ``KEY = VALUE`` of a comparison.
+    configs : list of Config
+        The configuration of each map (``target.depth`` the diver's depth of the map [m]).
+    east, north : ndarray
+        The grid [m], shapes (E,) and (N,).
+    maps : list of ndarray
+        The horizontal DRMS of one round of fresh measurements plus depth [m], each of shape (N, E).
+    levels : list of float
+        The accuracy prescriptions contoured [m].
+    compared : tuple or None
+        ``(key, values)`` of a comparison.
+    out : Path or None
+    """
+
+    labels: list[str]
+    configs: list[Config]
+    east: Any
+    north: Any
+    maps: list[Any]
+    levels: list[float]
+    compared: tuple[str, list[str]] | None = None
+    out: Path | None = None
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """``map.csv``: (compared value,) ``east``, ``north``, ``depth``, ``drms`` [m], one row per cell."""
+        from sblsim.orchestrator.maps import table
+
+        return table(self.labels, self.configs, self.east, self.north, self.maps, self.compared)
+
+    def shares(self) -> list[dict[float, float]]:
+        """Per map: level [m] -> the share of the grid's cells within it [%]."""
+        out = []
+        for m in self.maps:
+            out.append({v: 100 * float((m <= v).sum()) / m.size for v in self.levels})
+        return out
+
+    def plot(self) -> Figure:
+        """The figure ``map.png``."""
+        from sblsim.orchestrator.maps import plot
+
+        return plot(self.labels, self.configs, self.east, self.north, self.maps, self.levels)
+
+
+def _compared(compare: str | tuple[str, Sequence[Any]] | None) -> tuple[str, list[str]] | None:
+    from sblsim.orchestrator.config import parse_compare
+
+    if compare is None:
+        return None
+    if isinstance(compare, str):
+        return parse_compare(compare)
+    try:
+        key, values = compare
+    except (TypeError, ValueError):
+        raise ConfigError(f"compare: expected 'KEY=V1,V2' or (key, [values]), got {compare!r}") from None
+    if not isinstance(key, str):
+        raise ConfigError(f"compare: the key must be a text 'section.key', got {key!r}")
+    return parse_compare(f"{key}={','.join(str(v) for v in values)}")
+
+
+def accuracy_map(scenario: str | Path, *, extent: float = 30.0, step: float = 0.5,
+                 levels: Sequence[float] = (0.5, 1.0, 2.0), compare: str | tuple | None = None,
+                 depth: float | None = None, seed: int | None = None, set: Overrides = None,
+                 out: str | Path | None = None, force: bool = False, progress: Progress = False) -> MapResult:
+    """The accuracy map around the platform: ``sblsim map``.
+
+    The horizontal standard deviation (DRMS) of one fix from one round of fresh measurements plus depth,
+    on a square grid, from the Fisher information of the configured error sources (Kay 1993, Section 3.7).
+
+    Parameters
+    ----------
+    scenario : str or Path
+        A built-in scenario or ``CONFIG.toml`` (the geometry and error levels).
+    extent : float
+        Half-width of the square grid [m], (0, 100000].
+    step : float
+        Grid spacing [m].
+    levels : sequence of float
+        Accuracy prescriptions to contour [m].
+    compare : str or tuple, optional
+        One map per value: ``"platform.baseline=0.4,1,3"`` or ``("platform.system", ["sbl", "lbl",
+        "usbl"])`` (a compared system starts from its defaults, ``set`` over them).
+    depth : float, optional
+        The diver's depth of the maps [m] (default ``target.depth``, or the median depth of a trajectory
+        file).
+    seed, set
+        As for :func:`run`.
+    out : str or Path, optional
+        Write ``map.csv`` and ``map.png`` there.
+    force : bool
+        Replace an earlier map in ``out``.
+    progress : bool or callable
+        Report each map made.
+
+    Returns
+    -------
+    MapResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        Bad input (nothing is computed or written).
+    """
+    from sblsim.orchestrator.maps import make_maps, parse_levels, write
+
+    _check_seed(seed)
+    source = _source(scenario)
+    try:
+        level_text = ",".join(repr(float(v)) for v in levels)
+    except (TypeError, ValueError):
+        raise ConfigError(f"levels: expected numbers [m], got {levels!r}") from None
+    parsed = parse_levels(level_text)
+    chosen = _compared(compare)
+    target = _prepare_out(out, force, "map.csv", "map")
+    labels, configs, east, north, maps = make_maps(source, _override_items(set), seed, extent, step, chosen, depth,
+                                                   progress=progress)
+    if target is not None:
+        write(labels, configs, east, north, maps, parsed, target, chosen)
+    return MapResult(labels, [Config(c) for c in configs], east, north, maps, parsed, chosen, target)
+
+
+# --------------------------------------------------------------------------- budget
+
+@dataclass
+class BudgetResult:
+    """The outcome of :func:`budget`.
+
+    Attributes
+    ----------
+    budgets : list
+        One budget per configuration (the scenario, or each compared value), each with ``label``,
+        ``config``, ``total``, ``floor``, ``remainder`` [m²], their standard errors, ``table`` (one row per
+        error source: ``contribution`` [m²], ``se`` [m²], ``share`` [-], ``rms`` [m], ``status``),
+        ``diverged``, ``runs`` and ``wall_time`` [s].
+    title : str
+        The heading ``sblsim budget`` prints.
+    compared : tuple or None
+    out : Path or None
+    """
+
+    budgets: list[Any]
+    title: str
+    compared: tuple[str, list[str]] | None = None
+    out: Path | None = None
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """``budget.csv``: one row per source (per compared value), the contributions [m²] and shares."""
+        from sblsim.orchestrator.budget import table
+
+        return table(self.budgets, self.compared[0] if self.compared else None)
+
+    def markdown(self) -> str:
+        """``budget.md``'s table."""
+        from sblsim.orchestrator.budget import markdown
+
+        return markdown(self.budgets, self.compared[0] if self.compared else None)
+
+    def lines(self) -> list[str]:
+        """What ``sblsim budget`` prints for each budget: one line per source, the floor, remainder, total
+        and what to improve first."""
+        from sblsim.orchestrator.budget import advice, lines
+
+        out = []
+        for b in self.budgets:
+            if self.compared is not None:
+                out.append(f"{b.label}:")
+            out += lines(b)
+            out.append(f"  {advice(b)}")
+        return out
+
+    def plot(self) -> Figure:
+        """The figure ``budget.png``."""
+        from sblsim.orchestrator.budget import plot
+
+        return plot(self.budgets, self.title)
+
+
+def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str | None = None,
+           compare: str | tuple | None = None, seed: int | None = None, set: Overrides = None,
+           out: str | Path | None = None, force: bool = False, progress: Progress = False) -> BudgetResult:
+    """The error budget, each error source's share of the position error: ``sblsim budget``.
+
+    Parameters
+    ----------
+    scenario : str or Path
+        A built-in scenario or ``CONFIG.toml``.
+    replicates : int, optional
+        Runs per configuration (all sources on, all off, one per source off) [2, …]; default 500.
+    receiver : str, optional
+        The receiver (default the configuration's).
+    compare : str or tuple, optional
+        One budget per value, e.g. ``"platform.system=sbl,lbl,usbl"``.
+    seed, set
+        As for :func:`run`.
+    out : str or Path, optional
+        Write ``budget.csv``, ``budget.md``, ``budget.png`` and the configurations there.
+    force : bool
+        Replace an earlier budget in ``out``.
+    progress : bool or callable
+        Report the steps done, a unit being one macro step of one replicate of one configuration.
+
+    Returns
+    -------
+    BudgetResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        Bad input, or a source that cannot be switched off (nothing is run or written).
+    """
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, budgets, check_replicates, configurations, title, write
+    from sblsim.orchestrator.config import check_receiver, parse_compare
+
+    _check_seed(seed)
+    source = _source(scenario)
+    replicates = DEFAULT_REPLICATES if replicates is None else replicates
+    _check_count(replicates, "replicates", -2**63, 2**63)
+    check_replicates(replicates)
+    if isinstance(compare, str):
+        chosen = parse_compare(compare, "platform.system=sbl,lbl,usbl")
+    else:
+        chosen = _compared(compare)
+    if receiver is not None:
+        check_receiver(receiver, "receiver")
+    items = _override_items(set)
+    configs = configurations(source, items, seed, receiver, chosen)
+    target = _prepare_out(out, force, "budget.csv", "budget")
+    results = budgets(configs, replicates, progress=progress)
+    heading = title(source, results, items)
+    if target is not None:
+        write(results, target, heading, chosen[0] if chosen else None)
+    return BudgetResult(results, heading, chosen, target)
+
+
+# --------------------------------------------------------------------------- replay
+
+@dataclass
+class ReplayResult:
+    """The outcome of :func:`replay`.
+
+    Attributes
+    ----------
+    config : Config
+        The configuration the receiver ran with.
+    source : str
+        Where that configuration came from.
+    engine : str
+    summary : dict
+        ``summary.json``: a run's keys (errors None without a truth track), ``log`` (what was read of the
+        log) and ``truth``.
+    timeseries : pandas.DataFrame
+        One row per macro step: ``time`` [s] on the log's clock, ``log_row``, the receiver's inputs and
+        outputs; with a truth track ``true_*`` [m], ``pcrb`` and the errors ``e_*`` [m].
+    out : Path or None
+    """
+
+    config: Config
+    source: str
+    engine: str
+    summary: dict[str, Any]
+    timeseries: pd.DataFrame
+    out: Path | None = None
+
+    def plot(self) -> dict[str, Figure]:
+        """The figures of a run over the steps the truth track covers (empty without truth)."""
+        import numpy as np
+
+        from sblsim.orchestrator.config import receiver_label
+        from sblsim.orchestrator.plots import run_figures
+
+        ts = self.timeseries
+        covered = ts[np.isfinite(ts["true_x"].to_numpy())] if "true_x" in ts else ts.iloc[:0]
+        if not len(covered):
+            return {}
+        receiver = receiver_label(self.config)
+        if "replicate" not in covered:
+            covered = covered.assign(replicate=0)
+        return run_figures(covered, f"replay of {self.summary['log']['file']}, {receiver} ({self.engine})", receiver)
+
+
+def replay(log: str | Path, *, receiver: str | None = None, config: str | Path | None = None,
+           truth: str | Path | None = None, engine: str = "local", set: Overrides = None,
+           fmu_dir: str | Path | None = None, out: str | Path | None = None, force: bool = False) -> ReplayResult:
+    """Run a receiver on a recorded log: ``sblsim replay``.
+
+    Parameters
+    ----------
+    log : str or Path
+        The log, ``.csv`` or ``.parquet`` (the log-format page; ``sblsim run --export-log`` writes one).
+    receiver : str, optional
+        ``ekf``, ``ekf-seq``, ``ukf``, ``lsq``, ``model:PATH.py`` or ``fmu:PATH`` (default the
+        configuration's).
+    config : str or Path, optional
+        The receiver's parameters, T and rate ratio: a built-in scenario or ``CONFIG.toml`` (default the
+        configuration an exported log carries, else the semicircle scenario's).
+    truth : str or Path, optional
+        Truth track (``time_s``, ``n_m``, ``e_m``, ``d_m``): errors, consistency and figures.
+    engine, set, fmu_dir
+        As for :func:`run`.
+    out : str or Path, optional
+        Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and the figures there.
+    force : bool
+        Replace an earlier replay in ``out``.
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        A log or truth track that cannot be read (the message names the row and column), bad options.
+    """
+    from sblsim.orchestrator.config import beacon_count
+    from sblsim.orchestrator.replay import read_log, read_truth, replay_config, write_replay
+    from sblsim.orchestrator.replay import replay as _replay
+
+    _check_engine(engine)
+    if receiver is not None and not isinstance(receiver, str):
+        raise ConfigError(f"receiver: expected a text, got {receiver!r}")
+    cfg, source = replay_config(Path(log), str(config) if config is not None else None, receiver,
+                                _override_items(set))
+    data = read_log(Path(log), beacon_count(cfg), cfg["platform"]["system"] == "usbl",
+                    cfg["acoustics"]["sound_speed_assumed"])
+    track = read_truth(Path(truth)) if truth is not None else None
+    target = _prepare_out(out, force, "summary.json", "replay")
+    result = _replay(data, cfg, engine, fmu_dir, track)
+    if target is not None:
+        write_replay(result, target)
+    return ReplayResult(Config(result.config), source, result.engine, result.summary, result.timeseries, target)
+
+
+# --------------------------------------------------------------------------- campaign and analysis
+
+@dataclass
+class CampaignResult:
+    """The outcome of :func:`campaign`.
+
+    Attributes
+    ----------
+    out : Path
+        The campaign directory.
+    total : int
+        Runs in ``runs.parquet``.
+    computed : int
+        Runs simulated by this call (0 when a finished campaign is resumed).
+    wall_time : float
+        Wall-clock time of the simulation [s].
+    """
+
+    out: Path
+    total: int
+    computed: int
+    wall_time: float
+    _result: Any = field(default=None, repr=False)
+
+    @property
+    def runs(self) -> pd.DataFrame:
+        """``runs.parquet``: one row per run, the factors' levels and the metrics (read when first asked)."""
+        return self._result.runs
+
+    def analyze(self, **options: Any) -> AnalysisResult:
+        """:func:`analyze` of this campaign (options as for :func:`analyze`)."""
+        return analyze(self.out, **options)
+
+
+def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None = None, engine: str = "local",
+             workers: int | None = None, scheduler: str | None = None, resume: bool = False,
+             batch: int | None = None, save_timeseries: bool = False, fmu_dir: str | Path | None = None,
+             progress: Progress = False) -> CampaignResult:
+    """A factorial Monte Carlo study: ``sblsim campaign``.
+
+    Parameters
+    ----------
+    study : str, Path or mapping
+        A built-in study (``paper``), a ``STUDY.toml`` or a study's tables.
+    out : str or Path
+        The campaign directory (written: ``study.toml``, ``chunks/``, ``manifest.json``, ``runs.parquet``).
+    seed : int, optional
+        The campaign seed (default the study's).
+    engine : {'local', 'fmu'}
+    workers : int, optional
+        Worker processes (default all cores; 1: in this process).
+    scheduler : str, optional
+        A Dask distributed scheduler ``tcp://host:port``, or ``local``.
+    resume : bool
+        Finish the campaign in ``out`` (missing chunks only).
+    batch : int, optional
+        Runs per chunk (does not change the results).
+    save_timeseries : bool
+        Also write every run's per-step time series.
+    fmu_dir : str or Path, optional
+        The built FMUs (fmu engine).
+    progress : bool or callable
+        Report the runs done (``True``: a bar; a callable ``progress(done, total)`` [runs]).
+
+    Returns
+    -------
+    CampaignResult
+
+    Raises
+    ------
+    SblsimError
+        Bad input (nothing is written).
+    sblsim.orchestrator.campaign.CampaignInterrupted
+        On Ctrl-C: the finished chunks are kept (``resume=True`` finishes).
+    """
+    from sblsim.orchestrator.campaign import run_campaign
+    from sblsim.orchestrator.output import check_writable
+    from sblsim.orchestrator.study import load_study
+
+    _check_seed(seed)
+    _check_engine(engine)
+    if isinstance(study, Mapping):
+        study = dict(study)
+    elif isinstance(study, Path):
+        study = str(study)
+    loaded = load_study(study, seed=seed)
+    check_writable(Path(out), "out")
+    spec: Any = "off" if progress in (False, None) else True if progress is True else progress
+    result = run_campaign(loaded, Path(out), workers=workers, scheduler=scheduler, resume=resume, engine=engine,
+                          batch=batch, fmu_dir=fmu_dir, save_timeseries=save_timeseries, progress=spec)
+    return CampaignResult(result.out, result.total, result.computed, result.wall_time, result)
+
+
+@dataclass
+class AnalysisResult:
+    """The outcome of :func:`analyze`.
+
+    Attributes
+    ----------
+    effects : pandas.DataFrame
+        ``effects.csv``: per scenario and term, ``effect``, ``coefficient``, ``std_err``, ``t``, ``p_value``
+        (in the metric's unit, [m] for the errors; with ``transform="log"`` also ``ratio``).
+    anova : pandas.DataFrame
+        ``anova.csv``.
+    tables : pandas.DataFrame
+        ``tables.csv``: the tidy tables of the report.
+    diagnostics : pandas.DataFrame
+        ``diagnostics.csv``: one row per scenario.
+    warnings : list of str
+    fits : dict
+        Scenario -> the fit (its ``effects``, ``anova``, ``lmbda``, ...).
+    out : Path or None
+    """
+
+    effects: pd.DataFrame
+    anova: pd.DataFrame
+    tables: pd.DataFrame
+    diagnostics: pd.DataFrame
+    warnings: list[str]
+    fits: dict[str, Any]
+    out: Path | None = None
+    _analysis: Any = field(default=None, repr=False)
+
+    def plot(self, scenario: str | None = None) -> dict[str, Figure]:
+        """The report's figures of one scenario (default the first): ``pareto``, ``main_effects``,
+        ``interactions``, ``residuals`` -> matplotlib Figure.
+
+        Raises
+        ------
+        ConfigError
+            A scenario the campaign does not have.
+        """
+        from sblsim.orchestrator.analysis.plots import figures
+
+        a = self._analysis
+        name = next(iter(a.fits)) if scenario is None else scenario
+        if name not in a.fits:
+            raise ConfigError(f"scenario: {name!r} is not one of {', '.join(a.fits)}")
+        return figures(a.fits[name], a.runs[a.runs["scenario"] == name], a.study.factors)
+
+
+def analyze(directory: str | Path, *, metric: str = "e_tot_rms", order: int = 2, transform: str = "none",
+            alpha: float = 0.05, out: str | Path | None = None, progress: Callable[[str], object] | None = None
+            ) -> AnalysisResult:
+    """The factorial analysis of a campaign: ``sblsim analyze``.
+
+    Parameters
+    ----------
+    directory : str or Path
+        A campaign directory (with ``runs.parquet`` and ``study.toml``).
+    metric : str
+        The response column (default ``e_tot_rms`` [m]).
+    order : int
+        Highest interaction order of the model, 1 … number of factors.
+    transform : {'none', 'log', 'boxcox'}
+        Fit the metric, its logarithm (effects as factors) or its Box-Cox transform.
+    alpha : float
+        Significance level [-], (0, 1).
+    out : str or Path, optional
+        Write the report, tables and figures there (``sblsim analyze`` writes into the campaign directory).
+    progress : callable, optional
+        Called with one line per step of the work.
+
+    Returns
+    -------
+    AnalysisResult
+
+    Raises
+    ------
+    SblsimError
+        Missing or corrupt ``runs.parquet`` or ``study.toml``, unknown metric or transform, bad order or
+        alpha.
+    """
+    import pandas as pd
+
+    from sblsim.orchestrator.analysis import compute, write
+
+    if out is not None:
+        from sblsim.orchestrator.output import check_writable
+
+        check_writable(Path(out), "out")
+    a = compute(directory, metric, order, alpha, progress=progress, transform=transform)
+    target = write(a, out, progress=progress) if out is not None else None
+    effects = pd.concat([r.effects.assign(scenario=s) for s, r in a.fits.items()], ignore_index=True)
+    anova = pd.concat([r.anova.assign(scenario=s) for s, r in a.fits.items()], ignore_index=True)
+    return AnalysisResult(effects, anova, a.tables, a.diagnostics, list(a.warnings), dict(a.fits), target, a)
+

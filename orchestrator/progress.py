@@ -1,0 +1,123 @@
+"""Progress of long work: a tqdm bar at a terminal, a plain log line every few seconds otherwise, a caller's
+callback, or nothing.
+
+Every command that can take more than a few seconds reports through :class:`Progress`: the command line
+passes ``"auto"`` (a bar when standard error is a terminal, else a line ``DESC: done/total UNIT (P %), about
+S s left`` every :data:`LOG_EVERY` seconds, none for work that ends sooner), the Python API ``False`` by
+default (silent), ``True`` for a bar, or a callable.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Callable, Union
+
+#: How often a plain progress line is printed when standard error is not a terminal [s].
+LOG_EVERY = 10.0
+
+#: What a ``progress`` argument may be: ``False``/``None`` (silent), ``True`` (a tqdm bar on standard error),
+#: ``"auto"`` (a bar at a terminal, else log lines), or a callable ``progress(done, total)`` [units of the work].
+ProgressSpec = Union[bool, None, str, Callable[[float, float], object]]
+
+
+class Progress:
+    """Report ``done`` of ``total`` units of work (steps, runs, cells, targets).
+
+    Parameters
+    ----------
+    total : float
+        Units of the whole work (0: unknown; no time left is estimated).
+    desc : str
+        What the work is (the bar's label, the log line's start).
+    unit : str
+        The unit's name (``step``, ``run``, ...).
+    spec : bool, str or callable
+        :data:`ProgressSpec`.
+    every : float
+        Seconds between plain log lines [s].
+
+    Raises
+    ------
+    ValueError
+        On a ``spec`` that is none of :data:`ProgressSpec`.
+    """
+
+    def __init__(self, total: float, desc: str, unit: str = "step", spec: ProgressSpec = False,
+                 every: float = LOG_EVERY) -> None:
+        self.total, self.desc, self.unit, self.every = total, desc, unit, every
+        self.done = 0.0
+        self.start = self.last = time.perf_counter()
+        self.bar = None
+        self.callback: Callable[[float, float], object] | None = None
+        self.log = False
+        if callable(spec):
+            self.callback = spec
+        elif spec == "auto":
+            if sys.stderr.isatty():
+                self._open_bar()
+            else:
+                self.log = True
+        elif spec is True:
+            self._open_bar()
+        elif spec not in (False, None):
+            raise ValueError(f"progress: {spec!r} is not True, False, 'auto' or a callable(done, total)")
+
+    def _open_bar(self) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=self.total or None, unit=self.unit, desc=self.desc, leave=False, smoothing=0.1)
+
+    @property
+    def active(self) -> bool:
+        """Whether anything is reported (callers may skip the bookkeeping when not)."""
+        return self.bar is not None or self.callback is not None or self.log
+
+    def update(self, units: float = 1) -> None:
+        """``units`` more of the work are done."""
+        self.done += units
+        if self.bar is not None:
+            self.bar.update(units)
+        elif self.callback is not None:
+            self.callback(self.done, self.total)
+        elif self.log:
+            now = time.perf_counter()
+            if now - self.last >= self.every:
+                self.last = now
+                self._line(now)
+
+    def _line(self, now: float) -> None:
+        rate = self.done / (now - self.start) if now > self.start else 0.0
+        if self.total:
+            left = (f", about {(self.total - self.done) / rate:.0f} s left" if rate > 0 and self.done < self.total
+                    else "")
+            print(f"{self.desc}: {self.done:.0f}/{self.total:.0f} {self.unit}s ({100.0 * self.done / self.total:.0f} "
+                  f"%){left}", file=sys.stderr, flush=True)
+        else:
+            print(f"{self.desc}: {self.done:.0f} {self.unit}s, {now - self.start:.0f} s", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def progress_of(spec: ProgressSpec | Progress, total: float, desc: str, unit: str = "step") -> tuple[Progress, bool]:
+    """A :class:`Progress` for a piece of work: ``spec`` itself when it is one already (shared by the pieces
+    of a larger work; not closed by the piece), else a new one of ``total`` units.
+
+    Returns
+    -------
+    progress : Progress
+    own : bool
+        Whether the caller made it (and closes it).
+    """
+    if isinstance(spec, Progress):
+        return spec, False
+    return Progress(total, desc, unit, spec), True

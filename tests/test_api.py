@@ -1,0 +1,213 @@
+"""The public Python API (``import sblsim``) gives the command line's numbers, raises instead of exiting, and
+imports cheaply.
+
+The command line is the reference: each case runs ``sblsim ...`` (its ``main``, writing its files into a
+temporary folder) and the API function, and compares the files the command wrote with the API's objects.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import sblsim
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.systems import system_overrides
+
+SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
+SYSTEMS = ("sbl", "lbl", "usbl")
+RECEIVERS = ("ekf", "ekf-seq", "ukf", "lsq")
+SHORT = "simulation.duration=15"  # every case runs 150 steps: the comparison is exact, whatever the length
+
+
+def cli_run(tmp_path: Path, scenario: str, items: list[str], seed: int, engine: str = "local",
+            fmu_dir: Path | None = None) -> tuple[dict, pd.DataFrame]:
+    out = tmp_path / "cli"
+    args = ["run", scenario, "--seed", str(seed), "--out", str(out), "--engine", engine]
+    args += [a for item in items for a in ("--set", item)]
+    args += ["--fmu-dir", str(fmu_dir)] if fmu_dir is not None else []
+    assert main(args) == 0
+    return json.loads((out / "summary.json").read_text()), pd.read_parquet(out / "timeseries.parquet")
+
+
+def assert_same_run(tmp_path, scenario, items, seed=3, engine="local", fmu_dir=None):
+    summary, series = cli_run(tmp_path, scenario, items, seed, engine, fmu_dir)
+    r = sblsim.run(scenario, seed=seed, set=items, engine=engine, fmu_dir=fmu_dir)
+    mine = dict(r.summary)
+    assert mine.pop("wall_time") >= 0 and summary.pop("wall_time") >= 0
+    assert mine == summary  # every key, every number bit for bit
+    pd.testing.assert_frame_equal(r.timeseries, series, check_exact=True)
+    return r
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+@pytest.mark.parametrize("system", SYSTEMS)
+def test_api_run_is_the_cli_run_for_every_scenario_and_system(tmp_path, scenario, system):
+    items = system_overrides(system, [SHORT]) if system != "sbl" else [SHORT]
+    r = assert_same_run(tmp_path, scenario, items)
+    assert r.config["platform"]["system"] == system and r.steps == 150
+
+
+@pytest.mark.parametrize("system", SYSTEMS)
+@pytest.mark.parametrize("receiver", RECEIVERS)
+def test_api_run_is_the_cli_run_for_every_receiver(tmp_path, system, receiver):
+    items = [SHORT, f"simulation.receiver={receiver}"]
+    items = system_overrides(system, items) if system != "sbl" else items
+    r = assert_same_run(tmp_path, "semicircle", items, seed=5)
+    assert r.summary["receiver"] == receiver
+
+
+def test_api_run_on_the_fmu_engine_is_the_cli_run(tmp_path, fmu_dir):
+    assert_same_run(tmp_path, "spiral", [SHORT, "simulation.receiver=ukf"], seed=2, engine="fmu", fmu_dir=fmu_dir)
+
+
+def test_a_mapping_of_overrides_is_the_set_items(tmp_path):
+    """``set={"platform.baseline": 0.4}`` is ``--set platform.baseline=0.4``; a text stays a text."""
+    a = sblsim.load("semicircle", seed=7, set={"platform.baseline": 0.4, "receiver": "lsq", "target.depth": 12})
+    b = sblsim.load("semicircle", seed=7, set=["platform.baseline=0.4", "receiver=lsq", "target.depth=12"])
+    assert a == b and a["platform"]["baseline"] == 0.4 and a["simulation"]["receiver"] == "lsq"
+    assert sblsim.load(a) == a  # a configuration is validated again, unchanged
+    assert sblsim.load(a, set={"target.depth": 20})["target"]["depth"] == 20
+
+
+def test_replicates_are_the_runs_of_each_replicate_alone():
+    both = sblsim.run("semicircle", replicates=2, set=[SHORT])
+    for k, s in enumerate(both.summaries):
+        alone = sblsim.run("semicircle", set=[SHORT, f"run.replicate={k}"]).summary
+        assert {**s, "wall_time": 0} == {**alone, "wall_time": 0}
+
+
+def test_nothing_is_written_without_out_and_the_files_with_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = sblsim.run("semicircle", set=[SHORT])
+    assert list(tmp_path.iterdir()) == []
+    figures = r.plot()
+    assert set(figures) == {"trajectory_xy", "trajectory_3d", "errors", "error_bounds"}
+    assert all(type(f).__name__ == "Figure" for f in figures.values())
+    r = sblsim.run("semicircle", set=[SHORT], out="here")
+    assert json.loads((tmp_path / "here" / "summary.json").read_text())["e_tot_rms"] == r.summary["e_tot_rms"]
+    with pytest.raises(sblsim.SblsimError, match="out: .* holds an earlier run; pass force=True"):
+        sblsim.run("semicircle", set=[SHORT], out="here")
+
+
+@pytest.mark.parametrize("call, needle", [
+    (lambda: sblsim.load("no-such-scenario"), "no-such-scenario"),
+    (lambda: sblsim.run("semicircle", set={"platform.baseline": -1.0}), "platform.baseline"),
+    (lambda: sblsim.run("semicircle", seed=-1), "seed"),
+    (lambda: sblsim.run("semicircle", engine="gpu"), "engine"),
+    (lambda: sblsim.run("semicircle", replicates=0), "replicates"),
+    (lambda: sblsim.load("semicircle", set="platform.baseline=1"), "set"),
+    (lambda: sblsim.compare("semicircle", receivers=["ekf", "nope"]), "nope"),
+    (lambda: sblsim.accuracy_map("semicircle", levels=["x"]), "levels"),
+    (lambda: sblsim.budget("semicircle", replicates=1), "replicates"),
+])
+def test_bad_input_raises_an_sblsim_error_not_system_exit(call, needle):
+    with pytest.raises(sblsim.SblsimError) as caught:
+        call()
+    message = str(caught.value)
+    assert needle in message and "\n" not in message
+
+
+def test_compare_map_and_budget_give_the_cli_tables(tmp_path):
+    items = [SHORT]
+    assert main(["compare", "semicircle", "--receivers", "ekf,lsq", "--replicates", "3", "--seed", "4",
+                 "--set", SHORT, "--out", str(tmp_path / "c")]) == 0
+    c = sblsim.compare("semicircle", receivers=["ekf", "lsq"], replicates=3, seed=4, set=items)
+    cli = pd.read_csv(tmp_path / "c" / "compare.csv")
+    keep = [k for k in cli.columns if k != "us_per_step"]  # a timing, not a result
+    pd.testing.assert_frame_equal(c.table[keep].reset_index(drop=True), cli[keep], check_exact=False, rtol=1e-15)
+    assert c.title in (tmp_path / "c" / "compare.md").read_text()
+
+    assert main(["map", "semicircle", "--compare", "platform.baseline=0.5,2", "--step", "2", "--out",
+                 str(tmp_path / "m")]) == 0
+    m = sblsim.accuracy_map("semicircle", compare=("platform.baseline", [0.5, 2]), step=2.0)
+    cli = pd.read_csv(tmp_path / "m" / "map.csv")
+    assert np.array_equal(m.table["drms"].to_numpy(), cli["drms"].to_numpy(), equal_nan=True)
+    assert len(m.maps) == 2 and m.maps[0].shape == (len(m.north), len(m.east))
+
+    assert main(["budget", "semicircle", "--replicates", "3", "--set", SHORT, "--out", str(tmp_path / "b")]) == 0
+    b = sblsim.budget("semicircle", replicates=3, set=items)
+    cli = pd.read_csv(tmp_path / "b" / "budget.csv")
+    assert np.allclose(b.table["contribution"].to_numpy(), cli["contribution"].to_numpy(), rtol=1e-12, atol=0)
+    assert list(b.table["source"]) == list(cli["source"])
+
+
+def test_campaign_and_analyze_give_the_cli_results(tmp_path):
+    import tomli_w
+
+    study = {"study": {"name": "tiny", "scenarios": ["semicircle"], "replicates": 2, "seed": 3,
+                       "set": ["simulation.duration=10"]},
+             "factors": [{"name": "baseline", "key": "platform.baseline", "low": 0.5, "high": 2.0},
+                         {"name": "range", "key": "acoustics.sigma_range", "low": 0.05, "high": 0.2}]}
+    path = tmp_path / "tiny.toml"
+    path.write_text(tomli_w.dumps(study))
+    assert main(["campaign", str(path), "--workers", "1", "--out", str(tmp_path / "cli"), "--analyze"]) == 0
+    seen = []
+    result = sblsim.campaign(path, tmp_path / "api", workers=1, progress=lambda done, total: seen.append(done))
+    assert seen[-1] == result.total == 8
+    cli = pd.read_parquet(tmp_path / "cli" / "runs.parquet")
+    pd.testing.assert_frame_equal(result.runs.drop(columns=["wall_time"], errors="ignore"),
+                                  cli.drop(columns=["wall_time"], errors="ignore"))
+    a = sblsim.analyze(tmp_path / "api")
+    effects = pd.read_csv(tmp_path / "cli" / "effects.csv")
+    assert np.allclose(a.effects["effect"].to_numpy(), effects["effect"].to_numpy(), rtol=1e-12, atol=1e-15)
+    assert set(a.plot()) == {"pareto", "main_effects", "interactions", "residuals"}
+
+
+def test_every_public_name_exists_and_importing_sblsim_is_cheap():
+    assert all(hasattr(sblsim, name) for name in sblsim.__all__)
+    for name in ("load", "run", "compare", "accuracy_map", "budget", "replay", "campaign", "analyze"):
+        assert callable(getattr(sblsim, name)) and getattr(sblsim, name).__doc__
+    probe = ("import sys, sblsim; "
+             "print(sorted(m for m in ('numpy', 'pandas', 'casadi', 'matplotlib') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True)
+    assert done.stdout.strip() == "[]"
+
+
+def _cli_number(tmp_path: Path) -> float:
+    done = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "run", "semicircle", "--seed", "1",
+                           "--out", str(tmp_path / "cli")], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    return json.loads((tmp_path / "cli" / "summary.json").read_text())["e_tot_rms"]
+
+
+def test_the_one_line_example_prints_the_cli_number(tmp_path):
+    line = "import sblsim; r = sblsim.run('semicircle', seed=1); print(r.summary['e_tot_rms'])"
+    done = subprocess.run([sys.executable, "-c", line], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert float(done.stdout) == _cli_number(tmp_path)
+    assert list(p.name for p in tmp_path.iterdir()) == ["cli"]  # the API wrote nothing
+
+
+NOTEBOOK = textwrap.dedent("""
+    import sblsim
+
+    cfg = sblsim.load("semicircle", seed=1)
+    result = sblsim.run(cfg)
+    table = result.timeseries
+    rms = float((table["e_tot"] ** 2).mean() ** 0.5)
+    figures = result.plot()
+    print(repr(result.summary["e_tot_rms"]), repr(rms), len(figures))
+""")
+
+
+def test_a_notebook_script_of_public_names_reproduces_the_cli_result(tmp_path):
+    tree = ast.parse(NOTEBOOK)
+    used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name)
+            and n.value.id == "sblsim"}
+    assert used and used <= set(sblsim.__all__)
+    done = subprocess.run([sys.executable, "-c", NOTEBOOK], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    summary, mine, count = done.stdout.split()
+    cli = _cli_number(tmp_path)
+    assert float(summary) == cli and int(count) == 4
+    assert float(mine) == pytest.approx(cli, rel=1e-12)  # the RMS of the time series' e_tot is the summary's
