@@ -109,7 +109,7 @@ def c_host_runs(directory: Path, tmp_path: Path):
     from sblsim.fmus.codegen import fmi_headers_dir
     from sblsim.fmus.compiler import find_compiler
 
-    host = Path(__file__).parents[1] / "fmus" / "c_host.c"
+    host = Path(__file__).parents[1] / "fmus_tests" / "c_host.c"
     exe = tmp_path / "c_host"
     subprocess.run([*find_compiler("system").command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(host), "-o",
                     str(exe), "-ldl"], check=True, capture_output=True)
