@@ -35,9 +35,27 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Union
 
+import numpy as np
+import tomli_w
+
+from sblsim.models.declarations import shown
 from sblsim.models.errors import SblsimError
-from sblsim.orchestrator.config import BUILTIN_SCENARIOS, ConfigError
+from sblsim.models.systems import SYSTEMS
+from sblsim.orchestrator.config import (
+    BUILTIN_SCENARIOS,
+    ConfigError,
+    apply_overrides,
+    beacon_count,
+    check_receiver,
+    load_config,
+    parse_compare,
+    receiver_label,
+    resolve,
+    to_toml,
+)
 from sblsim.orchestrator.engines import ENGINES
+from sblsim.orchestrator.output import check_output, check_writable
+from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -78,14 +96,10 @@ class Config(dict):
 
     def to_toml(self) -> str:
         """The configuration as TOML text (what ``config.toml`` of a run holds; ``sblsim run FILE`` reads it)."""
-        from sblsim.orchestrator.config import to_toml
-
         return to_toml(self)
 
 
 def _check_seed(seed: Any, where: str = "seed") -> None:
-    from sblsim.models.declarations import shown
-
     if seed is None:
         return
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
@@ -101,8 +115,6 @@ def _override_items(overrides: Overrides) -> list[str]:
         raise ConfigError(f"set: expected a mapping {{'section.key': value}} or a list of 'section.key=value', "
                           f"got the text {overrides!r}")
     if isinstance(overrides, Mapping):
-        import tomli_w
-
         items = []
         for key, value in overrides.items():
             if not isinstance(key, str) or "=" in key:
@@ -123,8 +135,6 @@ def _override_items(overrides: Overrides) -> list[str]:
 def _config(source: Any, seed: int | None = None, overrides: Overrides = None) -> Config:
     """A :class:`Config` from a scenario name, a TOML file or a configuration (re-validated with the
     overrides and seed)."""
-    from sblsim.orchestrator.config import apply_overrides, load_config, resolve
-
     _check_seed(seed)
     items = _override_items(overrides)
     if isinstance(source, Mapping):
@@ -177,7 +187,6 @@ def _prepare_out(out: str | Path | None, force: bool, marker: str, what: str) ->
     """``out`` checked before any work (writable; an earlier result only with ``force``)."""
     if out is None:
         return None
-    from sblsim.orchestrator.output import check_output
 
     out = Path(out)
     check_output(out, force, marker, what, "out")
@@ -255,7 +264,6 @@ class RunResult:
         ConfigError
             A replicate the run does not have.
         """
-        from sblsim.orchestrator.config import receiver_label
         from sblsim.orchestrator.plots import run_figures
 
         ts = self.timeseries
@@ -404,7 +412,6 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     """
     from sblsim.orchestrator.compare import compare as _compare
     from sblsim.orchestrator.compare import parse_receivers, write
-    from sblsim.orchestrator.systems import parse_systems, system_overrides
 
     _check_seed(seed)
     _check_engine(engine)
@@ -426,9 +433,6 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
 def compare_title(scenario: str | Path, replicates: int, overrides: Sequence[str], seed: int | None,
                   systems: Sequence[str] | None) -> tuple[str, str]:
     """The heading and note of a comparison (``sblsim compare`` prints them, ``compare.md`` holds them)."""
-    from sblsim.orchestrator.config import load_config
-    from sblsim.orchestrator.systems import describe_defaults, system_overrides
-
     # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
     # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
     first = system_overrides(systems[0], overrides) if systems is not None else list(overrides)
@@ -506,8 +510,6 @@ class MapResult:
 
 
 def _compared(compare: str | tuple[str, Sequence[Any]] | None) -> tuple[str, list[str]] | None:
-    from sblsim.orchestrator.config import parse_compare
-
     if compare is None:
         return None
     if isinstance(compare, str):
@@ -673,7 +675,6 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
         Bad input, or a source that cannot be switched off (nothing is run or written).
     """
     from sblsim.orchestrator.budget import DEFAULT_REPLICATES, budgets, check_replicates, configurations, title, write
-    from sblsim.orchestrator.config import check_receiver, parse_compare
 
     _check_seed(seed)
     source = _source(scenario)
@@ -681,7 +682,7 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
     _check_count(replicates, "replicates", -2**63, 2**63)
     check_replicates(replicates)
     if isinstance(compare, str):
-        chosen = parse_compare(compare, "platform.system=sbl,lbl,usbl")
+        chosen = parse_compare(compare, "platform.system=" + ",".join(SYSTEMS))
     else:
         chosen = _compared(compare)
     if receiver is not None:
@@ -727,9 +728,6 @@ class ReplayResult:
 
     def plot(self) -> dict[str, Figure]:
         """The figures of a run over the steps the truth track covers (empty without truth)."""
-        import numpy as np
-
-        from sblsim.orchestrator.config import receiver_label
         from sblsim.orchestrator.plots import run_figures
 
         ts = self.timeseries
@@ -775,7 +773,6 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
     ConfigError, SblsimError
         A log or truth track that cannot be read (the message names the row and column), bad options.
     """
-    from sblsim.orchestrator.config import beacon_count
     from sblsim.orchestrator.replay import read_log, read_truth, replay_config, write_replay
     from sblsim.orchestrator.replay import replay as _replay
 
@@ -784,7 +781,7 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
         raise ConfigError(f"receiver: expected a text, got {receiver!r}")
     cfg, source = replay_config(Path(log), str(config) if config is not None else None, receiver,
                                 _override_items(set))
-    data = read_log(Path(log), beacon_count(cfg), cfg["platform"]["system"] == "usbl",
+    data = read_log(Path(log), beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]],
                     cfg["acoustics"]["sound_speed_assumed"])
     track = read_truth(Path(truth)) if truth is not None else None
     target = _prepare_out(out, force, "summary.json", "replay")
@@ -870,7 +867,6 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
         On Ctrl-C: the finished chunks are kept (``resume=True`` finishes).
     """
     from sblsim.orchestrator.campaign import run_campaign
-    from sblsim.orchestrator.output import check_writable
     from sblsim.orchestrator.study import load_study
 
     _check_seed(seed)
@@ -972,8 +968,6 @@ def analyze(directory: str | Path, *, metric: str = "e_tot_rms", order: int = 2,
     from sblsim.orchestrator.analysis import compute, write
 
     if out is not None:
-        from sblsim.orchestrator.output import check_writable
-
         check_writable(Path(out), "out")
     a = compute(directory, metric, order, alpha, progress=progress, transform=transform)
     target = write(a, out, progress=progress) if out is not None else None

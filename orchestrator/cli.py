@@ -34,6 +34,7 @@ from sblsim.models.errors import SblsimError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import horizontal_spread
 from sblsim.models.systems import SYSTEMS, interface_owners
+from sblsim.orchestrator import api
 from sblsim.orchestrator.config import (
     MODEL_PREFIX,
     beacon_count,
@@ -45,7 +46,7 @@ from sblsim.orchestrator.config import (
 )
 from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.output import OutputLock, check_writable, folder_name
+from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
@@ -449,7 +450,6 @@ def _output_name(scenario: str) -> str:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator import api
     from sblsim.orchestrator.compare import markdown, parse_receivers, write
 
     _check_seed(args.seed)
@@ -472,7 +472,6 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _budget(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator import api
     from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, configurations, write
 
     _check_seed(args.seed)
@@ -500,7 +499,6 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator import api
     from sblsim.orchestrator.maps import diver_depth, parse_levels, write
 
     _check_seed(args.seed)
@@ -653,8 +651,6 @@ def _output(given: Path | None, default: Path, force: bool, marker: str, what: s
 
 def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
     """:func:`sblsim.orchestrator.output.check_output` naming ``--out``."""
-    from sblsim.orchestrator.output import check_output
-
     check_output(out, force, marker, what)
 
 

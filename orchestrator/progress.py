@@ -13,6 +13,8 @@ import sys
 import time
 from typing import Callable, Union
 
+from tqdm import tqdm
+
 #: How often a plain progress line is printed when standard error is not a terminal [s].
 LOG_EVERY = 10.0
 
@@ -64,8 +66,6 @@ class Progress:
             raise ValueError(f"progress: {spec!r} is not True, False, 'auto' or a callable(done, total)")
 
     def _open_bar(self) -> None:
-        from tqdm import tqdm
-
         self.bar = tqdm(total=self.total or None, unit=self.unit, desc=self.desc, leave=False, smoothing=0.1)
 
     @property

@@ -17,9 +17,10 @@ PACKAGES = {"sblsim.models": sblsim.models, "sblsim.fmus": sblsim.fmus, "sblsim.
 #: Which layers a layer may import (besides itself): models at the bottom, then fmus, then the orchestrator.
 MAY_IMPORT = {"sblsim.models": set(), "sblsim.fmus": {"sblsim.models"},
               "sblsim.orchestrator": {"sblsim.models", "sblsim.fmus"}}
-#: Libraries heavy enough to import only when used (seconds, or a process's worth of threads): a function-level
-#: import is allowed where it defers one of these, directly or through the sblsim module it imports.
-HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats")
+#: Libraries heavy enough to import only when used (seconds, or a process's worth of threads; casadi: what
+#: ``import sblsim`` must not load): a function-level import is allowed where it defers one of these, directly or
+#: through the sblsim module it imports.
+HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats", "casadi")
 #: Function-level imports that defer nothing heavy but ask whether an optional package is installed.
 PROBES = {"ziglang"}
 
@@ -48,6 +49,9 @@ def _imports(name: str, path: Path) -> list[tuple[str, int, bool]]:
 
     def visit(node: ast.AST, nested: bool) -> None:
         for child in ast.iter_child_nodes(node):
+            if _type_checking(child):  # never runs: the body's imports are for the type checker only
+                visit(ast.Module(body=child.orelse, type_ignores=[]), nested)
+                continue
             inner = nested or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
             if isinstance(child, ast.Import):
                 found.extend((alias.name, child.lineno, nested) for alias in child.names)
@@ -63,6 +67,15 @@ def _imports(name: str, path: Path) -> list[tuple[str, int, bool]]:
 
     visit(ast.parse(path.read_text(encoding="utf-8")), False)
     return found
+
+
+def _type_checking(node: ast.AST) -> bool:
+    """``if TYPE_CHECKING:`` (or ``typing.TYPE_CHECKING``)."""
+    if not isinstance(node, ast.If):
+        return False
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
 IMPORTS = {name: _imports(name, path) for name, path in MODULES.items()}
@@ -142,6 +155,15 @@ def test_the_graph_is_read():
     assert "sblsim.models.receiver.kalman" in graph["sblsim.models.bound"]  # from package import submodule
     lazy = [(m, line) for m, line, nested in IMPORTS["sblsim.orchestrator.cli"] if nested and _own(m)]
     assert ("sblsim.orchestrator.run" in {m for m, _ in lazy}) and all(line > 0 for _, line in lazy)
+
+
+def test_imports_for_the_type_checker_are_not_read(tmp_path):
+    """``if TYPE_CHECKING:`` imports never run (no arrow, nothing loaded); its ``else`` does."""
+    source = tmp_path / "m.py"
+    source.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import pandas\nelse:\n    import json\n"
+                      "def f():\n    import csv\n")
+    assert [(m, nested) for m, _, nested in _imports("x.m", source)] == [
+        ("typing", False), ("json", False), ("csv", True)]
 
 
 def test_the_cycle_finder_finds_a_cycle():

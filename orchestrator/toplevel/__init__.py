@@ -19,6 +19,8 @@ subpackages (``package-dir`` in ``pyproject.toml``).
 
 from __future__ import annotations
 
+from importlib.metadata import PackageNotFoundError, version
+
 __all__ = [
     "load", "run", "compare", "accuracy_map", "budget", "replay", "campaign", "analyze",
     "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "ReplayResult", "CampaignResult",
@@ -29,8 +31,6 @@ __all__ = [
 def __getattr__(name: str) -> object:
     """The public names, imported from :mod:`sblsim.orchestrator.api` when first used."""
     if name == "__version__":
-        from importlib.metadata import PackageNotFoundError, version
-
         try:
             return version("sblsim")
         except PackageNotFoundError:  # a checkout that was never installed
