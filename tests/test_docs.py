@@ -18,8 +18,9 @@ from urllib.parse import unquote, urlsplit
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = ("index", "getting-started", "model", "measurement-models", "log-format", "variables", "cli", "api",
-         "hardware-grades")
+PAGES = ("index", "getting-started", "usage", "model", "systems-compare", "receivers", "campaigns", "budget", "replay",
+         "log-format", "interop", "variables", "extending", "measurement-models", "systems", "hardware-grades",
+         "benchmarks", "architecture", "cli", "api")
 
 
 class _Links(HTMLParser):

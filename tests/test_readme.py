@@ -1,21 +1,27 @@
-"""The README's command and Python blocks run top to bottom, as written, in a fresh copy of the repository;
-then the Python blocks of every page of docs/.
+"""The command and Python blocks of the README and of every page of docs/ run, as written, in a fresh copy of the
+repository, page by page in the order a new user reads them.
 
-A new user copies the ``bash`` blocks in order; this test does the same, each block in one shell
-(``set -e``: the first failing command fails the test, and the shell's trace names it), in a folder
-holding the repository's files and nothing else. What is changed, and why:
+A new user runs the README's set-up, then works through the site in its reading order, the toctree of
+docs/index.md: Getting started first (the later pages assume its set-up: sblsim installed into ``.venv`` and
+activated, in the repository's folder), then each page's blocks top to bottom; a page may read what the
+commands of the pages before it wrote (docs/index.md says so). This test does the same: one test per page, in
+that order, all in one copy holding the repository's files and nothing else. Each ``bash`` block runs in one
+shell (``set -e``: the first failing command fails the test, and the shell's trace names it), each ``python``
+block with the environment's Python in the copy's folder; a failure names the page, the block's number and
+its line. (A page selected alone with ``-k`` runs without what the pages before it wrote.) What is changed,
+and why:
 
-* the set-up command's ``python3 -m venv .venv && .venv/bin/pip install -e .`` part: the copy's ``.venv``
-  is this test's own environment (installing takes minutes and the network), the rest of the line runs;
-* the test command (it would run this test again) and the Dask-cluster line (its address is a placeholder
-  for the user's own scheduler) are not run;
-* the shell is one session: after the block that activates ``.venv``, the later blocks run activated;
+* the set-up's ``python3 -m venv .venv && .venv/bin/pip install -e .`` part: the copy's ``.venv`` is this
+  test's own environment (installing takes minutes and the network), the rest of the line runs;
+* the test command (it would run this test again) is not run;
+* the shell is one session: after a block that activates ``.venv``, the later blocks (of that page and of the
+  pages after it) run activated;
 * the built-in studies ``paper`` and ``million`` run as the paper's factors with 2 replicates of 10 s
   (the same commands, the same code paths, a minute instead of an hour).
 
-A ``python`` block runs with the environment's Python in the copy's folder, after the blocks above it (it
-reads what they wrote). A page may keep a block from running only by saying why in the page itself: its first
-line is a comment ``# not run: <reason>`` (an excerpt, say); every other block runs.
+A page may keep a block from running only by saying why in the page itself: its first line is a comment
+``# not run: <reason>`` (an excerpt, a placeholder for the user's own Dask scheduler); every other block runs.
+Each page's time is printed (``-s``) and reported by ``--durations``; the tutorial pages state it.
 """
 
 from __future__ import annotations
@@ -25,19 +31,19 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SETUP_INSTALL = "python3 -m venv .venv && .venv/bin/pip install -e . && "
+#: the set-up's install, as this test leaves it out: the README's (followed by its commands) or a page's (alone)
+INSTALL = re.compile(r"^python3 -m venv \.venv && \.venv/bin/pip install -e \.(?: && |$)")
 NOT_RUN = {
     'python3 -m venv .venv && .venv/bin/pip install -e ".[test]" && .venv/bin/python -m pytest -q':
         "the test command itself",
 }
-PLACEHOLDER = "SCHEDULER-HOST"
-
-
 NOT_RUN_MARK = "# not run:"
 
 
@@ -54,21 +60,30 @@ def bash_blocks(text: str) -> list[tuple[int, str]]:
 
 
 def not_run(body: str) -> str | None:
-    """The reason a Python block gives for not running (its first line ``# not run: <reason>``), else None."""
+    """The reason a block gives for not running (its first line ``# not run: <reason>``), else None."""
     first = body.split("\n", 1)[0].strip()
     return first[len(NOT_RUN_MARK):].strip() if first.startswith(NOT_RUN_MARK) else None
 
 
-PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
+def reading_order() -> list[str]:
+    """The pages of docs/ in the order of docs/index.md's toctree (index itself first)."""
+    index = (ROOT / "docs" / "index.md").read_text()
+    tree = re.search(r"^```\{toctree\}\n(.*?)^```$", index, flags=re.S | re.M)
+    assert tree, "docs/index.md has no toctree"
+    names = [line.strip() for line in tree.group(1).splitlines() if line.strip() and not line.startswith(":")]
+    return ["docs/index.md", *(f"docs/{name}.md" for name in names)]
+
+
+PAGES = ["README.md", *reading_order()]
 
 
 def as_run(body: str, study: str) -> str:
-    """A block as this test runs it (module docstring)."""
+    """A bash block as this test runs it (module docstring)."""
     lines = []
     for line in body.splitlines():
-        if line.strip() in NOT_RUN or PLACEHOLDER in line:
+        if line.strip() in NOT_RUN:
             continue
-        line = line.replace(SETUP_INSTALL, "")
+        line = INSTALL.sub("", line)
         line = re.sub(r"\bsblsim campaign (paper|million)\b", f"sblsim campaign {study}", line)
         lines.append(line)
     return "\n".join(lines)
@@ -76,28 +91,44 @@ def as_run(body: str, study: str) -> str:
 
 def test_the_readme_has_the_blocks_this_test_knows():
     blocks = bash_blocks((ROOT / "README.md").read_text())
-    assert len(blocks) >= 5
+    assert len(blocks) >= 1
     first = blocks[0][1].splitlines()
     assert len(first) == 2 and first[0].startswith(SETUP_INSTALL) and first[1] in NOT_RUN
+    assert INSTALL.sub("", first[0]) == first[0][len(SETUP_INSTALL):]
+
+
+def test_every_page_is_in_the_reading_order():
+    """Every page of docs/ is run, once: the toctree lists each exactly once."""
+    listed = reading_order()
+    assert len(listed) == len(set(listed))
+    assert sorted(listed) == sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))
 
 
 @pytest.mark.parametrize("page", PAGES)
-def test_every_python_block_runs_or_says_why_not(page):
-    """A block kept from running names its reason in the page; every other one is Python that compiles (the
-    run itself is :func:`test_readme_blocks_run_in_order`)."""
-    for line, _, body in fenced_blocks((ROOT / page).read_text(), ("python",)):
+def test_every_block_runs_or_says_why_not(page):
+    """A block kept from running names its reason in the page; every other one is Python that compiles or bash
+    that parses (the run itself is :func:`test_the_page_blocks_run_in_order`)."""
+    for line, language, body in fenced_blocks((ROOT / page).read_text(), ("bash", "python")):
         reason = not_run(body)
         if reason is not None:
             assert len(reason) >= 10, f"{page} block at line {line}: '# not run:' without a reason"
             continue
-        compile(body, f"{page}:{line}", "exec")
+        if language == "python":
+            compile(body, f"{page}:{line}", "exec")
+        else:
+            done = subprocess.run(["bash", "-n", "-c", body], capture_output=True, text=True)
+            assert done.returncode == 0, f"{page}: bash block at line {line} does not parse:\n{done.stderr}"
 
 
-def test_the_pages_have_python_blocks_that_run():
-    runnable = [(page, line) for page in PAGES for line, _, body in fenced_blocks((ROOT / page).read_text(),
-                                                                                    ("python",))
-                if not_run(body) is None]
-    assert len(runnable) >= 2, runnable
+def test_the_pages_have_blocks_that_run():
+    runnable = {language: [(page, line) for page in PAGES
+                           for line, lang, body in fenced_blocks((ROOT / page).read_text(), ("bash", "python"))
+                           if lang == language and not_run(body) is None]
+                for language in ("bash", "python")}
+    assert len(runnable["python"]) >= 2, runnable
+    assert len(runnable["bash"]) >= 8, runnable
+    # the tutorials' commands are on their pages, not only in the README
+    assert len({page for page, _ in runnable["bash"]} - {"README.md"}) >= 6, runnable
 
 
 @pytest.fixture(scope="module")
@@ -118,26 +149,34 @@ def fresh_copy(tmp_path_factory):
     return copy
 
 
-def test_readme_blocks_run_in_order(fresh_copy):
+@pytest.fixture(scope="module")
+def shell():
+    """What the user's shell keeps from one block to the next, across pages: the activated environment."""
+    return {"session": ""}
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_the_page_blocks_run_in_order(fresh_copy, shell, page):
     env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH")}
     env["SBLSIM_FMU_DIR"] = str(fresh_copy / "fmus" / "build")  # where a checkout's own install builds them
     env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep) if Path(sys.prefix) not in
                                   Path(p).parents and p != str(Path(sys.prefix) / "bin"))
-    session = ""  # what the user's shell keeps from one block to the next: the activated environment
     python = str(fresh_copy / ".venv" / "bin" / "python")
-    for page in PAGES:  # the README first: the docs' blocks may read what its commands wrote
-        languages = ("bash", "python") if page == "README.md" else ("python",)
-        for line, language, body in fenced_blocks((fresh_copy / page).read_text(), languages):
-            if language == "python":
-                if not_run(body) is not None:
-                    continue
-                done = subprocess.run([python, "-c", body], cwd=fresh_copy, env=env, capture_output=True, text=True,
-                                      timeout=1200)
-                assert done.returncode == 0, f"{page}: Python block at line {line} failed:\n{done.stderr[-4000:]}"
-                continue
-            script = as_run(body, "short-paper.toml")
-            done = subprocess.run(["bash", "-e", "-x", "-c", session + script], cwd=fresh_copy, env=env,
-                                  capture_output=True, text=True, timeout=1200)
-            assert done.returncode == 0, f"{page}: block at line {line} failed:\n{done.stderr[-4000:]}"
-            if "source .venv/bin/activate" in script:
-                session = "source .venv/bin/activate\n"
+    start = time.perf_counter()
+    blocks = fenced_blocks((fresh_copy / page).read_text(), ("bash", "python"))
+    for number, (line, language, body) in enumerate(blocks, 1):
+        if not_run(body) is not None:
+            continue
+        where = f"{page}: {language} block {number} of {len(blocks)} (line {line}) failed"
+        if language == "python":
+            done = subprocess.run([python, "-c", body], cwd=fresh_copy, env=env, capture_output=True, text=True,
+                                  timeout=1200)
+            assert done.returncode == 0, f"{where}:\n{done.stderr[-4000:]}"
+            continue
+        script = as_run(body, "short-paper.toml")
+        done = subprocess.run(["bash", "-e", "-x", "-c", shell["session"] + script], cwd=fresh_copy, env=env,
+                              capture_output=True, text=True, timeout=1200)
+        assert done.returncode == 0, f"{where}:\n{done.stderr[-4000:]}"
+        if "source .venv/bin/activate" in script:
+            shell["session"] = "source .venv/bin/activate\n"
+    print(f"\n{page}: {len(blocks)} blocks in {time.perf_counter() - start:.0f} s")

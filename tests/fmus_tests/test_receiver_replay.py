@@ -5,7 +5,7 @@ records every input the receiver was given and its estimate. Two other
 hosts replay those inputs and must give the same estimate to 1e-9 m:
 
 * fmpy's ``simulate_fmu`` with the inputs as a signal table. Time alignment
-  (docs in the README): the master gives the receiver, for its step from
+  (docs/interop.md): the master gives the receiver, for its step from
   t_(k-1) to t_k, the packet the channel produced at the end of that macro
   step (recorded with time t_k); fmpy applies the signal value at the
   current communication point before ``doStep``, so the recorded row of

@@ -216,8 +216,9 @@ def test_a_latency_as_long_as_the_run_is_said_so(tmp_path, capsys):
 
 
 def test_set_applies_over_the_compared_systems_defaults(tmp_path, capsys):
-    """README: --set applies over each system's defaults (the LBL circle takes platform.beacons = 3), in
-    compare --systems and in map --compare platform.system, though the scenario's cross would refuse it."""
+    """docs/systems-compare.md: --set applies over each system's defaults (the LBL circle takes
+    platform.beacons = 3), in compare --systems and in map --compare platform.system, though the scenario's cross
+    would refuse it."""
     assert main(["compare", "semicircle", "--systems", "lbl", "--receivers", "ekf", "--replicates", "2",
                  "--set", "platform.beacons=3", "--set", "simulation.duration=3", "--out", str(tmp_path / "c")]) == 0
     assert main(["map", "semicircle", "--compare", "platform.system=lbl,usbl", "--set", "platform.beacons=3",

@@ -1,8 +1,9 @@
-"""Reference results: every built-in scenario at seed 1 against tests/data/reference, and the README's
-Results table against the same files (as the Modelica Reference-FMUs keep a reference output per model).
+"""Reference results: every built-in scenario at seed 1 against tests/data/reference, and the Results tables
+of the README and of docs/usage.md against the same files (as the Modelica Reference-FMUs keep a reference
+output per model).
 
 After a change meant to alter the numbers: ``python tests/data/reference/regenerate.py``, then update the
-README table and say why in the commit.
+README's and docs/usage.md's tables and say why in the commit.
 """
 
 from __future__ import annotations
@@ -38,17 +39,18 @@ def test_a_fresh_run_equals_the_reference(name):
             assert got[key] == value, key
 
 
-def readme_results() -> dict[str, list[str]]:
-    text = (ROOT / "README.md").read_text()
+def readme_results(page: str = "README.md") -> dict[str, list[str]]:
+    text = (ROOT / page).read_text()
     section = text.split("## Results", 1)[1].split("\n## ", 1)[0]
     rows = [line for line in section.splitlines() if re.match(r"^\| [a-z-]+ \| \d", line)]
     return {cells[0]: cells[1:] for cells in ([c.strip() for c in row.strip("|").split("|")] for row in rows)}
 
 
-def test_the_readme_results_table_equals_the_references():
-    table = readme_results()
+@pytest.mark.parametrize("page", ["README.md", "docs/usage.md"])
+def test_the_readme_results_table_equals_the_references(page):
+    table = readme_results(page)
     assert sorted(table) == sorted(BUILTIN_SCENARIOS)
     for name, cells in table.items():
         ref = stored(name)
         expected = [str(ref["steps"])] + [f"{ref[c]:.3f}" for c in COLUMNS[1:]]
-        assert cells == expected, f"{name}: README {cells} against the reference {expected}"
+        assert cells == expected, f"{name}: {page} {cells} against the reference {expected}"

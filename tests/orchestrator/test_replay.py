@@ -425,11 +425,11 @@ def test_a_usbl_log_needs_its_angles(tmp_path, capsys):
     assert "has no column azimuth_rad (a USBL log)" in capsys.readouterr().err
 
 
-# --------------------------------------------------------------------------- the README's worked example
+# --------------------------------------------------------------------------- docs/replay.md's worked example
 
 def test_the_readme_table_2_comparison_is_what_the_replays_give(tmp_path):
-    """The README's Table-2-style rows (harbour, seed 1, a log replayed with each receiver against its truth)."""
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    """docs/replay.md's Table-2-style rows (harbour, seed 1, a log replayed with each receiver against its truth)."""
+    readme = (Path(__file__).resolve().parents[2] / "docs" / "replay.md").read_text()
     section = readme[readme.index("## Replay a recorded log"):]
     section = section[:section.index("\n## ")]
     table = {line.split("|")[1].strip(): [float(v) for v in line.split("|")[2:4]]

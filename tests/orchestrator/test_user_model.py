@@ -1,4 +1,4 @@
-"""The README's worked example: a receiver written as one Python file (docs/examples/constant_position.py).
+"""docs/extending.md's worked example: a receiver written as one Python file (docs/examples/constant_position.py).
 
 It runs on the local engine and on the fmu engine (its FMU built on demand)
 with the same numbers, builds as an FMU with ``sblsim fmus build --model``
