@@ -224,6 +224,7 @@ static const double* draw(sblsim_instance* s, const sblsim_function* f) {
     uint64_t keys[4];
     double* noise = s->work->noise;
     int k, offset = 0;
+    if (f->n_streams == 0) return noise; /* a function without random numbers reads none */
     for (k = 0; k < 4; k++) keys[k] = key_of(s, k);
     for (k = 0; k < f->n_streams; k++) {
         const sblsim_stream* st = &f->streams[k];
