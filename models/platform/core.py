@@ -215,7 +215,7 @@ class Platform(Component):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phase_sin", 4), ("phase_cos", 4),
                                             ("gps_error", 3), ("gps", 3), ("broadcast", 3 * n),
-                                            ("installation", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3),
+                                            ("installed", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3),
                                             ("survey", 3 * n), ("usbl_misalignment", 3), ("imu", 3)],
                            derived=[("offsets", 3 * n), ("motion", 4), ("seafloor", 3 * n)])
         # the systems of this interface: the first places the transducers on the platform, the others (LBL) may
@@ -268,7 +268,8 @@ class Platform(Component):
             phases = 2.0 * math.pi * w[_PHASES]
             wave_phases = {"phase_sin": ca.sin(phases), "phase_cos": ca.cos(phases)}
             gps_error = p["gps_sigma"] * w[_GPS]  # stationary start of either model
-            fixed = {"installation": p["installation_sigma"] * w[_INSTALLATION],  # per run: zeros when σ = 0
+            # the body offsets as installed: the layout's plus the installation error (per run: zero when σ = 0)
+            fixed = {"installed": d["offsets"] + p["installation_sigma"] * w[_INSTALLATION],
                      "imu_scale": p["imu_scale_factor_ppm"] * 1e-6 * w[_IMU_SCALE],
                      "imu_misalignment": p["imu_misalignment_deg"] * (math.pi / 180.0) * w[_IMU_MISALIGNMENT],
                      "survey": p["survey_sigma"] * w[_SURVEY],
@@ -293,7 +294,7 @@ class Platform(Component):
 
         def output(x, p, d, t):
             roll, pitch, yaw, depth = attitude(p, d, x, t)
-            installed = [a + x["installation"][3 * i:3 * i + 3] for i, a in enumerate(offsets(d))]
+            installed = [x["installed"][3 * i:3 * i + 3] for i in range(n)]
             true = ca.vertcat(*beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw),
                                                 installed))
             for system in systems:  # LBL: the transponders on the seafloor
