@@ -200,8 +200,15 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     events = []
     for ev in program.events:
         handler = _function(f"event_{ev.name}", ev.handler, ev.streams, slots, lines, choices)
+        when_index, when_mask = -1, 0
+        if ev.when is not None:  # a bit per choice the event runs with (their indices: what p holds)
+            when_index, options = choices[ev.when[0]]
+            if len(options) > 64:
+                raise ValueError(f"event {ev.name}: {ev.when[0]} has more than 64 choices")
+            when_mask = sum(1 << options.index(c) for c in set(ev.when[1]))
         events.append(f"{{.name = {_cstr(ev.name)}, .guard = {ev.guard.name()}, "
-                      f".guard_work = {ev.guard.name()}_work, .handler = {handler}}}")
+                      f".guard_work = {ev.guard.name()}_work, .handler = {handler}, .when_index = {when_index}, "
+                      f".when_mask = {when_mask}ULL}}")
     empty = "{.name = NULL}"
     lines.append("static const sblsim_event events[] = {\n    " + (",\n    ".join(events) or empty) + "\n};")
     seeds = ", ".join(str(p_index.get(name, -1)) for name in SEED_NAMES)

@@ -46,8 +46,10 @@ from sblsim.orchestrator.config import (
 )
 from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.master import ALGORITHMS
+from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, REACH_RATIO
 from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.study import load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 EXIT_USAGE = 2
@@ -242,7 +244,6 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO
     from sblsim.orchestrator.run import run, summary, system_sources, write_run
 
     _check_seed(args.seed)
@@ -394,8 +395,6 @@ def _replay(args: argparse.Namespace) -> int:
 def _run_warnings(s: dict, cfg: dict) -> list[str]:
     """What a run's numbers do not say by themselves: a receiver that never made a fix, and a diver beyond
     what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
-    from sblsim.orchestrator.metrics import REACH_RATIO
-
     out = []
     if s["updates"] == 0:
         out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
@@ -523,7 +522,6 @@ def _map(args: argparse.Namespace) -> int:
 
 def _campaign(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.campaign import CampaignInterrupted, run_campaign
-    from sblsim.orchestrator.study import load_study
 
     study = load_study(args.study, seed=args.seed)
     out = args.out or Path("results") / folder_name(study.name)

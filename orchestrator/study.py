@@ -45,7 +45,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyDOE3
 import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
@@ -295,6 +294,8 @@ def design_matrix(k: int, design: str = "full", resolution: int = 0, generators:
     StudyError
         If the design cannot be built.
     """
+    import pyDOE3  # here, not at the top: it imports scipy.stats (a second), which a campaign's workers never need
+
     if design == "full":
         return pyDOE3.ff2n(k).astype(np.int64)
     if generators:

@@ -20,7 +20,8 @@ MAY_IMPORT = {"sblsim.models": set(), "sblsim.fmus": {"sblsim.models"},
 #: Libraries heavy enough to import only when used (seconds, or a process's worth of threads; casadi: what
 #: ``import sblsim`` must not load): a function-level import is allowed where it defers one of these, directly or
 #: through the sblsim module it imports.
-HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats", "casadi")
+HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats", "pyDOE3",
+         "casadi")
 #: Function-level imports that defer nothing heavy but ask whether an optional package is installed.
 PROBES = {"ziglang"}
 
@@ -225,7 +226,15 @@ def test_a_function_level_import_defers_a_heavy_library(name):
 
 def test_the_function_level_check_can_fail():
     """A module-level library is not heavy where its importer loads it already; a light one never is."""
-    assert "scipy.stats" in _heavy_at_load("sblsim.orchestrator.metrics")
+    assert "pyarrow" in _heavy_at_load("sblsim.orchestrator.campaign.merge")
     assert _heavy_at_load("sblsim.models.declarations") == set()
     assert "matplotlib" in _heavy_at_load("sblsim.orchestrator.plots")
     assert not _heavy_at_load("sblsim.orchestrator.cli") & {"pandas", "scipy.stats", "matplotlib"}
+
+
+def test_a_campaign_worker_loads_no_statistics_or_plotting():
+    """A campaign's worker process starts by importing its worker module: nothing of scipy.stats, pyDOE3 (which
+    imports it) or matplotlib, seconds of start-up that the chunks never use (the study's design is made by the
+    campaign's process)."""
+    assert not _heavy_at_load("sblsim.orchestrator.campaign.worker") & {"scipy.stats", "pyDOE3", "matplotlib"}
+    assert "pyDOE3" in {m for m, _, nested in IMPORTS["sblsim.orchestrator.study"] if nested}

@@ -177,12 +177,22 @@ static double now(void) {
 static void feed(sblsim_batch** batches, int c, const int* link_offsets, const int* link_src, const int* link_out,
                  const int* link_in) {
     sblsim_batch* dst = batches[c];
-    int i, k, n_u = dst->m->n_u;
-    for (i = 0; i < dst->B; i++) { /* replicate by replicate: each touches a few cache lines */
-        double* u = dst->vectors[SBLSIM_VECTOR_U] + (size_t)i * n_u;
-        for (k = link_offsets[c]; k < link_offsets[c + 1]; k++) {
-            const sblsim_batch* src = batches[link_src[k]];
-            u[link_in[k]] = src->vectors[SBLSIM_VECTOR_Y][(size_t)i * src->m->n_y + link_out[k]];
+    int i, k, n_u = dst->m->n_u, first = link_offsets[c], n = link_offsets[c + 1] - link_offsets[c];
+    if (n <= 0) return;
+    {
+        /* each link's source output (replicate 0), the stride between replicates and the input, found once */
+        const double* from[n];
+        size_t stride[n];
+        int to[n];
+        for (k = 0; k < n; k++) {
+            const sblsim_batch* src = batches[link_src[first + k]];
+            from[k] = src->vectors[SBLSIM_VECTOR_Y] + link_out[first + k];
+            stride[k] = (size_t)src->m->n_y;
+            to[k] = link_in[first + k];
+        }
+        for (i = 0; i < dst->B; i++) { /* replicate by replicate: each touches a few cache lines */
+            double* u = dst->vectors[SBLSIM_VECTOR_U] + (size_t)i * n_u;
+            for (k = 0; k < n; k++) u[to[k]] = from[k][(size_t)i * stride[k]];
         }
     }
 }

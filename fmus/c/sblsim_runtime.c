@@ -224,6 +224,7 @@ static const double* draw(sblsim_instance* s, const sblsim_function* f) {
     uint64_t keys[4];
     double* noise = s->work->noise;
     int k, offset = 0;
+    if (f->n_streams == 0) return noise; /* a function without random numbers reads none */
     for (k = 0; k < 4; k++) keys[k] = key_of(s, k);
     for (k = 0; k < f->n_streams; k++) {
         const sblsim_stream* st = &f->streams[k];
@@ -303,14 +304,17 @@ int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t
         if (call(s, m->step.f, s->x_next)) goto failed;
         swap_state(s);
     }
+    /* x, u, p, d are the first arguments of every guard and handler (a generated function uses the arguments
+       after its own as work space, never its own) */
+    a[1] = s->u;
+    a[2] = s->p;
+    a[3] = s->d;
     for (k = 0; k < m->n_events; k++) {
         const sblsim_event* e = &m->events[k];
         long fired = 0;
+        if (e->when_index >= 0 && !((e->when_mask >> (int)s->p[e->when_index]) & 1u)) continue; /* not this run's */
         for (;;) {
             a[0] = s->x;
-            a[1] = s->u;
-            a[2] = s->p;
-            a[3] = s->d;
             a[4] = &t;
             a[5] = &h;
             if (call(s, e->guard, &g)) goto failed;
@@ -321,9 +325,6 @@ int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t
                 return -1;
             }
             a[0] = s->x;
-            a[1] = s->u;
-            a[2] = s->p;
-            a[3] = s->d;
             a[4] = draw(s, &e->handler);
             a[5] = &t;
             a[6] = &h;

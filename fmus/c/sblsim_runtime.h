@@ -43,11 +43,15 @@ typedef struct {
     int n_streams;
 } sblsim_function;
 
+/* An event; it runs in a run whose choice parameter p[when_index] has its bit in when_mask (when_index -1:
+   in every run). */
 typedef struct {
     const char* name;
     sblsim_fn guard;
     sblsim_work_fn guard_work;
     sblsim_function handler;
+    int when_index;
+    uint64_t when_mask;
 } sblsim_event;
 
 /* A parameter's declared type and range (checked at the end of initialization). */

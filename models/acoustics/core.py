@@ -232,67 +232,68 @@ class Acoustics(Component):
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
 
-        def slot(x, u, p, d, w, t, h):
-            k = x["k"] + 1
-            t_k = x["t0"] + k * p["slot_period"]
-            i = ca.fmod(k - 1, n)
-            beacon = ca.vertcat(*[select(i, [u[true_names[3 * j + a]] for j in range(n)]) for a in range(3)])
-            sent = ca.vertcat(*[select(i, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
-            position = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]])
-            velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
+        def slot(ranging):
+            """The handler of a slot: of the interface's system (USBL) or of ``ranging`` (SBL and LBL)."""
+            def handler(x, u, p, d, w, t, h):
+                k = x["k"] + 1
+                t_k = x["t0"] + k * p["slot_period"]
+                i = ca.fmod(k - 1, n)
+                beacon = ca.vertcat(*[select(i, [u[true_names[3 * j + a]] for j in range(n)]) for a in range(3)])
+                sent = ca.vertcat(*[select(i, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
+                position = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]])
+                velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
 
-            def leg(offset, solve):
-                """Travel time and length between the beacon and the diver at ``t_k + offset`` [s] (None: 0),
-                plus the travel time itself when ``solve`` (fixed-point iterations)."""
-                def path(tau):
-                    receive = position + velocity * (tau if offset is None else offset + tau)
-                    distance = ca.norm_2(receive - beacon)
-                    speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
-                                          d["nodes"], d["slowness"])
-                    return distance / speed, distance, receive
+                def leg(offset, solve):
+                    """Travel time and length between the beacon and the diver at ``t_k + offset`` [s] (None: 0),
+                    plus the travel time itself when ``solve`` (fixed-point iterations)."""
+                    def path(tau):
+                        receive = position + velocity * (tau if offset is None else offset + tau)
+                        distance = ca.norm_2(receive - beacon)
+                        speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
+                                              d["nodes"], d["slowness"])
+                        return distance / speed, distance, receive
 
-                tau, distance, receive = path(0.0)
-                for _ in range(OWTT_ITERATIONS if solve else 0):
-                    tau, distance, receive = path(tau)
-                return tau, distance, receive
+                    tau, distance, receive = path(0.0)
+                    for _ in range(OWTT_ITERATIONS if solve else 0):
+                        tau, distance, receive = path(tau)
+                    return tau, distance, receive
 
-            draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
-            valid = draws[0] >= p["loss_pct"] / 100.0
-            outlier = draws[1] < p["outlier_pct"] / 100.0
-            excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
-            drift = p["clock_drift_ppm"] * 1e-6
-            turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
+                draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
+                valid = draws[0] >= p["loss_pct"] / 100.0
+                outlier = draws[1] < p["outlier_pct"] / 100.0
+                excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
+                drift = p["clock_drift_ppm"] * 1e-6
 
-            def two_way(up, down):
-                """Range, true range and round trip of a two-way exchange: ``up`` and ``down`` are the legs."""
-                trip = up[0] + turnaround + down[0]
-                measured = trip * (1.0 + drift)
-                return p["sound_speed_assumed"] * (measured - p["turnaround"]) / 2.0, (up[1] + down[1]) / 2.0, trip
+                def two_way(up, down):
+                    """Range, true range and round trip of a two-way exchange: ``up`` and ``down`` are the legs."""
+                    trip = up[0] + turnaround + down[0]
+                    measured = trip * (1.0 + drift)
+                    return p["sound_speed_assumed"] * (measured - p["turnaround"]) / 2.0, (up[1] + down[1]) / 2.0, trip
 
-            if direction:  # the transceiver interrogates; the diver replies from where it is then
-                up = leg(None, True)
-                reply = leg(up[0] + turnaround, False)
-                rng, distance, tau = two_way(up, reply)
-                valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # the reply, the downlink
-            else:
-                tau, distance, _ = leg(None, True)
-                measured = tau + drift * (t_k - x["t0"] + tau)
-                rng = p["sound_speed_assumed"] * measured
-                # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
-                up = leg(None, False)
-                twtt = two_way(up, leg(up[0] + turnaround, True))
-                is_twtt = p["ranging"] == RANGING.index("twtt")
-                rng, distance, tau = (ca.if_else(is_twtt, a, b) for a, b in zip(twtt, (rng, distance, tau)))
-            rng = rng + p["sigma_range"] * noise + excess
-            out = {"k": k, "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
-                   "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
-                   "outlier": ca.logic_and(outlier, valid)}
-            out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
-            if direction:
-                out.update(zip(("azimuth", "elevation"),
-                    (ca.if_else(valid, a, 0.0) for a in arrival(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
-            return out
-
+                if ranging == "twtt":  # the replying transponder's turnaround
+                    turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
+                if direction:  # the transceiver interrogates; the diver replies from where it is then
+                    up = leg(None, True)
+                    reply = leg(up[0] + turnaround, False)
+                    rng, distance, tau = two_way(up, reply)
+                    valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # the reply, the downlink
+                elif ranging == "owtt":
+                    tau, distance, _ = leg(None, True)
+                    measured = tau + drift * (t_k - x["t0"] + tau)
+                    rng = p["sound_speed_assumed"] * measured
+                else:  # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
+                    up = leg(None, False)
+                    rng, distance, tau = two_way(up, leg(up[0] + turnaround, True))
+                rng = rng + p["sigma_range"] * noise + excess
+                out = {"k": k, "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
+                       "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
+                       "outlier": ca.logic_and(outlier, valid)}
+                out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
+                if direction:
+                    out.update(zip(("azimuth", "elevation"),
+                        (ca.if_else(valid, a, 0.0) for a in arrival(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
+                return out
+            return handler
 
         def arrival(direction, u, p, w_angle):
             """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1)."""
@@ -312,12 +313,13 @@ class Acoustics(Component):
 
         streams = (Stream(_CHANNEL_UNIFORM, "uniform", 3), Stream(_RANGE_NOISE, "normal", 1))
         if direction:
-            streams += (Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2),
-                        Stream(_DOWNLINK, "uniform", 1))
-        else:
-            streams += (Stream(_TURNAROUND, "normal", 1, when=("ranging", "twtt")),)
-        return b.program(b.prepare(prepare), b.init(init), b.output(output),
-                         events=[b.event("slot", due, slot, streams)])
+            events = [b.event("slot", due, slot("twtt"), streams + (
+                Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2), Stream(_DOWNLINK, "uniform", 1)))]
+        else:  # one slot event per ranging, each only in the runs of its ranging: a run computes its own legs
+            events = [b.event("slot", due, slot("owtt"), streams, when=("ranging", ("owtt",))),
+                      b.event("slot_twtt", due, slot("twtt"), streams + (Stream(_TURNAROUND, "normal", 1),),
+                              when=("ranging", ("twtt",)))]
+        return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
 __all__ = ["Acoustics", "DIRECTION", "OWTT_ITERATIONS", "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -215,7 +215,7 @@ class Platform(Component):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1), ("phase_sin", 4), ("phase_cos", 4),
                                             ("gps_error", 3), ("gps", 3), ("broadcast", 3 * n),
-                                            ("installation", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3),
+                                            ("installed", 3 * n), ("imu_scale", 3), ("imu_misalignment", 3),
                                             ("survey", 3 * n), ("usbl_misalignment", 3), ("imu", 3)],
                            derived=[("offsets", 3 * n), ("motion", 4), ("seafloor", 3 * n)])
         # the systems of this interface: the first places the transducers on the platform, the others (LBL) may
@@ -249,9 +249,9 @@ class Platform(Component):
         def offsets(d):
             return [d["offsets"][3 * i:3 * i + 3] for i in range(n)]
 
-        def sample(p, d, x, gps_error, imu_noise, t_k):
+        def sample(p, d, x, gps_error, imu_noise, t_k, systems=systems):
             """GPS position and broadcast beacon positions sampled at ``t_k`` (``x``: the phases and the
-            IMU's scale-factor and misalignment errors)."""
+            IMU's scale-factor and misalignment errors) where ``p["system"]`` is one of ``systems``."""
             roll, pitch, yaw, depth = attitude(p, d, x, t_k)
             gps = ca.vertcat(0.0, 0.0, depth) + gps_error
             bias = p["imu_bias_deg"] * (math.pi / 180.0) + p["imu_gyro_bias"] * t_k
@@ -268,7 +268,8 @@ class Platform(Component):
             phases = 2.0 * math.pi * w[_PHASES]
             wave_phases = {"phase_sin": ca.sin(phases), "phase_cos": ca.cos(phases)}
             gps_error = p["gps_sigma"] * w[_GPS]  # stationary start of either model
-            fixed = {"installation": p["installation_sigma"] * w[_INSTALLATION],  # per run: zeros when σ = 0
+            # the body offsets as installed: the layout's plus the installation error (per run: zero when σ = 0)
+            fixed = {"installed": d["offsets"] + p["installation_sigma"] * w[_INSTALLATION],
                      "imu_scale": p["imu_scale_factor_ppm"] * 1e-6 * w[_IMU_SCALE],
                      "imu_misalignment": p["imu_misalignment_deg"] * (math.pi / 180.0) * w[_IMU_MISALIGNMENT],
                      "survey": p["survey_sigma"] * w[_SURVEY],
@@ -279,17 +280,21 @@ class Platform(Component):
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["sample_period"], t, h)
 
-        def take_sample(x, u, p, d, w, t, h):
-            k = x["k"] + 1
-            t_k = x["t0"] + k * p["sample_period"]
-            phi = ca.exp(-p["sample_period"] / p["gps_tau"])
-            markov = phi * x["gps_error"] + p["gps_sigma"] * ca.sqrt(1.0 - phi * phi) * w[_GPS]
-            gps_error = ca.if_else(p["gps_model"] == GPS_MODELS.index("white"), p["gps_sigma"] * w[_GPS], markov)
-            return {"k": k, "gps_error": gps_error, **sample(p, d, x, gps_error, w[_IMU], t_k)}
+        def take_sample(systems):
+            """The sample event's handler in the runs of ``systems``."""
+            def handler(x, u, p, d, w, t, h):
+                k = x["k"] + 1
+                t_k = x["t0"] + k * p["sample_period"]
+                phi = ca.exp(-p["sample_period"] / p["gps_tau"])
+                markov = phi * x["gps_error"] + p["gps_sigma"] * ca.sqrt(1.0 - phi * phi) * w[_GPS]
+                gps_error = ca.if_else(p["gps_model"] == GPS_MODELS.index("white"), p["gps_sigma"] * w[_GPS],
+                                       markov)
+                return {"k": k, "gps_error": gps_error, **sample(p, d, x, gps_error, w[_IMU], t_k, systems)}
+            return handler
 
         def output(x, p, d, t):
             roll, pitch, yaw, depth = attitude(p, d, x, t)
-            installed = [a + x["installation"][3 * i:3 * i + 3] for i, a in enumerate(offsets(d))]
+            installed = [x["installed"][3 * i:3 * i + 3] for i in range(n)]
             true = ca.vertcat(*beacon_positions(ca.vertcat(0.0, 0.0, depth), rotation_ned(roll, pitch, yaw),
                                                 installed))
             for system in systems:  # LBL: the transponders on the seafloor
@@ -308,8 +313,15 @@ class Platform(Component):
         fixed = (Stream(_INSTALLATION, "normal", 3 * n), Stream(_IMU_SCALE, "normal", 3),
                  Stream(_IMU_MISALIGNMENT, "normal", 3), Stream(_SURVEY, "normal", 3 * n),
                  Stream(_USBL_MISALIGNMENT, "normal", 3))
+        # a sample event of the runs whose system places no transducer elsewhere (SBL, USBL), which computes no
+        # other placement, and one of each system that does (LBL's surveyed positions)
+        placing = [s for s in systems if s.places_transducers]
+        others = [name for name, s in SYSTEMS.items() if s not in placing]
+        events = [b.event("sample", due, take_sample([]), noise, when=("system", others) if placing else None)]
+        events += [b.event(f"sample_{s.name}", due, take_sample([s]), noise, when=("system", [s.name]))
+                   for s in placing]
         return b.program(b.prepare(prepare), b.init(init, (Stream(_PHASES, "uniform", 4),) + noise + fixed),
-                         b.output(output), events=[b.event("sample", due, take_sample, noise)])
+                         b.output(output), events=events)
 
 
 __all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "USBL_ATTITUDES",

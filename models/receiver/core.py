@@ -134,6 +134,12 @@ def clock_tick(x, u, p, d, w, t, h) -> dict[str, ca.SX]:
     return {"tick": x["tick"] + 1}
 
 
+def clock_step(x, p, t, h) -> dict[str, ca.SX]:
+    """The clock's first tick of a step, taken in the step function (the clock event, which runs first, then
+    takes only the further ticks of a step longer than the receiver's: the same ticks, one handler call less)."""
+    return {"tick": x["tick"] + clock_due(x, None, p, None, t, h)}
+
+
 def slot_due(x, u, p, t, h) -> ca.SX:
     """A new packet whose transmit epoch the end of the step has reached, in a step that reached a tick of the
     receiver's clock (the last tick lies after the step's start; the clock event runs first)."""
@@ -347,7 +353,7 @@ class KalmanReceiver(Component):
 
         def step(x, u, p, d, w, t, h):
             state, P = cls.predict(x["x"], ca.reshape(x["P"], size, size), h, p)
-            return {"x": state, "P": ca.vec(P)}
+            return {"x": state, "P": ca.vec(P), **clock_step(x, p, t, h)}
 
         def due(x, u, p, d, t, h):
             return slot_due(x, u, p, t, h)
@@ -397,6 +403,6 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "beacon_parameters",
-           "clock_due", "clock_parameters", "clock_tick", "covariance_outputs", "filter_parameters", "fresh_packet",
-           "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
+           "clock_due", "clock_parameters", "clock_step", "clock_tick", "covariance_outputs", "filter_parameters",
+           "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
            "packet_init", "packet_states", "receiver_interface", "slot_due", "system_interface", "take_packet"]

@@ -69,6 +69,9 @@ class System:
         Time-series columns the system adds: name -> recorded ``component.variable``.
     log_columns : dict
         Columns a replay log of the system adds: log column -> time-series column.
+    places_transducers : bool
+        The transducers stand elsewhere than on the platform (:meth:`placed_true`, :meth:`placed_broadcast`):
+        the platform program samples the broadcast positions of the system's runs with an event of their own.
     bound_fixed, bound_steps : tuple of str
         The per-run and per-step inputs of the system's own compiled PCRB (:meth:`bound_function`); empty
         for a system whose bound is the metrics pass's range bound.
@@ -86,6 +89,7 @@ class System:
     takes_ranges: ClassVar[bool] = True
     timeseries_columns: ClassVar[dict[str, str]] = {}
     log_columns: ClassVar[dict[str, str]] = {}
+    places_transducers: ClassVar[bool] = False
     bound_fixed: ClassVar[tuple[str, ...]] = ()
     bound_steps: ClassVar[tuple[str, ...]] = ()
 
@@ -126,7 +130,8 @@ class System:
 
     def placed_true(self, p: Mapping[str, Any], d: Mapping[str, Any], true):
         """The true transducer positions (3 n, 1) of the platform program where ``p["system"]`` is this system,
-        given the platform-mounted ones ``true`` (default: those)."""
+        given the platform-mounted ones ``true`` (default: those; a system that overrides this or
+        :meth:`placed_broadcast` sets :attr:`places_transducers`)."""
         return true
 
     def placed_broadcast(self, p: Mapping[str, Any], d: Mapping[str, Any], x: Mapping[str, Any], broadcast):

@@ -40,6 +40,7 @@ class LBL(SBL):
     words = "4 transponders on a 50 m circle at platform.seafloor_depth"
     compare_defaults = ("platform.layout=circle", "platform.beacons=4", "platform.baseline=50")
     marker = "transponders"
+    places_transducers = True
 
     def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
         """The transponders' NED positions relative to the mooring point (n, 3) [m]: the layout's points at

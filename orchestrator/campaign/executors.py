@@ -135,9 +135,25 @@ def close_client(client) -> None:
         cluster.close()
 
 
+def start_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` worker processes, started now: each imports the worker module while the campaign's
+    process goes on planning (rather than after it, when the chunks are submitted).
+
+    A spawn pool starts a process for a submission that finds none idle: one trivial task per worker starts
+    them all. :func:`execute` runs the chunks in it and shuts it down; :func:`stop_pool` stops it unused.
+    """
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=watch_parent, initargs=(os.getpid(),))
+    for _ in range(workers):
+        pool.submit(os.getpid)
+    return pool
+
+
 def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries: bool, workers: int | None,
-            client) -> Iterator[tuple[Chunk, tuple[pd.DataFrame, pd.DataFrame | None]]]:
-    """Yield each chunk with its result as soon as it is finished."""
+            client, pool: ProcessPoolExecutor | None = None
+            ) -> Iterator[tuple[Chunk, tuple[pd.DataFrame, pd.DataFrame | None]]]:
+    """Yield each chunk with its result as soon as it is finished (in ``pool``, a pool of :func:`start_pool`,
+    when the chunks run in worker processes and one is given)."""
     if client is not None:
         from distributed import as_completed
 
@@ -156,9 +172,10 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
         for c in chunks:
             yield c, run_chunk(c, study, engine, fmu_dir, timeseries)
         return
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
-                               mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
-                               initargs=(os.getpid(),))
+    if pool is None:
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
+                                   mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
+                                   initargs=(os.getpid(),))
     pending: dict = {}
     try:
         pending = {pool.submit(run_chunk, c, study, engine, fmu_dir, timeseries): c for c in chunks}

@@ -14,7 +14,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from sblsim.orchestrator.campaign.errors import CampaignError, CampaignInterrupted
-from sblsim.orchestrator.campaign.executors import check_address, close_client, connect, execute
+from sblsim.orchestrator.campaign.executors import check_address, close_client, connect, execute, start_pool, stop_pool
 from sblsim.orchestrator.campaign.manifest import (
     PLAN,
     file_digest,
@@ -122,6 +122,22 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     if scheduler:
         check_address(scheduler)
     batch = batch or DEFAULT_BATCH[engine]
+    pool = None
+    count = workers or os.cpu_count() or 1
+    if not scheduler and count > 1 and study.runs > max(batch, study.replicates):  # two chunks at least
+        # the worker processes start first: they import while the cells are resolved and planned
+        pool = start_pool(min(count, study.cells * len(study.scenarios)))
+    try:
+        return _run_campaign(study, out, workers, scheduler, resume, engine, batch, fmu_dir, save_timeseries,
+                             progress, pool)
+    finally:
+        if pool is not None:  # unused (nothing to run, or bad input), or shut down by execute
+            stop_pool(pool)
+
+
+def _run_campaign(study: Study, out: Path, workers: int | None, scheduler: str | None, resume: bool, engine: str,
+                  batch: int, fmu_dir, save_timeseries: bool, progress: bool | None, pool) -> CampaignResult:
+    """:func:`run_campaign` after the checks of its arguments (``pool``: worker processes started, or None)."""
     configs = cell_configs(study)  # every cell resolves before anything is written
     if engine == "fmu":  # refuse missing FMUs before anything is written
         for sources, n_beacons in {(tuple(system_sources(cfg).items()), beacon_count(cfg))
@@ -139,7 +155,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         raise
     try:
         return _run_prepared(study, out, batch, configs, workers, client, engine, fmu_dir, save_timeseries,
-                             progress)
+                             progress, pool)
     except KeyboardInterrupt:  # chunk files are written whole (then renamed): each one present is kept
         done = sum(pq.ParquetFile(f).metadata.num_rows for f in (out / "chunks").glob("*.parquet"))
         raise CampaignInterrupted(done, study.runs, out) from None
@@ -173,7 +189,7 @@ def _check_memory(chunks: list, workers: int | None, scheduler: str | None, save
 
 
 def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, client, engine: str, fmu_dir,
-                  save_timeseries: bool, progress: bool | None) -> CampaignResult:
+                  save_timeseries: bool, progress: bool | None, pool=None) -> CampaignResult:
     """Run the missing chunks of a prepared campaign directory and write ``runs.parquet``."""
     chunks = plan(study, batch, configs)
     chunk_dir, series_dir = out / "chunks", out / "timeseries"
@@ -215,7 +231,7 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
         reporter = Progress(total, done, progress)
         try:
             for chunk, (rows, series) in execute(todo, study, engine, fmu_dir, save_timeseries,
-                                                  workers, client):
+                                                  workers, client, pool):
                 path = chunk_dir / f"{chunk.id}.parquet"
                 seconds = rows.attrs.pop("seconds", None)  # not into the file: its bytes depend on the results only
                 if series is not None:

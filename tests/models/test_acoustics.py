@@ -23,10 +23,12 @@ import pytest
 from scipy import integrate, stats
 
 from sblsim.models.acoustics import Acoustics, profile_table
+from sblsim.models.acoustics.core import RANGING
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
 from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms
 from sblsim.models.platform.core import beacon_names
+from sblsim.models.program import ProgramBuilder
 from tests.helpers import Core
 
 CONF = 0.999
@@ -662,3 +664,33 @@ def test_step_with_moving_target_reports_reception_distance():
     # and differs from the distance at transmit by about the radial motion v·u τ
     u = d / np.linalg.norm(d)
     assert out["range_true"][0] - np.linalg.norm(d) == pytest.approx(v @ u * tau, rel=1e-3)
+
+
+@pytest.mark.parametrize("ranging", RANGING)
+def test_each_ranging_runs_its_own_slot_event_once_per_slot(ranging):
+    """SBL and LBL have a slot event per ranging, each in the runs of its ranging only (``Event.when``): a step
+    that reaches one slot epoch emits one packet (not none, not one per event), timed as that ranging times it:
+    OWTT ``τ = d / c``, TWTT the round trip ``2 d / c + t_ta`` of a diver at rest."""
+    events = [e for e in Acoustics.program(4).events if e.when is not None]
+    assert sorted(c for e in events for c in e.when[1]) == sorted(RANGING)  # every ranging, each once
+    T, turnaround = 0.25, 0.05
+    core = make(dict(sigma_range=0.0, slot_period=T, ranging=ranging, turnaround=turnaround), replicates=(0, 1))
+    for k in range(4):
+        out = core.step(k * T, T)
+        assert out["packet_seq"].tolist() == [k + 1, k + 1]
+        d = np.linalg.norm(TARGET - TRUE_BEACONS[k])
+        expected = d / 1500.0 if ranging == "owtt" else 2.0 * d / 1500.0 + turnaround
+        np.testing.assert_allclose(out["travel_time"], expected, rtol=1e-12)
+        np.testing.assert_allclose(out["range"], d, rtol=1e-12)
+
+
+def test_an_event_names_choices_of_a_choice_parameter():
+    """``ProgramBuilder.event(when=...)`` refuses a parameter that is not a choice, a choice it does not have, a
+    bare string and no choice at all."""
+    b = ProgramBuilder(Acoustics, 4, states=[("k", 1)])
+    due = lambda x, u, p, d, t, h: x["k"] < 0  # noqa: E731
+    tick = lambda x, u, p, d, w, t, h: {"k": x["k"] + 1}  # noqa: E731
+    assert b.event("e", due, tick, when=("ranging", ["twtt"])).when == ("ranging", ("twtt",))
+    for when in (("sigma_range", ["twtt"]), ("ranging", ["usbl"]), ("ranging", "twtt"), ("ranging", [])):
+        with pytest.raises(ValueError, match="choice parameter"):
+            b.event("e", due, tick, when=when)
