@@ -55,6 +55,7 @@ from sblsim.orchestrator.config import (
 )
 from sblsim.orchestrator.engines import ENGINES
 from sblsim.orchestrator.output import check_output, check_writable
+from sblsim.orchestrator.study import load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -867,7 +868,6 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
         On Ctrl-C: the finished chunks are kept (``resume=True`` finishes).
     """
     from sblsim.orchestrator.campaign import run_campaign
-    from sblsim.orchestrator.study import load_study
 
     _check_seed(seed)
     _check_engine(engine)
