@@ -214,7 +214,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--cross", action=argparse.BooleanOptionalAction, default=None,
                    help="also build Windows and macOS binaries with zig (default: when the compiler is zig)")
     b.add_argument("--model", type=Path, default=None, metavar="PATH.py",
-                   help="build only the receiver model this Python file defines (see README, Write your own receiver)")
+                   help="build only the receiver model this Python file defines (see docs/extending.md, "
+                        "Write your own receiver)")
     b.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="beacons of the interfaces (default 4; other N go to the folder beacons<N> of the output)")
     b.add_argument("--system", choices=_OWNERS, default=_OWNERS[0],

@@ -1,10 +1,13 @@
 """Progress of long work: a tqdm bar at a terminal, a plain log line every few seconds otherwise, a caller's
 callback, or nothing.
 
-Every command that can take more than a few seconds reports through :class:`Progress`: the command line
-passes ``"auto"`` (a bar when standard error is a terminal, else a line ``DESC: done/total UNIT (P %), about
-S s left`` every :data:`LOG_EVERY` seconds, none for work that ends sooner), the Python API ``False`` by
-default (silent), ``True`` for a bar, or a callable.
+Every command that can take more than a few seconds (``run``, ``compare``, ``map``, ``budget``,
+``campaign``) reports through :class:`Progress`: the command line passes ``"auto"`` (a bar when standard
+error is a terminal, else a line ``DESC: done/total UNITs (P %), about S s left`` every :data:`LOG_EVERY`
+seconds, none for work that ends sooner), the Python API ``False`` by default (silent), ``True`` for a bar,
+or a callable. A campaign's reporter takes three options: it starts where a resumed campaign stands
+(``initial``), prints its first and last line whatever the time (``ends``), and its line has the rate
+(``rate``: ``campaign: 4/8 runs (50 %), 0.5 runs/s, about 8 s left``).
 """
 
 from __future__ import annotations
@@ -18,13 +21,17 @@ from tqdm import tqdm
 #: How often a plain progress line is printed when standard error is not a terminal [s].
 LOG_EVERY = 10.0
 
-#: What a ``progress`` argument may be: ``False``/``None`` (silent), ``True`` (a tqdm bar on standard error),
-#: ``"auto"`` (a bar at a terminal, else log lines), or a callable ``progress(done, total)`` [units of the work].
+#: What a ``progress`` argument may be: ``False``/``None``/``"off"`` (silent), ``True`` (a tqdm bar on standard
+#: error), ``"auto"`` (a bar at a terminal, else log lines), ``"log"`` (log lines, even at a terminal), or a
+#: callable ``progress(done, total)`` [units of the work].
 ProgressSpec = Union[bool, None, str, Callable[[float, float], object]]
 
 
 class Progress:
     """Report ``done`` of ``total`` units of work (steps, runs, cells, targets).
+
+    The rate is the units done since this reporter started over the time since [units/s], and the time
+    left the units still to do over that rate [s].
 
     Parameters
     ----------
@@ -38,6 +45,14 @@ class Progress:
         :data:`ProgressSpec`.
     every : float
         Seconds between plain log lines [s].
+    initial : float
+        Units already done when this reporter starts (a resumed campaign's): the bar and the lines start
+        there, and the rate counts only the units done since.
+    ends : bool
+        Report the start and the end whatever the time: the first log line at once and the last when the
+        work is done (a callback is called at once with ``initial``); the bar stays on the terminal.
+    rate : bool
+        The log line gives the rate (``, 0.5 runs/s``).
 
     Raises
     ------
@@ -46,9 +61,10 @@ class Progress:
     """
 
     def __init__(self, total: float, desc: str, unit: str = "step", spec: ProgressSpec = False,
-                 every: float = LOG_EVERY) -> None:
+                 every: float = LOG_EVERY, *, initial: float = 0, ends: bool = False, rate: bool = False) -> None:
         self.total, self.desc, self.unit, self.every = total, desc, unit, every
-        self.done = 0.0
+        self.initial = self.done = initial
+        self.ends, self.rate = ends, rate
         self.start = self.last = time.perf_counter()
         self.bar = None
         self.callback: Callable[[float, float], object] | None = None
@@ -60,13 +76,21 @@ class Progress:
                 self._open_bar()
             else:
                 self.log = True
+        elif spec == "log":
+            self.log = True
         elif spec is True:
             self._open_bar()
-        elif spec not in (False, None):
-            raise ValueError(f"progress: {spec!r} is not True, False, 'auto' or a callable(done, total)")
+        elif spec not in (False, None, "off"):
+            raise ValueError(f"progress: {spec!r} is not True, False, 'auto', 'log', 'off' or a callable(done, total)")
+        if ends:
+            if self.callback is not None:
+                self.callback(self.done, self.total)
+            elif self.log:
+                self._line(self.start)
 
     def _open_bar(self) -> None:
-        self.bar = tqdm(total=self.total or None, unit=self.unit, desc=self.desc, leave=False, smoothing=0.1)
+        self.bar = tqdm(total=self.total or None, initial=self.initial, unit=self.unit, desc=self.desc,
+                        leave=self.ends, smoothing=0.1)
 
     @property
     def active(self) -> bool:
@@ -82,17 +106,18 @@ class Progress:
             self.callback(self.done, self.total)
         elif self.log:
             now = time.perf_counter()
-            if now - self.last >= self.every:
+            if now - self.last >= self.every or (self.ends and self.total and self.done >= self.total):
                 self.last = now
                 self._line(now)
 
     def _line(self, now: float) -> None:
-        rate = self.done / (now - self.start) if now > self.start else 0.0
+        rate = (self.done - self.initial) / (now - self.start) if now > self.start else 0.0
         if self.total:
+            speed = f", {rate:.1f} {self.unit}s/s" if self.rate else ""
             left = (f", about {(self.total - self.done) / rate:.0f} s left" if rate > 0 and self.done < self.total
                     else "")
             print(f"{self.desc}: {self.done:.0f}/{self.total:.0f} {self.unit}s ({100.0 * self.done / self.total:.0f} "
-                  f"%){left}", file=sys.stderr, flush=True)
+                  f"%){speed}{left}", file=sys.stderr, flush=True)
         else:
             print(f"{self.desc}: {self.done:.0f} {self.unit}s, {now - self.start:.0f} s", file=sys.stderr, flush=True)
 

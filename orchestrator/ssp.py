@@ -16,7 +16,7 @@ An SSP archive (Modelica Association, *System Structure and Parameterization*
   binding.
 
 What the package avoids, because one of the hosts it was run in rejects it
-(the README lists the hosts): names that are not identifiers
+(docs/interop.md lists the hosts): names that are not identifiers
 (``[A-Za-z][A-Za-z0-9_]*``), String parameters (the FMUs have none: choices
 are Integer indices, tables are Real arrays), and annotations on a component.
 A configuration with ``receiver.latency`` > 0 is not exported: the

@@ -22,6 +22,13 @@ and why:
 A page may keep a block from running only by saying why in the page itself: its first line is a comment
 ``# not run: <reason>`` (an excerpt, a placeholder for the user's own Dask scheduler); every other block runs.
 Each page's time is printed (``-s``) and reported by ``--durations``; the tutorial pages state it.
+
+The figures the pages show (``![...](figures/NAME.png)``, the README's ``docs/figures/NAME.png``) are made by
+the pages' own blocks: the copy starts without any file of ``docs/figures/``, and after a page's blocks have
+run, every figure it shows must have been written by them (there, and since the page started: not left by an
+earlier page), a PNG of about the size of the committed one (the same figure; matplotlib's bytes are not
+stable, so the bytes are not compared). The site is then built from the copy (``sphinx-build -W``), and its
+images are the bytes the run wrote.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import struct
 import subprocess
 import sys
 import time
@@ -75,6 +83,25 @@ def reading_order() -> list[str]:
 
 
 PAGES = ["README.md", *reading_order()]
+FIGURES = "docs/figures"
+
+
+def figures_shown(page: str, text: str) -> list[str]:
+    """The figures of ``docs/figures/`` a page shows (Markdown images), as paths from the repository's root."""
+    shown = []
+    for target in re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text):
+        path = os.path.normpath(os.path.join(os.path.dirname(page), target))
+        if path.startswith(FIGURES + "/") and path not in shown:
+            shown.append(path)
+    return shown
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """The width and height [px] of a PNG file (its IHDR chunk); ValueError if it is not a PNG."""
+    head = path.read_bytes()[:24]
+    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        raise ValueError(f"{path} is not a PNG file")
+    return struct.unpack(">II", head[16:24])
 
 
 def as_run(body: str, study: str) -> str:
@@ -131,6 +158,26 @@ def test_the_pages_have_blocks_that_run():
     assert len({page for page, _ in runnable["bash"]} - {"README.md"}) >= 6, runnable
 
 
+def test_every_committed_figure_is_shown_and_made_by_a_block_of_its_page():
+    """Each file of docs/figures/ is shown by a page, and every page that shows it has a block that names it
+    (the run itself, :func:`test_the_page_blocks_run_in_order`, checks that the block writes it)."""
+    listed = subprocess.run(["git", "ls-files", FIGURES], cwd=ROOT, capture_output=True, text=True,
+                            check=True).stdout.split()
+    assert listed, "docs/figures/ holds no figure"
+    shown = {page: figures_shown(page, (ROOT / page).read_text()) for page in PAGES}
+    for figure in listed:
+        pages = [page for page, figures in shown.items() if figure in figures]
+        assert pages, f"{figure} is committed but no page shows it"
+        for page in pages:
+            blocks = [body for _, _, body in fenced_blocks((ROOT / page).read_text(), ("bash", "python"))
+                      if not_run(body) is None]
+            assert any(figure in body for body in blocks), f"{page} shows {figure} but no block of it writes it"
+    for page, figures in shown.items():
+        for figure in figures:
+            assert figure in listed, f"{page} shows {figure}, which is not committed"
+    assert "docs/figures/semicircle_trajectory_xy.png" in shown["README.md"]
+
+
 @pytest.fixture(scope="module")
 def fresh_copy(tmp_path_factory):
     """The repository's files (as git lists them) in a new folder, with this environment as its ``.venv``."""
@@ -142,6 +189,8 @@ def fresh_copy(tmp_path_factory):
             (copy / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(source, copy / name)
     (copy / ".venv").symlink_to(sys.prefix, target_is_directory=True)
+    for figure in (copy / FIGURES).iterdir():  # the pages' blocks make them again
+        figure.unlink()
     paper = (ROOT / "orchestrator" / "studies" / "paper.toml").read_text()
     short = re.sub(r"(?m)^replicates = \d+$", 'replicates = 2\nset = ["simulation.duration=10"]', paper)
     assert short != paper
@@ -151,8 +200,9 @@ def fresh_copy(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def shell():
-    """What the user's shell keeps from one block to the next, across pages: the activated environment."""
-    return {"session": ""}
+    """What the user's shell keeps from one block to the next, across pages: the activated environment; and
+    the pages whose blocks all ran."""
+    return {"session": "", "done": set()}
 
 
 @pytest.mark.parametrize("page", PAGES)
@@ -163,7 +213,12 @@ def test_the_page_blocks_run_in_order(fresh_copy, shell, page):
                                   Path(p).parents and p != str(Path(sys.prefix) / "bin"))
     python = str(fresh_copy / ".venv" / "bin" / "python")
     start = time.perf_counter()
-    blocks = fenced_blocks((fresh_copy / page).read_text(), ("bash", "python"))
+    text = (fresh_copy / page).read_text()
+    figures = figures_shown(page, text)
+    before = {figure: (fresh_copy / figure).stat() if (fresh_copy / figure).exists() else None
+              for figure in figures}
+    started = time.time_ns()
+    blocks = fenced_blocks(text, ("bash", "python"))
     for number, (line, language, body) in enumerate(blocks, 1):
         if not_run(body) is not None:
             continue
@@ -179,4 +234,36 @@ def test_the_page_blocks_run_in_order(fresh_copy, shell, page):
         assert done.returncode == 0, f"{where}:\n{done.stderr[-4000:]}"
         if "source .venv/bin/activate" in script:
             shell["session"] = "source .venv/bin/activate\n"
+    for figure in figures:
+        made = fresh_copy / figure
+        assert made.is_file(), f"{page}: the figure {figure} it shows was not made by its blocks"
+        now, earlier = made.stat(), before[figure]
+        assert earlier is None or (now.st_mtime_ns, now.st_ino, now.st_size) != \
+            (earlier.st_mtime_ns, earlier.st_ino, earlier.st_size), \
+            f"{page}: the figure {figure} it shows was not written again by its blocks (an earlier page's)"
+        assert now.st_mtime_ns >= started - 2_000_000_000, f"{page}: the figure {figure} is older than the page's run"
+        width, height = png_size(made)
+        committed = png_size(ROOT / figure)
+        assert abs(width / committed[0] - 1) < 0.2 and abs(height / committed[1] - 1) < 0.2, \
+            f"{page}: the figure {figure} made is {width}x{height} px, the committed one {committed[0]}x{committed[1]}"
+    shell["done"].add(page)
     print(f"\n{page}: {len(blocks)} blocks in {time.perf_counter() - start:.0f} s")
+
+
+def test_the_site_builds_from_the_copy_with_the_figures_the_run_made(fresh_copy, shell, tmp_path):
+    """After every page has run: ``sphinx-build -W`` of the copy's docs/, whose images are the bytes the
+    pages' blocks wrote (the committed figures were removed from the copy before the run)."""
+    if set(PAGES) - shell["done"]:
+        pytest.skip("not every page's blocks ran (a selection, or a page failed)")
+    pytest.importorskip("sphinx", reason="the docs extra is not installed (pip install -e '.[docs]')")
+    done = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-E", "-b", "html",
+                           "-d", str(tmp_path / ".doctrees"), str(fresh_copy / "docs"), str(tmp_path / "html")],
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, f"the docs build of the copy failed:\n{done.stderr[-6000:]}"
+    shown = {figure for page in PAGES if page != "README.md"
+             for figure in figures_shown(page, (fresh_copy / page).read_text())}
+    assert len(shown) >= 10, shown
+    for figure in sorted(shown):
+        in_site = tmp_path / "html" / "_images" / Path(figure).name
+        assert in_site.is_file(), f"the site has no {figure}"
+        assert in_site.read_bytes() == (fresh_copy / figure).read_bytes(), f"the site's {figure} is not the run's"

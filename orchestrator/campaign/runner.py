@@ -27,9 +27,9 @@ from sblsim.orchestrator.campaign.manifest import (
 )
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
-from sblsim.orchestrator.campaign.progress import Progress
 from sblsim.orchestrator.engines import ENGINES, fmu_paths
 from sblsim.orchestrator.limits import check_steps, step_count
+from sblsim.orchestrator.progress import Progress
 from sblsim.orchestrator.run import beacon_count, system_sources
 from sblsim.orchestrator.study import Study
 
@@ -98,8 +98,11 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
         Directory of the built FMUs (fmu engine).
     save_timeseries : bool
         Also write the per-step time series of every run.
-    progress : bool, optional
-        Progress bar (default: when stderr is a terminal; else log lines).
+    progress : bool, 'off' or callable, optional
+        How the runs done are reported (:class:`sblsim.orchestrator.progress.Progress`, from the resumed
+        campaign's runs, with its first and last line and the runs/s): None (default) a bar when standard
+        error is a terminal, else log lines; True a bar; False log lines; ``"off"`` nothing; a callable
+        ``progress(done, total)`` [runs].
 
     Returns
     -------
@@ -228,7 +231,8 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
     computed = 0
     if todo:
         todo.sort(key=lambda c: -c.steps * c.runs)  # longest first: better load balance
-        reporter = Progress(total, done, progress)
+        spec = "auto" if progress is None else "log" if progress is False else progress
+        reporter = Progress(total, "campaign", "run", spec, initial=done, ends=True, rate=True)
         try:
             for chunk, (rows, series) in execute(todo, study, engine, fmu_dir, save_timeseries,
                                                   workers, client, pool):
