@@ -49,7 +49,7 @@ from sblsim.orchestrator.config import (
     parse_compare,
     resolve,
 )
-from sblsim.orchestrator.engines import ENGINES
+from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.output import check_output, check_writable
 from sblsim.orchestrator.plan import Config, RunPlan, load_plan, make_plan, thaw
 from sblsim.orchestrator.study import Study, load_study
@@ -330,7 +330,6 @@ def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Pa
     """Simulate a plan's replicates ``run.replicate`` … (``sblsim run`` and :func:`run`); ``ssp``, an SSP
     package read back (:func:`sblsim.orchestrator.ssp.read_ssp`: its plan is ``plan``), brings its connections
     and, on the fmu engine, its FMUs."""
-    from sblsim.orchestrator.engines import close_handles, make_handles
     from sblsim.orchestrator.run import run as _run
 
     handles, connections = None, None

@@ -5,7 +5,7 @@ Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
 
 Each command imports the module that runs it when it runs (``run``, ``metrics``,
-``compare``, ``budget``, ``maps``, ``replay``, ``ssp``, ``campaign``, ``study``,
+``compare``, ``budget``, ``maps``, ``replay``, ``campaign``, ``study``,
 ``analysis``, ``codegen``): they load scipy.stats, pandas or matplotlib, which
 ``sblsim --help`` and a usage error do not need. Everything else is imported
 here; ``tests/test_import_graph.py`` holds both rules.
@@ -45,6 +45,7 @@ from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, REACH_RATIO
 from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.ssp import export_ssp, read_ssp
 from sblsim.orchestrator.study import load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
@@ -248,8 +249,6 @@ def _run(args: argparse.Namespace) -> int:
     overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else [])
     system = None
     if args.ssp is not None:
-        from sblsim.orchestrator.ssp import read_ssp
-
         engine = args.engine or "fmu"
         system = read_ssp(args.ssp, overrides, args.seed)
         plan = system.config
@@ -420,8 +419,6 @@ def _run_warnings(s: dict, plan) -> list[str]:
 
 
 def _ssp(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.ssp import export_ssp
-
     _check_seed(args.seed)
     cfg = api._plan(args.scenario, args.seed, args.overrides)  # the export's one resolution
     _check_writable(args.out.parent if str(args.out.parent) else Path("."))
