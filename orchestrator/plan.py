@@ -29,6 +29,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from sblsim.models import MODELS, RECEIVERS
+from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.receiver.core import filter_parameters
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
@@ -348,10 +349,18 @@ def make_plan(config: Mapping[str, Any]) -> RunPlan:
 
     Raises
     ------
-    ConfigError, ModelError
-        Naming the field and its allowed range (one error; nothing later re-reads the configuration).
+    ConfigError
+        Naming the field and its allowed range (one error; nothing later re-reads the configuration): a value
+        outside its declared range too (the declarations raise a plain ``ModelError``, turned into this).
+    ArchiveError
+        A file the configuration names that is not safe to read (a user's receiver FMU).
     """
-    cfg = resolve(thaw(config))
+    try:
+        cfg = resolve(thaw(config))
+    except ModelError as exc:
+        if type(exc) is not ModelError:
+            raise
+        raise ConfigError(str(exc)) from None
     platform, sim, run = cfg["platform"], cfg["simulation"], cfg["run"]
     system = SYSTEMS[platform["system"]]
     n_beacons = system.beacon_count(platform)
@@ -376,8 +385,9 @@ def load_plan(source: str | Path, overrides: Iterable[str] = (), seed: int | Non
 
     Raises
     ------
-    ConfigError, ModelError
-        As :func:`sblsim.orchestrator.config.load_config`; nothing has been written.
+    ConfigError
+        As :func:`sblsim.orchestrator.config.load_config` (an unknown scenario, section or key, invalid TOML) and
+        :func:`make_plan`; nothing has been written.
     """
     return make_plan(load_raw(source, overrides, seed))
 
