@@ -135,8 +135,9 @@ def accuracy_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model
     return drms.reshape(E.shape)
 
 
-def system_line(plan: RunPlan) -> str:
-    """The geometry of a plan's system in a few words (a panel's title)."""
+def system_line(plan: RunPlan | dict) -> str:
+    """The geometry of a plan's system in a few words (a panel's title; a configuration: its plan is made)."""
+    plan = as_plan(plan)
     return plan.system.describe(plan["platform"])
 
 

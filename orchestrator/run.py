@@ -80,7 +80,7 @@ class RunResult:
 
 def merge_params(plans: Sequence[RunPlan], component: str,
                  accepted: frozenset[str] | None = None) -> tuple[dict[str, Any], np.ndarray]:
-    """Parameters of one component for a batch of runs, one plan per run.
+    """Parameters of one component for a batch of runs, one plan per run (a configuration: its plan is made).
 
     The FMU parameters of the first run (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`);
     a numeric key whose value differs between runs (a factor of a batch
@@ -101,6 +101,7 @@ def merge_params(plans: Sequence[RunPlan], component: str,
     ModelError
         If the runs differ in a key a batch must share.
     """
+    plans = [as_plan(p) for p in plans]
     first = plans[0]
     params = first.component_parameters(component, accepted)
     params.pop("replicate", None)
