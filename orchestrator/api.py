@@ -698,7 +698,7 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
     ConfigError, SblsimError
         Bad input, or a source that cannot be switched off (nothing is run or written).
     """
-    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, budgets, check_replicates, configurations, title, write
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates
 
     _check_seed(seed)
     source = _source(scenario)
@@ -711,9 +711,19 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
         chosen = _compared(compare)
     if receiver is not None:
         check_receiver(receiver, "receiver")
-    items = _override_items(set)
-    configs = configurations(source, items, seed, receiver, chosen)
-    target = _prepare_out(out, force, "budget.csv", "budget")
+    return _budget(source, _override_items(set), seed, receiver, chosen, replicates, progress,
+                   lambda: _prepare_out(out, force, "budget.csv", "budget"))
+
+
+def _budget(source: str, items: list[str], seed: int | None, receiver: str | None,
+            chosen: tuple[str, list[str]] | None, replicates: int, progress: Any,
+            prepare: Callable[[], Path | None]) -> BudgetResult:
+    """:func:`budget` (and ``sblsim budget``) after the checks of its arguments: each configuration and its
+    switched-off ones resolved once, ``prepare()`` the output folder (None: nothing is written), run, write."""
+    from sblsim.orchestrator.budget import budgets, configurations, title, write
+
+    configs = configurations(source, items, seed, receiver, chosen)  # every check before any output
+    target = prepare()
     results = budgets(configs, replicates, progress=progress)
     heading = title(source, results, items)
     if target is not None:

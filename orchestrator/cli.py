@@ -461,7 +461,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _budget(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, configurations, write
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, write
 
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
@@ -469,11 +469,15 @@ def _budget(args: argparse.Namespace) -> int:
     compare = parse_compare(args.compare, f"platform.system={_ALL_SYSTEMS}") if args.compare else None
     if args.receiver is not None:
         check_receiver(args.receiver, "--receiver")
-    configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)  # every check before any output
-    out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
-                  "budget")
-    result = api.budget(args.scenario, replicates=replicates, receiver=args.receiver, compare=compare,
-                        seed=args.seed, set=args.overrides, progress="auto")
+    target: list[Path] = []
+
+    def prepare() -> None:  # after every configuration is checked (resolved once), before any run
+        target.append(_output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force,
+                              "budget.csv", "budget"))
+
+    result = api._budget(args.scenario, list(args.overrides), args.seed, args.receiver, compare, replicates,
+                         "auto", prepare)
+    out = target[0]
     results, heading = result.budgets, result.title
     print(heading)
     print("\n".join(result.lines()))
