@@ -72,8 +72,8 @@ def sample_configs(study, replicates: int) -> tuple[list[list[dict]], int]:
     picked = {}
     for chunk in plan(study, study.replicates):
         if chunk.scenario == "semicircle":
-            picked.setdefault(chunk.configs[0]["simulation"]["sampling_time"], chunk)
-    groups = [with_replicates(chunk.configs[0], range(replicates)) for chunk in picked.values()]
+            picked.setdefault(chunk.plans[0]["simulation"]["sampling_time"], chunk)
+    groups = [with_replicates(chunk.plans[0], range(replicates)) for chunk in picked.values()]
     return groups, sum(chunk.steps * replicates for chunk in picked.values())
 
 

@@ -29,7 +29,6 @@ Examples
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,17 +44,15 @@ from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
     ConfigError,
     apply_overrides,
-    beacon_count,
     check_receiver,
     load_config,
     parse_compare,
-    receiver_label,
     resolve,
-    to_toml,
 )
-from sblsim.orchestrator.engines import ENGINES
+from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.output import check_output, check_writable
-from sblsim.orchestrator.study import load_study
+from sblsim.orchestrator.plan import Config, RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.study import Study, load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -80,25 +77,6 @@ MAX_SEED = 2**31 - 1
 
 
 # --------------------------------------------------------------------------- configurations
-
-class Config(dict):
-    """A resolved, validated configuration: section -> key -> value, every key present.
-
-    A :class:`dict` (``cfg["platform"]["baseline"]`` [m]) with the sections ``run``, ``simulation``,
-    ``platform``, ``acoustics``, ``target`` and ``receiver`` (the keys and their units: the model page and
-    ``sblsim fmus variables``). Made by :func:`load`; any function that takes a scenario takes one. A
-    changed copy is made by ``sblsim.load(cfg, set={...})``, which validates it again.
-    """
-
-    @property
-    def scenario(self) -> str:
-        """``run.scenario``: the scenario's name."""
-        return str(self["run"]["scenario"])
-
-    def to_toml(self) -> str:
-        """The configuration as TOML text (what ``config.toml`` of a run holds; ``sblsim run FILE`` reads it)."""
-        return to_toml(self)
-
 
 def _check_seed(seed: Any, where: str = "seed") -> None:
     if seed is None:
@@ -139,11 +117,29 @@ def _config(source: Any, seed: int | None = None, overrides: Overrides = None) -
     _check_seed(seed)
     items = _override_items(overrides)
     if isinstance(source, Mapping):
-        return Config(resolve(apply_overrides(copy.deepcopy(dict(source)), items, seed)))
+        return Config(resolve(apply_overrides(thaw(source), items, seed)))
+    _check_source(source)
+    return Config(load_config(source, items, seed))
+
+
+def _check_source(source: Any) -> None:
     if not isinstance(source, (str, Path)):
         raise ConfigError(f"scenario: expected a built-in scenario ({', '.join(BUILTIN_SCENARIOS)}), a TOML file "
                           f"or a configuration, got {type(source).__name__}")
-    return Config(load_config(source, items, seed))
+
+
+def _plan(source: Any, seed: int | None = None, overrides: Overrides = None) -> RunPlan:
+    """The plan of a run of a scenario name, a TOML file or a configuration with the overrides and seed: the one
+    resolution of a call (:func:`sblsim.orchestrator.plan.make_plan`); a plan without overrides or seed is
+    taken as it is."""
+    _check_seed(seed)
+    items = _override_items(overrides)
+    if isinstance(source, RunPlan) and not items and seed is None:
+        return source
+    if isinstance(source, Mapping):
+        return make_plan(apply_overrides(thaw(source), items, seed))
+    _check_source(source)
+    return load_plan(source, items, seed)
 
 
 def load(scenario_or_path: str | Path | Mapping, *, seed: int | None = None, set: Overrides = None) -> Config:
@@ -247,8 +243,8 @@ class RunResult:
         out = []
         for k in range(len(r.metrics)):
             row = r.metrics.iloc[[k]].reset_index(drop=True)
-            cfg = {**r.config, "run": {**r.config["run"], "replicate": int(row["replicate"].iloc[0])}}
-            out.append(summary(_Result(cfg, r.engine, r.timeseries, row, r.steps, r.wall_time)))
+            plan = r.plan.with_replicate(int(row["replicate"].iloc[0]))
+            out.append(summary(_Result(plan.config, r.engine, r.timeseries, row, r.steps, r.wall_time, plan=plan)))
         return out
 
     def plot(self, replicate: int | None = None) -> dict[str, Figure]:
@@ -273,7 +269,7 @@ class RunResult:
                 raise ConfigError(f"replicate: {replicate!r} is not one of the run's "
                                   f"{sorted(ts['replicate'].unique().tolist())}")
             ts = ts[ts["replicate"] == replicate]
-        receiver = receiver_label(self.config)
+        receiver = self._result.plan.receiver_label
         return run_figures(ts, f"{self.config.scenario}, {receiver} ({self.engine})", receiver)
 
 
@@ -315,20 +311,42 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
     ConfigError, SblsimError
         Bad input of any kind (nothing is run or written).
     """
-    from sblsim.orchestrator.run import run as _run
     from sblsim.orchestrator.run import write_run
 
-    cfg = _config(config_or_scenario, seed, set)
+    plan = _plan(config_or_scenario, seed, set)
     _check_engine(engine)
     _check_count(replicates, "replicates", 1, 100_000)
     if out is not None and replicates != 1:
         raise ConfigError(f"out: writes one run (the files of sblsim run); replicates is {replicates}")
     target = _prepare_out(out, force, "summary.json", "run")
-    first = int(cfg["run"]["replicate"])
-    result = _run(cfg, engine, range(first, first + replicates), fmu_dir=fmu_dir, progress=progress)
+    result = _simulate(plan, engine, replicates, fmu_dir, progress)
     if target is not None:
         write_run(result, target)
-    return RunResult(Config(result.config), result.engine, result.timeseries, result.metrics, result.steps,
+    return _run_result(result, target)
+
+
+def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Path | None = None,
+              progress: Any = False, ssp: Any = None) -> Any:
+    """Simulate a plan's replicates ``run.replicate`` … (``sblsim run`` and :func:`run`); ``ssp``, an SSP
+    package read back (:func:`sblsim.orchestrator.ssp.read_ssp`: its plan is ``plan``), brings its connections
+    and, on the fmu engine, its FMUs."""
+    from sblsim.orchestrator.run import run as _run
+
+    handles, connections = None, None
+    if ssp is not None:
+        connections = ssp.connections
+        handles = make_handles(engine, None, plan.n_beacons, dict(plan.sources),
+                               fmu_files=ssp.fmu_files if engine == "fmu" else None)
+    try:
+        return _run(plan, engine, range(plan.replicate, plan.replicate + replicates), fmu_dir=fmu_dir,
+                    handles=handles, progress=progress, connections=connections)
+    finally:
+        if handles is not None:
+            close_handles(handles)
+
+
+def _run_result(result: Any, target: Path | None = None) -> RunResult:
+    return RunResult(Config(thaw(result.config)), result.engine, result.timeseries, result.metrics, result.steps,
                      result.wall_time, target, result)
 
 
@@ -411,8 +429,8 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     ConfigError, SblsimError
         Bad input (nothing is run or written).
     """
+    from sblsim.orchestrator.compare import check_replicates, parse_receivers, plans, write
     from sblsim.orchestrator.compare import compare as _compare
-    from sblsim.orchestrator.compare import parse_receivers, write
 
     _check_seed(seed)
     _check_engine(engine)
@@ -423,21 +441,26 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     chosen = parse_systems(_listed(systems, "systems")) if systems is not None else None
     if chosen is not None:
         system_overrides(chosen[0], items)  # refuses a platform.system override before any work
+    check_replicates(replicates)
+    compared = plans(source, names, items, seed, chosen)  # each system and receiver resolved once
     target = _prepare_out(out, force, "compare.csv", "comparison")
-    table = _compare(source, names, replicates, items, seed, engine, fmu_dir, progress=progress, systems=chosen)
-    title, note = compare_title(source, replicates, items, seed, chosen)
+    table = _compare(compared, replicates=replicates, engine=engine, fmu_dir=fmu_dir, progress=progress,
+                     systems=chosen)
+    title, note = compare_title(source, replicates, items, seed, chosen, compared[0].seed)
     if target is not None:
         write(table, target, title, note)
     return CompareResult(table, title, note, target)
 
 
 def compare_title(scenario: str | Path, replicates: int, overrides: Sequence[str], seed: int | None,
-                  systems: Sequence[str] | None) -> tuple[str, str]:
-    """The heading and note of a comparison (``sblsim compare`` prints them, ``compare.md`` holds them)."""
+                  systems: Sequence[str] | None, run_seed: int | None = None) -> tuple[str, str]:
+    """The heading and note of a comparison (``sblsim compare`` prints them, ``compare.md`` holds them);
+    ``run_seed``, the ``run.seed`` of the comparison's first plan (default: its configuration is loaded)."""
     # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
     # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
-    first = system_overrides(systems[0], overrides) if systems is not None else list(overrides)
-    run_seed = load_config(scenario, first, seed)["run"]["seed"]
+    if run_seed is None:
+        first = system_overrides(systems[0], overrides) if systems is not None else list(overrides)
+        run_seed = load_config(scenario, first, seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
     title = (f"{scenario}: {replicates} replicates per {per}, seed {run_seed}"
              + (f", {' '.join(overrides)}" if overrides else ""))
@@ -582,7 +605,7 @@ def accuracy_map(scenario: str | Path, *, extent: float = 30.0, step: float = 0.
                                                    progress=progress)
     if target is not None:
         write(labels, configs, east, north, maps, parsed, target, chosen)
-    return MapResult(labels, [Config(c) for c in configs], east, north, maps, parsed, chosen, target)
+    return MapResult(labels, configs, east, north, maps, parsed, chosen, target)
 
 
 # --------------------------------------------------------------------------- budget
@@ -675,7 +698,7 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
     ConfigError, SblsimError
         Bad input, or a source that cannot be switched off (nothing is run or written).
     """
-    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, budgets, check_replicates, configurations, title, write
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates
 
     _check_seed(seed)
     source = _source(scenario)
@@ -688,9 +711,19 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
         chosen = _compared(compare)
     if receiver is not None:
         check_receiver(receiver, "receiver")
-    items = _override_items(set)
-    configs = configurations(source, items, seed, receiver, chosen)
-    target = _prepare_out(out, force, "budget.csv", "budget")
+    return _budget(source, _override_items(set), seed, receiver, chosen, replicates, progress,
+                   lambda: _prepare_out(out, force, "budget.csv", "budget"))
+
+
+def _budget(source: str, items: list[str], seed: int | None, receiver: str | None,
+            chosen: tuple[str, list[str]] | None, replicates: int, progress: Any,
+            prepare: Callable[[], Path | None]) -> BudgetResult:
+    """:func:`budget` (and ``sblsim budget``) after the checks of its arguments: each configuration and its
+    switched-off ones resolved once, ``prepare()`` the output folder (None: nothing is written), run, write."""
+    from sblsim.orchestrator.budget import budgets, configurations, title, write
+
+    configs = configurations(source, items, seed, receiver, chosen)  # every check before any output
+    target = prepare()
     results = budgets(configs, replicates, progress=progress)
     heading = title(source, results, items)
     if target is not None:
@@ -726,6 +759,7 @@ class ReplayResult:
     summary: dict[str, Any]
     timeseries: pd.DataFrame
     out: Path | None = None
+    _plan: Any = field(default=None, repr=False)
 
     def plot(self) -> dict[str, Figure]:
         """The figures of a run over the steps the truth track covers (empty without truth)."""
@@ -735,7 +769,7 @@ class ReplayResult:
         covered = ts[np.isfinite(ts["true_x"].to_numpy())] if "true_x" in ts else ts.iloc[:0]
         if not len(covered):
             return {}
-        receiver = receiver_label(self.config)
+        receiver = self._plan.receiver_label if self._plan is not None else self.config.plan().receiver_label
         if "replicate" not in covered:
             covered = covered.assign(replicate=0)
         return run_figures(covered, f"replay of {self.summary['log']['file']}, {receiver} ({self.engine})", receiver)
@@ -774,22 +808,32 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
     ConfigError, SblsimError
         A log or truth track that cannot be read (the message names the row and column), bad options.
     """
-    from sblsim.orchestrator.replay import read_log, read_truth, replay_config, write_replay
-    from sblsim.orchestrator.replay import replay as _replay
+    from sblsim.orchestrator.replay import replay_config
 
     _check_engine(engine)
     if receiver is not None and not isinstance(receiver, str):
         raise ConfigError(f"receiver: expected a text, got {receiver!r}")
-    cfg, source = replay_config(Path(log), str(config) if config is not None else None, receiver,
-                                _override_items(set))
-    data = read_log(Path(log), beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]],
-                    cfg["acoustics"]["sound_speed_assumed"])
-    track = read_truth(Path(truth)) if truth is not None else None
-    target = _prepare_out(out, force, "summary.json", "replay")
-    result = _replay(data, cfg, engine, fmu_dir, track)
+    plan, source = replay_config(Path(log), str(config) if config is not None else None, receiver,
+                                 _override_items(set))
+    return _replay_plan(plan, source, Path(log), Path(truth) if truth is not None else None, engine, fmu_dir,
+                        lambda: _prepare_out(out, force, "summary.json", "replay"))
+
+
+def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,
+                 fmu_dir: str | Path | None, prepare: Callable[[], Path | None]) -> ReplayResult:
+    """:func:`replay` of a plan (and ``sblsim replay``): read the log and the truth track, ``prepare()`` the
+    output folder (None: nothing is written), replay and write."""
+    from sblsim.orchestrator.replay import read_log, read_truth, write_replay
+    from sblsim.orchestrator.replay import replay as _replay
+
+    data = read_log(log, plan.n_beacons, plan.system, plan["acoustics"]["sound_speed_assumed"])
+    track = read_truth(truth) if truth is not None else None
+    target = prepare()
+    result = _replay(data, plan, engine, fmu_dir, track)
     if target is not None:
         write_replay(result, target)
-    return ReplayResult(Config(result.config), source, result.engine, result.summary, result.timeseries, target)
+    return ReplayResult(Config(thaw(result.config)), source, result.engine, result.summary, result.timeseries,
+                        target, result.config)
 
 
 # --------------------------------------------------------------------------- campaign and analysis
@@ -871,13 +915,20 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
 
     _check_seed(seed)
     _check_engine(engine)
-    if isinstance(study, Mapping):
-        study = dict(study)
-    elif isinstance(study, Path):
-        study = str(study)
-    loaded = load_study(study, seed=seed)
+    if isinstance(study, Study):  # validated already (sblsim campaign loads it to name its output)
+        if seed is not None:
+            raise ConfigError("seed: a loaded study holds its seed; give the seed to load_study")
+        loaded = study
+    else:
+        if isinstance(study, Mapping):
+            study = dict(study)
+        elif isinstance(study, Path):
+            study = str(study)
+        loaded = load_study(study, seed=seed)
     check_writable(Path(out), "out")
-    spec: Any = "off" if progress in (False, None) else True if progress is True else progress
+    # "auto" (sblsim campaign): a bar at a terminal, log lines otherwise
+    spec: Any = (None if isinstance(progress, str) and progress == "auto" else "off" if progress in (False, None)
+                 else True if progress is True else progress)
     result = run_campaign(loaded, Path(out), workers=workers, scheduler=scheduler, resume=resume, engine=engine,
                           batch=batch, fmu_dir=fmu_dir, save_timeseries=save_timeseries, progress=spec)
     return CampaignResult(result.out, result.total, result.computed, result.wall_time, result)

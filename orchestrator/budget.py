@@ -34,7 +34,6 @@ survey error of an SBL) runs and contributes exactly 0, every run unchanged
 
 from __future__ import annotations
 
-import copy
 import math
 import re
 import time
@@ -48,17 +47,14 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import (
     ConfigError,
-    load_config,
     parse_override,
-    receiver_label,
-    resolve,
     to_toml,
 )
-from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.plan import RunPlan, as_plan, load_plan, make_plan, thaw, with_replicates
 from sblsim.orchestrator.progress import Progress, ProgressSpec
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.run import run_batch
 from sblsim.orchestrator.systems import compared
 
 #: Error source -> (what it is, the ``--set`` overrides that switch it off). A value ``{section.key}`` is that
@@ -95,11 +91,12 @@ COLUMNS = ("source", "description", "status", "contribution", "se", "share", "rm
 _REFERENCE = re.compile(r"^\{(\w+)\.(\w+)\}$")
 
 
-def switched_off(cfg: dict[str, dict], overrides: Sequence[str]) -> dict[str, dict]:
-    """The resolved configuration ``cfg`` with ``overrides`` applied and its receiver kept.
+def switched_off(cfg: RunPlan | dict[str, dict], overrides: Sequence[str]) -> RunPlan:
+    """The plan of the configuration ``cfg`` with ``overrides`` applied and its receiver kept.
 
-    The overrides go into a copy of the resolved configuration, which is
-    resolved again: every receiver key is then given, so no tie retunes the
+    The overrides go into a copy of the resolved configuration, whose plan is
+    made (:func:`~sblsim.orchestrator.plan.make_plan`: it is resolved again, once): every receiver key is then
+    given, so no tie retunes the
     receiver (its R stays the configured one, e.g. when ``acoustics.sigma_range``
     is 0); only a receiver key an override names changes.
 
@@ -108,7 +105,7 @@ def switched_off(cfg: dict[str, dict], overrides: Sequence[str]) -> dict[str, di
     ConfigError
         If an override names a key the configuration does not have, or a value outside its range.
     """
-    raw = copy.deepcopy(cfg)
+    raw = thaw(cfg)
     receiver = dict(cfg["receiver"])
     for item in overrides:
         section, name, value = parse_override(item)
@@ -120,7 +117,7 @@ def switched_off(cfg: dict[str, dict], overrides: Sequence[str]) -> dict[str, di
         raw[section][name] = value
         if section == "receiver":
             receiver[name] = value
-    out = resolve(raw)
+    out = make_plan(raw)
     if out["receiver"] != receiver or out["simulation"] != cfg["simulation"]:  # the ties above: never
         raise ModelError("budget: switching a source off changed the receiver or the simulation settings")
     return out
@@ -134,8 +131,8 @@ class Budget:
     ----------
     label : str
         What the budget is of (the scenario, or ``KEY = VALUE`` of a comparison).
-    config : dict
-        The resolved configuration, every source on.
+    config : RunPlan
+        The plan of the configuration, every source on (reads as the configuration).
     replicates : int
     total, total_se, floor, floor_se, remainder, remainder_se : float
         [m²]; the standard errors of the mean over the replicates (the remainder's from its per-replicate
@@ -152,7 +149,7 @@ class Budget:
     """
 
     label: str
-    config: dict
+    config: RunPlan
     replicates: int
     total: float
     total_se: float
@@ -191,14 +188,14 @@ def _se(values: np.ndarray) -> float:
     return float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else math.nan
 
 
-def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: str | None = None,
+def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: str | None = None,
            bar=None, records: RecordBuffer | None = None) -> Budget:
-    """The error budget of a resolved configuration (module docstring).
+    """The error budget of a configuration (module docstring).
 
     Parameters
     ----------
-    cfg : dict
-        Resolved configuration, every source as configured.
+    cfg : RunPlan or dict
+        The plan of the configuration, every source as configured (a configuration: its plan is made once).
     replicates : int
         Runs per configuration (replicates 0 … N − 1 of ``run.seed``).
     label : str, optional
@@ -216,12 +213,13 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
     """
     check_replicates(replicates)
     start = time.perf_counter()
+    cfg = as_plan(cfg)
     names = SOURCES
     off, floor_cfg = _switches(cfg)
     records = records if records is not None else RecordBuffer()
-    done: list[tuple[dict, np.ndarray, int]] = []  # (configuration, per-replicate MSE, diverged runs)
+    done: list[tuple[RunPlan, np.ndarray, int]] = []  # (plan, per-replicate MSE, diverged runs)
 
-    def mse(c: dict) -> np.ndarray:
+    def mse(c: RunPlan) -> np.ndarray:
         for other, values, _ in done:
             if other == c:  # the same configuration: the same runs
                 return values
@@ -254,23 +252,37 @@ def budget(cfg: dict[str, dict], replicates: int = DEFAULT_REPLICATES, label: st
     rank = table["status"].map({ON: 0, NO_EFFECT: 1, OFF: 2})
     table = (table.assign(_rank=rank, _size=-table["contribution"]).sort_values(["_rank", "_size"], kind="stable")
              .drop(columns=["_rank", "_size"]).reset_index(drop=True))
-    return Budget(label or str(cfg["run"]["scenario"]), cfg, replicates, total, _se(on), floor_mean, _se(floor),
+    return Budget(label or cfg.scenario, cfg, replicates, total, _se(on), floor_mean, _se(floor),
                   remainder, _se(per_replicate), table, sum(d for _, _, d in done), len(done) * replicates,
                   time.perf_counter() - start, differences)
 
 
-def _switches(cfg: dict[str, dict]) -> tuple[dict[str, dict], dict]:
-    """Each source's switched-off configuration, and the floor's (every source off)."""
+#: The switched-off plans of the plans of this process's budgets, by the plan's id: (plan, switches); each plan's
+#: switches are made once (:func:`configurations` checks them, :func:`budgets` counts and runs them).
+_SWITCHED: dict[int, tuple[RunPlan, tuple[dict[str, RunPlan], RunPlan]]] = {}
+_KEEP = 64
+
+
+def _switches(cfg: RunPlan) -> tuple[dict[str, RunPlan], RunPlan]:
+    """Each source's switched-off plan, and the floor's (every source off): made once per plan."""
+    kept = _SWITCHED.get(id(cfg))
+    if kept is not None and kept[0] is cfg:
+        return kept[1]
     names = SOURCES
     off = {name: switched_off(cfg, overrides) for name, (_, overrides) in names.items()}
-    return off, switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
+    switches = off, switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
+    if len(_SWITCHED) >= _KEEP:
+        _SWITCHED.pop(next(iter(_SWITCHED)))
+    _SWITCHED[id(cfg)] = (cfg, switches)
+    return switches
 
 
-def planned(cfg: dict[str, dict]) -> int:
+def planned(cfg: RunPlan | dict[str, dict]) -> int:
     """How many configurations a budget of ``cfg`` runs: all on, the floor and each source that is on, the
     same configuration once."""
+    cfg = as_plan(cfg)
     off, floor = _switches(cfg)
-    distinct: list[dict] = []
+    distinct: list[RunPlan] = []
     for c in (cfg, floor, *(c for c in off.values() if c != cfg)):
         if not any(c == d for d in distinct):
             distinct.append(c)
@@ -285,8 +297,9 @@ def check_replicates(replicates: int) -> None:
 
 def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: int | None = None,
                    receiver: str | None = None,
-                   compare: tuple[str, list[str]] | None = None) -> list[tuple[str, dict]]:
-    """The resolved configurations of a budget, or of one budget per compared value: (label, configuration).
+                   compare: tuple[str, list[str]] | None = None) -> list[tuple[str, RunPlan]]:
+    """The plans of a budget, or of one budget per compared value: (label, plan), each resolved once with its
+    switched-off plans.
 
     ``receiver`` sets ``simulation.receiver``; a compared ``platform.system`` starts, as in ``sblsim compare
     --systems``, from its :attr:`~sblsim.models.systems.System.compare_defaults` with the overrides over them
@@ -300,25 +313,25 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
     """
     items = [*overrides, *([f"simulation.receiver={receiver}"] if receiver is not None else [])]
     if compare is None:
-        out = [(Path(str(scenario)).stem, load_config(scenario, items, seed=seed))]
+        out = [(Path(str(scenario)).stem, load_plan(scenario, items, seed=seed))]
     else:
         key, values = compare
-        out = [(f"{key} = {value}", load_config(scenario, items_of, seed=seed))
+        out = [(f"{key} = {value}", load_plan(scenario, items_of, seed=seed))
                for value, items_of in zip(values, compared(key, values, items))]
     for _, cfg in out:  # every switch is checked before any run
         _switches(cfg)
     return out
 
 
-def budgets(configs: Sequence[tuple[str, dict]], replicates: int = DEFAULT_REPLICATES,
+def budgets(configs: Sequence[tuple[str, RunPlan]], replicates: int = DEFAULT_REPLICATES,
             progress: ProgressSpec = False) -> list[Budget]:
-    """The budget of every configuration (:func:`configurations`), each of the replicates 0 … N − 1.
+    """The budget of every plan (:func:`configurations`), each of the replicates 0 … N − 1.
 
     ``progress`` reports the steps of every run (:class:`sblsim.orchestrator.progress.Progress`); default
     silent."""
     check_replicates(replicates)
-    steps = sum(planned(cfg) * step_count(cfg["simulation"]["duration"], cfg["simulation"]["sampling_time"])
-                for _, cfg in configs)
+    configs = [(label, as_plan(cfg)) for label, cfg in configs]
+    steps = sum(planned(cfg) * cfg.n_steps for _, cfg in configs)
     records = RecordBuffer()
     with Progress(steps * replicates, "budget", "step", progress) as bar:
         return [budget(cfg, replicates, label, bar, records) for label, cfg in configs]
@@ -515,7 +528,7 @@ def write(budgets: Sequence[Budget], out: Path | str, title: str, key: str | Non
 def title(scenario: str, budgets: Sequence[Budget], overrides: Sequence[str] = ()) -> str:
     """The heading of a budget's outputs: scenario, receiver, replicates, seed and overrides."""
     cfg = budgets[0].config
-    receivers = sorted({receiver_label(b.config) for b in budgets})
+    receivers = sorted({b.config.receiver_label for b in budgets})
     return (f"{scenario}: error budget of the {', '.join(receivers)} receiver, {budgets[0].replicates} replicates "
             f"per configuration, seed {cfg['run']['seed']}" + (f", {' '.join(overrides)}" if overrides else ""))
 

@@ -5,7 +5,7 @@ Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
 field and the allowed range, exit status 2, and nothing written.
 
 Each command imports the module that runs it when it runs (``run``, ``metrics``,
-``compare``, ``budget``, ``maps``, ``replay``, ``ssp``, ``campaign``, ``study``,
+``compare``, ``budget``, ``maps``, ``replay``, ``campaign``, ``study``,
 ``analysis``, ``codegen``): they load scipy.stats, pandas or matplotlib, which
 ``sblsim --help`` and a usage error do not need. Everything else is imported
 here; ``tests/test_import_graph.py`` holds both rules.
@@ -32,23 +32,20 @@ from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.declarations import ModelError, shown
 from sblsim.models.errors import SblsimError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
-from sblsim.models.platform.geometry import horizontal_spread
 from sblsim.models.systems import SYSTEMS, interface_owners
 from sblsim.orchestrator import api
 from sblsim.orchestrator.config import (
     MODEL_PREFIX,
-    beacon_count,
     check_receiver,
     external_path,
-    latency_steps,
-    load_config,
     parse_compare,
 )
-from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
+from sblsim.orchestrator.engines import ENGINES
 from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, REACH_RATIO
 from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.ssp import export_ssp, read_ssp
 from sblsim.orchestrator.study import load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
@@ -245,54 +242,48 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.run import run, summary, system_sources, write_run
+    from sblsim.orchestrator.run import write_run
 
     _check_seed(args.seed)
     if (args.scenario is None) == (args.ssp is None):
         raise ModelError("run: give either a scenario (or CONFIG.toml) or --ssp FILE.ssp")
     overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else [])
-    connections, handles = None, None
+    system = None
     if args.ssp is not None:
-        from sblsim.orchestrator.ssp import read_ssp
-
         engine = args.engine or "fmu"
         system = read_ssp(args.ssp, overrides, args.seed)
-        cfg, connections = system.config, system.connections
-        handles = make_handles(engine, None, beacon_count(cfg), system_sources(cfg),
-                               fmu_files=system.fmu_files if engine == "fmu" else None)
+        plan = system.config
     else:
         engine = args.engine or "local"
-        cfg = load_config(args.scenario, overrides, args.seed)
+        plan = api._plan(args.scenario, args.seed, overrides)  # the run's one resolution
     if args.export_log is not None:
         from sblsim.orchestrator.replay import check_export
 
         check_export(args.export_log, args.force)
         _check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
-    out = _output(args.out, Path("results") / folder_name(cfg["run"]["scenario"]), args.force, "summary.json",
+    out = _output(args.out, Path("results") / folder_name(plan.scenario), args.force, "summary.json",
                   "run", before=lambda out: _check_export_apart(args.export_log, out))
-    try:
-        result = run(cfg, engine, fmu_dir=args.fmu_dir, handles=handles, progress="auto", connections=connections)
-    finally:
-        if handles is not None:
-            close_handles(handles)
-    write_run(result, out)
-    s = summary(result)
-    sim = cfg["simulation"]
-    print(f"{s['scenario']} on the {s['engine']} engine ({sim['master']}, receiver {s['receiver']}), "
+    if system is None:
+        result = api.run(plan, engine=engine, fmu_dir=args.fmu_dir, progress="auto")
+    else:  # the package's connections and, on the fmu engine, its FMUs
+        result = api._run_result(api._simulate(plan, engine, fmu_dir=args.fmu_dir, progress="auto", ssp=system))
+    write_run(result._result, out)
+    s = result.summary
+    print(f"{s['scenario']} on the {s['engine']} engine ({plan.master}, receiver {s['receiver']}), "
           f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
     _print_metrics(s)
     if s["diverged"]:
         print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
               f"{DIVERGENCE_DISTANCE:g} m and {DIVERGENCE_RATIO:g} times the diver's distance from the platform "
               "off the truth): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
-    for line in _run_warnings(s, cfg):
+    for line in _run_warnings(s, plan):
         print(f"sblsim: warning: {line}", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     if args.export_log is not None:
         from sblsim.orchestrator.replay import export_log
 
         try:
-            log, truth = export_log(result, args.export_log)
+            log, truth = export_log(result._result, args.export_log)
         except ModelError as exc:  # e.g. a full disk: the run's own files are written, say so
             raise ModelError(f"{exc}; the run's results were written to {out}/") from None
         print(f"  log of the receiver's inputs: {log} (replay it: sblsim replay {log} --truth {truth})")
@@ -344,26 +335,27 @@ def _print_metrics(s: dict, truth: bool = True) -> None:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.replay import read_log, read_truth, replay, replay_config, write_replay
+    from sblsim.orchestrator.replay import replay_config
 
     notes: list[str] = []
-    cfg, source = replay_config(args.log, args.config, args.receiver, args.overrides, notes)
-    receiver = cfg["simulation"]["receiver"]
+    plan, source = replay_config(args.log, args.config, args.receiver, args.overrides, notes)
+    receiver = plan.receiver
     if external_path(receiver, MODEL_PREFIX) or external_path(receiver):
         given = "--receiver" if args.receiver else "--set" if any("receiver=" in o for o in args.overrides) \
             else "--config"
         notes.append(f"the receiver is your own program, {receiver} ({given}): it runs as you")
-    log = read_log(args.log, beacon_count(cfg), SYSTEMS[cfg["platform"]["system"]],
-                   cfg["acoustics"]["sound_speed_assumed"])
-    truth = read_truth(args.truth) if args.truth is not None else None
-    out = _output(args.out, Path("results") / f"replay_{folder_name(args.log.stem)}", args.force, "summary.json",
-                  "replay")
-    for note in notes:
-        print(f"note: {note}", file=sys.stderr)
-    result = replay(log, cfg, args.engine, args.fmu_dir, truth)
-    write_replay(result, out)
+
+    def prepare() -> Path:  # after the log and truth track are read, before the replay
+        out = _output(args.out, Path("results") / f"replay_{folder_name(args.log.stem)}", args.force,
+                      "summary.json", "replay")
+        for note in notes:
+            print(f"note: {note}", file=sys.stderr)
+        return out
+
+    result = api._replay_plan(plan, source, args.log, args.truth, args.engine, args.fmu_dir, prepare)
+    out, truth = result.out, args.truth
     s, c = result.summary, result.summary["log"]
-    sim = cfg["simulation"]
+    sim = plan["simulation"]
     print(f"replay of {args.log} on the {s['engine']} engine (receiver {s['receiver']}, configuration {source}): "
           f"{s['steps']} steps of {sim['sampling_time']:g} s from {s['start_time']:.10g} s in {s['wall_time']:.2f} s")
     skipped = c["duplicate"] + c["unknown_beacon"] + c["same_step"] + c["not_reached"]
@@ -393,7 +385,7 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_warnings(s: dict, cfg: dict) -> list[str]:
+def _run_warnings(s: dict, plan) -> list[str]:
     """What a run's numbers do not say by themselves: a receiver that never made a fix, and a diver beyond
     what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
     out = []
@@ -401,10 +393,10 @@ def _run_warnings(s: dict, cfg: dict) -> list[str]:
         out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
                    "(every packet lost or gated); its numbers measure its starting guess (receiver.x0_*) and what "
                    "its motion model predicts from it (summary.json: updates = 0)")
-    elif s["fix_steps"] == 0 and latency_steps(cfg) > 0:
+    elif s["fix_steps"] == 0 and plan.latency_steps > 0:
         # the record shows what the diver sees: the receiver's outputs receiver.latency late
-        latency = f"receiver.latency = {cfg['receiver']['latency']:g} s"
-        if latency_steps(cfg) >= s["steps"]:
+        latency = f"receiver.latency = {plan['receiver']['latency']:g} s"
+        if plan.latency_steps >= s["steps"]:
             what = (f"{latency} is as long as the run: the diver never sees an output the receiver computed from a "
                     f"packet (every recorded estimate is its starting guess), though it used {s['updates']} ranges")
         else:
@@ -417,7 +409,7 @@ def _run_warnings(s: dict, cfg: dict) -> list[str]:
                    "no value, and a receiver that reports that fix (lsq) never left its starting guess "
                    "(summary.json: fix_steps = 0)")
     if s["beyond_geometry"]:
-        spread = horizontal_spread(cfg["platform"])
+        spread = plan.horizontal_spread
         ratio = f"{s['max_distance'] / spread:.0f} times" if spread > 0 else "infinitely many times"
         bound = "n/a" if s["pcrb_rms"] is None else f"{s['pcrb_rms']:.3f}"
         out.append(f"the diver went {s['max_distance']:.6g} m from the platform, {ratio} the beacons' horizontal "
@@ -428,10 +420,8 @@ def _run_warnings(s: dict, cfg: dict) -> list[str]:
 
 
 def _ssp(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.ssp import export_ssp
-
     _check_seed(args.seed)
-    cfg = load_config(args.scenario, args.overrides, args.seed)
+    cfg = api._plan(args.scenario, args.seed, args.overrides)  # the export's one resolution
     _check_writable(args.out.parent if str(args.out.parent) else Path("."))
     if args.out.is_dir():
         raise ModelError(f"--out: {str(args.out)!r} is a directory; give the .ssp file to write")
@@ -472,7 +462,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _budget(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, configurations, write
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, write
 
     _check_seed(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
@@ -480,11 +470,15 @@ def _budget(args: argparse.Namespace) -> int:
     compare = parse_compare(args.compare, f"platform.system={_ALL_SYSTEMS}") if args.compare else None
     if args.receiver is not None:
         check_receiver(args.receiver, "--receiver")
-    configurations(args.scenario, args.overrides, args.seed, args.receiver, compare)  # every check before any output
-    out = _output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force, "budget.csv",
-                  "budget")
-    result = api.budget(args.scenario, replicates=replicates, receiver=args.receiver, compare=compare,
-                        seed=args.seed, set=args.overrides, progress="auto")
+    target: list[Path] = []
+
+    def prepare() -> None:  # after every configuration is checked (resolved once), before any run
+        target.append(_output(args.out, Path("results") / f"budget_{_output_name(args.scenario)}", args.force,
+                              "budget.csv", "budget"))
+
+    result = api._budget(args.scenario, list(args.overrides), args.seed, args.receiver, compare, replicates,
+                         "auto", prepare)
+    out = target[0]
     results, heading = result.budgets, result.title
     print(heading)
     print("\n".join(result.lines()))
@@ -522,7 +516,7 @@ def _map(args: argparse.Namespace) -> int:
 
 
 def _campaign(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.campaign import CampaignInterrupted, run_campaign
+    from sblsim.orchestrator.campaign import CampaignInterrupted
 
     study = load_study(args.study, seed=args.seed)
     out = args.out or Path("results") / folder_name(study.name)
@@ -532,18 +526,18 @@ def _campaign(args: argparse.Namespace) -> int:
     print(f"{study.name}: {len(study.scenarios)} scenarios x {study.cells} cells x {study.replicates} replicates "
           f"= {study.runs} runs on the {args.engine} engine, {where}")
     try:
-        result = run_campaign(study, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+        result = api.campaign(study, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                               engine=args.engine, batch=args.batch, fmu_dir=args.fmu_dir,
-                              save_timeseries=args.save_timeseries)
+                              save_timeseries=args.save_timeseries, progress="auto")
     except CampaignInterrupted as exc:
         print(f"sblsim: {exc}", file=sys.stderr)
         return _interrupted_status()
     if result.computed:
-        print(f"{result.computed} runs in {result.wall_time:.1f} s ({result.runs_per_second:.0f} runs/s); "
+        print(f"{result.computed} runs in {result.wall_time:.1f} s ({result._result.runs_per_second:.0f} runs/s); "
               f"{result.total} runs in {out / 'runs.parquet'}")
     else:
         print(f"nothing to do: {result.total} runs already in {out / 'runs.parquet'}")
-    diverged = int(result.column("diverged").sum())
+    diverged = int(result._result.column("diverged").sum())
     if diverged:
         print(f"sblsim: warning: the receiver diverged in {diverged} of {result.total} runs (column diverged of "
               "runs.parquet): their numbers mean nothing", file=sys.stderr)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.config import beacon_count, component_params, load_config
+from sblsim.orchestrator.plan import load_plan
 from sblsim.orchestrator.run import run
 
 #: The recorded run: the semicircle's first 20 s at seed 1, with 10 % packet loss so that lost slots show.
@@ -42,14 +42,14 @@ def example_files(receiver: str, system: str | None = None) -> tuple[dict[str, s
     scenario, overrides, seed = EXAMPLE
     if system is not None and system != next(iter(SYSTEMS)):  # the scenario's own is the first
         overrides = [*overrides, f"platform.system={system}"]
-    cfg = load_config(scenario, [*overrides, f"simulation.receiver={receiver}"], seed=seed)
-    series = run(cfg).timeseries
+    plan = load_plan(scenario, [*overrides, f"simulation.receiver={receiver}"], seed=seed)
+    series = run(plan).timeseries
     model = MODELS[RECEIVERS[receiver]]
-    n_beacons = beacon_count(cfg)
-    params = component_params(cfg, "receiver")  # the [receiver] section and what the orchestrator sets (the clock)
+    n_beacons = plan.n_beacons
+    params = plan.component_parameters("receiver")  # the [receiver] section and what the orchestrator sets (the clock)
     seeds = {"seed", "scenario_key", "cell", "replicate"}
     inputs = [v.name for v in model.inputs(n_beacons)]
-    T = cfg["simulation"]["sampling_time"]
+    T = plan.sampling_time
     packets = [" ".join(repr(float(x)) for x in [k * T, T, *(getattr(row, n) for n in inputs)])
                for k, row in enumerate(series.itertuples(index=False))]
     expected = [" ".join(repr(float(getattr(row, c))) for c in ("time", "est_x", "est_y", "est_z"))

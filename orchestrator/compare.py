@@ -44,12 +44,12 @@ import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import check_receiver, load_config, receiver_label
-from sblsim.orchestrator.limits import step_count
+from sblsim.orchestrator.config import check_receiver
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.plan import RunPlan, load_plan, with_replicates
 from sblsim.orchestrator.progress import ProgressSpec, progress_of
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.run import run_batch
 from sblsim.orchestrator.systems import system_overrides
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "rms_e_tot_sd", "mean_e_tot", "nees", "nees_sd", "coverage_95", "nis",
@@ -72,15 +72,46 @@ def parse_receivers(text: str) -> list[str]:
     return [check_receiver(r, "--receivers") for r in receivers]
 
 
-def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overrides: Sequence[str] = (),
-            seed: int | None = None, engine: str = "local", fmu_dir: Path | str | None = None,
-            progress: ProgressSpec = False, systems: Sequence[str] | None = None) -> pd.DataFrame:
+def check_replicates(replicates: int) -> None:
+    """Refuse a replicate count outside [1, 100000].
+
+    Raises
+    ------
+    ModelError
+        Naming ``--replicates`` and the range.
+    """
+    if not 1 <= replicates <= 100_000:
+        raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
+
+
+def plans(scenario: str, receivers: Sequence[str], overrides: Sequence[str] = (), seed: int | None = None,
+          systems: Sequence[str] | None = None) -> list[RunPlan]:
+    """The plan of every receiver (of every system) of a comparison, each resolved once
+    (:func:`sblsim.orchestrator.plan.load_plan`); the arguments as for :func:`compare`.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        On a bad receiver or override (nothing is run).
+    """
+    if systems is None:
+        return [load_plan(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
+    return [load_plan(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"]), seed=seed)
+            for s in systems for r in receivers]
+
+
+def compare(scenario: str | Sequence[RunPlan], receivers: Sequence[str] = (), replicates: int = 20,
+            overrides: Sequence[str] = (), seed: int | None = None, engine: str = "local",
+            fmu_dir: Path | str | None = None, progress: ProgressSpec = False,
+            systems: Sequence[str] | None = None) -> pd.DataFrame:
     """Run every receiver (of every system) on the same replicates of a scenario and tabulate them.
 
     Parameters
     ----------
-    scenario : str
-        Built-in scenario or configuration file.
+    scenario : str or sequence of RunPlan
+        Built-in scenario or configuration file; or the comparison's plans (:func:`plans`, then
+        ``receivers``, ``overrides``, ``seed`` are theirs, and ``systems`` only says whether the table has a
+        ``system`` column).
     receivers : sequence of str
         ``simulation.receiver`` values.
     replicates : int
@@ -106,28 +137,26 @@ def compare(scenario: str, receivers: Sequence[str], replicates: int = 20, overr
     ConfigError, ModelError
         On a bad receiver, override or replicate count (nothing is run).
     """
-    if not 1 <= replicates <= 100_000:
-        raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
-    if systems is None:
-        configs = [load_config(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
+    check_replicates(replicates)
+    if isinstance(scenario, (str, Path)):
+        configs = plans(str(scenario), receivers, overrides, seed, systems)
     else:
-        configs = [load_config(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"]), seed=seed)
-                   for s in systems for r in receivers]
+        configs = list(scenario)
     rows = []
     records = RecordBuffer()  # one record memory for the receivers' batches, one after the other
-    steps = sum(step_count(c["simulation"]["duration"], c["simulation"]["sampling_time"]) for c in configs)
+    steps = sum(p.n_steps for p in configs)
     bar, own = progress_of(progress, steps * replicates, "compare")
     try:
-        results = [run_batch(with_replicates(cfg, range(replicates)), engine, fmu_dir=fmu_dir, timeseries=False,
-                             progress=bar, records=records) for cfg in configs]
+        results = [run_batch(with_replicates(plan, range(replicates)), engine, fmu_dir=fmu_dir, timeseries=False,
+                             progress=bar, records=records) for plan in configs]
     finally:
         if own:
             bar.close()
-    for cfg, result in zip(configs, results):
+    for plan, result in zip(configs, results):
         m = result.metrics
         rms = math.sqrt(float(np.mean(m["e_tot_rms"] ** 2)))
         bound = math.sqrt(float(np.mean(m["pcrb_rms"] ** 2)))
-        rows.append({"system": cfg["platform"]["system"], "receiver": receiver_label(cfg), "runs": replicates,
+        rows.append({"system": plan.system.name, "receiver": plan.receiver_label, "runs": replicates,
                      "rms_e_tot": rms,
                      "rms_e_tot_sd": float(np.std(m["e_tot_rms"], ddof=1)) if replicates > 1 else math.nan,
                      "mean_e_tot": float(m["e_tot_mean"].mean()), "nees": float(m["nees_mean"].mean()),
@@ -231,4 +260,4 @@ def write(table: pd.DataFrame, out: Path | str, title: str, note: str = "") -> P
     return Path(out)
 
 
-__all__ = ["COLUMNS", "compare", "labels", "markdown", "parse_receivers", "plot", "write"]
+__all__ = ["COLUMNS", "check_replicates", "compare", "labels", "markdown", "parse_receivers", "plans", "plot", "write"]

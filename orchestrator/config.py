@@ -32,7 +32,7 @@ from typing import Any, Iterable
 
 import tomli_w
 
-from sblsim.models import COMPONENTS, MODELS, RECEIVER_MODELS, RECEIVERS
+from sblsim.models import COMPONENTS, RECEIVER_MODELS
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
@@ -93,7 +93,8 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
 )
 
 #: Keys of the ``receiver`` section that the orchestrator implements for every receiver (built-in, a user's model
-#: or FMU): configuration keys only, never parameters of the receiver component (:func:`component_params`).
+#: or FMU): configuration keys only, never parameters of the receiver component
+#: (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`).
 RECEIVER_KEYS: tuple[Variable, ...] = (
     Variable("latency", "parameter", "Real", 0.0, "s",
              "Processing latency: the estimate a diver sees is the one the receiver computed this long ago "
@@ -121,21 +122,6 @@ def receiver_model(value: str) -> type | Path:
     if external_path(value, MODEL_PREFIX):
         return user_model(external_path(value, MODEL_PREFIX))
     return Path(external_path(value))
-
-
-def receiver_source(cfg: dict[str, dict]) -> str | Path | type:
-    """The receiver of a configuration: a built-in model name, a user's model class, or a user's FMU path."""
-    value = cfg["simulation"]["receiver"]
-    source = receiver_model(value)
-    return RECEIVERS[value] if value in RECEIVERS else source
-
-
-def component_model(cfg: dict[str, dict], component: str) -> type | None:
-    """The model that implements a component of a configuration (None: a user's FMU)."""
-    source = receiver_source(cfg) if component == "receiver" else component
-    if isinstance(source, Path):
-        return None
-    return source if isinstance(source, type) else MODELS[source]
 
 
 def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ...]:
@@ -351,10 +337,22 @@ def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | N
     ConfigError, ModelError
         On any invalid input; nothing has been written.
     """
+    return resolve(load_raw(source, overrides, seed))
+
+
+def load_raw(source: str | Path, overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
+    """The raw configuration of a scenario or file with ``--set`` overrides and seed, not yet validated
+    (:func:`resolve`, or :func:`sblsim.orchestrator.plan.make_plan` for a run's plan).
+
+    Raises
+    ------
+    ConfigError
+        Unknown scenario, missing file, invalid TOML, an unknown section or key of an override.
+    """
     raw = copy.deepcopy(read_source(source))
     if str(source) in BUILTIN_SCENARIOS:
         raw.setdefault("run", {})["scenario"] = str(source)
-    return resolve(apply_overrides(raw, overrides, seed))
+    return apply_overrides(raw, overrides, seed)
 
 
 def apply_overrides(raw: dict[str, Any], overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
@@ -420,7 +418,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
-            model.fmu_parameters(cfg[name], beacon_count(cfg))
+            model.fmu_parameters(cfg[name], platform_offsets(cfg["platform"]).shape[0])
     check_geometry(cfg["platform"])
     check_diver(cfg)
     _check_duration(sim, cfg["target"])
@@ -465,7 +463,7 @@ def _check_trajectory_file(target: dict[str, Any]) -> None:
 
 def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
     """The :data:`RECEIVER_KEYS` of a receiver section, validated: ``latency`` within [0, 60] s and a whole
-    number of sampling times T (:func:`latency_steps`).
+    number of sampling times T (:attr:`sblsim.orchestrator.plan.RunPlan.latency_steps`).
 
     Raises
     ------
@@ -487,11 +485,6 @@ def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> d
         raise ConfigError(f"receiver.latency: {latency:g} s is not a whole number of sampling times "
                           f"(T = {T:g} s{note}); give {' or '.join(nearest)} s")
     return keys
-
-
-def latency_steps(cfg: dict[str, dict]) -> int:
-    """``receiver.latency`` of a resolved configuration in steps of the record (sampling times T)."""
-    return int(round(cfg["receiver"]["latency"] / cfg["simulation"]["sampling_time"]))
 
 
 def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
@@ -581,63 +574,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
             rx[key] = value
 
 
-def beacon_count(cfg: dict[str, dict]) -> int:
-    """Number of beacons of a configuration (the size of its components' interfaces): 4 for the cross,
-    ``platform.beacons`` for the circle, the offsets' count for a custom layout; 1 for USBL (its transceiver)."""
-    return platform_offsets(cfg["platform"]).shape[0]
-
-
-def component_params(cfg: dict[str, dict], component: str, accepted: frozenset[str] | None = None,
-                     model: type | None = None) -> dict[str, Any]:
-    """The FMU parameter values of one component of a resolved configuration.
-
-    The component's section turned into FMU parameters by its model
-    (:meth:`sblsim.models.component.Component.fmu_parameters`: tables from files, custom
-    offsets), the sampling ties (:data:`SAMPLING_TIES`) and the seed keys it
-    declares. String choices stay text (each engine encodes them). The
-    orchestrator's receiver keys (:data:`RECEIVER_KEYS`, e.g. ``latency``) are
-    never among them.
-
-    Parameters
-    ----------
-    cfg : dict
-    component : str
-    accepted : frozenset of str, optional
-        The parameters of the FMU or model that implements the component
-        (e.g. a user's receiver FMU); only those keys are kept.
-    model : type, optional
-        The model (default :func:`component_model`; None for a user's FMU).
-
-    Raises
-    ------
-    ModelError
-        If a file or table of the section cannot be read.
-    """
-    model = model if model is not None else component_model(cfg, component)
-    section = cfg[component]
-    if component == "receiver":  # the orchestrator's keys are not the receiver's parameters
-        section = {k: v for k, v in section.items() if k not in RECEIVER_KEY_NAMES}
-    if model is None:
-        params = dict(section)
-        declared = accepted or frozenset()
-    else:
-        params = model.fmu_parameters(section, beacon_count(cfg))
-        declared = frozenset(v.name for v in model.fmu_parameters_declared(beacon_count(cfg)))
-    for owner, name in SAMPLING_TIES:
-        if owner == component and name in declared:
-            params[name] = cfg["simulation"]["sampling_time"]
-    for (owner, name), (section, key) in KEY_TIES:
-        if owner == component and name in declared:
-            params[name] = cfg[section][key]
-    if component == "receiver" and "communication_step" in declared:  # the receiver's own clock: T / ratio
-        params["communication_step"] = cfg["simulation"]["sampling_time"] / cfg["simulation"]["ekf_rate_ratio"]
-    params.update({k: v for k, v in cfg["run"].items() if k in declared})
-    if accepted is not None:
-        params = {k: v for k, v in params.items() if k in accepted}
-    return params
-
-
 def to_toml(cfg: dict[str, dict]) -> str:
     """The resolved configuration as TOML text (readable back by :func:`load_config`)."""
     header = "# sblsim resolved configuration: every parameter, the seed, Q, P0 and the initial state.\n"
-    return header + tomli_w.dumps(cfg)
+    return header + tomli_w.dumps({section: dict(table) for section, table in cfg.items()})

@@ -629,7 +629,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
         Directory of the built FMUs (fmu engine).
     n_beacons : int
     sources : dict, optional
-        What implements each component (:func:`sblsim.orchestrator.run.system_sources` of a configuration;
+        What implements each component (:attr:`sblsim.orchestrator.plan.RunPlan.sources` of a run's plan;
         default :func:`paper_sources`). A user's FMU is loaded on either engine and checked against the
         component's interface.
     fmu_files : dict, optional

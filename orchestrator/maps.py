@@ -10,7 +10,7 @@ model's casadi Jacobian; the model is the receivers' ranges-plus-depth
 grid around the platform at the diver's depth: the platform level at its
 mean heading, its reference at the origin, the beacons at their lever arms,
 with the configured range noise, GPS, IMU and depth-sensor errors
-(:func:`sblsim.orchestrator.run.bound_parameters`). It is the accuracy of one
+(:func:`sblsim.orchestrator.plan.bound_parameters`). It is the accuracy of one
 round of ranges without a motion model (a filter does better by averaging;
 the PCRB of a run says how much), and it is the design question of the
 paper: which baseline and sensors keep the diver within a required accuracy
@@ -19,7 +19,7 @@ over the working area.
 The systems (``platform.system``): LBL maps the same way, the beacons the
 seafloor transponders (their positions, :func:`~sblsim.models.platform.geometry.lever_arms`),
 with the survey error in place of the GPS and no attitude term
-(:func:`~sblsim.orchestrator.run.bound_parameters`). USBL maps one packet
+(:func:`~sblsim.orchestrator.plan.bound_parameters`). USBL maps one packet
 of slant range, azimuth and elevation from the transceiver plus the depth
 (:func:`sblsim.models.systems.usbl.horizontal_std`), with the receivers' R:
 ``σ_r²`` for the range, ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` for each
@@ -45,13 +45,10 @@ import pandas as pd
 
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
-from sblsim.models.platform.geometry import lever_arms
-from sblsim.models.systems import SYSTEMS
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.plan import Config, RunPlan, as_plan, load_plan, thaw
 from sblsim.orchestrator.progress import Progress, ProgressSpec
-from sblsim.orchestrator.run import bound_parameters
 from sblsim.orchestrator.systems import check_diver, compared
 
 MAX_POINTS = 1_000_000
@@ -107,13 +104,14 @@ def diver_depth(cfg: dict) -> tuple[float, str]:
     return float(target["depth"]), "target.depth"
 
 
-def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, depth: float | None = None) -> np.ndarray:
+def accuracy_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model=MODEL,
+                 depth: float | None = None) -> np.ndarray:
     """Horizontal DRMS [m] of one round of fresh ranges (USBL: one packet) plus depth, shape (len(north), len(east)).
 
     Parameters
     ----------
-    cfg : dict
-        Resolved configuration (geometry and error levels).
+    cfg : RunPlan or dict
+        The plan of the configuration (geometry and error levels; a configuration: its plan is made once).
     east, north : ndarray
         Grid coordinates [m].
     model : RangeDepthModel, optional
@@ -128,26 +126,27 @@ def accuracy_map(cfg: dict, east: np.ndarray, north: np.ndarray, model=MODEL, de
     Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
     Prentice Hall 1993, Section 3.7.
     """
-    params = bound_parameters(cfg)
+    plan = as_plan(cfg)
     E, N = np.meshgrid(east, north)
-    depth = diver_depth(cfg)[0] if depth is None else float(depth)
+    depth = diver_depth(plan)[0] if depth is None else float(depth)
     points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, depth)])
-    platform = cfg["platform"]
-    drms = SYSTEMS[platform["system"]].horizontal_std(points, platform, params, cfg["acoustics"]["sigma_range"],
-                                                      model=model)
+    drms = plan.system.horizontal_std(points, plan["platform"], plan.bound, plan["acoustics"]["sigma_range"],
+                                      model=model)
     return drms.reshape(E.shape)
 
 
-def system_line(cfg: dict) -> str:
-    """The geometry of a configuration's system in a few words (a panel's title)."""
-    return SYSTEMS[cfg["platform"]["system"]].describe(cfg["platform"])
+def system_line(plan: RunPlan | dict) -> str:
+    """The geometry of a plan's system in a few words (a panel's title; a configuration: its plan is made)."""
+    plan = as_plan(plan)
+    return plan.system.describe(plan["platform"])
 
 
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
               step: float = 0.5, compare: tuple[str, list[str]] | None = None,
               depth: float | None = None, progress: ProgressSpec = False
               ) -> tuple[list[str], list[dict], np.ndarray, np.ndarray, list[np.ndarray]]:
-    """The accuracy map of a configuration, or one per value of a compared key.
+    """The accuracy map of a configuration, or one per value of a compared key (each configuration resolved
+    once into its plan).
 
     ``progress`` reports each map made (:class:`sblsim.orchestrator.progress.Progress`); default silent.
 
@@ -158,7 +157,8 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     -------
     labels : list of str
         Panel titles (``platform.baseline = 1`` or the scenario).
-    configs : list of dict
+    configs : list of MapConfig
+        Each map's configuration (a dict, ``target.depth`` the map's depth) and its plan (``.plan()``).
     east, north : ndarray
     maps : list of ndarray, each (len(north), len(east)) [m]
 
@@ -169,23 +169,40 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     """
     east, north = grid(extent, step)
     if compare is None:
-        configs, labels = [load_config(scenario, overrides, seed=seed)], [str(scenario)]
+        plans, labels = [load_plan(scenario, overrides, seed=seed)], [str(scenario)]
     else:  # a compared system starts from its defaults, the user's --set over them
         key, values = compare
-        configs = [load_config(scenario, items, seed=seed) for items in compared(key, values, overrides)]
+        plans = [load_plan(scenario, items, seed=seed) for items in compared(key, values, overrides)]
         labels = [f"{key} = {v}" for v in values]
     if depth is not None and not 0.0 <= depth <= 11000.0:
         raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")
-    for cfg in configs:
-        cfg["target"]["depth"] = diver_depth(cfg)[0] if depth is None else float(depth)
+    configs = []
+    for plan in plans:
+        configs.append(MapConfig(plan, diver_depth(plan)[0] if depth is None else float(depth)))
         if compare is not None and compare[0] == "platform.system":
-            check_diver(cfg, cfg["target"]["depth"])
+            check_diver(configs[-1], configs[-1]["target"]["depth"])
     with Progress(len(configs), "map", "map", progress) as bar:
         maps = []
         for c in configs:
-            maps.append(accuracy_map(c, east, north, depth=c["target"]["depth"]))
+            maps.append(accuracy_map(c.plan(), east, north, depth=c["target"]["depth"]))
             bar.update(1)
     return labels, configs, east, north, maps
+
+
+class MapConfig(Config):
+    """The configuration of one map: its plan's configuration (a changeable copy) with ``target.depth`` the
+    map's diver depth [m]; :meth:`plan` is the plan the map was made of (resolved once: a map does not
+    simulate, its depth is not resolved again)."""
+
+    def __init__(self, plan: RunPlan, depth: float) -> None:
+        config = thaw(plan.config)
+        config["target"]["depth"] = depth
+        super().__init__(config)
+        self._plan = plan
+
+    def plan(self) -> RunPlan:
+        """The plan the map was made of (its ``target.depth`` the configuration's, not the map's)."""
+        return self._plan
 
 
 def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,
@@ -215,13 +232,14 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
     finite = np.concatenate([m[np.isfinite(m)] for m in maps])
     norm = LogNorm(vmin=max(float(finite.min()), 1e-4), vmax=float(finite.max()))
     fig, axes = plt.subplots(1, len(maps), figsize=(5.2 * len(maps) + 0.8, 4.8), squeeze=False)
-    systems = [SYSTEMS[cfg["platform"]["system"]] for cfg in configs]
+    plans = [cfg.plan() if isinstance(cfg, MapConfig) else as_plan(cfg) for cfg in configs]
+    systems = [p.system for p in plans]
     step = float(east[1] - east[0]) if len(east) > 1 else 1.0
     for k, (ax, label, cfg, m) in enumerate(zip(axes[0], labels, configs, maps)):
         mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
         lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
-        arms = lever_arms(cfg["platform"])
+        arms = plans[k].lever_arms
         inside = (np.abs(arms[:, 1]) <= east.max()) & (np.abs(arms[:, 0]) <= north.max())
         ax.plot(arms[inside, 1], arms[inside, 0], "r^", ms=6, label=systems[k].marker)
         if not inside.all():  # the grid, not the far markers, sets the axes
@@ -231,7 +249,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         ax.set_xlabel("East [m]")
         if k == 0:
             ax.set_ylabel("North [m]")
-        what = f"{system_line(cfg)}\n" if label.startswith("platform.system = ") else ""
+        what = f"{system_line(plans[k])}\n" if label.startswith("platform.system = ") else ""
         off = ("" if inside.all() else f", the {systems[k].marker} off the map" if not inside.any()
                else f", {int((~inside).sum())} of the {len(arms)} {systems[k].marker} off the map")
         ax.set_title(f"{label}\n({what}diver at {cfg['target']['depth']:g} m depth{off})", fontsize=9)
@@ -258,5 +276,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["accuracy_map", "grid", "make_maps", "parse_levels", "plot", "system_line", "table",
+__all__ = ["MapConfig", "accuracy_map", "grid", "make_maps", "parse_levels", "plot", "system_line", "table",
            "write"]

@@ -59,7 +59,7 @@ from sblsim.models import RECEIVER_MODELS
 from sblsim.models.acoustics.core import Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
-from sblsim.models.systems import SYSTEMS, System
+from sblsim.models.systems import System
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
@@ -68,14 +68,9 @@ from sblsim.orchestrator.config import (
     ConfigError,
     _is_path,
     apply_overrides,
-    beacon_count,
     check_receiver,
-    latency_steps,
     parse_override,
     read_source,
-    receiver_label,
-    receiver_source,
-    resolve,
     section_variables,
     to_toml,
 )
@@ -83,7 +78,8 @@ from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make
 from sblsim.orchestrator.limits import max_steps
 from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
 from sblsim.orchestrator.output import staged_directory, write_atomic
-from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _metrics, merge_params, summary
+from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
+from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _label, _metrics, merge_params, summary
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
 FORMAT = 1
@@ -659,8 +655,8 @@ def stamp_tolerance(log: Log, T: float) -> float:
 # --------------------------------------------------------------------------- configuration
 
 def replay_config(log_path: Path | str, config: str | None = None, receiver: str | None = None,
-                  overrides: Sequence[str] = (), notes: list[str] | None = None) -> tuple[dict, str]:
-    """The resolved configuration of a replay and where it came from.
+                  overrides: Sequence[str] = (), notes: list[str] | None = None) -> tuple[RunPlan, str]:
+    """The plan of a replay's configuration (resolved once) and where it came from.
 
     The source is ``config`` (a built-in scenario or a TOML file) when given, else the configuration an
     exported log carries, else the built-in scenario :data:`DEFAULT_CONFIG`. A ``receiver`` (or a
@@ -681,7 +677,7 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
 
     Returns
     -------
-    cfg : dict
+    plan : RunPlan
     source : str
         What the configuration is, for the messages.
 
@@ -724,7 +720,7 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
         _switch_receiver(raw, receiver)
     raw = apply_overrides(raw, overrides)
     try:
-        cfg = resolve(raw)
+        cfg = make_plan(raw)
     except ModelError as exc:
         if embedded:
             raise type(exc)(f"log: the configuration {str(log_path)!r} carries: {exc}; give --config") from None
@@ -814,8 +810,8 @@ class ReplayResult:
 
     Attributes
     ----------
-    config : dict
-        The resolved configuration the receiver ran with.
+    config : RunPlan
+        The plan the receiver ran with (reads as its resolved configuration).
     engine : str
     timeseries : pandas.DataFrame
         One row per macro step: ``time`` [s] (the log's clock), ``log_row`` (where in the log the row the
@@ -825,7 +821,7 @@ class ReplayResult:
         ``summary.json``: a run's keys (errors ``null`` without a truth track), ``log`` and ``truth``.
     """
 
-    config: dict
+    config: RunPlan
     engine: str
     timeseries: pd.DataFrame
     summary: dict[str, Any]
@@ -845,7 +841,7 @@ def _inputs(log: Log, names: Sequence[str], rel: np.ndarray) -> np.ndarray:
     return np.stack([values[n] for n in names], axis=1)
 
 
-def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | None = None,
+def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path | str | None = None,
            truth: tuple[np.ndarray, np.ndarray] | None = None) -> ReplayResult:
     """Step the configuration's receiver on a log (module docstring).
 
@@ -853,8 +849,9 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     ----------
     log : Log
         From :func:`read_log` with the configuration's beacon count.
-    cfg : dict
-        Resolved configuration (the receiver, its parameters, T, the rate ratio, the master).
+    cfg : RunPlan or dict
+        The plan (the receiver, its parameters, T, the rate ratio, the master; a configuration: its plan is made
+        once).
     engine : {'local', 'fmu'}
     fmu_dir : path, optional
     truth : (time, ned), optional
@@ -865,9 +862,9 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     ModelError
         A truth track that covers no step; as :func:`schedule` and :func:`sblsim.orchestrator.engines.make_handles`.
     """
-    sim = cfg["simulation"]
-    T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
-    plan = schedule(log, T, ratio, sim["master"] == "jacobi")
+    cfg = as_plan(cfg)
+    T, ratio = cfg.sampling_time, cfg.ekf_rate_ratio
+    plan = schedule(log, T, ratio, cfg.master == "jacobi")
     rel_times = 0.0 + T * np.arange(1, plan.steps + 1)  # the end of each macro step, as the master records it
     times = plan.start + rel_times
     true = np.full((plan.steps, 3), np.nan)
@@ -878,8 +875,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
         if not np.isfinite(true[:, 0]).any():
             raise ModelError(f"--truth: its times ({truth[0][0]:.10g} … {truth[0][-1]:.10g} s) cover no step of "
                              f"the log ({times[0]:.10g} … {times[-1]:.10g} s); are they on the log's clock?")
-    n_beacons = beacon_count(cfg)
-    handles = make_handles(engine, fmu_dir, n_beacons, {"receiver": receiver_source(cfg)})
+    handles = make_handles(engine, fmu_dir, cfg.n_beacons, {"receiver": cfg.sources["receiver"]})
     handle = handles["receiver"]
     start = time.perf_counter()
     try:
@@ -903,7 +899,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     finally:
         close_handles(handles)
     wall = time.perf_counter() - start
-    delay = latency_steps(cfg)
+    delay = cfg.latency_steps
     if delay:  # what the diver sees, as a run records it (sblsim.orchestrator.run.apply_latency)
         source = np.maximum(np.arange(plan.steps) - delay, 0)
         for k, name in enumerate(names):
@@ -933,7 +929,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
         columns.update(azimuth=packet(angles[:, 0]), elevation=packet(angles[:, 1]))
     columns.update({n: out[n] for n in names if n not in columns})
     frame = pd.DataFrame(columns)
-    result = RunResult(cfg, engine, frame, pd.DataFrame(), plan.steps, wall)
+    result = RunResult(cfg.config, engine, frame, pd.DataFrame(), plan.steps, wall, plan=cfg)
     metrics, truth_steps = _replay_metrics(cfg, frame)
     frame["pcrb"] = metrics.pop("__pcrb")
     for name in ("e_x", "e_y", "e_z", "e_tot"):
@@ -954,7 +950,7 @@ def replay(log: Log, cfg: dict, engine: str = "local", fmu_dir: Path | str | Non
     return ReplayResult(cfg, engine, frame, s)
 
 
-def _replay_metrics(cfg: dict, frame: pd.DataFrame) -> tuple[dict, int]:
+def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
     """The metrics of a replay: a run's, over the steps the truth track covers (contiguous), and the per-step
     PCRB and errors (keys ``__*``, NaN outside); without truth only those that need none."""
     n = len(frame)
@@ -1003,7 +999,7 @@ def write_replay(result: ReplayResult, out_dir: Path | str) -> Path:
     from sblsim.orchestrator.plots import plot_trajectory_xy, save_run_figures
 
     out_dir = Path(out_dir)
-    receiver = receiver_label(result.config)
+    receiver = result.config.receiver_label
     title = f"replay of {result.summary['log']['file']}, {receiver} ({result.engine})"
     with staged_directory(out_dir) as tmp:
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2, allow_nan=False) + "\n")
@@ -1110,9 +1106,10 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     cfg = result.config
     ts = result.timeseries
     ts = ts[ts["replicate"] == ts["replicate"].iloc[0]]
-    log, truth = log_frames(ts, SYSTEMS[cfg["platform"]["system"]])
+    plan = result.plan if result.plan is not None else as_plan(cfg)
+    log, truth = log_frames(ts, plan.system)
     origin = (f"exported from: sblsim run {cfg['run']['scenario']} (seed {cfg['run']['seed']}, "
-              f"platform.system {cfg['platform']['system']}, receiver {receiver_label(cfg)}, {result.engine} engine)")
+              f"platform.system {cfg['platform']['system']}, receiver {_label(result)}, {result.engine} engine)")
     config = to_toml(cfg)
     lost = int(log["beacon_id"].isna().sum())
     comments = [f"# {LOG_TITLE}",

@@ -6,7 +6,7 @@ import json
 import math
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache, partial
+from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -17,19 +17,8 @@ from sblsim.fmus import native
 from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
-from sblsim.models.platform.geometry import horizontal_spread, lever_arms
-from sblsim.models.receiver.core import filter_parameters
 from sblsim.models.systems import SYSTEMS
-from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
-from sblsim.orchestrator.config import (
-    MIN_SIGMA,
-    beacon_count,
-    component_params,
-    latency_steps,
-    receiver_label,
-    receiver_source,
-    to_toml,
-)
+from sblsim.orchestrator.config import receiver_label, to_toml
 from sblsim.orchestrator.connections import (
     Connection,
     check_connections,
@@ -38,16 +27,16 @@ from sblsim.orchestrator.connections import (
 from sblsim.orchestrator.engines import (
     DTYPES,
     ComponentHandle,
-    Source,
     cast_column,
     close_handles,
     make_handles,
-    paper_sources,
 )
 from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.master import RecordBuffer, simulate
 from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.plan import RunPlan, as_plan
+from sblsim.orchestrator.plan import with_replicates as _with_replicates
 from sblsim.orchestrator.progress import Progress, ProgressSpec, progress_of
 
 #: A system's time series adds its own columns after :data:`TIMESERIES_COLUMNS`
@@ -61,7 +50,7 @@ class RunResult:
     Attributes
     ----------
     config : dict
-        Resolved configuration.
+        Resolved configuration (read-only: the plan's).
     engine : str
         ``local`` or ``fmu``.
     timeseries : pandas.DataFrame
@@ -75,6 +64,8 @@ class RunResult:
         Wall-clock time of the simulation [s].
     step_time : dict
         Component -> wall-clock time spent in its ``doStep`` calls [s], all runs of the batch.
+    plan : RunPlan or None
+        The plan that ran (:mod:`sblsim.orchestrator.plan`; its ``config`` is :attr:`config`).
     """
 
     config: dict
@@ -84,72 +75,14 @@ class RunResult:
     steps: int
     wall_time: float
     step_time: dict[str, float] = field(default_factory=dict)
+    plan: RunPlan | None = None
 
 
-def system_sources(cfg: dict | None = None) -> dict[str, Source]:
-    """What implements each component of a configuration's system.
-
-    Returns
-    -------
-    dict
-        Component name -> the name of a built-in model (:data:`models.MODELS`,
-        e.g. ``receiver_lsq`` for ``simulation.receiver = "lsq"``), a user's
-        model class (``receiver = "model:PATH.py"``) or the path of a user's
-        FMU (``receiver = "fmu:PATH"``). Default: the paper's system.
-    """
-    sources = paper_sources()
-    if cfg is not None:
-        sources["receiver"] = receiver_source(cfg)
-    return sources
-
-
-#: The Kalman-type receivers' parameter defaults (the bound's motion model for a receiver without one).
-_FILTER_DEFAULTS = {v.name: v.start for v in filter_parameters()}
-
-
-def bound_parameters(cfg: dict) -> dict[str, float]:
-    """The parameters of the position PCRB of a configuration (:func:`sblsim.models.bound.pcrb`).
-
-    The motion model and prior are the random walk's for ``random-walk`` (the
-    bound is then a true bound), else the receiver's (``q_horizontal``,
-    ``q_vertical``, ``p0_position``, ``p0_velocity``; the defaults of the
-    Kalman-type receivers for one that has none). The measurement variances
-    are the configured white error sources: ``acoustics.sigma_range²`` plus the
-    broadcast position's variance and the attitude variance of the system
-    (:meth:`~sblsim.models.systems.System.position_errors`: ``platform.gps_sigma²``
-    and ``platform.imu_sigma_deg`` [rad]²; LBL: ``platform.survey_sigma²`` and 0), and
-    ``target.depth_sigma²`` (floored at 1 mm). The USBL bound takes the range's and the transceiver
-    position's apart: ``range_variance = acoustics.sigma_range²`` and ``position_variance``, the broadcast
-    position's isotropic variance per axis as the receivers' R takes it, the position error's plus the largest
-    lever arm turned by the attitude error (``σ² + (σ_att a)²``, a the receivers' ``beacon_arm`` tie,
-    :meth:`~sblsim.models.systems.System.receiver_ties`); ``angle_sigma_deg``, the USBL
-    direction-of-arrival std on the array's axis, ``platform.usbl_angle_sigma_deg``
-    [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
-    :func:`sblsim.models.systems.usbl.pcrb`).
-    """
-    target, platform = cfg["target"], cfg["platform"]
-    defaults = _FILTER_DEFAULTS
-    names = ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")
-    if target["trajectory"] == "random-walk":
-        motion = {k: target[f"walk_{k}"] for k in names}
-    else:
-        motion = {k: cfg["receiver"].get(k, defaults[k]) for k in names}
-    system = SYSTEMS[platform["system"]]
-    position, attitude = system.position_errors(platform)
-    arm = system.receiver_ties(platform)["beacon_arm"]
-    return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + position ** 2,
-            "range_variance": cfg["acoustics"]["sigma_range"] ** 2,
-            "position_variance": position ** 2 + (attitude * arm) ** 2,
-            "attitude_variance": attitude ** 2,
-            "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
-            "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
-
-
-def merge_params(cfgs: Sequence[dict], component: str,
+def merge_params(plans: Sequence[RunPlan], component: str,
                  accepted: frozenset[str] | None = None) -> tuple[dict[str, Any], np.ndarray]:
-    """Parameters of one component for a batch of runs, one resolved configuration per run.
+    """Parameters of one component for a batch of runs, one plan per run (a configuration: its plan is made).
 
-    The FMU parameters of the first run (:func:`sblsim.orchestrator.config.component_params`);
+    The FMU parameters of the first run (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`);
     a numeric key whose value differs between runs (a factor of a batch
     spanning several design cells) becomes an array of shape (B,). Only the
     seed keys and numeric FMU parameters may differ; text, tables and
@@ -168,36 +101,40 @@ def merge_params(cfgs: Sequence[dict], component: str,
     ModelError
         If the runs differ in a key a batch must share.
     """
-    first = cfgs[0]
-    params = component_params(first, component, accepted)
+    plans = [as_plan(p) for p in plans]
+    first = plans[0]
+    params = first.component_parameters(component, accepted)
     params.pop("replicate", None)
-    replicates = np.array([c["run"]["replicate"] for c in cfgs], dtype=np.int64)
+    replicates = np.array([p.replicate for p in plans], dtype=np.int64)
+    configs = [p.config for p in plans]
     for section in (component, "run"):
-        for key, value in first[section].items():
-            if key == "replicate" or all(c[section][key] == value for c in cfgs):
+        for key, value in first.config[section].items():
+            if key == "replicate" or all(c[section][key] == value for c in configs):
                 continue
             if section == "run" and key not in params:
                 continue  # a seed key the component does not take (e.g. the EKF draws no random numbers)
             if key not in params or isinstance(value, str):
                 raise ModelError(f"{component}.{key}: must be the same for every run of a batch")
-            params[key] = np.asarray([c[section][key] for c in cfgs])
+            params[key] = np.asarray([c[section][key] for c in configs])
     return params, replicates
 
 
-def with_replicates(cfg: dict, replicates: Sequence[int]) -> list[dict]:
-    """One configuration per replicate (``run.replicate`` set), sharing everything else."""
-    return [{**cfg, "run": {**cfg["run"], "replicate": int(r)}} for r in replicates]
+def with_replicates(plan: RunPlan | dict, replicates: Sequence[int]) -> list[RunPlan]:
+    """One plan per replicate (``run.replicate`` set), sharing everything else; a configuration is resolved
+    into its plan once (:func:`sblsim.orchestrator.plan.as_plan`)."""
+    return _with_replicates(as_plan(plan), replicates)
 
 
-def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = None,
+def run(cfg: RunPlan | dict, engine: str = "local", replicates: Sequence[int] | None = None,
         fmu_dir: Path | str | None = None, handles: dict[str, ComponentHandle] | None = None,
         progress: ProgressSpec | Progress = False, connections: Sequence[Connection] | None = None) -> RunResult:
     """Simulate a resolved configuration on an engine.
 
     Parameters
     ----------
-    cfg : dict
-        Resolved configuration (:func:`sblsim.orchestrator.config.load_config`).
+    cfg : RunPlan or dict
+        The run's plan (:func:`sblsim.orchestrator.plan.make_plan`); a configuration is resolved into its plan
+        once.
     engine : {'local', 'fmu'}
     replicates : sequence of int, optional
         Replicates to run (stepped together on the local engine, one after the
@@ -222,15 +159,16 @@ def run(cfg: dict, engine: str = "local", replicates: Sequence[int] | None = Non
     ModelError
         On a connection that does not match the components, or invalid parameters.
     """
-    replicates = list(replicates) if replicates is not None else [cfg["run"]["replicate"]]
-    return run_batch(with_replicates(cfg, replicates), engine, fmu_dir, handles, progress, connections=connections)
+    plan = as_plan(cfg)
+    replicates = list(replicates) if replicates is not None else [plan.replicate]
+    return run_batch(_with_replicates(plan, replicates), engine, fmu_dir, handles, progress, connections=connections)
 
 
-def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str | None = None,
+def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | str | None = None,
               handles: dict[str, ComponentHandle] | None = None, progress: ProgressSpec | Progress = False,
               timeseries: bool = True, connections: Sequence[Connection] | None = None,
               records: RecordBuffer | None = None) -> RunResult:
-    """Simulate a batch of runs, one resolved configuration each.
+    """Simulate a batch of runs, one plan each.
 
     The runs may differ in the seed keys (cell, replicate) and in the
     parameters the cores accept per replicate (``batched_parameters``); they
@@ -244,8 +182,9 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
 
     Parameters
     ----------
-    cfgs : sequence of dict
-        Resolved configurations, B ≥ 1.
+    cfgs : sequence of RunPlan
+        The runs' plans, B ≥ 1 (:func:`with_replicates`; a configuration given instead is resolved into its
+        plan).
     engine, fmu_dir, handles, progress
         As for :func:`run`.
     timeseries : bool
@@ -262,7 +201,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     Returns
     -------
     RunResult
-        For the first configuration, with one metrics row per run (in order).
+        For the first plan, with one metrics row per run (in order).
 
     Raises
     ------
@@ -270,24 +209,25 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         If the runs differ where a batch cannot, their record would not fit in memory
         (:func:`sblsim.orchestrator.limits.check_steps`), or as for :func:`run`.
     """
-    cfgs = list(cfgs)
-    sim = cfgs[0]["simulation"]
-    if any(c["simulation"] != sim for c in cfgs):
+    plans = [as_plan(c) for c in cfgs]
+    first = plans[0]
+    sim = first.config["simulation"]
+    if any(p.config["simulation"] != sim for p in plans):
         raise ModelError("simulation: every run of a batch needs the same simulation settings")
-    n_beacons = beacon_count(cfgs[0])
-    T = sim["sampling_time"]
-    n_steps = check_steps(sim["duration"], T, len(cfgs), timeseries)  # before any work: the record must fit
+    n_beacons = first.n_beacons
+    T = first.sampling_time
+    n_steps = check_steps(first.duration, T, len(plans), timeseries)  # before any work: the record must fit
     own = handles is None
     if own:
-        handles = make_handles(engine, fmu_dir, n_beacons, system_sources(cfgs[0]))
+        handles = make_handles(engine, fmu_dir, n_beacons, dict(first.sources))
     try:
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
-        rates = {"receiver": sim["ekf_rate_ratio"]}
+        rates = first.rates
         record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
         batched = all(h.batched for h in handles.values())
-        groups = [cfgs] if batched else [[c] for c in cfgs]
-        bar, own_bar = progress_of(progress, n_steps * len(cfgs), f"{cfgs[0]['run']['scenario']} ({engine})")
+        groups = [plans] if batched else [[p] for p in plans]
+        bar, own_bar = progress_of(progress, n_steps * len(plans), f"{first.scenario} ({engine})")
         start = time.perf_counter()
         recs, replicates, timing = [], [], {}
         try:
@@ -297,7 +237,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                     handle.setup(params, reps)
                 advance = partial(_advance, bar, len(group)) if bar.active else None
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
-                                     progress=advance, algorithm=sim["master"],
+                                     progress=advance, algorithm=first.master,
                                      buffer=records if len(groups) == 1 else None))
                 replicates.extend(reps.tolist())
         finally:
@@ -311,15 +251,15 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
         rec = recs[0]
     else:
         rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
-    rec = apply_latency(rec, latency_steps(cfgs[0]))  # what the diver sees; the runs of a batch share it
-    metrics, bound = _metrics(cfgs, rec, replicates, with_bound=timeseries)
+    rec = apply_latency(rec, first.latency_steps)  # what the diver sees; the runs of a batch share it
+    metrics, bound = _metrics(plans, rec, replicates, with_bound=timeseries)
     if timeseries:
         types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
         rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
         frame = _timeseries(rec, replicates, n_steps, bound)
     else:
         frame = pd.DataFrame()
-    result = RunResult(cfgs[0], engine, frame, metrics, n_steps, wall)
+    result = RunResult(first.config, engine, frame, metrics, n_steps, wall, plan=first)
     result.step_time = timing
     return result
 
@@ -347,7 +287,7 @@ def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.nd
     columns : dict
         ``"component.variable"`` -> array of shape (n_steps, B), and ``"time"`` (:func:`simulate`'s record).
     steps : int
-        The latency in steps of the record (:func:`sblsim.orchestrator.config.latency_steps`), ≥ 0.
+        The latency in steps of the record (:attr:`sblsim.orchestrator.plan.RunPlan.latency_steps`), ≥ 0.
 
     Returns
     -------
@@ -361,29 +301,19 @@ def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.nd
     return {k: (v[source] if k.startswith("receiver.") and k not in UNDELAYED else v) for k, v in columns.items()}
 
 
-@lru_cache(maxsize=64)
-def _arms(platform: tuple) -> np.ndarray:
-    return lever_arms(dict(platform))
-
-
-@lru_cache(maxsize=64)
-def _spread(platform: tuple) -> float:
-    return horizontal_spread(dict(platform))
-
-
 #: The recorded outputs :func:`sblsim.orchestrator.metrics.run_flags` reads (all among the metrics' inputs).
 FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid", "true_x", "true_y")
 
 
-def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
+def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
              with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
     """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass
     (a system with a bound of its own, :func:`_system_bound`, replaces the pass's range-only one)."""
-    dt = cfgs[0]["simulation"]["sampling_time"]
-    parameters = [bound_parameters(c) for c in cfgs]
+    dt = plans[0].sampling_time
+    parameters = [p.bound for p in plans]
     fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in parameters])  # (B, 8)
-    arms = np.stack([_arms(tuple(sorted(c["platform"].items()))) for c in cfgs], axis=0)  # (B, n, 3)
-    system = SYSTEMS[cfgs[0]["platform"]["system"]]
+    arms = np.stack([p.lever_arms for p in plans], axis=0)  # (B, n, 3)
+    system = plans[0].system
     own = bool(system.bound_fixed)  # the system steps a bound of its own
     values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
                                 with_bound and not own)
@@ -391,7 +321,7 @@ def _metrics(cfgs: Sequence[dict], rec: dict, replicates: list[int],
         bound = _system_bound(system, rec, dt, parameters, arms.shape[1])
         values["pcrb_rms"] = np.sqrt(np.mean(np.ascontiguousarray(bound.T) ** 2, axis=-1))
         bound = bound if with_bound else None
-    spread = np.array([_spread(tuple(sorted(c["platform"].items()))) for c in cfgs])
+    spread = np.array([p.horizontal_spread for p in plans])
     flags = run_flags({name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, spread, arms.shape[1])
     return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
 
@@ -452,12 +382,17 @@ def summary(result: RunResult) -> dict[str, Any]:
         return None if math.isnan(row[k]) else float(row[k])
 
     out: dict[str, Any] = {k: value(k) for k in result.metrics.columns if k != "replicate"}
-    out.update(engine=result.engine, receiver=receiver_label(result.config), seed=int(result.config["run"]["seed"]),
+    out.update(engine=result.engine, receiver=_label(result), seed=int(result.config["run"]["seed"]),
                steps=int(result.steps),
                scenario=result.config["run"]["scenario"], replicate=int(row["replicate"]),
                duration=float(result.steps * result.config["simulation"]["sampling_time"]),
                wall_time=round(result.wall_time, 3))
     return out
+
+
+def _label(result: RunResult) -> str:
+    """What figures and tables call the receiver of a result (its plan's label)."""
+    return result.plan.receiver_label if result.plan is not None else receiver_label(result.config)
 
 
 def write_run(result: RunResult, out_dir: Path | str) -> Path:
@@ -479,7 +414,7 @@ def write_run(result: RunResult, out_dir: Path | str) -> Path:
         (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2, allow_nan=False) + "\n")
         (tmp / "config.toml").write_text(to_toml(result.config))
         result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
-        receiver = receiver_label(result.config)
+        receiver = _label(result)
         save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']}, {receiver} "
                          f"({result.engine})", receiver=receiver)
     return out_dir

@@ -49,23 +49,18 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
-from sblsim.models import COMPONENTS, MODELS
+from sblsim.models import COMPONENTS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, UNITS
 from sblsim.models.errors import ArchiveError
 from sblsim.orchestrator.archives import check_members, inside, safe_extract
 from sblsim.orchestrator.config import (
     EXTERNAL_PREFIX,
-    RECEIVERS,
     apply_overrides,
-    beacon_count,
-    component_params,
-    resolve,
     section_variables,
 )
 from sblsim.orchestrator.connections import Connection, default_connections
 from sblsim.orchestrator.engines import fmu_paths, read_description
-from sblsim.orchestrator.limits import step_count
-from sblsim.orchestrator.run import system_sources
+from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -177,14 +172,14 @@ def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any],
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
+def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None = None,
                connections: Sequence[Connection] | None = None) -> Path:
-    """Write a resolved configuration as an SSP 1.0 archive.
+    """Write a run's plan as an SSP 1.0 archive.
 
     Parameters
     ----------
-    cfg : dict
-        Resolved configuration (:func:`sblsim.orchestrator.config.load_config`).
+    cfg : RunPlan or dict
+        The run's plan (:func:`sblsim.orchestrator.plan.load_plan`; a configuration: its plan is made once).
     out : path
         The ``.ssp`` file to write (replaced atomically).
     fmu_dir : path, optional
@@ -207,19 +202,18 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
     out = Path(out)
     if out.suffix != ".ssp":
         raise SspError(f"--out: {str(out)!r} must end in .ssp")
-    if cfg["receiver"].get("latency", 0.0) > 0.0:
-        raise SspError(f"receiver.latency: {cfg['receiver']['latency']:g} s cannot be exported: the orchestrator "
+    plan = as_plan(cfg)
+    if plan["receiver"].get("latency", 0.0) > 0.0:
+        raise SspError(f"receiver.latency: {plan['receiver']['latency']:g} s cannot be exported: the orchestrator "
                        "delays the receiver's outputs after a run, an FMI host would show them undelayed; "
                        "export with receiver.latency = 0")
-    n_beacons = beacon_count(cfg)
+    n_beacons = plan.n_beacons
     connections = list(connections) if connections is not None else default_connections(n_beacons)
-    sources = system_sources(cfg)
-    paths = fmu_paths(fmu_dir, sources, n_beacons)
-    sim = cfg["simulation"]
-    T, ratio = sim["sampling_time"], sim["ekf_rate_ratio"]
-    n_steps = step_count(sim["duration"], T)
+    paths = fmu_paths(fmu_dir, dict(plan.sources), n_beacons)
+    T, ratio = plan.sampling_time, plan.ekf_rate_ratio
+    n_steps = plan.n_steps
     base = T / ratio
-    name = identifier(cfg["run"]["scenario"])
+    name = identifier(plan.scenario)
 
     root = ET.Element(_q("ssd:SystemStructureDescription"), version="1.0", name=f"sblsim_{name}")
     system = ET.SubElement(root, _q("ssd:System"), name=name, description="sblsim SBL acoustic positioning system")
@@ -244,8 +238,8 @@ def export_ssp(cfg: dict, out: Path | str, fmu_dir: Path | str | None = None,
             if v.type == "Real" and v.unit:
                 used_units.add(v.unit)
         accepted = frozenset(n for n, v in variables.items() if v.causality == "parameter")
-        model = None if isinstance(sources[component], Path) else MODELS[sources[component]]
-        params = component_params(cfg, component, accepted)
+        model = plan.model(component)
+        params = plan.component_parameters(component, accepted)
         if model is not None:
             params = model.fmi_values(params, n_beacons)
         ssv = f"resources/{component}.ssv"
@@ -317,14 +311,14 @@ class SspSystem:
 
     Attributes
     ----------
-    config : dict
-        Resolved configuration (parameter sets, experiment, overrides).
+    config : RunPlan
+        The plan of the configuration (parameter sets, experiment, overrides), resolved once.
     connections : list of Connection
     fmu_files : dict
         Component -> its FMU extracted from the package.
     """
 
-    config: dict
+    config: RunPlan
     connections: list[Connection]
     fmu_files: dict[str, Path]
 
@@ -435,7 +429,7 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
                    for c in system.connections]
     if any(c.source is None or c.destination is None for c in connections):
         raise SspError("ssp: connections to the system's own connectors are not supported")
-    return SspSystem(resolve(apply_overrides(raw, overrides, seed)), connections, fmu_files)
+    return SspSystem(make_plan(apply_overrides(raw, overrides, seed)), connections, fmu_files)
 
 
 __all__ = ["SspError", "SspSystem", "export_ssp", "read_ssp", "validate_ssp"]

@@ -60,6 +60,7 @@ from sblsim.orchestrator.config import (
     section_variables,
 )
 from sblsim.orchestrator.metrics import RUN_METRICS
+from sblsim.orchestrator.plan import RunPlan, load_plan
 
 BUILTIN_STUDIES = ("paper", "million")
 DESIGNS = ("full", "fractional")
@@ -168,6 +169,18 @@ class Study:
         """
         return load_config(scenario, [*self.overrides, *self.cell_overrides(cell), f"run.cell={cell}"],
                            seed=self.seed)
+
+    def cell_plan(self, scenario: str, cell: int) -> RunPlan:
+        """The plan of one design cell (``run.cell`` set, replicate 0), resolved once
+        (:func:`sblsim.orchestrator.plan.load_plan`); its replicates share it.
+
+        Raises
+        ------
+        ConfigError, ModelError
+            If the levels do not make a valid configuration for the scenario.
+        """
+        return load_plan(scenario, [*self.overrides, *self.cell_overrides(cell), f"run.cell={cell}"],
+                         seed=self.seed)
 
     def to_dict(self) -> dict[str, Any]:
         """The resolved study as a TOML-ready table (``study.toml``)."""

@@ -23,7 +23,7 @@ def collect(out: Path, chunks: list[Chunk], path: Path, cached: int = 8) -> None
     order from their chunks, holding only the few chunks in use (``cached``) and one row group: the memory
     is bounded by the chunk size, not by the study's.
     """
-    order = sorted((c.configs[0]["run"]["scenario_key"], cell, c.id, k, c.replicates)
+    order = sorted((c.plans[0]["run"]["scenario_key"], cell, c.id, k, c.replicates)
                    for c in chunks for k, cell in enumerate(c.cells))
     tables: OrderedDict[str, pa.Table] = OrderedDict()
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from sblsim.models import COMPONENTS
-from sblsim.orchestrator.limits import step_count
+from sblsim.orchestrator.plan import RunPlan
 from sblsim.orchestrator.study import Study
 
 #: Default runs per chunk on each engine.
@@ -22,8 +22,8 @@ class Chunk:
         File stem, ``SCENARIOKEY-FIRSTCELL-LASTCELL``.
     scenario : str
     cells : list of int
-    configs : list of dict
-        Resolved configuration of each cell (replicate 0).
+    plans : list of RunPlan
+        The plan of each cell (replicate 0), resolved once; the cell's replicates share it.
     replicates : int
     steps : int
         Macro steps per run (cost estimate).
@@ -32,7 +32,7 @@ class Chunk:
     id: str
     scenario: str
     cells: list[int]
-    configs: list[dict] = field(repr=False)
+    plans: list[RunPlan] = field(repr=False)
     replicates: int = 1
     steps: int = 0
 
@@ -41,7 +41,7 @@ class Chunk:
         return len(self.cells) * self.replicates
 
 
-def batch_key(cfg: dict) -> tuple:
+def batch_key(cfg: RunPlan | dict) -> tuple:
     """What the runs of one batch must share: the simulation settings, every text value and every
     configuration-only key (they make tables or files); numeric FMU parameters may differ per run."""
     key = [("simulation", name, value) for name, value in sorted(cfg["simulation"].items())]
@@ -52,18 +52,18 @@ def batch_key(cfg: dict) -> tuple:
     return tuple(key)
 
 
-def cell_configs(study: Study) -> dict[str, list[dict]]:
-    """Resolved configuration of every design cell of every scenario (replicate 0).
+def cell_configs(study: Study) -> dict[str, list[RunPlan]]:
+    """The plan of every design cell of every scenario (replicate 0), each cell resolved once.
 
     Raises
     ------
     ConfigError, ModelError
         If a design cell does not make a valid configuration.
     """
-    return {scenario: [study.cell_config(scenario, c) for c in range(study.cells)] for scenario in study.scenarios}
+    return {scenario: [study.cell_plan(scenario, c) for c in range(study.cells)] for scenario in study.scenarios}
 
 
-def plan(study: Study, batch: int, configs: dict[str, list[dict]] | None = None) -> list[Chunk]:
+def plan(study: Study, batch: int, configs: dict[str, list[RunPlan]] | None = None) -> list[Chunk]:
     """Split a study into chunks of at most ``batch`` runs (at least one cell each).
 
     Cells are grouped by :func:`batch_key` in design order; the plan depends
@@ -80,8 +80,7 @@ def plan(study: Study, batch: int, configs: dict[str, list[dict]] | None = None)
             for start in range(0, len(cells), per_chunk):
                 part = cells[start:start + per_chunk]
                 cfg = configs[scenario][part[0]]
-                sim = cfg["simulation"]
-                steps = step_count(sim["duration"], sim["sampling_time"]) * sim["ekf_rate_ratio"]
+                steps = cfg.n_steps * cfg.ekf_rate_ratio
                 chunks.append(Chunk(f"{cfg['run']['scenario_key']:03d}-{part[0]:05d}-{part[-1]:05d}", scenario,
                                     part, [configs[scenario][c] for c in part], study.replicates, steps))
     return chunks

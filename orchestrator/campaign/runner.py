@@ -28,9 +28,8 @@ from sblsim.orchestrator.campaign.manifest import (
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
 from sblsim.orchestrator.engines import ENGINES, fmu_paths
-from sblsim.orchestrator.limits import check_steps, step_count
+from sblsim.orchestrator.limits import check_steps
 from sblsim.orchestrator.progress import Progress
-from sblsim.orchestrator.run import beacon_count, system_sources
 from sblsim.orchestrator.study import Study
 
 
@@ -141,10 +140,10 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
 def _run_campaign(study: Study, out: Path, workers: int | None, scheduler: str | None, resume: bool, engine: str,
                   batch: int, fmu_dir, save_timeseries: bool, progress: bool | None, pool) -> CampaignResult:
     """:func:`run_campaign` after the checks of its arguments (``pool``: worker processes started, or None)."""
-    configs = cell_configs(study)  # every cell resolves before anything is written
+    configs = cell_configs(study)  # every cell is resolved into its plan, once, before anything is written
     if engine == "fmu":  # refuse missing FMUs before anything is written
-        for sources, n_beacons in {(tuple(system_sources(cfg).items()), beacon_count(cfg))
-                                   for cfgs in configs.values() for cfg in cfgs}:
+        for sources, n_beacons in {(tuple(p.sources.items()), p.n_beacons) for plans in configs.values()
+                                   for p in plans}:
             fmu_paths(fmu_dir, dict(sources), n_beacons)
         fmu_dir = str(Path(fmu_dir).resolve()) if fmu_dir is not None else None
     _check_memory(plan(study, batch, configs), workers, scheduler, save_timeseries)
@@ -182,13 +181,12 @@ def _check_memory(chunks: list, workers: int | None, scheduler: str | None, save
     """
     concurrent = 1 if scheduler else min(workers or os.cpu_count() or 1, len(chunks))
     def need(chunk) -> int:
-        sim = chunk.configs[0]["simulation"]
-        return chunk.runs * step_count(sim["duration"], sim["sampling_time"])
+        return chunk.runs * chunk.plans[0].n_steps
 
     if chunks:
         largest = max(chunks, key=need)
-        sim = largest.configs[0]["simulation"]
-        check_steps(sim["duration"], sim["sampling_time"], largest.runs, save_timeseries, concurrent)
+        first = largest.plans[0]
+        check_steps(first.duration, first.sampling_time, largest.runs, save_timeseries, concurrent)
 
 
 def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, client, engine: str, fmu_dir,
@@ -210,7 +208,7 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
     for c in chunks:
         path, series = chunk_dir / f"{c.id}.parquet", series_dir / f"{c.id}.parquet"
         entry = manifest.get(c.id)
-        reason = verify_chunk(c, path, entry, c.configs[0]["run"]["scenario_key"], study)
+        reason = verify_chunk(c, path, entry, c.plans[0]["run"]["scenario_key"], study)
         if not reason and save_timeseries:
             if not series.is_file():
                 reason = "its time series are missing"

@@ -12,10 +12,10 @@ import numpy as np
 import pandas as pd
 
 from sblsim.orchestrator.campaign.plan import Chunk
-from sblsim.orchestrator.config import receiver_label
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.plan import with_replicates
+from sblsim.orchestrator.run import run_batch
 from sblsim.orchestrator.study import Study
 
 
@@ -38,10 +38,10 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
         Per-step time series with ``cell`` and ``replicate`` columns, if asked.
     """
     start = time.perf_counter()
-    cfgs = [cfg for base in chunk.configs for cfg in with_replicates(base, range(chunk.replicates))]
-    result = run_batch(cfgs, engine, fmu_dir=fmu_dir, timeseries=timeseries, records=process_records())
+    plans = [plan for base in chunk.plans for plan in with_replicates(base, range(chunk.replicates))]
+    result = run_batch(plans, engine, fmu_dir=fmu_dir, timeseries=timeseries, records=process_records())
     cells = np.repeat(chunk.cells, chunk.replicates)
-    first = chunk.configs[0]["run"]
+    first = chunk.plans[0]["run"]
     rows: dict[str, Any] = {
         "scenario": first["scenario"], "scenario_key": np.int64(first["scenario_key"]),
         "cell": cells.astype(np.int64), "replicate": result.metrics["replicate"].to_numpy(np.int64),
@@ -51,7 +51,7 @@ def run_chunk(chunk: Chunk, study: Study, engine: str = "local", fmu_dir: str | 
         coded = study.matrix[cells, k]
         rows[factor.name] = coded.astype(np.int64)
         rows[f"{factor.name}_value"] = np.where(coded < 0, factor.low, factor.high)
-    rows["receiver"] = receiver_label(chunk.configs[0])  # a chunk shares its receiver (batch_key)
+    rows["receiver"] = chunk.plans[0].receiver_label  # a chunk shares its receiver (batch_key)
     rows.update({m: result.metrics[m].to_numpy() for m in RUN_METRICS + FLAG_NAMES})
     series = None
     if timeseries:

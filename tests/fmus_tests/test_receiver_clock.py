@@ -17,7 +17,8 @@ from fmpy.fmi2 import FMU2Slave
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.orchestrator.config import component_params, load_config
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.run import run
 
 INPUTS = [v.name for v in MODELS["receiver"].inputs()]
@@ -61,7 +62,7 @@ class Receiver:
 
 def test_a_tiny_last_step_takes_no_packet_and_a_whole_step_does(fmu_dir, recorded):
     cfg, series = recorded
-    params = {k: v for k, v in component_params(cfg, "receiver").items() if k in
+    params = {k: v for k, v in make_plan(cfg).component_parameters("receiver").items() if k in
               {p.name for p in MODELS[RECEIVERS["ekf"]].fmu_parameters_declared()}}
     assert params["communication_step"] == pytest.approx(T)
     rows = [{n: getattr(r, n) for n in INPUTS} for r in series.itertuples(index=False)]

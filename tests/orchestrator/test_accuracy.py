@@ -16,7 +16,8 @@ from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.maps import accuracy_map, grid
-from sblsim.orchestrator.run import bound_parameters, run, run_batch, with_replicates
+from sblsim.orchestrator.plan import make_plan
+from sblsim.orchestrator.run import run, run_batch, with_replicates
 from sblsim.orchestrator.study import load_study
 
 
@@ -88,7 +89,7 @@ def test_map_writes_the_fisher_map_of_each_compared_value(tmp_path, capsys):
     for value, part in frame.groupby("platform.baseline"):
         cfg = load_config("semicircle", [f"platform.baseline={value}"])
         arms = lever_arms(cfg["platform"])
-        p = bound_parameters(cfg)
+        p = make_plan(cfg).bound
         row = part.sample(1, random_state=0).iloc[0]
         expected = horizontal_std(np.array([[row.north, row.east, row.depth]]), arms, arms, p["noise_variance"],
                                   p["attitude_variance"], p["depth_variance"])[0]

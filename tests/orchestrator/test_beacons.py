@@ -17,8 +17,9 @@ from sblsim.fmus.build import beacons_dir, build_all, fmu_path
 from sblsim.models import COMPONENTS
 from sblsim.models.platform.geometry import platform_offsets
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import beacon_count, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.maps import accuracy_map
+from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.run import run
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
 
@@ -52,7 +53,7 @@ def assert_same_frames(a: pd.DataFrame, b: pd.DataFrame, atol: float = 1e-9) -> 
 def test_the_circle_puts_n_beacons_at_the_baseline_from_north():
     cfg = load_config("semicircle", ["platform.layout=circle", "platform.beacons=6", "platform.baseline=2"])
     offsets = platform_offsets(cfg["platform"])
-    assert beacon_count(cfg) == 6 and offsets.shape == (6, 3)
+    assert make_plan(cfg).n_beacons == 6 and offsets.shape == (6, 3)
     angles = np.arctan2(offsets[:, 1], offsets[:, 0])
     np.testing.assert_allclose(np.unwrap(angles), 2 * np.pi * np.arange(6) / 6, atol=1e-15)
     np.testing.assert_allclose(np.hypot(offsets[:, 0], offsets[:, 1]), 2.0, rtol=1e-15)
@@ -76,7 +77,7 @@ def test_a_custom_layout_fills_the_beacon_count():
 def test_both_engines_give_the_same_numbers_for_any_number_of_beacons(beacon_fmus, layout):
     overrides, n = LAYOUTS[layout]
     cfg = load_config("semicircle", overrides + ["simulation.duration=6", "acoustics.loss_pct=10"], seed=7)
-    assert beacon_count(cfg) == n
+    assert make_plan(cfg).n_beacons == n
     local = run(cfg, "local").timeseries
     fmu = run(cfg, "fmu", fmu_dir=beacon_fmus).timeseries
     assert sorted(set(local["beacon_id"])) == list(range(1, n + 1))

@@ -19,8 +19,9 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.campaign.plan import batch_key
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import ConfigError, component_params, latency_steps, load_config, section_variables
+from sblsim.orchestrator.config import ConfigError, load_config, section_variables
 from sblsim.orchestrator.metrics import RUN_METRICS, nees
+from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.run import apply_latency, run, run_batch, with_replicates
 from sblsim.orchestrator.ssp import SspError, export_ssp
 from sblsim.orchestrator.study import load_study
@@ -57,7 +58,7 @@ def test_the_key_is_in_every_receivers_section_with_unit_range_and_default():
                                                                                           "config")
         assert latency.description
         assert load_config("semicircle", [f"receiver={receiver}"])["receiver"]["latency"] == 0.0
-    assert latency_steps(config(STEPS * 0.1)) == STEPS
+    assert make_plan(config(STEPS * 0.1)).latency_steps == STEPS
 
 
 def test_the_estimate_at_step_k_is_the_one_of_step_k_minus_L(pair):
@@ -122,7 +123,8 @@ def test_with_an_ekf_rate_ratio_the_latency_is_still_a_whole_number_of_sampling_
     with pytest.raises(ConfigError, match=r"^receiver\.latency: 0\.05 s .*once per T, not per T / 2\); "
                                           r"give 0 or 0\.1 s$"):
         load_config("semicircle", ["simulation.ekf_rate_ratio=2", "receiver.latency=0.05"])
-    assert latency_steps(load_config("semicircle", ["simulation.ekf_rate_ratio=2", "receiver.latency=0.1"])) == 1
+    plan = make_plan(load_config("semicircle", ["simulation.ekf_rate_ratio=2", "receiver.latency=0.1"]))
+    assert plan.latency_steps == 1
 
 
 def test_the_command_line_says_the_same_and_writes_nothing(tmp_path, capsys):
@@ -136,15 +138,15 @@ def test_the_receiver_component_never_receives_the_key():
     for receiver in ("ekf", "ekf-seq", "ukf", "lsq", f"model:{EXAMPLE_MODEL}"):
         cfg = load_config("semicircle", [f"receiver={receiver}", "receiver.latency=1"])
         assert cfg["receiver"]["latency"] == 1.0
-        assert "latency" not in component_params(cfg, "receiver")
-        assert "latency" not in component_params(cfg, "receiver", frozenset(cfg["receiver"]))
+        assert "latency" not in make_plan(cfg).component_parameters("receiver")
+        assert "latency" not in make_plan(cfg).component_parameters("receiver", frozenset(cfg["receiver"]))
 
 
 def test_a_users_receiver_fmu_gets_the_latency_from_the_orchestrator(fmu_dir):
     """sblsim's lsq FMU as a user's ``fmu:PATH``: the key is accepted, not passed, and applied."""
     user = f"fmu:{fmu_path(fmu_dir, 'receiver_lsq')}"
     cfg = load_config("random", [*SHORT, f"receiver={user}", "receiver.latency=0.3"], seed=4)
-    assert "latency" not in component_params(cfg, "receiver")
+    assert "latency" not in make_plan(cfg).component_parameters("receiver")
     builtin = load_config("random", [*SHORT, "receiver=lsq", "receiver.latency=0.3"], seed=4)
     a, b = run(cfg).timeseries, run(builtin).timeseries
     np.testing.assert_allclose(a[RECEIVER_COLUMNS].to_numpy(float), b[RECEIVER_COLUMNS].to_numpy(float), rtol=0,

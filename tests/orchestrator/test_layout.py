@@ -3,7 +3,8 @@
 import numpy as np
 
 from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import beacon_count, run
+from sblsim.orchestrator.plan import make_plan
+from sblsim.orchestrator.run import run
 
 SIX = "10 0 1; 0 10 1; -10 0 1; 0 -10 1; 0 0 15; 7 7 1"
 
@@ -15,7 +16,7 @@ def _six_beacon_config():
 
 def test_custom_six_beacon_layout_runs_round_robin_over_six():
     cfg = _six_beacon_config()
-    assert beacon_count(cfg) == 6
+    assert make_plan(cfg).n_beacons == 6
     ts = run(cfg, "local").timeseries
     expected = (np.arange(len(ts)) % 6) + 1
     np.testing.assert_array_equal(ts["beacon_id"].to_numpy(), expected)

@@ -20,7 +20,8 @@ import pytest
 from sblsim.models import RECEIVERS
 from sblsim.models.systems import SYSTEMS as SYSTEMS_BY_NAME
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import beacon_count, load_config, to_toml
+from sblsim.orchestrator.config import load_config, to_toml
+from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.replay import (
     export_log,
     read_log,
@@ -43,7 +44,7 @@ SYSTEMS = {"sbl": [], "lbl": ["platform.system=lbl"], "usbl": ["platform.system=
 def replay_file(path: Path, engine: str = "local", receiver: str | None = None, fmu_dir=None, truth=True,
                 config=None):
     cfg, _ = replay_config(path, config, receiver)
-    log = read_log(path, beacon_count(cfg), SYSTEMS_BY_NAME[cfg["platform"]["system"]],
+    log = read_log(path, make_plan(cfg).n_beacons, SYSTEMS_BY_NAME[cfg["platform"]["system"]],
                    cfg["acoustics"]["sound_speed_assumed"])
     return replay(log, cfg, engine, fmu_dir, read_truth(truth_path(path)) if truth else None)
 
@@ -180,7 +181,7 @@ def test_a_truth_track_on_another_grid_is_interpolated_not_misaligned(tmp_path):
     truth.write_text("# a truth track on its own grid\ntime_s,n_m,e_m,d_m\n"
                      + "".join(",".join(repr(float(v)) for v in (a, *p)) + "\n" for a, p in zip(t, track)))
     cfg, _ = replay_config(path)
-    log = read_log(path, beacon_count(cfg))
+    log = read_log(path, make_plan(cfg).n_beacons)
     result = replay(log, cfg, truth=read_truth(truth))
     ts = result.timeseries
     expected = start + ts["time"].to_numpy()[:, None] * velocity

@@ -13,8 +13,9 @@ from fmpy.ssp.ssd import read_ssd, read_ssv
 
 from sblsim.models import MODELS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import component_params, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import default_connections
+from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.run import run
 from sblsim.orchestrator.ssp import SspError, export_ssp, read_ssp, validate_ssp
 
@@ -85,7 +86,7 @@ def test_parameter_sets_hold_the_scenarios_values(exported):
         names.add(pset.name)
         got = {p.name: p for p in pset.parameters}
         model = MODELS[comp.name]
-        want = model.fmi_values(component_params(cfg, comp.name))
+        want = model.fmi_values(make_plan(cfg).component_parameters(comp.name))
         assert set(got) == set(want)
         for name, value in want.items():
             p = got[name]

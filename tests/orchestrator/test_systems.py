@@ -22,13 +22,14 @@ from scipy.stats import chi2
 from sblsim.models.platform.geometry import platform_offsets
 from sblsim.models.systems.usbl import pcrb as usbl_pcrb
 from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
-from sblsim.orchestrator.config import beacon_count, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import default_connections
 from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.master import simulate
 from sblsim.orchestrator.metrics import slots
-from sblsim.orchestrator.run import bound_parameters, merge_params, run, run_batch, system_sources, with_replicates
+from sblsim.orchestrator.plan import make_plan
+from sblsim.orchestrator.run import merge_params, run, run_batch, with_replicates
 from tests.orchestrator.test_fmus import assert_same_frames
 
 SYSTEMS = ("sbl", "lbl", "usbl")
@@ -47,8 +48,8 @@ def every_output(cfg, replicates):
     """Every output of every component at each step (the master's record, ``component.variable`` -> (N, B)), of a
     batch of replicates on the local engine: what a run records before it keeps its time-series columns."""
     cfgs = with_replicates(cfg, replicates)
-    n, sim = beacon_count(cfg), cfg["simulation"]
-    handles = make_handles("local", None, n, system_sources(cfg))
+    n, sim = make_plan(cfg).n_beacons, cfg["simulation"]
+    handles = make_handles("local", None, n, dict(make_plan(cfg).sources))
     try:
         for name, handle in handles.items():
             handle.setup(*merge_params(cfgs, name, handle.parameters))
@@ -126,7 +127,7 @@ def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
     assert (slot & ~fresh).sum() > 10  # lost packets: depth-only slots
     truth = np.stack([column[f"true_{a}"] for a in "xyz"], -1)
     transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], -1)
-    p = bound_parameters(cfg)
+    p = make_plan(cfg).bound
     fixed = {k: p[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance",
                                "position_variance", "angle_sigma_deg", "attitude_variance", "depth_variance")}
     # the transceiver position's error per axis: the GPS error and the lever arm turned by the attitude error

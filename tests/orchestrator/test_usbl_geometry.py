@@ -24,8 +24,9 @@ import pytest
 from sblsim.models.platform.core import Platform, beacon_names
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import component_params, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.maps import accuracy_map, grid
+from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.run import run, run_batch, with_replicates
 from tests.helpers import Core
 
@@ -43,7 +44,7 @@ def usbl(baseline: float, *more: str) -> list[str]:
 def transceiver(cfg: dict, kind: str) -> np.ndarray:
     """The platform's true or broadcast transceiver position at t = 0 for a configuration, (3,) [m]."""
     n = SYSTEMS["usbl"].interface_beacons
-    core = Core(Platform, component_params(cfg, "platform"), n_beacons=n).initialize(0.0)
+    core = Core(Platform, make_plan(cfg).component_parameters("platform"), n_beacons=n).initialize(0.0)
     return np.array([core.outputs[name][0] for name in beacon_names(n, kind)])
 
 
