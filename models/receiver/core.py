@@ -5,8 +5,10 @@ Every receiver runs at its own communication step Δt = T / (EKF rate ratio)
 (the ``communication_step`` parameter, set by the orchestrator) and shares
 the packet handling (:func:`slot_due`, :func:`take_packet`): a replicate has
 a new *slot* when ``packet_seq`` differs from the last one it used, the end
-of the step has reached the packet's transmit epoch,
-``t + h ≥ tx_time − 1 ns``, and the step has reached a new tick
+of the step has reached the packet's arrival epoch,
+``t + h ≥ rx_time − 1 ns`` (the channel delivers a packet in the step that
+reaches its arrival, so a receiver stepping faster than the channel uses it
+at its first step end after the arrival, never before), and the step has reached a new tick
 ``t0 + k·Δt`` of the receiver's own clock (:func:`clock_tick`). The last
 condition changes nothing when a host steps at Δt, as every host of sblsim
 does; it keeps the receiver on its own clock when a host takes other steps:
@@ -36,7 +38,7 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import PACKET
+from sblsim.models.acoustics.core import ARRIVAL, PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import sample_due
@@ -53,7 +55,7 @@ STATE_NAMES = CONSTANT_VELOCITY.state_names
 _AXES = {"x": "North", "y": "East", "z": "Down"}
 #: Iteration cap and step tolerance [standard deviations of the fix] of the instrumentation fix.
 INSTRUMENT_ITERATIONS, INSTRUMENT_TOLERANCE = 8, 1e-3
-#: Slack of the slot test ``t + Δt ≥ tx_time − SLOT_SLACK`` [s].
+#: Slack of the slot test ``t + Δt ≥ rx_time − SLOT_SLACK`` [s] (the channel's delivery test has the same).
 SLOT_SLACK = 1e-9
 
 
@@ -103,6 +105,13 @@ def system_interface(n_beacons: int) -> tuple[Variable, ...]:
     return parameters + interface_system(n_beacons).receiver_inputs()
 
 
+def arrival_interface() -> tuple[Variable, ...]:
+    """The packet's arrival epoch ``rx_time`` (the channel's :data:`~sblsim.models.acoustics.core.ARRIVAL`), an
+    input of every receiver: declared last, so that the value references of every earlier variable stay what
+    they were before it existed."""
+    return tuple(replace(v, causality="input") for v in ARRIVAL)
+
+
 def clock_parameters() -> tuple[Variable, ...]:
     """The receiver's own clock: declared after the receiver interface, so that the value references of every
     earlier variable stay what they were before the clock existed."""
@@ -141,10 +150,10 @@ def clock_step(x, p, t, h) -> dict[str, ca.SX]:
 
 
 def slot_due(x, u, p, t, h) -> ca.SX:
-    """A new packet whose transmit epoch the end of the step has reached, in a step that reached a tick of the
+    """A new packet whose arrival epoch the end of the step has reached, in a step that reached a tick of the
     receiver's clock (the last tick lies after the step's start; the clock event runs first)."""
     ticked = x["tick_t0"] + x["tick"] * p["communication_step"] > t + 1e-6 * p["communication_step"]
-    new = ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["tx_time"] - SLOT_SLACK)
+    new = ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["rx_time"] - SLOT_SLACK)
     return ca.logic_and(new, ticked)
 
 
@@ -260,7 +269,8 @@ class KalmanReceiver(Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
+        return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
+                + arrival_interface())
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -402,7 +412,8 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
     return fresh_packet(u, n_beacons), u["range"], ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
 
 
-__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "beacon_parameters",
+__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "arrival_interface",
+           "beacon_parameters",
            "clock_due", "clock_parameters", "clock_step", "clock_tick", "covariance_outputs", "filter_parameters",
            "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
            "packet_init", "packet_states", "receiver_interface", "slot_due", "system_interface", "take_packet"]
