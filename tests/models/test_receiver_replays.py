@@ -75,7 +75,7 @@ def slots(ts, cfg, ratio):
     for k, row in enumerate(ts.itertuples()):
         for j in range(ratio):
             t = k * T + j * dt
-            slot = row.packet_seq != last and t + dt >= row.tx_time - SLACK
+            slot = row.packet_seq != last and t + dt >= row.rx_time - SLACK
             if slot:
                 last = row.packet_seq
             yield j == ratio - 1, slot, row
