@@ -15,6 +15,7 @@ import pandas as pd
 
 from sblsim.fmus import native
 from sblsim.models.bound import FIXED
+from sblsim.models.acoustics.core import check_in_flight
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms
@@ -29,6 +30,7 @@ from sblsim.orchestrator.config import (
     receiver_label,
     receiver_source,
     to_toml,
+    turnaround,
 )
 from sblsim.orchestrator.connections import (
     Connection,
@@ -299,6 +301,7 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
                                      progress=advance, algorithm=sim["master"],
                                      buffer=records if len(groups) == 1 else None))
+                _check_in_flight(handles, group)
                 replicates.extend(reps.tolist())
         finally:
             if own_bar:
@@ -322,6 +325,25 @@ def run_batch(cfgs: Sequence[dict], engine: str = "local", fmu_dir: Path | str |
     result = RunResult(cfgs[0], engine, frame, metrics, n_steps, wall)
     result.step_time = timing
     return result
+
+
+def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
+    """Refuse the runs whose channel had more packets in flight than it holds (its ``overflow_travel_time``
+    output, never reset in a run: :func:`sblsim.models.acoustics.core.check_in_flight`), before anything of
+    them is written.
+
+    Raises
+    ------
+    ModelError
+        The one line of :func:`~sblsim.models.acoustics.core.check_in_flight`, for the longest flight refused.
+    """
+    channel = handles.get("acoustics")
+    if channel is None or "overflow_travel_time" not in channel.output_names:
+        return
+    refused = channel.output_vector()[channel.output_names.index("overflow_travel_time")]
+    if np.any(refused > 0.0):  # the runs of a batch share the sampling time; name the longest turnaround of them
+        check_in_flight(cfgs[0]["simulation"]["sampling_time"], max(turnaround(c) for c in cfgs),
+                        float(np.max(refused)))
 
 
 def _advance(bar: Progress, width: int, steps: int) -> None:

@@ -60,6 +60,7 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping
 
 import casadi as ca
@@ -67,6 +68,7 @@ import casadi as ca
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
+from sblsim.models.errors import ModelError
 from sblsim.models.expressions import sample_due, select
 from sblsim.models.platform.core import (
     AXES,
@@ -134,6 +136,46 @@ TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "
 ARRIVAL_SLACK = 1e-9
 #: Fixed-point iterations of the travel time (before the final evaluation).
 OWTT_ITERATIONS = 3
+
+
+def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
+    """Refuse a run whose packets stay in flight longer than the channel can hold them.
+
+    A packet that arrives Δ after its transmit epoch is delivered in the step that reaches its arrival,
+    ⌈Δ / T⌉ steps of T after the one that sent it, and the channel sends one packet per step: with
+    :data:`FLIGHT_CAPACITY` places C, a packet must arrive within ``Δ ≤ (C − 1) T``.
+
+    Parameters
+    ----------
+    slot_period : float
+        T = ``simulation.sampling_time`` [s].
+    turnaround : float
+        The nominal turnaround of two-way ranging (0 for one-way) [s].
+    elapsed : float, optional
+        The longest Δ a run saw (the channel's ``overflow_travel_time``; 0: nothing refused). None: the check
+        before a run, of the turnaround alone (the travel time is not known yet).
+
+    Raises
+    ------
+    ModelError
+        One line naming ``simulation.sampling_time``, ``acoustics.turnaround``, the travel time and the
+        shortest sampling time that holds them.
+    """
+    limit = (FLIGHT_CAPACITY - 1) * slot_period
+    if elapsed is None:
+        if turnaround < limit:
+            return
+        late, travel = turnaround, "the travel times on top"
+    else:
+        if not elapsed > 0.0:
+            return
+        late, travel = elapsed, f"a travel time of {max(elapsed - turnaround, 0.0):.4g} s"
+    raise ModelError(
+        f"simulation.sampling_time: {slot_period:g} s is too short for acoustics.turnaround = {turnaround:g} s and "
+        f"{travel}: a packet arrives {late:.4g} s after it is sent, {math.ceil(late / slot_period - 1e-9) + 1} "
+        f"packets in flight, and the channel holds {FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} "
+        f"sampling times); give a simulation.sampling_time above {late / (FLIGHT_CAPACITY - 1):.4g} s or a shorter "
+        "acoustics.turnaround")
 
 
 class Acoustics(Component):
@@ -323,8 +365,9 @@ class Acoustics(Component):
             return handler
 
         def send(x, out, elapsed):
-            """The queue after a packet ``out`` (by output name) left: in the first free in-flight place; none
-            free, the longest such ``elapsed`` (arrival − transmit) [s] is kept in ``overflow_travel_time``."""
+            """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
+            free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
+            ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
             placed, new = 0, {name: [] for name, _ in queue}
             for j in range(FLIGHT_CAPACITY):
                 free = x["q_used"][j] < 0.5
@@ -333,7 +376,10 @@ class Acoustics(Component):
                     new[f"q_{name}"].append(ca.if_else(put, out[name], x[f"q_{name}"][j]))
                 new["q_used"].append(ca.if_else(put, 1.0, x["q_used"][j]))
                 placed = ca.logic_or(placed, free)
-            refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], elapsed))
+            longest = elapsed  # the longest in flight then, for the refusal's message
+            for j in range(FLIGHT_CAPACITY):
+                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - x["q_tx_time"][j], 0.0))
+            refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
             return {**{name: ca.vertcat(*values) for name, values in new.items()}, "overflow_travel_time": refused}
 
         def arrived(x, t, h):
@@ -389,5 +435,5 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW", "OWTT_ITERATIONS",
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW", "OWTT_ITERATIONS",
            "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -150,8 +150,9 @@ def test_step_reaching_several_slots_sends_each_and_delivers_one_per_step():
         assert np.all(out["beacon_id"] == (seq - 1) % 4 + 1)
         np.testing.assert_allclose(out["tx_time"], t0 + seq * T, rtol=0, atol=1e-12)
         np.testing.assert_allclose(out["rx_time"], t0 + seq * T + d[(seq - 1) % 4] / 1500.0, rtol=0, atol=1e-12)
-        # the last step sends slots 9 … 15 with 6, 7 and 8 in flight: 14 and 15 find no room (8 places)
-        refused = max(d[13 % 4], d[14 % 4]) / 1500.0 if k == 15 else 0.0
+        # the last step sends slots 9 … 15 with 6, 7 and 8 in flight: 14 and 15 find no room (8 places); the
+        # refusal keeps the longest flight of them and of those in flight (every beacon's)
+        refused = np.max(d) / 1500.0 if k == 15 else 0.0
         np.testing.assert_allclose(out["overflow_travel_time"], refused, rtol=1e-13)
         # the shown packet is slot seq's, with the random numbers of draw seq - 1
         for r in reps:
