@@ -15,11 +15,14 @@ The replay runs on the grid of the configuration: macro steps of T =
 ``simulation.sampling_time``, each of ``simulation.ekf_rate_ratio``
 communication steps of the receiver. It starts at the last multiple of T
 before the first row's time (``start_time``) and ends with the macro step
-that reaches the last row. In each communication step ``[t, t + Δt]`` the
-receiver is shown the newest row whose time the step's end has reached
-(``t + Δt ≥ time_s − 1 ns``, the receiver's own slot test), so it uses each
-row in the step that reaches the row's time, as it uses a packet in a run.
-A row's time within its float resolution of a slot epoch k T is taken as that
+that reaches the last row's arrival. A row's arrival is its ``rx_time``
+(an exported log's: when the packet reached the diver), else its ``time_s``;
+rows are taken in the order of arrival. In each communication step
+``[t, t + Δt]`` the receiver is shown the newest row whose arrival the step's
+end has reached (``t + Δt ≥ rx_time − 1 ns``, the receiver's own slot test),
+so it uses each row in the step that reaches its arrival, as it uses a packet
+in a run (``tx_time`` is the row's ``time_s``).
+A row's arrival within its float resolution of a slot epoch k T is taken as that
 epoch (:func:`stamp_tolerance`), so that Unix-time stamps replay as times from 0.
 When several rows fall in one step only one can be used: the last row that
 carries a packet, else the last depth reading; the others are skipped and
