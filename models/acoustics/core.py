@@ -16,8 +16,28 @@ the assumed sound speed, ``r = c_assumed τ_m + σ_r w + e_mp``, where
 ``p_out`` (reflected path) and the packet is lost with probability
 ``p_loss``. The packet carries the slot counter, the beacon id, ``t_k`` and
 the beacon's broadcast position; a lost packet has ``packet_valid = false``
-and range and position 0. A step that reaches several slot epochs emits each
-of them in turn (the outputs show the last).
+and range and position 0.
+
+Delivery at arrival. The packet of slot k is computed at ``t_k`` (from the
+inputs of the step that reaches ``t_k``) with its **arrival** ``a_k`` at the
+diver: ``t_k + τ`` (OWTT), ``t_k`` plus the round trip the truth gives
+(TWTT: up leg, turnaround with its jitter, down leg), and for USBL the reply's
+arrival at the surface plus the downlink's travel time to the diver where it
+is then. It is then **in flight**: the channel holds up to
+:data:`FLIGHT_CAPACITY` packets sent and not yet arrived in its state. The
+outputs show the last **delivered** packet, with ``rx_time = a_k``: in each
+step, after the slots the step reaches were sent, the packet in flight of
+earliest arrival ``a ≤ t + h`` (then the lowest slot counter) is delivered;
+one per step, so that a host sees every packet: one that must wait for a
+later step is delivered then, never before it arrives. A step that reaches
+several slot epochs sends each of them (each with its own random numbers).
+Every receiver uses a packet at its first step end that reaches
+``rx_time`` (:func:`sblsim.models.receiver.core.slot_due`). A packet that
+finds every place taken is not dropped silently: ``overflow_travel_time``
+keeps the longest arrival − transmit of it and of those in flight, and the
+orchestrator refuses the run (:func:`check_in_flight`: a packet must arrive
+within ``FLIGHT_CAPACITY − 1`` slots, so the turnaround alone is checked
+before a run).
 
 Two-way travel time (``ranging = "twtt"``, SBL and LBL). At ``t_k`` the
 diver's transceiver interrogates the beacon of the slot from its position
@@ -47,8 +67,9 @@ surface turns the measured direction into NED with the IMU's attitude
 :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`'s
 convention) and its transceiver position (GPS and IMU) down to the diver on
 the acoustic link: the packet is lost when the reply or the downlink is lost
-(two draws of ``p_loss``), and it is delivered at the slot like every packet;
-the measurement refers to the diver's position at the reply.
+(two draws of ``p_loss``), and it reaches the diver a downlink travel time
+after the reply reached the surface (delivered at its arrival like every
+packet); the measurement refers to the diver's position at the reply.
 
 References
 ----------
