@@ -1082,9 +1082,10 @@ def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataF
     """A run's time series (one replicate) as a log, one row per slot, and its truth track (every step).
 
     A slot whose packet was lost is a depth-only row (``beacon_id`` missing); ``time_s`` is the packet's
-    epoch (``tx_time``), ``rx_time`` its arrival (the run's receiver used it at its first step reaching that).
-    The rows are in the order the receiver was given them (of arrival). Values are the receiver's inputs as the run recorded them, with the columns the
-    run's ``system`` adds (:attr:`~sblsim.models.systems.System.log_columns`: USBL's angles).
+    epoch (``tx_time``), ``rx_time`` its arrival (the run's receiver used it at its first step reaching
+    that). The rows are in the order the receiver was given them (of arrival). Values are the receiver's
+    inputs as the run recorded them, with the columns the run's ``system`` adds
+    (:attr:`~sblsim.models.systems.System.log_columns`: USBL's angles).
     """
     seq = ts["packet_seq"].to_numpy()
     previous = np.concatenate([[0], seq[:-1]])

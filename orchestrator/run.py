@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
-from sblsim.models.bound import FIXED
 from sblsim.models.acoustics.core import check_in_flight
+from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.geometry import horizontal_spread, lever_arms

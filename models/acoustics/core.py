@@ -456,5 +456,5 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW", "OWTT_ITERATIONS",
-           "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
+           "OWTT_ITERATIONS", "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -444,8 +444,8 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
     return fresh_packet(u, n_beacons), u["range"], ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
 
 
-__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES", "arrival_interface",
-           "beacon_parameters",
-           "clock_due", "clock_parameters", "clock_step", "clock_tick", "covariance_outputs", "filter_parameters",
-           "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
-           "packet_init", "packet_states", "receiver_interface", "reply_epoch", "slot_due", "system_interface", "take_packet"]
+__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
+           "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
+           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active",
+           "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "receiver_interface",
+           "reply_epoch", "slot_due", "system_interface", "take_packet"]
