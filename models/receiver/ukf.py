@@ -81,7 +81,10 @@ class UnscentedReceiver(KalmanReceiver):
         m = cls.measurement
         A = cls.reference(x, u)  # each sigma point's range at the packet's reference epoch
         variance = m.fresh_range_variance(ca.mtimes(A, x["x"]), beacon, p)
-        return cls._update(x, u, p, n_beacons, fresh, lambda c: m.h(ca.mtimes(A, c), [beacon]), rng,
+        def predicted(c):  # the range at the reference epoch, the depth now
+            return ca.vertcat(m.h(ca.mtimes(A, c), [beacon])[0], m.depth(c))
+
+        return cls._update(x, u, p, n_beacons, fresh, predicted, rng,
                            ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
 
     @classmethod
