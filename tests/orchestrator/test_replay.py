@@ -500,9 +500,12 @@ def test_a_log_in_unix_time_replays_to_the_run(tmp_path, offset):
     assert len(replayed.timeseries) == len(result.timeseries)
     np.testing.assert_allclose(replayed.timeseries["time"].to_numpy() - offset, result.timeseries["time"].to_numpy(),
                                rtol=0, atol=1e-5)
+    # the stamps resolve an arrival to spacing(offset) s only, and ekf-seq moves a range back by its age (from
+    # tx_time and rx_time) at the diver's speed (below 1 m/s): the estimates agree to that
+    tol = max(TOL, 4.0 * float(np.spacing(offset)) * 1.0)
     for name in OUTPUTS:
         np.testing.assert_allclose(replayed.timeseries[name].to_numpy(dtype=float),
-                                   result.timeseries[name].to_numpy(dtype=float), rtol=0, atol=TOL, err_msg=name)
+                                   result.timeseries[name].to_numpy(dtype=float), rtol=0, atol=tol, err_msg=name)
 
 
 def test_stamps_too_coarse_for_the_sampling_time_are_refused(tmp_path, capsys):
