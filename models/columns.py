@@ -36,6 +36,7 @@ TIMESERIES_COLUMNS = {
     "beacon_id": "acoustics.beacon_id",
     "packet_valid": "acoustics.packet_valid",
     "tx_time": "acoustics.tx_time",
+    "rx_time": "acoustics.rx_time",
     "range": "acoustics.range",
     **{f"beacon_{a}": f"acoustics.beacon_{a}" for a in "xyz"},
     "depth": "target.depth_measured",

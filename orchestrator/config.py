@@ -33,6 +33,7 @@ from typing import Any, Iterable
 import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
+from sblsim.models.acoustics.core import check_in_flight
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
@@ -415,6 +416,10 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
             cfg[s] = resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s)
     _check_trajectory_file(cfg["target"])
     _check_system(cfg, set(raw.get("platform", {})))
+    try:  # a turnaround the channel cannot hold in flight, whatever the travel time (that one is checked in a run)
+        check_in_flight(sim["sampling_time"], turnaround(cfg))
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
     _receiver_ties(cfg, set(raw.get("receiver", {})))
     for name, model in COMPONENTS.items():  # files and tables are read and checked now
         if name != "receiver":
@@ -485,6 +490,13 @@ def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> d
         raise ConfigError(f"receiver.latency: {latency:g} s is not a whole number of sampling times "
                           f"(T = {T:g} s{note}); give {' or '.join(nearest)} s")
     return keys
+
+
+def turnaround(cfg: dict[str, dict]) -> float:
+    """The nominal turnaround a packet of a resolved configuration waits for [s]: ``acoustics.turnaround`` in
+    two-way ranging, 0 in one-way."""
+    return float(cfg["acoustics"]["turnaround"]) if cfg["acoustics"]["ranging"] == "twtt" else 0.0
+
 
 
 def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:

@@ -12,12 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from sblsim.models.acoustics.core import DIRECTION, PACKET, TARGET_INPUTS
+from sblsim.models.acoustics.core import ARRIVAL, DIRECTION, PACKET, TARGET_INPUTS
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
 from sblsim.models.systems import interface_system
 
-PACKET_FIELDS = tuple(v.name for v in PACKET)
+#: What the channel sends every receiver: the packet, then its arrival epoch.
+PACKET_FIELDS = tuple(v.name for v in PACKET + ARRIVAL)
 
 
 class ConnectionMismatch(ModelError):

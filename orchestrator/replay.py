@@ -15,11 +15,14 @@ The replay runs on the grid of the configuration: macro steps of T =
 ``simulation.sampling_time``, each of ``simulation.ekf_rate_ratio``
 communication steps of the receiver. It starts at the last multiple of T
 before the first row's time (``start_time``) and ends with the macro step
-that reaches the last row. In each communication step ``[t, t + Δt]`` the
-receiver is shown the newest row whose time the step's end has reached
-(``t + Δt ≥ time_s − 1 ns``, the receiver's own slot test), so it uses each
-row in the step that reaches the row's time, as it uses a packet in a run.
-A row's time within its float resolution of a slot epoch k T is taken as that
+that reaches the last row's arrival. A row's arrival is its ``rx_time``
+(an exported log's: when the packet reached the diver), else its ``time_s``;
+rows are taken in the order of arrival. In each communication step
+``[t, t + Δt]`` the receiver is shown the newest row whose arrival the step's
+end has reached (``t + Δt ≥ rx_time − 1 ns``, the receiver's own slot test),
+so it uses each row in the step that reaches its arrival, as it uses a packet
+in a run (``tx_time`` is the row's ``time_s``).
+A row's arrival within its float resolution of a slot epoch k T is taken as that
 epoch (:func:`stamp_tolerance`), so that Unix-time stamps replay as times from 0.
 When several rows fall in one step only one can be used: the last row that
 carries a packet, else the last depth reading; the others are skipped and
@@ -107,6 +110,8 @@ NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|i
 LOG_COLUMNS = {
     "time_s": ("s", "the packet's epoch (its transmit time, the slot's tx_time); for a depth reading, its time",
                "always"),
+    "rx_time": ("s", "the packet's arrival at the diver (on time_s's clock, not before it): the replay uses the row "
+                "at its first step that reaches it; empty or no column: time_s", "optional"),
     "beacon_id": ("1", "the beacon the packet came from, 1 … N (USBL: 1); empty: the row is a depth reading only",
                   "always (the column)"),
     "range_m": ("m", "the measured range (one-way: c · travel time; two-way: c · (round trip − turnaround) / 2)",
@@ -317,7 +322,7 @@ class Log:
     ----------
     path : Path
     time : ndarray, shape (N,)
-        Each row's time [s], non-decreasing.
+        Each row's arrival (``rx_time``, else ``time_s``) [s], non-decreasing: when the replay uses it.
     beacon : ndarray of int, shape (N,)
         Beacon id 1 … n; 0 for a depth reading only.
     range : ndarray, shape (N,)
@@ -340,6 +345,8 @@ class Log:
         Columns the replay does not use.
     config : str
         The configuration an exported log carries (TOML; empty for another log).
+    sent : ndarray, shape (N,)
+        Each row's ``time_s`` (its transmit epoch) [s]; empty: the arrivals ``time``.
     """
 
     path: Path
@@ -355,6 +362,12 @@ class Log:
     typical_gap: float = 0.0
     ignored: list[str] = field(default_factory=list)
     config: str = ""
+    sent: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def transmit(self) -> np.ndarray:
+        """Each row's transmit epoch ``time_s`` [s] (its arrival where the log gives none)."""
+        return self.sent if self.sent.size == self.time.size else self.time
 
 
 def log_config(path: Path | str) -> str:
@@ -390,8 +403,10 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
       not finite, or outside the receiver's declared input range), a missing required column, or both
       ``range_m`` and ``travel_time_s``: **refused**;
     * a beacon id that is not a whole number in 1 … n_beacons: the row is **skipped** (``unknown_beacon``);
+    * an ``rx_time`` before the row's ``time_s``: **refused** (an arrival before its transmission);
     * a row with the same time and beacon id as an earlier one: **skipped** (``duplicate``);
-    * a row up to :data:`REORDER_WINDOW` earlier than a row before it: **sorted** into place
+    * a row that arrives (``rx_time``, else ``time_s``) up to :data:`REORDER_WINDOW` earlier than a row before
+      it: **sorted** into place
       (``out_of_order``); further back, a clock jump: **refused** with the line;
     * a gap forward: **stepped through** (the receiver predicts), the longest reported; a gap so long that
       the replay would not fit in memory: refused with the line after it;
@@ -425,6 +440,9 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     used = set(required) | {"range_m" if has_range else "travel_time_s"}
     if has_travel and "sound_speed_mps" in index:
         used.add("sound_speed_mps")
+    has_arrival = "rx_time" in index
+    if has_arrival:
+        used.add("rx_time")
     ignored = [c for c in table.header if c not in used]
     speeds = next(v for v in Acoustics.variables() if v.name == "sound_speed_assumed")
     t_lo, t_hi = -1e12, 1e12  # any clock; the receiver runs on times from the log's start
@@ -433,17 +451,24 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     d_lo, d_hi = SIGNAL_RANGES["depth"]
 
     counts = {"rows": len(table.rows), "unknown_beacon": 0, "duplicate": 0, "out_of_order": 0}
-    kept: list[tuple[float, int, float, tuple, float, tuple, str]] = []
+    kept: list[tuple[float, int, float, tuple, float, tuple, str, float]] = []
     latest, latest_where = -math.inf, ""
     for where_short, cells in table.rows:
         where = f"log: {name!r} {where_short}"
-        t = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
+        sent = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
+        t = sent  # the row's arrival: when the receiver uses it
+        if has_arrival and cells[index["rx_time"]]:
+            t = _number(cells[index["rx_time"]], where, "rx_time", t_lo, t_hi)
+            if t < sent:
+                raise ModelError(f"{where}: rx_time {t:.10g} s is before the row's time_s {sent:.10g} s: a packet "
+                                 "arrives after it is sent; leave rx_time empty where the arrival is not known")
         beacon = _beacon(cells[index["beacon_id"]], n_beacons)
         if beacon < 0:
             counts["unknown_beacon"] += 1
             continue
         if t < latest - REORDER_WINDOW:
-            raise ModelError(f"{where}: time_s {t:.10g} s is {latest - t:.6g} s before {latest_where}'s "
+            column = "rx_time" if t != sent else "time_s"
+            raise ModelError(f"{where}: {column} {t:.10g} s is {latest - t:.6g} s before {latest_where}'s "
                              f"{latest:.10g} s: a clock jump back (rows up to {REORDER_WINDOW:g} s out of order "
                              f"are sorted); replay the rows before and from {where_short} as two logs, or "
                              "correct the clock")
@@ -453,7 +478,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
             latest, latest_where = t, where_short
         depth = _number(cells[index["depth_m"]], where, "depth_m", d_lo, d_hi)
         if beacon == 0:
-            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0, 0.0), where_short))
+            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0, 0.0), where_short, sent))
             continue
         if has_range:
             rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
@@ -465,14 +490,14 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
             rng = speed * travel
         position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
         angles = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra) if extra else (0.0, 0.0)
-        kept.append((t, beacon, rng, position, depth, angles, where_short))
+        kept.append((t, beacon, rng, position, depth, angles, where_short, sent))
 
-    # in time order (stable: rows of one time keep the file's order), then without duplicates
+    # in arrival order (stable: rows of one time keep the file's order), then without duplicates
     kept.sort(key=lambda row: row[0])
     seen: set[tuple[float, int]] = set()
     rows = []
     for row in kept:
-        key = (row[0], row[1])
+        key = (row[7], row[1])
         if key in seen:
             counts["duplicate"] += 1
             continue
@@ -489,7 +514,8 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
                depth=np.array([r[4] for r in rows]),
                angles=np.array([r[5] for r in rows], dtype=float) if extra else None,
                where=[r[6] for r in rows], counts=counts, longest_gap=gap,
-               typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config)
+               typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config,
+               sent=np.array([r[7] for r in rows]))
 
 
 def _beacon(text: str, n_beacons: int) -> int:
@@ -585,7 +611,8 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
         When the log's span is more macro steps than fit in memory (naming its longest gap).
     """
     tol = stamp_tolerance(log, T)
-    start = T * (math.ceil(log.time[0] / T - max(1e-9, tol / T)) - 1)
+    first = float(np.min(log.transmit))  # the grid starts before the first transmission (the run's slot grid)
+    start = T * (math.ceil(first / T - max(1e-9, tol / T)) - 1)
     rel = log.time - start
     slot = 0.0 + np.rint(rel / T) * T  # the slot epochs k T as the channel computes them (t0 + k T, t0 = 0)
     rel = np.where(np.abs(rel - slot) <= tol, slot, rel)
@@ -827,12 +854,15 @@ class ReplayResult:
     summary: dict[str, Any]
 
 
-def _inputs(log: Log, names: Sequence[str], rel: np.ndarray) -> np.ndarray:
-    """The receiver's input vector of every row, shape (N, n_in); ``rel`` the rows' times from the start."""
+def _inputs(log: Log, names: Sequence[str], rel: np.ndarray, start: float) -> np.ndarray:
+    """The receiver's input vector of every row, shape (N, n_in); ``rel`` the rows' arrivals from the start
+    ``start`` [s]."""
     packet = log.beacon > 0
     angles = log.angles if log.angles is not None else np.zeros((len(rel), 2))
+    # the transmit epoch from the start: the arrival itself where the log gives none (as the schedule has it)
+    sent = np.where(log.transmit == log.time, rel, log.transmit - start)
     values = {"packet_seq": np.arange(1, len(rel) + 1, dtype=float), "beacon_id": log.beacon.astype(float),
-              "packet_valid": packet.astype(float), "tx_time": rel, "range": log.range,
+              "packet_valid": packet.astype(float), "tx_time": sent, "rx_time": rel, "range": log.range,
               "beacon_x": log.beacon_ned[:, 0], "beacon_y": log.beacon_ned[:, 1], "beacon_z": log.beacon_ned[:, 2],
               "depth": log.depth, "azimuth": angles[:, 0], "elevation": angles[:, 1]}
     unknown = [n for n in names if n not in values]
@@ -881,7 +911,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     try:
         params, replicates = merge_params([cfg], "receiver", handle.parameters)
         handle.setup(params, replicates, 0.0)
-        inputs = _inputs(log, handle.input_names, plan.rel)
+        inputs = _inputs(log, handle.input_names, plan.rel, plan.start)
         outputs = np.empty((plan.steps, len(handle.output_names)))
         sub = T / ratio
         current = -1
@@ -921,7 +951,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
         **{n: out[n] for n in names if n.startswith(("est_", "instr_"))},
         "packet_seq": np.where(none, 0, shown + 1).astype(np.int64),
         "beacon_id": packet(log.beacon).astype(np.int64), "packet_valid": packet(log.beacon > 0, False),
-        "tx_time": packet(log.time), "range": packet(log.range),
+        "tx_time": packet(log.transmit), "rx_time": packet(log.time), "range": packet(log.range),
         **{f"beacon_{a}": packet(log.beacon_ned[:, k]) for k, a in enumerate("xyz")},
         "depth": packet(log.depth),
     }
@@ -1048,8 +1078,10 @@ def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataF
     """A run's time series (one replicate) as a log, one row per slot, and its truth track (every step).
 
     A slot whose packet was lost is a depth-only row (``beacon_id`` missing); ``time_s`` is the packet's
-    epoch (``tx_time``). Values are the receiver's inputs as the run recorded them, with the columns the
-    run's ``system`` adds (:attr:`~sblsim.models.systems.System.log_columns`: USBL's angles).
+    epoch (``tx_time``), ``rx_time`` its arrival (the run's receiver used it at its first step reaching
+    that). The rows are in the order the receiver was given them (of arrival). Values are the receiver's
+    inputs as the run recorded them, with the columns the run's ``system`` adds
+    (:attr:`~sblsim.models.systems.System.log_columns`: USBL's angles).
     """
     seq = ts["packet_seq"].to_numpy()
     previous = np.concatenate([[0], seq[:-1]])
@@ -1060,6 +1092,7 @@ def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataF
         return np.where(valid, slot[column].to_numpy(dtype=float), np.nan)
 
     log = pd.DataFrame({"time_s": slot["tx_time"].to_numpy(dtype=float),
+                        **({"rx_time": slot["rx_time"].to_numpy(dtype=float)} if "rx_time" in slot else {}),
                         "beacon_id": pd.array(np.where(valid, slot["beacon_id"].to_numpy(), 0), dtype="Int64"),
                         "range_m": packet("range"), "beacon_n_m": packet("beacon_x"),
                         "beacon_e_m": packet("beacon_y"), "beacon_d_m": packet("beacon_z"),

@@ -14,11 +14,12 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
+from sblsim.models.acoustics.core import check_in_flight
 from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.config import receiver_label, to_toml
+from sblsim.orchestrator.config import receiver_label, to_toml, turnaround
 from sblsim.orchestrator.connections import (
     Connection,
     check_connections,
@@ -239,6 +240,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
                                      progress=advance, algorithm=first.master,
                                      buffer=records if len(groups) == 1 else None))
+                _check_in_flight(handles, group)
                 replicates.extend(reps.tolist())
         finally:
             if own_bar:
@@ -262,6 +264,25 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
     result = RunResult(first.config, engine, frame, metrics, n_steps, wall, plan=first)
     result.step_time = timing
     return result
+
+
+def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
+    """Refuse the runs whose channel had more packets in flight than it holds (its ``overflow_travel_time``
+    output, never reset in a run: :func:`sblsim.models.acoustics.core.check_in_flight`), before anything of
+    them is written.
+
+    Raises
+    ------
+    ModelError
+        The one line of :func:`~sblsim.models.acoustics.core.check_in_flight`, for the longest flight refused.
+    """
+    channel = handles.get("acoustics")
+    if channel is None or "overflow_travel_time" not in channel.output_names:
+        return
+    refused = channel.output_vector()[channel.output_names.index("overflow_travel_time")]
+    if np.any(refused > 0.0):  # the runs of a batch share the sampling time; name the longest turnaround of them
+        check_in_flight(cfgs[0]["simulation"]["sampling_time"], max(turnaround(c) for c in cfgs),
+                        float(np.max(refused)))
 
 
 def _advance(bar: Progress, width: int, steps: int) -> None:

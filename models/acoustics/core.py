@@ -16,8 +16,28 @@ the assumed sound speed, ``r = c_assumed τ_m + σ_r w + e_mp``, where
 ``p_out`` (reflected path) and the packet is lost with probability
 ``p_loss``. The packet carries the slot counter, the beacon id, ``t_k`` and
 the beacon's broadcast position; a lost packet has ``packet_valid = false``
-and range and position 0. A step that reaches several slot epochs emits each
-of them in turn (the outputs show the last).
+and range and position 0.
+
+Delivery at arrival. The packet of slot k is computed at ``t_k`` (from the
+inputs of the step that reaches ``t_k``) with its **arrival** ``a_k`` at the
+diver: ``t_k + τ`` (OWTT), ``t_k`` plus the round trip the truth gives
+(TWTT: up leg, turnaround with its jitter, down leg), and for USBL the reply's
+arrival at the surface plus the downlink's travel time to the diver where it
+is then. It is then **in flight**: the channel holds up to
+:data:`FLIGHT_CAPACITY` packets sent and not yet arrived in its state. The
+outputs show the last **delivered** packet, with ``rx_time = a_k``: in each
+step, after the slots the step reaches were sent, the packet in flight of
+earliest arrival ``a ≤ t + h`` (then the lowest slot counter) is delivered;
+one per step, so that a host sees every packet: one that must wait for a
+later step is delivered then, never before it arrives. A step that reaches
+several slot epochs sends each of them (each with its own random numbers).
+Every receiver uses a packet at its first step end that reaches
+``rx_time`` (:func:`sblsim.models.receiver.core.slot_due`). A packet that
+finds every place taken is not dropped silently: ``overflow_travel_time``
+keeps the longest arrival − transmit of it and of those in flight, and the
+orchestrator refuses the run (:func:`check_in_flight`: a packet must arrive
+within ``FLIGHT_CAPACITY − 1`` slots, so the turnaround alone is checked
+before a run).
 
 Two-way travel time (``ranging = "twtt"``, SBL and LBL). At ``t_k`` the
 diver's transceiver interrogates the beacon of the slot from its position
@@ -47,8 +67,9 @@ surface turns the measured direction into NED with the IMU's attitude
 :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`'s
 convention) and its transceiver position (GPS and IMU) down to the diver on
 the acoustic link: the packet is lost when the reply or the downlink is lost
-(two draws of ``p_loss``), and it is delivered at the slot like every packet;
-the measurement refers to the diver's position at the reply.
+(two draws of ``p_loss``), and it reaches the diver a downlink travel time
+after the reply reached the surface (delivered at its arrival like every
+packet); the measurement refers to the diver's position at the reply.
 
 References
 ----------
@@ -60,6 +81,7 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping
 
 import casadi as ca
@@ -67,6 +89,7 @@ import casadi as ca
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
+from sblsim.models.errors import ModelError
 from sblsim.models.expressions import sample_due, select
 from sblsim.models.platform.core import (
     AXES,
@@ -113,9 +136,67 @@ DIRECTION: tuple[Variable, ...] = (
              "USBL: measured elevation of the diver below the horizontal (0 when lost)", discrete=True,
              min=-10.0, max=10.0),
 )
+#: What a delivered packet adds at the end of the channel's declarations (after every earlier variable, so that
+#: their value references stay): its arrival epoch, an input of every receiver too.
+ARRIVAL: tuple[Variable, ...] = (
+    Variable("rx_time", "output", "Real", 0.0, "s",
+             "Arrival epoch of the packet at the diver (the receiver uses it at its first step end reaching it)",
+             discrete=True, **signal_range("time")),
+)
+#: The channel's refusal signal (an output of the channel alone, declared last).
+OVERFLOW: tuple[Variable, ...] = (
+    Variable("overflow_travel_time", "output", "Real", 0.0, "s",
+             "Longest arrival minus transmit epoch of a packet that found every in-flight place taken "
+             "(0: none; the orchestrator refuses such a run)", discrete=True),
+)
+#: In-flight places of the channel: the packets transmitted and not yet arrived it holds (a packet that finds
+#: them all taken is counted in ``overflow_travel_time``, never silently dropped).
+FLIGHT_CAPACITY = 8
 TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "target_vz")
+#: Slack of the delivery test ``rx_time ≤ t + h + ARRIVAL_SLACK`` [s] (the receivers' slot test has the same).
+ARRIVAL_SLACK = 1e-9
 #: Fixed-point iterations of the travel time (before the final evaluation).
 OWTT_ITERATIONS = 3
+
+
+def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
+    """Refuse a run whose packets stay in flight longer than the channel can hold them.
+
+    A packet that arrives Δ after its transmit epoch is delivered in the step that reaches its arrival,
+    ⌈Δ / T⌉ steps of T after the one that sent it, and the channel sends one packet per step: with
+    :data:`FLIGHT_CAPACITY` places C, a packet must arrive within ``Δ ≤ (C − 1) T``.
+
+    Parameters
+    ----------
+    slot_period : float
+        T = ``simulation.sampling_time`` [s].
+    turnaround : float
+        The nominal turnaround of two-way ranging (0 for one-way) [s].
+    elapsed : float, optional
+        The longest Δ a run saw (the channel's ``overflow_travel_time``; 0: nothing refused). None: the check
+        before a run, of the turnaround alone (the travel time is not known yet).
+
+    Raises
+    ------
+    ModelError
+        One line naming ``simulation.sampling_time``, ``acoustics.turnaround``, the travel time and the
+        shortest sampling time that holds them.
+    """
+    limit = (FLIGHT_CAPACITY - 1) * slot_period
+    if elapsed is None:
+        if turnaround < limit:
+            return
+        late, travel = turnaround, "the travel times on top"
+    else:
+        if not elapsed > 0.0:
+            return
+        late, travel = elapsed, f"a travel time of {max(elapsed - turnaround, 0.0):.4g} s"
+    raise ModelError(
+        f"simulation.sampling_time: {slot_period:g} s is too short for acoustics.turnaround = {turnaround:g} s and "
+        f"{travel}: a packet arrives {late:.4g} s after it is sent, {math.ceil(late / slot_period - 1e-9) + 1} "
+        f"packets in flight, and the channel holds {FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} "
+        f"sampling times); give a simulation.sampling_time above {late / (FLIGHT_CAPACITY - 1):.4g} s or a shorter "
+        "acoustics.turnaround")
 
 
 class Acoustics(Component):
@@ -176,12 +257,12 @@ class Acoustics(Component):
                      min=0.0, max=1.0),
         )
         if not interface_system(n_beacons).measures_direction:
-            return params + SEED_PARAMETERS + inputs + outputs + ranging
+            return params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
-        return params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION
+        return params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -211,8 +292,11 @@ class Acoustics(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         packet = [v.name for v in cls.outputs(n)]
-        b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet],
-                           derived=[("nodes", NODES), ("slowness", NODES)])
+        # what a packet in flight carries: every output but the refusal signal
+        carried = [name for name in packet if name not in {v.name for v in OVERFLOW}]
+        queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
+        b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
+                           + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
@@ -227,7 +311,9 @@ class Acoustics(Component):
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
-            return {"t0": t0, "k": 0, **zero, "tx_time": t0}
+            empty = {name: ca.SX.zeros(size) for name, size in queue}
+            return {"t0": t0, "k": 0, **zero, "tx_time": t0, "rx_time": t0, **empty,
+                    "delivered_end": t0 - p["slot_period"]}
 
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
@@ -277,25 +363,72 @@ class Acoustics(Component):
                     reply = leg(up[0] + turnaround, False)
                     rng, distance, tau = two_way(up, reply)
                     valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # the reply, the downlink
+                    # the surface measures at the reply's arrival and sends the fix down to the diver
+                    arrival = t_k + tau + leg(tau, True)[0]
                 elif ranging == "owtt":
                     tau, distance, _ = leg(None, True)
                     measured = tau + drift * (t_k - x["t0"] + tau)
                     rng = p["sound_speed_assumed"] * measured
+                    arrival = t_k + tau
                 else:  # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
                     up = leg(None, False)
                     rng, distance, tau = two_way(up, leg(up[0] + turnaround, True))
+                    arrival = t_k + tau
                 rng = rng + p["sigma_range"] * noise + excess
-                out = {"k": k, "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
+                out = {"packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
                        "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
-                       "outlier": ca.logic_and(outlier, valid)}
+                       "outlier": ca.logic_and(outlier, valid), "rx_time": arrival}
                 out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
                 if direction:
                     out.update(zip(("azimuth", "elevation"),
-                        (ca.if_else(valid, a, 0.0) for a in arrival(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
-                return out
+                        (ca.if_else(valid, a, 0.0) for a in doa(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
+                return {"k": k, **send(x, out, arrival - t_k)}
             return handler
 
-        def arrival(direction, u, p, w_angle):
+        def send(x, out, elapsed):
+            """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
+            free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
+            ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
+            placed, new = 0, {name: [] for name, _ in queue}
+            for j in range(FLIGHT_CAPACITY):
+                free = x["q_used"][j] < 0.5
+                put = ca.logic_and(free, ca.logic_not(placed))
+                for name in carried:
+                    new[f"q_{name}"].append(ca.if_else(put, out[name], x[f"q_{name}"][j]))
+                new["q_used"].append(ca.if_else(put, 1.0, x["q_used"][j]))
+                placed = ca.logic_or(placed, free)
+            longest = elapsed  # the longest in flight then, for the refusal's message
+            for j in range(FLIGHT_CAPACITY):
+                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - x["q_tx_time"][j], 0.0))
+            refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
+            return {**{name: ca.vertcat(*values) for name, values in new.items()}, "overflow_travel_time": refused}
+
+        def arrived(x, t, h):
+            """Per in-flight place: it holds a packet whose arrival the end of the step has reached."""
+            return [ca.logic_and(x["q_used"][j] > 0.5, x["q_rx_time"][j] <= t + h + ARRIVAL_SLACK)
+                    for j in range(FLIGHT_CAPACITY)]
+
+        def deliverable(x, u, p, d, t, h):
+            """Guard of the delivery: a packet has arrived by the end of the step, and none was delivered in it
+            (the last delivery's step end lies before this step's middle)."""
+            any_arrived = 0
+            for flag in arrived(x, t, h):
+                any_arrived = ca.logic_or(any_arrived, flag)
+            return ca.logic_and(any_arrived, x["delivered_end"] < t + 0.5 * h)
+
+        def deliver(x, u, p, d, w, t, h):
+            """The arrived packet of earliest arrival (then lowest slot counter) becomes the outputs."""
+            best, best_rx, best_seq = 0, ca.inf, ca.inf
+            for j, flag in enumerate(arrived(x, t, h)):
+                rx, seq = x["q_rx_time"][j], x["q_packet_seq"][j]
+                better = ca.logic_and(flag, ca.logic_or(rx < best_rx, ca.logic_and(rx == best_rx, seq < best_seq)))
+                best = ca.if_else(better, j, best)
+                best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
+            out = {name: select(best, [x[f"q_{name}"][j] for j in range(FLIGHT_CAPACITY)]) for name in carried}
+            used = ca.vertcat(*[ca.if_else(best == j, 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
+            return {**out, "q_used": used, "delivered_end": t + h}
+
+        def doa(direction, u, p, w_angle):
             """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1)."""
             array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
             # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
@@ -319,7 +452,9 @@ class Acoustics(Component):
             events = [b.event("slot", due, slot("owtt"), streams, when=("ranging", ("owtt",))),
                       b.event("slot_twtt", due, slot("twtt"), streams + (Stream(_TURNAROUND, "normal", 1),),
                               when=("ranging", ("twtt",)))]
+        events.append(b.event("deliver", deliverable, deliver))  # after the slots: a packet is sent, then arrives
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["Acoustics", "DIRECTION", "OWTT_ITERATIONS", "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
+           "OWTT_ITERATIONS", "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

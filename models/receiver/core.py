@@ -5,8 +5,10 @@ Every receiver runs at its own communication step Δt = T / (EKF rate ratio)
 (the ``communication_step`` parameter, set by the orchestrator) and shares
 the packet handling (:func:`slot_due`, :func:`take_packet`): a replicate has
 a new *slot* when ``packet_seq`` differs from the last one it used, the end
-of the step has reached the packet's transmit epoch,
-``t + h ≥ tx_time − 1 ns``, and the step has reached a new tick
+of the step has reached the packet's arrival epoch,
+``t + h ≥ rx_time − 1 ns`` (the channel delivers a packet in the step that
+reaches its arrival, so a receiver stepping faster than the channel uses it
+at its first step end after the arrival, never before), and the step has reached a new tick
 ``t0 + k·Δt`` of the receiver's own clock (:func:`clock_tick`). The last
 condition changes nothing when a host steps at Δt, as every host of sblsim
 does; it keeps the receiver on its own clock when a host takes other steps:
@@ -36,7 +38,7 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import PACKET
+from sblsim.models.acoustics.core import ARRIVAL, PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import sample_due
@@ -53,7 +55,10 @@ STATE_NAMES = CONSTANT_VELOCITY.state_names
 _AXES = {"x": "North", "y": "East", "z": "Down"}
 #: Iteration cap and step tolerance [standard deviations of the fix] of the instrumentation fix.
 INSTRUMENT_ITERATIONS, INSTRUMENT_TOLERANCE = 8, 1e-3
-#: Slack of the slot test ``t + Δt ≥ tx_time − SLOT_SLACK`` [s].
+#: The sound speed that dates a USBL packet's reply from its arrival and range (:func:`reply_epoch`; 3 % off
+#: moves the epoch by 3 % of the two travel times) [m/s].
+REFERENCE_SOUND_SPEED = 1500.0
+#: Slack of the slot test ``t + Δt ≥ rx_time − SLOT_SLACK`` [s] (the channel's delivery test has the same).
 SLOT_SLACK = 1e-9
 
 
@@ -103,6 +108,13 @@ def system_interface(n_beacons: int) -> tuple[Variable, ...]:
     return parameters + interface_system(n_beacons).receiver_inputs()
 
 
+def arrival_interface() -> tuple[Variable, ...]:
+    """The packet's arrival epoch ``rx_time`` (the channel's :data:`~sblsim.models.acoustics.core.ARRIVAL`), an
+    input of every receiver: declared last, so that the value references of every earlier variable stay what
+    they were before it existed."""
+    return tuple(replace(v, causality="input") for v in ARRIVAL)
+
+
 def clock_parameters() -> tuple[Variable, ...]:
     """The receiver's own clock: declared after the receiver interface, so that the value references of every
     earlier variable stay what they were before the clock existed."""
@@ -141,10 +153,10 @@ def clock_step(x, p, t, h) -> dict[str, ca.SX]:
 
 
 def slot_due(x, u, p, t, h) -> ca.SX:
-    """A new packet whose transmit epoch the end of the step has reached, in a step that reached a tick of the
+    """A new packet whose arrival epoch the end of the step has reached, in a step that reached a tick of the
     receiver's clock (the last tick lies after the step's start; the clock event runs first)."""
     ticked = x["tick_t0"] + x["tick"] * p["communication_step"] > t + 1e-6 * p["communication_step"]
-    new = ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["tx_time"] - SLOT_SLACK)
+    new = ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["rx_time"] - SLOT_SLACK)
     return ca.logic_and(new, ticked)
 
 
@@ -252,6 +264,26 @@ class KalmanReceiver(Component):
     motion = CONSTANT_VELOCITY
     #: The measurement model (ranges to broadcast beacons plus depth).
     measurement = RangeDepthModel(CONSTANT_VELOCITY)
+    #: Evaluate a packet's rows at the position the motion model gives for the packet's reference epoch
+    #: (:meth:`reference`) rather than at the state's own epoch (the paper's ``ekf`` does not).
+    backdate = False
+
+    @classmethod
+    def reference(cls, x: dict, u: dict, epoch=None) -> ca.SX | None:
+        """The map ``A`` (n, n) from the state at the use ``x["now"]`` to the state at the packet's reference
+        epoch ``t_ref``, ``A = Φ(−(now − t_ref))`` of the motion model; the packet's rows are ``h(A x)`` with the
+        Jacobian ``H(A x) A``. None when :attr:`backdate` is off.
+
+        ``t_ref`` defaults to the midpoint ``(tx_time + rx_time) / 2`` of a range packet: where a two-way range
+        refers (the mean of the legs to the diver at interrogation and at reception, to first order); a one-way
+        range refers to the arrival (the midpoint is ``τ / 2`` early: millimetres at a diver's speed). A USBL
+        packet passes its reply's epoch (:meth:`packet_update`).
+        """
+        if not cls.backdate:
+            return None
+        if epoch is None:
+            epoch = 0.5 * (u["tx_time"] + u["rx_time"])
+        return cls.motion.transition(-ca.fmax(x["now"] - epoch, 0.0))
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
@@ -260,7 +292,8 @@ class KalmanReceiver(Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
-        return cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
+        return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
+                + arrival_interface())
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -330,8 +363,11 @@ class KalmanReceiver(Component):
         depth_row[motion.position_index[2]] = 1.0
         state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - motion.position(x["x"])[2],
                                                    depth_row, p["sigma_depth"] ** 2)
-        R = variances(motion.position(state))
-        h, H = model.linearize(state, context)
+        A = cls.reference(x, u, reply_epoch(u))
+        then = state if A is None else ca.mtimes(A, state)  # the state at the packet's reference epoch
+        R = variances(motion.position(then))
+        h, H = model.linearize(then, context)
+        H = H if A is None else ca.mtimes(H, A)
         y = model.residual(z, h)
         checked = gate(y[0], ca.mtimes([H[0, :], P, H[0, :].T]) + R[0], fresh, x, u, p)
         updated, P_new, nis = kalman.update(state, P, y, H, R)
@@ -362,8 +398,8 @@ class KalmanReceiver(Component):
 
         def slot(x, u, p, d, w, t, h):
             if not system.takes_ranges:
-                return packet_slot(x, u, p)
-            out = cls.correct({**x, "P": ca.reshape(x["P"], size, size)}, u, p, n)
+                return packet_slot(x, u, p, t, h)
+            out = cls.correct({**x, "P": ca.reshape(x["P"], size, size), "now": t + h}, u, p, n)
             held = {**x, **{k: out[k] for k in ("ranges", "beacons", "heard", "last_seq", "slot_time")}}
             # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
             guess = ca.if_else(x["fix_valid"], x["fix"], cls.motion.position(out["x"]))
@@ -372,11 +408,11 @@ class KalmanReceiver(Component):
                     "failed": out["failed"], **fix,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
-        def packet_slot(x, u, p):
+        def packet_slot(x, u, p, t, h):
             """A slot of a system whose packet is not one range (USBL): the receiver's update and the system's fix
             of a fresh packet (no iteration)."""
             fresh = fresh_packet(u, 1)
-            out = system.receiver_update(cls, {**x, "P": ca.reshape(x["P"], size, size)}, u, p, fresh)
+            out = system.receiver_update(cls, {**x, "P": ca.reshape(x["P"], size, size), "now": t + h}, u, p, fresh)
             return {**x, **out, "P": ca.vec(out["P"]), "fix": ca.if_else(fresh, system.polar_fix(u), x["fix"]),
                     "fix_valid": ca.logic_or(x["fix_valid"], fresh)}
 
@@ -397,12 +433,19 @@ class KalmanReceiver(Component):
                                  b.event("lm", lm_active, iterate)])
 
 
+def reply_epoch(u: dict) -> ca.SX:
+    """The epoch a USBL packet refers to [s]: the diver's reply, the reply's and the downlink's travel times
+    (``2 r / c`` at :data:`REFERENCE_SOUND_SPEED`) before the packet's arrival."""
+    return u["rx_time"] - 2.0 * u["range"] / REFERENCE_SOUND_SPEED
+
+
 def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
     """The slot's fresh range: whether there is one, its value and its broadcast beacon position (3, 1)."""
     return fresh_packet(u, n_beacons), u["range"], ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
 
 
-__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "STATE_NAMES", "beacon_parameters",
-           "clock_due", "clock_parameters", "clock_step", "clock_tick", "covariance_outputs", "filter_parameters",
-           "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step",
-           "packet_init", "packet_states", "receiver_interface", "slot_due", "system_interface", "take_packet"]
+__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
+           "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
+           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active",
+           "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "receiver_interface",
+           "reply_epoch", "slot_due", "system_interface", "take_packet"]

@@ -7,7 +7,10 @@ ranges held from earlier slots are never re-used (the paper's conclusion:
 adds the uncertainty of the broadcast beacon position, propagated through
 ``∂h/∂b`` by casadi (:meth:`RangeDepthModel.fresh_range_variance`): the GPS error
 per axis and the attitude error times the beacon's arm, whose defaults come
-from the platform's configured GPS and IMU errors. A χ² NIS gate (1 dof,
+from the platform's configured GPS and IMU errors. The range is predicted
+from the position the constant-velocity state gives at the packet's
+reference epoch (:meth:`KalmanReceiver.reference`: the packet is used when it
+arrives, up to a sampling time after the reply). A χ² NIS gate (1 dof,
 ``gate_probability``) refuses a range that a multipath outlier lengthened;
 the output ``gated`` says so. A lost packet leaves the depth update only.
 
@@ -33,6 +36,7 @@ class SequentialReceiver(KalmanReceiver):
 
     name = "receiver_ekf_seq"
     label = "ekf-seq"
+    backdate = True
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
@@ -44,8 +48,11 @@ class SequentialReceiver(KalmanReceiver):
         m = cls.measurement
         state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - m.depth(x["x"]), m.depth_jacobian(),
                                                    p["sigma_depth"] ** 2)
-        h, H = m.range_row(state, beacon)
-        variance = m.fresh_range_variance(state, beacon, p)
+        A = cls.reference(x, u)  # the range at the packet's reference epoch
+        then = ca.mtimes(A, state)
+        h, H = m.range_row(then, beacon)
+        H = ca.mtimes(H, A)
+        variance = m.fresh_range_variance(then, beacon, p)
         y = rng - h
         S = ca.mtimes([H, P, H.T]) + variance
         nis_range = y * y / S

@@ -41,6 +41,7 @@ from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.core import (
+    arrival_interface,
     clock_due,
     clock_parameters,
     clock_tick,
@@ -78,7 +79,7 @@ class LeastSquaresReceiver(Component):
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
-                + clock_parameters() + system_interface(n_beacons))
+                + clock_parameters() + system_interface(n_beacons) + arrival_interface())
 
     @classmethod
     def build(cls, n_beacons: int):

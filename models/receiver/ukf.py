@@ -3,7 +3,8 @@
 Scaled sigma points (α, β, κ; van der Merwe:
 :class:`~sblsim.models.receiver.sigma_points.MerweScaledSigmaPoints`) of the predicted state carry the
 measurement ``z = [‖p − b‖, d]`` of the fresh range and the depth through
-the same :class:`~sblsim.models.receiver.measurement.RangeDepthModel`; the range's
+the same :class:`~sblsim.models.receiver.measurement.RangeDepthModel` (the range at the packet's
+reference epoch: :meth:`~sblsim.models.receiver.core.KalmanReceiver.reference`); the range's
 variance adds the broadcast beacon's uncertainty as in ``ekf-seq``. The range
 is gated on its own NIS (its marginal ``y_r² / S_rr``, χ²(1)); a gated or
 lost range leaves the depth update only. The motion model is linear, so the
@@ -28,6 +29,7 @@ from sblsim.models.receiver.core import (
     beacon_parameters,
     filter_parameters,
     fresh_range,
+    reply_epoch,
     take_packet,
 )
 from sblsim.models.receiver.gate import gate, gate_parameters
@@ -62,6 +64,7 @@ class UnscentedReceiver(KalmanReceiver):
 
     name = "receiver_ukf"
     label = "ukf"
+    backdate = True
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
@@ -76,8 +79,12 @@ class UnscentedReceiver(KalmanReceiver):
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
-        variance = m.fresh_range_variance(x["x"], beacon, p)
-        return cls._update(x, u, p, n_beacons, fresh, lambda c: m.h(c, [beacon]), rng,
+        A = cls.reference(x, u)  # each sigma point's range at the packet's reference epoch
+        variance = m.fresh_range_variance(ca.mtimes(A, x["x"]), beacon, p)
+        def predicted(c):  # the range at the reference epoch, the depth now
+            return ca.vertcat(m.h(ca.mtimes(A, c), [beacon])[0], m.depth(c))
+
+        return cls._update(x, u, p, n_beacons, fresh, predicted, rng,
                            ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
 
     @classmethod
@@ -85,10 +92,12 @@ class UnscentedReceiver(KalmanReceiver):
         """The unscented update with the packet's rows (range, azimuth, elevation) and the depth; each sigma
         point's predicted rows are taken within ``model.residual`` of the measured ones (angles within π, so
         that their mean does not straddle ±π); R from ``variances`` at the predicted position."""
-        def predicted(c):
-            return ca.vertcat(z - model.residual(z, model.h(c, context)), cls.measurement.depth(c))
+        A = cls.reference(x, u, reply_epoch(u))  # the packet's rows at the reply, the depth now
 
-        R = ca.diag(ca.vertcat(variances(cls.motion.position(x["x"])), p["sigma_depth"] ** 2))
+        def predicted(c):
+            return ca.vertcat(z - model.residual(z, model.h(ca.mtimes(A, c), context)), cls.measurement.depth(c))
+
+        R = ca.diag(ca.vertcat(variances(cls.motion.position(ca.mtimes(A, x["x"]))), p["sigma_depth"] ** 2))
         return cls._update(x, u, p, 1, fresh, predicted, z, R)
 
     @classmethod

@@ -30,7 +30,7 @@ class RealWithUnit(Real):
 
 INPUTS = [("packet_seq", "Integer", ""), ("beacon_id", "Integer", ""), ("packet_valid", "Boolean", ""),
           ("tx_time", "Real", "s"), ("range", "Real", "m"), ("beacon_x", "Real", "m"),
-          ("beacon_y", "Real", "m"), ("beacon_z", "Real", "m"), ("depth", "Real", "m")]
+          ("beacon_y", "Real", "m"), ("beacon_z", "Real", "m"), ("depth", "Real", "m"), ("rx_time", "Real", "s")]
 OUTPUTS = [("est_x", "Real", "m"), ("est_y", "Real", "m"), ("est_z", "Real", "m"),
            ("est_vx", "Real", "m/s"), ("est_vy", "Real", "m/s"), ("est_vz", "Real", "m/s"),
            ("instr_x", "Real", "m"), ("instr_y", "Real", "m"), ("instr_z", "Real", "m"),
@@ -60,7 +60,8 @@ class UserReceiver(Fmi2Slave):
         self.pos_std = math.sqrt(sum(COVARIANCE.values()))
 
     def do_step(self, current_time, step_size):
-        if self.packet_seq != self.last_seq and self.packet_valid:
+        # a new packet that has arrived by the end of the step
+        if self.packet_seq != self.last_seq and current_time + step_size >= self.rx_time - 1e-9 and self.packet_valid:
             dz = self.depth - self.beacon_z
             radius = math.sqrt(max(self.range ** 2 - dz ** 2, 0.0))
             dx, dy = self.est_x - self.beacon_x, self.est_y - self.beacon_y
@@ -71,5 +72,6 @@ class UserReceiver(Fmi2Slave):
             self.est_x, self.est_y, self.est_z = x, y, self.depth
             self.instr_x, self.instr_y, self.instr_z = x, y, self.depth
             self.instr_valid = True
-        self.last_seq = self.packet_seq
+        if current_time + step_size >= self.rx_time - 1e-9:
+            self.last_seq = self.packet_seq
         return True

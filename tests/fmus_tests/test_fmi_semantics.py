@@ -75,15 +75,17 @@ class Slave:
 
 
 def run_channel(fmu: str, steps: list[float], **params) -> list[tuple]:
-    """The packets an acoustics instance emits for a sequence of host step sizes (constant inputs)."""
+    """The packets an acoustics instance delivers for a sequence of host step sizes (constant inputs), each with its
+    arrival ``rx_time`` and the end of the step that delivered it."""
     s = Slave(fmu).start(**params)
     s.set(**{f"beacon{i}_true_x": 3.0 * i for i in range(1, 5)}, target_x=10.0, target_y=5.0, target_z=5.0)
     t, packets = 0.0, []
     for h in steps:
         s.fmu.doStep(t, h)
         t += h
-        packet = tuple(s.get("packet_seq", "beacon_id", "packet_valid", "tx_time", "range"))
+        packet = tuple(s.get("packet_seq", "beacon_id", "packet_valid", "tx_time", "range", "rx_time"))
         if packet[0] > 0 and (not packets or packet[0] != packets[-1][0]):
+            assert packet[3] < packet[5] <= t + 1e-9  # sent, then delivered in the step that reached its arrival
             packets.append(packet)
     return packets
 
@@ -140,23 +142,26 @@ def test_two_instances_side_by_side_equal_runs_in_their_own_process(fmu_dir, tmp
     [0.03, 0.07, 0.25, 0.05, 0.6, 0.1, 0.9],        # irregular, some spanning several slots
 ], ids=["quarter", "slot", "irregular"])
 def test_slots_do_not_depend_on_the_host_step(fmu_dir, steps):
-    """The channel emits slot k at t_k = k T of its own clock, whatever the host's steps (2 s of slots)."""
+    """The channel sends slot k at t_k = k T of its own clock, whatever the host's steps (2 s of slots), and
+    delivers it when it arrives (the 20th is still in flight at 2 s)."""
     fmu = str(fmu_path(fmu_dir, "acoustics"))
     reference = run_channel(fmu, [T] * 20, sigma_range=0.3, loss_pct=20.0)
     got = run_channel(fmu, steps, sigma_range=0.3, loss_pct=20.0)
-    assert len(reference) == 20 and [p[3] for p in reference] == pytest.approx([T * k for k in range(1, 21)])
-    if steps[0] == 0.03:  # the irregular steps show only the last packet of a step that spans several
+    assert len(reference) == 19 and [p[3] for p in reference] == pytest.approx([T * k for k in range(1, 20)])
+    if steps[0] == 0.03:  # the irregular steps deliver one packet per step: those of long steps wait in flight
         shown = {p[0]: p for p in reference}
-        assert all(shown[p[0]] == p for p in got) and got[-1] == reference[-1]
+        assert all(shown[p[0]] == p for p in got) and [p[0] for p in got] == list(range(1, len(got) + 1))
     else:
         assert got == reference
 
 
 def test_a_tiny_closing_step_adds_no_packet(fmu_dir):
-    """OMSimulator's closing step of 2e-15 s after the last slot must not emit one more packet."""
+    """OMSimulator's closing step of 2e-15 s after the last slot must not send or deliver one more packet (the
+    tenth, sent at 1 s, arrives a travel time later)."""
     fmu = str(fmu_path(fmu_dir, "acoustics"))
     packets = run_channel(fmu, [T] * 10 + [2e-15])
-    assert [p[0] for p in packets] == list(range(1, 11))
+    assert [p[0] for p in packets] == list(range(1, 10))
+    assert [p[0] for p in run_channel(fmu, [T] * 10 + [2e-15, T])] == list(range(1, 11))
 
 
 def call_fails(slave: Slave, call, *args, match: str) -> None:

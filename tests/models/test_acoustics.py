@@ -23,7 +23,7 @@ import pytest
 from scipy import integrate, stats
 
 from sblsim.models.acoustics import Acoustics, profile_table
-from sblsim.models.acoustics.core import RANGING
+from sblsim.models.acoustics.core import FLIGHT_CAPACITY, RANGING
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
 from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms
@@ -60,6 +60,24 @@ def make(params, replicates=(0,), target=TARGET, velocity=(0.0, 0.0, 0.0), t0=0.
     return core
 
 
+def slots(core, T, n, t0=0.0):
+    """Step the channel by T from t0 until it has delivered slots 1 … n (each in the step that reaches its
+    arrival, one per step); their outputs, in slot order. Every replicate delivers the same slot at once here."""
+    got, t = {}, t0
+    for _ in range(n + 8):
+        out = core.step(t, T)
+        t += T
+        seq = out["packet_seq"]
+        assert np.all(seq == seq[0])
+        if seq[0] and int(seq[0]) not in got:
+            assert np.all(out["rx_time"] <= t + 1e-9)  # delivered no earlier than its arrival
+            got[int(seq[0])] = {name: v.copy() for name, v in out.items()}
+        if len(got) == n:
+            break
+    assert sorted(got) == list(range(1, n + 1))
+    return [got[k] for k in range(1, n + 1)]
+
+
 def std_ci_contains(x, sigma, conf=CONF):
     x = np.ravel(x)
     ss = float(np.sum(x * x))
@@ -90,14 +108,14 @@ def test_round_robin_order_sequence_and_tx_time():
     assert core.outputs["packet_seq"].tolist() == [0, 0]
     assert core.outputs["beacon_id"].tolist() == [0, 0]
     assert not core.outputs["packet_valid"].any()
-    for k in range(10):
+    for k, out in enumerate(slots(core, T, 10)):
         t = k * T
-        core.step(t, T)
-        out = core.outputs
         bid = k % 4 + 1
         assert out["beacon_id"].tolist() == [bid, bid]
         assert out["packet_seq"].tolist() == [k + 1, k + 1]
         np.testing.assert_allclose(out["tx_time"], t + T, rtol=0, atol=1e-12)
+        # it arrives a travel time later (then the next step delivers it)
+        np.testing.assert_allclose(out["rx_time"], t + T + out["travel_time"], rtol=0, atol=1e-12)
         assert out["packet_valid"].all()
         # the packet carries the broadcast position of the transmitting beacon ...
         np.testing.assert_array_equal(np.column_stack([out[f"beacon_{a}"] for a in "xyz"]),
@@ -109,33 +127,44 @@ def test_round_robin_order_sequence_and_tx_time():
                                    rtol=1e-13)
 
 
-def test_step_reaching_several_slots_emits_each_and_shows_the_last():
-    """Slot k ends at t0 + k T whatever the host step; skipped slots still use their random draws."""
+def test_step_reaching_several_slots_sends_each_and_delivers_one_per_step():
+    """Slot k ends at t0 + k T whatever the host step; a step that reaches several sends each (with its own
+    random draws); the channel delivers one packet per step, the earliest arrived, and keeps the others in flight
+    (a step within a slot adds nothing)."""
     T, t0 = 0.125, 10.0  # binary fractions: the slot counts below are exact
     params = dict(sigma_range=0.4, loss_pct=30.0, outlier_pct=30.0, slot_period=T, seed=5, scenario_key=2, cell=3)
     reps = list(range(40))
     core = make(params, replicates=reps, t0=t0)
     d = np.linalg.norm(TARGET - TRUE_BEACONS, axis=1)
-    t, shown = t0, []
+    t, shown, waiting = t0, [], 1  # the next slot to deliver (arrivals are in slot order here)
     for h in (0.3125, 0.0625, 0.03125, 0.5, 0.125, 0.875):
         core.step(t, h)
         t += h
-        k = int(math.floor((t - t0) / T + 1e-9))  # slots whose epoch the step reached
+        k = int(math.floor((t - t0) / T + 1e-9))  # slots whose epoch the step reached: all sent
+        assert np.all(core.state["k"][:, 0] == k), (t, k)
+        if waiting <= k and t0 + waiting * T + d[(waiting - 1) % 4] / 1500.0 <= t:
+            waiting += 1
+        seq = waiting - 1
         out = core.outputs
-        assert np.all(out["packet_seq"] == k), (t, k)
-        assert np.all(out["beacon_id"] == (k - 1) % 4 + 1)
-        np.testing.assert_allclose(out["tx_time"], t0 + k * T, rtol=0, atol=1e-12)
-        assert np.all(core.state["k"][:, 0] == k)
-        # the shown packet is slot k's, with the random numbers of draw k - 1
+        assert np.all(out["packet_seq"] == seq), (t, seq)
+        assert np.all(out["beacon_id"] == (seq - 1) % 4 + 1)
+        np.testing.assert_allclose(out["tx_time"], t0 + seq * T, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(out["rx_time"], t0 + seq * T + d[(seq - 1) % 4] / 1500.0, rtol=0, atol=1e-12)
+        # the last step sends slots 9 … 15 with 6, 7 and 8 in flight: 14 and 15 find no room (8 places); the
+        # refusal keeps the longest flight of them and of those in flight (every beacon's)
+        refused = np.max(d) / 1500.0 if k == 15 else 0.0
+        np.testing.assert_allclose(out["overflow_travel_time"], refused, rtol=1e-13)
+        # the shown packet is slot seq's, with the random numbers of draw seq - 1
         for r in reps:
-            u, w = slot_draws(5, 2, 3, r, k)
+            u, w = slot_draws(5, 2, 3, r, seq)
             valid = u[0] >= 0.3
             excess = -2.0 * math.log1p(-u[2]) if u[1] < 0.3 else 0.0
-            want = 1500.0 * d[(k - 1) % 4] / 1500.0 + 0.4 * w + excess
+            want = 1500.0 * d[(seq - 1) % 4] / 1500.0 + 0.4 * w + excess
             assert out["packet_valid"][r] == valid
             assert out["range"][r] == pytest.approx(want if valid else 0.0, rel=1e-12, abs=1e-12)
-        shown.append(k)
-    assert shown == [2, 3, 3, 7, 8, 15]  # a step within a slot adds nothing; long steps add several
+        shown.append(seq)
+    assert shown == [1, 2, 3, 4, 5, 6]  # one per step: slots 7 … 13 are still in flight
+    assert FLIGHT_CAPACITY == 8 and np.all(core.state["q_used"].sum(axis=1) == 13 - 6)
 
 
 def test_packets_do_not_depend_on_host_step():
@@ -144,10 +173,7 @@ def test_packets_do_not_depend_on_host_step():
     params = dict(sigma_range=0.5, loss_pct=20.0, outlier_pct=20.0, slot_period=T, seed=9)
     coarse = make(params, replicates=range(30))
     fine = make(params, replicates=range(30))
-    want = {}
-    for k in range(12):
-        coarse.step(k * T, T)
-        want[k + 1] = {n: v.copy() for n, v in coarse.outputs.items()}
+    want = dict(enumerate(slots(coarse, T, 11), 1))
     steps = np.tile([0.03, 0.07, 0.05, 0.11, 0.02, 0.09, 0.03], 40)
     t, got = 0.0, {}
     for h in steps:
@@ -175,9 +201,7 @@ def test_ranges_losses_outliers_match_philox_reference_exactly():
     core = make(params, replicates=reps)
     d = np.linalg.norm(TARGET - TRUE_BEACONS, axis=1)
     n_lost = n_out = 0
-    for k in range(1, 9):
-        core.step((k - 1) * T, T)
-        out = core.outputs
+    for k, out in enumerate(slots(core, T, 8), 1):
         b = (k - 1) % 4
         tau = d[b] / c_t
         for j, r in enumerate(reps):
@@ -203,9 +227,7 @@ def test_range_noise_std():
     sigma = 0.2
     core = make(dict(sigma_range=sigma, seed=3, slot_period=1.0), replicates=range(4000))
     errors = []
-    for k in range(2):
-        core.step(k * 1.0, 1.0)
-        out = core.outputs
+    for k, out in enumerate(slots(core, 1.0, 2)):
         true = np.linalg.norm(TARGET - TRUE_BEACONS[k])
         np.testing.assert_allclose(out["range_true"], true, rtol=1e-13)
         errors.append(out["range"] - true)
@@ -226,9 +248,7 @@ def test_packet_loss_rate_and_lost_packet_fields():
     core = make(dict(loss_pct=loss, sigma_range=0.1, outlier_pct=50.0, seed=4, slot_period=1.0),
                 replicates=range(3000))
     valid = []
-    for k in range(2):
-        core.step(k * 1.0, 1.0)
-        out = core.outputs
+    for k, out in enumerate(slots(core, 1.0, 2)):
         v = out["packet_valid"]
         valid.append(v)
         # a lost packet has range and position 0 (no NaN anywhere)
@@ -250,21 +270,17 @@ def test_packet_loss_rate_and_lost_packet_fields():
 
 
 def test_loss_extremes():
-    core = make(dict(loss_pct=100.0), replicates=range(50))
-    core.step(0.0, 0.1)
-    assert not core.outputs["packet_valid"].any()
-    assert np.all(core.outputs["range"] == 0.0)
-    core = make(dict(loss_pct=0.0), replicates=range(50))
-    core.step(0.0, 0.1)
-    assert core.outputs["packet_valid"].all()
+    out = slots(make(dict(loss_pct=100.0), replicates=range(50)), 0.1, 1)[0]
+    assert not out["packet_valid"].any()
+    assert np.all(out["range"] == 0.0)
+    assert slots(make(dict(loss_pct=0.0), replicates=range(50)), 0.1, 1)[0]["packet_valid"].all()
 
 
 def test_outliers_only_lengthen_ranges_with_exponential_excess():
     p_out, mean_excess = 30.0, 2.0
     core = make(dict(outlier_pct=p_out, outlier_excess=mean_excess, sigma_range=0.0, clock_drift_ppm=0.0,
                      sound_speed_assumed=1500.0, sound_speed_true=1500.0, seed=8), replicates=range(4000))
-    core.step(0.0, 0.1)
-    out = core.outputs
+    out = slots(core, 0.1, 1)[0]
     true = np.linalg.norm(TARGET - TRUE_BEACONS[0])
     excess = out["range"] - true
     assert np.all(excess >= -1e-9)
@@ -285,11 +301,10 @@ def test_outliers_only_lengthen_ranges_with_exponential_excess():
 def test_sound_speed_mismatch_scales_range():
     c_a, c_t = 1480.0, 1525.0
     core = make(dict(sound_speed_assumed=c_a, sound_speed_true=c_t, sigma_range=0.0, slot_period=0.5))
-    for k in range(4):
-        core.step(k * 0.5, 0.5)
+    for k, out in enumerate(slots(core, 0.5, 4)):
         d = np.linalg.norm(TARGET - TRUE_BEACONS[k])
-        assert core.outputs["range"][0] == pytest.approx(d * c_a / c_t, rel=1e-13)
-        assert core.outputs["travel_time"][0] == pytest.approx(d / c_t, rel=1e-13)
+        assert out["range"][0] == pytest.approx(d * c_a / c_t, rel=1e-13)
+        assert out["travel_time"][0] == pytest.approx(d / c_t, rel=1e-13)
 
 
 def test_clock_drift_adds_drift_times_reception_epoch():
@@ -297,12 +312,11 @@ def test_clock_drift_adds_drift_times_reception_epoch():
     T = 2.0
     core = make(dict(clock_drift_ppm=drift_ppm, sigma_range=0.0, sound_speed_assumed=c, sound_speed_true=c,
                      slot_period=T))
-    for k in range(3):
-        core.step(k * T, T)
+    for k, out in enumerate(slots(core, T, 3)):
         d = np.linalg.norm(TARGET - TRUE_BEACONS[k])
         tau = d / c
         expected = c * (tau + drift_ppm * 1e-6 * ((k + 1) * T + tau))
-        assert core.outputs["range"][0] == pytest.approx(expected, rel=1e-13)
+        assert out["range"][0] == pytest.approx(expected, rel=1e-13)
         # the drift term is not negligible at this tolerance
         assert abs(expected - d) > 1e-6 * d
 
@@ -477,9 +491,7 @@ def test_channel_travel_time_uses_profile(spec, tmp_path):
     core = Core(Acoustics, dict(sigma_range=0.0, sound_speed_assumed=c_a, **params), replicates=range(B))
     core.initialize(0.0)
     core.set_inputs(channel_inputs(target, (0.0, 0.0, 0.0), true=true, sent=true))
-    for k in range(4):
-        core.step(k * 0.1, 0.1)
-        out = core.outputs
+    for k, out in enumerate(slots(core, 0.1, 4)):
         b = true[k]
         distance = np.linalg.norm(np.array(target) - b, axis=0)
         c_bar = reference_harmonic_mean(depth, speed, b[2], target[2])
@@ -607,9 +619,11 @@ def _travel_times(c, beacon, position, velocity):
     core = Core(Acoustics, dict(sound_speed_true=c, sound_speed_assumed=c, sigma_range=0.0), replicates=range(B))
     core.initialize(0.0)
     core.set_inputs(channel_inputs(position.T, velocity.T, true=true, sent=true))
-    core.step(0.0, 0.1)
-    assert np.all(core.outputs["beacon_id"] == 1)
-    return core.outputs["travel_time"], core.outputs["range_true"], core.outputs["range"]
+    core.step(0.0, 0.1)  # slot 1 at 0.1 s, delivered in the step that reaches its arrival
+    out = core.step(0.1, max(0.1, float(np.max(np.linalg.norm(position - beacon, axis=1))) / 1000.0))
+    assert np.all(out["beacon_id"] == 1)
+    np.testing.assert_allclose(out["rx_time"], 0.1 + out["travel_time"], rtol=1e-14)
+    return out["travel_time"], out["range_true"], out["range"]
 
 
 def test_travel_time_moving_target_solves_quadratic():
@@ -654,8 +668,7 @@ def test_step_with_moving_target_reports_reception_distance():
     c = 1500.0
     v = np.array([1.5, -1.0, 0.3])
     core = make(dict(sound_speed_true=c, sound_speed_assumed=c, sigma_range=0.0), velocity=v)
-    core.step(0.0, 0.1)
-    out = core.outputs
+    out = slots(core, 0.1, 1)[0]
     d = TARGET - TRUE_BEACONS[0]
     tau = float(_positive_root(d, v, c))
     assert out["travel_time"][0] == pytest.approx(tau, rel=1e-11)
@@ -675,8 +688,7 @@ def test_each_ranging_runs_its_own_slot_event_once_per_slot(ranging):
     assert sorted(c for e in events for c in e.when[1]) == sorted(RANGING)  # every ranging, each once
     T, turnaround = 0.25, 0.05
     core = make(dict(sigma_range=0.0, slot_period=T, ranging=ranging, turnaround=turnaround), replicates=(0, 1))
-    for k in range(4):
-        out = core.step(k * T, T)
+    for k, out in enumerate(slots(core, T, 4)):
         assert out["packet_seq"].tolist() == [k + 1, k + 1]
         d = np.linalg.norm(TARGET - TRUE_BEACONS[k])
         expected = d / 1500.0 if ranging == "owtt" else 2.0 * d / 1500.0 + turnaround

@@ -48,14 +48,15 @@ def _acoustics_inputs(t, reps):
 
 
 def _packet_inputs(t, reps):
-    """One round-robin packet per step (transmitted at the step's end), some lost, ranges from a moving diver."""
+    """One round-robin packet per step (sent and arrived within the step), some lost, ranges from a moving diver."""
     k = int(round(t / DT))
     beacon = k % 4
     valid = ((k + reps.astype(int)) % 5 != 0).astype(float)
     diver = np.column_stack([15.0 * np.cos(0.05 * t + reps), 15.0 * np.sin(0.05 * t + reps), 5.0 + 0.1 * reps])
     rng = np.linalg.norm(diver - CROSS[beacon], axis=1) + 0.05 * np.sin(3.0 * k + reps)
     return {"packet_seq": np.full(reps.size, k + 1.0), "beacon_id": np.full(reps.size, beacon + 1.0),
-            "packet_valid": valid, "tx_time": np.full(reps.size, t + DT), "range": rng * valid,
+            "packet_valid": valid, "tx_time": np.full(reps.size, t + 0.9 * DT), "range": rng * valid,
+            "rx_time": np.full(reps.size, t + 0.99 * DT),
             **{f"beacon_{a}": CROSS[beacon, j] * valid for j, a in enumerate("xyz")},
             "depth": diver[:, 2] + 0.01 * np.cos(k + reps)}
 
@@ -191,8 +192,8 @@ def test_acoustics_high_level_is_exercised():
     ref_b, _ = _step(Acoustics, {**SEEDS, **high}, [0, 1, 2])
     ref_a, _ = _step(Acoustics, {**SEEDS, **low}, [0, 1, 2])
     assert ref_b["outlier"].any() and not ref_b["packet_valid"].all()
-    # slot clocks: 6 s at 0.2 s and 0.3 s per slot
-    assert ref_a["packet_seq"][-1].tolist() == [30] * 3 and ref_b["packet_seq"][-1].tolist() == [20] * 3
+    # slot clocks: 6 s at 0.2 s and 0.3 s per slot; the last slot, sent at 6 s, is still in flight
+    assert ref_a["packet_seq"][-1].tolist() == [29] * 3 and ref_b["packet_seq"][-1].tolist() == [19] * 3
 
 
 def test_parameter_matrix_columns_are_the_scalar_vectors():

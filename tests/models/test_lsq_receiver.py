@@ -14,7 +14,7 @@ from scipy.optimize import least_squares
 
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
-from sblsim.models.receiver.core import clock_parameters
+from sblsim.models.receiver.core import arrival_interface, clock_parameters
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
 from sblsim.models.systems.usbl import receiver_parameters as usbl_parameters
 from tests.helpers import Core
@@ -57,15 +57,17 @@ def fd_spread(p, ranges, beacons, depth, sr, sd, eps=1e-6):
     return float(np.sqrt(np.trace(np.linalg.inv(J.T @ J))))
 
 
-def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True):
-    """Receiver inputs of one packet; values are scalars or arrays of shape (B,). A lost packet carries
-    range 0 and beacon position 0, as the acoustics component sends it."""
+def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True, rx_time=None):
+    """Receiver inputs of one packet (arriving at ``rx_time``, default its ``tx_time``); values are scalars or
+    arrays of shape (B,). A lost packet carries range 0 and beacon position 0, as the acoustics component sends
+    it."""
     beacon = np.asarray(beacon, dtype=float)
     valid_b = np.asarray(valid, dtype=bool)
     return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time,
                 range=np.where(valid_b, range_value, 0.0),
                 beacon_x=np.where(valid_b, beacon[..., 0], 0.0), beacon_y=np.where(valid_b, beacon[..., 1], 0.0),
-                beacon_z=np.where(valid_b, beacon[..., 2], 0.0), depth=depth)
+                beacon_z=np.where(valid_b, beacon[..., 2], 0.0), depth=depth,
+                rx_time=tx_time if rx_time is None else rx_time)
 
 
 def snapshot(core):
@@ -360,8 +362,8 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     lsq, ekf = LeastSquaresReceiver.variables(4), PaperEKF.variables(4)
     signals = [key(v) for v in lsq if v.causality != "parameter"]
     assert signals == [key(v) for v in ekf if v.causality != "parameter"]
-    assert signals == [key(v) for v in receiver_interface()]
-    assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface()
+    assert signals == [key(v) for v in receiver_interface() + arrival_interface()]
+    assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface() + arrival_interface()
     # parameters: the EKF's own declarations of the shared ones, then the seed keys, then the receiver's clock and
     # the USBL angle (declared after it)
     ekf_params = {v.name: v for v in ekf if v.causality == "parameter"}
@@ -370,28 +372,29 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     assert list(SHARED_PARAMETERS) == shared
     assert params == ([ekf_params[n] for n in shared] + list(SEED_PARAMETERS) + list(clock_parameters())
                       + list(usbl_parameters()))
-    # declared last: the earlier value references stay
-    assert ekf[-2:] == clock_parameters() + usbl_parameters()
+    # declared last: the earlier value references stay (the clock and USBL angle, then the arrival epoch)
+    assert ekf[-3:] == clock_parameters() + usbl_parameters() + arrival_interface()
     assert LeastSquaresReceiver.name == "receiver_lsq" and LeastSquaresReceiver.component_index == 3
     core = Core(LeastSquaresReceiver, {"seed": 3, "scenario_key": 1, "cell": 2, "replicate": 4}).initialize(0.0)
     assert list(core.outputs) == OUTPUTS
-    assert core.handle.input_names == [v.name for v in receiver_interface() if v.causality == "input"]
+    assert core.handle.input_names == [v.name for v in receiver_interface() + arrival_interface()
+                                       if v.causality == "input"]
     with pytest.raises(ModelError, match=r"^receiver_lsq\.q_horizontal: not a parameter"):
         Core(LeastSquaresReceiver, {"q_horizontal": 0.1}).initialize(0.0)
 
 
 def test_both_receivers_share_the_packet_handling():
-    """Same packet stream (late tx epochs, a lost packet, a repeated packet, a bad id): same held state."""
+    """Same packet stream (late arrivals, a lost packet, a repeated packet, a bad id): same held state."""
     x0 = dict(x0_x=3.0, x0_y=-2.0, x0_z=5.0)
     ekf = Core(PaperEKF, x0, replicates=[0, 1]).initialize(0.0)
     lsq = Core(LeastSquaresReceiver, x0, replicates=[0, 1]).initialize(0.0)
     beacons = cross()
-    stream = [  # (seq, beacon_id, tx_time, range, valid), each on the inputs for 4 steps of 0.25 s
+    stream = [  # (seq, beacon_id, rx_time, range, valid), each on the inputs for 4 steps of 0.25 s
         (1, 1, 0.75, [20.0, 21.0], [True, True]),
         (2, 2, 1.75, [22.0, 23.0], [True, False]),
         (2, 2, 1.75, [22.0, 23.0], [True, False]),  # the same packet again: no new slot
         (3, 9, 3.75, [5.0, 5.0], [True, True]),  # no such beacon: a slot that stores nothing
-        (4, 3, 4.6, [24.0, 25.0], [True, True]),  # epoch between step ends: used at 4.75 s
+        (4, 3, 4.6, [24.0, 25.0], [True, True]),  # arrival between step ends: used at 4.75 s
     ]
     expected_ranges, expected_beacons, expected_heard = np.zeros((2, 4)), np.zeros((2, 12)), np.zeros((2, 4))
     expected_seq = np.zeros(2)
@@ -399,7 +402,8 @@ def test_both_receivers_share_the_packet_handling():
     for seq, bid, tx, rng_value, valid in stream:
         valid = np.array(valid)
         for core in (ekf, lsq):
-            core.set_inputs(packet(seq, bid, tx, np.array(rng_value), beacons[min(bid, 4) - 1], 6.0, valid))
+            core.set_inputs(packet(seq, bid, tx - 0.5, np.array(rng_value), beacons[min(bid, 4) - 1], 6.0, valid,
+                                   rx_time=tx))
         for _ in range(4):
             reached = t + dt >= tx - 1e-9
             for core in (ekf, lsq):
@@ -418,6 +422,6 @@ def test_both_receivers_share_the_packet_handling():
             np.testing.assert_array_equal(e["beacons"], expected_beacons)
             np.testing.assert_array_equal(e["heard"], expected_heard)
             np.testing.assert_array_equal(e["last_seq"][:, 0], expected_seq)
-    assert ekf.state["slot_time"][:, 0].tolist() == [4.6, 4.6]  # the packet's epoch, not the step end
+    assert ekf.state["slot_time"][:, 0].tolist() == [4.1, 4.1]  # the packet's transmit epoch, not the step end
     assert lsq.outputs["instr_valid"].tolist() == [True, False]  # replicate 1 lost beacon 2: two ranges
     assert ekf.outputs["instr_valid"].tolist() == [True, False]

@@ -133,11 +133,13 @@ def scipy_fix(ranges, beacons, depth, sr, sd, start):
                          xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=10000).x
 
 
-def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True):
-    """Receiver inputs of one packet; values are scalars or arrays of shape (B,)."""
+def packet(seq, beacon_id, tx_time, range_value, beacon, depth, valid=True, rx_time=None):
+    """Receiver inputs of one packet (arriving at ``rx_time``, default its ``tx_time``); values are scalars or
+    arrays of shape (B,)."""
     beacon = np.asarray(beacon, dtype=float)
     return dict(packet_seq=seq, beacon_id=beacon_id, packet_valid=valid, tx_time=tx_time, range=range_value,
-                beacon_x=beacon[..., 0], beacon_y=beacon[..., 1], beacon_z=beacon[..., 2], depth=depth)
+                beacon_x=beacon[..., 0], beacon_y=beacon[..., 1], beacon_z=beacon[..., 2], depth=depth,
+                rx_time=tx_time if rx_time is None else rx_time)
 
 
 def est(out):
@@ -545,7 +547,9 @@ def test_initial_outputs_are_the_prior_and_never_nan():
     np.testing.assert_array_equal(instr(out), 0.0)
 
 
-def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_tx_time():
+def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_rx_time():
+    """A packet transmitted a quarter slot in and arriving at the slot's end is used at the step that reaches its
+    arrival, not its transmit epoch."""
     T, r = 1.0, 4
     dt = T / r
     core = Core(PaperEKF, RX, replicates=[0])
@@ -564,18 +568,18 @@ def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_tx_time():
     packets = [(1, 2, 12.3, 6.4), (2, 3, 13.1, 6.5)]  # (seq, beacon_id, range, depth), one slot of length T each
     t, nis_before = 0.0, 0.0
     for seq, bid, rng_value, depth in packets:
-        tx = t + T
-        core.set_inputs(packet(seq, bid, tx, rng_value, beacons[bid - 1], depth))
+        tx, rx = t + dt, t + T
+        core.set_inputs(packet(seq, bid, tx, rng_value, beacons[bid - 1], depth, rx_time=rx))
         for j in range(r):
             core.step(t, dt)
             t += dt
             x_ref, P_ref = phi @ x_ref, phi @ P_ref @ phi.T + Q
             if j < r - 1:
-                assert t < tx - 1e-9
+                assert t < rx - 1e-9
                 check_no_update()  # the packet's epoch not reached yet: a pure prediction
                 assert core.outputs["nis"][0] == (0.0 if seq == 1 else nis_before)
                 continue
-            assert t == pytest.approx(tx)
+            assert t == pytest.approx(rx)
             held[bid - 1] = rng_value
             x_ref, P_ref, nis = ref_update(x_ref, P_ref, held, beacons, depth, RX["sigma_range"], RX["sigma_depth"])
             np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-10, atol=1e-10)
@@ -702,7 +706,7 @@ def test_instrumentation_fix_matches_scipy_within_its_stopping_tolerance():
 
 
 def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parameters():
-    """A packet stream at T = 1 s stepped at T/4 with epochs between step ends, losses, repeats and a
+    """A packet stream at T = 1 s stepped at T/4 with arrivals between step ends, losses, repeats and a
     bad id; three replicates with their own parameters, each against a numpy EKF of its own."""
     B, T, r = 3, 1.0, 4
     dt = T / r
@@ -733,15 +737,16 @@ def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parame
         rng_value = np.linalg.norm(target - b_pos, axis=1) + per["sigma_range"] * rng.normal(size=B)
         valid = rng.uniform(size=B) > 0.25
         depth = target[:, 2] + per["sigma_depth"] * rng.normal(size=B)
+        rx = tx + 0.1  # it arrives a tenth of a second after it was sent: used then
         core.set_inputs(packet(seq, bid, tx, np.where(valid, rng_value, 0.0), np.where(valid[:, None], b_pos, 0.0),
-                               depth, valid))
+                               depth, valid, rx_time=rx))
         for _ in range(r):
             core.step(t, dt)
             for b, s in enumerate(ref):
                 p = s["p"]
                 s["x"], s["P"] = ref_phi(dt) @ s["x"], ref_phi(dt) @ s["P"] @ ref_phi(dt).T + ref_q(
                     dt, p["q_horizontal"], p["q_vertical"])
-                if seq != s["seq"] and t + dt >= tx - 1e-9:
+                if seq != s["seq"] and t + dt >= rx - 1e-9:
                     s["seq"] = seq
                     if valid[b] and 1 <= bid <= 4:
                         s["held"][bid - 1], s["beacons"][bid - 1] = rng_value[b], b_pos[b]

@@ -8,12 +8,13 @@ feed the same inputs to FilterPy:
 * ``ekf-seq``: ``filterpy.kalman.ExtendedKalmanFilter``, one ``predict()`` per
   receiver step and, at each new slot, one scalar ``update()`` with the depth
   and then, for a received packet that passes the gate, one with the fresh
-  range, its variance ``σ_r² + σ_GPS² + (σ_att · arm)²`` (the beacon's
+  range predicted from the state moved back to the packet's reference epoch
+  (``Φ(−age) x``, the Jacobian times ``Φ(−age)``), its variance ``σ_r² + σ_GPS² + (σ_att · arm)²`` (the beacon's
   isotropic position error through the unit vector ∂h/∂b, whose norm is 1);
 * ``ukf``: ``filterpy.kalman.UnscentedKalmanFilter`` with
   ``MerweScaledSigmaPoints(6, alpha, beta, kappa)``; sigma points are redrawn
   from the predicted mean and covariance before each update, as the receiver
-  does; the joint update (range, depth) when the range is used, else the
+  does, and each carries its range from ``Φ(−age) x``; the joint update (range, depth) when the range is used, else the
   depth alone.
 
 The slot rule, the one-sided NIS gate (χ²(1) quantile from scipy) and its
@@ -68,17 +69,19 @@ def range_variance(rc):
 
 
 def slots(ts, cfg, ratio):
-    """Yield (last sub-step of the macro step, is_slot, row) for every receiver step, with the slot rule applied."""
+    """Yield (last sub-step of the macro step, is_slot, row, A) for every receiver step, with the slot rule applied;
+    ``A`` = Φ(−age) moves the state at the step's end back to the packet's reference epoch, the midpoint of its
+    transmission and arrival (age = step end − (tx_time + rx_time) / 2)."""
     T = cfg["simulation"]["sampling_time"]
     dt = T / ratio
     last = 0
     for k, row in enumerate(ts.itertuples()):
         for j in range(ratio):
             t = k * T + j * dt
-            slot = row.packet_seq != last and t + dt >= row.tx_time - SLACK
+            slot = row.packet_seq != last and t + dt >= row.rx_time - SLACK
             if slot:
                 last = row.packet_seq
-            yield j == ratio - 1, slot, row
+            yield j == ratio - 1, slot, row, phi(-max(t + dt - 0.5 * (row.tx_time + row.rx_time), 0.0))
 
 
 def fresh(row):
@@ -95,7 +98,7 @@ def replay_ekf_seq(ts, cfg, ratio):
     gate, var = Gate(rc), range_variance(rc)
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
     nis, gated = 0.0, False
-    for last_substep, slot, row in slots(ts, cfg, ratio):
+    for last_substep, slot, row, A in slots(ts, cfg, ratio):
         ekf.predict()
         if slot:
             ekf.update(np.array([[row.depth]]), lambda x: DEPTH_ROW, lambda x: x[4:5], R=rc["sigma_depth"] ** 2)
@@ -103,11 +106,12 @@ def replay_ekf_seq(ts, cfg, ratio):
             gated = False
             if fresh(row):
                 b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
-                h, H = range_row(ekf.x, b)
+                h, H = range_row(A @ ekf.x, b)  # the range of the state moved back to the reference epoch
+                H = H @ A
                 y, S = row.range - h, (H @ ekf.P @ H.T).item() + var
                 if gate(row.beacon_id, y, S):
-                    ekf.update(np.array([[row.range]]), lambda x, b=b: range_row(x, b)[1],
-                               lambda x, b=b: np.array([[range_row(x, b)[0]]]), R=var)
+                    ekf.update(np.array([[row.range]]), lambda x, b=b, A=A: range_row(A @ x, b)[1] @ A,
+                               lambda x, b=b, A=A: np.array([[range_row(A @ x, b)[0]]]), R=var)
                     nis += y * y / S
                 else:
                     gated = True
@@ -131,7 +135,7 @@ def replay_ukf(ts, cfg, ratio):
     gate, var, sd2 = Gate(rc), range_variance(rc), rc["sigma_depth"] ** 2
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
     nis, gated = 0.0, False
-    for last_substep, slot, row in slots(ts, cfg, ratio):
+    for last_substep, slot, row, A in slots(ts, cfg, ratio):
         ukf.predict()
         if slot:
             ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # redrawn from the predicted mean and covariance
@@ -141,7 +145,7 @@ def replay_ukf(ts, cfg, ratio):
                 b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
                 joint = copy.deepcopy(ukf)
                 joint.update(np.array([row.range, row.depth]), R=np.diag([var, sd2]),
-                             hx=lambda x, b=b: np.array([np.linalg.norm(x[[0, 2, 4]] - b), x[4]]))
+                             hx=lambda x, b=b, A=A: np.array([np.linalg.norm((A @ x)[[0, 2, 4]] - b), x[4]]))
                 use = gate(row.beacon_id, joint.y[0], joint.S[0, 0])
                 gated = not use
             if use:

@@ -79,7 +79,7 @@ def replay(ts, cfg, ratio):
         for j in range(ratio):
             t = k * T + j * dt
             ekf.predict()
-            if row.packet_seq != last and t + dt >= row.tx_time - SLACK:
+            if row.packet_seq != last and t + dt >= row.rx_time - SLACK:
                 last = row.packet_seq
                 ekf.update(np.array([[row.depth]]), lambda x: DEPTH_ROW, lambda x: x[4:5],
                            R=np.array([[rc["sigma_depth"] ** 2]]))

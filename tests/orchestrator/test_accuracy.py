@@ -41,7 +41,11 @@ def test_the_bound_of_a_run_follows_its_configuration():
     runs = {rx: run(load_config("semicircle", base + [f"receiver={rx}"], seed=1)) for rx in ("ekf", "ekf-seq")}
     np.testing.assert_array_equal(runs["ekf"].timeseries["pcrb"], runs["ekf-seq"].timeseries["pcrb"])
     better = run(load_config("semicircle", base + ["platform.gps_sigma=0.01", "acoustics.sigma_range=0.02"], seed=1))
-    assert better.metrics["pcrb_rms"][0] < 0.5 * runs["ekf"].metrics["pcrb_rms"][0]
+    assert better.metrics["pcrb_rms"][0] < runs["ekf"].metrics["pcrb_rms"][0]
+    # past the prior's first second (which weighs on a 30 s RMS: the first packet arrives in the second step),
+    # less than half of it
+    settled = lambda r: r.timeseries["pcrb"][r.timeseries["time"] > 1.0].mean()  # noqa: E731
+    assert settled(better) < 0.5 * settled(runs["ekf"])
 
 
 def test_compare_tabulates_each_receiver_as_its_own_runs_do(tmp_path, capsys):

@@ -99,7 +99,10 @@ def test_a_lone_source_carries_the_whole_error_above_the_floor():
     cfg = load_config("semicircle", items)
     b = budget(cfg, 10)
     assert contribution(b, "range_noise") == b.total - b.floor
-    assert b.total > 5 * b.floor > 0
+    # the floor: what is left with every source off, the paper's EKF taking a range as of the step it is used at,
+    # up to a step after the diver's position it refers to (0.015 m here; 0.005 m when ranges were used at
+    # their transmission)
+    assert b.total > 3 * b.floor > 0
     assert b.remainder == 0.0
     others = b.table[b.table["source"] != "range_noise"]
     assert (others["contribution"] == 0.0).all() and (others["status"] == OFF).all()

@@ -69,7 +69,7 @@ def test_a_users_receiver_fmu_is_swapped_in(user_fmu):
 def test_a_mismatching_fmu_is_rejected_naming_every_variable(tmp_path, capsys):
     text = USER_SCRIPT.read_text()
     bad = (text.replace('("est_x", "Real", "m")', '("est_x", "Real", "cm")')
-               .replace(', ("depth", "Real", "m")]', "]")
+               .replace(', ("depth", "Real", "m"), ("rx_time"', ', ("rx_time"')
                .replace('("nis", "Real", "1")', '("nis", "Integer", "")')
                .replace("class UserReceiver", "class BadReceiver"))
     assert bad.count("BadReceiver") == 1 and '"cm"' in bad

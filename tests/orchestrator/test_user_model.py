@@ -61,7 +61,7 @@ def test_the_example_is_the_filter_its_docstring_describes(local):
         last, est = 0, []
         for row in ts.itertuples():  # the step from row.time − T to row.time
             P = P + np.eye(3) * rc["q_position"] * T
-            if row.packet_seq != last and row.time >= row.tx_time - 1e-9:
+            if row.packet_seq != last and row.time >= row.rx_time - 1e-9:
                 last = row.packet_seq
                 updates = [(row.depth, lambda x: (x[2], np.array([0.0, 0.0, 1.0])), rc["sigma_depth"] ** 2)]
                 if row.packet_valid and 1 <= row.beacon_id <= 4:
