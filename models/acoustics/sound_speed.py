@@ -73,14 +73,33 @@ def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX]:
     nodes, slowness : casadi.MX, each (NODES, 1)
         Depth [m] and ``S`` [s/m · m] at each node.
     """
+    nodes, speeds = node_speeds(count, depth, speed)
+    steps = 0.5 * (1.0 / speeds[1:] + 1.0 / speeds[:-1]) * (nodes[1:] - nodes[:-1])
+    slowness = ca.vertcat(0.0, cumulative_sum(steps))
+    return nodes, slowness - slowness[1]
+
+
+def node_speeds(count, depth, speed) -> tuple[ca.MX, ca.MX]:
+    """The padded profile's nodes and the speed at each: the table's rows, its end speeds 10 km beyond.
+
+    Parameters
+    ----------
+    count : casadi.MX
+        Rows in use, n ≥ 1 (0 gives a finite, unused profile).
+    depth, speed : casadi.MX, shape (MAX_PROFILE_ROWS, 1)
+        The table columns [m, m/s] (rows beyond n ignored).
+
+    Returns
+    -------
+    nodes, speeds : casadi.MX, each (NODES, 1)
+        Depth [m] and speed [m/s] at each node (see :func:`profile_nodes`; speeds floored at 1 m/s).
+    """
     (pad_depth, pad_speed), (last_depth, last_speed) = padded_rows(count, [depth, speed], EXTENSION)
     final = ca.if_else(count >= MAX_PROFILE_ROWS, last_depth + EXTENSION, pad_depth[MAX_PROFILE_ROWS - 1] + 1.0)
     nodes = ca.vertcat(depth[0] - EXTENSION, pad_depth, final)
     # an empty table (speeds 0) stays finite; it is not used
     speeds = ca.fmax(ca.vertcat(speed[0], pad_speed, last_speed), 1.0)
-    steps = 0.5 * (1.0 / speeds[1:] + 1.0 / speeds[:-1]) * (nodes[1:] - nodes[:-1])
-    slowness = ca.vertcat(0.0, cumulative_sum(steps))
-    return nodes, slowness - slowness[1]
+    return nodes, speeds
 
 
 def harmonic_mean(z1, z2, constant, count, nodes, slowness) -> ca.SX:
@@ -291,4 +310,4 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
 
 
 __all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean",
-           "profile_nodes", "profile_table", "read_cast_csv", "teos10_table"]
+           "node_speeds", "profile_nodes", "profile_table", "read_cast_csv", "teos10_table"]
