@@ -132,7 +132,7 @@ class Acoustics(Component):
             Variable("sound_speed_true", "parameter", "Real", 1500.0, "m/s",
                      "True sound speed when the profile is constant", min=1300.0, max=1700.0),
             Variable("sound_speed_profile", "parameter", "String", "constant", scope="config",
-                     description="True sound speed: constant, teos10, table, ctd:NAME or a CSV cast path"),
+                     description="True sound speed: constant, teos10, table, munk, ctd:NAME or a CSV cast path"),
             Variable("sound_speed_table", "parameter", "String", "", scope="config",
                      description="Sound-speed profile 'depth speed; ...' [m, m/s] (sound_speed_profile = table)"),
             Variable("temperature", "parameter", "Real", 15.0, "degC", "Water temperature for teos10",
