@@ -96,7 +96,9 @@ def _piece(q, cref, u, v, z0, z1, c0, c1):
     dz = b2 - a2
     ca2 = ca.if_else(dz > 0, ca2, c0)  # an empty piece: finite values, zero length
     cb2 = ca.if_else(dz > 0, cb2, c0)
-    sa, sb = _sine(ca2, cref, k), _sine(cb2, cref, k)
+    # exactly 0 where the ray turns (the square root of a rounded zero would be ~1e-8, a noise of mm in X)
+    sa = ca.if_else(ca.logic_and(blocked_a, dz > 0), 0.0, _sine(ca2, cref, k))
+    sb = ca.if_else(ca.logic_and(blocked_b, dz > 0), 0.0, _sine(cb2, cref, k))
     xi = ca.sqrt(ca.fmax(k, _TINY)) / cref
     ssum = ca.fmax(sa + sb, 1e-12)
     x = xi * dz * (ca2 + cb2) / ssum
