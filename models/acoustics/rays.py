@@ -51,7 +51,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import casadi as ca
-
 import numpy as np
 
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, node_speeds
@@ -102,7 +101,8 @@ def _piece(q, cref, u, v, z0, z1, c0, c1):
     xi = ca.sqrt(ca.fmax(k, _TINY)) / cref
     ssum = ca.fmax(sa + sb, 1e-12)
     x = xi * dz * (ca2 + cb2) / ssum
-    t = dz * (_phi((cb2 - ca2) / ca2) / ca2 + _phi((sa - sb) / (1.0 + sb)) * xi * xi * (ca2 + cb2) / (ssum * (1.0 + sb)))
+    t = dz * (_phi((cb2 - ca2) / ca2) / ca2
+              + _phi((sa - sb) / (1.0 + sb)) * xi * xi * (ca2 + cb2) / (ssum * (1.0 + sb)))
     return x, t
 
 
@@ -305,7 +305,7 @@ def _first_arrival_constant() -> ca.Function:
 def _first_arrival() -> ca.Function:
     zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
     nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    args, names = [zs, zr, x, depth, c, nodes, speeds], ["zs", "zr", "x", "depth", "c", "nodes", "speeds"]
+    args = [zs, zr, x, depth, c, nodes, speeds]
     const = ca.Function("sblsim_ray_isovelocity", args, _first_arrival_constant()(zs, zr, x, depth, c))
     table = ca.Function("sblsim_ray_table", args,
                         _first_arrival_table()(depth > 0, zs, zr, x, depth, nodes, speeds))

@@ -387,5 +387,6 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     return read_cast_csv(spec, field)
 
 
-__all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean",
-           "munk_speed", "munk_table", "node_speeds", "profile_nodes", "read_gnatss_ctd", "profile_table", "read_cast_csv", "teos10_table"]
+__all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean", "munk_speed",
+           "munk_table", "node_speeds", "profile_nodes", "profile_table", "read_cast_csv", "read_gnatss_ctd",
+           "teos10_table"]
