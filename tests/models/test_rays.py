@@ -187,8 +187,8 @@ def test_against_bellhop(name):
 
     Bellhop's arrival of the same eigenray is the one with the same bounces whose launch angle is nearest to
     ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
-    1 % in range of a family's shadow boundary, where a fan of beams decides by its sampling (a ray grazing the
-    surface counts as reflected or not)."""
+    1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
+    of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected."""
     table = _table(name)
     sources, depths, ranges, depth = BELLHOP_SITES[name]
     nodes, speeds = rays.profile_arrays(table)
@@ -213,7 +213,8 @@ def test_against_bellhop(name):
                         inside = table[(table[:, 0] > lo) & (table[:, 0] < hi), 1]
                         fastest = max([float(speed(lo, nodes, speeds)), float(speed(hi, nodes, speeds)), *inside])
                         graze = np.degrees(np.arccos(min(1.0, float(speed(zs, nodes, speeds)) / fastest)))
-                        theirs = theirs[np.abs(np.abs(theirs.source_angle_degrees.values) - graze) > 0.1]
+                        if np.any(np.abs(np.abs(theirs.source_angle_degrees.values) - graze) < 0.1):
+                            continue
                     if bool(valid[k]) != (len(theirs) > 0):
                         mismatched.append((k + 1, zs, zr, x, bool(valid[k])))
                         continue
@@ -249,4 +250,4 @@ def test_ncl1_cast_is_the_published_file_resampled():
     table = profile_table("ctd:NCL1", "", 15.0, 35.0)
     assert table.shape == (256, 2)
     assert table[0, 0] == pytest.approx(-kept[0, 0]) and table[-1, 0] == pytest.approx(-kept[-1, 0])
-    np.testing.assert_allclose(table[:, 1], np.interp(table[:, 0], -kept[::-1, 0], kept[::-1, 1]), atol=1e-9)
+    np.testing.assert_allclose(table[:, 1], np.interp(table[:, 0], -kept[:, 0], kept[:, 1]), atol=1e-9)
