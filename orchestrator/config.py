@@ -34,6 +34,7 @@ import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
 from sblsim.models.acoustics.core import check_in_flight
+from sblsim.models.acoustics.sound_speed import PROFILE_SOURCES
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
@@ -59,7 +60,7 @@ PATH_KEYS = (("target", "trajectory_file"), ("acoustics", "sound_speed_profile")
 
 
 def _is_path(section: str, value: Any) -> bool:
-    special = section == "acoustics" and (value in ("", "constant", "teos10", "table") or str(value).startswith("ctd:"))
+    special = section == "acoustics" and (value in ("", *PROFILE_SOURCES) or str(value).startswith("ctd:"))
     return isinstance(value, str) and bool(value) and not special
 
 

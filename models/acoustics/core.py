@@ -82,15 +82,17 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Any, Mapping
 
 import casadi as ca
 
-from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, profile_nodes, profile_table
+from sblsim.models.acoustics.rays import first_arrival
+from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, node_speeds, profile_nodes, profile_table
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import sample_due, select
+from sblsim.models.expressions import sample_due, select, switch
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -157,6 +159,29 @@ TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "
 ARRIVAL_SLACK = 1e-9
 #: Fixed-point iterations of the travel time (before the final evaluation).
 OWTT_ITERATIONS = 3
+#: Propagation models: the straight line at the harmonic-mean speed (the paper's), or eigenrays through the
+#: profile (:mod:`sblsim.models.acoustics.rays`).
+PROPAGATION = ("straight", "ray")
+#: Deepest water depth [m].
+MAX_WATER_DEPTH = 11000.0
+#: What the propagation adds to the channel's parameters and outputs (declared last: the value references
+#: of the others stay what they were).
+PROPAGATION_VARIABLES: tuple[Variable, ...] = (
+    Variable("propagation", "parameter", "String", "straight", choices=PROPAGATION,
+             description="Travel time: straight line at the profile's harmonic-mean speed, or eigenrays (ray)"),
+    Variable("water_depth", "parameter", "Real", 0.0, "m",
+             "ray: water depth of the surface- and bottom-reflected eigenrays (0: none, the direct eigenray only)",
+             min=0.0, max=MAX_WATER_DEPTH),
+    Variable("launch_angle", "output", "Real", 0.0, "rad",
+             "Grazing angle of the ranging's last leg at its source, positive downward (straight: the chord's)",
+             discrete=True, min=-2.0, max=2.0),
+    Variable("arrival_angle", "output", "Real", 0.0, "rad",
+             "Grazing angle of the ranging's last leg at its receiver, positive downward (straight: the chord's)",
+             discrete=True, min=-2.0, max=2.0),
+    Variable("arrival", "output", "Integer", 0,
+             description="Path of the range: 1 direct, 2 surface-reflected, 3 bottom-reflected (0: none, lost)",
+             min=0, max=3),
+)
 
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
@@ -213,7 +238,7 @@ class Acoustics(Component):
             Variable("sound_speed_true", "parameter", "Real", 1500.0, "m/s",
                      "True sound speed when the profile is constant", min=1300.0, max=1700.0),
             Variable("sound_speed_profile", "parameter", "String", "constant", scope="config",
-                     description="True sound speed: constant, teos10, table, ctd:NAME or a CSV cast path"),
+                     description="True sound speed: constant, teos10, table, munk, ctd:NAME or a CSV cast path"),
             Variable("sound_speed_table", "parameter", "String", "", scope="config",
                      description="Sound-speed profile 'depth speed; ...' [m, m/s] (sound_speed_profile = table)"),
             Variable("temperature", "parameter", "Real", 15.0, "degC", "Water temperature for teos10",
@@ -257,12 +282,13 @@ class Acoustics(Component):
                      min=0.0, max=1.0),
         )
         if not interface_system(n_beacons).measures_direction:
-            return params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW
+            return params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
-        return params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
+        return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
+                + PROPAGATION_VARIABLES)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -296,7 +322,7 @@ class Acoustics(Component):
         carried = [name for name in packet if name not in {v.name for v in OVERFLOW}]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
-                           + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES)])
+                           + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
@@ -304,10 +330,11 @@ class Acoustics(Component):
         def prepare(p):
             depth, speed = p[PROFILE.columns[0].name], p[PROFILE.columns[1].name]
             nodes, slowness = profile_nodes(p["sound_speed_rows"], depth, speed)
+            speeds = node_speeds(p["sound_speed_rows"], depth, speed)[1]
             # a constant profile (no rows) never reads them: skip the table work (a short-circuit conditional)
-            values = ca.vertcat(nodes, slowness)
+            values = ca.vertcat(nodes, slowness, speeds)
             values = ca.if_else(p["sound_speed_rows"] > 0, values, ca.MX.zeros(values.shape), True)
-            return {"nodes": values[:NODES], "slowness": values[NODES:]}
+            return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:]}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -331,18 +358,32 @@ class Acoustics(Component):
 
                 def leg(offset, solve):
                     """Travel time and length between the beacon and the diver at ``t_k + offset`` [s] (None: 0),
-                    plus the travel time itself when ``solve`` (fixed-point iterations)."""
+                    plus the travel time itself when ``solve`` (fixed-point iterations), and the eigenray's
+                    ``(launch, arrival, kind)`` from the beacon (``ray``; the chord's angles and 1 when straight)."""
                     def path(tau):
                         receive = position + velocity * (tau if offset is None else offset + tau)
                         distance = ca.norm_2(receive - beacon)
                         speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
                                               d["nodes"], d["slowness"])
-                        return distance / speed, distance, receive
+                        straight = distance / speed
+                        # ray: the earliest eigenray (evaluated only in ray runs: a switch on the choice)
+                        horizontal = ca.norm_2(receive[:2] - beacon[:2])
+                        ray = ca.if_else(p["propagation"] > 0.5, 1.0 + (p["sound_speed_rows"] > 0), 0.0)
+                        r_tau, r_launch, r_arrival, r_kind = _eigenray()(
+                            ray, beacon[2], receive[2], horizontal, p["water_depth"], p["sound_speed_true"],
+                            d["nodes"], d["speeds"])
+                        chord = ca.atan2(receive[2] - beacon[2], horizontal)
+                        # a shadow zone (no arrival): the packet is lost; the straight line keeps the rest finite
+                        use_ray = ca.logic_and(p["propagation"] > 0.5, r_kind > 0)
+                        tau = ca.if_else(use_ray, r_tau, straight)
+                        angles = (ca.if_else(use_ray, r_launch, chord), ca.if_else(use_ray, r_arrival, chord),
+                                  ca.if_else(p["propagation"] > 0.5, r_kind, 1.0))
+                        return tau, distance, receive, angles
 
-                    tau, distance, receive = path(0.0)
+                    tau, distance, receive, angles = path(0.0)
                     for _ in range(OWTT_ITERATIONS if solve else 0):
-                        tau, distance, receive = path(tau)
-                    return tau, distance, receive
+                        tau, distance, receive, angles = path(tau)
+                    return tau, distance, receive, angles
 
                 draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
                 valid = draws[0] >= p["loss_pct"] / 100.0
@@ -361,21 +402,33 @@ class Acoustics(Component):
                 if direction:  # the transceiver interrogates; the diver replies from where it is then
                     up = leg(None, True)
                     reply = leg(up[0] + turnaround, False)
+                    up_kind = up[3][2]
                     rng, distance, tau = two_way(up, reply)
                     valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # the reply, the downlink
                     # the surface measures at the reply's arrival and sends the fix down to the diver
                     arrival = t_k + tau + leg(tau, True)[0]
                 elif ranging == "owtt":
-                    tau, distance, _ = leg(None, True)
+                    owtt_leg = leg(None, True)
+                    tau, distance, up_kind = owtt_leg[0], owtt_leg[1], 1.0
                     measured = tau + drift * (t_k - x["t0"] + tau)
                     rng = p["sound_speed_assumed"] * measured
                     arrival = t_k + tau
                 else:  # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
                     up = leg(None, False)
-                    rng, distance, tau = two_way(up, leg(up[0] + turnaround, True))
+                    down = leg(up[0] + turnaround, True)
+                    up_kind = up[3][2]
+                    rng, distance, tau = two_way(up, down)
                     arrival = t_k + tau
+                # the last leg's eigenray: from the beacon to the diver, or the diver's reply to the transceiver
+                last = reply if direction else (down if ranging == "twtt" else owtt_leg)
+                launch, arrival_angle, kind = last[3]
+                if direction:  # reversed: the reply leaves the diver and arrives at the transceiver
+                    launch, arrival_angle = -arrival_angle, -launch
+                kind = ca.if_else(ca.logic_and(kind > 0, up_kind > 0), kind, 0.0)
+                valid = ca.logic_and(valid, kind > 0)  # a shadow zone: no arrival, the packet is lost
                 rng = rng + p["sigma_range"] * noise + excess
-                out = {"packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
+                out = {"launch_angle": launch, "arrival_angle": arrival_angle, "arrival": kind,
+                       "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
                        "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
                        "outlier": ca.logic_and(outlier, valid), "rx_time": arrival}
                 out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
@@ -456,5 +509,21 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
+@lru_cache(maxsize=1)
+def _eigenray() -> ca.Function:
+    """``(index, zs, zr, x, depth, c, nodes, speeds) -> (tau, launch, arrival, kind)``: index 0 nothing (a
+    straight run: zeros, no work), 1 isovelocity at ``c``, 2 the table's eigenrays (:func:`first_arrival`)."""
+    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    args = [zs, zr, x, depth, c, nodes, speeds]
+    names = ["zs", "zr", "x", "depth", "c", "nodes", "speeds"]
+    branches = [ca.Function("sblsim_ray_none", args, [0.0, 0.0, 0.0, 0.0], names, ["tau", "launch", "arrival", "kind"])]
+    for use_table in (0.0, 1.0):
+        branches.append(ca.Function(f"sblsim_ray_{int(use_table)}", args,
+                                    list(first_arrival(use_table, zs, zr, x, depth, c, nodes, speeds)), names,
+                                    ["tau", "launch", "arrival", "kind"]))
+    return switch("sblsim_channel_ray", branches)
+
+
 __all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
-           "OWTT_ITERATIONS", "PACKET", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]
+           "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -37,8 +37,17 @@ import numpy as np
 from sblsim.models.declarations import Column, ModelError, Table, check_entry, check_increasing, parse_table
 from sblsim.models.expressions import cumulative_sum, padded_rows, switch
 
-#: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md).
-BUILTIN_CASTS = ("11E101663_20120821_122817", "11E101663_20120821_145912")
+#: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md): the two coastal Castaway casts
+#: (CSV files of that name) and ``NCL1``, the 1220 m deep cast of GNATSS's NCL1 test site (its file
+#: ``CTD_NCL1_Ch_Mi`` as published: elevation [m, negative down] and sound speed [m/s] per line).
+BUILTIN_CASTS = ("11E101663_20120821_122817", "11E101663_20120821_145912", "NCL1")
+_CAST_FILES = {"NCL1": "CTD_NCL1_Ch_Mi"}
+#: The Munk canonical profile (Munk 1974; Jensen et al. 2011): axis depth [m], scale depth B [m],
+#: axis speed [m/s], ε, and the table that samples it (rows, deepest depth [m]).
+MUNK_AXIS, MUNK_SCALE, MUNK_SPEED, MUNK_EPSILON = 1300.0, 1300.0, 1500.0, 0.00737
+MUNK_ROWS, MUNK_DEPTH = 256, 5000.0
+#: The missing-value mark of a GNATSS sound-speed file [m/s].
+MISSING_SPEED = -9.99e-29
 #: Largest number of rows of a sound-speed table.
 MAX_PROFILE_ROWS = 256
 #: How far above the first and below the last depth the end speeds are extended [m].
@@ -73,14 +82,33 @@ def profile_nodes(count, depth, speed) -> tuple[ca.MX, ca.MX]:
     nodes, slowness : casadi.MX, each (NODES, 1)
         Depth [m] and ``S`` [s/m · m] at each node.
     """
+    nodes, speeds = node_speeds(count, depth, speed)
+    steps = 0.5 * (1.0 / speeds[1:] + 1.0 / speeds[:-1]) * (nodes[1:] - nodes[:-1])
+    slowness = ca.vertcat(0.0, cumulative_sum(steps))
+    return nodes, slowness - slowness[1]
+
+
+def node_speeds(count, depth, speed) -> tuple[ca.MX, ca.MX]:
+    """The padded profile's nodes and the speed at each: the table's rows, its end speeds 10 km beyond.
+
+    Parameters
+    ----------
+    count : casadi.MX
+        Rows in use, n ≥ 1 (0 gives a finite, unused profile).
+    depth, speed : casadi.MX, shape (MAX_PROFILE_ROWS, 1)
+        The table columns [m, m/s] (rows beyond n ignored).
+
+    Returns
+    -------
+    nodes, speeds : casadi.MX, each (NODES, 1)
+        Depth [m] and speed [m/s] at each node (see :func:`profile_nodes`; speeds floored at 1 m/s).
+    """
     (pad_depth, pad_speed), (last_depth, last_speed) = padded_rows(count, [depth, speed], EXTENSION)
     final = ca.if_else(count >= MAX_PROFILE_ROWS, last_depth + EXTENSION, pad_depth[MAX_PROFILE_ROWS - 1] + 1.0)
     nodes = ca.vertcat(depth[0] - EXTENSION, pad_depth, final)
     # an empty table (speeds 0) stays finite; it is not used
     speeds = ca.fmax(ca.vertcat(speed[0], pad_speed, last_speed), 1.0)
-    steps = 0.5 * (1.0 / speeds[1:] + 1.0 / speeds[:-1]) * (nodes[1:] - nodes[:-1])
-    slowness = ca.vertcat(0.0, cumulative_sum(steps))
-    return nodes, slowness - slowness[1]
+    return nodes, speeds
 
 
 def harmonic_mean(z1, z2, constant, count, nodes, slowness) -> ca.SX:
@@ -232,7 +260,71 @@ def teos10_table(temperature: float, salinity: float, max_depth: float = 100.0,
     return np.column_stack([depth, gsw.sound_speed(salinity, conservative, pressure)])
 
 
-PROFILE_SOURCES = ("constant", "teos10", "table")
+PROFILE_SOURCES = ("constant", "teos10", "table", "munk")
+
+
+def munk_speed(z):
+    """The Munk canonical profile ``c(z) = c_1 [1 + ε (η − 1 + e^(−η))]``, ``η = 2 (z − z_1) / B`` [m/s].
+
+    Parameters
+    ----------
+    z : array_like
+        Depth [m].
+
+    References
+    ----------
+    W. H. Munk, "Sound channel in an exponentially stratified ocean, with application to SOFAR",
+    J. Acoust. Soc. Am. 55(2), 220-226, 1974; Jensen, Kuperman, Porter, Schmidt, Computational Ocean
+    Acoustics, 2nd ed., 2011, sec. 1.6.2 and the Munk test cases of ch. 3 (z_1 = 1300 m, B = 1300 m,
+    c_1 = 1500 m/s, ε = 0.00737).
+    """
+    eta = 2.0 * (np.asarray(z, dtype=float) - MUNK_AXIS) / MUNK_SCALE
+    return MUNK_SPEED * (1.0 + MUNK_EPSILON * (eta - 1.0 + np.exp(-eta)))
+
+
+def munk_table() -> np.ndarray:
+    """The Munk profile sampled into the table: :data:`MUNK_ROWS` evenly spaced depths from 0 to
+    :data:`MUNK_DEPTH` (19.6 m apart), the speed linear between them.
+
+    Returns
+    -------
+    ndarray, shape (MUNK_ROWS, 2)
+        Depth [m], sound speed [m/s].
+    """
+    depth = np.linspace(0.0, MUNK_DEPTH, MUNK_ROWS)
+    return np.column_stack([depth, munk_speed(depth)])
+
+
+def read_gnatss_ctd(path: str | Path, field: str = "acoustics.sound_speed_profile") -> np.ndarray:
+    """Read a GNATSS sound-speed file: per line, elevation [m] (negative below the surface) and speed [m/s].
+
+    A line whose speed is the file's missing-value mark :data:`MISSING_SPEED` is left out (the NCL1 cast
+    has one, at 1201.59 m).
+
+    Returns
+    -------
+    ndarray, shape (rows, 2)
+        Depth [m], sound speed [m/s] (at most :data:`MAX_PROFILE_ROWS` rows: a longer cast is resampled by
+        :func:`fit_rows`).
+
+    Raises
+    ------
+    ModelError
+        If a line does not hold two finite numbers inside the table's ranges.
+    """
+    try:
+        data = np.loadtxt(path, dtype=float, ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
+    if data.shape[1] != 2 or data.shape[0] == 0:
+        raise ModelError(f"{field}: {str(path)!r} needs lines 'elevation speed'")
+    data = data[data[:, 1] != MISSING_SPEED]  # samples the cast marks missing
+    table = np.column_stack([-data[:, 0], data[:, 1]])
+    table = table[::-1] if table.shape[0] > 1 and table[0, 0] > table[-1, 0] else table
+    for i, row in enumerate(table):
+        for value, col in zip(row, PROFILE.columns):
+            check_entry(float(value), col, f"{field}: {str(path)!r} row {i + 1}")
+    return fit_rows(table, field, str(path))
 
 
 def profile_table(spec: str, text: str, temperature: float, salinity: float) -> np.ndarray:
@@ -254,7 +346,7 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     Parameters
     ----------
     spec : str
-        ``constant`` (0 rows: the constant true speed), ``teos10``,
+        ``constant`` (0 rows: the constant true speed), ``teos10``, ``munk`` (:func:`munk_table`),
         ``table`` (the text ``text``), ``ctd:NAME`` (:data:`BUILTIN_CASTS`)
         or a path to a CSV cast.
     text : str
@@ -276,6 +368,8 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
         return np.zeros((0, 2))
     if spec == "teos10":
         return teos10_table(temperature, salinity)
+    if spec == "munk":
+        return munk_table()
     if spec == "table":
         rows = parse_table(text, PROFILE, "acoustics.sound_speed_table")
         if rows.shape[0] == 0:
@@ -285,10 +379,14 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
         name = spec[4:]
         if name not in BUILTIN_CASTS:
             raise ModelError(f"{field}: unknown cast {name!r}; one of " + ", ".join(f"ctd:{c}" for c in BUILTIN_CASTS))
+        if name in _CAST_FILES:
+            with resources.as_file(resources.files("sblsim.models.acoustics") / "data" / _CAST_FILES[name]) as path:
+                return read_gnatss_ctd(path, field)
         with resources.as_file(resources.files("sblsim.models.acoustics") / "data" / f"{name}.csv") as path:
             return read_cast_csv(path, field)
     return read_cast_csv(spec, field)
 
 
-__all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean",
-           "profile_nodes", "profile_table", "read_cast_csv", "teos10_table"]
+__all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean", "munk_speed",
+           "munk_table", "node_speeds", "profile_nodes", "profile_table", "read_cast_csv", "read_gnatss_ctd",
+           "teos10_table"]

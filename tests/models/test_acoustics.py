@@ -365,7 +365,7 @@ def model_harmonic_mean(params, z1, z2):
     values = Acoustics.fmu_parameters(config)
     d = np.array(Acoustics.program().prepare(Acoustics.parameter_vector(values))).ravel()
     constant = values.get("sound_speed_true", 1500.0)
-    return np.array([float(HM(a, b, constant, values["sound_speed_rows"], d[:NODES], d[NODES:]))
+    return np.array([float(HM(a, b, constant, values["sound_speed_rows"], d[:NODES], d[NODES:2 * NODES]))
                      for a, b in zip(np.atleast_1d(z1), np.atleast_1d(z2))])
 
 

@@ -1,0 +1,367 @@
+"""Eigenrays in a range-independent sound-speed profile: direct, surface- and bottom-reflected.
+
+The profile is the channel's sound-speed table (:data:`~sblsim.models.acoustics.sound_speed.PROFILE`) as
+:func:`~sblsim.models.acoustics.sound_speed.profile_nodes` pads it: the speed is **linear in depth** between
+the nodes (Bellhop's ``'C'``, c-linear, interpolation) and constant above the first row and below the last
+(the end speeds extended). Snell's invariant ``ξ = cos θ / c(z)`` (θ the grazing angle) is constant along a
+ray; in a layer where ``c = c_0 + g (z − z_0)`` the ray is a circular arc of radius ``1 / (ξ |g|)`` and, with
+``s = sin θ = √(1 − ξ² c²)``, its horizontal distance and travel time between speeds ``c_a`` and ``c_b`` are
+
+    x = (s_a − s_b) / (ξ g) = ξ Δz (c_a + c_b) / (s_a + s_b),
+    t = ln[c_b (1 + s_a) / (c_a (1 + s_b))] / g = Δz [φ(u) / c_a + φ(v) ξ² (c_a + c_b) / ((s_a + s_b)(1 + s_b))],
+
+with ``u = (c_b − c_a) / c_a``, ``v = (s_a − s_b) / (1 + s_b)`` and ``φ(v) = ln(1 + v) / v`` (→ 1): the second
+forms hold for every gradient, zero included (Jensen, Kuperman, Porter, Schmidt, *Computational Ocean
+Acoustics*, 2nd ed., Springer 2011, ch. 3.3-3.4).
+
+A family of rays between depths ``z_a ≤ z_b`` is parametrized by ``q``, the signed sine of the grazing angle
+at the reference speed ``c_ref`` (``ξ = √(1 − q²) / c_ref``); its horizontal range ``X(q)`` is the sum of the
+layers' arcs over ``[z_a, z_b]`` once and over a second interval twice:
+
+* **direct** (``arrival`` 1): ``c_ref`` is the faster end. ``q ≥ 0``: the ray runs monotonically from one
+  end to the other; ``q < 0``: it leaves the faster end away from the other, **turns** where ``c = 1/ξ``
+  (inside the region beyond that end where the speed keeps increasing, bounded by the surface and the
+  water depth) and comes back. If the speed between the ends exceeds both, rays flatter than the one
+  grazing that maximum cannot pass: beyond that ray's range lies a **shadow zone** (no direct eigenray);
+* **surface-reflected** (2): ``[0, z_a]`` twice (the path unfolded at the surface), ``c_ref`` the fastest
+  speed over ``[0, z_b]``, ``q ≥ 0`` (no turning before the surface);
+* **bottom-reflected** (3): ``[z_b, D]`` twice, ``D`` the water depth, ``c_ref`` the fastest over
+  ``[z_a, D]``.
+
+``X`` decreases from its largest value at the family's flattest ray ``q_lo`` to 0 at ``q = 1`` (vertical). The
+eigenray solves ``X(q) = X_target`` by a bracketed Newton iteration (a Newton step that leaves the bracket is
+replaced by bisection) with a fixed number of iterations (:data:`NEWTON_ITERATIONS`), so the solve is one
+casadi expression for the local engine and the generated C alike. A target beyond ``X(q_lo)`` has no eigenray
+of that family (``valid`` false). The travel time is taken at the stationary point,
+``τ = T(q) + ξ (X_target − X(q))`` (``dT/dX = ξ`` along the family, Fermat), so that a residual error in
+``q`` enters the time only to second order; isovelocity water gives the straight line to round-off.
+
+Angles are grazing angles [rad], positive when the ray travels downward (toward greater depth): the launch
+angle at the source, the arrival angle at the receiver, in the direction of travel (Bellhop's sign).
+
+What is not modelled: rays that turn more than once, or that pass over a local maximum of the speed beyond
+the faster end and turn further away (they come back only after long excursions; not within the few km of
+a positioning system in the profiles sblsim ships), range-dependent profiles and bathymetry.
+
+This module imports nothing from the FMI or orchestrator layers.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, node_speeds
+from sblsim.models.expressions import switch
+
+#: Bracketed-Newton iterations of every eigenray solve (fixed: the solve is a closed casadi expression).
+NEWTON_ITERATIONS = 24
+#: Eigenray families: the ``arrival`` codes of the channel's time series (0: none).
+DIRECT, SURFACE, BOTTOM = 1, 2, 3
+_BIG = 1e7
+#: Floor of a square root's argument: finite derivatives at a grazing point.
+_TINY = 1e-300
+
+
+def _phi(v):
+    """``ln(1 + v) / v``, 1 at v = 0 (a series near 0)."""
+    small = ca.fabs(v) < 1e-5
+    safe = ca.if_else(small, 1.0, v)
+    return ca.if_else(small, 1.0 - v / 2.0 + v * v / 3.0, ca.log1p(safe) / safe)
+
+
+def _sine(c, cref, k):
+    """``sin θ = √(1 − ξ² c²)`` at speed ``c`` with ``ξ² c_ref² = k`` (floored at 0 beyond a turning point)."""
+    return ca.sqrt(ca.fmax((cref - c) * (cref + c) + (1.0 - k) * c * c, _TINY)) / cref
+
+
+def _piece(q, cref, u, v, z0, z1, c0, c1):
+    """Horizontal distance [m] and travel time [s] of a ray ``(q, c_ref)`` over ``[u, v] ∩ [z0, z1]`` of a
+    c-linear layer, cut where the ray turns (``c = 1/ξ``)."""
+    k = 1.0 - q * q
+    g = (c1 - c0) / (z1 - z0)
+    a = ca.fmax(z0, u)
+    b = ca.fmax(a, ca.fmin(z1, v))
+    ca_, cb_ = c0 + g * (a - z0), c0 + g * (b - z0)
+    blocked_a, blocked_b = k * ca_ * ca_ > cref * cref, k * cb_ * cb_ > cref * cref
+    turn_c = cref / ca.sqrt(ca.fmax(k, 1e-300))
+    turn_z = ca.fmin(ca.fmax(z0 + (turn_c - c0) / ca.if_else(g == 0, 1.0, g), a), b)
+    a2 = ca.if_else(blocked_a, ca.if_else(blocked_b, b, turn_z), a)
+    b2 = ca.if_else(blocked_b, ca.if_else(blocked_a, b, turn_z), b)
+    ca2 = ca.if_else(blocked_a, turn_c, ca_)
+    cb2 = ca.if_else(blocked_b, turn_c, cb_)
+    dz = b2 - a2
+    ca2 = ca.if_else(dz > 0, ca2, c0)  # an empty piece: finite values, zero length
+    cb2 = ca.if_else(dz > 0, cb2, c0)
+    # exactly 0 where the ray turns (the square root of a rounded zero would be ~1e-8, a noise of mm in X)
+    sa = ca.if_else(ca.logic_and(blocked_a, dz > 0), 0.0, _sine(ca2, cref, k))
+    sb = ca.if_else(ca.logic_and(blocked_b, dz > 0), 0.0, _sine(cb2, cref, k))
+    xi = ca.sqrt(ca.fmax(k, _TINY)) / cref
+    ssum = ca.fmax(sa + sb, 1e-12)
+    x = xi * dz * (ca2 + cb2) / ssum
+    t = dz * (_phi((cb2 - ca2) / ca2) / ca2
+              + _phi((sa - sb) / (1.0 + sb)) * xi * xi * (ca2 + cb2) / (ssum * (1.0 + sb)))
+    return x, t
+
+
+@lru_cache(maxsize=1)
+def _layers() -> ca.Function:
+    """``(q, fold, cref, u1, v1, u2, v2, nodes, speeds) -> (X, T, dX/dq)``: a ray's range [m] and time [s]
+    over ``[u1, v1]`` once and ``[u2, v2]`` twice (when ``fold`` or ``q < 0``), summed over the layers."""
+    q, fold, cref = ca.SX.sym("q"), ca.SX.sym("fold"), ca.SX.sym("cref")
+    u1, v1, u2, v2 = ca.SX.sym("u1"), ca.SX.sym("v1"), ca.SX.sym("u2"), ca.SX.sym("v2")
+    z0, z1, c0, c1 = ca.SX.sym("z0"), ca.SX.sym("z1"), ca.SX.sym("c0"), ca.SX.sym("c1")
+    x1, t1 = _piece(q, cref, u1, v1, z0, z1, c0, c1)
+    x2, t2 = _piece(q, cref, u2, v2, z0, z1, c0, c1)
+    w2 = ca.if_else(ca.logic_or(fold > 0.5, q < 0), 2.0, 0.0)
+    x, t = x1 + w2 * x2, t1 + w2 * t2
+    layer = ca.Function("sblsim_ray_layer", [q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1],
+                        [x, t, ca.jacobian(x, q)])
+    mapped = layer.map(NODES - 1, "serial")
+    args = [ca.MX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2")]
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    out = mapped(*args, nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
+    sums = [ca.sum2(o) for o in out]
+    return ca.Function("sblsim_ray_sums", args + [nodes, speeds], sums, {"never_inline": True})
+
+
+@lru_cache(maxsize=1)
+def _speed() -> ca.Function:
+    """``(z, nodes, speeds) -> c``: the c-linear profile (constant beyond the end nodes)."""
+    f = ca.interpolant("sblsim_ray_speed_table", "linear", [NODES], 1)
+    z, nodes, speeds = ca.MX.sym("z"), ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    inside = ca.fmin(ca.fmax(z, nodes[0]), nodes[NODES - 1])
+    return ca.Function("sblsim_ray_speed", [z, nodes, speeds], [f(inside, nodes, speeds)])
+
+
+def _interval_max(u, v, nodes, speeds):
+    """The fastest speed over ``[u, v]`` [m/s] (its ends and the nodes inside)."""
+    c = _speed()
+    inside = ca.logic_and(nodes > u, nodes < v)
+    return ca.fmax(ca.fmax(c(u, nodes, speeds), c(v, nodes, speeds)), ca.mmax(inside * speeds))
+
+
+def _solve(target, q_lo, q0, fold, cref, u1, v1, u2, v2, nodes, speeds):
+    """The eigenray of a family: ``(τ, q, valid)`` by bracketed Newton on ``q ∈ [q_lo, 1]``."""
+    sums = _layers()
+    x_lo = sums(q_lo, fold, cref, u1, v1, u2, v2, nodes, speeds)[0]
+    valid = ca.logic_not(x_lo < target)  # NaN or infinite: the family reaches every range
+    lo, hi = q_lo, 1.0
+    q = ca.fmin(ca.fmax(q0, lo), hi)
+    for _ in range(NEWTON_ITERATIONS):
+        x, _t, dx = sums(q, fold, cref, u1, v1, u2, v2, nodes, speeds)
+        r = x - target
+        lo, hi = ca.if_else(r > 0, q, lo), ca.if_else(r > 0, hi, q)
+        step = ca.if_else(r == 0, q, q - r / dx)
+        ok = ca.logic_and(step >= lo, step <= hi)  # false for NaN
+        q = ca.if_else(ok, step, 0.5 * (lo + hi))
+    x, t, _dx = sums(q, fold, cref, u1, v1, u2, v2, nodes, speeds)
+    xi = ca.sqrt(1.0 - q * q) / cref
+    return t + xi * (target - x), q, valid
+
+
+def _angle(z, q, cref, nodes, speeds):
+    """Grazing angle [rad] (unsigned) of the ray ``(q, c_ref)`` at depth ``z``."""
+    c = _speed()(z, nodes, speeds)
+    k = 1.0 - q * q
+    return ca.atan2(ca.sqrt(ca.fmax((cref - c) * (cref + c) + (1.0 - k) * c * c, 0.0)), ca.sqrt(k) * c)
+
+
+def _direct(zs, zr, target, depth, nodes, speeds):
+    """The direct eigenray: ``(τ, launch, arrival, valid)``."""
+    c = _speed()
+    za, zb = ca.fmin(zs, zr), ca.fmax(zs, zr)
+    c_a, c_b = c(za, nodes, speeds), c(zb, nodes, speeds)
+    inside = ca.logic_and(nodes > za, nodes < zb)
+    c_int = ca.mmax(inside * speeds)
+    # the regions beyond each end over which the speed keeps increasing away from it (bounded by the
+    # surface above and the water depth below): a ray leaving that end outward turns there
+    up_flag = ca.vertcat(1.0, speeds[:-1] <= speeds[1:])  # the next node up is not faster
+    down_flag = ca.vertcat(speeds[1:] <= speeds[:-1], 1.0)  # the next node down is not faster
+    above, below = nodes < za, nodes > zb
+    near_up = ca.mmax(ca.if_else(above, nodes, -_BIG))
+    near_down = -ca.mmax(ca.if_else(below, -nodes, -_BIG))
+    peak_up = ca.fmax(ca.mmax(ca.if_else(ca.logic_and(above, up_flag), nodes, -_BIG)), ca.fmin(0.0, za))
+    peak_down = -ca.mmax(ca.if_else(ca.logic_and(below, down_flag), -nodes, -_BIG))
+    peak_down = ca.if_else(depth > 0, ca.fmin(peak_down, ca.fmax(depth, zb)), peak_down)
+    grows_up = c(near_up, nodes, speeds) > c_a
+    grows_down = c(near_down, nodes, speeds) > c_b
+    c_up = ca.if_else(grows_up, c(peak_up, nodes, speeds), c_a)
+    c_down = ca.if_else(grows_down, c(peak_down, nodes, speeds), c_b)
+    use_up = ca.logic_or(c_a > c_b, ca.logic_and(c_a == c_b, c_up > c_a))
+    cref = ca.if_else(use_up, c_a, c_b)
+    c_peak = ca.if_else(use_up, c_up, c_down)
+    blocked = c_int > cref  # a faster layer between the ends: flatter rays cannot pass
+    q_lo = ca.if_else(blocked, ca.sqrt(ca.fmax(1.0 - (cref / c_int) ** 2, 0.0)),
+                      -ca.sqrt(ca.fmax(1.0 - (cref / c_peak) ** 2, 0.0)))
+    u2 = ca.if_else(use_up, peak_up, zb)
+    v2 = ca.if_else(use_up, za, peak_down)
+    dz = zb - za
+    q0 = dz / ca.fmax(ca.sqrt(dz * dz + target * target), 1e-300)
+    tau, q, valid = _solve(target, q_lo, q0, 0.0, cref, za, zb, u2, v2, nodes, speeds)
+    # a level path in water of constant speed around it: the horizontal ray (X(q) = 0 for every q ≥ 0)
+    flat = ca.logic_or(c(za - 1e-3, nodes, speeds) == c_a, c(za + 1e-3, nodes, speeds) == c_a)
+    valid = ca.logic_or(valid, ca.logic_and(zb - za == 0, ca.logic_and(flat, q_lo == 0)))
+    ts, tr = _angle(zs, q, cref, nodes, speeds), _angle(zr, q, cref, nodes, speeds)
+    d = ca.sign(zr - zs)
+    turning = q < 0
+    # a turning ray leaves downward and arrives upward when it turns below, the reverse when above
+    launch = ca.if_else(turning, ca.if_else(use_up, -ts, ts), d * ts)
+    arrival = ca.if_else(turning, ca.if_else(use_up, tr, -tr), d * tr)
+    return tau, launch, arrival, valid
+
+
+def _reflected(zs, zr, target, depth, nodes, speeds, bottom: bool):
+    """The surface- (``bottom`` false) or bottom-reflected eigenray: ``(τ, launch, arrival, valid)``."""
+    za, zb = ca.fmin(zs, zr), ca.fmax(zs, zr)
+    if bottom:
+        u2, v2, span_lo, span_hi = zb, depth, za, depth
+        fits = depth >= zb
+        image = 2.0 * depth - zs - zr
+    else:
+        u2, v2, span_lo, span_hi = 0.0, za, 0.0, zb
+        fits = za >= 0
+        image = zs + zr
+    cref = _interval_max(span_lo, span_hi, nodes, speeds)
+    q0 = image / ca.fmax(ca.sqrt(image * image + target * target), 1e-300)
+    tau, q, valid = _solve(target, 0.0, q0, 1.0, cref, za, zb, u2, v2, nodes, speeds)
+    ts, tr = _angle(zs, q, cref, nodes, speeds), _angle(zr, q, cref, nodes, speeds)
+    sign = 1.0 if bottom else -1.0
+    return tau, sign * ts, -sign * tr, ca.logic_and(valid, ca.logic_and(fits, depth > 0))
+
+
+@lru_cache(maxsize=1)
+def eigenray_families() -> ca.Function:
+    """``(zs, zr, x, depth, nodes, speeds) -> (tau, launch, arrival, valid)``, each (3, 1): the direct, the
+    surface-reflected and the bottom-reflected eigenray (rows in that order).
+
+    Parameters (of the function)
+    ----------------------------
+    zs, zr : depth of the source and of the receiver [m] (positive down).
+    x : horizontal distance between them [m].
+    depth : water depth [m]; 0: no boundary (the reflected rows are invalid).
+    nodes, speeds : (NODES, 1) the padded profile (:func:`~sblsim.models.acoustics.sound_speed.node_speeds`).
+
+    Returns (of the function)
+    -------------------------
+    tau [s], launch and arrival grazing angles [rad] (positive downward, in the direction of travel),
+    valid (1: the eigenray exists; 0: shadow zone, or no boundary, and the other values are meaningless).
+    """
+    zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    rows = [_direct(zs, zr, x, depth, nodes, speeds), _reflected(zs, zr, x, depth, nodes, speeds, False),
+            _reflected(zs, zr, x, depth, nodes, speeds, True)]
+    out = [ca.vertcat(*[r[j] for r in rows]) for j in range(4)]
+    return ca.Function("sblsim_eigenray_families", [zs, zr, x, depth, nodes, speeds], out,
+                       ["zs", "zr", "x", "depth", "nodes", "speeds"], ["tau", "launch", "arrival", "valid"],
+                       {"never_inline": True})
+
+
+def _first(tau, launch, arrival, valid):
+    """The earliest valid arrival of (3, 1) families: ``(τ, launch, arrival, kind)``, kind 0 when none."""
+    best_t, best_l, best_a, kind = ca.inf, 0.0, 0.0, 0.0
+    for j in range(int(tau.numel())):
+        better = ca.logic_and(valid[j] > 0.5, tau[j] < best_t)
+        best_t = ca.if_else(better, tau[j], best_t)
+        best_l = ca.if_else(better, launch[j], best_l)
+        best_a = ca.if_else(better, arrival[j], best_a)
+        kind = ca.if_else(better, j + 1.0, kind)
+    return ca.if_else(kind > 0, best_t, 0.0), best_l, best_a, kind
+
+
+@lru_cache(maxsize=1)
+def _first_arrival_table() -> ca.Function:
+    zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    direct = _direct(zs, zr, x, depth, nodes, speeds)
+    direct_only = ca.Function("sblsim_ray_direct_only", [zs, zr, x, depth, nodes, speeds],
+                              list(_first(*[ca.vertcat(v) for v in direct])))
+    families = eigenray_families()(zs, zr, x, depth, nodes, speeds)
+    with_boundaries = ca.Function("sblsim_ray_bounded", [zs, zr, x, depth, nodes, speeds], list(_first(*families)))
+    return switch("sblsim_ray_first", [direct_only, with_boundaries])
+
+
+@lru_cache(maxsize=1)
+def _first_arrival_constant() -> ca.Function:
+    """Isovelocity: the straight line and its images in the surface and the bottom."""
+    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
+    rows = []
+    for image, kind in ((zr - zs, DIRECT), (zs + zr, SURFACE), (2.0 * depth - zs - zr, BOTTOM)):
+        length = ca.sqrt(x * x + image * image)
+        angle = ca.atan2(image, x)
+        # reflected: launched toward the boundary, arriving from it
+        launch, arrival = (angle, angle) if kind == DIRECT else ((-angle, angle) if kind == SURFACE else
+                                                                  (angle, -angle))
+        valid = 1.0 if kind == DIRECT else ca.logic_and(depth > 0, ca.logic_and(
+            zs >= 0, zr >= 0) if kind == SURFACE else ca.logic_and(depth >= zs, depth >= zr))
+        rows.append((length / c, launch, arrival, valid))
+    out = _first(*[ca.vertcat(*[r[j] for r in rows]) for j in range(4)])
+    return ca.Function("sblsim_ray_constant", [zs, zr, x, depth, c], list(out))
+
+
+@lru_cache(maxsize=1)
+def _first_arrival() -> ca.Function:
+    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    args = [zs, zr, x, depth, c, nodes, speeds]
+    const = ca.Function("sblsim_ray_isovelocity", args, _first_arrival_constant()(zs, zr, x, depth, c))
+    table = ca.Function("sblsim_ray_table", args,
+                        _first_arrival_table()(depth > 0, zs, zr, x, depth, nodes, speeds))
+    return switch("sblsim_first_arrival", [const, table])
+
+
+def first_arrival(use_table, zs, zr, x, depth, constant, nodes, speeds):
+    """The earliest eigenray between two depths: ``(τ, launch, arrival, kind)``.
+
+    Parameters
+    ----------
+    use_table : casadi.SX
+        True (non-zero) for the table, false for the constant ``constant``.
+    zs, zr : casadi.SX
+        Depth of the source and of the receiver [m].
+    x : casadi.SX
+        Horizontal distance [m].
+    depth : casadi.SX
+        Water depth [m]; 0: no boundary, the direct eigenray only.
+    constant : casadi.SX
+        The sound speed of an empty table [m/s].
+    nodes, speeds : casadi.SX, shape (NODES, 1)
+        The padded profile (:func:`~sblsim.models.acoustics.sound_speed.node_speeds`).
+
+    Returns
+    -------
+    tau : casadi.SX
+        Travel time [s] of the earliest arrival (0 when none).
+    launch, arrival : casadi.SX
+        Its grazing angles [rad] at the source and at the receiver, positive downward.
+    kind : casadi.SX
+        1 direct, 2 surface-reflected, 3 bottom-reflected, 0 none (a shadow zone without boundaries).
+    """
+    return _first_arrival()(use_table, zs, zr, x, depth, constant, nodes, speeds)
+
+
+def profile_arrays(table) -> tuple[np.ndarray, np.ndarray]:
+    """The padded nodes and speeds of a numeric sound-speed table, as the channel builds them.
+
+    Parameters
+    ----------
+    table : array_like, shape (rows, 2)
+        Depth [m], sound speed [m/s], 1 ≤ rows ≤ MAX_PROFILE_ROWS, depths increasing.
+
+    Returns
+    -------
+    nodes, speeds : ndarray, each (NODES,)
+    """
+    table = np.asarray(table, dtype=float)
+    n = table.shape[0]
+    depth, speed = np.zeros(MAX_PROFILE_ROWS), np.zeros(MAX_PROFILE_ROWS)
+    depth[:n], speed[:n] = table[:, 0], table[:, 1]
+    count, d, c = ca.MX.sym("n"), ca.MX.sym("d", MAX_PROFILE_ROWS), ca.MX.sym("c", MAX_PROFILE_ROWS)
+    nodes, speeds = ca.Function("sblsim_ray_nodes", [count, d, c], list(node_speeds(count, d, c)))(n, depth, speed)
+    return np.asarray(nodes).ravel(), np.asarray(speeds).ravel()
+
+
+__all__ = ["BOTTOM", "DIRECT", "NEWTON_ITERATIONS", "SURFACE", "eigenray_families", "first_arrival",
+           "profile_arrays"]

@@ -1,0 +1,253 @@
+"""Eigenrays through the sound-speed profile (models/acoustics/rays.py) against references nobody here wrote:
+the straight line of isovelocity water, the circular arc of a linear gradient, a numerical integration of the
+ray equations (scipy ``solve_ivp``) and Bellhop (M. Porter) through the ``pelagic`` package."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from sblsim.models.acoustics import rays
+from sblsim.models.acoustics.sound_speed import munk_speed, munk_table, profile_table
+
+#: A strongly refracting table: a surface duct over a sharp thermocline, then the deep increase.
+STRONG = np.array([[0.0, 1500.0], [80.0, 1501.5], [140.0, 1468.0], [600.0, 1478.0], [1500.0, 1486.0],
+                   [4500.0, 1537.0]])
+
+
+def families(table, zs, zr, x, depth=0.0):
+    nodes, speeds = rays.profile_arrays(table)
+    return [np.asarray(v).ravel() for v in rays.eigenray_families()(zs, zr, x, depth, nodes, speeds)]
+
+
+# ------------------------------------------------------------------ closed forms
+
+
+@pytest.mark.parametrize("zs, zr, x", [(10.0, 30.0, 100.0), (10.0, 10.0, 500.0), (30.0, 10.0, 0.0),
+                                       (100.0, 3000.0, 4000.0), (5.0, 5.0, 0.0), (2.0, 250.0, 0.3)])
+def test_isovelocity_is_the_straight_line(zs, zr, x):
+    table = np.array([[0.0, 1493.0], [100.0, 1493.0], [5000.0, 1493.0]])
+    depth = 5000.0
+    tau, launch, arrival, valid = families(table, zs, zr, x, depth)
+    assert valid.all()
+    for k, image in enumerate((zr - zs, zs + zr, 2 * depth - zs - zr)):
+        length = np.hypot(x, image)
+        assert tau[k] == pytest.approx(length / 1493.0, rel=4e-15, abs=1e-17)
+        angle = np.arctan2(abs(image), x)
+        assert abs(launch[k]) == pytest.approx(angle, abs=1e-9)
+    # the constant-speed branch of the channel: the same straight line
+    out = [float(v) for v in rays.first_arrival(0.0, zs, zr, x, depth, 1493.0, *rays.profile_arrays(table))]
+    assert out[0] == pytest.approx(np.hypot(x, zr - zs) / 1493.0, rel=4e-15, abs=1e-17) and out[3] == rays.DIRECT
+
+
+@pytest.mark.parametrize("zs, zr, x", [(100.0, 900.0, 2000.0), (1000.0, 1000.0, 3000.0), (2000.0, 100.0, 5000.0),
+                                       (500.0, 600.0, 4000.0), (3000.0, 50.0, 1000.0), (40.0, 3900.0, 700.0)])
+def test_linear_gradient_is_a_circular_arc(zs, zr, x):
+    """c = c0 + g z: the ray is a circle centred at the depth where c would vanish; t = ln tan(φ/2) / g
+    between the polar angles φ of the two ends (geometry of the circle, not the layer formulas)."""
+    c0, g = 1480.0, 0.05
+    table = np.array([[0.0, c0], [5000.0, c0 + 5000.0 * g]])
+    zc = -c0 / g
+    a, b = zs - zc, zr - zc
+    xc = (x * x + b * b - a * a) / (2 * x)
+    phi_s, phi_r = np.arctan2(a, -xc), np.arctan2(b, x - xc)
+    want = abs(np.log(np.tan(phi_r / 2)) - np.log(np.tan(phi_s / 2))) / g
+    tau, launch, arrival, valid = families(table, zs, zr, x)
+    assert valid[0]
+    assert tau[0] == pytest.approx(want, abs=1e-12)
+    # grazing angle |π/2 − φ|; the arc descends until it passes under the centre (x = xc), then rises
+    assert launch[0] == pytest.approx(np.sign(xc) * abs(np.pi / 2 - phi_s), abs=1e-11)
+    assert arrival[0] == pytest.approx(np.sign(xc - x) * abs(np.pi / 2 - phi_r), abs=1e-11)
+
+
+def test_a_faster_layer_between_the_ends_casts_a_shadow():
+    """A speed maximum between source and receiver: beyond the range of the ray grazing it, no direct
+    eigenray (and the channel reports no arrival without boundaries)."""
+    table = np.array([[0.0, 1480.0], [100.0, 1500.0], [200.0, 1480.0], [1000.0, 1480.0]])
+    near, far = families(table, 50.0, 150.0, 200.0), families(table, 50.0, 150.0, 5000.0)
+    assert near[3][0] == 1 and far[3][0] == 0
+    out = rays.first_arrival(1.0, 50.0, 150.0, 5000.0, 0.0, 1500.0, *rays.profile_arrays(table))
+    assert float(out[3]) == 0
+
+
+# ------------------------------------------------------------------ numerical integration of the ray equations
+
+
+def _ivp_ray(table, zs, x, theta0, depth):
+    """Integrate dz/dr = tan θ, dθ/dr = −c'(z)/c, dτ/dr = 1/(c cos θ) in range, reflecting at 0 and ``depth``.
+    Returns (z at x, τ at x, boundaries hit)."""
+    zt, ct = table[:, 0], table[:, 1]
+
+    def rhs(r, y):
+        z, th, _ = y
+        c = np.interp(z, zt, ct)
+        k = int(np.clip(np.searchsorted(zt, z, side="right") - 1, 0, len(zt) - 2))
+        g = 0.0 if (z < zt[0] or z > zt[-1]) else (ct[k + 1] - ct[k]) / (zt[k + 1] - zt[k])
+        return [np.tan(th), -g / c, 1.0 / (c * np.cos(th))]
+
+    def top(r, y):
+        return y[0]
+
+    def bottom(r, y):
+        return y[0] - depth
+
+    top.terminal = bottom.terminal = True
+    top.direction, bottom.direction = -1, 1
+    y, r0, hits = [zs, theta0, 0.0], 0.0, []
+    while True:
+        sol = solve_ivp(rhs, (r0, x), y, method="DOP853", rtol=1e-10, atol=1e-10, events=[top, bottom],
+                        max_step=20.0)
+        if sol.status != 1:
+            return sol.y[0, -1], sol.y[2, -1], hits
+        which = 0 if len(sol.t_events[0]) else 1
+        r0, y = sol.t_events[which][0], sol.y_events[which][0].copy()
+        y[0], y[1] = (0.0, -y[1]) if which == 0 else (depth, -y[1])
+        hits.append(which)
+
+
+IVP_CASES = [("munk", 1300.0, 1300.0, 5000.0),
+             ("strong", 20.0, 60.0, 1500.0), ("strong", 100.0, 1200.0, 3000.0), ("strong", 3000.0, 300.0, 4500.0),
+             ("strong", 700.0, 700.0, 2500.0)]
+
+
+def _table(name):
+    return {"munk": munk_table(), "NCL1": profile_table("ctd:NCL1", "", 15.0, 35.0), "strong": STRONG}[name]
+
+
+@pytest.mark.parametrize("name, zs, zr, x", IVP_CASES)
+def test_against_solve_ivp(name, zs, zr, x):
+    """Within 1 µs of the ray equations integrated numerically (DOP853, tolerance 1e-12), shooting the launch
+    angle (Brent) inside a small window around ours: the same eigenray, found by the integration itself."""
+    table = _table(name)
+    depth = float(table[-1, 0])
+    tau, launch, arrival, valid = families(table, zs, zr, x, depth)
+    checked = 0
+    for k in range(3):
+        if not valid[k]:
+            continue
+        th = launch[k]
+        root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, th - 1e-5, th + 1e-5, xtol=1e-13)
+        z_end, t_end, hits = _ivp_ray(table, zs, x, root, depth)
+        assert hits == [[], [0], [1]][k]
+        assert tau[k] == pytest.approx(t_end, abs=1e-6)
+        checked += 1
+    assert checked >= 2
+
+
+# ------------------------------------------------------------------ Bellhop (pelagic)
+
+#: Bellhop's fan of launch angles [deg], its step [m] and its number of beams.
+FAN, STEP, BEAMS = 86.0, 5.0, 4001
+#: Arrivals are compared where the eigenray leaves within this angle of the horizontal [deg] (the fan's last
+#: degrees hold too few beams for Bellhop's interpolation to the receiver).
+STEEPEST = 80.0
+
+
+def _bellhop(table, source, depths, ranges, depth):
+    pg = pytest.importorskip("pelagic")  # the test extra installs it: this skips only outside it
+    tab = table[table[:, 0] < depth]
+    tab = np.vstack([tab, [depth, np.interp(depth, table[:, 0], table[:, 1])]])
+    if tab[0, 0] > 0:
+        tab = np.vstack([[0.0, tab[0, 1]], tab])
+    lines = ["'sblsim'", "1000.0", "1", "'CVW'", f"0 0.0 {depth:.4f}"]
+    lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
+    lines += ["'A' 0.0", f"{depth:.4f} 1600.00 0.0 1.8 0.8 /", "1", f"{source:.6f} /",
+              f"{len(depths)}", " ".join(f"{z:.6f}" for z in depths) + " /", f"{len(ranges)}",
+              " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'A'", f"{BEAMS}", f"{-FAN} {FAN} /",
+              f"{STEP} {depth + 100:.1f} {max(ranges) / 1000 + 1:.3f}"]
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "case.env")
+        with open(path, "w") as handle:
+            handle.write("\n".join(lines) + "\n")
+        return pg.bellhop.load(path).run().arrivals.to_pandas()
+
+
+BELLHOP_SITES = {
+    "munk": ([25.0, 400.0, 1300.0, 2500.0], [10.0, 150.0, 800.0, 1300.0, 2200.0, 4000.0],
+             [800.0, 1500.0, 2200.0, 3000.0, 3700.0, 4300.0, 5000.0], 5000.0),
+    "NCL1": ([5.0, 300.0, 900.0, 1150.0], [2.0, 50.0, 250.0, 600.0, 1000.0, 1200.0],
+             [800.0, 1500.0, 2200.0, 3000.0, 3700.0, 4300.0, 5000.0], 1220.0),
+    "strong": ([20.0, 110.0, 700.0, 3000.0], [5.0, 60.0, 200.0, 1000.0, 2500.0, 4000.0],
+               [800.0, 1500.0, 2200.0, 3000.0, 3700.0, 4300.0, 5000.0], 4500.0),
+}
+
+
+@pytest.mark.parametrize("name", ["munk", *(pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=reason))
+                                            for name, reason in (
+    ("NCL1", "open: a direct eigenray of Bellhop's 3° from ours at one geometry, not yet explained"),
+    ("strong", "open: a direct time 35 µs from Bellhop's at one geometry of the surface duct, not yet explained")))])
+def test_against_bellhop(name):
+    """Direct eigenray times within 10 µs of Bellhop's, surface- and bottom-reflected within 20 µs, over 168
+    geometries per profile (504 in all, out to 5 km and 4 km deep), the same shadowed geometries.
+
+    Bellhop's arrival of the same eigenray is the one with the same bounces whose launch angle is nearest to
+    ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
+    1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
+    of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected."""
+    table = _table(name)
+    sources, depths, ranges, depth = BELLHOP_SITES[name]
+    nodes, speeds = rays.profile_arrays(table)
+    solve = rays.eigenray_families()
+    compared, worst = [0, 0, 0], [0.0, 0.0, 0.0]
+    mismatched, other_ray = [], []
+    speed = rays._speed()
+    for zs in sources:
+        arrivals = _bellhop(table, zs, depths, ranges, depth)
+        for zr in depths:
+            for x in ranges:
+                tau, launch, _arrival, valid = (np.asarray(v).ravel() for v in solve(zs, zr, x, depth, nodes, speeds))
+                edge = [np.asarray(solve(zs, zr, x * f, depth, nodes, speeds)[3]).ravel() for f in (0.99, 1.01)]
+                here = arrivals[(arrivals.depth_m == np.float32(zr)) & (np.isclose(arrivals.range_m, x))]
+                for k, (top, bottom) in enumerate(((0, 0), (1, 0), (0, 1))):
+                    theirs = here[(here.top_bounces == top) & (here.bottom_bounces == bottom)]
+                    if edge[0][k] != edge[1][k]:
+                        continue  # at a shadow boundary
+                    if k > 0 and len(theirs):  # Bellhop's beam grazing the boundary: reflected or not, by sampling
+                        boundary = 0.0 if k == 1 else depth
+                        lo, hi = min(zs, boundary), max(zs, boundary)
+                        inside = table[(table[:, 0] > lo) & (table[:, 0] < hi), 1]
+                        fastest = max([float(speed(lo, nodes, speeds)), float(speed(hi, nodes, speeds)), *inside])
+                        graze = np.degrees(np.arccos(min(1.0, float(speed(zs, nodes, speeds)) / fastest)))
+                        if np.any(np.abs(np.abs(theirs.source_angle_degrees.values) - graze) < 0.1):
+                            continue
+                    if bool(valid[k]) != (len(theirs) > 0):
+                        mismatched.append((k + 1, zs, zr, x, bool(valid[k])))
+                        continue
+                    if not valid[k] or abs(np.degrees(launch[k])) > STEEPEST:
+                        continue
+                    nearest = np.argmin(np.abs(theirs.source_angle_degrees.values - np.degrees(launch[k])))
+                    if abs(theirs.source_angle_degrees.values[nearest] - np.degrees(launch[k])) > 0.5:
+                        other_ray.append((k + 1, zs, zr, x, np.degrees(launch[k]), theirs.source_angle_degrees.values))
+                        continue
+                    error = abs(tau[k] - theirs.travel_time_s.values[nearest])
+                    worst[k] = max(worst[k], error)
+                    compared[k] += 1
+    print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s")
+    assert not mismatched, mismatched
+    assert not other_ray, other_ray
+    assert compared[0] >= 60 and compared[1] + compared[2] >= 60
+    assert worst[0] <= 10e-6 and worst[1] <= 20e-6 and worst[2] <= 20e-6
+
+
+def test_munk_table_samples_the_canonical_profile():
+    table = munk_table()
+    assert table.shape == (256, 2) and table[0, 0] == 0.0 and table[-1, 0] == 5000.0
+    assert munk_speed(1300.0) == pytest.approx(1500.0, abs=1e-9)  # the axis: c_1
+    np.testing.assert_allclose(table[:, 1], munk_speed(table[:, 0]), rtol=0, atol=0)
+    z = np.linspace(0.0, 5000.0, 20001)
+    assert np.max(np.abs(np.interp(z, table[:, 0], table[:, 1]) - munk_speed(z))) < 0.01  # c-linear sampling
+
+
+def test_ncl1_cast_is_the_published_file_resampled():
+    data = np.loadtxt(os.path.join(os.path.dirname(rays.__file__), "data", "CTD_NCL1_Ch_Mi"))
+    assert data.shape == (985, 2)
+    kept = data[data[:, 1] > 0]
+    table = profile_table("ctd:NCL1", "", 15.0, 35.0)
+    assert table.shape == (256, 2)
+    assert table[0, 0] == pytest.approx(-kept[0, 0]) and table[-1, 0] == pytest.approx(-kept[-1, 0])
+    np.testing.assert_allclose(table[:, 1], np.interp(table[:, 0], -kept[:, 0], kept[:, 1]), atol=1e-9)
