@@ -17,12 +17,13 @@ import pytest
 from sblsim.models.acoustics.core import FLIGHT_CAPACITY
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import beacon_count, load_config
+from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import default_connections
 from sblsim.orchestrator.engines import close_handles, make_handles
 from sblsim.orchestrator.limits import step_count
 from sblsim.orchestrator.master import simulate
-from sblsim.orchestrator.run import merge_params, run, system_sources, with_replicates
+from sblsim.orchestrator.plan import make_plan
+from sblsim.orchestrator.run import merge_params, run, with_replicates
 from tests.orchestrator.test_fmus import assert_same_frames
 
 SLACK = 1e-9  # the receivers' slot slack [s]
@@ -55,9 +56,10 @@ class Watched:
 
 def watched_run(cfg, replicates=(0, 1)):
     """The record, the receiver's uses (replicate, seq, use time, rx_time) and the channel's final state."""
-    cfgs = with_replicates(cfg, list(replicates))
-    n, sim = beacon_count(cfg), cfg["simulation"]
-    handles = make_handles("local", None, n, system_sources(cfg))
+    plan = make_plan(cfg)
+    cfgs = with_replicates(plan, list(replicates))
+    n, sim = plan.n_beacons, cfg["simulation"]
+    handles = make_handles("local", None, n, dict(plan.sources))
     try:
         for name, handle in handles.items():
             handle.setup(*merge_params(cfgs, name, handle.parameters))
