@@ -324,3 +324,24 @@ def test_engines_agree_with_eigenrays(fmu_dir, overrides):
     assert (received["launch_angle"] - received["arrival_angle"]).abs().min() > 1e-6  # refracted, not the chord
     assert_same_frames(local.timeseries, fmu.timeseries)
     assert_same_frames(local.metrics, fmu.metrics)
+
+
+def test_the_channel_fmu_of_eigenrays_validates(fmu_dir):
+    """The channel FMU that runs ``ray`` (the same FMU: the choice is a parameter) passes fmpy's validation and
+    declares the propagation (0 straight, 1 ray), the water depth [m] and the eigenray's outputs."""
+    from fmpy import read_model_description
+
+    from sblsim.fmus.build import fmu_path, validate
+
+    path = fmu_path(fmu_dir, "acoustics")
+    assert validate(path) == []
+    variables = {v.name: v for v in read_model_description(str(path)).modelVariables}
+    propagation, depth = variables["propagation"], variables["water_depth"]
+    assert (propagation.causality, propagation.type, propagation.start, propagation.min, propagation.max) == \
+        ("parameter", "Integer", "0", "0", "1")
+    assert "0: straight, 1: ray" in propagation.description
+    assert (depth.causality, depth.type, depth.unit, float(depth.min), float(depth.max)) == \
+        ("parameter", "Real", "m", 0.0, 11000.0)
+    assert {(variables[n].causality, variables[n].unit) for n in ("launch_angle", "arrival_angle")} == \
+        {("output", "rad")}
+    assert (variables["arrival"].causality, variables["arrival"].type) == ("output", "Integer")
