@@ -1,7 +1,7 @@
 """Campaign throughput, with every ratio measured in this one run on this machine.
 
 Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against REV] [--skip-paper]
-                                             [--skip-scaling]
+                                             [--skip-scaling] [--ray | --only-ray] [--ray-runs N]
 
 1. **Engines**: a sample of the `paper` study (semicircle, one design cell at T = 0.1 s and one at
    T = 1 s, ``--replicates`` runs each) stepped three ways in this process: the local engine one
@@ -12,7 +12,9 @@ Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against
    replicate-step, its ratio to **one FilterPy ``ExtendedKalmanFilter`` predict + update** (6 states, four
    ranges and the depth, the paper's EKF step; the best of seven rounds) timed here, and where the time
    goes (each component's compiled step, the compiled master loop, the metrics and the bound); then the
-   same chunk for SBL with TWTT ranging, LBL and USBL, against the SBL chunk.
+   same chunk for SBL with TWTT ranging, LBL and USBL, against the SBL chunk. With ``--ray`` (or alone with
+   ``--only-ray``): the chunk of SBL, LBL and USBL through the Munk profile with ``acoustics.propagation =
+   ray`` beside ``straight``, alternated in this run: µs per replicate-step and the ratio (target ≤ 1.5×).
 3. With ``--numpy REV``: the same chunk on the batched numpy engine of an earlier revision (e.g.
    ``9903b13``), timed the same way in a subprocess from a temporary git worktree.
    With ``--against REV``: the same chunk on the compiled engine of an earlier revision, timed the same
@@ -184,6 +186,50 @@ def system_timing(per_step: float) -> None:
         print(f"     {label:44s} {cost * 1e6:.2f} us per replicate-step, {cost / per_step:.2f}x the SBL chunk")
 
 
+#: The systems whose chunk is timed with eigenrays beside the straight line (``--ray``): their ``--set`` overrides.
+RAY_SYSTEMS = {"SBL": (), "LBL": SYSTEM_CHUNKS["LBL (4 transponders on a 50 m circle)"],
+               "USBL": ("platform.system=usbl",)}
+#: The profile of both propagations' chunks (a deep one: the rays bend), and the issue's target for the ratio.
+RAY_PROFILE, RAY_TARGET = "munk", 1.5
+
+
+def propagation_timing(runs: int = CHUNK_RUNS, duration: float = CHUNK_DURATION,
+                       rounds: int = 3) -> dict[str, tuple[float, float, object, object]]:
+    """The chunk of each system of :data:`RAY_SYSTEMS` with ``acoustics.propagation = ray`` beside ``straight``
+    (both through :data:`RAY_PROFILE`), each timed after a first run, the two alternated ``rounds`` times (the
+    best of each: a load on the machine falls on both alike); prints µs per replicate-step and their ratio.
+
+    Returns
+    -------
+    dict
+        System -> (straight, ray) s per replicate-step and the two runs' results.
+    """
+    print(f"\n2b. eigenrays (acoustics.propagation = ray) beside the straight line, the same chunk ({runs} runs x "
+          f"{duration:g} s, profile {RAY_PROFILE}), best of {rounds} alternated:")
+    out = {}
+    for label, overrides in RAY_SYSTEMS.items():
+        batches, records, best, results = {}, {}, {}, {}
+        for propagation in ("straight", "ray"):
+            cfg = load_config("semicircle", [f"simulation.duration={duration}", *overrides,
+                                             f"acoustics.sound_speed_profile={RAY_PROFILE}",
+                                             f"acoustics.propagation={propagation}"], seed=1)
+            batches[propagation], records[propagation] = with_replicates(cfg, range(runs)), RecordBuffer()
+            run_batch(batches[propagation], timeseries=False, records=records[propagation])  # first time
+        for _ in range(rounds):
+            for propagation, cfgs in batches.items():
+                start = time.perf_counter()
+                results[propagation] = run_batch(cfgs, timeseries=False, records=records[propagation])
+                wall = time.perf_counter() - start
+                best[propagation] = min(wall, best.get(propagation, wall))
+        steps = runs * results["ray"].steps
+        straight, ray = best["straight"] / steps, best["ray"] / steps
+        print(f"     {label:5s} straight {straight * 1e6:7.2f} us, ray {ray * 1e6:7.2f} us per replicate-step: "
+              f"{ray / straight:.2f}x ({'within' if ray / straight <= RAY_TARGET else 'beyond'} the target "
+              f"{RAY_TARGET}x)")
+        out[label] = (straight, ray, results["straight"], results["ray"])
+    return out
+
+
 def chunk_timing() -> float:
     """The benchmark chunk timed after a first run in this process (best of three), and its profile; s per
     replicate-step."""
@@ -282,12 +328,22 @@ def main() -> None:
     parser.add_argument("--scale", type=int, default=128, help="replicates per cell of the 1x million-study cut")
     parser.add_argument("--skip-paper", action="store_true", help="skip the whole-study runs")
     parser.add_argument("--skip-scaling", action="store_true", help="skip the study-size runs")
+    parser.add_argument("--ray", action="store_true",
+                        help="also time the chunk with eigenrays (acoustics.propagation = ray) beside the straight "
+                             "line for SBL, LBL and USBL")
+    parser.add_argument("--only-ray", action="store_true", help="time only that (implies --ray)")
+    parser.add_argument("--ray-runs", type=int, default=CHUNK_RUNS, help="runs of the chunk of --ray")
     args = parser.parse_args()
     study = load_study("paper")
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, numpy {np.__version__}\n")
+    if args.only_ray:
+        propagation_timing(args.ray_runs)
+        return
     engines(study, args.replicates)
     per_step = chunk_timing()
     system_timing(per_step)
+    if args.ray:
+        propagation_timing(args.ray_runs)
     try:
         ekf = filterpy_step()
         print(f"   one FilterPy ExtendedKalmanFilter predict + update (6 states, 4 ranges + depth): "

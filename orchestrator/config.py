@@ -33,7 +33,7 @@ from typing import Any, Iterable
 import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
-from sblsim.models.acoustics.core import check_in_flight
+from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight
 from sblsim.models.acoustics.sound_speed import PROFILE_SOURCES
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
@@ -42,6 +42,7 @@ from sblsim.models.receiver.core import clock_parameters
 from sblsim.models.systems import SYSTEMS
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
+from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.engines import read_description
 from sblsim.orchestrator.limits import check_steps
@@ -427,6 +428,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
             model.fmu_parameters(cfg[name], platform_offsets(cfg["platform"]).shape[0])
     check_geometry(cfg["platform"])
     check_diver(cfg)
+    _check_water_depth(cfg)
     _check_duration(sim, cfg["target"])
     return cfg
 
@@ -533,6 +535,36 @@ def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
         check_steps(sim["duration"], T, what=what)
     except ModelError as exc:
         raise ConfigError(str(exc)) from None
+
+
+def _check_water_depth(cfg: dict[str, dict]) -> None:
+    """Refuse a water depth (``acoustics.water_depth``, 0: none) above a transducer or not below the diver.
+
+    The transducers' depths are the system's lever arms at the mean heading (LBL: its transponders at
+    ``platform.seafloor_depth``), the diver's the deepest waypoint of a trajectory file or ``target.depth`` (the
+    start of the other trajectories: a diver that a random walk takes below a given water depth later in a run is
+    not refused; its reflected eigenrays are then those of the depths the solve is given).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``acoustics.water_depth``, the depth it must exceed and the allowed range.
+    """
+    depth = cfg["acoustics"]["water_depth"]
+    if depth <= 0.0:
+        return
+    platform, target = cfg["platform"], cfg["target"]
+    deepest = [(float(SYSTEMS[platform["system"]].lever_arms(platform)[:, 2].max()), "the deepest transducer")]
+    if target["trajectory"] == "file":
+        source = "target.trajectory_file" if target.get("trajectory_file") else "target.waypoints"
+        deepest.append((float(file_waypoints(target)[:, 3].max()), f"the diver, the deepest waypoint of {source}"))
+    else:
+        deepest.append((float(target["depth"]), "the diver, target.depth"))
+    below, what = max(deepest)
+    if depth < below or (depth == below and what.startswith("the diver")):
+        bracket = "(" if what.startswith("the diver") else "["
+        raise ConfigError(f"acoustics.water_depth: {depth:g} m is above {what} ({below:g} m); allowed: 0 "
+                          f"(no surface or bottom reflection) or a depth in {bracket}{below:g}, {MAX_WATER_DEPTH:g}] m")
 
 
 def _check_system(cfg: dict[str, dict], given: set[str]) -> None:

@@ -211,6 +211,25 @@ CASES = {
                              "acoustics.sound_speed_profile"),
     "profile table": (["run", "semicircle", *S, "acoustics.sound_speed_profile=table",
                        *S, "acoustics.sound_speed_table=0 1500; 10"], "acoustics.sound_speed_table"),
+    # run: propagation and the site's water depth (the key and its allowed range in the one line)
+    "propagation curved": (["run", "semicircle", *S, "acoustics.propagation=curved"],
+                           "acoustics.propagation: 'curved' is not allowed; one of straight, ray"),
+    "water depth negative": (["run", "semicircle", *S, "acoustics.propagation=ray", *S, "acoustics.water_depth=-1"],
+                             "acoustics.water_depth: -1.0 is outside the allowed range [0, 11000] m"),
+    "water depth 20000": (["run", "semicircle", *S, "acoustics.water_depth=20000"],
+                          "acoustics.water_depth: 20000.0 is outside the allowed range [0, 11000] m"),
+    "water depth above the diver": (["run", "semicircle", *S, "acoustics.propagation=ray", *S, "target.depth=30",
+                                     *S, "acoustics.water_depth=20"],
+                                    "acoustics.water_depth: 20 m is above the diver, target.depth (30 m); allowed: 0 "
+                                    "(no surface or bottom reflection) or a depth in (30, 11000] m"),
+    "water depth above a waypoint": (["run", "semicircle", *T, "target.waypoints=0 0 0 5; 10 5 5 40", *S,
+                                      "acoustics.water_depth=20"],
+                                     "acoustics.water_depth: 20 m is above the diver, the deepest waypoint of "
+                                     "target.waypoints (40 m)"),
+    "water depth above the transponders": (["run", "semicircle", *S, "platform.system=lbl", *S,
+                                            "acoustics.water_depth=20"],
+                                           "acoustics.water_depth: 20 m is above the deepest transducer (50 m); "
+                                           "allowed: 0 (no surface or bottom reflection) or a depth in [50, 11000] m"),
     # run: engines, outputs, packages
     "run fmu engine without fmus": (["run", "semicircle", "--engine", "fmu", "--fmu-dir", "emptyfmus"], "fmu"),
     "run six beacons on the cross": (["run", "semicircle", "--set", "platform.beacons=6"], "platform.beacons"),

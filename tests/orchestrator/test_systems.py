@@ -297,3 +297,51 @@ def test_engines_agree_for_every_system(fmu_dir, overrides):
     assert not local.timeseries["packet_valid"].all()
     assert_same_frames(local.timeseries, fmu.timeseries)
     assert_same_frames(local.metrics, fmu.metrics)
+
+
+#: id -> overrides: eigenrays through the Munk profile (``acoustics.propagation = "ray"``) for every system, and
+#: with a water depth (the surface- and bottom-reflected eigenrays solved too)
+RAY = ["acoustics.propagation=ray", "acoustics.sound_speed_profile=munk"]
+RAY_CASES = {
+    "sbl-ray": ["platform.system=sbl", *RAY],
+    "lbl-ray": ["platform.system=lbl", *RAY],
+    "usbl-ray": ["platform.system=usbl", *RAY],
+    "sbl-ray-water-depth": ["platform.system=sbl", *RAY, "acoustics.water_depth=8"],
+    "lbl-ray-water-depth": ["platform.system=lbl", *RAY, "acoustics.water_depth=50"],
+}
+
+
+@pytest.mark.parametrize("overrides", RAY_CASES.values(), ids=RAY_CASES.keys())
+def test_engines_agree_with_eigenrays(fmu_dir, overrides):
+    """``ray`` through both engines: every time-series column (travel time, launch and arrival angles, the path)
+    and every metric equal to 1e-9; the rays bend (a straight chord leaves and arrives at one angle)."""
+    cfg = load_config("random-walk", overrides + ["simulation.duration=5", "acoustics.loss_pct=10"], seed=9)
+    local = run(cfg, "local", replicates=[0, 1])
+    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
+    assert local.steps == fmu.steps == 50
+    received = local.timeseries[local.timeseries["arrival"] > 0]
+    assert len(received) > 20
+    assert (received["launch_angle"] - received["arrival_angle"]).abs().min() > 1e-6  # refracted, not the chord
+    assert_same_frames(local.timeseries, fmu.timeseries)
+    assert_same_frames(local.metrics, fmu.metrics)
+
+
+def test_the_channel_fmu_of_eigenrays_validates(fmu_dir):
+    """The channel FMU that runs ``ray`` (the same FMU: the choice is a parameter) passes fmpy's validation and
+    declares the propagation (0 straight, 1 ray), the water depth [m] and the eigenray's outputs."""
+    from fmpy import read_model_description
+
+    from sblsim.fmus.build import fmu_path, validate
+
+    path = fmu_path(fmu_dir, "acoustics")
+    assert validate(path) == []
+    variables = {v.name: v for v in read_model_description(str(path)).modelVariables}
+    propagation, depth = variables["propagation"], variables["water_depth"]
+    assert (propagation.causality, propagation.type, propagation.start, propagation.min, propagation.max) == \
+        ("parameter", "Integer", "0", "0", "1")
+    assert "0: straight, 1: ray" in propagation.description
+    assert (depth.causality, depth.type, depth.unit, float(depth.min), float(depth.max)) == \
+        ("parameter", "Real", "m", 0.0, 11000.0)
+    assert {(variables[n].causality, variables[n].unit) for n in ("launch_angle", "arrival_angle")} == \
+        {("output", "rad")}
+    assert (variables["arrival"].causality, variables["arrival"].type) == ("output", "Integer")
