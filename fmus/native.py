@@ -28,10 +28,10 @@ import casadi as ca
 import numpy as np
 import platformdirs
 
+import sblsim.models
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
-import sblsim.models
 from sblsim.models import MODELS
 from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
