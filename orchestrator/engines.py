@@ -127,7 +127,8 @@ class LocalHandle:
         self.model = model or COMPONENTS[component]
         self.n_beacons = n_beacons
         ports, self.parameters, inputs, outputs, types = _model_ports(self.model, int(n_beacons))
-        self.ports, self.input_names, self.output_names, self._types = list(ports), list(inputs), list(outputs), list(types)
+        self.ports, self.input_names = list(ports), list(inputs)
+        self.output_names, self._types = list(outputs), list(types)
         self.batch = None
 
     def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:
