@@ -317,8 +317,9 @@ class Acoustics(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         packet = [v.name for v in cls.outputs(n)]
-        # what a packet in flight carries: every output but the refusal signal
-        carried = [name for name in packet if name not in {v.name for v in OVERFLOW}]
+        # what a packet in flight carries: every output but the refusal signal and what its slot counter gives
+        # (the beacon and the transmit epoch, computed again at delivery as the slot computed them)
+        carried = [name for name in packet if name not in {v.name for v in OVERFLOW} | {"beacon_id", "tx_time"}]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
                            + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES)])
@@ -434,10 +435,10 @@ class Acoustics(Component):
                 if direction:
                     out.update(zip(("azimuth", "elevation"),
                         (ca.if_else(valid, a, 0.0) for a in doa(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
-                return {"k": k, **send(x, out, arrival - t_k)}
+                return {"k": k, **send(x, p, out, arrival - t_k)}
             return handler
 
-        def send(x, out, elapsed):
+        def send(x, p, out, elapsed):
             """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
             free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
             ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
@@ -451,7 +452,8 @@ class Acoustics(Component):
                 placed = ca.logic_or(placed, free)
             longest = elapsed  # the longest in flight then, for the refusal's message
             for j in range(FLIGHT_CAPACITY):
-                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - x["q_tx_time"][j], 0.0))
+                sent_at = x["t0"] + x["q_packet_seq"][j] * p["slot_period"]
+                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - sent_at, 0.0))
             refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
             return {**{name: ca.vertcat(*values) for name, values in new.items()}, "overflow_travel_time": refused}
 
@@ -476,8 +478,16 @@ class Acoustics(Component):
                 better = ca.logic_and(flag, ca.logic_or(rx < best_rx, ca.logic_and(rx == best_rx, seq < best_seq)))
                 best = ca.if_else(better, j, best)
                 best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
-            out = {name: select(best, [x[f"q_{name}"][j] for j in range(FLIGHT_CAPACITY)]) for name in carried}
-            used = ca.vertcat(*[ca.if_else(best == j, 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
+            at = [best == j for j in range(FLIGHT_CAPACITY)]
+            out = {}
+            for name in carried:  # rows[best], as expressions.select sums it, each place's test made once
+                total = 0
+                for j in range(FLIGHT_CAPACITY):
+                    total = total + ca.if_else(at[j], x[f"q_{name}"][j], 0)
+                out[name] = total
+            seq = out["packet_seq"]
+            out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
+            used = ca.vertcat(*[ca.if_else(at[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
             return {**out, "q_used": used, "delivered_end": t + h}
 
         def doa(direction, u, p, w_angle):
