@@ -197,18 +197,21 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     init = _function("init", program.init, program.init_streams, slots, lines, choices)
     step = _function("step", program.step, program.step_streams, slots, lines, choices)
     output = _function("output", program.output, (), slots, lines, choices)
-    events = []
+    events, when_index, when_mask = [], [], []
     for ev in program.events:
         handler = _function(f"event_{ev.name}", ev.handler, ev.streams, slots, lines, choices)
-        when_index, when_mask = -1, 0
-        if ev.when is not None:  # a bit per choice the event runs with (their indices: what p holds)
-            when_index, options = choices[ev.when[0]]
+        first = len(when_index)
+        for parameter, runs_with in ev.when:  # a bit per choice the event runs with (their indices: what p holds)
+            index, options = choices[parameter]
             if len(options) > 64:
-                raise ValueError(f"event {ev.name}: {ev.when[0]} has more than 64 choices")
-            when_mask = sum(1 << options.index(c) for c in set(ev.when[1]))
+                raise ValueError(f"event {ev.name}: {parameter} has more than 64 choices")
+            when_index.append(str(index))
+            when_mask.append(f"{sum(1 << options.index(c) for c in set(runs_with))}ULL")
         events.append(f"{{.name = {_cstr(ev.name)}, .guard = {ev.guard.name()}, "
-                      f".guard_work = {ev.guard.name()}_work, .handler = {handler}, .when_index = {when_index}, "
-                      f".when_mask = {when_mask}ULL}}")
+                      f".guard_work = {ev.guard.name()}_work, .handler = {handler}, .n_when = {len(ev.when)}, "
+                      f".when_index = when_index + {first}, .when_mask = when_mask + {first}}}")
+    lines.append(f"static const int when_index[] = {{{', '.join(when_index) or '0'}}};")
+    lines.append(f"static const uint64_t when_mask[] = {{{', '.join(when_mask) or '0'}}};")
     empty = "{.name = NULL}"
     lines.append("static const sblsim_event events[] = {\n    " + (",\n    ".join(events) or empty) + "\n};")
     seeds = ", ".join(str(p_index.get(name, -1)) for name in SEED_NAMES)

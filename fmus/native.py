@@ -3,9 +3,12 @@
 The library holds the same generated code and runtime as the FMUs, plus a
 batch API (``fmus/c/sblsim_batch.c``) that steps B replicates of a model in
 one call. It is built on first use for a beacon count (about ten seconds)
-into a cache folder, keyed by a hash of its sources and the compiler flags,
-and re-used by every later process: ``$SBLSIM_CACHE_DIR`` or the user's
-cache folder (``platformdirs``).
+into a cache folder, keyed by a hash of what its sources are generated from
+(the package's model and FMU sources, casadi's version) and the compiler
+flags, and re-used by every later process: ``$SBLSIM_CACHE_DIR`` or the
+user's cache folder (``platformdirs``). A process generates the sources only
+when it compiles them, or when a model or system from outside the package
+takes part (then the key hashes the generated sources themselves).
 
 :class:`NativeBatch` wraps one batch: parameter, input and output matrices
 are numpy views of the library's memory (B rows each).
@@ -25,13 +28,14 @@ import casadi as ca
 import numpy as np
 import platformdirs
 
+import sblsim.models
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
 from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
-from sblsim.models.systems import interface_system
+from sblsim.models.systems import SYSTEMS, interface_system
 
 #: The compiled loop of a system's own bound (the library of that system's interface only).
 SYSTEM_BOUND = "sblsim_system_bound.c"
@@ -73,6 +77,24 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     return sorted(directory.glob("*.c"))
 
 
+def _built_in(models: tuple[type, ...] | None) -> bool:
+    """Every model compiled in and every registered system comes from this package."""
+    classes = list(models or MODELS.values()) + [type(s) for s in SYSTEMS.values()]
+    return all(c.__module__.startswith("sblsim.") for c in classes)
+
+
+@lru_cache(maxsize=1)
+def _package_digest() -> bytes | None:
+    """A hash of every source the generated code is made from: the ``.py`` files of ``sblsim.models`` and
+    ``sblsim.fmus``, the runtime's C (``fmus/c``) and casadi's version (None when the files are not there)."""
+    models, fmus = Path(sblsim.models.__file__).parent, Path(__file__).parent
+    files = sorted(models.rglob("*.py")) + sorted(fmus.glob("*.py")) + sorted(C_DIR.glob("*.[ch]"))
+    digest = hashlib.sha256(ca.__version__.encode())
+    for path in files:
+        digest.update(path.name.encode() + path.read_bytes())
+    return digest.digest() if files else None
+
+
 @lru_cache(maxsize=None)
 def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type, ...] | None = None) -> Path:
     """The compiled batch library for ``n_beacons`` beacons, built into the cache if missing.
@@ -90,16 +112,23 @@ def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type,
         If no compiler is found or it fails.
     """
     cc = find_compiler(compiler)
+    flags = " ".join(FLAGS + cc.command[-1:]).encode()
+    package = _package_digest() if _built_in(models) else None
     with tempfile.TemporaryDirectory(prefix="sblsim_native_") as tmp:
-        files = write_library_sources(n_beacons, Path(tmp), models)
-        digest = hashlib.sha256()
-        for path in sorted(Path(tmp).iterdir()):
-            digest.update(path.name.encode() + path.read_bytes())
-        digest.update(" ".join(FLAGS + cc.command[-1:]).encode())
+        digest = hashlib.sha256(flags)
+        if package is not None:  # what the sources are generated from: no need to generate them to know them
+            names = [model.__name__ for model in (models or MODELS.values())] + list(SYSTEMS)
+            digest.update(package + " ".join(names).encode() + str(n_beacons).encode())
+        else:
+            write_library_sources(n_beacons, Path(tmp), models)
+            for path in sorted(Path(tmp).iterdir()):
+                digest.update(path.name.encode() + path.read_bytes())
         key = digest.hexdigest()[:16]
         target = cache_dir() / f"libsblsim-{key}-n{n_beacons}{PLATFORMS[host_platform()][1]}"
         if target.is_file():
             return target
+        files = write_library_sources(n_beacons, Path(tmp), models) if package is not None else sorted(
+            Path(tmp).glob("*.c"))
         target.parent.mkdir(parents=True, exist_ok=True)
         partial = target.parent / f".{target.name}.{os.getpid()}.partial"
         if sys.stderr.isatty():  # the first run on a machine waits seconds for this: say so at a terminal

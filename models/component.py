@@ -101,14 +101,14 @@ class Component:
         ModelError
             On an unknown name, or a value outside its allowed range.
         """
-        declared = cls.fmu_parameters_declared(n_beacons)
-        known = {v.name: v for v in declared}
-        unknown = sorted(set(values) - set(known))
+        index, starts = _parameter_index(cls, int(n_beacons))
+        unknown = sorted(set(values) - set(index))
         if unknown:
             raise ModelError(f"{cls.name}.{unknown[0]}: not a parameter of the {cls.name} FMU")
-        out = np.empty(len(declared))
-        for k, v in enumerate(declared):
-            value = values.get(v.name, v.start)
+        out = starts.copy()
+        for name in sorted(values, key=lambda name: index[name][0]):  # checked in the declared order
+            k, v = index[name]
+            value = values[name]
             out[k] = v.code(value if v.in_table else v.coerce(value, f"{cls.name}.{v.name}"))
         return out
 
@@ -164,6 +164,16 @@ class Component:
 @lru_cache(maxsize=None)
 def _config_parameters(cls: type, n_beacons: int) -> tuple[Variable, ...]:
     return tuple(v for v in cls.variables(n_beacons) if v.causality == "parameter" and v.scope != "fmu")
+
+
+@lru_cache(maxsize=None)
+def _parameter_index(cls: type, n_beacons: int) -> tuple[dict[str, tuple[int, Variable]], np.ndarray]:
+    """Each FMU parameter's place in ``p`` and declaration, and the ``p`` of the declared starts (read-only)."""
+    declared = _by_causality(cls, n_beacons, "parameter")
+    starts = np.array([v.code(v.start if v.in_table else v.coerce(v.start, f"{cls.name}.{v.name}"))
+                       for v in declared], dtype=float)
+    starts.flags.writeable = False
+    return {v.name: (k, v) for k, v in enumerate(declared)}, starts
 
 
 @lru_cache(maxsize=None)

@@ -80,10 +80,11 @@ class Event:
         ``(x, u, p, d, w, t, h) -> x``.
     streams : tuple of Stream
         Random numbers of the handler.
-    when : (str, tuple of str), optional
-        ``(choice parameter, choices)``: the event exists only in a run whose parameter holds one of these
-        choices; in any other neither its guard nor its handler runs, so a run computes only what its
-        configuration uses (e.g. the channel's one-way and two-way slots, ``("ranging", ("twtt",))``). A
+    when : tuple of (str, tuple of str)
+        ``(choice parameter, choices)`` pairs: the event exists only in a run where every one of these
+        parameters holds one of its choices; in any other neither its guard nor its handler runs, so a run
+        computes only what its configuration uses (e.g. the channel's slot of one-way ranging along the
+        straight line, ``(("ranging", ("owtt",)), ("propagation", ("straight",)))``). Empty: every run. A
         choice parameter is fixed for a run.
     """
 
@@ -91,7 +92,7 @@ class Event:
     guard: ca.Function
     handler: ca.Function
     streams: tuple[Stream, ...] = ()
-    when: tuple[str, tuple[str, ...]] | None = None
+    when: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -287,21 +288,22 @@ class ProgramBuilder:
         return f, tuple(streams)
 
     def event(self, name: str, guard, handler, streams: Sequence[Stream] = (),
-              when: tuple[str, Sequence[str]] | None = None) -> Event:
+              when: Mapping[str, Sequence[str]] | None = None) -> Event:
         """An :class:`Event` from ``guard(x, u, p, d, t, h) -> bool expression`` and
-        ``handler(x, u, p, d, w, t, h) -> {changed block: value}``, for the runs ``when`` selects (see
-        :class:`Event`; None: every run).
+        ``handler(x, u, p, d, w, t, h) -> {changed block: value}``, for the runs ``when`` selects: a mapping
+        of choice parameters to the choices the event runs with (see :class:`Event`; None: every run).
 
         Raises
         ------
         ValueError
             If ``when`` names no choice parameter of the component, a choice it does not have, or none.
         """
-        if when is not None:
-            choice = next((v for v in self.param_vars if v.name == when[0] and v.choices is not None), None)
-            if choice is None or isinstance(when[1], str) or not when[1] or not set(when[1]) <= set(choice.choices):
-                raise ValueError(f"event {name}: {when[0]!r} is not a choice parameter with the choices {when[1]!r}")
-            when = (str(when[0]), tuple(str(c) for c in when[1]))
+        pairs = []
+        for parameter, options in (when or {}).items():
+            choice = next((v for v in self.param_vars if v.name == parameter and v.choices is not None), None)
+            if choice is None or isinstance(options, str) or not options or not set(options) <= set(choice.choices):
+                raise ValueError(f"event {name}: {parameter!r} is not a choice parameter with the choices {options!r}")
+            pairs.append((str(parameter), tuple(str(c) for c in options)))
         x = self.X.unpack(self.x)
         u, p, d = self.inputs(), self.params(), self.D.unpack(self.d)
         g = ca.Function(f"{self.prefix}_{name}_guard", [self.x, self.u, self.p, self.d, self.t, self.h],
@@ -310,7 +312,7 @@ class ProgramBuilder:
         values = handler(x, u, p, d, ws, self.t, self.h)
         f = ca.Function(f"{self.prefix}_{name}", [self.x, self.u, self.p, self.d, w, self.t, self.h],
                         [self.X.pack(values, x)], ["x", "u", "p", "d", "w", "t", "h"], ["x_next"])
-        return Event(name, g, f, tuple(streams), when)
+        return Event(name, g, f, tuple(streams), tuple(pairs))
 
     def output(self, body) -> ca.Function:
         """``output(x, p, d, t) -> y`` from ``body(x, p, d, t) -> {output name: value}`` (every output)."""

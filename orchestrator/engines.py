@@ -26,6 +26,7 @@ import shutil
 import tempfile
 import zipfile
 from collections import deque, namedtuple
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping, Protocol, Sequence
 
@@ -46,6 +47,17 @@ FMU_BEACONS = 4
 
 #: A variable as an engine exposes it (what the connection checks need).
 Port = namedtuple("Port", "name causality type unit")
+
+
+@lru_cache(maxsize=None)
+def _model_ports(model: type, n_beacons: int) -> tuple[tuple[Port, ...], frozenset, tuple[str, ...],
+                                                      tuple[str, ...], tuple[Any, ...]]:
+    """A model's ports, parameter names, input and output names and output dtypes (made once per model)."""
+    ports = tuple(Port(v.name, v.causality, v.fmi_type, v.unit) for v in model.fmu_variables(n_beacons))
+    parameters = frozenset(v.name for v in model.fmu_parameters_declared(n_beacons))
+    outputs = model.outputs(n_beacons)
+    return (ports, parameters, tuple(v.name for v in model.inputs(n_beacons)), tuple(v.name for v in outputs),
+            tuple(DTYPES[v.fmi_type] for v in outputs))
 
 #: numpy type of each FMI type, as the engines return outputs.
 DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
@@ -114,12 +126,9 @@ class LocalHandle:
         self.component = component
         self.model = model or COMPONENTS[component]
         self.n_beacons = n_beacons
-        variables = self.model.fmu_variables(n_beacons)
-        self.ports = [Port(v.name, v.causality, v.fmi_type, v.unit) for v in variables]
-        self.parameters = frozenset(v.name for v in self.model.fmu_parameters_declared(n_beacons))
-        self.input_names = [v.name for v in self.model.inputs(n_beacons)]
-        self.output_names = [v.name for v in self.model.outputs(n_beacons)]
-        self._types = [DTYPES[v.fmi_type] for v in self.model.outputs(n_beacons)]
+        ports, self.parameters, inputs, outputs, types = _model_ports(self.model, int(n_beacons))
+        self.ports, self.input_names = list(ports), list(inputs)
+        self.output_names, self._types = list(outputs), list(types)
         self.batch = None
 
     def setup(self, params: Mapping[str, Any], replicates: Sequence[int], t0: float = 0.0) -> None:

@@ -312,7 +312,9 @@ int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t
     for (k = 0; k < m->n_events; k++) {
         const sblsim_event* e = &m->events[k];
         long fired = 0;
-        if (e->when_index >= 0 && !((e->when_mask >> (int)s->p[e->when_index]) & 1u)) continue; /* not this run's */
+        int c, runs = 1;
+        for (c = 0; c < e->n_when; c++) runs = runs && ((e->when_mask[c] >> (int)s->p[e->when_index[c]]) & 1u);
+        if (!runs) continue; /* not this run's */
         for (;;) {
             a[0] = s->x;
             a[4] = &t;

@@ -43,15 +43,16 @@ typedef struct {
     int n_streams;
 } sblsim_function;
 
-/* An event; it runs in a run whose choice parameter p[when_index] has its bit in when_mask (when_index -1:
-   in every run). */
+/* An event; it runs in a run where, for each of its n_when conditions c, the choice parameter
+   p[when_index[c]] has its bit in when_mask[c] (n_when 0: in every run). */
 typedef struct {
     const char* name;
     sblsim_fn guard;
     sblsim_work_fn guard_work;
     sblsim_function handler;
-    int when_index;
-    uint64_t when_mask;
+    int n_when;
+    const int* when_index;
+    const uint64_t* when_mask;
 } sblsim_event;
 
 /* A parameter's declared type and range (checked at the end of initialization). */

@@ -82,7 +82,6 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import Any, Mapping
 
 import casadi as ca
@@ -92,7 +91,7 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, n
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import sample_due, select, switch
+from sblsim.models.expressions import sample_due, select
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -318,8 +317,9 @@ class Acoustics(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         packet = [v.name for v in cls.outputs(n)]
-        # what a packet in flight carries: every output but the refusal signal
-        carried = [name for name in packet if name not in {v.name for v in OVERFLOW}]
+        # what a packet in flight carries: every output but the refusal signal and what its slot counter gives
+        # (the beacon and the transmit epoch, computed again at delivery as the slot computed them)
+        carried = [name for name in packet if name not in {v.name for v in OVERFLOW} | {"beacon_id", "tx_time"}]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
                            + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES)])
@@ -345,8 +345,9 @@ class Acoustics(Component):
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
 
-        def slot(ranging):
-            """The handler of a slot: of the interface's system (USBL) or of ``ranging`` (SBL and LBL)."""
+        def slot(ranging, propagation):
+            """The handler of a slot: of the interface's system (USBL) or of ``ranging`` (SBL and LBL), with the
+            travel times of ``propagation``."""
             def handler(x, u, p, d, w, t, h):
                 k = x["k"] + 1
                 t_k = x["t0"] + k * p["slot_period"]
@@ -363,21 +364,20 @@ class Acoustics(Component):
                     def path(tau):
                         receive = position + velocity * (tau if offset is None else offset + tau)
                         distance = ca.norm_2(receive - beacon)
+                        horizontal = ca.norm_2(receive[:2] - beacon[:2])
+                        chord = ca.atan2(receive[2] - beacon[2], horizontal)
                         speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
                                               d["nodes"], d["slowness"])
-                        straight = distance / speed
-                        # ray: the earliest eigenray (evaluated only in ray runs: a switch on the choice)
-                        horizontal = ca.norm_2(receive[:2] - beacon[:2])
-                        ray = ca.if_else(p["propagation"] > 0.5, 1.0 + (p["sound_speed_rows"] > 0), 0.0)
-                        r_tau, r_launch, r_arrival, r_kind = _eigenray()(
-                            ray, beacon[2], receive[2], horizontal, p["water_depth"], p["sound_speed_true"],
-                            d["nodes"], d["speeds"])
-                        chord = ca.atan2(receive[2] - beacon[2], horizontal)
-                        # a shadow zone (no arrival): the packet is lost; the straight line keeps the rest finite
-                        use_ray = ca.logic_and(p["propagation"] > 0.5, r_kind > 0)
-                        tau = ca.if_else(use_ray, r_tau, straight)
-                        angles = (ca.if_else(use_ray, r_launch, chord), ca.if_else(use_ray, r_arrival, chord),
-                                  ca.if_else(p["propagation"] > 0.5, r_kind, 1.0))
+                        if propagation == "straight":
+                            return distance / speed, distance, receive, (chord, chord, 1.0)
+                        # ray: the earliest eigenray; a shadow zone (no arrival) loses the packet, and the
+                        # straight line keeps the rest finite
+                        r_tau, r_launch, r_arrival, r_kind = first_arrival(
+                            p["sound_speed_rows"] > 0, beacon[2], receive[2], horizontal, p["water_depth"],
+                            p["sound_speed_true"], d["nodes"], d["speeds"])
+                        found = r_kind > 0
+                        tau = ca.if_else(found, r_tau, distance / speed)
+                        angles = (ca.if_else(found, r_launch, chord), ca.if_else(found, r_arrival, chord), r_kind)
                         return tau, distance, receive, angles
 
                     tau, distance, receive, angles = path(0.0)
@@ -435,10 +435,10 @@ class Acoustics(Component):
                 if direction:
                     out.update(zip(("azimuth", "elevation"),
                         (ca.if_else(valid, a, 0.0) for a in doa(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
-                return {"k": k, **send(x, out, arrival - t_k)}
+                return {"k": k, **send(x, p, out, arrival - t_k)}
             return handler
 
-        def send(x, out, elapsed):
+        def send(x, p, out, elapsed):
             """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
             free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
             ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
@@ -452,7 +452,8 @@ class Acoustics(Component):
                 placed = ca.logic_or(placed, free)
             longest = elapsed  # the longest in flight then, for the refusal's message
             for j in range(FLIGHT_CAPACITY):
-                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - x["q_tx_time"][j], 0.0))
+                sent_at = x["t0"] + x["q_packet_seq"][j] * p["slot_period"]
+                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - sent_at, 0.0))
             refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
             return {**{name: ca.vertcat(*values) for name, values in new.items()}, "overflow_travel_time": refused}
 
@@ -477,8 +478,16 @@ class Acoustics(Component):
                 better = ca.logic_and(flag, ca.logic_or(rx < best_rx, ca.logic_and(rx == best_rx, seq < best_seq)))
                 best = ca.if_else(better, j, best)
                 best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
-            out = {name: select(best, [x[f"q_{name}"][j] for j in range(FLIGHT_CAPACITY)]) for name in carried}
-            used = ca.vertcat(*[ca.if_else(best == j, 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
+            at = [best == j for j in range(FLIGHT_CAPACITY)]
+            out = {}
+            for name in carried:  # rows[best], as expressions.select sums it, each place's test made once
+                total = 0
+                for j in range(FLIGHT_CAPACITY):
+                    total = total + ca.if_else(at[j], x[f"q_{name}"][j], 0)
+                out[name] = total
+            seq = out["packet_seq"]
+            out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
+            used = ca.vertcat(*[ca.if_else(at[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
             return {**out, "q_used": used, "delivered_end": t + h}
 
         def doa(direction, u, p, w_angle):
@@ -498,31 +507,19 @@ class Acoustics(Component):
             return {name: x[name] for name in packet}
 
         streams = (Stream(_CHANNEL_UNIFORM, "uniform", 3), Stream(_RANGE_NOISE, "normal", 1))
-        if direction:
-            events = [b.event("slot", due, slot("twtt"), streams + (
-                Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2), Stream(_DOWNLINK, "uniform", 1)))]
-        else:  # one slot event per ranging, each only in the runs of its ranging: a run computes its own legs
-            events = [b.event("slot", due, slot("owtt"), streams, when=("ranging", ("owtt",))),
-                      b.event("slot_twtt", due, slot("twtt"), streams + (Stream(_TURNAROUND, "normal", 1),),
-                              when=("ranging", ("twtt",)))]
+        events = []
+        for propagation in PROPAGATION:  # a slot event per (ranging, propagation): a run computes its own legs
+            if direction:
+                events.append(b.event(f"slot_{propagation}", due, slot("twtt", propagation), streams + (
+                    Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2),
+                    Stream(_DOWNLINK, "uniform", 1)), when={"propagation": (propagation,)}))
+                continue
+            for ranging in RANGING:
+                extra = (Stream(_TURNAROUND, "normal", 1),) if ranging == "twtt" else ()
+                events.append(b.event(f"slot_{ranging}_{propagation}", due, slot(ranging, propagation),
+                                      streams + extra, when={"ranging": (ranging,), "propagation": (propagation,)}))
         events.append(b.event("deliver", deliverable, deliver))  # after the slots: a packet is sent, then arrives
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
-
-
-@lru_cache(maxsize=1)
-def _eigenray() -> ca.Function:
-    """``(index, zs, zr, x, depth, c, nodes, speeds) -> (tau, launch, arrival, kind)``: index 0 nothing (a
-    straight run: zeros, no work), 1 isovelocity at ``c``, 2 the table's eigenrays (:func:`first_arrival`)."""
-    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
-    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    args = [zs, zr, x, depth, c, nodes, speeds]
-    names = ["zs", "zr", "x", "depth", "c", "nodes", "speeds"]
-    branches = [ca.Function("sblsim_ray_none", args, [0.0, 0.0, 0.0, 0.0], names, ["tau", "launch", "arrival", "kind"])]
-    for use_table in (0.0, 1.0):
-        branches.append(ca.Function(f"sblsim_ray_{int(use_table)}", args,
-                                    list(first_arrival(use_table, zs, zr, x, depth, c, nodes, speeds)), names,
-                                    ["tau", "launch", "arrival", "kind"]))
-    return switch("sblsim_channel_ray", branches)
 
 
 __all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",

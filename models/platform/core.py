@@ -317,8 +317,8 @@ class Platform(Component):
         # other placement, and one of each system that does (LBL's surveyed positions)
         placing = [s for s in systems if s.places_transducers]
         others = [name for name, s in SYSTEMS.items() if s not in placing]
-        events = [b.event("sample", due, take_sample([]), noise, when=("system", others) if placing else None)]
-        events += [b.event(f"sample_{s.name}", due, take_sample([s]), noise, when=("system", [s.name]))
+        events = [b.event("sample", due, take_sample([]), noise, when={"system": others} if placing else None)]
+        events += [b.event(f"sample_{s.name}", due, take_sample([s]), noise, when={"system": [s.name]})
                    for s in placing]
         return b.program(b.prepare(prepare), b.init(init, (Stream(_PHASES, "uniform", 4),) + noise + fixed),
                          b.output(output), events=events)

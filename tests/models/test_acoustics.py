@@ -23,7 +23,7 @@ import pytest
 from scipy import integrate, stats
 
 from sblsim.models.acoustics import Acoustics, profile_table
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY, RANGING
+from sblsim.models.acoustics.core import FLIGHT_CAPACITY, PROPAGATION, RANGING
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
 from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms
@@ -679,17 +679,22 @@ def test_step_with_moving_target_reports_reception_distance():
     assert out["range_true"][0] - np.linalg.norm(d) == pytest.approx(v @ u * tau, rel=1e-3)
 
 
+@pytest.mark.parametrize("propagation", PROPAGATION)
 @pytest.mark.parametrize("ranging", RANGING)
-def test_each_ranging_runs_its_own_slot_event_once_per_slot(ranging):
-    """SBL and LBL have a slot event per ranging, each in the runs of its ranging only (``Event.when``): a step
-    that reaches one slot epoch emits one packet (not none, not one per event), timed as that ranging times it:
-    OWTT ``τ = d / c``, TWTT the round trip ``2 d / c + t_ta`` of a diver at rest."""
-    events = [e for e in Acoustics.program(4).events if e.when is not None]
-    assert sorted(c for e in events for c in e.when[1]) == sorted(RANGING)  # every ranging, each once
+def test_each_ranging_runs_its_own_slot_event_once_per_slot(ranging, propagation):
+    """SBL and LBL have a slot event per (ranging, propagation), each in the runs of its pair only
+    (``Event.when``): a step that reaches one slot epoch emits one packet (not none, not one per event), timed as
+    that ranging times it: OWTT ``τ = d / c``, TWTT the round trip ``2 d / c + t_ta`` of a diver at rest (the
+    eigenray of isovelocity water is the straight line)."""
+    pairs = [dict(e.when) for e in Acoustics.program(4).events if e.when]
+    assert sorted((w["ranging"], w["propagation"]) for w in pairs) == sorted(
+        ((r,), (q,)) for r in RANGING for q in PROPAGATION)  # every pair, each once
     T, turnaround = 0.25, 0.05
-    core = make(dict(sigma_range=0.0, slot_period=T, ranging=ranging, turnaround=turnaround), replicates=(0, 1))
+    core = make(dict(sigma_range=0.0, slot_period=T, ranging=ranging, turnaround=turnaround,
+                     propagation=propagation), replicates=(0, 1))
     for k, out in enumerate(slots(core, T, 4)):
         assert out["packet_seq"].tolist() == [k + 1, k + 1]
+        assert out["arrival"].tolist() == [1, 1]
         d = np.linalg.norm(TARGET - TRUE_BEACONS[k])
         expected = d / 1500.0 if ranging == "owtt" else 2.0 * d / 1500.0 + turnaround
         np.testing.assert_allclose(out["travel_time"], expected, rtol=1e-12)
@@ -702,7 +707,10 @@ def test_an_event_names_choices_of_a_choice_parameter():
     b = ProgramBuilder(Acoustics, 4, states=[("k", 1)])
     due = lambda x, u, p, d, t, h: x["k"] < 0  # noqa: E731
     tick = lambda x, u, p, d, w, t, h: {"k": x["k"] + 1}  # noqa: E731
-    assert b.event("e", due, tick, when=("ranging", ["twtt"])).when == ("ranging", ("twtt",))
-    for when in (("sigma_range", ["twtt"]), ("ranging", ["usbl"]), ("ranging", "twtt"), ("ranging", [])):
+    assert b.event("e", due, tick, when={"ranging": ["twtt"]}).when == (("ranging", ("twtt",)),)
+    assert b.event("e", due, tick, when={"ranging": ["twtt"], "propagation": ("ray",)}).when == (
+        ("ranging", ("twtt",)), ("propagation", ("ray",)))
+    for when in ({"sigma_range": ["twtt"]}, {"ranging": ["usbl"]}, {"ranging": "twtt"}, {"ranging": []},
+                 {"ranging": ["twtt"], "propagation": ["curved"]}):
         with pytest.raises(ValueError, match="choice parameter"):
             b.event("e", due, tick, when=when)
