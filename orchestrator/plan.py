@@ -29,6 +29,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from sblsim.fmus.native import compiled_exact_points
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.acoustics.rays import RAY_BOUNDS, RAY_TABLE, eigenray_table
 from sblsim.models.target.core import file_waypoints
@@ -362,7 +363,7 @@ def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[s
 
 @lru_cache(maxsize=32)
 def _ray_table(table: tuple, depth: float, box: tuple) -> tuple:
-    columns = eigenray_table(np.array(table), depth, box)
+    columns = eigenray_table(np.array(table), depth, box, compiled_exact_points())
     out = {name: float(value) for name, value in zip(RAY_BOUNDS, box)}
     out.update(RAY_TABLE.values(np.column_stack([columns[c.name] for c in RAY_TABLE.columns]), "ray_table_rows"))
     return tuple(out.items())

@@ -477,7 +477,7 @@ def first_arrival_grid(use, zs, zr, x, depth, use_table, constant, nodes, speeds
     return _first_arrival_grid()(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values)
 
 
-def eigenray_table(table, depth: float, bounds) -> dict[str, np.ndarray]:
+def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None) -> dict[str, np.ndarray]:
     """The eigenray table of a profile over a box of geometries, built once for a run (exact solves at its nodes).
 
     At each node of the grid :func:`ray_grid` the exact earliest eigenray (:func:`first_arrival`) gives the
@@ -493,6 +493,8 @@ def eigenray_table(table, depth: float, bounds) -> dict[str, np.ndarray]:
         Water depth [m] (0: none).
     bounds : array_like, shape (6,)
         The box (:data:`RAY_BOUNDS`): source depth, receiver depth and horizontal distance [m], each min ≤ max.
+    exact : casadi.Function, optional
+        :func:`exact_points` as it is evaluated (e.g. compiled); default that function itself.
 
     Returns
     -------
@@ -500,11 +502,12 @@ def eigenray_table(table, depth: float, bounds) -> dict[str, np.ndarray]:
         Column name -> (RAY_TABLE_ROWS,) values, and ``"exact_share"``: the share of cells solved exactly.
     """
     nodes, speeds = profile_arrays(table)
+    exact = exact_points() if exact is None else exact
     bounds = np.asarray(bounds, dtype=float)
     grid = ray_grid(bounds)
     axes = np.split(grid, np.cumsum(RAY_GRID)[:-1])
     zs, zr, x = (a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij"))
-    tau, launch, arrival, kind = _exact(zs, zr, x, depth, nodes, speeds)
+    tau, launch, arrival, kind = _exact(exact, zs, zr, x, depth, nodes, speeds)
     length, l0, a0 = _numeric_images(kind, zs, zr, x, depth)
     c_source = np.interp(zs, nodes, speeds)
     slowness = np.where(length > 1e-9, tau / np.maximum(length, 1e-300), 1.0 / c_source)
@@ -512,7 +515,7 @@ def eigenray_table(table, depth: float, bounds) -> dict[str, np.ndarray]:
                np.where(kind > 0, arrival - a0, 0.0), kind.astype(float)]
     shape = RAY_GRID
     kinds = kind.reshape(shape, order="F")
-    exact = (kinds == 0)
+    needs = (kinds == 0)
     # cells: the lower corner's index; a cell is used when its 8 nodes share a path and its centre checks out
     corners = [kinds[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1]
                for i in (0, 1) for j in (0, 1) for k in (0, 1)]
@@ -520,7 +523,7 @@ def eigenray_table(table, depth: float, bounds) -> dict[str, np.ndarray]:
     centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
     czs, czr, cx = (a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
     values = np.asarray(ray_values([ca.DM(c) for c in columns + [np.zeros(RAY_TABLE_ROWS)]])).ravel()
-    want = _exact(czs, czr, cx, depth, nodes, speeds)
+    want = _exact(exact, czs, czr, cx, depth, nodes, speeds)
     got = _tabled(czs, czr, cx, depth, grid, values)
     shape_c = tuple(n - 1 for n in shape)
     good = (want[3] == got[3]) & (np.abs(want[0] - got[0]) <= RAY_TABLE_TOLERANCE[0]) \
@@ -529,9 +532,9 @@ def eigenray_table(table, depth: float, bounds) -> dict[str, np.ndarray]:
     for i in (0, 1):
         for j in (0, 1):
             for k in (0, 1):
-                exact[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1] |= ~uniform
+                needs[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1] |= ~uniform
     names = [c.name for c in RAY_TABLE.columns]
-    out = dict(zip(names, columns + [exact.ravel(order="F").astype(float)]))
+    out = dict(zip(names, columns + [needs.ravel(order="F").astype(float)]))
     out["exact_share"] = float(np.mean(~uniform))
     return out
 
@@ -542,11 +545,18 @@ def _numeric_images(kind, zs, zr, x, depth):
     return np.hypot(x, image), np.where(kind == SURFACE, -angle, angle), np.where(kind == BOTTOM, -angle, angle)
 
 
-def _exact(zs, zr, x, depth, nodes, speeds):
-    """The exact earliest eigenray at arrays of geometries: (τ, launch, arrival, kind), each (n,)."""
+@lru_cache(maxsize=1)
+def exact_points() -> ca.Function:
+    """``(zs, zr, x, depth, nodes, speeds) -> (τ, launch, arrival, kind)``: :func:`first_arrival` through a profile
+    table, as the table's builder evaluates it at its nodes (the local engine's library compiles it)."""
     args = [ca.MX.sym(n) for n in ("zs", "zr", "x", "depth")]
     nd, sp = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    f = ca.Function("sblsim_ray_exact_points", args + [nd, sp], list(first_arrival(1, *args[:4], 1500.0, nd, sp)))
+    return ca.Function("sblsim_ray_exact_points", args + [nd, sp], list(first_arrival(1, *args[:4], 1500.0, nd, sp)),
+                       ["zs", "zr", "x", "depth", "nodes", "speeds"], ["tau", "launch", "arrival", "kind"])
+
+
+def _exact(f, zs, zr, x, depth, nodes, speeds):
+    """The exact earliest eigenray at arrays of geometries: (τ, launch, arrival, kind), each (n,)."""
     n = zs.size
     out = f.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), float(depth)), nodes, speeds)
     return tuple(np.asarray(o).ravel() for o in out)
@@ -567,5 +577,5 @@ def _tabled(zs, zr, x, depth, grid, values):
 
 
 __all__ = ["BOTTOM", "DIRECT", "NEWTON_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS",
-           "RAY_TABLE_TOLERANCE", "SURFACE", "eigenray_families", "eigenray_table", "first_arrival",
+           "RAY_TABLE_TOLERANCE", "SURFACE", "eigenray_families", "eigenray_table", "exact_points", "first_arrival",
            "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values"]
