@@ -411,5 +411,6 @@ def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
 
 
 __all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "cache_dir", "compiled_exact_points",
-           "library_path", "load", "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb", "write_library_sources"]
+           "library_path", "load", "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb",
+           "write_library_sources"]
 

@@ -32,12 +32,12 @@ import numpy as np
 from sblsim.fmus.native import compiled_exact_points
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.acoustics.rays import RAY_BOUNDS, RAY_TABLE, eigenray_table
-from sblsim.models.target.core import file_waypoints
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.platform.waves import wave_motion
 from sblsim.models.receiver.core import filter_parameters
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
+from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import (
     KEY_TIES,
     MIN_SIGMA,

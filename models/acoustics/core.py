@@ -86,7 +86,15 @@ from typing import Any, Mapping
 
 import casadi as ca
 
-from sblsim.models.acoustics.rays import RAY_BOUNDS, RAY_GRID, RAY_TABLE, RAY_TABLE_ROWS, first_arrival_grid, ray_grid, ray_values
+from sblsim.models.acoustics.rays import (
+    RAY_BOUNDS,
+    RAY_GRID,
+    RAY_TABLE,
+    RAY_TABLE_ROWS,
+    first_arrival_grid,
+    ray_grid,
+    ray_values,
+)
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, node_speeds, profile_nodes, profile_table
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
