@@ -33,10 +33,19 @@ from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
+from sblsim.models.acoustics.rays import exact_points
 from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
+from sblsim.models.errors import CompileError
 from sblsim.models.systems import SYSTEMS, interface_system
 
+#: Exports the eigenray solve's casadi entry points from the library (built with hidden symbols).
+RAY_EXPORT = """#if defined(_WIN32)
+#define CASADI_SYMBOL_EXPORT __declspec(dllexport)
+#else
+#define CASADI_SYMBOL_EXPORT __attribute__((visibility("default")))
+#endif
+"""
 #: The compiled loop of a system's own bound (the library of that system's interface only).
 SYSTEM_BOUND = "sblsim_system_bound.c"
 
@@ -72,6 +81,12 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     for function in own or ():  # the interface's system steps a bound of its own (USBL: range, azimuth, elevation)
         cg.add(function)
     cg.generate(str(directory) + "/")
+    # the eigenray table's builder (sblsim.models.acoustics.rays.eigenray_table) calls this one through casadi
+    rays = ca.CodeGenerator("sblsim_ray_points.c", {"casadi_real": "double", "casadi_int": "long long int"})
+    rays.add(exact_points())
+    rays.generate(str(directory) + "/")
+    code = (directory / "sblsim_ray_points.c").read_text()
+    (directory / "sblsim_ray_points.c").write_text(RAY_EXPORT + code)
     for name in (BATCH, METRICS) + ((SYSTEM_BOUND,) if own else ()):
         (directory / name).write_text((C_DIR / name).read_text())
     return sorted(directory.glob("*.c"))
@@ -415,6 +430,16 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
                                             out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
     return out
 
+def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
+    """:func:`sblsim.models.acoustics.rays.exact_points` compiled in the local engine's library (built if missing),
+    or None when no compiler can build it."""
+    try:
+        return ca.external(exact_points().name(), str(library_path(n_beacons)))
+    except (CompileError, OSError, RuntimeError):
+        return None
 
-__all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "cache_dir", "library_path", "load",
-           "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb", "write_library_sources"]
+
+__all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "cache_dir", "compiled_exact_points",
+           "library_path", "load", "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb",
+           "write_library_sources"]
+

@@ -43,6 +43,7 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
     "m2/s": ({"m": 2, "s": -1}, 1.0),
     "degC": ({"K": 1}, 1.0),
     "g/kg": ({}, 1e-3),
+    "s/m": ({"m": -1, "s": 1}, 1.0),
 }
 
 

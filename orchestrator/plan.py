@@ -23,16 +23,21 @@ from __future__ import annotations
 import copy
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
 
+from sblsim.fmus.native import compiled_exact_points
 from sblsim.models import MODELS, RECEIVERS
+from sblsim.models.acoustics.rays import RAY_BOUNDS, RAY_TABLE, eigenray_table
 from sblsim.models.errors import ConfigError, ModelError
+from sblsim.models.platform.waves import wave_motion
 from sblsim.models.receiver.core import filter_parameters
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
+from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.config import (
     KEY_TIES,
     MIN_SIGMA,
@@ -294,7 +299,74 @@ def _component_parameters(cfg: Mapping[str, Mapping[str, Any]], component: str, 
     if component == "receiver" and takes("communication_step"):  # the receiver's own clock: T / ratio
         params["communication_step"] = sim["sampling_time"] / sim["ekf_rate_ratio"]
     params.update({k: v for k, v in cfg["run"].items() if takes(k)})
+    if component == "acoustics" and model is not None and takes("ray_table_rows"):
+        params.update(ray_table_parameters(cfg, params))
     return FrozenMapping(params)
+
+
+#: Margins of the eigenray table's box around the geometry the configuration gives [m]: depths, distance.
+RAY_BOX_MARGINS = (1.0, 5.0)
+
+
+def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
+    """The box of geometries of a run's eigenray table (:data:`sblsim.models.acoustics.rays.RAY_BOUNDS`), or
+    None when the configuration does not bound them (a random walk, a spiral).
+
+    The source depths are the transducers' (the system's lever arms) widened by the wave heave and the lever
+    arms' tilt at ``platform.beaufort``; the receiver's the diver's depth (a trajectory file's depths); the
+    horizontal distances those between the transducers' horizontal circle and the diver's (the semicircle's
+    radius, the square's corners, the random path's ``max_radius``, a file's waypoints), each widened by
+    :data:`RAY_BOX_MARGINS`. A geometry outside the box is solved exactly, so the box only decides the speed.
+    """
+    platform, target = cfg["platform"], cfg["target"]
+    arms = SYSTEMS[platform["system"]].lever_arms(platform)
+    reach = float(np.linalg.norm(arms, axis=1).max(initial=0.0))
+    tilt, _yaw, heave, _frequency = (float(v) for v in wave_motion(int(platform.get("beaufort", 0)),
+                                                                     float(platform.get("hull_length", 1.0))))
+    dz, dx = RAY_BOX_MARGINS
+    rise = heave + reach * np.sin(tilt) + dz  # the transducers' largest vertical excursion, widened
+    # not above the surface: the profile's end speed is extended there (a kink the table would straddle)
+    zs_lo, zs_hi = max(float(arms[:, 2].min()) - rise, 0.0), float(arms[:, 2].max()) + rise
+    r_beacon = float(np.linalg.norm(arms[:, :2], axis=1).max(initial=0.0))
+    kind = target["trajectory"]
+    if kind == "file":
+        rows = file_waypoints(target)
+        depths, radii = rows[:, 3], np.linalg.norm(rows[:, 1:3], axis=1)
+        r_lo, r_hi = 0.0, float(radii.max())
+    elif kind in ("semicircle", "square", "random"):
+        depths = np.array([float(target["depth"])])
+        r_hi = {"semicircle": float(target["radius"]), "square": float(target["square_side"]) / np.sqrt(2.0),
+                "random": float(target["max_radius"])}[kind]
+        r_lo = r_hi if kind == "semicircle" else 0.0
+    else:
+        return None
+    x_lo = max(r_lo - r_beacon - 2.0 * dx, 0.0)
+    x_hi = r_hi + r_beacon + 2.0 * dx
+    return (zs_lo, zs_hi, max(float(depths.min()) - dz, 0.0), float(depths.max()) + dz, x_lo, x_hi)
+
+
+def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[str, Any]) -> dict[str, Any]:
+    """The eigenray table's FMU parameters of a resolved configuration: none (every eigenray solved) unless it is a
+    ``ray`` run through a profile table whose geometry :func:`ray_box` bounds; built once per profile, water depth
+    and box (:func:`sblsim.models.acoustics.rays.eigenray_table`)."""
+    acoustics = cfg["acoustics"]
+    rows = int(params.get("sound_speed_rows", 0))
+    if acoustics.get("propagation") != "ray" or rows == 0:
+        return {}
+    box = ray_box(cfg)
+    if box is None:
+        return {}
+    table = tuple((float(params[f"sound_speed_depth[{k}]"]), float(params[f"sound_speed[{k}]"]))
+                  for k in range(1, rows + 1))
+    return dict(_ray_table(table, float(acoustics["water_depth"]), box))
+
+
+@lru_cache(maxsize=32)
+def _ray_table(table: tuple, depth: float, box: tuple) -> tuple:
+    columns = eigenray_table(np.array(table), depth, box, compiled_exact_points())
+    out = {name: float(value) for name, value in zip(RAY_BOUNDS, box)}
+    out.update(RAY_TABLE.values(np.column_stack([columns[c.name] for c in RAY_TABLE.columns]), "ray_table_rows"))
+    return tuple(out.items())
 
 
 def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> dict[str, float]:

@@ -86,7 +86,15 @@ from typing import Any, Mapping
 
 import casadi as ca
 
-from sblsim.models.acoustics.rays import first_arrival
+from sblsim.models.acoustics.rays import (
+    RAY_BOUNDS,
+    RAY_GRID,
+    RAY_TABLE,
+    RAY_TABLE_ROWS,
+    first_arrival_grid,
+    ray_grid,
+    ray_values,
+)
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, node_speeds, profile_nodes, profile_table
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
@@ -181,6 +189,20 @@ PROPAGATION_VARIABLES: tuple[Variable, ...] = (
              description="Path of the range: 1 direct, 2 surface-reflected, 3 bottom-reflected (0: none, lost)",
              min=0, max=3),
 )
+#: The eigenray table of a ``ray`` run (:func:`sblsim.models.acoustics.rays.eigenray_table`), built once by the
+#: orchestrator for the run's profile and geometry (declared after the rest: their value references stay). Without
+#: it (0 rows, the default: a host that gives none) every eigenray is solved exactly.
+RAY_TABLE_VARIABLES: tuple[Variable, ...] = (
+    Variable("ray_table_rows", "parameter", "Integer", 0, scope="fmu", table=RAY_TABLE,
+             description=f"ray: rows of the eigenray table ({RAY_TABLE_ROWS}: in use; 0: every eigenray solved)",
+             min=0, max=RAY_TABLE_ROWS),
+) + tuple(
+    Variable(name, "parameter", "Real", 0.0, "m",
+             f"ray: eigenray table's {what} {end} ({'the' if end == 'min' else 'its'} box)", scope="fmu",
+             min=-MAX_WATER_DEPTH if name.startswith("ray_z") else 0.0, max=1e6 if name.startswith("ray_x") else
+             MAX_WATER_DEPTH)
+    for name, what, end in zip(RAY_BOUNDS, ("source depth",) * 2 + ("receiver depth",) * 2
+                               + ("horizontal distance",) * 2, ("min", "max") * 3))
 
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
@@ -281,13 +303,14 @@ class Acoustics(Component):
                      min=0.0, max=1.0),
         )
         if not interface_system(n_beacons).measures_direction:
-            return params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
+            return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
+                    + RAY_TABLE_VARIABLES)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
-                + PROPAGATION_VARIABLES)
+                + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -322,7 +345,9 @@ class Acoustics(Component):
         carried = [name for name in packet if name not in {v.name for v in OVERFLOW} | {"beacon_id", "tx_time"}]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
-                           + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES)])
+                           + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
+                                    ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
+                                    ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
@@ -334,7 +359,10 @@ class Acoustics(Component):
             # a constant profile (no rows) never reads them: skip the table work (a short-circuit conditional)
             values = ca.vertcat(nodes, slowness, speeds)
             values = ca.if_else(p["sound_speed_rows"] > 0, values, ca.MX.zeros(values.shape), True)
-            return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:]}
+            bounds = ca.vertcat(*[p[name] for name in RAY_BOUNDS])
+            return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:],
+                    "ray_bounds": bounds, "ray_grid": ray_grid([bounds[j] for j in range(len(RAY_BOUNDS))]),
+                    "ray_values": ray_values([p[c.name] for c in RAY_TABLE.columns])}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -372,9 +400,11 @@ class Acoustics(Component):
                             return distance / speed, distance, receive, (chord, chord, 1.0)
                         # ray: the earliest eigenray; a shadow zone (no arrival) loses the packet, and the
                         # straight line keeps the rest finite
-                        r_tau, r_launch, r_arrival, r_kind = first_arrival(
-                            p["sound_speed_rows"] > 0, beacon[2], receive[2], horizontal, p["water_depth"],
-                            p["sound_speed_true"], d["nodes"], d["speeds"])
+                        # (interpolated in the run's eigenray table where it holds)
+                        r_tau, r_launch, r_arrival, r_kind = first_arrival_grid(
+                            p["ray_table_rows"] == RAY_TABLE_ROWS, beacon[2], receive[2], horizontal,
+                            p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"],
+                            d["speeds"], d["ray_bounds"], d["ray_grid"], d["ray_values"])
                         found = r_kind > 0
                         tau = ca.if_else(found, r_tau, distance / speed)
                         angles = (ca.if_else(found, r_launch, chord), ca.if_else(found, r_arrival, chord), r_kind)

@@ -54,6 +54,7 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, node_speeds
+from sblsim.models.declarations import Column, Table
 from sblsim.models.expressions import switch
 
 #: Bracketed-Newton iterations of every eigenray solve (fixed: the solve is a closed casadi expression).
@@ -363,5 +364,218 @@ def profile_arrays(table) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(nodes).ravel(), np.asarray(speeds).ravel()
 
 
-__all__ = ["BOTTOM", "DIRECT", "NEWTON_ITERATIONS", "SURFACE", "eigenray_families", "first_arrival",
-           "profile_arrays"]
+# ------------------------------------------------------------------------------------------ the eigenray table
+
+#: Nodes of the eigenray table along the source depth, the receiver depth and the horizontal distance.
+RAY_GRID = (4, 4, 32)
+#: Rows of a full eigenray table (one per node, the source depth varying fastest, then the receiver depth).
+RAY_TABLE_ROWS = RAY_GRID[0] * RAY_GRID[1] * RAY_GRID[2]
+#: The earliest eigenray at each node of the table: its time over the length of the isovelocity image of its
+#: path, its angles less the image's, its path, and whether a cell at the node needs the exact solve.
+RAY_TABLE = Table(
+    columns=(Column("ray_slowness", "s/m", "Eigenray table: travel time over the image path's length", 0.0, 1.0),
+             Column("ray_launch_offset", "rad", "Eigenray table: launch angle less the image path's", -4.0, 4.0),
+             Column("ray_arrival_offset", "rad", "Eigenray table: arrival angle less the image path's", -4.0, 4.0),
+             Column("ray_kind", "1", "Eigenray table: path (1 direct, 2 surface, 3 bottom; 0 none)", 0.0, 3.0),
+             Column("ray_exact", "1", "Eigenray table: 1 where a cell at the node needs the exact solve", 0.0, 1.0)),
+    max_rows=RAY_TABLE_ROWS)
+#: The table's box: source depth, receiver depth [m] and horizontal distance [m], each (min, max).
+RAY_BOUNDS = ("ray_zs_min", "ray_zs_max", "ray_zr_min", "ray_zr_max", "ray_x_min", "ray_x_max")
+#: What the interpolated table must reproduce of the exact solve at the centre of every cell it is used in:
+#: travel time [s] and angles [rad] (a cell beyond it is solved exactly).
+RAY_TABLE_TOLERANCE = (1e-7, 1e-5)
+
+
+def ray_grid(bounds):
+    """The table's node coordinates from its box ``bounds`` (6,): the three axes stacked, (sum(RAY_GRID),).
+
+    An empty box (``max ≤ min``) is given a width of 1 m so that the grid increases."""
+    out = []
+    for j, n in enumerate(RAY_GRID):
+        lo, hi = bounds[2 * j], bounds[2 * j + 1]
+        width = ca.if_else(hi > lo, hi - lo, 1.0) if isinstance(lo, (ca.SX, ca.MX)) else (hi - lo if hi > lo else 1.0)
+        out += [lo + width * (k / (n - 1)) for k in range(n)]
+    return ca.vertcat(*out) if isinstance(bounds[0], (ca.SX, ca.MX)) else np.array(out, dtype=float)
+
+
+def ray_values(columns):
+    """The interpolant's values from the table's columns (each (RAY_TABLE_ROWS, 1)): interleaved, the column
+    fastest."""
+    return ca.reshape(ca.horzcat(*columns).T, -1, 1)
+
+
+@lru_cache(maxsize=1)
+def _interpolant() -> ca.Function:
+    return ca.interpolant("sblsim_ray_grid", "linear", list(RAY_GRID), len(RAY_TABLE.columns))
+
+
+def _images(kind, zs, zr, x, depth):
+    """Length [m] and launch and arrival angles [rad] of the isovelocity image of path ``kind``."""
+    image = ca.if_else(kind == SURFACE, zs + zr, ca.if_else(kind == BOTTOM, 2.0 * depth - zs - zr, zr - zs))
+    angle = ca.atan2(image, x)
+    launch = ca.if_else(kind == SURFACE, -angle, angle)
+    arrival = ca.if_else(kind == BOTTOM, -angle, angle)
+    return ca.sqrt(x * x + image * image), launch, arrival
+
+
+@lru_cache(maxsize=1)
+def _first_arrival_grid() -> ca.Function:
+    """``(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values) -> (τ, launch,
+    arrival, kind)``: the table's interpolation inside its box where its cell allows, the exact solve elsewhere."""
+    zs, zr, x, depth, use_table, constant = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "use_table", "c"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    row = ca.MX.sym("row", len(RAY_TABLE.columns))
+    args = [zs, zr, x, depth, use_table, constant, nodes, speeds, row]
+    kind = ca.floor(row[3] + 0.5)
+    length, launch, arrival = _images(kind, zs, zr, x, depth)
+    tabled = ca.Function("sblsim_ray_tabled", args, [row[0] * length, launch + row[1], arrival + row[2], kind])
+    exact = ca.Function("sblsim_ray_exact", args, list(_first_arrival()(use_table, zs, zr, x, depth, constant,
+                                                                         nodes, speeds)))
+    chosen = switch("sblsim_ray_choice", [tabled, exact])
+    use = ca.MX.sym("use")
+    bounds, grid = ca.MX.sym("bounds", 6), ca.MX.sym("grid", sum(RAY_GRID))
+    values = ca.MX.sym("values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS)
+    row_value = _interpolant()(ca.vertcat(zs, zr, x), grid, values)
+    inside = use > 0
+    for j, v in enumerate((zs, zr, x)):
+        inside = ca.logic_and(inside, ca.logic_and(v >= bounds[2 * j], v <= bounds[2 * j + 1]))
+    tabulate = ca.logic_and(inside, row_value[4] == 0)  # false for NaN
+    out = chosen(ca.logic_not(tabulate), zs, zr, x, depth, use_table, constant, nodes, speeds, row_value)
+    return ca.Function("sblsim_first_arrival_grid",
+                       [use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values], out,
+                       {"never_inline": True})
+
+
+def first_arrival_grid(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values):
+    """The earliest eigenray as :func:`first_arrival`, interpolated in an eigenray table where it holds.
+
+    Inside the table's box, in a cell whose nodes all carry ``ray_exact = 0`` (every corner the same path, and
+    the interpolation checked against the exact solve at the cell's centre when the table was built,
+    :func:`eigenray_table`), the time is the multilinear interpolation of ``τ / L`` times the length ``L`` of the
+    path's isovelocity image (the chord, or its image in the surface or the bottom) and the angles the image's
+    plus the interpolated offsets; elsewhere, or without a table (``use`` false), the exact solve, which then alone
+    is evaluated in the generated C.
+
+    Parameters
+    ----------
+    use : casadi.SX
+        True (non-zero) when the table is given.
+    zs, zr, x, depth, use_table, constant, nodes, speeds :
+        As :func:`first_arrival`.
+    bounds : casadi.SX, shape (6, 1)
+        The table's box (:data:`RAY_BOUNDS`) [m].
+    grid : casadi.SX, shape (sum(RAY_GRID), 1)
+        Its nodes (:func:`ray_grid`).
+    values : casadi.SX, shape (5 RAY_TABLE_ROWS, 1)
+        Its columns interleaved (:func:`ray_values`).
+
+    Returns
+    -------
+    tau, launch, arrival, kind : casadi.SX
+        As :func:`first_arrival`.
+    """
+    return _first_arrival_grid()(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values)
+
+
+def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None) -> dict[str, np.ndarray]:
+    """The eigenray table of a profile over a box of geometries, built once for a run (exact solves at its nodes).
+
+    At each node of the grid :func:`ray_grid` the exact earliest eigenray (:func:`first_arrival`) gives the
+    columns of :data:`RAY_TABLE`. ``ray_exact`` is 1 at a node without an arrival and at every node of a cell
+    whose nodes have different paths, or whose interpolation misses the exact solve at the cell's centre by more
+    than :data:`RAY_TABLE_TOLERANCE` (time or an angle): there the channel solves exactly.
+
+    Parameters
+    ----------
+    table : array_like, shape (rows, 2)
+        The sound-speed table: depth [m], speed [m/s] (1 ≤ rows ≤ MAX_PROFILE_ROWS).
+    depth : float
+        Water depth [m] (0: none).
+    bounds : array_like, shape (6,)
+        The box (:data:`RAY_BOUNDS`): source depth, receiver depth and horizontal distance [m], each min ≤ max.
+    exact : casadi.Function, optional
+        :func:`exact_points` as it is evaluated (e.g. compiled); default that function itself.
+
+    Returns
+    -------
+    dict
+        Column name -> (RAY_TABLE_ROWS,) values, and ``"exact_share"``: the share of cells solved exactly.
+    """
+    nodes, speeds = profile_arrays(table)
+    exact = exact_points() if exact is None else exact
+    bounds = np.asarray(bounds, dtype=float)
+    grid = ray_grid(bounds)
+    axes = np.split(grid, np.cumsum(RAY_GRID)[:-1])
+    zs, zr, x = (a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij"))
+    tau, launch, arrival, kind = _exact(exact, zs, zr, x, depth, nodes, speeds)
+    length, l0, a0 = _numeric_images(kind, zs, zr, x, depth)
+    c_source = np.interp(zs, nodes, speeds)
+    slowness = np.where(length > 1e-9, tau / np.maximum(length, 1e-300), 1.0 / c_source)
+    columns = [np.where(kind > 0, slowness, 0.0), np.where(kind > 0, launch - l0, 0.0),
+               np.where(kind > 0, arrival - a0, 0.0), kind.astype(float)]
+    shape = RAY_GRID
+    kinds = kind.reshape(shape, order="F")
+    needs = (kinds == 0)
+    # cells: the lower corner's index; a cell is used when its 8 nodes share a path and its centre checks out
+    corners = [kinds[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1]
+               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    uniform = np.all([c == corners[0] for c in corners], axis=0) & (corners[0] > 0)
+    centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
+    czs, czr, cx = (a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
+    values = np.asarray(ray_values([ca.DM(c) for c in columns + [np.zeros(RAY_TABLE_ROWS)]])).ravel()
+    want = _exact(exact, czs, czr, cx, depth, nodes, speeds)
+    got = _tabled(czs, czr, cx, depth, grid, values)
+    shape_c = tuple(n - 1 for n in shape)
+    good = (want[3] == got[3]) & (np.abs(want[0] - got[0]) <= RAY_TABLE_TOLERANCE[0]) \
+        & (np.abs(want[1] - got[1]) <= RAY_TABLE_TOLERANCE[1]) & (np.abs(want[2] - got[2]) <= RAY_TABLE_TOLERANCE[1])
+    uniform &= good.reshape(shape_c, order="F")
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                needs[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1] |= ~uniform
+    names = [c.name for c in RAY_TABLE.columns]
+    out = dict(zip(names, columns + [needs.ravel(order="F").astype(float)]))
+    out["exact_share"] = float(np.mean(~uniform))
+    return out
+
+
+def _numeric_images(kind, zs, zr, x, depth):
+    image = np.where(kind == SURFACE, zs + zr, np.where(kind == BOTTOM, 2.0 * depth - zs - zr, zr - zs))
+    angle = np.arctan2(image, x)
+    return np.hypot(x, image), np.where(kind == SURFACE, -angle, angle), np.where(kind == BOTTOM, -angle, angle)
+
+
+@lru_cache(maxsize=1)
+def exact_points() -> ca.Function:
+    """``(zs, zr, x, depth, nodes, speeds) -> (τ, launch, arrival, kind)``: :func:`first_arrival` through a profile
+    table, as the table's builder evaluates it at its nodes (the local engine's library compiles it)."""
+    args = [ca.MX.sym(n) for n in ("zs", "zr", "x", "depth")]
+    nd, sp = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    return ca.Function("sblsim_ray_exact_points", args + [nd, sp], list(first_arrival(1, *args[:4], 1500.0, nd, sp)),
+                       ["zs", "zr", "x", "depth", "nodes", "speeds"], ["tau", "launch", "arrival", "kind"])
+
+
+def _exact(f, zs, zr, x, depth, nodes, speeds):
+    """The exact earliest eigenray at arrays of geometries: (τ, launch, arrival, kind), each (n,)."""
+    n = zs.size
+    out = f.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), float(depth)), nodes, speeds)
+    return tuple(np.asarray(o).ravel() for o in out)
+
+
+def _tabled(zs, zr, x, depth, grid, values):
+    """The table's interpolation at arrays of geometries inside its box: (τ, launch, arrival, kind)."""
+    args = [ca.MX.sym(n) for n in ("zs", "zr", "x", "depth")]
+    g, v = ca.MX.sym("grid", sum(RAY_GRID)), ca.MX.sym("values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS)
+    row = _interpolant()(ca.vertcat(*args[:3]), g, v)
+    kind = ca.floor(row[3] + 0.5)
+    length, launch, arrival = _images(kind, *args)
+    f = ca.Function("sblsim_ray_tabled_points", args + [g, v],
+                    [row[0] * length, launch + row[1], arrival + row[2], kind])
+    n = zs.size
+    out = f.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), float(depth)), grid, values)
+    return tuple(np.asarray(o).ravel() for o in out)
+
+
+__all__ = ["BOTTOM", "DIRECT", "NEWTON_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS",
+           "RAY_TABLE_TOLERANCE", "SURFACE", "eigenray_families", "eigenray_table", "exact_points", "first_arrival",
+           "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values"]

@@ -251,3 +251,125 @@ def test_ncl1_cast_is_the_published_file_resampled():
     assert table.shape == (256, 2)
     assert table[0, 0] == pytest.approx(-kept[0, 0]) and table[-1, 0] == pytest.approx(-kept[-1, 0])
     np.testing.assert_allclose(table[:, 1], np.interp(table[:, 0], -kept[:, 0], kept[:, 1]), atol=1e-9)
+
+
+# ------------------------------------------------------------------ the eigenray table of a run
+
+
+def _grid_function(table, depth, bounds, columns):
+    """The channel's table lookup (:func:`rays.first_arrival_grid`) at arrays of points, with ``columns`` the table
+    (None: no table, every eigenray solved)."""
+    import casadi as ca
+
+    nodes, speeds = rays.profile_arrays(table)
+    bounds = np.asarray(bounds, dtype=float)
+    use = columns is not None
+    cols = [columns[c.name] for c in rays.RAY_TABLE.columns] if use else [np.zeros(rays.RAY_TABLE_ROWS)] * 5
+    values = np.asarray(rays.ray_values([ca.DM(c) for c in cols])).ravel()
+    grid = rays.ray_grid(bounds if use else np.arange(6.0))
+
+    def f(zs, zr, x):
+        n = zs.size
+        out = rays._first_arrival_grid().map(n)(float(use), zs[None], zr[None], x[None], depth, 1.0, 1500.0, nodes,
+                                                 speeds, bounds, grid, values)
+        return [np.asarray(o).ravel() for o in out]
+    return f
+
+
+def _exact_points(table, depth, zs, zr, x):
+    nodes, speeds = rays.profile_arrays(table)
+    return [np.asarray(o).ravel() for o in rays.exact_points().map(zs.size)(zs[None], zr[None], x[None], depth,
+                                                                          nodes, speeds)]
+
+
+def _tabulated(columns, bounds, zs, zr, x):
+    """Which points the table answers: inside the box, every corner of their cell ``ray_exact = 0``."""
+    axes = np.split(rays.ray_grid(np.asarray(bounds, float)), np.cumsum(rays.RAY_GRID)[:-1])
+    flags = columns["ray_exact"].reshape(rays.RAY_GRID, order="F")
+    index = [np.clip(np.searchsorted(a, v, side="right") - 1, 0, len(a) - 2) for a, v in zip(axes, (zs, zr, x))]
+    ok = np.ones(zs.size, bool)
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                ok &= flags[index[0] + i, index[1] + j, index[2] + k] == 0
+    return ok
+
+
+#: (profile, water depth, box, the least share of points the table answers): the benchmark's SBL geometry through
+#: Munk, an LBL-like one with surface and bottom, a diver 1000 m deep within 220 m through the NCL1 cast, the
+#: strongly refracting table's surface duct, and boxes far too coarse for the table's nodes (it answers nothing: the
+#: exact solve everywhere), across Munk's channel axis and across the strong table's thermocline.
+TABLE_CASES = [("munk", 0.0, (0.0, 2.5, 4.0, 6.0, 2.0, 28.0), 0.8),
+               ("munk", 60.0, (45.0, 55.0, 0.0, 10.0, 0.0, 120.0), 0.8),
+               ("NCL1", 0.0, (0.0, 5.0, 990.0, 1010.0, 0.0, 220.0), 0.8),
+               ("strong", 0.0, (60.0, 70.0, 60.0, 70.0, 0.0, 100.0), 0.8),
+               ("munk", 0.0, (0.0, 50.0, 900.0, 1400.0, 0.0, 2500.0), 0.0),
+               ("strong", 0.0, (20.0, 40.0, 100.0, 120.0, 0.0, 800.0), 0.0)]
+
+
+@pytest.mark.parametrize("name, depth, bounds, share", TABLE_CASES)
+def test_the_eigenray_table_holds_the_exact_solve(name, depth, bounds, share):
+    """Inside the box, the channel's lookup equals the exact solve within 1 µs and 1e-5 rad with the same path,
+    at random geometries (the table answers a share of them; the exact solve the rest)."""
+    from sblsim.fmus.native import compiled_exact_points
+
+    table = _table(name)
+    columns = rays.eigenray_table(table, depth, bounds, compiled_exact_points())
+    rng = np.random.default_rng(7)
+    n = 200
+    zs, zr, x = (rng.uniform(bounds[2 * j], bounds[2 * j + 1], n) for j in range(3))
+    want = _exact_points(table, depth, zs, zr, x)
+    got = _grid_function(table, depth, bounds, columns)(zs, zr, x)
+    np.testing.assert_array_equal(got[3], want[3])
+    found = want[3] > 0
+    assert np.max(np.abs(got[0] - want[0])[found]) <= 1e-6
+    assert np.max(np.abs(got[1] - want[1])[found]) <= 1e-5 and np.max(np.abs(got[2] - want[2])[found]) <= 1e-5
+    answered = _tabulated(columns, bounds, zs, zr, x)
+    if share == 0.0:
+        assert not answered.any()
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)
+        return
+    assert answered.mean() > share, answered.mean()
+    # the answered points are interpolated, not solved: they differ from the exact solve (by far less than 1 µs)
+    assert np.any(got[0][answered] != want[0][answered])
+    # the others are the exact solve itself
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g[~answered], w[~answered])
+
+
+def test_without_a_table_the_lookup_is_the_exact_solve():
+    table = munk_table()
+    rng = np.random.default_rng(3)
+    zs, zr, x = rng.uniform(0, 100, 50), rng.uniform(0, 100, 50), rng.uniform(0, 500, 50)
+    got = _grid_function(table, 0.0, (0, 0, 0, 0, 0, 0), None)(zs, zr, x)
+    for g, w in zip(got, _exact_points(table, 0.0, zs, zr, x)):
+        np.testing.assert_array_equal(g, w)
+
+
+def test_an_isovelocity_table_is_the_straight_line():
+    table = np.array([[0.0, 1493.0], [100.0, 1493.0], [5000.0, 1493.0]])
+    bounds = (0.0, 30.0, 10.0, 200.0, 0.0, 500.0)
+    columns = rays.eigenray_table(table, 0.0, bounds)
+    assert not columns["ray_exact"].any()
+    rng = np.random.default_rng(5)
+    zs, zr, x = (rng.uniform(bounds[2 * j], bounds[2 * j + 1], 100) for j in range(3))
+    tau, launch, arrival, kind = _grid_function(table, 0.0, bounds, columns)(zs, zr, x)
+    np.testing.assert_allclose(tau, np.hypot(x, zr - zs) / 1493.0, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(launch, np.arctan2(zr - zs, x), rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(kind, rays.DIRECT)
+
+
+def test_the_compiled_builder_is_the_model():
+    """The table built with the exact solve compiled in the local engine's library equals the one built by casadi
+    itself."""
+    from sblsim.fmus.native import compiled_exact_points
+
+    compiled = compiled_exact_points()
+    if compiled is None:
+        pytest.skip("no C compiler")
+    bounds = (0.0, 2.5, 4.0, 6.0, 2.0, 28.0)
+    a = rays.eigenray_table(munk_table(), 8.0, bounds, compiled)
+    b = rays.eigenray_table(munk_table(), 8.0, bounds)
+    for c in rays.RAY_TABLE.columns:
+        np.testing.assert_array_equal(a[c.name], b[c.name])

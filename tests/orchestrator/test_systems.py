@@ -326,6 +326,31 @@ def test_engines_agree_with_eigenrays(fmu_dir, overrides):
     assert_same_frames(local.metrics, fmu.metrics)
 
 
+@pytest.mark.parametrize("system", ["sbl", "usbl"])
+def test_the_eigenray_table_of_a_run(fmu_dir, monkeypatch, system):
+    """A semicircle through Munk gets an eigenray table (a random walk, above, gets none): both engines equal to
+    1e-9 with it, and the run without it (every eigenray solved) gives the same travel times within 1 µs, the same
+    paths and angles within 1e-5 rad."""
+    from sblsim.orchestrator import plan as plan_module
+
+    cfg = load_config("semicircle", ["platform.system=" + system, *RAY, "simulation.duration=5"], seed=4)
+    table = make_plan(cfg).parameters["acoustics"]
+    assert table["ray_table_rows"] == 512 and not any(table[f"ray_exact[{k}]"] for k in range(1, 513))
+    local = run(cfg, "local", replicates=[0, 1])
+    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
+    assert_same_frames(local.timeseries, fmu.timeseries)
+    assert_same_frames(local.metrics, fmu.metrics)
+    monkeypatch.setattr(plan_module, "ray_table_parameters", lambda cfg, params: {})
+    solved = run(cfg, "local", replicates=[0, 1])
+    a, b = local.timeseries, solved.timeseries
+    assert (a["arrival"] > 0).sum() > 40
+    np.testing.assert_array_equal(a["arrival"], b["arrival"])
+    assert (a["travel_time"] - b["travel_time"]).abs().max() <= 1e-6
+    assert (a["travel_time"] != b["travel_time"]).any()  # interpolated, not solved
+    for column in ("launch_angle", "arrival_angle"):
+        assert (a[column] - b[column]).abs().max() <= 1e-5
+
+
 def test_the_channel_fmu_of_eigenrays_validates(fmu_dir):
     """The channel FMU that runs ``ray`` (the same FMU: the choice is a parameter) passes fmpy's validation and
     declares the propagation (0 straight, 1 ray), the water depth [m] and the eigenray's outputs."""
