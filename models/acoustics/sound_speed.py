@@ -327,20 +327,25 @@ def read_gnatss_ctd(path: str | Path, field: str = "acoustics.sound_speed_profil
     return fit_rows(table, field, str(path))
 
 
-def profile_table(spec: str, text: str, temperature: float, salinity: float) -> np.ndarray:
+def profile_table(spec: str, text: str, temperature: float, salinity: float,
+                  field: str = "acoustics.sound_speed_profile",
+                  table_field: str = "acoustics.sound_speed_table") -> np.ndarray:
     """The sound-speed table of an ``acoustics.sound_speed_profile`` setting (read once per file version).
 
-    See :func:`_profile_table` for the parameters.
+    See :func:`_profile_table` for the parameters; ``field`` and ``table_field`` are the keys an error names
+    (``receiver.sound_speed_profile`` and ``receiver.sound_speed_table`` for a receiver's own profile).
     """
     stamp = None
     if spec not in PROFILE_SOURCES and spec not in ("",) and not spec.startswith("ctd:") and Path(spec).is_file():
         info = Path(spec).stat()
         stamp = (info.st_size, info.st_mtime_ns)
-    return _profile_table(spec, text, float(temperature), float(salinity), stamp).copy()
+    return _profile_table(spec, text, float(temperature), float(salinity), stamp, field, table_field).copy()
 
 
 @lru_cache(maxsize=64)
-def _profile_table(spec: str, text: str, temperature: float, salinity: float, stamp) -> np.ndarray:
+def _profile_table(spec: str, text: str, temperature: float, salinity: float, stamp,
+                   field: str = "acoustics.sound_speed_profile",
+                   table_field: str = "acoustics.sound_speed_table") -> np.ndarray:
     """The sound-speed table of an ``acoustics.sound_speed_profile`` setting.
 
     Parameters
@@ -363,7 +368,6 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     ModelError
         On an unknown built-in cast, an unreadable or malformed file or text.
     """
-    field = "acoustics.sound_speed_profile"
     if spec in ("", "constant"):
         return np.zeros((0, 2))
     if spec == "teos10":
@@ -371,9 +375,9 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     if spec == "munk":
         return munk_table()
     if spec == "table":
-        rows = parse_table(text, PROFILE, "acoustics.sound_speed_table")
+        rows = parse_table(text, PROFILE, table_field)
         if rows.shape[0] == 0:
-            raise ModelError("acoustics.sound_speed_table: sound_speed_profile = table needs rows 'depth speed; ...'")
+            raise ModelError(f"{table_field}: sound_speed_profile = table needs rows 'depth speed; ...'")
         return rows
     if spec.startswith("ctd:"):
         name = spec[4:]
