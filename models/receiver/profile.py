@@ -128,7 +128,7 @@ def profile_fmu_parameters(values: Mapping[str, Any]) -> dict[str, Any]:
     if spec in ("", "constant", TRUE):
         raise ModelError(f"{_FIELD}: {spec!r} is not a receiver's profile; one of {ALLOWED}")
     rows = profile_table(spec, values.get("sound_speed_table", ""), values.get("temperature", 15.0),
-                         values.get("salinity", 35.0), _FIELD, _TABLE_FIELD)
+                         values.get("salinity", 35.0), _FIELD, _TABLE_FIELD, ALLOWED)
     return {"sound_speed_model": "profile", **PROFILE.values(rows, "sound_speed_rows")}
 
 
