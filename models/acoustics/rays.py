@@ -365,7 +365,7 @@ def profile_arrays(table) -> tuple[np.ndarray, np.ndarray]:
 
 #: Newton iterations of :func:`slant_range` (from the straight line at the harmonic-mean speed; the error falls
 #: quadratically: metres, millimetres, then round-off at a 1 km slant range).
-RANGE_ITERATIONS = 4
+RANGE_ITERATIONS = 3
 
 
 @lru_cache(maxsize=1)

@@ -107,17 +107,26 @@ def test_a_bad_profile_is_refused_in_one_line(value, message, tmp_path, capsys):
 
 
 def test_a_profile_receiver_reaches_its_pcrb_at_a_1000_m_site_where_the_assumed_speed_is_biased():
-    straight = run_batch(with_replicates(load_config("random-walk", SITE, seed=1), range(12)), "local",
-                         timeseries=False).metrics
-    aware = run_batch(with_replicates(load_config("random-walk", [*SITE, "receiver.sound_speed_profile=acoustics"],
-                                                  seed=1), range(12)), "local", timeseries=False).metrics
+    """With the single assumed speed ekf-seq is tens of metres off (NEES in the thousands); with the true profile
+    its NEES is in [1.5, 4.5] and its RMS error that of the same receiver in isovelocity water at the assumed
+    speed (no sound-speed error at all: the straight line at 1500 m/s), within 10 %: the PCRB's ratio of this
+    receiver at this geometry (about 1.2-1.3, its own: the same without any sound-speed error)."""
+    def metrics(*more):
+        cfg = load_config("random-walk", [*SITE, *more], seed=1)
+        return run_batch(with_replicates(cfg, range(12)), "local", timeseries=False).metrics
+
+    def rms(m):
+        return float(np.sqrt(np.mean(m["e_tot_rms"] ** 2)))
+
+    straight, aware = metrics(), metrics("receiver.sound_speed_profile=acoustics")
+    isovelocity = metrics("acoustics.propagation=straight", "acoustics.sound_speed_profile=constant")
     np.testing.assert_array_equal(straight["pcrb_rms"], aware["pcrb_rms"])  # the same bound
     pcrb = float(np.sqrt(np.mean(aware["pcrb_rms"] ** 2)))
-    rms = {k: float(np.sqrt(np.mean(m["e_tot_rms"] ** 2))) for k, m in (("straight", straight), ("aware", aware))}
-    assert rms["straight"] > 10.0 * pcrb and float(straight["nees_mean"].mean()) > 100.0
+    assert rms(straight) > 10.0 * pcrb and float(straight["nees_mean"].mean()) > 100.0
     nees = float(aware["nees_mean"].mean())
     assert 1.5 <= nees <= 4.5, nees
-    assert 0.8 * pcrb <= rms["aware"] <= 1.3 * pcrb, (rms, pcrb)
+    assert rms(aware) == pytest.approx(rms(isovelocity), rel=0.10), (rms(aware), rms(isovelocity))
+    assert rms(aware) <= 1.5 * pcrb, (rms(aware), pcrb)
 
 
 def test_the_budget_names_the_profile_error():
