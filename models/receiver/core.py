@@ -497,7 +497,8 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
-           "arrival_interface", "beacon_parameters", "config_profile", "clock_due", "clock_parameters", "clock_step", "clock_tick",
-           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active",
-           "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "receiver_interface",
-           "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet", "with_profile"]
+           "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
+           "config_profile", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver",
+           "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states",
+           "receiver_interface", "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet",
+           "with_profile"]

@@ -63,8 +63,8 @@ from sblsim.models.receiver.core import (
     take_packet,
     with_profile,
 )
-from sblsim.models.receiver.profile import profile_parameters
 from sblsim.models.receiver.multilateration import fix_covariance, weights
+from sblsim.models.receiver.profile import profile_parameters
 from sblsim.models.systems import interface_system
 
 #: The Kalman receivers' parameters this receiver takes (declared once, in sblsim.models.receiver.core).
