@@ -65,7 +65,7 @@ def profile_parameters() -> tuple[Variable, ...]:
                  description="Travel time to range: the single assumed speed, or the slant range of the direct "
                              "eigenray through the receiver's profile table"),
         Variable("sound_speed_assumed", "parameter", "Real", 1500.0, "m/s",
-                 "The channel's assumed speed c_a the packet's range is c_a times the travel time with "
+                 "The channel's assumed speed c_a: the packet's range is c_a times the travel time "
                  "(acoustics.sound_speed_assumed)", min=1300.0, max=1700.0, scope="fmu"),
         Variable("sound_speed_rows", "parameter", "Integer", 0, scope="fmu", table=PROFILE,
                  description="Rows of the receiver's sound-speed table (sound_speed_model = profile)",
