@@ -44,7 +44,7 @@ from sblsim.models.declarations import ModelError, Variable, format_table
 #: ``receiver.sound_speed_profile``'s default: the single assumed speed.
 ASSUMED = "assumed"
 #: ``receiver.sound_speed_profile``: the channel's own profile (the true one).
-TRUE = "acoustics"
+CHANNEL = "acoustics"
 #: The FMU's choice: the single assumed speed, or the profile's table.
 SOUND_SPEED_MODELS = ("assumed", "profile")
 _FIELD, _TABLE_FIELD = "receiver.sound_speed_profile", "receiver.sound_speed_table"
@@ -73,7 +73,7 @@ def profile_parameters() -> tuple[Variable, ...]:
     )
 
 
-def resolve_true(values: Mapping[str, Any], acoustics: Mapping[str, Any]) -> dict[str, Any]:
+def resolve_channel_profile(values: Mapping[str, Any], acoustics: Mapping[str, Any]) -> dict[str, Any]:
     """A receiver section with ``sound_speed_profile = acoustics`` made the channel's profile (as a table).
 
     Parameters
@@ -98,7 +98,7 @@ def resolve_true(values: Mapping[str, Any], acoustics: Mapping[str, Any]) -> dic
     """
     out = dict(values)
     out["temperature"], out["salinity"] = acoustics.get("temperature", 15.0), acoustics.get("salinity", 35.0)
-    if out.get("sound_speed_profile", ASSUMED) != TRUE:
+    if out.get("sound_speed_profile", ASSUMED) != CHANNEL:
         return out
     rows = profile_table(acoustics.get("sound_speed_profile", "constant"), acoustics.get("sound_speed_table", ""),
                          out["temperature"], out["salinity"])
@@ -109,7 +109,7 @@ def resolve_true(values: Mapping[str, Any], acoustics: Mapping[str, Any]) -> dic
 
 
 def profile_fmu_parameters(values: Mapping[str, Any]) -> dict[str, Any]:
-    """The FMU parameters of a receiver's ``sound_speed_profile`` (after :func:`resolve_true`).
+    """The FMU parameters of a receiver's ``sound_speed_profile`` (after :func:`resolve_channel_profile`).
 
     Returns
     -------
@@ -125,7 +125,7 @@ def profile_fmu_parameters(values: Mapping[str, Any]) -> dict[str, Any]:
     spec = values.get("sound_speed_profile", ASSUMED)
     if spec == ASSUMED:
         return {"sound_speed_model": ASSUMED, "sound_speed_rows": 0}
-    if spec in ("", "constant", TRUE):
+    if spec in ("", "constant", CHANNEL):
         raise ModelError(f"{_FIELD}: {spec!r} is not a receiver's profile; one of {ALLOWED}")
     rows = profile_table(spec, values.get("sound_speed_table", ""), values.get("temperature", 15.0),
                          values.get("salinity", 35.0), _FIELD, _TABLE_FIELD, ALLOWED)
@@ -183,5 +183,5 @@ def profile_range(u: dict, p: dict) -> dict:
     return {**u, "range": ca.if_else(use, rho, u["range"])}
 
 
-__all__ = ["ALLOWED", "ASSUMED", "SOUND_SPEED_MODELS", "TRUE", "profile_config_values", "profile_fmu_parameters",
-           "profile_parameters", "profile_range", "profile_when", "resolve_true"]
+__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "SOUND_SPEED_MODELS", "profile_config_values", "profile_fmu_parameters",
+           "profile_parameters", "profile_range", "profile_when", "resolve_channel_profile"]
