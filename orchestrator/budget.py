@@ -80,7 +80,12 @@ SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
     "usbl_angle": ("USBL direction-of-arrival noise", ("platform.usbl_angle_sigma_deg=0",)),
     "usbl_misalignment": ("USBL array misalignment", ("platform.usbl_misalignment_deg=0",)),
     "latency": ("the receiver's processing latency (the diver sees an older estimate)", ("receiver.latency=0",)),
+    "profile_error": ("profile error: the receiver's sound-speed profile other than the true one",
+                      ("receiver.sound_speed_profile=acoustics",)),
 }
+#: Sources that exist only for a receiver that ranges with its own profile (``receiver.sound_speed_profile`` not
+#: ``assumed``): a receiver of the single assumed speed has them off (its error is the ``sound_speed`` source).
+PROFILE_SOURCES = frozenset({"profile_error"})
 
 DEFAULT_REPLICATES = 500
 MAX_REPLICATES = 100_000
@@ -268,13 +273,21 @@ def _switches(cfg: RunPlan) -> tuple[dict[str, RunPlan], RunPlan]:
     kept = _SWITCHED.get(id(cfg))
     if kept is not None and kept[0] is cfg:
         return kept[1]
-    names = SOURCES
-    off = {name: switched_off(cfg, overrides) for name, (_, overrides) in names.items()}
-    switches = off, switched_off(cfg, [o for _, overrides in names.values() for o in overrides])
+    names = {name: _overrides(cfg, name, overrides) for name, (_, overrides) in SOURCES.items()}
+    off = {name: switched_off(cfg, overrides) for name, overrides in names.items()}
+    switches = off, switched_off(cfg, [o for overrides in names.values() for o in overrides])
     if len(_SWITCHED) >= _KEEP:
         _SWITCHED.pop(next(iter(_SWITCHED)))
     _SWITCHED[id(cfg)] = (cfg, switches)
     return switches
+
+
+def _overrides(cfg: RunPlan, name: str, overrides: tuple[str, ...]) -> tuple[str, ...]:
+    """The overrides that switch the source ``name`` off in ``cfg``: none (the source is off) for a profile
+    source of a receiver that ranges with the single assumed speed (or declares no profile)."""
+    if name in PROFILE_SOURCES and cfg["receiver"].get("sound_speed_profile", "assumed") == "assumed":
+        return ()
+    return overrides
 
 
 def planned(cfg: RunPlan | dict[str, dict]) -> int:

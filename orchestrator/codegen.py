@@ -54,6 +54,8 @@ def example_files(receiver: str, system: str | None = None) -> tuple[dict[str, s
                for k, row in enumerate(series.itertuples(index=False))]
     expected = [" ".join(repr(float(getattr(row, c))) for c in ("time", "est_x", "est_y", "est_z"))
                 for row in series.itertuples(index=False)]
+    choices = {v.name: v.choices for v in model.fmu_parameters_declared(n_beacons) if v.choices is not None}
+    params = {k: (choices[k].index(v) if k in choices and isinstance(v, str) else v) for k, v in params.items()}
     files = {"parameters.txt": " ".join(f"{k}={v!r}" for k, v in params.items() if k not in seeds) + "\n",
              "packets.txt": "\n".join(packets) + "\n", "expected.txt": "\n".join(expected) + "\n"}
     about = (f"The example files are a recorded run (`sblsim run {scenario} --seed {seed} "

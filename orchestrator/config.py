@@ -108,7 +108,8 @@ RECEIVER_KEY_NAMES = frozenset(v.name for v in RECEIVER_KEYS)
 #: FMU parameters filled with ``simulation.sampling_time``: (component, parameter).
 SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
 #: FMU parameters filled from a configuration key of another section: (component, parameter) <- (section, key).
-KEY_TIES = ((("acoustics", "usbl_angle_sigma_deg"), ("platform", "usbl_angle_sigma_deg")),)
+KEY_TIES = ((("acoustics", "usbl_angle_sigma_deg"), ("platform", "usbl_angle_sigma_deg")),
+            (("receiver", "sound_speed_assumed"), ("acoustics", "sound_speed_assumed")))
 EXTERNAL_PREFIX = "fmu:"
 MODEL_PREFIX = "model:"
 

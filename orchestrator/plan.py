@@ -35,6 +35,7 @@ from sblsim.models.acoustics.rays import RAY_BOUNDS, RAY_TABLE, eigenray_table
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.platform.waves import wave_motion
 from sblsim.models.receiver.core import filter_parameters
+from sblsim.models.receiver.profile import resolve_channel_profile
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target.core import file_waypoints
@@ -279,6 +280,8 @@ def _component_parameters(cfg: Mapping[str, Mapping[str, Any]], component: str, 
     section = cfg[component]
     if component == "receiver":  # the orchestrator's keys are not the receiver's parameters
         section = {k: v for k, v in section.items() if k not in RECEIVER_KEY_NAMES}
+        if "sound_speed_profile" in section:  # its own profile: ``acoustics`` is the channel's, teos10 at its water
+            section = resolve_channel_profile(section, cfg["acoustics"])
     if model is None:
         params = dict(section)
         declared = None

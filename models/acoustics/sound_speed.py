@@ -160,7 +160,8 @@ def _profile_functions() -> tuple[ca.Function, ca.Function]:
     return ca.Function("sblsim_level_speed", [z, nodes, slowness], [speed]), f
 
 
-def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile") -> np.ndarray:
+def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile",
+                  allowed: str = "constant, teos10, table, ctd:NAME or a CSV path") -> np.ndarray:
     """Read a sound-speed cast: a Castaway CTD processed file or a plain CSV ``depth, sound_speed``.
 
     Lines starting with ``%`` or ``#`` are comments. The first other line
@@ -184,7 +185,7 @@ def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile"
     if path.is_dir():
         raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
     if not path.is_file():
-        raise ModelError(f"{field}: no such file {str(path)!r}; use constant, teos10, table, ctd:NAME or a CSV path")
+        raise ModelError(f"{field}: no such file {str(path)!r}; use {allowed}")
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:
             lines = [(i, row) for i, row in enumerate(csv.reader(handle), start=1)
@@ -327,20 +328,27 @@ def read_gnatss_ctd(path: str | Path, field: str = "acoustics.sound_speed_profil
     return fit_rows(table, field, str(path))
 
 
-def profile_table(spec: str, text: str, temperature: float, salinity: float) -> np.ndarray:
+def profile_table(spec: str, text: str, temperature: float, salinity: float,
+                  field: str = "acoustics.sound_speed_profile",
+                  table_field: str = "acoustics.sound_speed_table", allowed: str | None = None) -> np.ndarray:
     """The sound-speed table of an ``acoustics.sound_speed_profile`` setting (read once per file version).
 
-    See :func:`_profile_table` for the parameters.
+    See :func:`_profile_table` for the parameters; ``field`` and ``table_field`` are the keys an error names
+    (``receiver.sound_speed_profile`` and ``receiver.sound_speed_table`` for a receiver's own profile) and
+    ``allowed`` what the error of a missing file lists (default the channel's sources).
     """
     stamp = None
     if spec not in PROFILE_SOURCES and spec not in ("",) and not spec.startswith("ctd:") and Path(spec).is_file():
         info = Path(spec).stat()
         stamp = (info.st_size, info.st_mtime_ns)
-    return _profile_table(spec, text, float(temperature), float(salinity), stamp).copy()
+    return _profile_table(spec, text, float(temperature), float(salinity), stamp, field, table_field,
+                          allowed).copy()
 
 
 @lru_cache(maxsize=64)
-def _profile_table(spec: str, text: str, temperature: float, salinity: float, stamp) -> np.ndarray:
+def _profile_table(spec: str, text: str, temperature: float, salinity: float, stamp,
+                   field: str = "acoustics.sound_speed_profile",
+                   table_field: str = "acoustics.sound_speed_table", allowed: str | None = None) -> np.ndarray:
     """The sound-speed table of an ``acoustics.sound_speed_profile`` setting.
 
     Parameters
@@ -363,7 +371,6 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     ModelError
         On an unknown built-in cast, an unreadable or malformed file or text.
     """
-    field = "acoustics.sound_speed_profile"
     if spec in ("", "constant"):
         return np.zeros((0, 2))
     if spec == "teos10":
@@ -371,9 +378,9 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     if spec == "munk":
         return munk_table()
     if spec == "table":
-        rows = parse_table(text, PROFILE, "acoustics.sound_speed_table")
+        rows = parse_table(text, PROFILE, table_field)
         if rows.shape[0] == 0:
-            raise ModelError("acoustics.sound_speed_table: sound_speed_profile = table needs rows 'depth speed; ...'")
+            raise ModelError(f"{table_field}: sound_speed_profile = table needs rows 'depth speed; ...'")
         return rows
     if spec.startswith("ctd:"):
         name = spec[4:]
@@ -384,7 +391,7 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
                 return read_gnatss_ctd(path, field)
         with resources.as_file(resources.files("sblsim.models.acoustics") / "data" / f"{name}.csv") as path:
             return read_cast_csv(path, field)
-    return read_cast_csv(spec, field)
+    return read_cast_csv(spec, field) if allowed is None else read_cast_csv(spec, field, allowed)
 
 
 __all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean", "munk_speed",

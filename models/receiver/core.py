@@ -48,6 +48,13 @@ from sblsim.models.receiver.gate import gate
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
+from sblsim.models.receiver.profile import (
+    profile_config_values,
+    profile_fmu_parameters,
+    profile_parameters,
+    profile_range,
+    profile_when,
+)
 from sblsim.models.systems import SYSTEMS, interface_system
 
 #: The state entries of the built-in motion model, as the ``x0_*`` parameters and ``est_*`` outputs name them.
@@ -293,7 +300,24 @@ class KalmanReceiver(Component):
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
-                + arrival_interface())
+                + arrival_interface() + profile_parameters())
+
+    @classmethod
+    def fmu_parameters(cls, values, n_beacons: int = 4) -> dict:
+        """FMU parameters of a configuration section: the receiver's sound-speed profile becomes its table
+        (:func:`~sblsim.models.receiver.profile.profile_fmu_parameters`).
+
+        Raises
+        ------
+        ModelError
+            On a bad ``receiver.sound_speed_profile`` or ``receiver.sound_speed_table``.
+        """
+        return with_profile(cls, super().fmu_parameters(values, n_beacons), values, n_beacons)
+
+    @classmethod
+    def config_values(cls, values, n_beacons: int = 4) -> dict:
+        """Configuration keys from FMU parameters: a profile table becomes ``sound_speed_profile = table``."""
+        return config_profile(cls, super().config_values(values, n_beacons), values, n_beacons)
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -429,8 +453,36 @@ class KalmanReceiver(Component):
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output), step=b.step(step),
-                         events=[b.event("clock", clock_due, clock_tick), b.event("slot", due, slot),
+                         events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, due, slot),
                                  b.event("lm", lm_active, iterate)])
+
+
+def with_profile(model, params: dict, values, n_beacons: int) -> dict:
+    """``params`` plus the profile's FMU parameters, when ``model`` declares them."""
+    if any(v.name == "sound_speed_model" for v in model.fmu_parameters_declared(n_beacons)):
+        params.update(profile_fmu_parameters(values))
+    return params
+
+
+def config_profile(model, out: dict, values, n_beacons: int) -> dict:
+    """``out`` plus the profile's configuration keys, when ``model`` declares them."""
+    if any(v.name == "sound_speed_model" for v in model.fmu_parameters_declared(n_beacons)):
+        out.update(profile_config_values(values))
+    return out
+
+
+def slot_events(b: ProgramBuilder, model, n_beacons: int, due, slot) -> list:
+    """The slot event of a receiver: ``slot`` as it always was for the single assumed speed, and ``slot_profile``
+    (its packet's range turned into the slant range of the receiver's profile first,
+    :func:`~sblsim.models.receiver.profile.profile_range`) for a run with a profile."""
+    events = []
+    for choice, when in profile_when(model.fmu_parameters_declared(n_beacons)).items():
+        if choice == "assumed":
+            events.append(b.event("slot", due, slot, when=when))
+        else:
+            events.append(b.event("slot_profile", due,
+                                  lambda x, u, p, d, w, t, h: slot(x, profile_range(u, p), p, d, w, t, h), when=when))
+    return events
 
 
 def reply_epoch(u: dict) -> ca.SX:
@@ -446,6 +498,7 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
            "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
-           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active",
-           "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "receiver_interface",
-           "reply_epoch", "slot_due", "system_interface", "take_packet"]
+           "config_profile", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver",
+           "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states",
+           "receiver_interface", "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet",
+           "with_profile"]

@@ -45,6 +45,7 @@ from sblsim.models.receiver.core import (
     clock_due,
     clock_parameters,
     clock_tick,
+    config_profile,
     covariance_outputs,
     filter_parameters,
     fresh_packet,
@@ -57,10 +58,13 @@ from sblsim.models.receiver.core import (
     packet_states,
     receiver_interface,
     slot_due,
+    slot_events,
     system_interface,
     take_packet,
+    with_profile,
 )
 from sblsim.models.receiver.multilateration import fix_covariance, weights
+from sblsim.models.receiver.profile import profile_parameters
 from sblsim.models.systems import interface_system
 
 #: The Kalman receivers' parameters this receiver takes (declared once, in sblsim.models.receiver.core).
@@ -79,7 +83,23 @@ class LeastSquaresReceiver(Component):
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
-                + clock_parameters() + system_interface(n_beacons) + arrival_interface())
+                + clock_parameters() + system_interface(n_beacons) + arrival_interface() + profile_parameters())
+
+    @classmethod
+    def fmu_parameters(cls, values, n_beacons: int = 4) -> dict:
+        """FMU parameters of a configuration section: the receiver's sound-speed profile becomes its table.
+
+        Raises
+        ------
+        ModelError
+            On a bad ``receiver.sound_speed_profile`` or ``receiver.sound_speed_table``.
+        """
+        return with_profile(cls, super().fmu_parameters(values, n_beacons), values, n_beacons)
+
+    @classmethod
+    def config_values(cls, values, n_beacons: int = 4) -> dict:
+        """Configuration keys from FMU parameters: a profile table becomes ``sound_speed_profile = table``."""
+        return config_profile(cls, super().config_values(values, n_beacons), values, n_beacons)
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -145,7 +165,7 @@ class LeastSquaresReceiver(Component):
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output),
-                         events=[b.event("clock", clock_due, clock_tick), b.event("slot", due, slot),
+                         events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, due, slot),
                                  b.event("lm", lm_active, iterate),
                                  b.event("finish", finished, finish)])
 

@@ -308,6 +308,10 @@ RAY_CASES = {
     "usbl-ray": ["platform.system=usbl", *RAY],
     "sbl-ray-water-depth": ["platform.system=sbl", *RAY, "acoustics.water_depth=8"],
     "lbl-ray-water-depth": ["platform.system=lbl", *RAY, "acoustics.water_depth=50"],
+    # a receiver that ranges with its own profile (the true one): its slot event of the eigenray conversion
+    "lbl-ray-receiver-profile": ["platform.system=lbl", *RAY, "receiver.sound_speed_profile=acoustics"],
+    "usbl-ray-receiver-profile": ["platform.system=usbl", *RAY, "receiver.sound_speed_profile=munk",
+                                  "simulation.receiver=ekf-seq"],
 }
 
 
