@@ -143,7 +143,7 @@ class Component:
         if out is None:
             out = np.empty((batch, base.size))
         out[:] = base
-        declared = {v.name: (k, v) for k, v in enumerate(cls.fmu_parameters_declared(n_beacons))}
+        declared = _parameter_index(cls, int(n_beacons))[0]
         for name, array in arrays.items():
             k, var = declared[name]
             if array.shape != (batch,):
