@@ -251,3 +251,13 @@ def test_usbl_fmus_run_in_a_plain_c_host_with_an_empty_environment(usbl_fmus, tm
 def test_fmus_build_refuses_beacons_with_the_usbl_system(capsys):
     assert main(["fmus", "build", "--system", "usbl", "--beacons", "6", "--out", "unused"]) != 0
     assert "--beacons: 6 with --system usbl" in capsys.readouterr().err
+
+
+def test_a_ray_ssp_with_a_profile_receiver_runs_in_libcosim_like_the_jacobi_master(fmu_dir, tmp_path):
+    """Eigenrays through Munk's profile (the channel's eigenray table and its exact solve) and a receiver ranging
+    with that profile, stepped by libcosim from the SSP: the fmu engine's Jacobi numbers."""
+    cfg = load_config("semicircle", ["acoustics.propagation=ray", "acoustics.sound_speed_profile=munk",
+                                     "receiver.sound_speed_profile=acoustics", "simulation.duration=5"], seed=4)
+    _libcosim_against_jacobi(cfg, fmu_dir, tmp_path)
+    back = read_ssp(tmp_path / "system.ssp").config  # the package the host ran is the ray run's
+    assert back["acoustics"]["propagation"] == "ray" and back["receiver"]["sound_speed_profile"] != "assumed"
