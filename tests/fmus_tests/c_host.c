@@ -33,13 +33,14 @@ static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status sta
 int main(int argc, char** argv) {
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     fmi2Component c[2];
-    unsigned int vr[4096], pvr[256];
+    unsigned int vr[4096], pvr[256], ivr[256];
     double value[4096], pval[256];
-    int n_out = 0, n_par = 0, k, i, j, steps;
+    int ival[256];
+    int n_out = 0, n_par = 0, n_int = 0, k, i, j, steps;
     double h;
     void* lib;
     if (argc < 6) {
-        fprintf(stderr, "usage: c_host BINARY GUID RESOURCE_URI STEPS H [VR=VALUE ...]\n");
+        fprintf(stderr, "usage: c_host BINARY GUID RESOURCE_URI STEPS H [VR=VALUE | iVR=INTEGER ...]\n");
         return 1;
     }
     steps = atoi(argv[4]);
@@ -51,12 +52,14 @@ int main(int argc, char** argv) {
     }
     {
         LOAD(fmi2Instantiate) LOAD(fmi2SetupExperiment) LOAD(fmi2EnterInitializationMode)
-        LOAD(fmi2ExitInitializationMode) LOAD(fmi2DoStep) LOAD(fmi2GetReal) LOAD(fmi2SetReal)
+        LOAD(fmi2ExitInitializationMode) LOAD(fmi2DoStep) LOAD(fmi2GetReal) LOAD(fmi2SetReal) LOAD(fmi2SetInteger)
         LOAD(fmi2FreeInstance) LOAD(fmi2Terminate)
-        /* output value references come on stdin, one per line; parameters as VR=VALUE arguments */
+        /* output value references come on stdin, one per line; parameters as VR=VALUE (Real) and iVR=VALUE
+           (Integer) arguments */
         while (n_out < 4096 && scanf("%u", &vr[n_out]) == 1) n_out++;
-        for (i = 6; i < argc && n_par < 256; i++) {
-            if (sscanf(argv[i], "%u=%lf", &pvr[n_par], &pval[n_par]) == 2) n_par++;
+        for (i = 6; i < argc; i++) {
+            if (n_int < 256 && sscanf(argv[i], "i%u=%d", &ivr[n_int], &ival[n_int]) == 2) n_int++;
+            else if (n_par < 256 && sscanf(argv[i], "%u=%lf", &pvr[n_par], &pval[n_par]) == 2) n_par++;
         }
         for (i = 0; i < 2; i++) {
             c[i] = fmi2Instantiate(i ? "b" : "a", fmi2CoSimulation, argv[2], argv[3], &callbacks, fmi2False, fmi2False);
@@ -67,6 +70,7 @@ int main(int argc, char** argv) {
             CHECK(fmi2SetupExperiment(c[i], fmi2False, 0.0, 0.0, fmi2False, 0.0))
             CHECK(fmi2EnterInitializationMode(c[i]))
             if (i == 1 && n_par) CHECK(fmi2SetReal(c[i], pvr, (size_t)n_par, pval))
+            if (i == 1 && n_int) CHECK(fmi2SetInteger(c[i], ivr, (size_t)n_int, ival))
             CHECK(fmi2ExitInitializationMode(c[i]))
         }
         for (k = 1; k <= steps; k++) {

@@ -3,6 +3,7 @@ an independent FMU checker, other platforms, another compiler, and the random st
 
 from __future__ import annotations
 
+import math
 import shutil
 import struct
 import subprocess
@@ -245,3 +246,32 @@ def test_philox_reference_is_numpys_bit_generator():
         assert not np.any(other == base)
     big = uniforms(1, 0, 0, 0, 0, 0, 0, 40000)
     assert 0.0 <= big.min() and big.max() < 1.0 and abs(big.mean() - 0.5) < 0.01
+
+
+def test_the_ray_channel_runs_in_the_plain_c_host_with_an_empty_environment(fmu_dir, c_host, tmp_path):
+    """The channel FMU set by a plain C host (no Python, an empty environment) to ``propagation = ray`` through a
+    table profile, with no eigenray table (every eigenray solved), a diver 300 m out and 178 m below beacon 1: the
+    travel time of beacon 1's packet is the eigenray's that the casadi model gives (:func:`rays.first_arrival`),
+    not the straight line's."""
+    from sblsim.models.acoustics.rays import first_arrival, profile_arrays
+
+    binary, guid, outputs = unpack(fmu_path(fmu_dir, "acoustics"), tmp_path)
+    declared = MODELS["acoustics"].fmu_variables()
+    index = {v.name: k for k, v in enumerate(declared)}
+    table = np.array([[0.0, 1500.0], [50.0, 1490.0], [200.0, 1470.0], [500.0, 1485.0], [1000.0, 1500.0]])
+    reals = {"beacon1_true_z": 2.0, "target_x": 300.0, "target_y": 40.0, "target_z": 180.0}
+    reals.update({f"sound_speed_depth[{k + 1}]": row[0] for k, row in enumerate(table)})
+    reals.update({f"sound_speed[{k + 1}]": row[1] for k, row in enumerate(table)})
+    ints = {"propagation": declared[index["propagation"]].choices.index("ray"), "sound_speed_rows": len(table)}
+    params = [f"{index[n]}={float(v)!r}" for n, v in reals.items()] + [f"i{index[n]}={v}" for n, v in ints.items()]
+    proc = subprocess.run([str(c_host), str(binary), guid, f"file://{tmp_path}/resources", "30", "0.1", *params],
+                          input="\n".join(map(str, outputs)), capture_output=True, text=True, env={}, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = parse(proc.stdout)["b"]
+    real_names = [declared[vr].name for vr in outputs]
+    first = rows[np.isclose(rows[:, real_names.index("tx_time")], 0.1)][0]  # slot 1: beacon 1's packet
+    nodes, speeds = profile_arrays(table)
+    x = math.hypot(300.0, 40.0)
+    tau = float(first_arrival(1.0, 2.0, 180.0, x, 0.0, 1500.0, nodes, speeds)[0])
+    assert first[real_names.index("travel_time")] == pytest.approx(tau, rel=1e-12)
+    assert abs(tau - math.hypot(x, 178.0) / table[:, 1].mean()) > 1e-5  # refraction shows
