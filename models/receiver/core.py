@@ -250,7 +250,40 @@ def beacon_parameters() -> tuple[Variable, ...]:
     )
 
 
-class KalmanReceiver(Component):
+class RangesWithProfile:
+    """What a receiver that declares :func:`~sblsim.models.receiver.profile.profile_parameters` adds to a
+    :class:`~sblsim.models.component.Component` (listed before it): its configuration's sound-speed profile
+    becomes its FMU table and back."""
+
+    @classmethod
+    def _declares_profile(cls, n_beacons: int) -> bool:
+        return any(v.name == "sound_speed_model" for v in cls.fmu_parameters_declared(n_beacons))
+
+    @classmethod
+    def fmu_parameters(cls, values, n_beacons: int = 4) -> dict:
+        """FMU parameters of a configuration section: the receiver's sound-speed profile becomes its table
+        (:func:`~sblsim.models.receiver.profile.profile_fmu_parameters`).
+
+        Raises
+        ------
+        ModelError
+            On a bad ``receiver.sound_speed_profile`` or ``receiver.sound_speed_table``.
+        """
+        params = super().fmu_parameters(values, n_beacons)
+        if cls._declares_profile(n_beacons):
+            params.update(profile_fmu_parameters(values))
+        return params
+
+    @classmethod
+    def config_values(cls, values, n_beacons: int = 4) -> dict:
+        """Configuration keys from FMU parameters: a profile table becomes ``sound_speed_profile = table``."""
+        out = super().config_values(values, n_beacons)
+        if cls._declares_profile(n_beacons):
+            out.update(profile_config_values(values))
+        return out
+
+
+class KalmanReceiver(RangesWithProfile, Component):
     """Base of the Kalman-type receivers: a motion model, a measurement model, ``predict`` and ``correct``.
 
     Subclasses set :attr:`name` (the FMU's, ``receiver_*``) and :attr:`label`
@@ -301,23 +334,6 @@ class KalmanReceiver(Component):
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
                 + arrival_interface() + profile_parameters())
-
-    @classmethod
-    def fmu_parameters(cls, values, n_beacons: int = 4) -> dict:
-        """FMU parameters of a configuration section: the receiver's sound-speed profile becomes its table
-        (:func:`~sblsim.models.receiver.profile.profile_fmu_parameters`).
-
-        Raises
-        ------
-        ModelError
-            On a bad ``receiver.sound_speed_profile`` or ``receiver.sound_speed_table``.
-        """
-        return with_profile(cls, super().fmu_parameters(values, n_beacons), values, n_beacons)
-
-    @classmethod
-    def config_values(cls, values, n_beacons: int = 4) -> dict:
-        """Configuration keys from FMU parameters: a profile table becomes ``sound_speed_profile = table``."""
-        return config_profile(cls, super().config_values(values, n_beacons), values, n_beacons)
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -457,20 +473,6 @@ class KalmanReceiver(Component):
                                  b.event("lm", lm_active, iterate)])
 
 
-def with_profile(model, params: dict, values, n_beacons: int) -> dict:
-    """``params`` plus the profile's FMU parameters, when ``model`` declares them."""
-    if any(v.name == "sound_speed_model" for v in model.fmu_parameters_declared(n_beacons)):
-        params.update(profile_fmu_parameters(values))
-    return params
-
-
-def config_profile(model, out: dict, values, n_beacons: int) -> dict:
-    """``out`` plus the profile's configuration keys, when ``model`` declares them."""
-    if any(v.name == "sound_speed_model" for v in model.fmu_parameters_declared(n_beacons)):
-        out.update(profile_config_values(values))
-    return out
-
-
 def slot_events(b: ProgramBuilder, model, n_beacons: int, due, slot) -> list:
     """The slot event of a receiver: ``slot`` as it always was for the single assumed speed, and ``slot_profile``
     (its packet's range turned into the slant range of the receiver's profile first,
@@ -498,7 +500,6 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
            "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
-           "config_profile", "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver",
-           "lm_active", "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states",
-           "receiver_interface", "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet",
-           "with_profile"]
+           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active",
+           "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "RangesWithProfile",
+           "receiver_interface", "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet"]

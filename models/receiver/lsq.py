@@ -41,11 +41,11 @@ from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.core import (
+    RangesWithProfile,
     arrival_interface,
     clock_due,
     clock_parameters,
     clock_tick,
-    config_profile,
     covariance_outputs,
     filter_parameters,
     fresh_packet,
@@ -61,7 +61,6 @@ from sblsim.models.receiver.core import (
     slot_events,
     system_interface,
     take_packet,
-    with_profile,
 )
 from sblsim.models.receiver.multilateration import fix_covariance, weights
 from sblsim.models.receiver.profile import profile_parameters
@@ -73,7 +72,7 @@ SHARED_PARAMETERS = ("sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z")
 ITERATIONS, TOLERANCE = 50, 1e-6
 
 
-class LeastSquaresReceiver(Component):
+class LeastSquaresReceiver(RangesWithProfile, Component):
     """Per-slot weighted least-squares (Levenberg-Marquardt) multilateration receiver."""
 
     name = "receiver_lsq"
@@ -84,22 +83,6 @@ class LeastSquaresReceiver(Component):
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
                 + clock_parameters() + system_interface(n_beacons) + arrival_interface() + profile_parameters())
-
-    @classmethod
-    def fmu_parameters(cls, values, n_beacons: int = 4) -> dict:
-        """FMU parameters of a configuration section: the receiver's sound-speed profile becomes its table.
-
-        Raises
-        ------
-        ModelError
-            On a bad ``receiver.sound_speed_profile`` or ``receiver.sound_speed_table``.
-        """
-        return with_profile(cls, super().fmu_parameters(values, n_beacons), values, n_beacons)
-
-    @classmethod
-    def config_values(cls, values, n_beacons: int = 4) -> dict:
-        """Configuration keys from FMU parameters: a profile table becomes ``sound_speed_profile = table``."""
-        return config_profile(cls, super().config_values(values, n_beacons), values, n_beacons)
 
     @classmethod
     def build(cls, n_beacons: int):
