@@ -167,8 +167,7 @@ class Study:
         ConfigError, ModelError
             If the levels do not make a valid configuration for the scenario.
         """
-        return load_config(scenario, [*self.overrides, *self.cell_overrides(cell), f"run.cell={cell}"],
-                           seed=self.seed)
+        return load_config(scenario, self._cell_settings(cell), seed=self.seed)
 
     def cell_plan(self, scenario: str, cell: int) -> RunPlan:
         """The plan of one design cell (``run.cell`` set, replicate 0), resolved once
@@ -179,8 +178,11 @@ class Study:
         ConfigError, ModelError
             If the levels do not make a valid configuration for the scenario.
         """
-        return load_plan(scenario, [*self.overrides, *self.cell_overrides(cell), f"run.cell={cell}"],
-                         seed=self.seed)
+        return load_plan(scenario, self._cell_settings(cell), seed=self.seed)
+
+    def _cell_settings(self, cell: int) -> list[str]:
+        """The study's overrides, the cell's levels and ``run.cell``, in that order."""
+        return [*self.overrides, *self.cell_overrides(cell), f"run.cell={cell}"]
 
     def to_dict(self) -> dict[str, Any]:
         """The resolved study as a TOML-ready table (``study.toml``)."""

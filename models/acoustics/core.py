@@ -360,9 +360,12 @@ class Acoustics(Component):
             values = ca.vertcat(nodes, slowness, speeds)
             values = ca.if_else(p["sound_speed_rows"] > 0, values, ca.MX.zeros(values.shape), True)
             bounds = ca.vertcat(*[p[name] for name in RAY_BOUNDS])
+            table = ray_values([p[c.name] for c in RAY_TABLE.columns])
+            # a run without an eigenray table (every straight run) never reads it: skip its copy, as above
+            table = ca.if_else(p["ray_table_rows"] > 0, table, ca.MX.zeros(table.shape), True)
             return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:],
                     "ray_bounds": bounds, "ray_grid": ray_grid([bounds[j] for j in range(len(RAY_BOUNDS))]),
-                    "ray_values": ray_values([p[c.name] for c in RAY_TABLE.columns])}
+                    "ray_values": table}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}

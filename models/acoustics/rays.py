@@ -419,6 +419,25 @@ def _images(kind, zs, zr, x, depth):
 
 
 @lru_cache(maxsize=1)
+def _image_function() -> ca.Function:
+    """``(kind, zs, zr, x, depth) -> (length, launch, arrival)``: :func:`_images` (the builder's offsets)."""
+    args = [ca.SX.sym(n) for n in ("kind", "zs", "zr", "x", "depth")]
+    return ca.Function("sblsim_ray_image", args, list(_images(*args)))
+
+
+@lru_cache(maxsize=1)
+def _row_eigenray() -> ca.Function:
+    """``(zs, zr, x, depth, row) -> (τ, launch, arrival, kind)``: the eigenray a table row gives at a geometry,
+    ``τ / L`` times the image's length ``L`` and the image's angles plus the row's offsets."""
+    zs, zr, x, depth = (ca.SX.sym(n) for n in ("zs", "zr", "x", "depth"))
+    row = ca.SX.sym("row", len(RAY_TABLE.columns))
+    kind = ca.floor(row[3] + 0.5)
+    length, launch, arrival = _images(kind, zs, zr, x, depth)
+    return ca.Function("sblsim_ray_row", [zs, zr, x, depth, row],
+                       [row[0] * length, launch + row[1], arrival + row[2], kind])
+
+
+@lru_cache(maxsize=1)
 def _first_arrival_grid() -> ca.Function:
     """``(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values) -> (τ, launch,
     arrival, kind)``: the table's interpolation inside its box where its cell allows, the exact solve elsewhere."""
@@ -426,9 +445,7 @@ def _first_arrival_grid() -> ca.Function:
     nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
     row = ca.MX.sym("row", len(RAY_TABLE.columns))
     args = [zs, zr, x, depth, use_table, constant, nodes, speeds, row]
-    kind = ca.floor(row[3] + 0.5)
-    length, launch, arrival = _images(kind, zs, zr, x, depth)
-    tabled = ca.Function("sblsim_ray_tabled", args, [row[0] * length, launch + row[1], arrival + row[2], kind])
+    tabled = ca.Function("sblsim_ray_tabled", args, _row_eigenray()(zs, zr, x, depth, row))
     exact = ca.Function("sblsim_ray_exact", args, list(_first_arrival()(use_table, zs, zr, x, depth, constant,
                                                                          nodes, speeds)))
     chosen = switch("sblsim_ray_choice", [tabled, exact])
@@ -507,8 +524,8 @@ def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None
     grid = ray_grid(bounds)
     axes = np.split(grid, np.cumsum(RAY_GRID)[:-1])
     zs, zr, x = (a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij"))
-    tau, launch, arrival, kind = _exact(exact, zs, zr, x, depth, nodes, speeds)
-    length, l0, a0 = _numeric_images(kind, zs, zr, x, depth)
+    tau, launch, arrival, kind = _at_points(exact, (zs, zr, x, depth), (nodes, speeds))
+    length, l0, a0 = _at_points(_image_function(), (kind, zs, zr, x, depth))
     c_source = np.interp(zs, nodes, speeds)
     slowness = np.where(length > 1e-9, tau / np.maximum(length, 1e-300), 1.0 / c_source)
     columns = [np.where(kind > 0, slowness, 0.0), np.where(kind > 0, launch - l0, 0.0),
@@ -523,8 +540,8 @@ def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None
     centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
     czs, czr, cx = (a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
     values = np.asarray(ray_values([ca.DM(c) for c in columns + [np.zeros(RAY_TABLE_ROWS)]])).ravel()
-    want = _exact(exact, czs, czr, cx, depth, nodes, speeds)
-    got = _tabled(czs, czr, cx, depth, grid, values)
+    want = _at_points(exact, (czs, czr, cx, depth), (nodes, speeds))
+    got = _at_points(_tabled(), (czs, czr, cx, depth), (grid, values))
     shape_c = tuple(n - 1 for n in shape)
     good = (want[3] == got[3]) & (np.abs(want[0] - got[0]) <= RAY_TABLE_TOLERANCE[0]) \
         & (np.abs(want[1] - got[1]) <= RAY_TABLE_TOLERANCE[1]) & (np.abs(want[2] - got[2]) <= RAY_TABLE_TOLERANCE[1])
@@ -539,12 +556,6 @@ def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None
     return out
 
 
-def _numeric_images(kind, zs, zr, x, depth):
-    image = np.where(kind == SURFACE, zs + zr, np.where(kind == BOTTOM, 2.0 * depth - zs - zr, zr - zs))
-    angle = np.arctan2(image, x)
-    return np.hypot(x, image), np.where(kind == SURFACE, -angle, angle), np.where(kind == BOTTOM, -angle, angle)
-
-
 @lru_cache(maxsize=1)
 def exact_points() -> ca.Function:
     """``(zs, zr, x, depth, nodes, speeds) -> (τ, launch, arrival, kind)``: :func:`first_arrival` through a profile
@@ -555,25 +566,22 @@ def exact_points() -> ca.Function:
                        ["zs", "zr", "x", "depth", "nodes", "speeds"], ["tau", "launch", "arrival", "kind"])
 
 
-def _exact(f, zs, zr, x, depth, nodes, speeds):
-    """The exact earliest eigenray at arrays of geometries: (τ, launch, arrival, kind), each (n,)."""
-    n = zs.size
-    out = f.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), float(depth)), nodes, speeds)
-    return tuple(np.asarray(o).ravel() for o in out)
+def _at_points(f: ca.Function, points, shared=()):
+    """``f`` at n geometries: ``points`` are its first arguments, each an array (n,) or a number (the same at every
+    point), ``shared`` its others (the profile, the table); its outputs, each (n,)."""
+    n = max(np.size(a) for a in points)
+    columns = [np.broadcast_to(np.asarray(a, dtype=float), (n,))[None, :] for a in points]
+    return tuple(np.asarray(o).ravel() for o in f.map(n)(*columns, *shared))
 
 
-def _tabled(zs, zr, x, depth, grid, values):
-    """The table's interpolation at arrays of geometries inside its box: (τ, launch, arrival, kind)."""
-    args = [ca.MX.sym(n) for n in ("zs", "zr", "x", "depth")]
+@lru_cache(maxsize=1)
+def _tabled() -> ca.Function:
+    """``(zs, zr, x, depth, grid, values) -> (τ, launch, arrival, kind)``: the table's interpolation inside its box
+    (the check of :func:`eigenray_table`)."""
+    zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
     g, v = ca.MX.sym("grid", sum(RAY_GRID)), ca.MX.sym("values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS)
-    row = _interpolant()(ca.vertcat(*args[:3]), g, v)
-    kind = ca.floor(row[3] + 0.5)
-    length, launch, arrival = _images(kind, *args)
-    f = ca.Function("sblsim_ray_tabled_points", args + [g, v],
-                    [row[0] * length, launch + row[1], arrival + row[2], kind])
-    n = zs.size
-    out = f.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), float(depth)), grid, values)
-    return tuple(np.asarray(o).ravel() for o in out)
+    row = _interpolant()(ca.vertcat(zs, zr, x), g, v)
+    return ca.Function("sblsim_ray_tabled_points", [zs, zr, x, depth, g, v], _row_eigenray()(zs, zr, x, depth, row))
 
 
 #: Newton iterations of :func:`slant_range` (from the straight line at the harmonic-mean speed; the error falls

@@ -49,6 +49,7 @@ from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 from sblsim.models.receiver.profile import (
+    declares_profile,
     profile_config_values,
     profile_fmu_parameters,
     profile_parameters,
@@ -256,10 +257,6 @@ class RangesWithProfile:
     becomes its FMU table and back."""
 
     @classmethod
-    def _declares_profile(cls, n_beacons: int) -> bool:
-        return any(v.name == "sound_speed_model" for v in cls.fmu_parameters_declared(n_beacons))
-
-    @classmethod
     def fmu_parameters(cls, values, n_beacons: int = 4) -> dict:
         """FMU parameters of a configuration section: the receiver's sound-speed profile becomes its table
         (:func:`~sblsim.models.receiver.profile.profile_fmu_parameters`).
@@ -270,7 +267,7 @@ class RangesWithProfile:
             On a bad ``receiver.sound_speed_profile`` or ``receiver.sound_speed_table``.
         """
         params = super().fmu_parameters(values, n_beacons)
-        if cls._declares_profile(n_beacons):
+        if declares_profile(cls.fmu_parameters_declared(n_beacons)):
             params.update(profile_fmu_parameters(values))
         return params
 
@@ -278,7 +275,7 @@ class RangesWithProfile:
     def config_values(cls, values, n_beacons: int = 4) -> dict:
         """Configuration keys from FMU parameters: a profile table becomes ``sound_speed_profile = table``."""
         out = super().config_values(values, n_beacons)
-        if cls._declares_profile(n_beacons):
+        if declares_profile(cls.fmu_parameters_declared(n_beacons)):
             out.update(profile_config_values(values))
         return out
 

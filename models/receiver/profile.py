@@ -142,10 +142,15 @@ def profile_config_values(values: Mapping[str, Any]) -> dict[str, Any]:
     return {"sound_speed_profile": "table", "sound_speed_table": format_table(PROFILE.rows(values, "sound_speed_rows"))}
 
 
+def declares_profile(variables) -> bool:
+    """Whether a receiver's FMU parameters ``variables`` hold the profile's choice (:func:`profile_parameters`)."""
+    return any(v.name == "sound_speed_model" for v in variables)
+
+
 def profile_when(variables) -> dict[str, dict[str, tuple[str, ...]]]:
     """The ``when`` of a receiver's slot events: ``{"assumed": ..., "profile": ...}``, or one event for every run
     (``{"assumed": None}``) when the receiver declares no ``sound_speed_model``."""
-    if not any(v.name == "sound_speed_model" for v in variables):
+    if not declares_profile(variables):
         return {ASSUMED: None}
     return {m: {"sound_speed_model": (m,)} for m in SOUND_SPEED_MODELS}
 
@@ -183,5 +188,5 @@ def profile_range(u: dict, p: dict) -> dict:
     return {**u, "range": ca.if_else(use, rho, u["range"])}
 
 
-__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "SOUND_SPEED_MODELS", "profile_config_values", "profile_fmu_parameters",
-           "profile_parameters", "profile_range", "profile_when", "resolve_channel_profile"]
+__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "SOUND_SPEED_MODELS", "declares_profile", "profile_config_values",
+           "profile_fmu_parameters", "profile_parameters", "profile_range", "profile_when", "resolve_channel_profile"]
