@@ -197,7 +197,7 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     init = _function("init", program.init, program.init_streams, slots, lines, choices)
     step = _function("step", program.step, program.step_streams, slots, lines, choices)
     output = _function("output", program.output, (), slots, lines, choices)
-    events, when_index, when_mask = [], [], []
+    events, when_index, when_mask, writes = [], [], [], []
     for ev in program.events:
         handler = _function(f"event_{ev.name}", ev.handler, ev.streams, slots, lines, choices)
         first = len(when_index)
@@ -209,9 +209,12 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
             when_mask.append(f"{sum(1 << options.index(c) for c in set(runs_with))}ULL")
         events.append(f"{{.name = {_cstr(ev.name)}, .guard = {ev.guard.name()}, "
                       f".guard_work = {ev.guard.name()}_work, .handler = {handler}, .n_when = {len(ev.when)}, "
-                      f".when_index = when_index + {first}, .when_mask = when_mask + {first}}}")
+                      f".when_index = when_index + {first}, .when_mask = when_mask + {first}, "
+                      f".n_writes = {-1 if ev.writes is None else len(ev.writes)}, .writes = writes + {len(writes)}}}")
+        writes += [str(k) for k in ev.writes or ()]
     lines.append(f"static const int when_index[] = {{{', '.join(when_index) or '0'}}};")
     lines.append(f"static const uint64_t when_mask[] = {{{', '.join(when_mask) or '0'}}};")
+    lines.append(f"static const int writes[] = {{{', '.join(writes) or '0'}}};")
     empty = "{.name = NULL}"
     lines.append("static const sblsim_event events[] = {\n    " + (",\n    ".join(events) or empty) + "\n};")
     seeds = ", ".join(str(p_index.get(name, -1)) for name in SEED_NAMES)

@@ -6,9 +6,13 @@ This module imports nothing from the FMI or orchestrator layers.
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Sequence
 
 import casadi as ca
+
+#: An index past every row: :func:`put_row` at it writes nothing.
+NO_ROW = 1e9
 
 
 def sample_due(index, start, period, t, h):
@@ -92,9 +96,40 @@ def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
     return total
 
 
+@functools.lru_cache(maxsize=None)
+def _row_functions(rows: int, columns: int) -> tuple[ca.Function, ca.Function]:
+    """The never-inlined ``put`` and ``get`` of one row of a (rows, columns) column-major table."""
+    table, index, row = ca.MX.sym("table", rows * columns), ca.MX.sym("index"), ca.MX.sym("row", columns)
+    places = index + ca.DM(list(range(0, rows * columns, rows)))
+    written = ca.MX(table)
+    written.set_nz(row, False, places)
+    options = {"never_inline": True}
+    return (ca.Function(f"sblsim_put_row_{rows}x{columns}", [table, index, row], [written], options),
+            ca.Function(f"sblsim_get_row_{rows}x{columns}", [table, index], [table.get_nz(False, places)], options))
+
+
+def put_row(table: Sequence[ca.SX], index: ca.SX, row: Sequence[Any]) -> list[ca.SX]:
+    """Columns ``table`` (each of the same length) with row ``index`` replaced by ``row``.
+
+    One call of a generated function that writes the row in place (a parametric index): no ``if_else`` per
+    element. ``index`` at or past the row count (:data:`NO_ROW`) writes nothing. Returns the new columns.
+    """
+    rows, columns = int(table[0].numel()), len(table)
+    put = _row_functions(rows, columns)[0]
+    written = put(ca.vertcat(*table), index, ca.vertcat(*row))
+    return [written[j * rows:(j + 1) * rows] for j in range(columns)]
+
+
+def get_row(table: Sequence[ca.SX], index: ca.SX) -> list[ca.SX]:
+    """Row ``index`` (in range) of columns ``table``: one element per column, read at a parametric index."""
+    rows, columns = int(table[0].numel()), len(table)
+    row = _row_functions(rows, columns)[1](ca.vertcat(*table), index)
+    return [row[j] for j in range(columns)]
+
+
 def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
     """A constant table indexed by a symbolic integer (zero if out of range)."""
     return select(index, [float(v) for v in values])
 
 
-__all__ = ["cumulative_sum", "lookup", "padded_rows", "sample_due", "select", "switch"]
+__all__ = ["cumulative_sum", "get_row", "lookup", "NO_ROW", "padded_rows", "put_row", "sample_due", "select", "switch"]

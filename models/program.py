@@ -77,7 +77,12 @@ class Event:
     guard : casadi.Function
         ``(x, u, p, d, t, h) -> g``; the handler runs while ``g > 0.5``.
     handler : casadi.Function
-        ``(x, u, p, d, w, t, h) -> x``.
+        ``(x, u, p, d, w, t, h) -> x_written``: the new values of the states in :attr:`writes`, in that order.
+    writes : tuple of int or None
+        The indices in ``x`` of the states the handler computes (the states it changes, when they are at most
+        half of them; every other state keeps its value: the runtime writes these alone, so that an event that
+        changes a few states costs no copy of the others); None: the handler computes every state
+        (``x_written`` is the whole ``x``), which costs less when it changes most of them.
     streams : tuple of Stream
         Random numbers of the handler.
     when : tuple of (str, tuple of str)
@@ -91,6 +96,7 @@ class Event:
     name: str
     guard: ca.Function
     handler: ca.Function
+    writes: tuple[int, ...] | None
     streams: tuple[Stream, ...] = ()
     when: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
@@ -310,9 +316,16 @@ class ProgramBuilder:
                         [ca.densify(ca.SX(guard(x, u, p, d, self.t, self.h)))], ["x", "u", "p", "d", "t", "h"], ["g"])
         w, ws = self._streams(streams)
         values = handler(x, u, p, d, ws, self.t, self.h)
+        x_next = self.X.pack(values, x)
+        # the states the handler changes: an element that is not the state's own symbol
+        writes = tuple(k for k in range(x_next.numel()) if not ca.is_equal(x_next[k], self.x[k]))
+        if 2 * len(writes) > x_next.numel():
+            writes, x_next = None, ca.densify(x_next)  # most of them: the whole state, written in sequence
+        else:
+            x_next = ca.densify(x_next[list(writes)])
         f = ca.Function(f"{self.prefix}_{name}", [self.x, self.u, self.p, self.d, w, self.t, self.h],
-                        [self.X.pack(values, x)], ["x", "u", "p", "d", "w", "t", "h"], ["x_next"])
-        return Event(name, g, f, tuple(streams), tuple(pairs))
+                        [x_next], ["x", "u", "p", "d", "w", "t", "h"], ["x_written"])
+        return Event(name, g, f, writes, tuple(streams), tuple(pairs))
 
     def output(self, body) -> ca.Function:
         """``output(x, p, d, t) -> y`` from ``body(x, p, d, t) -> {output name: value}`` (every output)."""

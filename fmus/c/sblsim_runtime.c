@@ -331,7 +331,10 @@ int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t
             a[5] = &t;
             a[6] = &h;
             if (call(s, e->handler.f, s->x_next)) goto failed;
-            swap_state(s);
+            if (e->n_writes < 0)
+                swap_state(s); /* every state */
+            else
+                for (c = 0; c < e->n_writes; c++) s->x[e->writes[c]] = s->x_next[c]; /* these alone */
         }
     }
     s->t = t + h;

@@ -44,7 +44,9 @@ typedef struct {
 } sblsim_function;
 
 /* An event; it runs in a run where, for each of its n_when conditions c, the choice parameter
-   p[when_index[c]] has its bit in when_mask[c] (n_when 0: in every run). */
+   p[when_index[c]] has its bit in when_mask[c] (n_when 0: in every run). Its handler computes the new values
+   of the n_writes states x[writes[j]] (in that order; the other states keep theirs), or of every state when
+   n_writes is -1. */
 typedef struct {
     const char* name;
     sblsim_fn guard;
@@ -53,6 +55,8 @@ typedef struct {
     int n_when;
     const int* when_index;
     const uint64_t* when_mask;
+    int n_writes;
+    const int* writes;
 } sblsim_event;
 
 /* A parameter's declared type and range (checked at the end of initialization). */

@@ -99,7 +99,7 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, n
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import sample_due, select
+from sblsim.models.expressions import NO_ROW, get_row, put_row, sample_due, select
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -475,20 +475,18 @@ class Acoustics(Component):
             """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
             free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
             ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
-            placed, new = 0, {name: [] for name, _ in queue}
-            for j in range(FLIGHT_CAPACITY):
-                free = x["q_used"][j] < 0.5
-                put = ca.logic_and(free, ca.logic_not(placed))
-                for name in carried:
-                    new[f"q_{name}"].append(ca.if_else(put, out[name], x[f"q_{name}"][j]))
-                new["q_used"].append(ca.if_else(put, 1.0, x["q_used"][j]))
-                placed = ca.logic_or(placed, free)
+            place = NO_ROW  # the first free place (none: nowhere)
+            for j in reversed(range(FLIGHT_CAPACITY)):
+                place = ca.if_else(x["q_used"][j] < 0.5, j, place)
+            placed = place < FLIGHT_CAPACITY
+            columns = put_row([x[name] for name, _ in queue], place, [*(out[name] for name in carried), 1.0])
+            new = {name: column for (name, _), column in zip(queue, columns)}
             longest = elapsed  # the longest in flight then, for the refusal's message
             for j in range(FLIGHT_CAPACITY):
                 sent_at = x["t0"] + x["q_packet_seq"][j] * p["slot_period"]
                 longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - sent_at, 0.0))
             refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
-            return {**{name: ca.vertcat(*values) for name, values in new.items()}, "overflow_travel_time": refused}
+            return {**new, "overflow_travel_time": refused}
 
         def arrived(x, t, h):
             """Per in-flight place: it holds a packet whose arrival the end of the step has reached."""
@@ -512,12 +510,7 @@ class Acoustics(Component):
                 best = ca.if_else(better, j, best)
                 best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
             at = [best == j for j in range(FLIGHT_CAPACITY)]
-            out = {}
-            for name in carried:  # rows[best], as expressions.select sums it, each place's test made once
-                total = 0
-                for j in range(FLIGHT_CAPACITY):
-                    total = total + ca.if_else(at[j], x[f"q_{name}"][j], 0)
-                out[name] = total
+            out = dict(zip(carried, get_row([x[f"q_{name}"] for name in carried], best)))
             seq = out["packet_seq"]
             out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
             used = ca.vertcat(*[ca.if_else(at[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
