@@ -129,6 +129,7 @@ def check_frame(frame: pd.DataFrame, where: list[str], source: str) -> SurveyLog
         Naming the row's place, the column and the allowed range.
     """
     frame = frame.reset_index(drop=True)
+    frame["transponder"] = frame["transponder"].astype(object)
     for name, (kind, _, bounds, _) in COLUMNS.items():
         if kind != "float":
             continue
