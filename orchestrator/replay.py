@@ -42,13 +42,10 @@ have no truth and no errors (they are counted).
 from __future__ import annotations
 
 import copy
-import csv
 import io
 import json
 import math
 import os
-import re
-import stat
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -85,8 +82,6 @@ from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
 from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _label, _metrics, merge_params, summary
 from sblsim.orchestrator.tables import (  # the hostile-safe table reading every log reader shares
     CONFIG_PREFIX,
-    MAX_LOG_BYTES,
-    MAX_LOG_ROWS,
     META_CONFIG,
     META_TITLE,
     NUMBER,

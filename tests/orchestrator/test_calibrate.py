@@ -44,7 +44,7 @@ def survey_a():
 def test_survey_a_equals_the_authors_script(survey_a):
     s = survey_a.solution
     assert len(s["segments"]) == len(AUTHORS_SEGMENTS)
-    for seg, (start, end, n, e, kept, rows, rejected) in zip(s["segments"], AUTHORS_SEGMENTS):
+    for seg, (start, end, n, e, kept, rows, _) in zip(s["segments"], AUTHORS_SEGMENTS):
         assert (seg["start"], seg["end"]) == (start, end)
         assert abs(seg["n_m"] - n) < 0.01 and abs(seg["e_m"] - e) < 0.01, (seg, n, e)
         assert seg["pings_used"] == kept and seg["pings_used"] + seg["pings_rejected"] == rows
