@@ -17,7 +17,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from importlib.resources import files
+from importlib.resources import as_file, files
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,7 @@ from sblsim.models.calibration import (
 )
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator import tomlfile
+from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.surveys.log import SurveyLog, read_log
 from sblsim.orchestrator.surveys.xie import origin as xie_origin
 from sblsim.orchestrator.surveys.xie import read_xie
@@ -166,7 +167,7 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     for part in meta["log"].split("/"):
         data = data.joinpath(part)
     fmt = meta["format"]
-    with _as_path(data) as path:
+    with as_file(data) as path:
         log = FORMATS[fmt](path)
     ids = [t["id"] for t in site["transponders"]]
     apriori = np.array([[t["e_m"], t["n_m"], t["u_m"]] for t in site["transponders"]], dtype=float)
@@ -176,12 +177,6 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     solver = apply_overrides(solver, overrides)
     return Survey(name, log, ids, apriori, solver, {k: site[k] for k in ("lat_deg", "lon_deg", "height_m")}, fmt,
                   meta.get("title", name))
-
-
-def _as_path(resource):
-    from importlib.resources import as_file
-
-    return as_file(resource)
 
 
 def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None) -> Survey:
@@ -343,8 +338,6 @@ def write_calibration(result: Calibration, out: Path | str) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from sblsim.orchestrator.output import staged_directory
 
     out = Path(out)
     r = result.residuals

@@ -19,6 +19,7 @@ import pandas as pd
 
 from sblsim.models.calibration import Replies
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.output import write_atomic
 from sblsim.orchestrator.tables import columns, number, read_table
 
 #: POSIX times accepted [s] (1970 to 2100).
@@ -232,8 +233,6 @@ def write_log(log: SurveyLog, path: Path | str) -> Path:
     ModelError
         A suffix other than .csv or .parquet.
     """
-    from sblsim.orchestrator.output import write_atomic
-
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".parquet"):

@@ -573,7 +573,7 @@ def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path,
 
 
 def test_the_documented_log_limits_are_the_code_s():
-    from sblsim.orchestrator.replay import MAX_LOG_BYTES, MAX_LOG_ROWS
+    from sblsim.orchestrator.tables import MAX_LOG_BYTES, MAX_LOG_ROWS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
     assert f"{MAX_LOG_ROWS:,}" in doc and f"{MAX_LOG_BYTES // 2**20} MiB" in doc
