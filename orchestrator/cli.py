@@ -1,4 +1,4 @@
-"""Command line: ``sblsim run``, ``replay``, ``compare``, ``budget``, ``map``, ``campaign``, ``analyze``,
+"""Command line: ``sblsim run``, ``replay``, ``calibrate``, ``compare``, ``budget``, ``map``, ``campaign``, ``analyze``,
 ``ssp export``, ``fmus build|validate|variables`` and ``codegen receiver``.
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the
@@ -118,6 +118,19 @@ def _parser() -> argparse.ArgumentParser:
     y.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a configuration key, e.g. receiver.q_horizontal=0.05 (repeatable)")
     y.add_argument("--fmu-dir", type=Path, default=None, help=FMU_DIR_HELP)
+
+    k = sub.add_parser("calibrate", help="locate seafloor transponders from a surface survey's two-way travel times "
+                                         "(docs/calibration.md)")
+    k.add_argument("survey", metavar="SURVEY|LOG",
+                   help="a built-in survey (xie-2021-07-23) or a survey log (.csv or .parquet; any text file with "
+                        "--format xie)")
+    k.add_argument("--format", default=None, metavar="FORMAT",
+                   help="the log's format: sblsim (default) or xie (survey A's text files)")
+    k.add_argument("--out", type=Path, default=None, help="output directory (default results/calibrate_NAME)")
+    k.add_argument("--force", action="store_true", help="replace an earlier calibration in --out")
+    k.add_argument("--set", dest="overrides", action="append", default=[], metavar="solver.KEY=VALUE",
+                   help="override a solver setting, e.g. solver.sound_speed_mps=1500 or solver.solve_sound_speed=true "
+                        "(repeatable)")
 
     m = sub.add_parser("compare", help="run several receivers (or positioning systems) on the same replicates of a "
                                        "scenario")
@@ -439,6 +452,28 @@ def _output_name(scenario: str) -> str:
     return folder_name(Path(scenario).stem if scenario.endswith(".toml") else Path(scenario).name)
 
 
+def _calibrate(args: argparse.Namespace) -> int:
+    from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey, write_calibration
+
+    survey = load_survey(args.survey, args.format, args.overrides)  # every input read and checked first
+    result = calibrate(survey)
+    out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
+                  "calibration")
+    for note in survey.notes:
+        print(f"note: {note}", file=sys.stderr)
+    write_calibration(result, out)
+    s = result.solution
+    print(f"calibration of {survey.name} ({s['format']} log, {s['log']['rows']} replies, "
+          f"{len(result.segments)} segment(s), sound speed {s['sound_speed_mps']:.6g} m/s)")
+    for t in s["transponders"]:
+        print(f"  transponder {t['id']}: N {t['n_m']:+.4f} E {t['e_m']:+.4f} U {t['u_m']:+.4f} m from the a-priori "
+              f"(sigma {t['sigma_n_m']:.4f} {t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m)")
+    print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
+          f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
+    print(f"  written to {out}/ (solution.json, residuals.csv, figures)")
+    return 0
+
+
 def _compare(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.compare import markdown, parse_receivers, write
 
@@ -751,6 +786,8 @@ def _command(args: argparse.Namespace) -> int:
             return _replay(args)
         if args.command == "campaign":
             return _campaign(args)
+        if args.command == "calibrate":
+            return _calibrate(args)
         if args.command == "compare":
             return _compare(args)
         if args.command == "budget":

@@ -42,13 +42,10 @@ have no truth and no errors (they are counted).
 from __future__ import annotations
 
 import copy
-import csv
 import io
 import json
 import math
 import os
-import re
-import stat
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -83,29 +80,26 @@ from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
 from sblsim.orchestrator.output import staged_directory, write_atomic
 from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
 from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _label, _metrics, merge_params, summary
+from sblsim.orchestrator.tables import (  # the hostile-safe table reading every log reader shares
+    CONFIG_PREFIX,
+    META_CONFIG,
+    META_TITLE,
+    NUMBER,
+    SUFFIXES,
+)
+from sblsim.orchestrator.tables import columns as _columns
+from sblsim.orchestrator.tables import number as _number
+from sblsim.orchestrator.tables import read_table as _read_table
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
 FORMAT = 1
 LOG_TITLE = f"sblsim log, format {FORMAT}"
 TRUTH_TITLE = f"sblsim truth track, format {FORMAT}"
-#: Comment lines of an exported CSV log that hold the run's resolved configuration (TOML), one line each.
-CONFIG_PREFIX = "#% "
-#: Parquet schema metadata keys of an exported log: its title and the run's configuration.
-META_TITLE, META_CONFIG = b"sblsim.title", b"sblsim.config"
 #: Rows that come up to this much earlier than a row before them are sorted into place (counted); a row
 #: further back is a clock jump and the log is refused [s].
 REORDER_WINDOW = 1.0
-#: Suffixes of the formats read and written.
-SUFFIXES = (".csv", ".parquet")
 #: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
 DEFAULT_CONFIG = "semicircle"
-#: The largest log read [bytes] and the most rows (a log is read whole, checked before reading it).
-MAX_LOG_BYTES = 256 * 2**20
-MAX_LOG_ROWS = 2_000_000
-#: A number in a log: ASCII digits, an optional sign, point and exponent, or inf / nan (refused as not finite
-#: where a finite number is needed); not what else Python's float() takes (``1_0.0``, other scripts' digits).
-NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", re.IGNORECASE)
-
 #: The log's columns: name -> (unit, meaning, when required).
 LOG_COLUMNS = {
     "time_s": ("s", "the packet's epoch (its transmit time, the slot's tx_time); for a depth reading, its time",
@@ -130,186 +124,6 @@ LOG_COLUMNS = {
 #: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
 TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
 _PACKET_COLUMNS = ("beacon_n_m", "beacon_e_m", "beacon_d_m")
-
-
-# --------------------------------------------------------------------------- reading tables
-
-def _cell(value: Any) -> str:
-    """A Parquet cell as the text a CSV cell would hold ('' for a missing value)."""
-    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    if isinstance(value, (float, np.floating)):
-        return repr(float(value))
-    return str(value)
-
-
-@dataclass
-class _Table:
-    """A CSV or Parquet file as text cells: its header, its rows (where, cells) and its metadata."""
-
-    path: Path
-    header: list[str]
-    rows: list[tuple[str, list[str]]]
-    config: str = ""
-    title: str = ""
-
-
-def _regular_file(path: Path, what: str) -> int:
-    """The size of a file that is a regular file [bytes] (checked without opening it: a FIFO would block).
-
-    Raises
-    ------
-    ModelError
-        ``what: ...`` for a missing file, a directory or anything that is not a regular file.
-    """
-    name = str(path)
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        raise ModelError(f"{what}: no such file {name!r}") from None
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise ModelError(f"{what}: {name!r} is a directory")
-    if not stat.S_ISREG(info.st_mode):
-        raise ModelError(f"{what}: {name!r} is not a regular file (a pipe, a device or a socket); give a file")
-    return info.st_size
-
-
-def _too_large(name: str, what: str, amount: str) -> ModelError:
-    return ModelError(f"{what}: {name!r} {amount}; a log is read whole, at most {MAX_LOG_ROWS:,} rows and "
-                      f"{MAX_LOG_BYTES // 2**20} MiB (docs/log-format.md): replay it in parts")
-
-
-def _text_lines(text: str) -> list[str]:
-    """The lines of a text, split at ``\\n`` only (a ``\\r\\n`` ending loses its ``\\r``): not at the other line
-    boundaries :meth:`str.splitlines` knows (U+2028, form feed, ...), which a comment may hold and which no CSV
-    writer takes as a new line, so that line numbers are the ones an editor shows."""
-    lines = text.split("\n")
-    if lines and lines[-1] == "":
-        lines.pop()
-    return [line[:-1] if line.endswith("\r") else line for line in lines]
-
-
-def _read_parquet(path: Path, what: str) -> _Table:
-    """A Parquet file's columns as text cells (:func:`_read_table`); its pandas metadata is not used."""
-    name = str(path)
-    try:
-        import pyarrow.parquet as pq
-
-        rows = pq.ParquetFile(path).metadata.num_rows
-        if rows > MAX_LOG_ROWS:
-            raise _too_large(name, what, f"has {rows:,} rows")
-        table = pq.read_table(path)
-        meta = table.schema.metadata or {}
-        header = [str(c).strip() for c in table.column_names]
-        columns = [[_cell(v) for v in table.column(k).to_pylist()] for k in range(table.num_columns)]
-    except ModelError:
-        raise
-    except Exception as exc:  # pyarrow raises its own errors on a damaged file
-        raise ModelError(f"{what}: {name!r} is not a readable Parquet file ({' '.join(str(exc).split())[:200]})") \
-            from None
-    cells = [list(values) for values in zip(*columns)] if columns else []
-    return _Table(path, header, [(f"row {k + 1}", c) for k, c in enumerate(cells)],
-                  meta.get(META_CONFIG, b"").decode("utf-8", "replace"),
-                  meta.get(META_TITLE, b"").decode("utf-8", "replace"))
-
-
-def _read_table(path: Path, what: str) -> _Table:
-    """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
-
-    Lines end at ``\\n`` (or ``\\r\\n``) only. A file larger than :data:`MAX_LOG_BYTES` or with more than
-    :data:`MAX_LOG_ROWS` rows is refused before it is read whole.
-
-    Raises
-    ------
-    ModelError
-        ``what: ...`` for a missing or unreadable file, one that is not a regular file, a suffix other than
-        .csv or .parquet, a file too large, no header, or a line whose field count differs from the header's
-        (with its line number).
-    """
-    name = str(path)
-    if path.suffix.lower() not in SUFFIXES:
-        raise ModelError(f"{what}: {name!r} must be a .csv or .parquet file")
-    size = _regular_file(path, what)
-    if size > MAX_LOG_BYTES:
-        raise _too_large(name, what, f"is {size / 2**20:.0f} MiB")
-    if path.suffix.lower() == ".parquet":
-        return _read_parquet(path, what)
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(MAX_LOG_BYTES + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > MAX_LOG_BYTES:
-        raise _too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
-    lines = data.count(b"\n")
-    if lines > MAX_LOG_ROWS + 10_000:  # a header and comment lines besides the rows
-        raise _too_large(name, what, f"has {lines:,} lines")
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
-    header: list[str] | None = None
-    rows: list[tuple[str, list[str]]] = []
-    config: list[str] = []
-    title = ""
-    for number, line in enumerate(_text_lines(text), start=1):
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped.startswith("#"):
-            if header is None and line.startswith(CONFIG_PREFIX.rstrip()):
-                config.append(line[len(CONFIG_PREFIX):] if line.startswith(CONFIG_PREFIX) else "")
-            elif header is None and not title:
-                title = stripped.lstrip("#").strip()
-            continue
-        try:
-            cells = [c.strip() for c in next(csv.reader([line]))]
-        except csv.Error as exc:
-            raise ModelError(f"{what}: {name!r} line {number} does not parse ({exc})") from None
-        if header is None:
-            header = cells
-            continue
-        if len(cells) != len(header):
-            raise ModelError(f"{what}: {name!r} line {number} has {len(cells)} fields, the header "
-                             f"{len(header)} ({','.join(header)})")
-        rows.append((f"line {number}", cells))
-        if len(rows) > MAX_LOG_ROWS:
-            raise _too_large(name, what, f"has more than {MAX_LOG_ROWS:,} rows (line {number})")
-    if header is None:
-        raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
-    return _Table(path, header, rows, "\n".join(config), title)
-
-
-def _columns(table: _Table, what: str) -> dict[str, int]:
-    """Column name -> position; a name given twice is refused."""
-    index: dict[str, int] = {}
-    for k, name in enumerate(table.header):
-        if name in index:
-            raise ModelError(f"{what}: {str(table.path)!r}: the column {name!r} is given twice")
-        index[name] = k
-    return index
-
-
-def _number(text: str, where: str, column: str, low: float, high: float) -> float:
-    """A cell as a finite number within [low, high].
-
-    Raises
-    ------
-    ModelError
-        Naming the line, the column and the value.
-    """
-    if not text:
-        raise ModelError(f"{where}: {column} is empty")
-    if not NUMBER.fullmatch(text):
-        raise ModelError(f"{where}: {column}: {text[:40]!r} is not a number") from None
-    value = float(text)
-    if not math.isfinite(value):
-        raise ModelError(f"{where}: {column}: {text!r} is not a finite number")
-    if not low <= value <= high:
-        raise ModelError(f"{where}: {column}: {value:.10g} is outside the allowed range [{low:g}, {high:g}]")
-    return value
 
 
 # --------------------------------------------------------------------------- the log

@@ -29,8 +29,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = ("index", "getting-started", "usage", "model", "systems-compare", "receivers", "campaigns", "budget", "replay",
-         "log-format", "interop", "variables", "extending", "measurement-models", "systems", "hardware-grades",
-         "benchmarks", "architecture", "cli", "api")
+         "log-format", "calibration", "interop", "variables", "extending", "measurement-models", "systems",
+         "hardware-grades", "benchmarks", "architecture", "cli", "api")
 
 
 class _Links(HTMLParser):

@@ -553,7 +553,7 @@ def test_a_parquet_log_whose_pandas_metadata_disagrees_reads_its_cells(tmp_path)
 
 def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path, capsys, monkeypatch):
     """The limits of docs/log-format.md, made small: rows of a CSV and of a Parquet file, and bytes."""
-    import sblsim.orchestrator.replay as module
+    import sblsim.orchestrator.tables as module  # the table reading replay shares with the other log readers
 
     log = tmp_path / "many.csv"
     log.write_text(HEADER + "".join(f"{0.1 * k!r},1,6,1,0,1,2\n" for k in range(1, 12)))
@@ -573,7 +573,7 @@ def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path,
 
 
 def test_the_documented_log_limits_are_the_code_s():
-    from sblsim.orchestrator.replay import MAX_LOG_BYTES, MAX_LOG_ROWS
+    from sblsim.orchestrator.tables import MAX_LOG_BYTES, MAX_LOG_ROWS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
     assert f"{MAX_LOG_ROWS:,}" in doc and f"{MAX_LOG_BYTES // 2**20} MiB" in doc

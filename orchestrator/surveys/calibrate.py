@@ -1,0 +1,381 @@
+"""``sblsim calibrate``: a survey's definition, its solution and its outputs.
+
+A survey is a log (:mod:`sblsim.orchestrator.surveys.log`, or a public format it is read from), a *site* (the
+local frame's origin and the transponders' ids and a-priori positions) and the solver's settings
+(:data:`SOLVER_KEYS`). A built-in survey is a TOML file of this package (:data:`BUILTIN_SURVEYS`) whose log is
+one of the package's data files; a log given on the command line comes with the default settings, the
+transponders it names and a-priori positions guessed from it (:func:`guess_apriori`), and ``--set
+solver.KEY=VALUE``. Each segment ``[start, end)`` of transmit times is solved alone
+(:func:`sblsim.models.calibration.solve`), and the segments are combined as Xie et al. (2023) combine them
+(:func:`sblsim.models.calibration.combine`); without segments the whole log is one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from importlib.resources import as_file, files
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.calibration import (
+    OUTLIER_FACTOR_RANGE,
+    SOUND_SPEED_RANGE,
+    Solution,
+    combine,
+    solve,
+)
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator import tomlfile
+from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.surveys.log import SurveyLog, read_log
+from sblsim.orchestrator.surveys.xie import origin as xie_origin
+from sblsim.orchestrator.surveys.xie import read_xie
+
+#: The log formats read: name -> reader.
+FORMATS = {"sblsim": read_log, "xie": read_xie}
+_FOLDER = files("sblsim.orchestrator.surveys")
+#: The built-in surveys: name -> its TOML file's name in this package.
+BUILTIN_SURVEYS = {"xie-2021-07-23": "xie-2021-07-23.toml"}
+#: The solver's settings: key -> (type, allowed range or choices, unit, default, meaning).
+SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
+    "sound_speed_mps": (float, SOUND_SPEED_RANGE, "m/s", 1500.0,
+                        "the sound speed of the straight ray (the harmonic mean of the water column)"),
+    "solve_sound_speed": (bool, None, "", False, "also estimate a sound-speed scale"),
+    "rigid": (bool, None, "", False, "solve one common shift of all transponders (a known array)"),
+    "outlier_factor": (float, OUTLIER_FACTOR_RANGE, "", 3.0,
+                       "drop the worst reply while its residual exceeds this many weighted RMS"),
+    "twtt_sigma_s": (float, (0.0, 1.0), "s", 0.0, "a TWTT noise added to the weights"),
+    "segments": (list, None, "", [], "[start, end) windows of transmit times, ISO 8601 UTC; empty: the whole log"),
+}
+#: The site's keys of a transponder: name -> (allowed range, unit).
+TRANSPONDER_KEYS = {"e_m": ((-1e5, 1e5), "m"), "n_m": ((-1e5, 1e5), "m"), "u_m": ((-1e5, 1e5), "m"),
+                    "turnaround_s": ((0.0, 60.0), "s")}
+#: The files ``sblsim calibrate`` writes.
+OUTPUT_FILES = ("solution.json", "residuals.csv", "track.png", "residuals_time.png", "residuals_elevation.png")
+
+
+@dataclass
+class Survey:
+    """A survey to solve: its log, site and settings."""
+
+    name: str
+    log: SurveyLog
+    ids: list[str]
+    apriori: np.ndarray
+    solver: dict
+    origin: dict | None = None
+    format: str = "sblsim"
+    title: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+def _value(key: str, value: Any) -> Any:
+    kind, allowed, unit, _, _ = SOLVER_KEYS[key]
+    units = f" {unit}" if unit else ""
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ModelError(f"solver.{key}: {value!r} is not true or false")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not allowed[0] <= value <= allowed[1]:
+            raise ModelError(f"solver.{key}: {value!r} is outside the allowed range [{allowed[0]:g}, "
+                             f"{allowed[1]:g}]{units}")
+        return float(value)
+    return _segments(value)
+
+
+def _instant(text: Any, key: str) -> float:
+    if not isinstance(text, str) or len(text) > 40:
+        raise ModelError(f"{key}: {str(text)[:40]!r} is not an ISO 8601 UTC time like \"2021-07-23T19:34:30Z\"")
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        raise ModelError(f"{key}: {text!r} is not an ISO 8601 UTC time like \"2021-07-23T19:34:30Z\"") from None
+    if moment.tzinfo is None or moment.utcoffset().total_seconds() != 0:
+        raise ModelError(f"{key}: {text!r} must be UTC (end it with Z)")
+    return moment.replace(tzinfo=timezone.utc).timestamp()
+
+
+def _segments(value: Any) -> list[tuple[str, str]]:
+    if not isinstance(value, list) or len(value) > 1000:
+        raise ModelError("solver.segments: expected a list of [start, end] pairs (ISO 8601 UTC), at most 1000")
+    out = []
+    for k, pair in enumerate(value):
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise ModelError(f"solver.segments[{k}]: expected [start, end] (ISO 8601 UTC)")
+        start, end = (_instant(t, f"solver.segments[{k}]") for t in pair)
+        if not start < end:
+            raise ModelError(f"solver.segments[{k}]: the end {pair[1]!r} is not after the start {pair[0]!r}")
+        out.append((pair[0], pair[1]))
+    return out
+
+
+def apply_overrides(solver: dict, overrides: list[str]) -> dict:
+    """The solver's settings with ``--set solver.KEY=VALUE`` items applied (the value read as TOML).
+
+    Raises
+    ------
+    ModelError
+        An item without ``=``, a key other than ``solver.`` + one of :data:`SOLVER_KEYS`, or a value outside its
+        range.
+    """
+    solver = dict(solver)
+    for item in overrides:
+        if "=" not in item:
+            raise ModelError(f"--set: expected solver.KEY=VALUE, got {item[:60]!r}")
+        key, text = (s.strip() for s in item.split("=", 1))
+        name = key.removeprefix("solver.")
+        if not key.startswith("solver.") or name not in SOLVER_KEYS:
+            raise ModelError(f"--set: {key[:60]!r} is not a calibration key; the keys: "
+                             + ", ".join(f"solver.{k}" for k in SOLVER_KEYS))
+        try:
+            value = tomlfile.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise ModelError(f"--set: solver.{name}: {text[:40]!r} is not a TOML value") from None
+        solver[name] = _value(name, value)
+    return solver
+
+
+def _defaults() -> dict:
+    return {key: spec[3] for key, spec in SOLVER_KEYS.items()}
+
+
+def guess_apriori(log: SurveyLog, ids: list[str], sound_speed: float) -> np.ndarray:
+    """A-priori positions from the log alone: under the mean transmit point of each transponder's replies, at
+    half the median TWTT times the sound speed below the mean transducer height [m, ENU]."""
+    f = log.frame
+    out = []
+    for name in ids:
+        mine = f[f["transponder"] == name]
+        out.append([mine["tx_e_m"].mean(), mine["tx_n_m"].mean(),
+                    mine["tx_u_m"].mean() - 0.5 * sound_speed * mine["twtt_s"].median()])
+    return np.asarray(out, dtype=float)
+
+
+def _builtin(name: str, overrides: list[str]) -> Survey:
+    raw = tomlfile.loads(_FOLDER.joinpath(BUILTIN_SURVEYS[name]).read_text(encoding="utf-8"))
+    meta, site = raw["survey"], raw["site"]
+    data = _FOLDER.joinpath("data")
+    for part in meta["log"].split("/"):
+        data = data.joinpath(part)
+    fmt = meta["format"]
+    with as_file(data) as path:
+        log = FORMATS[fmt](path)
+    ids = [t["id"] for t in site["transponders"]]
+    apriori = np.array([[t["e_m"], t["n_m"], t["u_m"]] for t in site["transponders"]], dtype=float)
+    solver = _defaults()
+    for key, value in raw.get("solver", {}).items():
+        solver[key] = _value(key, value)
+    solver = apply_overrides(solver, overrides)
+    return Survey(name, log, ids, apriori, solver, {k: site[k] for k in ("lat_deg", "lon_deg", "height_m")}, fmt,
+                  meta.get("title", name))
+
+
+def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None) -> Survey:
+    """A built-in survey by name, or a log file with the default settings.
+
+    Parameters
+    ----------
+    source : str
+        A name of :data:`BUILTIN_SURVEYS`, or a log (``.csv``/``.parquet`` in the sblsim format, any text file with
+        ``fmt="xie"``).
+    fmt : str or None
+        The log's format, one of :data:`FORMATS` (default: sblsim; a built-in survey's own).
+    overrides : list of str
+        ``solver.KEY=VALUE`` items (:func:`apply_overrides`).
+
+    Raises
+    ------
+    ModelError
+        An unknown format, a simulated survey (not available yet), a log that cannot be read, a bad override.
+    """
+    overrides = overrides or []
+    if fmt is not None and fmt not in FORMATS:
+        raise ModelError(f"--format: {fmt[:40]!r} is not one of {', '.join(FORMATS)}")
+    if source in BUILTIN_SURVEYS:
+        if fmt is not None:
+            raise ModelError(f"--format: the built-in survey {source} has its own format; give --format with a log")
+        return _builtin(source, overrides)
+    if source.lower().endswith(".toml"):
+        raise ModelError(f"calibrate: {source[:80]!r}: simulated surveys (CONFIG.toml) are not available yet; give a "
+                         f"built-in survey ({', '.join(BUILTIN_SURVEYS)}) or a log")
+    fmt = fmt or "sblsim"
+    solver = apply_overrides(_defaults(), overrides)
+    path = Path(source)
+    log = FORMATS[fmt](path)
+    ids = sorted(log.counts["transponders"])
+    apriori = guess_apriori(log, ids, solver["sound_speed_mps"])
+    site_origin = None
+    if fmt == "xie":
+        found = xie_origin(path)
+        site_origin = dict(zip(("lat_deg", "lon_deg", "height_m"), found)) if found else None
+    notes = ["the a-priori positions are guessed from the log (under the mean transmit point, half the median "
+             "TWTT deep): the offsets are from that guess"]
+    return Survey(path.stem, log, ids, apriori, solver, site_origin, fmt, str(path), notes)
+
+
+@dataclass
+class Calibration:
+    """A solved survey: its segments' solutions, the combination, the tables and numbers written."""
+
+    survey: Survey
+    segments: list[tuple[str, str, np.ndarray, Solution]]
+    solution: dict
+    residuals: pd.DataFrame
+
+
+def _windows(survey: Survey) -> list[tuple[str, str, np.ndarray]]:
+    t = survey.log.frame["t_tx_s"].to_numpy()
+    if not survey.solver["segments"]:
+        return [("", "", np.arange(len(t)))]
+    out = []
+    for k, (a, b) in enumerate(survey.solver["segments"]):
+        start, end = _instant(a, f"solver.segments[{k}]"), _instant(b, f"solver.segments[{k}]")
+        out.append((a, b, np.flatnonzero((t >= start) & (t < end))))
+    return out
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x**2))) if len(x) else float("nan")
+
+
+def calibrate(survey: Survey) -> Calibration:
+    """Solve every segment of a survey and combine them.
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    ModelError
+        A segment without enough replies (named), or replies that do not determine the unknowns.
+    """
+    s = survey.solver
+    f = survey.log.frame
+    segments, tables = [], []
+    for k, (a, b, rows) in enumerate(_windows(survey)):
+        what = f"segment {k + 1} [{a}, {b})" if a else "the log"
+        replies = survey.log.replies(survey.ids, rows)
+        sol = solve(replies, survey.apriori, s["sound_speed_mps"], rigid=s["rigid"],
+                    solve_sound_speed=s["solve_sound_speed"], outlier_factor=s["outlier_factor"],
+                    twtt_sigma=s["twtt_sigma_s"], what=what)
+        segments.append((a, b, rows, sol))
+        part = f.iloc[rows][["ping", "transponder", "t_tx_s", "tx_e_m", "tx_n_m", "rx_e_m", "rx_n_m"]].copy()
+        part.insert(0, "segment", k + 1)
+        part["residual_s"] = sol.residual_s
+        part["residual_m"] = sol.residual_m
+        part["weight_per_m2"] = sol.weight
+        part["elevation_deg"] = np.degrees(sol.elevation)
+        part["azimuth_deg"] = np.degrees(sol.azimuth) % 360.0
+        part["used"] = sol.used
+        tables.append(part)
+    residuals = pd.concat(tables, ignore_index=True)
+    combined = combine([seg[3] for seg in segments])
+    used = residuals[residuals["used"]]
+    rejected = residuals[~residuals["used"]]
+    w = used["weight_per_m2"].to_numpy()
+    speeds = [seg[3].sound_speed for seg in segments]
+    solution = {
+        "survey": survey.name,
+        "title": survey.title,
+        "format": survey.format,
+        "origin": survey.origin,
+        "sound_speed_mps": float(np.mean(speeds)),
+        "solver": {k: (list(map(list, v)) if k == "segments" else v) for k, v in s.items()},
+        "transponders": [
+            {"id": name,
+             "n_m": float(combined.position[j, 1] - survey.apriori[j, 1]),
+             "e_m": float(combined.position[j, 0] - survey.apriori[j, 0]),
+             "u_m": float(combined.position[j, 2] - survey.apriori[j, 2]),
+             "sigma_n_m": float(combined.sigma[j, 1]), "sigma_e_m": float(combined.sigma[j, 0]),
+             "sigma_u_m": float(combined.sigma[j, 2]),
+             "scatter_n_m": _finite(combined.scatter[j, 1]), "scatter_e_m": _finite(combined.scatter[j, 0]),
+             "scatter_u_m": _finite(combined.scatter[j, 2]),
+             "apriori_e_m": float(survey.apriori[j, 0]), "apriori_n_m": float(survey.apriori[j, 1]),
+             "apriori_u_m": float(survey.apriori[j, 2])}
+            for j, name in enumerate(survey.ids)],
+        "segments": [
+            {"start": a, "end": b, "id": name,
+             "n_m": float(sol.offset[j, 1]), "e_m": float(sol.offset[j, 0]), "u_m": float(sol.offset[j, 2]),
+             "sigma_n_m": float(sol.sigma[j, 1]), "sigma_e_m": float(sol.sigma[j, 0]),
+             "sigma_u_m": float(sol.sigma[j, 2]),
+             "pings_used": int(f.iloc[rows[sol.used]]["ping"].nunique()),
+             "pings_rejected": int(f.iloc[rows[~sol.used]]["ping"].nunique()),
+             "sound_speed_mps": sol.sound_speed,
+             "twtt_residual_rms_s": _rms(sol.residual_s[sol.used]),
+             "variance_factor": sol.variance_factor, "converged": sol.converged}
+            for a, b, rows, sol in segments for j, name in enumerate(survey.ids)],
+        "twtt_residual_rms_s": _rms(used["residual_s"].to_numpy()),
+        "twtt_residual_wrms_s": float(np.sqrt(np.sum(w * used["residual_s"].to_numpy() ** 2) / np.sum(w))),
+        "pings_used": int(used["ping"].nunique()),
+        "pings_rejected": int(rejected["ping"].nunique()),
+        "replies_used": len(used),
+        "replies_rejected": len(rejected),
+        "log": {"rows": survey.log.counts["rows"], "pings": survey.log.counts["pings"],
+                "replies_per_transponder": survey.log.counts["transponders"],
+                "replies_in_no_segment": int(len(f) - residuals.drop_duplicates(["ping", "transponder"]).shape[0]),
+                "ignored_columns": survey.log.counts.get("ignored_columns", [])},
+    }
+    return Calibration(survey, segments, solution, residuals)
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def write_calibration(result: Calibration, out: Path | str) -> Path:
+    """Write :data:`OUTPUT_FILES` into ``out`` atomically (nothing changes there if a write fails)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    r = result.residuals
+    title = result.solution["title"] or result.survey.name
+    with staged_directory(out) as tmp:
+        (tmp / "solution.json").write_text(json.dumps(result.solution, indent=2, allow_nan=False) + "\n")
+        r.to_csv(tmp / "residuals.csv", index=False)
+        used = r[r["used"]]
+        rejected = r[~r["used"]]
+        scale = float(np.nanpercentile(np.abs(used["residual_s"]) * 1e6, 98)) if len(used) else 1.0
+        fig, ax = plt.subplots(figsize=(6.5, 6))
+        dots = ax.scatter(used["rx_e_m"], used["rx_n_m"], c=used["residual_s"] * 1e6, cmap="coolwarm", s=8,
+                          vmin=-scale, vmax=scale)
+        ax.scatter(rejected["rx_e_m"], rejected["rx_n_m"], marker="x", c="k", s=16, label="rejected")
+        for j, name in enumerate(result.survey.ids):
+            t = result.solution["transponders"][j]
+            ax.plot(t["apriori_e_m"] + t["e_m"], t["apriori_n_m"] + t["n_m"], "k^", ms=9)
+            ax.annotate(f"transponder {name}", (t["apriori_e_m"] + t["e_m"], t["apriori_n_m"] + t["n_m"]),
+                        textcoords="offset points", xytext=(6, 6))
+        fig.colorbar(dots, ax=ax, label="TWTT residual [µs]")
+        ax.set(xlabel="East [m]", ylabel="North [m]", aspect="equal", title=f"Track, {title}")
+        ax.legend(loc="lower right")
+        fig.savefig(tmp / "track.png", dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        for name, column, label in (("residuals_time.png", "t_tx_s", "transmit time [s from the first ping]"),
+                                    ("residuals_elevation.png", "elevation_deg", "elevation angle [deg]")):
+            fig, ax = plt.subplots(figsize=(7, 3.5))
+            x0 = float(r["t_tx_s"].min()) if column == "t_tx_s" else 0.0
+            for k, part in used.groupby("segment"):
+                ax.plot(part[column] - x0, part["residual_s"] * 1e6, ".", ms=3, label=f"segment {k}")
+            ax.plot(rejected[column] - x0, rejected["residual_s"] * 1e6, "kx", ms=5, label="rejected")
+            ax.set(xlabel=label, ylabel="TWTT residual [µs]", title=title)
+            ax.grid(True, lw=0.3)
+            ax.legend(fontsize=7, ncol=3)
+            fig.savefig(tmp / name, dpi=110, bbox_inches="tight")
+            plt.close(fig)
+    return out
+
+
+__all__ = ["BUILTIN_SURVEYS", "Calibration", "FORMATS", "OUTPUT_FILES", "SOLVER_KEYS", "Survey", "apply_overrides",
+           "calibrate", "guess_apriori", "load_survey", "write_calibration"]

@@ -1,0 +1,127 @@
+"""Reader of survey A's text format (Xie et al. 2023, repository suruixie/sfg_gnssa_sw, ``gnssa_data_*.txt``)
+into the calibration survey log (:mod:`sblsim.orchestrator.surveys.log`).
+
+The format, from the files' own header lines: ``#`` comment lines, then one line per ping of 15
+whitespace-separated numbers: transmit time [s after 2020-01-01T00:00:00 UTC], the transducer's local North,
+East, Up [m] and their 1-sigma [m] at transmit, the receive time [s, same clock], North, East, Up and 1-sigma
+at the reply's receive time, and the two-way travel time with the transponder's 0.2 s turnaround already
+removed [s]. There is one transponder: every row is a reply of transponder ``"1"``, ``ping`` is the row's index
+(from 0). The origin of the local frame is in a header line (``Lat0=... deg., Lon0=... deg., H0=... m``);
+:func:`origin` reads it.
+"""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
+from sblsim.orchestrator.tables import MAX_LOG_BYTES, MAX_LOG_ROWS, number, regular_file, text_lines, too_large
+
+#: The files' clock: seconds after this instant (UTC) [s since 1970-01-01].
+EPOCH = datetime(2020, 1, 1, tzinfo=timezone.utc).timestamp()
+#: The fields of a line, in order (N before E, as the authors write them).
+FIELDS = ("t_tx", "tx_n_m", "tx_e_m", "tx_u_m", "tx_sigma_n_m", "tx_sigma_e_m", "tx_sigma_u_m",
+          "t_rx", "rx_n_m", "rx_e_m", "rx_u_m", "rx_sigma_n_m", "rx_sigma_e_m", "rx_sigma_u_m", "twtt_s")
+#: The one transponder's id.
+TRANSPONDER = "1"
+#: The file clock's range accepted [s after 2020-01-01] (to 2100).
+CLOCK_RANGE = (0.0, 2_524_608_000.0)
+_ORIGIN = re.compile(r"Lat0\s*=\s*([-+0-9.eE]+)\s*deg\.?,\s*Lon0\s*=\s*([-+0-9.eE]+)\s*deg\.?,\s*H0\s*=\s*"
+                     r"([-+0-9.eE]+)\s*m")
+
+
+def _lines(path: Path, what: str) -> list[str]:
+    name = str(path)
+    size = regular_file(path, what)
+    if size > MAX_LOG_BYTES:
+        raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_LOG_BYTES + 1)
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > MAX_LOG_BYTES:
+        raise too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
+    lines = data.count(b"\n")
+    if lines > MAX_LOG_ROWS + 10_000:
+        raise too_large(name, what, f"has {lines:,} lines")
+    try:
+        return text_lines(data.decode("utf-8-sig"))
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
+
+
+def origin(path: Path | str) -> tuple[float, float, float] | None:
+    """The local frame's origin from the file's header (latitude [deg], longitude [deg], height [m]), or None.
+
+    Raises
+    ------
+    ModelError
+        As :func:`read_xie` for a file that cannot be read.
+    """
+    for line in _lines(Path(path), "log"):
+        if not line.lstrip().startswith("#"):
+            break
+        found = _ORIGIN.search(line)
+        if found:
+            here = f"log: {str(path)!r} header"
+            return (number(found.group(1), here, "Lat0", -90, 90), number(found.group(2), here, "Lon0", -180, 360),
+                    number(found.group(3), here, "H0", -1e4, 1e4))
+    return None
+
+
+def read_xie(path: Path | str) -> SurveyLog:
+    """Read a ``gnssa_data_*.txt`` file of survey A into the calibration log.
+
+    Parameters
+    ----------
+    path : pathlib.Path or str
+        The text file.
+
+    Returns
+    -------
+    SurveyLog
+        One row per line: ``ping`` the line's index among the data lines, ``transponder`` ``"1"``, times as POSIX
+        seconds, E/N/U in the log's column order.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the line and the field: a missing or not regular file, too large, not UTF-8, a
+        line without 15 fields, a field that is not a number or outside its range (those of
+        :data:`sblsim.orchestrator.surveys.log.COLUMNS`), no data line.
+    """
+    path = Path(path)
+    what = "log"
+    rows: list[list[float]] = []
+    where: list[str] = []
+    for k, line in enumerate(_lines(path, what), start=1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        cells = stripped.split()
+        here = f"{what}: {str(path)!r} line {k}"
+        if len(cells) != len(FIELDS):
+            raise ModelError(f"{here} has {len(cells)} fields, the format {len(FIELDS)} ({' '.join(FIELDS)})")
+        values = []
+        for name, text in zip(FIELDS, cells):
+            bounds = CLOCK_RANGE if name in ("t_tx", "t_rx") else COLUMNS[name][2]
+            values.append(number(text, here, name, *bounds))
+        rows.append(values)
+        where.append(f"line {k}")
+    if not rows:
+        raise ModelError(f"{what}: {str(path)!r} holds no data line")
+    raw = pd.DataFrame(rows, columns=list(FIELDS))
+    frame = raw.drop(columns=["t_tx", "t_rx"]).assign(
+        ping=range(len(raw)), transponder=TRANSPONDER, t_tx_s=raw["t_tx"] + EPOCH, t_rx_s=raw["t_rx"] + EPOCH)
+    log = check_frame(frame[list(LOG_COLUMNS)], where, str(path))
+    log.counts["ignored_columns"] = []
+    return log
+
+
+__all__ = ["EPOCH", "FIELDS", "TRANSPONDER", "origin", "read_xie"]
