@@ -644,21 +644,22 @@ def solve_rigid_shift(log: pd.DataFrame, site: Site, tolerance_m: float = 1e-6, 
     """
     if len(log) < 4:
         raise ModelError(f"rigid shift: {len(log)} replies; at least 4 are needed for 3 unknowns")
-    shift = np.zeros(3)
-    for iteration in range(1, max_iterations + 1):
+    shift, iterations = np.zeros(3), 0
+    while True:
+        iterations += 1
         modelled, jacobian = _modelled(log, site, shift)
         step = np.linalg.lstsq(jacobian, log["twtt_s"].to_numpy() - modelled, rcond=None)[0]
         shift = shift + step
         if np.max(np.abs(step)) < tolerance_m:
             break
-    else:
-        raise ModelError(f"rigid shift: no convergence in {max_iterations} Gauss-Newton steps")
+        if iterations >= max_iterations:
+            raise ModelError(f"rigid shift: no convergence in {max_iterations} Gauss-Newton steps")
     modelled, jacobian = _modelled(log, site, shift)
     residuals = log["twtt_s"].to_numpy() - modelled
     variance = residuals @ residuals / (len(residuals) - 3)
     sigma = np.sqrt(np.diag(variance * np.linalg.inv(jacobian.T @ jacobian)))
     return RigidShift(shift, sigma, float(np.sqrt(np.mean(residuals ** 2))), int(log["ping"].nunique()), len(log),
-                      iteration)
+                      iterations)
 
 
 def ncl1_paths() -> tuple[Path, Path, Path]:
