@@ -64,10 +64,12 @@ from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
+import casadi as ca
 import numpy as np
 import pandas as pd
 import pymap3d
 
+from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, harmonic_mean, profile_nodes, profile_table
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import write_atomic
@@ -431,10 +433,6 @@ def read_site(path: Path | str, profile: str = "ctd:NCL1") -> Site:
 @lru_cache(maxsize=1)
 def _harmonic_function():
     """The model's harmonic mean (sblsim.models.acoustics.sound_speed) as a function of a padded table."""
-    import casadi as ca
-
-    from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, harmonic_mean, profile_nodes
-
     count, z1, z2 = ca.MX.sym("count"), ca.MX.sym("z1"), ca.MX.sym("z2")
     depth, speed = ca.MX.sym("depth", MAX_PROFILE_ROWS), ca.MX.sym("speed", MAX_PROFILE_ROWS)
     nodes, slowness = profile_nodes(count, depth, speed)
@@ -463,8 +461,6 @@ def harmonic_mean_speed(z1: float, z2: float, profile: str = "ctd:NCL1") -> floa
     ModelError
         An unknown or unreadable profile, or a constant one (no table).
     """
-    from sblsim.models.acoustics.sound_speed import profile_table
-
     table = profile_table(profile, "", 15.0, 35.0)
     if table.shape[0] == 0:
         raise ModelError(f"profile: {profile!r} has no table; give a cast such as ctd:NCL1")

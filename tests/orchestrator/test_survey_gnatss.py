@@ -13,6 +13,7 @@ import pandas as pd
 import pymap3d
 import pytest
 
+from sblsim.models.errors import ModelError
 from sblsim.orchestrator.surveys import gnatss
 from sblsim.orchestrator.surveys.gnatss import (
     LOG_COLUMNS,
@@ -359,7 +360,7 @@ def test_bad_site_values_name_the_key_and_range(tmp_path, old, new, message):
     text = SITE.read_text()
     assert old in text
     (tmp_path / "site.toml").write_text(text.replace(old, new, 1))
-    with pytest.raises(gnatss.ModelError) as info:
+    with pytest.raises(ModelError) as info:
         read_site(tmp_path / "site.toml")
     assert message in str(info.value)
 
