@@ -2,6 +2,8 @@
 
 * :mod:`~sblsim.orchestrator.surveys.log`: sblsim's calibration survey log and its hostile-safe reader;
 * :mod:`~sblsim.orchestrator.surveys.xie`: survey A's text format (Xie et al. 2023);
+* :mod:`~sblsim.orchestrator.surveys.gnatss`: survey B's files (GNATSS's ``pxp_tt`` and
+  ``POS_FREED_TRANS_TWTT``, site NCL1);
 * :mod:`~sblsim.orchestrator.surveys.calibrate`: a survey's definition (built-in TOML files in this folder:
   the site and the solver's settings), its solution with :mod:`sblsim.models.calibration`, and its outputs.
 """
