@@ -25,10 +25,10 @@ The covariance is :math:`(J^\\top W J)^{-1}` scaled by the a posteriori variance
 (:func:`combine`): a weighted mean with weights one over the squared weighted RMS of the half residuals projected
 on North, East and Up.
 
-The leg model is a hook (:class:`StraightRay` is the straight ray at one speed, what Xie et al. use): any object
-with a ``legs(points, x)`` method giving the path lengths [m] and their gradients with respect to ``x`` can
-replace it, e.g. the eigenrays of a sound-speed profile (:mod:`sblsim.models.acoustics.rays`), times the
-reference speed.
+The leg model is a hook: :class:`StraightRay` is the straight ray at one speed (what Xie et al. use) or at one
+speed per transponder (GNATSS's harmonic mean down to each transponder), :class:`EigenRay` the direct eigenray
+through a sound-speed profile (:mod:`sblsim.models.acoustics.rays`); a leg's path length is its travel time
+times the reference speed :math:`c_0`.
 
 Frames: every position is local East, North, Up [m] of the survey's origin, in that column order.
 
@@ -45,6 +45,8 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
+from sblsim.models.acoustics.rays import exact_points, profile_arrays
+from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS
 from sblsim.models.declarations import ModelError
 
 #: The sound speeds accepted [m/s].
@@ -59,36 +61,168 @@ MAX_ITERATIONS = 50
 
 
 class LegModel(Protocol):
-    """What :func:`solve` asks of the propagation: the acoustic path lengths of legs to a point."""
+    """What :func:`solve` asks of the propagation: the acoustic path lengths of legs to a transponder.
 
-    def legs(self, points: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Path lengths [m] from ``points`` (n, 3) to ``x`` (n, 3) and their gradients w.r.t. ``x`` (n, 3)."""
+    A path length is the leg's travel time times the solver's reference speed :math:`c_0` (for a straight ray
+    at :math:`c_0`, the leg's length), so that the range residual :math:`c_0 T - \\ell_{tx} - \\ell_{rx}` over
+    :math:`c_0` is the TWTT residual [s].
+    """
+
+    def legs(self, points: np.ndarray, x: np.ndarray, transponder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Path lengths [m] from ``points`` (n, 3) to ``x`` (n, 3), the position of transponder ``transponder``
+        (n,) (an index), and their gradients w.r.t. ``x`` (n, 3)."""
 
 
 class StraightRay:
-    """A straight ray: a leg's path length is its length (the sound speed is :func:`solve`'s).
+    """A straight ray: a leg's path length is its length, at the solver's speed or at one speed per transponder.
 
-    Source: the straight-ray model of Xie et al. (2023), Section 2 (harmonic-mean sound speed).
+    Parameters
+    ----------
+    scale : array_like of float, shape (k,), or None
+        Per transponder, the solver's reference speed over the transponder's own speed, :math:`c_0 / c_j` [1]
+        (each transponder's harmonic mean of the water column above it, as GNATSS takes it); None: 1 for all
+        (the solver's speed, as Xie et al. take it).
+
+    Source: the straight-ray model of Xie et al. (2023), Section 2 (harmonic-mean sound speed); Chadwell and
+    Sweeney (2010), Marine Geodesy 33(2-3), 164-186 (the harmonic mean down to each transponder).
     """
 
-    def legs(self, points: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Lengths and unit vectors of the legs.
+    def __init__(self, scale: Sequence[float] | np.ndarray | None = None):
+        self.scale = None if scale is None else np.asarray(scale, dtype=float)
+        if self.scale is not None and (self.scale.ndim != 1 or not np.all(np.isfinite(self.scale))
+                                       or np.any(self.scale <= 0.0)):
+            raise ModelError("scale: the speed ratios must be finite and > 0, one per transponder")
+
+    def legs(self, points: np.ndarray, x: np.ndarray, transponder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lengths and unit vectors of the legs (times the transponder's speed ratio).
 
         Parameters
         ----------
         points, x : numpy.ndarray, shape (n, 3)
             The legs' ends, local ENU [m].
+        transponder : numpy.ndarray of int, shape (n,)
+            The transponder at ``x`` (its index).
 
         Returns
         -------
         length : numpy.ndarray, shape (n,)
-            :math:`|\\mathbf x - \\mathbf p|` [m].
+            :math:`(c_0 / c_j) |\\mathbf x - \\mathbf p|` [m].
         gradient : numpy.ndarray, shape (n, 3)
-            Its gradient with respect to ``x``, the unit vector from ``points`` to ``x`` [1].
+            Its gradient with respect to ``x``, the unit vector from ``points`` to ``x`` times the ratio [1].
+
+        Raises
+        ------
+        ModelError
+            A transponder index without a speed ratio.
         """
         d = x - points
         length = np.sqrt(np.sum(d * d, axis=1))
-        return length, d / length[:, None]
+        if self.scale is None:
+            return length, d / length[:, None]
+        if len(transponder) and int(np.max(transponder)) >= len(self.scale):
+            raise ModelError(f"scale: {len(self.scale)} speed ratios for transponder index {int(np.max(transponder))}")
+        r = self.scale[transponder]
+        return r * length, (r / length)[:, None] * d
+
+
+class EigenRay:
+    """The direct eigenray through a sound-speed profile: a leg's path length is its travel time times
+    :math:`c_0`.
+
+    Each leg is the direct eigenray (:func:`sblsim.models.acoustics.rays.exact_points`, the exact bracketed-Newton
+    solve, no boundaries) between the depths of its ends over their horizontal distance; the depth of a point is
+    ``surface_u`` minus its Up. The gradient with respect to the transponder's position ``x`` is the ray's:
+    along the horizontal, :math:`\\partial\\tau/\\partial X = \\xi = \\cos\\theta / c` (Snell's invariant, the ray
+    parameter; :math:`\\theta` the grazing angle) on the horizontal unit vector from the other end to ``x``;
+    along the depth, :math:`\\partial\\tau/\\partial z = \\sin\\theta_x / c(z_x)
+    = \\xi\\tan\\theta_x` with :math:`\\theta_x` the grazing angle at ``x`` in the direction of travel toward ``x``,
+    positive downward (Jensen, Kuperman, Porter, Schmidt, *Computational Ocean Acoustics*, 2nd ed., 2011, ch. 3.2).
+
+    Parameters
+    ----------
+    table : array_like, shape (rows, 2)
+        The profile: depth [m, positive down, increasing], sound speed [m/s] (linear between rows, the end
+        speeds beyond).
+    reference_speed : float
+        The solver's :math:`c_0` [m/s] (give :func:`solve` the same).
+    surface_u : float
+        Up of the sea surface in the survey's frame [m] (depth 0 of the profile).
+
+    Raises
+    ------
+    ModelError
+        A table that is empty, not (rows, 2), too long, with depths not increasing or speeds outside
+        :data:`SOUND_SPEED_RANGE`; a reference speed outside it.
+    """
+
+    def __init__(self, table: np.ndarray, reference_speed: float, surface_u: float = 0.0):
+        table = np.asarray(table, dtype=float)
+        lo, hi = SOUND_SPEED_RANGE
+        if table.ndim != 2 or table.shape[1] != 2 or not 1 <= table.shape[0] <= MAX_PROFILE_ROWS \
+                or not np.all(np.isfinite(table)):
+            raise ModelError(f"sound_speed_profile: expected 1 to {MAX_PROFILE_ROWS} finite rows of depth [m] and "
+                             "speed [m/s]")
+        if np.any(np.diff(table[:, 0]) <= 0.0) or np.any(table[:, 1] < lo) or np.any(table[:, 1] > hi):
+            raise ModelError(f"sound_speed_profile: depths must increase and speeds lie in [{lo:g}, {hi:g}] m/s")
+        if not (np.isfinite(reference_speed) and lo <= reference_speed <= hi):
+            raise ModelError(f"sound_speed_mps: {reference_speed!r} is outside the allowed range [{lo:g}, {hi:g}] m/s")
+        if not (np.isfinite(surface_u) and abs(surface_u) <= 1e4):
+            raise ModelError(f"surface_u_m: {surface_u!r} is outside the allowed range [-10000, 10000] m")
+        self.table = table
+        self.reference_speed = float(reference_speed)
+        self.surface_u = float(surface_u)
+        self.nodes, self.speeds = profile_arrays(table)
+        self._exact = exact_points()
+
+    def times(self, zs: np.ndarray, zr: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The direct eigenray between depths ``zs`` and ``zr`` [m] over horizontal distances ``x`` [m], each (n,):
+        travel time [s], launch and arrival grazing angles [rad, positive downward], and whether it exists."""
+        n = len(x)
+        if n == 0:
+            return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
+        out = self._exact.map(n)(zs[None, :], zr[None, :], x[None, :], np.zeros((1, n)), self.nodes, self.speeds)
+        tau, launch, arrival, kind = (np.asarray(o).ravel() for o in out)
+        return tau, launch, arrival, kind == 1
+
+    def legs(self, points: np.ndarray, x: np.ndarray, transponder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:math:`c_0\\tau` of each leg's direct eigenray and its gradient with respect to ``x``.
+
+        Parameters
+        ----------
+        points, x : numpy.ndarray, shape (n, 3)
+            The legs' ends (the transducer, the transponder), local ENU [m].
+        transponder : numpy.ndarray of int, shape (n,)
+            Not used (the profile is the same for every transponder).
+
+        Returns
+        -------
+        length : numpy.ndarray, shape (n,)
+            :math:`c_0 \\tau` [m].
+        gradient : numpy.ndarray, shape (n, 3)
+            :math:`c_0\\,\\partial\\tau/\\partial\\mathbf x` [1].
+
+        Raises
+        ------
+        ModelError
+            A leg without a direct eigenray (a shadow zone of the profile).
+        """
+        zs = self.surface_u - points[:, 2]
+        zr = self.surface_u - x[:, 2]
+        dh = x[:, :2] - points[:, :2]
+        horizontal = np.sqrt(np.sum(dh * dh, axis=1))
+        tau, launch, arrival, found = self.times(zs, zr, horizontal)
+        if not np.all(found):
+            k = int(np.flatnonzero(~found)[0])
+            raise ModelError(f"sound_speed_profile: no direct eigenray from depth {zs[k]:.1f} m to {zr[k]:.1f} m over "
+                             f"{horizontal[k]:.1f} m (a shadow zone)")
+        c_s = np.interp(zs, self.nodes, self.speeds)
+        xi = np.cos(launch) / c_s  # Snell's invariant [s/m]
+        # toward x: the arrival angle is at x, positive downward = toward greater depth = -Up
+        d_depth = xi * np.tan(arrival)
+        unit = np.divide(dh, horizontal[:, None], out=np.zeros_like(dh), where=horizontal[:, None] > 0.0)
+        gradient = np.column_stack((xi[:, None] * unit, -d_depth))
+        c0 = self.reference_speed
+        return c0 * tau, c0 * gradient
 
 
 @dataclass(frozen=True)
@@ -221,8 +355,8 @@ def _model(replies: Replies, apriori: np.ndarray, theta: np.ndarray, c0: float, 
     position = apriori + shift if not rigid else apriori + shift[0]
     scale = theta[-1] if solve_speed else 1.0
     x = position[replies.transponder]
-    l_tx, u_tx = legs.legs(replies.tx, x)
-    l_rx, u_rx = legs.legs(replies.rx, x)
+    l_tx, u_tx = legs.legs(replies.tx, x, replies.transponder)
+    l_rx, u_rx = legs.legs(replies.rx, x, replies.transponder)
     c = scale * c0
     residual = c * replies.twtt - l_tx - l_rx
     g = u_tx + u_rx  # d(l_tx + l_rx)/dx
@@ -399,5 +533,5 @@ def combine(solutions: Sequence[Solution]) -> Combined:
     return Combined(mean, sigma, scatter)
 
 
-__all__ = ["Combined", "LegModel", "MAX_ITERATIONS", "OUTLIER_FACTOR_RANGE", "POSITION_TOLERANCE", "Replies",
+__all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "OUTLIER_FACTOR_RANGE", "POSITION_TOLERANCE", "Replies",
            "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution", "StraightRay", "combine", "solve"]

@@ -24,17 +24,22 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import (
     OUTLIER_FACTOR_RANGE,
     SOUND_SPEED_RANGE,
+    EigenRay,
+    LegModel,
     Solution,
+    StraightRay,
     combine,
     solve,
 )
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import staged_directory
-from sblsim.orchestrator.surveys.log import SurveyLog, read_log
+from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
+from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_log
 from sblsim.orchestrator.surveys.xie import origin as xie_origin
 from sblsim.orchestrator.surveys.xie import read_xie
 
@@ -42,7 +47,11 @@ from sblsim.orchestrator.surveys.xie import read_xie
 FORMATS = {"sblsim": read_log, "xie": read_xie}
 _FOLDER = files("sblsim.orchestrator.surveys")
 #: The built-in surveys: name -> its TOML file's name in this package.
-BUILTIN_SURVEYS = {"xie-2021-07-23": "xie-2021-07-23.toml"}
+BUILTIN_SURVEYS = {"xie-2021-07-23": "xie-2021-07-23.toml", "ncl1-2022-208": "ncl1-2022-208.toml"}
+#: The legs' models of ``solver.propagation``.
+PROPAGATIONS = ("straight", "ray")
+#: The editing a built-in GNATSS survey may ask for (``survey.editing``).
+EDITINGS = ("none", "community")
 #: The solver's settings: key -> (type, allowed range or choices, unit, default, meaning).
 SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
     "sound_speed_mps": (float, SOUND_SPEED_RANGE, "m/s", 1500.0,
@@ -53,6 +62,16 @@ SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
                        "drop the worst reply while its residual exceeds this many weighted RMS"),
     "twtt_sigma_s": (float, (0.0, 1.0), "s", 0.0, "a TWTT noise added to the weights"),
     "segments": (list, None, "", [], "[start, end) windows of transmit times, ISO 8601 UTC; empty: the whole log"),
+    "propagation": (str, PROPAGATIONS, "", "straight",
+                    "straight: a straight ray at sound_speed_mps, or with sound_speed_profile at each transponder's "
+                    "harmonic mean; ray: the direct eigenray through sound_speed_profile"),
+    "sound_speed_profile": (str, None, "", "",
+                            "a sound-speed profile (an acoustics.sound_speed_profile value: ctd:NAME, munk, a CSV "
+                            "cast); empty: none"),
+    "harmonic_mean_start_depth_m": (float, (0.0, 1000.0), "m", 0.0,
+                                    "depth where each transponder's harmonic mean of the profile starts"),
+    "surface_u_m": (float, (-1e4, 1e4), "m", 0.0, "Up of the sea surface in the survey's frame (depth 0 of the "
+                    "profile)"),
 }
 #: The site's keys of a transponder: name -> (allowed range, unit).
 TRANSPONDER_KEYS = {"e_m": ((-1e5, 1e5), "m"), "n_m": ((-1e5, 1e5), "m"), "u_m": ((-1e5, 1e5), "m"),
@@ -82,6 +101,12 @@ def _value(key: str, value: Any) -> Any:
     if kind is bool:
         if not isinstance(value, bool):
             raise ModelError(f"solver.{key}: {value!r} is not true or false")
+        return value
+    if kind is str:
+        if allowed is not None and value not in allowed:
+            raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not one of {', '.join(allowed)}")
+        if not isinstance(value, str) or len(value) > 200:
+            raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not a text of at most 200 characters")
         return value
     if kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
@@ -160,23 +185,46 @@ def guess_apriori(log: SurveyLog, ids: list[str], sound_speed: float) -> np.ndar
     return np.asarray(out, dtype=float)
 
 
+def _gnatss_log(folder, editing: str, name: str) -> tuple[SurveyLog, list[str], np.ndarray, dict]:
+    """A GNATSS survey folder of the package (``pxp_tt``, ``POS_FREED_TRANS_TWTT``, ``site.toml``) as a log, its
+    transponders' ids and a-priori positions and the site's origin."""
+    with as_file(folder.joinpath("pxp_tt")) as pxp, as_file(folder.joinpath("POS_FREED_TRANS_TWTT")) as pos, \
+            as_file(folder.joinpath("site.toml")) as site_file:
+        frame, site = read_gnatss(pxp, pos, site_file)
+    if editing == "community":
+        frame = community_editing(frame, site)
+    where = [f"ping {p} transponder {t}" for p, t in zip(frame["ping"], frame["transponder"])]
+    log = check_frame(frame[list(LOG_COLUMNS)].copy(), where, name)
+    log.counts["ignored_columns"] = []
+    ids = [t.id for t in site.transponders]
+    apriori = np.array([[t.e_m, t.n_m, t.u_m] for t in site.transponders], dtype=float)
+    return log, ids, apriori, {"lat_deg": site.lat_deg, "lon_deg": site.lon_deg, "height_m": site.height_m}
+
+
 def _builtin(name: str, overrides: list[str]) -> Survey:
     raw = tomlfile.loads(_FOLDER.joinpath(BUILTIN_SURVEYS[name]).read_text(encoding="utf-8"))
-    meta, site = raw["survey"], raw["site"]
+    meta = raw["survey"]
     data = _FOLDER.joinpath("data")
     for part in meta["log"].split("/"):
         data = data.joinpath(part)
     fmt = meta["format"]
-    with as_file(data) as path:
-        log = FORMATS[fmt](path)
-    ids = [t["id"] for t in site["transponders"]]
-    apriori = np.array([[t["e_m"], t["n_m"], t["u_m"]] for t in site["transponders"]], dtype=float)
+    if fmt == "gnatss":
+        editing = meta.get("editing", "none")
+        if editing not in EDITINGS:
+            raise ModelError(f"survey.editing: {str(editing)[:40]!r} is not one of {', '.join(EDITINGS)}")
+        log, ids, apriori, origin = _gnatss_log(data, editing, name)
+    else:
+        site = raw["site"]
+        with as_file(data) as path:
+            log = FORMATS[fmt](path)
+        ids = [t["id"] for t in site["transponders"]]
+        apriori = np.array([[t["e_m"], t["n_m"], t["u_m"]] for t in site["transponders"]], dtype=float)
+        origin = {k: site[k] for k in ("lat_deg", "lon_deg", "height_m")}
     solver = _defaults()
     for key, value in raw.get("solver", {}).items():
         solver[key] = _value(key, value)
     solver = apply_overrides(solver, overrides)
-    return Survey(name, log, ids, apriori, solver, {k: site[k] for k in ("lat_deg", "lon_deg", "height_m")}, fmt,
-                  meta.get("title", name))
+    return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name))
 
 
 def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None) -> Survey:
@@ -247,6 +295,44 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x**2))) if len(x) else float("nan")
 
 
+def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
+    """The legs' model of a survey's settings and, for a straight ray through a profile, each transponder's
+    harmonic-mean speed [m/s].
+
+    ``propagation = "straight"`` without a profile: None (a straight ray at ``sound_speed_mps``); with one:
+    :class:`~sblsim.models.calibration.StraightRay` at each transponder's harmonic mean of the profile from
+    ``harmonic_mean_start_depth_m`` to its a-priori depth (``surface_u_m`` less its Up), the model's
+    :func:`~sblsim.orchestrator.surveys.gnatss.harmonic_mean_speed`; ``propagation = "ray"``:
+    :class:`~sblsim.models.calibration.EigenRay` through the profile.
+
+    Raises
+    ------
+    ModelError
+        ``ray`` without a profile, an unknown or unreadable profile, a transponder not below the start depth.
+    """
+    s = survey.solver
+    profile = s["sound_speed_profile"]
+    if not profile:
+        if s["propagation"] == "ray":
+            raise ModelError("solver.sound_speed_profile: propagation = \"ray\" needs a profile (e.g. ctd:NCL1)")
+        return None, None
+    table = profile_table(profile, "", 15.0, 35.0, field="solver.sound_speed_profile")
+    if table.shape[0] == 0:
+        raise ModelError(f"solver.sound_speed_profile: {profile[:40]!r} has no table; give a cast such as ctd:NCL1")
+    if s["propagation"] == "ray":
+        return EigenRay(table, s["sound_speed_mps"], s["surface_u_m"]), None
+    start = s["harmonic_mean_start_depth_m"]
+    speeds = []
+    for name, up in zip(survey.ids, survey.apriori[:, 2]):
+        depth = s["surface_u_m"] - up
+        if depth <= start:
+            raise ModelError(f"solver.harmonic_mean_start_depth_m: transponder {name} at {depth:g} m is not below "
+                             f"the start depth {start:g} m")
+        speeds.append(harmonic_mean_speed(start, depth, profile))
+    speeds = np.array(speeds)
+    return StraightRay(s["sound_speed_mps"] / speeds), speeds
+
+
 def calibrate(survey: Survey) -> Calibration:
     """Solve every segment of a survey and combine them.
 
@@ -261,13 +347,14 @@ def calibrate(survey: Survey) -> Calibration:
     """
     s = survey.solver
     f = survey.log.frame
+    legs, harmonic = leg_model(survey)
     segments, tables = [], []
     for k, (a, b, rows) in enumerate(_windows(survey)):
         what = f"segment {k + 1} [{a}, {b})" if a else "the log"
         replies = survey.log.replies(survey.ids, rows)
         sol = solve(replies, survey.apriori, s["sound_speed_mps"], rigid=s["rigid"],
                     solve_sound_speed=s["solve_sound_speed"], outlier_factor=s["outlier_factor"],
-                    twtt_sigma=s["twtt_sigma_s"], what=what)
+                    twtt_sigma=s["twtt_sigma_s"], legs=legs, what=what)
         segments.append((a, b, rows, sol))
         part = f.iloc[rows][["ping", "transponder", "t_tx_s", "tx_e_m", "tx_n_m", "rx_e_m", "rx_n_m"]].copy()
         part.insert(0, "segment", k + 1)
@@ -301,7 +388,8 @@ def calibrate(survey: Survey) -> Calibration:
              "scatter_n_m": _finite(combined.scatter[j, 1]), "scatter_e_m": _finite(combined.scatter[j, 0]),
              "scatter_u_m": _finite(combined.scatter[j, 2]),
              "apriori_e_m": float(survey.apriori[j, 0]), "apriori_n_m": float(survey.apriori[j, 1]),
-             "apriori_u_m": float(survey.apriori[j, 2])}
+             "apriori_u_m": float(survey.apriori[j, 2]),
+             **({"sound_speed_mps": float(harmonic[j])} if harmonic is not None else {})}
             for j, name in enumerate(survey.ids)],
         "segments": [
             {"start": a, "end": b, "id": name,
@@ -377,5 +465,5 @@ def write_calibration(result: Calibration, out: Path | str) -> Path:
     return out
 
 
-__all__ = ["BUILTIN_SURVEYS", "Calibration", "FORMATS", "OUTPUT_FILES", "SOLVER_KEYS", "Survey", "apply_overrides",
-           "calibrate", "guess_apriori", "load_survey", "write_calibration"]
+__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "OUTPUT_FILES", "PROPAGATIONS", "SOLVER_KEYS",
+           "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model", "load_survey", "write_calibration"]

@@ -34,9 +34,9 @@ transponder's turnaround (GNATSS's transducer delay and travel-time correction a
 :func:`community_editing` keeps the pings the community keeps at a site (every transponder replied, the 3-D
 GNSS sigma of the transmit and every receive position at most ``gnss_sigma_limit_m``, the transmit point
 within ``distance_limit_m`` of the array centre, horizontally). :func:`straight_ray_residuals` checks the
-reading against the a-priori positions at each transponder's harmonic-mean sound speed of the CTD, and
-:func:`solve_rigid_shift` is a plain Gauss-Newton fit of one common shift of the array (an interim check:
-the calibration solver replaces it).
+reading against the a-priori positions (or shifted ones) at each transponder's harmonic-mean sound speed of the
+CTD. The survey is solved by the calibration solver (:mod:`sblsim.models.calibration`; the built-in survey
+``ncl1-2022-208`` of ``sblsim calibrate``).
 
 Every file is read as hostile (the helpers of :mod:`sblsim.orchestrator.replay`): a regular file only, at
 most :data:`MAX_FILE_BYTES`, every number checked with its file, line and column named
@@ -573,16 +573,15 @@ def community_editing(log: pd.DataFrame, site: Site) -> pd.DataFrame:
     return log[log["ping"].isin(kept)].reset_index(drop=True)
 
 
-def _modelled(log: pd.DataFrame, site: Site, shift: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The straight-ray two-way travel time of each row with the array shifted by ``shift`` [s], and its
-    derivative by the shift [s/m], shape (rows, 3)."""
+def _modelled(log: pd.DataFrame, site: Site, shift: np.ndarray) -> np.ndarray:
+    """The straight-ray two-way travel time of each row with the array shifted by ``shift`` [s]."""
     by_id = {t.id: t for t in site.transponders}
     x = np.array([[by_id[i].e_m, by_id[i].n_m, by_id[i].u_m] for i in log["transponder"]]) + shift
     c = np.array([by_id[i].sound_speed_mps for i in log["transponder"]])
     a = x - log[["tx_e_m", "tx_n_m", "tx_u_m"]].to_numpy()
     b = x - log[["rx_e_m", "rx_n_m", "rx_u_m"]].to_numpy()
     ra, rb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
-    return (ra + rb) / c, (a / ra[:, None] + b / rb[:, None]) / c[:, None]
+    return (ra + rb) / c
 
 
 def straight_ray_residuals(log: pd.DataFrame, site: Site, shift: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
@@ -594,66 +593,8 @@ def straight_ray_residuals(log: pd.DataFrame, site: Site, shift: Sequence[float]
     -------
     ndarray, shape (rows,)
     """
-    modelled, _ = _modelled(log, site, np.asarray(shift, dtype=float))
+    modelled = _modelled(log, site, np.asarray(shift, dtype=float))
     return log["twtt_s"].to_numpy() - modelled
-
-
-@dataclass(frozen=True)
-class RigidShift:
-    """One common shift of the array from its a-priori positions (:func:`solve_rigid_shift`).
-
-    Attributes
-    ----------
-    shift_m : ndarray, shape (3,)
-        East, north, up [m].
-    sigma_m : ndarray, shape (3,)
-        Their 1-sigma [m]: ``s² (JᵀJ)⁻¹``, s² the residuals' variance (rows − 3 degrees of freedom).
-    residual_rms_s : float
-        RMS of the residuals at the solution [s].
-    pings, replies : int
-        Pings and rows used.
-    iterations : int
-        Gauss-Newton steps taken.
-    """
-
-    shift_m: np.ndarray
-    sigma_m: np.ndarray
-    residual_rms_s: float
-    pings: int
-    replies: int
-    iterations: int
-
-
-def solve_rigid_shift(log: pd.DataFrame, site: Site, tolerance_m: float = 1e-6, max_iterations: int = 20) -> RigidShift:
-    """Solve one common east/north/up shift of the array by plain (unweighted) Gauss-Newton least squares on
-    the straight-ray travel times (:func:`straight_ray_residuals`).
-
-    An interim check of the reading, kept small: the calibration solver (weights, outlier rule, rays)
-    replaces it.
-
-    Raises
-    ------
-    ModelError
-        Fewer than 4 rows, or no convergence in ``max_iterations`` steps.
-    """
-    if len(log) < 4:
-        raise ModelError(f"rigid shift: {len(log)} replies; at least 4 are needed for 3 unknowns")
-    shift, iterations = np.zeros(3), 0
-    while True:
-        iterations += 1
-        modelled, jacobian = _modelled(log, site, shift)
-        step = np.linalg.lstsq(jacobian, log["twtt_s"].to_numpy() - modelled, rcond=None)[0]
-        shift = shift + step
-        if np.max(np.abs(step)) < tolerance_m:
-            break
-        if iterations >= max_iterations:
-            raise ModelError(f"rigid shift: no convergence in {max_iterations} Gauss-Newton steps")
-    modelled, jacobian = _modelled(log, site, shift)
-    residuals = log["twtt_s"].to_numpy() - modelled
-    variance = residuals @ residuals / (len(residuals) - 3)
-    sigma = np.sqrt(np.diag(variance * np.linalg.inv(jacobian.T @ jacobian)))
-    return RigidShift(shift, sigma, float(np.sqrt(np.mean(residuals ** 2))), int(log["ping"].nunique()), len(log),
-                      iterations)
 
 
 def ncl1_paths() -> tuple[Path, Path, Path]:
@@ -704,9 +645,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-__all__ = ["RigidShift", "Site", "Transponder", "community_editing", "ecef_to_enu", "enu_rotation",
+__all__ = ["Site", "Transponder", "community_editing", "ecef_to_enu", "enu_rotation",
            "geodetic_to_enu", "harmonic_mean_speed", "ncl1_paths", "read_gnatss", "read_ncl1", "read_posfilter",
-           "read_pxp_tt", "read_site", "solve_rigid_shift", "straight_ray_residuals"]
+           "read_pxp_tt", "read_site", "straight_ray_residuals"]
 
 if __name__ == "__main__":
     sys.exit(main())

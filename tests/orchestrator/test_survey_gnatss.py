@@ -13,6 +13,7 @@ import pandas as pd
 import pymap3d
 import pytest
 
+from sblsim.models.calibration import StraightRay, solve
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator.surveys import gnatss
 from sblsim.orchestrator.surveys.gnatss import (
@@ -23,10 +24,9 @@ from sblsim.orchestrator.surveys.gnatss import (
     read_gnatss,
     read_ncl1,
     read_site,
-    solve_rigid_shift,
     straight_ray_residuals,
 )
-from sblsim.orchestrator.surveys.log import LOG_COLUMNS
+from sblsim.orchestrator.surveys.log import LOG_COLUMNS, check_frame
 
 PXP, POS, SITE = gnatss.ncl1_paths()
 #: GNATSS's own harmonic means of the CTD for NCL1 (tests/data/config.yaml, sv_mean) [m/s].
@@ -229,21 +229,35 @@ def test_straight_ray_residuals_after_editing_and_the_rigid_shift(survey):
     assert np.sqrt(np.mean(before ** 2)) < APRIORI_RMS_BOUND
     for tid in edited["transponder"].unique():  # the scatter about each transponder's own offset
         assert np.std(before[(edited["transponder"] == tid).to_numpy()]) < SHIFTED_RMS_BOUND
-    fit = solve_rigid_shift(edited, site)
-    after = straight_ray_residuals(edited, site, fit.shift_m)
-    assert fit.residual_rms_s == pytest.approx(np.sqrt(np.mean(after ** 2)), rel=1e-12)
-    assert fit.residual_rms_s < SHIFTED_RMS_BOUND
-    # the least-squares solution: the residuals are orthogonal to the Jacobian's columns (numerically)
+    # the calibration solver: one rigid shift, each transponder at its harmonic mean, no outlier rule
+    c0 = 1481.5
+    speeds = np.array([t.sound_speed_mps for t in site.transponders])
+    ids = [t.id for t in site.transponders]
+    replies = check_frame(edited[list(LOG_COLUMNS)].copy(), [""] * len(edited), "ncl1").replies(ids)
+    apriori = np.array([[t.e_m, t.n_m, t.u_m] for t in site.transponders])
+    fit = solve(replies, apriori, c0, rigid=True, outlier_factor=None, legs=StraightRay(c0 / speeds))
+    shift = fit.offset[0]
+    np.testing.assert_allclose(fit.offset, np.tile(shift, (3, 1)), atol=1e-15)
+    order = check_frame(edited[list(LOG_COLUMNS)].copy(), [""] * len(edited), "ncl1").frame
+    after = straight_ray_residuals(order, site, shift)
+    # the solver's TWTT residuals are this independent straight-ray model's at the solved shift
+    np.testing.assert_allclose(fit.residual_s, after, atol=1e-12)
+    assert np.sqrt(np.mean(after ** 2)) < SHIFTED_RMS_BOUND
+    # the weighted least-squares solution: the residuals are W-orthogonal to the Jacobian's columns
     step = 1e-3
-    jac = np.column_stack([(straight_ray_residuals(edited, site, fit.shift_m - step * d)
-                            - straight_ray_residuals(edited, site, fit.shift_m + step * d)) / (2 * step)
+    jac = np.column_stack([(straight_ray_residuals(order, site, shift - step * d)
+                            - straight_ray_residuals(order, site, shift + step * d)) / (2 * step)
                            for d in np.eye(3)])
-    assert np.max(np.abs(jac.T @ after)) < 1e-9 * np.linalg.norm(jac) * np.linalg.norm(after) * len(after)
-    # its sigma from the same Jacobian
-    sigma = np.sqrt(np.diag(np.sum(after ** 2) / (len(after) - 3) * np.linalg.inv(jac.T @ jac)))
-    np.testing.assert_allclose(fit.sigma_m, sigma, rtol=1e-4)
-    assert np.all(fit.sigma_m < 0.02) and np.linalg.norm(fit.shift_m) < 1.0
-    assert fit.pings == edited["ping"].nunique()
+    w = fit.weight
+    assert np.max(np.abs(jac.T @ (w * after))) < 1e-9 * np.linalg.norm(jac) * np.linalg.norm(w * after) * len(after)
+    # an unweighted fit is not the solution (the weights matter): its normal equations are not met
+    assert np.max(np.abs(jac.T @ after)) > 1e-6 * np.linalg.norm(jac) * np.linalg.norm(after)
+    # its sigma from the same Jacobian and weights, scaled by the variance of unit weight
+    factor = np.sum(w * after ** 2) / (len(after) - 3)
+    sigma = np.sqrt(np.diag(factor * np.linalg.inv(jac.T @ (w[:, None] * jac))))
+    np.testing.assert_allclose(fit.sigma[0], sigma, rtol=1e-4)
+    assert np.all(fit.sigma[0] < 0.02) and np.linalg.norm(shift) < 1.0
+    assert fit.used.all() and len(fit.used) == 3 * edited["ping"].nunique()
 
 
 def test_the_check_fails_when_replies_are_paired_wrongly(survey, tmp_path):
