@@ -147,6 +147,9 @@ class EigenRay:
         The solver's :math:`c_0` [m/s] (give :func:`solve` the same).
     surface_u : float
         Up of the sea surface in the survey's frame [m] (depth 0 of the profile).
+    exact : casadi.Function or None
+        :func:`~sblsim.models.acoustics.rays.exact_points` as it is evaluated (e.g. compiled in the local engine's
+        library, some 100 times faster); default that function itself.
 
     Raises
     ------
@@ -155,7 +158,7 @@ class EigenRay:
         :data:`SOUND_SPEED_RANGE`; a reference speed outside it.
     """
 
-    def __init__(self, table: np.ndarray, reference_speed: float, surface_u: float = 0.0):
+    def __init__(self, table: np.ndarray, reference_speed: float, surface_u: float = 0.0, exact=None):
         table = np.asarray(table, dtype=float)
         lo, hi = SOUND_SPEED_RANGE
         if table.ndim != 2 or table.shape[1] != 2 or not 1 <= table.shape[0] <= MAX_PROFILE_ROWS \
@@ -172,7 +175,7 @@ class EigenRay:
         self.reference_speed = float(reference_speed)
         self.surface_u = float(surface_u)
         self.nodes, self.speeds = profile_arrays(table)
-        self._exact = exact_points()
+        self._exact = exact_points() if exact is None else exact
 
     def times(self, zs: np.ndarray, zr: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
         """The direct eigenray between depths ``zs`` and ``zr`` [m] over horizontal distances ``x`` [m], each (n,):

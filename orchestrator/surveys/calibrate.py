@@ -36,6 +36,7 @@ from sblsim.models.calibration import (
     solve,
 )
 from sblsim.models.declarations import ModelError
+from sblsim.fmus.native import compiled_exact_points
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
@@ -303,7 +304,8 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
     :class:`~sblsim.models.calibration.StraightRay` at each transponder's harmonic mean of the profile from
     ``harmonic_mean_start_depth_m`` to its a-priori depth (``surface_u_m`` less its Up), the model's
     :func:`~sblsim.orchestrator.surveys.gnatss.harmonic_mean_speed`; ``propagation = "ray"``:
-    :class:`~sblsim.models.calibration.EigenRay` through the profile.
+    :class:`~sblsim.models.calibration.EigenRay` through the profile (its solve compiled in the local engine's
+    library when a C compiler can build it; else evaluated by casadi, some 15 times slower).
 
     Raises
     ------
@@ -320,7 +322,8 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
     if table.shape[0] == 0:
         raise ModelError(f"solver.sound_speed_profile: {profile[:40]!r} has no table; give a cast such as ctd:NCL1")
     if s["propagation"] == "ray":
-        return EigenRay(table, s["sound_speed_mps"], s["surface_u_m"]), None
+        # the eigenray solve compiled in the local engine's library when a compiler builds it (once per cache)
+        return EigenRay(table, s["sound_speed_mps"], s["surface_u_m"], compiled_exact_points()), None
     start = s["harmonic_mean_start_depth_m"]
     speeds = []
     for name, up in zip(survey.ids, survey.apriori[:, 2]):
