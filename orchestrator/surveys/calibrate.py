@@ -69,7 +69,7 @@ SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
     "sound_speed_profile": (str, None, "", "",
                             "a sound-speed profile (an acoustics.sound_speed_profile value: ctd:NAME, munk, a CSV "
                             "cast); empty: none"),
-    "harmonic_mean_start_depth_m": (float, (0.0, 1000.0), "m", 0.0,
+    "harmonic_mean_start_depth_m": (float, (0.0, 11000.0), "m", 0.0,
                                     "depth where each transponder's harmonic mean of the profile starts"),
     "surface_u_m": (float, (-1e4, 1e4), "m", 0.0, "Up of the sea surface in the survey's frame (depth 0 of the "
                     "profile)"),
@@ -94,6 +94,9 @@ class Survey:
     format: str = "sblsim"
     title: str = ""
     notes: list[str] = field(default_factory=list)
+    #: Each transponder's depth below the sea surface [m] when the site gives it (GNATSS: minus its orthometric
+    #: height); else ``solver.surface_u_m`` less its a-priori Up.
+    depth_m: np.ndarray | None = None
 
 
 def _value(key: str, value: Any) -> Any:
@@ -186,9 +189,9 @@ def guess_apriori(log: SurveyLog, ids: list[str], sound_speed: float) -> np.ndar
     return np.asarray(out, dtype=float)
 
 
-def _gnatss_log(folder, editing: str, name: str) -> tuple[SurveyLog, list[str], np.ndarray, dict]:
+def _gnatss_log(folder, editing: str, name: str) -> tuple[SurveyLog, list[str], np.ndarray, dict, np.ndarray]:
     """A GNATSS survey folder of the package (``pxp_tt``, ``POS_FREED_TRANS_TWTT``, ``site.toml``) as a log, its
-    transponders' ids and a-priori positions and the site's origin."""
+    transponders' ids, a-priori positions, the site's origin and the transponders' depths."""
     with as_file(folder.joinpath("pxp_tt")) as pxp, as_file(folder.joinpath("POS_FREED_TRANS_TWTT")) as pos, \
             as_file(folder.joinpath("site.toml")) as site_file:
         frame, site = read_gnatss(pxp, pos, site_file)
@@ -199,7 +202,8 @@ def _gnatss_log(folder, editing: str, name: str) -> tuple[SurveyLog, list[str], 
     log.counts["ignored_columns"] = []
     ids = [t.id for t in site.transponders]
     apriori = np.array([[t.e_m, t.n_m, t.u_m] for t in site.transponders], dtype=float)
-    return log, ids, apriori, {"lat_deg": site.lat_deg, "lon_deg": site.lon_deg, "height_m": site.height_m}
+    origin = {"lat_deg": site.lat_deg, "lon_deg": site.lon_deg, "height_m": site.height_m}
+    return log, ids, apriori, origin, np.array([t.depth_m for t in site.transponders])
 
 
 def _builtin(name: str, overrides: list[str]) -> Survey:
@@ -213,8 +217,9 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
         editing = meta.get("editing", "none")
         if editing not in EDITINGS:
             raise ModelError(f"survey.editing: {str(editing)[:40]!r} is not one of {', '.join(EDITINGS)}")
-        log, ids, apriori, origin = _gnatss_log(data, editing, name)
+        log, ids, apriori, origin, depth = _gnatss_log(data, editing, name)
     else:
+        depth = None
         site = raw["site"]
         with as_file(data) as path:
             log = FORMATS[fmt](path)
@@ -225,7 +230,7 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     for key, value in raw.get("solver", {}).items():
         solver[key] = _value(key, value)
     solver = apply_overrides(solver, overrides)
-    return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name))
+    return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name), depth_m=depth)
 
 
 def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None) -> Survey:
@@ -302,7 +307,8 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
 
     ``propagation = "straight"`` without a profile: None (a straight ray at ``sound_speed_mps``); with one:
     :class:`~sblsim.models.calibration.StraightRay` at each transponder's harmonic mean of the profile from
-    ``harmonic_mean_start_depth_m`` to its a-priori depth (``surface_u_m`` less its Up), the model's
+    ``harmonic_mean_start_depth_m`` to its depth (:attr:`Survey.depth_m`, or ``surface_u_m`` less its Up), the
+    model's
     :func:`~sblsim.orchestrator.surveys.gnatss.harmonic_mean_speed`; ``propagation = "ray"``:
     :class:`~sblsim.models.calibration.EigenRay` through the profile (its solve compiled in the local engine's
     library when a C compiler can build it; else evaluated by casadi, some 15 times slower).
@@ -326,8 +332,8 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
         return EigenRay(table, s["sound_speed_mps"], s["surface_u_m"], compiled_exact_points()), None
     start = s["harmonic_mean_start_depth_m"]
     speeds = []
-    for name, up in zip(survey.ids, survey.apriori[:, 2]):
-        depth = s["surface_u_m"] - up
+    depths = survey.depth_m if survey.depth_m is not None else s["surface_u_m"] - survey.apriori[:, 2]
+    for name, depth in zip(survey.ids, depths):
         if depth <= start:
             raise ModelError(f"solver.harmonic_mean_start_depth_m: transponder {name} at {depth:g} m is not below "
                              f"the start depth {start:g} m")
