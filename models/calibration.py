@@ -19,7 +19,9 @@ two lines of sight,
 
 (:math:`\\mathbf u` the unit vectors of the legs; :math:`\\sigma_T` an optional TWTT noise, 0 in their work),
 and their outlier rule: while the largest :math:`|v_i|` exceeds ``outlier_factor`` times the weighted RMS
-:math:`\\sqrt{\\sum w_i v_i^2 / \\sum w_i}`, the reply (or replies) with it is dropped and the solution redone.
+:math:`\\sqrt{\\sum w_i v_i^2 / \\sum w_i}`, the reply (or replies) with it is dropped and the solution redone
+(when Gauss-Newton diverges, a gross outlier, the largest residual after one step is dropped, as their script
+does).
 The covariance is :math:`(J^\\top W J)^{-1}` scaled by the a posteriori variance of unit weight
 :math:`\\sum w_i v_i^2 / (n - p)`. Several solutions (time segments) combine as the authors combine them
 (:func:`combine`): a weighted mean with weights one over the squared weighted RMS of the half residuals projected
@@ -446,8 +448,30 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
         subset = replies.subset(used)
         if used.sum() <= p:
             raise ModelError(f"{what}: the outlier rule left {int(used.sum())} replies for {p} unknowns")
-        theta, iterations, converged = _gauss_newton(subset, apriori, theta, sound_speed, rigid, solve_sound_speed,
-                                                     legs, twtt_sigma, what)
+        start = theta
+        try:
+            theta, iterations, converged = _gauss_newton(subset, apriori, start, sound_speed, rigid,
+                                                         solve_sound_speed, legs, twtt_sigma, what)
+        except ModelError:
+            if outlier_factor is None:
+                raise
+            converged = False
+        if not converged and outlier_factor is not None and used.sum() > p + 1:
+            # Gauss-Newton diverged (a gross outlier): as Xie et al.'s script, judge the replies after one step
+            # from the start, drop the worst and solve again from the start
+            residual, jacobian, variance, *_ = _model(subset, apriori, start, sound_speed, rigid, solve_sound_speed,
+                                                      legs, twtt_sigma)
+            w = 1.0 / variance
+            try:
+                one = start + np.linalg.solve(jacobian.T @ (w[:, None] * jacobian), jacobian.T @ (w * residual))
+            except np.linalg.LinAlgError:
+                raise ModelError(f"{what}: the replies do not determine the unknowns (the normal matrix is "
+                                 "singular): more replies, from more directions, are needed") from None
+            residual = _model(subset, apriori, one, sound_speed, rigid, solve_sound_speed, legs, twtt_sigma)[0]
+            rows = np.flatnonzero(used)
+            used[rows[np.abs(residual) == np.max(np.abs(residual))]] = False
+            theta = start
+            continue
         residual, _, variance, _, _, _ = _model(subset, apriori, theta, sound_speed, rigid, solve_sound_speed, legs,
                                                 twtt_sigma)
         w = 1.0 / variance

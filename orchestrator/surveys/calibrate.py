@@ -48,7 +48,9 @@ from sblsim.orchestrator.surveys.xie import read_xie
 FORMATS = {"sblsim": read_log, "xie": read_xie}
 _FOLDER = files("sblsim.orchestrator.surveys")
 #: The built-in surveys: name -> its TOML file's name in this package.
-BUILTIN_SURVEYS = {"xie-2021-07-23": "xie-2021-07-23.toml", "ncl1-2022-208": "ncl1-2022-208.toml"}
+BUILTIN_SURVEYS = {name: f"{name}.toml" for name in (
+    "xie-2021-07-23", "xie-2021-08-23-1065", "xie-2021-08-23-1063", "xie-2021-12-10", "xie-2022-03-21",
+    "ncl1-2022-208")}
 #: The legs' models of ``solver.propagation``.
 PROPAGATIONS = ("straight", "ray")
 #: The editing a built-in GNATSS survey may ask for (``survey.editing``).
@@ -63,6 +65,9 @@ SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
                        "drop the worst reply while its residual exceeds this many weighted RMS"),
     "twtt_sigma_s": (float, (0.0, 1.0), "s", 0.0, "a TWTT noise added to the weights"),
     "segments": (list, None, "", [], "[start, end) windows of transmit times, ISO 8601 UTC; empty: the whole log"),
+    "distance_limit_m": (float, (0.0, 1e5), "m", 1e5,
+                         "use only the replies whose transmit point is within this horizontal distance of the "
+                         "frame's origin"),
     "propagation": (str, PROPAGATIONS, "", "straight",
                     "straight: a straight ray at sound_speed_mps, or with sound_speed_profile at each transponder's "
                     "harmonic mean; ray: the direct eigenray through sound_speed_profile"),
@@ -287,13 +292,15 @@ class Calibration:
 
 
 def _windows(survey: Survey) -> list[tuple[str, str, np.ndarray]]:
-    t = survey.log.frame["t_tx_s"].to_numpy()
+    f = survey.log.frame
+    t = f["t_tx_s"].to_numpy()
+    near = np.hypot(f["tx_e_m"].to_numpy(), f["tx_n_m"].to_numpy()) <= survey.solver["distance_limit_m"]
     if not survey.solver["segments"]:
-        return [("", "", np.arange(len(t)))]
+        return [("", "", np.flatnonzero(near))]
     out = []
     for k, (a, b) in enumerate(survey.solver["segments"]):
         start, end = _instant(a, f"solver.segments[{k}]"), _instant(b, f"solver.segments[{k}]")
-        out.append((a, b, np.flatnonzero((t >= start) & (t < end))))
+        out.append((a, b, np.flatnonzero((t >= start) & (t < end) & near)))
     return out
 
 
