@@ -122,8 +122,8 @@ def _parser() -> argparse.ArgumentParser:
     k = sub.add_parser("calibrate", help="locate seafloor transponders from a surface survey's two-way travel times "
                                          "(docs/calibration.md)")
     k.add_argument("survey", metavar="SURVEY|LOG",
-                   help="a built-in survey (xie-2021-07-23) or a survey log (.csv or .parquet; any text file with "
-                        "--format xie)")
+                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., "
+                        "ncl1-2022-208) or a survey log (.csv or .parquet; any text file with --format xie)")
     k.add_argument("--format", default=None, metavar="FORMAT",
                    help="the log's format: sblsim (default) or xie (survey A's text files)")
     k.add_argument("--out", type=Path, default=None, help="output directory (default results/calibrate_NAME)")
@@ -463,11 +463,19 @@ def _calibrate(args: argparse.Namespace) -> int:
         print(f"note: {note}", file=sys.stderr)
     write_calibration(result, out)
     s = result.solution
+    solver = s["solver"]
+    if solver["propagation"] == "ray":
+        speed = f"eigenrays through {solver['sound_speed_profile']}"
+    elif solver["sound_speed_profile"]:
+        speed = f"straight rays at each transponder's harmonic mean of {solver['sound_speed_profile']}"
+    else:
+        speed = f"sound speed {s['sound_speed_mps']:.6g} m/s"
     print(f"calibration of {survey.name} ({s['format']} log, {s['log']['rows']} replies, "
-          f"{len(result.segments)} segment(s), sound speed {s['sound_speed_mps']:.6g} m/s)")
+          f"{len(result.segments)} segment(s), {speed})")
     for t in s["transponders"]:
+        own = f", {t['sound_speed_mps']:.3f} m/s" if "sound_speed_mps" in t else ""
         print(f"  transponder {t['id']}: N {t['n_m']:+.4f} E {t['e_m']:+.4f} U {t['u_m']:+.4f} m from the a-priori "
-              f"(sigma {t['sigma_n_m']:.4f} {t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m)")
+              f"(sigma {t['sigma_n_m']:.4f} {t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m{own})")
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
     print(f"  written to {out}/ (solution.json, residuals.csv, figures)")
