@@ -560,5 +560,5 @@ def combine(solutions: Sequence[Solution]) -> Combined:
     return Combined(mean, sigma, scatter)
 
 
-__all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "OUTLIER_FACTOR_RANGE", "POSITION_TOLERANCE", "Replies",
-           "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution", "StraightRay", "combine", "solve"]
+__all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "OUTLIER_FACTOR_RANGE", "POSITION_TOLERANCE",
+           "Replies", "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution", "StraightRay", "combine", "solve"]

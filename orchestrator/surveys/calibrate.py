@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sblsim.fmus.native import compiled_exact_points
 from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import (
     OUTLIER_FACTOR_RANGE,
@@ -36,7 +37,6 @@ from sblsim.models.calibration import (
     solve,
 )
 from sblsim.models.declarations import ModelError
-from sblsim.fmus.native import compiled_exact_points
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
@@ -153,7 +153,8 @@ def _segments(value: Any) -> list[tuple[str, str]]:
 
 
 def apply_overrides(solver: dict, overrides: list[str]) -> dict:
-    """The solver's settings with ``--set solver.KEY=VALUE`` items applied (the value read as TOML).
+    """The solver's settings with ``--set solver.KEY=VALUE`` items applied (the value read as TOML; a text key also
+    takes a bare word).
 
     Raises
     ------
@@ -173,7 +174,9 @@ def apply_overrides(solver: dict, overrides: list[str]) -> dict:
         try:
             value = tomlfile.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
-            raise ModelError(f"--set: solver.{name}: {text[:40]!r} is not a TOML value") from None
+            if SOLVER_KEYS[name][0] is not str:
+                raise ModelError(f"--set: solver.{name}: {text[:40]!r} is not a TOML value") from None
+            value = text  # a text key takes a bare word too (solver.propagation=ray)
         solver[name] = _value(name, value)
     return solver
 

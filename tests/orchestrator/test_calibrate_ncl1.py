@@ -7,11 +7,10 @@ import dataclasses
 import json
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.fmus.native import compiled_exact_points
+from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import EigenRay, solve
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.surveys.calibrate import calibrate, leg_model, load_survey
@@ -20,7 +19,7 @@ from sblsim.orchestrator.surveys.log import SurveyLog
 
 #: GNATSS's own harmonic means of the CTD for NCL1 (its tests/data/config.yaml, sv_mean) [m/s].
 GNATSS_SV_MEAN = (1481.551, 1481.521, 1481.509)
-RAY = ['solver.propagation="ray"']
+RAY = ['solver.propagation=ray']
 
 
 @pytest.fixture(scope="module")
@@ -77,8 +76,9 @@ def test_replies_are_paired_by_identity_a_shuffled_log_gives_the_same_solution(s
     assert not (shuffled["transponder"].to_numpy() == f["transponder"].to_numpy()).all()
     # and the transponders listed in another order
     order = [2, 0, 1]
-    other = dataclasses.replace(survey, depth_m=survey.depth_m[order], log=SurveyLog(shuffled, "shuffled", [""] * len(f), dict(survey.log.counts)),
-                                ids=[survey.ids[k] for k in order], apriori=survey.apriori[order])
+    log = SurveyLog(shuffled, "shuffled", [""] * len(f), dict(survey.log.counts))
+    other = dataclasses.replace(survey, log=log, ids=[survey.ids[k] for k in order], apriori=survey.apriori[order],
+                                depth_m=survey.depth_m[order])
     again = calibrate(other)
     by_id = {t["id"]: t for t in again.solution["transponders"]}
     for t in straight.solution["transponders"]:
