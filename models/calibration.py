@@ -180,8 +180,24 @@ class EigenRay:
         self._exact = exact_points() if exact is None else exact
 
     def times(self, zs: np.ndarray, zr: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The direct eigenray between depths ``zs`` and ``zr`` [m] over horizontal distances ``x`` [m], each (n,):
-        travel time [s], launch and arrival grazing angles [rad, positive downward], and whether it exists."""
+        """The direct eigenrays between two depths over a horizontal distance.
+
+        Parameters
+        ----------
+        zs, zr : numpy.ndarray, shape (n,)
+            Depths of the source and of the receiver [m, positive down].
+        x : numpy.ndarray, shape (n,)
+            Horizontal distances [m].
+
+        Returns
+        -------
+        tau : numpy.ndarray, shape (n,)
+            Travel time [s].
+        launch, arrival : numpy.ndarray, shape (n,)
+            Grazing angles at the source and at the receiver [rad], positive downward in the direction of travel.
+        found : numpy.ndarray of bool, shape (n,)
+            Whether the direct eigenray exists (False: a shadow zone; the other values are meaningless).
+        """
         n = len(x)
         if n == 0:
             return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)

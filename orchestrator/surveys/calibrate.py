@@ -3,7 +3,8 @@
 A survey is a log (:mod:`sblsim.orchestrator.surveys.log`, or a public format it is read from), a *site* (the
 local frame's origin and the transponders' ids and a-priori positions) and the solver's settings
 (:data:`SOLVER_KEYS`). A built-in survey is a TOML file of this package (:data:`BUILTIN_SURVEYS`) whose log is
-one of the package's data files; a log given on the command line comes with the default settings, the
+one of the package's data files (a text file of survey A, or a GNATSS folder with its own site, edited as
+``survey.editing`` says); a log given on the command line comes with the default settings, the
 transponders it names and a-priori positions guessed from it (:func:`guess_apriori`), and ``--set
 solver.KEY=VALUE``. Each segment ``[start, end)`` of transmit times is solved alone
 (:func:`sblsim.models.calibration.solve`), and the segments are combined as Xie et al. (2023) combine them
@@ -322,6 +323,13 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
     :func:`~sblsim.orchestrator.surveys.gnatss.harmonic_mean_speed`; ``propagation = "ray"``:
     :class:`~sblsim.models.calibration.EigenRay` through the profile (its solve compiled in the local engine's
     library when a C compiler can build it; else evaluated by casadi, some 15 times slower).
+
+    Returns
+    -------
+    legs : LegModel or None
+        The leg model for :func:`~sblsim.models.calibration.solve` (None: its default straight ray).
+    speeds : numpy.ndarray, shape (k,), or None
+        Each transponder's harmonic-mean speed [m/s] (straight rays through a profile only).
 
     Raises
     ------
