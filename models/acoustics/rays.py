@@ -41,7 +41,11 @@ angle at the source, the arrival angle at the receiver, in the direction of trav
 
 What is not modelled: rays that turn more than once, or that pass over a local maximum of the speed beyond
 the faster end and turn further away (they come back only after long excursions; not within the few km of
-a positioning system in the profiles sblsim ships), range-dependent profiles and bathymetry.
+a positioning system in the profiles sblsim ships), reflected rays that also turn (in a surface duct: a ray
+reflected at the surface that turns back up to the receiver, or turns before it reaches the surface: Bellhop
+and the integrated ray equations find them where the duct traps the flatter rays), range-dependent profiles
+and bathymetry. Where ``X(q)`` is not monotonic (several eigenrays of one family) the solve returns one of
+them.
 
 This module imports nothing from the FMI or orchestrator layers.
 """

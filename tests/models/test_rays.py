@@ -177,27 +177,53 @@ BELLHOP_SITES = {
 }
 
 
-@pytest.mark.parametrize("name", ["munk", *(pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=reason))
-                                            for name, reason in (
-    ("NCL1", "open: a direct eigenray of Bellhop's 3° from ours at one geometry, not yet explained"),
-    ("strong", "open: a direct time 35 µs from Bellhop's at one geometry of the surface duct, not yet explained")))])
-def test_against_bellhop(name):
-    """Direct eigenray times within 10 µs of Bellhop's, surface- and bottom-reflected within 20 µs, over 168
-    geometries per profile (504 in all, out to 5 km and 4 km deep), the same shadowed geometries.
+#: Bellhop's fan samples launch angles 2 FAN / (BEAMS − 1) = 0.043° apart. Within this angle [deg] (about two beams)
+#: of a separatrix — a ray horizontal at a local maximum of the speed, where the range reached is infinitely
+#: sensitive to the launch angle — the fan cannot place an eigenray: its beams land metres to hundreds of metres
+#: from the receiver and their interpolated times miss by tens of µs, or they miss or invent the arrival.
+SEPARATRIX = 0.1
 
-    Bellhop's arrival of the same eigenray is the one with the same bounces whose launch angle is nearest to
-    ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
-    1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
-    of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected."""
+
+def _separatrices(table, zs):
+    """Launch angles [deg] (unsigned) at depth ``zs`` of the rays horizontal at a local maximum of the table's speed
+    (a row not slower than its neighbours; the ends count, the speed being constant beyond them)."""
+    c = table[:, 1]
+    peaks = c[np.r_[True, c[1:] >= c[:-1]] & np.r_[c[:-1] >= c[1:], True]]
+    here = np.interp(zs, table[:, 0], c)
+    return np.degrees(np.arccos(here / peaks[peaks > here]))
+
+
+def _turns(k, source_angle, receiver_angle):
+    """Bellhop's reflected arrivals whose ray also turns: leaving away from the boundary (surface: downward,
+    bottom: upward) or arriving toward it. Not a path of the families (a single reflection, no turning)."""
+    sign = -1.0 if k == 1 else 1.0
+    return (sign * source_angle < 0) | (sign * receiver_angle > 0)
+
+
+_ARRIVALS: dict[str, dict] = {}
+
+
+def _bellhop_arrivals(name):
+    """Bellhop's arrivals at the site ``name``, per source depth (run once per test session)."""
+    if name not in _ARRIVALS:
+        table = _table(name)
+        sources, depths, ranges, depth = BELLHOP_SITES[name]
+        _ARRIVALS[name] = {zs: _bellhop(table, zs, depths, ranges, depth) for zs in sources}
+    return _ARRIVALS[name]
+
+
+def _compare_with_bellhop(name, solve):
+    """The comparison of :func:`test_against_bellhop` of the eigenrays ``solve`` gives (the signature of
+    :func:`rays.eigenray_families`); raises AssertionError naming the check that fails."""
     table = _table(name)
     sources, depths, ranges, depth = BELLHOP_SITES[name]
     nodes, speeds = rays.profile_arrays(table)
-    solve = rays.eigenray_families()
     compared, worst = [0, 0, 0], [0.0, 0.0, 0.0]
-    mismatched, other_ray = [], []
+    mismatched, other_ray, separatrix = [], [], []
     speed = rays._speed()
     for zs in sources:
-        arrivals = _bellhop(table, zs, depths, ranges, depth)
+        arrivals = _bellhop_arrivals(name)[zs]
+        seps = _separatrices(table, zs)
         for zr in depths:
             for x in ranges:
                 tau, launch, _arrival, valid = (np.asarray(v).ravel() for v in solve(zs, zr, x, depth, nodes, speeds))
@@ -205,6 +231,9 @@ def test_against_bellhop(name):
                 here = arrivals[(arrivals.depth_m == np.float32(zr)) & (np.isclose(arrivals.range_m, x))]
                 for k, (top, bottom) in enumerate(((0, 0), (1, 0), (0, 1))):
                     theirs = here[(here.top_bounces == top) & (here.bottom_bounces == bottom)]
+                    if k > 0:
+                        theirs = theirs[~_turns(k, theirs.source_angle_degrees.values,
+                                                theirs.receiver_angle_degrees.values)]
                     if edge[0][k] != edge[1][k]:
                         continue  # at a shadow boundary
                     if k > 0 and len(theirs):  # Bellhop's beam grazing the boundary: reflected or not, by sampling
@@ -215,6 +244,13 @@ def test_against_bellhop(name):
                         graze = np.degrees(np.arccos(min(1.0, float(speed(zs, nodes, speeds)) / fastest)))
                         if np.any(np.abs(np.abs(theirs.source_angle_degrees.values) - graze) < 0.1):
                             continue
+                    angles = list(np.abs(theirs.source_angle_degrees.values))
+                    if valid[k]:
+                        angles.append(abs(np.degrees(launch[k])))
+                    if len(seps) and np.min(np.abs(np.subtract.outer(angles, seps)), initial=np.inf) < SEPARATRIX:
+                        if valid[k] and abs(np.degrees(launch[k])) <= STEEPEST:
+                            separatrix.append((k, zs, zr, x, float(launch[k]), float(tau[k])))
+                        continue
                     if bool(valid[k]) != (len(theirs) > 0):
                         mismatched.append((k + 1, zs, zr, x, bool(valid[k])))
                         continue
@@ -227,11 +263,62 @@ def test_against_bellhop(name):
                     error = abs(tau[k] - theirs.travel_time_s.values[nearest])
                     worst[k] = max(worst[k], error)
                     compared[k] += 1
-    print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s")
-    assert not mismatched, mismatched
-    assert not other_ray, other_ray
-    assert compared[0] >= 60 and compared[1] + compared[2] >= 60
-    assert worst[0] <= 10e-6 and worst[1] <= 20e-6 and worst[2] <= 20e-6
+    # near a separatrix: the eigenray against the ray equations integrated (the shooting of test_against_solve_ivp)
+    ivp_worst = 0.0
+    for k, zs, zr, x, theta, t in separatrix:
+        root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, theta - 1e-5, theta + 1e-5, xtol=1e-11)
+        _z, t_end, hits = _ivp_ray(table, zs, x, root, depth)
+        assert hits == [[], [0], [1]][k], ("separatrix: other path", k + 1, zs, zr, x, hits)
+        ivp_worst = max(ivp_worst, abs(t - t_end))
+    print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s; near a separatrix "
+          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s")
+    assert not mismatched, ("shadowed sets", mismatched)
+    assert not other_ray, ("other eigenray", other_ray)
+    assert compared[0] >= 60 and compared[1] + compared[2] >= 60, ("compared", compared)
+    assert worst[0] <= 10e-6 and worst[1] <= 20e-6 and worst[2] <= 20e-6, ("Bellhop's times", worst)
+    assert ivp_worst <= 1e-6, ("solve_ivp's times near a separatrix", ivp_worst)
+    return compared, len(separatrix)
+
+
+@pytest.mark.parametrize("name", ["munk", "NCL1", "strong"])
+def test_against_bellhop(name):
+    """Direct eigenray times within 10 µs of Bellhop's, surface- and bottom-reflected within 20 µs, over 168
+    geometries per profile (504 in all, out to 5 km and 4 km deep), the same shadowed geometries.
+
+    Bellhop's arrival of the same eigenray is the one with the same bounces whose launch angle is nearest to
+    ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
+    1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
+    of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected.
+    Bellhop's reflected arrivals whose ray also turns (in a surface duct: down, up to the surface and back down)
+    are no path of the families (:func:`_turns`; not modelled, docs/model.md).
+
+    Near a separatrix (ours or Bellhop's arrival leaving within :data:`SEPARATRIX` of a ray horizontal at a local
+    maximum of the speed: the top of a duct, the cast's first sample, which the receiver 2 m deep lies 1.6 cm
+    under) Bellhop's fan cannot resolve the eigenray: its nearest beams land up to hundreds of metres from the
+    receiver (the integration shows it), so that it misses the arrival, reports one the rays do not make or
+    times it tens of µs off. There our eigenray is checked against the ray equations integrated (solve_ivp,
+    within 1 µs, the same boundaries hit) instead; the NCL1 cast and the strong table have such geometries."""
+    compared, near = _compare_with_bellhop(name, rays.eigenray_families())
+    if name != "munk":
+        assert near > 0
+
+
+@pytest.mark.parametrize("name, family, offset, check", [("strong", 0, 2e-6, "separatrix"),
+                                                         ("munk", 0, 12e-6, "Bellhop's times"),
+                                                         ("munk", 1, 25e-6, "Bellhop's times")])
+def test_against_bellhop_can_fail(name, family, offset, check):
+    """The comparison fails for eigenray times off by a little more than its tolerances: 2 µs near a separatrix
+    (solve_ivp), 12 µs direct and 25 µs reflected elsewhere (Bellhop)."""
+    solve = rays.eigenray_families()
+    shift = np.zeros(3)
+    shift[family] = offset
+
+    def perturbed(*args):
+        tau, launch, arrival, valid = solve(*args)
+        return np.asarray(tau).ravel() + shift, launch, arrival, valid
+
+    with pytest.raises(AssertionError, match=check):
+        _compare_with_bellhop(name, perturbed)
 
 
 def test_munk_table_samples_the_canonical_profile():
