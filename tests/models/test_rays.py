@@ -110,6 +110,13 @@ def _ivp_ray(table, zs, x, theta0, depth):
         hits.append(which)
 
 
+def _shoot(table, zs, zr, x, theta, depth):
+    """The eigenray of the integrated ray equations whose launch angle [rad] lies within 1e-5 of ``theta``
+    (Brent on the depth reached at ``x``): :func:`_ivp_ray`'s (z at x, τ at x, boundaries hit)."""
+    root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, theta - 1e-5, theta + 1e-5, xtol=1e-11)
+    return _ivp_ray(table, zs, x, root, depth)
+
+
 IVP_CASES = [("munk", 1300.0, 1300.0, 5000.0),
              ("strong", 20.0, 60.0, 1500.0), ("strong", 100.0, 1200.0, 3000.0), ("strong", 3000.0, 300.0, 4500.0),
              ("strong", 700.0, 700.0, 2500.0)]
@@ -148,7 +155,7 @@ FAN, STEP, BEAMS = 86.0, 5.0, 4001
 STEEPEST = 80.0
 
 
-def _bellhop(table, source, depths, ranges, depth):
+def _bellhop(table, source, depths, ranges, depth, fan=(-FAN, FAN), beams=BEAMS):
     pg = pytest.importorskip("pelagic")  # the test extra installs it: this skips only outside it
     tab = table[table[:, 0] < depth]
     tab = np.vstack([tab, [depth, np.interp(depth, table[:, 0], table[:, 1])]])
@@ -158,7 +165,7 @@ def _bellhop(table, source, depths, ranges, depth):
     lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
     lines += ["'A' 0.0", f"{depth:.4f} 1600.00 0.0 1.8 0.8 /", "1", f"{source:.6f} /",
               f"{len(depths)}", " ".join(f"{z:.6f}" for z in depths) + " /", f"{len(ranges)}",
-              " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'A'", f"{BEAMS}", f"{-FAN} {FAN} /",
+              " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'A'", f"{beams}", f"{fan[0]} {fan[1]} /",
               f"{STEP} {depth + 100:.1f} {max(ranges) / 1000 + 1:.3f}"]
     with tempfile.TemporaryDirectory() as folder:
         path = os.path.join(folder, "case.env")
@@ -182,6 +189,10 @@ BELLHOP_SITES = {
 #: sensitive to the launch angle — the fan cannot place an eigenray: its beams land metres to hundreds of metres
 #: from the receiver and their interpolated times miss by tens of µs, or they miss or invent the arrival.
 SEPARATRIX = 0.1
+#: Half-width [deg] of the narrow fan run there around our launch angle.
+NARROW = 0.05
+#: The integrated eigenray and the narrow fan's arrivals per geometry (a perturbed solve reuses them).
+_SHOOTING: dict[tuple, tuple] = {}
 
 
 def _separatrices(table, zs):
@@ -263,20 +274,34 @@ def _compare_with_bellhop(name, solve):
                     error = abs(tau[k] - theirs.travel_time_s.values[nearest])
                     worst[k] = max(worst[k], error)
                     compared[k] += 1
-    # near a separatrix: the eigenray against the ray equations integrated (the shooting of test_against_solve_ivp)
-    ivp_worst = 0.0
+    # near a separatrix: the eigenray against the ray equations integrated (the shooting of test_against_solve_ivp),
+    # and against Bellhop with a fan of 1001 beams over ±0.05° around ours (beams 1e-4° apart)
+    ivp_worst, narrow_worst, narrow_missed = 0.0, [0.0, 0.0, 0.0], []
     for k, zs, zr, x, theta, t in separatrix:
-        root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, theta - 1e-5, theta + 1e-5, xtol=1e-11)
-        _z, t_end, hits = _ivp_ray(table, zs, x, root, depth)
+        key = (name, k, zs, zr, x, theta)
+        if key not in _SHOOTING:
+            narrow = _bellhop(table, zs, [zr], [x], depth, (np.degrees(theta) - NARROW, np.degrees(theta) + NARROW),
+                              1001)
+            _SHOOTING[key] = (_shoot(table, zs, zr, x, theta, depth), narrow)
+        (_z, t_end, hits), narrow = _SHOOTING[key]
         assert hits == [[], [0], [1]][k], ("separatrix: other path", k + 1, zs, zr, x, hits)
         ivp_worst = max(ivp_worst, abs(t - t_end))
+        top, bottom = ((0, 0), (1, 0), (0, 1))[k]
+        theirs = narrow[(narrow.top_bounces == top) & (narrow.bottom_bounces == bottom)]
+        gap = np.abs(theirs.source_angle_degrees.values - np.degrees(theta))
+        if not len(theirs) or gap.min() > 0.01:
+            narrow_missed.append((k + 1, zs, zr, x))
+            continue
+        narrow_worst[k] = max(narrow_worst[k], abs(t - theirs.travel_time_s.values[np.argmin(gap)]))
     print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s; near a separatrix "
-          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s")
+          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s, and Bellhop's narrow fan, worst {narrow_worst} s")
     assert not mismatched, ("shadowed sets", mismatched)
     assert not other_ray, ("other eigenray", other_ray)
     assert compared[0] >= 60 and compared[1] + compared[2] >= 60, ("compared", compared)
     assert worst[0] <= 10e-6 and worst[1] <= 20e-6 and worst[2] <= 20e-6, ("Bellhop's times", worst)
     assert ivp_worst <= 1e-6, ("solve_ivp's times near a separatrix", ivp_worst)
+    assert not narrow_missed, ("the narrow fan's eigenrays near a separatrix", narrow_missed)
+    assert narrow_worst[0] <= 10e-6 and max(narrow_worst[1:]) <= 20e-6, ("the narrow fan's times", narrow_worst)
     return compared, len(separatrix)
 
 
@@ -297,7 +322,9 @@ def test_against_bellhop(name):
     under) Bellhop's fan cannot resolve the eigenray: its nearest beams land up to hundreds of metres from the
     receiver (the integration shows it), so that it misses the arrival, reports one the rays do not make or
     times it tens of µs off. There our eigenray is checked against the ray equations integrated (solve_ivp,
-    within 1 µs, the same boundaries hit) instead; the NCL1 cast and the strong table have such geometries."""
+    within 1 µs, the same boundaries hit) and against Bellhop with a fan 1e-4° fine around it (an arrival with the
+    same bounces within 0.01° of ours, within 10 µs, 20 µs reflected) instead; the NCL1 cast and the strong table
+    have such geometries."""
     compared, near = _compare_with_bellhop(name, rays.eigenray_families())
     if name != "munk":
         assert near > 0
