@@ -18,12 +18,13 @@ machine precision). The recorded TWTT, turnaround removed, is
 
 a straight ray at the sound speed :math:`c` (the water column's harmonic mean). The recorded transducer
 positions are the GNSS position plus the lever arm turned by the *measured* attitude,
-:math:`\\tilde{\\mathbf p} = \\mathbf g + \\mathbf e_\\mathrm{GNSS} + R(\\phi + \\epsilon_\\phi, \\theta + \\epsilon_\\theta,
-\\psi + \\epsilon_\\psi)\\,\\mathbf a`, with the platform's error model (:mod:`sblsim.models.platform.core`, the
-same parameters, units and defaults): the GNSS error per axis white (``gps_sigma``) or first-order Gauss-Markov
-(``gps_tau``, its exact discretization between the survey's instants, stationary start), the attitude error
-per axis ``imu_bias_deg`` plus white noise of ``imu_sigma_deg``. The rotation is the platform's own
-(:func:`sblsim.models.platform.geometry.rotation_ned`, NED; turned here into the survey's local ENU frame).
+:math:`\\tilde{\\mathbf p} = \\mathbf g + \\mathbf e_\\mathrm{GNSS} + R(\\phi + \\epsilon_\\phi, \\theta +
+\\epsilon_\\theta, \\psi + \\epsilon_\\psi)\\,\\mathbf a`, with the platform's error model
+(:mod:`sblsim.models.platform.core`, the same parameters, units and defaults): the GNSS error per axis white
+(``gps_sigma``) or first-order Gauss-Markov (``gps_tau``, its exact discretization between the survey's instants,
+stationary start), the attitude error per axis ``imu_bias_deg`` plus white noise of ``imu_sigma_deg``. The rotation
+is the platform's own (:func:`sblsim.models.platform.geometry.rotation_ned`, NED; turned here into the survey's
+local ENU frame).
 
 This is a numpy draw of the platform's error model at the survey's transmit and receive instants, not a run of
 the platform component: the platform is moored at the origin (it does not sail a pattern), and a survey's
@@ -31,7 +32,8 @@ error sources are only its GNSS and attitude errors at those instants; the GNSS 
 ``sample_period`` is left out (a transmission and its reply are more than a sample period apart).
 
 The log's transducer sigmas are what a survey's GNSS/INS would report: per axis
-:math:`\\sqrt{\\sigma_\\mathrm{GNSS}^2 + \\sum_k (\\partial (R\\mathbf a)/\\partial \\vartheta_k\\,\\sigma_\\mathrm{IMU})^2}`
+:math:`\\sqrt{\\sigma_\\mathrm{GNSS}^2
++ \\sum_k (\\partial (R\\mathbf a)/\\partial \\vartheta_k\\,\\sigma_\\mathrm{IMU})^2}`
 (the attitude noise through the lever arm, linearized; the bias is not in it), at least :data:`SIGMA_FLOOR`.
 
 The true transponder is the a-priori position :math:`(0, 0, -d)` plus :math:`N(0, \\sigma_\\mathrm{apriori}^2 I)`
