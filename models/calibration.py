@@ -524,6 +524,59 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
                     converged=converged)
 
 
+def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sound_speed: float, *,
+        rigid: bool = False, solve_sound_speed: bool = False, twtt_sigma: float = 0.0,
+        legs: LegModel | None = None) -> np.ndarray:
+    """The Cramér-Rao bound of a survey's unknowns: :math:`(J^\\top W J)^{-1}` at the truth.
+
+    The Fisher information of the replies' range residuals (Gaussian, independent, variances
+    :math:`\\sigma_i^2` of the line-of-sight projection of :func:`solve`) is :math:`J^\\top W J`, with
+    :math:`J` the Jacobian of the two legs at the true positions and :math:`W = \\mathrm{diag}(1/\\sigma_i^2)`.
+    Its inverse bounds the covariance of any unbiased estimator of the (static) transponders: for a static
+    state the posterior CRB (PCRB) without a prior is this CRB.
+
+    Parameters
+    ----------
+    replies : Replies
+        The replies at the truth: the transducer's true transmit and receive positions [m], their 1-sigma [m]
+        (the noise the positions carry), the true TWTTs [s] (used only with ``solve_sound_speed``).
+    positions : array_like, shape (k, 3)
+        The transponders' true positions, local ENU [m].
+    sound_speed : float
+        The true sound speed [m/s].
+    rigid, solve_sound_speed, twtt_sigma, legs
+        As :func:`solve` (``twtt_sigma``: the TWTT noise [s]).
+
+    Returns
+    -------
+    numpy.ndarray, shape (p, p)
+        The bound on the unknowns' covariance (3 per transponder, or 3 for a rigid shift; then the speed scale)
+        [m², 1]. The horizontal bound of transponder j is ``sqrt(P[3j, 3j] + P[3j+1, 3j+1])`` [m].
+
+    Raises
+    ------
+    ModelError
+        A value outside its range, or replies that do not determine the unknowns (a singular information).
+
+    Source: the CRB of a nonlinear least-squares problem with Gaussian noise, e.g. S. M. Kay, *Fundamentals of
+    Statistical Signal Processing: Estimation Theory*, 1993, ch. 3; P. Tichavsky, C. H. Muravchik, A. Nehorai,
+    "Posterior Cramér-Rao bounds for discrete-time nonlinear filtering", IEEE Trans. Signal Process. 46(5), 1998.
+    """
+    positions = np.asarray(positions, dtype=float)
+    _check(replies, positions, float(sound_speed), None, float(twtt_sigma))
+    theta = np.zeros(_unknowns(len(positions), rigid, solve_sound_speed))
+    if solve_sound_speed:
+        theta[-1] = 1.0
+    _, jacobian, variance, *_ = _model(replies, positions, theta, float(sound_speed), rigid, solve_sound_speed,
+                                       legs or StraightRay(), float(twtt_sigma))
+    information = jacobian.T @ (jacobian / variance[:, None])
+    try:
+        return np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        raise ModelError("calibration: the replies do not determine the unknowns (the information is "
+                         "singular)") from None
+
+
 @dataclass(frozen=True)
 class Combined:
     """Segment solutions combined (:func:`combine`), per transponder, local ENU [m].
@@ -577,4 +630,4 @@ def combine(solutions: Sequence[Solution]) -> Combined:
 
 
 __all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "OUTLIER_FACTOR_RANGE", "POSITION_TOLERANCE",
-           "Replies", "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution", "StraightRay", "combine", "solve"]
+           "Replies", "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution", "StraightRay", "combine", "crb", "solve"]

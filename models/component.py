@@ -50,6 +50,11 @@ class Component:
         return _by_causality(cls, int(n_beacons), "parameter")
 
     @classmethod
+    def fmu_parameter_names(cls, n_beacons: int = 4) -> frozenset[str]:
+        """The names of :meth:`fmu_parameters_declared` (made once per model and beacon count)."""
+        return _parameter_names(cls, int(n_beacons))
+
+    @classmethod
     def inputs(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         return _by_causality(cls, int(n_beacons), "input")
 
@@ -66,7 +71,7 @@ class Component:
         ModelError
             If a configuration key cannot be turned into FMU parameters (e.g. an unreadable file).
         """
-        names = {v.name for v in cls.fmu_parameters_declared(n_beacons)}
+        names = cls.fmu_parameter_names(n_beacons)
         return {k: v for k, v in values.items() if k in names}
 
     @classmethod
@@ -159,6 +164,11 @@ class Component:
         declared = {v.name: v for v in cls.fmu_parameters_declared(n_beacons)}
         return {k: (declared[k].choices.index(v) if k in declared and declared[k].type == "String" else v)
                 for k, v in values.items()}
+
+
+@lru_cache(maxsize=None)
+def _parameter_names(cls: type, n_beacons: int) -> frozenset[str]:
+    return frozenset(v.name for v in cls.fmu_parameters_declared(n_beacons))
 
 
 @lru_cache(maxsize=None)

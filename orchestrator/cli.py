@@ -121,16 +121,20 @@ def _parser() -> argparse.ArgumentParser:
 
     k = sub.add_parser("calibrate", help="locate seafloor transponders from a surface survey's two-way travel times "
                                          "(docs/calibration.md)")
-    k.add_argument("survey", metavar="SURVEY|LOG",
-                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., "
-                        "ncl1-2022-208) or a survey log (.csv or .parquet; any text file with --format xie)")
+    k.add_argument("survey", metavar="SURVEY|LOG|CONFIG",
+                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., ncl1-2022-208; "
+                        "box-in, simulated), a survey log (.csv or .parquet; any text file with --format xie) or a "
+                        "simulated survey CONFIG.toml")
     k.add_argument("--format", default=None, metavar="FORMAT",
                    help="the log's format: sblsim (default) or xie (survey A's text files)")
+    k.add_argument("--replicates", type=int, default=None, metavar="N",
+                   help="a simulated survey: solve N replicates and write replicates.parquet (errors against the "
+                        "truth, NEES, the horizontal bound)")
     k.add_argument("--out", type=Path, default=None, help="output directory (default results/calibrate_NAME)")
     k.add_argument("--force", action="store_true", help="replace an earlier calibration in --out")
-    k.add_argument("--set", dest="overrides", action="append", default=[], metavar="solver.KEY=VALUE",
-                   help="override a solver setting, e.g. solver.sound_speed_mps=1500 or solver.solve_sound_speed=true "
-                        "(repeatable)")
+    k.add_argument("--set", dest="overrides", action="append", default=[], metavar="TABLE.KEY=VALUE",
+                   help="override a solver setting, e.g. solver.sound_speed_mps=1500 or solver.solve_sound_speed=true, "
+                        "or a simulated survey's survey.KEY / platform.KEY (repeatable)")
 
     m = sub.add_parser("compare", help="run several receivers (or positioning systems) on the same replicates of a "
                                        "scenario")
@@ -454,7 +458,12 @@ def _output_name(scenario: str) -> str:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey, write_calibration
+    from sblsim.orchestrator.surveys.simulate import is_simulated
 
+    if is_simulated(args.survey):
+        return _calibrate_simulated(args)
+    if args.replicates is not None:
+        raise ModelError("--replicates: only a simulated survey (box-in or a CONFIG.toml) has replicates")
     survey = load_survey(args.survey, args.format, args.overrides)  # every input read and checked first
     result = calibrate(survey)
     out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
@@ -479,6 +488,42 @@ def _calibrate(args: argparse.Namespace) -> int:
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
     print(f"  written to {out}/ (solution.json, residuals.csv, figures)")
+    return 0
+
+
+def _calibrate_simulated(args: argparse.Namespace) -> int:
+    from sblsim.orchestrator.surveys.calibrate import write_calibration
+    from sblsim.orchestrator.surveys.log import write_log
+    from sblsim.orchestrator.surveys.simulate import REPLICATES_RANGE, load_simulated, run_simulated
+
+    if args.format is not None:
+        raise ModelError("--format: a simulated survey has no log format; give --format with a log")
+    if args.replicates is not None and not REPLICATES_RANGE[0] <= args.replicates <= REPLICATES_RANGE[1]:
+        raise ModelError(f"--replicates: {args.replicates} is outside the allowed range [{REPLICATES_RANGE[0]}, "
+                         f"{REPLICATES_RANGE[1]}]")
+    sim = load_simulated(args.survey, args.overrides)  # every input read and checked first
+    out = _output(args.out, Path("results") / f"calibrate_{folder_name(sim.name)}", args.force, "solution.json",
+                  "calibration")
+    result, table = run_simulated(sim, args.replicates, progress="auto")
+    extra = {"survey_log.csv": lambda path: write_log(result.survey.log, path)}  # replicate 0's log
+    if table is not None:
+        extra["replicates.parquet"] = lambda path: table.to_parquet(path, index=False)
+    write_calibration(result, out, extra)
+    s = result.solution
+    t, e, truth = s["transponders"][0], s["errors"][0], s["truth"][0]
+    print(f"simulated calibration {sim.name}: {sim.survey['pattern']} of {sim.survey['radius_m']:g} m around a "
+          f"transponder {sim.survey['depth_m']:g} m deep, {s['log']['rows']} replies, seed {sim.survey['seed']}")
+    print(f"  replicate 0: error N {e['e_n_m']:+.4f} E {e['e_e_m']:+.4f} U {e['e_u_m']:+.4f} m against the truth "
+          f"(N {truth['n_m']:+.3f} E {truth['e_m']:+.3f} U {truth['u_m']:+.3f} m); sigma {t['sigma_n_m']:.4f} "
+          f"{t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m; horizontal bound (CRB) {e['pcrb_h_m']:.4f} m")
+    if table is not None:
+        r = s["replicates"]
+        print(f"  {r['count']} replicates: horizontal RMS error {r['rms_h_m']:.4f} m, bound {r['pcrb_h_m']:.4f} m "
+              f"(ratio {r['rms_h_m'] / r['pcrb_h_m']:.3f}); RMS N {r['rms_n_m']:.4f} E {r['rms_e_m']:.4f} "
+              f"U {r['rms_u_m']:.4f} m; mean NEES {r['nees_mean']:.2f} (3 when consistent)")
+    print(f"  survey error for an LBL design ({s['survey_sigma_from']}): --set {s['lbl_set']}")
+    files = "solution.json, residuals.csv, survey_log.csv" + (", replicates.parquet" if table is not None else "")
+    print(f"  written to {out}/ ({files}, figures)")
     return 0
 
 

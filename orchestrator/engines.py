@@ -54,7 +54,7 @@ def _model_ports(model: type, n_beacons: int) -> tuple[tuple[Port, ...], frozens
                                                       tuple[str, ...], tuple[Any, ...]]:
     """A model's ports, parameter names, input and output names and output dtypes (made once per model)."""
     ports = tuple(Port(v.name, v.causality, v.fmi_type, v.unit) for v in model.fmu_variables(n_beacons))
-    parameters = frozenset(v.name for v in model.fmu_parameters_declared(n_beacons))
+    parameters = model.fmu_parameter_names(n_beacons)
     outputs = model.outputs(n_beacons)
     return (ports, parameters, tuple(v.name for v in model.inputs(n_beacons)), tuple(v.name for v in outputs),
             tuple(DTYPES[v.fmi_type] for v in outputs))

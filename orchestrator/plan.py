@@ -287,7 +287,7 @@ def _component_parameters(cfg: Mapping[str, Mapping[str, Any]], component: str, 
         declared = None
     else:
         params = model.fmu_parameters(section, n_beacons)
-        declared = frozenset(v.name for v in model.fmu_parameters_declared(n_beacons))
+        declared = model.fmu_parameter_names(n_beacons)
 
     def takes(name: str) -> bool:
         return declared is None or name in declared

@@ -109,8 +109,10 @@ def merge_params(plans: Sequence[RunPlan], component: str,
     replicates = np.array([p.replicate for p in plans], dtype=np.int64)
     configs = [p.config for p in plans]
     for section in (component, "run"):
+        # the runs' distinct sections (the replicates of a cell share theirs, :func:`with_replicates`)
+        distinct = list({id(c[section]): c[section] for c in configs}.values())
         for key, value in first.config[section].items():
-            if key == "replicate" or all(c[section][key] == value for c in configs):
+            if key == "replicate" or all(d[key] == value for d in distinct):
                 continue
             if section == "run" and key not in params:
                 continue  # a seed key the component does not take (e.g. the EKF draws no random numbers)

@@ -142,7 +142,8 @@ DIRECTION: tuple[Variable, ...] = (
              "USBL: measured azimuth of the diver from the transceiver, clockwise from North (0 when lost)",
              discrete=True, min=-10.0, max=10.0),
     Variable("elevation", "output", "Real", 0.0, "rad",
-             "USBL: measured elevation of the diver below the horizontal (0 when lost)", discrete=True,
+             "USBL: measured elevation of the diver below the horizontal (ray: the eigenray's at the transceiver) "
+             "(0 when lost)", discrete=True,
              min=-10.0, max=10.0),
 )
 #: What a delivered packet adds at the end of the channel's declarations (after every earlier variable, so that
@@ -466,8 +467,17 @@ class Acoustics(Component):
                        "outlier": ca.logic_and(outlier, valid), "rx_time": arrival}
                 out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
                 if direction:
+                    arrives = reply[2] - beacon
+                    if propagation == "ray":  # along the reply's eigenray: the chord's azimuth (a range-independent
+                        # profile), the eigenray's grazing angle at the transceiver (reciprocal: its launch toward
+                        # the diver, the reply's −arrival_angle) as the elevation
+                        level = ca.norm_2(arrives[:2])
+                        east, north = ca.if_else(level > 0, arrives[1] / level, 0.0), ca.if_else(level > 0,
+                                                                                               arrives[0] / level, 1.0)
+                        grazing = reply[3][0]
+                        arrives = ca.vertcat(north * ca.cos(grazing), east * ca.cos(grazing), ca.sin(grazing))
                     out.update(zip(("azimuth", "elevation"),
-                        (ca.if_else(valid, a, 0.0) for a in doa(reply[2] - beacon, u, p, w[_ANGLE_NOISE]))))
+                        (ca.if_else(valid, a, 0.0) for a in doa(arrives, u, p, w[_ANGLE_NOISE]))))
                 return {"k": k, **send(x, p, out, arrival - t_k)}
             return handler
 

@@ -41,7 +41,11 @@ angle at the source, the arrival angle at the receiver, in the direction of trav
 
 What is not modelled: rays that turn more than once, or that pass over a local maximum of the speed beyond
 the faster end and turn further away (they come back only after long excursions; not within the few km of
-a positioning system in the profiles sblsim ships), range-dependent profiles and bathymetry.
+a positioning system in the profiles sblsim ships), reflected rays that also turn (in a surface duct: a ray
+reflected at the surface that turns back up to the receiver, or turns before it reaches the surface: Bellhop
+and the integrated ray equations find them where the duct traps the flatter rays), range-dependent profiles
+and bathymetry. Where ``X(q)`` is not monotonic (several eigenrays of one family) the solve returns one of
+them.
 
 This module imports nothing from the FMI or orchestrator layers.
 """
@@ -646,6 +650,74 @@ def slant_range(zs, zr, tau, start, nodes, speeds):
     return _slant_range()(zs, zr, tau, start, nodes, speeds)
 
 
+#: Bisections of :func:`chord_elevation` on the depth the ray reaches (over 20 km: 2e-8 m).
+TRACE_ITERATIONS = 40
+#: The span [m] of depths :func:`chord_elevation` searches, up or down from the transceiver.
+_TRACE_SPAN = 20000.0
+
+
+@lru_cache(maxsize=1)
+def _chord_elevation() -> ca.Function:
+    """``(zt, elevation, tau, nodes, speeds) -> (chord, horizontal, depth)``: see :func:`chord_elevation`."""
+    zt, elevation, tau = ca.MX.sym("zt"), ca.MX.sym("elevation"), ca.MX.sym("tau")
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    sums = _layers()
+    cref = _speed()(zt, nodes, speeds)
+    q = ca.fabs(ca.sin(elevation))
+    down = elevation >= 0
+
+    def reached(d):
+        """Range [m] and time [s] of the ray over the depth interval ``d`` [m] from the transceiver."""
+        a, b = ca.if_else(down, zt, zt - d), ca.if_else(down, zt + d, zt)
+        x, t, _dx = sums(q, 0.0, cref, a, b, 0.0, 0.0, nodes, speeds)
+        return x, t
+
+    lo, hi = 0.0, _TRACE_SPAN
+    for _ in range(TRACE_ITERATIONS):
+        d = 0.5 * (lo + hi)
+        early = reached(d)[1] < tau
+        lo, hi = ca.if_else(early, d, lo), ca.if_else(early, hi, d)
+    d = 0.5 * (lo + hi)
+    x, _t = reached(d)
+    dz = ca.if_else(down, d, -d)
+    return ca.Function("sblsim_ray_chord_elevation", [zt, elevation, tau, nodes, speeds],
+                       [ca.atan2(dz, x), x, zt + dz], ["zt", "elevation", "tau", "nodes", "speeds"],
+                       ["chord", "horizontal", "depth"], {"never_inline": True})
+
+
+def chord_elevation(zt, elevation, tau, nodes, speeds):
+    """The straight chord's elevation of a target whose direct eigenray leaves depth ``zt`` at ``elevation`` and
+    takes ``tau``: the ray traced from the transceiver through the profile, as USBL processing corrects its
+    direction of arrival for ray bending with a measured profile.
+
+    Snell's invariant of the ray is ``ξ = cos(elevation) / c(z_t)``; the depth it reaches after the travel time
+    ``tau`` is found by bisection (:data:`TRACE_ITERATIONS`) on the layers' closed-form times (module docstring),
+    and its horizontal distance is the layers' sum to that depth. A ray that would turn before its time is spent is
+    not traced past its turning depth (the direct eigenray of a USBL, steep, does not turn).
+
+    Parameters
+    ----------
+    zt : casadi.SX
+        The transceiver's depth [m] (positive down).
+    elevation : casadi.SX
+        The eigenray's grazing angle at the transceiver [rad], positive below the horizontal (toward a deeper
+        target: the launch angle of the transceiver-to-target eigenray, the reply's ``−arrival_angle``).
+    tau : casadi.SX
+        One-way travel time [s].
+    nodes, speeds : casadi.SX, shape (NODES, 1)
+        The padded profile (:func:`~sblsim.models.acoustics.sound_speed.node_speeds`).
+
+    Returns
+    -------
+    chord : casadi.SX
+        ``atan2(z − z_t, X)`` [rad]: the elevation of the straight line to where the ray is at ``tau``.
+    horizontal, depth : casadi.SX
+        That point's horizontal distance ``X`` [m] and depth ``z`` [m].
+    """
+    return _chord_elevation()(zt, elevation, tau, nodes, speeds)
+
+
 __all__ = ["BOTTOM", "DIRECT", "NEWTON_ITERATIONS", "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE",
-           "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE", "eigenray_families", "eigenray_table", "exact_points",
-           "first_arrival", "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range"]
+           "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE", "TRACE_ITERATIONS", "chord_elevation",
+           "eigenray_families", "eigenray_table", "exact_points", "first_arrival", "first_arrival_grid",
+           "profile_arrays", "ray_grid", "ray_values", "slant_range"]

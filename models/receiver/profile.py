@@ -37,7 +37,7 @@ from typing import Any, Mapping
 
 import casadi as ca
 
-from sblsim.models.acoustics.rays import slant_range
+from sblsim.models.acoustics.rays import chord_elevation, slant_range
 from sblsim.models.acoustics.sound_speed import PROFILE, node_speeds, profile_table
 from sblsim.models.declarations import ModelError, Variable, format_table
 
@@ -167,25 +167,32 @@ def profile_range(u: dict, p: dict) -> dict:
     """The packet with its range turned into the slant range of the receiver's profile (``sound_speed_model`` =
     profile): ``τ = range / c_a``, the direct eigenray between ``beacon_z`` and the depth reading ``depth``
     (:func:`~sblsim.models.acoustics.rays.slant_range`, from ``range``). A lost packet, or one whose eigenray lies
-    in the profile's shadow, keeps the range it had.
+    in the profile's shadow, keeps the range it had. A USBL packet's ``elevation`` (the direction the reply's
+    eigenray arrives from) becomes the chord's elevation of the point the ray traced from the transceiver reaches
+    after τ (:func:`~sblsim.models.acoustics.rays.chord_elevation`).
 
     Parameters
     ----------
     u : dict
-        The receiver's inputs (``range`` [m], ``beacon_z`` [m], ``depth`` [m], ``packet_valid``).
+        The receiver's inputs (``range`` [m], ``beacon_z`` [m], ``depth`` [m], ``packet_valid``; USBL:
+        ``elevation`` [rad]).
     p : dict
         The parameters (``sound_speed_assumed`` [m/s], ``sound_speed_rows`` and the table's columns).
 
     Returns
     -------
     dict
-        ``u`` with ``range`` [m] replaced.
+        ``u`` with ``range`` [m] (and ``elevation`` [rad]) replaced.
     """
     nodes, speeds = _nodes()(p["sound_speed_rows"], p[PROFILE.columns[0].name], p[PROFILE.columns[1].name])
     tau = u["range"] / p["sound_speed_assumed"]
     rho, found = slant_range(u["beacon_z"], u["depth"], tau, u["range"], nodes, speeds)
     use = ca.logic_and(ca.logic_and(u["packet_valid"], found), u["range"] > 0)
-    return {**u, "range": ca.if_else(use, rho, u["range"])}
+    out = {**u, "range": ca.if_else(use, rho, u["range"])}
+    if "elevation" in u:  # USBL: the eigenray's elevation traced back to the chord's
+        chord = chord_elevation(u["beacon_z"], u["elevation"], tau, nodes, speeds)[0]
+        out["elevation"] = ca.if_else(ca.logic_and(u["packet_valid"], u["range"] > 0), chord, u["elevation"])
+    return out
 
 
 __all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "SOUND_SPEED_MODELS", "declares_profile", "profile_config_values",

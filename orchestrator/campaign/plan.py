@@ -46,7 +46,7 @@ def batch_key(cfg: RunPlan | dict) -> tuple:
     configuration-only key (they make tables or files); numeric FMU parameters may differ per run."""
     key = [("simulation", name, value) for name, value in sorted(cfg["simulation"].items())]
     for section, model in COMPONENTS.items():
-        fmu = {v.name for v in model.fmu_parameters_declared()}
+        fmu = model.fmu_parameter_names()
         key.extend((section, name, value) for name, value in sorted(cfg[section].items())
                    if isinstance(value, str) or name not in fmu)
     return tuple(key)

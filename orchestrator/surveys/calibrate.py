@@ -268,8 +268,8 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
             raise ModelError(f"--format: the built-in survey {source} has its own format; give --format with a log")
         return _builtin(source, overrides)
     if source.lower().endswith(".toml"):
-        raise ModelError(f"calibrate: {source[:80]!r}: simulated surveys (CONFIG.toml) are not available yet; give a "
-                         f"built-in survey ({', '.join(BUILTIN_SURVEYS)}) or a log")
+        raise ModelError(f"calibrate: {source[:80]!r} is a simulated survey (CONFIG.toml): "
+                         "sblsim.orchestrator.surveys.simulate.load_simulated reads it")
     fmt = fmt or "sblsim"
     solver = apply_overrides(_defaults(), overrides)
     path = Path(source)
@@ -447,8 +447,11 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def write_calibration(result: Calibration, out: Path | str) -> Path:
-    """Write :data:`OUTPUT_FILES` into ``out`` atomically (nothing changes there if a write fails)."""
+def write_calibration(result: Calibration, out: Path | str, extra: dict | None = None) -> Path:
+    """Write :data:`OUTPUT_FILES` into ``out`` atomically (nothing changes there if a write fails).
+
+    ``extra`` maps further files' names to functions writing them (given the file's path), written in the same
+    step (a simulated survey's log and replicates)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -489,6 +492,8 @@ def write_calibration(result: Calibration, out: Path | str) -> Path:
             ax.legend(fontsize=7, ncol=3)
             fig.savefig(tmp / name, dpi=110, bbox_inches="tight")
             plt.close(fig)
+        for name, write in (extra or {}).items():
+            write(tmp / name)
     return out
 
 

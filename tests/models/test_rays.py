@@ -110,6 +110,13 @@ def _ivp_ray(table, zs, x, theta0, depth):
         hits.append(which)
 
 
+def _shoot(table, zs, zr, x, theta, depth):
+    """The eigenray of the integrated ray equations whose launch angle [rad] lies within 1e-5 of ``theta``
+    (Brent on the depth reached at ``x``): :func:`_ivp_ray`'s (z at x, τ at x, boundaries hit)."""
+    root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, theta - 1e-5, theta + 1e-5, xtol=1e-11)
+    return _ivp_ray(table, zs, x, root, depth)
+
+
 IVP_CASES = [("munk", 1300.0, 1300.0, 5000.0),
              ("strong", 20.0, 60.0, 1500.0), ("strong", 100.0, 1200.0, 3000.0), ("strong", 3000.0, 300.0, 4500.0),
              ("strong", 700.0, 700.0, 2500.0)]
@@ -122,7 +129,9 @@ def _table(name):
 @pytest.mark.parametrize("name, zs, zr, x", IVP_CASES)
 def test_against_solve_ivp(name, zs, zr, x):
     """Within 1 µs of the ray equations integrated numerically (DOP853, tolerance 1e-12), shooting the launch
-    angle (Brent) inside a small window around ours: the same eigenray, found by the integration itself."""
+    angle (Brent) inside a small window around ours: the same eigenray, found by the integration itself, its
+    launch angle within 1e-6 rad (the shooting itself is no finer where the depth reached barely changes with the
+    angle: along the Munk axis 8e-8 rad apart)."""
     table = _table(name)
     depth = float(table[-1, 0])
     tau, launch, arrival, valid = families(table, zs, zr, x, depth)
@@ -135,6 +144,7 @@ def test_against_solve_ivp(name, zs, zr, x):
         z_end, t_end, hits = _ivp_ray(table, zs, x, root, depth)
         assert hits == [[], [0], [1]][k]
         assert tau[k] == pytest.approx(t_end, abs=1e-6)
+        assert launch[k] == pytest.approx(root, abs=1e-6)  # the launch angle (a USBL measures it): 0.1 mm at 100 m
         checked += 1
     assert checked >= 2
 
@@ -148,7 +158,7 @@ FAN, STEP, BEAMS = 86.0, 5.0, 4001
 STEEPEST = 80.0
 
 
-def _bellhop(table, source, depths, ranges, depth):
+def _bellhop(table, source, depths, ranges, depth, fan=(-FAN, FAN), beams=BEAMS):
     pg = pytest.importorskip("pelagic")  # the test extra installs it: this skips only outside it
     tab = table[table[:, 0] < depth]
     tab = np.vstack([tab, [depth, np.interp(depth, table[:, 0], table[:, 1])]])
@@ -158,7 +168,7 @@ def _bellhop(table, source, depths, ranges, depth):
     lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
     lines += ["'A' 0.0", f"{depth:.4f} 1600.00 0.0 1.8 0.8 /", "1", f"{source:.6f} /",
               f"{len(depths)}", " ".join(f"{z:.6f}" for z in depths) + " /", f"{len(ranges)}",
-              " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'A'", f"{BEAMS}", f"{-FAN} {FAN} /",
+              " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'A'", f"{beams}", f"{fan[0]} {fan[1]} /",
               f"{STEP} {depth + 100:.1f} {max(ranges) / 1000 + 1:.3f}"]
     with tempfile.TemporaryDirectory() as folder:
         path = os.path.join(folder, "case.env")
@@ -177,27 +187,57 @@ BELLHOP_SITES = {
 }
 
 
-@pytest.mark.parametrize("name", ["munk", *(pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=reason))
-                                            for name, reason in (
-    ("NCL1", "open: a direct eigenray of Bellhop's 3° from ours at one geometry, not yet explained"),
-    ("strong", "open: a direct time 35 µs from Bellhop's at one geometry of the surface duct, not yet explained")))])
-def test_against_bellhop(name):
-    """Direct eigenray times within 10 µs of Bellhop's, surface- and bottom-reflected within 20 µs, over 168
-    geometries per profile (504 in all, out to 5 km and 4 km deep), the same shadowed geometries.
+#: Bellhop's fan samples launch angles 2 FAN / (BEAMS − 1) = 0.043° apart. Within this angle [deg] (about two beams)
+#: of a separatrix — a ray horizontal at a local maximum of the speed, where the range reached is infinitely
+#: sensitive to the launch angle — the fan cannot place an eigenray: its beams land metres to hundreds of metres
+#: from the receiver and their interpolated times miss by tens of µs, or they miss or invent the arrival.
+SEPARATRIX = 0.1
+#: Half-width [deg] of the narrow fan run there around our launch angle.
+NARROW = 0.05
+#: The integrated eigenray and the narrow fan's arrivals per geometry (a perturbed solve reuses them).
+_SHOOTING: dict[tuple, tuple] = {}
 
-    Bellhop's arrival of the same eigenray is the one with the same bounces whose launch angle is nearest to
-    ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
-    1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
-    of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected."""
+
+def _separatrices(table, zs):
+    """Launch angles [deg] (unsigned) at depth ``zs`` of the rays horizontal at a local maximum of the table's speed
+    (a row not slower than its neighbours; the ends count, the speed being constant beyond them)."""
+    c = table[:, 1]
+    peaks = c[np.r_[True, c[1:] >= c[:-1]] & np.r_[c[:-1] >= c[1:], True]]
+    here = np.interp(zs, table[:, 0], c)
+    return np.degrees(np.arccos(here / peaks[peaks > here]))
+
+
+def _turns(k, source_angle, receiver_angle):
+    """Bellhop's reflected arrivals whose ray also turns: leaving away from the boundary (surface: downward,
+    bottom: upward) or arriving toward it. Not a path of the families (a single reflection, no turning)."""
+    sign = -1.0 if k == 1 else 1.0
+    return (sign * source_angle < 0) | (sign * receiver_angle > 0)
+
+
+_ARRIVALS: dict[str, dict] = {}
+
+
+def _bellhop_arrivals(name):
+    """Bellhop's arrivals at the site ``name``, per source depth (run once per test session)."""
+    if name not in _ARRIVALS:
+        table = _table(name)
+        sources, depths, ranges, depth = BELLHOP_SITES[name]
+        _ARRIVALS[name] = {zs: _bellhop(table, zs, depths, ranges, depth) for zs in sources}
+    return _ARRIVALS[name]
+
+
+def _compare_with_bellhop(name, solve):
+    """The comparison of :func:`test_against_bellhop` of the eigenrays ``solve`` gives (the signature of
+    :func:`rays.eigenray_families`); raises AssertionError naming the check that fails."""
     table = _table(name)
     sources, depths, ranges, depth = BELLHOP_SITES[name]
     nodes, speeds = rays.profile_arrays(table)
-    solve = rays.eigenray_families()
     compared, worst = [0, 0, 0], [0.0, 0.0, 0.0]
-    mismatched, other_ray = [], []
+    mismatched, other_ray, separatrix = [], [], []
     speed = rays._speed()
     for zs in sources:
-        arrivals = _bellhop(table, zs, depths, ranges, depth)
+        arrivals = _bellhop_arrivals(name)[zs]
+        seps = _separatrices(table, zs)
         for zr in depths:
             for x in ranges:
                 tau, launch, _arrival, valid = (np.asarray(v).ravel() for v in solve(zs, zr, x, depth, nodes, speeds))
@@ -205,6 +245,9 @@ def test_against_bellhop(name):
                 here = arrivals[(arrivals.depth_m == np.float32(zr)) & (np.isclose(arrivals.range_m, x))]
                 for k, (top, bottom) in enumerate(((0, 0), (1, 0), (0, 1))):
                     theirs = here[(here.top_bounces == top) & (here.bottom_bounces == bottom)]
+                    if k > 0:
+                        theirs = theirs[~_turns(k, theirs.source_angle_degrees.values,
+                                                theirs.receiver_angle_degrees.values)]
                     if edge[0][k] != edge[1][k]:
                         continue  # at a shadow boundary
                     if k > 0 and len(theirs):  # Bellhop's beam grazing the boundary: reflected or not, by sampling
@@ -215,6 +258,13 @@ def test_against_bellhop(name):
                         graze = np.degrees(np.arccos(min(1.0, float(speed(zs, nodes, speeds)) / fastest)))
                         if np.any(np.abs(np.abs(theirs.source_angle_degrees.values) - graze) < 0.1):
                             continue
+                    angles = list(np.abs(theirs.source_angle_degrees.values))
+                    if valid[k]:
+                        angles.append(abs(np.degrees(launch[k])))
+                    if len(seps) and np.min(np.abs(np.subtract.outer(angles, seps)), initial=np.inf) < SEPARATRIX:
+                        if valid[k] and abs(np.degrees(launch[k])) <= STEEPEST:
+                            separatrix.append((k, zs, zr, x, float(launch[k]), float(tau[k])))
+                        continue
                     if bool(valid[k]) != (len(theirs) > 0):
                         mismatched.append((k + 1, zs, zr, x, bool(valid[k])))
                         continue
@@ -227,11 +277,78 @@ def test_against_bellhop(name):
                     error = abs(tau[k] - theirs.travel_time_s.values[nearest])
                     worst[k] = max(worst[k], error)
                     compared[k] += 1
-    print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s")
-    assert not mismatched, mismatched
-    assert not other_ray, other_ray
-    assert compared[0] >= 60 and compared[1] + compared[2] >= 60
-    assert worst[0] <= 10e-6 and worst[1] <= 20e-6 and worst[2] <= 20e-6
+    # near a separatrix: the eigenray against the ray equations integrated (the shooting of test_against_solve_ivp),
+    # and against Bellhop with a fan of 1001 beams over ±0.05° around ours (beams 1e-4° apart)
+    ivp_worst, narrow_worst, narrow_missed = 0.0, [0.0, 0.0, 0.0], []
+    for k, zs, zr, x, theta, t in separatrix:
+        key = (name, k, zs, zr, x, theta)
+        if key not in _SHOOTING:
+            narrow = _bellhop(table, zs, [zr], [x], depth, (np.degrees(theta) - NARROW, np.degrees(theta) + NARROW),
+                              1001)
+            _SHOOTING[key] = (_shoot(table, zs, zr, x, theta, depth), narrow)
+        (_z, t_end, hits), narrow = _SHOOTING[key]
+        assert hits == [[], [0], [1]][k], ("separatrix: other path", k + 1, zs, zr, x, hits)
+        ivp_worst = max(ivp_worst, abs(t - t_end))
+        top, bottom = ((0, 0), (1, 0), (0, 1))[k]
+        theirs = narrow[(narrow.top_bounces == top) & (narrow.bottom_bounces == bottom)]
+        gap = np.abs(theirs.source_angle_degrees.values - np.degrees(theta))
+        if not len(theirs) or gap.min() > 0.01:
+            narrow_missed.append((k + 1, zs, zr, x))
+            continue
+        narrow_worst[k] = max(narrow_worst[k], abs(t - theirs.travel_time_s.values[np.argmin(gap)]))
+    print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s; near a separatrix "
+          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s, and Bellhop's narrow fan, worst {narrow_worst} s")
+    assert not mismatched, ("shadowed sets", mismatched)
+    assert not other_ray, ("other eigenray", other_ray)
+    assert compared[0] >= 60 and compared[1] + compared[2] >= 60, ("compared", compared)
+    assert worst[0] <= 10e-6 and worst[1] <= 20e-6 and worst[2] <= 20e-6, ("Bellhop's times", worst)
+    assert ivp_worst <= 1e-6, ("solve_ivp's times near a separatrix", ivp_worst)
+    assert not narrow_missed, ("the narrow fan's eigenrays near a separatrix", narrow_missed)
+    assert narrow_worst[0] <= 10e-6 and max(narrow_worst[1:]) <= 20e-6, ("the narrow fan's times", narrow_worst)
+    return compared, len(separatrix)
+
+
+@pytest.mark.parametrize("name", ["munk", "NCL1", "strong"])
+def test_against_bellhop(name):
+    """Direct eigenray times within 10 µs of Bellhop's, surface- and bottom-reflected within 20 µs, over 168
+    geometries per profile (504 in all, out to 5 km and 4 km deep), the same shadowed geometries.
+
+    Bellhop's arrival of the same eigenray is the one with the same bounces whose launch angle is nearest to
+    ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
+    1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
+    of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected.
+    Bellhop's reflected arrivals whose ray also turns (in a surface duct: down, up to the surface and back down)
+    are no path of the families (:func:`_turns`; not modelled, docs/model.md).
+
+    Near a separatrix (ours or Bellhop's arrival leaving within :data:`SEPARATRIX` of a ray horizontal at a local
+    maximum of the speed: the top of a duct, the cast's first sample, which the receiver 2 m deep lies 1.6 cm
+    under) Bellhop's fan cannot resolve the eigenray: its nearest beams land up to hundreds of metres from the
+    receiver (the integration shows it), so that it misses the arrival, reports one the rays do not make or
+    times it tens of µs off. There our eigenray is checked against the ray equations integrated (solve_ivp,
+    within 1 µs, the same boundaries hit) and against Bellhop with a fan 1e-4° fine around it (an arrival with the
+    same bounces within 0.01° of ours, within 10 µs, 20 µs reflected) instead; the NCL1 cast and the strong table
+    have such geometries."""
+    compared, near = _compare_with_bellhop(name, rays.eigenray_families())
+    if name != "munk":
+        assert near > 0
+
+
+@pytest.mark.parametrize("name, family, offset, check", [("strong", 0, 2e-6, "separatrix"),
+                                                         ("munk", 0, 12e-6, "Bellhop's times"),
+                                                         ("munk", 1, 25e-6, "Bellhop's times")])
+def test_against_bellhop_can_fail(name, family, offset, check):
+    """The comparison fails for eigenray times off by a little more than its tolerances: 2 µs near a separatrix
+    (solve_ivp), 12 µs direct and 25 µs reflected elsewhere (Bellhop)."""
+    solve = rays.eigenray_families()
+    shift = np.zeros(3)
+    shift[family] = offset
+
+    def perturbed(*args):
+        tau, launch, arrival, valid = solve(*args)
+        return np.asarray(tau).ravel() + shift, launch, arrival, valid
+
+    with pytest.raises(AssertionError, match=check):
+        _compare_with_bellhop(name, perturbed)
 
 
 def test_munk_table_samples_the_canonical_profile():

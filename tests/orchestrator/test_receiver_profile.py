@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.models.acoustics.rays import first_arrival, profile_arrays, slant_range
+from sblsim.models.acoustics.rays import chord_elevation, eigenray_families, first_arrival, profile_arrays, slant_range
 from sblsim.models.acoustics.sound_speed import PROFILE, profile_table
 from sblsim.orchestrator.budget import OFF, ON, SOURCES, budget
 from sblsim.orchestrator.cli import main
@@ -70,6 +70,59 @@ def test_the_true_profile_removes_the_sound_speed_error_of_a_deep_cast():
         straight = max(straight, abs(1500.0 * float(tau) - r))
     assert worst < 0.01
     assert straight > 5.0
+
+
+def test_the_elevation_conversion_inverts_a_linear_gradients_arc():
+    """c = c0 + g z: the ray between two points is the circle centred where c would vanish; its grazing angle at
+    the transceiver and its closed-form time (arccosh, as above) traced back give the chord's elevation."""
+    c0, g = 1480.0, 0.05
+    nodes, speeds = profile_arrays([[0.0, c0], [5000.0, c0 + g * 5000.0]])
+    zc = -c0 / g
+    rng = np.random.default_rng(11)
+    for _ in range(30):
+        zt, zr, x = rng.uniform(0, 50), rng.uniform(0, 1500), rng.uniform(1, 1500)
+        a, b = zt - zc, zr - zc
+        xc = (x * x + b * b - a * a) / (2 * x)
+        grazing = np.sign(xc) * abs(np.pi / 2 - np.arctan2(a, -xc))  # positive down while it descends
+        tau = np.arccosh(1.0 + g * g * (x * x + (zr - zt) ** 2) / (2.0 * (c0 + g * zt) * (c0 + g * zr))) / g
+        chord, horizontal, depth = (float(v) for v in chord_elevation(zt, grazing, tau, nodes, speeds))
+        assert chord == pytest.approx(np.arctan2(zr - zt, x), abs=1e-9), (zt, zr, x)
+        assert horizontal == pytest.approx(x, abs=1e-6) and depth == pytest.approx(zr, abs=1e-6)
+        assert abs(grazing - chord) > 1e-6 or x < 5  # the ray bends: the measured angle is not the chord's
+
+
+def test_the_elevation_conversion_round_trip_through_a_deep_cast():
+    """The direct eigenray from a transceiver near the surface to a diver 50-1200 m deep through the NCL1 cast: its
+    launch angle and time give back the chord's elevation within 1e-9 rad, where the measured angle is up to a
+    degree off it."""
+    nodes, speeds = profile_arrays(profile_table("ctd:NCL1", "", 15.0, 35.0))
+    solve = eigenray_families()
+    rng = np.random.default_rng(5)
+    worst, bent = 0.0, 0.0
+    for _ in range(30):
+        zt, zr, x = rng.uniform(0, 10), rng.uniform(50, 1200), rng.uniform(1, 1000)
+        tau, launch, _arrival, valid = (np.asarray(v).ravel() for v in solve(zt, zr, x, 0.0, nodes, speeds))
+        assert valid[0]
+        chord = float(chord_elevation(zt, launch[0], tau[0], nodes, speeds)[0])
+        worst = max(worst, abs(chord - np.arctan2(zr - zt, x)))
+        bent = max(bent, abs(launch[0] - np.arctan2(zr - zt, x)))
+    assert worst < 1e-9 and bent > np.radians(0.5)
+
+
+def test_the_usbl_elevation_is_the_eigenrays_in_ray_mode():
+    """Without angle and attitude noise the USBL's measured elevation is the grazing angle of the reply's eigenray
+    at the transceiver (−arrival_angle), not the chord's: through Munk 300 m deep and 200 m off they differ."""
+    quiet = ["platform.system=usbl", "platform.usbl_angle_sigma_deg=0", "platform.imu_sigma_deg=0",
+             "target.depth=300", "target.radius=200", "simulation.sampling_time=0.5", "simulation.duration=20"]
+    for propagation in ("ray", "straight"):
+        cfg = load_config("random-walk", quiet + [f"acoustics.propagation={propagation}",
+                                                  "acoustics.sound_speed_profile=munk"], seed=3)
+        ts = run(cfg, "local", replicates=[0]).timeseries
+        got = ts[ts["packet_valid"] > 0]
+        assert len(got) > 20
+        np.testing.assert_allclose(got["elevation"], -got["arrival_angle"], rtol=0, atol=1e-9)
+        bend = (got["launch_angle"] - got["arrival_angle"]).abs()
+        assert (bend.min() > 1e-3) if propagation == "ray" else (bend.max() == 0.0)
 
 
 def test_acoustics_gives_the_receiver_the_channels_table():
