@@ -120,6 +120,38 @@ def read_parquet(path: Path, what: str) -> Table:
                   meta.get(META_TITLE, b"").decode("utf-8", "replace"))
 
 
+def read_lines(path: Path, what: str, encoding: str = "utf-8-sig") -> list[str]:
+    """The lines of a regular text file (split as :func:`text_lines`), refused before it is read whole when it
+    is larger than :data:`MAX_LOG_BYTES` or holds more than :data:`MAX_LOG_ROWS` rows and 10,000 lines besides
+    (a header and comments).
+
+    Raises
+    ------
+    ModelError
+        ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large, or one
+        that is not text in ``encoding`` ("utf-8-sig" or "ascii").
+    """
+    name = str(path)
+    size = regular_file(path, what)
+    if size > MAX_LOG_BYTES:
+        raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_LOG_BYTES + 1)
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > MAX_LOG_BYTES:
+        raise too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
+    lines = data.count(b"\n")
+    if lines > MAX_LOG_ROWS + 10_000:  # a header and comment lines besides the rows
+        raise too_large(name, what, f"has {lines:,} lines")
+    try:
+        return text_lines(data.decode(encoding))
+    except UnicodeDecodeError as exc:
+        kind = "ASCII" if encoding == "ascii" else "UTF-8"
+        raise ModelError(f"{what}: {name!r} is not {kind} text (byte {exc.start})") from None
+
+
 def read_table(path: Path, what: str) -> Table:
     """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
 
@@ -136,30 +168,17 @@ def read_table(path: Path, what: str) -> Table:
     name = str(path)
     if path.suffix.lower() not in SUFFIXES:
         raise ModelError(f"{what}: {name!r} must be a .csv or .parquet file")
-    size = regular_file(path, what)
-    if size > MAX_LOG_BYTES:
-        raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
     if path.suffix.lower() == ".parquet":
+        size = regular_file(path, what)
+        if size > MAX_LOG_BYTES:
+            raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
         return read_parquet(path, what)
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(MAX_LOG_BYTES + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > MAX_LOG_BYTES:
-        raise too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
-    lines = data.count(b"\n")
-    if lines > MAX_LOG_ROWS + 10_000:  # a header and comment lines besides the rows
-        raise too_large(name, what, f"has {lines:,} lines")
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
+    lines = read_lines(path, what)
     header: list[str] | None = None
     rows: list[tuple[str, list[str]]] = []
     config: list[str] = []
     title = ""
-    for number, line in enumerate(text_lines(text), start=1):
+    for number, line in enumerate(lines, start=1):
         stripped = line.strip()
         if not stripped:
             continue
@@ -218,4 +237,5 @@ def number(text: str, where: str, column: str, low: float, high: float) -> float
 
 
 __all__ = ["CONFIG_PREFIX", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES", "Table",
-           "cell", "columns", "number", "read_parquet", "read_table", "regular_file", "text_lines", "too_large"]
+           "cell", "columns", "number", "read_lines", "read_parquet", "read_table", "regular_file", "text_lines",
+           "too_large"]

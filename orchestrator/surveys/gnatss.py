@@ -38,9 +38,9 @@ reading against the a-priori positions (or shifted ones) at each transponder's h
 CTD. The survey is solved by the calibration solver (:mod:`sblsim.models.calibration`; the built-in survey
 ``ncl1-2022-208`` of ``sblsim calibrate``).
 
-Every file is read as hostile (the helpers of :mod:`sblsim.orchestrator.replay`): a regular file only, at
-most :data:`MAX_FILE_BYTES`, every number checked with its file, line and column named
-(:class:`~sblsim.models.errors.ModelError`, one line). No file names another file the reader opens.
+Every file is read as hostile (the helpers every log reader shares, :mod:`sblsim.orchestrator.tables`): a
+regular file of ASCII text only, within the logs' documented size, every number checked with its file, line
+and column named (:class:`~sblsim.models.errors.ModelError`, one line). No file names another file the reader opens.
 
 References
 ----------
@@ -74,13 +74,11 @@ from sblsim.models.errors import ModelError
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import write_atomic
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS
-from sblsim.orchestrator.tables import MAX_LOG_ROWS, regular_file, text_lines
 from sblsim.orchestrator.tables import number as table_number
+from sblsim.orchestrator.tables import read_lines
 
 #: POSIX time of J2000 (2000-01-01T12:00:00 UTC) [s]: GNATSS's J2000 seconds are POSIX seconds less this.
 J2000_POSIX = 946728000
-#: The largest input file read [bytes] (NCL1's day 208: pxp_tt 92 kB, POS_FREED_TRANS_TWTT 1.4 MB).
-MAX_FILE_BYTES = 64 * 2**20
 #: Range of a two-way travel time in pxp_tt [us] (0: no reply).
 MAX_TWTT_US = 60e6
 #: Range of an ECEF coordinate [m] and of a covariance entry [m^2].
@@ -217,29 +215,6 @@ def enu_rotation(lat_deg: float, lon_deg: float) -> np.ndarray:
 
 # --------------------------------------------------------------------------- reading files
 
-def _read_text(path: Path, what: str) -> list[str]:
-    """The lines of a regular text file of at most :data:`MAX_FILE_BYTES` (checked before it is read whole)."""
-    size = regular_file(path, what)
-    if size > MAX_FILE_BYTES:
-        raise ModelError(f"{what}: {str(path)!r} is {size / 2**20:.0f} MiB, more than the {MAX_FILE_BYTES // 2**20} "
-                         "MiB read")
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {str(path)!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > MAX_FILE_BYTES:
-        raise ModelError(f"{what}: {str(path)!r} is more than the {MAX_FILE_BYTES // 2**20} MiB read")
-    try:
-        text = data.decode("ascii")
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"{what}: {str(path)!r} is not ASCII text (byte {exc.start})") from None
-    lines = text_lines(text)
-    if len(lines) > MAX_LOG_ROWS:
-        raise ModelError(f"{what}: {str(path)!r} has {len(lines):,} lines, more than {MAX_LOG_ROWS:,}")
-    return lines
-
-
 def _utc(date: str, clock: str, where: str) -> float:
     """POSIX seconds of a ``pxp_tt`` date and time (``27-JUL-22``, ``17:37:45.00``; years 2000-2099)."""
     d, t = _DATE.fullmatch(date), _TIME.fullmatch(clock)
@@ -282,7 +257,7 @@ def read_pxp_tt(path: Path | str, columns: int) -> pd.DataFrame:
     path = Path(path)
     what = "pxp_tt"
     rows = []
-    for number, line in enumerate(_read_text(path, what), start=1):
+    for number, line in enumerate(read_lines(path, what, "ascii"), start=1):
         fields = line.split()
         if not fields:
             continue
@@ -320,7 +295,7 @@ def read_posfilter(path: Path | str) -> pd.DataFrame:
                                                                   for b in "xyz"]]
     ranges = [J2000_RANGE] + [(-MAX_ECEF_M, MAX_ECEF_M)] * 3 + [(-MAX_COV_M2, MAX_COV_M2)] * 9
     rows = []
-    for number, line in enumerate(_read_text(path, what), start=1):
+    for number, line in enumerate(read_lines(path, what, "ascii"), start=1):
         fields = line.split()
         if not fields:
             continue
@@ -373,7 +348,7 @@ def read_site(path: Path | str, profile: str = "ctd:NCL1") -> Site:
     """
     path = Path(path)
     what = "site"
-    lines = _read_text(path, what)
+    lines = read_lines(path, what, "ascii")
     try:
         data = tomlfile.loads("\n".join(lines))
     except tomllib.TOMLDecodeError as exc:

@@ -20,7 +20,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
-from sblsim.orchestrator.tables import MAX_LOG_BYTES, MAX_LOG_ROWS, number, regular_file, text_lines, too_large
+from sblsim.orchestrator.tables import number, read_lines
 
 #: The files' clock: seconds after this instant (UTC) [s since 1970-01-01].
 EPOCH = datetime(2020, 1, 1, tzinfo=timezone.utc).timestamp()
@@ -35,27 +35,6 @@ _ORIGIN = re.compile(r"Lat0\s*=\s*([-+0-9.eE]+)\s*deg\.?,\s*Lon0\s*=\s*([-+0-9.e
                      r"([-+0-9.eE]+)\s*m")
 
 
-def _lines(path: Path, what: str) -> list[str]:
-    name = str(path)
-    size = regular_file(path, what)
-    if size > MAX_LOG_BYTES:
-        raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(MAX_LOG_BYTES + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > MAX_LOG_BYTES:
-        raise too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
-    lines = data.count(b"\n")
-    if lines > MAX_LOG_ROWS + 10_000:
-        raise too_large(name, what, f"has {lines:,} lines")
-    try:
-        return text_lines(data.decode("utf-8-sig"))
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
-
-
 def origin(path: Path | str) -> tuple[float, float, float] | None:
     """The local frame's origin from the file's header (latitude [deg], longitude [deg], height [m]), or None.
 
@@ -64,7 +43,7 @@ def origin(path: Path | str) -> tuple[float, float, float] | None:
     ModelError
         As :func:`read_xie` for a file that cannot be read.
     """
-    for line in _lines(Path(path), "log"):
+    for line in read_lines(Path(path), "log"):
         if not line.lstrip().startswith("#"):
             break
         found = _ORIGIN.search(line)
@@ -100,7 +79,7 @@ def read_xie(path: Path | str) -> SurveyLog:
     what = "log"
     rows: list[list[float]] = []
     where: list[str] = []
-    for k, line in enumerate(_lines(path, what), start=1):
+    for k, line in enumerate(read_lines(path, what), start=1):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue

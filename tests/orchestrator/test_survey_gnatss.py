@@ -15,6 +15,7 @@ import pytest
 
 from sblsim.models.calibration import StraightRay, solve
 from sblsim.models.errors import ModelError
+from sblsim.orchestrator import tables
 from sblsim.orchestrator.surveys import gnatss
 from sblsim.orchestrator.surveys.gnatss import (
     community_editing,
@@ -335,7 +336,7 @@ def test_truncated_files_are_refused(tmp_path, capsys):
 def test_oversize_and_odd_files_are_refused(tmp_path, capsys, monkeypatch):
     pxp, pos, site = _copy(tmp_path)
     out = tmp_path / "log.csv"
-    monkeypatch.setattr(gnatss, "MAX_FILE_BYTES", 100_000)  # pxp_tt (92 kB) passes, the 1.4 MB file does not
+    monkeypatch.setattr(tables, "MAX_LOG_BYTES", 100_000)  # pxp_tt (92 kB) passes, the 1.4 MB file does not
     status, err = _main(capsys, pxp, pos, site, out)
     assert status == 2 and "POS_FREED_TRANS_TWTT" in err and "MiB" in err and not out.exists()
     monkeypatch.undo()
