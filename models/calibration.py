@@ -577,10 +577,10 @@ def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sou
                          "singular)") from None
 
 
-#: The running solution's prior 1-sigma of the a-priori positions accepted [m] and its default (large: the prior
-#: barely pulls, yet keeps the first updates well posed).
+#: The running solution's prior 1-sigma of the a-priori positions accepted [m] and its default (wide against
+#: the metre an a-priori position is usually off, not so wide that the first, far from linear, replies mislead).
 PRIOR_SIGMA_RANGE = (1e-3, 1e4)
-PRIOR_SIGMA_M = 100.0
+PRIOR_SIGMA_M = 10.0
 #: The running solution's prior 1-sigma of the sound-speed scale [1] (0.1: 150 m/s at 1500 m/s).
 PRIOR_SCALE_SIGMA = 0.1
 #: The passes of the running solution accepted (1: the extended Kalman filter; more: re-linearised).
