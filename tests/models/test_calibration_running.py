@@ -125,8 +125,8 @@ def test_the_updates_are_filterpys_extended_kalman_filter(solve_speed):
     for i in range(len(replies)):
         one = replies.subset(np.array([i]))
         var = _independent(ekf.x, one, k, solve_speed)[2][0]
-        ekf.update(np.array([0.0]), lambda th: _independent(th, one, k, solve_speed)[1],
-                   lambda th: _independent(th, one, k, solve_speed)[0], R=np.array([[var]]))
+        ekf.update(np.array([0.0]), lambda th, one=one: _independent(th, one, k, solve_speed)[1],
+                   lambda th, one=one: _independent(th, one, k, solve_speed)[0], R=np.array([[var]]))
         np.testing.assert_allclose(run.state[i], ekf.x, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(run.sigma[i], np.sqrt(np.diag(ekf.P)), rtol=1e-9, atol=1e-12)
         assert run.innovation[i] == pytest.approx(float(ekf.y[0]), abs=1e-9)
