@@ -659,9 +659,9 @@ def running(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, s
     weighted least-squares solution with the prior as one more observation. With ``passes`` > 1 the filter is run
     again from the same prior, each reply linearised at the previous pass's last state :math:`\\bar\\theta` (the
     innovation :math:`\\nu_i(\\bar\\theta) - H_i(\\hat\\theta_{i-1} - \\bar\\theta)`, the variance at
-    :math:`\\bar\\theta`): each pass is one Gauss-Newton step of the batch problem with the prior, so the last state converges to :func:`solve`'s
-    (to the prior's pull, :math:`\\sim\\sigma^2_{\\mathrm{WLS}}/\\sigma_p^2` of the offset); its running states are then
-    no longer causal. No outlier rule: give it the replies :func:`solve` kept.
+    :math:`\\bar\\theta`): each pass is one Gauss-Newton step of the batch problem with the prior, so the last
+    state converges to :func:`solve`'s (to the prior's pull, :math:`\\sim\\sigma^2_{\\mathrm{WLS}}/\\sigma_p^2` of
+    the offset); its running states are then no longer causal. No outlier rule: give it the replies :func:`solve` kept.
 
     Parameters
     ----------
