@@ -739,7 +739,8 @@ def running(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, s
             theta = at
             a = eye - np.outer(gain, h)
             cov = a @ cov @ a.T + variance[0] * np.outer(gain, gain)
-            states[i], sigmas[i] = theta, np.sqrt(np.diag(cov))
+            # noise-free replies (sigma 0) leave round-off below zero on the diagonal: a sigma of 0
+            states[i], sigmas[i] = theta, np.sqrt(np.clip(np.diag(cov), 0.0, None))
         reference = theta
     if rigid:
         offset = np.repeat(states[:, None, :3], k, axis=1)
