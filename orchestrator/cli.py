@@ -487,6 +487,9 @@ def _calibrate(args: argparse.Namespace) -> int:
               f"(sigma {t['sigma_n_m']:.4f} {t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m{own})")
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
+    if "running" in s:
+        print(f"  running solution (Kalman form, running.csv): {s['running']['replies']} replies, mean NIS "
+              f"{s['running']['nis_mean']:.2f}")
     print(f"  written to {out}/ (solution.json, residuals.csv, figures)")
     return 0
 

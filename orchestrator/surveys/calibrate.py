@@ -29,12 +29,16 @@ from sblsim.fmus.native import compiled_exact_points
 from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import (
     OUTLIER_FACTOR_RANGE,
+    PASSES_RANGE,
+    PRIOR_SIGMA_M,
+    PRIOR_SIGMA_RANGE,
     SOUND_SPEED_RANGE,
     EigenRay,
     LegModel,
     Solution,
     StraightRay,
     combine,
+    running,
     solve,
 )
 from sblsim.models.declarations import ModelError
@@ -79,12 +83,27 @@ SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
                                     "depth where each transponder's harmonic mean of the profile starts"),
     "surface_u_m": (float, (-1e4, 1e4), "m", 0.0, "Up of the sea surface in the survey's frame (depth 0 of the "
                     "profile)"),
+    "running": (bool, None, "", True, "also compute the running solution (a static Kalman filter, running.csv and "
+                "running.png)"),
+    "running_prior_sigma_m": (float, PRIOR_SIGMA_RANGE, "m", PRIOR_SIGMA_M,
+                              "the running solution's prior 1-sigma of the a-priori positions per axis"),
+    "running_iterated": (bool, None, "", True, "the running solution's updates iterated (the iterated extended "
+                         "Kalman filter); false: the extended Kalman filter"),
+    "running_passes": (int, PASSES_RANGE, "", 1, "the running solution's passes: 1 the extended Kalman filter, more "
+                       "re-linearised at the previous pass's last state"),
 }
 #: The site's keys of a transponder: name -> (allowed range, unit).
 TRANSPONDER_KEYS = {"e_m": ((-1e5, 1e5), "m"), "n_m": ((-1e5, 1e5), "m"), "u_m": ((-1e5, 1e5), "m"),
                     "turnaround_s": ((0.0, 60.0), "s")}
 #: The files ``sblsim calibrate`` writes.
 OUTPUT_FILES = ("solution.json", "residuals.csv", "track.png", "residuals_time.png", "residuals_elevation.png")
+#: The files of the running solution, written unless ``solver.running = false``.
+RUNNING_FILES = ("running.csv", "running.png")
+#: Columns of ``running.csv``: one row per reply the running solution takes and per transponder (the
+#: estimate after that reply: offsets from the a-priori position [m], local frame of the a-priori point, and
+#: their 1-sigma; the reply's innovation [m], its 1-sigma [m] and its NIS [1]).
+RUNNING_COLUMNS = ("segment", "reply", "ping", "transponder", "t_tx_s", "id", "e_m", "n_m", "u_m", "sigma_e_m",
+                   "sigma_n_m", "sigma_u_m", "sound_speed_mps", "innovation_m", "innovation_sigma_m", "nis")
 
 
 @dataclass
@@ -117,6 +136,11 @@ def _value(key: str, value: Any) -> Any:
             raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not one of {', '.join(allowed)}")
         if not isinstance(value, str) or len(value) > 200:
             raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not a text of at most 200 characters")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int) or not allowed[0] <= value <= allowed[1]:
+            raise ModelError(f"solver.{key}: {value!r} is outside the allowed range [{allowed[0]}, {allowed[1]}] "
+                             "(an integer)")
         return value
     if kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
@@ -293,6 +317,8 @@ class Calibration:
     segments: list[tuple[str, str, np.ndarray, Solution]]
     solution: dict
     residuals: pd.DataFrame
+    #: The running solution, :data:`RUNNING_COLUMNS` (None with ``solver.running = false``).
+    running: pd.DataFrame | None = None
 
 
 def _windows(survey: Survey) -> list[tuple[str, str, np.ndarray]]:
@@ -375,7 +401,7 @@ def calibrate(survey: Survey) -> Calibration:
     s = survey.solver
     f = survey.log.frame
     legs, harmonic = leg_model(survey)
-    segments, tables = [], []
+    segments, tables, runs, nis = [], [], [], []
     for k, (a, b, rows) in enumerate(_windows(survey)):
         what = f"segment {k + 1} [{a}, {b})" if a else "the log"
         replies = survey.log.replies(survey.ids, rows)
@@ -383,6 +409,9 @@ def calibrate(survey: Survey) -> Calibration:
                     solve_sound_speed=s["solve_sound_speed"], outlier_factor=s["outlier_factor"],
                     twtt_sigma=s["twtt_sigma_s"], legs=legs, what=what)
         segments.append((a, b, rows, sol))
+        if s["running"]:
+            runs.append(_running(survey, k + 1, rows, replies, sol, legs, what))
+            nis.append(runs[-1]["nis"].to_numpy()[::len(survey.ids)])
         part = f.iloc[rows][["ping", "transponder", "t_tx_s", "tx_e_m", "tx_n_m", "rx_e_m", "rx_n_m"]].copy()
         part.insert(0, "segment", k + 1)
         part["residual_s"] = sol.residual_s
@@ -440,7 +469,39 @@ def calibrate(survey: Survey) -> Calibration:
                 "replies_in_no_segment": int(len(f) - residuals.drop_duplicates(["ping", "transponder"]).shape[0]),
                 "ignored_columns": survey.log.counts.get("ignored_columns", [])},
     }
-    return Calibration(survey, segments, solution, residuals)
+    if runs:
+        values = np.concatenate(nis)
+        solution["running"] = {"replies": len(values), "nis_mean": float(np.mean(values)),
+                               "prior_sigma_m": s["running_prior_sigma_m"], "iterated": s["running_iterated"],
+                               "passes": s["running_passes"]}
+    return Calibration(survey, segments, solution, residuals, pd.concat(runs, ignore_index=True) if runs else None)
+
+
+def _running(survey: Survey, segment: int, rows: np.ndarray, replies, sol: Solution, legs: LegModel | None,
+             what: str) -> pd.DataFrame:
+    """The running solution of a segment's replies that :func:`~sblsim.models.calibration.solve` kept, in
+    transmit-time order, as rows of :data:`RUNNING_COLUMNS`."""
+    s = survey.solver
+    f = survey.log.frame
+    kept = np.flatnonzero(sol.used)
+    kept = kept[np.argsort(f["t_tx_s"].to_numpy()[rows[kept]], kind="stable")]
+    run = running(replies.subset(kept), survey.apriori, s["sound_speed_mps"], rigid=s["rigid"],
+                  solve_sound_speed=s["solve_sound_speed"], twtt_sigma=s["twtt_sigma_s"], legs=legs,
+                  prior_sigma=s["running_prior_sigma_m"], iterated=s["running_iterated"],
+                  passes=s["running_passes"], what=what)
+    n, k = len(kept), len(survey.ids)
+    source = f.iloc[rows[kept]]
+    offset = run.position - survey.apriori[None]
+    rep = np.repeat
+    return pd.DataFrame({
+        "segment": segment, "reply": rep(np.arange(n), k), "ping": rep(source["ping"].to_numpy(), k),
+        "transponder": rep(source["transponder"].to_numpy(), k), "t_tx_s": rep(source["t_tx_s"].to_numpy(), k),
+        "id": np.tile(np.asarray(survey.ids, dtype=object), n),
+        "e_m": offset[:, :, 0].ravel(), "n_m": offset[:, :, 1].ravel(), "u_m": offset[:, :, 2].ravel(),
+        "sigma_e_m": run.position_sigma[:, :, 0].ravel(), "sigma_n_m": run.position_sigma[:, :, 1].ravel(),
+        "sigma_u_m": run.position_sigma[:, :, 2].ravel(), "sound_speed_mps": rep(run.sound_speed, k),
+        "innovation_m": rep(run.innovation, k), "innovation_sigma_m": rep(np.sqrt(run.innovation_variance), k),
+        "nis": rep(run.nis, k)}, columns=list(RUNNING_COLUMNS))
 
 
 def _finite(x: float) -> float | None:
@@ -492,10 +553,49 @@ def write_calibration(result: Calibration, out: Path | str, extra: dict | None =
             ax.legend(fontsize=7, ncol=3)
             fig.savefig(tmp / name, dpi=110, bbox_inches="tight")
             plt.close(fig)
+        if result.running is not None:
+            result.running.to_csv(tmp / "running.csv", index=False)
+            _running_figure(result, tmp / "running.png", plt)
         for name, write in (extra or {}).items():
             write(tmp / name)
     return out
 
 
-__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "OUTPUT_FILES", "PROPAGATIONS", "SOLVER_KEYS",
+def _running_figure(result: Calibration, path: Path, plt) -> None:
+    """The running estimate of each transponder's East, North, Up offsets with its +-1-sigma band, beside each
+    segment's weighted least-squares solution (dashed)."""
+    r = result.running
+    title = result.solution["title"] or result.survey.name
+    ids = result.survey.ids
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    t0 = float(r["t_tx_s"].min())
+    for axis, (ax, name) in enumerate(zip(axes, ("e", "n", "u"))):
+        limits = []
+        for j, tid in enumerate(ids):
+            for segment, part in r[r["id"] == tid].groupby("segment"):
+                t = part["t_tx_s"].to_numpy() - t0
+                x, sd = part[f"{name}_m"].to_numpy(), part[f"sigma_{name}_m"].to_numpy()
+                colour = f"C{j % 10}"
+                label = f"transponder {tid}" if segment == 1 else None
+                ax.plot(t, x, "-", color=colour, lw=1, label=label)
+                ax.fill_between(t, x - sd, x + sd, color=colour, alpha=0.2, lw=0)
+                sol = result.segments[segment - 1][3]
+                ax.hlines(sol.offset[j, axis], t[0], t[-1], colors="k", linestyles="--", lw=0.8,
+                          label="least squares" if (j, segment) == (0, 1) else None)
+                # the band is metres wide at the start (the prior): show the last nine tenths
+                tail = x[len(x) // 10:]
+                spread = max(float(np.max(np.abs(tail - x[-1]))), 4.0 * sd[-1], 1e-3)
+                limits += [x[-1] - 1.5 * spread, x[-1] + 1.5 * spread]
+        ax.set_ylim(min(limits), max(limits))
+        ax.set_ylabel(f"{name.upper()} offset [m]")
+        ax.grid(True, lw=0.3)
+    axes[0].set_title(f"Running solution (static Kalman filter, ±1σ), {title}")
+    axes[0].legend(fontsize=7, ncol=3)
+    axes[-1].set_xlabel("transmit time [s from the first ping]")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "OUTPUT_FILES", "PROPAGATIONS", "RUNNING_COLUMNS",
+           "RUNNING_FILES", "SOLVER_KEYS",
            "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model", "load_survey", "write_calibration"]
