@@ -38,7 +38,7 @@ from sblsim.models.calibration import crb
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.progress import Progress
-from sblsim.orchestrator.surveys.calibrate import SOLVER_KEYS, Calibration, Survey, _value, calibrate
+from sblsim.orchestrator.surveys.calibrate import SOLVER_KEYS, Calibration, Survey, _defaults, _value, calibrate
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame
 
 _FOLDER = files("sblsim.orchestrator.surveys")
@@ -164,7 +164,7 @@ def load_simulated(source: str, overrides: list[str] | None = None) -> Simulated
             raise ModelError(f"{table}.{unknown[0][:40]}: unknown key; the keys: "
                              + ", ".join(f"{table}.{k}" for k in declared))
         out[table] = {k: v.coerce(values[table].get(k, v.start), f"{table}.{k}") for k, v in declared.items()}
-    solver = {key: spec[3] for key, spec in SOLVER_KEYS.items()}
+    solver = _defaults()
     for key, value in values["solver"].items():
         solver[key] = _solver_value(key, value)
     return SimulatedSurvey(name, out["survey"], out["platform"], solver, set(values["solver"]))
