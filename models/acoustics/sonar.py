@@ -244,7 +244,7 @@ def noise_level(frequency, bandwidth, wind_speed, shipping):
     The spectrum level at the centre frequency stands for the whole band (a
     flat spectrum across it). The spectrum falls by about 17 dB per decade at
     the frequencies of positioning systems (10-50 kHz), so for a band of
-    B/f_c = 0.2 the band's true power differs from this by less than 0.2 dB.
+    B/f_c = 0.2 the band's true power differs from this by less than 0.05 dB.
 
     Parameters
     ----------

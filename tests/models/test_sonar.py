@@ -137,6 +137,16 @@ def test_noise_level_adds_the_band():
                 == pytest.approx(10.0 * math.log10(bandwidth), abs=1e-12))
 
 
+@pytest.mark.parametrize("centre", [10e3, 25e3, 50e3])
+@pytest.mark.parametrize("wind", [0.1, 4.4, 18.95])
+def test_noise_level_of_a_band_within_005_db_of_the_integrated_spectrum(centre, wind):
+    """docs/model.md: for B/f_c = 0.2 the centre's spectrum level stands for the band within 0.05 dB."""
+    f = np.linspace(0.9 * centre, 1.1 * centre, 2001)
+    power = np.array([10.0 ** (sonar.noise_spectrum_level(x, wind, 0.5) / 10.0) for x in f])
+    integrated = 10.0 * np.log10(np.trapezoid(power, f))
+    assert abs(integrated - sonar.noise_level(centre, 0.2 * centre, wind, 0.5)) < 0.05
+
+
 def test_beaufort_tables_are_the_platforms():
     assert [sonar.wind_speed(b) for b in range(9)] == list(WIND_SPEED)
     assert [sonar.wave_height(b) for b in range(9)] == list(WAVE_HEIGHT)
