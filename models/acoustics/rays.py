@@ -77,14 +77,21 @@ def _phi(v):
     return ca.if_else(small, 1.0 - v / 2.0 + v * v / 3.0, ca.log1p(safe) / safe)
 
 
+def _psi(w):
+    """``asin(w) / w``, 1 at w = 0 (a series near 0)."""
+    small = ca.fabs(w) < 1e-4
+    safe = ca.if_else(small, 1.0, w)
+    return ca.if_else(small, 1.0 + w * w / 6.0, ca.asin(safe) / safe)
+
+
 def _sine(c, cref, k):
     """``sin θ = √(1 − ξ² c²)`` at speed ``c`` with ``ξ² c_ref² = k`` (floored at 0 beyond a turning point)."""
     return ca.sqrt(ca.fmax((cref - c) * (cref + c) + (1.0 - k) * c * c, _TINY)) / cref
 
 
 def _piece(q, cref, u, v, z0, z1, c0, c1):
-    """Horizontal distance [m] and travel time [s] of a ray ``(q, c_ref)`` over ``[u, v] ∩ [z0, z1]`` of a
-    c-linear layer, cut where the ray turns (``c = 1/ξ``)."""
+    """Horizontal distance [m], travel time [s], the distance over ``√(1 − q²)`` [m] and the arc length [m] of a
+    ray ``(q, c_ref)`` over ``[u, v] ∩ [z0, z1]`` of a c-linear layer, cut where the ray turns (``c = 1/ξ``)."""
     k = 1.0 - q * q
     g = (c1 - c0) / (z1 - z0)
     a = ca.fmax(z0, u)
@@ -108,7 +115,13 @@ def _piece(q, cref, u, v, z0, z1, c0, c1):
     x = xi * dz * (ca2 + cb2) / ssum
     t = dz * (_phi((cb2 - ca2) / ca2) / ca2
               + _phi((sa - sb) / (1.0 + sb)) * xi * xi * (ca2 + cb2) / (ssum * (1.0 + sb)))
-    return x, t
+    # the range over ξ c_ref = √(1 − q²): smooth up to the vertical ray (q = 1), where x itself has an infinite slope
+    reduced = dz * (ca2 + cb2) / (cref * ssum)
+    # the arc length ∫ dz / sin θ = (θ_a − θ_b) / (ξ g) = ψ(w) Δz (c_a + c_b) / (c_b s_a + c_a s_b), with
+    # w = ξ (c_b s_a − c_a s_b) = sin(θ_a − θ_b) and ψ(w) = asin(w) / w (every gradient, zero included)
+    w = ca.fmin(ca.fmax(xi * (cb2 * sa - ca2 * sb), -1.0), 1.0)
+    length = _psi(w) * dz * (ca2 + cb2) / ca.fmax(cb2 * sa + ca2 * sb, _TINY)
+    return x, t, reduced, length
 
 
 @lru_cache(maxsize=1)
@@ -118,8 +131,8 @@ def _layers() -> ca.Function:
     q, fold, cref = ca.SX.sym("q"), ca.SX.sym("fold"), ca.SX.sym("cref")
     u1, v1, u2, v2 = ca.SX.sym("u1"), ca.SX.sym("v1"), ca.SX.sym("u2"), ca.SX.sym("v2")
     z0, z1, c0, c1 = ca.SX.sym("z0"), ca.SX.sym("z1"), ca.SX.sym("c0"), ca.SX.sym("c1")
-    x1, t1 = _piece(q, cref, u1, v1, z0, z1, c0, c1)
-    x2, t2 = _piece(q, cref, u2, v2, z0, z1, c0, c1)
+    x1, t1, _f1, _l1 = _piece(q, cref, u1, v1, z0, z1, c0, c1)
+    x2, t2, _f2, _l2 = _piece(q, cref, u2, v2, z0, z1, c0, c1)
     w2 = ca.if_else(ca.logic_or(fold > 0.5, q < 0), 2.0, 0.0)
     x, t = x1 + w2 * x2, t1 + w2 * t2
     layer = ca.Function("sblsim_ray_layer", [q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1],
@@ -130,6 +143,28 @@ def _layers() -> ca.Function:
     out = mapped(*args, nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
     sums = [ca.sum2(o) for o in out]
     return ca.Function("sblsim_ray_sums", args + [nodes, speeds], sums, {"never_inline": True})
+
+
+@lru_cache(maxsize=1)
+def _tube() -> ca.Function:
+    """``(q, fold, cref, u1, v1, u2, v2, nodes, speeds) -> (F, dF/dq, S)``: a ray's range over ``√(1 − q²)``
+    (``X = √(1 − q²) F``) [m], its derivative in ``q`` [m] and its arc length [m], summed over the layers as
+    :func:`_layers` sums the range."""
+    q, fold, cref = ca.SX.sym("q"), ca.SX.sym("fold"), ca.SX.sym("cref")
+    u1, v1, u2, v2 = ca.SX.sym("u1"), ca.SX.sym("v1"), ca.SX.sym("u2"), ca.SX.sym("v2")
+    z0, z1, c0, c1 = ca.SX.sym("z0"), ca.SX.sym("z1"), ca.SX.sym("c0"), ca.SX.sym("c1")
+    _x1, _t1, f1, s1 = _piece(q, cref, u1, v1, z0, z1, c0, c1)
+    _x2, _t2, f2, s2 = _piece(q, cref, u2, v2, z0, z1, c0, c1)
+    w2 = ca.if_else(ca.logic_or(fold > 0.5, q < 0), 2.0, 0.0)
+    f, arc = f1 + w2 * f2, s1 + w2 * s2
+    layer = ca.Function("sblsim_ray_tube_layer", [q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1],
+                        [f, ca.jacobian(f, q), arc])
+    mapped = layer.map(NODES - 1, "serial")
+    args = [ca.MX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2")]
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    out = mapped(*args, nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
+    return ca.Function("sblsim_ray_tube", args + [nodes, speeds], [ca.sum2(o) for o in out],
+                       {"never_inline": True})
 
 
 @lru_cache(maxsize=1)
@@ -175,7 +210,8 @@ def _angle(z, q, cref, nodes, speeds):
 
 
 def _direct(zs, zr, target, depth, nodes, speeds):
-    """The direct eigenray: ``(τ, launch, arrival, valid)``."""
+    """The direct eigenray: ``(τ, launch, arrival, valid, ray)``, ``ray`` the solved ray for :func:`_tube_loss`
+    (``q, fold, c_ref, u1, v1, u2, v2``, the isovelocity image's vertical extent and whether the path is level)."""
     c = _speed()
     za, zb = ca.fmin(zs, zr), ca.fmax(zs, zr)
     c_a, c_b = c(za, nodes, speeds), c(zb, nodes, speeds)
@@ -215,11 +251,13 @@ def _direct(zs, zr, target, depth, nodes, speeds):
     # a turning ray leaves downward and arrives upward when it turns below, the reverse when above
     launch = ca.if_else(turning, ca.if_else(use_up, -ts, ts), d * ts)
     arrival = ca.if_else(turning, ca.if_else(use_up, tr, -tr), d * tr)
-    return tau, launch, arrival, valid
+    level = ca.logic_and(zb - za == 0, ca.logic_and(flat, q_lo == 0))
+    return tau, launch, arrival, valid, (q, 0.0, cref, za, zb, u2, v2, dz, level)
 
 
 def _reflected(zs, zr, target, depth, nodes, speeds, bottom: bool):
-    """The surface- (``bottom`` false) or bottom-reflected eigenray: ``(τ, launch, arrival, valid)``."""
+    """The surface- (``bottom`` false) or bottom-reflected eigenray: ``(τ, launch, arrival, valid, ray)`` (as
+    :func:`_direct`)."""
     za, zb = ca.fmin(zs, zr), ca.fmax(zs, zr)
     if bottom:
         u2, v2, span_lo, span_hi = zb, depth, za, depth
@@ -234,7 +272,78 @@ def _reflected(zs, zr, target, depth, nodes, speeds, bottom: bool):
     tau, q, valid = _solve(target, 0.0, q0, 1.0, cref, za, zb, u2, v2, nodes, speeds)
     ts, tr = _angle(zs, q, cref, nodes, speeds), _angle(zr, q, cref, nodes, speeds)
     sign = 1.0 if bottom else -1.0
-    return tau, sign * ts, -sign * tr, ca.logic_and(valid, ca.logic_and(fits, depth > 0))
+    return (tau, sign * ts, -sign * tr, ca.logic_and(valid, ca.logic_and(fits, depth > 0)),
+            (q, 1.0, cref, za, zb, u2, v2, image, 0.0))
+
+
+#: The most a ray tube may gain over the spherical spreading of the path's isovelocity image [dB]: the cap of the
+#: ray-tube intensity at and near a caustic (``dX/dq → 0``), where geometric acoustics predicts an infinite one.
+CAUSTIC_GAIN = 10.0
+
+
+def _spherical(length):
+    """``20 log10 L`` [dB] of a distance ``L`` [m], floored at 0 dB (within 1 m of the source: its source level)."""
+    return ca.fmax(20.0 * ca.log10(ca.fmax(length, _TINY)), 0.0)
+
+
+def _tube_loss(zs, zr, x, ray, nodes, speeds):
+    """Geometric spreading [dB re 1 m] and arc length [m] of a solved eigenray ``ray`` (:func:`_direct`).
+
+    The ray-tube intensity relative to 1 m (Jensen et al. 2011, ch. 3.3, eq. 3.65 with the tube's Jacobian) is
+    ``|p/p0|² = (c_r / c_s) cos θ_s / (r |∂r/∂θ_s| sin θ_r)``; in the family's parameter ``q`` (``cos θ_s = ξ c_s``,
+    ``ξ = √(1 − q²) / c_ref``: ``cos θ_s |dθ_s/dq| = c_s² |q| / (c_ref² sin θ_s)``) and with ``X = √(1 − q²) F``
+    (so that ``X |dX/dq| = |q F² − (1 − q²) F F'|``, finite at the vertical ray), it is
+    ``c_s c_r / (c_ref² · X |dX/dq| · sin θ_s sin θ_r / |q|)``. ``sin θ / |q|`` is taken at the faster end (1 where
+    the speed is ``c_ref``: a ray horizontal at that end, ``q → 0``, keeps a finite tube) and ``sin θ`` at the other.
+    A level path in water of constant speed around it (the family degenerate: ``X ≡ 0``) is the straight line. The
+    loss is capped at :data:`CAUSTIC_GAIN` below the spherical spreading of the isovelocity image, and floored at
+    0 dB."""
+    q, fold, cref, u1, v1, u2, v2, image, level = ray
+    f, df, arc = _tube()(q, fold, cref, u1, v1, u2, v2, nodes, speeds)
+    speed = _speed()
+    c_s, c_r = speed(zs, nodes, speeds), speed(zr, nodes, speeds)
+    qq = q * q
+    area = ca.fabs(q * f * f - (1.0 - qq) * f * df)  # X |dX/dq| [m²]
+
+    def sine(c):
+        return ca.sqrt(ca.fmax((cref - c) * (cref + c) + qq * c * c, 0.0)) / cref
+
+    def ratio(c):  # sin θ / |q|
+        return ca.sqrt(ca.fmax((cref - c) * (cref + c), 0.0) / ca.fmax(qq, _TINY) + c * c) / cref
+
+    ends = ca.if_else(c_s >= c_r, ratio(c_s) * sine(c_r), sine(c_s) * ratio(c_r))
+    tube = 10.0 * ca.log10(ca.fmax(cref * cref * area * ends / (c_s * c_r), _TINY))
+    straight = ca.sqrt(x * x + image * image)
+    spreading = ca.fmax(ca.fmax(tube, _spherical(straight) - CAUSTIC_GAIN), 0.0)
+    return ca.if_else(level, _spherical(x), spreading), ca.if_else(level, x, arc)
+
+
+@lru_cache(maxsize=1)
+def eigenray_paths() -> ca.Function:
+    """``(zs, zr, x, depth, nodes, speeds) -> (tau, launch, arrival, valid, spreading, length)``, each (3, 1): the
+    eigenrays of :func:`eigenray_families` (the same first four outputs) with their geometric spreading and their
+    length along the ray.
+
+    Parameters (of the function)
+    ----------------------------
+    zs, zr, x, depth, nodes, speeds : as :func:`eigenray_families`.
+
+    Returns (of the function)
+    -------------------------
+    tau, launch, arrival, valid : as :func:`eigenray_families`.
+    spreading : the ray-tube geometric spreading loss [dB re 1 m] of each eigenray, ``−10 log10 |p/p0|²``
+        (:func:`_tube_loss`: Jensen et al. 2011, ch. 3), capped at caustics (:data:`CAUSTIC_GAIN`), ≥ 0.
+    length : its arc length along the ray [m] (closed form per c-linear layer).
+    """
+    zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    rows = [_direct(zs, zr, x, depth, nodes, speeds), _reflected(zs, zr, x, depth, nodes, speeds, False),
+            _reflected(zs, zr, x, depth, nodes, speeds, True)]
+    rows = [r[:4] + _tube_loss(zs, zr, x, r[4], nodes, speeds) for r in rows]
+    out = [ca.vertcat(*[r[j] for r in rows]) for j in range(6)]
+    return ca.Function("sblsim_eigenray_paths", [zs, zr, x, depth, nodes, speeds], out,
+                       ["zs", "zr", "x", "depth", "nodes", "speeds"],
+                       ["tau", "launch", "arrival", "valid", "spreading", "length"], {"never_inline": True})
 
 
 @lru_cache(maxsize=1)
@@ -280,7 +389,7 @@ def _first(tau, launch, arrival, valid):
 def _first_arrival_table() -> ca.Function:
     zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
     nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    direct = _direct(zs, zr, x, depth, nodes, speeds)
+    direct = _direct(zs, zr, x, depth, nodes, speeds)[:4]
     direct_only = ca.Function("sblsim_ray_direct_only", [zs, zr, x, depth, nodes, speeds],
                               list(_first(*[ca.vertcat(v) for v in direct])))
     families = eigenray_families()(zs, zr, x, depth, nodes, speeds)
@@ -288,10 +397,9 @@ def _first_arrival_table() -> ca.Function:
     return switch("sblsim_ray_first", [direct_only, with_boundaries])
 
 
-@lru_cache(maxsize=1)
-def _first_arrival_constant() -> ca.Function:
-    """Isovelocity: the straight line and its images in the surface and the bottom."""
-    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
+def _constant_rows(zs, zr, x, depth, c):
+    """Isovelocity: the straight line and its images in the surface and the bottom, each ``(τ, launch, arrival,
+    valid, L)`` with ``L`` the (image) path's length [m]."""
     rows = []
     for image, kind in ((zr - zs, DIRECT), (zs + zr, SURFACE), (2.0 * depth - zs - zr, BOTTOM)):
         length = ca.sqrt(x * x + image * image)
@@ -301,7 +409,15 @@ def _first_arrival_constant() -> ca.Function:
                                                                   (angle, -angle))
         valid = 1.0 if kind == DIRECT else ca.logic_and(depth > 0, ca.logic_and(
             zs >= 0, zr >= 0) if kind == SURFACE else ca.logic_and(depth >= zs, depth >= zr))
-        rows.append((length / c, launch, arrival, valid))
+        rows.append((length / c, launch, arrival, valid, length))
+    return rows
+
+
+@lru_cache(maxsize=1)
+def _first_arrival_constant() -> ca.Function:
+    """Isovelocity: the straight line and its images in the surface and the bottom."""
+    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
+    rows = _constant_rows(zs, zr, x, depth, c)
     out = _first(*[ca.vertcat(*[r[j] for r in rows]) for j in range(4)])
     return ca.Function("sblsim_ray_constant", [zs, zr, x, depth, c], list(out))
 
@@ -345,6 +461,77 @@ def first_arrival(use_table, zs, zr, x, depth, constant, nodes, speeds):
         1 direct, 2 surface-reflected, 3 bottom-reflected, 0 none (a shadow zone without boundaries).
     """
     return _first_arrival()(use_table, zs, zr, x, depth, constant, nodes, speeds)
+
+
+@lru_cache(maxsize=1)
+def _arrivals() -> ca.Function:
+    """``(use_table, zs, zr, x, depth, constant, nodes, speeds) -> (tau, launch, arrival, valid, spreading,
+    length)``: see :func:`arrivals`."""
+    zs, zr, x, depth, c = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "c"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    args = [zs, zr, x, depth, c, nodes, speeds]
+    names = ["tau", "launch", "arrival", "valid", "spreading", "length"]
+    rows = _constant_rows(zs, zr, x, depth, c)
+    const = ca.Function("sblsim_arrivals_isovelocity", args,
+                        [ca.vertcat(*[r[j] for r in rows]) for j in range(4)]
+                        + [ca.vertcat(*[_spherical(r[4]) for r in rows]), ca.vertcat(*[r[4] for r in rows])])
+    # without a water depth the direct eigenray alone is solved (the reflected rows: invalid, zero)
+    direct = _direct(zs, zr, x, depth, nodes, speeds)
+    direct = list(direct[:4]) + list(_tube_loss(zs, zr, x, direct[4], nodes, speeds))
+    inner = [zs, zr, x, depth, nodes, speeds]
+    direct_only = ca.Function("sblsim_arrivals_direct", inner, [ca.vertcat(v, 0.0, 0.0) for v in direct])
+    bounded = ca.Function("sblsim_arrivals_bounded", inner, eigenray_paths()(*inner))
+    table = ca.Function("sblsim_arrivals_table", args,
+                        switch("sblsim_arrivals_boundary", [direct_only, bounded])(depth > 0, *inner))
+    chosen = switch("sblsim_arrivals_choice", [const, table])
+    use = ca.MX.sym("use_table")
+    return ca.Function("sblsim_arrivals", [use, *args], chosen(use, *args),
+                       ["use_table", "zs", "zr", "x", "depth", "constant", "nodes", "speeds"], names,
+                       {"never_inline": True})
+
+
+def arrivals(use_table, zs, zr, x, depth, constant, nodes, speeds):
+    """Every eigenray family between two depths with its geometric spreading and its length, for the sonar
+    equation: ``(tau, launch, arrival, valid, spreading, length)``, each (3, 1), rows direct, surface-reflected,
+    bottom-reflected (the ``arrival`` codes 1, 2, 3 less one).
+
+    Through the profile table (``use_table``) the eigenrays of :func:`eigenray_paths` (only the direct one solved
+    without a water depth); in water of the constant speed ``constant`` the straight line and its images in the
+    surface and the bottom, spreading ``20 log10 L`` and length ``L`` (``L`` the image path's length), as
+    :func:`first_arrival`'s isovelocity branch. Only the chosen branch runs in the generated C.
+
+    Parameters
+    ----------
+    use_table : casadi.SX
+        True (non-zero) for the table, false for the constant ``constant``.
+    zs, zr : casadi.SX
+        Depth of the source and of the receiver [m] (positive down).
+    x : casadi.SX
+        Horizontal distance [m].
+    depth : casadi.SX
+        Water depth [m]; 0: no boundary (the reflected rows invalid).
+    constant : casadi.SX
+        The sound speed of an empty table [m/s].
+    nodes, speeds : casadi.SX, shape (NODES, 1)
+        The padded profile (:func:`~sblsim.models.acoustics.sound_speed.node_speeds`).
+
+    Returns
+    -------
+    tau : casadi.SX, shape (3, 1)
+        Travel times [s].
+    launch, arrival : casadi.SX, shape (3, 1)
+        Grazing angles [rad] at the source and at the receiver, positive downward, in the direction of travel.
+    valid : casadi.SX, shape (3, 1)
+        1 where the eigenray exists (0: shadow zone or no boundary; the row's other values are then meaningless).
+    spreading : casadi.SX, shape (3, 1)
+        Geometric spreading loss [dB re 1 m], ``−10 log10 |p/p0|²`` of the ray tube (Jensen, Kuperman, Porter,
+        Schmidt, *Computational Ocean Acoustics*, 2nd ed., 2011, ch. 3), at most :data:`CAUSTIC_GAIN` below the
+        spherical spreading ``20 log10`` of the isovelocity image's length (caustics), and at least 0 dB.
+    length : casadi.SX, shape (3, 1)
+        Path length along the ray [m] (for absorption): per c-linear layer ``(θ_a − θ_b) / (ξ g)`` in a form that
+        holds for a zero gradient too.
+    """
+    return _arrivals()(use_table, zs, zr, x, depth, constant, nodes, speeds)
 
 
 def profile_arrays(table) -> tuple[np.ndarray, np.ndarray]:
@@ -717,7 +904,7 @@ def chord_elevation(zt, elevation, tau, nodes, speeds):
     return _chord_elevation()(zt, elevation, tau, nodes, speeds)
 
 
-__all__ = ["BOTTOM", "DIRECT", "NEWTON_ITERATIONS", "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE",
-           "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE", "TRACE_ITERATIONS", "chord_elevation",
-           "eigenray_families", "eigenray_table", "exact_points", "first_arrival", "first_arrival_grid",
-           "profile_arrays", "ray_grid", "ray_values", "slant_range"]
+__all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "NEWTON_ITERATIONS", "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID",
+           "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE", "TRACE_ITERATIONS", "arrivals",
+           "chord_elevation", "eigenray_families", "eigenray_paths", "eigenray_table", "exact_points", "first_arrival",
+           "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range"]
