@@ -71,6 +71,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -393,6 +394,13 @@ def fix_information(n_beacons: int, model=MODEL) -> ca.Function:
                        ["J", "drms"])
 
 
+def per_point(value: Any) -> Any:
+    """A number of a mapped accuracy function: a float, or an array of one per point as a (1, M) row (the
+    columns of a ``casadi.Function.map``)."""
+    array = np.asarray(value, dtype=float)
+    return float(array) if array.ndim == 0 else array.reshape(1, -1)
+
+
 def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, noise_variance: float,
                    attitude_variance: float, depth_variance: float, model=MODEL) -> np.ndarray:
     """Horizontal standard deviation (DRMS) of a fix from one round of fresh ranges plus depth.
@@ -403,11 +411,11 @@ def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, no
         Target positions [m].
     beacons, arms : ndarray, shape (n, 3)
         Beacon positions and their lever arms in NED [m].
-    noise_variance : float
-        ``σ_r² + σ_GPS²`` [m²].
-    attitude_variance : float
+    noise_variance : float or ndarray, shape (M,)
+        ``σ_r² + σ_GPS²`` [m²] (an array: one per point).
+    attitude_variance : float or ndarray, shape (M,)
         σ_att² [rad²].
-    depth_variance : float
+    depth_variance : float or ndarray, shape (M,)
         σ_d² [m²], > 0.
     model : RangeDepthModel, optional
         The measurement model (:func:`fix_information`).
@@ -421,8 +429,8 @@ def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, no
     points = np.atleast_2d(np.asarray(points, dtype=float))
     beacons, arms = np.asarray(beacons, dtype=float), np.asarray(arms, dtype=float)
     f = fix_information(beacons.shape[0], model).map(points.shape[0])
-    drms = np.asarray(f(points.T, beacons.reshape(-1, 1), arms.reshape(-1, 1), float(noise_variance),
-                        float(attitude_variance), float(depth_variance))[1]).ravel()
+    drms = np.asarray(f(points.T, beacons.reshape(-1, 1), arms.reshape(-1, 1), per_point(noise_variance),
+                        per_point(attitude_variance), per_point(depth_variance))[1]).ravel()
     return np.where(np.isfinite(drms), drms, np.inf)
 
 
@@ -463,4 +471,5 @@ def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.nd
 
 __all__ = ["FIXED", "MODEL", "MOTION", "bound_step", "effective_range_variance", "fisher_information",
            "fix_information", "horizontal_drms", "horizontal_std", "information_update", "measurement_information",
-           "model_horizontal_std", "pcrb", "pcrb_inputs", "position_information", "predicted", "state_at", "stepped"]
+           "model_horizontal_std", "pcrb", "pcrb_inputs", "per_point", "position_information", "predicted", "state_at",
+           "stepped"]

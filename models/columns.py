@@ -46,6 +46,8 @@ TIMESERIES_COLUMNS = {
     "launch_angle": "acoustics.launch_angle",
     "arrival_angle": "acoustics.arrival_angle",
     "arrival": "acoustics.arrival",
+    "snr": "acoustics.snr",
+    "detection_probability": "acoustics.detection_probability",
     "nis": "receiver.nis",
     "pos_std": "receiver.pos_std",
     **{f"cov_{ab}": f"receiver.cov_{ab}" for ab in COVARIANCE},

@@ -44,6 +44,10 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
     "degC": ({"K": 1}, 1.0),
     "g/kg": ({}, 1e-3),
     "s/m": ({"m": -1, "s": 1}, 1.0),
+    "Hz": ({"s": -1}, 1.0),
+    # logarithmic levels: dimensionless to FMI (a level is not converted to another unit)
+    "dB": ({}, 1.0),
+    "dB/m": ({"m": -1}, 1.0),
 }
 
 

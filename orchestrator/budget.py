@@ -71,7 +71,10 @@ SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
                     ("acoustics.sound_speed_profile=constant",
                      "acoustics.sound_speed_true={acoustics.sound_speed_assumed}")),
     "clock_drift": ("receiver clock drift", ("acoustics.clock_drift_ppm=0",)),
-    "multipath": ("multipath outliers (long ranges)", ("acoustics.outlier_pct=0",)),
+    "multipath": ("multipath: ranges from a reflected path (outliers, or the surface and sea-floor eigenrays)",
+                  ("acoustics.outlier_pct=0", "acoustics.water_depth=0")),
+    "ambient_noise": ("ambient noise: arrivals missed and timing and angle noise grown below the reference SNR",
+                      ("acoustics.source_level=250",)),
     "packet_loss": ("lost packets", ("acoustics.loss_pct=0",)),
     "depth_sensor": ("depth-sensor noise", ("target.depth_sigma=0",)),
     "survey": ("LBL transponders' survey error", ("platform.survey_sigma=0",)),
@@ -86,6 +89,9 @@ SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
 #: Sources that exist only for a receiver that ranges with its own profile (``receiver.sound_speed_profile`` not
 #: ``assumed``): a receiver of the single assumed speed has them off (its error is the ``sound_speed`` source).
 PROFILE_SOURCES = frozenset({"profile_error"})
+#: Sources that exist only with detection by signal-to-noise (``acoustics.detection = "snr"``); a source level
+#: of 250 dB re 1 µPa at 1 m hears every eigenray there is, at the configured accuracy.
+SNR_SOURCES = frozenset({"ambient_noise"})
 
 DEFAULT_REPLICATES = 500
 MAX_REPLICATES = 100_000
@@ -284,8 +290,11 @@ def _switches(cfg: RunPlan) -> tuple[dict[str, RunPlan], RunPlan]:
 
 def _overrides(cfg: RunPlan, name: str, overrides: tuple[str, ...]) -> tuple[str, ...]:
     """The overrides that switch the source ``name`` off in ``cfg``: none (the source is off) for a profile
-    source of a receiver that ranges with the single assumed speed (or declares no profile)."""
+    source of a receiver that ranges with the single assumed speed (or declares no profile), and for a source of
+    detection by signal-to-noise with fixed detection."""
     if name in PROFILE_SOURCES and cfg["receiver"].get("sound_speed_profile", "assumed") == "assumed":
+        return ()
+    if name in SNR_SOURCES and cfg["acoustics"]["detection"] != "snr":
         return ()
     return overrides
 

@@ -50,7 +50,7 @@ from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.systems import check_diver
 
-BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
+BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk", "usbl-deep", "lbl-field")
 SECTIONS = ("run", "simulation", *COMPONENTS)
 MIN_SIGMA = 1e-3  # floor of the tied R standard deviations [m]
 
@@ -109,7 +109,8 @@ RECEIVER_KEY_NAMES = frozenset(v.name for v in RECEIVER_KEYS)
 SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("acoustics", "slot_period"))
 #: FMU parameters filled from a configuration key of another section: (component, parameter) <- (section, key).
 KEY_TIES = ((("acoustics", "usbl_angle_sigma_deg"), ("platform", "usbl_angle_sigma_deg")),
-            (("receiver", "sound_speed_assumed"), ("acoustics", "sound_speed_assumed")))
+            (("receiver", "sound_speed_assumed"), ("acoustics", "sound_speed_assumed")),
+            (("acoustics", "beaufort"), ("platform", "beaufort")))
 EXTERNAL_PREFIX = "fmu:"
 MODEL_PREFIX = "model:"
 
@@ -430,6 +431,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     check_geometry(cfg["platform"])
     check_diver(cfg)
     _check_water_depth(cfg)
+    _check_detection(cfg["acoustics"])
     _check_duration(sim, cfg["target"])
     return cfg
 
@@ -536,6 +538,20 @@ def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
         check_steps(sim["duration"], T, what=what)
     except ModelError as exc:
         raise ConfigError(str(exc)) from None
+
+
+def _check_detection(acoustics: dict[str, Any]) -> None:
+    """Refuse detection by signal-to-noise (``acoustics.detection = "snr"``) without eigenrays.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``acoustics.detection`` and ``acoustics.propagation``.
+    """
+    if acoustics["detection"] == "snr" and acoustics["propagation"] != "ray":
+        raise ConfigError(f"acoustics.detection: snr needs acoustics.propagation = ray (the transmission loss along "
+                          f"each eigenray), got propagation = {acoustics['propagation']!r}; allowed: fixed, or snr "
+                          "with ray")
 
 
 def _check_water_depth(cfg: dict[str, dict]) -> None:

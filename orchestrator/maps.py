@@ -43,6 +43,9 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from sblsim.fmus.native import compiled_family_levels
+from sblsim.models.acoustics.core import site_levels
+from sblsim.models.acoustics.detection import packet_probability
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.target.core import file_waypoints
@@ -52,6 +55,8 @@ from sblsim.orchestrator.progress import Progress, ProgressSpec
 from sblsim.orchestrator.systems import check_diver, compared
 
 MAX_POINTS = 1_000_000
+#: With detection by signal-to-noise an accuracy map is blank (NaN) where the probability of a fix is below this.
+MIN_AVAILABILITY = 0.5
 
 
 def parse_levels(text: str) -> list[float]:
@@ -126,13 +131,122 @@ def accuracy_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model
     Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
     Prentice Hall 1993, Section 3.7.
     """
+    return site_maps(cfg, east, north, model, depth)[0]
+
+
+def site_maps(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model=MODEL,
+              depth: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The accuracy map (:func:`accuracy_map`) and the availability map (:func:`availability_map`) of a
+    configuration, its packets' probabilities computed once.
+
+    With detection by signal-to-noise (``acoustics.detection = "snr"``) the accuracy accounts for what is heard:
+    the range noise (and the USBL angle noise) of each transducer grows with its
+    :func:`~sblsim.models.acoustics.sonar.accuracy_scale` (the map takes the root mean square of the
+    transducers' scales), and the map is blank (NaN) where the probability of a fix is below
+    :data:`MIN_AVAILABILITY`.
+
+    Returns
+    -------
+    drms, availability : ndarray, each (len(north), len(east))
+        [m], and the probability of a fix in one cycle [0–1].
+    """
     plan = as_plan(cfg)
+    points = _points(plan, east, north, depth)
+    bound, sigma = dict(plan.bound), plan["acoustics"]["sigma_range"]
+    probability, scale = packet_probabilities(plan, points)
+    available = fix_probability(probability, plan.system.fix_packets)
+    if plan["acoustics"]["detection"] == "snr":  # the noise grown below the reference SNR, per point
+        grown = np.sqrt(np.mean(scale ** 2, axis=1))
+        for key in ("noise_variance", "range_variance"):
+            if key in bound:
+                bound[key] = bound[key] + sigma ** 2 * (grown ** 2 - 1.0)
+        if "angle_sigma_deg" in bound:
+            bound["angle_sigma_deg"] = bound["angle_sigma_deg"] * grown
+        sigma = sigma * grown
+    drms = plan.system.horizontal_std(points, plan["platform"], bound, sigma, model=model)
+    if plan["acoustics"]["detection"] == "snr":  # no fix there at least half of the cycles
+        drms = np.where(available < MIN_AVAILABILITY, np.nan, drms)
+    return drms.reshape(len(north), len(east)), available.reshape(len(north), len(east))
+
+def packet_probabilities(plan: RunPlan, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per point and transducer: the probability that one packet is received, and the accuracy scale.
+
+    With fixed detection a packet is received with ``1 − loss_pct`` per draw (USBL: the reply and the
+    downlink, two draws) and the scale is 1. With detection by signal-to-noise (``acoustics.detection = "snr"``)
+    each leg of the exchange is the eigenrays between the point and the transducer (a leg and its reverse
+    are the same path: reciprocity), the legs' fluctuations independent: every leg before the last must be
+    heard (``1 − Π (1 − P_j)``: TWTT's interrogation; USBL's interrogation and reply), the last one's first
+    detected arrival decoded (:func:`~sblsim.models.acoustics.detection.packet_probability`); the scale is
+    :func:`~sblsim.models.acoustics.sonar.accuracy_scale` at the SNR of the earliest eigenray.
+
+    Parameters
+    ----------
+    plan : RunPlan
+    points : ndarray, shape (M, 3)
+        NED [m].
+
+    Returns
+    -------
+    probability, scale : ndarray, each (M, n)
+        n the system's transducers (:attr:`RunPlan.lever_arms`).
+    """
+    acoustics, system = plan["acoustics"], plan.system
+    arms = np.asarray(plan.lever_arms, dtype=float)
+    m, n = points.shape[0], arms.shape[0]
+    if acoustics["detection"] != "snr":
+        keep = (1.0 - acoustics["loss_pct"] / 100.0) ** (2 if system.measures_direction else 1)
+        return np.full((m, n), keep), np.ones((m, n))
+    legs = 3 if system.measures_direction else (2 if acoustics["ranging"] == "twtt" else 1)
+    levels = site_levels(plan.component_parameters("acoustics"), np.repeat(arms, m, axis=0), np.tile(points, (n, 1)),
+                         compiled_family_levels())
+    pd, snr, tau = levels["pd"], levels["snr"], np.where(levels["valid"] > 0.5, levels["tau"], np.inf)
+    heard = 1.0 - np.prod(1.0 - pd, axis=1)
+    data = packet_probability(tau, pd, snr, acoustics["detection_threshold"], acoustics["decoding_margin"],
+                              acoustics["fluctuation"])
+    first = np.take_along_axis(snr, np.argmin(tau, axis=1)[:, None], 1)[:, 0]
+    scale = np.maximum(1.0, 10.0 ** ((acoustics["reference_snr"] - first) / 20.0))
+    return (heard ** (legs - 1) * data).reshape(n, m).T, scale.reshape(n, m).T
+
+
+def fix_probability(probability: np.ndarray, needed: int) -> np.ndarray:
+    """The probability that at least ``needed`` of a cycle's packets are received (independent packets).
+
+    Parameters
+    ----------
+    probability : ndarray, shape (M, n)
+        Each packet's probability of being received.
+    needed : int
+        The packets a fix needs (:attr:`~sblsim.models.systems.System.fix_packets`).
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        The upper tail of the Poisson-binomial distribution (the count's distribution, one packet at a time).
+    """
+    count = np.zeros((probability.shape[0], probability.shape[1] + 1))
+    count[:, 0] = 1.0
+    for j in range(probability.shape[1]):
+        p = probability[:, j:j + 1]
+        count[:, 1:] = count[:, 1:] * (1.0 - p) + count[:, :-1] * p
+        count[:, 0] *= 1.0 - p[:, 0]
+    return count[:, needed:].sum(axis=1)
+
+
+def availability_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray,
+                     depth: float | None = None) -> np.ndarray:
+    """The probability of a fix in one cycle [0–1], shape (len(north), len(east)): at least the system's
+    :attr:`~sblsim.models.systems.System.fix_packets` packets received (:func:`packet_probabilities`,
+    :func:`fix_probability`)."""
+    plan = as_plan(cfg)
+    probability = packet_probabilities(plan, _points(plan, east, north, depth))[0]
+    return fix_probability(probability, plan.system.fix_packets).reshape(len(north), len(east))
+
+
+def _points(plan: RunPlan, east: np.ndarray, north: np.ndarray, depth: float | None) -> np.ndarray:
+    """The grid's points (M, 3), NED [m], at the diver's depth (default :func:`diver_depth`), north-major."""
     E, N = np.meshgrid(east, north)
     depth = diver_depth(plan)[0] if depth is None else float(depth)
-    points = np.column_stack([N.ravel(), E.ravel(), np.full(E.size, depth)])
-    drms = plan.system.horizontal_std(points, plan["platform"], plan.bound, plan["acoustics"]["sigma_range"],
-                                      model=model)
-    return drms.reshape(E.shape)
+    return np.column_stack([N.ravel(), E.ravel(), np.full(E.size, depth)])
 
 
 def system_line(plan: RunPlan | dict) -> str:
@@ -184,7 +298,8 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     with Progress(len(configs), "map", "map", progress) as bar:
         maps = []
         for c in configs:
-            maps.append(accuracy_map(c.plan(), east, north, depth=c["target"]["depth"]))
+            drms, c.availability = site_maps(c.plan(), east, north, depth=c["target"]["depth"])
+            maps.append(drms)
             bar.update(1)
     return labels, configs, east, north, maps
 
@@ -199,6 +314,8 @@ class MapConfig(Config):
         config["target"]["depth"] = depth
         super().__init__(config)
         self._plan = plan
+        #: The map's probability of a fix in one cycle (:func:`availability_map`), once made.
+        self.availability: np.ndarray | None = None
 
     def plan(self) -> RunPlan:
         """The plan the map was made of (its ``target.depth`` the configuration's, not the map's)."""
@@ -207,12 +324,16 @@ class MapConfig(Config):
 
 def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,
           maps: Sequence[np.ndarray], compare: tuple[str, list[str]] | None = None) -> pd.DataFrame:
-    """Long table of the maps: (compared value,) east, north, depth [m], drms [m]."""
+    """Long table of the maps: (compared value,) east, north, depth [m], drms [m] (NaN: no fix), availability
+    (the probability of a fix in one cycle, when the map has it)."""
     E, N = np.meshgrid(east, north)
     frames = []
     for label, cfg, m in zip(labels, configs, maps):
         frame = pd.DataFrame({"east": E.ravel(), "north": N.ravel(), "depth": float(cfg["target"]["depth"]),
                               "drms": m.ravel()})
+        available = getattr(cfg, "availability", None)
+        if available is not None:
+            frame["availability"] = available.ravel()
         if compare is not None:
             frame.insert(0, compare[0], label.split(" = ", 1)[1])
         frames.append(frame)
@@ -230,9 +351,15 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
     from matplotlib.ticker import LogLocator, ScalarFormatter
 
     finite = np.concatenate([m[np.isfinite(m)] for m in maps])
+    if finite.size == 0:  # no fix anywhere (detection by signal-to-noise): any scale
+        finite = np.array([1e-4, 1.0])
     norm = LogNorm(vmin=max(float(finite.min()), 1e-4), vmax=float(finite.max()))
-    fig, axes = plt.subplots(1, len(maps), figsize=(5.2 * len(maps) + 0.8, 4.8), squeeze=False)
     plans = [cfg.plan() if isinstance(cfg, MapConfig) else as_plan(cfg) for cfg in configs]
+    # detection by signal-to-noise: the probability of a fix beside (below) each accuracy map
+    heard = [getattr(cfg, "availability", None) if p["acoustics"]["detection"] == "snr" else None
+             for cfg, p in zip(configs, plans)]
+    rows = 2 if any(a is not None for a in heard) else 1
+    fig, axes = plt.subplots(rows, len(maps), figsize=(5.2 * len(maps) + 0.8, 4.8 * rows), squeeze=False)
     systems = [p.system for p in plans]
     step = float(east[1] - east[0]) if len(east) > 1 else 1.0
     for k, (ax, label, cfg, m) in enumerate(zip(axes[0], labels, configs, maps)):
@@ -260,6 +387,22 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
     bar.locator = LogLocator(subs=(1.0, 2.0, 5.0))  # 0.1, 0.2, 0.5, 1, 2, 5 ... labelled, not only the decades
     bar.formatter = ScalarFormatter()
     bar.update_ticks()
+    if rows == 2:
+        for k, (ax, available) in enumerate(zip(axes[1], heard)):
+            if available is None:  # fixed detection: no site to hear at
+                ax.set_axis_off()
+                continue
+            shade = ax.pcolormesh(east, north, available, vmin=0.0, vmax=1.0, cmap="magma", shading="nearest")
+            if np.ptp(available) > 0:
+                lines = ax.contour(east, north, available, levels=[0.5, 0.9, 0.99], colors="c", linewidths=1.0)
+                ax.clabel(lines, fmt=lambda v: f"{v:g}", fontsize=8)
+            ax.set_aspect("equal")
+            ax.set_xlabel("East [m]")
+            if k == 0:
+                ax.set_ylabel("North [m]")
+            ax.set_title("probability of a fix in one cycle\n(the map above is blank where it is below "
+                         f"{MIN_AVAILABILITY:g})", fontsize=9)
+        fig.colorbar(shade, ax=axes[1].tolist(), label="availability [0-1]")
     return fig
 
 

@@ -60,7 +60,7 @@ DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
 REACH_RATIO = 100.0
 #: Per-run flags computed besides the compiled pass (:func:`run_flags`): in ``summary.json`` and in a campaign's
 #: rows.
-FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry")
+FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry", "detected_pct")
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position, ``scipy.stats.chi2.ppf(0.95, 3)`` written out
 #: (a test holds it to scipy's), so that a campaign's worker processes need not import scipy.stats.
 NEES_95 = 7.814727903251179
@@ -260,14 +260,17 @@ def run_flags(columns: Mapping[str, np.ndarray], spread: np.ndarray, n_beacons: 
     dict
         ``updates`` (int, slots whose received range the receiver used), ``fix_steps`` (int, steps with a
         multilateration fix), ``max_distance`` (largest horizontal distance of the diver from the platform
-        reference [m]) and ``beyond_geometry`` (bool, ``max_distance > REACH_RATIO · spread``), each (B,).
+        reference [m]), ``beyond_geometry`` (bool, ``max_distance > REACH_RATIO · spread``) and ``detected_pct``
+        (the share of the slots sent whose packet was received [%]; NaN before the first slot), each (B,).
     """
     beacon = np.asarray(columns["beacon_id"])
     received = (np.asarray(columns["packet_valid"]) > 0.5) & (beacon >= 1) & (beacon <= n_beacons)
-    _, fresh = slots(columns["packet_seq"], received)
+    slot, fresh = slots(columns["packet_seq"], received)
     updates = (fresh & ~(np.asarray(columns["gated"]) > 0.5)).sum(axis=0)
     fix_steps = (np.asarray(columns["instr_valid"]) > 0.5).sum(axis=0)
     distance = np.hypot(np.asarray(columns["true_x"], dtype=float), np.asarray(columns["true_y"], dtype=float))
     reach = distance.max(axis=0) if distance.shape[0] else np.zeros(distance.shape[1:])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        detected = 100.0 * fresh.sum(axis=0) / slot.sum(axis=0)
     return {"updates": updates.astype(np.int64), "fix_steps": fix_steps.astype(np.int64), "max_distance": reach,
-            "beyond_geometry": reach > REACH_RATIO * np.asarray(spread, dtype=float)}
+            "beyond_geometry": reach > REACH_RATIO * np.asarray(spread, dtype=float), "detected_pct": detected}

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
-from sblsim.models.acoustics.core import check_in_flight
+from sblsim.models.acoustics.core import check_in_flight, check_slot
 from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
@@ -270,7 +270,8 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
 
 def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
     """Refuse the runs whose channel had more packets in flight than it holds (its ``overflow_travel_time``
-    output, never reset in a run: :func:`sblsim.models.acoustics.core.check_in_flight`), before anything of
+    output, never reset in a run: :func:`sblsim.models.acoustics.core.check_in_flight`), or heard an exchange
+    into the next slot (``slot_overrun``: :func:`sblsim.models.acoustics.core.check_slot`), before anything of
     them is written.
 
     Raises
@@ -285,6 +286,9 @@ def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
     if np.any(refused > 0.0):  # the runs of a batch share the sampling time; name the longest turnaround of them
         check_in_flight(cfgs[0]["simulation"]["sampling_time"], max(turnaround(c) for c in cfgs),
                         float(np.max(refused)))
+    if "slot_overrun" in channel.output_names:  # detection by signal-to-noise: a packet heard into the next slot
+        overrun = channel.output_vector()[channel.output_names.index("slot_overrun")]
+        check_slot(cfgs[0]["simulation"]["sampling_time"], float(np.max(overrun, initial=0.0)))
 
 
 def _advance(bar: Progress, width: int, steps: int) -> None:

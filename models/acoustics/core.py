@@ -85,13 +85,17 @@ import math
 from typing import Any, Mapping
 
 import casadi as ca
+import numpy as np
 
+from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics.detection import NO_SNR, SITE, family_levels, first_detected
 from sblsim.models.acoustics.rays import (
     RAY_BOUNDS,
     RAY_GRID,
     RAY_TABLE,
     RAY_TABLE_ROWS,
     first_arrival_grid,
+    profile_arrays,
     ray_grid,
     ray_values,
 )
@@ -99,7 +103,7 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, n
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import NO_ROW, get_row, put_row, sample_due, select
+from sblsim.models.expressions import NO_ROW, get_row, lookup, put_row, sample_due, select
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -108,10 +112,11 @@ from sblsim.models.platform.core import (
     beacon_variables,
 )
 from sblsim.models.platform.geometry import rotation_ned
+from sblsim.models.platform.waves import WAVE_HEIGHT
 from sblsim.models.program import ProgramBuilder, Stream
 from sblsim.models.systems import interface_system
 
-_CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK = range(5)
+_CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK, _DETECTION = range(6)
 #: Ranging modes: one-way travel time (synchronized clocks) or two-way (interrogation and reply).
 RANGING = ("owtt", "twtt")
 #: Smallest cosine of a ray's angle off the USBL array's axis the angle noise is scaled with (84°).
@@ -205,6 +210,107 @@ RAY_TABLE_VARIABLES: tuple[Variable, ...] = (
     for name, what, end in zip(RAY_BOUNDS, ("source depth",) * 2 + ("receiver depth",) * 2
                                + ("horizontal distance",) * 2, ("min", "max") * 3))
 
+#: What is heard: the paper's fixed percentages and σ, or the sonar equation per eigenray (:mod:`.sonar`).
+DETECTION = ("fixed", "snr")
+#: Uniform numbers of a slot's detection draws (``snr``): three eigenray families per leg of up to three legs
+#: (USBL: interrogation, reply, downlink), then the decoding of the packet's data.
+DETECTION_DRAWS = 10
+#: What detection by signal-to-noise adds to the channel (declared after the rest: their value references stay).
+DETECTION_VARIABLES: tuple[Variable, ...] = (
+    Variable("detection", "parameter", "String", "fixed", choices=DETECTION,
+             description="What is heard: fixed loss_pct, outlier_pct and sigma_range (the paper's), or the sonar "
+                         "equation's SNR per eigenray (snr; needs propagation = ray)"),
+    Variable("frequency", "parameter", "Real", 25000.0, "Hz", "snr: centre frequency of the signal",
+             min=200.0, max=1e6),
+    Variable("bandwidth", "parameter", "Real", 5000.0, "Hz", "snr: bandwidth of the signal (the noise band)",
+             min=1.0, max=1e6),
+    Variable("source_level", "parameter", "Real", 190.0, "dB",
+             "snr: source level of every transmitter [dB re 1 uPa at 1 m]", min=100.0, max=250.0),
+    Variable("detection_threshold", "parameter", "Real", 12.0, "dB",
+             "snr: SNR of a 50 % detection of an arrival", min=-30.0, max=60.0),
+    Variable("directivity_index", "parameter", "Real", 0.0, "dB", "snr: receiving directivity index",
+             min=0.0, max=40.0),
+    Variable("shipping", "parameter", "Real", 0.5, "1", "snr: shipping activity of the ambient noise (Wenz)",
+             min=0.0, max=1.0),
+    Variable("bottom", "parameter", "String", "sand", choices=tuple(sonar.BOTTOMS),
+             description="snr: sea-floor type of the bottom reflection (fluid half-space, docs/model.md)"),
+    Variable("reference_snr", "parameter", "Real", 20.0, "dB",
+             "snr: the SNR at which sigma_range and the USBL angle sigma hold (below it they grow as the "
+             "Cramer-Rao bounds)", min=-30.0, max=100.0),
+    Variable("fluctuation", "parameter", "Real", 3.0, "dB",
+             "snr: std of the received level's log-normal fluctuation (0: a sharp threshold)", min=0.0, max=20.0),
+    Variable("decoding_margin", "parameter", "Real", 3.0, "dB",
+             "snr: SNR above the detection threshold the packet's data needs to be decoded", min=0.0, max=60.0),
+    Variable("absorption", "parameter", "Real", 0.0, "dB/m",
+             "snr: volume absorption (Francois-Garrison at frequency, temperature, salinity; filled by the "
+             "orchestrator)", min=0.0, max=1.0, scope="fmu"),
+    Variable("beaufort", "parameter", "Integer", 2,
+             description="snr: sea state of the wind noise and the surface's roughness (platform.beaufort)",
+             min=0, max=len(WAVE_HEIGHT) - 1, scope="fmu"),
+    Variable("snr", "output", "Real", 0.0, "dB",
+             "snr: SNR of the arrival the range came from (none heard: of the strongest; 0 with fixed detection)",
+             discrete=True, min=NO_SNR, max=400.0),
+    Variable("detection_probability", "output", "Real", 0.0, "1",
+             "snr: detection probability of the arrival the range came from (none heard: of the strongest; "
+             "0 with fixed detection)", discrete=True, min=0.0, max=1.0),
+)
+#: The channel's refusal signal of detection by signal-to-noise (an output of the channel alone).
+OVERRUN: tuple[Variable, ...] = (
+    Variable("slot_overrun", "output", "Real", 0.0, "s",
+             "snr: longest time from a slot's transmit epoch to the last heard arrival of its exchange (multipath "
+             "included) beyond the slot (0: none; the orchestrator refuses such a run)", discrete=True),
+)
+
+
+def site_numbers(p: Mapping[str, Any]) -> Any:
+    """The site's numbers (:data:`~sblsim.models.acoustics.detection.SITE`) from the channel's parameters ``p``
+    (by name; casadi symbols or numbers): the ambient noise over the signal's band from the Beaufort number's
+    wind and the shipping (Wenz), the probable wave height of the Beaufort number, the sea floor's row of
+    :data:`~sblsim.models.acoustics.sonar.BOTTOMS` (``p["bottom"]`` its index).
+
+    Returns
+    -------
+    casadi.SX or casadi.DM, shape (len(SITE), 1)
+    """
+    floor = [lookup(p["bottom"], [sonar.BOTTOMS[name][j] for name in sonar.BOTTOMS]) for j in range(3)]
+    noise = sonar.noise_level(p["frequency"], p["bandwidth"], sonar.wind_speed(p["beaufort"]), p["shipping"])
+    return ca.vertcat(p["source_level"], p["detection_threshold"], p["directivity_index"], p["fluctuation"],
+                      p["frequency"], p["absorption"], noise, sonar.wave_height(p["beaufort"]), *floor)
+
+
+def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
+                levels: ca.Function | None = None) -> dict[str, np.ndarray]:
+    """The eigenrays between pairs of points and what the channel's site makes of them (numbers, for maps).
+
+    Parameters
+    ----------
+    parameters : mapping
+        The channel's FMU parameters (a plan's ``component_parameters("acoustics")``; missing ones take their
+        declared start, String choices as text).
+    sources, receivers : array_like, shape (K, 3)
+        NED positions [m] of each pair's ends.
+    levels : casadi.Function, optional
+        :func:`~sblsim.models.acoustics.detection.family_levels` as compiled code (default: casadi's own
+        evaluation of it, the same numbers, far slower).
+
+    Returns
+    -------
+    dict
+        ``tau`` [s], ``valid``, ``snr`` [dB], ``pd``, each (K, 3) (families direct, surface, bottom;
+        :func:`~sblsim.models.acoustics.detection.family_levels`).
+    """
+    declared = {v.name: v for v in Acoustics.fmu_parameters_declared()}
+    p = {name: v.start for name, v in declared.items() if not v.in_table} | dict(parameters)
+    rows = PROFILE.rows(p, "sound_speed_rows")
+    nodes, speeds = profile_arrays(rows) if rows.shape[0] else (np.zeros(NODES), np.zeros(NODES))
+    numeric = {**p, "bottom": float(declared["bottom"].choices.index(p["bottom"]))}
+    site = np.asarray(ca.evalf(site_numbers(numeric))).ravel()
+    sources, receivers = np.atleast_2d(np.asarray(sources, float)), np.atleast_2d(np.asarray(receivers, float))
+    horizontal = np.hypot(*(receivers[:, :2] - sources[:, :2]).T)
+    f = (family_levels() if levels is None else levels).map(sources.shape[0])
+    out = f(sources[:, 2], receivers[:, 2], horizontal, float(p["water_depth"]), float(rows.shape[0] > 0),
+            float(p["sound_speed_true"]), nodes, speeds, site)
+    return {name: np.asarray(out[k]).T for k, name in ((0, "tau"), (3, "valid"), (4, "snr"), (5, "pd"))}
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
     """Refuse a run whose packets stay in flight longer than the channel can hold them.
@@ -244,6 +350,30 @@ def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None
         f"packets in flight, and the channel holds {FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} "
         f"sampling times); give a simulation.sampling_time above {late / (FLIGHT_CAPACITY - 1):.4g} s or a shorter "
         "acoustics.turnaround")
+
+
+def check_slot(slot_period: float, elapsed: float) -> None:
+    """Refuse a run of detection by signal-to-noise whose exchanges were still heard when the next slot began.
+
+    Parameters
+    ----------
+    slot_period : float
+        T = ``simulation.sampling_time`` [s].
+    elapsed : float
+        The longest time from a slot's transmit epoch to the last heard arrival of its exchange, multipath
+        included (the channel's ``slot_overrun``; 0: none beyond its slot) [s].
+
+    Raises
+    ------
+    ModelError
+        One line naming ``simulation.sampling_time``, the longest heard arrival plus its multipath spread and
+        the shortest sampling time that holds it.
+    """
+    if elapsed > 0.0:
+        raise ModelError(
+            f"simulation.sampling_time: {slot_period:g} s is shorter than the longest heard arrival plus its "
+            f"multipath spread, {elapsed:.4g} s after its slot began: the next slot's packet would overlap it; "
+            f"give a simulation.sampling_time of at least {elapsed:.4g} s")
 
 
 class Acoustics(Component):
@@ -305,13 +435,13 @@ class Acoustics(Component):
         )
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
-                    + RAY_TABLE_VARIABLES)
+                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
-                + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES)
+                + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -326,6 +456,10 @@ class Acoustics(Component):
         rows = profile_table(values.get("sound_speed_profile", "constant"), values.get("sound_speed_table", ""),
                              values.get("temperature", 15.0), values.get("salinity", 35.0))
         out.update(PROFILE.values(rows, "sound_speed_rows"))
+        # volume absorption at the signal's frequency, at the middle of the water column (0 m without a depth)
+        out["absorption"] = float(sonar.absorption(
+            values.get("frequency", 25000.0), values.get("temperature", 15.0), values.get("salinity", 35.0),
+            0.5 * values.get("water_depth", 0.0)))
         return out
 
     @classmethod
@@ -343,12 +477,13 @@ class Acoustics(Component):
         packet = [v.name for v in cls.outputs(n)]
         # what a packet in flight carries: every output but the refusal signal and what its slot counter gives
         # (the beacon and the transmit epoch, computed again at delivery as the slot computed them)
-        carried = [name for name in packet if name not in {v.name for v in OVERFLOW} | {"beacon_id", "tx_time"}]
+        carried = [name for name in packet
+                   if name not in {v.name for v in OVERFLOW + OVERRUN} | {"beacon_id", "tx_time"}]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
                            + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
                                     ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
-                                    ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS)])
+                                    ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS), ("site", len(SITE))])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
@@ -366,7 +501,8 @@ class Acoustics(Component):
             table = ca.if_else(p["ray_table_rows"] > 0, table, ca.MX.zeros(table.shape), True)
             return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:],
                     "ray_bounds": bounds, "ray_grid": ray_grid([bounds[j] for j in range(len(RAY_BOUNDS))]),
-                    "ray_values": table}
+                    "ray_values": table,
+                    "site": site_numbers(p)}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -377,9 +513,11 @@ class Acoustics(Component):
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
 
-        def slot(ranging, propagation):
+        def slot(ranging, propagation, detection):
             """The handler of a slot: of the interface's system (USBL) or of ``ranging`` (SBL and LBL), with the
-            travel times of ``propagation``."""
+            travel times of ``propagation`` and what ``detection`` hears."""
+            snr_mode = detection == "snr"
+
             def handler(x, u, p, d, w, t, h):
                 k = x["k"] + 1
                 t_k = x["t0"] + k * p["slot_period"]
@@ -388,11 +526,15 @@ class Acoustics(Component):
                 sent = ca.vertcat(*[select(i, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
                 position = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]])
                 velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
+                heard_draws = w[_DETECTION] if snr_mode else None
 
-                def leg(offset, solve):
+                def leg(offset, solve, draw=0):
                     """Travel time and length between the beacon and the diver at ``t_k + offset`` [s] (None: 0),
-                    plus the travel time itself when ``solve`` (fixed-point iterations), and the eigenray's
-                    ``(launch, arrival, kind)`` from the beacon (``ray``; the chord's angles and 1 when straight)."""
+                    plus the travel time itself when ``solve`` (fixed-point iterations), the eigenray's
+                    ``(launch, arrival, kind)`` from the beacon (``ray``; the chord's angles and 1 when straight)
+                    and the SNR and detection probability of that arrival (``snr``: the first **detected** of the
+                    leg's eigenrays with the uniforms ``draw … draw + 2``, kind 0 when none is; else 0, 0), and
+                    the travel time of its latest detected arrival (``snr``; else the travel time)."""
                     def path(tau):
                         receive = position + velocity * (tau if offset is None else offset + tau)
                         distance = ca.norm_2(receive - beacon)
@@ -417,13 +559,19 @@ class Acoustics(Component):
                     tau, distance, receive, angles = path(0.0)
                     for _ in range(OWTT_ITERATIONS if solve else 0):
                         tau, distance, receive, angles = path(tau)
-                    return tau, distance, receive, angles
+                    if not snr_mode:
+                        return tau, distance, receive, angles, 0.0, 0.0, tau
+                    heard = hear(beacon, receive, p, d, heard_draws[draw:draw + 3])
+                    return heard[0], distance, receive, heard[1:4], heard[4], heard[5], heard[6]
 
                 draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
-                valid = draws[0] >= p["loss_pct"] / 100.0
-                outlier = draws[1] < p["outlier_pct"] / 100.0
-                excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
                 drift = p["clock_drift_ppm"] * 1e-6
+                if snr_mode:  # what is heard decides loss and multipath (the percentages are not drawn)
+                    valid, outlier, excess = 1, 0, 0.0
+                else:
+                    valid = draws[0] >= p["loss_pct"] / 100.0
+                    outlier = draws[1] < p["outlier_pct"] / 100.0
+                    excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
 
                 def two_way(up, down):
                     """Range, true range and round trip of a two-way exchange: ``up`` and ``down`` are the legs."""
@@ -435,37 +583,65 @@ class Acoustics(Component):
                     turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
                 if direction:  # the transceiver interrogates; the diver replies from where it is then
                     up = leg(None, True)
-                    reply = leg(up[0] + turnaround, False)
+                    reply = leg(up[0] + turnaround, False, 3)
                     up_kind = up[3][2]
                     rng, distance, tau = two_way(up, reply)
-                    valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # the reply, the downlink
                     # the surface measures at the reply's arrival and sends the fix down to the diver
-                    arrival = t_k + tau + leg(tau, True)[0]
+                    downlink = leg(tau, True, 6)
+                    arrival = t_k + tau + downlink[0]
+                    if snr_mode:  # the fix reaches the diver when the downlink is heard
+                        valid = downlink[3][2] > 0
+                    else:
+                        valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # reply, downlink
+                    timing, data = (up, reply), downlink
+                    spread_end = tau + downlink[6]  # the downlink's multipath ends the exchange
                 elif ranging == "owtt":
                     owtt_leg = leg(None, True)
                     tau, distance, up_kind = owtt_leg[0], owtt_leg[1], 1.0
                     measured = tau + drift * (t_k - x["t0"] + tau)
                     rng = p["sound_speed_assumed"] * measured
                     arrival = t_k + tau
+                    timing, data = (owtt_leg,), owtt_leg
+                    spread_end = owtt_leg[6]
                 else:  # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
                     up = leg(None, False)
-                    down = leg(up[0] + turnaround, True)
+                    down = leg(up[0] + turnaround, True, 3)
                     up_kind = up[3][2]
                     rng, distance, tau = two_way(up, down)
                     arrival = t_k + tau
+                    timing, data = (up, down), down
+                    spread_end = up[0] + turnaround + down[6]
                 # the last leg's eigenray: from the beacon to the diver, or the diver's reply to the transceiver
                 last = reply if direction else (down if ranging == "twtt" else owtt_leg)
                 launch, arrival_angle, kind = last[3]
                 if direction:  # reversed: the reply leaves the diver and arrives at the transceiver
                     launch, arrival_angle = -arrival_angle, -launch
                 kind = ca.if_else(ca.logic_and(kind > 0, up_kind > 0), kind, 0.0)
-                valid = ca.logic_and(valid, kind > 0)  # a shadow zone: no arrival, the packet is lost
-                rng = rng + p["sigma_range"] * noise + excess
+                valid = ca.logic_and(valid, kind > 0)  # a shadow zone (or nothing heard): the packet is lost
+                scale, angle_scale = 1.0, 1.0
+                if snr_mode:
+                    # the packet's data needs its margin above the threshold (its own draw); a range from a
+                    # reflected arrival on any leg carries that path's excess
+                    decoded = heard_draws[DETECTION_DRAWS - 1] < sonar.detection_probability(
+                        data[4], p["detection_threshold"] + p["decoding_margin"], p["fluctuation"])
+                    valid = ca.logic_and(valid, decoded)
+                    for part in timing:
+                        outlier = ca.logic_or(outlier, part[3][2] > 1.5)
+                    # the timing noise of each leg grows below the reference SNR (their mean variance)
+                    scales = [sonar.accuracy_scale(part[4], p["reference_snr"]) for part in timing]
+                    scale = ca.sqrt(sum(s_ * s_ for s_ in scales) / len(scales))
+                    angle_scale = scales[-1]
+                rng = rng + p["sigma_range"] * scale * noise + excess
                 out = {"launch_angle": launch, "arrival_angle": arrival_angle, "arrival": kind,
                        "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
                        "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
-                       "outlier": ca.logic_and(outlier, valid), "rx_time": arrival}
+                       "outlier": ca.logic_and(outlier, valid), "rx_time": arrival,
+                       "snr": last[4], "detection_probability": last[5]}
                 out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
+                overrun = {}
+                if snr_mode:  # the exchange's last heard arrival after the next slot began: refused after the run
+                    overrun = {"slot_overrun": ca.if_else(spread_end > p["slot_period"], ca.fmax(
+                        x["slot_overrun"], spread_end), x["slot_overrun"])}
                 if direction:
                     arrives = reply[2] - beacon
                     if propagation == "ray":  # along the reply's eigenray: the chord's azimuth (a range-independent
@@ -477,9 +653,17 @@ class Acoustics(Component):
                         grazing = reply[3][0]
                         arrives = ca.vertcat(north * ca.cos(grazing), east * ca.cos(grazing), ca.sin(grazing))
                     out.update(zip(("azimuth", "elevation"),
-                        (ca.if_else(valid, a, 0.0) for a in doa(arrives, u, p, w[_ANGLE_NOISE]))))
-                return {"k": k, **send(x, p, out, arrival - t_k)}
+                        (ca.if_else(valid, a, 0.0) for a in doa(arrives, u, p, w[_ANGLE_NOISE], angle_scale))))
+                return {"k": k, **send(x, p, out, arrival - t_k), **overrun}
             return handler
+
+        def hear(source, receive, p, d, draws):
+            """The first detected eigenray from ``source`` to ``receive`` (3, 1) [m, NED] with the uniforms
+            ``draws`` (3: one per family): :func:`~sblsim.models.acoustics.detection.first_detected`."""
+            families = family_levels()(source[2], receive[2], ca.norm_2(receive[:2] - source[:2]), p["water_depth"],
+                                       p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"], d["speeds"],
+                                       d["site"])
+            return first_detected(*families, draws)
 
         def send(x, p, out, elapsed):
             """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
@@ -526,12 +710,13 @@ class Acoustics(Component):
             used = ca.vertcat(*[ca.if_else(at[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
             return {**out, "q_used": used, "delivered_end": t + h}
 
-        def doa(direction, u, p, w_angle):
-            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1)."""
+        def doa(direction, u, p, w_angle, scale=1.0):
+            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1), the noise
+            ``scale`` times the configured one."""
             array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
             # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
             seen = ca.mtimes(array.T, direction / ca.fmax(ca.norm_2(direction), 1e-9))
-            sigma = p["usbl_angle_sigma_deg"] * (ca.pi / 180.0) / ca.fmax(seen[2], USBL_COS_FLOOR)
+            sigma = scale * p["usbl_angle_sigma_deg"] * (ca.pi / 180.0) / ca.fmax(seen[2], USBL_COS_FLOOR)
             azimuth = ca.atan2(seen[1], seen[0]) + sigma * w_angle[0]
             elevation = ca.atan2(seen[2], ca.sqrt(seen[0] ** 2 + seen[1] ** 2)) + sigma * w_angle[1]
             measured = ca.vertcat(ca.cos(elevation) * ca.cos(azimuth), ca.cos(elevation) * ca.sin(azimuth),
@@ -544,19 +729,25 @@ class Acoustics(Component):
 
         streams = (Stream(_CHANNEL_UNIFORM, "uniform", 3), Stream(_RANGE_NOISE, "normal", 1))
         events = []
-        for propagation in PROPAGATION:  # a slot event per (ranging, propagation): a run computes its own legs
+        # a slot event per (ranging, propagation, detection): a run computes its own legs and what it hears
+        modes = [(propagation, "fixed") for propagation in PROPAGATION] + [("ray", "snr")]
+        for propagation, detection in modes:
+            chosen = {"propagation": (propagation,), "detection": (detection,)}
+            heard = (Stream(_DETECTION, "uniform", DETECTION_DRAWS),) if detection == "snr" else ()
+            suffix = f"{propagation}" + ("_snr" if detection == "snr" else "")
             if direction:
-                events.append(b.event(f"slot_{propagation}", due, slot("twtt", propagation), streams + (
+                events.append(b.event(f"slot_{suffix}", due, slot("twtt", propagation, detection), streams + (
                     Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2),
-                    Stream(_DOWNLINK, "uniform", 1)), when={"propagation": (propagation,)}))
+                    Stream(_DOWNLINK, "uniform", 1)) + heard, when=chosen))
                 continue
             for ranging in RANGING:
                 extra = (Stream(_TURNAROUND, "normal", 1),) if ranging == "twtt" else ()
-                events.append(b.event(f"slot_{ranging}_{propagation}", due, slot(ranging, propagation),
-                                      streams + extra, when={"ranging": (ranging,), "propagation": (propagation,)}))
+                events.append(b.event(f"slot_{ranging}_{suffix}", due, slot(ranging, propagation, detection),
+                                      streams + extra + heard, when={"ranging": (ranging,), **chosen}))
         events.append(b.event("deliver", deliverable, deliver))  # after the slots: a packet is sent, then arrives
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "check_in_flight", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "OVERRUN", "check_in_flight", "check_slot",
+           "site_levels", "site_numbers", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
            "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

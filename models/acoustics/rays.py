@@ -176,6 +176,12 @@ def _speed() -> ca.Function:
     return ca.Function("sblsim_ray_speed", [z, nodes, speeds], [f(inside, nodes, speeds)])
 
 
+def sound_speed_at(z, nodes, speeds):
+    """The c-linear profile's speed [m/s] at depth ``z`` [m] (constant beyond the end nodes): ``nodes``, ``speeds``
+    (NODES, 1) as :func:`~sblsim.models.acoustics.sound_speed.node_speeds` pads them."""
+    return _speed()(z, nodes, speeds)
+
+
 def _interval_max(u, v, nodes, speeds):
     """The fastest speed over ``[u, v]`` [m/s] (its ends and the nodes inside)."""
     c = _speed()
@@ -907,4 +913,4 @@ def chord_elevation(zt, elevation, tau, nodes, speeds):
 __all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "NEWTON_ITERATIONS", "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID",
            "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE", "TRACE_ITERATIONS", "arrivals",
            "chord_elevation", "eigenray_families", "eigenray_paths", "eigenray_table", "exact_points", "first_arrival",
-           "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range"]
+           "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range", "sound_speed_at"]

@@ -75,6 +75,9 @@ class System:
     bound_fixed, bound_steps : tuple of str
         The per-run and per-step inputs of the system's own compiled PCRB (:meth:`bound_function`); empty
         for a system whose bound is the metrics pass's range bound.
+    fix_packets : int
+        The packets of one cycle a fix needs (an availability map's "probability of a fix"): three ranges
+        (with the depth, the fix of two is ambiguous), or one packet of range and direction.
     """
 
     name: ClassVar[str] = ""
@@ -92,6 +95,7 @@ class System:
     places_transducers: ClassVar[bool] = False
     bound_fixed: ClassVar[tuple[str, ...]] = ()
     bound_steps: ClassVar[tuple[str, ...]] = ()
+    fix_packets: ClassVar[int] = 3
 
     def __repr__(self) -> str:
         return f"<positioning system {self.name}>"

@@ -75,6 +75,7 @@ from sblsim.models.bound import (
     MOTION,
     information_update,
     measurement_information,
+    per_point,
     predicted,
     stepped,
 )
@@ -396,9 +397,10 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: 
         Target positions, NED [m].
     transceiver : ndarray, shape (3,)
         The transceiver's position, NED [m].
-    range_variance, position_variance : float
-        σ_r², the range noise, and σ_b², the broadcast transceiver position's error per axis [m²].
-    angle_sigma_deg : float
+    range_variance, position_variance : float or ndarray, shape (M,)
+        σ_r², the range noise, and σ_b², the broadcast transceiver position's error per axis [m²] (an array:
+        one per point, as the other numbers may be).
+    angle_sigma_deg : float or ndarray, shape (M,)
         Direction-of-arrival std on the array's axis [deg].
     attitude_variance : float
         σ_att², the IMU attitude error [rad²].
@@ -412,9 +414,9 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: 
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
     f = fix_information().map(points.shape[0])
-    return np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), float(range_variance),
-                        float(position_variance), float(angle_sigma_deg), float(attitude_variance),
-                        float(depth_variance))[1]).ravel()
+    return np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), per_point(range_variance),
+                        per_point(position_variance), per_point(angle_sigma_deg), per_point(attitude_variance),
+                        per_point(depth_variance))[1]).ravel()
 
 
 @register
@@ -426,6 +428,7 @@ class USBL(System):
     code = 2
     title = "ultra-short baseline"
     words = "one transceiver, 0.5 deg on axis"
+    fix_packets = 1
     compare_defaults = ("platform.layout=cross", "platform.usbl_angle_sigma_deg=0.5")  # the transceiver at (0, 0, h)
     marker = "transceiver"
     interface_beacons = 1

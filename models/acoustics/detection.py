@@ -1,0 +1,147 @@
+"""What is heard at a site: the SNR and detection probability of every eigenray between two depths.
+
+For each eigenray family of :func:`sblsim.models.acoustics.rays.arrivals` (direct, surface-reflected,
+bottom-reflected), the transmission loss is the ray tube's geometric spreading plus the volume absorption along
+the path plus the boundary's reflection loss (the surface's roughness at the grazing angle where the ray meets
+it, the sea floor's Rayleigh coefficient likewise; Snell's invariant gives those angles from the launch angle),
+and the sonar equation gives the arrival's SNR and its detection probability (:mod:`sblsim.models.acoustics.sonar`).
+The channel draws which arrivals are detected and ranges on the first detected one; the availability map takes
+the probabilities themselves (:func:`packet_probability`).
+
+Every transmitter has the same source level and every receiver the same directivity index and ambient noise:
+a site's, not a device's, numbers. The fluctuations of the arrivals are independent.
+
+This module imports nothing from the FMI or orchestrator layers.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics.rays import arrivals, sound_speed_at
+from sblsim.models.acoustics.sound_speed import NODES
+
+#: The site's numbers :func:`family_levels` takes, in this order (units: dB, dB, dB, dB, Hz, dB/m, dB, m, 1, m/s,
+#: dB/λ): source level [dB re 1 µPa at 1 m], detection threshold, receiving directivity index, fluctuation std,
+#: frequency, absorption, ambient noise level over the band [dB re 1 µPa], probable wave height, and the sea
+#: floor's density ratio, compressional speed and attenuation (:data:`~sblsim.models.acoustics.sonar.BOTTOMS`).
+SITE = ("source_level", "detection_threshold", "directivity_index", "fluctuation", "frequency", "absorption",
+        "noise", "wave_height", "bottom_density", "bottom_speed", "bottom_attenuation")
+#: SNR [dB] reported for an eigenray that does not exist.
+NO_SNR = -200.0
+
+
+@lru_cache(maxsize=1)
+def family_levels() -> ca.Function:
+    """``(zs, zr, x, depth, profile, constant, nodes, speeds, site) -> (tau, launch, arrival, valid, snr, pd)``.
+
+    Parameters (of the function)
+    ----------------------------
+    zs, zr : depth of the source and of the receiver [m] (positive down).
+    x : horizontal distance between them [m].
+    depth : water depth [m]; 0: no boundary (the reflected rows are invalid).
+    profile : 1 to use the table ``nodes``, ``speeds``; 0 for the constant speed ``constant`` [m/s].
+    nodes, speeds : (NODES, 1) the padded profile (:func:`~sblsim.models.acoustics.sound_speed.node_speeds`).
+    site : (len(SITE), 1) the site's numbers (:data:`SITE`).
+
+    Returns (of the function)
+    -------------------------
+    Each (3, 1), rows direct, surface-reflected, bottom-reflected: travel time [s], launch and arrival grazing
+    angles [rad] (positive downward), valid (1: the eigenray exists), SNR [dB] (floored at :data:`NO_SNR`, which
+    it is when the eigenray does not exist) and detection probability (0 when it does not).
+    """
+    zs, zr, x, depth, profile, constant = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "profile", "constant"))
+    nodes, speeds, site = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES), ca.MX.sym("site", len(SITE))
+    s = {name: site[j] for j, name in enumerate(SITE)}
+    tau, launch, arrive, valid, spreading, length = arrivals(profile, zs, zr, x, depth, constant, nodes, speeds)
+
+    def speed(z):
+        return ca.if_else(profile > 0.5, sound_speed_at(z, nodes, speeds), constant)
+
+    # where a reflected ray meets its boundary: Snell's invariant from its launch angle
+    source_speed, surface_speed, bottom_speed = speed(zs), speed(0.0), speed(depth)
+    at_surface = ca.acos(ca.fmin(ca.cos(launch[1]) * surface_speed / source_speed, 1.0))
+    at_bottom = ca.acos(ca.fmin(ca.cos(launch[2]) * bottom_speed / source_speed, 1.0))
+    boundary = (0.0, sonar.surface_loss(at_surface, s["frequency"], s["wave_height"], surface_speed),
+                sonar.half_space_loss(at_bottom, s["bottom_density"], s["bottom_speed"] / bottom_speed,
+                                      s["bottom_attenuation"]))
+    levels, chances = [], []
+    for j in range(3):
+        loss = spreading[j] + s["absorption"] * length[j] + boundary[j]
+        level = sonar.snr(s["source_level"], loss, s["noise"], s["directivity_index"])
+        exists = valid[j] > 0.5
+        levels.append(ca.if_else(exists, ca.fmax(level, NO_SNR), NO_SNR))
+        chances.append(ca.if_else(exists, sonar.detection_probability(level, s["detection_threshold"],
+                                                                      s["fluctuation"]), 0.0))
+    return ca.Function("sblsim_family_levels", [zs, zr, x, depth, profile, constant, nodes, speeds, site],
+                       [tau, launch, arrive, valid, ca.vertcat(*levels), ca.vertcat(*chances)],
+                       ["zs", "zr", "x", "depth", "profile", "constant", "nodes", "speeds", "site"],
+                       ["tau", "launch", "arrival", "valid", "snr", "pd"], {"never_inline": True})
+
+
+def first_detected(tau, launch, arrive, valid, snr, pd, draws):
+    """The first detected arrival of a leg: ``(τ, launch, arrival, kind, SNR, P_d)``.
+
+    Parameters
+    ----------
+    tau, launch, arrive, valid, snr, pd : casadi.SX, shape (3, 1)
+        The families of :func:`family_levels`.
+    draws : casadi.SX, shape (3, 1)
+        Uniform numbers on [0, 1): family j is detected when it exists and ``draws[j] < pd[j]``.
+
+    Returns
+    -------
+    tuple of casadi.SX
+        The earliest detected arrival's travel time [s], launch and arrival angles [rad], kind (1 direct,
+        2 surface, 3 bottom; 0 when none is detected), SNR [dB] and detection probability; when none is
+        detected, τ of the earliest eigenray (0 without any), and the SNR and P_d of the strongest. Last, the
+        travel time of the latest detected arrival [s] (the end of the leg's multipath spread; 0 when none).
+    """
+    best_tau, best, strongest, earliest, latest = ca.inf, [0.0] * 5, [NO_SNR, 0.0], ca.inf, 0.0
+    for j in range(3):
+        exists = valid[j] > 0.5
+        found = ca.logic_and(exists, draws[j] < pd[j])
+        latest = ca.if_else(found, ca.fmax(latest, tau[j]), latest)
+        better = ca.logic_and(found, tau[j] < best_tau)
+        best_tau = ca.if_else(better, tau[j], best_tau)
+        best = [ca.if_else(better, v, b) for v, b in zip((launch[j], arrive[j], j + 1.0, snr[j], pd[j]), best)]
+        louder = ca.logic_and(exists, snr[j] > strongest[0])
+        strongest = [ca.if_else(louder, snr[j], strongest[0]), ca.if_else(louder, pd[j], strongest[1])]
+        earliest = ca.if_else(ca.logic_and(exists, tau[j] < earliest), tau[j], earliest)
+    heard = best[2] > 0
+    first = ca.if_else(heard, best_tau, ca.if_else(earliest < ca.inf, earliest, 0.0))
+    return (first, best[0], best[1], best[2], ca.if_else(heard, best[3], strongest[0]),
+            ca.if_else(heard, best[4], strongest[1]), latest)
+
+
+def packet_probability(tau, pd, snr, threshold, margin, fluctuation) -> np.ndarray:
+    """Probability that a leg's packet is received: its first detected arrival's data decoded.
+
+    With the arrivals sorted by travel time, arrival j is the first detected with probability
+    ``P_j Π_{i before j} (1 − P_i)``; its data is decoded with the detection probability of its SNR at the
+    threshold plus the decoding margin.
+
+    Parameters
+    ----------
+    tau, pd, snr : ndarray, shape (..., 3)
+        Travel times [s], detection probabilities and SNRs [dB] of the families (an absent one: pd 0).
+    threshold, margin, fluctuation : float
+        Detection threshold, decoding margin and fluctuation std [dB].
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    tau, pd, snr = (np.asarray(v, dtype=float) for v in (tau, pd, snr))
+    order = np.argsort(np.where(pd > 0, tau, np.inf), axis=-1)
+    pd, snr = np.take_along_axis(pd, order, -1), np.take_along_axis(snr, order, -1)
+    missed_before = np.cumprod(np.concatenate([np.ones(pd.shape[:-1] + (1,)), 1.0 - pd[..., :-1]], -1), -1)
+    decoded = np.vectorize(lambda v: float(sonar.detection_probability(v, threshold + margin, fluctuation)))(snr)
+    return np.sum(pd * missed_before * decoded, axis=-1)
+
+
+__all__ = ["NO_SNR", "SITE", "family_levels", "first_detected", "packet_probability"]
