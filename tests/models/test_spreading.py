@@ -198,6 +198,129 @@ def test_spreading_against_solve_ivp(name, zs, zr, x):
         image = np.hypot(x, [zr - zs, zs + zr, 2 * depth - zs - zr][k])
         if 20 * np.log10(image) - want > rays.CAUSTIC_GAIN - 1.0:
             continue
+        print(f"{name} {zs} {zr} {x} family {k + 1}: ours {out[4][k]:.4f} dB, integrated {want:.4f} dB")
         assert out[4][k] == pytest.approx(want, abs=0.5)
         checked += 1
     assert checked >= 2
+
+
+# ------------------------------------------------------------------ Bellhop's incoherent transmission loss
+
+#: Bellhop's fan [deg] and its number of beams (geometric beams, run type 'I': incoherent TL).
+BELLHOP_FAN, BELLHOP_BEAMS = 89.0, 4001
+#: A point is left out where Bellhop's TL differs by more than this [dB] from one of its four neighbours on the grid
+#: (a caustic or a shadow edge, where ray theory and beams differ by construction).
+JUMP = 3.0
+#: The sites: (profile, water depth [m], bottom, source depth [m], receiver depths, ranges [m]). ``absorbing``: an
+#: acousto-elastic half-space matching the water (sound speed and density), which reflects nothing (the bottom
+#: family then carries nothing); ``rigid``: |R| = 1. The surface is a vacuum (|R| = 1) at both. The isovelocity site
+#: stops at 300 m range: beyond about 450 m the paths reflected twice or more (surface and bottom, which the
+#: families do not hold) add more than 2 dB there (the image sum of a pressure-release surface and a rigid bottom).
+BELLHOP_SITES = {
+    "munk": (munk_table(), 5000.0, "absorbing", 1000.0, np.arange(50.0, 4001.0, 100.0),
+             np.arange(200.0, 5001.0, 200.0)),
+    "isovelocity": (np.array([[0.0, 1500.0], [300.0, 1500.0]]), 300.0, "rigid", 20.0, np.arange(5.0, 296.0, 10.0),
+                    np.arange(10.0, 301.0, 10.0)),
+}
+_BELLHOP: dict[str, tuple] = {}
+
+
+def _bellhop_tl(table, source, depths, ranges, depth, bottom):
+    """Bellhop's incoherent TL [dB] on the grid (depths × ranges), no volume attenuation."""
+    pg = pytest.importorskip("pelagic")  # the test extra installs it: this skips only outside it
+    tab = table[table[:, 0] < depth]
+    tab = np.vstack([tab, [depth, np.interp(depth, table[:, 0], table[:, 1])]])
+    lines = ["'sblsim tl'", "1000.0", "1", "'CVW'", f"0 0.0 {depth:.4f}"]
+    lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
+    if bottom == "rigid":
+        lines += ["'R' 0.0"]
+    else:
+        lines += ["'A' 0.0", f"{depth:.4f} {tab[-1, 1]:.6f} 0.0 1.0 0.0 /"]
+    lines += ["1", f"{source:.6f} /", f"{len(depths)}", " ".join(f"{z:.6f}" for z in depths) + " /",
+              f"{len(ranges)}", " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'I'", f"{BELLHOP_BEAMS}",
+              f"{-BELLHOP_FAN} {BELLHOP_FAN} /", f"0.0 {depth + 100:.1f} {max(ranges) / 1000 + 0.2:.3f}"]
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "case.env")
+        with open(path, "w") as handle:
+            handle.write("\n".join(lines) + "\n")
+        result = pg.bellhop.load(path).run()
+    return np.asarray(result.field.transmission_loss()[0], dtype=float)
+
+
+def _site(name):
+    """Bellhop's TL and our families' outputs at the site ``name`` (computed once per session)."""
+    if name not in _BELLHOP:
+        table, depth, bottom, source, depths, ranges = BELLHOP_SITES[name]
+        theirs = _bellhop_tl(table, source, depths, ranges, depth, bottom)
+        zr, x = (a.ravel() for a in np.meshgrid(depths, ranges, indexing="ij"))
+        _BELLHOP[name] = (theirs, paths_at(table, source, zr, x, depth), zr, x)
+    return _BELLHOP[name]
+
+
+def _compare_with_bellhop(name, offset=0.0):
+    """Our incoherent TL (the families' intensities 10^(−spreading/10) summed; the bottom family only where the
+    bottom reflects) against Bellhop's outside the mask: (points compared, points masked, max |ΔTL| [dB], median)."""
+    table, depth, bottom, source, depths, ranges = BELLHOP_SITES[name]
+    theirs, out, zr, x = _site(name)
+    _tau, _launch, _arrival, valid, spreading, _length = out
+    spreading = spreading + offset
+    families = 3 if bottom == "rigid" else 2
+    intensity = np.sum(np.where(valid[:families] > 0, 10.0 ** (-spreading[:families] / 10.0), 0.0), axis=0)
+    ours = (-10.0 * np.log10(intensity)).reshape(theirs.shape)
+    # the mask: Bellhop's TL jumping between neighbours, and our tube capped at a caustic
+    padded = np.pad(theirs, 1, mode="edge")
+    jumps = np.max([np.abs(padded[1 + i:1 + i + theirs.shape[0], 1 + j:1 + j + theirs.shape[1]] - theirs)
+                    for i, j in ((-1, 0), (1, 0), (0, -1), (0, 1))], axis=0)
+    image = np.hypot(x, np.array([zr - source, zr + source, 2 * depth - source - zr]))
+    capped = np.any((valid > 0) & (np.abs(spreading - offset - (20 * np.log10(image) - rays.CAUSTIC_GAIN)) < 1e-9),
+                    axis=0).reshape(theirs.shape)
+    keep = (jumps <= JUMP) & ~capped & np.isfinite(theirs)
+    error = np.abs(ours - theirs)[keep]
+    return int(keep.sum()), int((~keep).sum()), float(error.max()), float(np.median(error))
+
+
+@pytest.mark.parametrize("name", list(BELLHOP_SITES))
+def test_bellhop_incoherent_tl(name):
+    """The families' summed intensities within 3 dB of Bellhop's incoherent TL at ≥ 200 receiver points outside the
+    mask (:data:`JUMP`, and our caustic cap): Munk with the source 1000 m deep, receivers to 4 km depth and 5 km
+    range (1000 points, a bottom that reflects nothing), and isovelocity water with a rigid bottom at 300 m (900
+    points, out to 300 m range). ``pytest -s`` prints the numbers."""
+    compared, masked, worst, median = _compare_with_bellhop(name)
+    print(f"{name}: {compared} points compared, {masked} masked, max |ΔTL| {worst:.3f} dB, median {median:.4f} dB")
+    assert compared >= 200
+    assert worst <= 3.0
+
+
+def test_bellhop_comparison_can_fail():
+    """The comparison fails for a loss 3.5 dB off everywhere (Munk)."""
+    compared, _masked, worst, _median = _compare_with_bellhop("munk", offset=3.5)
+    assert compared >= 200 and worst > 3.0
+
+
+# ------------------------------------------------------------------ the channel's function
+
+
+def test_arrivals_in_an_sx_expression_agree_with_first_arrival():
+    """``arrivals`` called with SX symbols (as the channel's event handlers call ``first_arrival_grid``) gives the
+    families of ``eigenray_paths``; its earliest valid row is ``first_arrival``'s eigenray, through the table and
+    through the constant speed."""
+    table = munk_table()
+    nodes, speeds = rays.profile_arrays(table)
+    sym = [ca.SX.sym(n) for n in ("use", "zs", "zr", "x", "depth", "c")]
+    nd, sp = ca.SX.sym("nodes", nodes.size), ca.SX.sym("speeds", speeds.size)
+    f = ca.Function("f", [*sym, nd, sp], list(rays.arrivals(*sym, nd, sp)))
+    for use, zs, zr, x, depth in [(1.0, 30.0, 900.0, 1200.0, 1000.0), (1.0, 500.0, 40.0, 3000.0, 0.0),
+                                  (0.0, 30.0, 900.0, 1200.0, 1000.0), (1.0, 5.0, 60.0, 150.0, 80.0)]:
+        got = [np.asarray(v).ravel() for v in f(use, zs, zr, x, depth, 1500.0, nodes, speeds)]
+        if use:
+            want = paths(table, zs, zr, x, depth)
+            for k in range(3 if depth > 0 else 1):
+                for g, w in zip(got, want):
+                    assert g[k] == w[k]
+            if depth == 0:
+                assert not got[3][1:].any()
+        tau, launch, arrival, kind = (float(v) for v in rays.first_arrival(use, zs, zr, x, depth, 1500.0, nodes,
+                                                                            speeds))
+        times = np.where(got[3] > 0, got[0], np.inf)
+        assert int(np.argmin(times)) + 1 == kind and times.min() == tau
+        assert got[1][int(kind) - 1] == launch and got[2][int(kind) - 1] == arrival
