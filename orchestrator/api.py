@@ -48,6 +48,7 @@ from sblsim.orchestrator.config import (
     load_config,
     parse_compare,
     resolve,
+    scenario_system,
 )
 from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.output import check_output, check_writable
@@ -458,13 +459,14 @@ def compare_title(scenario: str | Path, replicates: int, overrides: Sequence[str
     ``run_seed``, the ``run.seed`` of the comparison's first plan (default: its configuration is loaded)."""
     # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
     # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
+    own = scenario_system(scenario) if systems is not None else None
     if run_seed is None:
-        first = system_overrides(systems[0], overrides) if systems is not None else list(overrides)
+        first = system_overrides(systems[0], overrides, own=own) if systems is not None else list(overrides)
         run_seed = load_config(scenario, first, seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
     title = (f"{scenario}: {replicates} replicates per {per}, seed {run_seed}"
              + (f", {' '.join(overrides)}" if overrides else ""))
-    note = "" if systems is None else f"systems: {describe_defaults(systems)}" + (
+    note = "" if systems is None else f"systems: {describe_defaults(systems, own)}" + (
         "; then --set " + " ".join(overrides) if overrides else "")
     return title, note
 

@@ -48,6 +48,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import (
     ConfigError,
     parse_override,
+    scenario_system,
     to_toml,
 )
 from sblsim.orchestrator.master import RecordBuffer
@@ -339,7 +340,7 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
     else:
         key, values = compare
         out = [(f"{key} = {value}", load_plan(scenario, items_of, seed=seed))
-               for value, items_of in zip(values, compared(key, values, items))]
+               for value, items_of in zip(values, compared(key, values, items, scenario_system(scenario)))]
     for _, cfg in out:  # every switch is checked before any run
         _switches(cfg)
     return out

@@ -403,8 +403,8 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _run_warnings(s: dict, plan) -> list[str]:
-    """What a run's numbers do not say by themselves: a receiver that never made a fix, and a diver beyond
-    what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
+    """What a run's numbers do not say by themselves: a receiver that never made a fix, exchanges heard into the
+    next slot, and a diver beyond what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
     out = []
     if s["updates"] == 0:
         out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
@@ -425,6 +425,11 @@ def _run_warnings(s: dict, plan) -> list[str]:
         out.append("no multilateration fix was ever made (never ranges of three beacons): the instr_ metrics have "
                    "no value, and a receiver that reports that fix (lsq) never left its starting guess "
                    "(summary.json: fix_steps = 0)")
+    if s.get("slot_overrun"):
+        out.append(f"an exchange was still heard {s['slot_overrun']:.4g} s after its slot began (its last arrival, "
+                   f"multipath included), beyond simulation.sampling_time = {plan.sampling_time:g} s: the next "
+                   "slot's packet overlaps it, which the channel does not model; give a sampling time of at least "
+                   f"{s['slot_overrun']:.4g} s (summary.json: slot_overrun)")
     if s["beyond_geometry"]:
         spread = plan.horizontal_spread
         ratio = f"{s['max_distance'] / spread:.0f} times" if spread > 0 else "infinitely many times"

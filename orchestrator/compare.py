@@ -44,7 +44,7 @@ import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import check_receiver
+from sblsim.orchestrator.config import check_receiver, scenario_system
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.plan import RunPlan, load_plan, with_replicates
@@ -96,7 +96,8 @@ def plans(scenario: str, receivers: Sequence[str], overrides: Sequence[str] = ()
     """
     if systems is None:
         return [load_plan(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
-    return [load_plan(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"]), seed=seed)
+    own = scenario_system(scenario)
+    return [load_plan(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"], own=own), seed=seed)
             for s in systems for r in receivers]
 
 

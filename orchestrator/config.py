@@ -436,6 +436,18 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     return cfg
 
 
+def scenario_system(source: str | Path) -> str:
+    """The positioning system a scenario or configuration file configures itself (its ``platform.system``,
+    without overrides): the system that keeps the scenario's platform when systems are compared.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_config`.
+    """
+    return load_config(source)["platform"]["system"]
+
+
 def _check_receiver_step(sim: dict[str, Any]) -> None:
     """Refuse a sampling time and rate ratio whose receiver step T / ratio is outside the receiver clock's
     range (:func:`sblsim.models.receiver.core.clock_parameters`), naming the two keys the user sets.

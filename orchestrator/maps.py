@@ -49,6 +49,7 @@ from sblsim.models.acoustics.detection import packet_probability
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.target.core import file_waypoints
+from sblsim.orchestrator.config import scenario_system
 from sblsim.orchestrator.output import staged_directory
 from sblsim.orchestrator.plan import Config, RunPlan, as_plan, load_plan, thaw
 from sblsim.orchestrator.progress import Progress, ProgressSpec
@@ -286,7 +287,8 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
         plans, labels = [load_plan(scenario, overrides, seed=seed)], [str(scenario)]
     else:  # a compared system starts from its defaults, the user's --set over them
         key, values = compare
-        plans = [load_plan(scenario, items, seed=seed) for items in compared(key, values, overrides)]
+        plans = [load_plan(scenario, items, seed=seed)
+                 for items in compared(key, values, overrides, scenario_system(scenario))]
         labels = [f"{key} = {v}" for v in values]
     if depth is not None and not 0.0 <= depth <= 11000.0:
         raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")

@@ -58,9 +58,9 @@ DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
 #: A diver farther from the platform reference (horizontally) than this many times the beacons' horizontal
 #: spread is beyond what the geometry serves (``beyond_geometry``; the command line warns).
 REACH_RATIO = 100.0
-#: Per-run flags computed besides the compiled pass (:func:`run_flags`): in ``summary.json`` and in a campaign's
-#: rows.
-FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry", "detected_pct")
+#: Per-run flags computed besides the compiled pass (:func:`run_flags`; ``slot_overrun`` is the channel's own
+#: output, :func:`sblsim.orchestrator.run.slot_overrun`): in ``summary.json`` and in a campaign's rows.
+FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry", "detected_pct", "slot_overrun")
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position, ``scipy.stats.chi2.ppf(0.95, 3)`` written out
 #: (a test holds it to scipy's), so that a campaign's worker processes need not import scipy.stats.
 NEES_95 = 7.814727903251179

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
-from sblsim.models.acoustics.core import check_in_flight, check_slot
+from sblsim.models.acoustics.core import check_in_flight
 from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
@@ -232,7 +232,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         groups = [plans] if batched else [[p] for p in plans]
         bar, own_bar = progress_of(progress, n_steps * len(plans), f"{first.scenario} ({engine})")
         start = time.perf_counter()
-        recs, replicates, timing = [], [], {}
+        recs, replicates, timing, overruns = [], [], {}, []
         try:
             for group in groups:
                 for name, handle in handles.items():
@@ -243,6 +243,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
                                      progress=advance, algorithm=first.master,
                                      buffer=records if len(groups) == 1 else None))
                 _check_in_flight(handles, group)
+                overruns.extend(slot_overrun(handles, len(group)))
                 replicates.extend(reps.tolist())
         finally:
             if own_bar:
@@ -257,6 +258,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
     rec = apply_latency(rec, first.latency_steps)  # what the diver sees; the runs of a batch share it
     metrics, bound = _metrics(plans, rec, replicates, with_bound=timeseries)
+    metrics["slot_overrun"] = overruns
     if timeseries:
         types = {f"{c}.{p.name}": p.type for c, h in handles.items() for p in h.ports}
         rec = {k: (v if k == "time" else cast_column(v, DTYPES[types[k]])) for k, v in rec.items()}
@@ -270,8 +272,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
 
 def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
     """Refuse the runs whose channel had more packets in flight than it holds (its ``overflow_travel_time``
-    output, never reset in a run: :func:`sblsim.models.acoustics.core.check_in_flight`), or heard an exchange
-    into the next slot (``slot_overrun``: :func:`sblsim.models.acoustics.core.check_slot`), before anything of
+    output, never reset in a run: :func:`sblsim.models.acoustics.core.check_in_flight`), before anything of
     them is written.
 
     Raises
@@ -286,9 +287,18 @@ def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
     if np.any(refused > 0.0):  # the runs of a batch share the sampling time; name the longest turnaround of them
         check_in_flight(cfgs[0]["simulation"]["sampling_time"], max(turnaround(c) for c in cfgs),
                         float(np.max(refused)))
-    if "slot_overrun" in channel.output_names:  # detection by signal-to-noise: a packet heard into the next slot
-        overrun = channel.output_vector()[channel.output_names.index("slot_overrun")]
-        check_slot(cfgs[0]["simulation"]["sampling_time"], float(np.max(overrun, initial=0.0)))
+
+
+
+def slot_overrun(handles: dict, width: int) -> list[float]:
+    """Per run of a batch of ``width``: the longest time from a slot's transmit epoch to the last heard arrival of
+    its exchange beyond the slot [s] (the channel's ``slot_overrun`` output, detection by signal-to-noise; 0:
+    none, and for a channel without it)."""
+    channel = handles.get("acoustics")
+    if channel is None or "slot_overrun" not in channel.output_names:
+        return [0.0] * width
+    values = np.asarray(channel.output_vector()[channel.output_names.index("slot_overrun")], dtype=float)
+    return np.broadcast_to(values, (width,)).tolist()
 
 
 def _advance(bar: Progress, width: int, steps: int) -> None:

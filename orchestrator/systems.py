@@ -6,7 +6,9 @@ point a designer would take, its object's
 :attr:`~sblsim.models.systems.System.compare_defaults` (the registry
 :data:`sblsim.models.systems.SYSTEMS`; docs/systems.md):
 
-* ``sbl``: the scenario's own platform (the paper's cross for the built-in scenarios);
+* the system the scenario configures itself (``platform.system``: SBL for the paper's scenarios, LBL for the
+  ``lbl-field`` site, USBL for ``usbl-deep``): the scenario's own platform;
+* ``sbl``: the paper's cross at 3 m (``platform.layout=cross``, ``platform.baseline=3``);
 * ``lbl``: 4 transponders on a circle of 50 m radius (``platform.layout=circle``,
   ``platform.beacons=4``, ``platform.baseline=50``) on the seafloor at
   ``platform.seafloor_depth`` (default 50 m, deeper than every built-in
@@ -34,12 +36,12 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS, system
 
 
-def describe_defaults(systems: Sequence[str] | None = None) -> str:
+def describe_defaults(systems: Sequence[str] | None = None, own: str | None = None) -> str:
     """The compare defaults of ``systems`` (default every registered one) in one line (the command's help, the
-    table's heading)."""
+    table's heading); ``own``, the scenario's system, keeps the scenario's platform."""
     objects = [system(s) for s in (SYSTEMS if systems is None else systems)]
-    return "; ".join(f"{s.name}: {s.words}" + (f" ({', '.join(s.compare_defaults)})" if s.compare_defaults else "")
-                     for s in objects)
+    return "; ".join(f"{s.name}: the scenario's platform" if s.name == own else f"{s.name}: {s.words}" + (
+        f" ({', '.join(s.compare_defaults)})" if s.compare_defaults else "") for s in objects)
 
 
 def parse_systems(text: str, option: str = "--systems") -> list[str]:
@@ -60,9 +62,11 @@ def parse_systems(text: str, option: str = "--systems") -> list[str]:
     return systems
 
 
-def system_overrides(name: str, overrides: Sequence[str] = (), option: str = "--systems") -> list[str]:
+def system_overrides(name: str, overrides: Sequence[str] = (), option: str = "--systems",
+                     own: str | None = None) -> list[str]:
     """The overrides of one compared system: ``platform.system``, its
-    :attr:`~sblsim.models.systems.System.compare_defaults`, then the user's (which win).
+    :attr:`~sblsim.models.systems.System.compare_defaults` (not for ``own``, the system the scenario configures
+    itself: it keeps the scenario's platform, e.g. a site's LBL field), then the user's (which win).
 
     Raises
     ------
@@ -70,17 +74,19 @@ def system_overrides(name: str, overrides: Sequence[str] = (), option: str = "--
         If the system is not registered, or the user's overrides set ``platform.system`` themselves (``option``
         sets it).
     """
-    defaults = system(name, option).compare_defaults
+    defaults = () if name == own else system(name, option).compare_defaults
     for item in overrides:
         if item.split("=", 1)[0].strip() == "platform.system":
             raise ModelError(f"--set {item}: the system is set by {option}, not by --set")
     return [f"platform.system={name}", *defaults, *overrides]
 
 
-def compared(key: str, values: Sequence[str], overrides: Sequence[str] = ()) -> list[list[str]]:
+def compared(key: str, values: Sequence[str], overrides: Sequence[str] = (), own: str | None = None
+             ) -> list[list[str]]:
     """The overrides of each value of ``--compare KEY=V1,V2,...`` (``sblsim map``, ``sblsim budget``): a compared
-    ``platform.system`` starts from its compare defaults with ``overrides`` over them (:func:`system_overrides`),
-    as ``sblsim compare --systems`` does; any other key is set over ``overrides``.
+    ``platform.system`` starts from its compare defaults with ``overrides`` over them (:func:`system_overrides`;
+    ``own``, the scenario's system, from the scenario's platform), as ``sblsim compare --systems`` does; any other
+    key is set over ``overrides``.
 
     Raises
     ------
@@ -91,7 +97,7 @@ def compared(key: str, values: Sequence[str], overrides: Sequence[str] = ()) -> 
     if key != "platform.system":
         return [[*overrides, f"{key}={value}"] for value in values]
     option = "--compare platform.system"
-    return [system_overrides(s, overrides, option) for s in parse_systems(",".join(values), option)]
+    return [system_overrides(s, overrides, option, own) for s in parse_systems(",".join(values), option)]
 
 
 def check_diver(cfg: dict, depth: float | None = None) -> None:

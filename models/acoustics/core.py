@@ -258,7 +258,8 @@ DETECTION_VARIABLES: tuple[Variable, ...] = (
 OVERRUN: tuple[Variable, ...] = (
     Variable("slot_overrun", "output", "Real", 0.0, "s",
              "snr: longest time from a slot's transmit epoch to the last heard arrival of its exchange (multipath "
-             "included) beyond the slot (0: none; the orchestrator refuses such a run)", discrete=True),
+             "included) beyond the slot (0: none; the next slot's packet overlaps it, which the channel does not "
+             "model: the orchestrator flags the run)", discrete=True),
 )
 
 
@@ -350,30 +351,6 @@ def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None
         f"packets in flight, and the channel holds {FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} "
         f"sampling times); give a simulation.sampling_time above {late / (FLIGHT_CAPACITY - 1):.4g} s or a shorter "
         "acoustics.turnaround")
-
-
-def check_slot(slot_period: float, elapsed: float) -> None:
-    """Refuse a run of detection by signal-to-noise whose exchanges were still heard when the next slot began.
-
-    Parameters
-    ----------
-    slot_period : float
-        T = ``simulation.sampling_time`` [s].
-    elapsed : float
-        The longest time from a slot's transmit epoch to the last heard arrival of its exchange, multipath
-        included (the channel's ``slot_overrun``; 0: none beyond its slot) [s].
-
-    Raises
-    ------
-    ModelError
-        One line naming ``simulation.sampling_time``, the longest heard arrival plus its multipath spread and
-        the shortest sampling time that holds it.
-    """
-    if elapsed > 0.0:
-        raise ModelError(
-            f"simulation.sampling_time: {slot_period:g} s is shorter than the longest heard arrival plus its "
-            f"multipath spread, {elapsed:.4g} s after its slot began: the next slot's packet would overlap it; "
-            f"give a simulation.sampling_time of at least {elapsed:.4g} s")
 
 
 class Acoustics(Component):
@@ -639,7 +616,7 @@ class Acoustics(Component):
                        "snr": last[4], "detection_probability": last[5]}
                 out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
                 overrun = {}
-                if snr_mode:  # the exchange's last heard arrival after the next slot began: refused after the run
+                if snr_mode:  # the exchange's last heard arrival after the next slot began: flagged
                     overrun = {"slot_overrun": ca.if_else(spread_end > p["slot_period"], ca.fmax(
                         x["slot_overrun"], spread_end), x["slot_overrun"])}
                 if direction:
@@ -748,6 +725,6 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "OVERRUN", "check_in_flight", "check_slot",
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "OVERRUN", "check_in_flight",
            "site_levels", "site_numbers", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
            "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -38,8 +38,8 @@ class SBL(System):
     name = "sbl"
     code = 0
     title = "short baseline"
-    words = "the scenario's platform"
-    compare_defaults = ()  # the scenario's own platform (the paper's cross)
+    words = "the paper's cross at 3 m"
+    compare_defaults = ("platform.layout=cross", "platform.baseline=3")  # the paper's cross (its LOW corner)
     marker = "beacons"
 
     def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:

@@ -23,7 +23,7 @@ LBL_BY_HAND = ["platform.system=lbl", "platform.layout=circle", "platform.beacon
 
 def test_the_defaults_table_names_every_system_and_the_documented_values():
     assert tuple(SYSTEMS) == ("sbl", "lbl", "usbl")
-    assert SYSTEMS["sbl"].compare_defaults == ()
+    assert set(SYSTEMS["sbl"].compare_defaults) == {"platform.layout=cross", "platform.baseline=3"}
     assert set(LBL_BY_HAND[1:]) == set(SYSTEMS["lbl"].compare_defaults)
     assert "platform.usbl_angle_sigma_deg=0.5" in SYSTEMS["usbl"].compare_defaults
 
@@ -32,6 +32,21 @@ def test_the_defaults_table_names_every_system_and_the_documented_values():
 def test_the_built_in_divers_are_above_the_default_seafloor(scenario):
     cfg = load_config(scenario, system_overrides("lbl"))
     assert cfg["target"]["depth"] < cfg["platform"]["seafloor_depth"]
+
+
+def test_the_scenarios_own_system_keeps_the_scenarios_platform():
+    """At the lbl-field site the LBL keeps its 250 m circle and the SBL starts from the paper's cross; on the
+    harbour (an SBL scenario of 1 m arms) the SBL keeps its 1 m."""
+    from sblsim.orchestrator.config import scenario_system
+
+    own = scenario_system("lbl-field")
+    assert own == "lbl"
+    lbl = load_config("lbl-field", system_overrides("lbl", own=own))["platform"]
+    sbl = load_config("lbl-field", system_overrides("sbl", own=own))["platform"]
+    assert (lbl["layout"], lbl["baseline"]) == ("circle", 250.0)
+    assert (sbl["system"], sbl["layout"], sbl["baseline"]) == ("sbl", "cross", 3.0)
+    harbour = load_config("harbour", system_overrides("sbl", own=scenario_system("harbour")))["platform"]
+    assert harbour["baseline"] == 1.0
 
 
 def test_the_users_set_wins_over_the_system_defaults():
