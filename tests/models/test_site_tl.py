@@ -88,8 +88,8 @@ def _site(name):
 
 
 def _compare(name, offset=0.0, beyond=False):
-    """ΔTL = ours + offset − Bellhop's [dB] outside the mask (its neighbour differences taken without the offset), at the ranges below the site's limit (``beyond``:
-    at and past it): (ΔTL of the points compared, points masked)."""
+    """ΔTL = ours + offset − Bellhop's [dB] outside the mask (its neighbour differences taken without the
+    offset), at the ranges below the site's limit (``beyond``: at and past it): (ΔTL compared, points masked)."""
     ours, theirs = _site(name)
     ranges, limit = SITES[name][3], SITES[name][4]
     columns = np.ones(ranges.size, bool) if limit is None else ((ranges >= limit) if beyond else (ranges < limit))
