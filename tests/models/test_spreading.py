@@ -225,17 +225,30 @@ BELLHOP_SITES = {
 _BELLHOP: dict[str, tuple] = {}
 
 
-def _bellhop_tl(table, source, depths, ranges, depth, bottom):
-    """Bellhop's incoherent TL [dB] on the grid (depths × ranges), no volume attenuation."""
+def _bellhop_tl(table, source, depths, ranges, depth, bottom, frequency=1000.0, volume=None):
+    """Bellhop's incoherent TL [dB] on the grid (depths × ranges) at ``frequency`` [Hz], below a vacuum surface.
+
+    ``bottom``: ``"rigid"``, ``"absorbing"`` (an acousto-elastic half-space matching the water) or
+    ``(density ratio, compressional speed [m/s], attenuation [dB/λ])`` of an acousto-elastic half-space without
+    shear. ``volume``: None (no volume attenuation) or ``(temperature [°C], salinity [PSU], pH, depth [m])`` of
+    Bellhop's Francois-Garrison attenuation (option 'F', one depth for the whole water column)."""
     pg = pytest.importorskip("pelagic")  # the test extra installs it: this skips only outside it
     tab = table[table[:, 0] < depth]
     tab = np.vstack([tab, [depth, np.interp(depth, table[:, 0], table[:, 1])]])
-    lines = ["'sblsim tl'", "1000.0", "1", "'CVW'", f"0 0.0 {depth:.4f}"]
+    lines = ["'sblsim tl'", f"{frequency:.6f}", "1"]
+    if volume is None:
+        lines += ["'CVW'"]
+    else:
+        lines += ["'CVWF'", " ".join(f"{v:.6f}" for v in volume) + " /"]
+    lines += [f"0 0.0 {depth:.4f}"]
     lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
     if bottom == "rigid":
         lines += ["'R' 0.0"]
-    else:
+    elif bottom == "absorbing":
         lines += ["'A' 0.0", f"{depth:.4f} {tab[-1, 1]:.6f} 0.0 1.0 0.0 /"]
+    else:
+        density, speed, attenuation = bottom
+        lines += ["'A' 0.0", f"{depth:.4f} {speed:.6f} 0.0 {density:.6f} {attenuation:.6f} 0.0 /"]
     lines += ["1", f"{source:.6f} /", f"{len(depths)}", " ".join(f"{z:.6f}" for z in depths) + " /",
               f"{len(ranges)}", " ".join(f"{r / 1000:.9f}" for r in ranges) + " /", "'I'", f"{BELLHOP_BEAMS}",
               f"{-BELLHOP_FAN} {BELLHOP_FAN} /", f"0.0 {depth + 100:.1f} {max(ranges) / 1000 + 0.2:.3f}"]
@@ -257,6 +270,14 @@ def _site(name):
     return _BELLHOP[name]
 
 
+def _jumps(theirs):
+    """The largest |ΔTL| [dB] between each point of a (depths × ranges) TL grid and its four neighbours (the grid's
+    edge repeated): more than :data:`JUMP` marks a caustic or a shadow edge."""
+    padded = np.pad(theirs, 1, mode="edge")
+    return np.max([np.abs(padded[1 + i:1 + i + theirs.shape[0], 1 + j:1 + j + theirs.shape[1]] - theirs)
+                   for i, j in ((-1, 0), (1, 0), (0, -1), (0, 1))], axis=0)
+
+
 def _compare_with_bellhop(name, offset=0.0):
     """Our incoherent TL (the families' intensities 10^(−spreading/10) summed; the bottom family only where the
     bottom reflects) against Bellhop's outside the mask: (points compared, points masked, max |ΔTL| [dB], median)."""
@@ -268,9 +289,7 @@ def _compare_with_bellhop(name, offset=0.0):
     intensity = np.sum(np.where(valid[:families] > 0, 10.0 ** (-spreading[:families] / 10.0), 0.0), axis=0)
     ours = (-10.0 * np.log10(intensity)).reshape(theirs.shape)
     # the mask: Bellhop's TL jumping between neighbours, and our tube capped at a caustic
-    padded = np.pad(theirs, 1, mode="edge")
-    jumps = np.max([np.abs(padded[1 + i:1 + i + theirs.shape[0], 1 + j:1 + j + theirs.shape[1]] - theirs)
-                    for i, j in ((-1, 0), (1, 0), (0, -1), (0, 1))], axis=0)
+    jumps = _jumps(theirs)
     image = np.hypot(x, np.array([zr - source, zr + source, 2 * depth - source - zr]))
     capped = np.any((valid > 0) & (np.abs(spreading - offset - (20 * np.log10(image) - rays.CAUSTIC_GAIN)) < 1e-9),
                     axis=0).reshape(theirs.shape)
