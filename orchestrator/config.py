@@ -438,14 +438,20 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
 
 def scenario_system(source: str | Path) -> str:
     """The positioning system a scenario or configuration file configures itself (its ``platform.system``,
-    without overrides): the system that keeps the scenario's platform when systems are compared.
+    without overrides; the interface's default when it names none): the system that keeps the scenario's
+    platform when systems are compared. The file is read, not resolved (each configuration of a comparison is
+    resolved once, with its system's overrides).
 
     Raises
     ------
     ConfigError
-        As :func:`load_config`.
+        As :func:`read_source`.
     """
-    return load_config(source)["platform"]["system"]
+    platform = read_source(source).get("platform", {})
+    named = platform.get("system") if isinstance(platform, dict) else None
+    if isinstance(named, str):
+        return named
+    return next(v.start for v in COMPONENTS["platform"].variables() if v.name == "system")
 
 
 def _check_receiver_step(sim: dict[str, Any]) -> None:

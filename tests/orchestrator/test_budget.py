@@ -11,7 +11,6 @@ import pandas as pd
 import pytest
 
 from sblsim.models.platform.geometry import lever_arms
-from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.budget import (
     DEFAULT_REPLICATES,
     NO_EFFECT,
@@ -178,7 +177,9 @@ def test_common_random_numbers_make_a_difference_far_more_precise():
 def test_a_compared_system_starts_from_its_defaults_and_a_set_wins():
     lbl, usbl = (cfg for _, cfg in configurations("semicircle", compare=("platform.system", ["lbl", "usbl"])))
     assert (lbl["platform"]["layout"], lbl["platform"]["beacons"], lbl["platform"]["baseline"]) == ("circle", 4, 50)
-    assert usbl["platform"]["usbl_angle_sigma_deg"] == 0.5 and SYSTEMS["sbl"].compare_defaults == ()
+    assert usbl["platform"]["usbl_angle_sigma_deg"] == 0.5
+    (_, sbl), = configurations("semicircle", compare=("platform.system", ["sbl"]))  # its own: as configured
+    assert sbl.config == configurations("semicircle")[0][1].config
     (label, cfg), = configurations("semicircle", ["platform.baseline=20"], compare=("platform.system", ["lbl"]))
     assert label == "platform.system = lbl" and cfg["platform"]["baseline"] == 20
     (_, cfg), = configurations("semicircle", receiver="ukf")

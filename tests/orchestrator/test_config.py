@@ -7,7 +7,7 @@ import tomllib
 
 import pytest
 
-from sblsim.models import COMPONENTS
+from sblsim.models import COMPONENTS, RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
@@ -21,12 +21,13 @@ from sblsim.orchestrator.config import (
 )
 
 
-def declared_parameters(section: str) -> set[str]:
-    """Parameter names a section must hold, computed from the declarations (the receiver's section also holds
-    the orchestrator's receiver keys)."""
+def declared_parameters(section: str, receiver: str = "ekf") -> set[str]:
+    """Parameter names a section must hold, computed from the declarations (the receiver's section: of the
+    ``receiver`` model, plus the orchestrator's receiver keys)."""
     if section in COMPONENTS:
         seed = {"seed", "scenario_key", "cell", "replicate"}
-        declared = COMPONENTS[section].variables()
+        model = RECEIVER_MODELS[receiver] if section == "receiver" else COMPONENTS[section]
+        declared = model.variables()
         extra = {v.name for v in RECEIVER_KEYS} if section == "receiver" else set()
         return ({v.name for v in declared if v.causality == "parameter" and v.scope != "fmu"} - seed) | extra
     return {v.name for v in section_variables(section)}
@@ -47,7 +48,7 @@ def test_builtin_scenario_resolves(name):
     cfg = load_config(name)
     assert list(cfg) == list(SECTIONS)
     for section in SECTIONS:
-        assert set(cfg[section]) == declared_parameters(section), section
+        assert set(cfg[section]) == declared_parameters(section, cfg["simulation"]["receiver"]), section
     assert cfg["run"]["scenario"] == name
     assert cfg["target"]["trajectory"] == raw_trajectory(name)
     assert cfg["simulation"]["duration"] >= cfg["simulation"]["sampling_time"]
