@@ -412,3 +412,29 @@ def test_the_channel_fmu_of_eigenrays_validates(fmu_dir):
     assert {(variables[n].causality, variables[n].unit) for n in ("launch_angle", "arrival_angle")} == \
         {("output", "rad")}
     assert (variables["arrival"].causality, variables["arrival"].type) == ("output", "Integer")
+
+
+def test_the_channel_fmu_declares_detection_by_snr(fmu_dir):
+    """fmpy validates an FMU's description, whatever its parameters are set to: the channel FMU that runs ``snr``
+    is the one validated above (the choice is a parameter). It declares the detection (0 fixed, 1 snr), the
+    issue's keys with their units and a range that holds their start, and the outputs ``snr`` [dB] and
+    ``detection_probability``."""
+    from fmpy import read_model_description
+
+    from sblsim.fmus.build import fmu_path
+
+    variables = {v.name: v for v in read_model_description(str(fmu_path(fmu_dir, "acoustics"))).modelVariables}
+    detection = variables["detection"]
+    assert (detection.causality, detection.type, detection.start, detection.min, detection.max) == \
+        ("parameter", "Integer", "0", "0", "1")
+    assert "0: fixed, 1: snr" in detection.description
+    units = {"frequency": "Hz", "bandwidth": "Hz", "source_level": "dB", "detection_threshold": "dB",
+             "directivity_index": "dB", "shipping": "1"}
+    for name, unit in units.items():
+        v = variables[name]
+        assert (v.causality, v.type, v.unit) == ("parameter", "Real", unit), name
+        assert float(v.min) <= float(v.start) <= float(v.max), name
+    assert (float(variables["shipping"].min), float(variables["shipping"].max)) == (0.0, 1.0)
+    assert "0: clay" in variables["bottom"].description and variables["bottom"].type == "Integer"
+    assert {(variables[n].causality, variables[n].unit) for n in ("snr", "detection_probability")} == \
+        {("output", "dB"), ("output", "1")}
