@@ -248,6 +248,32 @@ def test_philox_reference_is_numpys_bit_generator():
     assert 0.0 <= big.min() and big.max() < 1.0 and abs(big.mean() - 0.5) < 0.01
 
 
+def run_channel(c_host: Path, fmu_dir: Path, tmp_path: Path, values: dict, steps: int = 30) -> dict[str, np.ndarray]:
+    """The channel FMU's instance b in the plain C host (no Python, an empty environment), ``values`` (parameters
+    and inputs by name: Reals, Integers, String choices as text) set before initialization, ``steps`` steps of
+    0.1 s: each Real output by name, one value per step."""
+    binary, guid, outputs = unpack(fmu_path(fmu_dir, "acoustics"), tmp_path)
+    declared = MODELS["acoustics"].fmu_variables()
+    index = {v.name: k for k, v in enumerate(declared)}
+    params = []
+    for name, value in values.items():
+        variable = declared[index[name]]
+        if variable.type == "Real":
+            params.append(f"{index[name]}={float(value)!r}")
+        else:
+            params.append(f"i{index[name]}={variable.choices.index(value) if variable.choices else int(value)}")
+    proc = subprocess.run([str(c_host), str(binary), guid, f"file://{tmp_path}/resources", str(steps), "0.1",
+                           *params], input="\n".join(map(str, outputs)), capture_output=True, text=True, env={},
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = parse(proc.stdout)["b"]
+    return {declared[vr].name: rows[:, k] for k, vr in enumerate(outputs)}
+
+
+#: A sound-speed table of the channel tests in the C host: refracting, and a minimum at 200 m [m, m/s].
+TABLE = np.array([[0.0, 1500.0], [50.0, 1490.0], [200.0, 1470.0], [500.0, 1485.0], [1000.0, 1500.0]])
+
+
 def test_the_ray_channel_runs_in_the_plain_c_host_with_an_empty_environment(fmu_dir, c_host, tmp_path):
     """The channel FMU set by a plain C host (no Python, an empty environment) to ``propagation = ray`` through a
     table profile, with no eigenray table (every eigenray solved), a diver 300 m out and 178 m below beacon 1: the
@@ -255,23 +281,65 @@ def test_the_ray_channel_runs_in_the_plain_c_host_with_an_empty_environment(fmu_
     not the straight line's."""
     from sblsim.models.acoustics.rays import first_arrival, profile_arrays
 
-    binary, guid, outputs = unpack(fmu_path(fmu_dir, "acoustics"), tmp_path)
-    declared = MODELS["acoustics"].fmu_variables()
-    index = {v.name: k for k, v in enumerate(declared)}
-    table = np.array([[0.0, 1500.0], [50.0, 1490.0], [200.0, 1470.0], [500.0, 1485.0], [1000.0, 1500.0]])
-    reals = {"beacon1_true_z": 2.0, "target_x": 300.0, "target_y": 40.0, "target_z": 180.0}
-    reals.update({f"sound_speed_depth[{k + 1}]": row[0] for k, row in enumerate(table)})
-    reals.update({f"sound_speed[{k + 1}]": row[1] for k, row in enumerate(table)})
-    ints = {"propagation": declared[index["propagation"]].choices.index("ray"), "sound_speed_rows": len(table)}
-    params = [f"{index[n]}={float(v)!r}" for n, v in reals.items()] + [f"i{index[n]}={v}" for n, v in ints.items()]
-    proc = subprocess.run([str(c_host), str(binary), guid, f"file://{tmp_path}/resources", "30", "0.1", *params],
-                          input="\n".join(map(str, outputs)), capture_output=True, text=True, env={}, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    rows = parse(proc.stdout)["b"]
-    real_names = [declared[vr].name for vr in outputs]
-    first = rows[np.isclose(rows[:, real_names.index("tx_time")], 0.1)][0]  # slot 1: beacon 1's packet
-    nodes, speeds = profile_arrays(table)
+    values = {"beacon1_true_z": 2.0, "target_x": 300.0, "target_y": 40.0, "target_z": 180.0,
+              "propagation": "ray", "sound_speed_rows": len(TABLE)}
+    values.update({f"sound_speed_depth[{k + 1}]": row[0] for k, row in enumerate(TABLE)})
+    values.update({f"sound_speed[{k + 1}]": row[1] for k, row in enumerate(TABLE)})
+    got = run_channel(c_host, fmu_dir, tmp_path, values)
+    first = np.flatnonzero(np.isclose(got["tx_time"], 0.1))[0]  # slot 1: beacon 1's packet
+    nodes, speeds = profile_arrays(TABLE)
     x = math.hypot(300.0, 40.0)
     tau = float(first_arrival(1.0, 2.0, 180.0, x, 0.0, 1500.0, nodes, speeds)[0])
-    assert first[real_names.index("travel_time")] == pytest.approx(tau, rel=1e-12)
-    assert abs(tau - math.hypot(x, 178.0) / table[:, 1].mean()) > 1e-5  # refraction shows
+    assert got["travel_time"][first] == pytest.approx(tau, rel=1e-12)
+    assert abs(tau - math.hypot(x, 178.0) / TABLE[:, 1].mean()) > 1e-5  # refraction shows
+
+
+def test_the_snr_channel_runs_in_the_plain_c_host_like_the_casadi_model_and_the_local_engine(fmu_dir, c_host,
+                                                                                             tmp_path):
+    """The channel FMU set by a plain C host (an empty environment) to ``detection = snr`` (eigenrays through a
+    table profile, 400 m of water, a calm sea, a gravel floor), four beacons 10 m deep and a diver 300 m out and
+    180 m deep, at a source level and fluctuation where some packets are heard on the direct path, some on the
+    surface-reflected one and some are lost: every Real output of every step equals the local engine's (the same
+    parameters and inputs) within 1e-9, and each packet's SNR, detection probability and travel time are those
+    of its arrival that the casadi model of the site gives (:func:`~sblsim.models.acoustics.core.site_levels`)."""
+    from sblsim.models.acoustics.core import Acoustics, site_levels
+    from sblsim.orchestrator.engines import LocalHandle
+
+    table = "; ".join(f"{z:g} {c:g}" for z, c in TABLE)
+    params = Acoustics.fmu_parameters({"propagation": "ray", "detection": "snr", "sound_speed_profile": "table",
+                                       "sound_speed_table": table, "water_depth": 400.0, "bottom": "gravel",
+                                       "beaufort": 0, "source_level": 126.0, "fluctuation": 6.0})
+    beacons = np.array([[1.5, 0.0, 10.0], [0.0, 1.5, 10.0], [-1.5, 0.0, 10.0], [0.0, -1.5, 10.0]])
+    target = np.array([300.0, 40.0, 180.0])
+    inputs = {f"target_{a}": target[k] for k, a in enumerate("xyz")}
+    for b, position in enumerate(beacons, start=1):
+        for k, a in enumerate("xyz"):
+            inputs[f"beacon{b}_true_{a}"] = inputs[f"beacon{b}_{a}"] = position[k]
+    steps = 60
+    got = run_channel(c_host, fmu_dir, tmp_path, {**params, **inputs}, steps)
+
+    local = LocalHandle("acoustics")
+    try:
+        local.setup(params, [0])
+        local.set_inputs({name: np.array([value]) for name, value in inputs.items()})
+        records = []
+        for k in range(steps):
+            local.do_step(k * 0.1, 0.1)
+            records.append({name: value[0] for name, value in local.get_outputs().items()})
+    finally:
+        local.close()
+    for name, column in got.items():
+        np.testing.assert_allclose(column, [r[name] for r in records], rtol=0, atol=1e-9, err_msg=name)
+
+    levels = site_levels(params, beacons, np.tile(target, (4, 1)))
+    new = np.flatnonzero(np.diff([0] + [r["packet_seq"] for r in records]))
+    kinds = []
+    for k in new:
+        beacon, kind = records[k]["beacon_id"] - 1, records[k]["arrival"]
+        family = kind - 1 if kind else int(np.argmax(levels["snr"][beacon]))  # none heard: the strongest
+        assert got["snr"][k] == pytest.approx(levels["snr"][beacon, family], abs=1e-9)
+        assert got["detection_probability"][k] == pytest.approx(levels["pd"][beacon, family], abs=1e-9)
+        if kind:
+            assert got["travel_time"][k] == pytest.approx(levels["tau"][beacon, family], rel=1e-12)
+        kinds.append(kind)
+    assert len(kinds) > 40 and {0, 1, 2} <= set(kinds)

@@ -22,6 +22,7 @@ from sblsim.orchestrator.maps import accuracy_map
 from sblsim.orchestrator.plan import make_plan
 from sblsim.orchestrator.run import run
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
+from tests.orchestrator.test_systems import SNR_CASES
 
 FIVE = "12 0 1; 3 9 1.5; -8 6 1; -7 -7 2; 4 -11 1"
 #: id -> (overrides, number of beacons)
@@ -208,20 +209,26 @@ def usbl_fmus(tmp_path_factory) -> Path:
     return directory
 
 
-def _libcosim_against_jacobi(cfg: dict, fmu_dir: Path, tmp_path: Path) -> None:
-    """The configuration's SSP stepped by libcosim gives the fmu engine's Jacobi numbers (≤ 1e-9 m)."""
+def _libcosim_against_jacobi(cfg: dict, fmu_dir: Path, tmp_path: Path, channel: tuple[str, ...] = ()) -> pd.DataFrame:
+    """The configuration's SSP stepped by libcosim gives the fmu engine's Jacobi numbers (≤ 1e-9): the estimate
+    [m] and each Real output of the channel named in ``channel`` at every step. The Jacobi run's time series."""
     pytest.importorskip("libcosimpy")
     ssp = export_ssp(cfg, tmp_path / "system.ssp", fmu_dir)
     assert read_ssp(ssp).config["platform"]["system"] == cfg["platform"]["system"]
     out = tmp_path / "libcosim.npz"
     done = subprocess.run([sys.executable, str(Path(__file__).with_name("ssp_hosts.py")), "libcosim", str(ssp),
-                           str(out)], capture_output=True, text=True, timeout=600)
+                           str(out), *(f"acoustics.{name}" for name in channel)], capture_output=True, text=True,
+                          timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     data = dict(np.load(out))
     jacobi = run({**cfg, "simulation": {**cfg["simulation"], "master": "jacobi"}}, "fmu", fmu_dir=fmu_dir).timeseries
     assert len(data["time"]) == len(jacobi)
     np.testing.assert_allclose(np.column_stack([data[f"est_{a}"] for a in "xyz"]),
                                jacobi[["est_x", "est_y", "est_z"]].to_numpy(), rtol=0, atol=1e-9)
+    for name in channel:
+        np.testing.assert_allclose(data[f"acoustics.{name}"], jacobi[name].to_numpy(dtype=float), rtol=0, atol=1e-9,
+                                   err_msg=name)
+    return jacobi
 
 
 def test_a_six_transponder_lbl_ssp_runs_in_libcosim_like_the_jacobi_master(beacon_fmus, tmp_path):
@@ -261,3 +268,19 @@ def test_a_ray_ssp_with_a_profile_receiver_runs_in_libcosim_like_the_jacobi_mast
     _libcosim_against_jacobi(cfg, fmu_dir, tmp_path)
     back = read_ssp(tmp_path / "system.ssp").config  # the package the host ran is the ray run's
     assert back["acoustics"]["propagation"] == "ray" and back["receiver"]["sound_speed_profile"] != "assumed"
+
+
+@pytest.mark.parametrize("case", SNR_CASES)
+def test_an_snr_ssp_runs_in_libcosim_like_the_jacobi_master(request, fmu_dir, tmp_path, case):
+    """Detection by signal-to-noise on each system (:data:`~tests.orchestrator.test_systems.SNR_CASES`), stepped by
+    libcosim from the SSP ``sblsim ssp export`` writes: the fmu engine's Jacobi numbers, the estimate and the
+    channel's SNR, detection probability, range and travel time at every step; the package carries the site."""
+    scenario, overrides = SNR_CASES[case]
+    cfg = load_config(scenario, overrides, seed=9)
+    fmus = request.getfixturevalue("usbl_fmus") if cfg["platform"]["system"] == "usbl" else fmu_dir
+    jacobi = _libcosim_against_jacobi(cfg, fmus, tmp_path, ("snr", "detection_probability", "range", "travel_time"))
+    back = read_ssp(tmp_path / "system.ssp").config
+    for key in ("detection", "propagation", "source_level", "fluctuation", "water_depth", "bottom"):
+        assert back["acoustics"][key] == cfg["acoustics"][key], key
+    assert back["platform"]["beaufort"] == cfg["platform"]["beaufort"]
+    assert not jacobi["packet_valid"].astype(bool).all() and (jacobi["arrival"] > 1).any()  # lost and reflected

@@ -7,7 +7,8 @@ the two engines.
 * TWTT cancels a clock drift that ruins OWTT; the turnaround jitter enters the range as ``c σ / 2``.
 * The errors drawn once per run (LBL survey, SBL installation, USBL mounting misalignment) are constant within a
   run and differ between runs.
-* The local and fmu engines give the same numbers for every system, for 3 to 8 beacons and with TWTT.
+* The local and fmu engines give the same numbers for every system, for 3 to 8 beacons, with TWTT, with eigenrays
+  and with detection by signal-to-noise.
 """
 
 from __future__ import annotations
@@ -42,6 +43,17 @@ def new_packets(ts):
     seq = ts["packet_seq"].to_numpy()
     new = seq != np.concatenate([[0], seq[:-1]])
     return ts[new & ts["packet_valid"].to_numpy(bool)]
+
+
+def both_engines(cfg, fmu_dir):
+    """Replicates 0 and 1 of ``cfg`` on the local and the fmu engine: every time-series column and every metric
+    equal to 1e-9 (:func:`assert_same_frames`); the local engine's result."""
+    local = run(cfg, "local", replicates=[0, 1])
+    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
+    assert local.steps == fmu.steps
+    assert_same_frames(local.timeseries, fmu.timeseries)
+    assert_same_frames(local.metrics, fmu.metrics)
+    return local
 
 
 def every_output(cfg, replicates):
@@ -291,12 +303,9 @@ def test_engines_agree_for_every_system(fmu_dir, overrides):
     equal to 1e-9. The FMUs for 4 beacons are the suite's; other numbers (and USBL's one transceiver) are built into
     the cache once."""
     cfg = load_config("random-walk", overrides + ["simulation.duration=5", "acoustics.loss_pct=10"], seed=9)
-    local = run(cfg, "local", replicates=[0, 1])
-    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
-    assert local.steps == fmu.steps == 50
+    local = both_engines(cfg, fmu_dir)
+    assert local.steps == 50
     assert not local.timeseries["packet_valid"].all()
-    assert_same_frames(local.timeseries, fmu.timeseries)
-    assert_same_frames(local.metrics, fmu.metrics)
 
 
 #: id -> overrides: eigenrays through the Munk profile (``acoustics.propagation = "ray"``) for every system, and
@@ -320,14 +329,46 @@ def test_engines_agree_with_eigenrays(fmu_dir, overrides):
     """``ray`` through both engines: every time-series column (travel time, launch and arrival angles, the path)
     and every metric equal to 1e-9; the rays bend (a straight chord leaves and arrives at one angle)."""
     cfg = load_config("random-walk", overrides + ["simulation.duration=5", "acoustics.loss_pct=10"], seed=9)
-    local = run(cfg, "local", replicates=[0, 1])
-    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
-    assert local.steps == fmu.steps == 50
+    local = both_engines(cfg, fmu_dir)
+    assert local.steps == 50
     received = local.timeseries[local.timeseries["arrival"] > 0]
     assert len(received) > 20
     assert (received["launch_angle"] - received["arrival_angle"]).abs().min() > 1e-6  # refracted, not the chord
-    assert_same_frames(local.timeseries, fmu.timeseries)
-    assert_same_frames(local.metrics, fmu.metrics)
+
+
+#: id -> (scenario, overrides): detection by signal-to-noise (``acoustics.detection = "snr"``) on each system, at
+#: a source level and fluctuation of the received level that lose some packets and range some on a surface- or
+#: bottom-reflected eigenray: SBL one-way on the semicircle in 40 m of calm water, the LBL field (two-way) and the
+#: deep USBL site, shortened
+SNR_CASES = {
+    "sbl-owtt-snr": ("semicircle", ["acoustics.propagation=ray", "acoustics.detection=snr",
+                                    "acoustics.water_depth=40", "platform.beaufort=0", "acoustics.source_level=105",
+                                    "acoustics.fluctuation=15", "simulation.duration=10"]),
+    "lbl-field-twtt-snr": ("lbl-field", ["acoustics.source_level=145", "acoustics.fluctuation=10",
+                                         "simulation.duration=90"]),
+    "usbl-deep-snr": ("usbl-deep", ["acoustics.source_level=160", "acoustics.fluctuation=10",
+                                    "simulation.duration=400"]),
+}
+
+
+@pytest.mark.parametrize(("scenario", "overrides"), SNR_CASES.values(), ids=SNR_CASES.keys())
+def test_engines_agree_with_detection_by_snr(fmu_dir, scenario, overrides):
+    """``snr`` through both engines: every time-series column (the SNR and detection probability of each
+    packet's arrival, the range, the estimate) and every metric (``detected_pct``) equal to 1e-9; the runs take
+    each branch of what is heard: nothing (lost), the direct arrival, a reflected one (its range received)."""
+    cfg = load_config(scenario, overrides, seed=9)
+    assert cfg["acoustics"]["detection"] == "snr"
+    result = both_engines(cfg, fmu_dir)
+    ts = result.timeseries
+    sent = ts.groupby("replicate")["packet_seq"].diff().fillna(ts["packet_seq"]).ne(0) & ts["packet_seq"].gt(0)
+    packets = ts[sent]
+    received = packets[packets["packet_valid"].astype(bool)]
+    assert len(packets) > 40
+    assert (packets["arrival"] == 0).sum() > 5 and len(received) > 5  # nothing heard, and heard and decoded
+    assert (received["arrival"] == 1).any() and (received["arrival"] > 1).any()  # direct and reflected ranges
+    assert packets["snr"].std() > 1.0 and packets["detection_probability"].between(0.0, 1.0).all()
+    share = 100.0 * received.groupby("replicate").size() / packets.groupby("replicate").size()
+    np.testing.assert_allclose(result.metrics["detected_pct"], share.to_numpy(), rtol=1e-12)
 
 
 @pytest.mark.parametrize("system", ["sbl", "usbl"])
@@ -340,10 +381,7 @@ def test_the_eigenray_table_of_a_run(fmu_dir, monkeypatch, system):
     cfg = load_config("semicircle", ["platform.system=" + system, *RAY, "simulation.duration=5"], seed=4)
     table = make_plan(cfg).parameters["acoustics"]
     assert table["ray_table_rows"] == 512 and not any(table[f"ray_exact[{k}]"] for k in range(1, 513))
-    local = run(cfg, "local", replicates=[0, 1])
-    fmu = run(cfg, "fmu", fmu_dir=fmu_dir, replicates=[0, 1])
-    assert_same_frames(local.timeseries, fmu.timeseries)
-    assert_same_frames(local.metrics, fmu.metrics)
+    local = both_engines(cfg, fmu_dir)
     monkeypatch.setattr(plan_module, "ray_table_parameters", lambda cfg, params: {})
     solved = run(cfg, "local", replicates=[0, 1])
     a, b = local.timeseries, solved.timeseries
@@ -374,3 +412,29 @@ def test_the_channel_fmu_of_eigenrays_validates(fmu_dir):
     assert {(variables[n].causality, variables[n].unit) for n in ("launch_angle", "arrival_angle")} == \
         {("output", "rad")}
     assert (variables["arrival"].causality, variables["arrival"].type) == ("output", "Integer")
+
+
+def test_the_channel_fmu_declares_detection_by_snr(fmu_dir):
+    """fmpy validates an FMU's description, whatever its parameters are set to: the channel FMU that runs ``snr``
+    is the one validated above (the choice is a parameter). It declares the detection (0 fixed, 1 snr), the
+    issue's keys with their units and a range that holds their start, and the outputs ``snr`` [dB] and
+    ``detection_probability``."""
+    from fmpy import read_model_description
+
+    from sblsim.fmus.build import fmu_path
+
+    variables = {v.name: v for v in read_model_description(str(fmu_path(fmu_dir, "acoustics"))).modelVariables}
+    detection = variables["detection"]
+    assert (detection.causality, detection.type, detection.start, detection.min, detection.max) == \
+        ("parameter", "Integer", "0", "0", "1")
+    assert "0: fixed, 1: snr" in detection.description
+    units = {"frequency": "Hz", "bandwidth": "Hz", "source_level": "dB", "detection_threshold": "dB",
+             "directivity_index": "dB", "shipping": "1"}
+    for name, unit in units.items():
+        v = variables[name]
+        assert (v.causality, v.type, v.unit) == ("parameter", "Real", unit), name
+        assert float(v.min) <= float(v.start) <= float(v.max), name
+    assert (float(variables["shipping"].min), float(variables["shipping"].max)) == (0.0, 1.0)
+    assert "0: clay" in variables["bottom"].description and variables["bottom"].type == "Integer"
+    assert {(variables[n].causality, variables[n].unit) for n in ("snr", "detection_probability")} == \
+        {("output", "dB"), ("output", "1")}
