@@ -40,12 +40,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+import casadi as ca
 import numpy as np
 import pandas as pd
 
 from sblsim.fmus.native import compiled_family_levels
 from sblsim.models.acoustics.core import site_levels
 from sblsim.models.acoustics.detection import packet_probability
+from sblsim.models.acoustics.sonar import accuracy_scale
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.target.core import file_waypoints
@@ -205,7 +207,7 @@ def packet_probabilities(plan: RunPlan, points: np.ndarray) -> tuple[np.ndarray,
     data = packet_probability(tau, pd, snr, acoustics["detection_threshold"], acoustics["decoding_margin"],
                               acoustics["fluctuation"])
     first = np.take_along_axis(snr, np.argmin(tau, axis=1)[:, None], 1)[:, 0]
-    scale = np.maximum(1.0, 10.0 ** ((acoustics["reference_snr"] - first) / 20.0))
+    scale = np.asarray(accuracy_scale(ca.DM(first), acoustics["reference_snr"])).ravel()  # the channel's form
     return (heard ** (legs - 1) * data).reshape(n, m).T, scale.reshape(n, m).T
 
 
