@@ -2,6 +2,7 @@
 
 Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against REV] [--skip-paper]
                                              [--skip-scaling] [--ray | --only-ray] [--ray-runs N]
+                                             [--snr | --only-snr] [--snr-runs N]
 
 1. **Engines**: a sample of the `paper` study (semicircle, one design cell at T = 0.1 s and one at
    T = 1 s, ``--replicates`` runs each) stepped three ways in this process: the local engine one
@@ -15,6 +16,8 @@ Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against
    same chunk for SBL with TWTT ranging, LBL and USBL, against the SBL chunk. With ``--ray`` (or alone with
    ``--only-ray``): the chunk of SBL, LBL and USBL through the Munk profile with ``acoustics.propagation =
    ray`` beside ``straight``, alternated in this run: µs per replicate-step and the ratio (target ≤ 1.5×).
+   With ``--snr`` (or alone with ``--only-snr``): the same with eigenrays for both, ``acoustics.detection =
+   snr`` beside ``fixed`` in 20 m of water (target ≤ 2×).
 3. With ``--numpy REV``: the same chunk on the batched numpy engine of an earlier revision (e.g.
    ``9903b13``), timed the same way in a subprocess from a temporary git worktree.
    With ``--against REV``: the same chunk on the compiled engine of an earlier revision, timed the same
@@ -35,6 +38,7 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -193,11 +197,46 @@ RAY_SYSTEMS = {"SBL": (), "LBL": SYSTEM_CHUNKS["LBL (4 transponders on a 50 m ci
 RAY_PROFILE, RAY_TARGET = "munk", 1.5
 
 
+def alternated_timing(key: str, choices: tuple[str, str], common: tuple[str, ...], runs: int, duration: float,
+                      rounds: int, target: float, own: Mapping[str, tuple[str, ...]] | None = None
+                      ) -> dict[str, tuple[float, float, object, object]]:
+    """The chunk of each system of :data:`RAY_SYSTEMS` with ``key`` set to each of the two ``choices`` (and the
+    ``--set`` overrides ``common``, and a system's ``own``), each timed after a first run, the two alternated ``rounds`` times (the best of
+    each: a load on the machine falls on both alike); prints µs per replicate-step and their ratio against
+    ``target``.
+
+    Returns
+    -------
+    dict
+        System -> (first, second choice) s per replicate-step and the two runs' results.
+    """
+    out = {}
+    for label, overrides in RAY_SYSTEMS.items():
+        batches, records, best, results = {}, {}, {}, {}
+        for choice in choices:
+            cfg = load_config("semicircle", [f"simulation.duration={duration}", *overrides, *common,
+                                             *(own or {}).get(label, ()), f"{key}={choice}"], seed=1)
+            batches[choice], records[choice] = with_replicates(cfg, range(runs)), RecordBuffer()
+            run_batch(batches[choice], timeseries=False, records=records[choice])  # first time
+        for _ in range(rounds):
+            for choice, cfgs in batches.items():
+                start = time.perf_counter()
+                results[choice] = run_batch(cfgs, timeseries=False, records=records[choice])
+                wall = time.perf_counter() - start
+                best[choice] = min(wall, best.get(choice, wall))
+        steps = runs * results[choices[1]].steps
+        base, other = best[choices[0]] / steps, best[choices[1]] / steps
+        print(f"     {label:5s} {choices[0]} {base * 1e6:7.2f} us, {choices[1]} {other * 1e6:7.2f} us per "
+              f"replicate-step: {other / base:.2f}x ({'within' if other / base <= target else 'beyond'} the target "
+              f"{target}x)")
+        out[label] = (base, other, results[choices[0]], results[choices[1]])
+    return out
+
+
 def propagation_timing(runs: int = CHUNK_RUNS, duration: float = CHUNK_DURATION,
                        rounds: int = 3) -> dict[str, tuple[float, float, object, object]]:
     """The chunk of each system of :data:`RAY_SYSTEMS` with ``acoustics.propagation = ray`` beside ``straight``
-    (both through :data:`RAY_PROFILE`), each timed after a first run, the two alternated ``rounds`` times (the
-    best of each: a load on the machine falls on both alike); prints µs per replicate-step and their ratio.
+    (both through :data:`RAY_PROFILE`), alternated (:func:`alternated_timing`).
 
     Returns
     -------
@@ -206,28 +245,35 @@ def propagation_timing(runs: int = CHUNK_RUNS, duration: float = CHUNK_DURATION,
     """
     print(f"\n2b. eigenrays (acoustics.propagation = ray) beside the straight line, the same chunk ({runs} runs x "
           f"{duration:g} s, profile {RAY_PROFILE}), best of {rounds} alternated:")
-    out = {}
-    for label, overrides in RAY_SYSTEMS.items():
-        batches, records, best, results = {}, {}, {}, {}
-        for propagation in ("straight", "ray"):
-            cfg = load_config("semicircle", [f"simulation.duration={duration}", *overrides,
-                                             f"acoustics.sound_speed_profile={RAY_PROFILE}",
-                                             f"acoustics.propagation={propagation}"], seed=1)
-            batches[propagation], records[propagation] = with_replicates(cfg, range(runs)), RecordBuffer()
-            run_batch(batches[propagation], timeseries=False, records=records[propagation])  # first time
-        for _ in range(rounds):
-            for propagation, cfgs in batches.items():
-                start = time.perf_counter()
-                results[propagation] = run_batch(cfgs, timeseries=False, records=records[propagation])
-                wall = time.perf_counter() - start
-                best[propagation] = min(wall, best.get(propagation, wall))
-        steps = runs * results["ray"].steps
-        straight, ray = best["straight"] / steps, best["ray"] / steps
-        print(f"     {label:5s} straight {straight * 1e6:7.2f} us, ray {ray * 1e6:7.2f} us per replicate-step: "
-              f"{ray / straight:.2f}x ({'within' if ray / straight <= RAY_TARGET else 'beyond'} the target "
-              f"{RAY_TARGET}x)")
-        out[label] = (straight, ray, results["straight"], results["ray"])
-    return out
+    return alternated_timing("acoustics.propagation", ("straight", "ray"),
+                             (f"acoustics.sound_speed_profile={RAY_PROFILE}",), runs, duration, rounds, RAY_TARGET)
+
+
+#: The ``--set`` overrides of both detections' chunks (``--snr``): eigenrays through :data:`RAY_PROFILE` in water
+#: of :data:`SNR_WATER_DEPTH` (the surface- and bottom-reflected families exist; a USBL exchange and its multipath
+#: end within the chunk's 0.1 s slot), and the issue's target for the ratio.
+SNR_WATER_DEPTH, SNR_TARGET = 20.0, 2.0
+SNR_COMMON = (f"acoustics.sound_speed_profile={RAY_PROFILE}", "acoustics.propagation=ray",
+              f"acoustics.water_depth={SNR_WATER_DEPTH:g}")
+#: The systems' own overrides there: LBL's transponders on that floor (1 m above it).
+SNR_OWN = {"LBL": (f"platform.seafloor_depth={SNR_WATER_DEPTH - 1:g}",)}
+
+
+def detection_timing(runs: int = CHUNK_RUNS, duration: float = CHUNK_DURATION,
+                     rounds: int = 3) -> dict[str, tuple[float, float, object, object]]:
+    """The chunk of each system of :data:`RAY_SYSTEMS` with ``acoustics.detection = snr`` beside ``fixed`` (both
+    with eigenrays, :data:`SNR_COMMON`), alternated (:func:`alternated_timing`).
+
+    Returns
+    -------
+    dict
+        System -> (fixed, snr) s per replicate-step and the two runs' results.
+    """
+    print(f"\n2c. detection by signal-to-noise (acoustics.detection = snr) beside the fixed one, the same chunk "
+          f"({runs} runs x {duration:g} s, propagation ray, profile {RAY_PROFILE}, water depth {SNR_WATER_DEPTH:g} "
+          f"m), best of {rounds} alternated:")
+    return alternated_timing("acoustics.detection", ("fixed", "snr"), SNR_COMMON, runs, duration, rounds,
+                             SNR_TARGET, SNR_OWN)
 
 
 def chunk_timing() -> float:
@@ -333,17 +379,27 @@ def main() -> None:
                              "line for SBL, LBL and USBL")
     parser.add_argument("--only-ray", action="store_true", help="time only that (implies --ray)")
     parser.add_argument("--ray-runs", type=int, default=CHUNK_RUNS, help="runs of the chunk of --ray")
+    parser.add_argument("--snr", action="store_true",
+                        help="also time the chunk with detection by signal-to-noise (acoustics.detection = snr) "
+                             "beside the fixed one, both with eigenrays, for SBL, LBL and USBL")
+    parser.add_argument("--only-snr", action="store_true", help="time only that (implies --snr)")
+    parser.add_argument("--snr-runs", type=int, default=CHUNK_RUNS, help="runs of the chunk of --snr")
     args = parser.parse_args()
     study = load_study("paper")
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, numpy {np.__version__}\n")
-    if args.only_ray:
-        propagation_timing(args.ray_runs)
+    if args.only_ray or args.only_snr:
+        if args.only_ray:
+            propagation_timing(args.ray_runs)
+        if args.only_snr:
+            detection_timing(args.snr_runs)
         return
     engines(study, args.replicates)
     per_step = chunk_timing()
     system_timing(per_step)
     if args.ray:
         propagation_timing(args.ray_runs)
+    if args.snr:
+        detection_timing(args.snr_runs)
     try:
         ekf = filterpy_step()
         print(f"   one FilterPy ExtendedKalmanFilter predict + update (6 states, 4 ranges + depth): "
