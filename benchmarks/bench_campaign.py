@@ -201,9 +201,9 @@ def alternated_timing(key: str, choices: tuple[str, str], common: tuple[str, ...
                       rounds: int, target: float, own: Mapping[str, tuple[str, ...]] | None = None
                       ) -> dict[str, tuple[float, float, object, object]]:
     """The chunk of each system of :data:`RAY_SYSTEMS` with ``key`` set to each of the two ``choices`` (and the
-    ``--set`` overrides ``common``, and a system's ``own``), each timed after a first run, the two alternated ``rounds`` times (the best of
-    each: a load on the machine falls on both alike); prints µs per replicate-step and their ratio against
-    ``target``.
+    ``--set`` overrides ``common``, and a system's ``own``), each timed after a first run, the two alternated
+    ``rounds`` times (the best of each: a load on the machine falls on both alike); prints µs per replicate-step
+    and their ratio against ``target``.
 
     Returns
     -------

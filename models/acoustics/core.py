@@ -90,9 +90,9 @@ import numpy as np
 from sblsim.models.acoustics import sonar
 from sblsim.models.acoustics.detection import NO_SNR, SITE, family_levels, family_levels_grid, first_detected
 from sblsim.models.acoustics.rays import (
+    FAMILY_TABLE,
     RAY_BOUNDS,
     RAY_GRID,
-    FAMILY_TABLE,
     RAY_TABLE,
     RAY_TABLE_ROWS,
     first_arrival_grid,
@@ -781,5 +781,6 @@ class Acoustics(Component):
 
 
 __all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "OVERRUN", "check_in_flight", "check_slot",
-           "FAMILY_TABLE_VARIABLES", "site_levels", "site_numbers", "site_vector", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
+           "FAMILY_TABLE_VARIABLES", "site_levels", "site_numbers", "site_vector", "DIRECTION", "FLIGHT_CAPACITY",
+           "OVERFLOW",
            "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -1072,7 +1072,7 @@ def chord_elevation(zt, elevation, tau, nodes, speeds):
 
 
 __all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "FAMILIES", "FAMILY_COLUMNS", "FAMILY_TABLE", "NEWTON_ITERATIONS",
-           "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE",
-           "TRACE_ITERATIONS", "arrivals", "arrivals_grid", "chord_elevation", "eigenray_families", "eigenray_paths",
-           "eigenray_table", "exact_points", "family_nodes", "family_points", "first_arrival", "first_arrival_grid",
-           "profile_arrays", "ray_grid", "ray_values", "slant_range", "sound_speed_at"]
+           "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE",
+           "SURFACE", "TRACE_ITERATIONS", "arrivals", "arrivals_grid", "chord_elevation", "eigenray_families",
+           "eigenray_paths", "eigenray_table", "exact_points", "family_nodes", "family_points", "first_arrival",
+           "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range", "sound_speed_at"]
