@@ -34,7 +34,7 @@ from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compile
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
 from sblsim.models.acoustics.detection import family_levels
-from sblsim.models.acoustics.rays import exact_points
+from sblsim.models.acoustics.rays import exact_points, family_points
 from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import CompileError
@@ -86,6 +86,7 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     rays = ca.CodeGenerator("sblsim_ray_points.c", {"casadi_real": "double", "casadi_int": "long long int"})
     rays.add(exact_points())
     rays.add(family_levels())  # and the availability map (sblsim.orchestrator.maps) this one
+    rays.add(family_points())  # and the family table's (sblsim.models.acoustics.detection.level_table) these two
     rays.generate(str(directory) + "/")
     code = (directory / "sblsim_ray_points.c").read_text()
     (directory / "sblsim_ray_points.c").write_text(RAY_EXPORT + code)
@@ -441,6 +442,15 @@ def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
         return None
 
 
+def compiled_family_points(n_beacons: int = 4) -> ca.Function | None:
+    """:func:`sblsim.models.acoustics.rays.family_points` compiled in the local engine's library (built if missing),
+    or None when no compiler can build it."""
+    try:
+        return ca.external(family_points().name(), str(library_path(n_beacons)))
+    except (CompileError, OSError, RuntimeError):
+        return None
+
+
 def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
     """:func:`sblsim.models.acoustics.detection.family_levels` compiled in the local engine's library (built if
     missing), or None when no compiler can build it."""
@@ -451,7 +461,7 @@ def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
 
 
 __all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "cache_dir", "compiled_exact_points",
-           "compiled_family_levels",
+           "compiled_family_levels", "compiled_family_points",
            "library_path", "load", "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb",
            "write_library_sources"]
 

@@ -29,9 +29,11 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from sblsim.fmus.native import compiled_exact_points
+from sblsim.fmus.native import compiled_exact_points, compiled_family_levels, compiled_family_points
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.models.acoustics.rays import RAY_BOUNDS, RAY_TABLE, eigenray_table
+from sblsim.models.acoustics.core import site_vector
+from sblsim.models.acoustics.detection import level_table
+from sblsim.models.acoustics.rays import FAMILY_TABLE, RAY_BOUNDS, RAY_TABLE, eigenray_table
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.platform.waves import wave_motion
 from sblsim.models.receiver.core import filter_parameters
@@ -351,7 +353,9 @@ def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
 def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[str, Any]) -> dict[str, Any]:
     """The eigenray table's FMU parameters of a resolved configuration: none (every eigenray solved) unless it is a
     ``ray`` run through a profile table whose geometry :func:`ray_box` bounds; built once per profile, water depth
-    and box (:func:`sblsim.models.acoustics.rays.eigenray_table`)."""
+    and box (:func:`sblsim.models.acoustics.rays.eigenray_table`). An ``snr`` run (``acoustics.detection``) gets
+    the family table at the same nodes too, built once per profile, water depth, box and site
+    (:func:`sblsim.models.acoustics.detection.level_table`)."""
     acoustics = cfg["acoustics"]
     rows = int(params.get("sound_speed_rows", 0))
     if acoustics.get("propagation") != "ray" or rows == 0:
@@ -361,7 +365,19 @@ def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[s
         return {}
     table = tuple((float(params[f"sound_speed_depth[{k}]"]), float(params[f"sound_speed[{k}]"]))
                   for k in range(1, rows + 1))
-    return dict(_ray_table(table, float(acoustics["water_depth"]), box))
+    out = dict(_ray_table(table, float(acoustics["water_depth"]), box))
+    if acoustics.get("detection") == "snr":
+        site = tuple(float(v) for v in site_vector(params))
+        out.update(_family_table(table, float(acoustics["water_depth"]), box, site))
+    return out
+
+
+@lru_cache(maxsize=32)
+def _family_table(table: tuple, depth: float, box: tuple, site: tuple) -> tuple:
+    columns = level_table(np.array(table), depth, box, np.array(site), compiled_family_points(),
+                          compiled_family_levels())
+    return tuple(FAMILY_TABLE.values(np.column_stack([columns[c.name] for c in FAMILY_TABLE.columns]),
+                                     "ray_family_rows").items())
 
 
 @lru_cache(maxsize=32)

@@ -88,8 +88,9 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.detection import NO_SNR, SITE, family_levels, first_detected
+from sblsim.models.acoustics.detection import NO_SNR, SITE, family_levels, family_levels_grid, first_detected
 from sblsim.models.acoustics.rays import (
+    FAMILY_TABLE,
     RAY_BOUNDS,
     RAY_GRID,
     RAY_TABLE,
@@ -261,6 +262,15 @@ OVERRUN: tuple[Variable, ...] = (
              "included) beyond the slot (0: none; the next slot's packet overlaps it, which the channel does not "
              "model: the orchestrator flags the run)", discrete=True),
 )
+#: The family table of an ``snr`` run (:func:`sblsim.models.acoustics.detection.level_table`): every eigenray family
+#: for the sonar equation at the eigenray table's nodes (its box), built once by the orchestrator for the run's
+#: profile, geometry and site (declared after the rest: their value references stay). Without it (0 rows, the
+#: default: a host that gives none) every family is solved exactly.
+FAMILY_TABLE_VARIABLES: tuple[Variable, ...] = (
+    Variable("ray_family_rows", "parameter", "Integer", 0, scope="fmu", table=FAMILY_TABLE,
+             description=f"snr: rows of the family table ({RAY_TABLE_ROWS}: in use; 0: every family solved)",
+             min=0, max=RAY_TABLE_ROWS),
+)
 
 
 def site_numbers(p: Mapping[str, Any]) -> Any:
@@ -277,6 +287,25 @@ def site_numbers(p: Mapping[str, Any]) -> Any:
     noise = sonar.noise_level(p["frequency"], p["bandwidth"], sonar.wind_speed(p["beaufort"]), p["shipping"])
     return ca.vertcat(p["source_level"], p["detection_threshold"], p["directivity_index"], p["fluctuation"],
                       p["frequency"], p["absorption"], noise, sonar.wave_height(p["beaufort"]), *floor)
+
+
+def _site(parameters: Mapping[str, Any]) -> tuple[dict[str, Any], np.ndarray]:
+    """The channel's parameters (missing ones: their declared start) and the site's numbers they give."""
+    declared = {v.name: v for v in Acoustics.fmu_parameters_declared()}
+    p = {name: v.start for name, v in declared.items() if not v.in_table} | dict(parameters)
+    numeric = {**p, "bottom": float(declared["bottom"].choices.index(p["bottom"]))}
+    return p, np.asarray(ca.evalf(site_numbers(numeric))).ravel()
+
+
+def site_vector(parameters: Mapping[str, Any]) -> np.ndarray:
+    """The site's numbers (:data:`~sblsim.models.acoustics.detection.SITE`) of the channel's FMU parameters
+    ``parameters`` (missing ones take their declared start, String choices as text), as :func:`site_numbers`.
+
+    Returns
+    -------
+    ndarray, shape (len(SITE),)
+    """
+    return _site(parameters)[1]
 
 
 def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
@@ -300,12 +329,9 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
         ``tau`` [s], ``valid``, ``snr`` [dB], ``pd``, each (K, 3) (families direct, surface, bottom;
         :func:`~sblsim.models.acoustics.detection.family_levels`).
     """
-    declared = {v.name: v for v in Acoustics.fmu_parameters_declared()}
-    p = {name: v.start for name, v in declared.items() if not v.in_table} | dict(parameters)
+    p, site = _site(parameters)
     rows = PROFILE.rows(p, "sound_speed_rows")
     nodes, speeds = profile_arrays(rows) if rows.shape[0] else (np.zeros(NODES), np.zeros(NODES))
-    numeric = {**p, "bottom": float(declared["bottom"].choices.index(p["bottom"]))}
-    site = np.asarray(ca.evalf(site_numbers(numeric))).ravel()
     sources, receivers = np.atleast_2d(np.asarray(sources, float)), np.atleast_2d(np.asarray(receivers, float))
     horizontal = np.hypot(*(receivers[:, :2] - sources[:, :2]).T)
     f = (family_levels() if levels is None else levels).map(sources.shape[0])
@@ -412,13 +438,14 @@ class Acoustics(Component):
         )
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
-                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN)
+                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
-                + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN)
+                + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
+                + FAMILY_TABLE_VARIABLES)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -460,7 +487,8 @@ class Acoustics(Component):
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
                            + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
                                     ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
-                                    ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS), ("site", len(SITE))])
+                                    ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS), ("site", len(SITE)),
+                                    ("family_values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
@@ -476,10 +504,12 @@ class Acoustics(Component):
             table = ray_values([p[c.name] for c in RAY_TABLE.columns])
             # a run without an eigenray table (every straight run) never reads it: skip its copy, as above
             table = ca.if_else(p["ray_table_rows"] > 0, table, ca.MX.zeros(table.shape), True)
+            family = ray_values([p[c.name] for c in FAMILY_TABLE.columns])
+            family = ca.if_else(p["ray_family_rows"] > 0, family, ca.MX.zeros(family.shape), True)  # (snr runs)
             return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:],
                     "ray_bounds": bounds, "ray_grid": ray_grid([bounds[j] for j in range(len(RAY_BOUNDS))]),
                     "ray_values": table,
-                    "site": site_numbers(p)}
+                    "site": site_numbers(p), "family_values": family}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -636,10 +666,12 @@ class Acoustics(Component):
 
         def hear(source, receive, p, d, draws):
             """The first detected eigenray from ``source`` to ``receive`` (3, 1) [m, NED] with the uniforms
-            ``draws`` (3: one per family): :func:`~sblsim.models.acoustics.detection.first_detected`."""
-            families = family_levels()(source[2], receive[2], ca.norm_2(receive[:2] - source[:2]), p["water_depth"],
-                                       p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"], d["speeds"],
-                                       d["site"])
+            ``draws`` (3: one per family): :func:`~sblsim.models.acoustics.detection.first_detected` (the families
+            interpolated in the run's family table where it holds)."""
+            families = family_levels_grid()(
+                p["ray_family_rows"] == RAY_TABLE_ROWS, source[2], receive[2], ca.norm_2(receive[:2] - source[:2]),
+                p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"], d["speeds"],
+                d["site"], d["ray_bounds"], d["ray_grid"], d["family_values"])
             return first_detected(*families, draws)
 
         def send(x, p, out, elapsed):
@@ -726,5 +758,6 @@ class Acoustics(Component):
 
 
 __all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "OVERRUN", "check_in_flight",
-           "site_levels", "site_numbers", "DIRECTION", "FLIGHT_CAPACITY", "OVERFLOW",
+           "FAMILY_TABLE_VARIABLES", "site_levels", "site_numbers", "site_vector", "DIRECTION", "FLIGHT_CAPACITY",
+           "OVERFLOW",
            "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

@@ -22,7 +22,18 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.rays import arrivals, sound_speed_at
+from sblsim.models.acoustics.rays import (
+    FAMILY_TABLE,
+    RAY_GRID,
+    RAY_TABLE_ROWS,
+    arrivals,
+    arrivals_grid,
+    family_nodes,
+    profile_arrays,
+    ray_grid,
+    ray_values,
+    sound_speed_at,
+)
 from sblsim.models.acoustics.sound_speed import NODES
 
 #: The site's numbers :func:`family_levels` takes, in this order (units: dB, dB, dB, dB, Hz, dB/m, dB, m, 1, m/s,
@@ -56,8 +67,18 @@ def family_levels() -> ca.Function:
     """
     zs, zr, x, depth, profile, constant = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "profile", "constant"))
     nodes, speeds, site = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES), ca.MX.sym("site", len(SITE))
+    families = arrivals(profile, zs, zr, x, depth, constant, nodes, speeds)
+    return ca.Function("sblsim_family_levels", [zs, zr, x, depth, profile, constant, nodes, speeds, site],
+                       _levels(families, zs, depth, profile, constant, nodes, speeds, site),
+                       ["zs", "zr", "x", "depth", "profile", "constant", "nodes", "speeds", "site"],
+                       ["tau", "launch", "arrival", "valid", "snr", "pd"], {"never_inline": True})
+
+
+def _levels(families, zs, depth, profile, constant, nodes, speeds, site):
+    """``[tau, launch, arrival, valid, snr, pd]`` of the families ``(tau, launch, arrival, valid, spreading,
+    length)`` (:func:`~sblsim.models.acoustics.rays.arrivals`) at the site ``site``: the sonar equation per family."""
     s = {name: site[j] for j, name in enumerate(SITE)}
-    tau, launch, arrive, valid, spreading, length = arrivals(profile, zs, zr, x, depth, constant, nodes, speeds)
+    tau, launch, arrive, valid, spreading, length = families
 
     def speed(z):
         return ca.if_else(profile > 0.5, sound_speed_at(z, nodes, speeds), constant)
@@ -77,10 +98,115 @@ def family_levels() -> ca.Function:
         levels.append(ca.if_else(exists, ca.fmax(level, NO_SNR), NO_SNR))
         chances.append(ca.if_else(exists, sonar.detection_probability(level, s["detection_threshold"],
                                                                       s["fluctuation"]), 0.0))
-    return ca.Function("sblsim_family_levels", [zs, zr, x, depth, profile, constant, nodes, speeds, site],
-                       [tau, launch, arrive, valid, ca.vertcat(*levels), ca.vertcat(*chances)],
-                       ["zs", "zr", "x", "depth", "profile", "constant", "nodes", "speeds", "site"],
+    return [tau, launch, arrive, valid, ca.vertcat(*levels), ca.vertcat(*chances)]
+
+
+@lru_cache(maxsize=1)
+def family_levels_grid() -> ca.Function:
+    """``(use, zs, zr, x, depth, profile, constant, nodes, speeds, site, bounds, grid, values) -> (tau, launch,
+    arrival, valid, snr, pd)``: :func:`family_levels` with the eigenrays interpolated in the run's family table
+    where it holds (:func:`~sblsim.models.acoustics.rays.arrivals_grid`; ``use`` true when the table is given),
+    the exact solve elsewhere.
+
+    Parameters (of the function)
+    ----------------------------
+    use : 1 when the family table (:func:`level_table`) is given; 0: every eigenray solved exactly.
+    zs, zr, x, depth, profile, constant, nodes, speeds, site : as :func:`family_levels`.
+    bounds, grid, values : the table's box [m], its nodes [m] and its columns interleaved
+        (:func:`~sblsim.models.acoustics.rays.arrivals_grid`).
+
+    Returns (of the function)
+    -------------------------
+    As :func:`family_levels`, each (3, 1).
+    """
+    names = ["use", "zs", "zr", "x", "depth", "profile", "constant"]
+    use, zs, zr, x, depth, profile, constant = (ca.MX.sym(n) for n in names)
+    nodes, speeds, site = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES), ca.MX.sym("site", len(SITE))
+    bounds, grid = ca.MX.sym("bounds", 6), ca.MX.sym("grid", sum(RAY_GRID))
+    values = ca.MX.sym("values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS)
+    families = arrivals_grid(use, zs, zr, x, depth, profile, constant, nodes, speeds, bounds, grid, values)
+    return ca.Function("sblsim_family_levels_grid",
+                       [use, zs, zr, x, depth, profile, constant, nodes, speeds, site, bounds, grid, values],
+                       _levels(families, zs, depth, profile, constant, nodes, speeds, site),
+                       names + ["nodes", "speeds", "site", "bounds", "grid", "values"],
                        ["tau", "launch", "arrival", "valid", "snr", "pd"], {"never_inline": True})
+
+
+#: What the interpolated family table must reproduce of the exact solve at the centre of every cell it is used in,
+#: for every family that exists there: travel time [s] (0.1 µs), angles [rad] (1e-4 rad: 0.006°, a twenty-fourth
+#: of the 0.14° of the best USBL; the reflected families' launch angles near the surface miss 1e-5) and SNR [dB]
+#: (a cell beyond it is solved exactly).
+LEVEL_TABLE_TOLERANCE = (1e-7, 1e-4, 0.01)
+
+
+def level_table(table, depth: float, bounds, site, paths: ca.Function | None = None,
+                levels: ca.Function | None = None) -> dict[str, np.ndarray]:
+    """The family table of a run (:data:`~sblsim.models.acoustics.rays.FAMILY_TABLE`), built once for its profile,
+    water depth, box and site from exact solves at the eigenray table's nodes.
+
+    ``ray_family_exact`` is 1 at every node of a cell whose nodes differ in which families exist, or whose
+    interpolation misses the exact :func:`family_levels` at the cell's centre, for a family that exists, by more
+    than :data:`LEVEL_TABLE_TOLERANCE` (time, an angle or the SNR) or differs in which exist: there the channel
+    solves exactly.
+
+    Parameters
+    ----------
+    table : array_like, shape (rows, 2)
+        The sound-speed table: depth [m], speed [m/s] (1 ≤ rows ≤ MAX_PROFILE_ROWS).
+    depth : float
+        Water depth [m] (0: none).
+    bounds : array_like, shape (6,)
+        The box (:data:`~sblsim.models.acoustics.rays.RAY_BOUNDS`) [m], each min ≤ max.
+    site : array_like, shape (len(SITE),)
+        The site's numbers (:data:`SITE`).
+    paths, levels : casadi.Function, optional
+        :func:`~sblsim.models.acoustics.rays.family_points` and :func:`family_levels` as they are evaluated (e.g.
+        compiled); default those functions themselves.
+
+    Returns
+    -------
+    dict
+        Column name -> (RAY_TABLE_ROWS,) values, and ``"exact_share"``: the share of cells solved exactly.
+    """
+    nodes, speeds = profile_arrays(table)
+    bounds = np.asarray(bounds, dtype=float)
+    site = np.asarray(site, dtype=float).ravel()
+    columns = family_nodes(table, depth, bounds, paths)
+    valid = columns.pop("valid")
+    shape = RAY_GRID
+    pattern = (valid[0] + 2 * valid[1] + 4 * valid[2]).reshape(shape, order="F")
+    corners = [pattern[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1]
+               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    uniform = np.all([c == corners[0] for c in corners], axis=0)
+    grid = ray_grid(bounds)
+    axes = np.split(grid, np.cumsum(RAY_GRID)[:-1])
+    centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
+    czs, czr, cx = (a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
+    n = czs.size
+    names = [c.name for c in FAMILY_TABLE.columns]
+    values = np.asarray(ray_values([ca.DM(columns[c]) for c in names[:-1]]
+                                   + [ca.DM(np.zeros(RAY_TABLE_ROWS))])).ravel()
+    points = (czs[None, :], czr[None, :], cx[None, :], np.full((1, n), depth), np.ones((1, n)),
+              np.full((1, n), 1500.0))
+    want = [np.asarray(o) for o in (family_levels() if levels is None else levels).map(n)(
+        *points, nodes, speeds, site)]
+    got = [np.asarray(o) for o in family_levels_grid().map(n)(1.0, *points, nodes, speeds, site, bounds, grid,
+                                                              values)]
+    exists = want[3] > 0.5
+    good = np.all((got[3] > 0.5) == exists, axis=0)
+    for k, tolerance in ((0, LEVEL_TABLE_TOLERANCE[0]), (1, LEVEL_TABLE_TOLERANCE[1]),
+                         (2, LEVEL_TABLE_TOLERANCE[1]), (4, LEVEL_TABLE_TOLERANCE[2])):
+        good &= np.all(~exists | (np.abs(got[k] - want[k]) <= tolerance), axis=0)  # false for NaN
+    uniform &= good.reshape(tuple(m - 1 for m in shape), order="F")
+    needs = np.zeros(shape, dtype=bool)
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                needs[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1] |= ~uniform
+    out = {name: columns[name] for name in names[:-1]}
+    out[names[-1]] = needs.ravel(order="F").astype(float)
+    out["exact_share"] = float(np.mean(~uniform))
+    return out
 
 
 def first_detected(tau, launch, arrive, valid, snr, pd, draws):
@@ -144,4 +270,5 @@ def packet_probability(tau, pd, snr, threshold, margin, fluctuation) -> np.ndarr
     return np.sum(pd * missed_before * decoded, axis=-1)
 
 
-__all__ = ["NO_SNR", "SITE", "family_levels", "first_detected", "packet_probability"]
+__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "family_levels", "family_levels_grid", "first_detected",
+           "level_table", "packet_probability"]

@@ -781,6 +781,167 @@ def _tabled() -> ca.Function:
     return ca.Function("sblsim_ray_tabled_points", [zs, zr, x, depth, g, v], _row_eigenray()(zs, zr, x, depth, row))
 
 
+# ------------------------------------------------------------------------ the eigenray table of every family
+
+#: The eigenray families, in the row order of :func:`arrivals`.
+FAMILIES = ("direct", "surface", "bottom")
+#: The per-family table: at each node of the eigenray table's grid (the same nodes and box), each family's time over
+#: the length of its isovelocity image (0: no eigenray of the family), its angles less the image's, its geometric
+#: spreading less the image's spherical spreading and its length along the ray over the image's; then whether a
+#: cell at the node needs the exact solve.
+FAMILY_TABLE = Table(
+    columns=tuple(
+        Column(f"ray_{family}_{what}", unit, f"Family table: {family} eigenray's {text}", lo, hi)
+        for family in FAMILIES
+        for what, unit, text, lo, hi in (
+            ("slowness", "s/m", "travel time over the image path's length (0: none)", 0.0, 1.0),
+            ("launch_offset", "rad", "launch angle less the image path's", -4.0, 4.0),
+            ("arrival_offset", "rad", "arrival angle less the image path's", -4.0, 4.0),
+            ("spreading_offset", "dB", "spreading less the image path's spherical spreading", -100.0, 100.0),
+            ("length_ratio", "1", "length along the ray over the image path's length", 0.0, 100.0)))
+    + (Column("ray_family_exact", "1", "Family table: 1 where a cell at the node needs the exact solve", 0.0, 1.0),),
+    max_rows=RAY_TABLE_ROWS)
+#: Columns of :data:`FAMILY_TABLE` per family.
+FAMILY_COLUMNS = 5
+
+
+@lru_cache(maxsize=1)
+def family_points() -> ca.Function:
+    """``(zs, zr, x, depth, nodes, speeds) -> (tau, launch, arrival, valid, spreading, length)``, each (3, 1):
+    :func:`arrivals` through a profile table, as the family table's builder evaluates it at its nodes (the local
+    engine's library compiles it)."""
+    args = [ca.MX.sym(n) for n in ("zs", "zr", "x", "depth")]
+    nd, sp = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    return ca.Function("sblsim_ray_family_points", args + [nd, sp], list(arrivals(1, *args, 1500.0, nd, sp)),
+                       ["zs", "zr", "x", "depth", "nodes", "speeds"],
+                       ["tau", "launch", "arrival", "valid", "spreading", "length"])
+
+
+@lru_cache(maxsize=1)
+def _family_interpolant() -> ca.Function:
+    return ca.interpolant("sblsim_ray_family_grid", "linear", list(RAY_GRID), len(FAMILY_TABLE.columns))
+
+
+@lru_cache(maxsize=1)
+def _family_row() -> ca.Function:
+    """``(zs, zr, x, depth, row) -> (tau, launch, arrival, valid, spreading, length)``, each (3, 1): the families a
+    row of :data:`FAMILY_TABLE` gives at a geometry (``τ / L``, ``S / L`` times the image's length ``L``, the
+    image's angles plus the offsets, the image's spherical spreading plus the offset; valid where ``τ / L > 0``)."""
+    zs, zr, x, depth = (ca.SX.sym(n) for n in ("zs", "zr", "x", "depth"))
+    row = ca.SX.sym("row", len(FAMILY_TABLE.columns))
+    out = [[] for _ in range(6)]
+    for j in range(len(FAMILIES)):
+        length, launch, arrival = _images(j + 1.0, zs, zr, x, depth)
+        slowness, d_launch, d_arrival, d_spreading, ratio = (row[FAMILY_COLUMNS * j + c] for c in range(5))
+        for k, v in enumerate((slowness * length, launch + d_launch, arrival + d_arrival, slowness > 0,
+                               _spherical(length) + d_spreading, ratio * length)):
+            out[k].append(v)
+    return ca.Function("sblsim_ray_family_row", [zs, zr, x, depth, row], [ca.vertcat(*o) for o in out])
+
+
+@lru_cache(maxsize=1)
+def _arrivals_grid() -> ca.Function:
+    """``(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values) -> (tau, launch, arrival,
+    valid, spreading, length)``: the family table's interpolation inside its box where its cell allows, the exact
+    :func:`arrivals` elsewhere."""
+    zs, zr, x, depth, use_table, constant = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth", "use_table", "c"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    row = ca.MX.sym("row", len(FAMILY_TABLE.columns))
+    args = [zs, zr, x, depth, use_table, constant, nodes, speeds, row]
+    tabled = ca.Function("sblsim_ray_families_tabled", args, _family_row()(zs, zr, x, depth, row))
+    exact = ca.Function("sblsim_ray_families_exact", args, list(arrivals(use_table, zs, zr, x, depth, constant,
+                                                                          nodes, speeds)))
+    chosen = switch("sblsim_ray_families_choice", [tabled, exact])
+    use = ca.MX.sym("use")
+    bounds, grid = ca.MX.sym("bounds", 6), ca.MX.sym("grid", sum(RAY_GRID))
+    values = ca.MX.sym("values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS)
+    row_value = _family_interpolant()(ca.vertcat(zs, zr, x), grid, values)
+    inside = use > 0
+    for j, v in enumerate((zs, zr, x)):
+        inside = ca.logic_and(inside, ca.logic_and(v >= bounds[2 * j], v <= bounds[2 * j + 1]))
+    tabulate = ca.logic_and(inside, row_value[len(FAMILY_TABLE.columns) - 1] == 0)  # false for NaN
+    out = chosen(ca.logic_not(tabulate), zs, zr, x, depth, use_table, constant, nodes, speeds, row_value)
+    return ca.Function("sblsim_arrivals_grid",
+                       [use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values], out,
+                       {"never_inline": True})
+
+
+def arrivals_grid(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values):
+    """Every eigenray family as :func:`arrivals`, interpolated in a family table where it holds.
+
+    Inside the table's box, in a cell whose nodes all carry ``ray_family_exact = 0`` (at every corner the same
+    families exist, and the interpolation was checked against the exact solve at the cell's centre when the table
+    was built, :func:`sblsim.models.acoustics.detection.level_table`), each family's time is the multilinear
+    interpolation of ``τ / L`` times the length ``L`` of its isovelocity image (the chord, or its image in the
+    surface or the bottom), its angles the image's plus the interpolated offsets, its spreading the image's
+    ``20 log10 L`` plus the interpolated offset and its length ``L`` times the interpolated ratio; elsewhere, or
+    without a table (``use`` false), the exact solve, which then alone is evaluated in the generated C.
+
+    Parameters
+    ----------
+    use : casadi.SX
+        True (non-zero) when the table is given.
+    zs, zr, x, depth, use_table, constant, nodes, speeds :
+        As :func:`arrivals`.
+    bounds : casadi.SX, shape (6, 1)
+        The table's box (:data:`RAY_BOUNDS`) [m].
+    grid : casadi.SX, shape (sum(RAY_GRID), 1)
+        Its nodes (:func:`ray_grid`).
+    values : casadi.SX, shape (len(FAMILY_TABLE.columns) RAY_TABLE_ROWS, 1)
+        Its columns interleaved (:func:`ray_values`).
+
+    Returns
+    -------
+    tau, launch, arrival, valid, spreading, length : casadi.SX, each shape (3, 1)
+        As :func:`arrivals` (an invalid family's other values are 0 where the table answers).
+    """
+    return _arrivals_grid()(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values)
+
+
+def family_nodes(table, depth: float, bounds, paths: ca.Function | None = None) -> dict[str, np.ndarray]:
+    """The columns of :data:`FAMILY_TABLE` at the nodes of the grid of ``bounds`` (exact solves), but the last.
+
+    Parameters
+    ----------
+    table : array_like, shape (rows, 2)
+        The sound-speed table: depth [m], speed [m/s] (1 ≤ rows ≤ MAX_PROFILE_ROWS).
+    depth : float
+        Water depth [m] (0: none).
+    bounds : array_like, shape (6,)
+        The box (:data:`RAY_BOUNDS`) [m], each min ≤ max.
+    paths : casadi.Function, optional
+        :func:`family_points` as it is evaluated (e.g. compiled); default that function itself.
+
+    Returns
+    -------
+    dict
+        Column name -> (RAY_TABLE_ROWS,) values (every column of :data:`FAMILY_TABLE` but ``ray_family_exact``),
+        and ``"valid"``: (3, RAY_TABLE_ROWS) whether each family exists at each node.
+    """
+    nodes, speeds = profile_arrays(table)
+    paths = family_points() if paths is None else paths
+    axes = np.split(ray_grid(np.asarray(bounds, dtype=float)), np.cumsum(RAY_GRID)[:-1])
+    zs, zr, x = (a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij"))
+    n = zs.size
+    tau, launch, arrival, valid, spreading, length = (
+        np.asarray(o) for o in paths.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), depth),
+                                            nodes, speeds))
+    c_source = np.interp(zs, nodes, speeds)
+    out, exists = {}, valid > 0.5
+    for j, family in enumerate(FAMILIES):
+        image, l0, a0 = _at_points(_image_function(), (j + 1.0, zs, zr, x, depth))
+        ok = exists[j]
+        slowness = np.where(image > 1e-9, tau[j] / np.maximum(image, 1e-300), 1.0 / c_source)
+        ratio = np.where(image > 1e-9, length[j] / np.maximum(image, 1e-300), 1.0)
+        spherical = np.maximum(20.0 * np.log10(np.maximum(image, 1e-300)), 0.0)
+        for what, value in (("slowness", slowness), ("launch_offset", launch[j] - l0),
+                            ("arrival_offset", arrival[j] - a0), ("spreading_offset", spreading[j] - spherical),
+                            ("length_ratio", ratio)):
+            out[f"ray_{family}_{what}"] = np.where(ok, value, 0.0)
+    out["valid"] = exists
+    return out
+
+
 #: Newton iterations of :func:`slant_range` (from the straight line at the harmonic-mean speed; the error falls
 #: quadratically: metres, millimetres, then round-off at a 1 km slant range).
 RANGE_ITERATIONS = 3
@@ -910,7 +1071,8 @@ def chord_elevation(zt, elevation, tau, nodes, speeds):
     return _chord_elevation()(zt, elevation, tau, nodes, speeds)
 
 
-__all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "NEWTON_ITERATIONS", "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID",
-           "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE", "SURFACE", "TRACE_ITERATIONS", "arrivals",
-           "chord_elevation", "eigenray_families", "eigenray_paths", "eigenray_table", "exact_points", "first_arrival",
+__all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "FAMILIES", "FAMILY_COLUMNS", "FAMILY_TABLE", "NEWTON_ITERATIONS",
+           "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE",
+           "SURFACE", "TRACE_ITERATIONS", "arrivals", "arrivals_grid", "chord_elevation", "eigenray_families",
+           "eigenray_paths", "eigenray_table", "exact_points", "family_nodes", "family_points", "first_arrival",
            "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range", "sound_speed_at"]
