@@ -324,14 +324,19 @@ def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
     :data:`RAY_BOX_MARGINS`. A geometry outside the box is solved exactly, so the box only decides the speed.
     """
     platform, target = cfg["platform"], cfg["target"]
-    arms = SYSTEMS[platform["system"]].lever_arms(platform)
-    reach = float(np.linalg.norm(arms, axis=1).max(initial=0.0))
-    tilt, _yaw, heave, _frequency = (float(v) for v in wave_motion(int(platform.get("beaufort", 0)),
-                                                                     float(platform.get("hull_length", 1.0))))
+    system = SYSTEMS[platform["system"]]
+    arms = system.lever_arms(platform)
     dz, dx = RAY_BOX_MARGINS
-    rise = heave + reach * np.sin(tilt) + dz  # the transducers' largest vertical excursion, widened
-    # not above the surface: the profile's end speed is extended there (a kink the table would straddle)
-    zs_lo, zs_hi = max(float(arms[:, 2].min()) - rise, 0.0), float(arms[:, 2].max()) + rise
+    rise = dz  # transducers that stand elsewhere than on the platform (seafloor transponders) do not heave
+    if not system.places_transducers:
+        reach = float(np.linalg.norm(arms, axis=1).max(initial=0.0))
+        tilt, _yaw, heave, _frequency = (float(v) for v in wave_motion(int(platform.get("beaufort", 0)),
+                                                                         float(platform.get("hull_length", 1.0))))
+        rise += heave + reach * np.sin(tilt)  # the transducers' largest vertical excursion, widened
+    # within the water: the profile's end speed is extended above the surface (a kink the table would straddle),
+    # and a family's existence changes at the floor
+    floor = float(cfg["acoustics"].get("water_depth", 0.0)) or np.inf
+    zs_lo, zs_hi = max(float(arms[:, 2].min()) - rise, 0.0), min(float(arms[:, 2].max()) + rise, floor)
     r_beacon = float(np.linalg.norm(arms[:, :2], axis=1).max(initial=0.0))
     kind = target["trajectory"]
     if kind == "file":
@@ -347,7 +352,7 @@ def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
         return None
     x_lo = max(r_lo - r_beacon - 2.0 * dx, 0.0)
     x_hi = r_hi + r_beacon + 2.0 * dx
-    return (zs_lo, zs_hi, max(float(depths.min()) - dz, 0.0), float(depths.max()) + dz, x_lo, x_hi)
+    return (zs_lo, zs_hi, max(float(depths.min()) - dz, 0.0), min(float(depths.max()) + dz, floor), x_lo, x_hi)
 
 
 def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[str, Any]) -> dict[str, Any]:
