@@ -393,6 +393,46 @@ def test_the_eigenray_table_of_a_run(fmu_dir, monkeypatch, system):
         assert (a[column] - b[column]).abs().max() <= 1e-5
 
 
+#: The benchmark's snr geometry (``bench_campaign.py --snr``): the semicircle through Munk in 20 m of water (every
+#: family exists), LBL's transponders 1 m above the floor, in a rough sea (the heave of the vessel's transducers),
+#: at a source level and fluctuation that miss some direct arrivals (as :data:`SNR_CASES`)
+SNR_TABLE = [*RAY, "acoustics.detection=snr", "acoustics.water_depth=20", "platform.beaufort=5",
+             "acoustics.source_level=125", "acoustics.fluctuation=15"]
+
+
+@pytest.mark.parametrize("system", ["sbl", "lbl", "usbl"])
+def test_the_family_table_of_a_run(fmu_dir, monkeypatch, system):
+    """An ``snr`` semicircle gets the family table, every cell answered (a box of seafloor transponders neither
+    heaves nor reaches below the floor): both engines equal to 1e-9 with it, and the run without it (every family
+    solved) ranges on the same path of nearly every packet with the same travel time within 1 µs and SNR within
+    0.02 dB."""
+    from sblsim.orchestrator import plan as plan_module
+
+    own = ["platform.seafloor_depth=19"] if system == "lbl" else []
+    cfg = load_config("semicircle", ["platform.system=" + system, *SNR_TABLE, *own, "simulation.duration=10"],
+                      seed=4)
+    box = plan_module.ray_box(cfg)
+    arms = make_plan(cfg).lever_arms
+    assert box[1] <= 20.0 and box[3] <= 20.0  # no node below the water depth
+    if system == "lbl":  # seafloor transponders: the depth margin alone
+        assert box[:2] == (arms[:, 2].min() - 1.0, 20.0)
+    else:  # vessel-mounted ones: the heave of Beaufort 5 (about a metre) widens it beyond the margin
+        assert box[1] > arms[:, 2].max() + 1.5
+    table = make_plan(cfg).parameters["acoustics"]
+    assert table["ray_family_rows"] == 512 and not any(table[f"ray_family_exact[{k}]"] for k in range(1, 513))
+    a = both_engines(cfg, fmu_dir).timeseries
+    monkeypatch.setattr(plan_module, "ray_table_parameters", lambda cfg, params: {})
+    b = run(cfg, "local", replicates=[0, 1]).timeseries
+    heard = (a["arrival"] > 0) & (b["arrival"] > 0)
+    assert heard.sum() > 40
+    same = heard & (a["arrival"] == b["arrival"])
+    assert same.sum() >= 0.98 * heard.sum()
+    assert (a["arrival"] > 1).any()  # a reflected path ranges too
+    assert (a["travel_time"] - b["travel_time"])[same].abs().max() <= 1e-6
+    assert (a["travel_time"] != b["travel_time"])[same].any()  # interpolated, not solved
+    assert (a["snr"] - b["snr"])[same].abs().max() <= 0.02
+
+
 def test_the_channel_fmu_of_eigenrays_validates(fmu_dir):
     """The channel FMU that runs ``ray`` (the same FMU: the choice is a parameter) passes fmpy's validation and
     declares the propagation (0 straight, 1 ray), the water depth [m] and the eigenray's outputs."""
