@@ -98,6 +98,8 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
     parts = []
     # none: effects in the response's unit; boxcox: on the transformed scale (no unit); log: factors (_ratio_text)
     unit = f" {response_unit(result.metric)}" if result.transform == "none" else ""
+    # a change of a share in words: percentage points, not a percentage of it
+    amount = " percentage points" if unit == " %" else unit
     higher = higher_is_better(result.metric)
     scale = f" on the Box-Cox scale, lambda = {result.lmbda:.3g}" if result.transform == "boxcox" else ""
     for row in sig.itertuples():
@@ -108,7 +110,7 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
         elif len(names) == 1:
             f = by_name[names[0]]
             verb = "raises" if e > 0 else "lowers"
-            by = f" by {abs(e):.3g}{unit}" if result.transform == "none" else ""
+            by = f" by {abs(e):.3g}{amount}" if result.transform == "none" else ""
             better = "low" if (e > 0) != higher else "high"
             parts.append(f"{row.term} (effect {e:+.3g}{unit}{scale}: going from {format_level(f.low, f.unit)} to "
                          f"{format_level(f.high, f.unit)} {verb} {what}{by}; the {better} level "
@@ -118,7 +120,7 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
             more = "larger" if e > 0 else "smaller"
             hi, lo = format_level(by_name[b].high, by_name[b].unit), format_level(by_name[b].low, by_name[b].unit)
             parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{scale}: the effect of {a} is "
-                         f"{abs(2 * e):.3g}{unit} {more} at high {b} ({hi}) than at low {b} ({lo}))")
+                         f"{abs(2 * e):.3g}{amount} {more} at high {b} ({hi}) than at low {b} ({lo}))")
         else:
             on = f" on log({result.metric})" if result.transform == "log" else scale
             parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{on})")
