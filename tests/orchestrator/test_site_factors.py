@@ -137,6 +137,8 @@ def test_the_effects_have_the_physical_sign(campaign, expected):
     assert "response**: detected_pct (the share of packets received) [%]" in report
     assert "going from 140 dB to 160 dB raises the share of packets received" in report
     assert "the high level (160 dB) is better" in report
+    best = runs.groupby("cell")["detected_pct"].mean().idxmax()  # the most packets received: the best cell
+    assert f"best cell: {best} (highest mean detected_pct = " in report
 
 
 def test_a_campaign_row_is_the_run_of_its_levels(campaign):
