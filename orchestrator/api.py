@@ -994,7 +994,8 @@ def analyze(directory: str | Path, *, metric: str = "e_tot_rms", order: int = 2,
     directory : str or Path
         A campaign directory (with ``runs.parquet`` and ``study.toml``).
     metric : str
-        The response column (default ``e_tot_rms`` [m]).
+        The response column: an error metric (default ``e_tot_rms`` [m]) or ``detected_pct`` [%], the share of
+        the slots whose packet was received.
     order : int
         Highest interaction order of the model, 1 … number of factors.
     transform : {'none', 'log', 'boxcox'}

@@ -213,7 +213,8 @@ def _parser() -> argparse.ArgumentParser:
     a = sub.add_parser("analyze", help="factorial analysis and report of a campaign directory")
     a.add_argument("dir", type=Path, help="campaign directory (with runs.parquet)")
     a.add_argument("--out", type=Path, default=None, help="output directory (default: the campaign directory)")
-    a.add_argument("--metric", default="e_tot_rms", help="response column (default e_tot_rms)")
+    a.add_argument("--metric", default="e_tot_rms",
+                   help="response column: an error metric [m] (default e_tot_rms) or detected_pct [%%]")
     a.add_argument("--order", type=int, default=2, help="highest interaction order in the model (default 2)")
     a.add_argument("--transform", choices=("none", "log", "boxcox"), default="none",
                    help="fit the model to the metric (none, default), its logarithm (log: effects as factors) or "

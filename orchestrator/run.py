@@ -84,11 +84,16 @@ def merge_params(plans: Sequence[RunPlan], component: str,
     """Parameters of one component for a batch of runs, one plan per run (a configuration: its plan is made).
 
     The FMU parameters of the first run (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`);
-    a numeric key whose value differs between runs (a factor of a batch
-    spanning several design cells) becomes an array of shape (B,). Only the
-    seed keys and numeric FMU parameters may differ; text, tables and
-    configuration-only keys must be the same in every run of a batch.
-    ``accepted`` names the parameters of the handle (default: the model's).
+    a numeric parameter whose value differs between runs (a factor of a batch
+    spanning several design cells) becomes an array of shape (B,). The values
+    are each run's parameters as its plan resolved them: those tied to a key of
+    another section (``acoustics.beaufort`` from ``platform.beaufort``,
+    :data:`sblsim.orchestrator.config.KEY_TIES`) and those the model derives
+    from its keys (the absorption at ``acoustics.frequency``, the eigenray
+    table) follow their run. Only the seed keys and numeric FMU parameters may
+    differ; text, tables' shapes and configuration-only keys must be the same in
+    every run of a batch. ``accepted`` names the parameters of the handle
+    (default: the model's).
 
     Returns
     -------
@@ -107,18 +112,22 @@ def merge_params(plans: Sequence[RunPlan], component: str,
     params = first.component_parameters(component, accepted)
     params.pop("replicate", None)
     replicates = np.array([p.replicate for p in plans], dtype=np.int64)
-    configs = [p.config for p in plans]
-    for section in (component, "run"):
-        # the runs' distinct sections (the replicates of a cell share theirs, :func:`with_replicates`)
-        distinct = list({id(c[section]): c[section] for c in configs}.values())
-        for key, value in first.config[section].items():
-            if key == "replicate" or all(d[key] == value for d in distinct):
-                continue
-            if section == "run" and key not in params:
-                continue  # a seed key the component does not take (e.g. the EKF draws no random numbers)
-            if key not in params or isinstance(value, str):
-                raise ModelError(f"{component}.{key}: must be the same for every run of a batch")
-            params[key] = np.asarray([c[section][key] for c in configs])
+    # the runs' distinct plans: the replicates of a cell share every section but their run.replicate
+    # (:func:`with_replicates`)
+    distinct = list({(tuple(id(v) for s, v in p.config.items() if s != "run"),
+                      tuple((k, v) for k, v in p.config["run"].items() if k != "replicate")): p
+                     for p in plans}.values())
+    section = first.config.get(component, {})
+    for key, value in section.items():  # a configuration-only key (it makes tables or files)
+        if key not in params and any(d.config[component][key] != value for d in distinct[1:]):
+            raise ModelError(f"{component}.{key}: must be the same for every run of a batch")
+    missing = object()
+    for key, value in params.items():
+        if all(d.parameters[component].get(key, missing) == value for d in distinct[1:]):
+            continue
+        if isinstance(value, str) or any(key not in d.parameters[component] for d in distinct[1:]):
+            raise ModelError(f"{component}.{key}: must be the same for every run of a batch")
+        params[key] = np.asarray([p.parameters[component][key] for p in plans])
     return params, replicates
 
 

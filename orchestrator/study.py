@@ -48,6 +48,7 @@ import numpy as np
 import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
+from sblsim.models.acoustics.core import FIXED_KEYS, SNR_KEYS
 from sblsim.models.declarations import ModelError, Variable, shown
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator import tomlfile
@@ -507,6 +508,27 @@ def _check_receiver_factors(study: Study, scenario: str, cfg: dict) -> None:
                                  f"receiver ({scenario}); its keys: {', '.join(names)}")
 
 
+def _check_detection_factors(study: Study, scenario: str, cfg: dict) -> None:
+    """Every ``acoustics.*`` factor is read by the scenario's detection: a key of the site
+    (:data:`~sblsim.models.acoustics.core.SNR_KEYS`) needs ``acoustics.detection = "snr"``, one of the fixed
+    percentages (:data:`~sblsim.models.acoustics.core.FIXED_KEYS`) ``"fixed"``; otherwise both of its levels would
+    run the same (unless ``acoustics.detection`` is a factor too: then the interaction says it)."""
+    if any(f.key == "acoustics.detection" for f in study.factors):
+        return
+    detection = cfg["acoustics"]["detection"]
+    for factor in study.factors:
+        name = factor.key.split(".")[1]
+        if factor.section != "acoustics" or (name not in SNR_KEYS and name not in FIXED_KEYS):
+            continue
+        needed = "snr" if name in SNR_KEYS else "fixed"
+        if detection != needed:
+            how = ('"acoustics.detection=snr", "acoustics.propagation=ray"' if needed == "snr"
+                   else '"acoustics.detection=fixed"')
+            raise StudyError(f"factors.{factor.name}.key: {factor.key!r} is read only with acoustics.detection = "
+                             f"{needed}, and {scenario} has {detection}: both levels would run the same; allowed: "
+                             f"a scenario with detection {needed} (e.g. study.set = [{how}])")
+
+
 def _check_scenarios(study: Study) -> None:
     """Every scenario resolves with its overrides, and scenario keys are distinct."""
     keys: dict[int, str] = {}
@@ -514,6 +536,7 @@ def _check_scenarios(study: Study) -> None:
         read_source(scenario)  # unknown scenario / missing file
         cfg = load_config(scenario, study.overrides, seed=study.seed)
         _check_receiver_factors(study, scenario, cfg)
+        _check_detection_factors(study, scenario, cfg)
         key = cfg["run"]["scenario_key"]
         if key in keys:
             raise StudyError(f"study.scenarios: {keys[key]!r} and {scenario!r} share run.scenario_key {key}; "

@@ -255,6 +255,11 @@ DETECTION_VARIABLES: tuple[Variable, ...] = (
              "snr: detection probability of the arrival the range came from (none heard: of the strongest; "
              "0 with fixed detection)", discrete=True, min=0.0, max=1.0),
 )
+#: The keys of ``[acoustics]`` that only detection by signal-to-noise reads (the site), and those that only the
+#: fixed detection reads (its percentages: not drawn with ``snr``); the channel's other keys are read by both.
+SNR_KEYS: tuple[str, ...] = tuple(v.name for v in DETECTION_VARIABLES
+                                  if v.causality == "parameter" and v.scope != "fmu" and v.name != "detection")
+FIXED_KEYS: tuple[str, ...] = ("loss_pct", "outlier_pct", "outlier_excess")
 #: The channel's refusal signal of detection by signal-to-noise (an output of the channel alone).
 OVERRUN: tuple[Variable, ...] = (
     Variable("slot_overrun", "output", "Real", 0.0, "s",
@@ -757,7 +762,7 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "OVERRUN", "check_in_flight",
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "FIXED_KEYS", "OVERRUN", "SNR_KEYS", "check_in_flight",
            "FAMILY_TABLE_VARIABLES", "site_levels", "site_numbers", "site_vector", "DIRECTION", "FLIGHT_CAPACITY",
            "OVERFLOW",
            "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]

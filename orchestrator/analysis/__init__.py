@@ -8,7 +8,8 @@ for the instrumentation fix) and ``study.toml`` (the resolved study: design,
 replicates, seed, scenarios and one ``[[factors]]`` table per factor). Without
 ``study.toml`` the factors are the columns that have a ``NAME_value`` partner.
 
-Per scenario, the response (``e_tot_rms`` by default; with ``transform`` its
+Per scenario, the response (``e_tot_rms`` by default, any error metric [m] or
+``detected_pct`` [%], the share of the slots whose packet was received; with ``transform`` its
 natural logarithm or its Box-Cox transform, λ by maximum likelihood) is
 regressed by ordinary least squares on the coded factors with every interaction up to ``order``
 (default 2: main effects and two-factor interactions). With the −1/+1 coding
@@ -31,8 +32,9 @@ Outputs (written atomically into ``out``):
     model term, in model order (main effects, then two-factor interactions,
     ...); terms are factor names joined with ``:``. The Intercept is *not* a
     row (it is no effect; the grand mean of the response is in the report).
-    ``effect`` and ``coefficient`` are in the response's unit [m]; ``std_err``
-    is the standard error of the coefficient [m] (Lenth: PSE / 2); ``t`` is
+    ``effect`` and ``coefficient`` are in the response's unit ([m], or [%] for
+    ``detected_pct``); ``std_err`` is the standard error of the coefficient
+    in that unit (Lenth: PSE / 2); ``t`` is
     the standardized effect [-].
     With ``transform = "log"`` the effects are differences of mean log
     response and a last column ``ratio = exp(effect)`` [-] is the factor by
@@ -90,6 +92,7 @@ import pandas as pd
 from sblsim.orchestrator.analysis.data import (
     METRICS,
     REQUIRED_COLUMNS,
+    RESPONSES,
     TRANSFORMS,
     AnalysisError,
     allowed_metrics,
@@ -135,7 +138,7 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
     directory : path
         Campaign directory with ``runs.parquet`` (and ``study.toml``).
     metric : str
-        Response column, one of :data:`METRICS` [m].
+        Response column, one of :data:`RESPONSES`: an error metric [m] or ``detected_pct`` [%].
     order : int
         Highest interaction order, 1 .. number of factors.
     alpha : float
@@ -194,7 +197,7 @@ def analyze(directory: Path | str, out: Path | str | None = None, metric: str = 
     out : path, optional
         Output directory (default ``directory``).
     metric : str
-        Response column, one of :data:`METRICS` [m]; default ``e_tot_rms``.
+        Response column, one of :data:`RESPONSES` ([m], ``detected_pct`` [%]); default ``e_tot_rms``.
     order : int
         Highest interaction order of the model, 1 .. number of factors;
         default 2 (main effects and two-factor interactions).
@@ -268,9 +271,9 @@ def _file_stem(scenario: str, used: set[str]) -> str:
     return stem
 
 
-__all__ = ["ANOVA_TYPE", "DIAGNOSTIC_COLUMNS", "METRICS", "REQUIRED_COLUMNS", "TRANSFORMS", "Analysis", "AnalysisError",
-           "Factor", "FitResult", "StudyRecord", "allowed_metrics", "analyze", "best_cell", "boxcox_lambda",
-           "check_metric", "check_order", "check_transform", "compute", "diagnose", "fit",
+__all__ = ["ANOVA_TYPE", "DIAGNOSTIC_COLUMNS", "METRICS", "REQUIRED_COLUMNS", "RESPONSES", "TRANSFORMS", "Analysis",
+           "AnalysisError", "Factor", "FitResult", "StudyRecord", "allowed_metrics", "analyze", "best_cell",
+           "boxcox_lambda", "check_metric", "check_order", "check_transform", "compute", "diagnose", "fit",
            "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
            "model_matrix", "model_terms", "ranking", "report_html", "report_markdown", "scenario_order", "tables",
            "term_name", "write"]

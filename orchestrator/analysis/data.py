@@ -15,9 +15,10 @@ from sblsim.orchestrator.metrics import METRIC_NAMES
 from sblsim.orchestrator.study import Factor, StudyError, StudyRecord, level_value, read_record
 
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
+#: Every response a fit can take: the error metrics [m] and the share of the slots whose packet was received
+#: (``detected_pct`` [%], detection by signal-to-noise), each with its unit and whether a higher value is better.
+RESPONSES: dict[str, tuple[str, bool]] = {**{m: ("m", False) for m in METRICS}, "detected_pct": ("%", True)}
 #: Columns ``runs.parquet`` must hold besides the factors and the metrics.
-
-
 REQUIRED_COLUMNS = ("scenario", "cell", "replicate")
 
 #: Transforms of the response before the fit: none, the natural logarithm, Box-Cox with λ by maximum likelihood.
@@ -65,7 +66,7 @@ def infer_factors(runs: pd.DataFrame) -> list[Factor]:
     """
     factors = []
     for col in runs.columns:
-        if col in METRICS or not isinstance(col, str) or f"{col}_value" not in runs.columns:
+        if col in RESPONSES or not isinstance(col, str) or f"{col}_value" not in runs.columns:
             continue
         levels = []
         for code in (-1, 1):
@@ -132,16 +133,26 @@ def scenario_order(runs: pd.DataFrame) -> list[str]:
     return list(dict.fromkeys(runs["scenario"]))
 
 
+def response_unit(metric: str) -> str:
+    """The unit of a response of :data:`RESPONSES` (``m``, ``%``); '' for another column."""
+    return RESPONSES.get(metric, ("", False))[0]
+
+
+def higher_is_better(metric: str) -> bool:
+    """Whether a higher value of the response is better (``detected_pct``), not a lower one (the errors)."""
+    return RESPONSES.get(metric, ("", False))[1]
+
+
 def allowed_metrics(frame: pd.DataFrame) -> list[str]:
-    """Metric columns of :data:`METRICS` present in ``frame``."""
-    return [m for m in METRICS if m in frame.columns]
+    """Response columns of :data:`RESPONSES` present in ``frame``."""
+    return [m for m in RESPONSES if m in frame.columns]
 
 
 def check_metric(metric: str, frame: pd.DataFrame) -> None:
-    """Raise :class:`AnalysisError` unless ``metric`` is a metric column of ``frame``."""
+    """Raise :class:`AnalysisError` unless ``metric`` is a response column (:data:`RESPONSES`) of ``frame``."""
     allowed = allowed_metrics(frame)
     if metric not in allowed:
-        if metric in METRICS:
+        if metric in RESPONSES:
             raise AnalysisError(f"runs.parquet: has no {metric!r} column (not written by a finished campaign?); "
                                 f"--metric can be one of {', '.join(allowed) or '(no metric column)'}")
         raise AnalysisError(f"metric: {metric!r} is not one of {', '.join(allowed) or '(no metric column)'}")

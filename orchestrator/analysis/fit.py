@@ -31,8 +31,8 @@ class FitResult:
     ----------
     scenario : str
     metric : str
-        Response column.
-    factors : list of str
+        Response column (:data:`~sblsim.orchestrator.analysis.data.RESPONSES`: an error [m] or
+        ``detected_pct`` [%]; the unit of the values below).
         Factor names in design order.
     order : int
         Highest interaction order of the model.
@@ -274,7 +274,8 @@ def diagnose(model, y_raw: np.ndarray, transform: str = "none", lmbda: float | N
     from statsmodels.stats.stattools import jarque_bera
 
     fitted = np.asarray(model.fittedvalues, dtype=float)
-    out = {"r2": float(model.rsquared), "r2_adj": float(model.rsquared_adj)}
+    with np.errstate(divide="ignore", invalid="ignore"):  # a constant response: R² is NaN
+        out = {"r2": float(model.rsquared), "r2_adj": float(model.rsquared_adj)}
     resid = np.asarray(model.resid, dtype=float)
     if round(model.df_resid) > 0 and np.ptp(resid) > 0:
         lm, lm_p, _, _ = het_breuschpagan(resid, model.model.exog)
@@ -342,7 +343,7 @@ def fit(frame: pd.DataFrame, factors: Sequence[str], metric: str = "e_tot_rms", 
     factors : sequence of str
         Factor names in design order.
     metric : str
-        Response column [m].
+        Response column (:data:`~sblsim.orchestrator.analysis.data.RESPONSES`) [m] or [%].
     order : int
         Highest interaction order, 1 .. len(factors).
     alpha : float
@@ -396,6 +397,8 @@ def fit(frame: pd.DataFrame, factors: Sequence[str], metric: str = "e_tot_rms", 
         notes.append(f"{int((~finite).sum())} run(s) with a non-finite {metric} left out")
     data = frame.loc[finite]
     y = y[finite]
+    if len(y) and np.ptp(y) == 0:  # e.g. detected_pct at 100 % in every run: the levels change nothing
+        notes.append(f"{metric} is {y[0]:.6g} in every run: no factor changes it (every effect is 0)")
     X = model_matrix(data, factors, order)
     kept, dropped, alias_notes = _estimable(X)
     notes += alias_notes

@@ -25,15 +25,17 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from sblsim.orchestrator.analysis.data import METRICS  # noqa: E402
+from sblsim.orchestrator.analysis.data import response_unit  # noqa: E402
 from sblsim.orchestrator.analysis.report import format_level  # noqa: E402
 
 LOW_COLOR, HIGH_COLOR = "tab:blue", "tab:red"
 
 
 def _unit(response: str) -> str:
-    """`` [m]`` for a metric, nothing for a transformed response such as ``log(e_tot_rms)``."""
-    return " [m]" if response in METRICS else ""
+    """`` [m]`` for an error metric, `` [%]`` for ``detected_pct``, nothing for a transformed response such as
+    ``log(e_tot_rms)``."""
+    unit = response_unit(response)
+    return f" [{unit}]" if unit else ""
 
 
 def _name(factor: Any) -> str:

@@ -12,12 +12,14 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from sblsim.orchestrator.analysis.data import higher_is_better, response_unit
 from sblsim.orchestrator.analysis.fit import DIAGNOSTIC_COLUMNS, FitResult
 from sblsim.orchestrator.analysis.tables import best_cell
 from sblsim.orchestrator.study import Factor, StudyRecord
 
 _METRIC_WORDS = {"e_x_mean": "mean e_x", "e_y_mean": "mean e_y", "e_z_mean": "mean e_z",
-                 "e_tot_mean": "mean e_tot", "e_tot_rms": "RMS e_tot", "e_tot_std": "std of e_tot"}
+                 "e_tot_mean": "mean e_tot", "e_tot_rms": "RMS e_tot", "e_tot_std": "std of e_tot",
+                 "detected_pct": "the share of packets received"}
 
 
 @dataclass
@@ -77,7 +79,7 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
     """Plain-language ranking of the significant terms of one scenario, largest ``|t|`` first.
 
     Main effects say what going from the low to the high level does to the
-    response and which level is better (lower error); two-factor
+    response and which level is better (lower error, more packets received: ``detected_pct``); two-factor
     interactions say how much the first factor's effect changes between the
     levels of the second (twice the interaction effect, Montgomery 2017, §6.2).
     With ``transform = "log"`` effects read as factors: a main effect
@@ -94,19 +96,22 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
     if sig.empty:
         return head + f"no term is significant at alpha = {result.alpha:g} ({test})."
     parts = []
-    # none: effects in metres; boxcox: on the transformed scale (no unit); log: factors (_ratio_text)
-    unit = " m" if result.transform == "none" else ""
+    # none: effects in the response's unit; boxcox: on the transformed scale (no unit); log: factors (_ratio_text)
+    unit = f" {response_unit(result.metric)}" if result.transform == "none" else ""
+    # a change of a share in words: percentage points, not a percentage of it
+    amount = " percentage points" if unit == " %" else unit
+    higher = higher_is_better(result.metric)
     scale = f" on the Box-Cox scale, lambda = {result.lmbda:.3g}" if result.transform == "boxcox" else ""
     for row in sig.itertuples():
         names = row.term.split(":")
         e = row.effect
         if result.transform == "log" and len(names) <= 2:
-            parts.append(_ratio_text(row.term, e, by_name, what))
+            parts.append(_ratio_text(row.term, e, by_name, what, higher))
         elif len(names) == 1:
             f = by_name[names[0]]
             verb = "raises" if e > 0 else "lowers"
-            by = f" by {abs(e):.3g} m" if result.transform == "none" else ""
-            better = "low" if e > 0 else "high"
+            by = f" by {abs(e):.3g}{amount}" if result.transform == "none" else ""
+            better = "low" if (e > 0) != higher else "high"
             parts.append(f"{row.term} (effect {e:+.3g}{unit}{scale}: going from {format_level(f.low, f.unit)} to "
                          f"{format_level(f.high, f.unit)} {verb} {what}{by}; the {better} level "
                          f"({format_level(f.low if better == 'low' else f.high, f.unit)}) is better)")
@@ -115,7 +120,7 @@ def ranking(result: FitResult, factors: Sequence[Factor]) -> str:
             more = "larger" if e > 0 else "smaller"
             hi, lo = format_level(by_name[b].high, by_name[b].unit), format_level(by_name[b].low, by_name[b].unit)
             parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{scale}: the effect of {a} is "
-                         f"{abs(2 * e):.3g}{unit} {more} at high {b} ({hi}) than at low {b} ({lo}))")
+                         f"{abs(2 * e):.3g}{amount} {more} at high {b} ({hi}) than at low {b} ({lo}))")
         else:
             on = f" on log({result.metric})" if result.transform == "log" else scale
             parts.append(f"{row.term} (interaction effect {e:+.3g}{unit}{on})")
@@ -130,12 +135,13 @@ def _summary_line(result: FitResult) -> str:
     return f"{result.scenario}: {terms}"
 
 
-def _ratio_text(term: str, e: float, by_name: dict[str, Factor], what: str) -> str:
-    """A term of a log fit in plain words: the factor by which it multiplies the response."""
+def _ratio_text(term: str, e: float, by_name: dict[str, Factor], what: str, higher: bool = False) -> str:
+    """A term of a log fit in plain words: the factor by which it multiplies the response (``higher``: a
+    higher response is better)."""
     names = term.split(":")
     if len(names) == 1:
         f = by_name[names[0]]
-        better = "low" if e > 0 else "high"
+        better = "low" if (e > 0) != higher else "high"
         return (f"{term} (x{math.exp(e):.3g}: going from {format_level(f.low, f.unit)} to "
                 f"{format_level(f.high, f.unit)} multiplies {what} by {math.exp(e):.3g} ({_percent(e)}); the "
                 f"{better} level ({format_level(f.low if better == 'low' else f.high, f.unit)}) is better)")
@@ -178,7 +184,7 @@ def _settings(analysis: Analysis) -> list[tuple[str, str]]:
         ("scenarios", ", ".join(analysis.fits)),
         ("engine", s.engine or "?"),
         ("runs", str(len(analysis.runs))),
-        ("response", f"{analysis.metric} ({metric_label(analysis.metric)}) [m]"),
+        ("response", f"{analysis.metric} ({metric_label(analysis.metric)}) [{response_unit(analysis.metric)}]"),
         ("transform", _transform_text(analysis)),
         ("model", f"OLS on the coded factors (-1/+1), interactions up to order {analysis.order}"),
         ("significance", f"alpha = {analysis.alpha:g}, two-sided"),
@@ -196,7 +202,8 @@ def _transform_text(analysis: Analysis) -> str:
                          for s, r in analysis.fits.items())
         return (f"Box-Cox, lambda by maximum likelihood of the factorial model per scenario: {lams}; effects are "
                 "on the transformed scale (y^lambda - 1) / lambda")
-    return "none (the effects are in metres; see the diagnostics before reading the t and p values)"
+    unit = {"m": "metres", "%": "percentage points"}.get(response_unit(analysis.metric), "the response's unit")
+    return f"none (the effects are in {unit}; see the diagnostics before reading the t and p values)"
 
 
 def _diagnostics_table(analysis: Analysis) -> pd.DataFrame:
@@ -247,7 +254,9 @@ def _best_cell_text(analysis: Analysis, scenario: str) -> str:
         value = f.low if code < 0 else f.high
         levels.append(f"{f.name} = {format_level(value, f.unit)} ({code:+d})")
     mean = frame.loc[frame["cell"] == cell, analysis.metric].mean()
-    return (f"best cell: {cell} (lowest mean {analysis.metric} = {mean:.4g} m): " + ", ".join(levels))
+    best = "highest" if higher_is_better(analysis.metric) else "lowest"
+    return (f"best cell: {cell} ({best} mean {analysis.metric} = {mean:.4g} {response_unit(analysis.metric)}): "
+            + ", ".join(levels))
 
 
 def _effects_view(result: FitResult) -> pd.DataFrame:
@@ -257,13 +266,14 @@ def _effects_view(result: FitResult) -> pd.DataFrame:
 
 
 def _method_text(result: FitResult) -> str:
+    unit = f" {response_unit(result.metric)}"
     if result.transform == "log":
-        mean = f"geometric mean {math.exp(result.intercept):.4g} m"
+        mean = f"geometric mean {math.exp(result.intercept):.4g}{unit}"
     elif result.transform == "boxcox":
         mean = f"grand mean {result.intercept:.4g} on the Box-Cox scale (lambda = {result.lmbda:.3g})"
     else:
-        mean = f"grand mean {result.intercept:.4g} m"
-    unit = " m" if result.transform == "none" else ""
+        mean = f"grand mean {result.intercept:.4g}{unit}"
+    unit = unit if result.transform == "none" else ""
     if result.method == "lenth":
         return (f"{result.n} runs, no residual degrees of freedom: Lenth's pseudo standard error "
                 f"PSE = {result.pse:.4g}{unit}, t = effect / PSE, significance line t(1-alpha/2, m/3) = "

@@ -6,7 +6,7 @@ import math
 
 import pandas as pd
 
-from sblsim.orchestrator.analysis.data import AnalysisError
+from sblsim.orchestrator.analysis.data import AnalysisError, higher_is_better
 
 
 def _estimators(frame: pd.DataFrame) -> tuple[tuple[str, str], ...]:
@@ -16,11 +16,12 @@ def _estimators(frame: pd.DataFrame) -> tuple[tuple[str, str], ...]:
 
 
 def best_cell(frame: pd.DataFrame, metric: str) -> int:
-    """Design cell with the lowest mean ``metric`` over its runs (NaN runs left out)."""
+    """Design cell with the best mean ``metric`` over its runs (NaN runs left out): the lowest error, the
+    highest ``detected_pct`` (:func:`~sblsim.orchestrator.analysis.data.higher_is_better`)."""
     means = frame.groupby("cell")[metric].mean()
     if means.isna().all():
         raise AnalysisError(f"runs.parquet: {metric} is NaN in every run")
-    return int(means.idxmin())
+    return int(means.idxmax() if higher_is_better(metric) else means.idxmin())
 
 
 def tables(frame: pd.DataFrame, metric: str = "e_tot_rms", scenario: str = "") -> pd.DataFrame:
@@ -31,7 +32,7 @@ def tables(frame: pd.DataFrame, metric: str = "e_tot_rms", scenario: str = "") -
     frame : pandas.DataFrame
         Runs of one scenario.
     metric : str
-        Response that picks the best cell (lowest mean).
+        Response that picks the best cell (:func:`best_cell`).
     scenario : str
 
     Returns
