@@ -28,6 +28,9 @@ from sblsim.models.acoustics.rays import (
     RAY_TABLE_ROWS,
     arrivals,
     arrivals_grid,
+    cell_centres,
+    cell_corners,
+    exact_nodes,
     family_nodes,
     profile_arrays,
     ray_grid,
@@ -173,15 +176,10 @@ def level_table(table, depth: float, bounds, site, paths: ca.Function | None = N
     site = np.asarray(site, dtype=float).ravel()
     columns = family_nodes(table, depth, bounds, paths)
     valid = columns.pop("valid")
-    shape = RAY_GRID
-    pattern = (valid[0] + 2 * valid[1] + 4 * valid[2]).reshape(shape, order="F")
-    corners = [pattern[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1]
-               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    corners = cell_corners(valid[0] + 2 * valid[1] + 4 * valid[2])  # which families exist
     uniform = np.all([c == corners[0] for c in corners], axis=0)
     grid = ray_grid(bounds)
-    axes = np.split(grid, np.cumsum(RAY_GRID)[:-1])
-    centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
-    czs, czr, cx = (a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
+    czs, czr, cx = cell_centres(bounds)
     n = czs.size
     names = [c.name for c in FAMILY_TABLE.columns]
     values = np.asarray(ray_values([ca.DM(columns[c]) for c in names[:-1]]
@@ -197,14 +195,9 @@ def level_table(table, depth: float, bounds, site, paths: ca.Function | None = N
     for k, tolerance in ((0, LEVEL_TABLE_TOLERANCE[0]), (1, LEVEL_TABLE_TOLERANCE[1]),
                          (2, LEVEL_TABLE_TOLERANCE[1]), (4, LEVEL_TABLE_TOLERANCE[2])):
         good &= np.all(~exists | (np.abs(got[k] - want[k]) <= tolerance), axis=0)  # false for NaN
-    uniform &= good.reshape(tuple(m - 1 for m in shape), order="F")
-    needs = np.zeros(shape, dtype=bool)
-    for i in (0, 1):
-        for j in (0, 1):
-            for k in (0, 1):
-                needs[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1] |= ~uniform
+    uniform &= good.reshape(uniform.shape, order="F")
     out = {name: columns[name] for name in names[:-1]}
-    out[names[-1]] = needs.ravel(order="F").astype(float)
+    out[names[-1]] = exact_nodes(uniform)
     out["exact_share"] = float(np.mean(~uniform))
     return out
 

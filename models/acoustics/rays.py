@@ -650,10 +650,7 @@ def _first_arrival_grid() -> ca.Function:
     bounds, grid = ca.MX.sym("bounds", 6), ca.MX.sym("grid", sum(RAY_GRID))
     values = ca.MX.sym("values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS)
     row_value = _interpolant()(ca.vertcat(zs, zr, x), grid, values)
-    inside = use > 0
-    for j, v in enumerate((zs, zr, x)):
-        inside = ca.logic_and(inside, ca.logic_and(v >= bounds[2 * j], v <= bounds[2 * j + 1]))
-    tabulate = ca.logic_and(inside, row_value[4] == 0)  # false for NaN
+    tabulate = ca.logic_and(_in_box(use, zs, zr, x, bounds), row_value[4] == 0)  # false for NaN
     out = chosen(ca.logic_not(tabulate), zs, zr, x, depth, use_table, constant, nodes, speeds, row_value)
     return ca.Function("sblsim_first_arrival_grid",
                        [use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values], out,
@@ -689,6 +686,43 @@ def first_arrival_grid(use, zs, zr, x, depth, use_table, constant, nodes, speeds
         As :func:`first_arrival`.
     """
     return _first_arrival_grid()(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values)
+
+
+def cell_corners(values) -> list[np.ndarray]:
+    """The values at the eight corners of every cell of the table's grid, each array shaped as the cells
+    (``RAY_GRID`` less one per axis; a cell indexed by its lower corner), from ``values`` (RAY_TABLE_ROWS,) at the
+    nodes (the source depth fastest, as :func:`ray_grid`'s meshgrid in Fortran order)."""
+    v = np.asarray(values).reshape(RAY_GRID, order="F")
+    a, b, c = (n - 1 for n in RAY_GRID)
+    return [v[i:i + a, j:j + b, k:k + c] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+
+
+def cell_centres(bounds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Source depth, receiver depth and horizontal distance [m] of the centre of every cell of the grid of
+    ``bounds`` (6,), each (cells,), in the order of :func:`cell_corners`' arrays raveled in Fortran order."""
+    axes = np.split(ray_grid(np.asarray(bounds, dtype=float)), np.cumsum(RAY_GRID)[:-1])
+    centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
+    return tuple(a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
+
+
+def exact_nodes(usable: np.ndarray, nodes=None) -> np.ndarray:
+    """A table's exact-solve column: 1 at every node of a cell that is not ``usable`` (shaped as the cells), and
+    at the nodes where ``nodes`` (RAY_TABLE_ROWS,) is true; (RAY_TABLE_ROWS,) of 0 and 1."""
+    needs = np.zeros(RAY_GRID, bool) if nodes is None else np.asarray(nodes, bool).reshape(RAY_GRID, order="F")
+    a, b, c = (n - 1 for n in RAY_GRID)
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                needs[i:i + a, j:j + b, k:k + c] |= ~usable
+    return needs.ravel(order="F").astype(float)
+
+
+def _in_box(use, zs, zr, x, bounds):
+    """True when a table is given (``use``) and the geometry lies inside its box ``bounds`` (casadi)."""
+    inside = use > 0
+    for j, v in enumerate((zs, zr, x)):
+        inside = ca.logic_and(inside, ca.logic_and(v >= bounds[2 * j], v <= bounds[2 * j + 1]))
+    return inside
 
 
 def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None) -> dict[str, np.ndarray]:
@@ -727,28 +761,18 @@ def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None
     slowness = np.where(length > 1e-9, tau / np.maximum(length, 1e-300), 1.0 / c_source)
     columns = [np.where(kind > 0, slowness, 0.0), np.where(kind > 0, launch - l0, 0.0),
                np.where(kind > 0, arrival - a0, 0.0), kind.astype(float)]
-    shape = RAY_GRID
-    kinds = kind.reshape(shape, order="F")
-    needs = (kinds == 0)
-    # cells: the lower corner's index; a cell is used when its 8 nodes share a path and its centre checks out
-    corners = [kinds[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1]
-               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    # a cell is used when its 8 nodes share a path and its centre checks out
+    corners = cell_corners(kind)
     uniform = np.all([c == corners[0] for c in corners], axis=0) & (corners[0] > 0)
-    centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
-    czs, czr, cx = (a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
+    czs, czr, cx = cell_centres(bounds)
     values = np.asarray(ray_values([ca.DM(c) for c in columns + [np.zeros(RAY_TABLE_ROWS)]])).ravel()
     want = _at_points(exact, (czs, czr, cx, depth), (nodes, speeds))
     got = _at_points(_tabled(), (czs, czr, cx, depth), (grid, values))
-    shape_c = tuple(n - 1 for n in shape)
     good = (want[3] == got[3]) & (np.abs(want[0] - got[0]) <= RAY_TABLE_TOLERANCE[0]) \
         & (np.abs(want[1] - got[1]) <= RAY_TABLE_TOLERANCE[1]) & (np.abs(want[2] - got[2]) <= RAY_TABLE_TOLERANCE[1])
-    uniform &= good.reshape(shape_c, order="F")
-    for i in (0, 1):
-        for j in (0, 1):
-            for k in (0, 1):
-                needs[i:i + shape[0] - 1, j:j + shape[1] - 1, k:k + shape[2] - 1] |= ~uniform
+    uniform &= good.reshape(uniform.shape, order="F")
     names = [c.name for c in RAY_TABLE.columns]
-    out = dict(zip(names, columns + [needs.ravel(order="F").astype(float)]))
+    out = dict(zip(names, columns + [exact_nodes(uniform, kind == 0)]))
     out["exact_share"] = float(np.mean(~uniform))
     return out
 
@@ -856,10 +880,8 @@ def _arrivals_grid() -> ca.Function:
     bounds, grid = ca.MX.sym("bounds", 6), ca.MX.sym("grid", sum(RAY_GRID))
     values = ca.MX.sym("values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS)
     row_value = _family_interpolant()(ca.vertcat(zs, zr, x), grid, values)
-    inside = use > 0
-    for j, v in enumerate((zs, zr, x)):
-        inside = ca.logic_and(inside, ca.logic_and(v >= bounds[2 * j], v <= bounds[2 * j + 1]))
-    tabulate = ca.logic_and(inside, row_value[len(FAMILY_TABLE.columns) - 1] == 0)  # false for NaN
+    tabulate = ca.logic_and(_in_box(use, zs, zr, x, bounds),
+                            row_value[len(FAMILY_TABLE.columns) - 1] == 0)  # false for NaN
     out = chosen(ca.logic_not(tabulate), zs, zr, x, depth, use_table, constant, nodes, speeds, row_value)
     return ca.Function("sblsim_arrivals_grid",
                        [use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values], out,
@@ -1073,6 +1095,7 @@ def chord_elevation(zt, elevation, tau, nodes, speeds):
 
 __all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "FAMILIES", "FAMILY_COLUMNS", "FAMILY_TABLE", "NEWTON_ITERATIONS",
            "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE",
-           "SURFACE", "TRACE_ITERATIONS", "arrivals", "arrivals_grid", "chord_elevation", "eigenray_families",
-           "eigenray_paths", "eigenray_table", "exact_points", "family_nodes", "family_points", "first_arrival",
-           "first_arrival_grid", "profile_arrays", "ray_grid", "ray_values", "slant_range", "sound_speed_at"]
+           "SURFACE", "TRACE_ITERATIONS", "arrivals", "arrivals_grid", "cell_centres", "cell_corners",
+           "chord_elevation", "eigenray_families", "eigenray_paths", "eigenray_table", "exact_nodes", "exact_points",
+           "family_nodes", "family_points", "first_arrival", "first_arrival_grid", "profile_arrays", "ray_grid",
+           "ray_values", "slant_range", "sound_speed_at"]
