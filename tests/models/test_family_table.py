@@ -61,9 +61,11 @@ def _answered(columns, bounds, zs, zr, x):
 
 
 #: (profile, water depth, box, the least share of points the table answers): the benchmark's SBL geometry through
-#: Munk in 20 m of water, a diver 1000 m deep within 220 m through the NCL1 cast without boundaries, and a box far
-#: too coarse for the nodes (it answers nothing).
+#: Munk in 20 m of water and its LBL one (transponders 1 m above the floor, the box up to the floor), a diver 1000 m
+#: deep within 220 m through the NCL1 cast without boundaries, and a box far too coarse for the nodes (it answers
+#: nothing).
 CASES = [("munk", 20.0, (0.0, 2.5, 4.0, 6.0, 2.0, 28.0), 0.8),
+         ("munk", 20.0, (18.0, 20.0, 4.0, 6.0, 2.0, 28.0), 0.8),
          ("NCL1", 0.0, (0.0, 5.0, 990.0, 1010.0, 0.0, 220.0), 0.8),
          ("munk", 1500.0, (0.0, 50.0, 100.0, 1400.0, 0.0, 2500.0), 0.0)]
 
