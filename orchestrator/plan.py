@@ -317,11 +317,13 @@ def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
     """The box of geometries of a run's eigenray table (:data:`sblsim.models.acoustics.rays.RAY_BOUNDS`), or
     None when the configuration does not bound them (a random walk, a spiral).
 
-    The source depths are the transducers' (the system's lever arms) widened by the wave heave and the lever
-    arms' tilt at ``platform.beaufort``; the receiver's the diver's depth (a trajectory file's depths); the
-    horizontal distances those between the transducers' horizontal circle and the diver's (the semicircle's
-    radius, the square's corners, the random path's ``max_radius``, a file's waypoints), each widened by
-    :data:`RAY_BOX_MARGINS`. A geometry outside the box is solved exactly, so the box only decides the speed.
+    The source depths are the transducers' (the system's lever arms) widened, for the platform's own, by the wave
+    heave and the lever arms' tilt at ``platform.beaufort`` (seafloor transponders do not heave); the receiver's
+    the diver's depth (a trajectory file's depths); the horizontal distances those between the transducers'
+    horizontal circle and the diver's (the semicircle's radius, the square's corners, the random path's
+    ``max_radius``, a file's waypoints), each widened by :data:`RAY_BOX_MARGINS`; no depth above the surface or
+    below ``acoustics.water_depth`` (where the bottom-reflected family ceases to exist). A geometry outside the
+    box is solved exactly, so the box only decides the speed.
     """
     platform, target = cfg["platform"], cfg["target"]
     system = SYSTEMS[platform["system"]]
