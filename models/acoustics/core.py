@@ -339,10 +339,14 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
     nodes, speeds = profile_arrays(rows) if rows.shape[0] else (np.zeros(NODES), np.zeros(NODES))
     sources, receivers = np.atleast_2d(np.asarray(sources, float)), np.atleast_2d(np.asarray(receivers, float))
     horizontal = np.hypot(*(receivers[:, :2] - sources[:, :2]).T)
-    f = (family_levels() if levels is None else levels).map(sources.shape[0])
-    out = f(sources[:, 2], receivers[:, 2], horizontal, float(p["water_depth"]), float(rows.shape[0] > 0),
+    # a range-independent site: pairs of the same depths and distance (a map's symmetric grid) are solved once
+    geometry, pair = np.unique(np.column_stack([sources[:, 2], receivers[:, 2], horizontal]), axis=0,
+                               return_inverse=True)
+    f = (family_levels() if levels is None else levels).map(geometry.shape[0])
+    out = f(geometry[:, 0], geometry[:, 1], geometry[:, 2], float(p["water_depth"]), float(rows.shape[0] > 0),
             float(p["sound_speed_true"]), nodes, speeds, site)
-    return {name: np.asarray(out[k]).T for k, name in ((0, "tau"), (3, "valid"), (4, "snr"), (5, "pd"))}
+    return {name: np.asarray(out[k]).T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"),
+                                                                     (5, "pd"))}
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
     """Refuse a run whose packets stay in flight longer than the channel can hold them.
