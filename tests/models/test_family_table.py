@@ -9,6 +9,7 @@ import pytest
 
 from sblsim.models.acoustics import detection, rays
 from sblsim.models.acoustics.sound_speed import munk_table, profile_table
+from tests.models.test_rays import _tabulated
 
 #: A site's numbers (detection.SITE): 190 dB, threshold 12 dB, DI 0, fluctuation 3 dB, 25 kHz, 0.0043 dB/m, noise
 #: 70.7 dB, wave height 0.2 m, a sand-like floor.
@@ -48,16 +49,8 @@ def _levels(f, use, table, depth, bounds, columns, zs, zr, x):
 
 
 def _answered(columns, bounds, zs, zr, x):
-    """Which points the table answers: inside the box, every corner of their cell ``ray_family_exact = 0``."""
-    axes = np.split(rays.ray_grid(np.asarray(bounds, float)), np.cumsum(rays.RAY_GRID)[:-1])
-    flags = columns["ray_family_exact"].reshape(rays.RAY_GRID, order="F")
-    index = [np.clip(np.searchsorted(a, v, side="right") - 1, 0, len(a) - 2) for a, v in zip(axes, (zs, zr, x))]
-    ok = np.ones(zs.size, bool)
-    for i in (0, 1):
-        for j in (0, 1):
-            for k in (0, 1):
-                ok &= flags[index[0] + i, index[1] + j, index[2] + k] == 0
-    return ok
+    """Which points the family table answers (its cells' ``ray_family_exact``)."""
+    return _tabulated(columns, bounds, zs, zr, x, "ray_family_exact")
 
 
 #: (profile, water depth, box, the least share of points the table answers): the benchmark's SBL geometry through

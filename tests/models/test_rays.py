@@ -399,10 +399,11 @@ def _exact_points(table, depth, zs, zr, x):
                                                                           nodes, speeds)]
 
 
-def _tabulated(columns, bounds, zs, zr, x):
-    """Which points the table answers: inside the box, every corner of their cell ``ray_exact = 0``."""
+def _tabulated(columns, bounds, zs, zr, x, flag="ray_exact"):
+    """Which points a table answers: inside the box, every corner of their cell ``flag = 0`` (its exact-solve
+    column: ``ray_exact`` of the eigenray table, ``ray_family_exact`` of the family table)."""
     axes = np.split(rays.ray_grid(np.asarray(bounds, float)), np.cumsum(rays.RAY_GRID)[:-1])
-    flags = columns["ray_exact"].reshape(rays.RAY_GRID, order="F")
+    flags = columns[flag].reshape(rays.RAY_GRID, order="F")
     index = [np.clip(np.searchsorted(a, v, side="right") - 1, 0, len(a) - 2) for a, v in zip(axes, (zs, zr, x))]
     ok = np.ones(zs.size, bool)
     for i in (0, 1):
