@@ -11,7 +11,9 @@ when it compiles them, or when a model or system from outside the package
 takes part (then the key hashes the generated sources themselves).
 
 :class:`NativeBatch` wraps one batch: parameter, input and output matrices
-are numpy views of the library's memory (B rows each).
+are numpy views of the library's memory (B rows of inputs and outputs; one
+parameter row per design cell of the batch, shared by its replicates, whose
+derived values are prepared once).
 """
 
 from __future__ import annotations
@@ -166,7 +168,9 @@ def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.C
     if needed)."""
     lib = ctypes.CDLL(str(library_path(n_beacons, models=models)))
     lib.sblsim_batch_new.restype = ctypes.c_void_p
-    lib.sblsim_batch_new.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    lib.sblsim_batch_new.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_int]
+    lib.sblsim_batch_rows.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_int),
+                                      ctypes.POINTER(ctypes.c_longlong)]
     lib.sblsim_batch_free.argtypes = [ctypes.c_void_p]
     lib.sblsim_batch_vector.restype = ctypes.POINTER(ctypes.c_double)
     lib.sblsim_batch_vector.argtypes = [ctypes.c_void_p, ctypes.c_int]
@@ -199,34 +203,59 @@ class NativeBatch:
     batch : int
         Number of replicates B.
     n_beacons : int
+    rows : int, optional
+        Number of parameter rows R, 1 ≤ R ≤ B (default B: one per replicate). Replicates that differ only in
+        their random streams (a design cell's) share one row and its derived values, which are then checked
+        and prepared once (:meth:`assign` says which row each replicate uses).
 
     Attributes
     ----------
-    p : ndarray, shape (B, n_p)
-        Parameters, one row per replicate (filled before :meth:`initialize`).
+    p : ndarray, shape (R, n_p)
+        Parameter rows (filled before :meth:`initialize`).
+    d : ndarray, shape (R, n_d)
+        Derived values of each row (after :meth:`initialize`).
     u : ndarray, shape (B, n_u)
         Inputs (set before every :meth:`do_step`).
     y : ndarray, shape (B, n_y)
         Outputs (after :meth:`initialize` and every :meth:`do_step`).
     """
 
-    def __init__(self, model: type, batch: int, n_beacons: int = 4) -> None:
+    def __init__(self, model: type, batch: int, n_beacons: int = 4, rows: int | None = None) -> None:
         self.lib = load(n_beacons, None if model in MODELS.values() else (model,))
         self.model, self.batch = model, int(batch)
+        self.rows = self.batch if rows is None else int(rows)
         name = model.name.encode()
-        self._handle = self.lib.sblsim_batch_new(name, self.batch)
+        self._handle = self.lib.sblsim_batch_new(name, self.batch, self.rows)
         if not self._handle:
-            raise ModelError(f"engine: the compiled library has no model {model.name!r} or is out of memory")
+            raise ModelError(f"engine: the compiled library has no model {model.name!r}, {self.rows} parameter "
+                             f"rows for a batch of {self.batch}, or it is out of memory")
         sizes = {k: self.lib.sblsim_model_size(name, VECTORS.index(k)) for k in ("p", "d", "x", "u", "y", "draws")}
         self.sizes = sizes
-        self.p = self._view("p", sizes["p"])
-        self.d = self._view("d", sizes["d"])
-        self.u = self._view("u", sizes["u"])
-        self.y = self._view("y", sizes["y"])
+        self.p = self._view("p", self.rows, sizes["p"])
+        self.d = self._view("d", self.rows, sizes["d"])
+        self.u = self._view("u", self.batch, sizes["u"])
+        self.y = self._view("y", self.batch, sizes["y"])
 
-    def _view(self, which: str, n: int) -> np.ndarray:
+    def _view(self, which: str, rows: int, n: int) -> np.ndarray:
         pointer = self.lib.sblsim_batch_vector(self._handle, VECTORS.index(which))
-        return np.ctypeslib.as_array(pointer, shape=(self.batch, max(n, 1)))[:, :n]
+        return np.ctypeslib.as_array(pointer, shape=(rows, max(n, 1)))[:, :n]
+
+    def assign(self, row_of: np.ndarray, replicate: np.ndarray | None = None) -> None:
+        """Replicate ``i`` uses parameter row ``row_of[i]`` and, if given, draws its random streams as replicate
+        ``replicate[i]`` (else as its row's ``replicate`` parameter).
+
+        Raises
+        ------
+        ModelError
+            If a row index is outside ``[0, R)`` or the arrays are not of length B.
+        """
+        rows = np.ascontiguousarray(row_of, dtype=np.intc)
+        keys = None if replicate is None else np.ascontiguousarray(replicate, dtype=np.longlong)
+        if rows.shape != (self.batch,) or (keys is not None and keys.shape != (self.batch,)):
+            raise ModelError(f"{self.model.name}: a row and a replicate for each of the {self.batch} replicates")
+        self._check(self.lib.sblsim_batch_rows(
+            self._handle, rows.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+            None if keys is None else keys.ctypes.data_as(ctypes.POINTER(ctypes.c_longlong))), "parameter rows")
 
     def _check(self, status: int, what: str) -> None:
         if status:

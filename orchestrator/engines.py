@@ -63,6 +63,37 @@ def _model_ports(model: type, n_beacons: int) -> tuple[tuple[Port, ...], frozens
 DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
 
 
+def parameter_rows(params: Mapping[str, Any], size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Which runs of a batch share their parameters: runs with the same value, bit for bit, of every parameter
+    given per run (an array of shape (B,); a design cell's replicates differ only in ``replicate``, which
+    keys their random streams and is not compared).
+
+    Parameters
+    ----------
+    params : mapping
+        Parameter values, a scalar or an array of shape (B,) each.
+    size : int
+        B.
+
+    Returns
+    -------
+    row_of : ndarray of int, shape (B,)
+        Each run's row, numbered in the order of the runs.
+    first : ndarray of int, shape (R,)
+        The first run of each row.
+    """
+    columns = [v.view(np.int64) if v.dtype == np.float64 else v for k, v in params.items()
+               if k != "replicate" and isinstance(v, np.ndarray) and v.ndim > 0]
+    if any(c.shape != (size,) for c in columns):  # one row per run (the wrong length is refused by its check)
+        return np.arange(size), np.arange(size)
+    if not columns:
+        return np.zeros(size, dtype=np.int64), np.zeros(1, dtype=np.int64)
+    rows: dict[tuple, int] = {}
+    row_of = np.fromiter((rows.setdefault(key, len(rows)) for key in zip(*(c.tolist() for c in columns))),
+                         dtype=np.int64, count=size)
+    return row_of, np.unique(row_of, return_index=True)[1]
+
+
 class ComponentHandle(Protocol):
     """What the master algorithm and a run ask of a component, on any engine.
 
@@ -140,13 +171,19 @@ class LocalHandle:
             On a parameter outside its declared range.
         """
         replicates = np.asarray(replicates, dtype=np.int64)
-        values = dict(params)
-        if "replicate" in self.parameters:
-            values["replicate"] = replicates
-        if self.batch is None or self.batch.batch != replicates.size:
+        size = replicates.size
+        row_of, first = parameter_rows(params, size)
+        values = {k: (v[first] if isinstance(v, np.ndarray) and v.shape == (size,) else v) for k, v in params.items()}
+        seeded = "replicate" in self.parameters
+        if seeded:
+            values["replicate"] = replicates[first]
+            for value in {replicates.min(), replicates.max()}:  # every run's, by its declaration
+                self.model.parameter_vector({"replicate": int(value)}, self.n_beacons)
+        if self.batch is None or (self.batch.batch, self.batch.rows) != (size, first.size):
             self.close()
-            self.batch = NativeBatch(self.model, replicates.size, self.n_beacons)
-        self.model.parameter_matrix(values, replicates.size, self.n_beacons, out=self.batch.p)
+            self.batch = NativeBatch(self.model, size, self.n_beacons, rows=first.size)
+        self.model.parameter_matrix(values, first.size, self.n_beacons, out=self.batch.p)
+        self.batch.assign(row_of, replicates if seeded else None)
         self.batch.u[:] = [v.start for v in self.model.inputs(self.n_beacons)] or 0.0
         self.batch.initialize(t0)
 

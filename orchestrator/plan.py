@@ -228,8 +228,8 @@ class RunPlan(Mapping):
 
     def __copy__(self) -> RunPlan:
         new = object.__new__(RunPlan)
-        for f in fields(self):
-            object.__setattr__(new, f.name, getattr(self, f.name))
+        for name in _FIELDS:
+            object.__setattr__(new, name, getattr(self, name))
         return new
 
     def __deepcopy__(self, memo: dict) -> RunPlan:
@@ -239,6 +239,10 @@ class RunPlan(Mapping):
         # the system object and a user's model class go by name (a user's model is imported again from its file)
         state = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("system", "sources")}
         return _restore, (state,)
+
+
+#: The fields of a plan, in order (:meth:`RunPlan.__copy__` copies them once per replicate).
+_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(RunPlan))
 
 
 def _restore(state: dict[str, Any]) -> RunPlan:

@@ -79,8 +79,16 @@ class RunResult:
     plan: RunPlan | None = None
 
 
-def merge_params(plans: Sequence[RunPlan], component: str,
-                 accepted: frozenset[str] | None = None) -> tuple[dict[str, Any], np.ndarray]:
+def distinct_plans(plans: Sequence[RunPlan]) -> list[RunPlan]:
+    """The runs' distinct plans, one per design cell: the replicates of a cell share every section but their
+    ``run.replicate`` (:func:`with_replicates`)."""
+    return list({(tuple(id(v) for s, v in p.config.items() if s != "run"),
+                  tuple((k, v) for k, v in p.config["run"].items() if k != "replicate")): p
+                 for p in plans}.values())
+
+
+def merge_params(plans: Sequence[RunPlan], component: str, accepted: frozenset[str] | None = None,
+                 distinct: Sequence[RunPlan] | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """Parameters of one component for a batch of runs, one plan per run (a configuration: its plan is made).
 
     The FMU parameters of the first run (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`);
@@ -93,7 +101,8 @@ def merge_params(plans: Sequence[RunPlan], component: str,
     table) follow their run. Only the seed keys and numeric FMU parameters may
     differ; text, tables' shapes and configuration-only keys must be the same in
     every run of a batch. ``accepted`` names the parameters of the handle
-    (default: the model's).
+    (default: the model's); ``distinct`` are the runs' :func:`distinct_plans`
+    when the caller has them (one batch, several components).
 
     Returns
     -------
@@ -112,11 +121,7 @@ def merge_params(plans: Sequence[RunPlan], component: str,
     params = first.component_parameters(component, accepted)
     params.pop("replicate", None)
     replicates = np.array([p.replicate for p in plans], dtype=np.int64)
-    # the runs' distinct plans: the replicates of a cell share every section but their run.replicate
-    # (:func:`with_replicates`)
-    distinct = list({(tuple(id(v) for s, v in p.config.items() if s != "run"),
-                      tuple((k, v) for k, v in p.config["run"].items() if k != "replicate")): p
-                     for p in plans}.values())
+    distinct = distinct_plans(plans) if distinct is None else distinct
     section = first.config.get(component, {})
     for key, value in section.items():  # a configuration-only key (it makes tables or files)
         if key not in params and any(d.config[component][key] != value for d in distinct[1:]):
@@ -244,8 +249,9 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         recs, replicates, timing, overruns = [], [], {}, []
         try:
             for group in groups:
+                distinct = distinct_plans(group)
                 for name, handle in handles.items():
-                    params, reps = merge_params(group, name, handle.parameters)
+                    params, reps = merge_params(group, name, handle.parameters, distinct)
                     handle.setup(params, reps)
                 advance = partial(_advance, bar, len(group)) if bar.active else None
                 recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,

@@ -1,13 +1,16 @@
 /* A batch of instances of one model stepped together: the local engine's compiled path.
  *
- * The caller fills the parameters (B x n_p, row per replicate) and inputs (B x n_u), and
- * reads the outputs (B x n_y) through the pointers this API returns; one call steps every
+ * The caller fills the parameters (R x n_p: R parameter rows, 1 <= R <= B) and inputs (B x n_u),
+ * says which row each of the B replicates uses (sblsim_batch_rows: the replicates of a design cell
+ * differ only in their random streams, so they share one row and its derived values, prepared once),
+ * and reads the outputs (B x n_y) through the pointers this API returns; one call steps every
  * replicate, with the same runtime (and so the same numbers) as the FMUs.
  */
 #if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
 #define _POSIX_C_SOURCE 199309L /* clock_gettime under -std=c99 */
 #endif
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #if defined(_WIN32)
@@ -29,13 +32,16 @@ extern const sblsim_model* const sblsim_models[];
 
 typedef struct {
     const sblsim_model* m;
-    int B;
+    int B, R;
+    int* row_of; /* each replicate's parameter row */
     double* vectors[SBLSIM_VECTOR_DRAWS]; /* every vector but the draw counters (numbered last) */
     uint64_t* draws;
     sblsim_instance* instances;
     sblsim_work* work;
     char message[SBLSIM_MESSAGE];
 } sblsim_batch;
+
+static int is_row_vector(int which) { return which == SBLSIM_VECTOR_P || which == SBLSIM_VECTOR_D; }
 
 static int length(const sblsim_model* m, int which) {
     switch (which) {
@@ -67,34 +73,41 @@ SBLSIM_EXPORT void sblsim_batch_free(sblsim_batch* b) {
     if (b == NULL) return;
     for (k = 0; k < SBLSIM_VECTOR_DRAWS; k++) free(b->vectors[k]);
     free(b->draws);
+    free(b->row_of);
     free(b->instances);
     sblsim_work_free(b->work);
     free(b);
 }
 
-SBLSIM_EXPORT sblsim_batch* sblsim_batch_new(const char* name, int B) {
+/* B replicates of model `name` with R parameter rows (1 <= R <= B); replicate i uses row i % R until
+   sblsim_batch_rows says otherwise. NULL: no such model, a bad count, or out of memory. */
+SBLSIM_EXPORT sblsim_batch* sblsim_batch_new(const char* name, int B, int R) {
     const sblsim_model* m = sblsim_find_model(name);
     sblsim_batch* b;
     int k, i;
-    if (m == NULL || B < 1) return NULL;
+    if (m == NULL || B < 1 || R < 1 || R > B) return NULL;
     b = (sblsim_batch*)calloc(1, sizeof(sblsim_batch));
     if (b == NULL) return NULL;
     b->m = m;
     b->B = B;
+    b->R = R;
     for (k = 0; k < SBLSIM_VECTOR_DRAWS; k++) {
         int n = length(m, k);
-        b->vectors[k] = (double*)calloc((size_t)B * (size_t)(n > 0 ? n : 1), sizeof(double));
+        b->vectors[k] = (double*)calloc((size_t)(is_row_vector(k) ? R : B) * (size_t)(n > 0 ? n : 1),
+                                        sizeof(double));
         if (b->vectors[k] == NULL) goto failed;
     }
     b->draws = (uint64_t*)calloc((size_t)B * (size_t)(m->n_purposes > 0 ? m->n_purposes : 1), sizeof(uint64_t));
+    b->row_of = (int*)calloc((size_t)B, sizeof(int));
     b->instances = (sblsim_instance*)calloc((size_t)B, sizeof(sblsim_instance));
     b->work = sblsim_work_new(m);
-    if (b->draws == NULL || b->instances == NULL || b->work == NULL) goto failed;
+    if (b->draws == NULL || b->row_of == NULL || b->instances == NULL || b->work == NULL) goto failed;
     for (i = 0; i < B; i++) {
         sblsim_instance* s = &b->instances[i];
         s->model = m;
-        s->p = b->vectors[SBLSIM_VECTOR_P] + (size_t)i * m->n_p;
-        s->d = b->vectors[SBLSIM_VECTOR_D] + (size_t)i * m->n_d;
+        b->row_of[i] = i % R;
+        s->p = b->vectors[SBLSIM_VECTOR_P] + (size_t)(i % R) * m->n_p;
+        s->d = b->vectors[SBLSIM_VECTOR_D] + (size_t)(i % R) * m->n_d;
         s->x = b->vectors[SBLSIM_VECTOR_X] + (size_t)i * m->n_x;
         s->u = b->vectors[SBLSIM_VECTOR_U] + (size_t)i * m->n_u;
         s->y = b->vectors[SBLSIM_VECTOR_Y] + (size_t)i * m->n_y;
@@ -102,18 +115,37 @@ SBLSIM_EXPORT sblsim_batch* sblsim_batch_new(const char* name, int B) {
         s->draws = b->draws + (size_t)i * m->n_purposes;
         s->work = b->work;
     }
-    for (i = 0; i < B; i++) {
-        memcpy(b->instances[i].p, m->p_start, sizeof(double) * (size_t)m->n_p);
-        memcpy(b->instances[i].u, m->u_start, sizeof(double) * (size_t)m->n_u);
-    }
+    for (i = 0; i < R; i++) memcpy(b->instances[i].p, m->p_start, sizeof(double) * (size_t)m->n_p);
+    for (i = 0; i < B; i++) memcpy(b->instances[i].u, m->u_start, sizeof(double) * (size_t)m->n_u);
     return b;
 failed:
     sblsim_batch_free(b);
     return NULL;
 }
 
-/* The batch's vector `which` (p, d, u or y), B rows of length sblsim_model_size (the states swap while
-   stepping: sblsim_batch_states copies them). */
+/* Replicate i uses parameter row row_of[i] (0 <= row_of[i] < R) and, when `replicate` is not NULL, draws
+   its random streams as replicate replicate[i] (else as its row's `replicate` parameter). 0 on success, else
+   1 + the first replicate whose row is out of range. */
+SBLSIM_EXPORT int sblsim_batch_rows(sblsim_batch* b, const int* row_of, const long long* replicate) {
+    int i;
+    for (i = 0; i < b->B; i++)
+        if (row_of[i] < 0 || row_of[i] >= b->R) {
+            snprintf(b->message, sizeof b->message, "parameter row %d of %d rows", row_of[i], b->R);
+            return 1 + i;
+        }
+    for (i = 0; i < b->B; i++) {
+        sblsim_instance* s = &b->instances[i];
+        b->row_of[i] = row_of[i];
+        s->p = b->vectors[SBLSIM_VECTOR_P] + (size_t)row_of[i] * b->m->n_p;
+        s->d = b->vectors[SBLSIM_VECTOR_D] + (size_t)row_of[i] * b->m->n_d;
+        s->own_replicate = replicate != NULL;
+        s->replicate = replicate != NULL ? (uint64_t)replicate[i] : 0;
+    }
+    return 0;
+}
+
+/* The batch's vector `which`: p or d (R rows), u or y (B rows), each row of length sblsim_model_size (the
+   states swap while stepping: sblsim_batch_states copies them). */
 SBLSIM_EXPORT double* sblsim_batch_vector(sblsim_batch* b, int which) {
     return (which == SBLSIM_VECTOR_P || which == SBLSIM_VECTOR_D || which == SBLSIM_VECTOR_U ||
             which == SBLSIM_VECTOR_Y) ? b->vectors[which] : NULL;
@@ -128,17 +160,28 @@ SBLSIM_EXPORT void sblsim_batch_states(sblsim_batch* b, double* out) {
 
 SBLSIM_EXPORT const char* sblsim_batch_message(sblsim_batch* b) { return b->message; }
 
-/* Check every replicate's parameters, then prepare, init and output at t0. 0 on success,
-   else 1 + the index of the first failing replicate (the message names the parameter). */
+/* Check every parameter row, then prepare each row once, and init and output every replicate at t0. 0 on
+   success, else 1 + the index of the first failing replicate (the message names the parameter). */
 SBLSIM_EXPORT int sblsim_batch_initialize(sblsim_batch* b, double t0) {
-    int i;
-    for (i = 0; i < b->B; i++) {
-        if (sblsim_check_parameters(b->m, b->instances[i].p, b->message, sizeof b->message)) return 1 + i;
+    int i, status = 0;
+    char* seen = (char*)calloc((size_t)b->R, 1); /* rows checked, then rows prepared */
+    if (seen == NULL) {
+        snprintf(b->message, sizeof b->message, "out of memory");
+        return 1;
     }
-    for (i = 0; i < b->B; i++) {
-        if (sblsim_initialize(&b->instances[i], t0, b->message, sizeof b->message)) return 1 + i;
+    for (i = 0; i < b->B && !status; i++) {
+        if (seen[b->row_of[i]]) continue;
+        seen[b->row_of[i]] = 1;
+        if (sblsim_check_parameters(b->m, b->instances[i].p, b->message, sizeof b->message)) status = 1 + i;
     }
-    return 0;
+    memset(seen, 0, (size_t)b->R);
+    for (i = 0; i < b->B && !status; i++) {
+        int prepare = !seen[b->row_of[i]];
+        seen[b->row_of[i]] = 1;
+        if (sblsim_start(&b->instances[i], t0, prepare, b->message, sizeof b->message)) status = 1 + i;
+    }
+    free(seen);
+    return status;
 }
 
 SBLSIM_EXPORT int sblsim_batch_do_step(sblsim_batch* b, double t, double h) {

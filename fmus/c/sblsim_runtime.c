@@ -217,6 +217,7 @@ int sblsim_check_parameters(const sblsim_model* m, const double* p, char* messag
 
 static uint64_t key_of(const sblsim_instance* s, int k) {
     int index = s->model->seed_index[k];
+    if (k == SBLSIM_SEED_REPLICATE && s->own_replicate) return index < 0 ? 0 : s->replicate;
     return index < 0 ? 0 : (uint64_t)s->p[index];
 }
 
@@ -265,12 +266,16 @@ static int output(sblsim_instance* s, double t) {
 }
 
 int sblsim_initialize(sblsim_instance* s, double t0, char* message, size_t size) {
+    return sblsim_start(s, t0, 1, message, size);
+}
+
+int sblsim_start(sblsim_instance* s, double t0, int prepare, char* message, size_t size) {
     const sblsim_model* m = s->model;
     const double** a = s->work->arg;
     int k;
     for (k = 0; k < m->n_purposes; k++) s->draws[k] = 0;
     a[0] = s->p;
-    if (call(s, m->prepare.f, s->d)) goto failed;
+    if (prepare && call(s, m->prepare.f, s->d)) goto failed;
     a[0] = s->p;
     a[1] = s->d;
     a[2] = draw(s, &m->init);

@@ -135,6 +135,10 @@ typedef struct {
     uint64_t* draws;
     double t0, t;
     sblsim_work* work;
+    /* Nonzero: the replicate key of the random streams is `replicate`, not p's (the instances of a batch
+       that share one parameter row, a design cell's replicates). Zero in an FMU. */
+    int own_replicate;
+    uint64_t replicate;
 } sblsim_instance;
 
 #define SBLSIM_MESSAGE 512
@@ -148,6 +152,10 @@ int sblsim_check_parameters(const sblsim_model* m, const double* p, char* messag
 
 /* prepare, init and output at t0 (parameters must have been checked). 0 on success. */
 int sblsim_initialize(sblsim_instance* s, double t0, char* message, size_t size);
+
+/* As sblsim_initialize, preparing the derived values d only when `prepare` is nonzero (instances that share
+   their p and d prepare them once). */
+int sblsim_start(sblsim_instance* s, double t0, int prepare, char* message, size_t size);
 
 /* One communication step from t to t + h: step, events, output. 0 on success. */
 int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t size);

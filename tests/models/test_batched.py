@@ -16,8 +16,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sblsim.fmus.native import NativeBatch
 from sblsim.models import Acoustics, LeastSquaresReceiver, PaperEKF, Platform, Target
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator import engines
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.run import run_batch, with_replicates
 from tests.helpers import Core
@@ -194,6 +196,49 @@ def test_acoustics_high_level_is_exercised():
     assert ref_b["outlier"].any() and not ref_b["packet_valid"].all()
     # slot clocks: 6 s at 0.2 s and 0.3 s per slot; the last slot, sent at 6 s, is still in flight
     assert ref_a["packet_seq"][-1].tolist() == [29] * 3 and ref_b["packet_seq"][-1].tolist() == [19] * 3
+
+
+@pytest.mark.parametrize("model,extra", CASES, ids=lambda c: getattr(c, "name", None) or "-".join(map(str, c.values())))
+def test_shared_parameter_rows_equal_one_row_per_replicate(model, extra, monkeypatch):
+    """The replicates of a design cell share one parameter row (its derived values prepared once) and key their
+    random streams by their own replicate: the same numbers as one row per replicate whose ``replicate``
+    parameter keys the streams (as in an FMU)."""
+    reps = np.array([3, 0, 7, 1, 5, 2])
+    low, high = LEVELS[model]
+    common = {**SEEDS, **extra} if "cell" in low else dict(extra)
+    cells = {name: np.where(np.arange(6) % 3 == 1, high[name], low[name]) for name in low}  # cells a b a a b a
+    shared = _core(model, {**common, **low}, reps, arrays=cells).initialize(0.0)
+    assert (shared.handle.batch.batch, shared.handle.batch.rows) == (6, 2)
+    got, got_state = _step(model, {**common, **low}, reps, arrays=cells)
+    # the reference: one row per replicate, the runtime's draws keyed by each row's replicate parameter
+    assign = NativeBatch.assign
+    monkeypatch.setattr(engines, "parameter_rows", lambda params, size: (np.arange(size), np.arange(size)))
+    monkeypatch.setattr(NativeBatch, "assign", lambda self, row_of, replicate=None: assign(self, row_of, None))
+    alone = _core(model, {**common, **low}, reps, arrays=cells).initialize(0.0)
+    assert alone.handle.batch.rows == 6
+    seeded = "cell" in low
+    if seeded:
+        names = [v.name for v in model.fmu_parameters_declared()]
+        np.testing.assert_array_equal(alone.handle.batch.p[:, names.index("replicate")], reps)
+    want, want_state = _step(model, {**common, **low}, reps, arrays=cells)
+    _assert_columns_equal(got, want, slice(None), "shared rows")
+    for name in want_state:
+        np.testing.assert_array_equal(got_state[name], want_state[name], err_msg=name)
+    if seeded:  # two replicates of one cell really differ: the keys are compared, not ignored
+        assert any(not np.array_equal(v[:, 0], v[:, 2]) for v in want.values())
+
+
+def test_parameter_rows_group_runs_bit_for_bit():
+    size = 6
+    rows, first = engines.parameter_rows({"a": np.array([1.0, 1.0, -0.0, 0.0, 1.0, np.nan]), "b": 2.0,
+                                          "replicate": np.arange(size)}, size)
+    assert rows.tolist() == [0, 0, 1, 2, 0, 3] and first.tolist() == [0, 2, 3, 5]  # -0.0 is not 0.0
+    rows, first = engines.parameter_rows({"a": 1.0, "replicate": np.arange(size)}, size)
+    assert rows.tolist() == [0] * size and first.tolist() == [0]
+    rows, first = engines.parameter_rows({"a": np.array(["x", "y", "x"]), "c": np.array([1, 1, 2])}, 3)
+    assert rows.tolist() == [0, 1, 2] and first.tolist() == [0, 1, 2]
+    rows, _ = engines.parameter_rows({"a": np.array([1.0, 2.0])}, 3)  # a wrong length: one row each (refused later)
+    assert rows.tolist() == [0, 1, 2]
 
 
 def test_parameter_matrix_columns_are_the_scalar_vectors():
