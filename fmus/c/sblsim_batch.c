@@ -178,7 +178,7 @@ SBLSIM_EXPORT int sblsim_batch_initialize(sblsim_batch* b, double t0) {
     for (i = 0; i < b->B && !status; i++) {
         int prepare = !seen[b->row_of[i]];
         seen[b->row_of[i]] = 1;
-        if (sblsim_start(&b->instances[i], t0, prepare, b->message, sizeof b->message)) status = 1 + i;
+        if (sblsim_initialize_shared(&b->instances[i], t0, prepare, b->message, sizeof b->message)) status = 1 + i;
     }
     free(seen);
     return status;

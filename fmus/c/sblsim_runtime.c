@@ -266,10 +266,10 @@ static int output(sblsim_instance* s, double t) {
 }
 
 int sblsim_initialize(sblsim_instance* s, double t0, char* message, size_t size) {
-    return sblsim_start(s, t0, 1, message, size);
+    return sblsim_initialize_shared(s, t0, 1, message, size);
 }
 
-int sblsim_start(sblsim_instance* s, double t0, int prepare, char* message, size_t size) {
+int sblsim_initialize_shared(sblsim_instance* s, double t0, int prepare, char* message, size_t size) {
     const sblsim_model* m = s->model;
     const double** a = s->work->arg;
     int k;

@@ -155,7 +155,7 @@ int sblsim_initialize(sblsim_instance* s, double t0, char* message, size_t size)
 
 /* As sblsim_initialize, preparing the derived values d only when `prepare` is nonzero (instances that share
    their p and d prepare them once). */
-int sblsim_start(sblsim_instance* s, double t0, int prepare, char* message, size_t size);
+int sblsim_initialize_shared(sblsim_instance* s, double t0, int prepare, char* message, size_t size);
 
 /* One communication step from t to t + h: step, events, output. 0 on success. */
 int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t size);
