@@ -215,6 +215,16 @@ def _angle(z, q, cref, nodes, speeds):
     return ca.atan2(ca.sqrt(ca.fmax((cref - c) * (cref + c) + (1.0 - k) * c * c, 0.0)), ca.sqrt(k) * c)
 
 
+def _peak_down(zb, depth, nodes, speeds):
+    """The bottom [m] of the region below ``zb`` over which the speed keeps increasing downward (from the first node
+    below ``zb``): the first node below ``zb`` with no faster node under it, at most the water depth ``depth`` (when
+    it is set, > 0)."""
+    down_flag = ca.vertcat(speeds[1:] <= speeds[:-1], 1.0)  # the next node down is not faster
+    below = nodes > zb
+    peak_down = -ca.mmax(ca.if_else(ca.logic_and(below, down_flag), -nodes, -_BIG))
+    return ca.if_else(depth > 0, ca.fmin(peak_down, ca.fmax(depth, zb)), peak_down)
+
+
 def _direct(zs, zr, target, depth, nodes, speeds):
     """The direct eigenray: ``(τ, launch, arrival, valid, ray)``, ``ray`` the solved ray for :func:`_tube_loss`
     (``q, fold, c_ref, u1, v1, u2, v2``, the isovelocity image's vertical extent and whether the path is level)."""
@@ -226,13 +236,11 @@ def _direct(zs, zr, target, depth, nodes, speeds):
     # the regions beyond each end over which the speed keeps increasing away from it (bounded by the
     # surface above and the water depth below): a ray leaving that end outward turns there
     up_flag = ca.vertcat(1.0, speeds[:-1] <= speeds[1:])  # the next node up is not faster
-    down_flag = ca.vertcat(speeds[1:] <= speeds[:-1], 1.0)  # the next node down is not faster
     above, below = nodes < za, nodes > zb
     near_up = ca.mmax(ca.if_else(above, nodes, -_BIG))
     near_down = -ca.mmax(ca.if_else(below, -nodes, -_BIG))
     peak_up = ca.fmax(ca.mmax(ca.if_else(ca.logic_and(above, up_flag), nodes, -_BIG)), ca.fmin(0.0, za))
-    peak_down = -ca.mmax(ca.if_else(ca.logic_and(below, down_flag), -nodes, -_BIG))
-    peak_down = ca.if_else(depth > 0, ca.fmin(peak_down, ca.fmax(depth, zb)), peak_down)
+    peak_down = _peak_down(zb, depth, nodes, speeds)
     grows_up = c(near_up, nodes, speeds) > c_a
     grows_down = c(near_down, nodes, speeds) > c_b
     c_up = ca.if_else(grows_up, c(peak_up, nodes, speeds), c_a)
@@ -282,6 +290,102 @@ def _reflected(zs, zr, target, depth, nodes, speeds, bottom: bool):
             (q, 1.0, cref, za, zb, u2, v2, image, 0.0))
 
 
+def _surface_turning(zs, zr, target, depth, nodes, speeds):
+    """The surface-reflected eigenray that also turns below the deeper end (a surface duct): ``(τ, launch, arrival,
+    valid, ray)`` (as :func:`_direct`; ``ray`` has two more items, the interval it covers twice beyond the deeper
+    end).
+
+    Unfolded at the surface, the ray covers ``[0, z_a]`` twice, ``[z_a, z_b]`` once and ``[z_b, z_t]`` twice, ``z_t``
+    its turning depth (``c = 1/ξ``) inside the region below ``z_b`` where the speed keeps increasing
+    (:func:`_peak_down`, bounded by the water depth). ``c_ref`` is the fastest speed over ``[0, z_b]`` (as for the
+    plain surface-reflected ray) and ``q ∈ [0, q_hi]``: from the ray horizontal at ``c_ref`` (``q = 0``, where the
+    plain surface family ends) to the ray turning at the bottom of that region, ``c_peak``
+    (``q_hi = √(1 − (c_ref / c_peak)²)``); none where ``c_peak ≤ c_ref``. The eigenray exists when ``X(0)`` and
+    ``X(q_hi)`` bracket the target; it is found by the bracketed Newton iteration of :func:`_solve` in whichever
+    direction ``X`` runs over the bracket. It leaves the shallower end upward and the deeper end downward."""
+    c = _speed()
+    za, zb = ca.fmin(zs, zr), ca.fmax(zs, zr)
+    cref = _interval_max(0.0, zb, nodes, speeds)
+    peak = _peak_down(zb, depth, nodes, speeds)
+    c_peak = c(peak, nodes, speeds)
+    q_hi = ca.sqrt(ca.fmax(1.0 - (cref / c_peak) ** 2, 0.0))
+    sums = _layers()
+
+    def total(q):
+        x1, t1, d1 = sums(q, 1.0, cref, za, zb, 0.0, za, nodes, speeds)
+        x2, t2, d2 = sums(q, 1.0, cref, zb, zb, zb, peak, nodes, speeds)
+        return x1 + x2, t1 + t2, d1 + d2
+
+    x_lo, x_hi = total(0.0)[0], total(q_hi)[0]
+    rising = x_hi > x_lo
+    bracket = ca.logic_and(ca.fmin(x_lo, x_hi) <= target, ca.fmax(x_lo, x_hi) >= target)  # false for NaN
+    valid = ca.logic_and(ca.logic_and(bracket, q_hi > 0),
+                         ca.logic_and(ca.logic_and(za >= 0, depth >= zb), depth > 0))
+    lo, hi = 0.0, q_hi
+    span = x_hi - x_lo
+    q = ca.fmin(ca.fmax(q_hi * (target - x_lo) / ca.if_else(span == 0, 1.0, span), lo), hi)
+    for _ in range(NEWTON_ITERATIONS):
+        x, _t, dx = total(q)
+        r = x - target
+        past = ca.if_else(rising, r > 0, r < 0)  # the eigenray lies between lo and q
+        lo, hi = ca.if_else(past, lo, q), ca.if_else(past, q, hi)
+        step = ca.if_else(r == 0, q, q - r / dx)
+        ok = ca.logic_and(step >= lo, step <= hi)  # false for NaN
+        q = ca.if_else(ok, step, 0.5 * (lo + hi))
+    x, t, _dx = total(q)
+    xi = ca.sqrt(1.0 - q * q) / cref
+    tau = t + xi * (target - x)
+    ts, tr = _angle(zs, q, cref, nodes, speeds), _angle(zr, q, cref, nodes, speeds)
+    # up from the shallower end, down from the deeper one (at equal depths: the ray leaving upward)
+    up_first = zs <= zr
+    launch = ca.if_else(up_first, -ts, ts)
+    arrival = ca.if_else(up_first, -tr, tr)
+    return tau, launch, arrival, valid, (q, 1.0, cref, za, zb, 0.0, za, zs + zr, 0.0, zb, peak)
+
+
+def _duct(zs, zr, depth, nodes, speeds):
+    """True where a surface-reflected ray can also turn below the deeper end: a water depth is set and the speed
+    below the deeper end climbs above the fastest over ``[0, z_b]`` (:func:`_surface_turning`)."""
+    zb = ca.fmax(zs, zr)
+    c_peak = _speed()(_peak_down(zb, depth, nodes, speeds), nodes, speeds)
+    return ca.logic_and(depth > 0, c_peak > _interval_max(0.0, zb, nodes, speeds))
+
+
+def _earliest(plain, turning):
+    """The earliest valid of two eigenrays of one family, each ``(τ, launch, arrival, valid, ...)``: the row of the
+    chosen one, valid if either is."""
+    better = ca.logic_and(turning[3], ca.logic_or(ca.logic_not(plain[3]), turning[0] < plain[0]))
+    out = [ca.if_else(better, b, a) for a, b in zip(plain, turning)]
+    out[3] = ca.logic_or(plain[3], turning[3])
+    return out
+
+
+@lru_cache(maxsize=2)
+def _surface_family(paths: bool) -> ca.Function:
+    """``(zs, zr, x, depth, nodes, speeds) -> (tau, launch, arrival, valid[, spreading, length])``: the surface family's
+    eigenray, the earliest valid of the plain surface-reflected one (:func:`_reflected`) and the one that also turns
+    (:func:`_surface_turning`); the latter solved only where a surface duct exists (:func:`_duct`, a switch: elsewhere
+    the plain one alone is evaluated, in the generated C too). With ``paths``, its spreading and length
+    (:func:`_tube_loss`)."""
+    zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    args = [zs, zr, x, depth, nodes, speeds]
+    names = ["tau", "launch", "arrival", "valid"] + (["spreading", "length"] if paths else [])
+
+    def row(r):
+        return list(r[:4]) + (list(_tube_loss(zs, zr, x, r[4], nodes, speeds)) if paths else [])
+
+    plain = row(_reflected(zs, zr, x, depth, nodes, speeds, False))
+    turning = row(_surface_turning(zs, zr, x, depth, nodes, speeds))
+    tag = "paths" if paths else "families"
+    alone = ca.Function(f"sblsim_ray_surface_{tag}_plain", args, plain)
+    both = ca.Function(f"sblsim_ray_surface_{tag}_duct", args, _earliest(plain, turning))
+    chosen = switch(f"sblsim_ray_surface_{tag}", [alone, both])
+    out = chosen(_duct(zs, zr, depth, nodes, speeds), *args)
+    return ca.Function(f"sblsim_ray_surface_{tag}", args, out, ["zs", "zr", "x", "depth", "nodes", "speeds"], names,
+                       {"never_inline": True})
+
+
 #: The most a ray tube may gain over the spherical spreading of the path's isovelocity image [dB]: the cap of the
 #: ray-tube intensity at and near a caustic (``dX/dq → 0``), where geometric acoustics predicts an infinite one.
 CAUSTIC_GAIN = 10.0
@@ -304,8 +408,11 @@ def _tube_loss(zs, zr, x, ray, nodes, speeds):
     A level path in water of constant speed around it (the family degenerate: ``X ≡ 0``) is the straight line. The
     loss is capped at :data:`CAUSTIC_GAIN` below the spherical spreading of the isovelocity image, and floored at
     0 dB."""
-    q, fold, cref, u1, v1, u2, v2, image, level = ray
+    q, fold, cref, u1, v1, u2, v2, image, level = ray[:9]
     f, df, arc = _tube()(q, fold, cref, u1, v1, u2, v2, nodes, speeds)
+    if len(ray) > 9:  # a second interval covered twice (:func:`_surface_turning`)
+        f2, df2, arc2 = _tube()(q, 1.0, cref, ray[9], ray[9], ray[9], ray[10], nodes, speeds)
+        f, df, arc = f + f2, df + df2, arc + arc2
     speed = _speed()
     c_s, c_r = speed(zs, nodes, speeds), speed(zr, nodes, speeds)
     qq = q * q
@@ -343,9 +450,9 @@ def eigenray_paths() -> ca.Function:
     """
     zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
     nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    rows = [_direct(zs, zr, x, depth, nodes, speeds), _reflected(zs, zr, x, depth, nodes, speeds, False),
-            _reflected(zs, zr, x, depth, nodes, speeds, True)]
+    rows = [_direct(zs, zr, x, depth, nodes, speeds), _reflected(zs, zr, x, depth, nodes, speeds, True)]
     rows = [r[:4] + _tube_loss(zs, zr, x, r[4], nodes, speeds) for r in rows]
+    rows.insert(1, _surface_family(True)(zs, zr, x, depth, nodes, speeds))
     out = [ca.vertcat(*[r[j] for r in rows]) for j in range(6)]
     return ca.Function("sblsim_eigenray_paths", [zs, zr, x, depth, nodes, speeds], out,
                        ["zs", "zr", "x", "depth", "nodes", "speeds"],
@@ -371,7 +478,7 @@ def eigenray_families() -> ca.Function:
     """
     zs, zr, x, depth = (ca.MX.sym(n) for n in ("zs", "zr", "x", "depth"))
     nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    rows = [_direct(zs, zr, x, depth, nodes, speeds), _reflected(zs, zr, x, depth, nodes, speeds, False),
+    rows = [_direct(zs, zr, x, depth, nodes, speeds), _surface_family(False)(zs, zr, x, depth, nodes, speeds),
             _reflected(zs, zr, x, depth, nodes, speeds, True)]
     out = [ca.vertcat(*[r[j] for r in rows]) for j in range(4)]
     return ca.Function("sblsim_eigenray_families", [zs, zr, x, depth, nodes, speeds], out,
