@@ -149,6 +149,34 @@ def test_against_solve_ivp(name, zs, zr, x):
     assert checked >= 2
 
 
+#: Geometries of the strong table's surface duct (source depth, receiver depth, range [m]) where the surface-reflected
+#: eigenray also turns below the deeper end: beyond the range of the flattest plain surface-reflected ray (the one
+#: horizontal at the fastest speed above the deeper end), short of the ray grazing the duct's bottom at 80 m. The
+#: first is the case of 3.332 s (no direct eigenray there: the thermocline's shadow).
+DUCT_CASES = [(20.0, 60.0, 5000.0), (60.0, 20.0, 5000.0), (5.0, 60.0, 4000.0), (10.0, 70.0, 4500.0),
+              (30.0, 50.0, 6000.0), (20.0, 60.0, 3800.0)]
+
+
+@pytest.mark.parametrize("zs, zr, x", DUCT_CASES)
+def test_surface_duct_eigenray_against_solve_ivp(zs, zr, x):
+    """The surface family's eigenray that also turns (leaving the shallower end upward and the deeper end downward,
+    arriving likewise) within 1 µs of the integrated ray equations shot around our launch angle, its launch angle
+    within 1e-6 rad, one surface reflection and no bottom. Where the direct path is shadowed it is the first arrival,
+    not the bottom bounce (6.8 s at the first geometry)."""
+    table, depth = STRONG, float(STRONG[-1, 0])
+    tau, launch, arrival, valid = families(table, zs, zr, x, depth)
+    assert valid[1] and np.sign(launch[1]) == np.sign(arrival[1]) == (1.0 if zs > zr else -1.0)
+    th = launch[1]
+    root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, th - 1e-5, th + 1e-5, xtol=1e-13)
+    _z, t_end, hits = _ivp_ray(table, zs, x, root, depth)
+    assert hits == [0]
+    assert tau[1] == pytest.approx(t_end, abs=1e-6)
+    assert launch[1] == pytest.approx(root, abs=1e-6)
+    if not valid[0]:
+        out = rays.first_arrival(1.0, zs, zr, x, depth, 1500.0, *rays.profile_arrays(table))
+        assert int(out[3]) == rays.SURFACE and float(out[0]) == pytest.approx(t_end, abs=1e-6)
+
+
 # ------------------------------------------------------------------ Bellhop (pelagic)
 
 #: Bellhop's fan of launch angles [deg], its step [m] and its number of beams.
@@ -207,11 +235,20 @@ def _separatrices(table, zs):
     return np.degrees(np.arccos(here / peaks[peaks > here]))
 
 
-def _turns(k, source_angle, receiver_angle):
-    """Bellhop's reflected arrivals whose ray also turns: leaving away from the boundary (surface: downward,
-    bottom: upward) or arriving toward it. Not a path of the families (a single reflection, no turning)."""
-    sign = -1.0 if k == 1 else 1.0
-    return (sign * source_angle < 0) | (sign * receiver_angle > 0)
+def _turns(k, zs, zr, source_angle, receiver_angle):
+    """Bellhop's reflected arrivals whose ray turns as no path of the families does.
+
+    Bottom: leaving away from the bottom (upward) or arriving toward it. Surface: the plain surface-reflected ray
+    leaves upward and arrives downward; the one that also turns below the deeper end (a surface duct) leaves the
+    shallower end upward and the deeper end downward, and arrives likewise (at equal depths either way); every other
+    surface arrival (leaving the shallower end downward: turning below, it crosses ``[z_a, z_b]`` three times, or
+    turning above the source before it reaches the surface) is not modelled (docs/model.md)."""
+    if k == 2:
+        return (source_angle < 0) | (receiver_angle > 0)
+    plain = (source_angle < 0) & (receiver_angle > 0)
+    up = (source_angle < 0) & (receiver_angle < 0) & (zs <= zr)
+    down = (source_angle > 0) & (receiver_angle > 0) & (zs >= zr)
+    return ~(plain | up | down)
 
 
 _ARRIVALS: dict[str, dict] = {}
@@ -233,6 +270,7 @@ def _compare_with_bellhop(name, solve):
     sources, depths, ranges, depth = BELLHOP_SITES[name]
     nodes, speeds = rays.profile_arrays(table)
     compared, worst = [0, 0, 0], [0.0, 0.0, 0.0]
+    ducted, ducted_worst = 0, 0.0  # surface-reflected eigenrays that also turn (leaving and arriving the same way)
     mismatched, other_ray, separatrix = [], [], []
     speed = rays._speed()
     for zs in sources:
@@ -240,13 +278,13 @@ def _compare_with_bellhop(name, solve):
         seps = _separatrices(table, zs)
         for zr in depths:
             for x in ranges:
-                tau, launch, _arrival, valid = (np.asarray(v).ravel() for v in solve(zs, zr, x, depth, nodes, speeds))
+                tau, launch, arrival, valid = (np.asarray(v).ravel() for v in solve(zs, zr, x, depth, nodes, speeds))
                 edge = [np.asarray(solve(zs, zr, x * f, depth, nodes, speeds)[3]).ravel() for f in (0.99, 1.01)]
                 here = arrivals[(arrivals.depth_m == np.float32(zr)) & (np.isclose(arrivals.range_m, x))]
                 for k, (top, bottom) in enumerate(((0, 0), (1, 0), (0, 1))):
                     theirs = here[(here.top_bounces == top) & (here.bottom_bounces == bottom)]
                     if k > 0:
-                        theirs = theirs[~_turns(k, theirs.source_angle_degrees.values,
+                        theirs = theirs[~_turns(k, zs, zr, theirs.source_angle_degrees.values,
                                                 theirs.receiver_angle_degrees.values)]
                     if edge[0][k] != edge[1][k]:
                         continue  # at a shadow boundary
@@ -277,6 +315,8 @@ def _compare_with_bellhop(name, solve):
                     error = abs(tau[k] - theirs.travel_time_s.values[nearest])
                     worst[k] = max(worst[k], error)
                     compared[k] += 1
+                    if k == 1 and np.sign(launch[k]) == np.sign(arrival[k]):
+                        ducted, ducted_worst = ducted + 1, max(ducted_worst, error)
     # near a separatrix: the eigenray against the ray equations integrated (the shooting of test_against_solve_ivp),
     # and against Bellhop with a fan of 1001 beams over ±0.05° around ours (beams 1e-4° apart)
     ivp_worst, narrow_worst, narrow_missed = 0.0, [0.0, 0.0, 0.0], []
@@ -297,7 +337,8 @@ def _compare_with_bellhop(name, solve):
             continue
         narrow_worst[k] = max(narrow_worst[k], abs(t - theirs.travel_time_s.values[np.argmin(gap)]))
     print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s; near a separatrix "
-          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s, and Bellhop's narrow fan, worst {narrow_worst} s")
+          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s, and Bellhop's narrow fan, worst {narrow_worst} s; "
+          f"surface-reflected and turning {ducted}, worst {ducted_worst} s")
     assert not mismatched, ("shadowed sets", mismatched)
     assert not other_ray, ("other eigenray", other_ray)
     assert compared[0] >= 60 and compared[1] + compared[2] >= 60, ("compared", compared)
@@ -305,7 +346,7 @@ def _compare_with_bellhop(name, solve):
     assert ivp_worst <= 1e-6, ("solve_ivp's times near a separatrix", ivp_worst)
     assert not narrow_missed, ("the narrow fan's eigenrays near a separatrix", narrow_missed)
     assert narrow_worst[0] <= 10e-6 and max(narrow_worst[1:]) <= 20e-6, ("the narrow fan's times", narrow_worst)
-    return compared, len(separatrix)
+    return compared, len(separatrix), ducted
 
 
 @pytest.mark.parametrize("name", ["munk", "NCL1", "strong"])
@@ -328,9 +369,11 @@ def test_against_bellhop(name):
     within 1 µs, the same boundaries hit) and against Bellhop with a fan 1e-4° fine around it (an arrival with the
     same bounces within 0.01° of ours, within 10 µs, 20 µs reflected) instead; the NCL1 cast and the strong table
     have such geometries."""
-    compared, near = _compare_with_bellhop(name, rays.eigenray_families())
+    compared, near, ducted = _compare_with_bellhop(name, rays.eigenray_families())
     if name != "munk":
         assert near > 0
+    if name == "strong":  # its surface duct: surface-reflected eigenrays that also turn, compared
+        assert ducted >= 10, ducted
 
 
 @pytest.mark.parametrize("name, family, offset, check", [("strong", 0, 2e-6, "separatrix"),

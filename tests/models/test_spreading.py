@@ -204,6 +204,24 @@ def test_spreading_against_solve_ivp(name, zs, zr, x):
     assert checked >= 2
 
 
+@pytest.mark.parametrize("zs, zr, x", [(20.0, 60.0, 5000.0), (60.0, 20.0, 5000.0), (10.0, 70.0, 4500.0),
+                                       (30.0, 50.0, 6000.0)])
+def test_surface_duct_spreading_against_solve_ivp(zs, zr, x):
+    """The surface-reflected eigenray that also turns below the deeper end (the strong table's surface duct): its
+    spreading within 0.01 dB of the integrated rays' tube, the integration following it (one surface reflection,
+    within 5 cm of the receiver) and no caustic cap; its length longer than the image path's and within 2 m of it
+    (a nearly level ray)."""
+    depth = float(STRONG[-1, 0])
+    out = paths(STRONG, zs, zr, x, depth)
+    assert out[3][1] and np.sign(out[1][1]) == np.sign(out[2][1])  # leaving and arriving the same way: it turns
+    miss, hits, want = _ivp_spreading(STRONG, zs, zr, x, out[1][1], depth)
+    assert abs(miss) < 0.05 and hits == [0]
+    image = np.hypot(x, zs + zr)
+    assert 20 * np.log10(image) - want < rays.CAUSTIC_GAIN - 1.0
+    assert out[4][1] == pytest.approx(want, abs=0.01)
+    assert image < out[5][1] < image + 2.0
+
+
 # ------------------------------------------------------------------ Bellhop's incoherent transmission loss
 
 #: Bellhop's fan [deg] and its number of beams (geometric beams, run type 'I': incoherent TL).
