@@ -373,7 +373,7 @@ def test_against_bellhop(name):
     if name != "munk":
         assert near > 0
     if name == "strong":  # its surface duct: surface-reflected eigenrays that also turn, compared
-        assert ducted >= 10, ducted
+        assert ducted >= 5, ducted
 
 
 @pytest.mark.parametrize("name, family, offset, check", [("strong", 0, 2e-6, "separatrix"),
