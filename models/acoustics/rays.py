@@ -24,13 +24,19 @@ layers' arcs over ``[z_a, z_b]`` once and over a second interval twice:
   water depth) and comes back. If the speed between the ends exceeds both, rays flatter than the one
   grazing that maximum cannot pass: beyond that ray's range lies a **shadow zone** (no direct eigenray);
 * **surface-reflected** (2): ``[0, z_a]`` twice (the path unfolded at the surface), ``c_ref`` the fastest
-  speed over ``[0, z_b]``, ``q ≥ 0`` (no turning before the surface);
+  speed over ``[0, z_b]``, ``q ≥ 0`` (no turning before the surface). In a **surface duct** (the speed below
+  ``z_b`` climbing above ``c_ref``) also the ray reflected at the surface that **turns** below ``z_b``: it covers
+  ``[0, z_a]`` twice, ``[z_a, z_b]`` once and ``[z_b, z_t]`` twice (``z_t`` where ``c = 1/ξ``, inside the region
+  below ``z_b`` where the speed keeps increasing, bounded by the water depth; its bottom's speed ``c_peak``), the
+  same ``c_ref`` and ``q ∈ [0, √(1 − (c_ref / c_peak)²)]``: from the plain family's flattest ray to the ray
+  grazing the region's bottom. It leaves the shallower end upward and the deeper end downward. The family's
+  eigenray is the earliest valid of the two; where no duct exists only the plain one is solved;
 * **bottom-reflected** (3): ``[z_b, D]`` twice, ``D`` the water depth, ``c_ref`` the fastest over
   ``[z_a, D]``.
 
-``X`` decreases from its largest value at the family's flattest ray ``q_lo`` to 0 at ``q = 1`` (vertical). The
-eigenray solves ``X(q) = X_target`` by a bracketed Newton iteration (a Newton step that leaves the bracket is
-replaced by bisection) with a fixed number of iterations (:data:`NEWTON_ITERATIONS`), so the solve is one
+``X`` decreases from its largest value at the family's flattest ray ``q_lo`` to 0 at ``q = 1`` (vertical) (the
+surface duct's turning ray: over its own bracket, in whichever direction ``X`` runs). The eigenray solves
+``X(q) = X_target`` by a bracketed Newton iteration (a Newton step that leaves the bracket is replaced by bisection) with a fixed number of iterations (:data:`NEWTON_ITERATIONS`), so the solve is one
 casadi expression for the local engine and the generated C alike. A target beyond ``X(q_lo)`` has no eigenray
 of that family (``valid`` false). The travel time is taken at the stationary point,
 ``τ = T(q) + ξ (X_target − X(q))`` (``dT/dX = ξ`` along the family, Fermat), so that a residual error in
@@ -41,10 +47,10 @@ angle at the source, the arrival angle at the receiver, in the direction of trav
 
 What is not modelled: rays that turn more than once, or that pass over a local maximum of the speed beyond
 the faster end and turn further away (they come back only after long excursions; not within the few km of
-a positioning system in the profiles sblsim ships), reflected rays that also turn (in a surface duct: a ray
-reflected at the surface that turns back up to the receiver, or turns before it reaches the surface: Bellhop
-and the integrated ray equations find them where the duct traps the flatter rays), range-dependent profiles
-and bathymetry. Where ``X(q)`` is not monotonic (several eigenrays of one family) the solve returns one of
+a positioning system in the profiles sblsim ships), reflected rays that turn otherwise than the surface duct's
+above (a surface-reflected ray leaving the shallower end downward, crossing ``[z_a, z_b]`` three times, or
+turning before it reaches the surface; a bottom-reflected ray that turns), range-dependent profiles and
+bathymetry. Where ``X(q)`` is not monotonic (several eigenrays of one family) the solve returns one of
 them.
 
 This module imports nothing from the FMI or orchestrator layers.
