@@ -36,11 +36,12 @@ layers' arcs over ``[z_a, z_b]`` once and over a second interval twice:
 
 ``X`` decreases from its largest value at the family's flattest ray ``q_lo`` to 0 at ``q = 1`` (vertical) (the
 surface duct's turning ray: over its own bracket, in whichever direction ``X`` runs). The eigenray solves
-``X(q) = X_target`` by a bracketed Newton iteration (a Newton step that leaves the bracket is replaced by bisection) with a fixed number of iterations (:data:`NEWTON_ITERATIONS`), so the solve is one
-casadi expression for the local engine and the generated C alike. A target beyond ``X(q_lo)`` has no eigenray
-of that family (``valid`` false). The travel time is taken at the stationary point,
-``τ = T(q) + ξ (X_target − X(q))`` (``dT/dX = ξ`` along the family, Fermat), so that a residual error in
-``q`` enters the time only to second order; isovelocity water gives the straight line to round-off.
+``X(q) = X_target`` by a bracketed Newton iteration (a Newton step that leaves the bracket is replaced by
+bisection) with a fixed number of iterations (:data:`NEWTON_ITERATIONS`), so the solve is one casadi
+expression for the local engine and the generated C alike. A target beyond ``X(q_lo)`` has no eigenray of that
+family (``valid`` false). The travel time is taken at the stationary point, ``τ = T(q) + ξ (X_target − X(q))``
+(``dT/dX = ξ`` along the family, Fermat), so that a residual error in ``q`` enters the time only to second
+order; isovelocity water gives the straight line to round-off.
 
 Angles are grazing angles [rad], positive when the ray travels downward (toward greater depth): the launch
 angle at the source, the arrival angle at the receiver, in the direction of travel (Bellhop's sign).

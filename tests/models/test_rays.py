@@ -337,8 +337,8 @@ def _compare_with_bellhop(name, solve):
             continue
         narrow_worst[k] = max(narrow_worst[k], abs(t - theirs.travel_time_s.values[np.argmin(gap)]))
     print(f"{name}: compared {compared} (direct, surface, bottom), worst {worst} s; near a separatrix "
-          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s, and Bellhop's narrow fan, worst {narrow_worst} s; "
-          f"surface-reflected and turning {ducted}, worst {ducted_worst} s")
+          f"{len(separatrix)} against solve_ivp, worst {ivp_worst} s, and Bellhop's narrow fan, worst {narrow_worst} "
+          f"s; surface-reflected and turning {ducted}, worst {ducted_worst} s")
     assert not mismatched, ("shadowed sets", mismatched)
     assert not other_ray, ("other eigenray", other_ray)
     assert compared[0] >= 60 and compared[1] + compared[2] >= 60, ("compared", compared)
