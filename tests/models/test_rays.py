@@ -358,8 +358,10 @@ def test_against_bellhop(name):
     ours (within 0.5°). Left out: eigenrays steeper than :data:`STEEPEST`, and, for the sets, geometries within
     1 % in range of a family's shadow boundary, and reflected families where Bellhop has an arrival within 0.1°
     of the ray grazing the boundary: there a fan of beams decides by its sampling whether a ray is reflected.
-    Bellhop's reflected arrivals whose ray also turns (in a surface duct: down, up to the surface and back down)
-    are no path of the families (:func:`_turns`; not modelled, docs/model.md).
+    Bellhop's surface-reflected arrivals that also turn below the deeper end (the strong table's surface duct) are
+    compared with the surface family (at least 5 of them there); its reflected arrivals that turn otherwise (in the
+    duct: down, up to the surface and back down) are no path of the families (:func:`_turns`; not modelled,
+    docs/model.md).
 
     Near a separatrix (ours or Bellhop's arrival leaving within :data:`SEPARATRIX` of a ray horizontal at a local
     maximum of the speed: the top of a duct, the cast's first sample, which the receiver 2 m deep lies 1.6 cm
