@@ -29,7 +29,7 @@ with H from ``model.jacobian`` (casadi's derivative of h);
 :func:`measurement_information` adds the same rows to the bound in
 covariance form, one scalar row at a time (:func:`information_update`), with
 H at the true state (:func:`state_at`). A model with another context (a
-USBL transceiver's position, :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`)
+USBL transceiver's position, :class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`)
 goes through the same functions (:func:`model_horizontal_std`).
 
 The bound's measurement model is the fresh-range-plus-depth model of ``ekf-seq``
@@ -438,9 +438,10 @@ def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.nd
     """Horizontal DRMS [m] of a fix from one measurement of any model with a fixed context (an accuracy map).
 
     :func:`horizontal_drms` of :func:`position_information` at each point, the
-    model's Jacobian from casadi. For the range + bearing model
-    (:class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`) the
-    context is the transceiver's position and ``variances`` ``[σ_r², σ_α², σ_ε²]``.
+    model's Jacobian from casadi. For the range + direction model
+    (:class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`) the
+    context is the transceiver's position and attitude and ``variances`` ``[σ_r², σ_u², σ_u²]`` (the array's
+    noise alone: the USBL map, :func:`sblsim.models.systems.usbl.fix_information`, takes its full R).
 
     Parameters
     ----------

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from sblsim.models.acoustics.core import ARRIVAL, DIRECTION, PACKET, TARGET_INPUTS
+from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
 from sblsim.models.systems import interface_system
@@ -41,17 +41,20 @@ class Connection:
 def default_connections(n_beacons: int = 4) -> list[Connection]:
     """The system: platform and target feed the channel; channel and target feed the receiver (the interface of a
     system that measures a direction, USBL's, adds the array's and the IMU's attitude to the channel and the
-    direction of arrival to the receiver)."""
+    direction of arrival with the attitude it was turned with to the receiver)."""
     conns = [Connection("platform", n, "acoustics", n)
              for kind in ("true", "broadcast") for n in beacon_names(n_beacons, kind)]
     conns += [Connection("target", out, "acoustics", inp)
               for out, inp in zip(("pos_x", "pos_y", "pos_z", "vel_x", "vel_y", "vel_z"), TARGET_INPUTS)]
     conns += [Connection("acoustics", n, "receiver", n) for n in PACKET_FIELDS]
     conns.append(Connection("target", "depth_measured", "receiver", "depth"))
-    if interface_system(n_beacons).measures_direction:
+    system = interface_system(n_beacons)
+    if system.measures_direction:
         conns += [Connection("platform", f"{prefix}_{a}", "acoustics", f"{prefix}_{a}")
                   for prefix, _, _ in USBL_ATTITUDES for a in ("roll", "pitch", "yaw")]
-        conns += [Connection("acoustics", v.name, "receiver", v.name) for v in DIRECTION]
+    # what the system adds to the packet (USBL's direction of arrival and the attitude it was turned with)
+    conns += [Connection("acoustics", v.name, "receiver", v.name)
+              for v in system.receiver_inputs() + system.receiver_late_inputs()]
     return conns
 
 

@@ -241,7 +241,9 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
         rates = first.rates
-        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS]
+        own_columns = first.system.timeseries_columns  # what the system's own bound reads besides (USBL's doa_*)
+        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS] + [
+            own_columns[k] for k in first.system.bound_steps if k in own_columns]
         batched = all(h.batched for h in handles.values())
         groups = [plans] if batched else [[p] for p in plans]
         bar, own_bar = progress_of(progress, n_steps * len(plans), f"{first.scenario} ({engine})")
@@ -383,14 +385,16 @@ def _system_bound(system, rec: dict, dt: float, parameters: Sequence[dict], n_be
     :func:`sblsim.models.systems.usbl.pcrb`), compiled (:func:`sblsim.fmus.native.system_pcrb`): its
     per-run inputs :attr:`~sblsim.models.systems.System.bound_fixed` from the bound's parameters, its per-step
     inputs :attr:`~sblsim.models.systems.System.bound_steps` from the record (``true_*``, the position the
-    packet carries, the slot and whether the packet was received)."""
+    packet carries, the slot and whether the packet was received, and the system's own time-series columns:
+    USBL's attitude of the packet's direction)."""
     column = {name: np.asarray(rec[TIMESERIES_COLUMNS[name]], dtype=float)
               for name in ("true_x", "true_y", "true_z", "packet_seq", "packet_valid", "beacon_id", "beacon_x",
                            "beacon_y", "beacon_z")}
     received = (column["packet_valid"] > 0.5) & (np.rint(column["beacon_id"]) >= 1)
     slot, fresh = slots(np.rint(column["packet_seq"]), received)
     sources = {**{f"true_{a}": column[f"true_{a}"] for a in "xyz"},
-               **{f"transceiver_{a}": column[f"beacon_{a}"] for a in "xyz"}, "slot": slot, "received": fresh}
+               **{f"transceiver_{a}": column[f"beacon_{a}"] for a in "xyz"}, "slot": slot, "received": fresh,
+               **{name: rec[source] for name, source in system.timeseries_columns.items() if source in rec}}
     steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
                                           axis=-1))
     per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])

@@ -57,15 +57,19 @@ the transceiver interrogates the diver's transponder (up leg to the diver at
 reception), which replies after its turnaround from where it is then; the
 slant range is the TWTT range above, and the array measures the reply's
 **direction of arrival** in its own frame (attitude ``array_*``: the
-platform's plus the mounting misalignment): azimuth and elevation with
-noise ``σ_θ / cos φ`` each, ``σ_θ = usbl_angle_sigma_deg`` on the array's
-axis (body down) and φ the ray's angle off that axis (cos φ floored at
-:data:`USBL_COS_FLOOR`: a phase-difference array resolves the direction
-cosines across it, so its angles degrade as the ray leaves the axis). The
-surface turns the measured direction into NED with the IMU's attitude
-(``imu_*``) and sends range, azimuth, elevation (NED,
-:class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`'s
-convention) and its transceiver position (GPS and IMU) down to the diver on
+platform's plus the mounting misalignment, tilted by the waves) as a planar
+phase-difference array does: the direction cosines ``a_x``, ``a_y`` of the
+line of sight across its two axes, each with noise ``σ_u``
+(``usbl_angle_sigma_deg`` in radians: the angle's std on the array's axis,
+body down; off the axis the angle error grows as ``σ_u / cos θ``, the
+direction cosines' does not), the wavefront taken as arriving from below the
+array's plane (a pair outside the unit circle put in it). The surface turns
+the measured direction into NED with the IMU's attitude (``imu_*``) and sends
+range, azimuth, elevation (NED: azimuth clockwise from North, elevation below
+the horizontal), the attitude it used (``doa_roll``, ``doa_pitch``, ``doa_yaw``:
+a receiver recovers the array's direction cosines from them,
+:class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`) and its
+transceiver position (GPS and IMU) down to the diver on
 the acoustic link: the packet is lost when the reply or the downlink is lost
 (two draws of ``p_loss``), and it reaches the diver a downlink travel time
 after the reply reached the surface (delivered at its arrival like every
@@ -120,8 +124,6 @@ from sblsim.models.systems import interface_system
 _CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK, _DETECTION = range(6)
 #: Ranging modes: one-way travel time (synchronized clocks) or two-way (interrogation and reply).
 RANGING = ("owtt", "twtt")
-#: Smallest cosine of a ray's angle off the USBL array's axis the angle noise is scaled with (84°).
-USBL_COS_FLOOR = 0.1
 #: The packet a slot delivers: outputs of the channel, inputs of every receiver (whose FMUs refuse a value outside
 #: the declared ranges, :data:`sblsim.models.declarations.SIGNAL_RANGES`).
 PACKET: tuple[Variable, ...] = (
@@ -152,6 +154,15 @@ DIRECTION: tuple[Variable, ...] = (
              "(0 when lost)", discrete=True,
              min=-10.0, max=10.0),
 )
+#: The Euler angles of an attitude, in the order of :func:`~sblsim.models.platform.geometry.rotation_ned`'s arguments.
+ATTITUDE_ANGLES = ("roll", "pitch", "yaw")
+#: The attitude with which the surface turned a USBL packet's direction of arrival into NED (the IMU's, as
+#: sampled): outputs of the channel and inputs of the receivers of a USBL interface, declared after every other
+#: variable (their value references stay), so that a receiver recovers the array's direction cosines.
+DOA_ATTITUDE: tuple[Variable, ...] = tuple(
+    Variable(f"doa_{a}", "output", "Real", 0.0, "rad",
+             f"USBL: the IMU {a} with which the surface turned the direction of arrival into NED (0 when lost)",
+             discrete=True, min=-10.0, max=10.0) for a in ATTITUDE_ANGLES)
 #: What a delivered packet adds at the end of the channel's declarations (after every earlier variable, so that
 #: their value references stay): its arrival epoch, an input of every receiver too.
 ARRIVAL: tuple[Variable, ...] = (
@@ -454,7 +465,7 @@ class Acoustics(Component):
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
-                + FAMILY_TABLE_VARIABLES)
+                + FAMILY_TABLE_VARIABLES + DOA_ATTITUDE)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -670,6 +681,7 @@ class Acoustics(Component):
                         arrives = ca.vertcat(north * ca.cos(grazing), east * ca.cos(grazing), ca.sin(grazing))
                     out.update(zip(("azimuth", "elevation"),
                         (ca.if_else(valid, a, 0.0) for a in doa(arrives, u, p, w[_ANGLE_NOISE], angle_scale))))
+                    out.update({f"doa_{a}": ca.if_else(valid, u[f"imu_{a}"], 0.0) for a in ATTITUDE_ANGLES})
                 return {"k": k, **send(x, p, out, arrival - t_k), **overrun}
             return handler
 
@@ -729,17 +741,20 @@ class Acoustics(Component):
             return {**out, "q_used": used, "delivered_end": t + h}
 
         def doa(direction, u, p, w_angle, scale=1.0):
-            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1), the noise
-            ``scale`` times the configured one."""
+            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1): the array
+            (attitude ``array_*``) measures the direction cosines of the line of sight in its own frame, each with
+            the noise ``scale`` σ_u (σ_u = ``usbl_angle_sigma_deg`` [rad], the angle's std on the array's axis),
+            takes the wavefront as arriving from below its plane, and the surface turns the direction into NED
+            with the IMU's attitude (``imu_*``)."""
             array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
             # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
             seen = ca.mtimes(array.T, direction / ca.fmax(ca.norm_2(direction), 1e-9))
-            sigma = scale * p["usbl_angle_sigma_deg"] * (ca.pi / 180.0) / ca.fmax(seen[2], USBL_COS_FLOOR)
-            azimuth = ca.atan2(seen[1], seen[0]) + sigma * w_angle[0]
-            elevation = ca.atan2(seen[2], ca.sqrt(seen[0] ** 2 + seen[1] ** 2)) + sigma * w_angle[1]
-            measured = ca.vertcat(ca.cos(elevation) * ca.cos(azimuth), ca.cos(elevation) * ca.sin(azimuth),
-                                  ca.sin(elevation))
-            ned = ca.mtimes(rotation_ned(*[u[f"imu_{a}"] for a in ("roll", "pitch", "yaw")]), measured)
+            sigma = scale * p["usbl_angle_sigma_deg"] * (ca.pi / 180.0)
+            ux, uy = seen[0] + sigma * w_angle[0], seen[1] + sigma * w_angle[1]
+            across = ca.sqrt(ux ** 2 + uy ** 2)
+            shrink = 1.0 / ca.fmax(across, 1.0)  # a measured pair beyond the unit circle: in the array's plane
+            measured = ca.vertcat(ux * shrink, uy * shrink, ca.sqrt(ca.fmax(1.0 - across ** 2, 0.0)))
+            ned = ca.mtimes(rotation_ned(*[u[f"imu_{a}"] for a in ATTITUDE_ANGLES]), measured)
             return ca.atan2(ned[1], ned[0]), ca.atan2(ned[2], ca.sqrt(ned[0] ** 2 + ned[1] ** 2))
 
         def output(x, p, d, t):
@@ -766,7 +781,7 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "Acoustics", "DETECTION", "FIXED_KEYS", "OVERRUN", "SNR_KEYS", "check_in_flight",
+__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "Acoustics", "DETECTION", "DOA_ATTITUDE", "FIXED_KEYS", "OVERRUN", "SNR_KEYS", "check_in_flight",
            "FAMILY_TABLE_VARIABLES", "site_levels", "site_numbers", "site_vector", "DIRECTION", "FLIGHT_CAPACITY",
            "OVERFLOW",
-           "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS", "USBL_COS_FLOOR"]
+           "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS"]

@@ -4,7 +4,7 @@ Every receiver is one module: its declarations and its casadi predict and
 update steps (:class:`sblsim.models.receiver.core.KalmanReceiver`), sharing the
 motion model (:mod:`sblsim.models.receiver.motion`), the measurement models
 (:mod:`sblsim.models.receiver.measurement`,
-:mod:`sblsim.models.receiver.range_bearing`), the Kalman arithmetic
+:mod:`sblsim.models.receiver.range_direction`), the Kalman arithmetic
 (:mod:`sblsim.models.receiver.kalman`), the sigma points
 (:mod:`sblsim.models.receiver.sigma_points`) and the NIS gate
 (:mod:`sblsim.models.receiver.gate`). The accuracy bound is
@@ -22,9 +22,9 @@ from sblsim.models.receiver.measurement import (
     range_function,
 )
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY, ConstantVelocity
-from sblsim.models.receiver.range_bearing import RangeBearingModel
+from sblsim.models.receiver.range_direction import RangeDirectionModel
 from sblsim.models.receiver.ukf import UnscentedReceiver
 
 __all__ = ["CONSTANT_VELOCITY", "ConstantVelocity", "KalmanReceiver", "LeastSquaresReceiver", "MeasurementModel",
-           "PaperEKF", "RangeBearingModel", "RangeDepthModel", "SequentialReceiver", "UnscentedReceiver",
+           "PaperEKF", "RangeDepthModel", "RangeDirectionModel", "SequentialReceiver", "UnscentedReceiver",
            "position_range_function", "range_function", "receiver_interface"]

@@ -123,6 +123,13 @@ def arrival_interface() -> tuple[Variable, ...]:
     return tuple(replace(v, causality="input") for v in ARRIVAL)
 
 
+def late_inputs(n_beacons: int) -> tuple[Variable, ...]:
+    """What the interface's system adds to a receiver's inputs after every other variable (the attitude of a USBL
+    packet's direction, :meth:`~sblsim.models.systems.System.receiver_late_inputs`), so that the value references
+    of every earlier variable stay what they were before it existed."""
+    return interface_system(n_beacons).receiver_late_inputs()
+
+
 def clock_parameters() -> tuple[Variable, ...]:
     """The receiver's own clock: declared after the receiver interface, so that the value references of every
     earlier variable stay what they were before the clock existed."""
@@ -330,7 +337,7 @@ class KalmanReceiver(RangesWithProfile, Component):
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
-                + arrival_interface() + profile_parameters())
+                + arrival_interface() + profile_parameters() + late_inputs(n_beacons))
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
@@ -368,10 +375,11 @@ class KalmanReceiver(RangesWithProfile, Component):
         raise NotImplementedError
 
     @classmethod
-    def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, variances) -> dict:
+    def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, covariance) -> dict:
         """The update at a slot with a packet of a measurement model's rows (a system whose packet is not one range,
         :meth:`sblsim.models.systems.System.receiver_update`): the depth, then the rows of a fresh packet, the
-        first through the NIS gate (default: the EKF's, angle residuals by ``model.residual``).
+        first through the NIS gate (default: the EKF's, the rows decorrelated by
+        :func:`~sblsim.models.receiver.kalman.whiten`, the first one alone in its own NIS).
 
         Parameters
         ----------
@@ -384,11 +392,11 @@ class KalmanReceiver(RangesWithProfile, Component):
         model : MeasurementModel
             The packet's measurement model (:mod:`sblsim.models.receiver.measurement`).
         context
-            What ``model.h`` needs besides the state (a transceiver's position).
+            What ``model.h`` needs besides the state (a transceiver's position and attitude).
         z : casadi.SX, (m, 1)
             The packet's measurement.
-        variances : callable
-            The diagonal of R (m, 1) at a position (3, 1) [units of z squared].
+        covariance : callable
+            R (m, m) at a state (n, 1) [units of z squared], symmetric positive definite.
 
         Returns
         -------
@@ -402,12 +410,13 @@ class KalmanReceiver(RangesWithProfile, Component):
                                                    depth_row, p["sigma_depth"] ** 2)
         A = cls.reference(x, u, reply_epoch(u))
         then = state if A is None else ca.mtimes(A, state)  # the state at the packet's reference epoch
-        R = variances(motion.position(then))
+        R = covariance(then)
         h, H = model.linearize(then, context)
         H = H if A is None else ca.mtimes(H, A)
         y = model.residual(z, h)
-        checked = gate(y[0], ca.mtimes([H[0, :], P, H[0, :].T]) + R[0], fresh, x, u, p)
-        updated, P_new, nis = kalman.update(state, P, y, H, R)
+        checked = gate(y[0], ca.mtimes([H[0, :], P, H[0, :].T]) + R[0, 0], fresh, x, u, p)
+        y_w, H_w = kalman.whiten(y, H, R)
+        updated, P_new, nis = kalman.update(state, P, y_w, H_w, ca.SX.ones(y.shape[0]))
         use = checked["use"]
         return {**take_packet(x, u, 1), "x": ca.if_else(use, updated, state), "P": ca.if_else(use, P_new, P),
                 "nis": nis_depth + ca.if_else(use, nis, 0.0), "gated": checked["gated"], "failed": checked["failed"]}
@@ -447,10 +456,11 @@ class KalmanReceiver(RangesWithProfile, Component):
 
         def packet_slot(x, u, p, t, h):
             """A slot of a system whose packet is not one range (USBL): the receiver's update and the system's fix
-            of a fresh packet (no iteration)."""
+            of a fresh packet and the depth (:meth:`~sblsim.models.systems.System.packet_fix`)."""
             fresh = fresh_packet(u, 1)
             out = system.receiver_update(cls, {**x, "P": ca.reshape(x["P"], size, size), "now": t + h}, u, p, fresh)
-            return {**x, **out, "P": ca.vec(out["P"]), "fix": ca.if_else(fresh, system.polar_fix(u), x["fix"]),
+            return {**x, **out, "P": ca.vec(out["P"]),
+                    "fix": ca.if_else(fresh, system.packet_fix(u, p, u["depth"])[0], x["fix"]),
                     "fix_valid": ca.logic_or(x["fix_valid"], fresh)}
 
         def iterate(x, u, p, d, w, t, h):
@@ -497,6 +507,7 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 __all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
            "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
-           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "lm_active",
+           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "late_inputs",
+           "lm_active",
            "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "RangesWithProfile",
            "receiver_interface", "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet"]

@@ -80,6 +80,41 @@ def solve_spd(S: ca.SX, B: ca.SX) -> ca.SX:
     return ca.horzcat(*cols)
 
 
+def solve_lower(L: ca.SX, B: ca.SX) -> ca.SX:
+    """``L⁻¹ B`` for a lower-triangular L (m, m) and B (m, k), by forward substitution."""
+    rows = []
+    for i in range(L.shape[0]):
+        total = B[i, :]
+        for k in range(i):
+            total = total - L[i, k] * rows[k]
+        rows.append(total / L[i, i])
+    return ca.vertcat(*rows)
+
+
+def whiten(y: ca.SX, H: ca.SX, R: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Rows of unit variance from a measurement of full covariance: ``(L⁻¹ y, L⁻¹ H)`` with ``R = L Lᵀ``
+    (:func:`cholesky`, L lower). Their sequential scalar updates of variance 1 (:func:`update`) are the joint
+    update with R (Bar-Shalom et al. 2001, Section 3.6: decorrelating the measurements first); the first row is
+    the first measurement over ``sqrt(R_00)``, so that its own NIS is unchanged.
+
+    Parameters
+    ----------
+    y : casadi.SX, (m, 1)
+        Innovation.
+    H : casadi.SX, (m, n)
+        Jacobian.
+    R : casadi.SX, (m, m)
+        Symmetric positive-definite covariance.
+
+    Returns
+    -------
+    y, H : casadi.SX
+        (m, 1) and (m, n).
+    """
+    L = cholesky(R)
+    return solve_lower(L, y), solve_lower(L, H)
+
+
 def symmetric(P: ca.SX) -> ca.SX:
     """P with its lower triangle taken from the upper one: exactly symmetric, the upper triangle's values."""
     n = P.shape[0]
@@ -208,4 +243,5 @@ def ekf_update(x: ca.SX, P: ca.SX, z: ca.SX, model, context, variances: ca.SX,
     return update(x, P, y, H, variances)
 
 
-__all__ = ["cholesky", "ekf_update", "linear_predict", "scalar_update", "solve_spd", "symmetric", "update"]
+__all__ = ["cholesky", "ekf_update", "linear_predict", "scalar_update", "solve_lower", "solve_spd", "symmetric",
+           "update", "whiten"]

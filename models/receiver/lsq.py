@@ -13,9 +13,11 @@ filtered: the estimate is the latest valid fix of a slot that brought a fresh
 range (the initial guess x0 until the first one), and the velocity is the
 finite difference of the last two such fixes over the time between their
 slots (a slot whose packet was lost refits the same held ranges: it changes
-neither). With a USBL interface the fix is the packet's polar fix, no iteration, with
-the covariance of its range and angles (:mod:`sblsim.models.systems.usbl`),
-and ``nis`` is 0 (three measurements, three unknowns). The receiver is its own
+neither). With a USBL interface the fix is the least-squares fix of the packet's
+range and direction and the depth, with its covariance and its weighted residual
+(``nis``, one degree of freedom: :func:`sblsim.models.systems.usbl.packet_fix`),
+R with the transceiver's uncertainty of the beacon parameters
+(:func:`~sblsim.models.receiver.core.beacon_parameters`, declared last). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
 
@@ -43,12 +45,14 @@ from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.core import (
     RangesWithProfile,
     arrival_interface,
+    beacon_parameters,
     clock_due,
     clock_parameters,
     clock_tick,
     covariance_outputs,
     filter_parameters,
     fresh_packet,
+    late_inputs,
     lm_active,
     lm_begin,
     lm_idle,
@@ -82,7 +86,8 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
-                + clock_parameters() + system_interface(n_beacons) + arrival_interface() + profile_parameters())
+                + clock_parameters() + system_interface(n_beacons) + arrival_interface() + profile_parameters()
+                + beacon_parameters() + late_inputs(n_beacons))
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -104,9 +109,11 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
         def slot(x, u, p, d, w, t, h):
             held = {**x, **take_packet(x, u, n)}
             fresh = fresh_packet(u, n)
-            if not system.takes_ranges:  # the system's fix of one packet (USBL's polar fix): no iteration
-                point = ca.if_else(fresh, system.polar_fix(u), x["lm_point"])
-                return {**held, **lm_idle(), "lm_point": point, "pending": 1, "fresh": fresh}
+            if not system.takes_ranges:  # the system's fix of one packet and the depth (USBL): no LM iteration
+                point, covariance, rss = system.packet_fix(u, p, u["depth"])
+                return {**held, **lm_idle(), "lm_point": ca.if_else(fresh, point, x["lm_point"]),
+                        "cov": ca.if_else(fresh, ca.vec(covariance), x["cov"]), "nis": ca.if_else(fresh, rss, x["nis"]),
+                        "pending": 1, "fresh": fresh}
             return {**held, **lm_begin(held, x["fix"], u["depth"], p), "pending": 1, "fresh": fresh}
 
         def iterate(x, u, p, d, w, t, h):
@@ -118,9 +125,9 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
         def finish(x, u, p, d, w, t, h):
             """Fit statistics and finite-difference velocity of the slot's fix."""
             point = x["lm_point"]
-            if not system.takes_ranges:
+            if not system.takes_ranges:  # the packet's fix (slot): its residual and covariance
                 valid = x["heard"][0] > 0.5
-                rss, covariance = 0.0, system.fix_covariance(point, x["beacons"], p)
+                rss, covariance = x["nis"], ca.reshape(x["cov"], 3, 3)
             else:
                 valid = ca.sum1(x["heard"]) >= 3
                 w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])

@@ -18,12 +18,12 @@ arguments, or Stone Soup's measurement models, it gives (:class:`MeasurementMode
 
 Two implementations: :class:`RangeDepthModel`, ranges to broadcast beacons
 plus depth (every built-in receiver, the accuracy bound and the accuracy
-maps), and :class:`~sblsim.models.receiver.range_bearing.RangeBearingModel`,
-slant range, azimuth and elevation from a transceiver (USBL). The variance a
+maps), and :class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`,
+slant range and the direction cosines of the line of sight in a USBL array's frame. The variance a
 range inherits from an uncertain beacon position is written once,
-:meth:`RangeDepthModel.range_variance`; what an uncertain transceiver adds to
-a range-bearing packet's R, ``H_b Σ_b H_bᵀ``, likewise
-(:meth:`~sblsim.models.receiver.range_bearing.RangeBearingModel.transceiver_covariance`).
+:meth:`RangeDepthModel.range_variance`; what an uncertain transceiver and attitude add to
+a USBL packet's R, ``H_b Σ_b H_bᵀ + H_θ Σ_θ H_θᵀ``, likewise
+(:meth:`~sblsim.models.receiver.range_direction.RangeDirectionModel.covariance`).
 
 References
 ----------

@@ -54,6 +54,14 @@ class ConstantVelocity:
         """The position part of a state ``x`` (6, 1): (3, 1) [m], NED."""
         return ca.vertcat(*[x[i] for i in self.position_index])
 
+    def gps_error(self, x) -> ca.SX:
+        """The GPS error of the broadcast positions the state carries, (3, 1) [m]: none here (zeros)."""
+        return ca.SX.zeros(3)
+
+    def attitude_bias(self, x) -> ca.SX:
+        """The constant attitude error (roll, pitch, yaw) the state carries, (3, 1) [rad]: none here (zeros)."""
+        return ca.SX.zeros(3)
+
     def transition(self, dt) -> ca.SX:
         """Transition matrix Φ, (6, 6), for a step ``dt`` [s]."""
         phi = ca.SX.eye(self.state_size)

@@ -88,16 +88,19 @@ class UnscentedReceiver(KalmanReceiver):
                            ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
 
     @classmethod
-    def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, variances) -> dict:
-        """The unscented update with the packet's rows (range, azimuth, elevation) and the depth; each sigma
-        point's predicted rows are taken within ``model.residual`` of the measured ones (angles within π, so
-        that their mean does not straddle ±π); R from ``variances`` at the predicted position."""
+    def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, covariance) -> dict:
+        """The unscented update with the packet's rows (range and direction) and the depth; each sigma point's
+        predicted rows are taken within ``model.residual`` of the measured ones (rows that are angles within π,
+        so that their mean does not straddle ±π); R from ``covariance`` at the predicted state, full."""
         A = cls.reference(x, u, reply_epoch(u))  # the packet's rows at the reply, the depth now
 
         def predicted(c):
             return ca.vertcat(z - model.residual(z, model.h(ca.mtimes(A, c), context)), cls.measurement.depth(c))
 
-        R = ca.diag(ca.vertcat(variances(cls.motion.position(ca.mtimes(A, x["x"]))), p["sigma_depth"] ** 2))
+        m = z.shape[0]
+        R = ca.SX.zeros(m + 1, m + 1)
+        R[:m, :m] = covariance(ca.mtimes(A, x["x"]))
+        R[m, m] = p["sigma_depth"] ** 2
         return cls._update(x, u, p, 1, fresh, predicted, z, R)
 
     @classmethod

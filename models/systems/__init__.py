@@ -64,7 +64,7 @@ class System:
         receivers' inputs, the platform's array attitude).
     takes_ranges : bool
         A packet is one range, which each receiver takes with its own update (its ``correct``); else the
-        receivers take the packet through :meth:`receiver_update` and the fix is :meth:`polar_fix`.
+        receivers take the packet through :meth:`receiver_update` and the fix is :meth:`packet_fix`.
     timeseries_columns : dict
         Time-series columns the system adds: name -> recorded ``component.variable``.
     log_columns : dict
@@ -157,12 +157,13 @@ class System:
         """A receiver's update with this system's packet (systems whose packet is not one range)."""
         raise NotImplementedError
 
-    def polar_fix(self, u: dict):
-        """The diver's position from one packet (systems whose packet is not one range)."""
-        raise NotImplementedError
+    def receiver_late_inputs(self) -> tuple:
+        """Inputs a receiver of this system's interface declares after every other variable (default none)."""
+        return ()
 
-    def fix_covariance(self, position, beacon, p: dict):
-        """The covariance of :meth:`polar_fix` (3, 3) [m²]."""
+    def packet_fix(self, u: dict, p: dict, depth):
+        """The diver's position (3, 1) [m] from one packet and the depth reading ``depth`` [m], its covariance
+        (3, 3) [m²] and the fit's weighted sum of squared residuals [1] (systems whose packet is not one range)."""
         raise NotImplementedError
 
     # ---- configuration ----

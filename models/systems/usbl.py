@@ -7,57 +7,63 @@ instead), plus its installation error; ``platform.baseline`` does not apply
 platform.baseline``). Its array is mounted with a misalignment
 ``μ ~ N(0, σ_μ² I)`` per axis, drawn once per run: the array's attitude is the
 platform's plus μ (the platform's ``array_*`` outputs), while the surface
-converts the array's angles with the IMU's measured attitude (``imu_*``). The
+converts the array's direction with the IMU's measured attitude (``imu_*``). The
 transceiver interrogates: ranging is always two-way (``acoustics.ranging`` is
 forced to ``twtt``). The components' interface is that of one beacon.
 
 **What a packet measures** (what every receiver does with it): the slant range
-[m], the direction of arrival (azimuth and elevation, NED, [rad]) and the
-transceiver's position (GPS and IMU) [m], the
-:class:`~sblsim.models.receiver.range_bearing.RangeBearingModel` with the depth
-reading:
+[m] and the direction of arrival as the array measures it, its direction
+cosines ``a_x``, ``a_y`` in the array's frame
+(:class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`, the
+context ``(b, θ)``: the transceiver's position ``b`` [m] and the attitude ``θ``
+[rad] with which the surface turned the direction into NED, both in the
+packet). The packet carries the direction as NED azimuth and elevation and the
+attitude as ``doa_roll``, ``doa_pitch``, ``doa_yaw``; :func:`measurement`
+turns them back into ``a = R(θ)ᵀ n(α, ε)``, exactly what the array measured.
+No coordinate of z is undefined anywhere, straight below the transceiver
+included.
 
 * the Kalman receivers update with the depth and then with the three rows of
   the fresh packet (:meth:`KalmanReceiver.packet_update
-  <sblsim.models.receiver.core.KalmanReceiver.packet_update>`: the EKF's,
-  angle residuals wrapped; the UKF has its own), the range row through the
-  NIS gate (multipath lengthens the range);
-* the instrumentation fix, and the ``lsq`` receiver's estimate, is the polar
-  fix ``b + r (cos ε cos α, cos ε sin α, sin ε)`` (:func:`polar_fix`), with
-  the covariance ``(Hᵀ R⁻¹ H)⁻¹`` of the position (:func:`fix_covariance`).
+  <sblsim.models.receiver.core.KalmanReceiver.packet_update>`: the EKF's rows
+  decorrelated by :func:`~sblsim.models.receiver.kalman.whiten`; the UKF has its
+  own), the range row through the NIS gate (multipath lengthens the range);
+* the instrumentation fix, and the ``lsq`` receiver's estimate, is the
+  least-squares fix of the packet and the depth reading (:func:`packet_fix`:
+  Gauss-Newton from the packet's polar fix), with its covariance
+  ``(Hᵀ R⁻¹ H + e_z e_zᵀ / σ_d²)⁻¹``.
 
-R (:func:`variances`): the channel's noise, ``σ_r²`` on the range and
-``σ_a² = (σ_θ / max(cos φ, floor))² + σ_att²`` on each angle (σ_θ =
-``sigma_angle_deg`` on the array's axis, φ the predicted ray's angle off the
-vertical, σ_att the attitude error; :mod:`sblsim.models.acoustics.core`), plus
-the transceiver position's error ``H_b Σ_b H_bᵀ`` with ``Σ_b = σ_b² I``,
-``σ_b² = σ_GPS² + (σ_att a)²`` (GPS, and the lever arm a turned by the
-attitude error, as for an SBL range): ``σ_b²`` on the range, ``σ_b² / ρ²`` on
-the azimuth, ``σ_b² / r²`` on the elevation
-(:meth:`~sblsim.models.receiver.range_bearing.RangeBearingModel.transceiver_variances`).
-Straight below the transceiver the azimuth is undefined: the derivatives and
-ρ are taken at least :data:`RHO_FLOOR` off the vertical.
+R (:func:`covariance`, :meth:`RangeDirectionModel.covariance
+<sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>`): the channel's noise
+chain propagated by the model's Jacobians, ``diag(σ_r², σ_u², σ_u²)`` (the
+range noise; the array's noise on each direction cosine, ``σ_u`` =
+``sigma_angle_deg`` in radians, the angle's std on the array's axis) plus the
+broadcast transceiver position's error ``σ_b² H_b H_bᵀ``, ``σ_b² = σ_GPS² +
+(σ_att a)²`` (GPS, and the lever arm a turned by the attitude error), plus the
+error of the attitude the surface used, ``σ_θ² H_θ H_θᵀ``, ``σ_θ² = σ_att²``
+(the IMU's white error per Euler angle). The channel adds the array's noise in
+its own frame, tilted by the waves: the direction cosines are exactly that
+frame's, whatever the tilt.
 
 **Bound.** :func:`bound_step`: the receivers' prediction, then at a slot the
-depth row and, for a received packet, the range, azimuth and elevation rows
-of :data:`BOUND_MODEL` with the transceiver position the packet carries, H at
-the true position, the variances of the receivers' R at the true position
-(:func:`bound_variances`, the transceiver's error included). :func:`pcrb`
-evaluates it with casadi's virtual machine; :func:`compiled_bound` is the same
-step with the packed inputs of :data:`FIXED` and :data:`STEPS`, which the local
-engine's library of the USBL interface compiles (``sblsim.fmus.native``). A
-mounting misalignment (a bias) is not in it. **Map**: one packet plus the depth
-(:func:`fix_information`), from the covariance of the packet's polar fix
-(:func:`packet_covariance`, the same R in Cartesian form: finite everywhere).
+depth row and, for a received packet, the three rows of :data:`BOUND_MODEL`
+with the packet's transceiver and attitude, H at the true position and R of
+the receivers at the true position, decorrelated. :func:`pcrb` evaluates it with
+casadi's virtual machine; :func:`compiled_bound` is the same step with the
+packed inputs of :data:`FIXED` and :data:`STEPS`, which the local engine's
+library of the USBL interface compiles (``sblsim.fmus.native``). **Map**: one
+packet plus the depth (:func:`fix_information`), the Fisher information of the
+same rows for a level array at the platform's heading.
 
 References
 ----------
-Bar-Shalom, Li, Kirubarajan, Estimation with Applications to Tracking and
-Navigation, Wiley 2001, Section 10.3 (EKF with polar measurements).
-Tichavský, Muravchik, Nehorai, "Posterior Cramér-Rao bounds for
-discrete-time nonlinear filtering", IEEE Trans. Signal Processing 46(5),
-1998, Eq. (21). Kay, Fundamentals of Statistical Signal Processing:
-Estimation Theory, Prentice Hall 1993, Section 3.7.
+Vickery, "Acoustic positioning systems. A practical overview of current
+systems", Proc. 1998 Workshop on Autonomous Underwater Vehicles, IEEE,
+doi:10.1109/AUV.1998.744441. Tichavský, Muravchik, Nehorai, "Posterior
+Cramér-Rao bounds for discrete-time nonlinear filtering", IEEE Trans. Signal
+Processing 46(5), 1998, Eq. (21). Kay, Fundamentals of Statistical Signal
+Processing: Estimation Theory, Prentice Hall 1993, Sections 3.7 and 8.9
+(Gauss-Newton).
 """
 
 from __future__ import annotations
@@ -70,37 +76,27 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics.core import DIRECTION, USBL_COS_FLOOR
-from sblsim.models.bound import (
-    MOTION,
-    information_update,
-    measurement_information,
-    per_point,
-    predicted,
-    stepped,
-)
+from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ATTITUDE
+from sblsim.models.bound import MOTION, information_update, per_point, predicted, stepped
 from sblsim.models.declarations import ModelError, Variable
-from sblsim.models.platform.geometry import parse_offsets
+from sblsim.models.platform.geometry import parse_offsets, rotation_ned
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.range_bearing import RangeBearingModel
+from sblsim.models.receiver.range_direction import RangeDirectionModel
 from sblsim.models.systems import System, register
 
 #: The smallest direction-of-arrival std in R [deg] (the ``sigma_angle_deg`` parameter's minimum; the ties and
 #: the bound floor the platform's value at it).
 MIN_ANGLE_SIGMA_DEG = 1e-3
-#: ρ_min [m]: the receivers' and the bound's derivatives of the packet and the azimuth's transceiver term of R
-#: (``σ_b² / ρ²``) take the diver at least this far from the vertical through the transceiver
-#: (:func:`~sblsim.models.receiver.range_bearing.off_axis_point`), where the azimuth is undefined: below any GPS
-#: error, so that near the vertical R's ``σ_b² / ρ_min²`` leaves the azimuth without weight, and finite.
-RHO_FLOOR = 1e-3
 #: The USBL measurement model of the receivers.
-MODEL_RB = RangeBearingModel(floor=RHO_FLOOR)
-#: The measurement model of the bound: range, azimuth and elevation from the transceiver.
-BOUND_MODEL = RangeBearingModel(MOTION, floor=RHO_FLOOR)
+MODEL = RangeDirectionModel()
+#: The measurement model of the bound (its motion model's).
+BOUND_MODEL = RangeDirectionModel(MOTION)
+#: Gauss-Newton iterations of the packet's least-squares fix from its polar fix (:func:`packet_fix`).
+FIX_ITERATIONS = 3
 
 
 class _PositionState:
-    """The layout of a bare position (for the fix's Jacobian)."""
+    """The layout of a bare position (the fix's Jacobians): no velocity, no error states."""
 
     state_size = 3
     position_index = (0, 1, 2)
@@ -109,15 +105,24 @@ class _PositionState:
     def position(x):
         return x
 
+    @staticmethod
+    def gps_error(x):
+        return ca.SX.zeros(3)
 
-_POSITION_MODEL = RangeBearingModel(_PositionState(), floor=RHO_FLOOR)
+    @staticmethod
+    def attitude_bias(x):
+        return ca.SX.zeros(3)
+
+
+#: The packet's model of a bare position (the fix and the map).
+POSITION_MODEL = RangeDirectionModel(_PositionState())
 
 
 def receiver_parameters() -> tuple[Variable, ...]:
     """The receivers' USBL parameter (declared after the clock, so that earlier value references stay)."""
     return (Variable("sigma_angle_deg", "parameter", "Real", 0.5, "deg",
-                     "USBL: direction-of-arrival std on the array's axis in R (default: platform.usbl_angle_sigma_deg)",
-                     min=MIN_ANGLE_SIGMA_DEG, max=45.0),)
+                     "USBL: the array's direction-of-arrival std on its axis in R, the std of each direction cosine "
+                     "(default: platform.usbl_angle_sigma_deg)", min=MIN_ANGLE_SIGMA_DEG, max=45.0),)
 
 
 def transceiver(u: dict) -> ca.SX:
@@ -125,41 +130,32 @@ def transceiver(u: dict) -> ca.SX:
     return ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
 
 
+def attitude(u: dict) -> ca.SX:
+    """The attitude ``[roll, pitch, yaw]`` (3, 1) [rad] with which the surface turned the packet's direction."""
+    return ca.vertcat(*[u[f"doa_{a}"] for a in ATTITUDE_ANGLES])
+
+
+def context(u: dict) -> tuple[ca.SX, ca.SX]:
+    """The packet's context of :data:`MODEL`: ``(transceiver, attitude)``."""
+    return transceiver(u), attitude(u)
+
+
+def direction(u: dict) -> ca.SX:
+    """The packet's direction in NED, the unit vector ``(cos ε cos α, cos ε sin α, sin ε)`` (3, 1)."""
+    a, e = u["azimuth"], u["elevation"]
+    return ca.vertcat(ca.cos(e) * ca.cos(a), ca.cos(e) * ca.sin(a), ca.sin(e))
+
+
 def measurement(u: dict) -> ca.SX:
-    """``z = [r, α, ε]`` of the packet, (3, 1) [m, rad, rad]."""
-    return ca.vertcat(u["range"], u["azimuth"], u["elevation"])
+    """``z = [r, a_x, a_y]`` of the packet, (3, 1) [m, 1, 1]: the direction in the array's frame,
+    ``a = R(θ)ᵀ n(α, ε)``, what the array measured."""
+    a = ca.mtimes(rotation_ned(*[u[f"doa_{x}"] for x in ATTITUDE_ANGLES]).T, direction(u))
+    return ca.vertcat(u["range"], a[0], a[1])
 
 
 def polar_fix(u: dict) -> ca.SX:
-    """The diver's position from one packet: ``b + r (cos ε cos α, cos ε sin α, sin ε)``, (3, 1) [m]."""
-    r, a, e = u["range"], u["azimuth"], u["elevation"]
-    return transceiver(u) + r * ca.vertcat(ca.cos(e) * ca.cos(a), ca.cos(e) * ca.sin(a), ca.sin(e))
-
-
-def sensor_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance) -> ca.SX:
-    """What the packet's own measurement adds to R, ``[σ_r², σ_a², σ_a²]`` (3, 1) [m², rad², rad²], at
-    ``position`` (3, 1) [m] seen from ``beacon`` (3, 1) [m]: the range noise ``range_variance = σ_r²``, and for
-    each angle ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` (``angle_sigma_deg = σ_θ`` [deg] on the array's
-    axis, φ the line of sight's angle off the vertical, ``attitude_variance = σ_att²`` [rad²] of the IMU that turns
-    the array's angles into NED; the channel's model, :mod:`sblsim.models.acoustics.core`)."""
-    d = position - beacon
-    off_axis = ca.fmax(d[2] / ca.fmax(ca.norm_2(d), 1e-9), USBL_COS_FLOOR)  # cos of the angle off the vertical
-    angle = (angle_sigma_deg * (math.pi / 180.0) / off_axis) ** 2 + attitude_variance
-    return ca.vertcat(range_variance, angle, angle)
-
-
-def packet_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance,
-                     position_variance) -> ca.SX:
-    """Diagonal of R of a USBL packet (3, 1) [m², rad², rad²] at ``position`` (3, 1) [m]: :func:`sensor_variances`
-    plus what an isotropic error of ``position_variance = σ_b²`` [m²] per axis in the broadcast transceiver position
-    adds, ``H_b σ_b² I H_bᵀ = σ_b² [1, 1 / ρ², 1 / r²]``
-    (:meth:`~sblsim.models.receiver.range_bearing.RangeBearingModel.transceiver_variances`, ρ floored at
-    :data:`RHO_FLOOR`):
-
-    ``[σ_r² + σ_b², σ_a² + σ_b² / ρ², σ_a² + σ_b² / r²]``.
-    """
-    return (sensor_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance)
-            + _POSITION_MODEL.transceiver_variances(position, beacon, position_variance))
+    """The diver's position from the packet alone: ``b + r n(α, ε)``, (3, 1) [m]."""
+    return transceiver(u) + u["range"] * direction(u)
 
 
 def transceiver_variance(p: dict):
@@ -168,82 +164,91 @@ def transceiver_variance(p: dict):
     range (:meth:`~sblsim.models.receiver.measurement.RangeDepthModel.fresh_range_variance`); from
     ``beacon_gps_sigma`` [m], ``beacon_attitude_sigma_deg`` [deg] and ``beacon_arm`` [m], each 0 where the receiver
     does not declare it (``p`` is read with ``get``)."""
-    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
-    return p.get("beacon_gps_sigma", 0.0) ** 2 + (attitude * p.get("beacon_arm", 0.0)) ** 2
+    att = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+    return p.get("beacon_gps_sigma", 0.0) ** 2 + (att * p.get("beacon_arm", 0.0)) ** 2
 
 
-def variances(position, beacon, p: dict) -> ca.SX:
-    """Diagonal of the receivers' R (3, 1) at the predicted position (3, 1) [m]: :func:`packet_variances` with
-    ``σ_r = sigma_range``, ``σ_θ = sigma_angle_deg``, ``σ_att = beacon_attitude_sigma_deg`` and
-    ``σ_b² =`` :func:`transceiver_variance` (a receiver that declares no beacon uncertainty: σ_att = σ_b = 0)."""
-    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
-    return packet_variances(position, beacon, p["sigma_range"] ** 2, p["sigma_angle_deg"], attitude ** 2,
-                            transceiver_variance(p))
+def covariance(x, ctx, p: dict, model: RangeDirectionModel = MODEL) -> ca.SX:
+    """The receivers' R (3, 3) at the state ``x`` (n, 1) of ``model``: :meth:`RangeDirectionModel.covariance
+    <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>` with ``σ_r = sigma_range``,
+    ``σ_u = sigma_angle_deg`` [rad], ``σ_b² =`` :func:`transceiver_variance` and ``σ_θ = beacon_attitude_sigma_deg``
+    (a receiver that declares no beacon uncertainty: σ_b = σ_θ = 0)."""
+    att = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+    return model.covariance(x, ctx, p["sigma_range"] ** 2, (p["sigma_angle_deg"] * (math.pi / 180.0)) ** 2,
+                            transceiver_variance(p), att ** 2)
 
 
-@lru_cache(maxsize=None)
-def polar_jacobian() -> ca.Function:
-    """casadi Function ``z[3] -> ∂f/∂z`` (3, 3) of the polar fix ``f = b + r (cos ε cos α, cos ε sin α, sin ε)``,
-    ``z = [r, α, ε]`` (casadi's derivative; it does not depend on b): the columns ``u``,
-    ``r cos ε (−sin α, cos α, 0)`` and ``r (−sin ε cos α, −sin ε sin α, cos ε)``, finite everywhere."""
-    z = ca.SX.sym("z", 3)
-    fix = polar_fix({"range": z[0], "azimuth": z[1], "elevation": z[2], "beacon_x": 0.0, "beacon_y": 0.0,
-                     "beacon_z": 0.0})
-    return ca.Function("sblsim_usbl_polar_jacobian", [z], [ca.jacobian(fix, z)], ["z"], ["J"])
+def _depth_row(n: int, index: int) -> ca.SX:
+    row = ca.SX.zeros(1, n)
+    row[index] = 1.0
+    return row
 
 
-def packet_covariance(position, beacon, range_variance, angle_sigma_deg, attitude_variance,
-                      position_variance) -> ca.SX:
-    """Covariance of the polar fix of one packet (3, 3) [m²] for a diver at ``position`` (3, 1) [m]:
+def position_information(position, ctx, R, depth_variance) -> ca.SX:
+    """Fisher information (3, 3) [1/m²] of one packet of covariance ``R`` (3, 3) and a depth reading of variance
+    ``depth_variance`` [m²] about a diver at ``position`` (3, 1) [m]: ``Hᵀ R⁻¹ H + e_z e_zᵀ / σ_d²``, H of
+    :data:`POSITION_MODEL` (Kay 1993, Section 3.7)."""
+    H = POSITION_MODEL.jacobian(position, ctx)
+    _, Hw = kalman.whiten(ca.SX.zeros(3), H, R)
+    e_z = _depth_row(3, 2)
+    return ca.mtimes(Hw.T, Hw) + ca.mtimes(e_z.T, e_z) / depth_variance
 
-    ``C = J diag(σ_r², σ_a², σ_a²) Jᵀ + σ_b² I``,
 
-    J = :func:`polar_jacobian` at ``z = h(position)``, the :func:`sensor_variances` and the isotropic transceiver
-    position error ``position_variance = σ_b²`` [m²]. Where ``H = ∂h/∂p`` is invertible ``J = H⁻¹`` and
-    ``H_b = −H``, so C is ``(Hᵀ R⁻¹ H)⁻¹`` with the receivers' R (:func:`packet_variances`); unlike that inverse
-    it is finite straight below the transceiver (the azimuth's column is ``∝ ρ``), where it tells that the
-    azimuth carries nothing.
+def packet_fix(u: dict, p: dict, depth) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The least-squares fix of one packet and the depth reading ``depth`` [m], its covariance and its residual.
+
+    Gauss-Newton (:data:`FIX_ITERATIONS` steps) on ``[r, a_x, a_y, d]`` weighted by the receivers' R
+    (:func:`covariance` at the polar fix) and ``σ_d² = sigma_depth²``, from the polar fix ``b + r n(α, ε)``;
+    the covariance is ``(Hᵀ R⁻¹ H + e_z e_zᵀ / σ_d²)⁻¹`` at the fix (Kay 1993, Section 8.9).
+
+    Returns
+    -------
+    point : casadi.SX, (3, 1)
+        The fix [m].
+    covariance : casadi.SX, (3, 3)
+        Its covariance [m²].
+    rss : casadi.SX
+        The weighted sum of squared residuals at the fix [1] (chi-square with 1 degree of freedom: four
+        measurements, three unknowns).
     """
-    z = _POSITION_MODEL.h(position, beacon)
-    J = polar_jacobian()(z)
-    R = sensor_variances(position, beacon, range_variance, angle_sigma_deg, attitude_variance)
-    return ca.mtimes([J, ca.diag(R), J.T]) + position_variance * ca.SX.eye(3)
+    ctx, z = context(u), measurement(u)
+    point = polar_fix(u)
+    R = covariance(point, ctx, p, POSITION_MODEL)
+    depth_variance = p["sigma_depth"] ** 2
+    e_z = _depth_row(3, 2)
 
+    def normal(point):
+        h, H = POSITION_MODEL.linearize(point, ctx)
+        yw, Hw = kalman.whiten(z - h, H, R)
+        J = ca.mtimes(Hw.T, Hw) + ca.mtimes(e_z.T, e_z) / depth_variance
+        g = ca.mtimes(Hw.T, yw) + e_z.T * (depth - point[2]) / depth_variance
+        return J, g, ca.dot(yw, yw) + (depth - point[2]) ** 2 / depth_variance
 
-def fix_covariance(position, beacon, p: dict) -> ca.SX:
-    """Covariance of the polar fix (3, 3) [m²] at ``position``: :func:`packet_covariance` with the receivers'
-    parameters (as :func:`variances`)."""
-    attitude = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
-    return packet_covariance(position, beacon, p["sigma_range"] ** 2, p["sigma_angle_deg"], attitude ** 2,
-                             transceiver_variance(p))
-
-
-def bound_variances(position, transceiver, range_variance, position_variance, angle_sigma_deg,
-                    attitude_variance) -> ca.SX:
-    """Variances of a USBL packet's range, azimuth and elevation at ``position`` (3, 1) [m], (3, 1): the receivers'
-    R (:func:`packet_variances`) with ``range_variance = σ_r²`` [m²], ``position_variance = σ_b²`` [m²] (the
-    broadcast transceiver position's, per axis), the angle std on the array's axis ``angle_sigma_deg`` [deg] and
-    ``attitude_variance = σ_att²`` [rad²]."""
-    return packet_variances(position, transceiver, range_variance, angle_sigma_deg, attitude_variance,
-                            position_variance)
+    for _ in range(FIX_ITERATIONS):
+        J, g, _ = normal(point)
+        point = point + kalman.solve_spd(J, g)
+    _, _, rss = normal(point)
+    J = position_information(point, ctx, covariance(point, ctx, p, POSITION_MODEL), depth_variance)
+    return point, kalman.symmetric(kalman.solve_spd(J, ca.SX.eye(3))), rss
 
 
 @lru_cache(maxsize=None)
 def bound_step(model=BOUND_MODEL) -> ca.Function:
     """One step of the USBL bound in covariance form, as a casadi Function.
 
-    Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m],
-    range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
+    Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m], attitude (3)
+    [rad], range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
     depth_variance [m²], slot, received (0 or 1)``; output the bound after the prediction over ``dt`` with
-    ``model.motion`` and, at a slot, the depth row, then (for a received packet) the range, azimuth and elevation
-    rows of ``model`` seen from the transceiver the packet carries
-    (:func:`sblsim.models.bound.measurement_information`, H at the true position) with the variances
-    :func:`bound_variances` at the true position: what :func:`sblsim.models.bound.bound_step` does for a range, for
-    the three rows of a USBL packet.
+    ``model.motion`` and, at a slot, the depth row, then (for a received packet) the three rows of ``model`` seen
+    from the transceiver and attitude the packet carries, H and R (:meth:`RangeDirectionModel.covariance
+    <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>`) at the true position, decorrelated
+    (:func:`~sblsim.models.receiver.kalman.whiten`) and added one at a time
+    (:func:`sblsim.models.bound.information_update`): what :func:`sblsim.models.bound.bound_step` does for a
+    range, for a USBL packet.
 
     Parameters
     ----------
-    model : RangeBearingModel, optional
+    model : RangeDirectionModel, optional
         The measurement model (its motion model gives the state size and the prediction).
 
     References
@@ -252,39 +257,43 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     """
     motion = model.motion
     (B, dt, qh, qv, position), x, P = predicted(motion)
-    beacon = ca.SX.sym("transceiver", 3)
-    noise, position_var, angle, attitude, d_var, slot, received = (
+    beacon, att = ca.SX.sym("transceiver", 3), ca.SX.sym("attitude", 3)
+    noise, position_var, angle, attitude_var, d_var, slot, received = (
         ca.SX.sym(name) for name in ("range_variance", "position_variance", "angle_sigma_deg", "attitude_variance",
                                      "depth_variance", "slot", "received"))
-    depth_row = ca.SX.zeros(1, motion.state_size)
-    depth_row[motion.position_index[2]] = 1.0
-    P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
+    P = information_update(P, _depth_row(motion.state_size, motion.position_index[2]), d_var, slot)  # depth first
     use = ca.logic_and(slot, received)
-    P = measurement_information(P, model, x, beacon,
-                                bound_variances(position, beacon, noise, position_var, angle, attitude), (use,) * 3)
-    names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "range_variance", "position_variance",
+    ctx = (beacon, att)
+    R = model.covariance(x, ctx, noise, (angle * (math.pi / 180.0)) ** 2, position_var, attitude_var)
+    _, Hw = kalman.whiten(ca.SX.zeros(3), model.jacobian(x, ctx), R)
+    for k in range(3):
+        P = information_update(P, Hw[k, :], 1.0, use)
+    names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "attitude", "range_variance", "position_variance",
              "angle_sigma_deg", "attitude_variance", "depth_variance", "slot", "received"]
-    return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, beacon, noise, position_var, angle,
-                                                  attitude, d_var, slot, received], [ca.vec(P)], names, ["B_next"])
+    return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, beacon, att, noise, position_var, angle,
+                                                  attitude_var, d_var, slot, received], [ca.vec(P)], names,
+                       ["B_next"])
 
 
 #: Per-replicate inputs of the USBL bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled bound
 #: numbers them from this tuple: :func:`compiled_bound`, :mod:`sblsim.fmus.contract`).
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance", "position_variance",
          "angle_sigma_deg", "attitude_variance", "depth_variance")
-#: Per-step inputs of the USBL bound, in the order of :func:`pcrb`'s ``steps`` columns.
-STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transceiver_z", "slot", "received")
+#: Per-step inputs of the USBL bound, in the order of :func:`pcrb`'s ``steps`` columns: the true position, the
+#: transceiver and the attitude the packet carries, the slot and the packet's reception.
+STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transceiver_z",
+         *(f"doa_{a}" for a in ATTITUDE_ANGLES), "slot", "received")
 
 
 def _step_inputs(f, s):
     """The inputs of :func:`bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name ``f`` and the
     step columns ``s`` (in :data:`STEPS` order)."""
-    return (s[0:3], s[3:6], f["range_variance"], f["position_variance"], f["angle_sigma_deg"], f["attitude_variance"],
-            f["depth_variance"], s[6:7], s[7:8])
+    return (s[0:3], s[3:6], s[6:9], f["range_variance"], f["position_variance"], f["angle_sigma_deg"],
+            f["attitude_variance"], f["depth_variance"], s[9:10], s[10:11])
 
 
 def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, transceivers: np.ndarray,
-                **fixed) -> tuple[np.ndarray, np.ndarray]:
+                attitudes: np.ndarray, **fixed) -> tuple[np.ndarray, np.ndarray]:
     """Pack the inputs of :func:`pcrb`.
 
     Parameters
@@ -293,13 +302,15 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, trans
         True positions at the steps t_1 … t_N [m].
     slot, received : ndarray of bool, shape (N, B)
         As for :func:`sblsim.models.bound.pcrb_inputs`.
-    transceivers : ndarray, shape (N, B, 3)
-        The transceiver position the packet carries [m] (used where received).
+    transceivers, attitudes : ndarray, shape (N, B, 3)
+        The transceiver position [m] and the attitude ``[roll, pitch, yaw]`` [rad] the packet carries (used where
+        received).
     **fixed : float or ndarray (B,)
         Every name of :data:`FIXED` (as for :func:`sblsim.models.bound.pcrb_inputs`; ``range_variance = σ_r²``
         [m²] the range noise alone, ``position_variance = σ_b²`` [m²] the broadcast transceiver position's error
-        per axis (GPS and the lever arm turned by the attitude error, :func:`transceiver_variance`) and
-        ``angle_sigma_deg`` the direction-of-arrival std on the array's axis [deg], > 0).
+        per axis (GPS and the lever arm turned by the attitude error, :func:`transceiver_variance`),
+        ``angle_sigma_deg`` the array's direction std on its axis [deg], > 0, and ``attitude_variance`` the
+        attitude error per Euler angle [rad²]).
 
     Returns
     -------
@@ -309,8 +320,9 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, trans
     truth = np.asarray(truth, dtype=float)
     b = truth.shape[1]
     columns = np.stack([np.broadcast_to(np.asarray(fixed[k], dtype=float), (b,)) for k in FIXED], axis=1)
-    steps = np.concatenate([truth, np.asarray(transceivers, dtype=float), np.asarray(slot, dtype=float)[..., None],
-                            np.asarray(received, dtype=float)[..., None]], axis=-1)
+    steps = np.concatenate([truth, np.asarray(transceivers, dtype=float), np.asarray(attitudes, dtype=float),
+                            np.asarray(slot, dtype=float)[..., None], np.asarray(received, dtype=float)[..., None]],
+                           axis=-1)
     return np.ascontiguousarray(columns), np.ascontiguousarray(steps)
 
 
@@ -322,7 +334,7 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=BOUND_MODEL) -> np.ndarray:
     ----------
     fixed, steps : ndarray
         From :func:`pcrb_inputs`.
-    model : RangeBearingModel, optional
+    model : RangeDirectionModel, optional
         The measurement model of :func:`bound_step`.
 
     Returns
@@ -362,34 +374,34 @@ def compiled_bound() -> tuple[ca.Function, ca.Function]:
 
 @lru_cache(maxsize=None)
 def fix_information() -> ca.Function:
-    """casadi Function of the accuracy of one USBL packet (range, azimuth, elevation) plus the depth (the map).
+    """casadi Function of the accuracy of one USBL packet plus the depth (the map).
 
-    ``(p[3], transceiver[3], range_variance, position_variance, angle_sigma_deg, attitude_variance,
-    depth_variance) -> (C (3, 3), drms)``: the covariance of the packet's polar fix with the receivers' R,
-    :func:`packet_covariance` ``C_p = J diag(σ_r², σ_a², σ_a²) Jᵀ + σ_b² I`` (the Cartesian form of the Fisher
-    information ``Hᵀ R⁻¹ H`` of :data:`BOUND_MODEL` with R = :func:`packet_variances`, Kay 1993, Section 3.7:
-    ``C_p = (Hᵀ R⁻¹ H)⁻¹`` wherever H is invertible), the depth reading (variance σ_d²) added in covariance form,
-    ``C = C_p − C_p e_z e_zᵀ C_p / (e_zᵀ C_p e_z + σ_d²)`` (the same as ``(C_p⁻¹ + e_z e_zᵀ / σ_d²)⁻¹``), and
-    ``drms = sqrt(C_NN + C_EE)`` [m]. Finite everywhere, straight below the transceiver too (there the azimuth
-    carries nothing and the transceiver's error remains: with a GPS error of σ per axis, DRMS ≥ √2 σ).
+    ``(p[3], transceiver[3], attitude[3], range_variance, position_variance, angle_sigma_deg, attitude_variance,
+    depth_variance) -> (C (3, 3), drms)``: ``C = J⁻¹``, J the Fisher information of the packet's range and
+    direction cosines with the receivers' R and of the depth reading (:func:`position_information`), and
+    ``drms = sqrt(C_NN + C_EE)`` [m]. Finite everywhere, straight below the transceiver too.
 
     References
     ----------
-    Kay 1993, Section 3.7. Bar-Shalom, Li, Kirubarajan 2001, Section 10.3.
+    Kay 1993, Section 3.7.
     """
-    p, b = ca.SX.sym("p", 3), ca.SX.sym("transceiver", 3)
+    p, b, att = ca.SX.sym("p", 3), ca.SX.sym("transceiver", 3), ca.SX.sym("attitude", 3)
     names = ("range_variance", "position_variance", "angle_sigma_deg", "attitude_variance", "depth_variance")
-    range_var, position_var, angle, attitude, d_var = (ca.SX.sym(n) for n in names)
-    C = packet_covariance(p, b, range_var, angle, attitude, position_var)
-    g = C[:, 2]
-    C = kalman.symmetric(C - ca.mtimes(g, g.T) / (C[2, 2] + d_var))
-    return ca.Function("sblsim_usbl_fix_information", [p, b, *(range_var, position_var, angle, attitude, d_var)],
-                       [C, ca.sqrt(C[0, 0] + C[1, 1])], ["p", "transceiver", *names], ["C", "drms"])
+    range_var, position_var, angle, attitude_var, d_var = (ca.SX.sym(n) for n in names)
+    ctx = (b, att)
+    R = POSITION_MODEL.covariance(p, ctx, range_var, (angle * (math.pi / 180.0)) ** 2, position_var, attitude_var)
+    C = kalman.solve_spd(position_information(p, ctx, R, d_var), ca.SX.eye(3))
+    C = kalman.symmetric(C)
+    return ca.Function("sblsim_usbl_fix_information", [p, b, att, range_var, position_var, angle, attitude_var,
+                                                       d_var], [C, ca.sqrt(C[0, 0] + C[1, 1])],
+                       ["p", "transceiver", "attitude", *names], ["C", "drms"])
 
 
 def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: float, position_variance: float,
-                   angle_sigma_deg: float, attitude_variance: float, depth_variance: float) -> np.ndarray:
-    """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth (:func:`fix_information`).
+                   angle_sigma_deg: float, attitude_variance: float, depth_variance: float,
+                   heading: float = 0.0) -> np.ndarray:
+    """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth (:func:`fix_information`), the
+    array level at the heading ``heading``.
 
     Parameters
     ----------
@@ -401,11 +413,13 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: 
         σ_r², the range noise, and σ_b², the broadcast transceiver position's error per axis [m²] (an array:
         one per point, as the other numbers may be).
     angle_sigma_deg : float or ndarray, shape (M,)
-        Direction-of-arrival std on the array's axis [deg].
+        The array's direction std on its axis [deg].
     attitude_variance : float
-        σ_att², the IMU attitude error [rad²].
+        σ_θ², the error per Euler angle of the attitude the surface uses [rad²].
     depth_variance : float
         σ_d² [m²], > 0.
+    heading : float, optional
+        The array's yaw [rad].
 
     Returns
     -------
@@ -414,9 +428,9 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: 
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
     f = fix_information().map(points.shape[0])
-    return np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), per_point(range_variance),
-                        per_point(position_variance), per_point(angle_sigma_deg), per_point(attitude_variance),
-                        per_point(depth_variance))[1]).ravel()
+    return np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), np.array([0.0, 0.0, heading]),
+                        per_point(range_variance), per_point(position_variance), per_point(angle_sigma_deg),
+                        per_point(attitude_variance), per_point(depth_variance))[1]).ravel()
 
 
 @register
@@ -435,10 +449,11 @@ class USBL(System):
     ranging = ("twtt",)
     measures_direction = True
     takes_ranges = False
-    #: The direction of arrival the packet carries and the true attitude of the transceiver's array (the
-    #: platform's plus the mounting misalignment).
+    #: The direction of arrival the packet carries, the true attitude of the transceiver's array (the platform's
+    #: plus the mounting misalignment) and the attitude the surface turned the direction with.
     timeseries_columns = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation",
-                          **{f"array_{a}": f"platform.array_{a}" for a in ("roll", "pitch", "yaw")}}
+                          **{f"array_{a}": f"platform.array_{a}" for a in ATTITUDE_ANGLES},
+                          **{f"doa_{a}": f"acoustics.doa_{a}" for a in ATTITUDE_ANGLES}}
     log_columns = {"azimuth_rad": "azimuth", "elevation_rad": "elevation"}
     bound_fixed = FIXED
     bound_steps = STEPS
@@ -477,15 +492,18 @@ class USBL(System):
 
     def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
                        sigma_range: float, model=None) -> np.ndarray:
-        """One packet (range, azimuth, elevation) plus the depth (:func:`horizontal_std`; ``model`` is not used:
-        the packet's model is :data:`BOUND_MODEL`)."""
+        """One packet (range and direction) plus the depth, the array level at the platform's heading
+        (:func:`horizontal_std`; ``model`` is not used: the packet's model is :data:`POSITION_MODEL`). What a
+        static vehicle's fixes scatter by over runs: the attitude's error adds the array's misalignment, drawn
+        once per run, and the IMU's constant bias to the bound's white attitude noise."""
+        constant = math.radians(platform["usbl_misalignment_deg"]) ** 2 + math.radians(platform["imu_bias_deg"]) ** 2
         return horizontal_std(points, self.lever_arms(platform)[0], sigma_range ** 2, parameters["position_variance"],
-                              parameters["angle_sigma_deg"], parameters["attitude_variance"],
-                              parameters["depth_variance"])
+                              parameters["angle_sigma_deg"], parameters["attitude_variance"] + constant,
+                              parameters["depth_variance"], math.radians(platform["heading_deg"]))
 
     def measurement_model(self):
-        """Range, azimuth and elevation from the transceiver (:data:`MODEL_RB`), with the depth."""
-        return MODEL_RB
+        """Range and direction cosines from the transceiver (:data:`MODEL`), with the depth."""
+        return MODEL
 
     def bound_step(self):
         """:func:`bound_step` (module function)."""
@@ -502,21 +520,22 @@ class USBL(System):
         """The direction of arrival (the channel's ``azimuth`` and ``elevation``)."""
         return tuple(replace(v, causality="input") for v in DIRECTION)
 
-    def polar_fix(self, u: dict) -> ca.SX:
-        return polar_fix(u)
+    def receiver_late_inputs(self) -> tuple[Variable, ...]:
+        """The attitude the surface turned the direction with (the channel's ``doa_*``)."""
+        return tuple(replace(v, causality="input") for v in DOA_ATTITUDE)
 
-    def fix_covariance(self, position, beacon, p: dict) -> ca.SX:
-        return fix_covariance(position, beacon, p)
+    def packet_fix(self, u: dict, p: dict, depth) -> tuple[ca.SX, ca.SX, ca.SX]:
+        return packet_fix(u, p, depth)
 
     def receiver_update(self, receiver, x: dict, u: dict, p: dict, fresh) -> dict:
-        """The receiver's update at a slot with this system's packet: ``receiver.packet_update`` with the
-        range-bearing model, the transceiver as context, ``z = [r, α, ε]`` and R from :func:`variances`."""
-        beacon = transceiver(u)
-        return receiver.packet_update(x, u, p, fresh, MODEL_RB, beacon, measurement(u),
-                                      lambda position: variances(position, beacon, p))
+        """The receiver's update at a slot with this system's packet: ``receiver.packet_update`` with
+        :data:`MODEL`, the packet's context, ``z = [r, a_x, a_y]`` and R from :func:`covariance`."""
+        ctx = context(u)
+        return receiver.packet_update(x, u, p, fresh, MODEL, ctx, measurement(u),
+                                      lambda state: covariance(state, ctx, p))
 
 
-__all__ = ["BOUND_MODEL", "FIXED", "MIN_ANGLE_SIGMA_DEG", "MODEL_RB", "RHO_FLOOR", "STEPS", "USBL", "bound_step",
-           "bound_variances", "compiled_bound", "fix_covariance", "fix_information", "horizontal_std", "measurement",
-           "packet_covariance", "packet_variances", "pcrb", "pcrb_inputs", "polar_fix", "polar_jacobian",
-           "receiver_parameters", "sensor_variances", "transceiver", "transceiver_variance", "variances"]
+__all__ = ["BOUND_MODEL", "FIXED", "FIX_ITERATIONS", "MIN_ANGLE_SIGMA_DEG", "MODEL", "POSITION_MODEL", "STEPS", "USBL",
+           "attitude", "bound_step", "compiled_bound", "context", "covariance", "direction", "fix_information",
+           "horizontal_std", "measurement", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
+           "receiver_parameters", "transceiver", "transceiver_variance"]
