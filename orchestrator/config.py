@@ -110,6 +110,7 @@ SAMPLING_TIES = (("platform", "sample_period"), ("target", "sample_period"), ("a
 #: FMU parameters filled from a configuration key of another section: (component, parameter) <- (section, key).
 KEY_TIES = ((("acoustics", "usbl_angle_sigma_deg"), ("platform", "usbl_angle_sigma_deg")),
             (("receiver", "sound_speed_assumed"), ("acoustics", "sound_speed_assumed")),
+            (("receiver", "ranging"), ("acoustics", "ranging")),
             (("acoustics", "beaufort"), ("platform", "beaufort")))
 EXTERNAL_PREFIX = "fmu:"
 MODEL_PREFIX = "model:"
@@ -646,6 +647,9 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
             **SYSTEMS[platform["system"]].receiver_ties(platform),
             "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
+    acoustics = cfg["acoustics"]
+    if acoustics["clock_drift_ppm"] != 0.0 and acoustics["ranging"] == "owtt":  # the clock's states, its prior
+        ties.update(clock_states=True, clock_drift_sigma_ppm=abs(acoustics["clock_drift_ppm"]))
     target = cfg["target"]
     if target["trajectory"] == "random-walk":  # the receiver's motion model and prior are the walk's
         ties.update({k: target[f"walk_{k}"] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")})

@@ -781,7 +781,9 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
 
 
-__all__ = ["ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "Acoustics", "DETECTION", "DOA_ATTITUDE", "FIXED_KEYS", "OVERRUN", "SNR_KEYS", "check_in_flight",
-           "FAMILY_TABLE_VARIABLES", "site_levels", "site_numbers", "site_vector", "DIRECTION", "FLIGHT_CAPACITY",
-           "OVERFLOW",
-           "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "TARGET_INPUTS"]
+__all__ = [
+    "Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
+    "DOA_ATTITUDE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "OVERFLOW", "OVERRUN",
+    "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS",
+    "TARGET_INPUTS"
+]

@@ -41,7 +41,7 @@ import casadi as ca
 from sblsim.models.acoustics.core import ARRIVAL, PACKET
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
-from sblsim.models.expressions import sample_due
+from sblsim.models.expressions import sample_due, select
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.gate import gate
@@ -258,6 +258,97 @@ def beacon_parameters() -> tuple[Variable, ...]:
     )
 
 
+def error_parameters() -> tuple[Variable, ...]:
+    """What a receiver that carries error states (:class:`~sblsim.models.receiver.motion.WithErrorStates`) and
+    dates its ranges declares: the ranging, the GPS error's correlation time, the clock's states and the constant
+    attitude error (declared after the profile's: the value references of every earlier variable stay)."""
+    return (
+        Variable("ranging", "parameter", "String", "owtt", choices=("owtt", "twtt"), scope="fmu",
+                 description="The channel's ranging (acoustics.ranging): a one-way range refers to its reception "
+                             "and carries the clock's offset; a two-way one refers to the mean of its legs"),
+        Variable("gps_correlation_time", "parameter", "Real", 0.0, "s",
+                 "0: the GPS error of the broadcast positions is white, in R; > 0: carried as three Gauss-Markov "
+                 "states of this correlation time (default: platform.gps_tau with platform.gps_model = "
+                 "gauss-markov)", min=0.0, max=1e6),
+        Variable("clock_states", "parameter", "Boolean", False,
+                 description="Carry the receiver clock's offset and drift as states (one-way ranging; default: on "
+                             "when acoustics.clock_drift_ppm is not 0)"),
+        Variable("clock_drift_sigma_ppm", "parameter", "Real", 1.0, "ppm",
+                 "Prior std of the clock's drift (clock_states; default: |acoustics.clock_drift_ppm|)",
+                 min=0.0, max=1000.0),
+        Variable("attitude_bias_sigma_deg", "parameter", "Real", 0.0, "deg",
+                 "USBL: prior std per Euler angle of the constant error of the attitude the surface turns the "
+                 "direction with (the IMU's bias and misalignment, the array's mounting misalignment), carried "
+                 "as three states; 0: none (default: from platform.imu_bias_deg, imu_misalignment_deg and "
+                 "usbl_misalignment_deg)", min=0.0, max=180.0),
+    )
+
+
+def errors_of(p: dict) -> dict:
+    """The ``errors`` mapping of :class:`~sblsim.models.receiver.motion.WithErrorStates` from a receiver's
+    parameters (:func:`error_parameters`, :func:`beacon_parameters`): the GPS error as states where its
+    correlation time is positive, the clock's drift where ``clock_states`` is on, the attitude error."""
+    markov = p["gps_correlation_time"] > 0.0
+    return {"gps_sigma": ca.if_else(markov, p["beacon_gps_sigma"], 0.0), "gps_tau": p["gps_correlation_time"],
+            "clock_drift_sigma": ca.if_else(p["clock_states"], p["clock_drift_sigma_ppm"] * 1e-6, 0.0),
+            "attitude_sigma": p["attitude_bias_sigma_deg"] * (ca.pi / 180.0)}
+
+
+def clock_scale(p: dict):
+    """What the clock's offset [s] adds to a range [m/s]: the assumed sound speed for a one-way range of a
+    receiver with clock states, else 0."""
+    if "clock_states" not in p:
+        return 0.0
+    one_way = p["ranging"] == 0  # the index of "owtt"
+    return ca.if_else(ca.logic_and(p["clock_states"], one_way), p["sound_speed_assumed"], 0.0)
+
+
+def rejected_states(n_beacons: int) -> list[tuple[str, int]]:
+    """State blocks of the gate's re-acquisition: per beacon its last range that failed the test, the position it
+    was broadcast from and its reference epoch (:func:`~sblsim.models.receiver.gate.gate`)."""
+    return [("rejected_range", n_beacons), ("rejected_beacon", 3 * n_beacons), ("rejected_epoch", n_beacons)]
+
+
+def rejected_init(n_beacons: int) -> dict[str, ca.SX]:
+    return {"rejected_range": ca.SX.zeros(n_beacons), "rejected_beacon": ca.SX.zeros(3 * n_beacons),
+            "rejected_epoch": ca.SX.zeros(n_beacons)}
+
+
+def _pick(u: dict, block, width: int, n_beacons: int) -> ca.SX:
+    """The fresh beacon's ``width`` entries of a per-beacon state block."""
+    index = u["beacon_id"] - 1
+    return ca.vertcat(*[select(index, [block[width * j + a] for j in range(n_beacons)]) for a in range(width)])
+
+
+def earlier_innovation(receiver, x: dict, u: dict, state, P, row, n_beacons: int) -> tuple[ca.SX, ca.SX]:
+    """The fresh beacon's last failed range predicted from the current state: its innovation [m] and innovation
+    variance [m²] (the gate's re-acquisition).
+
+    ``row(then, beacon)`` gives ``(h, H (1, n), variance)`` of a range from ``beacon`` (3, 1) at the state
+    ``then``; the state is moved to the failed range's reference epoch (:meth:`KalmanReceiver.reference`).
+    """
+    rng = _pick(u, x["rejected_range"], 1, n_beacons)
+    beacon = _pick(u, x["rejected_beacon"], 3, n_beacons)
+    A = receiver.reference(x, u, _pick(u, x["rejected_epoch"], 1, n_beacons))
+    then = state if A is None else ca.mtimes(A, state)
+    h, H, variance = row(then, beacon)
+    H = H if A is None else ca.mtimes(H, A)
+    return rng - h, ca.mtimes([H, P, H.T]) + variance
+
+
+def remember_rejected(x: dict, u: dict, rejecting, rng, beacon, epoch, n_beacons: int) -> dict[str, ca.SX]:
+    """The re-acquisition's states after a slot: a fresh range that failed its test (``rejecting``) replaces its
+    beacon's range, position and epoch."""
+    index = u["beacon_id"] - 1
+    out = {"rejected_range": [], "rejected_beacon": [], "rejected_epoch": []}
+    for j in range(n_beacons):
+        mine = ca.logic_and(rejecting, index == j)
+        out["rejected_range"].append(ca.if_else(mine, rng, x["rejected_range"][j]))
+        out["rejected_beacon"].append(ca.if_else(mine, beacon, x["rejected_beacon"][3 * j:3 * j + 3]))
+        out["rejected_epoch"].append(ca.if_else(mine, epoch, x["rejected_epoch"][j]))
+    return {name: ca.vertcat(*values) for name, values in out.items()}
+
+
 class RangesWithProfile:
     """What a receiver that declares :func:`~sblsim.models.receiver.profile.profile_parameters` adds to a
     :class:`~sblsim.models.component.Component` (listed before it): its configuration's sound-speed profile
@@ -313,20 +404,25 @@ class KalmanReceiver(RangesWithProfile, Component):
     backdate = False
 
     @classmethod
-    def reference(cls, x: dict, u: dict, epoch=None) -> ca.SX | None:
-        """The map ``A`` (n, n) from the state at the use ``x["now"]`` to the state at the packet's reference
-        epoch ``t_ref``, ``A = Φ(−(now − t_ref))`` of the motion model; the packet's rows are ``h(A x)`` with the
-        Jacobian ``H(A x) A``. None when :attr:`backdate` is off.
+    def epoch(cls, u: dict, p: dict):
+        """The reference epoch of a range packet [s]: where its range refers. A one-way range is the travel time
+        to the diver where the packet arrives: its reception ``rx_time`` (a receiver that declares its
+        ``ranging``); a two-way range is the mean of its two legs, to the diver at interrogation and at
+        reception: the midpoint ``(tx_time + rx_time) / 2``, which equals the legs' mean to second order
+        (``v² Δt² / (8 r)``: micrometres at a diver's speed)."""
+        middle = 0.5 * (u["tx_time"] + u["rx_time"])
+        if "ranging" not in p:
+            return middle
+        return ca.if_else(p["ranging"] == 0, u["rx_time"], middle)  # 0: "owtt"
 
-        ``t_ref`` defaults to the midpoint ``(tx_time + rx_time) / 2`` of a range packet: where a two-way range
-        refers (the mean of the legs to the diver at interrogation and at reception, to first order); a one-way
-        range refers to the arrival (the midpoint is ``τ / 2`` early: millimetres at a diver's speed). A USBL
-        packet passes its reply's epoch (:meth:`packet_update`).
-        """
+    @classmethod
+    def reference(cls, x: dict, u: dict, epoch) -> ca.SX | None:
+        """The map ``A`` (n, n) from the state at the use ``x["now"]`` to the state at a packet's reference epoch
+        ``epoch`` [s] (:meth:`epoch`; a USBL packet's reply, :func:`reply_epoch`), ``A = Φ(−(now − t_ref))`` of
+        the motion model; the packet's rows are ``h(A x)`` with the Jacobian ``H(A x) A``. None when
+        :attr:`backdate` is off."""
         if not cls.backdate:
             return None
-        if epoch is None:
-            epoch = 0.5 * (u["tx_time"] + u["rx_time"])
         return cls.motion.transition(-ca.fmax(x["now"] - epoch, 0.0))
 
     @classmethod
@@ -335,20 +431,40 @@ class KalmanReceiver(RangesWithProfile, Component):
         raise NotImplementedError
 
     @classmethod
+    def late_parameters(cls) -> tuple[Variable, ...]:
+        """Parameters declared after the profile's (default: the error states' and the ranging's where the
+        motion model carries error states, :func:`error_parameters`)."""
+        return error_parameters() if cls.motion.state_size > CONSTANT_VELOCITY.state_size else ()
+
+    @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
-                + arrival_interface() + profile_parameters() + late_inputs(n_beacons))
+                + arrival_interface() + profile_parameters() + cls.late_parameters() + late_inputs(n_beacons))
+
+    @classmethod
+    def errors(cls, p: dict) -> dict | None:
+        """The motion model's ``errors`` mapping (:func:`errors_of`), or None where it carries no error states."""
+        return errors_of(p) if cls.motion.state_size > CONSTANT_VELOCITY.state_size else None
 
     @classmethod
     def initial(cls, p: dict) -> tuple[ca.SX, ca.SX]:
-        """State (n, 1) and covariance (n, n) at the start (default: ``x0_*``, ``p0_position``, ``p0_velocity``)."""
-        x0 = ca.vertcat(*[p[f"x0_{name}"] for name in cls.motion.state_names])
-        return x0, cls.motion.initial_covariance(p["p0_position"], p["p0_velocity"])
+        """State (n, 1) and covariance (n, n) at the start (default: ``x0_*``, ``p0_position``, ``p0_velocity``;
+        error states at 0 with their priors)."""
+        x0 = ca.vertcat(*[p[f"x0_{name}"] for name in STATE_NAMES],
+                        ca.SX.zeros(cls.motion.state_size - len(STATE_NAMES)))
+        errors = cls.errors(p)
+        if errors is None:
+            return x0, cls.motion.initial_covariance(p["p0_position"], p["p0_velocity"])
+        return x0, cls.motion.initial_covariance(p["p0_position"], p["p0_velocity"], errors)
 
     @classmethod
     def predict(cls, x: ca.SX, P: ca.SX, h, p: dict) -> tuple[ca.SX, ca.SX]:
-        """State and covariance after a step of ``h`` [s] (default: constant velocity, white-noise acceleration)."""
-        return cls.motion.predict(x, P, h, p["q_horizontal"], p["q_vertical"])
+        """State and covariance after a step of ``h`` [s] (default: constant velocity, white-noise acceleration;
+        the error states' own dynamics)."""
+        errors = cls.errors(p)
+        if errors is None:
+            return cls.motion.predict(x, P, h, p["q_horizontal"], p["q_vertical"])
+        return cls.motion.predict(x, P, h, p["q_horizontal"], p["q_vertical"], errors)
 
     @classmethod
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
@@ -408,30 +524,38 @@ class KalmanReceiver(RangesWithProfile, Component):
         depth_row[motion.position_index[2]] = 1.0
         state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - motion.position(x["x"])[2],
                                                    depth_row, p["sigma_depth"] ** 2)
-        A = cls.reference(x, u, reply_epoch(u))
+        epoch = reply_epoch(u)
+        A = cls.reference(x, u, epoch)
         then = state if A is None else ca.mtimes(A, state)  # the state at the packet's reference epoch
         R = covariance(then)
         h, H = model.linearize(then, context)
         H = H if A is None else ca.mtimes(H, A)
         y = model.residual(z, h)
-        checked = gate(y[0], ca.mtimes([H[0, :], P, H[0, :].T]) + R[0, 0], fresh, x, u, p)
+        checked = gate(y[0], ca.mtimes([H[0, :], P, H[0, :].T]) + R[0, 0], fresh, x, u, p,
+                       earlier_innovation(cls, x, u, state, P, first_row(model, context, covariance), 1))
         y_w, H_w = kalman.whiten(y, H, R)
         updated, P_new, nis = kalman.update(state, P, y_w, H_w, ca.SX.ones(y.shape[0]))
         use = checked["use"]
         return {**take_packet(x, u, 1), "x": ca.if_else(use, updated, state), "P": ca.if_else(use, P_new, P),
-                "nis": nis_depth + ca.if_else(use, nis, 0.0), "gated": checked["gated"], "failed": checked["failed"]}
+                "nis": nis_depth + ca.if_else(use, nis, 0.0), "gated": checked["gated"], "failed": checked["failed"],
+                **remember_rejected(x, u, checked["rejecting"], z[0], context[0], epoch, 1)}
 
     @classmethod
     def build(cls, n_beacons: int):
         n = n_beacons
         size, position = cls.motion.state_size, list(cls.motion.position_index)
+        rejected = rejected_states(n)
         b = ProgramBuilder(cls, n, states=[("x", size), ("P", size * size)] + packet_states(n) + [
-            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states())
+            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states() + rejected)
 
         def init(p, d, w, t0):
             x0, P0 = cls.initial(p)
             return {"x": x0, "P": ca.vec(P0), **packet_init(n, t0), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
-                    "gated": 0, "failed": ca.SX.zeros(n), **lm_idle()}
+                    "gated": 0, "failed": ca.SX.zeros(n), **lm_idle(), **rejected_init(n)}
+
+        def remembered(out):
+            """The re-acquisition's states a receiver's update returned (one that returns none keeps them)."""
+            return {name: out[name] for name, _ in rejected if name in out}
 
         def step(x, u, p, d, w, t, h):
             state, P = cls.predict(x["x"], ca.reshape(x["P"], size, size), h, p)
@@ -451,7 +575,7 @@ class KalmanReceiver(RangesWithProfile, Component):
             guess = ca.if_else(x["fix_valid"], x["fix"], cls.motion.position(out["x"]))
             fix = lm_begin(held, guess, u["depth"], p)
             return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"],
-                    "failed": out["failed"], **fix,
+                    "failed": out["failed"], **remembered(out), **fix,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
         def packet_slot(x, u, p, t, h):
@@ -469,7 +593,7 @@ class KalmanReceiver(RangesWithProfile, Component):
 
         def output(x, p, d, t):
             P = ca.reshape(x["P"], size, size)[position, position]
-            out = {f"est_{name}": x["x"][k] for k, name in enumerate(cls.motion.state_names)}
+            out = {f"est_{name}": x["x"][k] for k, name in enumerate(STATE_NAMES)}
             out.update({f"instr_{a}": ca.if_else(x["fix_valid"], x["fix"][k], 0.0) for k, a in enumerate("xyz")})
             out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[1, 1] + P[2, 2]),
                        gated=x["gated"], **covariance_outputs(P))
@@ -494,6 +618,16 @@ def slot_events(b: ProgramBuilder, model, n_beacons: int, due, slot) -> list:
     return events
 
 
+def first_row(model, context, covariance):
+    """``row(then, transceiver)`` of :func:`earlier_innovation` for a packet whose first row is its range (USBL): the
+    model's first row and R's first entry, the transceiver replaced (the rest of the context kept)."""
+    def row(then, transceiver):
+        ctx = (transceiver, *context[1:])
+        h, H = model.linearize(then, ctx)
+        return h[0], H[0, :], covariance(then)[0, 0]
+    return row
+
+
 def reply_epoch(u: dict) -> ca.SX:
     """The epoch a USBL packet refers to [s]: the diver's reply, the reply's and the downlink's travel times
     (``2 r / c`` at :data:`REFERENCE_SOUND_SPEED`) before the packet's arrival."""
@@ -505,9 +639,10 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
     return fresh_packet(u, n_beacons), u["range"], ca.vertcat(u["beacon_x"], u["beacon_y"], u["beacon_z"])
 
 
-__all__ = ["COVARIANCE", "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "REFERENCE_SOUND_SPEED", "STATE_NAMES",
-           "arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_step", "clock_tick",
-           "covariance_outputs", "filter_parameters", "fresh_packet", "fresh_range", "KalmanReceiver", "late_inputs",
-           "lm_active",
-           "lm_begin", "lm_idle", "lm_states", "lm_step", "packet_init", "packet_states", "RangesWithProfile",
-           "receiver_interface", "reply_epoch", "slot_due", "slot_events", "system_interface", "take_packet"]
+__all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_scale", "clock_step",
+           "clock_tick", "COVARIANCE", "covariance_outputs", "earlier_innovation", "error_parameters", "errors_of",
+           "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
+           "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
+           "lm_step", "packet_init", "packet_states", "RangesWithProfile", "receiver_interface",
+           "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch",
+           "slot_due", "slot_events", "STATE_NAMES", "system_interface", "take_packet"]

@@ -23,7 +23,14 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import KalmanReceiver, filter_parameters, fresh_range, take_packet
+from sblsim.models.receiver.core import (
+    KalmanReceiver,
+    earlier_innovation,
+    filter_parameters,
+    fresh_range,
+    remember_rejected,
+    take_packet,
+)
 from sblsim.models.receiver.gate import gate, gate_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
 
@@ -76,13 +83,18 @@ class PaperEKF(KalmanReceiver):
     @classmethod
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
-        h, H = cls.measurement.range_row(x["x"], beacon)
-        S = ca.mtimes([H, x["P"], H.T]) + p["sigma_range"] ** 2
-        checked = gate(rng - h, S, fresh, x, u, p)
+
+        def row(state, beacon):  # a range at the state: prediction, Jacobian row, variance
+            return (*cls.measurement.range_row(state, beacon), p["sigma_range"] ** 2)
+
+        h, H, variance = row(x["x"], beacon)
+        S = ca.mtimes([H, x["P"], H.T]) + variance
+        checked = gate(rng - h, S, fresh, x, u, p, earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons))
         held = take_packet(x, {**u, "packet_valid": checked["use"]}, n_beacons)
         state, P, nis = update(x["x"], x["P"], held["ranges"], held["beacons"], held["heard"], u["depth"],
                                p["sigma_range"], p["sigma_depth"], cls.measurement)
-        return {**held, "x": state, "P": P, "nis": nis, "gated": checked["gated"], "failed": checked["failed"]}
+        return {**held, "x": state, "P": P, "nis": nis, "gated": checked["gated"], "failed": checked["failed"],
+                **remember_rejected(x, u, checked["rejecting"], rng, beacon, cls.epoch(u, p), n_beacons)}
 
 
 __all__ = ["PaperEKF", "update"]

@@ -10,9 +10,17 @@ per axis and the attitude error times the beacon's arm, whose defaults come
 from the platform's configured GPS and IMU errors. The range is predicted
 from the position the constant-velocity state gives at the packet's
 reference epoch (:meth:`KalmanReceiver.reference`: the packet is used when it
-arrives, up to a sampling time after the reply). A χ² NIS gate (1 dof,
+arrives, up to a sampling time after the reply): a one-way range at its
+reception, a two-way range at the mean of its legs. The state carries the
+error states of :class:`~sblsim.models.receiver.motion.WithErrorStates`
+(the GPS error as a Gauss-Markov process, the clock's offset and drift,
+USBL's constant attitude error), each inert unless its parameter asks for it
+(:func:`~sblsim.models.receiver.core.error_parameters`). A χ² NIS gate (1 dof,
 ``gate_probability``) refuses a range that a multipath outlier lengthened;
-the output ``gated`` says so. A lost packet leaves the depth update only.
+the output ``gated`` says so, and a range that fails after a run of failures
+is used again only if it agrees with its beacon's previous one
+(:func:`~sblsim.models.receiver.gate.gate`). A lost packet leaves the depth
+update only.
 
 References
 ----------
@@ -27,16 +35,29 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import KalmanReceiver, beacon_parameters, filter_parameters, fresh_range, take_packet
+from sblsim.models.receiver.core import (
+    KalmanReceiver,
+    beacon_parameters,
+    clock_scale,
+    earlier_innovation,
+    filter_parameters,
+    fresh_range,
+    remember_rejected,
+    take_packet,
+)
 from sblsim.models.receiver.gate import gate, gate_parameters
+from sblsim.models.receiver.measurement import RangeDepthModel
+from sblsim.models.receiver.motion import WITH_ERROR_STATES
 
 
 class SequentialReceiver(KalmanReceiver):
-    """Sequential EKF: depth and the fresh range of each slot, beacon uncertainty in R, NIS gate."""
+    """Sequential EKF: depth and the fresh range of each slot, beacon uncertainty in R, error states, NIS gate."""
 
     name = "receiver_ekf_seq"
     label = "ekf-seq"
     backdate = True
+    motion = WITH_ERROR_STATES
+    measurement = RangeDepthModel(WITH_ERROR_STATES)
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
@@ -48,19 +69,24 @@ class SequentialReceiver(KalmanReceiver):
         m = cls.measurement
         state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - m.depth(x["x"]), m.depth_jacobian(),
                                                    p["sigma_depth"] ** 2)
-        A = cls.reference(x, u)  # the range at the packet's reference epoch
-        then = ca.mtimes(A, state)
-        h, H = m.range_row(then, beacon)
+        epoch = cls.epoch(u, p)
+        clock = clock_scale(p)
+
+        def row(then, beacon):  # a range at the state ``then``: prediction, Jacobian row, variance
+            return (*m.range_row(then, beacon, clock), m.fresh_range_variance(then, beacon, p))
+
+        A = cls.reference(x, u, epoch)  # the range at the packet's reference epoch
+        h, H, variance = row(ca.mtimes(A, state), beacon)
         H = ca.mtimes(H, A)
-        variance = m.fresh_range_variance(then, beacon, p)
         y = rng - h
         S = ca.mtimes([H, P, H.T]) + variance
         nis_range = y * y / S
-        checked = gate(y, S, fresh, x, u, p)
+        checked = gate(y, S, fresh, x, u, p, earlier_innovation(cls, x, u, state, P, row, n_beacons))
         state, P, _ = kalman.scalar_update(state, P, y, H, variance, checked["use"])
         return {**take_packet(x, u, n_beacons), "x": state, "P": P,
                 "nis": nis_depth + ca.if_else(checked["use"], nis_range, 0.0), "gated": checked["gated"],
-                "failed": checked["failed"]}
+                "failed": checked["failed"], **remember_rejected(x, u, checked["rejecting"], rng, beacon, epoch,
+                                                                 n_beacons)}
 
 
 __all__ = ["SequentialReceiver"]

@@ -5,7 +5,8 @@ A fresh scalar measurement of innovation ``y`` and innovation variance
 χ²-distributed with one degree of freedom when the filter is consistent.
 The gate refuses a measurement whose NIS exceeds the χ²(1) quantile of the
 gate probability (:func:`gate_threshold`), one-sided for ranges (a late
-multipath arrival is long, never short), with a lock-out guard (:func:`gate`).
+multipath arrival is long, never short), with a re-acquisition that tests the
+range itself against the lock-out (:func:`gate`).
 
 References
 ----------
@@ -22,6 +23,7 @@ import math
 import casadi as ca
 
 from sblsim.models.declarations import Variable
+from sblsim.models.expressions import select
 
 
 def gate_parameters(probability: float) -> tuple[Variable, ...]:
@@ -31,8 +33,9 @@ def gate_parameters(probability: float) -> tuple[Variable, ...]:
                  "NIS gate on long ranges: probability that a correct range passes (chi-square, 1 dof); 1: no gate",
                  min=0.5, max=1.0),
         Variable("gate_max_rejections", "parameter", "Integer", 2,
-                 description="NIS gate: when this many beacons' latest ranges failed the test, ranges are used "
-                             "(no lock-out)", min=1, max=1000),
+                 description="NIS gate: when this many beacons' latest ranges failed the test, a failing range "
+                             "that agrees with its beacon's previous failing one is used (re-acquisition, no "
+                             "lock-out)", min=1, max=1000),
     )
 
 
@@ -57,19 +60,27 @@ def gate_threshold(probability) -> ca.SX:
     return ca.if_else(probability >= 1.0, ca.inf, q)
 
 
-def gate(innovation, variance, fresh, x: dict, u: dict, p: dict) -> dict[str, ca.SX]:
+def gate(innovation, variance, fresh, x: dict, u: dict, p: dict, earlier=None) -> dict[str, ca.SX]:
     """The NIS gate on a fresh range of innovation ``innovation`` [m] and innovation variance ``variance`` [m²].
 
     A fresh range passes the test when it is not longer than predicted
     (multipath and non-line-of-sight arrivals are late: the direct path is the
     shortest) or its NIS ``innovation² / variance`` is within the χ²(1)
     quantile of ``gate_probability``; each beacon remembers whether its latest
-    range failed. A range is used when it passes, or when at least
-    ``gate_max_rejections`` beacons' latest ranges failed (or every beacon's, when
-    the interface has fewer: a USBL interface has one, its transceiver): a multipath outlier
-    is isolated, but when the estimate has drifted (a sudden turn, a long
-    loss, a mirror solution) the ranges of several beacons fail together, and
-    a gate that kept rejecting them would never recover (gate lock-out).
+    range failed. A multipath outlier is isolated, but when the estimate has
+    drifted (a sudden turn, a long loss, a mirror solution) the ranges of
+    several beacons fail together, and a gate that kept rejecting them would
+    never recover (gate lock-out). So when at least ``gate_max_rejections``
+    beacons' latest ranges failed (or every beacon's, when the interface has
+    fewer: a USBL interface has one, its transceiver), a range that fails is
+    **re-acquired** if it agrees with its own beacon's previous range, which
+    failed too: both predicted from the current state, their innovations must
+    differ by no more than the χ²(1) quantile allows for the sum of their
+    innovation variances (``earlier``). A drifted estimate misses two
+    consecutive ranges of a beacon alike; a multipath outlier's random excess
+    makes it disagree with the range before it, so it is not let in to
+    re-acquire (the consistency of consecutive ranges: Olson, Leonard, Teller
+    2006).
 
     Parameters
     ----------
@@ -81,22 +92,38 @@ def gate(innovation, variance, fresh, x: dict, u: dict, p: dict) -> dict[str, ca
         The inputs; ``beacon_id`` is read.
     p : dict
         The parameters ``gate_probability`` and ``gate_max_rejections`` (:func:`gate_parameters`).
+    earlier : tuple of casadi.SX, optional
+        ``(innovation, variance)`` of the fresh beacon's previous failed range predicted from the current state
+        (:func:`sblsim.models.receiver.core.earlier_innovation`); None: nothing is re-acquired.
 
     Returns
     -------
     dict
-        ``use`` (update with the range), ``gated`` (rejected) and ``failed``
-        (n: each beacon's latest test failed, after this slot).
+        ``use`` (update with the range), ``gated`` (rejected), ``failed``
+        (n: each beacon's latest test failed, after this slot) and ``rejecting`` (the fresh range failed its
+        test: the one to remember for the next re-acquisition).
+
+    References
+    ----------
+    Olson, Leonard, Teller, "Robust range-only beacon localization", IEEE Journal of Oceanic Engineering 31(4),
+    2006 (consistency of ranges against outliers).
     """
-    test = ca.logic_or(innovation <= 0.0,
-                       innovation * innovation / variance <= gate_threshold(p["gate_probability"]))
+    threshold = gate_threshold(p["gate_probability"])
+    test = ca.logic_or(innovation <= 0.0, innovation * innovation / variance <= threshold)
     beacons = x["failed"].numel()
     guard = ca.sum1(x["failed"]) >= ca.fmin(p["gate_max_rejections"], beacons)  # fewer beacons: all of them failed
-    use = ca.logic_and(fresh, ca.logic_or(test, guard))
     index = u["beacon_id"] - 1
+    if earlier is None:
+        again = 0
+    else:  # the beacon's own previous range failed too, and the two agree
+        before, spread = earlier
+        own = select(index, [x["failed"][j] for j in range(beacons)]) > 0.5
+        again = ca.logic_and(own, (innovation - before) ** 2 <= threshold * (variance + spread))
+    use = ca.logic_and(fresh, ca.logic_or(test, ca.logic_and(guard, again)))
     failed = ca.vertcat(*[ca.if_else(ca.logic_and(fresh, index == j), ca.logic_not(test), x["failed"][j])
                           for j in range(beacons)])
-    return {"use": use, "gated": ca.logic_and(fresh, ca.logic_not(use)), "failed": failed}
+    return {"use": use, "gated": ca.logic_and(fresh, ca.logic_not(use)), "failed": failed,
+            "rejecting": ca.logic_and(fresh, ca.logic_not(test))}
 
 
 __all__ = ["erfinv", "gate", "gate_parameters", "gate_threshold"]

@@ -46,7 +46,10 @@ def linear_predict(x: ca.SX, P: ca.SX, phi: ca.SX, Q: ca.SX) -> tuple[ca.SX, ca.
 
 
 def cholesky(S: ca.SX) -> ca.SX:
-    """Lower-triangular L with ``S = L Lᵀ`` for a symmetric positive-definite S (Cholesky-Banachiewicz)."""
+    """Lower-triangular L with ``S = L Lᵀ`` for a symmetric positive-(semi)definite S (Cholesky-Banachiewicz).
+
+    A zero pivot (a state that is known exactly: an error state a receiver does not use) gives a zero column
+    instead of a division by zero; a positive-definite S gets the plain factor."""
     m = S.shape[0]
     L = ca.SX.zeros(m, m)
     for i in range(m):
@@ -54,7 +57,7 @@ def cholesky(S: ca.SX) -> ca.SX:
             total = S[i, j]
             for k in range(j):
                 total = total - L[i, k] * L[j, k]
-            L[i, j] = ca.sqrt(total) if i == j else total / L[j, j]
+            L[i, j] = ca.sqrt(ca.fmax(total, 0.0)) if i == j else ca.if_else(L[j, j] > 0.0, total / L[j, j], 0.0)
     return L
 
 

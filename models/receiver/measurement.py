@@ -118,6 +118,14 @@ class MeasurementModel:
         return ca.vertcat(*[wrap_angle(y[k]) if k in self.angles else y[k] for k in range(y.shape[0])])
 
 
+def white_gps_sigma(p: dict):
+    """The GPS error per axis a receiver puts in R [m]: ``beacon_gps_sigma``, or 0 where it carries the error as
+    states (``gps_correlation_time`` > 0; a receiver that declares no such parameter: in R)."""
+    if "gps_correlation_time" not in p:
+        return p["beacon_gps_sigma"]
+    return ca.if_else(p["gps_correlation_time"] > 0.0, 0.0, p["beacon_gps_sigma"])
+
+
 def _range_model(name: str, size: int, position_index: tuple[int, ...]) -> ca.Function:
     """casadi Function ``(x[size], b[3]) -> (‖p(x) − b‖, ∂h/∂x [size])`` with ``p = x[position_index]``."""
     x = ca.SX.sym("x", size)
@@ -146,6 +154,18 @@ def beacon_range_function() -> ca.Function:
     return ca.Function("sblsim_beacon_range", [p, b], [ca.jacobian(ca.norm_2(p - b), b).T], ["p", "b"], ["dh_db"])
 
 
+@lru_cache(maxsize=None)
+def error_range_function(motion) -> ca.Function:
+    """casadi Function ``(x[n], b[3], clock) -> (h, ∂h/∂x [n])`` of one range at the state ``x`` of a motion model
+    that carries error states: ``‖p − (b − e)‖ + clock · offset``, e the state's GPS error of the broadcast
+    position and ``offset`` its clock offset [s] (``clock`` [m/s]: the assumed sound speed of a one-way range
+    with clock states, else 0)."""
+    x, b, clock = ca.SX.sym("x", motion.state_size), ca.SX.sym("b", 3), ca.SX.sym("clock")
+    h = ca.norm_2(motion.position(x) - (b - motion.gps_error(x))) + clock * motion.clock_offset(x)
+    return ca.Function("sblsim_error_range", [x, b, clock], [h, ca.jacobian(h, x).T], ["x", "b", "clock"],
+                       ["h", "H"])
+
+
 class RangeDepthModel(MeasurementModel):
     """Ranges to broadcast beacons plus depth: ``z = [‖p − b_1‖, …, ‖p − b_m‖, d]`` [m].
 
@@ -172,14 +192,18 @@ class RangeDepthModel(MeasurementModel):
     Cario et al., Sensors 21(3):762, 2021, Section 4.3.
     """
 
-    state_size = STATE_SIZE
-    depth_row = (0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
-
     def __init__(self, motion=CONSTANT_VELOCITY) -> None:
-        if motion.state_size != STATE_SIZE or tuple(motion.position_index) != POSITION_INDEX:
-            raise ValueError(f"RangeDepthModel: the state must be laid out as {STATE_SIZE} entries with the "
-                             f"position at {POSITION_INDEX}, got {motion.state_size} and {motion.position_index}")
+        if motion.state_size < STATE_SIZE or tuple(motion.position_index) != POSITION_INDEX:
+            raise ValueError(f"RangeDepthModel: the state must begin with the {STATE_SIZE} entries of the constant "
+                             f"velocity, the position at {POSITION_INDEX}, got {motion.state_size} and "
+                             f"{motion.position_index}")
         super().__init__(motion)
+        self.depth_row = tuple(1.0 if i == POSITION_INDEX[2] else 0.0 for i in range(motion.state_size))
+
+    @property
+    def errors(self) -> bool:
+        """The motion model carries error states (the GPS error, the clock) that a range reads."""
+        return self.motion.state_size > STATE_SIZE
 
     def dimension(self, context) -> int:
         """m + 1: the ranges and the depth."""
@@ -191,7 +215,7 @@ class RangeDepthModel(MeasurementModel):
 
     def h(self, x, beacons) -> ca.SX:
         """Predicted measurement ``[‖p − b_i‖ …, p_z]``, (m + 1, 1) [m]."""
-        return ca.vertcat(*[range_function()(x, b)[0] for b in beacons], self.depth(x))
+        return ca.vertcat(*[self.range_row(x, b)[0] for b in beacons], self.depth(x))
 
     def linearize(self, x, beacons) -> tuple[ca.SX, ca.SX]:
         """``h`` (m + 1, 1) and ``∂h/∂x`` (m + 1, 6): one casadi range Function call per beacon, the depth row."""
@@ -200,16 +224,21 @@ class RangeDepthModel(MeasurementModel):
                 ca.vertcat(*[r[1] for r in rows], self.depth_jacobian()))
 
     def jacobian(self, x, beacons) -> ca.SX:
-        """``∂h/∂x``, (m + 1, 6): the casadi-derived range rows and the depth row."""
-        return ca.vertcat(*[range_function()(x, b)[1].T for b in beacons], self.depth_jacobian())
+        """``∂h/∂x``, (m + 1, n): the casadi-derived range rows and the depth row."""
+        return ca.vertcat(*[self.range_row(x, b)[1] for b in beacons], self.depth_jacobian())
 
-    def range_row(self, x, beacon) -> tuple[ca.SX, ca.SX]:
-        """One range: its prediction [m] and its Jacobian row (1, 6)."""
-        h, H = range_function()(x, beacon)
+    def range_row(self, x, beacon, clock=0.0) -> tuple[ca.SX, ca.SX]:
+        """One range: its prediction [m] and its Jacobian row (1, n). With error states
+        (:func:`error_range_function`) the broadcast position is corrected by the state's GPS error and ``clock``
+        [m/s] times the state's clock offset is added (0: none)."""
+        if not self.errors:
+            h, H = range_function()(x, beacon)
+        else:
+            h, H = error_range_function(self.motion)(x, beacon, clock)
         return h, H.T
 
     def depth_jacobian(self) -> ca.SX:
-        """``∂d/∂x``, (1, 6)."""
+        """``∂d/∂x``, (1, n)."""
         return ca.horzcat(*self.depth_row)
 
     def variances(self, x, beacons, p: dict) -> ca.SX:
@@ -270,11 +299,13 @@ class RangeDepthModel(MeasurementModel):
     def fresh_range_variance(self, x, beacon, p: dict) -> ca.SX:
         """A fresh range's variance in R [m²] from the receiver's parameters: :meth:`range_variance` with σ_r²
         and an isotropic beacon error ``σ_GPS² + (σ_att · arm)²`` per axis (``beacon_gps_sigma`` [m],
-        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m]: the attitude error taken isotropic)."""
+        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m]: the attitude error taken isotropic); the GPS
+        term is left out where the receiver carries the GPS error as states (``gps_correlation_time`` > 0)."""
         attitude = p["beacon_attitude_sigma_deg"] * math.pi / 180.0
         return self.range_variance(self.position(x), beacon, p["sigma_range"] ** 2,
-                                   p["beacon_gps_sigma"] ** 2 + (attitude * p["beacon_arm"]) ** 2)
+                                   white_gps_sigma(p) ** 2 + (attitude * p["beacon_arm"]) ** 2)
 
 
 __all__ = ["MeasurementModel", "POSITION_INDEX", "RangeDepthModel", "STATE_SIZE", "beacon_range_function",
+           "error_range_function", "white_gps_sigma",
            "position_range_function", "range_function", "wrap_angle"]

@@ -62,6 +62,10 @@ class ConstantVelocity:
         """The constant attitude error (roll, pitch, yaw) the state carries, (3, 1) [rad]: none here (zeros)."""
         return ca.SX.zeros(3)
 
+    def clock_offset(self, x) -> ca.SX:
+        """The receiver clock's offset the state carries [s]: none here (0)."""
+        return ca.SX(0.0)
+
     def transition(self, dt) -> ca.SX:
         """Transition matrix Φ, (6, 6), for a step ``dt`` [s]."""
         phi = ca.SX.eye(self.state_size)
@@ -102,7 +106,95 @@ class ConstantVelocity:
         return ca.diag(ca.vertcat(*[position_std**2, velocity_std**2] * 3))
 
 
+class WithErrorStates(ConstantVelocity):
+    """Constant velocity plus the error states of the broadcast positions and of the receiver's clock.
+
+    The state is ``[posX, velX, posY, velY, posZ, velZ, gps_x, gps_y, gps_z, clock_offset, clock_drift,
+    attitude_roll, attitude_pitch, attitude_yaw]``:
+
+    * ``gps_*`` [m]: the GPS error of the positions the platform broadcasts (North, East, Down), a first-order
+      Gauss-Markov process of standard deviation σ_g and correlation time τ, exactly discretized,
+      ``e_k+1 = φ e_k + w_k``, ``φ = exp(−Δt / τ)``, ``var(w) = σ_g² (1 − φ²)`` (the platform's
+      ``gps_model = "gauss-markov"``): the broadcast position is the true one plus it;
+    * ``clock_offset`` [s] and ``clock_drift`` [1]: the receiver clock's error after its power-on
+      synchronization, ``offset_k+1 = offset_k + Δt drift_k``, the drift constant (a one-way travel time is
+      measured late by the offset at reception);
+    * ``attitude_*`` [rad]: a constant error of the attitude the surface turns directions with (the IMU's
+      bias, a USBL array's mounting misalignment), per Euler angle.
+
+    Each block is inert with a zero prior (its rows of P stay zero): a receiver that models none of them
+    computes what it computes with :class:`ConstantVelocity`. The ``errors`` mapping of :meth:`predict` and
+    :meth:`initial_covariance` holds ``gps_sigma`` (σ_g, 0: none) [m], ``gps_tau`` (τ) [s],
+    ``clock_drift_sigma`` (the drift's prior std, 0: none) [1] and ``attitude_sigma`` (the attitude error's
+    prior std per angle, 0: none) [rad].
+
+    References
+    ----------
+    Brown, Hwang, Introduction to Random Signals and Applied Kalman Filtering, 4th ed., Wiley 2012, Sections
+    2.9 (Gauss-Markov process) and 9.3 (clock model, augmented states). Bar-Shalom, Li, Kirubarajan 2001,
+    Section 6.2.2.
+    """
+
+    state_names = ConstantVelocity.state_names + ("gps_x", "gps_y", "gps_z", "clock_offset", "clock_drift",
+                                                  "attitude_roll", "attitude_pitch", "attitude_yaw")
+    state_size = 14
+    gps_index = (6, 7, 8)
+    clock_index = (9, 10)
+    attitude_index = (11, 12, 13)
+
+    def gps_error(self, x) -> ca.SX:
+        """The GPS error of the broadcast positions, (3, 1) [m]."""
+        return ca.vertcat(*[x[i] for i in self.gps_index])
+
+    def clock_offset(self, x) -> ca.SX:
+        """The receiver clock's offset [s]."""
+        return x[self.clock_index[0]]
+
+    def attitude_bias(self, x) -> ca.SX:
+        """The constant attitude error (roll, pitch, yaw), (3, 1) [rad]."""
+        return ca.vertcat(*[x[i] for i in self.attitude_index])
+
+    def transition(self, dt, gps_decay=1.0) -> ca.SX:
+        """Φ (14, 14) for a step ``dt`` [s]: constant velocity, ``gps_decay`` = φ on the GPS error (1: the map of
+        a packet's reference epoch, where the error does not change over the packet's age), the clock's offset
+        moved by its drift, the attitude error constant."""
+        phi = ca.SX.eye(self.state_size)
+        phi[:6, :6] = ConstantVelocity().transition(dt)
+        for i in self.gps_index:
+            phi[i, i] = gps_decay
+        phi[self.clock_index[0], self.clock_index[1]] = dt
+        return phi
+
+    def process_noise(self, dt, q_horizontal, q_vertical, gps_variance=0.0) -> ca.SX:
+        """Q (14, 14): the constant velocity's, and ``gps_variance`` = σ_g² (1 − φ²) [m²] on the GPS error."""
+        q = ca.SX.zeros(self.state_size, self.state_size)
+        q[:6, :6] = ConstantVelocity().process_noise(dt, q_horizontal, q_vertical)
+        for i in self.gps_index:
+            q[i, i] = gps_variance
+        return q
+
+    def predict(self, x, P, dt, q_horizontal, q_vertical, errors=None) -> tuple[ca.SX, ca.SX]:
+        """``x ← Φx``, ``P ← ΦPΦᵀ + Q`` for a step ``dt`` [s] with the ``errors`` mapping (class docstring; None:
+        the error states inert)."""
+        if errors is None:
+            return linear_predict(x, P, self.transition(dt, 0.0), self.process_noise(dt, q_horizontal, q_vertical))
+        decay = ca.exp(-dt / ca.fmax(errors["gps_tau"], 1e-9))
+        return linear_predict(x, P, self.transition(dt, decay), self.process_noise(
+            dt, q_horizontal, q_vertical, errors["gps_sigma"] ** 2 * (1.0 - decay * decay)))
+
+    def initial_covariance(self, position_std, velocity_std, errors=None) -> ca.SX:
+        """Diagonal initial covariance (14, 14): the constant velocity's, the GPS error's stationary σ_g², the
+        clock's offset 0 (synchronized at power-on) and its drift's prior, the attitude error's prior."""
+        if errors is None:
+            errors = {"gps_sigma": 0.0, "clock_drift_sigma": 0.0, "attitude_sigma": 0.0}
+        diagonal = [position_std**2, velocity_std**2] * 3 + [errors["gps_sigma"] ** 2] * 3 + [
+            0.0, errors["clock_drift_sigma"] ** 2] + [errors["attitude_sigma"] ** 2] * 3
+        return ca.diag(ca.vertcat(*diagonal))
+
+
 #: The motion model of the built-in Kalman receivers and of the accuracy bound.
 CONSTANT_VELOCITY = ConstantVelocity()
+#: The motion model of the receivers that carry error states (``ekf-seq``, ``ukf``) and of their bound.
+WITH_ERROR_STATES = WithErrorStates()
 
-__all__ = ["CONSTANT_VELOCITY", "ConstantVelocity"]
+__all__ = ["CONSTANT_VELOCITY", "ConstantVelocity", "WITH_ERROR_STATES", "WithErrorStates"]

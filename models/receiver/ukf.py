@@ -27,12 +27,18 @@ from sblsim.models.receiver import kalman
 from sblsim.models.receiver.core import (
     KalmanReceiver,
     beacon_parameters,
+    clock_scale,
+    earlier_innovation,
     filter_parameters,
+    first_row,
     fresh_range,
+    remember_rejected,
     reply_epoch,
     take_packet,
 )
 from sblsim.models.receiver.gate import gate, gate_parameters
+from sblsim.models.receiver.measurement import RangeDepthModel
+from sblsim.models.receiver.motion import WITH_ERROR_STATES
 from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 
 
@@ -60,11 +66,13 @@ def unscented_update(x, P, points, wm, wc, z_points, z, R) -> tuple[ca.SX, ca.SX
 
 
 class UnscentedReceiver(KalmanReceiver):
-    """Unscented Kalman filter: fresh range and depth, beacon uncertainty in R, NIS gate."""
+    """Unscented Kalman filter: fresh range and depth, beacon uncertainty in R, error states, NIS gate."""
 
     name = "receiver_ukf"
     label = "ukf"
     backdate = True
+    motion = WITH_ERROR_STATES
+    measurement = RangeDepthModel(WITH_ERROR_STATES)
 
     @classmethod
     def parameters(cls, n_beacons: int) -> tuple[Variable, ...]:
@@ -79,20 +87,29 @@ class UnscentedReceiver(KalmanReceiver):
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
-        A = cls.reference(x, u)  # each sigma point's range at the packet's reference epoch
+        epoch = cls.epoch(u, p)
+        clock = clock_scale(p)
+        A = cls.reference(x, u, epoch)  # each sigma point's range at the packet's reference epoch
         variance = m.fresh_range_variance(ca.mtimes(A, x["x"]), beacon, p)
-        def predicted(c):  # the range at the reference epoch, the depth now
-            return ca.vertcat(m.h(ca.mtimes(A, c), [beacon])[0], m.depth(c))
 
-        return cls._update(x, u, p, n_beacons, fresh, predicted, rng,
-                           ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)))
+        def predicted(c):  # the range at the reference epoch, the depth now
+            return ca.vertcat(m.range_row(ca.mtimes(A, c), beacon, clock)[0], m.depth(c))
+
+        def row(then, beacon):  # a range at the state ``then`` (the re-acquisition's linearized test)
+            return (*m.range_row(then, beacon, clock), m.fresh_range_variance(then, beacon, p))
+
+        earlier = earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons)
+        out = cls._update(x, u, p, n_beacons, fresh, predicted, rng,
+                          ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)), earlier)
+        return {**out, **remember_rejected(x, u, out["rejecting"], rng, beacon, epoch, n_beacons)}
 
     @classmethod
     def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, covariance) -> dict:
         """The unscented update with the packet's rows (range and direction) and the depth; each sigma point's
         predicted rows are taken within ``model.residual`` of the measured ones (rows that are angles within π,
         so that their mean does not straddle ±π); R from ``covariance`` at the predicted state, full."""
-        A = cls.reference(x, u, reply_epoch(u))  # the packet's rows at the reply, the depth now
+        epoch = reply_epoch(u)
+        A = cls.reference(x, u, epoch)  # the packet's rows at the reply, the depth now
 
         def predicted(c):
             return ca.vertcat(z - model.residual(z, model.h(ca.mtimes(A, c), context)), cls.measurement.depth(c))
@@ -101,12 +118,15 @@ class UnscentedReceiver(KalmanReceiver):
         R = ca.SX.zeros(m + 1, m + 1)
         R[:m, :m] = covariance(ca.mtimes(A, x["x"]))
         R[m, m] = p["sigma_depth"] ** 2
-        return cls._update(x, u, p, 1, fresh, predicted, z, R)
+        earlier = earlier_innovation(cls, x, u, x["x"], x["P"], first_row(model, context, covariance), 1)
+        out = cls._update(x, u, p, 1, fresh, predicted, z, R, earlier)
+        return {**out, **remember_rejected(x, u, out["rejecting"], z[0], context[0], epoch, 1)}
 
     @classmethod
-    def _update(cls, x: dict, u: dict, p: dict, n_beacons: int, fresh, h, z, R) -> dict:
+    def _update(cls, x: dict, u: dict, p: dict, n_beacons: int, fresh, h, z, R, earlier=None) -> dict:
         """The unscented update with the packet's rows ``z`` (predicted by ``h``) and the depth (their noise
-        ``R``), the first row through the gate; the depth alone when the packet is not used."""
+        ``R``), the first row through the gate (``earlier``: its re-acquisition test); the depth alone when the
+        packet is not used."""
         m = cls.measurement
         state, P = x["x"], x["P"]
         sigma = MerweScaledSigmaPoints(cls.motion.state_size, p["alpha"], p["beta"], p["kappa"])
@@ -116,11 +136,11 @@ class UnscentedReceiver(KalmanReceiver):
         depth = unscented_update(state, P, points, wm, wc, [m.depth(c) for c in points], u["depth"],
                                  ca.SX(p["sigma_depth"] ** 2))
         y, S = joint[2], joint[3]
-        checked = gate(y[0], S[0, 0], fresh, x, u, p)
+        checked = gate(y[0], S[0, 0], fresh, x, u, p, earlier)
         use = checked["use"]
         return {**take_packet(x, u, n_beacons), "x": ca.if_else(use, joint[0], depth[0]),
                 "P": ca.if_else(use, joint[1], depth[1]), "nis": ca.if_else(use, joint[4], depth[4]),
-                "gated": checked["gated"], "failed": checked["failed"]}
+                "gated": checked["gated"], "failed": checked["failed"], "rejecting": checked["rejecting"]}
 
 
 __all__ = ["UnscentedReceiver", "unscented_update"]

@@ -186,9 +186,16 @@ class System:
 
     def receiver_ties(self, platform: Mapping[str, Any]) -> dict[str, float]:
         """What the receivers' beacon-uncertainty parameters are tied to: ``beacon_gps_sigma`` [m],
-        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m] (default: GPS, IMU, the largest arm)."""
-        return {"beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
-                "beacon_arm": float(max(np.linalg.norm(self.offsets(platform), axis=1)))}
+        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m], ``gps_correlation_time`` [s] and
+        ``attitude_bias_sigma_deg`` [deg] (default: GPS, the IMU's white error with its constant errors (bias,
+        axis misalignment) taken as white, the largest arm, the GPS error's correlation time where it is a
+        Gauss-Markov process, no attitude states)."""
+        constant = (platform["imu_bias_deg"], platform["imu_misalignment_deg"])
+        attitude = platform["imu_sigma_deg"] if not any(constant) else math.hypot(platform["imu_sigma_deg"], *constant)
+        return {"beacon_gps_sigma": platform["gps_sigma"], "beacon_attitude_sigma_deg": attitude,
+                "beacon_arm": float(max(np.linalg.norm(self.offsets(platform), axis=1))),
+                "gps_correlation_time": platform["gps_tau"] if platform["gps_model"] == "gauss-markov" else 0.0,
+                "attitude_bias_sigma_deg": 0.0}
 
     def position_errors(self, platform: Mapping[str, Any]) -> tuple[float, float]:
         """Standard deviations of the broadcast transducer position, (position per axis [m], attitude [rad]):

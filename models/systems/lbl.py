@@ -94,8 +94,9 @@ class LBL(SBL):
                              "site's depth, below the diver")
 
     def receiver_ties(self, platform: Mapping[str, Any]) -> dict[str, float]:
-        """Surveyed transponders: the survey error in place of GPS, no attitude, no arm."""
-        return {"beacon_gps_sigma": platform["survey_sigma"], "beacon_attitude_sigma_deg": 0.0, "beacon_arm": 0.0}
+        """Surveyed transponders: the survey error in place of GPS, no attitude, no arm, no error states."""
+        return {"beacon_gps_sigma": platform["survey_sigma"], "beacon_attitude_sigma_deg": 0.0, "beacon_arm": 0.0,
+                "gps_correlation_time": 0.0, "attitude_bias_sigma_deg": 0.0}
 
     def position_errors(self, platform: Mapping[str, Any]) -> tuple[float, float]:
         """The survey error, no attitude error."""

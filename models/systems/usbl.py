@@ -89,6 +89,12 @@ from sblsim.models.systems import System, register
 MIN_ANGLE_SIGMA_DEG = 1e-3
 #: The USBL measurement model of the receivers.
 MODEL = RangeDirectionModel()
+@lru_cache(maxsize=None)
+def model_of(motion) -> RangeDirectionModel:
+    """The packet's model of a receiver's motion model (its state layout)."""
+    return RangeDirectionModel(motion)
+
+
 #: The measurement model of the bound (its motion model's).
 BOUND_MODEL = RangeDirectionModel(MOTION)
 #: Gauss-Newton iterations of the packet's least-squares fix from its polar fix (:func:`packet_fix`).
@@ -158,24 +164,33 @@ def polar_fix(u: dict) -> ca.SX:
     return transceiver(u) + u["range"] * direction(u)
 
 
-def transceiver_variance(p: dict):
+def transceiver_variance(p: dict, states: bool = True):
     """``σ_b² = σ_GPS² + (σ_att a)²`` [m²]: the receivers' isotropic per-axis variance of the broadcast transceiver
     position, the GPS error and the lever arm ``a`` turned by the attitude error (taken isotropic), as for a
     range (:meth:`~sblsim.models.receiver.measurement.RangeDepthModel.fresh_range_variance`); from
     ``beacon_gps_sigma`` [m], ``beacon_attitude_sigma_deg`` [deg] and ``beacon_arm`` [m], each 0 where the receiver
-    does not declare it (``p`` is read with ``get``)."""
+    does not declare it (``p`` is read with ``get``). With ``states``, the GPS error is left out where the receiver
+    carries it as states (``gps_correlation_time`` > 0)."""
     att = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
-    return p.get("beacon_gps_sigma", 0.0) ** 2 + (att * p.get("beacon_arm", 0.0)) ** 2
+    gps = p.get("beacon_gps_sigma", 0.0)
+    if states and "gps_correlation_time" in p:
+        gps = ca.if_else(p["gps_correlation_time"] > 0.0, 0.0, gps)
+    return gps ** 2 + (att * p.get("beacon_arm", 0.0)) ** 2
 
 
-def covariance(x, ctx, p: dict, model: RangeDirectionModel = MODEL) -> ca.SX:
+def covariance(x, ctx, p: dict, model: RangeDirectionModel = MODEL, states: bool = True) -> ca.SX:
     """The receivers' R (3, 3) at the state ``x`` (n, 1) of ``model``: :meth:`RangeDirectionModel.covariance
     <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>` with ``σ_r = sigma_range``,
     ``σ_u = sigma_angle_deg`` [rad], ``σ_b² =`` :func:`transceiver_variance` and ``σ_θ = beacon_attitude_sigma_deg``
-    (a receiver that declares no beacon uncertainty: σ_b = σ_θ = 0)."""
-    att = p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)
+    (a receiver that declares no beacon uncertainty: σ_b = σ_θ = 0). With ``states`` (a filter that carries the
+    error states), what they carry is left out: the GPS error of a positive ``gps_correlation_time`` and the
+    constant attitude error; without (one packet's fix), the constant attitude error's prior
+    ``attitude_bias_sigma_deg`` joins the white one."""
+    att = (p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)) ** 2
+    if not states:
+        att = att + (p.get("attitude_bias_sigma_deg", 0.0) * (math.pi / 180.0)) ** 2
     return model.covariance(x, ctx, p["sigma_range"] ** 2, (p["sigma_angle_deg"] * (math.pi / 180.0)) ** 2,
-                            transceiver_variance(p), att ** 2)
+                            transceiver_variance(p, states), att)
 
 
 def _depth_row(n: int, index: int) -> ca.SX:
@@ -213,7 +228,7 @@ def packet_fix(u: dict, p: dict, depth) -> tuple[ca.SX, ca.SX, ca.SX]:
     """
     ctx, z = context(u), measurement(u)
     point = polar_fix(u)
-    R = covariance(point, ctx, p, POSITION_MODEL)
+    R = covariance(point, ctx, p, POSITION_MODEL, states=False)
     depth_variance = p["sigma_depth"] ** 2
     e_z = _depth_row(3, 2)
 
@@ -228,7 +243,7 @@ def packet_fix(u: dict, p: dict, depth) -> tuple[ca.SX, ca.SX, ca.SX]:
         J, g, _ = normal(point)
         point = point + kalman.solve_spd(J, g)
     _, _, rss = normal(point)
-    J = position_information(point, ctx, covariance(point, ctx, p, POSITION_MODEL), depth_variance)
+    J = position_information(point, ctx, covariance(point, ctx, p, POSITION_MODEL, states=False), depth_variance)
     return point, kalman.symmetric(kalman.solve_spd(J, ca.SX.eye(3))), rss
 
 
@@ -458,6 +473,14 @@ class USBL(System):
     bound_fixed = FIXED
     bound_steps = STEPS
 
+    def receiver_ties(self, platform: Mapping[str, Any]) -> dict[str, float]:
+        """The ranging systems' ties (GPS, lever arm, the GPS error's correlation time), the IMU's white error
+        in R and its constant errors with the array's mounting misalignment as the attitude states' prior
+        (``attitude_bias_sigma_deg``)."""
+        constant = (platform["imu_bias_deg"], platform["imu_misalignment_deg"], platform["usbl_misalignment_deg"])
+        return {**super().receiver_ties(platform), "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
+                "attitude_bias_sigma_deg": math.hypot(*constant)}
+
     def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
         """The transceiver's body-frame lever arm (1, 3) [m]: ``(0, 0, transducer_depth)`` whatever
         ``baseline``, or a custom layout's one offset."""
@@ -528,14 +551,15 @@ class USBL(System):
         return packet_fix(u, p, depth)
 
     def receiver_update(self, receiver, x: dict, u: dict, p: dict, fresh) -> dict:
-        """The receiver's update at a slot with this system's packet: ``receiver.packet_update`` with
-        :data:`MODEL`, the packet's context, ``z = [r, a_x, a_y]`` and R from :func:`covariance`."""
-        ctx = context(u)
-        return receiver.packet_update(x, u, p, fresh, MODEL, ctx, measurement(u),
-                                      lambda state: covariance(state, ctx, p))
+        """The receiver's update at a slot with this system's packet: ``receiver.packet_update`` with the packet's
+        model of the receiver's state (:func:`model_of`), its context, ``z = [r, a_x, a_y]`` and R from
+        :func:`covariance`."""
+        ctx, model = context(u), model_of(receiver.motion)
+        return receiver.packet_update(x, u, p, fresh, model, ctx, measurement(u),
+                                      lambda state: covariance(state, ctx, p, model))
 
 
 __all__ = ["BOUND_MODEL", "FIXED", "FIX_ITERATIONS", "MIN_ANGLE_SIGMA_DEG", "MODEL", "POSITION_MODEL", "STEPS", "USBL",
            "attitude", "bound_step", "compiled_bound", "context", "covariance", "direction", "fix_information",
-           "horizontal_std", "measurement", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
+           "horizontal_std", "measurement", "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
            "receiver_parameters", "transceiver", "transceiver_variance"]
