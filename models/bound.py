@@ -78,7 +78,7 @@ import numpy as np
 
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.measurement import RangeDepthModel
-from sblsim.models.receiver.motion import CONSTANT_VELOCITY
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY, WITH_ERROR_STATES
 
 #: The motion model of the bound (the receivers').
 MOTION = CONSTANT_VELOCITY
@@ -158,16 +158,43 @@ def measurement_information(P: ca.SX, model, x, context, variances, use, rows=No
     return P
 
 
-def predicted(motion) -> tuple[tuple[ca.SX, ...], ca.SX, ca.SX]:
+def predicted(motion, errors=None) -> tuple[tuple[ca.SX, ...], ca.SX, ca.SX]:
     """What every bound step shares: its first inputs ``(B (n²), dt, q_h, q_v, position (3))`` as symbols, the
-    state at the true position, and the bound after the prediction over ``dt`` with ``motion``, (n, n)."""
+    state at the true position, and the bound after the prediction over ``dt`` with ``motion``, (n, n) (with the
+    ``errors`` mapping of a motion model that carries error states,
+    :class:`~sblsim.models.receiver.motion.WithErrorStates`)."""
     n = motion.state_size
     B = ca.SX.sym("B", n * n)
     dt, qh, qv = ca.SX.sym("dt"), ca.SX.sym("q_h"), ca.SX.sym("q_v")
     position = ca.SX.sym("position", 3)
     x = state_at(motion, position)
-    _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv)
+    if errors is None:
+        _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv)
+    else:
+        _, P = motion.predict(x, ca.reshape(B, n, n), dt, qh, qv, errors)
     return (B, dt, qh, qv, position), x, P
+
+
+#: The names of the error sources of a bound with error states (the ``errors`` mapping of
+#: :class:`~sblsim.models.receiver.motion.WithErrorStates`), in the order of its per-run inputs.
+ERROR_NAMES = ("gps_sigma", "gps_tau", "clock_drift_sigma", "attitude_sigma")
+
+
+def error_symbols() -> dict[str, ca.SX]:
+    """The ``errors`` mapping as symbols, by :data:`ERROR_NAMES`."""
+    return {name: ca.SX.sym(name) for name in ERROR_NAMES}
+
+
+def error_prior(motion, named: dict) -> ca.SX:
+    """The prior of a bound (n², column-major) from per-run inputs by name: ``p0_position``, ``p0_velocity`` and,
+    for a motion model with error states, the priors of :data:`ERROR_NAMES`
+    (:meth:`~sblsim.models.receiver.motion.WithErrorStates.initial_covariance`)."""
+    if motion.state_size == STATE_SIZE:
+        prior = motion.initial_covariance(named["p0_position"], named["p0_velocity"])
+    else:
+        prior = motion.initial_covariance(named["p0_position"], named["p0_velocity"],
+                                          {k: named[k] for k in ERROR_NAMES})
+    return ca.densify(ca.vec(prior))  # dense: generated code writes every entry, in order
 
 
 @lru_cache(maxsize=None)
@@ -203,6 +230,104 @@ def bound_step(model=MODEL) -> ca.Function:
              "depth_variance", "slot", "received"]
     return ca.Function("sblsim_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var, slot,
                                              received], [ca.vec(P)], names, ["B_next"])
+
+
+#: The motion model of the bound with error states: the receivers' that carry them.
+ERROR_MOTION = WITH_ERROR_STATES
+
+
+def error_range(x, beacon, arm, clock) -> ca.SX:
+    """A range at the state ``x`` of :data:`ERROR_MOTION` [m]: from the true beacon, the broadcast one ``beacon``
+    (3, 1) less the state's GPS error and less its attitude error turned through the beacon's lever arm ``arm``
+    (3, 1, NED) [m] (``β × a``, a small rotation), plus ``clock`` [m/s] times the clock's offset."""
+    motion = ERROR_MOTION
+    true = beacon - motion.gps_error(x) - ca.cross(motion.attitude_bias(x), arm)
+    return ca.norm_2(motion.position(x) - true) + clock * motion.clock_offset(x)
+
+
+@lru_cache(maxsize=None)
+def error_bound_step() -> ca.Function:
+    """One step of the bound of a ranging system with error states, as a casadi Function.
+
+    The state is :data:`ERROR_MOTION`'s (the position, the velocity, the broadcast positions' GPS error, a
+    Gauss-Markov process, the clock's offset and drift, a constant attitude error), predicted with their own
+    dynamics; the range row is :func:`error_range`'s at the true position (the error states at 0), with the
+    white part of its variance (the range noise, the white GPS error, the white attitude error through the
+    lever arm: :func:`effective_range_variance`): a bound on the mean squared error of an estimator that knows
+    these error sources as well as the receivers that carry them do (Tichavský et al. 1998, Eq. (21), the
+    error states as random parameters with their priors; Van Trees, Bell, Bayesian Bounds for Parameter
+    Estimation and Nonlinear Filtering/Tracking, Wiley 2007).
+
+    Inputs ``B (n²), dt, q_h, q_v, position (3), beacon (3), arm (3), noise_variance, attitude_variance,
+    depth_variance, gps_sigma [m], gps_tau [s], clock_drift_sigma [1], attitude_sigma [rad], clock [m/s], slot,
+    received``; output ``B_next``.
+    """
+    motion = ERROR_MOTION
+    errors = error_symbols()
+    (B, dt, qh, qv, position), x, P = predicted(motion, errors)
+    beacon, arm = ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
+    noise, attitude, d_var, clock, slot, received = (
+        ca.SX.sym(name) for name in ("noise_variance", "attitude_variance", "depth_variance", "clock", "slot",
+                                     "received"))
+    depth_row = ca.SX.zeros(1, motion.state_size)
+    depth_row[motion.position_index[2]] = 1.0
+    P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
+    s = ca.SX.sym("x", motion.state_size)
+    H = ca.substitute(ca.jacobian(error_range(s, beacon, arm, clock), s), s, x)
+    variance = effective_range_variance(position, beacon, arm, noise, attitude)
+    P = information_update(P, H, variance, ca.logic_and(slot, received))
+    names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
+             "depth_variance", *ERROR_NAMES, "clock", "slot", "received"]
+    return ca.Function("sblsim_error_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var,
+                                                   *errors.values(), clock, slot, received], [ca.vec(P)], names,
+                       ["B_next"])
+
+
+#: Per-replicate inputs of the bound with error states, in the order of its ``fixed`` columns (the compiled bound
+#: numbers them: :func:`compiled_error_bound`, :mod:`sblsim.fmus.contract`).
+ERROR_FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance",
+               "attitude_variance", "depth_variance", *ERROR_NAMES, "clock")
+#: Per-step inputs of the bound with error states: the true position, the transmitting beacon's broadcast
+#: position and lever arm (NED), the slot and the packet's reception.
+ERROR_STEPS = ("true_x", "true_y", "true_z", "beacon_x", "beacon_y", "beacon_z", "arm_x", "arm_y", "arm_z", "slot",
+               "received")
+
+
+def _error_inputs(f, s):
+    """The inputs of :func:`error_bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name and a
+    step's columns (:data:`ERROR_STEPS` order)."""
+    return (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"], f["depth_variance"],
+            *(f[k] for k in ERROR_NAMES), f["clock"], s[9:10], s[10:11])
+
+
+def error_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Position PCRB with error states along B runs (:func:`error_bound_step`, casadi's virtual machine), as
+    :func:`pcrb` (``fixed`` (B, len(ERROR_FIXED)), ``steps`` (N, B, len(ERROR_STEPS))); (N, B) [m]."""
+    return stepped(error_bound_step(), ERROR_MOTION, ERROR_FIXED, fixed, steps, _error_inputs)
+
+
+def packed_bound(step: ca.Function, motion, fixed_names: Sequence[str], step_names: Sequence[str],
+                 inputs) -> tuple[ca.Function, ca.Function]:
+    """A bound step with packed inputs, for code generation: ``sblsim_system_bound_prior(fixed) -> B0``
+    (:func:`error_prior`) and ``sblsim_system_bound_step(B, fixed, step) -> (B_next, error)``, ``fixed`` and
+    ``step`` in ``fixed_names`` and ``step_names`` order, ``inputs(f, s)`` the step's inputs after
+    ``(B, dt, q_h, q_v)``, ``error = sqrt(trace)`` of the position block [m]."""
+    n = motion.state_size
+    B, f, s = ca.SX.sym("B", n * n), ca.SX.sym("fixed", len(fixed_names)), ca.SX.sym("step", len(step_names))
+    named = {k: f[i] for i, k in enumerate(fixed_names)}
+    B_next = step(B, named["dt"], named["q_horizontal"], named["q_vertical"], *inputs(named, s))
+    index = [i * (n + 1) for i in motion.position_index]
+    error = ca.sqrt(B_next[index[0]] + B_next[index[1]] + B_next[index[2]])
+    return (ca.Function("sblsim_system_bound_prior", [f], [error_prior(motion, named)], ["fixed"], ["B0"]),
+            ca.Function("sblsim_system_bound_step", [B, f, s], [B_next, error], ["B", "fixed", "step"],
+                        ["B_next", "error"]))
+
+
+@lru_cache(maxsize=None)
+def compiled_error_bound() -> tuple[ca.Function, ca.Function]:
+    """The bound with error states with packed inputs (:func:`packed_bound` of :func:`error_bound_step`): what
+    the local engine's library of the ranging interface compiles as its system's own bound."""
+    return packed_bound(error_bound_step(), ERROR_MOTION, ERROR_FIXED, ERROR_STEPS, _error_inputs)
 
 
 #: Per-replicate inputs of the bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled metrics pass
@@ -277,17 +402,17 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
 
 def stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, steps: np.ndarray,
              inputs) -> np.ndarray:
-    """A bound step Function stepped along B runs (casadi's virtual machine, mapped over B): the prior from
-    ``p0_position`` and ``p0_velocity``, then at each row ``step(B, dt, q_h, q_v, *inputs(f, s))`` with ``f``
-    the fixed columns by name (``names``) and ``s`` the row's step columns (transposed, (columns, B));
-    ``sqrt(trace)`` of the position block at each step, (N, B) [m]."""
+    """A bound step Function stepped along B runs (casadi's virtual machine, mapped over B): the prior
+    (:func:`error_prior`), then at each row ``step(B, dt, q_h, q_v, *inputs(f, s))`` with ``f`` the fixed columns
+    by name (``names``) and ``s`` the row's step columns (transposed, (columns, B)); ``sqrt(trace)`` of the
+    position block at each step, (N, B) [m]."""
     n, b = steps.shape[:2]
     size = motion.state_size
     f = {k: fixed[:, i][None, :] for i, k in enumerate(names)}
     step = step.map(b)
-    bound = np.zeros((size * size, b))
-    for index, key in ((motion.position_index, "p0_position"), (motion.velocity_index, "p0_velocity")):
-        bound[np.asarray(index) * (size + 1)] = f[key] ** 2
+    symbols = {k: ca.SX.sym(k) for k in names}
+    prior = ca.Function("prior", list(symbols.values()), [error_prior(motion, symbols)]).map(b)
+    bound = np.asarray(prior(*[f[k] for k in names]))
     out = np.empty((n, b))
     for k in range(n):
         s = steps[k].T
@@ -470,7 +595,8 @@ def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.nd
     return np.where(np.isfinite(drms), drms, np.inf)
 
 
-__all__ = ["FIXED", "MODEL", "MOTION", "bound_step", "effective_range_variance", "fisher_information",
-           "fix_information", "horizontal_drms", "horizontal_std", "information_update", "measurement_information",
-           "model_horizontal_std", "pcrb", "pcrb_inputs", "per_point", "position_information", "predicted", "state_at",
-           "stepped"]
+__all__ = ["bound_step", "compiled_error_bound", "effective_range_variance", "error_bound_step", "ERROR_FIXED",
+           "ERROR_MOTION", "ERROR_NAMES", "error_pcrb", "error_prior", "error_range", "ERROR_STEPS", "error_symbols",
+           "fisher_information", "fix_information", "FIXED", "horizontal_drms", "horizontal_std",
+           "information_update", "measurement_information", "MODEL", "model_horizontal_std", "MOTION", "packed_bound",
+           "pcrb", "pcrb_inputs", "per_point", "position_information", "predicted", "state_at", "stepped"]

@@ -417,7 +417,9 @@ def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> di
     :meth:`~sblsim.models.systems.System.receiver_ties`); ``angle_sigma_deg``, the USBL
     direction-of-arrival std on the array's axis, ``platform.usbl_angle_sigma_deg``
     [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
-    :func:`sblsim.models.systems.usbl.pcrb`).
+    :func:`sblsim.models.systems.usbl.pcrb`); the error states of the bound, the system's
+    :meth:`~sblsim.models.systems.System.bound_errors` (a Gauss-Markov GPS error then leaves the white
+    variances).
     """
     target, platform = cfg["target"], cfg["platform"]
     names = ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")
@@ -426,13 +428,16 @@ def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> di
     else:
         motion = {k: cfg["receiver"].get(k, _FILTER_DEFAULTS[k]) for k in names}
     position, attitude = system.position_errors(platform)
+    errors = system.bound_errors(cfg)
+    if errors["gps_sigma"] > 0.0:  # a Gauss-Markov GPS error is a state of the bound, not white noise
+        position = 0.0
     arm = system.receiver_ties(platform)["beacon_arm"]
     return {**motion, "noise_variance": cfg["acoustics"]["sigma_range"] ** 2 + position ** 2,
             "range_variance": cfg["acoustics"]["sigma_range"] ** 2,
             "position_variance": position ** 2 + (attitude * arm) ** 2,
             "attitude_variance": attitude ** 2,
             "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
-            "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
+            "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG), **errors}
 
 
 def make_plan(config: Mapping[str, Any]) -> RunPlan:

@@ -362,45 +362,61 @@ FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid"
 def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
              with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
     """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass
-    (a system with a bound of its own, :func:`_system_bound`, replaces the pass's range-only one)."""
+    (the runs whose system steps a bound of its own, :func:`_system_bound`, take that one in place of the pass's
+    range bound: USBL's, or a ranging system's with error states)."""
     dt = plans[0].sampling_time
     parameters = [p.bound for p in plans]
     fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in parameters])  # (B, 8)
     arms = np.stack([p.lever_arms for p in plans], axis=0)  # (B, n, 3)
     system = plans[0].system
-    own = bool(system.bound_fixed)  # the system steps a bound of its own
+    own = np.array([system.own_bound(p) for p in parameters])  # the runs that step the system's own bound
     values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
-                                with_bound and not own)
-    if own:
-        bound = _system_bound(system, rec, dt, parameters, arms.shape[1])
-        values["pcrb_rms"] = np.sqrt(np.mean(np.ascontiguousarray(bound.T) ** 2, axis=-1))
-        bound = bound if with_bound else None
+                                with_bound and not own.all())
+    if own.any():
+        chosen = np.flatnonzero(own)
+        theirs = _system_bound(system, rec, None if own.all() else chosen, dt, [parameters[i] for i in chosen],
+                               arms[chosen])
+        if with_bound:
+            bound = np.empty((theirs.shape[0], len(plans))) if bound is None else bound
+            bound[:, chosen] = theirs
+        values["pcrb_rms"] = np.asarray(values["pcrb_rms"], dtype=float).copy()
+        values["pcrb_rms"][chosen] = np.sqrt(np.mean(np.ascontiguousarray(theirs.T) ** 2, axis=-1))
     spread = np.array([p.horizontal_spread for p in plans])
     flags = run_flags({name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, spread, arms.shape[1])
     return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
 
 
-def _system_bound(system, rec: dict, dt: float, parameters: Sequence[dict], n_beacons: int) -> np.ndarray:
-    """The position PCRB (N, B) [m] of a system with a bound of its own (USBL:
-    :func:`sblsim.models.systems.usbl.pcrb`), compiled (:func:`sblsim.fmus.native.system_pcrb`): its
+def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, parameters: Sequence[dict],
+                  arms: np.ndarray) -> np.ndarray:
+    """The position PCRB (N, B) [m] of runs that step the system's own bound (USBL's,
+    :func:`sblsim.models.systems.usbl.pcrb`; a ranging system's with error states,
+    :func:`sblsim.models.bound.error_pcrb`), compiled (:func:`sblsim.fmus.native.system_pcrb`): its
     per-run inputs :attr:`~sblsim.models.systems.System.bound_fixed` from the bound's parameters, its per-step
     inputs :attr:`~sblsim.models.systems.System.bound_steps` from the record (``true_*``, the position the
-    packet carries, the slot and whether the packet was received, and the system's own time-series columns:
-    USBL's attitude of the packet's direction)."""
-    column = {name: np.asarray(rec[TIMESERIES_COLUMNS[name]], dtype=float)
+    packet carries, the transmitting beacon's lever arm ``arms`` (B, n, 3), the slot and whether the packet was
+    received, and the system's own time-series columns: USBL's attitude of the packet's direction), of the runs
+    ``chosen`` among the record's columns (None: all of them)."""
+    def column_of(source: str) -> np.ndarray:
+        values = np.asarray(rec[source], dtype=float)
+        return values if chosen is None else values[:, chosen]
+
+    column = {name: column_of(TIMESERIES_COLUMNS[name])
               for name in ("true_x", "true_y", "true_z", "packet_seq", "packet_valid", "beacon_id", "beacon_x",
                            "beacon_y", "beacon_z")}
     received = (column["packet_valid"] > 0.5) & (np.rint(column["beacon_id"]) >= 1)
     slot, fresh = slots(np.rint(column["packet_seq"]), received)
+    index = np.clip(np.rint(column["beacon_id"]).astype(int) - 1, 0, arms.shape[1] - 1)  # (N, B)
+    arm = arms[np.arange(arms.shape[0])[None, :], index]  # (N, B, 3): the transmitting beacon's
     sources = {**{f"true_{a}": column[f"true_{a}"] for a in "xyz"},
-               **{f"transceiver_{a}": column[f"beacon_{a}"] for a in "xyz"}, "slot": slot, "received": fresh,
-               **{name: rec[source] for name, source in system.timeseries_columns.items() if source in rec}}
+               **{f"{kind}_{a}": column[f"beacon_{a}"] for kind in ("transceiver", "beacon") for a in "xyz"},
+               **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": slot, "received": fresh,
+               **{name: column_of(source) for name, source in system.timeseries_columns.items() if source in rec}}
     steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
                                           axis=-1))
     per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])
                                                       for k in system.bound_fixed[1:]}}
     fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
-    return native.system_pcrb(n_beacons, fixed, steps)
+    return native.system_pcrb(arms.shape[1], fixed, steps)
 
 
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:

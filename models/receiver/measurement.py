@@ -306,6 +306,6 @@ class RangeDepthModel(MeasurementModel):
                                    white_gps_sigma(p) ** 2 + (attitude * p["beacon_arm"]) ** 2)
 
 
-__all__ = ["MeasurementModel", "POSITION_INDEX", "RangeDepthModel", "STATE_SIZE", "beacon_range_function",
-           "error_range_function", "white_gps_sigma",
-           "position_range_function", "range_function", "wrap_angle"]
+__all__ = ["beacon_range_function", "error_range_function", "MeasurementModel", "POSITION_INDEX",
+           "position_range_function", "range_function", "RangeDepthModel", "STATE_SIZE", "white_gps_sigma",
+           "wrap_angle"]

@@ -197,6 +197,24 @@ class System:
                 "gps_correlation_time": platform["gps_tau"] if platform["gps_model"] == "gauss-markov" else 0.0,
                 "attitude_bias_sigma_deg": 0.0}
 
+    def bound_errors(self, cfg: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
+        """The error states of the system's bound (:data:`sblsim.models.bound.ERROR_NAMES`, and ``clock``): the GPS
+        error's std [m] and correlation time [s] where it is a Gauss-Markov process, the clock drift's prior std
+        [1] and what its offset adds to a range [m/s] (one-way ranging), the constant attitude error's std [rad]
+        (the IMU's bias and axis misalignment); 0 where there is none (default: an SBL's)."""
+        platform, acoustics = cfg["platform"], cfg["acoustics"]
+        markov, one_way = platform["gps_model"] == "gauss-markov", acoustics["ranging"] == "owtt"
+        return {"gps_sigma": platform["gps_sigma"] if markov else 0.0,
+                "gps_tau": platform["gps_tau"] if markov else 0.0,
+                "clock_drift_sigma": abs(acoustics["clock_drift_ppm"]) * 1e-6 if one_way else 0.0,
+                "attitude_sigma": math.radians(math.hypot(platform["imu_bias_deg"], platform["imu_misalignment_deg"])),
+                "clock": acoustics["sound_speed_assumed"] if one_way else 0.0}
+
+    def own_bound(self, parameters: Mapping[str, float]) -> bool:
+        """A run of the bound's ``parameters`` steps the system's own bound (:meth:`bound_function`), not the
+        metrics pass's range bound (default: where the system has one)."""
+        return bool(self.bound_fixed)
+
     def position_errors(self, platform: Mapping[str, Any]) -> tuple[float, float]:
         """Standard deviations of the broadcast transducer position, (position per axis [m], attitude [rad]):
         the bound's and the map's (default: GPS and IMU)."""

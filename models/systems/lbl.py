@@ -102,5 +102,9 @@ class LBL(SBL):
         """The survey error, no attitude error."""
         return platform["survey_sigma"], 0.0
 
+    def bound_errors(self, cfg: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
+        """The clock's (one-way ranging); surveyed transponders have no GPS or attitude."""
+        return {**super().bound_errors(cfg), "gps_sigma": 0.0, "gps_tau": 0.0, "attitude_sigma": 0.0}
+
 
 __all__ = ["LBL"]

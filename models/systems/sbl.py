@@ -8,7 +8,8 @@ the platform reference, which the waves move; the platform broadcasts
 (:mod:`sblsim.models.platform.core`). One packet measures one range (OWTT or
 TWTT); the receivers take ranges plus the depth
 (:class:`~sblsim.models.receiver.measurement.RangeDepthModel`); the bound and
-the accuracy map are the range bound of :mod:`sblsim.models.bound`.
+the accuracy map are the range bound of :mod:`sblsim.models.bound` (with error states where a run has
+error sources that are not white: :func:`sblsim.models.bound.error_bound_step`).
 
 References
 ----------
@@ -24,7 +25,7 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.bound import MODEL, bound_step, horizontal_std
+from sblsim.models.bound import ERROR_FIXED, ERROR_STEPS, MODEL, bound_step, compiled_error_bound, horizontal_std
 from sblsim.models.declarations import ModelError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import cross_offsets, layout_offsets, parse_offsets
@@ -87,9 +88,23 @@ class SBL(System):
         """Fresh ranges plus the depth (:class:`~sblsim.models.receiver.measurement.RangeDepthModel`, the bound's)."""
         return MODEL
 
+    bound_fixed = ERROR_FIXED
+    bound_steps = ERROR_STEPS
+
     def bound_step(self):
         """The range bound's step (:func:`sblsim.models.bound.bound_step`), which the compiled metrics pass steps."""
         return bound_step()
+
+    def bound_function(self):
+        """The bound with error states (:func:`sblsim.models.bound.compiled_error_bound`), stepped for a run that has
+        one (:meth:`own_bound`)."""
+        return compiled_error_bound()
+
+    def own_bound(self, parameters: Mapping[str, float]) -> bool:
+        """A run whose errors include one the bound carries as a state (a Gauss-Markov GPS error, a clock's drift,
+        a constant attitude error: :meth:`bound_errors`) steps the bound with error states; every other run the
+        metrics pass's range bound."""
+        return any(parameters[k] > 0.0 for k in ("gps_sigma", "clock_drift_sigma", "attitude_sigma"))
 
     def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
                        sigma_range: float, model=None) -> np.ndarray:

@@ -77,7 +77,15 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ATTITUDE
-from sblsim.models.bound import MOTION, information_update, per_point, predicted, stepped
+from sblsim.models.bound import (
+    ERROR_MOTION,
+    ERROR_NAMES,
+    information_update,
+    packed_bound,
+    per_point,
+    predicted,
+    stepped,
+)
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.geometry import parse_offsets, rotation_ned
 from sblsim.models.receiver import kalman
@@ -95,8 +103,8 @@ def model_of(motion) -> RangeDirectionModel:
     return RangeDirectionModel(motion)
 
 
-#: The measurement model of the bound (its motion model's).
-BOUND_MODEL = RangeDirectionModel(MOTION)
+#: The measurement model of the bound: the packet's for the receivers' state with error states.
+BOUND_MODEL = RangeDirectionModel(ERROR_MOTION)
 #: Gauss-Newton iterations of the packet's least-squares fix from its polar fix (:func:`packet_fix`).
 FIX_ITERATIONS = 3
 
@@ -253,13 +261,15 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
 
     Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m], attitude (3)
     [rad], range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
-    depth_variance [m²], slot, received (0 or 1)``; output the bound after the prediction over ``dt`` with
-    ``model.motion`` and, at a slot, the depth row, then (for a received packet) the three rows of ``model`` seen
-    from the transceiver and attitude the packet carries, H and R (:meth:`RangeDirectionModel.covariance
-    <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>`) at the true position, decorrelated
-    (:func:`~sblsim.models.receiver.kalman.whiten`) and added one at a time
-    (:func:`sblsim.models.bound.information_update`): what :func:`sblsim.models.bound.bound_step` does for a
-    range, for a USBL packet.
+    depth_variance [m²], gps_sigma [m], gps_tau [s], attitude_sigma [rad], slot, received (0 or 1)``; output the
+    bound after the prediction over ``dt`` with ``model.motion`` (its error states: the GPS error a Gauss-Markov
+    process of std ``gps_sigma`` and correlation time ``gps_tau`` where that is positive, a constant attitude
+    error of prior std ``attitude_sigma``) and, at a slot, the depth row, then (for a received packet) the three
+    rows of ``model`` seen from the transceiver and attitude the packet carries, H and R
+    (:meth:`RangeDirectionModel.covariance <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>`:
+    the white errors) at the true position, decorrelated (:func:`~sblsim.models.receiver.kalman.whiten`) and added
+    one at a time (:func:`sblsim.models.bound.information_update`): what :func:`sblsim.models.bound.bound_step`
+    does for a range, for a USBL packet.
 
     Parameters
     ----------
@@ -271,7 +281,9 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     Tichavský, Muravchik, Nehorai, IEEE Trans. Signal Processing 46(5), 1998, Eq. (21).
     """
     motion = model.motion
-    (B, dt, qh, qv, position), x, P = predicted(motion)
+    gps_sigma, gps_tau, attitude_sigma = ca.SX.sym("gps_sigma"), ca.SX.sym("gps_tau"), ca.SX.sym("attitude_sigma")
+    errors = {"gps_sigma": gps_sigma, "gps_tau": gps_tau, "clock_drift_sigma": 0.0, "attitude_sigma": attitude_sigma}
+    (B, dt, qh, qv, position), x, P = predicted(motion, errors)
     beacon, att = ca.SX.sym("transceiver", 3), ca.SX.sym("attitude", 3)
     noise, position_var, angle, attitude_var, d_var, slot, received = (
         ca.SX.sym(name) for name in ("range_variance", "position_variance", "angle_sigma_deg", "attitude_variance",
@@ -284,16 +296,18 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     for k in range(3):
         P = information_update(P, Hw[k, :], 1.0, use)
     names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "attitude", "range_variance", "position_variance",
-             "angle_sigma_deg", "attitude_variance", "depth_variance", "slot", "received"]
+             "angle_sigma_deg", "attitude_variance", "depth_variance", "gps_sigma", "gps_tau", "attitude_sigma",
+             "slot", "received"]
     return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, beacon, att, noise, position_var, angle,
-                                                  attitude_var, d_var, slot, received], [ca.vec(P)], names,
-                       ["B_next"])
+                                                  attitude_var, d_var, gps_sigma, gps_tau, attitude_sigma, slot,
+                                                  received], [ca.vec(P)], names, ["B_next"])
 
 
 #: Per-replicate inputs of the USBL bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled bound
-#: numbers them from this tuple: :func:`compiled_bound`, :mod:`sblsim.fmus.contract`).
+#: numbers them from this tuple: :func:`compiled_bound`, :mod:`sblsim.fmus.contract`); the error states' priors
+#: (:data:`sblsim.models.bound.ERROR_NAMES`, the clock's drift 0: the USBL ranges two-way) after the rest.
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance", "position_variance",
-         "angle_sigma_deg", "attitude_variance", "depth_variance")
+         "angle_sigma_deg", "attitude_variance", "depth_variance", *ERROR_NAMES)
 #: Per-step inputs of the USBL bound, in the order of :func:`pcrb`'s ``steps`` columns: the true position, the
 #: transceiver and the attitude the packet carries, the slot and the packet's reception.
 STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transceiver_z",
@@ -304,7 +318,8 @@ def _step_inputs(f, s):
     """The inputs of :func:`bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name ``f`` and the
     step columns ``s`` (in :data:`STEPS` order)."""
     return (s[0:3], s[3:6], s[6:9], f["range_variance"], f["position_variance"], f["angle_sigma_deg"],
-            f["attitude_variance"], f["depth_variance"], s[9:10], s[10:11])
+            f["attitude_variance"], f["depth_variance"], f["gps_sigma"], f["gps_tau"], f["attitude_sigma"],
+            s[9:10], s[10:11])
 
 
 def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, transceivers: np.ndarray,
@@ -366,25 +381,10 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=BOUND_MODEL) -> np.ndarray:
 
 @lru_cache(maxsize=None)
 def compiled_bound() -> tuple[ca.Function, ca.Function]:
-    """The USBL bound with packed inputs, for code generation: ``sblsim_system_bound_prior(fixed) -> B0`` (the
-    prior's variances on the diagonal) and ``sblsim_system_bound_step(B, fixed, step) -> (B_next, error)``,
-    ``fixed`` and ``step`` in :data:`FIXED` and :data:`STEPS` order, ``error = sqrt(trace)`` of the position
-    block [m] (:func:`bound_step`; the same arithmetic as :func:`pcrb`)."""
-    motion = BOUND_MODEL.motion
-    n = motion.state_size
-    step = bound_step()
-    B, f, s = ca.SX.sym("B", n * n), ca.SX.sym("fixed", len(FIXED)), ca.SX.sym("step", len(STEPS))
-    named = {k: f[i] for i, k in enumerate(FIXED)}
-    B_next = step(B, named["dt"], named["q_horizontal"], named["q_vertical"], *_step_inputs(named, s))
-    index = [i * (n + 1) for i in motion.position_index]
-    error = ca.sqrt(B_next[index[0]] + B_next[index[1]] + B_next[index[2]])
-    prior = ca.SX.zeros(n * n)
-    for indices, key in ((motion.position_index, "p0_position"), (motion.velocity_index, "p0_velocity")):
-        for i in indices:
-            prior[i * (n + 1)] = named[key] ** 2
-    return (ca.Function("sblsim_system_bound_prior", [f], [prior], ["fixed"], ["B0"]),
-            ca.Function("sblsim_system_bound_step", [B, f, s], [B_next, error], ["B", "fixed", "step"],
-                        ["B_next", "error"]))
+    """The USBL bound with packed inputs, for code generation (:func:`sblsim.models.bound.packed_bound` of
+    :func:`bound_step`, ``fixed`` and ``step`` in :data:`FIXED` and :data:`STEPS` order; the same arithmetic as
+    :func:`pcrb`)."""
+    return packed_bound(bound_step(), BOUND_MODEL.motion, FIXED, STEPS, _step_inputs)
 
 
 @lru_cache(maxsize=None)
@@ -481,6 +481,14 @@ class USBL(System):
         return {**super().receiver_ties(platform), "beacon_attitude_sigma_deg": platform["imu_sigma_deg"],
                 "attitude_bias_sigma_deg": math.hypot(*constant)}
 
+    def bound_errors(self, cfg: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
+        """The GPS error where it is a Gauss-Markov process, the constant attitude error (the IMU's bias and axis
+        misalignment, the array's mounting misalignment); no clock (two-way)."""
+        platform = cfg["platform"]
+        constant = (platform["imu_bias_deg"], platform["imu_misalignment_deg"], platform["usbl_misalignment_deg"])
+        return {**super().bound_errors(cfg), "clock_drift_sigma": 0.0, "clock": 0.0,
+                "attitude_sigma": math.radians(math.hypot(*constant))}
+
     def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
         """The transceiver's body-frame lever arm (1, 3) [m]: ``(0, 0, transducer_depth)`` whatever
         ``baseline``, or a custom layout's one offset."""
@@ -559,7 +567,7 @@ class USBL(System):
                                       lambda state: covariance(state, ctx, p, model))
 
 
-__all__ = ["BOUND_MODEL", "FIXED", "FIX_ITERATIONS", "MIN_ANGLE_SIGMA_DEG", "MODEL", "POSITION_MODEL", "STEPS", "USBL",
-           "attitude", "bound_step", "compiled_bound", "context", "covariance", "direction", "fix_information",
-           "horizontal_std", "measurement", "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
-           "receiver_parameters", "transceiver", "transceiver_variance"]
+__all__ = ["attitude", "BOUND_MODEL", "bound_step", "compiled_bound", "context", "covariance", "direction",
+           "fix_information", "FIX_ITERATIONS", "FIXED", "horizontal_std", "measurement", "MIN_ANGLE_SIGMA_DEG",
+           "MODEL", "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
+           "POSITION_MODEL", "receiver_parameters", "STEPS", "transceiver", "transceiver_variance", "USBL"]
