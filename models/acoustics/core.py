@@ -66,8 +66,9 @@ direction cosines' does not), the wavefront taken as arriving from below the
 array's plane (a pair outside the unit circle put in it). The surface turns
 the measured direction into NED with the IMU's attitude (``imu_*``) and sends
 range, azimuth, elevation (NED: azimuth clockwise from North, elevation below
-the horizontal), the attitude it used (``doa_roll``, ``doa_pitch``, ``doa_yaw``:
-a receiver recovers the array's direction cosines from them,
+the horizontal), the direction cosines as the array measured them (``doa_x``,
+``doa_y``) with the attitude it used (``doa_roll``, ``doa_pitch``, ``doa_yaw``:
+what a receiver measures,
 :class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`) and its
 transceiver position (GPS and IMU) down to the diver on
 the acoustic link: the packet is lost when the reply or the downlink is lost
@@ -156,10 +157,14 @@ DIRECTION: tuple[Variable, ...] = (
 )
 #: The Euler angles of an attitude, in the order of :func:`~sblsim.models.platform.geometry.rotation_ned`'s arguments.
 ATTITUDE_ANGLES = ("roll", "pitch", "yaw")
-#: The attitude with which the surface turned a USBL packet's direction of arrival into NED (the IMU's, as
-#: sampled): outputs of the channel and inputs of the receivers of a USBL interface, declared after every other
-#: variable (their value references stay), so that a receiver recovers the array's direction cosines.
-DOA_ATTITUDE: tuple[Variable, ...] = tuple(
+#: What a USBL packet carries of the array's own measurement: the direction cosines of the reply across the array's
+#: two axes as measured (``doa_x``, ``doa_y``, with their noise, before any conversion) and the attitude (the IMU's,
+#: as sampled) with which the surface turned the direction into NED: outputs of the channel and inputs of the
+#: receivers of a USBL interface, declared after every other variable (their value references stay).
+DOA_ARRAY: tuple[Variable, ...] = tuple(
+    Variable(f"doa_{a}", "output", "Real", 0.0, "1",
+             f"USBL: measured direction cosine of the reply along the array's {a} axis (0 when lost)",
+             discrete=True, min=-2.0, max=2.0) for a in ("x", "y")) + tuple(
     Variable(f"doa_{a}", "output", "Real", 0.0, "rad",
              f"USBL: the IMU {a} with which the surface turned the direction of arrival into NED (0 when lost)",
              discrete=True, min=-10.0, max=10.0) for a in ATTITUDE_ANGLES)
@@ -465,7 +470,7 @@ class Acoustics(Component):
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
-                + FAMILY_TABLE_VARIABLES + DOA_ATTITUDE)
+                + FAMILY_TABLE_VARIABLES + DOA_ARRAY)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -679,8 +684,9 @@ class Acoustics(Component):
                                                                                                arrives[0] / level, 1.0)
                         grazing = reply[3][0]
                         arrives = ca.vertcat(north * ca.cos(grazing), east * ca.cos(grazing), ca.sin(grazing))
-                    out.update(zip(("azimuth", "elevation"),
-                        (ca.if_else(valid, a, 0.0) for a in doa(arrives, u, p, w[_ANGLE_NOISE], angle_scale))))
+                    measured = doa(arrives, u, p, w[_ANGLE_NOISE], angle_scale)
+                    out.update({name: ca.if_else(valid, value, 0.0) for name, value in zip(
+                        ("azimuth", "elevation", "doa_x", "doa_y"), measured)})
                     out.update({f"doa_{a}": ca.if_else(valid, u[f"imu_{a}"], 0.0) for a in ATTITUDE_ANGLES})
                 return {"k": k, **send(x, p, out, arrival - t_k), **overrun}
             return handler
@@ -741,11 +747,12 @@ class Acoustics(Component):
             return {**out, "q_used": used, "delivered_end": t + h}
 
         def doa(direction, u, p, w_angle, scale=1.0):
-            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1): the array
-            (attitude ``array_*``) measures the direction cosines of the line of sight in its own frame, each with
-            the noise ``scale`` σ_u (σ_u = ``usbl_angle_sigma_deg`` [rad], the angle's std on the array's axis),
-            takes the wavefront as arriving from below its plane, and the surface turns the direction into NED
-            with the IMU's attitude (``imu_*``)."""
+            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1), and the
+            direction cosines the array measured: the array (attitude ``array_*``) measures the direction cosines
+            of the line of sight across its two axes, each with the noise ``scale`` σ_u (σ_u =
+            ``usbl_angle_sigma_deg`` [rad], the angle's std on the array's axis), takes the wavefront as
+            arriving from below its plane, and the surface turns the direction into NED with the IMU's attitude
+            (``imu_*``)."""
             array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
             # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
             seen = ca.mtimes(array.T, direction / ca.fmax(ca.norm_2(direction), 1e-9))
@@ -755,7 +762,7 @@ class Acoustics(Component):
             shrink = 1.0 / ca.fmax(across, 1.0)  # a measured pair beyond the unit circle: in the array's plane
             measured = ca.vertcat(ux * shrink, uy * shrink, ca.sqrt(ca.fmax(1.0 - across ** 2, 0.0)))
             ned = ca.mtimes(rotation_ned(*[u[f"imu_{a}"] for a in ATTITUDE_ANGLES]), measured)
-            return ca.atan2(ned[1], ned[0]), ca.atan2(ned[2], ca.sqrt(ned[0] ** 2 + ned[1] ** 2))
+            return ca.atan2(ned[1], ned[0]), ca.atan2(ned[2], ca.sqrt(ned[0] ** 2 + ned[1] ** 2)), ux, uy
 
         def output(x, p, d, t):
             return {name: x[name] for name in packet}
@@ -783,7 +790,7 @@ class Acoustics(Component):
 
 __all__ = [
     "Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
-    "DOA_ATTITUDE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "OVERFLOW", "OVERRUN",
+    "DOA_ARRAY", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "OVERFLOW", "OVERRUN",
     "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS",
     "TARGET_INPUTS"
 ]

@@ -199,10 +199,16 @@ def rotation_ned(roll, pitch, yaw) -> ca.SX:
     )
 
 
+def unit_vector(azimuth, elevation) -> ca.SX:
+    """The NED unit vector ``(cos ε cos α, cos ε sin α, sin ε)`` (3, 1) of an azimuth α (clockwise from North) and an
+    elevation ε (below the horizontal) [rad]."""
+    return ca.vertcat(ca.cos(elevation) * ca.cos(azimuth), ca.cos(elevation) * ca.sin(azimuth), ca.sin(elevation))
+
+
 def beacon_positions(position: ca.SX, rotation: ca.SX, offsets: list[ca.SX]) -> list[ca.SX]:
     """Beacon positions ``b_i = p + R a_i`` in NED [m], one (3, 1) vector per beacon."""
     return [position + ca.mtimes(rotation, a) for a in offsets]
 
 
 __all__ = ["MIN_SEPARATION", "beacon_positions", "check_geometry", "cross_directions", "cross_offsets",
-           "horizontal_spread", "layout_offsets", "parse_offsets", "rotation_ned"]
+           "horizontal_spread", "layout_offsets", "parse_offsets", "rotation_ned", "unit_vector"]

@@ -40,6 +40,7 @@ import casadi as ca
 from sblsim.models.acoustics.rays import chord_elevation, slant_range
 from sblsim.models.acoustics.sound_speed import PROFILE, node_speeds, profile_table
 from sblsim.models.declarations import ModelError, Variable, format_table
+from sblsim.models.platform.geometry import rotation_ned, unit_vector
 
 #: ``receiver.sound_speed_profile``'s default: the single assumed speed.
 ASSUMED = "assumed"
@@ -169,7 +170,8 @@ def profile_range(u: dict, p: dict) -> dict:
     (:func:`~sblsim.models.acoustics.rays.slant_range`, from ``range``). A lost packet, or one whose eigenray lies
     in the profile's shadow, keeps the range it had. A USBL packet's ``elevation`` (the direction the reply's
     eigenray arrives from) becomes the chord's elevation of the point the ray traced from the transceiver reaches
-    after τ (:func:`~sblsim.models.acoustics.rays.chord_elevation`).
+    after τ (:func:`~sblsim.models.acoustics.rays.chord_elevation`), and its direction cosines in the array's
+    frame (``doa_x``, ``doa_y``) move as that direction moved.
 
     Parameters
     ----------
@@ -191,8 +193,15 @@ def profile_range(u: dict, p: dict) -> dict:
     out = {**u, "range": ca.if_else(use, rho, u["range"])}
     if "elevation" in u:  # USBL: the eigenray's elevation traced back to the chord's
         chord = chord_elevation(u["beacon_z"], u["elevation"], tau, nodes, speeds)[0]
-        out["elevation"] = ca.if_else(ca.logic_and(u["packet_valid"], u["range"] > 0), chord, u["elevation"])
+        valid = ca.logic_and(u["packet_valid"], u["range"] > 0)
+        out["elevation"] = ca.if_else(valid, chord, u["elevation"])
+        if "doa_x" in u:  # and the array's direction cosines moved as the direction moved
+            array = rotation_ned(*[u[f"doa_{a}"] for a in ("roll", "pitch", "yaw")]).T
+            moved = ca.mtimes(array, unit_vector(u["azimuth"], chord) - unit_vector(u["azimuth"], u["elevation"]))
+            out.update(doa_x=ca.if_else(valid, u["doa_x"] + moved[0], u["doa_x"]),
+                       doa_y=ca.if_else(valid, u["doa_y"] + moved[1], u["doa_y"]))
     return out
+
 
 
 __all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "SOUND_SPEED_MODELS", "declares_profile", "profile_config_values",

@@ -38,7 +38,7 @@ direction rows are correlated); :func:`~sblsim.models.receiver.kalman.whiten` tu
 unit variance for the sequential update and the bound.
 
 **Error states.** Where the motion model carries them
-(:class:`~sblsim.models.receiver.motion.ConstantVelocity`'s accessors), the
+(:class:`~sblsim.models.receiver.motion.WithErrorStates`), the
 transceiver's position is corrected by the state's GPS error and the attitude
 by the state's attitude bias before ``h`` is evaluated, so that ``H`` has their
 columns too.
@@ -83,8 +83,10 @@ def range_direction_function(motion) -> ca.Function:
     at the state ``x`` of ``motion`` (its position, and its GPS error and attitude bias where it carries them),
     its Jacobians with respect to the state, the transceiver's position and the attitude (casadi's)."""
     x, b, att = ca.SX.sym("x", motion.state_size), ca.SX.sym("b", 3), ca.SX.sym("attitude", 3)
-    beacon = b - motion.gps_error(x)  # the transceiver where the state's GPS error puts it
-    attitude = att - motion.attitude_bias(x)
+    beacon, attitude = b, att
+    if hasattr(motion, "gps_error"):  # a motion model that may carry error states (the receivers')
+        beacon = b - motion.gps_error(x)  # the transceiver where the state's GPS error puts it
+        attitude = att - motion.attitude_bias(x)
     h = _range_direction(motion.position(x) - beacon, attitude)
     return ca.Function("sblsim_range_direction", [x, b, att],
                        [h, ca.jacobian(h, x), ca.jacobian(h, b), ca.jacobian(h, att)],

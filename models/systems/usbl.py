@@ -13,15 +13,14 @@ forced to ``twtt``). The components' interface is that of one beacon.
 
 **What a packet measures** (what every receiver does with it): the slant range
 [m] and the direction of arrival as the array measures it, its direction
-cosines ``a_x``, ``a_y`` in the array's frame
-(:class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`, the
+cosines ``a_x``, ``a_y`` in the array's frame (the packet's ``doa_x``,
+``doa_y``: :func:`measurement`;
+:class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`, the
 context ``(b, θ)``: the transceiver's position ``b`` [m] and the attitude ``θ``
-[rad] with which the surface turned the direction into NED, both in the
-packet). The packet carries the direction as NED azimuth and elevation and the
-attitude as ``doa_roll``, ``doa_pitch``, ``doa_yaw``; :func:`measurement`
-turns them back into ``a = R(θ)ᵀ n(α, ε)``, exactly what the array measured.
-No coordinate of z is undefined anywhere, straight below the transceiver
-included.
+[rad] with which the surface turned the direction into NED, ``doa_roll``,
+``doa_pitch``, ``doa_yaw``, both in the packet besides the NED azimuth and
+elevation). No coordinate of z is undefined anywhere, straight below the
+transceiver included.
 
 * the Kalman receivers update with the depth and then with the three rows of
   the fresh packet (:meth:`KalmanReceiver.packet_update
@@ -76,7 +75,7 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ATTITUDE
+from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ARRAY
 from sblsim.models.bound import (
     ERROR_MOTION,
     ERROR_NAMES,
@@ -87,7 +86,7 @@ from sblsim.models.bound import (
     stepped,
 )
 from sblsim.models.declarations import ModelError, Variable
-from sblsim.models.platform.geometry import parse_offsets, rotation_ned
+from sblsim.models.platform.geometry import parse_offsets, unit_vector
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.range_direction import RangeDirectionModel
 from sblsim.models.systems import System, register
@@ -106,7 +105,7 @@ def model_of(motion) -> RangeDirectionModel:
 #: The measurement model of the bound: the packet's for the receivers' state with error states.
 BOUND_MODEL = RangeDirectionModel(ERROR_MOTION)
 #: Gauss-Newton iterations of the packet's least-squares fix from its polar fix (:func:`packet_fix`).
-FIX_ITERATIONS = 3
+FIX_ITERATIONS = 5
 
 
 class _PositionState:
@@ -118,14 +117,6 @@ class _PositionState:
     @staticmethod
     def position(x):
         return x
-
-    @staticmethod
-    def gps_error(x):
-        return ca.SX.zeros(3)
-
-    @staticmethod
-    def attitude_bias(x):
-        return ca.SX.zeros(3)
 
 
 #: The packet's model of a bare position (the fix and the map).
@@ -155,16 +146,14 @@ def context(u: dict) -> tuple[ca.SX, ca.SX]:
 
 
 def direction(u: dict) -> ca.SX:
-    """The packet's direction in NED, the unit vector ``(cos ε cos α, cos ε sin α, sin ε)`` (3, 1)."""
-    a, e = u["azimuth"], u["elevation"]
-    return ca.vertcat(ca.cos(e) * ca.cos(a), ca.cos(e) * ca.sin(a), ca.sin(e))
+    """The packet's direction in NED, the unit vector of its azimuth and elevation (3, 1)."""
+    return unit_vector(u["azimuth"], u["elevation"])
 
 
 def measurement(u: dict) -> ca.SX:
-    """``z = [r, a_x, a_y]`` of the packet, (3, 1) [m, 1, 1]: the direction in the array's frame,
-    ``a = R(θ)ᵀ n(α, ε)``, what the array measured."""
-    a = ca.mtimes(rotation_ned(*[u[f"doa_{x}"] for x in ATTITUDE_ANGLES]).T, direction(u))
-    return ca.vertcat(u["range"], a[0], a[1])
+    """``z = [r, a_x, a_y]`` of the packet, (3, 1) [m, 1, 1]: the slant range and the direction cosines the array
+    measured (``doa_x``, ``doa_y``)."""
+    return ca.vertcat(u["range"], u["doa_x"], u["doa_y"])
 
 
 def polar_fix(u: dict) -> ca.SX:
@@ -468,7 +457,7 @@ class USBL(System):
     #: plus the mounting misalignment) and the attitude the surface turned the direction with.
     timeseries_columns = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation",
                           **{f"array_{a}": f"platform.array_{a}" for a in ATTITUDE_ANGLES},
-                          **{f"doa_{a}": f"acoustics.doa_{a}" for a in ATTITUDE_ANGLES}}
+                          **{f"doa_{a}": f"acoustics.doa_{a}" for a in ("x", "y", *ATTITUDE_ANGLES)}}
     log_columns = {"azimuth_rad": "azimuth", "elevation_rad": "elevation"}
     bound_fixed = FIXED
     bound_steps = STEPS
@@ -552,8 +541,9 @@ class USBL(System):
         return tuple(replace(v, causality="input") for v in DIRECTION)
 
     def receiver_late_inputs(self) -> tuple[Variable, ...]:
-        """The attitude the surface turned the direction with (the channel's ``doa_*``)."""
-        return tuple(replace(v, causality="input") for v in DOA_ATTITUDE)
+        """The array's direction cosines and the attitude the surface turned the direction with (the channel's
+        ``doa_*``)."""
+        return tuple(replace(v, causality="input") for v in DOA_ARRAY)
 
     def packet_fix(self, u: dict, p: dict, depth) -> tuple[ca.SX, ca.SX, ca.SX]:
         return packet_fix(u, p, depth)

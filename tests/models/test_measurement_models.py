@@ -1,12 +1,11 @@
 """Measurement models, motion model, sigma points and gate against independent computations.
 
-* The range + bearing model (``models/receiver/range_bearing.py``): h against
-  numpy and a hand-worked case, its casadi Jacobian against central finite
-  differences of the numpy h, the residual's wrap at ±π, and an EKF built
-  from the receivers' own code (``kalman.ekf_update`` with this model and the
-  constant-velocity prediction) against FilterPy's ``ExtendedKalmanFilter``
-  (``HJacobian``, ``Hx``, ``residual=``) on the same measurements, on a path
-  that crosses the azimuth's ±π branch.
+* The range + direction model of a USBL (``models/receiver/range_direction.py``): h against numpy and
+  hand-worked cases (straight below the transceiver included, and a turned array), its casadi Jacobians
+  (state, transceiver, attitude) against central finite differences of the numpy h, finite everywhere, and an
+  EKF built from the receivers' own code (the constant-velocity prediction and the whitened sequential
+  update with the full R) against FilterPy's ``ExtendedKalmanFilter`` with the same R, on a path that passes
+  straight below the transceiver.
 * The range + depth model's linearization and its one range-variance formula.
 * The sigma points against FilterPy's ``MerweScaledSigmaPoints`` and
   ``JulierSigmaPoints``; the gate threshold against scipy's χ² quantile.
@@ -20,42 +19,31 @@ import casadi as ca
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter, JulierSigmaPoints, MerweScaledSigmaPoints
+from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from sblsim.models.receiver import kalman, sigma_points
 from sblsim.models.receiver.gate import gate_threshold
 from sblsim.models.receiver.measurement import MeasurementModel, RangeDepthModel, wrap_angle
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
-from sblsim.models.receiver.range_bearing import RangeBearingModel
+from sblsim.models.receiver.range_direction import RangeDirectionModel
 from tests.models.test_receiver_filterpy import phi, white_noise_q
 
 POS = [0, 2, 4]
-MODEL = RangeBearingModel()
+MODEL = RangeDirectionModel()
 
 
-def np_range_bearing(state, b):
-    """Range, azimuth atan2(E, N), elevation below the horizontal, written out in numpy."""
+def np_rotation(attitude):
+    """Body to NED of roll, pitch, yaw (ZYX), by scipy's rotations (not our rotation_ned)."""
+    roll, pitch, yaw = attitude
+    return Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+
+
+def np_range_direction(state, b, attitude):
+    """Range and the first two direction cosines of the line of sight in the array's frame, in numpy."""
     d = np.asarray(state, float).reshape(-1)[POS] - b
-    return np.array([np.linalg.norm(d), np.arctan2(d[1], d[0]), np.arctan2(d[2], np.hypot(d[0], d[1]))])
-
-
-def np_wrap(a):
-    """To (−π, π], by a route of its own (numpy remainder, then the −π end moved to π)."""
-    w = np.remainder(np.asarray(a, float) + np.pi, 2 * np.pi) - np.pi
-    return np.where(w <= -np.pi, w + 2 * np.pi, w)
-
-
-def np_jacobian(state, b):
-    """Analytic ∂h/∂x of range, azimuth, elevation (3, 6), derived by hand."""
-    d = np.asarray(state, float).reshape(-1)[POS] - b
-    n, e, z = d
-    rho2 = n * n + e * e
-    rho, r = np.sqrt(rho2), np.linalg.norm(d)
-    H = np.zeros((3, 6))
-    H[0, POS] = d / r
-    H[1, POS] = [-e / rho2, n / rho2, 0.0]
-    H[2, POS] = [-n * z / (rho * r * r), -e * z / (rho * r * r), rho / (r * r)]
-    return H
+    a = np_rotation(attitude).T @ d / np.linalg.norm(d)
+    return np.array([np.linalg.norm(d), a[0], a[1]])
 
 
 def evaluate(f, *args):
@@ -63,144 +51,155 @@ def evaluate(f, *args):
 
 
 def model_function(model, method):
-    x, b = ca.SX.sym("x", 6), ca.SX.sym("b", 3)
-    out = getattr(model, method)(x, b)
+    x, b, att = ca.SX.sym("x", 6), ca.SX.sym("b", 3), ca.SX.sym("att", 3)
+    out = getattr(model, method)(x, (b, att))
     out = list(out) if isinstance(out, tuple) else [out]
-    return ca.Function("f", [x, b], out)
+    return ca.Function("f", [x, b, att], out)
+
+
+def central(f, point, eps=1e-6):
+    """Central finite differences of a numpy function at ``point`` (columns per entry)."""
+    point = np.asarray(point, float)
+    columns = []
+    for i in range(point.size):
+        e = np.zeros(point.size)
+        e[i] = eps
+        columns.append((f(point + e) - f(point - e)) / (2 * eps))
+    return np.stack(columns, axis=1)
 
 
 # ----------------------------------------------------------------------------
-# range + bearing
+# range + direction (USBL)
 # ----------------------------------------------------------------------------
 
-def test_range_bearing_hand_worked_and_against_numpy():
-    b = np.array([1.0, -2.0, 3.0])
-    # 10 m East and 10 m deeper: r = 10√2, azimuth π/2 (East), elevation π/4 below the horizontal
-    (h,) = evaluate(model_function(MODEL, "h"), [1.0, 0, 8.0, 0, 13.0, 0], b)
-    np.testing.assert_allclose(h.ravel(), [10 * math.sqrt(2), math.pi / 2, math.pi / 4], rtol=1e-15)
-    # due South and shallower: azimuth π, elevation negative
-    (h,) = evaluate(model_function(MODEL, "h"), [-3.0, 0, -2.0, 0, 0.0, 0], b)
-    np.testing.assert_allclose(h.ravel(), [5.0, math.pi, -math.atan2(3, 4)], rtol=1e-15)
-    rng = np.random.default_rng(1)
+def test_range_direction_hand_worked_and_against_numpy():
+    b, level = np.array([1.0, -2.0, 3.0]), np.zeros(3)
     f = model_function(MODEL, "h")
+    # straight below: 10 m, the direction cosines across the array 0 (no azimuth needed, none undefined)
+    (h,) = evaluate(f, [1.0, 0, -2.0, 0, 13.0, 0], b, level)
+    np.testing.assert_allclose(h.ravel(), [10.0, 0.0, 0.0], atol=1e-15)
+    # 10 m East and 10 m deeper, a level array: a = (0, 1/√2); the array turned to heading East (yaw π/2):
+    # its x axis points East, so a = (1/√2, 0)
+    (h,) = evaluate(f, [1.0, 0, 8.0, 0, 13.0, 0], b, level)
+    np.testing.assert_allclose(h.ravel(), [10 * math.sqrt(2), 0.0, 1 / math.sqrt(2)], atol=1e-15)
+    (h,) = evaluate(f, [1.0, 0, 8.0, 0, 13.0, 0], b, [0.0, 0.0, math.pi / 2])
+    np.testing.assert_allclose(h.ravel(), [10 * math.sqrt(2), 1 / math.sqrt(2), 0.0], atol=1e-15)
+    rng = np.random.default_rng(1)
     for _ in range(20):
-        state, b = rng.normal(scale=10, size=6), rng.normal(scale=3, size=3)
-        np.testing.assert_allclose(evaluate(f, state, b)[0].ravel(), np_range_bearing(state, b), rtol=1e-14)
-    assert MODEL.dimension(b) == 3 and MODEL.state_size == 6
+        state, b, att = rng.normal(scale=10, size=6), rng.normal(scale=3, size=3), rng.normal(scale=0.3, size=3)
+        np.testing.assert_allclose(evaluate(f, state, b, att)[0].ravel(), np_range_direction(state, b, att),
+                                   rtol=1e-13, atol=1e-15)
+    assert MODEL.dimension((b, level)) == 3 and MODEL.state_size == 6 and MODEL.angles == ()
 
 
 @pytest.mark.parametrize("seed", range(5))
-def test_range_bearing_jacobian_matches_finite_differences(seed):
+def test_range_direction_jacobians_match_finite_differences_straight_below_too(seed):
     rng = np.random.default_rng(seed)
-    state, b = rng.normal(scale=10, size=6), rng.normal(scale=3, size=3)
-    f = model_function(MODEL, "linearize")
-    h, H = evaluate(f, state, b)
-    eps = 1e-6
-    fd = np.zeros((3, 6))
-    for i in range(6):
-        e = np.zeros(6)
-        e[i] = eps
-        fd[:, i] = np_wrap(np_range_bearing(state + e, b) - np_range_bearing(state - e, b)) / (2 * eps)
-    np.testing.assert_allclose(H, fd, rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(H, np_jacobian(state, b), rtol=1e-12, atol=1e-15)
-    assert np.all(H[:, [1, 3, 5]] == 0.0)  # velocities do not enter
+    state, b, att = rng.normal(scale=10, size=6), rng.normal(scale=3, size=3), rng.normal(scale=0.2, size=3)
+    if seed == 0:  # straight below the transceiver, where an azimuth has no derivative
+        state[POS] = b + [0.0, 0.0, 500.0]
+    x, bs, a = ca.SX.sym("x", 6), ca.SX.sym("b", 3), ca.SX.sym("att", 3)
+    ctx = (bs, a)
+    f = ca.Function("f", [x, bs, a], [*MODEL.linearize(x, ctx), MODEL.transceiver_jacobian(x, ctx),
+                                      MODEL.attitude_jacobian(x, ctx)])
+    h, H, H_b, H_a = evaluate(f, state, b, att)
+    assert np.all(np.isfinite(H)) and np.all(np.isfinite(H_b)) and np.all(np.isfinite(H_a))
+    np.testing.assert_allclose(H, central(lambda s: np_range_direction(s, b, att), state), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(H_b, central(lambda c: np_range_direction(state, c, att), b), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(H_a, central(lambda c: np_range_direction(state, b, c), att), rtol=1e-6, atol=1e-9)
+    assert np.all(H[:, [1, 3, 5]] == 0.0) and np.all(H_a[0] == 0.0)  # velocities do not enter; nor the attitude
     # the base class's generic linearization (casadi's derivative of h) gives the same
-    generic = model_function(MODEL, "h")
-    s, c = ca.SX.sym("x", 6), ca.SX.sym("b", 3)
-    g_h, g_H = MeasurementModel.linearize(MODEL, s, c)
-    got = evaluate(ca.Function("g", [s, c], [g_h, g_H]), state, b)
-    np.testing.assert_allclose(got[0], evaluate(generic, state, b)[0], rtol=1e-15)
-    np.testing.assert_allclose(got[1], H, rtol=1e-14, atol=1e-16)
+    g_h, g_H = MeasurementModel.linearize(MODEL, x, ctx)
+    got = evaluate(ca.Function("g", [x, bs, a], [g_h, g_H]), state, b, att)
+    np.testing.assert_allclose(got[0], h, rtol=1e-15)
+    np.testing.assert_allclose(got[1], H, rtol=1e-13, atol=1e-16)
 
 
-def test_residual_wraps_angles_at_pi_and_leaves_the_range():
-    z, h = ca.SX.sym("z", 3), ca.SX.sym("h", 3)
-    f = ca.Function("r", [z, h], [MODEL.residual(z, h)])
-    (y,) = evaluate(f, [5.0, math.pi - 0.01, 0.1], [4.0, -math.pi + 0.01, 0.2])
-    np.testing.assert_allclose(y.ravel(), [1.0, -0.02, -0.1], atol=1e-14)
-    (y,) = evaluate(f, [5.0, -math.pi + 0.01, 0.0], [4.0, math.pi - 0.01, 0.0])
-    np.testing.assert_allclose(y.ravel(), [1.0, 0.02, 0.0], atol=1e-14)
-    # a range difference of 7 m is not an angle: never wrapped
-    (y,) = evaluate(f, [10.0, 0.0, 0.0], [3.0, 0.0, 0.0])
-    assert y[0, 0] == 7.0
+def test_range_direction_covariance_is_the_noise_chain_through_its_jacobians():
+    """R = diag(σ_r², σ_u², σ_u²) + σ_b² H_b H_bᵀ + σ_θ² H_θ H_θᵀ, with the Jacobians by finite differences."""
+    rng = np.random.default_rng(4)
+    state, b, att = rng.normal(scale=20, size=6), rng.normal(size=3), rng.normal(scale=0.1, size=3)
+    x, bs, a = ca.SX.sym("x", 6), ca.SX.sym("b", 3), ca.SX.sym("att", 3)
+    f = ca.Function("R", [x, bs, a], [MODEL.covariance(x, (bs, a), 0.04, 1e-4, 0.09, 3e-4)])
+    (R,) = evaluate(f, state, b, att)
+    H_b = central(lambda c: np_range_direction(state, c, att), b)
+    H_a = central(lambda c: np_range_direction(state, b, c), att)
+    expected = np.diag([0.04, 1e-4, 1e-4]) + 0.09 * H_b @ H_b.T + 3e-4 * H_a @ H_a.T
+    np.testing.assert_allclose(R, expected, rtol=1e-7, atol=1e-10)
+    assert np.all(np.linalg.eigvalsh(R) > 0)
+
+
+def path_case(n=80, dt=1.0, seed=2):
+    """The diver crosses below a transceiver 40 m deep, from 8 m North to 8 m South, under a gently rolling array
+    (its attitude known), measured with the array's noise on each direction cosine and a range noise."""
+    rng = np.random.default_rng(seed)
+    b = np.array([0.5, -0.3, 1.0])
+    t = dt * np.arange(1, n + 1)
+    truth = np.stack([8.0 - 0.2 * t, -0.3 + 0.5 * np.sin(0.1 * t), 41.0 + 0.01 * t], axis=1)
+    attitude = np.stack([0.05 * np.sin(0.7 * t), 0.04 * np.cos(0.5 * t), 0.3 + 0.01 * t], axis=1)
+    sigma = np.array([0.1, 0.01, 0.01])
+    z = np.array([np_range_direction(np.array([p[0], 0, p[1], 0, p[2], 0]), b, a) for p, a in zip(truth, attitude)])
+    return b, truth, attitude, z + rng.normal(size=z.shape) * sigma, sigma, dt
+
+
+def ekf_step_function():
+    """One prediction and one range-direction update with a full R, from the receivers' code, as a Function."""
+    x, P, z, b, att = ca.SX.sym("x", 6), ca.SX.sym("P", 6, 6), ca.SX.sym("z", 3), ca.SX.sym("b", 3), ca.SX.sym("a", 3)
+    dt, qh, qv, sr, su, sb = (ca.SX.sym(n) for n in ("dt", "qh", "qv", "sr", "su", "sb"))
+    x1, P1 = CONSTANT_VELOCITY.predict(x, P, dt, qh, qv)
+    R = MODEL.covariance(x1, (b, att), sr ** 2, su ** 2, sb ** 2, 0.0)
+    h, H = MODEL.linearize(x1, (b, att))
+    y, Hw = kalman.whiten(z - h, H, R)
+    x2, P2, nis = kalman.update(x1, P1, y, Hw, ca.SX.ones(3))
+    return ca.Function("ekf_step", [x, P, z, b, att, dt, qh, qv, sr, su, sb], [x2, P2, nis, R])
+
+
+def test_ekf_over_range_direction_equals_filterpy_straight_below_the_transceiver():
+    b, truth, attitude, z, sigma, dt = path_case()
+    qh, qv, sb = 0.05, 0.005, 0.2
+    x0 = np.array([truth[0, 0], 0.0, truth[0, 1] + 0.5, 0.0, truth[0, 2], 0.0])
+    P0 = np.diag([1.0, 0.25] * 3)
+    step = ekf_step_function()
+    ekf = ExtendedKalmanFilter(dim_x=6, dim_z=3)
+    ekf.x, ekf.P = x0.reshape(-1, 1).copy(), P0.copy()
+    ekf.F, ekf.Q = phi(dt), white_noise_q(dt, qh, qv)
+    x, P = x0, P0
+    for k, (zk, att) in enumerate(zip(z, attitude)):
+        x, P, nis, R = (np.array(v) for v in step(x, P, zk, b, att, dt, qh, qv, *sigma[:2], sb))
+        x = x.ravel()
+        ekf.predict()
+        ekf.update(zk.reshape(-1, 1), lambda s, a=att: central(lambda c: np_range_direction(c, b, a), s.ravel()),
+                   lambda s, a=att: np_range_direction(s, b, a).reshape(-1, 1), R=R)
+        np.testing.assert_allclose(x, ekf.x.ravel(), rtol=0, atol=1e-6, err_msg=f"step {k}")
+        np.testing.assert_allclose(P, ekf.P, rtol=1e-5, atol=1e-9, err_msg=f"step {k}")
+        assert nis.item() == pytest.approx((ekf.y.T @ ekf.SI @ ekf.y).item(), rel=1e-5, abs=1e-9), k
+    # the path passes within a metre of the vertical, and the filter tracks the diver there and after
+    horizontal = np.hypot(truth[:, 0] - b[0], truth[:, 1] - b[1])
+    assert horizontal.min() < 1.0
+    assert np.linalg.norm(x[POS] - truth[-1]) < 1.0
+
+
+def test_residual_wraps_the_rows_that_are_angles():
+    """A model with angle rows (``angles``) wraps them to (−π, π]; the range + direction model has none."""
+    class Bearing(MeasurementModel):
+        angles = (1,)
+
+    z, h = ca.SX.sym("z", 2), ca.SX.sym("h", 2)
+    f = ca.Function("r", [z, h], [Bearing().residual(z, h)])
+    (y,) = evaluate(f, [5.0, math.pi - 0.01], [4.0, -math.pi + 0.01])
+    np.testing.assert_allclose(y.ravel(), [1.0, -0.02], atol=1e-14)
+    (y,) = evaluate(f, [10.0, 0.0], [3.0, 0.0])
+    assert y[0, 0] == 7.0  # a range difference is not an angle: never wrapped
     # the interval is (−π, π]: π stays, −π becomes π, 3π is π, −3π/2 is π/2
     a = ca.SX.sym("a")
     w = ca.Function("w", [a], [wrap_angle(a)])
     for value, expected in [(math.pi, math.pi), (-math.pi, math.pi), (3 * math.pi, math.pi),
                             (-1.5 * math.pi, 0.5 * math.pi), (0.3, 0.3), (-0.3, -0.3)]:
         assert float(w(value)) == pytest.approx(expected, abs=1e-14)
-        assert float(np_wrap(value)) == pytest.approx(expected, abs=1e-14)
-    # the range + depth model has no angles: its residual is z − h as is
-    r = RangeDepthModel()
-    assert r.angles == () and float(ca.Function("d", [z, h], [r.residual(z, h)])([10, 0, 0], [3, 0, 0])[0]) == 7.0
-
-
-def path_case(n=80, dt=1.0, seed=2):
-    """The diver sways East and West 12 m South of a transceiver, 6 m deeper: its azimuth crosses ±π (due South)
-    again and again."""
-    rng = np.random.default_rng(seed)
-    b = np.array([0.5, -0.3, 1.0])
-    t = dt * np.arange(1, n + 1)
-    truth = np.stack([-12.0 + 0.1 * np.sin(0.2 * t), -0.3 + 1.5 * np.sin(0.2 * t), 7.0 + 0.02 * t], axis=1)
-    sigma = np.array([0.1, np.radians(1.0), np.radians(1.5)])
-    z = np.array([np_range_bearing(np.array([p[0], 0, p[1], 0, p[2], 0]), b) for p in truth])
-    z = z + rng.normal(size=z.shape) * sigma
-    z[:, 1:] = np_wrap(z[:, 1:])
-    return b, truth, z, sigma, dt
-
-
-def ekf_step_function():
-    """One prediction and one range-bearing update, from the receivers' code, as a casadi Function."""
-    x, P, z, b = ca.SX.sym("x", 6), ca.SX.sym("P", 6, 6), ca.SX.sym("z", 3), ca.SX.sym("b", 3)
-    dt, qh, qv, sr, sa, se = (ca.SX.sym(n) for n in ("dt", "qh", "qv", "sr", "sa", "se"))
-    x1, P1 = CONSTANT_VELOCITY.predict(x, P, dt, qh, qv)
-    p = {"sigma_range": sr, "sigma_azimuth": sa, "sigma_elevation": se}
-    x2, P2, nis = kalman.ekf_update(x1, P1, z, MODEL, b, MODEL.variances(x1, b, p))
-    return ca.Function("ekf_step", [x, P, z, b, dt, qh, qv, sr, sa, se], [x2, P2, nis])
-
-
-def filterpy_ekf(b, z, sigma, dt, qh, qv, x0, P0, residual):
-    ekf = ExtendedKalmanFilter(dim_x=6, dim_z=3)
-    ekf.x, ekf.P = x0.reshape(-1, 1).copy(), P0.copy()
-    ekf.F, ekf.Q = phi(dt), white_noise_q(dt, qh, qv)
-    out = []
-    for zk in z:
-        ekf.predict()
-        ekf.update(zk.reshape(-1, 1), lambda x: np_jacobian(x, b), lambda x: np_range_bearing(x, b).reshape(-1, 1),
-                   R=np.diag(sigma**2), residual=residual)
-        out.append((ekf.x.ravel().copy(), ekf.P.copy(), (ekf.y.T @ ekf.SI @ ekf.y).item()))
-    return out
-
-
-def test_ekf_over_range_bearing_equals_filterpy_across_the_azimuth_branch():
-    b, truth, z, sigma, dt = path_case()
-    qh, qv = 0.05, 0.005
-    x0 = np.array([truth[0, 0], 0.0, truth[0, 1] + 0.5, 0.3, truth[0, 2], 0.0])
-    P0 = np.diag([1.0, 0.25] * 3)
-
-    def wrapped(a, c):
-        y = a - c
-        y[1:] = np_wrap(y[1:])
-        return y
-
-    reference = filterpy_ekf(b, z, sigma, dt, qh, qv, x0, P0, wrapped)
-    step = ekf_step_function()
-    x, P = x0, P0
-    raw_jumps = 0
-    for k, (zk, (x_ref, P_ref, nis_ref)) in enumerate(zip(z, reference)):
-        predicted = phi(dt) @ x
-        raw_jumps += abs(zk[1] - np_range_bearing(predicted, b)[1]) > np.pi
-        x, P, nis = (np.array(v) for v in step(x, P, zk, b, dt, qh, qv, *sigma))
-        x = x.ravel()
-        np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-9, err_msg=f"step {k}")
-        np.testing.assert_allclose(P, P_ref, rtol=1e-9, atol=1e-12, err_msg=f"step {k}")
-        assert nis.item() == pytest.approx(nis_ref, rel=1e-8, abs=1e-12), k
-    # the path crosses the branch (raw azimuth residuals near 2π), and the filter tracks the diver
-    assert raw_jumps >= 3
-    assert np.linalg.norm(x[POS] - truth[-1]) < 1.0
-    # without the wrap the same filter goes wrong: the residual matters
-    unwrapped = filterpy_ekf(b, z, sigma, dt, qh, qv, x0, P0, np.subtract)
-    assert max(np.linalg.norm(u[0][POS] - p) for u, p in zip(unwrapped, truth)) > 10.0
+    # the range + depth and range + direction models have no angles: their residual is z − h as is
+    for m in (RangeDepthModel(), MODEL):
+        z3, h3 = ca.SX.sym("z", 3), ca.SX.sym("h", 3)
+        assert float(ca.Function("d", [z3, h3], [m.residual(z3, h3)])([10, 0, 0], [3, 0, 0])[0]) == 7.0
 
 
 # ----------------------------------------------------------------------------
@@ -284,16 +283,21 @@ def test_models_refuse_a_state_layout_they_cannot_read():
     class PositionOnly:  # a motion model of three positions, no velocities
         state_names, state_size, position_index = ("x", "y", "z"), 3, (0, 1, 2)
 
+        @staticmethod
+        def position(x):
+            return x
+
     class Planar:
         state_names, state_size, position_index = ("x", "y"), 2, (0, 1)
 
     with pytest.raises(ValueError, match="RangeDepthModel"):
         RangeDepthModel(PositionOnly())
     with pytest.raises(ValueError, match="3 entries"):
-        RangeBearingModel(Planar())
-    # the range + bearing model reads any layout with a 3-D position
-    m = RangeBearingModel(PositionOnly())
-    s, b = ca.SX.sym("x", 3), ca.SX.sym("b", 3)
-    h, H = (np.array(v) for v in ca.Function("f", [s, b], list(m.linearize(s, b)))([3.0, 4.0, 0.0], [0.0, 0.0, 0.0]))
-    np.testing.assert_allclose(h.ravel(), [5.0, math.atan2(4, 3), 0.0], rtol=1e-15)
+        RangeDirectionModel(Planar())
+    # the range + direction model reads any layout with a 3-D position
+    m = RangeDirectionModel(PositionOnly())
+    s, b, a = ca.SX.sym("x", 3), ca.SX.sym("b", 3), ca.SX.sym("a", 3)
+    h, H = (np.array(v) for v in ca.Function("f", [s, b, a], list(m.linearize(s, (b, a))))(
+        [3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(h.ravel(), [5.0, 0.6, 0.8], rtol=1e-15)
     assert H.shape == (3, 3) and m.state_size == 3
