@@ -187,13 +187,13 @@ def error_symbols() -> dict[str, ca.SX]:
 
 def error_prior(motion, named: dict) -> ca.SX:
     """The prior of a bound (n², column-major) from per-run inputs by name: ``p0_position``, ``p0_velocity`` and,
-    for a motion model with error states, the priors of :data:`ERROR_NAMES`
+    for a motion model with error states, the priors of :data:`ERROR_NAMES` (0 where not named)
     (:meth:`~sblsim.models.receiver.motion.WithErrorStates.initial_covariance`)."""
     if motion.state_size == STATE_SIZE:
         prior = motion.initial_covariance(named["p0_position"], named["p0_velocity"])
     else:
         prior = motion.initial_covariance(named["p0_position"], named["p0_velocity"],
-                                          {k: named[k] for k in ERROR_NAMES})
+                                          {k: named.get(k, 0.0) for k in ERROR_NAMES})
     return ca.densify(ca.vec(prior))  # dense: generated code writes every entry, in order
 
 

@@ -78,7 +78,6 @@ import numpy as np
 from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ARRAY
 from sblsim.models.bound import (
     ERROR_MOTION,
-    ERROR_NAMES,
     information_update,
     packed_bound,
     per_point,
@@ -294,9 +293,9 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
 
 #: Per-replicate inputs of the USBL bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled bound
 #: numbers them from this tuple: :func:`compiled_bound`, :mod:`sblsim.fmus.contract`); the error states' priors
-#: (:data:`sblsim.models.bound.ERROR_NAMES`, the clock's drift 0: the USBL ranges two-way) after the rest.
+#: (of :data:`sblsim.models.bound.ERROR_NAMES`, not the clock's: the USBL ranges two-way) after the rest.
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance", "position_variance",
-         "angle_sigma_deg", "attitude_variance", "depth_variance", *ERROR_NAMES)
+         "angle_sigma_deg", "attitude_variance", "depth_variance", "gps_sigma", "gps_tau", "attitude_sigma")
 #: Per-step inputs of the USBL bound, in the order of :func:`pcrb`'s ``steps`` columns: the true position, the
 #: transceiver and the attitude the packet carries, the slot and the packet's reception.
 STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transceiver_z",

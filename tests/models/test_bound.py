@@ -11,9 +11,13 @@
 * The Fisher information of one round of ranges: a hand-worked case and a
   numpy build with finite-difference gradients.
 * The compiled bound equals the casadi evaluation.
-* The same generic Fisher information for the range + bearing (USBL) model:
-  against analytic gradients and finite differences, and the closed form of
-  its horizontal DRMS along a line at fixed depth.
+* The bound with error states (a Gauss-Markov GPS error, the clock, a
+  constant attitude error) against an augmented FilterPy Kalman filter, and
+  equal to the plain bound without them.
+* The same generic Fisher information for the range + direction (USBL)
+  model against analytic gradients, with the closed form of its cross-range
+  accuracy; the USBL bound against an augmented FilterPy Kalman filter with
+  the full R; the compiled bounds equal the casadi evaluations.
 """
 
 from __future__ import annotations
@@ -156,158 +160,203 @@ def test_horizontal_std_hand_worked_and_against_a_numpy_fisher_matrix():
     assert np.allclose(J, J.T) and np.all(np.linalg.eigvalsh(J) > 0)
 
 
-def usbl_h(p, transceiver):
-    """Range, azimuth, elevation (numpy): NED, the elevation below the horizontal."""
-    d = p - transceiver
-    return np.array([np.linalg.norm(d), np.arctan2(d[1], d[0]), np.arctan2(d[2], np.hypot(d[0], d[1]))])
+def augmented_filter(f, n_states=14):
+    """FilterPy's KalmanFilter of the receivers' state with error states (numpy): the constant velocity, the GPS
+    error a Gauss-Markov process, the clock's offset and drift, a constant attitude error, with their priors."""
+    kf = KalmanFilter(dim_x=n_states, dim_z=1)
+    dt = f["dt"]
+    decay = np.exp(-dt / max(f["gps_tau"], 1e-9))
+    F = np.eye(n_states)
+    F[:6, :6] = phi(dt)
+    F[6:9, 6:9] = decay * np.eye(3)
+    F[9, 10] = dt
+    Q = np.zeros((n_states, n_states))
+    Q[:6, :6] = white_noise_q(dt, f["q_horizontal"], f["q_vertical"])
+    Q[6:9, 6:9] = f["gps_sigma"] ** 2 * (1 - decay ** 2) * np.eye(3)
+    kf.x, kf.F, kf.Q = np.zeros((n_states, 1)), F, Q
+    kf.P = np.diag([f["p0_position"] ** 2, f["p0_velocity"] ** 2] * 3 + [f["gps_sigma"] ** 2] * 3
+                   + [0.0, f["clock_drift_sigma"] ** 2] + [f["attitude_sigma"] ** 2] * 3)
+    return kf
 
 
-def usbl_information(p, transceiver, variances):
-    """Fisher information of range, azimuth, elevation about the position, from the analytic gradients (numpy)."""
-    dn, de, dd = p - transceiver
-    rho2 = dn**2 + de**2
-    rho, r2 = np.sqrt(rho2), rho2 + dd**2
-    gradients = (np.array([dn, de, dd]) / np.sqrt(r2),  # ∂r/∂p
-                 np.array([-de, dn, 0.0]) / rho2,  # ∂α/∂p, α = atan2(d_E, d_N)
-                 np.array([-dd * dn / rho, -dd * de / rho, rho]) / r2)  # ∂ε/∂p, ε = atan2(d_D, ρ)
-    return sum(np.outer(g, g) / v for g, v in zip(gradients, variances))
+def np_error_range(position, beacon, arm, errors, clock):
+    """A range from the broadcast beacon less the GPS error and the attitude error turned through the arm (numpy)."""
+    gps, offset, attitude = errors[0:3], errors[3], errors[5:8]
+    return np.linalg.norm(position - (beacon - gps - np.cross(attitude, arm))) + clock * offset
 
 
-def test_range_bearing_fisher_information_through_the_generic_map_function():
-    """The map's Fisher information for a USBL transceiver (range + bearing model) through the same generic function
-    as the ranges-plus-depth map, against analytic gradients; its horizontal DRMS grows linearly with the horizontal
-    distance at fixed depth (cross-range σ = ρ σ_α exactly; DRMS² = ρ²σ_α² + σ_r² cos²ε + D²σ_ε²)."""
+def test_the_bound_with_error_states_equals_an_augmented_kalman_filter_and_the_plain_bound_without_them():
+    """The ranging bound with error states (models/bound.py error_pcrb) against FilterPy's KalmanFilter with the
+    augmented state (a Gauss-Markov GPS error, the clock's offset and drift, a constant attitude error), its range
+    row by central differences of the numpy range; with every error prior 0 it is the plain bound bit for bit."""
+    from sblsim.models.bound import ERROR_FIXED, error_pcrb
+
+    truth, slot, received, beacons, arms, fixed = case()
+    n, b = slot.shape
+    errors = dict(gps_sigma=np.array([0.0, 1.0, 0.3]), gps_tau=np.array([0.0, 60.0, 5.0]),
+                  clock_drift_sigma=np.array([5e-6, 0.0, 2e-5]), attitude_sigma=np.radians([0.0, 1.0, 2.0]),
+                  clock=np.array([1500.0, 0.0, 1480.0]))
+    columns = np.stack([np.broadcast_to({**fixed, **errors}[k], (b,)) for k in ERROR_FIXED], axis=1)
+    steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None]], axis=-1)
+    bound = error_pcrb(columns, steps)
+    for r in range(b):
+        f = {k: float(np.broadcast_to(v, (b,))[r]) for k, v in {**fixed, **errors}.items()}
+        kf = augmented_filter(f)
+        for k in range(n):
+            kf.predict()
+            if slot[k, r]:
+                depth = np.zeros((1, 14))
+                depth[0, 4] = 1.0
+                kf.update(np.zeros((1, 1)), R=f["depth_variance"], H=depth)
+                if received[k, r]:
+                    state = np.zeros(14)
+                    state[[0, 2, 4]] = truth[k, r]
+
+                    def h(x, beacon=beacons[k, r], arm=arms[k, r], clock=f["clock"]):
+                        return np_error_range(x[[0, 2, 4]], beacon, arm, np.r_[x[6:9], x[9], x[10], x[11:14]], clock)
+
+                    H = np.zeros((1, 14))
+                    for i in range(14):
+                        e = np.zeros(14)
+                        e[i] = EPS
+                        H[0, i] = (h(state + e) - h(state - e)) / (2 * EPS)
+                    variance = range_variance(truth[k, r], beacons[k, r], arms[k, r], f["noise_variance"],
+                                              f["attitude_variance"])
+                    kf.update(np.zeros((1, 1)), R=variance, H=H)
+            assert bound[k, r] == pytest.approx(np.sqrt(kf.P[0, 0] + kf.P[2, 2] + kf.P[4, 4]), rel=1e-6), (k, r)
+    # the error states only add uncertainty: each run's bound is at least the plain one
+    plain = pcrb(*pcrb_inputs(truth, slot, received, beacons, arms, **fixed))
+    assert np.all(bound >= plain * (1 - 1e-12)) and np.all(bound[-1, 1:] > 1.05 * plain[-1, 1:])
+    zero = np.stack([np.broadcast_to({**fixed, **{k: 0.0 for k in errors}}[k], (b,)) for k in ERROR_FIXED], axis=1)
+    np.testing.assert_array_equal(error_pcrb(zero, steps), plain)
+
+
+def test_the_compiled_bound_with_error_states_is_the_reference_one():
+    """The ranging interface's library steps the bound with error states in C (the runs with such errors);
+    casadi's virtual machine is the reference."""
+    from sblsim.fmus import native
+    from sblsim.models.bound import ERROR_FIXED, error_pcrb
+
+    truth, slot, received, beacons, arms, fixed = case(seed=8, n=200)
+    b = slot.shape[1]
+    errors = dict(gps_sigma=1.0, gps_tau=60.0, clock_drift_sigma=5e-6, attitude_sigma=np.radians(1.0), clock=1500.0)
+    columns = np.stack([np.broadcast_to({**fixed, **errors}[k], (b,)) for k in ERROR_FIXED], axis=1)
+    steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None]], axis=-1)
+    np.testing.assert_allclose(native.system_pcrb(4, columns, steps), error_pcrb(columns, steps), rtol=1e-12, atol=0)
+
+
+def test_range_direction_fisher_information_through_the_generic_map_function():
+    """The map's Fisher information of a USBL packet (the range + direction model of a level array, through the
+    same generic function as the ranges-plus-depth map) against analytic gradients; its cross-range standard
+    deviation is the slant range times the direction cosines' σ, exactly, at any elevation, and it is finite
+    straight below the transceiver."""
     import casadi as ca
 
-    from sblsim.models.bound import horizontal_drms, model_horizontal_std, position_information
-    from sblsim.models.receiver.range_bearing import RangeBearingModel
+    from sblsim.models.bound import model_horizontal_std, position_information
+    from sblsim.models.receiver.range_direction import RangeDirectionModel
 
-    model = RangeBearingModel()
-    transceiver = np.array([1.0, -2.0, 0.5])
-    s_r, s_a, s_e = 0.1, np.radians(0.5), np.radians(0.7)
-    variances = np.array([s_r**2, s_a**2, s_e**2])
+    model = RangeDirectionModel()
+    transceiver, level = np.array([1.0, -2.0, 0.5]), np.zeros(3)
+    s_r, s_u = 0.1, np.radians(0.5)
+    variances = np.array([s_r**2, s_u**2, s_u**2])
     rng = np.random.default_rng(7)
     for p in rng.normal(scale=[40, 40, 10], size=(10, 3)) + [0, 0, 20]:
-        J = np.array(ca.evalf(position_information(model, p, transceiver, variances)))
-        expected = usbl_information(p, transceiver, variances)
+        J = np.array(ca.evalf(position_information(model, p, (transceiver, level), variances)))
+        d = p - transceiver
+        r = np.linalg.norm(d)
+        s = d / r
+        H = np.vstack([s, ((np.eye(3) - np.outer(s, s)) / r)[:2]])  # ∂[r, s_N, s_E]/∂p of a level array
+        expected = H.T @ np.diag(1 / variances) @ H
         np.testing.assert_allclose(J, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
-        # and the finite-difference Jacobian of the numpy measurement
-        H = np.zeros((3, 3))
-        for k in range(3):
-            d = np.zeros(3)
-            d[k] = EPS
-            H[:, k] = (usbl_h(p + d, transceiver) - usbl_h(p - d, transceiver)) / (2 * EPS)
-        np.testing.assert_allclose(J, H.T @ np.diag(1 / variances) @ H, rtol=1e-6)
-        inverse = np.linalg.inv(expected)
-        assert float(ca.evalf(horizontal_drms(ca.DM(J)))) == pytest.approx(np.sqrt(inverse[0, 0] + inverse[1, 1]),
-                                                                           rel=1e-10)
-    # along a horizontal line at fixed depth D below the transceiver
-    depth = 20.0
-    rho = np.linspace(50.0, 2000.0, 40)
-    bearing = np.radians(130.0)
-    points = transceiver + np.column_stack([rho * np.cos(bearing), rho * np.sin(bearing), np.full(rho.size, depth)])
-    drms = model_horizontal_std(model, points, transceiver, variances)
-    cos2 = rho**2 / (rho**2 + depth**2)
-    np.testing.assert_allclose(drms, np.sqrt((rho * s_a) ** 2 + s_r**2 * cos2 + (depth * s_e) ** 2), rtol=1e-10)
-    for p, r in zip(points, rho):  # the cross-range (azimuth) component alone: ρ σ_α
-        across = np.array([-np.sin(bearing), np.cos(bearing), 0.0])
-        J = np.array(ca.evalf(position_information(model, p, transceiver, variances)))
-        assert np.sqrt(across @ np.linalg.solve(J, across)) == pytest.approx(r * s_a, rel=1e-10)
-    slope = np.diff(drms) / np.diff(rho)
-    np.testing.assert_allclose(slope[rho[1:] > 500], s_a, rtol=1e-2)  # linear: about range · σ_angle
-    # straight below the transceiver the azimuth is undefined: no finite fix
-    assert np.isinf(model_horizontal_std(model, transceiver + [[0, 0, 10.0]], transceiver, variances)).all()
-
-
-def usbl_gradients(p, transceiver):
-    """∂[r, α, ε]/∂p (3, 3), analytic (numpy)."""
-    dn, de, dd = p - transceiver
-    rho2 = dn**2 + de**2
-    rho, r2 = np.sqrt(rho2), rho2 + dd**2
-    return np.array([np.array([dn, de, dd]) / np.sqrt(r2), np.array([-de, dn, 0.0]) / rho2,
-                     np.array([-dd * dn / rho, -dd * de / rho, rho]) / r2])
+        across = np.array([-s[1], s[0], 0.0]) / np.hypot(s[0], s[1])
+        assert np.sqrt(across @ np.linalg.solve(J, across)) == pytest.approx(r * s_u, rel=1e-9)
+    # straight below the transceiver: finite, √2 r σ_u horizontally (both direction cosines measure it)
+    below = transceiver + [[0.0, 0.0, 100.0]]
+    drms = model_horizontal_std(model, below, (transceiver, level), variances)
+    assert drms[0] == pytest.approx(np.sqrt(2) * 100.0 * s_u, rel=1e-9)
 
 
 def usbl_case(seed=4, n=200, b=3):
-    """Three runs: a diver circling 8-20 m from a transceiver that heaves, one run passing almost under it (the
-    angle noise at its floor, cos φ ≥ 0.1 off the vertical, and far off it)."""
+    """Three runs: a diver circling 8-20 m from a transceiver that heaves and rolls, one run passing almost under
+    it; the attitude the packets carry varies, and the third run has a Gauss-Markov GPS error and an attitude
+    error as states."""
     rng = np.random.default_rng(seed)
     t = 0.5 * np.arange(1, n + 1)
-    radius = np.array([8.0, 20.0, 3.0])
-    depth = np.array([6.0, 2.5, 40.0])  # cos φ ≈ 0.6, ≈ 0.07 (floored at 0.1) and ≈ 1
+    radius = np.array([8.0, 20.0, 0.3])
+    depth = np.array([6.0, 2.5, 40.0])
     truth = np.stack([np.stack([radius[j] * np.cos(0.03 * t + j), radius[j] * np.sin(0.03 * t + j),
                                 depth[j] + 0.01 * t], -1) for j in range(b)], axis=1)
     transceivers = rng.normal(scale=0.2, size=(n, b, 3)) + [0, 0, 1.0]
+    attitudes = rng.normal(scale=0.05, size=(n, b, 3)) + [0.0, 0.0, 0.4]
     slot = rng.uniform(size=(n, b)) < 0.8
     received = slot & (rng.uniform(size=(n, b)) < 0.8)
     fixed = dict(dt=0.5, q_horizontal=np.array([0.01, 0.002, 0.05]), q_vertical=np.array([1e-3, 1e-4, 1e-2]),
                  p0_position=np.array([1.0, 2.0, 0.5]), p0_velocity=np.array([0.5, 0.2, 0.3]),
                  range_variance=np.array([0.01, 0.49, 0.01]), position_variance=np.array([0.01, 1.0, 0.0]),
                  angle_sigma_deg=np.array([0.5, 1.0, 0.2]),
-                 attitude_variance=np.radians([1.0, 0.0, 0.5]) ** 2, depth_variance=np.array([1e-4, 1e-2, 1e-6]))
-    return truth, slot, received, transceivers, fixed
+                 attitude_variance=np.radians([1.0, 0.0, 0.5]) ** 2, depth_variance=np.array([1e-4, 1e-2, 1e-6]),
+                 gps_sigma=np.array([0.0, 0.0, 0.5]), gps_tau=np.array([0.0, 0.0, 30.0]),
+                 attitude_sigma=np.radians([0.0, 0.0, 1.0]))
+    return truth, slot, received, transceivers, attitudes, fixed
 
 
-def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_azimuth_and_elevation():
-    """The USBL bound (models/systems/usbl.py pcrb) against FilterPy's KalmanFilter covariance with the linearized
-    range, azimuth and elevation rows at the true position (analytic gradients, numpy) and the variances written
-    out here: ``σ_r² + σ_b²``, ``σ_a² + σ_b² / ρ²`` and ``σ_a² + σ_b² / r²``,
-    ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` (φ off the vertical) and σ_b² the transceiver position's variance
-    per axis (its error seen along the range and across the angles)."""
+def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_and_direction_cosines():
+    """The USBL bound (models/systems/usbl.py pcrb) against FilterPy's KalmanFilter covariance of the augmented state
+    (the third run's GPS error and attitude error as states) with the linearized range and direction-cosine rows
+    at the true position (central differences of the numpy h, scipy's rotations) and their full R written out
+    here: ``diag(σ_r², σ_u², σ_u²) + σ_b² H_b H_bᵀ + σ_att² H_θ H_θᵀ`` (σ_b² the transceiver position's variance
+    per axis, σ_att² the attitude's per Euler angle)."""
     from sblsim.models.systems.usbl import pcrb as usbl_pcrb
     from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
+    from tests.models.test_measurement_models import central, np_range_direction
 
-    truth, slot, received, transceivers, fixed = usbl_case()
+    truth, slot, received, transceivers, attitudes, fixed = usbl_case()
     n, b = slot.shape
-    bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, received, transceivers, **fixed))
-    floored = 0
+    bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, received, transceivers, attitudes, **fixed))
     for r in range(b):
-        f = {k: v[r] if isinstance(v, np.ndarray) else v for k, v in fixed.items()}
-        kf = KalmanFilter(dim_x=6, dim_z=1)
-        kf.x, kf.F, kf.Q = np.zeros((6, 1)), phi(f["dt"]), white_noise_q(f["dt"], f["q_horizontal"], f["q_vertical"])
-        kf.P = np.diag([f["p0_position"] ** 2, f["p0_velocity"] ** 2] * 3)
+        f = {k: float(np.broadcast_to(v, (b,))[r]) for k, v in fixed.items()}
+        kf = augmented_filter({**f, "clock_drift_sigma": 0.0})
         for k in range(n):
             kf.predict()
             if slot[k, r]:
-                kf.update(np.zeros((1, 1)), R=f["depth_variance"], H=np.array([[0, 0, 0, 0, 1.0, 0]]))
+                depth = np.zeros((1, 14))
+                depth[0, 4] = 1.0
+                kf.update(np.zeros((1, 1)), R=f["depth_variance"], H=depth)
                 if received[k, r]:
-                    d = truth[k, r] - transceivers[k, r]
-                    cos_phi = d[2] / np.linalg.norm(d)
-                    floored += cos_phi < 0.1
-                    angle = (np.radians(f["angle_sigma_deg"]) / max(cos_phi, 0.1)) ** 2 + f["attitude_variance"]
-                    b2, rho2 = f["position_variance"], d[0] ** 2 + d[1] ** 2
-                    H = np.zeros((3, 6))
-                    H[:, [0, 2, 4]] = usbl_gradients(truth[k, r], transceivers[k, r])
-                    R = np.diag([f["range_variance"] + b2, angle + b2 / rho2, angle + b2 / (rho2 + d[2] ** 2)])
+                    c, a, p = transceivers[k, r], attitudes[k, r], truth[k, r]
+                    state = np.zeros(14)
+                    state[[0, 2, 4]] = p
+
+                    def h(x, c=c, a=a):  # the broadcast transceiver less the GPS error, the attitude less its error
+                        return np_range_direction(x[:6], c - x[6:9], a - x[11:14])
+
+                    H = central(h, state)
+                    H_b = central(lambda q, x=state[:6], a=a: np_range_direction(x, q, a), c)
+                    H_a = central(lambda q, x=state[:6], c=c: np_range_direction(x, c, q), a)
+                    R = (np.diag([f["range_variance"]] + [np.radians(f["angle_sigma_deg"]) ** 2] * 2)
+                         + f["position_variance"] * H_b @ H_b.T + f["attitude_variance"] * H_a @ H_a.T)
                     kf.update(np.zeros((3, 1)), R=R, H=H)
-            assert bound[k, r] == pytest.approx(np.sqrt(kf.P[0, 0] + kf.P[2, 2] + kf.P[4, 4]), rel=1e-7), (k, r)
-    assert floored > 50 and received.sum() > 300  # the floor of the angle noise is exercised
-    # the angles carry the horizontal position: far below the range-only bound of the same packets
+            assert bound[k, r] == pytest.approx(np.sqrt(kf.P[0, 0] + kf.P[2, 2] + kf.P[4, 4]), rel=1e-6), (k, r)
+    assert received.sum() > 300
+    # the direction carries the horizontal position: far below the range-only bound of the same packets
     zeros = np.zeros_like(transceivers)
-    ranges = {k: v for k, v in fixed.items() if k not in ("angle_sigma_deg", "range_variance", "position_variance")}
+    ranges = {k: v for k, v in fixed.items()
+              if k in ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "attitude_variance",
+                       "depth_variance")}
     range_only = pcrb(*pcrb_inputs(truth, slot, received, transceivers, zeros,
                                    noise_variance=fixed["range_variance"] + fixed["position_variance"], **ranges))
-    assert np.all(bound[-1] < 0.5 * range_only[-1])
+    assert np.all(bound[-1, :2] < 0.5 * range_only[-1, :2])
 
 
 def test_the_compiled_usbl_bound_is_the_reference_one():
     """The USBL interface's library steps the USBL bound in C (what runs use); casadi's virtual machine is the
-    reference: equal to round-off on random tracks, packets, losses and transceiver motion."""
+    reference: equal to round-off on random tracks, packets, losses, attitudes and transceiver motion."""
     from sblsim.fmus import native
     from sblsim.models.systems.usbl import pcrb as usbl_pcrb
     from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 
-    rng = np.random.default_rng(11)
-    n, b = 300, 5
-    truth = rng.normal(size=(n, b, 3)) * 10.0 + np.array([0.0, 0.0, 5.0])
-    transceiver = rng.normal(size=(n, b, 3)) * 0.1 + np.array([0.0, 0.0, 1.0])
-    slot = rng.random((n, b)) < 0.5
-    received = slot & (rng.random((n, b)) < 0.8)
-    fixed, steps = usbl_pcrb_inputs(truth, slot, received, transceiver, dt=0.1, q_horizontal=0.01,
-                                    q_vertical=0.001, p0_position=1.0, p0_velocity=np.linspace(0.2, 1.0, b),
-                                    range_variance=0.01, position_variance=np.linspace(0.0, 1.0, b),
-                                    angle_sigma_deg=0.5, attitude_variance=1e-4,
-                                    depth_variance=1e-4)
+    truth, slot, received, transceivers, attitudes, fixed = usbl_case(seed=11)
+    fixed, steps = usbl_pcrb_inputs(truth, slot, received, transceivers, attitudes, **fixed)
     reference = usbl_pcrb(fixed, steps)
     np.testing.assert_allclose(native.system_pcrb(1, fixed, steps), reference, rtol=1e-12, atol=0)
     assert np.ptp(reference[-1]) > 0  # the runs differ: each is stepped with its own inputs
