@@ -354,7 +354,7 @@ def metrics_sizes(n_beacons: int = 4) -> tuple[int, int, int]:
     return tuple(sizes)
 
 
-def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float],
+def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float, float],
                 with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
     """The per-run metrics of :mod:`sblsim.orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
 
@@ -367,8 +367,9 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
         The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
     arms : ndarray, shape (B, n_beacons, 3)
         Each run's beacon lever arms in NED [m].
-    limits : (float, float, float)
-        χ²₃(0.95), the divergence distance [m] and ratio.
+    limits : (float, float, float, float)
+        χ²₃(0.95), the divergence distance [m] and ratio, and the received packets in a row the gate rejects when
+        the receiver has lost the diver.
     with_bound : bool
         Also return the position PCRB at every step.
 

@@ -42,7 +42,7 @@ from sblsim.orchestrator.config import (
 )
 from sblsim.orchestrator.engines import ENGINES
 from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, REACH_RATIO
+from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
 from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
@@ -293,7 +293,8 @@ def _run(args: argparse.Namespace) -> int:
     if s["diverged"]:
         print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
               f"{DIVERGENCE_DISTANCE:g} m and {DIVERGENCE_RATIO:g} times the diver's distance from the platform "
-              "off the truth): its numbers mean nothing; see error_bounds.png", file=sys.stderr)
+              f"off the truth, or {DIVERGENCE_REJECTIONS} received packets in a row its gate rejected): its numbers "
+              "mean nothing; see error_bounds.png", file=sys.stderr)
     for line in _run_warnings(s, plan):
         print(f"sblsim: warning: {line}", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")

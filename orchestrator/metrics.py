@@ -18,8 +18,13 @@ the position PCRB along the run (:mod:`sblsim.models.bound`), comparable
 with ``e_tot_rms``. ``diverged`` flags a run whose receiver lost the diver: an
 estimate that is not finite, or farther from the truth than both
 :data:`DIVERGENCE_DISTANCE` and :data:`DIVERGENCE_RATIO` times the diver's
-distance from the platform; its other numbers then mean nothing (an
-overconfident but tracking receiver is not flagged: its NEES says so).
+distance from the platform, or, by the receiver's own statistics, a run of
+:data:`DIVERGENCE_REJECTIONS` received packets in a row that its NIS gate
+rejected (every new measurement inconsistent with the estimate and with the
+one before it: the receiver knows it has lost track; a receiver without a
+gate, the paper's ``ekf``, is judged by its error alone); its other numbers
+then mean nothing (an overconfident but tracking receiver is not flagged:
+its NEES says so).
 
 Two flags say when the numbers are not what they seem (:func:`run_flags`):
 ``updates`` counts the slots whose received range the receiver used (new,
@@ -53,8 +58,10 @@ from sblsim.fmus import native
 from sblsim.models.columns import METRIC_INPUTS, METRIC_NAMES, RUN_METRICS
 
 #: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
-#: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference.
-DIVERGENCE_DISTANCE, DIVERGENCE_RATIO = 100.0, 10.0
+#: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference, or when its own gate rejected
+#: :data:`DIVERGENCE_REJECTIONS` received packets in a row (its own statistics: every new measurement disagrees
+#: with its estimate, and with the one before, :func:`sblsim.models.receiver.gate.gate`).
+DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS = 100.0, 10.0, 10
 #: A diver farther from the platform reference (horizontally) than this many times the beacons' horizontal
 #: spread is beyond what the geometry serves (``beyond_geometry``; the command line warns).
 REACH_RATIO = 100.0
@@ -90,8 +97,8 @@ def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.n
     bound : ndarray, shape (N, B), or None
         ``sqrt(trace)`` of the position PCRB [m] (:func:`sblsim.models.bound.pcrb`).
     """
-    values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS], fixed, arms,
-                                       (NEES_95, DIVERGENCE_DISTANCE, DIVERGENCE_RATIO), with_bound,
+    limits = (NEES_95, DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS)
+    values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS], fixed, arms, limits, with_bound,
                                        n_beacons=arms.shape[1])
     out = {name: values[:, k] for k, name in enumerate(RUN_METRICS)}
     out["diverged"] = out["diverged"] > 0.5
@@ -191,6 +198,27 @@ def slots(packet_seq: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, np.
     return slot, slot & np.asarray(received, bool)
 
 
+def rejected_run(rejected: np.ndarray, fresh: np.ndarray) -> np.ndarray:
+    """The longest run of received packets in a row that the gate rejected, per run.
+
+    Parameters
+    ----------
+    rejected, fresh : ndarray of bool, shape (B, N)
+        Run-major: received packets the gate rejected, and received packets.
+
+    Returns
+    -------
+    ndarray of int, shape (B,)
+    """
+    longest = np.zeros(rejected.shape[0], dtype=np.int64)
+    for r in range(rejected.shape[0]):
+        count = 0
+        for gated in rejected[r][fresh[r]]:
+            count = count + 1 if gated else 0
+            longest[r] = max(longest[r], count)
+    return longest
+
+
 def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: np.ndarray, fresh: np.ndarray,
                 gated: np.ndarray, bound: np.ndarray, truth: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Consistency metrics of B runs (:data:`CONSISTENCY_NAMES`).
@@ -226,6 +254,8 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
     error = runs(np.sqrt(np.sum(np.asarray(err, dtype=float) ** 2, axis=-1)))
     reach = 0.0 if truth is None else runs(np.sqrt(np.sum(np.asarray(truth, dtype=float) ** 2, axis=-1)))
     lost = ~np.isfinite(error) | ((error > DIVERGENCE_DISTANCE) & (error > DIVERGENCE_RATIO * reach))
+    lost = lost.any(axis=-1) | (rejected_run(runs(fresh, bool) & runs(gated, bool), runs(fresh, bool))
+                                >= DIVERGENCE_REJECTIONS)
     valid = np.isfinite(e)
     count = valid.sum(axis=-1)
     started = runs(packet_seq) > 0
@@ -237,7 +267,7 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
             "nis_mean": np.where(started, runs(nis), 0.0).sum(axis=-1) / started.sum(axis=-1),
             "gated_pct": 100.0 * (fresh & runs(gated, bool)).sum(axis=-1) / fresh.sum(axis=-1),
             "pcrb_rms": np.sqrt(np.mean(runs(bound) ** 2, axis=-1)),
-            "diverged": lost.any(axis=-1),
+            "diverged": lost,
         }
 
 

@@ -31,7 +31,7 @@ typedef struct {
 typedef struct {
     errors_acc est, instr;
     double nees_sum, nis_sum, trace_sum, previous_seq;
-    long nees_count, covered, started, fresh, gated;
+    long nees_count, covered, started, fresh, gated, rejected;
     int lost;
     double bound[N_BOUND];
 } run_acc;
@@ -152,6 +152,9 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             if (fresh > 0) {
                 s->fresh++;
                 if (v[SBLSIM_COLUMN_GATED] > 0.5) s->gated++;
+                /* the receiver's own statistics: its gate rejected this many received packets in a row */
+                s->rejected = v[SBLSIM_COLUMN_GATED] > 0.5 ? s->rejected + 1 : 0;
+                if (s->rejected >= limits[3]) s->lost = 1;
             }
             id = id < 1 ? 1 : (id > n_beacons ? n_beacons : id);
             arg[SBLSIM_BOUND_IN_B] = s->bound;
