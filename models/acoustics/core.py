@@ -259,7 +259,8 @@ DETECTION_VARIABLES: tuple[Variable, ...] = (
     Variable("decoding_margin", "parameter", "Real", 3.0, "dB",
              "snr: SNR above the detection threshold the packet's data needs to be decoded", min=0.0, max=60.0),
     Variable("absorption", "parameter", "Real", 0.0, "dB/m",
-             "snr: volume absorption (Francois-Garrison at frequency, temperature, salinity; filled by the "
+             "snr: volume absorption of the site's water (Francois-Garrison at frequency, the cast's temperature, "
+             "salinity, over the water column; filled by the "
              "orchestrator)", min=0.0, max=1.0, scope="fmu"),
     Variable("beaufort", "parameter", "Integer", 2,
              description="snr: sea state of the wind noise and the surface's roughness (platform.beaufort)",
@@ -485,10 +486,11 @@ class Acoustics(Component):
         rows = profile_table(values.get("sound_speed_profile", "constant"), values.get("sound_speed_table", ""),
                              values.get("temperature", 15.0), values.get("salinity", 35.0))
         out.update(PROFILE.values(rows, "sound_speed_rows"))
-        # volume absorption at the signal's frequency, at the middle of the water column (0 m without a depth)
-        out["absorption"] = float(sonar.absorption(
-            values.get("frequency", 25000.0), values.get("temperature", 15.0), values.get("salinity", 35.0),
-            0.5 * values.get("water_depth", 0.0)))
+        # volume absorption at the signal's frequency in the site's own water (the column's mean, each depth at
+        # the temperature its cast gives)
+        out["absorption"] = sonar.water_column_absorption(
+            values.get("frequency", 25000.0), rows, values.get("temperature", 15.0), values.get("salinity", 35.0),
+            values.get("water_depth", 0.0))
         return out
 
     @classmethod

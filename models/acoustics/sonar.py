@@ -48,7 +48,10 @@ import math
 from typing import Any, NamedTuple
 
 import casadi as ca
+import numpy as np
+from scipy.integrate import trapezoid
 
+from sblsim.models.acoustics.sound_speed import temperature_from_speed
 from sblsim.models.errors import ModelError
 from sblsim.models.expressions import lookup
 from sblsim.models.platform.waves import WAVE_HEIGHT, WIND_SPEED
@@ -628,6 +631,52 @@ def detection_range(frequency, bandwidth, source_level, directivity_index, detec
     return math.exp(0.5 * (low + high))
 
 
-__all__ = ["BOTTOMS", "Bottom", "DB_PER_NEPER", "REFERENCE_SNR", "absorption", "accuracy_scale", "bottom_loss",
-           "bottom_parameters", "detection_probability", "detection_range", "half_space_loss", "noise_components",
-           "noise_level", "noise_spectrum_level", "snr", "surface_loss", "wave_height", "wind_speed"]
+
+def water_column_absorption(frequency: float, rows: np.ndarray, temperature: float, salinity: float,
+                            water_depth: float, points: int = 201) -> float:
+    """The volume absorption of the site's own water [dB/m]: Francois & Garrison's (:func:`absorption`) averaged
+    over the water column, each depth at its own temperature and pressure.
+
+    The temperature at each depth is the cast's: where the profile is a table of sound speeds (a CTD cast, a
+    table, the Munk or TEOS-10 profile), the temperature TEOS-10 gives that speed at the salinity
+    (:func:`~sblsim.models.acoustics.sound_speed.temperature_from_speed`); with a constant speed, the declared
+    ``temperature``. The column is ``[0, water_depth]`` (its deepest row where no water depth is given; at the
+    surface where there is neither).
+
+    Parameters
+    ----------
+    frequency : float
+        Signal frequency [Hz].
+    rows : ndarray, shape (n, 2)
+        The sound-speed table: depth [m], speed [m/s] (0 rows: a constant speed).
+    temperature, salinity : float
+        The declared temperature [°C] and salinity [g/kg].
+    water_depth : float
+        Water depth [m] (0: none).
+    points : int
+        Depths of the average (evenly spaced, trapezoidal rule).
+
+    Returns
+    -------
+    float
+        [dB/m].
+
+    References
+    ----------
+    Francois, Garrison, J. Acoust. Soc. Am. 72(6), 1982. IOC, SCOR, IAPSO, TEOS-10, 2010.
+    """
+    rows = np.asarray(rows, dtype=float).reshape(-1, 2)
+    bottom = water_depth if water_depth > 0.0 else (float(rows[-1, 0]) if rows.shape[0] else 0.0)
+    depth = np.linspace(0.0, max(bottom, 0.0), points)
+    if rows.shape[0]:
+        temperature = np.interp(depth, rows[:, 0], temperature_from_speed(rows[:, 0], rows[:, 1], salinity))
+    alpha = np.broadcast_to(np.asarray(absorption(frequency, temperature, salinity, depth), dtype=float).ravel(),
+                            (points,))
+    if bottom <= 0.0:
+        return float(alpha[0])
+    return float(trapezoid(alpha, depth) / bottom)
+
+__all__ = ["absorption", "accuracy_scale", "Bottom", "bottom_loss", "bottom_parameters", "BOTTOMS", "DB_PER_NEPER",
+           "detection_probability", "detection_range", "half_space_loss", "noise_components", "noise_level",
+           "noise_spectrum_level", "REFERENCE_SNR", "snr", "surface_loss", "water_column_absorption", "wave_height",
+           "wind_speed"]

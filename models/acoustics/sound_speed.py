@@ -261,6 +261,42 @@ def teos10_table(temperature: float, salinity: float, max_depth: float = 100.0,
     return np.column_stack([depth, gsw.sound_speed(salinity, conservative, pressure)])
 
 
+def temperature_from_speed(depth: np.ndarray, speed: np.ndarray, salinity: float,
+                           latitude: float = 43.0) -> np.ndarray:
+    """In-situ temperature of a cast that gives only its sound speed: TEOS-10's sound speed (``gsw``) solved
+    for the temperature at each depth, at the salinity ``salinity`` (Newton's iteration on the conservative
+    temperature, derivative by central differences; 8 steps reach 1e-9 °C).
+
+    Parameters
+    ----------
+    depth, speed : ndarray, shape (n,)
+        Depth [m] and sound speed [m/s] of the cast.
+    salinity : float
+        Salinity of the water [g/kg] (taken as absolute salinity).
+    latitude : float
+        Latitude of the depth-to-pressure conversion [deg].
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        In-situ temperature [°C] (clipped to TEOS-10's range, −2 to 40 °C).
+
+    References
+    ----------
+    IOC, SCOR, IAPSO, The international thermodynamic equation of seawater – 2010 (TEOS-10), 2010; McDougall,
+    Barker, Getting started with TEOS-10 and the Gibbs Seawater (GSW) Oceanographic Toolbox, 2011.
+    """
+    depth, speed = np.asarray(depth, dtype=float), np.asarray(speed, dtype=float)
+    pressure = gsw.p_from_z(-np.maximum(depth, 0.0), latitude)
+    conservative = np.full(depth.shape, 10.0)
+    for _ in range(8):
+        slope = (gsw.sound_speed(salinity, conservative + 0.01, pressure)
+                 - gsw.sound_speed(salinity, conservative - 0.01, pressure)) / 0.02
+        conservative = np.clip(conservative - (gsw.sound_speed(salinity, conservative, pressure) - speed) / slope,
+                               -2.0, 40.0)
+    return np.clip(gsw.t_from_CT(salinity, conservative, pressure), -2.0, 40.0)
+
+
 PROFILE_SOURCES = ("constant", "teos10", "table", "munk")
 
 
@@ -394,6 +430,6 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     return read_cast_csv(spec, field) if allowed is None else read_cast_csv(spec, field, allowed)
 
 
-__all__ = ["BUILTIN_CASTS", "MAX_PROFILE_ROWS", "NODES", "PROFILE", "PROFILE_SOURCES", "harmonic_mean", "munk_speed",
-           "munk_table", "node_speeds", "profile_nodes", "profile_table", "read_cast_csv", "read_gnatss_ctd",
-           "teos10_table"]
+__all__ = ["BUILTIN_CASTS", "harmonic_mean", "MAX_PROFILE_ROWS", "munk_speed", "munk_table", "node_speeds", "NODES",
+           "PROFILE", "profile_nodes", "PROFILE_SOURCES", "profile_table", "read_cast_csv", "read_gnatss_ctd",
+           "temperature_from_speed", "teos10_table"]
