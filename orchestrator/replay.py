@@ -120,6 +120,14 @@ LOG_COLUMNS = {
     "depth_m": ("m", "the depth reading at time_s", "always"),
     "azimuth_rad": ("rad", "USBL: the direction of arrival's azimuth, clockwise from North (NED)", "USBL"),
     "elevation_rad": ("rad", "USBL: the direction of arrival's elevation below the horizontal", "USBL"),
+    "doa_x": ("1", "USBL: the direction cosine of the reply along the array's x axis, as the array measured it",
+              "USBL"),
+    "doa_y": ("1", "USBL: the direction cosine of the reply along the array's y axis, as the array measured it",
+              "USBL"),
+    "doa_roll_rad": ("rad", "USBL: the roll with which the surface turned the direction into NED (the IMU's)",
+                     "USBL"),
+    "doa_pitch_rad": ("rad", "USBL: the pitch with which the surface turned the direction into NED", "USBL"),
+    "doa_yaw_rad": ("rad", "USBL: the yaw with which the surface turned the direction into NED", "USBL"),
 }
 #: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
 TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
@@ -145,8 +153,11 @@ class Log:
         The beacon position the packet carried [m] (0 on a depth-only row).
     depth : ndarray, shape (N,)
         Depth reading [m].
-    angles : ndarray, shape (N, 2), or None
-        USBL azimuth and elevation [rad] (0 on a depth-only row).
+    system_values : ndarray, shape (N, k), or None
+        The columns the system adds, in the order of its
+        :attr:`~sblsim.models.systems.System.log_columns` (USBL: azimuth and elevation [rad], the array's
+        direction cosines [1] and the attitude the surface turned the direction with [rad]; 0 on a depth-only
+        row).
     where : list of str
         Each row's place in the file (``line 12``, ``row 11``).
     counts : dict
@@ -161,6 +172,8 @@ class Log:
         The configuration an exported log carries (TOML; empty for another log).
     sent : ndarray, shape (N,)
         Each row's ``time_s`` (its transmit epoch) [s]; empty: the arrivals ``time``.
+    system_columns : dict
+        The system's log columns -> the receiver inputs they feed (those of :attr:`system_values`).
     """
 
     path: Path
@@ -169,7 +182,7 @@ class Log:
     range: np.ndarray
     beacon_ned: np.ndarray
     depth: np.ndarray
-    angles: np.ndarray | None
+    system_values: np.ndarray | None
     where: list[str]
     counts: dict[str, int]
     longest_gap: tuple[float, str]
@@ -177,6 +190,7 @@ class Log:
     ignored: list[str] = field(default_factory=list)
     config: str = ""
     sent: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    system_columns: dict[str, str] = field(default_factory=dict)
 
     @property
     def transmit(self) -> np.ndarray:
@@ -206,8 +220,8 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
         Beacons of the configuration (ids 1 … n_beacons are known).
     system : System, optional
         The configuration's positioning system (:mod:`sblsim.models.systems`): the columns it adds to a log
-        (:attr:`~sblsim.models.systems.System.log_columns`: USBL's ``azimuth_rad`` and ``elevation_rad``) are
-        required. Default: none added.
+        (:attr:`~sblsim.models.systems.System.log_columns`: USBL's direction of arrival, the array's direction
+        cosines and the attitude) are required. Default: none added.
     sound_speed : float
         The sound speed that turns ``travel_time_s`` into range where the log gives none [m/s].
 
@@ -240,7 +254,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     index = _columns(table, "log")
     name = str(path)
     doc = "see docs/log-format.md"
-    extra = tuple(system.log_columns) if system is not None else ()  # the system's angles (USBL)
+    extra = tuple(system.log_columns) if system is not None else ()  # the system's own columns (USBL)
     required = ["time_s", "beacon_id", *_PACKET_COLUMNS, "depth_m", *extra]
     missing = [c for c in required if c not in index]
     if missing:
@@ -292,7 +306,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
             latest, latest_where = t, where_short
         depth = _number(cells[index["depth_m"]], where, "depth_m", d_lo, d_hi)
         if beacon == 0:
-            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0, 0.0), where_short, sent))
+            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0,) * len(extra), where_short, sent))
             continue
         if has_range:
             rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
@@ -303,8 +317,8 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
                 speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)
             rng = speed * travel
         position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
-        angles = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra) if extra else (0.0, 0.0)
-        kept.append((t, beacon, rng, position, depth, angles, where_short, sent))
+        own = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra)
+        kept.append((t, beacon, rng, position, depth, own, where_short, sent))
 
     # in arrival order (stable: rows of one time keep the file's order), then without duplicates
     kept.sort(key=lambda row: row[0])
@@ -326,10 +340,10 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     return Log(path=path, time=times, beacon=np.array([r[1] for r in rows], dtype=np.int64),
                range=np.array([r[2] for r in rows]), beacon_ned=np.array([r[3] for r in rows], dtype=float),
                depth=np.array([r[4] for r in rows]),
-               angles=np.array([r[5] for r in rows], dtype=float) if extra else None,
+               system_values=np.array([r[5] for r in rows], dtype=float) if extra else None,
                where=[r[6] for r in rows], counts=counts, longest_gap=gap,
                typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config,
-               sent=np.array([r[7] for r in rows]))
+               sent=np.array([r[7] for r in rows]), system_columns=dict(system.log_columns) if extra else {})
 
 
 def _beacon(text: str, n_beacons: int) -> int:
@@ -668,17 +682,24 @@ class ReplayResult:
     summary: dict[str, Any]
 
 
+def system_inputs(log: Log) -> dict[str, np.ndarray]:
+    """The receiver's inputs of the columns the log's system adds (USBL's direction of arrival): input name ->
+    values (N,)."""
+    if log.system_values is None:
+        return {}
+    return {source: log.system_values[:, j] for j, source in enumerate(log.system_columns.values())}
+
+
 def _inputs(log: Log, names: Sequence[str], rel: np.ndarray, start: float) -> np.ndarray:
     """The receiver's input vector of every row, shape (N, n_in); ``rel`` the rows' arrivals from the start
     ``start`` [s]."""
     packet = log.beacon > 0
-    angles = log.angles if log.angles is not None else np.zeros((len(rel), 2))
     # the transmit epoch from the start: the arrival itself where the log gives none (as the schedule has it)
     sent = np.where(log.transmit == log.time, rel, log.transmit - start)
     values = {"packet_seq": np.arange(1, len(rel) + 1, dtype=float), "beacon_id": log.beacon.astype(float),
               "packet_valid": packet.astype(float), "tx_time": sent, "rx_time": rel, "range": log.range,
               "beacon_x": log.beacon_ned[:, 0], "beacon_y": log.beacon_ned[:, 1], "beacon_z": log.beacon_ned[:, 2],
-              "depth": log.depth, "azimuth": angles[:, 0], "elevation": angles[:, 1]}
+              "depth": log.depth, **system_inputs(log)}
     unknown = [n for n in names if n not in values]
     if unknown:
         raise ModelError(f"receiver: input {unknown[0]!r} is not in a log")
@@ -757,7 +778,6 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     def packet(values: np.ndarray, empty: float = 0.0) -> np.ndarray:
         return np.where(none, empty, values[rows])
 
-    angles = log.angles
     columns: dict[str, np.ndarray] = {
         "time": times, "replicate": np.zeros(plan.steps, dtype=np.int64),
         "log_row": np.array([log.where[r] if r >= 0 else "" for r in shown], dtype=object),
@@ -769,8 +789,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
         **{f"beacon_{a}": packet(log.beacon_ned[:, k]) for k, a in enumerate("xyz")},
         "depth": packet(log.depth),
     }
-    if angles is not None:
-        columns.update(azimuth=packet(angles[:, 0]), elevation=packet(angles[:, 1]))
+    columns.update({name: packet(values) for name, values in system_inputs(log).items()})
     columns.update({n: out[n] for n in names if n not in columns})
     frame = pd.DataFrame(columns)
     result = RunResult(cfg.config, engine, frame, pd.DataFrame(), plan.steps, wall, plan=cfg)
@@ -895,7 +914,7 @@ def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataF
     epoch (``tx_time``), ``rx_time`` its arrival (the run's receiver used it at its first step reaching
     that). The rows are in the order the receiver was given them (of arrival). Values are the receiver's
     inputs as the run recorded them, with the columns the run's ``system`` adds
-    (:attr:`~sblsim.models.systems.System.log_columns`: USBL's angles).
+    (:attr:`~sblsim.models.systems.System.log_columns`: USBL's direction of arrival).
     """
     seq = ts["packet_seq"].to_numpy()
     previous = np.concatenate([[0], seq[:-1]])

@@ -457,7 +457,8 @@ class USBL(System):
     timeseries_columns = {"azimuth": "acoustics.azimuth", "elevation": "acoustics.elevation",
                           **{f"array_{a}": f"platform.array_{a}" for a in ATTITUDE_ANGLES},
                           **{f"doa_{a}": f"acoustics.doa_{a}" for a in ("x", "y", *ATTITUDE_ANGLES)}}
-    log_columns = {"azimuth_rad": "azimuth", "elevation_rad": "elevation"}
+    log_columns = {"azimuth_rad": "azimuth", "elevation_rad": "elevation", "doa_x": "doa_x", "doa_y": "doa_y",
+                   **{f"doa_{a}_rad": f"doa_{a}" for a in ATTITUDE_ANGLES}}
     bound_fixed = FIXED
     bound_steps = STEPS
 
