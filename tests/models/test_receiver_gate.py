@@ -3,10 +3,12 @@
 A range whose NIS is just above the χ²(1) quantile of the gate probability
 (scipy) is gated; one just below, or one shorter than predicted by any
 amount (multipath only lengthens ranges), is used. When the latest ranges of
-``gate_max_rejections`` beacons failed, the next failing range is used (no
-lock-out). In a simulated channel with 10 % multipath outliers, the gate
-rejects the outliers and, at the stated probability, leaves correct ranges
-alone.
+``gate_max_rejections`` beacons failed, a failing range that agrees with its
+beacon's previous failed one is used (a lost track is re-acquired: no
+lock-out), and an outlier is not: a stream of outliers after a run of
+rejections gets none in. In a simulated channel with 10 % multipath
+outliers, the gate rejects the outliers and, at the stated probability,
+leaves correct ranges alone.
 """
 
 from __future__ import annotations
@@ -65,38 +67,66 @@ def test_the_gate_passes_and_rejects_at_the_chi_square_quantile(model):
     assert out["est_x"][2] != pytest.approx(ref["est_x"][0], abs=1e-3)
 
 
-def test_no_lock_out_after_failures_on_several_beacons():
-    core = Core(SequentialReceiver, GATE).initialize(0.0)
-    t, gated = 0.0, []
-    for seq, beacon in enumerate((1, 2, 3, 4), start=1):  # every range 20 m long: all fail the test
-        x = core.state["x"][0]
-        d = np.linalg.norm(x[[0, 2, 4]] - BEACONS[beacon - 1])
-        core.set_inputs(packet(seq, beacon, t + 0.5, d + 20.0, BEACONS[beacon - 1], x[4]))
-        gated.append(bool(core.step(t, 0.5)["gated"][0]))
-        t += 0.5
-    # two rejected, then (two beacons failed) the gate opens and the ranges are used though they fail
-    assert gated == [True, True, False, False]
-    assert core.state["failed"][0].tolist() == [1.0, 1.0, 1.0, 1.0]
-
-
-@pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
-def test_no_lock_out_with_the_one_transceiver_of_a_usbl_interface(model):
-    """USBL: one "beacon", so ``gate_max_rejections`` (2) beacons can never have failed; the guard counts every
-    beacon of a smaller interface: after one failed packet the next ones are used, though they fail as well, until
-    one passes again (without it the gate refused every packet after a drift: an ekf-seq run on random-walk gated
-    its packets for 9 s while its error grew to 4 m)."""
-    transceiver = np.array([0.0, 0.0, 1.0])
-    core = Core(model, GATE, n_beacons=1).initialize(0.0)
-    t, gated = 0.0, []
-    for seq in range(1, 5):  # every range 20 m long: all fail the test
-        x = core.state["x"][0]
-        d = x[[0, 2, 4]] - transceiver
-        inputs = packet(seq, 1, t + 0.5, np.linalg.norm(d) + 20.0, transceiver, x[4])
-        inputs.update(azimuth=np.arctan2(d[1], d[0]), elevation=np.arctan2(d[2], np.hypot(d[0], d[1])))
+def feed(core, stream, t=0.0, n_beacons=4, transceiver=None):
+    """Feed ``(beacon, range)`` packets one per half second; the ``gated`` flag of each."""
+    gated = []
+    for seq, (beacon, rng) in enumerate(stream, start=1):
+        where = BEACONS[beacon - 1] if transceiver is None else transceiver
+        inputs = packet(seq, beacon, t + 0.5, rng, where, core.state["x"][0][4])
+        if transceiver is not None:  # a USBL packet: a level array, the direction straight down
+            inputs.update(azimuth=0.0, elevation=np.pi / 2, doa_x=0.0, doa_y=0.0, doa_roll=0.0, doa_pitch=0.0,
+                          doa_yaw=0.0)
         core.set_inputs(inputs)
         gated.append(bool(core.step(t, 0.5)["gated"][0]))
         t += 0.5
-    assert gated == [True, False, False, False]
+    return gated
+
+
+def distance(core, beacon):
+    return float(np.linalg.norm(core.state["x"][0][[0, 2, 4]] - BEACONS[beacon - 1]))
+
+
+@pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
+def test_a_lost_track_is_reacquired_by_consistent_ranges(model):
+    """The diver is 15 m from where the filter believes it: every range fails its test at first; once two beacons
+    failed, a range that agrees with its own beacon's previous failed one is used, and the filter recovers (no
+    lock-out). A failing range whose beacon had not failed before is not let in."""
+    core = Core(model, GATE).initialize(0.0)
+    truth = core.state["x"][0][[0, 2, 4]] + [15.0, 0.0, 0.0]
+    stream = [(k % 4 + 1, float(np.linalg.norm(truth - BEACONS[k % 4]))) for k in range(12)]
+    gated = feed(core, stream)
+    # the first round fails throughout (beacons 3 and 4 have no failed range before theirs); the second is re-acquired
+    assert gated[:4] == [True, True, True, True]
+    assert gated[4:6] == [False, False]
+    assert np.linalg.norm(core.state["x"][0][[0, 2, 4]] - truth) < 1.0
+
+
+@pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
+def test_after_a_run_of_rejections_no_outlier_is_let_in(model):
+    """The filter is right; two beacons' ranges are multipath outliers (a few metres long): they fail, and the gate's
+    guard is open. Outliers follow on every beacon, each with its own random excess: none is used (before, the guard
+    let the next range in whatever it was); then correct ranges pass."""
+    core = Core(model, GATE).initialize(0.0)
+    excess = [5.0, 7.0, 3.0, 4.0, 9.0, 2.0, 6.5, 1.5]
+    stream = [(k % 4 + 1, distance(core, k % 4 + 1) + e) for k, e in enumerate(excess)]
+    gated = feed(core, stream)
+    assert gated == [True] * len(excess), gated
+    correct = [(b, distance(core, b)) for b in (1, 2, 3, 4)]
+    assert feed(core, correct, t=4.0) == [False] * 4
+
+
+@pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
+def test_the_one_transceiver_of_a_usbl_interface_reacquires_and_keeps_outliers_out(model):
+    """USBL: one "beacon", so the guard opens after one failed packet (every beacon of the interface failed). Two
+    consecutive packets that agree (a drift) are used from the second on; outliers of random excess are not."""
+    transceiver = np.array([0.0, 0.0, 1.0])
+    core = Core(model, GATE, n_beacons=1).initialize(0.0)
+    below = float(core.state["x"][0][4] - transceiver[2])
+    gated = feed(core, [(1, below + 20.0), (1, below + 20.0)], transceiver=transceiver)
+    assert gated == [True, False]
+    core = Core(model, GATE, n_beacons=1).initialize(0.0)
+    gated = feed(core, [(1, below + e) for e in (6.0, 2.0, 9.0, 4.0)], transceiver=transceiver)
+    assert gated == [True] * 4
     assert core.state["failed"][0].tolist() == [1.0]
 
 
@@ -119,8 +149,8 @@ def test_in_a_multipath_channel_the_gate_takes_the_outliers_and_leaves_correct_r
     outlier, gated = t["outlier"].astype(bool), t["gated"].astype(bool)
     long = outlier & (t["range"] - t["range_true"] > 1.0)
     assert long.sum() > 1000
-    # a metre-long outlier is gated unless the latest ranges of two other beacons failed too (the lock-out
-    # guard opens the gate then: about 3 % of the time with four beacons and 10 % outliers)
-    assert gated[long].mean() > 0.95
+    # a metre-long outlier is gated: the re-acquisition after a run of failures lets in only a range that agrees
+    # with its beacon's previous failed one (before, the guard let any range in: about 3 % of the outliers)
+    assert gated[long].mean() > 0.995
     # a correct range passes with at least the stated probability (one-sided test: about 1 − (1 − p)/2)
     assert 0 < gated[~outlier].mean() < 1 - p
