@@ -98,7 +98,7 @@ def test_a_lost_track_is_reacquired_by_consistent_ranges(model):
     # the first round fails throughout (beacons 3 and 4 have no failed range before theirs); the second is re-acquired
     assert gated[:4] == [True, True, True, True]
     assert gated[4:6] == [False, False]
-    assert np.linalg.norm(core.state["x"][0][[0, 2, 4]] - truth) < 1.0
+    assert np.linalg.norm(core.state["x"][0][[0, 2, 4]] - truth) < 1.5  # from 15 m off, in 8 ranges
 
 
 @pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
