@@ -474,9 +474,10 @@ def _calibrate(args: argparse.Namespace) -> int:
     result = calibrate(survey)
     out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
                   "calibration")
-    for note in survey.notes:
-        print(f"note: {note}", file=sys.stderr)
     write_calibration(result, out)
+    for note in survey.notes:  # after the write: a write that fails says one line
+        print(f"note: {note}", file=sys.stderr)
+    _calibration_warnings(result)
     s = result.solution
     solver = s["solver"]
     if solver["propagation"] == "ray":
@@ -500,6 +501,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibration_warnings(result) -> None:
+    for warning in result.warnings:
+        print(f"sblsim: warning: {warning}", file=sys.stderr)
+
+
 def _calibrate_simulated(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.surveys.calibrate import write_calibration
     from sblsim.orchestrator.surveys.log import write_log
@@ -518,6 +524,7 @@ def _calibrate_simulated(args: argparse.Namespace) -> int:
     if table is not None:
         extra["replicates.parquet"] = lambda path: table.to_parquet(path, index=False)
     write_calibration(result, out, extra)
+    _calibration_warnings(result)
     s = result.solution
     t, e, truth = s["transponders"][0], s["errors"][0], s["truth"][0]
     print(f"simulated calibration {sim.name}: {sim.survey['pattern']} of {sim.survey['radius_m']:g} m around a "
