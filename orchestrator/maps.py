@@ -258,9 +258,29 @@ def system_line(plan: RunPlan | dict) -> str:
     return plan.system.describe(plan["platform"])
 
 
+def check_depth(cfg: dict, depth: float, option: str = "--depth") -> None:
+    """Refuse a diver's depth of a map that the site cannot hold: at or below the water depth
+    (``acoustics.water_depth``; 0: none), or where the system has no diver
+    (:func:`~sblsim.orchestrator.systems.check_diver`: LBL's transponders stand on the seafloor).
+
+    Raises
+    ------
+    ModelError
+        Naming ``option`` (the option or argument that gave the depth) and the allowed range.
+    """
+    water = float(cfg["acoustics"]["water_depth"])
+    if water > 0.0 and not depth < water:
+        raise ModelError(f"{option}: {depth:g} m is outside the allowed range [0, {water:g}) m: the site's water is "
+                         f"{water:g} m deep (acoustics.water_depth)")
+    try:
+        check_diver(cfg, depth)
+    except ModelError as exc:
+        raise ModelError(f"{option}: {depth:g} m is not above the seafloor: {exc}") from None
+
+
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
               step: float = 0.5, compare: tuple[str, list[str]] | None = None,
-              depth: float | None = None, progress: ProgressSpec = False
+              depth: float | None = None, progress: ProgressSpec = False, option: str = "--depth"
               ) -> tuple[list[str], list[dict], np.ndarray, np.ndarray, list[np.ndarray]]:
     """The accuracy map of a configuration, or one per value of a compared key (each configuration resolved
     once into its plan).
@@ -268,7 +288,8 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     ``progress`` reports each map made (:class:`sblsim.orchestrator.progress.Progress`); default silent.
 
     ``depth`` [m] is the diver's depth of every map (default :func:`diver_depth` of each configuration); the
-    configurations returned hold it as ``target.depth``, which the table and the figure show.
+    configurations returned hold it as ``target.depth``, which the table and the figure show. It is checked
+    against each configuration's site (:func:`check_depth`); errors name it as ``option``.
 
     Returns
     -------
@@ -293,12 +314,11 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
                  for items in compared(key, values, overrides, scenario_system(scenario))]
         labels = [f"{key} = {v}" for v in values]
     if depth is not None and not 0.0 <= depth <= 11000.0:
-        raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")
+        raise ModelError(f"{option}: {depth!r} is outside the allowed range [0, 11000] m")
     configs = []
     for plan in plans:
         configs.append(MapConfig(plan, diver_depth(plan)[0] if depth is None else float(depth)))
-        if compare is not None and compare[0] == "platform.system":
-            check_diver(configs[-1], configs[-1]["target"]["depth"])
+        check_depth(configs[-1], configs[-1]["target"]["depth"], option if depth is not None else "target.depth")
     with Progress(len(configs), "map", "map", progress) as bar:
         maps = []
         for c in configs:
@@ -423,5 +443,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["MapConfig", "accuracy_map", "grid", "make_maps", "parse_levels", "plot", "system_line", "table",
-           "write"]
+__all__ = ["MapConfig", "accuracy_map", "check_depth", "grid", "make_maps", "parse_levels", "plot", "system_line",
+           "table", "write"]
