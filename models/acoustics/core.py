@@ -104,7 +104,7 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, n
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import NO_ROW, get_row, lookup, put_row, sample_due, select
+from sblsim.models.expressions import NO_ROW, get_row, lookup, map_in_chunks, put_row, sample_due, select
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -342,11 +342,11 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
     # a range-independent site: pairs of the same depths and distance (a map's symmetric grid) are solved once
     geometry, pair = np.unique(np.column_stack([sources[:, 2], receivers[:, 2], horizontal]), axis=0,
                                return_inverse=True)
-    f = (family_levels() if levels is None else levels).map(geometry.shape[0])
-    out = f(geometry[:, 0], geometry[:, 1], geometry[:, 2], float(p["water_depth"]), float(rows.shape[0] > 0),
-            float(p["sound_speed_true"]), nodes, speeds, site)
-    return {name: np.asarray(out[k]).T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"),
-                                                                     (5, "pd"))}
+    # in calls of a fraction of a second (a large map is minutes of compiled code: Ctrl-C between two calls)
+    out = map_in_chunks(family_levels() if levels is None else levels, geometry.T,
+                        (float(p["water_depth"]), float(rows.shape[0] > 0), float(p["sound_speed_true"]), nodes,
+                         speeds, site))
+    return {name: out[k].T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"), (5, "pd"))}
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
     """Refuse a run whose packets stay in flight longer than the channel can hold them.
