@@ -597,14 +597,15 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.maps import diver_depth, parse_levels, write
+    from sblsim.orchestrator.maps import diver_depth, grid, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
-    out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map")
-    result = api.accuracy_map(args.scenario, extent=args.extent, step=args.step, levels=levels, compare=compare,
-                              depth=args.depth, seed=args.seed, set=args.overrides, progress="auto")
+    out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map",
+                  before=lambda _: grid(args.extent, args.step))
+    result = api._accuracy_map(args.scenario, list(args.overrides), args.seed, args.extent, args.step, levels, compare,
+                               args.depth, "auto", lambda: None, ("--extent", "--step", "--depth"))
     labels, configs, east, north, maps = result.labels, result.configs, result.east, result.north, result.maps
     depth = configs[0]["target"]["depth"]
     where = "--depth" if args.depth is not None else diver_depth(configs[0])[1]  # (compared systems' defaults)
