@@ -877,8 +877,9 @@ def _command(args: argparse.Namespace) -> int:
     except OSError as exc:  # a full disk or a folder that refused a write during the work: one line, no traceback
         reason = os.strerror(exc.errno) if exc.errno else str(exc)
         where = f": {exc.filename}" if exc.filename else ""
-        print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced (a campaign keeps its "
-              "finished chunks: run it again with --resume)", file=sys.stderr)
+        resume = (" (a campaign keeps its finished chunks: run it again with --resume)" if args.command == "campaign"
+                  else "")
+        print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced{resume}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("sblsim: interrupted", file=sys.stderr)

@@ -27,15 +27,40 @@ def write_atomic(path: Path | str, write: Callable[[Path], object]) -> None:
     The file gets the mode a file created with :func:`open` gets (0666 without the process's umask), like
     the other files of a command, not the private 0600 of :func:`tempfile.mkstemp`.
     """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    write_together({Path(path): write}, parents=False)
+
+
+def write_together(writers: dict[Path, Callable[[Path], object]], parents: bool = True) -> None:
+    """Write several files as one: each through a temporary file in its folder (:func:`write_atomic`'s mode), all
+    moved into place only when every one is written; if any write fails, no file is replaced, the temporary files
+    are removed and so are the folders made for them (``parents``: the missing folders are made,
+    :func:`make_parents`).
+
+    Parameters
+    ----------
+    writers : dict
+        Each file's path -> a function writing it (given the temporary file's path).
+    parents : bool
+        Make the missing folders above the files (else a missing one is an error).
+    """
+    created: list[Path] = []
+    done: list[tuple[str, Path]] = []
     try:
-        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's file is 0600: the mode any other file written here has
-        write(Path(tmp))
-        os.replace(tmp, path)
+        for path, write in writers.items():
+            path = Path(path)
+            if parents:
+                created += make_parents(path)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            os.close(fd)
+            done.append((tmp, path))
+            os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's file is 0600: the mode any other file here has
+            write(Path(tmp))
+        for tmp, path in done:
+            os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        for tmp, _ in done:
+            Path(tmp).unlink(missing_ok=True)
+        remove_empty(created)
         raise
 
 
@@ -309,4 +334,4 @@ def check_writable(directory: Path, where: str = "--out") -> None:
 
 
 __all__ = ["OutputLock", "check_output", "check_writable", "current_umask", "folder_name", "make_parents",
-           "refuse_link", "remove_empty", "remove_stale", "staged_directory", "write_atomic"]
+           "refuse_link", "remove_empty", "remove_stale", "staged_directory", "write_atomic", "write_together"]
