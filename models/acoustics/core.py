@@ -348,7 +348,8 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
                          speeds, site))
     return {name: out[k].T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"), (5, "pd"))}
 
-def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
+def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None,
+                    jitter: float = 0.0) -> None:
     """Refuse a run whose packets stay in flight longer than the channel can hold them.
 
     A packet that arrives Δ after its transmit epoch is delivered in the step that reaches its arrival,
@@ -364,28 +365,39 @@ def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None
     elapsed : float, optional
         The longest Δ a run saw (the channel's ``overflow_travel_time``; 0: nothing refused). None: the check
         before a run, of the turnaround alone (the travel time is not known yet).
+    jitter : float
+        The turnaround's jitter, ``acoustics.turnaround_sigma`` of two-way ranging (0 for one-way) [s]: part of
+        Δ, named with it.
 
     Raises
     ------
     ModelError
-        One line naming ``simulation.sampling_time``, ``acoustics.turnaround``, the travel time and the
-        shortest sampling time that holds them.
+        One line naming ``simulation.sampling_time``, what makes the flight long (the turnaround and its jitter
+        where they are not 0, the travel time) and the shortest sampling time that holds it.
     """
     limit = (FLIGHT_CAPACITY - 1) * slot_period
+    shorter = ["acoustics.turnaround"] if turnaround > 0.0 or elapsed is None else []
     if elapsed is None:
         if turnaround < limit:
             return
-        late, travel = turnaround, "the travel times on top"
+        late, causes = turnaround, f"acoustics.turnaround = {turnaround:g} s and the travel times on top"
     else:
         if not elapsed > 0.0:
             return
-        late, travel = elapsed, f"a travel time of {max(elapsed - turnaround, 0.0):.4g} s"
+        late = elapsed
+        causes = [f"acoustics.turnaround = {turnaround:g} s"] if turnaround > 0.0 else []
+        if jitter > 0.0:
+            causes.append(f"its jitter acoustics.turnaround_sigma = {jitter:g} s")
+            shorter.append("acoustics.turnaround_sigma")
+            travel = "the travel time"  # not told apart from the jitter's draw
+        else:
+            travel = f"a travel time of {max(elapsed - turnaround, 0.0):.4g} s"
+        causes = ", ".join(causes + [travel]) if causes else travel
     raise ModelError(
-        f"simulation.sampling_time: {slot_period:g} s is too short for acoustics.turnaround = {turnaround:g} s and "
-        f"{travel}: a packet arrives {late:.4g} s after it is sent, {math.ceil(late / slot_period - 1e-9) + 1} "
-        f"packets in flight, and the channel holds {FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} "
-        f"sampling times); give a simulation.sampling_time above {late / (FLIGHT_CAPACITY - 1):.4g} s or a shorter "
-        "acoustics.turnaround")
+        f"simulation.sampling_time: {slot_period:g} s is too short for {causes}: a packet arrives {late:.4g} s after "
+        f"it is sent, {math.ceil(late / slot_period - 1e-9) + 1} packets in flight, and the channel holds "
+        f"{FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} sampling times); give a simulation.sampling_time "
+        f"above {late / (FLIGHT_CAPACITY - 1):.4g} s" + "".join(f" or a smaller {key}" for key in shorter))
 
 
 class Acoustics(Component):
