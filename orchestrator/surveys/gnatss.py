@@ -74,8 +74,8 @@ from sblsim.models.errors import ModelError
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import write_atomic
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, POSITION_RANGE
+from sblsim.orchestrator.tables import NUMBER, read_lines
 from sblsim.orchestrator.tables import number as table_number
-from sblsim.orchestrator.tables import read_lines
 
 #: POSIX time of J2000 (2000-01-01T12:00:00 UTC) [s]: GNATSS's J2000 seconds are POSIX seconds less this.
 J2000_POSIX = 946728000
@@ -295,26 +295,35 @@ def read_posfilter(path: Path | str) -> pd.DataFrame:
     names = ["time [s since J2000]", "x [m]", "y [m]", "z [m]", *[f"covariance {a}{b} [m^2]" for a in "xyz"
                                                                   for b in "xyz"]]
     ranges = [J2000_RANGE] + [(-MAX_ECEF_M, MAX_ECEF_M)] * 3 + [(-MAX_COV_M2, MAX_COV_M2)] * 9
-    rows = []
-    for number, line in enumerate(read_lines(path, what, "ascii"), start=1):
-        fields = line.split()
-        if not fields:
-            continue
-        where = f"{what}: {str(path)!r} line {number}"
-        if len(fields) != POS_FIELDS:
-            raise ModelError(f"{where} has {len(fields)} fields, {POS_FIELDS} expected (time, x, y, z and 9 "
-                             "covariance entries; a truncated file?)")
-        values = [table_number(f, where, f"column {k + 1} ({name})", low, high)
-                  for k, (f, name, (low, high)) in enumerate(zip(fields, names, ranges))]
-        cov = np.array(values[4:]).reshape(3, 3)
-        if np.any(np.diag(cov) <= 0.0):
-            raise ModelError(f"{where}: the covariance's diagonal (columns 5, 9, 13) must be > 0 m^2")
-        if np.max(np.abs(cov - cov.T)) > 1e-9 + 1e-6 * np.max(np.abs(cov)):
-            raise ModelError(f"{where}: the covariance (columns 5-13) is not symmetric")
-        rows.append([number, *values])
-    if not rows:
+    lines = [(number, line.split()) for number, line in enumerate(read_lines(path, what, "ascii"), start=1)]
+    lines = [(number, fields) for number, fields in lines if fields]
+    if not lines:
         raise ModelError(f"{what}: {str(path)!r} holds no positions")
-    frame = pd.DataFrame(rows, columns=["line", "t_j2000_s", "x_m", "y_m", "z_m", *[f"c{k}" for k in range(9)]])
+    low, high = np.array(ranges).T
+    values = None
+    if all(len(fields) == POS_FIELDS and all(NUMBER.fullmatch(f) for f in fields) for _, fields in lines):
+        values = np.array([fields for _, fields in lines], dtype=float)  # every line at once (a file of 10^6 lines)
+        cov = values[:, 4:].reshape(-1, 3, 3)
+        diagonal = np.diagonal(cov, axis1=1, axis2=2)
+        asymmetry = np.max(np.abs(cov - cov.transpose(0, 2, 1)), axis=(1, 2))
+        if not (np.all(np.isfinite(values) & (values >= low) & (values <= high)) and np.all(diagonal > 0.0)
+                and np.all(asymmetry <= 1e-9 + 1e-6 * np.max(np.abs(cov), axis=(1, 2)))):
+            values = None
+    if values is None:  # a flaw: found and named, line by line
+        for number, fields in lines:
+            where = f"{what}: {str(path)!r} line {number}"
+            if len(fields) != POS_FIELDS:
+                raise ModelError(f"{where} has {len(fields)} fields, {POS_FIELDS} expected (time, x, y, z and 9 "
+                                 "covariance entries; a truncated file?)")
+            one = [table_number(f, where, f"column {k + 1} ({name})", lo, hi)
+                   for k, (f, name, lo, hi) in enumerate(zip(fields, names, low, high))]
+            cov = np.array(one[4:]).reshape(3, 3)
+            if np.any(np.diag(cov) <= 0.0):
+                raise ModelError(f"{where}: the covariance's diagonal (columns 5, 9, 13) must be > 0 m^2")
+            if np.max(np.abs(cov - cov.T)) > 1e-9 + 1e-6 * np.max(np.abs(cov)):
+                raise ModelError(f"{where}: the covariance (columns 5-13) is not symmetric")
+    frame = pd.DataFrame(values, columns=["t_j2000_s", "x_m", "y_m", "z_m", *[f"c{k}" for k in range(9)]])
+    frame.insert(0, "line", np.array([number for number, _ in lines], dtype=np.int64))
     cov = frame[[f"c{k}" for k in range(9)]].to_numpy().reshape(-1, 3, 3)
     try:
         np.linalg.cholesky(0.5 * (cov + cov.transpose(0, 2, 1)))
