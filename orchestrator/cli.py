@@ -170,7 +170,8 @@ def _parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("map", help="accuracy map: horizontal standard deviation of a fix around the platform")
     g.add_argument("scenario", help="built-in scenario or CONFIG.toml (geometry and error levels)")
-    g.add_argument("--extent", type=float, default=30.0, help="half-width of the square grid [m] (default 30)")
+    g.add_argument("--extent", type=float, default=30.0,
+                   help="half-width of the square grid [m] (default 30; at most 100000)")
     g.add_argument("--step", type=float, default=0.5, help="grid spacing [m] (default 0.5)")
     g.add_argument("--levels", default="0.5,1,2", help="accuracy prescriptions to contour [m] (default 0.5,1,2)")
     g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
@@ -179,7 +180,8 @@ def _parser() -> argparse.ArgumentParser:
                         "maps each system from the defaults of compare --systems, your --set over them")
     g.add_argument("--depth", type=float, default=None,
                    help="the diver's depth of the maps [m] (default target.depth, or the median depth of a "
-                        "trajectory file)")
+                        "trajectory file); above the site's water depth acoustics.water_depth and, LBL, above its "
+                        "seafloor transponders")
     g.add_argument("--out", type=Path, default=None, help="output directory (default results/map_SCENARIO)")
     g.add_argument("--force", action="store_true", help="replace an earlier map in --out")
     g.add_argument("--seed", type=int, default=None, help=argparse.SUPPRESS)
