@@ -997,9 +997,9 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
     fmu_dir = _path(fmu_dir, "fmu_dir")
     scheduler = _text(scheduler, "scheduler")
     resume, save_timeseries = _flag(resume, "resume"), _flag(save_timeseries, "save_timeseries")
-    for value, where in ((workers, "workers"), (batch, "batch")):
-        if value is not None:
-            _check_count(value, where, 1, 2**31 - 1)
+    for value, where in ((workers, "workers"), (batch, "batch")):  # integers; their ranges the campaign's
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ConfigError(f"{where}: {shown(value)} is not an integer or None")
     check_progress(progress)
     if isinstance(study, Study):  # validated already (sblsim campaign loads it to name its output)
         if seed is not None:

@@ -146,7 +146,7 @@ HOSTILE = {
     "replay config=1": (lambda: sblsim.replay("log.csv", config=1), "config: 1 is not a file or folder"),
     "campaign out None": (lambda: sblsim.campaign("paper", None), "out: None is not a file or folder"),
     "campaign resume 'yes'": (lambda: sblsim.campaign("paper", "c", resume="yes"), "resume: 'yes' is not True or"),
-    "campaign workers 0": (lambda: sblsim.campaign("paper", "c", workers=0), "workers: 0 is outside the allowed"),
+    "campaign workers 'two'": (lambda: sblsim.campaign("paper", "c", workers="two"), "workers: 'two' is not an"),
     "analyze None": (lambda: sblsim.analyze(None), "directory: None is not a file or folder"),
     "analyze alpha 'x'": (lambda: sblsim.analyze("c", alpha="x"), "alpha: 'x' is not a number"),
 }
