@@ -23,8 +23,10 @@ import hashlib
 import os
 import sys
 import tempfile
+import threading
 from functools import lru_cache
 from pathlib import Path
+from typing import Any, Callable
 
 import casadi as ca
 import numpy as np
@@ -186,7 +188,7 @@ def load(n_beacons: int = 4, models: tuple[type, ...] | None = None) -> ctypes.C
     ints, doubles = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
     lib.sblsim_system_run.argtypes = [ctypes.c_int, ctypes.POINTER(ctypes.c_void_p), ints, ints, ints, ints, ints,
                                       ctypes.c_int, ints, ints, doubles, ctypes.c_double, ctypes.c_double,
-                                      ctypes.c_int, ctypes.c_int, ctypes.c_int, doubles, ints]
+                                      ctypes.c_int, ctypes.c_int, ctypes.c_int, doubles, ints, ints]
     for name in ("sblsim_stream_uniforms", "sblsim_stream_normals"):
         getattr(lib, name).argtypes = [ctypes.POINTER(ctypes.c_uint64), ctypes.c_int, ctypes.c_int, ctypes.c_uint64,
                                        ctypes.c_int, ctypes.POINTER(ctypes.c_double)]
@@ -291,6 +293,39 @@ class NativeBatch:
         self.close()
 
 
+def abandonable(call: Callable[[], Any], cancel: ctypes.c_int) -> Any:
+    """``call()``, a compiled call that reads ``cancel`` as it works, made interruptible.
+
+    A compiled call holds the thread that made it for as long as it runs (minutes for a site's budget) and
+    Python handles a signal only in the main thread, between two of its own instructions: a user's Ctrl-C or
+    SIGTERM would wait for the call's end. The call therefore runs in a worker thread (ctypes releases the GIL)
+    while this thread waits and handles signals; when the wait ends in an exception (KeyboardInterrupt from
+    Ctrl-C, or the SIGTERM handler's), ``cancel`` is set, the compiled code stops at its next check (within one
+    replicate's step) and the exception goes on. The call's own result or exception is this function's.
+    """
+    outcome: list = []
+
+    def work() -> None:
+        try:
+            outcome.append((True, call()))
+        except BaseException as exc:  # handed to the waiting thread
+            outcome.append((False, exc))
+
+    worker = threading.Thread(target=work, name="sblsim-native", daemon=True)
+    worker.start()
+    try:
+        while worker.is_alive():
+            worker.join(0.5)
+    except BaseException:
+        cancel.value = 1
+        worker.join()
+        raise
+    ok, value = outcome[0]
+    if not ok:
+        raise value
+    return value
+
+
 class NativeSystem:
     """Several batches of one library stepped together by the compiled master loop (``sblsim_system_run``).
 
@@ -335,12 +370,12 @@ class NativeSystem:
         """
         ints = ctypes.POINTER(ctypes.c_int)
         a = {k: v.ctypes.data_as(ints) for k, v in self._arrays.items()}
-        failed = ctypes.c_int(0)
-        status = self.lib.sblsim_system_run(
+        failed, cancel = ctypes.c_int(0), ctypes.c_int(0)
+        status = abandonable(lambda: self.lib.sblsim_system_run(
             self.n, self._pointers, a["rates"], a["offsets"], a["src"], a["out"], a["in"], self.n_record,
             a["rec_comp"], a["rec_out"], into.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), float(t0), float(T),
             int(k0), int(n_steps), int(jacobi), self.timing.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-            ctypes.byref(failed))
+            ctypes.byref(failed), ctypes.byref(cancel)), cancel)
         if status:
             batch = self.batches[status - 1]
             t = t0 + k0 * T
@@ -490,8 +525,6 @@ def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
         return None
 
 
-__all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "cache_dir", "compiled_exact_points",
-           "compiled_family_levels", "compiled_family_points",
-           "library_path", "load", "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb",
-           "write_library_sources"]
-
+__all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "abandonable", "cache_dir",
+           "compiled_exact_points", "compiled_family_levels", "compiled_family_points", "library_path", "load",
+           "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb", "write_library_sources"]

@@ -60,6 +60,11 @@ OUTLIER_FACTOR_RANGE = (1.0, 100.0)
 POSITION_TOLERANCE = 1e-7
 SCALE_TOLERANCE = 1e-10
 MAX_ITERATIONS = 50
+#: A solved sound speed (``solve_sound_speed``) must lie in :data:`SOUND_SPEED_RANGE` (sea water's physical range)
+#: with a 1-sigma of at most this [m/s]; otherwise the replies do not determine it (e.g. a circle at one
+#: radius: every reply at one elevation angle, so that depth and speed trade one for the other) and the solution
+#: is refused. Surveys that determine it give 0.05-1 m/s (NCL1, Xie et al.'s days, a box or figure-eight).
+MAX_SOUND_SPEED_SIGMA = 10.0
 
 
 class LegModel(Protocol):
@@ -357,6 +362,19 @@ def _check(replies: Replies, apriori: np.ndarray, sound_speed: float, outlier_fa
         raise ModelError(f"transponder: an index is outside [0, {len(apriori) - 1}]")
 
 
+def _check_solved_speed(speed: float, sigma: float, what: str) -> None:
+    """Refuse a solved sound speed outside the physical range or not determined by the replies
+    (:data:`MAX_SOUND_SPEED_SIGMA`)."""
+    lo, hi = SOUND_SPEED_RANGE
+    if np.isfinite(speed) and np.isfinite(sigma) and lo <= speed <= hi and sigma <= MAX_SOUND_SPEED_SIGMA:
+        return
+    raise ModelError(f"solve_sound_speed: the replies of {what} do not determine the sound speed: its estimate "
+                     f"{speed:.6g} m/s (1-sigma {sigma:.3g} m/s) must lie in the physical range [{lo:g}, {hi:g}] m/s "
+                     f"with a 1-sigma of at most {MAX_SOUND_SPEED_SIGMA:g} m/s (replies at one elevation angle, e.g. a "
+                     "circle at one radius, cannot separate depth from speed): give the sound speed and solve it "
+                     "false, or survey at several distances")
+
+
 def _line_of_sight_variance(replies: Replies, x: np.ndarray, u_tx: np.ndarray, u_rx: np.ndarray, c: float,
                             twtt_sigma: float) -> np.ndarray:
     """:math:`\\sigma_i^2` [m²]: the transducer's sigmas projected on the legs' unit vectors."""
@@ -446,7 +464,9 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     Raises
     ------
     ModelError
-        A value outside its range, fewer replies than unknowns + 1, or replies that do not determine the unknowns.
+        A value outside its range, fewer replies than unknowns + 1, or replies that do not determine the unknowns
+        (with ``solve_sound_speed``: a sound speed outside :data:`SOUND_SPEED_RANGE` or with a 1-sigma above
+        :data:`MAX_SOUND_SPEED_SIGMA`).
     """
     apriori = np.asarray(apriori, dtype=float)
     _check(replies, apriori, float(sound_speed), outlier_factor, float(twtt_sigma))
@@ -506,6 +526,8 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     factor = float(np.sum(wu * ru**2) / dof)
     covariance = q * factor
     sd = np.sqrt(np.diag(covariance))
+    if solve_sound_speed:
+        _check_solved_speed(float(c), float(sound_speed * sd[-1]), what)
     sigma = np.tile(sd[:3], (k, 1)) if rigid else sd[:3 * k].reshape(k, 3)
     horizontal = np.hypot(replies.rx[:, 0] - x[:, 0], replies.rx[:, 1] - x[:, 1])
     elevation = np.arctan2(replies.rx[:, 2] - x[:, 2], horizontal)
@@ -585,6 +607,11 @@ PRIOR_SIGMA_M = 10.0
 PRIOR_SCALE_SIGMA = 0.1
 #: The passes of the running solution accepted (1: the extended Kalman filter; more: re-linearised).
 PASSES_RANGE = (1, 20)
+#: The running solution's last positions agree with the least-squares solution of the same replies when no axis
+#: differs by more than this many combined 1-sigma :math:`\sqrt{\sigma_{run}^2 + \sigma_{WLS}^2}` (the built-in
+#: surveys stay within 2.2); farther, it did not converge from the prior (an a-priori position far outside
+#: ``prior_sigma``) and its states are no solution (:func:`running_disagreement`).
+RUNNING_AGREEMENT_SIGMA = 10.0
 
 
 @dataclass
@@ -754,6 +781,31 @@ def running(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, s
                    nis=innovation**2 / variance_s, sound_speed=speed, passes=int(passes))
 
 
+def running_disagreement(run: Running, solution: Solution) -> tuple[np.ndarray, np.ndarray]:
+    """How far the running solution ends from the least-squares solution of the same replies, per transponder.
+
+    Parameters
+    ----------
+    run : Running
+        :func:`running` of the replies :func:`solve` kept.
+    solution : Solution
+        :func:`solve`'s solution.
+
+    Returns
+    -------
+    distance : numpy.ndarray, shape (k,)
+        From the running solution's last position to the least-squares position [m].
+    sigmas : numpy.ndarray, shape (k,)
+        The largest per-axis difference in combined 1-sigma :math:`\\sqrt{\\sigma_{run}^2 + \\sigma_{WLS}^2}` [1]
+        (above :data:`RUNNING_AGREEMENT_SIGMA`: the running solution did not converge).
+    """
+    difference = run.position[-1] - solution.position
+    combined = np.sqrt(run.position_sigma[-1] ** 2 + solution.sigma ** 2)
+    scaled = np.divide(np.abs(difference), combined, out=np.full_like(difference, np.inf), where=combined > 0.0)
+    scaled[difference == 0.0] = 0.0
+    return np.linalg.norm(difference, axis=1), np.max(scaled, axis=1)
+
+
 @dataclass(frozen=True)
 class Combined:
     """Segment solutions combined (:func:`combine`), per transponder, local ENU [m].
@@ -806,6 +858,7 @@ def combine(solutions: Sequence[Solution]) -> Combined:
     return Combined(mean, sigma, scatter)
 
 
-__all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "OUTLIER_FACTOR_RANGE", "PASSES_RANGE",
-           "POSITION_TOLERANCE", "PRIOR_SCALE_SIGMA", "PRIOR_SIGMA_M", "PRIOR_SIGMA_RANGE", "Replies", "Running",
-           "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution", "StraightRay", "combine", "crb", "running", "solve"]
+__all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "MAX_SOUND_SPEED_SIGMA", "OUTLIER_FACTOR_RANGE",
+           "PASSES_RANGE", "POSITION_TOLERANCE", "PRIOR_SCALE_SIGMA", "PRIOR_SIGMA_M", "PRIOR_SIGMA_RANGE",
+           "RUNNING_AGREEMENT_SIGMA", "Replies", "Running", "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution",
+           "StraightRay", "combine", "crb", "running", "running_disagreement", "solve"]

@@ -7,9 +7,11 @@ This module imports nothing from the FMI or orchestrator layers.
 from __future__ import annotations
 
 import functools
+import time
 from typing import Any, Sequence
 
 import casadi as ca
+import numpy as np
 
 #: An index past every row: :func:`put_row` at it writes nothing.
 NO_ROW = 1e9
@@ -133,3 +135,53 @@ def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
 
 
 __all__ = ["cumulative_sum", "get_row", "lookup", "NO_ROW", "padded_rows", "put_row", "sample_due", "select", "switch"]
+
+
+#: How long one call of :func:`map_in_chunks` may take [s]: Ctrl-C waits for the call under way.
+CHUNK_SECONDS = 0.1
+
+
+def map_in_chunks(function: ca.Function, columns: Sequence[Any], shared: Sequence[Any] = (),
+                  seconds: float = CHUNK_SECONDS) -> list[np.ndarray]:
+    """``function`` evaluated at every column of ``columns``, as its map over them all, in calls of about
+    ``seconds`` each.
+
+    A map over many points (a site's eigenrays over a grid of a million points) is minutes of compiled code in
+    one call, during which Python handles no signal: a user's Ctrl-C or SIGTERM would wait for its end. Cut into
+    chunks, the signal is handled between two of them. The chunk's width is adapted to the time the last one
+    took (a power of two, from 16 columns); each column is evaluated alone, so the numbers are those of one map.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        Its inputs: first one row per entry of ``columns``, then ``shared`` (the same for every column).
+    columns : sequence of array_like, each shape (n,)
+        The mapped inputs.
+    shared : sequence
+        The inputs every column shares.
+    seconds : float
+        The time one call should take [s].
+
+    Returns
+    -------
+    list of numpy.ndarray, each shape (rows, n)
+        The function's outputs, one column per point.
+    """
+    columns = [np.asarray(c, dtype=float).reshape(-1) for c in columns]
+    n = len(columns[0]) if columns else 0
+    maps: dict[int, ca.Function] = {}
+    parts: list[list[np.ndarray]] = []
+    start, width = 0, 16
+    while start < n:
+        k = min(width, n - start)
+        mapped = maps.get(k) or maps.setdefault(k, function.map(k))
+        began = time.perf_counter()
+        out = mapped(*(c[None, start:start + k] for c in columns), *shared)
+        took = time.perf_counter() - began
+        parts.append([np.asarray(o).reshape(-1, k) for o in (out if isinstance(out, (list, tuple)) else [out])])
+        start += k
+        if k == width:  # the next width: the power of two nearest the target's share
+            width = int(2 ** np.clip(np.round(np.log2(max(k * seconds / max(took, 1e-9), 1.0))), 0, 20))
+    if not parts:
+        return [np.zeros((function.size1_out(j), 0)) for j in range(function.n_out())]
+    return [np.concatenate([part[j] for part in parts], axis=1) for j in range(len(parts[0]))]

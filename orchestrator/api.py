@@ -29,8 +29,11 @@ Examples
 
 from __future__ import annotations
 
+import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from numbers import Real
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Union
 
@@ -53,6 +56,7 @@ from sblsim.orchestrator.config import (
 from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
 from sblsim.orchestrator.output import check_output, check_writable
 from sblsim.orchestrator.plan import Config, RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.progress import check_progress
 from sblsim.orchestrator.study import Study, load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
@@ -105,6 +109,9 @@ def _override_items(overrides: Overrides) -> list[str]:
                 raise ConfigError(f"set: {key}: {value!r} is not a number, text, boolean or list") from None
             items.append(f"{key}={text}")
         return items
+    if not isinstance(overrides, Sequence):
+        raise ConfigError(f"set: expected a mapping {{'section.key': value}} or a list of 'section.key=value', got "
+                          f"{shown(overrides)}")
     items = list(overrides)
     for item in items:
         if not isinstance(item, str):
@@ -171,7 +178,7 @@ def load(scenario_or_path: str | Path | Mapping, *, seed: int | None = None, set
 
 
 def _check_engine(engine: str) -> None:
-    if engine not in ENGINES:
+    if not isinstance(engine, str) or engine not in ENGINES:
         raise ConfigError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
 
 
@@ -181,12 +188,48 @@ def _check_count(value: Any, where: str, low: int, high: int) -> int:
     return value
 
 
+def _path(value: Any, where: str, optional: bool = True) -> Path | None:
+    """A file or folder argument (a text or a path; None where it is optional) as a :class:`Path`."""
+    if value is None and optional:
+        return None
+    text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else None
+    if not isinstance(text, str) or not text or "\0" in text:
+        allowed = "a file or folder: a text or a pathlib.Path" + (", or None" if optional else "")
+        raise ConfigError(f"{where}: {shown(value)} is not {allowed}")
+    return Path(text)
+
+
+def _flag(value: Any, where: str) -> bool:
+    """A true-or-false argument (``force=\"no\"`` would replace an earlier result)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{where}: {shown(value)} is not True or False")
+    return bool(value)
+
+
+def _real(value: Any, where: str, low: float, high: float, unit: str, low_open: bool = False) -> float:
+    """A finite real number argument in ``[low, high]`` (``(low, high]`` with ``low_open``)."""
+    allowed = f"{'(' if low_open else '['}{low:g}, {high:g}] {unit}".rstrip()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
+        raise ConfigError(f"{where}: {shown(value)} is not a number; allowed: {allowed}")
+    if not math.isfinite(value) or not (value > low if low_open else value >= low) or not value <= high:
+        raise ConfigError(f"{where}: {shown(value)} is outside the allowed range {allowed}")
+    return float(value)
+
+
+def _text(value: Any, where: str, optional: bool = True) -> str | None:
+    if value is None and optional:
+        return None
+    if not isinstance(value, str):
+        raise ConfigError(f"{where}: {shown(value)} is not a text" + (" or None" if optional else ""))
+    return value
+
+
 def _prepare_out(out: str | Path | None, force: bool, marker: str, what: str) -> Path | None:
     """``out`` checked before any work (writable; an earlier result only with ``force``)."""
+    out = _path(out, "out")
+    force = _flag(force, "force")
     if out is None:
         return None
-
-    out = Path(out)
     check_output(out, force, marker, what, "out")
     return out
 
@@ -317,6 +360,8 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
     plan = _plan(config_or_scenario, seed, set)
     _check_engine(engine)
     _check_count(replicates, "replicates", 1, 100_000)
+    fmu_dir = _path(fmu_dir, "fmu_dir")
+    check_progress(progress)
     if out is not None and replicates != 1:
         raise ConfigError(f"out: writes one run (the files of sblsim run); replicates is {replicates}")
     target = _prepare_out(out, force, "summary.json", "run")
@@ -390,8 +435,8 @@ class CompareResult:
 def _listed(value: str | Sequence[str] | None, what: str) -> str | None:
     if value is None or isinstance(value, str):
         return value
-    if not all(isinstance(v, str) for v in value):
-        raise ConfigError(f"{what}: expected names, got {list(value)!r}")
+    if not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{what}: expected a text or a list of names, got {shown(value)}")
     return ",".join(value)
 
 
@@ -436,8 +481,10 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     _check_seed(seed)
     _check_engine(engine)
     _check_count(replicates, "replicates", -2**63, 2**63)  # an integer; its range is checked by the comparison
+    fmu_dir = _path(fmu_dir, "fmu_dir")
+    check_progress(progress)
     items = _override_items(set)
-    source = _source(scenario)
+    source = _source(scenario, configuration=True)
     names = parse_receivers(_listed(receivers, "receivers") or "")
     chosen = parse_systems(_listed(systems, "systems")) if systems is not None else None
     if chosen is not None:
@@ -453,10 +500,11 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     return CompareResult(table, title, note, target)
 
 
-def compare_title(scenario: str | Path, replicates: int, overrides: Sequence[str], seed: int | None,
+def compare_title(scenario: str | Path | Mapping, replicates: int, overrides: Sequence[str], seed: int | None,
                   systems: Sequence[str] | None, run_seed: int | None = None) -> tuple[str, str]:
     """The heading and note of a comparison (``sblsim compare`` prints them, ``compare.md`` holds them);
-    ``run_seed``, the ``run.seed`` of the comparison's first plan (default: its configuration is loaded)."""
+    ``run_seed``, the ``run.seed`` of the comparison's first plan (default: its configuration is loaded; given
+    for a configuration)."""
     # the seed of the title: of the first compared system's configuration, which its defaults make valid (the
     # user's --set may hold keys that apply over them only, e.g. platform.beacons over the LBL circle)
     own = scenario_system(scenario) if systems is not None else None
@@ -464,17 +512,20 @@ def compare_title(scenario: str | Path, replicates: int, overrides: Sequence[str
         first = system_overrides(systems[0], overrides, own=own) if systems is not None else list(overrides)
         run_seed = load_config(scenario, first, seed)["run"]["seed"]
     per = "receiver" if systems is None else "system and receiver"
-    title = (f"{scenario}: {replicates} replicates per {per}, seed {run_seed}"
+    name = scenario.get("run", {}).get("scenario", "configuration") if isinstance(scenario, Mapping) else scenario
+    title = (f"{name}: {replicates} replicates per {per}, seed {run_seed}"
              + (f", {' '.join(overrides)}" if overrides else ""))
     note = "" if systems is None else f"systems: {describe_defaults(systems, own)}" + (
         "; then --set " + " ".join(overrides) if overrides else "")
     return title, note
 
 
-def _source(scenario: Any) -> str | Path:
-    """A scenario argument of the functions that take a name or file (a configuration: written to a
-    temporary TOML file is not wanted; its scenario must be named)."""
+def _source(scenario: Any, configuration: bool = False) -> str | Path | Mapping:
+    """A scenario argument of the functions that take a name or file, or (``configuration``) a configuration
+    too (a :class:`Config` or mapping, taken as it is)."""
     if isinstance(scenario, Mapping):
+        if configuration:
+            return scenario
         raise ConfigError("scenario: this function takes a built-in scenario or a CONFIG.toml; write a "
                           "configuration with Config.to_toml() and give the file")
     if not isinstance(scenario, (str, Path)):
@@ -543,9 +594,11 @@ def _compared(compare: str | tuple[str, Sequence[Any]] | None) -> tuple[str, lis
     try:
         key, values = compare
     except (TypeError, ValueError):
-        raise ConfigError(f"compare: expected 'KEY=V1,V2' or (key, [values]), got {compare!r}") from None
+        raise ConfigError(f"compare: expected 'KEY=V1,V2' or (key, [values]), got {shown(compare)}") from None
     if not isinstance(key, str):
-        raise ConfigError(f"compare: the key must be a text 'section.key', got {key!r}")
+        raise ConfigError(f"compare: the key must be a text 'section.key', got {shown(key)}")
+    if isinstance(values, (str, bytes)) or not isinstance(values, Sequence) or not values:
+        raise ConfigError(f"compare: the values of {key} must be a list of at least one value, got {shown(values)}")
     return parse_compare(f"{key}={','.join(str(v) for v in values)}")
 
 
@@ -592,22 +645,39 @@ def accuracy_map(scenario: str | Path, *, extent: float = 30.0, step: float = 0.
     ConfigError, SblsimError
         Bad input (nothing is computed or written).
     """
-    from sblsim.orchestrator.maps import make_maps, parse_levels, write
+    from sblsim.orchestrator.maps import MAX_EXTENT, parse_levels
 
     _check_seed(seed)
     source = _source(scenario)
+    extent = _real(extent, "extent", 0.0, MAX_EXTENT, "m", low_open=True)
+    step = _real(step, "step", 0.0, extent, "m (the extent)", low_open=True)
+    depth = None if depth is None else _real(depth, "depth", 0.0, 11000.0, "m")
+    check_progress(progress)
+    if isinstance(levels, (str, bytes)) or not isinstance(levels, (Sequence, np.ndarray)):
+        raise ConfigError(f"levels: expected a list of accuracies [m], got {shown(levels)}")
     try:
         level_text = ",".join(repr(float(v)) for v in levels)
     except (TypeError, ValueError):
-        raise ConfigError(f"levels: expected numbers [m], got {levels!r}") from None
-    parsed = parse_levels(level_text)
-    chosen = _compared(compare)
-    target = _prepare_out(out, force, "map.csv", "map")
-    labels, configs, east, north, maps = make_maps(source, _override_items(set), seed, extent, step, chosen, depth,
-                                                   progress=progress)
+        raise ConfigError(f"levels: expected numbers [m], got {shown(levels)}") from None
+    return _accuracy_map(source, _override_items(set), seed, extent, step, parse_levels(level_text, "levels"),
+                         _compared(compare), depth, progress, lambda: _prepare_out(out, force, "map.csv", "map"),
+                         ("extent", "step", "depth"))
+
+
+def _accuracy_map(source: str, items: list[str], seed: int | None, extent: float, step: float, levels: list[float],
+                  chosen: tuple[str, list[str]] | None, depth: float | None, progress: Any,
+                  prepare: Callable[[], Path | None], options: tuple[str, str, str]) -> MapResult:
+    """:func:`accuracy_map` (and ``sblsim map``) after the checks of its arguments: ``prepare()`` the output folder
+    (None: nothing is written), the maps, the files; errors name the extent, step and depth as ``options``."""
+    from sblsim.orchestrator.maps import grid, make_maps, write
+
+    grid(extent, step, options[:2])  # the grid's size before any output
+    target = prepare()
+    labels, configs, east, north, maps = make_maps(source, items, seed, extent, step, chosen, depth,
+                                                   progress=progress, options=options)
     if target is not None:
-        write(labels, configs, east, north, maps, parsed, target, chosen)
-    return MapResult(labels, configs, east, north, maps, parsed, chosen, target)
+        write(labels, configs, east, north, maps, levels, target, chosen)
+    return MapResult(labels, configs, east, north, maps, levels, chosen, target)
 
 
 # --------------------------------------------------------------------------- budget
@@ -704,6 +774,9 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
 
     _check_seed(seed)
     source = _source(scenario)
+    receiver = _text(receiver, "receiver")
+    check_progress(progress)
+    _prepare_out(out, force, "budget.csv", "budget")  # before any work (and again once the plans are made)
     replicates = DEFAULT_REPLICATES if replicates is None else replicates
     _check_count(replicates, "replicates", -2**63, 2**63)
     check_replicates(replicates)
@@ -813,11 +886,14 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
     from sblsim.orchestrator.replay import replay_config
 
     _check_engine(engine)
-    if receiver is not None and not isinstance(receiver, str):
-        raise ConfigError(f"receiver: expected a text, got {receiver!r}")
-    plan, source = replay_config(Path(log), str(config) if config is not None else None, receiver,
-                                 _override_items(set))
-    return _replay_plan(plan, source, Path(log), Path(truth) if truth is not None else None, engine, fmu_dir,
+    log = _path(log, "log", optional=False)
+    truth = _path(truth, "truth")
+    fmu_dir = _path(fmu_dir, "fmu_dir")
+    receiver = _text(receiver, "receiver")
+    config = None if config is None else str(_path(config, "config"))
+    _prepare_out(out, force, "summary.json", "replay")  # before any work (and again once the log is read)
+    plan, source = replay_config(log, config, receiver, _override_items(set))
+    return _replay_plan(plan, source, log, truth, engine, fmu_dir,
                         lambda: _prepare_out(out, force, "summary.json", "replay"))
 
 
@@ -917,6 +993,14 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
 
     _check_seed(seed)
     _check_engine(engine)
+    out = _path(out, "out", optional=False)
+    fmu_dir = _path(fmu_dir, "fmu_dir")
+    scheduler = _text(scheduler, "scheduler")
+    resume, save_timeseries = _flag(resume, "resume"), _flag(save_timeseries, "save_timeseries")
+    for value, where in ((workers, "workers"), (batch, "batch")):  # integers; their ranges the campaign's
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ConfigError(f"{where}: {shown(value)} is not an integer or None")
+    check_progress(progress)
     if isinstance(study, Study):  # validated already (sblsim campaign loads it to name its output)
         if seed is not None:
             raise ConfigError("seed: a loaded study holds its seed; give the seed to load_study")
@@ -926,12 +1010,15 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
             study = dict(study)
         elif isinstance(study, Path):
             study = str(study)
+        elif not isinstance(study, str):
+            raise ConfigError(f"study: expected a built-in study, a STUDY.toml or a study's tables, got "
+                              f"{shown(study)}")
         loaded = load_study(study, seed=seed)
-    check_writable(Path(out), "out")
+    check_writable(out, "out")
     # "auto" (sblsim campaign): a bar at a terminal, log lines otherwise
     spec: Any = (None if isinstance(progress, str) and progress == "auto" else "off" if progress in (False, None)
                  else True if progress is True else progress)
-    result = run_campaign(loaded, Path(out), workers=workers, scheduler=scheduler, resume=resume, engine=engine,
+    result = run_campaign(loaded, out, workers=workers, scheduler=scheduler, resume=resume, engine=engine,
                           batch=batch, fmu_dir=fmu_dir, save_timeseries=save_timeseries, progress=spec)
     return CampaignResult(result.out, result.total, result.computed, result.wall_time, result)
 
@@ -1021,8 +1108,16 @@ def analyze(directory: str | Path, *, metric: str = "e_tot_rms", order: int = 2,
 
     from sblsim.orchestrator.analysis import compute, write
 
+    directory = _path(directory, "directory", optional=False)
+    out = _path(out, "out")
+    _text(metric, "metric", optional=False)
+    _text(transform, "transform", optional=False)
+    _check_count(order, "order", 1, 2**31 - 1)
+    _real(alpha, "alpha", 0.0, 1.0, "", low_open=True)
+    if progress is not None and not callable(progress):
+        raise ConfigError(f"progress: {shown(progress)} is not None or a callable(line)")
     if out is not None:
-        check_writable(Path(out), "out")
+        check_writable(out, "out")
     a = compute(directory, metric, order, alpha, progress=progress, transform=transform)
     target = write(a, out, progress=progress) if out is not None else None
     effects = pd.concat([r.effects.assign(scenario=s) for s, r in a.fits.items()], ignore_index=True)

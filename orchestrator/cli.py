@@ -170,7 +170,8 @@ def _parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("map", help="accuracy map: horizontal standard deviation of a fix around the platform")
     g.add_argument("scenario", help="built-in scenario or CONFIG.toml (geometry and error levels)")
-    g.add_argument("--extent", type=float, default=30.0, help="half-width of the square grid [m] (default 30)")
+    g.add_argument("--extent", type=float, default=30.0,
+                   help="half-width of the square grid [m] (default 30; at most 100000)")
     g.add_argument("--step", type=float, default=0.5, help="grid spacing [m] (default 0.5)")
     g.add_argument("--levels", default="0.5,1,2", help="accuracy prescriptions to contour [m] (default 0.5,1,2)")
     g.add_argument("--compare", default=None, metavar="KEY=V1,V2,...",
@@ -179,7 +180,8 @@ def _parser() -> argparse.ArgumentParser:
                         "maps each system from the defaults of compare --systems, your --set over them")
     g.add_argument("--depth", type=float, default=None,
                    help="the diver's depth of the maps [m] (default target.depth, or the median depth of a "
-                        "trajectory file)")
+                        "trajectory file); above the site's water depth acoustics.water_depth and, LBL, above its "
+                        "seafloor transponders")
     g.add_argument("--out", type=Path, default=None, help="output directory (default results/map_SCENARIO)")
     g.add_argument("--force", action="store_true", help="replace an earlier map in --out")
     g.add_argument("--seed", type=int, default=None, help=argparse.SUPPRESS)
@@ -475,9 +477,10 @@ def _calibrate(args: argparse.Namespace) -> int:
     result = calibrate(survey)
     out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
                   "calibration")
-    for note in survey.notes:
-        print(f"note: {note}", file=sys.stderr)
     write_calibration(result, out)
+    for note in survey.notes:  # after the write: a write that fails says one line
+        print(f"note: {note}", file=sys.stderr)
+    _calibration_warnings(result)
     s = result.solution
     solver = s["solver"]
     if solver["propagation"] == "ray":
@@ -501,6 +504,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibration_warnings(result) -> None:
+    for warning in result.warnings:
+        print(f"sblsim: warning: {warning}", file=sys.stderr)
+
+
 def _calibrate_simulated(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.surveys.calibrate import write_calibration
     from sblsim.orchestrator.surveys.log import write_log
@@ -519,6 +527,7 @@ def _calibrate_simulated(args: argparse.Namespace) -> int:
     if table is not None:
         extra["replicates.parquet"] = lambda path: table.to_parquet(path, index=False)
     write_calibration(result, out, extra)
+    _calibration_warnings(result)
     s = result.solution
     t, e, truth = s["transponders"][0], s["errors"][0], s["truth"][0]
     print(f"simulated calibration {sim.name}: {sim.survey['pattern']} of {sim.survey['radius_m']:g} m around a "
@@ -591,14 +600,15 @@ def _budget(args: argparse.Namespace) -> int:
 
 
 def _map(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.maps import diver_depth, parse_levels, write
+    from sblsim.orchestrator.maps import diver_depth, grid, parse_levels, write
 
     _check_seed(args.seed)
     levels = parse_levels(args.levels)
     compare = parse_compare(args.compare) if args.compare else None
-    out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map")
-    result = api.accuracy_map(args.scenario, extent=args.extent, step=args.step, levels=levels, compare=compare,
-                              depth=args.depth, seed=args.seed, set=args.overrides, progress="auto")
+    out = _output(args.out, Path("results") / f"map_{_output_name(args.scenario)}", args.force, "map.csv", "map",
+                  before=lambda _: grid(args.extent, args.step))
+    result = api._accuracy_map(args.scenario, list(args.overrides), args.seed, args.extent, args.step, levels, compare,
+                               args.depth, "auto", lambda: None, ("--extent", "--step", "--depth"))
     labels, configs, east, north, maps = result.labels, result.configs, result.east, result.north, result.maps
     depth = configs[0]["target"]["depth"]
     where = "--depth" if args.depth is not None else diver_depth(configs[0])[1]  # (compared systems' defaults)
@@ -870,8 +880,9 @@ def _command(args: argparse.Namespace) -> int:
     except OSError as exc:  # a full disk or a folder that refused a write during the work: one line, no traceback
         reason = os.strerror(exc.errno) if exc.errno else str(exc)
         where = f": {exc.filename}" if exc.filename else ""
-        print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced (a campaign keeps its "
-              "finished chunks: run it again with --resume)", file=sys.stderr)
+        resume = (" (a campaign keeps its finished chunks: run it again with --resume)" if args.command == "campaign"
+                  else "")
+        print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced{resume}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("sblsim: interrupted", file=sys.stderr)

@@ -36,6 +36,7 @@ Per receiver (and system), over all steps of all replicates:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Sequence
 
@@ -44,10 +45,10 @@ import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import check_receiver, scenario_system
+from sblsim.orchestrator.config import apply_overrides, check_receiver, scenario_system, section_variables
 from sblsim.orchestrator.master import RecordBuffer
 from sblsim.orchestrator.output import staged_directory
-from sblsim.orchestrator.plan import RunPlan, load_plan, with_replicates
+from sblsim.orchestrator.plan import RunPlan, load_plan, make_plan, thaw, with_replicates
 from sblsim.orchestrator.progress import ProgressSpec, progress_of
 from sblsim.orchestrator.run import run_batch
 from sblsim.orchestrator.systems import system_overrides
@@ -84,20 +85,32 @@ def check_replicates(replicates: int) -> None:
         raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
 
 
-def plans(scenario: str, receivers: Sequence[str], overrides: Sequence[str] = (), seed: int | None = None,
+def plans(scenario: str | Mapping, receivers: Sequence[str], overrides: Sequence[str] = (), seed: int | None = None,
           systems: Sequence[str] | None = None) -> list[RunPlan]:
     """The plan of every receiver (of every system) of a comparison, each resolved once
     (:func:`sblsim.orchestrator.plan.load_plan`); the arguments as for :func:`compare`.
+
+    ``scenario`` may be a configuration (a :class:`~sblsim.orchestrator.plan.Config` or its mapping): each receiver
+    then takes its sections as they are and, of its ``[receiver]`` section, the keys that receiver has (a resolved
+    configuration holds every key of its own receiver, some of which another receiver does not take).
 
     Raises
     ------
     ConfigError, ModelError
         On a bad receiver or override (nothing is run).
     """
+    def plan_of(items: list[str]) -> RunPlan:
+        if not isinstance(scenario, Mapping):
+            return load_plan(scenario, items, seed=seed)
+        raw = apply_overrides(thaw(scenario), items, seed)
+        keys = {v.name for v in section_variables("receiver", check_receiver(raw["simulation"]["receiver"]))}
+        raw["receiver"] = {k: v for k, v in raw.get("receiver", {}).items() if k in keys}
+        return make_plan(raw)
+
     if systems is None:
-        return [load_plan(scenario, [*overrides, f"simulation.receiver={r}"], seed=seed) for r in receivers]
+        return [plan_of([*overrides, f"simulation.receiver={r}"]) for r in receivers]
     own = scenario_system(scenario)
-    return [load_plan(scenario, system_overrides(s, [*overrides, f"simulation.receiver={r}"], own=own), seed=seed)
+    return [plan_of(system_overrides(s, [*overrides, f"simulation.receiver={r}"], own=own))
             for s in systems for r in receivers]
 
 

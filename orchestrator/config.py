@@ -26,6 +26,7 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
@@ -437,18 +438,18 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
     return cfg
 
 
-def scenario_system(source: str | Path) -> str:
-    """The positioning system a scenario or configuration file configures itself (its ``platform.system``,
-    without overrides; the interface's default when it names none): the system that keeps the scenario's
-    platform when systems are compared. The file is read, not resolved (each configuration of a comparison is
-    resolved once, with its system's overrides).
+def scenario_system(source: str | Path | Mapping) -> str:
+    """The positioning system a scenario, configuration file or configuration configures itself (its
+    ``platform.system``, without overrides; the interface's default when it names none): the system that keeps
+    the scenario's platform when systems are compared. The file is read, not resolved (each configuration of a
+    comparison is resolved once, with its system's overrides).
 
     Raises
     ------
     ConfigError
         As :func:`read_source`.
     """
-    platform = read_source(source).get("platform", {})
+    platform = (source if isinstance(source, Mapping) else read_source(source)).get("platform", {})
     named = platform.get("system") if isinstance(platform, dict) else None
     if isinstance(named, str):
         return named

@@ -58,43 +58,47 @@ from sblsim.orchestrator.progress import Progress, ProgressSpec
 from sblsim.orchestrator.systems import check_diver, compared
 
 MAX_POINTS = 1_000_000
+#: The largest half-width of a map's grid [m].
+MAX_EXTENT = 1e5
 #: With detection by signal-to-noise an accuracy map is blank (NaN) where the probability of a fix is below this.
 MIN_AVAILABILITY = 0.5
 
 
-def parse_levels(text: str) -> list[float]:
+def parse_levels(text: str, option: str = "--levels") -> list[float]:
     """``0.5,1,2`` -> increasing positive accuracy levels [m].
 
     Raises
     ------
     ModelError
-        Naming ``--levels`` and what is allowed.
+        Naming ``option`` and what is allowed.
     """
     try:
         levels = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise ModelError(f"--levels: expected comma-separated accuracies in metres, e.g. 0.5,1,2; got {text!r}") \
+        raise ModelError(f"{option}: expected comma-separated accuracies in metres, e.g. 0.5,1,2; got {text!r}") \
             from None
     if not levels or not all(np.isfinite(v) and v > 0 for v in levels):
-        raise ModelError(f"--levels: expected positive accuracies in metres, e.g. 0.5,1,2; got {text!r}")
+        raise ModelError(f"{option}: expected positive accuracies in metres, e.g. 0.5,1,2; got {text!r}")
     return sorted(set(levels))
 
 
-def grid(extent: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+def grid(extent: float, step: float, options: tuple[str, str] = ("--extent", "--step")
+         ) -> tuple[np.ndarray, np.ndarray]:
     """East and North coordinates of the grid, ``−extent … extent`` every ``step`` [m].
 
     Raises
     ------
     ModelError
-        If the extent or step is out of range or the grid too large.
+        If the extent (at most :data:`MAX_EXTENT`) or step is out of range or the grid too large, naming
+        ``options``.
     """
-    if not (np.isfinite(extent) and 0 < extent <= 1e4):
-        raise ModelError(f"--extent: {extent!r} m is outside the allowed range (0, 10000]")
+    if not (np.isfinite(extent) and 0 < extent <= MAX_EXTENT):
+        raise ModelError(f"{options[0]}: {extent!r} m is outside the allowed range (0, {MAX_EXTENT:g}]")
     if not (np.isfinite(step) and 0 < step <= extent):
-        raise ModelError(f"--step: {step!r} m is outside the allowed range (0, extent = {extent:g}]")
+        raise ModelError(f"{options[1]}: {step!r} m is outside the allowed range (0, extent = {extent:g}]")
     n = int(np.floor(2 * extent / step + 1e-9)) + 1
     if n * n > MAX_POINTS:
-        raise ModelError(f"--step: {step:g} m gives {n}×{n} points over ±{extent:g} m; at most {MAX_POINTS} "
+        raise ModelError(f"{options[1]}: {step:g} m gives {n}×{n} points over ±{extent:g} m; at most {MAX_POINTS} "
                          f"(use a step of at least {2 * extent / (np.sqrt(MAX_POINTS) - 1):.3g} m)")
     axis = -extent + step * np.arange(n)
     return axis, axis.copy()
@@ -258,9 +262,30 @@ def system_line(plan: RunPlan | dict) -> str:
     return plan.system.describe(plan["platform"])
 
 
+def check_depth(cfg: dict, depth: float, option: str = "--depth") -> None:
+    """Refuse a diver's depth of a map that the site cannot hold: at or below the water depth
+    (``acoustics.water_depth``; 0: none), or where the system has no diver
+    (:func:`~sblsim.orchestrator.systems.check_diver`: LBL's transponders stand on the seafloor).
+
+    Raises
+    ------
+    ModelError
+        Naming ``option`` (the option or argument that gave the depth) and the allowed range.
+    """
+    water = float(cfg["acoustics"]["water_depth"])
+    if water > 0.0 and not depth < water:
+        raise ModelError(f"{option}: {depth:g} m is outside the allowed range [0, {water:g}) m: the site's water is "
+                         f"{water:g} m deep (acoustics.water_depth)")
+    try:
+        check_diver(cfg, depth)
+    except ModelError as exc:
+        raise ModelError(f"{option}: {depth:g} m is not above the seafloor: {exc}") from None
+
+
 def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = None, extent: float = 30.0,
               step: float = 0.5, compare: tuple[str, list[str]] | None = None,
-              depth: float | None = None, progress: ProgressSpec = False
+              depth: float | None = None, progress: ProgressSpec = False,
+              options: tuple[str, str, str] = ("--extent", "--step", "--depth")
               ) -> tuple[list[str], list[dict], np.ndarray, np.ndarray, list[np.ndarray]]:
     """The accuracy map of a configuration, or one per value of a compared key (each configuration resolved
     once into its plan).
@@ -268,7 +293,9 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     ``progress`` reports each map made (:class:`sblsim.orchestrator.progress.Progress`); default silent.
 
     ``depth`` [m] is the diver's depth of every map (default :func:`diver_depth` of each configuration); the
-    configurations returned hold it as ``target.depth``, which the table and the figure show.
+    configurations returned hold it as ``target.depth``, which the table and the figure show. It is checked
+    against each configuration's site (:func:`check_depth`). Errors name the extent, step and depth as
+    ``options`` (the command's options, or the API's arguments).
 
     Returns
     -------
@@ -284,7 +311,8 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     ConfigError, ModelError
         On a bad option or configuration value (nothing is computed).
     """
-    east, north = grid(extent, step)
+    east, north = grid(extent, step, options[:2])
+    option = options[2]
     if compare is None:
         plans, labels = [load_plan(scenario, overrides, seed=seed)], [str(scenario)]
     else:  # a compared system starts from its defaults, the user's --set over them
@@ -293,12 +321,11 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
                  for items in compared(key, values, overrides, scenario_system(scenario))]
         labels = [f"{key} = {v}" for v in values]
     if depth is not None and not 0.0 <= depth <= 11000.0:
-        raise ModelError(f"--depth: {depth!r} is outside the allowed range [0, 11000] m")
+        raise ModelError(f"{option}: {depth!r} is outside the allowed range [0, 11000] m")
     configs = []
     for plan in plans:
         configs.append(MapConfig(plan, diver_depth(plan)[0] if depth is None else float(depth)))
-        if compare is not None and compare[0] == "platform.system":
-            check_diver(configs[-1], configs[-1]["target"]["depth"])
+        check_depth(configs[-1], configs[-1]["target"]["depth"], option if depth is not None else "target.depth")
     with Progress(len(configs), "map", "map", progress) as bar:
         maps = []
         for c in configs:
@@ -423,5 +450,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["MapConfig", "accuracy_map", "grid", "make_maps", "parse_levels", "plot", "system_line", "table",
-           "write"]
+__all__ = ["MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "grid", "make_maps", "parse_levels", "plot",
+           "system_line", "table", "write"]

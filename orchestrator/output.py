@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import shutil
+import stat
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,15 +27,40 @@ def write_atomic(path: Path | str, write: Callable[[Path], object]) -> None:
     The file gets the mode a file created with :func:`open` gets (0666 without the process's umask), like
     the other files of a command, not the private 0600 of :func:`tempfile.mkstemp`.
     """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    write_together({Path(path): write}, parents=False)
+
+
+def write_together(writers: dict[Path, Callable[[Path], object]], parents: bool = True) -> None:
+    """Write several files as one: each through a temporary file in its folder (:func:`write_atomic`'s mode), all
+    moved into place only when every one is written; if any write fails, no file is replaced, the temporary files
+    are removed and so are the folders made for them (``parents``: the missing folders are made,
+    :func:`make_parents`).
+
+    Parameters
+    ----------
+    writers : dict
+        Each file's path -> a function writing it (given the temporary file's path).
+    parents : bool
+        Make the missing folders above the files (else a missing one is an error).
+    """
+    created: list[Path] = []
+    done: list[tuple[str, Path]] = []
     try:
-        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's file is 0600: the mode any other file written here has
-        write(Path(tmp))
-        os.replace(tmp, path)
+        for path, write in writers.items():
+            path = Path(path)
+            if parents:
+                created += make_parents(path)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            os.close(fd)
+            done.append((tmp, path))
+            os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's file is 0600: the mode any other file here has
+            write(Path(tmp))
+        for tmp, path in done:
+            os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        for tmp, _ in done:
+            Path(tmp).unlink(missing_ok=True)
+        remove_empty(created)
         raise
 
 
@@ -81,19 +108,71 @@ def staged_directory(out: Path | str) -> Iterator[Path]:
         The staging folder to write into.
     """
     out = Path(out).absolute()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale(out)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", dir=out.parent))
+    created = make_parents(out)
+    done = False
     try:
-        yield tmp
-        out.mkdir(exist_ok=True)
-        for item in list(tmp.iterdir()):
-            target = out / item.name
-            if item.is_dir() and target.is_dir():  # os.replace cannot overwrite a non-empty directory
-                os.replace(target, tmp / f".old.{item.name}")
-            os.replace(item, target)
+        remove_stale(out)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", dir=out.parent))
+        try:
+            yield tmp
+            out.mkdir(exist_ok=True)
+            for item in list(tmp.iterdir()):
+                target = out / item.name
+                # os.replace cannot overwrite a non-empty directory (a link to one is replaced, not followed)
+                if item.is_dir() and target.is_dir() and not target.is_symlink():
+                    os.replace(target, tmp / f".old.{item.name}")
+                os.replace(item, target)
+            done = True
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            remove_empty(created)
+
+
+def make_parents(path: Path) -> list[Path]:
+    """Create the missing folders above ``path`` (as ``mkdir -p`` of its parent) and return them, the
+    deepest last, so that a command that fails can remove what it created (:func:`remove_empty`).
+
+    A dangling symbolic link on the way is not followed: ``mkdir`` fails on it (``FileExistsError``).
+    """
+    folder, missing = Path(path).absolute().parent, []
+    while not os.path.lexists(folder):
+        missing.append(folder)
+        folder = folder.parent
+    created = []
+    try:
+        for item in reversed(missing):
+            item.mkdir()
+            created.append(item)
+    except BaseException:
+        remove_empty(created)
+        raise
+    return created
+
+
+def refuse_link(path: Path, where: str) -> None:
+    """Refuse a folder or file that a command would write into or over but that is a symbolic link it was not
+    given (e.g. ``chunks/`` inside a campaign directory): writing through it would write where it points.
+
+    Raises
+    ------
+    ModelError
+        Naming ``where`` and the link.
+    """
+    if os.path.islink(path):
+        raise ModelError(f"{where}: {str(path)!r} is a symbolic link; sblsim never writes through a link it was "
+                         "not given: remove it (or choose another folder)")
+
+
+def remove_empty(folders: list[Path]) -> None:
+    """Remove the folders :func:`make_parents` created that stayed empty, the deepest first."""
+    for item in reversed(folders):
+        try:
+            item.rmdir()
+        except OSError:  # it holds something now (the results): kept
+            pass
+    folders.clear()
 
 
 def remove_stale(out: Path) -> list[Path]:
@@ -101,7 +180,7 @@ def remove_stale(out: Path) -> list[Path]:
     removed = []
     for folder in out.parent.glob(f".{out.name}.*"):
         parts = folder.name[len(out.name) + 2:].split(".")
-        if not folder.is_dir() or not parts[0].isdigit() or _alive(int(parts[0])):
+        if folder.is_symlink() or not folder.is_dir() or not parts[0].isdigit() or _alive(int(parts[0])):
             continue
         shutil.rmtree(folder, ignore_errors=True)
         removed.append(folder)
@@ -126,9 +205,11 @@ class OutputLock:
 
     The lock is ``fcntl.flock`` on the file ``.<name>.lock`` beside the folder, taken without waiting: a
     second command into the same folder while the first runs is refused (its results would silently replace
-    the first's). The lock file is removed on release, and any folder created to hold it when nothing was
-    written into it; the kernel releases the lock of a killed process. Where ``fcntl`` does not exist
-    (Windows) no lock is taken.
+    the first's). The lock file is opened without following a symbolic link (``O_NOFOLLOW``: a link of that
+    name, dangling or not, would make us create or lock a file where it points, outside the folder the user
+    named) and must be a regular file; anything else is refused in one line. The lock file is removed on
+    release, and any folder created to hold it when nothing was written into it; the kernel releases the lock
+    of a killed process. Where ``fcntl`` does not exist (Windows) no lock is taken.
     """
 
     def __init__(self, out: Path | str, option: str = "--out") -> None:
@@ -144,20 +225,14 @@ class OutputLock:
         Raises
         ------
         ModelError
-            Naming the option and the folder, when another command holds it.
+            Naming the option and the folder, when another command holds it, or when the lock file's name is
+            a symbolic link or not a regular file.
         """
         if fcntl is None:  # pragma: no cover - Windows
             return self
-        folder = self.out.parent
-        missing = []
-        while not folder.exists():
-            missing.append(folder)
-            folder = folder.parent
-        for item in reversed(missing):
-            item.mkdir()
-            self._created.append(item)
+        self._created = make_parents(self.path)
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            fd = self._open()
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -166,13 +241,32 @@ class OutputLock:
                 raise ModelError(f"{self.option}: {str(self.out)!r} is being written by another sblsim command "
                                  "right now; wait until it ends or choose another folder") from None
             try:  # the holder before may have removed the file between our open and our lock: lock the new one
-                same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+                same = os.lstat(self.path).st_ino == os.fstat(fd).st_ino
             except FileNotFoundError:
                 same = False
             if same:
                 self._fd = fd
                 return self
             os.close(fd)
+
+    def _open(self) -> int:
+        """The lock file, created if missing, never through a symbolic link; a regular file only."""
+        flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+        try:
+            fd = os.open(self.path, flags, 0o666)
+        except OSError as exc:
+            if exc.errno != errno.ELOOP and not os.path.islink(self.path):
+                raise
+            self._remove_created()
+            raise ModelError(f"{self.option}: the lock file {str(self.path)!r} beside {str(self.out)!r} is a "
+                             "symbolic link; sblsim never creates a file through a link it was not given: remove "
+                             "it (or choose another folder)") from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            self._remove_created()
+            raise ModelError(f"{self.option}: the lock file {str(self.path)!r} beside {str(self.out)!r} is not a "
+                             "regular file; remove it (or choose another folder)")
+        return fd
 
     def release(self) -> None:
         """Remove the lock file and release the lock (and remove folders created for it that stayed empty)."""
@@ -186,12 +280,7 @@ class OutputLock:
         self._remove_created()
 
     def _remove_created(self) -> None:
-        for item in reversed(self._created):  # the deepest first
-            try:
-                item.rmdir()
-            except OSError:  # it holds something now (the results): kept
-                pass
-        self._created = []
+        remove_empty(self._created)
 
 
 
@@ -244,5 +333,5 @@ def check_writable(directory: Path, where: str = "--out") -> None:
         raise ModelError(f"{where}: {str(directory)!r} cannot be written ({reason} in {str(probe)!r})") from None
 
 
-__all__ = ["OutputLock", "check_output", "check_writable", "current_umask", "folder_name", "remove_stale",
-           "staged_directory", "write_atomic"]
+__all__ = ["OutputLock", "check_output", "check_writable", "current_umask", "folder_name", "make_parents",
+           "refuse_link", "remove_empty", "remove_stale", "staged_directory", "write_atomic", "write_together"]

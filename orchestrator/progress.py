@@ -18,6 +18,8 @@ from typing import Callable, Union
 
 from tqdm import tqdm
 
+from sblsim.models.declarations import ModelError, shown
+
 #: How often a plain progress line is printed when standard error is not a terminal [s].
 LOG_EVERY = 10.0
 
@@ -25,6 +27,20 @@ LOG_EVERY = 10.0
 #: error), ``"auto"`` (a bar at a terminal, else log lines), ``"log"`` (log lines, even at a terminal), or a
 #: callable ``progress(done, total)`` [units of the work].
 ProgressSpec = Union[bool, None, str, Callable[[float, float], object]]
+
+
+def check_progress(spec: object, where: str = "progress") -> None:
+    """Refuse a progress ``spec`` that is none of :data:`ProgressSpec`.
+
+    Raises
+    ------
+    ModelError
+        Naming ``where`` and what is allowed (a :class:`ValueError` too).
+    """
+    if callable(spec) or spec is None or isinstance(spec, bool) or (isinstance(spec, str)
+                                                                    and spec in ("auto", "log", "off")):
+        return
+    raise ModelError(f"{where}: {shown(spec)} is not True, False, 'auto', 'log', 'off' or a callable(done, total)")
 
 
 class Progress:
@@ -56,8 +72,8 @@ class Progress:
 
     Raises
     ------
-    ValueError
-        On a ``spec`` that is none of :data:`ProgressSpec`.
+    ModelError
+        On a ``spec`` that is none of :data:`ProgressSpec` (:func:`check_progress`).
     """
 
     def __init__(self, total: float, desc: str, unit: str = "step", spec: ProgressSpec = False,
@@ -69,6 +85,7 @@ class Progress:
         self.bar = None
         self.callback: Callable[[float, float], object] | None = None
         self.log = False
+        check_progress(spec)
         if callable(spec):
             self.callback = spec
         elif spec == "auto":
@@ -80,8 +97,6 @@ class Progress:
             self.log = True
         elif spec is True:
             self._open_bar()
-        elif spec not in (False, None, "off"):
-            raise ValueError(f"progress: {spec!r} is not True, False, 'auto', 'log', 'off' or a callable(done, total)")
         if ends:
             if self.callback is not None:
                 self.callback(self.done, self.total)

@@ -77,7 +77,7 @@ from sblsim.orchestrator.config import (
 from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make_handles
 from sblsim.orchestrator.limits import max_steps
 from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
-from sblsim.orchestrator.output import staged_directory, write_atomic
+from sblsim.orchestrator.output import staged_directory, write_together
 from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
 from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _label, _metrics, merge_params, summary
 from sblsim.orchestrator.tables import (  # the hostile-safe table reading every log reader shares
@@ -966,7 +966,8 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     Raises
     ------
     ModelError
-        ``--export-log: ...`` when a write fails (a full disk), saying which of the two files was written.
+        ``--export-log: ...`` when a write fails (a full disk): then neither file is replaced, nor is a folder
+        made for them left (:func:`sblsim.orchestrator.output.write_together`).
     """
     path = Path(path)
     cfg = result.config
@@ -985,7 +986,6 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
                 "# the run's resolved configuration, which `sblsim replay` uses unless given --config:",
                 *[f"{CONFIG_PREFIX}{line}" if line else CONFIG_PREFIX.rstrip() for line in config.splitlines()]]
     target = truth_path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".parquet":
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -1004,16 +1004,12 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
                                        "of every step (N, E, D in the platform's frame)"])
         writers = (lambda tmp: tmp.write_text(text, encoding="utf-8"),
                    lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
-    written = []
-    try:
-        for file, writer in zip((path, target), writers):
-            write_atomic(file, writer)
-            written.append(file)
-    except OSError as exc:  # e.g. a full disk: say what was written (each file is whole or not there)
+    try:  # the pair as one: both written, or neither replaced (nor a folder made for them left)
+        write_together(dict(zip((path, target), writers)))
+    except OSError as exc:  # e.g. a full disk
         reason = os.strerror(exc.errno) if exc.errno else str(exc)
-        done = (f"the log {str(path)!r} was written, its truth track {str(target)!r} not" if written else
-                f"neither the log nor its truth track was written ({str(path)!r} is as it was)")
-        raise ModelError(f"--export-log: {reason}; {done}") from None
+        raise ModelError(f"--export-log: {reason}; neither the log nor its truth track was written ({str(path)!r} "
+                         "is as it was)") from None
     return path, target
 
 

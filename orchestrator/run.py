@@ -302,8 +302,9 @@ def _check_in_flight(handles: dict, cfgs: Sequence[dict]) -> None:
         return
     refused = channel.output_vector()[channel.output_names.index("overflow_travel_time")]
     if np.any(refused > 0.0):  # the runs of a batch share the sampling time; name the longest turnaround of them
+        jitter = max(c["acoustics"]["turnaround_sigma"] if c["acoustics"]["ranging"] == "twtt" else 0.0 for c in cfgs)
         check_in_flight(cfgs[0]["simulation"]["sampling_time"], max(turnaround(c) for c in cfgs),
-                        float(np.max(refused)))
+                        float(np.max(refused)), jitter)
 
 
 

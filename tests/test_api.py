@@ -116,6 +116,67 @@ def test_bad_input_raises_an_sblsim_error_not_system_exit(call, needle):
     assert needle in message and "\n" not in message
 
 
+#: Each argument of the API given what its docstring does not allow (issue 42's corpus and the like): the documented
+#: error class (an SblsimError), one line starting with the argument's name, raised at the boundary (before any
+#: work: none of these calls may run long enough to notice).
+HOSTILE = {
+    "run out=1": (lambda: sblsim.run("semicircle", out=1), "out: 1 is not a file or folder"),
+    "run force='no'": (lambda: sblsim.run("semicircle", out="o", force="no"), "force: 'no' is not True or False"),
+    "run fmu_dir=2.5": (lambda: sblsim.run("semicircle", fmu_dir=2.5), "fmu_dir: 2.5 is not a file or folder"),
+    "run set=1": (lambda: sblsim.run("semicircle", set=1), "set: expected a mapping"),
+    "run engine array": (lambda: sblsim.run("semicircle", engine=np.array(["local", "fmu"])), "engine:"),
+    "run progress 'x'": (lambda: sblsim.run("semicircle", progress="x"), "progress: 'x' is not True, False"),
+    "map extent 'x'": (lambda: sblsim.accuracy_map("semicircle", extent="x"),
+                       "extent: 'x' is not a number; allowed: (0, 100000] m"),
+    "map extent beyond 100 km": (lambda: sblsim.accuracy_map("semicircle", extent=2e5, step=1e5),
+                                 "extent: 200000.0 is outside the allowed range (0, 100000] m"),
+    "map step array": (lambda: sblsim.accuracy_map("semicircle", step=np.array([1.0, 2.0])), "step: array("),
+    "map step nan": (lambda: sblsim.accuracy_map("semicircle", step=float("nan")),
+                     "step: nan is outside the allowed range (0, 30] m"),
+    "map compare values None": (lambda: sblsim.accuracy_map("semicircle", compare=("platform.baseline", None)),
+                                "compare: the values of platform.baseline must be a list"),
+    "map depth 'x'": (lambda: sblsim.accuracy_map("semicircle", depth="x"), "depth: 'x' is not a number"),
+    "map depth below the site": (lambda: sblsim.accuracy_map("lbl-field", depth=301.0),
+                                 "depth: 301 m is outside the allowed range [0, 300) m"),
+    "map levels text": (lambda: sblsim.accuracy_map("semicircle", levels="0.5"), "levels: expected a list"),
+    "compare receivers 5": (lambda: sblsim.compare("semicircle", receivers=5), "receivers: expected a text or a list"),
+    "budget receiver list": (lambda: sblsim.budget("semicircle", receiver=["ekf"]), "receiver: ['ekf'] is not a text"),
+    "replay None": (lambda: sblsim.replay(None), "log: None is not a file or folder"),
+    "replay truth=1": (lambda: sblsim.replay("log.csv", truth=1), "truth: 1 is not a file or folder"),
+    "replay config=1": (lambda: sblsim.replay("log.csv", config=1), "config: 1 is not a file or folder"),
+    "campaign out None": (lambda: sblsim.campaign("paper", None), "out: None is not a file or folder"),
+    "campaign resume 'yes'": (lambda: sblsim.campaign("paper", "c", resume="yes"), "resume: 'yes' is not True or"),
+    "campaign workers 'two'": (lambda: sblsim.campaign("paper", "c", workers="two"), "workers: 'two' is not an"),
+    "analyze None": (lambda: sblsim.analyze(None), "directory: None is not a file or folder"),
+    "analyze alpha 'x'": (lambda: sblsim.analyze("c", alpha="x"), "alpha: 'x' is not a number"),
+}
+
+
+@pytest.mark.parametrize("case", list(HOSTILE))
+def test_hostile_arguments_raise_the_documented_error_naming_the_argument(case, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    call, needle = HOSTILE[case]
+    with pytest.raises(sblsim.SblsimError) as caught:
+        call()
+    message = str(caught.value)
+    assert message.startswith(needle) and "\n" not in message, message
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_what_the_docstrings_allow_is_accepted():
+    """accuracy_map's extent (0, 100000] m with a step of the extent; compare() of a Config (a mapping or Config,
+    its docstring says), the same table as its scenario's."""
+    m = sblsim.accuracy_map("semicircle", extent=50_000.0, step=50_000.0)
+    assert list(m.east) == [-50_000.0, 0.0, 50_000.0] and m.maps[0].shape == (3, 3)
+    assert np.all(m.maps[0] > 0) and m.maps[0][1, 1] < m.maps[0][0, 0]  # better under the platform than 50 km off
+    cfg = sblsim.load("semicircle", set=[SHORT])
+    mine = sblsim.compare(cfg, receivers=["ekf", "lsq"], replicates=2)
+    theirs = sblsim.compare("semicircle", receivers=["ekf", "lsq"], replicates=2, set=[SHORT])
+    keep = [k for k in theirs.table.columns if k != "us_per_step"]
+    pd.testing.assert_frame_equal(mine.table[keep].reset_index(drop=True), theirs.table[keep].reset_index(drop=True))
+    assert mine.title.startswith("semicircle: 2 replicates per receiver, seed 0")
+
+
 def test_compare_map_and_budget_give_the_cli_tables(tmp_path):
     items = [SHORT]
     assert main(["compare", "semicircle", "--receivers", "ekf,lsq", "--replicates", "3", "--seed", "4",

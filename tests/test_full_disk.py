@@ -95,3 +95,49 @@ def test_export_log_on_a_full_disk_says_what_was_written(small_disk, tmp_path):
     assert f"the run's results were written to {tmp_path / 'o'}/" in line and "nothing in the output" not in line
     assert (tmp_path / "o" / "summary.json").is_file()
     assert list(disk.iterdir()) == []
+
+
+def test_export_log_into_a_new_folder_on_a_full_disk_leaves_no_folder(small_disk, tmp_path):
+    """The folder made for the log goes with the failed write: nothing half-written is left on the disk."""
+    disk, _ = small_disk
+    line = _one_line(_sblsim("run", "semicircle", "--out", tmp_path / "o", "--export-log", disk / "logs" / "a.csv",
+                             cwd=tmp_path))
+    assert line.startswith("sblsim: error: --export-log: No space left on device; neither the log nor")
+    assert list(disk.iterdir()) == []
+
+
+def test_the_log_and_its_truth_track_are_written_together(tmp_path):
+    """A failure writing the second file (the truth track) replaces neither: the earlier pair stays whole."""
+    import errno
+
+    from sblsim.orchestrator.output import write_together
+
+    old = {tmp_path / "log.csv": "old log", tmp_path / "log_truth.csv": "old truth"}
+    for path, text in old.items():
+        path.write_text(text)
+
+    def full(tmp):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OSError):
+        write_together({tmp_path / "log.csv": lambda tmp: tmp.write_text("new log"), tmp_path / "log_truth.csv": full})
+    assert {p: p.read_text() for p in old} == old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.csv", "log_truth.csv"]  # no temporary file left
+    with pytest.raises(OSError):
+        write_together({tmp_path / "new" / "deeper" / "a.csv": full})
+    assert not (tmp_path / "new").exists()  # the folders made for it went with it
+
+
+def test_calibrate_a_log_on_a_full_disk_is_one_line(small_disk, tmp_path):
+    """A log's calibration has a note (its a-priori positions are guessed): it is said after the write, so that a
+    write that fails says one line."""
+    from sblsim.orchestrator.surveys.log import write_log
+    from sblsim.orchestrator.surveys.simulate import load_simulated, replicate
+
+    disk, _ = small_disk
+    write_log(replicate(load_simulated("box-in", ["survey.duration_s=200"]), 0)[0].log, tmp_path / "survey.csv")
+    line = _one_line(_sblsim("calibrate", "survey.csv", "--out", disk / "c", cwd=tmp_path))
+    assert "No space left on device" in line
+    assert list(disk.iterdir()) == []
+    done = _sblsim("calibrate", "survey.csv", "--out", tmp_path / "c", cwd=tmp_path)
+    assert done.returncode == 0 and done.stderr.startswith("note: the a-priori positions are guessed"), done.stderr

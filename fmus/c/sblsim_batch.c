@@ -184,13 +184,19 @@ SBLSIM_EXPORT int sblsim_batch_initialize(sblsim_batch* b, double t0) {
     return status;
 }
 
-SBLSIM_EXPORT int sblsim_batch_do_step(sblsim_batch* b, double t, double h) {
+/* One step of every replicate; before each, *cancel (when not NULL) is read: set, the steps stop there and -1 is
+   returned (the batch is then half-stepped: a run that is abandoned). 0 on success, else 1 + the failing
+   replicate. */
+static int batch_steps(sblsim_batch* b, double t, double h, const volatile int* cancel) {
     int i;
     for (i = 0; i < b->B; i++) {
+        if (cancel != NULL && *cancel) return -1;
         if (sblsim_do_step(&b->instances[i], t, h, b->message, sizeof b->message)) return 1 + i;
     }
     return 0;
 }
+
+SBLSIM_EXPORT int sblsim_batch_do_step(sblsim_batch* b, double t, double h) { return batch_steps(b, t, h, NULL); }
 
 /* The random streams, for the tests that pin them against numpy's Philox. */
 SBLSIM_EXPORT void sblsim_stream_uniforms(const uint64_t keys[4], int component, int purpose, uint64_t draw,
@@ -245,12 +251,14 @@ static void feed(sblsim_batch** batches, int c, const int* link_offsets, const i
    (source component, its output index, c's input index) are link_offsets[c] .. link_offsets[c + 1] - 1.
    Macro steps k0 .. k0 + n_steps - 1 of size T from t0; component c takes rates[c] communication steps per macro
    step. After each macro step the outputs (rec_comp[j], rec_out[j]) go to record[(k - k0) x n_record x B].
-   timing[c] accumulates the seconds of c's steps. 0 on success, else 1 + the failing component's index (its
-   batch message says why, `failed_replicate` which replicate). */
+   timing[c] accumulates the seconds of c's steps. 0 on success, -1 when *cancel was set (by another thread:
+   read before every replicate's step, so that a run of minutes stops within one), else 1 + the failing
+   component's index (its batch message says why, `failed_replicate` which replicate). */
 SBLSIM_EXPORT int sblsim_system_run(int n, sblsim_batch** batches, const int* rates, const int* link_offsets,
                                     const int* link_src, const int* link_out, const int* link_in, int n_record,
                                     const int* rec_comp, const int* rec_out, double* record, double t0, double T,
-                                    int k0, int n_steps, int jacobi, double* timing, int* failed_replicate) {
+                                    int k0, int n_steps, int jacobi, double* timing, int* failed_replicate,
+                                    const volatile int* cancel) {
     int k, c, j, i;
     int B = batches[0]->B;
     for (k = k0; k < k0 + n_steps; k++) {
@@ -262,7 +270,8 @@ SBLSIM_EXPORT int sblsim_system_run(int n, sblsim_batch** batches, const int* ra
             if (!jacobi) feed(batches, c, link_offsets, link_src, link_out, link_in);
             start = now();
             for (j = 0; j < rates[c]; j++) {
-                int status = sblsim_batch_do_step(batches[c], t + j * sub, sub);
+                int status = batch_steps(batches[c], t + j * sub, sub, cancel);
+                if (status < 0) return -1;
                 if (status) {
                     *failed_replicate = status - 1;
                     return 1 + c;

@@ -109,7 +109,7 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, n
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import NO_ROW, get_row, lookup, put_row, sample_due, select
+from sblsim.models.expressions import NO_ROW, get_row, lookup, map_in_chunks, put_row, sample_due, select
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -359,13 +359,14 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
     # a range-independent site: pairs of the same depths and distance (a map's symmetric grid) are solved once
     geometry, pair = np.unique(np.column_stack([sources[:, 2], receivers[:, 2], horizontal]), axis=0,
                                return_inverse=True)
-    f = (family_levels() if levels is None else levels).map(geometry.shape[0])
-    out = f(geometry[:, 0], geometry[:, 1], geometry[:, 2], float(p["water_depth"]), float(rows.shape[0] > 0),
-            float(p["sound_speed_true"]), nodes, speeds, site)
-    return {name: np.asarray(out[k]).T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"),
-                                                                     (5, "pd"))}
+    # in calls of a fraction of a second (a large map is minutes of compiled code: Ctrl-C between two calls)
+    out = map_in_chunks(family_levels() if levels is None else levels, geometry.T,
+                        (float(p["water_depth"]), float(rows.shape[0] > 0), float(p["sound_speed_true"]), nodes,
+                         speeds, site))
+    return {name: out[k].T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"), (5, "pd"))}
 
-def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None) -> None:
+def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None,
+                    jitter: float = 0.0) -> None:
     """Refuse a run whose packets stay in flight longer than the channel can hold them.
 
     A packet that arrives Δ after its transmit epoch is delivered in the step that reaches its arrival,
@@ -381,28 +382,39 @@ def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None
     elapsed : float, optional
         The longest Δ a run saw (the channel's ``overflow_travel_time``; 0: nothing refused). None: the check
         before a run, of the turnaround alone (the travel time is not known yet).
+    jitter : float
+        The turnaround's jitter, ``acoustics.turnaround_sigma`` of two-way ranging (0 for one-way) [s]: part of
+        Δ, named with it.
 
     Raises
     ------
     ModelError
-        One line naming ``simulation.sampling_time``, ``acoustics.turnaround``, the travel time and the
-        shortest sampling time that holds them.
+        One line naming ``simulation.sampling_time``, what makes the flight long (the turnaround and its jitter
+        where they are not 0, the travel time) and the shortest sampling time that holds it.
     """
     limit = (FLIGHT_CAPACITY - 1) * slot_period
+    shorter = ["acoustics.turnaround"] if turnaround > 0.0 or elapsed is None else []
     if elapsed is None:
         if turnaround < limit:
             return
-        late, travel = turnaround, "the travel times on top"
+        late, causes = turnaround, f"acoustics.turnaround = {turnaround:g} s and the travel times on top"
     else:
         if not elapsed > 0.0:
             return
-        late, travel = elapsed, f"a travel time of {max(elapsed - turnaround, 0.0):.4g} s"
+        late = elapsed
+        causes = [f"acoustics.turnaround = {turnaround:g} s"] if turnaround > 0.0 else []
+        if jitter > 0.0:
+            causes.append(f"its jitter acoustics.turnaround_sigma = {jitter:g} s")
+            shorter.append("acoustics.turnaround_sigma")
+            travel = "the travel time"  # not told apart from the jitter's draw
+        else:
+            travel = f"a travel time of {max(elapsed - turnaround, 0.0):.4g} s"
+        causes = ", ".join(causes + [travel]) if causes else travel
     raise ModelError(
-        f"simulation.sampling_time: {slot_period:g} s is too short for acoustics.turnaround = {turnaround:g} s and "
-        f"{travel}: a packet arrives {late:.4g} s after it is sent, {math.ceil(late / slot_period - 1e-9) + 1} "
-        f"packets in flight, and the channel holds {FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} "
-        f"sampling times); give a simulation.sampling_time above {late / (FLIGHT_CAPACITY - 1):.4g} s or a shorter "
-        "acoustics.turnaround")
+        f"simulation.sampling_time: {slot_period:g} s is too short for {causes}: a packet arrives {late:.4g} s after "
+        f"it is sent, {math.ceil(late / slot_period - 1e-9) + 1} packets in flight, and the channel holds "
+        f"{FLIGHT_CAPACITY} (an arrival within {FLIGHT_CAPACITY - 1} sampling times); give a simulation.sampling_time "
+        f"above {late / (FLIGHT_CAPACITY - 1):.4g} s" + "".join(f" or a smaller {key}" for key in shorter))
 
 
 class Acoustics(Component):

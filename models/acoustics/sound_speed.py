@@ -26,6 +26,8 @@ thermodynamic equation of seawater - 2010 (TEOS-10), via the ``gsw`` package.
 from __future__ import annotations
 
 import csv
+import os
+import stat
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -50,6 +52,12 @@ MUNK_ROWS, MUNK_DEPTH = 256, 5000.0
 MISSING_SPEED = -9.99e-29
 #: Largest number of rows of a sound-speed table.
 MAX_PROFILE_ROWS = 256
+#: The largest CSV cast read [bytes] (checked before it is opened) and the most data rows (counted while it is
+#: read, before anything is kept beyond them): a 24 Hz CTD lowered 5 km at 1 m/s records some 120,000 rows. A
+#: cast within both is read in about a second and some 100 MB and resampled to :data:`MAX_PROFILE_ROWS` rows
+#: (:func:`fit_rows`); a larger one is refused in one line.
+MAX_CAST_BYTES = 16 * 2**20
+MAX_CAST_ROWS = 200_000
 #: How far above the first and below the last depth the end speeds are extended [m].
 EXTENSION = 1e4
 PROFILE = Table(
@@ -168,7 +176,11 @@ def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile"
     is the header: the depth column is the one whose name starts with
     ``depth``; the speed column is the one whose name contains ``sound``
     or ``velocity``. Every cell of those columns must be a finite number
-    inside the table's ranges; repeated depths are averaged.
+    inside the table's ranges; the depths must not decrease down the file
+    (one downcast; a row above the one before it is refused, not sorted);
+    repeated depths are averaged. A file larger than :data:`MAX_CAST_BYTES`
+    or with more than :data:`MAX_CAST_ROWS` data rows is refused before it
+    is read whole.
 
     Returns
     -------
@@ -178,18 +190,34 @@ def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile"
     Raises
     ------
     ModelError
-        If the file is missing, a directory, has no such columns, or a cell
-        is not a valid number (naming the line and column).
+        If the file is missing, a directory or not a regular file, too large,
+        has no such columns, a cell is not a valid number or a depth is above
+        the one before it (naming the line and column).
     """
     path = Path(path)
-    if path.is_dir():
+    try:
+        info = os.stat(path)
+    except OSError:
+        raise ModelError(f"{field}: no such file {str(path)!r}; use {allowed}") from None
+    if stat.S_ISDIR(info.st_mode):
         raise ModelError(f"{field}: {str(path)!r} is a directory, not a CSV file")
-    if not path.is_file():
-        raise ModelError(f"{field}: no such file {str(path)!r}; use {allowed}")
+    if not stat.S_ISREG(info.st_mode):  # a pipe would block the reader
+        raise ModelError(f"{field}: {str(path)!r} is not a regular file (a pipe, a device or a socket); give a CSV "
+                         "file")
+    if info.st_size > MAX_CAST_BYTES:
+        raise ModelError(f"{field}: {str(path)!r} is {info.st_size / 2**20:.0f} MiB; a cast is at most "
+                         f"{MAX_CAST_BYTES // 2**20} MiB and {MAX_CAST_ROWS:,} rows (decimate it: sblsim resamples "
+                         f"it to {MAX_PROFILE_ROWS} rows anyway)")
+    lines = []
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:
-            lines = [(i, row) for i, row in enumerate(csv.reader(handle), start=1)
-                     if row and not row[0].lstrip().startswith(("%", "#")) and any(c.strip() for c in row)]
+            for i, row in enumerate(csv.reader(handle), start=1):
+                if row and not row[0].lstrip().startswith(("%", "#")) and any(c.strip() for c in row):
+                    lines.append((i, row))
+                    if len(lines) > MAX_CAST_ROWS + 1:  # the header and the rows allowed
+                        raise ModelError(f"{field}: {str(path)!r} has more than {MAX_CAST_ROWS:,} rows; a cast is "
+                                         f"at most {MAX_CAST_BYTES // 2**20} MiB and {MAX_CAST_ROWS:,} rows "
+                                         f"(decimate it: sblsim resamples it to {MAX_PROFILE_ROWS} rows anyway)")
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ModelError(f"{field}: cannot read {str(path)!r} ({exc.__class__.__name__})") from None
     if not lines:
@@ -200,23 +228,37 @@ def read_cast_csv(path: str | Path, field: str = "acoustics.sound_speed_profile"
     if depth_col is None or speed_col is None:
         raise ModelError(f"{field}: {str(path)!r} needs a header line naming a depth column and a sound-speed "
                          "column (e.g. 'depth,sound_speed')")
-    rows: dict[float, list[float]] = {}
-    for i, row in lines[1:]:
-        values = []
-        for k, col in ((depth_col, PROFILE.columns[0]), (speed_col, PROFILE.columns[1])):
-            cell = row[k].strip() if k < len(row) else ""
-            try:
-                number = float(cell)
-            except ValueError:
-                raise ModelError(f"{field}: {str(path)!r} line {i}, column {lines[0][1][k].strip()!r}: "
-                                 f"{cell!r} is not a number") from None
-            check_entry(number, col, f"{field}: {str(path)!r} line {i}, column {lines[0][1][k].strip()!r}")
-            values.append(number)
-        rows.setdefault(values[0], []).append(values[1])
-    if not rows:
+    data = lines[1:]
+    if not data:
         raise ModelError(f"{field}: {str(path)!r} holds no data rows")
-    depths = np.array(sorted(rows))
-    table = np.column_stack([depths, [np.mean(rows[z]) for z in depths]])
+    columns = ((depth_col, PROFILE.columns[0]), (speed_col, PROFILE.columns[1]))
+    cells = [[row[k].strip() if k < len(row) else "" for _, row in data] for k, _ in columns]
+    try:  # every cell at once; a bad one is found and named below
+        values = np.array(cells, dtype=float)
+        good = all(np.all(np.isfinite(v) & (v >= col.min) & (v <= col.max)) for v, (_, col) in zip(values, columns))
+    except ValueError:
+        good = False
+    if not good:
+        for n, (i, _) in enumerate(data):
+            for (k, col), column in zip(columns, cells):
+                where = f"{field}: {str(path)!r} line {i}, column {lines[0][1][k].strip()!r}"
+                try:
+                    number = float(column[n])
+                except ValueError:
+                    raise ModelError(f"{where}: {column[n]!r} is not a number") from None
+                check_entry(number, col, where)
+    depth, speed = values
+    up = np.flatnonzero(np.diff(depth) < 0.0)
+    if up.size:
+        k = int(up[0])
+        raise ModelError(f"{field}: {str(path)!r} line {data[k + 1][0]}, column {lines[0][1][depth_col].strip()!r}: "
+                         f"depth {depth[k + 1]:g} m is above line {data[k][0]}'s {depth[k]:g} m; a cast's depths must "
+                         "not decrease (one downcast, from the surface down)")
+    depths, first, counts = np.unique(depth, return_index=True, return_counts=True)
+    speeds = speed[first]
+    for g in np.flatnonzero(counts > 1):  # repeated depths (adjacent: the depths do not decrease) averaged
+        speeds[g] = np.mean(speed[first[g]:first[g] + counts[g]])
+    table = np.column_stack([depths, speeds])
     return fit_rows(table, field, str(path))
 
 
@@ -430,6 +472,6 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
     return read_cast_csv(spec, field) if allowed is None else read_cast_csv(spec, field, allowed)
 
 
-__all__ = ["BUILTIN_CASTS", "harmonic_mean", "MAX_PROFILE_ROWS", "munk_speed", "munk_table", "node_speeds", "NODES",
-           "PROFILE", "profile_nodes", "PROFILE_SOURCES", "profile_table", "read_cast_csv", "read_gnatss_ctd",
-           "temperature_from_speed", "teos10_table"]
+__all__ = ["BUILTIN_CASTS", "harmonic_mean", "MAX_CAST_BYTES", "MAX_CAST_ROWS", "MAX_PROFILE_ROWS", "munk_speed",
+           "munk_table", "node_speeds", "NODES", "PROFILE", "profile_nodes", "PROFILE_SOURCES", "profile_table",
+           "read_cast_csv", "read_gnatss_ctd", "temperature_from_speed", "teos10_table"]

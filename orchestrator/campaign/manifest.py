@@ -16,6 +16,7 @@ import tomli_w
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
+from sblsim.orchestrator.output import refuse_link
 from sblsim.orchestrator.output import write_atomic as write_file
 from sblsim.orchestrator.study import Study
 
@@ -151,6 +152,8 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
         batch = int(plan_record.get("batch", batch))
         print(f"campaign: {str(study_file)!r} was missing; written again from the study given", file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
+    for name in ("chunks", "timeseries"):  # folders written into: never through a link
+        refuse_link(out / name, "--out")
     (out / "chunks").mkdir(exist_ok=True)
     execution = "\n# how the campaign is executed (does not change the results)\n" + tomli_w.dumps(
         {"execution": {"engine": engine, "batch": batch}})

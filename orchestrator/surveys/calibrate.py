@@ -32,6 +32,7 @@ from sblsim.models.calibration import (
     PASSES_RANGE,
     PRIOR_SIGMA_M,
     PRIOR_SIGMA_RANGE,
+    RUNNING_AGREEMENT_SIGMA,
     SOUND_SPEED_RANGE,
     EigenRay,
     LegModel,
@@ -39,6 +40,7 @@ from sblsim.models.calibration import (
     StraightRay,
     combine,
     running,
+    running_disagreement,
     solve,
 )
 from sblsim.models.declarations import ModelError
@@ -319,6 +321,8 @@ class Calibration:
     residuals: pd.DataFrame
     #: The running solution, :data:`RUNNING_COLUMNS` (None with ``solver.running = false``).
     running: pd.DataFrame | None = None
+    #: What the user must know about the solution (one line each; ``sblsim calibrate`` prints them as warnings).
+    warnings: list[str] = field(default_factory=list)
 
 
 def _windows(survey: Survey) -> list[tuple[str, str, np.ndarray]]:
@@ -401,7 +405,7 @@ def calibrate(survey: Survey) -> Calibration:
     s = survey.solver
     f = survey.log.frame
     legs, harmonic = leg_model(survey)
-    segments, tables, runs, nis = [], [], [], []
+    segments, tables, runs, nis, apart = [], [], [], [], []
     for k, (a, b, rows) in enumerate(_windows(survey)):
         what = f"segment {k + 1} [{a}, {b})" if a else "the log"
         replies = survey.log.replies(survey.ids, rows)
@@ -410,8 +414,11 @@ def calibrate(survey: Survey) -> Calibration:
                     twtt_sigma=s["twtt_sigma_s"], legs=legs, what=what)
         segments.append((a, b, rows, sol))
         if s["running"]:
-            runs.append(_running(survey, k + 1, rows, replies, sol, legs, what))
-            nis.append(runs[-1]["nis"].to_numpy()[::len(survey.ids)])
+            frame, distance, sigmas = _running(survey, k + 1, rows, replies, sol, legs, what)
+            runs.append(frame)
+            nis.append(frame["nis"].to_numpy()[::len(survey.ids)])
+            j = int(np.argmax(sigmas))
+            apart.append((float(sigmas[j]), float(np.max(distance)), survey.ids[j], what, float(np.mean(nis[-1]))))
         part = f.iloc[rows][["ping", "transponder", "t_tx_s", "tx_e_m", "tx_n_m", "rx_e_m", "rx_n_m"]].copy()
         part.insert(0, "segment", k + 1)
         part["residual_s"] = sol.residual_s
@@ -469,18 +476,30 @@ def calibrate(survey: Survey) -> Calibration:
                 "replies_in_no_segment": int(len(f) - residuals.drop_duplicates(["ping", "transponder"]).shape[0]),
                 "ignored_columns": survey.log.counts.get("ignored_columns", [])},
     }
+    warnings = []
     if runs:
         values = np.concatenate(nis)
+        worst = max(apart)
         solution["running"] = {"replies": len(values), "nis_mean": float(np.mean(values)),
                                "prior_sigma_m": s["running_prior_sigma_m"], "iterated": s["running_iterated"],
-                               "passes": s["running_passes"]}
-    return Calibration(survey, segments, solution, residuals, pd.concat(runs, ignore_index=True) if runs else None)
+                               "passes": s["running_passes"],
+                               "largest_distance_from_least_squares_m": max(a[1] for a in apart),
+                               "agrees_with_least_squares": worst[0] <= RUNNING_AGREEMENT_SIGMA}
+        if worst[0] > RUNNING_AGREEMENT_SIGMA:
+            warnings.append(f"the running solution of {worst[3]} ends {worst[1]:.4g} m from the least-squares "
+                            f"solution (transponder {worst[2]} {worst[0]:.3g} sigma apart, more than "
+                            f"{RUNNING_AGREEMENT_SIGMA:g}; mean NIS {worst[4]:.3g}, 1 when consistent): it did not "
+                            "converge from the a-priori positions, so running.csv is no solution (solution.json "
+                            "is); give it more passes (solver.running_passes) or a-priori positions nearer the truth")
+    return Calibration(survey, segments, solution, residuals, pd.concat(runs, ignore_index=True) if runs else None,
+                       warnings)
 
 
 def _running(survey: Survey, segment: int, rows: np.ndarray, replies, sol: Solution, legs: LegModel | None,
-             what: str) -> pd.DataFrame:
+             what: str) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
     """The running solution of a segment's replies that :func:`~sblsim.models.calibration.solve` kept, in
-    transmit-time order, as rows of :data:`RUNNING_COLUMNS`."""
+    transmit-time order, as rows of :data:`RUNNING_COLUMNS`, and how far it ends from ``sol``
+    (:func:`~sblsim.models.calibration.running_disagreement`)."""
     s = survey.solver
     f = survey.log.frame
     kept = np.flatnonzero(sol.used)
@@ -493,7 +512,7 @@ def _running(survey: Survey, segment: int, rows: np.ndarray, replies, sol: Solut
     source = f.iloc[rows[kept]]
     offset = run.position - survey.apriori[None]
     rep = np.repeat
-    return pd.DataFrame({
+    frame = pd.DataFrame({
         "segment": segment, "reply": rep(np.arange(n), k), "ping": rep(source["ping"].to_numpy(), k),
         "transponder": rep(source["transponder"].to_numpy(), k), "t_tx_s": rep(source["t_tx_s"].to_numpy(), k),
         "id": np.tile(np.asarray(survey.ids, dtype=object), n),
@@ -502,6 +521,7 @@ def _running(survey: Survey, segment: int, rows: np.ndarray, replies, sol: Solut
         "sigma_u_m": run.position_sigma[:, :, 2].ravel(), "sound_speed_mps": rep(run.sound_speed, k),
         "innovation_m": rep(run.innovation, k), "innovation_sigma_m": rep(np.sqrt(run.innovation_variance), k),
         "nis": rep(run.nis, k)}, columns=list(RUNNING_COLUMNS))
+    return (frame, *running_disagreement(run, sol))
 
 
 def _finite(x: float) -> float | None:

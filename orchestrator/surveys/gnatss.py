@@ -73,9 +73,9 @@ from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, harmonic_mean,
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import write_atomic
-from sblsim.orchestrator.surveys.log import LOG_COLUMNS
+from sblsim.orchestrator.surveys.log import LOG_COLUMNS, POSITION_RANGE
+from sblsim.orchestrator.tables import NUMBER, read_lines
 from sblsim.orchestrator.tables import number as table_number
-from sblsim.orchestrator.tables import read_lines
 
 #: POSIX time of J2000 (2000-01-01T12:00:00 UTC) [s]: GNATSS's J2000 seconds are POSIX seconds less this.
 J2000_POSIX = 946728000
@@ -287,33 +287,55 @@ def read_posfilter(path: Path | str) -> pd.DataFrame:
     ------
     ModelError
         Naming file, line and column: a line without :data:`POS_FIELDS` fields, a number that is not one or
-        outside its range, a covariance that is not symmetric or has a diagonal entry <= 0.
+        outside its range, a covariance that is not symmetric or not positive definite (its Cholesky
+        factorisation by numpy fails).
     """
     path = Path(path)
     what = "POS_FREED_TRANS_TWTT"
     names = ["time [s since J2000]", "x [m]", "y [m]", "z [m]", *[f"covariance {a}{b} [m^2]" for a in "xyz"
                                                                   for b in "xyz"]]
     ranges = [J2000_RANGE] + [(-MAX_ECEF_M, MAX_ECEF_M)] * 3 + [(-MAX_COV_M2, MAX_COV_M2)] * 9
-    rows = []
-    for number, line in enumerate(read_lines(path, what, "ascii"), start=1):
-        fields = line.split()
-        if not fields:
-            continue
-        where = f"{what}: {str(path)!r} line {number}"
-        if len(fields) != POS_FIELDS:
-            raise ModelError(f"{where} has {len(fields)} fields, {POS_FIELDS} expected (time, x, y, z and 9 "
-                             "covariance entries; a truncated file?)")
-        values = [table_number(f, where, f"column {k + 1} ({name})", low, high)
-                  for k, (f, name, (low, high)) in enumerate(zip(fields, names, ranges))]
-        cov = np.array(values[4:]).reshape(3, 3)
-        if np.any(np.diag(cov) <= 0.0):
-            raise ModelError(f"{where}: the covariance's diagonal (columns 5, 9, 13) must be > 0 m^2")
-        if np.max(np.abs(cov - cov.T)) > 1e-9 + 1e-6 * np.max(np.abs(cov)):
-            raise ModelError(f"{where}: the covariance (columns 5-13) is not symmetric")
-        rows.append([number, *values])
-    if not rows:
+    lines = [(number, line.split()) for number, line in enumerate(read_lines(path, what, "ascii"), start=1)]
+    lines = [(number, fields) for number, fields in lines if fields]
+    if not lines:
         raise ModelError(f"{what}: {str(path)!r} holds no positions")
-    return pd.DataFrame(rows, columns=["line", "t_j2000_s", "x_m", "y_m", "z_m", *[f"c{k}" for k in range(9)]])
+    low, high = np.array(ranges).T
+    values = None
+    if all(len(fields) == POS_FIELDS and all(NUMBER.fullmatch(f) for f in fields) for _, fields in lines):
+        values = np.array([fields for _, fields in lines], dtype=float)  # every line at once (a file of 10^6 lines)
+        cov = values[:, 4:].reshape(-1, 3, 3)
+        diagonal = np.diagonal(cov, axis1=1, axis2=2)
+        asymmetry = np.max(np.abs(cov - cov.transpose(0, 2, 1)), axis=(1, 2))
+        if not (np.all(np.isfinite(values) & (values >= low) & (values <= high)) and np.all(diagonal > 0.0)
+                and np.all(asymmetry <= 1e-9 + 1e-6 * np.max(np.abs(cov), axis=(1, 2)))):
+            values = None
+    if values is None:  # a flaw: found and named, line by line
+        for number, fields in lines:
+            where = f"{what}: {str(path)!r} line {number}"
+            if len(fields) != POS_FIELDS:
+                raise ModelError(f"{where} has {len(fields)} fields, {POS_FIELDS} expected (time, x, y, z and 9 "
+                                 "covariance entries; a truncated file?)")
+            one = [table_number(f, where, f"column {k + 1} ({name})", lo, hi)
+                   for k, (f, name, lo, hi) in enumerate(zip(fields, names, low, high))]
+            cov = np.array(one[4:]).reshape(3, 3)
+            if np.any(np.diag(cov) <= 0.0):
+                raise ModelError(f"{where}: the covariance's diagonal (columns 5, 9, 13) must be > 0 m^2")
+            if np.max(np.abs(cov - cov.T)) > 1e-9 + 1e-6 * np.max(np.abs(cov)):
+                raise ModelError(f"{where}: the covariance (columns 5-13) is not symmetric")
+    frame = pd.DataFrame(values, columns=["t_j2000_s", "x_m", "y_m", "z_m", *[f"c{k}" for k in range(9)]])
+    frame.insert(0, "line", np.array([number for number, _ in lines], dtype=np.int64))
+    cov = frame[[f"c{k}" for k in range(9)]].to_numpy().reshape(-1, 3, 3)
+    try:
+        np.linalg.cholesky(0.5 * (cov + cov.transpose(0, 2, 1)))
+    except np.linalg.LinAlgError:  # which line: one at a time, only now
+        for line, one in zip(frame["line"], cov):
+            try:
+                np.linalg.cholesky(0.5 * (one + one.T))
+            except np.linalg.LinAlgError:
+                raise ModelError(f"{what}: {str(path)!r} line {line}: the covariance (columns 5-13) is not positive "
+                                 "definite (a covariance has positive variances and correlations within ±1)") \
+                    from None
+    return frame
 
 
 def _settings_number(table: dict, key: str, where: str, low: float, high: float) -> float:
@@ -390,6 +412,8 @@ def read_site(path: Path | str, profile: str = "ctd:NCL1") -> Site:
     parsed.sort(key=lambda p: p[1])
     enu = geodetic_to_enu([p[2] for p in parsed], [p[3] for p in parsed], [p[4] + geoid for p in parsed],
                           lat0, lon0, h0)
+    for (tid, *_), point in zip(parsed, enu):
+        _near_origin(point, f"{what}.transponders: {tid}")
     transponders = []
     for (tid, column, _lat, _lon, height, turnaround), (e, nn, u) in zip(parsed, enu):
         depth = -height
@@ -399,6 +423,17 @@ def read_site(path: Path | str, profile: str = "ctd:NCL1") -> Site:
         speed = harmonic_mean_speed(start, depth, profile)
         transponders.append(Transponder(tid, column, float(e), float(nn), float(u), depth, turnaround, speed))
     return Site(name, lat0, lon0, h0, tuple(transponders), geoid, start, sigma, distance)
+
+
+def _near_origin(enu: np.ndarray, where: str) -> None:
+    """Refuse a position farther from the site's origin than a survey's frame spans (the log's
+    :data:`~sblsim.orchestrator.surveys.log.POSITION_RANGE` on each axis): another site's or a wrong datum's."""
+    limit = POSITION_RANGE[1]
+    if np.all(np.abs(enu) <= limit):
+        return
+    raise ModelError(f"{where}: the position is {np.linalg.norm(enu) / 1e3:.6g} km from the site's origin (East "
+                     f"{enu[0]:.6g}, North {enu[1]:.6g}, Up {enu[2]:.6g} m); allowed: within {limit / 1e3:g} km on "
+                     "each axis (another site's file, or another datum?)")
 
 
 # --------------------------------------------------------------------------- sound speed (the model's)
@@ -466,8 +501,10 @@ def read_gnatss(pxp_tt: Path | str, posfilter: Path | str, site: Site | Path | s
     ------
     ModelError
         Any flaw of a file (see :func:`read_pxp_tt`, :func:`read_posfilter`, :func:`read_site`); two pings at
-        one time; two different positions at one time; no position at a transmit or a reply's time (naming
-        the pxp_tt line); a travel time not longer than its transponder's turnaround.
+        one time; two different positions at one time; a position farther than 100 km from the site's origin on
+        an axis (:data:`~sblsim.orchestrator.surveys.log.POSITION_RANGE`); no position at a transmit or a
+        reply's time (naming the pxp_tt line); a travel time not longer than its transponder's turnaround; no
+        reply at all.
     """
     site = site if isinstance(site, Site) else read_site(site)
     pings = read_pxp_tt(pxp_tt, len(site.transponders)).sort_values("t_tx_s", kind="stable")
@@ -489,6 +526,9 @@ def read_gnatss(pxp_tt: Path | str, posfilter: Path | str, site: Site | Path | s
                          "different positions at one time")
     rotation = enu_rotation(site.lat_deg, site.lon_deg)
     enu = ecef_to_enu(values[:, :3], site.lat_deg, site.lon_deg, site.height_m)
+    far = np.flatnonzero(np.any(np.abs(enu) > POSITION_RANGE[1], axis=1))
+    if far.size:
+        _near_origin(enu[far[0]], f"POS_FREED_TRANS_TWTT: {str(posfilter)!r} line {lines[far[0]]}")
     cov = values[:, 3:].reshape(-1, 3, 3)
     cov = 0.5 * (cov + cov.transpose(0, 2, 1))
     sigma = np.sqrt(np.einsum("ij,njk,ik->ni", rotation, cov, rotation))
@@ -517,6 +557,9 @@ def read_gnatss(pxp_tt: Path | str, posfilter: Path | str, site: Site | Path | s
             rx = lookup(tx_key + int(round(us)), record.line, f"reply of {transponder.id}")
             rows.append((ping, transponder.id, t_tx, *enu[tx], *sigma[tx], t_tx + us * 1e-6, *enu[rx], *sigma[rx],
                          twtt))
+    if not rows:
+        raise ModelError(f"pxp_tt: {str(pxp_tt)!r} holds no reply (every two-way travel time is 0); at least one is "
+                         "needed")
     log = pd.DataFrame(rows, columns=list(LOG_COLUMNS))
     return log.astype({"ping": np.int64, "transponder": str}), site
 

@@ -20,7 +20,7 @@ import pandas as pd
 from sblsim.models.calibration import Replies
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.output import write_atomic
-from sblsim.orchestrator.tables import columns, number, read_table
+from sblsim.orchestrator.tables import NUMBER, columns, number, read_table
 
 #: POSIX times accepted [s] (1970 to 2100).
 TIME_RANGE = (0.0, 4_102_444_800.0)
@@ -153,7 +153,8 @@ def check_frame(frame: pd.DataFrame, where: list[str], source: str) -> SurveyLog
                          and frame.at[j, "transponder"] == frame.at[first, "transponder"]))
         raise ModelError(f"{source!r} {where[other]}: ping {frame.at[first, 'ping']} has a second reply from "
                          f"transponder {frame.at[first, 'transponder']!r} (the first: {where[first]})")
-    spread = frame.groupby("ping")["t_tx_s"].agg(lambda s: float(s.max() - s.min()))
+    by_ping = frame.groupby("ping")["t_tx_s"]
+    spread = by_ping.max() - by_ping.min()
     if (spread > 1e-6).any():
         ping = spread.index[int(np.argmax((spread > 1e-6).to_numpy()))]
         k = int(np.flatnonzero(frame["ping"].to_numpy() == ping)[-1])
@@ -199,30 +200,49 @@ def read_log(path: Path | str) -> SurveyLog:
                          f"{', '.join(missing)} (the calibration log's columns: {', '.join(LOG_COLUMNS)})")
     if not table.rows:
         raise ModelError(f"{what}: {str(path)!r} holds no reply (only a header)")
-    data: dict[str, list] = {name: [] for name in LOG_COLUMNS}
-    where = []
-    for place, cells in table.rows:
-        here = f"{what}: {str(path)!r} {place}"
-        for name, (kind, _, bounds, _) in COLUMNS.items():
-            text = cells[index[name]]
-            if kind == "str":
-                if not TRANSPONDER_ID.fullmatch(text):
-                    raise ModelError(f"{here}: {name}: {text[:40]!r} is not an id (1-32 letters, digits, _, - "
-                                     "or .)")
-                data[name].append(text)
-            elif kind == "int":
+    where = [place for place, _ in table.rows]
+    data = _columns(table, index)
+    if data is None:  # a cell that is not what its column takes: found and named, cell by cell
+        for place, cells in table.rows:
+            here = f"{what}: {str(path)!r} {place}"
+            for name, (kind, _, bounds, _) in COLUMNS.items():
+                text = cells[index[name]]
+                if kind == "str":
+                    if not TRANSPONDER_ID.fullmatch(text):
+                        raise ModelError(f"{here}: {name}: {text[:40]!r} is not an id (1-32 letters, digits, _, - "
+                                         "or .)")
+                    continue
                 value = number(text, here, name, *bounds)
-                if value != int(value):
+                if kind == "int" and value != int(value):
                     raise ModelError(f"{here}: {name}: {text[:40]!r} is not a whole number")
-                data[name].append(int(value))
-            else:
-                data[name].append(number(text, here, name, *bounds))
-        where.append(place)
-    frame = pd.DataFrame({name: pd.Series(values, dtype={"int": "int64", "str": object, "float": "float64"}[
-        COLUMNS[name][0]]) for name, values in data.items()})
+    frame = pd.DataFrame(data)
     log = check_frame(frame, where, str(path))
     log.counts["ignored_columns"] = [name for name in table.header if name not in COLUMNS]
     return log
+
+
+def _columns(table, index: dict[str, int]) -> dict[str, pd.Series] | None:
+    """The log's columns of a table's text cells, read a column at a time (a log of 100,000 rows in seconds), or
+    None when a cell is not what its column takes (:func:`read_log` then finds and names it)."""
+    data = {}
+    for name, (kind, _, bounds, _) in COLUMNS.items():
+        texts = [cells[index[name]] for _, cells in table.rows]
+        if kind == "str":
+            if not all(TRANSPONDER_ID.fullmatch(t) for t in texts):
+                return None
+            data[name] = pd.Series(texts, dtype=object)
+            continue
+        if not all(NUMBER.fullmatch(t) for t in texts):
+            return None
+        values = np.array(texts, dtype=float)
+        if not np.all(np.isfinite(values) & (values >= bounds[0]) & (values <= bounds[1])):
+            return None
+        if kind == "int":
+            if not np.all(values == np.floor(values)):
+                return None
+            values = values.astype(np.int64)
+        data[name] = pd.Series(values)
+    return data
 
 
 def write_log(log: SurveyLog, path: Path | str) -> Path:

@@ -536,12 +536,12 @@ def test_config_values_round_trip_the_table():
 # Reading casts
 # ----------------------------------------------------------------------------
 
-def test_read_cast_csv_columns_by_name_comments_sorting_and_repeats(tmp_path):
+def test_read_cast_csv_columns_by_name_comments_and_repeats(tmp_path):
     path = tmp_path / "cast.csv"
     path.write_text("% a comment\n# another\n\nTemperature,Sound Velocity (m/s),Depth (m)\n"
-                    "12.0,1500.5,3.0\n11.0,1501.0,1.0\n\n10.0,1502.0,3.0\n9.0,1499.0,2.5\n")
+                    "11.0,1501.0,1.0\n9.0,1499.0,2.5\n12.0,1500.5,3.0\n\n10.0,1502.0,3.0\n")
     table = read_cast_csv(path)
-    # sorted by depth, the two rows at 3 m averaged
+    # the two rows at 3 m averaged
     np.testing.assert_array_equal(table, [[1.0, 1501.0], [2.5, 1499.0], [3.0, (1500.5 + 1502.0) / 2]])
 
 
@@ -567,6 +567,7 @@ def test_read_cast_csv_resamples_long_casts(tmp_path):
     ("depth,temperature\n1,10\n", r"needs a header line"),
     ("% only a comment\n", r"holds no header and no data"),
     ("depth,sound_speed\n", r"holds no data rows"),
+    ("depth,sound_speed\n0,1510\n100,1489\n30,1508\n", r"line 4, column 'depth': depth 30 m is above line 3's 100 m"),
 ])
 def test_read_cast_csv_refuses_malformed_files(tmp_path, text, match):
     path = tmp_path / "bad.csv"

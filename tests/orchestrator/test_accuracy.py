@@ -136,7 +136,7 @@ def test_map_of_a_trajectory_file_is_drawn_at_the_files_depth(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["--depth", "-1"], "--depth: -1.0 is outside the allowed range [0, 11000] m"),
-    (["--extent", "0"], "--extent: 0.0 m is outside the allowed range (0, 10000]"),
+    (["--extent", "0"], "--extent: 0.0 m is outside the allowed range (0, 100000]"),
     (["--step", "50"], "--step: 50.0 m is outside the allowed range (0, extent = 30]"),
     (["--step", "0.01"], "--step: 0.01 m gives"),
     (["--levels", "1,x"], "--levels: expected comma-separated accuracies"),

@@ -142,14 +142,27 @@ def test_a_12_km_lbl_range_is_refused_at_a_short_sampling_time_and_used_after_it
                  "--set", "simulation.duration=30"]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and not out.exists()
-    for name in ("simulation.sampling_time: 0.1 s", "acoustics.turnaround = 0 s", "a travel time of 7.99",
-                 f"the channel holds {FLIGHT_CAPACITY}"):
+    for name in ("simulation.sampling_time: 0.1 s is too short for a travel time of 7.99",
+                 f"the channel holds {FLIGHT_CAPACITY}", "give a simulation.sampling_time above 1.14"):
         assert name in err, err
+    assert "turnaround" not in err  # one-way ranging: no turnaround to blame
     for ranging, T in (("owtt", 2.0), ("twtt", 2.5)):
         cfg = load_config("semicircle", deep + [f"acoustics.ranging={ranging}", f"simulation.sampling_time={T}",
                                                f"simulation.duration={40 * T}"], seed=1)
         ages = check_uses(cfg, (0,))
         assert ages.size >= 30 and ages.min() >= -SLACK
+
+
+def test_a_turnaround_jitter_the_channel_cannot_hold_is_named(capsys, tmp_path):
+    """acoustics.turnaround_sigma at its documented maximum (1 s) at T = 0.1 s: replies 3 s late, refused after
+    the run in one line that names the jitter (not a travel time of 3 s) and what holds it."""
+    jitter = ["acoustics.ranging=twtt", "acoustics.turnaround_sigma=1", "simulation.duration=20"]
+    assert main(["run", "semicircle", "--out", str(tmp_path / "j"), *[a for k in jitter for a in ("--set", k)]]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "j").exists(), err
+    assert ("too short for acoustics.turnaround = 0.05 s, its jitter acoustics.turnaround_sigma = 1 s, the travel "
+            "time: a packet arrives" in err), err
+    assert err.rstrip().endswith("or a smaller acoustics.turnaround or a smaller acoustics.turnaround_sigma"), err
 
 
 def test_a_turnaround_the_channel_cannot_hold_is_refused_before_the_run():

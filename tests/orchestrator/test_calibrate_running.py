@@ -111,3 +111,29 @@ def test_bad_running_settings_are_refused_in_one_line(tmp_path, capsys, item, me
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and message in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_running_solution_far_from_the_least_squares_is_said_so(survey_a, tmp_path):
+    """NCL1's edited log read without its site: the a-priori positions guessed from the log (all three under the
+    mean transmit point) lie 600-1300 m from the transponders; one causal pass from a 10 m prior ends hundreds of
+    metres from the least squares of the same replies, which the solution must say (it agrees on survey A)."""
+    from sblsim.orchestrator.surveys.gnatss import community_editing, read_ncl1
+    from sblsim.orchestrator.surveys.log import LOG_COLUMNS, check_frame, write_log
+
+    assert survey_a.solution["running"]["agrees_with_least_squares"] and not survey_a.warnings
+    frame, site = read_ncl1()
+    frame = community_editing(frame, site)
+    log = check_frame(frame[list(LOG_COLUMNS)].copy(), [f"row {k}" for k in range(len(frame))], "ncl1")
+    write_log(log, tmp_path / "ncl1.csv")
+    result = calibrate(load_survey(str(tmp_path / "ncl1.csv")))
+    sol = result.segments[0][3]
+    last = result.running[result.running["reply"] == result.running["reply"].max()]
+    apart = np.linalg.norm(last[["e_m", "n_m", "u_m"]].to_numpy() - sol.offset, axis=1)  # independent of the check
+    assert apart.max() > 100.0
+    running_entry = result.solution["running"]
+    assert running_entry["agrees_with_least_squares"] is False
+    assert running_entry["largest_distance_from_least_squares_m"] == pytest.approx(apart.max(), rel=1e-9)
+    assert len(result.warnings) == 1 and "running.csv is no solution" in result.warnings[0]
+    # more passes, re-linearised at the last state, bring it home
+    again = calibrate(load_survey(str(tmp_path / "ncl1.csv"), overrides=["solver.running_passes=5"]))
+    assert again.solution["running"]["agrees_with_least_squares"] and not again.warnings

@@ -120,6 +120,23 @@ def test_a_wrong_sound_speed_biases_the_depth_not_the_bound(two_hundred):
     np.testing.assert_allclose(biased["pcrb_h_m"], table["pcrb_h_m"][:20], rtol=1e-12)
 
 
+def test_a_wrong_sound_speed_puts_the_depth_where_the_documented_rule_says():
+    """docs/calibration.md: every range (1 + eps) long, the GNSS holding the horizontal distances R, so the depth D
+    takes the whole excess of each slant range: dD = eps (R^2 + D^2) / D (1.2 m for the box-in's circle, not the
+    0.6 m of eps D)."""
+    sim = load_simulated("box-in", NOISE_FREE + ["survey.sound_speed_error_mps=3"])
+    outcome = solve_replicate(sim, 0)
+    s = outcome.simulated
+    eps = 3.0 / sim.survey["sound_speed_mps"]
+    # the geometry of the replies, from the true transducer positions and the true transponder
+    d = s.truth[0] - np.vstack([s.true.tx, s.true.rx])
+    R2, D = np.mean(d[:, 0] ** 2 + d[:, 1] ** 2), -np.mean(d[:, 2])
+    rule = eps * (R2 + D**2) / D
+    assert rule == pytest.approx(1.2, abs=0.01)
+    assert -outcome.row["e_u_m"] == pytest.approx(rule, rel=0.01), (outcome.row, rule)
+    assert abs(outcome.row["e_n_m"]) < 0.02 * rule and abs(outcome.row["e_e_m"]) < 0.02 * rule
+
+
 def test_the_survey_sigma_passed_on_is_the_replicates_rms(two_hundred):
     """One calibration's own sigma (what `sblsim calibrate box-in` passes on without replicates) is the RMS
     error per axis over replicates, within its sampling error."""
