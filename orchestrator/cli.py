@@ -122,11 +122,12 @@ def _parser() -> argparse.ArgumentParser:
     k = sub.add_parser("calibrate", help="locate seafloor transponders from a surface survey's two-way travel times "
                                          "(docs/calibration.md)")
     k.add_argument("survey", metavar="SURVEY|LOG|CONFIG",
-                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., ncl1-2022-208; "
-                        "box-in, simulated), a survey log (.csv or .parquet; any text file with --format xie) or a "
-                        "simulated survey CONFIG.toml")
+                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., ncl1-2022-208, "
+                        "seagap-example; box-in, simulated), a survey log (.csv or .parquet; any text file with "
+                        "--format xie; a SeaGap folder with --format seagap) or a simulated survey CONFIG.toml")
     k.add_argument("--format", default=None, metavar="FORMAT",
-                   help="the log's format: sblsim (default) or xie (survey A's text files)")
+                   help="the log's format: sblsim (default), xie (survey A's text files) or seagap (a folder of "
+                        "SeaGap's files)")
     k.add_argument("--replicates", type=int, default=None, metavar="N",
                    help="a simulated survey: solve N replicates and write replicates.parquet (errors against the "
                         "truth, NEES, the horizontal bound)")
@@ -479,10 +480,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     write_calibration(result, out)
     s = result.solution
     solver = s["solver"]
+    profile = solver["sound_speed_profile"] or "the survey's own profile"
     if solver["propagation"] == "ray":
-        speed = f"eigenrays through {solver['sound_speed_profile']}"
-    elif solver["sound_speed_profile"]:
-        speed = f"straight rays at each transponder's harmonic mean of {solver['sound_speed_profile']}"
+        speed = f"eigenrays through {profile}"
+    elif solver["sound_speed_profile"] or survey.profile is not None:
+        speed = f"straight rays at each transponder's harmonic mean of {profile}"
     else:
         speed = f"sound speed {s['sound_speed_mps']:.6g} m/s"
     print(f"calibration of {survey.name} ({s['format']} log, {s['log']['rows']} replies, "
@@ -491,12 +493,22 @@ def _calibrate(args: argparse.Namespace) -> int:
         own = f", {t['sound_speed_mps']:.3f} m/s" if "sound_speed_mps" in t else ""
         print(f"  transponder {t['id']}: N {t['n_m']:+.4f} E {t['e_m']:+.4f} U {t['u_m']:+.4f} m from the a-priori "
               f"(sigma {t['sigma_n_m']:.4f} {t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m{own})")
+    if "perturbation" in s:
+        d = s["array_displacement"]
+        print(f"  array displacement: E {d['e_m']:+.6f} N {d['n_m']:+.6f} U {d['u_m']:+.6f} m (sigma "
+              f"{d['sigma_e_m'] * 1e3:.2f} {d['sigma_n_m'] * 1e3:.2f} {d['sigma_u_m'] * 1e3:.2f} mm; realistic x"
+              f"{s['realistic_sigma_scale']:.2f})")
+        criteria = ", ".join(f"{k.upper()} {s[k]:.2f}" for k in ("aic", "bic", "abic") if s[k] is not None)
+        grad = f"; deep gradient E {s['gradient']['e']:.6g} N {s['gradient']['n']:.6g}" if s["gradient"] else ""
+        print(f"  perturbation {s['perturbation']['kind']}: {s['n_bases']} bases, {criteria}{grad}")
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
     if "running" in s:
         print(f"  running solution (Kalman form, running.csv): {s['running']['replies']} replies, mean NIS "
               f"{s['running']['nis_mean']:.2f}")
-    print(f"  written to {out}/ (solution.json, residuals.csv, figures)")
+    extra = ", ntd.csv" if result.ntd is not None else ""
+    extra += ", criterion.csv" if result.search is not None else ""
+    print(f"  written to {out}/ (solution.json, residuals.csv{extra}, figures)")
     return 0
 
 
