@@ -126,8 +126,11 @@ def _parser() -> argparse.ArgumentParser:
                         "seagap-example; box-in, simulated), a survey log (.csv or .parquet; any text file with "
                         "--format xie; a SeaGap folder with --format seagap) or a simulated survey CONFIG.toml")
     k.add_argument("--format", default=None, metavar="FORMAT",
-                   help="the log's format: sblsim (default), xie (survey A's text files) or seagap (a folder of "
-                        "SeaGap's files)")
+                   help="the log's format: sblsim (default), xie (survey A's text files), seagap (a folder of "
+                        "SeaGap's files) or garpos (GARPOS's observation CSV, with --initcfg and --svp)")
+    k.add_argument("--initcfg", default=None, metavar="FILE",
+                   help="--format garpos: GARPOS's initial site-parameter file (the paths it names are not read)")
+    k.add_argument("--svp", default=None, metavar="FILE", help="--format garpos: GARPOS's sound-speed profile (CSV)")
     k.add_argument("--replicates", type=int, default=None, metavar="N",
                    help="a simulated survey: solve N replicates and write replicates.parquet (errors against the "
                         "truth, NEES, the horizontal bound)")
@@ -471,7 +474,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         return _calibrate_simulated(args)
     if args.replicates is not None:
         raise ModelError("--replicates: only a simulated survey (box-in or a CONFIG.toml) has replicates")
-    survey = load_survey(args.survey, args.format, args.overrides)  # every input read and checked first
+    survey = load_survey(args.survey, args.format, args.overrides, args.initcfg, args.svp)  # all read first
     result = calibrate(survey)
     out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
                   "calibration")
@@ -517,7 +520,7 @@ def _calibrate_simulated(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.surveys.log import write_log
     from sblsim.orchestrator.surveys.simulate import REPLICATES_RANGE, load_simulated, run_simulated
 
-    if args.format is not None:
+    if args.format is not None or args.initcfg is not None or args.svp is not None:
         raise ModelError("--format: a simulated survey has no log format; give --format with a log")
     if args.replicates is not None and not REPLICATES_RANGE[0] <= args.replicates <= REPLICATES_RANGE[1]:
         raise ModelError(f"--replicates: {args.replicates} is outside the allowed range [{REPLICATES_RANGE[0]}, "

@@ -56,16 +56,15 @@ from sblsim.models.perturbation import (
 )
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.surveys.garpos import read_garpos
 from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_log
 from sblsim.orchestrator.surveys.seagap import NOMINAL_SIGMA_M, read_seagap
 from sblsim.orchestrator.surveys.xie import origin as xie_origin
 from sblsim.orchestrator.surveys.xie import read_xie
 
-#: The log formats read: name -> reader of a log file (the folder formats, :data:`FOLDER_FORMATS`, have their own).
-FORMATS = {"sblsim": read_log, "xie": read_xie, "seagap": None}
-#: The formats whose survey is a folder of files with fixed names.
-FOLDER_FORMATS = ("seagap",)
+#: The log formats read: name -> reader of a log file (SeaGap's folder and GARPOS's three files have their own).
+FORMATS = {"sblsim": read_log, "xie": read_xie, "seagap": None, "garpos": None}
 _FOLDER = files("sblsim.orchestrator.surveys")
 #: The built-in surveys: name -> its TOML file's name in this package.
 BUILTIN_SURVEYS = {name: f"{name}.toml" for name in (
@@ -344,7 +343,8 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
                   profile=profile)
 
 
-def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None) -> Survey:
+def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None,
+                initcfg: str | None = None, svp: str | None = None) -> Survey:
     """A built-in survey by name, or a log file with the default settings.
 
     Parameters
@@ -353,9 +353,14 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
         A name of :data:`BUILTIN_SURVEYS`, or a log (``.csv``/``.parquet`` in the sblsim format, any text file with
         ``fmt="xie"``).
     fmt : str or None
-        The log's format, one of :data:`FORMATS` (default: sblsim; a built-in survey's own).
+        The log's format, one of :data:`FORMATS` (default: sblsim; a built-in survey's own): ``seagap`` takes a
+        folder (:mod:`~sblsim.orchestrator.surveys.seagap`), ``garpos`` the observation CSV with ``initcfg`` and
+        ``svp`` (:mod:`~sblsim.orchestrator.surveys.garpos`); both take ``propagation = "ray"`` through the
+        survey's own profile unless ``--set`` says otherwise.
     overrides : list of str
         ``solver.KEY=VALUE`` items (:func:`apply_overrides`).
+    initcfg, svp : str or None
+        GARPOS's initial site-parameter file and sound-speed profile (``fmt="garpos"`` only, both needed).
 
     Raises
     ------
@@ -365,6 +370,11 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
     overrides = overrides or []
     if fmt is not None and fmt not in FORMATS:
         raise ModelError(f"--format: {fmt[:40]!r} is not one of {', '.join(FORMATS)}")
+    if fmt == "garpos" and (initcfg is None or svp is None):
+        raise ModelError("--format garpos: give the site-parameter file (--initcfg FILE) and the sound-speed profile "
+                         "(--svp FILE); the paths written in GARPOS's files are not followed")
+    if fmt != "garpos" and (initcfg is not None or svp is not None):
+        raise ModelError("--initcfg, --svp: GARPOS's files go with --format garpos")
     if source in BUILTIN_SURVEYS:
         if fmt is not None:
             raise ModelError(f"--format: the built-in survey {source} has its own format; give --format with a log")
@@ -375,12 +385,22 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
     fmt = fmt or "sblsim"
     solver = apply_overrides(_defaults(), overrides)
     path = Path(source)
-    if fmt == "seagap":
-        folder = read_seagap(path)
-        notes = [f"SeaGap's files carry no GNSS sigma: every position takes {NOMINAL_SIGMA_M:g} m (immaterial with "
+    if fmt in ("seagap", "garpos"):  # their own transponders and profile; eigenrays unless --set says otherwise
+        if not any(item.split("=", 1)[0].strip() == "solver.propagation" for item in overrides):
+            solver["propagation"] = "ray"
+        notes = [f"{fmt}'s files carry no GNSS sigma: every position takes {NOMINAL_SIGMA_M:g} m (immaterial with "
                  "the covariance scaled by the residuals)"]
-        return Survey(path.name or str(path), folder.log, folder.ids, folder.apriori, solver, None, fmt, str(path),
-                      notes, profile=folder.profile)
+        if fmt == "seagap":
+            folder = read_seagap(path)
+            return Survey(path.name or str(path), folder.log, folder.ids, folder.apriori, solver, None, fmt,
+                          str(path), notes, profile=folder.profile)
+        site = read_garpos(path, Path(initcfg), Path(svp))
+        left = site.left_out
+        if left["flagged"] or left["unknown_transponder"]:
+            notes.append(f"left out {left['flagged']} flagged replies and {left['unknown_transponder']} of "
+                         "transponders that are not Stations")
+        return Survey(site.name, site.log, site.ids, site.apriori, solver, site.origin, fmt, str(path), notes,
+                      profile=site.profile)
     log = FORMATS[fmt](path)
     ids = sorted(log.counts["transponders"])
     apriori = guess_apriori(log, ids, solver["sound_speed_mps"])
@@ -873,7 +893,7 @@ def _running_figure(result: Calibration, path: Path, plt) -> None:
     plt.close(fig)
 
 
-__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FOLDER_FORMATS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES",
+__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES",
            "PERTURBATION_FILES", "PROPAGATIONS", "RUNNING_COLUMNS", "RUNNING_FILES", "SEARCH_FILES", "SEARCH_KEYS",
            "SOLVER_KEYS", "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model", "load_survey",
            "perturbations", "profile_of", "write_calibration"]
