@@ -1106,9 +1106,10 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
                                           what, (reference, residual, jacobian), reference))
     values = [getattr(s.perturbation, name) for s in solutions]
     best = int(np.argmin(values))
+    start = solutions[best].offset[0] if rigid else solutions[best].offset.ravel()
     chosen = first if best == 0 and first.perturbation.settings == candidates[0] else \
         _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, candidates[best], outlier_factor, what,
-                         None, reference)
+                         None, start)
     return chosen, [_candidate_row(c, s, k == best) for k, (c, s) in enumerate(zip(candidates, solutions))]
 
 
@@ -1124,7 +1125,7 @@ def _candidate_row(candidate: Perturbation, solution: Solution, chosen: bool) ->
 
 def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sound_speed: float, *,
         rigid: bool = False, solve_sound_speed: bool = False, twtt_sigma: float = 0.0,
-        legs: LegModel | None = None) -> np.ndarray:
+        legs: LegModel | None = None, perturbation: Perturbation | None = None) -> np.ndarray:
     """The Cramér-Rao bound of a survey's unknowns: :math:`(J^\\top W J)^{-1}` at the truth.
 
     The Fisher information of the replies' range residuals (Gaussian, independent, variances
@@ -1144,6 +1145,10 @@ def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sou
         The true sound speed [m/s].
     rigid, solve_sound_speed, twtt_sigma, legs
         As :func:`solve` (``twtt_sigma``: the TWTT noise [s]).
+    perturbation : Perturbation or None
+        The perturbation solved with the positions (the replies need their times): its coefficients are unknowns
+        too (its Jacobian at the truth, the same noise mapped to its residuals, GARPOS's prior as prior
+        information); the bound returned is then the positions' block.
 
     Returns
     -------
@@ -1167,12 +1172,44 @@ def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sou
         theta[-1] = 1.0
     _, jacobian, variance, *_ = _model(replies, positions, theta, float(sound_speed), rigid, solve_sound_speed,
                                        legs or StraightRay(), float(twtt_sigma))
+    if perturbation is not None:
+        return _perturbed_crb(replies, positions, float(sound_speed), rigid, legs or StraightRay(), perturbation,
+                              variance)
     information = jacobian.T @ (jacobian / variance[:, None])
     try:
         return np.linalg.inv(information)
     except np.linalg.LinAlgError:
         raise ModelError("calibration: the replies do not determine the unknowns (the information is "
                          "singular)") from None
+
+
+def _perturbed_crb(replies: Replies, positions: np.ndarray, c0: float, rigid: bool, legs: LegModel,
+                   pert: Perturbation, variance: np.ndarray) -> np.ndarray:
+    """:func:`crb` with a perturbation: the positions' block of :math:`(A^\\top W A + D/\\sigma_0^2)^{-1}`,
+    :math:`A` the Jacobian of the perturbation's prediction at the truth (no perturbation), :math:`W` the inverse
+    variances of its residuals (each reply's line-of-sight variance [m²] over :math:`c_0^2`, mapped), :math:`D`
+    GARPOS's prior, whose covariance scales with the data's (:math:`\\sigma_0` the replies' RMS sigma over
+    GARPOS's travel-time scale)."""
+    _check_perturbation(pert, replies, False)
+    q = 3 if rigid else 3 * len(positions)
+    start, end = float(np.min(replies.t_tx)), float(np.max(replies.t_rx))
+    knots = uniform_knots(start, end, pert.n_bases or interval_bases(start, end, pert.knot_interval))
+    design = _Design(pert, replies, positions, knots, c0)
+    theta = np.zeros(q + design.width())
+    used = np.ones(len(replies), dtype=bool)
+    _, a, tau, _, mapping, *_ = _perturbed_model(design, positions, theta, c0, rigid, legs, np.arange(len(replies)))
+    seconds = np.sqrt(variance) / c0
+    sd = mapping * seconds if pert.kind == "ntd" else seconds / (replies.twtt * design.unit)
+    keep = np.concatenate((np.ones(q, dtype=bool), design.active(used)))
+    information = a[:, keep].T @ (a[:, keep] / sd[:, None] ** 2)
+    prior = design.prior(q, design.active(used))
+    if prior is not None:
+        information = information + prior / float(np.mean((seconds / TRAVEL_TIME_SCALE) ** 2))
+    try:
+        return np.linalg.inv(information)[:q, :q]
+    except np.linalg.LinAlgError:
+        raise ModelError("calibration: the replies do not determine the positions and the perturbation (the "
+                         "information is singular)") from None
 
 
 #: The running solution's prior 1-sigma of the a-priori positions accepted [m] and its default (wide against
