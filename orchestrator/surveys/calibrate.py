@@ -654,9 +654,10 @@ def perturbations(survey: Survey) -> list[Perturbation]:
 
 def _perturbation_keys(survey: Survey, segments: list, combined) -> dict:
     """``solution.json``'s keys of the array and the perturbation: ``array_displacement`` (the rigid shift, or the
-    transponders' mean offset, with the formal and the realistic 1-sigma), ``n_bases``, ``aic``, ``bic``,
-    ``abic`` (summed over segments: the criteria of their joint model), ``gradient`` (the deep gradient's East
-    and North: SeaGap's constants [s], GARPOS's time mean [1/km]) and ``shallow_gradient``."""
+    transponders' mean offset with their sigmas taken as independent; the formal and the realistic 1-sigma),
+    ``n_bases``, ``aic``, ``bic``, ``abic`` (summed over segments: the criteria of their joint model), ``gradient``
+    (the deep gradient's East and North: SeaGap's constants [s], the mean of GARPOS's coefficients [1/km]) and
+    ``shallow_gradient``."""
     fits = [seg[3].perturbation for seg in segments]
     offset = combined.position - survey.apriori
     scales = [_realistic(seg[3]) for seg in segments]
@@ -833,25 +834,28 @@ def _ntd_figure(result: Calibration, path: Path, plt) -> None:
 
 
 def _criterion_figure(result: Calibration, path: Path, plt) -> None:
-    """The search's criterion against the number of bases (SeaGap) or the smoothness (GARPOS), the chosen one
-    marked."""
+    """The search's criteria against the number of bases (SeaGap's AIC and BIC) or the smoothness (GARPOS's ABIC),
+    the chosen candidate marked."""
     table = result.search
     garpos = table["abic"].notna().any()
-    name = "abic" if garpos else result.survey.solver["criterion"]
+    names = ["abic"] if garpos else ["aic", "bic"]
+    chosen = "abic" if garpos else result.survey.solver["criterion"]
     axis = "log_lambda0" if garpos and table["log_lambda0"].nunique() > 1 else "n_bases"
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for k, part in table.groupby("segment"):
         others = [c for c in ("log_grad_lambda", "mu_t", "mu_mt") if part[c].nunique() > 1]
         for values, line in (part.groupby(others) if others else [((), part)]):
-            label = ", ".join(f"{c} {v:g}" for c, v in zip(others, np.atleast_1d(values))) or f"segment {k}"
             line = line.sort_values(axis)
-            ax.plot(line[axis], line[name], "+-", label=label)
+            for name in names:
+                label = ", ".join([name.upper()] + [f"{c} {v:g}" for c, v in zip(others, np.atleast_1d(values))])
+                ax.plot(line[axis], line[name], "+-", label=label + (f", segment {k}" if k > 1 else ""))
         best = part[part["chosen"]]
         ax.axvline(float(best[axis].iloc[0]), color="r", lw=0.8)
-        ax.annotate(f"{best[axis].iloc[0]:g}", (float(best[axis].iloc[0]), float(best[name].iloc[0])),
+        ax.annotate(f"{best[axis].iloc[0]:g} ({chosen.upper()})", (float(best[axis].iloc[0]),
+                                                                      float(best[chosen].iloc[0])),
                     textcoords="offset points", xytext=(4, -12), color="r")
     ax.set(xlabel={"n_bases": "number of B-spline bases", "log_lambda0": "log10 lambda0^2"}[axis],
-           ylabel=name.upper(), title=f"Model selection, {result.solution['title'] or result.survey.name}")
+           ylabel="criterion", title=f"Model selection, {result.solution['title'] or result.survey.name}")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=7)
     fig.savefig(path, dpi=110, bbox_inches="tight")
