@@ -96,7 +96,17 @@ SURVEY_VARIABLES = (
              "the true one", min=-100.0, max=100.0),
     Variable("seed", "parameter", "Integer", 1, description="Seed of the survey's random draws (replicate r draws "
              "from the streams of (seed, r))", min=0, max=2**63 - 1),
+    Variable("ntd_sigma_s", "parameter", "Real", 0.0, "s", "Std of the moving ocean's nadir total delay (two-way), "
+             "a random smooth function of time (0: a still ocean)", min=0.0, max=0.01),
+    Variable("ntd_time_scale_s", "parameter", "Real", 3600.0, "s", "Time scale of the delay's changes (its "
+             "covariance exp(-dt^2 / (2 T^2)))", min=10.0, max=1e6),
+    Variable("ntd_gradient_e_s", "parameter", "Real", 0.0, "s", "The moving ocean's deep gradient, East (SeaGap's g_d: "
+             "the delay grows by it times tan(nadir angle) toward East)", min=-0.01, max=0.01),
+    Variable("ntd_gradient_n_s", "parameter", "Real", 0.0, "s", "The moving ocean's deep gradient, North",
+             min=-0.01, max=0.01),
 )
+#: Random cosines of the moving ocean's delay (random Fourier features of its squared-exponential covariance).
+OCEAN_TERMS = 64
 
 
 def platform_variables() -> dict[str, Variable]:
@@ -106,14 +116,32 @@ def platform_variables() -> dict[str, Variable]:
 
 
 # stream purposes
-_TRUTH, _GNSS, _ATTITUDE, _JITTER, _TWTT = range(5)
+_TRUTH, _GNSS, _ATTITUDE, _JITTER, _TWTT, _OCEAN = range(6)
 
 
 def streams(seed: int, replicate: int) -> dict[int, np.random.Generator]:
     """The random streams of one replicate, one per error source (numpy's PCG64 of the seed sequence
     ``(seed, replicate, purpose)``)."""
     return {k: np.random.default_rng([int(seed), int(replicate), k]) for k in (_TRUTH, _GNSS, _ATTITUDE, _JITTER,
-                                                                              _TWTT)}
+                                                                              _TWTT, _OCEAN)}
+
+
+def ocean_delay(t: np.ndarray, sigma: float, time_scale: float, rng: np.random.Generator) -> np.ndarray:
+    """A random smooth delay of the moving ocean at times ``t`` [s]: a stationary Gaussian process of standard
+    deviation ``sigma`` and covariance :math:`\\sigma^2 e^{-\\Delta t^2/(2T^2)}`, drawn as
+    :data:`OCEAN_TERMS` random cosines :math:`\\sigma\\sqrt{2/K}\\sum_k \\cos(\\omega_k t + \\phi_k)`,
+    :math:`\\omega_k \\sim N(0, 1/T^2)`, :math:`\\phi_k \\sim U(0, 2\\pi)` (A. Rahimi, B. Recht, "Random features
+    for large-scale kernel machines", NIPS 2007).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        [s].
+    """
+    omega = rng.standard_normal(OCEAN_TERMS) / time_scale
+    phase = rng.uniform(0.0, 2.0 * math.pi, OCEAN_TERMS)
+    t = np.asarray(t, dtype=float)
+    return sigma * math.sqrt(2.0 / OCEAN_TERMS) * np.sum(np.cos(np.outer(t, omega) + phase), axis=1)
 
 
 def _outline(pattern: str, radius: float) -> np.ndarray:
@@ -221,6 +249,11 @@ class Simulated:
         The TWTT's total noise std, turnaround jitter and measurement [s].
     sound_speed, assumed_sound_speed : float
         The true sound speed and the one the solver is told [m/s].
+    ocean : numpy.ndarray, shape (n,)
+        The moving ocean's delay of each TWTT [s] (0 in a still ocean): its nadir delay at the reply's mid-time
+        and its gradient's part, over the legs' mean nadir cosine.
+    ntd : numpy.ndarray, shape (n,)
+        The nadir delay at each reply's mid-time [s].
     """
 
     t_tx: np.ndarray
@@ -232,6 +265,8 @@ class Simulated:
     twtt_sigma: float
     sound_speed: float
     assumed_sound_speed: float
+    ocean: np.ndarray | None = None
+    ntd: np.ndarray | None = None
 
 
 def simulate(survey: Mapping[str, Any], platform: Mapping[str, Any], replicate: int = 0) -> Simulated:
@@ -282,6 +317,16 @@ def simulate(survey: Mapping[str, Any], platform: Mapping[str, Any], replicate: 
     leg_rx = np.linalg.norm(p_rx - x, axis=1)
     true_twtt = (leg_tx + leg_rx) / c
     twtt = true_twtt + jitter + survey["twtt_sigma_s"] * rng[_TWTT].standard_normal(n)
+    ocean = ntd = np.zeros(n)
+    gradient = np.array([survey["ntd_gradient_e_s"], survey["ntd_gradient_n_s"]])
+    if survey["ntd_sigma_s"] > 0.0 or np.any(gradient != 0.0):  # a moving ocean: SeaGap's model of its delay
+        mid = 0.5 * (t_tx + t_rx)
+        ntd = ocean_delay(mid, survey["ntd_sigma_s"], survey["ntd_time_scale_s"], rng[_OCEAN])
+        legs = (p_tx, p_rx)
+        mapping = 0.5 * sum((p[:, 2] - x[2]) / np.linalg.norm(p - x, axis=1) for p in legs)
+        slant = 0.5 * sum((x[:2] - p[:, :2]) / (p[:, 2] - x[2])[:, None] for p in legs)
+        ocean = (ntd + slant @ gradient) / mapping
+        twtt = twtt + ocean
 
     times = np.concatenate((t_tx, t_rx))
     order = np.argsort(times, kind="stable")
@@ -299,13 +344,13 @@ def simulate(survey: Mapping[str, Any], platform: Mapping[str, Any], replicate: 
     ids = np.zeros(n, dtype=int)
     return Simulated(
         t_tx=EPOCH + t_tx, t_rx=EPOCH + t_rx,
-        measured=Replies(measured[:n], sigma[:n], measured[n:], sigma[n:], twtt, ids),
-        true=Replies(p_tx, sigma[:n], p_rx, sigma[n:], true_twtt, ids),
+        measured=Replies(measured[:n], sigma[:n], measured[n:], sigma[n:], twtt, ids, EPOCH + t_tx, EPOCH + t_rx),
+        true=Replies(p_tx, sigma[:n], p_rx, sigma[n:], true_twtt, ids, EPOCH + t_tx, EPOCH + t_rx),
         truth=truth, apriori=apriori,
         twtt_sigma=math.hypot(survey["turnaround_jitter_s"], survey["twtt_sigma_s"]),
-        sound_speed=c, assumed_sound_speed=c + survey["sound_speed_error_mps"])
+        sound_speed=c, assumed_sound_speed=c + survey["sound_speed_error_mps"], ocean=ocean, ntd=ntd)
 
 
-__all__ = ["EPOCH", "GPS_MODELS", "PATTERNS", "PATTERN_POINTS", "PLATFORM_KEYS", "SIGMA_FLOOR", "SURVEY_VARIABLES",
-           "Simulated", "gnss_errors", "lever_enu", "lever_sigma", "platform_variables", "simulate", "streams",
-           "track"]
+__all__ = ["EPOCH", "GPS_MODELS", "OCEAN_TERMS", "PATTERNS", "PATTERN_POINTS", "PLATFORM_KEYS", "SIGMA_FLOOR",
+           "SURVEY_VARIABLES", "Simulated", "gnss_errors", "lever_enu", "lever_sigma", "ocean_delay",
+           "platform_variables", "simulate", "streams", "track"]

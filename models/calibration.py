@@ -42,14 +42,35 @@ Algebra, Geodesy, and GPS*, 1997, ch. 9).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol, Sequence
 
 import numpy as np
+from scipy.linalg import cholesky_banded, solve_banded
 
 from sblsim.models.acoustics.rays import exact_points, profile_arrays
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS
 from sblsim.models.declarations import ModelError
+from sblsim.models.perturbation import (
+    BASES_RANGE,
+    CRITERIA,
+    DEGREE,
+    GRADIENT_LENGTH,
+    GRADIENTS,
+    KNOT_INTERVAL_RANGE,
+    PERTURBATIONS,
+    TRAVEL_TIME_SCALE,
+    akaike,
+    basis,
+    correlation_band,
+    effective_scale,
+    interval_bases,
+    nadir_cosine,
+    roughness,
+    slant_direction,
+    uniform_knots,
+)
 
 #: The sound speeds accepted [m/s].
 SOUND_SPEED_RANGE = (1300.0, 1800.0)
@@ -65,6 +86,10 @@ MAX_ITERATIONS = 50
 #: radius: every reply at one elevation angle, so that depth and speed trade one for the other) and the solution
 #: is refused. Surveys that determine it give 0.05-1 m/s (NCL1, Xie et al.'s days, a box or figure-eight).
 MAX_SOUND_SPEED_SIGMA = 10.0
+#: The radii of a spherically layered ocean accepted [m] (0: flat layers) and the transducer depths of a profile
+#: hung from the transducer [m] (0: the sea surface fixed): :class:`EigenRay`.
+EARTH_RADIUS_RANGE = (6.3e6, 6.4e6)
+TRANSDUCER_DEPTH_RANGE = (1e-3, 1000.0)
 
 
 class LegModel(Protocol):
@@ -145,6 +170,19 @@ class EigenRay:
     = \\xi\\tan\\theta_x` with :math:`\\theta_x` the grazing angle at ``x`` in the direction of travel toward ``x``,
     positive downward (Jensen, Kuperman, Porter, Schmidt, *Computational Ocean Acoustics*, 2nd ed., 2011, ch. 3.2).
 
+    Two options follow SeaGap (Tomita and Kido, 2022, Earth, Planets and Space, doi:10.1186/s40623-022-01740-0;
+    its ``traveltime.jl``): ``earth_radius`` > 0 layers the ocean in spherical shells (the frame's Up is height
+    above a sphere of that radius, a horizontal distance :math:`X` is the arc :math:`\\Delta = X/R` at Up 0), traced
+    exactly by the Earth-flattening transformation: a point at radius :math:`r` is at flat depth
+    :math:`z_f = R_s \\ln(R_s/r)` with the speed :math:`c_f = c\\,R_s/r` and the arc is the flat distance
+    :math:`X_f = R_s \\Delta`, :math:`R_s` the radius of depth 0 (K. Aki, P. G. Richards, *Quantitative
+    Seismology*, 2nd ed., 2002, ch. 9; G. Müller, Geophys. J. R. astr. Soc. 23, 435-449, 1971); the profile is flattened
+    once about :math:`R + ` ``surface_u`` (a radius off by tens of metres changes a flattened speed by
+    :math:`10^{-9}` of itself). ``transducer_depth`` > 0 hangs the profile from each surface point: that point is
+    at this depth of the profile and the other end that much deeper plus their height difference (SeaGap's
+    ``XDUCER_DEPTH``: the water column rides with the sea surface, tide and waves), instead of the surface at
+    ``surface_u``.
+
     Parameters
     ----------
     table : array_like, shape (rows, 2)
@@ -157,15 +195,21 @@ class EigenRay:
     exact : casadi.Function or None
         :func:`~sblsim.models.acoustics.rays.exact_points` as it is evaluated (e.g. compiled in the local engine's
         library, some 100 times faster); default that function itself.
+    earth_radius : float
+        The radius of the spherical layering [m], in :data:`EARTH_RADIUS_RANGE`; 0: flat layers.
+    transducer_depth : float
+        The surface point's depth in the profile [m], in :data:`TRANSDUCER_DEPTH_RANGE`; 0: the sea surface at
+        ``surface_u``.
 
     Raises
     ------
     ModelError
         A table that is empty, not (rows, 2), too long, with depths not increasing or speeds outside
-        :data:`SOUND_SPEED_RANGE`; a reference speed outside it.
+        :data:`SOUND_SPEED_RANGE`; a reference speed, an Earth radius or a transducer depth outside its range.
     """
 
-    def __init__(self, table: np.ndarray, reference_speed: float, surface_u: float = 0.0, exact=None):
+    def __init__(self, table: np.ndarray, reference_speed: float, surface_u: float = 0.0, exact=None,
+                 earth_radius: float = 0.0, transducer_depth: float = 0.0):
         table = np.asarray(table, dtype=float)
         lo, hi = SOUND_SPEED_RANGE
         if table.ndim != 2 or table.shape[1] != 2 or not 1 <= table.shape[0] <= MAX_PROFILE_ROWS \
@@ -178,9 +222,19 @@ class EigenRay:
             raise ModelError(f"sound_speed_mps: {reference_speed!r} is outside the allowed range [{lo:g}, {hi:g}] m/s")
         if not (np.isfinite(surface_u) and abs(surface_u) <= 1e4):
             raise ModelError(f"surface_u_m: {surface_u!r} is outside the allowed range [-10000, 10000] m")
+        for name, value, (low, high) in (("earth_radius_m", earth_radius, EARTH_RADIUS_RANGE),
+                                          ("transducer_depth_m", transducer_depth, TRANSDUCER_DEPTH_RANGE)):
+            if not (np.isfinite(value) and (value == 0.0 or low <= value <= high)):
+                raise ModelError(f"{name}: {value!r} is outside the allowed range 0 or [{low:g}, {high:g}] m")
         self.table = table
         self.reference_speed = float(reference_speed)
         self.surface_u = float(surface_u)
+        self.earth_radius = float(earth_radius)
+        self.transducer_depth = float(transducer_depth)
+        if self.earth_radius > 0.0:
+            top = self.earth_radius + self.surface_u
+            radius = top - table[:, 0]
+            table = np.column_stack((top * np.log(top / radius), table[:, 1] * top / radius))
         self.nodes, self.speeds = profile_arrays(table)
         self._exact = exact_points() if exact is None else exact
 
@@ -232,10 +286,19 @@ class EigenRay:
         ModelError
             A leg without a direct eigenray (a shadow zone of the profile).
         """
-        zs = self.surface_u - points[:, 2]
-        zr = self.surface_u - x[:, 2]
+        if self.transducer_depth > 0.0:  # the profile hangs from the surface point
+            zs = np.full(len(points), self.transducer_depth)
+            zr = self.transducer_depth + points[:, 2] - x[:, 2]
+        else:
+            zs = self.surface_u - points[:, 2]
+            zr = self.surface_u - x[:, 2]
         dh = x[:, :2] - points[:, :2]
         horizontal = np.sqrt(np.sum(dh * dh, axis=1))
+        stretch, steep = np.ones(len(x)), np.ones(len(x))  # dX_f/dX and dz_f/dz at x (1 in flat layers)
+        if self.earth_radius > 0.0:  # Earth-flattening: the depths, the arc and their derivatives
+            top = self.earth_radius + (points[:, 2] + zs if self.transducer_depth > 0.0 else self.surface_u)
+            stretch, steep = top / self.earth_radius, top / (top - zr)
+            zs, zr, horizontal = top * np.log(top / (top - zs)), top * np.log(steep), horizontal * stretch
         tau, launch, arrival, found = self.times(zs, zr, horizontal)
         if not np.all(found):
             k = int(np.flatnonzero(~found)[0])
@@ -244,9 +307,9 @@ class EigenRay:
         c_s = np.interp(zs, self.nodes, self.speeds)
         xi = np.cos(launch) / c_s  # Snell's invariant [s/m]
         # toward x: the arrival angle is at x, positive downward = toward greater depth = -Up
-        d_depth = xi * np.tan(arrival)
+        d_depth = xi * np.tan(arrival) * steep
         unit = np.divide(dh, horizontal[:, None], out=np.zeros_like(dh), where=horizontal[:, None] > 0.0)
-        gradient = np.column_stack((xi[:, None] * unit, -d_depth))
+        gradient = np.column_stack(((xi * stretch)[:, None] * unit, -d_depth))
         c0 = self.reference_speed
         return c0 * tau, c0 * gradient
 
@@ -265,6 +328,8 @@ class Replies:
         Two-way travel time without the turnaround [s], > 0.
     transponder : numpy.ndarray of int, shape (n,)
         The replying transponder's index into the a-priori positions (replies are paired by identity).
+    t_tx, t_rx : numpy.ndarray, shape (n,), or None
+        Transmit and receive times [s] (a sound-speed perturbation, :class:`Perturbation`, needs them).
     """
 
     tx: np.ndarray
@@ -273,14 +338,17 @@ class Replies:
     rx_sigma: np.ndarray
     twtt: np.ndarray
     transponder: np.ndarray
+    t_tx: np.ndarray | None = None
+    t_rx: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.twtt)
 
     def subset(self, rows: np.ndarray) -> Replies:
         """The replies at ``rows`` (indices or a boolean mask)."""
+        times = (None, None) if self.t_tx is None else (self.t_tx[rows], self.t_rx[rows])
         return Replies(self.tx[rows], self.tx_sigma[rows], self.rx[rows], self.rx_sigma[rows], self.twtt[rows],
-                       self.transponder[rows])
+                       self.transponder[rows], *times)
 
 
 @dataclass
@@ -324,6 +392,11 @@ class Solution:
         Gauss-Newton iterations of the last solution.
     converged : bool
         Whether the last solution met the tolerances within :data:`MAX_ITERATIONS`.
+    perturbation : PerturbationFit or None
+        The sound-speed perturbation solved with the positions (None without one). With it, ``covariance`` is the
+        positions' block, ``residual_s`` the TWTT residual of the whole model (legs and perturbation) and
+        ``variance_factor`` the a posteriori variance of the perturbation's residuals (SeaGap: of the
+        nadir-normalised time [s²]; GARPOS: of unit weight).
     """
 
     position: np.ndarray
@@ -343,6 +416,7 @@ class Solution:
     scatter: np.ndarray
     iterations: int
     converged: bool
+    perturbation: PerturbationFit | None = None
 
 
 def _check(replies: Replies, apriori: np.ndarray, sound_speed: float, outlier_factor: float | None,
@@ -380,6 +454,23 @@ def _line_of_sight_variance(replies: Replies, x: np.ndarray, u_tx: np.ndarray, u
     """:math:`\\sigma_i^2` [m²]: the transducer's sigmas projected on the legs' unit vectors."""
     return (np.sum((u_tx * replies.tx_sigma) ** 2, axis=1) + np.sum((u_rx * replies.rx_sigma) ** 2, axis=1)
             + (c * twtt_sigma) ** 2)
+
+
+def _directions(replies: Replies, x: np.ndarray, residual: np.ndarray, w: np.ndarray, used: np.ndarray,
+                k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each reply's elevation and azimuth of the receive point seen from the transponder [rad], and per transponder
+    the weighted RMS of the used half residuals projected on East, North, Up [m] (:attr:`Solution.scatter`)."""
+    horizontal = np.hypot(replies.rx[:, 0] - x[:, 0], replies.rx[:, 1] - x[:, 1])
+    elevation = np.arctan2(replies.rx[:, 2] - x[:, 2], horizontal)
+    azimuth = np.arctan2(replies.rx[:, 0] - x[:, 0], replies.rx[:, 1] - x[:, 1])
+    half = 0.5 * residual
+    projected = np.column_stack((half * np.sin(azimuth), half * np.cos(azimuth), half * np.sin(elevation)))
+    scatter = np.full((k, 3), np.nan)
+    for j in range(k):
+        mine = used & (replies.transponder == j)
+        if mine.any():
+            scatter[j] = np.sqrt(np.sum(w[mine, None] * projected[mine] ** 2, axis=0) / np.sum(w[mine]))
+    return elevation, azimuth, scatter
 
 
 def _unknowns(k: int, rigid: bool, solve_speed: bool) -> int:
@@ -432,7 +523,8 @@ def _gauss_newton(replies: Replies, apriori: np.ndarray, theta: np.ndarray, c0: 
 
 def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sound_speed: float, *,
           rigid: bool = False, solve_sound_speed: bool = False, outlier_factor: float | None = 3.0,
-          twtt_sigma: float = 0.0, legs: LegModel | None = None, what: str = "calibration") -> Solution:
+          twtt_sigma: float = 0.0, legs: LegModel | None = None, what: str = "calibration",
+          perturbation: Perturbation | None = None) -> Solution:
     """Transponder positions from two-way travel times by weighted least squares with the outlier rule.
 
     Parameters
@@ -456,6 +548,11 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
         The propagation (default :class:`StraightRay`).
     what : str
         What errors name (e.g. the segment).
+    perturbation : Perturbation or None
+        Solve a sound-speed perturbation in time with the positions (:class:`Perturbation`; the replies need their
+        times): the residuals, weights and statistics are then the perturbation's (SeaGap's nadir-normalised
+        time with equal weights, or GARPOS's log time with its covariance and prior), the outlier rule judges the
+        TWTT residuals [s] against their RMS, ``twtt_sigma`` is not used. None: the model above.
 
     Returns
     -------
@@ -471,6 +568,9 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     apriori = np.asarray(apriori, dtype=float)
     _check(replies, apriori, float(sound_speed), outlier_factor, float(twtt_sigma))
     legs = legs or StraightRay()
+    if perturbation is not None:
+        _check_perturbation(perturbation, replies, solve_sound_speed)
+        return _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, perturbation, outlier_factor, what)
     k = len(apriori)
     p = _unknowns(k, rigid, solve_sound_speed)
     n = len(replies)
@@ -529,16 +629,7 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     if solve_sound_speed:
         _check_solved_speed(float(c), float(sound_speed * sd[-1]), what)
     sigma = np.tile(sd[:3], (k, 1)) if rigid else sd[:3 * k].reshape(k, 3)
-    horizontal = np.hypot(replies.rx[:, 0] - x[:, 0], replies.rx[:, 1] - x[:, 1])
-    elevation = np.arctan2(replies.rx[:, 2] - x[:, 2], horizontal)
-    azimuth = np.arctan2(replies.rx[:, 0] - x[:, 0], replies.rx[:, 1] - x[:, 1])
-    half = 0.5 * residual
-    projected = np.column_stack((half * np.sin(azimuth), half * np.cos(azimuth), half * np.sin(elevation)))
-    scatter = np.full((k, 3), np.nan)
-    for j in range(k):
-        mine = used & (replies.transponder == j)
-        if mine.any():
-            scatter[j] = np.sqrt(np.sum(w[mine, None] * projected[mine] ** 2, axis=0) / np.sum(w[mine]))
+    elevation, azimuth, scatter = _directions(replies, x, residual, w, used, k)
     return Solution(position=position, offset=position - apriori, sigma=sigma, covariance=covariance,
                     sound_speed=float(c), sound_speed_sigma=float(sound_speed * sd[-1]) if solve_sound_speed else 0.0,
                     used=used, residual_m=residual, residual_s=residual / c, weight=w, elevation=elevation,
@@ -546,9 +637,517 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
                     converged=converged)
 
 
+@dataclass(frozen=True)
+class Perturbation:
+    """The settings of a sound-speed perturbation solved with the positions (:mod:`sblsim.models.perturbation`).
+
+    Attributes
+    ----------
+    kind : str
+        ``"ntd"`` (SeaGap's nadir total delay) or ``"garpos"`` (GARPOS's correction of the log travel time).
+    n_bases : int
+        Cubic B-spline bases over the survey, in :data:`~sblsim.models.perturbation.BASES_RANGE`; 0: one knot every
+        ``knot_interval``.
+    knot_interval : float
+        The knots' spacing when ``n_bases`` is 0 [s].
+    gradient : str
+        ``"none"``, ``"deep"`` or ``"shallow+deep"`` (:data:`~sblsim.models.perturbation.GRADIENTS`).
+    log_lambda0, log_grad_lambda : float
+        GARPOS's smoothness: :math:`\\log_{10}\\lambda_0^2` of the background, :math:`\\log_{10}` of the gradients'
+        :math:`\\lambda_g^2/\\lambda_0^2` (``garpos`` only).
+    mu_t : float
+        GARPOS's data correlation length [s] (0: independent replies; ``garpos`` only).
+    mu_mt : float
+        GARPOS's correlation between different transponders' replies, in [0, 1].
+    reject_sigma : float
+        Drop the replies whose residual is more than this many standard deviations from the mean, re-judged after
+        each solution (GARPOS's ``RejectCriteria``; 0: none). A correlated data covariance is not used with it (as
+        GARPOS).
+    earth_radius : float
+        The radius of the nadir angle's geometry [m] (the legs' :class:`EigenRay` ``earth_radius``; 0: flat).
+    t0 : float
+        GARPOS's characteristic travel time :math:`T_0` [s] (twice the mean depth over the mean speed: the unit of
+        its coefficients and residuals is :data:`~sblsim.models.perturbation.TRAVEL_TIME_SCALE` over it); 0: twice
+        the a-priori positions' mean depth below Up 0 over the solver's speed.
+    """
+
+    kind: str = "ntd"
+    n_bases: int = 0
+    knot_interval: float = 300.0
+    gradient: str = "none"
+    log_lambda0: float = -2.0
+    log_grad_lambda: float = -1.0
+    mu_t: float = 0.0
+    mu_mt: float = 0.5
+    reject_sigma: float = 0.0
+    earth_radius: float = 0.0
+    t0: float = 0.0
+
+
+@dataclass
+class PerturbationFit:
+    """A solved perturbation (:attr:`Solution.perturbation`).
+
+    Attributes
+    ----------
+    settings : Perturbation
+    n_bases : int
+        The splines' bases.
+    knots : numpy.ndarray, shape (n_bases + 4,)
+        [s].
+    used_bases : numpy.ndarray of bool, shape (n_bases,)
+        The bases solved (``ntd`` drops those no used reply touches, as SeaGap; ``garpos`` keeps all, the prior
+        holds them).
+    coefficients, coefficient_sigma : numpy.ndarray, shape (n_bases,)
+        The background's coefficients and their 1-sigma: ``ntd`` the NTD [s], ``garpos`` :math:`\\alpha_0` [1]
+        (0 for an unused basis).
+    gradient, gradient_sigma : dict of numpy.ndarray
+        ``deep`` and ``shallow`` when solved, each (2, ...) East and North: ``ntd`` two constants ([s], and [s/km]
+        for the shallow), ``garpos`` the coefficients of :math:`\\boldsymbol\\alpha_2` and
+        :math:`\\boldsymbol\\alpha_1` (2, n_bases) [1/km].
+    delay : numpy.ndarray, shape (n,)
+        The model's perturbation of each reply as a two-way nadir delay [s]: ``ntd`` the NTD at its mid-time,
+        ``garpos`` :math:`(\\hat T - \\tau)\\cos\\xi`.
+    observed : numpy.ndarray, shape (n,)
+        :math:`(T - \\tau)\\cos\\xi` less the gradients' part [s]: what the delay fits.
+    mapping : numpy.ndarray, shape (n,)
+        :math:`\\cos\\xi` of each reply [1].
+    mid_time : numpy.ndarray, shape (n,)
+        Each reply's mid-time [s].
+    parameters : int
+        The unknowns solved (positions, bases, gradients).
+    aic, bic : float or None
+        SeaGap's criteria (:func:`~sblsim.models.perturbation.akaike`; ``ntd``).
+    abic : float or None
+        GARPOS's ABIC (``garpos``).
+    effective_scale : float
+        The realistic sigma's factor over the formal one for the residuals' correlation in time
+        (:func:`~sblsim.models.perturbation.effective_scale`).
+    """
+
+    settings: Perturbation
+    n_bases: int
+    knots: np.ndarray
+    used_bases: np.ndarray
+    coefficients: np.ndarray
+    coefficient_sigma: np.ndarray
+    gradient: dict
+    gradient_sigma: dict
+    delay: np.ndarray
+    observed: np.ndarray
+    mapping: np.ndarray
+    mid_time: np.ndarray
+    parameters: int
+    aic: float | None
+    bic: float | None
+    abic: float | None
+    effective_scale: float
+
+
+def _check_perturbation(pert: Perturbation, replies: Replies, solve_speed: bool) -> None:
+    if pert.kind not in PERTURBATIONS[1:]:
+        raise ModelError(f"perturbation: {str(pert.kind)[:40]!r} is not one of {', '.join(PERTURBATIONS[1:])}")
+    if pert.gradient not in GRADIENTS:
+        raise ModelError(f"gradient: {str(pert.gradient)[:40]!r} is not one of {', '.join(GRADIENTS)}")
+    if solve_speed:
+        raise ModelError("solve_sound_speed: a speed scale and a perturbation are one unknown twice (the perturbation "
+                         "holds the speed's change); solve one of them")
+    if replies.t_tx is None:
+        raise ModelError("perturbation: the replies carry no transmit and receive times")
+    lo, hi = BASES_RANGE
+    if pert.n_bases and not lo <= pert.n_bases <= hi:
+        raise ModelError(f"n_bases: {pert.n_bases!r} is outside the allowed range 0 or [{lo}, {hi}]")
+    lo, hi = KNOT_INTERVAL_RANGE
+    if not pert.n_bases and not lo <= pert.knot_interval <= hi:
+        raise ModelError(f"knot_interval: {pert.knot_interval!r} is outside the allowed range [{lo:g}, {hi:g}] s")
+    if pert.kind == "ntd" and pert.mu_t > 0.0:
+        raise ModelError("mu_t: the data correlation is GARPOS's (perturbation = garpos); SeaGap's NTD takes "
+                         "independent replies")
+
+
+class _Design:
+    """A perturbed survey's fixed parts for all its replies: times, splines, the gradients' fixed factors, GARPOS's
+    units and prior; the columns of a fit are those of its replies (:meth:`active`)."""
+
+    def __init__(self, pert: Perturbation, replies: Replies, apriori: np.ndarray, knots: np.ndarray, c0: float):
+        self.pert = pert
+        self.replies = replies
+        #: None, or (positions' unknowns, residuals [m], Jacobian) of the legs at a reference solution
+        self.linear: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.mid = 0.5 * (replies.t_tx + replies.t_rx)
+        self.deep = pert.gradient != "none"
+        self.shallow = pert.gradient == "shallow+deep"
+        self.n_bases = len(knots) - DEGREE - 1
+        # the transducer's horizontal offsets from their means [km], at transmit and at receive
+        d_tx = (replies.tx[:, :2] - replies.tx[:, :2].mean(axis=0)) / GRADIENT_LENGTH
+        d_rx = (replies.rx[:, :2] - replies.rx[:, :2].mean(axis=0)) / GRADIENT_LENGTH
+        if pert.kind == "ntd":
+            self.spline = basis(self.mid, knots)
+            self.fixed = [self.spline] + ([0.5 * (d_tx + d_rx)] if self.shallow else [])
+            self.unit, self.t0, self.prior_blocks = 1.0, 0.0, []
+            return
+        b_tx, b_rx = basis(replies.t_tx, knots), basis(replies.t_rx, knots)
+        mean = 0.5 * (b_tx + b_rx)
+        centre = (apriori[replies.transponder] - apriori.mean(axis=0))[:, :2] / GRADIENT_LENGTH
+        blocks = [mean]
+        if self.shallow:
+            blocks += [0.5 * (b_tx * d_tx[:, j:j + 1] + b_rx * d_rx[:, j:j + 1]) for j in (0, 1)]
+        if self.deep:
+            blocks += [mean * centre[:, j:j + 1] for j in (0, 1)]
+        self.fixed = blocks
+        self.t0 = pert.t0 or 2.0 * abs(float(np.mean(apriori[:, 2]))) / c0
+        self.unit = TRAVEL_TIME_SCALE / self.t0  # GARPOS's unit of the log residuals and the coefficients
+        lam0 = 10.0 ** pert.log_lambda0
+        omega = roughness(knots)
+        self.prior_blocks = [omega / lam0] + [omega / (lam0 * 10.0 ** pert.log_grad_lambda)] * (len(blocks) - 1)
+
+    def width(self) -> int:
+        """The perturbation's coefficients, all bases."""
+        if self.pert.kind == "garpos":
+            return sum(b.shape[1] for b in self.fixed)
+        return self.n_bases + 2 * self.deep + 2 * self.shallow
+
+    def active(self, used: np.ndarray) -> np.ndarray:
+        """The coefficients a fit of the ``used`` replies solves: ``ntd`` the bases they touch (SeaGap's
+        ``retrieveb``) and the gradients, ``garpos`` all (the prior holds a basis without data)."""
+        if self.pert.kind == "garpos":
+            return np.ones(self.width(), dtype=bool)
+        touched = np.any(self.spline[used] != 0.0, axis=0)
+        return np.concatenate((touched, np.ones(2 * self.deep + 2 * self.shallow, dtype=bool)))
+
+    def columns(self, rows: np.ndarray, tx: np.ndarray, rx: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """All the perturbation's columns at ``rows`` (``ntd``: of the nadir-normalised time [s]; ``garpos``: of
+        the log time in units of :attr:`unit`), shape (len(rows), width)."""
+        if self.pert.kind == "garpos":
+            return np.hstack([b[rows] for b in self.fixed])
+        blocks = [self.spline[rows]]
+        if self.deep:
+            blocks.append(0.5 * (slant_direction(tx, x) + slant_direction(rx, x)))
+        if self.shallow:
+            blocks.append(self.fixed[1][rows])
+        return np.hstack(blocks)
+
+    def prior(self, q: int, active: np.ndarray) -> np.ndarray | None:
+        """GARPOS's prior information over the solved unknowns (none on the positions); None for ``ntd``."""
+        if self.pert.kind == "ntd":
+            return None
+        out = np.zeros((q + len(active), q + len(active)))
+        at = q
+        for block in self.prior_blocks:
+            out[at:at + len(block), at:at + len(block)] = block
+            at += len(block)
+        keep = np.concatenate((np.ones(q, dtype=bool), active))
+        return out[np.ix_(keep, keep)]
+
+    def covariance(self, used: np.ndarray) -> _DataCovariance:
+        """The data covariance of the ``used`` replies (``ntd``: the identity)."""
+        return _DataCovariance(self, used)
+
+
+class _DataCovariance:
+    """:math:`E = L L^\\top` of a fit's replies: ``whiten`` applies :math:`L^{-1}`; ``log_det_inverse`` is
+    :math:`\\ln|E^{-1}|` (GARPOS's units)."""
+
+    def __init__(self, design: _Design, used: np.ndarray):
+        self.kind = design.pert.kind
+        self.factor = None
+        self.log_det_inverse = 0.0
+        if self.kind == "ntd":
+            return
+        r = design.replies
+        scale = r.twtt[used] / design.t0
+        self.inverse_sd = scale  # GARPOS: the log residual's sigma in units of ``unit`` is T0 / T
+        pert = design.pert
+        if pert.mu_t > 0.0 and pert.reject_sigma == 0.0:
+            t, transponder = r.t_tx[used], r.transponder[used]
+            self.order = np.argsort(t, kind="stable")
+            band = correlation_band(t[self.order], transponder[self.order], scale[self.order], pert.mu_t, pert.mu_mt)
+            try:
+                self.factor = cholesky_banded(band, lower=True)
+            except np.linalg.LinAlgError:
+                raise ModelError(f"mu_t: the data covariance of correlation length {pert.mu_t:g} s is not positive "
+                                 "definite (its reach is cut at 4 lengths); take a shorter one") from None
+            self.log_det_inverse = -2.0 * float(np.sum(np.log(self.factor[0])))
+        else:
+            self.log_det_inverse = float(np.sum(np.log(scale**2)))
+
+    def whiten(self, a: np.ndarray) -> np.ndarray:
+        if self.kind == "ntd":
+            return a
+        if self.factor is None:
+            return a * (self.inverse_sd[:, None] if a.ndim == 2 else self.inverse_sd)
+        out = np.empty_like(a)
+        out[self.order] = solve_banded((self.factor.shape[0] - 1, 0), self.factor, a[self.order])
+        return out
+
+
+def _perturbed_model(design: _Design, apriori: np.ndarray, theta: np.ndarray, c0: float, rigid: bool,
+                     legs: LegModel, rows: np.ndarray):
+    """At the unknowns ``theta`` (positions, then all the perturbation's coefficients), for the replies ``rows``:
+    the residual and the Jacobian of the prediction in the perturbation's units, the legs' time, the TWTT residual
+    [s], the mapping, the positions, the transponders and the perturbation's columns."""
+    q = 3 if rigid else 3 * len(apriori)
+    replies = design.replies.subset(rows)
+    if design.linear is None:
+        residual_m, jacobian, _, position, _, x = _model(replies, apriori, theta[:q], c0, rigid, False, legs, 0.0)
+    else:  # the legs linearised about a reference solution (a search's candidates)
+        reference, residual_0, jacobian_0 = design.linear
+        jacobian = jacobian_0[rows]
+        residual_m = residual_0[rows] - jacobian @ (theta[:q] - reference)
+        shift = theta[:q].reshape(-1, 3)
+        position = apriori + shift if not rigid else apriori + shift[0]
+        x = position[replies.transponder]
+    tau = replies.twtt - residual_m / c0
+    p = design.columns(rows, replies.tx, replies.rx, x)
+    radius = design.pert.earth_radius
+    mapping = 0.5 * (nadir_cosine(replies.tx, x, radius) + nadir_cosine(replies.rx, x, radius))
+    model = p @ theta[q:]
+    if design.pert.kind == "ntd":
+        residual = mapping * (replies.twtt - tau) - model
+        a = np.hstack((mapping[:, None] * jacobian / c0, p))
+        seconds = residual / mapping
+    else:
+        residual = (np.log(replies.twtt) - np.log(tau)) / design.unit + model
+        a = np.hstack((jacobian / (c0 * tau * design.unit)[:, None], -p))
+        seconds = replies.twtt - tau * np.exp(-design.unit * model)
+    return residual, a, tau, seconds, mapping, position, x, p
+
+
+def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool, legs: LegModel, used: np.ndarray,
+                   theta: np.ndarray, what: str):
+    """Gauss-Newton on the positions and the active coefficients of the ``used`` replies (GARPOS: with its prior),
+    from ``theta``; returns theta (inactive coefficients 0), the iterations, convergence, the active mask, the
+    prior, the data covariance and the last normal matrix."""
+    q = 3 if rigid else 3 * len(apriori)
+    rows = np.flatnonzero(used)
+    active = design.active(used)
+    keep = np.concatenate((np.ones(q, dtype=bool), active))
+    theta = np.where(keep, theta, 0.0)
+    prior = design.prior(q, active)
+    data = design.covariance(used)
+    converged, iterations, normal = False, 0, None
+    for iterations in range(1, MAX_ITERATIONS + 1):  # noqa: B007 (the count is returned)
+        residual, a, *_ = _perturbed_model(design, apriori, theta, c0, rigid, legs, rows)
+        wa, wr = data.whiten(a[:, keep]), data.whiten(residual)
+        normal, rhs = wa.T @ wa, wa.T @ wr
+        if prior is not None:
+            normal = normal + prior
+            rhs = rhs - prior @ theta[keep]
+        try:
+            step = np.linalg.solve(normal, rhs)
+        except np.linalg.LinAlgError:
+            raise ModelError(f"{what}: the replies do not determine the positions and the perturbation (the normal "
+                             "matrix is singular): fewer bases, or replies from more directions") from None
+        theta[keep] += step
+        if np.max(np.abs(step[:q])) <= POSITION_TOLERANCE:
+            converged = True
+            break
+    return theta, iterations, converged, keep, prior, data, normal
+
+
+def _solve_perturbed(replies: Replies, apriori: np.ndarray, c0: float, rigid: bool, legs: LegModel,
+                     pert: Perturbation, outlier_factor: float | None, what: str,
+                     linear: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                     start_positions: np.ndarray | None = None) -> Solution:
+    """:func:`solve` with a sound-speed perturbation (:class:`Perturbation`): the outlier rule on the TWTT
+    residuals [s], and GARPOS's rejection of the residuals beyond ``reject_sigma`` standard deviations of their
+    mean (judged on every reply after each solution). ``linear``: the legs linearised about a reference
+    (:func:`select`); ``start_positions``: the positions' unknowns to start from."""
+    k = len(apriori)
+    q = 3 if rigid else 3 * k
+    n = len(replies)
+    start, end = float(np.min(replies.t_tx)), float(np.max(replies.t_rx))
+    if not end > start:
+        raise ModelError(f"{what}: the replies span no time; a perturbation in time needs a survey of some duration")
+    n_bases = pert.n_bases or interval_bases(start, end, pert.knot_interval)
+    knots = uniform_knots(start, end, n_bases)
+    design = _Design(pert, replies, apriori, knots, c0)
+    design.linear = linear
+    theta = np.zeros(q + design.width())
+    if start_positions is not None:
+        theta[:q] = start_positions
+    used = np.ones(n, dtype=bool)
+    every = np.arange(n)
+    for _ in range(n):
+        size = q + int(design.active(used).sum())
+        if used.sum() <= size:
+            raise ModelError(f"{what}: {int(used.sum())} replies for {size} unknowns (the positions and the "
+                             f"perturbation's {n_bases} bases); at least {size + 1} are needed: fewer bases")
+        theta, iterations, converged, keep, prior, data, normal = _perturbed_fit(design, apriori, c0, rigid, legs,
+                                                                                  used, theta, what)
+        model = _perturbed_model(design, apriori, theta, c0, rigid, legs, every)
+        residual, seconds = model[0], model[3]
+        if outlier_factor is not None and used.sum() > size + 1:
+            worst = float(np.max(np.abs(seconds[used])))
+            if worst > outlier_factor * float(np.sqrt(np.mean(seconds[used] ** 2))):
+                used &= np.abs(seconds) != worst
+                continue
+        if pert.reject_sigma > 0.0:
+            mean, sd = float(np.mean(residual[used])), float(np.std(residual[used], ddof=1))
+            judged = np.abs(residual - mean) <= pert.reject_sigma * sd
+            if not np.array_equal(judged, used):
+                used = judged
+                continue
+        break
+    return _perturbed_solution(design, apriori, c0, rigid, knots, theta, used, keep, prior, data, normal, iterations,
+                               converged, model)
+
+
+def _perturbed_solution(design: _Design, apriori: np.ndarray, c0: float, rigid: bool, knots: np.ndarray,
+                        theta: np.ndarray, used: np.ndarray, keep: np.ndarray, prior: np.ndarray | None,
+                        data: _DataCovariance, normal: np.ndarray, iterations: int, converged: bool,
+                        model: tuple) -> Solution:
+    """The solution's statistics: SeaGap's (a posteriori variance, AIC, BIC) or GARPOS's (ABIC); ``model`` is
+    :func:`_perturbed_model` of every reply at ``theta``."""
+    pert = design.pert
+    replies = design.replies
+    k = len(apriori)
+    q = 3 if rigid else 3 * k
+    n = len(replies)
+    residual, _, tau, seconds, mapping, position, x, p = model
+    m = int(used.sum())
+    parameters = int(keep.sum())
+    inverse = np.linalg.inv(normal)
+    aic = bic = abic = None
+    if pert.kind == "ntd":
+        variance = float(np.sum(residual[used] ** 2) / (m - parameters))
+        aic, bic = akaike(residual[used], parameters)
+        sigma_t = np.sqrt(variance) / mapping  # each TWTT residual's sigma [s]
+    else:
+        misfit = float(np.sum(data.whiten(residual[used]) ** 2))
+        penalty = float(theta[keep] @ prior @ theta[keep])
+        eigen = np.linalg.eigvalsh(prior[q:, q:])
+        positive = eigen[eigen > 1e-8 / 10.0**pert.log_lambda0]
+        dof = m + len(positive) - parameters
+        variance = (misfit + penalty) / dof
+        abic = (dof * math.log(misfit + penalty) - data.log_det_inverse - float(np.sum(np.log(positive)))
+                + float(np.linalg.slogdet(normal)[1]))
+        sigma_t = np.full(n, np.sqrt(variance) * TRAVEL_TIME_SCALE)
+    covariance_all = variance * inverse
+    sd = np.sqrt(np.diag(covariance_all))
+    full_sd = np.zeros(len(theta))
+    full_sd[keep] = sd
+    sigma = np.tile(sd[:3], (k, 1)) if rigid else sd[:q].reshape(k, 3)
+    w = 1.0 / (c0 * sigma_t) ** 2
+    residual_m = c0 * seconds
+    wrms = float(np.sqrt(np.sum(w[used] * residual_m[used] ** 2) / np.sum(w[used])))
+    elevation, azimuth, scatter = _directions(replies, x, residual_m, w, used, k)
+    order = np.argsort(design.mid[used], kind="stable")
+    coefficients = theta[q:]
+    units = design.unit
+    background, bg_sd = coefficients[:design.n_bases] * units, full_sd[q:q + design.n_bases] * units
+    gradient, gradient_sd = {}, {}
+    rest, rest_sd = coefficients[design.n_bases:] * units, full_sd[q + design.n_bases:] * units
+    if pert.kind == "ntd":  # the columns' order: the bases, the deep gradient, the shallow one
+        names = (["deep"] if design.deep else []) + (["shallow"] if design.shallow else [])
+        for j, name in enumerate(names):
+            gradient[name], gradient_sd[name] = rest[2 * j:2 * j + 2], rest_sd[2 * j:2 * j + 2]
+        delay = design.spline @ coefficients[:design.n_bases]
+        observed = mapping * (replies.twtt - tau) - (p[:, design.n_bases:] @ coefficients[design.n_bases:])
+    else:  # GARPOS's order: the background, the shallow gradient, the deep one
+        b = design.n_bases
+        names = (["shallow"] if design.shallow else []) + (["deep"] if design.deep else [])
+        for j, name in enumerate(names):
+            gradient[name] = rest[2 * j * b:(2 * j + 2) * b].reshape(2, b)
+            gradient_sd[name] = rest_sd[2 * j * b:(2 * j + 2) * b].reshape(2, b)
+        delay = (tau * np.exp(-units * (p @ coefficients)) - tau) * mapping
+        observed = (replies.twtt - tau) * mapping
+    fit = PerturbationFit(settings=pert, n_bases=design.n_bases, knots=knots, used_bases=keep[q:q + design.n_bases],
+                          coefficients=background, coefficient_sigma=bg_sd, gradient=gradient,
+                          gradient_sigma=gradient_sd, delay=delay, observed=observed, mapping=mapping,
+                          mid_time=design.mid, parameters=parameters, aic=aic, bic=bic, abic=abic,
+                          effective_scale=effective_scale(residual[used][order]))
+    return Solution(position=position, offset=position - apriori, sigma=sigma, covariance=covariance_all[:q, :q],
+                    sound_speed=float(c0), sound_speed_sigma=0.0, used=used, residual_m=residual_m,
+                    residual_s=seconds, weight=w, elevation=elevation, azimuth=azimuth, wrms_m=wrms,
+                    variance_factor=variance, scatter=scatter, iterations=iterations, converged=converged,
+                    perturbation=fit)
+
+
+def _search_criterion(kind: str, criterion: str) -> str:
+    return "abic" if kind == "garpos" else criterion
+
+
+def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sound_speed: float,
+           candidates: Sequence[Perturbation], *, rigid: bool = False, outlier_factor: float | None = None,
+           legs: LegModel | None = None, what: str = "calibration", criterion: str = "bic",
+           reference: Solution | None = None) -> tuple[Solution, list[dict]]:
+    """The perturbation chosen among ``candidates`` by an information criterion, and every candidate's.
+
+    SeaGap's search over the number of bases takes the smallest AIC or BIC (:func:`~sblsim.models.perturbation.
+    akaike`; Tomita and Kido, 2022), GARPOS's over its hyperparameters the smallest ABIC (Akaike's Bayesian
+    information criterion of the smoothness prior, H. Akaike, in *Bayesian Statistics*, 1980; Watanabe et al.,
+    2020, eq. 22). The first candidate is solved in full; every candidate is then solved with the legs linearised
+    about that solution's positions (the candidates move them by millimetres, which changes the travel times'
+    linearisation by :math:`10^{-10}` s), and the chosen one is solved in full from there.
+
+    Parameters
+    ----------
+    replies, apriori, sound_speed, rigid, outlier_factor, legs, what
+        As :func:`solve`.
+    candidates : sequence of Perturbation
+        One kind for all (``ntd`` or ``garpos``).
+    criterion : str
+        ``"aic"`` or ``"bic"`` (:data:`~sblsim.models.perturbation.CRITERIA`) for ``ntd``; ``garpos`` takes ABIC.
+    reference : Solution or None
+        A solution of these replies to linearise about instead of the first candidate's.
+
+    Returns
+    -------
+    solution : Solution
+        The chosen candidate's.
+    table : list of dict
+        Per candidate: ``n_bases``, ``log_lambda0``, ``log_grad_lambda``, ``mu_t``, ``mu_mt``, ``aic``, ``bic``,
+        ``abic``, ``twtt_residual_rms_s``, ``e_m``, ``n_m``, ``u_m`` (the first transponder's offset), ``chosen``.
+
+    Raises
+    ------
+    ModelError
+        No candidate, kinds mixed, an unknown criterion, or what :func:`solve` raises.
+    """
+    if not candidates:
+        raise ModelError(f"{what}: no candidate perturbation to choose from")
+    if len({c.kind for c in candidates}) != 1:
+        kinds = ", ".join(sorted({c.kind for c in candidates}))
+        raise ModelError(f"{what}: the candidates mix perturbations ({kinds})")
+    if criterion not in CRITERIA:
+        raise ModelError(f"criterion: {str(criterion)[:40]!r} is not one of {', '.join(CRITERIA)}")
+    apriori = np.asarray(apriori, dtype=float)
+    legs = legs or StraightRay()
+    first = reference or solve(replies, apriori, sound_speed, rigid=rigid, outlier_factor=outlier_factor, legs=legs,
+                               what=what, perturbation=candidates[0])
+    if len(candidates) == 1 and reference is None:
+        return first, [_candidate_row(candidates[0], first, True)]
+    reference = first.offset[0] if rigid else first.offset.ravel()
+    residual, jacobian = _model(replies, apriori, reference, float(sound_speed), rigid, False, legs, 0.0)[:2]
+    name = _search_criterion(candidates[0].kind, criterion)
+    solutions = []
+    for candidate in candidates:
+        _check_perturbation(candidate, replies, False)
+        solutions.append(_solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, candidate, outlier_factor,
+                                          what, (reference, residual, jacobian), reference))
+    values = [getattr(s.perturbation, name) for s in solutions]
+    best = int(np.argmin(values))
+    start = solutions[best].offset[0] if rigid else solutions[best].offset.ravel()
+    chosen = first if best == 0 and first.perturbation.settings == candidates[0] else \
+        _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, candidates[best], outlier_factor, what,
+                         None, start)
+    return chosen, [_candidate_row(c, s, k == best) for k, (c, s) in enumerate(zip(candidates, solutions))]
+
+
+def _candidate_row(candidate: Perturbation, solution: Solution, chosen: bool) -> dict:
+    fit = solution.perturbation
+    used = solution.used
+    return {"n_bases": fit.n_bases, "log_lambda0": candidate.log_lambda0, "log_grad_lambda": candidate.log_grad_lambda,
+            "mu_t": candidate.mu_t, "mu_mt": candidate.mu_mt, "aic": fit.aic, "bic": fit.bic, "abic": fit.abic,
+            "twtt_residual_rms_s": float(np.sqrt(np.mean(solution.residual_s[used] ** 2))),
+            "e_m": float(solution.offset[0, 0]), "n_m": float(solution.offset[0, 1]),
+            "u_m": float(solution.offset[0, 2]), "chosen": chosen}
+
+
 def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sound_speed: float, *,
         rigid: bool = False, solve_sound_speed: bool = False, twtt_sigma: float = 0.0,
-        legs: LegModel | None = None) -> np.ndarray:
+        legs: LegModel | None = None, perturbation: Perturbation | None = None) -> np.ndarray:
     """The Cramér-Rao bound of a survey's unknowns: :math:`(J^\\top W J)^{-1}` at the truth.
 
     The Fisher information of the replies' range residuals (Gaussian, independent, variances
@@ -568,6 +1167,10 @@ def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sou
         The true sound speed [m/s].
     rigid, solve_sound_speed, twtt_sigma, legs
         As :func:`solve` (``twtt_sigma``: the TWTT noise [s]).
+    perturbation : Perturbation or None
+        The perturbation solved with the positions (the replies need their times): its coefficients are unknowns
+        too (its Jacobian at the truth, the same noise mapped to its residuals, GARPOS's prior as prior
+        information); the bound returned is then the positions' block.
 
     Returns
     -------
@@ -591,12 +1194,44 @@ def crb(replies: Replies, positions: Sequence[Sequence[float]] | np.ndarray, sou
         theta[-1] = 1.0
     _, jacobian, variance, *_ = _model(replies, positions, theta, float(sound_speed), rigid, solve_sound_speed,
                                        legs or StraightRay(), float(twtt_sigma))
+    if perturbation is not None:
+        return _perturbed_crb(replies, positions, float(sound_speed), rigid, legs or StraightRay(), perturbation,
+                              variance)
     information = jacobian.T @ (jacobian / variance[:, None])
     try:
         return np.linalg.inv(information)
     except np.linalg.LinAlgError:
         raise ModelError("calibration: the replies do not determine the unknowns (the information is "
                          "singular)") from None
+
+
+def _perturbed_crb(replies: Replies, positions: np.ndarray, c0: float, rigid: bool, legs: LegModel,
+                   pert: Perturbation, variance: np.ndarray) -> np.ndarray:
+    """:func:`crb` with a perturbation: the positions' block of :math:`(A^\\top W A + D/\\sigma_0^2)^{-1}`,
+    :math:`A` the Jacobian of the perturbation's prediction at the truth (no perturbation), :math:`W` the inverse
+    variances of its residuals (each reply's line-of-sight variance [m²] over :math:`c_0^2`, mapped), :math:`D`
+    GARPOS's prior, whose covariance scales with the data's (:math:`\\sigma_0` the replies' RMS sigma over
+    GARPOS's travel-time scale)."""
+    _check_perturbation(pert, replies, False)
+    q = 3 if rigid else 3 * len(positions)
+    start, end = float(np.min(replies.t_tx)), float(np.max(replies.t_rx))
+    knots = uniform_knots(start, end, pert.n_bases or interval_bases(start, end, pert.knot_interval))
+    design = _Design(pert, replies, positions, knots, c0)
+    theta = np.zeros(q + design.width())
+    used = np.ones(len(replies), dtype=bool)
+    _, a, tau, _, mapping, *_ = _perturbed_model(design, positions, theta, c0, rigid, legs, np.arange(len(replies)))
+    seconds = np.sqrt(variance) / c0
+    sd = mapping * seconds if pert.kind == "ntd" else seconds / (replies.twtt * design.unit)
+    keep = np.concatenate((np.ones(q, dtype=bool), design.active(used)))
+    information = a[:, keep].T @ (a[:, keep] / sd[:, None] ** 2)
+    prior = design.prior(q, design.active(used))
+    if prior is not None:
+        information = information + prior / float(np.mean((seconds / TRAVEL_TIME_SCALE) ** 2))
+    try:
+        return np.linalg.inv(information)[:q, :q]
+    except np.linalg.LinAlgError:
+        raise ModelError("calibration: the replies do not determine the positions and the perturbation (the "
+                         "information is singular)") from None
 
 
 #: The running solution's prior 1-sigma of the a-priori positions accepted [m] and its default (wide against
@@ -858,7 +1493,8 @@ def combine(solutions: Sequence[Solution]) -> Combined:
     return Combined(mean, sigma, scatter)
 
 
-__all__ = ["Combined", "EigenRay", "LegModel", "MAX_ITERATIONS", "MAX_SOUND_SPEED_SIGMA", "OUTLIER_FACTOR_RANGE",
-           "PASSES_RANGE", "POSITION_TOLERANCE", "PRIOR_SCALE_SIGMA", "PRIOR_SIGMA_M", "PRIOR_SIGMA_RANGE",
-           "RUNNING_AGREEMENT_SIGMA", "Replies", "Running", "SCALE_TOLERANCE", "SOUND_SPEED_RANGE", "Solution",
-           "StraightRay", "combine", "crb", "running", "running_disagreement", "solve"]
+__all__ = ["combine", "Combined", "crb", "EARTH_RADIUS_RANGE", "EigenRay", "LegModel", "MAX_ITERATIONS",
+           "MAX_SOUND_SPEED_SIGMA", "OUTLIER_FACTOR_RANGE", "PASSES_RANGE", "Perturbation", "PerturbationFit",
+           "POSITION_TOLERANCE", "PRIOR_SCALE_SIGMA", "PRIOR_SIGMA_M", "PRIOR_SIGMA_RANGE", "Replies", "Running",
+           "running", "RUNNING_AGREEMENT_SIGMA", "running_disagreement", "SCALE_TOLERANCE", "select", "Solution",
+           "solve", "SOUND_SPEED_RANGE", "StraightRay", "TRANSDUCER_DEPTH_RANGE"]

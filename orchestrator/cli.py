@@ -122,11 +122,15 @@ def _parser() -> argparse.ArgumentParser:
     k = sub.add_parser("calibrate", help="locate seafloor transponders from a surface survey's two-way travel times "
                                          "(docs/calibration.md)")
     k.add_argument("survey", metavar="SURVEY|LOG|CONFIG",
-                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., ncl1-2022-208; "
-                        "box-in, simulated), a survey log (.csv or .parquet; any text file with --format xie) or a "
-                        "simulated survey CONFIG.toml")
+                   help="a built-in survey (xie-2021-07-23, the other days xie-2021-08-23-1065 ..., ncl1-2022-208, "
+                        "seagap-example; box-in, simulated), a survey log (.csv or .parquet; any text file with "
+                        "--format xie; a SeaGap folder with --format seagap) or a simulated survey CONFIG.toml")
     k.add_argument("--format", default=None, metavar="FORMAT",
-                   help="the log's format: sblsim (default) or xie (survey A's text files)")
+                   help="the log's format: sblsim (default), xie (survey A's text files), seagap (a folder of "
+                        "SeaGap's files) or garpos (GARPOS's observation CSV, with --initcfg and --svp)")
+    k.add_argument("--initcfg", default=None, metavar="FILE",
+                   help="--format garpos: GARPOS's initial site-parameter file (the paths it names are not read)")
+    k.add_argument("--svp", default=None, metavar="FILE", help="--format garpos: GARPOS's sound-speed profile (CSV)")
     k.add_argument("--replicates", type=int, default=None, metavar="N",
                    help="a simulated survey: solve N replicates and write replicates.parquet (errors against the "
                         "truth, NEES, the horizontal bound)")
@@ -473,7 +477,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         return _calibrate_simulated(args)
     if args.replicates is not None:
         raise ModelError("--replicates: only a simulated survey (box-in or a CONFIG.toml) has replicates")
-    survey = load_survey(args.survey, args.format, args.overrides)  # every input read and checked first
+    survey = load_survey(args.survey, args.format, args.overrides, args.initcfg, args.svp)  # all read first
     result = calibrate(survey)
     out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
                   "calibration")
@@ -483,10 +487,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     _calibration_warnings(result)
     s = result.solution
     solver = s["solver"]
+    profile = solver["sound_speed_profile"] or "the survey's own profile"
     if solver["propagation"] == "ray":
-        speed = f"eigenrays through {solver['sound_speed_profile']}"
-    elif solver["sound_speed_profile"]:
-        speed = f"straight rays at each transponder's harmonic mean of {solver['sound_speed_profile']}"
+        speed = f"eigenrays through {profile}"
+    elif solver["sound_speed_profile"] or survey.profile is not None:
+        speed = f"straight rays at each transponder's harmonic mean of {profile}"
     else:
         speed = f"sound speed {s['sound_speed_mps']:.6g} m/s"
     print(f"calibration of {survey.name} ({s['format']} log, {s['log']['rows']} replies, "
@@ -495,12 +500,22 @@ def _calibrate(args: argparse.Namespace) -> int:
         own = f", {t['sound_speed_mps']:.3f} m/s" if "sound_speed_mps" in t else ""
         print(f"  transponder {t['id']}: N {t['n_m']:+.4f} E {t['e_m']:+.4f} U {t['u_m']:+.4f} m from the a-priori "
               f"(sigma {t['sigma_n_m']:.4f} {t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m{own})")
+    if "perturbation" in s:
+        d = s["array_displacement"]
+        print(f"  array displacement: E {d['e_m']:+.6f} N {d['n_m']:+.6f} U {d['u_m']:+.6f} m (sigma "
+              f"{d['sigma_e_m'] * 1e3:.2f} {d['sigma_n_m'] * 1e3:.2f} {d['sigma_u_m'] * 1e3:.2f} mm; realistic x"
+              f"{s['realistic_sigma_scale']:.2f})")
+        criteria = ", ".join(f"{k.upper()} {s[k]:.2f}" for k in ("aic", "bic", "abic") if s[k] is not None)
+        grad = f"; deep gradient E {s['gradient']['e']:.6g} N {s['gradient']['n']:.6g}" if s["gradient"] else ""
+        print(f"  perturbation {s['perturbation']['kind']}: {s['n_bases']} bases, {criteria}{grad}")
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
     if "running" in s:
         print(f"  running solution (Kalman form, running.csv): {s['running']['replies']} replies, mean NIS "
               f"{s['running']['nis_mean']:.2f}")
-    print(f"  written to {out}/ (solution.json, residuals.csv, figures)")
+    extra = ", ntd.csv" if result.ntd is not None else ""
+    extra += ", criterion.csv" if result.search is not None else ""
+    print(f"  written to {out}/ (solution.json, residuals.csv{extra}, figures)")
     return 0
 
 
@@ -514,7 +529,7 @@ def _calibrate_simulated(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.surveys.log import write_log
     from sblsim.orchestrator.surveys.simulate import REPLICATES_RANGE, load_simulated, run_simulated
 
-    if args.format is not None:
+    if args.format is not None or args.initcfg is not None or args.svp is not None:
         raise ModelError("--format: a simulated survey has no log format; give --format with a log")
     if args.replicates is not None and not REPLICATES_RANGE[0] <= args.replicates <= REPLICATES_RANGE[1]:
         raise ModelError(f"--replicates: {args.replicates} is outside the allowed range [{REPLICATES_RANGE[0]}, "

@@ -28,36 +28,50 @@ import pandas as pd
 from sblsim.fmus.native import compiled_exact_points
 from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import (
+    EARTH_RADIUS_RANGE,
     OUTLIER_FACTOR_RANGE,
     PASSES_RANGE,
     PRIOR_SIGMA_M,
     PRIOR_SIGMA_RANGE,
     RUNNING_AGREEMENT_SIGMA,
     SOUND_SPEED_RANGE,
+    TRANSDUCER_DEPTH_RANGE,
     EigenRay,
     LegModel,
+    Perturbation,
     Solution,
     StraightRay,
     combine,
     running,
     running_disagreement,
+    select,
     solve,
 )
 from sblsim.models.declarations import ModelError
+from sblsim.models.perturbation import (
+    BASES_RANGE,
+    CRITERIA,
+    GRADIENTS,
+    KNOT_INTERVAL_RANGE,
+    PERTURBATIONS,
+    effective_scale,
+)
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.surveys.garpos import read_garpos
 from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_log
+from sblsim.orchestrator.surveys.seagap import NOMINAL_SIGMA_M, read_seagap
 from sblsim.orchestrator.surveys.xie import origin as xie_origin
 from sblsim.orchestrator.surveys.xie import read_xie
 
-#: The log formats read: name -> reader.
-FORMATS = {"sblsim": read_log, "xie": read_xie}
+#: The log formats read: name -> reader of a log file (SeaGap's folder and GARPOS's three files have their own).
+FORMATS = {"sblsim": read_log, "xie": read_xie, "seagap": None, "garpos": None}
 _FOLDER = files("sblsim.orchestrator.surveys")
 #: The built-in surveys: name -> its TOML file's name in this package.
 BUILTIN_SURVEYS = {name: f"{name}.toml" for name in (
     "xie-2021-07-23", "xie-2021-08-23-1065", "xie-2021-08-23-1063", "xie-2021-12-10", "xie-2022-03-21",
-    "ncl1-2022-208")}
+    "ncl1-2022-208", "seagap-example")}
 #: The legs' models of ``solver.propagation``.
 PROPAGATIONS = ("straight", "ray")
 #: The editing a built-in GNATSS survey may ask for (``survey.editing``).
@@ -93,7 +107,39 @@ SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
                          "Kalman filter); false: the extended Kalman filter"),
     "running_passes": (int, PASSES_RANGE, "", 1, "the running solution's passes: 1 the extended Kalman filter, more "
                        "re-linearised at the previous pass's last state"),
+    "earth_radius_m": (float, (0.0, EARTH_RADIUS_RANGE[1]), "m", 0.0,
+                       f"the eigenrays through spherical layers of this radius (0: flat layers; else in "
+                       f"[{EARTH_RADIUS_RANGE[0]:g}, {EARTH_RADIUS_RANGE[1]:g}]), as SeaGap"),
+    "transducer_depth_m": (float, (0.0, TRANSDUCER_DEPTH_RANGE[1]), "m", 0.0,
+                           "the profile hung from each transducer at this depth, as SeaGap's XDUCER_DEPTH (0: the sea "
+                           "surface fixed at surface_u_m)"),
+    "perturbation": (str, PERTURBATIONS, "", "none", "the sound speed's change in time solved with the positions: "
+                     "none, ntd (SeaGap's nadir total delay), garpos (GARPOS's correction of the log travel time)"),
+    "n_bases": ("ints", BASES_RANGE, "", 0, "the perturbation's cubic B-spline bases over the survey (0: one knot "
+                "every knot_interval); a list: the candidates of the search by criterion"),
+    "knot_interval": (float, KNOT_INTERVAL_RANGE, "s", 300.0, "the perturbation's knot spacing when n_bases is 0"),
+    "criterion": (str, CRITERIA, "", "bic", "the criterion of the search over n_bases (ntd; garpos takes ABIC)"),
+    "gradient": (str, GRADIENTS, "", "none", "the perturbation's horizontal gradients: none, deep, shallow+deep"),
+    "log_lambda0": ("floats", (-10.0, 10.0), "", -2.0, "GARPOS's smoothness, log10 of lambda0 squared; a list: the "
+                    "candidates of the ABIC search"),
+    "log_grad_lambda": ("floats", (-10.0, 10.0), "", -1.0, "GARPOS's gradients' smoothness over the background's, "
+                        "log10; a list: candidates"),
+    "mu_t": ("floats", (0.0, 86400.0), "s", 0.0, "GARPOS's data correlation length (0: independent replies); a list: "
+             "candidates"),
+    "mu_mt": ("floats", (0.0, 1.0), "", 0.5, "GARPOS's data correlation between transponders; a list: candidates"),
+    "reject_sigma": (float, (0.0, 100.0), "", 0.0, "with a perturbation, drop the replies beyond this many standard "
+                     "deviations of the residuals' mean (GARPOS's rejection; 0: none)"),
 }
+#: The perturbation's keys a list may search (product of the lists).
+SEARCH_KEYS = ("n_bases", "log_lambda0", "log_grad_lambda", "mu_t", "mu_mt")
+#: The files of a perturbation: ``ntd.csv`` and ``ntd.png``; of a search, ``criterion.csv`` and ``criterion.png``.
+PERTURBATION_FILES = ("ntd.csv", "ntd.png")
+SEARCH_FILES = ("criterion.csv", "criterion.png")
+#: Columns of ``ntd.csv``: one row per reply (its segment, ping, transponder, mid-time [s, POSIX], the nadir angle's
+#: cosine, the nadir-normalised TWTT residual of the legs less the gradients' part [s], the perturbation's nadir
+#: delay [s] and what remains [s], the sound speed's change the delay means [m/s], used).
+NTD_COLUMNS = ("segment", "ping", "transponder", "t_s", "nadir_cosine", "observed_s", "ntd_s", "residual_s",
+               "sound_speed_change_mps", "used")
 #: The site's keys of a transponder: name -> (allowed range, unit).
 TRANSPONDER_KEYS = {"e_m": ((-1e5, 1e5), "m"), "n_m": ((-1e5, 1e5), "m"), "u_m": ((-1e5, 1e5), "m"),
                     "turnaround_s": ((0.0, 60.0), "s")}
@@ -124,11 +170,21 @@ class Survey:
     #: Each transponder's depth below the sea surface [m] when the site gives it (GNATSS: minus its orthometric
     #: height); else ``solver.surface_u_m`` less its a-priori Up.
     depth_m: np.ndarray | None = None
+    #: The survey's own sound-speed profile (depth [m], speed [m/s]) when its format carries one (SeaGap): taken
+    #: unless ``solver.sound_speed_profile`` names another.
+    profile: np.ndarray | None = None
 
 
 def _value(key: str, value: Any) -> Any:
     kind, allowed, unit, _, _ = SOLVER_KEYS[key]
     units = f" {unit}" if unit else ""
+    if kind in ("ints", "floats"):  # a number, or a list of candidates
+        one = int if kind == "ints" else float
+        if isinstance(value, list):
+            if not 1 <= len(value) <= 200:
+                raise ModelError(f"solver.{key}: a list of 1 to 200 candidates, got {len(value)}")
+            return [_number(key, v, one, allowed, units) for v in value]
+        return _number(key, value, one, allowed, units)
     if kind is bool:
         if not isinstance(value, bool):
             raise ModelError(f"solver.{key}: {value!r} is not true or false")
@@ -151,6 +207,19 @@ def _value(key: str, value: Any) -> Any:
                              f"{allowed[1]:g}]{units}")
         return float(value)
     return _segments(value)
+
+
+def _number(key: str, value: Any, kind: type, allowed: tuple, units: str) -> Any:
+    """One number of a key that takes a list of candidates (``n_bases``: 0 or in the range)."""
+    whole = kind is int
+    low = allowed[0]
+    fine = not isinstance(value, bool) and isinstance(value, int if whole else (int, float)) \
+        and math.isfinite(value) and (allowed[0] <= value <= allowed[1] or (whole and value == 0))
+    if not fine:
+        zero = "0 or " if whole else ""
+        raise ModelError(f"solver.{key}: {value!r} is outside the allowed range {zero}[{low:g}, {allowed[1]:g}]{units}"
+                         + (" (an integer)" if whole else ""))
+    return kind(value)
 
 
 def _instant(text: Any, key: str) -> float:
@@ -248,11 +317,18 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     for part in meta["log"].split("/"):
         data = data.joinpath(part)
     fmt = meta["format"]
+    profile = None
     if fmt == "gnatss":
         editing = meta.get("editing", "none")
         if editing not in EDITINGS:
             raise ModelError(f"survey.editing: {str(editing)[:40]!r} is not one of {', '.join(EDITINGS)}")
         log, ids, apriori, origin, depth = _gnatss_log(data, editing, name)
+    elif fmt == "seagap":  # the folder's own transponders and profile; the site's origin from the TOML
+        depth = None
+        with as_file(data) as path:
+            folder = read_seagap(path)
+        log, ids, apriori, profile = folder.log, folder.ids, folder.apriori, folder.profile
+        origin = {k: raw["site"][k] for k in ("lat_deg", "lon_deg", "height_m")}
     else:
         depth = None
         site = raw["site"]
@@ -265,10 +341,12 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     for key, value in raw.get("solver", {}).items():
         solver[key] = _value(key, value)
     solver = apply_overrides(solver, overrides)
-    return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name), depth_m=depth)
+    return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name), depth_m=depth,
+                  profile=profile)
 
 
-def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None) -> Survey:
+def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None = None,
+                initcfg: str | None = None, svp: str | None = None) -> Survey:
     """A built-in survey by name, or a log file with the default settings.
 
     Parameters
@@ -277,9 +355,14 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
         A name of :data:`BUILTIN_SURVEYS`, or a log (``.csv``/``.parquet`` in the sblsim format, any text file with
         ``fmt="xie"``).
     fmt : str or None
-        The log's format, one of :data:`FORMATS` (default: sblsim; a built-in survey's own).
+        The log's format, one of :data:`FORMATS` (default: sblsim; a built-in survey's own): ``seagap`` takes a
+        folder (:mod:`~sblsim.orchestrator.surveys.seagap`), ``garpos`` the observation CSV with ``initcfg`` and
+        ``svp`` (:mod:`~sblsim.orchestrator.surveys.garpos`); both take ``propagation = "ray"`` through the
+        survey's own profile unless ``--set`` says otherwise.
     overrides : list of str
         ``solver.KEY=VALUE`` items (:func:`apply_overrides`).
+    initcfg, svp : str or None
+        GARPOS's initial site-parameter file and sound-speed profile (``fmt="garpos"`` only, both needed).
 
     Raises
     ------
@@ -289,6 +372,11 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
     overrides = overrides or []
     if fmt is not None and fmt not in FORMATS:
         raise ModelError(f"--format: {fmt[:40]!r} is not one of {', '.join(FORMATS)}")
+    if fmt == "garpos" and (initcfg is None or svp is None):
+        raise ModelError("--format garpos: give the site-parameter file (--initcfg FILE) and the sound-speed profile "
+                         "(--svp FILE); the paths written in GARPOS's files are not followed")
+    if fmt != "garpos" and (initcfg is not None or svp is not None):
+        raise ModelError("--initcfg, --svp: GARPOS's files go with --format garpos")
     if source in BUILTIN_SURVEYS:
         if fmt is not None:
             raise ModelError(f"--format: the built-in survey {source} has its own format; give --format with a log")
@@ -299,6 +387,22 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
     fmt = fmt or "sblsim"
     solver = apply_overrides(_defaults(), overrides)
     path = Path(source)
+    if fmt in ("seagap", "garpos"):  # their own transponders and profile; eigenrays unless --set says otherwise
+        if not any(item.split("=", 1)[0].strip() == "solver.propagation" for item in overrides):
+            solver["propagation"] = "ray"
+        notes = [f"{fmt}'s files carry no GNSS sigma: every position takes {NOMINAL_SIGMA_M:g} m (immaterial with "
+                 "the covariance scaled by the residuals)"]
+        if fmt == "seagap":
+            folder = read_seagap(path)
+            return Survey(path.name or str(path), folder.log, folder.ids, folder.apriori, solver, None, fmt,
+                          str(path), notes, profile=folder.profile)
+        site = read_garpos(path, Path(initcfg), Path(svp))
+        left = site.left_out
+        if left["flagged"] or left["unknown_transponder"]:
+            notes.append(f"left out {left['flagged']} flagged replies and {left['unknown_transponder']} of "
+                         "transponders that are not Stations")
+        return Survey(site.name, site.log, site.ids, site.apriori, solver, site.origin, fmt, str(path), notes,
+                      profile=site.profile)
     log = FORMATS[fmt](path)
     ids = sorted(log.counts["transponders"])
     apriori = guess_apriori(log, ids, solver["sound_speed_mps"])
@@ -321,6 +425,10 @@ class Calibration:
     residuals: pd.DataFrame
     #: The running solution, :data:`RUNNING_COLUMNS` (None with ``solver.running = false``).
     running: pd.DataFrame | None = None
+    #: The perturbation of each reply, :data:`NTD_COLUMNS` (None without one).
+    ntd: pd.DataFrame | None = None
+    #: The search's candidates (:func:`sblsim.models.calibration.select`, with their ``segment``; None without).
+    search: pd.DataFrame | None = None
     #: What the user must know about the solution (one line each; ``sblsim calibrate`` prints them as warnings).
     warnings: list[str] = field(default_factory=list)
 
@@ -367,17 +475,15 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
         ``ray`` without a profile, an unknown or unreadable profile, a transponder not below the start depth.
     """
     s = survey.solver
-    profile = s["sound_speed_profile"]
-    if not profile:
+    table = profile_of(survey)
+    if table is None:
         if s["propagation"] == "ray":
             raise ModelError("solver.sound_speed_profile: propagation = \"ray\" needs a profile (e.g. ctd:NCL1)")
         return None, None
-    table = profile_table(profile, "", 15.0, 35.0, field="solver.sound_speed_profile")
-    if table.shape[0] == 0:
-        raise ModelError(f"solver.sound_speed_profile: {profile[:40]!r} has no table; give a cast such as ctd:NCL1")
     if s["propagation"] == "ray":
         # the eigenray solve compiled in the local engine's library when a compiler builds it (once per cache)
-        return EigenRay(table, s["sound_speed_mps"], s["surface_u_m"], compiled_exact_points()), None
+        return EigenRay(table, s["sound_speed_mps"], s["surface_u_m"], compiled_exact_points(),
+                        earth_radius=s["earth_radius_m"], transducer_depth=s["transducer_depth_m"]), None
     start = s["harmonic_mean_start_depth_m"]
     speeds = []
     depths = survey.depth_m if survey.depth_m is not None else s["surface_u_m"] - survey.apriori[:, 2]
@@ -385,9 +491,27 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
         if depth <= start:
             raise ModelError(f"solver.harmonic_mean_start_depth_m: transponder {name} at {depth:g} m is not below "
                              f"the start depth {start:g} m")
-        speeds.append(harmonic_mean_speed(start, depth, profile))
+        speeds.append(harmonic_mean_speed(start, depth, s["sound_speed_profile"] or table))
     speeds = np.array(speeds)
     return StraightRay(s["sound_speed_mps"] / speeds), speeds
+
+
+def profile_of(survey: Survey) -> np.ndarray | None:
+    """The profile of a survey's settings: ``solver.sound_speed_profile``'s table, else the survey's own (SeaGap),
+    else None.
+
+    Raises
+    ------
+    ModelError
+        An unknown or unreadable profile, or one without a table.
+    """
+    profile = survey.solver["sound_speed_profile"]
+    if not profile:
+        return survey.profile
+    table = profile_table(profile, "", 15.0, 35.0, field="solver.sound_speed_profile")
+    if table.shape[0] == 0:
+        raise ModelError(f"solver.sound_speed_profile: {profile[:40]!r} has no table; give a cast such as ctd:NCL1")
+    return table
 
 
 def calibrate(survey: Survey) -> Calibration:
@@ -405,15 +529,22 @@ def calibrate(survey: Survey) -> Calibration:
     s = survey.solver
     f = survey.log.frame
     legs, harmonic = leg_model(survey)
-    segments, tables, runs, nis, apart = [], [], [], [], []
+    candidates = perturbations(survey)
+    segments, tables, runs, nis, apart, searches = [], [], [], [], [], []
     for k, (a, b, rows) in enumerate(_windows(survey)):
         what = f"segment {k + 1} [{a}, {b})" if a else "the log"
         replies = survey.log.replies(survey.ids, rows)
-        sol = solve(replies, survey.apriori, s["sound_speed_mps"], rigid=s["rigid"],
-                    solve_sound_speed=s["solve_sound_speed"], outlier_factor=s["outlier_factor"],
-                    twtt_sigma=s["twtt_sigma_s"], legs=legs, what=what)
+        if len(candidates) > 1:
+            sol, table = select(replies, survey.apriori, s["sound_speed_mps"], candidates, rigid=s["rigid"],
+                                outlier_factor=s["outlier_factor"], legs=legs, what=what, criterion=s["criterion"])
+            searches.append(pd.DataFrame(table).assign(segment=k + 1))
+        else:
+            sol = solve(replies, survey.apriori, s["sound_speed_mps"], rigid=s["rigid"],
+                        solve_sound_speed=s["solve_sound_speed"], outlier_factor=s["outlier_factor"],
+                        twtt_sigma=s["twtt_sigma_s"], legs=legs, what=what,
+                        perturbation=candidates[0] if candidates else None)
         segments.append((a, b, rows, sol))
-        if s["running"]:
+        if s["running"] and not candidates:  # the running solution has no perturbation model
             frame, distance, sigmas = _running(survey, k + 1, rows, replies, sol, legs, what)
             runs.append(frame)
             nis.append(frame["nis"].to_numpy()[::len(survey.ids)])
@@ -491,8 +622,116 @@ def calibrate(survey: Survey) -> Calibration:
                             f"{RUNNING_AGREEMENT_SIGMA:g}; mean NIS {worst[4]:.3g}, 1 when consistent): it did not "
                             "converge from the a-priori positions, so running.csv is no solution (solution.json "
                             "is); give it more passes (solver.running_passes) or a-priori positions nearer the truth")
+    solution.update(_perturbation_keys(survey, segments, combined))
+    ntd = _ntd_table(survey, segments) if candidates else None
+    search = pd.concat(searches, ignore_index=True) if searches else None
     return Calibration(survey, segments, solution, residuals, pd.concat(runs, ignore_index=True) if runs else None,
-                       warnings)
+                       ntd=ntd, search=search, warnings=warnings)
+
+
+def perturbations(survey: Survey) -> list[Perturbation]:
+    """The perturbations a survey's settings solve: none (``solver.perturbation = "none"``), one, or the candidates
+    of a search (the product of the lists among :data:`SEARCH_KEYS`).
+
+    GARPOS's characteristic travel time is twice the transponders' mean depth (:attr:`Survey.depth_m`, or
+    ``surface_u_m`` less their Up) over the profile's depth-averaged speed (its trapezoidal mean over its rows;
+    ``sound_speed_mps`` without a profile), as GARPOS takes it.
+
+    Raises
+    ------
+    ModelError
+        A list among GARPOS's keys with ``perturbation = "ntd"``, more than 500 candidates, or the profile's errors.
+    """
+    s = survey.solver
+    if s["perturbation"] == "none":
+        return []
+    lists = {k: (s[k] if isinstance(s[k], list) else [s[k]]) for k in SEARCH_KEYS}
+    if s["perturbation"] == "ntd":
+        for key in SEARCH_KEYS[1:]:
+            if len(lists[key]) > 1:
+                raise ModelError(f"solver.{key}: a list searches GARPOS's hyperparameters (perturbation = garpos); "
+                                 "SeaGap's NTD searches n_bases")
+    count = math.prod(len(v) for v in lists.values())
+    if count > 500:
+        raise ModelError(f"solver: {count} candidates in the search (the product of the lists of "
+                         f"{', '.join(SEARCH_KEYS)}); at most 500")
+    t0 = 0.0
+    if s["perturbation"] == "garpos":
+        table = profile_of(survey)
+        depths = survey.depth_m if survey.depth_m is not None else s["surface_u_m"] - survey.apriori[:, 2]
+        speed = s["sound_speed_mps"] if table is None or len(table) < 2 else \
+            float(np.sum(0.5 * (table[1:, 1] + table[:-1, 1]) * np.diff(table[:, 0])) / (table[-1, 0] - table[0, 0]))
+        t0 = 2.0 * float(np.mean(depths)) / speed
+    common = {"kind": s["perturbation"], "knot_interval": s["knot_interval"], "gradient": s["gradient"],
+              "reject_sigma": s["reject_sigma"], "earth_radius": s["earth_radius_m"], "t0": t0}
+    return [Perturbation(n_bases=n, log_lambda0=l0, log_grad_lambda=lg, mu_t=mt, mu_mt=mm, **common)
+            for n in lists["n_bases"] for l0 in lists["log_lambda0"] for lg in lists["log_grad_lambda"]
+            for mt in lists["mu_t"] for mm in lists["mu_mt"]]
+
+
+def _perturbation_keys(survey: Survey, segments: list, combined) -> dict:
+    """``solution.json``'s keys of the array and the perturbation: ``array_displacement`` (the rigid shift, or the
+    transponders' mean offset with their sigmas taken as independent; the formal and the realistic 1-sigma),
+    ``n_bases``, ``aic``, ``bic``, ``abic`` (summed over segments: the criteria of their joint model), ``gradient``
+    (the deep gradient's East and North: SeaGap's constants [s], the mean of GARPOS's coefficients [1/km]) and
+    ``shallow_gradient``."""
+    fits = [seg[3].perturbation for seg in segments]
+    offset = combined.position - survey.apriori
+    scales = [_realistic(seg[3]) for seg in segments]
+    scale = float(np.sqrt(np.mean(np.square(scales))))
+    if survey.solver["rigid"]:
+        mean, sd = offset[0], combined.sigma[0]
+    else:
+        mean, sd = offset.mean(axis=0), np.sqrt(np.sum(combined.sigma**2, axis=0)) / len(offset)
+    out = {"array_displacement": {**{f"{a}_m": float(mean[j]) for j, a in enumerate("enu")},
+                                  **{f"sigma_{a}_m": float(sd[j]) for j, a in enumerate("enu")},
+                                  **{f"sigma_realistic_{a}_m": float(sd[j] * scale) for j, a in enumerate("enu")}},
+           "realistic_sigma_scale": scale}
+    if fits[0] is None:
+        return {**out, "n_bases": None, "aic": None, "bic": None, "abic": None, "gradient": None}
+
+    def total(name: str) -> float | None:
+        values = [getattr(fit, name) for fit in fits]
+        return None if values[0] is None else float(np.sum(values))
+
+    def gradient(name: str) -> dict | None:
+        if name not in fits[0].gradient:
+            return None
+        values = np.mean([np.mean(fit.gradient[name].reshape(2, -1), axis=1) for fit in fits], axis=0)
+        return {"e": float(values[0]), "n": float(values[1])}
+
+    bases = [fit.n_bases for fit in fits]
+    return {**out, "n_bases": bases[0] if len(set(bases)) == 1 else bases, "aic": total("aic"), "bic": total("bic"),
+            "abic": total("abic"), "gradient": gradient("deep"), "shallow_gradient": gradient("shallow"),
+            "perturbation": {"kind": fits[0].settings.kind, "parameters": [fit.parameters for fit in fits]}}
+
+
+def _realistic(sol: Solution) -> float:
+    """The realistic sigma's factor of a segment (:func:`~sblsim.models.perturbation.effective_scale` of its used
+    residuals in time order)."""
+    if sol.perturbation is not None:
+        return sol.perturbation.effective_scale
+    return effective_scale(sol.residual_s[sol.used])
+
+
+def _ntd_table(survey: Survey, segments: list) -> pd.DataFrame:
+    """The rows of :data:`NTD_COLUMNS`, every segment's replies.
+
+    The sound speed's change of a reply's delay :math:`\\delta` is that of a uniform water column,
+    :math:`\\delta V = -V\\,\\delta/T_v`, :math:`T_v = T\\cos\\xi` its nadir two-way time, :math:`V` the solver's
+    speed (for GARPOS this is its :math:`\\gamma V`)."""
+    f = survey.log.frame
+    parts = []
+    for k, (_, _, rows, sol) in enumerate(segments, start=1):
+        fit = sol.perturbation
+        src = f.iloc[rows]
+        nadir = src["twtt_s"].to_numpy() * fit.mapping
+        parts.append(pd.DataFrame({
+            "segment": k, "ping": src["ping"].to_numpy(), "transponder": src["transponder"].to_numpy(),
+            "t_s": fit.mid_time, "nadir_cosine": fit.mapping, "observed_s": fit.observed, "ntd_s": fit.delay,
+            "residual_s": fit.observed - fit.delay, "sound_speed_change_mps": -sol.sound_speed * fit.delay / nadir,
+            "used": sol.used}))
+    return pd.concat(parts, ignore_index=True)[list(NTD_COLUMNS)]
 
 
 def _running(survey: Survey, segment: int, rows: np.ndarray, replies, sol: Solution, legs: LegModel | None,
@@ -576,9 +815,70 @@ def write_calibration(result: Calibration, out: Path | str, extra: dict | None =
         if result.running is not None:
             result.running.to_csv(tmp / "running.csv", index=False)
             _running_figure(result, tmp / "running.png", plt)
+        if result.ntd is not None:
+            result.ntd.to_csv(tmp / "ntd.csv", index=False)
+            _ntd_figure(result, tmp / "ntd.png", plt)
+        if result.search is not None:
+            result.search.to_csv(tmp / "criterion.csv", index=False)
+            _criterion_figure(result, tmp / "criterion.png", plt)
         for name, write in (extra or {}).items():
             write(tmp / name)
     return out
+
+
+def _ntd_figure(result: Calibration, path: Path, plt) -> None:
+    """SeaGap's figure of the perturbation: each transponder's nadir-normalised residual of the legs (less the
+    gradients) and the solved delay against time, and what remains."""
+    r = result.ntd
+    title = result.solution["title"] or result.survey.name
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True)
+    t0 = float(r["t_s"].min())
+    used = r[r["used"]]
+    for j, tid in enumerate(result.survey.ids):
+        mine = used[used["transponder"] == tid]
+        hours = (mine["t_s"] - t0) / 3600.0
+        top.plot(hours, mine["observed_s"] * 1e3, "+", ms=3, color=f"C{j % 10}", label=f"transponder {tid}")
+        bottom.plot(hours, mine["residual_s"] * 1e3, "+", ms=3, color=f"C{j % 10}")
+    for k, part in r.groupby("segment"):
+        part = part.sort_values("t_s")
+        top.plot((part["t_s"] - t0) / 3600.0, part["ntd_s"] * 1e3, "k-", lw=1.2,
+                 label="perturbation (nadir delay)" if k == 1 else None)
+    top.set(ylabel="nadir-normalised delay [ms]", title=f"Sound-speed perturbation, {title}")
+    bottom.set(xlabel="time [h from the first reply]", ylabel="residual [ms]")
+    for ax in (top, bottom):
+        ax.grid(True, lw=0.3)
+    top.legend(fontsize=7, ncol=3)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _criterion_figure(result: Calibration, path: Path, plt) -> None:
+    """The search's criteria against the number of bases (SeaGap's AIC and BIC) or the smoothness (GARPOS's ABIC),
+    the chosen candidate marked."""
+    table = result.search
+    garpos = table["abic"].notna().any()
+    names = ["abic"] if garpos else ["aic", "bic"]
+    chosen = "abic" if garpos else result.survey.solver["criterion"]
+    axis = "log_lambda0" if garpos and table["log_lambda0"].nunique() > 1 else "n_bases"
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for k, part in table.groupby("segment"):
+        others = [c for c in ("log_grad_lambda", "mu_t", "mu_mt") if part[c].nunique() > 1]
+        for values, line in (part.groupby(others) if others else [((), part)]):
+            line = line.sort_values(axis)
+            for name in names:
+                label = ", ".join([name.upper()] + [f"{c} {v:g}" for c, v in zip(others, np.atleast_1d(values))])
+                ax.plot(line[axis], line[name], "+-", label=label + (f", segment {k}" if k > 1 else ""))
+        best = part[part["chosen"]]
+        ax.axvline(float(best[axis].iloc[0]), color="r", lw=0.8)
+        ax.annotate(f"{best[axis].iloc[0]:g} ({chosen.upper()})", (float(best[axis].iloc[0]),
+                                                                      float(best[chosen].iloc[0])),
+                    textcoords="offset points", xytext=(4, -12), color="r")
+    ax.set(xlabel={"n_bases": "number of B-spline bases", "log_lambda0": "log10 lambda0^2"}[axis],
+           ylabel="criterion", title=f"Model selection, {result.solution['title'] or result.survey.name}")
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
 
 
 def _running_figure(result: Calibration, path: Path, plt) -> None:
@@ -616,6 +916,7 @@ def _running_figure(result: Calibration, path: Path, plt) -> None:
     plt.close(fig)
 
 
-__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "OUTPUT_FILES", "PROPAGATIONS", "RUNNING_COLUMNS",
-           "RUNNING_FILES", "SOLVER_KEYS",
-           "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model", "load_survey", "write_calibration"]
+__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES",
+           "PERTURBATION_FILES", "PROPAGATIONS", "RUNNING_COLUMNS", "RUNNING_FILES", "SEARCH_FILES", "SEARCH_KEYS",
+           "SOLVER_KEYS", "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model", "load_survey",
+           "perturbations", "profile_of", "write_calibration"]

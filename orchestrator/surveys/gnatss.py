@@ -448,16 +448,16 @@ def _harmonic_function():
                        [harmonic_mean(z1, z2, 0.0, count, nodes, slowness)]), MAX_PROFILE_ROWS
 
 
-def harmonic_mean_speed(z1: float, z2: float, profile: str = "ctd:NCL1") -> float:
+def harmonic_mean_speed(z1: float, z2: float, profile: str | np.ndarray = "ctd:NCL1") -> float:
     """Harmonic-mean sound speed of a profile between two depths [m/s], by sblsim's acoustics model.
 
     Parameters
     ----------
     z1, z2 : float
         Depths [m, positive down].
-    profile : str
+    profile : str or numpy.ndarray
         An ``acoustics.sound_speed_profile`` value (``ctd:NCL1``: the NCL1 cast, resampled to the model's
-        table of at most 256 rows).
+        table of at most 256 rows), or a table (rows, 2) of depth [m] and speed [m/s].
 
     Returns
     -------
@@ -469,7 +469,7 @@ def harmonic_mean_speed(z1: float, z2: float, profile: str = "ctd:NCL1") -> floa
     ModelError
         An unknown or unreadable profile, or a constant one (no table).
     """
-    table = profile_table(profile, "", 15.0, 35.0)
+    table = profile if isinstance(profile, np.ndarray) else profile_table(profile, "", 15.0, 35.0)
     if table.shape[0] == 0:
         raise ModelError(f"profile: {profile!r} has no table; give a cast such as ctd:NCL1")
     function, rows = _harmonic_function()

@@ -106,7 +106,8 @@ class SurveyLog:
             return f[[f"{prefix}_e_m", f"{prefix}_n_m", f"{prefix}_u_m"]].to_numpy(float)
 
         return Replies(block("tx"), block("tx_sigma"), block("rx"), block("rx_sigma"), f["twtt_s"].to_numpy(float),
-                       f["transponder"].map(index).to_numpy(int))
+                       f["transponder"].map(index).to_numpy(int), f["t_tx_s"].to_numpy(float),
+                       f["t_rx_s"].to_numpy(float))
 
 
 def check_frame(frame: pd.DataFrame, where: list[str], source: str) -> SurveyLog:

@@ -14,7 +14,9 @@ with the solver's covariance, and the horizontal bound of the pattern from the C
 
 The solver is told the true sound speed plus ``survey.sound_speed_error_mps`` (``solver.sound_speed_mps`` is
 not set by hand here) and, unless ``solver.twtt_sigma_s`` is given, the simulation's own TWTT noise
-(turnaround jitter and measurement noise together).
+(turnaround jitter and measurement noise together). A moving ocean (``survey.ntd_sigma_s``, its time scale and
+gradient) delays every reply; ``solver.perturbation`` solves it (the bound is then that of the positions with
+the perturbation's unknowns), or leaves it in the residuals.
 
 The survey error an LBL design takes (``platform.survey_sigma``, one sigma for the three axes) is
 :func:`survey_sigma`: the replicates' RMS error per axis when there are several, else the calibration's own
@@ -221,8 +223,9 @@ def solve_replicate(sim: SimulatedSurvey, k: int) -> Outcome:
         nees = float(error_enu @ np.linalg.solve(covariance, error_enu))
     except np.linalg.LinAlgError:
         nees = float("nan")
+    solved = result.segments[0][3].perturbation  # the bound of the perturbation solved (a search's choice)
     bound = crb(s.true, s.truth, s.sound_speed, solve_sound_speed=sim.solver["solve_sound_speed"],
-                twtt_sigma=s.twtt_sigma)
+                twtt_sigma=s.twtt_sigma, perturbation=None if solved is None else solved.settings)
     row = {"replicate": k, "id": TRANSPONDER_ID, "e_n_m": float(error_enu[1]), "e_e_m": float(error_enu[0]),
            "e_u_m": float(error_enu[2]), "nees": nees, "pcrb_h_m": float(math.sqrt(bound[0, 0] + bound[1, 1]))}
     return Outcome(result, s, row)
