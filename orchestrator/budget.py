@@ -72,6 +72,8 @@ SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
                     ("acoustics.sound_speed_profile=constant",
                      "acoustics.sound_speed_true={acoustics.sound_speed_assumed}")),
     "clock_drift": ("receiver clock drift", ("acoustics.clock_drift_ppm=0",)),
+    "moving_ocean": ("the moving ocean: the sound speed's smooth change in time (nadir total delay)",
+                     ("acoustics.ntd_sigma_ppm=0",)),
     "multipath": ("multipath: ranges from a reflected path (outliers, or the surface and sea-floor eigenrays)",
                   ("acoustics.outlier_pct=0", "acoustics.water_depth=0")),
     "ambient_noise": ("ambient noise: arrivals missed and timing and angle noise grown below the reference SNR",

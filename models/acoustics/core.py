@@ -122,7 +122,10 @@ from sblsim.models.platform.waves import WAVE_HEIGHT
 from sblsim.models.program import ProgramBuilder, Stream
 from sblsim.models.systems import interface_system
 
-_CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK, _DETECTION = range(6)
+(_CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK, _DETECTION, _OCEAN_FREQUENCY,
+ _OCEAN_PHASE) = range(8)
+#: Random Fourier features of the moving ocean's travel-time perturbation (:func:`ocean_perturbation`).
+OCEAN_FEATURES = 16
 #: Ranging modes: one-way travel time (synchronized clocks) or two-way (interrogation and reply).
 RANGING = ("owtt", "twtt")
 #: The packet a slot delivers: outputs of the channel, inputs of every receiver (whose FMUs refuse a value outside
@@ -155,6 +158,35 @@ DIRECTION: tuple[Variable, ...] = (
              "(0 when lost)", discrete=True,
              min=-10.0, max=10.0),
 )
+#: The moving ocean (declared after every other variable of the channel: their value references stay): the
+#: sound speed's smooth change in time, the same on every path, as the nadir total delay (NTD) of GNSS-Acoustic
+#: seafloor geodesy models it (docs/calibration.md).
+OCEAN_VARIABLES: tuple[Variable, ...] = (
+    Variable("ntd_sigma_ppm", "parameter", "Real", 0.0, "ppm",
+             "Moving ocean: std of the travel times' relative change in time (the nadir total delay over the nadir "
+             "travel time; 0: a steady ocean)", min=0.0, max=1e4),
+    Variable("ntd_time_scale", "parameter", "Real", 1800.0, "s",
+             "Moving ocean: time scale of the change (a Gaussian correlation exp(-dt^2 / (2 scale^2)))",
+             min=1.0, max=1e7),
+)
+
+
+def ocean_perturbation(t, sigma, frequency, phase) -> ca.SX:
+    """The moving ocean's relative travel-time change ε(t) at the epoch ``t`` [s]: a stationary Gaussian process of
+    standard deviation ``sigma`` [1] and Gaussian correlation ``exp(−Δt² / (2 ℓ²))``, drawn as random Fourier
+    features, ``ε(t) = σ √(2/M) Σ_m cos(ω_m t + φ_m)``, with ``ω_m ~ N(0, 1/ℓ²)`` (``frequency`` (M, 1) [rad/s])
+    and ``φ_m ~ U(0, 2π)`` (``phase`` (M, 1) [rad]) drawn once per run; a path's travel time is multiplied by
+    ``1 + ε``.
+
+    References
+    ----------
+    Rahimi, Recht, "Random features for large-scale kernel machines", NIPS 2007. Tomita, Kido, "SeaGap", 2022
+    (the nadir total delay of GNSS-A); Watanabe et al., Front. Earth Sci. 8:597532, 2020 (GARPOS).
+    """
+    m = frequency.shape[0]
+    return sigma * math.sqrt(2.0 / m) * ca.sum1(ca.cos(frequency * t + phase))
+
+
 #: The Euler angles of an attitude, in the order of :func:`~sblsim.models.platform.geometry.rotation_ned`'s arguments.
 ATTITUDE_ANGLES = ("roll", "pitch", "yaw")
 #: What a USBL packet carries of the array's own measurement: the direction cosines of the reply across the array's
@@ -476,14 +508,14 @@ class Acoustics(Component):
         )
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
-                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES)
+                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES + OCEAN_VARIABLES)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
-                + FAMILY_TABLE_VARIABLES + DOA_ARRAY)
+                + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES)
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
@@ -524,7 +556,9 @@ class Acoustics(Component):
                    if name not in {v.name for v in OVERFLOW + OVERRUN} | {"beacon_id", "tx_time"}]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
-                           + [("delivered_end", 1)], derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
+                           + [("delivered_end", 1), ("ocean_frequency", OCEAN_FEATURES),
+                              ("ocean_phase", OCEAN_FEATURES)],
+                           derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
                                     ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
                                     ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS), ("site", len(SITE)),
                                     ("family_values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS)])
@@ -554,7 +588,10 @@ class Acoustics(Component):
             zero = {name: 0 for name in packet}
             empty = {name: ca.SX.zeros(size) for name, size in queue}
             return {"t0": t0, "k": 0, **zero, "tx_time": t0, "rx_time": t0, **empty,
-                    "delivered_end": t0 - p["slot_period"]}
+                    "delivered_end": t0 - p["slot_period"],
+                    # the moving ocean's features, drawn once per run (their own streams)
+                    "ocean_frequency": w[_OCEAN_FREQUENCY] / p["ntd_time_scale"],
+                    "ocean_phase": 2.0 * math.pi * w[_OCEAN_PHASE]}
 
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
@@ -581,6 +618,11 @@ class Acoustics(Component):
                     and the SNR and detection probability of that arrival (``snr``: the first **detected** of the
                     leg's eigenrays with the uniforms ``draw … draw + 2``, kind 0 when none is; else 0, 0), and
                     the travel time of its latest detected arrival (``snr``; else the travel time)."""
+                    # the moving ocean at the leg's start: every travel time of the leg scaled by 1 + ε
+                    slower = 1.0 + ocean_perturbation(t_k - x["t0"] + (0.0 if offset is None else offset),
+                                                      p["ntd_sigma_ppm"] * 1e-6, x["ocean_frequency"],
+                                                      x["ocean_phase"])
+
                     def path(tau):
                         receive = position + velocity * (tau if offset is None else offset + tau)
                         distance = ca.norm_2(receive - beacon)
@@ -589,7 +631,7 @@ class Acoustics(Component):
                         speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
                                               d["nodes"], d["slowness"])
                         if propagation == "straight":
-                            return distance / speed, distance, receive, (chord, chord, 1.0)
+                            return distance / speed * slower, distance, receive, (chord, chord, 1.0)
                         # ray: the earliest eigenray; a shadow zone (no arrival) loses the packet, and the
                         # straight line keeps the rest finite
                         # (interpolated in the run's eigenray table where it holds)
@@ -598,7 +640,7 @@ class Acoustics(Component):
                             p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"],
                             d["speeds"], d["ray_bounds"], d["ray_grid"], d["ray_values"])
                         found = r_kind > 0
-                        tau = ca.if_else(found, r_tau, distance / speed)
+                        tau = ca.if_else(found, r_tau, distance / speed) * slower
                         angles = (ca.if_else(found, r_launch, chord), ca.if_else(found, r_arrival, chord), r_kind)
                         return tau, distance, receive, angles
 
@@ -608,7 +650,7 @@ class Acoustics(Component):
                     if not snr_mode:
                         return tau, distance, receive, angles, 0.0, 0.0, tau
                     heard = hear(beacon, receive, p, d, heard_draws[draw:draw + 3])
-                    return heard[0], distance, receive, heard[1:4], heard[4], heard[5], heard[6]
+                    return heard[0] * slower, distance, receive, heard[1:4], heard[4], heard[5], heard[6] * slower
 
                 draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
                 drift = p["clock_drift_ppm"] * 1e-6
@@ -799,12 +841,11 @@ class Acoustics(Component):
                 events.append(b.event(f"slot_{ranging}_{suffix}", due, slot(ranging, propagation, detection),
                                       streams + extra + heard, when={"ranging": (ranging,), **chosen}))
         events.append(b.event("deliver", deliverable, deliver))  # after the slots: a packet is sent, then arrives
-        return b.program(b.prepare(prepare), b.init(init), b.output(output), events=events)
+        ocean = (Stream(_OCEAN_FREQUENCY, "normal", OCEAN_FEATURES), Stream(_OCEAN_PHASE, "uniform", OCEAN_FEATURES))
+        return b.program(b.prepare(prepare), b.init(init, ocean), b.output(output), events=events)
 
 
-__all__ = [
-    "Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
-    "DOA_ARRAY", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "OVERFLOW", "OVERRUN",
-    "OWTT_ITERATIONS", "PACKET", "PROPAGATION", "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS",
-    "TARGET_INPUTS"
-]
+__all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
+           "DOA_ARRAY", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "OCEAN_FEATURES",
+           "ocean_perturbation", "OCEAN_VARIABLES", "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PROPAGATION",
+           "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS"]
