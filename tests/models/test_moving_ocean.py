@@ -1,0 +1,56 @@
+"""The moving ocean of the channel: every travel time scaled by ``1 + ε(t)``, ε a smooth stationary random process.
+
+* :func:`sblsim.models.acoustics.core.ocean_perturbation` against its covariance: over many draws of its random
+  Fourier features (numpy), the standard deviation is σ and the correlation at a lag τ is ``exp(−τ² / (2 ℓ²))``.
+* Through the channel (an LBL of one-way ranges, no range noise, the assumed speed the true one): every range is its
+  true length times ``1 + ε(t)``, the same ε for every transponder at one time, of std σ over runs, changing
+  smoothly within a run; with σ = 0 the ranges are exactly those of a steady ocean.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from sblsim.models.acoustics.core import OCEAN_FEATURES, ocean_perturbation
+from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.run import run
+
+
+def test_the_perturbation_has_its_std_and_gaussian_correlation():
+    t, sigma, w, phi = ca.SX.sym("t"), ca.SX.sym("s"), ca.SX.sym("w", OCEAN_FEATURES), ca.SX.sym("p", OCEAN_FEATURES)
+    f = ca.Function("eps", [t, sigma, w, phi], [ocean_perturbation(t, sigma, w, phi)])
+    rng = np.random.default_rng(4)
+    scale, draws = 600.0, 20000
+    omega = rng.normal(size=(draws, OCEAN_FEATURES)) / scale
+    phase = rng.uniform(0, 2 * np.pi, size=(draws, OCEAN_FEATURES))
+    mapped = f.map(draws)
+    at = {lag: np.asarray(mapped(1000.0 + lag, 2e-4, omega.T, phase.T)).ravel() for lag in (0.0, scale, 3 * scale)}
+    assert np.std(at[0.0]) == pytest.approx(2e-4, rel=0.03)
+    assert np.corrcoef(at[0.0], at[scale])[0, 1] == pytest.approx(np.exp(-0.5), abs=0.03)
+    assert abs(np.corrcoef(at[0.0], at[3 * scale])[0, 1]) < 0.05
+
+
+@pytest.fixture(scope="module")
+def lbl():
+    sets = ["platform.system=lbl", "acoustics.ranging=owtt", "acoustics.sigma_range=0", "simulation.duration=120",
+            "simulation.sampling_time=1", "acoustics.ntd_time_scale=60"]
+    steady = run(load_config("random-walk", sets), replicates=range(40)).timeseries
+    moving = run(load_config("random-walk", sets + ["acoustics.ntd_sigma_ppm=1000"]), replicates=range(40)).timeseries
+    return steady, moving
+
+
+def test_every_range_is_its_length_times_one_plus_the_oceans_change(lbl):
+    steady, moving = lbl
+    np.testing.assert_array_equal(moving["range_true"], steady["range_true"])  # the geometry is the same
+    valid = moving["packet_valid"].astype(bool) & (moving["range_true"] > 0)
+    ratio = (moving["range"] / moving["range_true"] - 1.0)[valid]
+    steady_ratio = (steady["range"] / steady["range_true"] - 1.0)[valid]
+    assert np.abs(steady_ratio).max() < 2e-6  # a steady ocean: only the diver's motion over the travel time
+    change = ratio - steady_ratio
+    assert np.std(change) == pytest.approx(1e-3, rel=0.2)  # σ = 1000 ppm over 40 runs
+    # smooth within a run: the change of ε between consecutive packets (1 s) is small against its spread (60 s)
+    frame = moving[valid].assign(change=change)
+    steps = frame.groupby("replicate")["change"].diff().dropna()
+    assert np.std(steps) < 0.1 * np.std(change)
