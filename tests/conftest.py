@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import subprocess
+from pathlib import Path
+
 import pytest
+
+#: The project's plain C FMI host (one FMU twice, or a system of FMUs: its header comment).
+C_HOST = Path(__file__).with_name("fmus_tests") / "c_host.c"
 
 
 @pytest.fixture(scope="session")
@@ -33,3 +39,16 @@ def fmu_dir(tmp_path_factory, request):
             shared.mkdir(exist_ok=True)
             build(shared)
     return shared
+
+
+@pytest.fixture(scope="session")
+def c_host(tmp_path_factory) -> Path:
+    """The plain C host (:data:`C_HOST`), compiled with the system compiler and the FMI headers fmpy ships."""
+    from sblsim.fmus.codegen import fmi_headers_dir
+    from sblsim.fmus.compiler import find_compiler
+
+    exe = tmp_path_factory.mktemp("host") / "c_host"
+    cc = find_compiler("system")
+    subprocess.run([*cc.command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(C_HOST), "-o", str(exe), "-ldl"],
+                   check=True, capture_output=True)
+    return exe
