@@ -30,13 +30,20 @@ import tempfile
 import time
 import zipfile
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from sblsim.fmus.codegen import C_DIR, model_guid, write_sources
-from sblsim.fmus.compiler import CROSS_PLATFORMS, PLATFORMS, CompileError, compile_library, find_compiler, host_platform
+from sblsim.fmus.compiler import (
+    CROSS_PLATFORMS,
+    PLATFORMS,
+    CompileError,
+    cache_dir,
+    compile_library,
+    find_compiler,
+    host_platform,
+)
 from sblsim.fmus.contract import contract_header
 from sblsim.fmus.description import model_description
-from sblsim.fmus.native import cache_dir
 from sblsim.models import MODELS
 from sblsim.models.systems import interface_system
 
@@ -60,7 +67,7 @@ def default_dir() -> Path:
 
     ``$SBLSIM_FMU_DIR`` when set; else the checkout's ``fmus/build/`` in an editable install; else (an
     installed wheel, whose site-packages may be read-only) a folder of the user's cache keyed by the
-    installed sources, ``<cache>/fmus/build-<digest>`` (:func:`sblsim.fmus.native.cache_dir`: ``$SBLSIM_CACHE_DIR``
+    installed sources, ``<cache>/fmus/build-<digest>`` (:func:`sblsim.fmus.compiler.cache_dir`: ``$SBLSIM_CACHE_DIR``
     or platformdirs' user cache, e.g. ``~/.cache/sblsim`` on Linux).
     """
     if os.environ.get("SBLSIM_FMU_DIR"):
@@ -89,7 +96,9 @@ def beacons_dir(directory: Path | str, n_beacons: int = 4) -> Path:
 
 
 def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, compiler: str = "auto",
-              cross: bool | None = None, report: Callable[[str], object] | None = None) -> Path:
+              cross: bool | None = None, report: Callable[[str], object] | None = None,
+              parameters: Mapping[str, Any] | None = None, experiment: tuple[float, float] | None = None,
+              built_for: str = "") -> Path:
     """Build one model's FMU into ``out_dir``.
 
     Parameters
@@ -110,6 +119,15 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
     report : callable, optional
         Called with one line before each platform's binary is compiled (which platform, how many are left
         and, after the first, the time left) [default: silent].
+    parameters : mapping, optional
+        FMU parameter values (String choices as text) compiled in as the defaults and written as the start
+        values of ``modelDescription.xml``, so that a host that sets nothing runs them (a scenario's:
+        :func:`sblsim.orchestrator.scenario_fmus.build_scenario_fmus`); every other parameter keeps its
+        declared start, and a host may still set any of them [default: the declared starts].
+    experiment : (float, float), optional
+        The default experiment's step size and stop time [s] [default: 0.1 s and 100 s].
+    built_for : str, optional
+        What ``parameters`` are (e.g. ``scenario lbl-field, seed 0``), said in the model's description.
 
     Returns
     -------
@@ -120,8 +138,11 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
     ------
     CompileError
         If the compiler is missing or fails.
+    ModelError
+        If a value of ``parameters`` is not a parameter of the model or is outside its allowed range.
     """
     model = component if isinstance(component, type) else MODELS[component]
+    p_start = None if parameters is None else model.parameter_vector(parameters, n_beacons)
     component = model.name
     cc = find_compiler(compiler)
     cross = cc.zig if cross is None else cross
@@ -132,7 +153,7 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
     target = fmu_path(out_dir, component)
     with tempfile.TemporaryDirectory(prefix="sblsim_fmu_") as tmp:
         root = Path(tmp)
-        sources = write_sources(model, n_beacons, root / "sources")
+        sources = write_sources(model, n_beacons, root / "sources", p_start=p_start)
         c_files = [root / "sources" / f for f in sources.files if f.endswith(".c")]
         start = time.perf_counter()
         for k, platform in enumerate(platforms):
@@ -145,8 +166,10 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
             compile_library(cc if platform == host_platform() else zig_cc, c_files,
                             folder / f"sblsim_{component}{PLATFORMS[platform][1]}", [root / "sources"],
                             [f"SBLSIM_MODEL={sources.symbol}"], platform)
+        step_size, stop_time = experiment or (0.1, 100.0)
         (root / "modelDescription.xml").write_bytes(
-            model_description(model, n_beacons, sources.guid, list(sources.files)))
+            model_description(model, n_beacons, sources.guid, list(sources.files), step_size, stop_time, p_start,
+                              built_for))
         partial = out_dir / f".{target.name}.{os.getpid()}.partial"  # builds of the same FMU may run at once
         try:
             with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as archive:

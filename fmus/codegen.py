@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
+from typing import Sequence
 
 import casadi as ca
 
@@ -137,8 +138,12 @@ def _input_range(v) -> str:
             f".unit = {_cstr(v.unit)}")
 
 
-def model_record(model: type, n_beacons: int, guid: str) -> str:
-    """The C source of a model's ``sblsim_model`` record (everything the runtime needs but the math)."""
+def model_record(model: type, n_beacons: int, guid: str, p_start: Sequence[float] | None = None) -> str:
+    """The C source of a model's ``sblsim_model`` record (everything the runtime needs but the math).
+
+    ``p_start``: the parameters' compiled-in defaults, as they travel in ``p``
+    (:meth:`~sblsim.models.component.Component.parameter_vector`, e.g. a scenario's); default their declared
+    starts."""
     program = model.program(n_beacons)
     symbol = f"{stem(model, n_beacons)}_model"
     variables = model.fmu_variables(n_beacons)
@@ -179,7 +184,10 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
                     f".min = {_num(lo if lo is not None else 0.0)}, .max = {_num(hi if hi is not None else 0.0)}, "
                     f".table = {table}, .row = {row}, .unit = {_cstr(v.unit)}}}")
     lines.append("static const sblsim_parameter parameters[] = {\n    " + ",\n    ".join(rows) + "\n};")
-    lines.append("static const double p_start[] = {" + ", ".join(_num(float(v.fmi_start)) for v in params) + "};")
+    starts = [float(v.fmi_start) for v in params] if p_start is None else [float(x) for x in p_start]
+    if len(starts) != len(params):
+        raise ValueError(f"{model.name}: {len(starts)} compiled-in parameter values for {len(params)} parameters")
+    lines.append("static const double p_start[] = {" + ", ".join(map(_num, starts)) + "};")
     lines.append("static const double u_start[] = {" + (", ".join(_num(float(v.start)) for v in inputs) or "0.0")
                  + "};")
     # an empty table list still needs one element (C has no empty arrays); n_tables says none is used
@@ -247,14 +255,15 @@ def model_record(model: type, n_beacons: int, guid: str) -> str:
     return "\n".join(lines)
 
 
-def model_guid(model: type, n_beacons: int) -> str:
-    """A GUID that changes whenever the generated code or the declarations change."""
+def model_guid(model: type, n_beacons: int, p_start: Sequence[float] | None = None) -> str:
+    """A GUID that changes whenever the generated code, the declarations or the compiled-in defaults change."""
     source, header = casadi_code(model, n_beacons)
-    digest = hashlib.sha256((source + header + model_record(model, n_beacons, "")).encode()).hexdigest()
+    digest = hashlib.sha256((source + header + model_record(model, n_beacons, "", p_start)).encode()).hexdigest()
     return f"{{{digest[:8]}-{digest[8:12]}-{digest[12:16]}-{digest[16:20]}-{digest[20:32]}}}"
 
 
-def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str = FMI_SHELL) -> Sources:
+def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str = FMI_SHELL,
+                  p_start: Sequence[float] | None = None) -> Sources:
     """Write a model's C sources, the runtime, its shared header and (for the FMI shell) the FMI headers into
     ``directory``.
 
@@ -267,6 +276,8 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
         Created if missing.
     shell : str
         ``fmi2_shell.c`` for an FMU, or ``''`` for the generated code and runtime only.
+    p_start : sequence of float, optional
+        The parameters' compiled-in defaults (:func:`model_record`).
 
     Returns
     -------
@@ -277,11 +288,11 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     directory.mkdir(parents=True, exist_ok=True)
     base = stem(model, n_beacons)
     source, header = casadi_code(model, n_beacons)
-    guid = model_guid(model, n_beacons)
+    guid = model_guid(model, n_beacons, p_start)
     files = [f"{base}_casadi.c", f"{base}_casadi.h", f"{base}_model.c"]
     (directory / files[0]).write_text(source)
     (directory / files[1]).write_text(header)
-    (directory / files[2]).write_text(model_record(model, n_beacons, guid))
+    (directory / files[2]).write_text(model_record(model, n_beacons, guid, p_start))
     for name in RUNTIME:
         shutil.copyfile(C_DIR / name, directory / name)
     (directory / CONTRACT).write_text(contract_header())

@@ -1,25 +1,43 @@
 """The C compiler: the system's when there is one, else zig from the ``ziglang`` package.
 
 Every build uses the same flags, which keep the arithmetic IEEE-exact and
-identical between the FMUs and the local engine: ``-O2`` without
+identical between the FMUs and the local engine: ``-O3`` without
 ``-ffast-math``, and ``-ffp-contract=off`` so that no compiler fuses a
 multiply and an add (``fma``) on one platform and not on another. zig also
 cross-compiles the FMU binaries for Windows and macOS.
+
+Each C file is compiled once into an object file kept in the cache
+(:func:`cache_dir`), keyed by everything its compilation reads: the compiler
+and its version, the flags, the target, the file, the local headers it
+includes and the macros it names. A library is then linked from them, so the
+generated code of a model, compiled for the local engine's library, for its
+FMU, for the FMU of a scenario (which differs only in its compiled-in start
+values) or by ``sblsim fmus build`` again, is compiled once. A library's
+objects compile side by side on every core, and processes that need the same
+objects at once share the work (a lock file per object).
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import platform
+import re
 import shlex
 import shutil
 import struct
 import subprocess
 import sys
 import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Sequence
+
+import platformdirs
+from filelock import FileLock, Timeout
 
 from sblsim.models.errors import CompileError
 
@@ -37,6 +55,14 @@ CROSS_PLATFORMS = ("win64", "darwin64")
 #: Mach-O CPU types of the zig targets' architectures, and the alignment (log2) of their slices.
 _MACHO_CPU = {"x86_64": (0x01000007, 3, 12), "aarch64": (0x0100000C, 0, 14)}
 COMPILERS = ("auto", "system", "zig")
+_INCLUDE = re.compile(rb'^\s*#\s*include\s*"([^"]+)"', re.M)
+
+
+def cache_dir() -> Path:
+    """Where compiled objects and libraries are kept: ``$SBLSIM_CACHE_DIR`` or the user's cache folder."""
+    if os.environ.get("SBLSIM_CACHE_DIR"):
+        return Path(os.environ["SBLSIM_CACHE_DIR"])
+    return Path(platformdirs.user_cache_dir("sblsim"))
 
 
 @dataclass(frozen=True)
@@ -151,8 +177,11 @@ def compile_library(compiler: Compiler, sources: Sequence[Path], output: Path, i
             # in a folder of its own: some linkers leave companions (a .pdb, an import .lib) beside the library
             folder = Path(tmp) / str(k)
             folder.mkdir()
-            built.append(_compile(compiler, [*compiler.command, *options], sources, folder / output.name, include,
-                                  defines, target))
+            command = [*compiler.command, *options]
+            objects = _objects(compiler, command, sources, include, defines, target, folder)
+            built.append(_run(compiler, [*command, *FLAGS, *map(str, objects), "-o", str(folder / output.name),
+                                         *([] if target.startswith("win") else ["-lm"])],
+                              folder / output.name, target))
         if len(built) > 1:
             universal_macho(built, Path(tmp) / output.name)
             built = [Path(tmp) / output.name]
@@ -160,18 +189,117 @@ def compile_library(compiler: Compiler, sources: Sequence[Path], output: Path, i
     return output
 
 
-def _compile(compiler: Compiler, command: list[str], sources: Sequence[Path], built: Path, include: Sequence[Path],
-             defines: Sequence[str], target: str) -> Path:
-    """One compiler run into ``built``; raises CompileError with the compiler's first error lines."""
-    command = [*command, *FLAGS, *(f"-I{p}" for p in include), *(f"-D{d}" for d in defines),
-               *(str(s) for s in sources), "-o", str(built)]
-    if not target.startswith("win"):
-        command.append("-lm")
+@lru_cache(maxsize=None)
+def _identity(compiler: Compiler) -> bytes:
+    """The compiler's command and the version it reports (another compiler or version: other objects)."""
+    try:
+        version = subprocess.run([*compiler.command, "--version"], capture_output=True, timeout=120).stdout
+    except (OSError, subprocess.SubprocessError):
+        version = b""
+    return repr(compiler.command).encode() + b"\0" + version
+
+
+def _headers(text: bytes, include: Sequence[Path], seen: dict[str, bytes]) -> None:
+    """The local headers (``#include "..."`` found in ``include``) a text includes, transitively, into ``seen``."""
+    for name in _INCLUDE.findall(text):
+        name = name.decode()
+        if name in seen:
+            continue
+        for folder in include:
+            path = Path(folder) / name
+            if path.is_file():
+                seen[name] = path.read_bytes()
+                _headers(seen[name], include, seen)
+                break
+        else:
+            seen[name] = b""
+
+
+@dataclass(frozen=True)
+class _Object:
+    """One C file's object: where it is kept, and the compiler command that makes it (but its output)."""
+
+    source: Path
+    path: Path
+    command: tuple[str, ...]
+    target: str
+    compiler: Compiler
+
+
+def _plan_object(compiler: Compiler, command: list[str], source: Path, include: Sequence[Path],
+                 defines: Sequence[str], target: str, folder: Path) -> _Object:
+    """``source``'s object in ``folder``, named by a key of everything its compilation reads: the compiler's
+    identity, the command's options and the flags, the target, the file's name and bytes, the bytes of the local
+    headers it includes and the macros whose names its text (or those headers') holds."""
+    text = source.read_bytes()
+    headers: dict[str, bytes] = {}
+    _headers(text, include, headers)
+    everything = b"\0".join([text, *headers.values()])
+    used = [d for d in defines if re.search(rb"\b" + re.escape(d.split("=", 1)[0].encode()) + rb"\b", everything)]
+    digest = hashlib.sha256(_identity(compiler) + repr((command[len(compiler.command):], FLAGS, target, used,
+                                                        source.name)).encode())
+    for name in sorted(headers):
+        digest.update(name.encode() + b"\0" + headers[name] + b"\0")
+    digest.update(text)
+    return _Object(source, folder / f"{digest.hexdigest()[:40]}.o",
+                   (*command, *FLAGS, *(f"-I{p}" for p in include), *(f"-D{d}" for d in used), "-c", str(source),
+                    "-o"), target, compiler)
+
+
+def _make(item: _Object, wait: bool, locked: bool = True) -> bool:
+    """Make ``item``'s object unless it is there; with ``locked``, under its lock file, which another process may
+    hold (then, without ``wait``, leave it to that process: False)."""
+    if item.path.is_file():
+        return True
+    lock = FileLock(str(item.path) + ".lock", timeout=-1 if wait else 0) if locked else None
+    if lock is not None:
+        try:
+            lock.acquire()
+        except Timeout:
+            return False
+    try:
+        if not item.path.is_file():
+            partial = item.path.with_name(f".{item.path.name}.{os.getpid()}.{threading.get_ident()}.partial")
+            try:
+                _run(item.compiler, [*item.command, str(partial)], partial, item.target, item.source.name)
+                os.replace(partial, item.path)
+            finally:
+                partial.unlink(missing_ok=True)
+    finally:
+        if lock is not None:
+            lock.release()
+    return True
+
+
+def _objects(compiler: Compiler, command: list[str], sources: Sequence[Path], include: Sequence[Path],
+             defines: Sequence[str], target: str, work: Path) -> list[Path]:
+    """The sources' objects: from the cache, else compiled (several at once, on every core) and kept.
+
+    Processes that need the same objects at once share the work: each first compiles those no other is
+    compiling, then waits for the rest. A cache that cannot be written only costs the compilations (into
+    ``work``)."""
+    folder = cache_dir() / "objects"
+    try:  # a cache this process can write into (checked by writing)
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+        locked = True
+    except OSError:
+        folder, locked = work, False
+    items = [_plan_object(compiler, command, Path(source), include, defines, target, folder) for source in sources]
+    with ThreadPoolExecutor(max_workers=max(1, min(len(items), os.cpu_count() or 1))) as pool:
+        done = list(pool.map(lambda item: _make(item, False, locked), items))
+        list(pool.map(lambda item: _make(item, True, locked), [i for i, ok in zip(items, done) if not ok]))
+    return [item.path for item in items]
+
+
+def _run(compiler: Compiler, command: list[str], built: Path, target: str, what: str = "") -> Path:
+    """One compiler run that writes ``built`` (of ``what``, default its name); raises CompileError with the
+    compiler's first error lines."""
     result = subprocess.run(command, capture_output=True, text=True, cwd=built.parent)
     if result.returncode != 0 or not built.is_file():
         errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
         detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
-        raise CompileError(f"compiler: {compiler.describe()} failed for {built.name} ({target}): {detail}")
+        raise CompileError(f"compiler: {compiler.describe()} failed for {what or built.name} ({target}): {detail}")
     return built
 
 
@@ -207,5 +335,6 @@ def universal_macho(slices: Sequence[Path], output: Path) -> Path:
             out.write(blob)
     return output
 
-__all__ = ["COMPILERS", "CROSS_PLATFORMS", "CompileError", "Compiler", "FLAGS", "PLATFORMS", "compile_library",
+__all__ = ["COMPILERS", "CROSS_PLATFORMS", "CompileError", "Compiler", "FLAGS", "PLATFORMS", "cache_dir",
+           "compile_library",
            "find_compiler", "host_platform", "universal_macho", "zig"]

@@ -30,11 +30,10 @@ from typing import Any, Callable
 
 import casadi as ca
 import numpy as np
-import platformdirs
 
 import sblsim.models
 from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
-from sblsim.fmus.compiler import FLAGS, PLATFORMS, compile_library, find_compiler, host_platform
+from sblsim.fmus.compiler import FLAGS, PLATFORMS, cache_dir, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
 from sblsim.models.acoustics.detection import family_levels
@@ -54,13 +53,6 @@ RAY_EXPORT = """#if defined(_WIN32)
 #: The compiled loop of a system's own bound (the library of that system's interface only).
 SYSTEM_BOUND = "sblsim_system_bound.c"
 
-
-
-def cache_dir() -> Path:
-    """Where compiled libraries are kept: ``$SBLSIM_CACHE_DIR`` or the user's cache folder."""
-    if os.environ.get("SBLSIM_CACHE_DIR"):
-        return Path(os.environ["SBLSIM_CACHE_DIR"])
-    return Path(platformdirs.user_cache_dir("sblsim"))
 
 
 def _registry(n_beacons: int, models: tuple[type, ...]) -> str:

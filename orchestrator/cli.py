@@ -45,6 +45,7 @@ from sblsim.orchestrator.master import ALGORITHMS
 from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
 from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.scenario_fmus import build_scenario_fmus
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
 from sblsim.orchestrator.study import load_study
 from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
@@ -242,6 +243,16 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--system", choices=_OWNERS, default=_OWNERS[0],
                    help=f"{_FIXED}: the interfaces of that system (its folder of the output); the others use the "
                         f"{_OWNERS[0]} interfaces of --beacons N (default {_OWNERS[0]})")
+    b.add_argument("--scenario", default=None, metavar="NAME|CONFIG.toml",
+                   help="build that scenario's FMUs (the set `sblsim ssp export` packs, into --out, which is "
+                        "required) with its parameters as their start values and compiled-in defaults: a host that "
+                        "sets nothing runs the scenario (docs/interop.md)")
+    b.add_argument("--seed", type=int, default=None, help="with --scenario: the campaign seed (default: the "
+                   "configuration's, 0)")
+    b.add_argument("--receiver", default=None,
+                   help="with --scenario: ekf, ekf-seq, ukf, lsq or model:PATH.py (default: the scenario's)")
+    b.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --scenario: override a configuration key (repeatable)")
     fsub.add_parser("variables", help="print every FMU's variables as Markdown tables (from the declarations)")
     v = fsub.add_parser("validate", help="validate the FMUs with fmpy")
     v.add_argument("dir", type=Path, nargs="?", default=None, help=f"directory of the FMUs (default {DEFAULT_DIR})")
@@ -714,6 +725,12 @@ def _fmus(args: argparse.Namespace) -> int:
         def say(line: str) -> None:  # each target's binary takes seconds (cross: a minute): progress lines
             print(f"sblsim: {line}", file=sys.stderr, flush=True)
 
+        if args.scenario is not None:
+            return _scenario_fmus(args, say)
+        for option, given in (("--seed", args.seed is not None), ("--receiver", args.receiver is not None),
+                              ("--set", bool(args.overrides))):
+            if given:
+                raise ModelError(f"{option}: only with --scenario NAME|CONFIG.toml (the scenario's FMUs)")
         out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
         _check_writable(out)
         if args.model is not None:
@@ -738,6 +755,33 @@ def _fmus(args: argparse.Namespace) -> int:
         for problem in problems:
             print(f"  {problem}")
     return 1 if failures else 0
+
+
+def _scenario_fmus(args: argparse.Namespace, say: Callable[[str], None]) -> int:
+    """``sblsim fmus build --scenario``: the scenario's FMUs, its parameters as their defaults."""
+    for option, given in (("--model", args.model is not None), ("--beacons", args.beacons != 4),
+                          ("--system", args.system != _OWNERS[0])):
+        if given:
+            raise ModelError(f"{option}: not with --scenario, whose configuration sets the system, beacons and "
+                             "receiver (--receiver NAME)")
+    if args.out is None:
+        raise ModelError("--out: give the folder for the scenario's FMUs (--scenario needs --out DIR)")
+    _check_seed(args.seed)
+    overrides = list(args.overrides)
+    if args.receiver is not None:
+        check_receiver(args.receiver, "--receiver")
+        if external_path(args.receiver):
+            raise ModelError(f"--receiver: {args.receiver!r} is an FMU; a scenario is built into the FMUs sblsim "
+                             "generates: ekf, ekf-seq, ukf, lsq or model:PATH.py")
+        overrides.append(f"receiver={args.receiver}")
+    plan = api._plan(args.scenario, args.seed, overrides)
+    _check_writable(args.out)
+    for path in build_scenario_fmus(plan, args.out, args.compiler, args.cross, report=say):
+        print(f"built {path}", flush=True)
+    print(f"the FMUs' start values are {plan.scenario}'s (seed {plan.seed}, receiver {plan.receiver}); a host "
+          f"that sets nothing runs it for {plan.duration:g} s in steps of "
+          f"{plan.sampling_time / plan.ekf_rate_ratio:g} s")
+    return 0
 
 
 def _output(given: Path | None, default: Path, force: bool, marker: str, what: str,

@@ -172,6 +172,16 @@ def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any],
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+def check_no_latency(plan: RunPlan, what: str, error: type[Exception]) -> None:
+    """Raise ``error`` if ``receiver.latency`` > 0: the orchestrator delays the receiver's recorded outputs after
+    a run, and an FMI host stepping the exported system (SSP package or scenario FMUs) would show them undelayed
+    (other numbers than ``sblsim run``)."""
+    latency = plan["receiver"].get("latency", 0.0)
+    if latency > 0.0:
+        raise error(f"receiver.latency: {latency:g} s cannot be {what}: the orchestrator delays the receiver's "
+                    f"outputs after a run, an FMI host would show them undelayed; use receiver.latency = 0")
+
+
 def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None = None,
                connections: Sequence[Connection] | None = None) -> Path:
     """Write a run's plan as an SSP 1.0 archive.
@@ -203,10 +213,7 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     if out.suffix != ".ssp":
         raise SspError(f"--out: {str(out)!r} must end in .ssp")
     plan = as_plan(cfg)
-    if plan["receiver"].get("latency", 0.0) > 0.0:
-        raise SspError(f"receiver.latency: {plan['receiver']['latency']:g} s cannot be exported: the orchestrator "
-                       "delays the receiver's outputs after a run, an FMI host would show them undelayed; "
-                       "export with receiver.latency = 0")
+    check_no_latency(plan, "exported", SspError)
     n_beacons = plan.n_beacons
     connections = list(connections) if connections is not None else default_connections(n_beacons)
     paths = fmu_paths(fmu_dir, dict(plan.sources), n_beacons)
@@ -432,4 +439,4 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     return SspSystem(make_plan(apply_overrides(raw, overrides, seed)), connections, fmu_files)
 
 
-__all__ = ["SspError", "SspSystem", "export_ssp", "read_ssp", "validate_ssp"]
+__all__ = ["SspError", "SspSystem", "check_no_latency", "export_ssp", "read_ssp", "validate_ssp"]

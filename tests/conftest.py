@@ -1,8 +1,88 @@
-"""Shared fixtures of the sblsim test suite."""
+"""Shared fixtures of the sblsim test suite, and how pytest-xdist shares the tests between the cores.
+
+The suite runs on every core (``-n auto``) with :class:`FileScheduling`: a test file is one unit of work (its
+module fixtures made once), except where a file splits its tests into units of their own (:func:`unit_of`: the
+documentation's page runs are two chains, run side by side). The units start longest first (:data:`LONGEST`),
+and a worker takes its next unit only when it has run out of work, so no unit waits behind a long one while
+another core idles. ``docs/architecture.md`` lists the slowest tests and the command that measures them.
+"""
 
 from __future__ import annotations
 
+import subprocess
+from pathlib import Path
+
 import pytest
+
+#: The units of work that take longest (measured with ``--durations``, docs/architecture.md), longest first: they
+#: start first. A file's tests and a group's keep their order; the other units follow in collection order, and
+#: the documentation site's build from the page runs' figures comes last (it waits for the page chains).
+LONGEST = ("pages-1", "pages-2", "tests/test_docs.py", "tests/test_packaging.py", "tests/test_bad_input.py",
+           "tests/orchestrator/test_systems.py", "tests/models/test_rays.py", "tests/orchestrator/test_replay.py",
+           "tests/orchestrator/test_beacons.py", "tests/orchestrator/test_campaign.py",
+           "tests/orchestrator/test_fmus.py", "tests/fmus_tests/test_binaries.py")
+LAST = ("pages-site",)
+
+
+def unit_of(nodeid: str) -> str:
+    """The unit of work of a test (by its id, which is all the scheduler sees): the one its file names for it
+    (``tests/test_readme.py``'s :func:`~tests.test_readme.unit_of_test`), else its file."""
+    file, _, test = nodeid.partition("::")
+    if file == "tests/test_readme.py":
+        from tests.test_readme import unit_of_test
+
+        return unit_of_test(test) or file
+    return file
+
+
+def _rank(unit: str) -> int:
+    if unit in LAST:
+        return len(LONGEST) + 1
+    return LONGEST.index(unit) if unit in LONGEST else len(LONGEST)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Longest units first, the site build last (a stable sort: each unit keeps its order)."""
+    items.sort(key=lambda item: _rank(unit_of(item.nodeid)))
+
+
+def pytest_xdist_make_scheduler(config, log):
+    return FileScheduling(config, log)
+
+
+try:
+    from xdist.scheduler import LoadScopeScheduling
+except ImportError:  # without pytest-xdist the suite runs in one process
+    LoadScopeScheduling = object
+
+
+class FileScheduling(LoadScopeScheduling):
+    """pytest-xdist's ``loadfile``, with the units of :func:`unit_of`, in collection order (see
+    :func:`pytest_collection_modifyitems`), and no unit handed to a worker that still has work."""
+
+    def __init__(self, config, log=None):
+        super().__init__(config, log)
+        config.option.loadscopereorder = False  # the collection's order: longest first
+
+    def _split_scope(self, nodeid: str) -> str:
+        return unit_of(nodeid)
+
+    def _reschedule(self, node) -> None:
+        """A worker holds the last test it was sent until it knows the next (or is shut down): with one test left
+        it is idle, and only then does it get a new unit (xdist's ``loadscope`` hands it one with two left, and a
+        unit then waits behind a long test)."""
+        if node.shutting_down:
+            return
+        if not self.workqueue:
+            node.shutdown()
+            return
+        if self._pending_of(self.assigned_work[node]) > 1:
+            return
+        self._assign_work_unit(node)
+
+
+#: The project's plain C FMI host (one FMU twice, or a system of FMUs: its header comment).
+C_HOST = Path(__file__).with_name("fmus_tests") / "c_host.c"
 
 
 @pytest.fixture(scope="session")
@@ -33,3 +113,16 @@ def fmu_dir(tmp_path_factory, request):
             shared.mkdir(exist_ok=True)
             build(shared)
     return shared
+
+
+@pytest.fixture(scope="session")
+def c_host(tmp_path_factory) -> Path:
+    """The plain C host (:data:`C_HOST`), compiled with the system compiler and the FMI headers fmpy ships."""
+    from sblsim.fmus.codegen import fmi_headers_dir
+    from sblsim.fmus.compiler import find_compiler
+
+    exe = tmp_path_factory.mktemp("host") / "c_host"
+    cc = find_compiler("system")
+    subprocess.run([*cc.command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(C_HOST), "-o", str(exe), "-ldl"],
+                   check=True, capture_output=True)
+    return exe

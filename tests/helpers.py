@@ -1,4 +1,4 @@
-"""Test helpers: step one model's compiled code directly, as the local engine does.
+"""Test helpers: step one model's compiled code directly, as the local engine does; start a child to signal.
 
 ``Core(model, params, replicates)`` takes configuration keys (e.g.
 ``trajectory_file``, ``sound_speed_profile``, ``beacon_offsets``) or FMU
@@ -8,6 +8,8 @@ starts, and steps a batch of replicates through :class:`sblsim.fmus.native.Nativ
 
 from __future__ import annotations
 
+import signal
+import subprocess
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -75,4 +77,20 @@ class Core:
         return self.handle.states()
 
 
-__all__ = ["Core", "fmu_values"]
+def _default_signals() -> None:
+    # in the child between fork and exec: an ignored signal stays ignored across exec, a default one does not
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def start_for_signals(command: Sequence[str], **kwargs: Any) -> subprocess.Popen:
+    """``subprocess.Popen(command, **kwargs)`` with SIGINT and SIGTERM at their defaults in the child.
+
+    A test that sends the child a signal must not inherit the test process's dispositions: in a background
+    job (``nohup pytest &``) the shell starts pytest with SIGINT ignored, children inherit an ignored signal
+    across exec, and sblsim rightly keeps an ignored SIGINT ignored (POSIX only, as the signals are).
+    """
+    return subprocess.Popen(command, preexec_fn=_default_signals, **kwargs)
+
+
+__all__ = ["Core", "fmu_values", "start_for_signals"]

@@ -84,7 +84,7 @@ def test_a_failed_compilation_is_a_compile_error(tmp_path):
     source.write_text("int f(void) { return undeclared_name; }\n")
     exc = _caught(lambda: compile_library(find_compiler("auto"), [source], tmp_path / "libbroken.so"))
     assert _kind(exc) is CompileError
-    assert "failed for libbroken.so" in str(exc) and "undeclared_name" in str(exc)
+    assert "failed for broken.c" in str(exc) and "undeclared_name" in str(exc)
 
 
 def test_a_hostile_archive_is_an_archive_error(tmp_path):

@@ -5,11 +5,14 @@ A new user runs the README's set-up, then works through the site in its reading 
 docs/index.md: Getting started first (the later pages assume its set-up: sblsim installed into ``.venv`` and
 activated, in the repository's folder), then each page's blocks top to bottom; a page may read what the
 commands of the pages before it wrote (docs/index.md says so). This test does the same: one test per page, in
-that order, all in one copy holding the repository's files and nothing else. Each ``bash`` block runs in one
-shell (``set -e``: the first failing command fails the test, and the shell's trace names it), each ``python``
-block with the environment's Python in the copy's folder; a failure names the page, the block's number and
-its line. (A page selected alone with ``-k`` runs without what the pages before it wrote.) What is changed,
-and why:
+that order, in a copy holding the repository's files and nothing else. The pages run as two chains side by
+side (:data:`CHAINS`, each a unit of work of pytest-xdist in a copy of its own: :func:`unit_of_test`): the
+first is the README and every page
+but those of the second, which read nothing another page wrote and start from Getting started's set-up. Each
+``bash`` block runs in one shell (``set -e``: the first failing command fails the test, and the shell's trace
+names it), each ``python`` block with the environment's Python in the copy's folder; a failure names the page,
+the block's number and its line. (A page selected alone with ``-k`` runs without what the pages before it
+wrote.) What is changed, and why:
 
 * the set-up's ``python3 -m venv .venv && .venv/bin/pip install -e .`` part: the copy's ``.venv`` is this
   test's own environment (installing takes minutes and the network), the rest of the line runs;
@@ -24,11 +27,11 @@ A page may keep a block from running only by saying why in the page itself: its 
 Each page's time is printed (``-s``) and reported by ``--durations``; the tutorial pages state it.
 
 The figures the pages show (``![...](figures/NAME.png)``, the README's ``docs/figures/NAME.png``) are made by
-the pages' own blocks: the copy starts without any file of ``docs/figures/``, and after a page's blocks have
+the pages' own blocks: each copy starts without any file of ``docs/figures/``, and after a page's blocks have
 run, every figure it shows must have been written by them (there, and since the page started: not left by an
 earlier page), a PNG of about the size of the committed one (the same figure; matplotlib's bytes are not
-stable, so the bytes are not compared). The site is then built from the copy (``sphinx-build -W``), and its
-images are the bytes the run wrote.
+stable, so the bytes are not compared). Once both chains have run, the site is built from the first chain's
+copy with the second's figures added (``sphinx-build -W``), and its images are the bytes the runs wrote.
 """
 
 from __future__ import annotations
@@ -84,6 +87,26 @@ def reading_order() -> list[str]:
 
 PAGES = ["README.md", *reading_order()]
 FIGURES = "docs/figures"
+#: The pages of the second chain (the first: every other page), each of which reads nothing another page wrote.
+SECOND_CHAIN = ("docs/systems-compare.md", "docs/receivers.md", "docs/campaigns.md", "docs/budget.md",
+                "docs/replay.md", "docs/log-format.md", "docs/calibration.md")
+#: Chain -> its pages in reading order.
+CHAINS = {"pages-1": [p for p in PAGES if p not in SECOND_CHAIN], "pages-2": [p for p in PAGES if p in SECOND_CHAIN]}
+CHAIN_OF = {page: chain for chain, pages in CHAINS.items() for page in pages}
+PAGE_RUN = "test_the_page_blocks_run_in_order"
+SITE_BUILD = "test_the_site_builds_from_the_copy_with_the_figures_the_run_made"
+
+
+def unit_of_test(name: str) -> str | None:
+    """The unit of work (tests/conftest.py's scheduler) of a test of this file, by its name with parameters: a
+    page run its chain's, the site's build its own (``pages-site``, run last: it waits for the chains); None for
+    the others (the file's unit)."""
+    if name.startswith(f"{PAGE_RUN}["):
+        return CHAIN_OF.get(name[len(PAGE_RUN) + 1:-1])
+    return "pages-site" if name == SITE_BUILD else None
+#: What a chain's shell holds when it starts: the first runs the README's set-up, the second starts from Getting
+#: started's (sblsim installed into .venv and activated).
+START = {"pages-1": "", "pages-2": "source .venv/bin/activate\n"}
 
 
 def figures_shown(page: str, text: str) -> list[str]:
@@ -178,8 +201,7 @@ def test_every_committed_figure_is_shown_and_made_by_a_block_of_its_page():
     assert "docs/figures/semicircle_trajectory_xy.png" in shown["README.md"]
 
 
-@pytest.fixture(scope="module")
-def fresh_copy(tmp_path_factory):
+def make_copy(tmp_path_factory) -> Path:
     """The repository's files (as git lists them) in a new folder, with this environment as its ``.venv``."""
     copy = tmp_path_factory.mktemp("readme") / "sblsim"
     listed = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
@@ -199,14 +221,47 @@ def fresh_copy(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def shell():
-    """What the user's shell keeps from one block to the next, across pages: the activated environment; and
-    the pages whose blocks all ran."""
-    return {"session": "", "done": set()}
+def chains(tmp_path_factory):
+    """Per chain (made when its first page runs): its fresh copy, and what the user's shell keeps from one block
+    to the next, across pages: the activated environment; and the pages whose blocks all ran."""
+    made = {}
+
+    def chain(name: str) -> dict:
+        if name not in made:
+            made[name] = {"copy": make_copy(tmp_path_factory), "session": START[name], "done": set()}
+        return made[name]
+
+    return chain
+
+
+def shared_folder(tmp_path_factory, config) -> Path:
+    """A folder every pytest-xdist worker of this run sees (their temporary folders have one parent per run)."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if hasattr(config, "workerinput") else base) / "page-chains"
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
+def _say_chain(tmp_path_factory, config, chain: str, outcome: str, copy: Path | None = None) -> None:
+    """Tell the site's build that a chain has ended: ``done`` (with its copy) or ``failed``."""
+    folder = shared_folder(tmp_path_factory, config)
+    (folder / f"{chain}.{outcome}").write_text(str(copy or ""))
 
 
 @pytest.mark.parametrize("page", PAGES)
-def test_the_page_blocks_run_in_order(fresh_copy, shell, page):
+def test_the_page_blocks_run_in_order(chains, tmp_path_factory, request, page):
+    name = CHAIN_OF[page]
+    shell = chains(name)
+    try:
+        _run_page(shell["copy"], shell, page)
+    except BaseException:
+        _say_chain(tmp_path_factory, request.config, name, "failed")
+        raise
+    if page == CHAINS[name][-1] and set(CHAINS[name]) <= shell["done"]:
+        _say_chain(tmp_path_factory, request.config, name, "done", shell["copy"])
+
+
+def _run_page(fresh_copy: Path, shell: dict, page: str) -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH")}
     env["SBLSIM_FMU_DIR"] = str(fresh_copy / "fmus" / "build")  # where a checkout's own install builds them
     env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep) if Path(sys.prefix) not in
@@ -250,20 +305,46 @@ def test_the_page_blocks_run_in_order(fresh_copy, shell, page):
     print(f"\n{page}: {len(blocks)} blocks in {time.perf_counter() - start:.0f} s")
 
 
-def test_the_site_builds_from_the_copy_with_the_figures_the_run_made(fresh_copy, shell, tmp_path):
-    """After every page has run: ``sphinx-build -W`` of the copy's docs/, whose images are the bytes the
-    pages' blocks wrote (the committed figures were removed from the copy before the run)."""
-    if set(PAGES) - shell["done"]:
-        pytest.skip("not every page's blocks ran (a selection, or a page failed)")
+#: How long the site's build waits for the page chains run by other workers [s].
+CHAIN_WAIT = 3600.0
+
+
+def test_the_site_builds_from_the_copy_with_the_figures_the_run_made(tmp_path_factory, request, tmp_path):
+    """After every page has run: ``sphinx-build -W`` of the first chain's copy of docs/, with the figures the
+    second chain's pages made added, whose images are the bytes the pages' blocks wrote (the committed figures
+    were removed from the copies before the runs)."""
+    selected = {item.callspec.params["page"] for item in request.session.items
+                if getattr(item, "originalname", None) == PAGE_RUN}
+    if set(PAGES) - selected:
+        pytest.skip("not every page's blocks run in this selection")
     pytest.importorskip("sphinx", reason="the docs extra is not installed (pip install -e '.[docs]')")
+    folder = shared_folder(tmp_path_factory, request.config)
+    copies, deadline = {}, time.monotonic() + CHAIN_WAIT
+    while len(copies) < len(CHAINS):  # the chains run in other workers, or before this test in this one
+        for chain in CHAINS:
+            if (folder / f"{chain}.failed").exists():
+                pytest.skip(f"a page of {chain} failed")
+            if (folder / f"{chain}.done").exists():
+                copies[chain] = Path((folder / f"{chain}.done").read_text())
+        assert time.monotonic() < deadline, f"the page chains did not end within {CHAIN_WAIT:.0f} s: {sorted(copies)}"
+        time.sleep(1.0)
+    first, *others = [copies[chain] for chain in CHAINS]
+    source = tmp_path / "docs"
+    shutil.copytree(first / "docs", source)
+    made = {}  # figure -> the copy whose pages made it
+    for chain, copy in copies.items():
+        for page in CHAINS[chain]:
+            for figure in figures_shown(page, (copy / page).read_text()):
+                made[figure] = copy
+                shutil.copyfile(copy / figure, tmp_path / figure)
     done = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-E", "-b", "html",
-                           "-d", str(tmp_path / ".doctrees"), str(fresh_copy / "docs"), str(tmp_path / "html")],
+                           "-d", str(tmp_path / ".doctrees"), str(source), str(tmp_path / "html")],
                           capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, f"the docs build of the copy failed:\n{done.stderr[-6000:]}"
     shown = {figure for page in PAGES if page != "README.md"
-             for figure in figures_shown(page, (fresh_copy / page).read_text())}
+             for figure in figures_shown(page, (first / page).read_text())}
     assert len(shown) >= 10, shown
     for figure in sorted(shown):
         in_site = tmp_path / "html" / "_images" / Path(figure).name
         assert in_site.is_file(), f"the site has no {figure}"
-        assert in_site.read_bytes() == (fresh_copy / figure).read_bytes(), f"the site's {figure} is not the run's"
+        assert in_site.read_bytes() == (made[figure] / figure).read_bytes(), f"the site's {figure} is not the run's"

@@ -15,24 +15,12 @@ import pytest
 from fmpy import read_model_description
 
 from sblsim.fmus.build import build_fmu, fmu_path
-from sblsim.fmus.codegen import fmi_headers_dir
 from sblsim.fmus.compiler import find_compiler
 from sblsim.fmus.native import stream
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.philox import normals, uniforms
 
-HOST = Path(__file__).with_name("c_host.c")
 NAMES = list(MODELS)
-
-
-@pytest.fixture(scope="module")
-def c_host(tmp_path_factory) -> Path:
-    """The plain C host, compiled with the system compiler and the FMI headers fmpy ships."""
-    exe = tmp_path_factory.mktemp("host") / "c_host"
-    cc = find_compiler("system")
-    subprocess.run([*cc.command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(HOST), "-o", str(exe), "-ldl"],
-                   check=True, capture_output=True)
-    return exe
 
 
 def unpack(fmu: Path, into: Path) -> tuple[Path, str, list[int]]:

@@ -101,20 +101,13 @@ def test_the_fmu_engine_builds_the_fmus_it_needs_out_of_the_box(tmp_path):
                                rtol=0, atol=1e-9)
 
 
-def c_host_runs(directory: Path, tmp_path: Path):
+def c_host_runs(c_host: Path, directory: Path, tmp_path: Path):
     """Each component's FMU of ``directory`` run for 30 steps of 0.1 s in the plain C host (no Python, an empty
     environment): yields the component, its model description and its Real outputs (30, m), checked finite."""
     import zipfile
 
     from fmpy import read_model_description
 
-    from sblsim.fmus.codegen import fmi_headers_dir
-    from sblsim.fmus.compiler import find_compiler
-
-    host = Path(__file__).parents[1] / "fmus_tests" / "c_host.c"
-    exe = tmp_path / "c_host"
-    subprocess.run([*find_compiler("system").command, "-std=c99", "-O1", f"-I{fmi_headers_dir()}", str(host), "-o",
-                    str(exe), "-ldl"], check=True, capture_output=True)
     for name in COMPONENTS:
         fmu, folder = fmu_path(directory, name), tmp_path / name
         with zipfile.ZipFile(fmu) as archive:
@@ -122,7 +115,7 @@ def c_host_runs(directory: Path, tmp_path: Path):
         md = read_model_description(str(fmu))
         outputs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
         binary = folder / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
-        proc = subprocess.run([str(exe), str(binary), md.guid, f"file://{folder}/resources", "30", "0.1", ""],
+        proc = subprocess.run([str(c_host), str(binary), md.guid, f"file://{folder}/resources", "30", "0.1", ""],
                               input="\n".join(map(str, outputs)), capture_output=True, text=True, env={}, timeout=300)
         assert proc.returncode == 0, proc.stderr[-2000:]
         rows = np.array([[float(x) for x in line.split()[2:]] for line in proc.stdout.splitlines()
@@ -131,8 +124,8 @@ def c_host_runs(directory: Path, tmp_path: Path):
         yield name, md, rows
 
 
-def test_six_beacon_fmus_run_in_a_plain_c_host_with_an_empty_environment(beacon_fmus, tmp_path):
-    for name, md, rows in c_host_runs(beacons_dir(beacon_fmus, 6), tmp_path):
+def test_six_beacon_fmus_run_in_a_plain_c_host_with_an_empty_environment(beacon_fmus, c_host, tmp_path):
+    for name, md, rows in c_host_runs(c_host, beacons_dir(beacon_fmus, 6), tmp_path):
         if name == "platform":  # six beacons 60° apart (whatever the waves' yaw; their tilt is a few degrees)
             names = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
             assert sum(n.endswith("_true_x") for n in names) == 6
@@ -244,10 +237,10 @@ def test_a_usbl_ssp_runs_in_libcosim_like_the_jacobi_master(usbl_fmus, tmp_path)
     _libcosim_against_jacobi(cfg, usbl_fmus, tmp_path)
 
 
-def test_usbl_fmus_run_in_a_plain_c_host_with_an_empty_environment(usbl_fmus, tmp_path):
+def test_usbl_fmus_run_in_a_plain_c_host_with_an_empty_environment(usbl_fmus, c_host, tmp_path):
     """Each USBL FMU in the plain C host (no Python, empty environment): 30 finite steps; the channel declares
     the direction of arrival and the attitudes it reads, the platform one transceiver."""
-    for name, md, _rows in c_host_runs(beacons_dir(usbl_fmus, 1), tmp_path):
+    for name, md, _rows in c_host_runs(c_host, beacons_dir(usbl_fmus, 1), tmp_path):
         names = {v.name: v.causality for v in md.modelVariables}
         if name == "acoustics":
             assert names["azimuth"] == names["elevation"] == "output" and names["array_roll"] == "input"

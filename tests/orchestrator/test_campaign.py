@@ -27,6 +27,7 @@ from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.run import run
 from sblsim.orchestrator.study import design_matrix, load_study
+from tests.helpers import start_for_signals
 
 ROOT = Path(__file__).resolve().parents[2]
 REPLICATES = 3
@@ -60,8 +61,9 @@ def sblsim(*args, cwd: Path, timeout: float = 300) -> subprocess.CompletedProces
 
 
 def start_sblsim(*args, cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "sblsim.orchestrator.cli", *map(str, args)], cwd=cwd,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    """A campaign in the background, to be signalled (SIGINT and SIGTERM at their defaults in it)."""
+    return start_for_signals([sys.executable, "-m", "sblsim.orchestrator.cli", *map(str, args)], cwd=cwd,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def assert_usage_error(proc: subprocess.CompletedProcess, *needles: str) -> str:

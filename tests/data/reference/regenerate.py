@@ -1,8 +1,8 @@
 """Write the reference results: ``summary.json`` of every built-in scenario at seed 1 (local engine).
 
 Run ``python tests/data/reference/regenerate.py`` after a change that is meant to change the numbers, and say
-why in the commit; ``tests/orchestrator/test_reference.py`` compares fresh runs and the README's Results table
-with these files.
+why in the commit; it prints the rows of the Results table, to paste into the README's and docs/usage.md's
+tables. ``tests/orchestrator/test_reference.py`` compares fresh runs and those tables with these files.
 """
 
 from __future__ import annotations
@@ -18,6 +18,14 @@ HERE = Path(__file__).resolve().parent
 #: What a reference keeps of summary.json (not the wall time, which is the machine's).
 VOLATILE = ("wall_time",)
 SEED = 1
+#: The columns of the README's and docs/usage.md's Results table, after the scenario's name.
+COLUMNS = ("steps", "e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "instr_e_tot_mean",
+           "instr_e_tot_rms")
+
+
+def table_cells(ref: dict) -> list[str]:
+    """A reference's cells of the Results table (after the name): the steps, then the errors to the millimetre."""
+    return [str(ref["steps"])] + [f"{ref[c]:.3f}" for c in COLUMNS[1:]]
 
 
 def reference(name: str) -> dict:
@@ -31,3 +39,5 @@ if __name__ == "__main__":
         path = HERE / f"{name}.json"
         path.write_text(json.dumps(reference(name), indent=2, allow_nan=False) + "\n")
         print(f"wrote {path}")
+    for name in BUILTIN_SCENARIOS:  # the Results table's rows
+        print("| " + " | ".join([name, *table_cells(json.loads((HERE / f"{name}.json").read_text()))]) + " |")

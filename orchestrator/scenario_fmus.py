@@ -1,0 +1,68 @@
+"""FMUs that carry a scenario: ``sblsim fmus build --scenario NAME|CONFIG.toml [--seed N] [--receiver NAME]``.
+
+The scenario's components (the set and file names ``sblsim ssp export`` packs: ``sblsim_platform.fmu``,
+``sblsim_acoustics.fmu``, ``sblsim_target.fmu`` and the receiver's) are built with that scenario's parameter
+values, the values of the package's ``.ssv`` files, as their start values in ``modelDescription.xml`` and
+as the defaults compiled into their binaries; their default experiment is the scenario's (the base step
+``T / ekf_rate_ratio``, the duration). A host that sets no parameter, such as the FMI Compliance Checker or
+a tool into which the FMUs are dragged, therefore runs the scenario: connected as ``default_connections``
+and stepped by a Jacobi master, it gives the numbers of ``sblsim run SCENARIO --engine fmu --master jacobi``
+with the same seed. Every variable stays: a host may still set any parameter before initialization.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from sblsim.fmus.build import build_fmu
+from sblsim.models.errors import ModelError
+from sblsim.orchestrator.plan import RunPlan
+from sblsim.orchestrator.ssp import check_no_latency
+
+
+def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", cross: bool | None = None,
+                        report: Callable[[str], object] | None = None) -> list[Path]:
+    """Build a run plan's FMUs with its parameter values as their start values and compiled-in defaults.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The scenario's plan (:func:`sblsim.orchestrator.plan.load_plan`), seed and replicate included.
+    out : path
+        The folder to write ``sblsim_<model>.fmu`` into (created if missing; each file replaced atomically).
+    compiler, cross, report
+        As :func:`sblsim.fmus.build.build_fmu`.
+
+    Returns
+    -------
+    list of Path
+        The FMUs, in the order of the plan's components.
+
+    Raises
+    ------
+    ModelError
+        If the receiver is a user's FMU (``fmu:PATH``: its binary cannot be given other defaults), or
+        ``receiver.latency`` is not 0 (the orchestrator delays the receiver's outputs after a run; a host
+        would show them undelayed).
+    CompileError
+        If the compiler is missing or fails.
+    """
+    check_no_latency(plan, "built into FMUs", ModelError)
+    n_beacons = plan.n_beacons
+    models = {component: plan.model(component) for component in plan.sources}
+    for component, model in models.items():
+        if model is None:
+            raise ModelError(f"{component}: {plan.sources[component]} is an FMU; a scenario is built into the "
+                             "FMUs sblsim generates (a receiver named ekf, ekf-seq, ukf, lsq or model:PATH.py)")
+    experiment = (plan.sampling_time / plan.ekf_rate_ratio, plan.n_steps * plan.sampling_time)
+    built_for = f"scenario {plan.scenario}, seed {plan.seed}"
+    paths = []
+    for component, model in models.items():
+        values = plan.component_parameters(component, model.fmu_parameter_names(n_beacons))
+        paths.append(build_fmu(model, out, n_beacons, compiler=compiler, cross=cross, report=report,
+                               parameters=values, experiment=experiment, built_for=built_for))
+    return paths
+
+
+__all__ = ["build_scenario_fmus"]
