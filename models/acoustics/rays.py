@@ -1140,76 +1140,51 @@ def slant_range(zs, zr, tau, start, nodes, speeds):
     return _slant_range()(zs, zr, tau, start, nodes, speeds)
 
 
-#: Bisections of :func:`chord_elevation` on the depth the ray reaches (over 20 km: 2e-8 m).
-TRACE_ITERATIONS = 40
-#: The span [m] of depths :func:`chord_elevation` searches, up or down from the transceiver.
-_TRACE_SPAN = 20000.0
-
-
 @lru_cache(maxsize=1)
-def _chord_elevation() -> ca.Function:
-    """``(zt, elevation, tau, nodes, speeds) -> (chord, horizontal, depth)``: see :func:`chord_elevation`."""
-    zt, elevation, tau = ca.MX.sym("zt"), ca.MX.sym("elevation"), ca.MX.sym("tau")
+def _ray_bending() -> ca.Function:
+    """``(zt, zr, range, nodes, speeds) -> (bending, valid)``: see :func:`ray_bending`."""
+    zt, zr, rho = ca.MX.sym("zt"), ca.MX.sym("zr"), ca.MX.sym("range")
     nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    sums = _layers()
-    cref = _speed()(zt, nodes, speeds)
-    q = ca.fabs(ca.sin(elevation))
-    down = elevation >= 0
-
-    def reached(d):
-        """Range [m] and time [s] of the ray over the depth interval ``d`` [m] from the transceiver."""
-        a, b = ca.if_else(down, zt, zt - d), ca.if_else(down, zt + d, zt)
-        x, t, _dx = sums(q, 0.0, cref, a, b, 0.0, 0.0, nodes, speeds)
-        return x, t
-
-    lo, hi = 0.0, _TRACE_SPAN
-    for _ in range(TRACE_ITERATIONS):
-        d = 0.5 * (lo + hi)
-        early = reached(d)[1] < tau
-        lo, hi = ca.if_else(early, d, lo), ca.if_else(early, hi, d)
-    d = 0.5 * (lo + hi)
-    x, _t = reached(d)
-    dz = ca.if_else(down, d, -d)
-    return ca.Function("sblsim_ray_chord_elevation", [zt, elevation, tau, nodes, speeds],
-                       [ca.atan2(dz, x), x, zt + dz], ["zt", "elevation", "tau", "nodes", "speeds"],
-                       ["chord", "horizontal", "depth"], {"never_inline": True})
+    dz = zr - zt
+    x = ca.sqrt(ca.fmax(rho * rho - dz * dz, 0.0))
+    _t, launch, _arrival, kind = first_arrival(1.0, zt, zr, x, 0.0, 0.0, nodes, speeds)
+    found = kind > 0
+    bending = ca.if_else(found, ca.atan2(dz, x) - launch, 0.0)
+    return ca.Function("sblsim_ray_bending", [zt, zr, rho, nodes, speeds], [bending, found],
+                       ["zt", "zr", "range", "nodes", "speeds"], ["bending", "valid"], {"never_inline": True})
 
 
-def chord_elevation(zt, elevation, tau, nodes, speeds):
-    """The straight chord's elevation of a target whose direct eigenray leaves depth ``zt`` at ``elevation`` and
-    takes ``tau``: the ray traced from the transceiver through the profile, as USBL processing corrects its
-    direction of arrival for ray bending with a measured profile.
-
-    Snell's invariant of the ray is ``ξ = cos(elevation) / c(z_t)``; the depth it reaches after the travel time
-    ``tau`` is found by bisection (:data:`TRACE_ITERATIONS`) on the layers' closed-form times (module docstring),
-    and its horizontal distance is the layers' sum to that depth. A ray that would turn before its time is spent is
-    not traced past its turning depth (the direct eigenray of a USBL, steep, does not turn).
+def ray_bending(zt, zr, rho, nodes, speeds):
+    """The bending of the direct eigenray between a transceiver at depth ``zt`` and a target at depth ``zr`` at the
+    slant range ``rho``: the chord's elevation minus the eigenray's grazing angle at the transceiver, the angle by
+    which USBL processing with a measured profile turns a direction of arrival in its vertical plane to the chord
+    (a range-independent profile keeps the eigenray in that plane). It is computed from the range and the depth,
+    which the packet carries to centimetres, not from the measured elevation: a ray traced from a noisy shallow
+    elevation would amplify its noise near the turning angles.
 
     Parameters
     ----------
-    zt : casadi.SX
-        The transceiver's depth [m] (positive down).
-    elevation : casadi.SX
-        The eigenray's grazing angle at the transceiver [rad], positive below the horizontal (toward a deeper
-        target: the launch angle of the transceiver-to-target eigenray, the reply's ``−arrival_angle``).
-    tau : casadi.SX
-        One-way travel time [s].
+    zt, zr : casadi.SX
+        Depth of the transceiver and of the target [m] (positive down).
+    rho : casadi.SX
+        Slant range [m] (the straight chord's length, :func:`slant_range`).
     nodes, speeds : casadi.SX, shape (NODES, 1)
         The padded profile (:func:`~sblsim.models.acoustics.sound_speed.node_speeds`).
 
     Returns
     -------
-    chord : casadi.SX
-        ``atan2(z − z_t, X)`` [rad]: the elevation of the straight line to where the ray is at ``tau``.
-    horizontal, depth : casadi.SX
-        That point's horizontal distance ``X`` [m] and depth ``z`` [m].
+    bending : casadi.SX
+        ``atan2(zr − zt, X) − θ_launch`` [rad] (``X = √(ρ² − Δz²)``, θ_launch the direct eigenray's grazing angle
+        at the transceiver, positive down, :func:`first_arrival`); 0 where no direct eigenray exists.
+    valid : casadi.SX
+        1 when the direct eigenray exists (0: a shadow zone).
     """
-    return _chord_elevation()(zt, elevation, tau, nodes, speeds)
+    return _ray_bending()(zt, zr, rho, nodes, speeds)
 
 
 __all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "FAMILIES", "FAMILY_COLUMNS", "FAMILY_TABLE", "NEWTON_ITERATIONS",
            "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE",
-           "SURFACE", "TRACE_ITERATIONS", "arrivals", "arrivals_grid", "cell_centres", "cell_corners",
-           "chord_elevation", "eigenray_families", "eigenray_paths", "eigenray_table", "exact_nodes", "exact_points",
-           "family_nodes", "family_points", "first_arrival", "first_arrival_grid", "profile_arrays", "ray_grid",
+           "SURFACE", "arrivals", "arrivals_grid", "cell_centres", "cell_corners",
+           "eigenray_families", "eigenray_paths", "eigenray_table", "exact_nodes", "exact_points",
+           "family_nodes", "family_points", "first_arrival", "first_arrival_grid", "profile_arrays", "ray_bending", "ray_grid",
            "ray_values", "slant_range", "sound_speed_at"]

@@ -37,7 +37,7 @@ from typing import Any, Mapping
 
 import casadi as ca
 
-from sblsim.models.acoustics.rays import chord_elevation, slant_range
+from sblsim.models.acoustics.rays import ray_bending, slant_range
 from sblsim.models.acoustics.sound_speed import PROFILE, node_speeds, profile_table
 from sblsim.models.declarations import ModelError, Variable, format_table
 from sblsim.models.platform.geometry import rotation_ned, unit_vector
@@ -168,10 +168,11 @@ def profile_range(u: dict, p: dict) -> dict:
     """The packet with its range turned into the slant range of the receiver's profile (``sound_speed_model`` =
     profile): ``τ = range / c_a``, the direct eigenray between ``beacon_z`` and the depth reading ``depth``
     (:func:`~sblsim.models.acoustics.rays.slant_range`, from ``range``). A lost packet, or one whose eigenray lies
-    in the profile's shadow, keeps the range it had. A USBL packet's ``elevation`` (the direction the reply's
-    eigenray arrives from) becomes the chord's elevation of the point the ray traced from the transceiver reaches
-    after τ (:func:`~sblsim.models.acoustics.rays.chord_elevation`), and its direction cosines in the array's
-    frame (``doa_x``, ``doa_y``) move as that direction moved.
+    in the profile's shadow, keeps the range it had. A USBL packet's direction (the reply's eigenray arriving) is
+    turned in its vertical plane by the direct eigenray's bending between the transceiver and the depth reading at
+    that slant range (:func:`~sblsim.models.acoustics.rays.ray_bending`: the chord's elevation minus the eigenray's
+    grazing angle, from the range and the depth, not from the noisy measured elevation): its ``elevation`` and its
+    direction cosines in the array's frame (``doa_x``, ``doa_y``) move as that direction moved.
 
     Parameters
     ----------
@@ -191,9 +192,10 @@ def profile_range(u: dict, p: dict) -> dict:
     rho, found = slant_range(u["beacon_z"], u["depth"], tau, u["range"], nodes, speeds)
     use = ca.logic_and(ca.logic_and(u["packet_valid"], found), u["range"] > 0)
     out = {**u, "range": ca.if_else(use, rho, u["range"])}
-    if "elevation" in u:  # USBL: the eigenray's elevation traced back to the chord's
-        chord = chord_elevation(u["beacon_z"], u["elevation"], tau, nodes, speeds)[0]
-        valid = ca.logic_and(u["packet_valid"], u["range"] > 0)
+    if "elevation" in u:  # USBL: the direction turned by the eigenray's bending to the chord
+        bending, bent = ray_bending(u["beacon_z"], u["depth"], out["range"], nodes, speeds)
+        valid = ca.logic_and(use, bent)
+        chord = u["elevation"] + bending
         out["elevation"] = ca.if_else(valid, chord, u["elevation"])
         if "doa_x" in u:  # and the array's direction cosines moved as the direction moved
             array = rotation_ned(*[u[f"doa_{a}"] for a in ("roll", "pitch", "yaw")]).T

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.models.acoustics.rays import chord_elevation, eigenray_families, first_arrival, profile_arrays, slant_range
+from sblsim.models.acoustics.rays import eigenray_families, first_arrival, profile_arrays, ray_bending, slant_range
 from sblsim.models.acoustics.sound_speed import PROFILE, profile_table
 from sblsim.orchestrator.budget import OFF, ON, SOURCES, budget
 from sblsim.orchestrator.cli import main
@@ -72,9 +72,10 @@ def test_the_true_profile_removes_the_sound_speed_error_of_a_deep_cast():
     assert straight > 5.0
 
 
-def test_the_elevation_conversion_inverts_a_linear_gradients_arc():
-    """c = c0 + g z: the ray between two points is the circle centred where c would vanish; its grazing angle at
-    the transceiver and its closed-form time (arccosh, as above) traced back give the chord's elevation."""
+def test_the_bending_is_a_linear_gradients_arc():
+    """c = c0 + g z: the ray between two points is the circle centred where c would vanish; the bending the
+    receiver turns a direction by (from the slant range and the two depths) is the chord's elevation minus that
+    circle's grazing angle at the transceiver."""
     c0, g = 1480.0, 0.05
     nodes, speeds = profile_arrays([[0.0, c0], [5000.0, c0 + g * 5000.0]])
     zc = -c0 / g
@@ -84,17 +85,16 @@ def test_the_elevation_conversion_inverts_a_linear_gradients_arc():
         a, b = zt - zc, zr - zc
         xc = (x * x + b * b - a * a) / (2 * x)
         grazing = np.sign(xc) * abs(np.pi / 2 - np.arctan2(a, -xc))  # positive down while it descends
-        tau = np.arccosh(1.0 + g * g * (x * x + (zr - zt) ** 2) / (2.0 * (c0 + g * zt) * (c0 + g * zr))) / g
-        chord, horizontal, depth = (float(v) for v in chord_elevation(zt, grazing, tau, nodes, speeds))
-        assert chord == pytest.approx(np.arctan2(zr - zt, x), abs=1e-9), (zt, zr, x)
-        assert horizontal == pytest.approx(x, abs=1e-6) and depth == pytest.approx(zr, abs=1e-6)
-        assert abs(grazing - chord) > 1e-6 or x < 5  # the ray bends: the measured angle is not the chord's
+        bending, valid = (float(v) for v in ray_bending(zt, zr, np.hypot(x, zr - zt), nodes, speeds))
+        assert valid == 1.0
+        assert bending == pytest.approx(np.arctan2(zr - zt, x) - grazing, abs=1e-9), (zt, zr, x)
+        assert abs(bending) > 1e-6 or x < 5  # the ray bends: the measured angle is not the chord's
 
 
-def test_the_elevation_conversion_round_trip_through_a_deep_cast():
-    """The direct eigenray from a transceiver near the surface to a diver 50-1200 m deep through the NCL1 cast: its
-    launch angle and time give back the chord's elevation within 1e-9 rad, where the measured angle is up to a
-    degree off it."""
+def test_the_bending_turns_a_deep_casts_eigenrays_to_the_chord():
+    """The direct eigenray from a transceiver near the surface to a diver 50-1200 m deep through the NCL1 cast
+    (solved by the eigenray families, another solver): its launch angle plus the bending is the chord's elevation
+    within 1e-9 rad, where the launch angle is up to a degree off it."""
     nodes, speeds = profile_arrays(profile_table("ctd:NCL1", "", 15.0, 35.0))
     solve = eigenray_families()
     rng = np.random.default_rng(5)
@@ -103,8 +103,8 @@ def test_the_elevation_conversion_round_trip_through_a_deep_cast():
         zt, zr, x = rng.uniform(0, 10), rng.uniform(50, 1200), rng.uniform(1, 1000)
         tau, launch, _arrival, valid = (np.asarray(v).ravel() for v in solve(zt, zr, x, 0.0, nodes, speeds))
         assert valid[0]
-        chord = float(chord_elevation(zt, launch[0], tau[0], nodes, speeds)[0])
-        worst = max(worst, abs(chord - np.arctan2(zr - zt, x)))
+        bending = float(ray_bending(zt, zr, np.hypot(x, zr - zt), nodes, speeds)[0])
+        worst = max(worst, abs(launch[0] + bending - np.arctan2(zr - zt, x)))
         bent = max(bent, abs(launch[0] - np.arctan2(zr - zt, x)))
     assert worst < 1e-9 and bent > np.radians(0.5)
 
