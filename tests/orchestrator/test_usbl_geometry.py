@@ -146,20 +146,21 @@ NADIR = ("semicircle", ("simulation.sampling_time=0.5", "simulation.duration=10"
                         "target.waypoints=0 0.5 0 1000; 100 0.5 0 1000"))
 
 
-def far_fix_error(scenario: str, sets, *more: str) -> tuple[float, float, int]:
+def far_fix_error(scenario: str, sets, *more: str, replicates: int = 200) -> tuple[float, float, int]:
     cfg = load_config(scenario, ["platform.system=usbl", "simulation.receiver=lsq", "target.trajectory=file",
                                  *sets, *more], seed=5)
-    ts = run_batch(with_replicates(cfg, range(200)), "local", timeseries=True).timeseries
+    ts = run_batch(with_replicates(cfg, range(replicates)), "local", timeseries=True).timeseries
     return static_fix_error(cfg, ts)
 
 
 @pytest.mark.parametrize("where", FAR)
 def test_the_map_is_what_a_static_vehicle_gets_off_the_vertical_to_kilometres(where):
     """The USBL map at a point against a static-vehicle Monte Carlo there: the ``lsq`` receiver's fix of each
-    received packet over 200 replicates (its horizontal RMS error) within 15 % of the map's DRMS, from 200 m to
-    2 km off."""
-    rms, drms, count = far_fix_error(*FAR[where])
-    assert count > 1500, count
+    received packet (its horizontal RMS error) within 15 % of the map's DRMS, from 200 m to 2 km off: 200
+    replicates at 1,000 m, 40 at the site (its eigenrays cost; over 500 packets, the RMS's sampling std about 3 %)."""
+    site = FAR[where][0] == "lbl-field"
+    rms, drms, count = far_fix_error(*FAR[where], replicates=40 if site else 200)
+    assert count > (500 if site else 1500), count
     assert rms == pytest.approx(drms, rel=0.15), (where, rms, drms)
 
 
