@@ -525,6 +525,9 @@ class FmuHandle:
         values = dict(params)
         if self.model is not None:
             values = self.model.fmi_values(values)
+        else:  # a user's FMU: a String choice the configuration sets goes as its index, as sblsim's FMUs take it
+            values = {k: (_choice_index(k, v) if isinstance(v, str) and self.variables[k].type == "Integer" else v)
+                      for k, v in values.items()}
         if "replicate" in self.variables:
             values["replicate"] = int(replicates[0])
         self._call(self._initialize, values, t0)
@@ -612,6 +615,23 @@ def native_system(batches: Sequence[Any], rates: Sequence[int], links: Sequence[
 
 #: What implements a component: a built-in model's name, a user's model class or the path of a user's FMU.
 Source = str | Path | type
+
+
+@lru_cache(maxsize=None)
+def _choice_index(name: str, value: str) -> int:
+    """The index of ``value`` among the choices sblsim's models declare for the String parameter ``name`` (the
+    FMUs take a choice as its index).
+
+    Raises
+    ------
+    ModelError
+        When no model declares ``value`` as a choice of ``name``.
+    """
+    for model in MODELS.values():
+        for variable in model.fmu_parameters_declared(1):
+            if variable.name == name and variable.choices is not None and value in variable.choices:
+                return variable.choices.index(value)
+    raise ModelError(f"fmu: parameter {name!r} is an Integer; the value {value!r} is none of its choices")
 
 
 def source_model(source: Source) -> type | None:

@@ -59,7 +59,7 @@ from sblsim.models import RECEIVER_MODELS
 from sblsim.models.acoustics.core import Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
-from sblsim.models.systems import System
+from sblsim.models.systems import SYSTEMS, System
 from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.config import (
     BUILTIN_SCENARIOS,
@@ -834,8 +834,9 @@ def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
     if covered.size == 0:
         return values, 0
     block = slice(int(covered[0]), int(covered[-1]) + 1)
-    rec = {column: frame[name].to_numpy()[block, None].astype(float) for name, column in TIMESERIES_COLUMNS.items()
-           if name in frame}
+    own = {name: source for system in SYSTEMS.values() for name, source in system.timeseries_columns.items()}
+    rec = {column: frame[name].to_numpy()[block, None].astype(float)
+           for name, column in {**TIMESERIES_COLUMNS, **own}.items() if name in frame}
     metrics, bound = _metrics([cfg], rec, [0], with_bound=True)
     row = metrics.iloc[0]
     values.update({k: row[k] for k in metrics.columns if k != "replicate"})
