@@ -22,6 +22,7 @@ from scipy.stats import chi2
 
 from sblsim.models.platform.geometry import platform_offsets
 from sblsim.models.systems.usbl import pcrb as usbl_pcrb
+from sblsim.models.systems.usbl import FIXED as USBL_FIXED
 from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import default_connections
@@ -101,7 +102,7 @@ def normalized(m):
     return q.mean(), q.std(ddof=1) / math.sqrt(q.size)
 
 
-def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded, request):
+def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded):
     """ekf-seq: sqrt(mean q) within 10 % of 1. Over 200 runs the standard error of mean q is ≈ 0.03-0.04 (that of
     its square root half that, ≤ 0.019): the band is ≥ 4 standard errors wide (the test checks it), so sampling alone
     does not fail it, while a bound off by 10 % (a missing or wrong measurement row: the range-only bound of a USBL
@@ -109,11 +110,6 @@ def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded, request):
     1 − 3 standard errors (seen: ekf-seq and ukf ≈ 1.03-1.08, ekf 1.08 (USBL) to 2.4 (SBL: its held ranges), lsq
     ≥ 16)."""
     system, metrics = bounded
-    if system == "usbl":  # a known gap of the bound, not of the receiver (its NEES is 3.2 here)
-        request.applymarker(pytest.mark.xfail(strict=True, reason=(
-            "the bound takes each packet as information on the state of the step that delivers it; a packet is "
-            "used at its arrival, up to T = 0.5 s after its reply, and the bound does not yet add the process "
-            "noise of that age: USBL ekf-seq RMS / PCRB 1.13 at T = 0.5 s, 1.04 at T = 0.1 s")))
     m = metrics["ekf-seq"]
     assert not m["diverged"].any() and (m["pcrb_rms"] > 0).all()
     q, se = normalized(m)
@@ -127,8 +123,8 @@ def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded, request):
 
 
 def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
-    """The per-step ``pcrb`` of a USBL run is the range-azimuth-elevation bound (casadi) of the recorded packets at
-    the recorded true positions, ``pcrb_rms`` its RMS, the same whatever the batch; far below the range-only bound
+    """The per-step ``pcrb`` of a USBL run is the range-direction bound (casadi) of the recorded packets (their
+    transceiver and attitude) at the recorded true positions, ``pcrb_rms`` its RMS, the same whatever the batch; far below the range-only bound
     of the same packets."""
     from sblsim.models.bound import pcrb, pcrb_inputs
 
@@ -139,26 +135,26 @@ def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
     n = result.steps
     column = {c: ts[c].to_numpy().reshape(2, n).T for c in ("true_x", "true_y", "true_z", "packet_seq",
                                                            "packet_valid", "beacon_id", "beacon_x", "beacon_y",
-                                                           "beacon_z", "pcrb")}
+                                                           "beacon_z", "pcrb", "doa_roll", "doa_pitch", "doa_yaw")}
     slot, fresh = slots(column["packet_seq"], column["packet_valid"].astype(bool) & (column["beacon_id"] == 1))
     assert (slot & ~fresh).sum() > 10  # lost packets: depth-only slots
     truth = np.stack([column[f"true_{a}"] for a in "xyz"], -1)
     transceiver = np.stack([column[f"beacon_{a}"] for a in "xyz"], -1)
+    attitude = np.stack([column[f"doa_{a}"] for a in ("roll", "pitch", "yaw")], -1)
     p = make_plan(cfg).bound
-    fixed = {k: p[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance",
-                               "position_variance", "angle_sigma_deg", "attitude_variance", "depth_variance")}
+    fixed = {k: p[k] for k in USBL_FIXED[1:]}  # after dt
     # the transceiver position's error per axis: the GPS error and the lever arm turned by the attitude error
     platform = cfg["platform"]
     assert fixed["position_variance"] == pytest.approx(
         platform["gps_sigma"] ** 2 + (math.radians(platform["imu_sigma_deg"]) * platform["transducer_depth"]) ** 2,
         rel=1e-12)
-    bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, dt=0.1, **fixed))
+    bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, attitude, dt=0.1, **fixed))
     np.testing.assert_array_equal(column["pcrb"], bound)
     np.testing.assert_allclose(result.metrics["pcrb_rms"], np.sqrt(np.mean(bound**2, axis=0)), rtol=1e-14)
-    for k in ("angle_sigma_deg", "range_variance", "position_variance"):
-        fixed.pop(k)
+    kept = {k: fixed[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "attitude_variance",
+                                  "depth_variance")}
     range_only = pcrb(*pcrb_inputs(truth, slot, fresh, transceiver, np.zeros_like(truth), dt=0.1,
-                                   noise_variance=p["noise_variance"], **fixed))
+                                   noise_variance=p["noise_variance"], **kept))
     assert np.all(np.sqrt(np.mean(range_only**2, axis=0)) > 3 * result.metrics["pcrb_rms"])
     alone = run(cfg, replicates=[1])  # a run's bound whatever batch it is part of
     np.testing.assert_array_equal(alone.timeseries["pcrb"], column["pcrb"][:, 1])
@@ -172,8 +168,10 @@ def test_twtt_cancels_a_clock_drift_that_ruins_owtt(system):
     """100 ppm of clock drift. OWTT: the range grows by ``c δ (t_k − t0 + τ)`` (0.45 m after 30 s) and e_tot_mean
     by a factor ≥ 5 in every run (seen 7.7-16). TWTT: the drift acts on the round trip Δt only, ``c δ Δt / 2`` (about
     5 mm for SBL, 9 mm for LBL's 50 m deep transponders: the 0.05 s turnaround counts), each range exactly that
-    longer, and e_tot_mean within 2 cm and 3 % of the run without drift (seen ≤ 6 mm, 1.7 %). USBL has TWTT only."""
-    base = ["simulation.duration=30", f"platform.system={system}", "receiver=ekf-seq"]
+    longer, and e_tot_mean within 2 cm and 3 % of the run without drift (seen ≤ 6 mm, 1.7 %). USBL has TWTT only.
+    The OWTT runs are those of a receiver without the clock's states (``receiver.clock_states = false``); with them
+    (the default under a drift) the error is at least halved in every run."""
+    base = ["simulation.duration=30", f"platform.system={system}", "receiver=ekf-seq", "receiver.clock_states=false"]
     for ranging in ("owtt", "twtt") if system != "usbl" else ("twtt",):
         runs = [run(load_config("random-walk", base + [f"acoustics.ranging={ranging}",
                                                        f"acoustics.clock_drift_ppm={ppm}"], seed=3),
@@ -186,6 +184,9 @@ def test_twtt_cancels_a_clock_drift_that_ruins_owtt(system):
             elapsed = (ts0["tx_time"] + ts0["travel_time"]).to_numpy()[valid]
             np.testing.assert_allclose(longer, SPEED * 1e-4 * elapsed, rtol=1e-9, atol=1e-9)
             assert np.all(drift > 5.0 * steady), (system, drift / steady)
+            states = run(load_config("random-walk", [*base[:-1], "acoustics.ranging=owtt",
+                                                     "acoustics.clock_drift_ppm=100"], seed=3), replicates=range(4))
+            assert np.all(states.metrics["e_tot_mean"].to_numpy() < 0.5 * drift), (system, states.metrics, drift)
         else:
             trip = ts0["travel_time"].to_numpy()[valid]  # TWTT: the round trip, turnaround included
             np.testing.assert_allclose(longer, SPEED * 1e-4 * trip / 2.0, rtol=1e-9, atol=1e-10)
