@@ -27,6 +27,8 @@ from tests.models.test_receiver_filterpy import phi, white_noise_q
 BEACONS = np.array([[3.0, 0, 1], [0, 3.0, 1], [-3.0, 0, 1], [0, -3.0, 1]])
 GATE = dict(RX, gate_probability=0.99, beacon_gps_sigma=0.1, beacon_attitude_sigma_deg=1.0, beacon_arm=3.2,
             gate_max_rejections=2)
+#: A filter sure of its position (5 cm, 1 cm/s) and at rest: a range a metre or more longer fails its test.
+SURE = dict(GATE, p0_position=0.05, p0_velocity=0.01, x0_vx=0.0, x0_vy=0.0, x0_vz=0.0)
 
 
 def predicted_range(h=0.5, depth=None):
@@ -73,7 +75,8 @@ def feed(core, stream, t=0.0, n_beacons=4, transceiver=None):
     for seq, (beacon, rng) in enumerate(stream, start=1):
         where = BEACONS[beacon - 1] if transceiver is None else transceiver
         inputs = packet(seq, beacon, t + 0.5, rng, where, core.state["x"][0][4])
-        if transceiver is not None:  # a USBL packet: a level array, the direction straight down
+        if transceiver is not None:  # a USBL packet: a level array, the direction straight down (the transceiver
+            # is above the filter's prior)
             inputs.update(azimuth=0.0, elevation=np.pi / 2, doa_x=0.0, doa_y=0.0, doa_roll=0.0, doa_pitch=0.0,
                           doa_yaw=0.0)
         core.set_inputs(inputs)
@@ -93,12 +96,12 @@ def test_a_lost_track_is_reacquired_by_consistent_ranges(model):
     lock-out). A failing range whose beacon had not failed before is not let in."""
     core = Core(model, GATE).initialize(0.0)
     truth = core.state["x"][0][[0, 2, 4]] + [15.0, 0.0, 0.0]
-    stream = [(k % 4 + 1, float(np.linalg.norm(truth - BEACONS[k % 4]))) for k in range(12)]
+    stream = [(k % 4 + 1, float(np.linalg.norm(truth - BEACONS[k % 4]))) for k in range(20)]
     gated = feed(core, stream)
     # the first round fails throughout (beacons 3 and 4 have no failed range before theirs); the second is re-acquired
     assert gated[:4] == [True, True, True, True]
     assert gated[4:6] == [False, False]
-    assert np.linalg.norm(core.state["x"][0][[0, 2, 4]] - truth) < 1.5  # from 15 m off, in 8 ranges
+    assert np.linalg.norm(core.state["x"][0][[0, 2, 4]] - truth) < 1.5  # from 15 m off, in 16 ranges
 
 
 @pytest.mark.parametrize("model", [SequentialReceiver, UnscentedReceiver], ids=["ekf-seq", "ukf"])
@@ -106,8 +109,8 @@ def test_after_a_run_of_rejections_no_outlier_is_let_in(model):
     """The filter is right; two beacons' ranges are multipath outliers (a few metres long): they fail, and the gate's
     guard is open. Outliers follow on every beacon, each with its own random excess: none is used (before, the guard
     let the next range in whatever it was); then correct ranges pass."""
-    core = Core(model, GATE).initialize(0.0)
-    excess = [5.0, 7.0, 3.0, 4.0, 9.0, 2.0, 6.5, 1.5]
+    core = Core(model, SURE).initialize(0.0)
+    excess = [5.0, 7.0, 3.0, 4.0, 9.0, 2.0, 6.5, 8.0]  # each beacon's two differ by metres
     stream = [(k % 4 + 1, distance(core, k % 4 + 1) + e) for k, e in enumerate(excess)]
     gated = feed(core, stream)
     assert gated == [True] * len(excess), gated
@@ -119,12 +122,12 @@ def test_after_a_run_of_rejections_no_outlier_is_let_in(model):
 def test_the_one_transceiver_of_a_usbl_interface_reacquires_and_keeps_outliers_out(model):
     """USBL: one "beacon", so the guard opens after one failed packet (every beacon of the interface failed). Two
     consecutive packets that agree (a drift) are used from the second on; outliers of random excess are not."""
-    transceiver = np.array([0.0, 0.0, 1.0])
+    transceiver = np.array([GATE["x0_x"], GATE["x0_y"], 1.0])  # straight above the filter's prior
     core = Core(model, GATE, n_beacons=1).initialize(0.0)
     below = float(core.state["x"][0][4] - transceiver[2])
     gated = feed(core, [(1, below + 20.0), (1, below + 20.0)], transceiver=transceiver)
     assert gated == [True, False]
-    core = Core(model, GATE, n_beacons=1).initialize(0.0)
+    core = Core(model, SURE, n_beacons=1).initialize(0.0)
     gated = feed(core, [(1, below + e) for e in (6.0, 2.0, 9.0, 4.0)], transceiver=transceiver)
     assert gated == [True] * 4
     assert core.state["failed"][0].tolist() == [1.0]
