@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 import time
@@ -16,6 +17,7 @@ import pytest
 from sblsim.models import MODELS
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.config import load_config
+from tests.helpers import start_for_signals
 
 SUMMARY_METRICS = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
 FIGURES = ("trajectory_xy.png", "trajectory_3d.png", "errors.png", "error_bounds.png")
@@ -181,12 +183,15 @@ def test_a_closed_pipe_does_not_fail_a_finished_run(tmp_path):
     assert proc.stderr.strip() == "status 0", proc.stderr
 
 
-@pytest.mark.parametrize("command", [["budget", "semicircle", "--replicates", "40"],
-                                     ["compare", "semicircle", "--replicates", "30", "--receivers", "ekf,ukf"]],
+@pytest.mark.parametrize("command", [["budget", "semicircle", "--replicates", "4000"],
+                                     ["compare", "semicircle", "--replicates", "4000", "--receivers", "ekf,ukf"]],
                          ids=["budget", "compare"])
 def test_a_second_command_into_the_same_folder_is_refused_while_the_first_runs(tmp_path, command):
-    first = subprocess.Popen([sys.executable, "-m", "sblsim.orchestrator.cli", *command, "--out", "c"],
-                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    """A first command far too long to end on its own holds the folder's lock: a second into the same folder is
+    refused in one line; the first, interrupted (Ctrl-C), exits 130, removes its lock and writes nothing; then a
+    command into that folder runs."""
+    first = start_for_signals([sys.executable, "-m", "sblsim.orchestrator.cli", *command, "--out", "c"],
+                              cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         lock = tmp_path / ".c.lock"
         for _ in range(600):
@@ -197,11 +202,12 @@ def test_a_second_command_into_the_same_folder_is_refused_while_the_first_runs(t
         second = sblsim(*command, "--out", "c", cwd=tmp_path)
         assert first.poll() is None, "the first command ended before the second was refused: make it longer"
         assert_usage_error(second, "--out:", "is being written by another sblsim command")
+        first.send_signal(signal.SIGINT)
     finally:
         out, err = first.communicate(timeout=900)
-    assert first.returncode == 0, err[-2000:]
-    assert "written to c/" in out and not lock.exists()
-    third = sblsim(*command[:2], "--replicates", "2", "--out", "c", "--force", cwd=tmp_path)
+    assert first.returncode == 130, err[-2000:]
+    assert not lock.exists() and not (tmp_path / "c").exists()
+    third = sblsim(*command[:2], "--replicates", "2", "--out", "c", cwd=tmp_path)
     assert third.returncode == 0, third.stderr[-2000:]  # the lock went with the first
 
 
