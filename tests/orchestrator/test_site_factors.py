@@ -65,7 +65,7 @@ def expected_detected(plan) -> float:
     """The share of the slots whose packet a diver at :data:`DIVER` receives [0–1], from the sonar equation.
 
     The direct arrival's SNR is SL − (20 log10 r + α r) − (NL − DI) (spherical spreading in constant water;
-    α Francois–Garrison, NL Wenz, both from :mod:`sblsim.models.acoustics.sonar`); the surface- and
+    α Francois–Garrison averaged over the water column at the declared temperature, NL Wenz, both from :mod:`sblsim.models.acoustics.sonar`); the surface- and
     bottom-reflected arrivals' SNR is the channel's (its eigenrays and boundary losses). An arrival is detected
     with Φ((SNR − DT)/σ_f). A two-way exchange needs the interrogation heard (any arrival) and the reply's first
     detected arrival decoded (Φ((SNR − DT − margin)/σ_f)); the legs are reciprocal and drawn independently.
@@ -74,7 +74,8 @@ def expected_detected(plan) -> float:
     arms = np.asarray(plan.lever_arms, dtype=float)
     levels = site_levels(plan.component_parameters("acoustics"), arms, np.tile(DIVER, (len(arms), 1)))
     r = np.linalg.norm(arms - DIVER, axis=1)
-    alpha = sonar.absorption(a["frequency"], a["temperature"], a["salinity"], 0.5 * a["water_depth"])
+    depths = np.linspace(0.0, a["water_depth"], 1001)  # the water column's mean: its pressure terms vary with depth
+    alpha = float(np.mean([sonar.absorption(a["frequency"], a["temperature"], a["salinity"], d) for d in depths]))
     noise = sonar.noise_level(a["frequency"], a["bandwidth"], sonar.wind_speed(plan["platform"]["beaufort"]),
                               a["shipping"])
     direct = a["source_level"] - (20.0 * np.log10(r) + alpha * r) - (noise - a["directivity_index"])
