@@ -1184,7 +1184,7 @@ def ray_bending(zt, zr, rho, nodes, speeds):
 
 __all__ = ["BOTTOM", "CAUSTIC_GAIN", "DIRECT", "FAMILIES", "FAMILY_COLUMNS", "FAMILY_TABLE", "NEWTON_ITERATIONS",
            "RANGE_ITERATIONS", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS", "RAY_TABLE_TOLERANCE",
-           "SURFACE", "arrivals", "arrivals_grid", "cell_centres", "cell_corners",
-           "eigenray_families", "eigenray_paths", "eigenray_table", "exact_nodes", "exact_points",
-           "family_nodes", "family_points", "first_arrival", "first_arrival_grid", "profile_arrays", "ray_bending", "ray_grid",
-           "ray_values", "slant_range", "sound_speed_at"]
+           "SURFACE", "arrivals", "arrivals_grid", "cell_centres", "cell_corners", "eigenray_families",
+           "eigenray_paths", "eigenray_table", "exact_nodes", "exact_points", "family_nodes", "family_points",
+           "first_arrival", "first_arrival_grid", "profile_arrays", "ray_bending", "ray_grid", "ray_values",
+           "slant_range", "sound_speed_at"]

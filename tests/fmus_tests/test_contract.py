@@ -14,9 +14,8 @@ from sblsim.fmus.codegen import C_DIR, model_record, write_sources
 from sblsim.fmus.contract import CONTRACT, contract_header, contract_tables
 from sblsim.fmus.native import VECTORS, load, metrics_sizes, system_bound_sizes
 from sblsim.models import MODELS
-from sblsim.models.bound import FIXED, bound_step
+from sblsim.models.bound import ERROR_MOTION, FIXED, bound_step
 from sblsim.models.declarations import SEED_NAMES
-from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.metrics import METRIC_INPUTS, RUN_METRICS
 
@@ -91,13 +90,13 @@ def test_the_model_record_names_every_field_it_sets():
 def test_every_compiled_system_bound_reports_its_systems_layouts():
     """The library of the interface of each system with a bound of its own (USBL) compiles the system's casadi
     prior and step with the packed layouts of its tuples: the sizes it reports are the tuples' lengths, and the
-    bound's entries the receivers' state size squared."""
+    bound's entries the error-state receivers' state size squared."""
     checked = 0
     for system in SYSTEMS.values():
-        if system.bound_fixed:
+        if system.bound_fixed and system.interface_beacons is not None:  # compiled into its interface's library
             n = system.interface_beacons
             assert system_bound_sizes(n) == (len(system.bound_fixed), len(system.bound_steps),
-                                             CONSTANT_VELOCITY.state_size ** 2)
+                                             ERROR_MOTION.state_size ** 2)
             prior, step = system.bound_function()
             assert step.size1_in(1) == len(system.bound_fixed) and step.size1_in(2) == len(system.bound_steps)
             assert prior.size1_in(0) == len(system.bound_fixed)

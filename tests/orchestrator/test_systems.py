@@ -21,8 +21,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from sblsim.models.platform.geometry import platform_offsets
-from sblsim.models.systems.usbl import pcrb as usbl_pcrb
 from sblsim.models.systems.usbl import FIXED as USBL_FIXED
+from sblsim.models.systems.usbl import pcrb as usbl_pcrb
 from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 from sblsim.orchestrator.config import load_config
 from sblsim.orchestrator.connections import default_connections
@@ -124,8 +124,8 @@ def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded):
 
 def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
     """The per-step ``pcrb`` of a USBL run is the range-direction bound (casadi) of the recorded packets (their
-    transceiver and attitude) at the recorded true positions, ``pcrb_rms`` its RMS, the same whatever the batch; far below the range-only bound
-    of the same packets."""
+    transceiver and attitude) at the recorded true positions, ``pcrb_rms`` its RMS, the same whatever the batch;
+    far below the range-only bound of the same packets."""
     from sblsim.models.bound import pcrb, pcrb_inputs
 
     cfg = load_config("random-walk", ["platform.system=usbl", "simulation.duration=20", "acoustics.loss_pct=20"],
