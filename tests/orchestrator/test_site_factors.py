@@ -67,8 +67,9 @@ def expected_detected(plan) -> float:
     The direct arrival's SNR is SL − (20 log10 r + α r) − (NL − DI) (spherical spreading in constant water;
     α Francois–Garrison averaged over the water column at the declared temperature, NL Wenz, both from
     :mod:`sblsim.models.acoustics.sonar`); the surface- and bottom-reflected arrivals' SNR is the channel's (its
-    eigenrays and boundary losses). An arrival is detected with Φ((SNR − DT)/σ_f). A two-way exchange needs the interrogation heard (any arrival) and the reply's first
-    detected arrival decoded (Φ((SNR − DT − margin)/σ_f)); the legs are reciprocal and drawn independently.
+    eigenrays and boundary losses). An arrival is detected with Φ((SNR − DT)/σ_f). A two-way exchange needs the
+    interrogation heard (any arrival) and the reply's first detected arrival decoded (Φ((SNR − DT − margin)/σ_f));
+    the legs are reciprocal and drawn independently.
     """
     a = plan["acoustics"]
     arms = np.asarray(plan.lever_arms, dtype=float)
