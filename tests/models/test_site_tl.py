@@ -7,8 +7,8 @@ tube + Francois-Garrison absorption × path length + the boundary's loss), from 
 are summed incoherently, ``TL = −10 log10 Σ_j 10^(−TL_j/10)``. Bellhop's is run type 'I' (geometric beams) with
 the same profile, the same sea floor as an acousto-elastic half-space without shear (density, compressional speed,
 attenuation in dB/λ of :data:`~sblsim.models.acoustics.sonar.BOTTOMS`), a vacuum surface (Beaufort 0: no
-roughness loss) and its own Francois-Garrison volume attenuation (option 'F', at the temperature, salinity, pH and
-the mid-water depth the channel's absorption uses), at 12 kHz.
+roughness loss) and the channel's volume attenuation (Francois-Garrison over the water column at the cast's
+temperatures, given at every point of Bellhop's profile), at 12 kHz.
 
 The mask: a point where Bellhop's TL differs by more than 3 dB from one of its four grid neighbours (a caustic or a
 shadow edge, where ray theory and beams differ by construction; ``tests/models/test_spreading.py``'s rule), or where
@@ -34,7 +34,7 @@ from sblsim.models.acoustics.core import PROFILE, Acoustics, site_levels
 from tests.models.test_spreading import JUMP, _bellhop_tl, _jumps
 
 #: The signal and the water of every site: frequency [Hz], temperature [°C], salinity [PSU], pH (the channel's).
-FREQUENCY, TEMPERATURE, SALINITY, PH = 12000.0, 15.0, 35.0, 8.0
+FREQUENCY, TEMPERATURE, SALINITY = 12000.0, 15.0, 35.0
 #: The mild profile of the 300 m sites [m, m/s]: 10 m/s slower at the sea floor (downward refracting).
 MILD = "0 1505; 300 1495"
 #: The receiver depths of the 300 m sites [m].
@@ -47,7 +47,7 @@ SHALLOW_DEPTHS = np.arange(5.0, 296.0, 10.0)
 #: receivers at 5 m beyond about 2 km; Bellhop's multiply reflected beams fill it).
 SITES = {
     "sand": (dict(sound_speed_profile="table", sound_speed_table=MILD, water_depth=300.0, bottom="sand"), 20.0,
-             SHALLOW_DEPTHS, np.arange(25.0, 1526.0, 50.0), 1525.0),
+             SHALLOW_DEPTHS, np.r_[np.arange(25.0, 1526.0, 50.0), 1550.0], 1550.0),
     "mud": (dict(sound_speed_profile="table", sound_speed_table=MILD, water_depth=300.0, bottom="mud"), 20.0,
             SHALLOW_DEPTHS, np.arange(25.0, 2551.0, 25.0), 2550.0),
     "rock": (dict(sound_speed_profile="table", sound_speed_table=MILD, water_depth=300.0, bottom="rock"), 20.0,
@@ -78,11 +78,14 @@ def _site(name):
             ours = -10.0 * np.log10(np.sum(np.where(levels["valid"] > 0.5, 10.0 ** (-family / 10.0), 0.0), axis=1))
         bottom = sonar.BOTTOMS[section["bottom"]]
         depth = section["water_depth"]
-        # the channel's absorption: Francois-Garrison at the middle of the water column; Bellhop's at the same
-        assert parameters["absorption"] == sonar.absorption(FREQUENCY, TEMPERATURE, SALINITY, depth / 2, PH)
-        theirs = _bellhop_tl(PROFILE.rows(parameters, "sound_speed_rows"), source, depths, ranges, depth,
+        # the channel's absorption: Francois-Garrison over the water column at the cast's temperatures; Bellhop
+        # takes that value at every point of its profile
+        rows = PROFILE.rows(parameters, "sound_speed_rows")
+        assert parameters["absorption"] == sonar.water_column_absorption(FREQUENCY, rows, TEMPERATURE, SALINITY,
+                                                                         depth)
+        theirs = _bellhop_tl(rows, source, depths, ranges, depth,
                              (bottom.density_ratio, bottom.speed, bottom.attenuation), FREQUENCY,
-                             (TEMPERATURE, SALINITY, PH, depth / 2))
+                             parameters["absorption"])
         _CACHE[name] = (ours.reshape(theirs.shape), theirs)
     return _CACHE[name]
 

@@ -248,18 +248,22 @@ def _bellhop_tl(table, source, depths, ranges, depth, bottom, frequency=1000.0, 
 
     ``bottom``: ``"rigid"``, ``"absorbing"`` (an acousto-elastic half-space matching the water) or
     ``(density ratio, compressional speed [m/s], attenuation [dB/λ])`` of an acousto-elastic half-space without
-    shear. ``volume``: None (no volume attenuation) or ``(temperature [°C], salinity [PSU], pH, depth [m])`` of
-    Bellhop's Francois-Garrison attenuation (option 'F', one depth for the whole water column)."""
+    shear. ``volume``: None (no volume attenuation), ``(temperature [°C], salinity [PSU], pH, depth [m])`` of
+    Bellhop's Francois-Garrison attenuation (option 'F', one depth for the whole water column), or a volume
+    attenuation [dB/m] given at every point of the profile (as dB/λ, ``α λ = α c / f``)."""
     pg = pytest.importorskip("pelagic")  # the test extra installs it: this skips only outside it
     tab = table[table[:, 0] < depth]
     tab = np.vstack([tab, [depth, np.interp(depth, table[:, 0], table[:, 1])]])
     lines = ["'sblsim tl'", f"{frequency:.6f}", "1"]
-    if volume is None:
+    if volume is None or np.isscalar(volume):
         lines += ["'CVW'"]
     else:
         lines += ["'CVWF'", " ".join(f"{v:.6f}" for v in volume) + " /"]
     lines += [f"0 0.0 {depth:.4f}"]
-    lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
+    if np.isscalar(volume):  # z, c_p, c_s, density, α_p [dB/λ], α_s
+        lines += [f"{z:.6f} {c:.6f} 0.0 1.0 {volume * c / frequency:.9f} 0.0 /" for z, c in tab]
+    else:
+        lines += [f"{z:.6f} {c:.6f} /" for z, c in tab]
     if bottom == "rigid":
         lines += ["'R' 0.0"]
     elif bottom == "absorbing":
