@@ -14,7 +14,7 @@ from scipy.optimize import least_squares
 
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
-from sblsim.models.receiver.core import arrival_interface, clock_parameters
+from sblsim.models.receiver.core import arrival_interface, beacon_parameters, clock_parameters
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
 from sblsim.models.receiver.profile import profile_parameters
 from sblsim.models.systems.usbl import receiver_parameters as usbl_parameters
@@ -366,13 +366,14 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     assert signals == [key(v) for v in receiver_interface() + arrival_interface()]
     assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface() + arrival_interface()
     # parameters: the EKF's own declarations of the shared ones, then the seed keys, then the receiver's clock and
-    # the USBL angle (declared after it), then the receiver's sound-speed profile (declared last)
+    # the USBL angle (declared after it), then the receiver's sound-speed profile, then the transceiver's
+    # uncertainty the USBL packet fix weighs (declared last)
     ekf_params = {v.name: v for v in ekf if v.causality == "parameter"}
     params = [v for v in lsq if v.causality == "parameter"]
     shared = ["sigma_range", "sigma_depth", "x0_x", "x0_y", "x0_z"]
     assert list(SHARED_PARAMETERS) == shared
     assert params == ([ekf_params[n] for n in shared] + list(SEED_PARAMETERS) + list(clock_parameters())
-                      + list(usbl_parameters()) + list(profile_parameters()))
+                      + list(usbl_parameters()) + list(profile_parameters()) + list(beacon_parameters()))
     # declared last: the earlier value references stay (the clock and USBL angle, the arrival epoch, the profile)
     n = len(profile_parameters())
     assert ekf[-3 - n:] == clock_parameters() + usbl_parameters() + arrival_interface() + profile_parameters()

@@ -43,7 +43,8 @@ def lbl():
 
 def test_every_range_is_its_length_times_one_plus_the_oceans_change(lbl):
     steady, moving = lbl
-    np.testing.assert_array_equal(moving["range_true"], steady["range_true"])  # the geometry is the same
+    # the geometry is the same (a one-way range's true length at its reception, which the ocean moves by a few ms)
+    np.testing.assert_allclose(moving["range_true"], steady["range_true"], rtol=1e-5, atol=0)
     valid = moving["packet_valid"].astype(bool) & (moving["range_true"] > 0)
     ratio = (moving["range"] / moving["range_true"] - 1.0)[valid]
     steady_ratio = (steady["range"] / steady["range_true"] - 1.0)[valid]
