@@ -9,16 +9,20 @@ feed the same inputs to FilterPy:
   receiver step and, at each new slot, one scalar ``update()`` with the depth
   and then, for a received packet that passes the gate, one with the fresh
   range predicted from the state moved back to the packet's reference epoch
-  (``Φ(−age) x``, the Jacobian times ``Φ(−age)``), its variance ``σ_r² + σ_GPS² + (σ_att · arm)²`` (the beacon's
-  isotropic position error through the unit vector ∂h/∂b, whose norm is 1);
+  (``Φ(−age) x``, the Jacobian times ``Φ(−age)``; a one-way range refers to its reception ``rx_time``), its
+  variance ``σ_r² + σ_GPS² + (σ_att · arm)²`` (the beacon's isotropic position error through the unit vector
+  ∂h/∂b, whose norm is 1);
 * ``ukf``: ``filterpy.kalman.UnscentedKalmanFilter`` with
-  ``MerweScaledSigmaPoints(6, alpha, beta, kappa)``; sigma points are redrawn
-  from the predicted mean and covariance before each update, as the receiver
-  does, and each carries its range from ``Φ(−age) x``; the joint update (range, depth) when the range is used, else the
-  depth alone.
+  ``MerweScaledSigmaPoints(14, alpha, beta, kappa)`` over the receiver's 14 states (the six of position and
+  velocity, and its error states: GPS, clock, attitude, here with no prior: their rows and columns of P zero, a
+  square root that takes zero pivots); sigma points are redrawn from the predicted mean and covariance before each
+  update, as the receiver does, and each carries its range from ``Φ(−age) x``; the joint update (range, depth)
+  when the range is used, else the depth alone.
 
 The slot rule, the one-sided NIS gate (χ²(1) quantile from scipy) and its
-lock-out guard are re-implemented here in plain Python. Tolerances as in
+re-acquisition (when ``gate_max_rejections`` beacons' latest ranges failed, a failing range is used if it agrees
+with its own beacon's previous failed one, both predicted from the current state, within the quantile of their
+summed innovation variances) are re-implemented here in plain Python. Tolerances as in
 ``test_receiver_filterpy.py``: round-off of backward-stable arithmetic in a
 contracting filter.
 """
@@ -38,6 +42,22 @@ from tests.models.test_receiver_filterpy import N_BEACONS, SLACK, phi, white_noi
 
 STATE = ("x", "vx", "y", "vy", "z", "vz")
 DEPTH_ROW = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+#: The ukf's state: the six above, then its error states (GPS 3, clock 2, attitude 3).
+UKF_STATES = 14
+
+
+def psd_sqrt(M):
+    """FilterPy's square root (``UᵀU = M``, its rows the sigma points' offsets) of a positive semi-definite M:
+    Cholesky with a zero column where the pivot is zero (the states without a prior)."""
+    n = M.shape[0]
+    L = np.zeros_like(M)
+    for j in range(n):
+        pivot = M[j, j] - L[j, :j] @ L[j, :j]
+        if pivot <= 0.0:
+            continue
+        L[j, j] = np.sqrt(pivot)
+        L[j + 1:, j] = (M[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / L[j, j]
+    return L.T
 
 
 def range_row(x, beacon):
@@ -49,18 +69,28 @@ def range_row(x, beacon):
 
 
 class Gate:
-    """The one-sided NIS gate with its lock-out guard, in plain Python."""
+    """The one-sided NIS gate with its re-acquisition, in plain Python: each beacon remembers whether its latest
+    range failed, and the last failed range, where it was broadcast from and its reference epoch."""
 
     def __init__(self, rc):
         self.threshold = chi2.ppf(rc["gate_probability"], 1) if rc["gate_probability"] < 1 else np.inf
-        self.max_failed = rc["gate_max_rejections"]
+        self.max_failed = min(rc["gate_max_rejections"], N_BEACONS)
         self.failed = np.zeros(N_BEACONS, bool)
+        self.rejected = [None] * N_BEACONS
 
-    def __call__(self, beacon_id, y, S):
+    def __call__(self, beacon_id, y, S, rng, beacon, epoch, earlier):
+        """Whether the range is used; ``earlier(range, beacon, epoch)`` gives the innovation and its variance of
+        the beacon's last failed range predicted from the current state."""
+        i = beacon_id - 1
         test = y <= 0 or y * y / S <= self.threshold
-        use = test or self.failed.sum() >= self.max_failed
-        self.failed[beacon_id - 1] = not test
-        return use
+        again = False
+        if not test and self.failed.sum() >= self.max_failed and self.failed[i]:
+            y_then, S_then = earlier(*self.rejected[i])
+            again = (y - y_then) ** 2 <= self.threshold * (S + S_then)
+        self.failed[i] = not test
+        if not test:
+            self.rejected[i] = (rng, beacon, epoch)
+        return test or again
 
 
 def range_variance(rc):
@@ -69,11 +99,12 @@ def range_variance(rc):
 
 
 def slots(ts, cfg, ratio):
-    """Yield (last sub-step of the macro step, is_slot, row, A) for every receiver step, with the slot rule applied;
-    ``A`` = Φ(−age) moves the state at the step's end back to the packet's reference epoch, the midpoint of its
-    transmission and arrival (age = step end − (tx_time + rx_time) / 2)."""
+    """Yield (last sub-step of the macro step, is_slot, row, now, epoch) for every receiver step, with the slot rule
+    applied: ``now`` the step's end, ``epoch`` the packet's reference epoch (a one-way range's reception, else the
+    midpoint of its transmission and arrival); ``Φ(−(now − epoch))`` moves the state back to it."""
     T = cfg["simulation"]["sampling_time"]
     dt = T / ratio
+    one_way = cfg["acoustics"]["ranging"] == "owtt"
     last = 0
     for k, row in enumerate(ts.itertuples()):
         for j in range(ratio):
@@ -81,7 +112,13 @@ def slots(ts, cfg, ratio):
             slot = row.packet_seq != last and t + dt >= row.rx_time - SLACK
             if slot:
                 last = row.packet_seq
-            yield j == ratio - 1, slot, row, phi(-max(t + dt - 0.5 * (row.tx_time + row.rx_time), 0.0))
+            epoch = row.rx_time if one_way else 0.5 * (row.tx_time + row.rx_time)
+            yield j == ratio - 1, slot, row, t + dt, epoch
+
+
+def back(now, epoch):
+    """``Φ(−age)`` (6×6) to a reference epoch from ``now``."""
+    return phi(-max(now - epoch, 0.0))
 
 
 def fresh(row):
@@ -98,7 +135,7 @@ def replay_ekf_seq(ts, cfg, ratio):
     gate, var = Gate(rc), range_variance(rc)
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
     nis, gated = 0.0, False
-    for last_substep, slot, row, A in slots(ts, cfg, ratio):
+    for last_substep, slot, row, now, epoch in slots(ts, cfg, ratio):
         ekf.predict()
         if slot:
             ekf.update(np.array([[row.depth]]), lambda x: DEPTH_ROW, lambda x: x[4:5], R=rc["sigma_depth"] ** 2)
@@ -106,10 +143,18 @@ def replay_ekf_seq(ts, cfg, ratio):
             gated = False
             if fresh(row):
                 b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
+                A = back(now, epoch)
                 h, H = range_row(A @ ekf.x, b)  # the range of the state moved back to the reference epoch
                 H = H @ A
                 y, S = row.range - h, (H @ ekf.P @ H.T).item() + var
-                if gate(row.beacon_id, y, S):
+
+                def earlier(rng, beacon, then, x=ekf.x, P=ekf.P):
+                    A_then = back(now, then)
+                    h_then, H_then = range_row(A_then @ x, beacon)
+                    H_then = H_then @ A_then
+                    return rng - h_then, (H_then @ P @ H_then.T).item() + var
+
+                if gate(row.beacon_id, y, S, row.range, b, epoch, earlier):
                     ekf.update(np.array([[row.range]]), lambda x, b=b, A=A: range_row(A @ x, b)[1] @ A,
                                lambda x, b=b, A=A: np.array([[range_row(A @ x, b)[0]]]), R=var)
                     nis += y * y / S
@@ -127,15 +172,25 @@ def replay_ekf_seq(ts, cfg, ratio):
 def replay_ukf(ts, cfg, ratio):
     rc = cfg["receiver"]
     dt = cfg["simulation"]["sampling_time"] / ratio
-    points = MerweScaledSigmaPoints(6, alpha=rc["alpha"], beta=rc["beta"], kappa=rc["kappa"])
-    ukf = UnscentedKalmanFilter(dim_x=6, dim_z=2, dt=dt, fx=lambda x, dt: phi(dt) @ x, hx=None, points=points)
-    ukf.x = np.array([rc[f"x0_{n}"] for n in STATE], dtype=float)
-    ukf.P = np.diag([rc["p0_position"] ** 2, rc["p0_velocity"] ** 2] * 3)
-    ukf.Q = white_noise_q(dt, rc["q_horizontal"], rc["q_vertical"])
+    size = UKF_STATES
+    points = MerweScaledSigmaPoints(size, alpha=rc["alpha"], beta=rc["beta"], kappa=rc["kappa"],
+                                    sqrt_method=psd_sqrt)
+
+    def grow(M, eye=False):  # a 6×6 block of the kinematic states in the whole (the error states constant, no prior)
+        out = np.eye(size) if eye else np.zeros((size, size))
+        out[:6, :6] = M
+        return out
+
+    ukf = UnscentedKalmanFilter(dim_x=size, dim_z=2, dt=dt, fx=lambda x, dt: grow(phi(dt), True) @ x, hx=None,
+                                points=points)
+    ukf.x = np.zeros(size)
+    ukf.x[:6] = [rc[f"x0_{s}"] for s in STATE]
+    ukf.P = grow(np.diag([rc["p0_position"] ** 2, rc["p0_velocity"] ** 2] * 3))
+    ukf.Q = grow(white_noise_q(dt, rc["q_horizontal"], rc["q_vertical"]))
     gate, var, sd2 = Gate(rc), range_variance(rc), rc["sigma_depth"] ** 2
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
     nis, gated = 0.0, False
-    for last_substep, slot, row, A in slots(ts, cfg, ratio):
+    for last_substep, slot, row, now, epoch in slots(ts, cfg, ratio):
         ukf.predict()
         if slot:
             ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # redrawn from the predicted mean and covariance
@@ -143,10 +198,18 @@ def replay_ukf(ts, cfg, ratio):
             use = False
             if fresh(row):
                 b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
+                A = back(now, epoch)
                 joint = copy.deepcopy(ukf)
                 joint.update(np.array([row.range, row.depth]), R=np.diag([var, sd2]),
-                             hx=lambda x, b=b, A=A: np.array([np.linalg.norm((A @ x)[[0, 2, 4]] - b), x[4]]))
-                use = gate(row.beacon_id, joint.y[0], joint.S[0, 0])
+                             hx=lambda x, b=b, A=A: np.array([np.linalg.norm((A @ x[:6])[[0, 2, 4]] - b), x[4]]))
+
+                def earlier(rng, beacon, then, x=ukf.x[:6], P=ukf.P[:6, :6]):  # linearized at the mean
+                    A_then = back(now, then)
+                    h_then, H_then = range_row(A_then @ x, beacon)
+                    H_then = H_then @ A_then
+                    return rng - h_then, (H_then @ P @ H_then.T).item() + var
+
+                use = gate(row.beacon_id, joint.y[0], joint.S[0, 0], row.range, b, epoch, earlier)
                 gated = not use
             if use:
                 ukf = joint
