@@ -148,7 +148,7 @@ def replay_ekf_seq(ts, cfg, ratio):
                 H = H @ A
                 y, S = row.range - h, (H @ ekf.P @ H.T).item() + var
 
-                def earlier(rng, beacon, then, x=ekf.x, P=ekf.P):
+                def earlier(rng, beacon, then, x=ekf.x, P=ekf.P, now=now):
                     A_then = back(now, then)
                     h_then, H_then = range_row(A_then @ x, beacon)
                     H_then = H_then @ A_then
@@ -203,7 +203,7 @@ def replay_ukf(ts, cfg, ratio):
                 joint.update(np.array([row.range, row.depth]), R=np.diag([var, sd2]),
                              hx=lambda x, b=b, A=A: np.array([np.linalg.norm((A @ x[:6])[[0, 2, 4]] - b), x[4]]))
 
-                def earlier(rng, beacon, then, x=ukf.x[:6], P=ukf.P[:6, :6]):  # linearized at the mean
+                def earlier(rng, beacon, then, x=ukf.x[:6], P=ukf.P[:6, :6], now=now):  # linearized at the mean
                     A_then = back(now, then)
                     h_then, H_then = range_row(A_then @ x, beacon)
                     H_then = H_then @ A_then

@@ -1,14 +1,16 @@
 """The USBL receiver (``ekf`` of a USBL interface) replayed independently with FilterPy on a recorded run.
 
-A short co-simulation (``square`` around the transceiver, passing close to straight below it; 20 % packet
+A short co-simulation (``square`` with a diver crossing straight below the transceiver twice; 20 % packet
 loss; the receiver at one and at three steps per sampling time) records the receiver's inputs: the packet's
 range, azimuth, elevation, the attitude it was turned with (``doa_*``) and the transceiver position, the
 depth reading, the slot counter and validity. The replay feeds them to
 ``filterpy.kalman.ExtendedKalmanFilter``: ``F`` and ``Q`` of the constant-velocity, white-noise-acceleration
 model (``test_receiver_filterpy.py``), one ``predict()`` per receiver step and, at each new slot (the slot
 rule re-implemented there), one scalar ``update()`` with the depth and then, for a received packet, one
-``update()`` with ``z = [r, a_x, a_y]``: the array's direction cosines recovered in numpy from the NED
-azimuth and elevation and the attitude (scipy's rotations, ``test_measurement_models.py``), h in numpy and
+``update()`` with ``z = [r, a_x, a_y]``: the array's direction cosines as recorded (``doa_x``, ``doa_y``; where
+the noisy pair lies inside the unit circle they equal the ones recovered in numpy from the NED azimuth and
+elevation and the attitude, scipy's rotations, ``test_measurement_models.py``; beyond it the NED direction is
+the pair shrunk to the circle, while the receiver weighs the pair as measured), h in numpy and
 its Jacobian by central differences, and R = diag(σ_r², σ_u², σ_u²) (the ``ekf`` declares no GPS, attitude
 or lever arm: the transceiver's and the attitude's terms are 0). The ``ekf`` receiver has no gate (gate
 probability 1).
@@ -31,16 +33,27 @@ from tests.models.test_measurement_models import central, np_range_direction, np
 from tests.models.test_receiver_filterpy import SLACK, phi, white_noise_q
 
 STATE = ("x", "vx", "y", "vy", "z", "vz")
+#: The diver crosses straight below the transceiver (at the origin) twice, 5 m deep.
+THROUGH = ("target.trajectory=file", "target.waypoints=0 -12 -12 5; 30 12 12 5; 50 12 -12 5; 80 -12 12 5")
 DEPTH_ROW = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
 
 
 def array_direction(row) -> np.ndarray:
     """``[r, a_x, a_y]`` of a recorded packet: the NED direction of its azimuth and elevation turned back into the
-    array's frame by the attitude it carries."""
+    array's frame by the attitude it carries (the measured pair, or that pair shrunk to the unit circle)."""
     n = np.array([math.cos(row.elevation) * math.cos(row.azimuth), math.cos(row.elevation) * math.sin(row.azimuth),
                   math.sin(row.elevation)])
     a = np_rotation([row.doa_roll, row.doa_pitch, row.doa_yaw]).T @ n
     return np.array([row.range, a[0], a[1]])
+
+
+def measured(row) -> np.ndarray:
+    """``[r, a_x, a_y]`` as the packet carries it, checked against :func:`array_direction`."""
+    z = np.array([row.range, row.doa_x, row.doa_y])
+    recovered = array_direction(row)
+    inside = math.hypot(row.doa_x, row.doa_y) <= 1.0
+    np.testing.assert_allclose(recovered[1:], z[1:] if inside else z[1:] / math.hypot(*z[1:]), rtol=0, atol=1e-9)
+    return z
 
 
 def replay(ts, cfg, ratio):
@@ -67,7 +80,7 @@ def replay(ts, cfg, ratio):
                 if row.packet_valid and row.beacon_id == 1:
                     b = np.array([row.beacon_x, row.beacon_y, row.beacon_z])
                     att = [row.doa_roll, row.doa_pitch, row.doa_yaw]
-                    ekf.update(array_direction(row).reshape(-1, 1),
+                    ekf.update(measured(row).reshape(-1, 1),
                                lambda x, b=b, a=att: central(lambda c: np_range_direction(c, b, a), x.ravel()),
                                lambda x, b=b, a=att: np_range_direction(x, b, a).reshape(-1, 1), R=R)
                     updates += 1
@@ -81,7 +94,7 @@ def replay(ts, cfg, ratio):
 def recorded(request):
     ratio = request.param
     cfg = load_config("square", ["platform.system=usbl", "simulation.duration=80", "acoustics.loss_pct=20",
-                                 f"simulation.ekf_rate_ratio={ratio}"], seed=6)
+                                 f"simulation.ekf_rate_ratio={ratio}", *THROUGH], seed=6)
     return run(cfg, "local", replicates=[0, 1]), ratio
 
 
