@@ -834,7 +834,7 @@ def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
     if covered.size == 0:
         return values, 0
     block = slice(int(covered[0]), int(covered[-1]) + 1)
-    own = {name: source for system in SYSTEMS.values() for name, source in system.timeseries_columns.items()}
+    own = {name: source for system in SYSTEMS.values() for name, source in system.bound_columns.items()}
     rec = {column: frame[name].to_numpy()[block, None].astype(float)
            for name, column in {**TIMESERIES_COLUMNS, **own}.items() if name in frame}
     metrics, bound = _metrics([cfg], rec, [0], with_bound=True)

@@ -241,9 +241,8 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})
         rates = first.rates
-        own_columns = first.system.timeseries_columns  # what the system's own bound reads besides (USBL's doa_*)
-        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS] + [
-            own_columns[k] for k in first.system.bound_steps if k in own_columns]
+        own_columns = first.system.bound_columns  # what the system's own bound reads besides (USBL's doa_*)
+        record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS] + list(own_columns.values())
         batched = all(h.batched for h in handles.values())
         groups = [plans] if batched else [[p] for p in plans]
         bar, own_bar = progress_of(progress, n_steps * len(plans), f"{first.scenario} ({engine})")
@@ -395,7 +394,8 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     per-run inputs :attr:`~sblsim.models.systems.System.bound_fixed` from the bound's parameters, its per-step
     inputs :attr:`~sblsim.models.systems.System.bound_steps` from the record (``true_*``, the position the
     packet carries, the transmitting beacon's lever arm ``arms`` (B, n, 3), the slot and whether the packet was
-    received, and the system's own time-series columns: USBL's attitude of the packet's direction), of the runs
+    received, and the system's :attr:`~sblsim.models.systems.System.bound_columns`: USBL's attitude of the packet's
+    direction), of the runs
     ``chosen`` among the record's columns (None: all of them)."""
     def column_of(source: str) -> np.ndarray:
         values = np.asarray(rec[source], dtype=float)
@@ -411,7 +411,7 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     sources = {**{f"true_{a}": column[f"true_{a}"] for a in "xyz"},
                **{f"{kind}_{a}": column[f"beacon_{a}"] for kind in ("transceiver", "beacon") for a in "xyz"},
                **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": slot, "received": fresh,
-               **{name: column_of(source) for name, source in system.timeseries_columns.items() if source in rec}}
+               **{name: column_of(source) for name, source in system.bound_columns.items() if source in rec}}
     steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
                                           axis=-1))
     per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])

@@ -75,6 +75,10 @@ class System:
     bound_fixed, bound_steps : tuple of str
         The per-run and per-step inputs of the system's own compiled PCRB (:meth:`bound_function`); empty
         for a system whose bound is the metrics pass's range bound.
+    bound_columns : dict
+        The per-step inputs of the bound that the record gives beyond the truth and the packet's common columns:
+        name -> recorded ``component.variable`` (USBL: the attitude the packet's direction was turned with),
+        recorded whatever time-series columns the system shows.
     fix_packets : int
         The packets of one cycle a fix needs (an availability map's "probability of a fix"): three ranges
         (with the depth, the fix of two is ambiguous), or one packet of range and direction.
@@ -95,6 +99,7 @@ class System:
     places_transducers: ClassVar[bool] = False
     bound_fixed: ClassVar[tuple[str, ...]] = ()
     bound_steps: ClassVar[tuple[str, ...]] = ()
+    bound_columns: ClassVar[dict[str, str]] = {}
     fix_packets: ClassVar[int] = 3
 
     def __repr__(self) -> str:

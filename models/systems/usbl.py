@@ -461,6 +461,7 @@ class USBL(System):
                    **{f"doa_{a}_rad": f"doa_{a}" for a in ATTITUDE_ANGLES}}
     bound_fixed = FIXED
     bound_steps = STEPS
+    bound_columns = {f"doa_{a}": f"acoustics.doa_{a}" for a in ATTITUDE_ANGLES}
 
     def receiver_ties(self, platform: Mapping[str, Any]) -> dict[str, float]:
         """The ranging systems' ties (GPS, lever arm, the GPS error's correlation time), the IMU's white error

@@ -202,3 +202,6 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
             process.terminate()
     for process in processes:
         process.join(timeout=5.0)
+    # the pool's management thread too, now that its processes are gone: left running, it races the interpreter's
+    # exit, whose hook then writes to the pipe it closed ("Exception ignored ... Bad file descriptor")
+    pool.shutdown(wait=True)
