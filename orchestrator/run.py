@@ -395,8 +395,7 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     inputs :attr:`~sblsim.models.systems.System.bound_steps` from the record (``true_*``, the position the
     packet carries, the transmitting beacon's lever arm ``arms`` (B, n, 3), the slot and whether the packet was
     received, and the system's :attr:`~sblsim.models.systems.System.bound_columns`: USBL's attitude of the packet's
-    direction), of the runs
-    ``chosen`` among the record's columns (None: all of them)."""
+    direction), of the runs ``chosen`` among the record's columns (None: all of them)."""
     def column_of(source: str) -> np.ndarray:
         values = np.asarray(rec[source], dtype=float)
         return values if chosen is None else values[:, chosen]
