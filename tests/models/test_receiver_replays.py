@@ -121,6 +121,18 @@ def back(now, epoch):
     return phi(-max(now - epoch, 0.0))
 
 
+def linearized(x, P, var, now):
+    """The gate's ``earlier(range, beacon, epoch)``: a beacon's last failed range predicted from the state ``x``
+    (6) and covariance ``P`` (6×6) at ``now``, moved back to that range's epoch: its innovation and its
+    linearized innovation variance (``var`` the range's noise)."""
+    def earlier(rng, beacon, then):
+        A = back(now, then)
+        h, H = range_row(A @ x, beacon)
+        H = H @ A
+        return rng - h, (H @ P @ H.T).item() + var
+    return earlier
+
+
 def fresh(row):
     return bool(row.packet_valid) and 1 <= row.beacon_id <= N_BEACONS
 
@@ -148,13 +160,7 @@ def replay_ekf_seq(ts, cfg, ratio):
                 H = H @ A
                 y, S = row.range - h, (H @ ekf.P @ H.T).item() + var
 
-                def earlier(rng, beacon, then, x=ekf.x, P=ekf.P, now=now):
-                    A_then = back(now, then)
-                    h_then, H_then = range_row(A_then @ x, beacon)
-                    H_then = H_then @ A_then
-                    return rng - h_then, (H_then @ P @ H_then.T).item() + var
-
-                if gate(row.beacon_id, y, S, row.range, b, epoch, earlier):
+                if gate(row.beacon_id, y, S, row.range, b, epoch, linearized(ekf.x, ekf.P, var, now)):
                     ekf.update(np.array([[row.range]]), lambda x, b=b, A=A: range_row(A @ x, b)[1] @ A,
                                lambda x, b=b, A=A: np.array([[range_row(A @ x, b)[0]]]), R=var)
                     nis += y * y / S
@@ -203,13 +209,8 @@ def replay_ukf(ts, cfg, ratio):
                 joint.update(np.array([row.range, row.depth]), R=np.diag([var, sd2]),
                              hx=lambda x, b=b, A=A: np.array([np.linalg.norm((A @ x[:6])[[0, 2, 4]] - b), x[4]]))
 
-                def earlier(rng, beacon, then, x=ukf.x[:6], P=ukf.P[:6, :6], now=now):  # linearized at the mean
-                    A_then = back(now, then)
-                    h_then, H_then = range_row(A_then @ x, beacon)
-                    H_then = H_then @ A_then
-                    return rng - h_then, (H_then @ P @ H_then.T).item() + var
-
-                use = gate(row.beacon_id, joint.y[0], joint.S[0, 0], row.range, b, epoch, earlier)
+                use = gate(row.beacon_id, joint.y[0], joint.S[0, 0], row.range, b, epoch,
+                           linearized(ukf.x[:6], ukf.P[:6, :6], var, now))  # the re-acquisition: at the mean
                 gated = not use
             if use:
                 ukf = joint
