@@ -262,6 +262,15 @@ def model_guid(model: type, n_beacons: int, p_start: Sequence[float] | None = No
     return f"{{{digest[:8]}-{digest[8:12]}-{digest[12:16]}-{digest[16:20]}-{digest[20:32]}}}"
 
 
+def write_runtime(directory: Path) -> list[str]:
+    """Write the runtime's C files and the contract header every model's code includes into ``directory``; their
+    names."""
+    for name in RUNTIME:
+        shutil.copyfile(C_DIR / name, directory / name)
+    (directory / CONTRACT).write_text(contract_header())
+    return [*RUNTIME, CONTRACT]
+
+
 def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str = FMI_SHELL,
                   p_start: Sequence[float] | None = None) -> Sources:
     """Write a model's C sources, the runtime, its shared header and (for the FMI shell) the FMI headers into
@@ -293,10 +302,7 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     (directory / files[0]).write_text(source)
     (directory / files[1]).write_text(header)
     (directory / files[2]).write_text(model_record(model, n_beacons, guid, p_start))
-    for name in RUNTIME:
-        shutil.copyfile(C_DIR / name, directory / name)
-    (directory / CONTRACT).write_text(contract_header())
-    files += [*RUNTIME, CONTRACT]
+    files += write_runtime(directory)
     if shell:
         shutil.copyfile(C_DIR / shell, directory / shell)
         files.append(shell)
@@ -307,4 +313,4 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
 
 
 __all__ = ["BATCH", "C_DIR", "FMI_HEADERS", "FMI_SHELL", "METRICS", "RUNTIME", "Sources", "casadi_code",
-           "fmi_headers_dir", "model_guid", "model_record", "stem", "write_sources"]
+           "fmi_headers_dir", "model_guid", "model_record", "stem", "write_runtime", "write_sources"]

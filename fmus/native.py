@@ -1,14 +1,18 @@
-"""The local engine's compiled path: every model's generated C and the runtime in one library.
+"""The local engine's compiled path: the models' generated C and the runtime in one library.
 
 The library holds the same generated code and runtime as the FMUs, plus a
 batch API (``fmus/c/sblsim_batch.c``) that steps B replicates of a model in
-one call. It is built on first use for a beacon count (about ten seconds)
-into a cache folder, keyed by a hash of what its sources are generated from
-(the package's model and FMU sources, casadi's version) and the compiler
-flags, and re-used by every later process: ``$SBLSIM_CACHE_DIR`` or the
-user's cache folder (``platformdirs``). A process generates the sources only
-when it compiles them, or when a model or system from outside the package
-takes part (then the key hashes the generated sources themselves).
+one call. It is built on first use for a beacon count and a set of models (a
+run's engine asks for the models the run uses) into a cache folder, keyed by
+a hash of what its sources are generated from (the package's model and FMU
+sources, casadi's version), the models and the compiler flags, and re-used
+by every later process: ``$SBLSIM_CACHE_DIR`` or the user's cache folder
+(``platformdirs``). Its objects are the compiler's cache's
+(:mod:`sblsim.fmus.compiler`), shared with the other libraries and the FMUs,
+so a library of other models compiles only the models new to the machine. A
+process generates the sources only when it compiles them, or when a model or
+system from outside the package takes part (then the key hashes the
+generated sources themselves).
 
 :class:`NativeBatch` wraps one batch: parameter, input and output matrices
 are numpy views of the library's memory (B rows of inputs and outputs; one
@@ -32,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 import sblsim.models
-from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_sources
+from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_runtime, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, cache_dir, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
@@ -52,6 +56,9 @@ RAY_EXPORT = """#if defined(_WIN32)
 """
 #: The compiled loop of a system's own bound (the library of that system's interface only).
 SYSTEM_BOUND = "sblsim_system_bound.c"
+#: The models of the library of the metrics, the bounds and the eigenray entry points: none (the runtime, the
+#: bound, the eigenray functions and the metrics alone).
+NO_MODELS: tuple[type, ...] = ()
 
 
 
@@ -59,17 +66,19 @@ def _registry(n_beacons: int, models: tuple[type, ...]) -> str:
     symbols = [f"{stem(model, n_beacons)}_model" for model in models]
     lines = ['#include <stddef.h>', '#include "sblsim_runtime.h"']
     lines += [f"extern const sblsim_model {s};" for s in symbols]
-    lines.append("const sblsim_model* const sblsim_models[] = {" + ", ".join(f"&{s}" for s in symbols) + ", NULL};")
+    lines.append("const sblsim_model* const sblsim_models[] = {" + "".join(f"&{s}, " for s in symbols) + "NULL};")
     return "\n".join(lines) + "\n"
 
 
 def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, ...] | None = None) -> list[Path]:
-    """The models' sources (default every built-in), the runtime, the registry, the bound and the batch API
-    into ``directory``; the C files."""
+    """The models' sources (default every built-in; ``()``: none), the runtime, the registry, the bound and the
+    batch API into ``directory``; the C files. A model's generated files do not depend on the others compiled
+    with it, so libraries of different models share their objects in the compiler's cache."""
     models = tuple(MODELS.values()) if models is None else models
     directory.mkdir(parents=True, exist_ok=True)
     for model in models:
         write_sources(model, n_beacons, directory, shell="")
+    write_runtime(directory)  # (with each model's sources too; a library of no model needs it as well)
     (directory / "sblsim_models.c").write_text(_registry(n_beacons, models))
     cg = ca.CodeGenerator("sblsim_bound_casadi.c", {"with_header": True, "casadi_real": "double",
                                                     "casadi_int": "long long int"})
@@ -93,7 +102,7 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
 
 def _built_in(models: tuple[type, ...] | None) -> bool:
     """Every model compiled in and every registered system comes from this package."""
-    classes = list(models or MODELS.values()) + [type(s) for s in SYSTEMS.values()]
+    classes = list(MODELS.values() if models is None else models) + [type(s) for s in SYSTEMS.values()]
     return all(c.__module__.startswith("sblsim.") for c in classes)
 
 
@@ -118,7 +127,10 @@ def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type,
     n_beacons : int
     compiler : {'auto', 'system', 'zig'}
     models : tuple of type, optional
-        The models compiled in (default every built-in; a user's model gets a library of its own).
+        The models compiled in (default every built-in; a run's engine asks for the models it runs, a user's model
+        for a library of its own, and the metrics, the bounds and the eigenray entry points for none:
+        :data:`NO_MODELS`). Libraries share the objects of their common sources (the compiler's cache), so a
+        first run compiles only what it uses.
 
     Raises
     ------
@@ -131,7 +143,7 @@ def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type,
     with tempfile.TemporaryDirectory(prefix="sblsim_native_") as tmp:
         digest = hashlib.sha256(flags)
         if package is not None:  # what the sources are generated from: no need to generate them to know them
-            names = [model.__name__ for model in (models or MODELS.values())] + list(SYSTEMS)
+            names = [model.__name__ for model in (MODELS.values() if models is None else models)] + list(SYSTEMS)
             digest.update(package + " ".join(names).encode() + str(n_beacons).encode())
         else:
             write_library_sources(n_beacons, Path(tmp), models)
@@ -214,8 +226,13 @@ class NativeBatch:
         Outputs (after :meth:`initialize` and every :meth:`do_step`).
     """
 
-    def __init__(self, model: type, batch: int, n_beacons: int = 4, rows: int | None = None) -> None:
-        self.lib = load(n_beacons, None if model in MODELS.values() else (model,))
+    def __init__(self, model: type, batch: int, n_beacons: int = 4, rows: int | None = None,
+                 models: tuple[type, ...] | None = None) -> None:
+        if models is None:
+            models = None if model in MODELS.values() else (model,)
+        elif model not in models:
+            raise ValueError(f"NativeBatch: the model {model.name!r} is not one of the library's models")
+        self.lib = load(n_beacons, models)
         self.model, self.batch = model, int(batch)
         self.rows = self.batch if rows is None else int(rows)
         name = model.name.encode()
@@ -377,7 +394,7 @@ class NativeSystem:
 def metrics_sizes(n_beacons: int = 4) -> tuple[int, int, int]:
     """The compiled metrics pass's column, metric and per-run bound input counts (``sblsim_contract.h``)."""
     sizes = (ctypes.c_int * 3)()
-    load(n_beacons).sblsim_metrics_sizes(sizes)
+    load(n_beacons, NO_MODELS).sblsim_metrics_sizes(sizes)
     return tuple(sizes)
 
 
@@ -412,7 +429,7 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
     ValueError
         If the arrays do not fit together.
     """
-    lib = load(n_beacons)
+    lib = load(n_beacons, NO_MODELS)
     n_columns, n_metrics, n_fixed = metrics_sizes(n_beacons)
     n, b = columns[0].shape
     views = [c if c.dtype == np.float64 and c.strides[1] == 8 else np.ascontiguousarray(c, dtype=float)
@@ -439,7 +456,7 @@ def system_bound_sizes(n_beacons: int) -> tuple[int, int, int]:
     """The sizes the library of an interface with a system's own bound was built with: (per-run inputs, per-step
     inputs, entries of the bound)."""
     sizes = (ctypes.c_int * 3)()
-    load(n_beacons).sblsim_system_bound_sizes(sizes)
+    load(n_beacons, NO_MODELS).sblsim_system_bound_sizes(sizes)
     return int(sizes[0]), int(sizes[1]), int(sizes[2])
 
 
@@ -473,7 +490,7 @@ def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray) -> np.ndar
     n, b = steps.shape[:2]
     if fixed.shape != (b, len(system.bound_fixed)) or steps.shape != (n, b, len(system.bound_steps)):
         raise ValueError(f"system_pcrb: fixed {fixed.shape} and steps {steps.shape} do not fit together")
-    lib = load(n_beacons)
+    lib = load(n_beacons, NO_MODELS)
     lib.sblsim_system_pcrb.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.c_void_p] * 3
     out = np.empty((n, b))
     if lib.sblsim_system_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, out.ctypes.data):
@@ -483,7 +500,7 @@ def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray) -> np.ndar
 
 def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int, n_beacons: int = 4) -> np.ndarray:
     """One draw of a random stream as the C runtime makes it (for the tests against numpy's Philox)."""
-    lib = load(n_beacons)
+    lib = load(n_beacons, NO_MODELS)
     out = np.empty(count)
     key_array = (ctypes.c_uint64 * 4)(*[int(k) for k in keys])
     getattr(lib, f"sblsim_stream_{kind}s")(key_array, component, purpose, draw, count,
@@ -494,7 +511,7 @@ def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
     """:func:`sblsim.models.acoustics.rays.exact_points` compiled in the local engine's library (built if missing),
     or None when no compiler can build it."""
     try:
-        return ca.external(exact_points().name(), str(library_path(n_beacons)))
+        return ca.external(exact_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
         return None
 
@@ -503,7 +520,7 @@ def compiled_family_points(n_beacons: int = 4) -> ca.Function | None:
     """:func:`sblsim.models.acoustics.rays.family_points` compiled in the local engine's library (built if missing),
     or None when no compiler can build it."""
     try:
-        return ca.external(family_points().name(), str(library_path(n_beacons)))
+        return ca.external(family_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
         return None
 
@@ -512,11 +529,11 @@ def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
     """:func:`sblsim.models.acoustics.detection.family_levels` compiled in the local engine's library (built if
     missing), or None when no compiler can build it."""
     try:
-        return ca.external(family_levels().name(), str(library_path(n_beacons)))
+        return ca.external(family_levels().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
         return None
 
 
-__all__ = ["NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "abandonable", "cache_dir",
+__all__ = ["NO_MODELS", "NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "abandonable", "cache_dir",
            "compiled_exact_points", "compiled_family_levels", "compiled_family_points", "library_path", "load",
            "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb", "write_library_sources"]

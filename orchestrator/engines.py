@@ -148,15 +148,21 @@ class LocalHandle:
         The model that implements it (default the paper's, ``COMPONENTS[component]``).
     n_beacons : int
         Beacons of the interface.
+    library : tuple of type, optional
+        The models of the compiled library it runs in (:func:`sblsim.fmus.native.library_path`; default every
+        built-in, or the model alone if it is not one): the handles of one run share one, so the compiled master
+        loop steps them together, and a first run compiles only the models it uses.
     """
 
     #: Steps a batch of replicates at once.
     batched = True
 
-    def __init__(self, component: str, model: type | None = None, n_beacons: int = 4) -> None:
+    def __init__(self, component: str, model: type | None = None, n_beacons: int = 4,
+                 library: tuple[type, ...] | None = None) -> None:
         self.component = component
         self.model = model or COMPONENTS[component]
         self.n_beacons = n_beacons
+        self.library = library
         ports, self.parameters, inputs, outputs, types = _model_ports(self.model, int(n_beacons))
         self.ports, self.input_names = list(ports), list(inputs)
         self.output_names, self._types = list(outputs), list(types)
@@ -181,7 +187,7 @@ class LocalHandle:
                 self.model.parameter_vector({"replicate": int(value)}, self.n_beacons)
         if self.batch is None or (self.batch.batch, self.batch.rows) != (size, first.size):
             self.close()
-            self.batch = NativeBatch(self.model, size, self.n_beacons, rows=first.size)
+            self.batch = NativeBatch(self.model, size, self.n_beacons, rows=first.size, models=self.library)
         self.model.parameter_matrix(values, first.size, self.n_beacons, out=self.batch.p)
         self.batch.assign(row_of, replicates if seeded else None)
         self.batch.u[:] = [v.start for v in self.model.inputs(self.n_beacons)] or 0.0
@@ -715,11 +721,14 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
                  **(fmu_files or {})}
     else:
         paths = {name: src for name, src in sources.items() if isinstance(src, Path)}
+    local = {source_model(src) for name, src in sources.items() if name not in paths}
+    library = tuple(model for model in MODELS.values() if model in local)  # the built-ins this run compiles
     handles: dict[str, ComponentHandle] = {}
     try:
         for name, src in sources.items():
             if name not in paths:
-                handles[name] = LocalHandle(name, source_model(src), n_beacons)
+                model = source_model(src)
+                handles[name] = LocalHandle(name, model, n_beacons, library if model in library else None)
                 continue
             if isinstance(src, Path):  # a user's FMU: check its interface before loading it
                 check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)

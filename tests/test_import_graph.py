@@ -17,11 +17,12 @@ PACKAGES = {"sblsim.models": sblsim.models, "sblsim.fmus": sblsim.fmus, "sblsim.
 #: Which layers a layer may import (besides itself): models at the bottom, then fmus, then the orchestrator.
 MAY_IMPORT = {"sblsim.models": set(), "sblsim.fmus": {"sblsim.models"},
               "sblsim.orchestrator": {"sblsim.models", "sblsim.fmus"}}
-#: Libraries heavy enough to import only when used (seconds, or a process's worth of threads; casadi: what
+#: Libraries heavy enough to import only when used (seconds, or a process's worth of threads; scipy.integrate: half a
+#: second of every command's start-up; casadi: what
 #: ``import sblsim`` must not load): a function-level import is allowed where it defers one of these, directly or
 #: through the sblsim module it imports.
 HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats", "pyDOE3",
-         "casadi")
+         "casadi", "scipy.integrate")
 #: Function-level imports that defer nothing heavy but ask whether an optional package is installed.
 PROBES = {"ziglang"}
 
@@ -229,7 +230,7 @@ def test_the_function_level_check_can_fail():
     assert "pyarrow" in _heavy_at_load("sblsim.orchestrator.campaign.merge")
     assert _heavy_at_load("sblsim.models.declarations") == set()
     assert "matplotlib" in _heavy_at_load("sblsim.orchestrator.plots")
-    assert not _heavy_at_load("sblsim.orchestrator.cli") & {"pandas", "scipy.stats", "matplotlib"}
+    assert not _heavy_at_load("sblsim.orchestrator.cli") & {"pandas", "scipy.stats", "matplotlib", "scipy.integrate"}
 
 
 def test_a_campaign_worker_loads_no_statistics_or_plotting():

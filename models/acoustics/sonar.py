@@ -49,7 +49,6 @@ from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
-from scipy.integrate import trapezoid
 
 from sblsim.models.acoustics.sound_speed import temperature_from_speed
 from sblsim.models.errors import ModelError
@@ -674,6 +673,8 @@ def water_column_absorption(frequency: float, rows: np.ndarray, temperature: flo
                             (points,))
     if bottom <= 0.0:
         return float(alpha[0])
+    from scipy.integrate import trapezoid  # here: scipy.integrate takes most of a command's start-up
+
     return float(trapezoid(alpha, depth) / bottom)
 
 __all__ = ["absorption", "accuracy_scale", "Bottom", "bottom_loss", "bottom_parameters", "BOTTOMS", "DB_PER_NEPER",

@@ -51,3 +51,53 @@ def test_the_package_digest_covers_the_model_and_runtime_sources(monkeypatch, tm
         assert native._package_digest() != before
     finally:
         native._package_digest.cache_clear()
+
+
+def test_libraries_of_other_models_share_their_objects(monkeypatch, tmp_path):
+    """A library of one model is made of the runtime's, the bound's, the eigenray functions' and that model's
+    objects and no other model's; the library of no model (the metrics' and the bounds') is another file made of
+    the same objects but the model's and the registry's: the objects are the compiler cache's, shared (here the
+    suite's cache; the libraries go to a folder of their own)."""
+    import sblsim.fmus.compiler as compiler
+
+    used = []
+    objects = compiler._objects
+
+    def recording(*args, **kwargs):
+        paths = objects(*args, **kwargs)
+        used.append({path.name: source.name for path, source in zip(paths, args[2])})
+        return paths
+
+    monkeypatch.setattr(compiler, "_objects", recording)
+    monkeypatch.setattr(native, "cache_dir", lambda: tmp_path)
+    native.library_path.cache_clear()
+    try:
+        one = native.library_path(4, models=(MODELS["target"],))
+        none = native.library_path(4, models=native.NO_MODELS)
+    finally:
+        native.library_path.cache_clear()
+    assert none != one and none.is_file() and one.parent == none.parent == tmp_path
+    (first, second) = used
+    sources = set(first.values())
+    assert {"sblsim_target_casadi.c", "sblsim_ray_points.c", "sblsim_bound_casadi.c"} <= sources
+    assert not any(name.startswith(("sblsim_receiver", "sblsim_acoustics", "sblsim_platform")) for name in sources)
+    shared = set(first) & set(second)
+    assert {first[o] for o in set(first) - shared} == {"sblsim_target_casadi.c", "sblsim_target_model.c",
+                                                      "sblsim_models.c"}
+    assert {second[o] for o in set(second) - shared} == {"sblsim_models.c"}
+
+
+def test_a_run_s_local_handles_share_the_library_of_the_models_it_runs():
+    """The paper's system on the local engine: the four components' handles run in one library of their four
+    models (no other receiver compiled), and a user's model in a library of its own."""
+    from sblsim.orchestrator.engines import make_handles, paper_sources
+
+    handles = make_handles("local")
+    paper = tuple(MODELS[name] for name in ("platform", "acoustics", "target", "receiver"))
+    assert {handle.library for handle in handles.values()} == {paper}
+
+    class Mine(MODELS["receiver"]):
+        pass
+
+    handles = make_handles("local", sources={**paper_sources(), "receiver": Mine})
+    assert handles["receiver"].library is None and handles["platform"].library == paper[:3]
