@@ -1,4 +1,5 @@
-"""Test helpers: step one model's compiled code directly, as the local engine does; start a child to signal.
+"""Test helpers: step one model's compiled code directly, as the local engine does; start a child to signal; give
+an empty cache the objects the suite compiled.
 
 ``Core(model, params, replicates)`` takes configuration keys (e.g.
 ``trajectory_file``, ``sound_speed_profile``, ``beacon_offsets``) or FMU
@@ -8,8 +9,11 @@ starts, and steps a batch of replicates through :class:`sblsim.fmus.native.Nativ
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
 import subprocess
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -94,3 +98,25 @@ def start_for_signals(command: Sequence[str], **kwargs: Any) -> subprocess.Popen
 
 
 __all__ = ["Core", "fmu_values", "start_for_signals"]
+
+
+def share_compiled_objects(cache: Path) -> int:
+    """Give the sblsim cache folder ``cache`` (empty: a user's first run) the objects the suite's cache holds, as
+    hard links (copies across file systems); the number given.
+
+    A test of what a first run does (build its FMUs and its library into a fresh cache, from a wheel) then links
+    the objects the suite compiled once instead of compiling them again: an object is keyed by everything its
+    compilation reads (:mod:`sblsim.fmus.compiler`), so a kept one is the one the compiler would make.
+    """
+    from sblsim.fmus.compiler import cache_dir
+
+    source, target = cache_dir() / "objects", Path(cache) / "objects"
+    target.mkdir(parents=True, exist_ok=True)
+    shared = 0
+    for path in source.glob("*.o") if source.is_dir() else ():
+        try:
+            os.link(path, target / path.name)
+        except OSError:
+            shutil.copyfile(path, target / path.name)
+        shared += 1
+    return shared

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers import share_compiled_objects
+
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("models", "orchestrator", "fmus", "pyproject.toml", "README.md")
 
@@ -113,15 +115,21 @@ def _tree(folder: Path) -> dict[str, tuple]:
     return out
 
 
-def test_the_fmu_engine_runs_from_a_wheel_without_writing_into_site_packages(installed):
+def test_the_fmu_engine_runs_from_a_wheel_without_writing_into_site_packages(installed, fmu_dir):
     """``sblsim run semicircle --engine fmu --seed 1`` from a non-editable install, no FMU built beforehand:
     the FMUs are built into the user's cache, site-packages is left as it was, and the numbers are the
-    local engine's."""
+    local engine's. (The user's cache is given the objects the suite compiled for its FMUs and the local engine:
+    the wheel's sources are the checkout's, so the FMUs and the library are linked from them.)"""
+    from sblsim.fmus.native import library_path
+    from sblsim.models import COMPONENTS, MODELS
+
     env, outside, _ = installed
     python = env / "bin" / "python"
     purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                                   check=True, capture_output=True, text=True).stdout.strip())
     cache = outside.parent / "user-cache"
+    library_path(4, models=tuple(m for m in MODELS.values() if m in COMPONENTS.values()))
+    assert share_compiled_objects(cache / "sblsim") > 0
     run_env = {k: v for k, v in os.environ.items() if not k.startswith(("SBLSIM_", "VIRTUAL_ENV", "PYTHONPATH"))}
     run_env.update(XDG_CACHE_HOME=str(cache), HOME=str(outside.parent / "home"))
     before = _tree(purelib)
