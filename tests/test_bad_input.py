@@ -1,5 +1,6 @@
 """The bad-input corpus: every command, configuration file, trajectory and sound-speed file and study file
-given something wrong, run as a user runs it (a subprocess).
+given something wrong, run as a user runs it: each command in a process of its own (forked from one that imported
+the CLI once, :func:`_command`).
 
 Each case must end with exit status 2, no traceback, one line ``sblsim: error: ...`` naming the field (or
 argparse's one line for a malformed option), and the working folder unchanged byte for byte: the output of
@@ -10,6 +11,7 @@ a folder of its own holding the files it needs and an earlier result that must s
 from __future__ import annotations
 
 import hashlib
+import multiprocessing
 import os
 import subprocess
 import sys
@@ -392,19 +394,56 @@ def _prepare(folder: Path) -> None:
         os.mkfifo(folder / name)
 
 
+def _command(args: list[str], folder: str, stdout: str, stderr: str) -> None:
+    """A case's command in a process of its own (forked from the server that imported the CLI): in its folder, its
+    output into two files, ended as ``python -m sblsim.orchestrator.cli`` ends (the exit status of ``main``, or
+    of the SystemExit it raised; any other exception: its traceback and 1)."""
+    import traceback
+
+    from sblsim.orchestrator.cli import main
+
+    os.chdir(folder)
+    os.environ["SBLSIM_FMU_DIR"] = os.path.join(folder, "emptyfmus")
+    for fd, name in ((1, stdout), (2, stderr)):
+        os.dup2(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), fd)
+    sys.argv = ["sblsim", *args]
+    try:
+        code = main(args)
+    except SystemExit as stop:
+        code = stop.code if isinstance(stop.code, int) or stop.code is None else (print(stop.code, file=sys.stderr)
+                                                                                  or 1)
+    except BaseException:
+        traceback.print_exc()
+        code = 1
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code or 0)
+
+
+#: Processes forked from one that imported the CLI once (a command's start-up, a second each, is not what is tested).
+SERVER = multiprocessing.get_context("forkserver")
+SERVER.set_forkserver_preload(["sblsim.orchestrator.cli"])
+
+
 def _run(case: str, folder: Path) -> tuple[subprocess.CompletedProcess, dict, dict]:
     _prepare(folder)
     before = _snapshot(folder)
     args, _ = CASES[case]
-    env = {**os.environ, "SBLSIM_FMU_DIR": str(folder / "emptyfmus")}
-    proc = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", *args], cwd=folder, capture_output=True,
-                          text=True, timeout=600, check=False, env=env)
-    return proc, before, _snapshot(folder)
+    streams = folder.parent / f"{folder.name}.stdout", folder.parent / f"{folder.name}.stderr"
+    process = SERVER.Process(target=_command, args=(list(args), str(folder), *map(str, streams)))
+    process.start()
+    process.join(600)
+    if process.exitcode is None:
+        process.kill()
+        process.join()
+        raise TimeoutError(f"{case}: still running after 600 s")
+    out, err = (path.read_text() for path in streams)
+    return subprocess.CompletedProcess(args, process.exitcode, out, err), before, _snapshot(folder)
 
 
 @pytest.fixture(scope="module")
 def outcomes(tmp_path_factory):
-    """Every case, run two at a time (each in a folder of its own)."""
+    """Every case, run two at a time (each in a folder of its own, its output beside it)."""
     root = tmp_path_factory.mktemp("corpus")
     with ThreadPoolExecutor(max_workers=2) as pool:
         futures = {case: pool.submit(_run, case, root / f"case{k:03d}") for k, case in enumerate(CASES)}
