@@ -213,6 +213,14 @@ class NativeBatch:
         Number of parameter rows R, 1 ≤ R ≤ B (default B: one per replicate). Replicates that differ only in
         their random streams (a design cell's) share one row and its derived values, which are then checked
         and prepared once (:meth:`assign` says which row each replicate uses).
+    models : tuple of type, optional
+        The models of the library it runs in (:func:`library_path`; default every built-in, or ``model`` alone if
+        it is not one); ``model`` is one of them.
+
+    Raises
+    ------
+    ValueError
+        If ``model`` is not one of ``models``.
 
     Attributes
     ----------
