@@ -74,7 +74,7 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     """The models' sources (default every built-in; ``()``: none), the runtime, the registry, the bound and the
     batch API into ``directory``; the C files. A model's generated files do not depend on the others compiled
     with it, so libraries of different models share their objects in the compiler's cache."""
-    models = tuple(MODELS.values()) if models is None else models
+    models = _library_models(models)
     directory.mkdir(parents=True, exist_ok=True)
     for model in models:
         write_sources(model, n_beacons, directory, shell="")
@@ -100,9 +100,14 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     return sorted(directory.glob("*.c"))
 
 
+def _library_models(models: tuple[type, ...] | None) -> tuple[type, ...]:
+    """The models of a library (None: every built-in)."""
+    return tuple(MODELS.values()) if models is None else models
+
+
 def _built_in(models: tuple[type, ...] | None) -> bool:
     """Every model compiled in and every registered system comes from this package."""
-    classes = list(MODELS.values() if models is None else models) + [type(s) for s in SYSTEMS.values()]
+    classes = list(_library_models(models)) + [type(s) for s in SYSTEMS.values()]
     return all(c.__module__.startswith("sblsim.") for c in classes)
 
 
@@ -143,7 +148,7 @@ def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type,
     with tempfile.TemporaryDirectory(prefix="sblsim_native_") as tmp:
         digest = hashlib.sha256(flags)
         if package is not None:  # what the sources are generated from: no need to generate them to know them
-            names = [model.__name__ for model in (MODELS.values() if models is None else models)] + list(SYSTEMS)
+            names = [model.__name__ for model in _library_models(models)] + list(SYSTEMS)
             digest.update(package + " ".join(names).encode() + str(n_beacons).encode())
         else:
             write_library_sources(n_beacons, Path(tmp), models)

@@ -97,9 +97,6 @@ def start_for_signals(command: Sequence[str], **kwargs: Any) -> subprocess.Popen
     return subprocess.Popen(command, preexec_fn=_default_signals, **kwargs)
 
 
-__all__ = ["Core", "fmu_values", "start_for_signals"]
-
-
 def share_compiled_objects(cache: Path) -> int:
     """Give the sblsim cache folder ``cache`` (empty: a user's first run) the objects the suite's cache holds, as
     hard links (copies across file systems); the number given.
@@ -120,3 +117,7 @@ def share_compiled_objects(cache: Path) -> int:
             shutil.copyfile(path, target / path.name)
         shared += 1
     return shared
+
+
+__all__ = ["Core", "fmu_values", "share_compiled_objects", "start_for_signals"]
+

@@ -410,8 +410,10 @@ def _command(args: list[str], folder: str, stdout: str, stderr: str) -> None:
     try:
         code = main(args)
     except SystemExit as stop:
-        code = stop.code if isinstance(stop.code, int) or stop.code is None else (print(stop.code, file=sys.stderr)
-                                                                                  or 1)
+        code = stop.code
+        if code is not None and not isinstance(code, int):  # sys.exit("message"): the message, status 1
+            print(code, file=sys.stderr)
+            code = 1
     except BaseException:
         traceback.print_exc()
         code = 1
