@@ -14,7 +14,9 @@ generated code of a model, compiled for the local engine's library, for its
 FMU, for the FMU of a scenario (which differs only in its compiled-in start
 values) or by ``sblsim fmus build`` again, is compiled once. A library's
 objects compile side by side on every core, and processes that need the same
-objects at once share the work (a lock file per object).
+objects at once share the work (a lock file per object). Ctrl-C (or SIGTERM)
+during a compilation ends it at once: the compilers running are stopped,
+their partial files removed and nothing is kept half-written.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import platform
 import re
 import shlex
 import shutil
+import signal
 import struct
 import subprocess
 import sys
@@ -246,22 +249,31 @@ def _plan_object(compiler: Compiler, command: list[str], source: Path, include: 
                     "-o"), target, compiler)
 
 
-def _make(item: _Object, wait: bool, locked: bool = True) -> bool:
+def _make(item: _Object, wait: bool, locked: bool = True, stop: threading.Event | None = None) -> bool:
     """Make ``item``'s object unless it is there; with ``locked``, under its lock file, which another process may
-    hold (then, without ``wait``, leave it to that process: False)."""
+    hold (then, without ``wait``, leave it to that process: False). A set ``stop`` ends the wait or the
+    compilation (:class:`_Stopped`)."""
     if item.path.is_file():
         return True
-    lock = FileLock(str(item.path) + ".lock", timeout=-1 if wait else 0) if locked else None
+    lock = FileLock(str(item.path) + ".lock") if locked else None
     if lock is not None:
         try:
-            lock.acquire()
+            lock.acquire(timeout=0)
         except Timeout:
-            return False
+            if not wait:
+                return False
+            while True:  # another process compiles it: wait, a fraction of a second at a time
+                try:
+                    lock.acquire(timeout=_POLL)
+                    break
+                except Timeout:
+                    if stop is not None and stop.is_set():
+                        raise _Stopped from None
     try:
         if not item.path.is_file():
             partial = item.path.with_name(f".{item.path.name}.{os.getpid()}.{threading.get_ident()}.partial")
             try:
-                _run(item.compiler, [*item.command, str(partial)], partial, item.target, item.source.name)
+                _run(item.compiler, [*item.command, str(partial)], partial, item.target, item.source.name, stop)
                 os.replace(partial, item.path)
             finally:
                 partial.unlink(missing_ok=True)
@@ -286,19 +298,56 @@ def _objects(compiler: Compiler, command: list[str], sources: Sequence[Path], in
     except OSError:
         folder, locked = work, False
     items = [_plan_object(compiler, command, Path(source), include, defines, target, folder) for source in sources]
-    with ThreadPoolExecutor(max_workers=max(1, min(len(items), os.cpu_count() or 1))) as pool:
-        done = list(pool.map(lambda item: _make(item, False, locked), items))
-        list(pool.map(lambda item: _make(item, True, locked), [i for i, ok in zip(items, done) if not ok]))
+    stop = threading.Event()
+    pool = ThreadPoolExecutor(max_workers=max(1, min(len(items), os.cpu_count() or 1)))
+    try:
+        done = list(pool.map(lambda item: _make(item, False, locked, stop), items))
+        list(pool.map(lambda item: _make(item, True, locked, stop), [i for i, ok in zip(items, done) if not ok]))
+    except BaseException:  # Ctrl-C, SIGTERM or a compiler's error: the other compilations stop too
+        stop.set()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
     return [item.path for item in items]
 
 
-def _run(compiler: Compiler, command: list[str], built: Path, target: str, what: str = "") -> Path:
+class _Stopped(Exception):
+    """A compilation ended because another one failed or the user interrupted the build."""
+
+
+#: How often [s] a compilation in a worker thread looks whether it should stop.
+_POLL = 0.1
+
+
+def _run(compiler: Compiler, command: list[str], built: Path, target: str, what: str = "",
+         stop: threading.Event | None = None) -> Path:
     """One compiler run that writes ``built`` (of ``what``, default its name); raises CompileError with the
-    compiler's first error lines."""
-    result = subprocess.run(command, capture_output=True, text=True, cwd=built.parent)
-    if result.returncode != 0 or not built.is_file():
-        errors = [line for line in (result.stderr or result.stdout).splitlines() if "error" in line.lower()]
-        detail = " | ".join((errors or (result.stderr or result.stdout).splitlines())[:3])
+    compiler's first error lines.
+
+    The compiler runs in a process group of its own (on POSIX), so a terminal's Ctrl-C reaches this process
+    only; an exception here (KeyboardInterrupt in the main thread) or a set ``stop`` (a worker thread) kills
+    the group — the compiler and what it started (zig's wrapper starts zig) — before anything is returned."""
+    posix = os.name == "posix"
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=built.parent,
+                            start_new_session=posix)
+    try:
+        while True:
+            try:
+                stdout, stderr = proc.communicate(timeout=_POLL)
+                break
+            except subprocess.TimeoutExpired:
+                if stop is not None and stop.is_set():
+                    raise _Stopped from None
+    except BaseException:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL) if posix else proc.kill()
+        except ProcessLookupError:
+            pass
+        proc.communicate()
+        raise
+    if proc.returncode != 0 or not built.is_file():
+        errors = [line for line in (stderr or stdout).splitlines() if "error" in line.lower()]
+        detail = " | ".join((errors or (stderr or stdout).splitlines())[:3])
         raise CompileError(f"compiler: {compiler.describe()} failed for {what or built.name} ({target}): {detail}")
     return built
 

@@ -6,11 +6,15 @@ from __future__ import annotations
 
 import ctypes
 import os
+import signal
 import stat
+import threading
+import time
 import zipfile
 from pathlib import Path
 
 import pytest
+from filelock import FileLock
 from fmpy import read_model_description
 
 from sblsim.fmus import compiler
@@ -77,6 +81,42 @@ def test_a_file_two_libraries_share_is_compiled_once(logged, tmp_path):
     d = _library(tmp_path, "d", {"shared.c": SHARED, "shared.h": "",
                                  "a.c": PLUS}, cc, ["SCALE=7.0"])
     assert compiled() == ["shared.c"] and d.scale(1.0) == 7.0  # a.c (no SCALE in it) from the cache
+
+
+def test_an_object_another_process_compiles_is_waited_for_and_ctrl_c_ends_the_wait(logged, tmp_path):
+    """Another process holds the objects' locks (it compiles them): a build waits, compiles each once the lock is
+    free and the object still missing, and Ctrl-C (SIGINT to the main thread) ends the wait at once."""
+    cc, compiled = logged
+    files = {"shared.c": SHARED, "shared.h": "#define SCALE 2.0\n", "a.c": PLUS}
+    _library(tmp_path, "first", files, cc)
+    assert compiled() == ["a.c", "shared.c"]
+    objects = sorted((tmp_path / "cache" / "objects").glob("*.o"))
+    for path in objects:
+        path.unlink()
+    locks = [FileLock(str(path) + ".lock") for path in objects]
+    for lock in locks:
+        lock.acquire()
+    main = threading.main_thread().ident
+    timer = threading.Timer(0.5, signal.pthread_kill, (main, signal.SIGINT))
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C as a user's Python has it
+    try:
+        timer.start()
+        began = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            _library(tmp_path, "interrupted", files, cc)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, handler)
+    assert time.monotonic() - began < 2.0 and compiled() == []
+    waiting = threading.Thread(target=_library, args=(tmp_path, "waiting", files, cc))
+    waiting.start()
+    time.sleep(0.5)
+    assert waiting.is_alive() and compiled() == []  # still waiting for the other process
+    for lock in locks:
+        lock.release()
+    waiting.join(60)
+    assert not waiting.is_alive() and compiled() == ["a.c", "shared.c"]
+    assert [path.is_file() for path in objects] == [True, True]
 
 
 def test_an_unwritable_cache_costs_only_the_compilation(logged, tmp_path, monkeypatch):

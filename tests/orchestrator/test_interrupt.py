@@ -1,16 +1,19 @@
-"""Ctrl-C and SIGTERM during long compiled work (a large site map, a site budget): the command ends within 2 s
-with exit status 130 or 143 and one line, its lock removed and nothing written.
+"""Ctrl-C and SIGTERM during long compiled work (a large site map, a site budget) and during a first run's
+compilation: the command ends within 2 s with exit status 130 or 143 and one line, its lock removed and nothing
+written.
 
 A map's eigenrays over a grid of 160,000 points are minutes of compiled code, a site budget's master loop
 minutes more; Python handles a signal only between its own instructions, so the work is cut into calls of a
 fraction of a second (:func:`sblsim.models.expressions.map_in_chunks`) or made abandonable
-(:func:`sblsim.fmus.native.abandonable`). Each command runs as a user runs it: a process of its own, started
+(:func:`sblsim.fmus.native.abandonable`); a compilation stops its compilers
+(:mod:`sblsim.fmus.compiler`). Each command runs as a user runs it: a process of its own, started
 with SIGINT and SIGTERM at their defaults (as a shell starts it, whatever this test process ignores), the signal
 sent to it and its exit timed.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -24,11 +27,14 @@ WITHIN = 2.0
 
 
 @pytest.fixture(scope="module")
-def built():
-    """The local engine's library (the compiled eigenrays and master loop), built before any clock runs."""
-    from sblsim.fmus.native import library_path
-
-    return library_path(4)
+def built(tmp_path_factory):
+    """What the commands below run on (the local engine's libraries, the deep site's eigenray tables), built before
+    any clock runs: each command once, small (the budget's runs 30 s long)."""
+    work = tmp_path_factory.mktemp("warm")
+    for args in (["map", "usbl-deep", "--extent", "20", "--step", "10"],
+                 ["budget", "lbl-field", "--replicates", "2", "--set", "simulation.duration=30"]):
+        subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", *args, "--out", args[0]], cwd=work,
+                       check=True, capture_output=True)
 
 
 def _default_signals() -> None:
@@ -36,17 +42,20 @@ def _default_signals() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _interrupt(tmp_path: Path, sig: int, *args: str, into: float) -> tuple[int, float, str]:
-    """Start ``sblsim ARGS --out o``, send ``sig`` ``into`` seconds after it locked its output folder (its input
-    checked, the work begun), and return its exit status, the seconds it took to end and its standard error."""
+def _interrupt(tmp_path: Path, sig: int, *args: str, into: float, env: dict[str, str] | None = None,
+               begun: Path | None = None) -> tuple[int, float, str]:
+    """Start ``sblsim ARGS --out o`` in ``tmp_path``, send ``sig`` ``into`` seconds after it locked its output
+    folder (its input checked, the work begun) and a file matching ``begun`` exists, and return its exit status,
+    the seconds it took to end and its standard error."""
     lock = tmp_path / ".o.lock"
     proc = subprocess.Popen([sys.executable, "-m", "sblsim.orchestrator.cli", *args, "--out", "o"], cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals,
+                            env=env)
     try:
         deadline = time.monotonic() + 120
-        while not lock.exists():
+        while not lock.exists() or (begun is not None and not any(begun.parent.glob(begun.name))):
             assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, "the command never locked its output folder"
+            assert time.monotonic() < deadline, "the command never locked its output folder or began its work"
             time.sleep(0.01)
         time.sleep(into)
         assert proc.poll() is None, "the work ended before the signal: make it longer"
@@ -78,3 +87,34 @@ def test_sigterm_during_a_site_budget(built, tmp_path):
     """The LBL field's budget: 13 configurations of 500 replicates, each step of the master loop seconds long."""
     status, took, stderr = _interrupt(tmp_path, signal.SIGTERM, "budget", "lbl-field", into=5.0)
     _ended_cleanly(tmp_path, status, took, stderr, signal.SIGTERM)
+
+
+def test_ctrl_c_during_a_first_compile(tmp_path):
+    """A first run on a machine compiles the local engine's models (a minute of the compiler): Ctrl-C one second
+    into a compilation stops the compilers, keeps the objects already made and leaves no partial one."""
+    work, cache = tmp_path / "work", tmp_path / "cache"
+    work.mkdir()
+    objects = cache / "sblsim" / "objects"
+    status, took, stderr = _interrupt(work, signal.SIGINT, "run", "semicircle", into=1.0,
+                                      env={**os.environ, "XDG_CACHE_HOME": str(cache)}, begun=objects / "*.lock")
+    _ended_cleanly(work, status, took, stderr, signal.SIGINT)
+    names = {p.name for p in objects.iterdir()}
+    assert not [n for n in names if n.endswith(".partial") or n.startswith(".")], names
+    begun = {n.removesuffix(".lock") for n in names if n.endswith(".lock")}
+    assert begun - names, "no compilation was under way at the signal: signal sooner"  # a lock without its object
+    if Path("/proc/self/cmdline").exists():  # Linux: no compiler left running on the cache
+        left = []
+        for _ in range(20):
+            left = [c for c in Path("/proc").glob("[0-9]*/cmdline") if _reads(c, str(objects))]
+            if not left:
+                break
+            time.sleep(0.05)
+        assert not left, left
+
+
+def _reads(cmdline: Path, text: str) -> bool:
+    """The process of ``/proc/PID/cmdline`` names ``text`` (False once it has ended)."""
+    try:
+        return text.encode() in cmdline.read_bytes()
+    except OSError:
+        return False
