@@ -46,11 +46,11 @@ import pandas as pd
 
 from sblsim.fmus.build import build_all
 from sblsim.orchestrator.campaign import plan, run_campaign
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import close_handles, make_handles
-from sblsim.orchestrator.master import RecordBuffer
-from sblsim.orchestrator.metrics import RUN_METRICS
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.master import RecordBuffer
+from sblsim.orchestrator.cosim.metrics import RUN_METRICS
+from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from sblsim.orchestrator.study import load_study, study_source
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -59,8 +59,8 @@ from revision import run_at  # noqa: E402
 #: The chunk, timed in an earlier revision's own code (its run_batch had the same signature).
 OLD_CHUNK = """
 import sys, time
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 cfg = load_config("semicircle", ["simulation.duration=" + sys.argv[1]], seed=1)
 cfgs = with_replicates(cfg, range(int(sys.argv[2])))
 run_batch(cfgs[:10], timeseries=False)
@@ -297,9 +297,9 @@ def threads(per_step: float) -> None:
     """The chunk's master loop: one batch against two half-batches in two threads."""
     import threading
 
-    from sblsim.orchestrator.connections import default_connections
-    from sblsim.orchestrator.master import simulate
-    from sblsim.orchestrator.run import METRIC_INPUTS, TIMESERIES_COLUMNS, merge_params
+    from sblsim.orchestrator.cosim.connections import default_connections
+    from sblsim.orchestrator.cosim.master import simulate
+    from sblsim.orchestrator.cosim.run import METRIC_INPUTS, TIMESERIES_COLUMNS, merge_params
 
     cfgs = with_replicates(load_config("semicircle", [f"simulation.duration={CHUNK_DURATION}"], seed=1),
                            range(CHUNK_RUNS))

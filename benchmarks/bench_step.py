@@ -26,9 +26,9 @@ import time
 from pathlib import Path
 
 from sblsim.fmus.build import build_all
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import close_handles, make_handles
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.run import run
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from revision import run_at  # noqa: E402
@@ -39,8 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 OLD = """
 import sys, tempfile, time
 from sblsim.fmus.build import build_all
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import make_handles, run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import make_handles, run
 duration, repeat = float(sys.argv[1]), int(sys.argv[2])
 cfg = load_config("semicircle", [f"simulation.duration={duration}"], seed=1)
 with tempfile.TemporaryDirectory() as tmp:
@@ -59,12 +59,12 @@ print(best / result.steps)
 AT_REVISION = """
 import sys, tempfile, time
 from sblsim.fmus.build import build_all
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 try:
-    from sblsim.orchestrator.engines import make_handles, close_handles
+    from sblsim.orchestrator.cosim.engines import make_handles, close_handles
 except ImportError:  # revisions where the run module built the handles
-    from sblsim.orchestrator.run import make_handles, close_handles
+    from sblsim.orchestrator.cosim.run import make_handles, close_handles
 duration, repeat = float(sys.argv[1]), int(sys.argv[2])
 cfg = load_config("semicircle", [f"simulation.duration={duration}"], seed=1)
 def best(engine, handles):

@@ -38,7 +38,7 @@ C_DIR = Path(__file__).resolve().parent / "c"
 RUNTIME = ("sblsim_runtime.h", "sblsim_runtime.c")
 FMI_SHELL = "fmi2_shell.c"
 BATCH = "sblsim_batch.c"
-#: The compiled per-run metrics of the local engine (orchestrator/metrics.py is their reference).
+#: The compiled per-run metrics of the local engine (orchestrator/cosim/metrics.py is their reference).
 METRICS = "sblsim_metrics.c"
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 _TYPES = {"Real": "SBLSIM_REAL", "Integer": "SBLSIM_INTEGER", "Boolean": "SBLSIM_BOOLEAN"}

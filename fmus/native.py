@@ -413,12 +413,12 @@ def metrics_sizes(n_beacons: int = 4) -> tuple[int, int, int]:
 
 def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float, float],
                 with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
-    """The per-run metrics of :mod:`sblsim.orchestrator.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
+    """The per-run metrics of :mod:`sblsim.orchestrator.cosim.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
 
     Parameters
     ----------
     columns : sequence of ndarray, shape (N, B) each
-        The recorded outputs in the order of :data:`sblsim.orchestrator.metrics.METRIC_INPUTS`, as floats; any
+        The recorded outputs in the order of :data:`sblsim.orchestrator.cosim.metrics.METRIC_INPUTS`, as floats; any
         step stride, replicates contiguous (a column of the master's record array is used in place).
     fixed : ndarray, shape (B, len(FIXED))
         The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
@@ -433,7 +433,7 @@ def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[floa
     Returns
     -------
     metrics : ndarray, shape (B, len(RUN_METRICS))
-        :data:`sblsim.orchestrator.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
+        :data:`sblsim.orchestrator.cosim.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
     bound : ndarray, shape (N, B), or None
         ``sqrt(trace)`` of the position PCRB [m].
 

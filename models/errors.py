@@ -14,8 +14,8 @@ fault (the command line prints it as it is and exits with status 2)::
     └── CampaignError     a campaign that cannot run, resume or be analysed as asked
 
 The modules that raise an error kind also name it (``sblsim.models.declarations.ModelError``,
-``sblsim.orchestrator.config.ConfigError``, ``sblsim.fmus.compiler.CompileError``,
-``sblsim.orchestrator.archives.ArchiveError``, ``sblsim.orchestrator.campaign.CampaignError``);
+``sblsim.orchestrator.cosim.config.ConfigError``, ``sblsim.fmus.compiler.CompileError``,
+``sblsim.orchestrator.io.archives.ArchiveError``, ``sblsim.orchestrator.campaign.CampaignError``);
 they are the same classes. More specific errors derive from these kinds where they are raised:
 ``StudyError`` (a :class:`ConfigError`), ``ConnectionMismatch`` (a :class:`ModelError`), ``SspError``
 (an :class:`ArchiveError`) and ``AnalysisError`` (a :class:`CampaignError`).

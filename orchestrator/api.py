@@ -43,7 +43,7 @@ import tomli_w
 from sblsim.models.declarations import shown
 from sblsim.models.errors import SblsimError
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     ConfigError,
     apply_overrides,
@@ -53,12 +53,12 @@ from sblsim.orchestrator.config import (
     resolve,
     scenario_system,
 )
-from sblsim.orchestrator.engines import ENGINES, close_handles, make_handles
-from sblsim.orchestrator.output import check_output, check_writable
-from sblsim.orchestrator.plan import Config, RunPlan, load_plan, make_plan, thaw
-from sblsim.orchestrator.progress import check_progress
+from sblsim.orchestrator.cosim.engines import ENGINES, close_handles, make_handles
+from sblsim.orchestrator.cosim.plan import Config, RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
+from sblsim.orchestrator.io.output import check_output, check_writable
+from sblsim.orchestrator.io.progress import check_progress
 from sblsim.orchestrator.study import Study, load_study
-from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -138,7 +138,7 @@ def _check_source(source: Any) -> None:
 
 def _plan(source: Any, seed: int | None = None, overrides: Overrides = None) -> RunPlan:
     """The plan of a run of a scenario name, a TOML file or a configuration with the overrides and seed: the one
-    resolution of a call (:func:`sblsim.orchestrator.plan.make_plan`); a plan without overrides or seed is
+    resolution of a call (:func:`sblsim.orchestrator.cosim.plan.make_plan`); a plan without overrides or seed is
     taken as it is."""
     _check_seed(seed)
     items = _override_items(overrides)
@@ -280,8 +280,8 @@ class RunResult:
     @property
     def summaries(self) -> list[dict[str, Any]]:
         """``summary.json`` of every replicate, in order."""
-        from sblsim.orchestrator.run import RunResult as _Result
-        from sblsim.orchestrator.run import summary
+        from sblsim.orchestrator.cosim.run import RunResult as _Result
+        from sblsim.orchestrator.cosim.run import summary
 
         r = self._result
         out = []
@@ -305,7 +305,7 @@ class RunResult:
         ConfigError
             A replicate the run does not have.
         """
-        from sblsim.orchestrator.plots import run_figures
+        from sblsim.orchestrator.io.plots import run_figures
 
         ts = self.timeseries
         if replicate is not None:
@@ -355,7 +355,7 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
     ConfigError, SblsimError
         Bad input of any kind (nothing is run or written).
     """
-    from sblsim.orchestrator.run import write_run
+    from sblsim.orchestrator.cosim.run import write_run
 
     plan = _plan(config_or_scenario, seed, set)
     _check_engine(engine)
@@ -376,7 +376,7 @@ def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Pa
     """Simulate a plan's replicates ``run.replicate`` … (``sblsim run`` and :func:`run`); ``ssp``, an SSP
     package read back (:func:`sblsim.orchestrator.ssp.read_ssp`: its plan is ``plan``), brings its connections
     and, on the fmu engine, its FMUs."""
-    from sblsim.orchestrator.run import run as _run
+    from sblsim.orchestrator.cosim.run import run as _run
 
     handles, connections = None, None
     if ssp is not None:
@@ -838,7 +838,7 @@ class ReplayResult:
 
     def plot(self) -> dict[str, Figure]:
         """The figures of a run over the steps the truth track covers (empty without truth)."""
-        from sblsim.orchestrator.plots import run_figures
+        from sblsim.orchestrator.io.plots import run_figures
 
         ts = self.timeseries
         covered = ts[np.isfinite(ts["true_x"].to_numpy())] if "true_x" in ts else ts.iloc[:0]

@@ -23,7 +23,7 @@ are far less noisy than two independent estimates, and their standard error
 (``se``, of the mean over the replicates) is the one given. The receiver is
 the same in every run of a budget: its section is resolved once, all
 sources on, and kept (its R does not follow a switched-off source, as
-the ties of :mod:`sblsim.orchestrator.config` would have it).
+the ties of :mod:`sblsim.orchestrator.cosim.config` would have it).
 
 A source that is already zero in the configuration (its switched-off
 configuration equals the configured one) contributes exactly 0 and is not
@@ -45,18 +45,18 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     ConfigError,
     parse_override,
     scenario_system,
     to_toml,
 )
-from sblsim.orchestrator.master import RecordBuffer
-from sblsim.orchestrator.output import staged_directory
-from sblsim.orchestrator.plan import RunPlan, as_plan, load_plan, make_plan, thaw, with_replicates
-from sblsim.orchestrator.progress import Progress, ProgressSpec
-from sblsim.orchestrator.run import run_batch
-from sblsim.orchestrator.systems import compared
+from sblsim.orchestrator.cosim.master import RecordBuffer
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, load_plan, make_plan, thaw, with_replicates
+from sblsim.orchestrator.cosim.run import run_batch
+from sblsim.orchestrator.cosim.systems import compared
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 
 #: Error source -> (what it is, the ``--set`` overrides that switch it off). A value ``{section.key}`` is that
 #: key's value in the configured (all-on) configuration.
@@ -109,7 +109,7 @@ def switched_off(cfg: RunPlan | dict[str, dict], overrides: Sequence[str]) -> Ru
     """The plan of the configuration ``cfg`` with ``overrides`` applied and its receiver kept.
 
     The overrides go into a copy of the resolved configuration, whose plan is
-    made (:func:`~sblsim.orchestrator.plan.make_plan`: it is resolved again, once): every receiver key is then
+    made (:func:`~sblsim.orchestrator.cosim.plan.make_plan`: it is resolved again, once): every receiver key is then
     given, so no tie retunes the
     receiver (its R stays the configured one, e.g. when ``acoustics.sigma_range``
     is 0); only a receiver key an override names changes.
@@ -216,7 +216,7 @@ def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES,
         Default the scenario.
     bar : Progress, optional
         Advanced by every step of every replicate of every configuration run
-        (:class:`sblsim.orchestrator.progress.Progress`).
+        (:class:`sblsim.orchestrator.io.progress.Progress`).
     records : RecordBuffer, optional
         Record memory re-used from batch to batch.
 
@@ -328,7 +328,7 @@ def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: in
 
     ``receiver`` sets ``simulation.receiver``; a compared ``platform.system`` starts, as in ``sblsim compare
     --systems``, from its :attr:`~sblsim.models.systems.System.compare_defaults` with the overrides over them
-    (:func:`~sblsim.orchestrator.systems.system_overrides`).
+    (:func:`~sblsim.orchestrator.cosim.systems.system_overrides`).
 
     Raises
     ------
@@ -352,7 +352,7 @@ def budgets(configs: Sequence[tuple[str, RunPlan]], replicates: int = DEFAULT_RE
             progress: ProgressSpec = False) -> list[Budget]:
     """The budget of every plan (:func:`configurations`), each of the replicates 0 … N − 1.
 
-    ``progress`` reports the steps of every run (:class:`sblsim.orchestrator.progress.Progress`); default
+    ``progress`` reports the steps of every run (:class:`sblsim.orchestrator.io.progress.Progress`); default
     silent."""
     check_replicates(replicates)
     configs = [(label, as_plan(cfg)) for label, cfg in configs]

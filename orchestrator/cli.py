@@ -34,21 +34,21 @@ from sblsim.models.errors import SblsimError
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.systems import SYSTEMS, interface_owners
 from sblsim.orchestrator import api
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     MODEL_PREFIX,
     check_receiver,
     external_path,
     parse_compare,
 )
-from sblsim.orchestrator.engines import ENGINES
-from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
-from sblsim.orchestrator.output import OutputLock, check_output, check_writable, folder_name
-from sblsim.orchestrator.plugins import user_model
+from sblsim.orchestrator.cosim.engines import ENGINES
+from sblsim.orchestrator.cosim.master import ALGORITHMS
+from sblsim.orchestrator.cosim.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
+from sblsim.orchestrator.cosim.plugins import user_model
+from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
+from sblsim.orchestrator.io.output import OutputLock, check_output, check_writable, folder_name
 from sblsim.orchestrator.scenario_fmus import build_scenario_fmus
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
 from sblsim.orchestrator.study import load_study
-from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 EXIT_USAGE = 2
 #: --fmu-dir: where the fmu engine looks when it is not given (fmus/build of a checkout, else the user cache).
@@ -277,7 +277,7 @@ def _check_seed(seed: int | None) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.run import write_run
+    from sblsim.orchestrator.cosim.run import write_run
 
     _check_seed(args.seed)
     if (args.scenario is None) == (args.ssp is None):
@@ -423,7 +423,7 @@ def _replay(args: argparse.Namespace) -> int:
 
 def _run_warnings(s: dict, plan) -> list[str]:
     """What a run's numbers do not say by themselves: a receiver that never made a fix, exchanges heard into the
-    next slot, and a diver beyond what the geometry serves (:func:`sblsim.orchestrator.metrics.run_flags`)."""
+    next slot, and a diver beyond what the geometry serves (:func:`sblsim.orchestrator.cosim.metrics.run_flags`)."""
     out = []
     if s["updates"] == 0:
         out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
@@ -476,7 +476,7 @@ def _ssp(args: argparse.Namespace) -> int:
 
 def _output_name(scenario: str) -> str:
     """The name a default output folder takes from a scenario argument: a file's stem, a built-in's name (any
-    character that is not a plain file-name character replaced: :func:`sblsim.orchestrator.output.folder_name`)."""
+    character that is not a plain file-name character replaced: :func:`sblsim.orchestrator.io.output.folder_name`)."""
     return folder_name(Path(scenario).stem if scenario.endswith(".toml") else Path(scenario).name)
 
 
@@ -792,8 +792,8 @@ def _output(given: Path | None, default: Path, force: bool, marker: str, what: s
     ``marker`` file) needs ``--force``; the default folder, when it holds one, is kept and the next free
     numbered folder beside it is used (``results/semicircle-2``), said on the command line, so that the
     documented commands run one after the other. Checked before any work (:func:`_check_output`, then
-    ``before(out)``). The folder is then locked until the command ends (:class:`sblsim.orchestrator.output.OutputLock`):
-    a second command into it meanwhile is refused.
+    ``before(out)``). The folder is then locked until the command ends
+    (:class:`sblsim.orchestrator.io.output.OutputLock`): a second command into it meanwhile is refused.
     """
     if given is not None or force or not (default / marker).exists():
         out = given or default
@@ -810,12 +810,12 @@ def _output(given: Path | None, default: Path, force: bool, marker: str, what: s
 
 
 def _check_output(out: Path, force: bool, marker: str, what: str) -> None:
-    """:func:`sblsim.orchestrator.output.check_output` naming ``--out``."""
+    """:func:`sblsim.orchestrator.io.output.check_output` naming ``--out``."""
     check_output(out, force, marker, what)
 
 
 def _check_writable(directory: Path, option: str = "--out") -> None:
-    """:func:`sblsim.orchestrator.output.check_writable` naming ``option``."""
+    """:func:`sblsim.orchestrator.io.output.check_writable` naming ``option``."""
     check_writable(directory, option)
 
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.plan import load_plan
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.plan import load_plan
+from sblsim.orchestrator.cosim.run import run
 
 #: The recorded run: the semicircle's first 20 s at seed 1, with 10 % packet loss so that lost slots show.
 EXAMPLE = ("semicircle", ["simulation.duration=20", "acoustics.loss_pct=10"], 1)

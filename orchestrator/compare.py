@@ -8,7 +8,7 @@ With ``systems`` (``sblsim compare --systems sbl,lbl,usbl``) every system
 runs with every receiver on the same replicates, diver paths and error
 levels (the target's random numbers do not depend on the system), each
 system from its :attr:`~sblsim.models.systems.System.compare_defaults` with
-the user's ``--set`` over them (:mod:`sblsim.orchestrator.systems`); the
+the user's ``--set`` over them (:mod:`sblsim.orchestrator.cosim.systems`); the
 table gains a ``system`` column, one row per system and receiver.
 
 The ``pcrb_rms`` of each system is its own: ranges and depth for SBL and
@@ -22,7 +22,7 @@ Per receiver (and system), over all steps of all replicates:
   run to run);
 * ``mean_e_tot``: mean e_tot [m];
 * ``nees``, ``coverage_95``, ``nis``, ``gated_pct``: means over runs of the
-  consistency metrics (:mod:`sblsim.orchestrator.metrics`), and ``nees_sd``
+  consistency metrics (:mod:`sblsim.orchestrator.cosim.metrics`), and ``nees_sd``
   the standard deviation of the runs' mean NEES;
 * ``pcrb_rms`` [m] and ``ratio_to_pcrb = rms_e_tot / pcrb_rms``;
 * ``us_per_step``: wall-clock time of the receiver's doStep per run and
@@ -45,13 +45,13 @@ import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import apply_overrides, check_receiver, scenario_system, section_variables
-from sblsim.orchestrator.master import RecordBuffer
-from sblsim.orchestrator.output import staged_directory
-from sblsim.orchestrator.plan import RunPlan, load_plan, make_plan, thaw, with_replicates
-from sblsim.orchestrator.progress import ProgressSpec, progress_of
-from sblsim.orchestrator.run import run_batch
-from sblsim.orchestrator.systems import system_overrides
+from sblsim.orchestrator.cosim.config import apply_overrides, check_receiver, scenario_system, section_variables
+from sblsim.orchestrator.cosim.master import RecordBuffer
+from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw, with_replicates
+from sblsim.orchestrator.cosim.run import run_batch
+from sblsim.orchestrator.cosim.systems import system_overrides
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.progress import ProgressSpec, progress_of
 
 COLUMNS = ("receiver", "runs", "rms_e_tot", "rms_e_tot_sd", "mean_e_tot", "nees", "nees_sd", "coverage_95", "nis",
            "gated_pct", "pcrb_rms", "ratio_to_pcrb", "us_per_step", "diverged")
@@ -88,11 +88,11 @@ def check_replicates(replicates: int) -> None:
 def plans(scenario: str | Mapping, receivers: Sequence[str], overrides: Sequence[str] = (), seed: int | None = None,
           systems: Sequence[str] | None = None) -> list[RunPlan]:
     """The plan of every receiver (of every system) of a comparison, each resolved once
-    (:func:`sblsim.orchestrator.plan.load_plan`); the arguments as for :func:`compare`.
+    (:func:`sblsim.orchestrator.cosim.plan.load_plan`); the arguments as for :func:`compare`.
 
-    ``scenario`` may be a configuration (a :class:`~sblsim.orchestrator.plan.Config` or its mapping): each receiver
-    then takes its sections as they are and, of its ``[receiver]`` section, the keys that receiver has (a resolved
-    configuration holds every key of its own receiver, some of which another receiver does not take).
+    ``scenario`` may be a configuration (a :class:`~sblsim.orchestrator.cosim.plan.Config` or its mapping): each
+    receiver then takes its sections as they are and, of its ``[receiver]`` section, the keys that receiver has (a
+    resolved configuration holds every key of its own receiver, some of which another receiver does not take).
 
     Raises
     ------
@@ -133,7 +133,7 @@ def compare(scenario: str | Sequence[RunPlan], receivers: Sequence[str] = (), re
     overrides, seed, engine, fmu_dir
         As for ``sblsim run``.
     progress : bool, 'auto' or callable
-        Report the steps done over every receiver's runs (:class:`sblsim.orchestrator.progress.Progress`; a
+        Report the steps done over every receiver's runs (:class:`sblsim.orchestrator.io.progress.Progress`; a
         unit is one step of one replicate); default silent.
     systems : sequence of str, optional
         ``platform.system`` values, each run from its compare defaults

@@ -10,7 +10,7 @@ model's casadi Jacobian; the model is the receivers' ranges-plus-depth
 grid around the platform at the diver's depth: the platform level at its
 mean heading, its reference at the origin, the beacons at their lever arms,
 with the configured range noise, GPS, IMU and depth-sensor errors
-(:func:`sblsim.orchestrator.plan.bound_parameters`). It is the accuracy of one
+(:func:`sblsim.orchestrator.cosim.plan.bound_parameters`). It is the accuracy of one
 round of ranges without a motion model (a filter does better by averaging;
 the PCRB of a run says how much), and it is the design question of the
 paper: which baseline and sensors keep the diver within a required accuracy
@@ -19,7 +19,7 @@ over the working area.
 The systems (``platform.system``): LBL maps the same way, the beacons the
 seafloor transponders (their positions, :func:`~sblsim.models.platform.geometry.lever_arms`),
 with the survey error in place of the GPS and no attitude term
-(:func:`~sblsim.orchestrator.plan.bound_parameters`). USBL maps one packet
+(:func:`~sblsim.orchestrator.cosim.plan.bound_parameters`). USBL maps one packet
 of slant range, azimuth and elevation from the transceiver plus the depth
 (:func:`sblsim.models.systems.usbl.horizontal_std`), with the receivers' R:
 ``σ_r²`` for the range, ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` for each
@@ -51,11 +51,11 @@ from sblsim.models.acoustics.sonar import accuracy_scale
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator.config import scenario_system
-from sblsim.orchestrator.output import staged_directory
-from sblsim.orchestrator.plan import Config, RunPlan, as_plan, load_plan, thaw
-from sblsim.orchestrator.progress import Progress, ProgressSpec
-from sblsim.orchestrator.systems import check_diver, compared
+from sblsim.orchestrator.cosim.config import scenario_system
+from sblsim.orchestrator.cosim.plan import Config, RunPlan, as_plan, load_plan, thaw
+from sblsim.orchestrator.cosim.systems import check_diver, compared
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 
 MAX_POINTS = 1_000_000
 #: The largest half-width of a map's grid [m].
@@ -265,7 +265,7 @@ def system_line(plan: RunPlan | dict) -> str:
 def check_depth(cfg: dict, depth: float, option: str = "--depth") -> None:
     """Refuse a diver's depth of a map that the site cannot hold: at or below the water depth
     (``acoustics.water_depth``; 0: none), or where the system has no diver
-    (:func:`~sblsim.orchestrator.systems.check_diver`: LBL's transponders stand on the seafloor).
+    (:func:`~sblsim.orchestrator.cosim.systems.check_diver`: LBL's transponders stand on the seafloor).
 
     Raises
     ------
@@ -290,7 +290,7 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     """The accuracy map of a configuration, or one per value of a compared key (each configuration resolved
     once into its plan).
 
-    ``progress`` reports each map made (:class:`sblsim.orchestrator.progress.Progress`); default silent.
+    ``progress`` reports each map made (:class:`sblsim.orchestrator.io.progress.Progress`); default silent.
 
     ``depth`` [m] is the diver's depth of every map (default :func:`diver_depth` of each configuration); the
     configurations returned hold it as ``target.depth``, which the table and the figure show. It is checked

@@ -32,7 +32,7 @@ of a Jacobi run replays to the run; the rows of the last macro step are then
 not used). The receiver's times are taken from the start time (a log with
 Unix times runs as one starting near 0); the time series records them as
 the log has them. ``receiver.latency`` delays the receiver's recorded outputs
-as a run's (:func:`sblsim.orchestrator.run.apply_latency`).
+as a run's (:func:`sblsim.orchestrator.cosim.run.apply_latency`).
 
 A truth track (``time_s, n_m, e_m, d_m``) is interpolated linearly at the
 end of every macro step, as a run records its truth; steps outside its span
@@ -60,8 +60,7 @@ from sblsim.models.acoustics.core import Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
 from sblsim.models.systems import SYSTEMS, System
-from sblsim.orchestrator import tomlfile
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     EXTERNAL_PREFIX,
     MODEL_PREFIX,
@@ -74,22 +73,31 @@ from sblsim.orchestrator.config import (
     section_variables,
     to_toml,
 )
-from sblsim.orchestrator.engines import DTYPES, cast_column, close_handles, make_handles
-from sblsim.orchestrator.limits import max_steps
-from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
-from sblsim.orchestrator.output import staged_directory, write_together
-from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
-from sblsim.orchestrator.run import TIMESERIES_COLUMNS, UNDELAYED, RunResult, _label, _metrics, merge_params, summary
-from sblsim.orchestrator.tables import (  # the hostile-safe table reading every log reader shares
+from sblsim.orchestrator.cosim.engines import DTYPES, cast_column, close_handles, make_handles
+from sblsim.orchestrator.cosim.limits import max_steps
+from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
+from sblsim.orchestrator.cosim.run import (
+    TIMESERIES_COLUMNS,
+    UNDELAYED,
+    RunResult,
+    _label,
+    _metrics,
+    merge_params,
+    summary,
+)
+from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.output import staged_directory, write_together
+from sblsim.orchestrator.io.tables import (  # the hostile-safe table reading every log reader shares
     CONFIG_PREFIX,
     META_CONFIG,
     META_TITLE,
     NUMBER,
     SUFFIXES,
 )
-from sblsim.orchestrator.tables import columns as _columns
-from sblsim.orchestrator.tables import number as _number
-from sblsim.orchestrator.tables import read_table as _read_table
+from sblsim.orchestrator.io.tables import columns as _columns
+from sblsim.orchestrator.io.tables import number as _number
+from sblsim.orchestrator.io.tables import read_table as _read_table
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
 FORMAT = 1
@@ -523,7 +531,7 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
 
     A log is data (:func:`_as_data`): of the configuration it carries only plain numbers and names are
     used. A receiver it names as ``model:PATH.py`` or ``fmu:PATH`` is refused unless ``receiver`` replaces
-    it, and the files it names (:data:`sblsim.orchestrator.config.PATH_KEYS`) are neither opened nor kept.
+    it, and the files it names (:data:`sblsim.orchestrator.cosim.config.PATH_KEYS`) are neither opened nor kept.
 
     Parameters
     ----------
@@ -539,7 +547,7 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
     Raises
     ------
     ConfigError, ModelError
-        As :func:`sblsim.orchestrator.config.load_config`; a log's configuration that does not resolve, or
+        As :func:`sblsim.orchestrator.cosim.config.load_config`; a log's configuration that does not resolve, or
         names a receiver program, is named as the log's.
     """
     overrides = list(overrides)
@@ -593,7 +601,7 @@ def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
 
     * ``simulation.receiver`` naming a program (``model:PATH.py``, ``fmu:PATH``: anything but a built-in
       receiver) is refused, unless the user's ``--receiver`` replaces it (it is then never imported);
-    * a file named by :data:`sblsim.orchestrator.config.PATH_KEYS` is not opened: a replay needs neither the
+    * a file named by :data:`sblsim.orchestrator.cosim.config.PATH_KEYS` is not opened: a replay needs neither the
       diver's track nor the channel (the log holds what the receiver was given), so ``target.trajectory =
       file`` becomes the semicircle (and the duration one pass of it) and a profile file a constant sound
       speed, said in a note.
@@ -725,7 +733,8 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     Raises
     ------
     ModelError
-        A truth track that covers no step; as :func:`schedule` and :func:`sblsim.orchestrator.engines.make_handles`.
+        A truth track that covers no step; as :func:`schedule` and
+        :func:`sblsim.orchestrator.cosim.engines.make_handles`.
     """
     cfg = as_plan(cfg)
     T, ratio = cfg.sampling_time, cfg.ekf_rate_ratio
@@ -765,7 +774,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
         close_handles(handles)
     wall = time.perf_counter() - start
     delay = cfg.latency_steps
-    if delay:  # what the diver sees, as a run records it (sblsim.orchestrator.run.apply_latency)
+    if delay:  # what the diver sees, as a run records it (sblsim.orchestrator.cosim.run.apply_latency)
         source = np.maximum(np.arange(plan.steps) - delay, 0)
         for k, name in enumerate(names):
             if f"receiver.{name}" not in UNDELAYED:
@@ -860,7 +869,7 @@ def write_replay(result: ReplayResult, out_dir: Path | str) -> Path:
     """
     import matplotlib.pyplot as plt
 
-    from sblsim.orchestrator.plots import plot_trajectory_xy, save_run_figures
+    from sblsim.orchestrator.io.plots import plot_trajectory_xy, save_run_figures
 
     out_dir = Path(out_dir)
     receiver = result.config.receiver_label
@@ -968,7 +977,7 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     ------
     ModelError
         ``--export-log: ...`` when a write fails (a full disk): then neither file is replaced, nor is a folder
-        made for them left (:func:`sblsim.orchestrator.output.write_together`).
+        made for them left (:func:`sblsim.orchestrator.io.output.write_together`).
     """
     path = Path(path)
     cfg = result.config

@@ -17,7 +17,7 @@ from typing import Callable
 
 from sblsim.fmus.build import build_fmu
 from sblsim.models.errors import ModelError
-from sblsim.orchestrator.plan import RunPlan
+from sblsim.orchestrator.cosim.plan import RunPlan
 from sblsim.orchestrator.ssp import check_no_latency
 
 
@@ -28,7 +28,7 @@ def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", 
     Parameters
     ----------
     plan : RunPlan
-        The scenario's plan (:func:`sblsim.orchestrator.plan.load_plan`), seed and replicate included.
+        The scenario's plan (:func:`sblsim.orchestrator.cosim.plan.load_plan`), seed and replicate included.
     out : path
         The folder to write ``sblsim_<model>.fmu`` into (created if missing; each file replaced atomically).
     compiler, cross, report

@@ -52,15 +52,15 @@ from xml.etree import ElementTree as ET
 from sblsim.models import COMPONENTS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, UNITS
 from sblsim.models.errors import ArchiveError
-from sblsim.orchestrator.archives import check_members, inside, safe_extract
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     EXTERNAL_PREFIX,
     apply_overrides,
     section_variables,
 )
-from sblsim.orchestrator.connections import Connection, default_connections
-from sblsim.orchestrator.engines import fmu_paths, read_description
-from sblsim.orchestrator.plan import RunPlan, as_plan, make_plan
+from sblsim.orchestrator.cosim.connections import Connection, default_connections
+from sblsim.orchestrator.cosim.engines import fmu_paths, read_description
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
+from sblsim.orchestrator.io.archives import check_members, inside, safe_extract
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -189,7 +189,7 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     Parameters
     ----------
     cfg : RunPlan or dict
-        The run's plan (:func:`sblsim.orchestrator.plan.load_plan`; a configuration: its plan is made once).
+        The run's plan (:func:`sblsim.orchestrator.cosim.plan.load_plan`; a configuration: its plan is made once).
     out : path
         The ``.ssp`` file to write (replaced atomically).
     fmu_dir : path, optional
@@ -365,7 +365,7 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     path : path
         The ``.ssp`` archive.
     overrides, seed
-        As for :func:`sblsim.orchestrator.config.load_config` (e.g. ``master=jacobi``).
+        As for :func:`sblsim.orchestrator.cosim.config.load_config` (e.g. ``master=jacobi``).
 
     Raises
     ------

@@ -51,8 +51,7 @@ from sblsim.models import RECEIVER_MODELS
 from sblsim.models.acoustics.core import FIXED_KEYS, SNR_KEYS
 from sblsim.models.declarations import ModelError, Variable, shown
 from sblsim.models.errors import ConfigError
-from sblsim.orchestrator import tomlfile
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     SECTIONS,
     check_receiver,
@@ -60,8 +59,9 @@ from sblsim.orchestrator.config import (
     read_source,
     section_variables,
 )
-from sblsim.orchestrator.metrics import RUN_METRICS
-from sblsim.orchestrator.plan import RunPlan, load_plan
+from sblsim.orchestrator.cosim.metrics import RUN_METRICS
+from sblsim.orchestrator.cosim.plan import RunPlan, load_plan
+from sblsim.orchestrator.io import tomlfile
 
 BUILTIN_STUDIES = ("paper", "million")
 DESIGNS = ("full", "fractional")
@@ -172,7 +172,7 @@ class Study:
 
     def cell_plan(self, scenario: str, cell: int) -> RunPlan:
         """The plan of one design cell (``run.cell`` set, replicate 0), resolved once
-        (:func:`sblsim.orchestrator.plan.load_plan`); its replicates share it.
+        (:func:`sblsim.orchestrator.cosim.plan.load_plan`); its replicates share it.
 
         Raises
         ------

@@ -20,7 +20,7 @@ import pytest
 
 import sblsim
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.systems import system_overrides
+from sblsim.orchestrator.cosim.systems import system_overrides
 
 SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk")
 SYSTEMS = ("sbl", "lbl", "usbl")

@@ -9,8 +9,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_campaign  # noqa: E402
 
-from sblsim.orchestrator.config import load_config  # noqa: E402
-from sblsim.orchestrator.run import run_batch, with_replicates  # noqa: E402
+from sblsim.orchestrator.cosim.config import load_config  # noqa: E402
+from sblsim.orchestrator.cosim.run import run_batch, with_replicates  # noqa: E402
 
 
 def test_the_snr_chunk_times_both_detections_of_every_system(capsys):

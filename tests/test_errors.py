@@ -21,10 +21,10 @@ from sblsim.models.errors import (
     SblsimError,
 )
 from sblsim.orchestrator.analysis import compute
-from sblsim.orchestrator.archives import check_members
 from sblsim.orchestrator.campaign import run_campaign
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import open_fmu
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.engines import open_fmu
+from sblsim.orchestrator.io.archives import check_members
 from sblsim.orchestrator.ssp import SspError, read_ssp
 from sblsim.orchestrator.study import StudyError, load_study
 

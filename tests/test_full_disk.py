@@ -110,7 +110,7 @@ def test_the_log_and_its_truth_track_are_written_together(tmp_path):
     """A failure writing the second file (the truth track) replaces neither: the earlier pair stays whole."""
     import errno
 
-    from sblsim.orchestrator.output import write_together
+    from sblsim.orchestrator.io.output import write_together
 
     old = {tmp_path / "log.csv": "old log", tmp_path / "log_truth.csv": "old truth"}
     for path, text in old.items():

@@ -153,10 +153,10 @@ def test_the_graph_is_read():
     """The reader finds the package's modules and known arrows, function-level ones included."""
     assert len(MODULES) > 60
     graph = _graph()
-    assert "sblsim.orchestrator.config" in graph["sblsim.orchestrator.run"]
+    assert "sblsim.orchestrator.cosim.config" in graph["sblsim.orchestrator.cosim.run"]
     assert "sblsim.models.receiver.kalman" in graph["sblsim.models.bound"]  # from package import submodule
     lazy = [(m, line) for m, line, nested in IMPORTS["sblsim.orchestrator.cli"] if nested and _own(m)]
-    assert ("sblsim.orchestrator.run" in {m for m, _ in lazy}) and all(line > 0 for _, line in lazy)
+    assert ("sblsim.orchestrator.cosim.run" in {m for m, _ in lazy}) and all(line > 0 for _, line in lazy)
 
 
 def test_imports_for_the_type_checker_are_not_read(tmp_path):
@@ -186,6 +186,28 @@ def test_no_arrow_from_a_lower_layer_up():
     wrong = sorted((name, module, line) for name, imports in IMPORTS.items() for module, line, _ in imports
                    if _own(module) and _layer(_own(module)) != _layer(name)
                    and _layer(_own(module)) not in MAY_IMPORT[_layer(name)])
+    for name, module, line in wrong:
+        print(f"{MODULES[name]}:{line}: {name} imports {module}")
+    assert wrong == []
+
+
+#: The orchestrator's own layers, bottom up, and what each may import besides itself: io (what every command reads
+#: and writes) knows no run, no system and no FMU; cosim (the co-simulation kernel) knows no command.
+ORCHESTRATOR_LAYERS = {"sblsim.orchestrator.io": {"sblsim.models"},
+                       "sblsim.orchestrator.cosim": {"sblsim.models", "sblsim.fmus", "sblsim.orchestrator.io"}}
+
+
+def _in(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+@pytest.mark.parametrize("layer", list(ORCHESTRATOR_LAYERS))
+def test_an_orchestrator_layer_imports_only_the_layers_below_it(layer):
+    inside = [name for name in MODULES if _in(name, layer)]
+    assert len(inside) >= 7
+    allowed = {layer, *ORCHESTRATOR_LAYERS[layer]}
+    wrong = sorted((name, module, line) for name in inside for module, line, _ in IMPORTS[name]
+                   if _own(module) and not any(_in(_own(module), package) for package in allowed))
     for name, module, line in wrong:
         print(f"{MODULES[name]}:{line}: {name} imports {module}")
     assert wrong == []
@@ -229,7 +251,7 @@ def test_the_function_level_check_can_fail():
     """A module-level library is not heavy where its importer loads it already; a light one never is."""
     assert "pyarrow" in _heavy_at_load("sblsim.orchestrator.campaign.merge")
     assert _heavy_at_load("sblsim.models.declarations") == set()
-    assert "matplotlib" in _heavy_at_load("sblsim.orchestrator.plots")
+    assert "matplotlib" in _heavy_at_load("sblsim.orchestrator.io.plots")
     assert not _heavy_at_load("sblsim.orchestrator.cli") & {"pandas", "scipy.stats", "matplotlib", "scipy.integrate"}
 
 

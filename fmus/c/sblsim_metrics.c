@@ -41,7 +41,7 @@ static double at(const double* const* columns, const long long* strides, int c, 
     return columns[c][(size_t)k * (size_t)strides[c] + (size_t)r];
 }
 
-/* |truth - position| per axis and their norm; 1 when all four are finite (sblsim.orchestrator.metrics.errors). */
+/* |truth - position| per axis and their norm; 1 when all four are finite (sblsim.orchestrator.cosim.metrics.errors). */
 static int errors(const double* truth, const double* position, double e[4]) {
     int a;
     for (a = 0; a < 3; a++) e[a] = fabs(truth[a] - position[a]);
@@ -56,7 +56,7 @@ static void add_errors(errors_acc* acc, const double e[4]) {
     acc->count++;
 }
 
-/* The six error metrics of a run, in the order of sblsim.orchestrator.metrics.METRIC_NAMES. */
+/* The six error metrics of a run, in the order of sblsim.orchestrator.cosim.metrics.METRIC_NAMES. */
 static void put_errors(const errors_acc* acc, double* out) {
     double n = (double)acc->count;
     int a;
@@ -65,7 +65,7 @@ static void put_errors(const errors_acc* acc, double* out) {
     out[5] = sqrt(acc->spread / n);
 }
 
-/* Position NEES e' P^-1 e by cofactors; NaN where P is not positive-definite (sblsim.orchestrator.metrics.nees). */
+/* Position NEES e' P^-1 e by cofactors; NaN where P is not positive-definite (sblsim.orchestrator.cosim.metrics.nees). */
 static double nees(const double e[3], const double* cov) {
     double xx = cov[0], xy = cov[1], xz = cov[2], yy = cov[3], yz = cov[4], zz = cov[5];
     double c00 = yy * zz - yz * yz, c11 = xx * zz - xz * xz, c22 = xx * yy - xy * xy;
@@ -144,7 +144,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
                 s->nis_sum += v[SBLSIM_COLUMN_NIS];
                 s->started++;
             }
-            /* a new slot, and whether its packet names a beacon of the array (sblsim.orchestrator.metrics.slots) */
+            /* a new slot, and whether its packet names a beacon of the array (sblsim.orchestrator.cosim.metrics.slots) */
             id = (int)rint(v[SBLSIM_COLUMN_BEACON_ID]);
             slot = rint(v[SBLSIM_COLUMN_PACKET_SEQ]) != s->previous_seq ? 1.0 : 0.0;
             s->previous_seq = rint(v[SBLSIM_COLUMN_PACKET_SEQ]);

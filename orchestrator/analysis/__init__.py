@@ -3,7 +3,7 @@
 Input: a campaign directory holding ``runs.parquet`` (one row per Monte Carlo
 run: ``scenario``, ``scenario_key``, ``cell``, ``replicate``, ``seed``, per
 factor ``NAME`` coded −1/+1 and ``NAME_value`` physical level, and the
-metrics of :mod:`sblsim.orchestrator.metrics` for the receiver and, prefixed ``instr_``,
+metrics of :mod:`sblsim.orchestrator.cosim.metrics` for the receiver and, prefixed ``instr_``,
 for the instrumentation fix) and ``study.toml`` (the resolved study: design,
 replicates, seed, scenarios and one ``[[factors]]`` table per factor). Without
 ``study.toml`` the factors are the columns that have a ``NAME_value`` partner.
@@ -125,7 +125,7 @@ from sblsim.orchestrator.analysis.report import (
     report_markdown,
 )
 from sblsim.orchestrator.analysis.tables import best_cell, tables
-from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.study import Factor, StudyRecord
 
 

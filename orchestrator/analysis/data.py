@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.errors import CampaignError
-from sblsim.orchestrator.metrics import METRIC_NAMES
+from sblsim.orchestrator.cosim.metrics import METRIC_NAMES
 from sblsim.orchestrator.study import Factor, StudyError, StudyRecord, level_value, read_record
 
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)

@@ -13,11 +13,11 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
-from sblsim.orchestrator import tomlfile
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
-from sblsim.orchestrator.output import refuse_link
-from sblsim.orchestrator.output import write_atomic as write_file
+from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.output import refuse_link
+from sblsim.orchestrator.io.output import write_atomic as write_file
 from sblsim.orchestrator.study import Study
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from sblsim.models import COMPONENTS
-from sblsim.orchestrator.plan import RunPlan
+from sblsim.orchestrator.cosim.plan import RunPlan
 from sblsim.orchestrator.study import Study
 
 #: Default runs per chunk on each engine.

@@ -27,9 +27,9 @@ from sblsim.orchestrator.campaign.manifest import (
 )
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
-from sblsim.orchestrator.engines import ENGINES, fmu_paths
-from sblsim.orchestrator.limits import check_steps
-from sblsim.orchestrator.progress import Progress
+from sblsim.orchestrator.cosim.engines import ENGINES, fmu_paths
+from sblsim.orchestrator.cosim.limits import check_steps
+from sblsim.orchestrator.io.progress import Progress
 from sblsim.orchestrator.study import Study
 
 
@@ -98,7 +98,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     save_timeseries : bool
         Also write the per-step time series of every run.
     progress : bool, 'off' or callable, optional
-        How the runs done are reported (:class:`sblsim.orchestrator.progress.Progress`, from the resumed
+        How the runs done are reported (:class:`sblsim.orchestrator.io.progress.Progress`, from the resumed
         campaign's runs, with its first and last line and the runs/s): None (default) a bar when standard
         error is a terminal, else log lines; True a bar; False log lines; ``"off"`` nothing; a callable
         ``progress(done, total)`` [runs].
@@ -177,7 +177,7 @@ def _check_memory(chunks: list, workers: int | None, scheduler: str | None, save
     Raises
     ------
     ModelError
-        As :func:`sblsim.orchestrator.limits.check_steps`.
+        As :func:`sblsim.orchestrator.cosim.limits.check_steps`.
     """
     concurrent = 1 if scheduler else min(workers or os.cpu_count() or 1, len(chunks))
     def need(chunk) -> int:

@@ -12,10 +12,10 @@ import numpy as np
 import pandas as pd
 
 from sblsim.orchestrator.campaign.plan import Chunk
-from sblsim.orchestrator.master import RecordBuffer
-from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS
-from sblsim.orchestrator.plan import with_replicates
-from sblsim.orchestrator.run import run_batch
+from sblsim.orchestrator.cosim.master import RecordBuffer
+from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
+from sblsim.orchestrator.cosim.plan import with_replicates
+from sblsim.orchestrator.cosim.run import run_batch
 from sblsim.orchestrator.study import Study
 
 

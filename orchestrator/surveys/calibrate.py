@@ -56,8 +56,8 @@ from sblsim.models.perturbation import (
     PERTURBATIONS,
     effective_scale,
 )
-from sblsim.orchestrator import tomlfile
-from sblsim.orchestrator.output import staged_directory
+from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.surveys.garpos import read_garpos
 from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_log

@@ -43,9 +43,9 @@ from sblsim.models.acoustics.sound_speed import fit_rows
 from sblsim.models.boxin import lever_enu
 from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.tables import columns, number, read_lines, read_table
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, TRANSPONDER_ID, SurveyLog, check_frame
 from sblsim.orchestrator.surveys.seagap import HEADING_RANGE, NOMINAL_SIGMA_M, OFFSET_RANGE, TILT_RANGE
-from sblsim.orchestrator.tables import columns, number, read_lines, read_table
 
 #: The observation CSV's columns read (by name): name -> allowed range (None: text).
 OBS_COLUMNS = {"MT": None, "TT": COLUMNS["twtt_s"][2], "flag": None, "ST": (-86400.0, 864000.0),

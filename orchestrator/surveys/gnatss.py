@@ -38,7 +38,7 @@ reading against the a-priori positions (or shifted ones) at each transponder's h
 CTD. The survey is solved by the calibration solver (:mod:`sblsim.models.calibration`; the built-in survey
 ``ncl1-2022-208`` of ``sblsim calibrate``).
 
-Every file is read as hostile (the helpers every log reader shares, :mod:`sblsim.orchestrator.tables`): a
+Every file is read as hostile (the helpers every log reader shares, :mod:`sblsim.orchestrator.io.tables`): a
 regular file of ASCII text only, within the logs' documented size, every number checked with its file, line
 and column named (:class:`~sblsim.models.errors.ModelError`, one line). No file names another file the reader opens.
 
@@ -71,11 +71,11 @@ import pymap3d
 
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, harmonic_mean, profile_nodes, profile_table
 from sblsim.models.errors import ModelError
-from sblsim.orchestrator import tomlfile
-from sblsim.orchestrator.output import write_atomic
+from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.output import write_atomic
+from sblsim.orchestrator.io.tables import NUMBER, read_lines
+from sblsim.orchestrator.io.tables import number as table_number
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, POSITION_RANGE
-from sblsim.orchestrator.tables import NUMBER, read_lines
-from sblsim.orchestrator.tables import number as table_number
 
 #: POSIX time of J2000 (2000-01-01T12:00:00 UTC) [s]: GNATSS's J2000 seconds are POSIX seconds less this.
 J2000_POSIX = 946728000

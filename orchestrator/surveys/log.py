@@ -3,7 +3,7 @@
 One row per reply (CSV with a header row and ``#`` comment lines, or Parquet), SI units in the column names
 (:data:`COLUMNS`; docs/calibration.md). Every reader of another format (:mod:`sblsim.orchestrator.surveys.xie`,
 the GNATSS reader) produces this table. :func:`read_log` reads a file with the hostile-safe table reading of
-``sblsim replay`` (:mod:`sblsim.orchestrator.tables`: a regular file only, size and row limits before reading,
+``sblsim replay`` (:mod:`sblsim.orchestrator.io.tables`: a regular file only, size and row limits before reading,
 line numbers in every error) and refuses any flaw with one line naming the line and the column: a log never
 runs code and never makes us read or write a path it names.
 """
@@ -19,8 +19,8 @@ import pandas as pd
 
 from sblsim.models.calibration import Replies
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.output import write_atomic
-from sblsim.orchestrator.tables import NUMBER, columns, number, read_table
+from sblsim.orchestrator.io.output import write_atomic
+from sblsim.orchestrator.io.tables import NUMBER, columns, number, read_table
 
 #: POSIX times accepted [s] (1970 to 2100).
 TIME_RANGE = (0.0, 4_102_444_800.0)

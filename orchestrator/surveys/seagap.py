@@ -44,9 +44,9 @@ from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS
 from sblsim.models.boxin import lever_enu
 from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.tables import number, read_lines
 from sblsim.orchestrator.surveys.gnatss import J2000_POSIX, J2000_RANGE
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
-from sblsim.orchestrator.tables import number, read_lines
 
 #: The files of a SeaGap folder: role -> the names it may have (one of them, not two).
 FILES = {"obsdata": ("obsdata.inp",), "transponders": ("pxp-ini.xyh", "pxp-ini.inp"), "offset": ("tr-ant.inp",),

@@ -38,8 +38,8 @@ import pandas as pd
 from sblsim.models import boxin
 from sblsim.models.calibration import crb
 from sblsim.models.declarations import ModelError, Variable
-from sblsim.orchestrator import tomlfile
-from sblsim.orchestrator.progress import Progress
+from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.progress import Progress
 from sblsim.orchestrator.surveys.calibrate import SOLVER_KEYS, Calibration, Survey, _defaults, _value, calibrate
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame
 

@@ -19,8 +19,8 @@ from pathlib import Path
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.tables import number, read_lines
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
-from sblsim.orchestrator.tables import number, read_lines
 
 #: The files' clock: seconds after this instant (UTC) [s since 1970-01-01].
 EPOCH = datetime(2020, 1, 1, tzinfo=timezone.utc).timestamp()

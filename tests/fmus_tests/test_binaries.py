@@ -291,7 +291,7 @@ def test_the_snr_channel_runs_in_the_plain_c_host_like_the_casadi_model_and_the_
     parameters and inputs) within 1e-9, and each packet's SNR, detection probability and travel time are those
     of its arrival that the casadi model of the site gives (:func:`~sblsim.models.acoustics.core.site_levels`)."""
     from sblsim.models.acoustics.core import Acoustics, site_levels
-    from sblsim.orchestrator.engines import LocalHandle
+    from sblsim.orchestrator.cosim.engines import LocalHandle
 
     table = "; ".join(f"{z:g} {c:g}" for z, c in TABLE)
     params = Acoustics.fmu_parameters({"propagation": "ray", "detection": "snr", "sound_speed_profile": "table",

@@ -17,7 +17,7 @@ from sblsim.models import MODELS
 from sblsim.models.bound import ERROR_MOTION, FIXED, bound_step
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.metrics import METRIC_INPUTS, RUN_METRICS
+from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, RUN_METRICS
 
 
 def header_enums(text: str) -> list[list[str]]:

@@ -17,9 +17,9 @@ from fmpy.fmi2 import FMU2Slave
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run
 
 INPUTS = [v.name for v in MODELS["receiver"].inputs()]
 T = 0.1

@@ -24,8 +24,8 @@ from sblsim.fmus.build import fmu_path
 from sblsim.fmus.compiler import find_compiler
 from sblsim.fmus.embedded import write_receiver
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 
 INPUTS = [v.name for v in MODELS["receiver"].inputs()]
 TOL = 1e-9  # [m]

@@ -19,9 +19,9 @@ import pytest
 from sblsim.fmus.native import NativeBatch
 from sblsim.models import Acoustics, LeastSquaresReceiver, PaperEKF, Platform, Target
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator import engines
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.cosim import engines
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from tests.helpers import Core
 
 SEEDS = {"seed": 3, "scenario_key": 1, "cell": 2}
@@ -82,7 +82,7 @@ def _core(model, params, replicates, arrays=None):
     """A batch of the compiled model; ``arrays`` are per-replicate FMU parameter values, shape (B,).
 
     They are set on the FMU parameters the helper resolved from the scalar ``params``, as
-    ``sblsim.orchestrator.run.merge_params`` does (the helper resolves configuration keys one value each).
+    ``sblsim.orchestrator.cosim.run.merge_params`` does (the helper resolves configuration keys one value each).
     """
     core = Core(model, params, replicates=replicates)
     core.values.update(arrays or {})

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from sblsim.models.acoustics.core import OCEAN_FEATURES, ocean_perturbation
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 
 
 def test_the_perturbation_has_its_std_and_gaussian_correlation():

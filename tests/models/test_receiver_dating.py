@@ -69,8 +69,8 @@ def test_one_way_ranges_dated_at_reception_are_consistent_and_mid_flight_dating_
 @pytest.mark.parametrize("ranging", ["owtt", "twtt"])
 def test_the_ranging_parameter_is_the_channels(ranging):
     """The receiver's ``ranging`` is tied to ``acoustics.ranging`` (its plan's FMU parameter)."""
-    from sblsim.orchestrator.config import load_config
-    from sblsim.orchestrator.plan import make_plan
+    from sblsim.orchestrator.cosim.config import load_config
+    from sblsim.orchestrator.cosim.plan import make_plan
 
     plan = make_plan(load_config("random-walk", ["simulation.receiver=ekf-seq", f"acoustics.ranging={ranging}"]))
     assert plan.component_parameters("receiver")["ranging"] == ranging

@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 
 N_BEACONS = 4
 SLACK = 1e-9  # the slot rule's allowance [s]

@@ -18,8 +18,8 @@ import pytest
 from scipy.stats import chi2
 
 from sblsim.models.receiver import SequentialReceiver, UnscentedReceiver
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 from tests.helpers import Core
 from tests.models.test_receiver import RX, _x0_P0, packet
 from tests.models.test_receiver_filterpy import phi, white_noise_q

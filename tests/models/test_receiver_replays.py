@@ -36,8 +36,8 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from scipy.stats import chi2
 
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 from tests.models.test_receiver_filterpy import N_BEACONS, SLACK, phi, white_noise_q
 
 STATE = ("x", "vx", "y", "vy", "z", "vz")

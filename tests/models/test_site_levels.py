@@ -7,7 +7,7 @@ import numpy as np
 
 from sblsim.models.acoustics.core import site_levels
 from sblsim.models.acoustics.detection import family_levels
-from sblsim.orchestrator.plan import load_plan
+from sblsim.orchestrator.cosim.plan import load_plan
 
 
 class _Counting:

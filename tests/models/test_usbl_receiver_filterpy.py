@@ -27,8 +27,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 from tests.models.test_measurement_models import central, np_range_direction, np_rotation
 from tests.models.test_receiver_filterpy import SLACK, phi, white_noise_q
 

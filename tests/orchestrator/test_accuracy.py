@@ -14,10 +14,10 @@ from sblsim.models.platform.geometry import lever_arms
 from sblsim.orchestrator.analysis import compute
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
 from sblsim.orchestrator.maps import accuracy_map, grid
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import run, run_batch, with_replicates
 from sblsim.orchestrator.study import load_study
 
 

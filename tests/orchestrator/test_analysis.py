@@ -20,7 +20,7 @@ from sblsim.models.errors import CampaignError  # noqa: E402
 from sblsim.orchestrator.analysis import AnalysisError, analyze, compute, fit, lenth_pse, tables  # noqa: E402
 from sblsim.orchestrator.analysis import plots as analysis_plots  # noqa: E402
 from sblsim.orchestrator.analysis.plots import plot_interactions, plot_main_effects, plot_pareto, plot_residuals  # noqa: E402
-from sblsim.orchestrator.metrics import METRIC_NAMES  # noqa: E402
+from sblsim.orchestrator.cosim.metrics import METRIC_NAMES  # noqa: E402
 
 # Names chosen to clash with formula syntax and Python builtins.
 FACTORS = ("baseline", "range", "T", "gps")

@@ -10,9 +10,9 @@ import zipfile
 
 import pytest
 
-from sblsim.orchestrator import archives
-from sblsim.orchestrator.archives import ArchiveError, inside, safe_extract
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.io import archives
+from sblsim.orchestrator.io.archives import ArchiveError, inside, safe_extract
 from sblsim.orchestrator.ssp import export_ssp
 
 

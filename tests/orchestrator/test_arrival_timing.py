@@ -17,13 +17,13 @@ import pytest
 from sblsim.models.acoustics.core import FLIGHT_CAPACITY
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.connections import default_connections
-from sblsim.orchestrator.engines import close_handles, make_handles
-from sblsim.orchestrator.limits import step_count
-from sblsim.orchestrator.master import simulate
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import merge_params, run, with_replicates
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.limits import step_count
+from sblsim.orchestrator.cosim.master import simulate
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import merge_params, run, with_replicates
 from tests.orchestrator.test_fmus import assert_same_frames
 
 SLACK = 1e-9  # the receivers' slot slack [s]

@@ -7,9 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.metrics import RUN_METRICS
-from sblsim.orchestrator.run import run, run_batch, with_replicates
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.metrics import RUN_METRICS
+from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
 
 OVERRIDES = ["simulation.duration=5", "acoustics.loss_pct=20", "acoustics.outlier_pct=5", "receiver=ekf-seq"]
 

@@ -17,10 +17,10 @@ from sblsim.fmus.build import beacons_dir, build_all, fmu_path
 from sblsim.models import COMPONENTS
 from sblsim.models.platform.geometry import platform_offsets
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.maps import accuracy_map
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import run
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
 from tests.helpers import share_compiled_objects
 from tests.orchestrator.test_systems import SNR_CASES

@@ -23,8 +23,8 @@ from sblsim.orchestrator.budget import (
     switched_off,
 )
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 
 SHORT = "simulation.duration=20"
 

@@ -187,7 +187,7 @@ def test_missing_columns_duplicates_and_oversize_are_refused(tmp_path, capsys, m
     pd.concat([frame, frame.iloc[[3]]]).to_csv(tmp_path / "twice.csv", index=False)
     assert main(["calibrate", str(tmp_path / "twice.csv"), "--out", str(tmp_path / "o")]) == 2
     assert "line 42: ping 3 has a second reply from transponder '1' (the first: line 5)" in capsys.readouterr().err
-    import sblsim.orchestrator.tables as tables
+    import sblsim.orchestrator.io.tables as tables
 
     monkeypatch.setattr(tables, "MAX_LOG_ROWS", 10)
     assert main(["calibrate", str(good), "--out", str(tmp_path / "o")]) == 2

@@ -23,9 +23,9 @@ import pytest
 import tomli_w
 
 from sblsim.orchestrator.campaign import plan, run_campaign
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.metrics import FLAG_NAMES, RUN_METRICS
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
+from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.study import design_matrix, load_study
 from tests.helpers import start_for_signals
 
@@ -666,8 +666,8 @@ def test_scheduler_local_starts_a_dask_local_cluster(reference, tmp_path):
 PEAK = """
 import resource, sys
 from sblsim.orchestrator.campaign import run_campaign
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run_batch, with_replicates
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from sblsim.orchestrator.study import load_study
 run_batch(with_replicates(load_config("semicircle", ["simulation.duration=2"]), range(500)), timeseries=False)
 base = int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0])  # after a chunk's worth of warm-up

@@ -16,7 +16,7 @@ import pytest
 
 from sblsim.models import MODELS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
 from tests.helpers import start_for_signals
 
 SUMMARY_METRICS = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")

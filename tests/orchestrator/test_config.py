@@ -9,7 +9,7 @@ import pytest
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     MIN_SIGMA,
     RECEIVER_KEYS,
@@ -273,7 +273,7 @@ def test_to_toml_round_trip(tmp_path, name, overrides):
 
 def test_duration_limits_say_what_fits(monkeypatch):
     """The longest run is what fits in the memory available here; a duration is a whole number of T."""
-    from sblsim.orchestrator import limits
+    from sblsim.orchestrator.cosim import limits
 
     monkeypatch.setattr(limits, "available_memory", lambda: 2**30)
     most = limits.max_steps()

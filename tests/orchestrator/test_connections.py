@@ -6,10 +6,10 @@ import pytest
 
 from sblsim.models import COMPONENTS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.connections import Connection, check_connections, default_connections, execution_order
-from sblsim.orchestrator.engines import LocalHandle, Port, make_handles
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.connections import Connection, check_connections, default_connections, execution_order
+from sblsim.orchestrator.cosim.engines import LocalHandle, Port, make_handles
+from sblsim.orchestrator.cosim.run import run
 
 
 @pytest.fixture

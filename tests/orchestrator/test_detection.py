@@ -12,9 +12,9 @@ import pytest
 import sblsim
 from sblsim.models.acoustics import sonar
 from sblsim.models.acoustics.core import site_levels
-from sblsim.orchestrator.config import ConfigError
+from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.maps import availability_map, fix_probability, packet_probabilities
-from sblsim.orchestrator.plan import load_plan
 
 SNR = ("acoustics.propagation=ray", "acoustics.detection=snr")
 

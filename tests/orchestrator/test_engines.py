@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from sblsim.models.errors import FMICallError, ModelError, SblsimError
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import ComponentHandle, FmuHandle, LocalHandle, check_status
-from sblsim.orchestrator.master import RecordBuffer
-from sblsim.orchestrator.run import merge_params
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.engines import ComponentHandle, FmuHandle, LocalHandle, check_status
+from sblsim.orchestrator.cosim.master import RecordBuffer
+from sblsim.orchestrator.cosim.run import merge_params
 
 
 def test_both_handles_have_every_method_of_the_interface():
@@ -66,7 +66,7 @@ def test_a_record_buffer_re_uses_its_memory():
 
 
 def test_a_wrapper_that_passes_attributes_on_is_not_a_compiled_batch():
-    from sblsim.orchestrator.master import _native_batch
+    from sblsim.orchestrator.cosim.master import _native_batch
 
     class Passing:
         def __init__(self, handle):

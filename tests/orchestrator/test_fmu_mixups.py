@@ -4,7 +4,7 @@ A user's FMU is a zip from someone else. A GUID that does not match the binary, 
 binaries for this platform, a ``modelIdentifier`` that names no library: each ends the run with one
 line (``sblsim: error: ...``, exit status 2) naming the FMU and carrying what the FMU itself logged. A
 zip bomb or an entry that climbs out of the folder is refused before a byte is unpacked
-(:func:`sblsim.orchestrator.archives.safe_extract`).
+(:func:`sblsim.orchestrator.io.archives.safe_extract`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import pytest
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models.errors import FMICallError
-from sblsim.orchestrator.engines import open_fmu
+from sblsim.orchestrator.cosim.engines import open_fmu
 
 SHORT = ["--set", "simulation.duration=2"]
 

@@ -5,9 +5,9 @@ import zipfile
 import pytest
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import close_handles, make_handles, open_fmu
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles, open_fmu
+from sblsim.orchestrator.cosim.run import run
 
 
 def test_instances_are_reused_and_concurrent_runs_get_their_own(fmu_dir):

@@ -1,7 +1,7 @@
 """FMI 2.0 FMU state (fmi2GetFMUstate / fmi2SetFMUstate / fmi2FreeFMUstate, serialization) of the four components' FMUs.
 
 The whole system is stepped through fmpy by the real master
-(:func:`sblsim.orchestrator.master.simulate`, Gauss-Seidel over the default
+(:func:`sblsim.orchestrator.cosim.master.simulate`, Gauss-Seidel over the default
 connections); states are taken and restored on every component at once.
 """
 
@@ -15,11 +15,11 @@ import pytest
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models import COMPONENTS
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.connections import default_connections
-from sblsim.orchestrator.engines import close_handles, make_handles
-from sblsim.orchestrator.master import simulate
-from sblsim.orchestrator.run import merge_params
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.master import simulate
+from sblsim.orchestrator.cosim.run import merge_params
 
 N_BEFORE = 20  # macro steps before the state is saved
 N_AFTER = 30   # macro steps replayed from the saved state

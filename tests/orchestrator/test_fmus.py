@@ -14,9 +14,9 @@ import pytest
 from sblsim.fmus.build import fmu_path, validate
 from sblsim.models import MODELS
 from sblsim.models.declarations import UNITS, ModelError
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.engines import close_handles, make_handles
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.run import run
 
 COMPONENT_NAMES = list(MODELS)
 
@@ -232,8 +232,8 @@ def test_fmu_handles_reset_between_runs(fmu_handles):
 
 _OWN_HANDLES_SCRIPT = """
 import sys
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 cfg = load_config("semicircle", ["simulation.duration=%s"], seed=1)
 for k in range(int(sys.argv[2])):
     run(cfg, "fmu", fmu_dir=sys.argv[1]).timeseries.to_parquet(f"{sys.argv[3]}/fmu{k}.parquet")

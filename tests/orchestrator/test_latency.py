@@ -19,10 +19,10 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.campaign.plan import batch_key
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import ConfigError, load_config, section_variables
-from sblsim.orchestrator.metrics import RUN_METRICS, nees
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import apply_latency, run, run_batch, with_replicates
+from sblsim.orchestrator.cosim.config import ConfigError, load_config, section_variables
+from sblsim.orchestrator.cosim.metrics import RUN_METRICS, nees
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import apply_latency, run, run_batch, with_replicates
 from sblsim.orchestrator.ssp import SspError, export_ssp
 from sblsim.orchestrator.study import load_study
 

@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run
 
 SIX = "10 0 1; 0 10 1; -10 0 1; 0 -10 1; 0 0 15; 7 7 1"
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sblsim.orchestrator.connections import Connection
-from sblsim.orchestrator.master import simulate
+from sblsim.orchestrator.cosim.connections import Connection
+from sblsim.orchestrator.cosim.master import simulate
 
 
 class Counter:
@@ -88,15 +88,15 @@ class Plain:
 def test_the_compiled_master_loop_equals_the_python_one(algorithm, batch, monkeypatch):
     """The compiled loop (every handle a compiled batch) and the Python loop give identical records, with a
     receiver at three steps per macro step, loss and multipath."""
-    from sblsim.orchestrator.config import load_config
-    from sblsim.orchestrator.connections import default_connections
-    from sblsim.orchestrator.engines import LocalHandle
-    from sblsim.orchestrator.run import merge_params, with_replicates
+    from sblsim.orchestrator.cosim.config import load_config
+    from sblsim.orchestrator.cosim.connections import default_connections
+    from sblsim.orchestrator.cosim.engines import LocalHandle
+    from sblsim.orchestrator.cosim.run import merge_params, with_replicates
 
     cfg = load_config("random", ["acoustics.loss_pct=20", "acoustics.outlier_pct=10", "simulation.duration=20"],
                       seed=4)
     cfgs = with_replicates(cfg, range(batch))
-    from sblsim.orchestrator import master
+    from sblsim.orchestrator.cosim import master
 
     original, compiled = master._simulate_native, []
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from sblsim.orchestrator.metrics import METRIC_NAMES, NEES_95, consistency, errors, nees, slots, summarize
+from sblsim.orchestrator.cosim.metrics import METRIC_NAMES, NEES_95, consistency, errors, nees, slots, summarize
 
 NAN = float("nan")
 
@@ -150,7 +150,7 @@ def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     positive-definite, lost packets, foreign beacon ids, the gate at work and a diverged run; the columns are
     strided views of one (N, 24, B) array, as the compiled master records them."""
     from sblsim.models.bound import FIXED, pcrb, pcrb_inputs
-    from sblsim.orchestrator.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
+    from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
 
     rng = np.random.default_rng(7)
     n, b = 300, 5

@@ -5,7 +5,7 @@ import ast
 from pathlib import Path
 
 import sblsim.orchestrator
-from sblsim.orchestrator import engines
+from sblsim.orchestrator.cosim import engines
 
 ORCHESTRATOR = Path(sblsim.orchestrator.__file__).parent
 

@@ -1,4 +1,4 @@
-"""A run is resolved once: the plan (``sblsim.orchestrator.plan``) is typed and frozen, an invalid configuration
+"""A run is resolved once: the plan (``sblsim.orchestrator.cosim.plan``) is typed and frozen, an invalid configuration
 fails when its plan is made, and every entry point resolves each configuration exactly once."""
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ import pytest
 
 import sblsim
 import sblsim.orchestrator
-import sblsim.orchestrator.config as config_module
-import sblsim.orchestrator.plan as plan_module
+import sblsim.orchestrator.cosim.config as config_module
+import sblsim.orchestrator.cosim.plan as plan_module
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.orchestrator.budget import SOURCES
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.plan import RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
 from sblsim.orchestrator.study import load_study
 
 SHORT = ["simulation.duration=2"]
@@ -102,7 +102,7 @@ def test_an_invalid_configuration_fails_when_the_plan_is_made():
 
 
 def test_the_api_fails_before_any_simulation(monkeypatch):
-    import sblsim.orchestrator.run as run_module
+    import sblsim.orchestrator.cosim.run as run_module
 
     _every_module()
     for name, module in list(sys.modules.items()):

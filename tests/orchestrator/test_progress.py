@@ -1,4 +1,4 @@
-"""One progress reporter for every long command: :class:`sblsim.orchestrator.progress.Progress`.
+"""One progress reporter for every long command: :class:`sblsim.orchestrator.io.progress.Progress`.
 
 A campaign and a compare report through the same class, and their callbacks receive the same fields (units
 done, units in all); the log lines' arithmetic (rate, time left, the campaign's resumed start and its forced
@@ -12,9 +12,9 @@ import re
 import pytest
 
 import sblsim
-from sblsim.orchestrator import progress as progress_module
 from sblsim.orchestrator.campaign import run_campaign
-from sblsim.orchestrator.progress import Progress
+from sblsim.orchestrator.io import progress as progress_module
+from sblsim.orchestrator.io.progress import Progress
 from sblsim.orchestrator.study import load_study
 
 DURATION, T, REPLICATES = 10.0, 0.1, 2

@@ -9,8 +9,8 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import ConfigError, load_config
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import ConfigError, load_config
+from sblsim.orchestrator.cosim.run import run
 
 USER_SCRIPT = Path(__file__).parents[1] / "data" / "user_receiver.py"
 SHORT = ["simulation.duration=20"]

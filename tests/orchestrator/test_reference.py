@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from sblsim.orchestrator.config import BUILTIN_SCENARIOS
+from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS
 from tests.data.reference.regenerate import reference, table_cells
 
 ROOT = Path(__file__).resolve().parents[2]

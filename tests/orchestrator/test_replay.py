@@ -20,8 +20,9 @@ import pytest
 from sblsim.models import RECEIVERS
 from sblsim.models.systems import SYSTEMS as SYSTEMS_BY_NAME
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config, to_toml
-from sblsim.orchestrator.plan import make_plan
+from sblsim.orchestrator.cosim.config import load_config, to_toml
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.replay import (
     export_log,
     read_log,
@@ -30,7 +31,6 @@ from sblsim.orchestrator.replay import (
     replay_config,
     truth_path,
 )
-from sblsim.orchestrator.run import run
 
 TOL = 1e-9  # [m]
 #: The receiver's outputs compared with the run's.
@@ -553,7 +553,7 @@ def test_a_parquet_log_whose_pandas_metadata_disagrees_reads_its_cells(tmp_path)
 
 def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path, capsys, monkeypatch):
     """The limits of docs/log-format.md, made small: rows of a CSV and of a Parquet file, and bytes."""
-    import sblsim.orchestrator.tables as module  # the table reading replay shares with the other log readers
+    import sblsim.orchestrator.io.tables as module  # the table reading replay shares with the other log readers
 
     log = tmp_path / "many.csv"
     log.write_text(HEADER + "".join(f"{0.1 * k!r},1,6,1,0,1,2\n" for k in range(1, 12)))
@@ -573,7 +573,7 @@ def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path,
 
 
 def test_the_documented_log_limits_are_the_code_s():
-    from sblsim.orchestrator.tables import MAX_LOG_BYTES, MAX_LOG_ROWS
+    from sblsim.orchestrator.io.tables import MAX_LOG_BYTES, MAX_LOG_ROWS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
     assert f"{MAX_LOG_ROWS:,}" in doc and f"{MAX_LOG_BYTES // 2**20} MiB" in doc

@@ -21,9 +21,9 @@ import pyarrow.parquet as pq
 import pytest
 import tomli_w
 
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.replay import CONFIG_PREFIX, META_CONFIG, export_log, log_config
-from sblsim.orchestrator.run import run
 
 #: The audited command: argv = outside folder, report file, sblsim arguments.
 AUDITED = r"""

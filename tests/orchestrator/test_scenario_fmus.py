@@ -29,10 +29,10 @@ from sblsim.fmus.build import beacons_dir, fmu_path, validate
 from sblsim.models import MODELS
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.connections import default_connections
-from sblsim.orchestrator.engines import fmu_paths
-from sblsim.orchestrator.plan import load_plan
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.engines import fmu_paths
+from sblsim.orchestrator.cosim.plan import load_plan
+from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.ssp import export_ssp
 
 SITES = ("lbl-field", "usbl-deep")

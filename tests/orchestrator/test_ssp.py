@@ -13,10 +13,10 @@ from fmpy.ssp.ssd import read_ssd, read_ssv
 
 from sblsim.models import MODELS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.connections import default_connections
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.ssp import SspError, export_ssp, read_ssp, validate_ssp
 
 

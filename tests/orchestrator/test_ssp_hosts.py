@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.connections import default_connections
-from sblsim.orchestrator.engines import LocalHandle
-from sblsim.orchestrator.master import simulate
-from sblsim.orchestrator.run import merge_params, run
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.engines import LocalHandle
+from sblsim.orchestrator.cosim.master import simulate
+from sblsim.orchestrator.cosim.run import merge_params, run
 from sblsim.orchestrator.ssp import export_ssp
 
 HOSTS = Path(__file__).with_name("ssp_hosts.py")

@@ -15,7 +15,7 @@ import pytest
 
 from sblsim.models.calibration import StraightRay, solve
 from sblsim.models.errors import ModelError
-from sblsim.orchestrator import tables
+from sblsim.orchestrator.io import tables
 from sblsim.orchestrator.surveys import gnatss
 from sblsim.orchestrator.surveys.gnatss import (
     community_editing,

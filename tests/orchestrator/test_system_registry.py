@@ -16,11 +16,11 @@ from sblsim.models import component
 from sblsim.models.platform.core import Platform
 from sblsim.models.systems import SYSTEMS, System, interface_system
 from sblsim.orchestrator import cli
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
+from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
 from sblsim.orchestrator.maps import system_line
 from sblsim.orchestrator.replay import log_frames
-from sblsim.orchestrator.run import run
-from sblsim.orchestrator.systems import describe_defaults, parse_systems, system_overrides
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Where a system may be named: its own module (and the registry, which names none).

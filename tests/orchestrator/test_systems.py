@@ -24,14 +24,14 @@ from sblsim.models.platform.geometry import platform_offsets
 from sblsim.models.systems.usbl import FIXED as USBL_FIXED
 from sblsim.models.systems.usbl import pcrb as usbl_pcrb
 from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
-from sblsim.orchestrator.config import load_config
-from sblsim.orchestrator.connections import default_connections
-from sblsim.orchestrator.engines import close_handles, make_handles
-from sblsim.orchestrator.limits import step_count
-from sblsim.orchestrator.master import simulate
-from sblsim.orchestrator.metrics import slots
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import merge_params, run, run_batch, with_replicates
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.limits import step_count
+from sblsim.orchestrator.cosim.master import simulate
+from sblsim.orchestrator.cosim.metrics import slots
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import merge_params, run, run_batch, with_replicates
 from tests.orchestrator.test_fmus import assert_same_frames
 
 SYSTEMS = ("sbl", "lbl", "usbl")
@@ -377,7 +377,7 @@ def test_the_eigenray_table_of_a_run(fmu_dir, monkeypatch, system):
     """A semicircle through Munk gets an eigenray table (a random walk, above, gets none): both engines equal to
     1e-9 with it, and the run without it (every eigenray solved) gives the same travel times within 1 µs, the same
     paths and angles within 1e-5 rad."""
-    from sblsim.orchestrator import plan as plan_module
+    from sblsim.orchestrator.cosim import plan as plan_module
 
     cfg = load_config("semicircle", ["platform.system=" + system, *RAY, "simulation.duration=5"], seed=4)
     table = make_plan(cfg).parameters["acoustics"]
@@ -407,7 +407,7 @@ def test_the_family_table_of_a_run(fmu_dir, monkeypatch, system):
     heaves nor reaches below the floor): both engines equal to 1e-9 with it, and the run without it (every family
     solved) ranges on the same path of nearly every packet with the same travel time within 1 µs and SNR within
     0.02 dB."""
-    from sblsim.orchestrator import plan as plan_module
+    from sblsim.orchestrator.cosim import plan as plan_module
 
     own = ["platform.seafloor_depth=19"] if system == "lbl" else []
     cfg = load_config("semicircle", ["platform.system=" + system, *SNR_TABLE, *own, "simulation.duration=10"],

@@ -12,10 +12,10 @@ import pytest
 from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run_batch, with_replicates
+from sblsim.orchestrator.cosim.systems import system_overrides
 from sblsim.orchestrator.maps import accuracy_map, make_maps, plot
-from sblsim.orchestrator.run import run_batch, with_replicates
-from sblsim.orchestrator.systems import system_overrides
 
 #: The LBL defaults of compare, set by hand as a user would.
 LBL_BY_HAND = ["platform.system=lbl", "platform.layout=circle", "platform.beacons=4", "platform.baseline=50"]
@@ -37,7 +37,7 @@ def test_the_built_in_divers_are_above_the_default_seafloor(scenario):
 def test_the_scenarios_own_system_keeps_the_scenarios_platform():
     """At the lbl-field site the LBL keeps its 250 m circle and the SBL starts from the paper's cross; on the
     harbour (an SBL scenario of 1 m arms) the SBL keeps its 1 m."""
-    from sblsim.orchestrator.config import scenario_system
+    from sblsim.orchestrator.cosim.config import scenario_system
 
     own = scenario_system("lbl-field")
     assert own == "lbl"

@@ -25,10 +25,10 @@ import pytest
 from sblsim.models.platform.core import Platform, beacon_names
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import load_config
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import make_plan
+from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
 from sblsim.orchestrator.maps import accuracy_map, grid
-from sblsim.orchestrator.plan import make_plan
-from sblsim.orchestrator.run import run, run_batch, with_replicates
 from tests.helpers import Core
 
 BASELINES = (0.5, 3.0, 200.0)

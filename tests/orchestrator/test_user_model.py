@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.config import ConfigError, load_config, receiver_label
-from sblsim.orchestrator.run import run
+from sblsim.orchestrator.cosim.config import ConfigError, load_config, receiver_label
+from sblsim.orchestrator.cosim.run import run
 
 EXAMPLE = Path(__file__).parents[2] / "docs" / "examples" / "constant_position.py"
 OVERRIDES = ["simulation.duration=30", "acoustics.loss_pct=20", f"receiver=model:{EXAMPLE}",

@@ -10,8 +10,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from sblsim.orchestrator.config import BUILTIN_SCENARIOS, load_config
-from sblsim.orchestrator.run import run, summary
+from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, load_config
+from sblsim.orchestrator.cosim.run import run, summary
 
 HERE = Path(__file__).resolve().parent
 

@@ -19,26 +19,26 @@ from sblsim.models.bound import FIXED
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.config import receiver_label, to_toml, turnaround
-from sblsim.orchestrator.connections import (
+from sblsim.orchestrator.cosim.config import receiver_label, to_toml, turnaround
+from sblsim.orchestrator.cosim.connections import (
     Connection,
     check_connections,
     default_connections,
 )
-from sblsim.orchestrator.engines import (
+from sblsim.orchestrator.cosim.engines import (
     DTYPES,
     ComponentHandle,
     cast_column,
     close_handles,
     make_handles,
 )
-from sblsim.orchestrator.limits import check_steps
-from sblsim.orchestrator.master import RecordBuffer, simulate
-from sblsim.orchestrator.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
-from sblsim.orchestrator.output import staged_directory
-from sblsim.orchestrator.plan import RunPlan, as_plan
-from sblsim.orchestrator.plan import with_replicates as _with_replicates
-from sblsim.orchestrator.progress import Progress, ProgressSpec, progress_of
+from sblsim.orchestrator.cosim.limits import check_steps
+from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
+from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan
+from sblsim.orchestrator.cosim.plan import with_replicates as _with_replicates
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.progress import Progress, ProgressSpec, progress_of
 
 #: A system's time series adds its own columns after :data:`TIMESERIES_COLUMNS`
 #: (:attr:`sblsim.models.systems.System.timeseries_columns`: USBL's direction of arrival and array attitude).
@@ -58,7 +58,7 @@ class RunResult:
         One row per replicate and step (columns :data:`TIMESERIES_COLUMNS`, a USBL run's
         a system's own columns, ``time`` [s], ``replicate`` and the errors ``e_*``, ``instr_e_*`` [m]).
     metrics : pandas.DataFrame
-        One row per replicate: the metrics of :mod:`sblsim.orchestrator.metrics`.
+        One row per replicate: the metrics of :mod:`sblsim.orchestrator.cosim.metrics`.
     steps : int
         Macro steps per replicate.
     wall_time : float
@@ -66,7 +66,7 @@ class RunResult:
     step_time : dict
         Component -> wall-clock time spent in its ``doStep`` calls [s], all runs of the batch.
     plan : RunPlan or None
-        The plan that ran (:mod:`sblsim.orchestrator.plan`; its ``config`` is :attr:`config`).
+        The plan that ran (:mod:`sblsim.orchestrator.cosim.plan`; its ``config`` is :attr:`config`).
     """
 
     config: dict
@@ -91,12 +91,12 @@ def merge_params(plans: Sequence[RunPlan], component: str, accepted: frozenset[s
                  distinct: Sequence[RunPlan] | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """Parameters of one component for a batch of runs, one plan per run (a configuration: its plan is made).
 
-    The FMU parameters of the first run (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`);
+    The FMU parameters of the first run (:meth:`sblsim.orchestrator.cosim.plan.RunPlan.component_parameters`);
     a numeric parameter whose value differs between runs (a factor of a batch
     spanning several design cells) becomes an array of shape (B,). The values
     are each run's parameters as its plan resolved them: those tied to a key of
     another section (``acoustics.beaufort`` from ``platform.beaufort``,
-    :data:`sblsim.orchestrator.config.KEY_TIES`) and those the model derives
+    :data:`sblsim.orchestrator.cosim.config.KEY_TIES`) and those the model derives
     from its keys (the absorption at ``acoustics.frequency``, the eigenray
     table) follow their run. Only the seed keys and numeric FMU parameters may
     differ; text, tables' shapes and configuration-only keys must be the same in
@@ -138,7 +138,7 @@ def merge_params(plans: Sequence[RunPlan], component: str, accepted: frozenset[s
 
 def with_replicates(plan: RunPlan | dict, replicates: Sequence[int]) -> list[RunPlan]:
     """One plan per replicate (``run.replicate`` set), sharing everything else; a configuration is resolved
-    into its plan once (:func:`sblsim.orchestrator.plan.as_plan`)."""
+    into its plan once (:func:`sblsim.orchestrator.cosim.plan.as_plan`)."""
     return _with_replicates(as_plan(plan), replicates)
 
 
@@ -150,7 +150,7 @@ def run(cfg: RunPlan | dict, engine: str = "local", replicates: Sequence[int] | 
     Parameters
     ----------
     cfg : RunPlan or dict
-        The run's plan (:func:`sblsim.orchestrator.plan.make_plan`); a configuration is resolved into its plan
+        The run's plan (:func:`sblsim.orchestrator.cosim.plan.make_plan`); a configuration is resolved into its plan
         once.
     engine : {'local', 'fmu'}
     replicates : sequence of int, optional
@@ -162,7 +162,7 @@ def run(cfg: RunPlan | dict, engine: str = "local", replicates: Sequence[int] | 
         Re-usable handles from :func:`make_handles` (FMUs are then reset, not
         re-instantiated); closed by the caller.
     progress : bool, 'auto', callable or Progress
-        Report the steps done (:class:`sblsim.orchestrator.progress.Progress`; a unit is one step of one
+        Report the steps done (:class:`sblsim.orchestrator.io.progress.Progress`; a unit is one step of one
         replicate); default silent.
     connections : sequence of Connection, optional
         As for :func:`run_batch`.
@@ -224,7 +224,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
     ------
     ModelError
         If the runs differ where a batch cannot, their record would not fit in memory
-        (:func:`sblsim.orchestrator.limits.check_steps`), or as for :func:`run`.
+        (:func:`sblsim.orchestrator.cosim.limits.check_steps`), or as for :func:`run`.
     """
     plans = [as_plan(c) for c in cfgs]
     first = plans[0]
@@ -341,7 +341,7 @@ def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.nd
     columns : dict
         ``"component.variable"`` -> array of shape (n_steps, B), and ``"time"`` (:func:`simulate`'s record).
     steps : int
-        The latency in steps of the record (:attr:`sblsim.orchestrator.plan.RunPlan.latency_steps`), ≥ 0.
+        The latency in steps of the record (:attr:`sblsim.orchestrator.cosim.plan.RunPlan.latency_steps`), ≥ 0.
 
     Returns
     -------
@@ -355,7 +355,7 @@ def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.nd
     return {k: (v[source] if k.startswith("receiver.") and k not in UNDELAYED else v) for k, v in columns.items()}
 
 
-#: The recorded outputs :func:`sblsim.orchestrator.metrics.run_flags` reads (all among the metrics' inputs).
+#: The recorded outputs :func:`sblsim.orchestrator.cosim.metrics.run_flags` reads (all among the metrics' inputs).
 FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid", "true_x", "true_y")
 
 
@@ -479,7 +479,7 @@ def write_run(result: RunResult, out_dir: Path | str) -> Path:
     Path
         ``out_dir``.
     """
-    from sblsim.orchestrator.plots import save_run_figures
+    from sblsim.orchestrator.io.plots import save_run_figures
 
     out_dir = Path(out_dir)
     with staged_directory(out_dir) as tmp:

@@ -30,8 +30,8 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from sblsim.orchestrator.connections import Connection, execution_order
-from sblsim.orchestrator.engines import ComponentHandle, native_system
+from sblsim.orchestrator.cosim.connections import Connection, execution_order
+from sblsim.orchestrator.cosim.engines import ComponentHandle, native_system
 
 #: Master algorithms of :func:`simulate`.
 ALGORITHMS = ("gauss-seidel", "jacobi")
@@ -63,7 +63,7 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
              timing: dict[str, float] | None = None, buffer: RecordBuffer | None = None) -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
-    A handle (:class:`sblsim.orchestrator.engines.ComponentHandle`) names its inputs and outputs
+    A handle (:class:`sblsim.orchestrator.cosim.engines.ComponentHandle`) names its inputs and outputs
     (``input_names``, ``output_names``), takes its inputs as one matrix
     (``set_input_vector``, shape (n_in, B)), gives its outputs as one matrix
     (``output_vector``, shape (n_out, B), numbers as floats) and steps

@@ -12,8 +12,8 @@ from sblsim.models import COMPONENTS, MODELS, RECEIVERS
 from sblsim.models.component import Component
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import ConfigError
-from sblsim.orchestrator.connections import check_interface
-from sblsim.orchestrator.engines import Port
+from sblsim.orchestrator.cosim.connections import check_interface
+from sblsim.orchestrator.cosim.engines import Port
 
 
 @lru_cache(maxsize=None)

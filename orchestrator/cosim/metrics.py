@@ -66,7 +66,7 @@ DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS = 100.0, 10.0, 10
 #: spread is beyond what the geometry serves (``beyond_geometry``; the command line warns).
 REACH_RATIO = 100.0
 #: Per-run flags computed besides the compiled pass (:func:`run_flags`; ``slot_overrun`` is the channel's own
-#: output, :func:`sblsim.orchestrator.run.slot_overrun`): in ``summary.json`` and in a campaign's rows.
+#: output, :func:`sblsim.orchestrator.cosim.run.slot_overrun`): in ``summary.json`` and in a campaign's rows.
 FLAG_NAMES = ("updates", "fix_steps", "max_distance", "beyond_geometry", "detected_pct", "slot_overrun")
 #: χ²₃(0.95): the NEES inside the 95 % ellipsoid of a 3-D position, ``scipy.stats.chi2.ppf(0.95, 3)`` written out
 #: (a test holds it to scipy's), so that a campaign's worker processes need not import scipy.stats.

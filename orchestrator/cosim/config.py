@@ -44,12 +44,12 @@ from sblsim.models.systems import SYSTEMS
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator import tomlfile
-from sblsim.orchestrator.engines import read_description
-from sblsim.orchestrator.limits import check_steps
-from sblsim.orchestrator.master import ALGORITHMS
-from sblsim.orchestrator.plugins import user_model
-from sblsim.orchestrator.systems import check_diver
+from sblsim.orchestrator.cosim.engines import read_description
+from sblsim.orchestrator.cosim.limits import check_steps
+from sblsim.orchestrator.cosim.master import ALGORITHMS
+from sblsim.orchestrator.cosim.plugins import user_model
+from sblsim.orchestrator.cosim.systems import check_diver
+from sblsim.orchestrator.io import tomlfile
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk", "usbl-deep", "lbl-field")
 SECTIONS = ("run", "simulation", *COMPONENTS)
@@ -98,7 +98,7 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
 
 #: Keys of the ``receiver`` section that the orchestrator implements for every receiver (built-in, a user's model
 #: or FMU): configuration keys only, never parameters of the receiver component
-#: (:meth:`sblsim.orchestrator.plan.RunPlan.component_parameters`).
+#: (:meth:`sblsim.orchestrator.cosim.plan.RunPlan.component_parameters`).
 RECEIVER_KEYS: tuple[Variable, ...] = (
     Variable("latency", "parameter", "Real", 0.0, "s",
              "Processing latency: the estimate a diver sees is the one the receiver computed this long ago "
@@ -349,7 +349,7 @@ def load_config(source: str | Path, overrides: Iterable[str] = (), seed: int | N
 
 def load_raw(source: str | Path, overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
     """The raw configuration of a scenario or file with ``--set`` overrides and seed, not yet validated
-    (:func:`resolve`, or :func:`sblsim.orchestrator.plan.make_plan` for a run's plan).
+    (:func:`resolve`, or :func:`sblsim.orchestrator.cosim.plan.make_plan` for a run's plan).
 
     Raises
     ------
@@ -494,7 +494,7 @@ def _check_trajectory_file(target: dict[str, Any]) -> None:
 
 def _orchestrator_receiver_keys(given: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
     """The :data:`RECEIVER_KEYS` of a receiver section, validated: ``latency`` within [0, 60] s and a whole
-    number of sampling times T (:attr:`sblsim.orchestrator.plan.RunPlan.latency_steps`).
+    number of sampling times T (:attr:`sblsim.orchestrator.cosim.plan.RunPlan.latency_steps`).
 
     Raises
     ------
@@ -529,7 +529,7 @@ def _check_duration(sim: dict[str, Any], target: dict[str, Any]) -> None:
     """Fill ``simulation.duration`` = 0 with one pass of the trajectory (cut to whole sampling times, as
     documented; a resolved configuration holds that duration, which is accepted again as one pass), and
     refuse any other duration that is not a whole number of sampling times (it would be cut without a word)
-    or whose record would not fit in memory (:func:`sblsim.orchestrator.limits.check_steps`; a trajectory
+    or whose record would not fit in memory (:func:`sblsim.orchestrator.cosim.limits.check_steps`; a trajectory
     file's natural duration too).
 
     Raises

@@ -1,7 +1,7 @@
 """A run resolved once: the typed, immutable plan of a validated configuration.
 
 :func:`make_plan` is the one place a configuration is resolved for a run: it validates the configuration
-(:func:`sblsim.orchestrator.config.resolve`: every key, range and tie; an invalid one raises one
+(:func:`sblsim.orchestrator.cosim.config.resolve`: every key, range and tie; an invalid one raises one
 :class:`~sblsim.models.errors.ConfigError` here, never later) and derives, once, everything a run asks of it:
 the positioning system object (:data:`sblsim.models.systems.SYSTEMS`), what implements each component (a
 built-in model's name, a user's model class, a user's FMU path), each component's FMU parameters, the
@@ -41,7 +41,7 @@ from sblsim.models.receiver.profile import resolve_channel_profile
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator.config import (
+from sblsim.orchestrator.cosim.config import (
     KEY_TIES,
     MIN_SIGMA,
     RECEIVER_KEY_NAMES,
@@ -52,8 +52,8 @@ from sblsim.orchestrator.config import (
     resolve,
     to_toml,
 )
-from sblsim.orchestrator.engines import Source, paper_sources
-from sblsim.orchestrator.limits import step_count
+from sblsim.orchestrator.cosim.engines import Source, paper_sources
+from sblsim.orchestrator.cosim.limits import step_count
 
 
 class FrozenMapping(dict):
@@ -113,7 +113,7 @@ class RunPlan(Mapping):
     receiver : str
         ``simulation.receiver`` (``ekf``, ``ekf-seq``, ``ukf``, ``lsq``, ``model:PATH.py`` or ``fmu:PATH``).
     receiver_label : str
-        What figures and tables call it (:func:`sblsim.orchestrator.config.receiver_label`).
+        What figures and tables call it (:func:`sblsim.orchestrator.cosim.config.receiver_label`).
     sources : FrozenMapping
         Component -> what implements it: a built-in model's name (:data:`sblsim.models.MODELS`), a user's model
         class or the path of a user's FMU (the receiver's source, built-in, ``model:`` or ``fmu:``).
@@ -278,8 +278,8 @@ def _component_parameters(cfg: Mapping[str, Mapping[str, Any]], component: str, 
 
     The component's section turned into FMU parameters by its model
     (:meth:`sblsim.models.component.Component.fmu_parameters`: tables from files, custom offsets), the
-    sampling ties (:data:`sblsim.orchestrator.config.SAMPLING_TIES`), the key ties
-    (:data:`sblsim.orchestrator.config.KEY_TIES`), the receiver's clock ``communication_step`` = T / ratio and
+    sampling ties (:data:`sblsim.orchestrator.cosim.config.SAMPLING_TIES`), the key ties
+    (:data:`sblsim.orchestrator.cosim.config.KEY_TIES`), the receiver's clock ``communication_step`` = T / ratio and
     the seed keys it declares. A user's FMU (``model`` None) declares what it declares: every candidate is
     kept, and :meth:`RunPlan.component_parameters` keeps those of the FMU's parameters.
     """
@@ -447,7 +447,7 @@ def make_plan(config: Mapping[str, Any]) -> RunPlan:
     ----------
     config : mapping
         A configuration, raw (as read from a file, with overrides applied) or resolved (a
-        :func:`~sblsim.orchestrator.config.load_config` result, a :class:`RunPlan`'s, an API ``Config``): it is
+        :func:`~sblsim.orchestrator.cosim.config.load_config` result, a :class:`RunPlan`'s, an API ``Config``): it is
         validated (again) either way.
 
     Returns
@@ -493,7 +493,7 @@ def load_plan(source: str | Path, overrides: Iterable[str] = (), seed: int | Non
     Raises
     ------
     ConfigError
-        As :func:`sblsim.orchestrator.config.load_config` (an unknown scenario, section or key, invalid TOML) and
+        As :func:`sblsim.orchestrator.cosim.config.load_config` (an unknown scenario, section or key, invalid TOML) and
         :func:`make_plan`; nothing has been written.
     """
     return make_plan(load_raw(source, overrides, seed))

@@ -37,8 +37,8 @@ from sblsim.fmus.native import NativeBatch, NativeSystem
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import FMICallError, SblsimError
-from sblsim.orchestrator.archives import check_members, safe_extract
-from sblsim.orchestrator.connections import check_interface
+from sblsim.orchestrator.cosim.connections import check_interface
+from sblsim.orchestrator.io.archives import check_members, safe_extract
 
 #: The engines of :func:`make_handles`.
 ENGINES = ("local", "fmu")
@@ -295,7 +295,7 @@ def read_description(component: str, path: Path) -> Any:
     ------
     ModelError
         If the file is missing or unreadable, not FMI 2.0 Co-Simulation, or an archive that is not safe to
-        unpack (:func:`sblsim.orchestrator.archives.check_members`: checked before its description is read).
+        unpack (:func:`sblsim.orchestrator.io.archives.check_members`: checked before its description is read).
     """
     from fmpy import read_model_description
 
@@ -701,7 +701,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
         Directory of the built FMUs (fmu engine).
     n_beacons : int
     sources : dict, optional
-        What implements each component (:attr:`sblsim.orchestrator.plan.RunPlan.sources` of a run's plan;
+        What implements each component (:attr:`sblsim.orchestrator.cosim.plan.RunPlan.sources` of a run's plan;
         default :func:`paper_sources`). A user's FMU is loaded on either engine and checked against the
         component's interface.
     fmu_files : dict, optional
