@@ -5,7 +5,7 @@ Every name in :data:`__all__` is public and stable; it is re-exported by the pac
 is reached.
 
 Each function does what the command of the same name does (``sblsim run``, ``compare``, ``map``, ``budget``,
-``replay``, ``campaign``, ``analyze``), with the same numbers: both call the same functions of the
+``replay``, ``calibrate``, ``campaign``, ``analyze``), with the same numbers: both call the same functions of the
 orchestrator. Unlike a command, a function
 
 - returns its results as Python objects: tables as :class:`pandas.DataFrame`, figures as
@@ -65,9 +65,9 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     from matplotlib.figure import Figure
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "replay", "campaign", "analyze",
-    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "ReplayResult", "CampaignResult",
-    "AnalysisResult", "SblsimError", "ConfigError", "ENGINES", "BUILTIN_SCENARIOS",
+    "load", "run", "compare", "accuracy_map", "budget", "replay", "calibrate", "campaign", "analyze",
+    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "ReplayResult", "CalibrationResult",
+    "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES", "BUILTIN_SCENARIOS",
 ]
 
 #: What a ``progress`` argument may be: False or None (silent, the default), True (a tqdm bar on standard
@@ -912,6 +912,158 @@ def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engi
         write_replay(result, target)
     return ReplayResult(Config(thaw(result.config)), source, result.engine, result.summary, result.timeseries,
                         target, result.config)
+
+
+# --------------------------------------------------------------------------- calibration
+
+@dataclass
+class CalibrationResult:
+    """The outcome of :func:`calibrate`.
+
+    Attributes
+    ----------
+    name : str
+        The survey's name (the default output folder's).
+    sound_speed : str
+        What the travel times were computed with: a sound speed, straight rays at each transponder's harmonic
+        mean of a profile, or eigenrays through one.
+    segments : int
+        The survey's segments, each solved on its own before they are combined.
+    solution : dict
+        ``solution.json``: each transponder's position from its a-priori ENU [m] with its sigma [m], the
+        sound speed [m/s], the residuals' RMS [s], the solver's settings; a simulated survey's truth, errors
+        [m] and bound [m].
+    residuals : pandas.DataFrame
+        ``residuals.csv``: one row per reply, its TWTT residual [s] and whether it was used.
+    running : pandas.DataFrame or None
+        ``running.csv``: the running solution (Kalman form), one row per reply.
+    ntd : pandas.DataFrame or None
+        ``ntd.csv``: the sound-speed perturbation of each reply (a moving-ocean solve).
+    search : pandas.DataFrame or None
+        ``criterion.csv``: the candidates of the number of bases' search.
+    replicates : pandas.DataFrame or None
+        ``replicates.parquet``: a simulated survey's replicates (errors against the truth [m], NEES, bound).
+    notes, warnings : list of str
+        What was left out of the log, and what a user must know about the solution (one line each).
+    out : Path or None
+    """
+
+    name: str
+    sound_speed: str
+    segments: int
+    solution: dict[str, Any]
+    residuals: pd.DataFrame
+    running: pd.DataFrame | None
+    ntd: pd.DataFrame | None
+    search: pd.DataFrame | None
+    replicates: pd.DataFrame | None
+    notes: list[str]
+    warnings: list[str]
+    out: Path | None = None
+    _calibration: Any = field(default=None, repr=False)
+
+
+def calibrate(survey: str | Path, *, format: str | None = None, initcfg: str | Path | None = None,
+              svp: str | Path | None = None, set: Overrides = None, replicates: int | None = None,
+              out: str | Path | None = None, force: bool = False, progress: Progress = False) -> CalibrationResult:
+    """Locate seafloor transponders from a surface survey's two-way travel times: ``sblsim calibrate``.
+
+    The box-in least squares of GNSS-Acoustic calibration (docs/calibration.md), with the moving-ocean
+    perturbation of SeaGap and GARPOS where the survey asks for it; a simulated survey (``box-in`` or a
+    ``CONFIG.toml``) is solved against its truth.
+
+    Parameters
+    ----------
+    survey : str or Path
+        A built-in survey (``xie-2021-07-23``, ``ncl1-2022-208``, ``seagap-example``, ``box-in``, ...), a
+        survey log (``.csv`` or ``.parquet``; a text file with ``format='xie'``; a SeaGap folder with
+        ``format='seagap'``) or a simulated survey's ``CONFIG.toml``.
+    format : str, optional
+        The log's format: ``sblsim`` (default), ``xie``, ``seagap`` or ``garpos`` (with ``initcfg`` and
+        ``svp``).
+    initcfg, svp : str or Path, optional
+        ``format='garpos'``: GARPOS's initial site-parameter file (the paths it names are not read) and its
+        sound-speed profile.
+    set : mapping or sequence of str, optional
+        Solver settings (``solver.sound_speed_mps``, ...) or a simulated survey's ``survey.KEY`` /
+        ``platform.KEY``.
+    replicates : int, optional
+        A simulated survey: solve this many replicates (``replicates`` of the result).
+    out : str or Path, optional
+        Write ``solution.json``, ``residuals.csv`` and the figures there (and the tables above that exist).
+    force : bool
+        Replace an earlier calibration in ``out``.
+    progress : bool or callable
+        Report a simulated survey's replicates solved.
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        A survey that cannot be read (the message names the row and column), bad settings or options.
+    """
+    source = str(_path(survey, "survey", optional=False))
+    fmt = _text(format, "format")
+    initcfg, svp = _path(initcfg, "initcfg"), _path(svp, "svp")
+    if replicates is not None and (isinstance(replicates, bool) or not isinstance(replicates, int)):
+        raise ConfigError(f"replicates: {shown(replicates)} is not an integer or None")  # its range the survey's
+    check_progress(progress)
+    _prepare_out(out, force, "solution.json", "calibration")  # before any work (and again before the write)
+    return _calibrate(source, fmt, _override_items(set), initcfg, svp, replicates, progress,
+                      lambda name: _prepare_out(out, force, "solution.json", "calibration"), lambda n: n)
+
+
+def _calibrate(source: str, fmt: str | None, overrides: list[str], initcfg: Path | str | None,
+               svp: Path | str | None, replicates: int | None, progress: Any,
+               prepare: Callable[[str], Path | None], option: Callable[[str], str]) -> CalibrationResult:
+    """:func:`calibrate` (and ``sblsim calibrate``): read the survey, solve it, ``prepare(name)`` the output
+    folder (None: nothing is written; a survey's log is solved first, a simulated survey's folder prepared
+    first) and write. ``option(name)`` is how an option is named in a message (``--replicates`` on the command
+    line)."""
+    from sblsim.orchestrator.surveys.calibrate import calibrate as solve
+    from sblsim.orchestrator.surveys.calibrate import load_survey, write_calibration
+    from sblsim.orchestrator.surveys.log import write_log
+    from sblsim.orchestrator.surveys.simulate import REPLICATES_RANGE, is_simulated, load_simulated, run_simulated
+
+    table, extra = None, {}
+    if not is_simulated(source):
+        if replicates is not None:
+            raise ConfigError(f"{option('replicates')}: only a simulated survey (box-in or a CONFIG.toml) has "
+                              "replicates")
+        survey = load_survey(source, fmt, overrides, initcfg, svp)  # all read first
+        result, name = solve(survey), survey.name
+        target = prepare(name)
+    else:
+        if fmt is not None or initcfg is not None or svp is not None:
+            raise ConfigError(f"{option('format')}: a simulated survey has no log format; give "
+                              f"{option('format')} with a log")
+        if replicates is not None and not REPLICATES_RANGE[0] <= replicates <= REPLICATES_RANGE[1]:
+            raise ConfigError(f"{option('replicates')}: {replicates} is outside the allowed range "
+                              f"[{REPLICATES_RANGE[0]}, {REPLICATES_RANGE[1]}]")
+        sim = load_simulated(source, overrides)  # every input read and checked first
+        name = sim.name
+        target = prepare(name)
+        result, table = run_simulated(sim, replicates, progress=progress)
+        survey = result.survey
+        extra = {"survey_log.csv": lambda path: write_log(survey.log, path)}  # replicate 0's log
+        if table is not None:
+            extra["replicates.parquet"] = lambda path: table.to_parquet(path, index=False)
+    if target is not None:
+        write_calibration(result, target, extra)
+    s = result.solution
+    profile = s["solver"]["sound_speed_profile"] or "the survey's own profile"
+    if s["solver"]["propagation"] == "ray":
+        speed = f"eigenrays through {profile}"
+    elif s["solver"]["sound_speed_profile"] or survey.profile is not None:
+        speed = f"straight rays at each transponder's harmonic mean of {profile}"
+    else:
+        speed = f"sound speed {s['sound_speed_mps']:.6g} m/s"
+    return CalibrationResult(name, speed, len(result.segments), s, result.residuals, result.running,
+                             result.ntd, result.search, table, list(survey.notes), list(result.warnings), target,
+                             result)
 
 
 # --------------------------------------------------------------------------- campaign and analysis

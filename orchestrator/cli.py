@@ -481,32 +481,18 @@ def _output_name(scenario: str) -> str:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey, write_calibration
-    from sblsim.orchestrator.surveys.simulate import is_simulated
-
-    if is_simulated(args.survey):
-        return _calibrate_simulated(args)
-    if args.replicates is not None:
-        raise ModelError("--replicates: only a simulated survey (box-in or a CONFIG.toml) has replicates")
-    survey = load_survey(args.survey, args.format, args.overrides, args.initcfg, args.svp)  # all read first
-    result = calibrate(survey)
-    out = _output(args.out, Path("results") / f"calibrate_{folder_name(survey.name)}", args.force, "solution.json",
-                  "calibration")
-    write_calibration(result, out)
-    for note in survey.notes:  # after the write: a write that fails says one line
+    result = api._calibrate(
+        args.survey, args.format, args.overrides, args.initcfg, args.svp, args.replicates, "auto",
+        lambda name: _output(args.out, Path("results") / f"calibrate_{folder_name(name)}", args.force,
+                             "solution.json", "calibration"), lambda name: f"--{name}")
+    s, out = result.solution, result.out
+    if "simulation" in s:
+        return _simulated_lines(result)
+    for note in result.notes:  # after the write: a write that fails says one line
         print(f"note: {note}", file=sys.stderr)
     _calibration_warnings(result)
-    s = result.solution
-    solver = s["solver"]
-    profile = solver["sound_speed_profile"] or "the survey's own profile"
-    if solver["propagation"] == "ray":
-        speed = f"eigenrays through {profile}"
-    elif solver["sound_speed_profile"] or survey.profile is not None:
-        speed = f"straight rays at each transponder's harmonic mean of {profile}"
-    else:
-        speed = f"sound speed {s['sound_speed_mps']:.6g} m/s"
-    print(f"calibration of {survey.name} ({s['format']} log, {s['log']['rows']} replies, "
-          f"{len(result.segments)} segment(s), {speed})")
+    print(f"calibration of {result.name} ({s['format']} log, {s['log']['rows']} replies, "
+          f"{result.segments} segment(s), {result.sound_speed})")
     for t in s["transponders"]:
         own = f", {t['sound_speed_mps']:.3f} m/s" if "sound_speed_mps" in t else ""
         print(f"  transponder {t['id']}: N {t['n_m']:+.4f} E {t['e_m']:+.4f} U {t['u_m']:+.4f} m from the a-priori "
@@ -535,29 +521,15 @@ def _calibration_warnings(result) -> None:
         print(f"sblsim: warning: {warning}", file=sys.stderr)
 
 
-def _calibrate_simulated(args: argparse.Namespace) -> int:
-    from sblsim.orchestrator.surveys.calibrate import write_calibration
-    from sblsim.orchestrator.surveys.log import write_log
-    from sblsim.orchestrator.surveys.simulate import REPLICATES_RANGE, load_simulated, run_simulated
-
-    if args.format is not None or args.initcfg is not None or args.svp is not None:
-        raise ModelError("--format: a simulated survey has no log format; give --format with a log")
-    if args.replicates is not None and not REPLICATES_RANGE[0] <= args.replicates <= REPLICATES_RANGE[1]:
-        raise ModelError(f"--replicates: {args.replicates} is outside the allowed range [{REPLICATES_RANGE[0]}, "
-                         f"{REPLICATES_RANGE[1]}]")
-    sim = load_simulated(args.survey, args.overrides)  # every input read and checked first
-    out = _output(args.out, Path("results") / f"calibrate_{folder_name(sim.name)}", args.force, "solution.json",
-                  "calibration")
-    result, table = run_simulated(sim, args.replicates, progress="auto")
-    extra = {"survey_log.csv": lambda path: write_log(result.survey.log, path)}  # replicate 0's log
-    if table is not None:
-        extra["replicates.parquet"] = lambda path: table.to_parquet(path, index=False)
-    write_calibration(result, out, extra)
+def _simulated_lines(result) -> int:
+    """``sblsim calibrate`` of a simulated survey: replicate 0 against the truth, the replicates, the survey
+    error an LBL design takes."""
     _calibration_warnings(result)
-    s = result.solution
+    s, table = result.solution, result.replicates
+    survey = s["simulation"]["survey"]
     t, e, truth = s["transponders"][0], s["errors"][0], s["truth"][0]
-    print(f"simulated calibration {sim.name}: {sim.survey['pattern']} of {sim.survey['radius_m']:g} m around a "
-          f"transponder {sim.survey['depth_m']:g} m deep, {s['log']['rows']} replies, seed {sim.survey['seed']}")
+    print(f"simulated calibration {result.name}: {survey['pattern']} of {survey['radius_m']:g} m around a "
+          f"transponder {survey['depth_m']:g} m deep, {s['log']['rows']} replies, seed {survey['seed']}")
     print(f"  replicate 0: error N {e['e_n_m']:+.4f} E {e['e_e_m']:+.4f} U {e['e_u_m']:+.4f} m against the truth "
           f"(N {truth['n_m']:+.3f} E {truth['e_m']:+.3f} U {truth['u_m']:+.3f} m); sigma {t['sigma_n_m']:.4f} "
           f"{t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m; horizontal bound (CRB) {e['pcrb_h_m']:.4f} m")
@@ -568,7 +540,7 @@ def _calibrate_simulated(args: argparse.Namespace) -> int:
               f"U {r['rms_u_m']:.4f} m; mean NEES {r['nees_mean']:.2f} (3 when consistent)")
     print(f"  survey error for an LBL design ({s['survey_sigma_from']}): --set {s['lbl_set']}")
     files = "solution.json, residuals.csv, survey_log.csv" + (", replicates.parquet" if table is not None else "")
-    print(f"  written to {out}/ ({files}, figures)")
+    print(f"  written to {result.out}/ ({files}, figures)")
     return 0
 
 

@@ -108,6 +108,10 @@ def test_nothing_is_written_without_out_and_the_files_with_it(tmp_path, monkeypa
     (lambda: sblsim.compare("semicircle", receivers=["ekf", "nope"]), "nope"),
     (lambda: sblsim.accuracy_map("semicircle", levels=["x"]), "levels"),
     (lambda: sblsim.budget("semicircle", replicates=1), "replicates"),
+    (lambda: sblsim.calibrate("xie-2021-07-23", replicates=2), "replicates"),
+    (lambda: sblsim.calibrate("box-in", format="xie"), "format"),
+    (lambda: sblsim.calibrate("box-in", replicates=0), "replicates"),
+    (lambda: sblsim.calibrate("box-in", set={"survey.radius_m": -1.0}), "survey.radius_m"),
 ])
 def test_bad_input_raises_an_sblsim_error_not_system_exit(call, needle):
     with pytest.raises(sblsim.SblsimError) as caught:
@@ -148,6 +152,9 @@ HOSTILE = {
     "campaign resume 'yes'": (lambda: sblsim.campaign("paper", "c", resume="yes"), "resume: 'yes' is not True or"),
     "campaign workers 'two'": (lambda: sblsim.campaign("paper", "c", workers="two"), "workers: 'two' is not an"),
     "analyze None": (lambda: sblsim.analyze(None), "directory: None is not a file or folder"),
+    "calibrate None": (lambda: sblsim.calibrate(None), "survey: None is not a file or folder"),
+    "calibrate replicates '3'": (lambda: sblsim.calibrate("box-in", replicates="3"), "replicates: '3' is not an"),
+    "calibrate out=1": (lambda: sblsim.calibrate("box-in", out=1), "out: 1 is not a file or folder"),
     "analyze alpha 'x'": (lambda: sblsim.analyze("c", alpha="x"), "alpha: 'x' is not a number"),
 }
 
@@ -223,9 +230,32 @@ def test_campaign_and_analyze_give_the_cli_results(tmp_path):
     assert set(a.plot()) == {"pareto", "main_effects", "interactions", "residuals"}
 
 
+@pytest.mark.parametrize("survey, options", [("box-in", ["--replicates", "3"]), ("xie-2021-07-23", [])])
+def test_calibrate_is_the_cli_calibration(tmp_path, survey, options):
+    """A simulated survey with replicates and a recorded one: the same solution, tables and files."""
+    assert main(["calibrate", survey, *options, "--out", str(tmp_path / "cli")]) == 0
+    replicates = int(options[1]) if options else None
+    result = sblsim.calibrate(survey, replicates=replicates, out=tmp_path / "api")
+    cli = json.loads((tmp_path / "cli" / "solution.json").read_text())
+    assert result.solution == cli == json.loads((tmp_path / "api" / "solution.json").read_text())
+    for name in ("residuals.csv", "running.csv"):  # the tables the API holds are the files, byte for byte
+        if (tmp_path / "cli" / name).exists():
+            table = result.residuals if name == "residuals.csv" else result.running
+            assert table.to_csv(index=False) == (tmp_path / "cli" / name).read_text() == (
+                tmp_path / "api" / name).read_text()
+    if replicates:
+        assert len(result.replicates) == replicates == cli["replicates"]["count"]
+        pd.testing.assert_frame_equal(result.replicates, pd.read_parquet(tmp_path / "cli" / "replicates.parquet"))
+    else:
+        assert result.replicates is None and result.segments == 4
+    assert sorted(p.name for p in (tmp_path / "api").iterdir()) == sorted(p.name for p in (tmp_path / "cli").iterdir())
+    quiet = sblsim.calibrate(survey, replicates=replicates)  # nothing written without out
+    assert quiet.out is None and quiet.solution == cli
+
+
 def test_every_public_name_exists_and_importing_sblsim_is_cheap():
     assert all(hasattr(sblsim, name) for name in sblsim.__all__)
-    for name in ("load", "run", "compare", "accuracy_map", "budget", "replay", "campaign", "analyze"):
+    for name in ("load", "run", "compare", "accuracy_map", "budget", "replay", "calibrate", "campaign", "analyze"):
         assert callable(getattr(sblsim, name)) and getattr(sblsim, name).__doc__
     probe = ("import sys, sblsim; "
              "print(sorted(m for m in ('numpy', 'pandas', 'casadi', 'matplotlib') if m in sys.modules))")
