@@ -4,10 +4,11 @@ configuration does not load code, and the model knows nothing of the orchestrato
 import ast
 from pathlib import Path
 
-import sblsim.orchestrator
+import sblsim.orchestrator.cosim
 from sblsim.orchestrator.cosim import engines
 
-ORCHESTRATOR = Path(sblsim.orchestrator.__file__).parent
+#: The co-simulation kernel's folder (orchestrator/cosim/): the master algorithm and the configuration.
+COSIM = Path(sblsim.orchestrator.cosim.__file__).parent
 
 #: The handle classes of the engines (the master must not know them).
 HANDLE_CLASSES = {name for name, value in vars(engines).items()
@@ -30,7 +31,7 @@ def test_the_handle_classes_are_found():
 
 
 def test_the_master_imports_neither_the_fmi_layer_nor_handle_classes():
-    imports = _imports(ORCHESTRATOR / "master.py")
+    imports = _imports(COSIM / "master.py")
     assert imports
     fmi = [m for m, _ in imports if m.split(".")[:2] == ["sblsim", "fmus"] or m.split(".")[0] in ("fmus", "fmpy")]
     assert fmi == []
@@ -39,15 +40,15 @@ def test_the_master_imports_neither_the_fmi_layer_nor_handle_classes():
 
 
 def test_the_configuration_loads_no_code():
-    imports = _imports(ORCHESTRATOR / "config.py")
+    imports = _imports(COSIM / "config.py")
     assert not [m for m, _ in imports if m in ("importlib.util", "importlib.machinery", "runpy")]
     assert ("importlib", "util") not in imports
-    text = (ORCHESTRATOR / "config.py").read_text()
+    text = (COSIM / "config.py").read_text()
     assert "spec_from_file_location" not in text and "exec_module" not in text
 
 
 def test_the_configuration_computes_no_geometry():
     """The platform's beacon geometry is model code (models/platform/geometry.py)."""
-    tree = ast.parse((ORCHESTRATOR / "config.py").read_text())
+    tree = ast.parse((COSIM / "config.py").read_text())
     defined = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
     assert not defined & {"beacon_offsets", "beacon_arms", "beacon_arm", "platform_offsets", "lever_arms"}
