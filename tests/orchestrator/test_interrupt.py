@@ -94,9 +94,9 @@ def test_ctrl_c_during_a_first_compile(tmp_path):
     into a compilation stops the compilers, keeps the objects already made and leaves no partial one."""
     work, cache = tmp_path / "work", tmp_path / "cache"
     work.mkdir()
-    objects = cache / "sblsim" / "objects"
+    objects = cache / "objects"
     status, took, stderr = _interrupt(work, signal.SIGINT, "run", "semicircle", into=1.0,
-                                      env={**os.environ, "XDG_CACHE_HOME": str(cache)}, begun=objects / "*.lock")
+                                      env={**os.environ, "SBLSIM_CACHE_DIR": str(cache)}, begun=objects / "*.lock")
     _ended_cleanly(work, status, took, stderr, signal.SIGINT)
     names = {p.name for p in objects.iterdir()}
     assert not [n for n in names if n.endswith(".partial") or n.startswith(".")], names
