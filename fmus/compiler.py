@@ -256,19 +256,15 @@ def _make(item: _Object, wait: bool, locked: bool = True, stop: threading.Event 
     if item.path.is_file():
         return True
     lock = FileLock(str(item.path) + ".lock") if locked else None
-    if lock is not None:
+    while lock is not None:  # another process may compile it: wait a fraction of a second at a time
         try:
-            lock.acquire(timeout=0)
+            lock.acquire(timeout=_POLL if wait else 0)
+            break
         except Timeout:
             if not wait:
                 return False
-            while True:  # another process compiles it: wait, a fraction of a second at a time
-                try:
-                    lock.acquire(timeout=_POLL)
-                    break
-                except Timeout:
-                    if stop is not None and stop.is_set():
-                        raise _Stopped from None
+            if stop is not None and stop.is_set():
+                raise _Stopped from None
     try:
         if not item.path.is_file():
             partial = item.path.with_name(f".{item.path.name}.{os.getpid()}.{threading.get_ident()}.partial")
@@ -315,7 +311,7 @@ class _Stopped(Exception):
     """A compilation ended because another one failed or the user interrupted the build."""
 
 
-#: How often [s] a compilation in a worker thread looks whether it should stop.
+#: How often [s] a compilation or a wait in a worker thread looks whether it should stop.
 _POLL = 0.1
 
 
@@ -333,7 +329,7 @@ def _run(compiler: Compiler, command: list[str], built: Path, target: str, what:
     try:
         while True:
             try:
-                stdout, stderr = proc.communicate(timeout=_POLL)
+                stdout, stderr = proc.communicate(timeout=None if stop is None else _POLL)
                 break
             except subprocess.TimeoutExpired:
                 if stop is not None and stop.is_set():

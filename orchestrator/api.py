@@ -188,6 +188,12 @@ def _check_count(value: Any, where: str, low: int, high: int) -> int:
     return value
 
 
+def _integer(value: Any, where: str) -> None:
+    """An integer argument or None, whose range the work it sets checks."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ConfigError(f"{where}: {shown(value)} is not an integer or None")
+
+
 def _path(value: Any, where: str, optional: bool = True) -> Path | None:
     """A file or folder argument (a text or a path; None where it is optional) as a :class:`Path`."""
     if value is None and optional:
@@ -960,7 +966,6 @@ class CalibrationResult:
     notes: list[str]
     warnings: list[str]
     out: Path | None = None
-    _calibration: Any = field(default=None, repr=False)
 
 
 def calibrate(survey: str | Path, *, format: str | None = None, initcfg: str | Path | None = None,
@@ -1008,8 +1013,7 @@ def calibrate(survey: str | Path, *, format: str | None = None, initcfg: str | P
     source = str(_path(survey, "survey", optional=False))
     fmt = _text(format, "format")
     initcfg, svp = _path(initcfg, "initcfg"), _path(svp, "svp")
-    if replicates is not None and (isinstance(replicates, bool) or not isinstance(replicates, int)):
-        raise ConfigError(f"replicates: {shown(replicates)} is not an integer or None")  # its range the survey's
+    _integer(replicates, "replicates")  # its range the survey's
     check_progress(progress)
     _prepare_out(out, force, "solution.json", "calibration")  # before any work (and again before the write)
     return _calibrate(source, fmt, _override_items(set), initcfg, svp, replicates, progress,
@@ -1062,8 +1066,7 @@ def _calibrate(source: str, fmt: str | None, overrides: list[str], initcfg: Path
     else:
         speed = f"sound speed {s['sound_speed_mps']:.6g} m/s"
     return CalibrationResult(name, speed, len(result.segments), s, result.residuals, result.running,
-                             result.ntd, result.search, table, list(survey.notes), list(result.warnings), target,
-                             result)
+                             result.ntd, result.search, table, list(survey.notes), list(result.warnings), target)
 
 
 # --------------------------------------------------------------------------- campaign and analysis
@@ -1149,9 +1152,8 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
     fmu_dir = _path(fmu_dir, "fmu_dir")
     scheduler = _text(scheduler, "scheduler")
     resume, save_timeseries = _flag(resume, "resume"), _flag(save_timeseries, "save_timeseries")
-    for value, where in ((workers, "workers"), (batch, "batch")):  # integers; their ranges the campaign's
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
-            raise ConfigError(f"{where}: {shown(value)} is not an integer or None")
+    _integer(workers, "workers")  # their ranges the campaign's
+    _integer(batch, "batch")
     check_progress(progress)
     if isinstance(study, Study):  # validated already (sblsim campaign loads it to name its output)
         if seed is not None:
