@@ -155,7 +155,7 @@ def test_the_graph_is_read():
     graph = _graph()
     assert "sblsim.orchestrator.cosim.config" in graph["sblsim.orchestrator.cosim.run"]
     assert "sblsim.models.receiver.kalman" in graph["sblsim.models.bound"]  # from package import submodule
-    lazy = [(m, line) for m, line, nested in IMPORTS["sblsim.orchestrator.cli"] if nested and _own(m)]
+    lazy = [(m, line) for m, line, nested in IMPORTS["sblsim.orchestrator.commands.run"] if nested and _own(m)]
     assert ("sblsim.orchestrator.cosim.run" in {m for m, _ in lazy}) and all(line > 0 for _, line in lazy)
 
 
@@ -211,6 +211,48 @@ def test_an_orchestrator_layer_imports_only_the_layers_below_it(layer):
     for name, module, line in wrong:
         print(f"{MODULES[name]}:{line}: {name} imports {module}")
     assert wrong == []
+
+
+#: The commands (orchestrator/commands/: one module per command, its function, result, arguments and main), the
+#: modules they share, and the one command that runs another (campaign's --analyze and CampaignResult.analyze).
+COMMANDS = "sblsim.orchestrator.commands"
+SHARED = {COMMANDS, f"{COMMANDS}.common", f"{COMMANDS}.console"}
+RUNS_ANOTHER = {(f"{COMMANDS}.campaign", f"{COMMANDS}.analyze")}
+
+
+def _commands() -> list[str]:
+    return [name for name in MODULES if _in(name, COMMANDS) and name not in SHARED]
+
+
+def test_a_command_imports_no_other_command():
+    """A command's module imports no other command's (the stated exception aside), and what the commands share
+    imports none (the package's table registers them all)."""
+    commands = _commands()
+    assert len(commands) >= 11
+    importers = commands + sorted(SHARED - {COMMANDS})
+    wrong = sorted((name, own, line) for name in importers for module, line, _ in IMPORTS[name]
+                   if (own := _own(module)) in commands and own != name and (name, own) not in RUNS_ANOTHER)
+    for name, module, line in wrong:
+        print(f"{MODULES[name]}:{line}: {name} imports {module}")
+    assert wrong == []
+
+
+def test_only_the_api_and_the_cli_import_the_commands():
+    """The commands are the top of the orchestrator: the kernel, io and the modules that do a command's work
+    import none of them (the package's public face reaches them through the API)."""
+    above = {"sblsim.orchestrator.api", "sblsim.orchestrator.cli"}
+    wrong = sorted((name, module, line) for name in MODULES if not _in(name, COMMANDS) and name not in above
+                   for module, line, _ in IMPORTS[name] if _own(module) and _in(_own(module), COMMANDS))
+    for name, module, line in wrong:
+        print(f"{MODULES[name]}:{line}: {name} imports {module}")
+    assert wrong == []
+
+
+def test_the_command_rules_can_fail():
+    """The checks above see the arrows they forbid: campaign's import of analyze is one."""
+    campaign = {_own(module) for module, _, _ in IMPORTS[f"{COMMANDS}.campaign"]}
+    assert f"{COMMANDS}.analyze" in campaign and f"{COMMANDS}.common" in campaign
+    assert {f"{COMMANDS}.run", f"{COMMANDS}.map"} <= {_own(m) for m, _, _ in IMPORTS["sblsim.orchestrator.api"]}
 
 
 def _heavy_at_load(name: str, seen: set[str] | None = None) -> set[str]:

@@ -1,0 +1,227 @@
+"""What the commands' functions share: the checks of the API's arguments (each error names the argument and
+its allowed range) and the one resolution of a scenario, file or configuration into a plan (:func:`resolve_plan`),
+or into a validated configuration (:func:`load`, ``sblsim.load``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from numbers import Real
+from pathlib import Path
+from typing import Any, Callable, Union
+
+import numpy as np
+import tomli_w
+
+from sblsim.models.declarations import shown
+from sblsim.orchestrator.cosim.config import (
+    BUILTIN_SCENARIOS,
+    ConfigError,
+    apply_overrides,
+    load_config,
+    parse_compare,
+    resolve,
+)
+from sblsim.orchestrator.cosim.engines import ENGINES
+from sblsim.orchestrator.cosim.plan import Config, RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.io.output import check_output
+
+#: What a ``progress`` argument may be: False or None (silent, the default), True (a tqdm bar on standard
+#: error), or a callable ``progress(done, total)`` called as the work advances.
+Progress = Union[bool, None, Callable[[float, float], object]]
+
+
+#: What a ``set`` argument may be: a mapping ``{"section.key": value}`` (e.g. ``{"platform.baseline": 0.4,
+#: "receiver": "lsq"}``) or a sequence of ``"section.key=value"`` texts as ``--set`` takes them.
+Overrides = Union[Mapping[str, Any], Sequence[str], None]
+
+
+MAX_SEED = 2**31 - 1
+
+
+def check_seed(seed: Any, where: str = "seed") -> None:
+    if seed is None:
+        return
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"{where}: {shown(seed)} is outside the allowed range [0, {MAX_SEED}] (an integer)")
+
+
+def override_items(overrides: Overrides) -> list[str]:
+    """``set`` as the ``section.key=value`` items of ``--set``: a mapping's values written as TOML values
+    (a text stays a text, a number keeps every digit)."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, str):
+        raise ConfigError(f"set: expected a mapping {{'section.key': value}} or a list of 'section.key=value', "
+                          f"got the text {overrides!r}")
+    if isinstance(overrides, Mapping):
+        items = []
+        for key, value in overrides.items():
+            if not isinstance(key, str) or "=" in key:
+                raise ConfigError(f"set: a key must be a text 'section.key', got {key!r}")
+            try:
+                text = tomli_w.dumps({"v": value}).split("=", 1)[1].strip()
+            except TypeError:
+                raise ConfigError(f"set: {key}: {value!r} is not a number, text, boolean or list") from None
+            items.append(f"{key}={text}")
+        return items
+    if not isinstance(overrides, Sequence):
+        raise ConfigError(f"set: expected a mapping {{'section.key': value}} or a list of 'section.key=value', got "
+                          f"{shown(overrides)}")
+    items = list(overrides)
+    for item in items:
+        if not isinstance(item, str):
+            raise ConfigError(f"set: expected 'section.key=value' texts, got {item!r}")
+    return items
+
+
+def resolve_config(source: Any, seed: int | None = None, overrides: Overrides = None) -> Config:
+    """A :class:`Config` from a scenario name, a TOML file or a configuration (re-validated with the
+    overrides and seed)."""
+    check_seed(seed)
+    items = override_items(overrides)
+    if isinstance(source, Mapping):
+        return Config(resolve(apply_overrides(thaw(source), items, seed)))
+    check_source(source)
+    return Config(load_config(source, items, seed))
+
+
+def check_source(source: Any) -> None:
+    if not isinstance(source, (str, Path)):
+        raise ConfigError(f"scenario: expected a built-in scenario ({', '.join(BUILTIN_SCENARIOS)}), a TOML file "
+                          f"or a configuration, got {type(source).__name__}")
+
+
+def resolve_plan(source: Any, seed: int | None = None, overrides: Overrides = None) -> RunPlan:
+    """The plan of a run of a scenario name, a TOML file or a configuration with the overrides and seed: the one
+    resolution of a call (:func:`sblsim.orchestrator.cosim.plan.make_plan`); a plan without overrides or seed is
+    taken as it is."""
+    check_seed(seed)
+    items = override_items(overrides)
+    if isinstance(source, RunPlan) and not items and seed is None:
+        return source
+    if isinstance(source, Mapping):
+        return make_plan(apply_overrides(thaw(source), items, seed))
+    check_source(source)
+    return load_plan(source, items, seed)
+
+
+def load(scenario_or_path: str | Path | Mapping, *, seed: int | None = None, set: Overrides = None) -> Config:
+    """The resolved, validated configuration of a scenario (``sblsim run``'s first step).
+
+    Parameters
+    ----------
+    scenario_or_path : str, Path or mapping
+        A built-in scenario (:data:`BUILTIN_SCENARIOS`), a configuration file ``CONFIG.toml`` (its relative
+        paths taken from its own folder), or a configuration (e.g. a :class:`Config`; validated again).
+    seed : int, optional
+        The campaign seed ``run.seed`` [0, 2147483647]; default the configuration's (0).
+    set : mapping or sequence of str, optional
+        Overrides, ``{"platform.baseline": 0.4, "receiver": "lsq"}`` or ``["platform.baseline=0.4"]`` (as
+        ``--set``; a key without a section is a ``simulation`` key).
+
+    Returns
+    -------
+    Config
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        An unknown scenario, section or key, a value outside its range (the message names it and the range),
+        a file that is not valid TOML.
+    """
+    return resolve_config(scenario_or_path, seed, set)
+
+
+def check_engine(engine: str) -> None:
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise ConfigError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
+
+
+def check_count(value: Any, where: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ConfigError(f"{where}: {value!r} is outside the allowed range [{low}, {high}] (an integer)")
+    return value
+
+
+def check_integer(value: Any, where: str) -> None:
+    """An integer argument or None, whose range the work it sets checks."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ConfigError(f"{where}: {shown(value)} is not an integer or None")
+
+
+def path_argument(value: Any, where: str, optional: bool = True) -> Path | None:
+    """A file or folder argument (a text or a path; None where it is optional) as a :class:`Path`."""
+    if value is None and optional:
+        return None
+    text = os.fspath(value) if isinstance(value, (str, os.PathLike)) else None
+    if not isinstance(text, str) or not text or "\0" in text:
+        allowed = "a file or folder: a text or a pathlib.Path" + (", or None" if optional else "")
+        raise ConfigError(f"{where}: {shown(value)} is not {allowed}")
+    return Path(text)
+
+
+def flag_argument(value: Any, where: str) -> bool:
+    """A true-or-false argument (``force=\"no\"`` would replace an earlier result)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{where}: {shown(value)} is not True or False")
+    return bool(value)
+
+
+def real_argument(value: Any, where: str, low: float, high: float, unit: str, low_open: bool = False) -> float:
+    """A finite real number argument in ``[low, high]`` (``(low, high]`` with ``low_open``)."""
+    allowed = f"{'(' if low_open else '['}{low:g}, {high:g}] {unit}".rstrip()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
+        raise ConfigError(f"{where}: {shown(value)} is not a number; allowed: {allowed}")
+    if not math.isfinite(value) or not (value > low if low_open else value >= low) or not value <= high:
+        raise ConfigError(f"{where}: {shown(value)} is outside the allowed range {allowed}")
+    return float(value)
+
+
+def text_argument(value: Any, where: str, optional: bool = True) -> str | None:
+    if value is None and optional:
+        return None
+    if not isinstance(value, str):
+        raise ConfigError(f"{where}: {shown(value)} is not a text" + (" or None" if optional else ""))
+    return value
+
+
+def prepare_out(out: str | Path | None, force: bool, marker: str, what: str) -> Path | None:
+    """``out`` checked before any work (writable; an earlier result only with ``force``)."""
+    out = path_argument(out, "out")
+    force = flag_argument(force, "force")
+    if out is None:
+        return None
+    check_output(out, force, marker, what, "out")
+    return out
+
+
+def scenario_source(scenario: Any, configuration: bool = False) -> str | Path | Mapping:
+    """A scenario argument of the functions that take a name or file, or (``configuration``) a configuration
+    too (a :class:`Config` or mapping, taken as it is)."""
+    if isinstance(scenario, Mapping):
+        if configuration:
+            return scenario
+        raise ConfigError("scenario: this function takes a built-in scenario or a CONFIG.toml; write a "
+                          "configuration with Config.to_toml() and give the file")
+    if not isinstance(scenario, (str, Path)):
+        raise ConfigError(f"scenario: expected a built-in scenario or a TOML file, got {type(scenario).__name__}")
+    return str(scenario)
+
+
+def compared(compare: str | tuple[str, Sequence[Any]] | None) -> tuple[str, list[str]] | None:
+    if compare is None:
+        return None
+    if isinstance(compare, str):
+        return parse_compare(compare)
+    try:
+        key, values = compare
+    except (TypeError, ValueError):
+        raise ConfigError(f"compare: expected 'KEY=V1,V2' or (key, [values]), got {shown(compare)}") from None
+    if not isinstance(key, str):
+        raise ConfigError(f"compare: the key must be a text 'section.key', got {shown(key)}")
+    if isinstance(values, (str, bytes)) or not isinstance(values, Sequence) or not values:
+        raise ConfigError(f"compare: the values of {key} must be a list of at least one value, got {shown(values)}")
+    return parse_compare(f"{key}={','.join(str(v) for v in values)}")

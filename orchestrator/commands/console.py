@@ -1,0 +1,109 @@
+"""What the commands share on the command line: the exit statuses, the options of a command that resolves a
+configuration, the output-folder rule (an earlier result is never replaced silently; the folder is locked while
+the command runs) and the metric lines of ``run`` and ``replay``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Callable
+
+from sblsim.fmus.build import DEFAULT_DIR
+from sblsim.models.declarations import ModelError, shown
+from sblsim.models.systems import SYSTEMS
+from sblsim.orchestrator.commands.common import MAX_SEED
+from sblsim.orchestrator.io.output import OutputLock, check_output, folder_name
+
+#: The exit status of bad input (one line ``sblsim: error: ...``, nothing written) and of Ctrl-C.
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+#: --fmu-dir: where the fmu engine looks when it is not given (fmus/build of a checkout, else the user cache).
+FMU_DIR_HELP = (f"directory of the built FMUs (default {DEFAULT_DIR}; FMUs missing there are built into the "
+                "user cache)")
+
+
+#: The registered systems (the command line's words: :data:`sblsim.models.systems.SYSTEMS`).
+ALL_SYSTEMS = ",".join(SYSTEMS)
+
+
+def config_options(p: argparse.ArgumentParser) -> None:
+    """``--seed``, ``--set`` and ``--fmu-dir``: the options of a command that resolves a configuration."""
+    p.add_argument("--seed", type=int, default=None, help="campaign seed (default: from the configuration, 0)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a configuration key, e.g. platform.baseline=3 or receiver=lsq (repeatable)")
+    p.add_argument("--fmu-dir", type=Path, default=None, help=FMU_DIR_HELP)
+
+
+def check_seed_option(seed: int | None) -> None:
+    """``--seed`` (an integer already: argparse's ``type=int``) in [0, MAX_SEED]."""
+    if seed is not None and not 0 <= seed <= MAX_SEED:
+        raise ModelError(f"--seed: {shown(seed)} is outside the allowed range [0, {MAX_SEED}]")
+
+
+#: The signal (SIGTERM, SIGHUP) that stopped the command, if one did: its exit status is 128 + the signal.
+SIGNAL: list[int] = []
+
+
+def interrupted_status() -> int:
+    """The exit status of a command stopped by Ctrl-C (130) or by a signal (128 + its number)."""
+    return 128 + SIGNAL[-1] if SIGNAL else EXIT_INTERRUPTED
+
+
+#: The output folders this command holds locked (released when it ends).
+LOCKS: list[OutputLock] = []
+
+
+def output_folder(given: Path | None, default: Path, force: bool, marker: str, what: str,
+                  before: Callable[[Path], None] | None = None) -> Path:
+    """The output folder of a command: ``--out`` as given, or the default folder.
+
+    An earlier result is never replaced silently. A folder given with ``--out`` that holds one (its
+    ``marker`` file) needs ``--force``; the default folder, when it holds one, is kept and the next free
+    numbered folder beside it is used (``results/semicircle-2``), said on the command line, so that the
+    documented commands run one after the other. Checked before any work (:func:`check_output`, then
+    ``before(out)``). The folder is then locked until the command ends
+    (:class:`sblsim.orchestrator.io.output.OutputLock`): a second command into it meanwhile is refused.
+    """
+    if given is not None or force or not (default / marker).exists():
+        out = given or default
+    else:
+        out = next(default.with_name(f"{default.name}-{k}") for k in range(2, 1_000_000)
+                   if not (default.with_name(f"{default.name}-{k}") / marker).exists())
+        print(f"note: {default}/ holds an earlier {what} (kept); writing to {out}/ (--out DIR to choose, --force "
+              "to replace)", file=sys.stderr)
+    check_output(out, force, marker, what)
+    if before is not None:
+        before(out)
+    LOCKS.append(OutputLock(out).acquire())
+    return out
+
+
+def output_name(scenario: str) -> str:
+    """The name a default output folder takes from a scenario argument: a file's stem, a built-in's name (any
+    character that is not a plain file-name character replaced: :func:`sblsim.orchestrator.io.output.folder_name`)."""
+    return folder_name(Path(scenario).stem if scenario.endswith(".toml") else Path(scenario).name)
+
+
+def print_metrics(s: dict, truth: bool = True) -> None:
+    """The metric lines of ``run`` and ``replay`` from a summary (``n/a`` for a metric without a value)."""
+    def v(key: str, spec: str = ".3f", scale: float = 1.0) -> str:
+        return "n/a" if s[key] is None else format(scale * s[key], spec)
+
+    label = f"{s['receiver']}:"
+    width = max(len(label), len("instrumentation:")) + 1
+    if truth:
+        print(f"  {label:<{width}}e_tot mean {v('e_tot_mean')} m, RMS {v('e_tot_rms')} m, std {v('e_tot_std')} m")
+        print(f"  {'instrumentation:':<{width}}e_tot mean {v('instr_e_tot_mean')} m, "
+              f"RMS {v('instr_e_tot_rms')} m, std {v('instr_e_tot_std')} m")
+        print(f"  {'consistency:':<{width}}NEES {v('nees_mean', '.2f')} (3 if consistent), truth inside the 95 % "
+              f"ellipsoid {v('coverage_95', '.1f', 100)} % of steps, mean NIS {v('nis_mean', '.2f')}, "
+              f"gated {v('gated_pct', '.1f')} % of ranges")
+        print(f"  {'accuracy limit:':<{width}}PCRB RMS {v('pcrb_rms')} m")
+    else:
+        print(f"  {label:<{width}}no truth track (--truth FILE for errors and consistency): {s['updates']} "
+              f"updates, {s['fix_steps']} steps with a multilateration fix, mean NIS {v('nis_mean', '.2f')}, "
+              f"gated {v('gated_pct', '.1f')} % of ranges")

@@ -1,0 +1,337 @@
+"""``sblsim run`` and ``sblsim.run``: one scenario, configuration file or SSP package, run for its replicates
+(:mod:`sblsim.orchestrator.cosim.run`); the command also writes its output folder and, with ``--export-log``, the
+receiver's inputs as a log that ``sblsim replay`` reproduces.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.commands.common import (
+    Overrides,
+    Progress,
+    check_count,
+    check_engine,
+    path_argument,
+    prepare_out,
+    resolve_plan,
+)
+from sblsim.orchestrator.commands.console import (
+    check_seed_option,
+    config_options,
+    output_folder,
+    print_metrics,
+)
+from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.cosim.engines import ENGINES, close_handles, make_handles
+from sblsim.orchestrator.cosim.master import ALGORITHMS
+from sblsim.orchestrator.cosim.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
+from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
+from sblsim.orchestrator.io.output import check_writable, folder_name
+from sblsim.orchestrator.io.progress import check_progress
+from sblsim.orchestrator.ssp import read_ssp
+
+if TYPE_CHECKING:  # the heavy modules are imported when a function runs
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+
+@dataclass
+class RunResult:
+    """The outcome of :func:`run`.
+
+    Attributes
+    ----------
+    config : Config
+        The resolved configuration that ran.
+    engine : str
+        ``local`` or ``fmu``.
+    timeseries : pandas.DataFrame
+        One row per replicate and macro step: the columns of ``timeseries.parquet`` (``replicate``,
+        ``time`` [s], ``true_*``, ``est_*``, ``instr_*`` [m], [m/s], the acoustic packet, the errors
+        ``e_x``, ``e_y``, ``e_z``, ``e_tot`` [m], the receiver's covariance [m²] and the bound ``pcrb`` [m];
+        the log-format page lists them).
+    metrics : pandas.DataFrame
+        One row per replicate: the metrics of ``summary.json`` (errors [m], NEES, NIS, coverage, ...).
+    steps : int
+        Macro steps per replicate.
+    wall_time : float
+        Wall-clock time of the simulation [s].
+    out : Path or None
+        Where the run was written (``out`` of :func:`run`), else None.
+    """
+
+    config: Config
+    engine: str
+    timeseries: pd.DataFrame
+    metrics: pd.DataFrame
+    steps: int
+    wall_time: float
+    out: Path | None = None
+    _result: Any = field(default=None, repr=False)
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """``summary.json`` of the first replicate (``run.replicate``): the keys ``sblsim run`` writes
+        (``e_tot_rms`` [m], ``nees_mean``, ``coverage_95``, ``pcrb_rms`` [m], ``steps``, ``seed``, ...); a
+        metric without a value is None."""
+        return self.summaries[0]
+
+    @property
+    def summaries(self) -> list[dict[str, Any]]:
+        """``summary.json`` of every replicate, in order."""
+        from sblsim.orchestrator.cosim.run import RunResult as _Result
+        from sblsim.orchestrator.cosim.run import summary
+
+        r = self._result
+        out = []
+        for k in range(len(r.metrics)):
+            row = r.metrics.iloc[[k]].reset_index(drop=True)
+            plan = r.plan.with_replicate(int(row["replicate"].iloc[0]))
+            out.append(summary(_Result(plan.config, r.engine, r.timeseries, row, r.steps, r.wall_time, plan=plan)))
+        return out
+
+    def plot(self, replicate: int | None = None) -> dict[str, Figure]:
+        """The figures ``sblsim run`` writes, of one replicate (default the first).
+
+        Returns
+        -------
+        dict
+            ``trajectory_xy``, ``trajectory_3d``, ``errors``, ``error_bounds`` -> matplotlib Figure (close
+            them with ``matplotlib.pyplot.close`` when done).
+
+        Raises
+        ------
+        ConfigError
+            A replicate the run does not have.
+        """
+        from sblsim.orchestrator.io.plots import run_figures
+
+        ts = self.timeseries
+        if replicate is not None:
+            if replicate not in set(ts["replicate"].unique().tolist()):
+                raise ConfigError(f"replicate: {replicate!r} is not one of the run's "
+                                  f"{sorted(ts['replicate'].unique().tolist())}")
+            ts = ts[ts["replicate"] == replicate]
+        receiver = self._result.plan.receiver_label
+        return run_figures(ts, f"{self.config.scenario}, {receiver} ({self.engine})", receiver)
+
+
+def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", replicates: int = 1,
+        seed: int | None = None, set: Overrides = None, out: str | Path | None = None, force: bool = False,
+        fmu_dir: str | Path | None = None, progress: Progress = False) -> RunResult:
+    """Simulate a scenario: the numbers of ``sblsim run``.
+
+    Parameters
+    ----------
+    config_or_scenario : str, Path or mapping
+        A built-in scenario, a ``CONFIG.toml`` or a configuration (:func:`load`).
+    engine : {'local', 'fmu'}
+        The component engine (:data:`ENGINES`); ``fmu`` needs the FMUs (``sblsim fmus build``, or built on
+        demand for other beacon counts).
+    replicates : int
+        Replicates to run, ``run.replicate`` … ``run.replicate + replicates - 1`` [1, 100000] (stepped
+        together on the local engine; each replicate's numbers are those of a run of it alone).
+    seed : int, optional
+        The campaign seed ``run.seed``; default the configuration's.
+    set : mapping or sequence of str, optional
+        Overrides, as for :func:`load`.
+    out : str or Path, optional
+        Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and the figures there (one
+        replicate only), atomically; default: nothing is written.
+    force : bool
+        Replace an earlier run in ``out``.
+    fmu_dir : str or Path, optional
+        The built FMUs (fmu engine; default ``fmus/build``).
+    progress : bool or callable
+        Report the steps done, a unit being one macro step of one replicate (:data:`Progress`).
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    ConfigError, SblsimError
+        Bad input of any kind (nothing is run or written).
+    """
+    from sblsim.orchestrator.cosim.run import write_run
+
+    plan = resolve_plan(config_or_scenario, seed, set)
+    check_engine(engine)
+    check_count(replicates, "replicates", 1, 100_000)
+    fmu_dir = path_argument(fmu_dir, "fmu_dir")
+    check_progress(progress)
+    if out is not None and replicates != 1:
+        raise ConfigError(f"out: writes one run (the files of sblsim run); replicates is {replicates}")
+    target = prepare_out(out, force, "summary.json", "run")
+    result = _simulate(plan, engine, replicates, fmu_dir, progress)
+    if target is not None:
+        write_run(result, target)
+    return _run_result(result, target)
+
+
+def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Path | None = None,
+              progress: Any = False, ssp: Any = None) -> Any:
+    """Simulate a plan's replicates ``run.replicate`` … (``sblsim run`` and :func:`run`); ``ssp``, an SSP
+    package read back (:func:`sblsim.orchestrator.ssp.read_ssp`: its plan is ``plan``), brings its connections
+    and, on the fmu engine, its FMUs."""
+    from sblsim.orchestrator.cosim.run import run as _run
+
+    handles, connections = None, None
+    if ssp is not None:
+        connections = ssp.connections
+        handles = make_handles(engine, None, plan.n_beacons, dict(plan.sources),
+                               fmu_files=ssp.fmu_files if engine == "fmu" else None)
+    try:
+        return _run(plan, engine, range(plan.replicate, plan.replicate + replicates), fmu_dir=fmu_dir,
+                    handles=handles, progress=progress, connections=connections)
+    finally:
+        if handles is not None:
+            close_handles(handles)
+
+
+def _run_result(result: Any, target: Path | None = None) -> RunResult:
+    return RunResult(Config(thaw(result.config)), result.engine, result.timeseries, result.metrics, result.steps,
+                     result.wall_time, target, result)
+
+
+NAME = "run"
+HELP = "run one scenario, configuration file or SSP package"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """``sblsim run``'s arguments."""
+    p.add_argument("scenario", nargs="?", default=None,
+                   help="built-in scenario (semicircle, spiral, random, square, harbour, random-walk) or CONFIG.toml")
+    p.add_argument("--ssp", type=Path, default=None, metavar="FILE.ssp",
+                   help="run an SSP package instead: its FMUs, connections and parameter sets")
+    p.add_argument("--engine", choices=ENGINES, default=None,
+                   help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
+    p.add_argument("--master", choices=ALGORITHMS, default=None,
+                   help="master algorithm (default: the configuration's, gauss-seidel)")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
+    p.add_argument("--force", action="store_true", help="replace an earlier run in --out (and --export-log files)")
+    p.add_argument("--export-log", type=Path, default=None, metavar="FILE",
+                   help="also write the receiver's inputs as a log (.csv or .parquet; docs/log-format.md) and the "
+                        "truth track beside it (FILE's stem + _truth): `sblsim replay FILE` reproduces the receiver")
+    config_options(p)
+
+
+def main(args: argparse.Namespace) -> int:
+    """``sblsim run`` from its parsed arguments: its lines printed, its exit status returned."""
+    from sblsim.orchestrator.cosim.run import write_run
+
+    check_seed_option(args.seed)
+    if (args.scenario is None) == (args.ssp is None):
+        raise ModelError("run: give either a scenario (or CONFIG.toml) or --ssp FILE.ssp")
+    overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else [])
+    system = None
+    if args.ssp is not None:
+        engine = args.engine or "fmu"
+        system = read_ssp(args.ssp, overrides, args.seed)
+        plan = system.config
+    else:
+        engine = args.engine or "local"
+        plan = resolve_plan(args.scenario, args.seed, overrides)  # the run's one resolution
+    if args.export_log is not None:
+        from sblsim.orchestrator.replay import check_export
+
+        check_export(args.export_log, args.force)
+        check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
+    out = output_folder(args.out, Path("results") / folder_name(plan.scenario), args.force, "summary.json",
+                  "run", before=lambda out: _check_export_apart(args.export_log, out))
+    if system is None:
+        result = run(plan, engine=engine, fmu_dir=args.fmu_dir, progress="auto")
+    else:  # the package's connections and, on the fmu engine, its FMUs
+        result = _run_result(_simulate(plan, engine, fmu_dir=args.fmu_dir, progress="auto", ssp=system))
+    write_run(result._result, out)
+    s = result.summary
+    print(f"{s['scenario']} on the {s['engine']} engine ({plan.master}, receiver {s['receiver']}), "
+          f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
+    print_metrics(s)
+    if s["diverged"]:
+        print(f"sblsim: warning: the {s['receiver']} receiver diverged (an estimate more than "
+              f"{DIVERGENCE_DISTANCE:g} m and {DIVERGENCE_RATIO:g} times the diver's distance from the platform "
+              f"off the truth, or {DIVERGENCE_REJECTIONS} received packets in a row its gate rejected): its numbers "
+              "mean nothing; see error_bounds.png", file=sys.stderr)
+    for line in _run_warnings(s, plan):
+        print(f"sblsim: warning: {line}", file=sys.stderr)
+    print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
+    if args.export_log is not None:
+        from sblsim.orchestrator.replay import export_log
+
+        try:
+            log, truth = export_log(result._result, args.export_log)
+        except ModelError as exc:  # e.g. a full disk: the run's own files are written, say so
+            raise ModelError(f"{exc}; the run's results were written to {out}/") from None
+        print(f"  log of the receiver's inputs: {log} (replay it: sblsim replay {log} --truth {truth})")
+    return 0
+
+
+#: The files ``sblsim run`` writes into its output folder that an ``--export-log`` file could replace.
+RUN_FILES = ("summary.json", "config.toml", "timeseries.parquet")
+
+
+def _check_export_apart(export: Path | None, out: Path) -> None:
+    """Refuse an ``--export-log`` file (or its truth track) that is one of the run's own files in ``out``.
+
+    Raises
+    ------
+    ModelError
+        Naming ``--export-log`` and the file.
+    """
+    if export is None:
+        return
+    from sblsim.orchestrator.replay import truth_path
+
+    folder = out.resolve()
+    for target in (export, truth_path(export)):
+        if target.resolve().parent == folder and target.name.lower() in RUN_FILES:
+            raise ModelError(f"--export-log: {str(target)!r} is the run's own {target.name} in --out {str(out)!r}; "
+                             "give the log another name or folder")
+
+
+def _run_warnings(s: dict, plan) -> list[str]:
+    """What a run's numbers do not say by themselves: a receiver that never made a fix, exchanges heard into the
+    next slot, and a diver beyond what the geometry serves (:func:`sblsim.orchestrator.cosim.metrics.run_flags`)."""
+    out = []
+    if s["updates"] == 0:
+        out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
+                   "(every packet lost or gated); its numbers measure its starting guess (receiver.x0_*) and what "
+                   "its motion model predicts from it (summary.json: updates = 0)")
+    elif s["fix_steps"] == 0 and plan.latency_steps > 0:
+        # the record shows what the diver sees: the receiver's outputs receiver.latency late
+        latency = f"receiver.latency = {plan['receiver']['latency']:g} s"
+        if plan.latency_steps >= s["steps"]:
+            what = (f"{latency} is as long as the run: the diver never sees an output the receiver computed from a "
+                    f"packet (every recorded estimate is its starting guess), though it used {s['updates']} ranges")
+        else:
+            what = (f"no multilateration fix reached the diver within the run (none was made, or {latency} delayed "
+                    "every one past its end)")
+        out.append(f"{what}; the instr_ metrics have no value (summary.json: fix_steps = 0 counts the steps the "
+                   "diver saw a fix)")
+    elif s["fix_steps"] == 0:
+        out.append("no multilateration fix was ever made (never ranges of three beacons): the instr_ metrics have "
+                   "no value, and a receiver that reports that fix (lsq) never left its starting guess "
+                   "(summary.json: fix_steps = 0)")
+    if s.get("slot_overrun"):
+        out.append(f"an exchange was still heard {s['slot_overrun']:.4g} s after its slot began (its last arrival, "
+                   f"multipath included), beyond simulation.sampling_time = {plan.sampling_time:g} s: the next "
+                   "slot's packet overlaps it, which the channel does not model; give a sampling time of at least "
+                   f"{s['slot_overrun']:.4g} s (summary.json: slot_overrun)")
+    if s["beyond_geometry"]:
+        spread = plan.horizontal_spread
+        ratio = f"{s['max_distance'] / spread:.0f} times" if spread > 0 else "infinitely many times"
+        bound = "n/a" if s["pcrb_rms"] is None else f"{s['pcrb_rms']:.3f}"
+        out.append(f"the diver went {s['max_distance']:.6g} m from the platform, {ratio} the beacons' horizontal "
+                   f"spread ({spread:.4g} m; the geometry serves up to {REACH_RATIO:g} times): the errors are the "
+                   f"system's real accuracy there (PCRB RMS {bound} m), not a divergence "
+                   "(summary.json: beyond_geometry)")
+    return out
