@@ -51,6 +51,7 @@ from sblsim.orchestrator.cosim.config import (
     scenario_system,
     to_toml,
 )
+from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, load_plan, make_plan, thaw, with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
@@ -97,7 +98,6 @@ PROFILE_SOURCES = frozenset({"profile_error"})
 SNR_SOURCES = frozenset({"ambient_noise"})
 
 DEFAULT_REPLICATES = 500
-MAX_REPLICATES = 100_000
 #: Status of a source in a budget.
 ON, NO_EFFECT, OFF = "on", "no effect", "off in this configuration"
 COLUMNS = ("source", "description", "status", "contribution", "se", "share", "rms")
@@ -225,7 +225,7 @@ def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES,
     ConfigError, ModelError
         On a source that cannot be switched off in this configuration (nothing is run).
     """
-    check_replicates(replicates)
+    check_budget_replicates(replicates)
     start = time.perf_counter()
     cfg = as_plan(cfg)
     names = SOURCES
@@ -314,10 +314,10 @@ def planned(cfg: RunPlan | dict[str, dict]) -> int:
     return len(distinct)
 
 
-def check_replicates(replicates: int) -> None:
-    if not 2 <= replicates <= MAX_REPLICATES:
-        raise ModelError(f"--replicates: {replicates} is outside the allowed range [2, {MAX_REPLICATES}] (the "
-                         "standard errors need two)")
+def check_budget_replicates(replicates: int) -> None:
+    """Refuse a budget's replicate count outside [2, :data:`~sblsim.orchestrator.cosim.limits.MAX_REPLICATES`]: its
+    standard errors need two."""
+    check_replicates(replicates, 2, "the standard errors need two")
 
 
 def configurations(scenario: str | Path, overrides: Sequence[str] = (), seed: int | None = None,
@@ -354,7 +354,7 @@ def budgets(configs: Sequence[tuple[str, RunPlan]], replicates: int = DEFAULT_RE
 
     ``progress`` reports the steps of every run (:class:`sblsim.orchestrator.io.progress.Progress`); default
     silent."""
-    check_replicates(replicates)
+    check_budget_replicates(replicates)
     configs = [(label, as_plan(cfg)) for label, cfg in configs]
     steps = sum(planned(cfg) * cfg.n_steps for _, cfg in configs)
     records = RecordBuffer()
@@ -559,5 +559,5 @@ def title(scenario: str, budgets: Sequence[Budget], overrides: Sequence[str] = (
 
 
 __all__ = ["COLUMNS", "DEFAULT_REPLICATES", "SOURCES", "Budget", "advice", "budget",
-           "budgets", "check_replicates", "configurations", "lines", "markdown", "planned", "plot",
+           "budgets", "check_budget_replicates", "configurations", "lines", "markdown", "planned", "plot",
            "switched_off", "table", "title", "write"]

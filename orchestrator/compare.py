@@ -46,6 +46,7 @@ import pandas as pd
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cosim.config import apply_overrides, check_receiver, scenario_system, section_variables
+from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw, with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
@@ -71,18 +72,6 @@ def parse_receivers(text: str) -> list[str]:
     if len(set(receivers)) != len(receivers):
         raise ModelError(f"--receivers: {text!r} names a receiver twice")
     return [check_receiver(r, "--receivers") for r in receivers]
-
-
-def check_replicates(replicates: int) -> None:
-    """Refuse a replicate count outside [1, 100000].
-
-    Raises
-    ------
-    ModelError
-        Naming ``--replicates`` and the range.
-    """
-    if not 1 <= replicates <= 100_000:
-        raise ModelError(f"--replicates: {replicates} is outside the allowed range [1, 100000]")
 
 
 def plans(scenario: str | Mapping, receivers: Sequence[str], overrides: Sequence[str] = (), seed: int | None = None,
@@ -274,4 +263,4 @@ def write(table: pd.DataFrame, out: Path | str, title: str, note: str = "") -> P
     return Path(out)
 
 
-__all__ = ["COLUMNS", "check_replicates", "compare", "labels", "markdown", "parse_receivers", "plans", "plot", "write"]
+__all__ = ["COLUMNS", "compare", "labels", "markdown", "parse_receivers", "plans", "plot", "write"]

@@ -80,7 +80,7 @@ from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
 from sblsim.orchestrator.cosim.run import (
     TIMESERIES_COLUMNS,
     UNDELAYED,
-    RunResult,
+    RunRecord,
     _label,
     _metrics,
     merge_params,
@@ -668,7 +668,7 @@ def _switch_receiver(raw: dict, receiver: str) -> None:
 # --------------------------------------------------------------------------- the replay
 
 @dataclass
-class ReplayResult:
+class ReplayRecord:
     """Outcome of a replay.
 
     Attributes
@@ -715,7 +715,7 @@ def _inputs(log: Log, names: Sequence[str], rel: np.ndarray, start: float) -> np
 
 
 def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path | str | None = None,
-           truth: tuple[np.ndarray, np.ndarray] | None = None) -> ReplayResult:
+           truth: tuple[np.ndarray, np.ndarray] | None = None) -> ReplayRecord:
     """Step the configuration's receiver on a log (module docstring).
 
     Parameters
@@ -801,7 +801,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     columns.update({name: packet(values) for name, values in system_inputs(log).items()})
     columns.update({n: out[n] for n in names if n not in columns})
     frame = pd.DataFrame(columns)
-    result = RunResult(cfg.config, engine, frame, pd.DataFrame(), plan.steps, wall, plan=cfg)
+    result = RunRecord(cfg.config, engine, frame, pd.DataFrame(), plan.steps, wall, plan=cfg)
     metrics, truth_steps = _replay_metrics(cfg, frame)
     frame["pcrb"] = metrics.pop("__pcrb")
     for name in ("e_x", "e_y", "e_z", "e_tot"):
@@ -819,7 +819,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
                 "longest_gap_before": log.longest_gap[1],
                 "ignored_columns": log.ignored}
     s["truth"] = None if truth is None else {"steps": int(truth_steps), "steps_without": int(plan.steps - truth_steps)}
-    return ReplayResult(cfg, engine, frame, s)
+    return ReplayRecord(cfg, engine, frame, s)
 
 
 def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
@@ -861,7 +861,7 @@ def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
     return values, covered.size
 
 
-def write_replay(result: ReplayResult, out_dir: Path | str) -> Path:
+def write_replay(result: ReplayRecord, out_dir: Path | str) -> Path:
     """Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and the figures atomically.
 
     With a truth track the figures of a run (over the steps it covers); without, ``trajectory_xy.png`` of
@@ -962,7 +962,7 @@ def _csv_text(frame: pd.DataFrame, comments: Sequence[str]) -> str:
     return buffer.getvalue()
 
 
-def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
+def export_log(result: RunRecord, path: Path | str) -> tuple[Path, Path]:
     """Write a run's receiver inputs as a log (``path``) and its truth track beside it (:func:`truth_path`).
 
     The log carries the run's resolved configuration (CSV: ``#%`` comment lines; Parquet: schema
@@ -1023,6 +1023,6 @@ def export_log(result: RunResult, path: Path | str) -> tuple[Path, Path]:
     return path, target
 
 
-__all__ = ["DEFAULT_CONFIG", "FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "ReplayResult", "Schedule",
+__all__ = ["DEFAULT_CONFIG", "FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "ReplayRecord", "Schedule",
            "TRUTH_COLUMNS", "check_export", "export_log", "log_config", "log_frames", "read_log", "read_truth",
            "replay", "replay_config", "schedule", "truth_path", "write_replay"]

@@ -100,8 +100,8 @@ from sblsim.orchestrator.analysis.data import (
     check_order,
     check_transform,
     infer_factors,
+    load_campaign_study,
     load_runs,
-    load_study,
     scenario_order,
 )
 from sblsim.orchestrator.analysis.fit import (
@@ -160,7 +160,7 @@ def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, al
         metric or transform, a value <= 0 for ``log`` / ``boxcox``, bad order or alpha.
     """
     runs = load_runs(directory)
-    study, notes = load_study(directory, runs)
+    study, notes = load_campaign_study(directory, runs)
     check_metric(metric, runs)
     check_transform(transform, runs, metric)
     names = [f.name for f in study.factors]
@@ -274,6 +274,6 @@ def _file_stem(scenario: str, used: set[str]) -> str:
 __all__ = ["ANOVA_TYPE", "DIAGNOSTIC_COLUMNS", "METRICS", "REQUIRED_COLUMNS", "RESPONSES", "TRANSFORMS", "Analysis",
            "AnalysisError", "Factor", "FitResult", "StudyRecord", "allowed_metrics", "analyze", "best_cell",
            "boxcox_lambda", "check_metric", "check_order", "check_transform", "compute", "diagnose", "fit",
-           "format_level", "infer_factors", "lenth_pse", "load_runs", "load_study", "metric_label",
+           "format_level", "infer_factors", "lenth_pse", "load_runs", "load_campaign_study", "metric_label",
            "model_matrix", "model_terms", "ranking", "report_html", "report_markdown", "scenario_order", "tables",
            "term_name", "write"]

@@ -76,7 +76,7 @@ def infer_factors(runs: pd.DataFrame) -> list[Factor]:
     return factors
 
 
-def load_study(directory: Path | str, runs: pd.DataFrame) -> tuple[StudyRecord, list[str]]:
+def load_campaign_study(directory: Path | str, runs: pd.DataFrame) -> tuple[StudyRecord, list[str]]:
     """Read ``DIR/study.toml`` (:func:`sblsim.orchestrator.study.read_record`), or infer the study from ``runs``
     when it is missing.
 

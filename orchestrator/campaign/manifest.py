@@ -16,14 +16,13 @@ import tomli_w
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
 from sblsim.orchestrator.io import tomlfile
-from sblsim.orchestrator.io.output import refuse_link
-from sblsim.orchestrator.io.output import write_atomic as write_file
+from sblsim.orchestrator.io.output import refuse_link, write_atomic
 from sblsim.orchestrator.study import Study
 
 
-def write_atomic(frame: pd.DataFrame, path: Path) -> None:
+def write_parquet(frame: pd.DataFrame, path: Path) -> None:
     """Write a Parquet file through a temporary file in the same folder and an atomic rename."""
-    write_file(path, lambda tmp: frame.to_parquet(tmp, index=False))
+    write_atomic(path, lambda tmp: frame.to_parquet(tmp, index=False))
 
 
 MANIFEST = "manifest.json"
@@ -63,7 +62,7 @@ def read_manifest(out: Path) -> dict[str, dict] | None:
 
 def write_manifest(out: Path, manifest: dict[str, dict]) -> None:
     """Write the manifest atomically."""
-    write_file(out / MANIFEST, lambda tmp: tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True)))
+    write_atomic(out / MANIFEST, lambda tmp: tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True)))
 
 
 def manifest_entry(chunk: Chunk, path: Path, series: Path | None = None, seconds: float | None = None
@@ -157,5 +156,5 @@ def prepare_directory(out: Path, study: Study, resume: bool, engine: str, batch:
     (out / "chunks").mkdir(exist_ok=True)
     execution = "\n# how the campaign is executed (does not change the results)\n" + tomli_w.dumps(
         {"execution": {"engine": engine, "batch": batch}})
-    write_file(study_file, lambda tmp: tmp.write_text(text + execution))
+    write_atomic(study_file, lambda tmp: tmp.write_text(text + execution))
     return batch

@@ -22,8 +22,8 @@ from sblsim.orchestrator.campaign.manifest import (
     prepare_directory,
     read_manifest,
     verify_chunk,
-    write_atomic,
     write_manifest,
+    write_parquet,
 )
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
@@ -34,7 +34,7 @@ from sblsim.orchestrator.study import Study
 
 
 @dataclass
-class CampaignResult:
+class CampaignRecord:
     """Outcome of :func:`run_campaign`.
 
     Attributes
@@ -74,7 +74,7 @@ class CampaignResult:
 def run_campaign(study: Study, out: Path | str, workers: int | None = None, scheduler: str | None = None,
                  resume: bool = False, engine: str = "local", batch: int | None = None,
                  fmu_dir: str | Path | None = None, save_timeseries: bool = False,
-                 progress: bool | None = None) -> CampaignResult:
+                 progress: bool | None = None) -> CampaignRecord:
     """Run (or finish) a campaign and write ``runs.parquet``.
 
     Parameters
@@ -105,7 +105,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
 
     Returns
     -------
-    CampaignResult
+    CampaignRecord
 
     Raises
     ------
@@ -138,7 +138,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
 
 
 def _run_campaign(study: Study, out: Path, workers: int | None, scheduler: str | None, resume: bool, engine: str,
-                  batch: int, fmu_dir, save_timeseries: bool, progress: bool | None, pool) -> CampaignResult:
+                  batch: int, fmu_dir, save_timeseries: bool, progress: bool | None, pool) -> CampaignRecord:
     """:func:`run_campaign` after the checks of its arguments (``pool``: worker processes started, or None)."""
     configs = cell_configs(study)  # every cell is resolved into its plan, once, before anything is written
     if engine == "fmu":  # refuse missing FMUs before anything is written
@@ -190,7 +190,7 @@ def _check_memory(chunks: list, workers: int | None, scheduler: str | None, save
 
 
 def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, client, engine: str, fmu_dir,
-                  save_timeseries: bool, progress: bool | None, pool=None) -> CampaignResult:
+                  save_timeseries: bool, progress: bool | None, pool=None) -> CampaignRecord:
     """Run the missing chunks of a prepared campaign directory and write ``runs.parquet``."""
     chunks = plan(study, batch, configs)
     chunk_dir, series_dir = out / "chunks", out / "timeseries"
@@ -237,8 +237,8 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
                 path = chunk_dir / f"{chunk.id}.parquet"
                 seconds = rows.attrs.pop("seconds", None)  # not into the file: its bytes depend on the results only
                 if series is not None:
-                    write_atomic(series, series_dir / f"{chunk.id}.parquet")
-                write_atomic(rows, path)
+                    write_parquet(series, series_dir / f"{chunk.id}.parquet")
+                write_parquet(rows, path)
                 manifest[chunk.id] = manifest_entry(chunk, path, series_dir / f"{chunk.id}.parquet"
                                                     if series is not None else None, seconds)
                 write_manifest(out, manifest)
@@ -249,4 +249,4 @@ def _run_prepared(study: Study, out: Path, batch: int, configs: dict, workers, c
     wall = time.perf_counter() - start
     if computed or not (out / "runs.parquet").is_file():
         collect(out, chunks, out / "runs.parquet")
-    return CampaignResult(out, pq.ParquetFile(out / "runs.parquet").metadata.num_rows, computed, wall)
+    return CampaignRecord(out, pq.ParquetFile(out / "runs.parquet").metadata.num_rows, computed, wall)

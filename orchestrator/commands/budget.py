@@ -124,7 +124,7 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
     ConfigError, SblsimError
         Bad input, or a source that cannot be switched off (nothing is run or written).
     """
-    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_budget_replicates
 
     check_seed(seed)
     source = scenario_source(scenario)
@@ -133,7 +133,7 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
     prepare_out(out, force, "budget.csv", "budget")  # before any work (and again once the plans are made)
     replicates = DEFAULT_REPLICATES if replicates is None else replicates
     check_count(replicates, "replicates", -2**63, 2**63)
-    check_replicates(replicates)
+    check_budget_replicates(replicates)
     if isinstance(compare, str):
         chosen = parse_compare(compare, "platform.system=" + ",".join(SYSTEMS))
     else:
@@ -184,11 +184,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim budget`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_replicates, write
+    from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_budget_replicates, write
 
     check_seed_option(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
-    check_replicates(replicates)
+    check_budget_replicates(replicates)
     compare = parse_compare(args.compare, f"platform.system={ALL_SYSTEMS}") if args.compare else None
     if args.receiver is not None:
         check_receiver(args.receiver, "--receiver")

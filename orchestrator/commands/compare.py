@@ -31,6 +31,7 @@ from sblsim.orchestrator.commands.console import (
 )
 from sblsim.orchestrator.cosim.config import ConfigError, load_config, scenario_system
 from sblsim.orchestrator.cosim.engines import ENGINES
+from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
 from sblsim.orchestrator.io.progress import check_progress
 
@@ -116,8 +117,8 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     ConfigError, SblsimError
         Bad input (nothing is run or written).
     """
-    from sblsim.orchestrator.compare import check_replicates, parse_receivers, plans, write
     from sblsim.orchestrator.compare import compare as _compare
+    from sblsim.orchestrator.compare import parse_receivers, plans, write
 
     check_seed(seed)
     check_engine(engine)

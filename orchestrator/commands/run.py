@@ -86,15 +86,14 @@ class RunResult:
     @property
     def summaries(self) -> list[dict[str, Any]]:
         """``summary.json`` of every replicate, in order."""
-        from sblsim.orchestrator.cosim.run import RunResult as _Result
-        from sblsim.orchestrator.cosim.run import summary
+        from sblsim.orchestrator.cosim.run import RunRecord, summary
 
         r = self._result
         out = []
         for k in range(len(r.metrics)):
             row = r.metrics.iloc[[k]].reset_index(drop=True)
             plan = r.plan.with_replicate(int(row["replicate"].iloc[0]))
-            out.append(summary(_Result(plan.config, r.engine, r.timeseries, row, r.steps, r.wall_time, plan=plan)))
+            out.append(summary(RunRecord(plan.config, r.engine, r.timeseries, row, r.steps, r.wall_time, plan=plan)))
         return out
 
     def plot(self, replicate: int | None = None) -> dict[str, Figure]:

@@ -10,7 +10,8 @@ metrics' inputs. :func:`check_steps` refuses, before anything is simulated or
 written, a run whose estimate exceeds :data:`MEMORY_SHARE` of the memory
 available here (``MemAvailable`` of ``/proc/meminfo``, else the physical
 memory), so a too-long run ends with one line instead of running out of
-memory after minutes.
+memory after minutes. :func:`check_replicates` holds the replicate count of a command that runs replicates of
+a configuration.
 """
 
 from __future__ import annotations
@@ -31,6 +32,21 @@ TABLE_COPIES = 4
 MEMORY_SHARE = 0.75
 #: Assumed available memory where the system does not say [bytes].
 FALLBACK_MEMORY = 4 * 2**30
+#: The most replicates a command (compare, budget) runs of a configuration.
+MAX_REPLICATES = 100_000
+
+
+def check_replicates(replicates: int, least: int = 1, why: str = "") -> None:
+    """Refuse a replicate count outside [least, :data:`MAX_REPLICATES`] (``why``: what needs ``least``).
+
+    Raises
+    ------
+    ModelError
+        Naming ``--replicates`` and the range.
+    """
+    if not least <= replicates <= MAX_REPLICATES:
+        raise ModelError(f"--replicates: {replicates} is outside the allowed range [{least}, {MAX_REPLICATES}]"
+                         + (f" ({why})" if why else ""))
 
 
 def available_memory() -> int:

@@ -535,9 +535,11 @@ def as_plan(config: RunPlan | Mapping[str, Any]) -> RunPlan:
     return config if isinstance(config, RunPlan) else make_plan(config)
 
 
-def with_replicates(plan: RunPlan, replicates: Iterable[int]) -> list[RunPlan]:
-    """One plan per replicate (``run.replicate`` set), sharing everything else (nothing resolved again)."""
-    return [plan.with_replicate(r) for r in replicates]
+def with_replicates(plan: RunPlan | Mapping[str, Any], replicates: Iterable[int]) -> list[RunPlan]:
+    """One plan per replicate (``run.replicate`` set), sharing everything else: a plan is not resolved again, a
+    configuration is resolved into its plan once (:func:`as_plan`)."""
+    base = as_plan(plan)
+    return [base.with_replicate(r) for r in replicates]
 
 
 __all__ = ["Config", "FrozenMapping", "RunPlan", "as_plan", "bound_parameters", "freeze", "load_plan", "make_plan",

@@ -35,8 +35,7 @@ from sblsim.orchestrator.cosim.engines import (
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
 from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
-from sblsim.orchestrator.cosim.plan import RunPlan, as_plan
-from sblsim.orchestrator.cosim.plan import with_replicates as _with_replicates
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, with_replicates
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec, progress_of
 
@@ -45,7 +44,7 @@ from sblsim.orchestrator.io.progress import Progress, ProgressSpec, progress_of
 
 
 @dataclass
-class RunResult:
+class RunRecord:
     """Outcome of one (batched) run.
 
     Attributes
@@ -136,15 +135,9 @@ def merge_params(plans: Sequence[RunPlan], component: str, accepted: frozenset[s
     return params, replicates
 
 
-def with_replicates(plan: RunPlan | dict, replicates: Sequence[int]) -> list[RunPlan]:
-    """One plan per replicate (``run.replicate`` set), sharing everything else; a configuration is resolved
-    into its plan once (:func:`sblsim.orchestrator.cosim.plan.as_plan`)."""
-    return _with_replicates(as_plan(plan), replicates)
-
-
 def run(cfg: RunPlan | dict, engine: str = "local", replicates: Sequence[int] | None = None,
         fmu_dir: Path | str | None = None, handles: dict[str, ComponentHandle] | None = None,
-        progress: ProgressSpec | Progress = False, connections: Sequence[Connection] | None = None) -> RunResult:
+        progress: ProgressSpec | Progress = False, connections: Sequence[Connection] | None = None) -> RunRecord:
     """Simulate a resolved configuration on an engine.
 
     Parameters
@@ -169,7 +162,7 @@ def run(cfg: RunPlan | dict, engine: str = "local", replicates: Sequence[int] | 
 
     Returns
     -------
-    RunResult
+    RunRecord
 
     Raises
     ------
@@ -178,13 +171,13 @@ def run(cfg: RunPlan | dict, engine: str = "local", replicates: Sequence[int] | 
     """
     plan = as_plan(cfg)
     replicates = list(replicates) if replicates is not None else [plan.replicate]
-    return run_batch(_with_replicates(plan, replicates), engine, fmu_dir, handles, progress, connections=connections)
+    return run_batch(with_replicates(plan, replicates), engine, fmu_dir, handles, progress, connections=connections)
 
 
 def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | str | None = None,
               handles: dict[str, ComponentHandle] | None = None, progress: ProgressSpec | Progress = False,
               timeseries: bool = True, connections: Sequence[Connection] | None = None,
-              records: RecordBuffer | None = None) -> RunResult:
+              records: RecordBuffer | None = None) -> RunRecord:
     """Simulate a batch of runs, one plan each.
 
     The runs may differ in the seed keys (cell, replicate) and in the
@@ -206,7 +199,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         As for :func:`run`.
     timeseries : bool
         Build the per-step time series (else only the metrics' inputs are
-        recorded and :attr:`RunResult.timeseries` is empty).
+        recorded and :attr:`RunRecord.timeseries` is empty).
     connections : sequence of Connection, optional
         The system's connections (default :func:`default_connections`; an
         SSP package brings its own).
@@ -217,7 +210,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
 
     Returns
     -------
-    RunResult
+    RunRecord
         For the first plan, with one metrics row per run (in order).
 
     Raises
@@ -281,7 +274,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         frame = _timeseries(rec, replicates, n_steps, bound)
     else:
         frame = pd.DataFrame()
-    result = RunResult(first.config, engine, frame, metrics, n_steps, wall, plan=first)
+    result = RunRecord(first.config, engine, frame, metrics, n_steps, wall, plan=first)
     result.step_time = timing
     return result
 
@@ -442,7 +435,7 @@ def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarra
     return pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in table.items()})
 
 
-def summary(result: RunResult) -> dict[str, Any]:
+def summary(result: RunRecord) -> dict[str, Any]:
     """``summary.json`` content of a single-replicate run (the keys the README lists); strict JSON: a metric
     without a value (e.g. no instrumentation fix at all) is ``None`` (``null``), never NaN."""
     row = result.metrics.iloc[0]
@@ -462,12 +455,12 @@ def summary(result: RunResult) -> dict[str, Any]:
     return out
 
 
-def _label(result: RunResult) -> str:
+def _label(result: RunRecord) -> str:
     """What figures and tables call the receiver of a result (its plan's label)."""
     return result.plan.receiver_label if result.plan is not None else receiver_label(result.config)
 
 
-def write_run(result: RunResult, out_dir: Path | str) -> Path:
+def write_run(result: RunRecord, out_dir: Path | str) -> Path:
     """Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and figures atomically.
 
     Everything is written into a temporary directory beside ``out_dir`` and

@@ -49,7 +49,7 @@ def cell(value: Any) -> str:
 
 
 @dataclass
-class Table:
+class TextTable:
     """A CSV or Parquet file as text cells: its header, its rows (where, cells) and its metadata."""
 
     path: Path
@@ -96,7 +96,7 @@ def text_lines(text: str) -> list[str]:
     return [line[:-1] if line.endswith("\r") else line for line in lines]
 
 
-def read_parquet(path: Path, what: str) -> Table:
+def read_parquet(path: Path, what: str) -> TextTable:
     """A Parquet file's columns as text cells (:func:`_read_table`); its pandas metadata is not used."""
     name = str(path)
     try:
@@ -115,7 +115,7 @@ def read_parquet(path: Path, what: str) -> Table:
         raise ModelError(f"{what}: {name!r} is not a readable Parquet file ({' '.join(str(exc).split())[:200]})") \
             from None
     cells = [list(values) for values in zip(*columns)] if columns else []
-    return Table(path, header, [(f"row {k + 1}", c) for k, c in enumerate(cells)],
+    return TextTable(path, header, [(f"row {k + 1}", c) for k, c in enumerate(cells)],
                   meta.get(META_CONFIG, b"").decode("utf-8", "replace"),
                   meta.get(META_TITLE, b"").decode("utf-8", "replace"))
 
@@ -152,7 +152,7 @@ def read_lines(path: Path, what: str, encoding: str = "utf-8-sig") -> list[str]:
         raise ModelError(f"{what}: {name!r} is not {kind} text (byte {exc.start})") from None
 
 
-def read_table(path: Path, what: str) -> Table:
+def read_table(path: Path, what: str) -> TextTable:
     """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
 
     Lines end at ``\\n`` (or ``\\r\\n``) only. A file larger than :data:`MAX_LOG_BYTES` or with more than
@@ -203,10 +203,10 @@ def read_table(path: Path, what: str) -> Table:
             raise too_large(name, what, f"has more than {MAX_LOG_ROWS:,} rows (line {number})")
     if header is None:
         raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
-    return Table(path, header, rows, "\n".join(config), title)
+    return TextTable(path, header, rows, "\n".join(config), title)
 
 
-def columns(table: Table, what: str) -> dict[str, int]:
+def columns(table: TextTable, what: str) -> dict[str, int]:
     """Column name -> position; a name given twice is refused."""
     index: dict[str, int] = {}
     for k, name in enumerate(table.header):
@@ -236,6 +236,6 @@ def number(text: str, where: str, column: str, low: float, high: float) -> float
     return value
 
 
-__all__ = ["CONFIG_PREFIX", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES", "Table",
-           "cell", "columns", "number", "read_lines", "read_parquet", "read_table", "regular_file", "text_lines",
-           "too_large"]
+__all__ = ["CONFIG_PREFIX", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES",
+           "TextTable", "cell", "columns", "number", "read_lines", "read_parquet", "read_table", "regular_file",
+           "text_lines", "too_large"]

@@ -60,13 +60,13 @@ from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.surveys.garpos import read_garpos
 from sblsim.orchestrator.surveys.gnatss import community_editing, harmonic_mean_speed, read_gnatss
-from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_log
+from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_survey_log
 from sblsim.orchestrator.surveys.seagap import NOMINAL_SIGMA_M, read_seagap
 from sblsim.orchestrator.surveys.xie import origin as xie_origin
 from sblsim.orchestrator.surveys.xie import read_xie
 
 #: The log formats read: name -> reader of a log file (SeaGap's folder and GARPOS's three files have their own).
-FORMATS = {"sblsim": read_log, "xie": read_xie, "seagap": None, "garpos": None}
+FORMATS = {"sblsim": read_survey_log, "xie": read_xie, "seagap": None, "garpos": None}
 _FOLDER = files("sblsim.orchestrator.surveys")
 #: The built-in surveys: name -> its TOML file's name in this package.
 BUILTIN_SURVEYS = {name: f"{name}.toml" for name in (

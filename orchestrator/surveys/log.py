@@ -2,7 +2,7 @@
 
 One row per reply (CSV with a header row and ``#`` comment lines, or Parquet), SI units in the column names
 (:data:`COLUMNS`; docs/calibration.md). Every reader of another format (:mod:`sblsim.orchestrator.surveys.xie`,
-the GNATSS reader) produces this table. :func:`read_log` reads a file with the hostile-safe table reading of
+the GNATSS reader) produces this table. :func:`read_survey_log` reads a file with the hostile-safe table reading of
 ``sblsim replay`` (:mod:`sblsim.orchestrator.io.tables`: a regular file only, size and row limits before reading,
 line numbers in every error) and refuses any flaw with one line naming the line and the column: a log never
 runs code and never makes us read or write a path it names.
@@ -169,7 +169,7 @@ def check_frame(frame: pd.DataFrame, where: list[str], source: str) -> SurveyLog
     return SurveyLog(frame, source, where, counts)
 
 
-def read_log(path: Path | str) -> SurveyLog:
+def read_survey_log(path: Path | str) -> SurveyLog:
     """Read a calibration survey log (CSV or Parquet, :data:`COLUMNS`).
 
     Columns beyond :data:`LOG_COLUMNS` are ignored (counted in ``counts["ignored_columns"]``).
@@ -224,7 +224,7 @@ def read_log(path: Path | str) -> SurveyLog:
 
 def _columns(table, index: dict[str, int]) -> dict[str, pd.Series] | None:
     """The log's columns of a table's text cells, read a column at a time (a log of 100,000 rows in seconds), or
-    None when a cell is not what its column takes (:func:`read_log` then finds and names it)."""
+    None when a cell is not what its column takes (:func:`read_survey_log` then finds and names it)."""
     data = {}
     for name, (kind, _, bounds, _) in COLUMNS.items():
         texts = [cells[index[name]] for _, cells in table.rows]
@@ -271,4 +271,4 @@ def write_log(log: SurveyLog, path: Path | str) -> Path:
 
 
 __all__ = ["COLUMNS", "LOG_COLUMNS", "POSITION_RANGE", "SIGMA_RANGE", "SurveyLog", "TIME_RANGE", "TITLE",
-           "TWTT_RANGE", "check_frame", "read_log", "write_log"]
+           "TWTT_RANGE", "check_frame", "read_survey_log", "write_log"]

@@ -13,7 +13,7 @@ import pytest
 from sblsim.models.calibration import Replies, solve
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey
-from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, read_log, write_log
+from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, read_survey_log, write_log
 
 # The authors' results on survey A, 2021-07-23 (Xie et al. 2023, Figure 8 e: fixed sound speed 1499.3 m/s, the four
 # non-overlapping segments), from their own script run outside this project on the same file:
@@ -227,7 +227,7 @@ def test_the_command_writes_the_named_keys_and_its_log_reads_back(tmp_path, surv
         assert (tmp_path / "a" / name).stat().st_size > 0
     # survey A through the sblsim log format (Parquet): the same solution
     write_log(survey_a.survey.log, tmp_path / "a.parquet")
-    pd.testing.assert_frame_equal(read_log(tmp_path / "a.parquet").frame, survey_a.survey.log.frame)
+    pd.testing.assert_frame_equal(read_survey_log(tmp_path / "a.parquet").frame, survey_a.survey.log.frame)
 
 
 @pytest.mark.parametrize("argv,message", [

@@ -14,7 +14,7 @@ import pytest
 from sblsim.models import boxin
 from sblsim.models.calibration import crb
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.surveys.log import read_log
+from sblsim.orchestrator.surveys.log import read_survey_log
 from sblsim.orchestrator.surveys.simulate import (
     REPLICATE_COLUMNS,
     load_simulated,
@@ -174,7 +174,7 @@ def test_the_command_writes_the_replicates_and_the_log(tmp_path, capsys):
     assert t["n_m"] + t["apriori_n_m"] - truth["n_m"] == pytest.approx(table["e_n_m"][0], abs=1e-12)
     assert f"--set {solution['lbl_set']}" in out
     # the simulated log reads back as a log, replicate 0's
-    log = read_log(tmp_path / "o" / "survey_log.csv")
+    log = read_survey_log(tmp_path / "o" / "survey_log.csv")
     sim = load_simulated(str(config))
     np.testing.assert_allclose(log.frame["twtt_s"], replicate(sim, 0)[0].log.frame["twtt_s"], rtol=1e-15)
 
