@@ -41,7 +41,7 @@ from sblsim.fmus.compiler import FLAGS, PLATFORMS, cache_dir, compile_library, f
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
 from sblsim.models.acoustics.detection import family_levels
-from sblsim.models.acoustics.rays import exact_points, family_points
+from sblsim.models.acoustics.ray_tables import exact_points, family_points
 from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import CompileError
@@ -87,7 +87,7 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     for function in own or ():  # the interface's system steps a bound of its own (USBL: range, azimuth, elevation)
         cg.add(function)
     cg.generate(str(directory) + "/")
-    # the eigenray table's builder (sblsim.models.acoustics.rays.eigenray_table) calls this one through casadi
+    # the eigenray table's builder (sblsim.models.acoustics.ray_tables.eigenray_table) calls this one through casadi
     rays = ca.CodeGenerator("sblsim_ray_points.c", {"casadi_real": "double", "casadi_int": "long long int"})
     rays.add(exact_points())
     rays.add(family_levels())  # and the availability map (sblsim.orchestrator.maps) this one
@@ -521,8 +521,8 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
     return out
 
 def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
-    """:func:`sblsim.models.acoustics.rays.exact_points` compiled in the local engine's library (built if missing),
-    or None when no compiler can build it."""
+    """:func:`sblsim.models.acoustics.ray_tables.exact_points` compiled in the local engine's library (built if
+    missing), or None when no compiler can build it."""
     try:
         return ca.external(exact_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
@@ -530,8 +530,8 @@ def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
 
 
 def compiled_family_points(n_beacons: int = 4) -> ca.Function | None:
-    """:func:`sblsim.models.acoustics.rays.family_points` compiled in the local engine's library (built if missing),
-    or None when no compiler can build it."""
+    """:func:`sblsim.models.acoustics.ray_tables.family_points` compiled in the local engine's library (built if
+    missing), or None when no compiler can build it."""
     try:
         return ca.external(family_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):

@@ -49,7 +49,8 @@ from typing import Protocol, Sequence
 import numpy as np
 from scipy.linalg import cholesky_banded, solve_banded
 
-from sblsim.models.acoustics.rays import exact_points, profile_arrays
+from sblsim.models.acoustics.ray_tables import exact_points
+from sblsim.models.acoustics.rays import profile_arrays
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS
 from sblsim.models.declarations import ModelError
 from sblsim.models.perturbation import (
@@ -161,7 +162,7 @@ class EigenRay:
     """The direct eigenray through a sound-speed profile: a leg's path length is its travel time times
     :math:`c_0`.
 
-    Each leg is the direct eigenray (:func:`sblsim.models.acoustics.rays.exact_points`, the exact bracketed-Newton
+    Each leg is the direct eigenray (:func:`sblsim.models.acoustics.ray_tables.exact_points`, the exact bracketed-Newton
     solve, no boundaries) between the depths of its ends over their horizontal distance; the depth of a point is
     ``surface_u`` minus its Up. The gradient with respect to the transponder's position ``x`` is the ray's:
     along the horizontal, :math:`\\partial\\tau/\\partial X = \\xi = \\cos\\theta / c` (Snell's invariant, the ray
@@ -193,7 +194,7 @@ class EigenRay:
     surface_u : float
         Up of the sea surface in the survey's frame [m] (depth 0 of the profile).
     exact : casadi.Function or None
-        :func:`~sblsim.models.acoustics.rays.exact_points` as it is evaluated (e.g. compiled in the local engine's
+        :func:`~sblsim.models.acoustics.ray_tables.exact_points` as it is evaluated (e.g. compiled in the local engine's
         library, some 100 times faster); default that function itself.
     earth_radius : float
         The radius of the spherical layering [m], in :data:`EARTH_RADIUS_RANGE`; 0: flat layers.

@@ -94,17 +94,17 @@ import numpy as np
 
 from sblsim.models.acoustics import sonar
 from sblsim.models.acoustics.detection import NO_SNR, SITE, family_levels, family_levels_grid, first_detected
-from sblsim.models.acoustics.rays import (
+from sblsim.models.acoustics.ray_tables import (
     FAMILY_TABLE,
     RAY_BOUNDS,
     RAY_GRID,
     RAY_TABLE,
     RAY_TABLE_ROWS,
     first_arrival_grid,
-    profile_arrays,
     ray_grid,
     ray_values,
 )
+from sblsim.models.acoustics.rays import profile_arrays
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, node_speeds, profile_nodes, profile_table
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
@@ -244,7 +244,7 @@ PROPAGATION_VARIABLES: tuple[Variable, ...] = (
              description="Path of the range: 1 direct, 2 surface-reflected, 3 bottom-reflected (0: none, lost)",
              min=0, max=3),
 )
-#: The eigenray table of a ``ray`` run (:func:`sblsim.models.acoustics.rays.eigenray_table`), built once by the
+#: The eigenray table of a ``ray`` run (:func:`sblsim.models.acoustics.ray_tables.eigenray_table`), built once by the
 #: orchestrator for the run's profile and geometry (declared after the rest: their value references stay). Without
 #: it (0 rows, the default: a host that gives none) every eigenray is solved exactly.
 RAY_TABLE_VARIABLES: tuple[Variable, ...] = (

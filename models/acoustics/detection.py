@@ -22,21 +22,19 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.rays import (
+from sblsim.models.acoustics.ray_tables import (
     FAMILY_TABLE,
     RAY_GRID,
     RAY_TABLE_ROWS,
-    arrivals,
     arrivals_grid,
     cell_centres,
     cell_corners,
     exact_nodes,
     family_nodes,
-    profile_arrays,
     ray_grid,
     ray_values,
-    sound_speed_at,
 )
+from sblsim.models.acoustics.rays import arrivals, profile_arrays, sound_speed_at
 from sblsim.models.acoustics.sound_speed import NODES
 
 #: The site's numbers :func:`family_levels` takes, in this order (units: dB, dB, dB, dB, Hz, dB/m, dB, m, 1, m/s,
@@ -108,7 +106,7 @@ def _levels(families, zs, depth, profile, constant, nodes, speeds, site):
 def family_levels_grid() -> ca.Function:
     """``(use, zs, zr, x, depth, profile, constant, nodes, speeds, site, bounds, grid, values) -> (tau, launch,
     arrival, valid, snr, pd)``: :func:`family_levels` with the eigenrays interpolated in the run's family table
-    where it holds (:func:`~sblsim.models.acoustics.rays.arrivals_grid`; ``use`` true when the table is given),
+    where it holds (:func:`~sblsim.models.acoustics.ray_tables.arrivals_grid`; ``use`` true when the table is given),
     the exact solve elsewhere.
 
     Parameters (of the function)
@@ -116,7 +114,7 @@ def family_levels_grid() -> ca.Function:
     use : 1 when the family table (:func:`level_table`) is given; 0: every eigenray solved exactly.
     zs, zr, x, depth, profile, constant, nodes, speeds, site : as :func:`family_levels`.
     bounds, grid, values : the table's box [m], its nodes [m] and its columns interleaved
-        (:func:`~sblsim.models.acoustics.rays.arrivals_grid`).
+        (:func:`~sblsim.models.acoustics.ray_tables.arrivals_grid`).
 
     Returns (of the function)
     -------------------------
@@ -144,7 +142,7 @@ LEVEL_TABLE_TOLERANCE = (1e-7, 1e-4, 0.01)
 
 def level_table(table, depth: float, bounds, site, paths: ca.Function | None = None,
                 levels: ca.Function | None = None) -> dict[str, np.ndarray]:
-    """The family table of a run (:data:`~sblsim.models.acoustics.rays.FAMILY_TABLE`), built once for its profile,
+    """The family table of a run (:data:`~sblsim.models.acoustics.ray_tables.FAMILY_TABLE`), built once for its profile,
     water depth, box and site from exact solves at the eigenray table's nodes.
 
     ``ray_family_exact`` is 1 at every node of a cell whose nodes differ in which families exist, or whose
@@ -159,11 +157,11 @@ def level_table(table, depth: float, bounds, site, paths: ca.Function | None = N
     depth : float
         Water depth [m] (0: none).
     bounds : array_like, shape (6,)
-        The box (:data:`~sblsim.models.acoustics.rays.RAY_BOUNDS`) [m], each min ≤ max.
+        The box (:data:`~sblsim.models.acoustics.ray_tables.RAY_BOUNDS`) [m], each min ≤ max.
     site : array_like, shape (len(SITE),)
         The site's numbers (:data:`SITE`).
     paths, levels : casadi.Function, optional
-        :func:`~sblsim.models.acoustics.rays.family_points` and :func:`family_levels` as they are evaluated (e.g.
+        :func:`~sblsim.models.acoustics.ray_tables.family_points` and :func:`family_levels` as they are evaluated (e.g.
         compiled); default those functions themselves.
 
     Returns

@@ -33,7 +33,7 @@ from sblsim.fmus.native import compiled_exact_points, compiled_family_levels, co
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.acoustics.core import site_vector
 from sblsim.models.acoustics.detection import level_table
-from sblsim.models.acoustics.rays import FAMILY_TABLE, RAY_BOUNDS, RAY_TABLE, eigenray_table
+from sblsim.models.acoustics.ray_tables import FAMILY_TABLE, RAY_BOUNDS, RAY_TABLE, eigenray_table
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.platform.waves import wave_motion
 from sblsim.models.receiver.core import filter_parameters
@@ -318,7 +318,7 @@ RAY_BOX_MARGINS = (1.0, 5.0)
 
 
 def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
-    """The box of geometries of a run's eigenray table (:data:`sblsim.models.acoustics.rays.RAY_BOUNDS`), or
+    """The box of geometries of a run's eigenray table (:data:`sblsim.models.acoustics.ray_tables.RAY_BOUNDS`), or
     None when the configuration does not bound them (a random walk, a spiral).
 
     The source depths are the transducers' (the system's lever arms) widened, for the platform's own, by the wave
@@ -364,7 +364,7 @@ def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
 def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[str, Any]) -> dict[str, Any]:
     """The eigenray table's FMU parameters of a resolved configuration: none (every eigenray solved) unless it is a
     ``ray`` run through a profile table whose geometry :func:`ray_box` bounds; built once per profile, water depth
-    and box (:func:`sblsim.models.acoustics.rays.eigenray_table`). An ``snr`` run (``acoustics.detection``) gets
+    and box (:func:`sblsim.models.acoustics.ray_tables.eigenray_table`). An ``snr`` run (``acoustics.detection``) gets
     the family table at the same nodes too, built once per profile, water depth, box and site
     (:func:`sblsim.models.acoustics.detection.level_table`)."""
     acoustics = cfg["acoustics"]

@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from sblsim.models.acoustics import detection, rays
+from sblsim.models.acoustics import detection, ray_tables, rays
 from sblsim.models.acoustics.sound_speed import munk_table, profile_table
 from tests.models.test_rays import _tabulated
 
@@ -30,8 +30,8 @@ def _compiled():
 
 
 def _values(columns):
-    cols = [columns[c.name] for c in rays.FAMILY_TABLE.columns]
-    return np.asarray(rays.ray_values([ca.DM(c) for c in cols])).ravel()
+    cols = [columns[c.name] for c in ray_tables.FAMILY_TABLE.columns]
+    return np.asarray(ray_tables.ray_values([ca.DM(c) for c in cols])).ravel()
 
 
 def _levels(f, use, table, depth, bounds, columns, zs, zr, x):
@@ -43,8 +43,8 @@ def _levels(f, use, table, depth, bounds, columns, zs, zr, x):
     if use is None:
         return [np.asarray(o) for o in f.map(n)(*points, nodes, speeds, SITE)]
     bounds = np.asarray(bounds, dtype=float)
-    values = _values(columns) if columns is not None else np.zeros(len(rays.FAMILY_TABLE.columns) * 512)
-    return [np.asarray(o) for o in f.map(n)(use, *points, nodes, speeds, SITE, bounds, rays.ray_grid(bounds),
+    values = _values(columns) if columns is not None else np.zeros(len(ray_tables.FAMILY_TABLE.columns) * 512)
+    return [np.asarray(o) for o in f.map(n)(use, *points, nodes, speeds, SITE, bounds, ray_tables.ray_grid(bounds),
                                             values)]
 
 
@@ -106,8 +106,8 @@ def test_the_family_table_is_the_image_paths_in_isovelocity_water():
     zs, zr, x = (rng.uniform(bounds[2 * j], bounds[2 * j + 1], 40) for j in range(3))
     nodes, speeds = rays.profile_arrays(table)
     bounds_a = np.asarray(bounds, float)
-    out = rays._arrivals_grid().map(40)(1.0, zs[None], zr[None], x[None], depth, 1.0, 1500.0, nodes, speeds, bounds_a,
-                                         rays.ray_grid(bounds_a), _values(columns))
+    out = ray_tables._arrivals_grid().map(40)(1.0, zs[None], zr[None], x[None], depth, 1.0, 1500.0, nodes, speeds,
+                                              bounds_a, ray_tables.ray_grid(bounds_a), _values(columns))
     tau, launch, _arrival, valid, spreading, length = (np.asarray(o) for o in out)
     images = np.vstack([zr - zs, zs + zr, 2.0 * depth - zs - zr])
     paths = np.hypot(x, images)

@@ -14,7 +14,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from sblsim.models.acoustics import rays
+from sblsim.models.acoustics import ray_tables, rays
 from sblsim.models.acoustics.sound_speed import munk_speed, munk_table, profile_table
 
 #: A strongly refracting table: a surface duct over a sharp thermocline, then the deep increase.
@@ -441,36 +441,36 @@ def test_ncl1_cast_is_the_published_file_resampled():
 
 
 def _grid_function(table, depth, bounds, columns):
-    """The channel's table lookup (:func:`rays.first_arrival_grid`) at arrays of points, with ``columns`` the table
-    (None: no table, every eigenray solved)."""
+    """The channel's table lookup (:func:`ray_tables.first_arrival_grid`) at arrays of points, with ``columns`` the
+    table (None: no table, every eigenray solved)."""
     import casadi as ca
 
     nodes, speeds = rays.profile_arrays(table)
     bounds = np.asarray(bounds, dtype=float)
     use = columns is not None
-    cols = [columns[c.name] for c in rays.RAY_TABLE.columns] if use else [np.zeros(rays.RAY_TABLE_ROWS)] * 5
-    values = np.asarray(rays.ray_values([ca.DM(c) for c in cols])).ravel()
-    grid = rays.ray_grid(bounds if use else np.arange(6.0))
+    cols = [columns[c.name] for c in ray_tables.RAY_TABLE.columns] if use else [np.zeros(ray_tables.RAY_TABLE_ROWS)] * 5
+    values = np.asarray(ray_tables.ray_values([ca.DM(c) for c in cols])).ravel()
+    grid = ray_tables.ray_grid(bounds if use else np.arange(6.0))
 
     def f(zs, zr, x):
         n = zs.size
-        out = rays._first_arrival_grid().map(n)(float(use), zs[None], zr[None], x[None], depth, 1.0, 1500.0, nodes,
-                                                 speeds, bounds, grid, values)
+        out = ray_tables._first_arrival_grid().map(n)(float(use), zs[None], zr[None], x[None], depth, 1.0, 1500.0,
+                                                      nodes, speeds, bounds, grid, values)
         return [np.asarray(o).ravel() for o in out]
     return f
 
 
 def _exact_points(table, depth, zs, zr, x):
     nodes, speeds = rays.profile_arrays(table)
-    return [np.asarray(o).ravel() for o in rays.exact_points().map(zs.size)(zs[None], zr[None], x[None], depth,
+    return [np.asarray(o).ravel() for o in ray_tables.exact_points().map(zs.size)(zs[None], zr[None], x[None], depth,
                                                                           nodes, speeds)]
 
 
 def _tabulated(columns, bounds, zs, zr, x, flag="ray_exact"):
     """Which points a table answers: inside the box, every corner of their cell ``flag = 0`` (its exact-solve
     column: ``ray_exact`` of the eigenray table, ``ray_family_exact`` of the family table)."""
-    axes = np.split(rays.ray_grid(np.asarray(bounds, float)), np.cumsum(rays.RAY_GRID)[:-1])
-    flags = columns[flag].reshape(rays.RAY_GRID, order="F")
+    axes = np.split(ray_tables.ray_grid(np.asarray(bounds, float)), np.cumsum(ray_tables.RAY_GRID)[:-1])
+    flags = columns[flag].reshape(ray_tables.RAY_GRID, order="F")
     index = [np.clip(np.searchsorted(a, v, side="right") - 1, 0, len(a) - 2) for a, v in zip(axes, (zs, zr, x))]
     ok = np.ones(zs.size, bool)
     for i in (0, 1):
@@ -499,7 +499,7 @@ def test_the_eigenray_table_holds_the_exact_solve(name, depth, bounds, share):
     from sblsim.fmus.native import compiled_exact_points
 
     table = _table(name)
-    columns = rays.eigenray_table(table, depth, bounds, compiled_exact_points())
+    columns = ray_tables.eigenray_table(table, depth, bounds, compiled_exact_points())
     rng = np.random.default_rng(7)
     n = 200
     zs, zr, x = (rng.uniform(bounds[2 * j], bounds[2 * j + 1], n) for j in range(3))
@@ -535,7 +535,7 @@ def test_without_a_table_the_lookup_is_the_exact_solve():
 def test_an_isovelocity_table_is_the_straight_line():
     table = np.array([[0.0, 1493.0], [100.0, 1493.0], [5000.0, 1493.0]])
     bounds = (0.0, 30.0, 10.0, 200.0, 0.0, 500.0)
-    columns = rays.eigenray_table(table, 0.0, bounds)
+    columns = ray_tables.eigenray_table(table, 0.0, bounds)
     assert not columns["ray_exact"].any()
     rng = np.random.default_rng(5)
     zs, zr, x = (rng.uniform(bounds[2 * j], bounds[2 * j + 1], 100) for j in range(3))
@@ -554,7 +554,7 @@ def test_the_compiled_builder_is_the_model():
     if compiled is None:
         pytest.skip("no C compiler")
     bounds = (0.0, 2.5, 4.0, 6.0, 2.0, 28.0)
-    a = rays.eigenray_table(munk_table(), 8.0, bounds, compiled)
-    b = rays.eigenray_table(munk_table(), 8.0, bounds)
-    for c in rays.RAY_TABLE.columns:
+    a = ray_tables.eigenray_table(munk_table(), 8.0, bounds, compiled)
+    b = ray_tables.eigenray_table(munk_table(), 8.0, bounds)
+    for c in ray_tables.RAY_TABLE.columns:
         np.testing.assert_array_equal(a[c.name], b[c.name])
