@@ -124,8 +124,9 @@ def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engi
                  fmu_dir: str | Path | None, prepare: Callable[[], Path | None]) -> ReplayResult:
     """:func:`replay` of a plan (and ``sblsim replay``): read the log and the truth track, ``prepare()`` the
     output folder (None: nothing is written), replay and write."""
-    from sblsim.orchestrator.replay import read_log, read_truth, write_replay
+    from sblsim.orchestrator.receiver_log import read_log, read_truth
     from sblsim.orchestrator.replay import replay as _replay
+    from sblsim.orchestrator.replay import write_replay
 
     data = read_log(log, plan.n_beacons, plan.system, plan["acoustics"]["sound_speed_assumed"])
     track = read_truth(truth) if truth is not None else None

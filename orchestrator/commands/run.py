@@ -240,7 +240,7 @@ def main(args: argparse.Namespace) -> int:
         engine = args.engine or "local"
         plan = resolve_plan(args.scenario, args.seed, overrides)  # the run's one resolution
     if args.export_log is not None:
-        from sblsim.orchestrator.replay import check_export
+        from sblsim.orchestrator.receiver_log import check_export
 
         check_export(args.export_log, args.force)
         check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
@@ -264,7 +264,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: {line}", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
     if args.export_log is not None:
-        from sblsim.orchestrator.replay import export_log
+        from sblsim.orchestrator.receiver_log import export_log
 
         try:
             log, truth = export_log(result._result, args.export_log)
@@ -288,7 +288,7 @@ def _check_export_apart(export: Path | None, out: Path) -> None:
     """
     if export is None:
         return
-    from sblsim.orchestrator.replay import truth_path
+    from sblsim.orchestrator.receiver_log import truth_path
 
     folder = out.resolve()
     for target in (export, truth_path(export)):

@@ -189,7 +189,7 @@ def test_a_map_resolves_each_configuration_once(counted):
 
 
 def test_a_replay_is_resolved_once(counted, tmp_path):
-    from sblsim.orchestrator.replay import export_log
+    from sblsim.orchestrator.receiver_log import export_log
 
     result = sblsim.run("semicircle", seed=1, set=SHORT)
     log, truth = export_log(result._result, tmp_path / "log.csv")

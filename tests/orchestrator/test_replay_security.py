@@ -23,7 +23,7 @@ import tomli_w
 
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.replay import CONFIG_PREFIX, META_CONFIG, export_log, log_config
+from sblsim.orchestrator.receiver_log import CONFIG_PREFIX, META_CONFIG, export_log, log_config
 
 #: The audited command: argv = outside folder, report file, sblsim arguments.
 AUDITED = r"""

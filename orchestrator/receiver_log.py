@@ -1,0 +1,491 @@
+"""The receiver's log (docs/log-format.md): read from a recorder's file and written from a run
+(``sblsim run --export-log``).
+
+A log holds, per received packet, its epoch, the beacon
+id, the range (or the travel time), the beacon position the packet carried
+and the depth reading; for USBL the direction of arrival. A row without a
+beacon id is a depth reading only (a slot whose packet was lost, or a depth
+sensor's sample). :func:`read_log` reads a CSV or Parquet log and decides
+what to do with every kind of flaw a real log has (:func:`read_log`,
+"Flaws"); :func:`export_log` writes a run's receiver inputs in that format, so
+that a replay of the export (:mod:`sblsim.orchestrator.replay`) equals the run.
+
+A truth track (``time_s, n_m, e_m, d_m``, :func:`read_truth`) is written beside an exported log.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.acoustics.core import Acoustics
+from sblsim.models.declarations import SIGNAL_RANGES, ModelError
+from sblsim.models.systems import System
+from sblsim.orchestrator.cosim.config import (
+    to_toml,
+)
+from sblsim.orchestrator.cosim.plan import as_plan
+from sblsim.orchestrator.cosim.run import (
+    RunRecord,
+    _label,
+)
+from sblsim.orchestrator.io.output import write_together
+from sblsim.orchestrator.io.tables import (  # the hostile-safe table reading every log reader shares
+    CONFIG_PREFIX,
+    META_CONFIG,
+    META_TITLE,
+    NUMBER,
+    SUFFIXES,
+)
+from sblsim.orchestrator.io.tables import columns as _columns
+from sblsim.orchestrator.io.tables import number as _number
+from sblsim.orchestrator.io.tables import read_table as _read_table
+
+#: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
+FORMAT = 1
+LOG_TITLE = f"sblsim log, format {FORMAT}"
+TRUTH_TITLE = f"sblsim truth track, format {FORMAT}"
+#: Rows that come up to this much earlier than a row before them are sorted into place (counted); a row
+#: further back is a clock jump and the log is refused [s].
+REORDER_WINDOW = 1.0
+#: The log's columns: name -> (unit, meaning, when required).
+LOG_COLUMNS = {
+    "time_s": ("s", "the packet's epoch (its transmit time, the slot's tx_time); for a depth reading, its time",
+               "always"),
+    "rx_time": ("s", "the packet's arrival at the diver (on time_s's clock, not before it): the replay uses the row "
+                "at its first step that reaches it; empty or no column: time_s", "optional"),
+    "beacon_id": ("1", "the beacon the packet came from, 1 … N (USBL: 1); empty: the row is a depth reading only",
+                  "always (the column)"),
+    "range_m": ("m", "the measured range (one-way: c · travel time; two-way: c · (round trip − turnaround) / 2)",
+                "one of range_m, travel_time_s"),
+    "travel_time_s": ("s", "the one-way travel time (two-way ranging: (round trip − turnaround) / 2); range = "
+                      "sound speed · travel time", "one of range_m, travel_time_s"),
+    "sound_speed_mps": ("m/s", "the sound speed the hardware used to turn travel time into range (empty: the "
+                        "configuration's acoustics.sound_speed_assumed)", "optional, with travel_time_s"),
+    "beacon_n_m": ("m", "the beacon position the packet carried, North", "always"),
+    "beacon_e_m": ("m", "the beacon position the packet carried, East", "always"),
+    "beacon_d_m": ("m", "the beacon position the packet carried, Down", "always"),
+    "depth_m": ("m", "the depth reading at time_s", "always"),
+    "azimuth_rad": ("rad", "USBL: the direction of arrival's azimuth, clockwise from North (NED)", "USBL"),
+    "elevation_rad": ("rad", "USBL: the direction of arrival's elevation below the horizontal", "USBL"),
+    "doa_x": ("1", "USBL: the direction cosine of the reply along the array's x axis, as the array measured it",
+              "USBL"),
+    "doa_y": ("1", "USBL: the direction cosine of the reply along the array's y axis, as the array measured it",
+              "USBL"),
+    "doa_roll_rad": ("rad", "USBL: the roll with which the surface turned the direction into NED (the IMU's)",
+                     "USBL"),
+    "doa_pitch_rad": ("rad", "USBL: the pitch with which the surface turned the direction into NED", "USBL"),
+    "doa_yaw_rad": ("rad", "USBL: the yaw with which the surface turned the direction into NED", "USBL"),
+}
+#: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
+TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
+_PACKET_COLUMNS = ("beacon_n_m", "beacon_e_m", "beacon_d_m")
+
+
+
+
+# --------------------------------------------------------------------------- the log
+
+@dataclass
+class Log:
+    """A log read and checked (:func:`read_log`): its usable rows in time order and what was done to the others.
+
+    Attributes
+    ----------
+    path : Path
+    time : ndarray, shape (N,)
+        Each row's arrival (``rx_time``, else ``time_s``) [s], non-decreasing: when the replay uses it.
+    beacon : ndarray of int, shape (N,)
+        Beacon id 1 … n; 0 for a depth reading only.
+    range : ndarray, shape (N,)
+        Range [m] (0 on a depth-only row).
+    beacon_ned : ndarray, shape (N, 3)
+        The beacon position the packet carried [m] (0 on a depth-only row).
+    depth : ndarray, shape (N,)
+        Depth reading [m].
+    system_values : ndarray, shape (N, k), or None
+        The columns the system adds, in the order of its
+        :attr:`~sblsim.models.systems.System.log_columns` (USBL: azimuth and elevation [rad], the array's
+        direction cosines [1] and the attitude the surface turned the direction with [rad]; 0 on a depth-only
+        row).
+    where : list of str
+        Each row's place in the file (``line 12``, ``row 11``).
+    counts : dict
+        ``rows`` (data rows read), ``duplicate``, ``unknown_beacon`` (skipped), ``out_of_order`` (sorted).
+    longest_gap : tuple
+        (seconds, where the row after the gap is) of the longest time between two rows.
+    typical_gap : float
+        The median time between two rows [s] (0 for one row).
+    ignored : list of str
+        Columns the replay does not use.
+    config : str
+        The configuration an exported log carries (TOML; empty for another log).
+    sent : ndarray, shape (N,)
+        Each row's ``time_s`` (its transmit epoch) [s]; empty: the arrivals ``time``.
+    system_columns : dict
+        The system's log columns -> the receiver inputs they feed (those of :attr:`system_values`).
+    """
+
+    path: Path
+    time: np.ndarray
+    beacon: np.ndarray
+    range: np.ndarray
+    beacon_ned: np.ndarray
+    depth: np.ndarray
+    system_values: np.ndarray | None
+    where: list[str]
+    counts: dict[str, int]
+    longest_gap: tuple[float, str]
+    typical_gap: float = 0.0
+    ignored: list[str] = field(default_factory=list)
+    config: str = ""
+    sent: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    system_columns: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def transmit(self) -> np.ndarray:
+        """Each row's transmit epoch ``time_s`` [s] (its arrival where the log gives none)."""
+        return self.sent if self.sent.size == self.time.size else self.time
+
+
+def log_config(path: Path | str) -> str:
+    """The configuration (TOML text) an exported log carries, or '' (read without checking its rows).
+
+    Raises
+    ------
+    ModelError
+        As :func:`read_log` for a file that cannot be read.
+    """
+    return _read_table(Path(path), "log").config
+
+
+def read_log(path: Path | str, n_beacons: int, system: System | None = None, sound_speed: float = 1500.0) -> Log:
+    """Read and check a log (docs/log-format.md).
+
+    Parameters
+    ----------
+    path : path
+        A ``.csv`` or ``.parquet`` file.
+    n_beacons : int
+        Beacons of the configuration (ids 1 … n_beacons are known).
+    system : System, optional
+        The configuration's positioning system (:mod:`sblsim.models.systems`): the columns it adds to a log
+        (:attr:`~sblsim.models.systems.System.log_columns`: USBL's direction of arrival, the array's direction
+        cosines and the attitude) are required. Default: none added.
+    sound_speed : float
+        The sound speed that turns ``travel_time_s`` into range where the log gives none [m/s].
+
+    Flaws (each a clear decision; a refusal is one line naming the file, the line and the column):
+
+    * a line that does not parse (field count, a number that is not one, a required value that is empty or
+      not finite, or outside the receiver's declared input range), a missing required column, or both
+      ``range_m`` and ``travel_time_s``: **refused**;
+    * a beacon id that is not a whole number in 1 … n_beacons: the row is **skipped** (``unknown_beacon``);
+    * an ``rx_time`` before the row's ``time_s``: **refused** (an arrival before its transmission);
+    * a row with the same time and beacon id as an earlier one: **skipped** (``duplicate``);
+    * a row that arrives (``rx_time``, else ``time_s``) up to :data:`REORDER_WINDOW` earlier than a row before
+      it: **sorted** into place
+      (``out_of_order``); further back, a clock jump: **refused** with the line;
+    * a gap forward: **stepped through** (the receiver predicts), the longest reported; a gap so long that
+      the replay would not fit in memory: refused with the line after it;
+    * columns the replay does not know or use: **ignored** and listed.
+
+    Returns
+    -------
+    Log
+
+    Raises
+    ------
+    ModelError
+        As listed above.
+    """
+    path = Path(path)
+    table = _read_table(path, "log")
+    index = _columns(table, "log")
+    name = str(path)
+    doc = "see docs/log-format.md"
+    extra = tuple(system.log_columns) if system is not None else ()  # the system's own columns (USBL)
+    required = ["time_s", "beacon_id", *_PACKET_COLUMNS, "depth_m", *extra]
+    missing = [c for c in required if c not in index]
+    if missing:
+        kind = f" (a {system.name.upper()} log)" if extra and set(missing) <= set(extra) else ""
+        raise ModelError(f"log: {name!r} has no column {missing[0]}{kind}; its columns: "
+                         f"{','.join(table.header)}; {doc}")
+    has_range, has_travel = "range_m" in index, "travel_time_s" in index
+    if has_range == has_travel:
+        which = "both" if has_range else "neither of"
+        raise ModelError(f"log: {name!r} has {which} range_m and travel_time_s; give one of them; {doc}")
+    used = set(required) | {"range_m" if has_range else "travel_time_s"}
+    if has_travel and "sound_speed_mps" in index:
+        used.add("sound_speed_mps")
+    has_arrival = "rx_time" in index
+    if has_arrival:
+        used.add("rx_time")
+    ignored = [c for c in table.header if c not in used]
+    speeds = next(v for v in Acoustics.variables() if v.name == "sound_speed_assumed")
+    t_lo, t_hi = -1e12, 1e12  # any clock; the receiver runs on times from the log's start
+    r_lo, r_hi = 0.0, SIGNAL_RANGES["range"][1]
+    p_lo, p_hi = SIGNAL_RANGES["position"]
+    d_lo, d_hi = SIGNAL_RANGES["depth"]
+
+    counts = {"rows": len(table.rows), "unknown_beacon": 0, "duplicate": 0, "out_of_order": 0}
+    kept: list[tuple[float, int, float, tuple, float, tuple, str, float]] = []
+    latest, latest_where = -math.inf, ""
+    for where_short, cells in table.rows:
+        where = f"log: {name!r} {where_short}"
+        sent = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
+        t = sent  # the row's arrival: when the receiver uses it
+        if has_arrival and cells[index["rx_time"]]:
+            t = _number(cells[index["rx_time"]], where, "rx_time", t_lo, t_hi)
+            if t < sent:
+                raise ModelError(f"{where}: rx_time {t:.10g} s is before the row's time_s {sent:.10g} s: a packet "
+                                 "arrives after it is sent; leave rx_time empty where the arrival is not known")
+        beacon = _beacon(cells[index["beacon_id"]], n_beacons)
+        if beacon < 0:
+            counts["unknown_beacon"] += 1
+            continue
+        if t < latest - REORDER_WINDOW:
+            column = "rx_time" if t != sent else "time_s"
+            raise ModelError(f"{where}: {column} {t:.10g} s is {latest - t:.6g} s before {latest_where}'s "
+                             f"{latest:.10g} s: a clock jump back (rows up to {REORDER_WINDOW:g} s out of order "
+                             f"are sorted); replay the rows before and from {where_short} as two logs, or "
+                             "correct the clock")
+        if t < latest:
+            counts["out_of_order"] += 1
+        elif t > latest:
+            latest, latest_where = t, where_short
+        depth = _number(cells[index["depth_m"]], where, "depth_m", d_lo, d_hi)
+        if beacon == 0:
+            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0,) * len(extra), where_short, sent))
+            continue
+        if has_range:
+            rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
+        else:
+            travel = _number(cells[index["travel_time_s"]], where, "travel_time_s", 0.0, 1e3)
+            speed = sound_speed
+            if "sound_speed_mps" in index and cells[index["sound_speed_mps"]]:
+                speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)
+            rng = speed * travel
+        position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
+        own = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra)
+        kept.append((t, beacon, rng, position, depth, own, where_short, sent))
+
+    # in arrival order (stable: rows of one time keep the file's order), then without duplicates
+    kept.sort(key=lambda row: row[0])
+    seen: set[tuple[float, int]] = set()
+    rows = []
+    for row in kept:
+        key = (row[7], row[1])
+        if key in seen:
+            counts["duplicate"] += 1
+            continue
+        seen.add(key)
+        rows.append(row)
+    if not rows:
+        raise ModelError(f"log: {name!r} has no row to replay ({counts['rows']} rows; {counts['unknown_beacon']} "
+                         f"with a beacon id outside 1 … {n_beacons}); {doc}")
+    times = np.array([r[0] for r in rows])
+    gaps = np.diff(times)
+    gap = (float(gaps.max()), rows[int(gaps.argmax()) + 1][6]) if gaps.size else (0.0, rows[0][6])
+    return Log(path=path, time=times, beacon=np.array([r[1] for r in rows], dtype=np.int64),
+               range=np.array([r[2] for r in rows]), beacon_ned=np.array([r[3] for r in rows], dtype=float),
+               depth=np.array([r[4] for r in rows]),
+               system_values=np.array([r[5] for r in rows], dtype=float) if extra else None,
+               where=[r[6] for r in rows], counts=counts, longest_gap=gap,
+               typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config,
+               sent=np.array([r[7] for r in rows]), system_columns=dict(system.log_columns) if extra else {})
+
+
+def _beacon(text: str, n_beacons: int) -> int:
+    """A beacon id cell: 1 … n_beacons, 0 when empty (a depth reading), −1 when it names no beacon of the array."""
+    if not text:
+        return 0
+    if not NUMBER.fullmatch(text):
+        return -1
+    value = float(text)
+    if not math.isfinite(value) or value != round(value) or not 1 <= value <= n_beacons:
+        return -1
+    return int(value)
+
+
+def read_truth(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
+    """Read a truth track: ``time_s, n_m, e_m, d_m`` (CSV or Parquet), times strictly increasing.
+
+    Returns
+    -------
+    time : ndarray, shape (M,)
+        [s], M ≥ 2.
+    ned : ndarray, shape (M, 3)
+        [m].
+
+    Raises
+    ------
+    ModelError
+        ``--truth: ...`` naming the line: a missing column, a value that is not a finite number, a time
+        that does not increase, fewer than two rows.
+    """
+    path = Path(path)
+    table = _read_table(path, "--truth")
+    index = _columns(table, "--truth")
+    name = str(path)
+    missing = [c for c in TRUTH_COLUMNS if c not in index]
+    if missing:
+        raise ModelError(f"--truth: {name!r} has no column {missing[0]}; its columns: {','.join(table.header)}; "
+                         f"a truth track has the columns {','.join(TRUTH_COLUMNS)} (docs/log-format.md)")
+    values = np.empty((len(table.rows), 4))
+    p_lo, p_hi = SIGNAL_RANGES["position"]
+    for k, (where_short, cells) in enumerate(table.rows):
+        where = f"--truth: {name!r} {where_short}"
+        for j, column in enumerate(TRUTH_COLUMNS):
+            low, high = (-1e12, 1e12) if j == 0 else (p_lo, p_hi)
+            values[k, j] = _number(cells[index[column]], where, column, low, high)
+        if k and values[k, 0] <= values[k - 1, 0]:
+            raise ModelError(f"{where}: time_s {values[k, 0]:.10g} s does not come after the row before "
+                             f"({values[k - 1, 0]:.10g} s): a truth track's times must increase")
+    if len(values) < 2:
+        raise ModelError(f"--truth: {name!r} has {len(values)} row(s); a track needs at least two")
+    return values[:, 0], values[:, 1:]
+
+
+# --------------------------------------------------------------------------- export
+
+def truth_path(log_path: Path | str) -> Path:
+    """Where ``--export-log FILE`` writes the truth track: ``FILE``'s stem with ``_truth``, the same suffix."""
+    path = Path(log_path)
+    return path.with_name(f"{path.stem}_truth{path.suffix}")
+
+
+def check_export(path: Path, force: bool) -> None:
+    """Refuse an ``--export-log`` file before any work: a suffix other than .csv or .parquet, a directory,
+    or an existing log or truth file without ``force``.
+
+    Raises
+    ------
+    ModelError
+        Naming ``--export-log``.
+    """
+    if path.suffix.lower() not in SUFFIXES:
+        raise ModelError(f"--export-log: {str(path)!r} must end in .csv or .parquet")
+    for target in (path, truth_path(path)):
+        if target.is_dir():
+            raise ModelError(f"--export-log: {str(target)!r} is a directory")
+        if target.exists() and not force:
+            raise ModelError(f"--export-log: {str(target)!r} exists; add --force to replace it or choose another "
+                             "file")
+
+
+def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """A run's time series (one replicate) as a log, one row per slot, and its truth track (every step).
+
+    A slot whose packet was lost is a depth-only row (``beacon_id`` missing); ``time_s`` is the packet's
+    epoch (``tx_time``), ``rx_time`` its arrival (the run's receiver used it at its first step reaching
+    that). The rows are in the order the receiver was given them (of arrival). Values are the receiver's
+    inputs as the run recorded them, with the columns the run's ``system`` adds
+    (:attr:`~sblsim.models.systems.System.log_columns`: USBL's direction of arrival).
+    """
+    seq = ts["packet_seq"].to_numpy()
+    previous = np.concatenate([[0], seq[:-1]])
+    slot = ts[(seq != previous) & (seq > 0)]
+    valid = slot["packet_valid"].to_numpy(bool)
+
+    def packet(column: str) -> np.ndarray:
+        return np.where(valid, slot[column].to_numpy(dtype=float), np.nan)
+
+    log = pd.DataFrame({"time_s": slot["tx_time"].to_numpy(dtype=float),
+                        **({"rx_time": slot["rx_time"].to_numpy(dtype=float)} if "rx_time" in slot else {}),
+                        "beacon_id": pd.array(np.where(valid, slot["beacon_id"].to_numpy(), 0), dtype="Int64"),
+                        "range_m": packet("range"), "beacon_n_m": packet("beacon_x"),
+                        "beacon_e_m": packet("beacon_y"), "beacon_d_m": packet("beacon_z"),
+                        "depth_m": slot["depth"].to_numpy(dtype=float)})
+    log.loc[~valid, "beacon_id"] = pd.NA
+    for column, source in (system.log_columns if system is not None else {}).items():
+        log[column] = packet(source)
+    truth = pd.DataFrame({"time_s": ts["time"].to_numpy(dtype=float), "n_m": ts["true_x"].to_numpy(dtype=float),
+                          "e_m": ts["true_y"].to_numpy(dtype=float), "d_m": ts["true_z"].to_numpy(dtype=float)})
+    return log, truth
+
+
+def _csv_text(frame: pd.DataFrame, comments: Sequence[str]) -> str:
+    """A frame as CSV text: numbers as Python writes them (they read back exactly), missing values empty."""
+    buffer = io.StringIO()
+    for line in comments:
+        buffer.write(f"{line}\n")
+    buffer.write(",".join(frame.columns) + "\n")
+    columns = [frame[c].to_numpy(dtype=object) for c in frame.columns]
+    for values in zip(*columns):
+        buffer.write(",".join("" if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v))
+                              else (repr(float(v)) if isinstance(v, (float, np.floating)) else str(v))
+                              for v in values) + "\n")
+    return buffer.getvalue()
+
+
+def export_log(result: RunRecord, path: Path | str) -> tuple[Path, Path]:
+    """Write a run's receiver inputs as a log (``path``) and its truth track beside it (:func:`truth_path`).
+
+    The log carries the run's resolved configuration (CSV: ``#%`` comment lines; Parquet: schema
+    metadata), which ``sblsim replay`` takes unless it is given ``--config``.
+
+    Returns
+    -------
+    (Path, Path)
+        The log and the truth track.
+
+    Raises
+    ------
+    ModelError
+        ``--export-log: ...`` when a write fails (a full disk): then neither file is replaced, nor is a folder
+        made for them left (:func:`sblsim.orchestrator.io.output.write_together`).
+    """
+    path = Path(path)
+    cfg = result.config
+    ts = result.timeseries
+    ts = ts[ts["replicate"] == ts["replicate"].iloc[0]]
+    plan = result.plan if result.plan is not None else as_plan(cfg)
+    log, truth = log_frames(ts, plan.system)
+    origin = (f"exported from: sblsim run {cfg['run']['scenario']} (seed {cfg['run']['seed']}, "
+              f"platform.system {cfg['platform']['system']}, receiver {_label(result)}, {result.engine} engine)")
+    config = to_toml(cfg)
+    lost = int(log["beacon_id"].isna().sum())
+    comments = [f"# {LOG_TITLE}",
+                "# columns, units and the replay's rules: docs/log-format.md; time_s is the packet's epoch, a row "
+                "without beacon_id a depth reading only",
+                f"# {origin}; {len(log)} slots, {lost} packets lost",
+                "# the run's resolved configuration, which `sblsim replay` uses unless given --config:",
+                *[f"{CONFIG_PREFIX}{line}" if line else CONFIG_PREFIX.rstrip() for line in config.splitlines()]]
+    target = truth_path(path)
+    if path.suffix.lower() == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        def parquet(frame: pd.DataFrame, meta: dict[bytes, bytes]):
+            def write(tmp: Path) -> None:
+                table = pa.Table.from_pandas(frame, preserve_index=False)
+                pq.write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **meta}), tmp)
+            return write
+
+        writers = (parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}),
+                   parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
+    else:
+        text = _csv_text(log, comments)
+        truth_text = _csv_text(truth, [f"# {TRUTH_TITLE}", f"# {origin}; the diver's true position at the end "
+                                       "of every step (N, E, D in the platform's frame)"])
+        writers = (lambda tmp: tmp.write_text(text, encoding="utf-8"),
+                   lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
+    try:  # the pair as one: both written, or neither replaced (nor a folder made for them left)
+        write_together(dict(zip((path, target), writers)))
+    except OSError as exc:  # e.g. a full disk
+        reason = os.strerror(exc.errno) if exc.errno else str(exc)
+        raise ModelError(f"--export-log: {reason}; neither the log nor its truth track was written ({str(path)!r} "
+                         "is as it was)") from None
+    return path, target
+
+
+__all__ = ["FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "TRUTH_COLUMNS", "check_export", "export_log",
+           "log_config", "log_frames", "read_log", "read_truth", "truth_path"]
