@@ -87,19 +87,28 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from functools import lru_cache
+from typing import Any, Callable, Mapping
 
 import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.detection import NO_SNR, SITE, family_levels, family_levels_grid, first_detected
+from sblsim.models.acoustics.detection import (
+    NO_SNR,
+    SITE,
+    family_levels,
+    family_levels_grid,
+    first_detected,
+    level_table,
+)
 from sblsim.models.acoustics.ray_tables import (
     FAMILY_TABLE,
     RAY_BOUNDS,
     RAY_GRID,
     RAY_TABLE,
     RAY_TABLE_ROWS,
+    eigenray_table,
     first_arrival_grid,
     ray_grid,
     ray_values,
@@ -449,6 +458,22 @@ def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None
         f"above {late / (FLIGHT_CAPACITY - 1):.4g} s" + "".join(f" or a smaller {key}" for key in shorter))
 
 
+@lru_cache(maxsize=32)
+def _ray_table(table: tuple, depth: float, box: tuple, exact_points: Callable) -> tuple:
+    columns = eigenray_table(np.array(table), depth, box, exact_points())
+    out = {name: float(value) for name, value in zip(RAY_BOUNDS, box)}
+    out.update(RAY_TABLE.values(np.column_stack([columns[c.name] for c in RAY_TABLE.columns]), "ray_table_rows"))
+    return tuple(out.items())
+
+
+@lru_cache(maxsize=32)
+def _family_table(table: tuple, depth: float, box: tuple, site: tuple, family_points: Callable,
+                  family_levels: Callable) -> tuple:
+    columns = level_table(np.array(table), depth, box, np.array(site), family_points(), family_levels())
+    return tuple(FAMILY_TABLE.values(np.column_stack([columns[c.name] for c in FAMILY_TABLE.columns]),
+                                     "ray_family_rows").items())
+
+
 class Acoustics(Component):
     """Round-robin one-way-travel-time acoustic channel."""
 
@@ -516,6 +541,47 @@ class Acoustics(Component):
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
                 + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES)
+
+    @classmethod
+    def uses_ray_table(cls, values: Mapping[str, Any], parameters: Mapping[str, Any]) -> bool:
+        """Whether a run of the channel's section ``values`` (its FMU parameters ``parameters``) interpolates an
+        eigenray table (:meth:`table_parameters`): a ``ray`` run through a sound-speed table."""
+        return values.get("propagation") == "ray" and int(parameters.get("sound_speed_rows", 0)) > 0
+
+    @classmethod
+    def table_parameters(cls, values: Mapping[str, Any], parameters: Mapping[str, Any], box: tuple[float, ...],
+                         exact_points: Callable[[], ca.Function | None],
+                         family_points: Callable[[], ca.Function | None],
+                         family_levels: Callable[[], ca.Function | None]) -> dict[str, Any]:
+        """The FMU parameters of a run's eigenray table (:data:`RAY_TABLE`, its box :data:`RAY_BOUNDS`) and, for an
+        ``snr`` run (``detection``), of its family table at the same nodes (:data:`FAMILY_TABLE`).
+
+        Parameters
+        ----------
+        values : mapping
+            The channel's resolved section (a run that :meth:`uses_ray_table`).
+        parameters : mapping
+            Its FMU parameters (:meth:`fmu_parameters`: the profile's table and the site).
+        box : tuple of 6 float
+            The geometries the table covers: source depth, receiver depth, horizontal distance, each (min, max)
+            [m]; a geometry outside it is solved exactly.
+        exact_points, family_points, family_levels : callable
+            Give the compiled forms of :func:`~sblsim.models.acoustics.ray_tables.exact_points`,
+            :func:`~sblsim.models.acoustics.ray_tables.family_points` and
+            :func:`~sblsim.models.acoustics.detection.family_levels` (called when a table is built; None: casadi's
+            own evaluation, the same numbers).
+
+        Each table is built once per profile, water depth and box (and site), however many runs ask
+        (:func:`~sblsim.models.acoustics.ray_tables.eigenray_table`,
+        :func:`~sblsim.models.acoustics.detection.level_table`).
+        """
+        table = tuple(map(tuple, PROFILE.rows(parameters, "sound_speed_rows").tolist()))
+        depth, box = float(values["water_depth"]), tuple(float(b) for b in box)
+        out = dict(_ray_table(table, depth, box, exact_points))
+        if values.get("detection") == "snr":
+            site = tuple(float(v) for v in site_vector(parameters))
+            out.update(_family_table(table, depth, box, site, family_points, family_levels))
+        return out
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:

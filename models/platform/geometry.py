@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.platform.waves import wave_motion
 from sblsim.models.systems import SYSTEMS, system
 
 
@@ -129,6 +130,23 @@ def largest_arm(platform: Mapping[str, Any]) -> float:
     return float(max(np.linalg.norm(platform_offsets(platform), axis=1)))
 
 
+def transducer_span(platform: Mapping[str, Any], margin: float) -> tuple[float, float, float]:
+    """Where the transducers of a ``[platform]`` section go: their depths, least and greatest [m] (widened by
+    ``margin`` [m] and, for transducers on the platform, by the wave heave and the lever arms' tilt at
+    ``platform.beaufort``, :func:`sblsim.models.platform.waves.wave_motion`; transducers that stand elsewhere,
+    seafloor transponders, do not heave; never above the surface), and their greatest horizontal distance from the
+    platform's centre [m]."""
+    arms = lever_arms(platform)
+    rise = margin
+    if not _system(platform).places_transducers:
+        reach = float(np.linalg.norm(arms, axis=1).max(initial=0.0))
+        tilt, _yaw, heave, _frequency = (float(v) for v in wave_motion(int(platform.get("beaufort", 0)),
+                                                                         float(platform.get("hull_length", 1.0))))
+        rise += heave + reach * np.sin(tilt)  # the transducers' largest vertical excursion, widened
+    return (max(float(arms[:, 2].min()) - rise, 0.0), float(arms[:, 2].max()) + rise,
+            float(np.linalg.norm(arms[:, :2], axis=1).max(initial=0.0)))
+
+
 #: Smallest distance between two beacons [m]: closer ones are refused (:func:`check_geometry`).
 MIN_SEPARATION = 1e-3
 
@@ -211,4 +229,5 @@ def beacon_positions(position: ca.SX, rotation: ca.SX, offsets: list[ca.SX]) -> 
 
 
 __all__ = ["MIN_SEPARATION", "beacon_positions", "check_geometry", "cross_directions", "cross_offsets",
+           "transducer_span",
            "horizontal_spread", "layout_offsets", "parse_offsets", "rotation_ned", "unit_vector"]

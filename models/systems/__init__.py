@@ -32,6 +32,10 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 
+#: The smallest direction-of-arrival std [deg] the receivers take (their ``sigma_angle_deg``'s minimum): the ties
+#: and the bound floor ``platform.usbl_angle_sigma_deg`` at it (:meth:`System.angle_sigma_deg`).
+MIN_ANGLE_SIGMA_DEG = 1e-3
+
 #: The registry: ``platform.system`` value -> system, in the order of :attr:`System.code` (the platform's
 #: ``system`` parameter is the index of its value in this order: the FMUs and the local engine encode it so).
 SYSTEMS: dict[str, System] = {}
@@ -225,6 +229,11 @@ class System:
         the bound's and the map's (default: GPS and IMU)."""
         return platform["gps_sigma"], math.radians(platform["imu_sigma_deg"])
 
+    def angle_sigma_deg(self, platform: Mapping[str, Any]) -> float:
+        """The direction-of-arrival std on the array's axis that the receivers (``sigma_angle_deg``) and the bound
+        (``angle_sigma_deg``) take [deg]: ``platform.usbl_angle_sigma_deg`` floored at :data:`MIN_ANGLE_SIGMA_DEG`."""
+        return max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)
+
     # ---- the accuracy limit ----
     def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
                        sigma_range: float, model=None) -> np.ndarray:
@@ -306,4 +315,5 @@ def interface_systems(n_beacons: int) -> list[System]:
     return [s for s in SYSTEMS.values() if s is own or (own.interface_beacons is None and s.interface_beacons is None)]
 
 
-__all__ = ["SYSTEMS", "System", "interface_owners", "interface_system", "interface_systems", "register", "system"]
+__all__ = ["MIN_ANGLE_SIGMA_DEG", "SYSTEMS", "System", "interface_owners", "interface_system", "interface_systems",
+           "register", "system"]

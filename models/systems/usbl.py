@@ -88,11 +88,8 @@ from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.geometry import parse_offsets, unit_vector
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.range_direction import RangeDirectionModel
-from sblsim.models.systems import System, register
+from sblsim.models.systems import MIN_ANGLE_SIGMA_DEG, System, register
 
-#: The smallest direction-of-arrival std in R [deg] (the ``sigma_angle_deg`` parameter's minimum; the ties and
-#: the bound floor the platform's value at it).
-MIN_ANGLE_SIGMA_DEG = 1e-3
 #: The USBL measurement model of the receivers.
 MODEL = RangeDirectionModel()
 @lru_cache(maxsize=None)
@@ -559,6 +556,6 @@ class USBL(System):
 
 
 __all__ = ["attitude", "BOUND_MODEL", "bound_step", "compiled_bound", "context", "covariance", "direction",
-           "fix_information", "FIX_ITERATIONS", "FIXED", "horizontal_std", "measurement", "MIN_ANGLE_SIGMA_DEG",
-           "MODEL", "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
+           "fix_information", "FIX_ITERATIONS", "FIXED", "horizontal_std", "measurement", "MODEL",
+           "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
            "POSITION_MODEL", "receiver_parameters", "STEPS", "transceiver", "transceiver_variance", "USBL"]

@@ -143,6 +143,28 @@ class Target(Component):
         return out
 
     @classmethod
+    def reach(cls, values: Mapping[str, Any]) -> tuple[np.ndarray, float, float] | None:
+        """Where a configuration's diver goes: its depths [m] and its least and greatest horizontal distance from
+        the platform's centre [m] (the semicircle's radius, the square's corners, the random path's
+        ``max_radius``, a file's waypoints), or None for a trajectory that does not bound them (a spiral, a random
+        walk).
+
+        Raises
+        ------
+        ModelError
+            As :func:`file_waypoints`, for ``trajectory = file``.
+        """
+        kind = values["trajectory"]
+        if kind == "file":
+            rows = file_waypoints(values)
+            return rows[:, 3], 0.0, float(np.linalg.norm(rows[:, 1:3], axis=1).max())
+        if kind in ("semicircle", "square", "random"):
+            far = {"semicircle": float(values["radius"]), "square": float(values["square_side"]) / np.sqrt(2.0),
+                   "random": float(values["max_radius"])}[kind]
+            return np.array([float(values["depth"])]), (far if kind == "semicircle" else 0.0), far
+        return None
+
+    @classmethod
     def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
         """Configuration keys from FMU parameters: the waypoint table becomes the ``waypoints`` text."""
         out = super().config_values(values, n_beacons)

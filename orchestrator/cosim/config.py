@@ -41,7 +41,6 @@ from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
 from sblsim.models.receiver.core import clock_parameters
 from sblsim.models.systems import SYSTEMS
-from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
 from sblsim.models.target import natural_duration, start_state
 from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.cosim.engines import read_description
@@ -647,7 +646,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
             **SYSTEMS[platform["system"]].receiver_ties(platform),
-            "sigma_angle_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG)}
+            "sigma_angle_deg": SYSTEMS[platform["system"]].angle_sigma_deg(platform)}
     acoustics = cfg["acoustics"]
     if acoustics["clock_drift_ppm"] != 0.0 and acoustics["ranging"] == "owtt":  # the clock's states, its prior
         ties.update(clock_states=True, clock_drift_sigma_ppm=abs(acoustics["clock_drift_ppm"]))

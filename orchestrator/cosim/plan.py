@@ -23,7 +23,6 @@ from __future__ import annotations
 import copy
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -31,16 +30,12 @@ import numpy as np
 
 from sblsim.fmus.native import compiled_exact_points, compiled_family_levels, compiled_family_points
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.models.acoustics.core import site_vector
-from sblsim.models.acoustics.detection import level_table
-from sblsim.models.acoustics.ray_tables import FAMILY_TABLE, RAY_BOUNDS, RAY_TABLE, eigenray_table
 from sblsim.models.errors import ConfigError, ModelError
-from sblsim.models.platform.waves import wave_motion
+from sblsim.models.platform.geometry import transducer_span
 from sblsim.models.receiver.core import filter_parameters
 from sblsim.models.receiver.profile import resolve_channel_profile
 from sblsim.models.systems import SYSTEMS, System
-from sblsim.models.systems.usbl import MIN_ANGLE_SIGMA_DEG
-from sblsim.models.target.core import file_waypoints
+from sblsim.models.target.core import Target
 from sblsim.orchestrator.cosim.config import (
     KEY_TIES,
     MIN_SIGMA,
@@ -308,8 +303,12 @@ def _component_parameters(cfg: Mapping[str, Mapping[str, Any]], component: str, 
     if component == "receiver" and takes("communication_step"):  # the receiver's own clock: T / ratio
         params["communication_step"] = sim["sampling_time"] / sim["ekf_rate_ratio"]
     params.update({k: v for k, v in cfg["run"].items() if takes(k)})
-    if component == "acoustics" and model is not None and takes("ray_table_rows"):
-        params.update(ray_table_parameters(cfg, params))
+    if component == "acoustics" and model is not None and takes("ray_table_rows") \
+            and model.uses_ray_table(cfg["acoustics"], params):
+        box = ray_box(cfg)
+        if box is not None:  # the channel's tables over the geometries the run keeps to
+            params.update(model.table_parameters(cfg["acoustics"], params, box, compiled_exact_points,
+                                                 compiled_family_points, compiled_family_levels))
     return FrozenMapping(params)
 
 
@@ -321,82 +320,23 @@ def ray_box(cfg: Mapping[str, Mapping[str, Any]]) -> tuple[float, ...] | None:
     """The box of geometries of a run's eigenray table (:data:`sblsim.models.acoustics.ray_tables.RAY_BOUNDS`), or
     None when the configuration does not bound them (a random walk, a spiral).
 
-    The source depths are the transducers' (the system's lever arms) widened, for the platform's own, by the wave
-    heave and the lever arms' tilt at ``platform.beaufort`` (seafloor transponders do not heave); the receiver's
-    the diver's depth (a trajectory file's depths); the horizontal distances those between the transducers'
-    horizontal circle and the diver's (the semicircle's radius, the square's corners, the random path's
-    ``max_radius``, a file's waypoints), each widened by :data:`RAY_BOX_MARGINS`; no depth above the surface or
-    below ``acoustics.water_depth`` (where the bottom-reflected family ceases to exist). A geometry outside the
-    box is solved exactly, so the box only decides the speed.
+    The source depths are where the system's transducers go (:func:`~sblsim.models.platform.geometry.transducer_span`:
+    with the platform's heave), the receiver's the diver's depths, the horizontal distances those between the
+    transducers' horizontal circle and the diver's (:meth:`~sblsim.models.target.core.Target.reach`), each
+    widened by :data:`RAY_BOX_MARGINS`; no depth below ``acoustics.water_depth`` (where the bottom-reflected family
+    ceases to exist). A geometry outside the box is solved exactly, so the box only decides the speed.
     """
-    platform, target = cfg["platform"], cfg["target"]
-    system = SYSTEMS[platform["system"]]
-    arms = system.lever_arms(platform)
+    reach = Target.reach(cfg["target"])
+    if reach is None:
+        return None
+    depths, r_lo, r_hi = reach
     dz, dx = RAY_BOX_MARGINS
-    rise = dz  # transducers that stand elsewhere than on the platform (seafloor transponders) do not heave
-    if not system.places_transducers:
-        reach = float(np.linalg.norm(arms, axis=1).max(initial=0.0))
-        tilt, _yaw, heave, _frequency = (float(v) for v in wave_motion(int(platform.get("beaufort", 0)),
-                                                                         float(platform.get("hull_length", 1.0))))
-        rise += heave + reach * np.sin(tilt)  # the transducers' largest vertical excursion, widened
     # within the water: the profile's end speed is extended above the surface (a kink the table would straddle),
     # and a family's existence changes at the floor
     floor = float(cfg["acoustics"].get("water_depth", 0.0)) or np.inf
-    zs_lo, zs_hi = max(float(arms[:, 2].min()) - rise, 0.0), min(float(arms[:, 2].max()) + rise, floor)
-    r_beacon = float(np.linalg.norm(arms[:, :2], axis=1).max(initial=0.0))
-    kind = target["trajectory"]
-    if kind == "file":
-        rows = file_waypoints(target)
-        depths, radii = rows[:, 3], np.linalg.norm(rows[:, 1:3], axis=1)
-        r_lo, r_hi = 0.0, float(radii.max())
-    elif kind in ("semicircle", "square", "random"):
-        depths = np.array([float(target["depth"])])
-        r_hi = {"semicircle": float(target["radius"]), "square": float(target["square_side"]) / np.sqrt(2.0),
-                "random": float(target["max_radius"])}[kind]
-        r_lo = r_hi if kind == "semicircle" else 0.0
-    else:
-        return None
-    x_lo = max(r_lo - r_beacon - 2.0 * dx, 0.0)
-    x_hi = r_hi + r_beacon + 2.0 * dx
-    return (zs_lo, zs_hi, max(float(depths.min()) - dz, 0.0), min(float(depths.max()) + dz, floor), x_lo, x_hi)
-
-
-def ray_table_parameters(cfg: Mapping[str, Mapping[str, Any]], params: Mapping[str, Any]) -> dict[str, Any]:
-    """The eigenray table's FMU parameters of a resolved configuration: none (every eigenray solved) unless it is a
-    ``ray`` run through a profile table whose geometry :func:`ray_box` bounds; built once per profile, water depth
-    and box (:func:`sblsim.models.acoustics.ray_tables.eigenray_table`). An ``snr`` run (``acoustics.detection``) gets
-    the family table at the same nodes too, built once per profile, water depth, box and site
-    (:func:`sblsim.models.acoustics.detection.level_table`)."""
-    acoustics = cfg["acoustics"]
-    rows = int(params.get("sound_speed_rows", 0))
-    if acoustics.get("propagation") != "ray" or rows == 0:
-        return {}
-    box = ray_box(cfg)
-    if box is None:
-        return {}
-    table = tuple((float(params[f"sound_speed_depth[{k}]"]), float(params[f"sound_speed[{k}]"]))
-                  for k in range(1, rows + 1))
-    out = dict(_ray_table(table, float(acoustics["water_depth"]), box))
-    if acoustics.get("detection") == "snr":
-        site = tuple(float(v) for v in site_vector(params))
-        out.update(_family_table(table, float(acoustics["water_depth"]), box, site))
-    return out
-
-
-@lru_cache(maxsize=32)
-def _family_table(table: tuple, depth: float, box: tuple, site: tuple) -> tuple:
-    columns = level_table(np.array(table), depth, box, np.array(site), compiled_family_points(),
-                          compiled_family_levels())
-    return tuple(FAMILY_TABLE.values(np.column_stack([columns[c.name] for c in FAMILY_TABLE.columns]),
-                                     "ray_family_rows").items())
-
-
-@lru_cache(maxsize=32)
-def _ray_table(table: tuple, depth: float, box: tuple) -> tuple:
-    columns = eigenray_table(np.array(table), depth, box, compiled_exact_points())
-    out = {name: float(value) for name, value in zip(RAY_BOUNDS, box)}
-    out.update(RAY_TABLE.values(np.column_stack([columns[c.name] for c in RAY_TABLE.columns]), "ray_table_rows"))
-    return tuple(out.items())
+    zs_lo, zs_hi, r_beacon = transducer_span(cfg["platform"], dz)
+    return (zs_lo, min(zs_hi, floor), max(float(depths.min()) - dz, 0.0), min(float(depths.max()) + dz, floor),
+            max(r_lo - r_beacon - 2.0 * dx, 0.0), r_hi + r_beacon + 2.0 * dx)
 
 
 def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> dict[str, float]:
@@ -437,7 +377,7 @@ def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> di
             "position_variance": position ** 2 + (attitude * arm) ** 2,
             "attitude_variance": attitude ** 2,
             "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
-            "angle_sigma_deg": max(platform["usbl_angle_sigma_deg"], MIN_ANGLE_SIGMA_DEG), **errors}
+            "angle_sigma_deg": system.angle_sigma_deg(platform), **errors}
 
 
 def make_plan(config: Mapping[str, Any]) -> RunPlan:
