@@ -87,8 +87,9 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 from __future__ import annotations
 
 import math
-from functools import lru_cache
-from typing import Any, Callable, Mapping
+from dataclasses import dataclass
+from functools import lru_cache, partial
+from typing import Any, Callable, Mapping, NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -474,6 +475,263 @@ def _family_table(table: tuple, depth: float, box: tuple, site: tuple, family_po
                                      "ray_family_rows").items())
 
 
+@dataclass(frozen=True)
+class _Slot:
+    """What the legs of a slot share: how travel times are computed, the slot's epoch ``t_k`` [s], the beacon
+    (3, 1) [m, NED], the diver's position and velocity at the step's start (3, 1) [m, m/s], the channel's state,
+    parameters and derived data, and the detection uniforms of an ``snr`` run (None: fixed detection)."""
+
+    propagation: str
+    t_k: Any
+    beacon: Any
+    position: Any
+    velocity: Any
+    x: Any
+    p: Any
+    d: Any
+    draws: Any
+
+
+def _leg(e: _Slot, offset, solve: bool, draw: int = 0):
+    """A leg of the slot ``e``: travel time and length between the beacon and the diver at ``t_k + offset`` [s]
+    (None: 0), plus the travel time itself when ``solve`` (fixed-point iterations), the eigenray's ``(launch,
+    arrival, kind)`` from the beacon (``ray``; the chord's angles and 1 when straight) and the SNR and detection
+    probability of that arrival (``snr``: the first **detected** of the leg's eigenrays with the uniforms
+    ``draw … draw + 2``, kind 0 when none is; else 0, 0), and the travel time of its latest detected arrival
+    (``snr``; else the travel time)."""
+    x, p, d, beacon, position, velocity = e.x, e.p, e.d, e.beacon, e.position, e.velocity
+    # the moving ocean at the leg's start: every travel time of the leg scaled by 1 + ε
+    slower = 1.0 + ocean_perturbation(e.t_k - x["t0"] + (0.0 if offset is None else offset), p["ntd_sigma_ppm"] * 1e-6,
+                                      x["ocean_frequency"], x["ocean_phase"])
+
+    def path(tau):
+        receive = position + velocity * (tau if offset is None else offset + tau)
+        distance = ca.norm_2(receive - beacon)
+        horizontal = ca.norm_2(receive[:2] - beacon[:2])
+        chord = ca.atan2(receive[2] - beacon[2], horizontal)
+        speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
+                              d["nodes"], d["slowness"])
+        if e.propagation == "straight":
+            return distance / speed * slower, distance, receive, (chord, chord, 1.0)
+        # ray: the earliest eigenray (interpolated in the run's eigenray table where it holds); a shadow zone (no
+        # arrival) loses the packet, and the straight line keeps the rest finite
+        r_tau, r_launch, r_arrival, r_kind = first_arrival_grid(
+            p["ray_table_rows"] == RAY_TABLE_ROWS, beacon[2], receive[2], horizontal,
+            p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"],
+            d["speeds"], d["ray_bounds"], d["ray_grid"], d["ray_values"])
+        found = r_kind > 0
+        tau = ca.if_else(found, r_tau, distance / speed) * slower
+        angles = (ca.if_else(found, r_launch, chord), ca.if_else(found, r_arrival, chord), r_kind)
+        return tau, distance, receive, angles
+
+    tau, distance, receive, angles = path(0.0)
+    for _ in range(OWTT_ITERATIONS if solve else 0):
+        tau, distance, receive, angles = path(tau)
+    if e.draws is None:
+        return tau, distance, receive, angles, 0.0, 0.0, tau
+    heard = _hear(beacon, receive, p, d, e.draws[draw:draw + 3])
+    return heard[0] * slower, distance, receive, heard[1:4], heard[4], heard[5], heard[6] * slower
+
+
+def _two_way(p, up, down, turnaround, drift):
+    """Range, true range and round trip of a two-way exchange: ``up`` and ``down`` are the legs (:func:`_leg`),
+    ``turnaround`` the transponder's [s], ``drift`` the clock's [1]."""
+    trip = up[0] + turnaround + down[0]
+    measured = trip * (1.0 + drift)
+    return p["sound_speed_assumed"] * (measured - p["turnaround"]) / 2.0, (up[1] + down[1]) / 2.0, trip
+
+
+class _Exchange(NamedTuple):
+    """A slot's exchange (:func:`_exchange`): the measured range [m], the true range [m] and travel time [s]
+    the packet reports, its arrival at the diver [s], whether it is still valid, its timing legs and the leg that
+    carries its data (:func:`_leg`'s tuples), when its last heard arrival ends after the slot's start [s], the
+    last leg (its eigenray: from the beacon to the diver, or the diver's reply to the transceiver) and the first
+    leg's path (1 for one way)."""
+
+    rng: Any
+    distance: Any
+    tau: Any
+    arrival: Any
+    valid: Any
+    timing: tuple
+    data: tuple
+    spread_end: Any
+    last: tuple
+    up_kind: Any
+
+
+def _exchange(e: _Slot, w, ranging: str, direction: bool, valid) -> _Exchange:
+    """The legs of the slot ``e``'s exchange and what they measure: the interface's system's when it measures a
+    ``direction`` (USBL: the transceiver interrogates, the diver replies, the surface sends the fix down), else
+    one way (``owtt``) or two way (``twtt``, the diver interrogates); ``valid``: the packet before the legs."""
+    p, x, t_k = e.p, e.x, e.t_k
+    drift = p["clock_drift_ppm"] * 1e-6
+    if ranging == "twtt":  # the replying transponder's turnaround
+        turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
+    if direction:  # the transceiver interrogates; the diver replies from where it is then
+        up = _leg(e, None, True)
+        reply = _leg(e, up[0] + turnaround, False, 3)
+        up_kind = up[3][2]
+        rng, distance, tau = _two_way(p, up, reply, turnaround, drift)
+        # the surface measures at the reply's arrival and sends the fix down to the diver
+        downlink = _leg(e, tau, True, 6)
+        arrival = t_k + tau + downlink[0]
+        if e.draws is not None:  # snr: the fix reaches the diver when the downlink is heard
+            valid = downlink[3][2] > 0
+        else:
+            valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # reply, downlink
+        timing, data, last = (up, reply), downlink, reply
+        spread_end = tau + downlink[6]  # the downlink's multipath ends the exchange
+    elif ranging == "owtt":
+        owtt_leg = _leg(e, None, True)
+        tau, distance, up_kind = owtt_leg[0], owtt_leg[1], 1.0
+        measured = tau + drift * (t_k - x["t0"] + tau)
+        rng = p["sound_speed_assumed"] * measured
+        arrival = t_k + tau
+        timing, data, last = (owtt_leg,), owtt_leg, owtt_leg
+        spread_end = owtt_leg[6]
+    else:  # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
+        up = _leg(e, None, False)
+        down = _leg(e, up[0] + turnaround, True, 3)
+        up_kind = up[3][2]
+        rng, distance, tau = _two_way(p, up, down, turnaround, drift)
+        arrival = t_k + tau
+        timing, data, last = (up, down), down, down
+        spread_end = up[0] + turnaround + down[6]
+    return _Exchange(rng, distance, tau, arrival, valid, timing, data, spread_end, last, up_kind)
+
+
+def _slot(n: int, true_names: list[str], sent_names: list[str], direction: bool, queue: list, carried: list,
+          ranging: str, propagation: str, detection: str):
+    """The handler of a slot of a channel of ``n`` beacons (their input names ``true_names``, ``sent_names``): of
+    the interface's system when it measures a ``direction`` (USBL) or of ``ranging`` (SBL and LBL), with the
+    travel times of ``propagation`` and what ``detection`` hears; the packet joins the in-flight ``queue``
+    (:func:`_send`)."""
+    snr_mode = detection == "snr"
+
+    def handler(x, u, p, d, w, t, h):
+        k = x["k"] + 1
+        t_k = x["t0"] + k * p["slot_period"]
+        i = ca.fmod(k - 1, n)
+        beacon = ca.vertcat(*[select(i, [u[true_names[3 * j + a]] for j in range(n)]) for a in range(3)])
+        sent = ca.vertcat(*[select(i, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
+        position = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]])
+        velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
+        heard_draws = w[_DETECTION] if snr_mode else None
+        e = _Slot(propagation, t_k, beacon, position, velocity, x, p, d, heard_draws)
+
+        draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
+        if snr_mode:  # what is heard decides loss and multipath (the percentages are not drawn)
+            valid, outlier, excess = 1, 0, 0.0
+        else:
+            valid = draws[0] >= p["loss_pct"] / 100.0
+            outlier = draws[1] < p["outlier_pct"] / 100.0
+            excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
+
+        rng, distance, tau, arrival, valid, timing, data, spread_end, last, up_kind = _exchange(
+            e, w, ranging, direction, valid)
+        launch, arrival_angle, kind = last[3]
+        if direction:  # reversed: the reply leaves the diver and arrives at the transceiver
+            launch, arrival_angle = -arrival_angle, -launch
+        kind = ca.if_else(ca.logic_and(kind > 0, up_kind > 0), kind, 0.0)
+        valid = ca.logic_and(valid, kind > 0)  # a shadow zone (or nothing heard): the packet is lost
+        scale, angle_scale = 1.0, 1.0
+        if snr_mode:
+            # the packet's data needs its margin above the threshold (its own draw); a range from a
+            # reflected arrival on any leg carries that path's excess
+            decoded = heard_draws[DETECTION_DRAWS - 1] < sonar.detection_probability(
+                data[4], p["detection_threshold"] + p["decoding_margin"], p["fluctuation"])
+            valid = ca.logic_and(valid, decoded)
+            for part in timing:
+                outlier = ca.logic_or(outlier, part[3][2] > 1.5)
+            # the timing noise of each leg grows below the reference SNR (their mean variance)
+            scales = [sonar.accuracy_scale(part[4], p["reference_snr"]) for part in timing]
+            scale = ca.sqrt(sum(s_ * s_ for s_ in scales) / len(scales))
+            angle_scale = scales[-1]
+        rng = rng + p["sigma_range"] * scale * noise + excess
+        out = {"launch_angle": launch, "arrival_angle": arrival_angle, "arrival": kind,
+               "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
+               "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
+               "outlier": ca.logic_and(outlier, valid), "rx_time": arrival,
+               "snr": last[4], "detection_probability": last[5]}
+        out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
+        overrun = {}
+        if snr_mode:  # the exchange's last heard arrival after the next slot began: flagged
+            overrun = {"slot_overrun": ca.if_else(spread_end > p["slot_period"], ca.fmax(
+                x["slot_overrun"], spread_end), x["slot_overrun"])}
+        if direction:
+            arrives = last[2] - beacon  # the reply's leg
+            if propagation == "ray":  # along the reply's eigenray: the chord's azimuth (a range-independent
+                # profile), the eigenray's grazing angle at the transceiver (reciprocal: its launch toward
+                # the diver, the reply's −arrival_angle) as the elevation
+                level = ca.norm_2(arrives[:2])
+                east, north = ca.if_else(level > 0, arrives[1] / level, 0.0), ca.if_else(level > 0,
+                                                                                       arrives[0] / level, 1.0)
+                grazing = last[3][0]
+                arrives = ca.vertcat(north * ca.cos(grazing), east * ca.cos(grazing), ca.sin(grazing))
+            measured = _direction_of_arrival(arrives, u, p, w[_ANGLE_NOISE], angle_scale)
+            out.update({name: ca.if_else(valid, value, 0.0) for name, value in zip(
+                ("azimuth", "elevation", "doa_x", "doa_y"), measured)})
+            out.update({f"doa_{a}": ca.if_else(valid, u[f"imu_{a}"], 0.0) for a in ATTITUDE_ANGLES})
+        return {"k": k, **_send(queue, carried, x, p, out, arrival - t_k), **overrun}
+    return handler
+
+
+def _hear(source, receive, p, d, draws):
+    """The first detected eigenray from ``source`` to ``receive`` (3, 1) [m, NED] with the uniforms
+    ``draws`` (3: one per family): :func:`~sblsim.models.acoustics.detection.first_detected` (the families
+    interpolated in the run's family table where it holds)."""
+    families = family_levels_grid()(
+        p["ray_family_rows"] == RAY_TABLE_ROWS, source[2], receive[2], ca.norm_2(receive[:2] - source[:2]),
+        p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"], d["speeds"],
+        d["site"], d["ray_bounds"], d["ray_grid"], d["family_values"])
+    return first_detected(*families, draws)
+
+
+def _send(queue, carried, x, p, out, elapsed):
+    """The in-flight queue (state ``queue``: ``(name, size)``, the packet's ``carried`` outputs and ``q_used``)
+    after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
+    free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
+    ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
+    place = NO_ROW  # the first free place (none: nowhere)
+    for j in reversed(range(FLIGHT_CAPACITY)):
+        place = ca.if_else(x["q_used"][j] < 0.5, j, place)
+    placed = place < FLIGHT_CAPACITY
+    columns = put_row([x[name] for name, _ in queue], place, [*(out[name] for name in carried), 1.0])
+    new = {name: column for (name, _), column in zip(queue, columns)}
+    longest = elapsed  # the longest in flight then, for the refusal's message
+    for j in range(FLIGHT_CAPACITY):
+        sent_at = x["t0"] + x["q_packet_seq"][j] * p["slot_period"]
+        longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - sent_at, 0.0))
+    refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
+    return {**new, "overflow_travel_time": refused}
+
+
+def _arrived(x, t, h):
+    """Per in-flight place: it holds a packet whose arrival the end of the step has reached."""
+    return [ca.logic_and(x["q_used"][j] > 0.5, x["q_rx_time"][j] <= t + h + ARRIVAL_SLACK)
+            for j in range(FLIGHT_CAPACITY)]
+
+
+def _direction_of_arrival(direction, u, p, w_angle, scale=1.0):
+    """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1), and the
+    direction cosines the array measured: the array (attitude ``array_*``) measures the direction cosines
+    of the line of sight across its two axes, each with the noise ``scale`` σ_u (σ_u =
+    ``usbl_angle_sigma_deg`` [rad], the angle's std on the array's axis), takes the wavefront as
+    arriving from below its plane, and the surface turns the direction into NED with the IMU's attitude
+    (``imu_*``)."""
+    array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
+    # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
+    seen = ca.mtimes(array.T, direction / ca.fmax(ca.norm_2(direction), 1e-9))
+    sigma = scale * p["usbl_angle_sigma_deg"] * (ca.pi / 180.0)
+    ux, uy = seen[0] + sigma * w_angle[0], seen[1] + sigma * w_angle[1]
+    across = ca.sqrt(ux ** 2 + uy ** 2)
+    shrink = 1.0 / ca.fmax(across, 1.0)  # a measured pair beyond the unit circle: in the array's plane
+    measured = ca.vertcat(ux * shrink, uy * shrink, ca.sqrt(ca.fmax(1.0 - across ** 2, 0.0)))
+    ned = ca.mtimes(rotation_ned(*[u[f"imu_{a}"] for a in ATTITUDE_ANGLES]), measured)
+    return ca.atan2(ned[1], ned[0]), ca.atan2(ned[2], ca.sqrt(ned[0] ** 2 + ned[1] ** 2)), ux, uy
+
+
 class Acoustics(Component):
     """Round-robin one-way-travel-time acoustic channel."""
 
@@ -662,201 +920,20 @@ class Acoustics(Component):
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
 
-        def slot(ranging, propagation, detection):
-            """The handler of a slot: of the interface's system (USBL) or of ``ranging`` (SBL and LBL), with the
-            travel times of ``propagation`` and what ``detection`` hears."""
-            snr_mode = detection == "snr"
-
-            def handler(x, u, p, d, w, t, h):
-                k = x["k"] + 1
-                t_k = x["t0"] + k * p["slot_period"]
-                i = ca.fmod(k - 1, n)
-                beacon = ca.vertcat(*[select(i, [u[true_names[3 * j + a]] for j in range(n)]) for a in range(3)])
-                sent = ca.vertcat(*[select(i, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
-                position = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]])
-                velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
-                heard_draws = w[_DETECTION] if snr_mode else None
-
-                def leg(offset, solve, draw=0):
-                    """Travel time and length between the beacon and the diver at ``t_k + offset`` [s] (None: 0),
-                    plus the travel time itself when ``solve`` (fixed-point iterations), the eigenray's
-                    ``(launch, arrival, kind)`` from the beacon (``ray``; the chord's angles and 1 when straight)
-                    and the SNR and detection probability of that arrival (``snr``: the first **detected** of the
-                    leg's eigenrays with the uniforms ``draw … draw + 2``, kind 0 when none is; else 0, 0), and
-                    the travel time of its latest detected arrival (``snr``; else the travel time)."""
-                    # the moving ocean at the leg's start: every travel time of the leg scaled by 1 + ε
-                    slower = 1.0 + ocean_perturbation(t_k - x["t0"] + (0.0 if offset is None else offset),
-                                                      p["ntd_sigma_ppm"] * 1e-6, x["ocean_frequency"],
-                                                      x["ocean_phase"])
-
-                    def path(tau):
-                        receive = position + velocity * (tau if offset is None else offset + tau)
-                        distance = ca.norm_2(receive - beacon)
-                        horizontal = ca.norm_2(receive[:2] - beacon[:2])
-                        chord = ca.atan2(receive[2] - beacon[2], horizontal)
-                        speed = harmonic_mean(beacon[2], receive[2], p["sound_speed_true"], p["sound_speed_rows"],
-                                              d["nodes"], d["slowness"])
-                        if propagation == "straight":
-                            return distance / speed * slower, distance, receive, (chord, chord, 1.0)
-                        # ray: the earliest eigenray; a shadow zone (no arrival) loses the packet, and the
-                        # straight line keeps the rest finite
-                        # (interpolated in the run's eigenray table where it holds)
-                        r_tau, r_launch, r_arrival, r_kind = first_arrival_grid(
-                            p["ray_table_rows"] == RAY_TABLE_ROWS, beacon[2], receive[2], horizontal,
-                            p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"],
-                            d["speeds"], d["ray_bounds"], d["ray_grid"], d["ray_values"])
-                        found = r_kind > 0
-                        tau = ca.if_else(found, r_tau, distance / speed) * slower
-                        angles = (ca.if_else(found, r_launch, chord), ca.if_else(found, r_arrival, chord), r_kind)
-                        return tau, distance, receive, angles
-
-                    tau, distance, receive, angles = path(0.0)
-                    for _ in range(OWTT_ITERATIONS if solve else 0):
-                        tau, distance, receive, angles = path(tau)
-                    if not snr_mode:
-                        return tau, distance, receive, angles, 0.0, 0.0, tau
-                    heard = hear(beacon, receive, p, d, heard_draws[draw:draw + 3])
-                    return heard[0] * slower, distance, receive, heard[1:4], heard[4], heard[5], heard[6] * slower
-
-                draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
-                drift = p["clock_drift_ppm"] * 1e-6
-                if snr_mode:  # what is heard decides loss and multipath (the percentages are not drawn)
-                    valid, outlier, excess = 1, 0, 0.0
-                else:
-                    valid = draws[0] >= p["loss_pct"] / 100.0
-                    outlier = draws[1] < p["outlier_pct"] / 100.0
-                    excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
-
-                def two_way(up, down):
-                    """Range, true range and round trip of a two-way exchange: ``up`` and ``down`` are the legs."""
-                    trip = up[0] + turnaround + down[0]
-                    measured = trip * (1.0 + drift)
-                    return p["sound_speed_assumed"] * (measured - p["turnaround"]) / 2.0, (up[1] + down[1]) / 2.0, trip
-
-                if ranging == "twtt":  # the replying transponder's turnaround
-                    turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
-                if direction:  # the transceiver interrogates; the diver replies from where it is then
-                    up = leg(None, True)
-                    reply = leg(up[0] + turnaround, False, 3)
-                    up_kind = up[3][2]
-                    rng, distance, tau = two_way(up, reply)
-                    # the surface measures at the reply's arrival and sends the fix down to the diver
-                    downlink = leg(tau, True, 6)
-                    arrival = t_k + tau + downlink[0]
-                    if snr_mode:  # the fix reaches the diver when the downlink is heard
-                        valid = downlink[3][2] > 0
-                    else:
-                        valid = ca.logic_and(valid, w[_DOWNLINK][0] >= p["loss_pct"] / 100.0)  # reply, downlink
-                    timing, data = (up, reply), downlink
-                    spread_end = tau + downlink[6]  # the downlink's multipath ends the exchange
-                elif ranging == "owtt":
-                    owtt_leg = leg(None, True)
-                    tau, distance, up_kind = owtt_leg[0], owtt_leg[1], 1.0
-                    measured = tau + drift * (t_k - x["t0"] + tau)
-                    rng = p["sound_speed_assumed"] * measured
-                    arrival = t_k + tau
-                    timing, data = (owtt_leg,), owtt_leg
-                    spread_end = owtt_leg[6]
-                else:  # TWTT: the diver interrogates from where it is at t_k, the reply reaches it later
-                    up = leg(None, False)
-                    down = leg(up[0] + turnaround, True, 3)
-                    up_kind = up[3][2]
-                    rng, distance, tau = two_way(up, down)
-                    arrival = t_k + tau
-                    timing, data = (up, down), down
-                    spread_end = up[0] + turnaround + down[6]
-                # the last leg's eigenray: from the beacon to the diver, or the diver's reply to the transceiver
-                last = reply if direction else (down if ranging == "twtt" else owtt_leg)
-                launch, arrival_angle, kind = last[3]
-                if direction:  # reversed: the reply leaves the diver and arrives at the transceiver
-                    launch, arrival_angle = -arrival_angle, -launch
-                kind = ca.if_else(ca.logic_and(kind > 0, up_kind > 0), kind, 0.0)
-                valid = ca.logic_and(valid, kind > 0)  # a shadow zone (or nothing heard): the packet is lost
-                scale, angle_scale = 1.0, 1.0
-                if snr_mode:
-                    # the packet's data needs its margin above the threshold (its own draw); a range from a
-                    # reflected arrival on any leg carries that path's excess
-                    decoded = heard_draws[DETECTION_DRAWS - 1] < sonar.detection_probability(
-                        data[4], p["detection_threshold"] + p["decoding_margin"], p["fluctuation"])
-                    valid = ca.logic_and(valid, decoded)
-                    for part in timing:
-                        outlier = ca.logic_or(outlier, part[3][2] > 1.5)
-                    # the timing noise of each leg grows below the reference SNR (their mean variance)
-                    scales = [sonar.accuracy_scale(part[4], p["reference_snr"]) for part in timing]
-                    scale = ca.sqrt(sum(s_ * s_ for s_ in scales) / len(scales))
-                    angle_scale = scales[-1]
-                rng = rng + p["sigma_range"] * scale * noise + excess
-                out = {"launch_angle": launch, "arrival_angle": arrival_angle, "arrival": kind,
-                       "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
-                       "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
-                       "outlier": ca.logic_and(outlier, valid), "rx_time": arrival,
-                       "snr": last[4], "detection_probability": last[5]}
-                out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
-                overrun = {}
-                if snr_mode:  # the exchange's last heard arrival after the next slot began: flagged
-                    overrun = {"slot_overrun": ca.if_else(spread_end > p["slot_period"], ca.fmax(
-                        x["slot_overrun"], spread_end), x["slot_overrun"])}
-                if direction:
-                    arrives = reply[2] - beacon
-                    if propagation == "ray":  # along the reply's eigenray: the chord's azimuth (a range-independent
-                        # profile), the eigenray's grazing angle at the transceiver (reciprocal: its launch toward
-                        # the diver, the reply's −arrival_angle) as the elevation
-                        level = ca.norm_2(arrives[:2])
-                        east, north = ca.if_else(level > 0, arrives[1] / level, 0.0), ca.if_else(level > 0,
-                                                                                               arrives[0] / level, 1.0)
-                        grazing = reply[3][0]
-                        arrives = ca.vertcat(north * ca.cos(grazing), east * ca.cos(grazing), ca.sin(grazing))
-                    measured = doa(arrives, u, p, w[_ANGLE_NOISE], angle_scale)
-                    out.update({name: ca.if_else(valid, value, 0.0) for name, value in zip(
-                        ("azimuth", "elevation", "doa_x", "doa_y"), measured)})
-                    out.update({f"doa_{a}": ca.if_else(valid, u[f"imu_{a}"], 0.0) for a in ATTITUDE_ANGLES})
-                return {"k": k, **send(x, p, out, arrival - t_k), **overrun}
-            return handler
-
-        def hear(source, receive, p, d, draws):
-            """The first detected eigenray from ``source`` to ``receive`` (3, 1) [m, NED] with the uniforms
-            ``draws`` (3: one per family): :func:`~sblsim.models.acoustics.detection.first_detected` (the families
-            interpolated in the run's family table where it holds)."""
-            families = family_levels_grid()(
-                p["ray_family_rows"] == RAY_TABLE_ROWS, source[2], receive[2], ca.norm_2(receive[:2] - source[:2]),
-                p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"], d["speeds"],
-                d["site"], d["ray_bounds"], d["ray_grid"], d["family_values"])
-            return first_detected(*families, draws)
-
-        def send(x, p, out, elapsed):
-            """The queue after a packet ``out`` (by output name) left ``elapsed`` before it arrives [s]: in the first
-            free in-flight place; none free, the longest arrival − transmit of it and of those in flight is kept in
-            ``overflow_travel_time`` (the run is refused, :func:`check_in_flight`)."""
-            place = NO_ROW  # the first free place (none: nowhere)
-            for j in reversed(range(FLIGHT_CAPACITY)):
-                place = ca.if_else(x["q_used"][j] < 0.5, j, place)
-            placed = place < FLIGHT_CAPACITY
-            columns = put_row([x[name] for name, _ in queue], place, [*(out[name] for name in carried), 1.0])
-            new = {name: column for (name, _), column in zip(queue, columns)}
-            longest = elapsed  # the longest in flight then, for the refusal's message
-            for j in range(FLIGHT_CAPACITY):
-                sent_at = x["t0"] + x["q_packet_seq"][j] * p["slot_period"]
-                longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - sent_at, 0.0))
-            refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
-            return {**new, "overflow_travel_time": refused}
-
-        def arrived(x, t, h):
-            """Per in-flight place: it holds a packet whose arrival the end of the step has reached."""
-            return [ca.logic_and(x["q_used"][j] > 0.5, x["q_rx_time"][j] <= t + h + ARRIVAL_SLACK)
-                    for j in range(FLIGHT_CAPACITY)]
+        slot = partial(_slot, n, true_names, sent_names, direction, queue, carried)
 
         def deliverable(x, u, p, d, t, h):
             """Guard of the delivery: a packet has arrived by the end of the step, and none was delivered in it
             (the last delivery's step end lies before this step's middle)."""
             any_arrived = 0
-            for flag in arrived(x, t, h):
+            for flag in _arrived(x, t, h):
                 any_arrived = ca.logic_or(any_arrived, flag)
             return ca.logic_and(any_arrived, x["delivered_end"] < t + 0.5 * h)
 
         def deliver(x, u, p, d, w, t, h):
             """The arrived packet of earliest arrival (then lowest slot counter) becomes the outputs."""
             best, best_rx, best_seq = 0, ca.inf, ca.inf
-            for j, flag in enumerate(arrived(x, t, h)):
+            for j, flag in enumerate(_arrived(x, t, h)):
                 rx, seq = x["q_rx_time"][j], x["q_packet_seq"][j]
                 better = ca.logic_and(flag, ca.logic_or(rx < best_rx, ca.logic_and(rx == best_rx, seq < best_seq)))
                 best = ca.if_else(better, j, best)
@@ -867,24 +944,6 @@ class Acoustics(Component):
             out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
             used = ca.vertcat(*[ca.if_else(at[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
             return {**out, "q_used": used, "delivered_end": t + h}
-
-        def doa(direction, u, p, w_angle, scale=1.0):
-            """Measured azimuth and elevation (NED) [rad] of a reply arriving along ``direction`` (3, 1), and the
-            direction cosines the array measured: the array (attitude ``array_*``) measures the direction cosines
-            of the line of sight across its two axes, each with the noise ``scale`` σ_u (σ_u =
-            ``usbl_angle_sigma_deg`` [rad], the angle's std on the array's axis), takes the wavefront as
-            arriving from below its plane, and the surface turns the direction into NED with the IMU's attitude
-            (``imu_*``)."""
-            array = rotation_ned(*[u[f"array_{a}"] for a in ("roll", "pitch", "yaw")])
-            # in the array's frame (axis = body down); a diver at the transceiver is seen on the axis, not as NaN
-            seen = ca.mtimes(array.T, direction / ca.fmax(ca.norm_2(direction), 1e-9))
-            sigma = scale * p["usbl_angle_sigma_deg"] * (ca.pi / 180.0)
-            ux, uy = seen[0] + sigma * w_angle[0], seen[1] + sigma * w_angle[1]
-            across = ca.sqrt(ux ** 2 + uy ** 2)
-            shrink = 1.0 / ca.fmax(across, 1.0)  # a measured pair beyond the unit circle: in the array's plane
-            measured = ca.vertcat(ux * shrink, uy * shrink, ca.sqrt(ca.fmax(1.0 - across ** 2, 0.0)))
-            ned = ca.mtimes(rotation_ned(*[u[f"imu_{a}"] for a in ATTITUDE_ANGLES]), measured)
-            return ca.atan2(ned[1], ned[0]), ca.atan2(ned[2], ca.sqrt(ned[0] ** 2 + ned[1] ** 2)), ux, uy
 
         def output(x, p, d, t):
             return {name: x[name] for name in packet}
