@@ -47,7 +47,7 @@ from sblsim.models.calibration import (
     select,
     solve,
 )
-from sblsim.models.declarations import ModelError
+from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.perturbation import (
     BASES_RANGE,
     CRITERIA,
@@ -76,60 +76,89 @@ BUILTIN_SURVEYS = {name: f"{name}.toml" for name in (
 PROPAGATIONS = ("straight", "ray")
 #: The editing a built-in GNATSS survey may ask for (``survey.editing``).
 EDITINGS = ("none", "community")
-#: The solver's settings: key -> (type, allowed range or choices, unit, default, meaning).
-SOLVER_KEYS: dict[str, tuple[type, Any, str, Any, str]] = {
-    "sound_speed_mps": (float, SOUND_SPEED_RANGE, "m/s", 1500.0,
-                        "the sound speed of the straight ray (the harmonic mean of the water column)"),
-    "solve_sound_speed": (bool, None, "", False, "also estimate a sound-speed scale"),
-    "rigid": (bool, None, "", False, "solve one common shift of all transponders (a known array)"),
-    "outlier_factor": (float, OUTLIER_FACTOR_RANGE, "", 3.0,
-                       "drop the worst reply while its residual exceeds this many weighted RMS"),
-    "twtt_sigma_s": (float, (0.0, 1.0), "s", 0.0, "a TWTT noise added to the weights"),
-    "segments": (list, None, "", [], "[start, end) windows of transmit times, ISO 8601 UTC; empty: the whole log"),
-    "distance_limit_m": (float, (0.0, 1e5), "m", 1e5,
-                         "use only the replies whose transmit point is within this horizontal distance of the "
-                         "frame's origin"),
-    "propagation": (str, PROPAGATIONS, "", "straight",
-                    "straight: a straight ray at sound_speed_mps, or with sound_speed_profile at each transponder's "
-                    "harmonic mean; ray: the direct eigenray through sound_speed_profile"),
-    "sound_speed_profile": (str, None, "", "",
-                            "a sound-speed profile (an acoustics.sound_speed_profile value: ctd:NAME, munk, a CSV "
-                            "cast); empty: none"),
-    "harmonic_mean_start_depth_m": (float, (0.0, 11000.0), "m", 0.0,
-                                    "depth where each transponder's harmonic mean of the profile starts"),
-    "surface_u_m": (float, (-1e4, 1e4), "m", 0.0, "Up of the sea surface in the survey's frame (depth 0 of the "
-                    "profile)"),
-    "running": (bool, None, "", True, "also compute the running solution (a static Kalman filter, running.csv and "
-                "running.png)"),
-    "running_prior_sigma_m": (float, PRIOR_SIGMA_RANGE, "m", PRIOR_SIGMA_M,
-                              "the running solution's prior 1-sigma of the a-priori positions per axis"),
-    "running_iterated": (bool, None, "", True, "the running solution's updates iterated (the iterated extended "
-                         "Kalman filter); false: the extended Kalman filter"),
-    "running_passes": (int, PASSES_RANGE, "", 1, "the running solution's passes: 1 the extended Kalman filter, more "
-                       "re-linearised at the previous pass's last state"),
-    "earth_radius_m": (float, (0.0, EARTH_RADIUS_RANGE[1]), "m", 0.0,
-                       f"the eigenrays through spherical layers of this radius (0: flat layers; else in "
-                       f"[{EARTH_RADIUS_RANGE[0]:g}, {EARTH_RADIUS_RANGE[1]:g}]), as SeaGap"),
-    "transducer_depth_m": (float, (0.0, TRANSDUCER_DEPTH_RANGE[1]), "m", 0.0,
-                           "the profile hung from each transducer at this depth, as SeaGap's XDUCER_DEPTH (0: the sea "
-                           "surface fixed at surface_u_m)"),
-    "perturbation": (str, PERTURBATIONS, "", "none", "the sound speed's change in time solved with the positions: "
-                     "none, ntd (SeaGap's nadir total delay), garpos (GARPOS's correction of the log travel time)"),
-    "n_bases": ("ints", BASES_RANGE, "", 0, "the perturbation's cubic B-spline bases over the survey (0: one knot "
-                "every knot_interval); a list: the candidates of the search by criterion"),
-    "knot_interval": (float, KNOT_INTERVAL_RANGE, "s", 300.0, "the perturbation's knot spacing when n_bases is 0"),
-    "criterion": (str, CRITERIA, "", "bic", "the criterion of the search over n_bases (ntd; garpos takes ABIC)"),
-    "gradient": (str, GRADIENTS, "", "none", "the perturbation's horizontal gradients: none, deep, shallow+deep"),
-    "log_lambda0": ("floats", (-10.0, 10.0), "", -2.0, "GARPOS's smoothness, log10 of lambda0 squared; a list: the "
-                    "candidates of the ABIC search"),
-    "log_grad_lambda": ("floats", (-10.0, 10.0), "", -1.0, "GARPOS's gradients' smoothness over the background's, "
-                        "log10; a list: candidates"),
-    "mu_t": ("floats", (0.0, 86400.0), "s", 0.0, "GARPOS's data correlation length (0: independent replies); a list: "
-             "candidates"),
-    "mu_mt": ("floats", (0.0, 1.0), "", 0.5, "GARPOS's data correlation between transponders; a list: candidates"),
-    "reject_sigma": (float, (0.0, 100.0), "", 0.0, "with a perturbation, drop the replies beyond this many standard "
-                     "deviations of the residuals' mean (GARPOS's rejection; 0: none)"),
-}
+
+
+def _solver_key(name: str, type_: str, start: Any, unit: str, description: str, **allowed: Any) -> Variable:
+    """A solver setting declared as a configuration key (``scope='config'``: never an FMU variable)."""
+    return Variable(name, "parameter", type_, start, unit, description, scope="config", **allowed)
+
+
+#: The solver's settings (``[solver]`` of a survey, ``--set solver.KEY=VALUE``), declared as every configuration key
+#: is: name, type, default, unit, meaning, allowed range or choices (a key of :data:`SEARCH_KEYS` also takes a list
+#: of candidates; ``segments`` a list of [start, end] pairs); checked by :func:`solver_value`.
+SOLVER_VARIABLES: tuple[Variable, ...] = (
+    _solver_key("sound_speed_mps", "Real", 1500.0, "m/s",
+                "the sound speed of the straight ray (the harmonic mean of the water column)",
+                min=SOUND_SPEED_RANGE[0], max=SOUND_SPEED_RANGE[1]),
+    _solver_key("solve_sound_speed", "Boolean", False, "",
+                "also estimate a sound-speed scale"),
+    _solver_key("rigid", "Boolean", False, "",
+                "solve one common shift of all transponders (a known array)"),
+    _solver_key("outlier_factor", "Real", 3.0, "1",
+                "drop the worst reply while its residual exceeds this many weighted RMS",
+                min=OUTLIER_FACTOR_RANGE[0], max=OUTLIER_FACTOR_RANGE[1]),
+    _solver_key("twtt_sigma_s", "Real", 0.0, "s",
+                "a TWTT noise added to the weights", min=0.0, max=1.0),
+    _solver_key("segments", "String", [], "",
+                "[start, end) windows of transmit times, ISO 8601 UTC; empty: the whole log"),
+    _solver_key("distance_limit_m", "Real", 1e5, "m",
+                "use only the replies whose transmit point is within this horizontal distance of the frame's origin",
+                min=0.0, max=1e5),
+    _solver_key("propagation", "String", "straight", "",
+                "straight: a straight ray at sound_speed_mps, or with sound_speed_profile at each transponder's "
+                "harmonic mean; ray: the direct eigenray through sound_speed_profile", choices=PROPAGATIONS),
+    _solver_key("sound_speed_profile", "String", "", "",
+                "a sound-speed profile (an acoustics.sound_speed_profile value: ctd:NAME, munk, a CSV cast); empty: "
+                "none"),
+    _solver_key("harmonic_mean_start_depth_m", "Real", 0.0, "m",
+                "depth where each transponder's harmonic mean of the profile starts", min=0.0, max=11000.0),
+    _solver_key("surface_u_m", "Real", 0.0, "m",
+                "Up of the sea surface in the survey's frame (depth 0 of the profile)", min=-1e4, max=1e4),
+    _solver_key("running", "Boolean", True, "",
+                "also compute the running solution (a static Kalman filter, running.csv and running.png)"),
+    _solver_key("running_prior_sigma_m", "Real", PRIOR_SIGMA_M, "m",
+                "the running solution's prior 1-sigma of the a-priori positions per axis",
+                min=PRIOR_SIGMA_RANGE[0], max=PRIOR_SIGMA_RANGE[1]),
+    _solver_key("running_iterated", "Boolean", True, "",
+                "the running solution's updates iterated (the iterated extended Kalman filter); false: the extended "
+                "Kalman filter"),
+    _solver_key("running_passes", "Integer", 1, "",
+                "the running solution's passes: 1 the extended Kalman filter, more re-linearised at the previous "
+                "pass's last state", min=PASSES_RANGE[0], max=PASSES_RANGE[1]),
+    _solver_key("earth_radius_m", "Real", 0.0, "m",
+                f"the eigenrays through spherical layers of this radius (0: flat layers; else in "
+                f"[{EARTH_RADIUS_RANGE[0]:g}, {EARTH_RADIUS_RANGE[1]:g}]), as SeaGap",
+                min=0.0, max=EARTH_RADIUS_RANGE[1]),
+    _solver_key("transducer_depth_m", "Real", 0.0, "m",
+                "the profile hung from each transducer at this depth, as SeaGap's XDUCER_DEPTH (0: the sea surface "
+                "fixed at surface_u_m)", min=0.0, max=TRANSDUCER_DEPTH_RANGE[1]),
+    _solver_key("perturbation", "String", "none", "",
+                "the sound speed's change in time solved with the positions: none, ntd (SeaGap's nadir total delay), "
+                "garpos (GARPOS's correction of the log travel time)", choices=PERTURBATIONS),
+    _solver_key("n_bases", "Integer", 0, "",
+                "the perturbation's cubic B-spline bases over the survey (0: one knot every knot_interval); a list: "
+                "the candidates of the search by criterion", min=BASES_RANGE[0], max=BASES_RANGE[1]),
+    _solver_key("knot_interval", "Real", 300.0, "s",
+                "the perturbation's knot spacing when n_bases is 0",
+                min=KNOT_INTERVAL_RANGE[0], max=KNOT_INTERVAL_RANGE[1]),
+    _solver_key("criterion", "String", "bic", "",
+                "the criterion of the search over n_bases (ntd; garpos takes ABIC)", choices=CRITERIA),
+    _solver_key("gradient", "String", "none", "",
+                "the perturbation's horizontal gradients: none, deep, shallow+deep", choices=GRADIENTS),
+    _solver_key("log_lambda0", "Real", -2.0, "1",
+                "GARPOS's smoothness, log10 of lambda0 squared; a list: the candidates of the ABIC search",
+                min=-10.0, max=10.0),
+    _solver_key("log_grad_lambda", "Real", -1.0, "1",
+                "GARPOS's gradients' smoothness over the background's, log10; a list: candidates", min=-10.0, max=10.0),
+    _solver_key("mu_t", "Real", 0.0, "s",
+                "GARPOS's data correlation length (0: independent replies); a list: candidates", min=0.0, max=86400.0),
+    _solver_key("mu_mt", "Real", 0.5, "1",
+                "GARPOS's data correlation between transponders; a list: candidates", min=0.0, max=1.0),
+    _solver_key("reject_sigma", "Real", 0.0, "1",
+                "with a perturbation, drop the replies beyond this many standard deviations of the residuals' mean "
+                "(GARPOS's rejection; 0: none)", min=0.0, max=100.0),
+)
+SOLVER_KEYS: dict[str, Variable] = {v.name: v for v in SOLVER_VARIABLES}
 #: The perturbation's keys a list may search (product of the lists).
 SEARCH_KEYS = ("n_bases", "log_lambda0", "log_grad_lambda", "mu_t", "mu_mt")
 #: The files of a perturbation: ``ntd.csv`` and ``ntd.png``; of a search, ``criterion.csv`` and ``criterion.png``.
@@ -175,38 +204,48 @@ class Survey:
     profile: np.ndarray | None = None
 
 
-def _value(key: str, value: Any) -> Any:
-    kind, allowed, unit, _, _ = SOLVER_KEYS[key]
-    units = f" {unit}" if unit else ""
-    if kind in ("ints", "floats"):  # a number, or a list of candidates
-        one = int if kind == "ints" else float
+def solver_value(key: str, value: Any) -> Any:
+    """The solver setting ``key`` (:data:`SOLVER_KEYS`) checked against its declaration and returned as its type: a
+    number in its range (a key of :data:`SEARCH_KEYS`: or a list of 1 to 200 candidates), true or false, one of its
+    choices or a text of at most 200 characters, ``segments`` a list of [start, end] pairs (ISO 8601 UTC).
+
+    Raises
+    ------
+    ModelError
+        ``solver.KEY: ...`` naming the value and the allowed range (and the unit).
+    """
+    v = SOLVER_KEYS[key]
+    allowed = (v.min, v.max)
+    units = f" {v.unit}" if v.unit not in ("", "1") else ""
+    if key in SEARCH_KEYS:  # a number, or a list of candidates
+        one = int if v.type == "Integer" else float
         if isinstance(value, list):
             if not 1 <= len(value) <= 200:
                 raise ModelError(f"solver.{key}: a list of 1 to 200 candidates, got {len(value)}")
-            return [_number(key, v, one, allowed, units) for v in value]
+            return [_number(key, x, one, allowed, units) for x in value]
         return _number(key, value, one, allowed, units)
-    if kind is bool:
+    if v.type == "Boolean":
         if not isinstance(value, bool):
             raise ModelError(f"solver.{key}: {value!r} is not true or false")
         return value
-    if kind is str:
-        if allowed is not None and value not in allowed:
-            raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not one of {', '.join(allowed)}")
+    if key == "segments":
+        return _segments(value)
+    if v.type == "String":
+        if v.choices is not None and value not in v.choices:
+            raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not one of {', '.join(v.choices)}")
         if not isinstance(value, str) or len(value) > 200:
             raise ModelError(f"solver.{key}: {str(value)[:40]!r} is not a text of at most 200 characters")
         return value
-    if kind is int:
+    if v.type == "Integer":
         if isinstance(value, bool) or not isinstance(value, int) or not allowed[0] <= value <= allowed[1]:
             raise ModelError(f"solver.{key}: {value!r} is outside the allowed range [{allowed[0]}, {allowed[1]}] "
                              "(an integer)")
         return value
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                or not allowed[0] <= value <= allowed[1]:
-            raise ModelError(f"solver.{key}: {value!r} is outside the allowed range [{allowed[0]:g}, "
-                             f"{allowed[1]:g}]{units}")
-        return float(value)
-    return _segments(value)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not allowed[0] <= value <= allowed[1]:
+        raise ModelError(f"solver.{key}: {value!r} is outside the allowed range [{allowed[0]:g}, "
+                         f"{allowed[1]:g}]{units}")
+    return float(value)
 
 
 def _number(key: str, value: Any, kind: type, allowed: tuple, units: str) -> Any:
@@ -270,15 +309,16 @@ def apply_overrides(solver: dict, overrides: list[str]) -> dict:
         try:
             value = tomlfile.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
-            if SOLVER_KEYS[name][0] is not str:
+            if SOLVER_KEYS[name].type != "String" or name == "segments":
                 raise ModelError(f"--set: solver.{name}: {text[:40]!r} is not a TOML value") from None
             value = text  # a text key takes a bare word too (solver.propagation=ray)
-        solver[name] = _value(name, value)
+        solver[name] = solver_value(name, value)
     return solver
 
 
-def _defaults() -> dict:
-    return {key: spec[3] for key, spec in SOLVER_KEYS.items()}
+def solver_defaults() -> dict:
+    """Every solver setting at its default (:data:`SOLVER_KEYS`; a list default a new list)."""
+    return {v.name: list(v.start) if isinstance(v.start, list) else v.start for v in SOLVER_VARIABLES}
 
 
 def guess_apriori(log: SurveyLog, ids: list[str], sound_speed: float) -> np.ndarray:
@@ -337,9 +377,9 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
         ids = [t["id"] for t in site["transponders"]]
         apriori = np.array([[t["e_m"], t["n_m"], t["u_m"]] for t in site["transponders"]], dtype=float)
         origin = {k: site[k] for k in ("lat_deg", "lon_deg", "height_m")}
-    solver = _defaults()
+    solver = solver_defaults()
     for key, value in raw.get("solver", {}).items():
-        solver[key] = _value(key, value)
+        solver[key] = solver_value(key, value)
     solver = apply_overrides(solver, overrides)
     return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name), depth_m=depth,
                   profile=profile)
@@ -385,7 +425,7 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
         raise ModelError(f"calibrate: {source[:80]!r} is a simulated survey (CONFIG.toml): "
                          "sblsim.orchestrator.surveys.simulate.load_simulated reads it")
     fmt = fmt or "sblsim"
-    solver = apply_overrides(_defaults(), overrides)
+    solver = apply_overrides(solver_defaults(), overrides)
     path = Path(source)
     if fmt in ("seagap", "garpos"):  # their own transponders and profile; eigenrays unless --set says otherwise
         if not any(item.split("=", 1)[0].strip() == "solver.propagation" for item in overrides):
@@ -918,5 +958,5 @@ def _running_figure(result: Calibration, path: Path, plt) -> None:
 
 __all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES",
            "PERTURBATION_FILES", "PROPAGATIONS", "RUNNING_COLUMNS", "RUNNING_FILES", "SEARCH_FILES", "SEARCH_KEYS",
-           "SOLVER_KEYS", "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model", "load_survey",
-           "perturbations", "profile_of", "write_calibration"]
+           "SOLVER_KEYS", "SOLVER_VARIABLES", "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model",
+           "load_survey", "perturbations", "profile_of", "solver_defaults", "solver_value", "write_calibration"]

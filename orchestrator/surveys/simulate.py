@@ -40,7 +40,14 @@ from sblsim.models.calibration import crb
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.progress import Progress
-from sblsim.orchestrator.surveys.calibrate import SOLVER_KEYS, Calibration, Survey, _defaults, _value, calibrate
+from sblsim.orchestrator.surveys.calibrate import (
+    SOLVER_KEYS,
+    Calibration,
+    Survey,
+    calibrate,
+    solver_defaults,
+    solver_value,
+)
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame
 
 _FOLDER = files("sblsim.orchestrator.surveys")
@@ -118,7 +125,7 @@ def _solver_value(name: str, value: Any) -> Any:
     if name == "sound_speed_mps":
         raise ModelError("solver.sound_speed_mps: a simulated survey's solver takes the true sound speed plus "
                          "survey.sound_speed_error_mps [m/s]; set that one")
-    return _value(name, value)
+    return solver_value(name, value)
 
 
 def load_simulated(source: str, overrides: list[str] | None = None) -> SimulatedSurvey:
@@ -166,7 +173,7 @@ def load_simulated(source: str, overrides: list[str] | None = None) -> Simulated
             raise ModelError(f"{table}.{unknown[0][:40]}: unknown key; the keys: "
                              + ", ".join(f"{table}.{k}" for k in declared))
         out[table] = {k: v.coerce(values[table].get(k, v.start), f"{table}.{k}") for k, v in declared.items()}
-    solver = _defaults()
+    solver = solver_defaults()
     for key, value in values["solver"].items():
         solver[key] = _solver_value(key, value)
     return SimulatedSurvey(name, out["survey"], out["platform"], solver, set(values["solver"]))
@@ -192,7 +199,7 @@ def replicate(sim: SimulatedSurvey, k: int) -> tuple[Survey, boxin.Simulated]:
     log: SurveyLog = check_frame(frame, [f"ping {p}" for p in range(n)], f"{sim.name} replicate {k}")
     log.counts["ignored_columns"] = []
     solver = dict(sim.solver)
-    solver["sound_speed_mps"] = _value("sound_speed_mps", s.assumed_sound_speed)
+    solver["sound_speed_mps"] = solver_value("sound_speed_mps", s.assumed_sound_speed)
     if "twtt_sigma_s" not in sim.given:
         solver["twtt_sigma_s"] = s.twtt_sigma
     survey = Survey(sim.name, log, [TRANSPONDER_ID], s.apriori, solver, None, "simulated",

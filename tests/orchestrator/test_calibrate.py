@@ -249,3 +249,27 @@ def test_an_unknown_format_is_refused(tmp_path, capsys):
     assert main(["calibrate", str(_good_csv(tmp_path)), "--format", "rinex", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "--format: 'rinex' is not one of sblsim, xie" in err
+
+
+def test_the_solver_keys_are_declared_and_documented_as_they_are_checked():
+    """Every solver setting is a Variable declaration (a configuration key), docs/calibration.md's table lists each
+    once with its unit and default, and a value outside its declared range is refused naming the range."""
+    import re
+
+    from sblsim.models.declarations import ModelError, Variable
+    from sblsim.orchestrator.surveys.calibrate import SOLVER_KEYS, SOLVER_VARIABLES, solver_defaults, solver_value
+
+    assert all(isinstance(v, Variable) and not v.in_fmu for v in SOLVER_VARIABLES)
+    text = (Path(__file__).resolve().parents[2] / "docs" / "calibration.md").read_text()
+    rows = {m[0]: [c.strip() for c in m[1].split("|")]
+            for m in re.findall(r"^\| `solver\.(\w+)` \|(.*)\|$", text, flags=re.M)}
+    assert set(rows) == set(SOLVER_KEYS)
+    defaults = solver_defaults()
+    for name, v in SOLVER_KEYS.items():
+        unit, _allowed, default = rows[name][:3]
+        assert unit == ("" if v.unit in ("", "1") else v.unit), name
+        if v.type == "Real" and name != "running_prior_sigma_m":
+            assert float(default.split()[0]) == defaults[name], (name, default)
+        if v.type in ("Real", "Integer") and v.max is not None:
+            with pytest.raises(ModelError, match=rf"solver\.{name}: .* is outside the allowed range"):
+                solver_value(name, v.max * 2 + 1)
