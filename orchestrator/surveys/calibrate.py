@@ -287,7 +287,7 @@ def _segments(value: Any) -> list[tuple[str, str]]:
     return out
 
 
-def apply_overrides(solver: dict, overrides: list[str]) -> dict:
+def apply_solver_overrides(solver: dict, overrides: list[str]) -> dict:
     """The solver's settings with ``--set solver.KEY=VALUE`` items applied (the value read as TOML; a text key also
     takes a bare word).
 
@@ -380,7 +380,7 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     solver = solver_defaults()
     for key, value in raw.get("solver", {}).items():
         solver[key] = solver_value(key, value)
-    solver = apply_overrides(solver, overrides)
+    solver = apply_solver_overrides(solver, overrides)
     return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name), depth_m=depth,
                   profile=profile)
 
@@ -400,7 +400,7 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
         ``svp`` (:mod:`~sblsim.orchestrator.surveys.garpos`); both take ``propagation = "ray"`` through the
         survey's own profile unless ``--set`` says otherwise.
     overrides : list of str
-        ``solver.KEY=VALUE`` items (:func:`apply_overrides`).
+        ``solver.KEY=VALUE`` items (:func:`apply_solver_overrides`).
     initcfg, svp : str or None
         GARPOS's initial site-parameter file and sound-speed profile (``fmt="garpos"`` only, both needed).
 
@@ -425,7 +425,7 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
         raise ModelError(f"calibrate: {source[:80]!r} is a simulated survey (CONFIG.toml): "
                          "sblsim.orchestrator.surveys.simulate.load_simulated reads it")
     fmt = fmt or "sblsim"
-    solver = apply_overrides(solver_defaults(), overrides)
+    solver = apply_solver_overrides(solver_defaults(), overrides)
     path = Path(source)
     if fmt in ("seagap", "garpos"):  # their own transponders and profile; eigenrays unless --set says otherwise
         if not any(item.split("=", 1)[0].strip() == "solver.propagation" for item in overrides):
@@ -956,7 +956,7 @@ def _running_figure(result: Calibration, path: Path, plt) -> None:
     plt.close(fig)
 
 
-__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES",
-           "PERTURBATION_FILES", "PROPAGATIONS", "RUNNING_COLUMNS", "RUNNING_FILES", "SEARCH_FILES", "SEARCH_KEYS",
-           "SOLVER_KEYS", "SOLVER_VARIABLES", "Survey", "apply_overrides", "calibrate", "guess_apriori", "leg_model",
+__all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES", "PERTURBATION_FILES",
+           "PROPAGATIONS", "RUNNING_COLUMNS", "RUNNING_FILES", "SEARCH_FILES", "SEARCH_KEYS", "SOLVER_KEYS",
+           "SOLVER_VARIABLES", "Survey", "apply_solver_overrides", "calibrate", "guess_apriori", "leg_model",
            "load_survey", "perturbations", "profile_of", "solver_defaults", "solver_value", "write_calibration"]
