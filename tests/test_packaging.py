@@ -94,6 +94,29 @@ def test_wheel_holds_only_the_sblsim_package(installed):
     assert {t for t in tops if not t.endswith(".dist-info")} == {"sblsim"}
 
 
+def test_the_wheel_holds_every_module_of_the_sources(installed):
+    """Every Python module of models/, orchestrator/ and fmus/ is in the wheel, at its installed name (a package
+    folder missing from pyproject.toml's ``packages`` would be left out)."""
+    _, _, wheel = installed
+    import zipfile
+
+    with zipfile.ZipFile(wheel) as z:
+        names = set(z.namelist())
+    mapping = {"models": "sblsim/models", "orchestrator": "sblsim/orchestrator", "fmus": "sblsim/fmus"}
+    expected = set()
+    for folder, installed_as in mapping.items():
+        for path in (ROOT / folder).rglob("*.py"):
+            relative = path.relative_to(ROOT / folder)
+            if "build" in relative.parts or "__pycache__" in relative.parts:
+                continue
+            if relative.parts[0] == "toplevel":  # the package sblsim itself
+                expected.add("sblsim/" + "/".join(relative.parts[1:]))
+            else:
+                expected.add(f"{installed_as}/{relative.as_posix()}")
+    assert len(expected) > 100
+    assert sorted(expected - names) == []
+
+
 def test_console_script_answers_its_version(installed):
     env, outside, _ = installed
     done = subprocess.run([str(env / "bin" / "sblsim"), "--version"], cwd=outside, capture_output=True, text=True,
