@@ -241,6 +241,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _calibration_warnings(result) -> None:
+    """A calibration's warnings, one line each on standard error."""
     for warning in result.warnings:
         print(f"sblsim: warning: {warning}", file=sys.stderr)
 

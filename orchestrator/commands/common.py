@@ -31,17 +31,15 @@ from sblsim.orchestrator.io.output import check_output
 #: What a ``progress`` argument may be: False or None (silent, the default), True (a tqdm bar on standard
 #: error), or a callable ``progress(done, total)`` called as the work advances.
 Progress = Union[bool, None, Callable[[float, float], object]]
-
-
 #: What a ``set`` argument may be: a mapping ``{"section.key": value}`` (e.g. ``{"platform.baseline": 0.4,
 #: "receiver": "lsq"}``) or a sequence of ``"section.key=value"`` texts as ``--set`` takes them.
 Overrides = Union[Mapping[str, Any], Sequence[str], None]
-
-
+#: The largest seed (``run.seed``, ``seed=``, ``--seed``): a 31-bit integer.
 MAX_SEED = 2**31 - 1
 
 
 def check_seed(seed: Any, where: str = "seed") -> None:
+    """A seed argument: None or an integer in [0, :data:`MAX_SEED`] (``where`` names it in the error)."""
     if seed is None:
         return
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
@@ -89,6 +87,7 @@ def resolve_config(source: Any, seed: int | None = None, overrides: Overrides = 
 
 
 def check_source(source: Any) -> None:
+    """A scenario argument that is not a configuration: a built-in scenario's name or a TOML file (text or path)."""
     if not isinstance(source, (str, Path)):
         raise ConfigError(f"scenario: expected a built-in scenario ({', '.join(BUILTIN_SCENARIOS)}), a TOML file "
                           f"or a configuration, got {type(source).__name__}")
@@ -136,11 +135,13 @@ def load(scenario_or_path: str | Path | Mapping, *, seed: int | None = None, set
 
 
 def check_engine(engine: str) -> None:
+    """An engine argument: one of :data:`~sblsim.orchestrator.cosim.engines.ENGINES`."""
     if not isinstance(engine, str) or engine not in ENGINES:
         raise ConfigError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
 
 
 def check_count(value: Any, where: str, low: int, high: int) -> int:
+    """An integer argument in [low, high] (a bool is not one)."""
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
         raise ConfigError(f"{where}: {value!r} is outside the allowed range [{low}, {high}] (an integer)")
     return value
@@ -181,6 +182,7 @@ def real_argument(value: Any, where: str, low: float, high: float, unit: str, lo
 
 
 def text_argument(value: Any, where: str, optional: bool = True) -> str | None:
+    """A text argument (None where it is optional)."""
     if value is None and optional:
         return None
     if not isinstance(value, str):
@@ -212,6 +214,8 @@ def scenario_source(scenario: Any, configuration: bool = False) -> str | Path | 
 
 
 def compared(compare: str | tuple[str, Sequence[Any]] | None) -> tuple[str, list[str]] | None:
+    """A ``compare`` argument (``"KEY=V1,V2"`` or ``(key, [values])``, None: no comparison) as ``--compare``
+    takes it, checked (:func:`~sblsim.orchestrator.cosim.config.parse_compare`)."""
     if compare is None:
         return None
     if isinstance(compare, str):

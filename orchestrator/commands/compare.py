@@ -75,6 +75,7 @@ class CompareResult:
 
 
 def _listed(value: str | Sequence[str] | None, what: str) -> str | None:
+    """A list of names argument (``receivers``, ``systems``) as the comma-separated text the command takes."""
     if value is None or isinstance(value, str):
         return value
     if not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value):

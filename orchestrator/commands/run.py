@@ -197,6 +197,8 @@ def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Pa
 
 
 def _run_result(result: Any, target: Path | None = None) -> RunResult:
+    """The API's result of the kernel's record of a run (:class:`~sblsim.orchestrator.cosim.run.RunRecord`), its
+    output folder ``target`` (None: nothing written)."""
     return RunResult(Config(thaw(result.config)), result.engine, result.timeseries, result.metrics, result.steps,
                      result.wall_time, target, result)
 
