@@ -100,7 +100,7 @@ def test_the_family_table_is_the_image_paths_in_isovelocity_water():
     c, depth = 1493.0, 40.0
     table = np.array([[0.0, c], [100.0, c]])
     bounds = (0.0, 5.0, 10.0, 30.0, 0.0, 200.0)
-    columns = detection.level_table(table, depth, bounds, SITE)
+    columns = detection.level_table(table, depth, bounds, SITE, *_compiled())  # as a run builds it
     assert columns["exact_share"] == 0.0
     rng = np.random.default_rng(5)
     zs, zr, x = (rng.uniform(bounds[2 * j], bounds[2 * j + 1], 40) for j in range(3))

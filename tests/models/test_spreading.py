@@ -283,12 +283,28 @@ def _bellhop_tl(table, source, depths, ranges, depth, bottom, frequency=1000.0, 
 
 
 def _site(name):
-    """Bellhop's TL and our families' outputs at the site ``name`` (computed once per session)."""
+    """Bellhop's TL and our families' outputs at the site ``name`` (computed once per session).
+
+    Ours are the families as the channel evaluates them, compiled in the local engine's library
+    (:func:`~sblsim.fmus.native.compiled_family_points`: casadi's own evaluation takes over a minute for the grid),
+    checked equal to :func:`rays.eigenray_paths` evaluated by casadi itself at every 97th point of the grid."""
     if name not in _BELLHOP:
+        from sblsim.fmus.native import compiled_family_points
+
         table, depth, bottom, source, depths, ranges = BELLHOP_SITES[name]
         theirs = _bellhop_tl(table, source, depths, ranges, depth, bottom)
         zr, x = (a.ravel() for a in np.meshgrid(depths, ranges, indexing="ij"))
-        _BELLHOP[name] = (theirs, paths_at(table, source, zr, x, depth), zr, x)
+        compiled = compiled_family_points()
+        if compiled is None:
+            ours = paths_at(table, source, zr, x, depth)
+        else:
+            nodes, speeds = rays.profile_arrays(table)
+            n = zr.size
+            ours = [np.asarray(v) for v in compiled.map(n)(source, zr[None], x[None], depth, nodes, speeds)]
+            sample = slice(0, n, 97)
+            for got, want in zip(ours, paths_at(table, source, zr[sample], x[sample], depth)):
+                np.testing.assert_array_equal(got[:, sample], want)
+        _BELLHOP[name] = (theirs, ours, zr, x)
     return _BELLHOP[name]
 
 
