@@ -273,11 +273,12 @@ def _eigenrays(name):
 
     model = rays.eigenray_families()
     compiled = compiled_family_points()
+    solve = model if compiled is None else compiled
 
     def solved(zs, zr, x, depth, nodes, speeds):
         key = (name, float(zs), float(zr), float(x), float(depth))
         if key not in _SOLVED:
-            out = tuple(np.asarray(v).ravel() for v in (compiled or model)(zs, zr, x, depth, nodes, speeds)[:4])
+            out = tuple(np.asarray(v).ravel() for v in solve(zs, zr, x, depth, nodes, speeds)[:4])
             if compiled is not None and len(_SOLVED) % 16 == 0:
                 for got, want in zip(out, model(zs, zr, x, depth, nodes, speeds)):
                     np.testing.assert_array_equal(got, np.asarray(want).ravel())

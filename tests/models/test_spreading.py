@@ -30,11 +30,12 @@ def paths(table, zs, zr, x, depth=0.0):
     return [np.asarray(v).ravel() for v in rays.eigenray_paths()(zs, zr, x, depth, nodes, speeds)]
 
 
-def paths_at(table, zs, zr, x, depth):
-    """:func:`rays.eigenray_paths` at arrays of receiver depths and ranges: its outputs, each (3, n)."""
+def paths_at(table, zs, zr, x, depth, paths=None):
+    """:func:`rays.eigenray_paths` at arrays of receiver depths and ranges: its outputs, each (3, n). ``paths``:
+    that function as it is evaluated (e.g. compiled); default casadi's own evaluation."""
     nodes, speeds = rays.profile_arrays(table)
     zr, x = np.broadcast_arrays(np.asarray(zr, float).ravel(), np.asarray(x, float).ravel())
-    f = rays.eigenray_paths().map(zr.size)
+    f = (rays.eigenray_paths() if paths is None else paths).map(zr.size)
     return [np.asarray(v) for v in f(zs, zr[None], x[None], depth, nodes, speeds)]
 
 
@@ -295,13 +296,9 @@ def _site(name):
         theirs = _bellhop_tl(table, source, depths, ranges, depth, bottom)
         zr, x = (a.ravel() for a in np.meshgrid(depths, ranges, indexing="ij"))
         compiled = compiled_family_points()
-        if compiled is None:
-            ours = paths_at(table, source, zr, x, depth)
-        else:
-            nodes, speeds = rays.profile_arrays(table)
-            n = zr.size
-            ours = [np.asarray(v) for v in compiled.map(n)(source, zr[None], x[None], depth, nodes, speeds)]
-            sample = slice(0, n, 97)
+        ours = paths_at(table, source, zr, x, depth, compiled)
+        if compiled is not None:
+            sample = slice(0, zr.size, 97)
             for got, want in zip(ours, paths_at(table, source, zr[sample], x[sample], depth)):
                 np.testing.assert_array_equal(got[:, sample], want)
         _BELLHOP[name] = (theirs, ours, zr, x)
