@@ -423,9 +423,11 @@ def _command(args: list[str], folder: str, stdout: str, stderr: str) -> None:
     os._exit(code or 0)
 
 
-#: Processes forked from one that imported the CLI once (a command's start-up, a second each, is not what is tested).
+#: Processes forked from one that imported the CLI, and the modules its commands import when they start, once (a
+#: command's start-up, up to a second each, is not what is tested).
 SERVER = multiprocessing.get_context("forkserver")
-SERVER.set_forkserver_preload(["sblsim.orchestrator.cli"])
+SERVER.set_forkserver_preload(["sblsim.orchestrator.cli", *(f"sblsim.orchestrator.{name}" for name in (
+    "cosim.run", "campaign", "analysis", "budget", "maps", "replay", "receiver_log", "io.tables"))])
 
 
 class _Case:

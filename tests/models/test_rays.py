@@ -80,9 +80,9 @@ def test_a_faster_layer_between_the_ends_casts_a_shadow():
 # ------------------------------------------------------------------ numerical integration of the ray equations
 
 
-def _ivp_ray(table, zs, x, theta0, depth):
+def _ivp_ray(table, zs, x, theta0, depth, end_angle=False):
     """Integrate dz/dr = tan θ, dθ/dr = −c'(z)/c, dτ/dr = 1/(c cos θ) in range, reflecting at 0 and ``depth``.
-    Returns (z at x, τ at x, boundaries hit)."""
+    Returns (z at x, τ at x, boundaries hit), and with ``end_angle`` θ at x [rad]."""
     # the table as Python floats, and each layer's gradient: the right-hand side runs millions of times, on scalars
     zt, ct = [float(v) for v in table[:, 0]], [float(v) for v in table[:, 1]]
     slopes = [(ct[k + 1] - ct[k]) / (zt[k + 1] - zt[k]) for k in range(len(zt) - 1)]
@@ -110,16 +110,30 @@ def _ivp_ray(table, zs, x, theta0, depth):
         sol = solve_ivp(rhs, (r0, x), y, method="DOP853", rtol=1e-10, atol=1e-10, events=[top, bottom],
                         max_step=20.0)
         if sol.status != 1:
-            return sol.y[0, -1], sol.y[2, -1], hits
+            return (sol.y[0, -1], sol.y[2, -1], hits) + ((sol.y[1, -1],) if end_angle else ())
         which = 0 if len(sol.t_events[0]) else 1
         r0, y = sol.t_events[which][0], sol.y_events[which][0].copy()
         y[0], y[1] = (0.0, -y[1]) if which == 0 else (depth, -y[1])
         hits.append(which)
 
 
+#: How near [m] to the receiver the integrated ray launched at our angle must reach its range for
+#: :func:`_shoot` to take its time without shooting.
+LANDED = 0.01
+
+
 def _shoot(table, zs, zr, x, theta, depth):
-    """The eigenray of the integrated ray equations whose launch angle [rad] lies within 1e-5 of ``theta``
-    (Brent on the depth reached at ``x``): :func:`_ivp_ray`'s (z at x, τ at x, boundaries hit)."""
+    """The integrated ray equations' eigenray near the launch angle ``theta`` [rad]: :func:`_ivp_ray`'s (z at x,
+    τ at (x, ``zr``), boundaries hit).
+
+    The ray launched at ``theta`` itself where it reaches ``x`` within :data:`LANDED` of ``zr`` (near a separatrix
+    the depth reached moves metres per µrad: landing there places the angle), its time moved along the wavefront
+    to ``zr``: τ(x, zr) = τ(x, z) − (z − zr) sin θ / c(z), θ its angle at x (Fermat: the time is stationary along
+    the ray; the rest, second order in z − zr, is below 1e-9 s here); else the ray of the launch angle found by
+    Brent's method within 1e-5 of ``theta`` (to 1e-11 rad)."""
+    z, tau, hits, angle = _ivp_ray(table, zs, x, theta, depth, end_angle=True)
+    if abs(z - zr) <= LANDED:
+        return z, tau - (z - zr) * math.sin(angle) / np.interp(z, table[:, 0], table[:, 1]), hits
     root = brentq(lambda a: _ivp_ray(table, zs, x, a, depth)[0] - zr, theta - 1e-5, theta + 1e-5, xtol=1e-11)
     return _ivp_ray(table, zs, x, root, depth)
 
