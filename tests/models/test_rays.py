@@ -77,6 +77,42 @@ def test_a_faster_layer_between_the_ends_casts_a_shadow():
     assert float(out[3]) == 0
 
 
+def test_the_layers_a_ray_does_not_cross_change_no_sum():
+    """The solve's layer sums (range, time, dX/dq; the tube's range over √(1 − q²), its derivative, the arc
+    length), which skip the layers a ray does not cross, equal bit for bit the sums of every layer's terms (each
+    layer evaluated) at random rays through a short table (most layers padding) and the NCL1 cast, with both pieces
+    and with fold on and off, ends on nodes included."""
+    import casadi as ca
+
+    rng = np.random.default_rng(5)
+    sym = [ca.SX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2", "z0", "z1", "c0", "c1")]
+    q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1 = sym
+    p1, p2 = rays._piece(q, cref, u1, v1, z0, z1, c0, c1), rays._piece(q, cref, u2, v2, z0, z1, c0, c1)
+    w2 = ca.if_else(ca.logic_or(fold > 0.5, q < 0), 2.0, 0.0)
+    x, t, f, arc = (a + w2 * b for a, b in zip(p1, p2))
+    every = {rays._layers(): ca.Function("every", sym, [x, t, ca.jacobian(x, q)]),
+             rays._tube(): ca.Function("every_tube", sym, [f, ca.jacobian(f, q), arc])}
+    for table in (np.array([[0, 1510], [30, 1508], [60, 1495], [100, 1489], [300, 1487.0]]),
+                  profile_table("ctd:NCL1", "", 15.0, 35.0)):
+        nodes, speeds = rays.profile_arrays(table)
+        n = 200
+        ends = np.sort(rng.uniform(-5.0, table[-1, 0] + 5.0, (n, 4)), axis=1)
+        ends[:20, 0] = table[rng.integers(0, len(table), 20), 0]  # on a node
+        ends[20:30, 1] = ends[20:30, 0]  # an empty first piece
+        cols = [rng.uniform(-0.9, 1.0, n), (np.arange(n) % 2).astype(float), rng.uniform(1480.0, 1520.0, n),
+                ends[:, 0], ends[:, 1], ends[:, 2], ends[:, 3]]
+        for sums, layer in every.items():
+            skipping = [np.asarray(v).ravel() for v in sums.map(n)(*[c[None] for c in cols], nodes, speeds)]
+            terms = layer.map(nodes.size - 1)
+            summed = [np.zeros(n) for _ in skipping]
+            for k in range(n):
+                out = terms(*[c[k] for c in cols], nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
+                for j, o in enumerate(out):
+                    summed[j][k] = float(ca.sum2(o))
+            for got, want in zip(skipping, summed):
+                np.testing.assert_array_equal(got, want)
+
+
 # ------------------------------------------------------------------ numerical integration of the ray equations
 
 
