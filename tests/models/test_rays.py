@@ -451,10 +451,11 @@ def test_against_bellhop(name):
     maximum of the speed: the top of a duct, the cast's first sample, which the receiver 2 m deep lies 1.6 cm
     under) Bellhop's fan cannot resolve the eigenray: its nearest beams land up to hundreds of metres from the
     receiver (the integration shows it), so that it misses the arrival, reports one the rays do not make or
-    times it tens of µs off. There our eigenray is checked against the ray equations integrated (solve_ivp,
-    within 1 µs, the same boundaries hit) and against Bellhop with a fan 1e-4° fine around it (an arrival with the
-    same bounces within 0.01° of ours, within 10 µs, 20 µs reflected) instead; the NCL1 cast and the strong table
-    have such geometries."""
+    times it tens of µs off. There our eigenray is checked against the ray equations integrated from our launch
+    angle (solve_ivp, :func:`_shoot`: the ray lands within 1 cm of the receiver after the same boundaries, its time
+    moved to the receiver's depth within 1 µs of ours) and against Bellhop with a fan 1e-4° fine around it (an
+    arrival with the same bounces within 0.01° of ours, within 10 µs, 20 µs reflected) instead; the NCL1 cast and
+    the strong table have such geometries."""
     compared, near, ducted = _compare_with_bellhop(name, _eigenrays(name))
     if name != "munk":
         assert near > 0
