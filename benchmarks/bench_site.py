@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -70,8 +71,6 @@ def main() -> None:
 
 def _here(code: str, *args: str) -> str:
     """``code`` run in this checkout's environment (as :func:`revision.checkout` runs it in a revision's)."""
-    import subprocess
-
     return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=True).stdout
 
 

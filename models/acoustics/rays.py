@@ -130,22 +130,28 @@ def _piece(q, cref, u, v, z0, z1, c0, c1):
     return x, t, reduced, length
 
 
-def _crossed_only(layer: ca.Function) -> ca.Function:
-    """A layer's terms of the sums (``(q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1) -> terms``), evaluated only
-    where the ray crosses the layer; exact zeros elsewhere.
+def _summed_over_layers(name: str, layer: ca.Function) -> ca.Function:
+    """``(q, fold, cref, u1, v1, u2, v2, nodes, speeds) -> sums``: each output of ``layer`` (a layer's terms,
+    ``(q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1) -> terms``) summed over the NODES − 1 layers of the padded
+    profile, a layer's terms evaluated only where the ray crosses it.
 
     :func:`_piece` clips ``[u, v]`` to ``[z0, z1]``; where ``min(z1, v) ≤ max(z0, u)`` for both pieces the clipped
     thickness is exactly 0 and every term is a product with it, a zero, which leaves each sum as it is. Most of the
-    NODES − 1 layers are such: a short table's padding, and every layer above or below the ray's depths; the
-    generated C skips them (:func:`~sblsim.models.expressions.switch`).
+    layers are such: a short table's padding, and every layer above or below the ray's depths; the generated C
+    skips them (:func:`~sblsim.models.expressions.switch`).
     """
-    args = [ca.MX.sym(layer.name_in(k)) for k in range(layer.n_in())]
-    _q, _fold, _cref, u1, v1, u2, v2, z0, z1, _c0, _c1 = args
+    terms = [ca.MX.sym(layer.name_in(k)) for k in range(layer.n_in())]
+    _q, _fold, _cref, u1, v1, u2, v2, z0, z1, _c0, _c1 = terms
     crossed = ca.logic_or(ca.fmin(z1, v1) > ca.fmax(z0, u1), ca.fmin(z1, v2) > ca.fmax(z0, u2))
-    outside = ca.Function(f"{layer.name()}_outside", args, [ca.MX.zeros(layer.sparsity_out(k))
-                                                           for k in range(layer.n_out())])
+    outside = ca.Function(f"{layer.name()}_outside", terms, [ca.MX.zeros(layer.sparsity_out(k))
+                                                            for k in range(layer.n_out())])
     chosen = switch(f"{layer.name()}_where", [outside, layer])
-    return ca.Function(f"{layer.name()}_crossed", args, chosen.call([crossed, *args]))
+    crossed_only = ca.Function(f"{layer.name()}_crossed", terms, chosen.call([crossed, *terms]))
+    mapped = crossed_only.map(NODES - 1, "serial")
+    args = [ca.MX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2")]
+    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
+    out = mapped(*args, nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
+    return ca.Function(name, args + [nodes, speeds], [ca.sum2(o) for o in out], {"never_inline": True})
 
 
 @lru_cache(maxsize=1)
@@ -161,12 +167,7 @@ def _layers() -> ca.Function:
     x, t = x1 + w2 * x2, t1 + w2 * t2
     layer = ca.Function("sblsim_ray_layer", [q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1],
                         [x, t, ca.jacobian(x, q)])
-    mapped = _crossed_only(layer).map(NODES - 1, "serial")
-    args = [ca.MX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2")]
-    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    out = mapped(*args, nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
-    sums = [ca.sum2(o) for o in out]
-    return ca.Function("sblsim_ray_sums", args + [nodes, speeds], sums, {"never_inline": True})
+    return _summed_over_layers("sblsim_ray_sums", layer)
 
 
 @lru_cache(maxsize=1)
@@ -183,12 +184,7 @@ def _tube() -> ca.Function:
     f, arc = f1 + w2 * f2, s1 + w2 * s2
     layer = ca.Function("sblsim_ray_tube_layer", [q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1],
                         [f, ca.jacobian(f, q), arc])
-    mapped = _crossed_only(layer).map(NODES - 1, "serial")
-    args = [ca.MX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2")]
-    nodes, speeds = ca.MX.sym("nodes", NODES), ca.MX.sym("speeds", NODES)
-    out = mapped(*args, nodes[:-1].T, nodes[1:].T, speeds[:-1].T, speeds[1:].T)
-    return ca.Function("sblsim_ray_tube", args + [nodes, speeds], [ca.sum2(o) for o in out],
-                       {"never_inline": True})
+    return _summed_over_layers("sblsim_ray_tube", layer)
 
 
 @lru_cache(maxsize=1)
