@@ -44,6 +44,7 @@ from sblsim.models.acoustics.detection import family_levels
 from sblsim.models.acoustics.ray_tables import exact_points, family_points
 from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
+from sblsim.models.design.information import SLOTS, layout_information
 from sblsim.models.errors import CompileError
 from sblsim.models.systems import SYSTEMS, interface_system
 
@@ -59,6 +60,17 @@ SYSTEM_BOUND = "sblsim_system_bound.c"
 #: The models of the library of the metrics, the bounds and the eigenray entry points: none (the runtime, the
 #: bound, the eigenray functions and the metrics alone).
 NO_MODELS: tuple[type, ...] = ()
+#: The points one call of a compiled layout function evaluates (:func:`layout_functions`).
+LAYOUT_CHUNK = 64
+
+
+def layout_functions() -> list[ca.Function]:
+    """The design's layout information (:func:`sblsim.models.design.information.layout_information`) of each slot
+    count (:data:`~sblsim.models.design.information.SLOTS`), mapped over :data:`LAYOUT_CHUNK` points that share the
+    layout (the transducers, their lever arms, the attitude and depth variances): ``sblsim_layout_S``, what the
+    library exports for the design's search (:func:`compiled_layout`)."""
+    return [layout_information(slots).map(f"sblsim_layout_{slots}", "serial", LAYOUT_CHUNK, [1, 2, 5, 6], [])
+            for slots in SLOTS]
 
 
 
@@ -95,6 +107,12 @@ def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, .
     rays.generate(str(directory) + "/")
     code = (directory / "sblsim_ray_points.c").read_text()
     (directory / "sblsim_ray_points.c").write_text(RAY_EXPORT + code)
+    # the design's search calls these through ctypes (compiled_layout)
+    layout = ca.CodeGenerator("sblsim_layout.c", {"casadi_real": "double", "casadi_int": "long long int"})
+    for function in layout_functions():
+        layout.add(function)
+    layout.generate(str(directory) + "/")
+    (directory / "sblsim_layout.c").write_text(RAY_EXPORT + (directory / "sblsim_layout.c").read_text())
     for name in (BATCH, METRICS) + ((SYSTEM_BOUND,) if own else ()):
         (directory / name).write_text((C_DIR / name).read_text())
     return sorted(directory.glob("*.c"))
@@ -547,6 +565,63 @@ def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
         return None
 
 
-__all__ = ["NO_MODELS", "NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS", "abandonable", "cache_dir",
-           "compiled_exact_points", "compiled_family_levels", "compiled_family_points", "library_path", "load",
-           "metrics_sizes", "run_metrics", "stream", "system_bound_sizes", "system_pcrb", "write_library_sources"]
+class CompiledFunction:
+    """A casadi-generated function of the local engine's library, called through ctypes on numpy arrays (no
+    conversion to casadi's matrices: a call costs the C function's time).
+
+    Parameters
+    ----------
+    lib : ctypes.CDLL
+        The library (:func:`load`).
+    name : str
+        The generated function's name.
+
+    Notes
+    -----
+    Each input and output is a float64 array laid out as casadi lays out a matrix (column-major: a (rows, K)
+    matrix of K mapped columns is a C-contiguous (K, rows) numpy array).
+    """
+
+    def __init__(self, lib: ctypes.CDLL, name: str) -> None:
+        self.function = getattr(lib, name)
+        self.function.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
+        sizes = [ctypes.c_longlong() for _ in range(4)]
+        work = getattr(lib, f"{name}_work")
+        work(*[ctypes.byref(size) for size in sizes])
+        self.n_arg, self.n_res, n_iw, n_w = (size.value for size in sizes)
+        self._iw = (ctypes.c_longlong * max(n_iw, 1))()
+        self._w = (ctypes.c_double * max(n_w, 1))()
+        self._arg = (ctypes.c_void_p * self.n_arg)()
+        self._res = (ctypes.c_void_p * self.n_res)()
+
+    def __call__(self, inputs, outputs) -> None:
+        """Evaluate into ``outputs`` (each C-contiguous float64, written in place) from ``inputs`` (each
+        C-contiguous float64).
+
+        Raises
+        ------
+        RuntimeError
+            If the generated function reports an error.
+        """
+        for k, array in enumerate(inputs):
+            self._arg[k] = array.ctypes.data
+        for k, array in enumerate(outputs):
+            self._res[k] = array.ctypes.data
+        if self.function(self._arg, self._res, self._iw, self._w, 0):
+            raise RuntimeError("a compiled layout function failed")
+
+
+def compiled_layout(slots: int) -> CompiledFunction | None:
+    """The design's layout information of ``slots`` transducers over :data:`LAYOUT_CHUNK` points
+    (:func:`layout_functions`), compiled in the local engine's library (built if missing), or None when no
+    compiler can build it."""
+    try:
+        return CompiledFunction(load(4, NO_MODELS), f"sblsim_layout_{slots}")
+    except (CompileError, OSError, RuntimeError, AttributeError):
+        return None
+
+
+__all__ = ["CompiledFunction", "LAYOUT_CHUNK", "NO_MODELS", "NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS",
+           "abandonable", "cache_dir", "compiled_exact_points", "compiled_family_levels", "compiled_family_points",
+           "compiled_layout", "layout_functions", "library_path", "load", "metrics_sizes", "run_metrics", "stream",
+           "system_bound_sizes", "system_pcrb", "write_library_sources"]

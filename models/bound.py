@@ -421,14 +421,19 @@ def stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, 
     return out
 
 
-def fisher_information(model, x, context, variances) -> ca.SX:
+def fisher_information(model, x, context, variances, weights=None) -> ca.SX:
     """Fisher information of one measurement of a model about the state: ``Σ_k H_kᵀ H_k / r_k = Hᵀ R⁻¹ H``.
 
     For ``z = h(x) + v``, ``v ~ N(0, R)`` with R diagonal, the information
     is ``Hᵀ R⁻¹ H`` with ``H = ∂h/∂x`` (Kay 1993, Section 3.7, the vector
     parameter, for a Gaussian whose covariance does not depend on x; the
     information of the linearized model); H is ``model.jacobian`` (casadi's
-    derivative of h), the rows added in order.
+    derivative of h), the rows added in order. With ``weights`` each row's term
+    is multiplied by its weight ``q_k``, the probability that the row is measured
+    at all: the expected information of a measurement that is received with
+    probability q_k (Niu, Willett, Bar-Shalom, "Matrix CRLB scaling due to
+    measurements of uncertain origin", IEEE Trans. Signal Processing 49(7), 2001:
+    the information reduction factor of a detection probability without clutter).
 
     Parameters
     ----------
@@ -442,6 +447,8 @@ def fisher_information(model, x, context, variances) -> ca.SX:
     variances : casadi.SX or array, (m, 1)
         The diagonal of R [units of z squared]: ``model.variances(x, context, p)``
         or effective variances; all > 0.
+    weights : casadi.SX or array, (m, 1), optional
+        Per row, the probability that it is measured [0–1] (default: every row, unweighted).
 
     Returns
     -------
@@ -452,17 +459,19 @@ def fisher_information(model, x, context, variances) -> ca.SX:
     References
     ----------
     Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
-    Prentice Hall 1993, Section 3.7.
+    Prentice Hall 1993, Section 3.7. Niu, Willett, Bar-Shalom, IEEE Trans. Signal
+    Processing 49(7), 2001.
     """
     H = model.jacobian(x, context)
     n = model.motion.state_size
     J = ca.SX.zeros(n, n)
     for k in range(H.shape[0]):
-        J += ca.mtimes(H[k, :].T, H[k, :]) / variances[k]
+        term = ca.mtimes(H[k, :].T, H[k, :]) / variances[k]
+        J += term if weights is None else weights[k] * term
     return J
 
 
-def position_information(model, position, context, variances) -> ca.SX:
+def position_information(model, position, context, variances, weights=None) -> ca.SX:
     """Fisher information about the position, (3, 3) [1/m²]: the position block of :func:`fisher_information` at
     the state :func:`state_at` ``(model.motion, position)`` (the models read only the position, so the other
     entries do not enter).
@@ -472,7 +481,7 @@ def position_information(model, position, context, variances) -> ca.SX:
     model : MeasurementModel
     position : casadi.SX or array, (3, 1)
         North, East, Down [m].
-    context, variances
+    context, variances, weights
         As for :func:`fisher_information`.
 
     References
@@ -480,7 +489,7 @@ def position_information(model, position, context, variances) -> ca.SX:
     Kay 1993, Section 3.7.
     """
     index = list(model.motion.position_index)
-    J = fisher_information(model, state_at(model.motion, position), context, variances)
+    J = fisher_information(model, state_at(model.motion, position), context, variances, weights)
     return J[index, index]
 
 

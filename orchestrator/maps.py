@@ -144,13 +144,7 @@ def accuracy_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model
 def site_maps(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model=MODEL,
               depth: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The accuracy map (:func:`accuracy_map`) and the availability map (:func:`availability_map`) of a
-    configuration, its packets' probabilities computed once.
-
-    With detection by signal-to-noise (``acoustics.detection = "snr"``) the accuracy accounts for what is heard:
-    the range noise (and the USBL angle noise) of each transducer grows with its
-    :func:`~sblsim.models.acoustics.sonar.accuracy_scale` (the map takes the root mean square of the
-    transducers' scales), and the map is blank (NaN) where the probability of a fix is below
-    :data:`MIN_AVAILABILITY`.
+    configuration, its packets' probabilities computed once (:func:`point_accuracy` at the grid's points).
 
     Returns
     -------
@@ -158,11 +152,48 @@ def site_maps(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model=MO
         [m], and the probability of a fix in one cycle [0–1].
     """
     plan = as_plan(cfg)
-    points = _points(plan, east, north, depth)
+    values = point_accuracy(plan, _points(plan, east, north, depth), model)
+    return values["drms"].reshape(len(north), len(east)), values["availability"].reshape(len(north), len(east))
+
+
+def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
+                   detection: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    """The accuracy of one cycle's fix at points: what a map holds there.
+
+    The system's :meth:`~sblsim.models.systems.System.fix_accuracy` with the plan's error levels
+    (:attr:`RunPlan.bound`). With detection by signal-to-noise (``acoustics.detection = "snr"``) the accuracy
+    accounts for what is heard: the range noise (and the USBL angle noise) of each transducer grows with its
+    :func:`~sblsim.models.acoustics.sonar.accuracy_scale`, each range's information is weighted by the probability
+    that its packet is heard (:func:`~sblsim.models.design.information.layout_information`: a transducer in a
+    shadow zone or beyond detection adds nothing; a USBL's fix is its one packet's, unweighted), and the accuracy
+    is NaN where the probability of a fix is below :data:`MIN_AVAILABILITY`.
+
+    Parameters
+    ----------
+    plan : RunPlan
+    points : ndarray, shape (M, 3)
+        NED [m].
+    model : RangeDepthModel, optional
+        The ranges' measurement model (default the receivers').
+    detection : tuple of ndarray, optional
+        Each packet's probability of being received and its accuracy scale, each (M, n), where they are known
+        (a design's search interpolates them): default :func:`packet_probabilities`.
+
+    Returns
+    -------
+    dict
+        ``drms`` and ``drms_3d`` [m] (NaN: no fix in half of the cycles), ``log_det`` (``log det J``) and
+        ``availability``, the probability of a fix in one cycle [0–1], each (M,).
+    """
     bound, sigma = dict(plan.bound), plan["acoustics"]["sigma_range"]
-    probability, scale = packet_probabilities(plan, points)
+    probability, scale = packet_probabilities(plan, points) if detection is None else detection
     available = fix_probability(probability, plan.system.fix_packets)
-    if plan["acoustics"]["detection"] == "snr":  # the noise grown below the reference SNR, per point
+    heard = None
+    if plan["acoustics"]["detection"] == "snr" and plan.system.takes_ranges:  # each range its own noise and weight
+        heard = probability
+        bound["noise_variance"] = np.where(heard > 0.0, bound["noise_variance"] + sigma ** 2 * (scale ** 2 - 1.0),
+                                           bound["noise_variance"])
+    elif plan["acoustics"]["detection"] == "snr":  # one packet's noise grown below the reference SNR, per point
         grown = np.sqrt(np.mean(scale ** 2, axis=1))
         for key in ("noise_variance", "range_variance"):
             if key in bound:
@@ -170,12 +201,18 @@ def site_maps(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model=MO
         if "angle_sigma_deg" in bound:
             bound["angle_sigma_deg"] = bound["angle_sigma_deg"] * grown
         sigma = sigma * grown
-    drms = plan.system.horizontal_std(points, plan["platform"], bound, sigma, model=model)
-    if plan["acoustics"]["detection"] == "snr":  # no fix there at least half of the cycles
-        drms = np.where(available < MIN_AVAILABILITY, np.nan, drms)
-    return drms.reshape(len(north), len(east)), available.reshape(len(north), len(east))
+    values = plan.system.fix_accuracy(points, plan["platform"], bound, sigma, model=model, heard=heard)
+    out = {}
+    for key in ("drms", "drms_3d"):
+        out[key] = np.where(np.isfinite(values[key]), values[key], np.inf)
+        if plan["acoustics"]["detection"] == "snr":  # no fix there at least half of the cycles
+            out[key] = np.where(available < MIN_AVAILABILITY, np.nan, out[key])
+    out["log_det"] = np.where(np.isnan(out["drms"]), np.nan, values["log_det"])
+    out["availability"] = available
+    return out
 
-def packet_probabilities(plan: RunPlan, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
     """Per point and transducer: the probability that one packet is received, and the accuracy scale.
 
     With fixed detection a packet is received with ``1 − loss_pct`` per draw (USBL: the reply and the
@@ -191,14 +228,17 @@ def packet_probabilities(plan: RunPlan, points: np.ndarray) -> tuple[np.ndarray,
     plan : RunPlan
     points : ndarray, shape (M, 3)
         NED [m].
+    arms : ndarray, shape (n, 3), optional
+        The transducers' positions when the platform is at the origin, NED [m] (default the plan's,
+        :attr:`RunPlan.lever_arms`; a design's candidate layout).
 
     Returns
     -------
     probability, scale : ndarray, each (M, n)
-        n the system's transducers (:attr:`RunPlan.lever_arms`).
+        n the system's transducers.
     """
     acoustics, system = plan["acoustics"], plan.system
-    arms = np.asarray(plan.lever_arms, dtype=float)
+    arms = np.asarray(plan.lever_arms if arms is None else arms, dtype=float)
     m, n = points.shape[0], arms.shape[0]
     if acoustics["detection"] != "snr":
         keep = (1.0 - acoustics["loss_pct"] / 100.0) ** (2 if system.measures_direction else 1)
@@ -451,4 +491,4 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
 
 
 __all__ = ["MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "grid", "make_maps", "parse_levels", "plot",
-           "system_line", "table", "write"]
+           "point_accuracy", "system_line", "table", "write"]

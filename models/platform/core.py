@@ -65,6 +65,9 @@ AXES = ("x", "y", "z")
 LAYOUTS = ("cross", "custom", "circle")
 #: Allowed numbers of beacons (``platform.beacons``).
 MIN_BEACONS, MAX_BEACONS = 3, 16
+#: The largest offset of a custom layout's transducer from the platform's reference [m]: an LBL field's
+#: transponders stand up to 100 km from the origin.
+MAX_OFFSET = 1e5
 GPS_MODELS = ("white", "gauss-markov")
 
 # Stream purposes (sblsim.models.philox, "Randomness").
@@ -114,7 +117,8 @@ class Platform(Component):
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
         offsets = tuple(
             Variable(f"beacon{i}_offset_{a}", "parameter", "Real", 0.0, "m",
-                     f"Custom layout: body-frame offset of beacon {i}, {a}", min=-1000.0, max=1000.0, scope="fmu")
+                     f"Custom layout: body-frame offset of beacon {i}, {a}", min=-MAX_OFFSET, max=MAX_OFFSET,
+                     scope="fmu")
             for i in range(1, n_beacons + 1) for a in AXES)
         params = (
             Variable("layout", "parameter", "String", "cross", description="Beacon layout", choices=LAYOUTS),
@@ -324,5 +328,5 @@ class Platform(Component):
                          b.output(output), events=events)
 
 
-__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MIN_BEACONS", "Platform", "USBL_ATTITUDES",
+__all__ = ["AXES", "GPS_MODELS", "LAYOUTS", "MAX_BEACONS", "MAX_OFFSET", "MIN_BEACONS", "Platform", "USBL_ATTITUDES",
            "attitude_variables", "beacon_names", "beacon_variables"]

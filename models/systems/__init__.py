@@ -236,13 +236,25 @@ class System:
 
     # ---- the accuracy limit ----
     def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
-                       sigma_range: float, model=None) -> np.ndarray:
+                       sigma_range: float, model=None, heard: np.ndarray | None = None) -> np.ndarray:
         """Horizontal DRMS [m] of a fix from one cycle plus the depth at ``points`` (M, 3) NED [m], (M,): the
-        Fisher information of the system's measurements (Kay 1993, Section 3.7).
+        ``drms`` of :meth:`fix_accuracy`, infinite where the information is singular."""
+        drms = self.fix_accuracy(points, platform, parameters, sigma_range, model, heard)["drms"]
+        return np.where(np.isfinite(drms), drms, np.inf)
+
+    def fix_accuracy(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
+                     sigma_range: float, model=None, heard: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The accuracy of a fix from one cycle plus the depth at ``points`` (M, 3) NED [m]: the Fisher information
+        J of the system's measurements (Kay 1993, Section 3.7) as ``drms`` (horizontal, ``sqrt((J⁻¹)_NN +
+        (J⁻¹)_EE)``) and ``drms_3d`` (``sqrt(tr J⁻¹)``) [m] and ``log_det`` (``log det J``), each (M,); the map
+        and the design's criteria.
 
         ``parameters`` are the bound's (``noise_variance``, ``attitude_variance``, ``depth_variance``,
         ``angle_sigma_deg``), ``sigma_range`` the range noise std [m], ``model`` a measurement model in place of
-        the system's (where it takes one; default the system's).
+        the system's (where it takes one; default the system's). ``heard`` (M, n), where the site decides what
+        is heard: each transducer's probability of being heard at each point, which weights its measurements'
+        information (a system whose fix needs every packet of its cycle, USBL's one, does not weight it: the
+        availability says how often there is a fix), with ``noise_variance`` then per point and transducer.
         """
         raise NotImplementedError
 

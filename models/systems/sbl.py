@@ -25,8 +25,9 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.bound import ERROR_FIXED, ERROR_STEPS, MODEL, bound_step, compiled_error_bound, horizontal_std
+from sblsim.models.bound import ERROR_FIXED, ERROR_STEPS, MODEL, bound_step, compiled_error_bound
 from sblsim.models.declarations import ModelError
+from sblsim.models.design.information import layout_values
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import cross_offsets, layout_offsets, parse_offsets
 from sblsim.models.systems import System, register
@@ -106,13 +107,17 @@ class SBL(System):
         metrics pass's range bound."""
         return any(parameters[k] > 0.0 for k in ("gps_sigma", "clock_drift_sigma", "attitude_sigma"))
 
-    def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
-                       sigma_range: float, model=None) -> np.ndarray:
-        """One round of fresh ranges (one per beacon) plus the depth (:func:`sblsim.models.bound.horizontal_std`,
-        ``model`` the range model, default the receivers')."""
+    def fix_accuracy(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
+                     sigma_range: float, model=None, heard: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """One round of fresh ranges (one per beacon) plus the depth
+        (:func:`sblsim.models.design.information.layout_values` of the beacons at their lever arms, ``model`` the
+        range model, default the receivers'); with ``heard``, each beacon's probability of being heard at each
+        point (M, n), its range weighted by it and ``parameters["noise_variance"]`` given per point and beacon,
+        (M, n)."""
         arms = self.lever_arms(platform)
-        return horizontal_std(points, arms, arms, parameters["noise_variance"], parameters["attitude_variance"],
-                              parameters["depth_variance"], model=MODEL if model is None else model)
+        return layout_values(points, arms, arms, 1.0 if heard is None else heard, parameters["noise_variance"],
+                             parameters["attitude_variance"], parameters["depth_variance"],
+                             MODEL if model is None else model)
 
 
 def _layout_words(platform: Mapping[str, Any]) -> str:

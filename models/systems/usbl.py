@@ -397,11 +397,11 @@ def fix_information() -> ca.Function:
                        ["p", "transceiver", "attitude", *names], ["C", "drms"])
 
 
-def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: float, position_variance: float,
-                   angle_sigma_deg: float, attitude_variance: float, depth_variance: float,
-                   heading: float = 0.0) -> np.ndarray:
-    """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth (:func:`fix_information`), the
-    array level at the heading ``heading``.
+def fix_accuracy(points: np.ndarray, transceiver: np.ndarray, range_variance: float, position_variance: float,
+                 angle_sigma_deg: float, attitude_variance: float, depth_variance: float,
+                 heading: float = 0.0) -> dict[str, np.ndarray]:
+    """The accuracy of a fix from one USBL packet plus depth (:func:`fix_information`), the array level at the
+    heading ``heading``: ``drms`` (horizontal) and ``drms_3d`` [m], ``log_det`` (``log det J = −log det C``).
 
     Parameters
     ----------
@@ -423,14 +423,27 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: 
 
     Returns
     -------
-    ndarray, shape (M,)
-        [m], finite everywhere (straight below the transceiver too).
+    dict
+        ``drms``, ``drms_3d``, ``log_det``, each (M,); finite everywhere (straight below the transceiver too).
     """
     points = np.atleast_2d(np.asarray(points, dtype=float))
-    f = fix_information().map(points.shape[0])
-    return np.asarray(f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), np.array([0.0, 0.0, heading]),
-                        per_point(range_variance), per_point(position_variance), per_point(angle_sigma_deg),
-                        per_point(attitude_variance), per_point(depth_variance))[1]).ravel()
+    m = points.shape[0]
+    f = fix_information().map(m)
+    C, drms = f(points.T, np.asarray(transceiver, dtype=float).reshape(3, 1), np.array([0.0, 0.0, heading]),
+                per_point(range_variance), per_point(position_variance), per_point(angle_sigma_deg),
+                per_point(attitude_variance), per_point(depth_variance))
+    C = np.asarray(C).reshape(3, m, 3).transpose(1, 0, 2)
+    return {"drms": np.asarray(drms).ravel(), "drms_3d": np.sqrt(np.trace(C, axis1=1, axis2=2)),
+            "log_det": -np.linalg.slogdet(C)[1]}
+
+
+def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: float, position_variance: float,
+                   angle_sigma_deg: float, attitude_variance: float, depth_variance: float,
+                   heading: float = 0.0) -> np.ndarray:
+    """Horizontal standard deviation (DRMS) of a fix from one USBL packet plus depth [m], (M,): the ``drms`` of
+    :func:`fix_accuracy` (its parameters)."""
+    return fix_accuracy(points, transceiver, range_variance, position_variance, angle_sigma_deg, attitude_variance,
+                        depth_variance, heading)["drms"]
 
 
 @register
@@ -508,16 +521,17 @@ class USBL(System):
             raise ModelError(f"platform.beacon_offsets: {parse_offsets(platform['beacon_offsets']).shape[0]} "
                              "offsets with platform.system = 'usbl'; give the transceiver's one lever arm 'x y z'")
 
-    def horizontal_std(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
-                       sigma_range: float, model=None) -> np.ndarray:
+    def fix_accuracy(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
+                     sigma_range: float, model=None, heard: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """One packet (range and direction) plus the depth, the array level at the platform's heading
-        (:func:`horizontal_std`; ``model`` is not used: the packet's model is :data:`POSITION_MODEL`). What a
+        (:func:`fix_accuracy`; ``model`` is not used: the packet's model is :data:`POSITION_MODEL`; nor is
+        ``heard``: a fix is the one packet's, and the availability says how often it is heard). What a
         static vehicle's fixes scatter by over runs: the attitude's error adds the array's misalignment, drawn
         once per run, and the IMU's constant bias to the bound's white attitude noise."""
         constant = math.radians(platform["usbl_misalignment_deg"]) ** 2 + math.radians(platform["imu_bias_deg"]) ** 2
-        return horizontal_std(points, self.lever_arms(platform)[0], sigma_range ** 2, parameters["position_variance"],
-                              parameters["angle_sigma_deg"], parameters["attitude_variance"] + constant,
-                              parameters["depth_variance"], math.radians(platform["heading_deg"]))
+        return fix_accuracy(points, self.lever_arms(platform)[0], sigma_range ** 2, parameters["position_variance"],
+                            parameters["angle_sigma_deg"], parameters["attitude_variance"] + constant,
+                            parameters["depth_variance"], math.radians(platform["heading_deg"]))
 
     def measurement_model(self):
         """Range and direction cosines from the transceiver (:data:`MODEL`), with the depth."""
@@ -556,6 +570,6 @@ class USBL(System):
 
 
 __all__ = ["attitude", "BOUND_MODEL", "bound_step", "compiled_bound", "context", "covariance", "direction",
-           "fix_information", "FIX_ITERATIONS", "FIXED", "horizontal_std", "measurement", "MODEL",
+           "fix_accuracy", "fix_information", "FIX_ITERATIONS", "FIXED", "horizontal_std", "measurement", "MODEL",
            "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
            "POSITION_MODEL", "receiver_parameters", "STEPS", "transceiver", "transceiver_variance", "USBL"]

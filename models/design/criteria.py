@@ -1,0 +1,130 @@
+"""The criteria a design is judged by over a work area, its coverage of a prescription, and the closed forms of
+the optimal geometries.
+
+At each point p of a work area a layout gives the Fisher information J(p) of one cycle
+(:func:`~sblsim.models.design.information.layout_information`): its horizontal DRMS
+``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` (or the 3-D ``sqrt(tr J⁻¹)``) and ``log det J``. A criterion turns the points'
+numbers into one number to minimise (:func:`criterion`):
+
+* ``percentile``: the P-th percentile of the DRMS over the area (P the prescription's coverage): the prescription
+  itself, "DRMS ≤ X at P % of the work area", is met if and only if it is at most X;
+* ``d-optimal``: minus the mean of ``log det J`` (D-optimality: the volume of the error ellipsoid);
+* ``a-optimal``: the mean of the squared DRMS (A-optimality: the trace of the Cramér-Rao bound, of its
+  horizontal block for a horizontal prescription);
+* ``worst``: the largest DRMS over the area (minimax).
+
+A point where no fix is made (the map's blank, NaN) counts as an infinite DRMS and an information of zero.
+
+Closed forms (range-only measurements of one standard deviation σ, no depth sensor; Bishop, Fidan, Anderson,
+Doğançay, Pathirana, "Optimality analysis of sensor-target localization geometries", Automatica 46(3):479-492,
+2010):
+
+* in 2-D, N ≥ 3 sensors at bearings θ_k around a target: ``det J = (N² − |Σ_k e^{2iθ_k}|²) / (4σ⁴)``, at most
+  ``N² / (4σ⁴)`` (:func:`bishop_2d_determinant`), reached if and only if ``Σ_k e^{2iθ_k} = 0``, where J is
+  ``N / (2σ²) I`` and the Cramér-Rao bound's trace ``4σ² / N`` (:func:`bishop_2d_crb_trace`), its minimum;
+* in 3-D, N ≥ 3 transponders equally spaced on a ring at height h below the target: D- and A-optimal at the
+  ring radius ``√2 h`` (:data:`RING_RADIUS_RATIO`; the lines of sight at :data:`RING_ELEVATION_DEG` below the
+  horizontal), where ``det J = (N / 3)³ / σ⁶`` (:func:`ring_determinant`) and ``tr J⁻¹ = 9σ² / N``
+  (:func:`ring_crb_trace`; a PDOP of 1.5 at N = 4).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: The criteria of a design: name -> what it minimises.
+CRITERIA = {
+    "percentile": "the DRMS at the prescription's coverage (its percentile over the work area) [m]",
+    "d-optimal": "minus the mean log det J over the work area (D-optimality)",
+    "a-optimal": "the mean squared DRMS over the work area (A-optimality: the trace of the Cramér-Rao bound) [m²]",
+    "worst": "the largest DRMS over the work area [m]",
+}
+#: The prescription's dimensions: horizontal (the DRMS of North and East) or 3d (North, East and Down).
+DIMENSIONS = ("horizontal", "3d")
+#: The 3-D ring's optimal radius over the height below the target [1].
+RING_RADIUS_RATIO = math.sqrt(2.0)
+#: The optimal ring's lines of sight below the horizontal [deg]: atan(1/√2), 35.2644°.
+RING_ELEVATION_DEG = math.degrees(math.atan(1.0 / math.sqrt(2.0)))
+
+
+def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: float) -> np.ndarray:
+    """The criterion ``name`` (:data:`CRITERIA`) of one or more layouts over a work area, to be minimised.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`CRITERIA`.
+    drms : ndarray, shape (..., M)
+        The DRMS (horizontal or 3-D, as the prescription's dimensions) at the M points [m]; NaN where no fix.
+    log_det : ndarray, shape (..., M)
+        ``log det J`` at the points; NaN where no fix.
+    coverage_pct : float
+        The prescription's coverage P [%], the percentile of ``percentile``.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        [m] for ``percentile`` and ``worst``, [m²] for ``a-optimal``, [1] for ``d-optimal``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown criterion.
+    """
+    drms = np.where(np.isfinite(drms), drms, np.inf)
+    if name == "percentile":
+        return np.percentile(drms, coverage_pct, axis=-1, method="higher")
+    if name == "worst":
+        return drms.max(axis=-1)
+    if name == "a-optimal":
+        return np.mean(drms ** 2, axis=-1)
+    if name == "d-optimal":
+        return -np.mean(np.where(np.isfinite(log_det), log_det, -np.inf), axis=-1)
+    raise ValueError(f"criterion: {name!r} is not one of {', '.join(CRITERIA)}")
+
+
+def coverage(drms: np.ndarray, availability: np.ndarray, drms_m: float, availability_pct: float) -> np.ndarray:
+    """The share of a work area's points that meet a prescription [%]: DRMS at most ``drms_m`` [m] and a fix in at
+    least ``availability_pct`` [%] of the cycles.
+
+    Parameters
+    ----------
+    drms, availability : ndarray, shape (..., M)
+        [m] (NaN: no fix) and the probability of a fix in one cycle [0–1].
+    drms_m, availability_pct : float
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    met = np.isfinite(drms) & (np.nan_to_num(drms, nan=np.inf) <= drms_m) & \
+        (availability >= availability_pct / 100.0 - 1e-12)
+    return 100.0 * met.mean(axis=-1)
+
+
+def bishop_2d_determinant(n: int, sigma: float) -> float:
+    """The largest ``det J`` of N range sensors around a target in 2-D, ``N² / (4σ⁴)`` [1/m⁴] (Bishop et al. 2010)."""
+    return n ** 2 / (4.0 * sigma ** 4)
+
+
+def bishop_2d_crb_trace(n: int, sigma: float) -> float:
+    """The smallest trace of the Cramér-Rao bound of N range sensors in 2-D, ``4σ² / N`` [m²] (Bishop et al.
+    2010)."""
+    return 4.0 * sigma ** 2 / n
+
+
+def ring_determinant(n: int, sigma: float) -> float:
+    """``det J`` of N transponders equally spaced on a ring of radius √2 h at height h below the target,
+    ``(N / 3)³ / σ⁶`` [1/m⁶]."""
+    return (n / 3.0) ** 3 / sigma ** 6
+
+
+def ring_crb_trace(n: int, sigma: float) -> float:
+    """``tr J⁻¹`` of the optimal ring, ``9σ² / N`` [m²] (a PDOP of 1.5 at N = 4)."""
+    return 9.0 * sigma ** 2 / n
+
+
+__all__ = ["CRITERIA", "DIMENSIONS", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO", "bishop_2d_crb_trace",
+           "bishop_2d_determinant", "coverage", "criterion", "ring_crb_trace", "ring_determinant"]

@@ -1,0 +1,125 @@
+"""Every proposed design confirmed by Monte Carlo: what a vehicle gets where the design's map predicts.
+
+* **Static vehicles** (:func:`static_check`): at the work area's worst point (the largest DRMS among the points
+  with a fix) and at its median point, a vehicle held still for a few cycles, ``monte_carlo.replicates`` runs of
+  the design's scenario with the ``lsq`` receiver (a fix from each cycle's latest measurements and the depth, no
+  motion model: what the map describes), its fixes after the first cycle; the horizontal (or 3-D) RMS error of
+  those fixes against the map's DRMS there. A ratio outside ``1 ± monte_carlo.tolerance_pct`` is flagged
+  (``confirmed`` false), never hidden. The share of cycles with a fix is reported beside the predicted
+  availability.
+* **A path** (:func:`path_check`): the receivers ``ekf-seq`` and ``lsq`` on a straight path across the work area
+  (through its centre, North to South, at the first depth, 2 m/s), ``monte_carlo.path_replicates`` runs on the
+  same replicates (:func:`sblsim.orchestrator.compare.compare`): their RMS error beside the map's RMS along the
+  path. A filter averages cycles and a moving vehicle's held ranges are stale, so this is what a receiver does with
+  the design, not a check of the map.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sblsim.orchestrator.compare import compare
+from sblsim.orchestrator.cosim.plan import with_replicates
+from sblsim.orchestrator.cosim.run import run_batch
+from sblsim.orchestrator.design.run import Design, Resolved, plan_of
+from sblsim.orchestrator.maps import point_accuracy
+
+#: The path's speed [m/s] (an AUV's transit).
+PATH_SPEED = 2.0
+#: The receivers on the path.
+PATH_RECEIVERS = ("ekf-seq", "lsq")
+
+
+def checked_points(design: Design, resolved: Resolved) -> list[tuple[str, np.ndarray]]:
+    """The worst and the median point of a design's map over the work area (among the points with a fix), named."""
+    dimensions = resolved.sections["prescription"]["dimensions"]
+    drms = design.values["drms" if dimensions == "horizontal" else "drms_3d"]
+    finite = np.flatnonzero(np.isfinite(drms))
+    if finite.size == 0:
+        return []
+    worst = finite[np.argmax(drms[finite])]
+    order = finite[np.argsort(drms[finite], kind="stable")]
+    median = order[(len(order) - 1) // 2]
+    points = [("worst", resolved.points[worst])]
+    if median != worst:
+        points.append(("median", resolved.points[median]))
+    return points
+
+
+def static_check(design: Design, resolved: Resolved, where: str, point: np.ndarray) -> dict:
+    """A static vehicle's fixes at ``point`` (N, E, D [m]) against the design's map there (module docstring).
+
+    Returns
+    -------
+    dict
+        ``point`` (its name), ``east_m``, ``north_m``, ``depth_m``, ``predicted_drms_m``, ``simulated_drms_m``,
+        ``ratio`` (simulated over predicted), ``confirmed``, ``fixes``, ``predicted_availability``,
+        ``simulated_availability`` (the share of cycles with at least one fix).
+    """
+    mc = resolved.sections["monte_carlo"]
+    horizontal = resolved.sections["prescription"]["dimensions"] == "horizontal"
+    n, e, d = (float(v) for v in point)
+    probe = plan_of(resolved, design.items)
+    slots = 1 if probe.system.measures_direction else design.candidate.count
+    period = float(probe["simulation"]["sampling_time"])
+    warm = (slots + 2) * period  # every transducer heard once, and the flight of the last
+    duration = warm + mc["cycles"] * slots * period
+    plan = plan_of(resolved, [*design.items, "simulation.receiver=lsq", "target.trajectory=file",
+                              f"target.waypoints=0 {n!r} {e!r} {d!r}; 100 {n!r} {e!r} {d!r}",
+                              f"simulation.duration={duration!r}"])
+    predicted = point_accuracy(plan, np.array([[n, e, d]]))
+    predicted_drms = float(predicted["drms" if horizontal else "drms_3d"][0])
+    ts = run_batch(with_replicates(plan, range(mc["replicates"])), "local", timeseries=True).timeseries
+    seq = ts["packet_seq"].to_numpy()
+    first = np.r_[True, ts["replicate"].to_numpy()[1:] != ts["replicate"].to_numpy()[:-1]]
+    new = (seq != np.r_[0, seq[:-1]]) & ~first & (seq > 0) & ts["packet_valid"].to_numpy(bool)
+    rows = ts[new & (ts["time"].to_numpy() > warm)]
+    error = rows[["est_x", "est_y", "est_z"]].to_numpy() - rows[["true_x", "true_y", "true_z"]].to_numpy()
+    if horizontal:
+        error = error[:, :2]
+    simulated = float(np.sqrt(np.mean(np.sum(error ** 2, axis=1)))) if len(rows) else math.nan
+    ratio = simulated / predicted_drms if np.isfinite(predicted_drms) and predicted_drms > 0 else math.nan
+    cycles = mc["replicates"] * mc["cycles"]
+    heard = rows.assign(cycle=((rows["time"] - warm - 1e-9) // (slots * period)).astype(int))
+    with_fix = heard.groupby(["replicate", "cycle"]).size().shape[0] if len(rows) else 0
+    return {"point": where, "east_m": e, "north_m": n, "depth_m": d, "predicted_drms_m": predicted_drms,
+            "simulated_drms_m": simulated, "ratio": ratio,
+            "confirmed": bool(np.isfinite(ratio) and abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0),
+            "fixes": int(len(rows)), "predicted_availability": float(predicted["availability"][0]),
+            "simulated_availability": min(1.0, with_fix / cycles)}
+
+
+def path_check(design: Design, resolved: Resolved) -> list[dict]:
+    """The receivers on a path across the work area (module docstring); one row per receiver: ``receiver``,
+    ``rms_e_tot_m`` (the receiver's RMS 3-D error over the runs) and ``map_rms_drms_m`` (the map's RMS DRMS along
+    the path, the one-round fix's prediction), ``nees``, ``runs``."""
+    mc = resolved.sections["monte_carlo"]
+    low, high = resolved.area.bounds()
+    centre = [float(v) for v in (low + high) / 2.0]
+    depth = resolved.depths[0]
+    inside = resolved.points[np.isclose(resolved.points[:, 2], depth)]
+    north = inside[np.isclose(inside[:, 1], inside[np.argmin(np.abs(inside[:, 1] - centre[1])), 1]), 0]
+    start, end = float(north.max()), float(north.min())
+    duration = (start - end) / PATH_SPEED
+    waypoints = f"0 {start!r} {centre[1]!r} {depth!r}; {duration!r} {end!r} {centre[1]!r} {depth!r}"
+    items = [*design.items, "target.trajectory=file", f"target.waypoints={waypoints}",
+             f"simulation.duration={duration!r}"]
+    plans = [plan_of(resolved, [*items, f"simulation.receiver={r}"]) for r in PATH_RECEIVERS]
+    table = compare(plans, replicates=mc["path_replicates"])
+    along = np.column_stack([np.linspace(start, end, 101), np.full(101, centre[1]), np.full(101, depth)])
+    drms = point_accuracy(plans[0], along)["drms_3d"]
+    predicted = float(np.sqrt(np.nanmean(drms ** 2)))
+    return [{"receiver": row.receiver, "runs": int(row.runs), "rms_e_tot_m": float(row.rms_e_tot),
+             "map_rms_drms_m": predicted, "nees": float(row.nees)} for row in table.itertuples()]
+
+
+def confirm(design: Design, resolved: Resolved) -> None:
+    """The design's Monte Carlo checks (module docstring), into ``design.monte_carlo`` and ``design.path``."""
+    design.monte_carlo = [static_check(design, resolved, name, point)
+                          for name, point in checked_points(design, resolved)]
+    design.path = path_check(design, resolved) if resolved.sections["monte_carlo"]["path"] else []
+
+
+__all__ = ["PATH_RECEIVERS", "PATH_SPEED", "checked_points", "confirm", "path_check", "static_check"]

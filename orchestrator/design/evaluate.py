@@ -1,0 +1,205 @@
+"""The design's evaluation of candidate layouts over a work area: the accuracy map's numbers, fast.
+
+A candidate is judged by the Fisher information of one cycle at every work-area point, the same as the map's
+(:func:`sblsim.orchestrator.maps.point_accuracy`): the layout's information
+(:func:`sblsim.models.design.information.layout_information`) with the plan's error levels, each transducer's range
+weighted by the probability that it is heard and its noise grown with its SNR. A search evaluates thousands of
+layouts, so:
+
+* the layout function runs compiled (:func:`sblsim.fmus.native.compiled_layout`: the generated C of the same casadi
+  function, called on numpy arrays, a few hundred microseconds for a layout over 441 points), casadi's own
+  evaluation where no compiler is found;
+* the site's detection is tabulated once (:class:`Detection`): the site is range-independent, so what a
+  transducer at the seafloor's depth makes of a vehicle at a work-area depth depends on their horizontal distance
+  alone; the search interpolates that table, and every design it proposes is evaluated again through the map
+  itself (:func:`~sblsim.orchestrator.maps.point_accuracy`), whose numbers the outputs carry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sblsim.fmus.native import LAYOUT_CHUNK, compiled_layout
+from sblsim.models.design.information import OUTPUTS, layout_values, padded, slots_for
+from sblsim.orchestrator.cosim.plan import RunPlan
+from sblsim.orchestrator.maps import MIN_AVAILABILITY, fix_probability, packet_probabilities
+
+#: The step of a detection table [m].
+TABLE_STEP = 5.0
+
+
+@dataclass(frozen=True)
+class Levels:
+    """A system's error levels for the layout function, from a plan (:attr:`RunPlan.bound`).
+
+    Attributes
+    ----------
+    noise_variance : float
+        A range's variance with the transducer position's error folded in, σ_r² + σ_pos² [m²].
+    range_variance : float
+        σ_r², the part that grows below the reference SNR [m²].
+    attitude_variance, depth_variance : float
+        [rad²], [m²] (``inf``: no depth sensor).
+    fix_packets : int
+        The packets of one cycle a fix needs.
+    """
+
+    noise_variance: float
+    range_variance: float
+    attitude_variance: float
+    depth_variance: float
+    fix_packets: int = 3
+
+    @classmethod
+    def of(cls, plan: RunPlan) -> Levels:
+        bound = plan.bound
+        return cls(bound["noise_variance"], plan["acoustics"]["sigma_range"] ** 2, bound["attitude_variance"],
+                   bound["depth_variance"], plan.system.fix_packets)
+
+
+class Detection:
+    """What the site makes of a transducer at one depth and a vehicle at each work-area depth, as functions of
+    their horizontal distance: the packet's probability of being heard and its accuracy scale
+    (:func:`~sblsim.orchestrator.maps.packet_probabilities`), tabulated every :data:`TABLE_STEP` and interpolated
+    linearly.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The site (a plan of the system, its channel and detection).
+    transducer_depth : float
+        The transducers' depth [m] (the seafloor's for an LBL; the platform's transducer depth otherwise).
+    depths : sequence of float
+        The vehicle's depths [m].
+    reach : float
+        The longest horizontal distance asked for [m].
+    """
+
+    def __init__(self, plan: RunPlan, transducer_depth: float, depths, reach: float) -> None:
+        self.snr = plan["acoustics"]["detection"] == "snr"
+        self.depths = np.asarray(depths, dtype=float)
+        self.distance = np.arange(0.0, reach + 2.0 * TABLE_STEP, TABLE_STEP)
+        transducer = np.array([[0.0, 0.0, float(transducer_depth)]])
+        self.probability, self.scale = [], []
+        for depth in self.depths:
+            points = np.column_stack([self.distance, np.zeros_like(self.distance),
+                                      np.full_like(self.distance, depth)])
+            p, s = packet_probabilities(plan, points, transducer)
+            self.probability.append(p[:, 0])
+            self.scale.append(s[:, 0])
+
+    def __call__(self, points: np.ndarray, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each packet's probability of being heard and its accuracy scale, between vehicles at ``points`` (M, 3)
+        (at the table's depths) and the transducers of S layouts (S, n, 3), NED [m]; each (S, M, n)."""
+        horizontal = np.hypot(points[None, :, None, 0] - layouts[:, None, :, 0],
+                              points[None, :, None, 1] - layouts[:, None, :, 1])
+        probability, scale = np.empty(horizontal.shape), np.empty(horizontal.shape)
+        for k, depth in enumerate(self.depths):
+            rows = np.isclose(points[:, 2], depth)
+            probability[:, rows] = np.interp(horizontal[:, rows], self.distance, self.probability[k])
+            scale[:, rows] = np.interp(horizontal[:, rows], self.distance, self.scale[k])
+        return probability, scale
+
+
+class LayoutEvaluator:
+    """Layouts of transducers judged over a work area's points (module docstring).
+
+    Parameters
+    ----------
+    points : ndarray, shape (M, 3)
+        The work area's points, NED [m].
+    levels : Levels
+        The error levels.
+    detection : Detection, optional
+        The site's detection (None: every packet heard, as with the paper's fixed channel, whose losses do not
+        depend on where the vehicle is; ``loss`` then gives each packet's probability for the availability).
+    loss : float
+        The probability that a packet is lost where the site does not decide it [0–1].
+    compiled : bool
+        Run the layout function compiled where a compiler is found (False: casadi's evaluation, the same numbers).
+    """
+
+    def __init__(self, points: np.ndarray, levels: Levels, detection: Detection | None = None, loss: float = 0.0,
+                 compiled: bool = True) -> None:
+        self.points = np.ascontiguousarray(points, dtype=float)
+        self.levels, self.detection, self.loss, self.compiled = levels, detection, float(loss), compiled
+        self.m = self.points.shape[0]
+        chunks = -(-self.m // LAYOUT_CHUNK)
+        self._padded_points = np.concatenate([self.points, np.repeat(self.points[-1:], chunks * LAYOUT_CHUNK - self.m,
+                                                                     axis=0)])
+        self.evaluations = 0
+
+    def heard(self, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per layout, point and transducer: the weight of its range, its noise variance [m²] and its packet's
+        probability of being received, each (S, M, n)."""
+        s, n = layouts.shape[0], layouts.shape[1]
+        shape = (s, self.m, n)
+        if self.detection is None:
+            return (np.ones(shape), np.full(shape, self.levels.noise_variance),
+                    np.full(shape, 1.0 - self.loss))
+        probability, scale = self.detection(self.points, layouts)
+        if not self.detection.snr:
+            return np.ones(shape), np.full(shape, self.levels.noise_variance), probability
+        grown = self.levels.noise_variance + self.levels.range_variance * (scale ** 2 - 1.0)
+        return probability, np.where(probability > 0.0, grown, self.levels.noise_variance), probability
+
+    def evaluate(self, layouts: np.ndarray, arms: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The accuracy of S layouts at every point.
+
+        Parameters
+        ----------
+        layouts : ndarray, shape (S, n, 3)
+            The transducers' positions, NED [m].
+        arms : ndarray, shape (S, n, 3), optional
+            Their lever arms in NED [m] (default the positions: a fixed array, or a platform at the origin).
+
+        Returns
+        -------
+        dict
+            ``drms``, ``drms_3d`` [m], ``log_det`` and ``availability`` [0–1], each (S, M); the accuracies NaN
+            where the probability of a fix is below the map's :data:`~sblsim.orchestrator.maps.MIN_AVAILABILITY`
+            (with the site's detection).
+        """
+        layouts = np.asarray(layouts, dtype=float)
+        arms = layouts if arms is None else np.asarray(arms, dtype=float)
+        s, n = layouts.shape[:2]
+        weight, noise, received = self.heard(layouts)
+        out = {name: np.empty((s, self.m)) for name in OUTPUTS}
+        function = compiled_layout(slots_for(n)) if self.compiled else None
+        for k in range(s):
+            if function is None:
+                values = layout_values(self.points, layouts[k], arms[k], weight[k], noise[k],
+                                       self.levels.attitude_variance, self.levels.depth_variance)
+            else:
+                values = self._compiled(function, layouts[k], arms[k], weight[k], noise[k])
+            for name in OUTPUTS:
+                out[name][k] = values[name]
+        self.evaluations += s
+        out["availability"] = fix_probability(received.reshape(s * self.m, n),
+                                              self.levels.fix_packets).reshape(s, self.m)
+        if self.detection is not None and self.detection.snr:
+            blank = out["availability"] < MIN_AVAILABILITY
+            for name in OUTPUTS:
+                out[name] = np.where(blank, np.nan, out[name])
+        return out
+
+    def _compiled(self, function, layout, arms, weight, noise) -> dict[str, np.ndarray]:
+        slots = slots_for(layout.shape[0])
+        b, a, w, v = padded(layout, arms, weight, noise, slots)
+        total = self._padded_points.shape[0]
+        w = np.concatenate([w, np.repeat(w[-1:], total - self.m, axis=0)])
+        v = np.concatenate([v, np.repeat(v[-1:], total - self.m, axis=0)])
+        b, a = np.ascontiguousarray(b), np.ascontiguousarray(a)
+        shared = (np.array([self.levels.attitude_variance]), np.array([self.levels.depth_variance]))
+        J = np.empty((total, 9))
+        values = [np.empty(total) for _ in OUTPUTS]
+        for start in range(0, total, LAYOUT_CHUNK):
+            rows = slice(start, start + LAYOUT_CHUNK)
+            function([np.ascontiguousarray(self._padded_points[rows]), b, a, np.ascontiguousarray(w[rows]),
+                      np.ascontiguousarray(v[rows]), *shared], [J[rows], *(x[rows] for x in values)])
+        return {name: x[:self.m] for name, x in zip(OUTPUTS, values)}
+
+
+__all__ = ["Detection", "LayoutEvaluator", "Levels", "TABLE_STEP"]

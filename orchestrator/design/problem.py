@@ -1,0 +1,428 @@
+"""A design problem as data: ``DESIGN.toml`` (or the keyword arguments of :func:`sblsim.design`), its declared keys,
+the hardware grades a design chooses among, and the work area and seafloor region as geometry.
+
+A problem names a base scenario (its site: profile, water depth, sea state, source level, frequency), a **work
+area** (a circle or polygon at one or several vehicle depths), a **prescription** (a horizontal or 3-D DRMS at a
+share of the work area, a fix in a share of the cycles, an update interval), the **candidates** (systems, the
+LBL transponders' count and the seafloor region where they may go with the areas to avoid, the SBL's arm length,
+the hardware grades with their costs) and the **search** (its criterion, seed and effort). Every key is a
+:class:`~sblsim.models.declarations.Variable` (:data:`DESIGN_KEYS`: type, default, unit, meaning, range or
+choices), checked by :func:`check_problem` with one-line errors naming ``section.key`` and the allowed range; the
+docs' table of keys is made from the same declarations (docs/design.md).
+
+A design file is data: it never names a file that is read or written (the base scenario is a built-in one, or the
+command line's ``--scenario``), and the overrides it gives refuse the keys that name files or code.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError, Variable, shown
+from sblsim.models.design.criteria import CRITERIA, DIMENSIONS
+from sblsim.models.errors import ConfigError
+from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, PATH_KEYS
+from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.tables import regular_file
+
+#: The systems a design may propose, in the order they are searched.
+SYSTEM_NAMES = ("lbl", "sbl", "usbl")
+#: The hardware grades a design chooses among: category -> grade -> (configuration key, value). The figures and
+#: their sources: docs/hardware-grades.md ("Grades a design chooses among").
+GRADES: dict[str, dict[str, tuple[str, float]]] = {
+    "gps": {"standalone": ("platform.gps_sigma", 2.0), "dgps": ("platform.gps_sigma", 0.1),
+            "rtk": ("platform.gps_sigma", 0.02)},
+    "imu": {"mems": ("platform.imu_sigma_deg", 1.0), "survey": ("platform.imu_sigma_deg", 0.02)},
+    "usbl_head": {"low-cost": ("platform.usbl_angle_sigma_deg", 0.5),
+                  "survey": ("platform.usbl_angle_sigma_deg", 0.14)},
+    "ranging": {"cw": ("acoustics.sigma_range", 0.1), "wide-band": ("acoustics.sigma_range", 0.02)},
+}
+#: The grade categories that change each system's accuracy (the others are not searched for it, nor paid).
+SYSTEM_GRADES = {"sbl": ("gps", "imu", "ranging"), "lbl": ("ranging",), "usbl": ("gps", "imu", "usbl_head", "ranging")}
+#: The keys an override of a design file may not set: they name files or code.
+FILE_KEYS = {f"{section}.{key}" for section, key in PATH_KEYS} | {"simulation.receiver", "receiver"}
+#: The largest design file read [bytes].
+MAX_BYTES = 1 << 20
+#: The most vertices of a polygon, areas to avoid, overrides and vehicle depths.
+MAX_VERTICES, MAX_AVOID, MAX_SET, MAX_DEPTHS = 200, 50, 200, 10
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+_FOLDER = files("sblsim.orchestrator") / "designs"
+#: The built-in design problems: name -> its TOML file in this package.
+BUILTIN_DESIGNS = {name: f"{name}.toml" for name in ("lbl-field-2km", "usbl-deep-head")}
+
+
+@dataclass(frozen=True)
+class Key:
+    """A declared key of a design problem: its :class:`Variable` (type, default, unit, meaning, range or
+    choices of one value) and, for a list, its allowed length ``(low, high)``."""
+
+    variable: Variable
+    length: tuple[int, int] | None = None
+
+    @property
+    def name(self) -> str:
+        return self.variable.name
+
+    @property
+    def start(self) -> Any:
+        start = self.variable.start
+        return list(start) if isinstance(start, (list, tuple)) else start
+
+    def allowed(self) -> str:
+        """The allowed values in words (a list: its length and each item's range)."""
+        one = self.variable.allowed()
+        if self.length is None:
+            return one
+        low, high = self.length
+        count = f"{low}" if low == high else f"{low} to {high}"
+        return f"a list of {count} values, each {one}"
+
+
+def _key(name: str, type_: str, start: Any, unit: str, description: str, length: tuple[int, int] | None = None,
+         **allowed: Any) -> Key:
+    item = start[0] if isinstance(start, list) and start else (start if not isinstance(start, list) else None)
+    if item is None:
+        item = {"Real": 0.0, "Integer": 0, "String": (allowed.get("choices") or ("",))[0], "Boolean": False}[type_]
+    variable = Variable(name, "parameter", type_, start if length else item, unit, description, scope="config",
+                        **allowed)
+    return Key(variable, length)
+
+
+_POSITION = dict(min=-1e5, max=1e5)
+_COST = dict(min=0.0, max=1e9)
+_GRADE_LIST = (0, 10)
+
+#: Every key of a design problem: section -> its keys (the docs' table, :func:`check_problem`, the defaults).
+DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
+    "design": (
+        _key("name", "String", "design", "", "the design's name (its files are NAME-SYSTEM.toml)"),
+        _key("scenario", "String", "", "", f"the base scenario, its site and error levels: one of "
+                                           f"{', '.join(BUILTIN_SCENARIOS)} (a CONFIG.toml: --scenario)"),
+        _key("set", "String", [], "", "overrides of the base scenario, 'section.key=value' as --set takes them",
+             (0, MAX_SET)),
+    ),
+    "work_area": (
+        _key("shape", "String", "circle", "", "the work area: a circle or a polygon", choices=("circle", "polygon")),
+        _key("centre_north_m", "Real", 0.0, "m", "North of the circle's centre", **_POSITION),
+        _key("centre_east_m", "Real", 0.0, "m", "East of the circle's centre", **_POSITION),
+        _key("radius_m", "Real", 100.0, "m", "the circle's radius", min=0.0, max=1e5, min_exclusive=True),
+        _key("polygon", "String", "", "", "the polygon's vertices 'north east; north east; ...' [m]"),
+        _key("depths_m", "Real", [], "m", "the vehicle's depths (empty: the scenario's target depth)",
+             (0, MAX_DEPTHS), min=0.0, max=11000.0),
+        _key("points", "Integer", 21, "", "grid points across the work area's bounding box per axis (21: 441 in "
+                                          "the box)", min=3, max=201),
+    ),
+    "prescription": (
+        _key("drms_m", "Real", 1.0, "m", "the DRMS to meet", min=0.0, max=1e4, min_exclusive=True),
+        _key("dimensions", "String", "horizontal", "", "the DRMS of North and East, or of all three axes",
+             choices=DIMENSIONS),
+        _key("coverage_pct", "Real", 95.0, "%", "the share of the work area where the DRMS must be met",
+             min=0.0, max=100.0, min_exclusive=True),
+        _key("availability_pct", "Real", 95.0, "%", "the share of cycles with a fix that those points need",
+             min=0.0, max=100.0),
+        _key("update_interval_s", "Real", 0.0, "s", "the longest cycle (a fix at least this often; 0: any)",
+             min=0.0, max=3600.0),
+    ),
+    "candidates": (
+        _key("systems", "String", list(SYSTEM_NAMES), "", "the systems to design", (1, len(SYSTEM_NAMES)),
+             choices=SYSTEM_NAMES),
+        _key("transponders", "Integer", [3, 8], "", "the LBL's fewest and most seafloor transponders", (2, 2),
+             min=3, max=16),
+        _key("transponder_cost", "Real", 1.0, "1", "the cost of one seafloor transponder", **_COST),
+        _key("sbl_cost", "Real", 0.0, "1", "the cost of the SBL platform", **_COST),
+        _key("usbl_cost", "Real", 0.0, "1", "the cost of the USBL transceiver", **_COST),
+        _key("sbl_baseline_m", "Real", [0.4, 3.0], "m", "the SBL's shortest and longest arm", (2, 2),
+             min=0.0, max=1000.0, min_exclusive=True),
+        _key("sbl_beacons", "Integer", 4, "", "the SBL's beacons on their circle", min=3, max=16),
+        *(k for category, grades in GRADES.items() for k in (
+            _key(category, "String", [], "", f"the {category.replace('_', ' ')} grades to choose among "
+                                              f"(empty: the scenario's)", _GRADE_LIST, choices=tuple(grades)),
+            _key(f"{category}_cost", "Real", [], "1", f"the cost of each {category.replace('_', ' ')} grade, in its "
+                                                     f"order (empty: free)", _GRADE_LIST, **_COST))),
+    ),
+    "seafloor": (
+        _key("shape", "String", "circle", "", "where LBL transponders may go: a circle or a polygon",
+             choices=("circle", "polygon")),
+        _key("centre_north_m", "Real", 0.0, "m", "North of the circle's centre", **_POSITION),
+        _key("centre_east_m", "Real", 0.0, "m", "East of the circle's centre", **_POSITION),
+        _key("radius_m", "Real", 0.0, "m", "the circle's radius (0: the work area's)", min=0.0, max=1e5),
+        _key("polygon", "String", "", "", "the polygon's vertices 'north east; north east; ...' [m]"),
+        _key("avoid", "String", [], "", "areas no transponder may go, each a polygon 'north east; ...' [m]",
+             (0, MAX_AVOID)),
+        _key("depth_m", "Real", 0.0, "m", "the transponders' depth (0: the scenario's platform.seafloor_depth)",
+             min=0.0, max=11000.0),
+    ),
+    "search": (
+        _key("criterion", "String", "percentile", "", "what a layout minimises: " + "; ".join(
+            f"{k}: {v}" for k, v in CRITERIA.items()), choices=tuple(CRITERIA)),
+        _key("pareto", "Boolean", False, "", "design every count and grade (the front of cost against the "
+                                             "criterion), not only up to the cheapest that meets"),
+        _key("population", "Integer", 10, "", "the differential evolution's population per free coordinate",
+             min=4, max=200),
+        _key("generations", "Integer", 60, "", "the differential evolution's most generations", min=1, max=10000),
+        _key("polish", "Boolean", True, "", "polish each layout with the criterion's gradient (d-optimal, "
+                                            "a-optimal)"),
+        _key("seed", "Integer", 0, "", "the search's seed", min=0, max=2**31 - 1),
+    ),
+    "monte_carlo": (
+        _key("replicates", "Integer", 100, "", "static-vehicle runs at each checked point", min=10, max=10000),
+        _key("cycles", "Integer", 3, "", "cycles of each static run", min=1, max=100),
+        _key("tolerance_pct", "Real", 15.0, "%", "a prediction further than this from its Monte Carlo is flagged",
+             min=0.0, max=100.0, min_exclusive=True),
+        _key("path", "Boolean", True, "", "also run the receivers on a path across the work area (compare)"),
+        _key("path_replicates", "Integer", 5, "", "replicates of the path", min=1, max=1000),
+    ),
+}
+#: The sections of a design problem.
+SECTIONS = tuple(DESIGN_KEYS)
+
+
+def defaults() -> dict[str, dict[str, Any]]:
+    """Every key of :data:`DESIGN_KEYS` at its default (lists new lists)."""
+    return {section: {k.name: k.start for k in keys} for section, keys in DESIGN_KEYS.items()}
+
+
+def _value(section: str, key: Key, value: Any) -> Any:
+    """One key's value checked against its declaration (a list item by item); returned as its type."""
+    where = f"{section}.{key.name}"
+    if key.length is None:
+        if isinstance(value, (list, tuple, dict)):
+            raise ConfigError(f"{where}: expected one value ({key.allowed()}), got a {type(value).__name__}")
+        value = key.variable.coerce(value, where)
+        if key.variable.type == "String" and (len(value) > 20000 or "\0" in value):
+            raise ConfigError(f"{where}: a text of at most 20,000 characters, got {len(value):,}")
+        return value
+    if not isinstance(value, (list, tuple)):
+        raise ConfigError(f"{where}: expected {key.allowed()}, got {shown(value)}")
+    low, high = key.length
+    if not low <= len(value) <= high:
+        raise ConfigError(f"{where}: {len(value)} values; expected {key.allowed()}")
+    out = [key.variable.coerce(item, f"{where}[{k}]") for k, item in enumerate(value)]
+    if key.variable.type == "String" and any(len(v) > 20000 or "\0" in v for v in out):
+        raise ConfigError(f"{where}: each text at most 20,000 characters")
+    return out
+
+
+def check_problem(raw: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """A design problem's sections checked against :data:`DESIGN_KEYS` and completed with the defaults.
+
+    Parameters
+    ----------
+    raw : mapping
+        Section -> key -> value, as read from ``DESIGN.toml`` (or given to :func:`sblsim.design`).
+
+    Returns
+    -------
+    dict
+        Every section and key (the problem as resolved, before the scenario's defaults fill what depends on it).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``section.key`` and what is allowed: an unknown section or key, a value of the wrong type,
+        outside its range or not one of its choices, a list of the wrong length, lists of grades and costs of
+        different lengths, an invalid polygon, a name that is not a file name, a scenario that is not built in, an
+        override that names a file or code.
+    """
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"design: expected sections {', '.join(SECTIONS)}, got {shown(raw)}")
+    problem = defaults()
+    for section, values in raw.items():
+        if section not in DESIGN_KEYS:
+            raise ConfigError(f"design: unknown section [{str(section)[:40]}]; the sections: {', '.join(SECTIONS)}")
+        if not isinstance(values, Mapping):
+            raise ConfigError(f"[{section}]: expected a table of keys, got {shown(values)}")
+        keys = {k.name: k for k in DESIGN_KEYS[section]}
+        for name, value in values.items():
+            if name not in keys:
+                raise ConfigError(f"{section}.{str(name)[:40]}: not a key of [{section}]; its keys: "
+                                  f"{', '.join(keys)}")
+            problem[section][name] = _value(section, keys[name], value)
+    _check_together(problem)
+    return problem
+
+
+def _check_together(problem: dict[str, dict[str, Any]]) -> None:
+    """What one key cannot check alone (module docstring of :func:`check_problem`)."""
+    design, candidates = problem["design"], problem["candidates"]
+    if not _NAME.fullmatch(design["name"]):
+        raise ConfigError(f"design.name: {design['name'][:40]!r} is not a name of 1 to 64 letters, digits, '.', '_' "
+                          "or '-' (starting with a letter or digit)")
+    if not design["scenario"]:
+        raise ConfigError(f"design.scenario: give the base scenario, one of {', '.join(BUILTIN_SCENARIOS)} (or "
+                          "--scenario CONFIG.toml)")
+    for item in design["set"]:
+        key = item.split("=", 1)[0].strip()
+        if "=" not in item or not key:
+            raise ConfigError(f"design.set: expected 'section.key=value', got {item[:60]!r}")
+        if key in FILE_KEYS:
+            raise ConfigError(f"design.set: {key} names a file or code, which a design file may not (give a "
+                              "configuration with --scenario)")
+    low, high = candidates["transponders"]
+    if low > high:
+        raise ConfigError(f"candidates.transponders: the fewest ({low}) is above the most ({high})")
+    short, long = candidates["sbl_baseline_m"]
+    if short > long:
+        raise ConfigError(f"candidates.sbl_baseline_m: the shortest ({short:g} m) is above the longest ({long:g} m)")
+    for category in GRADES:
+        grades, costs = candidates[category], candidates[f"{category}_cost"]
+        if costs and len(costs) != len(grades):
+            raise ConfigError(f"candidates.{category}_cost: {len(costs)} costs for {len(grades)} grades in "
+                              f"candidates.{category}")
+        if len(set(grades)) != len(grades):
+            raise ConfigError(f"candidates.{category}: a grade is listed twice")
+    if len(set(candidates["systems"])) != len(candidates["systems"]):
+        raise ConfigError("candidates.systems: a system is listed twice")
+    for section in ("work_area", "seafloor"):
+        if problem[section]["shape"] == "polygon":
+            polygon(problem[section]["polygon"], f"{section}.polygon")
+    for k, text in enumerate(problem["seafloor"]["avoid"]):
+        polygon(text, f"seafloor.avoid[{k}]")
+
+
+def polygon(text: str, where: str) -> np.ndarray:
+    """A polygon's vertices from ``"north east; north east; ..."`` [m], (V, 2), at least three, not degenerate.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where``.
+    """
+    rows = [r for r in text.replace(",", " ").split(";") if r.strip()]
+    if not 3 <= len(rows) <= MAX_VERTICES:
+        raise ConfigError(f"{where}: {len(rows)} vertices; give 3 to {MAX_VERTICES} as 'north east; north east; "
+                          "...' [m]")
+    try:
+        vertices = np.array([[float(x) for x in r.split()] for r in rows], dtype=float)
+    except ValueError:
+        raise ConfigError(f"{where}: expected 'north east; north east; ...' in metres") from None
+    if vertices.ndim != 2 or vertices.shape[1] != 2 or not np.all(np.isfinite(vertices)) \
+            or np.abs(vertices).max() > 1e5:
+        raise ConfigError(f"{where}: expected 'north east; north east; ...' in metres, each within ±100000")
+    n, e = vertices.T
+    if abs(np.dot(n, np.roll(e, -1)) - np.dot(e, np.roll(n, -1))) < 1e-6:
+        raise ConfigError(f"{where}: the polygon encloses no area")
+    return vertices
+
+
+def read_problem(source: str | Path) -> dict[str, Any]:
+    """The raw sections of a built-in design problem (:data:`BUILTIN_DESIGNS`) or a ``DESIGN.toml`` file.
+
+    Raises
+    ------
+    ConfigError
+        A file that is missing, not a regular file, larger than :data:`MAX_BYTES`, not UTF-8 or not valid TOML.
+    """
+    name = str(source)
+    if name in BUILTIN_DESIGNS:
+        return tomlfile.loads((_FOLDER / BUILTIN_DESIGNS[name]).read_text(encoding="utf-8"))
+    path = Path(source)
+    if path.suffix != ".toml" and not path.exists():
+        raise ConfigError(f"design: {name[:80]!r} is neither a built-in design ({', '.join(BUILTIN_DESIGNS)}) nor a "
+                          "DESIGN.toml file")
+    try:
+        size = regular_file(path, "design")
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+    if size > MAX_BYTES:
+        raise ConfigError(f"design: {name[:80]!r} is {size:,} bytes; a design file is at most {MAX_BYTES:,}")
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_BYTES + 1)
+        return tomlfile.loads(data.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"design: {name[:80]!r} is not valid TOML ({' '.join(str(exc).split())[:160]})") from None
+    except OSError as exc:
+        raise ConfigError(f"design: {name[:80]!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+
+
+# --------------------------------------------------------------------------- geometry of the areas
+
+@dataclass(frozen=True)
+class Area:
+    """A circle or polygon in the horizontal plane (North, East [m])."""
+
+    vertices: np.ndarray | None = None
+    centre: tuple[float, float] = (0.0, 0.0)
+    radius: float = 0.0
+
+    @classmethod
+    def of(cls, section: Mapping[str, Any], where: str, radius: float | None = None) -> Area:
+        """The area of a ``[work_area]`` or ``[seafloor]`` section (``radius`` in place of a 0 radius)."""
+        if section["shape"] == "polygon":
+            return cls(vertices=polygon(section["polygon"], f"{where}.polygon"))
+        r = section["radius_m"] if section["radius_m"] > 0.0 or radius is None else radius
+        return cls(centre=(section["centre_north_m"], section["centre_east_m"]), radius=float(r))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bounding box's lower and upper corners (North, East) [m]."""
+        if self.vertices is not None:
+            return self.vertices.min(axis=0), self.vertices.max(axis=0)
+        c = np.asarray(self.centre)
+        return c - self.radius, c + self.radius
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """The signed distance of points (..., 2) to the area's boundary [m]: negative inside."""
+        points = np.asarray(points, dtype=float)
+        if self.vertices is None:
+            return np.hypot(points[..., 0] - self.centre[0], points[..., 1] - self.centre[1]) - self.radius
+        return signed_distance(points, self.vertices)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Which points (..., 2) lie inside (or on) the area."""
+        return self.distance(points) <= 1e-9
+
+    def outline(self) -> np.ndarray:
+        """Points of the boundary (K, 2), closed (for figures)."""
+        if self.vertices is not None:
+            return np.vstack([self.vertices, self.vertices[:1]])
+        a = np.linspace(0.0, 2.0 * math.pi, 181)
+        return np.column_stack([self.centre[0] + self.radius * np.cos(a), self.centre[1] + self.radius * np.sin(a)])
+
+
+def signed_distance(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """Signed distance of points (..., 2) to a polygon's boundary (V, 2) [m]: negative inside (even-odd rule)."""
+    p = np.asarray(points, dtype=float)[..., None, :]
+    a, b = vertices, np.roll(vertices, -1, axis=0)
+    ab = b - a
+    t = np.clip(np.sum((p - a) * ab, axis=-1) / np.sum(ab * ab, axis=-1), 0.0, 1.0)
+    nearest = np.min(np.linalg.norm(p - (a + t[..., None] * ab), axis=-1), axis=-1)
+    # inside: a ray to the East crosses the edges an odd number of times
+    y, x = p[..., 0], p[..., 1]
+    crosses = ((a[:, 0] > y) != (b[:, 0] > y)) & (x < a[:, 1] + (y - a[:, 0]) * ab[:, 1] / np.where(
+        ab[:, 0] == 0.0, 1.0, ab[:, 0]))
+    inside = np.sum(crosses, axis=-1) % 2 == 1
+    return np.where(inside, -nearest, nearest)
+
+
+def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
+    """The work area's points: a regular grid of ``count`` × ``count`` over its bounding box, those inside, at
+    each depth; (M, 3) NED [m], depth-major, North-major within a depth.
+
+    Raises
+    ------
+    ConfigError
+        If no grid point lies inside the area.
+    """
+    low, high = area.bounds()
+    north = np.linspace(low[0], high[0], count)
+    east = np.linspace(low[1], high[1], count)
+    N, E = np.meshgrid(north, east, indexing="ij")
+    plane = np.column_stack([N.ravel(), E.ravel()])
+    plane = plane[area.contains(plane)]
+    if plane.shape[0] == 0:
+        raise ConfigError("work_area: no grid point lies inside the work area; give more work_area.points")
+    return np.vstack([np.column_stack([plane, np.full(len(plane), d)]) for d in depths])
+
+
+__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "FILE_KEYS", "GRADES", "Key", "SECTIONS", "SYSTEM_GRADES",
+           "SYSTEM_NAMES", "check_problem", "defaults", "polygon", "read_problem", "signed_distance",
+           "work_area_points"]

@@ -1,0 +1,490 @@
+"""``sblsim design``'s work: from a design problem to its proposed designs, each confirmed by Monte Carlo.
+
+1. **Resolve** the problem (:func:`resolve`): the base scenario's plan, the work area's points at the vehicle's
+   depths, the seafloor region and the areas to avoid, what the scenario gives to the keys left at 0 or empty.
+2. **Candidates** (:func:`candidates`): per system, every count (LBL transponders) and combination of the grades
+   that change that system's accuracy (:data:`~sblsim.orchestrator.design.problem.SYSTEM_GRADES`), with its cost,
+   in the order of their cost.
+3. **Search** each candidate's layout (:mod:`~sblsim.orchestrator.design.search`: an LBL's ring, then its free
+   placement started from it; an SBL's arm; a USBL has no layout) for the criterion over the work area, in the order
+   of cost, until the cheapest that meets the prescription (every candidate with ``search.pareto``); with
+   ``workers`` above 1, that many candidates at once, the result the same as one at a time.
+4. **Propose** the best design of each system (the cheapest that meets, else the one of the largest coverage), and
+   with ``search.pareto`` every design of the front of cost against the criterion; each is evaluated again through
+   the accuracy map itself (:func:`sblsim.orchestrator.maps.point_accuracy`), whose numbers the outputs carry.
+5. **Confirm** each proposal by Monte Carlo (:mod:`~sblsim.orchestrator.design.confirm`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from multiprocessing import get_context
+from typing import Any, Mapping
+
+import numpy as np
+
+from sblsim.models.acoustics.core import FLIGHT_CAPACITY
+from sblsim.models.declarations import ModelError, format_table
+from sblsim.models.design.criteria import coverage, criterion
+from sblsim.models.errors import ConfigError
+from sblsim.orchestrator.cosim.config import apply_overrides
+from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels
+from sblsim.orchestrator.design.problem import (
+    GRADES,
+    SYSTEM_GRADES,
+    SYSTEM_NAMES,
+    Area,
+    polygon,
+    work_area_points,
+)
+from sblsim.orchestrator.design.search import Objective, optimise_baseline, optimise_free, optimise_ring
+from sblsim.orchestrator.io.progress import Progress, ProgressSpec
+from sblsim.orchestrator.maps import diver_depth, point_accuracy
+
+#: The slowest sound speed a slot period is sized for [m/s] (any water; the eigenrays' bending on top: a margin).
+SLOWEST_SOUND = 1400.0
+#: The quantiles of the DRMS over the work area that a design reports [%].
+QUANTILES = (50.0, 95.0)
+
+
+@dataclass
+class Resolved:
+    """A design problem resolved against its base scenario.
+
+    Attributes
+    ----------
+    sections : dict
+        The problem as resolved (every key; what the scenario gives filled in).
+    source : str, Path or mapping
+        The base scenario.
+    items : list of str
+        The base scenario's overrides.
+    plan : RunPlan
+        The base scenario's plan.
+    area, seafloor : Area
+    avoid : list of Area
+    points : ndarray, shape (M, 3)
+        The work area's points, NED [m].
+    """
+
+    sections: dict
+    source: Any
+    items: list[str]
+    plan: RunPlan
+    area: Area
+    seafloor: Area
+    avoid: list[Area]
+    points: np.ndarray
+
+    @property
+    def depths(self) -> list[float]:
+        return self.sections["work_area"]["depths_m"]
+
+    @property
+    def seafloor_depth(self) -> float:
+        return self.sections["seafloor"]["depth_m"]
+
+
+@dataclass
+class Candidate:
+    """A system with a count and grades, and its cost (the layout is searched)."""
+
+    system: str
+    count: int
+    grades: dict[str, str]
+    cost: float
+    order: int = 0
+
+    @property
+    def label(self) -> str:
+        grades = ", ".join(f"{k} {v}" for k, v in self.grades.items())
+        what = {"lbl": f"{self.count} transponders", "sbl": f"{self.count} beacons", "usbl": "one transceiver"}
+        return f"{self.system.upper()}, {what[self.system]}" + (f", {grades}" if grades else "")
+
+
+@dataclass
+class Design:
+    """A candidate's searched layout and its accuracy over the work area.
+
+    Attributes
+    ----------
+    candidate : Candidate
+    items : list of str
+        The overrides of the base scenario that make the design (its scenario file's difference).
+    transponders : ndarray or None
+        An LBL's seafloor positions (n, 3), NED [m].
+    baseline : float or None
+        An SBL's arm [m].
+    value : float
+        The criterion (:func:`sblsim.models.design.criteria.criterion`).
+    values : dict
+        ``drms``, ``drms_3d``, ``log_det``, ``availability`` at the work area's points, (M,) each.
+    history : list of float
+        The search's best criterion after each generation.
+    cycle : float
+        The time of one cycle [s].
+    evaluated_by : str
+        ``map`` (the accuracy map itself) or ``search`` (the search's tables).
+    """
+
+    candidate: Candidate
+    items: list[str]
+    transponders: np.ndarray | None
+    baseline: float | None
+    value: float
+    values: dict
+    history: list[float]
+    cycle: float
+    evaluated_by: str = "search"
+    meets: bool = False
+    coverage: float = 0.0
+    name: str = ""
+    monte_carlo: list = field(default_factory=list)
+    path: list = field(default_factory=list)
+
+
+def _depth_default(plan: RunPlan) -> float:
+    return float(diver_depth(plan)[0])
+
+
+def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None) -> Resolved:
+    """The problem resolved against its base scenario (module docstring, step 1).
+
+    Parameters
+    ----------
+    sections : dict
+        From :func:`~sblsim.orchestrator.design.problem.check_problem`.
+    source : str, Path or mapping
+        The base scenario (``design.scenario``, or the command line's ``--scenario``).
+    scenario_items : list of str, optional
+        Overrides of the base scenario (default ``design.set``).
+
+    Raises
+    ------
+    ConfigError
+        A base scenario or override that does not resolve; a vehicle depth at or below the seafloor or the water;
+        a seafloor region without room outside its areas to avoid.
+    """
+    items = list(sections["design"]["set"] if scenario_items is None else scenario_items)
+    try:
+        plan = load_plan(source, items) if not isinstance(source, Mapping) else make_plan(
+            apply_overrides(thaw(source), items, None))
+    except ModelError as exc:
+        raise ConfigError(f"design.scenario: {exc}") from None
+    sections = {k: dict(v) for k, v in sections.items()}
+    work, floor = sections["work_area"], sections["seafloor"]
+    if not work["depths_m"]:
+        work["depths_m"] = [_depth_default(plan)]
+    if floor["depth_m"] == 0.0:
+        floor["depth_m"] = float(plan["platform"]["seafloor_depth"])
+    water = float(plan["acoustics"]["water_depth"])
+    deepest = max(work["depths_m"])
+    if not floor["depth_m"] > deepest:
+        raise ConfigError(f"seafloor.depth_m: {floor['depth_m']:g} m is not below the work area's deepest vehicle "
+                          f"({deepest:g} m, work_area.depths_m)")
+    if water > 0.0 and floor["depth_m"] > water:
+        raise ConfigError(f"seafloor.depth_m: {floor['depth_m']:g} m is below the site's water "
+                          f"(acoustics.water_depth = {water:g} m)")
+    area = Area.of(work, "work_area")
+    if floor["shape"] == "circle" and floor["radius_m"] == 0.0:
+        floor["centre_north_m"], floor["centre_east_m"] = work["centre_north_m"], work["centre_east_m"]
+        floor["radius_m"] = area.radius if area.vertices is None else float(
+            np.max(np.hypot(*(area.vertices - area.vertices.mean(axis=0)).T)))
+    seafloor = Area.of(floor, "seafloor")
+    avoid = [Area(vertices=polygon(text, f"seafloor.avoid[{k}]")) for k, text in enumerate(floor["avoid"])]
+    points = work_area_points(area, work["points"], work["depths_m"])
+    return Resolved(sections, source, items, plan, area, seafloor, avoid, points)
+
+
+def candidates(resolved: Resolved) -> list[Candidate]:
+    """Every candidate of the problem, in the order of cost (then of the systems, counts and grades as listed)."""
+    c = resolved.sections["candidates"]
+    out = []
+    for system in [s for s in SYSTEM_NAMES if s in c["systems"]]:
+        categories = [k for k in SYSTEM_GRADES[system] if c[k]]
+        choices = [[(k, grade, (c[f"{k}_cost"] or [0.0] * len(c[k]))[i]) for i, grade in enumerate(c[k])]
+                   for k in categories]
+        counts = range(c["transponders"][0], c["transponders"][1] + 1) if system == "lbl" else [
+            c["sbl_beacons"] if system == "sbl" else 1]
+        base = {"sbl": c["sbl_cost"], "usbl": c["usbl_cost"], "lbl": 0.0}[system]
+        for count in counts:
+            for combo in itertools.product(*choices):
+                cost = base + (count * c["transponder_cost"] if system == "lbl" else 0.0) + sum(x[2] for x in combo)
+                out.append(Candidate(system, count, {k: g for k, g, _ in combo}, float(cost), len(out)))
+    return sorted(out, key=lambda x: (x.cost, x.order))
+
+
+def grade_items(candidate: Candidate) -> list[str]:
+    """The overrides of a candidate's grades (:data:`~sblsim.orchestrator.design.problem.GRADES`)."""
+    return [f"{GRADES[k][g][0]}={GRADES[k][g][1]!r}" for k, g in candidate.grades.items()]
+
+
+def layout_items(system: str, count: int, transponders: np.ndarray | None = None,
+                 baseline: float | None = None) -> list[str]:
+    """The overrides of a system's layout: an LBL's custom positions, an SBL's circle of beacons, a USBL's none."""
+    items = [f"platform.system={system}"]
+    if system == "lbl":
+        items += ["platform.layout=custom", f"platform.beacons={count}",
+                  f"platform.beacon_offsets={format_table(transponders)}"]
+    elif system == "sbl":
+        items += ["platform.layout=circle", f"platform.beacons={count}", f"platform.baseline={baseline!r}"]
+    return items
+
+
+def plan_of(resolved: Resolved, items: list[str]) -> RunPlan:
+    """The plan of the base scenario with the problem's and a design's overrides."""
+    source = resolved.source
+    if isinstance(source, Mapping):
+        return make_plan(apply_overrides(thaw(source), [*resolved.items, *items], None))
+    return load_plan(source, [*resolved.items, *items])
+
+
+def slot_period(plan: RunPlan, transducers: np.ndarray, points: np.ndarray) -> float:
+    """The sampling time a design runs with [s]: the scenario's, or longer where a packet from the farthest
+    transducer to the farthest work-area point would stay in flight beyond what the channel holds
+    (:data:`~sblsim.models.acoustics.core.FLIGHT_CAPACITY` slots; the straight path at :data:`SLOWEST_SOUND`, two
+    legs for two-way ranging and a USBL, the turnaround and three of its jitter's standard deviations on top)."""
+    acoustics = plan["acoustics"]
+    period = float(plan["simulation"]["sampling_time"])
+    legs = 2 if (acoustics["ranging"] == "twtt" or plan.system.measures_direction) else 1
+    distance = float(np.max(np.linalg.norm(points[:, None, :] - transducers[None, :, :], axis=-1)))
+    turnaround = acoustics["turnaround"] + 3.0 * acoustics["turnaround_sigma"] if legs == 2 else 0.0
+    flight = 1.1 * (legs * distance / SLOWEST_SOUND + turnaround)
+    return max(period, flight / (FLIGHT_CAPACITY - 1))
+
+
+def _sampling_items(plan: RunPlan, period: float) -> list[str]:
+    return [] if period == plan["simulation"]["sampling_time"] else [f"simulation.sampling_time={period!r}"]
+
+
+class Searcher:
+    """The search of a resolved problem's candidates (module docstring, step 3); one per process."""
+
+    def __init__(self, resolved: Resolved) -> None:
+        self.resolved = resolved
+        self._detections: dict = {}
+
+    def detection(self, plan: RunPlan, transducer_depth: float) -> Detection:
+        """The site's detection table for transducers at a depth (made once per system and depth)."""
+        key = (plan.system.name, plan["acoustics"]["ranging"], round(transducer_depth, 9))
+        if key not in self._detections:
+            r = self.resolved
+            low, high = r.seafloor.bounds()
+            wlow, whigh = r.area.bounds()
+            corners = np.array([[a, b] for a in (low[0], high[0], wlow[0], whigh[0])
+                                for b in (low[1], high[1], wlow[1], whigh[1])])
+            reach = float(np.max(np.hypot(*(corners[:, None] - corners[None]).reshape(-1, 2).T)))
+            self._detections[key] = Detection(plan, transducer_depth, r.depths, reach)
+        return self._detections[key]
+
+    def objective(self, plan: RunPlan, transducer_depth: float) -> Objective:
+        r = self.resolved
+        detection = self.detection(plan, transducer_depth) if plan["acoustics"]["detection"] == "snr" else None
+        loss = plan["acoustics"]["loss_pct"] / 100.0
+        evaluator = LayoutEvaluator(r.points, Levels.of(plan), detection, loss)
+        s, p = r.sections["search"], r.sections["prescription"]
+        return Objective(evaluator, s["criterion"], p["dimensions"], p["coverage_pct"])
+
+    def search(self, candidate: Candidate) -> Design:
+        """A candidate's layout searched and its accuracy over the work area (by the search's tables)."""
+        r = self.resolved
+        s = r.sections["search"]
+        grades = grade_items(candidate)
+        options = dict(seed=s["seed"], population=s["population"], generations=s["generations"])
+        transponders = baseline = None
+        history: list[float] = []
+        if candidate.system == "lbl":
+            n = candidate.count
+            provisional = plan_of(r, [*layout_items("lbl", n, _provisional_ring(r, n)), *grades])
+            objective = self.objective(provisional, r.seafloor_depth)
+            ring_found = optimise_ring(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
+                                       **options)
+            found = optimise_free(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
+                                  start=ring_found.layout, **options)
+            if ring_found.value <= found.value and _feasible(ring_found.layout, r):
+                found = ring_found
+            transponders, history = found.layout, ring_found.history + found.history
+            layout = layout_items("lbl", n, transponders)
+            value, values = found.value, objective.evaluator.evaluate(transponders[None])
+            positions = transponders
+        elif candidate.system == "sbl":
+            low, high = r.sections["candidates"]["sbl_baseline_m"]
+            provisional = plan_of(r, [*layout_items("sbl", candidate.count, baseline=1.0), *grades])
+            unit = np.asarray(provisional.lever_arms, dtype=float)
+            objective = self.objective(provisional, float(unit[0, 2]))
+            found = optimise_baseline(objective, unit, low, high, **options)
+            baseline, history = float(found.variables[0]), found.history
+            layout = layout_items("sbl", candidate.count, baseline=baseline)
+            value, values = found.value, objective.evaluator.evaluate(found.layout[None])
+            positions = found.layout
+        else:
+            plan = plan_of(r, [*layout_items("usbl", 1), *grades])
+            arms = np.asarray(plan.lever_arms, dtype=float)
+            detection = None
+            if plan["acoustics"]["detection"] == "snr":
+                probability, scale = self.detection(plan, float(arms[0, 2]))(r.points, arms[None])
+                detection = (probability[0], scale[0])
+            values = point_accuracy(plan, r.points, detection=detection)
+            layout, positions = layout_items("usbl", 1), arms
+            p = r.sections["prescription"]
+            drms = values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
+            value = float(criterion(s["criterion"], drms, values["log_det"], p["coverage_pct"]))
+            values = {k: v[None] for k, v in values.items()}
+        plan = plan_of(r, [*layout, *grades])
+        period = slot_period(plan, positions, r.points)
+        items = [*layout, *grades, *_sampling_items(plan, period)]
+        slots = 1 if plan.system.measures_direction else candidate.count
+        design = Design(candidate, items, transponders, baseline, float(value), {k: v[0] for k, v in values.items()},
+                        history, slots * period)
+        self.judge(design)
+        return design
+
+    def judge(self, design: Design) -> None:
+        """Whether a design meets the prescription, and its coverage [%] (from its values)."""
+        p = self.resolved.sections["prescription"]
+        drms = design.values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
+        design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"]))
+        interval = p["update_interval_s"]
+        design.meets = bool(design.coverage >= p["coverage_pct"] - 1e-9 and (interval == 0.0 or
+                                                                             design.cycle <= interval + 1e-9))
+
+    def on_the_map(self, design: Design) -> None:
+        """A design evaluated again through the accuracy map itself (:func:`point_accuracy`), and judged."""
+        r = self.resolved
+        plan = plan_of(r, design.items)
+        design.values = point_accuracy(plan, r.points)
+        p, s = r.sections["prescription"], r.sections["search"]
+        drms = design.values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
+        design.value = float(criterion(s["criterion"], drms, design.values["log_det"], p["coverage_pct"]))
+        design.evaluated_by = "map"
+        self.judge(design)
+
+
+def _provisional_ring(r: Resolved, n: int) -> np.ndarray:
+    """A ring of n transponders inside the seafloor region (the plan of a candidate before its layout is known)."""
+    centre = r.seafloor.centre if r.seafloor.vertices is None else tuple(r.seafloor.vertices.mean(axis=0))
+    angle = 2.0 * math.pi * np.arange(n) / n
+    return np.column_stack([centre[0] + np.cos(angle), centre[1] + np.sin(angle), np.full(n, r.seafloor_depth)])
+
+
+def _feasible(layout: np.ndarray, r: Resolved) -> bool:
+    xy = layout[:, :2]
+    return bool(np.all(r.seafloor.contains(xy)) and all(np.all(a.distance(xy) >= 0.0) for a in r.avoid))
+
+
+_WORKER: Searcher | None = None
+
+
+def _start_worker(resolved: Resolved) -> None:
+    global _WORKER
+    _WORKER = Searcher(resolved)
+
+
+def _search_in_worker(candidate: Candidate) -> Design:
+    return _WORKER.search(candidate)
+
+
+@dataclass
+class DesignRun:
+    """What a design problem gave: its resolution, every candidate searched (in the order of cost) and the
+    proposed designs (best first)."""
+
+    resolved: Resolved
+    searched: list[Design]
+    proposed: list[Design]
+
+    @property
+    def best(self) -> Design:
+        return self.proposed[0]
+
+
+def _rank(design: Design) -> tuple:
+    return (not design.meets, design.candidate.cost if design.meets else -design.coverage, design.value,
+            design.candidate.order)
+
+
+def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = False) -> DesignRun:
+    """Steps 3 and 4 of the module docstring: the candidates searched in the order of cost, the proposals made and
+    evaluated on the map."""
+    searcher = Searcher(resolved)
+    todo = candidates(resolved)
+    pareto = resolved.sections["search"]["pareto"]
+    searched: list[Design] = []
+    bar = Progress(len(todo), "design", "candidate", progress)
+    pool = None
+    if workers > 1 and len(todo) > 1:
+        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_start_worker,
+                                   initargs=(resolved,))
+    try:
+        met_cost = math.inf
+        start = 0
+        while start < len(todo):
+            batch = [c for c in todo[start:start + (workers if pool else 1)]]
+            results = list(pool.map(_search_in_worker, batch)) if pool else [searcher.search(c) for c in batch]
+            for design in results:
+                if not pareto and design.candidate.cost > met_cost:
+                    break  # the sequential search would have stopped before it
+                if design.meets:  # a table's verdict, checked on the map itself
+                    searcher.on_the_map(design)
+                searched.append(design)
+                bar.update(1)
+                if design.meets:
+                    met_cost = min(met_cost, design.candidate.cost)
+            start += len(batch)
+            if not pareto and todo[start:start + 1] and todo[start].cost > met_cost:
+                break
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+        bar.close()
+    proposed = []
+    for system in SYSTEM_NAMES:
+        mine = [d for d in searched if d.candidate.system == system]
+        if mine:
+            proposed.append(min(mine, key=_rank))
+    if pareto:
+        proposed += [d for d in _front(searched) if d not in proposed]
+    for design in proposed:
+        if design.evaluated_by != "map":
+            searcher.on_the_map(design)
+    proposed.sort(key=_rank)
+    names = set()
+    for design in proposed:
+        design.name = _name(resolved.sections["design"]["name"], design, names)
+    return DesignRun(resolved, searched, proposed)
+
+
+def _front(designs: list[Design]) -> list[Design]:
+    """The designs that no other beats in both cost and criterion (the Pareto front), by cost."""
+    front = [d for d in designs if not any(o.candidate.cost <= d.candidate.cost and o.value <= d.value and
+                                           (o.candidate.cost < d.candidate.cost or o.value < d.value)
+                                           for o in designs)]
+    return sorted(front, key=lambda d: (d.candidate.cost, d.value))
+
+
+def _name(stem: str, design: Design, taken: set) -> str:
+    c = design.candidate
+    name = f"{stem}-{c.system}" + (f"{c.count}" if c.system == "lbl" else "")
+    base, k = name, 2
+    while name in taken:
+        name, k = f"{base}-{k}", k + 1
+    taken.add(name)
+    return name
+
+
+def quantiles(design: Design, dimensions: str) -> dict[str, float]:
+    """The DRMS over the work area (``drms_p50_m``, ``drms_p95_m``, ``drms_max_m``) [m]; a point without a fix
+    counts as an infinite DRMS (then ``inf``)."""
+    drms = design.values["drms" if dimensions == "horizontal" else "drms_3d"]
+    drms = np.where(np.isfinite(drms), drms, np.inf)
+    out = {f"drms_p{q:g}_m": float(np.percentile(drms, q, method="higher")) for q in QUANTILES}
+    out["drms_max_m"] = float(drms.max())
+    return out
+
+
+__all__ = ["Candidate", "Design", "DesignRun", "QUANTILES", "Resolved", "SLOWEST_SOUND", "Searcher", "candidates",
+           "grade_items", "layout_items", "plan_of", "quantiles", "resolve", "search_all", "slot_period"]
