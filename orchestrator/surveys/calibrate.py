@@ -47,8 +47,7 @@ from sblsim.models.calibration import (
     select,
     solve,
 )
-from sblsim.models.declarations import ModelError, Variable
-from sblsim.models.perturbation import (
+from sblsim.models.calibration.perturbation import (
     BASES_RANGE,
     CRITERIA,
     GRADIENTS,
@@ -56,6 +55,7 @@ from sblsim.models.perturbation import (
     PERTURBATIONS,
     effective_scale,
 )
+from sblsim.models.declarations import ModelError, Variable
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.surveys.garpos import read_garpos
@@ -747,8 +747,8 @@ def _perturbation_keys(survey: Survey, segments: list, combined) -> dict:
 
 
 def _realistic(sol: Solution) -> float:
-    """The realistic sigma's factor of a segment (:func:`~sblsim.models.perturbation.effective_scale` of its used
-    residuals in time order)."""
+    """The realistic sigma's factor of a segment (:func:`~sblsim.models.calibration.perturbation.effective_scale` of
+    its used residuals in time order)."""
     if sol.perturbation is not None:
         return sol.perturbation.effective_scale
     return effective_scale(sol.residual_s[sol.used])
