@@ -90,9 +90,10 @@ def _own(module: str) -> str | None:
     return module or None
 
 
-def _graph() -> dict[str, set[str]]:
+def _graph(read: dict[str, list[tuple[str, int, bool]]] | None = None) -> dict[str, set[str]]:
+    """The arrows between the package's modules, of :data:`IMPORTS` or of the imports ``read``."""
     graph = {name: set() for name in MODULES}
-    for name, imports in IMPORTS.items():
+    for name, imports in (IMPORTS if read is None else read).items():
         for module, _, _ in imports:
             target = _own(module)
             if target and target != name:
@@ -253,6 +254,66 @@ def test_the_command_rules_can_fail():
     campaign = {_own(module) for module, _, _ in IMPORTS[f"{COMMANDS}.campaign"]}
     assert f"{COMMANDS}.analyze" in campaign and f"{COMMANDS}.common" in campaign
     assert {f"{COMMANDS}.run", f"{COMMANDS}.map"} <= {_own(m) for m, _, _ in IMPORTS["sblsim.orchestrator.api"]}
+
+
+#: The calibration package (models/calibration/), bottom up: each module imports only the modules before it here
+#: (its ``__init__`` re-exports them and none imports it), nothing of the orchestrator or of fmus/, so that no import
+#: circle can form inside it.
+CALIBRATION = "sblsim.models.calibration"
+CALIBRATION_ORDER = tuple(f"{CALIBRATION}.{name}" for name in (
+    "perturbation", "legs", "replies", "measurement", "ocean", "leastsquares", "selection", "bound", "kalman",
+    "combination", "boxin"))
+
+
+def _calibration_wrong(read: dict[str, list[tuple[str, int, bool]]]) -> list[tuple[str, str, int]]:
+    """The calibration modules' arrows (at any depth) to the orchestrator or fmus/, to the package's ``__init__``,
+    or to a module of the package not before the importer in :data:`CALIBRATION_ORDER`."""
+    wrong = []
+    for k, name in enumerate(CALIBRATION_ORDER):
+        for module, line, _ in read[name]:
+            own = _own(module)
+            if own is None or own == name:
+                continue
+            up = _in(own, "sblsim.orchestrator") or _in(own, "sblsim.fmus")
+            if up or (_in(own, CALIBRATION) and own not in CALIBRATION_ORDER[:k]):
+                wrong.append((name, own, line))
+    return wrong
+
+
+def test_the_calibration_package_lists_every_module_in_its_order():
+    inside = {name for name in MODULES if _in(name, CALIBRATION)}
+    assert inside == {CALIBRATION, *CALIBRATION_ORDER}
+
+
+def test_the_calibration_package_imports_no_orchestrator_or_fmus_and_reads_bottom_up():
+    wrong = _calibration_wrong(IMPORTS)
+    for name, module, line in wrong:
+        print(f"{MODULES[name]}:{line}: {name} imports {module}")
+    assert wrong == []
+    inside = {name for name in MODULES if _in(name, CALIBRATION)}
+    graph = _graph()
+    assert _cycles({name: graph[name] & inside for name in inside}) == []
+    assert f"{CALIBRATION}.ocean" in graph[f"{CALIBRATION}.leastsquares"]  # the arrows are read
+
+
+def test_the_calibration_rules_can_fail(tmp_path):
+    """A calibration module importing the orchestrator, fmus/, the package's face or a module above it is caught,
+    and an arrow back up the order is a circle the cycle finder prints."""
+    source = tmp_path / "legs.py"
+    source.write_text("from sblsim.orchestrator.surveys import calibrate\n"
+                      "from sblsim.models.calibration import solve\n"
+                      "def f():\n"
+                      "    import sblsim.fmus.native\n"
+                      "    from sblsim.models.calibration.ocean import _Design\n")
+    legs = f"{CALIBRATION}.legs"
+    read = {**IMPORTS, legs: IMPORTS[legs] + _imports(legs, source)}
+    assert sorted((own, line) for name, own, line in _calibration_wrong(read) if name == legs) == [
+        ("sblsim.fmus.native", 4), (CALIBRATION, 2), (f"{CALIBRATION}.ocean", 5),
+        ("sblsim.orchestrator.surveys.calibrate", 1)]
+    inside = {name for name in MODULES if _in(name, CALIBRATION)}
+    graph = _graph(read)
+    cycles = _cycles({name: graph[name] & inside for name in inside})
+    assert cycles and all(legs in cycle for cycle in cycles)
 
 
 def _heavy_at_load(name: str, seen: set[str] | None = None) -> set[str]:

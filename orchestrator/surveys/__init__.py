@@ -4,6 +4,9 @@
 * :mod:`~sblsim.orchestrator.surveys.xie`: survey A's text format (Xie et al. 2023);
 * :mod:`~sblsim.orchestrator.surveys.gnatss`: survey B's files (GNATSS's ``pxp_tt`` and
   ``POS_FREED_TRANS_TWTT``, site NCL1);
-* :mod:`~sblsim.orchestrator.surveys.calibrate`: a survey's definition (built-in TOML files in this folder:
-  the site and the solver's settings), its solution with :mod:`sblsim.models.calibration`, and its outputs.
+* :mod:`~sblsim.orchestrator.surveys.calibrate`: ``sblsim calibrate``'s entry point, which re-exports what four
+  modules hold: :mod:`~sblsim.orchestrator.surveys.settings` (the solver's settings),
+  :mod:`~sblsim.orchestrator.surveys.survey` (a survey's definition, the built-in TOML files in this folder: the
+  site and the solver's settings, and loading one), :mod:`~sblsim.orchestrator.surveys.solution` (its solution with
+  :mod:`sblsim.models.calibration`) and :mod:`~sblsim.orchestrator.surveys.outputs` (its files).
 """

@@ -22,8 +22,9 @@ the sound-speed profile (``*-svp.csv``)
 
 The transducer is the antenna plus the offset turned by the attitude, :math:`R_z(\\mathrm{heading})\\,R_y(
 \\mathrm{pitch})\\,R_x(\\mathrm{roll})` in North-East-Down (GARPOS's ``corr_attitude``): the platform's own
-rotation (:func:`sblsim.models.boxin.lever_enu`). The log's pings are the distinct transmit times; the replies
-flagged ``True`` and those of transponders that are not ``Stations`` (GARPOS's ``M00``) are left out and counted.
+rotation (:func:`sblsim.models.calibration.boxin.lever_enu`). The log's pings are the distinct transmit times; the
+replies flagged ``True`` and those of transponders that are not ``Stations`` (GARPOS's ``M00``) are left out and
+counted.
 GARPOS's files carry no GNSS sigma: the log takes :data:`NOMINAL_SIGMA_M`. GARPOS's surface is the frame's Up 0
 and its layers flat (``solver.surface_u_m = 0``, ``earth_radius_m = 0``).
 """
@@ -40,8 +41,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.acoustics.sound_speed import fit_rows
-from sblsim.models.boxin import lever_enu
 from sblsim.models.calibration import SOUND_SPEED_RANGE
+from sblsim.models.calibration.boxin import lever_enu
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import columns, number, read_lines, read_table
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, TRANSPONDER_ID, SurveyLog, check_frame

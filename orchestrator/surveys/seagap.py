@@ -19,8 +19,9 @@ names inside the folder the user gives (a file never names another file that is 
 
 The transducer is the antenna plus the offset turned by the attitude: SeaGap turns the offset by minus the
 heading about Up, then by the pitch about the turned starboard axis, then by the roll about the turned bow axis
-(``anttena2tr.jl``), which is the yaw-pitch-roll rotation of the platform (:func:`sblsim.models.boxin.lever_enu`,
-:func:`sblsim.models.platform.geometry.rotation_ned`) of the offset in the body's forward, right, down axes.
+(``anttena2tr.jl``), which is the yaw-pitch-roll rotation of the platform
+(:func:`sblsim.models.calibration.boxin.lever_enu`, :func:`sblsim.models.platform.geometry.rotation_ned`) of the
+offset in the body's forward, right, down axes.
 The profile's layers (a speed constant down to the next row) become the model's table of at most
 :data:`~sblsim.models.acoustics.sound_speed.MAX_PROFILE_ROWS` rows, linear between them, by
 :func:`stair_table`: the slowness projected on the table's evenly spaced rows in the least-squares sense
@@ -41,8 +42,8 @@ import pandas as pd
 from scipy.linalg import solve_banded
 
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS
-from sblsim.models.boxin import lever_enu
 from sblsim.models.calibration import SOUND_SPEED_RANGE
+from sblsim.models.calibration.boxin import lever_enu
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import number, read_lines
 from sblsim.orchestrator.surveys.gnatss import J2000_POSIX, J2000_RANGE

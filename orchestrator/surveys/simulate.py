@@ -1,12 +1,12 @@
 """Simulated calibration surveys: ``sblsim calibrate box-in|CONFIG.toml [--replicates N]``.
 
 A simulated survey is a TOML file (the built-in ``box-in``, :data:`SIMULATED_SURVEYS`, or the user's
-``CONFIG.toml``) with three optional tables: ``[survey]`` (:data:`sblsim.models.boxin.SURVEY_VARIABLES`: the
+``CONFIG.toml``) with three optional tables: ``[survey]`` (:data:`sblsim.models.calibration.boxin.SURVEY_VARIABLES`: the
 pattern, the transponder, the turnaround, the TWTT noise, the sound speed and its error, the seed),
 ``[platform]`` (the platform's GNSS and attitude errors and lever arm,
-:data:`sblsim.models.boxin.PLATFORM_KEYS`, with the platform's names, units, ranges and defaults) and
+:data:`sblsim.models.calibration.boxin.PLATFORM_KEYS`, with the platform's names, units, ranges and defaults) and
 ``[solver]`` (:data:`sblsim.orchestrator.surveys.calibrate.SOLVER_KEYS`). Each replicate is simulated
-(:func:`sblsim.models.boxin.simulate`), written as a calibration log (checked like any log,
+(:func:`sblsim.models.calibration.boxin.simulate`), written as a calibration log (checked like any log,
 :func:`sblsim.orchestrator.surveys.log.check_frame`) and solved like a recorded one
 (:func:`sblsim.orchestrator.surveys.calibrate.calibrate`); its errors are taken against the truth, its NEES
 with the solver's covariance, and the horizontal bound of the pattern from the CRB
@@ -35,8 +35,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sblsim.models import boxin
-from sblsim.models.calibration import crb
+from sblsim.models.calibration import boxin, crb
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.progress import Progress

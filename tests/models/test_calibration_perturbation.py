@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from sblsim.fmus.native import compiled_exact_points
-from sblsim.models import calibration as cal
-from sblsim.models.calibration import EigenRay, Perturbation, Replies, StraightRay, select, solve
-from sblsim.models.perturbation import basis, uniform_knots
+from sblsim.models.calibration import EigenRay, Perturbation, Replies, StraightRay, ocean, select, solve
+from sblsim.models.calibration.perturbation import basis, uniform_knots
+from sblsim.models.declarations import ModelError
 
 C = 1500.0
 DEPTH = 2000.0
@@ -63,7 +63,7 @@ def _survey(rng, shift=(0.05, -0.03, 0.02), hours=4.0, noise=2e-5, form="ntd"):
 
 def _prediction(design, legs, rows, mapping, p, theta):
     """The model's prediction with the mapping and the perturbation's columns held (as the solver's Jacobian)."""
-    tau = cal._perturbed_model(design, ARRAY, theta, C, True, legs, rows)[2]
+    tau = ocean._perturbed_model(design, ARRAY, theta, C, True, legs, rows)[2]
     if design.pert.kind == "ntd":  # SeaGap holds the mapping and the gradients' directions at the current estimate
         return mapping * tau + p @ theta[3:]
     return np.log(tau) / design.unit - p @ theta[3:]
@@ -76,10 +76,10 @@ def test_the_jacobian_is_the_prediction_s_finite_differences():
     for kind, gradient in (("ntd", "shallow+deep"), ("garpos", "shallow+deep")):
         pert = Perturbation(kind, n_bases=8, gradient=gradient)
         knots = uniform_knots(replies.t_tx.min(), replies.t_rx.max(), 8)
-        design = cal._Design(pert, replies, ARRAY, knots, C)
+        design = ocean._Design(pert, replies, ARRAY, knots, C)
         rows = np.arange(0, len(replies), 23)
         theta = np.concatenate(([0.3, -0.2, 0.1], rng.normal(0.0, 1e-4 if kind == "ntd" else 1.0, design.width())))
-        _, a, tau, _, mapping, _, _, p = cal._perturbed_model(design, ARRAY, theta, C, True, legs, rows)
+        _, a, tau, _, mapping, _, _, p = ocean._perturbed_model(design, ARRAY, theta, C, True, legs, rows)
         for j in [0, 1, 2, *rng.choice(np.arange(3, len(theta)), 6, replace=False)]:
             step = 1e-4 if j < 3 else 1.0
             up, down = theta.copy(), theta.copy()
@@ -168,9 +168,9 @@ def test_the_rejection_drops_the_outliers():
     pert = Perturbation("garpos", knot_interval=600.0, reject_sigma=5.0)
     sol = solve(bad, ARRAY, C, outlier_factor=None, perturbation=pert)
     assert sorted(np.flatnonzero(~sol.used)) == [10, 500, 900]
-    with pytest.raises(cal.ModelError, match="mu_t"):
+    with pytest.raises(ModelError, match="mu_t"):
         solve(replies, ARRAY, C, perturbation=Perturbation("ntd", n_bases=10, mu_t=60.0))
-    with pytest.raises(cal.ModelError, match="solve_sound_speed"):
+    with pytest.raises(ModelError, match="solve_sound_speed"):
         solve(replies, ARRAY, C, solve_sound_speed=True, perturbation=Perturbation("ntd", n_bases=10))
 
 
@@ -239,7 +239,7 @@ def test_a_profile_hung_from_the_transducer_is_the_profile_at_its_own_surface():
         want, want_gradient = own.legs(points[j:j + 1], x[j:j + 1], np.zeros(1, int))
         assert got[j] == pytest.approx(want[0], abs=1e-9)
         np.testing.assert_allclose(gradient[j], want_gradient[0], atol=1e-12)
-    with pytest.raises(cal.ModelError, match="earth_radius_m"):
+    with pytest.raises(ModelError, match="earth_radius_m"):
         EigenRay(table, 1500.0, 0.0, earth_radius=1000.0)
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from sblsim.models.perturbation import (
+from sblsim.models.calibration.perturbation import (
     akaike,
     basis,
     correlation_band,

@@ -11,8 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.models import boxin
-from sblsim.models.calibration import crb
+from sblsim.models.calibration import boxin, crb
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.surveys.log import read_survey_log
 from sblsim.orchestrator.surveys.simulate import (

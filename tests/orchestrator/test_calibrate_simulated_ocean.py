@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from sblsim.models import boxin
+from sblsim.models.calibration import boxin
 from sblsim.orchestrator.surveys.simulate import load_simulated, run_simulated, solve_replicate
 
 OCEAN = ["survey.pattern=figure-eight", "survey.duration_s=3600", "survey.ntd_sigma_s=2e-4",

@@ -56,7 +56,8 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from sblsim.models.calibration import SOUND_SPEED_RANGE, Replies
+from sblsim.models.calibration.legs import SOUND_SPEED_RANGE
+from sblsim.models.calibration.replies import Replies
 from sblsim.models.declarations import Variable, parameters
 from sblsim.models.platform.core import GPS_MODELS, Platform
 from sblsim.models.platform.geometry import rotation_ned

@@ -3,7 +3,7 @@
 One profile (or one speed) for a whole survey cannot follow the ocean: its sound speed changes over hours by
 parts in 10^4, which moves every travel time by tens of microseconds, far more than the centimetre a survey is
 after. The field's tools model that change as a smooth function of time on top of the reference travel time
-:math:`\\tau` of each reply's two legs (:mod:`sblsim.models.calibration`):
+:math:`\\tau` of each reply's two legs (:mod:`sblsim.models.calibration.legs`):
 
 * **NTD** (SeaGap; F. Tomita, M. Kido, Earth, Planets and Space, 2022, doi:10.1186/s40623-022-01740-0; its
   ``static_array.jl``): the nadir total delay :math:`\\delta(t)` [s], a two-way delay along the vertical mapped to
