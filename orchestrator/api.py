@@ -5,8 +5,8 @@ Every name in :data:`__all__` is public and stable; it is re-exported by the pac
 is reached.
 
 Each function does what the command of the same name does (``sblsim run``, ``compare``, ``map``, ``budget``,
-``replay``, ``calibrate``, ``campaign``, ``analyze``), with the same numbers: the function and the command are
-one module of :mod:`sblsim.orchestrator.commands`, which this module re-exports. Unlike a command, a function
+``design``, ``replay``, ``calibrate``, ``campaign``, ``analyze``), with the same numbers: the function and the command
+are one module of :mod:`sblsim.orchestrator.commands`, which this module re-exports. Unlike a command, a function
 
 - returns its results as Python objects: tables as :class:`pandas.DataFrame`, figures as
   :class:`matplotlib.figure.Figure` (made when asked for, by the results' ``plot`` methods);
@@ -37,6 +37,7 @@ from sblsim.orchestrator.commands.calibrate import CalibrationResult, calibrate
 from sblsim.orchestrator.commands.campaign import CampaignResult, campaign
 from sblsim.orchestrator.commands.common import load
 from sblsim.orchestrator.commands.compare import CompareResult, compare
+from sblsim.orchestrator.commands.design import DesignResult, design
 from sblsim.orchestrator.commands.map import MapResult, accuracy_map
 from sblsim.orchestrator.commands.replay import ReplayResult, replay
 from sblsim.orchestrator.commands.run import RunResult, run
@@ -45,7 +46,8 @@ from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "replay", "calibrate", "campaign", "analyze",
-    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "ReplayResult", "CalibrationResult",
-    "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES", "BUILTIN_SCENARIOS",
+    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "calibrate", "campaign", "analyze",
+    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
+    "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
+    "BUILTIN_SCENARIOS",
 ]

@@ -1,5 +1,5 @@
 """The commands a user types, one module each: ``sblsim run``, ``replay``, ``calibrate``, ``compare``, ``budget``,
-``map``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and ``codegen``.
+``map``, ``design``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and ``codegen``.
 
 A command's module holds what the command is, from Python and from the command line:
 
@@ -24,9 +24,21 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from sblsim.orchestrator.commands import analyze, budget, calibrate, campaign, codegen, compare, fmus, replay, run, ssp
+from sblsim.orchestrator.commands import (
+    analyze,
+    budget,
+    calibrate,
+    campaign,
+    codegen,
+    compare,
+    design,
+    fmus,
+    replay,
+    run,
+    ssp,
+)
 from sblsim.orchestrator.commands import map as accuracy_map
 
 #: The commands, in the order of ``sblsim --help``: name -> module.
 COMMANDS: dict[str, ModuleType] = {module.NAME: module for module in (
-    run, replay, calibrate, compare, budget, accuracy_map, campaign, ssp, analyze, fmus, codegen)}
+    run, replay, calibrate, compare, budget, accuracy_map, design, campaign, ssp, analyze, fmus, codegen)}

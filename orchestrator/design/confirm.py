@@ -7,11 +7,11 @@
   those fixes against the map's DRMS there. A ratio outside ``1 ± monte_carlo.tolerance_pct`` is flagged
   (``confirmed`` false), never hidden. The share of cycles with a fix is reported beside the predicted
   availability.
-* **A path** (:func:`path_check`): the receivers ``ekf-seq`` and ``lsq`` on a straight path across the work area
-  (through its centre, North to South, at the first depth, 2 m/s), ``monte_carlo.path_replicates`` runs on the
-  same replicates (:func:`sblsim.orchestrator.compare.compare`): their RMS error beside the map's RMS along the
-  path. A filter averages cycles and a moving vehicle's held ranges are stale, so this is what a receiver does with
-  the design, not a check of the map.
+* **A path** (:func:`path_check`): the scenario's receiver on a straight path across the work area (through its
+  centre, North to South, at the first depth, at :data:`PATH_SPEED`, at most :data:`PATH_SLOTS` sampling times
+  long), ``monte_carlo.path_replicates`` runs (:func:`sblsim.orchestrator.compare.compare`): its RMS error, NEES and
+  PCRB beside the map's RMS along the path. A filter averages cycles and a moving vehicle's measurements are of
+  different instants, so this is what a receiver makes of the design, not a check of the map.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from sblsim.orchestrator.maps import point_accuracy
 
 #: The path's speed [m/s] (an AUV's transit).
 PATH_SPEED = 2.0
-#: The receivers on the path.
-PATH_RECEIVERS = ("ekf-seq", "lsq")
+#: The longest path, in sampling times.
+PATH_SLOTS = 200
 
 
 def checked_points(design: Design, resolved: Resolved) -> list[tuple[str, np.ndarray]]:
@@ -92,27 +92,28 @@ def static_check(design: Design, resolved: Resolved, where: str, point: np.ndarr
 
 
 def path_check(design: Design, resolved: Resolved) -> list[dict]:
-    """The receivers on a path across the work area (module docstring); one row per receiver: ``receiver``,
-    ``rms_e_tot_m`` (the receiver's RMS 3-D error over the runs) and ``map_rms_drms_m`` (the map's RMS DRMS along
-    the path, the one-round fix's prediction), ``nees``, ``runs``."""
+    """The scenario's receiver on a path across the work area (module docstring): one row, ``receiver``, ``runs``,
+    ``length_m`` (the path's), ``rms_e_tot_m`` (the receiver's RMS 3-D error over the runs), ``pcrb_rms_m``,
+    ``nees`` and ``map_rms_drms_m`` (the map's RMS 3-D DRMS along the path: the one-round fix's prediction)."""
     mc = resolved.sections["monte_carlo"]
     low, high = resolved.area.bounds()
     centre = [float(v) for v in (low + high) / 2.0]
-    depth = resolved.depths[0]
+    depth = float(resolved.depths[0])
+    probe = plan_of(resolved, design.items)
     inside = resolved.points[np.isclose(resolved.points[:, 2], depth)]
-    north = inside[np.isclose(inside[:, 1], inside[np.argmin(np.abs(inside[:, 1] - centre[1])), 1]), 0]
-    start, end = float(north.max()), float(north.min())
-    duration = (start - end) / PATH_SPEED
+    across = inside[np.isclose(inside[:, 1], inside[np.argmin(np.abs(inside[:, 1] - centre[1])), 1]), 0]
+    length = min(float(np.ptp(across)), PATH_SPEED * PATH_SLOTS * float(probe["simulation"]["sampling_time"]))
+    start, end = centre[0] + length / 2.0, centre[0] - length / 2.0
+    duration = length / PATH_SPEED
     waypoints = f"0 {start!r} {centre[1]!r} {depth!r}; {duration!r} {end!r} {centre[1]!r} {depth!r}"
-    items = [*design.items, "target.trajectory=file", f"target.waypoints={waypoints}",
-             f"simulation.duration={duration!r}"]
-    plans = [plan_of(resolved, [*items, f"simulation.receiver={r}"]) for r in PATH_RECEIVERS]
-    table = compare(plans, replicates=mc["path_replicates"])
+    plan = plan_of(resolved, [*design.items, "target.trajectory=file", f"target.waypoints={waypoints}",
+                              f"simulation.duration={duration!r}"])
+    row = next(compare([plan], replicates=mc["path_replicates"]).itertuples())
     along = np.column_stack([np.linspace(start, end, 101), np.full(101, centre[1]), np.full(101, depth)])
-    drms = point_accuracy(plans[0], along)["drms_3d"]
-    predicted = float(np.sqrt(np.nanmean(drms ** 2)))
-    return [{"receiver": row.receiver, "runs": int(row.runs), "rms_e_tot_m": float(row.rms_e_tot),
-             "map_rms_drms_m": predicted, "nees": float(row.nees)} for row in table.itertuples()]
+    drms = point_accuracy(plan, along)["drms_3d"]
+    return [{"receiver": row.receiver, "runs": int(row.runs), "length_m": length, "rms_e_tot_m": float(row.rms_e_tot),
+             "pcrb_rms_m": float(row.pcrb_rms), "nees": float(row.nees),
+             "map_rms_drms_m": float(np.sqrt(np.nanmean(drms ** 2)))}]
 
 
 def confirm(design: Design, resolved: Resolved) -> None:
@@ -122,4 +123,4 @@ def confirm(design: Design, resolved: Resolved) -> None:
     design.path = path_check(design, resolved) if resolved.sections["monte_carlo"]["path"] else []
 
 
-__all__ = ["PATH_RECEIVERS", "PATH_SPEED", "checked_points", "confirm", "path_check", "static_check"]
+__all__ = ["PATH_SLOTS", "PATH_SPEED", "checked_points", "confirm", "path_check", "static_check"]

@@ -173,12 +173,12 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("seed", "Integer", 0, "", "the search's seed", min=0, max=2**31 - 1),
     ),
     "monte_carlo": (
-        _key("replicates", "Integer", 100, "", "static-vehicle runs at each checked point", min=10, max=10000),
+        _key("replicates", "Integer", 40, "", "static-vehicle runs at each checked point", min=10, max=10000),
         _key("cycles", "Integer", 3, "", "cycles of each static run", min=1, max=100),
         _key("tolerance_pct", "Real", 15.0, "%", "a prediction further than this from its Monte Carlo is flagged",
              min=0.0, max=100.0, min_exclusive=True),
-        _key("path", "Boolean", True, "", "also run the receivers on a path across the work area (compare)"),
-        _key("path_replicates", "Integer", 5, "", "replicates of the path", min=1, max=1000),
+        _key("path", "Boolean", True, "", "also run the scenario's receiver on a path across the work area"),
+        _key("path_replicates", "Integer", 3, "", "replicates of the path", min=1, max=1000),
     ),
 }
 #: The sections of a design problem.

@@ -447,7 +447,7 @@ def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = Fa
         if mine:
             proposed.append(min(mine, key=_rank))
     if pareto:
-        proposed += [d for d in _front(searched) if d not in proposed]
+        proposed += [d for d in pareto_front(searched) if d not in proposed]
     for design in proposed:
         if design.evaluated_by != "map":
             searcher.on_the_map(design)
@@ -458,7 +458,7 @@ def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = Fa
     return DesignRun(resolved, searched, proposed)
 
 
-def _front(designs: list[Design]) -> list[Design]:
+def pareto_front(designs: list[Design]) -> list[Design]:
     """The designs that no other beats in both cost and criterion (the Pareto front), by cost."""
     front = [d for d in designs if not any(o.candidate.cost <= d.candidate.cost and o.value <= d.value and
                                            (o.candidate.cost < d.candidate.cost or o.value < d.value)
@@ -487,4 +487,5 @@ def quantiles(design: Design, dimensions: str) -> dict[str, float]:
 
 
 __all__ = ["Candidate", "Design", "DesignRun", "QUANTILES", "Resolved", "SLOWEST_SOUND", "Searcher", "candidates",
-           "grade_items", "layout_items", "plan_of", "quantiles", "resolve", "search_all", "slot_period"]
+           "grade_items", "layout_items", "pareto_front", "plan_of", "quantiles", "resolve", "search_all",
+           "slot_period"]

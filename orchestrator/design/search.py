@@ -8,7 +8,8 @@
   Storn, Price, "Differential evolution", J. Global Optimization 11:341-359, 1997; Lampinen, "A constraint
   handling approach for the differential evolution algorithm", CEC 2002.
 * **A regular ring** (:func:`optimise_ring`): n transponders equally spaced on a circle around the region's
-  centre, its radius the one unknown (the same search, one dimension).
+  centre, its radius and the first one's bearing the unknowns (the same search, two dimensions; one with the
+  bearing given).
 * **An SBL's arm** (:func:`optimise_baseline`): the beacons' circle on the platform, its radius the unknown
   (bounded by ``candidates.sbl_baseline_m``).
 
@@ -75,15 +76,6 @@ class Result:
     value: float
     history: list[float]
     variables: np.ndarray
-
-
-def ring(radius, n: int, centre: tuple[float, float], depth: float, bearing: float = 0.0) -> np.ndarray:
-    """n points equally spaced on a circle (S radii -> (S, n, 3)), the first at ``bearing`` [rad] from North."""
-    radius = np.atleast_1d(np.asarray(radius, dtype=float))
-    angle = bearing + 2.0 * math.pi * np.arange(n) / n
-    north = centre[0] + radius[:, None] * np.cos(angle)
-    east = centre[1] + radius[:, None] * np.sin(angle)
-    return np.stack([north, east, np.full_like(north, depth)], axis=-1)
 
 
 def _free(x: np.ndarray, n: int, depth: float) -> np.ndarray:
@@ -162,9 +154,10 @@ def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, regi
 
 
 def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area], depth: float,
-                  bearing: float = 0.0, seed: int = 0, population: int = 10, generations: int = 60,
+                  bearing: float | None = None, seed: int = 0, population: int = 10, generations: int = 60,
                   polish: bool = True) -> Result:
-    """The best regular ring of n transponders around the region's centre, its radius searched (module docstring).
+    """The best regular ring of n transponders around the region's centre, its radius (and its bearing) searched
+    (module docstring).
 
     Parameters
     ----------
@@ -175,26 +168,32 @@ def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area],
     avoid : list of Area
     depth : float
         The transponders' depth [m].
-    bearing : float
-        The first transponder's bearing from North [rad].
+    bearing : float, optional
+        The first transponder's bearing from North [rad]; default searched in [0, 2π/n).
     seed, population, generations, polish
         The differential evolution's (population per variable) and the gradient polish.
 
     Returns
     -------
     Result
+        Its ``variables`` the radius [m] (and the bearing [rad]).
     """
     centre = region.centre if region.vertices is None else tuple(region.vertices.mean(axis=0))
     reach = region.radius if region.vertices is None else float(np.max(np.hypot(*(region.vertices - centre).T)))
-    bounds = [(min(1.0, reach), reach)]
+    bounds = [(min(1.0, reach), reach)] + ([] if bearing is not None else [(0.0, 2.0 * math.pi / n)])
+    steps = 2.0 * math.pi * np.arange(n) / n
 
     def layouts(x):
-        x = x if isinstance(x, ca.MX) else np.asarray(x, dtype=float).reshape(1, -1)
         if isinstance(x, ca.MX):
-            angle = bearing + 2.0 * math.pi * np.arange(n) / n
-            return ca.horzcat(centre[0] + x[0] * ca.DM(np.cos(angle)), centre[1] + x[0] * ca.DM(np.sin(angle)),
+            angle = (x[1] if bearing is None else bearing) + ca.DM(steps)
+            return ca.horzcat(centre[0] + x[0] * ca.cos(angle), centre[1] + x[0] * ca.sin(angle),
                               ca.DM.ones(n) * depth)
-        return ring(x[0], n, centre, depth, bearing)
+        x = np.asarray(x, dtype=float).reshape(len(bounds), -1)
+        radius, first = x[0], (x[1] if bearing is None else np.full(x.shape[1], bearing))
+        angle = first[:, None] + steps[None, :]
+        north = centre[0] + radius[:, None] * np.cos(angle)
+        east = centre[1] + radius[:, None] * np.sin(angle)
+        return np.stack([north, east, np.full_like(north, depth)], axis=-1)
 
     constraints = _constraints(n, region, avoid, layouts)
     x, value, history = _evolve(objective, bounds, layouts, constraints, seed, population, generations)
@@ -261,4 +260,4 @@ def optimise_baseline(objective: Objective, unit_arms: np.ndarray, shortest: flo
     return Result(layouts(x[:, None])[0], value, history, np.exp(x))
 
 
-__all__ = ["Objective", "Result", "SMOOTH", "TOLERANCE", "optimise_baseline", "optimise_free", "optimise_ring", "ring"]
+__all__ = ["Objective", "Result", "SMOOTH", "TOLERANCE", "optimise_baseline", "optimise_free", "optimise_ring"]

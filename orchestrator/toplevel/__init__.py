@@ -22,9 +22,10 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "replay", "calibrate", "campaign", "analyze",
-    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "ReplayResult", "CalibrationResult",
-    "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES", "BUILTIN_SCENARIOS", "__version__",
+    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "calibrate", "campaign", "analyze",
+    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
+    "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
+    "BUILTIN_SCENARIOS", "__version__",
 ]
 
 

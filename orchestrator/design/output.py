@@ -1,0 +1,276 @@
+"""What ``sblsim design`` writes: ``design.json``, ``designs.csv``, a scenario file per proposed design and figures.
+
+* ``design.json``: the problem as resolved (``problem``), a one-line ``summary``, and ``designs``, the proposed
+  designs best first (:func:`design_record`): each its ``name``, ``system``, ``cost``, ``meets``, ``scenario`` (its
+  file), ``transponders_m`` (East, North, depth [m]), ``grades``, ``predicted`` (the map's DRMS quantiles over the
+  work area, ``coverage`` and ``availability``) and ``monte_carlo`` (the static vehicles' checks), ``path``;
+* ``designs.csv``: every candidate searched, one row each (:data:`CSV_COLUMNS`), in the order of the ranking;
+* ``NAME.toml`` per proposed design: the full configuration (``sblsim run``, ``map``, ``compare`` and
+  ``fmus build --scenario`` take it as it is);
+* ``layout.png`` (each proposed design on its accuracy map, with its transponders, the seafloor region, the areas
+  to avoid and the Monte Carlo points), ``pareto.png`` (cost against the criterion of every candidate, the front)
+  and ``convergence.png`` (the search's best criterion per generation).
+
+All of it is written at once (:func:`~sblsim.orchestrator.io.output.staged_directory`): an interrupted or failed run
+leaves ``--out`` as it was.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.design.criteria import CRITERIA
+from sblsim.orchestrator.cosim.plan import Config, thaw
+from sblsim.orchestrator.design.problem import GRADES
+from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles
+from sblsim.orchestrator.io.output import staged_directory
+
+#: The columns of ``designs.csv``.
+CSV_COLUMNS = ("rank", "name", "system", "count", *GRADES, "baseline_m", "cost", "criterion", "drms_p50_m",
+               "drms_p95_m", "drms_max_m", "coverage", "availability", "meets", "cycle_s", "evaluated_by")
+#: The files of a design's output folder (besides one ``NAME.toml`` per proposed design).
+OUTPUT_FILES = ("design.json", "designs.csv", "layout.png", "pareto.png", "convergence.png")
+
+
+def _finite(value: float) -> float | None:
+    """A number for JSON: None where it is not finite (JSON has no inf or NaN)."""
+    return float(value) if math.isfinite(value) else None
+
+
+def predicted(design: Design, run: DesignRun) -> dict[str, Any]:
+    """The map's numbers of a design over the work area: ``drms_p50_m``, ``drms_p95_m``, ``drms_max_m`` [m] (None
+    where a point has no fix: an infinite DRMS), ``coverage`` (the share of points that meet the prescription)
+    and ``availability`` (the mean probability of a fix in one cycle), both [0–1]."""
+    dimensions = run.resolved.sections["prescription"]["dimensions"]
+    out = {k: _finite(v) for k, v in quantiles(design, dimensions).items()}
+    out["coverage"] = design.coverage / 100.0
+    out["availability"] = float(np.mean(design.values["availability"]))
+    return out
+
+
+def design_record(design: Design, run: DesignRun) -> dict[str, Any]:
+    """One proposed design as ``design.json`` holds it (module docstring)."""
+    c = design.candidate
+    record = {"name": design.name, "system": c.system, "cost": c.cost, "meets": design.meets,
+              "scenario": f"{design.name}.toml", "label": c.label}
+    if design.transponders is not None:
+        record["transponders_m"] = [[float(t[1]), float(t[0]), float(t[2])] for t in design.transponders]
+    if design.baseline is not None:
+        record["baseline_m"] = design.baseline
+    record["grades"] = dict(c.grades)
+    record["cycle_s"] = design.cycle
+    record["criterion"] = {"name": run.resolved.sections["search"]["criterion"], "value": _finite(design.value)}
+    record["predicted"] = predicted(design, run)
+    record["evaluated_by"] = design.evaluated_by
+    record["monte_carlo"] = [{k: (_finite(v) if isinstance(v, float) else v) for k, v in m.items()}
+                             for m in design.monte_carlo]
+    record["confirmed"] = bool(design.monte_carlo) and all(m["confirmed"] for m in design.monte_carlo)
+    record["path"] = [{k: (_finite(v) if isinstance(v, float) else v) for k, v in p.items()} for p in design.path]
+    return record
+
+
+def summary(run: DesignRun) -> str:
+    """The design's outcome in one line: the best design and whether it meets the prescription, or that none
+    does and the best found."""
+    p = run.resolved.sections["prescription"]
+    best = run.best
+    what = (f"{p['drms_m']:g} m {p['dimensions']} DRMS at {p['coverage_pct']:g} % of the work area with a fix in "
+            f"{p['availability_pct']:g} % of the cycles"
+            + (f" at least every {p['update_interval_s']:g} s" if p["update_interval_s"] else ""))
+    found = (f"{best.candidate.label} (cost {best.candidate.cost:g}), covering {best.coverage:.1f} % "
+             f"(DRMS p95 {quantiles(best, p['dimensions'])['drms_p95_m']:.3g} m)")
+    checked = [m for m in best.monte_carlo]
+    if checked:
+        ratios = ", ".join(f"{m['ratio']:.2f} at the {m['point']} point" for m in checked)
+        confirmed = all(m["confirmed"] for m in checked)
+        found += f"; Monte Carlo / map {ratios}" + ("" if confirmed else " (NOT CONFIRMED within "
+                                                   f"{run.resolved.sections['monte_carlo']['tolerance_pct']:g} %)")
+    if best.meets:
+        return f"{run.resolved.sections['design']['name']}: {what}: {found}"
+    return f"{run.resolved.sections['design']['name']}: no candidate meets {what}; the best found: {found}"
+
+
+def table(run: DesignRun) -> pd.DataFrame:
+    """``designs.csv``: every candidate searched, ranked (those that meet, cheapest first; then by coverage)."""
+    dimensions = run.resolved.sections["prescription"]["dimensions"]
+    proposed = {id(d): d.name for d in run.proposed}
+    ranked = sorted(run.searched, key=lambda d: (not d.meets, d.candidate.cost if d.meets else -d.coverage, d.value,
+                                                 d.candidate.order))
+    rows = []
+    for k, d in enumerate(ranked, start=1):
+        c = d.candidate
+        q = quantiles(d, dimensions)
+        rows.append({"rank": k, "name": proposed.get(id(d), ""), "system": c.system, "count": c.count,
+                     **{g: c.grades.get(g, "") for g in GRADES},
+                     "baseline_m": d.baseline if d.baseline is not None else math.nan, "cost": c.cost,
+                     "criterion": d.value, **q, "coverage": d.coverage / 100.0,
+                     "availability": float(np.mean(d.values["availability"])), "meets": d.meets,
+                     "cycle_s": d.cycle, "evaluated_by": d.evaluated_by})
+    return pd.DataFrame(rows, columns=list(CSV_COLUMNS))
+
+
+def scenario_text(design: Design, run: DesignRun) -> str:
+    """The full configuration of a design (TOML), its ``run.scenario`` the design's name."""
+    config = Config(thaw(plan_of(run.resolved, design.items).config))
+    config["run"]["scenario"] = design.name
+    c = design.candidate
+    header = (f"# {design.name}: {c.label}, cost {c.cost:g}, written by sblsim design from the problem "
+              f"{run.resolved.sections['design']['name']!r}\n")
+    return header + config.to_toml()
+
+
+def document(run: DesignRun, seconds: float | None = None) -> dict[str, Any]:
+    """``design.json`` as a mapping (module docstring)."""
+    problem = json.loads(json.dumps(run.resolved.sections, default=str))
+    problem["design"]["scenario"] = str(run.resolved.sections["design"]["scenario"])
+    out = {"problem": problem, "summary": summary(run), "meets": run.best.meets,
+           "designs": [design_record(d, run) for d in run.proposed],
+           "search": {"candidates": len(run.searched), "work_area_points": int(len(run.resolved.points)),
+                      "criterion": run.resolved.sections["search"]["criterion"],
+                      "criterion_meaning": CRITERIA[run.resolved.sections["search"]["criterion"]]}}
+    if seconds is not None:
+        out["search"]["seconds"] = round(seconds, 1)
+    return out
+
+
+def write(run: DesignRun, out: Path | str, seconds: float | None = None) -> Path:
+    """Write the design's files into ``out`` at once (module docstring); return ``out``."""
+    import matplotlib.pyplot as plt
+
+    with staged_directory(out) as tmp:
+        (tmp / "design.json").write_text(json.dumps(document(run, seconds), indent=2, allow_nan=False) + "\n")
+        table(run).to_csv(tmp / "designs.csv", index=False)
+        for design in run.proposed:
+            (tmp / f"{design.name}.toml").write_text(scenario_text(design, run))
+        for name, figure in figures(run).items():
+            figure.savefig(tmp / f"{name}.png", dpi=110, bbox_inches="tight")
+            plt.close(figure)
+    return Path(out)
+
+
+def figures(run: DesignRun) -> dict[str, Any]:
+    """The figures by name: ``layout``, ``pareto``, ``convergence`` (matplotlib figures)."""
+    return {"layout": layout_figure(run), "pareto": pareto_figure(run), "convergence": convergence_figure(run)}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def layout_figure(run: DesignRun):
+    """Each proposed design on its accuracy map over the work area (module docstring)."""
+    plt = _plt()
+    from matplotlib.colors import LogNorm
+
+    r = run.resolved
+    p = r.sections["prescription"]
+    key = "drms" if p["dimensions"] == "horizontal" else "drms_3d"
+    depth = r.depths[0]
+    rows = np.isclose(r.points[:, 2], depth)
+    north, east = np.unique(r.points[rows, 0]), np.unique(r.points[rows, 1])
+    designs = run.proposed
+    fig, axes = plt.subplots(1, len(designs), figsize=(6.4 * len(designs), 6.0), squeeze=False)
+    for ax, design in zip(axes[0], designs):
+        v = design.values[key][rows]
+        finite = v[np.isfinite(v)] if np.isfinite(v).any() else np.array([p["drms_m"]])
+        low = max(float(finite.min()), 1e-4)
+        norm = LogNorm(vmin=low, vmax=max(float(finite.max()), 1.01 * low))
+        grid = np.full((len(north), len(east)), np.nan)
+        grid[np.searchsorted(north, r.points[rows, 0]), np.searchsorted(east, r.points[rows, 1])] = v
+        mesh = ax.pcolormesh(east, north, grid, norm=norm, cmap="viridis", shading="nearest")
+        if np.isfinite(grid).sum() > 3 and np.nanmin(grid) < p["drms_m"] < np.nanmax(grid):
+            lines = ax.contour(east, north, grid, levels=[p["drms_m"]], colors="w", linewidths=1.2)
+            ax.clabel(lines, fmt=lambda x: f"{x:g} m", fontsize=8)
+        for area, style in [(r.area, dict(color="k", lw=1.0, ls="-", label="work area"))] + (
+                [(r.seafloor, dict(color="0.4", lw=1.0, ls="--", label="seafloor region"))]
+                if design.candidate.system == "lbl" else []):
+            outline = area.outline()
+            ax.plot(outline[:, 1], outline[:, 0], **style)
+        if design.candidate.system == "lbl":
+            for k, a in enumerate(r.avoid):
+                outline = a.outline()
+                ax.fill(outline[:, 1], outline[:, 0], facecolor="none", edgecolor="r", hatch="//", lw=0.8,
+                        label="avoid" if k == 0 else None)
+        else:
+            arms = np.asarray(plan_of(r, design.items).lever_arms)
+            ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="transducers", zorder=4)
+        for m in design.monte_carlo:
+            ax.plot(m["east_m"], m["north_m"], "wo", mfc="none", ms=9, zorder=3)
+            ax.annotate(f"{m['point']}: MC/map {m['ratio']:.2f}", (m["east_m"], m["north_m"]), color="w", fontsize=7,
+                        xytext=(5, 5), textcoords="offset points")
+        if design.candidate.system == "lbl":
+            ax.plot(design.transponders[:, 1], design.transponders[:, 0], "r^", ms=9, mec="w", label="transponders",
+                    zorder=4)
+        ax.set_aspect("equal")
+        ax.set_xlabel("East [m]")
+        ax.set_ylabel("North [m]")
+        verdict = "meets" if design.meets else "does not meet"
+        ax.set_title(f"{design.name}\n{design.candidate.label}\ncost {design.candidate.cost:g}, {verdict} "
+                     f"({design.coverage:.1f} % of the area), vehicle at {depth:g} m", fontsize=8)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, fontsize=7, frameon=False)
+        fig.colorbar(mesh, ax=ax, shrink=0.8, label=f"{p['dimensions']} DRMS of one cycle [m]")
+    fig.subplots_adjust(wspace=0.5)
+    return fig
+
+
+def pareto_figure(run: DesignRun):
+    """Cost against the criterion of every candidate searched, by system; those that meet filled."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    criterion = run.resolved.sections["search"]["criterion"]
+    markers = {"lbl": ("^", "C0"), "sbl": ("s", "C1"), "usbl": ("o", "C2")}
+    for system, (marker, colour) in markers.items():
+        mine = [d for d in run.searched if d.candidate.system == system]
+        for meets in (True, False):
+            part = [d for d in mine if d.meets == meets]
+            if part:
+                ax.plot([d.candidate.cost for d in part], [d.value for d in part], marker, color=colour, ms=7,
+                        mfc=colour if meets else "none",
+                        label=f"{system.upper()}, " + ("meets" if meets else "does not meet"))
+    front = pareto_front(run.searched)
+    if len(front) > 1:
+        ax.step([d.candidate.cost for d in front], [d.value for d in front], where="post", color="0.5", lw=1,
+                label="front")
+    if criterion == "percentile":
+        ax.axhline(run.resolved.sections["prescription"]["drms_m"], color="r", lw=1, ls="--", label="prescription")
+    if criterion in ("percentile", "worst", "a-optimal") and all(d.value > 0 for d in run.searched):
+        ax.set_yscale("log")
+    ax.set_xlabel("cost")
+    ax.set_ylabel(f"criterion: {criterion}{' [m]' if criterion in ('percentile', 'worst') else ''}"
+                  f"{' [m²]' if criterion == 'a-optimal' else ''}")
+    ax.set_title(f"{run.resolved.sections['design']['name']}: the candidates searched", fontsize=9)
+    ax.legend(fontsize=7)
+    return fig
+
+
+def convergence_figure(run: DesignRun):
+    """The search's best criterion after each generation, for each candidate with a searched layout."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for d in run.searched:
+        if d.history:
+            ax.plot(np.arange(1, len(d.history) + 1), d.history, lw=1,
+                    label=d.candidate.label if d in run.proposed else None)
+    ax.set_xlabel("generation (a ring's search, then the free placement's)")
+    ax.set_ylabel(run.resolved.sections["search"]["criterion"])
+    if any(d.history for d in run.searched) and all(v > 0 for d in run.searched for v in d.history):
+        ax.set_yscale("log")
+    ax.set_title("the search's best criterion", fontsize=9)
+    if any(d.history and d in run.proposed for d in run.searched):
+        ax.legend(fontsize=7)
+    return fig
+
+
+__all__ = ["CSV_COLUMNS", "OUTPUT_FILES", "design_record", "document", "figures", "predicted", "scenario_text",
+           "summary", "table", "write"]
