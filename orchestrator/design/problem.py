@@ -157,8 +157,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("polygon", "String", "", "", "the polygon's vertices 'north east; north east; ...' [m]"),
         _key("avoid", "String", [], "", "areas no transponder may go, each a polygon 'north east; ...' [m]",
              (0, MAX_AVOID)),
-        _key("depth_m", "Real", 0.0, "m", "the transponders' depth (0: the scenario's platform.seafloor_depth)",
-             min=0.0, max=11000.0),
+        _key("depth_m", "Real", 0.0, "m", "the transponders' depth (0: an LBL scenario's platform.seafloor_depth, "
+                                          "else 1 m above acoustics.water_depth)", min=0.0, max=11000.0),
     ),
     "search": (
         _key("criterion", "String", "percentile", "", "what a layout minimises: " + "; ".join(
@@ -192,6 +192,13 @@ def defaults() -> dict[str, dict[str, Any]]:
 
 def _value(section: str, key: Key, value: Any) -> Any:
     """One key's value checked against its declaration (a list item by item); returned as its type."""
+    try:
+        return _checked(section, key, value)
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def _checked(section: str, key: Key, value: Any) -> Any:
     where = f"{section}.{key.name}"
     if key.length is None:
         if isinstance(value, (list, tuple, dict)):

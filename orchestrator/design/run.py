@@ -179,11 +179,12 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
     work, floor = sections["work_area"], sections["seafloor"]
     if not work["depths_m"]:
         work["depths_m"] = [_depth_default(plan)]
-    if floor["depth_m"] == 0.0:
-        floor["depth_m"] = float(plan["platform"]["seafloor_depth"])
     water = float(plan["acoustics"]["water_depth"])
+    if floor["depth_m"] == 0.0:  # the scenario's LBL field, else 1 m above the site's floor
+        lbl = plan.system.name == "lbl" or water == 0.0
+        floor["depth_m"] = float(plan["platform"]["seafloor_depth"]) if lbl else water - 1.0
     deepest = max(work["depths_m"])
-    if not floor["depth_m"] > deepest:
+    if "lbl" in sections["candidates"]["systems"] and not floor["depth_m"] > deepest:
         raise ConfigError(f"seafloor.depth_m: {floor['depth_m']:g} m is not below the work area's deepest vehicle "
                           f"({deepest:g} m, work_area.depths_m)")
     if water > 0.0 and floor["depth_m"] > water:

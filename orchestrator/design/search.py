@@ -3,8 +3,9 @@
 * **Free placement** (:func:`optimise_free`): the North and East of each of n transponders inside the seafloor
   region and outside its areas to avoid, by scipy's differential evolution (seeded, its population evaluated as
   one array, the region and the areas as vectorised constraints: Lampinen's feasibility rules) started from the
-  best regular ring, then, for the smooth criteria (D-optimal, A-optimal), polished by SLSQP with the criterion's
-  gradient, which casadi derives from the Fisher information (the site's detection held at its values there).
+  best regular ring, then polished: for the smooth criteria (D-optimal, A-optimal) by SLSQP with the criterion's
+  gradient, which casadi derives from the Fisher information (the site's detection held at its values there), for
+  the others by Powell's derivative-free search (Powell, The Computer Journal 7(2):155-162, 1964).
   Storn, Price, "Differential evolution", J. Global Optimization 11:341-359, 1997; Lampinen, "A constraint
   handling approach for the differential evolution algorithm", CEC 2002.
 * **A regular ring** (:func:`optimise_ring`): n transponders equally spaced on a circle around the region's
@@ -116,8 +117,33 @@ def _evolve(objective: Objective, bounds, layouts, constraints, seed: int, popul
 
 def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, region: Area, avoid: list[Area]
             ) -> np.ndarray:
-    """SLSQP from ``x`` on the criterion's gradient (the site's weights and noises held at their values at ``x``);
-    the polished variables, or ``x`` where the polish does not lower the criterion."""
+    """The variables ``x`` polished: by SLSQP on the criterion's gradient for a smooth criterion (:data:`SMOOTH`;
+    the site's weights and noises held at their values at ``x``), else by Powell's derivative-free search within
+    the bounds (a layout outside the region or in an area to avoid penalised); ``x`` where the polish does not lower
+    the criterion of a feasible layout."""
+    def inside(v):
+        pos = layout_of(np.asarray(v)[:, None])[0, :, :2]
+        return np.concatenate([-region.distance(pos)] + [a.distance(pos) for a in avoid])
+
+    start = objective.values(layout_of(x[:, None]))[0]
+    low, high = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
+    if objective.criterion in SMOOTH:
+        found = _gradient_polish(objective, x, layout_of, bounds, n, inside)
+    else:
+        def penalised(v):
+            value = objective.values(layout_of(np.asarray(v)[:, None]))[0]
+            return value + 1e3 * (1.0 + abs(value)) * float(np.sum(np.maximum(-inside(v), 0.0)))
+
+        found = minimize(penalised, x, method="Powell", bounds=bounds,
+                         options={"xtol": 1e-8, "ftol": 1e-12, "maxfev": 400 * x.size}).x
+    candidate = np.clip(np.asarray(found, dtype=float), low, high)
+    if np.all(inside(candidate) >= -1e-9) and objective.values(layout_of(candidate[:, None]))[0] < start:
+        return candidate
+    return x
+
+
+def _gradient_polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, inside) -> np.ndarray:
+    """SLSQP from ``x`` on a smooth criterion and its gradient, which casadi derives through the layout function."""
     evaluator = objective.evaluator
     layout = layout_of(x[:, None])
     weight, noise, _ = evaluator.heard(layout)
@@ -140,17 +166,8 @@ def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, regi
         f_value, gradient = g(v)
         return float(f_value), np.asarray(gradient, dtype=float).ravel()
 
-    def inside(v):
-        pos = layout_of(np.asarray(v)[:, None])[0, :, :2]
-        return np.concatenate([-region.distance(pos)] + [a.distance(pos) for a in avoid])
-
-    start = objective.values(layout)[0]
-    found = minimize(fun, x, jac=True, method="SLSQP", bounds=bounds,
-                     constraints=[{"type": "ineq", "fun": inside}], options={"maxiter": 300, "ftol": 1e-15})
-    candidate = np.clip(np.asarray(found.x, dtype=float), [b[0] for b in bounds], [b[1] for b in bounds])
-    if np.all(inside(candidate) >= -1e-9) and objective.values(layout_of(candidate[:, None]))[0] < start:
-        return candidate
-    return x
+    return minimize(fun, x, jac=True, method="SLSQP", bounds=bounds, constraints=[{"type": "ineq", "fun": inside}],
+                    options={"maxiter": 300, "ftol": 1e-15}).x
 
 
 def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area], depth: float,
@@ -197,7 +214,7 @@ def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area],
 
     constraints = _constraints(n, region, avoid, layouts)
     x, value, history = _evolve(objective, bounds, layouts, constraints, seed, population, generations)
-    if polish and objective.criterion in SMOOTH:
+    if polish:
         x = _polish(objective, x, layouts, bounds, n, region, avoid)
         value = float(objective.values(layouts(x[:, None]))[0])
         history.append(value)
@@ -234,7 +251,7 @@ def optimise_free(objective: Objective, n: int, region: Area, avoid: list[Area],
         x0 = np.clip(x0, [b[0] for b in bounds], [b[1] for b in bounds])
     constraints = _constraints(n, region, avoid, layouts)
     x, value, history = _evolve(objective, bounds, layouts, constraints, seed, population * 2, generations, x0)
-    if polish and objective.criterion in SMOOTH:
+    if polish:
         x = _polish(objective, x, layouts, bounds, n, region, avoid)
         value = float(objective.values(layouts(x[:, None]))[0])
         history.append(value)
