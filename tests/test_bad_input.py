@@ -119,10 +119,33 @@ FILES = {
     "earlier_run/summary.json": "{}",
     "earlier_map/map.csv": "east,north\n",
     "earlier_budget/budget.csv": "source,contribution\n",
+    "earlier_design/design.json": "{}\n",
     "earlier.ssp": "an earlier package",
     "afile": "not a directory",
     "emptyfmus/.keep": "",
     "adir/.keep": "",
+    # design problems
+    "d_bad.toml": "[work_area\nradius_m = 3\n",
+    "d_section.toml": '[design]\nscenario = "lbl-field"\n[sonar]\ngain = 1\n',
+    "d_key.toml": '[design]\nscenario = "lbl-field"\n[work_area]\ncolour = "red"\n',
+    "d_range.toml": '[design]\nscenario = "lbl-field"\n[prescription]\ndrms_m = -0.1\n',
+    "d_nan.toml": '[design]\nscenario = "lbl-field"\n[prescription]\ndrms_m = nan\n',
+    "d_type.toml": '[design]\nscenario = "lbl-field"\n[prescription]\ncoverage_pct = "most"\n',
+    "d_length.toml": '[design]\nscenario = "lbl-field"\n[candidates]\ntransponders = [3]\n',
+    "d_swapped.toml": '[design]\nscenario = "lbl-field"\n[candidates]\ntransponders = [8, 3]\n',
+    "d_grade.toml": '[design]\nscenario = "lbl-field"\n[candidates]\ngps = ["best"]\n',
+    "d_costs.toml": '[design]\nscenario = "lbl-field"\n[candidates]\ngps = ["dgps", "rtk"]\ngps_cost = [1]\n',
+    "d_polygon.toml": '[design]\nscenario = "lbl-field"\n[seafloor]\navoid = ["0 0; 1 1; 2 2"]\n',
+    "d_path.toml": '[design]\nscenario = "/etc/passwd"\n',
+    "d_toml_path.toml": '[design]\nscenario = "earlier.toml"\n',
+    "earlier.toml": '[simulation]\nreceiver = "model:exits.py"\n',
+    "d_set_file.toml": '[design]\nscenario = "lbl-field"\nset = ["target.trajectory_file=/etc/passwd"]\n',
+    "d_set_model.toml": '[design]\nscenario = "lbl-field"\nset = ["simulation.receiver=model:exits.py"]\n',
+    "d_set_bad.toml": '[design]\nscenario = "lbl-field"\nset = ["platform.baseline=-3"]\n',
+    "d_name.toml": '[design]\nname = "../escape"\nscenario = "lbl-field"\n',
+    "d_floor.toml": '[design]\nscenario = "lbl-field"\n[seafloor]\ndepth_m = 100\n',
+    "d_deep.toml": "[design]\nset = " + "[" * 40 + "]" * 40 + "\n",
+    "d_big.toml": "# " + "x" * (1 << 20) + "\n",
 }
 
 T = ["--set", "target.trajectory=file", "--set"]
@@ -368,6 +391,35 @@ CASES = {
                                    "acoustics.sigma"),
     "budget compare value": (["budget", "semicircle", "--compare", "platform.system=sbl,xbl"], "platform.system"),
     "budget over an earlier budget": (["budget", "semicircle", "--out", "earlier_budget"], "--force"),
+    # design
+    "design missing problem": (["design", "none.toml"], "design: no such file"),
+    "design unknown built-in": (["design", "lbl-field-9km"], "neither a built-in design"),
+    "design not toml": (["design", "d_bad.toml"], "is not valid TOML"),
+    "design fifo": (["design", "fifo.toml"], "not a regular file"),
+    "design too large": (["design", "d_big.toml"], "at most 1,048,576"),
+    "design nested deep": (["design", "d_deep.toml"], "not valid TOML"),
+    "design unknown section": (["design", "d_section.toml"], "unknown section [sonar]"),
+    "design unknown key": (["design", "d_key.toml"], "work_area.colour"),
+    "design value out of range": (["design", "d_range.toml"], "prescription.drms_m"),
+    "design nan": (["design", "d_nan.toml"], "prescription.drms_m"),
+    "design wrong type": (["design", "d_type.toml"], "prescription.coverage_pct"),
+    "design short list": (["design", "d_length.toml"], "candidates.transponders"),
+    "design swapped counts": (["design", "d_swapped.toml"], "candidates.transponders"),
+    "design unknown grade": (["design", "d_grade.toml"], "candidates.gps[0]"),
+    "design costs of other grades": (["design", "d_costs.toml"], "candidates.gps_cost"),
+    "design flat polygon": (["design", "d_polygon.toml"], "seafloor.avoid[0]"),
+    "design scenario path": (["design", "d_path.toml"], "design.scenario"),
+    "design scenario file it names": (["design", "d_toml_path.toml"], "design.scenario"),
+    "design set names a file": (["design", "d_set_file.toml"], "design.set: target.trajectory_file"),
+    "design set names code": (["design", "d_set_model.toml"], "design.set: simulation.receiver"),
+    "design set out of range": (["design", "d_set_bad.toml"], "platform.baseline"),
+    "design name escapes": (["design", "d_name.toml"], "design.name"),
+    "design floor above the vehicle": (["design", "d_floor.toml"], "seafloor.depth_m"),
+    "design zero workers": (["design", "lbl-field-2km", "--workers", "0"], "--workers"),
+    "design seed": (["design", "lbl-field-2km", "--seed", "-2"], "--seed"),
+    "design out under /proc": (["design", "lbl-field-2km", "--out", "/proc/sblsim-design"], "--out"),
+    "design over an earlier design": (["design", "lbl-field-2km", "--out", "earlier_design"], "--force"),
+    "design scenario option": (["design", "lbl-field-2km", "--scenario", "none.toml"], "no such file"),
 }
 
 
@@ -427,7 +479,7 @@ def _command(args: list[str], folder: str, stdout: str, stderr: str) -> None:
 #: command's start-up, up to a second each, is not what is tested).
 SERVER = multiprocessing.get_context("forkserver")
 SERVER.set_forkserver_preload(["sblsim.orchestrator.cli", *(f"sblsim.orchestrator.{name}" for name in (
-    "cosim.run", "campaign", "analysis", "budget", "maps", "replay", "receiver_log", "io.tables"))])
+    "cosim.run", "campaign", "analysis", "budget", "maps", "replay", "receiver_log", "io.tables", "design.run"))])
 
 
 class _Case:

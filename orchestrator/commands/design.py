@@ -21,6 +21,7 @@ from sblsim.orchestrator.commands.common import (
 )
 from sblsim.orchestrator.commands.console import check_seed_option, output_folder, output_name
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.progress import Progress as ProgressBar
 from sblsim.orchestrator.io.progress import check_progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -169,7 +170,7 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare) -> D
     from sblsim.orchestrator.design.problem import check_problem
     from sblsim.orchestrator.design.run import resolve, search_all
 
-    sections = check_problem(raw)
+    sections = check_problem(raw, scenario_given=scenario is not None)
     start = time.perf_counter()
     source = scenario if scenario is not None else sections["design"]["scenario"]
     if scenario is not None:
@@ -177,8 +178,10 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare) -> D
     resolved = resolve(sections, source)
     target = prepare()
     run = search_all(resolved, workers, progress)
-    for proposal in run.proposed:
-        confirm(proposal, resolved)
+    with ProgressBar(len(run.proposed), "monte carlo", "design", progress) as bar:
+        for proposal in run.proposed:
+            confirm(proposal, resolved)
+            bar.update(1)
     seconds = time.perf_counter() - start
     if target is not None:
         write(run, target, seconds)

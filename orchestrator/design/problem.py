@@ -103,7 +103,8 @@ _GRADE_LIST = (0, 10)
 #: Every key of a design problem: section -> its keys (the docs' table, :func:`check_problem`, the defaults).
 DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
     "design": (
-        _key("name", "String", "design", "", "the design's name (its files are NAME-SYSTEM.toml)"),
+        _key("name", "String", "design", "", "the design's name (its designs' files: NAME-lbl4.toml, NAME-sbl.toml, "
+                                             "NAME-usbl.toml)"),
         _key("scenario", "String", "", "", f"the base scenario, its site and error levels: one of "
                                            f"{', '.join(BUILTIN_SCENARIOS)} (a CONFIG.toml: --scenario)"),
         _key("set", "String", [], "", "overrides of the base scenario, 'section.key=value' as --set takes them",
@@ -161,15 +162,15 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
                                           "else 1 m above acoustics.water_depth)", min=0.0, max=11000.0),
     ),
     "search": (
-        _key("criterion", "String", "percentile", "", "what a layout minimises: " + "; ".join(
-            f"{k}: {v}" for k, v in CRITERIA.items()), choices=tuple(CRITERIA)),
+        _key("criterion", "String", "percentile", "", "what a layout minimises over the work area (docs/design.md: "
+                                                      "the criteria)", choices=tuple(CRITERIA)),
         _key("pareto", "Boolean", False, "", "design every count and grade (the front of cost against the "
                                              "criterion), not only up to the cheapest that meets"),
         _key("population", "Integer", 10, "", "the differential evolution's population per free coordinate",
              min=4, max=200),
         _key("generations", "Integer", 60, "", "the differential evolution's most generations", min=1, max=10000),
-        _key("polish", "Boolean", True, "", "polish each layout with the criterion's gradient (d-optimal, "
-                                            "a-optimal)"),
+        _key("polish", "Boolean", True, "", "polish each layout: SLSQP on the criterion's gradient (d-optimal, "
+                                            "a-optimal), Powell's search (the others)"),
         _key("seed", "Integer", 0, "", "the search's seed", min=0, max=2**31 - 1),
     ),
     "monte_carlo": (
@@ -218,13 +219,15 @@ def _checked(section: str, key: Key, value: Any) -> Any:
     return out
 
 
-def check_problem(raw: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+def check_problem(raw: Mapping[str, Any], scenario_given: bool = False) -> dict[str, dict[str, Any]]:
     """A design problem's sections checked against :data:`DESIGN_KEYS` and completed with the defaults.
 
     Parameters
     ----------
     raw : mapping
         Section -> key -> value, as read from ``DESIGN.toml`` (or given to :func:`sblsim.design`).
+    scenario_given : bool
+        The base scenario is given apart (``--scenario``): ``design.scenario`` may be empty.
 
     Returns
     -------
@@ -253,19 +256,20 @@ def check_problem(raw: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
                 raise ConfigError(f"{section}.{str(name)[:40]}: not a key of [{section}]; its keys: "
                                   f"{', '.join(keys)}")
             problem[section][name] = _value(section, keys[name], value)
-    _check_together(problem)
+    _check_together(problem, scenario_given)
     return problem
 
 
-def _check_together(problem: dict[str, dict[str, Any]]) -> None:
+def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) -> None:
     """What one key cannot check alone (module docstring of :func:`check_problem`)."""
     design, candidates = problem["design"], problem["candidates"]
     if not _NAME.fullmatch(design["name"]):
         raise ConfigError(f"design.name: {design['name'][:40]!r} is not a name of 1 to 64 letters, digits, '.', '_' "
                           "or '-' (starting with a letter or digit)")
-    if not design["scenario"]:
-        raise ConfigError(f"design.scenario: give the base scenario, one of {', '.join(BUILTIN_SCENARIOS)} (or "
-                          "--scenario CONFIG.toml)")
+    if not scenario_given and design["scenario"] not in BUILTIN_SCENARIOS:  # a file names no file to read
+        given = f"{design['scenario'][:60]!r} is not a built-in scenario" if design["scenario"] else "missing"
+        raise ConfigError(f"design.scenario: {given}; give one of {', '.join(BUILTIN_SCENARIOS)} (a CONFIG.toml: "
+                          "--scenario)")
     for item in design["set"]:
         key = item.split("=", 1)[0].strip()
         if "=" not in item or not key:
