@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import zipfile
+from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import numpy as np
@@ -242,3 +243,28 @@ def test_workers_do_not_change_the_design():
     two = sblsim.design(None, **SMALL, workers=2)
     pd.testing.assert_frame_equal(one.table, two.table)
     assert one.designs[0]["transponders_m"] == two.designs[0]["transponders_m"]
+
+
+def test_every_design_key_and_grade_is_documented_as_it_is_declared():
+    """docs/design.md's table lists every key of a design problem once, with its declared unit, allowed values,
+    default and meaning; docs/hardware-grades.md's grades table every grade with the key and value it sets."""
+    import re
+
+    from sblsim.orchestrator.design.problem import DESIGN_KEYS, GRADES
+
+    docs = Path(__file__).resolve().parents[2] / "docs"
+    rows = re.findall(r"^\| `(\w+)\.(\w+)` \|(.*)\|$", (docs / "design.md").read_text(), flags=re.M)
+    table = {(section, name): [c.strip() for c in rest.split("|")] for section, name, rest in rows}
+    assert len(rows) == len(table) == sum(len(keys) for keys in DESIGN_KEYS.values())
+    for section, keys in DESIGN_KEYS.items():
+        for key in keys:
+            unit, allowed, default, meaning = table[(section, key.name)]
+            assert unit == ("" if key.variable.unit in ("", "1") else key.variable.unit), key.name
+            assert allowed == key.allowed() and meaning == key.variable.description, key.name
+            expected = json.loads(default) if default not in ("true", "false") else \
+                default == "true"
+            assert expected == key.start, (key.name, default)
+    grades = re.findall(r"^\| `(\w+)` \| `([\w-]+)` \| `([\w.]+)` \| ([\d.]+) (?:m|deg) \|",
+                        (docs / "hardware-grades.md").read_text(), flags=re.M)
+    assert {(kind, grade): (key, float(value)) for kind, grade, key, value in grades} == {
+        (kind, grade): setting for kind, named in GRADES.items() for grade, setting in named.items()}
