@@ -46,7 +46,7 @@ import pandas as pd
 
 from sblsim.fmus.native import compiled_family_levels
 from sblsim.models.acoustics.core import site_levels
-from sblsim.models.acoustics.detection import packet_probability
+from sblsim.models.acoustics.detection import direct_first, packet_probability
 from sblsim.models.acoustics.sonar import accuracy_scale
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
@@ -176,17 +176,20 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     model : RangeDepthModel, optional
         The ranges' measurement model (default the receivers').
     detection : tuple of ndarray, optional
-        Each packet's probability of being received and its accuracy scale, each (M, n), where they are known
-        (a design's search interpolates them): default :func:`packet_probabilities`.
+        Each packet's probability of being received, its accuracy scale and the probability that its range is of
+        reflections, each (M, n), where they are known (a design's search interpolates them): default
+        :func:`packet_probabilities`.
 
     Returns
     -------
     dict
-        ``drms`` and ``drms_3d`` [m] (NaN: no fix in half of the cycles), ``log_det`` (``log det J``) and
-        ``availability``, the probability of a fix in one cycle [0–1], each (M,).
+        ``drms`` and ``drms_3d`` [m] (NaN: no fix in half of the cycles), ``log_det`` (``log det J``),
+        ``availability``, the probability of a fix in one cycle [0–1], and ``echo``, the probability that a cycle's
+        fix takes a range of reflections [0–1] (:func:`packet_probabilities`: there the accuracy, of the direct
+        rays, does not describe the fix), each (M,).
     """
     bound, sigma = dict(plan.bound), plan["acoustics"]["sigma_range"]
-    probability, scale = packet_probabilities(plan, points) if detection is None else detection
+    probability, scale, echo = packet_probabilities(plan, points, echo=True) if detection is None else detection
     available = fix_probability(probability, plan.system.fix_packets)
     heard = None
     if plan["acoustics"]["detection"] == "snr" and plan.system.takes_ranges:  # each range its own noise and weight
@@ -209,10 +212,11 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
             out[key] = np.where(available < MIN_AVAILABILITY, np.nan, out[key])
     out["log_det"] = np.where(np.isnan(out["drms"]), np.nan, values["log_det"])
     out["availability"] = available
+    out["echo"] = 1.0 - np.prod(1.0 - probability * echo, axis=1)
     return out
 
-def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, np.ndarray]:
+def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | None = None,
+                         echo: bool = False) -> tuple[np.ndarray, ...]:
     """Per point and transducer: the probability that one packet is received, and the accuracy scale.
 
     With fixed detection a packet is received with ``1 − loss_pct`` per draw (USBL: the reply and the
@@ -223,6 +227,11 @@ def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | N
     detected arrival decoded (:func:`~sblsim.models.acoustics.detection.packet_probability`); the scale is
     :func:`~sblsim.models.acoustics.sonar.accuracy_scale` at the SNR of the earliest eigenray.
 
+    With ``echo``, a third array: the probability that a received packet's range is not the direct rays' (a leg
+    of the range, TWTT's and USBL's interrogation and reply, or OWTT's one, had a reflection as its first detected
+    arrival: :func:`~sblsim.models.acoustics.detection.direct_first`), where the map's geometry of the direct ray
+    does not describe the range (0 with fixed detection).
+
     Parameters
     ----------
     plan : RunPlan
@@ -231,10 +240,12 @@ def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | N
     arms : ndarray, shape (n, 3), optional
         The transducers' positions when the platform is at the origin, NED [m] (default the plan's,
         :attr:`RunPlan.lever_arms`; a design's candidate layout).
+    echo : bool
+        Return the probability of a range of reflections too.
 
     Returns
     -------
-    probability, scale : ndarray, each (M, n)
+    probability, scale[, echo] : ndarray, each (M, n)
         n the system's transducers.
     """
     acoustics, system = plan["acoustics"], plan.system
@@ -242,7 +253,7 @@ def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | N
     m, n = points.shape[0], arms.shape[0]
     if acoustics["detection"] != "snr":
         keep = (1.0 - acoustics["loss_pct"] / 100.0) ** (2 if system.measures_direction else 1)
-        return np.full((m, n), keep), np.ones((m, n))
+        return (np.full((m, n), keep), np.ones((m, n))) + ((np.zeros((m, n)),) if echo else ())
     legs = 3 if system.measures_direction else (2 if acoustics["ranging"] == "twtt" else 1)
     levels = site_levels(plan.component_parameters("acoustics"), np.repeat(arms, m, axis=0), np.tile(points, (n, 1)),
                          compiled_family_levels())
@@ -252,7 +263,15 @@ def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | N
                               acoustics["fluctuation"])
     first = np.take_along_axis(snr, np.argmin(tau, axis=1)[:, None], 1)[:, 0]
     scale = np.asarray(accuracy_scale(ca.DM(first), acoustics["reference_snr"])).ravel()  # the channel's form
-    return (heard ** (legs - 1) * data).reshape(n, m).T, scale.reshape(n, m).T
+    out = (heard ** (legs - 1) * data).reshape(n, m).T, scale.reshape(n, m).T
+    if not echo:
+        return out
+    direct_heard = np.where(heard > 0.0, direct_first(tau, pd) / np.where(heard > 0.0, heard, 1.0), 1.0)
+    decoded = direct_first(tau, pd, snr, acoustics["detection_threshold"], acoustics["decoding_margin"],
+                           acoustics["fluctuation"])
+    direct_data = np.where(data > 0.0, decoded / np.where(data > 0.0, data, 1.0), 1.0)
+    direct = direct_heard ** 2 if system.measures_direction else direct_heard ** (legs - 1) * direct_data
+    return out + (np.clip(1.0 - direct, 0.0, 1.0).reshape(n, m).T,)
 
 
 def fix_probability(probability: np.ndarray, needed: int) -> np.ndarray:

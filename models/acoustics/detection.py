@@ -261,5 +261,36 @@ def packet_probability(tau, pd, snr, threshold, margin, fluctuation) -> np.ndarr
     return np.sum(pd * missed_before * decoded, axis=-1)
 
 
-__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "family_levels", "family_levels_grid", "first_detected",
-           "level_table", "packet_probability"]
+def direct_first(tau, pd, snr=None, threshold: float = 0.0, margin: float = 0.0, fluctuation: float = 0.0
+                 ) -> np.ndarray:
+    """Probability that a leg's first detected arrival is the direct one (family 0), and (with ``snr``) that its
+    data is decoded too: ``P_0 Π_{i before 0} (1 − P_i)`` times the decoding probability at the threshold plus the
+    margin (:func:`packet_probability`'s term of the direct arrival; the share of the received packets whose range
+    is the direct ray's is its ratio to :func:`packet_probability`).
+
+    Parameters
+    ----------
+    tau, pd : ndarray, shape (..., 3)
+        Travel times [s] and detection probabilities of the families (direct, surface, bottom; an absent one: pd 0).
+    snr : ndarray, shape (..., 3), optional
+        SNRs [dB]; None: the detection alone (a leg whose data is not decoded, an interrogation).
+    threshold, margin, fluctuation : float
+        As for :func:`packet_probability`.
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    tau, pd = np.asarray(tau, dtype=float), np.asarray(pd, dtype=float)
+    arrives = np.where(pd > 0, tau, np.inf)
+    before = arrives < arrives[..., :1]
+    share = pd[..., 0] * np.prod(np.where(before, 1.0 - pd, 1.0), axis=-1)
+    if snr is None:
+        return share
+    decoded = np.vectorize(lambda v: float(sonar.detection_probability(v, threshold + margin, fluctuation)))(
+        np.asarray(snr, dtype=float)[..., 0])
+    return share * decoded
+
+
+__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "direct_first", "family_levels", "family_levels_grid",
+           "first_detected", "level_table", "packet_probability"]

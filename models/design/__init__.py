@@ -21,6 +21,7 @@ from __future__ import annotations
 from sblsim.models.design.criteria import (
     CRITERIA,
     DIMENSIONS,
+    ECHO_LIMIT,
     RING_ELEVATION_DEG,
     RING_RADIUS_RATIO,
     bishop_2d_crb_trace,
@@ -41,6 +42,6 @@ from sblsim.models.design.information import (
     slots_for,
 )
 
-__all__ = ["CRITERIA", "DIMENSIONS", "FAR", "OUTPUTS", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO", "SLOTS",
+__all__ = ["CRITERIA", "DIMENSIONS", "ECHO_LIMIT", "FAR", "OUTPUTS", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO", "SLOTS",
            "bishop_2d_crb_trace", "bishop_2d_determinant", "coverage", "criterion", "layout_horizontal_std",
            "layout_information", "layout_values", "padded", "ring_crb_trace", "ring_determinant", "slots_for"]

@@ -13,7 +13,10 @@ numbers into one number to minimise (:func:`criterion`):
   horizontal block for a horizontal prescription);
 * ``worst``: the largest DRMS over the area (minimax).
 
-A point where no fix is made (the map's blank, NaN) counts as an infinite DRMS and an information of zero.
+A point where no fix is made (the map's blank, NaN) counts as an infinite DRMS and an information of zero. So does,
+for the coverage and the ``percentile`` and ``worst`` criteria, a point whose fix takes a range of reflections in
+more than :data:`ECHO_LIMIT` of the cycles (the first detected arrival of a transducer is a surface or bottom
+reflection there): the Fisher information of the direct rays does not describe that fix.
 
 Closed forms (range-only measurements of one standard deviation σ, no depth sensor; Bishop, Fidan, Anderson,
 Doğançay, Pathirana, "Optimality analysis of sensor-target localization geometries", Automatica 46(3):479-492,
@@ -41,6 +44,8 @@ CRITERIA = {
     "a-optimal": "the mean squared DRMS over the work area (A-optimality: the trace of the Cramér-Rao bound) [m²]",
     "worst": "the largest DRMS over the work area [m]",
 }
+#: The largest probability that a cycle's fix takes a range of reflections at a point the prediction holds for [1].
+ECHO_LIMIT = 0.01
 #: The prescription's dimensions: horizontal (the DRMS of North and East) or 3d (North, East and Down).
 DIMENSIONS = ("horizontal", "3d")
 #: The 3-D ring's optimal radius over the height below the target [1].
@@ -49,7 +54,8 @@ RING_RADIUS_RATIO = math.sqrt(2.0)
 RING_ELEVATION_DEG = math.degrees(math.atan(1.0 / math.sqrt(2.0)))
 
 
-def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: float) -> np.ndarray:
+def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: float,
+              echo: np.ndarray | None = None) -> np.ndarray:
     """The criterion ``name`` (:data:`CRITERIA`) of one or more layouts over a work area, to be minimised.
 
     Parameters
@@ -62,6 +68,9 @@ def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: fl
         ``log det J`` at the points; NaN where no fix.
     coverage_pct : float
         The prescription's coverage P [%], the percentile of ``percentile``.
+    echo : ndarray, shape (..., M), optional
+        The probability that a point's fix takes a range of reflections [0–1]; above :data:`ECHO_LIMIT` the
+        point counts as without a fix (``percentile``, ``worst``).
 
     Returns
     -------
@@ -74,6 +83,8 @@ def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: fl
         For an unknown criterion.
     """
     drms = np.where(np.isfinite(drms), drms, np.inf)
+    if echo is not None and name in ("percentile", "worst"):
+        drms = np.where(echo > ECHO_LIMIT, np.inf, drms)
     if name == "percentile":
         return np.percentile(drms, coverage_pct, axis=-1, method="higher")
     if name == "worst":
@@ -85,15 +96,19 @@ def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: fl
     raise ValueError(f"criterion: {name!r} is not one of {', '.join(CRITERIA)}")
 
 
-def coverage(drms: np.ndarray, availability: np.ndarray, drms_m: float, availability_pct: float) -> np.ndarray:
-    """The share of a work area's points that meet a prescription [%]: DRMS at most ``drms_m`` [m] and a fix in at
-    least ``availability_pct`` [%] of the cycles.
+def coverage(drms: np.ndarray, availability: np.ndarray, drms_m: float, availability_pct: float,
+             echo: np.ndarray | None = None) -> np.ndarray:
+    """The share of a work area's points that meet a prescription [%]: DRMS at most ``drms_m`` [m], a fix in at
+    least ``availability_pct`` [%] of the cycles and, with ``echo``, ranges of reflections in at most
+    :data:`ECHO_LIMIT` of them.
 
     Parameters
     ----------
     drms, availability : ndarray, shape (..., M)
         [m] (NaN: no fix) and the probability of a fix in one cycle [0–1].
     drms_m, availability_pct : float
+    echo : ndarray, shape (..., M), optional
+        The probability that a cycle's fix takes a range of reflections [0–1].
 
     Returns
     -------
@@ -101,6 +116,8 @@ def coverage(drms: np.ndarray, availability: np.ndarray, drms_m: float, availabi
     """
     met = np.isfinite(drms) & (np.nan_to_num(drms, nan=np.inf) <= drms_m) & \
         (availability >= availability_pct / 100.0 - 1e-12)
+    if echo is not None:
+        met &= echo <= ECHO_LIMIT
     return 100.0 * met.mean(axis=-1)
 
 
@@ -126,5 +143,5 @@ def ring_crb_trace(n: int, sigma: float) -> float:
     return 9.0 * sigma ** 2 / n
 
 
-__all__ = ["CRITERIA", "DIMENSIONS", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO", "bishop_2d_crb_trace",
+__all__ = ["CRITERIA", "DIMENSIONS", "ECHO_LIMIT", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO", "bishop_2d_crb_trace",
            "bishop_2d_determinant", "coverage", "criterion", "ring_crb_trace", "ring_determinant"]

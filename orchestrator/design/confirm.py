@@ -1,12 +1,12 @@
 """Every proposed design confirmed by Monte Carlo: what a vehicle gets where the design's map predicts.
 
 * **Static vehicles** (:func:`static_check`): at the work area's worst point (the largest DRMS among the points
-  with a fix) and at its median point, a vehicle held still for a few cycles, ``monte_carlo.replicates`` runs of
-  the design's scenario with the ``lsq`` receiver (a fix from each cycle's latest measurements and the depth, no
-  motion model: what the map describes), its fixes after the first cycle; the horizontal (or 3-D) RMS error of
-  those fixes against the map's DRMS there. A ratio outside ``1 ± monte_carlo.tolerance_pct`` is flagged
-  (``confirmed`` false), never hidden. The share of cycles with a fix is reported beside the predicted
-  availability.
+  with a fix of direct rays) and at its median point, a vehicle held still for a few cycles,
+  ``monte_carlo.replicates`` runs of the design's scenario with the ``lsq`` receiver (a fix from each cycle's latest
+  measurements and the depth, no motion model: what the map describes), its fixes after the first cycle; the
+  horizontal (or 3-D) RMS error of those fixes against the map's DRMS there. A ratio outside
+  ``1 ± monte_carlo.tolerance_pct`` is flagged (``confirmed`` false), never hidden. The share of cycles with a fix
+  is reported beside the predicted availability.
 * **A path** (:func:`path_check`): the scenario's receiver on a straight path across the work area (through its
   centre, North to South, at the first depth, at :data:`PATH_SPEED`, at most :data:`PATH_SLOTS` sampling times
   long), ``monte_carlo.path_replicates`` runs (:func:`sblsim.orchestrator.compare.compare`): its RMS error, NEES and
@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from sblsim.models.design.criteria import ECHO_LIMIT
 from sblsim.orchestrator.compare import compare
 from sblsim.orchestrator.cosim.plan import with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
@@ -33,10 +34,12 @@ PATH_SLOTS = 200
 
 
 def checked_points(design: Design, resolved: Resolved) -> list[tuple[str, np.ndarray]]:
-    """The worst and the median point of a design's map over the work area (among the points with a fix), named."""
+    """The worst and the median point of a design's map over the work area, named: among the points with a fix
+    whose ranges are the direct rays' (:data:`~sblsim.models.design.criteria.ECHO_LIMIT`), where the map predicts
+    the fix."""
     dimensions = resolved.sections["prescription"]["dimensions"]
     drms = design.values["drms" if dimensions == "horizontal" else "drms_3d"]
-    finite = np.flatnonzero(np.isfinite(drms))
+    finite = np.flatnonzero(np.isfinite(drms) & (design.values["echo"] <= ECHO_LIMIT))
     if finite.size == 0:
         return []
     worst = finite[np.argmax(drms[finite])]

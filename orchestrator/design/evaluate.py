@@ -82,25 +82,24 @@ class Detection:
         self.depths = np.asarray(depths, dtype=float)
         self.distance = np.arange(0.0, reach + 2.0 * TABLE_STEP, TABLE_STEP)
         transducer = np.array([[0.0, 0.0, float(transducer_depth)]])
-        self.probability, self.scale = [], []
+        self.columns = []  # per depth: the probability, the scale, the probability of a range of reflections
         for depth in self.depths:
             points = np.column_stack([self.distance, np.zeros_like(self.distance),
                                       np.full_like(self.distance, depth)])
-            p, s = packet_probabilities(plan, points, transducer)
-            self.probability.append(p[:, 0])
-            self.scale.append(s[:, 0])
+            self.columns.append([c[:, 0] for c in packet_probabilities(plan, points, transducer, echo=True)])
 
-    def __call__(self, points: np.ndarray, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Each packet's probability of being heard and its accuracy scale, between vehicles at ``points`` (M, 3)
-        (at the table's depths) and the transducers of S layouts (S, n, 3), NED [m]; each (S, M, n)."""
+    def __call__(self, points: np.ndarray, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each packet's probability of being heard, its accuracy scale and the probability that its range is of
+        reflections, between vehicles at ``points`` (M, 3) (at the table's depths) and the transducers of S layouts
+        (S, n, 3), NED [m]; each (S, M, n)."""
         horizontal = np.hypot(points[None, :, None, 0] - layouts[:, None, :, 0],
                               points[None, :, None, 1] - layouts[:, None, :, 1])
-        probability, scale = np.empty(horizontal.shape), np.empty(horizontal.shape)
+        out = tuple(np.empty(horizontal.shape) for _ in range(3))
         for k, depth in enumerate(self.depths):
             rows = np.isclose(points[:, 2], depth)
-            probability[:, rows] = np.interp(horizontal[:, rows], self.distance, self.probability[k])
-            scale[:, rows] = np.interp(horizontal[:, rows], self.distance, self.scale[k])
-        return probability, scale
+            for array, column in zip(out, self.columns[k]):
+                array[:, rows] = np.interp(horizontal[:, rows], self.distance, column)
+        return out
 
 
 class LayoutEvaluator:
@@ -131,19 +130,19 @@ class LayoutEvaluator:
                                                                      axis=0)])
         self.evaluations = 0
 
-    def heard(self, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per layout, point and transducer: the weight of its range, its noise variance [m²] and its packet's
-        probability of being received, each (S, M, n)."""
+    def heard(self, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per layout, point and transducer: the weight of its range, its noise variance [m²], its packet's
+        probability of being received and the probability that its range is of reflections, each (S, M, n)."""
         s, n = layouts.shape[0], layouts.shape[1]
         shape = (s, self.m, n)
         if self.detection is None:
             return (np.ones(shape), np.full(shape, self.levels.noise_variance),
-                    np.full(shape, 1.0 - self.loss))
-        probability, scale = self.detection(self.points, layouts)
+                    np.full(shape, 1.0 - self.loss), np.zeros(shape))
+        probability, scale, echo = self.detection(self.points, layouts)
         if not self.detection.snr:
-            return np.ones(shape), np.full(shape, self.levels.noise_variance), probability
+            return np.ones(shape), np.full(shape, self.levels.noise_variance), probability, echo
         grown = self.levels.noise_variance + self.levels.range_variance * (scale ** 2 - 1.0)
-        return probability, np.where(probability > 0.0, grown, self.levels.noise_variance), probability
+        return probability, np.where(probability > 0.0, grown, self.levels.noise_variance), probability, echo
 
     def evaluate(self, layouts: np.ndarray, arms: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """The accuracy of S layouts at every point.
@@ -158,14 +157,15 @@ class LayoutEvaluator:
         Returns
         -------
         dict
-            ``drms``, ``drms_3d`` [m], ``log_det`` and ``availability`` [0–1], each (S, M); the accuracies NaN
+            ``drms``, ``drms_3d`` [m], ``log_det``, ``availability`` and ``echo`` [0–1] (as
+            :func:`~sblsim.orchestrator.maps.point_accuracy` gives them), each (S, M); the accuracies NaN
             where the probability of a fix is below the map's :data:`~sblsim.orchestrator.maps.MIN_AVAILABILITY`
             (with the site's detection).
         """
         layouts = np.asarray(layouts, dtype=float)
         arms = layouts if arms is None else np.asarray(arms, dtype=float)
         s, n = layouts.shape[:2]
-        weight, noise, received = self.heard(layouts)
+        weight, noise, received, echo = self.heard(layouts)
         out = {name: np.empty((s, self.m)) for name in OUTPUTS}
         function = compiled_layout(slots_for(n)) if self.compiled else None
         for k in range(s):
@@ -179,6 +179,7 @@ class LayoutEvaluator:
         self.evaluations += s
         out["availability"] = fix_probability(received.reshape(s * self.m, n),
                                               self.levels.fix_packets).reshape(s, self.m)
+        out["echo"] = 1.0 - np.prod(1.0 - received * echo, axis=-1)
         if self.detection is not None and self.detection.snr:
             blank = out["availability"] < MIN_AVAILABILITY
             for name in OUTPUTS:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sblsim.models.design.criteria import CRITERIA
+from sblsim.models.design.criteria import CRITERIA, ECHO_LIMIT
 from sblsim.orchestrator.cosim.plan import Config, thaw
 from sblsim.orchestrator.design.problem import GRADES
 from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles
@@ -45,12 +45,14 @@ def _finite(value: float) -> float | None:
 
 def predicted(design: Design, run: DesignRun) -> dict[str, Any]:
     """The map's numbers of a design over the work area: ``drms_p50_m``, ``drms_p95_m``, ``drms_max_m`` [m] (None
-    where a point has no fix: an infinite DRMS), ``coverage`` (the share of points that meet the prescription)
-    and ``availability`` (the mean probability of a fix in one cycle), both [0–1]."""
+    where a point has no fix: an infinite DRMS), ``coverage`` (the share of points that meet the prescription),
+    ``availability`` (the mean probability of a fix in one cycle) and ``echo`` (the share of points whose fix takes
+    ranges of reflections in more than 1 % of the cycles, where the prediction does not hold), each [0–1]."""
     dimensions = run.resolved.sections["prescription"]["dimensions"]
     out = {k: _finite(v) for k, v in quantiles(design, dimensions).items()}
     out["coverage"] = design.coverage / 100.0
     out["availability"] = float(np.mean(design.values["availability"]))
+    out["echo"] = float(np.mean(design.values["echo"] > ECHO_LIMIT))
     return out
 
 

@@ -327,13 +327,12 @@ class Searcher:
             arms = np.asarray(plan.lever_arms, dtype=float)
             detection = None
             if plan["acoustics"]["detection"] == "snr":
-                probability, scale = self.detection(plan, float(arms[0, 2]))(r.points, arms[None])
-                detection = (probability[0], scale[0])
+                detection = tuple(a[0] for a in self.detection(plan, float(arms[0, 2]))(r.points, arms[None]))
             values = point_accuracy(plan, r.points, detection=detection)
             layout, positions = layout_items("usbl", 1), arms
             p = r.sections["prescription"]
             drms = values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
-            value = float(criterion(s["criterion"], drms, values["log_det"], p["coverage_pct"]))
+            value = float(criterion(s["criterion"], drms, values["log_det"], p["coverage_pct"], values["echo"]))
             values = {k: v[None] for k, v in values.items()}
         plan = plan_of(r, [*layout, *grades])
         period = slot_period(plan, positions, r.points)
@@ -348,7 +347,8 @@ class Searcher:
         """Whether a design meets the prescription, and its coverage [%] (from its values)."""
         p = self.resolved.sections["prescription"]
         drms = design.values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
-        design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"]))
+        design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"],
+                                         design.values["echo"]))
         interval = p["update_interval_s"]
         design.meets = bool(design.coverage >= p["coverage_pct"] - 1e-9 and (interval == 0.0 or
                                                                              design.cycle <= interval + 1e-9))
@@ -360,7 +360,8 @@ class Searcher:
         design.values = point_accuracy(plan, r.points)
         p, s = r.sections["prescription"], r.sections["search"]
         drms = design.values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
-        design.value = float(criterion(s["criterion"], drms, design.values["log_det"], p["coverage_pct"]))
+        design.value = float(criterion(s["criterion"], drms, design.values["log_det"], p["coverage_pct"],
+                                       design.values["echo"]))
         design.evaluated_by = "map"
         self.judge(design)
 

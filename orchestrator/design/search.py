@@ -66,7 +66,7 @@ class Objective:
         arms = None if self.arms is None else self.arms(layouts)
         out = self.evaluator.evaluate(layouts, arms)
         drms = out["drms" if self.dimensions == "horizontal" else "drms_3d"]
-        return criterion_of(self.criterion, drms, out["log_det"], self.coverage_pct)
+        return criterion_of(self.criterion, drms, out["log_det"], self.coverage_pct, out["echo"])
 
 
 @dataclass
@@ -132,7 +132,8 @@ def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, regi
     else:
         def penalised(v):
             value = objective.values(layout_of(np.asarray(v)[:, None]))[0]
-            return value + 1e3 * (1.0 + abs(value)) * float(np.sum(np.maximum(-inside(v), 0.0)))
+            outside = float(np.sum(np.maximum(-inside(v), 0.0)))
+            return value + 1e3 * (1.0 + abs(value)) * outside if outside > 0.0 else value
 
         found = minimize(penalised, x, method="Powell", bounds=bounds,
                          options={"xtol": 1e-8, "ftol": 1e-12, "maxfev": 400 * x.size}).x
@@ -146,7 +147,7 @@ def _gradient_polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: 
     """SLSQP from ``x`` on a smooth criterion and its gradient, which casadi derives through the layout function."""
     evaluator = objective.evaluator
     layout = layout_of(x[:, None])
-    weight, noise, _ = evaluator.heard(layout)
+    weight, noise = evaluator.heard(layout)[:2]
     m = evaluator.m
     variables = ca.MX.sym("x", x.size)
     positions = layout_of(variables)
