@@ -33,7 +33,7 @@ from sblsim.orchestrator.io.output import staged_directory
 
 #: The columns of ``designs.csv``.
 CSV_COLUMNS = ("rank", "name", "system", "count", *GRADES, "baseline_m", "cost", "criterion", "drms_p50_m",
-               "drms_p95_m", "drms_max_m", "coverage", "availability", "meets", "cycle_s", "evaluated_by")
+               "drms_p95_m", "drms_max_m", "coverage", "availability", "echo", "meets", "cycle_s", "evaluated_by")
 #: The files of a design's output folder (besides one ``NAME.toml`` per proposed design).
 OUTPUT_FILES = ("design.json", "designs.csv", "layout.png", "pareto.png", "convergence.png")
 
@@ -112,7 +112,8 @@ def table(run: DesignRun) -> pd.DataFrame:
                      **{g: c.grades.get(g, "") for g in GRADES},
                      "baseline_m": d.baseline if d.baseline is not None else math.nan, "cost": c.cost,
                      "criterion": d.value, **q, "coverage": d.coverage / 100.0,
-                     "availability": float(np.mean(d.values["availability"])), "meets": d.meets,
+                     "availability": float(np.mean(d.values["availability"])),
+                     "echo": float(np.mean(d.values["echo"] > ECHO_LIMIT)), "meets": d.meets,
                      "cycle_s": d.cycle, "evaluated_by": d.evaluated_by})
     return pd.DataFrame(rows, columns=list(CSV_COLUMNS))
 
