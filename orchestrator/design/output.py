@@ -134,7 +134,8 @@ def document(run: DesignRun, seconds: float | None = None) -> dict[str, Any]:
     problem["design"]["scenario"] = str(run.resolved.sections["design"]["scenario"])
     out = {"problem": problem, "summary": summary(run), "meets": run.best.meets,
            "designs": [design_record(d, run) for d in run.proposed],
-           "search": {"candidates": len(run.searched), "work_area_points": int(len(run.resolved.points)),
+           "search": {"candidates": len(run.searched), "layouts": sum(d.evaluations for d in run.searched),
+                      "work_area_points": int(len(run.resolved.points)),
                       "criterion": run.resolved.sections["search"]["criterion"],
                       "criterion_meaning": CRITERIA[run.resolved.sections["search"]["criterion"]]}}
     if seconds is not None:

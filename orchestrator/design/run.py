@@ -129,6 +129,8 @@ class Design:
         The time of one cycle [s].
     evaluated_by : str
         ``map`` (the accuracy map itself) or ``search`` (the search's tables).
+    evaluations : int
+        The layouts the search evaluated over the work area.
     """
 
     candidate: Candidate
@@ -140,6 +142,7 @@ class Design:
     history: list[float]
     cycle: float
     evaluated_by: str = "search"
+    evaluations: int = 1
     meets: bool = False
     coverage: float = 0.0
     name: str = ""
@@ -334,12 +337,13 @@ class Searcher:
             drms = values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
             value = float(criterion(s["criterion"], drms, values["log_det"], p["coverage_pct"], values["echo"]))
             values = {k: v[None] for k, v in values.items()}
+        evaluations = objective.evaluator.evaluations if candidate.system != "usbl" else 1
         plan = plan_of(r, [*layout, *grades])
         period = slot_period(plan, positions, r.points)
         items = [*layout, *grades, *_sampling_items(plan, period)]
         slots = 1 if plan.system.measures_direction else candidate.count
         design = Design(candidate, items, transponders, baseline, float(value), {k: v[0] for k, v in values.items()},
-                        history, slots * period)
+                        history, slots * period, evaluations=evaluations)
         self.judge(design)
         return design
 
