@@ -194,8 +194,7 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     heard = None
     if plan["acoustics"]["detection"] == "snr" and plan.system.takes_ranges:  # each range its own noise and weight
         heard = probability
-        bound["noise_variance"] = np.where(heard > 0.0, bound["noise_variance"] + sigma ** 2 * (scale ** 2 - 1.0),
-                                           bound["noise_variance"])
+        bound["noise_variance"] = grown_noise(bound["noise_variance"], sigma ** 2, probability, scale)
     elif plan["acoustics"]["detection"] == "snr":  # one packet's noise grown below the reference SNR, per point
         grown = np.sqrt(np.mean(scale ** 2, axis=1))
         for key in ("noise_variance", "range_variance"):
@@ -214,6 +213,13 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     out["availability"] = available
     out["echo"] = 1.0 - np.prod(1.0 - probability * echo, axis=1)
     return out
+
+def grown_noise(noise_variance, range_variance: float, probability: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Each range's variance where the site decides what is heard [m²]: the range noise ``range_variance`` (σ_r²,
+    part of ``noise_variance``, which holds the transducer position's error too) grown by the square of the
+    accuracy scale of the packet's SNR; a packet never heard keeps ``noise_variance`` (its weight is 0)."""
+    return np.where(probability > 0.0, noise_variance + range_variance * (scale ** 2 - 1.0), noise_variance)
+
 
 def packet_probabilities(plan: RunPlan, points: np.ndarray, arms: np.ndarray | None = None,
                          echo: bool = False) -> tuple[np.ndarray, ...]:
@@ -509,5 +515,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "grid", "make_maps", "parse_levels", "plot",
-           "point_accuracy", "system_line", "table", "write"]
+__all__ = ["MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "grid", "grown_noise", "make_maps", "parse_levels",
+           "plot", "point_accuracy", "system_line", "table", "write"]

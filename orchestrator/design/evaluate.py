@@ -24,7 +24,7 @@ import numpy as np
 from sblsim.fmus.native import LAYOUT_CHUNK, compiled_layout
 from sblsim.models.design.information import OUTPUTS, layout_values, padded, slots_for
 from sblsim.orchestrator.cosim.plan import RunPlan
-from sblsim.orchestrator.maps import MIN_AVAILABILITY, fix_probability, packet_probabilities
+from sblsim.orchestrator.maps import MIN_AVAILABILITY, fix_probability, grown_noise, packet_probabilities
 
 #: The step of a detection table [m].
 TABLE_STEP = 5.0
@@ -145,8 +145,8 @@ class LayoutEvaluator:
         probability, scale, echo = self.detection(self.points, layouts)
         if not self.detection.snr:
             return np.ones(shape), np.full(shape, self.levels.noise_variance), probability, echo
-        grown = self.levels.noise_variance + self.levels.range_variance * (scale ** 2 - 1.0)
-        return probability, np.where(probability > 0.0, grown, self.levels.noise_variance), probability, echo
+        noise = grown_noise(self.levels.noise_variance, self.levels.range_variance, probability, scale)
+        return probability, noise, probability, echo
 
     def evaluate(self, layouts: np.ndarray, arms: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """The accuracy of S layouts at every point.

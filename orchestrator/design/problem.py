@@ -373,6 +373,18 @@ class Area:
         r = section["radius_m"] if section["radius_m"] > 0.0 or radius is None else radius
         return cls(centre=(section["centre_north_m"], section["centre_east_m"]), radius=float(r))
 
+    @property
+    def middle(self) -> tuple[float, float]:
+        """The circle's centre, or the mean of the polygon's vertices (North, East) [m]."""
+        return self.centre if self.vertices is None else tuple(float(v) for v in self.vertices.mean(axis=0))
+
+    @property
+    def reach(self) -> float:
+        """The largest distance from :attr:`middle` to the boundary [m]."""
+        if self.vertices is None:
+            return self.radius
+        return float(np.max(np.hypot(*(self.vertices - np.asarray(self.middle)).T)))
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The bounding box's lower and upper corners (North, East) [m]."""
         if self.vertices is not None:

@@ -195,9 +195,7 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
                           f"(acoustics.water_depth = {water:g} m)")
     area = Area.of(work, "work_area")
     if floor["shape"] == "circle" and floor["radius_m"] == 0.0:
-        floor["centre_north_m"], floor["centre_east_m"] = work["centre_north_m"], work["centre_east_m"]
-        floor["radius_m"] = area.radius if area.vertices is None else float(
-            np.max(np.hypot(*(area.vertices - area.vertices.mean(axis=0)).T)))
+        (floor["centre_north_m"], floor["centre_east_m"]), floor["radius_m"] = area.middle, area.reach
     seafloor = Area.of(floor, "seafloor")
     avoid = [Area(vertices=polygon(text, f"seafloor.avoid[{k}]")) for k, text in enumerate(floor["avoid"])]
     points = work_area_points(area, work["points"], work["depths_m"])
@@ -333,9 +331,7 @@ class Searcher:
                 detection = tuple(a[0] for a in self.detection(plan, float(arms[0, 2]))(r.points, arms[None]))
             values = point_accuracy(plan, r.points, detection=detection)
             layout, positions = layout_items("usbl", 1), arms
-            p = r.sections["prescription"]
-            drms = values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
-            value = float(criterion(s["criterion"], drms, values["log_det"], p["coverage_pct"], values["echo"]))
+            value = self.criterion(values)
             values = {k: v[None] for k, v in values.items()}
         evaluations = objective.evaluator.evaluations if candidate.system != "usbl" else 1
         plan = plan_of(r, [*layout, *grades])
@@ -347,10 +343,19 @@ class Searcher:
         self.judge(design)
         return design
 
+    def drms(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The DRMS of the prescription's dimensions among a design's values (:func:`point_accuracy`'s) [m]."""
+        return values["drms" if self.resolved.sections["prescription"]["dimensions"] == "horizontal" else "drms_3d"]
+
+    def criterion(self, values: Mapping[str, np.ndarray]) -> float:
+        """The search's criterion of a design's values over the work area."""
+        return float(criterion(self.resolved.sections["search"]["criterion"], self.drms(values), values["log_det"],
+                               self.resolved.sections["prescription"]["coverage_pct"], values["echo"]))
+
     def judge(self, design: Design) -> None:
         """Whether a design meets the prescription, and its coverage [%] (from its values)."""
         p = self.resolved.sections["prescription"]
-        drms = design.values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
+        drms = self.drms(design.values)
         design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"],
                                          design.values["echo"]))
         interval = p["update_interval_s"]
@@ -362,17 +367,14 @@ class Searcher:
         r = self.resolved
         plan = plan_of(r, design.items)
         design.values = point_accuracy(plan, r.points)
-        p, s = r.sections["prescription"], r.sections["search"]
-        drms = design.values["drms" if p["dimensions"] == "horizontal" else "drms_3d"]
-        design.value = float(criterion(s["criterion"], drms, design.values["log_det"], p["coverage_pct"],
-                                       design.values["echo"]))
+        design.value = self.criterion(design.values)
         design.evaluated_by = "map"
         self.judge(design)
 
 
 def _provisional_ring(r: Resolved, n: int) -> np.ndarray:
     """A ring of n transponders inside the seafloor region (the plan of a candidate before its layout is known)."""
-    centre = r.seafloor.centre if r.seafloor.vertices is None else tuple(r.seafloor.vertices.mean(axis=0))
+    centre = r.seafloor.middle
     angle = 2.0 * math.pi * np.arange(n) / n
     return np.column_stack([centre[0] + np.cos(angle), centre[1] + np.sin(angle), np.full(n, r.seafloor_depth)])
 

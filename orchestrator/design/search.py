@@ -196,8 +196,7 @@ def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area],
     Result
         Its ``variables`` the radius [m] (and the bearing [rad]).
     """
-    centre = region.centre if region.vertices is None else tuple(region.vertices.mean(axis=0))
-    reach = region.radius if region.vertices is None else float(np.max(np.hypot(*(region.vertices - centre).T)))
+    centre, reach = region.middle, region.reach
     bounds = [(min(1.0, reach), reach)] + ([] if bearing is not None else [(0.0, 2.0 * math.pi / n)])
     steps = 2.0 * math.pi * np.arange(n) / n
 

@@ -238,6 +238,24 @@ def test_the_api_takes_the_problem_as_keyword_sections_and_refuses_bad_keys(tmp_
     assert not list(tmp_path.iterdir())
 
 
+def test_a_prescription_none_meets_is_said_in_one_line_with_the_best_found(tmp_path, capsys):
+    """No layout of 3 to 6 transponders gives 1 cm over the small work area: the command says so in its last line
+    with the best it found (the most coverage), exits 0 and writes the same files."""
+    problem = tmp_path / "tight.toml"
+    problem.write_text(
+        '[design]\nname = "tight"\nscenario = "semicircle"\n[work_area]\nradius_m = 30.0\ndepths_m = [5.0]\n'
+        'points = 7\n[prescription]\ndrms_m = 0.01\n[candidates]\nsystems = ["lbl"]\ntransponders = [3, 4]\n'
+        '[seafloor]\nradius_m = 60.0\ndepth_m = 20.0\n[search]\ngenerations = 10\n'
+        '[monte_carlo]\nreplicates = 10\npath = false\n')
+    assert main(["design", str(problem), "--out", str(tmp_path / "out")]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-2]
+    assert last.startswith("tight: no candidate meets 0.01 m horizontal DRMS") and "the best found: LBL" in last
+    document = json.loads((tmp_path / "out" / "design.json").read_text())
+    assert document["meets"] is False and not any(d["meets"] for d in document["designs"])
+    assert len(pd.read_csv(tmp_path / "out" / "designs.csv")) == 2  # every candidate searched
+    assert (tmp_path / "out" / "tight-lbl4.toml").is_file() or (tmp_path / "out" / "tight-lbl3.toml").is_file()
+
+
 def test_workers_do_not_change_the_design():
     one = sblsim.design(None, **SMALL, workers=1)
     two = sblsim.design(None, **SMALL, workers=2)
