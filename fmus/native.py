@@ -611,10 +611,11 @@ class CompiledFunction:
             raise RuntimeError("a compiled layout function failed")
 
 
+@lru_cache(maxsize=None)
 def compiled_layout(slots: int) -> CompiledFunction | None:
     """The design's layout information of ``slots`` transducers over :data:`LAYOUT_CHUNK` points
     (:func:`layout_functions`), compiled in the local engine's library (built if missing), or None when no
-    compiler can build it."""
+    compiler can build it; one per process (its work memory is its own: not for two threads at once)."""
     try:
         return CompiledFunction(load(4, NO_MODELS), f"sblsim_layout_{slots}")
     except (CompileError, OSError, RuntimeError, AttributeError):
