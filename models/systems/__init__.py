@@ -86,6 +86,13 @@ class System:
     fix_packets : int
         The packets of one cycle a fix needs (an availability map's "probability of a fix"): three ranges
         (with the depth, the fix of two is ambiguous), or one packet of range and direction.
+    design_layout : str
+        How ``sblsim design`` places the transducers: ``seafloor`` (each one in the seafloor region, their count
+        and places searched), ``platform`` (on a circle on the platform, its arm searched) or empty (one
+        transceiver where the platform is, nothing to place).
+    design_grades : tuple of str
+        The kinds of hardware grade that change the system's accuracy (what a design chooses among for it:
+        ``gps``, ``imu``, ``usbl_head``, ``ranging``).
     """
 
     name: ClassVar[str] = ""
@@ -105,6 +112,8 @@ class System:
     bound_steps: ClassVar[tuple[str, ...]] = ()
     bound_columns: ClassVar[dict[str, str]] = {}
     fix_packets: ClassVar[int] = 3
+    design_layout: ClassVar[str] = ""
+    design_grades: ClassVar[tuple[str, ...]] = ()
 
     def __repr__(self) -> str:
         return f"<positioning system {self.name}>"
@@ -134,6 +143,13 @@ class System:
     def describe(self, platform: Mapping[str, Any]) -> str:
         """The geometry in a few words (a map panel's title)."""
         raise NotImplementedError
+
+    def design_items(self, count: int, transponders: np.ndarray | None = None,
+                     baseline: float | None = None) -> list[str]:
+        """The configuration overrides of a design of this system (``sblsim design``): ``platform.system`` and the
+        layout of its ``count`` transducers, placed at ``transponders`` (n, 3) NED [m] or on an arm of ``baseline``
+        [m] as :attr:`design_layout` says (default: the system alone)."""
+        return [f"platform.system={self.name}"]
 
     # ---- the platform program (casadi) ----
     def body_offsets(self, p: Mapping[str, Any], n_beacons: int, layouts: Sequence[str]) -> list:

@@ -24,7 +24,7 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.declarations import ModelError, format_table
 from sblsim.models.systems import register
 from sblsim.models.systems.sbl import SBL, _layout_words
 from sblsim.models.target.core import file_waypoints
@@ -41,6 +41,8 @@ class LBL(SBL):
     compare_defaults = ("platform.layout=circle", "platform.beacons=4", "platform.baseline=50")
     marker = "transponders"
     places_transducers = True
+    design_layout = "seafloor"
+    design_grades = ("ranging",)
 
     def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
         """The transponders' NED positions relative to the mooring point (n, 3) [m]: the layout's points at
@@ -67,6 +69,12 @@ class LBL(SBL):
         LBL."""
         surveyed = d["seafloor"] + x["survey"]
         return ca.if_else(p["system"] == self.code, surveyed, broadcast)
+
+    def design_items(self, count: int, transponders: np.ndarray | None = None,
+                     baseline: float | None = None) -> list[str]:
+        """``count`` transponders at ``transponders`` (n, 3), NED [m] (a custom layout)."""
+        return [f"platform.system={self.name}", "platform.layout=custom", f"platform.beacons={count}",
+                f"platform.beacon_offsets={format_table(transponders)}"]
 
     def check_diver(self, cfg: Mapping[str, Any], depth: float | None = None) -> None:
         """Refuse a diver that is not above the seafloor transponders.

@@ -43,6 +43,8 @@ class SBL(System):
     words = "the paper's cross at 3 m"
     compare_defaults = ("platform.layout=cross", "platform.baseline=3")  # the paper's cross (its LOW corner)
     marker = "beacons"
+    design_layout = "platform"
+    design_grades = ("gps", "imu", "ranging")
 
     def offsets(self, platform: Mapping[str, Any]) -> np.ndarray:
         """Body-frame offsets (n, 3) [m]: the cross has the paper's 4 beacons, the circle ``platform.beacons``
@@ -106,6 +108,12 @@ class SBL(System):
         a constant attitude error: :meth:`bound_errors`) steps the bound with error states; every other run the
         metrics pass's range bound."""
         return any(parameters[k] > 0.0 for k in ("gps_sigma", "clock_drift_sigma", "attitude_sigma"))
+
+    def design_items(self, count: int, transponders: np.ndarray | None = None,
+                     baseline: float | None = None) -> list[str]:
+        """``count`` beacons on a circle of radius ``baseline`` [m] on the platform."""
+        return [*super().design_items(count), "platform.layout=circle", f"platform.beacons={count}",
+                f"platform.baseline={baseline!r}"]
 
     def fix_accuracy(self, points: np.ndarray, platform: Mapping[str, Any], parameters: Mapping[str, float],
                      sigma_range: float, model=None, heard: np.ndarray | None = None) -> dict[str, np.ndarray]:

@@ -458,6 +458,7 @@ class USBL(System):
     fix_packets = 1
     compare_defaults = ("platform.layout=cross", "platform.usbl_angle_sigma_deg=0.5")  # the transceiver at (0, 0, h)
     marker = "transceiver"
+    design_grades = ("gps", "imu", "usbl_head", "ranging")
     interface_beacons = 1
     ranging = ("twtt",)
     measures_direction = True

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.design.criteria import CRITERIA, ECHO_LIMIT
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.plan import Config, thaw
 from sblsim.orchestrator.design.problem import GRADES
 from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles
@@ -198,10 +199,10 @@ def layout_figure(run: DesignRun):
             ax.clabel(lines, fmt=lambda x: f"{x:g} m", fontsize=8)
         for area, style in [(r.area, dict(color="k", lw=1.0, ls="-", label="work area"))] + (
                 [(r.seafloor, dict(color="0.4", lw=1.0, ls="--", label="seafloor region"))]
-                if design.candidate.system == "lbl" else []):
+                if design.candidate.layout == "seafloor" else []):
             outline = area.outline()
             ax.plot(outline[:, 1], outline[:, 0], **style)
-        if design.candidate.system == "lbl":
+        if design.candidate.layout == "seafloor":
             for k, a in enumerate(r.avoid):
                 outline = a.outline()
                 ax.fill(outline[:, 1], outline[:, 0], facecolor="none", edgecolor="r", hatch="//", lw=0.8,
@@ -213,7 +214,7 @@ def layout_figure(run: DesignRun):
             ax.plot(m["east_m"], m["north_m"], "wo", mfc="none", ms=9, zorder=3)
             ax.annotate(f"{m['point']}: MC/map {m['ratio']:.2f}", (m["east_m"], m["north_m"]), color="w", fontsize=7,
                         xytext=(5, 5), textcoords="offset points")
-        if design.candidate.system == "lbl":
+        if design.candidate.layout == "seafloor":
             ax.plot(design.transponders[:, 1], design.transponders[:, 0], "r^", ms=9, mec="w", label="transponders",
                     zorder=4)
         ax.set_aspect("equal")
@@ -233,15 +234,16 @@ def pareto_figure(run: DesignRun):
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     criterion = run.resolved.sections["search"]["criterion"]
-    markers = {"lbl": ("^", "C0"), "sbl": ("s", "C1"), "usbl": ("o", "C2")}
-    for system, (marker, colour) in markers.items():
-        mine = [d for d in run.searched if d.candidate.system == system]
+    markers = {"seafloor": "^", "platform": "s", "": "o"}
+    for k, system in enumerate(SYSTEMS.values()):
+        marker, colour = markers.get(system.design_layout, "D"), f"C{k}"
+        mine = [d for d in run.searched if d.candidate.system == system.name]
         for meets in (True, False):
             part = [d for d in mine if d.meets == meets]
             if part:
                 ax.plot([d.candidate.cost for d in part], [d.value for d in part], marker, color=colour, ms=7,
                         mfc=colour if meets else "none",
-                        label=f"{system.upper()}, " + ("meets" if meets else "does not meet"))
+                        label=f"{system.name.upper()}, " + ("meets" if meets else "does not meet"))
     front = pareto_front(run.searched)
     if len(front) > 1:
         ax.step([d.candidate.cost for d in front], [d.value for d in front], where="post", color="0.5", lw=1,

@@ -29,12 +29,13 @@ import numpy as np
 from sblsim.models.declarations import ModelError, Variable, shown
 from sblsim.models.design.criteria import CRITERIA, DIMENSIONS
 from sblsim.models.errors import ConfigError
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, PATH_KEYS
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.tables import regular_file
 
-#: The systems a design may propose, in the order they are searched.
-SYSTEM_NAMES = ("lbl", "sbl", "usbl")
+#: The systems a design may propose (the registry's), in the order they are searched.
+SYSTEM_NAMES = tuple(SYSTEMS)
 #: The hardware grades a design chooses among: category -> grade -> (configuration key, value). The figures and
 #: their sources: docs/hardware-grades.md ("Grades a design chooses among").
 GRADES: dict[str, dict[str, tuple[str, float]]] = {
@@ -45,8 +46,6 @@ GRADES: dict[str, dict[str, tuple[str, float]]] = {
                   "survey": ("platform.usbl_angle_sigma_deg", 0.14)},
     "ranging": {"cw": ("acoustics.sigma_range", 0.1), "wide-band": ("acoustics.sigma_range", 0.02)},
 }
-#: The grade categories that change each system's accuracy (the others are not searched for it, nor paid).
-SYSTEM_GRADES = {"sbl": ("gps", "imu", "ranging"), "lbl": ("ranging",), "usbl": ("gps", "imu", "usbl_head", "ranging")}
 #: The keys an override of a design file may not set: they name files or code.
 FILE_KEYS = {f"{section}.{key}" for section, key in PATH_KEYS} | {"simulation.receiver", "receiver"}
 #: The largest design file read [bytes].
@@ -446,6 +445,5 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
     return np.vstack([np.column_stack([plane, np.full(len(plane), d)]) for d in depths])
 
 
-__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "FILE_KEYS", "GRADES", "Key", "SECTIONS", "SYSTEM_GRADES",
-           "SYSTEM_NAMES", "check_problem", "defaults", "polygon", "read_problem", "signed_distance",
-           "work_area_points"]
+__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "FILE_KEYS", "GRADES", "Key", "SECTIONS", "SYSTEM_NAMES",
+           "check_problem", "defaults", "polygon", "read_problem", "signed_distance", "work_area_points"]

@@ -27,20 +27,14 @@ from typing import Any, Mapping
 import numpy as np
 
 from sblsim.models.acoustics.core import FLIGHT_CAPACITY
-from sblsim.models.declarations import ModelError, format_table
+from sblsim.models.declarations import ModelError
 from sblsim.models.design.criteria import coverage, criterion
 from sblsim.models.errors import ConfigError
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import apply_overrides
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
 from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels
-from sblsim.orchestrator.design.problem import (
-    GRADES,
-    SYSTEM_GRADES,
-    SYSTEM_NAMES,
-    Area,
-    polygon,
-    work_area_points,
-)
+from sblsim.orchestrator.design.problem import GRADES, SYSTEM_NAMES, Area, polygon, work_area_points
 from sblsim.orchestrator.design.search import Objective, optimise_baseline, optimise_free, optimise_ring
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.maps import diver_depth, point_accuracy
@@ -102,8 +96,13 @@ class Candidate:
     @property
     def label(self) -> str:
         grades = ", ".join(f"{k} {v}" for k, v in self.grades.items())
-        what = {"lbl": f"{self.count} transponders", "sbl": f"{self.count} beacons", "usbl": "one transceiver"}
-        return f"{self.system.upper()}, {what[self.system]}" + (f", {grades}" if grades else "")
+        what = f"{self.system.upper()}, {self.count} {SYSTEMS[self.system].marker}"
+        return what + (f", {grades}" if grades else "")
+
+    @property
+    def layout(self) -> str:
+        """How the system's transducers are placed (:attr:`~sblsim.models.systems.System.design_layout`)."""
+        return SYSTEMS[self.system].design_layout
 
 
 @dataclass
@@ -183,11 +182,12 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
     if not work["depths_m"]:
         work["depths_m"] = [_depth_default(plan)]
     water = float(plan["acoustics"]["water_depth"])
-    if floor["depth_m"] == 0.0:  # the scenario's LBL field, else 1 m above the site's floor
-        lbl = plan.system.name == "lbl" or water == 0.0
-        floor["depth_m"] = float(plan["platform"]["seafloor_depth"]) if lbl else water - 1.0
+    if floor["depth_m"] == 0.0:  # the scenario's seafloor field, else 1 m above the site's floor
+        field = plan.system.design_layout == "seafloor" or water == 0.0
+        floor["depth_m"] = float(plan["platform"]["seafloor_depth"]) if field else water - 1.0
     deepest = max(work["depths_m"])
-    if "lbl" in sections["candidates"]["systems"] and not floor["depth_m"] > deepest:
+    seafloor = any(SYSTEMS[s].design_layout == "seafloor" for s in sections["candidates"]["systems"])
+    if seafloor and not floor["depth_m"] > deepest:
         raise ConfigError(f"seafloor.depth_m: {floor['depth_m']:g} m is not below the work area's deepest vehicle "
                           f"({deepest:g} m, work_area.depths_m)")
     if water > 0.0 and floor["depth_m"] > water:
@@ -206,17 +206,20 @@ def candidates(resolved: Resolved) -> list[Candidate]:
     """Every candidate of the problem, in the order of cost (then of the systems, counts and grades as listed)."""
     c = resolved.sections["candidates"]
     out = []
-    for system in [s for s in SYSTEM_NAMES if s in c["systems"]]:
-        categories = [k for k in SYSTEM_GRADES[system] if c[k]]
+    for name in [s for s in SYSTEM_NAMES if s in c["systems"]]:
+        system = SYSTEMS[name]
+        categories = [k for k in system.design_grades if c[k]]
         choices = [[(k, grade, (c[f"{k}_cost"] or [0.0] * len(c[k]))[i]) for i, grade in enumerate(c[k])]
                    for k in categories]
-        counts = range(c["transponders"][0], c["transponders"][1] + 1) if system == "lbl" else [
-            c["sbl_beacons"] if system == "sbl" else 1]
-        base = {"sbl": c["sbl_cost"], "usbl": c["usbl_cost"], "lbl": 0.0}[system]
+        if system.design_layout == "seafloor":  # each transponder paid
+            counts, base, each = range(c["transponders"][0], c["transponders"][1] + 1), 0.0, c["transponder_cost"]
+        else:  # the system paid: an SBL's beacons on their circle, or one transceiver
+            counts = [c["sbl_beacons"] if system.design_layout == "platform" else 1]
+            base, each = c.get(f"{name}_cost", 0.0), 0.0
         for count in counts:
             for combo in itertools.product(*choices):
-                cost = base + (count * c["transponder_cost"] if system == "lbl" else 0.0) + sum(x[2] for x in combo)
-                out.append(Candidate(system, count, {k: g for k, g, _ in combo}, float(cost), len(out)))
+                cost = base + count * each + sum(x[2] for x in combo)
+                out.append(Candidate(name, count, {k: g for k, g, _ in combo}, float(cost), len(out)))
     return sorted(out, key=lambda x: (x.cost, x.order))
 
 
@@ -227,14 +230,8 @@ def grade_items(candidate: Candidate) -> list[str]:
 
 def layout_items(system: str, count: int, transponders: np.ndarray | None = None,
                  baseline: float | None = None) -> list[str]:
-    """The overrides of a system's layout: an LBL's custom positions, an SBL's circle of beacons, a USBL's none."""
-    items = [f"platform.system={system}"]
-    if system == "lbl":
-        items += ["platform.layout=custom", f"platform.beacons={count}",
-                  f"platform.beacon_offsets={format_table(transponders)}"]
-    elif system == "sbl":
-        items += ["platform.layout=circle", f"platform.beacons={count}", f"platform.baseline={baseline!r}"]
-    return items
+    """The overrides of a system's layout (:meth:`~sblsim.models.systems.System.design_items`)."""
+    return SYSTEMS[system].design_items(count, transponders, baseline)
 
 
 def plan_of(resolved: Resolved, items: list[str]) -> RunPlan:
@@ -299,9 +296,9 @@ class Searcher:
         options = dict(seed=s["seed"], population=s["population"], generations=s["generations"])
         transponders = baseline = None
         history: list[float] = []
-        if candidate.system == "lbl":
-            n = candidate.count
-            provisional = plan_of(r, [*layout_items("lbl", n, _provisional_ring(r, n)), *grades])
+        name, n = candidate.system, candidate.count
+        if candidate.layout == "seafloor":
+            provisional = plan_of(r, [*layout_items(name, n, _provisional_ring(r, n)), *grades])
             objective = self.objective(provisional, r.seafloor_depth)
             ring_found = optimise_ring(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
                                        **options)
@@ -310,30 +307,30 @@ class Searcher:
             if ring_found.value <= found.value and _feasible(ring_found.layout, r):
                 found = ring_found
             transponders, history = found.layout, ring_found.history + found.history
-            layout = layout_items("lbl", n, transponders)
+            layout = layout_items(name, n, transponders)
             value, values = found.value, objective.evaluator.evaluate(transponders[None])
             positions = transponders
-        elif candidate.system == "sbl":
+        elif candidate.layout == "platform":
             low, high = r.sections["candidates"]["sbl_baseline_m"]
-            provisional = plan_of(r, [*layout_items("sbl", candidate.count, baseline=1.0), *grades])
+            provisional = plan_of(r, [*layout_items(name, n, baseline=1.0), *grades])
             unit = np.asarray(provisional.lever_arms, dtype=float)
             objective = self.objective(provisional, float(unit[0, 2]))
             found = optimise_baseline(objective, unit, low, high, **options)
             baseline, history = float(found.variables[0]), found.history
-            layout = layout_items("sbl", candidate.count, baseline=baseline)
+            layout = layout_items(name, n, baseline=baseline)
             value, values = found.value, objective.evaluator.evaluate(found.layout[None])
             positions = found.layout
         else:
-            plan = plan_of(r, [*layout_items("usbl", 1), *grades])
+            plan = plan_of(r, [*layout_items(name, n), *grades])
             arms = np.asarray(plan.lever_arms, dtype=float)
             detection = None
             if plan["acoustics"]["detection"] == "snr":
                 detection = tuple(a[0] for a in self.detection(plan, float(arms[0, 2]))(r.points, arms[None]))
             values = point_accuracy(plan, r.points, detection=detection)
-            layout, positions = layout_items("usbl", 1), arms
+            layout, positions = layout_items(name, n), arms
             value = self.criterion(values)
             values = {k: v[None] for k, v in values.items()}
-        evaluations = objective.evaluator.evaluations if candidate.system != "usbl" else 1
+        evaluations = objective.evaluator.evaluations if candidate.layout else 1
         plan = plan_of(r, [*layout, *grades])
         period = slot_period(plan, positions, r.points)
         items = [*layout, *grades, *_sampling_items(plan, period)]
@@ -476,7 +473,7 @@ def pareto_front(designs: list[Design]) -> list[Design]:
 
 def _name(stem: str, design: Design, taken: set) -> str:
     c = design.candidate
-    name = f"{stem}-{c.system}" + (f"{c.count}" if c.system == "lbl" else "")
+    name = f"{stem}-{c.system}" + (f"{c.count}" if c.layout == "seafloor" else "")
     base, k = name, 2
     while name in taken:
         name, k = f"{base}-{k}", k + 1
