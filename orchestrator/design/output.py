@@ -5,8 +5,8 @@
   file), ``transponders_m`` (East, North, depth [m]), ``grades``, ``predicted`` (the map's DRMS quantiles over the
   work area, ``coverage`` and ``availability``) and ``monte_carlo`` (the static vehicles' checks), ``path``;
 * ``designs.csv``: every candidate searched, one row each (:data:`CSV_COLUMNS`), in the order of the ranking;
-* ``NAME.toml`` per proposed design: the full configuration (``sblsim run``, ``map``, ``compare`` and
-  ``fmus build --scenario`` take it as it is);
+* ``NAME.toml`` per proposed design: its scenario, the base scenario's keys and the design's (``sblsim run``,
+  ``map``, ``compare`` and ``fmus build --scenario`` take it as it is);
 * ``layout.png`` (each proposed design on its accuracy map, with its transponders, the seafloor region, the areas
   to avoid and the Monte Carlo points), ``pareto.png`` (cost against the criterion of every candidate, the front)
   and ``convergence.png`` (the search's best criterion per generation).
@@ -20,14 +20,16 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import pandas as pd
+import tomli_w
 
 from sblsim.models.design.criteria import CRITERIA, ECHO_LIMIT
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.cosim.plan import Config, thaw
+from sblsim.orchestrator.cosim.config import apply_overrides, read_source
+from sblsim.orchestrator.cosim.plan import thaw
 from sblsim.orchestrator.design.problem import GRADES
 from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles
 from sblsim.orchestrator.io.output import staged_directory
@@ -120,13 +122,18 @@ def table(run: DesignRun) -> pd.DataFrame:
 
 
 def scenario_text(design: Design, run: DesignRun) -> str:
-    """The full configuration of a design (TOML), its ``run.scenario`` the design's name."""
-    config = Config(thaw(plan_of(run.resolved, design.items).config))
-    config["run"]["scenario"] = design.name
+    """A design's scenario as TOML: the base scenario's own keys with the problem's and the design's overrides
+    applied, ``run.scenario`` the design's name (not the resolved configuration: what the scenario derives from its
+    keys, such as the receiver's initial state from the trajectory, is derived again when the file is used, with
+    the user's overrides)."""
+    r = run.resolved
+    raw = thaw(r.source) if isinstance(r.source, Mapping) else read_source(r.source)
+    raw = apply_overrides(raw, [*r.items, *design.items])
+    raw.setdefault("run", {})["scenario"] = design.name
     c = design.candidate
     header = (f"# {design.name}: {c.label}, cost {c.cost:g}, written by sblsim design from the problem "
-              f"{run.resolved.sections['design']['name']!r}\n")
-    return header + config.to_toml()
+              f"{r.sections['design']['name']!r} over the scenario {str(r.sections['design']['scenario'])!r}\n")
+    return header + tomli_w.dumps({section: dict(table) for section, table in raw.items()})
 
 
 def document(run: DesignRun, seconds: float | None = None) -> dict[str, Any]:

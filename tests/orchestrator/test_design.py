@@ -287,3 +287,19 @@ def test_every_design_key_and_grade_is_documented_as_it_is_declared():
                         (docs / "hardware-grades.md").read_text(), flags=re.M)
     assert {(kind, grade): (key, float(value)) for kind, grade, key, value in grades} == {
         (kind, grade): setting for kind, named in GRADES.items() for grade, setting in named.items()}
+
+
+def test_the_path_check_is_the_scenarios_receiver_compared_on_that_path(tmp_path):
+    """``monte_carlo.path``: the scenario's receiver on a straight path through the work area's centre; its row is
+    what ``sblsim.compare`` gives for the design's own scenario file on the same path."""
+    problem = {**SMALL, "monte_carlo": {"replicates": 10, "path": True, "path_replicates": 2}}
+    result = sblsim.design(None, **problem, out=tmp_path / "d")
+    best = result.designs[0]
+    (row,) = best["path"]
+    assert row["receiver"] == "ekf" and row["runs"] == 2 and 0 < row["length_m"] <= 60.0
+    half, duration = row["length_m"] / 2, row["length_m"] / 2.0
+    path = [f"target.waypoints=0 {half!r} 0.0 5.0; {duration!r} {-half!r} 0.0 5.0", "target.trajectory=file",
+            f"simulation.duration={duration!r}"]
+    table = sblsim.compare(str(tmp_path / "d" / best["scenario"]), receivers=["ekf"], replicates=2, set=path).table
+    assert row["rms_e_tot_m"] == pytest.approx(float(table["rms_e_tot"].iloc[0]), rel=1e-12)
+    assert row["nees"] == pytest.approx(float(table["nees"].iloc[0]), rel=1e-12)
