@@ -141,3 +141,35 @@ def test_calibrate_a_log_on_a_full_disk_is_one_line(small_disk, tmp_path):
     assert list(disk.iterdir()) == []
     done = _sblsim("calibrate", "survey.csv", "--out", tmp_path / "c", cwd=tmp_path)
     assert done.returncode == 0 and done.stderr.startswith("note: the a-priori positions are guessed"), done.stderr
+
+
+#: A small design problem (seconds): an LBL of 3 or 4 transponders under a 30 m work area on the paper's channel.
+DESIGN = """[design]
+name = "small"
+scenario = "semicircle"
+[work_area]
+radius_m = 30.0
+depths_m = [5.0]
+points = 7
+[candidates]
+systems = ["lbl"]
+transponders = [3, 4]
+[seafloor]
+radius_m = 60.0
+depth_m = 20.0
+[search]
+generations = 10
+[monte_carlo]
+replicates = 10
+path = false
+"""
+
+
+def test_design_on_a_full_disk_writes_nothing(small_disk, tmp_path):
+    """The design's files (its json, its table, its scenario files and figures) are written at once: a full disk
+    leaves none of them."""
+    disk, _ = small_disk
+    (tmp_path / "small.toml").write_text(DESIGN)
+    line = _one_line(_sblsim("design", "small.toml", "--out", disk / "d", cwd=tmp_path))
+    assert "No space left on device" in line
+    assert list(disk.iterdir()) == []
