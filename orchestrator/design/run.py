@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -31,6 +32,8 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.design.criteria import coverage, criterion
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
+from sblsim.orchestrator.campaign.executors import stop_pool
+from sblsim.orchestrator.campaign.worker import watch_parent
 from sblsim.orchestrator.cosim.config import apply_overrides
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
 from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels
@@ -384,8 +387,10 @@ def _feasible(layout: np.ndarray, r: Resolved) -> bool:
 _WORKER: Searcher | None = None
 
 
-def _start_worker(resolved: Resolved) -> None:
+def _start_worker(resolved: Resolved, parent: int) -> None:
+    """A worker process's searcher (it exits as soon as the design's process is gone)."""
     global _WORKER
+    watch_parent(parent)
     _WORKER = Searcher(resolved)
 
 
@@ -420,10 +425,10 @@ def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = Fa
     pareto = resolved.sections["search"]["pareto"]
     searched: list[Design] = []
     bar = Progress(len(todo), "design", "candidate", progress)
-    pool = None
+    pool, finished = None, False
     if workers > 1 and len(todo) > 1:
         pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_start_worker,
-                                   initargs=(resolved,))
+                                   initargs=(resolved, os.getpid()))
     try:
         met_cost = math.inf
         start = 0
@@ -442,9 +447,12 @@ def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = Fa
             start += len(batch)
             if not pareto and todo[start:start + 1] and todo[start].cost > met_cost:
                 break
+        finished = True
     finally:
-        if pool is not None:
+        if pool is not None and finished:
             pool.shutdown(cancel_futures=True)
+        elif pool is not None:  # interrupted or failed: the candidates under way stopped at once
+            stop_pool(pool)
         bar.close()
     proposed = []
     for system in SYSTEM_NAMES:

@@ -118,3 +118,12 @@ def _reads(cmdline: Path, text: str) -> bool:
         return text.encode() in cmdline.read_bytes()
     except OSError:
         return False
+
+
+def test_sigterm_during_a_design_searched_by_worker_processes(tmp_path):
+    """``sblsim design`` with two worker processes searching candidates: SIGTERM to the command (not to its workers)
+    ends it within 2 s, the candidates under way stopped (their processes terminated, not awaited), nothing
+    written."""
+    status, took, stderr = _interrupt(tmp_path, signal.SIGTERM, "design", "lbl-field-2km", "--workers", "2",
+                                      into=5.0)
+    _ended_cleanly(tmp_path, status, took, stderr, signal.SIGTERM)
