@@ -58,10 +58,11 @@ SMALL = {
 
 @pytest.fixture(scope="module")
 def worked(tmp_path_factory):
-    """The docs' worked question, designed once (``sblsim.design("lbl-field-2km", out=...)``; without the receivers'
-    paths, which the docs' run of it has)."""
+    """The docs' worked question, designed once (``sblsim.design("lbl-field-2km", out=...)``), for its LBL (the
+    docs' run of it designs the three systems, with the receivers' paths; the systems side by side are tested on a
+    small problem below)."""
     out = tmp_path_factory.mktemp("design") / "lbl-field-2km"
-    return sblsim.design("lbl-field-2km", out=out, monte_carlo={"path": False})
+    return sblsim.design("lbl-field-2km", out=out, candidates={"systems": ["lbl"]}, monte_carlo={"path": False})
 
 
 def test_the_worked_question_gets_the_cheapest_design_that_meets_confirmed_by_monte_carlo(worked):
@@ -78,7 +79,7 @@ def test_the_worked_question_gets_the_cheapest_design_that_meets_confirmed_by_mo
     assert best["cost"] == meets["cost"].min()
     assert not ((table["cost"] < best["cost"]) & table["meets"]).any()
     # every cheaper candidate was searched (the search goes in the order of cost) and none met
-    assert len(table[table["cost"] < best["cost"]]) >= 3
+    assert len(table[table["cost"] < best["cost"]]) >= 1
     # the transponders stand in the seafloor region, off the corridor
     east, north, depth = np.array(best["transponders_m"]).T
     assert np.all(np.hypot(east, north) <= 2500.0 + 1e-6) and np.all(np.abs(east) >= 200.0 - 1e-6)
@@ -90,10 +91,6 @@ def test_the_worked_question_gets_the_cheapest_design_that_meets_confirmed_by_mo
         assert m["ratio"] == pytest.approx(m["simulated_drms_m"] / m["predicted_drms_m"])
     assert 0.85 <= checks["worst"]["ratio"] <= 1.15, checks["worst"]
     assert checks["worst"]["predicted_drms_m"] == pytest.approx(best["predicted"]["drms_max_m"], rel=1e-12)
-    # the other systems' best designs are there, flagged as not meeting, each checked too
-    systems = {d["system"]: d for d in document["designs"]}
-    assert set(systems) == {"lbl", "sbl", "usbl"} and not systems["sbl"]["meets"] and not systems["usbl"]["meets"]
-    assert all(len(d["monte_carlo"]) == 2 for d in document["designs"])
     for name in ("layout.png", "pareto.png", "convergence.png", *(d["scenario"] for d in document["designs"])):
         assert (worked.out / name).stat().st_size > 0
 
@@ -257,11 +254,26 @@ def test_a_prescription_none_meets_is_said_in_one_line_with_the_best_found(tmp_p
     assert (tmp_path / "out" / "tight-lbl4.toml").is_file() or (tmp_path / "out" / "tight-lbl3.toml").is_file()
 
 
-def test_workers_do_not_change_the_design():
-    one = sblsim.design(None, **SMALL, workers=1)
-    two = sblsim.design(None, **SMALL, workers=2)
+def test_each_systems_best_is_proposed_checked_and_ranked_and_workers_do_not_change_them():
+    """The three systems for the small problem, their grades priced: the best of each is proposed, each with its
+    Monte Carlo at the worst and the median point, those that meet first (cheapest first); two worker processes
+    give the same designs as one."""
+    problem = {**SMALL, "candidates": {"systems": ["sbl", "lbl", "usbl"], "transponders": [3, 5], "sbl_cost": 1.0,
+                                       "usbl_cost": 2.0, "gps": ["dgps", "rtk"], "gps_cost": [0.0, 0.5]}}
+    one = sblsim.design(None, **problem, workers=1)
+    two = sblsim.design(None, **problem, workers=2)
     pd.testing.assert_frame_equal(one.table, two.table)
-    assert one.designs[0]["transponders_m"] == two.designs[0]["transponders_m"]
+    assert one.designs == two.designs
+    systems = [d["system"] for d in one.designs]
+    assert sorted(systems) == ["lbl", "sbl", "usbl"]
+    assert all(len(d["monte_carlo"]) == 2 for d in one.designs)
+    ranks = [(not d["meets"], d["cost"] if d["meets"] else -d["predicted"]["coverage"]) for d in one.designs]
+    assert ranks == sorted(ranks)
+    # an LBL candidate pays its transponders, not the surface's grades; a USBL pays its system and its GPS
+    table = one.table
+    assert (table[table["system"] == "lbl"]["gps"].fillna("") == "").all()
+    usbl = table[table["system"] == "usbl"]
+    assert sorted(usbl["cost"]) == [2.0, 2.5][:len(usbl)]
 
 
 def test_every_design_key_and_grade_is_documented_as_it_is_declared():
