@@ -315,3 +315,15 @@ def test_the_path_check_is_the_scenarios_receiver_compared_on_that_path(tmp_path
     table = sblsim.compare(str(tmp_path / "d" / best["scenario"]), receivers=["ekf"], replicates=2, set=path).table
     assert row["rms_e_tot_m"] == pytest.approx(float(table["rms_e_tot"].iloc[0]), rel=1e-12)
     assert row["nees"] == pytest.approx(float(table["nees"].iloc[0]), rel=1e-12)
+
+
+def test_the_update_interval_bounds_the_cycle():
+    """An LBL's cycle is one sampling time per transponder (0.1 s at the paper's site): with a fix wanted every
+    0.35 s, 3 transponders meet a loose prescription; every 0.25 s, none does (3 slots are 0.3 s)."""
+    def meeting(interval):
+        problem = {**SMALL, "prescription": {"drms_m": 1.0, "coverage_pct": 90.0, "update_interval_s": interval}}
+        run = search_all(resolve(check_problem(problem), "semicircle"))
+        return [(d.candidate.count, d.cycle) for d in run.searched if d.meets]
+
+    assert meeting(0.35) == [(3, pytest.approx(0.3))]
+    assert meeting(0.25) == []
