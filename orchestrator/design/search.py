@@ -20,7 +20,7 @@ Each returns the layout, its criterion and the search's history (the best criter
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -50,21 +50,17 @@ class Objective:
         ``horizontal`` or ``3d`` (which DRMS the criterion reads).
     coverage_pct : float
         The percentile of the ``percentile`` criterion [%].
-    arms : callable, optional
-        The lever arms of a layout (S, n, 3) -> (S, n, 3) (default the positions).
     """
 
     evaluator: LayoutEvaluator
     criterion: str = "percentile"
     dimensions: str = "horizontal"
     coverage_pct: float = 95.0
-    arms: object = None
-    history: list = field(default_factory=list)
 
     def values(self, layouts: np.ndarray) -> np.ndarray:
-        """The criterion of S layouts (S, n, 3), (S,)."""
-        arms = None if self.arms is None else self.arms(layouts)
-        out = self.evaluator.evaluate(layouts, arms)
+        """The criterion of S layouts (S, n, 3) whose transducers' lever arms are their positions (a fixed array,
+        or a platform at the origin), (S,)."""
+        out = self.evaluator.evaluate(layouts)
         drms = out["drms" if self.dimensions == "horizontal" else "drms_3d"]
         return criterion_of(self.criterion, drms, out["log_det"], self.coverage_pct, out["echo"])
 
@@ -152,8 +148,7 @@ def _gradient_polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: 
     variables = ca.MX.sym("x", x.size)
     positions = layout_of(variables)
     f = layout_information(n).map("design_polish", "serial", m, [1, 2, 5, 6], [])
-    arms = positions if objective.arms is None else objective.arms(positions)
-    out = f(ca.DM(evaluator.points.T), ca.vec(positions.T), ca.vec(arms.T), ca.DM(weight[0].T), ca.DM(noise[0].T),
+    out = f(ca.DM(evaluator.points.T), ca.vec(positions.T), ca.vec(positions.T), ca.DM(weight[0].T), ca.DM(noise[0].T),
             evaluator.levels.attitude_variance, evaluator.levels.depth_variance)
     if objective.criterion == "d-optimal":
         value = -ca.sum2(out[3]) / m
