@@ -216,7 +216,8 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
     Parameters
     ----------
     notes : list of str, optional
-        Gets one line for every key of the log's configuration that was not used.
+        Gets one line for every key of the log's configuration that was not used, and one for the receiver keys
+        of the configuration's receiver that ``receiver`` does not have.
 
     Returns
     -------

@@ -90,7 +90,7 @@ def override_items(overrides: Overrides) -> list[str]:
 def _plain(value: Any) -> Any:
     """A ``set`` value with numpy scalars (``numpy.int64(3)``, ``numpy.float32(0.5)``, ``numpy.bool_``) as the
     Python numbers they hold, in a list too; anything else as it is."""
-    if isinstance(value, np.generic) and isinstance(value, (np.number, np.bool_)):
+    if isinstance(value, (np.number, np.bool_)):
         return value.item()
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
