@@ -58,8 +58,13 @@ def _format_bound(value: float) -> str:
 
 
 def shown(value: Any) -> str:
-    """A value for a message: its repr, shortened when it is very long (a 400-digit number)."""
+    """A value for a message, in one line: its repr, shortened when it is very long (a 400-digit number); an
+    array by its shape (``a numpy array of shape (2,)``), a repr of several lines in one."""
+    if isinstance(value, np.ndarray):
+        return f"a numpy array of shape {value.shape}"
     text = repr(value)
+    if "\n" in text:
+        text = " ".join(text.split())
     return text if len(text) <= 24 else f"{text[:12]}... ({len(text)} characters)"
 
 
@@ -263,16 +268,16 @@ class Variable:
         label = where or self.name
         if self.type == "String":
             if not isinstance(value, str):
-                raise ModelError(f"{label}: expected text ({self.allowed()}), got {value!r}")
+                raise ModelError(f"{label}: expected text ({self.allowed()}), got {shown(value)}")
             if self.choices is not None and value not in self.choices:
                 raise ModelError(f"{label}: {value!r} is not allowed; {self.allowed()}")
             return value
         if self.type == "Boolean":
             if not isinstance(value, (bool, np.bool_)):
-                raise ModelError(f"{label}: expected true or false, got {value!r}")
+                raise ModelError(f"{label}: expected true or false, got {shown(value)}")
             return bool(value)
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise ModelError(f"{label}: expected a number in {self.allowed()}, got {value!r}")
+            raise ModelError(f"{label}: expected a number in {self.allowed()}, got {shown(value)}")
         try:
             number = float(value)
         except OverflowError:

@@ -17,7 +17,8 @@ from importlib.metadata import PackageNotFoundError, version
 
 from sblsim.models.errors import SblsimError
 from sblsim.orchestrator.commands import COMMANDS
-from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, SIGNAL, interrupted_status
+from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, SIGNAL, interrupted_status, print_notes
+from sblsim.orchestrator.cosim.config import collected_notes
 
 
 class _Parser(argparse.ArgumentParser):
@@ -115,7 +116,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _command(args: argparse.Namespace) -> int:
     try:
-        return COMMANDS[args.command].main(args)
+        with collected_notes():  # the configurations' notes: printed with the output folder, or at the end
+            status = COMMANDS[args.command].main(args)
+            print_notes()
+            return status
     except SblsimError as exc:  # every kind of sblsim's errors (sblsim.models.errors): one line, exit 2
         print(f"sblsim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

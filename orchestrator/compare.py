@@ -45,7 +45,7 @@ import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.cosim.config import apply_overrides, check_receiver, scenario_system, section_variables
+from sblsim.orchestrator.cosim.config import apply_overrides, check_receiver, scenario_system
 from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw, with_replicates
@@ -80,8 +80,9 @@ def plans(scenario: str | Mapping, receivers: Sequence[str], overrides: Sequence
     (:func:`sblsim.orchestrator.cosim.plan.load_plan`); the arguments as for :func:`compare`.
 
     ``scenario`` may be a configuration (a :class:`~sblsim.orchestrator.cosim.plan.Config` or its mapping): each
-    receiver then takes its sections as they are and, of its ``[receiver]`` section, the keys that receiver has (a
-    resolved configuration holds every key of its own receiver, some of which another receiver does not take).
+    receiver then takes its sections as they are and, of its ``[receiver]`` section, the keys that receiver has
+    (:func:`~sblsim.orchestrator.cosim.config.switch_receiver`, as a configuration file's: a resolved
+    configuration holds every key of its own receiver, some of which another receiver does not take).
 
     Raises
     ------
@@ -91,10 +92,7 @@ def plans(scenario: str | Mapping, receivers: Sequence[str], overrides: Sequence
     def plan_of(items: list[str]) -> RunPlan:
         if not isinstance(scenario, Mapping):
             return load_plan(scenario, items, seed=seed)
-        raw = apply_overrides(thaw(scenario), items, seed)
-        keys = {v.name for v in section_variables("receiver", check_receiver(raw["simulation"]["receiver"]))}
-        raw["receiver"] = {k: v for k, v in raw.get("receiver", {}).items() if k in keys}
-        return make_plan(raw)
+        return make_plan(apply_overrides(thaw(scenario), items, seed))
 
     if systems is None:
         return [plan_of([*overrides, f"simulation.receiver={r}"]) for r in receivers]

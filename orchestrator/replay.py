@@ -59,6 +59,7 @@ from sblsim.orchestrator.cosim.config import (
     parse_override,
     read_source,
     section_variables,
+    switch_receiver,
     to_toml,
 )
 from sblsim.orchestrator.cosim.engines import DTYPES, cast_column, close_handles, make_handles
@@ -215,7 +216,8 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
     Parameters
     ----------
     notes : list of str, optional
-        Gets one line for every key of the log's configuration that was not used.
+        Gets one line for every key of the log's configuration that was not used, and one for the receiver keys
+        of the configuration's receiver that ``receiver`` does not have.
 
     Returns
     -------
@@ -259,7 +261,12 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
         raw.setdefault("run", {})["scenario"] = DEFAULT_CONFIG
         source = f"the built-in {DEFAULT_CONFIG} scenario's (the log carries none; --config to choose)"
     if receiver is not None:
-        _switch_receiver(raw, receiver)
+        named = config if config is not None else None if embedded else DEFAULT_CONFIG
+        what = "the log's configuration's" if named is None else \
+            f"the {named} scenario's" if str(named) in BUILTIN_SCENARIOS else f"{named}'s"
+        said = _switch_receiver(raw, receiver, what)
+        if notes is not None:
+            notes.extend(said)
     raw = apply_overrides(raw, overrides)
     try:
         cfg = make_plan(raw)
@@ -325,23 +332,19 @@ def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
     return notes
 
 
-def _switch_receiver(raw: dict, receiver: str) -> None:
+def _switch_receiver(raw: dict, receiver: str, what: str) -> list[str]:
     """Set ``simulation.receiver`` of a raw configuration, keeping the receiver keys that were chosen
-    (:func:`replay_config`). A receiver that is not a built-in one (a user's model or FMU, perhaps named by a
-    log) is never imported to learn its defaults: the keys the new receiver declares are kept."""
-    sim = raw.setdefault("simulation", {})
-    old = sim.get("receiver", "ekf")
-    sim["receiver"] = receiver
-    if old == receiver or "receiver" not in raw or not isinstance(raw["receiver"], dict):
-        return
-    try:
-        defaults = ({v.name: v.start for v in section_variables("receiver", str(old))}
-                    if old in RECEIVER_MODELS else {})
-        declared = {v.name for v in section_variables("receiver", receiver)}
-    except ModelError:
-        return  # an unknown receiver: resolve() names it
-    raw["receiver"] = {k: v for k, v in raw["receiver"].items()
-                       if k in declared and not (k in defaults and v == defaults[k])}
+    (:func:`replay_config`): those the new receiver has (:func:`~sblsim.orchestrator.cosim.config.switch_receiver`,
+    every command's rule; its note returned) and that are not at the old receiver's default. A receiver that is
+    not a built-in one (a user's model or FMU, perhaps named by a log) is never imported to learn its defaults."""
+    sim = raw.get("simulation")
+    old = sim.get("receiver", "ekf") if isinstance(sim, dict) else "ekf"
+    notes = switch_receiver(raw, receiver, what)
+    if old == receiver or not isinstance(raw.get("receiver"), dict) or old not in RECEIVER_MODELS:
+        return notes
+    defaults = {v.name: v.start for v in section_variables("receiver", str(old))}
+    raw["receiver"] = {k: v for k, v in raw["receiver"].items() if not (k in defaults and v == defaults[k])}
+    return notes
 
 
 # --------------------------------------------------------------------------- the replay

@@ -134,7 +134,8 @@ HOSTILE = {
                        "extent: 'x' is not a number; allowed: (0, 100000] m"),
     "map extent beyond 100 km": (lambda: sblsim.accuracy_map("semicircle", extent=2e5, step=1e5),
                                  "extent: 200000.0 is outside the allowed range (0, 100000] m"),
-    "map step array": (lambda: sblsim.accuracy_map("semicircle", step=np.array([1.0, 2.0])), "step: array("),
+    "map step array": (lambda: sblsim.accuracy_map("semicircle", step=np.array([1.0, 2.0])),
+                       "step: a numpy array of shape (2,) is not a number"),
     "map step nan": (lambda: sblsim.accuracy_map("semicircle", step=float("nan")),
                      "step: nan is outside the allowed range (0, 30] m"),
     "map compare values None": (lambda: sblsim.accuracy_map("semicircle", compare=("platform.baseline", None)),
@@ -156,6 +157,20 @@ HOSTILE = {
     "calibrate replicates '3'": (lambda: sblsim.calibrate("box-in", replicates="3"), "replicates: '3' is not an"),
     "calibrate out=1": (lambda: sblsim.calibrate("box-in", out=1), "out: 1 is not a file or folder"),
     "analyze alpha 'x'": (lambda: sblsim.analyze("c", alpha="x"), "alpha: 'x' is not a number"),
+    # an array shown by its shape (its repr spans lines), numpy's bool refused as a bool is
+    "run set array": (lambda: sblsim.run("semicircle", set={"platform.baseline": np.array([1.0, 2.0])}),
+                      "set: platform.baseline: a numpy array of shape (2,) is not a number, text, boolean or list"),
+    "load set 2-D array": (lambda: sblsim.load("semicircle", set={"platform.baseline": np.ones((2, 3))}),
+                           "set: platform.baseline: a numpy array of shape (2, 3) is not a number"),
+    "load configuration array": (lambda: sblsim.load({**sblsim.load("semicircle"), "platform": {
+        **sblsim.load("semicircle")["platform"], "baseline": np.arange(40.0)}}),
+        "platform.baseline: expected a number in (0, 1000] m, got a numpy array of shape (40,)"),
+    "calibrate replicates numpy bool": (lambda: sblsim.calibrate("box-in", replicates=np.True_),
+                                        "replicates: np.True_ is not an integer or None"),
+    "run replicates numpy 0": (lambda: sblsim.run("semicircle", replicates=np.int64(0)),
+                               "replicates: 0 is outside the allowed range [1, 100000] (an integer)"),
+    "load seed numpy -1": (lambda: sblsim.load("semicircle", seed=np.int32(-1)),
+                           "seed: -1 is outside the allowed range [0, 2147483647]"),
 }
 
 
@@ -182,6 +197,25 @@ def test_what_the_docstrings_allow_is_accepted():
     keep = [k for k in theirs.table.columns if k != "us_per_step"]
     pd.testing.assert_frame_equal(mine.table[keep].reset_index(drop=True), theirs.table[keep].reset_index(drop=True))
     assert mine.title.startswith("semicircle: 2 replicates per receiver, seed 0")
+
+
+def test_numpy_integers_are_accepted_where_integers_are():
+    """A numpy integer scalar is an integer argument (a seed, a count) and a set value, as a Python integer is, with
+    the same result; a bool (Python's or numpy's) is not one."""
+    from sblsim.orchestrator.commands.common import check_count, check_integer, check_seed
+
+    assert sblsim.load("semicircle", seed=np.int64(7)) == sblsim.load("semicircle", seed=7)
+    assert type(sblsim.load("semicircle", seed=np.uint16(7))["run"]["seed"]) is int
+    assert sblsim.load("semicircle", set={"platform.gps_tau": np.int64(30), "platform.baseline": np.float32(0.5)}) \
+        == sblsim.load("semicircle", set={"platform.gps_tau": 30, "platform.baseline": 0.5})
+    for check in (lambda v: check_count(v, "n", 1, 9), lambda v: check_integer(v, "n"), check_seed):
+        assert [type(check(v)) for v in (np.int8(3), np.uint64(3), 3)] == [int, int, int]
+        for flag in (True, np.True_):
+            with pytest.raises(sblsim.ConfigError):
+                check(flag)
+    short = {"survey.duration_s": 60.0}
+    mine = sblsim.calibrate("box-in", replicates=np.int64(2), set=short).replicates
+    pd.testing.assert_frame_equal(mine, sblsim.calibrate("box-in", replicates=2, set=short).replicates)
 
 
 def test_compare_map_and_budget_give_the_cli_tables(tmp_path):

@@ -774,7 +774,11 @@ class Acoustics(Component):
                 TARGET_INPUTS, ("m",) * 3 + ("m/s",) * 3, ("position",) * 3 + ("velocity",) * 3,
                 ("North", "East", "Down") * 2))
         outputs = PACKET + (
-            Variable("travel_time", "output", "Real", 0.0, "s", "True one-way travel time", discrete=True),
+            Variable("travel_time", "output", "Real", 0.0, "s",
+                     "True travel time of the exchange: one way (ranging owtt), the beacon's leg to the target; two "
+                     "way (twtt), the target's interrogation, the transponder's turnaround and the reply; USBL, the "
+                     "transceiver's interrogation, the target's turnaround and its reply (not the downlink)",
+                     discrete=True),
             Variable("range_true", "output", "Real", 0.0, "m",
                      "True distance from beacon at transmit to target at reception", discrete=True),
             Variable("outlier", "output", "Boolean", False, description="Range lengthened by multipath"),

@@ -49,7 +49,11 @@ def _check_solved_speed(speed: float, sigma: float, what: str) -> None:
 def _gauss_newton(replies: Replies, apriori: np.ndarray, theta: np.ndarray, c0: float, rigid: bool,
                   solve_speed: bool, legs: LegModel, twtt_sigma: float, what: str) -> tuple[np.ndarray, int, bool]:
     for iteration in range(1, MAX_ITERATIONS + 1):
-        residual, jacobian, variance, *_ = _model(replies, apriori, theta, c0, rigid, solve_speed, legs, twtt_sigma)
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverging step overflows: stopped here
+            residual, jacobian, variance, *_ = _model(replies, apriori, theta, c0, rigid, solve_speed, legs,
+                                                      twtt_sigma)
+        if not (np.all(np.isfinite(residual)) and np.all(np.isfinite(jacobian))):
+            return theta, iteration, False  # diverged: the caller's outlier rule, or its refusal
         w = 1.0 / variance
         normal = jacobian.T @ (w[:, None] * jacobian)
         try:
@@ -168,9 +172,11 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     dof = int(used.sum()) - p
     factor = float(np.sum(wu * ru**2) / dof)
     covariance = q * factor
-    sd = np.sqrt(np.diag(covariance))
-    if solve_sound_speed:
-        _check_solved_speed(float(c), float(sound_speed * sd[-1]), what)
+    variance = np.diag(covariance)
+    if solve_sound_speed:  # a negative variance (a numerically singular normal matrix): no sigma, refused
+        speed_sigma = sound_speed * np.sqrt(variance[-1]) if variance[-1] >= 0.0 else np.nan
+        _check_solved_speed(float(c), float(speed_sigma), what)
+    sd = np.sqrt(variance)
     sigma = np.tile(sd[:3], (k, 1)) if rigid else sd[:3 * k].reshape(k, 3)
     elevation, azimuth, scatter = _directions(replies, x, residual, w, used, k)
     return Solution(position=position, offset=position - apriori, sigma=sigma, covariance=covariance,

@@ -109,7 +109,7 @@ def analyze(directory: str | Path, *, metric: str = "e_tot_rms", order: int = 2,
     out = path_argument(out, "out")
     text_argument(metric, "metric", optional=False)
     text_argument(transform, "transform", optional=False)
-    check_count(order, "order", 1, 2**31 - 1)
+    order = check_count(order, "order", 1, 2**31 - 1)
     real_argument(alpha, "alpha", 0.0, 1.0, "", low_open=True)
     if progress is not None and not callable(progress):
         raise ConfigError(f"progress: {shown(progress)} is not None or a callable(line)")

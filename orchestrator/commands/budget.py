@@ -126,13 +126,13 @@ def budget(scenario: str | Path, *, replicates: int | None = None, receiver: str
     """
     from sblsim.orchestrator.budget import DEFAULT_REPLICATES, check_budget_replicates
 
-    check_seed(seed)
+    seed = check_seed(seed)
     source = scenario_source(scenario)
     receiver = text_argument(receiver, "receiver")
     check_progress(progress)
     prepare_out(out, force, "budget.csv", "budget")  # before any work (and again once the plans are made)
     replicates = DEFAULT_REPLICATES if replicates is None else replicates
-    check_count(replicates, "replicates", -2**63, 2**63)
+    replicates = check_count(replicates, "replicates", -2**63, 2**63)
     check_budget_replicates(replicates)
     if isinstance(compare, str):
         chosen = parse_compare(compare, "platform.system=" + ",".join(SYSTEMS))

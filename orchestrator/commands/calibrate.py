@@ -120,7 +120,7 @@ def calibrate(survey: str | Path, *, format: str | None = None, initcfg: str | P
     source = str(path_argument(survey, "survey", optional=False))
     fmt = text_argument(format, "format")
     initcfg, svp = path_argument(initcfg, "initcfg"), path_argument(svp, "svp")
-    check_integer(replicates, "replicates")  # its range the survey's
+    replicates = check_integer(replicates, "replicates")  # its range the survey's
     check_progress(progress)
     prepare_out(out, force, "solution.json", "calibration")  # before any work (and again before the write)
     return _calibrate(source, fmt, override_items(set), initcfg, svp, replicates, progress,

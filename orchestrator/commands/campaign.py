@@ -110,14 +110,14 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
     """
     from sblsim.orchestrator.campaign import run_campaign
 
-    check_seed(seed)
+    seed = check_seed(seed)
     check_engine(engine)
     out = path_argument(out, "out", optional=False)
     fmu_dir = path_argument(fmu_dir, "fmu_dir")
     scheduler = text_argument(scheduler, "scheduler")
     resume, save_timeseries = flag_argument(resume, "resume"), flag_argument(save_timeseries, "save_timeseries")
-    check_integer(workers, "workers")  # their ranges the campaign's
-    check_integer(batch, "batch")
+    workers = check_integer(workers, "workers")  # their ranges the campaign's
+    batch = check_integer(batch, "batch")
     check_progress(progress)
     if isinstance(study, Study):  # validated already (sblsim campaign loads it to name its output)
         if seed is not None:

@@ -38,12 +38,24 @@ Overrides = Union[Mapping[str, Any], Sequence[str], None]
 MAX_SEED = 2**31 - 1
 
 
-def check_seed(seed: Any, where: str = "seed") -> None:
-    """A seed argument: None or an integer in [0, :data:`MAX_SEED`] (``where`` names it in the error)."""
+def whole(value: Any) -> int | None:
+    """``value`` as a Python integer when it is one or a numpy integer scalar (``numpy.int64(3)``); else None (a
+    bool is not one)."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return int(value)
+    return None
+
+
+def check_seed(seed: Any, where: str = "seed") -> int | None:
+    """A seed argument: None or an integer (a numpy one too) in [0, :data:`MAX_SEED`] (``where`` names it in the
+    error), returned as a Python integer."""
     if seed is None:
-        return
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
-        raise ConfigError(f"{where}: {shown(seed)} is outside the allowed range [0, {MAX_SEED}] (an integer)")
+        return None
+    number = whole(seed)
+    if number is None or not 0 <= number <= MAX_SEED:
+        raise ConfigError(f"{where}: {shown(seed if number is None else number)} is outside the allowed range "
+                          f"[0, {MAX_SEED}] (an integer)")
+    return number
 
 
 def override_items(overrides: Overrides) -> list[str]:
@@ -58,11 +70,11 @@ def override_items(overrides: Overrides) -> list[str]:
         items = []
         for key, value in overrides.items():
             if not isinstance(key, str) or "=" in key:
-                raise ConfigError(f"set: a key must be a text 'section.key', got {key!r}")
+                raise ConfigError(f"set: a key must be a text 'section.key', got {shown(key)}")
             try:
-                text = tomli_w.dumps({"v": value}).split("=", 1)[1].strip()
+                text = tomli_w.dumps({"v": _plain(value)}).split("=", 1)[1].strip()
             except TypeError:
-                raise ConfigError(f"set: {key}: {value!r} is not a number, text, boolean or list") from None
+                raise ConfigError(f"set: {key}: {shown(value)} is not a number, text, boolean or list") from None
             items.append(f"{key}={text}")
         return items
     if not isinstance(overrides, Sequence):
@@ -71,14 +83,24 @@ def override_items(overrides: Overrides) -> list[str]:
     items = list(overrides)
     for item in items:
         if not isinstance(item, str):
-            raise ConfigError(f"set: expected 'section.key=value' texts, got {item!r}")
+            raise ConfigError(f"set: expected 'section.key=value' texts, got {shown(item)}")
     return items
+
+
+def _plain(value: Any) -> Any:
+    """A ``set`` value with numpy scalars (``numpy.int64(3)``, ``numpy.float32(0.5)``, ``numpy.bool_``) as the
+    Python numbers they hold, in a list too; anything else as it is."""
+    if isinstance(value, (np.number, np.bool_)):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
 
 
 def resolve_config(source: Any, seed: int | None = None, overrides: Overrides = None) -> Config:
     """A :class:`Config` from a scenario name, a TOML file or a configuration (re-validated with the
     overrides and seed)."""
-    check_seed(seed)
+    seed = check_seed(seed)
     items = override_items(overrides)
     if isinstance(source, Mapping):
         return Config(resolve(apply_overrides(thaw(source), items, seed)))
@@ -97,7 +119,7 @@ def resolve_plan(source: Any, seed: int | None = None, overrides: Overrides = No
     """The plan of a run of a scenario name, a TOML file or a configuration with the overrides and seed: the one
     resolution of a call (:func:`sblsim.orchestrator.cosim.plan.make_plan`); a plan without overrides or seed is
     taken as it is."""
-    check_seed(seed)
+    seed = check_seed(seed)
     items = override_items(overrides)
     if isinstance(source, RunPlan) and not items and seed is None:
         return source
@@ -141,16 +163,23 @@ def check_engine(engine: str) -> None:
 
 
 def check_count(value: Any, where: str, low: int, high: int) -> int:
-    """An integer argument in [low, high] (a bool is not one)."""
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise ConfigError(f"{where}: {value!r} is outside the allowed range [{low}, {high}] (an integer)")
-    return value
+    """An integer argument (a numpy one too; a bool is not one) in [low, high], returned as a Python integer."""
+    number = whole(value)
+    if number is None or not low <= number <= high:
+        raise ConfigError(f"{where}: {shown(value) if number is None else number} is outside the allowed range "
+                          f"[{low}, {high}] (an integer)")
+    return number
 
 
-def check_integer(value: Any, where: str) -> None:
-    """An integer argument or None, whose range the work it sets checks."""
-    if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+def check_integer(value: Any, where: str) -> int | None:
+    """An integer argument (a numpy one too) or None, whose range the work it sets checks; returned as a Python
+    integer."""
+    if value is None:
+        return None
+    number = whole(value)
+    if number is None:
         raise ConfigError(f"{where}: {shown(value)} is not an integer or None")
+    return number
 
 
 def path_argument(value: Any, where: str, optional: bool = True) -> Path | None:

@@ -121,9 +121,9 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     from sblsim.orchestrator.compare import compare as _compare
     from sblsim.orchestrator.compare import parse_receivers, plans, write
 
-    check_seed(seed)
+    seed = check_seed(seed)
     check_engine(engine)
-    check_count(replicates, "replicates", -2**63, 2**63)  # an integer; its range is checked by the comparison
+    replicates = check_count(replicates, "replicates", -2**63, 2**63)  # an integer; the comparison checks its range
     fmu_dir = path_argument(fmu_dir, "fmu_dir")
     check_progress(progress)
     items = override_items(set)

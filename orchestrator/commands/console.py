@@ -14,6 +14,7 @@ from sblsim.fmus.build import DEFAULT_DIR
 from sblsim.models.declarations import ModelError, shown
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.commands.common import MAX_SEED
+from sblsim.orchestrator.cosim.config import take_notes
 from sblsim.orchestrator.io.output import OutputLock, check_output, folder_name
 
 #: The exit status of bad input (one line ``sblsim: error: ...``, nothing written) and of Ctrl-C.
@@ -79,7 +80,15 @@ def output_folder(given: Path | None, default: Path, force: bool, marker: str, w
     if before is not None:
         before(out)
     LOCKS.append(OutputLock(out).acquire())
+    print_notes()  # every input read and checked: what the configurations left unused
     return out
+
+
+def print_notes() -> None:
+    """The notes of the configurations read so far (:func:`sblsim.orchestrator.cosim.config.take_notes`), one
+    ``note:`` line each on standard error."""
+    for line in take_notes():
+        print(f"note: {line}", file=sys.stderr)
 
 
 def output_name(scenario: str) -> str:

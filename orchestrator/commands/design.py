@@ -134,8 +134,8 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
     ConfigError, SblsimError
         Bad input, naming the key and its allowed range (nothing is computed or written).
     """
-    check_seed(seed)
-    check_count(workers, "workers", 1, MAX_WORKERS)
+    seed = check_seed(seed)
+    workers = check_count(workers, "workers", 1, MAX_WORKERS)
     check_progress(progress)
     raw = _problem(problem)
     for name, values in sections.items():

@@ -134,7 +134,7 @@ def accuracy_map(scenario: str | Path, *, extent: float = 30.0, step: float = 0.
     """
     from sblsim.orchestrator.maps import MAX_EXTENT, parse_levels
 
-    check_seed(seed)
+    seed = check_seed(seed)
     source = scenario_source(scenario)
     extent = real_argument(extent, "extent", 0.0, MAX_EXTENT, "m", low_open=True)
     step = real_argument(step, "step", 0.0, extent, "m (the extent)", low_open=True)

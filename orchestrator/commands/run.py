@@ -164,7 +164,7 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
 
     plan = resolve_plan(config_or_scenario, seed, set)
     check_engine(engine)
-    check_count(replicates, "replicates", 1, 100_000)
+    replicates = check_count(replicates, "replicates", 1, 100_000)
     fmu_dir = path_argument(fmu_dir, "fmu_dir")
     check_progress(progress)
     if out is not None and replicates != 1:

@@ -26,7 +26,9 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
@@ -356,13 +358,90 @@ def load_raw(source: str | Path, overrides: Iterable[str] = (), seed: int | None
         Unknown scenario, missing file, invalid TOML, an unknown section or key of an override.
     """
     raw = copy.deepcopy(read_source(source))
-    if str(source) in BUILTIN_SCENARIOS:
+    builtin = str(source) in BUILTIN_SCENARIOS
+    if builtin:
         raw.setdefault("run", {})["scenario"] = str(source)
-    return apply_overrides(raw, overrides, seed)
+    return apply_overrides(raw, overrides, seed, f"the {source} scenario's" if builtin else f"{source}'s")
 
 
-def apply_overrides(raw: dict[str, Any], overrides: Iterable[str] = (), seed: int | None = None) -> dict[str, Any]:
+def switch_receiver(raw: dict[str, Any], receiver: Any, what: str) -> list[str]:
+    """Make ``receiver`` the ``simulation.receiver`` of a raw configuration (in place), keeping of its ``[receiver]``
+    section what that receiver takes; the one rule of every command (a run's ``config.toml``, a configuration
+    given to the API, a replay's).
+
+    A configuration's ``[receiver]`` keys are those of its own receiver (a run's ``config.toml`` holds every one):
+    the keys of its own receiver that ``receiver`` does not have are dropped, and said in the note returned
+    (``what``, e.g. ``"config.toml's"``, names the configuration). Nothing changes with its own receiver (a key
+    it does not have is refused by :func:`resolve`), nor a key neither has. A receiver that is not a built-in
+    one is never imported here to learn its keys: an old one's are taken to be all of the section's, a new one
+    (or a value that names no receiver) leaves the section for :func:`resolve` to check.
+
+    Returns
+    -------
+    list of str
+        The note, one line (none when nothing was dropped).
+    """
+    sim = raw.setdefault("simulation", {})
+    if not isinstance(sim, dict):
+        return []  # resolve() names it
+    own = sim.get("receiver", next(v.start for v in SIMULATION_VARIABLES if v.name == "receiver"))
+    sim["receiver"] = receiver
+    table = raw.get("receiver")
+    if receiver == own or not isinstance(table, dict) or not table or not isinstance(receiver, str):
+        return []
+    try:
+        declared = {v.name for v in section_variables("receiver", receiver)}
+        owned = {v.name for v in section_variables("receiver", own)} if own in RECEIVER_MODELS else set(table)
+    except ModelError:
+        return []  # a receiver that is none: resolve() names it
+    dropped = [k for k in table if k not in declared and k in owned]
+    if not dropped:
+        return []
+    raw["receiver"] = {k: v for k, v in table.items() if k not in dropped}
+    keys = ", ".join(f"receiver.{k}" for k in dropped)
+    label = receiver_label({"simulation": {"receiver": receiver}})
+    verb = "is not a key" if len(dropped) == 1 else "are not keys"
+    return [f"{what} {keys} {verb} of the {label} receiver: not used"]
+
+
+#: The notes of the configurations read while :func:`collected_notes` collects them (None: not collected, as the
+#: API is silent).
+_NOTES: ContextVar[dict[str, bool] | None] = ContextVar("sblsim_configuration_notes", default=None)
+
+
+@contextmanager
+def collected_notes() -> Iterator[None]:
+    """Collect the one-line notes of the configurations read meanwhile (:func:`switch_receiver`'s), each once, for
+    :func:`take_notes` (the command line prints them; without this they are dropped)."""
+    token = _NOTES.set({})
+    try:
+        yield
+    finally:
+        _NOTES.reset(token)
+
+
+def _note(line: str) -> None:
+    notes = _NOTES.get()
+    if notes is not None:
+        notes.setdefault(line, False)
+
+
+def take_notes() -> list[str]:
+    """The notes collected (:func:`collected_notes`) and not taken yet, in order."""
+    notes = _NOTES.get() or {}
+    fresh = [line for line, taken in notes.items() if not taken]
+    for line in fresh:
+        notes[line] = True
+    return fresh
+
+
+def apply_overrides(raw: dict[str, Any], overrides: Iterable[str] = (), seed: int | None = None,
+                    what: str = "the configuration's") -> dict[str, Any]:
     """Apply ``section.key=value`` overrides and the seed to a raw configuration (in place).
+
+    A ``simulation.receiver`` override other than the configuration's own receiver first takes its ``[receiver]``
+    keys as :func:`switch_receiver` says (a run's ``config.toml`` runs with any receiver), its note naming the
+    configuration as ``what`` (``"config.toml's"``) and going to :func:`collected_notes`.
 
     Returns
     -------
@@ -374,6 +453,18 @@ def apply_overrides(raw: dict[str, Any], overrides: Iterable[str] = (), seed: in
     ConfigError
         On an unknown section or key.
     """
+    overrides = list(overrides)
+    chosen = None
+    for item in overrides:
+        try:
+            section, name, value = parse_override(item)
+        except ConfigError:
+            continue  # named below
+        if (section, name) == ("simulation", "receiver"):
+            chosen = value
+    if chosen is not None:
+        for line in switch_receiver(raw, chosen, what):
+            _note(line)
     for item in overrides:
         section, name, value = parse_override(item)
         if section != "receiver":  # the receiver's keys depend on the receiver: checked by resolve()

@@ -35,6 +35,7 @@ from sblsim.orchestrator.surveys.settings import (
     SOLVER_KEYS,
     SOLVER_VARIABLES,
     apply_solver_overrides,
+    check_solver,
     solver_defaults,
     solver_value,
 )
@@ -51,5 +52,6 @@ from sblsim.orchestrator.surveys.survey import BUILTIN_SURVEYS, EDITINGS, FORMAT
 
 __all__ = ["BUILTIN_SURVEYS", "Calibration", "EDITINGS", "FORMATS", "NTD_COLUMNS", "OUTPUT_FILES", "PERTURBATION_FILES",
            "PROPAGATIONS", "RUNNING_COLUMNS", "RUNNING_FILES", "SEARCH_FILES", "SEARCH_KEYS", "SOLVER_KEYS",
-           "SOLVER_VARIABLES", "Survey", "apply_solver_overrides", "calibrate", "guess_apriori", "leg_model",
-           "load_survey", "perturbations", "profile_of", "solver_defaults", "solver_value", "write_calibration"]
+           "SOLVER_VARIABLES", "Survey", "apply_solver_overrides", "calibrate", "check_solver", "guess_apriori",
+           "leg_model", "load_survey", "perturbations", "profile_of", "solver_defaults", "solver_value",
+           "write_calibration"]

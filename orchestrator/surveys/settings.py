@@ -1,6 +1,7 @@
 """The solver's settings of a calibration survey (``[solver]``, ``--set solver.KEY=VALUE``): each declared once as
 a configuration key (:data:`SOLVER_VARIABLES`), checked (:func:`solver_value`), taken from the command line
-(:func:`apply_solver_overrides`) and at its default (:func:`solver_defaults`).
+(:func:`apply_solver_overrides`), checked together (:func:`check_solver`) and at its default
+(:func:`solver_defaults`).
 """
 
 from __future__ import annotations
@@ -93,7 +94,8 @@ SOLVER_VARIABLES: tuple[Variable, ...] = (
     _solver_key("criterion", "String", "bic", "",
                 "the criterion of the search over n_bases (ntd; garpos takes ABIC)", choices=CRITERIA),
     _solver_key("gradient", "String", "none", "",
-                "the perturbation's horizontal gradients: none, deep, shallow+deep", choices=GRADIENTS),
+                "the perturbation's horizontal gradients: none, deep, shallow+deep (deep and shallow+deep need "
+                "a perturbation)", choices=GRADIENTS),
     _solver_key("log_lambda0", "Real", -2.0, "1",
                 "GARPOS's smoothness, log10 of lambda0 squared; a list: the candidates of the ABIC search",
                 min=-10.0, max=10.0),
@@ -224,10 +226,32 @@ def apply_solver_overrides(solver: dict, overrides: list[str]) -> dict:
     return solver
 
 
+def check_solver(solver: dict) -> dict:
+    """The solver's settings checked together (each is checked alone by :func:`solver_value`): a setting that
+    another one leaves unused is refused, not recorded and ignored.
+
+    Returns
+    -------
+    dict
+        ``solver``, unchanged.
+
+    Raises
+    ------
+    ModelError
+        ``solver.gradient`` other than none without ``solver.perturbation`` (the gradients are the
+        perturbation's).
+    """
+    if solver["gradient"] != "none" and solver["perturbation"] == "none":
+        solved = " or ".join(p for p in PERTURBATIONS if p != "none")
+        raise ModelError(f"solver.gradient: {solver['gradient']} needs solver.perturbation ({solved}): the "
+                         "gradients are the perturbation's; without one it is none")
+    return solver
+
+
 def solver_defaults() -> dict:
     """Every solver setting at its default (:data:`SOLVER_KEYS`; a list default a new list)."""
     return {v.name: list(v.start) if isinstance(v.start, list) else v.start for v in SOLVER_VARIABLES}
 
 
 __all__ = ["PROPAGATIONS", "SEARCH_KEYS", "SOLVER_KEYS", "SOLVER_VARIABLES", "apply_solver_overrides",
-           "solver_defaults", "solver_value"]
+           "check_solver", "solver_defaults", "solver_value"]

@@ -44,6 +44,7 @@ from sblsim.orchestrator.surveys.calibrate import (
     Calibration,
     Survey,
     calibrate,
+    check_solver,
     solver_defaults,
     solver_value,
 )
@@ -175,7 +176,7 @@ def load_simulated(source: str, overrides: list[str] | None = None) -> Simulated
     solver = solver_defaults()
     for key, value in values["solver"].items():
         solver[key] = _solver_value(key, value)
-    return SimulatedSurvey(name, out["survey"], out["platform"], solver, set(values["solver"]))
+    return SimulatedSurvey(name, out["survey"], out["platform"], check_solver(solver), set(values["solver"]))
 
 
 def replicate(sim: SimulatedSurvey, k: int) -> tuple[Survey, boxin.Simulated]:

@@ -17,7 +17,7 @@ from sblsim.orchestrator.surveys.garpos import read_garpos
 from sblsim.orchestrator.surveys.gnatss import community_editing, read_gnatss
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, SurveyLog, check_frame, read_survey_log
 from sblsim.orchestrator.surveys.seagap import NOMINAL_SIGMA_M, read_seagap
-from sblsim.orchestrator.surveys.settings import apply_solver_overrides, solver_defaults, solver_value
+from sblsim.orchestrator.surveys.settings import apply_solver_overrides, check_solver, solver_defaults, solver_value
 from sblsim.orchestrator.surveys.xie import origin as xie_origin
 from sblsim.orchestrator.surveys.xie import read_xie
 
@@ -116,7 +116,7 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
     solver = solver_defaults()
     for key, value in raw.get("solver", {}).items():
         solver[key] = solver_value(key, value)
-    solver = apply_solver_overrides(solver, overrides)
+    solver = check_solver(apply_solver_overrides(solver, overrides))
     return Survey(name, log, ids, apriori, solver, origin, fmt, meta.get("title", name), depth_m=depth,
                   profile=profile)
 
@@ -161,7 +161,7 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
         raise ModelError(f"calibrate: {source[:80]!r} is a simulated survey (CONFIG.toml): "
                          "sblsim.orchestrator.surveys.simulate.load_simulated reads it")
     fmt = fmt or "sblsim"
-    solver = apply_solver_overrides(solver_defaults(), overrides)
+    solver = check_solver(apply_solver_overrides(solver_defaults(), overrides))
     path = Path(source)
     if fmt in ("seagap", "garpos"):  # their own transponders and profile; eigenrays unless --set says otherwise
         if not any(item.split("=", 1)[0].strip() == "solver.propagation" for item in overrides):

@@ -273,3 +273,38 @@ def test_the_solver_keys_are_declared_and_documented_as_they_are_checked():
         if v.type in ("Real", "Integer") and v.max is not None:
             with pytest.raises(ModelError, match=rf"solver\.{name}: .* is outside the allowed range"):
                 solver_value(name, v.max * 2 + 1)
+
+
+GRADIENT_REFUSED = "solver.gradient: deep needs solver.perturbation (ntd or garpos)"
+
+
+@pytest.mark.parametrize("source,argv,toml", [
+    ("xie-2021-07-23", ["--set", "solver.gradient=deep"], None),  # a built-in survey's command line
+    ("box-in", ["--set", "solver.gradient=deep"], None),  # a simulated survey's
+    ("mine.toml", [], '[solver]\ngradient = "deep"\n'),  # a simulated survey's own [solver]
+    ("mine.toml", ["--set", "solver.perturbation=none"], '[solver]\nperturbation = "ntd"\ngradient = "deep"\n'),
+])
+def test_a_gradient_without_a_perturbation_is_refused_not_ignored(tmp_path, capsys, monkeypatch, source, argv, toml):
+    """solver.gradient is the perturbation's: without solver.perturbation it would be recorded and unused."""
+    monkeypatch.chdir(tmp_path)
+    if toml is not None:
+        (tmp_path / source).write_text(toml)
+    assert main(["calibrate", source, "--out", str(tmp_path / "o"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines() == [f"sblsim: error: {GRADIENT_REFUSED}: the gradients are the perturbation's; "
+                                "without one it is none"], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_api_refuses_a_gradient_without_a_perturbation():
+    import sblsim
+    from sblsim.orchestrator.surveys.calibrate import check_solver, solver_defaults
+
+    with pytest.raises(sblsim.SblsimError, match=r"^solver\.gradient: shallow\+deep needs solver\.perturbation"):
+        sblsim.calibrate("box-in", set={"solver.gradient": "shallow+deep"})
+    with pytest.raises(sblsim.SblsimError, match=r"^solver\.gradient: deep needs"):
+        sblsim.calibrate("xie-2021-07-23", set={"solver.gradient": "deep"})
+    # with a perturbation the gradient is taken
+    for kind in ("ntd", "garpos"):
+        settings = {**solver_defaults(), "perturbation": kind, "gradient": "deep"}
+        assert check_solver(settings) is settings

@@ -225,3 +225,26 @@ def test_a_folder_a_missing_file_and_replicates_of_a_log_are_refused(tmp_path, c
     assert main(["calibrate", "xie-2021-07-23", "--replicates", "3", "--out", str(tmp_path / "o")]) == 2
     assert "--replicates: only a simulated survey" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv,message", [
+    # a noise-free circle at one radius: the speed's variance comes out negative (a numerically singular normal
+    # matrix), which once printed numpy's warning of a square root before the refusal
+    ([*NOISE_FREE, "survey.depth_m=3000", "survey.radius_m=30", "survey.duration_s=600"],
+     "solve_sound_speed: the replies of the log do not determine the sound speed"),
+    # a box of 1 m: Gauss-Newton diverges (its legs overflowed, numpy warned twice) before the refusal
+    (["platform.gps_sigma=0", "platform.imu_sigma_deg=0", "survey.twtt_sigma_s=0", "survey.pattern=box",
+      "survey.radius_m=1", "survey.sound_speed_error_mps=20", "survey.duration_s=600", "solver.rigid=true"],
+     "the log: the replies do not determine the unknowns"),
+])
+def test_an_undetermined_sound_speed_is_refused_in_one_line_without_numpy_warnings(tmp_path, capsys, argv, message):
+    import warnings
+
+    items = [a for item in [*argv, "solver.solve_sound_speed=true"] for a in ("--set", item)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main(["calibrate", "box-in", "--out", str(tmp_path / "o"), *items]) == 2
+    assert [str(w.message) for w in caught] == []
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith(f"sblsim: error: {message}"), err
+    assert not (tmp_path / "o").exists()

@@ -286,3 +286,61 @@ def test_duration_limits_say_what_fits(monkeypatch):
         load_config("semicircle", ["simulation.duration=5", "simulation.sampling_time=0.3"])
     # 0 is one pass, cut to whole sampling times (documented)
     assert load_config("semicircle", ["simulation.sampling_time=0.3"])["simulation"]["duration"] > 0
+
+
+SHORT_RUN = "simulation.duration=15"  # 150 steps
+
+
+def test_a_saved_configuration_runs_and_compares_with_any_receiver(tmp_path, capsys):
+    """A run's config.toml holds every key of its receiver (the ekf's): another receiver drops the keys it does not
+    have, said in one note line, and runs as the scenario with that receiver does."""
+    import json
+
+    import pandas as pd
+
+    from sblsim.orchestrator.cli import main
+
+    assert main(["run", "semicircle", "--set", SHORT_RUN, "--out", str(tmp_path / "x")]) == 0
+    saved = tmp_path / "x" / "config.toml"
+    capsys.readouterr()
+    assert main(["run", str(saved), "--set", "simulation.receiver=lsq", "--out", str(tmp_path / "lsq")]) == 0
+    err = capsys.readouterr().err
+    lsq_only = {v.name for v in section_variables("receiver", "lsq")}
+    dropped = [k for k in tomllib.loads(saved.read_text())["receiver"] if k not in lsq_only]
+    assert "gate_max_rejections" in dropped
+    assert err.splitlines() == [f"note: {saved}'s {', '.join(f'receiver.{k}' for k in dropped)} are not keys of the "
+                                "lsq receiver: not used"], err
+    assert main(["run", "semicircle", "--set", SHORT_RUN, "--set", "receiver=lsq", "--out", str(tmp_path / "d")]) == 0
+    mine, direct = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("lsq", "d"))
+    assert mine.pop("wall_time") >= 0 and direct.pop("wall_time") >= 0
+    assert mine == direct  # the scenario's own lsq run, every number
+
+    capsys.readouterr()
+    assert main(["compare", str(saved), "--receivers", "ekf,lsq,ukf", "--replicates", "2",
+                 "--out", str(tmp_path / "c")]) == 0
+    assert capsys.readouterr().err.count("note: ") == 1  # lsq's, once
+    assert main(["compare", "semicircle", "--set", SHORT_RUN, "--receivers", "ekf,lsq", "--replicates", "2",
+                 "--out", str(tmp_path / "c2")]) == 0
+    keep = ["runs", "rms_e_tot", "mean_e_tot", "nees", "pcrb_rms"]
+    mine, direct = (pd.read_csv(tmp_path / c / "compare.csv").set_index("receiver") for c in ("c", "c2"))
+    pd.testing.assert_frame_equal(mine.loc[["ekf", "lsq"], keep], direct.loc[["ekf", "lsq"], keep])
+
+
+def test_a_receiver_key_the_files_own_receiver_lacks_is_still_refused(tmp_path, capsys):
+    """Only the keys of the file's own receiver are dropped for another one: a key its own receiver does not have
+    either is refused, as is another receiver's key given on the command line."""
+    import sblsim
+    from sblsim.orchestrator.cli import main
+
+    (tmp_path / "receiver.toml").write_text('[simulation]\nreceiver = "ekf"\n[receiver]\nalpha = 0.5\n')
+    for argv in ([], ["--set", "receiver=ekf"], ["--set", "receiver=lsq"]):
+        assert main(["run", str(tmp_path / "receiver.toml"), "--out", str(tmp_path / "o"), *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("sblsim: error: receiver.alpha: not a parameter of the ") and err.count("\n") == 1, err
+    with pytest.raises(sblsim.ConfigError, match="^receiver.q_horizontal: not a parameter of the lsq receiver"):
+        sblsim.load(sblsim.load("semicircle"), set={"receiver": "lsq", "receiver.q_horizontal": 5.0})
+    # a configuration given to the API: the same rule, silently
+    assert sblsim.load(sblsim.load("semicircle"), set={"receiver": "lsq"}) == sblsim.load("semicircle",
+                                                                                          set={"receiver": "lsq"})
+    assert capsys.readouterr().err == ""
+    assert not (tmp_path / "o").exists()
