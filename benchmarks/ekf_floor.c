@@ -15,24 +15,14 @@
 #define NZ 5
 #define NB 4
 
-/* C (n x k) = A (n x m) B (m x k). */
-static void multiply(int n, int m, int k, const double* A, const double* B, double* C) {
+/* C (n x k) = A (n x m) B (m x k), the entry (l, j) of B at B[l * row + j * column]: (k, 1) for B itself,
+   (1, m) for B given as its transpose (k x m). */
+static void multiply(int n, int m, int k, const double* A, const double* B, int row, int column, double* C) {
     int i, j, l;
     for (i = 0; i < n; i++)
         for (j = 0; j < k; j++) {
             double sum = 0.0;
-            for (l = 0; l < m; l++) sum += A[i * m + l] * B[l * k + j];
-            C[i * k + j] = sum;
-        }
-}
-
-/* C (n x k) = A (n x m) B^T, B given (k x m). */
-static void multiply_t(int n, int m, int k, const double* A, const double* B, double* C) {
-    int i, j, l;
-    for (i = 0; i < n; i++)
-        for (j = 0; j < k; j++) {
-            double sum = 0.0;
-            for (l = 0; l < m; l++) sum += A[i * m + l] * B[j * m + l];
+            for (l = 0; l < m; l++) sum += A[i * m + l] * B[l * row + j * column];
             C[i * k + j] = sum;
         }
 }
@@ -44,9 +34,9 @@ int ekf_step(double* x, double* P, const double* F, const double* Q, const doubl
     double y[NZ], IKH[NX * NX], T[NX * NX], KR[NX * NZ], KRKt[NX * NX];
     int i, j, l;
     /* predict */
-    multiply(NX, NX, 1, F, x, prior);
-    multiply(NX, NX, NX, F, P, FP);
-    multiply_t(NX, NX, NX, FP, F, P);
+    multiply(NX, NX, 1, F, x, 1, 1, prior);
+    multiply(NX, NX, NX, F, P, NX, 1, FP);
+    multiply(NX, NX, NX, FP, F, 1, NX, P);
     for (i = 0; i < NX * NX; i++) P[i] += Q[i];
     /* the measurement model and its Jacobian at the prediction */
     for (i = 0; i < NZ * NX; i++) H[i] = 0.0;
@@ -60,8 +50,8 @@ int ekf_step(double* x, double* P, const double* F, const double* Q, const doubl
     h[NB] = prior[4];
     H[NB * NX + 4] = 1.0;
     /* S = H P H^T + R and its Cholesky factor L (S = L L^T) */
-    multiply_t(NX, NX, NZ, P, H, PHt);
-    multiply(NZ, NX, NZ, H, PHt, S);
+    multiply(NX, NX, NZ, P, H, 1, NX, PHt);
+    multiply(NZ, NX, NZ, H, PHt, NZ, 1, S);
     for (i = 0; i < NZ * NZ; i++) S[i] += R[i];
     for (i = 0; i < NZ; i++)
         for (j = 0; j <= i; j++) {
@@ -96,13 +86,13 @@ int ekf_step(double* x, double* P, const double* F, const double* Q, const doubl
         x[i] = prior[i] + sum;
     }
     /* the covariance: (I - K H) P (I - K H)^T + K R K^T */
-    multiply(NX, NZ, NX, K, H, IKH);
+    multiply(NX, NZ, NX, K, H, NX, 1, IKH);
     for (i = 0; i < NX; i++)
         for (j = 0; j < NX; j++) IKH[i * NX + j] = (i == j ? 1.0 : 0.0) - IKH[i * NX + j];
-    multiply(NX, NX, NX, IKH, P, T);
-    multiply_t(NX, NX, NX, T, IKH, P);
-    multiply(NX, NZ, NZ, K, R, KR);
-    multiply_t(NX, NZ, NX, KR, K, KRKt);
+    multiply(NX, NX, NX, IKH, P, NX, 1, T);
+    multiply(NX, NX, NX, T, IKH, 1, NX, P);
+    multiply(NX, NZ, NZ, K, R, NZ, 1, KR);
+    multiply(NX, NZ, NX, KR, K, 1, NZ, KRKt);
     for (i = 0; i < NX * NX; i++) P[i] += KRKt[i];
     return 0;
 }
