@@ -2,7 +2,7 @@
 
 Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against REV] [--skip-paper]
                                              [--skip-scaling] [--ray | --only-ray] [--ray-runs N]
-                                             [--snr | --only-snr] [--snr-runs N]
+                                             [--snr | --only-snr] [--snr-runs N] [--only-floor]
 
 1. **Engines**: a sample of the `paper` study (semicircle, one design cell at T = 0.1 s and one at
    T = 1 s, ``--replicates`` runs each) stepped three ways in this process: the local engine one
@@ -11,19 +11,23 @@ Run:  python benchmarks/bench_campaign.py [--workers N] [--numpy REV] [--against
 2. **A campaign chunk**: 800 runs of `semicircle` (its 100 s at T = 0.1 s: 1,000 steps) in one batch, as a
    campaign worker steps them, timed after a first run in the process (best of three): µs per
    replicate-step, its ratio to **one FilterPy ``ExtendedKalmanFilter`` predict + update** (6 states, four
-   ranges and the depth, the paper's EKF step; the best of seven rounds) timed here, and where the time
-   goes (each component's compiled step, the compiled master loop, the metrics and the bound); then the
-   same chunk for SBL with TWTT ranging, LBL and USBL, against the SBL chunk. With ``--ray`` (or alone with
-   ``--only-ray``): the chunk of SBL, LBL and USBL through the Munk profile with ``acoustics.propagation =
-   ray`` beside ``straight``, alternated in this run: µs per replicate-step and the ratio (target ≤ 1.5×).
+   ranges and the depth, the paper's EKF step; the best of seven rounds) timed here and to **the same step in
+   plain C** (``ekf_floor.c``: compiled here ``-O2`` without vectorization, checked equal to FilterPy's step to
+   1e-12 first; the compiled floor, which does not move with numpy's overhead; target ≤ 2.5×), and where the
+   time goes (each component's compiled step, the compiled master loop, the metrics and the bound); then the
+   same chunk for SBL with TWTT ranging, LBL and USBL, against the SBL chunk. ``--only-floor`` times the chunk,
+   the two EKF steps and (unless ``--skip-paper``) the whole study on ``--workers`` processes alone. With
+   ``--ray`` (or alone with ``--only-ray``): the chunk of SBL, LBL and USBL through the Munk profile with
+   ``acoustics.propagation = ray`` beside ``straight``, alternated in this run: µs per replicate-step and the
+   ratio (target ≤ 1.5×).
    With ``--snr`` (or alone with ``--only-snr``): the same with eigenrays for both, ``acoustics.detection =
    snr`` beside ``fixed`` in 20 m of water (target ≤ 2×).
 3. With ``--numpy REV``: the same chunk on the batched numpy engine of an earlier revision (e.g.
    ``9903b13``), timed the same way in a subprocess from a temporary git worktree.
    With ``--against REV``: the same chunk on the compiled engine of an earlier revision, timed the same
    way (e.g. to check that a refactoring kept the speed).
-4. **The whole `paper` study** (19,200 runs) with 1 and with ``--workers`` processes: wall time, runs/s
-   and the speed-up.
+4. **The whole `paper` study** (19,200 runs) with 1 and with ``--workers`` processes: wall time, runs/s,
+   µs per replicate-step per core (and its ratio to the plain-C EKF step) and the speed-up.
 5. **Time against study size**: the `million` study cut to 1×, 2× and 4× ``--scale`` replicates per cell
    on ``--workers`` processes: wall time and its ratio to the 1× one (linear growth expected).
 6. **Threads inside a process**: the chunk's master loop (compiled; it releases the GIL) as one batch
@@ -35,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -45,6 +50,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus.build import build_all
+from sblsim.models.errors import CompileError
 from sblsim.orchestrator.campaign import plan, run_campaign
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.engines import close_handles, make_handles
@@ -54,6 +60,7 @@ from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from sblsim.orchestrator.study import load_study, study_source
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ekf_floor import filterpy_step, floor_step  # noqa: E402
 from revision import run_at  # noqa: E402
 
 #: The chunk, timed in an earlier revision's own code (its run_batch had the same signature).
@@ -114,44 +121,6 @@ def engines(study, replicates: int) -> None:
     print(f"   {'engine':36s} {'wall [s]':>9s} {'runs/s':>8s} {'us/replicate-step':>18s} {'speed-up':>9s}")
     for name, wall in rows:
         print(f"   {name:36s} {wall:9.2f} {len(cfgs) / wall:8.2f} {wall / steps * 1e6:18.1f} {t_single / wall:9.2f}")
-
-
-def filterpy_step(repeat: int = 1000, rounds: int = 7) -> float:
-    """Seconds of one FilterPy ExtendedKalmanFilter predict + update: 6 states, 4 ranges and the depth (the best
-    of ``rounds`` rounds of ``repeat`` steps, as the chunk is the best of its timings)."""
-    from filterpy.kalman import ExtendedKalmanFilter
-
-    beacons = np.array([[3.0, 0, 1], [0, 3.0, 1], [-3.0, 0, 1], [0, -3.0, 1]])
-
-    def hx(x):
-        p = x[[0, 2, 4], 0]
-        return np.append(np.linalg.norm(p - beacons, axis=1), x[4, 0]).reshape(-1, 1)
-
-    def jacobian(x):
-        p = x[[0, 2, 4], 0]
-        H = np.zeros((5, 6))
-        d = p - beacons
-        H[:4][:, [0, 2, 4]] = d / np.linalg.norm(d, axis=1)[:, None]
-        H[4, 4] = 1.0
-        return H
-
-    ekf = ExtendedKalmanFilter(dim_x=6, dim_z=5)
-    ekf.x = np.array([[15.0], [0.0], [0.0], [0.5], [5.0], [0.0]])
-    ekf.F = np.eye(6) + np.diag([0.1, 0, 0.1, 0, 0.1], 1)
-    ekf.Q = np.eye(6) * 1e-4
-    R = np.diag([0.01] * 4 + [1e-4])
-    z = hx(ekf.x) + 0.01
-    for _ in range(200):
-        ekf.predict()
-        ekf.update(z, jacobian, hx, R=R)
-    best = float("inf")
-    for _ in range(rounds):
-        start = time.perf_counter()
-        for _ in range(repeat):
-            ekf.predict()
-            ekf.update(z, jacobian, hx, R=R)
-        best = min(best, (time.perf_counter() - start) / repeat)
-    return best
 
 
 #: The benchmark chunk: semicircle runs of 100 s (1,000 steps at T = 0.1 s), in one batch.
@@ -338,15 +307,47 @@ def threads(per_step: float) -> None:
           f"({chunk / threaded:.2f}x in one process)")
 
 
-def paper(study, workers: int) -> None:
+#: The issue's target for a replicate-step against the plain-C EKF step (:func:`yardsticks`).
+FLOOR_TARGET = 2.5
+
+
+def yardsticks(per_step: float) -> float | None:
+    """A replicate-step of ``per_step`` seconds against one EKF predict + update of the paper's problem
+    (:mod:`ekf_floor`): FilterPy's (numpy's small-matrix overhead: it moves from machine to machine) and the plain-C
+    step compiled and checked against FilterPy's here (the compiled floor). Returns the C step's seconds (None
+    without FilterPy or a compiler)."""
+    try:
+        ekf = filterpy_step()
+    except ImportError:
+        print("   (FilterPy not installed: pip install filterpy, or the test extra)")
+        return None
+    print(f"   one FilterPy ExtendedKalmanFilter predict + update (6 states, 4 ranges + depth): "
+          f"{ekf * 1e6:.1f} us; a whole replicate-step here (platform, channel, diver, EKF, fix, metrics, "
+          f"bound) takes {ekf / per_step:.1f}x less")
+    try:
+        floor, worst, compiler = floor_step()
+    except (CompileError, OSError, subprocess.CalledProcessError) as exc:
+        print(f"   (the plain-C EKF step was not built: {exc})")
+        return None
+    print(f"   the same step in plain C (ekf_floor.c by {compiler}, -O2 without vectorization, equal to FilterPy's "
+          f"to {worst:.1e}): {floor * 1e6:.3f} us; a whole replicate-step here takes {per_step / floor:.2f}x its "
+          f"time (target {FLOOR_TARGET}x)")
+    return floor
+
+
+def paper(study, workers: int, floor: float | None = None, alone: bool = False) -> None:
+    """The whole study with 1 and ``workers`` processes (``alone``: with ``workers`` only): wall time, runs/s, µs
+    per replicate-step per core (and against ``floor``, the plain-C EKF step's seconds, when given)."""
     replicate_steps = sum(chunk.runs * chunk.steps for chunk in plan(study, 800))
     walls = {}
-    for count in sorted({1, workers}):
+    for count in [workers] if alone else sorted({1, workers}):
         with tempfile.TemporaryDirectory() as tmp:
             result = run_campaign(study, Path(tmp) / "paper", workers=count, progress=False)
         walls[count] = result.wall_time
+        per_core = result.wall_time * count / replicate_steps
+        against = f", {per_core / floor:.2f}x the plain-C EKF step" if floor else ""
         print(f"   {count} worker(s): {result.wall_time:.1f} s, {result.runs_per_second:.0f} runs/s, "
-              f"{result.wall_time * count / replicate_steps * 1e6:.2f} us per replicate-step per core")
+              f"{per_core * 1e6:.2f} us per replicate-step per core{against}")
     if len(walls) == 2:
         print(f"   speed-up of {workers} workers over 1: {walls[1] / walls[workers]:.2f}x")
 
@@ -384,9 +385,18 @@ def main() -> None:
                              "beside the fixed one, both with eigenrays, for SBL, LBL and USBL")
     parser.add_argument("--only-snr", action="store_true", help="time only that (implies --snr)")
     parser.add_argument("--snr-runs", type=int, default=CHUNK_RUNS, help="runs of the chunk of --snr")
+    parser.add_argument("--only-floor", action="store_true",
+                        help="time only the chunk and the whole study (on --workers processes; not with "
+                             "--skip-paper) against FilterPy's EKF step and the plain-C one")
     args = parser.parse_args()
     study = load_study("paper")
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, numpy {np.__version__}\n")
+    if args.only_floor:
+        floor = yardsticks(chunk_timing())
+        if not args.skip_paper:
+            print(f"\n4. whole paper study: {study.runs} runs on the local engine")
+            paper(study, args.workers, floor, alone=True)
+        return
     if args.only_ray or args.only_snr:
         if args.only_ray:
             propagation_timing(args.ray_runs)
@@ -400,13 +410,7 @@ def main() -> None:
         propagation_timing(args.ray_runs)
     if args.snr:
         detection_timing(args.snr_runs)
-    try:
-        ekf = filterpy_step()
-        print(f"   one FilterPy ExtendedKalmanFilter predict + update (6 states, 4 ranges + depth): "
-              f"{ekf * 1e6:.1f} us; a whole replicate-step here (platform, channel, diver, EKF, fix, metrics, "
-              f"bound) takes {ekf / per_step:.1f}x less")
-    except ImportError:
-        print("   (FilterPy not installed: pip install filterpy, or the test extra)")
+    floor = yardsticks(per_step)
     if args.numpy:
         old = float(run_at(args.numpy, OLD_CHUNK, str(CHUNK_DURATION), str(CHUNK_RUNS)).split()[-1])
         print(f"\n3. the same chunk on the batched numpy engine of revision {args.numpy}: {old * 1e6:.2f} us per "
@@ -417,7 +421,7 @@ def main() -> None:
               f"replicate-step; this revision takes {per_step / then:.2f}x its time")
     if not args.skip_paper:
         print(f"\n4. whole paper study: {study.runs} runs on the local engine")
-        paper(study, args.workers)
+        paper(study, args.workers, floor)
     if not args.skip_scaling:
         print(f"\n5. time against study size: the million study cut to {args.scale}, {2 * args.scale} and "
               f"{4 * args.scale} replicates per cell, {args.workers} workers")

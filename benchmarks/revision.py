@@ -14,7 +14,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,8 +23,9 @@ PACKAGES = ("models", "orchestrator", "fmus")
 
 @contextlib.contextmanager
 def checkout(revision: str) -> Iterator[Callable[..., str]]:
-    """A temporary worktree of ``revision`` for as long as the context lasts; yields ``run(code, *args)``,
-    which runs ``code`` there (its own modules first) and returns its stdout.
+    """A temporary worktree of ``revision`` for as long as the context lasts; yields ``run(code, *args,
+    wrapper=())``, which runs ``code`` there (its own modules first; under the command ``wrapper`` when given, e.g.
+    a profiler's) and returns its stdout.
 
     Raises
     ------
@@ -47,11 +48,11 @@ def checkout(revision: str) -> Iterator[Callable[..., str]]:
                 path = str(tree)
             env = {**os.environ, "PYTHONPATH": path}
 
-            def run(code: str, *args: str) -> str:
+            def run(code: str, *args: str, wrapper: Sequence[str] = ()) -> str:
                 if not namespaced:
                     code = code.replace("sblsim.", "")
-                done = subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True,
-                                      text=True, check=True)
+                done = subprocess.run([*wrapper, sys.executable, "-c", code, *args], cwd=tree, env=env,
+                                      capture_output=True, text=True, check=True)
                 return done.stdout
 
             yield run

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 import time
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import casadi as ca
 import numpy as np
@@ -85,6 +85,26 @@ def switch(name: str, branches: Sequence[ca.Function]) -> ca.Function:
                        first.name_out(), {"never_inline": True})
 
 
+def only_where(name: str, condition: ca.SX, build: Callable[..., ca.SX], *args: ca.SX) -> ca.SX:
+    """``build(*args)`` where ``condition`` is 1, an exact 0 where it is 0: the generated C computes it only where
+    ``condition`` holds, for a value read only then (an ``if_else`` or a logical ``and`` computes its operands
+    every time).
+
+    ``build`` is given a symbol for each of ``args`` (their values computed outside, once) and returns an SX;
+    whatever else it reads (the calling function's own symbols: states, inputs, parameters) is passed to it as it
+    is. Its result is the branch of a :func:`switch`: the same operations on the same values as ``build(*args)``,
+    so the same number bit for bit where it is computed.
+    """
+    symbols = [ca.SX.sym(f"{name}_{k}", *a.shape) for k, a in enumerate(args)]
+    value = build(*symbols)
+    given = ca.symvar(ca.vertcat(*[ca.vec(s) for s in symbols])) if symbols else []
+    free = [s for s in ca.symvar(value) if not any(ca.is_equal(s, g) for g in given)]
+    passed = ca.vertcat(*free) if free else ca.SX(0, 1)
+    computed = ca.Function(f"{name}_computed", [*symbols, passed], [value])
+    skipped = ca.Function(f"{name}_skipped", [*symbols, passed], [ca.SX.zeros(value.shape)])
+    return switch(name, [skipped, computed])(condition, *args, passed)
+
+
 def select(index: ca.SX, rows: Sequence[ca.SX]) -> ca.SX:
     """``rows[index]`` for a symbolic integer-valued ``index`` (zero if out of range).
 
@@ -134,7 +154,8 @@ def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
     return select(index, [float(v) for v in values])
 
 
-__all__ = ["cumulative_sum", "get_row", "lookup", "NO_ROW", "padded_rows", "put_row", "sample_due", "select", "switch"]
+__all__ = ["cumulative_sum", "get_row", "lookup", "NO_ROW", "only_where", "padded_rows", "put_row", "sample_due",
+           "select", "switch"]
 
 
 #: How long one call of :func:`map_in_chunks` may take [s]: Ctrl-C waits for the call under way.

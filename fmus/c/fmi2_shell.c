@@ -507,6 +507,7 @@ static void restore(Instance* s, const Saved* from) {
         offset += (size_t)block_size(k);
     }
     memcpy(s->draws, from->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    sblsim_choose_events(&s->run); /* its parameters */
 }
 
 static Saved* new_saved(void) {

@@ -265,6 +265,23 @@ static int output(sblsim_instance* s, double t) {
     return call(s, s->model->output.f, s->y);
 }
 
+/* Whether event e runs in this run: for each of its conditions, the choice parameter's bit in its mask. */
+static int event_runs(const sblsim_instance* s, const sblsim_event* e) {
+    int c;
+    for (c = 0; c < e->n_when; c++) {
+        double choice = s->p[e->when_index[c]];
+        if (!(choice >= 0.0 && choice < 64.0) || !((e->when_mask[c] >> (int)choice) & 1u)) return 0;
+    }
+    return 1;
+}
+
+void sblsim_choose_events(sblsim_instance* s) {
+    int k;
+    s->events_on = 0;
+    for (k = 0; k < s->model->n_events && k < 64; k++)
+        if (event_runs(s, &s->model->events[k])) s->events_on |= (uint64_t)1 << k;
+}
+
 int sblsim_initialize(sblsim_instance* s, double t0, char* message, size_t size) {
     return sblsim_initialize_shared(s, t0, 1, message, size);
 }
@@ -274,6 +291,7 @@ int sblsim_initialize_shared(sblsim_instance* s, double t0, int prepare, char* m
     const double** a = s->work->arg;
     int k;
     for (k = 0; k < m->n_purposes; k++) s->draws[k] = 0;
+    sblsim_choose_events(s);
     a[0] = s->p;
     if (prepare && call(s, m->prepare.f, s->d)) goto failed;
     a[0] = s->p;
@@ -317,9 +335,8 @@ int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t
     for (k = 0; k < m->n_events; k++) {
         const sblsim_event* e = &m->events[k];
         long fired = 0;
-        int c, runs = 1;
-        for (c = 0; c < e->n_when; c++) runs = runs && ((e->when_mask[c] >> (int)s->p[e->when_index[c]]) & 1u);
-        if (!runs) continue; /* not this run's */
+        int c;
+        if (!(k < 64 ? (s->events_on >> k) & 1u : event_runs(s, e))) continue; /* not this run's */
         for (;;) {
             a[0] = s->x;
             a[4] = &t;

@@ -139,6 +139,9 @@ typedef struct {
        that share one parameter row, a design cell's replicates). Zero in an FMU. */
     int own_replicate;
     uint64_t replicate;
+    /* Bit k set: event k (k < 64) runs in this run, its `when` read from p once p is fixed
+       (sblsim_choose_events); an event beyond the 64th is checked at every step. */
+    uint64_t events_on;
 } sblsim_instance;
 
 #define SBLSIM_MESSAGE 512
@@ -156,6 +159,10 @@ int sblsim_initialize(sblsim_instance* s, double t0, char* message, size_t size)
 /* As sblsim_initialize, preparing the derived values d only when `prepare` is nonzero (instances that share
    their p and d prepare them once). */
 int sblsim_initialize_shared(sblsim_instance* s, double t0, int prepare, char* message, size_t size);
+
+/* The events of this run from the choice parameters in p (sblsim_initialize does it; a host that replaces p
+   afterwards, as an FMU state's restore does, calls it again). */
+void sblsim_choose_events(sblsim_instance* s);
 
 /* One communication step from t to t + h: step, events, output. 0 on success. */
 int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t size);

@@ -119,7 +119,7 @@ from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, n
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import NO_ROW, get_row, lookup, map_in_chunks, put_row, sample_due, select
+from sblsim.models.expressions import NO_ROW, get_row, lookup, map_in_chunks, only_where, put_row, sample_due, select
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -501,8 +501,11 @@ def _leg(e: _Slot, offset, solve: bool, draw: int = 0):
     (``snr``; else the travel time)."""
     x, p, d, beacon, position, velocity = e.x, e.p, e.d, e.beacon, e.position, e.velocity
     # the moving ocean at the leg's start: every travel time of the leg scaled by 1 + ε
-    slower = 1.0 + ocean_perturbation(e.t_k - x["t0"] + (0.0 if offset is None else offset), p["ntd_sigma_ppm"] * 1e-6,
-                                      x["ocean_frequency"], x["ocean_phase"])
+    # (a steady ocean's ε, 0 · Σ cos = ±0, is an exact 0 without its cosines: 1 + ε is 1 either way)
+    ppm = p["ntd_sigma_ppm"]
+    slower = 1.0 + only_where("sblsim_ocean", ppm > 0,
+                              lambda t: ocean_perturbation(t, ppm * 1e-6, x["ocean_frequency"], x["ocean_phase"]),
+                              e.t_k - x["t0"] + (0.0 if offset is None else offset))
 
     def path(tau):
         receive = position + velocity * (tau if offset is None else offset + tau)

@@ -45,6 +45,7 @@ for passive sonar signal processing", IEEE Trans. ASSP 29(3):463-470, 1981.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Any, NamedTuple
 
 import casadi as ca
@@ -664,7 +665,16 @@ def water_column_absorption(frequency: float, rows: np.ndarray, temperature: flo
     ----------
     Francois, Garrison, J. Acoust. Soc. Am. 72(6), 1982. IOC, SCOR, IAPSO, TEOS-10, 2010.
     """
-    rows = np.asarray(rows, dtype=float).reshape(-1, 2)
+    # the same water for every cell of a study: computed once (the cells' plans are made one after another)
+    rows = tuple(map(tuple, np.asarray(rows, dtype=float).reshape(-1, 2).tolist()))
+    return _column_absorption(frequency, rows, temperature, salinity, water_depth, points)
+
+
+@lru_cache(maxsize=64)
+def _column_absorption(frequency: float, rows: tuple, temperature: float, salinity: float, water_depth: float,
+                       points: int) -> float:
+    """:func:`water_column_absorption` of a table given as a tuple of rows."""
+    rows = np.array(rows, dtype=float).reshape(-1, 2)
     bottom = water_depth if water_depth > 0.0 else (float(rows[-1, 0]) if rows.shape[0] else 0.0)
     depth = np.linspace(0.0, max(bottom, 0.0), points)
     if rows.shape[0]:

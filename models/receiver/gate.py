@@ -23,7 +23,7 @@ import math
 import casadi as ca
 
 from sblsim.models.declarations import Variable
-from sblsim.models.expressions import select
+from sblsim.models.expressions import only_where, select
 
 
 def gate_parameters(probability: float) -> tuple[Variable, ...]:
@@ -118,7 +118,11 @@ def gate(innovation, variance, fresh, x: dict, u: dict, p: dict, earlier=None) -
     else:  # the beacon's own previous range failed too, and the two agree
         before, spread = earlier
         own = select(index, [x["failed"][j] for j in range(beacons)]) > 0.5
-        again = ca.logic_and(own, (innovation - before) ** 2 <= threshold * (variance + spread))
+        # read only for a fresh range that fails its test in a lock-out, and computed only there (a run without a
+        # gate never computes the earlier range's innovation)
+        again = only_where("sblsim_gate_again", ca.logic_and(fresh, ca.logic_and(guard, ca.logic_not(test))),
+                           lambda y, s, q: ca.logic_and(own, (y - before) ** 2 <= q * (s + spread)),
+                           innovation, variance, threshold)
     use = ca.logic_and(fresh, ca.logic_or(test, ca.logic_and(guard, again)))
     failed = ca.vertcat(*[ca.if_else(ca.logic_and(fresh, index == j), ca.logic_not(test), x["failed"][j])
                           for j in range(beacons)])

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from sblsim.models.acoustics.core import OCEAN_FEATURES, ocean_perturbation
+from sblsim.models.expressions import only_where
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
 
@@ -30,6 +31,25 @@ def test_the_perturbation_has_its_std_and_gaussian_correlation():
     assert np.std(at[0.0]) == pytest.approx(2e-4, rel=0.03)
     assert np.corrcoef(at[0.0], at[scale])[0, 1] == pytest.approx(np.exp(-0.5), abs=0.03)
     assert abs(np.corrcoef(at[0.0], at[3 * scale])[0, 1]) < 0.05
+
+
+def test_the_channels_perturbation_is_computed_only_where_the_ocean_moves():
+    """The slot's ε (:func:`~sblsim.models.expressions.only_where`, as the channel calls it): where σ > 0 the same
+    number as the perturbation written out, bit for bit; where σ = 0 an exact 0 without its cosines (features that
+    are not finite leave it 0, where ``0 · Σ cos`` would be NaN)."""
+    t, ppm = ca.SX.sym("t"), ca.SX.sym("ppm")
+    w, phi = ca.SX.sym("w", OCEAN_FEATURES), ca.SX.sym("p", OCEAN_FEATURES)
+    switched = ca.Function("eps", [t, ppm, w, phi], [only_where(
+        "sblsim_ocean", ppm > 0, lambda at: ocean_perturbation(at, ppm * 1e-6, w, phi), t)])
+    written = ca.Function("eps", [t, ppm, w, phi], [ocean_perturbation(t, ppm * 1e-6, w, phi)])
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        args = (rng.uniform(0, 1e4), rng.choice([0.0, rng.uniform(0, 1e4)]), rng.normal(size=OCEAN_FEATURES) / 60,
+                rng.uniform(0, 2 * np.pi, OCEAN_FEATURES))
+        eps = float(switched(*args))
+        assert eps == float(written(*args)) if args[1] > 0 else eps == 0.0
+    nan = np.full(OCEAN_FEATURES, np.nan)
+    assert float(switched(10.0, 0.0, nan, nan)) == 0.0 and np.isnan(float(written(10.0, 0.0, nan, nan)))
 
 
 @pytest.fixture(scope="module")
