@@ -30,7 +30,7 @@ from sblsim.orchestrator.maps import point_accuracy
 #: The path's speed [m/s] (an AUV's transit).
 PATH_SPEED = 2.0
 #: The longest path, in sampling times.
-PATH_SLOTS = 200
+PATH_SLOTS = 100
 
 
 def checked_points(design: Design, resolved: Resolved) -> list[tuple[str, np.ndarray]]:

@@ -178,7 +178,7 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("tolerance_pct", "Real", 15.0, "%", "a prediction further than this from its Monte Carlo is flagged",
              min=0.0, max=100.0, min_exclusive=True),
         _key("path", "Boolean", True, "", "also run the scenario's receiver on a path across the work area"),
-        _key("path_replicates", "Integer", 3, "", "replicates of the path", min=1, max=1000),
+        _key("path_replicates", "Integer", 2, "", "replicates of the path", min=1, max=1000),
     ),
 }
 #: The sections of a design problem.
