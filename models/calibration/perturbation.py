@@ -57,6 +57,9 @@ DEGREE = 3
 #: The bases accepted (4: one cubic piece) and a knot interval's range [s].
 BASES_RANGE = (4, 5000)
 KNOT_INTERVAL_RANGE = (1.0, 86400.0)
+#: The pings (transmissions) a knot interval must hold on average for its basis to be determined
+#: (:func:`determinable_bases`).
+PINGS_PER_INTERVAL = 4
 #: GARPOS's typical travel-time error, the unit of its residuals and coefficients (``traveltimescale``) [s].
 TRAVEL_TIME_SCALE = 1e-4
 #: GARPOS's gradients are per km of horizontal offset (its ``ls``) [m].
@@ -94,6 +97,32 @@ def interval_bases(start: float, end: float, interval: float) -> int:
     """The bases of a knot every ``interval`` seconds (GARPOS: ``int(duration / interval)`` intervals, at least
     one), :math:`n = \\lfloor (t_1 - t_0)/\\Delta \\rfloor + 3`."""
     return max(1, int((end - start) / interval)) + DEGREE
+
+
+def determinable_bases(pings: int) -> int:
+    """The most cubic B-spline bases a survey of ``pings`` transmissions determines: :math:`3 + \\lfloor P / 4
+    \\rfloor`, so that each knot interval holds :data:`PINGS_PER_INTERVAL` pings on average.
+
+    Each knot interval of a cubic spline adds one coefficient (its polynomial's four less the three continuity
+    conditions), and the delay at one instant is one number however many transponders reply to that ping (their
+    nadir angles separate it from the positions, not from the delay of another instant): one ping per interval is
+    the least that can determine a coefficient, with nothing left to tell its noise. Four leave margin and hold
+    the field's practice: SeaGap's tutorial solves its example (857 pings over 14 h) with 100 bases, 8.6 pings per
+    interval, and searches up to 150, 5.8 (Tomita and Kido, 2022, its ``pos_array_all`` and
+    ``pos_array_all_AICBIC``). The duration enters through the knot interval: a survey of duration :math:`D`
+    allows a knot interval down to :math:`D / \\lfloor P/4 \\rfloor`.
+
+    Parameters
+    ----------
+    pings : int
+        The survey's (or segment's) transmissions with a reply [1].
+
+    Returns
+    -------
+    int
+        [1].
+    """
+    return DEGREE + int(pings) // PINGS_PER_INTERVAL
 
 
 def basis(t: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -265,6 +294,6 @@ def effective_scale(residual: np.ndarray) -> float:
 
 
 __all__ = ["BASES_RANGE", "CORRELATION_REACH", "CRITERIA", "DEGREE", "GRADIENTS", "GRADIENT_LENGTH",
-           "KNOT_INTERVAL_RANGE", "PERTURBATIONS", "ROUGHNESS_TIME", "TRAVEL_TIME_SCALE", "akaike", "basis",
-           "correlation_band", "effective_scale", "interval_bases", "nadir_cosine", "roughness", "slant_direction",
-           "uniform_knots"]
+           "KNOT_INTERVAL_RANGE", "PERTURBATIONS", "PINGS_PER_INTERVAL", "ROUGHNESS_TIME", "TRAVEL_TIME_SCALE",
+           "akaike", "basis", "correlation_band", "determinable_bases", "effective_scale", "interval_bases",
+           "nadir_cosine", "roughness", "slant_direction", "uniform_knots"]

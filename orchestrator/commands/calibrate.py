@@ -106,7 +106,8 @@ def calibrate(survey: str | Path, *, format: str | None = None, initcfg: str | P
     force : bool
         Replace an earlier calibration in ``out``.
     progress : bool or callable
-        Report a simulated survey's replicates solved.
+        Report a simulated survey's replicates solved, or a recorded survey's moving-ocean solve or search (its
+        Gauss-Newton iterations).
 
     Returns
     -------
@@ -145,7 +146,7 @@ def _calibrate(source: str, fmt: str | None, overrides: list[str], initcfg: Path
             raise ConfigError(f"{option('replicates')}: only a simulated survey (box-in or a CONFIG.toml) has "
                               "replicates")
         survey = load_survey(source, fmt, overrides, initcfg, svp)  # all read first
-        result, name = solve(survey), survey.name
+        result, name = solve(survey, progress), survey.name
         target = prepare(name)
     else:
         if fmt is not None or initcfg is not None or svp is not None:

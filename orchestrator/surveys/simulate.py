@@ -216,10 +216,11 @@ class Outcome:
     row: dict
 
 
-def solve_replicate(sim: SimulatedSurvey, k: int) -> Outcome:
-    """Simulate and solve replicate ``k``: errors against the truth, NEES, the horizontal CRB."""
+def solve_replicate(sim: SimulatedSurvey, k: int, progress: Any = False) -> Outcome:
+    """Simulate and solve replicate ``k``: errors against the truth, NEES, the horizontal CRB (``progress``: of a
+    moving-ocean solve, :func:`~sblsim.orchestrator.surveys.solution.calibrate`)."""
     survey, s = replicate(sim, k)
-    result = calibrate(survey)
+    result = calibrate(survey, progress)
     t = result.solution["transponders"][0]
     error_enu = np.array([t["e_m"], t["n_m"], t["u_m"]]) + s.apriori[0] - s.truth[0]
     if len(result.segments) == 1:
@@ -269,12 +270,16 @@ def run_simulated(sim: SimulatedSurvey, replicates: int | None = None, progress:
             raise ModelError(f"--replicates: {replicates!r} is outside the allowed range [{lo}, {hi}]")
     count = replicates or 1
     rows, first = [], None
-    with Progress(count, "calibrate", "replicate", progress) as bar:
-        for k in range(count):
-            outcome = solve_replicate(sim, k)
-            first = first or outcome
-            rows.append(outcome.row)
-            bar.update()
+    if count == 1 and sim.solver["perturbation"] != "none":  # one moving-ocean solve: its iterations' progress
+        first = solve_replicate(sim, 0, progress)
+        rows.append(first.row)
+    else:
+        with Progress(count, "calibrate", "replicate", progress) as bar:
+            for k in range(count):
+                outcome = solve_replicate(sim, k)
+                first = first or outcome
+                rows.append(outcome.row)
+                bar.update()
     table = pd.DataFrame(rows, columns=list(REPLICATE_COLUMNS)) if replicates is not None else None
     result, s = first.calibration, first.simulated
     solution = result.solution
