@@ -28,11 +28,13 @@ from sblsim.models.calibration.perturbation import (
     GRADIENT_LENGTH,
     GRADIENTS,
     KNOT_INTERVAL_RANGE,
+    MAX_DESIGN_CELLS,
     PERTURBATIONS,
     PINGS_PER_INTERVAL,
     TRAVEL_TIME_SCALE,
     akaike,
     basis,
+    computable_bases,
     correlation_band,
     determinable_bases,
     effective_scale,
@@ -76,7 +78,8 @@ def bases_of(pert: Perturbation, t_tx: np.ndarray, t_rx: np.ndarray, what: str =
              prefix: str = "") -> tuple[int, float, float]:
     """The perturbation's number of bases over replies transmitted at ``t_tx`` and received at ``t_rx`` [s], and
     their span, refused above what the replies determine (:func:`~sblsim.models.calibration.perturbation.
-    determinable_bases` of their pings, the distinct transmit times).
+    determinable_bases` of their pings, the distinct transmit times) or what their dense design holds
+    (:func:`~sblsim.models.calibration.perturbation.computable_bases`).
 
     Parameters
     ----------
@@ -97,15 +100,18 @@ def bases_of(pert: Perturbation, t_tx: np.ndarray, t_rx: np.ndarray, what: str =
     Raises
     ------
     ModelError
-        Replies that span no time, or more bases than they determine (naming ``n_bases``, or ``knot_interval``
-        when the bases come from it, the allowed maximum and the knot interval it means).
+        Replies that span no time, or more bases than they determine or their design holds (naming ``n_bases``,
+        or ``knot_interval`` when the bases come from it, the allowed maximum, why, and the knot interval it
+        means).
     """
     start, end = float(np.min(t_tx)), float(np.max(t_rx))
     if not end > start:
         raise ModelError(f"{what}: the replies span no time; a perturbation in time needs a survey of some duration")
     n_bases = pert.n_bases or interval_bases(start, end, pert.knot_interval)
     pings = len(np.unique(t_tx))
-    most = determinable_bases(pings)
+    determined = determinable_bases(pings)
+    computable = computable_bases(len(t_tx), pert.kind, pert.gradient)
+    most = min(determined, computable)
     if n_bases <= most:
         return n_bases, start, end
     duration = end - start
@@ -113,9 +119,13 @@ def bases_of(pert: Perturbation, t_tx: np.ndarray, t_rx: np.ndarray, what: str =
              f"{prefix}knot_interval: {pert.knot_interval:g} s gives {n_bases} bases, which")
     shortest = (f", a knot interval of {duration / (most - DEGREE):.4g} s or more" if most > DEGREE else
                 f"; {BASES_RANGE[0]} bases need {PINGS_PER_INTERVAL * (BASES_RANGE[0] - DEGREE)} pings")
-    raise ModelError(f"{given} are more than {what} determines: at most {most} for its {pings} pings over "
-                     f"{duration / 3600.0:.3g} h ({DEGREE} + one per {PINGS_PER_INTERVAL} pings, so that each knot "
-                     f"interval holds {PINGS_PER_INTERVAL} pings on average{shortest})")
+    if determined <= computable:
+        raise ModelError(f"{given} are more than {what} determines: at most {most} for its {pings} pings over "
+                         f"{duration / 3600.0:.3g} h ({DEGREE} + one per {PINGS_PER_INTERVAL} pings, so that each "
+                         f"knot interval holds {PINGS_PER_INTERVAL} pings on average{shortest})")
+    raise ModelError(f"{given} are more than a solve of {what} holds: at most {most} for its {len(t_tx)} replies "
+                     f"(its dense design, replies times columns, within {MAX_DESIGN_CELLS:,} cells{shortest}); "
+                     "solve shorter segments (solver.segments)")
 
 
 class _Design:
