@@ -264,7 +264,13 @@ def _simulated_lines(result) -> int:
         print(f"  {r['count']} replicates: horizontal RMS error {r['rms_h_m']:.4f} m, bound {r['pcrb_h_m']:.4f} m "
               f"(ratio {r['rms_h_m'] / r['pcrb_h_m']:.3f}); RMS N {r['rms_n_m']:.4f} E {r['rms_e_m']:.4f} "
               f"U {r['rms_u_m']:.4f} m; mean NEES {r['nees_mean']:.2f} (3 when consistent)")
-    print(f"  survey error for an LBL design ({s['survey_sigma_from']}): --set {s['lbl_set']}")
+    if s["lbl_set"] is not None:
+        print(f"  survey error for an LBL design ({s['survey_sigma_from']}): --set {s['lbl_set']}")
+    else:
+        a = s["bound_agreement"]
+        print(f"  no survey error suggested for an LBL design: {a['measured']} and the bound disagree (ratio "
+              f"{'undefined' if a['ratio'] is None else format(a['ratio'], '.3g')}, outside [1/3, 3]; "
+              f"solution.json's bound_agreement)")
     files = "solution.json, residuals.csv, survey_log.csv" + (", replicates.parquet" if table is not None else "")
     print(f"  written to {result.out}/ ({files}, figures)")
     return 0

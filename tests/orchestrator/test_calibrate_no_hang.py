@@ -1,7 +1,8 @@
-"""No hang of a calibration: antenna positions in km refused at the door (SeaGap's example and a GARPOS survey, each
-scaled by this test), a number of bases above what the survey determines or a solve holds refused before any solve,
-and the moving-ocean solve's iterations reported (the numbers unchanged by the report). Ctrl-C during a moving-ocean
-search: ``tests/orchestrator/test_interrupt.py``."""
+"""No hang of a calibration: antenna positions in km refused at the door (SeaGap's example and a GARPOS survey,
+each scaled by this test), a number of bases above what the survey determines or a solve holds refused before any
+solve, and the moving-ocean solve's iterations reported (the numbers unchanged by the report); Ctrl-C during a
+moving-ocean search: ``tests/orchestrator/test_interrupt.py``. And a box-in study that disagrees with its bound
+suggests no survey sigma."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from sblsim.models.calibration.ocean import bases_of
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey
-from sblsim.orchestrator.surveys.simulate import load_simulated, replicate
+from sblsim.orchestrator.surveys.simulate import load_simulated, replicate, run_simulated
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_calibrate_garpos import _write as write_garpos  # noqa: E402 (the GARPOS survey of that test)
@@ -162,3 +163,28 @@ def test_the_moving_ocean_s_iterations_are_reported_and_change_nothing():
     seen.clear()
     calibrate(survey, lambda done, total: seen.append(done))
     assert seen == list(range(1, len(seen) + 1)) and len(seen) >= 3 + 1
+
+
+def test_a_study_far_from_its_bound_suggests_no_survey_sigma(tmp_path, capsys):
+    """The default circle with a moving ocean solved: the NTD and the depth are one unknown on one circle, so the
+    bound is thousands of metres while the replicates err by decimetres; a still ocean's study agrees."""
+    moving = ["survey.ntd_sigma_s=2e-4", "solver.perturbation=ntd"]
+    result, table = run_simulated(load_simulated("box-in", moving), 5)
+    ratio = np.sqrt(np.mean(table["e_n_m"] ** 2 + table["e_e_m"] ** 2)) / np.sqrt(np.mean(table["pcrb_h_m"] ** 2))
+    assert ratio < 1 / 3
+    assert result.solution["lbl_set"] is None and not result.solution["bound_agreement"]["agrees"]
+    assert [w for w in result.warnings if "no survey sigma is suggested" in w]
+    # one replicate: its horizontal 1-sigma against its bound
+    one, _ = run_simulated(load_simulated("box-in", moving))
+    t, bound = one.solution["transponders"][0], one.solution["errors"][0]["pcrb_h_m"]
+    assert np.hypot(t["sigma_e_m"], t["sigma_n_m"]) < bound / 3 and one.solution["lbl_set"] is None
+    # the command says so instead of the --set line
+    assert main(["calibrate", "box-in", "--replicates", "5", *sum((["--set", m] for m in moving), []),
+                 "--out", str(tmp_path / "o")]) == 0
+    captured = capsys.readouterr()
+    assert "no survey error suggested for an LBL design" in captured.out and "--set platform" not in captured.out
+    assert "disagree by a factor" in captured.err
+    still, table = run_simulated(load_simulated("box-in"), 5)
+    ratio = np.sqrt(np.mean(table["e_n_m"] ** 2 + table["e_e_m"] ** 2)) / np.sqrt(np.mean(table["pcrb_h_m"] ** 2))
+    value = still.solution["survey_sigma_m"]
+    assert 1 / 3 <= ratio <= 3 and still.solution["lbl_set"] == f"platform.survey_sigma={value:.4g}"
