@@ -280,8 +280,7 @@ def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool,
                    theta: np.ndarray, what: str, progress: Step | None = None):
     """Gauss-Newton on the positions and the active coefficients of the ``used`` replies (GARPOS: with its prior),
     from ``theta`` (``progress(1)`` after each iteration); returns theta (inactive coefficients 0), the iterations,
-    convergence, the active mask, the
-    prior, the data covariance and the last normal matrix."""
+    convergence, the active mask, the prior, the data covariance and the last normal matrix."""
     q = 3 if rigid else 3 * len(apriori)
     rows = np.flatnonzero(used)
     active = design.active(used)
