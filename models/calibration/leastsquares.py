@@ -22,7 +22,7 @@ from sblsim.models.calibration.measurement import (
     _model,
     _unknowns,
 )
-from sblsim.models.calibration.ocean import _check_perturbation, _solve_perturbed
+from sblsim.models.calibration.ocean import Step, _check_perturbation, _solve_perturbed
 from sblsim.models.calibration.replies import Perturbation, Replies, Solution
 from sblsim.models.declarations import ModelError
 
@@ -71,7 +71,7 @@ def _gauss_newton(replies: Replies, apriori: np.ndarray, theta: np.ndarray, c0: 
 def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sound_speed: float, *,
           rigid: bool = False, solve_sound_speed: bool = False, outlier_factor: float | None = 3.0,
           twtt_sigma: float = 0.0, legs: LegModel | None = None, what: str = "calibration",
-          perturbation: Perturbation | None = None) -> Solution:
+          perturbation: Perturbation | None = None, progress: Step | None = None) -> Solution:
     """Transponder positions from two-way travel times by weighted least squares with the outlier rule.
 
     Parameters
@@ -100,6 +100,9 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
         times): the residuals, weights and statistics are then the perturbation's (SeaGap's nadir-normalised
         time with equal weights, or GARPOS's log time with its covariance and prior), the outlier rule judges the
         TWTT residuals [s] against their RMS, ``twtt_sigma`` is not used. None: the model above.
+    progress : callable or None
+        ``progress(1)`` after each Gauss-Newton iteration of a perturbation's solve (a report of the work, which
+        also lets a Ctrl-C through between iterations).
 
     Returns
     -------
@@ -108,7 +111,8 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     Raises
     ------
     ModelError
-        A value outside its range, fewer replies than unknowns + 1, or replies that do not determine the unknowns
+        A value outside its range, fewer replies than unknowns + 1, more bases than the replies' pings determine
+        (:func:`~sblsim.models.calibration.ocean.bases_of`), or replies that do not determine the unknowns
         (with ``solve_sound_speed``: a sound speed outside :data:`SOUND_SPEED_RANGE` or with a 1-sigma above
         :data:`MAX_SOUND_SPEED_SIGMA`).
     """
@@ -117,7 +121,8 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     legs = legs or StraightRay()
     if perturbation is not None:
         _check_perturbation(perturbation, replies, solve_sound_speed)
-        return _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, perturbation, outlier_factor, what)
+        return _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, perturbation, outlier_factor, what,
+                                progress=progress)
     k = len(apriori)
     p = _unknowns(k, rigid, solve_sound_speed)
     n = len(replies)

@@ -15,6 +15,7 @@ and its sources: :mod:`sblsim.models.calibration.perturbation`.
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 from scipy.linalg import cholesky_banded, solve_banded
@@ -27,11 +28,15 @@ from sblsim.models.calibration.perturbation import (
     GRADIENT_LENGTH,
     GRADIENTS,
     KNOT_INTERVAL_RANGE,
+    MAX_DESIGN_CELLS,
     PERTURBATIONS,
+    PINGS_PER_INTERVAL,
     TRAVEL_TIME_SCALE,
     akaike,
     basis,
+    computable_bases,
     correlation_band,
+    determinable_bases,
     effective_scale,
     interval_bases,
     nadir_cosine,
@@ -62,6 +67,65 @@ def _check_perturbation(pert: Perturbation, replies: Replies, solve_speed: bool)
     if pert.kind == "ntd" and pert.mu_t > 0.0:
         raise ModelError("mu_t: the data correlation is GARPOS's (perturbation = garpos); SeaGap's NTD takes "
                          "independent replies")
+
+
+#: A progress report: called with 1 after each Gauss-Newton iteration of a moving-ocean solve (the caller may show
+#: it, and a Ctrl-C is handled there at the latest).
+Step = Callable[[int], object]
+
+
+def bases_of(pert: Perturbation, t_tx: np.ndarray, t_rx: np.ndarray, what: str = "calibration",
+             prefix: str = "") -> tuple[int, float, float]:
+    """The perturbation's number of bases over replies transmitted at ``t_tx`` and received at ``t_rx`` [s], and
+    their span, refused above what the replies determine (:func:`~sblsim.models.calibration.perturbation.
+    determinable_bases` of their pings, the distinct transmit times) or what their dense design holds
+    (:func:`~sblsim.models.calibration.perturbation.computable_bases`).
+
+    Parameters
+    ----------
+    pert : Perturbation
+    t_tx, t_rx : numpy.ndarray, shape (n,)
+        [s].
+    what : str
+        What errors name (the segment).
+    prefix : str
+        Put before the key an error names (``"solver."``).
+
+    Returns
+    -------
+    n_bases : int
+    start, end : float
+        The first transmission and the last reception [s].
+
+    Raises
+    ------
+    ModelError
+        Replies that span no time, or more bases than they determine or their design holds (naming ``n_bases``,
+        or ``knot_interval`` when the bases come from it, the allowed maximum, why, and the knot interval it
+        means).
+    """
+    start, end = float(np.min(t_tx)), float(np.max(t_rx))
+    if not end > start:
+        raise ModelError(f"{what}: the replies span no time; a perturbation in time needs a survey of some duration")
+    n_bases = pert.n_bases or interval_bases(start, end, pert.knot_interval)
+    pings = len(np.unique(t_tx))
+    determined = determinable_bases(pings)
+    computable = computable_bases(len(t_tx), pert.kind, pert.gradient)
+    most = min(determined, computable)
+    if n_bases <= most:
+        return n_bases, start, end
+    duration = end - start
+    given = (f"{prefix}n_bases: {n_bases} bases" if pert.n_bases else
+             f"{prefix}knot_interval: {pert.knot_interval:g} s gives {n_bases} bases, which")
+    shortest = (f", a knot interval of {duration / (most - DEGREE):.4g} s or more" if most > DEGREE else
+                f"; {BASES_RANGE[0]} bases need {PINGS_PER_INTERVAL * (BASES_RANGE[0] - DEGREE)} pings")
+    if determined <= computable:
+        raise ModelError(f"{given} are more than {what} determines: at most {most} for its {pings} pings over "
+                         f"{duration / 3600.0:.3g} h ({DEGREE} + one per {PINGS_PER_INTERVAL} pings, so that each "
+                         f"knot interval holds {PINGS_PER_INTERVAL} pings on average{shortest})")
+    raise ModelError(f"{given} are more than a solve of {what} holds: at most {most} for its {len(t_tx)} replies "
+                     f"(its dense design, replies times columns, within {MAX_DESIGN_CELLS:,} cells{shortest}); "
+                     "solve shorter segments (solver.segments)")
 
 
 class _Design:
@@ -213,10 +277,10 @@ def _perturbed_model(design: _Design, apriori: np.ndarray, theta: np.ndarray, c0
 
 
 def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool, legs: LegModel, used: np.ndarray,
-                   theta: np.ndarray, what: str):
+                   theta: np.ndarray, what: str, progress: Step | None = None):
     """Gauss-Newton on the positions and the active coefficients of the ``used`` replies (GARPOS: with its prior),
-    from ``theta``; returns theta (inactive coefficients 0), the iterations, convergence, the active mask, the
-    prior, the data covariance and the last normal matrix."""
+    from ``theta`` (``progress(1)`` after each iteration); returns theta (inactive coefficients 0), the iterations,
+    convergence, the active mask, the prior, the data covariance and the last normal matrix."""
     q = 3 if rigid else 3 * len(apriori)
     rows = np.flatnonzero(used)
     active = design.active(used)
@@ -238,6 +302,8 @@ def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool,
             raise ModelError(f"{what}: the replies do not determine the positions and the perturbation (the normal "
                              "matrix is singular): fewer bases, or replies from more directions") from None
         theta[keep] += step
+        if progress is not None:
+            progress(1)
         if np.max(np.abs(step[:q])) <= POSITION_TOLERANCE:
             converged = True
             break
@@ -247,18 +313,16 @@ def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool,
 def _solve_perturbed(replies: Replies, apriori: np.ndarray, c0: float, rigid: bool, legs: LegModel,
                      pert: Perturbation, outlier_factor: float | None, what: str,
                      linear: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                     start_positions: np.ndarray | None = None) -> Solution:
+                     start_positions: np.ndarray | None = None, progress: Step | None = None) -> Solution:
     """:func:`solve` with a sound-speed perturbation (:class:`Perturbation`): the outlier rule on the TWTT
     residuals [s], and GARPOS's rejection of the residuals beyond ``reject_sigma`` standard deviations of their
     mean (judged on every reply after each solution). ``linear``: the legs linearised about a reference
-    (:func:`select`); ``start_positions``: the positions' unknowns to start from."""
+    (:func:`select`); ``start_positions``: the positions' unknowns to start from; ``progress(1)`` after each
+    Gauss-Newton iteration."""
     k = len(apriori)
     q = 3 if rigid else 3 * k
     n = len(replies)
-    start, end = float(np.min(replies.t_tx)), float(np.max(replies.t_rx))
-    if not end > start:
-        raise ModelError(f"{what}: the replies span no time; a perturbation in time needs a survey of some duration")
-    n_bases = pert.n_bases or interval_bases(start, end, pert.knot_interval)
+    n_bases, start, end = bases_of(pert, replies.t_tx, replies.t_rx, what)
     knots = uniform_knots(start, end, n_bases)
     design = _Design(pert, replies, apriori, knots, c0)
     design.linear = linear
@@ -273,7 +337,7 @@ def _solve_perturbed(replies: Replies, apriori: np.ndarray, c0: float, rigid: bo
             raise ModelError(f"{what}: {int(used.sum())} replies for {size} unknowns (the positions and the "
                              f"perturbation's {n_bases} bases); at least {size + 1} are needed: fewer bases")
         theta, iterations, converged, keep, prior, data, normal = _perturbed_fit(design, apriori, c0, rigid, legs,
-                                                                                  used, theta, what)
+                                                                                  used, theta, what, progress)
         model = _perturbed_model(design, apriori, theta, c0, rigid, legs, every)
         residual, seconds = model[0], model[3]
         if outlier_factor is not None and used.sum() > size + 1:
@@ -363,4 +427,4 @@ def _perturbed_solution(design: _Design, apriori: np.ndarray, c0: float, rigid: 
                     perturbation=fit)
 
 
-__all__ = []
+__all__ = ["Step", "bases_of"]

@@ -57,6 +57,12 @@ DEGREE = 3
 #: The bases accepted (4: one cubic piece) and a knot interval's range [s].
 BASES_RANGE = (4, 5000)
 KNOT_INTERVAL_RANGE = (1.0, 86400.0)
+#: The pings (transmissions) a knot interval must hold on average for its basis to be determined
+#: (:func:`determinable_bases`).
+PINGS_PER_INTERVAL = 4
+#: The most cells (replies times the perturbation's columns) of a moving-ocean solve's design, which is dense
+#: (:func:`computable_bases`): 80 MB a copy, a Gauss-Newton iteration within a second or two on two cores.
+MAX_DESIGN_CELLS = 10_000_000
 #: GARPOS's typical travel-time error, the unit of its residuals and coefficients (``traveltimescale``) [s].
 TRAVEL_TIME_SCALE = 1e-4
 #: GARPOS's gradients are per km of horizontal offset (its ``ls``) [m].
@@ -94,6 +100,61 @@ def interval_bases(start: float, end: float, interval: float) -> int:
     """The bases of a knot every ``interval`` seconds (GARPOS: ``int(duration / interval)`` intervals, at least
     one), :math:`n = \\lfloor (t_1 - t_0)/\\Delta \\rfloor + 3`."""
     return max(1, int((end - start) / interval)) + DEGREE
+
+
+def determinable_bases(pings: int) -> int:
+    """The most cubic B-spline bases a survey of ``pings`` transmissions determines: :math:`3 + \\lfloor P / 4
+    \\rfloor`, so that each knot interval holds :data:`PINGS_PER_INTERVAL` pings on average.
+
+    Each knot interval of a cubic spline adds one coefficient (its polynomial's four less the three continuity
+    conditions), and the delay at one instant is one number however many transponders reply to that ping (their
+    nadir angles separate it from the positions, not from the delay of another instant): one ping per interval is
+    the least that can determine a coefficient, with nothing left to tell its noise. Four leave margin and hold
+    the field's practice: SeaGap's tutorial solves its example (857 pings over 14 h) with 100 bases, 8.6 pings per
+    interval, and searches up to 150, 5.8 (Tomita and Kido, 2022, its ``pos_array_all`` and
+    ``pos_array_all_AICBIC``). The duration enters through the knot interval: a survey of duration :math:`D`
+    allows a knot interval down to :math:`D / \\lfloor P/4 \\rfloor`.
+
+    Parameters
+    ----------
+    pings : int
+        The survey's (or segment's) transmissions with a reply [1].
+
+    Returns
+    -------
+    int
+        [1].
+    """
+    return DEGREE + int(pings) // PINGS_PER_INTERVAL
+
+
+def computable_bases(replies: int, kind: str, gradient: str) -> int:
+    """The most bases whose dense design of ``replies`` rows stays within :data:`MAX_DESIGN_CELLS`.
+
+    A moving-ocean solve holds its design (one row per reply, a column per coefficient) and a few copies of it as
+    dense matrices, and each Gauss-Newton iteration forms its normal matrix, :math:`n p^2` operations: 21,601
+    replies and 5,000 bases are 0.9 GB a copy, some 5 GB in all and tens of seconds an iteration. SeaGap's NTD has
+    one column per basis and four of the gradients; GARPOS's gradients are splines too, one column per basis each
+    (``shallow+deep``: five per basis).
+
+    Parameters
+    ----------
+    replies : int
+        The replies solved [1].
+    kind : str
+        ``"ntd"`` or ``"garpos"``.
+    gradient : str
+        One of :data:`GRADIENTS`.
+
+    Returns
+    -------
+    int
+        [1].
+    """
+    deep, shallow = gradient != "none", gradient == "shallow+deep"
+    per_basis = 1 + (2 * deep + 2 * shallow if kind == "garpos" else 0)
+    fixed = 0 if kind == "garpos" else 2 * deep + 2 * shallow
+    return max(0, (MAX_DESIGN_CELLS // max(int(replies), 1) - fixed) // per_basis)
 
 
 def basis(t: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -265,6 +326,6 @@ def effective_scale(residual: np.ndarray) -> float:
 
 
 __all__ = ["BASES_RANGE", "CORRELATION_REACH", "CRITERIA", "DEGREE", "GRADIENTS", "GRADIENT_LENGTH",
-           "KNOT_INTERVAL_RANGE", "PERTURBATIONS", "ROUGHNESS_TIME", "TRAVEL_TIME_SCALE", "akaike", "basis",
-           "correlation_band", "effective_scale", "interval_bases", "nadir_cosine", "roughness", "slant_direction",
-           "uniform_knots"]
+           "KNOT_INTERVAL_RANGE", "MAX_DESIGN_CELLS", "PERTURBATIONS", "PINGS_PER_INTERVAL", "ROUGHNESS_TIME",
+           "TRAVEL_TIME_SCALE", "akaike", "basis", "computable_bases", "correlation_band", "determinable_bases",
+           "effective_scale", "interval_bases", "nadir_cosine", "roughness", "slant_direction", "uniform_knots"]

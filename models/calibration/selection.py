@@ -11,7 +11,7 @@ import numpy as np
 from sblsim.models.calibration.leastsquares import solve
 from sblsim.models.calibration.legs import LegModel, StraightRay
 from sblsim.models.calibration.measurement import _model
-from sblsim.models.calibration.ocean import _check_perturbation, _solve_perturbed
+from sblsim.models.calibration.ocean import Step, _check_perturbation, _solve_perturbed, bases_of
 from sblsim.models.calibration.perturbation import CRITERIA
 from sblsim.models.calibration.replies import Perturbation, Replies, Solution
 from sblsim.models.declarations import ModelError
@@ -24,7 +24,7 @@ def _search_criterion(kind: str, criterion: str) -> str:
 def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sound_speed: float,
            candidates: Sequence[Perturbation], *, rigid: bool = False, outlier_factor: float | None = None,
            legs: LegModel | None = None, what: str = "calibration", criterion: str = "bic",
-           reference: Solution | None = None) -> tuple[Solution, list[dict]]:
+           reference: Solution | None = None, progress: Step | None = None) -> tuple[Solution, list[dict]]:
     """The perturbation chosen among ``candidates`` by an information criterion, and every candidate's.
 
     SeaGap's search over the number of bases takes the smallest AIC or BIC
@@ -46,6 +46,8 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
         takes ABIC.
     reference : Solution or None
         A solution of these replies to linearise about instead of the first candidate's.
+    progress : callable or None
+        ``progress(1)`` after each Gauss-Newton iteration of every candidate's solve.
 
     Returns
     -------
@@ -58,7 +60,8 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
     Raises
     ------
     ModelError
-        No candidate, kinds mixed, an unknown criterion, or what :func:`solve` raises.
+        No candidate, kinds mixed, an unknown criterion, or what :func:`solve` raises (every candidate's number
+        of bases is checked before any is solved).
     """
     if not candidates:
         raise ModelError(f"{what}: no candidate perturbation to choose from")
@@ -69,8 +72,12 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
         raise ModelError(f"criterion: {str(criterion)[:40]!r} is not one of {', '.join(CRITERIA)}")
     apriori = np.asarray(apriori, dtype=float)
     legs = legs or StraightRay()
+    for candidate in candidates:  # every candidate checked before any is solved
+        _check_perturbation(candidate, replies, False)
+        if len(replies):
+            bases_of(candidate, replies.t_tx, replies.t_rx, what)
     first = reference or solve(replies, apriori, sound_speed, rigid=rigid, outlier_factor=outlier_factor, legs=legs,
-                               what=what, perturbation=candidates[0])
+                               what=what, perturbation=candidates[0], progress=progress)
     if len(candidates) == 1 and reference is None:
         return first, [_candidate_row(candidates[0], first, True)]
     reference = first.offset[0] if rigid else first.offset.ravel()
@@ -80,13 +87,13 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
     for candidate in candidates:
         _check_perturbation(candidate, replies, False)
         solutions.append(_solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, candidate, outlier_factor,
-                                          what, (reference, residual, jacobian), reference))
+                                          what, (reference, residual, jacobian), reference, progress))
     values = [getattr(s.perturbation, name) for s in solutions]
     best = int(np.argmin(values))
     start = solutions[best].offset[0] if rigid else solutions[best].offset.ravel()
     chosen = first if best == 0 and first.perturbation.settings == candidates[0] else \
         _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, candidates[best], outlier_factor, what,
-                         None, start)
+                         None, start, progress)
     return chosen, [_candidate_row(c, s, k == best) for k, (c, s) in enumerate(zip(candidates, solutions))]
 
 

@@ -106,7 +106,8 @@ def calibrate(survey: str | Path, *, format: str | None = None, initcfg: str | P
     force : bool
         Replace an earlier calibration in ``out``.
     progress : bool or callable
-        Report a simulated survey's replicates solved.
+        Report a simulated survey's replicates solved, or a recorded survey's moving-ocean solve or search (its
+        Gauss-Newton iterations).
 
     Returns
     -------
@@ -145,7 +146,7 @@ def _calibrate(source: str, fmt: str | None, overrides: list[str], initcfg: Path
             raise ConfigError(f"{option('replicates')}: only a simulated survey (box-in or a CONFIG.toml) has "
                               "replicates")
         survey = load_survey(source, fmt, overrides, initcfg, svp)  # all read first
-        result, name = solve(survey), survey.name
+        result, name = solve(survey, progress), survey.name
         target = prepare(name)
     else:
         if fmt is not None or initcfg is not None or svp is not None:
@@ -263,7 +264,13 @@ def _simulated_lines(result) -> int:
         print(f"  {r['count']} replicates: horizontal RMS error {r['rms_h_m']:.4f} m, bound {r['pcrb_h_m']:.4f} m "
               f"(ratio {r['rms_h_m'] / r['pcrb_h_m']:.3f}); RMS N {r['rms_n_m']:.4f} E {r['rms_e_m']:.4f} "
               f"U {r['rms_u_m']:.4f} m; mean NEES {r['nees_mean']:.2f} (3 when consistent)")
-    print(f"  survey error for an LBL design ({s['survey_sigma_from']}): --set {s['lbl_set']}")
+    if s["lbl_set"] is not None:
+        print(f"  survey error for an LBL design ({s['survey_sigma_from']}): --set {s['lbl_set']}")
+    else:
+        a = s["bound_agreement"]
+        print(f"  no survey error suggested for an LBL design: {a['measured']} and the bound disagree (ratio "
+              f"{'undefined' if a['ratio'] is None else format(a['ratio'], '.3g')}, outside [1/3, 3]; "
+              f"solution.json's bound_agreement)")
     files = "solution.json, residuals.csv, survey_log.csv" + (", replicates.parquet" if table is not None else "")
     print(f"  written to {result.out}/ ({files}, figures)")
     return 0

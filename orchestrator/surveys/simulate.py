@@ -20,7 +20,8 @@ the perturbation's unknowns), or leaves it in the residuals.
 
 The survey error an LBL design takes (``platform.survey_sigma``, one sigma for the three axes) is
 :func:`survey_sigma`: the replicates' RMS error per axis when there are several, else the calibration's own
-1-sigma per axis (both the root mean square over North, East and Up).
+1-sigma per axis (both the root mean square over North, East and Up). It is suggested (``lbl_set``) only when the
+study agrees with its Cramér-Rao bound within :data:`BOUND_AGREEMENT_FACTOR` (:func:`bound_agreement`).
 """
 
 from __future__ import annotations
@@ -59,6 +60,9 @@ MAX_CONFIG_BYTES = 1 << 20
 REPLICATES_RANGE = (1, 100_000)
 #: The transponder's id in a simulated log.
 TRANSPONDER_ID = "1"
+#: A study's horizontal error (the replicates' RMS, or one calibration's 1-sigma) and its Cramér-Rao bound must agree
+#: within this factor, either way, for a survey sigma to be suggested from it (:func:`bound_agreement`).
+BOUND_AGREEMENT_FACTOR = 3.0
 #: Columns of ``replicates.parquet``.
 REPLICATE_COLUMNS = ("replicate", "id", "e_n_m", "e_e_m", "e_u_m", "nees", "pcrb_h_m")
 
@@ -216,10 +220,11 @@ class Outcome:
     row: dict
 
 
-def solve_replicate(sim: SimulatedSurvey, k: int) -> Outcome:
-    """Simulate and solve replicate ``k``: errors against the truth, NEES, the horizontal CRB."""
+def solve_replicate(sim: SimulatedSurvey, k: int, progress: Any = False) -> Outcome:
+    """Simulate and solve replicate ``k``: errors against the truth, NEES, the horizontal CRB (``progress``: of a
+    moving-ocean solve, :func:`~sblsim.orchestrator.surveys.solution.calibrate`)."""
     survey, s = replicate(sim, k)
-    result = calibrate(survey)
+    result = calibrate(survey, progress)
     t = result.solution["transponders"][0]
     error_enu = np.array([t["e_m"], t["n_m"], t["u_m"]]) + s.apriori[0] - s.truth[0]
     if len(result.segments) == 1:
@@ -253,6 +258,35 @@ def survey_sigma(solution: dict, table: pd.DataFrame | None = None) -> tuple[flo
     return value, "the calibration's own 1-sigma per axis (RMS of North, East, Up)"
 
 
+def bound_agreement(solution: dict, table: pd.DataFrame | None = None) -> dict:
+    """Whether a study's horizontal error agrees with its Cramér-Rao bound within :data:`BOUND_AGREEMENT_FACTOR`.
+
+    With several replicates the measured error is their horizontal RMS error against the truth and the bound the
+    RMS of their horizontal bounds (``solution["replicates"]``); with one, the calibration's horizontal 1-sigma
+    :math:`\\sqrt{\\sigma_e^2 + \\sigma_n^2}` against that replicate's bound. A bound far from the Monte Carlo (or
+    from the solver's sigma) means the solver's model is not the simulation's (an ocean left out, correlated GNSS
+    errors) or that the survey does not determine what is solved (a gradient from one circle): neither number is a
+    survey error to design with.
+
+    Returns
+    -------
+    dict
+        ``measured_h_m``, ``bound_h_m`` [m], ``ratio`` (measured over bound; None when the bound is not a positive
+        finite number), ``agrees``, ``measured`` (what was measured).
+    """
+    if table is not None and len(table) > 1:
+        r = solution["replicates"]
+        measured, bound = r["rms_h_m"], r["pcrb_h_m"]
+        what = f"the horizontal RMS error of {len(table)} replicates"
+    else:
+        t = solution["transponders"][0]
+        measured, bound = math.hypot(t["sigma_e_m"], t["sigma_n_m"]), solution["errors"][0]["pcrb_h_m"]
+        what = "the calibration's horizontal 1-sigma"
+    ratio = measured / bound if math.isfinite(bound) and bound > 0.0 and math.isfinite(measured) else None
+    agrees = ratio is not None and 1.0 / BOUND_AGREEMENT_FACTOR <= ratio <= BOUND_AGREEMENT_FACTOR
+    return {"measured_h_m": measured, "bound_h_m": bound, "ratio": ratio, "agrees": agrees, "measured": what}
+
+
 def run_simulated(sim: SimulatedSurvey, replicates: int | None = None, progress: Any = False
                   ) -> tuple[Calibration, pd.DataFrame | None]:
     """Replicate 0 solved (with the truth, its errors and the bound in its solution), and with ``replicates``
@@ -269,12 +303,16 @@ def run_simulated(sim: SimulatedSurvey, replicates: int | None = None, progress:
             raise ModelError(f"--replicates: {replicates!r} is outside the allowed range [{lo}, {hi}]")
     count = replicates or 1
     rows, first = [], None
-    with Progress(count, "calibrate", "replicate", progress) as bar:
-        for k in range(count):
-            outcome = solve_replicate(sim, k)
-            first = first or outcome
-            rows.append(outcome.row)
-            bar.update()
+    if count == 1 and sim.solver["perturbation"] != "none":  # one moving-ocean solve: its iterations' progress
+        first = solve_replicate(sim, 0, progress)
+        rows.append(first.row)
+    else:
+        with Progress(count, "calibrate", "replicate", progress) as bar:
+            for k in range(count):
+                outcome = solve_replicate(sim, k)
+                first = first or outcome
+                rows.append(outcome.row)
+                bar.update()
     table = pd.DataFrame(rows, columns=list(REPLICATE_COLUMNS)) if replicates is not None else None
     result, s = first.calibration, first.simulated
     solution = result.solution
@@ -295,10 +333,21 @@ def run_simulated(sim: SimulatedSurvey, replicates: int | None = None, progress:
     value, what = survey_sigma(solution, table)
     solution["survey_sigma_m"] = value
     solution["survey_sigma_from"] = what
-    solution["lbl_set"] = f"platform.survey_sigma={value:.4g}"
+    agreement = bound_agreement(solution, table)
+    solution["bound_agreement"] = agreement
+    solution["lbl_set"] = f"platform.survey_sigma={value:.4g}" if agreement["agrees"] else None
+    if not agreement["agrees"]:
+        apart = None if agreement["ratio"] is None else max(agreement["ratio"], 1.0 / agreement["ratio"])
+        factor = ("an undefined factor" if apart is None else
+                  f"a factor {apart:.3g}" if apart < 1000.0 else f"a factor {apart:,.0f}")
+        result.warnings.append(
+            f"{agreement['measured']} ({agreement['measured_h_m']:.4g} m) and its Cramér-Rao bound "
+            f"({agreement['bound_h_m']:.4g} m) disagree by {factor}, more than {BOUND_AGREEMENT_FACTOR:g}: the "
+            "solver's model is not the simulation's (an ocean or correlated GNSS errors left out) or the survey does "
+            "not determine what it solves; no survey sigma is suggested from this study")
     return result, table
 
 
-__all__ = ["MAX_CONFIG_BYTES", "Outcome", "REPLICATES_RANGE", "REPLICATE_COLUMNS", "SIMULATED_SURVEYS",
-           "SimulatedSurvey", "TRANSPONDER_ID", "is_simulated", "load_simulated", "replicate", "run_simulated",
-           "sections", "solve_replicate", "survey_sigma"]
+__all__ = ["BOUND_AGREEMENT_FACTOR", "MAX_CONFIG_BYTES", "Outcome", "REPLICATES_RANGE", "REPLICATE_COLUMNS",
+           "SIMULATED_SURVEYS", "SimulatedSurvey", "TRANSPONDER_ID", "bound_agreement", "is_simulated",
+           "load_simulated", "replicate", "run_simulated", "sections", "solve_replicate", "survey_sigma"]

@@ -27,8 +27,10 @@ from sblsim.models.calibration import (
     select,
     solve,
 )
+from sblsim.models.calibration.ocean import bases_of
 from sblsim.models.calibration.perturbation import effective_scale
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.surveys.gnatss import harmonic_mean_speed
 from sblsim.orchestrator.surveys.settings import SEARCH_KEYS, _instant
 from sblsim.orchestrator.surveys.survey import Survey
@@ -144,8 +146,15 @@ def profile_of(survey: Survey) -> np.ndarray | None:
     return table
 
 
-def calibrate(survey: Survey) -> Calibration:
+def calibrate(survey: Survey, progress: ProgressSpec = False) -> Calibration:
     """Solve every segment of a survey and combine them.
+
+    Parameters
+    ----------
+    survey : Survey
+    progress : bool, 'auto', 'log' or callable
+        Report the Gauss-Newton iterations of a moving-ocean solve or search
+        (:class:`sblsim.orchestrator.io.progress.Progress`; their number is not known ahead).
 
     Returns
     -------
@@ -154,25 +163,46 @@ def calibrate(survey: Survey) -> Calibration:
     Raises
     ------
     ModelError
-        A segment without enough replies (named), or replies that do not determine the unknowns.
+        A segment without enough replies (named), more bases than a segment's pings determine (``solver.n_bases``
+        or ``solver.knot_interval``, checked for every segment and candidate before any is solved), or replies that
+        do not determine the unknowns.
     """
-    s = survey.solver
-    f = survey.log.frame
     legs, harmonic = leg_model(survey)
     candidates = perturbations(survey)
-    segments, tables, runs, nis, apart, searches = [], [], [], [], [], []
+    windows = []
     for k, (a, b, rows) in enumerate(_windows(survey)):
         what = f"segment {k + 1} [{a}, {b})" if a else "the log"
         replies = survey.log.replies(survey.ids, rows)
+        if len(replies):
+            for candidate in candidates:
+                bases_of(candidate, replies.t_tx, replies.t_rx, what, prefix="solver.")
+        windows.append((k, a, b, rows, what, replies))
+    bar = Progress(0, f"calibrate {survey.name} (the moving ocean)", "iteration", progress if candidates else False)
+    with bar:
+        segments, runs, nis, apart, searches, tables = _solve_windows(survey, windows, candidates, legs,
+                                                                      bar.update if bar.active else None)
+    residuals = pd.concat(tables, ignore_index=True)
+    return _combined(survey, segments, runs, nis, apart, searches, residuals, candidates, harmonic)
+
+
+def _solve_windows(survey: Survey, windows: list, candidates: list[Perturbation], legs: LegModel | None,
+                   step) -> tuple[list, list, list, list, list, list]:
+    """Each window's solution (a search's, the least squares', a moving ocean's), its running solution and its
+    rows of ``residuals.csv``; ``step(1)`` after each Gauss-Newton iteration of a moving-ocean solve."""
+    s = survey.solver
+    f = survey.log.frame
+    segments, tables, runs, nis, apart, searches = [], [], [], [], [], []
+    for k, a, b, rows, what, replies in windows:
         if len(candidates) > 1:
             sol, table = select(replies, survey.apriori, s["sound_speed_mps"], candidates, rigid=s["rigid"],
-                                outlier_factor=s["outlier_factor"], legs=legs, what=what, criterion=s["criterion"])
+                                outlier_factor=s["outlier_factor"], legs=legs, what=what, criterion=s["criterion"],
+                                progress=step)
             searches.append(pd.DataFrame(table).assign(segment=k + 1))
         else:
             sol = solve(replies, survey.apriori, s["sound_speed_mps"], rigid=s["rigid"],
                         solve_sound_speed=s["solve_sound_speed"], outlier_factor=s["outlier_factor"],
                         twtt_sigma=s["twtt_sigma_s"], legs=legs, what=what,
-                        perturbation=candidates[0] if candidates else None)
+                        perturbation=candidates[0] if candidates else None, progress=step)
         segments.append((a, b, rows, sol))
         if s["running"] and not candidates:  # the running solution has no perturbation model
             frame, distance, sigmas = _running(survey, k + 1, rows, replies, sol, legs, what)
@@ -189,7 +219,14 @@ def calibrate(survey: Survey) -> Calibration:
         part["azimuth_deg"] = np.degrees(sol.azimuth) % 360.0
         part["used"] = sol.used
         tables.append(part)
-    residuals = pd.concat(tables, ignore_index=True)
+    return segments, runs, nis, apart, searches, tables
+
+
+def _combined(survey: Survey, segments: list, runs: list, nis: list, apart: list, searches: list,
+              residuals: pd.DataFrame, candidates: list[Perturbation], harmonic: np.ndarray | None) -> Calibration:
+    """The segments combined: ``solution.json``'s numbers, the running solution's check, the tables."""
+    s = survey.solver
+    f = survey.log.frame
     combined = combine([seg[3] for seg in segments])
     used = residuals[residuals["used"]]
     rejected = residuals[~residuals["used"]]

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.surveys.garpos import read_garpos
@@ -30,6 +31,13 @@ BUILTIN_SURVEYS = {name: f"{name}.toml" for name in (
     "ncl1-2022-208", "seagap-example")}
 #: The editing a built-in GNATSS survey may ask for (``survey.editing``).
 EDITINGS = ("none", "community")
+#: The units' check (:func:`check_track_units`): the ranges' spread allowed beyond the transducer's movement, as a
+#: fraction of the transponder's depth [1], and the percentiles of the ranges whose difference is their spread.
+TRACK_DEPTH_FRACTION = 0.01
+RANGE_PERCENTILES = (5.0, 95.0)
+#: Where a format's transducer positions come from (what the units' check names).
+TRACK_FIELDS = {"seagap": "obsdata: the antenna's East, North, Up (fields 4-6 and 11-13) [m]",
+                "garpos": "obs: ant_e0, ant_n0, ant_u0, ant_e1, ant_n1, ant_u1 [m]"}
 #: The site's keys of a transponder: name -> (allowed range, unit).
 TRANSPONDER_KEYS = {"e_m": ((-1e5, 1e5), "m"), "n_m": ((-1e5, 1e5), "m"), "u_m": ((-1e5, 1e5), "m"),
                     "turnaround_s": ((0.0, 60.0), "s")}
@@ -55,6 +63,56 @@ class Survey:
     #: unless ``solver.sound_speed_profile`` names another.
     profile: np.ndarray | None = None
 
+
+
+def check_track_units(log: SurveyLog, ids: list[str], apriori: np.ndarray, field: str) -> None:
+    """Refuse a log whose transducer positions cannot be in metres: the ranges its travel times give span more
+    than the transducer moved.
+
+    Two ranges to one transponder differ by no more than the distance between the points they are measured from
+    (the triangle inequality; a reply's range, half its two legs, by no more than the larger of its transmit and
+    receive points' moves). Per transponder, the ranges :math:`r_i = c_{\\min} T_i / 2` at the slowest sea water
+    (:data:`~sblsim.models.calibration.SOUND_SPEED_RANGE`, the smallest spread any speed gives) spread between
+    their :data:`RANGE_PERCENTILES` (a few gross outliers do not count) by at most the diagonal :math:`L` of the
+    box holding the transducer's transmit and receive points plus :data:`TRACK_DEPTH_FRACTION` of the
+    transponder's depth :math:`D` below the transducer's mean height (the ocean's change over a survey, parts in
+    :math:`10^3` of a range of a few depths). Positions in km where metres are expected shrink :math:`L` a
+    thousandfold; the ranges, from the travel times, do not.
+
+    Parameters
+    ----------
+    log : SurveyLog
+    ids : list of str
+        The transponders.
+    apriori : numpy.ndarray, shape (k, 3)
+        Their a-priori positions [m] (their Up gives the depth).
+    field : str
+        Where the positions come from (the error names it).
+
+    Raises
+    ------
+    ModelError
+        One line naming ``field``, the transponder, the ranges' spread, the allowed maximum and the movement.
+    """
+    f = log.frame
+    speed = SOUND_SPEED_RANGE[0]
+    names = f["transponder"].to_numpy()
+    twtt = f["twtt_s"].to_numpy()
+    points = {w: f[[f"{w}_e_m", f"{w}_n_m", f"{w}_u_m"]].to_numpy() for w in ("tx", "rx")}
+    for j, name in enumerate(ids):
+        mine = names == name
+        if mine.sum() < 2:
+            continue
+        low, high = np.percentile(0.5 * speed * twtt[mine], RANGE_PERCENTILES)
+        both = np.vstack((points["tx"][mine], points["rx"][mine]))
+        moved = float(np.linalg.norm(both.max(axis=0) - both.min(axis=0)))
+        depth = abs(float(np.mean(both[:, 2])) - float(apriori[j, 2]))
+        allowed = moved + TRACK_DEPTH_FRACTION * depth
+        if high - low > allowed:
+            raise ModelError(f"{field}: transponder {name}'s ranges (half its TWTT at {speed:g} m/s or more) span "
+                             f"{high - low:.4g} m but the transducer moves within {moved:.4g} m: at most "
+                             f"{allowed:.4g} m is possible (the movement plus {TRACK_DEPTH_FRACTION:.0%} of its "
+                             f"{depth:.4g} m depth); are the positions in km where metres are expected?")
 
 
 def guess_apriori(log: SurveyLog, ids: list[str], sound_speed: float) -> np.ndarray:
@@ -104,6 +162,7 @@ def _builtin(name: str, overrides: list[str]) -> Survey:
         with as_file(data) as path:
             folder = read_seagap(path)
         log, ids, apriori, profile = folder.log, folder.ids, folder.apriori, folder.profile
+        check_track_units(log, ids, apriori, TRACK_FIELDS["seagap"])
         origin = {k: raw["site"][k] for k in ("lat_deg", "lon_deg", "height_m")}
     else:
         depth = None
@@ -170,9 +229,11 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
                  "the covariance scaled by the residuals)"]
         if fmt == "seagap":
             folder = read_seagap(path)
+            check_track_units(folder.log, folder.ids, folder.apriori, TRACK_FIELDS["seagap"])
             return Survey(path.name or str(path), folder.log, folder.ids, folder.apriori, solver, None, fmt,
                           str(path), notes, profile=folder.profile)
         site = read_garpos(path, Path(initcfg), Path(svp))
+        check_track_units(site.log, site.ids, site.apriori, TRACK_FIELDS["garpos"])
         left = site.left_out
         if left["flagged"] or left["unknown_transponder"]:
             notes.append(f"left out {left['flagged']} flagged replies and {left['unknown_transponder']} of "
@@ -191,4 +252,5 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
     return Survey(path.stem, log, ids, apriori, solver, site_origin, fmt, str(path), notes)
 
 
-__all__ = ["BUILTIN_SURVEYS", "EDITINGS", "FORMATS", "Survey", "guess_apriori", "load_survey"]
+__all__ = ["BUILTIN_SURVEYS", "EDITINGS", "FORMATS", "RANGE_PERCENTILES", "Survey", "TRACK_DEPTH_FRACTION",
+           "TRACK_FIELDS", "check_track_units", "guess_apriori", "load_survey"]

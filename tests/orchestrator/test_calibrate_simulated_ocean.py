@@ -54,6 +54,16 @@ def test_the_ntd_solution_meets_its_bound_and_is_consistent(replicates):
     assert r["rms_h_m"] == pytest.approx(r["pcrb_h_m"], rel=0.15)
     assert 1.5 <= r["nees_mean"] <= 4.5
     assert result.solution["n_bases"] == 9 and result.solution["perturbation"]["kind"] == "ntd"
+    _suggested_only_when_the_bound_agrees(result.solution, table)
+
+
+def _suggested_only_when_the_bound_agrees(solution, table):
+    """A survey sigma is suggested only when the replicates' horizontal RMS error (from their table) is within a
+    factor 3 of the RMS of their bounds."""
+    ratio = np.sqrt(np.mean(table["e_n_m"] ** 2 + table["e_e_m"] ** 2)) / np.sqrt(np.mean(table["pcrb_h_m"] ** 2))
+    agrees = 1 / 3 <= ratio <= 3
+    assert solution["bound_agreement"]["ratio"] == pytest.approx(ratio, rel=1e-12)
+    assert solution["bound_agreement"]["agrees"] == agrees and (solution["lbl_set"] is None) == (not agrees)
 
 
 def test_ignoring_the_ocean_sinks_the_transponder_by_c_times_the_mean_delay_over_twice_the_mean_cos2(replicates):
@@ -72,3 +82,4 @@ def test_ignoring_the_ocean_sinks_the_transponder_by_c_times_the_mean_delay_over
     assert np.corrcoef(predicted, got)[0, 1] > 0.95
     r = result.solution["replicates"]
     assert r["rms_h_m"] > 2 * r["pcrb_h_m"] and r["nees_mean"] > 20  # the horizontal too: overconfident
+    _suggested_only_when_the_bound_agrees(result.solution, table)

@@ -127,3 +127,15 @@ def test_sigterm_during_a_design_searched_by_worker_processes(tmp_path):
     status, took, stderr = _interrupt(tmp_path, signal.SIGTERM, "design", "lbl-field-2km", "--workers", "2",
                                       into=5.0)
     _ended_cleanly(tmp_path, status, took, stderr, signal.SIGTERM)
+
+
+def test_ctrl_c_during_a_moving_ocean_search(tmp_path):
+    """A day-long simulated figure-eight (21,601 replies) whose moving ocean is searched over four numbers of bases
+    (each Gauss-Newton iteration up to half a second, the whole some 15 s): Ctrl-C three seconds into the search
+    ends it within 2 s, nothing written (a simulated survey locks its output folder before it simulates)."""
+    status, took, stderr = _interrupt(tmp_path, signal.SIGINT, "calibrate", "box-in",
+                                      "--set", "survey.pattern=figure-eight", "--set", "survey.duration_s=86400",
+                                      "--set", "survey.ntd_sigma_s=2e-4", "--set", "solver.perturbation=ntd",
+                                      "--set", "solver.n_bases=[100, 200, 300, 400]",
+                                      "--set", "solver.outlier_factor=100", into=3.0)
+    _ended_cleanly(tmp_path, status, took, stderr, signal.SIGINT)
