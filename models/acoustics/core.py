@@ -42,13 +42,15 @@ before a run).
 Two-way travel time (``ranging = "twtt"``, SBL and LBL). At ``t_k`` the
 diver's transceiver interrogates the beacon of the slot from its position
 ``p`` then (the up leg, ``τ_u = ‖p − b_i‖ / c̄``); the beacon replies after
-its turnaround ``t_ta + σ_ta w``; the reply reaches the diver at
-``t_k + τ_u + t_ta + σ_ta w + τ_d`` (the down leg to the diver's position at
+its turnaround ``t'_ta = max(t_ta + σ_ta w, 0)`` (never before it heard the interrogation, so that no
+reply arrives before its interrogation; without jitter ``t_ta``); the reply reaches the diver at
+``t_k + τ_u + t'_ta + τ_d`` (the down leg to the diver's position at
 reception, solved as above). The receiver measures the round trip
-``Δt_m = (τ_u + t_ta + σ_ta w + τ_d)(1 + δ)`` on its own clock and
+``Δt_m = (τ_u + t'_ta + τ_d)(1 + δ)`` on its own clock and
 subtracts the nominal turnaround: ``r = c_assumed (Δt_m − t_ta) / 2 +
 σ_r w + e_mp``. Clock offsets cancel and a drift acts only over Δt; the
-turnaround jitter enters the range as ``c σ_ta / 2``; the range is the mean
+turnaround jitter enters the range as ``c σ_ta / 2`` (a jitter comparable to ``t_ta`` is cut at 0: the range
+then errs long on average); the range is the mean
 of the two legs (``range_true``), so it refers to the diver's positions at
 interrogation and at reception (their mean, to first order).
 
@@ -569,8 +571,9 @@ def _exchange(e: _Slot, w, ranging: str, direction: bool, valid) -> _Exchange:
     one way (``owtt``) or two way (``twtt``, the diver interrogates); ``valid``: the packet before the legs."""
     p, x, t_k = e.p, e.x, e.t_k
     drift = p["clock_drift_ppm"] * 1e-6
-    if ranging == "twtt":  # the replying transponder's turnaround
-        turnaround = p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0]
+    if ranging == "twtt":  # the replying transponder's turnaround: never before it heard the interrogation
+        # (a draw below 0 replies at once; without jitter the nominal turnaround, >= 0, is kept as it is)
+        turnaround = ca.fmax(p["turnaround"] + p["turnaround_sigma"] * w[_TURNAROUND][0], 0.0)
     if direction:  # the transceiver interrogates; the diver replies from where it is then
         up = _leg(e, None, True)
         reply = _leg(e, up[0] + turnaround, False, 3)
