@@ -19,8 +19,9 @@ it:
 - a normal matrix numerically rank deficient (its equilibrated condition above :data:`MAX_CONDITION`, or a
   non-positive variance on the diagonal of :math:`Q`: a negative variance is never square-rooted);
 - a position correlated beyond :data:`MAX_CORRELATION` with a perturbation's or a speed's unknown;
-- a solve that did not converge (:data:`~sblsim.models.calibration.measurement.MAX_ITERATIONS` iterations without
-  a step below :data:`~sblsim.models.calibration.measurement.POSITION_TOLERANCE`).
+- a solve that did not converge (checked last, so that a cause above is named first:
+  :data:`~sblsim.models.calibration.measurement.MAX_ITERATIONS` iterations without a step below
+  :data:`~sblsim.models.calibration.measurement.POSITION_TOLERANCE`).
 
 Sources: Björck, Å. (1996) *Numerical Methods for Least Squares Problems*, SIAM; Tomita, F. & Kido, M. (2022)
 SeaGap, Zenodo, doi:10.5281/zenodo.6370613; Watanabe, S. et al. (2020) GARPOS, Front. Earth Sci. 8:597532.
@@ -57,7 +58,8 @@ class Determination:
         The condition number of the normal matrix equilibrated to a unit diagonal [1] (inf: singular).
     max_correlation : float or None
         The largest absolute correlation of a position unknown with another kind of unknown [1] (None: the
-        positions are the only unknowns).
+        positions are the only unknowns; 1 when the normal matrix is numerically singular, its pair then the
+        largest position and other components of the eigenvector of its smallest eigenvalue).
     position : str or None
         The position unknown of ``max_correlation`` (e.g. ``"Up of transponder 2"``, 1-based).
     parameter : str or None
@@ -114,19 +116,22 @@ def determination(normal: np.ndarray, q: int, names: list[str], rigid: bool, con
     s = 1.0 / np.sqrt(d)
     scaled = normal * s[:, None] * s[None, :]
     with np.errstate(all="ignore"):
-        singular = np.linalg.svd(scaled, compute_uv=False)
-    condition = float(singular[0] / singular[-1]) if singular[-1] > 0.0 else float("inf")
-    if len(normal) == q or not np.isfinite(condition):
+        eigen, vectors = np.linalg.eigh(scaled)
+    condition = float(eigen[-1] / eigen[0]) if eigen[0] > 0.0 else float("inf")
+    if len(normal) == q:
         return Determination(condition, None, None, None, converged, iterations)
-    with np.errstate(all="ignore"):
-        inverse = np.linalg.inv(scaled)
-    v = np.diag(inverse)
-    if np.any(v <= 0.0):  # the scaled inverse's diagonal: no variance, numerically rank deficient
-        return Determination(float("inf"), None, None, None, converged, iterations)
-    r = inverse[:q, q:] / np.sqrt(np.outer(v[:q], v[q:]))
-    i, j = np.unravel_index(int(np.argmax(np.abs(r))), r.shape)
-    return Determination(condition, float(abs(r[i, j])), _position_name(int(i), rigid), names[int(j)], converged,
-                         iterations)
+    if condition <= MAX_CONDITION:
+        inverse = (vectors / eigen) @ vectors.T
+        v = np.diag(inverse)
+        r = np.abs(inverse[:q, q:] / np.sqrt(np.outer(v[:q], v[q:])))
+        i, j = np.unravel_index(int(np.argmax(r)), r.shape)
+        return Determination(condition, float(r[i, j]), _position_name(int(i), rigid), names[int(j)], converged,
+                             iterations)
+    # numerically singular: the direction of the smallest eigenvalue is the combination the data do not see;
+    # its largest position and other components are what trade one for the other (a correlation of 1)
+    null = np.abs(vectors[:, 0])
+    i, j = int(np.argmax(null[:q])), int(np.argmax(null[q:]))
+    return Determination(condition, 1.0, _position_name(i, rigid), names[j], converged, iterations)
 
 
 def check_determination(det: Determination, what: str, separate: str) -> None:
@@ -146,15 +151,18 @@ def check_determination(det: Determination, what: str, separate: str) -> None:
     ModelError
         One line naming what cannot be separated and what would separate it.
     """
-    if not det.converged:
-        raise ModelError(f"{what}: the solve did not converge in {det.iterations} iterations (no step below "
-                         "the tolerance): the survey does not determine the unknowns well enough; " + separate)
+    pair = det.max_correlation is not None and det.max_correlation > MAX_CORRELATION
     if not det.condition <= MAX_CONDITION:
-        raise ModelError(f"{what}: the survey cannot separate the unknowns (the normal matrix is rank deficient: "
-                         f"its equilibrated condition {det.condition:.3g} is above {MAX_CONDITION:g}); {separate}")
-    if det.max_correlation is not None and det.max_correlation > MAX_CORRELATION:
+        which = f"the {det.position} from the {det.parameter}" if pair else "the unknowns"
+        raise ModelError(f"{what}: the survey cannot separate {which} (the normal matrix is numerically rank "
+                         f"deficient: its equilibrated condition {det.condition:.3g} is above {MAX_CONDITION:g}); "
+                         + separate)
+    if pair:
         raise ModelError(f"{what}: the survey cannot separate the {det.position} from the {det.parameter} "
                          f"(correlation {det.max_correlation:.6f}, above {MAX_CORRELATION:g}); {separate}")
-
+    if not det.converged:
+        raise ModelError(f"{what}: the solve did not converge in {det.iterations} iterations (no step below "
+                         f"the tolerance; largest position correlation {det.max_correlation or 0.0:.4f}); "
+                         + separate)
 
 __all__ = ["MAX_CONDITION", "MAX_CORRELATION", "Determination", "check_determination", "determination"]

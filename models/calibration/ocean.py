@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from scipy.linalg import cholesky_banded, solve_banded
 
-from sblsim.models.calibration.determination import determination
+from sblsim.models.calibration.determination import check_determination, determination
 from sblsim.models.calibration.legs import LegModel
 from sblsim.models.calibration.measurement import MAX_ITERATIONS, POSITION_TOLERANCE, _directions, _model
 from sblsim.models.calibration.perturbation import (
@@ -311,19 +311,31 @@ def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool,
     theta = np.where(keep, theta, 0.0)
     prior = design.prior(q, active)
     data = design.covariance(used)
-    converged, iterations, normal = False, 0, None
+    converged, iterations, normal, first = False, 0, None, None
+    names = [name for name, on in zip(design.names(), active) if on]
     for iterations in range(1, MAX_ITERATIONS + 1):  # noqa: B007 (the count is returned)
-        residual, a, *_ = _perturbed_model(design, apriori, theta, c0, rigid, legs, rows)
-        wa, wr = data.whiten(a[:, keep]), data.whiten(residual)
-        normal, rhs = wa.T @ wa, wa.T @ wr
+        with np.errstate(all="ignore"):  # a diverging step overflows: refused below, its cause named
+            residual, a, *_ = _perturbed_model(design, apriori, theta, c0, rigid, legs, rows)
+            wa, wr = data.whiten(a[:, keep]), data.whiten(residual)
+            last, (normal, rhs) = normal, (wa.T @ wa, wa.T @ wr)
+            first = normal if last is None else first
         if prior is not None:
             normal = normal + prior
             rhs = rhs - prior @ theta[keep]
         try:
+            if not (np.all(np.isfinite(normal)) and np.all(np.isfinite(rhs))):
+                raise np.linalg.LinAlgError
             step = np.linalg.solve(normal, rhs)
-        except np.linalg.LinAlgError:
+            if not np.all(np.isfinite(step)):
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:  # singular, or diverged: what the survey cannot separate, named
+            for finite in (first, normal, last):  # named at the a-priori geometry, else where it diverged
+                if finite is not None and np.all(np.isfinite(finite)):
+                    det = determination(finite, q, names, rigid, False, iterations)
+                    if det.position is not None:
+                        check_determination(det, what, SEPARATE)
             raise ModelError(f"{what}: the replies do not determine the positions and the perturbation (the normal "
-                             "matrix is singular): fewer bases, or replies from more directions") from None
+                             f"matrix is singular, or the solve diverged); {SEPARATE}") from None
         theta[keep] += step
         if progress is not None:
             progress(1)
@@ -416,6 +428,7 @@ def _perturbed_solution(design: _Design, apriori: np.ndarray, c0: float, rigid: 
     covariance_all = variance * inverse
     diagonal = np.diag(covariance_all)
     if not np.all(diagonal > 0.0):  # born of a numerically singular normal matrix: refused, never a NaN sigma
+        check_determination(det, what, SEPARATE)
         raise ModelError(f"{what}: the survey cannot separate the positions from the perturbation (a non-positive "
                          f"variance of the unknowns; the normal matrix's equilibrated condition is "
                          f"{det.condition:.3g}): {SEPARATE}")
