@@ -261,8 +261,8 @@ def test_the_command_rules_can_fail():
 #: circle can form inside it.
 CALIBRATION = "sblsim.models.calibration"
 CALIBRATION_ORDER = tuple(f"{CALIBRATION}.{name}" for name in (
-    "perturbation", "legs", "replies", "measurement", "ocean", "leastsquares", "selection", "bound", "kalman",
-    "combination", "boxin"))
+    "determination", "perturbation", "legs", "replies", "measurement", "ocean", "leastsquares", "selection", "bound",
+    "kalman", "combination", "boxin"))
 
 
 def _calibration_wrong(read: dict[str, list[tuple[str, int, bool]]]) -> list[tuple[str, str, int]]:

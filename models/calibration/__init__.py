@@ -41,6 +41,9 @@ Algebra, Geodesy, and GPS*, 1997, ch. 9).
 
 Where each part is (one job per module; each imports only the modules listed before it):
 
+* :mod:`~sblsim.models.calibration.determination`: how well a solution is determined (the normal matrix's
+  condition, the positions' correlations with the other unknowns) and the refusal of what the survey cannot
+  separate or what did not converge;
 * :mod:`~sblsim.models.calibration.perturbation`: the sound-speed perturbation's pieces: cubic B-splines and
   their knots, the nadir cosine and the gradients' directions, GARPOS's roughness prior and data correlation, AIC
   and BIC, the realistic sigma's factor;
@@ -69,6 +72,7 @@ from __future__ import annotations
 
 from sblsim.models.calibration.bound import crb
 from sblsim.models.calibration.combination import Combined, combine
+from sblsim.models.calibration.determination import MAX_CONDITION, MAX_CORRELATION, Determination
 from sblsim.models.calibration.kalman import (
     PASSES_RANGE,
     PRIOR_SCALE_SIGMA,
@@ -97,7 +101,8 @@ from sblsim.models.calibration.measurement import (
 from sblsim.models.calibration.replies import Perturbation, PerturbationFit, Replies, Solution
 from sblsim.models.calibration.selection import select
 
-__all__ = ["combine", "Combined", "crb", "EARTH_RADIUS_RANGE", "EigenRay", "LegModel", "MAX_ITERATIONS",
+__all__ = ["combine", "Combined", "crb", "Determination", "MAX_CONDITION", "MAX_CORRELATION",
+           "EARTH_RADIUS_RANGE", "EigenRay", "LegModel", "MAX_ITERATIONS",
            "MAX_SOUND_SPEED_SIGMA", "OUTLIER_FACTOR_RANGE", "PASSES_RANGE", "Perturbation", "PerturbationFit",
            "POSITION_TOLERANCE", "PRIOR_SCALE_SIGMA", "PRIOR_SIGMA_M", "PRIOR_SIGMA_RANGE", "Replies", "Running",
            "running", "RUNNING_AGREEMENT_SIGMA", "running_disagreement", "SCALE_TOLERANCE", "select", "Solution",

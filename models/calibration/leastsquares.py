@@ -12,6 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
+from sblsim.models.calibration.determination import check_determination, determination
 from sblsim.models.calibration.legs import SOUND_SPEED_RANGE, LegModel, StraightRay
 from sblsim.models.calibration.measurement import (
     MAX_ITERATIONS,
@@ -22,7 +23,7 @@ from sblsim.models.calibration.measurement import (
     _model,
     _unknowns,
 )
-from sblsim.models.calibration.ocean import Step, _check_perturbation, _solve_perturbed
+from sblsim.models.calibration.ocean import SEPARATE, Step, _check_perturbation, _solve_perturbed
 from sblsim.models.calibration.replies import Perturbation, Replies, Solution
 from sblsim.models.declarations import ModelError
 
@@ -116,6 +117,38 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
         (with ``solve_sound_speed``: a sound speed outside :data:`SOUND_SPEED_RANGE` or with a 1-sigma above
         :data:`MAX_SOUND_SPEED_SIGMA`).
     """
+    solution = _solve(replies, apriori, sound_speed, rigid=rigid, solve_sound_speed=solve_sound_speed,
+                      outlier_factor=outlier_factor, twtt_sigma=twtt_sigma, legs=legs, what=what,
+                      perturbation=perturbation, progress=progress)
+    judge(solution, what)
+    return solution
+
+
+def judge(solution: Solution, what: str) -> None:
+    """Refuse a solution that did not converge or whose unknowns the survey cannot separate
+    (:func:`~sblsim.models.calibration.determination.check_determination`; a least-squares solution without a
+    perturbation only for its convergence and its rank: its speed scale has its own rule,
+    :data:`MAX_SOUND_SPEED_SIGMA`).
+
+    Raises
+    ------
+    ModelError
+        One line naming what cannot be separated and the survey that would separate it.
+    """
+    det = solution.determination
+    if det is None:
+        return
+    if solution.perturbation is not None:
+        check_determination(det, what, SEPARATE)
+    elif not det.converged:
+        check_determination(det, what, "more replies, from more directions, or a-priori positions nearer the truth")
+
+
+def _solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sound_speed: float, *,
+           rigid: bool = False, solve_sound_speed: bool = False, outlier_factor: float | None = 3.0,
+           twtt_sigma: float = 0.0, legs: LegModel | None = None, what: str = "calibration",
+           perturbation: Perturbation | None = None, progress: Step | None = None) -> Solution:
+    """:func:`solve` without :func:`judge` (a search's first candidate, judged once chosen)."""
     apriori = np.asarray(apriori, dtype=float)
     _check(replies, apriori, float(sound_speed), outlier_factor, float(twtt_sigma))
     legs = legs or StraightRay()
@@ -173,7 +206,8 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
                                                           solve_sound_speed, legs, twtt_sigma)
     w = 1.0 / variance
     ju, ru, wu = jacobian[used], residual[used], w[used]
-    q = np.linalg.inv(ju.T @ (wu[:, None] * ju))
+    normal = ju.T @ (wu[:, None] * ju)
+    q = np.linalg.inv(normal)
     dof = int(used.sum()) - p
     factor = float(np.sum(wu * ru**2) / dof)
     covariance = q * factor
@@ -181,14 +215,19 @@ def solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, sou
     if solve_sound_speed:  # a negative variance (a numerically singular normal matrix): no sigma, refused
         speed_sigma = sound_speed * np.sqrt(variance[-1]) if variance[-1] >= 0.0 else np.nan
         _check_solved_speed(float(c), float(speed_sigma), what)
+    if not np.all(variance >= 0.0):  # born of a numerically singular normal matrix: refused, never a NaN sigma
+        raise ModelError(f"{what}: the replies do not determine the positions (a negative variance: the normal "
+                         "matrix is numerically singular): more replies, from more directions, are needed")
     sd = np.sqrt(variance)
+    det = determination(normal, 3 if rigid else 3 * k, ["sound-speed scale"] if solve_sound_speed else [], rigid,
+                        converged, iterations)
     sigma = np.tile(sd[:3], (k, 1)) if rigid else sd[:3 * k].reshape(k, 3)
     elevation, azimuth, scatter = _directions(replies, x, residual, w, used, k)
     return Solution(position=position, offset=position - apriori, sigma=sigma, covariance=covariance,
                     sound_speed=float(c), sound_speed_sigma=float(sound_speed * sd[-1]) if solve_sound_speed else 0.0,
                     used=used, residual_m=residual, residual_s=residual / c, weight=w, elevation=elevation,
                     azimuth=azimuth, wrms_m=wrms, variance_factor=factor, scatter=scatter, iterations=iterations,
-                    converged=converged)
+                    converged=converged, determination=det)
 
 
-__all__ = ["MAX_SOUND_SPEED_SIGMA", "solve"]
+__all__ = ["MAX_SOUND_SPEED_SIGMA", "judge", "solve"]

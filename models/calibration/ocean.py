@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 from scipy.linalg import cholesky_banded, solve_banded
 
+from sblsim.models.calibration.determination import check_determination, determination
 from sblsim.models.calibration.legs import LegModel
 from sblsim.models.calibration.measurement import MAX_ITERATIONS, POSITION_TOLERANCE, _directions, _model
 from sblsim.models.calibration.perturbation import (
@@ -67,6 +68,13 @@ def _check_perturbation(pert: Perturbation, replies: Replies, solve_speed: bool)
     if pert.kind == "ntd" and pert.mu_t > 0.0:
         raise ModelError("mu_t: the data correlation is GARPOS's (perturbation = garpos); SeaGap's NTD takes "
                          "independent replies")
+
+
+#: What survey separates the positions from a moving ocean (the refusals' advice): a circle at one radius sees each
+#: transponder at few elevations, so that its depth and the nadir delay trade one for the other (SeaGap, Tomita &
+#: Kido 2022; GARPOS, Watanabe et al. 2020, survey several radii or crosses for this reason).
+SEPARATE = ("survey a second circle radius or a cross track over the array (replies at more elevation angles), "
+            "or fix the gradient (solver.gradient=none) and take fewer bases")
 
 
 #: A progress report: called with 1 after each Gauss-Newton iteration of a moving-ocean solve (the caller may show
@@ -190,6 +198,21 @@ class _Design:
             blocks.append(self.fixed[1][rows])
         return np.hstack(blocks)
 
+    def names(self) -> list[str]:
+        """The names of all the perturbation's coefficients, in :meth:`columns`' order (the diagnostics'
+        :func:`~sblsim.models.calibration.determination.determination`)."""
+        east_north = ("East", "North")
+        if self.pert.kind == "ntd":
+            out = [f"NTD basis {j + 1}" for j in range(self.n_bases)]
+            out += [f"deep gradient {a}" for a in east_north if self.deep]
+            return out + [f"shallow gradient {a}" for a in east_north if self.shallow]
+        b = self.n_bases
+        out = [f"GARPOS background basis {j + 1}" for j in range(b)]
+        for name, on in (("shallow", self.shallow), ("deep", self.deep)):
+            if on:
+                out += [f"{name} gradient {a} basis {j + 1}" for a in east_north for j in range(b)]
+        return out
+
     def prior(self, q: int, active: np.ndarray) -> np.ndarray | None:
         """GARPOS's prior information over the solved unknowns (none on the positions); None for ``ntd``."""
         if self.pert.kind == "ntd":
@@ -288,19 +311,31 @@ def _perturbed_fit(design: _Design, apriori: np.ndarray, c0: float, rigid: bool,
     theta = np.where(keep, theta, 0.0)
     prior = design.prior(q, active)
     data = design.covariance(used)
-    converged, iterations, normal = False, 0, None
+    converged, iterations, normal, first = False, 0, None, None
+    names = [name for name, on in zip(design.names(), active) if on]
     for iterations in range(1, MAX_ITERATIONS + 1):  # noqa: B007 (the count is returned)
-        residual, a, *_ = _perturbed_model(design, apriori, theta, c0, rigid, legs, rows)
-        wa, wr = data.whiten(a[:, keep]), data.whiten(residual)
-        normal, rhs = wa.T @ wa, wa.T @ wr
+        with np.errstate(all="ignore"):  # a diverging step overflows: refused below, its cause named
+            residual, a, *_ = _perturbed_model(design, apriori, theta, c0, rigid, legs, rows)
+            wa, wr = data.whiten(a[:, keep]), data.whiten(residual)
+            last, (normal, rhs) = normal, (wa.T @ wa, wa.T @ wr)
+            first = normal if last is None else first
         if prior is not None:
             normal = normal + prior
             rhs = rhs - prior @ theta[keep]
         try:
+            if not (np.all(np.isfinite(normal)) and np.all(np.isfinite(rhs))):
+                raise np.linalg.LinAlgError
             step = np.linalg.solve(normal, rhs)
-        except np.linalg.LinAlgError:
+            if not np.all(np.isfinite(step)):
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:  # singular, or diverged: what the survey cannot separate, named
+            for finite in (first, normal, last):  # named at the a-priori geometry, else where it diverged
+                if finite is not None and np.all(np.isfinite(finite)):
+                    det = determination(finite, q, names, rigid, False, iterations)
+                    if det.position is not None:
+                        check_determination(det, what, SEPARATE)
             raise ModelError(f"{what}: the replies do not determine the positions and the perturbation (the normal "
-                             "matrix is singular): fewer bases, or replies from more directions") from None
+                             f"matrix is singular, or the solve diverged); {SEPARATE}") from None
         theta[keep] += step
         if progress is not None:
             progress(1)
@@ -353,15 +388,17 @@ def _solve_perturbed(replies: Replies, apriori: np.ndarray, c0: float, rigid: bo
                 continue
         break
     return _perturbed_solution(design, apriori, c0, rigid, knots, theta, used, keep, prior, data, normal, iterations,
-                               converged, model)
+                               converged, model, what)
 
 
 def _perturbed_solution(design: _Design, apriori: np.ndarray, c0: float, rigid: bool, knots: np.ndarray,
                         theta: np.ndarray, used: np.ndarray, keep: np.ndarray, prior: np.ndarray | None,
                         data: _DataCovariance, normal: np.ndarray, iterations: int, converged: bool,
-                        model: tuple) -> Solution:
-    """The solution's statistics: SeaGap's (a posteriori variance, AIC, BIC) or GARPOS's (ABIC); ``model`` is
-    :func:`_perturbed_model` of every reply at ``theta``."""
+                        model: tuple, what: str = "calibration") -> Solution:
+    """The solution's statistics: SeaGap's (a posteriori variance, AIC, BIC) or GARPOS's (ABIC) and its
+    :class:`~sblsim.models.calibration.determination.Determination`; ``model`` is :func:`_perturbed_model` of every
+    reply at ``theta``. A non-positive variance (a numerically singular normal matrix) is refused here, where it is
+    born, rather than square-rooted to NaN."""
     pert = design.pert
     replies = design.replies
     k = len(apriori)
@@ -386,8 +423,16 @@ def _perturbed_solution(design: _Design, apriori: np.ndarray, c0: float, rigid: 
         abic = (dof * math.log(misfit + penalty) - data.log_det_inverse - float(np.sum(np.log(positive)))
                 + float(np.linalg.slogdet(normal)[1]))
         sigma_t = np.full(n, np.sqrt(variance) * TRAVEL_TIME_SCALE)
+    names = [name for name, on in zip(design.names(), keep[q:]) if on]
+    det = determination(normal, q, names, rigid, converged, iterations)
     covariance_all = variance * inverse
-    sd = np.sqrt(np.diag(covariance_all))
+    diagonal = np.diag(covariance_all)
+    if not np.all(diagonal > 0.0):  # born of a numerically singular normal matrix: refused, never a NaN sigma
+        check_determination(det, what, SEPARATE)
+        raise ModelError(f"{what}: the survey cannot separate the positions from the perturbation (a non-positive "
+                         f"variance of the unknowns; the normal matrix's equilibrated condition is "
+                         f"{det.condition:.3g}): {SEPARATE}")
+    sd = np.sqrt(diagonal)
     full_sd = np.zeros(len(theta))
     full_sd[keep] = sd
     sigma = np.tile(sd[:3], (k, 1)) if rigid else sd[:q].reshape(k, 3)
@@ -424,7 +469,7 @@ def _perturbed_solution(design: _Design, apriori: np.ndarray, c0: float, rigid: 
                     sound_speed=float(c0), sound_speed_sigma=0.0, used=used, residual_m=residual_m,
                     residual_s=seconds, weight=w, elevation=elevation, azimuth=azimuth, wrms_m=wrms,
                     variance_factor=variance, scatter=scatter, iterations=iterations, converged=converged,
-                    perturbation=fit)
+                    perturbation=fit, determination=det)
 
 
 __all__ = ["Step", "bases_of"]

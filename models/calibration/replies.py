@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sblsim.models.calibration.determination import Determination
+
 
 @dataclass(frozen=True)
 class Replies:
@@ -96,6 +98,9 @@ class Solution:
         positions' block, ``residual_s`` the TWTT residual of the whole model (legs and perturbation) and
         ``variance_factor`` the a posteriori variance of the perturbation's residuals (SeaGap: of the
         nadir-normalised time [s²]; GARPOS: of unit weight).
+    determination : Determination or None
+        The condition of the normal matrix and the positions' largest correlation with the other unknowns
+        (:mod:`sblsim.models.calibration.determination`).
     """
 
     position: np.ndarray
@@ -116,6 +121,7 @@ class Solution:
     iterations: int
     converged: bool
     perturbation: PerturbationFit | None = None
+    determination: Determination | None = None
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from typing import Sequence
 
 import numpy as np
 
-from sblsim.models.calibration.leastsquares import solve
+from sblsim.models.calibration.leastsquares import _solve, judge
 from sblsim.models.calibration.legs import LegModel, StraightRay
 from sblsim.models.calibration.measurement import _model
 from sblsim.models.calibration.ocean import Step, _check_perturbation, _solve_perturbed, bases_of
@@ -76,9 +76,10 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
         _check_perturbation(candidate, replies, False)
         if len(replies):
             bases_of(candidate, replies.t_tx, replies.t_rx, what)
-    first = reference or solve(replies, apriori, sound_speed, rigid=rigid, outlier_factor=outlier_factor, legs=legs,
+    first = reference or _solve(replies, apriori, sound_speed, rigid=rigid, outlier_factor=outlier_factor, legs=legs,
                                what=what, perturbation=candidates[0], progress=progress)
     if len(candidates) == 1 and reference is None:
+        judge(first, what)
         return first, [_candidate_row(candidates[0], first, True)]
     reference = first.offset[0] if rigid else first.offset.ravel()
     residual, jacobian = _model(replies, apriori, reference, float(sound_speed), rigid, False, legs, 0.0)[:2]
@@ -94,6 +95,7 @@ def select(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
     chosen = first if best == 0 and first.perturbation.settings == candidates[0] else \
         _solve_perturbed(replies, apriori, float(sound_speed), rigid, legs, candidates[best], outlier_factor, what,
                          None, start, progress)
+    judge(chosen, what)  # the chosen solution only: a candidate the survey cannot separate loses the search
     return chosen, [_candidate_row(c, s, k == best) for k, (c, s) in enumerate(zip(candidates, solutions))]
 
 

@@ -230,6 +230,11 @@ def main(args: argparse.Namespace) -> int:
         criteria = ", ".join(f"{k.upper()} {s[k]:.2f}" for k in ("aic", "bic", "abic") if s[k] is not None)
         grad = f"; deep gradient E {s['gradient']['e']:.6g} N {s['gradient']['n']:.6g}" if s["gradient"] else ""
         print(f"  perturbation {s['perturbation']['kind']}: {s['n_bases']} bases, {criteria}{grad}")
+    d = s["determination"]
+    correlation = (f"; largest correlation {d['max_correlation']:.4f} ({d['position']} with the {d['parameter']})"
+                   if d["max_correlation"] is not None else "")
+    print(f"  determination: condition {d['condition']:.3g}{correlation}; converged in {d['iterations']} "
+          "iteration(s)")
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
     if "running" in s:

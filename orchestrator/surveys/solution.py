@@ -263,6 +263,7 @@ def _combined(survey: Survey, segments: list, runs: list, nis: list, apart: list
              "twtt_residual_rms_s": _rms(sol.residual_s[sol.used]),
              "variance_factor": sol.variance_factor, "converged": sol.converged}
             for a, b, rows, sol in segments for j, name in enumerate(survey.ids)],
+        "determination": _determination(segments),
         "twtt_residual_rms_s": _rms(used["residual_s"].to_numpy()),
         "twtt_residual_wrms_s": float(np.sqrt(np.sum(w * used["residual_s"].to_numpy() ** 2) / np.sum(w))),
         "pings_used": int(used["ping"].nunique()),
@@ -371,6 +372,17 @@ def _perturbation_keys(survey: Survey, segments: list, combined) -> dict:
     return {**out, "n_bases": bases[0] if len(set(bases)) == 1 else bases, "aic": total("aic"), "bic": total("bic"),
             "abic": total("abic"), "gradient": gradient("deep"), "shallow_gradient": gradient("shallow"),
             "perturbation": {"kind": fits[0].settings.kind, "parameters": [fit.parameters for fit in fits]}}
+
+
+def _determination(segments: list) -> dict:
+    """``solution.json``'s ``determination``: of the segment whose normal matrix is worst conditioned, its condition
+    number equilibrated to a unit diagonal and its positions' largest correlation with another unknown (a speed
+    scale, the perturbation's bases or gradients; :mod:`sblsim.models.calibration.determination`), and each
+    segment's."""
+    dets = [seg[3].determination for seg in segments]
+    rows = [d.as_dict() for d in dets]
+    worst = max(range(len(dets)), key=lambda k: (dets[k].max_correlation or 0.0, dets[k].condition))
+    return {**rows[worst], "segment": worst + 1, "segments": rows}
 
 
 def _realistic(sol: Solution) -> float:

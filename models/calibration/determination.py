@@ -1,0 +1,169 @@
+"""How well a calibration's unknowns are determined: the condition of its normal matrix, the correlations of the
+positions with the other unknowns (a sound-speed scale, the perturbation's bases and gradients), and the refusal of
+a solve whose unknowns the survey's geometry cannot separate, or that did not converge.
+
+:func:`determination` computes the diagnostics from the normal matrix :math:`N = A^\\top W A` of the last
+Gauss-Newton step and its inverse :math:`Q = N^{-1}`:
+
+- the condition number of :math:`N` equilibrated to a unit diagonal, :math:`\\kappa(D^{-1/2} N D^{-1/2})`,
+  :math:`D = \\mathrm{diag}(N)` (the scaling makes it independent of the unknowns' units, metres against seconds;
+  Björck 1996, *Numerical Methods for Least Squares Problems*, SIAM, sections 1.4 and 2.6, and van der Sluis's
+  theorem that this scaling is within a factor of the number of unknowns of the best diagonal one);
+- the correlation :math:`\\rho_{ij} = Q_{ij}/\\sqrt{Q_{ii} Q_{jj}}` of each position unknown with each other unknown
+  (the formal correlation of the estimates; SeaGap, Tomita & Kido 2022, and GARPOS, Watanabe et al. 2020, report
+  the positions' covariance, of which these are the normalised off-diagonal terms).
+
+:func:`check_determination` refuses, in one line naming what cannot be separated and which survey would separate
+it:
+
+- a normal matrix numerically rank deficient (its equilibrated condition above :data:`MAX_CONDITION`, or a
+  non-positive variance on the diagonal of :math:`Q`: a negative variance is never square-rooted);
+- a position correlated beyond :data:`MAX_CORRELATION` with a perturbation's or a speed's unknown;
+- a solve that did not converge (checked last, so that a cause above is named first:
+  :data:`~sblsim.models.calibration.measurement.MAX_ITERATIONS` iterations without a step below
+  :data:`~sblsim.models.calibration.measurement.POSITION_TOLERANCE`).
+
+Sources: Björck, Å. (1996) *Numerical Methods for Least Squares Problems*, SIAM; Tomita, F. & Kido, M. (2022)
+SeaGap, Zenodo, doi:10.5281/zenodo.6370613; Watanabe, S. et al. (2020) GARPOS, Front. Earth Sci. 8:597532.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+
+#: The largest absolute correlation [1] of a position unknown with a perturbation's (or a speed scale's) unknown
+#: that a solution keeps. Above it the two trade one for the other within the data's noise (a correlation of
+#: 0.9999 inflates a sigma by a factor 71 over the one of a separable survey, :math:`1/\sqrt{1-\rho^2}`), as for a
+#: circle at one radius, whose replies at each transponder share a few elevations, so that its Up and a constant
+#: nadir delay are one unknown. Every survey of the package's examples and docs stays below it (NCL1's NTD 0.17,
+#: SeaGap's example 0.45; the simulated box-in's single circle in a moving ocean 0.99978, whose sigmas still cover
+#: its errors).
+MAX_CORRELATION = 0.9999
+#: The largest condition number [1] of the normal matrix equilibrated to a unit diagonal that a solution keeps:
+#: above it the matrix is numerically rank deficient (1e12 leaves 4 significant digits of double precision to the
+#: solution's variances, Björck 1996, section 1.4); the package's examples stay below 1e8.
+MAX_CONDITION = 1e12
+
+
+@dataclass(frozen=True)
+class Determination:
+    """The diagnostics of a solution's normal matrix (:func:`determination`).
+
+    Attributes
+    ----------
+    condition : float
+        The condition number of the normal matrix equilibrated to a unit diagonal [1] (inf: singular).
+    max_correlation : float or None
+        The largest absolute correlation of a position unknown with another kind of unknown [1] (None: the
+        positions are the only unknowns; 1 when the normal matrix is numerically singular, its pair then the
+        largest position and other components of the eigenvector of its smallest eigenvalue).
+    position : str or None
+        The position unknown of ``max_correlation`` (e.g. ``"Up of transponder 2"``, 1-based).
+    parameter : str or None
+        The other unknown of ``max_correlation`` (e.g. ``"NTD basis 3"``, ``"deep gradient East"``).
+    converged : bool
+        Whether Gauss-Newton met its tolerance.
+    iterations : int
+        Its iterations.
+    """
+
+    condition: float
+    max_correlation: float | None
+    position: str | None
+    parameter: str | None
+    converged: bool
+    iterations: int
+
+    def as_dict(self) -> dict:
+        """The keys of ``solution.json``'s ``determination``."""
+        return {"condition": self.condition if np.isfinite(self.condition) else None,
+                "max_correlation": self.max_correlation, "position": self.position, "parameter": self.parameter,
+                "converged": self.converged, "iterations": self.iterations}
+
+
+def _position_name(i: int, rigid: bool) -> str:
+    axis = ("East", "North", "Up")[i % 3]
+    return f"{axis} of the array's common shift" if rigid else f"{axis} of transponder {i // 3 + 1}"
+
+
+def determination(normal: np.ndarray, q: int, names: list[str], rigid: bool, converged: bool,
+                  iterations: int) -> Determination:
+    """The condition and the correlations of a normal matrix whose first ``q`` unknowns are positions.
+
+    Parameters
+    ----------
+    normal : numpy.ndarray, shape (p, p)
+        The normal matrix :math:`A^\\top W A` (with a prior, if any) of the last step [units of the unknowns⁻²].
+    q : int
+        The position unknowns, first (3 per transponder, or 3 for a rigid shift).
+    names : list of str
+        The names of the other ``p - q`` unknowns.
+    rigid : bool
+        Whether the positions are one common shift.
+    converged, iterations
+        Gauss-Newton's end.
+
+    Returns
+    -------
+    Determination
+    """
+    d = np.diag(normal)
+    if not np.all(np.isfinite(normal)) or np.any(d <= 0.0):
+        return Determination(float("inf"), None, None, None, converged, iterations)
+    s = 1.0 / np.sqrt(d)
+    scaled = normal * s[:, None] * s[None, :]
+    with np.errstate(all="ignore"):
+        eigen, vectors = np.linalg.eigh(scaled)
+    condition = float(eigen[-1] / eigen[0]) if eigen[0] > 0.0 else float("inf")
+    if len(normal) == q:
+        return Determination(condition, None, None, None, converged, iterations)
+    if condition <= MAX_CONDITION:
+        inverse = (vectors / eigen) @ vectors.T
+        v = np.diag(inverse)
+        r = np.abs(inverse[:q, q:] / np.sqrt(np.outer(v[:q], v[q:])))
+        i, j = np.unravel_index(int(np.argmax(r)), r.shape)
+        return Determination(condition, float(r[i, j]), _position_name(int(i), rigid), names[int(j)], converged,
+                             iterations)
+    # numerically singular: the direction of the smallest eigenvalue is the combination the data do not see;
+    # its largest position and other components are what trade one for the other (a correlation of 1)
+    null = np.abs(vectors[:, 0])
+    i, j = int(np.argmax(null[:q])), int(np.argmax(null[q:]))
+    return Determination(condition, 1.0, _position_name(i, rigid), names[j], converged, iterations)
+
+
+def check_determination(det: Determination, what: str, separate: str) -> None:
+    """Refuse a solution that did not converge, whose normal matrix is numerically rank deficient, or whose position
+    is correlated beyond :data:`MAX_CORRELATION` with another unknown.
+
+    Parameters
+    ----------
+    det : Determination
+    what : str
+        What the error names (e.g. the segment).
+    separate : str
+        The survey that would separate the unknowns (e.g. "a second circle radius or a cross track").
+
+    Raises
+    ------
+    ModelError
+        One line naming what cannot be separated and what would separate it.
+    """
+    pair = det.max_correlation is not None and det.max_correlation > MAX_CORRELATION
+    if not det.condition <= MAX_CONDITION:
+        which = f"the {det.position} from the {det.parameter}" if pair else "the unknowns"
+        raise ModelError(f"{what}: the survey cannot separate {which} (the normal matrix is numerically rank "
+                         f"deficient: its equilibrated condition {det.condition:.3g} is above {MAX_CONDITION:g}); "
+                         + separate)
+    if pair:
+        raise ModelError(f"{what}: the survey cannot separate the {det.position} from the {det.parameter} "
+                         f"(correlation {det.max_correlation:.6f}, above {MAX_CORRELATION:g}); {separate}")
+    if not det.converged:
+        raise ModelError(f"{what}: the solve did not converge in {det.iterations} iterations (no step below "
+                         f"the tolerance; largest position correlation {det.max_correlation or 0.0:.4f}); "
+                         + separate)
+
+__all__ = ["MAX_CONDITION", "MAX_CORRELATION", "Determination", "check_determination", "determination"]
