@@ -273,8 +273,7 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
 
     Over at most ``max_pings`` pings (evenly spread) heard by at least dim + 3 receivers, each fixed alone
     (:func:`fix_pings`, outliers dropped at the middle of ``bounds``, then again at the first estimate) at a
-    trial speed (only the fixes whose position spread is at most 3 times the median's: where the geometry is
-    poor, outside the array, a fix's nonlinearity biases the speed); the speed minimising the
+    trial speed; the speed minimising the
     sum of the fixes' squared residuals (bounded scalar search), its standard error from that sum's curvature
     (``σ_c² = 2 / (d²χ²/dc²)``). The redundant receivers of a ping see the speed through the spread of its
     ranges (a wrong speed scales every range alike, which a single emission time cannot absorb).
@@ -312,10 +311,8 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
     rich = rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
     c = 0.5 * (bounds[0] + bounds[1])
     for _ in range(2):  # the outliers dropped at the middle speed, then again at the first estimate
-        positions, _, covariances, used, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
+        positions, _, _, used, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
         keep = np.isfinite(positions).all(axis=1) & (used.sum(axis=1) >= dim + 2)
-        spread = np.sqrt(np.trace(covariances[:, :dim, :dim], axis1=1, axis2=2))
-        keep &= spread <= 3 * np.median(spread[keep]) if keep.any() else keep  # the array's good geometry only
         if keep.sum() < 3:
             raise ModelError("sound speed calibration: fewer than 3 pings could be fixed; give the sound speed")
         rows = np.where(used[keep], toa[rich][keep], np.nan)
