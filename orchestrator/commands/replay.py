@@ -21,7 +21,7 @@ from sblsim.orchestrator.commands.common import (
     text_argument,
 )
 from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, print_metrics
-from sblsim.orchestrator.cosim.config import MODEL_PREFIX, external_path
+from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external_path
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
@@ -120,6 +120,82 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
                         lambda: prepare_out(out, force, "summary.json", "replay"))
 
 
+@dataclass
+class TrackResult:
+    """The outcome of :func:`replay_toa`.
+
+    Attributes
+    ----------
+    summary : dict
+        ``summary.json``: the sound speed (given or calibrated), the ping interval, and per estimator (``rts``,
+        ``ekf``, ``fix``, ``reference``) the pings positioned and, with a truth track, the 2-D errors' count,
+        mean, median, RMS, 90th and 95th percentiles [m] and the mean 2-D NEES.
+    tracks : pandas.DataFrame
+        ``track.csv``: one row per ping and estimator: ``ping``, ``time`` (the estimated emission time) [s],
+        ``x``, ``y`` [m], ``sigma_x``, ``sigma_y`` [m], ``receivers_heard``, ``estimator``.
+    errors : pandas.DataFrame or None
+        ``errors.csv`` (with a truth track): ``estimator``, ``ping``, ``time`` [s], ``error_2d_m`` [m].
+    out : Path or None
+    """
+
+    summary: dict[str, Any]
+    tracks: pd.DataFrame
+    errors: pd.DataFrame | None
+    out: Path | None = None
+
+
+def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | None = None,
+               reference: str | Path | None = None, smooth: bool = True, sound_speed: float | None = None,
+               out: str | Path | None = None, force: bool = False) -> TrackResult:
+    """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
+    --format toa`` (docs/tracking.md).
+
+    Parameters
+    ----------
+    toa : str or Path
+        The TOA matrix: one row per ping, one column per receiver [s], ``NA`` or empty where not heard.
+    receivers : str or Path
+        The receivers' positions: a CSV (name, ``x_m``, ``y_m``[, ``z_m``][, ``status``]) or a TOML file.
+    truth : str or Path, optional
+        A truth track (``x y t`` [m, m, s] under a header, e.g. GPS): the errors.
+    reference : str or Path, optional
+        Another solution (``x y t``) scored beside, on its own rows.
+    smooth : bool
+        Also run the RTS smoother (the ``rts`` rows).
+    sound_speed : float, optional
+        [m/s] in [1300, 1700]; default calibrated from the pings (single-ping fixes).
+    out : str or Path, optional
+        Write ``track.csv``, ``summary.json``, ``errors.csv`` and ``track.png`` there.
+    force : bool
+        Replace an earlier result in ``out``.
+
+    Returns
+    -------
+    TrackResult
+
+    Raises
+    ------
+    ModelError, ConfigError
+        A file that cannot be read or holds a value outside its range (one line naming the file, line and
+        column), bad options.
+    """
+    from sblsim.orchestrator.commands.common import flag_argument, real_argument
+    from sblsim.orchestrator.tracks.track import track, write
+
+    toa = path_argument(toa, "toa", optional=False)
+    receivers = path_argument(receivers, "receivers", optional=False)
+    truth = path_argument(truth, "truth")
+    reference = path_argument(reference, "reference")
+    smooth = flag_argument(smooth, "smooth")
+    if sound_speed is not None:
+        sound_speed = real_argument(sound_speed, "sound_speed", 1300.0, 1700.0, "m/s")
+    target = prepare_out(out, force, "summary.json", "track")
+    outcome = track(toa, receivers, truth, reference, smooth, sound_speed)
+    if target is not None:
+        write(outcome, target, truth)
+    return TrackResult(outcome.summary, outcome.tracks, outcome.errors, target)
+
+
 def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,
                  fmu_dir: str | Path | None, prepare: Callable[[], Path | None]) -> ReplayResult:
     """:func:`replay` of a plan (and ``sblsim replay``): read the log and the truth track, ``prepare()`` the
@@ -144,14 +220,26 @@ HELP = "run a receiver on a recorded log (docs/log-format.md)"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim replay``'s arguments."""
-    p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one)")
+    p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one); with "
+                   "--format toa, the matrix of times of arrival (docs/tracking.md)")
+    p.add_argument("--format", choices=("log", "toa"), default="log",
+                   help="log: a receiver's log (default); toa: times of arrival of a pinger at a fixed array "
+                        "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS smoother")
+    p.add_argument("--receivers", type=Path, default=None, metavar="FILE",
+                   help="--format toa: the receivers' positions (CSV name,x_m,y_m[,z_m][,status], or TOML)")
+    p.add_argument("--reference", type=Path, default=None, metavar="FILE",
+                   help="--format toa: another solution (x y t) scored beside against --truth")
+    p.add_argument("--smooth", action="store_true", help="--format toa: also the RTS smoother (the rts rows)")
+    p.add_argument("--sound-speed", type=float, default=None, metavar="M_S",
+                   help="--format toa: the sound speed [m/s] (default: calibrated from the pings)")
     p.add_argument("--receiver", default=None,
                    help="ekf, ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH (default: the configuration's)")
     p.add_argument("--config", default=None, metavar="CONFIG",
                    help="the receiver's parameters, T and rate ratio: a built-in scenario or CONFIG.toml (default: "
                         "the configuration an exported log carries, else the semicircle scenario's)")
     p.add_argument("--truth", type=Path, default=None, metavar="FILE",
-                   help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures")
+                   help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures; with "
+                        "--format toa: x y t [m, m, s] under a header (e.g. GPS)")
     p.add_argument("--engine", choices=ENGINES, default="local", help="component engine (default local)")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/replay_LOGNAME)")
     p.add_argument("--force", action="store_true", help="replace an earlier replay in --out")
@@ -162,6 +250,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim replay`` from its parsed arguments: its lines printed, its exit status returned."""
+    if args.format == "toa":
+        return _main_toa(args)
+    given = [o for o, v in (("--receivers", args.receivers), ("--reference", args.reference),
+                            ("--smooth", args.smooth), ("--sound-speed", args.sound_speed)) if v]
+    if given:
+        raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
+                          "--config, --truth, --engine, --set")
     from sblsim.orchestrator.replay import replay_config
 
     notes: list[str] = []
@@ -209,4 +304,42 @@ def main(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: the {s['receiver']} receiver never made a fix: no row of the log brought a range "
               "it used", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
+    return 0
+
+
+def _main_toa(args: argparse.Namespace) -> int:
+    """``sblsim replay TOA_FILE --format toa``: the track's lines printed."""
+    from sblsim.orchestrator.commands.common import real_argument
+    from sblsim.orchestrator.tracks.track import track, write
+
+    if args.receivers is None:
+        raise ConfigError("--receivers: required with --format toa (the receivers' positions, a CSV or TOML file)")
+    other = [o for o, v in (("--receiver", args.receiver), ("--config", args.config), ("--set", args.overrides),
+                            ("--fmu-dir", args.fmu_dir)) if v]
+    if other or args.engine != "local":
+        raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
+                          "--truth, --reference, --smooth, --sound-speed, --out, --force")
+    speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", 1300.0, 1700.0,
+                                                                "m/s")
+    outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed)
+    out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
+                        "summary.json", "track")
+    write(outcome, out, args.truth)
+    s = outcome.summary
+    c = s["sound_speed"]
+    print(f"track of {args.log}: {s['n_pings']} pings at {len(s['receivers'])} receivers, sound speed "
+          f"{c['sound_speed_m_s']:.1f} m/s ({c['source']}), ping interval {s['ping_interval_s']:.4f} s, in "
+          f"{s['wall_time_s']:.1f} s")
+    names = {"rts": "RTS smoother", "ekf": "EKF (causal)", "fix": "single-ping fix", "reference": "reference"}
+    if args.truth is not None:
+        print(f"  2-D error against {args.truth} [m]:")
+        print(f"  {'estimator':<16} {'pings':>6} {'median':>7} {'RMS':>8} {'p90':>7} {'p95':>7}")
+        for key, e in s["estimators"].items():
+            if "median_m" in e:
+                print(f"  {names[key]:<16} {e['n_scored']:>6} {e['median_m']:>7.3f} {e['rms_m']:>8.3f} "
+                      f"{e['p90_m']:>7.3f} {e['p95_m']:>7.3f}")
+    else:
+        for key, e in s["estimators"].items():
+            print(f"  {names[key]}: {e['n_fixed']} pings positioned")
+    print(f"  written to {out}/ (track.csv, summary.json, {'errors.csv, ' if args.truth else ''}track.png)")
     return 0
