@@ -43,6 +43,7 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from sblsim.models.declarations import ModelError
 
@@ -300,8 +301,6 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
     pings : int
         Pings used.
     """
-    from scipy.optimize import minimize_scalar
-
     receivers = np.asarray(receivers, float)
     dim = receivers.shape[1]
     rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)

@@ -15,9 +15,11 @@ import numpy as np
 from sblsim.orchestrator.commands.common import (
     Overrides,
     check_engine,
+    flag_argument,
     override_items,
     path_argument,
     prepare_out,
+    real_argument,
     text_argument,
 )
 from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, print_metrics
@@ -25,6 +27,7 @@ from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.tracks.track import track, write
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -179,9 +182,6 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         A file that cannot be read or holds a value outside its range (one line naming the file, line and
         column), bad options.
     """
-    from sblsim.orchestrator.commands.common import flag_argument, real_argument
-    from sblsim.orchestrator.tracks.track import track, write
-
     toa = path_argument(toa, "toa", optional=False)
     receivers = path_argument(receivers, "receivers", optional=False)
     truth = path_argument(truth, "truth")
@@ -309,9 +309,6 @@ def main(args: argparse.Namespace) -> int:
 
 def _main_toa(args: argparse.Namespace) -> int:
     """``sblsim replay TOA_FILE --format toa``: the track's lines printed."""
-    from sblsim.orchestrator.commands.common import real_argument
-    from sblsim.orchestrator.tracks.track import track, write
-
     if args.receivers is None:
         raise ConfigError("--receivers: required with --format toa (the receivers' positions, a CSV or TOML file)")
     other = [o for o, v in (("--receiver", args.receiver), ("--config", args.config), ("--set", args.overrides),

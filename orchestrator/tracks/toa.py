@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import NUMBER, number, regular_file, text_lines
@@ -76,8 +77,6 @@ def _numbers(rows: list[str], name: str, what: str, first_line: int, header: lis
              missing: bool) -> np.ndarray:
     """The cells of ``rows`` parsed by pandas as a float matrix, each checked: a number (``NA``/empty allowed
     only where ``missing``), finite, within [low, high]; an error names the line and the column."""
-    import pandas as pd
-
     width = len(header)
     sep = "," if any("," in r for r in rows[:1]) else r"\s+"
     try:

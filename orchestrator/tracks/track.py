@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
 #: by their median absolute deviation, 0.15 ms by their standard deviation).
@@ -191,8 +192,6 @@ def figure(outcome: TrackOutcome, truth_path: Path | None):
 def write(outcome: TrackOutcome, out: Path, truth_path: Path | None) -> None:
     """``track.csv``, ``summary.json``, ``errors.csv`` (with a truth) and ``track.png``, all or nothing."""
     import matplotlib.pyplot as plt
-
-    from sblsim.orchestrator.io.output import staged_directory
 
     fig = figure(outcome, truth_path)
     try:
