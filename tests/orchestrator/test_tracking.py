@@ -15,7 +15,8 @@ from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.orchestrator.tracks.toa import read_receivers, read_toa, read_track
 
-DATA = Path(sblsim.orchestrator.__file__).parent / "tracks" / "data" / "lake-hald"
+# the recording is in the repository (tests and docs), not in the wheel
+DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
 
 
 def stats(e: np.ndarray) -> tuple[float, float]:
