@@ -103,24 +103,112 @@ def test_rts_against_filterpy():
     assert np.abs(xs - x_ref).max() <= 1e-9 and np.abs(Ps - P_ref).max() <= 1e-9
 
 
-def test_lake_hald_beats_umap():
-    r = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
-                          reference=DATA / "umap.txt", sound_speed=1420.0)
+THINNED = ["H2", "H4", "H6", "H7", "H11", "H12", "H17", "H23"]  # the authors' 8 of the 28 (docs/tracking.md)
+
+
+def gps_errors(t: np.ndarray, x: np.ndarray, y: np.ndarray, gps: np.ndarray, lag: float = 0.0) -> np.ndarray:
+    """An independent scoring: the GPS (rows x, y, t) interpolated at t + lag; 2-D errors inside its span."""
+    inside = (t >= gps[0, 2]) & (t <= gps[-1, 2])
+    return np.hypot(x - np.interp(t + lag, gps[:, 2], gps[:, 0]), y - np.interp(t + lag, gps[:, 2], gps[:, 1]))[inside]
+
+
+@pytest.fixture(scope="module")
+def full(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lake") / "full"
+    return sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                             reference=DATA / "umap.txt", sound_speed=1420.0, out=out)
+
+
+def test_lake_hald_beats_umap(full):
+    r = full
     umap = np.genfromtxt(DATA / "umap.txt", skip_header=1)
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
-    e_umap = np.hypot(umap[:, 0] - np.interp(umap[:, 2], gps[:, 2], gps[:, 0]),
-                      umap[:, 1] - np.interp(umap[:, 2], gps[:, 2], gps[:, 1]))
-    median_umap, rms_umap = stats(e_umap)
-    rts = r.tracks[r.tracks["estimator"] == "rts"]
-    e = np.hypot(rts["x"] - np.interp(rts["time"], gps[:, 2], gps[:, 0]),
-                 rts["y"] - np.interp(rts["time"], gps[:, 2], gps[:, 1]))
-    median, rms = stats(e.to_numpy())
-    assert median < median_umap and rms < rms_umap and len(rts) >= len(umap)
-    fix = r.tracks[r.tracks["estimator"] == "fix"]
-    e_fix = np.hypot(fix["x"] - np.interp(fix["time"], gps[:, 2], gps[:, 0]),
-                     fix["y"] - np.interp(fix["time"], gps[:, 2], gps[:, 1]))
-    assert np.median(e_fix) <= 0.5
+    median_umap, rms_umap = stats(gps_errors(umap[:, 2], umap[:, 0], umap[:, 1], gps))
+    e = gps_errors(r.track["time"].to_numpy(), r.track["x"].to_numpy(), r.track["y"].to_numpy(), gps)
+    median, rms = stats(e)
+    assert median < median_umap and rms < rms_umap and len(r.track) >= len(umap)
+    fix = r.estimates[r.estimates["estimator"] == "fix"]
+    assert np.median(gps_errors(fix["time"].to_numpy(), fix["x"].to_numpy(), fix["y"].to_numpy(), gps)) <= 0.5
     assert r.summary["wall_time_s"] <= 10
+    # score.json: the issue's keys, the track's (the smoother's) figures, the reference's under "others"
+    assert list(r.score)[:9] == ["n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95_m", "nees",
+                                 "lag_s"]
+    assert r.score["n_pings"] == 3244 and r.score["n_fixed"] == len(r.track)
+    assert np.isclose(r.score["median_m"], median, rtol=1e-12) and np.isclose(r.score["rms_m"], rms, rtol=1e-12)
+    assert np.isclose(r.score["p95_m"], np.percentile(e, 95), rtol=1e-12)
+    assert np.isclose(r.score["others"]["reference"]["rms_m"], rms_umap, rtol=1e-12)
+
+
+def test_written_files_keep_the_issue_names(full):
+    import json
+
+    import pandas as pd
+
+    track = pd.read_csv(full.out / "track.csv")
+    assert list(track.columns) == ["time", "x", "y", "sigma_x", "sigma_y", "receivers_heard"]
+    rts = full.estimates[full.estimates["estimator"] == "rts"]
+    assert np.allclose(track["x"], rts["x"], rtol=0, atol=1e-9) and len(track) == len(rts)
+    score = json.loads((full.out / "score.json").read_text())
+    assert list(score)[:9] == list(full.score)[:9] and score["estimator"] == "rts"
+    errors = pd.read_csv(full.out / "errors.csv")
+    assert set(errors["estimator"]) == {"rts", "ekf", "fix", "reference"}
+    assert not (full.out / "tracks.csv").exists()
+
+
+def test_thinned_array_gives_larger_errors(full):
+    """The authors' 8-hydrophone array against the full one, each scored here against the GPS."""
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    thin = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                             sound_speed=1420.0, receivers_kept=THINNED)
+    assert thin.summary["receivers"] == THINNED
+    rows = [r.track for r in (full, thin)]
+    (m_full, rms_full), (m_thin, rms_thin) = (stats(gps_errors(t["time"].to_numpy(), t["x"].to_numpy(),
+                                                               t["y"].to_numpy(), gps)) for t in rows)
+    assert m_thin > m_full and rms_thin > rms_full and len(thin.track) < len(full.track)
+
+
+def test_lag_is_estimated_and_not_applied():
+    from sblsim.orchestrator.tracks.track import score
+
+    rng = np.random.default_rng(5)
+    tt_ = np.arange(0.0, 600.0, 1.0)
+    truth = np.column_stack([tt_, 50 * np.cos(tt_ / 60), 50 * np.sin(tt_ / 60)])  # 0.83 m/s on a circle
+    t = np.arange(40.0, 560.0, 2.0)
+    lag = 2.3
+    xy = np.column_stack([np.interp(t + lag, tt_, truth[:, 1]), np.interp(t + lag, tt_, truth[:, 2])])
+    xy += 0.05 * rng.normal(size=xy.shape)
+    stats_, err, _ = score(t, xy, truth)
+    assert abs(stats_["lag_s"] - lag) < 0.05
+    e = gps_errors(t, xy[:, 0], xy[:, 1], truth[:, [1, 2, 0]])
+    assert np.isclose(stats_["median_m"], np.median(e), rtol=1e-12) and np.median(e) > 1.5  # not applied
+    assert np.isclose(stats_["along_track_m"], 0.83 * lag, rtol=0.1)  # a lag seen as an along-track offset
+
+
+def test_drop_detections_is_seeded_and_takes_its_share():
+    from sblsim.orchestrator.tracks.track import drop_detections
+
+    toa = read_toa(DATA / "toa.txt").toa
+    heard = np.isfinite(toa)
+    a, n = drop_detections(toa, 0.25, 1)
+    b, _ = drop_detections(toa, 0.25, 1)
+    c, _ = drop_detections(toa, 0.25, 2)
+    kept = np.isfinite(a)
+    assert np.array_equal(kept, np.isfinite(b)) and not np.array_equal(kept, np.isfinite(c))
+    assert not (kept & ~heard).any() and np.array_equal(a[kept], toa[kept]) and n == int((heard & ~kept).sum())
+    assert abs(n / heard.sum() - 0.25) < 4 * np.sqrt(0.25 * 0.75 / heard.sum())
+
+
+@pytest.mark.parametrize("option, word", [(["--drop-detections", "1.5"], "--drop-detections"),
+                                          (["--receivers-kept", "H2,H99"], "H99"),
+                                          (["--seed", "3"], "--seed")])
+def test_thinning_options_refused_in_one_line(tmp_path, capsys, option, word):
+    from sblsim.orchestrator.cli import main
+
+    out = tmp_path / "out"
+    status = main(["replay", str(DATA / "toa.txt"), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"),
+                   "--sound-speed", "1420", "--out", str(out), *option])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and word in err[0] and not out.exists()
 
 
 def test_simulated_sound_speed_and_nees():
