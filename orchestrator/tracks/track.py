@@ -174,7 +174,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
           drop: float = 0.0, seed: int = 0) -> TrackOutcome:
     """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
-    (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed`)."""
+    (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -189,8 +189,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     toa, dropped = drop_detections(toa, drop, seed)
     dim = positions.shape[1]
     if sound_speed is None:
-        c, sigma_c, calibration_pings = tt.calibrate_sound_speed(toa, positions, SIGMA_TOA)
-        speed = {"sound_speed_m_s": c, "source": "calibrated", "sigma_m_s": sigma_c, "pings": calibration_pings}
+        c, sigma_c, calibration_pings = tt.calibrate_sound_speed_robust(toa, positions, SIGMA_TOA)
+        speed = {"sound_speed_m_s": c, "source": "calibrated", "method": "joint soft-L1", "sigma_m_s": sigma_c,
+                 "pings": calibration_pings}
     else:
         c = sound_speed
         speed = {"sound_speed_m_s": c, "source": "given"}
