@@ -258,7 +258,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
 
 def figure(outcome: TrackOutcome, truth_path: Path | None):
-    """The track against the truth and the 2-D error along the time (a matplotlib figure)."""
+    """The track against the truth, and the 2-D errors along the time with the track's 2σ band (a matplotlib
+    figure)."""
     import matplotlib.pyplot as plt
 
     from sblsim.orchestrator.tracks.toa import read_track
@@ -276,6 +277,9 @@ def figure(outcome: TrackOutcome, truth_path: Path | None):
             e = outcome.errors[outcome.errors["estimator"] == estimator]
             if len(e):
                 bx.semilogy(e["time"], e["error_2d_m"], ".", ms=2, label=estimator)
+        # the track's own 2σ of the 2-D error (2 √(σx² + σy²), its covariance's DRMS doubled)
+        bx.semilogy(tr["time"], 2 * np.hypot(tr["sigma_x"], tr["sigma_y"]), "-", color="k", lw=0.8,
+                    label=f"{best} 2σ (2 DRMS)")
         bx.set(xlabel="emission time [s]", ylabel="2-D error [m]", title="error against the truth")
         bx.legend()
     fig.tight_layout()
