@@ -493,6 +493,14 @@ class TrackerSettings:
     reinit_after : int
         Pings heard by dim + 2 or more receivers, every arrival refused, after which the filter starts again from a
         single-ping fix.
+    fix_gate : float
+        The squared Mahalanobis distance (against the prediction's and the fix's position covariances summed)
+        beyond which an overdetermined single-ping fix (dim + 3 receivers or more) disagrees with the prediction
+        (χ²(2) at 1 − 2·10⁻⁹ is 40).
+    disagree_after : int
+        Consecutive disagreeing pings after which the filter starts again from a single-ping fix (it is lost:
+        a diverged filter with a grown covariance keeps accepting arrivals, so the refusals alone rarely restart
+        it); only when :meth:`ToaTracker.run` is given the fixes.
     """
 
     sound_speed: float
@@ -506,6 +514,8 @@ class TrackerSettings:
     gate: float = GATE_ONE
     gate_probability: float = 0.999
     reinit_after: int = 3
+    fix_gate: float = 40.0
+    disagree_after: int = 5
 
 
 @dataclass
@@ -627,16 +637,20 @@ class ToaTracker:
             used[worst] = False
         return x, P, used
 
-    def run(self, toa: np.ndarray) -> TrackRecord:
+    def run(self, toa: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> TrackRecord:
         """The EKF over every ping (rows of ``toa``, (m, n) [s], NaN: not heard), started at the first ping with a
         single-ping fix of dim + 2 receivers or more, and started again from a fix after ``reinit_after``
-        pings whose arrivals were all refused."""
+        pings whose arrivals were all refused or, given ``fixes`` (the single-ping fixes of every ping: positions
+        (m, dim) [m], NaN where none, covariances (m, ≥dim, ≥dim) [m²] and the receivers each used (m,), as
+        :func:`fix_pings` returns them), after ``disagree_after`` consecutive overdetermined fixes outside the
+        prediction's ``fix_gate``."""
         m, size, s = len(toa), self.size, self.settings
         rec = TrackRecord(np.full((m, size), np.nan), np.full((m, size, size), np.nan), np.full((m, size), np.nan),
                           np.full((m, size, size), np.nan), np.tile(np.eye(size), (m, 1, 1)),
                           np.zeros((m, self.n), bool), m)
         x = P = None
-        refused = 0
+        refused = disagree = 0
+        d = self.dim
         heard = np.isfinite(toa).sum(axis=1)
         for k in range(m):
             if x is not None:
@@ -644,10 +658,18 @@ class ToaTracker:
                 P = F @ P @ F.T + Q
                 x = xp
                 rec.x_predicted[k], rec.P_predicted[k], rec.F[k] = x, P, F
+                if fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 3:
+                    # an overdetermined single-ping fix far outside the prediction's ellipse: the filter may be lost
+                    e = fixes[0][k] - x[:d]
+                    far = float(e @ np.linalg.solve(P[:d, :d] + fixes[1][k][:d, :d], e)) > s.fix_gate
+                    disagree = disagree + 1 if far else 0
                 x, P, used = self.update(x, P, toa[k])
                 rec.used[k] = used
                 refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
+                if disagree >= s.disagree_after:
+                    refused = s.reinit_after
             if x is None or refused >= s.reinit_after:
+                disagree = 0
                 fix = single_ping_fix(toa[k], self.receivers, s.sound_speed, s.sigma_toa) \
                     if heard[k] >= self.dim + 2 else None
                 if fix is None:

@@ -200,7 +200,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
     settings = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=interval)
     tracker = tt.ToaTracker(positions, settings)
-    record = tracker.run(toa)
+    record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))  # the fixes restart a lost filter
     columns = ["x", "y", "z"][:dim]
     frames, covariances = {}, {}
 
