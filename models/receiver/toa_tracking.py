@@ -17,11 +17,14 @@ The estimators:
   redundancy remains.
 * :func:`calibrate_sound_speed`: the sound speed that minimises the single-ping fixes' residuals over the
   pings heard by at least dim + 3 receivers (a calibration step, not a state).
+* :func:`calibrate_sound_speed_robust`: the sound speed fitted jointly with the pings' positions and emission
+  times under a soft-L1 loss (late arrivals weigh as in an L1 fit); the replay's calibration.
 * :class:`ToaTracker`: an extended Kalman filter (EKF) over the pings, state
   ``[p, v, t_e, Δ]`` (position [m], velocity [m/s], emission time [s], ping interval [s]) with a
   nearly-constant-velocity motion model (white-noise acceleration), the emission time advancing by the
   interval plus a jitter and the interval a random walk (its drift); the times of arrival of each ping
-  gated by their NIS (each one, then the ping's set), and the fixed-interval Rauch-Tung-Striebel smoother
+  gated by their NIS (each one, then the ping's set), restarted from a single-ping fix when lost, and the
+  fixed-interval Rauch-Tung-Striebel smoother
   (:func:`rts_smooth`) over the filter's record, with its own covariance.
 
 Units: seconds [s], metres [m], metres per second [m/s].

@@ -279,3 +279,51 @@ def test_robust_calibration_against_scipy_least_squares():
     ref = least_squares(residuals, z0, loss="soft_l1", f_scale=tt.ROBUST_SCALE,
                         x_scale=np.r_[1.0, np.full(2 * k, 0.1), np.full(k, 1e-4)], xtol=1e-10, ftol=1e-10, gtol=1e-10)
     assert abs(c - ref.x[0]) <= 0.01
+
+
+def test_score_in_3d_against_numpy():
+    from sblsim.orchestrator.tracks.track import score
+
+    rng = np.random.default_rng(2)
+    tt_ = np.arange(0.0, 100.0, 1.0)
+    truth = np.column_stack([tt_, np.cos(tt_ / 10), np.sin(tt_ / 10), -5 - 0.01 * tt_])
+    t = rng.uniform(1, 99, 40)
+    g = np.column_stack([np.interp(t, tt_, truth[:, k]) for k in (1, 2, 3)])
+    p = g + rng.normal(scale=0.3, size=g.shape)
+    stats_, err, err3 = score(t, p, truth)
+    e3 = np.sqrt(((p - g) ** 2).sum(axis=1))
+    assert np.allclose(err3, e3, atol=1e-12) and np.allclose(err, np.hypot(*(p - g)[:, :2].T), atol=1e-12)
+    assert np.isclose(stats_["p90_3d_m"], np.percentile(e3, 90)) and np.isclose(stats_["rms_3d_m"],
+                                                                               np.sqrt(np.mean(e3**2)))
+
+
+def test_fixes_restart_a_lost_filter_and_only_then():
+    """Simulated pings, the refusal rule switched off: a filter started 40 m off is restarted from a fix by
+    disagree_after pings whose fixes disagree, only when given the fixes; a filter started right never is."""
+    import dataclasses
+
+    receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    receivers = receivers[np.isfinite(receivers).all(axis=1)]
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4,
+                           reinit_after=10**6)
+    rng = np.random.default_rng(4)
+    toa, truth, _ = tt.simulate_pings(receivers, 120, s, rng, speed=0.3, detection=0.5)
+    fx, _, fc, fused, _ = tt.fix_pings(toa, receivers, s.sound_speed, s.sigma_toa)
+    fixes = (fx, fc, fused.sum(axis=1))
+    assert tt.ToaTracker(receivers, dataclasses.replace(s, reinit_after=3)).run(toa, fixes).restarts == []
+
+    class Lost(tt.ToaTracker):
+        def initial(self, fix):
+            x, P = super().initial(fix)
+            self.calls = getattr(self, "calls", 0) + 1
+            if self.calls <= 2:  # the first start (its prediction and its state) 40 m off, as a lost filter
+                x[:2] += 40.0
+            return x, P
+
+    assert Lost(receivers, s).run(toa).restarts == []
+    record = Lost(receivers, s).run(toa, fixes)
+    overdetermined = np.flatnonzero(np.isfinite(fx).all(axis=1) & (fixes[2] >= 5))
+    fifth = overdetermined[overdetermined > record.start][s.disagree_after - 1]
+    assert record.restarts[0] == fifth
+    k = np.arange(fifth, len(toa))
+    assert np.median(np.hypot(*(record.x_filtered[k, :2] - truth[k]).T)) < 1.0
