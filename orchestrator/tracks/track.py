@@ -119,11 +119,13 @@ def bound_thirds(bound, errors) -> list[dict[str, Any]]:
                 continue
             predicted = bound[column].to_numpy()[e["ping"].to_numpy()]
             observed = e["error_2d_m"].to_numpy()
-            finite = np.isfinite(predicted)  # an unbounded ping (a degenerate geometry) counted, not averaged
+            # a ping before the tracker's start has no bound (NaN); an unbounded one (a degenerate geometry, inf)
+            # counts in the median, not in the RMS
+            finite, known = np.isfinite(predicted), ~np.isnan(predicted)
             entry[estimator] = {
                 "n": int(len(e)), "n_bounded": int(finite.sum()),
                 "predicted_rms_m": float(np.sqrt(np.mean(predicted[finite] ** 2))) if finite.any() else None,
-                "predicted_median_m": float(np.median(predicted)) if finite.any() else None,
+                "predicted_median_m": float(np.median(predicted[known])) if finite.any() else None,
                 "observed_rms_m": float(np.sqrt(np.mean(observed**2))),
                 "observed_median_m": float(np.median(observed)),
                 "observed_robust_rms_m": float(np.median(observed) * ROBUST_FROM_MEDIAN)}
