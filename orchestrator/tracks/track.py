@@ -36,6 +36,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.receiver import toa_bound as tb
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
@@ -84,8 +85,6 @@ def bound_along_track(toa: np.ndarray, receivers: np.ndarray, times: np.ndarray,
     ``pcrb_smoothed_m`` (:func:`~sblsim.models.receiver.toa_bound.pcrb` from the first ping with a time).
     """
     import pandas as pd
-
-    from sblsim.models.receiver import toa_bound as tb
 
     m, dim = len(toa), receivers.shape[1]
     heard = np.isfinite(toa)
