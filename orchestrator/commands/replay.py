@@ -152,6 +152,9 @@ class TrackResult:
         ``errors.csv`` (with a truth track): ``estimator``, ``ping``, ``time`` [s], ``error_2d_m``[,
         ``error_3d_m``] [m].
     out : Path or None
+    bound : pandas.DataFrame or None
+        ``bound.csv`` (with a truth track): the accuracy limit per ping at the truth
+        (:func:`sblsim.orchestrator.tracks.track.bound_along_track`); its thirds are ``score["bound"]``.
     """
 
     track: pd.DataFrame
@@ -160,6 +163,7 @@ class TrackResult:
     estimates: pd.DataFrame
     errors: pd.DataFrame | None
     out: Path | None = None
+    bound: pd.DataFrame | None = None
 
 
 def _receivers_kept(value: Any, where: str) -> list[str] | None:
@@ -237,7 +241,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed)
     if target is not None:
         write(outcome, target, truth)
-    return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target)
+    return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
+                       outcome.bound)
 
 
 def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,

@@ -14,6 +14,14 @@ never applied to those errors: ``lag_s``, the constant shift of the truth's time
 bounded scalar minimiser around its best point) over the pings whose shifted times stay inside the truth's span;
 and the mean error along and across the truth's heading (a lever arm; at a steady speed a lag and an along-track
 offset look alike). A reference solution (x, y, t rows) is scored the same way on the rows it reports.
+
+The accuracy limit along the track (:func:`bound_along_track`, with a truth): at each ping's true position (the
+truth at the tracker's emission time of that ping) with the receivers that heard it, the predicted DRMS of a
+single-ping fix and the tracker's PCRB, filtered and smoothed (:mod:`sblsim.models.receiver.toa_bound`);
+``bound.csv`` per ping, and in ``score.json`` under ``bound`` the track split into thirds by ping index, each with
+the predicted DRMS (the RMS and the median over the pings an estimator positioned) against the observed 2-D errors
+(RMS, median and the robust RMS ``median / sqrt(ln 2)``: the RMS of a circular Gaussian error with that median,
+blind to up to half the pings being gross outliers).
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.receiver import toa_bound as tb
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
@@ -54,6 +63,73 @@ class TrackOutcome:
     errors: Any  # pandas.DataFrame or None
     score: dict[str, Any] | None
     summary: dict[str, Any]
+    bound: Any = None  # pandas.DataFrame or None (bound.csv)
+
+
+#: The predicted DRMS of each estimator in ``bound.csv``: the single-ping fix's, the PCRB of the causal filter, the
+#: smoothing bound.
+BOUND_COLUMNS = {"fix": "fix_drms_m", "ekf": "pcrb_m", "rts": "pcrb_smoothed_m"}
+#: The RMS of a circular Gaussian 2-D error over its median: ``1 / sqrt(ln 2)``.
+ROBUST_FROM_MEDIAN = 1.0 / np.sqrt(np.log(2.0))
+
+
+def bound_along_track(toa: np.ndarray, receivers: np.ndarray, times: np.ndarray, truth: np.ndarray,
+                      settings) -> Any:
+    """The accuracy limit per ping along a true track (``bound.csv``, a pandas.DataFrame).
+
+    ``toa`` (m, n) [s] (NaN: not heard), ``receivers`` (n, dim) [m], ``times`` (m,) [s] each ping's emission time
+    (the tracker's estimate; NaN before the tracker starts: no bound there), ``truth`` rows (t, x, y[, z]),
+    ``settings`` the tracker's (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`). The true position
+    is the truth interpolated at ``times``, the true velocity its difference over ±0.5 s. Columns: ``ping``,
+    ``time``, ``heard``, ``fix_drms_m`` (:func:`~sblsim.models.receiver.toa_bound.fix_drms`), ``pcrb_m`` and
+    ``pcrb_smoothed_m`` (:func:`~sblsim.models.receiver.toa_bound.pcrb` from the first ping with a time).
+    """
+    import pandas as pd
+
+    m, dim = len(toa), receivers.shape[1]
+    heard = np.isfinite(toa)
+    rows = np.flatnonzero(np.isfinite(times))
+    frame = pd.DataFrame({"ping": np.arange(m), "time": times, "heard": heard.sum(axis=1),
+                          **{v: np.nan for v in BOUND_COLUMNS.values()}})
+    if len(rows) < 2:
+        return frame
+    k0 = rows[0]
+    t = times[k0:]
+    p = _truth_at(truth, t)[:, :dim]
+    v = _truth_at(truth, t + 0.5)[:, :dim] - _truth_at(truth, t - 0.5)[:, :dim]
+    frame.loc[k0:, "fix_drms_m"] = tb.fix_drms(p, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa)
+    b = tb.pcrb(p, v, t, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa, tb.MotionModel.of(settings))
+    frame.loc[k0:, "pcrb_m"], frame.loc[k0:, "pcrb_smoothed_m"] = b.filtered, b.smoothed
+    return frame
+
+
+def bound_thirds(bound, errors) -> list[dict[str, Any]]:
+    """The thirds of the track by ping index: per estimator of ``errors`` (``errors.csv``) with a column in
+    ``bound`` (``bound.csv``), over the pings it positioned inside the truth's span, ``n``, the predicted DRMS
+    (``predicted_rms_m``, ``predicted_median_m``) and the observed 2-D errors (``observed_rms_m``,
+    ``observed_median_m``, ``observed_robust_rms_m`` = median / sqrt(ln 2)) [m]."""
+    thirds = []
+    for part in np.array_split(np.arange(len(bound)), 3):
+        entry: dict[str, Any] = {"first_ping": int(part[0]), "last_ping": int(part[-1])}
+        for estimator, column in BOUND_COLUMNS.items():
+            e = errors[(errors["estimator"] == estimator) & errors["error_2d_m"].notna()]
+            e = e[(e["ping"] >= part[0]) & (e["ping"] <= part[-1])]
+            if not len(e):
+                continue
+            predicted = bound[column].to_numpy()[e["ping"].to_numpy()]
+            observed = e["error_2d_m"].to_numpy()
+            # a ping before the tracker's start has no bound (NaN); an unbounded one (a degenerate geometry, inf)
+            # counts in the median, not in the RMS
+            finite, known = np.isfinite(predicted), ~np.isnan(predicted)
+            entry[estimator] = {
+                "n": int(len(e)), "n_bounded": int(finite.sum()),
+                "predicted_rms_m": float(np.sqrt(np.mean(predicted[finite] ** 2))) if finite.any() else None,
+                "predicted_median_m": float(np.median(predicted[known])) if finite.any() else None,
+                "observed_rms_m": float(np.sqrt(np.mean(observed**2))),
+                "observed_median_m": float(np.median(observed)),
+                "observed_robust_rms_m": float(np.median(observed) * ROBUST_FROM_MEDIAN)}
+        thirds.append(entry)
+    return thirds
 
 
 def _usable(toa_matrix, receivers, kept: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -231,7 +307,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "restarts": len(record.restarts), "fixed": {e: int(len(fr)) for e, fr in frames.items()},
         "truth": None if truth_path is None else str(truth_path),
         "reference": None if reference_path is None else str(reference_path)}
-    errors = result = None
+    errors = result = bound = None
     if truth is not None:
         parts, entries = [], {}
         for estimator, frame in frames.items():
@@ -249,12 +325,16 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             parts.append(pd.DataFrame({"estimator": "reference", "ping": -1, "time": reference[:, 0],
                                        "error_2d_m": err, **({} if err3 is None else {"error_3d_m": err3})}))
         errors = pd.concat(parts, ignore_index=True)
+        bound = bound_along_track(toa, positions, record.x_filtered[:, -2] if not smooth else xs[:, -2], truth,
+                                  settings)
+        thirds = bound_thirds(bound, errors)
         first = entries.pop(main)
         result = {key: first.get(key) for key in SCORE_KEYS}
         result |= {key: value for key, value in first.items() if key not in result}
         result |= {"estimator": main, "others": entries}
+        result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS, "thirds": thirds}
     summary["wall_time_s"] = time.perf_counter() - start
-    return TrackOutcome(chosen, estimates, errors, result, summary)
+    return TrackOutcome(chosen, estimates, errors, result, summary, bound)
 
 
 def figure(outcome: TrackOutcome, truth_path: Path | None):
@@ -287,8 +367,8 @@ def figure(outcome: TrackOutcome, truth_path: Path | None):
 
 
 def write(outcome: TrackOutcome, out: Path, truth_path: Path | None) -> None:
-    """``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
-    ``errors.csv``, all or nothing."""
+    """``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json``,
+    ``errors.csv`` and ``bound.csv``, all or nothing."""
     import matplotlib.pyplot as plt
 
     fig = figure(outcome, truth_path)
@@ -298,6 +378,8 @@ def write(outcome: TrackOutcome, out: Path, truth_path: Path | None) -> None:
             outcome.estimates.to_csv(tmp / "estimates.csv", index=False)
             if outcome.errors is not None:
                 outcome.errors.to_csv(tmp / "errors.csv", index=False)
+            if outcome.bound is not None:
+                outcome.bound.to_csv(tmp / "bound.csv", index=False)
             if outcome.score is not None:
                 (tmp / "score.json").write_text(json.dumps(outcome.score, indent=2, allow_nan=False) + "\n")
             (tmp / "summary.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")
@@ -306,5 +388,6 @@ def write(outcome: TrackOutcome, out: Path, truth_path: Path | None) -> None:
         plt.close(fig)
 
 
-__all__ = ["ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "drop_detections",
-           "estimate_lag", "figure", "score", "track", "write"]
+__all__ = ["BOUND_COLUMNS", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA",
+           "TrackOutcome", "bound_along_track", "bound_thirds", "drop_detections", "estimate_lag", "figure", "score",
+           "track", "write"]
