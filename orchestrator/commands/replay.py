@@ -8,23 +8,28 @@ import argparse
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
 from sblsim.orchestrator.commands.common import (
+    MAX_SEED,
     Overrides,
     check_engine,
+    check_seed,
+    flag_argument,
     override_items,
     path_argument,
     prepare_out,
+    real_argument,
     text_argument,
 )
 from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, print_metrics
-from sblsim.orchestrator.cosim.config import MODEL_PREFIX, external_path
+from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external_path
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.tracks.track import MAX_DROP, track, write
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -120,6 +125,126 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
                         lambda: prepare_out(out, force, "summary.json", "replay"))
 
 
+@dataclass
+class TrackResult:
+    """The outcome of :func:`replay_toa`.
+
+    Attributes
+    ----------
+    track : pandas.DataFrame
+        ``track.csv``: one row per ping with a fix, of the RTS smoother (``smooth``) or else the causal EKF:
+        ``time`` (the estimated emission time) [s], ``x``, ``y``[, ``z``] [m], ``sigma_x``, ``sigma_y``[,
+        ``sigma_z``] [m], ``receivers_heard`` (the arrivals the estimate used).
+    score : dict or None
+        ``score.json`` (with a truth track): for the track ``n_pings``, ``n_fixed``, ``mean_m``, ``median_m``,
+        ``rms_m``, ``p90_m``, ``p95_m`` (2-D errors [m]), ``nees`` (the mean 2-D NEES), ``lag_s`` (the truth's
+        time shift that minimises the RMS error, reported, not applied) and further keys (``share_fixed``,
+        ``n_scored``, ``rms_at_lag_m``, ``along_track_m``, ``across_track_m``, the ``*_3d_m`` errors where both
+        have z); ``others``: the same per other estimator (``ekf``, ``fix``) and the ``reference``.
+    summary : dict
+        ``summary.json``: how the run went: the receivers used, the thinning and detections dropped, the sound
+        speed (given or calibrated), the ping interval, the EKF's restarts, the pings each estimator fixed, the
+        wall time.
+    estimates : pandas.DataFrame
+        ``estimates.csv``: every estimator's rows (``estimator`` ``rts``, ``ekf``, ``fix``; ``ping``, the row of
+        the TOA matrix) with the columns of ``track``.
+    errors : pandas.DataFrame or None
+        ``errors.csv`` (with a truth track): ``estimator``, ``ping``, ``time`` [s], ``error_2d_m``[,
+        ``error_3d_m``] [m].
+    out : Path or None
+    bound : pandas.DataFrame or None
+        ``bound.csv`` (with a truth track): the accuracy limit per ping at the truth
+        (:func:`sblsim.orchestrator.tracks.track.bound_along_track`); its thirds are ``score["bound"]``.
+    """
+
+    track: pd.DataFrame
+    score: dict[str, Any] | None
+    summary: dict[str, Any]
+    estimates: pd.DataFrame
+    errors: pd.DataFrame | None
+    out: Path | None = None
+    bound: pd.DataFrame | None = None
+
+
+def _receivers_kept(value: Any, where: str) -> list[str] | None:
+    """A ``receivers_kept`` argument: None, names separated by commas, or a sequence of names."""
+    if value is None:
+        return None
+    names = value.split(",") if isinstance(value, str) else value
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        raise ConfigError(f"{where}: expected receiver names (a list, or separated by commas), got "
+                          f"{type(value).__name__}")
+    names = [n.strip() for n in names]
+    if not names or not all(names) or len(set(names)) != len(names):
+        raise ConfigError(f"{where}: {','.join(names)[:80]!r}: allowed: distinct, non-empty receiver names of the "
+                          "receivers file, separated by commas")
+    return names
+
+
+def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | None = None,
+               reference: str | Path | None = None, smooth: bool = True, sound_speed: float | None = None,
+               receivers_kept: str | Sequence[str] | None = None, drop_detections: float = 0.0, seed: int = 0,
+               out: str | Path | None = None, force: bool = False) -> TrackResult:
+    """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
+    --format toa`` (docs/tracking.md).
+
+    Parameters
+    ----------
+    toa : str or Path
+        The TOA matrix: one row per ping, one column per receiver [s], ``NA`` or empty where not heard.
+    receivers : str or Path
+        The receivers' positions: a CSV (name, ``x_m``, ``y_m``[, ``z_m``][, ``status``]) or a TOML file.
+    truth : str or Path, optional
+        A truth track (``x y t`` [m, m, s] under a header, e.g. GPS): the score and the errors.
+    reference : str or Path, optional
+        Another solution (``x y t``) scored beside, on its own rows.
+    smooth : bool
+        Run the RTS smoother and make its rows the track (else the causal EKF's).
+    sound_speed : float, optional
+        [m/s] in [1300, 1700]; default calibrated from the pings (single-ping fixes).
+    receivers_kept : str or sequence of str, optional
+        Use only these receivers (their names in the receivers file; a text separated by commas, or a list):
+        a thinned array. Default every receiver.
+    drop_detections : float
+        In [0, 0.99]: remove each detection with this probability before tracking (seeded by ``seed``).
+    seed : int
+        In [0, 2**31 − 1]: the seed of ``drop_detections``'s draw (``numpy.random.default_rng``).
+    out : str or Path, optional
+        Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
+        ``errors.csv`` there.
+    force : bool
+        Replace an earlier result in ``out``.
+
+    Returns
+    -------
+    TrackResult
+
+    Raises
+    ------
+    ModelError, ConfigError
+        A file that cannot be read or holds a value outside its range (one line naming the file, line and
+        column), bad options.
+    """
+    toa = path_argument(toa, "toa", optional=False)
+    receivers = path_argument(receivers, "receivers", optional=False)
+    truth = path_argument(truth, "truth")
+    reference = path_argument(reference, "reference")
+    smooth = flag_argument(smooth, "smooth")
+    if sound_speed is not None:
+        sound_speed = real_argument(sound_speed, "sound_speed", 1300.0, 1700.0, "m/s")
+    kept = _receivers_kept(receivers_kept, "receivers_kept")
+    drop = real_argument(drop_detections, "drop_detections", 0.0, MAX_DROP, "")
+    seed = check_seed(seed)
+    if seed is None:
+        raise ConfigError(f"seed: None is not allowed; allowed: an integer in [0, {MAX_SEED}]")
+    target = prepare_out(out, force, "track.csv", "track")
+    outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed)
+    if target is not None:
+        write(outcome, target, truth)
+    return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
+                       outcome.bound)
+
+
 def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,
                  fmu_dir: str | Path | None, prepare: Callable[[], Path | None]) -> ReplayResult:
     """:func:`replay` of a plan (and ``sblsim replay``): read the log and the truth track, ``prepare()`` the
@@ -144,14 +269,34 @@ HELP = "run a receiver on a recorded log (docs/log-format.md)"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim replay``'s arguments."""
-    p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one)")
+    p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one); with "
+                   "--format toa, the matrix of times of arrival (docs/tracking.md)")
+    p.add_argument("--format", choices=("log", "toa"), default="log",
+                   help="log: a receiver's log (default); toa: times of arrival of a pinger at a fixed array "
+                        "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS smoother")
+    p.add_argument("--receivers", type=Path, default=None, metavar="FILE",
+                   help="--format toa: the receivers' positions (CSV name,x_m,y_m[,z_m][,status], or TOML)")
+    p.add_argument("--reference", type=Path, default=None, metavar="FILE",
+                   help="--format toa: another solution (x y t) scored beside against --truth")
+    p.add_argument("--smooth", action="store_true",
+                   help="--format toa: the RTS smoother's rows as the track (default: the causal EKF's)")
+    p.add_argument("--sound-speed", type=float, default=None, metavar="M_S",
+                   help="--format toa: the sound speed [m/s] (default: calibrated from the pings)")
+    p.add_argument("--receivers-kept", default=None, metavar="NAMES",
+                   help="--format toa: use only these receivers (their names, separated by commas): a thinned array")
+    p.add_argument("--drop-detections", type=float, default=None, metavar="SHARE",
+                   help="--format toa: remove each detection with this probability in [0, 0.99] before tracking "
+                        "(seeded by --seed)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="--format toa: the seed of --drop-detections's draw (default 0)")
     p.add_argument("--receiver", default=None,
                    help="ekf, ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH (default: the configuration's)")
     p.add_argument("--config", default=None, metavar="CONFIG",
                    help="the receiver's parameters, T and rate ratio: a built-in scenario or CONFIG.toml (default: "
                         "the configuration an exported log carries, else the semicircle scenario's)")
     p.add_argument("--truth", type=Path, default=None, metavar="FILE",
-                   help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures")
+                   help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures; with "
+                        "--format toa: x y t [m, m, s] under a header (e.g. GPS)")
     p.add_argument("--engine", choices=ENGINES, default="local", help="component engine (default local)")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/replay_LOGNAME)")
     p.add_argument("--force", action="store_true", help="replace an earlier replay in --out")
@@ -162,6 +307,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim replay`` from its parsed arguments: its lines printed, its exit status returned."""
+    if args.format == "toa":
+        return _main_toa(args)
+    given = [o for o, v in (("--receivers", args.receivers), ("--reference", args.reference),
+                            ("--smooth", args.smooth), ("--sound-speed", args.sound_speed),
+                            ("--receivers-kept", args.receivers_kept), ("--drop-detections", args.drop_detections),
+                            ("--seed", args.seed is not None)) if v]
+    if given:
+        raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
+                          "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
     from sblsim.orchestrator.replay import replay_config
 
     notes: list[str] = []
@@ -209,4 +363,59 @@ def main(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: the {s['receiver']} receiver never made a fix: no row of the log brought a range "
               "it used", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
+    return 0
+
+
+def _main_toa(args: argparse.Namespace) -> int:
+    """``sblsim replay TOA_FILE --format toa``: the track's lines printed."""
+    if args.receivers is None:
+        raise ConfigError("--receivers: required with --format toa (the receivers' positions, a CSV or TOML file)")
+    other = [o for o, v in (("--receiver", args.receiver), ("--config", args.config), ("--set", args.overrides),
+                            ("--fmu-dir", args.fmu_dir)) if v]
+    if other or args.engine != "local":
+        raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
+                          "--truth, --reference, --smooth, --sound-speed, --receivers-kept, --drop-detections, "
+                          "--seed, --out, --force")
+    speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", 1300.0, 1700.0,
+                                                                "m/s")
+    kept = _receivers_kept(args.receivers_kept, "--receivers-kept")
+    drop = 0.0 if args.drop_detections is None else real_argument(args.drop_detections, "--drop-detections", 0.0,
+                                                                  MAX_DROP, "")
+    seed = check_seed(0 if args.seed is None else args.seed, "--seed")
+    if args.seed is not None and not drop:
+        raise ConfigError("--seed: only with --drop-detections (the seed of its draw)")
+    outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed)
+    out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
+                        "track.csv", "track")
+    write(outcome, out, args.truth)
+    s = outcome.summary
+    c = s["sound_speed"]
+    thinned = (f" (kept {len(kept)} of the receivers file's)" if kept is not None else "") + \
+        (f", {s['detections_dropped']} detections removed at random ({drop:g}, seed {seed})" if drop else "")
+    print(f"track of {args.log}: {s['pings']} pings at "
+          f"{len(s['receivers'])} receivers{thinned}, sound speed {c['sound_speed_m_s']:.1f} m/s ({c['source']}), "
+          f"ping interval {s['ping_interval_s']:.4f} s, in {s['wall_time_s']:.1f} s")
+    names = {"rts": "RTS smoother", "ekf": "EKF (causal)", "fix": "single-ping fix", "reference": "reference"}
+    if outcome.score is not None:
+        r = outcome.score
+        print(f"  2-D error against {args.truth} at each estimated emission time [m] (no lag applied):")
+        print(f"  {'estimator':<16} {'fixed':>6} {'scored':>6} {'mean':>7} {'median':>7} {'RMS':>8} {'p90':>7} "
+              f"{'p95':>7} {'NEES':>7} {'lag [s]':>7}")
+        for key, e in [(r["estimator"], r)] + list(r["others"].items()):
+            if "median_m" in e:
+                nees = "-" if e["nees"] is None else f"{e['nees']:.3g}"
+                lag = "-" if e["lag_s"] is None else f"{e['lag_s']:+.2f}"
+                print(f"  {names[key]:<16} {e['n_fixed']:>6} {e['n_scored']:>6} {e['mean_m']:>7.3f} "
+                      f"{e['median_m']:>7.3f} {e['rms_m']:>8.3f} {e['p90_m']:>7.3f} {e['p95_m']:>7.3f} {nees:>7} "
+                      f"{lag:>7}")
+        if r["lag_s"] is not None:
+            print(f"  lag_s {r['lag_s']:+.2f} s: the truth's time shift (searched in ±{r['lag_range_s']:g} s) that "
+                  f"minimises the {names[r['estimator']]}'s RMS error ({r['rms_at_lag_m']:.3f} m there); reported, "
+                  "not applied" + (f"; mean error along the truth's heading {r['along_track_m']:+.3f} m, across "
+                                   f"{r['across_track_m']:+.3f} m" if "along_track_m" in r else ""))
+    else:
+        for key, n in s["fixed"].items():
+            print(f"  {names[key]}: {n} pings positioned")
+    print(f"  written to {out}/ (track.csv, estimates.csv, summary.json, "
+          f"{'score.json, errors.csv, ' if outcome.score is not None else ''}track.png)")
     return 0

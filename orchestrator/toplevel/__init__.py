@@ -22,8 +22,9 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "calibrate", "campaign", "analyze",
-    "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
+    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "calibrate", "campaign",
+    "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
+    "TrackResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS", "__version__",
 ]

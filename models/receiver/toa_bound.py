@@ -1,0 +1,292 @@
+"""The accuracy limit of a fixed, synchronised array tracking a pinger whose emission times are unknown.
+
+**One ping** (the single-ping fix's limit). With the times of arrival ``toa_i = t_e + ‖p − r_i‖ / c + w_i``,
+``w_i ~ N(0, σ²)`` independent, of the receivers i that heard the ping, the Fisher information of
+``θ = (p, t_e)`` is (Kay, Fundamentals of Statistical Signal Processing: Estimation Theory, Prentice Hall 1993,
+Eq. (3.31), Gaussian noise)
+
+    ``I(θ) = Σ_i h_i h_iᵀ / σ²``,   ``h_i = ∂toa_i/∂θ = [u_iᵀ / c, 1]``,   ``u_i = (p − r_i) / ‖p − r_i‖``,
+
+and the information of the position with the emission time unknown is the Schur complement that removes
+``t_e`` (Kay 1993, Section 3.7: the bound of a subset of parameters is the corresponding block of
+``I⁻¹``; its inverse is the Schur complement)
+
+    ``I_p = Σ_i u_i u_iᵀ / (σ c)² − (Σ_i u_i)(Σ_i u_i)ᵀ / (n σ² c²)``
+    ``    = Σ_i (u_i − ū)(u_i − ū)ᵀ / (σ c)²``,  ``ū`` the mean of the heard receivers' ``u_i``,
+
+so only the spread of the directions locates the target (a TDOA geometry). The predicted DRMS of an unbiased
+fix is ``sqrt(trace I_p⁻¹)`` [m] (infinite when ``I_p`` is singular: fewer than dim + 1 receivers, or all on a
+line through the target).
+
+**The tracker** (:class:`~sblsim.models.receiver.toa_tracking.ToaTracker`'s EKF). With the state
+``x = [p, v, t_e, Δ]`` and the transition ``x_k+1 = f(x_k) + w_k``, ``w_k ~ N(0, Q_k)`` (nearly constant
+velocity, ``t_e ← t_e + Δ`` with jitter, ``Δ`` a random walk), the posterior Cramér–Rao bound's information
+``J_k`` obeys (Tichavský, Muravchik, Nehorai, "Posterior Cramér–Rao bounds for discrete-time nonlinear
+filtering", IEEE Trans. Signal Processing 46(5):1386–1396, 1998, Eqs. (21) and (34)–(36), additive Gaussian
+noises)
+
+    ``J_k+1 = D22 − D21 (J_k + D11)⁻¹ D12``,
+    ``D11 = F_kᵀ Q_k⁻¹ F_k``,  ``D12 = D21ᵀ = −F_kᵀ Q_k⁻¹``,  ``D22 = Q_k⁻¹ + H_k+1ᵀ H_k+1 / σ²``,
+
+with ``F_k = ∂f/∂x`` and ``H_k+1`` (the heard receivers' rows of ``∂toa/∂x``) taken at the true state; the
+expectations of the paper are replaced by their value along the one true track (the usual evaluation for a given
+path, as :mod:`sblsim.models.bound` does). ``J_0`` is the tracker's own start: the first ping's information of
+``(p, t_e)`` above, ``1/σ_v²`` on each velocity, ``1/σ_Δ²`` on the interval. The bound's position DRMS is
+``sqrt(trace)`` of the position block of ``J_k⁻¹``.
+
+**The smoother.** For the fixed-interval smoother, the smoothing bound along the same track is the
+Rauch–Tung–Striebel backward pass over the bound's own covariances ``B_k = J_k⁻¹`` (Šimandl, Královec,
+Tichavský, "Filtering, predictive, and smoothing Cramér–Rao bounds for discrete-time nonlinear dynamic
+systems", Automatica 37(11):1703–1716, 2001, Section 5, additive Gaussian noises with the Jacobians at the truth):
+``C_k = B_k F_kᵀ B_k+1|k⁻¹``, ``B_k|m = B_k + C_k (B_k+1|m − B_k+1|k) C_kᵀ``, ``B_k+1|k = F_k B_k F_kᵀ + Q_k``.
+
+Not in the bounds: the truth's own error (a GPS), a lever arm between the truth and the tag, multipath (late)
+arrivals, a wrong sound speed: they add to an observed error, never to these limits.
+
+Units: seconds [s], metres [m], metres per second [m/s]. numpy only (no casadi: the derivatives are closed forms,
+checked against finite differences in the tests).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def directions(positions: np.ndarray, receivers: np.ndarray) -> np.ndarray:
+    """The unit vectors from the receivers to the target, ``u_i = (p − r_i) / ‖p − r_i‖``.
+
+    Parameters
+    ----------
+    positions : ndarray, (m, dim)
+        The target's positions at emission [m].
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+
+    Returns
+    -------
+    ndarray, (m, n, dim)
+        Unit vectors [1].
+    """
+    d = np.asarray(positions, float)[:, None, :] - np.asarray(receivers, float)[None, :, :]
+    return d / np.linalg.norm(d, axis=2, keepdims=True)
+
+
+def ping_information(positions: np.ndarray, heard: np.ndarray, receivers: np.ndarray, c: float,
+                     sigma_toa: float) -> np.ndarray:
+    """The Fisher information of ``(p, t_e)`` from one ping's times of arrival, per ping.
+
+    ``I = Σ_{i heard} h_i h_iᵀ / σ²`` with ``h_i = [u_iᵀ / c, 1]`` (module docstring; Kay 1993, Eq. (3.31)).
+
+    Parameters
+    ----------
+    positions : ndarray, (m, dim)
+        The target's positions at emission [m].
+    heard : ndarray of bool, (m, n)
+        Which receivers heard each ping.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c : float
+        Sound speed [m/s].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+
+    Returns
+    -------
+    ndarray, (m, dim + 1, dim + 1)
+        Information of ``(p [m], t_e [s])`` [1/m², 1/(m·s), 1/s²].
+    """
+    u = directions(positions, receivers)
+    h = np.concatenate([u / c, np.ones(u.shape[:2] + (1,))], axis=2) * np.asarray(heard, float)[:, :, None]
+    return np.einsum("mki,mkj->mij", h, h) / sigma_toa**2
+
+
+def position_information(positions: np.ndarray, heard: np.ndarray, receivers: np.ndarray, c: float,
+                         sigma_toa: float) -> np.ndarray:
+    """The information of the position with the emission time unknown: the Schur complement of :func:`ping_information`
+    that removes ``t_e``, ``I_pp − I_pt I_tt⁻¹ I_tp`` (zero for a ping nobody heard).
+
+    Parameters
+    ----------
+    positions, heard, receivers, c, sigma_toa
+        As :func:`ping_information`.
+
+    Returns
+    -------
+    ndarray, (m, dim, dim)
+        [1/m²].
+    """
+    info = ping_information(positions, heard, receivers, c, sigma_toa)
+    tt = info[:, -1, -1]
+    safe = np.where(tt > 0, tt, 1.0)
+    cross = info[:, :-1, -1]
+    return info[:, :-1, :-1] - np.einsum("mi,mj->mij", cross, cross) / safe[:, None, None]
+
+
+def drms(information: np.ndarray) -> np.ndarray:
+    """``sqrt(trace I⁻¹)`` of position informations (m, dim, dim) [1/m²]: the DRMS [m] (m,); ``inf`` where an
+    information is singular (its condition number above 1e12)."""
+    information = np.asarray(information, float)
+    out = np.full(len(information), np.inf)
+    ok = np.linalg.cond(information) < 1e12
+    if ok.any():
+        trace = np.trace(np.linalg.inv(information[ok]), axis1=1, axis2=2)
+        out[ok] = np.where(trace > 0, np.sqrt(np.abs(trace)), np.inf)
+    return out
+
+
+def fix_drms(positions: np.ndarray, heard: np.ndarray, receivers: np.ndarray, c: float,
+             sigma_toa: float) -> np.ndarray:
+    """The predicted DRMS of a single-ping fix [m] (m,) at each ping's true position with the receivers that heard
+    it, the emission time unknown (:func:`position_information`, :func:`drms`); ``inf`` where fewer than dim + 1
+    receivers heard the ping or the geometry is degenerate."""
+    heard = np.asarray(heard, bool)
+    out = drms(position_information(positions, heard, receivers, c, sigma_toa))
+    out[heard.sum(axis=1) < np.asarray(receivers).shape[1] + 1] = np.inf
+    return out
+
+
+@dataclass
+class MotionModel:
+    """The tracker's motion model (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`'s names).
+
+    Attributes
+    ----------
+    acceleration_psd : float
+        White-noise acceleration's power spectral density per axis [m²/s³].
+    jitter : float
+        Standard deviation of the emission time's step beyond the interval [s].
+    interval_drift : float
+        Standard deviation of the interval's random-walk step [s].
+    sigma_speed : float
+        Initial standard deviation of each velocity component [m/s].
+    sigma_interval : float
+        Initial standard deviation of the interval [s].
+    """
+
+    acceleration_psd: float
+    jitter: float
+    interval_drift: float
+    sigma_speed: float
+    sigma_interval: float
+
+    @classmethod
+    def of(cls, settings) -> MotionModel:
+        """The motion model of a tracker's settings (any object with these attributes)."""
+        return cls(settings.acceleration_psd, settings.jitter, settings.interval_drift, settings.sigma_speed,
+                   settings.sigma_interval)
+
+
+def transition(velocity: np.ndarray, interval: float, motion: MotionModel) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobian F (s, s) and the process noise Q (s, s) of one step of the state ``[p, v, t_e, Δ]``
+    (s = 2 dim + 2) at the true velocity (dim,) [m/s] and interval [s] (the tracker's model)."""
+    d = len(velocity)
+    s, T, q = 2 * d + 2, float(interval), motion.acceleration_psd
+    F = np.eye(s)
+    F[:d, d:2 * d] = T * np.eye(d)
+    F[:d, -1] = velocity
+    F[-2, -1] = 1.0
+    Q = np.zeros((s, s))
+    Q[:d, :d] = q * T**3 / 3 * np.eye(d)
+    Q[:d, d:2 * d] = Q[d:2 * d, :d] = q * T**2 / 2 * np.eye(d)
+    Q[d:2 * d, d:2 * d] = q * T * np.eye(d)
+    Q[-2, -2] = motion.jitter**2
+    Q[-1, -1] = motion.interval_drift**2
+    return F, Q
+
+
+@dataclass
+class TrackBound:
+    """What :func:`pcrb` returns, per ping k (m pings), state size s = 2 dim + 2.
+
+    Attributes
+    ----------
+    filtered : ndarray, (m,)
+        The PCRB's position DRMS of a causal filter after ping k [m].
+    smoothed : ndarray, (m,)
+        The smoothing bound's position DRMS [m].
+    B_filtered, B_smoothed : ndarray, (m, s, s)
+        The bounds' covariances ``J_k⁻¹`` [m², m²/s, m·s, ...].
+    """
+
+    filtered: np.ndarray
+    smoothed: np.ndarray
+    B_filtered: np.ndarray
+    B_smoothed: np.ndarray
+
+
+def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, heard: np.ndarray,
+         receivers: np.ndarray, c: float, sigma_toa: float, motion: MotionModel) -> TrackBound:
+    """The tracker's PCRB along a true track, and the smoothing bound (module docstring).
+
+    Parameters
+    ----------
+    positions : ndarray, (m, dim)
+        The true positions at each ping's emission [m].
+    velocities : ndarray, (m, dim)
+        The true velocities there [m/s] (they enter ``F``'s coupling of the interval into the position).
+    emissions : ndarray, (m,)
+        The true emission times [s]; their differences are the true intervals.
+    heard : ndarray of bool, (m, n)
+        The receivers that heard each ping (the first ping must be heard by dim + 1 or more: the start).
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c : float
+        Sound speed [m/s].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    motion : MotionModel
+        The tracker's motion model.
+
+    Returns
+    -------
+    TrackBound
+    """
+    positions = np.asarray(positions, float)
+    m, d = positions.shape
+    s = 2 * d + 2
+    idx = np.r_[0:d, 2 * d]  # (p, t_e) inside the state
+    info = ping_information(positions, heard, receivers, c, sigma_toa)  # (m, d + 1, d + 1)
+    Jz = np.zeros((m, s, s))
+    Jz[np.ix_(np.arange(m), idx, idx)] = info
+    J = Jz[0].copy()
+    J[d:2 * d, d:2 * d] += np.eye(d) / motion.sigma_speed**2
+    J[-1, -1] += 1.0 / motion.sigma_interval**2
+    intervals = np.diff(np.asarray(emissions, float))
+    B = np.empty((m, s, s))
+    Bp = np.empty((m, s, s))  # row k: the prediction of k from k − 1
+    Fs = np.tile(np.eye(s), (m, 1, 1))  # row k: the transition from k − 1 to k
+    B[0] = np.linalg.inv(J)
+    Bp[0] = B[0]
+    for k in range(m - 1):
+        F, Q = transition(velocities[k], intervals[k], motion)
+        Qi = np.linalg.inv(Q)
+        D11 = F.T @ Qi @ F
+        D12 = -F.T @ Qi
+        D22 = Qi + Jz[k + 1]
+        J = D22 - D12.T @ np.linalg.solve(J + D11, D12)
+        J = 0.5 * (J + J.T)
+        B[k + 1] = np.linalg.inv(J)
+        Fs[k + 1] = F
+        Bp[k + 1] = F @ B[k] @ F.T + Q
+    Bs = B.copy()
+    for k in range(m - 2, -1, -1):
+        C = np.linalg.solve(Bp[k + 1], Fs[k + 1] @ B[k]).T
+        Bs[k] = B[k] + C @ (Bs[k + 1] - Bp[k + 1]) @ C.T
+        Bs[k] = 0.5 * (Bs[k] + Bs[k].T)
+
+    def position_drms(b: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.trace(b[:, :d, :d], axis1=1, axis2=2))
+
+    return TrackBound(position_drms(B), position_drms(Bs), B, Bs)
+
+
+def rms(values: np.ndarray) -> float:
+    """The root mean square of values (NaN where there are none)."""
+    values = np.asarray(values, float)
+    return float(np.sqrt(np.mean(values**2))) if len(values) else float("nan")
+
+
+__all__ = ["MotionModel", "TrackBound", "directions", "drms", "fix_drms", "ping_information", "pcrb",
+           "position_information", "rms", "transition"]

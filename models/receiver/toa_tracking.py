@@ -1,0 +1,781 @@
+"""Tracking a pinger from its times of arrival at a fixed, synchronised array (an inverted LBL).
+
+A target emits a ping on its own clock about every ``Δ`` seconds; N receivers at known positions ``r_i``
+with synchronised clocks record its times of arrival (TOA). The emission time ``t_e`` of each ping is unknown
+to the receivers, so the measurement model of receiver i is
+
+    ``toa_i = t_e + ‖p − r_i‖ / c + w_i``,   ``w_i ~ N(0, σ_toa²)``,
+
+with the target's position ``p`` at emission (2-D, or 3-D), the sound speed ``c`` [m/s] and the timing noise
+``σ_toa`` [s]. Only differences of arrival times locate the target (TDOA); the emission time is estimated
+beside the position. The model and its Jacobian are casadi expressions (:func:`toa_function`).
+
+The estimators:
+
+* :func:`single_ping_fix`: each ping alone, Gauss-Newton least squares over ``(p, t_e)`` (needs dim + 1
+  receivers), the receiver with the largest normalised residual dropped while it fails the χ² test and
+  redundancy remains.
+* :func:`calibrate_sound_speed`: the sound speed that minimises the single-ping fixes' residuals over the
+  pings heard by at least dim + 3 receivers (a calibration step, not a state).
+* :func:`calibrate_sound_speed_robust`: the sound speed fitted jointly with the pings' positions and emission
+  times under a soft-L1 loss (late arrivals weigh as in an L1 fit); the replay's calibration.
+* :class:`ToaTracker`: an extended Kalman filter (EKF) over the pings, state
+  ``[p, v, t_e, Δ]`` (position [m], velocity [m/s], emission time [s], ping interval [s]) with a
+  nearly-constant-velocity motion model (white-noise acceleration), the emission time advancing by the
+  interval plus a jitter and the interval a random walk (its drift); the times of arrival of each ping
+  gated by their NIS (each one, then the ping's set), restarted from a single-ping fix when lost, and the
+  fixed-interval Rauch-Tung-Striebel smoother
+  (:func:`rts_smooth`) over the filter's record, with its own covariance.
+
+Units: seconds [s], metres [m], metres per second [m/s].
+
+References
+----------
+Baktoft, Gjelland, Økland, Thygesen, "Positioning of aquatic animals based on time-of-arrival and random walk
+models using YAPS (Yet Another Positioning Solver)", Scientific Reports 7:14294, 2017,
+doi:10.1038/s41598-017-14278-z (the random-walk model of the track and of the emission times, and the Lake
+Hald data). Rauch, Tung, Striebel, "Maximum likelihood estimates of linear dynamic systems", AIAA Journal
+3(8), 1965 (the smoother). Bar-Shalom, Li, Kirubarajan, Estimation with Applications to Tracking and
+Navigation, Wiley 2001, Sections 5.4 (NIS), 6.2 (white-noise acceleration model) and 10.3 (the EKF).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from sblsim.models.declarations import ModelError
+
+#: The sound speeds a tracker accepts and the calibration searches [m/s].
+SOUND_SPEED_RANGE = (1300.0, 1700.0)
+#: χ²(1) quantile of probability 0.999: the gate of one time of arrival.
+GATE_ONE = 10.828
+#: Iterations of a single-ping Gauss-Newton fix.
+FIX_ITERATIONS = 30
+
+
+@lru_cache(maxsize=32)
+def toa_function(n: int, dim: int) -> ca.Function:
+    """The TOA model of n receivers and its Jacobian, a casadi function.
+
+    ``toa(p, t_e, R, c) -> (toa, J)``: ``p`` (dim, 1) the target's position at emission [m], ``t_e`` the
+    emission time [s], ``R`` (dim, n) the receivers' positions [m], ``c`` the sound speed [m/s];
+    ``toa`` (n, 1) the times of arrival [s], ``J`` (n, dim + 1) their derivatives with respect to
+    ``(p, t_e)`` [s/m, 1].
+    """
+    p = ca.SX.sym("p", dim)
+    te = ca.SX.sym("t_e")
+    R = ca.SX.sym("R", dim, n)
+    c = ca.SX.sym("c")
+    toa = ca.vertcat(*[te + ca.norm_2(p - R[:, i]) / c for i in range(n)])
+    J = ca.jacobian(toa, ca.vertcat(p, te))
+    return ca.Function("toa", [p, te, R, c], [toa, J], ["p", "t_e", "R", "c"], ["toa", "J"])
+
+
+def toa_model(position: np.ndarray, emission: float, receivers: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray]:
+    """Times of arrival of one ping and their Jacobian (:func:`toa_function` evaluated).
+
+    Parameters
+    ----------
+    position : ndarray, (dim,)
+        Target position at emission [m].
+    emission : float
+        Emission time [s].
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c : float
+        Sound speed [m/s].
+
+    Returns
+    -------
+    toa : ndarray, (n,)
+        Times of arrival [s].
+    J : ndarray, (n, dim + 1)
+        Derivatives with respect to the position [s/m] and the emission time [1].
+    """
+    receivers = np.asarray(receivers, float)
+    n, dim = receivers.shape
+    toa, J = toa_function(n, dim)(np.asarray(position, float), float(emission), receivers.T, float(c))
+    return np.asarray(toa).ravel(), np.asarray(J)
+
+
+@dataclass
+class Fix:
+    """A single-ping fix: position [m] (dim,), emission time [s], covariance of ``(p, t_e)`` (dim + 1, dim + 1)
+    [m², m·s, s²], the receivers used (n,) and the normalised residuals' sum of squares."""
+
+    position: np.ndarray
+    emission: float
+    covariance: np.ndarray
+    used: np.ndarray
+    chi2: float
+
+
+def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float,
+                    guess: np.ndarray | None = None, gate: float = GATE_ONE) -> Fix | None:
+    """The least-squares fix of one ping from its times of arrival, the emission time unknown (TOA/TDOA).
+
+    Gauss-Newton on ``Σ_i (toa_i − t_e − ‖p − r_i‖/c)²`` with step halving; while the ping keeps at least
+    dim + 2 receivers, the one with the largest squared normalised residual is dropped when that exceeds
+    ``gate`` (multipath arrivals are late) and the fix is made again.
+
+    Parameters
+    ----------
+    toa : ndarray, (n,)
+        Times of arrival [s]; NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c : float
+        Sound speed [m/s].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    guess : ndarray, (dim,), optional
+        Start position [m] (default between the first receiver to hear and the centroid of those heard).
+    gate : float
+        χ²(1) threshold of one residual.
+
+    Returns
+    -------
+    Fix or None
+        None when fewer than dim + 1 receivers heard the ping or the iteration failed.
+    """
+    positions, emissions, covariances, used, chi2 = fix_pings(
+        np.asarray(toa, float)[None, :], receivers, c, sigma_toa, None if guess is None else np.asarray(guess)[None],
+        gate)
+    if not np.isfinite(emissions[0]):
+        return None
+    return Fix(positions[0], float(emissions[0]), covariances[0], used[0], float(chi2[0]))
+
+
+@lru_cache(maxsize=32)
+def _mapped(n: int, dim: int, m: int) -> ca.Function:
+    """:func:`toa_function` over m pings at once (the receivers and the sound speed shared)."""
+    return toa_function(n, dim).map("toa_pings", "serial", m, [2, 3], [])
+
+
+def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, guesses: np.ndarray | None = None,
+              gate: float = GATE_ONE) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`single_ping_fix` of every ping at once (one casadi call per Gauss-Newton iteration for all pings).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c, sigma_toa, gate
+        As :func:`single_ping_fix`.
+    guesses : ndarray, (m, dim), optional
+        Start positions [m].
+
+    Returns
+    -------
+    positions : ndarray, (m, dim)
+        [m]; NaN where a ping has no fix (fewer than dim + 1 receivers, or no convergence).
+    emissions : ndarray, (m,)
+        [s]; NaN likewise.
+    covariances : ndarray, (m, dim + 1, dim + 1)
+        Of ``(p, t_e)`` [m², m·s, s²].
+    used : ndarray of bool, (m, n)
+        The arrivals each fix used.
+    chi2 : ndarray, (m,)
+        Sum of the squared normalised residuals.
+    """
+    toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    m, (n, dim) = len(toa), receivers.shape
+    used = np.isfinite(toa)
+    valid = used.sum(axis=1) >= dim + 1
+    positions = np.full((m, dim), np.nan)
+    emissions = np.full(m, np.nan)
+    covariances = np.full((m, dim + 1, dim + 1), np.nan)
+    chi2 = np.full(m, np.nan)
+    rows = np.flatnonzero(valid)
+    if not len(rows):
+        return positions, emissions, covariances, used & valid[:, None], chi2
+    filled = np.where(used, toa, 0.0)
+    first = np.argmin(np.where(used, toa, np.inf), axis=1)
+    centroid = (used[:, :, None] * receivers[None]).sum(axis=1) / np.maximum(used.sum(axis=1), 1)[:, None]
+    p = 0.5 * (receivers[first] + centroid) if guesses is None else np.array(guesses, float)
+    te = toa[np.arange(m), first] - np.linalg.norm(p - receivers[first], axis=1) / c
+    p, te = p[rows], te[rows]
+    active = rows
+    for _ in range(n + 1):  # outlier rounds: the worst residual dropped while it fails the gate and redundancy remains
+        p_a, te_a, J, res = _gauss_newton_pings(toa[active], filled[active], used[active], receivers, c, p, te)
+        positions[active], emissions[active] = p_a, te_a
+        z2 = np.where(used[active], (res / sigma_toa) ** 2, 0.0)
+        chi2[active] = z2.sum(axis=1)
+        A = J * used[active][:, :, None] / sigma_toa
+        info = np.einsum("mki,mkj->mij", A, A)
+        with np.errstate(all="ignore"):
+            covariances[active] = np.linalg.pinv(info)
+        again = (used[active].sum(axis=1) >= dim + 3) & (z2.max(axis=1) > gate)
+        if not again.any():
+            break
+        worst = np.argmax(z2[again], axis=1)
+        used[active[again], worst] = False
+        active, p, te = active[again], p_a[again], te_a[again]
+    bad = ~(np.isfinite(positions).all(axis=1) & np.isfinite(emissions)) | ~valid
+    positions[bad], emissions[bad], chi2[bad] = np.nan, np.nan, np.nan
+    return positions, emissions, covariances, used & ~bad[:, None], chi2
+
+
+def _evaluate_pings(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`toa_function` at k pings' positions (k, dim) and emission times (k,): times of arrival (k, n) and
+    Jacobians (k, n, dim + 1); evaluated by a mapped function of the next power of two of k (few sizes made)."""
+    k, (n, dim) = len(p), receivers.shape
+    size = 1 << max(k - 1, 0).bit_length()
+    pad = size - k
+    model, J = _mapped(n, dim, size)(np.pad(p, ((0, pad), (0, 0))).T, np.pad(te, (0, pad))[None, :], receivers.T, c)
+    return np.asarray(model).T[:k], np.asarray(J).reshape(n, size, dim + 1).transpose(1, 0, 2)[:k]
+
+
+def _gauss_newton_pings(toa, filled, used, receivers, c, p, te):
+    """Gauss-Newton iterations with step halving of many pings' fixes at once: positions (k, dim), emission times
+    (k,), Jacobians (k, n, dim + 1) and residuals (k, n) (0 where not used) at the end."""
+    dim = receivers.shape[1]
+    p, te = p.copy(), te.copy()
+
+    def evaluate(idx, p, te):
+        model, J = _evaluate_pings(receivers, c, p, te)
+        return np.where(used[idx], filled[idx] - model, 0.0), J
+
+    res, J = evaluate(slice(None), p, te)
+    cost = (res**2).sum(axis=1)
+    moving = np.arange(len(p))
+    for _ in range(FIX_ITERATIONS):
+        Jw = J[moving] * used[moving][:, :, None]
+        normal = np.einsum("mki,mkj->mij", Jw, Jw) + 1e-12 * np.eye(dim + 1)
+        step = np.linalg.solve(normal, np.einsum("mki,mk->mi", Jw, res[moving])[..., None])[..., 0]
+        big = np.abs(step[:, :-1]).max(axis=1) >= 1e-6  # converged: a step below a micrometre
+        moving, step = moving[big], step[big]
+        trying, scale = moving, 1.0
+        for _halving in range(10):
+            if not len(trying):
+                break
+            p_try, te_try = p[trying] + scale * step[:, :-1], te[trying] + scale * step[:, -1]
+            res_try, J_try = evaluate(trying, p_try, te_try)
+            cost_try = (res_try**2).sum(axis=1)
+            better = cost_try <= cost[trying]
+            done = trying[better]
+            p[done], te[done], res[done], J[done], cost[done] = (p_try[better], te_try[better], res_try[better],
+                                                                 J_try[better], cost_try[better])
+            trying, step, scale = trying[~better], step[~better], 0.5 * scale
+        moving = np.setdiff1d(moving, trying)  # no step lowers the cost: done
+        if not len(moving):
+            break
+    return p, te, J, res
+
+
+def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
+                          bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> tuple[float, float, int]:
+    """The sound speed that minimises the residuals of the single-ping fixes (a calibration step).
+
+    Over at most ``max_pings`` pings (evenly spread) heard by at least dim + 3 receivers, each fixed alone
+    (:func:`fix_pings`, outliers dropped at the middle of ``bounds``, then again at the first estimate) at a
+    trial speed; the speed minimising the
+    sum of the fixes' squared residuals (bounded scalar search), its standard error from that sum's curvature
+    (``σ_c² = 2 / (d²χ²/dc²)``). The redundant receivers of a ping see the speed through the spread of its
+    ranges (a wrong speed scales every range alike, which a single emission time cannot absorb).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s] (scales the standard error).
+    max_pings : int
+        Most pings used.
+    bounds : (float, float)
+        The speeds searched [m/s].
+
+    Returns
+    -------
+    c : float
+        Sound speed [m/s].
+    sigma_c : float
+        Its standard error [m/s].
+    pings : int
+        Pings used.
+    """
+    receivers = np.asarray(receivers, float)
+    dim = receivers.shape[1]
+    rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)
+    if len(rich) < 3:
+        raise ModelError(f"sound speed calibration: {len(rich)} pings heard by at least {dim + 3} receivers; at "
+                         "least 3 are needed (give the sound speed)")
+    rich = rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
+    c = 0.5 * (bounds[0] + bounds[1])
+    for _ in range(2):  # the outliers dropped at the middle speed, then again at the first estimate
+        positions, _, _, used, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
+        keep = np.isfinite(positions).all(axis=1) & (used.sum(axis=1) >= dim + 2)
+        if keep.sum() < 3:
+            raise ModelError("sound speed calibration: fewer than 3 pings could be fixed; give the sound speed")
+        rows = np.where(used[keep], toa[rich][keep], np.nan)
+        guesses = positions[keep]
+
+        def cost(c: float, rows=rows, guesses=guesses) -> float:
+            return float(np.nansum(fix_pings(rows, receivers, c, sigma_toa, guesses, gate=np.inf)[4]))
+
+        best = minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 0.05})
+        c = float(best.x)
+    h = 1.0
+    curvature = (cost(c + h) - 2 * best.fun + cost(c - h)) / h**2
+    return c, float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("inf"), int(keep.sum())
+
+
+#: The robust calibration's soft-L1 scale, in standard deviations of a time of arrival: residuals beyond it weigh
+#: as in an L1 fit (late multipath arrivals).
+ROBUST_SCALE = 2.0
+#: The robust calibration's most joint steps, and the change of the sound speed [m/s] it stops below.
+JOINT_ITERATIONS = 200
+JOINT_TOLERANCE = 0.01
+
+
+def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
+                                 scale: float = ROBUST_SCALE,
+                                 bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> tuple[float, float, int]:
+    """The sound speed, the pings' positions and their emission times fitted jointly with a robust loss (a
+    calibration step).
+
+    Over at most ``max_pings`` pings (evenly spread) heard by at least dim + 3 receivers, every arrival kept, the
+    sum ``Σ ρ((toa_ij − t_e,i − ‖p_i − r_j‖/c)² / (scale σ_toa)²)`` with the soft-L1 loss
+    ``ρ(z) = 2 (√(1 + z) − 1)`` (the objective of scipy's ``least_squares(loss="soft_l1")``) is minimised over c
+    and every ``(p_i, t_e,i)``. From the middle of ``bounds``, the pings started from their single-ping fixes
+    there: each iteration solves the weighted normal equations (the soft-L1 weights) with the pings' blocks
+    eliminated (a Schur complement onto c), and takes the joint step, halved until the cost falls once every
+    ping's ``(p_i, t_e,i)`` has been fitted again at the new c (reweighted Gauss-Newton, each ping its own step
+    halving), until c moves by less than :data:`JOINT_TOLERANCE`. The search follows one continuous solution
+    from the start (a global scalar search over c jumps between the local solutions of pings with late
+    arrivals). The standard error is that of the weighted normal equations at the solution, reduced onto c.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    max_pings : int
+        Most pings used.
+    scale : float
+        The soft-L1 scale [σ_toa].
+    bounds : (float, float)
+        The speeds allowed [m/s]; a solution outside is refused.
+    Returns
+    -------
+    c : float
+        Sound speed [m/s].
+    sigma_c : float
+        Its standard error [m/s].
+    pings : int
+        Pings used.
+    """
+    receivers = np.asarray(receivers, float)
+    dim = receivers.shape[1]
+    rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)
+    if len(rich) < 3:
+        raise ModelError(f"sound speed calibration: {len(rich)} pings heard by at least {dim + 3} receivers; at "
+                         "least 3 are needed (give the sound speed)")
+    rich = rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
+    c = 0.5 * (bounds[0] + bounds[1])
+    p, te, _, _, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
+    ok = np.isfinite(p).all(axis=1) & np.isfinite(te)
+    if ok.sum() < 3:
+        raise ModelError("sound speed calibration: fewer than 3 pings could be fixed; give the sound speed")
+    T, p, te = toa[rich][ok], p[ok], te[ok]
+    heard = np.isfinite(T)
+    y = np.where(heard, T, 0.0)
+    f = scale * sigma_toa
+
+    def residuals(c, p, te):
+        diff = p[:, None, :] - receivers[None]
+        d = np.linalg.norm(diff, axis=2)
+        return np.where(heard, y - te[:, None] - d / c, 0.0), diff, d
+
+    def cost(r):
+        return float((2 * (np.sqrt(1 + (r / f) ** 2) - 1))[heard].sum())
+
+    def ping_costs(r):
+        return np.where(heard, 2 * (np.sqrt(1 + (r / f) ** 2) - 1), 0.0).sum(axis=1)
+
+    def normal(c, p, te):
+        """The weighted normal equations' blocks at (c, p, te): per ping A (k, dim+1, dim+1), b (k, dim+1), the
+        gradient gp (k, dim+1); for c the scalars Jc·W·Jc and gc."""
+        r, diff, d = residuals(c, p, te)
+        w = np.where(heard, 1 / np.sqrt(1 + (r / f) ** 2), 0.0)  # the soft-L1 weights ρ'
+        # the derivatives of the model (not of the residual) with respect to p_i, t_e,i and c
+        Jp = np.concatenate([diff / (np.maximum(d, 1e-9)[..., None] * c), np.ones(d.shape + (1,))], axis=2)
+        Jc = -d / c**2
+        A = np.einsum("kn,kni,knj->kij", w, Jp, Jp) + 1e-18 * np.eye(dim + 1)
+        return r, A, np.einsum("kn,kni,kn->ki", w, Jp, Jc), np.einsum("kn,kni,kn->ki", w, Jp, r), \
+            float((w * Jc**2).sum()), float((w * Jc * r).sum())
+
+    def pings_at(c, p, te):
+        """Every ping's (p, t_e) fitted at the sound speed c (reweighted Gauss-Newton, each ping's own step
+        halving)."""
+        p, te = p.copy(), te.copy()
+        for _ in range(FIX_ITERATIONS):
+            r, A, _, gp, _, _ = normal(c, p, te)
+            dq = np.linalg.solve(A, gp[..., None])[..., 0]
+            scale = (np.abs(dq[:, :dim]).max(axis=1) >= 1e-4).astype(float)  # moving by a tenth of a mm or more
+            if not scale.any():
+                break
+            before = ping_costs(r)
+            for _halving in range(12):
+                r_try = residuals(c, p + scale[:, None] * dq[:, :dim], te + scale * dq[:, dim])[0]
+                worse = (ping_costs(r_try) > before) & (scale > 0)
+                if not worse.any():
+                    break
+                scale[worse] *= 0.5
+            scale[worse] = 0.0
+            p, te = p + scale[:, None] * dq[:, :dim], te + scale * dq[:, dim]
+        return p, te
+
+    p, te = pings_at(c, p, te)
+    current = cost(residuals(c, p, te)[0])
+    for _iteration in range(JOINT_ITERATIONS):
+        _, A, b, gp, cc, gc = normal(c, p, te)
+        Ainv_b = np.linalg.solve(A, b[..., None])[..., 0]
+        Ainv_g = np.linalg.solve(A, gp[..., None])[..., 0]
+        dc = (gc - float(np.einsum("ki,ki->", b, Ainv_g))) / (cc - float(np.einsum("ki,ki->", b, Ainv_b)))
+        dq = Ainv_g - Ainv_b * dc
+        for halving in range(20):  # the joint step halved until the cost, the pings fitted again, falls
+            step = 0.5**halving
+            c_try = c + step * dc
+            p_try, te_try = pings_at(c_try, p + step * dq[:, :dim], te + step * dq[:, dim])
+            cost_try = cost(residuals(c_try, p_try, te_try)[0])
+            if cost_try <= current:
+                break
+        else:
+            break
+        c, p, te, current = c_try, p_try, te_try, cost_try
+        if abs(step * dc) < JOINT_TOLERANCE:
+            break
+    _, A, b, _, cc, _ = normal(c, p, te)
+    S = cc - float(np.einsum("ki,ki->", b, np.linalg.solve(A, b[..., None])[..., 0]))
+    if not bounds[0] <= c <= bounds[1]:
+        raise ModelError(f"sound speed calibration: {c:.1f} m/s is outside [{bounds[0]:g}, {bounds[1]:g}] m/s; give "
+                         "the sound speed")
+    return float(c), float(sigma_toa / np.sqrt(S)) if S > 0 else float("inf"), int(len(T))
+
+
+@dataclass
+class TrackerSettings:
+    """The tracker's model.
+
+    Attributes
+    ----------
+    sound_speed : float
+        [m/s].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    acceleration_psd : float
+        Power spectral density of the white-noise acceleration, per axis [m²/s³].
+    interval : float
+        The nominal ping interval, the initial Δ [s].
+    sigma_interval : float
+        Initial standard deviation of Δ [s].
+    jitter : float
+        Standard deviation of the emission time's step beyond Δ, per ping [s].
+    interval_drift : float
+        Standard deviation of Δ's random-walk step, per ping [s].
+    sigma_speed : float
+        Initial standard deviation of each velocity component [m/s].
+    gate : float
+        χ²(1) threshold of one time of arrival's NIS.
+    gate_probability : float
+        Probability that the χ² test of a ping's set of times of arrival passes a consistent set.
+    reinit_after : int
+        Pings heard by dim + 2 or more receivers, every arrival refused, after which the filter starts again from a
+        single-ping fix.
+    fix_gate : float
+        The squared Mahalanobis distance (against the prediction's and the fix's position covariances summed)
+        beyond which an overdetermined single-ping fix (dim + 3 receivers or more) disagrees with the prediction
+        (χ²(2) at 1 − 2·10⁻⁹ is 40).
+    disagree_after : int
+        Consecutive disagreeing pings after which the filter starts again from a single-ping fix (it is lost:
+        a diverged filter with a grown covariance keeps accepting arrivals, so the refusals alone rarely restart
+        it); only when :meth:`ToaTracker.run` is given the fixes.
+    """
+
+    sound_speed: float
+    sigma_toa: float = 2e-4
+    acceleration_psd: float = 0.01
+    interval: float = 2.0
+    sigma_interval: float = 0.05
+    jitter: float = 1e-3
+    interval_drift: float = 1e-4
+    sigma_speed: float = 1.0
+    gate: float = GATE_ONE
+    gate_probability: float = 0.999
+    reinit_after: int = 3
+    fix_gate: float = 40.0
+    disagree_after: int = 5
+
+
+@dataclass
+class TrackRecord:
+    """What :meth:`ToaTracker.run` records: per ping k (m pings), state size s = 2 dim + 2.
+
+    Attributes
+    ----------
+    x_filtered, P_filtered : ndarray, (m, s), (m, s, s)
+        The EKF's estimate after ping k (NaN before the filter starts).
+    x_predicted, P_predicted : ndarray, (m, s), (m, s, s)
+        The prediction of ping k from ping k − 1.
+    F : ndarray, (m, s, s)
+        The transition's Jacobian from ping k − 1 to k.
+    used : ndarray of bool, (m, n)
+        The times of arrival the update used.
+    start : int
+        The first ping with an estimate.
+    restarts : list of int
+        The pings where the filter started again from a single-ping fix.
+    """
+
+    x_filtered: np.ndarray
+    P_filtered: np.ndarray
+    x_predicted: np.ndarray
+    P_predicted: np.ndarray
+    F: np.ndarray
+    used: np.ndarray
+    start: int
+    restarts: list[int] = field(default_factory=list)
+
+
+class ToaTracker:
+    """EKF and RTS smoother of a pinger's track from times of arrival, the emission times unknown.
+
+    State ``x = [p (dim), v (dim), t_e, Δ]``; from ping k − 1 to ping k (one row of the TOA matrix each, heard or
+    not), with ``T = Δ``:
+
+        ``p ← p + T v``, ``v ← v``, ``t_e ← t_e + Δ``, ``Δ ← Δ``,
+
+    process noise ``q [T³/3, T²/2; T²/2, T]`` per axis (white-noise acceleration), ``jitter²`` on ``t_e`` and
+    ``interval_drift²`` on ``Δ``. The update of ping k uses :func:`toa_function` with the receivers that heard
+    it, gated one by one (NIS against ``settings.gate``) and then as a set (the χ² quantile of
+    ``settings.gate_probability``; the largest NIS dropped until it passes).
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+    """
+
+    def __init__(self, receivers: np.ndarray, settings: TrackerSettings) -> None:
+        self.receivers = np.asarray(receivers, float)
+        self.n, self.dim = self.receivers.shape
+        self.settings = settings
+        self.size = 2 * self.dim + 2
+        self._f = toa_function(self.n, self.dim)
+        from scipy.stats import chi2
+
+        self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
+
+    def transition(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s)."""
+        d, s = self.dim, self.settings
+        T = float(x[-1])
+        F = np.eye(self.size)
+        F[:d, d:2 * d] = T * np.eye(d)
+        F[:d, -1] = x[d:2 * d]
+        F[-2, -1] = 1.0
+        xp = x.copy()
+        xp[:d] = x[:d] + T * x[d:2 * d]
+        xp[-2] = x[-2] + T
+        Q = np.zeros((self.size, self.size))
+        q = s.acceleration_psd
+        Q[:d, :d] = q * T**3 / 3 * np.eye(d)
+        Q[:d, d:2 * d] = Q[d:2 * d, :d] = q * T**2 / 2 * np.eye(d)
+        Q[d:2 * d, d:2 * d] = q * T * np.eye(d)
+        Q[-2, -2] = s.jitter**2
+        Q[-1, -1] = s.interval_drift**2
+        return xp, F, Q
+
+    def initial(self, fix: Fix) -> tuple[np.ndarray, np.ndarray]:
+        """The state and covariance started from a single-ping fix (velocity 0, the nominal interval)."""
+        d, s = self.dim, self.settings
+        x = np.concatenate([fix.position, np.zeros(d), [fix.emission, s.interval]])
+        P = np.zeros((self.size, self.size))
+        idx = list(range(d)) + [2 * d]
+        P[np.ix_(idx, idx)] = fix.covariance
+        P[d:2 * d, d:2 * d] = s.sigma_speed**2 * np.eye(d)
+        P[-1, -1] = s.sigma_interval**2
+        return x, P
+
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The EKF update with one ping's times of arrival (n,) (NaN: not heard), gated; returns the state, the
+        covariance (Joseph form) and the arrivals used (n,)."""
+        d, s = self.dim, self.settings
+        model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
+        model, J = np.asarray(model).ravel(), np.asarray(J)
+        H = np.zeros((self.n, self.size))
+        H[:, :d] = J[:, :d]
+        H[:, -2] = J[:, d]
+        R = s.sigma_toa**2
+        nu = toa - model
+        variance = np.einsum("ij,jk,ik->i", H, P, H) + R
+        used = np.isfinite(toa)
+        used[used] = nu[used] ** 2 / variance[used] <= s.gate
+        while used.any():
+            Hu = H[used]
+            S = Hu @ P @ Hu.T + R * np.eye(int(used.sum()))
+            nis = float(nu[used] @ np.linalg.solve(S, nu[used]))
+            if nis <= self._set_gate[int(used.sum()) - 1]:
+                K = np.linalg.solve(S, Hu @ P).T
+                x = x + K @ nu[used]
+                A = np.eye(self.size) - K @ Hu
+                P = A @ P @ A.T + R * K @ K.T
+                return x, 0.5 * (P + P.T), used
+            worst = np.flatnonzero(used)[int(np.argmax(nu[used] ** 2 / variance[used]))]
+            used[worst] = False
+        return x, P, used
+
+    def run(self, toa: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> TrackRecord:
+        """The EKF over every ping (rows of ``toa``, (m, n) [s], NaN: not heard), started at the first ping with a
+        single-ping fix of dim + 2 receivers or more, and started again from a fix after ``reinit_after``
+        pings whose arrivals were all refused or, given ``fixes`` (the single-ping fixes of every ping: positions
+        (m, dim) [m], NaN where none, covariances (m, ≥dim, ≥dim) [m²] and the receivers each used (m,), as
+        :func:`fix_pings` returns them), after ``disagree_after`` consecutive overdetermined fixes outside the
+        prediction's ``fix_gate``."""
+        m, size, s = len(toa), self.size, self.settings
+        rec = TrackRecord(np.full((m, size), np.nan), np.full((m, size, size), np.nan), np.full((m, size), np.nan),
+                          np.full((m, size, size), np.nan), np.tile(np.eye(size), (m, 1, 1)),
+                          np.zeros((m, self.n), bool), m)
+        x = P = None
+        refused = disagree = 0
+        d = self.dim
+        heard = np.isfinite(toa).sum(axis=1)
+        for k in range(m):
+            if x is not None:
+                xp, F, Q = self.transition(x)
+                P = F @ P @ F.T + Q
+                x = xp
+                rec.x_predicted[k], rec.P_predicted[k], rec.F[k] = x, P, F
+                if fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 3:
+                    # an overdetermined single-ping fix far outside the prediction's ellipse: the filter may be lost
+                    e = fixes[0][k] - x[:d]
+                    far = float(e @ np.linalg.solve(P[:d, :d] + fixes[1][k][:d, :d], e)) > s.fix_gate
+                    disagree = disagree + 1 if far else 0
+                x, P, used = self.update(x, P, toa[k])
+                rec.used[k] = used
+                refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
+                if disagree >= s.disagree_after:
+                    refused = s.reinit_after
+            if x is None or refused >= s.reinit_after:
+                disagree = 0
+                fix = single_ping_fix(toa[k], self.receivers, s.sound_speed, s.sigma_toa) \
+                    if heard[k] >= self.dim + 2 else None
+                if fix is None:
+                    continue
+                if x is None:
+                    rec.start = k
+                    rec.x_predicted[k], rec.P_predicted[k] = self.initial(fix)
+                else:
+                    rec.restarts.append(k)
+                x, P = self.initial(fix)
+                if k > rec.start:  # the prediction of this ping stays the filter's; keep the interval
+                    x[-1] = rec.x_predicted[k][-1]
+                    P[-1, -1] = rec.P_predicted[k][-1, -1]
+                rec.used[k] = fix.used
+                refused = 0
+            rec.x_filtered[k], rec.P_filtered[k] = x, P
+        return rec
+
+    def smooth(self, rec: TrackRecord) -> tuple[np.ndarray, np.ndarray]:
+        """The RTS smoother over the filter's record from its first ping (:func:`rts_smooth`); NaN before it.
+        Returns the smoothed states (m, s) and covariances (m, s, s)."""
+        xs = np.full_like(rec.x_filtered, np.nan)
+        Ps = np.full_like(rec.P_filtered, np.nan)
+        k0 = rec.start
+        if k0 < len(xs):
+            xs[k0:], Ps[k0:] = rts_smooth(rec.x_filtered[k0:], rec.P_filtered[k0:], rec.x_predicted[k0:],
+                                          rec.P_predicted[k0:], rec.F[k0:])
+        return xs, Ps
+
+
+def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.ndarray, P_predicted: np.ndarray,
+               F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed-interval Rauch-Tung-Striebel smoother over a Kalman filter's (or EKF's) record.
+
+    For k = m − 2 down to 0, with ``C_k = P_k|k F_{k+1}ᵀ P_{k+1|k}⁻¹``:
+    ``x_k|m = x_k|k + C_k (x_{k+1}|m − x_{k+1|k})`` and ``P_k|m = P_k|k + C_k (P_{k+1}|m − P_{k+1|k}) C_kᵀ``.
+
+    Parameters
+    ----------
+    x_filtered, P_filtered : ndarray, (m, s), (m, s, s)
+        Filtered states and covariances.
+    x_predicted, P_predicted : ndarray, (m, s), (m, s, s)
+        Row k: the prediction of step k from step k − 1 (row 0 is not used).
+    F : ndarray, (m, s, s)
+        Row k: the transition (its Jacobian) from step k − 1 to k (row 0 is not used).
+
+    Returns
+    -------
+    x_smoothed : ndarray, (m, s)
+    P_smoothed : ndarray, (m, s, s)
+    """
+    xs = np.array(x_filtered, float)
+    Ps = np.array(P_filtered, float)
+    for k in range(len(xs) - 2, -1, -1):
+        C = np.linalg.solve(P_predicted[k + 1], F[k + 1] @ P_filtered[k]).T
+        xs[k] = x_filtered[k] + C @ (xs[k + 1] - x_predicted[k + 1])
+        Ps[k] = P_filtered[k] + C @ (Ps[k + 1] - P_predicted[k + 1]) @ C.T
+        Ps[k] = 0.5 * (Ps[k] + Ps[k].T)
+    return xs, Ps
+
+
+def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSettings, rng: np.random.Generator,
+                   start: np.ndarray | None = None, speed: float = 1.0, detection: float = 0.8,
+                   first_emission: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pings of a target moving as the tracker's model says, heard by an array.
+
+    The target starts at ``start`` (default the array's centroid) at ``speed`` [m/s] in a random direction and
+    moves by the discrete white-noise-acceleration model of ``settings.acceleration_psd``; ping k is emitted at
+    ``t_e,k = t_e,k−1 + Δ_k−1 + jitter`` and the interval walks by ``interval_drift``; each receiver hears each
+    ping with probability ``detection`` with Gaussian timing noise ``sigma_toa``.
+
+    Returns
+    -------
+    toa : ndarray, (n_pings, n)
+        Times of arrival [s], NaN where not heard.
+    positions : ndarray, (n_pings, dim)
+        The target's position at each emission [m].
+    emissions : ndarray, (n_pings,)
+        Emission times [s].
+    """
+    receivers = np.asarray(receivers, float)
+    n, dim = receivers.shape
+    s = settings
+    p = receivers.mean(axis=0) if start is None else np.asarray(start, float)
+    heading = rng.normal(size=dim)
+    v = speed * heading / np.linalg.norm(heading)
+    te, interval = first_emission, s.interval
+    positions, emissions = np.empty((n_pings, dim)), np.empty(n_pings)
+    for k in range(n_pings):
+        positions[k], emissions[k] = p, te
+        T = interval
+        cov = s.acceleration_psd * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+        w = rng.multivariate_normal(np.zeros(2), cov, size=dim)  # (dim, 2): position and velocity noise per axis
+        p, v = p + T * v + w[:, 0], v + w[:, 1]
+        te = te + interval + s.jitter * rng.normal()
+        interval = interval + s.interval_drift * rng.normal()
+    ranges = np.linalg.norm(positions[:, None, :] - receivers[None, :, :], axis=2)
+    toa = emissions[:, None] + ranges / s.sound_speed + s.sigma_toa * rng.normal(size=(n_pings, n))
+    toa[rng.random((n_pings, n)) > detection] = np.nan
+    return toa, positions, emissions
+
+
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_SCALE",
+           "SOUND_SPEED_RANGE", "Fix", "ToaTracker", "TrackRecord", "TrackerSettings", "calibrate_sound_speed",
+           "calibrate_sound_speed_robust", "fix_pings", "rts_smooth", "simulate_pings", "single_ping_fix",
+           "toa_function", "toa_model"]

@@ -1,0 +1,274 @@
+"""Reading recorded times of arrival at a fixed array (an inverted LBL), as hostile input.
+
+* the TOA matrix: one row per ping, one column per receiver, whitespace- or comma-separated, an optional header
+  of receiver names; ``NA`` or an empty cell where the ping was not heard (Lake Hald's ``toa.txt``);
+* the receivers' positions: a CSV with a name column and ``x_m``, ``y_m`` [, ``z_m``] [, ``status``] (or
+  ``x``, ``y``, ``z``), a receiver without a position not used (Lake Hald's ``hydrophones.csv``), or a TOML
+  file of ``[[receiver]]`` tables with ``name``, ``x_m``, ``y_m`` [, ``z_m``];
+* a track (the truth, or a reference solution): columns ``x``, ``y`` [, ``z``] [m] and ``t`` (or ``time``,
+  ``top``) [s] under a header line (Lake Hald's ``gps.txt``, ``umap.txt``).
+
+Each file must be a regular file (a FIFO or a device such as ``/dev/zero`` is refused before it is opened) and is
+read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read. The cells are
+parsed by pandas and every one checked (finite, within its range); no name or text in a file is ever taken as a
+path. An error is one line naming the file, its line or column and the allowed range (:class:`ModelError`).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.tables import NUMBER, number, regular_file, text_lines
+
+#: The largest file read [bytes] and the most rows (pings, receivers, track points).
+MAX_TOA_BYTES = 64 * 2**20
+MAX_PINGS = 500_000
+MAX_RECEIVERS = 1000
+#: The allowed times [s] (a time of arrival or a track's time) and coordinates [m].
+MAX_TIME = 1e10
+MAX_COORDINATE = 1e7
+#: The texts of a cell that was not heard.
+MISSING = ("NA", "")
+
+
+def _lines(path: Path, what: str) -> list[str]:
+    """The lines of a regular text file, refused when it holds more than :data:`MAX_TOA_BYTES` bytes or
+    :data:`MAX_PINGS` lines (counted by reading, not from the file's size); comments (``#``) and blank lines
+    dropped."""
+    name = str(path)
+    regular_file(path, what)
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_TOA_BYTES + 1)
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > MAX_TOA_BYTES:
+        raise ModelError(f"{what}: {name!r} is larger than {MAX_TOA_BYTES // 2**20} MiB; allowed at most "
+                         f"{MAX_TOA_BYTES // 2**20} MiB and {MAX_PINGS:,} rows")
+    lines = data.count(b"\n")
+    if lines > MAX_PINGS + 1000:
+        raise ModelError(f"{what}: {name!r} has {lines:,} lines; allowed at most {MAX_PINGS:,} rows")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
+    return [line for line in text_lines(text) if line.strip() and not line.lstrip().startswith("#")]
+
+
+def _split(line: str) -> list[str]:
+    """The cells of a line: comma-separated if it holds a comma, else whitespace-separated; quotes removed."""
+    cells = line.split(",") if "," in line else line.split()
+    return [c.strip().strip('"').strip("'").strip() for c in cells]
+
+
+def _is_cell(text: str) -> bool:
+    return text in MISSING or bool(NUMBER.fullmatch(text))
+
+
+def _numbers(rows: list[str], name: str, what: str, first_line: int, header: list[str], low: float, high: float,
+             missing: bool) -> np.ndarray:
+    """The cells of ``rows`` parsed by pandas as a float matrix, each checked: a number (``NA``/empty allowed
+    only where ``missing``), finite, within [low, high]; an error names the line and the column."""
+    width = len(header)
+    sep = "," if any("," in r for r in rows[:1]) else r"\s+"
+    try:
+        frame = pd.read_csv(io.StringIO("\n".join(rows)), sep=sep, header=None, dtype=str, keep_default_na=False,
+                            engine="python" if sep != "," else "c", quotechar='"', skipinitialspace=True)
+    except Exception as exc:  # pandas' parser errors name the line
+        raise ModelError(f"{what}: {name!r} does not parse ({' '.join(str(exc).split())[:160]})") from None
+    if frame.shape[1] != width:
+        raise ModelError(f"{what}: {name!r} has {frame.shape[1]} columns, the first row {width}")
+    cells = frame.to_numpy(dtype=str)
+    stripped = np.char.strip(cells)
+    values = np.array(pd.to_numeric(pd.Series(stripped.ravel()), errors="coerce"), float).reshape(cells.shape)
+    empty = np.isin(stripped, MISSING)
+    valid = np.vectorize(lambda t: bool(NUMBER.fullmatch(t)), otypes=[bool])(stripped) if stripped.size else empty
+    bad = ~(valid | (empty & missing))
+    bad |= valid & ~np.isfinite(values)
+    bad |= valid & np.isfinite(values) & ((values < low) | (values > high))
+    if bad.any():
+        i, j = map(int, np.argwhere(bad)[0])
+        text = stripped[i, j]
+        allowed = f"a finite number in [{low:g}, {high:g}]" + (" or NA/empty (not heard)" if missing else "")
+        raise ModelError(f"{what}: {name!r} line {first_line + i} column {header[j]}: {text[:40]!r} is not "
+                         f"allowed; allowed: {allowed}")
+    values[empty] = np.nan
+    return values
+
+
+@dataclass
+class ToaMatrix:
+    """Times of arrival: ``toa`` (pings, receivers) [s], NaN where not heard; ``names`` the columns' receiver names
+    (None: no header, the columns in the receivers file's order)."""
+
+    toa: np.ndarray
+    names: list[str] | None
+
+
+def read_toa(path: Path | str) -> ToaMatrix:
+    """Read a TOA matrix (module docstring); times in [0, :data:`MAX_TIME`] s.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the line and column, and the allowed range.
+    """
+    path, what = Path(path), "toa"
+    lines = _lines(path, what)
+    if not lines:
+        raise ModelError(f"{what}: {str(path)!r} holds no rows; allowed: a matrix of times of arrival [s]")
+    first = _split(lines[0])
+    names = None
+    if not all(_is_cell(c) for c in first):
+        names, lines = first, lines[1:]
+        if len(set(names)) != len(names):
+            raise ModelError(f"{what}: {str(path)!r}: a receiver name is given twice in the header")
+        if not lines:
+            raise ModelError(f"{what}: {str(path)!r} holds a header and no rows")
+    width = len(names) if names else len(first)
+    if not 1 <= width <= MAX_RECEIVERS:
+        raise ModelError(f"{what}: {str(path)!r} has {width} columns; allowed 1 to {MAX_RECEIVERS}")
+    header = names or [f"{k + 1}" for k in range(width)]
+    toa = _numbers(lines, str(path), what, 2 if names else 1, header, 0.0, MAX_TIME, True)
+    return ToaMatrix(toa, names)
+
+
+@dataclass
+class Receivers:
+    """The receivers: ``names`` (n,), ``positions`` (n, dim) [m], NaN rows where a receiver has no position
+    (not used)."""
+
+    names: list[str]
+    positions: np.ndarray
+
+
+def read_receivers(path: Path | str) -> Receivers:
+    """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``]
+    [, ``status``]) or a TOML file (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``]). A receiver
+    whose coordinates are empty is kept without a position (its column of the TOA matrix is not used).
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, its row or key, and the allowed range.
+    """
+    path, what = Path(path), "receivers"
+    name = str(path)
+    if path.suffix.lower() == ".toml":
+        return _receivers_toml(path, what)
+    lines = _lines(path, what)
+    if len(lines) < 2:
+        raise ModelError(f"{what}: {name!r} holds no receivers; allowed: a header (name, x_m, y_m[, z_m]) and rows")
+    header = [h.lower() for h in _split(lines[0])]
+    rows = [_split(line) for line in lines[1:]]
+    if len(rows) > MAX_RECEIVERS:
+        raise ModelError(f"{what}: {name!r} has {len(rows)} receivers; allowed at most {MAX_RECEIVERS}")
+    axes = []
+    for axis in "xyz":
+        found = [k for k, h in enumerate(header) if h in (f"{axis}_m", axis)]
+        axes.append(found[0] if found else None)
+    if axes[0] is None or axes[1] is None:
+        raise ModelError(f"{what}: {name!r}: the header needs x_m and y_m (or x, y) columns, got {','.join(header)}")
+    used = [k for k in axes if k is not None]
+    status = header.index("status") if "status" in header else None
+    label = next((k for k in range(len(header)) if k not in used and k != status), None)
+    names, positions = [], []
+    for lineno, cells in enumerate(rows, start=2):
+        if len(cells) != len(header):
+            raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} fields, the header {len(header)}")
+        names.append(cells[label] if label is not None else str(lineno - 1))
+        coordinates = [cells[k] for k in used]
+        if all(c in MISSING for c in coordinates):
+            positions.append([math.nan] * len(used))
+            continue
+        positions.append([number(c, f"{what}: {name!r} line {lineno}", header[k], -MAX_COORDINATE, MAX_COORDINATE)
+                          for c, k in zip(coordinates, used)])
+    if len(set(names)) != len(names):
+        raise ModelError(f"{what}: {name!r}: a receiver name is given twice")
+    return Receivers(names, np.array(positions, float))
+
+
+def _receivers_toml(path: Path, what: str) -> Receivers:
+    name = str(path)
+    text = "\n".join(_lines(path, what))
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelError(f"{what}: {name!r} is not valid TOML ({exc})") from None
+    unknown = set(data) - {"receiver"}
+    if unknown or not isinstance(data.get("receiver"), list) or not data["receiver"]:
+        raise ModelError(f"{what}: {name!r}: expected [[receiver]] tables only (name, x_m, y_m[, z_m]), got "
+                         f"{', '.join(sorted(unknown)) or 'no receiver'}")
+    names, positions = [], []
+    dims = set()
+    for k, table in enumerate(data["receiver"], start=1):
+        extra = set(table) - {"name", "x_m", "y_m", "z_m"}
+        if extra or "x_m" not in table or "y_m" not in table:
+            raise ModelError(f"{what}: {name!r}: receiver {k}: the keys are name, x_m, y_m[, z_m]; got "
+                             f"{', '.join(sorted(table))}")
+        row = []
+        for key in ("x_m", "y_m", "z_m"):
+            if key not in table:
+                continue
+            value = table[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or abs(value) > MAX_COORDINATE:
+                raise ModelError(f"{what}: {name!r}: receiver {k}: {key} = {value!r} is not allowed; allowed: a "
+                                 f"finite number in [{-MAX_COORDINATE:g}, {MAX_COORDINATE:g}] m")
+            row.append(float(value))
+        dims.add(len(row))
+        names.append(str(table.get("name", k)))
+        positions.append(row)
+    if len(dims) != 1:
+        raise ModelError(f"{what}: {name!r}: every receiver needs the same coordinates (all with z_m or none)")
+    return Receivers(names, np.array(positions, float))
+
+
+def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarray:
+    """Read a track (the truth, or a reference solution): columns x, y [, z] [m] and t (``time``, ``top``) [s]
+    under a header, the times increasing (a truth track, which is interpolated) or in any order (``increasing``
+    False: a reference solution, which is only compared at its own rows); returns (m, 3) ``t, x, y`` or (m, 4)
+    ``t, x, y, z``.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the line and column, and the allowed range.
+    """
+    path = Path(path)
+    name = str(path)
+    lines = _lines(path, what)
+    if len(lines) < 3:
+        raise ModelError(f"{what}: {name!r} needs a header (x y t) and at least two rows")
+    header = [h.lower() for h in _split(lines[0])]
+    index = {}
+    for key, aliases in (("t", ("t", "time", "top", "time_s", "t_s")), ("x", ("x", "x_m")), ("y", ("y", "y_m")),
+                         ("z", ("z", "z_m"))):
+        found = [k for k, h in enumerate(header) if h in aliases]
+        if found:
+            index[key] = found[0]
+    if not {"t", "x", "y"} <= set(index):
+        raise ModelError(f"{what}: {name!r}: the header needs x, y and t columns, got {' '.join(header)}")
+    values = _numbers(lines[1:], name, what, 2, header, -MAX_TIME, MAX_TIME, False)
+    track = values[:, [index[k] for k in ("t", "x", "y", "z") if k in index]]
+    if np.abs(track[:, 1:]).max() > MAX_COORDINATE:
+        raise ModelError(f"{what}: {name!r}: a coordinate is outside the allowed range [{-MAX_COORDINATE:g}, "
+                         f"{MAX_COORDINATE:g}] m")
+    steps = np.diff(track[:, 0])
+    if increasing and (steps <= 0).any():
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise ModelError(f"{what}: {name!r} line {k + 3}: the time {track[k + 1, 0]:.10g} s does not increase; "
+                         "allowed: times in increasing order")
+    return track
+
+
+__all__ = ["MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_TIME", "MAX_TOA_BYTES", "Receivers", "ToaMatrix",
+           "read_receivers", "read_toa", "read_track"]

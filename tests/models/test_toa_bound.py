@@ -1,0 +1,89 @@
+"""The accuracy limit of an inverted LBL (:mod:`sblsim.models.receiver.toa_bound`): the single-ping Fisher
+information against a finite-difference one built with numpy, the PCRB recursion against the covariance form, and
+both bounds reached by the estimators on simulated pings (the single-ping fix by Monte Carlo at a fixed point, the
+EKF over 20 seeds)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sblsim.models.receiver import toa_bound as tb
+from sblsim.models.receiver import toa_tracking as tt
+
+# a 2-D array of 8 receivers about 100 m across (the scale of the Lake Hald array)
+RECEIVERS = np.array([[0.0, 0.0], [110.0, 10.0], [95.0, 120.0], [-10.0, 105.0], [50.0, -20.0], [130.0, 60.0],
+                      [45.0, 130.0], [-25.0, 50.0]])
+C, SIGMA = 1420.0, 1.5e-4
+
+
+def toa_numpy(theta: np.ndarray, receivers: np.ndarray, c: float) -> np.ndarray:
+    """One-way times of arrival of (p, t_e)."""
+    return theta[-1] + np.linalg.norm(theta[None, :-1] - receivers, axis=1) / c
+
+
+def test_ping_information_against_finite_differences():
+    rng = np.random.default_rng(0)
+    for p in ([40.0, 50.0], [140.0, -30.0], [60.0, 90.0]):
+        heard = rng.random(len(RECEIVERS)) < 0.8
+        heard[:3] = True
+        theta = np.array([*p, 12.3])
+        steps = np.array([1e-3, 1e-3, 1e-6])
+        J = np.column_stack([(toa_numpy(theta + s * e, RECEIVERS, C) - toa_numpy(theta - s * e, RECEIVERS, C))
+                             / (2 * s) for s, e in zip(steps, np.eye(3))])[heard]
+        info = J.T @ J / SIGMA**2
+        got = tb.ping_information(np.array([p]), heard[None], RECEIVERS, C, SIGMA)[0]
+        assert np.all(np.abs(got - info) <= 1e-6 * np.abs(info) + 1e-12 * np.abs(info).max())
+        # the position's information with t_e unknown: the inverse of the position block of the inverse
+        schur = np.linalg.inv(np.linalg.inv(info)[:2, :2])
+        pos = tb.position_information(np.array([p]), heard[None], RECEIVERS, C, SIGMA)[0]
+        assert np.allclose(pos, schur, rtol=1e-6, atol=0)
+        drms = tb.fix_drms(np.array([p]), heard[None], RECEIVERS, C, SIGMA)[0]
+        assert np.isclose(drms, np.sqrt(np.trace(np.linalg.inv(info)[:2, :2])), rtol=1e-6)
+    # fewer than dim + 1 receivers: unbounded
+    assert np.isinf(tb.fix_drms(np.array([[40.0, 50.0]]), np.array([[True, True] + [False] * 6]), RECEIVERS, C,
+                                SIGMA)[0])
+
+
+def test_single_ping_fix_reaches_its_drms():
+    """Monte Carlo over 1,000 noise draws at a fixed point, two receiver sets: RMS error within 15 % of the DRMS."""
+    rng = np.random.default_rng(1)
+    for p, heard in (([40.0, 50.0], np.ones(8, bool)), ([150.0, 20.0], np.array([1, 1, 1, 0, 1, 1, 0, 0], bool))):
+        p = np.array(p)
+        draws = 1000
+        toa = np.tile(7.0 + np.linalg.norm(p - RECEIVERS, axis=1) / C, (draws, 1))
+        toa += SIGMA * rng.normal(size=toa.shape)
+        toa[:, ~heard] = np.nan
+        positions = tt.fix_pings(toa, RECEIVERS, C, SIGMA, gate=np.inf)[0]
+        rms = np.sqrt(np.mean(np.sum((positions - p) ** 2, axis=1)))
+        predicted = tb.fix_drms(p[None], heard[None], RECEIVERS, C, SIGMA)[0]
+        print(f"fix RMS {rms:.4f} m, DRMS {predicted:.4f} m")
+        assert abs(rms / predicted - 1) <= 0.15, (rms, predicted)
+
+
+def test_ekf_reaches_its_pcrb_over_20_seeds():
+    s = tt.TrackerSettings(sound_speed=C, sigma_toa=SIGMA, interval=2.0, acceleration_psd=1e-3, jitter=1e-3)
+    motion = tb.MotionModel.of(s)
+    squared_errors, squared_bounds = [], []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        toa, truth, emissions = tt.simulate_pings(RECEIVERS, 80, s, rng, speed=0.5, detection=0.6)
+        record = tt.ToaTracker(RECEIVERS, s).run(toa)
+        k0 = record.start
+        velocity = np.gradient(truth, emissions, axis=0)
+        bound = tb.pcrb(truth[k0:], velocity[k0:], emissions[k0:], np.isfinite(toa[k0:]), RECEIVERS, C, SIGMA, motion)
+        squared_errors.append(np.sum((record.x_filtered[k0:, :2] - truth[k0:]) ** 2, axis=1))
+        squared_bounds.append(bound.filtered**2)
+        if seed == 0:  # the information form against the covariance form of the same recursion
+            B = bound.B_filtered
+            for k in range(1, 6):
+                F, Q = tb.transition(velocity[k0 + k - 1], emissions[k0 + k] - emissions[k0 + k - 1], motion)
+                info = tb.ping_information(truth[k0 + k][None], np.isfinite(toa[k0 + k])[None], RECEIVERS, C, SIGMA)
+                Jz = np.zeros((6, 6))
+                Jz[np.ix_([0, 1, 4], [0, 1, 4])] = info[0]
+                expected = np.linalg.inv(np.linalg.inv(F @ B[k - 1] @ F.T + Q) + Jz)
+                assert np.allclose(B[k], expected, rtol=1e-6, atol=1e-12), k
+            # the smoothing bound is below the filtering one
+            assert np.all(bound.smoothed <= bound.filtered * (1 + 1e-9))
+    ratio = np.sqrt(np.mean(np.concatenate(squared_errors)) / np.mean(np.concatenate(squared_bounds)))
+    print(f"EKF RMS / PCRB over 20 seeds: {ratio:.3f}")
+    assert 1 / 1.3 <= ratio <= 1.3, ratio

@@ -1,0 +1,363 @@
+"""The inverted-LBL slice: the TOA reader against an independent parse and on hostile files, the TOA model against
+numpy, the RTS smoother against FilterPy, the Lake Hald track against GPS and U-MAP, and the simulated pings'
+sound-speed calibration and NEES."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sblsim
+from sblsim.models.errors import ModelError
+from sblsim.models.receiver import toa_tracking as tt
+from sblsim.orchestrator.tracks.toa import read_receivers, read_toa, read_track
+
+# the recording is in the repository (tests and docs), not in the wheel
+DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
+
+
+def stats(e: np.ndarray) -> tuple[float, float]:
+    return float(np.median(e)), float(np.sqrt(np.mean(e**2)))
+
+
+def test_reader_reads_lake_hald_as_genfromtxt():
+    expected = np.genfromtxt(DATA / "toa.txt")
+    got = read_toa(DATA / "toa.txt").toa
+    assert got.shape == expected.shape == (3244, 28)
+    assert np.array_equal(np.isnan(got), np.isnan(expected))
+    assert np.array_equal(got[np.isfinite(got)], expected[np.isfinite(expected)])
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    assert np.array_equal(read_track(DATA / "gps.txt", "truth"), gps[:, [2, 0, 1]])
+    r = read_receivers(DATA / "hydrophones.csv")
+    assert r.names[13] == "H14" and np.isnan(r.positions[13]).all()
+    assert np.allclose(r.positions[1], [143.34, -78.85])
+
+
+@pytest.mark.parametrize("cell, word", [("nan", "not allowed"), ("inf", "not allowed"), ("-0.5", "not allowed"),
+                                        ("/etc/passwd", "not allowed")])
+def test_hostile_cells_refused_in_one_line(tmp_path, cell, word):
+    path = tmp_path / "toa.txt"
+    path.write_text(f"0.1 NA 0.2\n0.3 {cell} 0.4\n")
+    with pytest.raises(ModelError) as info:
+        read_toa(path)
+    message = str(info.value)
+    assert "\n" not in message and word in message and "line 2" in message and "[0, 1e+10]" in message
+
+
+def test_large_and_device_files_refused(tmp_path):
+    big = tmp_path / "big.txt"
+    big.write_bytes(b"0.1 0.2\n" * 1_000_000)
+    with pytest.raises(ModelError, match="allowed at most"):
+        read_toa(big)
+    link = tmp_path / "zero.txt"
+    os.symlink("/dev/zero", link)
+    with pytest.raises(ModelError, match="not a regular file"):
+        read_toa(link)
+    toml = tmp_path / "receivers.toml"
+    toml.write_text('include = "/etc/passwd"\n[[receiver]]\nname = "a"\nx_m = 0\ny_m = 0\n')
+    with pytest.raises(ModelError, match="expected \\[\\[receiver\\]\\] tables only"):
+        read_receivers(toml)
+
+
+def test_command_refuses_bad_input_and_writes_nothing(tmp_path, capsys):
+    from sblsim.orchestrator.cli import main
+
+    bad = tmp_path / "toa.txt"
+    bad.write_text("0.1 NA\n0.2 nan\n")
+    out = tmp_path / "out"
+    status = main(["replay", str(bad), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"), "--out",
+                   str(out)])
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "toa" in err[0] and not out.exists()
+
+
+def test_toa_model_against_numpy():
+    rng = np.random.default_rng(3)
+    receivers = rng.uniform(-100, 100, (7, 2))
+    p, te, c = np.array([12.0, -30.0]), 5.25, 1437.0
+    toa, J = tt.toa_model(p, te, receivers, c)
+    d = np.sqrt(((p - receivers) ** 2).sum(axis=1))
+    assert np.allclose(toa, te + d / c, rtol=0, atol=1e-12)
+    assert np.allclose(J[:, :2], (p - receivers) / d[:, None] / c, atol=1e-15) and np.all(J[:, 2] == 1)
+
+
+def test_rts_against_filterpy():
+    from filterpy.kalman import rts_smoother
+
+    rng = np.random.default_rng(1)
+    m, s = 40, 6
+    F = np.eye(s) + 0.1 * rng.normal(size=(s, s))
+    Q = np.diag(rng.uniform(0.01, 0.1, s))
+    xf = rng.normal(size=(m, s))
+    A = rng.normal(size=(m, s, s))
+    Pf = A @ A.transpose(0, 2, 1) + np.eye(s)
+    Fs, Qs = np.tile(F, (m, 1, 1)), np.tile(Q, (m, 1, 1))
+    xp = np.einsum("ij,mj->mi", F, np.roll(xf, 1, axis=0))
+    Pp = F @ np.roll(Pf, 1, axis=0) @ F.T + Q
+    xs, Ps = tt.rts_smooth(xf, Pf, xp, Pp, Fs)
+    x_ref, P_ref, _, _ = rts_smoother(xf, Pf, Fs, Qs)
+    assert np.abs(xs - x_ref).max() <= 1e-9 and np.abs(Ps - P_ref).max() <= 1e-9
+
+
+THINNED = ["H2", "H4", "H6", "H7", "H11", "H12", "H17", "H23"]  # the authors' 8 of the 28 (docs/tracking.md)
+
+
+def gps_errors(t: np.ndarray, x: np.ndarray, y: np.ndarray, gps: np.ndarray, lag: float = 0.0) -> np.ndarray:
+    """An independent scoring: the GPS (rows x, y, t) interpolated at t + lag; 2-D errors inside its span."""
+    inside = (t >= gps[0, 2]) & (t <= gps[-1, 2])
+    return np.hypot(x - np.interp(t + lag, gps[:, 2], gps[:, 0]), y - np.interp(t + lag, gps[:, 2], gps[:, 1]))[inside]
+
+
+@pytest.fixture(scope="module")
+def full(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lake") / "full"
+    # the default: the sound speed calibrated (the joint soft-L1 fit)
+    return sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                             reference=DATA / "umap.txt", out=out)
+
+
+def test_lake_hald_beats_umap(full):
+    r = full
+    umap = np.genfromtxt(DATA / "umap.txt", skip_header=1)
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    median_umap, rms_umap = stats(gps_errors(umap[:, 2], umap[:, 0], umap[:, 1], gps))
+    e = gps_errors(r.track["time"].to_numpy(), r.track["x"].to_numpy(), r.track["y"].to_numpy(), gps)
+    median, rms = stats(e)
+    assert median < median_umap and rms < rms_umap and len(r.track) >= len(umap)
+    assert r.summary["sound_speed"]["source"] == "calibrated"
+    fix = r.estimates[r.estimates["estimator"] == "fix"]
+    assert np.median(gps_errors(fix["time"].to_numpy(), fix["x"].to_numpy(), fix["y"].to_numpy(), gps)) <= 0.5
+    assert r.summary["wall_time_s"] <= 10
+    # score.json: the issue's keys, the track's (the smoother's) figures, the reference's under "others"
+    assert list(r.score)[:9] == ["n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95_m", "nees",
+                                 "lag_s"]
+    assert r.score["n_pings"] == 3244 and r.score["n_fixed"] == len(r.track)
+    assert np.isclose(r.score["median_m"], median, rtol=1e-12) and np.isclose(r.score["rms_m"], rms, rtol=1e-12)
+    assert np.isclose(r.score["p95_m"], np.percentile(e, 95), rtol=1e-12)
+    assert np.isclose(r.score["others"]["reference"]["rms_m"], rms_umap, rtol=1e-12)
+
+
+def test_written_files_keep_the_issue_names(full):
+    import json
+
+    import pandas as pd
+
+    track = pd.read_csv(full.out / "track.csv")
+    assert list(track.columns) == ["time", "x", "y", "sigma_x", "sigma_y", "receivers_heard"]
+    rts = full.estimates[full.estimates["estimator"] == "rts"]
+    assert np.allclose(track["x"], rts["x"], rtol=0, atol=1e-9) and len(track) == len(rts)
+    score = json.loads((full.out / "score.json").read_text())
+    assert list(score)[:9] == list(full.score)[:9] and score["estimator"] == "rts"
+    errors = pd.read_csv(full.out / "errors.csv")
+    assert set(errors["estimator"]) == {"rts", "ekf", "fix", "reference"}
+    assert not (full.out / "tracks.csv").exists()
+
+
+def test_thinned_array_gives_larger_errors(full):
+    """The authors' 8-hydrophone array against the full one, each scored here against the GPS."""
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    thin = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                             sound_speed=full.summary["sound_speed"]["sound_speed_m_s"], receivers_kept=THINNED)
+    assert thin.summary["receivers"] == THINNED
+    rows = [r.track for r in (full, thin)]
+    (m_full, rms_full), (m_thin, rms_thin) = (stats(gps_errors(t["time"].to_numpy(), t["x"].to_numpy(),
+                                                               t["y"].to_numpy(), gps)) for t in rows)
+    assert m_thin > m_full and rms_thin > rms_full and len(thin.track) < len(full.track)
+
+
+def test_lag_is_estimated_and_not_applied():
+    from sblsim.orchestrator.tracks.track import score
+
+    rng = np.random.default_rng(5)
+    tt_ = np.arange(0.0, 600.0, 1.0)
+    truth = np.column_stack([tt_, 50 * np.cos(tt_ / 60), 50 * np.sin(tt_ / 60)])  # 0.83 m/s on a circle
+    t = np.arange(40.0, 560.0, 2.0)
+    lag = 2.3
+    xy = np.column_stack([np.interp(t + lag, tt_, truth[:, 1]), np.interp(t + lag, tt_, truth[:, 2])])
+    xy += 0.05 * rng.normal(size=xy.shape)
+    stats_, err, _ = score(t, xy, truth)
+    assert abs(stats_["lag_s"] - lag) < 0.05
+    e = gps_errors(t, xy[:, 0], xy[:, 1], truth[:, [1, 2, 0]])
+    assert np.isclose(stats_["median_m"], np.median(e), rtol=1e-12) and np.median(e) > 1.5  # not applied
+    assert np.isclose(stats_["along_track_m"], 0.83 * lag, rtol=0.1)  # a lag seen as an along-track offset
+
+
+def test_drop_detections_is_seeded_and_takes_its_share():
+    from sblsim.orchestrator.tracks.track import drop_detections
+
+    toa = read_toa(DATA / "toa.txt").toa
+    heard = np.isfinite(toa)
+    a, n = drop_detections(toa, 0.25, 1)
+    b, _ = drop_detections(toa, 0.25, 1)
+    c, _ = drop_detections(toa, 0.25, 2)
+    kept = np.isfinite(a)
+    assert np.array_equal(kept, np.isfinite(b)) and not np.array_equal(kept, np.isfinite(c))
+    assert not (kept & ~heard).any() and np.array_equal(a[kept], toa[kept]) and n == int((heard & ~kept).sum())
+    assert abs(n / heard.sum() - 0.25) < 4 * np.sqrt(0.25 * 0.75 / heard.sum())
+
+
+@pytest.mark.parametrize("option, word", [(["--drop-detections", "1.5"], "--drop-detections"),
+                                          (["--receivers-kept", "H2,H99"], "H99"),
+                                          (["--seed", "3"], "--seed")])
+def test_thinning_options_refused_in_one_line(tmp_path, capsys, option, word):
+    from sblsim.orchestrator.cli import main
+
+    out = tmp_path / "out"
+    status = main(["replay", str(DATA / "toa.txt"), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"),
+                   "--sound-speed", "1420", "--out", str(out), *option])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and word in err[0] and not out.exists()
+
+
+def test_simulated_sound_speed_and_nees():
+    receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    receivers = receivers[np.isfinite(receivers).all(axis=1)]
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
+    nees, speeds = [], []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        toa, truth, _ = tt.simulate_pings(receivers, 60, s, rng, speed=0.3, detection=0.3)
+        if seed < 4:
+            speeds.append(tt.calibrate_sound_speed(toa, receivers, s.sigma_toa, max_pings=60))
+        tracker = tt.ToaTracker(receivers, s)
+        record = tracker.run(toa)
+        xs, Ps = tracker.smooth(record)
+        k = np.arange(record.start, len(toa))
+        e = xs[k, :2] - truth[k]
+        nees.append(np.mean(np.einsum("mi,mi->m", e, np.linalg.solve(Ps[k][:, :2, :2], e[..., None])[..., 0])))
+    # 3 m/s: about 6 formal standard errors (0.4 m/s), a relative error of 0.2 %, i.e. 0.2 m at 100 m, about the
+    # timing noise's own 0.21 m; the estimate is biased high by about 1 m/s (docs/tracking.md)
+    assert all(abs(c - 1420.0) <= 3.0 for c, _, _ in speeds)
+    assert 1.0 <= np.mean(nees) <= 3.0
+
+
+def late_arrivals(toa: np.ndarray, rng: np.random.Generator, share: float = 0.05) -> np.ndarray:
+    """A share of the arrivals made 1 to 3 ms late (multipath)."""
+    late = np.isfinite(toa) & (rng.random(toa.shape) < share)
+    return np.where(late, toa + rng.uniform(1e-3, 3e-3, toa.shape), toa)
+
+
+def test_robust_calibration_finds_the_simulated_sound_speed():
+    """Simulated pings in the Lake Hald array at 1,420 m/s, 5 % of the arrivals 1 to 3 ms late: the joint soft-L1
+    calibration within 1.5 m/s of the truth on every seed (about 3 of its standard errors)."""
+    receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    receivers = receivers[np.isfinite(receivers).all(axis=1)]
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        toa, _, _ = tt.simulate_pings(receivers, 80, s, rng, speed=0.3, detection=0.3)
+        c, sigma_c, _ = tt.calibrate_sound_speed_robust(late_arrivals(toa, rng), receivers, s.sigma_toa)
+        assert abs(c - 1420.0) <= 1.5 and 0 < sigma_c < 1.0
+
+
+def test_robust_calibration_against_scipy_least_squares():
+    """The same objective minimised by scipy's least_squares(loss="soft_l1") over c and every ping's position and
+    emission time, started near the truth: the same sound speed."""
+    from scipy.optimize import least_squares
+
+    receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    receivers = receivers[np.isfinite(receivers).all(axis=1)]
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
+    rng = np.random.default_rng(7)
+    toa, truth, emissions = tt.simulate_pings(receivers, 15, s, rng, speed=0.3, detection=0.4)
+    toa = late_arrivals(toa, rng)
+    c, _, pings = tt.calibrate_sound_speed_robust(toa, receivers, s.sigma_toa)
+    rows = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 5)
+    assert pings == len(rows)
+    i, j = np.nonzero(np.isfinite(toa[rows]))
+    y, k = toa[rows][i, j], len(rows)
+
+    def residuals(z):
+        p, te = z[1:1 + 2 * k].reshape(k, 2), z[1 + 2 * k:]
+        return (y - te[i] - np.linalg.norm(p[i] - receivers[j], axis=1) / z[0]) / s.sigma_toa
+
+    z0 = np.concatenate([[1425.0], truth[rows].ravel() + 0.5, emissions[rows]])
+    ref = least_squares(residuals, z0, loss="soft_l1", f_scale=tt.ROBUST_SCALE,
+                        x_scale=np.r_[1.0, np.full(2 * k, 0.1), np.full(k, 1e-4)], xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    assert abs(c - ref.x[0]) <= 0.01
+
+
+def test_score_in_3d_against_numpy():
+    from sblsim.orchestrator.tracks.track import score
+
+    rng = np.random.default_rng(2)
+    tt_ = np.arange(0.0, 100.0, 1.0)
+    truth = np.column_stack([tt_, np.cos(tt_ / 10), np.sin(tt_ / 10), -5 - 0.01 * tt_])
+    t = rng.uniform(1, 99, 40)
+    g = np.column_stack([np.interp(t, tt_, truth[:, k]) for k in (1, 2, 3)])
+    p = g + rng.normal(scale=0.3, size=g.shape)
+    stats_, err, err3 = score(t, p, truth)
+    e3 = np.sqrt(((p - g) ** 2).sum(axis=1))
+    assert np.allclose(err3, e3, atol=1e-12) and np.allclose(err, np.hypot(*(p - g)[:, :2].T), atol=1e-12)
+    assert np.isclose(stats_["p90_3d_m"], np.percentile(e3, 90)) and np.isclose(stats_["rms_3d_m"],
+                                                                               np.sqrt(np.mean(e3**2)))
+
+
+def test_fixes_restart_a_lost_filter_and_only_then():
+    """Simulated pings, the refusal rule switched off: a filter started 40 m off is restarted from a fix by
+    disagree_after pings whose fixes disagree, only when given the fixes; a filter started right never is."""
+    import dataclasses
+
+    receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    receivers = receivers[np.isfinite(receivers).all(axis=1)]
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4,
+                           reinit_after=10**6)
+    rng = np.random.default_rng(4)
+    toa, truth, _ = tt.simulate_pings(receivers, 120, s, rng, speed=0.3, detection=0.5)
+    fx, _, fc, fused, _ = tt.fix_pings(toa, receivers, s.sound_speed, s.sigma_toa)
+    fixes = (fx, fc, fused.sum(axis=1))
+    assert tt.ToaTracker(receivers, dataclasses.replace(s, reinit_after=3)).run(toa, fixes).restarts == []
+
+    class Lost(tt.ToaTracker):
+        def initial(self, fix):
+            x, P = super().initial(fix)
+            self.calls = getattr(self, "calls", 0) + 1
+            if self.calls <= 2:  # the first start (its prediction and its state) 40 m off, as a lost filter
+                x[:2] += 40.0
+            return x, P
+
+    assert Lost(receivers, s).run(toa).restarts == []
+    record = Lost(receivers, s).run(toa, fixes)
+    overdetermined = np.flatnonzero(np.isfinite(fx).all(axis=1) & (fixes[2] >= 5))
+    fifth = overdetermined[overdetermined > record.start][s.disagree_after - 1]
+    assert record.restarts[0] == fifth
+    k = np.arange(fifth, len(toa))
+    assert np.median(np.hypot(*(record.x_filtered[k, :2] - truth[k]).T)) < 1.0
+
+
+def test_bound_predicts_the_observed_errors_on_lake_hald(full):
+    """The accuracy limit per third of the track (score.json's bound, bound.csv) against the errors observed here
+    against the GPS: the robust RMS (median / sqrt(ln 2)) of the single-ping fix and of the EKF within a factor 1.5
+    of the median predicted DRMS; the smoother's too once the floor the fix shows (its observed robust RMS beyond its
+    bound, in quadrature: GPS and lever arm) is added to its bound. The thinned array: a larger predicted DRMS,
+    the fix's robust RMS within a factor 2 of it (docs/tracking.md)."""
+    import pandas as pd
+
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    bound = pd.read_csv(full.out / "bound.csv")
+    assert list(bound.columns) == ["ping", "time", "heard", "fix_drms_m", "pcrb_m", "pcrb_smoothed_m"]
+    thirds = full.score["bound"]["thirds"]
+    assert len(thirds) == 3 and thirds[0]["first_ping"] == 0 and thirds[-1]["last_ping"] == 3243
+    for third in thirds:
+        part = np.arange(third["first_ping"], third["last_ping"] + 1)
+        robust = {}
+        for estimator, column in (("fix", "fix_drms_m"), ("ekf", "pcrb_m"), ("rts", "pcrb_smoothed_m")):
+            rows = full.estimates[(full.estimates["estimator"] == estimator) & full.estimates["ping"].isin(part)]
+            e = gps_errors(rows["time"].to_numpy(), rows["x"].to_numpy(), rows["y"].to_numpy(), gps)
+            inside = (rows["time"] >= gps[0, 2]) & (rows["time"] <= gps[-1, 2])
+            predicted = np.median(bound[column].to_numpy()[rows["ping"].to_numpy()[inside.to_numpy()]])
+            robust[estimator] = (np.median(e) / np.sqrt(np.log(2)), predicted)
+            assert np.isclose(third[estimator]["predicted_median_m"], predicted, rtol=1e-12)
+        floor2 = max(robust["fix"][0] ** 2 - robust["fix"][1] ** 2, 0.0)
+        for estimator, (observed, predicted) in robust.items():
+            with_floor = np.sqrt(predicted**2 + floor2) if estimator == "rts" else predicted
+            assert 1 / 1.5 <= observed / with_floor <= 1.5, (third, estimator, observed, predicted)
+    thin = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                             sound_speed=full.summary["sound_speed"]["sound_speed_m_s"], receivers_kept=THINNED)
+    for a, b in zip(thirds, thin.score["bound"]["thirds"]):
+        assert b["fix"]["predicted_median_m"] > a["fix"]["predicted_median_m"]
+        assert 1 / 2 <= b["fix"]["observed_robust_rms_m"] / b["fix"]["predicted_median_m"] <= 2
