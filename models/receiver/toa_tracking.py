@@ -504,6 +504,19 @@ class TrackerSettings:
         Consecutive disagreeing pings after which the filter starts again from a single-ping fix (it is lost:
         a diverged filter with a grown covariance keeps accepting arrivals, so the refusals alone rarely restart
         it); only when :meth:`ToaTracker.run` is given the fixes.
+    agree_after : int or None
+        Consecutive single-ping fixes of dim + 2 receivers or more that kept every arrival of their ping, each
+        outside the prediction's ``fix_gate`` and each agreeing with the previous one (below), after which the
+        filter starts again from a fix; None: off. An array of few receivers rarely gives the dim + 3 of
+        ``disagree_after``, and a fix of dim + 2 receivers has one redundant arrival only (a gross fix passes its
+        own test more often), so a single one must not restart: the sequence is the confirmation, the M-of-N
+        logic of track initiation (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
+        Navigation*, Wiley 2001, § 11.7; Blackman & Popoli, *Design and Analysis of Modern Tracking Systems*,
+        1999, § 6.3). A fix that dropped an arrival (multipath) neither counts nor breaks the sequence.
+    fix_speed : float
+        [m/s]. Two consecutive fixes of the ``agree_after`` sequence agree when their squared Mahalanobis distance,
+        against their position covariances summed plus ``(fix_speed · elapsed time)² / fix_gate`` per axis (so
+        that a move of ``fix_speed`` over the elapsed time sits on the gate), is at most ``fix_gate``.
     """
 
     sound_speed: float
@@ -648,7 +661,8 @@ class ToaTracker:
         pings whose arrivals were all refused or, given ``fixes`` (the single-ping fixes of every ping: positions
         (m, dim) [m], NaN where none, covariances (m, ≥dim, ≥dim) [m²] and the receivers each used (m,), as
         :func:`fix_pings` returns them), after ``disagree_after`` consecutive overdetermined fixes outside the
-        prediction's ``fix_gate``."""
+        prediction's ``fix_gate``, or after ``agree_after`` consecutive mutually consistent fixes of dim + 2
+        receivers or more outside it (:class:`TrackerSettings`)."""
         m, size, s = len(toa), self.size, self.settings
         rec = TrackRecord(np.full((m, size), np.nan), np.full((m, size, size), np.nan), np.full((m, size), np.nan),
                           np.full((m, size, size), np.nan), np.tile(np.eye(size), (m, 1, 1)),
