@@ -364,7 +364,7 @@ def test_bound_predicts_the_observed_errors_on_lake_hald(full):
 
 
 #: The thinned array's smoother: its 95 % and RMS 2-D errors against the GPS below these [m] (docs/tracking.md: about
-#: 28 and 13 m with the consistent-fixes restart, 112 and 46 m without it; the issue's 5 m is not reached).
+#: 31 and 18 m with the consistent-fixes restart, 112 and 46 m without it; the issue's 5 m is not reached).
 THIN_P95_M, THIN_RMS_M = 40.0, 20.0
 
 
