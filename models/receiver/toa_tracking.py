@@ -504,6 +504,19 @@ class TrackerSettings:
         Consecutive disagreeing pings after which the filter starts again from a single-ping fix (it is lost:
         a diverged filter with a grown covariance keeps accepting arrivals, so the refusals alone rarely restart
         it); only when :meth:`ToaTracker.run` is given the fixes.
+    agree_after : int or None
+        Consecutive single-ping fixes of dim + 2 receivers or more that kept every arrival of their ping, each
+        outside the prediction's ``fix_gate`` and each agreeing with the previous one (below), after which the
+        filter starts again from a fix; None: off. An array of few receivers rarely gives the dim + 3 of
+        ``disagree_after``, and a fix of dim + 2 receivers has one redundant arrival only (a gross fix passes its
+        own test more often), so a single one must not restart: the sequence is the confirmation, the M-of-N
+        logic of track initiation (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
+        Navigation*, Wiley 2001, § 11.7; Blackman & Popoli, *Design and Analysis of Modern Tracking Systems*,
+        1999, § 6.3). A fix that dropped an arrival (multipath) neither counts nor breaks the sequence.
+    fix_speed : float
+        [m/s]. Two consecutive fixes of the ``agree_after`` sequence agree when their squared Mahalanobis distance,
+        against their position covariances summed plus ``(fix_speed · elapsed time)² / fix_gate`` per axis (so
+        that a move of ``fix_speed`` over the elapsed time sits on the gate), is at most ``fix_gate``.
     """
 
     sound_speed: float
@@ -519,6 +532,8 @@ class TrackerSettings:
     reinit_after: int = 3
     fix_gate: float = 40.0
     disagree_after: int = 5
+    agree_after: int | None = None
+    fix_speed: float = 2.0
 
 
 @dataclass
@@ -646,13 +661,15 @@ class ToaTracker:
         pings whose arrivals were all refused or, given ``fixes`` (the single-ping fixes of every ping: positions
         (m, dim) [m], NaN where none, covariances (m, ≥dim, ≥dim) [m²] and the receivers each used (m,), as
         :func:`fix_pings` returns them), after ``disagree_after`` consecutive overdetermined fixes outside the
-        prediction's ``fix_gate``."""
+        prediction's ``fix_gate``, or after ``agree_after`` consecutive mutually consistent fixes of dim + 2
+        receivers or more outside it (:class:`TrackerSettings`)."""
         m, size, s = len(toa), self.size, self.settings
         rec = TrackRecord(np.full((m, size), np.nan), np.full((m, size, size), np.nan), np.full((m, size), np.nan),
                           np.full((m, size, size), np.nan), np.tile(np.eye(size), (m, 1, 1)),
                           np.zeros((m, self.n), bool), m)
         x = P = None
         refused = disagree = 0
+        chain, agreeing = None, 0
         d = self.dim
         heard = np.isfinite(toa).sum(axis=1)
         for k in range(m):
@@ -661,18 +678,33 @@ class ToaTracker:
                 P = F @ P @ F.T + Q
                 x = xp
                 rec.x_predicted[k], rec.P_predicted[k], rec.F[k] = x, P, F
-                if fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 3:
+                if fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 2:
                     # an overdetermined single-ping fix far outside the prediction's ellipse: the filter may be lost
                     e = fixes[0][k] - x[:d]
                     far = float(e @ np.linalg.solve(P[:d, :d] + fixes[1][k][:d, :d], e)) > s.fix_gate
-                    disagree = disagree + 1 if far else 0
+                    if fixes[2][k] >= d + 3:
+                        disagree = disagree + 1 if far else 0
+                    if not far:
+                        chain, agreeing = None, 0
+                    elif s.agree_after is not None and fixes[2][k] == heard[k]:
+                        # a fix that kept every arrival of its ping counts if it agrees with the previous such fix
+                        # (the same target, moved at most fix_speed since): one gross fix does not restart, a
+                        # consistent sequence does
+                        if chain is not None:
+                            gap = fixes[0][k] - fixes[0][chain]
+                            allowed = fixes[1][k][:d, :d] + fixes[1][chain][:d, :d] + \
+                                (s.fix_speed * (k - chain) * x[-1]) ** 2 / s.fix_gate * np.eye(d)
+                            agreeing = agreeing + 1 if float(gap @ np.linalg.solve(allowed, gap)) <= s.fix_gate else 1
+                        else:
+                            agreeing = 1
+                        chain = k
                 x, P, used = self.update(x, P, toa[k])
                 rec.used[k] = used
                 refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
-                if disagree >= s.disagree_after:
+                if disagree >= s.disagree_after or (s.agree_after is not None and agreeing >= s.agree_after):
                     refused = s.reinit_after
             if x is None or refused >= s.reinit_after:
-                disagree = 0
+                disagree, chain, agreeing = 0, None, 0
                 fix = single_ping_fix(toa[k], self.receivers, s.sound_speed, s.sigma_toa) \
                     if heard[k] >= self.dim + 2 else None
                 if fix is None:

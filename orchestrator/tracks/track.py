@@ -42,6 +42,9 @@ from sblsim.orchestrator.io.output import staged_directory
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
 #: by their median absolute deviation, 0.15 ms by their standard deviation).
 SIGMA_TOA = 1.5e-4
+#: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
+#: a lost EKF (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings` ``agree_after``).
+AGREE_AFTER = 4
 #: The estimators, in the order of the outputs.
 ESTIMATORS = ("rts", "ekf", "fix")
 #: The time lags between the truth and the track searched [s]: ±this.
@@ -274,7 +277,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
     steps = np.diff(fe)
     interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
-    settings = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=interval)
+    # a lost filter restarts on 4 consecutive consistent fixes of 4 receivers too: the 8-hydrophone array rarely
+    # gives the 5 of the disagreement rule (docs/tracking.md)
+    settings = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=interval, agree_after=AGREE_AFTER)
     tracker = tt.ToaTracker(positions, settings)
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))  # the fixes restart a lost filter
     columns = ["x", "y", "z"][:dim]
