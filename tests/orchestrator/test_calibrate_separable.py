@@ -5,6 +5,7 @@ agree with numpy's own inverse and condition number."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -13,6 +14,7 @@ import pytest
 
 from sblsim.models.calibration.determination import (
     MAX_CORRELATION,
+    MAX_MULTIPLE_R2,
     Determination,
     check_determination,
     determination,
@@ -159,3 +161,67 @@ def test_two_radii_with_noise_give_consistent_sigmas(tmp_path):
         e = (sol.position - np.array([truth[i] for i in survey.ids])).ravel()
         nees.append(float(e @ np.linalg.solve(sol.covariance, e)) / len(survey.ids))
     assert 1.5 <= np.mean(nees) <= 4.5, nees
+
+
+GRADIENT = ["--set", "survey.ntd_gradient_e_s=1e-4", "--set", "solver.perturbation=ntd", "--set",
+            "solver.gradient=deep"]
+
+
+def test_the_box_in_with_a_deep_gradient_on_one_circle_is_refused_naming_the_group(tmp_path, capsys):
+    """No single correlation is high (0.987), but the East position and the deep gradient with the NTD together are
+    one unknown on a circle: refused in one line naming the kinds and the survey that separates them."""
+    out = tmp_path / "out"
+    assert main(["calibrate", "box-in", *GRADIENT, "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    err = [line for line in captured.err.splitlines() if line.strip()]
+    assert len(err) == 1 and err[0].startswith("sblsim: error:"), err
+    assert "from the deep gradient and the NTD together" in err[0] and "multiple correlation R²" in err[0]
+    assert "second circle radius" in err[0] and "cross track" in err[0] and "solver.gradient=none" in err[0]
+    assert not out.exists() and captured.out == ""
+
+
+def test_a_figure_eight_separates_the_gradient_and_says_how_well(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["calibrate", "box-in", "--set", "survey.pattern=figure-eight", *GRADIENT, "--out", str(out)]) == 0
+    d = json.loads((out / "solution.json").read_text())["determination"]
+    assert d["multiple_r2"] < MAX_MULTIPLE_R2 and d["variance_inflation"] == pytest.approx(1 / (1 - d["multiple_r2"]))
+    assert d["multiple_position"].startswith(("East", "North")) and 0.0 <= d["multiple_r2_up"] <= 1.0
+    assert d["multiple_r2"] >= d["max_correlation"] ** 2 - 1e-12  # the group takes at least what one unknown does
+    line = [x for x in capsys.readouterr().out.splitlines() if "determination:" in x]
+    assert len(line) == 1 and "multiple correlation R²" in line[0] and "variance inflation" in line[0]
+
+
+def _regression_r2(a, w, i, columns):
+    """The (uncentred) R² of the weighted least-squares regression of column i of a on the columns given."""
+    y, x = np.sqrt(w) * a[:, i], np.sqrt(w)[:, None] * a[:, columns]
+    coefficients = np.linalg.lstsq(x, y, rcond=None)[0]
+    return 1.0 - np.sum((y - x @ coefficients) ** 2) / np.sum(y**2)
+
+
+def test_the_multiple_correlation_is_numpy_s_weighted_regression_and_names_the_fewest_kinds():
+    rng = np.random.default_rng(11)
+    n = 200
+    a = rng.normal(size=(n, 8)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 5.0, 5.0])
+    # the East of transponder 1 is what the NTD basis 1 and the deep gradient East make together, nearly
+    a[:, 0] = 300.0 * a[:, 3] + 0.2 * a[:, 6] + 2e-3 * rng.normal(size=n)
+    w = rng.uniform(0.5, 2.0, size=n)
+    names = ["NTD basis 1", "NTD basis 2", "NTD basis 3", "deep gradient East", "deep gradient North"]
+    det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
+    want = [_regression_r2(a, w, i, list(range(3, 8))) for i in range(3)]
+    assert det.max_r2 == pytest.approx(max(want[0], want[1]), abs=1e-12)
+    assert det.up_r2 == pytest.approx(want[2], abs=1e-12)
+    assert det.r2_position == "East of transponder 1" and det.max_r2 > MAX_MULTIPLE_R2
+    # neither kind alone takes it beyond the threshold: both are named
+    assert _regression_r2(a, w, 0, [3, 4, 5]) < MAX_MULTIPLE_R2 and _regression_r2(a, w, 0, [6, 7]) < MAX_MULTIPLE_R2
+    assert det.r2_group == "the deep gradient and the NTD"
+    # refused by the multiple correlation even where no single correlation is high (the box-in's 0.987)
+    with pytest.raises(ModelError, match="cannot separate the East of transponder 1 from the deep gradient and the "
+                                         "NTD together") as caught:
+        check_determination(dataclasses.replace(det, max_correlation=0.987), "seg", "survey a cross track")
+    assert "\n" not in str(caught.value)
+    assert det.as_dict()["variance_inflation"] == pytest.approx(1.0 / (1.0 - want[0]), rel=1e-6)
+    # with the gradient's share of the column removed, the NTD alone takes it: it alone is named
+    a[:, 0] = 300.0 * a[:, 3] + 2e-3 * rng.normal(size=n)
+    det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
+    assert det.r2_group == "the NTD" and det.max_r2 == pytest.approx(_regression_r2(a, w, 0, list(range(3, 8))),
+                                                                      abs=1e-12)
