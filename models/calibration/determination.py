@@ -65,12 +65,14 @@ MAX_CORRELATION = 0.9999
 #: above it the matrix is numerically rank deficient (1e12 leaves 4 significant digits of double precision to the
 #: solution's variances, Björck 1996, section 1.4); the package's examples stay below 1e8.
 MAX_CONDITION = 1e12
-#: The largest multiple correlation :math:`R^2` [1] of a position unknown with all the other unknowns together
-#: (:func:`determination`) that a solution keeps: the position's variance inflated by more than
-#: :math:`1/(1-R^2)` = 2,000 times (its sigma 45 times) over what it would be were the others known. Chosen between
-#: the package's surveys (docs/calibration.md, "How well a solve is determined"): every kept calibration has
-#: :math:`R^2` at most 0.99956 (the simulated box-in's single circle in a moving ocean, VIF 2.3e3... see docs), the
-#: box-in with a deep gradient on one circle, which the survey cannot tell from the NTD, 0.99998.
+#: The largest multiple correlation :math:`R^2` [1] of a horizontal position unknown with all the other unknowns
+#: together (:func:`determination`) that a solution keeps: above it the position's variance is inflated more than
+#: :math:`1/(1-R^2)` = 10,000 times (its sigma 100 times) over what it would be were the others known. Chosen between
+#: the package's surveys (docs/calibration.md, "How well a solve is determined"): every kept calibration's largest is
+#: 0.99930 (variance inflation 1.4e3: the simulated box-in's single circle in a moving ocean, the NTD solved; SeaGap's
+#: example with its deep gradient 0.979, the box-in's figure-eight with a deep gradient 0.99911), 7 times below the
+#: threshold in variance inflation, while the box-in with a deep gradient on one circle has 0.9999977 (4.3e5), 43
+#: times above it: on a circle the deep gradient's slant term and a horizontal shift change every range alike.
 MAX_MULTIPLE_R2 = 0.9999
 
 
