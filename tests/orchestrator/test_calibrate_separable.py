@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from sblsim.models.calibration.bound import crb
 from sblsim.models.calibration.determination import (
     MAX_CORRELATION,
     MAX_MULTIPLE_R2,
@@ -22,6 +23,7 @@ from sblsim.models.calibration.determination import (
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey
+from sblsim.orchestrator.surveys.simulate import load_simulated, replicate
 
 C = 1500.0
 STATIONS = {"M1": (700.0, 0.0, -2000.0), "M2": (0.0, 700.0, -2000.0), "M3": (-700.0, 0.0, -2000.0),
@@ -225,3 +227,31 @@ def test_the_multiple_correlation_is_numpy_s_weighted_regression_and_names_the_f
     det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
     assert det.r2_group == "the NTD" and det.max_r2 == pytest.approx(_regression_r2(a, w, 0, list(range(3, 8))),
                                                                       abs=1e-12)
+
+
+def _bound_sd(replies, positions, s, pert):
+    """The horizontal and Up sd of the Cramér-Rao bound of ``replies`` at ``positions`` [m]."""
+    b = crb(replies, positions, s.sound_speed, twtt_sigma=s.twtt_sigma, perturbation=pert)
+    return np.sqrt(np.diag(b)[:3])
+
+
+@pytest.mark.parametrize("pattern, gap", [("circle", 100.0), ("figure-eight", None)])
+def test_the_bound_and_the_sigma_are_one_information_at_two_tracks(pattern, gap):
+    """The bound a box-in prints is the information at the true track; the solve's sigma the same information at the
+    measured (GNSS-noisy) track and its estimate, scaled by its a-posteriori variance. At the measured track the
+    bound is the solve's sigma within 15 %; on one circle the true track's information is nearly singular (the NTD
+    follows the vessel's azimuth on its lap) and the bound is thousands of times the sigma, on a figure-eight the
+    two tracks agree."""
+    sim = load_simulated("box-in", [f"survey.pattern={pattern}", "survey.ntd_sigma_s=2e-4",
+                                    "solver.perturbation=ntd"])
+    survey, s = replicate(sim, 0)
+    sol = calibrate(survey).segments[0][3]
+    pert = sol.perturbation.settings
+    at_measured = _bound_sd(s.measured, sol.position, s, pert)
+    np.testing.assert_allclose(at_measured, sol.sigma[0], rtol=0.15)
+    at_truth = _bound_sd(s.true, s.truth, s, pert)
+    ratio = np.hypot(*at_truth[:2]) / np.hypot(*sol.sigma[0, :2])
+    if gap is None:
+        assert 0.8 <= ratio <= 1.25, ratio
+    else:
+        assert ratio > gap, ratio
