@@ -22,8 +22,12 @@ Gauss-Newton step and its inverse :math:`Q = N^{-1}`:
   position's column of the design on the other unknowns' columns, and :math:`1/(1-R_i^2)` the variance inflation
   factor (VIF) of the position by them (Belsley, Kuh & Welsch 1980, *Regression Diagnostics*, Wiley, chapter 3;
   Björck 1996, section 1.1.5, the Schur complement of a partitioned normal matrix). A degeneracy that several
-  unknowns make together (a deep gradient and the NTD on a circle at one radius) shows here where no pairwise
-  correlation is large.
+  unknowns make together shows here where no pairwise correlation is large;
+- when a perturbation's gradients are solved, the share of a position's information that they take beyond its
+  background (the NTD's or GARPOS's bases): the partial :math:`R^2`,
+  :math:`1 - (1 - R_i^2)/(1 - R_{i,b}^2)`, :math:`R_{i,b}^2` the multiple correlation with the background alone
+  (the incremental :math:`R^2` of a block of regressors, e.g. Cohen et al. 2003, *Applied Multiple
+  Regression/Correlation Analysis*, 3rd ed., section 5.5).
 
 :func:`check_determination` refuses, in one line naming what cannot be separated and which survey would separate
 it:
@@ -31,21 +35,21 @@ it:
 - a normal matrix numerically rank deficient (its equilibrated condition above :data:`MAX_CONDITION`, or a
   non-positive variance on the diagonal of :math:`Q`: a negative variance is never square-rooted);
 - a position correlated beyond :data:`MAX_CORRELATION` with a perturbation's or a speed's unknown;
-- a horizontal position whose multiple correlation with the other unknowns together is above
-  :data:`MAX_MULTIPLE_R2` (the Up's is reported: on a circle at one radius it and a constant nadir delay are one
-  unknown, which the correlations above judge and its sigma carries);
+- a position of which the gradients take more than :data:`MAX_GRADIENT_R2` of what the background leaves (the
+  multiple correlation with all the others is reported, not judged: a position and the NTD's bases that trade
+  one for the other are judged by the pairwise correlation and bounded by the bases a survey determines);
 - a solve that did not converge (checked last, so that a cause above is named first:
   :data:`~sblsim.models.calibration.measurement.MAX_ITERATIONS` iterations without a step below
   :data:`~sblsim.models.calibration.measurement.POSITION_TOLERANCE`).
 
-Sources: Belsley, D. A., Kuh, E. & Welsch, R. E. (1980) *Regression Diagnostics*, Wiley;
+Sources: Belsley, D. A., Kuh, E. & Welsch, R. E. (1980) *Regression Diagnostics*, Wiley; Cohen, J., Cohen, P.,
+West, S. G. & Aiken, L. S. (2003) *Applied Multiple Regression/Correlation Analysis*, 3rd ed., Erlbaum;
 Björck, Å. (1996) *Numerical Methods for Least Squares Problems*, SIAM; Tomita, F. & Kido, M. (2022)
 SeaGap, Zenodo, doi:10.5281/zenodo.6370613; Watanabe, S. et al. (2020) GARPOS, Front. Earth Sci. 8:597532.
 """
 
 from __future__ import annotations
 
-import itertools
 import re
 from dataclasses import dataclass
 
@@ -65,15 +69,11 @@ MAX_CORRELATION = 0.9999
 #: above it the matrix is numerically rank deficient (1e12 leaves 4 significant digits of double precision to the
 #: solution's variances, Björck 1996, section 1.4); the package's examples stay below 1e8.
 MAX_CONDITION = 1e12
-#: The largest multiple correlation :math:`R^2` [1] of a horizontal position unknown with all the other unknowns
-#: together (:func:`determination`) that a solution keeps: above it the position's variance is inflated more than
-#: :math:`1/(1-R^2)` = 10,000 times (its sigma 100 times) over what it would be were the others known. Chosen between
-#: the package's surveys (docs/calibration.md, "How well a solve is determined"): every kept calibration's largest is
-#: 0.99930 (variance inflation 1.4e3: the simulated box-in's single circle in a moving ocean, the NTD solved; SeaGap's
-#: example with its deep gradient 0.979, the box-in's figure-eight with a deep gradient 0.99911), 7 times below the
-#: threshold in variance inflation, while the box-in with a deep gradient on one circle has 0.9999977 (4.3e5), 43
-#: times above it: on a circle the deep gradient's slant term and a horizontal shift change every range alike.
-MAX_MULTIPLE_R2 = 0.9999
+#: The largest share [1] of a position's information that a perturbation's gradients take beyond its background
+#: (the partial :math:`R^2`, :func:`determination`) that a solution keeps: above it the gradients inflate the
+#: position's variance more than 100 times (its sigma 10 times) over what the background alone leaves. Chosen between
+#: the package's surveys (docs/calibration.md, "How well a solve is determined"): SEAGAP_MARGIN_PLACEHOLDER
+MAX_GRADIENT_R2 = 0.99
 
 
 @dataclass(frozen=True)
@@ -97,17 +97,17 @@ class Determination:
     iterations : int
         Its iterations.
     max_r2 : float or None
-        The largest multiple correlation :math:`R^2` of a horizontal position unknown (East or North) with all the
-        other unknowns together [1] (None: the positions are the only unknowns; 1 when the normal matrix is
-        numerically singular).
+        The largest multiple correlation :math:`R^2` of a position unknown with all the other unknowns together [1]
+        (None: the positions are the only unknowns; 1 when the normal matrix is numerically singular).
     r2_position : str or None
         The position unknown of ``max_r2``.
     r2_group : str or None
-        The fewest kinds of the other unknowns that take that position's information beyond
-        :data:`MAX_MULTIPLE_R2` (all of them if no fewer do, or if the position is kept), e.g.
-        ``"the deep gradient and the NTD"``.
-    up_r2 : float or None
-        The largest multiple correlation of an Up unknown with all the other unknowns together [1] (reported).
+        The kinds of the other unknowns, e.g. ``"the deep gradient and the NTD"``.
+    gradient_r2 : float or None
+        The largest share of a position's information that the gradients take beyond the background [1] (None: no
+        gradient solved).
+    gradient_position : str or None
+        The position unknown of ``gradient_r2``.
     """
 
     condition: float
@@ -119,15 +119,20 @@ class Determination:
     max_r2: float | None = None
     r2_position: str | None = None
     r2_group: str | None = None
-    up_r2: float | None = None
+    gradient_r2: float | None = None
+    gradient_position: str | None = None
 
     @property
     def variance_inflation(self) -> float | None:
         """The variance inflation factor :math:`1/(1-R^2)` of ``max_r2`` [1] (None: no other unknowns or a singular
         matrix)."""
-        if self.max_r2 is None or self.max_r2 >= 1.0:
-            return None
-        return 1.0 / (1.0 - self.max_r2)
+        return _inflation(self.max_r2)
+
+    @property
+    def gradient_inflation(self) -> float | None:
+        """The variance inflation of ``gradient_r2``, :math:`1/(1-R^2)` [1]: the factor by which the gradients
+        multiply the position's variance that the background leaves (None: no gradient)."""
+        return _inflation(self.gradient_r2)
 
     def as_dict(self) -> dict:
         """The keys of ``solution.json``'s ``determination``."""
@@ -135,7 +140,12 @@ class Determination:
                 "max_correlation": self.max_correlation, "position": self.position, "parameter": self.parameter,
                 "converged": self.converged, "iterations": self.iterations, "multiple_r2": self.max_r2,
                 "variance_inflation": self.variance_inflation, "multiple_position": self.r2_position,
-                "multiple_group": self.r2_group, "multiple_r2_up": self.up_r2}
+                "multiple_group": self.r2_group, "gradient_r2": self.gradient_r2,
+                "gradient_inflation": self.gradient_inflation, "gradient_position": self.gradient_position}
+
+
+def _inflation(r2: float | None) -> float | None:
+    return None if r2 is None or r2 >= 1.0 else 1.0 / (1.0 - r2)
 
 
 def _position_name(i: int, rigid: bool) -> str:
@@ -218,30 +228,28 @@ def determination(normal: np.ndarray, q: int, names: list[str], rigid: bool, con
         r = np.abs(inverse[:q, q:] / np.sqrt(np.outer(v[:q], v[q:])))
         i, j = np.unravel_index(int(np.argmax(r)), r.shape)
         r2 = multiple_r2(scaled, q)
-        horizontal = np.flatnonzero(np.arange(q) % 3 != 2)
-        k = int(horizontal[np.argmax(r2[horizontal])])
+        k = int(np.argmax(r2))
+        kinds = list(dict.fromkeys(_group(n) for n in names))
+        gradient = np.array([m for m, n in enumerate(names) if "gradient" in _group(n)], dtype=int)
+        partial, g = None, None
+        if 0 < len(gradient) < len(names):  # the share the gradients take of what the background leaves
+            background = np.setdiff1d(np.arange(len(names)), gradient)
+            left = 1.0 - multiple_r2(scaled, q, q + background)
+            with np.errstate(all="ignore"):
+                share = np.where(left > 0.0, 1.0 - (1.0 - r2) / left, 0.0)
+            share = np.clip(share, 0.0, 1.0)
+            g = int(np.argmax(share))
+            partial = float(share[g])
         return Determination(condition, float(r[i, j]), _position_name(int(i), rigid), names[int(j)], converged,
-                             iterations, float(r2[k]), _position_name(k, rigid),
-                             _join(_fewest(scaled, q, k, names, float(r2[k]))), float(np.max(r2[2::3])))
+                             iterations, float(r2[k]), _position_name(k, rigid), _join(kinds), partial,
+                             None if g is None else _position_name(g, rigid))
     # numerically singular: the direction of the smallest eigenvalue is the combination the data do not see;
     # its largest position and other components are what trade one for the other (a correlation of 1)
     null = np.abs(vectors[:, 0])
     i, j = int(np.argmax(null[:q])), int(np.argmax(null[q:]))
     groups = list(dict.fromkeys(_group(names[m]) for m in np.flatnonzero(null[q:] > 1e-3 * null[q:].max())))
     return Determination(condition, 1.0, _position_name(i, rigid), names[j], converged, iterations, 1.0,
-                         _position_name(i, rigid), _join(groups), 1.0)
-
-
-def _fewest(scaled: np.ndarray, q: int, k: int, names: list[str], r2: float) -> list[str]:
-    """The fewest kinds of unknowns (:func:`_group`) whose multiple correlation with position ``k`` is above
-    :data:`MAX_MULTIPLE_R2` (all kinds if none fewer is, or if all of them together, ``r2``, are not)."""
-    kinds = list(dict.fromkeys(_group(n) for n in names))
-    for size in range(1, len(kinds) if r2 > MAX_MULTIPLE_R2 else 0):
-        for subset in itertools.combinations(kinds, size):
-            cols = q + np.array([m for m, n in enumerate(names) if _group(n) in subset])
-            if multiple_r2(scaled, q, cols)[k] > MAX_MULTIPLE_R2:
-                return list(subset)
-    return kinds
+                         _position_name(i, rigid), _join(groups))
 
 
 def check_determination(det: Determination, what: str, separate: str) -> None:
@@ -270,16 +278,15 @@ def check_determination(det: Determination, what: str, separate: str) -> None:
     if pair:
         raise ModelError(f"{what}: the survey cannot separate the {det.position} from the {det.parameter} "
                          f"(correlation {det.max_correlation:.6f}, above {MAX_CORRELATION:g}); {separate}")
-    if det.max_r2 is not None and det.max_r2 > MAX_MULTIPLE_R2:
-        inflation = det.variance_inflation
-        vif = f"variance inflation {inflation:.3g}" if inflation is not None else "singular"
-        raise ModelError(f"{what}: the survey cannot separate the {det.r2_position} from {det.r2_group} together "
-                         f"(multiple correlation R² {det.max_r2:.7f}, {vif}, above R² {MAX_MULTIPLE_R2:g}); "
-                         + separate)
+    if det.gradient_r2 is not None and det.gradient_r2 > MAX_GRADIENT_R2:
+        raise ModelError(f"{what}: the survey cannot separate the {det.gradient_position} from {det.r2_group} "
+                         f"together (beyond the background the gradients take {det.gradient_r2:.2%} of its "
+                         f"information, above {MAX_GRADIENT_R2:.0%}: variance inflation {det.gradient_inflation:.3g}; "
+                         f"multiple correlation with all of them R² {det.max_r2:.7f}); " + separate)
     if not det.converged:
         raise ModelError(f"{what}: the solve did not converge in {det.iterations} iterations (no step below "
                          f"the tolerance; largest position correlation {det.max_correlation or 0.0:.4f}); "
                          + separate)
 
-__all__ = ["MAX_CONDITION", "MAX_CORRELATION", "MAX_MULTIPLE_R2", "Determination", "check_determination",
+__all__ = ["MAX_CONDITION", "MAX_CORRELATION", "MAX_GRADIENT_R2", "Determination", "check_determination",
            "determination", "multiple_r2"]

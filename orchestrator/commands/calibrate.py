@@ -250,13 +250,16 @@ def _calibration_warnings(result) -> None:
 
 def _determination_line(d: dict) -> str:
     """The console line of ``solution.json``'s ``determination``: the equilibrated condition, the largest pairwise
-    correlation and the largest horizontal multiple correlation (its variance inflation, what it cannot be told
-    from, the Up's), the iterations."""
+    correlation, the largest multiple correlation (its variance inflation, the kinds of unknowns), the share the
+    gradients take beyond the background, the iterations."""
     correlation = (f"; largest correlation {d['max_correlation']:.4f} ({d['position']} with the {d['parameter']})"
                    if d["max_correlation"] is not None else "")
     multiple = (f"; multiple correlation R² {d['multiple_r2']:.6f} (variance inflation {d['variance_inflation']:.3g}, "
-                f"{d['multiple_position']} with {d['multiple_group']} together; Up {d['multiple_r2_up']:.6f})"
+                f"{d['multiple_position']} with {d['multiple_group']} together)"
                 if d.get("variance_inflation") is not None else "")
+    if d.get("gradient_inflation") is not None:
+        multiple += (f"; the gradients take {d['gradient_r2']:.2%} of what the background leaves of the "
+                     f"{d['gradient_position']} (variance inflation {d['gradient_inflation']:.3g})")
     return (f"  determination: condition {d['condition']:.3g}{correlation}{multiple}; converged in {d['iterations']} "
             "iteration(s)")
 

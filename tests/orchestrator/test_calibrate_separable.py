@@ -15,7 +15,7 @@ import pytest
 from sblsim.models.calibration.bound import crb
 from sblsim.models.calibration.determination import (
     MAX_CORRELATION,
-    MAX_MULTIPLE_R2,
+    MAX_GRADIENT_R2,
     Determination,
     check_determination,
     determination,
@@ -170,14 +170,15 @@ GRADIENT = ["--set", "survey.ntd_gradient_e_s=1e-4", "--set", "solver.perturbati
 
 
 def test_the_box_in_with_a_deep_gradient_on_one_circle_is_refused_naming_the_group(tmp_path, capsys):
-    """No single correlation is high (0.987), but the East position and the deep gradient with the NTD together are
-    one unknown on a circle: refused in one line naming the kinds and the survey that separates them."""
+    """No single correlation is high (0.987), but on a circle the deep gradient takes nearly all the horizontal
+    information the NTD leaves: refused in one line naming the kinds and the survey that separates them."""
     out = tmp_path / "out"
     assert main(["calibrate", "box-in", *GRADIENT, "--out", str(out)]) == 2
     captured = capsys.readouterr()
     err = [line for line in captured.err.splitlines() if line.strip()]
     assert len(err) == 1 and err[0].startswith("sblsim: error:"), err
-    assert "from the deep gradient and the NTD together" in err[0] and "multiple correlation R²" in err[0]
+    assert "cannot separate the East of transponder 1 from the deep gradient and the NTD together" in err[0]
+    assert "beyond the background the gradients take 99.8" in err[0]
     assert "second circle radius" in err[0] and "cross track" in err[0] and "solver.gradient=none" in err[0]
     assert not out.exists() and captured.out == ""
 
@@ -186,11 +187,13 @@ def test_a_figure_eight_separates_the_gradient_and_says_how_well(tmp_path, capsy
     out = tmp_path / "out"
     assert main(["calibrate", "box-in", "--set", "survey.pattern=figure-eight", *GRADIENT, "--out", str(out)]) == 0
     d = json.loads((out / "solution.json").read_text())["determination"]
-    assert d["multiple_r2"] < MAX_MULTIPLE_R2 and d["variance_inflation"] == pytest.approx(1 / (1 - d["multiple_r2"]))
-    assert d["multiple_position"].startswith(("East", "North")) and 0.0 <= d["multiple_r2_up"] <= 1.0
+    assert d["gradient_r2"] < MAX_GRADIENT_R2 and d["gradient_inflation"] == pytest.approx(1 / (1 - d["gradient_r2"]))
+    assert d["variance_inflation"] == pytest.approx(1 / (1 - d["multiple_r2"]))
+    assert d["multiple_group"] == "the deep gradient and the NTD"
+    assert d["gradient_position"].endswith("of transponder 1") and d["multiple_position"].endswith("transponder 1")
     assert d["multiple_r2"] >= d["max_correlation"] ** 2 - 1e-12  # the group takes at least what one unknown does
     line = [x for x in capsys.readouterr().out.splitlines() if "determination:" in x]
-    assert len(line) == 1 and "multiple correlation R²" in line[0] and "variance inflation" in line[0]
+    assert len(line) == 1 and "multiple correlation R²" in line[0] and "the gradients take" in line[0]
 
 
 def _regression_r2(a, w, i, columns):
@@ -200,7 +203,7 @@ def _regression_r2(a, w, i, columns):
     return 1.0 - np.sum((y - x @ coefficients) ** 2) / np.sum(y**2)
 
 
-def test_the_multiple_correlation_is_numpy_s_weighted_regression_and_names_the_fewest_kinds():
+def test_the_multiple_correlations_are_numpy_s_weighted_regressions():
     rng = np.random.default_rng(11)
     n = 200
     a = rng.normal(size=(n, 8)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 5.0, 5.0])
@@ -209,24 +212,28 @@ def test_the_multiple_correlation_is_numpy_s_weighted_regression_and_names_the_f
     w = rng.uniform(0.5, 2.0, size=n)
     names = ["NTD basis 1", "NTD basis 2", "NTD basis 3", "deep gradient East", "deep gradient North"]
     det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
-    want = [_regression_r2(a, w, i, list(range(3, 8))) for i in range(3)]
-    assert det.max_r2 == pytest.approx(max(want[0], want[1]), abs=1e-12)
-    assert det.up_r2 == pytest.approx(want[2], abs=1e-12)
-    assert det.r2_position == "East of transponder 1" and det.max_r2 > MAX_MULTIPLE_R2
-    # neither kind alone takes it beyond the threshold: both are named
-    assert _regression_r2(a, w, 0, [3, 4, 5]) < MAX_MULTIPLE_R2 and _regression_r2(a, w, 0, [6, 7]) < MAX_MULTIPLE_R2
+    every = [_regression_r2(a, w, i, list(range(3, 8))) for i in range(3)]
+    background = [_regression_r2(a, w, i, [3, 4, 5]) for i in range(3)]
+    assert det.max_r2 == pytest.approx(max(every), abs=1e-12) and det.r2_position == "East of transponder 1"
     assert det.r2_group == "the deep gradient and the NTD"
-    # refused by the multiple correlation even where no single correlation is high (the box-in's 0.987)
+    share = [1.0 - (1.0 - e) / (1.0 - b) for e, b in zip(every, background)]
+    assert det.gradient_r2 == pytest.approx(max(share), rel=1e-9) and det.gradient_position == "East of transponder 1"
+    assert det.gradient_r2 > MAX_GRADIENT_R2
+    # refused by the gradients' share even where no single correlation is high (the box-in's 0.987)
     with pytest.raises(ModelError, match="cannot separate the East of transponder 1 from the deep gradient and the "
                                          "NTD together") as caught:
         check_determination(dataclasses.replace(det, max_correlation=0.987), "seg", "survey a cross track")
     assert "\n" not in str(caught.value)
-    assert det.as_dict()["variance_inflation"] == pytest.approx(1.0 / (1.0 - want[0]), rel=1e-6)
-    # with the gradient's share of the column removed, the NTD alone takes it: it alone is named
+    assert det.as_dict()["gradient_inflation"] == pytest.approx((1.0 - background[0]) / (1.0 - every[0]), rel=1e-6)
+    # what the NTD alone takes is reported, not judged by the gradients' rule
     a[:, 0] = 300.0 * a[:, 3] + 2e-3 * rng.normal(size=n)
     det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
-    assert det.r2_group == "the NTD" and det.max_r2 == pytest.approx(_regression_r2(a, w, 0, list(range(3, 8))),
-                                                                      abs=1e-12)
+    assert det.max_r2 == pytest.approx(_regression_r2(a, w, 0, list(range(3, 8))), abs=1e-12) and det.max_r2 > 0.9999
+    assert det.gradient_r2 < MAX_GRADIENT_R2
+    check_determination(dataclasses.replace(det, max_correlation=0.5), "seg", "survey a cross track")  # kept
+    # without a gradient there is no share
+    det = determination(a[:, :6].T @ (w[:, None] * a[:, :6]), 3, names[:3], False, True, 3)
+    assert det.gradient_r2 is None and det.as_dict()["gradient_inflation"] is None
 
 
 def _bound_sd(replies, positions, s, pert):
