@@ -230,11 +230,7 @@ def main(args: argparse.Namespace) -> int:
         criteria = ", ".join(f"{k.upper()} {s[k]:.2f}" for k in ("aic", "bic", "abic") if s[k] is not None)
         grad = f"; deep gradient E {s['gradient']['e']:.6g} N {s['gradient']['n']:.6g}" if s["gradient"] else ""
         print(f"  perturbation {s['perturbation']['kind']}: {s['n_bases']} bases, {criteria}{grad}")
-    d = s["determination"]
-    correlation = (f"; largest correlation {d['max_correlation']:.4f} ({d['position']} with the {d['parameter']})"
-                   if d["max_correlation"] is not None else "")
-    print(f"  determination: condition {d['condition']:.3g}{correlation}; converged in {d['iterations']} "
-          "iteration(s)")
+    print(_determination_line(s["determination"]))
     print(f"  {s['pings_used']} pings used, {s['pings_rejected']} rejected; TWTT residual RMS "
           f"{s['twtt_residual_rms_s'] * 1e6:.2f} us")
     if "running" in s:
@@ -252,6 +248,22 @@ def _calibration_warnings(result) -> None:
         print(f"sblsim: warning: {warning}", file=sys.stderr)
 
 
+def _determination_line(d: dict) -> str:
+    """The console line of ``solution.json``'s ``determination``: the equilibrated condition, the largest pairwise
+    correlation, the largest multiple correlation (its variance inflation, the kinds of unknowns), the share the
+    gradients take beyond the background, the iterations."""
+    correlation = (f"; largest correlation {d['max_correlation']:.4f} ({d['position']} with the {d['parameter']})"
+                   if d["max_correlation"] is not None else "")
+    multiple = (f"; multiple correlation R² {d['multiple_r2']:.6f} (variance inflation {d['variance_inflation']:.3g}, "
+                f"{d['multiple_position']} with {d['multiple_group']} together)"
+                if d.get("variance_inflation") is not None else "")
+    if d.get("gradient_inflation") is not None:
+        multiple += (f"; the gradients take {d['gradient_r2']:.2%} of what the background leaves of the "
+                     f"{d['gradient_position']} (variance inflation {d['gradient_inflation']:.3g})")
+    return (f"  determination: condition {d['condition']:.3g}{correlation}{multiple}; converged in {d['iterations']} "
+            "iteration(s)")
+
+
 def _simulated_lines(result) -> int:
     """``sblsim calibrate`` of a simulated survey: replicate 0 against the truth, the replicates, the survey
     error an LBL design takes."""
@@ -264,6 +276,7 @@ def _simulated_lines(result) -> int:
     print(f"  replicate 0: error N {e['e_n_m']:+.4f} E {e['e_e_m']:+.4f} U {e['e_u_m']:+.4f} m against the truth "
           f"(N {truth['n_m']:+.3f} E {truth['e_m']:+.3f} U {truth['u_m']:+.3f} m); sigma {t['sigma_n_m']:.4f} "
           f"{t['sigma_e_m']:.4f} {t['sigma_u_m']:.4f} m; horizontal bound (CRB) {e['pcrb_h_m']:.4f} m")
+    print(_determination_line(s["determination"]))
     if table is not None:
         r = s["replicates"]
         print(f"  {r['count']} replicates: horizontal RMS error {r['rms_h_m']:.4f} m, bound {r['pcrb_h_m']:.4f} m "

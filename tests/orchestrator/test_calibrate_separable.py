@@ -5,14 +5,17 @@ agree with numpy's own inverse and condition number."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
 
+from sblsim.models.calibration.bound import crb
 from sblsim.models.calibration.determination import (
     MAX_CORRELATION,
+    MAX_GRADIENT_R2,
     Determination,
     check_determination,
     determination,
@@ -20,6 +23,7 @@ from sblsim.models.calibration.determination import (
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.surveys.calibrate import calibrate, load_survey
+from sblsim.orchestrator.surveys.simulate import load_simulated, replicate
 
 C = 1500.0
 STATIONS = {"M1": (700.0, 0.0, -2000.0), "M2": (0.0, 700.0, -2000.0), "M3": (-700.0, 0.0, -2000.0),
@@ -159,3 +163,102 @@ def test_two_radii_with_noise_give_consistent_sigmas(tmp_path):
         e = (sol.position - np.array([truth[i] for i in survey.ids])).ravel()
         nees.append(float(e @ np.linalg.solve(sol.covariance, e)) / len(survey.ids))
     assert 1.5 <= np.mean(nees) <= 4.5, nees
+
+
+GRADIENT = ["--set", "survey.ntd_gradient_e_s=1e-4", "--set", "solver.perturbation=ntd", "--set",
+            "solver.gradient=deep"]
+
+
+def test_the_box_in_with_a_deep_gradient_on_one_circle_is_refused_naming_the_group(tmp_path, capsys):
+    """No single correlation is high (0.987), but on a circle the deep gradient takes nearly all the horizontal
+    information the NTD leaves: refused in one line naming the kinds and the survey that separates them."""
+    out = tmp_path / "out"
+    assert main(["calibrate", "box-in", *GRADIENT, "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    err = [line for line in captured.err.splitlines() if line.strip()]
+    assert len(err) == 1 and err[0].startswith("sblsim: error:"), err
+    assert "cannot separate the East of transponder 1 from the deep gradient and the NTD together" in err[0]
+    assert "beyond the background the gradients take 99.8" in err[0]
+    assert "second circle radius" in err[0] and "cross track" in err[0] and "solver.gradient=none" in err[0]
+    assert not out.exists() and captured.out == ""
+
+
+def test_a_figure_eight_separates_the_gradient_and_says_how_well(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["calibrate", "box-in", "--set", "survey.pattern=figure-eight", *GRADIENT, "--out", str(out)]) == 0
+    d = json.loads((out / "solution.json").read_text())["determination"]
+    assert d["gradient_r2"] < MAX_GRADIENT_R2 and d["gradient_inflation"] == pytest.approx(1 / (1 - d["gradient_r2"]))
+    assert d["variance_inflation"] == pytest.approx(1 / (1 - d["multiple_r2"]))
+    assert d["multiple_group"] == "the deep gradient and the NTD"
+    assert d["gradient_position"].endswith("of transponder 1") and d["multiple_position"].endswith("transponder 1")
+    assert d["multiple_r2"] >= d["max_correlation"] ** 2 - 1e-12  # the group takes at least what one unknown does
+    line = [x for x in capsys.readouterr().out.splitlines() if "determination:" in x]
+    assert len(line) == 1 and "multiple correlation R²" in line[0] and "the gradients take" in line[0]
+
+
+def _regression_r2(a, w, i, columns):
+    """The (uncentred) R² of the weighted least-squares regression of column i of a on the columns given."""
+    y, x = np.sqrt(w) * a[:, i], np.sqrt(w)[:, None] * a[:, columns]
+    coefficients = np.linalg.lstsq(x, y, rcond=None)[0]
+    return 1.0 - np.sum((y - x @ coefficients) ** 2) / np.sum(y**2)
+
+
+def test_the_multiple_correlations_are_numpy_s_weighted_regressions():
+    rng = np.random.default_rng(11)
+    n = 200
+    a = rng.normal(size=(n, 8)) * np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 5.0, 5.0])
+    # the East of transponder 1 is what the NTD basis 1 and the deep gradient East make together, nearly
+    a[:, 0] = 300.0 * a[:, 3] + 0.2 * a[:, 6] + 2e-3 * rng.normal(size=n)
+    w = rng.uniform(0.5, 2.0, size=n)
+    names = ["NTD basis 1", "NTD basis 2", "NTD basis 3", "deep gradient East", "deep gradient North"]
+    det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
+    every = [_regression_r2(a, w, i, list(range(3, 8))) for i in range(3)]
+    background = [_regression_r2(a, w, i, [3, 4, 5]) for i in range(3)]
+    assert det.max_r2 == pytest.approx(max(every), abs=1e-12) and det.r2_position == "East of transponder 1"
+    assert det.r2_group == "the deep gradient and the NTD"
+    share = [1.0 - (1.0 - e) / (1.0 - b) for e, b in zip(every, background)]
+    assert det.gradient_r2 == pytest.approx(max(share), rel=1e-9) and det.gradient_position == "East of transponder 1"
+    assert det.gradient_r2 > MAX_GRADIENT_R2
+    # refused by the gradients' share even where no single correlation is high (the box-in's 0.987)
+    with pytest.raises(ModelError, match="cannot separate the East of transponder 1 from the deep gradient and the "
+                                         "NTD together") as caught:
+        check_determination(dataclasses.replace(det, max_correlation=0.987), "seg", "survey a cross track")
+    assert "\n" not in str(caught.value)
+    assert det.as_dict()["gradient_inflation"] == pytest.approx((1.0 - background[0]) / (1.0 - every[0]), rel=1e-6)
+    # what the NTD alone takes is reported, not judged by the gradients' rule
+    a[:, 0] = 300.0 * a[:, 3] + 2e-3 * rng.normal(size=n)
+    det = determination(a.T @ (w[:, None] * a), 3, names, False, True, 3)
+    assert det.max_r2 == pytest.approx(_regression_r2(a, w, 0, list(range(3, 8))), abs=1e-12) and det.max_r2 > 0.9999
+    assert det.gradient_r2 < MAX_GRADIENT_R2
+    check_determination(dataclasses.replace(det, max_correlation=0.5), "seg", "survey a cross track")  # kept
+    # without a gradient there is no share
+    det = determination(a[:, :6].T @ (w[:, None] * a[:, :6]), 3, names[:3], False, True, 3)
+    assert det.gradient_r2 is None and det.as_dict()["gradient_inflation"] is None
+
+
+def _bound_sd(replies, positions, s, pert):
+    """The horizontal and Up sd of the Cramér-Rao bound of ``replies`` at ``positions`` [m]."""
+    b = crb(replies, positions, s.sound_speed, twtt_sigma=s.twtt_sigma, perturbation=pert)
+    return np.sqrt(np.diag(b)[:3])
+
+
+@pytest.mark.parametrize("pattern, gap", [("circle", 100.0), ("figure-eight", None)])
+def test_the_bound_and_the_sigma_are_one_information_at_two_tracks(pattern, gap):
+    """The bound a box-in prints is the information at the true track; the solve's sigma the same information at the
+    measured (GNSS-noisy) track and its estimate, scaled by its a-posteriori variance. At the measured track the
+    bound is the solve's sigma within 15 %; on one circle the true track's information is nearly singular (the NTD
+    follows the vessel's azimuth on its lap) and the bound is thousands of times the sigma, on a figure-eight the
+    two tracks agree."""
+    sim = load_simulated("box-in", [f"survey.pattern={pattern}", "survey.ntd_sigma_s=2e-4",
+                                    "solver.perturbation=ntd"])
+    survey, s = replicate(sim, 0)
+    sol = calibrate(survey).segments[0][3]
+    pert = sol.perturbation.settings
+    at_measured = _bound_sd(s.measured, sol.position, s, pert)
+    np.testing.assert_allclose(at_measured, sol.sigma[0], rtol=0.15)
+    at_truth = _bound_sd(s.true, s.truth, s, pert)
+    ratio = np.hypot(*at_truth[:2]) / np.hypot(*sol.sigma[0, :2])
+    if gap is None:
+        assert 0.8 <= ratio <= 1.25, ratio
+    else:
+        assert ratio > gap, ratio
