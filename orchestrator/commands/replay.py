@@ -201,7 +201,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     smooth : bool
         Run the RTS smoother and make its rows the track (else the causal EKF's).
     sound_speed : float, optional
-        [m/s] in [1300, 1700]; default calibrated from the pings (single-ping fixes).
+        [m/s] in [1300, 1700]; default calibrated from the pings (a robust joint fit of the sound speed and the
+        pings' positions and emission times, docs/tracking.md).
     receivers_kept : str or sequence of str, optional
         Use only these receivers (their names in the receivers file; a text separated by commas, or a list):
         a thinned array. Default every receiver.
