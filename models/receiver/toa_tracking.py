@@ -15,8 +15,6 @@ The estimators:
 * :func:`single_ping_fix`: each ping alone, Gauss-Newton least squares over ``(p, t_e)`` (needs dim + 1
   receivers), the receiver with the largest normalised residual dropped while it fails the χ² test and
   redundancy remains.
-* :func:`calibrate_sound_speed`: the sound speed that minimises the single-ping fixes' residuals over the
-  pings heard by at least dim + 3 receivers (a calibration step, not a state).
 * :func:`calibrate_sound_speed_robust`: the sound speed fitted jointly with the pings' positions and emission
   times under a soft-L1 loss (late arrivals weigh as in an L1 fit); the replay's calibration.
 * :class:`ToaTracker`: an extended Kalman filter (EKF) over the pings, state
@@ -46,7 +44,6 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from sblsim.models.declarations import ModelError
 
@@ -271,71 +268,22 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te):
     return p, te, J, res
 
 
-def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
-                          bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> tuple[float, float, int]:
-    """The sound speed that minimises the residuals of the single-ping fixes (a calibration step).
-
-    Over at most ``max_pings`` pings (evenly spread) heard by at least dim + 3 receivers, each fixed alone
-    (:func:`fix_pings`, outliers dropped at the middle of ``bounds``, then again at the first estimate) at a
-    trial speed; the speed minimising the
-    sum of the fixes' squared residuals (bounded scalar search), its standard error from that sum's curvature
-    (``σ_c² = 2 / (d²χ²/dc²)``). The redundant receivers of a ping see the speed through the spread of its
-    ranges (a wrong speed scales every range alike, which a single emission time cannot absorb).
-
-    Parameters
-    ----------
-    toa : ndarray, (m, n)
-        Times of arrival [s], NaN where not heard.
-    receivers : ndarray, (n, dim)
-        Receiver positions [m].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s] (scales the standard error).
-    max_pings : int
-        Most pings used.
-    bounds : (float, float)
-        The speeds searched [m/s].
-
-    Returns
-    -------
-    c : float
-        Sound speed [m/s].
-    sigma_c : float
-        Its standard error [m/s].
-    pings : int
-        Pings used.
-    """
-    receivers = np.asarray(receivers, float)
-    dim = receivers.shape[1]
-    rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)
-    if len(rich) < 3:
-        raise ModelError(f"sound speed calibration: {len(rich)} pings heard by at least {dim + 3} receivers; at "
-                         "least 3 are needed (give the sound speed)")
-    rich = rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
-    c = 0.5 * (bounds[0] + bounds[1])
-    for _ in range(2):  # the outliers dropped at the middle speed, then again at the first estimate
-        positions, _, _, used, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
-        keep = np.isfinite(positions).all(axis=1) & (used.sum(axis=1) >= dim + 2)
-        if keep.sum() < 3:
-            raise ModelError("sound speed calibration: fewer than 3 pings could be fixed; give the sound speed")
-        rows = np.where(used[keep], toa[rich][keep], np.nan)
-        guesses = positions[keep]
-
-        def cost(c: float, rows=rows, guesses=guesses) -> float:
-            return float(np.nansum(fix_pings(rows, receivers, c, sigma_toa, guesses, gate=np.inf)[4]))
-
-        best = minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 0.05})
-        c = float(best.x)
-    h = 1.0
-    curvature = (cost(c + h) - 2 * best.fun + cost(c - h)) / h**2
-    return c, float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("inf"), int(keep.sum())
-
-
 #: The robust calibration's soft-L1 scale, in standard deviations of a time of arrival: residuals beyond it weigh
 #: as in an L1 fit (late multipath arrivals).
 ROBUST_SCALE = 2.0
 #: The robust calibration's most joint steps, and the change of the sound speed [m/s] it stops below.
 JOINT_ITERATIONS = 200
 JOINT_TOLERANCE = 0.01
+
+
+def _calibration_pings(toa: np.ndarray, dim: int, max_pings: int) -> np.ndarray:
+    """The rows of ``toa`` (m, n) a sound-speed calibration uses: at most ``max_pings`` pings, evenly spread, of
+    those heard by at least dim + 3 receivers (redundant ones); ModelError (one line) if fewer than 3."""
+    rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)
+    if len(rich) < 3:
+        raise ModelError(f"sound speed calibration: {len(rich)} pings heard by at least {dim + 3} receivers; at "
+                         "least 3 are needed (give the sound speed)")
+    return rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
 
 
 def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
@@ -380,11 +328,7 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     """
     receivers = np.asarray(receivers, float)
     dim = receivers.shape[1]
-    rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)
-    if len(rich) < 3:
-        raise ModelError(f"sound speed calibration: {len(rich)} pings heard by at least {dim + 3} receivers; at "
-                         "least 3 are needed (give the sound speed)")
-    rich = rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
+    rich = _calibration_pings(toa, dim, max_pings)
     c = 0.5 * (bounds[0] + bounds[1])
     p, te, _, _, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
     ok = np.isfinite(p).all(axis=1) & np.isfinite(te)
@@ -808,6 +752,6 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
 
 
 __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_SCALE",
-           "SOUND_SPEED_RANGE", "Fix", "ToaTracker", "TrackRecord", "TrackerSettings", "calibrate_sound_speed",
+           "SOUND_SPEED_RANGE", "Fix", "ToaTracker", "TrackRecord", "TrackerSettings",
            "calibrate_sound_speed_robust", "fix_pings", "rts_smooth", "simulate_pings", "single_ping_fix",
            "toa_function", "toa_model"]

@@ -222,15 +222,14 @@ def test_simulated_sound_speed_and_nees():
         rng = np.random.default_rng(seed)
         toa, truth, _ = tt.simulate_pings(receivers, 60, s, rng, speed=0.3, detection=0.3)
         if seed < 4:
-            speeds.append(tt.calibrate_sound_speed(toa, receivers, s.sigma_toa, max_pings=60))
+            speeds.append(tt.calibrate_sound_speed_robust(toa, receivers, s.sigma_toa, max_pings=60))
         tracker = tt.ToaTracker(receivers, s)
         record = tracker.run(toa)
         xs, Ps = tracker.smooth(record)
         k = np.arange(record.start, len(toa))
         e = xs[k, :2] - truth[k]
         nees.append(np.mean(np.einsum("mi,mi->m", e, np.linalg.solve(Ps[k][:, :2, :2], e[..., None])[..., 0])))
-    # 3 m/s: about 6 formal standard errors (0.4 m/s), a relative error of 0.2 %, i.e. 0.2 m at 100 m, about the
-    # timing noise's own 0.21 m; the estimate is biased high by about 1 m/s (docs/tracking.md)
+    # 3 m/s: a relative error of 0.2 %, i.e. 0.2 m at 100 m, about the timing noise's own 0.21 m
     assert all(abs(c - 1420.0) <= 3.0 for c, _, _ in speeds)
     assert 1.0 <= np.mean(nees) <= 3.0
 
