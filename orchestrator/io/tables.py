@@ -16,7 +16,7 @@ import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import pandas as pd
@@ -120,10 +120,21 @@ def read_parquet(path: Path, what: str) -> TextTable:
                   meta.get(META_TITLE, b"").decode("utf-8", "replace"))
 
 
-def read_lines(path: Path, what: str, encoding: str = "utf-8-sig") -> list[str]:
+def read_lines(path: Path, what: str, encoding: str = "utf-8-sig", *, max_bytes: int | None = None,
+               max_rows: int | None = None, extra_lines: int = 10_000,
+               refuse: Callable[[str, str, str], ModelError] | None = None) -> list[str]:
     """The lines of a regular text file (split as :func:`text_lines`), refused before it is read whole when it
-    is larger than :data:`MAX_LOG_BYTES` or holds more than :data:`MAX_LOG_ROWS` rows and 10,000 lines besides
-    (a header and comments).
+    is larger than ``max_bytes`` or holds more than ``max_rows`` rows and ``extra_lines`` lines besides (a
+    header and comments); the sizes are checked in what was read, not only from the file's size.
+
+    Parameters
+    ----------
+    max_bytes, max_rows : int, optional
+        The limits [bytes], [1]; default a log's, :data:`MAX_LOG_BYTES` and :data:`MAX_LOG_ROWS`.
+    extra_lines : int
+        The lines allowed besides the rows [1].
+    refuse : callable, optional
+        ``refuse(name, what, amount)``: the error of a file too large (default :func:`too_large`, a log's).
 
     Raises
     ------
@@ -132,19 +143,22 @@ def read_lines(path: Path, what: str, encoding: str = "utf-8-sig") -> list[str]:
         that is not text in ``encoding`` ("utf-8-sig" or "ascii").
     """
     name = str(path)
+    max_bytes = MAX_LOG_BYTES if max_bytes is None else max_bytes
+    max_rows = MAX_LOG_ROWS if max_rows is None else max_rows
+    refuse = refuse or too_large
     size = regular_file(path, what)
-    if size > MAX_LOG_BYTES:
-        raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
+    if size > max_bytes:
+        raise refuse(name, what, f"is {size / 2**20:.0f} MiB")
     try:
         with open(path, "rb") as handle:
-            data = handle.read(MAX_LOG_BYTES + 1)
+            data = handle.read(max_bytes + 1)
     except OSError as exc:
         raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > MAX_LOG_BYTES:
-        raise too_large(name, what, f"is more than {MAX_LOG_BYTES // 2**20} MiB")
+    if len(data) > max_bytes:
+        raise refuse(name, what, f"is more than {max_bytes // 2**20} MiB")
     lines = data.count(b"\n")
-    if lines > MAX_LOG_ROWS + 10_000:  # a header and comment lines besides the rows
-        raise too_large(name, what, f"has {lines:,} lines")
+    if lines > max_rows + extra_lines:  # a header and comment lines besides the rows
+        raise refuse(name, what, f"has {lines:,} lines")
     try:
         return text_lines(data.decode(encoding))
     except UnicodeDecodeError as exc:

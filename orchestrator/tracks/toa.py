@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import NUMBER, number, regular_file, text_lines
+from sblsim.orchestrator.io.tables import NUMBER, number, read_lines
 
 #: The largest file read [bytes] and the most rows (pings, receivers, track points).
 MAX_TOA_BYTES = 64 * 2**20
@@ -39,28 +39,17 @@ MAX_COORDINATE = 1e7
 MISSING = ("NA", "")
 
 
+def _too_large(name: str, what: str, amount: str) -> ModelError:
+    return ModelError(f"{what}: {name!r} {amount}; allowed at most {MAX_TOA_BYTES // 2**20} MiB and {MAX_PINGS:,} "
+                      "rows")
+
+
 def _lines(path: Path, what: str) -> list[str]:
-    """The lines of a regular text file, refused when it holds more than :data:`MAX_TOA_BYTES` bytes or
-    :data:`MAX_PINGS` lines (counted by reading, not from the file's size); comments (``#``) and blank lines
-    dropped."""
-    name = str(path)
-    regular_file(path, what)
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(MAX_TOA_BYTES + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > MAX_TOA_BYTES:
-        raise ModelError(f"{what}: {name!r} is larger than {MAX_TOA_BYTES // 2**20} MiB; allowed at most "
-                         f"{MAX_TOA_BYTES // 2**20} MiB and {MAX_PINGS:,} rows")
-    lines = data.count(b"\n")
-    if lines > MAX_PINGS + 1000:
-        raise ModelError(f"{what}: {name!r} has {lines:,} lines; allowed at most {MAX_PINGS:,} rows")
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
-    return [line for line in text_lines(text) if line.strip() and not line.lstrip().startswith("#")]
+    """The lines of a regular text file (:func:`~sblsim.orchestrator.io.tables.read_lines`), refused when it holds
+    more than :data:`MAX_TOA_BYTES` bytes or :data:`MAX_PINGS` rows and 1,000 lines besides (counted in what was
+    read); comments (``#``) and blank lines dropped."""
+    lines = read_lines(path, what, max_bytes=MAX_TOA_BYTES, max_rows=MAX_PINGS, extra_lines=1000, refuse=_too_large)
+    return [line for line in lines if line.strip() and not line.lstrip().startswith("#")]
 
 
 def _split(line: str) -> list[str]:
