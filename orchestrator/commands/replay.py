@@ -241,7 +241,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     target = prepare_out(out, force, "track.csv", "track")
     outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed)
     if target is not None:
-        write(outcome, target, truth)
+        write(outcome, target)
     return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
                        outcome.bound)
 
@@ -388,7 +388,7 @@ def _main_toa(args: argparse.Namespace) -> int:
     outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
-    write(outcome, out, args.truth)
+    write(outcome, out)
     s = outcome.summary
     c = s["sound_speed"]
     thinned = (f" (kept {len(kept)} of the receivers file's)" if kept is not None else "") + \
@@ -418,5 +418,5 @@ def _main_toa(args: argparse.Namespace) -> int:
         for key, n in s["fixed"].items():
             print(f"  {names[key]}: {n} pings positioned")
     print(f"  written to {out}/ (track.csv, estimates.csv, summary.json, "
-          f"{'score.json, errors.csv, ' if outcome.score is not None else ''}track.png)")
+          f"{'score.json, errors.csv, bound.csv, ' if outcome.score is not None else ''}track.png)")
     return 0

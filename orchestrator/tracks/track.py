@@ -59,7 +59,8 @@ MAX_DROP = 0.99
 class TrackOutcome:
     """The outcome of :func:`track`: ``track`` (the track's rows, ``track.csv``), ``estimates`` (every estimator's
     rows, ``estimates.csv``), ``errors`` (``errors.csv``, None without a truth), ``score`` (``score.json``, None
-    without a truth) and ``summary`` (how the run went, ``summary.json``)."""
+    without a truth), ``summary`` (how the run went, ``summary.json``), ``bound`` (``bound.csv``, None without a
+    truth) and ``truth`` (the truth track as read, rows ``t, x, y[, z]``, for the figure; None without one)."""
 
     track: Any  # pandas.DataFrame
     estimates: Any  # pandas.DataFrame
@@ -67,6 +68,7 @@ class TrackOutcome:
     score: dict[str, Any] | None
     summary: dict[str, Any]
     bound: Any = None  # pandas.DataFrame or None (bound.csv)
+    truth: np.ndarray | None = None
 
 
 #: The predicted DRMS of each estimator in ``bound.csv``: the single-ping fix's, the PCRB of the causal filter, the
@@ -315,20 +317,19 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     errors = result = bound = None
     if truth is not None:
         parts, entries = [], {}
-        for estimator, frame in frames.items():
-            stats, err, err3 = score(frame["time"].to_numpy(), frame[columns].to_numpy(), truth,
-                                     covariances[estimator])
-            entries[estimator] = {"n_pings": int(len(toa)), "n_fixed": int(len(frame)),
-                                  "share_fixed": len(frame) / len(toa)} | stats
-            parts.append(pd.DataFrame({"estimator": estimator, "ping": frame["ping"].to_numpy(),
-                                       "time": frame["time"].to_numpy(), "error_2d_m": err,
+
+        def scored(estimator: str, ping: Any, t: np.ndarray, p: np.ndarray, cov: np.ndarray | None) -> None:
+            stats, err, err3 = score(t, p, truth, cov)
+            entries[estimator] = {"n_pings": int(len(toa)), "n_fixed": int(len(t)),
+                                  "share_fixed": len(t) / len(toa)} | stats
+            parts.append(pd.DataFrame({"estimator": estimator, "ping": ping, "time": t, "error_2d_m": err,
                                        **({} if err3 is None else {"error_3d_m": err3})}))
+
+        for estimator, frame in frames.items():
+            scored(estimator, frame["ping"].to_numpy(), frame["time"].to_numpy(), frame[columns].to_numpy(),
+                   covariances[estimator])
         if reference is not None:
-            stats, err, err3 = score(reference[:, 0], reference[:, 1:], truth)
-            entries["reference"] = {"n_pings": int(len(toa)), "n_fixed": int(len(reference)),
-                                    "share_fixed": len(reference) / len(toa)} | stats
-            parts.append(pd.DataFrame({"estimator": "reference", "ping": -1, "time": reference[:, 0],
-                                       "error_2d_m": err, **({} if err3 is None else {"error_3d_m": err3})}))
+            scored("reference", -1, reference[:, 0], reference[:, 1:], None)
         errors = pd.concat(parts, ignore_index=True)
         bound = bound_along_track(toa, positions, record.x_filtered[:, -2] if not smooth else xs[:, -2], truth,
                                   settings)
@@ -339,20 +340,17 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         result |= {"estimator": main, "others": entries}
         result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS, "thirds": thirds}
     summary["wall_time_s"] = time.perf_counter() - start
-    return TrackOutcome(chosen, estimates, errors, result, summary, bound)
+    return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
 
 
-def figure(outcome: TrackOutcome, truth_path: Path | None):
+def figure(outcome: TrackOutcome):
     """The track against the truth, and the 2-D errors along the time with the track's 2σ band (a matplotlib
     figure)."""
     import matplotlib.pyplot as plt
 
-    from sblsim.orchestrator.tracks.toa import read_track
-
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.5))
-    best, tr = outcome.summary["track"], outcome.track
-    if truth_path is not None:
-        truth = read_track(truth_path, "truth")
+    best, tr, truth = outcome.summary["track"], outcome.track, outcome.truth
+    if truth is not None:
         ax.plot(truth[:, 1], truth[:, 2], "-", color="0.6", lw=1, label="truth")
     ax.plot(tr["x"], tr["y"], ".", ms=2, label=best)
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title="track")
@@ -371,12 +369,12 @@ def figure(outcome: TrackOutcome, truth_path: Path | None):
     return fig
 
 
-def write(outcome: TrackOutcome, out: Path, truth_path: Path | None) -> None:
+def write(outcome: TrackOutcome, out: Path) -> None:
     """``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json``,
     ``errors.csv`` and ``bound.csv``, all or nothing."""
     import matplotlib.pyplot as plt
 
-    fig = figure(outcome, truth_path)
+    fig = figure(outcome)
     try:
         with staged_directory(out) as tmp:
             outcome.track.to_csv(tmp / "track.csv", index=False)
