@@ -28,6 +28,7 @@ from typing import Sequence
 
 import casadi as ca
 
+from sblsim.fmus.arrays import fmi3_table_source, fmi3_variables
 from sblsim.fmus.contract import CONTRACT, contract_header
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_NAMES
@@ -41,12 +42,16 @@ BATCH = "sblsim_batch.c"
 #: The compiled per-run metrics of the local engine (orchestrator/cosim/metrics.py is their reference).
 METRICS = "sblsim_metrics.c"
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+#: The FMI 3.0 shell, the header of its variable table and the FMI 3.0 headers (2-clause BSD, as fmpy ships them).
+FMI3_SHELL = "fmi3_shell.c"
+FMI3_TABLE_HEADER = "sblsim_fmi3.h"
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 _TYPES = {"Real": "SBLSIM_REAL", "Integer": "SBLSIM_INTEGER", "Boolean": "SBLSIM_BOOLEAN"}
 _CAUSALITIES = {"parameter": "SBLSIM_PARAMETER", "input": "SBLSIM_INPUT", "output": "SBLSIM_OUTPUT"}
 
 
 def fmi_headers_dir() -> Path:
-    """The FMI 2.0 C headers (2-clause BSD, Modelica Association) as fmpy ships them."""
+    """The FMI 2.0 and 3.0 C headers (2-clause BSD, Modelica Association) as fmpy ships them."""
     return Path(str(resources.files("fmpy") / "c-code"))
 
 
@@ -284,7 +289,8 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     directory : path
         Created if missing.
     shell : str
-        ``fmi2_shell.c`` for an FMU, or ``''`` for the generated code and runtime only.
+        ``fmi2_shell.c`` for an FMI 2.0 FMU, ``fmi3_shell.c`` for an FMI 3.0 one (with its variable table,
+        ``<stem>_fmi3.c``, :mod:`sblsim.fmus.arrays`), or ``''`` for the generated code and runtime only.
     p_start : sequence of float, optional
         The parameters' compiled-in defaults (:func:`model_record`).
 
@@ -303,14 +309,21 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     (directory / files[1]).write_text(header)
     (directory / files[2]).write_text(model_record(model, n_beacons, guid, p_start))
     files += write_runtime(directory)
+    if shell == FMI3_SHELL:
+        table = fmi3_variables(model.fmu_variables(n_beacons), n_beacons)
+        (directory / f"{base}_fmi3.c").write_text(fmi3_table_source(table, f"{base}_fmi3", n_beacons))
+        shutil.copyfile(C_DIR / FMI3_TABLE_HEADER, directory / FMI3_TABLE_HEADER)
+        files += [f"{base}_fmi3.c", FMI3_TABLE_HEADER]
     if shell:
         shutil.copyfile(C_DIR / shell, directory / shell)
         files.append(shell)
-        for name in FMI_HEADERS:
+        headers = FMI3_HEADERS if shell == FMI3_SHELL else FMI_HEADERS
+        for name in headers:
             shutil.copyfile(fmi_headers_dir() / name, directory / name)
-        files += list(FMI_HEADERS)
+        files += list(headers)
     return Sources(model, n_beacons, f"{base}_model", tuple(files), guid)
 
 
-__all__ = ["BATCH", "C_DIR", "FMI_HEADERS", "FMI_SHELL", "METRICS", "RUNTIME", "Sources", "casadi_code",
+__all__ = ["BATCH", "C_DIR", "FMI3_HEADERS", "FMI3_SHELL", "FMI3_TABLE_HEADER", "FMI_HEADERS", "FMI_SHELL", "METRICS",
+           "RUNTIME", "Sources", "casadi_code",
            "fmi_headers_dir", "model_guid", "model_record", "stem", "write_runtime", "write_sources"]

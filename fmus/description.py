@@ -1,4 +1,4 @@
-"""The FMI 2.0 model description of a component, written from its declarations.
+"""The FMI 2.0 and 3.0 model descriptions of a component, written from its declarations.
 
 Every variable comes from :meth:`sblsim.models.component.Component.fmu_variables`
 (value reference = position in that list): name, causality, variability
@@ -10,11 +10,12 @@ and every output is an initial unknown.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Mapping, Sequence
 from xml.etree import ElementTree as ET
 
 import casadi as ca
 
+from sblsim.fmus.arrays import fmi3_variables
 from sblsim.models.declarations import UNITS
 
 VERSION = "0.2.0"
@@ -77,19 +78,8 @@ def model_description(model: type, n_beacons: int, guid: str, source_files: list
             ET.SubElement(files, "File", name=name)
 
     variables = model.fmu_variables(n_beacons)
-    used = sorted({v.unit for v in variables if v.fmi_type == "Real" and v.unit})
-    units = ET.SubElement(root, "UnitDefinitions")
-    for name in used:
-        exponents, factor = UNITS[name]
-        base = {k: str(e) for k, e in exponents.items()}
-        if factor != 1.0:
-            base["factor"] = repr(factor)
-        ET.SubElement(ET.SubElement(units, "Unit", name=name), "BaseUnit", base)
-    categories = ET.SubElement(root, "LogCategories")
-    ET.SubElement(categories, "Category", name="logStatusError", description="Errors: bad calls, bad parameters")
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(stop_time), stepSize=repr(step_size))
-
-    starts = iter([None] * len(model.fmu_parameters_declared(n_beacons)) if p_start is None else p_start)
+    _common(root, variables, step_size, stop_time)
+    starts = _starts(model, n_beacons, variables, p_start)
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(variables):
         attrs = {"name": v.name, "valueReference": str(vr), "description": v.fmi_description(),
@@ -101,14 +91,8 @@ def model_description(model: type, n_beacons: int, guid: str, source_files: list
         if v.fmi_type == "Real" and v.unit:
             typed["unit"] = v.unit
         if v.causality != "output":
-            start = next(starts) if v.causality == "parameter" else None
-            typed["start"] = _number(v.fmi_start if start is None else start, v.fmi_type)
-        lo, hi = (0, len(v.choices) - 1) if v.type == "String" else (v.min, v.max)
-        if v.fmi_type in ("Real", "Integer"):
-            if lo is not None:
-                typed["min"] = _number(lo, v.fmi_type)
-            if hi is not None:
-                typed["max"] = _number(hi, v.fmi_type)
+            typed["start"] = _number(starts[vr], v.fmi_type)
+        typed.update(_range(v, v.fmi_type))
         ET.SubElement(sv, v.fmi_type, typed)
 
     structure = ET.SubElement(root, "ModelStructure")
@@ -122,4 +106,149 @@ def model_description(model: type, n_beacons: int, guid: str, source_files: list
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-__all__ = ["VERSION", "model_description"]
+def _common(root: ET.Element, variables: Sequence, step_size: float, stop_time: float) -> None:
+    """The unit definitions, log categories and default experiment (the same in FMI 2.0 and 3.0)."""
+    used = sorted({v.unit for v in variables if v.fmi_type == "Real" and v.unit})
+    units = ET.SubElement(root, "UnitDefinitions")
+    for name in used:
+        exponents, factor = UNITS[name]
+        base = {k: str(e) for k, e in exponents.items()}
+        if factor != 1.0:
+            base["factor"] = repr(factor)
+        ET.SubElement(ET.SubElement(units, "Unit", name=name), "BaseUnit", base)
+    categories = ET.SubElement(root, "LogCategories")
+    ET.SubElement(categories, "Category", name="logStatusError", description="Errors: bad calls, bad parameters")
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=repr(stop_time), stepSize=repr(step_size))
+
+
+def _starts(model: type, n_beacons: int, variables: Sequence, p_start: Sequence[float] | None) -> list:
+    """The start value of every FMI 2.0 variable (by value reference): a parameter's from ``p_start`` (the
+    parameters travel in ``p`` in their order among the variables) or declared, an input's declared, None for an
+    output."""
+    starts = iter([None] * len(model.fmu_parameters_declared(n_beacons)) if p_start is None else p_start)
+    out = []
+    for v in variables:
+        start = next(starts) if v.causality == "parameter" else None
+        out.append(None if v.causality == "output" else v.fmi_start if start is None else start)
+    return out
+
+
+def _range(v, fmi_type: str) -> dict[str, str]:
+    """The ``min``/``max`` attributes of a variable: its declared range (a String choice's: its indices)."""
+    lo, hi = (0, len(v.choices) - 1) if v.type == "String" else (v.min, v.max)
+    typed = {}
+    if v.fmi_type in ("Real", "Integer"):
+        if lo is not None:
+            typed["min"] = _number(lo, v.fmi_type)
+        if hi is not None:
+            typed["max"] = _number(hi, v.fmi_type)
+    return typed
+
+
+def model_description_fmi3(model: type, n_beacons: int, token: str, step_size: float = 0.1,
+                           stop_time: float = 100.0, p_start: Sequence[float] | None = None, built_for: str = "",
+                           early_return: bool = False) -> bytes:
+    """``modelDescription.xml`` of a component's FMI 3.0 Co-Simulation FMU.
+
+    The same variables as :func:`model_description`'s, grouped into arrays
+    (:func:`sblsim.fmus.arrays.fmi3_variables`), with the same units, ranges, causalities, variabilities and
+    start values (an array's start: its elements', space-separated). FMI 3.0 lists the source files in
+    ``sources/buildDescription.xml`` (:func:`build_description`).
+
+    Parameters
+    ----------
+    model, n_beacons, step_size, stop_time, p_start, built_for
+        As :func:`model_description`.
+    token : str
+        The instantiation token compiled into the binary (the FMI 2.0 GUID).
+    early_return : bool
+        The FMU may return early from ``fmi3DoStep`` (the channel, at an acoustic arrival).
+
+    Returns
+    -------
+    bytes
+    """
+    identifier = f"sblsim_{model.name}"
+    doc = ((model.__doc__ or "").strip().splitlines() or [getattr(model, "label", model.name)])[0]
+    if built_for:
+        doc = f"{doc} Start values: {built_for}."
+    root = ET.Element("fmiModelDescription", fmiVersion="3.0", modelName=identifier, instantiationToken=token,
+                      description=doc, author="sblsim", version=VERSION, license="MIT",
+                      generationTool=f"sblsim {VERSION} (C generated by casadi {ca.__version__})",
+                      variableNamingConvention="flat")
+    ET.SubElement(root, "CoSimulation", modelIdentifier=identifier, needsExecutionTool="false",
+                  canBeInstantiatedOnlyOncePerProcess="false", canGetAndSetFMUState="true",
+                  canSerializeFMUState="true", providesDirectionalDerivatives="false",
+                  providesAdjointDerivatives="false", canHandleVariableCommunicationStepSize="true",
+                  maxOutputDerivativeOrder="0", providesIntermediateUpdate="false",
+                  mightReturnEarlyFromDoStep="true" if early_return else "false",
+                  canReturnEarlyAfterIntermediateUpdate="false", hasEventMode="false",
+                  providesEvaluateDiscreteStates="false")
+    scalars = model.fmu_variables(n_beacons)
+    _common(root, scalars, step_size, stop_time)
+    starts = _starts(model, n_beacons, scalars, p_start)
+    variables = fmi3_variables(scalars, n_beacons)
+    n_vr = next((vr for vr, v in enumerate(variables) if v.causality == "structuralParameter"), None)
+    mv = ET.SubElement(root, "ModelVariables")
+    for vr, v in enumerate(variables):
+        if v.causality == "structuralParameter":
+            ET.SubElement(mv, "UInt64", name=v.name, valueReference=str(vr), causality=v.causality,
+                          variability="fixed", start=str(n_beacons), min=str(n_beacons), max=str(n_beacons),
+                          description="Beacons of the interface (compiled in: only this value is accepted)")
+            continue
+        first = scalars[v.elements[0]]
+        attrs = {"name": v.name, "valueReference": str(vr), "causality": v.causality,
+                 "variability": v.variability}
+        attrs["description"] = first.fmi_description() if not v.shape else _array_description(v, scalars)
+        if v.causality == "parameter":
+            attrs["initial"] = "exact"
+        if v.fmi_type == "Float64" and first.unit:
+            attrs["unit"] = first.unit
+        if v.causality != "output":
+            attrs["start"] = " ".join(_number(starts[e], first.fmi_type) for e in v.elements)
+        attrs.update(_range(first, first.fmi_type))
+        element = ET.SubElement(mv, v.fmi_type, attrs)
+        for k, size in enumerate(v.shape):
+            if k == 0 and v.beacon_rows and n_vr is not None:
+                ET.SubElement(element, "Dimension", valueReference=str(n_vr))
+            else:
+                ET.SubElement(element, "Dimension", start=str(size))
+    # the independent variable: its value reference follows the table's (the shell answers it with its time)
+    ET.SubElement(mv, "Float64", name="time", valueReference=str(len(variables)), causality="independent",
+                  variability="continuous", unit="s", description="Simulation time")
+    structure = ET.SubElement(root, "ModelStructure")
+    for vr, v in enumerate(variables):
+        if v.causality == "output":
+            ET.SubElement(structure, "Output", valueReference=str(vr), dependencies="")
+    for vr, v in enumerate(variables):
+        if v.causality == "output":
+            ET.SubElement(structure, "InitialUnknown", valueReference=str(vr), dependencies="")
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _array_description(v, scalars: Sequence) -> str:
+    names = [scalars[e].name for e in v.elements]
+    shape = ", ".join(map(str, v.shape))
+    if scalars[v.elements[0]].in_table:
+        text = scalars[v.elements[0]].fmi_description().rsplit(", row", 1)[0]
+        return f"{text} [{shape}]: the table column {names[0][:-3]}[1..{len(names)}]"
+    return f"[{shape}] of {', '.join(names[:3])}, ..., {names[-1]}" if len(names) > 4 else \
+        f"[{shape}] of {', '.join(names)}"
+
+
+def build_description(identifier: str, files: Sequence[str], defines: Mapping[str, str]) -> bytes:
+    """``sources/buildDescription.xml`` of an FMI 3.0 FMU: its C files and the macros they are compiled with."""
+    root = ET.Element("fmiBuildDescription", fmiVersion="3.0")
+    config = ET.SubElement(root, "BuildConfiguration", modelIdentifier=identifier)
+    fileset = ET.SubElement(config, "SourceFileSet", language="C99")
+    for name in files:
+        if name.endswith(".c"):
+            ET.SubElement(fileset, "SourceFile", name=name)
+    for name, value in defines.items():
+        ET.SubElement(fileset, "PreprocessorDefinition", name=name, value=value)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+__all__ = ["VERSION", "build_description", "model_description", "model_description_fmi3"]

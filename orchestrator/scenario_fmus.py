@@ -15,14 +15,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-from sblsim.fmus.build import build_fmu
+from sblsim.fmus.build import build_fmu, version_dir
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator.cosim.plan import RunPlan
 from sblsim.orchestrator.ssp import check_no_latency
 
 
 def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", cross: bool | None = None,
-                        report: Callable[[str], object] | None = None) -> list[Path]:
+                        report: Callable[[str], object] | None = None, fmi_version: int = 2) -> list[Path]:
     """Build a run plan's FMUs with its parameter values as their start values and compiled-in defaults.
 
     Parameters
@@ -30,8 +30,9 @@ def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", 
     plan : RunPlan
         The scenario's plan (:func:`sblsim.orchestrator.cosim.plan.load_plan`), seed and replicate included.
     out : path
-        The folder to write ``sblsim_<model>.fmu`` into (created if missing; each file replaced atomically).
-    compiler, cross, report
+        The folder to write ``sblsim_<model>.fmu`` into (created if missing; each file replaced atomically); the
+        FMI 3.0 FMUs go to its folder ``fmi3`` (:func:`sblsim.fmus.build.version_dir`).
+    compiler, cross, report, fmi_version
         As :func:`sblsim.fmus.build.build_fmu`.
 
     Returns
@@ -60,8 +61,9 @@ def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", 
     paths = []
     for component, model in models.items():
         values = plan.component_parameters(component, model.fmu_parameter_names(n_beacons))
-        paths.append(build_fmu(model, out, n_beacons, compiler=compiler, cross=cross, report=report,
-                               parameters=values, experiment=experiment, built_for=built_for))
+        paths.append(build_fmu(model, version_dir(out, fmi_version), n_beacons, compiler=compiler, cross=cross,
+                               report=report, parameters=values, experiment=experiment, built_for=built_for,
+                               fmi_version=fmi_version))
     return paths
 
 

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, build_fmu, fmu_path, validate
+from sblsim.fmus.build import DEFAULT_DIR, FMI_VERSIONS, beacons_dir, build_fmu, fmu_path, validate, version_dir
 from sblsim.fmus.compiler import COMPILERS
 from sblsim.fmus.variables import markdown_tables
 from sblsim.models import MODELS
@@ -30,7 +30,7 @@ _FIXED = ", ".join(name for name in _OWNERS if SYSTEMS[name].interface_beacons i
 
 
 NAME = "fmus"
-HELP = "build, validate or list the FMI 2.0 Co-Simulation FMUs"
+HELP = "build, validate or list the FMI 2.0 (and 3.0) Co-Simulation FMUs"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,6 +38,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     fsub = p.add_subparsers(dest="fmus_command", required=True, parser_class=type(p))
     b = fsub.add_parser("build", help="build the native FMUs (four components and the alternative receivers)")
     b.add_argument("--out", type=Path, default=None, help=f"output directory (default {DEFAULT_DIR})")
+    b.add_argument("--fmi-version", type=int, choices=FMI_VERSIONS, default=2,
+                   help="2 (default) or 3: FMI 3.0 Co-Simulation FMUs from the same C, with arrays, into the "
+                        "folder fmi3 of the output (docs/interop.md, FMI 3.0)")
     b.add_argument("--compiler", choices=COMPILERS, default="auto",
                    help="C compiler: auto (the system's, else zig), system or zig")
     b.add_argument("--cross", action=argparse.BooleanOptionalAction, default=None,
@@ -65,6 +68,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     v.add_argument("dir", type=Path, nargs="?", default=None, help=f"directory of the FMUs (default {DEFAULT_DIR})")
     v.add_argument("--beacons", type=int, default=4, metavar="N",
                    help="validate the FMUs built for N beacons (default 4: the folder beacons<N> for others)")
+    v.add_argument("--fmi-version", type=int, choices=FMI_VERSIONS, default=2,
+                   help="validate the FMI 3.0 FMUs (the folder fmi3) with 3 (default 2)")
     v.add_argument("--system", choices=_OWNERS, default=_OWNERS[0],
                    help=f"{_FIXED}: validate that system's interfaces' FMUs (its folder)")
 
@@ -93,24 +98,24 @@ def main(args: argparse.Namespace) -> int:
                               ("--set", bool(args.overrides))):
             if given:
                 raise ModelError(f"{option}: only with --scenario NAME|CONFIG.toml (the scenario's FMUs)")
-        out = beacons_dir(args.out or DEFAULT_DIR, n_beacons)
+        out = version_dir(beacons_dir(args.out or DEFAULT_DIR, n_beacons), args.fmi_version)
         check_writable(out)
+        options = dict(compiler=args.compiler, cross=args.cross, report=say, fmi_version=args.fmi_version)
         if args.model is not None:
             check_receiver(f"{MODEL_PREFIX}{args.model}", "--model")
             model = user_model(args.model)
-            print(f"built {build_fmu(model, out, n_beacons, compiler=args.compiler, cross=args.cross, report=say)}",
-                  flush=True)
+            print(f"built {build_fmu(model, out, n_beacons, **options)}", flush=True)
             return 0
         for name in MODELS:
-            print(f"built {build_fmu(name, out, n_beacons, compiler=args.compiler, cross=args.cross, report=say)}",
-                  flush=True)
+            print(f"built {build_fmu(name, out, n_beacons, **options)}", flush=True)
         return 0
-    directory = beacons_dir(args.dir or DEFAULT_DIR, n_beacons)
+    directory = version_dir(beacons_dir(args.dir or DEFAULT_DIR, n_beacons), args.fmi_version)
     failures = 0
     for name in MODELS:
         path = fmu_path(directory, name)
         if not path.is_file():
-            raise ModelError(f"fmus validate: {name} FMU not found at {str(path)!r}; run `sblsim fmus build`")
+            raise ModelError(f"fmus validate: {name} FMU not found at {str(path)!r}; run `sblsim fmus build"
+                             f"{' --fmi-version 3' if args.fmi_version == 3 else ''}`")
         problems = validate(path)
         failures += bool(problems)
         print(f"{path}: {len(problems)} problems")
@@ -138,7 +143,8 @@ def _scenario_fmus(args: argparse.Namespace, say: Callable[[str], None]) -> int:
         overrides.append(f"receiver={args.receiver}")
     plan = resolve_plan(args.scenario, args.seed, overrides)
     check_writable(args.out)
-    for path in build_scenario_fmus(plan, args.out, args.compiler, args.cross, report=say):
+    for path in build_scenario_fmus(plan, args.out, args.compiler, args.cross, report=say,
+                                    fmi_version=args.fmi_version):
         print(f"built {path}", flush=True)
     print(f"the FMUs' start values are {plan.scenario}'s (seed {plan.seed}, receiver {plan.receiver}); a host "
           f"that sets nothing runs it for {plan.duration:g} s in steps of "

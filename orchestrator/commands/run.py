@@ -217,6 +217,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
     p.add_argument("--master", choices=ALGORITHMS, default=None,
                    help="master algorithm (default: the configuration's, gauss-seidel)")
+    p.add_argument("--fmi-version", type=int, choices=(2, 3), default=None,
+                   help="with --engine fmu: FMI 2.0 (default) or 3.0 FMUs (the folder fmi3 of the FMU folder; "
+                        "the same numbers)")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/SCENARIO)")
     p.add_argument("--force", action="store_true", help="replace an earlier run in --out (and --export-log files)")
     p.add_argument("--export-log", type=Path, default=None, metavar="FILE",
@@ -232,7 +235,8 @@ def main(args: argparse.Namespace) -> int:
     check_seed_option(args.seed)
     if (args.scenario is None) == (args.ssp is None):
         raise ModelError("run: give either a scenario (or CONFIG.toml) or --ssp FILE.ssp")
-    overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else [])
+    overrides = args.overrides + ([f"simulation.master={args.master}"] if args.master else []) + \
+        ([f"simulation.fmi_version={args.fmi_version}"] if args.fmi_version else [])
     system = None
     if args.ssp is not None:
         engine = args.engine or "fmu"

@@ -95,6 +95,9 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
              choices=ALGORITHMS, scope="config"),
     Variable("receiver", "parameter", "String", "ekf", scope="config",
              description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH"),
+    Variable("fmi_version", "parameter", "Integer", 2, scope="config", min=2, max=3,
+             description="FMI version of the fmu engine's FMUs: 2, or 3 (the fmi3 folder of the FMU folder; "
+                         "the same numbers)"),
 )
 
 #: Keys of the ``receiver`` section that the orchestrator implements for every receiver (built-in, a user's model

@@ -12,7 +12,8 @@ component of a system:
   replicates (:class:`sblsim.fmus.native.NativeBatch`: one call per component and
   step for the whole batch);
 * :class:`FmuHandle` steps a real FMU through fmpy (B = 1), instantiated once
-  per process and reset between runs.
+  per process and reset between runs; :class:`Fmu3Handle` an sblsim FMI 3.0 FMU, its arrays seen as the
+  FMI 2.0 scalars.
 
 The two run the same generated code and runtime, so they give the same numbers.
 """
@@ -32,7 +33,8 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path
+from sblsim.fmus.arrays import fmi3_variables
+from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path, version_dir
 from sblsim.fmus.native import NativeBatch, NativeSystem
 from sblsim.models import COMPONENTS, MODELS
 from sblsim.models.declarations import ModelError
@@ -288,14 +290,15 @@ def one_line(text: str, limit: int = 400) -> str:
 _LOADED: dict[str, tuple[tuple, list["FmuHandle"]]] = {}
 
 
-def read_description(component: str, path: Path) -> Any:
-    """The model description of an FMI 2.0 Co-Simulation FMU.
+def read_description(component: str, path: Path, versions: tuple[str, ...] = ("2.0",)) -> Any:
+    """The model description of an FMI 2.0 (or, in ``versions``, 3.0) Co-Simulation FMU.
 
     Raises
     ------
     ModelError
-        If the file is missing or unreadable, not FMI 2.0 Co-Simulation, or an archive that is not safe to
-        unpack (:func:`sblsim.orchestrator.io.archives.check_members`: checked before its description is read).
+        If the file is missing or unreadable, not Co-Simulation of one of ``versions``, or an archive that is not
+        safe to unpack (:func:`sblsim.orchestrator.io.archives.check_members`: checked before its description is
+        read).
     """
     from fmpy import read_model_description
 
@@ -311,8 +314,8 @@ def read_description(component: str, path: Path) -> Any:
         raise
     except Exception as exc:  # fmpy raises plain exceptions on unreadable archives
         raise ModelError(f"fmu: {str(path)!r} is not a readable FMU ({exc})") from None
-    if md.fmiVersion != "2.0" or md.coSimulation is None:
-        raise ModelError(f"fmu: {str(path)!r} must be an FMI 2.0 Co-Simulation FMU")
+    if md.fmiVersion not in versions or md.coSimulation is None:
+        raise ModelError(f"fmu: {str(path)!r} must be an FMI {' or '.join(versions)} Co-Simulation FMU")
     return md
 
 
@@ -331,7 +334,8 @@ def _ports(md: Any) -> list[Port]:
     return [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
 
 
-def open_fmu(component: str, path: Path | str, model: type | None = None) -> "FmuHandle":
+def open_fmu(component: str, path: Path | str, model: type | None = None,
+             n_beacons: int = FMU_BEACONS) -> "FmuHandle":
     """An instance of an FMU file for a run: an idle one made earlier in this process, else a new one.
 
     Instances are made once and reset between runs. A run that needs an FMU while all its
@@ -344,7 +348,10 @@ def open_fmu(component: str, path: Path | str, model: type | None = None) -> "Fm
     component : str
     path : path
     model : type, optional
-        The sblsim model the FMU was built from (its String choices are sent as their indices).
+        The sblsim model the FMU was built from (its String choices are sent as their indices; an FMI 3.0 FMU
+        needs it: its arrays are read as the model's FMI 2.0 scalars, :class:`Fmu3Handle`).
+    n_beacons : int
+        The beacons of the interface (an FMI 3.0 FMU's arrays).
 
     Raises
     ------
@@ -352,7 +359,7 @@ def open_fmu(component: str, path: Path | str, model: type | None = None) -> "Fm
         If the file is missing or unreadable, or a once-per-process FMU is in use by another run.
     """
     path = Path(path)
-    md = read_description(component, path)
+    md = read_description(component, path, ("2.0", "3.0") if model is not None else ("2.0",))
     stat = path.resolve().stat()
     signature = (stat.st_size, stat.st_mtime_ns, md.guid)
     key = str(path.resolve())
@@ -364,7 +371,8 @@ def open_fmu(component: str, path: Path | str, model: type | None = None) -> "Fm
         if pool and md.coSimulation.canBeInstantiatedOnlyOncePerProcess:
             raise ModelError(f"fmu: {path.name} is in use by another run in this process and can be instantiated "
                              "only once per process")
-        handle = FmuHandle(component, path, md, model)
+        handle = (Fmu3Handle(component, path, md, model, n_beacons) if md.fmiVersion == "3.0"
+                  else FmuHandle(component, path, md, model))
         pool.append(handle)
     handle.component, handle.model = component, model
     handle.in_use = True
@@ -598,6 +606,146 @@ class FmuHandle:
         self.in_use = False
 
 
+class Fmu3Handle(FmuHandle):
+    """An sblsim FMI 3.0 Co-Simulation FMU stepped through fmpy, seen as its FMI 2.0 twin.
+
+    Its variables are the model's FMI 2.0 scalars grouped into arrays (:mod:`sblsim.fmus.arrays`); the handle
+    names its inputs, outputs and ports by those scalars (the master, the connections and the records are those
+    of :class:`FmuHandle`) and moves each array whole, one ``fmi3Set<Type>``/``fmi3Get<Type>`` call per type and
+    step. Create it with :func:`open_fmu`.
+
+    Raises
+    ------
+    ModelError
+        If the FMU's variables are not those sblsim writes for this model and beacon count.
+    """
+
+    _TYPES = {"Float64": (np.float64, ctypes.c_double), "Int32": (np.int32, ctypes.c_int32),
+              "Boolean": (np.bool_, ctypes.c_bool)}
+
+    def __init__(self, component: str, path: Path, md: Any, model: type, n_beacons: int) -> None:
+        self.component, self.path, self.model = component, path, model
+        scalars = model.fmu_variables(n_beacons)
+        self.table = fmi3_variables(scalars, n_beacons)
+        if [v.name for v in md.modelVariables if v.causality != "independent"] != [v.name for v in self.table]:
+            raise ModelError(f"fmu: {path.name} ({component}): its FMI 3.0 variables are not those of sblsim's "
+                             f"{model.name} for {n_beacons} beacons (build it with `sblsim fmus build "
+                             "--fmi-version 3` of this version)")
+        self.variables = {v.name: v for v in scalars}
+        self._vr = {v.name: k for k, v in enumerate(scalars)}
+        self._where = {}  # FMI 2.0 value reference -> (FMI 3.0 value reference, position among its values)
+        for vr, v in enumerate(self.table):
+            for k, e in enumerate(v.elements):
+                self._where.setdefault(e, (vr, k))
+        self.ports = [Port(v.name, v.causality, v.fmi_type, v.unit or "") for v in scalars]
+        self.parameters = frozenset(v.name for v in scalars if v.causality == "parameter")
+        self.log = deque(maxlen=LOG_LINES)
+        self._unzipdir = tempfile.mkdtemp(prefix="sblsim_fmu_")
+        try:
+            safe_extract(path, self._unzipdir, f"fmu: {path.name} ({component})")
+            self.fmu = self._load(md)
+        except BaseException:
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            raise
+        atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)
+        self._fresh = True
+        self.in_use = False
+        inputs = [v for v in scalars if v.causality == "input"]
+        outputs = [v for v in scalars if v.causality == "output"]
+        self.input_names = [v.name for v in inputs]
+        self.output_names = [v.name for v in outputs]
+        self._types = [DTYPES[v.fmi_type] for v in outputs]
+        self._in, self._out = self._groups3("input", inputs), self._groups3("output", outputs)
+
+    def _groups3(self, causality: str, scalars: Sequence[Any]) -> list[tuple]:
+        """Per FMI 3.0 type: (type, positions in the scalar vector of each value, value-reference array,
+        buffer, its pointer): the arrays of ``causality`` whole, in value-reference order."""
+        position = {self._vr[v.name]: k for k, v in enumerate(scalars)}
+        groups = []
+        for typ, (dtype, ctype) in self._TYPES.items():
+            chosen = [(vr, v) for vr, v in enumerate(self.table) if v.causality == causality and v.fmi_type == typ]
+            if chosen:
+                rows = np.array([position[e] for _, v in chosen for e in v.elements])
+                vrs = (ctypes.c_uint * len(chosen))(*[vr for vr, _ in chosen])
+                buffer = np.zeros(len(rows), dtype=dtype)
+                groups.append((typ, rows, vrs, buffer, buffer.ctypes.data_as(ctypes.POINTER(ctype))))
+        return groups
+
+    def _load(self, md: Any) -> Any:
+        """Load the unpacked FMU's library and instantiate it (Co-Simulation, no event mode, no early return),
+        with a logger that keeps what the FMU says."""
+        from fmpy import platform_tuple, sharedLibraryExtension
+        from fmpy.fmi3 import FMU3Slave
+
+        identifier = md.coSimulation.modelIdentifier
+        library = Path(self._unzipdir, "binaries", platform_tuple, f"{identifier}{sharedLibraryExtension}")
+        if not library.is_file():
+            raise ModelError(f"fmu: {self.where}: the FMU has no binaries/{platform_tuple}/{library.name}")
+        cwd = os.getcwd()
+        try:
+            fmu = FMU3Slave(guid=md.guid, unzipDirectory=self._unzipdir, modelIdentifier=identifier,
+                            instanceName=self.component)
+        except Exception as exc:
+            raise ModelError(f"fmu: {self.where}: its library {library.name} cannot be loaded "
+                             f"({one_line(str(exc))})") from None
+        finally:
+            os.chdir(cwd)
+
+        def logger(environment, status, category, message):
+            if status > FMI2_OK and message:
+                self.log.append(one_line(message.decode("utf-8", "replace").replace("%%", "%")))
+
+        try:
+            fmu.instantiate(logMessage=logger)
+        except Exception:
+            fmu.freeLibrary()
+            raise FMICallError(f"fmu: {self.where}: fmi3InstantiateCoSimulation failed: {self.reason()}",
+                               "fmi3InstantiateCoSimulation", None, self.log[-1] if self.log else "") from None
+        return fmu
+
+    def _set(self, values: Mapping[str, Any]) -> None:
+        """Set scalars by their FMI 2.0 names: each array they belong to is read, changed and written whole."""
+        changed: dict[int, np.ndarray] = {}
+        for name, value in values.items():
+            vr3, k = self._where[self._vr[name]]
+            v = self.table[vr3]
+            if vr3 not in changed:
+                changed[vr3] = np.array(getattr(self.fmu, f"get{v.fmi_type}")([vr3], nValues=v.size))
+            changed[vr3][k] = np.asarray(value).reshape(-1)[0].item()
+        for vr3, array in changed.items():
+            typ = self.table[vr3].fmi_type
+            cast = {"Float64": float, "Int32": int, "Boolean": bool}[typ]
+            getattr(self.fmu, f"set{typ}")([vr3], [cast(x) for x in array])
+
+    def _initialize(self, values: Mapping[str, Any], t0: float) -> None:
+        if not self._fresh:
+            self.fmu.reset()
+        self._fresh = False
+        self.fmu.enterInitializationMode(startTime=t0)
+        self._set(values)
+        self.fmu.exitInitializationMode()
+
+    def set_input_vector(self, values: np.ndarray) -> None:
+        """Every input at once, shape (n_in, 1) in the order of :attr:`input_names`."""
+        for typ, rows, vrs, buffer, pointer in self._in:
+            buffer[:] = values[rows, 0]
+            self._raw(f"fmi3Set{typ}", vrs, len(vrs), pointer, len(rows))
+
+    def output_vector(self) -> np.ndarray:
+        """Every output at once, shape (n_out, 1) in the order of :attr:`output_names` (a new array)."""
+        out = np.empty((len(self.output_names), 1))
+        for typ, rows, vrs, buffer, pointer in self._out:
+            self._raw(f"fmi3Get{typ}", vrs, len(vrs), pointer, len(rows))
+            out[rows, 0] = buffer
+        return out
+
+    def do_step(self, t: float, h: float) -> None:
+        flags = [ctypes.c_bool() for _ in range(3)]
+        last = ctypes.c_double()
+        self._raw("fmi3DoStep", ctypes.c_double(t), ctypes.c_double(h), ctypes.c_bool(True),
+                  *[ctypes.byref(f) for f in flags], ctypes.byref(last))
+
+
 def native_system(batches: Sequence[Any], rates: Sequence[int], links: Sequence[tuple[int, int, int, int]],
                   record: Sequence[tuple[int, int]]) -> Any | None:
     """The compiled master loop over compiled batches (:class:`sblsim.fmus.native.NativeSystem`), or None when
@@ -653,7 +801,7 @@ def paper_sources() -> dict[str, Source]:
 
 
 def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | None = None,
-              n_beacons: int = FMU_BEACONS) -> dict[str, Path]:
+              n_beacons: int = FMU_BEACONS, fmi_version: int = 2) -> dict[str, Path]:
     """The FMU file of every component: built ones in ``fmu_dir``, a user's FMU, or a model built into the
     cache (:func:`sblsim.fmus.build.cached_fmu`).
 
@@ -662,7 +810,8 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
     when it is there, else it is built once into the user's cache and reused: the ``fmu`` engine runs
     every configuration out of the box, and writes nothing into the installed package. With ``fmu_dir``, the
     paper's 4-beacon FMUs must be there (a folder given is a folder meant); another number of beacons is
-    built into the cache when that folder does not hold it.
+    built into the cache when that folder does not hold it. FMI 3.0 (``fmi_version`` 3): the same, in the
+    folders' ``fmi3`` folder (:func:`sblsim.fmus.build.version_dir`).
 
     Raises
     ------
@@ -671,27 +820,29 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
     CompileError
         If an FMU must be built and the compiler is missing or fails.
     """
-    directory = beacons_dir(Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR, n_beacons)
+    directory = version_dir(beacons_dir(Path(fmu_dir) if fmu_dir is not None else DEFAULT_DIR, n_beacons),
+                            fmi_version)
     sources = sources if sources is not None else paper_sources()
     paths = {}
     for name, src in sources.items():
         if isinstance(src, Path):
             paths[name] = src
         elif isinstance(src, type):
-            paths[name] = cached_fmu(src, n_beacons)
+            paths[name] = cached_fmu(src, n_beacons, fmi_version)
         else:
             built = fmu_path(directory, src)
             given = fmu_dir is not None and n_beacons == FMU_BEACONS
-            paths[name] = built if built.is_file() or given else cached_fmu(MODELS[src], n_beacons)
+            paths[name] = built if built.is_file() or given else cached_fmu(MODELS[src], n_beacons, fmi_version)
     for name, path in paths.items():
         if not path.is_file():
-            raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build`")
+            raise ModelError(f"fmu: {name} FMU not found at {str(path)!r}; build it with `sblsim fmus build"
+                             f"{' --fmi-version 3' if fmi_version == 3 else ''}`")
     return paths
 
 
 def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4,
                  sources: dict[str, Source] | None = None,
-                 fmu_files: dict[str, Path] | None = None) -> dict[str, ComponentHandle]:
+                 fmu_files: dict[str, Path] | None = None, fmi_version: int = 2) -> dict[str, ComponentHandle]:
     """One handle per component for an engine.
 
     Parameters
@@ -706,6 +857,8 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
         component's interface.
     fmu_files : dict, optional
         Component -> FMU file, overriding ``fmu_dir`` (an SSP package's FMUs).
+    fmi_version : {2, 3}
+        The fmu engine's FMUs of sblsim's models: FMI 2.0 or 3.0 (:class:`Fmu3Handle`; the same numbers).
 
     Raises
     ------
@@ -717,8 +870,8 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
         raise ModelError(f"engine: {engine!r} is not one of {', '.join(ENGINES)}")
     sources = sources if sources is not None else paper_sources()
     if engine == "fmu":
-        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}, n_beacons),
-                 **(fmu_files or {})}
+        paths = {**fmu_paths(fmu_dir, {k: v for k, v in sources.items() if k not in (fmu_files or {})}, n_beacons,
+                             fmi_version), **(fmu_files or {})}
     else:
         paths = {name: src for name, src in sources.items() if isinstance(src, Path)}
     local = {source_model(src) for name, src in sources.items() if name not in paths}
@@ -732,7 +885,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
                 continue
             if isinstance(src, Path):  # a user's FMU: check its interface before loading it
                 check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)
-            handles[name] = open_fmu(name, paths[name], source_model(src))
+            handles[name] = open_fmu(name, paths[name], source_model(src), n_beacons)
     except Exception:
         close_handles(handles)
         raise

@@ -229,7 +229,8 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
     n_steps = check_steps(first.duration, T, len(plans), timeseries)  # before any work: the record must fit
     own = handles is None
     if own:
-        handles = make_handles(engine, fmu_dir, n_beacons, dict(first.sources))
+        handles = make_handles(engine, fmu_dir, n_beacons, dict(first.sources),
+                               fmi_version=int(sim["fmi_version"]))
     try:
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})

@@ -1,0 +1,263 @@
+"""The FMI 3.0 Co-Simulation FMUs (``sblsim fmus build --fmi-version 3``): the FMI 2.0 numbers, with arrays.
+
+* fmpy validates every FMI 3.0 FMU with no problem; every FMI 2.0 variable is an element of exactly one FMI 3.0
+  variable of its causality, variability and type, and each carries its FMI 2.0 twin's unit;
+* the fmu engine on the FMI 3.0 FMUs equals it on the FMI 2.0 FMUs step by step (0 difference: the same C) for
+  the paper's scenarios, an LBL, a USBL and every receiver;
+* the two site scenarios' FMI 3.0 scenario FMUs, with nothing set, stepped through fmpy's FMI 3.0 bindings by a
+  Jacobi loop that moves each array whole, give ``sblsim run SCENARIO --engine fmu --master jacobi`` on the
+  FMI 2.0 FMUs (<= 1e-9);
+* the FMI 3.0 state machine refuses what the standard forbids (a second fmi3Terminate, a step before
+  initialization, a fixed parameter set in step mode, a wrong value count, another beacon count) with fmi3Error
+  and a logged line, and two instances of one FMU in one process, reset and run again, give the same numbers.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from fmpy import read_model_description
+from fmpy.fmi3 import FMU3Slave
+
+from sblsim.fmus.arrays import fmi3_variables
+from sblsim.fmus.build import beacons_dir, build_all, fmu_path, validate, version_dir
+from sblsim.models import MODELS
+from sblsim.models.columns import TIMESERIES_COLUMNS
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.plan import load_plan
+from sblsim.orchestrator.cosim.run import run
+
+OK, ERROR = 0, 3
+SHORT = ["simulation.duration=10", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"]
+
+
+@pytest.fixture(scope="module")
+def fmu3_root(tmp_path_factory) -> Path:
+    """A folder whose ``fmi3`` folder holds every model's FMI 3.0 FMU (``sblsim fmus build --fmi-version 3``)."""
+    root = tmp_path_factory.mktemp("fmi3")
+    paths = build_all(root, fmi_version=3)
+    assert sorted(p.name for p in paths) == sorted(f"sblsim_{n}.fmu" for n in MODELS)
+    assert all(p.parent == version_dir(root, 3) for p in paths)
+    return root
+
+
+def test_fmpy_validates_every_fmi3_fmu_and_every_fmi2_variable_is_one_element(fmu3_root, fmu_dir):
+    for name, model in MODELS.items():
+        fmu3 = fmu_path(version_dir(fmu3_root, 3), name)
+        assert validate(fmu3) == [], name
+        md3, md2 = read_model_description(str(fmu3)), read_model_description(str(fmu_path(fmu_dir, name)))
+        assert md3.fmiVersion == "3.0" and md2.fmiVersion == "2.0"
+        scalars = {v.valueReference: v for v in md2.modelVariables}
+        table = fmi3_variables(model.fmu_variables(4), 4)
+        seen: list[int] = []
+        for v3, t in zip([v for v in md3.modelVariables if v.causality != "independent"], table, strict=True):
+            assert v3.name == t.name and v3.valueReference == table.index(t)
+            if t.causality == "structuralParameter":
+                assert v3.type == "UInt64" and int(v3.start) == 4
+                continue
+            shape = [int(d.start) if d.start is not None else 4 for d in v3.dimensions]
+            assert int(np.prod(shape)) == len(t.elements) and tuple(shape) == t.shape, t.name
+            for e in t.elements:
+                twin = scalars[e]
+                assert (twin.causality, twin.variability) == (v3.causality, v3.variability), (t.name, twin.name)
+                assert {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}[twin.type] == v3.type
+                assert (twin.unit or None) == (v3.unit or None), (t.name, twin.name, twin.unit, v3.unit)
+            if t.causality != "output":  # an array's start values are its elements', in order
+                starts = str(v3.start).split() if t.shape else [str(v3.start)]
+                assert [float(x) if v3.type != "Boolean" else x == "true" for x in starts] == \
+                    [float(scalars[e].start) if v3.type != "Boolean" else scalars[e].start in ("true", True)
+                     for e in t.elements], t.name
+            seen += sorted(set(t.elements))
+        assert sorted(seen) == sorted(scalars), name  # each FMI 2.0 variable exactly once
+    # the arrays are there: a host sees the beacons' positions and the ray tables as one variable each
+    md = read_model_description(str(fmu_path(version_dir(fmu3_root, 3), "acoustics")))
+    arrays = {v.name: v for v in md.modelVariables if v.dimensions}
+    assert "beacon_positions" in arrays and arrays["beacon_positions"].dimensions[0].valueReference is not None
+    assert len(md.modelVariables) < 100 < len(read_model_description(str(fmu_path(fmu_dir, "acoustics"))
+                                                                       ).modelVariables)
+
+
+def _same(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("semicircle", []), ("spiral", []), ("random", []), ("square", []), ("harbour", []), ("random-walk", []),
+    ("semicircle", ["platform.system=lbl"]), ("semicircle", ["platform.system=usbl"]),
+    ("random", ["receiver=ekf-seq"]), ("random", ["receiver=ukf"]), ("random", ["receiver=lsq"]),
+])
+def test_the_fmi3_fmus_give_the_fmi2_numbers_step_by_step(fmu3_root, fmu_dir, name, overrides):
+    two = run(load_plan(name, SHORT + overrides, 5), "fmu", fmu_dir=fmu_dir)
+    three = run(load_plan(name, SHORT + overrides + ["simulation.fmi_version=3"], 5), "fmu", fmu_dir=fmu3_root)
+    assert len(two.timeseries) == 100 and not two.timeseries["packet_valid"].all()  # loss at work
+    _same(two.timeseries, three.timeseries)
+    _same(two.metrics, three.metrics)
+
+
+# --------------------------------------------------------------------------- the site scenarios, nothing set
+
+SITES = ("lbl-field", "usbl-deep")
+SEED = 3
+STEPS = 40
+
+
+def _unzip(fmu: Path, into: Path) -> Path:
+    with zipfile.ZipFile(fmu) as archive:
+        archive.extractall(into)
+    return into
+
+
+def jacobi_nothing_set(fmus: dict[str, Path], n_beacons: int, steps: int, h: float, into: Path) -> dict:
+    """The scenario FMUs stepped by fmpy's FMI 3.0 bindings, nothing set, each connection an FMI 3.0 variable
+    moved whole (the FMI 2.0 connections, grouped as the arrays group their elements): ``"component.output"``
+    (FMI 2.0 name) -> values (steps,)."""
+    slaves, tables = {}, {}
+    for component, fmu in fmus.items():
+        md = read_model_description(str(fmu))
+        slave = FMU3Slave(guid=md.guid, unzipDirectory=str(_unzip(fmu, into / component)),
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=component)
+        slave.instantiate()
+        slave.enterInitializationMode(startTime=0.0)
+        slave.exitInitializationMode()
+        slaves[component] = slave
+        model = MODELS[md.coSimulation.modelIdentifier.removeprefix("sblsim_")]
+        tables[component] = (model.fmu_variables(n_beacons), fmi3_variables(model.fmu_variables(n_beacons),
+                                                                            n_beacons))
+    where = {}  # (component, FMI 2.0 name) -> (FMI 3.0 vr, position)
+    for component, (scalars, table) in tables.items():
+        for vr, t in enumerate(table):
+            for k, e in enumerate(t.elements):
+                where.setdefault((component, scalars[e].name), (vr, k))
+    links: dict[tuple, list] = {}  # (source, vr, destination, vr) -> [(source position, destination position)]
+    for c in default_connections(n_beacons):
+        (svr, sk), (dvr, dk) = where[(c.source, c.output)], where[(c.destination, c.input)]
+        links.setdefault((c.source, svr, c.destination, dvr), []).append((sk, dk))
+    for (source, svr, destination, dvr), pairs in links.items():  # every connection is one array, whole
+        size_s, size_d = tables[source][1][svr].size, tables[destination][1][dvr].size
+        assert size_s == size_d == len(pairs) and all(a == b for a, b in pairs), (source, destination)
+
+    def get(component: str, vr: int) -> list:
+        t = tables[component][1][vr]
+        return getattr(slaves[component], f"get{t.fmi_type}")([vr], nValues=t.size)
+
+    outputs = [(c, vr) for c, (_, table) in tables.items() for vr, t in enumerate(table) if t.causality == "output"]
+    record = {f"{c}.{tables[c][0][e].name}": [] for c, vr in outputs for e in tables[c][1][vr].elements}
+    t = 0.0
+    for _ in range(steps):
+        values = {(c, vr): get(c, vr) for c, vr in outputs}  # Jacobi: every input from the outputs at t
+        for (source, svr, destination, dvr) in links:
+            typ = tables[destination][1][dvr].fmi_type
+            getattr(slaves[destination], f"set{typ}")([dvr], values[(source, svr)])
+        for slave in slaves.values():
+            slave.doStep(t, h)
+        t += h
+        for c, vr in outputs:
+            now = dict(zip(tables[c][1][vr].elements, get(c, vr)))  # the covariance shows an entry twice
+            for e, value in now.items():
+                record[f"{c}.{tables[c][0][e].name}"].append(float(value))
+    for slave in slaves.values():
+        slave.terminate()
+        slave.freeInstance()
+    return {k: np.array(v) for k, v in record.items()}
+
+
+@pytest.mark.parametrize("site", SITES)
+def test_the_site_scenario_fmi3_fmus_setting_nothing_give_the_sblsim_run(site, fmu_dir, tmp_path):
+    duration = f"simulation.duration={STEPS * load_plan(site).sampling_time!r}"
+    plan = load_plan(site, ["simulation.master=jacobi", duration], SEED)
+    folder = beacons_dir(tmp_path / "fmus", plan.n_beacons)
+    args = ["fmus", "build", "--scenario", site, "--seed", str(SEED), "--set", duration, "--fmi-version", "3",
+            "--out", str(folder)]
+    assert main(args) == 0
+    fmus = {c: fmu_path(version_dir(folder, 3), plan.model(c).name) for c in plan.sources}
+    assert all(validate(f) == [] for f in fmus.values())
+    ours = run(plan, "fmu", fmu_dir=fmu_dir).timeseries  # the FMI 2.0 FMUs, every parameter set by sblsim
+    host = jacobi_nothing_set(fmus, plan.n_beacons, plan.n_steps, plan.sampling_time, tmp_path / "run")
+    assert len(ours) == plan.n_steps == STEPS
+    for column, output in TIMESERIES_COLUMNS.items():
+        np.testing.assert_allclose(host[output], ours[column].to_numpy(dtype=float), rtol=0, atol=1e-9,
+                                   err_msg=f"{column} ({output})")
+    assert ours["packet_valid"].any()
+
+
+# --------------------------------------------------------------------------- the state machine
+
+class Raw:
+    """An FMI 3.0 instance of the target FMU called through its library directly, keeping what it logs."""
+
+    def __init__(self, fmu: Path, into: Path, name: str = "instance") -> None:
+        self.md = read_model_description(str(fmu))
+        self.log: list[str] = []
+        self.slave = FMU3Slave(guid=self.md.guid, unzipDirectory=str(_unzip(fmu, into)),
+                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.slave.instantiate(logMessage=lambda env, status, category, message: self.log.append(message.decode()))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+
+    def call(self, function: str, *args) -> int:
+        return getattr(self.slave.dll, function)(self.slave.component, *args)
+
+    def step(self, t: float, h: float) -> int:
+        flags = [ctypes.c_bool() for _ in range(3)]
+        last = ctypes.c_double()
+        return self.call("fmi3DoStep", ctypes.c_double(t), ctypes.c_double(h), ctypes.c_bool(True),
+                         *[ctypes.byref(f) for f in flags], ctypes.byref(last))
+
+    def floats(self, name: str, n: int) -> np.ndarray:
+        vrs = (ctypes.c_uint * 1)(self.vr[name])
+        out = (ctypes.c_double * n)()
+        assert self.call("fmi3GetFloat64", vrs, 1, out, n) == OK
+        return np.array(out)
+
+    def refused(self, status: int, text: str) -> None:
+        assert status == ERROR and self.log and text in self.log[-1], (status, self.log[-3:])
+
+
+def test_the_fmi3_state_machine_refuses_what_the_standard_forbids(fmu3_root, tmp_path):
+    fmu = fmu_path(version_dir(fmu3_root, 3), "target")
+    a, b = Raw(fmu, tmp_path / "a", "a"), Raw(fmu, tmp_path / "b", "b")
+    a.refused(a.step(0.0, 0.1), "fmi3DoStep: not allowed in state Instantiated")
+    for s in (a, b):
+        s.slave.enterInitializationMode(startTime=0.0)
+        s.slave.exitInitializationMode()
+    first = []
+    for k in range(20):
+        assert a.step(k * 0.1, 0.1) == OK and b.step(k * 0.1, 0.1) == OK
+        first.append(a.floats("pos", 3))
+        assert np.array_equal(first[-1], b.floats("pos", 3))  # two instances, one process, the same numbers
+    assert np.abs(first[-1] - first[0]).max() > 0.1  # it moves
+    # a fixed parameter in step mode, a wrong value count, an unknown value reference
+    vrs = (ctypes.c_uint * 1)(a.vr["speed"])
+    a.refused(a.call("fmi3SetFloat64", vrs, 1, (ctypes.c_double * 1)(2.0), 1), "speed")
+    a.refused(a.call("fmi3GetFloat64", (ctypes.c_uint * 1)(a.vr["pos"]), 1, (ctypes.c_double * 2)(), 2), "nValues")
+    a.refused(a.call("fmi3GetFloat64", (ctypes.c_uint * 1)(99999), 1, (ctypes.c_double * 1)(), 1), "99999")
+    a.refused(a.step(0.5, 0.1), "fmi3DoStep")  # not the FMU's time
+    assert a.call("fmi3Terminate") == OK
+    a.refused(a.call("fmi3Terminate"), "fmi3Terminate: not allowed in state Terminated")
+    # reset: the same run again
+    assert a.call("fmi3Reset") == OK
+    a.slave.enterInitializationMode(startTime=0.0)
+    a.slave.exitInitializationMode()
+    for k in range(20):
+        assert a.step(k * 0.1, 0.1) == OK
+    assert np.array_equal(a.floats("pos", 3), first[-1])
+    for s in (a, b):
+        s.slave.freeInstance()
+
+
+def test_an_fmi3_fmu_accepts_only_its_compiled_beacon_count(fmu3_root, tmp_path):
+    s = Raw(fmu_path(version_dir(fmu3_root, 3), "platform"), tmp_path / "p")
+    vrs = (ctypes.c_uint * 1)(s.vr["n_beacons"])
+    assert s.call("fmi3SetUInt64", vrs, 1, (ctypes.c_uint64 * 1)(4), 1) == OK
+    s.refused(s.call("fmi3SetUInt64", vrs, 1, (ctypes.c_uint64 * 1)(6), 1), "n_beacons")
+    s.slave.enterInitializationMode(startTime=0.0)
+    s.slave.exitInitializationMode()
+    out = (ctypes.c_uint64 * 1)()
+    assert s.call("fmi3GetUInt64", vrs, 1, out, 1) == OK and out[0] == 4
+    assert s.floats("beacon_positions", 12).reshape(4, 3)[:, 2].max() > 0  # below the surface (NED), 4 rows
+    s.slave.freeInstance()
