@@ -18,7 +18,16 @@ from typing import Callable
 from sblsim.fmus.build import build_fmu, version_dir
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator.cosim.plan import RunPlan
-from sblsim.orchestrator.ssp import check_no_latency
+
+
+def check_no_latency(plan: RunPlan, what: str, error: type[Exception]) -> None:
+    """Raise ``error`` if ``receiver.latency`` > 0: the orchestrator delays the receiver's recorded outputs after
+    a run, and an FMI host stepping the exported system (SSP package or scenario FMUs) would show them undelayed
+    (other numbers than ``sblsim run``)."""
+    latency = plan["receiver"].get("latency", 0.0)
+    if latency > 0.0:
+        raise error(f"receiver.latency: {latency:g} s cannot be {what}: the orchestrator delays the receiver's "
+                    f"outputs after a run, an FMI host would show them undelayed; use receiver.latency = 0")
 
 
 def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", cross: bool | None = None,
@@ -67,4 +76,4 @@ def build_scenario_fmus(plan: RunPlan, out: Path | str, compiler: str = "auto", 
     return paths
 
 
-__all__ = ["build_scenario_fmus"]
+__all__ = ["build_scenario_fmus", "check_no_latency"]

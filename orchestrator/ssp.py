@@ -46,9 +46,10 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
+from sblsim.fmus.arrays import fmi3_variables
 from sblsim.models import COMPONENTS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, UNITS
 from sblsim.models.errors import ArchiveError
@@ -61,6 +62,7 @@ from sblsim.orchestrator.cosim.connections import Connection, default_connection
 from sblsim.orchestrator.cosim.engines import fmu_paths, read_description
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
 from sblsim.orchestrator.io.archives import check_members, inside, safe_extract
+from sblsim.orchestrator.scenario_fmus import build_scenario_fmus, check_no_latency
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -172,18 +174,21 @@ def _parameter_set(name: str, params: dict[str, Any], variables: dict[str, Any],
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def check_no_latency(plan: RunPlan, what: str, error: type[Exception]) -> None:
-    """Raise ``error`` if ``receiver.latency`` > 0: the orchestrator delays the receiver's recorded outputs after
-    a run, and an FMI host stepping the exported system (SSP package or scenario FMUs) would show them undelayed
-    (other numbers than ``sblsim run``)."""
-    latency = plan["receiver"].get("latency", 0.0)
-    if latency > 0.0:
-        raise error(f"receiver.latency: {latency:g} s cannot be {what}: the orchestrator delays the receiver's "
-                    f"outputs after a run, an FMI host would show them undelayed; use receiver.latency = 0")
+#: FMI 3.0 type -> the SSP 1.0 connector and parameter type.
+_SSC_TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "Real": "Real", "Integer": "Integer"}
+
+
+@dataclass(frozen=True)
+class _Typed:
+    """A variable as the parameter sets need it: its SSP type and unit."""
+
+    type: str
+    unit: str | None
 
 
 def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None = None,
-               connections: Sequence[Connection] | None = None) -> Path:
+               connections: Sequence[Connection] | None = None, fmi_version: int = 2, compiler: str = "auto",
+               report: Callable[[str], object] | None = None) -> Path:
     """Write a run's plan as an SSP 1.0 archive.
 
     Parameters
@@ -193,9 +198,18 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     out : path
         The ``.ssp`` file to write (replaced atomically).
     fmu_dir : path, optional
-        Directory of the built FMUs (default ``fmus/build``).
+        Directory of the built FMUs (default ``fmus/build``; FMI 2.0 only).
     connections : sequence of Connection, optional
         Default: the scenario's :func:`default_connections`.
+    fmi_version : {2, 3}
+        FMI 2.0 (default): the built FMUs and every parameter in the parameter sets. FMI 3.0: the scenario's
+        FMI 3.0 FMUs, built for the package with its parameters as their start values
+        (:func:`sblsim.orchestrator.scenario_fmus.build_scenario_fmus`: SSP 1.0 has no array values, so the
+        arrays, e.g. ``beacon_offsets`` or a sound-speed table, travel in the FMUs), its scalar parameters in the
+        parameter sets, and each connection between two arrays whole (``pos`` to ``target``,
+        ``beacon_positions`` to ``beacon_positions``).
+    compiler, report
+        With FMI 3.0: as :func:`sblsim.fmus.build.build_fmu`.
 
     Returns
     -------
@@ -208,6 +222,8 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
         If an FMU is missing, the written package fails the SSP schemas
         (then nothing is left on disk), or ``receiver.latency`` is not 0 (the
         orchestrator applies it after a run; an FMI host would not).
+    CompileError
+        FMI 3.0: if the compiler is missing or fails.
     """
     out = Path(out)
     if out.suffix != ".ssp":
@@ -216,7 +232,51 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     check_no_latency(plan, "exported", SspError)
     n_beacons = plan.n_beacons
     connections = list(connections) if connections is not None else default_connections(n_beacons)
-    paths = fmu_paths(fmu_dir, dict(plan.sources), n_beacons)
+    with tempfile.TemporaryDirectory(prefix="sblsim_ssp_") as tmp:
+        if fmi_version == 3:
+            built = build_scenario_fmus(plan, tmp, compiler, report=report, fmi_version=3)
+            paths = dict(zip(plan.sources, built))
+            connections = _array_connections(plan, connections)
+        else:
+            paths = fmu_paths(fmu_dir, dict(plan.sources), n_beacons)
+        _write_package(plan, paths, connections, out, fmi_version)
+    return out
+
+
+def _array_connections(plan: RunPlan, connections: Sequence[Connection]) -> list[Connection]:
+    """The FMI 2.0 connections as connections of the FMI 3.0 variables (:mod:`sblsim.fmus.arrays`): the scalars
+    of one array go whole, element by element, to one array of the same size.
+
+    Raises
+    ------
+    SspError
+        If a connection joins part of an array, or two arrays out of order (a connection FMI 3.0 cannot make).
+    """
+    where = {}  # (component, FMI 2.0 name) -> (FMI 3.0 variable, position)
+    for component in plan.sources:
+        model = plan.model(component)
+        scalars = model.fmu_variables(plan.n_beacons)
+        for v in fmi3_variables(scalars, plan.n_beacons):
+            for k, e in enumerate(v.elements):
+                where.setdefault((component, scalars[e].name), (v, k))
+    grouped: dict[tuple[str, str, str, str], list[tuple[int, int, int]]] = {}
+    for c in connections:
+        (source, k), (destination, j) = where[(c.source, c.output)], where[(c.destination, c.input)]
+        grouped.setdefault((c.source, source.name, c.destination, destination.name), []).append(
+            (k, j, source.size if source.size == destination.size else -1))
+    out = []
+    for (src, output, dst, input_), pairs in grouped.items():
+        if len(pairs) != pairs[0][2] or any(k != j for k, j, _ in pairs):
+            raise SspError(f"ssp: the connection {src}.{output} -> {dst}.{input_} joins part of an array; FMI 3.0 "
+                           "connects arrays whole")
+        out.append(Connection(src, output, dst, input_))
+    return out
+
+
+def _write_package(plan: RunPlan, paths: dict[str, Path], connections: Sequence[Connection], out: Path,
+                   fmi_version: int) -> None:
+    """The package's SystemStructure.ssd, parameter sets and FMUs, written to ``out`` atomically."""
+    n_beacons = plan.n_beacons
     T, ratio = plan.sampling_time, plan.ekf_rate_ratio
     n_steps = plan.n_steps
     base = T / ratio
@@ -229,7 +289,8 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     units: dict[str, Any] = {}
     used_units: set[str] = set()
     for component, path in paths.items():
-        md = read_description(component, Path(path))  # a user's FMU too: its archive checked first
+        # a user's FMU too: its archive checked first
+        md = read_description(component, Path(path), ("3.0",) if fmi_version == 3 else ("2.0",))
         units.update({u.name: _unit_definition(u) for u in md.unitDefinitions})
         variables = {v.name: v for v in md.modelVariables}
         source = f"resources/{path.name}"
@@ -240,11 +301,15 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
         for v in md.modelVariables:
             if v.causality not in ("input", "output"):
                 continue
+            kind = _SSC_TYPES.get(v.type, v.type)
             connector = ET.SubElement(connectors, _q("ssd:Connector"), name=v.name, kind=v.causality)
-            ET.SubElement(connector, _q(f"ssc:{v.type}"), {"unit": v.unit} if v.type == "Real" and v.unit else {})
-            if v.type == "Real" and v.unit:
+            ET.SubElement(connector, _q(f"ssc:{kind}"), {"unit": v.unit} if kind == "Real" and v.unit else {})
+            if kind == "Real" and v.unit:
                 used_units.add(v.unit)
-        accepted = frozenset(n for n, v in variables.items() if v.causality == "parameter")
+        if fmi_version == 3:  # the scalar parameters (the arrays' values are the FMUs' start values)
+            variables = {v.name: _Typed(_SSC_TYPES[v.type], v.unit) for v in md.modelVariables
+                         if v.causality == "parameter" and not v.dimensions}
+        accepted = frozenset(n for n, v in variables.items() if fmi_version == 3 or v.causality == "parameter")
         model = plan.model(component)
         params = plan.component_parameters(component, accepted)
         if model is not None:
@@ -287,7 +352,6 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-    return out
 
 
 def validate_ssp(path: Path | str) -> Any:
@@ -439,4 +503,4 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     return SspSystem(make_plan(apply_overrides(raw, overrides, seed)), connections, fmu_files)
 
 
-__all__ = ["SspError", "SspSystem", "check_no_latency", "export_ssp", "read_ssp", "validate_ssp"]
+__all__ = ["SspError", "SspSystem", "export_ssp", "read_ssp", "validate_ssp"]

@@ -6,7 +6,8 @@
   the paper's scenarios, an LBL, a USBL and every receiver;
 * the two site scenarios' FMI 3.0 scenario FMUs, with nothing set, stepped through fmpy's FMI 3.0 bindings by a
   Jacobi loop that moves each array whole, give ``sblsim run SCENARIO --engine fmu --master jacobi`` on the
-  FMI 2.0 FMUs (<= 1e-9);
+  FMI 2.0 FMUs (<= 1e-9), and so does the package ``sblsim ssp export --fmi-version 3`` writes, stepped along
+  its own connections (array to array);
 * the FMI 3.0 state machine refuses what the standard forbids (a second fmi3Terminate, a step before
   initialization, a fixed parameter set in step mode, a wrong value count, another beacon count) with fmi3Error
   and a logged line, and two instances of one FMU in one process, reset and run again, give the same numbers.
@@ -17,6 +18,7 @@ from __future__ import annotations
 import ctypes
 import zipfile
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pandas as pd
@@ -105,6 +107,7 @@ def test_the_fmi3_fmus_give_the_fmi2_numbers_step_by_step(fmu3_root, fmu_dir, na
 SITES = ("lbl-field", "usbl-deep")
 SEED = 3
 STEPS = 40
+SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 
 
 def _unzip(fmu: Path, into: Path) -> Path:
@@ -113,11 +116,29 @@ def _unzip(fmu: Path, into: Path) -> Path:
     return into
 
 
-def jacobi_nothing_set(fmus: dict[str, Path], n_beacons: int, steps: int, h: float, into: Path) -> dict:
-    """The scenario FMUs stepped by fmpy's FMI 3.0 bindings, nothing set, each connection an FMI 3.0 variable
-    moved whole (the FMI 2.0 connections, grouped as the arrays group their elements): ``"component.output"``
-    (FMI 2.0 name) -> values (steps,)."""
-    slaves, tables = {}, {}
+def scalar_links(n_beacons: int, tables: dict) -> list[tuple[str, str, str, str]]:
+    """The FMI 2.0 connections of the system as connections of FMI 3.0 variables (each array whole, checked here
+    element by element): (source, output, destination, input) by FMI 3.0 names."""
+    where = {}  # (component, FMI 2.0 name) -> (FMI 3.0 variable, position)
+    for component, (scalars, table) in tables.items():
+        for t in table:
+            for k, e in enumerate(t.elements):
+                where.setdefault((component, scalars[e].name), (t, k))
+    links: dict[tuple, list] = {}
+    for c in default_connections(n_beacons):
+        (s, sk), (d, dk) = where[(c.source, c.output)], where[(c.destination, c.input)]
+        links.setdefault((c.source, s.name, c.destination, d.name), []).append((sk, dk, s.size, d.size))
+    for key, pairs in links.items():  # every connection is one array, whole, in order
+        assert all(a == b for a, b, _, _ in pairs) and len(pairs) == pairs[0][2] == pairs[0][3], key
+    return list(links)
+
+
+def jacobi_fmi3(fmus: dict[str, Path], n_beacons: int, steps: int, h: float, into: Path,
+                links: list[tuple[str, str, str, str]] | None = None) -> dict:
+    """The FMI 3.0 FMUs stepped by fmpy's FMI 3.0 bindings with nothing set, by a Jacobi loop that moves each
+    connected FMI 3.0 variable whole (``links``: by FMI 3.0 names; default :func:`scalar_links`):
+    ``"component.output"`` (FMI 2.0 name) -> values (steps,)."""
+    slaves, tables, vr = {}, {}, {}
     for component, fmu in fmus.items():
         md = read_model_description(str(fmu))
         slave = FMU3Slave(guid=md.guid, unzipDirectory=str(_unzip(fmu, into / component)),
@@ -129,42 +150,40 @@ def jacobi_nothing_set(fmus: dict[str, Path], n_beacons: int, steps: int, h: flo
         model = MODELS[md.coSimulation.modelIdentifier.removeprefix("sblsim_")]
         tables[component] = (model.fmu_variables(n_beacons), fmi3_variables(model.fmu_variables(n_beacons),
                                                                             n_beacons))
-    where = {}  # (component, FMI 2.0 name) -> (FMI 3.0 vr, position)
-    for component, (scalars, table) in tables.items():
-        for vr, t in enumerate(table):
-            for k, e in enumerate(t.elements):
-                where.setdefault((component, scalars[e].name), (vr, k))
-    links: dict[tuple, list] = {}  # (source, vr, destination, vr) -> [(source position, destination position)]
-    for c in default_connections(n_beacons):
-        (svr, sk), (dvr, dk) = where[(c.source, c.output)], where[(c.destination, c.input)]
-        links.setdefault((c.source, svr, c.destination, dvr), []).append((sk, dk))
-    for (source, svr, destination, dvr), pairs in links.items():  # every connection is one array, whole
-        size_s, size_d = tables[source][1][svr].size, tables[destination][1][dvr].size
-        assert size_s == size_d == len(pairs) and all(a == b for a, b in pairs), (source, destination)
+        vr[component] = {v.name: v.valueReference for v in md.modelVariables}
+    links = links if links is not None else scalar_links(n_beacons, tables)
 
-    def get(component: str, vr: int) -> list:
-        t = tables[component][1][vr]
-        return getattr(slaves[component], f"get{t.fmi_type}")([vr], nValues=t.size)
+    def get(component: str, k: int) -> list:
+        t = tables[component][1][k]
+        return getattr(slaves[component], f"get{t.fmi_type}")([k], nValues=t.size)
 
-    outputs = [(c, vr) for c, (_, table) in tables.items() for vr, t in enumerate(table) if t.causality == "output"]
-    record = {f"{c}.{tables[c][0][e].name}": [] for c, vr in outputs for e in tables[c][1][vr].elements}
+    outputs = [(c, k) for c, (_, table) in tables.items() for k, t in enumerate(table) if t.causality == "output"]
+    record = {f"{c}.{tables[c][0][e].name}": [] for c, k in outputs for e in tables[c][1][k].elements}
     t = 0.0
     for _ in range(steps):
-        values = {(c, vr): get(c, vr) for c, vr in outputs}  # Jacobi: every input from the outputs at t
-        for (source, svr, destination, dvr) in links:
-            typ = tables[destination][1][dvr].fmi_type
-            getattr(slaves[destination], f"set{typ}")([dvr], values[(source, svr)])
+        values = {(c, k): get(c, k) for c, k in outputs}  # Jacobi: every input from the outputs at t
+        for source, output, destination, input_ in links:
+            k = vr[destination][input_]
+            typ = tables[destination][1][k].fmi_type
+            getattr(slaves[destination], f"set{typ}")([k], values[(source, vr[source][output])])
         for slave in slaves.values():
             slave.doStep(t, h)
         t += h
-        for c, vr in outputs:
-            now = dict(zip(tables[c][1][vr].elements, get(c, vr)))  # the covariance shows an entry twice
+        for c, k in outputs:
+            now = dict(zip(tables[c][1][k].elements, get(c, k)))  # the covariance shows an entry twice
             for e, value in now.items():
                 record[f"{c}.{tables[c][0][e].name}"].append(float(value))
     for slave in slaves.values():
         slave.terminate()
         slave.freeInstance()
     return {k: np.array(v) for k, v in record.items()}
+
+
+def assert_sblsim_numbers(host: dict, ours: pd.DataFrame) -> None:
+    for column, output in TIMESERIES_COLUMNS.items():
+        np.testing.assert_allclose(host[output], ours[column].to_numpy(dtype=float), rtol=0, atol=1e-9,
+                                   err_msg=f"{column} ({output})")
+    assert ours["packet_valid"].any()
 
 
 @pytest.mark.parametrize("site", SITES)
@@ -178,12 +197,21 @@ def test_the_site_scenario_fmi3_fmus_setting_nothing_give_the_sblsim_run(site, f
     fmus = {c: fmu_path(version_dir(folder, 3), plan.model(c).name) for c in plan.sources}
     assert all(validate(f) == [] for f in fmus.values())
     ours = run(plan, "fmu", fmu_dir=fmu_dir).timeseries  # the FMI 2.0 FMUs, every parameter set by sblsim
-    host = jacobi_nothing_set(fmus, plan.n_beacons, plan.n_steps, plan.sampling_time, tmp_path / "run")
+    host = jacobi_fmi3(fmus, plan.n_beacons, plan.n_steps, plan.sampling_time, tmp_path / "run")
     assert len(ours) == plan.n_steps == STEPS
-    for column, output in TIMESERIES_COLUMNS.items():
-        np.testing.assert_allclose(host[output], ours[column].to_numpy(dtype=float), rtol=0, atol=1e-9,
-                                   err_msg=f"{column} ({output})")
-    assert ours["packet_valid"].any()
+    assert_sblsim_numbers(host, ours)
+    # the SSP package of FMI 3.0 FMUs: its connections, array to array, run the same numbers
+    ssp = tmp_path / f"{site}.ssp"
+    assert main(["ssp", "export", site, "--seed", str(SEED), "--set", duration, "--fmi-version", "3",
+                 "--out", str(ssp)]) == 0
+    packed = _unzip(ssp, tmp_path / "ssp")
+    ssd = ET.parse(packed / "SystemStructure.ssd").getroot()
+    links = [(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
+             for c in ssd.iter(f"{SSD}Connection")]
+    assert len(links) < len(default_connections(plan.n_beacons))  # arrays: fewer connections than scalars
+    sources = {e.get("name"): packed / e.get("source") for e in ssd.iter(f"{SSD}Component")}
+    host = jacobi_fmi3(sources, plan.n_beacons, plan.n_steps, plan.sampling_time, tmp_path / "ssp-run", links)
+    assert_sblsim_numbers(host, ours)
 
 
 # --------------------------------------------------------------------------- the state machine
