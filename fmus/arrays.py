@@ -34,6 +34,9 @@ from typing import Sequence
 FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
 #: The structural parameter of the beacon count.
 N_BEACONS = "n_beacons"
+#: The outputs by which a model delivers a packet at its arrival (the channel, models/acoustics): its counter and
+#: its arrival epoch. An FMI 3.0 FMU with both may return early from doStep at an arrival.
+ARRIVAL_OUTPUTS = ("packet_seq", "rx_time")
 _BEACON = re.compile(r"^beacon(\d+)_(true_|offset_)?([xyz])$")
 _BEACON_ARRAYS = {None: "beacon_positions", "true_": "beacon_true_positions", "offset_": "beacon_offsets"}
 _AXES = ("x", "y", "z")
@@ -162,7 +165,16 @@ def _check_alike(name: str, members: Sequence) -> None:
                 raise ValueError(f"FMI 3.0 array {name}: {m.name} and {first.name} differ in {field}")
 
 
-def fmi3_table_source(variables: Sequence[Fmi3Variable], symbol: str, n_beacons: int) -> str:
+def arrival_outputs(outputs: Sequence) -> tuple[int, int]:
+    """The positions among a model's outputs of :data:`ARRIVAL_OUTPUTS`, or (-1, -1) when it has not both."""
+    names = [v.name for v in outputs]
+    if all(n in names for n in ARRIVAL_OUTPUTS):
+        return names.index(ARRIVAL_OUTPUTS[0]), names.index(ARRIVAL_OUTPUTS[1])
+    return -1, -1
+
+
+def fmi3_table_source(variables: Sequence[Fmi3Variable], symbol: str, n_beacons: int,
+                      arrival: tuple[int, int] = (-1, -1)) -> str:
     """The C source of the FMI 3.0 variable table (``sblsim_fmi3.h``) the FMI 3.0 shell reads.
 
     Parameters
@@ -173,6 +185,8 @@ def fmi3_table_source(variables: Sequence[Fmi3Variable], symbol: str, n_beacons:
         The table's C name (``-DSBLSIM_FMI3_TABLE=<symbol>``).
     n_beacons : int
         The value of the structural parameter.
+    arrival : (int, int)
+        :func:`arrival_outputs` of the model.
     """
     types = {"Float64": "SBLSIM_REAL", "Int32": "SBLSIM_INTEGER", "Boolean": "SBLSIM_BOOLEAN",
              "UInt64": "SBLSIM_UINT64"}
@@ -191,7 +205,9 @@ def fmi3_table_source(variables: Sequence[Fmi3Variable], symbol: str, n_beacons:
         '#include "sblsim_fmi3.h"', "",
         "static const int elements[] = {" + (", ".join(flat) or "0") + "};",
         "static const sblsim_fmi3_variable variables[] = {\n    " + ",\n    ".join(rows) + "\n};",
-        f"const sblsim_fmi3_table {symbol} = {{.variables = variables, .n_variables = {len(variables)}}};", ""])
+        f"const sblsim_fmi3_table {symbol} = {{.variables = variables, .n_variables = {len(variables)}, "
+        f".arrival_seq = {arrival[0]}, .arrival_time = {arrival[1]}}};", ""])
 
 
-__all__ = ["FMI3_TYPES", "Fmi3Variable", "N_BEACONS", "fmi3_table_source", "fmi3_variables"]
+__all__ = ["ARRIVAL_OUTPUTS", "FMI3_TYPES", "Fmi3Variable", "N_BEACONS", "arrival_outputs", "fmi3_table_source",
+           "fmi3_variables"]

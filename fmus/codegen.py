@@ -28,7 +28,7 @@ from typing import Sequence
 
 import casadi as ca
 
-from sblsim.fmus.arrays import fmi3_table_source, fmi3_variables
+from sblsim.fmus.arrays import arrival_outputs, fmi3_table_source, fmi3_variables
 from sblsim.fmus.contract import CONTRACT, contract_header
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_NAMES
@@ -311,7 +311,8 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     files += write_runtime(directory)
     if shell == FMI3_SHELL:
         table = fmi3_variables(model.fmu_variables(n_beacons), n_beacons)
-        (directory / f"{base}_fmi3.c").write_text(fmi3_table_source(table, f"{base}_fmi3", n_beacons))
+        (directory / f"{base}_fmi3.c").write_text(fmi3_table_source(table, f"{base}_fmi3", n_beacons,
+                                                                    arrival_outputs(model.outputs(n_beacons))))
         shutil.copyfile(C_DIR / FMI3_TABLE_HEADER, directory / FMI3_TABLE_HEADER)
         files += [f"{base}_fmi3.c", FMI3_TABLE_HEADER]
     if shell:

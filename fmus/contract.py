@@ -18,6 +18,7 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
+from sblsim.models.acoustics.core import ARRIVAL_SLACK
 from sblsim.models.bound import FIXED, bound_step
 from sblsim.models.columns import METRIC_INPUTS, RUN_METRICS
 from sblsim.models.declarations import SEED_NAMES
@@ -87,7 +88,9 @@ def contract_header() -> str:
     for prefix, names, count, what in contract_tables().values():
         lines += _enum(prefix, names, count, what)
     lines += ["/* Rows and columns of the bound's matrix (sblsim.models.receiver.measurement.STATE_SIZE). */",
-              f"#define SBLSIM_BOUND_STATE {STATE_SIZE}", "", "#endif", ""]
+              f"#define SBLSIM_BOUND_STATE {STATE_SIZE}", "",
+              "/* Slack of the channel's delivery test [s] (sblsim.models.acoustics.core.ARRIVAL_SLACK). */",
+              f"#define SBLSIM_ARRIVAL_SLACK {ARRIVAL_SLACK!r}", "", "#endif", ""]
     return "\n".join(lines)
 
 

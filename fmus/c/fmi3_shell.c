@@ -9,8 +9,9 @@
  *  - every function first checks the instance's state against one table of the states it is
  *    allowed in (the FMI 3.0 Co-Simulation state machine); a call in another state returns
  *    fmi3Error and logs "<function>: not allowed in state <state>";
- *  - the FMU has no Event Mode (hasEventMode="false"): fmi3ExitInitializationMode goes to Step Mode, an
- *    instantiation with eventModeUsed is refused, and fmi3EnterEventMode and fmi3EnterStepMode are refused;
+ *  - Event Mode (hasEventMode="true") for an importer that uses it (eventModeUsed): fmi3ExitInitializationMode
+ *    then goes to Event Mode, fmi3UpdateDiscreteStates has nothing to update, fmi3EnterStepMode leaves it;
+ *    without it, fmi3ExitInitializationMode goes to Step Mode and fmi3EnterEventMode is refused;
  *  - variables are scalars or arrays (sblsim_fmi3.h): a get or set copies the values of every element of
  *    every value reference in turn, and nValues must be their number exactly (fmi3Error and a log line
  *    otherwise); a refused set changes nothing;
@@ -21,8 +22,10 @@
  *  - fmi3SetFloat64 and fmi3SetInt32 refuse a value outside an input's declared range (and any value that is
  *    not finite) with fmi3Error and a log line;
  *  - fmi3DoStep refuses h <= 0 and a communication point other than the FMU's time (a gap or
- *    an overlap) with fmi3Error and a log line; it never returns early (yet), never asks for event
- *    handling and never asks to terminate;
+ *    an overlap) with fmi3Error and a log line; it never asks to terminate. The channel, in an instance made
+ *    with earlyReturnAllowed, returns early at an acoustic arrival inside the step (see step()): the packet is
+ *    in its outputs at lastSuccessfulTime = its arrival epoch, and an importer in Event Mode is told
+ *    eventHandlingNeeded. Without earlyReturnAllowed it steps as the FMI 2.0 FMU does, to the same numbers;
  *  - errors are always logged (whatever fmi3SetDebugLogging says);
  *  - the state (every vector, the draw counters, the time) can be got, set and serialized; a serialized
  *    state is checked before it is taken (times finite and ordered, every value finite, parameters and
@@ -56,15 +59,16 @@ extern const sblsim_fmi3_table SBLSIM_FMI3_TABLE;
    returns fmi3Error (never fmi3Discard), so EventMode, ConfigurationMode, ReconfigurationMode,
    IntermediateUpdateMode and StepDiscarded are never entered; no call returns fmi3Fatal. Saved states store
    the number: append only. */
-typedef enum { INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED, ERROR_STATE, N_STATES } State;
+typedef enum { INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED, ERROR_STATE, EVENT_MODE, N_STATES } State;
 static const char* const state_names[N_STATES] = {"Instantiated", "InitializationMode", "StepMode", "Terminated",
-                                                  "Error"};
+                                                  "Error", "EventMode"};
 
 /* Sets of states, as bits; the groups the standard's table repeats (restricted to the states above). */
 #define IN(state) (1u << (state))
-#define ANY_STATE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_MODE) | IN(TERMINATED) | IN(ERROR_STATE))
-#define SETTABLE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_MODE))
-#define INITIALIZED (IN(INITIALIZATION_MODE) | IN(STEP_MODE) | IN(TERMINATED) | IN(ERROR_STATE))
+#define ANY_STATE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_MODE) | IN(TERMINATED) | IN(ERROR_STATE) | \
+                   IN(EVENT_MODE))
+#define SETTABLE (IN(INSTANTIATED) | IN(INITIALIZATION_MODE) | IN(STEP_MODE) | IN(EVENT_MODE))
+#define INITIALIZED (IN(INITIALIZATION_MODE) | IN(STEP_MODE) | IN(TERMINATED) | IN(ERROR_STATE) | IN(EVENT_MODE))
 /* The functions of modes this FMU never enters (Event Mode, Configuration Mode, Clock Activation Mode; Model
    Exchange's Continuous-Time Mode; Scheduled Execution): no state here. */
 #define NEVER 0u
@@ -99,7 +103,7 @@ static const struct {
     [ENTER_INITIALIZATION_MODE] = {"fmi3EnterInitializationMode", IN(INSTANTIATED)},
     [EXIT_INITIALIZATION_MODE] = {"fmi3ExitInitializationMode", IN(INITIALIZATION_MODE)},
     [ENTER_EVENT_MODE] = {"fmi3EnterEventMode", IN(STEP_MODE)},
-    [TERMINATE] = {"fmi3Terminate", IN(STEP_MODE)},
+    [TERMINATE] = {"fmi3Terminate", IN(STEP_MODE) | IN(EVENT_MODE)},
     [RESET] = {"fmi3Reset", ANY_STATE},
     [GET_FLOAT32] = {"fmi3GetFloat32", INITIALIZED},
     [GET_FLOAT64] = {"fmi3GetFloat64", INITIALIZED},
@@ -152,7 +156,7 @@ static const struct {
     [SET_SHIFT_DECIMAL] = {"fmi3SetShiftDecimal", ANY_STATE},
     [SET_SHIFT_FRACTION] = {"fmi3SetShiftFraction", ANY_STATE},
     [EVALUATE_DISCRETE_STATES] = {"fmi3EvaluateDiscreteStates", ANY_STATE},
-    [UPDATE_DISCRETE_STATES] = {"fmi3UpdateDiscreteStates", NEVER},
+    [UPDATE_DISCRETE_STATES] = {"fmi3UpdateDiscreteStates", IN(EVENT_MODE)},
     [ENTER_CONTINUOUS_TIME_MODE] = {"fmi3EnterContinuousTimeMode", NEVER},
     [COMPLETED_INTEGRATOR_STEP] = {"fmi3CompletedIntegratorStep", NEVER},
     [SET_TIME] = {"fmi3SetTime", NEVER},
@@ -163,7 +167,7 @@ static const struct {
     [GET_NOMINALS_OF_CONTINUOUS_STATES] = {"fmi3GetNominalsOfContinuousStates", NEVER},
     [GET_NUMBER_OF_EVENT_INDICATORS] = {"fmi3GetNumberOfEventIndicators", NEVER},
     [GET_NUMBER_OF_CONTINUOUS_STATES] = {"fmi3GetNumberOfContinuousStates", NEVER},
-    [ENTER_STEP_MODE] = {"fmi3EnterStepMode", NEVER}, /* only from Event Mode: never here */
+    [ENTER_STEP_MODE] = {"fmi3EnterStepMode", IN(EVENT_MODE)},
     [GET_OUTPUT_DERIVATIVES] = {"fmi3GetOutputDerivatives", IN(STEP_MODE) | IN(TERMINATED) | IN(ERROR_STATE)},
     [DO_STEP] = {"fmi3DoStep", IN(STEP_MODE)},
     [ACTIVATE_MODEL_PARTITION] = {"fmi3ActivateModelPartition", NEVER},
@@ -180,18 +184,25 @@ typedef struct {
     /* What the importer can handle (fmi3InstantiateCoSimulation): for an early return from doStep at an
        acoustic arrival, later. eventModeUsed is refused while the FMU has no Event Mode. */
     int event_mode_used, early_return_allowed;
+    /* With early return allowed, for a model that delivers packets: the state before a step, where it is tried
+       whole (NULL otherwise), and the positions in y of the packet counter and arrival epoch. */
+    struct Saved* trial;
+    int seq_index, rx_index;
     fmi3InstanceEnvironment environment;
     fmi3LogMessageCallback log_message;
     fmi3IntermediateUpdateCallback intermediate_update;
 } Instance;
 
 /* What a saved FMU state holds (a flat copy). */
-typedef struct {
+typedef struct Saved {
     State state;
     double start_time, t0, t;
     double* values; /* p, d, x, u, y */
     uint64_t* draws;
 } Saved;
+
+static Saved* new_saved(void);
+static void free_saved(Saved* saved);
 
 static const sblsim_model* model(void) { return &SBLSIM_MODEL; }
 static const sblsim_fmi3_table* table(void) { return &SBLSIM_FMI3_TABLE; }
@@ -281,6 +292,7 @@ static void free_instance(Instance* s) {
     free(s->u);
     free(s->y);
     free(s->draws);
+    free_saved(s->trial);
     sblsim_work_free(s->work);
     free(s);
 }
@@ -335,12 +347,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                   instantiationToken ? instantiationToken : "(null)", m->guid);
         return NULL;
     }
-    if (eventModeUsed) {
-        log_error(logMessage, instanceEnvironment,
-                  "fmi3InstantiateCoSimulation: %s has no Event Mode (hasEventMode=false); instantiate it with "
-                  "eventModeUsed=false", m->name);
-        return NULL;
-    }
     s = (Instance*)calloc(1, sizeof(Instance));
     if (s == NULL) {
         log_error(logMessage, instanceEnvironment, "out of memory");
@@ -372,6 +378,16 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     s->run.y = s->y;
     s->run.draws = s->draws;
     s->run.work = s->work;
+    if (s->early_return_allowed && table()->arrival_seq >= 0) {
+        s->seq_index = table()->arrival_seq;
+        s->rx_index = table()->arrival_time;
+        s->trial = new_saved();
+        if (s->trial == NULL) {
+            logf_(s, fmi3Error, "logStatusError", "out of memory");
+            free_instance(s);
+            return NULL;
+        }
+    }
     set_defaults(s);
     return s;
 }
@@ -427,12 +443,17 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance c) {
         s->state = ERROR_STATE;
         FAIL(s, "%s", message);
     }
-    s->state = STEP_MODE; /* not Event Mode: eventModeUsed is refused */
+    s->state = s->event_mode_used ? EVENT_MODE : STEP_MODE; /* an importer that uses Event Mode starts there */
     return fmi3OK;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance c) {
-    REFUSE(c, ENTER_EVENT_MODE, "fmi3EnterEventMode: this FMU has no Event Mode (hasEventMode=false)");
+    Instance* s = (Instance*)c;
+    ENTER(c, ENTER_EVENT_MODE);
+    if (!s->event_mode_used)
+        FAIL(s, "fmi3EnterEventMode: the instance was made with eventModeUsed=false");
+    s->state = EVENT_MODE;
+    return fmi3OK;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance c) {
@@ -950,7 +971,7 @@ static int check_saved(const Saved* v, char* message, size_t size) {
     static const char* const blocks[5] = {"p", "d", "x", "u", "y"};
     const sblsim_model* m = model();
     const double* u = v->values + m->n_p + m->n_d + m->n_x;
-    int past_init = v->state == STEP_MODE || v->state == TERMINATED;
+    int past_init = v->state == STEP_MODE || v->state == TERMINATED || v->state == EVENT_MODE;
     size_t offset = 0;
     int k, i;
     if (!isfinite(v->start_time) || !isfinite(v->t0) || !isfinite(v->t)) {
@@ -1164,13 +1185,15 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean* discreteStatesN
                                     fmi3Boolean* terminateSimulation, fmi3Boolean* nominalsOfContinuousStatesChanged,
                                     fmi3Boolean* valuesOfContinuousStatesChanged, fmi3Boolean* nextEventTimeDefined,
                                     fmi3Float64* nextEventTime) {
-    (void)discreteStatesNeedUpdate;
-    (void)terminateSimulation;
-    (void)nominalsOfContinuousStatesChanged;
-    (void)valuesOfContinuousStatesChanged;
-    (void)nextEventTimeDefined;
-    (void)nextEventTime;
-    REFUSE(c, UPDATE_DISCRETE_STATES, "fmi3UpdateDiscreteStates: this FMU has no Event Mode (hasEventMode=false)");
+    ENTER(c, UPDATE_DISCRETE_STATES);
+    /* nothing waits for an event: doStep has delivered the packet of the arrival it returned at */
+    if (discreteStatesNeedUpdate != NULL) *discreteStatesNeedUpdate = fmi3False;
+    if (terminateSimulation != NULL) *terminateSimulation = fmi3False;
+    if (nominalsOfContinuousStatesChanged != NULL) *nominalsOfContinuousStatesChanged = fmi3False;
+    if (valuesOfContinuousStatesChanged != NULL) *valuesOfContinuousStatesChanged = fmi3False;
+    if (nextEventTimeDefined != NULL) *nextEventTimeDefined = fmi3False;
+    if (nextEventTime != NULL) *nextEventTime = 0.0;
+    return fmi3OK;
 }
 
 /* ---------------------------------------------------------------------------------------- */
@@ -1237,7 +1260,10 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t* nContinuousSt
 /* Co-Simulation                                                                            */
 
 fmi3Status fmi3EnterStepMode(fmi3Instance c) {
-    REFUSE(c, ENTER_STEP_MODE, "fmi3EnterStepMode: this FMU has no Event Mode to leave (hasEventMode=false)");
+    Instance* s = (Instance*)c;
+    ENTER(c, ENTER_STEP_MODE);
+    s->state = STEP_MODE;
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
@@ -1250,16 +1276,45 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference vr[
     REFUSE(c, GET_OUTPUT_DERIVATIVES, "fmi3GetOutputDerivatives: not supported (maxOutputDerivativeOrder=0)");
 }
 
-/* One communication step from t to t + h, its arguments checked: s->run.t is the time reached and
-   *early_return whether it stopped short of t + h. It never does yet: an early return at an acoustic arrival
-   (when s->early_return_allowed) is to stop here. On failure the instance is in the Error state (logged). */
-static fmi3Status step(Instance* s, double t, double h, fmi3Boolean* early_return) {
+/* The runtime's step from t to t + h (0), or the Error state and a log line (-1). */
+static int advance(Instance* s, double t, double h) {
     char message[SBLSIM_MESSAGE];
-    *early_return = fmi3False;
     if (sblsim_do_step(&s->run, t, h, message, sizeof message)) {
         s->state = ERROR_STATE;
-        FAIL(s, "%s", message);
+        logf_(s, fmi3Error, "logStatusError", "%s", message);
+        return -1;
     }
+    return 0;
+}
+
+/* One communication step from t to t + h, its arguments checked: s->run.t is the time reached and
+   *early_return whether it stopped short of t + h.
+   Early return at an acoustic arrival (an importer that allows it, a model that delivers packets: outputs
+   packet_seq and rx_time): the step is tried whole from a saved state; when it delivers a packet that arrived
+   strictly inside the step (rx_time in (t, t + h), beyond the delivery slack), the state is restored and the
+   step taken to rx_time only, which delivers the same packet (the channel's slots and draws follow its own
+   clock, not the host's steps: docs/model.md), and doStep returns there. */
+static fmi3Status step(Instance* s, double t, double h, fmi3Boolean* early_return) {
+    *early_return = fmi3False;
+    if (s->trial != NULL) {
+        double seq = s->y[s->seq_index], arrival;
+        save(s, s->trial);
+        if (advance(s, t, h)) return fmi3Error;
+        arrival = s->y[s->rx_index];
+        if (s->y[s->seq_index] != seq && arrival - t > SBLSIM_ARRIVAL_SLACK && t + h - arrival > SBLSIM_ARRIVAL_SLACK) {
+            double delivered = s->y[s->seq_index];
+            restore(s, s->trial);
+            if (advance(s, t, arrival - t)) return fmi3Error;
+            if (s->y[s->seq_index] == delivered) {
+                *early_return = fmi3True;
+                return fmi3OK;
+            }
+            restore(s, s->trial); /* not delivered at its arrival after all: the whole step, as without */
+            if (advance(s, t, h)) return fmi3Error;
+        }
+        return fmi3OK;
+    }
+    if (advance(s, t, h)) return fmi3Error;
     return fmi3OK;
 }
 
@@ -1276,7 +1331,8 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi
         FAIL(s, "fmi3DoStep: currentCommunicationPoint %.17g s differs from the FMU's time %.17g s (a gap or an "
                 "overlap between steps)", t, s->run.t);
     if (step(s, t, h, &early) != fmi3OK) return fmi3Error;
-    if (eventHandlingNeeded != NULL) *eventHandlingNeeded = fmi3False;
+    /* an importer in Event Mode gets the arrival as an event (nothing to update: the packet is in the outputs) */
+    if (eventHandlingNeeded != NULL) *eventHandlingNeeded = early && s->event_mode_used ? fmi3True : fmi3False;
     if (terminateSimulation != NULL) *terminateSimulation = fmi3False;
     if (earlyReturn != NULL) *earlyReturn = early;
     if (lastSuccessfulTime != NULL) *lastSuccessfulTime = s->run.t;

@@ -28,6 +28,9 @@ typedef struct {
 typedef struct {
     const sblsim_fmi3_variable* variables; /* in value-reference order: variables[k].vr == k */
     int n_variables;
+    /* A model that delivers packets at their arrival (the channel): the indices in y of the packet counter and of
+       the arrival epoch (fmus/arrays.py, ARRIVAL_OUTPUTS); -1 for the others. doStep may return early there. */
+    int arrival_seq, arrival_time;
 } sblsim_fmi3_table;
 
 #endif

@@ -216,7 +216,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--engine", choices=ENGINES, default=None,
                    help="component engine (default local; fmu with --ssp, which runs the package's FMUs)")
     p.add_argument("--master", choices=ALGORITHMS, default=None,
-                   help="master algorithm (default: the configuration's, gauss-seidel)")
+                   help="master algorithm (default: the configuration's, gauss-seidel; event: with --engine fmu "
+                        "--fmi-version 3, steps end at the acoustic arrivals)")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=None,
                    help="with --engine fmu: FMI 2.0 (default) or 3.0 FMUs (the folder fmi3 of the FMU folder; "
                         "the same numbers)")

@@ -91,7 +91,8 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
     Variable("duration", "parameter", "Real", 0.0, "s", "Simulated time (0: one pass of the trajectory)",
              min=0.0, max=1e6),
     Variable("master", "parameter", "String", "gauss-seidel",
-             description="Master algorithm: gauss-seidel, or jacobi as FMI hosts step an SSP",
+             description="Master algorithm: gauss-seidel, jacobi as FMI hosts step an SSP, or event (FMI 3.0 "
+                         "FMUs: a step ends at each acoustic arrival)",
              choices=ALGORITHMS, scope="config"),
     Variable("receiver", "parameter", "String", "ekf", scope="config",
              description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH"),

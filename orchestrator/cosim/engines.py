@@ -335,7 +335,7 @@ def _ports(md: Any) -> list[Port]:
 
 
 def open_fmu(component: str, path: Path | str, model: type | None = None,
-             n_beacons: int = FMU_BEACONS) -> "FmuHandle":
+             n_beacons: int = FMU_BEACONS, early_return: bool = False) -> "FmuHandle":
     """An instance of an FMU file for a run: an idle one made earlier in this process, else a new one.
 
     Instances are made once and reset between runs. A run that needs an FMU while all its
@@ -352,6 +352,8 @@ def open_fmu(component: str, path: Path | str, model: type | None = None,
         needs it: its arrays are read as the model's FMI 2.0 scalars, :class:`Fmu3Handle`).
     n_beacons : int
         The beacons of the interface (an FMI 3.0 FMU's arrays).
+    early_return : bool
+        An FMI 3.0 instance made with early return allowed (the event master), kept apart from the others.
 
     Raises
     ------
@@ -362,7 +364,7 @@ def open_fmu(component: str, path: Path | str, model: type | None = None,
     md = read_description(component, path, ("2.0", "3.0") if model is not None else ("2.0",))
     stat = path.resolve().stat()
     signature = (stat.st_size, stat.st_mtime_ns, md.guid)
-    key = str(path.resolve())
+    key = str(path.resolve()) + ("\0early" if early_return and md.fmiVersion == "3.0" else "")
     if key not in _LOADED or _LOADED[key][0] != signature:
         _LOADED[key] = (signature, [])
     pool = _LOADED[key][1]
@@ -371,7 +373,7 @@ def open_fmu(component: str, path: Path | str, model: type | None = None,
         if pool and md.coSimulation.canBeInstantiatedOnlyOncePerProcess:
             raise ModelError(f"fmu: {path.name} is in use by another run in this process and can be instantiated "
                              "only once per process")
-        handle = (Fmu3Handle(component, path, md, model, n_beacons) if md.fmiVersion == "3.0"
+        handle = (Fmu3Handle(component, path, md, model, n_beacons, early_return) if md.fmiVersion == "3.0"
                   else FmuHandle(component, path, md, model))
         pool.append(handle)
     handle.component, handle.model = component, model
@@ -623,8 +625,12 @@ class Fmu3Handle(FmuHandle):
     _TYPES = {"Float64": (np.float64, ctypes.c_double), "Int32": (np.int32, ctypes.c_int32),
               "Boolean": (np.bool_, ctypes.c_bool)}
 
-    def __init__(self, component: str, path: Path, md: Any, model: type, n_beacons: int) -> None:
+    def __init__(self, component: str, path: Path, md: Any, model: type, n_beacons: int,
+                 early_return: bool = False) -> None:
         self.component, self.path, self.model = component, path, model
+        #: Instantiated with early return allowed (the event master), and whether the FMU may return early.
+        self.early_return = early_return
+        self.might_return_early = bool(md.coSimulation.mightReturnEarlyFromDoStep)
         scalars = model.fmu_variables(n_beacons)
         self.table = fmi3_variables(scalars, n_beacons)
         if [v.name for v in md.modelVariables if v.causality != "independent"] != [v.name for v in self.table]:
@@ -672,8 +678,8 @@ class Fmu3Handle(FmuHandle):
         return groups
 
     def _load(self, md: Any) -> Any:
-        """Load the unpacked FMU's library and instantiate it (Co-Simulation, no event mode, no early return),
-        with a logger that keeps what the FMU says."""
+        """Load the unpacked FMU's library and instantiate it (Co-Simulation, no Event Mode, early return as
+        asked), with a logger that keeps what the FMU says."""
         from fmpy import platform_tuple, sharedLibraryExtension
         from fmpy.fmi3 import FMU3Slave
 
@@ -696,7 +702,7 @@ class Fmu3Handle(FmuHandle):
                 self.log.append(one_line(message.decode("utf-8", "replace").replace("%%", "%")))
 
         try:
-            fmu.instantiate(logMessage=logger)
+            fmu.instantiate(logMessage=logger, earlyReturnAllowed=self.early_return)
         except Exception:
             fmu.freeLibrary()
             raise FMICallError(f"fmu: {self.where}: fmi3InstantiateCoSimulation failed: {self.reason()}",
@@ -740,10 +746,16 @@ class Fmu3Handle(FmuHandle):
         return out
 
     def do_step(self, t: float, h: float) -> None:
+        self.step_until(t, h)
+
+    def step_until(self, t: float, h: float) -> float:
+        """``fmi3DoStep`` from ``t`` [s] over ``h`` [s]; the time it reached [s]: ``t + h``, or the arrival it
+        returned early at (an instance made with early return allowed)."""
         flags = [ctypes.c_bool() for _ in range(3)]
         last = ctypes.c_double()
         self._raw("fmi3DoStep", ctypes.c_double(t), ctypes.c_double(h), ctypes.c_bool(True),
                   *[ctypes.byref(f) for f in flags], ctypes.byref(last))
+        return last.value if flags[2].value else t + h
 
 
 def native_system(batches: Sequence[Any], rates: Sequence[int], links: Sequence[tuple[int, int, int, int]],
@@ -842,7 +854,8 @@ def fmu_paths(fmu_dir: Path | str | None = None, sources: dict[str, Source] | No
 
 def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int = 4,
                  sources: dict[str, Source] | None = None,
-                 fmu_files: dict[str, Path] | None = None, fmi_version: int = 2) -> dict[str, ComponentHandle]:
+                 fmu_files: dict[str, Path] | None = None, fmi_version: int = 2,
+                 early_return: bool = False) -> dict[str, ComponentHandle]:
     """One handle per component for an engine.
 
     Parameters
@@ -859,6 +872,8 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
         Component -> FMU file, overriding ``fmu_dir`` (an SSP package's FMUs).
     fmi_version : {2, 3}
         The fmu engine's FMUs of sblsim's models: FMI 2.0 or 3.0 (:class:`Fmu3Handle`; the same numbers).
+    early_return : bool
+        FMI 3.0 instances made with early return allowed (the event master).
 
     Raises
     ------
@@ -885,7 +900,7 @@ def make_handles(engine: str, fmu_dir: Path | str | None = None, n_beacons: int 
                 continue
             if isinstance(src, Path):  # a user's FMU: check its interface before loading it
                 check_interface(name, fmu_ports(name, src), COMPONENTS[name].fmu_variables(n_beacons), src)
-            handles[name] = open_fmu(name, paths[name], source_model(src), n_beacons)
+            handles[name] = open_fmu(name, paths[name], source_model(src), n_beacons, early_return)
     except Exception:
         close_handles(handles)
         raise

@@ -1,4 +1,4 @@
-"""The master algorithm: fixed-step, multi-rate co-simulation, Gauss-Seidel or Jacobi.
+"""The master algorithm: fixed-step, multi-rate co-simulation, Gauss-Seidel or Jacobi, or event-driven.
 
 Every macro step of length T each component with rate ratio r takes r
 communication steps (doStep) of T / r with its inputs held (zero-order hold).
@@ -13,6 +13,12 @@ The two algorithms differ in where an input's value comes from:
   (the initial outputs at the first one), then steps all components; no
   component sees another's output of the same macro step. This is what FMI
   hosts such as libcosim's fixed-step algorithm and fmpy's SSP simulator do.
+* **Event** (FMI 3.0 FMUs instantiated with early return allowed: ``--engine fmu --fmi-version 3``) steps the
+  channel first, from the others' outputs as they are; when it returns early at an acoustic arrival, every other
+  component is stepped to that time (Gauss-Seidel, each at its rate's communication points on the way), so the
+  receiver gets the packet at its arrival and not at the end of the macro step, and the macro step goes on
+  from there. At sblsim's own macro step (the slot) this changes little; a host that steps at a long interval
+  keeps every packet (docs/interop.md, FMI 3.0).
 
 After each macro step every output of every component is recorded.
 
@@ -34,7 +40,7 @@ from sblsim.orchestrator.cosim.connections import Connection, execution_order
 from sblsim.orchestrator.cosim.engines import ComponentHandle, native_system
 
 #: Master algorithms of :func:`simulate`.
-ALGORITHMS = ("gauss-seidel", "jacobi")
+ALGORITHMS = ("gauss-seidel", "jacobi", "event")
 
 
 class RecordBuffer:
@@ -89,8 +95,9 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
         Called with 1 after every macro step.
     record : sequence of str, optional
         The ``"component.variable"`` outputs to record; default all of them.
-    algorithm : {'gauss-seidel', 'jacobi'}
-        Where inputs come from (see the module).
+    algorithm : {'gauss-seidel', 'jacobi', 'event'}
+        Where inputs come from and where steps end (see the module); ``event`` needs a handle that can return
+        early (:meth:`sblsim.orchestrator.cosim.engines.Fmu3Handle.step_until`).
     timing : dict, optional
         Filled with the wall-clock time [s] spent in each component's ``do_step`` calls (added to).
     buffer : RecordBuffer, optional
@@ -107,7 +114,7 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
     Raises
     ------
     ValueError
-        If ``algorithm`` is unknown.
+        If ``algorithm`` is unknown, or ``event`` without a handle that returns early.
     KeyError
         If a recorded name is not an output of the system.
     """
@@ -138,7 +145,12 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
             for c in handles}
     rows = {c: (slice(None) if len(kept[c]) == len(handles[c].output_names) else np.array(kept[c], dtype=int))
             for c in handles}
-    system = _native_system(handles, order, plans, kept, rates)
+    early = [c for c in order if getattr(handles[c], "early_return", False) and
+             getattr(handles[c], "might_return_early", False)]
+    if algorithm == "event" and not early:
+        raise ValueError("simulation.master: event needs a channel FMU that returns early at an arrival (FMI 3.0: "
+                         "--engine fmu --fmi-version 3)")
+    system = None if algorithm == "event" else _native_system(handles, order, plans, kept, rates)
     if system is not None:
         return _simulate_native(system, handles, order, kept, macro_step, n_steps, t0, progress, jacobi, timing,
                                 buffer)
@@ -152,8 +164,41 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
                 u[into] = outputs[src][rows]
             handles[c].set_input_vector(u)
 
+    def step(c: str, start: float, end: float) -> None:
+        """Step a component from ``start`` to ``end`` through its communication points on the way."""
+        ratio = rates.get(c, 1)
+        sub = macro_step / ratio
+        clock = time.perf_counter()
+        points = [t0 + j * sub for j in range(int(np.floor((start - t0) / sub + 1e-9)) + 1,
+                                                int(np.ceil((end - t0) / sub - 1e-9)))]
+        for a, b in zip([start, *points], [*points, end]):
+            handles[c].do_step(a, b - a)
+        if timing is not None:
+            timing[c] = timing.get(c, 0.0) + time.perf_counter() - clock
+        outputs[c] = handles[c].output_vector()
+
     for k in range(n_steps):
         t = t0 + k * macro_step
+        if early:  # event: the channel to its next arrival, then every other component to that time
+            now, end, channel = t, t + macro_step, early[0]
+            while end - now > 1e-9 * (1.0 + abs(end)):
+                feed(channel)
+                clock = time.perf_counter()
+                reached = handles[channel].step_until(now, end - now)
+                if timing is not None:
+                    timing[channel] = timing.get(channel, 0.0) + time.perf_counter() - clock
+                outputs[channel] = handles[channel].output_vector()
+                for c in order:
+                    if c != channel:
+                        feed(c)
+                        step(c, now, reached)
+                now = reached
+            for c in order:
+                if kept[c]:
+                    history[c].append(outputs[c][rows[c]])
+            if progress is not None:
+                progress(1)
+            continue
         if jacobi:  # every input from the outputs at the start of the macro step
             for c in order:
                 feed(c)

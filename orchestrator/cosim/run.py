@@ -230,7 +230,12 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
     own = handles is None
     if own:
         handles = make_handles(engine, fmu_dir, n_beacons, dict(first.sources),
-                               fmi_version=int(sim["fmi_version"]))
+                               fmi_version=int(sim["fmi_version"]), early_return=first.master == "event")
+    if first.master == "event" and not any(getattr(h, "early_return", False) for h in handles.values()):
+        if own:
+            close_handles(handles)
+        raise ModelError("simulation.master: event needs the fmu engine on FMI 3.0 FMUs, whose channel returns "
+                         "early at an arrival (--engine fmu --fmi-version 3)")
     try:
         connections = list(connections) if connections is not None else default_connections(n_beacons)
         check_connections(connections, {name: h.ports for name, h in handles.items()})

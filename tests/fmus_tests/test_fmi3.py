@@ -30,10 +30,13 @@ from sblsim.fmus.arrays import fmi3_variables
 from sblsim.fmus.build import beacons_dir, build_all, fmu_path, validate, version_dir
 from sblsim.models import MODELS
 from sblsim.models.columns import TIMESERIES_COLUMNS
+from sblsim.models.errors import ModelError
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.connections import default_connections
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.master import simulate
 from sblsim.orchestrator.cosim.plan import load_plan
-from sblsim.orchestrator.cosim.run import run
+from sblsim.orchestrator.cosim.run import merge_params, run
 
 OK, ERROR = 0, 3
 SHORT = ["simulation.duration=10", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"]
@@ -219,22 +222,28 @@ def test_the_site_scenario_fmi3_fmus_setting_nothing_give_the_sblsim_run(site, f
 class Raw:
     """An FMI 3.0 instance of the target FMU called through its library directly, keeping what it logs."""
 
-    def __init__(self, fmu: Path, into: Path, name: str = "instance") -> None:
+    def __init__(self, fmu: Path, into: Path, name: str = "instance", **instantiate) -> None:
         self.md = read_model_description(str(fmu))
         self.log: list[str] = []
         self.slave = FMU3Slave(guid=self.md.guid, unzipDirectory=str(_unzip(fmu, into)),
                                modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.slave.instantiate(logMessage=lambda env, status, category, message: self.log.append(message.decode()))
+        self.slave.instantiate(logMessage=lambda env, status, category, message: self.log.append(message.decode()),
+                               **instantiate)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
 
     def call(self, function: str, *args) -> int:
         return getattr(self.slave.dll, function)(self.slave.component, *args)
 
     def step(self, t: float, h: float) -> int:
+        return self.step_flags(t, h)[0]
+
+    def step_flags(self, t: float, h: float) -> tuple[int, bool, bool, bool, float]:
+        """fmi3DoStep: its status, eventHandlingNeeded, terminateSimulation, earlyReturn, lastSuccessfulTime."""
         flags = [ctypes.c_bool() for _ in range(3)]
         last = ctypes.c_double()
-        return self.call("fmi3DoStep", ctypes.c_double(t), ctypes.c_double(h), ctypes.c_bool(True),
-                         *[ctypes.byref(f) for f in flags], ctypes.byref(last))
+        status = self.call("fmi3DoStep", ctypes.c_double(t), ctypes.c_double(h), ctypes.c_bool(True),
+                           *[ctypes.byref(f) for f in flags], ctypes.byref(last))
+        return status, flags[0].value, flags[1].value, flags[2].value, last.value
 
     def floats(self, name: str, n: int) -> np.ndarray:
         vrs = (ctypes.c_uint * 1)(self.vr[name])
@@ -278,6 +287,32 @@ def test_the_fmi3_state_machine_refuses_what_the_standard_forbids(fmu3_root, tmp
         s.slave.freeInstance()
 
 
+def test_event_mode_for_an_importer_that_uses_it(fmu3_root, tmp_path):
+    """eventModeUsed: initialization ends in Event Mode (no step there), fmi3UpdateDiscreteStates has nothing to
+    update, fmi3EnterStepMode leaves it; an early return at an arrival asks for event handling. Without
+    eventModeUsed, fmi3EnterEventMode is refused."""
+    fmu = fmu_path(version_dir(fmu3_root, 3), "acoustics")
+    s = Raw(fmu, tmp_path / "e", eventModeUsed=True, earlyReturnAllowed=True)
+    s.slave.enterInitializationMode(startTime=0.0)
+    s.slave.exitInitializationMode()
+    s.refused(s.step(0.0, 0.1), "fmi3DoStep: not allowed in state EventMode")
+    need = [ctypes.c_bool(True) for _ in range(5)]
+    assert s.call("fmi3UpdateDiscreteStates", *[ctypes.byref(b) for b in need], ctypes.byref(ctypes.c_double())) == OK
+    assert not any(b.value for b in need)
+    assert s.call("fmi3EnterStepMode") == OK
+    status, handling, terminate, early, last = s.step_flags(0.0, 1.0)  # over 0.1 s slots: the first arrival ends it
+    assert status == OK and early and handling and not terminate and 0.0 < last < 1.0
+    assert s.call("fmi3EnterEventMode") == OK and s.call("fmi3EnterStepMode") == OK
+    s.slave.freeInstance()
+    plain = Raw(fmu, tmp_path / "p")
+    plain.slave.enterInitializationMode(startTime=0.0)
+    plain.slave.exitInitializationMode()
+    plain.refused(plain.call("fmi3EnterEventMode"), "eventModeUsed=false")
+    status, handling, _, early, last = plain.step_flags(0.0, 1.0)  # no early return unless allowed
+    assert status == OK and not early and not handling and last == 1.0
+    plain.slave.freeInstance()
+
+
 def test_an_fmi3_fmu_accepts_only_its_compiled_beacon_count(fmu3_root, tmp_path):
     s = Raw(fmu_path(version_dir(fmu3_root, 3), "platform"), tmp_path / "p")
     vrs = (ctypes.c_uint * 1)(s.vr["n_beacons"])
@@ -289,3 +324,78 @@ def test_an_fmi3_fmu_accepts_only_its_compiled_beacon_count(fmu3_root, tmp_path)
     assert s.call("fmi3GetUInt64", vrs, 1, out, 1) == OK and out[0] == 4
     assert s.floats("beacon_positions", 12).reshape(4, 3)[:, 2].max() > 0  # below the surface (NED), 4 rows
     s.slave.freeInstance()
+
+
+# --------------------------------------------------------------------------- early return at an arrival
+
+def _run_at(handles: dict, plan, algorithm: str, macro_step: float, duration: float) -> dict:
+    """The system of ``handles`` set up from ``plan`` (its slots every T) and stepped by the master at
+    ``macro_step`` (a host's communication interval) with ``algorithm``."""
+    for name, handle in handles.items():
+        params, replicates = merge_params([plan], name, handle.parameters)
+        handle.setup(params, replicates)
+    n = int(round(duration / macro_step))
+    return simulate(handles, default_connections(plan.n_beacons), plan.rates, macro_step, n, algorithm=algorithm)
+
+
+def _horizontal_rms(rec: dict) -> float:
+    error = np.hypot(rec["receiver.est_x"] - rec["target.pos_x"], rec["receiver.est_y"] - rec["target.pos_y"])
+    return float(np.sqrt(np.mean(error ** 2)))
+
+
+def test_the_event_master_delivers_each_range_at_its_arrival_and_a_1_s_host_keeps_every_packet(fmu3_root,
+                                                                                                 fmu_dir):
+    """The channel's slots are 0.1 s; a host that communicates every 1 s. On FMI 2.0 a 1 s step delivers one
+    packet (the rest wait in flight, and overflow its places): the estimate falls behind. With FMI 3.0 and
+    early return, each doStep of the channel ends at the arrival of the packet it delivers (its own ``rx_time``),
+    the receiver is stepped to that time with the packet, every packet is delivered, and the error stays that of
+    the 0.1 s run."""
+    plan = load_plan("semicircle", ["simulation.duration=60"], 2)
+    two = make_handles("fmu", fmu_dir, plan.n_beacons, dict(plan.sources))
+    three = make_handles("fmu", fmu3_root, plan.n_beacons, dict(plan.sources), fmi_version=3, early_return=True)
+    try:
+        channel, receiver = three["acoustics"], three["receiver"]
+        seq, rx = (channel.output_names.index(n) for n in ("packet_seq", "rx_time"))
+        returns, fed, ends = [], [], []
+        step_until, set_inputs, do_step = channel.step_until, receiver.set_input_vector, receiver.do_step
+
+        def channel_step(t, h):
+            reached = step_until(t, h)
+            out = channel.output_vector()
+            returns.append((t, h, reached, out[seq, 0], out[rx, 0]))
+            return reached
+
+        def receiver_inputs(values):
+            fed.append(values[receiver.input_names.index("packet_seq"), 0])
+            set_inputs(values)
+
+        def receiver_step(t, h):
+            ends.append((t + h, fed[-1]))
+            do_step(t, h)
+
+        channel.step_until, receiver.set_input_vector, receiver.do_step = channel_step, receiver_inputs, receiver_step
+        event = _run_at(three, plan, "event", 1.0, 60.0)
+        reference = _run_at(two, plan, "gauss-seidel", 0.1, 60.0)
+        slow = _run_at(two, plan, "gauss-seidel", 1.0, 60.0)
+    finally:
+        close_handles(two)
+        close_handles(three)
+    early = [r for r in returns if r[2] < r[0] + r[1] - 1e-9]
+    assert len(early) > 500  # the 0.1 s slots of a minute: almost every packet ends a step
+    for t, h, reached, _, arrival in early:  # at the channel's own arrival epoch, inside the step
+        assert reached == pytest.approx(arrival, abs=1e-12) and t < arrival < t + h
+    delivered = {packet: arrival for _, _, _, packet, arrival in returns}
+    for packet, arrival in delivered.items():  # the receiver has a step ending at each arrival, with the packet
+        if packet > 0:
+            assert any(abs(end - arrival) < 1e-9 and seen == packet for end, seen in ends), packet
+    # every packet of the 0.1 s run delivered, none overflowing; the FMI 2.0 host at 1 s falls behind
+    assert event["acoustics.packet_seq"][-1, 0] == reference["acoustics.packet_seq"][-1, 0] > 550
+    assert event["acoustics.overflow_travel_time"].max() == 0.0 < slow["acoustics.overflow_travel_time"].max()
+    assert _horizontal_rms(event) < 1.5 * _horizontal_rms(reference) < 0.2 * _horizontal_rms(slow)
+
+
+def test_sblsim_run_master_event_needs_fmi3_fmus(fmu_dir):
+    with pytest.raises(ModelError, match="event needs the fmu engine on FMI 3.0 FMUs"):
+        run(load_plan("semicircle", ["simulation.duration=1", "simulation.master=event"], 1), "fmu", fmu_dir=fmu_dir)
+    with pytest.raises(ModelError, match="event needs"):
+        run(load_plan("semicircle", ["simulation.duration=1", "simulation.master=event"], 1), "local")
