@@ -337,10 +337,11 @@ static double* slot(Instance* s, const sblsim_variable* v) {
 /* The declared range of a variable as text, e.g. "[0, 1e+07] m". */
 static void describe_range(const sblsim_variable* v, char* text, size_t size) {
     char lo[32], hi[32];
+    int unit = v->unit && v->unit[0] && strcmp(v->unit, "1") != 0; /* "1": no unit to name */
     if (v->has_min) snprintf(lo, sizeof lo, "%g", v->min); else snprintf(lo, sizeof lo, "-inf");
     if (v->has_max) snprintf(hi, sizeof hi, "%g", v->max); else snprintf(hi, sizeof hi, "inf");
     snprintf(text, size, "%s%s, %s%s%s%s", v->has_min ? "[" : "(", lo, hi, v->has_max ? "]" : ")",
-             (v->unit && v->unit[0] && strcmp(v->unit, "1") != 0) ? " " : "", v->unit ? v->unit : "");
+             unit ? " " : "", unit ? v->unit : "");
 }
 
 /* Whether `value` lies in the declared range of `v` (a variable without one takes any value). */

@@ -156,6 +156,7 @@ void sblsim_work_free(sblsim_work* w) {
 
 static void describe(const sblsim_parameter* q, char* text, size_t size) {
     char lo[32], hi[32];
+    int unit = q->unit && q->unit[0] && strcmp(q->unit, "1") != 0; /* "1": no unit to name */
     if (q->type == SBLSIM_BOOLEAN) {
         snprintf(text, size, "true or false");
         return;
@@ -163,8 +164,7 @@ static void describe(const sblsim_parameter* q, char* text, size_t size) {
     if (q->has_min) snprintf(lo, sizeof lo, "%g", q->min); else snprintf(lo, sizeof lo, "-inf");
     if (q->has_max) snprintf(hi, sizeof hi, "%g", q->max); else snprintf(hi, sizeof hi, "inf");
     snprintf(text, size, "%s%s, %s%s%s%s", (!q->has_min || q->min_exclusive) ? "(" : "[", lo, hi,
-             q->has_max ? "]" : ")", (q->unit && q->unit[0] && strcmp(q->unit, "1") != 0) ? " " : "",
-             q->unit ? q->unit : "");
+             q->has_max ? "]" : ")", unit ? " " : "", unit ? q->unit : "");
 }
 
 static int rows_in_use(const sblsim_model* m, const double* p, int table) {

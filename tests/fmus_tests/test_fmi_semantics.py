@@ -203,6 +203,16 @@ def test_a_parameter_outside_its_range_fails_initialization(fmu_dir, name, param
     call_fails(s, s.fmu.exitInitializationMode, match=match)
 
 
+def test_a_range_without_a_unit_names_none(fmu_dir):
+    """A dimensionless parameter's range ends at its bracket (its unit "1" is not written after it)."""
+    s = Slave(str(fmu_path(fmu_dir, "receiver")))
+    s.fmu.setupExperiment(startTime=0.0)
+    s.fmu.enterInitializationMode()
+    s.set(gate_probability=2.0)
+    call_fails(s, s.fmu.exitInitializationMode, match="gate_probability")
+    assert s.log[-1].endswith("allowed range [0.5, 1]"), s.log[-1]
+
+
 def test_parameters_are_fixed_after_initialization_and_outputs_cannot_be_set(fmu_dir):
     s = Slave(str(fmu_path(fmu_dir, "platform"))).start()
     call_fails(s, lambda: s.set(baseline=2.0), match="fixed parameter")
