@@ -13,12 +13,13 @@ The two algorithms differ in where an input's value comes from:
   (the initial outputs at the first one), then steps all components; no
   component sees another's output of the same macro step. This is what FMI
   hosts such as libcosim's fixed-step algorithm and fmpy's SSP simulator do.
-* **Event** (FMI 3.0 FMUs instantiated with early return allowed: ``--engine fmu --fmi-version 3``) steps the
-  channel first, from the others' outputs as they are; when it returns early at an acoustic arrival, every other
-  component is stepped to that time (Gauss-Seidel, each at its rate's communication points on the way), so the
-  receiver gets the packet at its arrival and not at the end of the macro step, and the macro step goes on
-  from there. At sblsim's own macro step (the slot) this changes little; a host that steps at a long interval
-  keeps every packet (docs/interop.md, FMI 3.0).
+* **Event** (FMI 3.0 FMUs instantiated with early return allowed: ``--engine fmu --fmi-version 3``) is
+  Gauss-Seidel, except that the channel's steps end at the acoustic arrivals: what feeds the channel (platform,
+  target) takes the macro step, the channel is stepped from arrival to arrival (it returns early at each, with
+  the packet in its outputs), and what it feeds (the receiver) is stepped to each arrival (at its rate's
+  communication points on the way), so the receiver has each packet at its arrival. At sblsim's own macro step
+  (the slot) the numbers are Gauss-Seidel's up to rounding; a host that steps at a long interval keeps every
+  packet (docs/interop.md, FMI 3.0).
 
 After each macro step every output of every component is recorded.
 
@@ -179,19 +180,22 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
 
     for k in range(n_steps):
         t = t0 + k * macro_step
-        if early:  # event: the channel to its next arrival, then every other component to that time
+        if early:  # event: the channel from arrival to arrival, what it feeds stepped to each
             now, end, channel = t, t + macro_step, early[0]
+            before = order[:order.index(channel)]
+            for c in before:  # what feeds the channel (platform, target): the whole macro step, as Gauss-Seidel
+                feed(c)
+                step(c, t, end)
+            feed(channel)
             while end - now > 1e-9 * (1.0 + abs(end)):
-                feed(channel)
                 clock = time.perf_counter()
                 reached = handles[channel].step_until(now, end - now)
                 if timing is not None:
                     timing[channel] = timing.get(channel, 0.0) + time.perf_counter() - clock
                 outputs[channel] = handles[channel].output_vector()
-                for c in order:
-                    if c != channel:
-                        feed(c)
-                        step(c, now, reached)
+                for c in order[len(before) + 1:]:  # what it feeds (the receiver): to the arrival
+                    feed(c)
+                    step(c, now, reached)
                 now = reached
             for c in order:
                 if kept[c]:

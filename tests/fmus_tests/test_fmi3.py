@@ -394,6 +394,21 @@ def test_the_event_master_delivers_each_range_at_its_arrival_and_a_1_s_host_keep
     assert _horizontal_rms(event) < 1.5 * _horizontal_rms(reference) < 0.2 * _horizontal_rms(slow)
 
 
+@pytest.mark.parametrize("name, overrides", [("semicircle", []), ("lbl-field", ["simulation.duration=60"])])
+def test_at_the_scenarios_own_step_the_event_master_gives_the_gauss_seidel_numbers(fmu3_root, fmu_dir, name,
+                                                                                    overrides):
+    """Slots every T and a receiver on its own clock: ending the channel's and the receiver's steps at the
+    arrivals changes the numbers by rounding only (an OWTT and a two-way LBL site)."""
+    plan = load_plan(name, SHORT[1:] + overrides, 4)
+    gauss_seidel = run(plan, "fmu", fmu_dir=fmu_dir).timeseries
+    event = run(load_plan(name, SHORT[1:] + overrides + ["simulation.master=event", "simulation.fmi_version=3"], 4),
+                "fmu", fmu_dir=fmu3_root).timeseries
+    assert list(event.columns) == list(gauss_seidel.columns) and len(event) == len(gauss_seidel)
+    for column in gauss_seidel.columns:
+        np.testing.assert_allclose(event[column].to_numpy(dtype=float), gauss_seidel[column].to_numpy(dtype=float),
+                                   rtol=0, atol=1e-9, err_msg=column)
+
+
 def test_sblsim_run_master_event_needs_fmi3_fmus(fmu_dir):
     with pytest.raises(ModelError, match="event needs the fmu engine on FMI 3.0 FMUs"):
         run(load_plan("semicircle", ["simulation.duration=1", "simulation.master=event"], 1), "fmu", fmu_dir=fmu_dir)
