@@ -181,6 +181,8 @@ CASES = {
                                  "platform.beacon_offsets"),
     "run ratio 0": (["run", "semicircle", "--set", "simulation.ekf_rate_ratio=0"], "simulation.ekf_rate_ratio"),
     "run master newton": (["run", "semicircle", "--set", "simulation.master=newton"], "simulation.master"),
+    "run master event on the local engine": (["run", "semicircle", "--master", "event"], "simulation.master"),
+    "run fmi version 5": (["run", "semicircle", "--set", "simulation.fmi_version=5"], "simulation.fmi_version"),
     "run trajectory choice": (["run", "semicircle", "--set", "target.trajectory=zigzag"], "target.trajectory"),
     "run tiny sigma_range": (["run", "semicircle", "--set", "receiver.sigma_range=1e-9"], "receiver.sigma_range"),
     "run layout offsets": (["run", "semicircle", "--set", "platform.layout=custom",
@@ -269,6 +271,7 @@ CASES = {
     "run two custom beacons": (["run", "semicircle", "--set", "platform.layout=custom",
                                 "--set", "platform.beacon_offsets=1 0 1; 0 1 1"], "platform.beacon_offsets"),
     "fmus build 2 beacons": (["fmus", "build", "--beacons", "2", "--out", "newfmus"], "--beacons"),
+    "fmus build fmi version 4": (["fmus", "build", "--fmi-version", "4", "--out", "newfmus"], "--fmi-version"),
     "run out is a file": (["run", "semicircle", "--out", "afile"], "--out"),
     # as root os.access says yes under /proc and /sys: the check must try a write
     "run out under /proc": (["run", "semicircle", "--out", "/proc/sblsim-run"], "--out"),
@@ -345,6 +348,8 @@ CASES = {
     "analyze unknown transform": (["analyze", "campaign", "--transform", "sqrt"], "--transform"),
     # ssp
     "ssp out not .ssp": (["ssp", "export", "semicircle", "--out", "package.zip"], "--out"),
+    "ssp fmi 3 with fmu dir": (["ssp", "export", "semicircle", "--fmi-version", "3", "--fmu-dir", "newfmus", "--out",
+                                "package.ssp"], "--fmu-dir"),
     "ssp over a package": (["ssp", "export", "semicircle", "--out", "earlier.ssp"], "--force"),
     "ssp out under /sys": (["ssp", "export", "semicircle", "--out", "/sys/kernel/sblsim/s.ssp"], "--out"),
     "ssp bad value": (["ssp", "export", "semicircle", "--out", "new.ssp", "--set", "platform.baseline=-1"],
