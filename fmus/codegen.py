@@ -38,6 +38,8 @@ C_DIR = Path(__file__).resolve().parent / "c"
 #: Runtime sources every build needs (the FMU adds the FMI shell, the local engine the batch API).
 RUNTIME = ("sblsim_runtime.h", "sblsim_runtime.c")
 FMI_SHELL = "fmi2_shell.c"
+#: The FMU state both FMI shells save, restore, serialize and check (not the local engine's).
+FMU_STATE = ("sblsim_fmu_state.h", "sblsim_fmu_state.c")
 BATCH = "sblsim_batch.c"
 #: The compiled per-run metrics of the local engine (orchestrator/cosim/metrics.py is their reference).
 METRICS = "sblsim_metrics.c"
@@ -278,8 +280,8 @@ def write_runtime(directory: Path) -> list[str]:
 
 def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str = FMI_SHELL,
                   p_start: Sequence[float] | None = None) -> Sources:
-    """Write a model's C sources, the runtime, its shared header and (for the FMI shell) the FMI headers into
-    ``directory``.
+    """Write a model's C sources, the runtime, its shared header and (for an FMI shell) the FMU state it shares
+    with the other shell and the FMI headers into ``directory``.
 
     Parameters
     ----------
@@ -316,8 +318,9 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
         shutil.copyfile(C_DIR / FMI3_TABLE_HEADER, directory / FMI3_TABLE_HEADER)
         files += [f"{base}_fmi3.c", FMI3_TABLE_HEADER]
     if shell:
-        shutil.copyfile(C_DIR / shell, directory / shell)
-        files.append(shell)
+        for name in (*FMU_STATE, shell):
+            shutil.copyfile(C_DIR / name, directory / name)
+        files += [*FMU_STATE, shell]
         headers = FMI3_HEADERS if shell == FMI3_SHELL else FMI_HEADERS
         for name in headers:
             shutil.copyfile(fmi_headers_dir() / name, directory / name)
@@ -325,6 +328,6 @@ def write_sources(model: type, n_beacons: int, directory: Path | str, shell: str
     return Sources(model, n_beacons, f"{base}_model", tuple(files), guid)
 
 
-__all__ = ["BATCH", "C_DIR", "FMI3_HEADERS", "FMI3_SHELL", "FMI3_TABLE_HEADER", "FMI_HEADERS", "FMI_SHELL", "METRICS",
-           "RUNTIME", "Sources", "casadi_code",
+__all__ = ["BATCH", "C_DIR", "FMI3_HEADERS", "FMI3_SHELL", "FMI3_TABLE_HEADER", "FMI_HEADERS", "FMI_SHELL",
+           "FMU_STATE", "METRICS", "RUNTIME", "Sources", "casadi_code",
            "fmi_headers_dir", "model_guid", "model_record", "stem", "write_runtime", "write_sources"]

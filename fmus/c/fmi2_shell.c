@@ -1,8 +1,8 @@
 /* FMI 2.0 Co-Simulation interface over the sblsim runtime, generic over the model tables.
  *
  * Compile with -DSBLSIM_MODEL=<model symbol> (e.g. sblsim_platform_model) together with the
- * model's generated sources and sblsim_runtime.c. Everything the FMU needs is in these
- * sources: no Python, no environment variables, no resource files; any number of instances.
+ * model's generated sources, sblsim_runtime.c and sblsim_fmu_state.c. Everything the FMU needs is in
+ * these sources: no Python, no environment variables, no resource files; any number of instances.
  *
  * FMI semantics (docs/model.md, "FMI semantics"):
  *  - every function first checks the instance's state against one table of the states it is
@@ -16,8 +16,9 @@
  *    an overlap) with fmi2Error and a log line;
  *  - errors are always logged (whatever fmi2SetDebugLogging says);
  *  - the state (every vector, the draw counters, the time) can be got, set and serialized; a serialized
- *    state is checked before it is taken (times finite and ordered, every value finite, parameters and
- *    inputs within their ranges past initialization, a known state number): fmi2Error and a log line
+ *    state is checked before it is taken (sblsim_fmu_state.c: times finite and ordered, every value finite,
+ *    the inputs within their ranges, the parameters within theirs past initialization, a known state number):
+ *    fmi2Error and a log line
  *    otherwise, and the caller's state object is left as it was.
  */
 #include <math.h>
@@ -27,6 +28,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "sblsim_fmu_state.h"
 #include "sblsim_runtime.h"
 
 #ifndef SBLSIM_MODEL
@@ -110,14 +112,6 @@ typedef struct {
     fmi2CallbackFunctions callbacks;
 } Instance;
 
-/* What a saved FMU state holds (a flat copy). */
-typedef struct {
-    State state;
-    double start_time, t0, t;
-    double* values; /* p, d, x, u, y */
-    uint64_t* draws;
-} Saved;
-
 static const sblsim_model* model(void) { return &SBLSIM_MODEL; }
 
 /* Log a message. The FMI logger takes a printf format; the text is passed as that format with
@@ -160,11 +154,6 @@ static int allowed(fmi2Component c, Call call) {
     do {                                             \
         if (!allowed((c), (call))) return fmi2Error; \
     } while (0)
-
-static size_t value_count(void) {
-    const sblsim_model* m = model();
-    return (size_t)(m->n_p + m->n_d + m->n_x + m->n_u + m->n_y);
-}
 
 static void set_defaults(Instance* s) {
     const sblsim_model* m = model();
@@ -334,25 +323,10 @@ static double* slot(Instance* s, const sblsim_variable* v) {
     return &s->y[v->index];
 }
 
-/* The declared range of a variable as text, e.g. "[0, 1e+07] m". */
-static void describe_range(const sblsim_variable* v, char* text, size_t size) {
-    char lo[32], hi[32];
-    int unit = v->unit && v->unit[0] && strcmp(v->unit, "1") != 0; /* "1": no unit to name */
-    if (v->has_min) snprintf(lo, sizeof lo, "%g", v->min); else snprintf(lo, sizeof lo, "-inf");
-    if (v->has_max) snprintf(hi, sizeof hi, "%g", v->max); else snprintf(hi, sizeof hi, "inf");
-    snprintf(text, size, "%s%s, %s%s%s%s", v->has_min ? "[" : "(", lo, hi, v->has_max ? "]" : ")",
-             unit ? " " : "", unit ? v->unit : "");
-}
-
-/* Whether `value` lies in the declared range of `v` (a variable without one takes any value). */
-static int in_range(const sblsim_variable* v, double value) {
-    return !(v->has_min && !(value >= v->min)) && !(v->has_max && !(value <= v->max));
-}
-
 static fmi2Status check_range(Instance* s, const sblsim_variable* v, double value, const char* caller) {
     char range[96];
-    if (in_range(v, value)) return fmi2OK;
-    describe_range(v, range, sizeof range);
+    if (sblsim_in_range(v, value)) return fmi2OK;
+    sblsim_describe_range(v, range, sizeof range);
     FAIL(s, "%s: %s = %g is outside the allowed range %s", caller, v->name, value, range);
 }
 
@@ -457,255 +431,75 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 }
 
 /* ---------------------------------------------------------------------------------------- */
-/* FMU state                                                                                */
+/* FMU state: a sblsim_saved (sblsim_fmu_state.h)                                           */
 
-static double* value_block(Instance* s, int k) {
-    double* blocks[5];
-    blocks[0] = s->p;
-    blocks[1] = s->d;
-    blocks[2] = s->run.x; /* the current state (x and x_next swap while stepping) */
-    blocks[3] = s->u;
-    blocks[4] = s->y;
-    return blocks[k];
-}
-
-static int block_size(int k) {
-    const sblsim_model* m = model();
-    int sizes[5];
-    sizes[0] = m->n_p;
-    sizes[1] = m->n_d;
-    sizes[2] = m->n_x;
-    sizes[3] = m->n_u;
-    sizes[4] = m->n_y;
-    return sizes[k];
-}
-
-static void save(Instance* s, Saved* to) {
-    size_t offset = 0;
-    int k;
-    to->state = s->state;
-    to->start_time = s->start_time;
-    to->t0 = s->run.t0;
-    to->t = s->run.t;
-    for (k = 0; k < 5; k++) {
-        memcpy(to->values + offset, value_block(s, k), sizeof(double) * (size_t)block_size(k));
-        offset += (size_t)block_size(k);
-    }
-    memcpy(to->draws, s->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
-}
-
-static void restore(Instance* s, const Saved* from) {
-    size_t offset = 0;
-    int k;
-    s->run.x = s->x;
-    s->run.x_next = s->x_next;
-    s->state = from->state;
-    s->start_time = from->start_time;
-    s->run.t0 = from->t0;
-    s->run.t = from->t;
-    for (k = 0; k < 5; k++) {
-        memcpy(value_block(s, k), from->values + offset, sizeof(double) * (size_t)block_size(k));
-        offset += (size_t)block_size(k);
-    }
-    memcpy(s->draws, from->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    sblsim_choose_events(&s->run); /* its parameters */
-}
-
-static Saved* new_saved(void) {
-    Saved* out = (Saved*)calloc(1, sizeof(Saved));
-    if (out == NULL) return NULL;
-    out->values = vector((int)value_count());
-    out->draws = (uint64_t*)calloc((size_t)(model()->n_purposes > 0 ? model()->n_purposes : 1), sizeof(uint64_t));
-    if (out->values == NULL || out->draws == NULL) {
-        free(out->values);
-        free(out->draws);
-        free(out);
-        return NULL;
-    }
-    return out;
-}
+#define SBLSIM_MAGIC 0x53424c53494d3032ULL /* "SBLSIM02": the serialized layout of sblsim_fmu_state.h */
+/* The states past initialization: a deserialized state in one of them has its parameters checked. */
+#define PAST_INITIALIZATION (IN(STEP_COMPLETE) | IN(TERMINATED))
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
     Instance* s = (Instance*)c;
     ENTER(c, GET_FMU_STATE);
     if (state == NULL) FAIL(s, "fmi2GetFMUstate: no place for the state");
     if (*state == NULL) {
-        *state = (fmi2FMUstate)new_saved();
+        *state = (fmi2FMUstate)sblsim_saved_new(model());
         if (*state == NULL) FAIL(s, "fmi2GetFMUstate: out of memory");
     }
-    save(s, (Saved*)*state);
+    sblsim_save(&s->run, s->state, s->start_time, (sblsim_saved*)*state);
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     Instance* s = (Instance*)c;
+    const sblsim_saved* from = (const sblsim_saved*)state;
     ENTER(c, SET_FMU_STATE);
-    if (state == NULL) FAIL(s, "fmi2SetFMUstate: no state");
-    restore(s, (const Saved*)state);
+    if (from == NULL) FAIL(s, "fmi2SetFMUstate: no state");
+    sblsim_restore(&s->run, s->x, s->x_next, from);
+    s->state = (State)from->state;
+    s->start_time = from->start_time;
     return fmi2OK;
-}
-
-static void free_saved(Saved* saved) {
-    if (saved == NULL) return;
-    free(saved->values);
-    free(saved->draws);
-    free(saved);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
     ENTER(c, FREE_FMU_STATE);
     if (state == NULL || *state == NULL) return fmi2OK;
-    free_saved((Saved*)*state);
+    sblsim_saved_free((sblsim_saved*)*state);
     *state = NULL;
     return fmi2OK;
-}
-
-/* Serialized layout: magic, value count, purposes, state, then start_time, t0, t, the values
-   and the draw counters, all as 8-byte words in the machine's byte order. */
-#define SBLSIM_MAGIC 0x53424c53494d3032ULL /* "SBLSIM02" */
-
-static size_t serialized_size(void) {
-    return sizeof(uint64_t) * (4 + 3 + value_count() + (size_t)model()->n_purposes);
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
     (void)state;
     ENTER(c, SERIALIZED_FMU_STATE_SIZE);
-    *size = serialized_size();
+    *size = sblsim_serialized_size(model());
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
     Instance* s = (Instance*)c;
-    const Saved* saved = (const Saved*)state;
-    size_t needed = serialized_size();
-    uint64_t header[4];
-    double times[3];
-    char* out = (char*)bytes;
+    size_t needed = sblsim_serialized_size(model());
     ENTER(c, SERIALIZE_FMU_STATE);
-    if (saved == NULL || size < needed) FAIL(s, "fmi2SerializeFMUstate: buffer of %lu bytes, %lu needed",
+    if (state == NULL || size < needed) FAIL(s, "fmi2SerializeFMUstate: buffer of %lu bytes, %lu needed",
                                                           (unsigned long)size, (unsigned long)needed);
-    header[0] = SBLSIM_MAGIC;
-    header[1] = (uint64_t)value_count();
-    header[2] = (uint64_t)model()->n_purposes;
-    header[3] = (uint64_t)saved->state;
-    times[0] = saved->start_time;
-    times[1] = saved->t0;
-    times[2] = saved->t;
-    memcpy(out, header, sizeof header);
-    out += sizeof header;
-    memcpy(out, times, sizeof times);
-    out += sizeof times;
-    memcpy(out, saved->values, sizeof(double) * value_count());
-    out += sizeof(double) * value_count();
-    memcpy(out, saved->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    sblsim_serialize(model(), SBLSIM_MAGIC, (const sblsim_saved*)state, bytes);
     return fmi2OK;
 }
 
-/* The FMU variable of causality `causality` at `index` of its vector (NULL if none: a table row, say). */
-static const sblsim_variable* variable_at(int causality, int index) {
-    const sblsim_model* m = model();
-    int k;
-    for (k = 0; k < m->n_variables; k++)
-        if (m->variables[k].causality == causality && m->variables[k].index == index) return &m->variables[k];
-    return NULL;
-}
-
-/* Why a deserialized state cannot be taken: 0 if it can, else -1 with a message naming what is wrong. */
-static int check_saved(const Saved* v, char* message, size_t size) {
-    static const char* const blocks[5] = {"p", "d", "x", "u", "y"};
-    const sblsim_model* m = model();
-    const double* u = v->values + m->n_p + m->n_d + m->n_x;
-    int past_init = v->state == STEP_COMPLETE || v->state == TERMINATED;
-    size_t offset = 0;
-    int k, i;
-    if (!isfinite(v->start_time) || !isfinite(v->t0) || !isfinite(v->t)) {
-        snprintf(message, size, "its times are not finite (start %g s, t0 %g s, t %g s)", v->start_time, v->t0, v->t);
-        return -1;
-    }
-    if (v->t < v->t0 || (past_init && v->t0 < v->start_time)) {
-        snprintf(message, size, "its times are out of order (start %.17g s, t0 %.17g s, t %.17g s)", v->start_time,
-                 v->t0, v->t);
-        return -1;
-    }
-    for (k = 0; k < 5; k++) {
-        for (i = 0; i < block_size(k); i++) {
-            double value = v->values[offset + (size_t)i];
-            if (!isfinite(value)) {
-                const sblsim_variable* named = k == 3 ? variable_at(SBLSIM_INPUT, i)
-                                               : k == 4 ? variable_at(SBLSIM_OUTPUT, i) : NULL;
-                if (k == 0)
-                    snprintf(message, size, "parameter %s = %g is not finite", m->parameters[i].name, value);
-                else if (named != NULL)
-                    snprintf(message, size, "%s = %g is not finite", named->name, value);
-                else
-                    snprintf(message, size, "%s[%d] = %g is not finite", blocks[k], i, value);
-                return -1;
-            }
-        }
-        offset += (size_t)block_size(k);
-    }
-    if (past_init && sblsim_check_parameters(m, v->values, message, size)) return -1;
-    for (k = 0; k < m->n_variables; k++) {
-        const sblsim_variable* in = &m->variables[k];
-        if (in->causality == SBLSIM_INPUT && !in_range(in, u[in->index])) {
-            char range[96];
-            describe_range(in, range, sizeof range);
-            snprintf(message, size, "%s = %g is outside the allowed range %s", in->name, u[in->index], range);
-            return -1;
-        }
-    }
-    return 0;
-}
-
+/* Checked before it is taken: the caller's state object changes only if it is (sblsim_deserialize). */
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state) {
     Instance* s = (Instance*)c;
-    size_t needed = serialized_size();
-    uint64_t header[4];
-    double times[3];
-    char message[SBLSIM_MESSAGE];
-    const char* in = (const char*)bytes;
-    Saved *fresh, *saved;
+    char message[SBLSIM_STATE_MESSAGE];
+    sblsim_saved* into;
     ENTER(c, DESERIALIZE_FMU_STATE);
     if (state == NULL) FAIL(s, "fmi2DeSerializeFMUstate: no place for the state");
-    if (bytes == NULL || size != needed)
-        FAIL(s, "fmi2DeSerializeFMUstate: %lu bytes, expected %lu", (unsigned long)size, (unsigned long)needed);
-    memcpy(header, in, sizeof header);
-    in += sizeof header;
-    if (header[0] != SBLSIM_MAGIC || header[1] != (uint64_t)value_count() ||
-        header[2] != (uint64_t)model()->n_purposes)
-        FAIL(s, "fmi2DeSerializeFMUstate: not a serialized state of %s", model()->name);
-    if (header[3] >= (uint64_t)N_STATES)
-        FAIL(s, "fmi2DeSerializeFMUstate: state number %llu is not one of the %d states; the state is refused",
-             (unsigned long long)header[3], (int)N_STATES);
-    /* read into a new state object and check it: the caller's object changes only if it is taken */
-    fresh = new_saved();
-    if (fresh == NULL) FAIL(s, "fmi2DeSerializeFMUstate: out of memory");
-    memcpy(times, in, sizeof times);
-    in += sizeof times;
-    fresh->state = (State)header[3];
-    fresh->start_time = times[0];
-    fresh->t0 = times[1];
-    fresh->t = times[2];
-    memcpy(fresh->values, in, sizeof(double) * value_count());
-    in += sizeof(double) * value_count();
-    memcpy(fresh->draws, in, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    if (check_saved(fresh, message, sizeof message)) {
-        free_saved(fresh);
-        FAIL(s, "fmi2DeSerializeFMUstate: %s; the state is refused", message);
+    into = *state != NULL ? (sblsim_saved*)*state : sblsim_saved_new(model());
+    if (into == NULL) FAIL(s, "fmi2DeSerializeFMUstate: out of memory");
+    if (sblsim_deserialize(model(), SBLSIM_MAGIC, N_STATES, PAST_INITIALIZATION, bytes, size, into, message,
+                           sizeof message)) {
+        if (*state == NULL) sblsim_saved_free(into);
+        FAIL(s, "fmi2DeSerializeFMUstate: %s", message);
     }
-    saved = (Saved*)*state;
-    if (saved == NULL) {
-        *state = (fmi2FMUstate)fresh;
-        return fmi2OK;
-    }
-    saved->state = fresh->state;
-    saved->start_time = fresh->start_time;
-    saved->t0 = fresh->t0;
-    saved->t = fresh->t;
-    memcpy(saved->values, fresh->values, sizeof(double) * value_count());
-    memcpy(saved->draws, fresh->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    free_saved(fresh);
+    *state = (fmi2FMUstate)into;
     return fmi2OK;
 }
 

@@ -2,8 +2,9 @@
  *
  * Compile with -DSBLSIM_MODEL=<model symbol> and -DSBLSIM_FMI3_TABLE=<FMI 3.0 variable table symbol> (e.g.
  * sblsim_platform_model and sblsim_platform_fmi3) together with the model's generated sources, its FMI 3.0
- * table (sblsim_fmi3.h) and sblsim_runtime.c. Everything the FMU needs is in these sources: no Python, no
- * environment variables, no resource files; any number of instances. The FMI 2.0 twin is fmi2_shell.c.
+ * table (sblsim_fmi3.h), sblsim_runtime.c and sblsim_fmu_state.c (the FMU state, shared with FMI 2.0).
+ * Everything the FMU needs is in these sources: no Python, no environment variables, no resource files; any
+ * number of instances. The FMI 2.0 twin is fmi2_shell.c.
  *
  * FMI semantics (docs/model.md, "FMI semantics"), as in FMI 2.0 where FMI 3.0 allows it:
  *  - every function first checks the instance's state against one table of the states it is
@@ -28,8 +29,9 @@
  *    eventHandlingNeeded. Without earlyReturnAllowed it steps as the FMI 2.0 FMU does, to the same numbers;
  *  - errors are always logged (whatever fmi3SetDebugLogging says);
  *  - the state (every vector, the draw counters, the time) can be got, set and serialized; a serialized
- *    state is checked before it is taken (times finite and ordered, every value finite, parameters and
- *    inputs within their ranges past initialization, a known state number): fmi3Error and a log line
+ *    state is checked before it is taken (sblsim_fmu_state.c: times finite and ordered, every value finite,
+ *    the inputs within their ranges, the parameters within theirs past initialization, a known state number):
+ *    fmi3Error and a log line
  *    otherwise, and the caller's state object is left as it was;
  *  - Model Exchange, Scheduled Execution, clocks, Configuration Mode, derivatives and the types the FMU has
  *    no variable of are refused with fmi3Error and a log line saying why.
@@ -42,6 +44,7 @@
 
 #include "fmi3Functions.h"
 #include "sblsim_fmi3.h"
+#include "sblsim_fmu_state.h"
 #include "sblsim_runtime.h"
 
 #ifndef SBLSIM_MODEL
@@ -186,23 +189,12 @@ typedef struct {
     int event_mode_used, early_return_allowed;
     /* With early return allowed, for a model that delivers packets: the state before a step, where it is tried
        whole (NULL otherwise), and the positions in y of the packet counter and arrival epoch. */
-    struct Saved* trial;
+    sblsim_saved* trial;
     int seq_index, rx_index;
     fmi3InstanceEnvironment environment;
     fmi3LogMessageCallback log_message;
     fmi3IntermediateUpdateCallback intermediate_update;
 } Instance;
-
-/* What a saved FMU state holds (a flat copy). */
-typedef struct Saved {
-    State state;
-    double start_time, t0, t;
-    double* values; /* p, d, x, u, y */
-    uint64_t* draws;
-} Saved;
-
-static Saved* new_saved(void);
-static void free_saved(Saved* saved);
 
 static const sblsim_model* model(void) { return &SBLSIM_MODEL; }
 static const sblsim_fmi3_table* table(void) { return &SBLSIM_FMI3_TABLE; }
@@ -264,11 +256,6 @@ static int allowed(fmi3Instance c, Call call) {
         FAIL((Instance*)(c), __VA_ARGS__);                           \
     } while (0)
 
-static size_t value_count(void) {
-    const sblsim_model* m = model();
-    return (size_t)(m->n_p + m->n_d + m->n_x + m->n_u + m->n_y);
-}
-
 static void set_defaults(Instance* s) {
     const sblsim_model* m = model();
     memcpy(s->p, m->p_start, sizeof(double) * (size_t)m->n_p);
@@ -292,7 +279,7 @@ static void free_instance(Instance* s) {
     free(s->u);
     free(s->y);
     free(s->draws);
-    free_saved(s->trial);
+    sblsim_saved_free(s->trial);
     sblsim_work_free(s->work);
     free(s);
 }
@@ -381,7 +368,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     if (s->early_return_allowed && table()->arrival_seq >= 0) {
         s->seq_index = table()->arrival_seq;
         s->rx_index = table()->arrival_time;
-        s->trial = new_saved();
+        s->trial = sblsim_saved_new(m);
         if (s->trial == NULL) {
             logf_(s, fmi3Error, "logStatusError", "out of memory");
             free_instance(s);
@@ -533,25 +520,10 @@ static double* slot(Instance* s, const sblsim_variable* v) {
     return &s->y[v->index];
 }
 
-/* The declared range of a variable as text, e.g. "[0, 1e+07] m". */
-static void describe_range(const sblsim_variable* v, char* text, size_t size) {
-    char lo[32], hi[32];
-    int unit = v->unit && v->unit[0] && strcmp(v->unit, "1") != 0; /* "1": no unit */
-    if (v->has_min) snprintf(lo, sizeof lo, "%g", v->min); else snprintf(lo, sizeof lo, "-inf");
-    if (v->has_max) snprintf(hi, sizeof hi, "%g", v->max); else snprintf(hi, sizeof hi, "inf");
-    snprintf(text, size, "%s%s, %s%s%s%s", v->has_min ? "[" : "(", lo, hi, v->has_max ? "]" : ")", unit ? " " : "",
-             unit ? v->unit : "");
-}
-
-/* Whether `value` lies in the declared range of `v` (a variable without one takes any value). */
-static int in_range(const sblsim_variable* v, double value) {
-    return !(v->has_min && !(value >= v->min)) && !(v->has_max && !(value <= v->max));
-}
-
 static fmi3Status check_range(Instance* s, const sblsim_variable* v, double value, Call call) {
     char range[96];
-    if (in_range(v, value)) return fmi3OK;
-    describe_range(v, range, sizeof range);
+    if (sblsim_in_range(v, value)) return fmi3OK;
+    sblsim_describe_range(v, range, sizeof range);
     FAIL(s, "%s: %s = %g is outside the allowed range %s", calls[call].name, v->name, value, range);
 }
 
@@ -811,72 +783,17 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference depend
 }
 
 /* ---------------------------------------------------------------------------------------- */
-/* FMU state                                                                                */
+/* FMU state: a sblsim_saved (sblsim_fmu_state.h)                                           */
 
-static double* value_block(Instance* s, int k) {
-    double* blocks[5];
-    blocks[0] = s->p;
-    blocks[1] = s->d;
-    blocks[2] = s->run.x; /* the current state (x and x_next swap while stepping) */
-    blocks[3] = s->u;
-    blocks[4] = s->y;
-    return blocks[k];
-}
+#define SBLSIM_MAGIC 0x53424c53494d3033ULL /* "SBLSIM03": the serialized layout of sblsim_fmu_state.h */
+/* The states past initialization: a deserialized state in one of them has its parameters checked. */
+#define PAST_INITIALIZATION (IN(STEP_MODE) | IN(TERMINATED) | IN(EVENT_MODE))
 
-static int block_size(int k) {
-    const sblsim_model* m = model();
-    int sizes[5];
-    sizes[0] = m->n_p;
-    sizes[1] = m->n_d;
-    sizes[2] = m->n_x;
-    sizes[3] = m->n_u;
-    sizes[4] = m->n_y;
-    return sizes[k];
-}
-
-static void save(Instance* s, Saved* to) {
-    size_t offset = 0;
-    int k;
-    to->state = s->state;
-    to->start_time = s->start_time;
-    to->t0 = s->run.t0;
-    to->t = s->run.t;
-    for (k = 0; k < 5; k++) {
-        memcpy(to->values + offset, value_block(s, k), sizeof(double) * (size_t)block_size(k));
-        offset += (size_t)block_size(k);
-    }
-    memcpy(to->draws, s->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
-}
-
-static void restore(Instance* s, const Saved* from) {
-    size_t offset = 0;
-    int k;
-    s->run.x = s->x;
-    s->run.x_next = s->x_next;
-    s->state = from->state;
+/* The instance as it was at `from`, its state and start time too. */
+static void restore(Instance* s, const sblsim_saved* from) {
+    sblsim_restore(&s->run, s->x, s->x_next, from);
+    s->state = (State)from->state;
     s->start_time = from->start_time;
-    s->run.t0 = from->t0;
-    s->run.t = from->t;
-    for (k = 0; k < 5; k++) {
-        memcpy(value_block(s, k), from->values + offset, sizeof(double) * (size_t)block_size(k));
-        offset += (size_t)block_size(k);
-    }
-    memcpy(s->draws, from->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    sblsim_choose_events(&s->run); /* its parameters */
-}
-
-static Saved* new_saved(void) {
-    Saved* out = (Saved*)calloc(1, sizeof(Saved));
-    if (out == NULL) return NULL;
-    out->values = vector((int)value_count());
-    out->draws = (uint64_t*)calloc((size_t)(model()->n_purposes > 0 ? model()->n_purposes : 1), sizeof(uint64_t));
-    if (out->values == NULL || out->draws == NULL) {
-        free(out->values);
-        free(out->draws);
-        free(out);
-        return NULL;
-    }
-    return out;
 }
 
 fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState* FMUState) {
@@ -884,10 +801,10 @@ fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState* FMUState) {
     ENTER(c, GET_FMU_STATE);
     if (FMUState == NULL) FAIL(s, "fmi3GetFMUState: no place for the state");
     if (*FMUState == NULL) {
-        *FMUState = (fmi3FMUState)new_saved();
+        *FMUState = (fmi3FMUState)sblsim_saved_new(model());
         if (*FMUState == NULL) FAIL(s, "fmi3GetFMUState: out of memory");
     }
-    save(s, (Saved*)*FMUState);
+    sblsim_save(&s->run, s->state, s->start_time, (sblsim_saved*)*FMUState);
     return fmi3OK;
 }
 
@@ -895,173 +812,52 @@ fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState FMUState) {
     Instance* s = (Instance*)c;
     ENTER(c, SET_FMU_STATE);
     if (FMUState == NULL) FAIL(s, "fmi3SetFMUState: no state");
-    restore(s, (const Saved*)FMUState);
+    restore(s, (const sblsim_saved*)FMUState);
     return fmi3OK;
-}
-
-static void free_saved(Saved* saved) {
-    if (saved == NULL) return;
-    free(saved->values);
-    free(saved->draws);
-    free(saved);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState* FMUState) {
     ENTER(c, FREE_FMU_STATE);
     if (FMUState == NULL || *FMUState == NULL) return fmi3OK;
-    free_saved((Saved*)*FMUState);
+    sblsim_saved_free((sblsim_saved*)*FMUState);
     *FMUState = NULL;
     return fmi3OK;
-}
-
-/* Serialized layout: magic, value count, purposes, state, then start_time, t0, t, the values
-   and the draw counters, all as 8-byte words in the machine's byte order. */
-#define SBLSIM_MAGIC 0x53424c53494d3033ULL /* "SBLSIM03" */
-
-static size_t serialized_size(void) {
-    return sizeof(uint64_t) * (4 + 3 + value_count() + (size_t)model()->n_purposes);
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState FMUState, size_t* size) {
     (void)FMUState;
     ENTER(c, SERIALIZED_FMU_STATE_SIZE);
     if (size == NULL) FAIL((Instance*)c, "fmi3SerializedFMUStateSize: no place for the size");
-    *size = serialized_size();
+    *size = sblsim_serialized_size(model());
     return fmi3OK;
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
     Instance* s = (Instance*)c;
-    const Saved* saved = (const Saved*)FMUState;
-    size_t needed = serialized_size();
-    uint64_t header[4];
-    double times[3];
-    char* out = (char*)serializedState;
+    size_t needed = sblsim_serialized_size(model());
     ENTER(c, SERIALIZE_FMU_STATE);
-    if (saved == NULL || serializedState == NULL || size < needed)
+    if (FMUState == NULL || serializedState == NULL || size < needed)
         FAIL(s, "fmi3SerializeFMUState: buffer of %lu bytes, %lu needed", (unsigned long)size, (unsigned long)needed);
-    header[0] = SBLSIM_MAGIC;
-    header[1] = (uint64_t)value_count();
-    header[2] = (uint64_t)model()->n_purposes;
-    header[3] = (uint64_t)saved->state;
-    times[0] = saved->start_time;
-    times[1] = saved->t0;
-    times[2] = saved->t;
-    memcpy(out, header, sizeof header);
-    out += sizeof header;
-    memcpy(out, times, sizeof times);
-    out += sizeof times;
-    memcpy(out, saved->values, sizeof(double) * value_count());
-    out += sizeof(double) * value_count();
-    memcpy(out, saved->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
+    sblsim_serialize(model(), SBLSIM_MAGIC, (const sblsim_saved*)FMUState, serializedState);
     return fmi3OK;
 }
 
-/* The FMU variable of causality `causality` at `index` of its vector (NULL if none: a table row, say). */
-static const sblsim_variable* variable_at(int causality, int index) {
-    const sblsim_model* m = model();
-    int k;
-    for (k = 0; k < m->n_variables; k++)
-        if (m->variables[k].causality == causality && m->variables[k].index == index) return &m->variables[k];
-    return NULL;
-}
-
-/* Why a deserialized state cannot be taken: 0 if it can, else -1 with a message naming what is wrong. */
-static int check_saved(const Saved* v, char* message, size_t size) {
-    static const char* const blocks[5] = {"p", "d", "x", "u", "y"};
-    const sblsim_model* m = model();
-    const double* u = v->values + m->n_p + m->n_d + m->n_x;
-    int past_init = v->state == STEP_MODE || v->state == TERMINATED || v->state == EVENT_MODE;
-    size_t offset = 0;
-    int k, i;
-    if (!isfinite(v->start_time) || !isfinite(v->t0) || !isfinite(v->t)) {
-        snprintf(message, size, "its times are not finite (start %g s, t0 %g s, t %g s)", v->start_time, v->t0, v->t);
-        return -1;
-    }
-    if (v->t < v->t0 || (past_init && v->t0 < v->start_time)) {
-        snprintf(message, size, "its times are out of order (start %.17g s, t0 %.17g s, t %.17g s)", v->start_time,
-                 v->t0, v->t);
-        return -1;
-    }
-    for (k = 0; k < 5; k++) {
-        for (i = 0; i < block_size(k); i++) {
-            double value = v->values[offset + (size_t)i];
-            if (!isfinite(value)) {
-                const sblsim_variable* named = k == 3 ? variable_at(SBLSIM_INPUT, i)
-                                               : k == 4 ? variable_at(SBLSIM_OUTPUT, i) : NULL;
-                if (k == 0)
-                    snprintf(message, size, "parameter %s = %g is not finite", m->parameters[i].name, value);
-                else if (named != NULL)
-                    snprintf(message, size, "%s = %g is not finite", named->name, value);
-                else
-                    snprintf(message, size, "%s[%d] = %g is not finite", blocks[k], i, value);
-                return -1;
-            }
-        }
-        offset += (size_t)block_size(k);
-    }
-    if (past_init && sblsim_check_parameters(m, v->values, message, size)) return -1;
-    for (k = 0; k < m->n_variables; k++) {
-        const sblsim_variable* in = &m->variables[k];
-        if (in->causality == SBLSIM_INPUT && !in_range(in, u[in->index])) {
-            char range[96];
-            describe_range(in, range, sizeof range);
-            snprintf(message, size, "%s = %g is outside the allowed range %s", in->name, u[in->index], range);
-            return -1;
-        }
-    }
-    return 0;
-}
-
+/* Checked before it is taken: the caller's state object changes only if it is (sblsim_deserialize). */
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState* FMUState) {
     Instance* s = (Instance*)c;
-    size_t needed = serialized_size();
-    uint64_t header[4];
-    double times[3];
-    char message[SBLSIM_MESSAGE];
-    const char* in = (const char*)serializedState;
-    Saved *fresh, *saved;
+    char message[SBLSIM_STATE_MESSAGE];
+    sblsim_saved* into;
     ENTER(c, DESERIALIZE_FMU_STATE);
     if (FMUState == NULL) FAIL(s, "fmi3DeserializeFMUState: no place for the state");
-    if (serializedState == NULL || size != needed)
-        FAIL(s, "fmi3DeserializeFMUState: %lu bytes, expected %lu", (unsigned long)size, (unsigned long)needed);
-    memcpy(header, in, sizeof header);
-    in += sizeof header;
-    if (header[0] != SBLSIM_MAGIC || header[1] != (uint64_t)value_count() ||
-        header[2] != (uint64_t)model()->n_purposes)
-        FAIL(s, "fmi3DeserializeFMUState: not a serialized state of %s", model()->name);
-    if (header[3] >= (uint64_t)N_STATES)
-        FAIL(s, "fmi3DeserializeFMUState: state number %llu is not one of the %d states; the state is refused",
-             (unsigned long long)header[3], (int)N_STATES);
-    /* read into a new state object and check it: the caller's object changes only if it is taken */
-    fresh = new_saved();
-    if (fresh == NULL) FAIL(s, "fmi3DeserializeFMUState: out of memory");
-    memcpy(times, in, sizeof times);
-    in += sizeof times;
-    fresh->state = (State)header[3];
-    fresh->start_time = times[0];
-    fresh->t0 = times[1];
-    fresh->t = times[2];
-    memcpy(fresh->values, in, sizeof(double) * value_count());
-    in += sizeof(double) * value_count();
-    memcpy(fresh->draws, in, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    if (check_saved(fresh, message, sizeof message)) {
-        free_saved(fresh);
-        FAIL(s, "fmi3DeserializeFMUState: %s; the state is refused", message);
+    into = *FMUState != NULL ? (sblsim_saved*)*FMUState : sblsim_saved_new(model());
+    if (into == NULL) FAIL(s, "fmi3DeserializeFMUState: out of memory");
+    if (sblsim_deserialize(model(), SBLSIM_MAGIC, N_STATES, PAST_INITIALIZATION, serializedState, size, into,
+                           message, sizeof message)) {
+        if (*FMUState == NULL) sblsim_saved_free(into);
+        FAIL(s, "fmi3DeserializeFMUState: %s", message);
     }
-    saved = (Saved*)*FMUState;
-    if (saved == NULL) {
-        *FMUState = (fmi3FMUState)fresh;
-        return fmi3OK;
-    }
-    saved->state = fresh->state;
-    saved->start_time = fresh->start_time;
-    saved->t0 = fresh->t0;
-    saved->t = fresh->t;
-    memcpy(saved->values, fresh->values, sizeof(double) * value_count());
-    memcpy(saved->draws, fresh->draws, sizeof(uint64_t) * (size_t)model()->n_purposes);
-    free_saved(fresh);
+    *FMUState = (fmi3FMUState)into;
     return fmi3OK;
 }
 
@@ -1298,7 +1094,7 @@ static fmi3Status step(Instance* s, double t, double h, fmi3Boolean* early_retur
     *early_return = fmi3False;
     if (s->trial != NULL) {
         double seq = s->y[s->seq_index], arrival;
-        save(s, s->trial);
+        sblsim_save(&s->run, s->state, s->start_time, s->trial);
         if (advance(s, t, h)) return fmi3Error;
         arrival = s->y[s->rx_index];
         if (s->y[s->seq_index] != seq && arrival - t > SBLSIM_ARRIVAL_SLACK && t + h - arrival > SBLSIM_ARRIVAL_SLACK) {
