@@ -410,11 +410,22 @@ class FmuHandle:
         self.variables = {v.name: v for v in md.modelVariables}
         self.ports = _ports(md)
         self.parameters = frozenset(v.name for v in md.modelVariables if v.causality == "parameter")
+        self._unpack_and_load(md)
+        inputs = [v for v in md.modelVariables if v.causality == "input"]
+        outputs = [v for v in md.modelVariables if v.causality == "output"]
+        self.input_names = [v.name for v in inputs]
+        self.output_names = [v.name for v in outputs]
+        self._types = [DTYPES[v.type] for v in outputs]
+        self._in, self._out = self._groups(inputs), self._groups(outputs)
+
+    def _unpack_and_load(self, md: Any) -> None:
+        """Unpack the FMU into a folder of its own (removed at exit) and load it (:meth:`_load`): an FMU may come
+        from anyone, so it is unpacked only after every check of :func:`~sblsim.orchestrator.io.archives.
+        safe_extract`."""
         self.log = deque(maxlen=LOG_LINES)
         self._unzipdir = tempfile.mkdtemp(prefix="sblsim_fmu_")
         try:
-            # an FMU may come from anyone: unpacked only after every check of archives.safe_extract
-            safe_extract(path, self._unzipdir, f"fmu: {path.name} ({component})")
+            safe_extract(self.path, self._unzipdir, f"fmu: {self.path.name} ({self.component})")
             self.fmu = self._load(md)
         except BaseException:
             shutil.rmtree(self._unzipdir, ignore_errors=True)
@@ -422,12 +433,6 @@ class FmuHandle:
         atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)
         self._fresh = True
         self.in_use = False
-        inputs = [v for v in md.modelVariables if v.causality == "input"]
-        outputs = [v for v in md.modelVariables if v.causality == "output"]
-        self.input_names = [v.name for v in inputs]
-        self.output_names = [v.name for v in outputs]
-        self._types = [DTYPES[v.type] for v in outputs]
-        self._in, self._out = self._groups(inputs), self._groups(outputs)
 
     @property
     def where(self) -> str:
@@ -645,17 +650,7 @@ class Fmu3Handle(FmuHandle):
                 self._where.setdefault(e, (vr, k))
         self.ports = [Port(v.name, v.causality, v.fmi_type, v.unit or "") for v in scalars]
         self.parameters = frozenset(v.name for v in scalars if v.causality == "parameter")
-        self.log = deque(maxlen=LOG_LINES)
-        self._unzipdir = tempfile.mkdtemp(prefix="sblsim_fmu_")
-        try:
-            safe_extract(path, self._unzipdir, f"fmu: {path.name} ({component})")
-            self.fmu = self._load(md)
-        except BaseException:
-            shutil.rmtree(self._unzipdir, ignore_errors=True)
-            raise
-        atexit.register(shutil.rmtree, self._unzipdir, ignore_errors=True)
-        self._fresh = True
-        self.in_use = False
+        self._unpack_and_load(md)
         inputs = [v for v in scalars if v.causality == "input"]
         outputs = [v for v in scalars if v.causality == "output"]
         self.input_names = [v.name for v in inputs]
