@@ -796,7 +796,9 @@ class Acoustics(Component):
                      choices=RANGING),
             Variable("turnaround", "parameter", "Real", 0.05, "s",
                      "TWTT: the replying transponder's nominal turnaround time", min=0.0, max=10.0),
-            Variable("turnaround_sigma", "parameter", "Real", 0.0, "s", "TWTT: turnaround time jitter std",
+            Variable("turnaround_sigma", "parameter", "Real", 0.0, "s",
+                     "TWTT: std of the turnaround's Gaussian jitter, the turnaround cut at 0 (no reply before its "
+                     "interrogation)",
                      min=0.0, max=1.0),
         )
         if not interface_system(n_beacons).measures_direction:
