@@ -30,6 +30,10 @@ OMSimulator's ``oms:FixedStepMaster`` annotation on the system, the Open
 Simulation Platform's ``osp:FixedStepAlgorithm`` on the default experiment
 (libcosim), and ``step_size`` for ecos.
 
+``export_ssp(..., fmi_version=3)`` (``sblsim ssp export --fmi-version 3``) packs the scenario's FMI 3.0 FMUs
+instead, built for the package (SSP 1.0 has no array values: the arrays travel as the FMUs' start values), its
+scalar parameters in the parameter sets and its connections array to array.
+
 :func:`read_ssp` reads a package back (components, connections, parameter
 sets, experiment) into a resolved configuration, the connections and the
 package's FMU files, so ``sblsim run --ssp`` runs a system edited in another
