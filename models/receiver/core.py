@@ -56,7 +56,7 @@ from sblsim.models.receiver.profile import (
     profile_range,
     profile_when,
 )
-from sblsim.models.systems import SYSTEMS, interface_system
+from sblsim.models.systems import MIN_R_SIGMA, SYSTEMS, interface_system
 
 #: The state entries of the built-in motion model, as the ``x0_*`` parameters and ``est_*`` outputs name them.
 STATE_NAMES = CONSTANT_VELOCITY.state_names
@@ -228,9 +228,9 @@ def filter_parameters() -> tuple[Variable, ...]:
     return (
         Variable("sigma_range", "parameter", "Real", 0.1, "m",
                  "Range standard deviation in R (at least 1 mm: below, R no longer regularizes the update)",
-                 min=1e-3, max=1000.0),
+                 min=MIN_R_SIGMA, max=1000.0),
         Variable("sigma_depth", "parameter", "Real", 0.01, "m", "Depth standard deviation in R (at least 1 mm)",
-                 min=1e-3, max=1000.0),
+                 min=MIN_R_SIGMA, max=1000.0),
         Variable("q_horizontal", "parameter", "Real", 0.01, "m2/s3",
                  "Process noise: horizontal acceleration spectral density", min=0.0, max=1e6),
         Variable("q_vertical", "parameter", "Real", 0.001, "m2/s3",

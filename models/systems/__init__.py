@@ -35,6 +35,9 @@ from sblsim.models.declarations import ModelError
 #: The smallest direction-of-arrival std [deg] the receivers take (their ``sigma_angle_deg``'s minimum): the ties
 #: and the bound floor ``platform.usbl_angle_sigma_deg`` at it (:meth:`System.angle_sigma_deg`).
 MIN_ANGLE_SIGMA_DEG = 1e-3
+#: The smallest range and depth std [m] the receivers take in R (``sigma_range``'s and ``sigma_depth``'s minimum):
+#: below it R no longer regularizes the update.
+MIN_R_SIGMA = 1e-3
 
 #: The registry: ``platform.system`` value -> system, in the order of :attr:`System.code` (the platform's
 #: ``system`` parameter is the index of its value in this order: the FMUs and the local engine encode it so).
@@ -343,5 +346,5 @@ def interface_systems(n_beacons: int) -> list[System]:
     return [s for s in SYSTEMS.values() if s is own or (own.interface_beacons is None and s.interface_beacons is None)]
 
 
-__all__ = ["MIN_ANGLE_SIGMA_DEG", "SYSTEMS", "System", "interface_owners", "interface_system", "interface_systems",
-           "register", "system"]
+__all__ = ["MIN_ANGLE_SIGMA_DEG", "MIN_R_SIGMA", "SYSTEMS", "System", "interface_owners", "interface_system",
+           "interface_systems", "register", "system"]
