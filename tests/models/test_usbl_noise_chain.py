@@ -150,5 +150,6 @@ def test_the_map_is_the_bounds_information_of_one_packet_and_finite_below_the_tr
                "attitude_variance": 0.0}
     points = np.array([[n, e, 5.0] for n in (-30.0, -0.5, 0.0, 1e-7, 3.0, 30.0) for e in (-20.0, 0.0, 0.5, 25.0)])
     drms = usbl.horizontal_std(points, transceiver, *perfect.values())
-    assert np.isfinite(drms).all() and np.all(drms >= math.sqrt(2.0) * gps * (1 - 1e-12))
+    # (to 1e-4 near the vertical, where the map is the fix's own error over its errors' draws: nadir_fix_rms)
+    assert np.isfinite(drms).all() and np.all(drms >= math.sqrt(2.0) * gps * (1 - 1e-4))
     assert drms.min() == pytest.approx(math.sqrt(2.0) * gps, rel=1e-3)
