@@ -52,7 +52,9 @@ casadi's virtual machine; :func:`compiled_bound` is the same step with the
 packed inputs of :data:`FIXED` and :data:`STEPS`, which the local engine's
 library of the USBL interface compiles (``sblsim.fmus.native``). **Map**: one
 packet plus the depth (:func:`fix_information`), the Fisher information of the
-same rows for a level array at the platform's heading.
+same rows for a level array at the platform's heading; near the vertical in deep
+water, where the range–depth constraint binds, the fix's own RMS error
+(:func:`nadir_fix_rms`, :data:`NADIR_ZONE`).
 
 References
 ----------
