@@ -586,7 +586,9 @@ def fix_accuracy(points: np.ndarray, transceiver: np.ndarray, range_variance: fl
         rms = nadir_fix_rms(points[chosen], transceiver, attitude, [v[chosen] for v in variances])
         for key, value in zip(("drms", "drms_3d"), rms):
             out[key] = out[key].copy()
-            out[key][near] *= np.interp(offset[near], offset[chosen], value / out[key][chosen])
+            if chosen.size < order.size:
+                out[key][near] *= np.interp(offset[near], offset[chosen], value / out[key][chosen])
+            out[key][chosen] = value  # each point computed: its own value
     return out
 
 

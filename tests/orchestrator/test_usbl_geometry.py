@@ -211,7 +211,7 @@ def test_the_usbl_map_is_finite_everywhere_and_never_beats_the_gps_error(gps, tm
     """``sblsim map`` of a USBL configuration over a grid through the point straight below the transceiver: every
     value finite (``map.csv`` has no ``inf``), at least √2 σ_GPS (the GPS error alone, per axis, gives that
     horizontally), and with a perfect array (range noise, angle noise at their minimums, no attitude error) the
-    floor itself below the transceiver (to 1e-6: there the map is the fix's RMS error over its errors' draws)."""
+    floor itself below the transceiver (to 1e-4: there the map is the fix's RMS error over its errors' draws)."""
     sets = ["platform.system=usbl", f"platform.gps_sigma={gps}"]
     out = tmp_path / "m"
     code = main(["map", "semicircle", *(a for o in sets for a in ("--set", o)), "--extent", "4", "--step", "0.5",
@@ -222,13 +222,13 @@ def test_the_usbl_map_is_finite_everywhere_and_never_beats_the_gps_error(gps, tm
     assert "inf" not in (out / "map.csv").read_text()
     assert (frame["drms"] >= np.sqrt(2.0) * gps).all()
     below = frame[(frame["east"] == 0) & (frame["north"] == 0)]["drms"].item()
-    assert below <= (1 + 1e-6) * frame["drms"].min()  # the best point is straight below, not a hole
+    assert below <= (1 + 1e-4) * frame["drms"].min()  # the best point is straight below, not a hole
     perfect = load_config("semicircle", [*sets, "acoustics.sigma_range=1e-6", "platform.usbl_angle_sigma_deg=0",
                                          "platform.imu_sigma_deg=0", "target.depth_sigma=1e-3"])
     east, north = grid(30.0, 0.5)
     m = accuracy_map(perfect, east, north)
-    # near the vertical the map is the fix's own error over the errors' draws (to 1e-6 of the floor there)
-    assert np.isfinite(m).all() and m.min() >= np.sqrt(2.0) * gps * (1 - 1e-6)
+    # near the vertical the map is the fix's own error over the errors' draws (to 1e-4 of the floor there)
+    assert np.isfinite(m).all() and m.min() >= np.sqrt(2.0) * gps * (1 - 1e-4)
     assert m[len(north) // 2, len(east) // 2] == pytest.approx(np.sqrt(2.0) * gps, rel=1e-3)
 
 
