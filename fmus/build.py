@@ -8,7 +8,8 @@ Each FMU holds
   the model record, the runtime and its generated header, the FMI shell and
   the FMI headers), so any
   user can rebuild it, e.g. ``cc -shared -fPIC -O2 -ffp-contract=off
-  -DSBLSIM_MODEL=sblsim_platform_model sources/*.c -lm``;
+  -DSBLSIM_MODEL=sblsim_platform_model sources/*.c -lm`` (FMI 3.0 also
+  ``-DSBLSIM_FMI3_TABLE=sblsim_platform_fmi3``, as its ``buildDescription.xml`` says);
 * ``binaries/<platform>/sblsim_<name>.<so|dll|dylib>``: the host's binary,
   and with zig the Windows and macOS ones too (FMI 3.0: ``binaries/x86_64-linux/`` and its other platform
   folders).
