@@ -101,10 +101,8 @@ static const struct {
 };
 
 typedef struct {
-    sblsim_instance run;
-    sblsim_work* work;
-    double *p, *d, *x, *x_next, *u, *y;
-    uint64_t* draws;
+    sblsim_instance run; /* its vectors (sblsim_vectors_new), the state buffers x and x_next apart */
+    double *x, *x_next;
     State state;
     double start_time;
     int logging;
@@ -156,34 +154,17 @@ static int allowed(fmi2Component c, Call call) {
     } while (0)
 
 static void set_defaults(Instance* s) {
-    const sblsim_model* m = model();
-    memcpy(s->p, m->p_start, sizeof(double) * (size_t)m->n_p);
-    memcpy(s->u, m->u_start, sizeof(double) * (size_t)m->n_u);
-    memset(s->y, 0, sizeof(double) * (size_t)m->n_y);
-    memset(s->x, 0, sizeof(double) * (size_t)m->n_x);
-    memset(s->d, 0, sizeof(double) * (size_t)m->n_d);
-    s->run.x = s->x;
-    s->run.x_next = s->x_next;
+    sblsim_vectors_reset(&s->run, s->x, s->x_next);
     s->state = INSTANTIATED;
     s->start_time = 0.0;
-    s->run.t0 = s->run.t = 0.0;
 }
 
 static void free_instance(Instance* s) {
     if (s == NULL) return;
-    free(s->p);
-    free(s->d);
-    free(s->x);
-    free(s->x_next);
-    free(s->u);
-    free(s->y);
-    free(s->draws);
+    sblsim_vectors_free(&s->run, s->x, s->x_next);
     free(s->name);
-    sblsim_work_free(s->work);
     free(s);
 }
-
-static double* vector(int n) { return (double*)calloc((size_t)(n > 0 ? n : 1), sizeof(double)); }
 
 /* ---------------------------------------------------------------------------------------- */
 
@@ -224,26 +205,11 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free_instance(s);
         return NULL;
     }
-    s->p = vector(m->n_p);
-    s->d = vector(m->n_d);
-    s->x = vector(m->n_x);
-    s->x_next = vector(m->n_x);
-    s->u = vector(m->n_u);
-    s->y = vector(m->n_y);
-    s->draws = (uint64_t*)calloc((size_t)(m->n_purposes > 0 ? m->n_purposes : 1), sizeof(uint64_t));
-    s->work = sblsim_work_new(m);
-    if (!s->name || !s->p || !s->d || !s->x || !s->x_next || !s->u || !s->y || !s->draws || !s->work) {
+    if (!s->name || sblsim_vectors_new(&s->run, m, &s->x, &s->x_next)) {
         logf_(s, fmi2Error, "logStatusError", "out of memory");
         free_instance(s);
         return NULL;
     }
-    s->run.model = m;
-    s->run.p = s->p;
-    s->run.d = s->d;
-    s->run.u = s->u;
-    s->run.y = s->y;
-    s->run.draws = s->draws;
-    s->run.work = s->work;
     set_defaults(s);
     return s;
 }
@@ -276,7 +242,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Instance* s = (Instance*)c;
     char message[SBLSIM_MESSAGE];
     ENTER(c, EXIT_INITIALIZATION_MODE);
-    if (sblsim_check_parameters(model(), s->p, message, sizeof message)) {
+    if (sblsim_check_parameters(model(), s->run.p, message, sizeof message)) {
         s->state = ERROR_STATE;
         FAIL(s, "%s", message);
     }
@@ -317,12 +283,6 @@ static const sblsim_variable* find(Instance* s, fmi2ValueReference vr, int type,
     return &m->variables[vr];
 }
 
-static double* slot(Instance* s, const sblsim_variable* v) {
-    if (v->causality == SBLSIM_PARAMETER) return &s->p[v->index];
-    if (v->causality == SBLSIM_INPUT) return &s->u[v->index];
-    return &s->y[v->index];
-}
-
 static fmi2Status check_range(Instance* s, const sblsim_variable* v, double value, const char* caller) {
     char range[96];
     if (sblsim_in_range(v, value)) return fmi2OK;
@@ -344,7 +304,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_REAL, "fmi2GetReal");
         if (v == NULL) return fmi2Error;
-        value[i] = *slot(s, v);
+        value[i] = *sblsim_slot(&s->run, v);
     }
     return fmi2OK;
 }
@@ -356,7 +316,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2GetInteger");
         if (v == NULL) return fmi2Error;
-        value[i] = (fmi2Integer)floor(*slot(s, v) + 0.5);
+        value[i] = (fmi2Integer)floor(*sblsim_slot(&s->run, v) + 0.5);
     }
     return fmi2OK;
 }
@@ -368,7 +328,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_BOOLEAN, "fmi2GetBoolean");
         if (v == NULL) return fmi2Error;
-        value[i] = *slot(s, v) > 0.5 ? fmi2True : fmi2False;
+        value[i] = *sblsim_slot(&s->run, v) > 0.5 ? fmi2True : fmi2False;
     }
     return fmi2OK;
 }
@@ -391,7 +351,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         if (v == NULL || check_set(s, v, "fmi2SetReal") != fmi2OK) return fmi2Error;
         if (!isfinite(value[i])) FAIL(s, "fmi2SetReal: %s = %g is not finite", v->name, value[i]);
         if (check_range(s, v, value[i], "fmi2SetReal") != fmi2OK) return fmi2Error;
-        *slot(s, v) = value[i];
+        *sblsim_slot(&s->run, v) = value[i];
     }
     return fmi2OK;
 }
@@ -404,7 +364,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         const sblsim_variable* v = find(s, vr[i], SBLSIM_INTEGER, "fmi2SetInteger");
         if (v == NULL || check_set(s, v, "fmi2SetInteger") != fmi2OK) return fmi2Error;
         if (check_range(s, v, (double)value[i], "fmi2SetInteger") != fmi2OK) return fmi2Error;
-        *slot(s, v) = (double)value[i];
+        *sblsim_slot(&s->run, v) = (double)value[i];
     }
     return fmi2OK;
 }
@@ -416,7 +376,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     for (i = 0; i < nvr; i++) {
         const sblsim_variable* v = find(s, vr[i], SBLSIM_BOOLEAN, "fmi2SetBoolean");
         if (v == NULL || check_set(s, v, "fmi2SetBoolean") != fmi2OK) return fmi2Error;
-        *slot(s, v) = value[i] ? 1.0 : 0.0;
+        *sblsim_slot(&s->run, v) = value[i] ? 1.0 : 0.0;
     }
     return fmi2OK;
 }

@@ -177,10 +177,8 @@ static const struct {
 };
 
 typedef struct {
-    sblsim_instance run;
-    sblsim_work* work;
-    double *p, *d, *x, *x_next, *u, *y;
-    uint64_t* draws;
+    sblsim_instance run; /* its vectors (sblsim_vectors_new), the state buffers x and x_next apart */
+    double *x, *x_next;
     State state;
     double start_time;
     int logging;
@@ -257,34 +255,17 @@ static int allowed(fmi3Instance c, Call call) {
     } while (0)
 
 static void set_defaults(Instance* s) {
-    const sblsim_model* m = model();
-    memcpy(s->p, m->p_start, sizeof(double) * (size_t)m->n_p);
-    memcpy(s->u, m->u_start, sizeof(double) * (size_t)m->n_u);
-    memset(s->y, 0, sizeof(double) * (size_t)m->n_y);
-    memset(s->x, 0, sizeof(double) * (size_t)m->n_x);
-    memset(s->d, 0, sizeof(double) * (size_t)m->n_d);
-    s->run.x = s->x;
-    s->run.x_next = s->x_next;
+    sblsim_vectors_reset(&s->run, s->x, s->x_next);
     s->state = INSTANTIATED;
     s->start_time = 0.0;
-    s->run.t0 = s->run.t = 0.0;
 }
 
 static void free_instance(Instance* s) {
     if (s == NULL) return;
-    free(s->p);
-    free(s->d);
-    free(s->x);
-    free(s->x_next);
-    free(s->u);
-    free(s->y);
-    free(s->draws);
+    sblsim_vectors_free(&s->run, s->x, s->x_next);
     sblsim_saved_free(s->trial);
-    sblsim_work_free(s->work);
     free(s);
 }
-
-static double* vector(int n) { return (double*)calloc((size_t)(n > 0 ? n : 1), sizeof(double)); }
 
 /* ---------------------------------------------------------------------------------------- */
 
@@ -345,26 +326,11 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     s->logging = loggingOn ? 1 : 0;
     s->event_mode_used = eventModeUsed ? 1 : 0;
     s->early_return_allowed = earlyReturnAllowed ? 1 : 0;
-    s->p = vector(m->n_p);
-    s->d = vector(m->n_d);
-    s->x = vector(m->n_x);
-    s->x_next = vector(m->n_x);
-    s->u = vector(m->n_u);
-    s->y = vector(m->n_y);
-    s->draws = (uint64_t*)calloc((size_t)(m->n_purposes > 0 ? m->n_purposes : 1), sizeof(uint64_t));
-    s->work = sblsim_work_new(m);
-    if (!s->p || !s->d || !s->x || !s->x_next || !s->u || !s->y || !s->draws || !s->work) {
+    if (sblsim_vectors_new(&s->run, m, &s->x, &s->x_next)) {
         logf_(s, fmi3Error, "logStatusError", "out of memory");
         free_instance(s);
         return NULL;
     }
-    s->run.model = m;
-    s->run.p = s->p;
-    s->run.d = s->d;
-    s->run.u = s->u;
-    s->run.y = s->y;
-    s->run.draws = s->draws;
-    s->run.work = s->work;
     if (s->early_return_allowed && table()->arrival_seq >= 0) {
         s->seq_index = table()->arrival_seq;
         s->rx_index = table()->arrival_time;
@@ -420,7 +386,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance c) {
     Instance* s = (Instance*)c;
     char message[SBLSIM_MESSAGE];
     ENTER(c, EXIT_INITIALIZATION_MODE);
-    if (sblsim_check_parameters(model(), s->p, message, sizeof message)) {
+    if (sblsim_check_parameters(model(), s->run.p, message, sizeof message)) {
         s->state = ERROR_STATE;
         FAIL(s, "%s", message);
     }
@@ -514,12 +480,6 @@ static fmi3Status check_references(Instance* s, const fmi3ValueReference vr[], s
     return fmi3OK;
 }
 
-static double* slot(Instance* s, const sblsim_variable* v) {
-    if (v->causality == SBLSIM_PARAMETER) return &s->p[v->index];
-    if (v->causality == SBLSIM_INPUT) return &s->u[v->index];
-    return &s->y[v->index];
-}
-
 static fmi3Status check_range(Instance* s, const sblsim_variable* v, double value, Call call) {
     char range[96];
     if (sblsim_in_range(v, value)) return fmi3OK;
@@ -549,7 +509,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
             continue;
         }
         v = &table()->variables[vr[i]];
-        for (k = 0; k < v->n_elements; k++) values[j++] = *slot(s, element(v, k));
+        for (k = 0; k < v->n_elements; k++) values[j++] = *sblsim_slot(&s->run, element(v, k));
     }
     return fmi3OK;
 }
@@ -563,7 +523,7 @@ fmi3Status fmi3GetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
     if (check_references(s, vr, nvr, nValues, SBLSIM_INTEGER, GET_INT32) != fmi3OK) return fmi3Error;
     for (i = 0; i < nvr; i++) {
         const sblsim_fmi3_variable* v = &table()->variables[vr[i]];
-        for (k = 0; k < v->n_elements; k++) values[j++] = (fmi3Int32)floor(*slot(s, element(v, k)) + 0.5);
+        for (k = 0; k < v->n_elements; k++) values[j++] = (fmi3Int32)floor(*sblsim_slot(&s->run, element(v, k)) + 0.5);
     }
     return fmi3OK;
 }
@@ -577,7 +537,8 @@ fmi3Status fmi3GetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     if (check_references(s, vr, nvr, nValues, SBLSIM_BOOLEAN, GET_BOOLEAN) != fmi3OK) return fmi3Error;
     for (i = 0; i < nvr; i++) {
         const sblsim_fmi3_variable* v = &table()->variables[vr[i]];
-        for (k = 0; k < v->n_elements; k++) values[j++] = *slot(s, element(v, k)) > 0.5 ? fmi3True : fmi3False;
+        for (k = 0; k < v->n_elements; k++)
+            values[j++] = *sblsim_slot(&s->run, element(v, k)) > 0.5 ? fmi3True : fmi3False;
     }
     return fmi3OK;
 }
@@ -612,7 +573,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     }
     for (i = 0, j = 0; i < nvr; i++) {
         const sblsim_fmi3_variable* v = &table()->variables[vr[i]];
-        for (k = 0; k < v->n_elements; k++) *slot(s, element(v, k)) = values[j++];
+        for (k = 0; k < v->n_elements; k++) *sblsim_slot(&s->run, element(v, k)) = values[j++];
     }
     return fmi3OK;
 }
@@ -632,7 +593,7 @@ fmi3Status fmi3SetInt32(fmi3Instance c, const fmi3ValueReference vr[], size_t nv
     }
     for (i = 0, j = 0; i < nvr; i++) {
         const sblsim_fmi3_variable* v = &table()->variables[vr[i]];
-        for (k = 0; k < v->n_elements; k++) *slot(s, element(v, k)) = (double)values[j++];
+        for (k = 0; k < v->n_elements; k++) *sblsim_slot(&s->run, element(v, k)) = (double)values[j++];
     }
     return fmi3OK;
 }
@@ -648,7 +609,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance c, const fmi3ValueReference vr[], size_t 
         if (check_set(s, &table()->variables[vr[i]], SET_BOOLEAN) != fmi3OK) return fmi3Error;
     for (i = 0; i < nvr; i++) {
         const sblsim_fmi3_variable* v = &table()->variables[vr[i]];
-        for (k = 0; k < v->n_elements; k++) *slot(s, element(v, k)) = values[j++] ? 1.0 : 0.0;
+        for (k = 0; k < v->n_elements; k++) *sblsim_slot(&s->run, element(v, k)) = values[j++] ? 1.0 : 0.0;
     }
     return fmi3OK;
 }
@@ -1093,15 +1054,16 @@ static int advance(Instance* s, double t, double h) {
 static fmi3Status step(Instance* s, double t, double h, fmi3Boolean* early_return) {
     *early_return = fmi3False;
     if (s->trial != NULL) {
-        double seq = s->y[s->seq_index], arrival;
+        double seq = s->run.y[s->seq_index], arrival;
         sblsim_save(&s->run, s->state, s->start_time, s->trial);
         if (advance(s, t, h)) return fmi3Error;
-        arrival = s->y[s->rx_index];
-        if (s->y[s->seq_index] != seq && arrival - t > SBLSIM_ARRIVAL_SLACK && t + h - arrival > SBLSIM_ARRIVAL_SLACK) {
-            double delivered = s->y[s->seq_index];
+        arrival = s->run.y[s->rx_index];
+        if (s->run.y[s->seq_index] != seq && arrival - t > SBLSIM_ARRIVAL_SLACK &&
+            t + h - arrival > SBLSIM_ARRIVAL_SLACK) {
+            double delivered = s->run.y[s->seq_index];
             restore(s, s->trial);
             if (advance(s, t, arrival - t)) return fmi3Error;
-            if (s->y[s->seq_index] == delivered) {
+            if (s->run.y[s->seq_index] == delivered) {
                 *early_return = fmi3True;
                 return fmi3OK;
             }

@@ -27,6 +27,52 @@ static void value_blocks(const sblsim_instance* run, double* blocks[N_BLOCKS]) {
 
 static size_t purposes(const sblsim_model* m) { return (size_t)m->n_purposes; }
 
+static double* vector(int n) { return (double*)calloc((size_t)(n > 0 ? n : 1), sizeof(double)); }
+
+int sblsim_vectors_new(sblsim_instance* run, const sblsim_model* m, double** x, double** x_next) {
+    run->model = m;
+    run->p = vector(m->n_p);
+    run->d = vector(m->n_d);
+    run->u = vector(m->n_u);
+    run->y = vector(m->n_y);
+    run->draws = (uint64_t*)calloc(purposes(m) > 0 ? purposes(m) : 1, sizeof(uint64_t));
+    run->work = sblsim_work_new(m);
+    *x = vector(m->n_x);
+    *x_next = vector(m->n_x);
+    run->x = *x;
+    run->x_next = *x_next;
+    return run->p && run->d && run->u && run->y && run->draws && run->work && *x && *x_next ? 0 : -1;
+}
+
+void sblsim_vectors_reset(sblsim_instance* run, double* x, double* x_next) {
+    const sblsim_model* m = run->model;
+    memcpy(run->p, m->p_start, sizeof(double) * (size_t)m->n_p);
+    memcpy(run->u, m->u_start, sizeof(double) * (size_t)m->n_u);
+    memset(run->y, 0, sizeof(double) * (size_t)m->n_y);
+    memset(x, 0, sizeof(double) * (size_t)m->n_x);
+    memset(run->d, 0, sizeof(double) * (size_t)m->n_d);
+    run->x = x;
+    run->x_next = x_next;
+    run->t0 = run->t = 0.0;
+}
+
+void sblsim_vectors_free(sblsim_instance* run, double* x, double* x_next) {
+    free(run->p);
+    free(run->d);
+    free(x);
+    free(x_next);
+    free(run->u);
+    free(run->y);
+    free(run->draws);
+    sblsim_work_free(run->work);
+}
+
+double* sblsim_slot(sblsim_instance* run, const sblsim_variable* v) {
+    if (v->causality == SBLSIM_PARAMETER) return &run->p[v->index];
+    if (v->causality == SBLSIM_INPUT) return &run->u[v->index];
+    return &run->y[v->index];
+}
+
 sblsim_saved* sblsim_saved_new(const sblsim_model* m) {
     sblsim_saved* out = (sblsim_saved*)calloc(1, sizeof(sblsim_saved));
     size_t n = value_count(m);

@@ -2,7 +2,8 @@
  *
  * A saved state is a flat copy of an instance (sblsim_runtime.h): its shell's state number, the times and
  * every vector, p, d, x, u, y in that order, and the draw counters. The shells keep their FMI functions and
- * state machines; what a state holds, how it is saved, restored, serialized and checked is here, once.
+ * state machines; an instance's vectors (allocated, reset, freed, a variable's place among them) and what a state
+ * holds, how it is saved, restored, serialized and checked are here, once.
  *
  *   sblsim_saved* saved = sblsim_saved_new(m);                         // fmiXGetFMUstate
  *   sblsim_save(&instance->run, state, start_time, saved);
@@ -20,6 +21,18 @@
 #include <stdint.h>
 
 #include "sblsim_runtime.h"
+
+/* An FMU instance's vectors live in its sblsim_instance `run` (p, d, u, y, the draw counters, the work space) and
+   in the two state buffers it owns, x and x_next, between which run->x and run->x_next swap while stepping.
+   sblsim_vectors_new allocates them for model m (0; -1 when memory runs out, whatever was allocated left for
+   sblsim_vectors_free), sblsim_vectors_reset sets the defaults (the start values of p and u, zeros elsewhere,
+   run->x = x, time 0), sblsim_vectors_free frees them (any of them NULL). */
+int sblsim_vectors_new(sblsim_instance* run, const sblsim_model* m, double** x, double** x_next);
+void sblsim_vectors_reset(sblsim_instance* run, double* x, double* x_next);
+void sblsim_vectors_free(sblsim_instance* run, double* x, double* x_next);
+
+/* Where a variable's value is kept: run->p, run->u or run->y at its index, by its causality. */
+double* sblsim_slot(sblsim_instance* run, const sblsim_variable* v);
 
 /* What a saved FMU state holds (a flat copy). */
 typedef struct {
