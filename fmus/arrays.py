@@ -157,6 +157,16 @@ def fmi3_variables(variables: Sequence, n_beacons: int) -> list[Fmi3Variable]:
     return out
 
 
+def element_positions(variables: Sequence[Fmi3Variable]) -> dict[int, tuple[int, int]]:
+    """Where each FMI 2.0 variable is among the FMI 3.0 ones: its value reference -> (the FMI 3.0 value reference
+    of the variable it is an element of, its first position among that variable's values)."""
+    where: dict[int, tuple[int, int]] = {}
+    for vr, v in enumerate(variables):
+        for k, e in enumerate(v.elements):
+            where.setdefault(e, (vr, k))
+    return where
+
+
 def _check_alike(name: str, members: Sequence) -> None:
     first = members[0]
     for m in members[1:]:
@@ -209,5 +219,5 @@ def fmi3_table_source(variables: Sequence[Fmi3Variable], symbol: str, n_beacons:
         f".arrival_seq = {arrival[0]}, .arrival_time = {arrival[1]}}};", ""])
 
 
-__all__ = ["ARRIVAL_OUTPUTS", "FMI3_TYPES", "Fmi3Variable", "N_BEACONS", "arrival_outputs", "fmi3_table_source",
-           "fmi3_variables"]
+__all__ = ["ARRIVAL_OUTPUTS", "FMI3_TYPES", "Fmi3Variable", "N_BEACONS", "arrival_outputs", "element_positions",
+           "fmi3_table_source", "fmi3_variables"]

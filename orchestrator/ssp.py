@@ -53,7 +53,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 from xml.etree import ElementTree as ET
 
-from sblsim.fmus.arrays import fmi3_variables
+from sblsim.fmus.arrays import element_positions, fmi3_variables
 from sblsim.models import COMPONENTS, RECEIVERS
 from sblsim.models.declarations import SEED_NAMES, UNITS
 from sblsim.models.errors import ArchiveError
@@ -258,11 +258,9 @@ def _array_connections(plan: RunPlan, connections: Sequence[Connection]) -> list
     """
     where = {}  # (component, FMI 2.0 name) -> (FMI 3.0 variable, position)
     for component in plan.sources:
-        model = plan.model(component)
-        scalars = model.fmu_variables(plan.n_beacons)
-        for v in fmi3_variables(scalars, plan.n_beacons):
-            for k, e in enumerate(v.elements):
-                where.setdefault((component, scalars[e].name), (v, k))
+        scalars = plan.model(component).fmu_variables(plan.n_beacons)
+        table = fmi3_variables(scalars, plan.n_beacons)
+        where.update({(component, scalars[e].name): (table[vr], k) for e, (vr, k) in element_positions(table).items()})
     grouped: dict[tuple[str, str, str, str], list[tuple[int, int, int]]] = {}
     for c in connections:
         (source, k), (destination, j) = where[(c.source, c.output)], where[(c.destination, c.input)]

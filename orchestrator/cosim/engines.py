@@ -33,7 +33,7 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from sblsim.fmus.arrays import fmi3_variables
+from sblsim.fmus.arrays import element_positions, fmi3_variables
 from sblsim.fmus.build import DEFAULT_DIR, beacons_dir, cached_fmu, fmu_path, version_dir
 from sblsim.fmus.native import NativeBatch, NativeSystem
 from sblsim.models import COMPONENTS, MODELS
@@ -644,10 +644,7 @@ class Fmu3Handle(FmuHandle):
                              "--fmi-version 3` of this version)")
         self.variables = {v.name: v for v in scalars}
         self._vr = {v.name: k for k, v in enumerate(scalars)}
-        self._where = {}  # FMI 2.0 value reference -> (FMI 3.0 value reference, position among its values)
-        for vr, v in enumerate(self.table):
-            for k, e in enumerate(v.elements):
-                self._where.setdefault(e, (vr, k))
+        self._where = element_positions(self.table)
         self.ports = [Port(v.name, v.causality, v.fmi_type, v.unit or "") for v in scalars]
         self.parameters = frozenset(v.name for v in scalars if v.causality == "parameter")
         self._unpack_and_load(md)
