@@ -46,8 +46,10 @@ import pandas as pd
 
 from sblsim.fmus.native import compiled_family_levels
 from sblsim.models.acoustics.core import site_levels
-from sblsim.models.acoustics.detection import direct_first, packet_probability
+from sblsim.models.acoustics.detection import direct_first, first_shares, packet_probability
+from sblsim.models.acoustics.rays import profile_arrays, ray_bending, slant_range
 from sblsim.models.acoustics.sonar import accuracy_scale
+from sblsim.models.acoustics.sound_speed import PROFILE
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.target.core import file_waypoints
@@ -62,6 +64,11 @@ MAX_POINTS = 1_000_000
 MAX_EXTENT = 1e5
 #: With detection by signal-to-noise an accuracy map is blank (NaN) where the probability of a fix is below this.
 MIN_AVAILABILITY = 0.5
+#: A point whose fixes take a reflected arrival at least this often is echo-only (``map.csv``'s ``echo_only``).
+ECHO_ONLY = 0.99
+#: The most horizontal distances per depth at which :func:`echo_spread` places the reflected arrivals' fixes (the
+#: other points interpolate in the horizontal distance: the site is range-independent).
+ECHO_DISTANCES = 24
 
 
 def parse_levels(text: str, option: str = "--levels") -> list[float]:
@@ -142,18 +149,20 @@ def accuracy_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model
 
 
 def site_maps(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model=MODEL,
-              depth: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The accuracy map (:func:`accuracy_map`) and the availability map (:func:`availability_map`) of a
-    configuration, its packets' probabilities computed once (:func:`point_accuracy` at the grid's points).
+              depth: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The accuracy map (:func:`accuracy_map`), the availability map (:func:`availability_map`) and the share of
+    the fixes that take a reflected arrival of a configuration, its packets' probabilities computed once
+    (:func:`point_accuracy` at the grid's points).
 
     Returns
     -------
-    drms, availability : ndarray, each (len(north), len(east))
-        [m], and the probability of a fix in one cycle [0–1].
+    drms, availability, echo : ndarray, each (len(north), len(east))
+        [m], the probability of a fix in one cycle [0–1] and the probability that a fix takes a reflected
+        arrival [0–1] (0 with fixed detection).
     """
     plan = as_plan(cfg)
     values = point_accuracy(plan, _points(plan, east, north, depth), model)
-    return values["drms"].reshape(len(north), len(east)), values["availability"].reshape(len(north), len(east))
+    return tuple(values[key].reshape(len(north), len(east)) for key in ("drms", "availability", "echo"))
 
 
 def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
@@ -204,6 +213,11 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
             bound["angle_sigma_deg"] = bound["angle_sigma_deg"] * grown
         sigma = sigma * grown
     values = plan.system.fix_accuracy(points, plan["platform"], bound, sigma, model=model, heard=heard)
+    if plan["acoustics"]["detection"] == "snr" and plan.system.measures_direction:
+        # a reflected arrival moves the one-packet fix: its offsets' mean square joins the noise's
+        spread = echo_spread(plan, points, bound, echo[:, 0])
+        values = {**values, "drms": np.sqrt(values["drms"] ** 2 + spread[0]),
+                  "drms_3d": np.sqrt(values["drms_3d"] ** 2 + spread[1])}
     out = {}
     for key in ("drms", "drms_3d"):
         out[key] = np.where(np.isfinite(values[key]), values[key], np.inf)
@@ -213,6 +227,112 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     out["availability"] = available
     out["echo"] = 1.0 - np.prod(1.0 - probability * echo, axis=1)
     return out
+
+def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, echo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """USBL with detection by signal-to-noise: the mean square of the one-packet fix's horizontal and 3-D offsets
+    that reflected arrivals give at each point [m²], over the arrivals a cycle may take.
+
+    Each leg of the exchange the range is timed over (the interrogation and the reply) takes its first detected
+    eigenray, family j with the probability :func:`~sblsim.models.acoustics.detection.first_shares` gives (given
+    that the leg is heard; the legs independent); the packet then carries the mean of the two legs' travel
+    times and the reply's grazing angle at the transceiver as its elevation. The receiver processes it as a
+    direct arrival: the range is the channel's assumed speed times that travel time, which a receiver with a
+    measured profile (``sound_speed_model = profile``) turns into the slant range of the direct eigenray of that
+    time (:func:`~sblsim.models.acoustics.rays.slant_range`) and whose elevation it turns by the direct eigenray's
+    bending (:func:`~sblsim.models.acoustics.rays.ray_bending`), each where the direct eigenray exists
+    (:func:`~sblsim.models.receiver.profile.profile_range`). That places the diver at a point ``seen`` along its
+    azimuth, and the fix of that packet with the diver's own depth reading is off by
+    :meth:`~sblsim.models.systems.usbl.USBL.seen_offsets`. The direct pair's offset is 0 (the map's geometry);
+    the mean square is over the other pairs with their probabilities. Computed at up to :data:`ECHO_DISTANCES`
+    horizontal distances per depth among the points where ``echo`` > 0, interpolated in between; 0 elsewhere.
+
+    Parameters
+    ----------
+    plan : RunPlan
+    points : ndarray, shape (M, 3)
+        NED [m].
+    bound : dict
+        The error levels of the fix's R (:attr:`RunPlan.bound`, as :func:`point_accuracy` grew them).
+    echo : ndarray, shape (M,)
+        The probability that a point's fix takes a reflected arrival (:func:`packet_probabilities`).
+
+    Returns
+    -------
+    horizontal, total : ndarray, each (M,)
+        [m²].
+    """
+    m = points.shape[0]
+    spread = np.zeros((2, m))
+    where = np.flatnonzero(echo > 0.0)
+    if where.size == 0:
+        return spread[0], spread[1]
+    b = np.asarray(plan.lever_arms[0], dtype=float)
+    horizontal = np.hypot(points[:, 0] - b[0], points[:, 1] - b[1])
+    for depth in np.unique(points[where, 2]):
+        at = where[points[where, 2] == depth]
+        distances = np.unique(horizontal[at])
+        if distances.size > ECHO_DISTANCES:  # evenly spread over the distances, the nearest point's own
+            wanted = np.linspace(distances[0], distances[-1], ECHO_DISTANCES)
+            distances = distances[np.unique(np.clip(np.searchsorted(distances, wanted), 0, distances.size - 1))]
+        geometry = np.column_stack([b[0] + distances, np.full(distances.size, b[1]), np.full(distances.size, depth)])
+        # the error levels that are one per point (grown by the SNR): a point's own at each distance
+        own = at[[np.flatnonzero(horizontal[at] == d)[0] for d in distances]]
+        squares = _reflected_offsets(plan, geometry, _taken(bound, own, m))
+        for row, values in enumerate(squares):
+            spread[row, at] = np.interp(horizontal[at], distances, values)
+    return spread[0], spread[1]
+
+
+def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The mean squares of :func:`echo_spread` at points (K, 3) North of the transceiver [m²], each (K,)."""
+    b = np.asarray(plan.lever_arms[0], dtype=float)
+    k = geometry.shape[0]
+    levels = site_levels(plan.component_parameters("acoustics"), np.repeat(b[None, :], k, axis=0), geometry,
+                         compiled_family_levels())
+    shares = first_shares(levels["tau"], levels["pd"])
+    total = shares.sum(axis=1, keepdims=True)
+    weight = shares / np.where(total > 0.0, total, 1.0)
+    out = np.zeros((2, k))
+    for up in range(3):
+        for reply in range(3):
+            w = weight[:, up] * weight[:, reply]
+            sel = np.flatnonzero(w > 0.0) if (up, reply) != (0, 0) else np.zeros(0, dtype=int)
+            if sel.size == 0:
+                continue
+            one_way = 0.5 * (levels["tau"][sel, up] + levels["tau"][sel, reply])
+            rho, chord = _received_as_direct(plan, b[2], geometry[sel, 2], one_way, levels["launch"][sel, reply])
+            seen = b + np.column_stack([rho * np.cos(chord), np.zeros(sel.size), rho * np.sin(chord)])
+            offset = plan.system.seen_offsets(geometry[sel], seen, plan["platform"], _taken(bound, sel, k),
+                                              plan["acoustics"]["sigma_range"])
+            out[0, sel] += w[sel] * np.sum(offset[:, :2] ** 2, axis=1)
+            out[1, sel] += w[sel] * np.sum(offset ** 2, axis=1)
+    return out[0], out[1]
+
+
+def _taken(bound: dict, index: np.ndarray, size: int) -> dict:
+    """The error levels ``bound`` at the points ``index`` of ``size``: a level that is one per point (an array of
+    that size) taken there, the others as they are."""
+    return {key: (np.asarray(v)[index] if np.ndim(v) == 1 and np.size(v) == size else v) for key, v in bound.items()}
+
+
+def _received_as_direct(plan: RunPlan, zt: float, depth: np.ndarray, one_way: np.ndarray, elevation: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The slant range [m] and elevation [rad] a receiver takes from a packet of one-way travel time ``one_way``
+    [s] arriving at the elevation ``elevation``, as if direct (:func:`echo_spread`), each (K,)."""
+    rng = plan["acoustics"]["sound_speed_assumed"] * one_way
+    receiver = plan.component_parameters("receiver")
+    if receiver.get("sound_speed_model") != "profile":
+        return rng, elevation
+    nodes, speeds = profile_arrays(PROFILE.rows(receiver, "sound_speed_rows"))
+    zs, zr = np.full((1, depth.size), float(zt)), depth.reshape(1, -1)
+    rho, found = slant_range(zs, zr, (rng / receiver["sound_speed_assumed"]).reshape(1, -1), rng.reshape(1, -1),
+                             nodes, speeds)
+    found = np.asarray(found).ravel() > 0.5
+    rho = np.where(found, np.asarray(rho).ravel(), rng)
+    bending, bent = ray_bending(zs, zr, rho.reshape(1, -1), nodes, speeds)
+    turned = found & (np.asarray(bent).ravel() > 0.5)
+    return rho, np.where(turned, elevation + np.asarray(bending).ravel(), elevation)
+
 
 def grown_noise(noise_variance, range_variance: float, probability: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """Each range's variance where the site decides what is heard [m²]: the range noise ``range_variance`` (σ_r²,
@@ -394,7 +514,7 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
     with Progress(len(configs), "map", "map", progress) as bar:
         maps = []
         for c in configs:
-            drms, c.availability = site_maps(c.plan(), east, north, depth=c["target"]["depth"])
+            drms, c.availability, c.echo = site_maps(c.plan(), east, north, depth=c["target"]["depth"])
             maps.append(drms)
             bar.update(1)
     return labels, configs, east, north, maps
@@ -412,6 +532,8 @@ class MapConfig(Config):
         self._plan = plan
         #: The map's probability of a fix in one cycle (:func:`availability_map`), once made.
         self.availability: np.ndarray | None = None
+        #: The map's probability that a fix takes a reflected arrival (:func:`site_maps`), once made.
+        self.echo: np.ndarray | None = None
 
     def plan(self) -> RunPlan:
         """The plan the map was made of (its ``target.depth`` the configuration's, not the map's)."""
@@ -421,7 +543,9 @@ class MapConfig(Config):
 def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north: np.ndarray,
           maps: Sequence[np.ndarray], compare: tuple[str, list[str]] | None = None) -> pd.DataFrame:
     """Long table of the maps: (compared value,) east, north, depth [m], drms [m] (NaN: no fix), availability
-    (the probability of a fix in one cycle, when the map has it)."""
+    (the probability of a fix in one cycle, when the map has it) and, with detection by signal-to-noise, echo (the
+    probability that a fix takes a reflected arrival) and echo_only (true where it is at least
+    :data:`ECHO_ONLY`: only echoes are heard first there)."""
     E, N = np.meshgrid(east, north)
     frames = []
     for label, cfg, m in zip(labels, configs, maps):
@@ -430,6 +554,10 @@ def table(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, nort
         available = getattr(cfg, "availability", None)
         if available is not None:
             frame["availability"] = available.ravel()
+        echo = getattr(cfg, "echo", None)
+        if echo is not None and cfg["acoustics"]["detection"] == "snr":
+            frame["echo"] = echo.ravel()
+            frame["echo_only"] = echo.ravel() >= ECHO_ONLY
         if compare is not None:
             frame.insert(0, compare[0], label.split(" = ", 1)[1])
         frames.append(frame)
@@ -462,6 +590,11 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         mesh = ax.pcolormesh(east, north, m, norm=norm, cmap="viridis", shading="nearest")
         lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
+        echo = getattr(cfg, "echo", None)
+        if heard[k] is not None and echo is not None and (echo >= ECHO_ONLY).any():  # where only echoes come first
+            ax.contourf(east, north, (echo >= ECHO_ONLY).astype(float), levels=[0.5, 1.5], colors="none",
+                        hatches=["//"])
+            ax.plot([], [], " ", label="/// echo-only")
         arms = plans[k].lever_arms
         inside = (np.abs(arms[:, 1]) <= east.max()) & (np.abs(arms[:, 0]) <= north.max())
         ax.plot(arms[inside, 1], arms[inside, 0], "r^", ms=6, label=systems[k].marker)
@@ -476,7 +609,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         off = ("" if inside.all() else f", the {systems[k].marker} off the map" if not inside.any()
                else f", {int((~inside).sum())} of the {len(arms)} {systems[k].marker} off the map")
         ax.set_title(f"{label}\n({what}diver at {cfg['target']['depth']:g} m depth{off})", fontsize=9)
-        if inside.any() and (k == 0 or systems[k] != systems[0]):
+        if (inside.any() and (k == 0 or systems[k] != systems[0])) or ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper right", fontsize=8)
     what = "measurements" if any(not s.takes_ranges for s in systems) else "ranges"
     bar = fig.colorbar(mesh, ax=axes[0].tolist(), label=f"horizontal DRMS of one round of {what} + depth [m]")
@@ -515,5 +648,5 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
     return Path(out)
 
 
-__all__ = ["MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "grid", "grown_noise", "make_maps", "parse_levels",
-           "plot", "point_accuracy", "system_line", "table", "write"]
+__all__ = ["ECHO_ONLY", "MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "echo_spread", "grid", "grown_noise",
+           "make_maps", "parse_levels", "plot", "point_accuracy", "system_line", "table", "write"]

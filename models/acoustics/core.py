@@ -392,7 +392,8 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
     Returns
     -------
     dict
-        ``tau`` [s], ``valid``, ``snr`` [dB], ``pd``, each (K, 3) (families direct, surface, bottom;
+        ``tau`` [s], ``launch`` (the grazing angle at the source [rad], positive downward), ``valid``,
+        ``snr`` [dB], ``pd``, each (K, 3) (families direct, surface, bottom;
         :func:`~sblsim.models.acoustics.detection.family_levels`).
     """
     p, site = _site(parameters)
@@ -407,7 +408,8 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
     out = map_in_chunks(family_levels() if levels is None else levels, geometry.T,
                         (float(p["water_depth"]), float(rows.shape[0] > 0), float(p["sound_speed_true"]), nodes,
                          speeds, site))
-    return {name: out[k].T[pair.ravel()] for k, name in ((0, "tau"), (3, "valid"), (4, "snr"), (5, "pd"))}
+    return {name: out[k].T[pair.ravel()] for k, name in ((0, "tau"), (1, "launch"), (3, "valid"), (4, "snr"),
+                                                          (5, "pd"))}
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None,
                     jitter: float = 0.0) -> None:

@@ -261,6 +261,27 @@ def packet_probability(tau, pd, snr, threshold, margin, fluctuation) -> np.ndarr
     return np.sum(pd * missed_before * decoded, axis=-1)
 
 
+def first_shares(tau, pd) -> np.ndarray:
+    """Per family, the probability that it is a leg's first detected arrival: ``P_j Π_{i before j} (1 − P_i)``
+    (the arrivals in order of travel time, an absent one never detected), the terms of
+    :func:`packet_probability` before decoding.
+
+    Parameters
+    ----------
+    tau, pd : ndarray, shape (..., 3)
+        Travel times [s] and detection probabilities of the families (direct, surface, bottom; an absent one: pd 0).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Their sum is the probability that the leg is heard at all.
+    """
+    tau, pd = np.asarray(tau, dtype=float), np.asarray(pd, dtype=float)
+    arrives = np.where(pd > 0, tau, np.inf)
+    before = arrives[..., None, :] < arrives[..., :, None]  # [..., j, i]: family i arrives before family j
+    return pd * np.prod(np.where(before, 1.0 - pd[..., None, :], 1.0), axis=-1)
+
+
 def direct_first(tau, pd, snr=None, threshold: float = 0.0, margin: float = 0.0, fluctuation: float = 0.0
                  ) -> np.ndarray:
     """Probability that a leg's first detected arrival is the direct one (family 0), and (with ``snr``) that its
@@ -281,10 +302,7 @@ def direct_first(tau, pd, snr=None, threshold: float = 0.0, margin: float = 0.0,
     -------
     ndarray, shape (...)
     """
-    tau, pd = np.asarray(tau, dtype=float), np.asarray(pd, dtype=float)
-    arrives = np.where(pd > 0, tau, np.inf)
-    before = arrives < arrives[..., :1]
-    share = pd[..., 0] * np.prod(np.where(before, 1.0 - pd, 1.0), axis=-1)
+    share = first_shares(tau, pd)[..., 0]
     if snr is None:
         return share
     decoded = np.vectorize(lambda v: float(sonar.detection_probability(v, threshold + margin, fluctuation)))(
@@ -293,4 +311,4 @@ def direct_first(tau, pd, snr=None, threshold: float = 0.0, margin: float = 0.0,
 
 
 __all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "direct_first", "family_levels", "family_levels_grid",
-           "first_detected", "level_table", "packet_probability"]
+           "first_detected", "first_shares", "level_table", "packet_probability"]

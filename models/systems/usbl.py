@@ -601,6 +601,47 @@ def horizontal_std(points: np.ndarray, transceiver: np.ndarray, range_variance: 
                         depth_variance, heading)["drms"]
 
 
+def seen_fix_offset(points: np.ndarray, seen: np.ndarray, transceiver: np.ndarray, range_variance,
+                    position_variance, angle_sigma_deg, attitude_variance, depth_variance,
+                    heading: float = 0.0) -> np.ndarray:
+    """The offset of the one-packet fix (:func:`fix_of_measurement`) from a diver at each of ``points`` whose
+    packet, without noise, is the one a diver at ``seen`` would give by the direct path (its range and direction
+    of arrival), while its depth reading is its own: what a reflected arrival does to the fix, ``seen`` being where
+    the receiver's processing of the reflection's travel time and direction places it (the array level at the
+    heading ``heading``).
+
+    Parameters
+    ----------
+    points, seen : ndarray, shape (M, 3)
+        The divers and where their packets place them, NED [m].
+    transceiver : ndarray, shape (3,)
+        The transceiver's position, NED [m].
+    range_variance, position_variance, angle_sigma_deg, attitude_variance, depth_variance : float or ndarray (M,)
+        As for :func:`fix_accuracy` (the R the fix weighs the packet with).
+    heading : float, optional
+        The array's yaw [rad].
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        The fix minus the diver's position, NED [m] (0 where ``seen`` is the diver).
+
+    References
+    ----------
+    Kay 1993, Section 8.9 (the fix).
+    """
+    points, seen = np.atleast_2d(np.asarray(points, float)), np.atleast_2d(np.asarray(seen, float))
+    m = points.shape[0]
+    if m == 0:
+        return np.zeros((0, 3))
+    b, att = np.asarray(transceiver, float).reshape(3, 1), np.array([[0.0], [0.0], [heading]])
+    z = _packet().map(m)(seen.T, b, att)
+    variances = [per_point(np.broadcast_to(np.asarray(v, float).ravel(), (m,))) for v in (
+        range_variance, position_variance, angle_sigma_deg, attitude_variance, depth_variance)]
+    fix = fix_of_measurement().map(m)(z, points[:, 2].reshape(1, m), b, att, *variances)
+    return np.asarray(fix).T - points
+
+
 @register
 class USBL(System):
     """Ultra-short baseline: one transceiver at ``(0, 0, transducer_depth)`` below the GPS antenna (module
@@ -689,6 +730,16 @@ class USBL(System):
                             parameters["angle_sigma_deg"], parameters["attitude_variance"] + constant,
                             parameters["depth_variance"], math.radians(platform["heading_deg"]))
 
+    def seen_offsets(self, points: np.ndarray, seen: np.ndarray, platform: Mapping[str, Any],
+                     parameters: Mapping[str, float], sigma_range) -> np.ndarray:
+        """The one-packet fix's offset from divers at ``points`` whose packets place them at ``seen`` (a reflected
+        arrival's range and direction, :func:`seen_fix_offset`), with the R of :meth:`fix_accuracy`, (M, 3) [m]."""
+        constant = math.radians(platform["usbl_misalignment_deg"]) ** 2 + math.radians(platform["imu_bias_deg"]) ** 2
+        return seen_fix_offset(points, seen, self.lever_arms(platform)[0], np.asarray(sigma_range, float) ** 2,
+                               parameters["position_variance"], parameters["angle_sigma_deg"],
+                               parameters["attitude_variance"] + constant, parameters["depth_variance"],
+                               math.radians(platform["heading_deg"]))
+
     def measurement_model(self):
         """Range and direction cosines from the transceiver (:data:`MODEL`), with the depth."""
         return MODEL
@@ -728,4 +779,5 @@ class USBL(System):
 __all__ = ["attitude", "BOUND_MODEL", "bound_step", "compiled_bound", "context", "covariance", "direction",
            "fix_accuracy", "fix_information", "FIX_ITERATIONS", "FIXED", "horizontal_std", "measurement", "MODEL",
            "model_of", "packet_fix", "pcrb", "pcrb_inputs", "polar_fix", "position_information",
-           "POSITION_MODEL", "receiver_parameters", "STEPS", "transceiver", "transceiver_variance", "USBL"]
+           "POSITION_MODEL", "receiver_parameters", "seen_fix_offset", "STEPS", "transceiver", "transceiver_variance",
+           "USBL"]

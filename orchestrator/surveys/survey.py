@@ -37,7 +37,9 @@ TRACK_DEPTH_FRACTION = 0.01
 RANGE_PERCENTILES = (5.0, 95.0)
 #: Where a format's transducer positions come from (what the units' check names).
 TRACK_FIELDS = {"seagap": "obsdata: the antenna's East, North, Up (fields 4-6 and 11-13) [m]",
-                "garpos": "obs: ant_e0, ant_n0, ant_u0, ant_e1, ant_n1, ant_u1 [m]"}
+                "garpos": "obs: ant_e0, ant_n0, ant_u0, ant_e1, ant_n1, ant_u1 [m]",
+                "sblsim": "the log's tx_e_m, tx_n_m, tx_u_m, rx_e_m, rx_n_m, rx_u_m [m]",
+                "xie": "the transducer's North, East, Up at transmit and at receive (fields 2-4 and 9-11) [m]"}
 #: The site's keys of a transponder: name -> (allowed range, unit).
 TRANSPONDER_KEYS = {"e_m": ((-1e5, 1e5), "m"), "n_m": ((-1e5, 1e5), "m"), "u_m": ((-1e5, 1e5), "m"),
                     "turnaround_s": ((0.0, 60.0), "s")}
@@ -243,6 +245,7 @@ def load_survey(source: str, fmt: str | None = None, overrides: list[str] | None
     log = FORMATS[fmt](path)
     ids = sorted(log.counts["transponders"])
     apriori = guess_apriori(log, ids, solver["sound_speed_mps"])
+    check_track_units(log, ids, apriori, TRACK_FIELDS[fmt])
     site_origin = None
     if fmt == "xie":
         found = xie_origin(path)

@@ -91,6 +91,67 @@ def test_a_garpos_survey_in_km_is_refused_and_in_metres_passes(tmp_path, capsys)
     assert took < DOOR and "obs: ant_e0, ant_n0, ant_u0, ant_e1, ant_n1, ant_u1 [m]: transponder M1" in err
 
 
+XIE = files("sblsim.orchestrator.surveys").joinpath("data", "xie", "gnssa_data_20210723.txt")
+#: A Xie line's transducer North, East, Up at transmit and at receive (0-based fields; the module's FIELDS).
+XIE_POSITIONS = (1, 2, 3, 8, 9, 10)
+
+
+def test_a_xie_file_in_km_is_refused_at_the_door_and_in_metres_passes(tmp_path, capsys):
+    """Survey A's file as the authors give it solves past the door; its transducer positions divided by 1000 (the
+    travel times kept) are refused in one line within 2 s, naming the fields and the ranges' spread."""
+    lines = XIE.read_text().splitlines()
+    assert len(load_survey(str(XIE), "xie").log.frame) == 555
+    scaled = []
+    for line in lines:
+        cells = line.split()
+        if line.startswith("#") or len(cells) != 15:
+            scaled.append(line)
+            continue
+        for j in XIE_POSITIONS:
+            cells[j] = repr(float(cells[j]) / 1000.0)
+        scaled.append(" ".join(cells))
+    km = tmp_path / "km.txt"
+    km.write_text("\n".join(scaled) + "\n")
+    err, took = _one_line_refusal(capsys, ["calibrate", str(km), "--format", "xie"], tmp_path / "o")
+    assert took < DOOR, took
+    assert "the transducer's North, East, Up at transmit and at receive (fields 2-4 and 9-11) [m]: transponder 1" \
+        in err and "are the positions in km where metres are expected?" in err
+    # the spread of its ranges, computed here from the file: half its TWTT at 1300 m/s, 5 to 95 %
+    rows = np.array([line.split() for line in lines if not line.startswith("#") and len(line.split()) == 15],
+                    dtype=float)
+    ranges = 0.5 * 1300.0 * rows[:, 14]
+    assert f"span {np.percentile(ranges, 95) - np.percentile(ranges, 5):.4g} m" in err
+
+
+def test_a_sblsim_log_in_km_is_refused_and_in_metres_passes(tmp_path, capsys):
+    """A synthetic CSV log (a 300 m circle around a point 120 m from a transponder 100 m deep: its ranges span
+    about 240 m) solves; the same log with its positions in km is refused at the door, naming the log's position
+    columns. (A circle centred over the transponder keeps every range the same: no check of the units can see
+    them there.)"""
+    from test_calibrate import _circle, _log_of
+
+    from sblsim.orchestrator.surveys.log import write_log
+
+    good = tmp_path / "good.csv"
+    write_log(_log_of(_circle(np.random.default_rng(2), np.array([120.0, 0.0, -100.0]), n=40)), good)
+    assert main(["calibrate", str(good), "--out", str(tmp_path / "ok")]) == 0
+    capsys.readouterr()
+    lines = good.read_text().splitlines()
+    header = lines[1].split(",")
+    columns = [header.index(f"{w}_{a}_m") for w in ("tx", "rx") for a in "enu"]
+    scaled = lines[:2]
+    for line in lines[2:]:
+        cells = line.split(",")
+        for j in columns:
+            cells[j] = repr(float(cells[j]) / 1000.0)
+        scaled.append(",".join(cells))
+    km = tmp_path / "km.csv"
+    km.write_text("\n".join(scaled) + "\n")
+    err, took = _one_line_refusal(capsys, ["calibrate", str(km)], tmp_path / "o")
+    assert took < DOOR, took
+    assert "the log's tx_e_m, tx_n_m, tx_u_m, rx_e_m, rx_n_m, rx_u_m [m]: transponder 1's ranges" in err
+
+
 def test_n_bases_above_the_survey_s_pings_is_refused_naming_the_most_it_determines(tmp_path, capsys):
     # SeaGap's example: its pings are obsdata's distinct transmit times, counted here from the file
     obs = np.loadtxt(EXAMPLE.joinpath("obsdata.inp"))

@@ -6,7 +6,9 @@ map use that one geometry.
   transceiver is there plus the installation error drawn for the run, for a baseline of 0.5, 3 and 200 m.
 * A static diver's horizontal fix error over 200 replicates (the ``lsq`` receiver's fix of each packet and the
   depth) is within 10 % of the accuracy map's DRMS at the diver's point, with the default GPS error (0.1 m) and with
-  1 m; and within 15 % 200 m off it at 1,000 m depth, and 1 km and 2 km off at the ``lbl-field`` site; straight
+  1 m; and within 15 % 200 m off it at 1,000 m depth, 200 m and 1 km off at ``usbl-deep``, 1 km and 2 km off at
+  the ``lbl-field`` site, and 3 km off there, where only bottom reflections are heard (the map holds the fix the
+  reflection gives, and ``map.csv`` marks the point echo-only); straight
   below the transceiver and near the vertical at 1,000 m (where the range's second order constrains the fix and the
   Fisher information at the point does not see it), and below the transceiver at ``usbl-deep``, within 10 %.
 * The consistency of ``ekf-seq`` (mean NEES) lies in [1.5, 4.5], and the numbers do not depend on the baseline; with
@@ -29,7 +31,7 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
-from sblsim.orchestrator.maps import accuracy_map, grid
+from sblsim.orchestrator.maps import accuracy_map, echo_spread, grid, point_accuracy
 from tests.helpers import Core
 
 BASELINES = (0.5, 3.0, 200.0)
@@ -133,15 +135,21 @@ def test_with_a_1_m_gps_error_the_static_fix_error_is_the_maps_value_and_above_t
 
 
 #: Static vehicles far from the 15 m of the paper's scenarios: 200 m off the transceiver at 1,000 m (isovelocity,
-#: 0.5 s cycle), and 1 km and 2 km off at the ``lbl-field`` site (rays through its profile, detection by
-#: signal-to-noise, its 3 s cycle; the receiver turns each direction by the eigenray's bending). At 3 km there the
-#: direct ray is shadowed and every packet is a bottom reflection (47 m long): no map of direct arrivals holds.
+#: 0.5 s cycle), 200 m and 1 km off at the ``usbl-deep`` site (800 m deep, 8 s cycle) and 1 km and 2 km off at the
+#: ``lbl-field`` site (rays through its profile, detection by signal-to-noise, its 3 s cycle; the receiver turns
+#: each direction by the eigenray's bending). At 3 km there the direct ray is shadowed and every packet is a bottom
+#: reflection (:data:`ECHO_ONLY_POINT`).
 FAR = {
     "200m-off-1000m": ("semicircle", ("simulation.sampling_time=0.5", "simulation.duration=10",
                                       "target.waypoints=0 200 0 1000; 100 200 0 1000")),
+    "usbl-deep-200m": ("usbl-deep", ("simulation.duration=400", "target.waypoints=0 200 0 800; 100 200 0 800")),
+    "usbl-deep-1km": ("usbl-deep", ("simulation.duration=400", "target.waypoints=0 1000 0 800; 100 1000 0 800")),
     "lbl-field-1km": ("lbl-field", ("simulation.duration=45", "target.waypoints=0 1000 0 150; 100 1000 0 150")),
     "lbl-field-2km": ("lbl-field", ("simulation.duration=45", "target.waypoints=0 2000 0 150; 100 2000 0 150")),
 }
+#: 3 km North of the transceiver at ``lbl-field``, 150 m deep: the thermocline shadows the direct ray and every
+#: packet is a bottom reflection, its range about 47 m long and its elevation steeper.
+ECHO_ONLY_POINT = ("lbl-field", ("simulation.duration=45", "target.waypoints=0 3000 0 150; 100 3000 0 150"))
 #: Straight below the transceiver at 1,000 m.
 NADIR = ("semicircle", ("simulation.sampling_time=0.5", "simulation.duration=10",
                         "target.waypoints=0 0.5 0 1000; 100 0.5 0 1000"))
@@ -159,10 +167,45 @@ def test_the_map_is_what_a_static_vehicle_gets_off_the_vertical_to_kilometres(wh
     """The USBL map at a point against a static-vehicle Monte Carlo there: the ``lsq`` receiver's fix of each
     received packet (its horizontal RMS error) within 15 % of the map's DRMS, from 200 m to 2 km off: 200
     replicates at 1,000 m, 40 at the site (its eigenrays cost; over 500 packets, the RMS's sampling std about 3 %)."""
-    site = FAR[where][0] == "lbl-field"
-    rms, drms, count = far_fix_error(*FAR[where], replicates=40 if site else 200)
+    site = FAR[where][0] != "semicircle"
+    rms, drms, count = far_fix_error(*FAR[where], replicates={"lbl-field": 40, "usbl-deep": 20}.get(FAR[where][0], 200))
     assert count > (500 if site else 1500), count
     assert rms == pytest.approx(drms, rel=0.15), (where, rms, drms)
+
+
+def test_where_only_echoes_are_heard_the_map_is_the_reflected_fix_and_says_so(tmp_path):
+    """3 km off at ``lbl-field`` every packet is a bottom reflection. The map holds the fix that reflection gives:
+    the static vehicle's fixes (40 replicates) scatter about a point off the diver along its azimuth, by the offset
+    the map computes from the reflection's path (within 15 %), and their RMS error is the map's value (within 15 %:
+    the direct ray's geometry alone, the map before, is 23 % low); ``map.csv`` marks the point echo-only, and the
+    points 1 km off (the direct ray heard) not."""
+    cfg = load_config(ECHO_ONLY_POINT[0], ["platform.system=usbl", "simulation.receiver=lsq",
+                                           "target.trajectory=file", *ECHO_ONLY_POINT[1]], seed=5)
+    ts = run_batch(with_replicates(cfg, range(40)), "local", timeseries=True).timeseries
+    assert (ts["arrival"][ts["packet_valid"].to_numpy(bool)] == 3).all()  # bottom reflections only
+    rms, drms, count = static_fix_error(cfg, ts)
+    assert count > 400, count
+    assert rms == pytest.approx(drms, rel=0.15), (rms, drms)
+    seq = ts["packet_seq"].to_numpy()
+    new = (seq != np.r_[0, seq[:-1]]) & (seq > 0) & ts["packet_valid"].to_numpy(bool)
+    radial = float(np.mean(ts["est_x"][new] - ts["true_x"][new]))  # the diver is due North of the transceiver
+    plan = make_plan(cfg)
+    point = np.array([[3000.0, 0.0, 150.0]])
+    values = point_accuracy(plan, point)
+    assert values["echo"][0] > 0.99
+    offset = np.sqrt(echo_spread(plan, point, dict(plan.bound), values["echo"])[0][0])
+    assert radial == pytest.approx(offset, rel=0.15), (radial, offset)
+    assert 30.0 < offset < 60.0
+    direct = float(np.sqrt(drms ** 2 - offset ** 2))  # what the map held before: the direct ray's geometry alone
+    assert direct < 0.85 * rms
+    out = tmp_path / "m"
+    code = main(["map", "lbl-field", "--set", "platform.system=usbl", "--extent", "3000", "--step", "1000",
+                 "--out", str(out)])
+    assert code == 0
+    frame = pd.read_csv(out / "map.csv")
+    north = frame[frame["east"] == 0].set_index("north")
+    assert bool(north.loc[3000.0, "echo_only"]) and not bool(north.loc[1000.0, "echo_only"])
+    assert north.loc[3000.0, "drms"] == pytest.approx(drms, rel=1e-9)
 
 
 #: Offsets [m] from the vertical below the transceiver at 1,000 m (the IMU's 1° and the array's 0.5°): below it, in
