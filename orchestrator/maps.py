@@ -215,7 +215,7 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     values = plan.system.fix_accuracy(points, plan["platform"], bound, sigma, model=model, heard=heard)
     if plan["acoustics"]["detection"] == "snr" and plan.system.measures_direction:
         # a reflected arrival moves the one-packet fix: its offsets' mean square joins the noise's
-        spread = echo_spread(plan, points, bound, echo[:, 0])
+        spread = echo_spread(plan, points, bound, sigma, echo[:, 0])
         values = {**values, "drms": np.sqrt(values["drms"] ** 2 + spread[0]),
                   "drms_3d": np.sqrt(values["drms_3d"] ** 2 + spread[1])}
     out = {}
@@ -228,7 +228,9 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     out["echo"] = 1.0 - np.prod(1.0 - probability * echo, axis=1)
     return out
 
-def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, echo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+
+def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, sigma, echo: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
     """USBL with detection by signal-to-noise: the mean square of the one-packet fix's horizontal and 3-D offsets
     that reflected arrivals give at each point [m²], over the arrivals a cycle may take.
 
@@ -253,6 +255,8 @@ def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, echo: np.ndarray
         NED [m].
     bound : dict
         The error levels of the fix's R (:attr:`RunPlan.bound`, as :func:`point_accuracy` grew them).
+    sigma : float or ndarray, shape (M,)
+        The range noise σ_r of the fix's R [m] (one per point where the SNR grew it).
     echo : ndarray, shape (M,)
         The probability that a point's fix takes a reflected arrival (:func:`packet_probabilities`).
 
@@ -277,14 +281,16 @@ def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, echo: np.ndarray
         geometry = np.column_stack([b[0] + distances, np.full(distances.size, b[1]), np.full(distances.size, depth)])
         # the error levels that are one per point (grown by the SNR): a point's own at each distance
         own = at[[np.flatnonzero(horizontal[at] == d)[0] for d in distances]]
-        squares = _reflected_offsets(plan, geometry, _taken(bound, own, m))
+        levels = _taken({**bound, "sigma_range": sigma}, own, m)
+        squares = _reflected_offsets(plan, geometry, levels)
         for row, values in enumerate(squares):
             spread[row, at] = np.interp(horizontal[at], distances, values)
     return spread[0], spread[1]
 
 
 def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The mean squares of :func:`echo_spread` at points (K, 3) North of the transceiver [m²], each (K,)."""
+    """The mean squares of :func:`echo_spread` at points (K, 3) North of the transceiver [m²], each (K,), with the
+    error levels ``bound`` (and ``sigma_range``) of those points."""
     b = np.asarray(plan.lever_arms[0], dtype=float)
     k = geometry.shape[0]
     levels = site_levels(plan.component_parameters("acoustics"), np.repeat(b[None, :], k, axis=0), geometry,
@@ -302,8 +308,8 @@ def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tupl
             one_way = 0.5 * (levels["tau"][sel, up] + levels["tau"][sel, reply])
             rho, chord = _received_as_direct(plan, b[2], geometry[sel, 2], one_way, levels["launch"][sel, reply])
             seen = b + np.column_stack([rho * np.cos(chord), np.zeros(sel.size), rho * np.sin(chord)])
-            offset = plan.system.seen_offsets(geometry[sel], seen, plan["platform"], _taken(bound, sel, k),
-                                              plan["acoustics"]["sigma_range"])
+            taken = _taken(bound, sel, k)
+            offset = plan.system.seen_offsets(geometry[sel], seen, plan["platform"], taken, taken["sigma_range"])
             out[0, sel] += w[sel] * np.sum(offset[:, :2] ** 2, axis=1)
             out[1, sel] += w[sel] * np.sum(offset ** 2, axis=1)
     return out[0], out[1]
@@ -591,7 +597,8 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         lines = ax.contour(east, north, m, levels=list(levels), colors="w", linewidths=1.2)
         ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=8)
         echo = getattr(cfg, "echo", None)
-        if heard[k] is not None and echo is not None and (echo >= ECHO_ONLY).any():  # where only echoes come first
+        hatched = heard[k] is not None and echo is not None and bool((echo >= ECHO_ONLY).any())
+        if hatched:  # where only echoes come first
             ax.contourf(east, north, (echo >= ECHO_ONLY).astype(float), levels=[0.5, 1.5], colors="none",
                         hatches=["//"])
             ax.plot([], [], " ", label="/// echo-only")
@@ -609,7 +616,7 @@ def plot(labels: Sequence[str], configs: Sequence[dict], east: np.ndarray, north
         off = ("" if inside.all() else f", the {systems[k].marker} off the map" if not inside.any()
                else f", {int((~inside).sum())} of the {len(arms)} {systems[k].marker} off the map")
         ax.set_title(f"{label}\n({what}diver at {cfg['target']['depth']:g} m depth{off})", fontsize=9)
-        if (inside.any() and (k == 0 or systems[k] != systems[0])) or ax.get_legend_handles_labels()[0]:
+        if (inside.any() and (k == 0 or systems[k] != systems[0])) or hatched:
             ax.legend(loc="upper right", fontsize=8)
     what = "measurements" if any(not s.takes_ranges for s in systems) else "ranges"
     bar = fig.colorbar(mesh, ax=axes[0].tolist(), label=f"horizontal DRMS of one round of {what} + depth [m]")

@@ -193,7 +193,7 @@ def test_where_only_echoes_are_heard_the_map_is_the_reflected_fix_and_says_so(tm
     point = np.array([[3000.0, 0.0, 150.0]])
     values = point_accuracy(plan, point)
     assert values["echo"][0] > 0.99
-    offset = np.sqrt(echo_spread(plan, point, dict(plan.bound), values["echo"])[0][0])
+    offset = np.sqrt(echo_spread(plan, point, dict(plan.bound), plan["acoustics"]["sigma_range"], values["echo"])[0][0])
     assert radial == pytest.approx(offset, rel=0.15), (radial, offset)
     assert 30.0 < offset < 60.0
     direct = float(np.sqrt(drms ** 2 - offset ** 2))  # what the map held before: the direct ray's geometry alone
