@@ -195,7 +195,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim map`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.maps import diver_depth, grid, parse_levels, write
+    from sblsim.orchestrator.maps import ECHO_ONLY, diver_depth, grid, parse_levels, write
 
     check_seed_option(args.seed)
     levels = parse_levels(args.levels)
@@ -208,11 +208,15 @@ def main(args: argparse.Namespace) -> int:
     depth = configs[0]["target"]["depth"]
     where = "--depth" if args.depth is not None else diver_depth(configs[0])[1]  # (compared systems' defaults)
     print(f"maps at {depth:g} m depth ({where}; --depth D to choose)")
-    for label, m in zip(labels, maps):
+    for label, cfg, m in zip(labels, configs, maps):
         cells = m.size
         shares = ", ".join(f"{100 * float((m <= v).sum()) / cells:.0f} % within {v:g} m" for v in levels)
+        echo = getattr(cfg, "echo", None)
+        only = ""
+        if echo is not None and cfg["acoustics"]["detection"] == "snr" and (echo >= ECHO_ONLY).any():
+            only = f"; {100 * float((echo >= ECHO_ONLY).sum()) / cells:.0f} % echo-only (hatched)"
         print(f"{label}: horizontal DRMS {np.nanmin(m):.3f} … {np.nanmax(m[np.isfinite(m)]):.3f} m over "
-              f"±{args.extent:g} m; {shares}")
+              f"±{args.extent:g} m; {shares}{only}")
     write(labels, configs, east, north, maps, levels, out, compare)
     print(f"written to {out}/ (map.csv, map.png)")
     return 0

@@ -173,7 +173,7 @@ def test_the_map_is_what_a_static_vehicle_gets_off_the_vertical_to_kilometres(wh
     assert rms == pytest.approx(drms, rel=0.15), (where, rms, drms)
 
 
-def test_where_only_echoes_are_heard_the_map_is_the_reflected_fix_and_says_so(tmp_path):
+def test_where_only_echoes_are_heard_the_map_is_the_reflected_fix_and_says_so(tmp_path, capsys):
     """3 km off at ``lbl-field`` every packet is a bottom reflection. The map holds the fix that reflection gives:
     the static vehicle's fixes (40 replicates) scatter about a point off the diver along its azimuth, by the offset
     the map computes from the reflection's path (within 15 %), and their RMS error is the map's value (within 15 %:
@@ -203,6 +203,8 @@ def test_where_only_echoes_are_heard_the_map_is_the_reflected_fix_and_says_so(tm
                  "--out", str(out)])
     assert code == 0
     frame = pd.read_csv(out / "map.csv")
+    share = 100 * frame["echo_only"].mean()
+    assert f"; {share:.0f} % echo-only (hatched)" in capsys.readouterr().out
     north = frame[frame["east"] == 0].set_index("north")
     assert bool(north.loc[3000.0, "echo_only"]) and not bool(north.loc[1000.0, "echo_only"])
     assert north.loc[3000.0, "drms"] == pytest.approx(drms, rel=1e-9)
