@@ -43,6 +43,20 @@ def _example_in_km(folder: Path) -> np.ndarray:
     return np.array(rows, dtype=float)
 
 
+def _in_km(path: Path, names: list[str]) -> list[str]:
+    """The lines of a CSV file (a comment line, then its header) with the columns ``names`` divided by 1000."""
+    lines = path.read_text().splitlines()
+    header = lines[1].split(",")
+    columns = [header.index(n) for n in names]
+    scaled = lines[:2]
+    for line in lines[2:]:
+        cells = line.split(",")
+        for j in columns:
+            cells[j] = repr(float(cells[j]) / 1000.0)
+        scaled.append(",".join(cells))
+    return scaled
+
+
 def _one_line_refusal(capsys, args: list[str], out: Path) -> tuple[str, float]:
     start = time.perf_counter()
     status = main([*args, "--out", str(out)])
@@ -72,16 +86,7 @@ def test_a_seagap_folder_in_km_is_refused_at_the_door(tmp_path, capsys):
 
 def test_a_garpos_survey_in_km_is_refused_and_in_metres_passes(tmp_path, capsys):
     write_garpos(tmp_path / "g")
-    names = [f"ant_{a}{w}" for w in "01" for a in "enu"]
-    lines = (tmp_path / "g" / "obs.csv").read_text().splitlines()
-    header = lines[1].split(",")
-    columns = [header.index(n) for n in names]
-    scaled = lines[:2]
-    for line in lines[2:]:
-        cells = line.split(",")
-        for j in columns:
-            cells[j] = repr(float(cells[j]) / 1000.0)
-        scaled.append(",".join(cells))
+    scaled = _in_km(tmp_path / "g" / "obs.csv", [f"ant_{a}{w}" for w in "01" for a in "enu"])
     files_of = [str(tmp_path / "g" / "obs.csv"), "--format", "garpos", "--initcfg", str(tmp_path / "g" / "initcfg.ini"),
                 "--svp", str(tmp_path / "g" / "svp.csv")]
     # in metres: past the door
@@ -136,15 +141,7 @@ def test_a_sblsim_log_in_km_is_refused_and_in_metres_passes(tmp_path, capsys):
     write_log(_log_of(_circle(np.random.default_rng(2), np.array([120.0, 0.0, -100.0]), n=40)), good)
     assert main(["calibrate", str(good), "--out", str(tmp_path / "ok")]) == 0
     capsys.readouterr()
-    lines = good.read_text().splitlines()
-    header = lines[1].split(",")
-    columns = [header.index(f"{w}_{a}_m") for w in ("tx", "rx") for a in "enu"]
-    scaled = lines[:2]
-    for line in lines[2:]:
-        cells = line.split(",")
-        for j in columns:
-            cells[j] = repr(float(cells[j]) / 1000.0)
-        scaled.append(",".join(cells))
+    scaled = _in_km(good, [f"{w}_{a}_m" for w in ("tx", "rx") for a in "enu"])
     km = tmp_path / "km.csv"
     km.write_text("\n".join(scaled) + "\n")
     err, took = _one_line_refusal(capsys, ["calibrate", str(km)], tmp_path / "o")
