@@ -29,7 +29,7 @@ from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
-from sblsim.orchestrator.tracks.track import MAX_DROP, track, write
+from sblsim.orchestrator.tracks.track import MAX_DROP, MAX_TRUTH_SIGMA, track, write
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -184,7 +184,7 @@ def _receivers_kept(value: Any, where: str) -> list[str] | None:
 def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | None = None,
                reference: str | Path | None = None, smooth: bool = True, sound_speed: float | None = None,
                receivers_kept: str | Sequence[str] | None = None, drop_detections: float = 0.0, seed: int = 0,
-               out: str | Path | None = None, force: bool = False) -> TrackResult:
+               truth_sigma: float = 0.0, out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -210,6 +210,10 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         In [0, 0.99]: remove each detection with this probability before tracking (seeded by ``seed``).
     seed : int
         In [0, 2**31 − 1]: the seed of ``drop_detections``'s draw (``numpy.random.default_rng``).
+    truth_sigma : float
+        In [0, 100] m: the truth's own error per horizontal axis (a GPS's, the tow's lever arm), added to each
+        estimate's covariance in the NEES against it (``score.json``'s ``nees``, ``nees_median`` and
+        ``truth_sigma_m``); default 0, the truth taken as exact.
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
         ``errors.csv`` there.
@@ -238,8 +242,9 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     seed = check_seed(seed)
     if seed is None:
         raise ConfigError(f"seed: None is not allowed; allowed: an integer in [0, {MAX_SEED}]")
+    truth_sigma = real_argument(truth_sigma, "truth_sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     target = prepare_out(out, force, "track.csv", "track")
-    outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed)
+    outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed, truth_sigma)
     if target is not None:
         write(outcome, target)
     return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
@@ -295,6 +300,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, metavar="CONFIG",
                    help="the receiver's parameters, T and rate ratio: a built-in scenario or CONFIG.toml (default: "
                         "the configuration an exported log carries, else the semicircle scenario's)")
+    p.add_argument("--truth-sigma", type=float, default=None, metavar="M",
+                   help="--format toa: the truth's own error per horizontal axis [m] in [0, 100] (GPS, lever arm), "
+                        "in the NEES against it (default 0: the truth taken as exact)")
     p.add_argument("--truth", type=Path, default=None, metavar="FILE",
                    help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures; with "
                         "--format toa: x y t [m, m, s] under a header (e.g. GPS)")
@@ -313,7 +321,7 @@ def main(args: argparse.Namespace) -> int:
     given = [o for o, v in (("--receivers", args.receivers), ("--reference", args.reference),
                             ("--smooth", args.smooth), ("--sound-speed", args.sound_speed),
                             ("--receivers-kept", args.receivers_kept), ("--drop-detections", args.drop_detections),
-                            ("--seed", args.seed is not None)) if v]
+                            ("--seed", args.seed is not None), ("--truth-sigma", args.truth_sigma is not None)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -375,8 +383,8 @@ def _main_toa(args: argparse.Namespace) -> int:
                             ("--fmu-dir", args.fmu_dir)) if v]
     if other or args.engine != "local":
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
-                          "--truth, --reference, --smooth, --sound-speed, --receivers-kept, --drop-detections, "
-                          "--seed, --out, --force")
+                          "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
+                          "--drop-detections, --seed, --out, --force")
     speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", 1300.0, 1700.0,
                                                                 "m/s")
     kept = _receivers_kept(args.receivers_kept, "--receivers-kept")
@@ -385,7 +393,13 @@ def _main_toa(args: argparse.Namespace) -> int:
     seed = check_seed(0 if args.seed is None else args.seed, "--seed")
     if args.seed is not None and not drop:
         raise ConfigError("--seed: only with --drop-detections (the seed of its draw)")
-    outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed)
+    truth_sigma = 0.0
+    if args.truth_sigma is not None:
+        if args.truth is None:
+            raise ConfigError("--truth-sigma: only with --truth (the truth's own error in the NEES against it)")
+        truth_sigma = real_argument(args.truth_sigma, "--truth-sigma", 0.0, MAX_TRUTH_SIGMA, "m")
+    outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed,
+                    truth_sigma)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
     write(outcome, out)
@@ -409,6 +423,10 @@ def _main_toa(args: argparse.Namespace) -> int:
                 print(f"  {names[key]:<16} {e['n_fixed']:>6} {e['n_scored']:>6} {e['mean_m']:>7.3f} "
                       f"{e['median_m']:>7.3f} {e['rms_m']:>8.3f} {e['p90_m']:>7.3f} {e['p95_m']:>7.3f} {nees:>7} "
                       f"{lag:>7}")
+        if r["nees"] is not None:
+            print(f"  NEES of the {names[r['estimator']]} against the truth: mean {r['nees']:.3g}, median "
+                  f"{r['nees_median']:.3g} (2 and 1.39 when consistent), the truth's own error "
+                  f"{r['truth_sigma_m']:g} m per axis in the budget (--truth-sigma)")
         if r["lag_s"] is not None:
             print(f"  lag_s {r['lag_s']:+.2f} s: the truth's time shift (searched in ±{r['lag_range_s']:g} s) that "
                   f"minimises the {names[r['estimator']]}'s RMS error ({r['rms_at_lag_m']:.3f} m there); reported, "

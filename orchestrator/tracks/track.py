@@ -53,6 +53,8 @@ LAG_RANGE_S = 30.0
 SCORE_KEYS = ("n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95_m", "nees", "lag_s")
 #: The largest share of detections removed at random.
 MAX_DROP = 0.99
+#: The largest truth error per axis ``--truth-sigma`` takes [m].
+MAX_TRUTH_SIGMA = 100.0
 
 
 @dataclass
@@ -211,11 +213,15 @@ def estimate_lag(t: np.ndarray, xy: np.ndarray, truth: np.ndarray, bound: float 
 
 
 def score(t: np.ndarray, p: np.ndarray, truth: np.ndarray, cov: np.ndarray | None = None,
-          lag_bound: float = LAG_RANGE_S) -> tuple[dict[str, Any], np.ndarray, np.ndarray | None]:
+          lag_bound: float = LAG_RANGE_S, truth_sigma: float = 0.0
+          ) -> tuple[dict[str, Any], np.ndarray, np.ndarray | None]:
     """The errors of estimates at times ``t`` (m,) [s], positions ``p`` (m, 2 or 3) [m] against the truth (rows
     t, x, y[, z]) interpolated at those times, and their statistics (module docstring; the estimates outside the
-    truth's span not scored); ``cov`` (m, 2, 2) [m²] adds the mean 2-D NEES. Returns the statistics, the 2-D
-    errors (m,) (NaN where not scored) and the 3-D ones (None unless both have z)."""
+    truth's span not scored); ``cov`` (m, 2, 2) [m²] adds the 2-D NEES, its mean (``nees``: 2 when consistent)
+    and median (``nees_median``: 2 ln 2 = 1.386 when consistent, the χ² of 2 degrees of freedom), with the truth's
+    own error ``truth_sigma`` [m] per horizontal axis in the budget (``cov`` + σ² I; 0: the truth taken as exact).
+    Returns the statistics, the 2-D errors (m,) (NaN where not scored) and the 3-D ones (None unless both have
+    z)."""
     inside = (t >= truth[0, 0]) & (t <= truth[-1, 0])
     g = _truth_at(truth, t)
     e = p[:, :2] - g[:, :2]
@@ -228,14 +234,15 @@ def score(t: np.ndarray, p: np.ndarray, truth: np.ndarray, cov: np.ndarray | Non
     if not ok.any():
         return stats, err, err3
     stats |= _stats(err[ok])
-    stats["nees"] = None
+    stats["nees"] = stats["nees_median"] = None
     if cov is not None:
-        c = cov[ok]
+        c = cov[ok] + truth_sigma**2 * np.eye(2)
         det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0]
         good = np.isfinite(det) & (det > 1e-9 * c[:, 0, 0] * c[:, 1, 1])  # a 3-receiver fix may have none
         x, y, c, det = e[ok][good, 0], e[ok][good, 1], c[good], det[good]
         nees = (c[:, 1, 1] * x**2 - (c[:, 0, 1] + c[:, 1, 0]) * x * y + c[:, 0, 0] * y**2) / det
-        stats["nees"] = float(nees.mean()) if good.any() else None
+        if good.any():
+            stats["nees"], stats["nees_median"] = float(nees.mean()), float(np.median(nees))
     stats["lag_s"], stats["rms_at_lag_m"] = estimate_lag(t, p[:, :2], truth, lag_bound)
     stats["lag_range_s"] = lag_bound
     # the truth's heading at each ping (its motion over ±0.5 s), where it moves at 0.1 m/s or more
@@ -253,9 +260,10 @@ def score(t: np.ndarray, p: np.ndarray, truth: np.ndarray, cov: np.ndarray | Non
 
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
-          drop: float = 0.0, seed: int = 0) -> TrackOutcome:
+          drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0) -> TrackOutcome:
     """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
-    (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`)."""
+    (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`); ``truth_sigma`` [m] the truth's
+    own error per horizontal axis in the NEES (:func:`score`)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -319,7 +327,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         parts, entries = [], {}
 
         def scored(estimator: str, ping: Any, t: np.ndarray, p: np.ndarray, cov: np.ndarray | None) -> None:
-            stats, err, err3 = score(t, p, truth, cov)
+            stats, err, err3 = score(t, p, truth, cov, truth_sigma=truth_sigma)
             entries[estimator] = {"n_pings": int(len(toa)), "n_fixed": int(len(t)),
                                   "share_fixed": len(t) / len(toa)} | stats
             parts.append(pd.DataFrame({"estimator": estimator, "ping": ping, "time": t, "error_2d_m": err,
@@ -337,7 +345,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         first = entries.pop(main)
         result = {key: first.get(key) for key in SCORE_KEYS}
         result |= {key: value for key, value in first.items() if key not in result}
-        result |= {"estimator": main, "others": entries}
+        result |= {"estimator": main, "others": entries, "truth_sigma_m": truth_sigma}
         result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS, "thirds": thirds}
     summary["wall_time_s"] = time.perf_counter() - start
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
@@ -391,6 +399,6 @@ def write(outcome: TrackOutcome, out: Path) -> None:
         plt.close(fig)
 
 
-__all__ = ["BOUND_COLUMNS", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA",
-           "TrackOutcome", "bound_along_track", "bound_thirds", "drop_detections", "estimate_lag", "figure", "score",
-           "track", "write"]
+__all__ = ["BOUND_COLUMNS", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA", "ROBUST_FROM_MEDIAN",
+           "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds", "drop_detections",
+           "estimate_lag", "figure", "score", "track", "write"]

@@ -296,6 +296,55 @@ def test_score_in_3d_against_numpy():
                                                                                np.sqrt(np.mean(e3**2)))
 
 
+def test_the_nees_holds_the_truth_s_own_error_against_numpy():
+    """score's 2-D NEES with the truth's error σ per axis in the budget: each estimate's eᵀ(P + σ² I)⁻¹e by numpy,
+    their mean and median; a consistent estimator against a truth of that error gives a mean near 2 and a median
+    near 2 ln 2, and without σ in the budget more."""
+    from sblsim.orchestrator.tracks.track import score
+
+    rng = np.random.default_rng(4)
+    tt_ = np.arange(0.0, 2000.0, 1.0)
+    truth = np.column_stack([tt_, 0.3 * tt_, np.zeros_like(tt_)])
+    t = np.arange(1.0, 1999.0, 2.0)
+    g = np.column_stack([np.interp(t, tt_, truth[:, k]) for k in (1, 2)])
+    a = rng.normal(size=(len(t), 2, 2)) * 0.2
+    cov = a @ a.transpose(0, 2, 1) + 0.01 * np.eye(2)
+    sigma = 0.3
+    p = g + np.einsum("mij,mj->mi", np.linalg.cholesky(cov + sigma**2 * np.eye(2)), rng.normal(size=(len(t), 2)))
+    stats_, _, _ = score(t, p, truth, cov, truth_sigma=sigma)
+    e = p - g
+    nees = np.einsum("mi,mi->m", e, np.linalg.solve(cov + sigma**2 * np.eye(2), e[..., None])[..., 0])
+    assert np.isclose(stats_["nees"], nees.mean(), rtol=1e-10) and np.isclose(stats_["nees_median"],
+                                                                             np.median(nees), rtol=1e-10)
+    assert abs(stats_["nees"] - 2.0) < 0.25 and abs(stats_["nees_median"] - 2 * np.log(2)) < 0.2
+    exact, _, _ = score(t, p, truth, cov)
+    assert exact["nees"] > 1.5 * stats_["nees"]
+
+
+def test_lake_hald_with_a_gps_error_in_the_budget(tmp_path, capsys, full):
+    """The smoother against the GPS with 0.1 m per axis of the truth's own error in the budget: the median NEES is
+    near a consistent estimator's (2 ln 2), the mean far above 2 (the tail of gross errors sets it); the number is
+    in score.json and on the console; a bad --truth-sigma, or one without --truth, refused in one line."""
+    from sblsim.orchestrator.cli import main
+
+    args = ["replay", str(DATA / "toa.txt"), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"),
+            "--smooth"]
+    out = tmp_path / "out"
+    assert main([*args, "--truth", str(DATA / "gps.txt"), "--truth-sigma", "0.1", "--out", str(out)]) == 0
+    import json
+
+    score = json.loads((out / "score.json").read_text())
+    assert score["truth_sigma_m"] == 0.1 and full.score["truth_sigma_m"] == 0.0
+    assert 1.0 <= score["nees_median"] <= 2.0 and score["nees"] > 4.0
+    assert score["nees"] < full.score["nees"] and score["median_m"] == full.score["median_m"]
+    assert f"median {score['nees_median']:.3g} (2 and 1.39 when consistent)" in capsys.readouterr().out
+    for option, word in ((["--truth", str(DATA / "gps.txt"), "--truth-sigma", "-1"], "--truth-sigma"),
+                         (["--truth-sigma", "0.1"], "only with --truth")):
+        status = main([*args, *option, "--out", str(tmp_path / "bad")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(err) == 1 and word in err[0] and not (tmp_path / "bad").exists()
+
+
 def test_fixes_restart_a_lost_filter_and_only_then():
     """Simulated pings, the refusal rule switched off: a filter started 40 m off is restarted from a fix by
     disagree_after pings whose fixes disagree, only when given the fixes; a filter started right never is."""
