@@ -52,6 +52,7 @@ from sblsim.models.acoustics.sonar import accuracy_scale
 from sblsim.models.acoustics.sound_speed import PROFILE
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
+from sblsim.models.design.criteria import ECHO_LIMIT
 from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.cosim.config import scenario_system
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, as_plan, load_plan, thaw
@@ -213,9 +214,15 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
             bound["angle_sigma_deg"] = bound["angle_sigma_deg"] * grown
         sigma = sigma * grown
     values = plan.system.fix_accuracy(points, plan["platform"], bound, sigma, model=model, heard=heard)
-    if plan["acoustics"]["detection"] == "snr" and plan.system.measures_direction:
-        # a reflected arrival moves the one-packet fix: its offsets' mean square joins the noise's
-        spread = echo_spread(plan, points, bound, sigma, echo[:, 0])
+    fix_echo = 1.0 - np.prod(1.0 - probability * echo, axis=1)
+    if plan["acoustics"]["detection"] == "snr":
+        # where a fix takes a reflected arrival more often than the prediction holds for (ECHO_LIMIT, a design's),
+        # the offsets the reflections give: their mean square joins the noise's
+        echoes = np.where((fix_echo > ECHO_LIMIT)[:, None], echo, 0.0)
+        if plan.system.measures_direction:
+            spread = echo_spread(plan, points, bound, sigma, echoes[:, 0])
+        else:
+            spread = range_echo_spread(plan, points, bound, probability, echoes)
         values = {**values, "drms": np.sqrt(values["drms"] ** 2 + spread[0]),
                   "drms_3d": np.sqrt(values["drms_3d"] ** 2 + spread[1])}
     out = {}
@@ -225,7 +232,7 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
             out[key] = np.where(available < MIN_AVAILABILITY, np.nan, out[key])
     out["log_det"] = np.where(np.isnan(out["drms"]), np.nan, values["log_det"])
     out["availability"] = available
-    out["echo"] = 1.0 - np.prod(1.0 - probability * echo, axis=1)
+    out["echo"] = fix_echo
     return out
 
 
@@ -286,6 +293,125 @@ def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, sigma, echo: np.
         for row, values in enumerate(squares):
             spread[row, at] = np.interp(horizontal[at], distances, values)
     return spread[0], spread[1]
+
+
+def range_echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, heard: np.ndarray, echo: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Ranging systems (SBL, LBL) with detection by signal-to-noise: the mean square of a cycle's fix's horizontal
+    and 3-D offsets that reflected arrivals give at each point [m²].
+
+    Each leg of a range (OWTT's one, TWTT's two) takes its first detected eigenray with the probability
+    :func:`~sblsim.models.acoustics.detection.first_shares` gives (given that it is heard; legs and transducers
+    independent); the receiver turns the legs' mean travel time into a range as for a direct arrival
+    (:func:`_received_as_direct`), so that transducer k's range is off by δ_k from the direct ray's, with mean
+    μ_k and variance v_k over the pairs. The fix of the ranges and the depth moves by ``G δ``, ``G = J⁻¹ Hᵀ W``
+    (H the ranges' straight-line unit vectors from the transducers, W each range's probability of being heard over
+    its variance, J = Hᵀ W H plus the depth's information: the map's expected information, Niu et al. 2001), whose
+    second moment is ``G (μ μᵀ + diag(v)) Gᵀ``: a bias common to every range moves a short baseline's fix little,
+    a difference between them moves it by the baseline's leverage. The legs' offsets are computed at up to
+    :data:`ECHO_DISTANCES` horizontal distances per pair of depths among the pairs where ``echo`` > 0, interpolated
+    in between (the site is range-independent).
+
+    Parameters
+    ----------
+    plan : RunPlan
+    points : ndarray, shape (M, 3)
+        NED [m].
+    bound : dict
+        The error levels (``noise_variance`` [m²], per point and transducer where the SNR grew it;
+        ``depth_variance`` [m²]).
+    heard, echo : ndarray, each (M, n)
+        Each transducer's probability of being heard and of its range being a reflection's
+        (:func:`packet_probabilities`).
+
+    Returns
+    -------
+    horizontal, total : ndarray, each (M,)
+        [m²].
+    """
+    m = points.shape[0]
+    spread = np.zeros((2, m))
+    rows = np.flatnonzero((echo > 0.0).any(axis=1))
+    if rows.size == 0:
+        return spread[0], spread[1]
+    arms = np.asarray(plan.lever_arms, dtype=float)
+    n = arms.shape[0]
+    p = points[rows]
+    mean, variance = np.zeros((rows.size, n)), np.zeros((rows.size, n))
+    horizontal = np.hypot(p[:, None, 0] - arms[None, :, 0], p[:, None, 1] - arms[None, :, 1])  # (R, n)
+    legs = 2 if plan["acoustics"]["ranging"] == "twtt" else 1
+    for zt in np.unique(arms[:, 2]):
+        for depth in np.unique(p[:, 2]):
+            pair = (p[:, None, 2] == depth) & (arms[None, :, 2] == zt) & (echo[rows] > 0.0)
+            if not pair.any():
+                continue
+            distances = np.unique(horizontal[pair])
+            if distances.size > ECHO_DISTANCES:
+                wanted = np.linspace(distances[0], distances[-1], ECHO_DISTANCES)
+                distances = distances[np.unique(np.clip(np.searchsorted(distances, wanted), 0, distances.size - 1))]
+            moments = _range_offsets(plan, zt, depth, distances, legs)
+            for out, values in zip((mean, variance), moments):  # each smooth in the distance (not s = v + μ²)
+                out[pair] = np.interp(horizontal[pair], distances, values)
+    # the fix's gain: straight-line unit vectors, each range weighted by its probability over its variance
+    u = p[:, None, :] - arms[None, :, :]
+    u = u / np.linalg.norm(u, axis=2, keepdims=True)  # (R, n, 3)
+    noise = np.broadcast_to(np.asarray(bound["noise_variance"], float), (m, n))[rows] \
+        if np.ndim(bound["noise_variance"]) == 2 else np.full((rows.size, n), float(bound["noise_variance"]))
+    w = heard[rows] / noise
+    # sums over the transducers in their order: one never heard (weight 0) adds exact zeros, the map is then the
+    # map without it bit for bit
+    information = np.zeros((rows.size, 3, 3))
+    for k in range(n):
+        information += w[:, k, None, None] * u[:, k, :, None] * u[:, k, None, :]
+    information[:, 2, 2] += 1.0 / float(bound["depth_variance"])
+    bias, offset = np.zeros((rows.size, 3)), np.zeros((rows.size, 3, 3))
+    for k in range(n):
+        g = np.linalg.solve(information, (w[:, k, None] * u[:, k, :])[..., None])[..., 0]  # (R, 3): k's gain
+        bias += g * mean[:, k, None]
+        offset += variance[:, k, None, None] * g[:, :, None] * g[:, None, :]
+    offset += bias[:, :, None] * bias[:, None, :]
+    spread[0, rows] = offset[:, 0, 0] + offset[:, 1, 1]
+    spread[1, rows] = np.trace(offset, axis1=1, axis2=2)
+    return spread[0], spread[1]
+
+
+def _range_offsets(plan: RunPlan, zt: float, depth: float, distances: np.ndarray, legs: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The mean and the variance [m, m²] of a range's offset from the direct ray's (:func:`range_echo_spread`)
+    between a transducer at depth ``zt`` and a diver at ``depth`` at the horizontal ``distances`` (K,), over the
+    first detected eigenrays of its ``legs`` (1: OWTT, 2: TWTT), each (K,)."""
+    k = distances.size
+    sources = np.column_stack([np.zeros(k), np.zeros(k), np.full(k, zt)])
+    divers = np.column_stack([distances, np.zeros(k), np.full(k, depth)])
+    levels = site_levels(plan.component_parameters("acoustics"), sources, divers, compiled_family_levels())
+    shares = first_shares(levels["tau"], levels["pd"])
+    total = shares.sum(axis=1, keepdims=True)
+    weight = shares / np.where(total > 0.0, total, 1.0)
+    tau = np.where(levels["valid"] > 0.5, levels["tau"], np.nan)
+    zr = np.full(k, float(depth))
+    chord = np.hypot(distances, depth - zt)
+    direct = np.isfinite(tau[:, 0])
+    reference = chord.copy()
+    if direct.any():
+        reference[direct] = _received_as_direct(plan, zt, zr[direct], tau[direct, 0], np.zeros(direct.sum()))[0]
+    combos = [(j,) for j in range(3)] if legs == 1 else [(j, i) for j in range(3) for i in range(3)]
+    offsets = []  # (weights, offsets) of each pair whose range is not the direct ray's
+    for combo in combos:
+        w = np.prod([weight[:, j] for j in combo], axis=0)
+        sel = np.flatnonzero((w > 0.0) & np.isfinite(tau[:, list(combo)]).all(axis=1)) if any(combo) else []
+        if len(sel) == 0:
+            continue
+        one_way = np.mean(tau[sel][:, list(combo)], axis=1)
+        seen = _received_as_direct(plan, zt, zr[sel], one_way, np.zeros(len(sel)))[0]
+        offsets.append((sel, w[sel], seen - reference[sel]))
+    mean, variance = np.zeros(k), np.zeros(k)
+    for sel, w, delta in offsets:
+        mean[sel] += w * delta
+    direct = 1.0 - sum(np.bincount(sel, w, k) for sel, w, _ in offsets) if offsets else np.ones(k)
+    variance += direct * mean**2  # the direct pairs' offset is 0
+    for sel, w, delta in offsets:
+        variance[sel] += w * (delta - mean[sel]) ** 2
+    return mean, variance
 
 
 def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -656,4 +782,4 @@ def write(labels, configs, east, north, maps, levels, out: Path | str,
 
 
 __all__ = ["ECHO_ONLY", "MAX_EXTENT", "MapConfig", "accuracy_map", "check_depth", "echo_spread", "grid", "grown_noise",
-           "make_maps", "parse_levels", "plot", "point_accuracy", "system_line", "table", "write"]
+           "make_maps", "parse_levels", "plot", "point_accuracy", "range_echo_spread", "system_line", "table", "write"]
