@@ -364,6 +364,11 @@ def range_echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, heard: np.
     for k in range(n):
         information += w[:, k, None, None] * u[:, k, :, None] * u[:, k, None, :]
     information[:, 2, 2] += 1.0 / float(bound["depth_variance"])
+    # where the ranges heard do not fix the position (J singular: the map is infinite there) no offset is added
+    eigen = np.linalg.eigvalsh(information)
+    fixed = eigen[:, 0] > 1e-12 * eigen[:, -1]
+    information[~fixed] = np.eye(3)
+    w = np.where(fixed[:, None], w, 0.0)
     bias, offset = np.zeros((rows.size, 3)), np.zeros((rows.size, 3, 3))
     for k in range(n):
         g = np.linalg.solve(information, (w[:, k, None] * u[:, k, :])[..., None])[..., 0]  # (R, 3): k's gain

@@ -45,7 +45,7 @@ from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import Area, check_problem
 from sblsim.orchestrator.design.run import resolve, search_all
 from sblsim.orchestrator.design.search import Objective, optimise_free, optimise_ring
-from sblsim.orchestrator.maps import packet_probabilities, point_accuracy
+from sblsim.orchestrator.maps import packet_probabilities, point_accuracy, range_echo_spread
 
 #: A small problem on the paper's fixed channel: LBL transponders on a 20 m deep floor around a 30 m work area.
 SMALL = {
@@ -234,6 +234,18 @@ def test_a_transponder_in_the_shadow_adds_nothing_where_it_is_not_heard():
     rms = float(np.sqrt(np.mean(((ts["est_x"] - ts["true_x"]) ** 2 + (ts["est_y"] - ts["true_y"]) ** 2)[settled])))
     mapped = float(with_it["drms"][np.flatnonzero(east == -500.0)[0]])
     assert rms == pytest.approx(mapped, rel=0.15), (rms, mapped)
+
+
+def test_reflected_ranges_that_do_not_fix_the_position_add_nothing():
+    """The reflected ranges' spread (maps.range_echo_spread) at a point where one range alone is heard (with the
+    depth it cannot fix the position: the map is infinite there) is 0, not an error; where all four are heard by
+    reflections it is the gain's trace, positive."""
+    plan = load_plan("lbl-field", ["platform.system=lbl"])
+    points = np.array([[4000.0, 0.0, 150.0], [3000.0, 3000.0, 150.0]])
+    one = np.array([[1.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0]])
+    horizontal, total = range_echo_spread(plan, points, dict(plan.bound), one, one)
+    assert horizontal[0] == 0.0 and total[0] == 0.0
+    assert 0.0 < horizontal[1] <= total[1]
 
 
 def test_the_api_takes_the_problem_as_keyword_sections_and_refuses_bad_keys(tmp_path):
