@@ -281,10 +281,7 @@ def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, sigma, echo: np.
     horizontal = np.hypot(points[:, 0] - b[0], points[:, 1] - b[1])
     for depth in np.unique(points[where, 2]):
         at = where[points[where, 2] == depth]
-        distances = np.unique(horizontal[at])
-        if distances.size > ECHO_DISTANCES:  # evenly spread over the distances, the nearest point's own
-            wanted = np.linspace(distances[0], distances[-1], ECHO_DISTANCES)
-            distances = distances[np.unique(np.clip(np.searchsorted(distances, wanted), 0, distances.size - 1))]
+        distances = _sampled(horizontal[at])
         geometry = np.column_stack([b[0] + distances, np.full(distances.size, b[1]), np.full(distances.size, depth)])
         # the error levels that are one per point (grown by the SNR): a point's own at each distance
         own = at[[np.flatnonzero(horizontal[at] == d)[0] for d in distances]]
@@ -345,10 +342,7 @@ def range_echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, heard: np.
             pair = (p[:, None, 2] == depth) & (arms[None, :, 2] == zt) & (echo[rows] > 0.0)
             if not pair.any():
                 continue
-            distances = np.unique(horizontal[pair])
-            if distances.size > ECHO_DISTANCES:
-                wanted = np.linspace(distances[0], distances[-1], ECHO_DISTANCES)
-                distances = distances[np.unique(np.clip(np.searchsorted(distances, wanted), 0, distances.size - 1))]
+            distances = _sampled(horizontal[pair])
             moments = _range_offsets(plan, zt, depth, distances, legs)
             for out, values in zip((mean, variance), moments):  # each smooth in the distance (not s = v + μ²)
                 out[pair] = np.interp(horizontal[pair], distances, values)
@@ -388,10 +382,7 @@ def _range_offsets(plan: RunPlan, zt: float, depth: float, distances: np.ndarray
     k = distances.size
     sources = np.column_stack([np.zeros(k), np.zeros(k), np.full(k, zt)])
     divers = np.column_stack([distances, np.zeros(k), np.full(k, depth)])
-    levels = site_levels(plan.component_parameters("acoustics"), sources, divers, compiled_family_levels())
-    shares = first_shares(levels["tau"], levels["pd"])
-    total = shares.sum(axis=1, keepdims=True)
-    weight = shares / np.where(total > 0.0, total, 1.0)
+    levels, weight = _first_arrivals(plan, sources, divers)
     tau = np.where(levels["valid"] > 0.5, levels["tau"], np.nan)
     zr = np.full(k, float(depth))
     chord = np.hypot(distances, depth - zt)
@@ -424,11 +415,7 @@ def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tupl
     error levels ``bound`` (and ``sigma_range``) of those points."""
     b = np.asarray(plan.lever_arms[0], dtype=float)
     k = geometry.shape[0]
-    levels = site_levels(plan.component_parameters("acoustics"), np.repeat(b[None, :], k, axis=0), geometry,
-                         compiled_family_levels())
-    shares = first_shares(levels["tau"], levels["pd"])
-    total = shares.sum(axis=1, keepdims=True)
-    weight = shares / np.where(total > 0.0, total, 1.0)
+    levels, weight = _first_arrivals(plan, np.repeat(b[None, :], k, axis=0), geometry)
     out = np.zeros((2, k))
     for up in range(3):
         for reply in range(3):
@@ -444,6 +431,26 @@ def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tupl
             out[0, sel] += w[sel] * np.sum(offset[:, :2] ** 2, axis=1)
             out[1, sel] += w[sel] * np.sum(offset ** 2, axis=1)
     return out[0], out[1]
+
+
+def _sampled(distances: np.ndarray) -> np.ndarray:
+    """The distinct ``distances``, or at most :data:`ECHO_DISTANCES` of them evenly spread over their span (each
+    the nearest given distance at or above its place), increasing [m]."""
+    distinct = np.unique(distances)
+    if distinct.size <= ECHO_DISTANCES:
+        return distinct
+    wanted = np.linspace(distinct[0], distinct[-1], ECHO_DISTANCES)
+    return distinct[np.unique(np.clip(np.searchsorted(distinct, wanted), 0, distinct.size - 1))]
+
+
+def _first_arrivals(plan: RunPlan, sources: np.ndarray, receivers: np.ndarray) -> tuple[dict, np.ndarray]:
+    """The site's eigenrays between pairs of points (:func:`~sblsim.models.acoustics.core.site_levels`) and each
+    family's probability of being a heard leg's first detected arrival, (K, 3)
+    (:func:`~sblsim.models.acoustics.detection.first_shares`, given that the leg is heard; 0 where none is)."""
+    levels = site_levels(plan.component_parameters("acoustics"), sources, receivers, compiled_family_levels())
+    shares = first_shares(levels["tau"], levels["pd"])
+    total = shares.sum(axis=1, keepdims=True)
+    return levels, shares / np.where(total > 0.0, total, 1.0)
 
 
 def _taken(bound: dict, index: np.ndarray, size: int) -> dict:
