@@ -231,6 +231,23 @@ def _evaluate_pings(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarr
     return np.asarray(model).T[:k], np.asarray(J).reshape(n, size, dim + 1).transpose(1, 0, 2)[:k]
 
 
+def _evaluate_arrivals(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`toa_function` of one receiver at each of h arrivals: the receiver (h, dim) [m], the target's position
+    (h, dim) [m] and emission time (h,) [s] of each; times of arrival (h,) and Jacobians (h, dim + 1) (a mapped
+    function of the next power of two of h)."""
+    h, dim = p.shape
+    size = 1 << max(h - 1, 0).bit_length()
+    pad = ((0, size - h), (0, 0))
+    model, J = _mapped_arrivals(dim, size)(np.pad(p, pad).T, np.pad(te, pad[0])[None, :], np.pad(receivers, pad).T, c)
+    return np.asarray(model).ravel()[:h], np.asarray(J).reshape(size, dim + 1)[:h]
+
+
+@lru_cache(maxsize=32)
+def _mapped_arrivals(dim: int, h: int) -> ca.Function:
+    """:func:`toa_function` of one receiver over h arrivals at once (each its own receiver; the sound speed shared)."""
+    return toa_function(1, dim).map("toa_arrivals", "serial", h, [3], [])
+
+
 def _gauss_newton_pings(toa, filled, used, receivers, c, p, te):
     """Gauss-Newton iterations with step halving of many pings' fixes at once: positions (k, dim), emission times
     (k,), Jacobians (k, n, dim + 1) and residuals (k, n) (0 where not used) at the end."""
@@ -710,6 +727,287 @@ def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.n
     return xs, Ps
 
 
+#: Degrees of freedom of the Student-t error of a time of arrival in the robust smoother (:func:`robust_smooth`): a
+#: heavy tail (a late multipath arrival 10 σ off weighs 4 / 103 of a good one), the common robust choice (Lange,
+#: Little, Taylor 1989).
+ROBUST_DOF = 3.0
+#: Gauss-Newton iterations of the robust smoother, at most, per start.
+ROBUST_ITERATIONS = 100
+#: The weight from which the robust smoother counts an arrival as kept (not weighed down as an outlier): a
+#: normalised residual within √(10 (ν + 1) − ν) ≈ 6.1 σ at ν = 3.
+ROBUST_KEPT_WEIGHT = 0.1
+#: The robust smoother stops when an iteration lowers its cost by less than this share.
+ROBUST_TOLERANCE = 1e-9
+#: Gauss-Newton iterations of each start before the robust smoother keeps the one of the lowest cost.
+ROBUST_SCREEN = 20
+
+
+@dataclass
+class RobustTrack:
+    """What :func:`robust_smooth` returns, over the pings it was given (m pings, state size s = 2 dim + 2).
+
+    Attributes
+    ----------
+    x : ndarray, (m, s)
+        The maximum a-posteriori states ``[p, v, t_e, Δ]`` [m, m/s, s, s].
+    P : ndarray, (m, s, s)
+        Their covariances: the diagonal blocks of the inverse of the cost's Gauss-Newton Hessian at ``x`` (the
+        Laplace approximation), with the final weights.
+    weights : ndarray, (m, n)
+        Each time of arrival's weight at the end, ``(ν + 1) / (ν + z²)`` (1 for an arrival as expected, near 0
+        for an outlier; 0 where not heard).
+    cost : float
+        The cost at ``x`` (:func:`robust_smooth`) [1].
+    iterations : int
+        The Gauss-Newton iterations of the start kept.
+    start : int
+        Which of the starts given gave ``x`` (the lowest cost).
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    weights: np.ndarray
+    cost: float
+    iterations: int
+    start: int
+
+
+def _process(settings: TrackerSettings, dim: int) -> np.ndarray:
+    """The inverse of the Cholesky factor of the process noise Q (s, s) over the nominal interval (the tracker's
+    model, :meth:`ToaTracker.transition`)."""
+    s, T, q = 2 * dim + 2, settings.interval, settings.acceleration_psd
+    Q = np.zeros((s, s))
+    Q[:dim, :dim] = q * T**3 / 3 * np.eye(dim)
+    Q[:dim, dim:2 * dim] = Q[dim:2 * dim, :dim] = q * T**2 / 2 * np.eye(dim)
+    Q[dim:2 * dim, dim:2 * dim] = q * T * np.eye(dim)
+    Q[-2, -2], Q[-1, -1] = settings.jitter**2, settings.interval_drift**2
+    return np.linalg.inv(np.linalg.cholesky(Q))
+
+
+def _robust_terms(toa, heard, receivers, settings, X, Li, dof):
+    """The robust smoother's residuals at the states X (m, s): the arrivals' normalised ones z (h,), the weights
+    (h,), the TOA Jacobians (h, dim + 1) [1/σ units], the whitened process residuals e (m − 1, s) and the
+    transitions' Jacobians F (m − 1, s, s); and the cost."""
+    dim = receivers.shape[1]
+    k, i = heard
+    model, J = _evaluate_arrivals(receivers[i], settings.sound_speed, X[k, :dim], X[k, -2])
+    z = (toa[k, i] - model) / settings.sigma_toa
+    Jz = -J / settings.sigma_toa
+    prev = X[:-1]
+    predicted = prev.copy()
+    predicted[:, :dim] += prev[:, -1:] * prev[:, dim:2 * dim]
+    predicted[:, -2] += prev[:, -1]
+    e = (X[1:] - predicted) @ Li.T
+    F = np.tile(np.eye(X.shape[1]), (len(prev), 1, 1))
+    F[:, :dim, dim:2 * dim] = prev[:, -1, None, None] * np.eye(dim)
+    F[:, :dim, -1] = prev[:, dim:2 * dim]
+    F[:, -2, -1] = 1.0
+    cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum())
+    return z, (dof + 1.0) / (dof + z**2), Jz, e, F, cost
+
+
+def _per_ping(m: int, pings: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The sums of ``values`` (h, ...) per ping of the arrivals ``pings`` (h,), sorted (as :func:`numpy.nonzero`
+    gives them): (m, ...), 0 for a ping none arrived from."""
+    out = np.zeros((m,) + values.shape[1:])
+    if len(pings):
+        first = np.flatnonzero(np.r_[True, pings[1:] != pings[:-1]])
+        out[pings[first]] = np.add.reduceat(values, first, axis=0)
+    return out
+
+
+def _normal_blocks(m, s, dim, heard, w, Jz, Li, F):
+    """The Gauss-Newton Hessian of the robust cost, block tridiagonal: diagonal blocks (m, s, s) and the blocks
+    (k, k + 1) (m − 1, s, s)."""
+    D = np.zeros((m, s, s))
+    cols = list(range(dim)) + [s - 2]
+    outer = w[:, None, None] * Jz[:, :, None] * Jz[:, None, :]
+    D[np.ix_(np.arange(m), cols, cols)] += _per_ping(m, heard[0], outer)
+    now = Li.T @ Li  # e_k's Jacobian with respect to x_k is Li, with respect to x_k−1 is −Li F_k
+    prev = -Li @ F
+    D[1:] += now
+    D[:-1] += np.einsum("kji,kjl->kil", prev, prev)
+    B = np.einsum("kji,jl->kil", prev, Li)
+    return D, B
+
+
+def _banded_solve(D, B, g):
+    """Solve ``N δ = g`` for the symmetric positive definite block-tridiagonal N (diagonal blocks D (m, s, s), upper
+    blocks B (m − 1, s, s)) by LAPACK's banded Cholesky (:func:`scipy.linalg.solveh_banded`); δ (m, s)."""
+    from scipy.linalg import solveh_banded
+
+    m, s = D.shape[:2]
+    u = 2 * s - 1
+    ab = np.zeros((u + 1, m * s))
+    starts = np.arange(m) * s
+    for a in range(s):
+        for b in range(a, s):
+            ab[u + a - b, starts + b] = D[:, a, b]
+        for b in range(s):
+            ab[u + a - s - b, starts[1:] + b] = B[:, a, b]
+    return solveh_banded(ab, g.ravel()).reshape(m, s)
+
+
+def _block_covariance(D, B):
+    """The diagonal blocks (m, s, s) of N⁻¹ for the block-tridiagonal N of :func:`_banded_solve` (the block
+    elimination and its backward pass: the Rauch-Tung-Striebel recursion in information form)."""
+    m = len(D)
+    Sinv = np.empty_like(D)
+    Sinv[0] = np.linalg.inv(D[0])
+    for k in range(1, m):
+        Sinv[k] = np.linalg.inv(D[k] - B[k - 1].T @ Sinv[k - 1] @ B[k - 1])
+    cov = np.empty_like(D)
+    cov[-1] = Sinv[-1]
+    for k in range(m - 2, -1, -1):
+        G = Sinv[k] @ B[k]
+        cov[k] = Sinv[k] + G @ cov[k + 1] @ G.T
+    return 0.5 * (cov + cov.transpose(0, 2, 1))
+
+
+def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
+                  dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS) -> RobustTrack:
+    """The robust fixed-interval smoother: the track's maximum a-posteriori states with heavy-tailed times of arrival.
+
+    Over the whole record at once (YAPS's approach, Baktoft et al. 2017: the state-space model fitted to every
+    time of arrival, here its MAP rather than its marginal likelihood), the states ``x_k = [p, v, t_e, Δ]`` of
+    :class:`ToaTracker` minimise
+
+        ``Σ_k ‖L⁻¹ (x_k − f(x_k−1))‖² + Σ_(k,i) heard (ν + 1) ln(1 + z_ki² / ν)``,
+        ``z_ki = (toa_ki − t_e,k − ‖p_k − r_i‖ / c) / σ_toa``,
+
+    the tracker's motion model (``f``, ``Q = L Lᵀ`` over the nominal interval) and a Student-t error of ν degrees of
+    freedom for each time of arrival (σ_toa its scale): a late multipath arrival is weighed down where the rest of
+    the track disagrees with it, with no gate and no restart. Gauss-Newton with iteratively reweighted least
+    squares (weights ``(ν + 1) / (ν + z²)``, the EM weights of the Student-t; Lange, Little, Taylor, "Robust
+    statistical modeling using the t distribution", JASA 84(408), 1989), the step halved until the cost falls,
+    each step solved as the banded system it is (the normal matrix is block tridiagonal over the pings: the
+    iterated Kalman smoother as a Gauss-Newton method, Bell, SIAM J. Optim. 4(3), 1994), the covariance by the
+    block recursion (the Rauch-Tung-Striebel backward pass in information form). The cost is not convex: each
+    start given takes :data:`ROBUST_SCREEN` steps, and the one of the lowest cost then goes on to the end.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+        The motion model, ``sound_speed``, ``sigma_toa`` and the nominal ``interval``.
+    starts : list of ndarray, each (m, 2 dim + 2)
+        Starting tracks (finite), e.g. the RTS smoother's states.
+    dof : float
+        ν.
+    iterations : int
+        Gauss-Newton iterations at most (of the start kept, its screening steps among them).
+
+    Returns
+    -------
+    RobustTrack
+
+    Raises
+    ------
+    ModelError
+        If no start is given, a start is not finite or of the wrong shape.
+    """
+    toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    m, (n, dim) = len(toa), receivers.shape
+    s = 2 * dim + 2
+    if not starts:
+        raise ModelError("robust smoother: no starting track")
+    heard = np.nonzero(np.isfinite(toa))
+    Li = _process(settings, dim)
+    runs = []
+    for start in starts:
+        X = np.array(start, float)
+        if X.shape != (m, s) or not np.isfinite(X).all():
+            raise ModelError(f"robust smoother: a starting track of shape {X.shape} or not finite; allowed: "
+                             f"({m}, {s}), finite")
+        runs.append({"X": X, "terms": _robust_terms(toa, heard, receivers, settings, X, Li, dof), "done": 0,
+                     "converged": False})
+
+    def iterate(run, count):
+        """Up to ``count`` more Gauss-Newton steps of a start (stopping where it has converged)."""
+        X, (z, w, Jz, e, F, cost) = run["X"], run["terms"]
+        for _ in range(count):
+            if run["converged"]:
+                return
+            D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, F)
+            g = np.zeros((m, s))  # the gradient's half: Jᵀ W r
+            g[:, list(range(dim)) + [s - 2]] += _per_ping(m, heard[0], (w * z)[:, None] * Jz)
+            g[1:] += e @ Li
+            g[:-1] += np.einsum("kji,kj->ki", -Li @ F, e)
+            step = _banded_solve(D + 1e-12 * np.eye(s), B, -g)
+            scale = 1.0
+            while scale > 1e-6:
+                trial = X + scale * step
+                terms = _robust_terms(toa, heard, receivers, settings, trial, Li, dof)
+                if terms[-1] < cost:
+                    break
+                scale *= 0.5
+            else:  # no step lowers the cost: a minimum
+                run["converged"] = True
+                return
+            gain = cost - terms[-1]
+            X, (z, w, Jz, e, F, cost) = trial, terms
+            run.update(X=X, terms=terms, done=run["done"] + 1, converged=gain <= ROBUST_TOLERANCE * cost)
+
+    # each start a few steps, then the one of the lowest cost to the end (the ranking of the starts' costs is
+    # settled within a few steps)
+    for run in runs:
+        iterate(run, min(ROBUST_SCREEN, iterations))
+    index = int(np.argmin([run["terms"][-1] for run in runs]))
+    best = runs[index]
+    iterate(best, iterations - best["done"])
+    X, (_, w, Jz, _, F, cost) = best["X"], best["terms"]
+    D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, F)
+    P = _block_covariance(D, B)
+    weights = np.zeros((m, n))
+    weights[heard] = w
+    return RobustTrack(X, P, weights, cost, best["done"], index)
+
+
+def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,
+                   dim: int) -> np.ndarray | None:
+    """A starting track for :func:`robust_smooth` from the single-ping fixes alone: the fixes of dim + 2 receivers or
+    more that kept every arrival of their ping (each within ``fix_speed`` × elapsed time + 5 m of the median of its
+    six neighbours among them), interpolated linearly over the pings (the velocity their differences, the emission
+    time advanced by the nominal interval from the nearest such fix before); None when fewer than 2 remain.
+
+    Parameters
+    ----------
+    fixes : tuple
+        Positions (m, dim) [m], emission times (m,) [s] and the arrivals used (m, n), as :func:`fix_pings` gives.
+    heard : ndarray, (m,)
+        The arrivals of each ping.
+    settings : TrackerSettings
+    dim : int
+    """
+    position, emission, used = fixes
+    m = len(position)
+    good = np.flatnonzero(np.isfinite(emission) & (used.sum(axis=1) >= dim + 2) & (used.sum(axis=1) == heard))
+    keep = np.ones(len(good), bool)
+    for j in range(len(good)):
+        near = [i for i in range(max(0, j - 3), min(len(good), j + 4)) if i != j]
+        if not near:
+            continue
+        elapsed = np.abs(good[near] - good[j]).max() * settings.interval
+        keep[j] = np.linalg.norm(position[good[j]] - np.median(position[good[near]], axis=0)) <= \
+            settings.fix_speed * elapsed + 5.0
+    good = good[keep]
+    if len(good) < 2:
+        return None
+    pings = np.arange(m)
+    X = np.empty((m, 2 * dim + 2))
+    for a in range(dim):
+        X[:, a] = np.interp(pings, good, position[good, a])
+        X[:, dim + a] = np.gradient(X[:, a]) / settings.interval
+    before = good[np.clip(np.searchsorted(good, pings, side="right") - 1, 0, len(good) - 1)]
+    X[:, -2] = emission[before] + (pings - before) * settings.interval
+    X[:, -1] = settings.interval
+    return X
+
+
 def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSettings, rng: np.random.Generator,
                    start: np.ndarray | None = None, speed: float = 1.0, detection: float = 0.8,
                    first_emission: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -751,7 +1049,8 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
     return toa, positions, emissions
 
 
-__all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_SCALE",
-           "SOUND_SPEED_RANGE", "Fix", "ToaTracker", "TrackRecord", "TrackerSettings",
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_DOF", "ROBUST_ITERATIONS",
+           "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack",
+           "ToaTracker", "TrackRecord", "TrackerSettings", "anchored_start", "robust_smooth",
            "calibrate_sound_speed_robust", "fix_pings", "rts_smooth", "simulate_pings", "single_ping_fix",
            "toa_function", "toa_model"]

@@ -29,7 +29,7 @@ from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
-from sblsim.orchestrator.tracks.track import MAX_DROP, MAX_TRUTH_SIGMA, track, write
+from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, track, write
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -410,7 +410,7 @@ def _main_toa(args: argparse.Namespace) -> int:
     print(f"track of {args.log}: {s['pings']} pings at "
           f"{len(s['receivers'])} receivers{thinned}, sound speed {c['sound_speed_m_s']:.1f} m/s ({c['source']}), "
           f"ping interval {s['ping_interval_s']:.4f} s, in {s['wall_time_s']:.1f} s")
-    names = {"rts": "RTS smoother", "ekf": "EKF (causal)", "fix": "single-ping fix", "reference": "reference"}
+    names = ESTIMATOR_NAMES
     if outcome.score is not None:
         r = outcome.score
         print(f"  2-D error against {args.truth} at each estimated emission time [m] (no lag applied):")

@@ -1,7 +1,9 @@
-"""A recorded inverted-LBL track: the times of arrival through the single-ping fix, the EKF and the RTS smoother
-(:mod:`sblsim.models.receiver.toa_tracking`), scored against a truth track, written to a folder.
+"""A recorded inverted-LBL track: the times of arrival through the single-ping fix, the EKF, the RTS smoother and
+the robust smoother (:mod:`sblsim.models.receiver.toa_tracking`), scored against a truth track, written to a
+folder.
 
-The track is the smoother's rows (``smooth``), else the causal EKF's; the other estimators are kept beside it.
+The track is the robust smoother's rows (``smooth``: every ping from the tracker's start), else the causal EKF's;
+the other estimators are kept beside it.
 Before tracking, the array may be thinned (``receivers_kept``: the other receivers' columns not used) and a
 share of the detections removed at random (``drop_detections``, seeded).
 
@@ -45,8 +47,10 @@ SIGMA_TOA = 1.5e-4
 #: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
 #: a lost EKF (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings` ``agree_after``).
 AGREE_AFTER = 4
-#: The estimators, in the order of the outputs.
-ESTIMATORS = ("rts", "ekf", "fix")
+#: The estimators, in the order of the outputs, and their names in words (the console, the figure).
+ESTIMATOR_NAMES = {"robust": "robust smoother", "rts": "RTS smoother", "ekf": "EKF (causal)", "fix": "single-ping fix",
+                   "reference": "reference"}
+ESTIMATORS = ("robust", "rts", "ekf", "fix")
 #: The time lags between the truth and the track searched [s]: ±this.
 LAG_RANGE_S = 30.0
 #: The keys of ``score.json`` for the track (the issue's names), before the further ones.
@@ -75,7 +79,7 @@ class TrackOutcome:
 
 #: The predicted DRMS of each estimator in ``bound.csv``: the single-ping fix's, the PCRB of the causal filter, the
 #: smoothing bound.
-BOUND_COLUMNS = {"fix": "fix_drms_m", "ekf": "pcrb_m", "rts": "pcrb_smoothed_m"}
+BOUND_COLUMNS = {"fix": "fix_drms_m", "ekf": "pcrb_m", "rts": "pcrb_smoothed_m", "robust": "pcrb_smoothed_m"}
 #: The RMS of a circular Gaussian 2-D error over its median: ``1 / sqrt(ln 2)``.
 ROBUST_FROM_MEDIAN = 1.0 / np.sqrt(np.log(2.0))
 
@@ -306,12 +310,23 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     k = np.flatnonzero(positioned)
     if smooth:
         xs, Ps = tracker.smooth(record)
+        k0 = record.start
+        if k0 < len(toa) - 1:
+            # the robust smoother from the fixes' own track and from the RTS smoother's: the lower cost kept
+            starts = [xs[k0:]]
+            anchored = tt.anchored_start((fx, fe, fused), np.isfinite(toa).sum(axis=1), settings, dim)
+            if anchored is not None:
+                starts.insert(0, anchored[k0:])
+            robust = tt.robust_smooth(toa[k0:], positions, settings, starts)
+            kr = np.arange(k0, len(toa))
+            rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
+                 (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1))
         rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1))
     rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
          record.used[k].sum(axis=1))
     f = np.flatnonzero(np.isfinite(fe))
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1))
-    main = "rts" if smooth else "ekf"
+    main = next(iter(frames)) if smooth else "ekf"  # the robust smoother where it ran, else the RTS smoother
     estimates = pd.concat(frames.values(), ignore_index=True)
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
     summary: dict[str, Any] = {
@@ -364,7 +379,7 @@ def figure(outcome: TrackOutcome):
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title="track")
     ax.legend()
     if outcome.errors is not None:
-        for estimator in ("fix", "ekf", "rts", "reference"):
+        for estimator in ("fix", "ekf", "rts", "robust", "reference"):
             e = outcome.errors[outcome.errors["estimator"] == estimator]
             if len(e):
                 bx.semilogy(e["time"], e["error_2d_m"], ".", ms=2, label=estimator)
@@ -399,6 +414,6 @@ def write(outcome: TrackOutcome, out: Path) -> None:
         plt.close(fig)
 
 
-__all__ = ["BOUND_COLUMNS", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA", "ROBUST_FROM_MEDIAN",
+__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA", "ROBUST_FROM_MEDIAN",
            "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds", "drop_detections",
            "estimate_lag", "figure", "score", "track", "write"]

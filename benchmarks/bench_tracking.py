@@ -1,0 +1,88 @@
+"""Time the replay of a recorded inverted-LBL track (the Lake Hald tow track, docs/tracking.md) on one core.
+
+Run:  python benchmarks/bench_tracking.py [--repeats N] [--receivers-kept H2,H4,...]
+
+Best of ``--repeats`` (after a first run that loads the modules and makes casadi's functions): the whole replay
+(reading, the sound speed's calibration, the single-ping fixes, the EKF, the RTS smoother, the robust smoother,
+scoring, no files written) against the issue's target of 10 s on one core; and, on the same pings in the same run,
+the robust smoother against its baseline, the EKF with the RTS smoother (the ratio of their times). Prints a JSON
+line last (``replay_s``, ``ekf_rts_s``, ``robust_s``, ``ratio``, ``rms_m`` of the track).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "lake-hald"
+#: The issue's target for the whole replay on one core [s].
+TARGET_S = 10.0
+
+
+def best_of(repeats: int, work) -> tuple[float, object]:
+    """The best time [s] of ``repeats`` calls of ``work`` after a first one, and its last result."""
+    result = work()
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = work()
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def measure(repeats: int, kept: str | None = None) -> dict:
+    """The timings (module docstring) on the Lake Hald files, and the replay's result (``result``)."""
+    import sblsim
+    from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.orchestrator.tracks.toa import read_receivers, read_toa
+    from sblsim.orchestrator.tracks.track import AGREE_AFTER, SIGMA_TOA, _usable
+
+    def replay():
+        return sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                                 receivers_kept=kept)
+
+    replay_s, result = best_of(repeats, replay)
+    c = result.summary["sound_speed"]["sound_speed_m_s"]
+    toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"),
+                                None if kept is None else kept.split(","))
+    fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
+    settings = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=float(np.nanmedian(np.diff(fe))),
+                                  agree_after=AGREE_AFTER)
+    tracker = tt.ToaTracker(positions, settings)
+
+    def ekf_rts():
+        record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))
+        return record, tracker.smooth(record)
+
+    ekf_rts_s, (record, (xs, _)) = best_of(repeats, ekf_rts)
+    k0 = record.start
+    starts = [tt.anchored_start((fx, fe, fused), np.isfinite(toa).sum(axis=1), settings, positions.shape[1])[k0:],
+              xs[k0:]]
+    robust_s, _ = best_of(repeats, lambda: tt.robust_smooth(toa[k0:], positions, settings, starts))
+    return {"replay_s": replay_s, "target_s": TARGET_S, "ekf_rts_s": ekf_rts_s, "robust_s": robust_s,
+            "ratio": robust_s / ekf_rts_s, "pings": int(len(toa)), "rms_m": result.score["rms_m"],
+            "cores": os.cpu_count(), "result": result}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs of each (the best is kept)")
+    parser.add_argument("--receivers-kept", default=None, help="a thinned array: the receivers' names, by commas")
+    args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error("--repeats: must be at least 1")
+    r = measure(args.repeats, args.receivers_kept)
+    print(f"Lake Hald, {r['pings']} pings: the whole replay {r['replay_s']:.2f} s (target {r['target_s']:g} s on one "
+          f"core); the EKF and RTS smoother {r['ekf_rts_s']:.2f} s, the robust smoother {r['robust_s']:.2f} s "
+          f"({r['ratio']:.2f}× the EKF and RTS smoother); the track's RMS error {r['rms_m']:.3f} m")
+    r.pop("result")
+    print(json.dumps(r))
+
+
+if __name__ == "__main__":
+    main()

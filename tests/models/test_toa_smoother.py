@@ -1,0 +1,160 @@
+"""The robust fixed-interval smoother of an inverted LBL (a pinger's track from its times of arrival at a fixed array,
+the emission times unknown): its answer is the minimum of its stated cost, found here by scipy's own least squares
+on that cost written again with numpy (no casadi, no Gauss-Newton of ours); its covariance is the inverse of that
+cost's information, inverted densely; on simulated pings with late (multipath) arrivals it is consistent over 20
+seeds and beats the RTS smoother it starts from."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from sblsim.models.errors import ModelError
+from sblsim.models.receiver import toa_tracking as tt
+
+DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
+
+
+def lake_hald_receivers() -> np.ndarray:
+    receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    return receivers[np.isfinite(receivers).all(axis=1)]
+
+
+def late_arrivals(toa: np.ndarray, rng: np.random.Generator, share: float) -> np.ndarray:
+    """A share of the arrivals made 1 to 3 ms late (a reflected path)."""
+    late = np.isfinite(toa) & (rng.random(toa.shape) < share)
+    return np.where(late, toa + rng.uniform(1e-3, 3e-3, toa.shape), toa)
+
+
+def cost_residuals(theta: np.ndarray, toa: np.ndarray, receivers: np.ndarray, s: tt.TrackerSettings, dof: float):
+    """The smoother's cost as a vector r with Σ r² the cost, written from its docstring with numpy alone: per heard
+    arrival ``sign(z) sqrt((ν + 1) ln(1 + z² / ν))`` (z / ... as ν → ∞), per ping after the first the process noise's
+    whitened innovation (Q over the nominal interval, as the EKF's model)."""
+    m, n = toa.shape
+    X = theta.reshape(m, 6)
+    p, v, te, interval = X[:, :2], X[:, 2:4], X[:, 4], X[:, 5]
+    k, i = np.nonzero(np.isfinite(toa))
+    z = (toa[k, i] - te[k] - np.sqrt(((p[k] - receivers[i]) ** 2).sum(axis=1)) / s.sound_speed) / s.sigma_toa
+    arrival = z if dof == np.inf else np.sign(z) * np.sqrt((dof + 1) * np.log1p(z**2 / dof))
+    T, q = s.interval, s.acceleration_psd
+    Q = np.zeros((6, 6))
+    for a in range(2):
+        Q[np.ix_([a, 2 + a], [a, 2 + a])] = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+    Q[4, 4], Q[5, 5] = s.jitter**2, s.interval_drift**2
+    W = np.linalg.inv(np.linalg.cholesky(Q))  # Q = L Lᵀ: the innovation whitened by L⁻¹
+    predicted = np.column_stack([p[:-1] + interval[:-1, None] * v[:-1], v[:-1], te[:-1] + interval[:-1],
+                                 interval[:-1]])
+    return np.concatenate([arrival, ((X[1:] - predicted) @ W.T).ravel()])
+
+
+def small_problem(seed: int = 2, pings: int = 30, late: float = 0.1):
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
+    receivers = lake_hald_receivers()
+    rng = np.random.default_rng(seed)
+    toa, truth, emissions = tt.simulate_pings(receivers, pings, s, rng, speed=0.3, detection=0.25)
+    return late_arrivals(toa, rng, late), receivers, s, truth, emissions
+
+
+def start_of(toa, receivers, s):
+    tracker = tt.ToaTracker(receivers, s)
+    record = tracker.run(toa)
+    xs, _ = tracker.smooth(record)
+    return record.start, xs
+
+
+@pytest.mark.parametrize("dof", [tt.ROBUST_DOF, np.inf], ids=["student-t", "gaussian"])
+def test_the_smoother_is_the_minimum_of_its_cost(dof):
+    """scipy's trust-region least squares (finite-difference Jacobian) on the cost written again with numpy, started
+    from the smoother's answer moved 0.5 m and 0.1 ms, lands on it: positions within 1 mm, emission times within
+    1 µs, the same cost to 1e-6; with ν → ∞ (a Gaussian error) the same. 10 % of the arrivals are 1 to 3 ms late."""
+    toa, receivers, s, truth, _ = small_problem()
+    k0, xs = start_of(toa, receivers, s)
+    toa = toa[k0:]
+    robust = tt.robust_smooth(toa, receivers, s, [xs[k0:]], dof=1e12 if dof == np.inf else dof)
+    moved = robust.x.copy()
+    moved[:, :2] += 0.5
+    moved[:, 4] += 1e-4
+    reference = least_squares(cost_residuals, moved.ravel(), args=(toa, receivers, s, dof), method="trf",
+                              x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=20000)
+    X = reference.x.reshape(robust.x.shape)
+    assert np.abs(X[:, :2] - robust.x[:, :2]).max() < 1e-3
+    assert np.abs(X[:, 4] - robust.x[:, 4]).max() < 1e-6
+    ours = float((cost_residuals(robust.x.ravel(), toa, receivers, s, dof) ** 2).sum())
+    assert abs(ours - 2 * reference.cost) <= 1e-6 * ours
+    assert abs(ours - robust.cost) <= 1e-9 * ours  # the cost it reports is the cost it states
+
+
+def test_the_covariance_is_the_inverse_of_the_information():
+    """Gaussian errors (ν → ∞): the smoother's covariance per ping is the diagonal block of (JᵀJ)⁻¹, J the
+    Jacobian of the cost's residuals at its answer by scipy's finite differences, inverted densely here."""
+    from scipy.optimize._numdiff import approx_derivative
+
+    toa, receivers, s, _, _ = small_problem(seed=3, late=0.0)
+    k0, xs = start_of(toa, receivers, s)
+    toa = toa[k0:]
+    robust = tt.robust_smooth(toa, receivers, s, [xs[k0:]], dof=1e12)
+    J = approx_derivative(cost_residuals, robust.x.ravel(), method="cs", args=(toa, receivers, s, np.inf))
+    cov = np.linalg.inv(J.T @ J)
+    for k in range(len(toa)):
+        block = cov[6 * k:6 * k + 6, 6 * k:6 * k + 6]
+        assert np.allclose(robust.P[k], block, rtol=1e-6, atol=1e-12 * np.abs(block).max())
+
+
+def test_consistent_on_simulated_pings_with_late_arrivals_and_better_than_rts():
+    """20 seeds of simulated pings (Lake Hald's array, a quarter of the arrivals heard, 5 % of them 1 to 3 ms late):
+    the robust smoother's 2-D NEES against the exact truth in [1, 3] (2 if consistent) and its RMS error below the
+    RTS smoother's on the same pings."""
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
+    receivers = lake_hald_receivers()
+    nees, robust_sq, rts_sq = [], [], []
+    for seed in range(20):
+        rng = np.random.default_rng(100 + seed)
+        toa, truth, _ = tt.simulate_pings(receivers, 80, s, rng, speed=0.3, detection=0.25)
+        toa = late_arrivals(toa, rng, 0.05)
+        k0, xs = start_of(toa, receivers, s)
+        robust = tt.robust_smooth(toa[k0:], receivers, s, [xs[k0:]])
+        e = robust.x[:, :2] - truth[k0:]
+        nees.append(np.mean(np.einsum("ki,kij,kj->k", e, np.linalg.inv(robust.P[:, :2, :2]), e)))
+        robust_sq.append(np.mean((e**2).sum(axis=1)))
+        rts_sq.append(np.mean(((xs[k0:, :2] - truth[k0:]) ** 2).sum(axis=1)))
+    assert 1.0 <= np.mean(nees) <= 3.0, np.mean(nees)
+    assert np.sqrt(np.mean(robust_sq)) < np.sqrt(np.mean(rts_sq)), (np.mean(robust_sq), np.mean(rts_sq))
+
+
+def test_the_lowest_cost_start_is_kept_and_bad_starts_refused():
+    """Two starts, one of them 30 m off: the answer is the other's (the lower cost), whichever order; a start of
+    the wrong shape or not finite, or none, is refused."""
+    toa, receivers, s, truth, _ = small_problem(seed=4, late=0.0)
+    k0, xs = start_of(toa, receivers, s)
+    toa, good = toa[k0:], xs[k0:]
+    far = good.copy()
+    far[:, :2] += 30.0
+    a = tt.robust_smooth(toa, receivers, s, [far, good])
+    b = tt.robust_smooth(toa, receivers, s, [good, far])
+    assert (a.start, b.start) == (1, 0) and np.array_equal(a.x, b.x) and a.cost == b.cost
+    assert np.median(np.hypot(*(a.x[:, :2] - truth[k0:]).T)) < 0.5
+    for starts in ([], [good[:-1]], [np.where(good == good[3, 0], np.nan, good)]):
+        with pytest.raises(ModelError, match="robust smoother"):
+            tt.robust_smooth(toa, receivers, s, starts)
+
+
+def test_the_anchored_start_follows_the_agreeing_fixes():
+    """The start made of the single-ping fixes that kept every arrival: a fix moved 200 m (a gross fix) is left out
+    by its neighbours, and the start passes within 1 m of the truth at the fixes it keeps."""
+    toa, receivers, s, truth, emissions = small_problem(seed=5, pings=60, late=0.0)
+    fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, s.sound_speed, s.sigma_toa)
+    heard = np.isfinite(toa).sum(axis=1)
+    good = np.flatnonzero(np.isfinite(fe) & (fused.sum(axis=1) >= 4) & (fused.sum(axis=1) == heard))
+    assert len(good) > 10
+    gross = good[len(good) // 2]
+    fx = fx.copy()
+    fx[gross] += 200.0
+    X = tt.anchored_start((fx, fe, fused), heard, s, 2)
+    assert X.shape == (60, 6) and np.isfinite(X).all()
+    assert np.hypot(*(X[gross, :2] - truth[gross])) < 5.0
+    kept = np.setdiff1d(good, [gross])
+    assert np.abs(X[kept, :2] - truth[kept]).max() < 1.0 and np.abs(X[kept, 4] - emissions[kept]).max() < 1e-3
+    assert tt.anchored_start((fx[:1], fe[:1], fused[:1]), heard[:1], s, 2) is None
