@@ -1050,7 +1050,7 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
 
 
 __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_DOF", "ROBUST_ITERATIONS",
-           "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack",
-           "ToaTracker", "TrackRecord", "TrackerSettings", "anchored_start", "robust_smooth",
+           "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix",
+           "RobustTrack", "ToaTracker", "TrackRecord", "TrackerSettings", "anchored_start", "robust_smooth",
            "calibrate_sound_speed_robust", "fix_pings", "rts_smooth", "simulate_pings", "single_ping_fix",
            "toa_function", "toa_model"]

@@ -132,9 +132,10 @@ class TrackResult:
     Attributes
     ----------
     track : pandas.DataFrame
-        ``track.csv``: one row per ping with a fix, of the RTS smoother (``smooth``) or else the causal EKF:
-        ``time`` (the estimated emission time) [s], ``x``, ``y``[, ``z``] [m], ``sigma_x``, ``sigma_y``[,
-        ``sigma_z``] [m], ``receivers_heard`` (the arrivals the estimate used).
+        ``track.csv``: one row per ping with a fix, of the robust smoother (``smooth``: every ping from the
+        tracker's start) or else the causal EKF: ``time`` (the estimated emission time) [s], ``x``, ``y``[,
+        ``z``] [m], ``sigma_x``, ``sigma_y``[, ``sigma_z``] [m], ``receivers_heard`` (the arrivals the estimate
+        used; the robust smoother's: those it did not weigh down as outliers).
     score : dict or None
         ``score.json`` (with a truth track): for the track ``n_pings``, ``n_fixed``, ``mean_m``, ``median_m``,
         ``rms_m``, ``p90_m``, ``p95_m`` (2-D errors [m]), ``nees`` (the mean 2-D NEES), ``lag_s`` (the truth's
@@ -199,7 +200,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     reference : str or Path, optional
         Another solution (``x y t``) scored beside, on its own rows.
     smooth : bool
-        Run the RTS smoother and make its rows the track (else the causal EKF's).
+        Run the RTS smoother and the robust smoother, and make the robust smoother's rows the track (else the
+        causal EKF's).
     sound_speed : float, optional
         [m/s] in [1300, 1700]; default calibrated from the pings (a robust joint fit of the sound speed and the
         pings' positions and emission times, docs/tracking.md).
@@ -279,13 +281,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "--format toa, the matrix of times of arrival (docs/tracking.md)")
     p.add_argument("--format", choices=("log", "toa"), default="log",
                    help="log: a receiver's log (default); toa: times of arrival of a pinger at a fixed array "
-                        "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS smoother")
+                        "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS and robust "
+                        "smoothers")
     p.add_argument("--receivers", type=Path, default=None, metavar="FILE",
                    help="--format toa: the receivers' positions (CSV name,x_m,y_m[,z_m][,status], or TOML)")
     p.add_argument("--reference", type=Path, default=None, metavar="FILE",
                    help="--format toa: another solution (x y t) scored beside against --truth")
     p.add_argument("--smooth", action="store_true",
-                   help="--format toa: the RTS smoother's rows as the track (default: the causal EKF's)")
+                   help="--format toa: also the RTS and the robust smoother, the robust smoother's rows as the "
+                        "track (default: the causal EKF's)")
     p.add_argument("--sound-speed", type=float, default=None, metavar="M_S",
                    help="--format toa: the sound speed [m/s] (default: calibrated from the pings)")
     p.add_argument("--receivers-kept", default=None, metavar="NAMES",

@@ -375,17 +375,17 @@ def figure(outcome: TrackOutcome):
     best, tr, truth = outcome.summary["track"], outcome.track, outcome.truth
     if truth is not None:
         ax.plot(truth[:, 1], truth[:, 2], "-", color="0.6", lw=1, label="truth")
-    ax.plot(tr["x"], tr["y"], ".", ms=2, label=best)
+    ax.plot(tr["x"], tr["y"], ".", ms=2, label=ESTIMATOR_NAMES[best])
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title="track")
     ax.legend()
     if outcome.errors is not None:
         for estimator in ("fix", "ekf", "rts", "robust", "reference"):
             e = outcome.errors[outcome.errors["estimator"] == estimator]
             if len(e):
-                bx.semilogy(e["time"], e["error_2d_m"], ".", ms=2, label=estimator)
+                bx.semilogy(e["time"], e["error_2d_m"], ".", ms=2, label=ESTIMATOR_NAMES[estimator])
         # the track's own 2σ of the 2-D error (2 √(σx² + σy²), its covariance's DRMS doubled)
         bx.semilogy(tr["time"], 2 * np.hypot(tr["sigma_x"], tr["sigma_y"]), "-", color="k", lw=0.8,
-                    label=f"{best} 2σ (2 DRMS)")
+                    label=f"{ESTIMATOR_NAMES[best]} 2σ (2 DRMS)")
         bx.set(xlabel="emission time [s]", ylabel="2-D error [m]", title="error against the truth")
         bx.legend()
     fig.tight_layout()
@@ -414,6 +414,6 @@ def write(outcome: TrackOutcome, out: Path) -> None:
         plt.close(fig)
 
 
-__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA", "ROBUST_FROM_MEDIAN",
-           "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds", "drop_detections",
-           "estimate_lag", "figure", "score", "track", "write"]
+__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
+           "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds",
+           "drop_detections", "estimate_lag", "figure", "score", "track", "write"]
