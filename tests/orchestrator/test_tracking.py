@@ -380,8 +380,8 @@ def test_fixes_restart_a_lost_filter_and_only_then():
 def test_bound_predicts_the_observed_errors_on_lake_hald(full):
     """The accuracy limit per third of the track (score.json's bound, bound.csv) against the errors observed here
     against the GPS: the robust RMS (median / sqrt(ln 2)) of the single-ping fix and of the EKF within a factor 1.5
-    of the median predicted DRMS; the smoother's too once the floor the fix shows (its observed robust RMS beyond its
-    bound, in quadrature: GPS and lever arm) is added to its bound. The thinned array: a larger predicted DRMS,
+    of the median predicted DRMS; the smoothers' (RTS and robust) too once the floor the fix shows (its observed
+    robust RMS beyond its bound, in quadrature: GPS and lever arm) is added to their bound. The thinned array: a larger predicted DRMS,
     the fix's robust RMS within a factor 2 of it (docs/tracking.md)."""
     import pandas as pd
 
@@ -393,7 +393,8 @@ def test_bound_predicts_the_observed_errors_on_lake_hald(full):
     for third in thirds:
         part = np.arange(third["first_ping"], third["last_ping"] + 1)
         robust = {}
-        for estimator, column in (("fix", "fix_drms_m"), ("ekf", "pcrb_m"), ("rts", "pcrb_smoothed_m")):
+        for estimator, column in (("fix", "fix_drms_m"), ("ekf", "pcrb_m"), ("rts", "pcrb_smoothed_m"),
+                                  ("robust", "pcrb_smoothed_m")):
             rows = full.estimates[(full.estimates["estimator"] == estimator) & full.estimates["ping"].isin(part)]
             e = gps_errors(rows["time"].to_numpy(), rows["x"].to_numpy(), rows["y"].to_numpy(), gps)
             inside = (rows["time"] >= gps[0, 2]) & (rows["time"] <= gps[-1, 2])
@@ -402,7 +403,7 @@ def test_bound_predicts_the_observed_errors_on_lake_hald(full):
             assert np.isclose(third[estimator]["predicted_median_m"], predicted, rtol=1e-12)
         floor2 = max(robust["fix"][0] ** 2 - robust["fix"][1] ** 2, 0.0)
         for estimator, (observed, predicted) in robust.items():
-            with_floor = np.sqrt(predicted**2 + floor2) if estimator == "rts" else predicted
+            with_floor = np.sqrt(predicted**2 + floor2) if estimator in ("rts", "robust") else predicted
             assert 1 / 1.5 <= observed / with_floor <= 1.5, (third, estimator, observed, predicted)
     thin = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
                              sound_speed=full.summary["sound_speed"]["sound_speed_m_s"], receivers_kept=THINNED)
