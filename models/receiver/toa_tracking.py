@@ -44,8 +44,11 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
+from scipy.linalg import solveh_banded
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.receiver.toa_bound import MotionModel
+from sblsim.models.receiver.toa_bound import transition as motion_step
 
 #: The sound speeds a tracker accepts and the calibration searches [m/s].
 SOUND_SPEED_RANGE = (1300.0, 1700.0)
@@ -559,22 +562,12 @@ class ToaTracker:
 
     def transition(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s)."""
-        d, s = self.dim, self.settings
+        d = self.dim
         T = float(x[-1])
-        F = np.eye(self.size)
-        F[:d, d:2 * d] = T * np.eye(d)
-        F[:d, -1] = x[d:2 * d]
-        F[-2, -1] = 1.0
+        F, Q = motion_step(x[d:2 * d], T, MotionModel.of(self.settings))
         xp = x.copy()
         xp[:d] = x[:d] + T * x[d:2 * d]
         xp[-2] = x[-2] + T
-        Q = np.zeros((self.size, self.size))
-        q = s.acceleration_psd
-        Q[:d, :d] = q * T**3 / 3 * np.eye(d)
-        Q[:d, d:2 * d] = Q[d:2 * d, :d] = q * T**2 / 2 * np.eye(d)
-        Q[d:2 * d, d:2 * d] = q * T * np.eye(d)
-        Q[-2, -2] = s.jitter**2
-        Q[-1, -1] = s.interval_drift**2
         return xp, F, Q
 
     def initial(self, fix: Fix) -> tuple[np.ndarray, np.ndarray]:
@@ -773,14 +766,9 @@ class RobustTrack:
 
 
 def _process(settings: TrackerSettings, dim: int) -> np.ndarray:
-    """The inverse of the Cholesky factor of the process noise Q (s, s) over the nominal interval (the tracker's
-    model, :meth:`ToaTracker.transition`)."""
-    s, T, q = 2 * dim + 2, settings.interval, settings.acceleration_psd
-    Q = np.zeros((s, s))
-    Q[:dim, :dim] = q * T**3 / 3 * np.eye(dim)
-    Q[:dim, dim:2 * dim] = Q[dim:2 * dim, :dim] = q * T**2 / 2 * np.eye(dim)
-    Q[dim:2 * dim, dim:2 * dim] = q * T * np.eye(dim)
-    Q[-2, -2], Q[-1, -1] = settings.jitter**2, settings.interval_drift**2
+    """The inverse of the Cholesky factor of the tracker's process noise Q over the nominal interval
+    (:func:`~sblsim.models.receiver.toa_bound.transition`)."""
+    Q = motion_step(np.zeros(dim), settings.interval, MotionModel.of(settings))[1]
     return np.linalg.inv(np.linalg.cholesky(Q))
 
 
@@ -834,8 +822,6 @@ def _normal_blocks(m, s, dim, heard, w, Jz, Li, F):
 def _banded_solve(D, B, g):
     """Solve ``N δ = g`` for the symmetric positive definite block-tridiagonal N (diagonal blocks D (m, s, s), upper
     blocks B (m − 1, s, s)) by LAPACK's banded Cholesky (:func:`scipy.linalg.solveh_banded`); δ (m, s)."""
-    from scipy.linalg import solveh_banded
-
     m, s = D.shape[:2]
     u = 2 * s - 1
     ab = np.zeros((u + 1, m * s))

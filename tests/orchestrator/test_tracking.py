@@ -381,8 +381,8 @@ def test_bound_predicts_the_observed_errors_on_lake_hald(full):
     """The accuracy limit per third of the track (score.json's bound, bound.csv) against the errors observed here
     against the GPS: the robust RMS (median / sqrt(ln 2)) of the single-ping fix and of the EKF within a factor 1.5
     of the median predicted DRMS; the smoothers' (RTS and robust) too once the floor the fix shows (its observed
-    robust RMS beyond its bound, in quadrature: GPS and lever arm) is added to their bound. The thinned array: a larger predicted DRMS,
-    the fix's robust RMS within a factor 2 of it (docs/tracking.md)."""
+    robust RMS beyond its bound, in quadrature: GPS and lever arm) is added to their bound. The thinned array: a
+    larger predicted DRMS, the fix's robust RMS within a factor 2 of it (docs/tracking.md)."""
     import pandas as pd
 
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
