@@ -530,6 +530,20 @@ class TrackRecord:
     restarts: list[int] = field(default_factory=list)
 
 
+def predict(x: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The tracker's motion model from one ping to the next, for states ``x`` (k, 2 dim + 2) = ``[p, v, t_e, Δ]``:
+    ``p + Δ v``, ``v``, ``t_e + Δ``, ``Δ`` (k, s), and its Jacobians F (k, s, s)."""
+    T = x[:, -1]
+    predicted = x.copy()
+    predicted[:, :dim] += T[:, None] * x[:, dim:2 * dim]
+    predicted[:, -2] += T
+    F = np.tile(np.eye(x.shape[1]), (len(x), 1, 1))
+    F[:, :dim, dim:2 * dim] = T[:, None, None] * np.eye(dim)
+    F[:, :dim, -1] = x[:, dim:2 * dim]
+    F[:, -2, -1] = 1.0
+    return predicted, F
+
+
 class ToaTracker:
     """EKF and RTS smoother of a pinger's track from times of arrival, the emission times unknown.
 
@@ -562,13 +576,9 @@ class ToaTracker:
 
     def transition(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s)."""
-        d = self.dim
-        T = float(x[-1])
-        F, Q = motion_step(x[d:2 * d], T, MotionModel.of(self.settings))
-        xp = x.copy()
-        xp[:d] = x[:d] + T * x[d:2 * d]
-        xp[-2] = x[-2] + T
-        return xp, F, Q
+        xp, F = predict(x[None], self.dim)
+        Q = motion_step(x[self.dim:2 * self.dim], float(x[-1]), MotionModel.of(self.settings))[1]
+        return xp[0], F[0], Q
 
     def initial(self, fix: Fix) -> tuple[np.ndarray, np.ndarray]:
         """The state and covariance started from a single-ping fix (velocity 0, the nominal interval)."""
@@ -781,15 +791,8 @@ def _robust_terms(toa, heard, receivers, settings, X, Li, dof):
     model, J = _evaluate_arrivals(receivers[i], settings.sound_speed, X[k, :dim], X[k, -2])
     z = (toa[k, i] - model) / settings.sigma_toa
     Jz = -J / settings.sigma_toa
-    prev = X[:-1]
-    predicted = prev.copy()
-    predicted[:, :dim] += prev[:, -1:] * prev[:, dim:2 * dim]
-    predicted[:, -2] += prev[:, -1]
+    predicted, F = predict(X[:-1], dim)
     e = (X[1:] - predicted) @ Li.T
-    F = np.tile(np.eye(X.shape[1]), (len(prev), 1, 1))
-    F[:, :dim, dim:2 * dim] = prev[:, -1, None, None] * np.eye(dim)
-    F[:, :dim, -1] = prev[:, dim:2 * dim]
-    F[:, -2, -1] = 1.0
     cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum())
     return z, (dof + 1.0) / (dof + z**2), Jz, e, F, cost
 
@@ -1037,6 +1040,6 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
 
 __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_DOF", "ROBUST_ITERATIONS",
            "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix",
-           "RobustTrack", "ToaTracker", "TrackRecord", "TrackerSettings", "anchored_start", "robust_smooth",
+           "RobustTrack", "ToaTracker", "TrackRecord", "TrackerSettings", "anchored_start", "predict", "robust_smooth",
            "calibrate_sound_speed_robust", "fix_pings", "rts_smooth", "simulate_pings", "single_ping_fix",
            "toa_function", "toa_model"]
