@@ -39,7 +39,7 @@ Navigation, Wiley 2001, Sections 5.4 (NIS), 6.2 (white-noise acceleration model)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import casadi as ca
@@ -743,6 +743,10 @@ ROBUST_KEPT_WEIGHT = 0.1
 ROBUST_TOLERANCE = 1e-9
 #: Gauss-Newton iterations of each start before the robust smoother keeps the one of the lowest cost.
 ROBUST_SCREEN = 20
+#: The timing noise's scale of the robust smoother's graduated start (:func:`graduated_start`), in σ_toa.
+ROBUST_COARSE_SCALE = 10.0
+#: Gauss-Newton iterations of the graduated start's coarse solve.
+ROBUST_COARSE_ITERATIONS = 20
 
 
 @dataclass
@@ -956,6 +960,22 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     return RobustTrack(X, P, weights, cost, best["done"], index)
 
 
+def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray
+                    ) -> np.ndarray:
+    """A start for :func:`robust_smooth` by graduated non-convexity (Blake & Zisserman, *Visual Reconstruction*,
+    MIT Press 1987): the robust smoother with the timing noise's scale :data:`ROBUST_COARSE_SCALE` times larger
+    (the arrivals' Student-t cost flatter over the residuals seen, the motion model weighing more: fewer local
+    minima), :data:`ROBUST_COARSE_ITERATIONS` steps from ``start`` (m, 2 dim + 2); its states (m, 2 dim + 2).
+
+    Raises
+    ------
+    ModelError
+        As :func:`robust_smooth`.
+    """
+    coarse = replace(settings, sigma_toa=settings.sigma_toa * ROBUST_COARSE_SCALE)
+    return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS).x
+
+
 def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,
                    dim: int) -> np.ndarray | None:
     """A starting track for :func:`robust_smooth` from the single-ping fixes alone: the fixes of dim + 2 receivers or
@@ -1038,8 +1058,8 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
     return toa, positions, emissions
 
 
-__all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_DOF", "ROBUST_ITERATIONS",
-           "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix",
-           "RobustTrack", "ToaTracker", "TrackRecord", "TrackerSettings", "anchored_start", "predict", "robust_smooth",
-           "calibrate_sound_speed_robust", "fix_pings", "rts_smooth", "simulate_pings", "single_ping_fix",
-           "toa_function", "toa_model"]
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_COARSE_ITERATIONS",
+           "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
+           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack", "ToaTracker", "TrackRecord",
+           "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
+           "predict", "robust_smooth", "rts_smooth", "simulate_pings", "single_ping_fix", "toa_function", "toa_model"]
