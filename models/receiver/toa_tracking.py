@@ -976,6 +976,25 @@ def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSet
     return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS).x
 
 
+def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
+                 fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray) -> RobustTrack:
+    """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
+    that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2); the lowest
+    cost kept (:func:`robust_smooth`). ``fixes``: positions (m, dim), emission times (m,) and the arrivals used
+    (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n).
+
+    Raises
+    ------
+    ModelError
+        As :func:`robust_smooth`.
+    """
+    starts = [rts]
+    anchored = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, receivers.shape[1])
+    if anchored is not None:
+        starts[:0] = [anchored, graduated_start(toa, receivers, settings, anchored)]
+    return robust_smooth(toa, receivers, settings, starts)
+
+
 def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,
                    dim: int) -> np.ndarray | None:
     """A starting track for :func:`robust_smooth` from the single-ping fixes alone: the fixes of dim + 2 receivers or
@@ -1062,4 +1081,5 @@ __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", 
            "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
            "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack", "ToaTracker", "TrackRecord",
            "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
-           "predict", "robust_smooth", "rts_smooth", "simulate_pings", "single_ping_fix", "toa_function", "toa_model"]
+           "predict", "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
+           "toa_function", "toa_model"]

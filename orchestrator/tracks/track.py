@@ -312,13 +312,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         xs, Ps = tracker.smooth(record)
         k0 = record.start
         if k0 < len(toa) - 1:
-            # the robust smoother from the fixes' own track, from that track graduated and from the RTS smoother's:
-            # the lowest cost kept
-            starts = [xs[k0:]]
-            anchored = tt.anchored_start((fx, fe, fused), np.isfinite(toa).sum(axis=1), settings, dim)
-            if anchored is not None:
-                starts[:0] = [anchored[k0:], tt.graduated_start(toa[k0:], positions, settings, anchored[k0:])]
-            robust = tt.robust_smooth(toa[k0:], positions, settings, starts)
+            robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:])
             kr = np.arange(k0, len(toa))
             rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                  (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1))
