@@ -769,6 +769,8 @@ class RobustTrack:
         The Gauss-Newton iterations of the start kept.
     start : int
         Which of the starts given gave ``x`` (the lowest cost).
+    start_names : tuple of str
+        What each start was (:func:`robust_track`: ``fixes``, ``graduated``, ``rts``; empty when not named).
     """
 
     x: np.ndarray
@@ -777,6 +779,7 @@ class RobustTrack:
     cost: float
     iterations: int
     start: int
+    start_names: tuple[str, ...] = ()
 
 
 def _process(settings: TrackerSettings, dim: int) -> np.ndarray:
@@ -988,11 +991,11 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     ModelError
         As :func:`robust_smooth`.
     """
-    starts = [rts]
+    starts = {"rts": rts}
     anchored = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, receivers.shape[1])
     if anchored is not None:
-        starts[:0] = [anchored, graduated_start(toa, receivers, settings, anchored)]
-    return robust_smooth(toa, receivers, settings, starts)
+        starts = {"fixes": anchored, "graduated": graduated_start(toa, receivers, settings, anchored), **starts}
+    return replace(robust_smooth(toa, receivers, settings, list(starts.values())), start_names=tuple(starts))
 
 
 def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,

@@ -308,6 +308,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
     positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
     k = np.flatnonzero(positioned)
+    robust = None
     if smooth:
         xs, Ps = tracker.smooth(record)
         k0 = record.start
@@ -326,6 +327,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
     summary: dict[str, Any] = {
         "track": main, "pings": int(len(toa)), "receivers": names,
+        "robust_smoother": None if robust is None else {
+            "start": robust.start_names[robust.start], "iterations": robust.iterations, "cost": robust.cost},
         "receivers_kept": None if receivers_kept is None else list(receivers_kept),
         "drop_detections": drop, "seed": seed if drop > 0 else None, "detections_dropped": dropped,
         "dimensions": dim, "sound_speed": speed, "sigma_toa_s": SIGMA_TOA, "ping_interval_s": interval,
