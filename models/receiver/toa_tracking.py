@@ -734,7 +734,7 @@ def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.n
 #: heavy tail (a late multipath arrival 10 σ off weighs 4 / 103 of a good one), the common robust choice (Lange,
 #: Little, Taylor 1989).
 ROBUST_DOF = 3.0
-#: Gauss-Newton iterations of the robust smoother, at most, per start.
+#: Gauss-Newton iterations of the robust smoother, at most (of the start it keeps, its screening steps among them).
 ROBUST_ITERATIONS = 100
 #: The weight from which the robust smoother counts an arrival as kept (not weighed down as an outlier): a
 #: normalised residual within √(10 (ν + 1) − ν) ≈ 6.1 σ at ν = 3.
