@@ -178,15 +178,28 @@ class MotionModel:
                    settings.sigma_interval)
 
 
+def predict(x: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The tracker's motion model from one ping to the next, for states ``x`` (k, 2 dim + 2) = ``[p, v, t_e, Δ]``:
+    ``p + Δ v``, ``v``, ``t_e + Δ``, ``Δ`` (k, s), and its Jacobians F (k, s, s)."""
+    T = x[:, -1]
+    predicted = x.copy()
+    predicted[:, :dim] += T[:, None] * x[:, dim:2 * dim]
+    predicted[:, -2] += T
+    F = np.tile(np.eye(x.shape[1]), (len(x), 1, 1))
+    F[:, :dim, dim:2 * dim] = T[:, None, None] * np.eye(dim)
+    F[:, :dim, -1] = x[:, dim:2 * dim]
+    F[:, -2, -1] = 1.0
+    return predicted, F
+
+
 def transition(velocity: np.ndarray, interval: float, motion: MotionModel) -> tuple[np.ndarray, np.ndarray]:
     """The Jacobian F (s, s) and the process noise Q (s, s) of one step of the state ``[p, v, t_e, Δ]``
-    (s = 2 dim + 2) at the true velocity (dim,) [m/s] and interval [s] (the tracker's model)."""
+    (s = 2 dim + 2) at the true velocity (dim,) [m/s] and interval [s] (the tracker's model, :func:`predict`)."""
     d = len(velocity)
     s, T, q = 2 * d + 2, float(interval), motion.acceleration_psd
-    F = np.eye(s)
-    F[:d, d:2 * d] = T * np.eye(d)
-    F[:d, -1] = velocity
-    F[-2, -1] = 1.0
+    state = np.zeros(s)
+    state[d:2 * d], state[-1] = velocity, T
+    F = predict(state[None], d)[1][0]
     Q = np.zeros((s, s))
     Q[:d, :d] = q * T**3 / 3 * np.eye(d)
     Q[:d, d:2 * d] = Q[d:2 * d, :d] = q * T**2 / 2 * np.eye(d)
@@ -289,4 +302,4 @@ def rms(values: np.ndarray) -> float:
 
 
 __all__ = ["MotionModel", "TrackBound", "directions", "drms", "fix_drms", "ping_information", "pcrb",
-           "position_information", "rms", "transition"]
+           "position_information", "predict", "rms", "transition"]

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.toa_bound import MotionModel
+from sblsim.models.receiver.toa_bound import MotionModel, predict
 from sblsim.models.receiver.toa_bound import transition as motion_step
 
 #: The sound speeds a tracker accepts and the calibration searches [m/s].
@@ -528,20 +528,6 @@ class TrackRecord:
     used: np.ndarray
     start: int
     restarts: list[int] = field(default_factory=list)
-
-
-def predict(x: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """The tracker's motion model from one ping to the next, for states ``x`` (k, 2 dim + 2) = ``[p, v, t_e, Δ]``:
-    ``p + Δ v``, ``v``, ``t_e + Δ``, ``Δ`` (k, s), and its Jacobians F (k, s, s)."""
-    T = x[:, -1]
-    predicted = x.copy()
-    predicted[:, :dim] += T[:, None] * x[:, dim:2 * dim]
-    predicted[:, -2] += T
-    F = np.tile(np.eye(x.shape[1]), (len(x), 1, 1))
-    F[:, :dim, dim:2 * dim] = T[:, None, None] * np.eye(dim)
-    F[:, :dim, -1] = x[:, dim:2 * dim]
-    F[:, -2, -1] = 1.0
-    return predicted, F
 
 
 class ToaTracker:
@@ -1084,5 +1070,5 @@ __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", 
            "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
            "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack", "ToaTracker", "TrackRecord",
            "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
-           "predict", "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
+           "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
            "toa_function", "toa_model"]
