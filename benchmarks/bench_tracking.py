@@ -18,8 +18,6 @@ import os
 import time
 from pathlib import Path
 
-import numpy as np
-
 DATA = Path(__file__).resolve().parents[1] / "data" / "lake-hald"
 #: The issue's target for the whole replay on one core [s].
 TARGET_S = 10.0
@@ -43,7 +41,7 @@ def measure(repeats: int, kept: str | None = None, warm: bool = True) -> dict:
     import sblsim
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.orchestrator.tracks.toa import read_receivers, read_toa
-    from sblsim.orchestrator.tracks.track import AGREE_AFTER, SIGMA_TOA, _usable
+    from sblsim.orchestrator.tracks.track import SIGMA_TOA, _usable, tracker_settings
 
     def replay():
         return sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
@@ -54,8 +52,7 @@ def measure(repeats: int, kept: str | None = None, warm: bool = True) -> dict:
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"),
                                 None if kept is None else kept.split(","))
     fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
-    settings = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=float(np.nanmedian(np.diff(fe))),
-                                  agree_after=AGREE_AFTER)
+    settings = tracker_settings(c, fe)
     tracker = tt.ToaTracker(positions, settings)
 
     def ekf_rts():

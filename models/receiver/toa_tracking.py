@@ -743,9 +743,9 @@ class RobustTrack:
     ----------
     x : ndarray, (m, s)
         The maximum a-posteriori states ``[p, v, t_e, Δ]`` [m, m/s, s, s].
-    P : ndarray, (m, s, s)
-        Their covariances: the diagonal blocks of the inverse of the cost's Gauss-Newton Hessian at ``x`` (the
-        Laplace approximation), with the final weights.
+    P : ndarray, (m, s, s), or None
+        Their covariances (None when not asked for): the diagonal blocks of the inverse of the cost's Gauss-Newton
+        Hessian at ``x`` (the Laplace approximation), with the final weights.
     weights : ndarray, (m, n)
         Each time of arrival's weight at the end, ``(ν + 1) / (ν + z²)`` (1 for an arrival as expected, near 0
         for an outlier; 0 where not heard).
@@ -760,7 +760,7 @@ class RobustTrack:
     """
 
     x: np.ndarray
-    P: np.ndarray
+    P: np.ndarray | None
     weights: np.ndarray
     cost: float
     iterations: int
@@ -800,15 +800,15 @@ def _per_ping(m: int, pings: np.ndarray, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def _normal_blocks(m, s, dim, heard, w, Jz, Li, F):
+def _normal_blocks(m, s, dim, heard, w, Jz, Li, prev):
     """The Gauss-Newton Hessian of the robust cost, block tridiagonal: diagonal blocks (m, s, s) and the blocks
-    (k, k + 1) (m − 1, s, s)."""
+    (k, k + 1) (m − 1, s, s); ``prev`` (m − 1, s, s) the whitened process residuals' Jacobians with respect to the
+    previous state, ``−L⁻¹ F_k``."""
     D = np.zeros((m, s, s))
     cols = list(range(dim)) + [s - 2]
     outer = w[:, None, None] * Jz[:, :, None] * Jz[:, None, :]
     D[np.ix_(np.arange(m), cols, cols)] += _per_ping(m, heard[0], outer)
     now = Li.T @ Li  # e_k's Jacobian with respect to x_k is Li, with respect to x_k−1 is −Li F_k
-    prev = -Li @ F
     D[1:] += now
     D[:-1] += np.einsum("kji,kjl->kil", prev, prev)
     B = np.einsum("kji,jl->kil", prev, Li)
@@ -847,7 +847,8 @@ def _block_covariance(D, B):
 
 
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
-                  dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS) -> RobustTrack:
+                  dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS, covariance: bool = True
+                  ) -> RobustTrack:
     """The robust fixed-interval smoother: the track's maximum a-posteriori states with heavy-tailed times of arrival.
 
     Over the whole record at once (YAPS's approach, Baktoft et al. 2017: the state-space model fitted to every
@@ -881,6 +882,8 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         ν.
     iterations : int
         Gauss-Newton iterations at most (of the start kept, its screening steps among them).
+    covariance : bool
+        Compute the covariance ``P`` (else None: a start's states alone, :func:`graduated_start`).
 
     Returns
     -------
@@ -914,11 +917,12 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         for _ in range(count):
             if run["converged"]:
                 return
-            D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, F)
+            prev = -Li @ F
+            D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, prev)
             g = np.zeros((m, s))  # the gradient's half: Jᵀ W r
             g[:, list(range(dim)) + [s - 2]] += _per_ping(m, heard[0], (w * z)[:, None] * Jz)
             g[1:] += e @ Li
-            g[:-1] += np.einsum("kji,kj->ki", -Li @ F, e)
+            g[:-1] += np.einsum("kji,kj->ki", prev, e)
             step = _banded_solve(D + 1e-12 * np.eye(s), B, -g)
             scale = 1.0
             while scale > 1e-6:
@@ -942,8 +946,9 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     best = runs[index]
     iterate(best, iterations - best["done"])
     X, (_, w, Jz, _, F, cost) = best["X"], best["terms"]
-    D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, F)
-    P = _block_covariance(D, B)
+    P = None
+    if covariance:
+        P = _block_covariance(*_normal_blocks(m, s, dim, heard, w, Jz, Li, -Li @ F))
     weights = np.zeros((m, n))
     weights[heard] = w
     return RobustTrack(X, P, weights, cost, best["done"], index)
@@ -962,7 +967,7 @@ def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSet
         As :func:`robust_smooth`.
     """
     coarse = replace(settings, sigma_toa=settings.sigma_toa * ROBUST_COARSE_SCALE)
-    return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS).x
+    return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS, covariance=False).x
 
 
 def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,

@@ -182,6 +182,19 @@ def drop_detections(toa: np.ndarray, share: float, seed: int) -> tuple[np.ndarra
     return np.where(gone, np.nan, toa), int(gone.sum())
 
 
+def tracker_settings(sound_speed: float, emissions: np.ndarray):
+    """The replay's tracker (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`) at ``sound_speed``
+    [m/s]: the timing noise :data:`SIGMA_TOA`, the ping interval the median step of the single-ping fixes' emission
+    times ``emissions`` (m,) [s] (NaN where no fix; 2 s when no two consecutive pings have one), and a lost filter
+    restarted on :data:`AGREE_AFTER` consecutive consistent fixes of dim + 2 receivers too (an array of few
+    receivers rarely gives the dim + 3 of the disagreement rule, docs/tracking.md)."""
+    from sblsim.models.receiver.toa_tracking import TrackerSettings
+
+    steps = np.diff(emissions)
+    interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
+    return TrackerSettings(sound_speed=sound_speed, sigma_toa=SIGMA_TOA, interval=interval, agree_after=AGREE_AFTER)
+
+
 def _truth_at(truth: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The truth's (x, y[, z]) interpolated linearly at the times ``t``."""
     return np.column_stack([np.interp(t, truth[:, 0], truth[:, k]) for k in range(1, truth.shape[1])])
@@ -289,11 +302,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         c = sound_speed
         speed = {"sound_speed_m_s": c, "source": "given"}
     fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
-    steps = np.diff(fe)
-    interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
-    # a lost filter restarts on 4 consecutive consistent fixes of 4 receivers too: the 8-hydrophone array rarely
-    # gives the 5 of the disagreement rule (docs/tracking.md)
-    settings = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=interval, agree_after=AGREE_AFTER)
+    settings = tracker_settings(c, fe)
+    interval = settings.interval
     tracker = tt.ToaTracker(positions, settings)
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))  # the fixes restart a lost filter
     columns = ["x", "y", "z"][:dim]
@@ -414,4 +424,4 @@ def write(outcome: TrackOutcome, out: Path) -> None:
 
 __all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
            "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds",
-           "drop_detections", "estimate_lag", "figure", "score", "track", "write"]
+           "drop_detections", "estimate_lag", "figure", "score", "track", "tracker_settings", "write"]

@@ -423,14 +423,13 @@ def test_consistent_fixes_restart_holds_the_thinned_track(full):
     of the same tracker without that rule (the disagreement rule of 5 receivers alone)."""
     import dataclasses
 
-    from sblsim.orchestrator.tracks.track import AGREE_AFTER, SIGMA_TOA, _usable
+    from sblsim.orchestrator.tracks.track import AGREE_AFTER, SIGMA_TOA, _usable, tracker_settings
 
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
     c = full.summary["sound_speed"]["sound_speed_m_s"]
     fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
-    s = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=float(np.nanmedian(np.diff(fe))),
-                           agree_after=AGREE_AFTER)
+    s = tracker_settings(c, fe)
     figures = {}
     for agree in (AGREE_AFTER, None):
         tracker = tt.ToaTracker(positions, dataclasses.replace(s, agree_after=agree))
@@ -467,13 +466,12 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
             assert rms < 3.0 and p95 < 5.0 and rms < rms_rts / 4 and p95 < p95_rts / 4, figures
             assert result.score["estimator"] == "robust" and np.isclose(result.score["rms_m"], rms, rtol=1e-12)
     # without the graduated start: from the fixes' own track and the RTS smoother's alone
-    from sblsim.orchestrator.tracks.track import AGREE_AFTER, SIGMA_TOA, _usable
+    from sblsim.orchestrator.tracks.track import SIGMA_TOA, _usable, tracker_settings
 
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
     c = full.summary["sound_speed"]["sound_speed_m_s"]
     fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
-    s = tt.TrackerSettings(sound_speed=c, sigma_toa=SIGMA_TOA, interval=float(np.nanmedian(np.diff(fe))),
-                           agree_after=AGREE_AFTER)
+    s = tracker_settings(c, fe)
     tracker = tt.ToaTracker(positions, s)
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))
     xs, _ = tracker.smooth(record)
