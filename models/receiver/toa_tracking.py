@@ -744,8 +744,9 @@ class RobustTrack:
     x : ndarray, (m, s)
         The maximum a-posteriori states ``[p, v, t_e, Δ]`` [m, m/s, s, s].
     P : ndarray, (m, s, s), or None
-        Their covariances (None when not asked for): the diagonal blocks of the inverse of the cost's Gauss-Newton
-        Hessian at ``x`` (the Laplace approximation), with the final weights.
+        Their covariances (None when not asked for): the diagonal blocks of the inverse of the cost's Hessian at
+        ``x`` (the Laplace approximation; each arrival's share its :func:`observed_information`, the model's
+        second derivatives left out as in Gauss-Newton).
     weights : ndarray, (m, n)
         Each time of arrival's weight at the end, ``(ν + 1) / (ν + z²)`` (1 for an arrival as expected, near 0
         for an outlier; 0 where not heard).
@@ -766,6 +767,30 @@ class RobustTrack:
     iterations: int
     start: int
     start_names: tuple[str, ...] = ()
+
+
+def observed_information(z: np.ndarray, dof: float = ROBUST_DOF) -> np.ndarray:
+    """Each time of arrival's share of the robust smoother's observed information, its Student-t log-likelihood's
+    second derivative: ``(ν + 1) (ν − z²) / (ν + z²)²`` [1], and 0 where that is negative (``|z| > √ν``).
+
+    The Gauss-Newton weight ``(ν + 1) / (ν + z²)`` is the same at ``z = 0`` and larger everywhere else: over
+    Student-t errors it is 1 on average against the observed information's ``(ν + 1) / (ν + 3)`` (2/3 at ν = 3), so
+    a covariance from those weights is too small by half (Lange, Little, Taylor 1989, section 3: the information
+    of the t's location). Clipped at 0: an arrival that the track disagrees with by more than √ν σ adds no
+    information (it would make the Hessian indefinite).
+
+    Parameters
+    ----------
+    z : ndarray, (h,)
+        The arrivals' normalised residuals [1].
+    dof : float
+        ν.
+
+    Returns
+    -------
+    ndarray, (h,)
+    """
+    return np.maximum((dof + 1.0) * (dof - z**2) / (dof + z**2) ** 2, 0.0)
 
 
 def _process(settings: TrackerSettings, dim: int) -> np.ndarray:
@@ -865,7 +890,8 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     statistical modeling using the t distribution", JASA 84(408), 1989), the step halved until the cost falls,
     each step solved as the banded system it is (the normal matrix is block tridiagonal over the pings: the
     iterated Kalman smoother as a Gauss-Newton method, Bell, SIAM J. Optim. 4(3), 1994), the covariance by the
-    block recursion (the Rauch-Tung-Striebel backward pass in information form). The cost is not convex: each
+    block recursion (the Rauch-Tung-Striebel backward pass in information form) from the arrivals' observed
+    information (:func:`observed_information`), not their Gauss-Newton weights. The cost is not convex: each
     start given takes :data:`ROBUST_SCREEN` steps, and the one of the lowest cost then goes on to the end.
 
     Parameters
@@ -945,10 +971,10 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     index = int(np.argmin([run["terms"][-1] for run in runs]))
     best = runs[index]
     iterate(best, iterations - best["done"])
-    X, (_, w, Jz, _, F, cost) = best["X"], best["terms"]
+    X, (z, w, Jz, _, F, cost) = best["X"], best["terms"]
     P = None
     if covariance:
-        P = _block_covariance(*_normal_blocks(m, s, dim, heard, w, Jz, Li, -Li @ F))
+        P = _block_covariance(*_normal_blocks(m, s, dim, heard, observed_information(z, dof), Jz, Li, -Li @ F))
     weights = np.zeros((m, n))
     weights[heard] = w
     return RobustTrack(X, P, weights, cost, best["done"], index)
@@ -1075,5 +1101,5 @@ __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", 
            "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
            "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack", "ToaTracker", "TrackRecord",
            "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
-           "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
+           "observed_information", "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
            "toa_function", "toa_model"]
