@@ -47,6 +47,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 from sblsim.models.receiver.toa_bound import MotionModel, predict
 from sblsim.models.receiver.toa_bound import transition as motion_step
 
@@ -685,6 +686,75 @@ class ToaTracker:
         return xs, Ps
 
 
+#: The scaled sigma points of :class:`ToaUkfTracker`: spread α, prior weight β (2: Gaussian), secondary scaling κ
+#: (the ``ukf`` receiver's defaults; λ = α²(n + κ) − n = 0: the points at ±√n standard deviations, the centre
+#: weighted in the covariance only).
+UKF_ALPHA, UKF_BETA, UKF_KAPPA = 1.0, 2.0, 0.0
+
+
+@lru_cache(maxsize=None)
+def _sigma_function(size: int, alpha: float, beta: float, kappa: float) -> ca.Function:
+    """``(x (size,), P (size, size)) -> (points (size, 2 size + 1), wm, wc (2 size + 1,))``: the scaled sigma points
+    of :class:`~sblsim.models.receiver.sigma_points.MerweScaledSigmaPoints` (the ``ukf`` receiver's) as a
+    function."""
+    x, P = ca.SX.sym("x", size), ca.SX.sym("P", size, size)
+    points = MerweScaledSigmaPoints(size, alpha, beta, kappa)
+    wm, wc = points.weights()
+    return ca.Function("sblsim_toa_sigma_points", [x, P], [ca.horzcat(*points.points(x, P)), wm, wc])
+
+
+class ToaUkfTracker(ToaTracker):
+    """The unscented Kalman filter of the same track: :class:`ToaTracker`'s motion model, start, gates and restarts,
+    with the unscented measurement update (the motion model is linear, so its prediction is the EKF's).
+
+    The scaled sigma points of the predicted state (α, β, κ: :data:`UKF_ALPHA`, :data:`UKF_BETA`,
+    :data:`UKF_KAPPA`; Wan & van der Merwe, "The unscented Kalman filter for nonlinear estimation", Proc. IEEE
+    AS-SPCC 2000) go through :func:`toa_function`; their weighted mean, covariance and cross-covariance with the
+    state take the place of the EKF's linearisation, in the same gates (each arrival's NIS, then the set's).
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+    alpha, beta, kappa : float
+        The sigma points' parameters.
+    """
+
+    def __init__(self, receivers: np.ndarray, settings: TrackerSettings, alpha: float = UKF_ALPHA,
+                 beta: float = UKF_BETA, kappa: float = UKF_KAPPA) -> None:
+        super().__init__(receivers, settings)
+        self._sigma = _sigma_function(self.size, float(alpha), float(beta), float(kappa))
+
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unscented update with one ping's times of arrival (n,) (NaN: not heard), gated; returns the state,
+        the covariance and the arrivals used (n,)."""
+        d, s = self.dim, self.settings
+        points, wm, wc = (np.asarray(v) for v in self._sigma(x, P))
+        wm, wc = wm.ravel(), wc.ravel()
+        Z = _evaluate_pings(self.receivers, s.sound_speed, points[:d].T, points[-2])[0]  # (2 size + 1, n)
+        predicted = wm @ Z
+        dZ, dX = Z - predicted, points.T - x
+        Pzz = (wc[:, None] * dZ).T @ dZ
+        Pxz = (wc[:, None] * dX).T @ dZ
+        R = s.sigma_toa**2
+        nu = toa - predicted
+        variance = np.diag(Pzz) + R
+        used = np.isfinite(toa)
+        used[used] = nu[used] ** 2 / variance[used] <= s.gate
+        while used.any():
+            S = Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
+            nis = float(nu[used] @ np.linalg.solve(S, nu[used]))
+            if nis <= self._set_gate[int(used.sum()) - 1]:
+                K = np.linalg.solve(S, Pxz[:, used].T).T
+                x = x + K @ nu[used]
+                P = P - K @ S @ K.T
+                return x, 0.5 * (P + P.T), used
+            worst = np.flatnonzero(used)[int(np.argmax(nu[used] ** 2 / variance[used]))]
+            used[worst] = False
+        return x, P, used
+
+
 def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.ndarray, P_predicted: np.ndarray,
                F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The fixed-interval Rauch-Tung-Striebel smoother over a Kalman filter's (or EKF's) record.
@@ -1099,7 +1169,7 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
 
 __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_COARSE_ITERATIONS",
            "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
-           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "Fix", "RobustTrack", "ToaTracker", "TrackRecord",
-           "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
-           "observed_information", "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
-           "toa_function", "toa_model"]
+           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA", "UKF_BETA", "UKF_KAPPA", "Fix",
+           "RobustTrack", "ToaTracker", "ToaUkfTracker", "TrackRecord", "TrackerSettings", "anchored_start",
+           "calibrate_sound_speed_robust", "fix_pings", "graduated_start", "observed_information", "robust_smooth",
+           "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix", "toa_function", "toa_model"]
