@@ -686,6 +686,43 @@ class ToaTracker:
         return xs, Ps
 
 
+class ToaSeqTracker(ToaTracker):
+    """The sequential EKF of the same track (the ``ekf-seq`` receiver's update): :class:`ToaTracker`'s motion model,
+    start and restarts, with one scalar update per time of arrival, each linearised at the state the arrivals
+    before it left, and each gated alone by its NIS (``settings.gate``); no test of the set.
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+    """
+
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The arrivals of one ping (n,) (NaN: not heard) one at a time, in the receivers' order; returns the
+        state, the covariance (Joseph form) and the arrivals used (n,)."""
+        d, s = self.dim, self.settings
+        R = s.sigma_toa**2
+        one = toa_function(1, d)
+        used = np.zeros(self.n, bool)
+        for i in np.flatnonzero(np.isfinite(toa)):
+            model, J = one(x[:d], x[-2], self.receivers[i], s.sound_speed)
+            J = np.asarray(J).ravel()
+            h = np.zeros(self.size)
+            h[:d], h[-2] = J[:d], J[d]
+            nu = toa[i] - float(model)
+            S = h @ P @ h + R
+            if nu**2 / S > s.gate:
+                continue
+            k = P @ h / S
+            x = x + k * nu
+            A = np.eye(self.size) - np.outer(k, h)
+            P = A @ P @ A.T + R * np.outer(k, k)
+            P = 0.5 * (P + P.T)
+            used[i] = True
+        return x, P, used
+
+
 #: The scaled sigma points of :class:`ToaUkfTracker`: spread α, prior weight β (2: Gaussian), secondary scaling κ
 #: (the ``ukf`` receiver's defaults; λ = α²(n + κ) − n = 0: the points at ±√n standard deviations, the centre
 #: weighted in the covariance only).
@@ -1170,6 +1207,7 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
 __all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_COARSE_ITERATIONS",
            "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
            "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA", "UKF_BETA", "UKF_KAPPA", "Fix",
-           "RobustTrack", "ToaTracker", "ToaUkfTracker", "TrackRecord", "TrackerSettings", "anchored_start",
-           "calibrate_sound_speed_robust", "fix_pings", "graduated_start", "observed_information", "robust_smooth",
-           "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix", "toa_function", "toa_model"]
+           "RobustTrack", "ToaSeqTracker", "ToaTracker", "ToaUkfTracker", "TrackRecord", "TrackerSettings",
+           "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start", "observed_information",
+           "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix", "toa_function",
+           "toa_model"]

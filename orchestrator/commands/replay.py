@@ -141,14 +141,15 @@ class TrackResult:
         ``rms_m``, ``p90_m``, ``p95_m`` (2-D errors [m]), ``nees`` (the mean 2-D NEES), ``lag_s`` (the truth's
         time shift that minimises the RMS error, reported, not applied) and further keys (``share_fixed``,
         ``n_scored``, ``rms_at_lag_m``, ``along_track_m``, ``across_track_m``, the ``*_3d_m`` errors where both
-        have z); ``others``: the same per other estimator (``rts``, ``ekf``, ``ukf``, ``fix``) and the ``reference``.
+        have z); ``others``: the same per other estimator (``rts``, ``ekf``, ``ekf-seq``, ``ukf``, ``fix``) and the
+        ``reference``.
     summary : dict
         ``summary.json``: how the run went: the receivers used, the thinning and detections dropped, the sound
         speed (given or calibrated), the ping interval, the EKF's restarts, the pings each estimator fixed, the
         wall time.
     estimates : pandas.DataFrame
-        ``estimates.csv``: every estimator's rows (``estimator`` ``robust``, ``rts``, ``ekf``, ``ukf``, ``fix``;
-        ``ping``, the row of the TOA matrix) with the columns of ``track``.
+        ``estimates.csv``: every estimator's rows (``estimator`` ``robust``, ``rts``, ``ekf``, ``ekf-seq``, ``ukf``,
+        ``fix``; ``ping``, the row of the TOA matrix) with the columns of ``track``.
     errors : pandas.DataFrame or None
         ``errors.csv`` (with a truth track): ``estimator``, ``ping``, ``time`` [s], ``error_2d_m``[,
         ``error_3d_m``] [m].

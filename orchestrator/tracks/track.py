@@ -49,8 +49,11 @@ SIGMA_TOA = 1.5e-4
 AGREE_AFTER = 4
 #: The estimators, in the order of the outputs, and their names in words (the console, the figure).
 ESTIMATOR_NAMES = {"robust": "robust smoother", "rts": "RTS smoother", "ekf": "EKF (causal)",
-                   "ukf": "UKF (causal)", "fix": "single-ping fix", "reference": "reference"}
-ESTIMATORS = ("robust", "rts", "ekf", "ukf", "fix")
+                   "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)", "fix": "single-ping fix",
+                   "reference": "reference"}
+ESTIMATORS = ("robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
+#: The causal filters beside the EKF (the tracker's model, start and restarts; their own measurement update).
+FILTERS = {"ekf-seq": "ToaSeqTracker", "ukf": "ToaUkfTracker"}
 #: The time lags between the truth and the track searched [s]: ±this.
 LAG_RANGE_S = 30.0
 #: The keys of ``score.json`` for the track (the issue's names), before the further ones.
@@ -79,8 +82,8 @@ class TrackOutcome:
 
 #: The predicted DRMS of each estimator in ``bound.csv``: the single-ping fix's, the PCRB of the causal filter, the
 #: smoothing bound.
-BOUND_COLUMNS = {"fix": "fix_drms_m", "ekf": "pcrb_m", "ukf": "pcrb_m", "rts": "pcrb_smoothed_m",
-                 "robust": "pcrb_smoothed_m"}
+BOUND_COLUMNS = {"fix": "fix_drms_m", "ekf": "pcrb_m", "ekf-seq": "pcrb_m", "ukf": "pcrb_m",
+                 "rts": "pcrb_smoothed_m", "robust": "pcrb_smoothed_m"}
 #: The RMS of a circular Gaussian 2-D error over its median: ``1 / sqrt(ln 2)``.
 ROBUST_FROM_MEDIAN = 1.0 / np.sqrt(np.log(2.0))
 
@@ -307,7 +310,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     interval = settings.interval
     tracker = tt.ToaTracker(positions, settings)
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))  # the fixes restart a lost filter
-    unscented = tt.ToaUkfTracker(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)))
+    filters = {name: getattr(tt, kind)(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)))
+               for name, kind in FILTERS.items()}
     columns = ["x", "y", "z"][:dim]
     frames, covariances = {}, {}
 
@@ -332,9 +336,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1))
     rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
          record.used[k].sum(axis=1))
-    u = np.flatnonzero(unscented.used.any(axis=1) & np.isfinite(unscented.x_filtered[:, 0]))
-    rows("ukf", u, unscented.x_filtered[u, -2], unscented.x_filtered[u, :dim],
-         unscented.P_filtered[u][:, :dim, :dim], unscented.used[u].sum(axis=1))
+    for name, other in filters.items():
+        u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
+        rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
+             other.used[u].sum(axis=1))
     f = np.flatnonzero(np.isfinite(fe))
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1))
     main = next(iter(frames)) if smooth else "ekf"  # the robust smoother where it ran, else the RTS smoother
@@ -427,6 +432,6 @@ def write(outcome: TrackOutcome, out: Path) -> None:
         plt.close(fig)
 
 
-__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
+__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "FILTERS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
            "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds",
            "drop_detections", "estimate_lag", "figure", "score", "track", "tracker_settings", "write"]

@@ -130,9 +130,41 @@ def test_ukf_update_against_filterpy():
     assert np.abs(got_P - ukf.P).max() <= 1e-9 * np.abs(ukf.P).max()
 
 
-def test_ukf_is_consistent_on_simulated_pings():
-    """The UKF tracker over 20 seeds of simulated pings (Lake Hald's array, 30 % of the arrivals heard): its 2-D
-    NEES against the exact truth in [1, 3] (2 if consistent), and its RMS error within 10 % of the EKF's."""
+def test_sequential_update_against_filterpy():
+    """One ping's five arrivals, one at a time (no gate), equal FilterPy's ExtendedKalmanFilter updated with each
+    arrival in turn (its Jacobian at the state the earlier ones left), to 1e-9."""
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    rng = np.random.default_rng(4)
+    receivers = rng.uniform(-150, 150, (5, 2))
+    s = tt.TrackerSettings(sound_speed=1430.0, sigma_toa=2e-4, gate=1e9)
+    x = np.array([20.0, -35.0, 0.4, -0.2, 812.5, 2.0])
+    A = np.array([3.0, 3.0, 0.3, 0.3, 1e-3, 1e-3])[:, None] * rng.normal(size=(6, 6))
+    P = A @ A.T + np.diag([1.0, 1.0, 0.1, 0.1, 1e-6, 1e-6])
+    truth = x + rng.multivariate_normal(np.zeros(6), P)
+    toa = truth[4] + np.hypot(*(truth[:2] - receivers).T) / s.sound_speed + rng.normal(0, s.sigma_toa, 5)
+    got_x, got_P, used = tt.ToaSeqTracker(receivers, s).update(x, P, toa)
+    assert used.all()
+
+    ekf = ExtendedKalmanFilter(6, 1)
+    ekf.x, ekf.P = x.copy(), P.copy()
+    for r, z in zip(receivers, toa):
+        def jacobian(state, r=r):
+            d = state[:2] - r
+            return np.array([[*(d / np.hypot(*d) / s.sound_speed), 0.0, 0.0, 1.0, 0.0]])
+
+        ekf.update(np.array([z]), jacobian, lambda state, r=r: np.array([state[4] + np.hypot(*(state[:2] - r))
+                                                                         / s.sound_speed]),
+                   R=np.array([[s.sigma_toa**2]]))
+    assert np.abs(got_x - ekf.x).max() <= 1e-9 * np.abs(ekf.x).max()
+    assert np.abs(got_P - ekf.P).max() <= 1e-9 * np.abs(ekf.P).max()
+
+
+@pytest.mark.parametrize("kind", ["ukf", "ekf-seq"])
+def test_ukf_and_ekf_seq_are_consistent_on_simulated_pings(kind):
+    """The UKF and the sequential EKF over 20 seeds of simulated pings (Lake Hald's array, 30 % of the arrivals
+    heard): the 2-D NEES against the exact truth in [1, 3] (2 if consistent), and the RMS error within 10 % of the
+    EKF's."""
     receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
     receivers = receivers[np.isfinite(receivers).all(axis=1)]
     s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
@@ -140,7 +172,8 @@ def test_ukf_is_consistent_on_simulated_pings():
     for seed in range(20):
         rng = np.random.default_rng(200 + seed)
         toa, truth, _ = tt.simulate_pings(receivers, 60, s, rng, speed=0.3, detection=0.3)
-        ukf, ekf = tt.ToaUkfTracker(receivers, s).run(toa), tt.ToaTracker(receivers, s).run(toa)
+        ukf = {"ukf": tt.ToaUkfTracker, "ekf-seq": tt.ToaSeqTracker}[kind](receivers, s).run(toa)
+        ekf = tt.ToaTracker(receivers, s).run(toa)
         k = np.arange(max(ukf.start, ekf.start), len(toa))
         e = ukf.x_filtered[k, :2] - truth[k]
         nees.append(np.mean(np.einsum("mi,mi->m", e, np.linalg.solve(ukf.P_filtered[k][:, :2, :2],
@@ -200,7 +233,7 @@ def test_written_files_keep_the_issue_names(full):
     score = json.loads((full.out / "score.json").read_text())
     assert list(score)[:9] == list(full.score)[:9] and score["estimator"] == "robust"
     errors = pd.read_csv(full.out / "errors.csv")
-    assert set(errors["estimator"]) == {"robust", "rts", "ekf", "ukf", "fix", "reference"}
+    assert set(errors["estimator"]) == {"robust", "rts", "ekf", "ekf-seq", "ukf", "fix", "reference"}
     assert not (full.out / "tracks.csv").exists()
 
 
