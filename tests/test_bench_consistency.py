@@ -1,6 +1,6 @@
 """The consistency benchmark's inverted-LBL rows (``bench_consistency.inverted_lbl_cells``): each row's figures
 are those of its estimator on the benchmark's simulated pings, computed again here for the EKF (its NEES, RMS
-error and PCRB pooled over the seeds' pings), and the robust smoother stays at its bound with multipath."""
+error and PCRB pooled over the seeds' pings), and every tracker stays at its bound with multipath."""
 
 import sys
 from pathlib import Path
@@ -43,6 +43,9 @@ def test_the_inverted_lbl_rows_are_their_estimators_figures():
     assert cells["rts"]["pcrb"] < ekf["pcrb"] and cells["robust"]["pcrb"] == cells["rts"]["pcrb"]
 
 
-def test_the_robust_smoother_keeps_its_bound_with_multipath():
-    robust = bench_consistency.inverted_lbl_cells(5, 0.05)["robust"]
-    assert 1.0 <= robust["nees"] <= 3.0 and robust["ratio"] <= 1.3, robust
+def test_every_tracker_keeps_its_bound_with_multipath():
+    """5 % of the arrivals 1 to 3 ms late, 5 seeds: every tracker's 2-D NEES in [1, 3] and RMS within 1.3 times its
+    bound (the causal filters thanks to the single-ping fix's screening of a failing set: without it the EKF's NEES
+    was 56 at 20 seeds, one seed diverging)."""
+    for name, cell in bench_consistency.inverted_lbl_cells(5, 0.05).items():
+        assert 1.0 <= cell["nees"] <= 3.0 and cell["ratio"] <= 1.3, (name, cell)

@@ -542,7 +542,8 @@ class ToaTracker:
     process noise ``q [T³/3, T²/2; T²/2, T]`` per axis (white-noise acceleration), ``jitter²`` on ``t_e`` and
     ``interval_drift²`` on ``Δ``. The update of ping k uses :func:`toa_function` with the receivers that heard
     it, gated one by one (NIS against ``settings.gate``) and then as a set (the χ² quantile of
-    ``settings.gate_probability``; the largest NIS dropped until it passes).
+    ``settings.gate_probability``): a set that fails with dim + 3 arrivals or more is first cut to those the
+    ping's own single-ping fix keeps, then the largest NIS is dropped until it passes.
 
     Parameters
     ----------
@@ -592,6 +593,7 @@ class ToaTracker:
         variance = np.einsum("ij,jk,ik->i", H, P, H) + R
         used = np.isfinite(toa)
         used[used] = nu[used] ** 2 / variance[used] <= s.gate
+        used = self._screened(toa, used, nu, H @ P @ H.T + R * np.eye(self.n))
         while used.any():
             Hu = H[used]
             S = Hu @ P @ Hu.T + R * np.eye(int(used.sum()))
@@ -605,6 +607,22 @@ class ToaTracker:
             worst = np.flatnonzero(used)[int(np.argmax(nu[used] ** 2 / variance[used]))]
             used[worst] = False
         return x, P, used
+
+    def _screened(self, toa: np.ndarray, used: np.ndarray, nu: np.ndarray, S: np.ndarray) -> np.ndarray:
+        """The arrivals ``used`` (n,) of a ping, screened by its own single-ping fix where they fail the set's test
+        (innovations ``nu`` (n,) [s], their predicted covariance ``S`` (n, n) [s²]) with redundancy to spare
+        (dim + 3 or more): those the fix kept. After a poor prediction (the velocity unknown at the start, a
+        turn) the prediction's residuals cannot tell a late multipath arrival from the good ones, and dropping the
+        largest of them until the set passes can drop the good ones and keep the late; the fix's own residuals
+        single it out."""
+        n_used = int(used.sum())
+        if n_used < self.dim + 3:
+            return used
+        if float(nu[used] @ np.linalg.solve(S[np.ix_(used, used)], nu[used])) <= self._set_gate[n_used - 1]:
+            return used
+        fix = single_ping_fix(np.where(used, toa, np.nan), self.receivers, self.settings.sound_speed,
+                              self.settings.sigma_toa)
+        return used if fix is None else used & fix.used
 
     def run(self, toa: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> TrackRecord:
         """The EKF over every ping (rows of ``toa``, (m, n) [s], NaN: not heard), started at the first ping with a
@@ -689,7 +707,8 @@ class ToaTracker:
 class ToaSeqTracker(ToaTracker):
     """The sequential EKF of the same track (the ``ekf-seq`` receiver's update): :class:`ToaTracker`'s motion model,
     start and restarts, with one scalar update per time of arrival, each linearised at the state the arrivals
-    before it left, and each gated alone by its NIS (``settings.gate``); no test of the set.
+    before it left, and each gated alone by its NIS (``settings.gate``); the ping's arrivals are first screened as
+    the EKF's are (by the ping's own single-ping fix where the set fails its test at the prediction).
 
     Parameters
     ----------
@@ -703,9 +722,13 @@ class ToaSeqTracker(ToaTracker):
         state, the covariance (Joseph form) and the arrivals used (n,)."""
         d, s = self.dim, self.settings
         R = s.sigma_toa**2
+        model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
+        H = np.zeros((self.n, self.size))
+        H[:, :d], H[:, -2] = np.asarray(J)[:, :d], np.asarray(J)[:, d]
+        heard = self._screened(toa, np.isfinite(toa), toa - np.asarray(model).ravel(), H @ P @ H.T + R * np.eye(self.n))
         one = toa_function(1, d)
         used = np.zeros(self.n, bool)
-        for i in np.flatnonzero(np.isfinite(toa)):
+        for i in np.flatnonzero(heard):
             model, J = one(x[:d], x[-2], self.receivers[i], s.sound_speed)
             J = np.asarray(J).ravel()
             h = np.zeros(self.size)
@@ -779,6 +802,7 @@ class ToaUkfTracker(ToaTracker):
         variance = np.diag(Pzz) + R
         used = np.isfinite(toa)
         used[used] = nu[used] ** 2 / variance[used] <= s.gate
+        used = self._screened(toa, used, nu, Pzz + R * np.eye(self.n))
         while used.any():
             S = Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
             nis = float(nu[used] @ np.linalg.solve(S, nu[used]))
