@@ -56,7 +56,7 @@ def measure(repeats: int, kept: str | None = None, warm: bool = True) -> dict:
     tracker = tt.ToaTracker(positions, settings)
 
     def ekf_rts():
-        record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))
+        record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused)
         return record, tracker.smooth(record)
 
     ekf_rts_s, (record, (xs, _)) = best_of(repeats, ekf_rts, warm)

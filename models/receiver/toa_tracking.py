@@ -561,6 +561,7 @@ class ToaTracker:
         from scipy.stats import chi2
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
+        self._kept: np.ndarray | None = None  # the arrivals the ping's fix keeps, while run() is given them
 
     def transition(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s)."""
@@ -620,18 +621,23 @@ class ToaTracker:
             return used
         if float(nu[used] @ np.linalg.solve(S[np.ix_(used, used)], nu[used])) <= self._set_gate[n_used - 1]:
             return used
-        fix = single_ping_fix(np.where(used, toa, np.nan), self.receivers, self.settings.sound_speed,
-                              self.settings.sigma_toa)
-        return used if fix is None else used & fix.used
+        kept = self._kept
+        if kept is None:
+            fix = single_ping_fix(toa, self.receivers, self.settings.sound_speed, self.settings.sigma_toa)
+            kept = None if fix is None else fix.used
+        return used if kept is None else used & kept
 
-    def run(self, toa: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> TrackRecord:
+    def run(self, toa: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+            kept: np.ndarray | None = None) -> TrackRecord:
         """The EKF over every ping (rows of ``toa``, (m, n) [s], NaN: not heard), started at the first ping with a
         single-ping fix of dim + 2 receivers or more, and started again from a fix after ``reinit_after``
         pings whose arrivals were all refused or, given ``fixes`` (the single-ping fixes of every ping: positions
         (m, dim) [m], NaN where none, covariances (m, ≥dim, ≥dim) [m²] and the receivers each used (m,), as
         :func:`fix_pings` returns them), after ``disagree_after`` consecutive overdetermined fixes outside the
         prediction's ``fix_gate``, or after ``agree_after`` consecutive mutually consistent fixes of dim + 2
-        receivers or more outside it (:class:`TrackerSettings`)."""
+        receivers or more outside it (:class:`TrackerSettings`). ``kept`` (m, n): the arrivals each ping's
+        single-ping fix keeps (:func:`fix_pings`' ``used``), for the screening of a set that fails its test
+        (computed ping by ping where needed when not given)."""
         m, size, s = len(toa), self.size, self.settings
         rec = TrackRecord(np.full((m, size), np.nan), np.full((m, size, size), np.nan), np.full((m, size), np.nan),
                           np.full((m, size, size), np.nan), np.tile(np.eye(size), (m, 1, 1)),
@@ -667,6 +673,7 @@ class ToaTracker:
                         else:
                             agreeing = 1
                         chain = k
+                self._kept = None if kept is None else kept[k]
                 x, P, used = self.update(x, P, toa[k])
                 rec.used[k] = used
                 refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
@@ -690,6 +697,7 @@ class ToaTracker:
                 rec.used[k] = fix.used
                 refused = 0
             rec.x_filtered[k], rec.P_filtered[k] = x, P
+        self._kept = None
         return rec
 
     def smooth(self, rec: TrackRecord) -> tuple[np.ndarray, np.ndarray]:
@@ -706,9 +714,10 @@ class ToaTracker:
 
 class ToaSeqTracker(ToaTracker):
     """The sequential EKF of the same track (the ``ekf-seq`` receiver's update): :class:`ToaTracker`'s motion model,
-    start and restarts, with one scalar update per time of arrival, each linearised at the state the arrivals
-    before it left, and each gated alone by its NIS (``settings.gate``); the ping's arrivals are first screened as
-    the EKF's are (by the ping's own single-ping fix where the set fails its test at the prediction).
+    start and restarts, with one scalar update per time of arrival (sequential processing, Bar-Shalom, Li &
+    Kirubarajan 2001, section 3.6), each gated alone by its NIS (``settings.gate``) against the state and
+    covariance the arrivals before it left, the model linearised once at the prediction; the ping's arrivals are
+    first screened as the EKF's are (by the ping's own single-ping fix where the set fails its test).
 
     Parameters
     ----------
@@ -723,23 +732,21 @@ class ToaSeqTracker(ToaTracker):
         d, s = self.dim, self.settings
         R = s.sigma_toa**2
         model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
+        model, J = np.asarray(model).ravel(), np.asarray(J)
         H = np.zeros((self.n, self.size))
-        H[:, :d], H[:, -2] = np.asarray(J)[:, :d], np.asarray(J)[:, d]
-        heard = self._screened(toa, np.isfinite(toa), toa - np.asarray(model).ravel(), H @ P @ H.T + R * np.eye(self.n))
-        one = toa_function(1, d)
+        H[:, :d], H[:, -2] = J[:, :d], J[:, d]
+        heard = self._screened(toa, np.isfinite(toa), toa - model, H @ P @ H.T + R * np.eye(self.n))
+        prediction, eye = x, np.eye(self.size)
         used = np.zeros(self.n, bool)
         for i in np.flatnonzero(heard):
-            model, J = one(x[:d], x[-2], self.receivers[i], s.sound_speed)
-            J = np.asarray(J).ravel()
-            h = np.zeros(self.size)
-            h[:d], h[-2] = J[:d], J[d]
-            nu = toa[i] - float(model)
+            h = H[i]
+            nu = toa[i] - (model[i] + h @ (x - prediction))
             S = h @ P @ h + R
             if nu**2 / S > s.gate:
                 continue
             k = P @ h / S
             x = x + k * nu
-            A = np.eye(self.size) - np.outer(k, h)
+            A = eye - np.outer(k, h)
             P = A @ P @ A.T + R * np.outer(k, k)
             P = 0.5 * (P + P.T)
             used[i] = True

@@ -309,8 +309,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     settings = tracker_settings(c, fe)
     interval = settings.interval
     tracker = tt.ToaTracker(positions, settings)
-    record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))  # the fixes restart a lost filter
-    filters = {name: getattr(tt, kind)(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)))
+    # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
+    record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused)
+    filters = {name: getattr(tt, kind)(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused)
                for name, kind in FILTERS.items()}
     columns = ["x", "y", "z"][:dim]
     frames, covariances = {}, {}

@@ -132,7 +132,7 @@ def test_ukf_update_against_filterpy():
 
 def test_sequential_update_against_filterpy():
     """One ping's five arrivals, one at a time (no gate), equal FilterPy's ExtendedKalmanFilter updated with each
-    arrival in turn (its Jacobian at the state the earlier ones left), to 1e-9."""
+    arrival in turn, the model linearised at the prediction (sequential processing), to 1e-9."""
     from filterpy.kalman import ExtendedKalmanFilter
 
     rng = np.random.default_rng(4)
@@ -149,12 +149,10 @@ def test_sequential_update_against_filterpy():
     ekf = ExtendedKalmanFilter(6, 1)
     ekf.x, ekf.P = x.copy(), P.copy()
     for r, z in zip(receivers, toa):
-        def jacobian(state, r=r):
-            d = state[:2] - r
-            return np.array([[*(d / np.hypot(*d) / s.sound_speed), 0.0, 0.0, 1.0, 0.0]])
-
-        ekf.update(np.array([z]), jacobian, lambda state, r=r: np.array([state[4] + np.hypot(*(state[:2] - r))
-                                                                         / s.sound_speed]),
+        d = x[:2] - r  # the model and its Jacobian at the prediction
+        h = np.array([[*(d / np.hypot(*d) / s.sound_speed), 0.0, 0.0, 1.0, 0.0]])
+        predicted = x[4] + np.hypot(*d) / s.sound_speed
+        ekf.update(np.array([z]), lambda state, h=h: h, lambda state, h=h, p=predicted: p + h @ (state - x),
                    R=np.array([[s.sigma_toa**2]]))
     assert np.abs(got_x - ekf.x).max() <= 1e-9 * np.abs(ekf.x).max()
     assert np.abs(got_P - ekf.P).max() <= 1e-9 * np.abs(ekf.P).max()
