@@ -912,10 +912,10 @@ def observed_information(z: np.ndarray, dof: float = ROBUST_DOF) -> np.ndarray:
     second derivative: ``(ν + 1) (ν − z²) / (ν + z²)²`` [1], and 0 where that is negative (``|z| > √ν``).
 
     The Gauss-Newton weight ``(ν + 1) / (ν + z²)`` is the same at ``z = 0`` and larger everywhere else: over
-    Student-t errors it is 1 on average against the observed information's ``(ν + 1) / (ν + 3)`` (2/3 at ν = 3), so
-    a covariance from those weights is too small by half (Lange, Little, Taylor 1989, section 3: the information
-    of the t's location). Clipped at 0: an arrival that the track disagrees with by more than √ν σ adds no
-    information (it would make the Hessian indefinite).
+    Student-t errors it is 1 on average against the observed information's ``(ν + 1) / (ν + 3)`` (2/3 at ν = 3, the
+    Fisher information of the t's location: Lange, Little, Taylor 1989), so a covariance from those weights is too
+    small by a third (a NEES 1.5 times too large). Clipped at 0: an arrival that the track disagrees with by more
+    than √ν σ adds no information (it would make the Hessian indefinite).
 
     Parameters
     ----------

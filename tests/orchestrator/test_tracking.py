@@ -166,20 +166,20 @@ def test_ukf_and_ekf_seq_are_consistent_on_simulated_pings(kind):
     receivers = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
     receivers = receivers[np.isfinite(receivers).all(axis=1)]
     s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
-    nees, ukf_sq, ekf_sq = [], [], []
+    nees, other_sq, ekf_sq = [], [], []
     for seed in range(20):
         rng = np.random.default_rng(200 + seed)
         toa, truth, _ = tt.simulate_pings(receivers, 60, s, rng, speed=0.3, detection=0.3)
-        ukf = {"ukf": tt.ToaUkfTracker, "ekf-seq": tt.ToaSeqTracker}[kind](receivers, s).run(toa)
+        other = {"ukf": tt.ToaUkfTracker, "ekf-seq": tt.ToaSeqTracker}[kind](receivers, s).run(toa)
         ekf = tt.ToaTracker(receivers, s).run(toa)
-        k = np.arange(max(ukf.start, ekf.start), len(toa))
-        e = ukf.x_filtered[k, :2] - truth[k]
-        nees.append(np.mean(np.einsum("mi,mi->m", e, np.linalg.solve(ukf.P_filtered[k][:, :2, :2],
+        k = np.arange(max(other.start, ekf.start), len(toa))
+        e = other.x_filtered[k, :2] - truth[k]
+        nees.append(np.mean(np.einsum("mi,mi->m", e, np.linalg.solve(other.P_filtered[k][:, :2, :2],
                                                                         e[..., None])[..., 0])))
-        ukf_sq.append(np.mean((e**2).sum(axis=1)))
+        other_sq.append(np.mean((e**2).sum(axis=1)))
         ekf_sq.append(np.mean(((ekf.x_filtered[k, :2] - truth[k]) ** 2).sum(axis=1)))
     assert 1.0 <= np.mean(nees) <= 3.0, np.mean(nees)
-    assert abs(np.sqrt(np.mean(ukf_sq) / np.mean(ekf_sq)) - 1.0) < 0.1
+    assert abs(np.sqrt(np.mean(other_sq) / np.mean(ekf_sq)) - 1.0) < 0.1
 
 
 THINNED = ["H2", "H4", "H6", "H7", "H11", "H12", "H17", "H23"]  # the authors' 8 of the 28 (docs/tracking.md)
