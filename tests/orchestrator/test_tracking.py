@@ -103,13 +103,10 @@ def test_rts_against_filterpy():
     assert np.abs(xs - x_ref).max() <= 1e-9 and np.abs(Ps - P_ref).max() <= 1e-9
 
 
-def test_ukf_update_against_filterpy():
-    """One unscented update of a ping heard by five receivers (no gate) equals FilterPy's UnscentedKalmanFilter
-    with the same scaled sigma points (its prediction through the identity without process noise gives back the
-    state and covariance), to 1e-9."""
-    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-
-    rng = np.random.default_rng(3)
+def one_ping(seed: int):
+    """A ping heard by five receivers around a predicted state (x, P) of realistic spread, no gate: receivers,
+    settings, x, P and the times of arrival drawn from a truth inside P."""
+    rng = np.random.default_rng(seed)
     receivers = rng.uniform(-150, 150, (5, 2))
     s = tt.TrackerSettings(sound_speed=1430.0, sigma_toa=2e-4, gate=1e9, gate_probability=1.0 - 1e-15)
     x = np.array([20.0, -35.0, 0.4, -0.2, 812.5, 2.0])
@@ -117,6 +114,16 @@ def test_ukf_update_against_filterpy():
     P = A @ A.T + np.diag([1.0, 1.0, 0.1, 0.1, 1e-6, 1e-6])
     truth = x + rng.multivariate_normal(np.zeros(6), P)
     toa = truth[4] + np.hypot(*(truth[:2] - receivers).T) / s.sound_speed + rng.normal(0, s.sigma_toa, 5)
+    return receivers, s, x, P, toa
+
+
+def test_ukf_update_against_filterpy():
+    """One unscented update of a ping heard by five receivers (no gate) equals FilterPy's UnscentedKalmanFilter
+    with the same scaled sigma points (its prediction through the identity without process noise gives back the
+    state and covariance), to 1e-9."""
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+    receivers, s, x, P, toa = one_ping(3)
     got_x, got_P, used = tt.ToaUkfTracker(receivers, s).update(x, P, toa)
     assert used.all()
 
@@ -135,14 +142,7 @@ def test_sequential_update_against_filterpy():
     arrival in turn, the model linearised at the prediction (sequential processing), to 1e-9."""
     from filterpy.kalman import ExtendedKalmanFilter
 
-    rng = np.random.default_rng(4)
-    receivers = rng.uniform(-150, 150, (5, 2))
-    s = tt.TrackerSettings(sound_speed=1430.0, sigma_toa=2e-4, gate=1e9)
-    x = np.array([20.0, -35.0, 0.4, -0.2, 812.5, 2.0])
-    A = np.array([3.0, 3.0, 0.3, 0.3, 1e-3, 1e-3])[:, None] * rng.normal(size=(6, 6))
-    P = A @ A.T + np.diag([1.0, 1.0, 0.1, 0.1, 1e-6, 1e-6])
-    truth = x + rng.multivariate_normal(np.zeros(6), P)
-    toa = truth[4] + np.hypot(*(truth[:2] - receivers).T) / s.sound_speed + rng.normal(0, s.sigma_toa, 5)
+    receivers, s, x, P, toa = one_ping(4)
     got_x, got_P, used = tt.ToaSeqTracker(receivers, s).update(x, P, toa)
     assert used.all()
 
