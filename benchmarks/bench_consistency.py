@@ -88,10 +88,10 @@ def inverted_lbl_cells(seeds: int, late: float) -> dict[str, dict[str, float]]:
 
     from sblsim.models.receiver import toa_bound as tb
     from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.orchestrator.tracks.toa import read_receivers
 
-    table = Path(__file__).resolve().parents[1] / "data" / "lake-hald" / "hydrophones.csv"
-    receivers = np.genfromtxt(table, delimiter=",", skip_header=1, usecols=(1, 2))
-    receivers = receivers[np.isfinite(receivers).all(axis=1)]
+    receivers = read_receivers(Path(__file__).resolve().parents[1] / "data" / "lake-hald" / "hydrophones.csv").positions
+    receivers = receivers[np.isfinite(receivers).all(axis=1)]  # H14 failed
     s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, acceleration_psd=1e-3, jitter=1e-3)
     motion = tb.MotionModel.of(s)
     sums = {name: {"nees": [], "e2": [], "b2": []} for name in TOA_ESTIMATORS}
@@ -106,9 +106,10 @@ def inverted_lbl_cells(seeds: int, late: float) -> dict[str, dict[str, float]]:
         k0 = record.start
         xs, Ps = tracker.smooth(record)
         states = {"ekf": (record.x_filtered, record.P_filtered), "rts": (xs, Ps)}
-        for name, kind in (("ekf-seq", tt.ToaSeqTracker), ("ukf", tt.ToaUkfTracker)):
-            other = kind(receivers, s).run(toa)
-            states[name] = (other.x_filtered, other.P_filtered)
+        for name, kind in tt.CAUSAL_TRACKERS.items():
+            if name != "ekf":  # the EKF's record is the RTS smoother's, above
+                other = kind(receivers, s).run(toa)
+                states[name] = (other.x_filtered, other.P_filtered)
         robust = tt.robust_smooth(toa[k0:], receivers, s, [xs[k0:]])
         states["robust"] = (np.vstack([xs[:k0], robust.x]), np.concatenate([Ps[:k0], robust.P]))
         velocity = np.gradient(truth, emissions, axis=0)

@@ -561,7 +561,6 @@ class ToaTracker:
         from scipy.stats import chi2
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
-        self._kept: np.ndarray | None = None  # the arrivals the ping's fix keeps, while run() is given them
 
     def transition(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s)."""
@@ -580,9 +579,11 @@ class ToaTracker:
         P[-1, -1] = s.sigma_interval**2
         return x, P
 
-    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The EKF update with one ping's times of arrival (n,) (NaN: not heard), gated; returns the state, the
-        covariance (Joseph form) and the arrivals used (n,)."""
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The EKF update with one ping's times of arrival (n,) (NaN: not heard), gated (:meth:`_gated`, ``kept``
+        (n,) the arrivals the ping's single-ping fix keeps, if known); returns the state, the covariance (Joseph
+        form) and the arrivals used (n,)."""
         d, s = self.dim, self.settings
         model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
         model, J = np.asarray(model).ravel(), np.asarray(J)
@@ -591,37 +592,55 @@ class ToaTracker:
         H[:, -2] = J[:, d]
         R = s.sigma_toa**2
         nu = toa - model
-        variance = np.einsum("ij,jk,ik->i", H, P, H) + R
-        used = np.isfinite(toa)
-        used[used] = nu[used] ** 2 / variance[used] <= s.gate
-        used = self._screened(toa, used, nu, H @ P @ H.T + R * np.eye(self.n))
-        while used.any():
+
+        def S(used):
+            return H[used] @ P @ H[used].T + R * np.eye(int(used.sum()))
+
+        used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R, S, kept)
+        if Su is not None:
             Hu = H[used]
-            S = Hu @ P @ Hu.T + R * np.eye(int(used.sum()))
-            nis = float(nu[used] @ np.linalg.solve(S, nu[used]))
-            if nis <= self._set_gate[int(used.sum()) - 1]:
-                K = np.linalg.solve(S, Hu @ P).T
-                x = x + K @ nu[used]
-                A = np.eye(self.size) - K @ Hu
-                P = A @ P @ A.T + R * K @ K.T
-                return x, 0.5 * (P + P.T), used
-            worst = np.flatnonzero(used)[int(np.argmax(nu[used] ** 2 / variance[used]))]
-            used[worst] = False
+            K = np.linalg.solve(Su, Hu @ P).T
+            x = x + K @ nu[used]
+            A = np.eye(self.size) - K @ Hu
+            P = A @ P @ A.T + R * K @ K.T
+            P = 0.5 * (P + P.T)
         return x, P, used
 
-    def _screened(self, toa: np.ndarray, used: np.ndarray, nu: np.ndarray, S: np.ndarray) -> np.ndarray:
-        """The arrivals ``used`` (n,) of a ping, screened by its own single-ping fix where they fail the set's test
-        (innovations ``nu`` (n,) [s], their predicted covariance ``S`` (n, n) [s²]) with redundancy to spare
-        (dim + 3 or more): those the fix kept. After a poor prediction (the velocity unknown at the start, a
-        turn) the prediction's residuals cannot tell a late multipath arrival from the good ones, and dropping the
-        largest of them until the set passes can drop the good ones and keep the late; the fix's own residuals
-        single it out."""
-        n_used = int(used.sum())
-        if n_used < self.dim + 3:
+    def _gated(self, toa: np.ndarray, nu: np.ndarray, variance: np.ndarray, S, kept: np.ndarray | None
+               ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The arrivals (n,) a ping's update uses, and their innovations' covariance (None when none is used):
+        each heard one whose NIS (innovation ``nu`` (n,) [s] over its ``variance`` (n,) [s²]) passes
+        ``settings.gate``; then as a set (``S(used)`` the predicted covariance [s²] of the innovations of the
+        arrivals ``used`` (n,) bool) against the χ² quantile of ``settings.gate_probability``: a set that fails is
+        first cut to the arrivals the ping's single-ping fix keeps (:meth:`_fix_kept`), then its largest NIS is
+        dropped until it passes."""
+        used = np.isfinite(toa)
+        used[used] = nu[used] ** 2 / variance[used] <= self.settings.gate
+        screened = False
+        while used.any():
+            Su = S(used)
+            if self._set_passes(used, nu, Su):
+                return used, Su
+            if not screened:
+                screened, cut = True, self._fix_kept(toa, used, kept)
+                if not np.array_equal(cut, used):
+                    used = cut
+                    continue
+            used[np.flatnonzero(used)[int(np.argmax(nu[used] ** 2 / variance[used]))]] = False
+        return used, None
+
+    def _set_passes(self, used: np.ndarray, nu: np.ndarray, Su: np.ndarray) -> bool:
+        """Whether the arrivals ``used`` (n,) pass the set's χ² test, ``Su`` their innovations' covariance [s²]."""
+        return float(nu[used] @ np.linalg.solve(Su, nu[used])) <= self._set_gate[int(used.sum()) - 1]
+
+    def _fix_kept(self, toa: np.ndarray, used: np.ndarray, kept: np.ndarray | None) -> np.ndarray:
+        """The arrivals ``used`` (n,) of a ping cut, with redundancy to spare (dim + 3 or more), to those its own
+        single-ping fix keeps (``kept`` (n,), computed here when None). After a poor prediction (the velocity
+        unknown at the start, a turn) the prediction's residuals cannot tell a late multipath arrival from the good
+        ones, and dropping the largest of them until the set passes can drop the good ones and keep the late; the
+        fix's own residuals single it out."""
+        if int(used.sum()) < self.dim + 3:
             return used
-        if float(nu[used] @ np.linalg.solve(S[np.ix_(used, used)], nu[used])) <= self._set_gate[n_used - 1]:
-            return used
-        kept = self._kept
         if kept is None:
             fix = single_ping_fix(toa, self.receivers, self.settings.sound_speed, self.settings.sigma_toa)
             kept = None if fix is None else fix.used
@@ -673,8 +692,7 @@ class ToaTracker:
                         else:
                             agreeing = 1
                         chain = k
-                self._kept = None if kept is None else kept[k]
-                x, P, used = self.update(x, P, toa[k])
+                x, P, used = self.update(x, P, toa[k], None if kept is None else kept[k])
                 rec.used[k] = used
                 refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
                 if disagree >= s.disagree_after or (s.agree_after is not None and agreeing >= s.agree_after):
@@ -697,7 +715,6 @@ class ToaTracker:
                 rec.used[k] = fix.used
                 refused = 0
             rec.x_filtered[k], rec.P_filtered[k] = x, P
-        self._kept = None
         return rec
 
     def smooth(self, rec: TrackRecord) -> tuple[np.ndarray, np.ndarray]:
@@ -726,16 +743,20 @@ class ToaSeqTracker(ToaTracker):
     settings : TrackerSettings
     """
 
-    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The arrivals of one ping (n,) (NaN: not heard) one at a time, in the receivers' order; returns the
-        state, the covariance (Joseph form) and the arrivals used (n,)."""
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The arrivals of one ping (n,) (NaN: not heard) one at a time, in the receivers' order (``kept`` as
+        :meth:`ToaTracker.update`'s); returns the state, the covariance (Joseph form) and the arrivals used (n,)."""
         d, s = self.dim, self.settings
         R = s.sigma_toa**2
         model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
         model, J = np.asarray(model).ravel(), np.asarray(J)
         H = np.zeros((self.n, self.size))
         H[:, :d], H[:, -2] = J[:, :d], J[:, d]
-        heard = self._screened(toa, np.isfinite(toa), toa - model, H @ P @ H.T + R * np.eye(self.n))
+        heard = np.isfinite(toa)
+        if heard.any() and not self._set_passes(heard, toa - model,
+                                                H[heard] @ P @ H[heard].T + R * np.eye(int(heard.sum()))):
+            heard = self._fix_kept(toa, heard, kept)
         prediction, eye = x, np.eye(self.size)
         used = np.zeros(self.n, bool)
         for i in np.flatnonzero(heard):
@@ -793,9 +814,10 @@ class ToaUkfTracker(ToaTracker):
         super().__init__(receivers, settings)
         self._sigma = _sigma_function(self.size, float(alpha), float(beta), float(kappa))
 
-    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The unscented update with one ping's times of arrival (n,) (NaN: not heard), gated; returns the state,
-        the covariance and the arrivals used (n,)."""
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unscented update with one ping's times of arrival (n,) (NaN: not heard), gated as the EKF's
+        (``kept`` as :meth:`ToaTracker.update`'s); returns the state, the covariance and the arrivals used (n,)."""
         d, s = self.dim, self.settings
         points, wm, wc = (np.asarray(v) for v in self._sigma(x, P))
         wm, wc = wm.ravel(), wc.ravel()
@@ -806,21 +828,22 @@ class ToaUkfTracker(ToaTracker):
         Pxz = (wc[:, None] * dX).T @ dZ
         R = s.sigma_toa**2
         nu = toa - predicted
-        variance = np.diag(Pzz) + R
-        used = np.isfinite(toa)
-        used[used] = nu[used] ** 2 / variance[used] <= s.gate
-        used = self._screened(toa, used, nu, Pzz + R * np.eye(self.n))
-        while used.any():
-            S = Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
-            nis = float(nu[used] @ np.linalg.solve(S, nu[used]))
-            if nis <= self._set_gate[int(used.sum()) - 1]:
-                K = np.linalg.solve(S, Pxz[:, used].T).T
-                x = x + K @ nu[used]
-                P = P - K @ S @ K.T
-                return x, 0.5 * (P + P.T), used
-            worst = np.flatnonzero(used)[int(np.argmax(nu[used] ** 2 / variance[used]))]
-            used[worst] = False
+
+        def S(used):
+            return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
+
+        used, Su = self._gated(toa, nu, np.diag(Pzz) + R, S, kept)
+        if Su is not None:
+            K = np.linalg.solve(Su, Pxz[:, used].T).T
+            x = x + K @ nu[used]
+            P = P - K @ Su @ K.T
+            P = 0.5 * (P + P.T)
         return x, P, used
+
+
+#: The causal filters of a pinger's track by their receivers' names (one model, start and restarts; their own
+#: measurement update).
+CAUSAL_TRACKERS = {"ekf": ToaTracker, "ekf-seq": ToaSeqTracker, "ukf": ToaUkfTracker}
 
 
 def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.ndarray, P_predicted: np.ndarray,
@@ -1235,10 +1258,10 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
     return toa, positions, emissions
 
 
-__all__ = ["FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_COARSE_ITERATIONS",
-           "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE",
-           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA", "UKF_BETA", "UKF_KAPPA", "Fix",
-           "RobustTrack", "ToaSeqTracker", "ToaTracker", "ToaUkfTracker", "TrackRecord", "TrackerSettings",
-           "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start", "observed_information",
-           "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix", "toa_function",
-           "toa_model"]
+__all__ = ["CAUSAL_TRACKERS", "FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE",
+           "ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT",
+           "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA", "UKF_BETA",
+           "UKF_KAPPA", "Fix", "RobustTrack", "ToaSeqTracker", "ToaTracker", "ToaUkfTracker", "TrackRecord",
+           "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
+           "observed_information", "robust_smooth", "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix",
+           "toa_function", "toa_model"]

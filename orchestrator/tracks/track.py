@@ -52,8 +52,6 @@ ESTIMATOR_NAMES = {"robust": "robust smoother", "rts": "RTS smoother", "ekf": "E
                    "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)", "fix": "single-ping fix",
                    "reference": "reference"}
 ESTIMATORS = ("robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
-#: The causal filters beside the EKF (the tracker's model, start and restarts; their own measurement update).
-FILTERS = {"ekf-seq": "ToaSeqTracker", "ukf": "ToaUkfTracker"}
 #: The time lags between the truth and the track searched [s]: ±this.
 LAG_RANGE_S = 30.0
 #: The keys of ``score.json`` for the track (the issue's names), before the further ones.
@@ -311,8 +309,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     tracker = tt.ToaTracker(positions, settings)
     # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused)
-    filters = {name: getattr(tt, kind)(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused)
-               for name, kind in FILTERS.items()}
+    filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused)
+               for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
     columns = ["x", "y", "z"][:dim]
     frames, covariances = {}, {}
 
@@ -433,6 +431,6 @@ def write(outcome: TrackOutcome, out: Path) -> None:
         plt.close(fig)
 
 
-__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "FILTERS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
+__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
            "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds",
            "drop_detections", "estimate_lag", "figure", "score", "track", "tracker_settings", "write"]

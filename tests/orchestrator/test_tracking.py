@@ -170,7 +170,7 @@ def test_ukf_and_ekf_seq_are_consistent_on_simulated_pings(kind):
     for seed in range(20):
         rng = np.random.default_rng(200 + seed)
         toa, truth, _ = tt.simulate_pings(receivers, 60, s, rng, speed=0.3, detection=0.3)
-        other = {"ukf": tt.ToaUkfTracker, "ekf-seq": tt.ToaSeqTracker}[kind](receivers, s).run(toa)
+        other = tt.CAUSAL_TRACKERS[kind](receivers, s).run(toa)
         ekf = tt.ToaTracker(receivers, s).run(toa)
         k = np.arange(max(other.start, ekf.start), len(toa))
         e = other.x_filtered[k, :2] - truth[k]
