@@ -9,6 +9,7 @@ import the other for a list of names.
 
 from __future__ import annotations
 
+from sblsim.models.acoustics.core import LANES, lane_name
 from sblsim.models.receiver.core import COVARIANCE
 
 #: Per-run error metrics of an estimator (the receiver's; prefixed ``instr_`` for the instrumentation fix) [m].
@@ -57,4 +58,11 @@ TIMESERIES_COLUMNS = {
     "yaw": "platform.yaw",
 }
 
-__all__ = ["CONSISTENCY_NAMES", "METRIC_INPUTS", "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]
+#: What the time series records of each lane 2 … :data:`~sblsim.models.acoustics.core.LANES` of a delivery (the
+#: packets that arrived in a step after lane 1's, whose fields are the columns above): name -> recorded
+#: ``component.variable``; a run's table has the columns of the lanes it used.
+LANE_COLUMNS = {lane_name(m, name): f"acoustics.{lane_name(m, name)}" for m in range(2, LANES + 1)
+                for name in ("packet_seq", "beacon_id", "packet_valid", "tx_time", "rx_time", "range", "beacon_x",
+                             "beacon_y", "beacon_z")}
+
+__all__ = ["CONSISTENCY_NAMES", "LANE_COLUMNS", "METRIC_INPUTS", "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]

@@ -89,7 +89,7 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache, partial
 from typing import Any, Callable, Mapping, NamedTuple
 
@@ -229,6 +229,11 @@ OVERFLOW: tuple[Variable, ...] = (
 #: them all taken is counted in ``overflow_travel_time``, never silently dropped).
 FLIGHT_CAPACITY = 8
 TARGET_INPUTS = ("target_x", "target_y", "target_z", "target_vx", "target_vy", "target_vz")
+#: Lanes of a delivery: every packet in flight may arrive within one step, so the channel delivers up to
+#: :data:`FLIGHT_CAPACITY` packets at a step's end, each on its lane (lane 1: the packet outputs themselves, the
+#: earliest arrival; lane m: ``lane<m>_<name>``, the next ones in the order they arrived; an empty lane has
+#: ``packet_seq`` 0).
+LANES = FLIGHT_CAPACITY
 #: Slack of the delivery test ``rx_time ≤ t + h + ARRIVAL_SLACK`` [s] (the receivers' slot test has the same).
 ARRIVAL_SLACK = 1e-9
 #: Fixed-point iterations of the travel time (before the final evaluation).
@@ -410,6 +415,29 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
                          speeds, site))
     return {name: out[k].T[pair.ravel()] for k, name in ((0, "tau"), (1, "launch"), (3, "valid"), (4, "snr"),
                                                           (5, "pd"))}
+
+def lane_fields(n_beacons: int) -> tuple[Variable, ...]:
+    """What a packet carries to a receiver (the channel's outputs a receiver reads): :data:`PACKET`, what the
+    interface's system adds (USBL: :data:`DIRECTION`), its arrival (:data:`ARRIVAL`) and what the system adds last
+    (USBL: :data:`DOA_ARRAY`)."""
+    direction = interface_system(n_beacons).measures_direction
+    return PACKET + (DIRECTION if direction else ()) + ARRIVAL + (DOA_ARRAY if direction else ())
+
+
+def lane_name(lane: int, name: str) -> str:
+    """The name of the field ``name`` of a packet on ``lane`` (1-based; lane 1: the name itself)."""
+    return name if lane == 1 else f"lane{lane}_{name}"
+
+
+def lane_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
+    """The fields of lanes 2 … :data:`LANES` (:func:`lane_fields`), as the channel's outputs (``causality``
+    ``"output"``) or a receiver's inputs (``"input"``): declared after every other variable of either, so that
+    their value references stay what they were before the lanes existed."""
+    return tuple(replace(v, name=lane_name(m, v.name), causality=causality,
+                         description=f"Lane {m} of a delivery (the packet that arrived {m}th in the step; packet_seq "
+                                     f"0: none): {v.description}")
+                 for m in range(2, LANES + 1) for v in lane_fields(n_beacons))
+
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None,
                     jitter: float = 0.0) -> None:
@@ -805,14 +833,15 @@ class Acoustics(Component):
         )
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
-                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES + OCEAN_VARIABLES)
+                    + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES + OCEAN_VARIABLES
+                    + lane_variables(n_beacons, "output"))
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
-                + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES)
+                + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES + lane_variables(n_beacons, "output"))
 
     @classmethod
     def uses_ray_table(cls, values: Mapping[str, Any], parameters: Mapping[str, Any]) -> bool:
@@ -888,10 +917,12 @@ class Acoustics(Component):
     def build(cls, n_beacons: int):
         n = n_beacons
         packet = [v.name for v in cls.outputs(n)]
-        # what a packet in flight carries: every output but the refusal signal and what its slot counter gives
-        # (the beacon and the transmit epoch, computed again at delivery as the slot computed them)
+        lanes = {v.name for v in lane_variables(n, "output")}
+        fields = [v.name for v in lane_fields(n)]
+        # what a packet in flight carries: every output of lane 1 but the refusal signal and what its slot counter
+        # gives (the beacon and the transmit epoch, computed again at delivery as the slot computed them)
         carried = [name for name in packet
-                   if name not in {v.name for v in OVERFLOW + OVERRUN} | {"beacon_id", "tx_time"}]
+                   if name not in {v.name for v in OVERFLOW + OVERRUN} | {"beacon_id", "tx_time"} | lanes]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
                            + [("delivered_end", 1), ("ocean_frequency", OCEAN_FEATURES),
@@ -945,18 +976,34 @@ class Acoustics(Component):
             return ca.logic_and(any_arrived, x["delivered_end"] < t + 0.5 * h)
 
         def deliver(x, u, p, d, w, t, h):
-            """The arrived packet of earliest arrival (then lowest slot counter) becomes the outputs."""
+            """Every arrived packet leaves the in-flight places, on its lane in the order of arrival (then of slot
+            counter): the earliest becomes the outputs (lane 1), the next ones lanes 2, 3, …; a lane left
+            empty shows packet_seq 0."""
+            arrived = _arrived(x, t, h)
+            rx, seq = x["q_rx_time"], x["q_packet_seq"]
             best, best_rx, best_seq = 0, ca.inf, ca.inf
-            for j, flag in enumerate(_arrived(x, t, h)):
-                rx, seq = x["q_rx_time"][j], x["q_packet_seq"][j]
-                better = ca.logic_and(flag, ca.logic_or(rx < best_rx, ca.logic_and(rx == best_rx, seq < best_seq)))
+            for j, flag in enumerate(arrived):
+                better = ca.logic_and(flag, ca.logic_or(rx[j] < best_rx,
+                                                        ca.logic_and(rx[j] == best_rx, seq[j] < best_seq)))
                 best = ca.if_else(better, j, best)
-                best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
-            at = [best == j for j in range(FLIGHT_CAPACITY)]
+                best_rx, best_seq = ca.if_else(better, rx[j], best_rx), ca.if_else(better, seq[j], best_seq)
             out = dict(zip(carried, get_row([x[f"q_{name}"] for name in carried], best)))
-            seq = out["packet_seq"]
-            out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
-            used = ca.vertcat(*[ca.if_else(at[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
+            first = out["packet_seq"]
+            out.update(beacon_id=ca.fmod(first - 1, n) + 1, tx_time=x["t0"] + first * p["slot_period"])
+            # each arrived packet's place in the order of arrival (0: lane 1's)
+            rank = [sum(ca.logic_and(arrived[i], ca.logic_or(rx[i] < rx[j], ca.logic_and(rx[i] == rx[j],
+                                                                                       seq[i] < seq[j])))
+                        for i in range(FLIGHT_CAPACITY) if i != j) for j in range(FLIGHT_CAPACITY)]
+            lane_carried = [name for name in fields if name in carried]
+            for m in range(2, LANES + 1):
+                on = [ca.logic_and(arrived[j], rank[j] == m - 1) for j in range(FLIGHT_CAPACITY)]
+                filled = sum(on)
+                row = dict(zip(lane_carried, get_row([x[f"q_{name}"] for name in lane_carried],
+                                                     sum(ca.if_else(on[j], j, 0) for j in range(FLIGHT_CAPACITY)))))
+                sequence = row["packet_seq"]
+                row.update(beacon_id=ca.fmod(sequence - 1, n) + 1, tx_time=x["t0"] + sequence * p["slot_period"])
+                out.update({lane_name(m, name): ca.if_else(filled > 0.5, row[name], 0.0) for name in fields})
+            used = ca.vertcat(*[ca.if_else(arrived[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
             return {**out, "q_used": used, "delivered_end": t + h}
 
         def output(x, p, d, t):
@@ -985,6 +1032,7 @@ class Acoustics(Component):
 
 
 __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
-           "DOA_ARRAY", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "OCEAN_FEATURES",
+           "DOA_ARRAY", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields", "lane_name",
+           "lane_variables", "OCEAN_FEATURES",
            "ocean_perturbation", "OCEAN_VARIABLES", "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PROPAGATION",
            "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS"]

@@ -38,7 +38,7 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import ARRIVAL, PACKET
+from sblsim.models.acoustics.core import ARRIVAL, LANES, PACKET, lane_fields, lane_name, lane_variables
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import sample_due, select
@@ -126,8 +126,10 @@ def arrival_interface() -> tuple[Variable, ...]:
 def late_inputs(n_beacons: int) -> tuple[Variable, ...]:
     """What the interface's system adds to a receiver's inputs after every other variable (the attitude of a USBL
     packet's direction, :meth:`~sblsim.models.systems.System.receiver_late_inputs`), so that the value references
-    of every earlier variable stay what they were before it existed."""
-    return interface_system(n_beacons).receiver_late_inputs()
+    of every earlier variable stay what they were before it existed; then the lanes 2 … of a delivery (the
+    packets that arrived in the same step after lane 1's,
+    :func:`~sblsim.models.acoustics.core.lane_variables`), last of all."""
+    return interface_system(n_beacons).receiver_late_inputs() + lane_variables(n_beacons, "input")
 
 
 def clock_parameters() -> tuple[Variable, ...]:
@@ -143,12 +145,13 @@ def packet_states(n_beacons: int) -> list[tuple[str, int]]:
     """State blocks of the packet handling: held ranges and beacon positions, heard flags, the last slot, and the
     receiver's clock (ticks reached since ``tick_t0``)."""
     return [("ranges", n_beacons), ("beacons", 3 * n_beacons), ("heard", n_beacons), ("last_seq", 1),
-            ("slot_time", 1), ("tick", 1), ("tick_t0", 1)]
+            ("slot_time", 1), ("tick", 1), ("tick_t0", 1), ("lane_seq", LANES - 1)]
 
 
 def packet_init(n_beacons: int, t0) -> dict[str, ca.SX]:
     return {"ranges": ca.SX.zeros(n_beacons), "beacons": ca.SX.zeros(3 * n_beacons),
-            "heard": ca.SX.zeros(n_beacons), "last_seq": 0, "slot_time": 0, "tick": 0, "tick_t0": t0}
+            "heard": ca.SX.zeros(n_beacons), "last_seq": 0, "slot_time": 0, "tick": 0, "tick_t0": t0,
+            "lane_seq": ca.SX.zeros(LANES - 1)}
 
 
 def clock_due(x, u, p, d, t, h) -> ca.SX:
@@ -167,12 +170,47 @@ def clock_step(x, p, t, h) -> dict[str, ca.SX]:
     return {"tick": x["tick"] + clock_due(x, None, p, None, t, h)}
 
 
-def slot_due(x, u, p, t, h) -> ca.SX:
-    """A new packet whose arrival epoch the end of the step has reached, in a step that reached a tick of the
-    receiver's clock (the last tick lies after the step's start; the clock event runs first)."""
+def lanes_due(x, u, p, t, h) -> list[ca.SX]:
+    """Per lane of the channel's delivery (:data:`~sblsim.models.acoustics.core.LANES`): a new packet whose arrival
+    epoch the end of the step has reached, in a step that reached a tick of the receiver's clock (the last tick lies
+    after the step's start; the clock event runs first). Lane 1 is new when its ``packet_seq`` differs from the last
+    one used there (``last_seq``), lane m when it holds a packet (``packet_seq`` > 0) other than the last one used
+    there (``lane_seq``)."""
     ticked = x["tick_t0"] + x["tick"] * p["communication_step"] > t + 1e-6 * p["communication_step"]
-    new = ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["rx_time"] - SLOT_SLACK)
-    return ca.logic_and(new, ticked)
+    due = [ca.logic_and(ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["rx_time"] - SLOT_SLACK), ticked)]
+    for m in range(2, LANES + 1):
+        seq, rx = u[lane_name(m, "packet_seq")], u[lane_name(m, "rx_time")]
+        new = ca.logic_and(ca.logic_and(seq > 0, seq != x["lane_seq"][m - 2]), t + h >= rx - SLOT_SLACK)
+        due.append(ca.logic_and(new, ticked))
+    return due
+
+
+def slot_due(x, u, p, t, h) -> ca.SX:
+    """A lane of the delivery holds a packet the receiver has not used and may use now (:func:`lanes_due`)."""
+    due = lanes_due(x, u, p, t, h)
+    any_due = due[0]
+    for flag in due[1:]:
+        any_due = ca.logic_or(any_due, flag)
+    return any_due
+
+
+def next_lane(x, u, p, t, h, n_beacons: int) -> tuple[ca.SX, dict[str, ca.SX]]:
+    """The lane a slot uses (0-based: the first due one, lanes being in the order of arrival) and the inputs with
+    that lane's packet in place of lane 1's (its fields :func:`~sblsim.models.acoustics.core.lane_fields`)."""
+    due = lanes_due(x, u, p, t, h)
+    lane = LANES - 1
+    for m in reversed(range(LANES - 1)):
+        lane = ca.if_else(due[m], m, lane)
+    chosen = {v.name: select(lane, [u[lane_name(m, v.name)] for m in range(1, LANES + 1)])
+              for v in lane_fields(n_beacons)}
+    return lane, {**u, **chosen}
+
+
+def lane_used(x, out, lane, seq) -> dict[str, ca.SX]:
+    """The lanes' memory after a slot used the packet ``seq`` of ``lane`` (0-based; the slot's own ``out`` wrote
+    ``last_seq``, kept for lane 1 alone)."""
+    return {"last_seq": ca.if_else(lane == 0, out["last_seq"], x["last_seq"]),
+            "lane_seq": ca.vertcat(*[ca.if_else(lane == m, seq, x["lane_seq"][m - 1]) for m in range(1, LANES)])}
 
 
 def fresh_packet(u, n_beacons: int) -> ca.SX:
@@ -561,9 +599,6 @@ class KalmanReceiver(RangesWithProfile, Component):
             state, P = cls.predict(x["x"], ca.reshape(x["P"], size, size), h, p)
             return {"x": state, "P": ca.vec(P), **clock_step(x, p, t, h)}
 
-        def due(x, u, p, d, t, h):
-            return slot_due(x, u, p, t, h)
-
         system = interface_system(n)
 
         def slot(x, u, p, d, w, t, h):
@@ -600,21 +635,32 @@ class KalmanReceiver(RangesWithProfile, Component):
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output), step=b.step(step),
-                         events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, due, slot),
+                         events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, slot),
                                  b.event("lm", lm_active, iterate)])
 
 
-def slot_events(b: ProgramBuilder, model, n_beacons: int, due, slot) -> list:
-    """The slot event of a receiver: ``slot`` as it always was for the single assumed speed, and ``slot_profile``
-    (its packet's range turned into the slant range of the receiver's profile first,
-    :func:`~sblsim.models.receiver.profile.profile_range`) for a run with a profile."""
+def slot_events(b: ProgramBuilder, model, n_beacons: int, slot) -> list:
+    """The slot event of a receiver, run while a lane of the delivery holds a packet it may use
+    (:func:`slot_due`), each time with the first such lane's packet (:func:`next_lane`): ``slot`` as it always was
+    for the single assumed speed, and ``slot_profile`` (its packet's range turned into the slant range of the
+    receiver's profile first, :func:`~sblsim.models.receiver.profile.profile_range`) for a run with a profile."""
+    def due(x, u, p, d, t, h):
+        return slot_due(x, u, p, t, h)
+
+    def on_lane(inner):
+        def handler(x, u, p, d, w, t, h):
+            lane, packet = next_lane(x, u, p, t, h, n_beacons)
+            out = inner(x, packet, p, d, w, t, h)
+            return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
+        return handler
+
     events = []
     for choice, when in profile_when(model.fmu_parameters_declared(n_beacons)).items():
         if choice == "assumed":
-            events.append(b.event("slot", due, slot, when=when))
+            events.append(b.event("slot", due, on_lane(slot), when=when))
         else:
-            events.append(b.event("slot_profile", due,
-                                  lambda x, u, p, d, w, t, h: slot(x, profile_range(u, p), p, d, w, t, h), when=when))
+            events.append(b.event("slot_profile", due, on_lane(
+                lambda x, u, p, d, w, t, h: slot(x, profile_range(u, p), p, d, w, t, h)), when=when))
     return events
 
 
@@ -643,6 +689,6 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "clock_tick", "COVARIANCE", "covariance_outputs", "earlier_innovation", "error_parameters", "errors_of",
            "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
-           "lm_step", "packet_init", "packet_states", "RangesWithProfile", "receiver_interface",
+           "lm_step", "lanes_due", "lane_used", "next_lane", "packet_init", "packet_states", "RangesWithProfile", "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch",
            "slot_due", "slot_events", "STATE_NAMES", "system_interface", "take_packet"]

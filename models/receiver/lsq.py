@@ -61,7 +61,6 @@ from sblsim.models.receiver.core import (
     packet_init,
     packet_states,
     receiver_interface,
-    slot_due,
     slot_events,
     system_interface,
     take_packet,
@@ -100,9 +99,6 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
             return {**packet_init(n, t0), "fix": ca.vertcat(p["x0_x"], p["x0_y"], p["x0_z"]), "has_fix": 0,
                     "fix_time": 0, "velocity": ca.SX.zeros(3), "instr": ca.SX.zeros(3), "instr_valid": 0, "nis": 0,
                     "pos_std": 0, "cov": ca.SX.zeros(9), "pending": 0, "fresh": 0, **lm_idle()}
-
-        def due(x, u, p, d, t, h):
-            return slot_due(x, u, p, t, h)
 
         system = interface_system(n)
 
@@ -155,7 +151,7 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
             return out
 
         return b.program(b.prepare(None), b.init(init), b.output(output),
-                         events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, due, slot),
+                         events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, slot),
                                  b.event("lm", lm_active, iterate),
                                  b.event("finish", finished, finish)])
 

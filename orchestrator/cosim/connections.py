@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS
+from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS, lane_variables
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
 from sblsim.models.systems import interface_system
@@ -55,6 +55,8 @@ def default_connections(n_beacons: int = 4) -> list[Connection]:
     # what the system adds to the packet (USBL's direction of arrival and the attitude it was turned with)
     conns += [Connection("acoustics", v.name, "receiver", v.name)
               for v in system.receiver_inputs() + system.receiver_late_inputs()]
+    # the lanes of a delivery: the packets that arrived in the same step after lane 1's
+    conns += [Connection("acoustics", v.name, "receiver", v.name) for v in lane_variables(n_beacons, "input")]
     return conns
 
 

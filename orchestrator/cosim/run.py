@@ -14,9 +14,9 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
-from sblsim.models.acoustics.core import check_in_flight
+from sblsim.models.acoustics.core import LANES, check_in_flight, lane_name
 from sblsim.models.bound import FIXED
-from sblsim.models.columns import TIMESERIES_COLUMNS
+from sblsim.models.columns import LANE_COLUMNS, TIMESERIES_COLUMNS
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import receiver_label, to_toml, turnaround
@@ -425,6 +425,12 @@ def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarra
     for system in SYSTEMS.values():  # a system's own columns (USBL's direction of arrival), where recorded
         if system.timeseries_columns and all(source in rec for source in system.timeseries_columns.values()):
             cols.update({name: rec[source] for name, source in system.timeseries_columns.items()})
+    # the lanes of a delivery a run used (a packet arrived after another in one step), each lane's columns
+    for m in range(2, LANES + 1):
+        seq = rec.get(LANE_COLUMNS[lane_name(m, "packet_seq")])
+        if seq is None or not np.any(seq):
+            break  # lanes fill in order: none later either
+        cols.update({name: rec[source] for name, source in LANE_COLUMNS.items() if name.startswith(f"lane{m}_")})
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
     # no fix at a step (instr_valid false, instr_* 0): the step has no instrumentation error
