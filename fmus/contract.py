@@ -18,9 +18,9 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
-from sblsim.models.acoustics.core import ARRIVAL_SLACK
+from sblsim.models.acoustics.core import ARRIVAL_SLACK, LANES
 from sblsim.models.bound import FIXED, bound_step
-from sblsim.models.columns import METRIC_INPUTS, RUN_METRICS
+from sblsim.models.columns import LANE_FIELDS, LANE_METRIC_INPUTS, METRIC_INPUTS, RUN_METRICS
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.receiver.measurement import STATE_SIZE
 from sblsim.models.systems import SYSTEMS
@@ -68,8 +68,9 @@ def contract_tables() -> dict[str, tuple[str, tuple[str, ...], str, str]]:
                   "The seed parameters of a model record (sblsim.models.declarations.SEED_NAMES)."),
         "vectors": ("SBLSIM_VECTOR_", VECTORS, "SBLSIM_N_VECTORS",
                     "The vectors of a batch (sblsim.fmus.contract.VECTORS); the draw counters last."),
-        "columns": ("SBLSIM_COLUMN_", METRIC_INPUTS, "SBLSIM_N_COLUMNS",
-                    "The recorded columns the metrics read (sblsim.models.columns.METRIC_INPUTS)."),
+        "columns": ("SBLSIM_COLUMN_", METRIC_INPUTS + LANE_METRIC_INPUTS, "SBLSIM_N_COLUMNS",
+                    "The recorded columns the metrics read (sblsim.models.columns.METRIC_INPUTS, then "
+                    "LANE_METRIC_INPUTS)."),
         "metrics": ("SBLSIM_METRIC_", RUN_METRICS, "SBLSIM_N_METRICS",
                     "The metrics of a run (sblsim.models.columns.RUN_METRICS)."),
         "fixed": ("SBLSIM_FIXED_", FIXED, "SBLSIM_N_FIXED",
@@ -90,7 +91,10 @@ def contract_header() -> str:
     lines += ["/* Rows and columns of the bound's matrix (sblsim.models.receiver.measurement.STATE_SIZE). */",
               f"#define SBLSIM_BOUND_STATE {STATE_SIZE}", "",
               "/* Slack of the channel's delivery test [s] (sblsim.models.acoustics.core.ARRIVAL_SLACK). */",
-              f"#define SBLSIM_ARRIVAL_SLACK {ARRIVAL_SLACK!r}", "", "#endif", ""]
+              f"#define SBLSIM_ARRIVAL_SLACK {ARRIVAL_SLACK!r}", "",
+              "/* Lanes of a delivery and the columns the metrics read of each after the first "
+              "(sblsim.models.acoustics.core.LANES, sblsim.models.columns.LANE_FIELDS). */",
+              f"#define SBLSIM_LANES {LANES}", f"#define SBLSIM_LANE_FIELDS {len(LANE_FIELDS)}", "", "#endif", ""]
     return "\n".join(lines)
 
 

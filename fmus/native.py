@@ -491,7 +491,8 @@ def system_bound_sizes(n_beacons: int) -> tuple[int, int, int]:
     return int(sizes[0]), int(sizes[1]), int(sizes[2])
 
 
-def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
+def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray, lane_steps: np.ndarray | None = None,
+                lane_new: np.ndarray | None = None) -> np.ndarray:
     """The PCRB of the system of the interface of ``n_beacons`` compiled (its
     :meth:`~sblsim.models.systems.System.bound_function` stepped by ``fmus/c/sblsim_system_bound.c``, in that
     interface's library): the position PCRB of B runs (USBL: :func:`sblsim.models.systems.usbl.pcrb`).
@@ -502,6 +503,10 @@ def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray) -> np.ndar
         The interface (1: USBL).
     fixed, steps : ndarray, shapes (B, len(bound_fixed)) and (N, B, len(bound_steps))
         The system's per-run and per-step inputs (USBL: :func:`sblsim.models.systems.usbl.pcrb_inputs`).
+    lane_steps, lane_new : ndarray, shapes (L, N, B, len(bound_steps)) and (L, N, B), optional
+        The later lanes of a delivery: each lane's per-step inputs (as ``steps``, from its packet) and where it holds
+        a new packet (1); each new one is a step of the bound after the step's own, in lane order, with no time
+        between them (``dt`` 0). None: no packet on a later lane.
 
     Returns
     -------
@@ -521,10 +526,22 @@ def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray) -> np.ndar
     n, b = steps.shape[:2]
     if fixed.shape != (b, len(system.bound_fixed)) or steps.shape != (n, b, len(system.bound_steps)):
         raise ValueError(f"system_pcrb: fixed {fixed.shape} and steps {steps.shape} do not fit together")
+    if lane_steps is None:
+        lane_steps, lane_new = np.zeros((0, n, b, steps.shape[2])), np.zeros((0, n, b))
+    lane_steps = np.ascontiguousarray(lane_steps, dtype=float)
+    lane_new = np.ascontiguousarray(lane_new, dtype=float)
+    lanes = lane_steps.shape[0]
+    if lane_steps.shape != (lanes, n, b, steps.shape[2]) or lane_new.shape != (lanes, n, b):
+        raise ValueError(f"system_pcrb: lane_steps {lane_steps.shape} and lane_new {lane_new.shape} do not fit "
+                         f"steps {steps.shape}")
+    lane_fixed = fixed.copy()
+    lane_fixed[:, system.bound_fixed.index("dt")] = 0.0
     lib = load(n_beacons, NO_MODELS)
-    lib.sblsim_system_pcrb.argtypes = [ctypes.c_int, ctypes.c_int] + [ctypes.c_void_p] * 3
+    lib.sblsim_system_pcrb.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int,
+                                       ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
     out = np.empty((n, b))
-    if lib.sblsim_system_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, out.ctypes.data):
+    if lib.sblsim_system_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, lanes, lane_fixed.ctypes.data,
+                              lane_steps.ctypes.data, lane_new.ctypes.data, out.ctypes.data):
         raise MemoryError("system_pcrb: out of memory")
     return out
 

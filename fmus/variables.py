@@ -2,18 +2,24 @@
 
 from __future__ import annotations
 
+import re
+
 from tabulate import tabulate
 
 from sblsim.models import MODELS
+from sblsim.models.acoustics.core import LANES
 
 BEGIN, END = "<!-- fmu-variables:begin -->", "<!-- fmu-variables:end -->"
+#: A variable of a later lane of a delivery (:func:`sblsim.models.acoustics.core.lane_variables`): its lane and field.
+LANE = re.compile(r"^lane(\d+)_(.+)$")
 
 
 def markdown_tables(n_beacons: int = 4) -> str:
     """One Markdown table per FMU: every variable with causality, variability, type, unit, start and description.
 
-    The columns of a table parameter are one row each (``waypoint_time[1..512]``); an input's description
-    ends with its allowed range.
+    The columns of a table parameter are one row each (``waypoint_time[1..512]``); the fields of the later lanes
+    of a delivery one row each for all lanes (``lane<m>_packet_seq (m = 2…8)``); an input's description ends with
+    its allowed range.
 
     Returns
     -------
@@ -27,10 +33,16 @@ def markdown_tables(n_beacons: int = 4) -> str:
         for v in model.fmu_variables(n_beacons):
             if v.in_table:
                 continue
+            lane = LANE.match(v.name)
+            if lane and int(lane.group(1)) > 2:
+                continue  # the lanes of a delivery: one row for all, lane 2's
             description = v.fmi_description()
             if v.causality == "input" and v.fmi_type != "Boolean":  # the FMU refuses a value outside the range
                 description += f", allowed {v.allowed()}"
-            rows.append((f"`{v.name}`", v.causality, v.variability, v.fmi_type, v.unit, _start(v), description))
+            shown = f"`lane<m>_{lane.group(2)}` (m = 2…{LANES})" if lane else f"`{v.name}`"
+            if lane:
+                description = description.replace("Lane 2 ", "Lane m ", 1)
+            rows.append((shown, v.causality, v.variability, v.fmi_type, v.unit, _start(v), description))
             if v.table is not None:
                 rows += [(f"`{c.name}[1..{v.table.max_rows}]`", "parameter", "fixed", "Real", c.unit, _number(c.start),
                           f"{c.description} (rows 1..{v.name} are used), allowed {c.allowed()}")

@@ -65,4 +65,18 @@ LANE_COLUMNS = {lane_name(m, name): f"acoustics.{lane_name(m, name)}" for m in r
                 for name in ("packet_seq", "beacon_id", "packet_valid", "tx_time", "rx_time", "range", "beacon_x",
                              "beacon_y", "beacon_z")}
 
-__all__ = ["CONSISTENCY_NAMES", "LANE_COLUMNS", "METRIC_INPUTS", "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]
+#: What the metrics read of a packet on a lane 2 … of a delivery (in this order, per lane).
+LANE_FIELDS = ("packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z")
+#: The lanes' columns the metrics read besides :data:`METRIC_INPUTS`, lane by lane (:data:`LANE_FIELDS` each; the
+#: compiled pass numbers them after those): recorded where a run's channel delivered two packets in one step,
+#: zeros (no packet) where not.
+LANE_METRIC_INPUTS = tuple(lane_name(m, name) for m in range(2, LANES + 1) for name in LANE_FIELDS)
+
+
+def lane_source(lane: int, source: str) -> str:
+    """The recorded ``component.variable`` of the channel's output ``source`` on ``lane`` (1-based)."""
+    component, name = source.split(".", 1)
+    return f"{component}.{lane_name(lane, name)}"
+
+
+__all__ = ["CONSISTENCY_NAMES", "LANE_COLUMNS", "LANE_FIELDS", "LANE_METRIC_INPUTS", "lane_source", "METRIC_INPUTS", "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]

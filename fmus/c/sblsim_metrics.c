@@ -30,7 +30,7 @@ typedef struct {
 
 typedef struct {
     errors_acc est, instr;
-    double nees_sum, nis_sum, trace_sum, previous_seq;
+    double nees_sum, nis_sum, trace_sum, previous_seq, lane_seq[SBLSIM_LANES - 1];
     long nees_count, covered, started, fresh, gated, rejected;
     int lost;
     double bound[N_BOUND];
@@ -97,6 +97,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
     double *w, next[N_BOUND];
     casadi_int* iw;
     run_acc* acc;
+    const double no_time = 0.0;
     int k, r, a, i;
     sblsim_bound_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     w = (double*)malloc(sizeof(double) * (size_t)(sz_w > 0 ? sz_w : 1));
@@ -121,9 +122,9 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
         for (r = 0; r < b; r++) {
             run_acc* s = &acc[r];
             const double* f = fixed + (size_t)r * SBLSIM_N_FIXED;
-            double v[SBLSIM_N_COLUMNS], e[4], signed_error[3], slot, fresh, epsilon, error, reach;
-            int c, id;
-            for (c = 0; c < SBLSIM_N_COLUMNS; c++) v[c] = at(columns, strides, c, k, r);
+            double v[SBLSIM_COLUMN_LANE2_PACKET_SEQ], e[4], signed_error[3], slot, fresh, epsilon, error, reach;
+            int c, id, m;
+            for (c = 0; c < SBLSIM_COLUMN_LANE2_PACKET_SEQ; c++) v[c] = at(columns, strides, c, k, r);
             if (errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_EST_X], e)) add_errors(&s->est, e);
             if (v[SBLSIM_COLUMN_INSTR_VALID] > 0.5 && errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_INSTR_X], e))
                 add_errors(&s->instr, e);
@@ -172,6 +173,27 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             res[0] = next;
             sblsim_bound_step(arg, res, iw, w, 0);
             memcpy(s->bound, next, sizeof next);
+            /* the packets that arrived in the step after lane 1's, on the later lanes of the delivery, in order:
+               each a slot of the bound at the same instant (no prediction) */
+            for (m = 0; m < SBLSIM_LANES - 1; m++) {
+                const int base = SBLSIM_COLUMN_LANE2_PACKET_SEQ + m * SBLSIM_LANE_FIELDS;
+                const double seq = rint(at(columns, strides, base, k, r));
+                double beacon[3], lane_fresh, one = 1.0;
+                if (!(seq > 0) || seq == s->lane_seq[m]) continue;
+                s->lane_seq[m] = seq;
+                id = (int)rint(at(columns, strides, base + 2, k, r));
+                lane_fresh = (at(columns, strides, base + 1, k, r) > 0.5 && id >= 1 && id <= n_beacons) ? 1.0 : 0.0;
+                id = id < 1 ? 1 : (id > n_beacons ? n_beacons : id);
+                for (a = 0; a < 3; a++) beacon[a] = at(columns, strides, base + 3 + a, k, r);
+                arg[SBLSIM_BOUND_IN_B] = s->bound;
+                arg[SBLSIM_BOUND_IN_DT] = &no_time;
+                arg[SBLSIM_BOUND_IN_BEACON] = beacon;
+                arg[SBLSIM_BOUND_IN_ARM] = arms + ((size_t)r * (size_t)n_beacons + (size_t)(id - 1)) * 3;
+                arg[SBLSIM_BOUND_IN_SLOT] = &one;
+                arg[SBLSIM_BOUND_IN_RECEIVED] = &lane_fresh;
+                sblsim_bound_step(arg, res, iw, w, 0);
+                memcpy(s->bound, next, sizeof next);
+            }
             error = sqrt(next[0] + next[2 * (SBLSIM_BOUND_STATE + 1)] + next[4 * (SBLSIM_BOUND_STATE + 1)]);
             s->trace_sum += error * error;
             if (bound != NULL) bound[(size_t)k * (size_t)b + (size_t)r] = error;

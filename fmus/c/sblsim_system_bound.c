@@ -28,14 +28,19 @@ SBLSIM_EXPORT void sblsim_system_bound_sizes(int* sizes) {
 }
 
 /* `fixed` B x n_fixed, `steps` N x B x n_step; `out` N x B: sqrt(trace) of the position PCRB at each step [m].
+   The later lanes of a delivery (`lanes` of them, 0 without): `lane_fixed` B x n_fixed (`fixed` with no time
+   between two packets of a step), `lane_steps` lanes x N x B x n_step, `lane_new` lanes x N x B (1 where the lane
+   holds a new packet): each new one a step of the bound after the step's own, in lane order.
    0 on success, 1 out of memory. */
-SBLSIM_EXPORT int sblsim_system_pcrb(int n, int b, const double* fixed, const double* steps, double* out) {
+SBLSIM_EXPORT int sblsim_system_pcrb(int n, int b, const double* fixed, const double* steps, int lanes,
+                                     const double* lane_fixed, const double* lane_steps, const double* lane_new,
+                                     double* out) {
     casadi_int sz_arg, sz_res, sz_iw, sz_w, p_arg, p_res, p_iw, p_w;
     const double* arg[3];
     double* res[2];
     double *w, *bound, *next;
     casadi_int* iw;
-    int k, r;
+    int k, r, m;
     const int n_fixed = step_rows(1), n_step = step_rows(2), n_bound = step_rows(0);
     sblsim_system_bound_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     sblsim_system_bound_prior_work(&p_arg, &p_res, &p_iw, &p_w);
@@ -68,6 +73,15 @@ SBLSIM_EXPORT int sblsim_system_pcrb(int n, int b, const double* fixed, const do
             res[1] = out + (size_t)k * (size_t)b + (size_t)r;
             sblsim_system_bound_step(arg, res, iw, w, 0);
             memcpy(state, next, sizeof(double) * (size_t)n_bound);
+            for (m = 0; m < lanes; m++) {
+                const size_t at = ((size_t)m * (size_t)n + (size_t)k) * (size_t)b + (size_t)r;
+                if (!(lane_new[at] > 0.5)) continue;
+                arg[0] = state;
+                arg[1] = lane_fixed + (size_t)r * (size_t)n_fixed;
+                arg[2] = lane_steps + at * (size_t)n_step;
+                sblsim_system_bound_step(arg, res, iw, w, 0);
+                memcpy(state, next, sizeof(double) * (size_t)n_bound);
+            }
         }
     }
     free(w);

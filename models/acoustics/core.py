@@ -24,15 +24,19 @@ diver: ``t_k + τ`` (OWTT), ``t_k`` plus the round trip the truth gives
 (TWTT: up leg, turnaround with its jitter, down leg), and for USBL the reply's
 arrival at the surface plus the downlink's travel time to the diver where it
 is then. It is then **in flight**: the channel holds up to
-:data:`FLIGHT_CAPACITY` packets sent and not yet arrived in its state. The
-outputs show the last **delivered** packet, with ``rx_time = a_k``: in each
-step, after the slots the step reaches were sent, the packet in flight of
-earliest arrival ``a ≤ t + h`` (then the lowest slot counter) is delivered;
-one per step, so that a host sees every packet: one that must wait for a
-later step is delivered then, never before it arrives. A step that reaches
-several slot epochs sends each of them (each with its own random numbers).
-Every receiver uses a packet at its first step end that reaches
-``rx_time`` (:func:`sblsim.models.receiver.core.slot_due`). A packet that
+:data:`FLIGHT_CAPACITY` packets sent and not yet arrived in its state. In
+each step, after the slots the step reaches were sent, **every** packet in
+flight that has arrived (``a ≤ t + h``) is delivered, on the **lanes** of
+the delivery in the order of arrival (then of slot counter): the earliest
+on the packet outputs themselves (lane 1, with ``rx_time = a_k``), the next
+ones on ``lane2_*``, ``lane3_*``, … (:data:`LANES` = :data:`FLIGHT_CAPACITY`
+lanes, so that every packet in flight fits; a lane left empty shows
+``packet_seq`` 0). None is delivered before it arrives, none is held behind
+another, and the outputs show the last delivery until the next. A step that
+reaches several slot epochs sends each of them (each with its own random
+numbers).
+Every receiver uses each lane's packet at its first step end that reaches
+its ``rx_time``, in lane order (:func:`sblsim.models.receiver.core.slot_events`). A packet that
 finds every place taken is not dropped silently: ``overflow_travel_time``
 keeps the longest arrival − transmit of it and of those in flight, and the
 orchestrator refuses the run (:func:`check_in_flight`: a packet must arrive
@@ -434,8 +438,8 @@ def lane_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
     ``"output"``) or a receiver's inputs (``"input"``): declared after every other variable of either, so that
     their value references stay what they were before the lanes existed."""
     return tuple(replace(v, name=lane_name(m, v.name), causality=causality,
-                         description=f"Lane {m} of a delivery (the packet that arrived {m}th in the step; packet_seq "
-                                     f"0: none): {v.description}")
+                         description=f"Lane {m} of a delivery (the packets that arrived in a step, in order; "
+                                     f"packet_seq 0: none): {v.description}")
                  for m in range(2, LANES + 1) for v in lane_fields(n_beacons))
 
 
@@ -444,7 +448,7 @@ def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None
     """Refuse a run whose packets stay in flight longer than the channel can hold them.
 
     A packet that arrives Δ after its transmit epoch is delivered in the step that reaches its arrival,
-    ⌈Δ / T⌉ steps of T after the one that sent it, and the channel sends one packet per step: with
+    ⌈Δ / T⌉ steps of T after the one that sent it, and the channel sends one packet per slot: with
     :data:`FLIGHT_CAPACITY` places C, a packet must arrive within ``Δ ≤ (C − 1) T``.
 
     Parameters

@@ -4,7 +4,9 @@ and :class:`KalmanReceiver`, the base of the Kalman-type receivers.
 Every receiver runs at its own communication step Δt = T / (EKF rate ratio)
 (the ``communication_step`` parameter, set by the orchestrator) and shares
 the packet handling (:func:`slot_due`, :func:`take_packet`): a replicate has
-a new *slot* when ``packet_seq`` differs from the last one it used, the end
+a new *slot* when a lane of the channel's delivery holds a packet other than
+the last one it used there (lane 1, the packet inputs themselves: its
+``packet_seq`` changed; lane m, ``lane<m>_*``: a ``packet_seq`` above 0), the end
 of the step has reached the packet's arrival epoch,
 ``t + h ≥ rx_time − 1 ns`` (the channel delivers a packet in the step that
 reaches its arrival, so a receiver stepping faster than the channel uses it
@@ -15,7 +17,9 @@ does; it keeps the receiver on its own clock when a host takes other steps:
 a host that adds its steps up in floating point ends a run a picosecond
 short and then takes a step of 1e-12 s, in which no tick falls, so the
 packet it shows then waits for the next tick instead of being used at once.
-At a slot a packet that was received (``packet_valid``) with a beacon id in
+Packets that arrived in one step are slots of that step, one after the other
+in the order they arrived (the lanes' order; :func:`slot_events`). At a slot
+a packet that was received (``packet_valid``) with a beacon id in
 ``1 … n`` is the *fresh* range.
 
 A Kalman-type receiver is one class: its parameter declarations, a

@@ -55,7 +55,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from sblsim.fmus import native
-from sblsim.models.columns import METRIC_INPUTS, METRIC_NAMES, RUN_METRICS
+from sblsim.models.columns import LANE_FIELDS, LANE_METRIC_INPUTS, METRIC_INPUTS, METRIC_NAMES, RUN_METRICS
 
 #: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
 #: :data:`DIVERGENCE_RATIO` times the diver's distance from the platform reference, or when its own gate rejected
@@ -81,7 +81,9 @@ def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.n
     ----------
     columns : mapping of str to ndarray, shape (N, B)
         Every name of :data:`METRIC_INPUTS` -> its recorded values as floats (Boolean and Integer outputs
-        as the master records them: 0/1 and whole numbers).
+        as the master records them: 0/1 and whole numbers), and those of :data:`LANE_METRIC_INPUTS` that were
+        recorded (a lane missing: no packet on it). A packet on a later lane of a delivery is a slot of the bound
+        at the step's end, after lane 1's, with no prediction between them (as the receivers take it).
     fixed : ndarray, shape (B, 8)
         The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
     arms : ndarray, shape (B, n_beacons, 3)
@@ -98,8 +100,11 @@ def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.n
         ``sqrt(trace)`` of the position PCRB [m] (:func:`sblsim.models.bound.pcrb`).
     """
     limits = (NEES_95, DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS)
-    values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS], fixed, arms, limits, with_bound,
-                                       n_beacons=arms.shape[1])
+    shape = np.shape(columns[METRIC_INPUTS[0]])
+    none = np.broadcast_to(np.zeros(shape[1:]), shape)  # a lane not recorded: no packet on it (read in place)
+    values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS]
+                                       + [columns.get(name, none) for name in LANE_METRIC_INPUTS],
+                                       fixed, arms, limits, with_bound, n_beacons=arms.shape[1])
     out = {name: values[:, k] for k, name in enumerate(RUN_METRICS)}
     out["diverged"] = out["diverged"] > 0.5
     return out, bound
@@ -198,6 +203,28 @@ def slots(packet_seq: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, np.
     return slot, slot & np.asarray(received, bool)
 
 
+def lane_slots(columns: Mapping[str, np.ndarray], n_beacons: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Per later lane m of a delivery recorded in ``columns`` (``lane<m>_packet_seq``, ``_packet_valid``,
+    ``_beacon_id``, (N, B) each): ``(m, new, fresh)``, the steps with a new packet on it (not 0, not the last one
+    it held) and those whose packet was received from a beacon of the array, as :func:`slots` gives them for
+    lane 1."""
+    out = []
+    for lane, name in enumerate(LANE_METRIC_INPUTS[::len(LANE_FIELDS)], start=2):
+        prefix = name[:-len("packet_seq")]
+        if name not in columns:
+            continue
+        seq = np.asarray(columns[name])
+        held = np.zeros_like(seq[:1])  # the last packet on the lane (an empty lane keeps it)
+        new = np.zeros(seq.shape, bool)
+        for k in range(seq.shape[0]):
+            new[k] = (seq[k] > 0) & (seq[k] != held[0])
+            held = np.where(seq[k:k + 1] > 0, seq[k:k + 1], held)
+        beacon = np.asarray(columns[prefix + "beacon_id"])
+        received = (np.asarray(columns[prefix + "packet_valid"]) > 0.5) & (beacon >= 1) & (beacon <= n_beacons)
+        out.append((lane, new, new & received))
+    return out
+
+
 def rejected_run(rejected: np.ndarray, fresh: np.ndarray) -> np.ndarray:
     """The longest run of received packets in a row that the gate rejected, per run.
 
@@ -288,7 +315,9 @@ def run_flags(columns: Mapping[str, np.ndarray], spread: np.ndarray, n_beacons: 
     Returns
     -------
     dict
-        ``updates`` (int, slots whose received range the receiver used), ``fix_steps`` (int, steps with a
+        ``updates`` (int, slots whose received range the receiver used; a packet on a later lane of a
+        delivery, in ``columns`` as ``lane<m>_packet_seq``, ``_packet_valid``, ``_beacon_id`` where recorded, counts
+        as used: its gate decision is not an output), ``fix_steps`` (int, steps with a
         multilateration fix), ``max_distance`` (largest horizontal distance of the diver from the platform
         reference [m]), ``beyond_geometry`` (bool, ``max_distance > REACH_RATIO · spread``) and ``detected_pct``
         (the share of the slots sent whose packet was received [%]; NaN before the first slot), each (B,).
@@ -297,10 +326,14 @@ def run_flags(columns: Mapping[str, np.ndarray], spread: np.ndarray, n_beacons: 
     received = (np.asarray(columns["packet_valid"]) > 0.5) & (beacon >= 1) & (beacon <= n_beacons)
     slot, fresh = slots(columns["packet_seq"], received)
     updates = (fresh & ~(np.asarray(columns["gated"]) > 0.5)).sum(axis=0)
+    sent, heard = slot.sum(axis=0), fresh.sum(axis=0)
+    for _, lane_slot, lane_fresh in lane_slots(columns, n_beacons):  # the gate's decision is lane 1's alone
+        sent, heard = sent + lane_slot.sum(axis=0), heard + lane_fresh.sum(axis=0)
+        updates = updates + lane_fresh.sum(axis=0)
     fix_steps = (np.asarray(columns["instr_valid"]) > 0.5).sum(axis=0)
     distance = np.hypot(np.asarray(columns["true_x"], dtype=float), np.asarray(columns["true_y"], dtype=float))
     reach = distance.max(axis=0) if distance.shape[0] else np.zeros(distance.shape[1:])
     with np.errstate(invalid="ignore", divide="ignore"):
-        detected = 100.0 * fresh.sum(axis=0) / slot.sum(axis=0)
+        detected = 100.0 * heard / sent
     return {"updates": updates.astype(np.int64), "fix_steps": fix_steps.astype(np.int64), "max_distance": reach,
             "beyond_geometry": reach > REACH_RATIO * np.asarray(spread, dtype=float), "detected_pct": detected}

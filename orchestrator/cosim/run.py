@@ -8,7 +8,7 @@ import time
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -16,7 +16,7 @@ import pandas as pd
 from sblsim.fmus import native
 from sblsim.models.acoustics.core import LANES, check_in_flight, lane_name
 from sblsim.models.bound import FIXED
-from sblsim.models.columns import LANE_COLUMNS, TIMESERIES_COLUMNS
+from sblsim.models.columns import LANE_COLUMNS, LANE_METRIC_INPUTS, TIMESERIES_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import receiver_label, to_toml, turnaround
@@ -34,7 +34,7 @@ from sblsim.orchestrator.cosim.engines import (
 )
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
-from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, errors, run_flags, run_metrics, slots
+from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, errors, lane_slots, run_flags, run_metrics, slots
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, with_replicates
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec, progress_of
@@ -242,6 +242,7 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
         rates = first.rates
         own_columns = first.system.bound_columns  # what the system's own bound reads besides (USBL's doa_*)
         record = None if timeseries else [TIMESERIES_COLUMNS[c] for c in METRIC_INPUTS] + list(own_columns.values())
+        lanes = list(_lane_sources(own_columns).values())
         batched = all(h.batched for h in handles.values())
         groups = [plans] if batched else [[p] for p in plans]
         bar, own_bar = progress_of(progress, n_steps * len(plans), f"{first.scenario} ({engine})")
@@ -254,9 +255,16 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
                     params, reps = merge_params(group, name, handle.parameters, distinct)
                     handle.setup(params, reps)
                 advance = partial(_advance, bar, len(group)) if bar.active else None
-                recs.append(simulate(handles, connections, rates, T, n_steps, record=record, timing=timing,
+                recs.append(simulate(handles, connections, rates, T, n_steps,
+                                     record=None if record is None else record + [LANE_SENTINEL], timing=timing,
                                      progress=advance, algorithm=first.master,
                                      buffer=records if len(groups) == 1 else None))
+                if record is not None and np.any(recs[-1][LANE_SENTINEL]):
+                    # a step delivered two packets: the same runs again (the same numbers), recording the lanes
+                    for name, handle in handles.items():
+                        handle.setup(*merge_params(group, name, handle.parameters, distinct))
+                    recs[-1] = simulate(handles, connections, rates, T, n_steps, record=record + lanes,
+                                        algorithm=first.master)
                 _check_in_flight(handles, group)
                 overruns.extend(slot_overrun(handles, len(group)))
                 replicates.extend(reps.tolist())
@@ -269,8 +277,10 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
             close_handles(handles)
     if len(recs) == 1:
         rec = recs[0]
-    else:
-        rec = {k: (recs[0][k] if k == "time" else np.concatenate([r[k] for r in recs], axis=1)) for k in recs[0]}
+    else:  # a lane recorded in one group only: no packet on it in the others
+        keys = list(dict.fromkeys(k for r in recs for k in r))
+        rec = {k: (recs[0][k] if k == "time" else np.concatenate(
+            [r[k] if k in r else np.zeros_like(r[LANE_SENTINEL]) for r in recs], axis=1)) for k in keys}
     rec = apply_latency(rec, first.latency_steps)  # what the diver sees; the runs of a batch share it
     metrics, bound = _metrics(plans, rec, replicates, with_bound=timeseries)
     metrics["slot_overrun"] = overruns
@@ -369,8 +379,9 @@ def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
     arms = np.stack([p.lever_arms for p in plans], axis=0)  # (B, n, 3)
     system = plans[0].system
     own = np.array([system.own_bound(p) for p in parameters])  # the runs that step the system's own bound
-    values, bound = run_metrics({name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, fixed, arms,
-                                with_bound and not own.all())
+    lanes = {name: rec[source] for name, source in _lane_sources({}).items() if source in rec}
+    values, bound = run_metrics({**{name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, **lanes},
+                                fixed, arms, with_bound and not own.all())
     if own.any():
         chosen = np.flatnonzero(own)
         theirs = _system_bound(system, rec, None if own.all() else chosen, dt, [parameters[i] for i in chosen],
@@ -381,7 +392,8 @@ def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
         values["pcrb_rms"] = np.asarray(values["pcrb_rms"], dtype=float).copy()
         values["pcrb_rms"][chosen] = np.sqrt(np.mean(np.ascontiguousarray(theirs.T) ** 2, axis=-1))
     spread = np.array([p.horizontal_spread for p in plans])
-    flags = run_flags({name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, spread, arms.shape[1])
+    flags = run_flags({**{name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, **lanes}, spread,
+                      arms.shape[1])
     return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
 
 
@@ -415,7 +427,36 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])
                                                       for k in system.bound_fixed[1:]}}
     fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
-    return native.system_pcrb(arms.shape[1], fixed, steps)
+    # the later lanes of a delivery (recorded where a step delivered two packets): each lane's packet in place of
+    # lane 1's, at the same true position
+    lanes = {name: column_of(source) for name, source in _lane_sources(system.bound_columns).items() if source in rec}
+    lane_steps, lane_new = [], []
+    for m, new, heard in lane_slots(lanes, arms.shape[1]):
+        def on_lane(name: str) -> np.ndarray:
+            return lanes[lane_name(m, name)]
+        index = np.clip(np.rint(on_lane("beacon_id")).astype(int) - 1, 0, arms.shape[1] - 1)
+        arm = arms[np.arange(arms.shape[0])[None, :], index]
+        mine = {**sources, **{f"{kind}_{a}": on_lane(f"beacon_{a}") for kind in ("transceiver", "beacon") for a in "xyz"},
+                **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": new, "received": heard,
+                **{name: on_lane(name) for name in system.bound_columns if lane_name(m, name) in lanes}}
+        lane_steps.append(np.stack([np.asarray(mine[k], dtype=float) for k in system.bound_steps], axis=-1))
+        lane_new.append(new)
+    if not lane_steps:
+        return native.system_pcrb(arms.shape[1], fixed, steps)
+    return native.system_pcrb(arms.shape[1], fixed, steps, np.stack(lane_steps), np.stack(lane_new))
+
+
+def _lane_sources(own_columns: Mapping[str, str]) -> dict[str, str]:
+    """The recorded outputs of the later lanes of a delivery that the metrics (and a system's own bound, whose
+    columns of the packet are ``own_columns``: name -> source) read: lane column name -> ``component.variable``."""
+    out = {name: f"acoustics.{name}" for name in LANE_METRIC_INPUTS}
+    out.update({lane_name(m, name): lane_source(m, source) for m in range(2, LANES + 1)
+                for name, source in own_columns.items()})
+    return out
+
+
+#: The record that says whether a run used the later lanes of a delivery (lane 2 fills first).
+LANE_SENTINEL = f"acoustics.{lane_name(2, 'packet_seq')}"
 
 
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:

@@ -11,6 +11,7 @@ turnaround with its jitter, the reply), and the first step end after it is the f
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import sblsim
@@ -114,3 +115,29 @@ def test_replies_that_arrive_in_one_step_all_reach_the_receiver_at_its_end(syste
     late = delivered > first + SLACK
     assert not late.any(), (f"{late.sum()} of {len(d)} replies delivered after the first step end after their "
                             f"arrival, by up to {np.max(delivered - first):.3g} s")
+
+
+@pytest.mark.parametrize("system", ["lbl", "usbl"])
+def test_a_run_without_its_time_series_counts_the_lanes_as_one_with_it(system):
+    """A batch run for its metrics alone records lane 2's counter only; where a step delivered two packets it runs
+    again recording the lanes (the same numbers): its metrics, the bound's among them, equal those of the run that
+    keeps its time series (every output recorded), and differ from the metrics of lane 1 alone."""
+    from sblsim.orchestrator.cosim.config import load_config
+    from sblsim.orchestrator.cosim.metrics import run_flags
+    from sblsim.orchestrator.cosim.plan import make_plan, with_replicates
+    from sblsim.orchestrator.cosim.run import run_batch
+
+    cfg = load_config("semicircle", [f"platform.system={system}", "acoustics.ranging=twtt",
+                                     "acoustics.turnaround_sigma=1", "simulation.sampling_time=2",
+                                     "simulation.duration=300"], seed=1)
+    plans = with_replicates(make_plan(cfg), [0, 1, 2])
+    full = run_batch(plans, "local", timeseries=True)
+    alone = run_batch(plans, "local", timeseries=False)
+    assert len(lanes_of(full.timeseries)) >= 2
+    pd.testing.assert_frame_equal(alone.metrics, full.metrics)
+    # lane 1 alone would count fewer updates: the lanes are in the metrics
+    ts = full.timeseries
+    lane1 = run_flags({c: ts[c].to_numpy().reshape(3, -1).T for c in ("packet_seq", "packet_valid", "beacon_id",
+                                                                      "gated", "instr_valid", "true_x", "true_y")},
+                      np.ones(3), 4 if system == "lbl" else 1)
+    assert np.all(full.metrics["updates"].to_numpy() > lane1["updates"])

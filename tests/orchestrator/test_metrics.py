@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import casadi as ca
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -205,3 +207,78 @@ def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     assert got["diverged"].tolist() == [False, False, True, False, True]
     assert np.isnan(got["instr_e_tot_rms"][3]) and np.all(np.isfinite(got["e_tot_rms"]))
     assert 0 < got["gated_pct"].min() and got["coverage_95"].max() < 1.0  # every branch exercised
+
+
+def test_the_compiled_pass_takes_the_later_lanes_of_a_delivery_as_slots_of_the_bound():
+    """Packets on the later lanes of a delivery (several arrived in one step): each new one is a slot of the bound at
+    the step's end after lane 1's, with no prediction between them. Reference: casadi's bound_step stepped here in
+    plain Python, over dt for the step and over 0 s for each new lane packet; every other metric is the record's
+    without lanes."""
+    from sblsim.models.bound import FIXED, MODEL, bound_step, error_prior
+    from sblsim.models.columns import LANE_METRIC_INPUTS
+    from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, RUN_METRICS, run_metrics
+
+    rng = np.random.default_rng(11)
+    n, b = 120, 3
+    col = {name: np.zeros((n, b)) for name in METRIC_INPUTS}
+    truth = np.cumsum(rng.normal(0.0, 0.3, (n, b, 3)), axis=0) + [20.0, 5.0, 10.0]
+    for k, a in enumerate("xyz"):
+        col[f"true_{a}"][:] = truth[..., k]
+        col[f"est_{a}"][:] = truth[..., k] + rng.normal(0.0, 0.5, (n, b))
+    for ab in ("xx", "yy", "zz"):
+        col[f"cov_{ab}"][:] = 0.25
+    seq = np.cumsum(rng.random((n, b)) < 0.5, axis=0) * 10  # lane 1's packets; lanes' ones between them
+    col["packet_seq"][:], col["packet_valid"][:], col["beacon_id"][:] = seq, 1.0, rng.integers(1, 5, (n, b))
+    beacons = rng.normal(0.0, 20.0, (n, b, 3))
+    for k, a in enumerate("xyz"):
+        col[f"beacon_{a}"][:] = beacons[..., k]
+    lanes = {}
+    for m in (2, 3):  # lane m holds a new packet where lane 1 does, some of the time; held (or emptied) after
+        new = (np.diff(seq, axis=0, prepend=0) > 0) & (rng.random((n, b)) < 0.5 / (m - 1))
+        lane_seq = np.where(new, seq + m - 1, 0.0)
+        held = np.where(rng.random((n, b)) < 0.5, np.maximum.accumulate(lane_seq, axis=0), lane_seq)
+        lanes[f"lane{m}_packet_seq"] = held
+        lanes[f"lane{m}_packet_valid"] = (rng.random((n, b)) < 0.8).astype(float)
+        lanes[f"lane{m}_beacon_id"] = rng.integers(0, 6, (n, b)).astype(float)  # 0 and 5: no beacon of four
+        for a in "xyz":
+            lanes[f"lane{m}_beacon_{a}"] = rng.normal(0.0, 20.0, (n, b))
+    assert set(lanes) <= set(LANE_METRIC_INPUTS)
+    arms = rng.normal(0.0, 1.5, (b, 4, 3))
+    fixed = np.column_stack([np.full(b, 0.1), rng.uniform(0.01, 0.1, b), rng.uniform(0.001, 0.01, b),
+                             rng.uniform(1.0, 10.0, b), rng.uniform(0.5, 2.0, b), rng.uniform(0.01, 0.1, b),
+                             rng.uniform(1e-5, 1e-3, b), rng.uniform(1e-4, 1e-2, b)])
+
+    got, bound = run_metrics({**col, **lanes}, fixed, arms, with_bound=True)
+    alone, alone_bound = run_metrics(col, fixed, arms, with_bound=True)
+
+    step, f = bound_step(MODEL), {k: fixed[:, i] for i, k in enumerate(FIXED)}
+    want = np.empty((n, b))
+    for r in range(b):
+        symbols = {k: ca.SX.sym(k) for k in FIXED}
+        B = ca.Function("prior", list(symbols.values()), [error_prior(MODEL.motion, symbols)])(
+            *[f[k][r] for k in FIXED])
+        last, held = 0.0, {2: 0.0, 3: 0.0}
+
+        def update(B, dt, beacon, beacon_id, valid, slot):
+            received = float(slot and valid > 0.5 and 1 <= beacon_id <= 4)
+            arm = arms[r, int(np.clip(beacon_id, 1, 4)) - 1]
+            return step(B, dt, f["q_horizontal"][r], f["q_vertical"][r], truth[k, r], beacon, arm,
+                        f["noise_variance"][r], f["attitude_variance"][r], f["depth_variance"][r], slot, received)
+
+        for k in range(n):
+            slot = float(seq[k, r] != last)
+            last = seq[k, r]
+            B = update(B, f["dt"][r], beacons[k, r], col["beacon_id"][k, r], 1.0, slot)
+            for m in (2, 3):
+                s = lanes[f"lane{m}_packet_seq"][k, r]
+                if s > 0 and s != held[m]:
+                    held[m] = s
+                    B = update(B, 0.0, [lanes[f"lane{m}_beacon_{a}"][k, r] for a in "xyz"],
+                               lanes[f"lane{m}_beacon_id"][k, r], lanes[f"lane{m}_packet_valid"][k, r], 1.0)
+            B_ = np.asarray(B).reshape(6, 6, order="F")
+            want[k, r] = np.sqrt(B_[0, 0] + B_[2, 2] + B_[4, 4])
+    np.testing.assert_allclose(bound, want, rtol=1e-12, atol=0)
+    assert np.all(bound[-1] < alone_bound[-1])  # the lanes' packets add information: a lower bound than lane 1's alone
+    for name in RUN_METRICS:
+        if name != "pcrb_rms":
+            np.testing.assert_allclose(got[name], alone[name], rtol=0, atol=0, err_msg=name)
