@@ -25,7 +25,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.acoustics.core import Acoustics
+from sblsim.models.acoustics.core import LANES, Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.systems import System
 from sblsim.orchestrator.cosim.config import (
@@ -390,9 +390,24 @@ def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataF
     inputs as the run recorded them, with the columns the run's ``system`` adds
     (:attr:`~sblsim.models.systems.System.log_columns`: USBL's direction of arrival).
     """
-    seq = ts["packet_seq"].to_numpy()
-    previous = np.concatenate([[0], seq[:-1]])
-    slot = ts[(seq != previous) & (seq > 0)]
+    parts = []  # per lane of a delivery: its new packets (step, lane, columns by lane 1's names)
+    for m in range(1, LANES + 1):
+        prefix = "" if m == 1 else f"lane{m}_"
+        if prefix + "packet_seq" not in ts:
+            break
+        seq = ts[prefix + "packet_seq"].to_numpy()
+        if m == 1:
+            new = (seq != np.concatenate([[0], seq[:-1]])) & (seq > 0)
+        else:  # a new packet on the lane: not 0 (empty), not the last one it held
+            held = pd.Series(np.where(seq > 0, seq, np.nan)).ffill().shift(1).fillna(0).to_numpy()
+            new = (seq > 0) & (seq != held)
+        steps = np.flatnonzero(new)
+        columns = {c[len(prefix):]: ts[c].to_numpy()[steps] for c in ts.columns if c.startswith(prefix)}
+        columns["depth"] = ts["depth"].to_numpy()[steps]
+        parts.append((steps, np.full(steps.size, m), columns))
+    order = np.lexsort((np.concatenate([p[1] for p in parts]), np.concatenate([p[0] for p in parts])))
+    slot = pd.DataFrame({name: np.concatenate([p[2][name] for p in parts])[order]
+                         for name in parts[0][2] if all(name in p[2] for p in parts)})
     valid = slot["packet_valid"].to_numpy(bool)
 
     def packet(column: str) -> np.ndarray:

@@ -15,9 +15,11 @@ so it uses each row in the step that reaches its arrival, as it uses a packet
 in a run (``tx_time`` is the row's ``time_s``).
 A row's arrival within its float resolution of a slot epoch k T is taken as that
 epoch (:func:`stamp_tolerance`), so that Unix-time stamps replay as times from 0.
-When several rows fall in one step only one can be used: the last row that
-carries a packet, else the last depth reading; the others are skipped and
-counted. With ``simulation.master = "jacobi"`` a row is shown one macro step
+Rows that fall in one step are shown together on the lanes of a delivery, in
+order (the receiver takes them one after the other at the step's end, as the
+packets that arrive in one step of a run); beyond the
+:data:`~sblsim.models.acoustics.core.LANES` newest of them the others are
+skipped and counted (``same_step``). With ``simulation.master = "jacobi"`` a row is shown one macro step
 later, as the Jacobi master hands the receiver its inputs (so that the log
 of a Jacobi run replays to the run; the rows of the last macro step are then
 not used). The receiver's times are taken from the start time (a log with
@@ -35,6 +37,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -45,6 +48,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
+from sblsim.models.acoustics.core import LANES, lane_name
+from sblsim.models.columns import LANE_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
 from sblsim.models.systems import SYSTEMS
@@ -81,6 +86,9 @@ from sblsim.orchestrator.receiver_log import (
     log_config,
 )
 
+#: An input of a later lane of a delivery (``lane<m>_<field>``).
+LANE = re.compile(r"^lane(\d+)_(.+)$")
+
 #: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
 DEFAULT_CONFIG = "semicircle"
 
@@ -95,9 +103,9 @@ class Schedule:
     start: float
     #: Macro steps.
     steps: int
-    #: Row shown in each communication step, shape (steps · ratio,); −1: none yet.
+    #: Rows shown in each communication step on the lanes of a delivery, shape (steps · ratio, LANES); −1: none.
     fed: np.ndarray
-    #: Row the time series records at each macro step (the newest one reached), shape (steps,); −1: none.
+    #: Rows the time series records at each macro step (the last ones shown), shape (steps, LANES); −1: none.
     shown: np.ndarray
     #: The rows the receiver is shown (in order).
     used: np.ndarray
@@ -150,26 +158,25 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
     while steps > 1 and end(steps - 1) >= last - SLOT_SLACK:
         steps -= 1
     ends = _step_ends(steps, T, ratio)
-    # newest row the end of each communication step has reached (the receiver's slot test, in its arithmetic)
-    newest = np.searchsorted(rel - SLOT_SLACK, ends, side="right") - 1
-    has_packet = log.beacon > 0
-    chosen = np.full(ends.size, -1, dtype=np.int64)
+    # newest row the end of each macro step has reached (the receiver's slot test, in its arithmetic): the rows the
+    # channel of a run delivers at its end, which the receiver then takes in its communication steps, each in the
+    # first that reaches its arrival (the Jacobi master hands them over a macro step later)
+    newest = np.searchsorted(rel - SLOT_SLACK, ends[ratio - 1::ratio], side="right") - 1
+    if jacobi:
+        newest = np.concatenate([[-1], newest[:-1]])
+    shown = np.full((steps, LANES), -1, dtype=np.int64)
     previous = -1
-    for m, top in enumerate(newest):
-        if top > previous:
-            packets = np.flatnonzero(has_packet[previous + 1:top + 1])
-            chosen[m] = previous + 1 + int(packets[-1]) if packets.size else top
+    for k, top in enumerate(newest):
+        if top > previous:  # the rows reached since, on the lanes in order (the newest LANES of them)
+            rows = np.arange(max(previous + 1, top + 1 - LANES), top + 1)
+            shown[k, :rows.size] = rows
             previous = top
-        else:
-            chosen[m] = chosen[m - 1] if m else -1
-    shown = chosen[ratio - 1::ratio]
-    if jacobi:  # each macro step shows what the last one reached, in all its communication steps
-        fed = np.repeat(np.concatenate([[-1], shown[:-1]]), ratio)
-    else:
-        fed = chosen
+        elif k:
+            shown[k] = shown[k - 1]  # the last delivery, held
+    fed = np.repeat(shown, ratio, axis=0)
     used = np.unique(fed[fed >= 0])
     if jacobi:  # the rows the end of the last macro step but one reached
-        reached = int(newest[-ratio - 1] + 1) if ends.size > ratio else 0
+        reached = int(newest[-1] + 1)
     else:
         reached = len(rel)
     return Schedule(start=start, steps=steps, fed=fed, shown=shown, used=used, same_step=reached - used.size,
@@ -380,20 +387,41 @@ def system_inputs(log: Log) -> dict[str, np.ndarray]:
     return {source: log.system_values[:, j] for j, source in enumerate(log.system_columns.values())}
 
 
-def _inputs(log: Log, names: Sequence[str], rel: np.ndarray, start: float) -> np.ndarray:
-    """The receiver's input vector of every row, shape (N, n_in); ``rel`` the rows' arrivals from the start
-    ``start`` [s]."""
+def _row_values(log: Log, rel: np.ndarray, start: float) -> dict[str, np.ndarray]:
+    """The receiver's inputs of every row by name, each (N,); ``rel`` the rows' arrivals from the start ``start``
+    [s]."""
     packet = log.beacon > 0
     # the transmit epoch from the start: the arrival itself where the log gives none (as the schedule has it)
     sent = np.where(log.transmit == log.time, rel, log.transmit - start)
-    values = {"packet_seq": np.arange(1, len(rel) + 1, dtype=float), "beacon_id": log.beacon.astype(float),
-              "packet_valid": packet.astype(float), "tx_time": sent, "rx_time": rel, "range": log.range,
-              "beacon_x": log.beacon_ned[:, 0], "beacon_y": log.beacon_ned[:, 1], "beacon_z": log.beacon_ned[:, 2],
-              "depth": log.depth, **system_inputs(log)}
-    unknown = [n for n in names if n not in values]
-    if unknown:
-        raise ModelError(f"receiver: input {unknown[0]!r} is not in a log")
-    return np.stack([values[n] for n in names], axis=1)
+    return {"packet_seq": np.arange(1, len(rel) + 1, dtype=float), "beacon_id": log.beacon.astype(float),
+            "packet_valid": packet.astype(float), "tx_time": sent, "rx_time": rel, "range": log.range,
+            "beacon_x": log.beacon_ned[:, 0], "beacon_y": log.beacon_ned[:, 1], "beacon_z": log.beacon_ned[:, 2],
+            "depth": log.depth, **system_inputs(log)}
+
+
+def _inputs(log: Log, names: Sequence[str], rel: np.ndarray, start: float):
+    """``vector(rows)``: the receiver's input vector (n_in,) that shows the log's ``rows`` (LANES, −1: none) on the
+    lanes of a delivery, the depth of the newest of them; ``rel`` the rows' arrivals from the start ``start`` [s].
+
+    Raises
+    ------
+    ModelError
+        An input of the receiver a log does not have.
+    """
+    values = _row_values(log, rel, start)
+    where = []  # per input: (lane index, its field)
+    for n in names:
+        lane = LANE.match(n)
+        m, field_name = (int(lane.group(1)), lane.group(2)) if lane else (1, n)
+        if field_name not in values or (lane and field_name == "depth"):
+            raise ModelError(f"receiver: input {n!r} is not in a log")
+        where.append((m - 1, field_name))
+
+    def vector(rows: np.ndarray) -> np.ndarray:
+        newest = rows[rows >= 0][-1]
+        return np.array([values[f][newest] if f == "depth" else (values[f][rows[m]] if rows[m] >= 0 else 0.0)
+                         for m, f in where])
+    return vector
 
 
 def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path | str | None = None,
@@ -440,14 +468,14 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
         inputs = _inputs(log, handle.input_names, plan.rel, plan.start)
         outputs = np.empty((plan.steps, len(handle.output_names)))
         sub = T / ratio
-        current = -1
+        current = np.full(LANES, -1)
         for k in range(plan.steps):
             t = 0.0 + k * T
             for j in range(ratio):
-                row = plan.fed[k * ratio + j]
-                if row != current:
-                    handle.set_input_vector(inputs[row][:, None])
-                    current = row
+                rows = plan.fed[k * ratio + j]
+                if not np.array_equal(rows, current):
+                    handle.set_input_vector(inputs(rows)[:, None])
+                    current = rows
                 handle.do_step(t + j * sub, sub)
             outputs[k] = handle.output_vector()[:, 0]
         types = {p.name: p.type for p in handle.ports}
@@ -462,12 +490,26 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
             if f"receiver.{name}" not in UNDELAYED:
                 outputs[:, k] = outputs[source, k]
     out = {n: cast_column(outputs[:, k], DTYPES[types[n]]) for k, n in enumerate(names)}
-    shown = plan.shown
+    shown = plan.shown[:, 0]
     rows = np.where(shown >= 0, shown, 0)
     none = shown < 0
 
     def packet(values: np.ndarray, empty: float = 0.0) -> np.ndarray:
         return np.where(none, empty, values[rows])
+
+    values = _row_values(log, plan.rel, plan.start)
+    lanes = {}  # the later lanes a delivery used: each lane's packet as a run records it
+    for m in range(2, LANES + 1):
+        on = plan.shown[:, m - 1]
+        if not np.any(on >= 0):
+            break
+        lane_rows, empty = np.where(on >= 0, on, 0), on < 0
+        lanes.update({lane_name(m, name): np.where(empty, 0.0, values[name][lane_rows])
+                      for name in values if name != "depth"})
+        lanes[lane_name(m, "tx_time")] = np.where(empty, 0.0, log.transmit[lane_rows])
+        lanes[lane_name(m, "rx_time")] = np.where(empty, 0.0, log.time[lane_rows])
+        for name, kind in (("packet_seq", np.int64), ("beacon_id", np.int64), ("packet_valid", bool)):
+            lanes[lane_name(m, name)] = lanes[lane_name(m, name)].astype(kind)
 
     columns: dict[str, np.ndarray] = {
         "time": times, "replicate": np.zeros(plan.steps, dtype=np.int64),
@@ -481,6 +523,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
         "depth": packet(log.depth),
     }
     columns.update({name: packet(values) for name, values in system_inputs(log).items()})
+    columns.update(lanes)
     columns.update({n: out[n] for n in names if n not in columns})
     frame = pd.DataFrame(columns)
     result = RunRecord(cfg.config, engine, frame, pd.DataFrame(), plan.steps, wall, plan=cfg)
@@ -526,8 +569,9 @@ def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
         return values, 0
     block = slice(int(covered[0]), int(covered[-1]) + 1)
     own = {name: source for system in SYSTEMS.values() for name, source in system.bound_columns.items()}
+    own.update({lane_name(m, name): lane_source(m, source) for m in range(2, LANES + 1) for name, source in own.items()})
     rec = {column: frame[name].to_numpy()[block, None].astype(float)
-           for name, column in {**TIMESERIES_COLUMNS, **own}.items() if name in frame}
+           for name, column in {**TIMESERIES_COLUMNS, **LANE_COLUMNS, **own}.items() if name in frame}
     metrics, bound = _metrics([cfg], rec, [0], with_bound=True)
     row = metrics.iloc[0]
     values.update({k: row[k] for k in metrics.columns if k != "replicate"})

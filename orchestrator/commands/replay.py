@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
+from sblsim.models.acoustics.core import LANES
 from sblsim.orchestrator.commands.common import (
     MAX_SEED,
     Overrides,
@@ -356,7 +357,7 @@ def main(args: argparse.Namespace) -> int:
     skipped = c["duplicate"] + c["unknown_beacon"] + c["same_step"] + c["not_reached"]
     print(f"  log: {c['rows']} rows, {c['used']} used ({c['depth_only']} depth readings only), {skipped} skipped "
           f"({c['duplicate']} duplicated, {c['unknown_beacon']} with an unknown beacon id, {c['same_step']} in a step "
-          f"that used another row" + (f", {c['not_reached']} after the last step" if c["not_reached"] else "")
+          f"that used {LANES} newer rows" + (f", {c['not_reached']} after the last step" if c["not_reached"] else "")
           + f"), {c['out_of_order']} out of order (sorted); rows every {c['typical_gap_s']:.6g} s (median), the "
           f"longest gap {c['longest_gap_s']:.6g} s"
           + (f" (before its {c['longest_gap_before']})" if c["longest_gap_s"] > 1.5 * c["typical_gap_s"] else "")
@@ -367,9 +368,10 @@ def main(args: argparse.Namespace) -> int:
               + (f" ({t['steps_without']} outside its span: no errors there)" if t["steps_without"] else ""))
     print_metrics(s, truth is not None)
     if c["same_step"]:
-        print(f"sblsim: warning: {c['same_step']} rows of the log fell in a step whose other row was used (one row "
-              f"per step of {sim['sampling_time'] / sim['ekf_rate_ratio']:g} s): a smaller simulation.sampling_time "
-              "or a larger simulation.ekf_rate_ratio (--set) uses them", file=sys.stderr)
+        print(f"sblsim: warning: {c['same_step']} rows of the log fell in a step that used {LANES} newer rows (at "
+              f"most {LANES} rows per step of {sim['sampling_time'] / sim['ekf_rate_ratio']:g} s, on the lanes of a "
+              "delivery): a smaller simulation.sampling_time or a larger simulation.ekf_rate_ratio (--set) uses them",
+              file=sys.stderr)
     if truth is not None and s["diverged"]:
         print(f"sblsim: warning: the {s['receiver']} receiver diverged: its numbers mean nothing; see "
               "error_bounds.png", file=sys.stderr)

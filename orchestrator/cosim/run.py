@@ -466,12 +466,16 @@ def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarra
     for system in SYSTEMS.values():  # a system's own columns (USBL's direction of arrival), where recorded
         if system.timeseries_columns and all(source in rec for source in system.timeseries_columns.values()):
             cols.update({name: rec[source] for name, source in system.timeseries_columns.items()})
-    # the lanes of a delivery a run used (a packet arrived after another in one step), each lane's columns
+    # the lanes of a delivery a run used (a packet arrived after another in one step), each lane's columns (and a
+    # system's own, where recorded)
     for m in range(2, LANES + 1):
         seq = rec.get(LANE_COLUMNS[lane_name(m, "packet_seq")])
         if seq is None or not np.any(seq):
             break  # lanes fill in order: none later either
         cols.update({name: rec[source] for name, source in LANE_COLUMNS.items() if name.startswith(f"lane{m}_")})
+        for system in SYSTEMS.values():
+            cols.update({lane_name(m, name): rec[lane_source(m, source)]
+                         for name, source in system.timeseries_columns.items() if lane_source(m, source) in rec})
     truth = np.stack([cols[f"true_{a}"] for a in "xyz"], axis=-1)
     est_err = errors(truth, np.stack([cols[f"est_{a}"] for a in "xyz"], axis=-1))
     # no fix at a step (instr_valid false, instr_* 0): the step has no instrumentation error

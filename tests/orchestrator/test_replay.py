@@ -87,12 +87,27 @@ def test_export_then_replay_equals_the_run(tmp_path, receiver, system):
     assert log["duplicate"] == log["unknown_beacon"] == log["same_step"] == log["out_of_order"] == 0
 
 
+#: Slots shorter than the longest travel time (5.2 ms): packets arrive two in a step (lanes).
+CROWDED = ["simulation.sampling_time=0.005", "simulation.duration=3"]
+
+
 @pytest.mark.parametrize("overrides", [["simulation.ekf_rate_ratio=3"], ["simulation.master=jacobi"],
-                                       ["platform.system=usbl", "simulation.ekf_rate_ratio=2"]],
-                         ids=["ratio3", "jacobi", "usbl-ratio2"])
+                                       ["platform.system=usbl", "simulation.ekf_rate_ratio=2"], CROWDED,
+                                       [*CROWDED, "simulation.ekf_rate_ratio=3"],
+                                       [*CROWDED, "simulation.master=jacobi"]],
+                         ids=["ratio3", "jacobi", "usbl-ratio2", "lanes", "lanes-ratio3", "lanes-jacobi"])
 def test_export_then_replay_equals_the_run_on_other_grids(tmp_path, overrides):
+    """On other grids, and where several packets arrive in one step (the lanes of a delivery: each exported as a
+    row, in the order of arrival, and shown together again by the replay)."""
     result, path = export(tmp_path, [*overrides, "receiver=ekf-seq"])
-    assert_same_receiver(result.timeseries, replay_file(path).timeseries)
+    replayed = replay_file(path)
+    assert_same_receiver(result.timeseries, replayed.timeseries)
+    if overrides[:len(CROWDED)] == CROWDED:
+        lanes = [c for c in result.timeseries if c.startswith("lane") and c.endswith("_packet_seq")]
+        assert lanes, "no step delivered two packets"
+        assert replayed.summary["log"]["same_step"] == 0
+        if "simulation.master=jacobi" not in overrides:  # (a Jacobi replay records what the receiver was handed)
+            assert replayed.summary["updates"] == result.metrics.iloc[0]["updates"]
 
 
 @pytest.mark.parametrize("system", ["sbl", "usbl"])
@@ -375,12 +390,14 @@ def test_a_flawed_truth_track_is_refused(tmp_path, capsys):
 
 def test_skipped_and_sorted_rows_are_counted(tmp_path, capsys):
     """Duplicates, unknown beacon ids (0, 5 with 4 beacons, 2.5, a name), rows out of order within the window
-    and two rows in one step: skipped or sorted, each counted on the command line and in summary.json; a gap
-    is stepped through and reported; an unknown column is ignored and listed."""
+    and nine rows in one step (one more than the lanes of a delivery): skipped or sorted, each counted on the
+    command line and in summary.json; a gap is stepped through and reported; an unknown column is ignored and
+    listed."""
     body = list(GOOD)
     body[10], body[11] = body[11], body[10]  # out of order by one slot
     body.insert(5, body[4])  # a duplicate
-    body += ["4.05,1,6.2,1,0,1,2", "4.1,2,6.41,1,0,1,2",  # two rows in the step that ends at 4.1 s
+    crowd = [f"4.0{j},{j % 4 + 1},{6.2 + 0.01 * j:.2f},1,0,1,2" for j in range(1, 9)]  # 4.01 … 4.08 s
+    body += [*crowd, "4.1,2,6.41,1,0,1,2",  # nine rows in the step that ends at 4.1 s
              "4.1,0,6,1,0,1,2", "4.1,5,6,1,0,1,2", "4.1,2.5,6,1,0,1,2", "4.1,B,6,1,0,1,2",  # unknown beacons
              "9.0,2,6.5,1,0,1,2"]  # after a gap of 4.9 s
     text = HEADER.replace("depth_m", "depth_m,temperature_c").replace("\n", "") + "\n" + "".join(
@@ -390,20 +407,24 @@ def test_skipped_and_sorted_rows_are_counted(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["replay", str(log), "--config", "harbour", "--out", str(out)]) == 0
     captured = capsys.readouterr()
-    assert "1 duplicated, 4 with an unknown beacon id, 1 in a step that used another row" in captured.out
+    assert "1 duplicated, 4 with an unknown beacon id, 1 in a step that used 8 newer rows" in captured.out
     assert "1 out of order (sorted)" in captured.out
-    assert "rows every 0.1 s (median), the longest gap 4.9 s (before its line 49)" in captured.out
+    assert "rows every 0.1 s (median), the longest gap 4.9 s (before its line 56)" in captured.out
     assert "ignored columns: temperature_c" in captured.out
     assert "smaller simulation.sampling_time" in captured.err
     s = json.loads((out / "summary.json").read_text())["log"]
-    assert s == {"file": "flawed.csv", "rows": 48, "unknown_beacon": 4, "duplicate": 1, "out_of_order": 1,
-                 "used": 42, "depth_only": 0, "same_step": 1, "not_reached": 0,
+    assert s == {"file": "flawed.csv", "rows": 55, "unknown_beacon": 4, "duplicate": 1, "out_of_order": 1,
+                 "used": 49, "depth_only": 0, "same_step": 1, "not_reached": 0,
                  "typical_gap_s": pytest.approx(0.1), "longest_gap_s": pytest.approx(4.9),
-                 "longest_gap_before": "line 49", "ignored_columns": ["temperature_c"]}
+                 "longest_gap_before": "line 56", "ignored_columns": ["temperature_c"]}
     ts = pd.read_parquet(out / "timeseries.parquet")
     assert len(ts) == 90 and ts["time"].iloc[-1] == pytest.approx(9.0)
-    # the step of 4.1 s used the row of 4.1 s (the last of its step), the sorted rows in time order
-    assert ts.loc[ts["time"].round(6) == 4.1, "range"].item() == pytest.approx(6.41)
+    # the step of 4.1 s showed its eight newest rows on the lanes in time order (4.02 … 4.1 s; 4.01 s skipped), the
+    # sorted rows in time order
+    step = ts.loc[ts["time"].round(6) == 4.1]
+    assert step["range"].item() == pytest.approx(6.22)
+    assert [step[f"lane{m}_range"].item() for m in range(2, 9)] == pytest.approx([6.23, 6.24, 6.25, 6.26, 6.27,
+                                                                                  6.28, 6.41])
     np.testing.assert_allclose(ts["tx_time"].iloc[9:12], [1.0, 1.1, 1.2])
 
 
