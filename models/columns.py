@@ -63,7 +63,7 @@ TIMESERIES_COLUMNS = {
 #: ``component.variable``; a run's table has the columns of the lanes it used.
 LANE_COLUMNS = {lane_name(m, name): f"acoustics.{lane_name(m, name)}" for m in range(2, LANES + 1)
                 for name in ("packet_seq", "beacon_id", "packet_valid", "tx_time", "rx_time", "range", "beacon_x",
-                             "beacon_y", "beacon_z")}
+                             "beacon_y", "beacon_z", "range_true", "travel_time", "outlier")}
 
 #: What the metrics read of a packet on a lane 2 … of a delivery (in this order, per lane).
 LANE_FIELDS = ("packet_seq", "packet_valid", "beacon_id", "beacon_x", "beacon_y", "beacon_z")

@@ -163,6 +163,17 @@ PACKET: tuple[Variable, ...] = (
     Variable("beacon_z", "output", "Real", 0.0, "m", "Broadcast beacon position in the packet, Down (0 when lost)",
              discrete=True, **signal_range("position")),
 )
+#: The truth of a packet's exchange: outputs of the channel only (what a receiver cannot know).
+EXCHANGE: tuple[Variable, ...] = (
+    Variable("travel_time", "output", "Real", 0.0, "s",
+             "True travel time of the exchange: one way (ranging owtt), the beacon's leg to the target; two "
+             "way (twtt), the target's interrogation, the transponder's turnaround and the reply; USBL, the "
+             "transceiver's interrogation, the target's turnaround and its reply (not the downlink)",
+             discrete=True),
+    Variable("range_true", "output", "Real", 0.0, "m",
+             "True distance from beacon at transmit to target at reception", discrete=True),
+    Variable("outlier", "output", "Boolean", False, description="Range lengthened by multipath"),
+)
 #: The direction of arrival a USBL packet adds (outputs of the channel and inputs of the receivers of a USBL
 #: interface).
 DIRECTION: tuple[Variable, ...] = (
@@ -434,13 +445,15 @@ def lane_name(lane: int, name: str) -> str:
 
 
 def lane_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
-    """The fields of lanes 2 … :data:`LANES` (:func:`lane_fields`), as the channel's outputs (``causality``
-    ``"output"``) or a receiver's inputs (``"input"``): declared after every other variable of either, so that
-    their value references stay what they were before the lanes existed."""
+    """The fields of lanes 2 … :data:`LANES` (:func:`lane_fields`), as a receiver's inputs (``causality``
+    ``"input"``) or the channel's outputs (``"output"``, with the truth of each exchange, :data:`EXCHANGE`):
+    declared after every other variable of either, so that their value references stay what they were before the
+    lanes existed."""
+    fields = lane_fields(n_beacons) + (EXCHANGE if causality == "output" else ())
     return tuple(replace(v, name=lane_name(m, v.name), causality=causality,
                          description=f"Lane {m} of a delivery (the packets that arrived in a step, in order; "
                                      f"packet_seq 0: none): {v.description}")
-                 for m in range(2, LANES + 1) for v in lane_fields(n_beacons))
+                 for m in range(2, LANES + 1) for v in fields)
 
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None,
@@ -813,16 +826,7 @@ class Acoustics(Component):
             for n, unit, what, axis in zip(
                 TARGET_INPUTS, ("m",) * 3 + ("m/s",) * 3, ("position",) * 3 + ("velocity",) * 3,
                 ("North", "East", "Down") * 2))
-        outputs = PACKET + (
-            Variable("travel_time", "output", "Real", 0.0, "s",
-                     "True travel time of the exchange: one way (ranging owtt), the beacon's leg to the target; two "
-                     "way (twtt), the target's interrogation, the transponder's turnaround and the reply; USBL, the "
-                     "transceiver's interrogation, the target's turnaround and its reply (not the downlink)",
-                     discrete=True),
-            Variable("range_true", "output", "Real", 0.0, "m",
-                     "True distance from beacon at transmit to target at reception", discrete=True),
-            Variable("outlier", "output", "Boolean", False, description="Range lengthened by multipath"),
-        )
+        outputs = PACKET + EXCHANGE
         # declared after the OWTT ones, so that their value references stay what they were
         ranging = (
             Variable("ranging", "parameter", "String", "owtt",
@@ -922,7 +926,7 @@ class Acoustics(Component):
         n = n_beacons
         packet = [v.name for v in cls.outputs(n)]
         lanes = {v.name for v in lane_variables(n, "output")}
-        fields = [v.name for v in lane_fields(n)]
+        fields = [v.name for v in lane_fields(n) + EXCHANGE]
         # what a packet in flight carries: every output of lane 1 but the refusal signal and what its slot counter
         # gives (the beacon and the transmit epoch, computed again at delivery as the slot computed them)
         carried = [name for name in packet
@@ -1036,7 +1040,7 @@ class Acoustics(Component):
 
 
 __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
-           "DOA_ARRAY", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields", "lane_name",
+           "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields", "lane_name",
            "lane_variables", "OCEAN_FEATURES",
            "ocean_perturbation", "OCEAN_VARIABLES", "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PROPAGATION",
            "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS"]

@@ -31,9 +31,9 @@ def deliveries(ts):
     the way (a packet missing from the deliveries is one of the last ``FLIGHT_CAPACITY`` sent, still in flight).
 
     A packet is delivered on a lane at the row where the lane's ``packet_seq`` changes to it (lane 1: the packet
-    columns; lane m: ``lane<m>_packet_seq``, 0 when empty). Lane 1's arrival is its transmit epoch plus the travel
+    columns; lane m: ``lane<m>_*``, ``packet_seq`` 0 when empty). Its arrival is its transmit epoch plus the travel
     time of the exchange the channel recorded, and its ``rx_time`` must equal it (USBL: follow it, by the
-    downlink); a later lane's (which carries no travel time) is its ``rx_time``."""
+    downlink)."""
     rows = []
     lanes = lanes_of(ts)
     for _, g in ts.groupby("replicate"):
@@ -43,15 +43,12 @@ def deliveries(ts):
             prefix = "" if m == 1 else f"lane{m}_"
             seq, tx = g[prefix + "packet_seq"].to_numpy(), g[prefix + "tx_time"].to_numpy()
             rx = g[prefix + "rx_time"].to_numpy()
-            if m == 1:
-                arrival = tx + g["travel_time"].to_numpy()
-                started = seq > 0
-                if "doa_x" in g:  # USBL: the downlink's travel time after the reply's arrival at the surface
-                    assert np.all(rx[started] >= arrival[started] - SLACK), "rx_time before the reply arrived"
-                else:
-                    assert np.allclose(rx[started], arrival[started], rtol=0, atol=SLACK), "rx_time is not the arrival"
+            arrival = tx + g[prefix + "travel_time"].to_numpy()
+            started = seq > 0
+            if "doa_x" in g:  # USBL: the downlink's travel time after the reply's arrival at the surface
+                assert np.all(rx[started] >= arrival[started] - SLACK), "rx_time before the reply arrived"
             else:
-                arrival = rx
+                assert np.allclose(rx[started], arrival[started], rtol=0, atol=SLACK), "rx_time is not the arrival"
             new = np.flatnonzero((seq != np.concatenate([[0], seq[:-1]])) & (seq > 0))
             for k in new:
                 after = np.searchsorted(t, arrival[k] - SLACK)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
@@ -40,10 +41,21 @@ SPEED = 1500.0  # the scenarios' assumed and true sound speed [m/s]
 
 
 def new_packets(ts):
-    """Rows of one replicate's time series (in time order) whose step brought a new, received packet."""
-    seq = ts["packet_seq"].to_numpy()
-    new = seq != np.concatenate([[0], seq[:-1]])
-    return ts[new & ts["packet_valid"].to_numpy(bool)]
+    """The new, received packets of one replicate's time series (in time order), one row each, on every lane of a
+    delivery (lane 1: the packet columns; lane m: ``lane<m>_*``, a packet_seq other than 0 and than the last one
+    the lane held), with lane 1's column names."""
+    frames = []
+    for m in range(1, 9):
+        prefix = "" if m == 1 else f"lane{m}_"
+        if prefix + "packet_seq" not in ts:
+            break
+        seq = ts[prefix + "packet_seq"].to_numpy()
+        held = pd.Series(np.where(seq > 0, seq, np.nan)).ffill().shift(1).fillna(0).to_numpy()
+        new = (seq != held) & (seq > 0) & ts[prefix + "packet_valid"].to_numpy(bool)
+        mine = [c for c in ts if (c.startswith(prefix) if m > 1 else not c.startswith("lane"))]
+        frames.append(ts.loc[new, mine].rename(columns=lambda c: c[len(prefix):]).assign(
+            time=ts["time"].to_numpy()[new]))
+    return pd.concat(frames).sort_values(["time", "rx_time"], kind="stable")
 
 
 def both_engines(cfg, fmu_dir):
