@@ -288,6 +288,7 @@ def _write_package(plan: RunPlan, paths: dict[str, Path], connections: Sequence[
     system = ET.SubElement(root, _q("ssd:System"), name=name, description="sblsim SBL acoustic positioning system")
     elements = ET.SubElement(system, _q("ssd:Elements"))
     files: dict[str, bytes | Path] = {}
+    inputs: dict[str, set[str]] = {}
     units: dict[str, Any] = {}
     used_units: set[str] = set()
     for component, path in paths.items():
@@ -300,6 +301,7 @@ def _write_package(plan: RunPlan, paths: dict[str, Path], connections: Sequence[
         comp = ET.SubElement(elements, _q("ssd:Component"), name=component, source=source,
                              type="application/x-fmu-sharedlibrary")
         connectors = ET.SubElement(comp, _q("ssd:Connectors"))
+        inputs[component] = {v.name for v in md.modelVariables if v.causality == "input"}
         for v in md.modelVariables:
             if v.causality not in ("input", "output"):
                 continue
@@ -322,6 +324,8 @@ def _write_package(plan: RunPlan, paths: dict[str, Path], connections: Sequence[
         ET.SubElement(bindings, _q("ssd:ParameterBinding"), type=PARAMETER_SET_TYPE, source=ssv)
     wires = ET.SubElement(system, _q("ssd:Connections"))
     for c in connections:
+        if c.input.startswith("lane") and c.input not in inputs[c.destination]:
+            continue  # a user's receiver without the later lanes of a delivery: lane 1 alone
         ET.SubElement(wires, _q("ssd:Connection"), startElement=c.source, startConnector=c.output,
                       endElement=c.destination, endConnector=c.input)
     info = ET.Element(_q("oms:Annotations"))

@@ -238,6 +238,9 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
                          "early at an arrival (--engine fmu --fmi-version 3)")
     try:
         connections = list(connections) if connections is not None else default_connections(n_beacons)
+        lane_less = _lane_less(handles, n_beacons)
+        if lane_less:  # a user's receiver without the later lanes of a delivery: lane 1 alone
+            connections = [c for c in connections if not (c.destination == "receiver" and c.input in lane_less)]
         check_connections(connections, {name: h.ports for name, h in handles.items()})
         rates = first.rates
         own_columns = first.system.bound_columns  # what the system's own bound reads besides (USBL's doa_*)
@@ -259,6 +262,11 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
                                      record=None if record is None else record + [LANE_SENTINEL], timing=timing,
                                      progress=advance, algorithm=first.master,
                                      buffer=records if len(groups) == 1 else None))
+                if lane_less and np.any(recs[-1][LANE_SENTINEL]):
+                    raise ModelError(f"simulation.receiver: {first.sources['receiver']} has no inputs for the later "
+                                     "lanes of a delivery (lane2_packet_seq ...), and packets arrived two in a step "
+                                     "in this run: it would lose them; give it those inputs (docs/interop.md) or a "
+                                     "shorter simulation.sampling_time")
                 if record is not None and np.any(recs[-1][LANE_SENTINEL]):
                     # a step delivered two packets: the same runs again (the same numbers), recording the lanes
                     for name, handle in handles.items():
@@ -444,6 +452,17 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     if not lane_steps:
         return native.system_pcrb(arms.shape[1], fixed, steps)
     return native.system_pcrb(arms.shape[1], fixed, steps, np.stack(lane_steps), np.stack(lane_new))
+
+
+def _lane_less(handles: Mapping[str, Any], n_beacons: int) -> set[str]:
+    """The inputs of the later lanes of a delivery the run's receiver lacks (a user's FMU may have none of them:
+    :func:`~sblsim.orchestrator.cosim.connections.check_interface`); empty for a receiver with them all."""
+    receiver = handles.get("receiver")
+    if receiver is None:
+        return set()
+    inputs = {p.name for p in receiver.ports if p.causality == "input"}
+    wanted = {c.input for c in default_connections(n_beacons) if c.destination == "receiver"}
+    return {name for name in wanted - inputs if name.startswith("lane")}
 
 
 def _lane_sources(own_columns: Mapping[str, str]) -> dict[str, str]:

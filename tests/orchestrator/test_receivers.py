@@ -66,6 +66,23 @@ def test_a_users_receiver_fmu_is_swapped_in(user_fmu):
     assert np.abs(ekf["est_x"] - ts["est_x"]).max() > 0.1
 
 
+def test_a_users_receiver_without_the_lanes_is_refused_where_packets_arrive_two_in_a_step(user_fmu, tmp_path,
+                                                                                         capsys):
+    """The user's FMU has no inputs for the later lanes of a delivery: it runs on lane 1 alone (above); where slots
+    are shorter than the travel time (T = 0.01 s on the semicircle: packets arrive two in a step) it would lose the
+    packets on the later lanes, so the run is refused in one line, with nothing written."""
+    sets = [f"receiver=fmu:{user_fmu}", "simulation.sampling_time=0.01", "simulation.duration=5"]
+    with pytest.raises(ModelError, match="no inputs for the later lanes of a delivery"):
+        run(load_config("semicircle", sets, seed=1))
+    out = tmp_path / "r"
+    assert main(["run", "semicircle", *[a for s_ in sets for a in ("--set", s_)], "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "shorter simulation.sampling_time" in err
+    assert not out.exists()
+    # the built-in receivers take every lane of the same run
+    assert run(load_config("semicircle", sets[1:], seed=1)).metrics["updates"].iloc[0] > 450
+
+
 def test_a_mismatching_fmu_is_rejected_naming_every_variable(tmp_path, capsys):
     text = USER_SCRIPT.read_text()
     bad = (text.replace('("est_x", "Real", "m")', '("est_x", "Real", "cm")')
