@@ -15,6 +15,7 @@ FMI 2.0 scalars                                 FMI 3.0 array                   
 ``<name>_x``, ``<name>_y``, ``<name>_z``        ``<name>`` (``est``, ``pos``, ``gps``)  [3]
 ``<name>_vx``, ``<name>_vy``, ``<name>_vz``     ``<name>_v`` (``est_v``, ``x0_v``)      [3]
 ``cov_xx`` … ``cov_zz`` (upper triangle)        ``cov`` (symmetric, both triangles)    [3, 3]
+``lane2_<field>`` … ``lane8_<field>``           ``lanes_<field>`` (lanes 2 … 8)        [7]
 a table column ``<column>[1]`` … ``[R]``        ``<column>``                           [R]
 ==============================================  =====================================  ==========
 
@@ -126,6 +127,11 @@ def fmi3_variables(variables: Sequence, n_beacons: int) -> list[Fmi3Variable]:
         wanted = [(k, a) for k in range(1, n_beacons + 1) for a in _AXES]
         if set(members) == set(wanted):
             claim(_BEACON_ARRAYS[middle], [members[key] for key in wanted], (n_beacons, 3), True)
+    for v in variables:  # lane<m>_<field>, m = 2 … : the later lanes of a delivery
+        if v.name.startswith("lane2_"):
+            field = v.name[len("lane2_"):]
+            members = list(takewhile(vr.__contains__, (f"lane{m}_{field}" for m in count(2))))
+            claim(f"lanes_{field}", members, (len(members),))
     for v in variables:  # <name>_x/_y/_z and <name>_vx/_vy/_vz
         for suffix, array in (("_x", ""), ("_vx", "_v")):
             if v.name.endswith(suffix):

@@ -232,6 +232,8 @@ def cached_fmu(model: type, n_beacons: int = 4, fmi_version: int = 2) -> Path:
     for source in sorted(C_DIR.iterdir()):  # and the runtime it is built with
         digest.update(source.name.encode() + source.read_bytes())
     digest.update(contract_header().encode())
+    for layout in ("description.py", "arrays.py"):  # and the model description it is written with
+        digest.update((Path(__file__).parent / layout).read_bytes())
     directory = version_dir(cache_dir() / "fmus" / digest.hexdigest()[:16], fmi_version)
     path = fmu_path(directory, model.name)
     if path.is_file():

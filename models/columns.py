@@ -79,4 +79,5 @@ def lane_source(lane: int, source: str) -> str:
     return f"{component}.{lane_name(lane, name)}"
 
 
-__all__ = ["CONSISTENCY_NAMES", "LANE_COLUMNS", "LANE_FIELDS", "LANE_METRIC_INPUTS", "lane_source", "METRIC_INPUTS", "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]
+__all__ = ["CONSISTENCY_NAMES", "LANE_COLUMNS", "LANE_FIELDS", "LANE_METRIC_INPUTS", "lane_source", "METRIC_INPUTS",
+           "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]

@@ -569,7 +569,8 @@ def _replay_metrics(cfg: RunPlan, frame: pd.DataFrame) -> tuple[dict, int]:
         return values, 0
     block = slice(int(covered[0]), int(covered[-1]) + 1)
     own = {name: source for system in SYSTEMS.values() for name, source in system.bound_columns.items()}
-    own.update({lane_name(m, name): lane_source(m, source) for m in range(2, LANES + 1) for name, source in own.items()})
+    own.update({lane_name(m, name): lane_source(m, source)
+                for m in range(2, LANES + 1) for name, source in own.items()})
     rec = {column: frame[name].to_numpy()[block, None].astype(float)
            for name, column in {**TIMESERIES_COLUMNS, **LANE_COLUMNS, **own}.items() if name in frame}
     metrics, bound = _metrics([cfg], rec, [0], with_bound=True)

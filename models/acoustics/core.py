@@ -1040,7 +1040,7 @@ class Acoustics(Component):
 
 
 __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
-           "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields", "lane_name",
-           "lane_variables", "OCEAN_FEATURES",
+           "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields",
+           "lane_name", "lane_variables", "OCEAN_FEATURES",
            "ocean_perturbation", "OCEAN_VARIABLES", "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PROPAGATION",
            "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS"]

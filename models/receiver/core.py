@@ -693,6 +693,7 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "clock_tick", "COVARIANCE", "covariance_outputs", "earlier_innovation", "error_parameters", "errors_of",
            "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
-           "lm_step", "lanes_due", "lane_used", "next_lane", "packet_init", "packet_states", "RangesWithProfile", "receiver_interface",
+           "lm_step", "lanes_due", "lane_used", "next_lane", "packet_init", "packet_states", "RangesWithProfile",
+           "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch",
            "slot_due", "slot_events", "STATE_NAMES", "system_interface", "take_packet"]

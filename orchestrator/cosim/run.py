@@ -387,7 +387,9 @@ def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
     arms = np.stack([p.lever_arms for p in plans], axis=0)  # (B, n, 3)
     system = plans[0].system
     own = np.array([system.own_bound(p) for p in parameters])  # the runs that step the system's own bound
-    lanes = {name: rec[source] for name, source in _lane_sources({}).items() if source in rec}
+    recorded = _lane_sources({})  # recorded all where a step delivered two packets (lane 2's counter alone: none)
+    lanes = {name: rec[source] for name, source in recorded.items()} \
+        if all(source in rec for source in recorded.values()) else {}
     values, bound = run_metrics({**{name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, **lanes},
                                 fixed, arms, with_bound and not own.all())
     if own.any():
@@ -437,16 +439,18 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
     # the later lanes of a delivery (recorded where a step delivered two packets): each lane's packet in place of
     # lane 1's, at the same true position
-    lanes = {name: column_of(source) for name, source in _lane_sources(system.bound_columns).items() if source in rec}
+    recorded = _lane_sources(system.bound_columns)
+    lanes = {name: column_of(source) for name, source in recorded.items()} \
+        if all(source in rec for source in recorded.values()) else {}
     lane_steps, lane_new = [], []
     for m, new, heard in lane_slots(lanes, arms.shape[1]):
-        def on_lane(name: str) -> np.ndarray:
-            return lanes[lane_name(m, name)]
-        index = np.clip(np.rint(on_lane("beacon_id")).astype(int) - 1, 0, arms.shape[1] - 1)
+        on_lane = {name[len(f"lane{m}_"):]: values for name, values in lanes.items() if name.startswith(f"lane{m}_")}
+        index = np.clip(np.rint(on_lane["beacon_id"]).astype(int) - 1, 0, arms.shape[1] - 1)
         arm = arms[np.arange(arms.shape[0])[None, :], index]
-        mine = {**sources, **{f"{kind}_{a}": on_lane(f"beacon_{a}") for kind in ("transceiver", "beacon") for a in "xyz"},
+        mine = {**sources, **{f"{kind}_{a}": on_lane[f"beacon_{a}"] for kind in ("transceiver", "beacon")
+                              for a in "xyz"},
                 **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": new, "received": heard,
-                **{name: on_lane(name) for name in system.bound_columns if lane_name(m, name) in lanes}}
+                **{name: on_lane[name] for name in system.bound_columns if name in on_lane}}
         lane_steps.append(np.stack([np.asarray(mine[k], dtype=float) for k in system.bound_steps], axis=-1))
         lane_new.append(new)
     if not lane_steps:

@@ -15,6 +15,7 @@ from sblsim.fmus.contract import CONTRACT, contract_header, contract_tables
 from sblsim.fmus.native import VECTORS, load, metrics_sizes, system_bound_sizes
 from sblsim.models import MODELS
 from sblsim.models.bound import ERROR_MOTION, FIXED, bound_step
+from sblsim.models.columns import LANE_METRIC_INPUTS
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, RUN_METRICS
@@ -32,7 +33,7 @@ def generated_names() -> list[str]:
 
 def test_the_header_lists_every_tuple_in_order():
     expected = [(SEED_NAMES, "SBLSIM_SEED_", "SBLSIM_N_SEEDS"), (VECTORS, "SBLSIM_VECTOR_", "SBLSIM_N_VECTORS"),
-                (METRIC_INPUTS, "SBLSIM_COLUMN_", "SBLSIM_N_COLUMNS"),
+                (METRIC_INPUTS + LANE_METRIC_INPUTS, "SBLSIM_COLUMN_", "SBLSIM_N_COLUMNS"),
                 (RUN_METRICS, "SBLSIM_METRIC_", "SBLSIM_N_METRICS"), (FIXED, "SBLSIM_FIXED_", "SBLSIM_N_FIXED"),
                 (tuple(bound_step().name_in()), "SBLSIM_BOUND_IN_", "SBLSIM_BOUND_N_IN")]
     for system in SYSTEMS.values():  # every system's own bound: its packed layouts
@@ -66,7 +67,7 @@ def test_the_c_sources_define_none_of_the_generated_names():
 
 
 def test_the_compiled_library_reports_the_tuples_counts():
-    assert metrics_sizes() == (len(METRIC_INPUTS), len(RUN_METRICS), len(FIXED))
+    assert metrics_sizes() == (len(METRIC_INPUTS) + len(LANE_METRIC_INPUTS), len(RUN_METRICS), len(FIXED))
     lib = load()
     model = MODELS["target"]
     program = model.program(4)

@@ -345,11 +345,12 @@ def _horizontal_rms(rec: dict) -> float:
 
 def test_the_event_master_delivers_each_range_at_its_arrival_and_a_1_s_host_keeps_every_packet(fmu3_root,
                                                                                                  fmu_dir):
-    """The channel's slots are 0.1 s; a host that communicates every 1 s. On FMI 2.0 a 1 s step delivers one
-    packet (the rest wait in flight, and overflow its places): the estimate falls behind. With FMI 3.0 and
-    early return, each doStep of the channel ends at the arrival of the packet it delivers (its own ``rx_time``),
-    the receiver is stepped to that time with the packet, every packet is delivered, and the error stays that of
-    the 0.1 s run."""
+    """The channel's slots are 0.1 s; a host that communicates every 1 s. On FMI 2.0 a 1 s step sends ten
+    packets, of which eight find an in-flight place (the others are refused: ``overflow_travel_time``) and are
+    delivered at the step's end on the lanes of the delivery, each dated at its arrival. With FMI 3.0 and early
+    return, each doStep of the channel ends at the arrival of the packet it delivers (its own ``rx_time``), the
+    receiver is stepped to that time with the packet, every packet is delivered, none refused, and the error stays
+    that of the 0.1 s run."""
     plan = load_plan("semicircle", ["simulation.duration=60"], 2)
     two = make_handles("fmu", fmu_dir, plan.n_beacons, dict(plan.sources))
     three = make_handles("fmu", fmu3_root, plan.n_beacons, dict(plan.sources), fmi_version=3, early_return=True)
@@ -388,10 +389,12 @@ def test_the_event_master_delivers_each_range_at_its_arrival_and_a_1_s_host_keep
     for packet, arrival in delivered.items():  # the receiver has a step ending at each arrival, with the packet
         if packet > 0:
             assert any(abs(end - arrival) < 1e-9 and seen == packet for end, seen in ends), packet
-    # every packet of the 0.1 s run delivered, none overflowing; the FMI 2.0 host at 1 s falls behind
+    # every packet of the 0.1 s run delivered, none overflowing; the FMI 2.0 host at 1 s refuses some
     assert event["acoustics.packet_seq"][-1, 0] == reference["acoustics.packet_seq"][-1, 0] > 550
     assert event["acoustics.overflow_travel_time"].max() == 0.0 < slow["acoustics.overflow_travel_time"].max()
-    assert _horizontal_rms(event) < 1.5 * _horizontal_rms(reference) < 0.2 * _horizontal_rms(slow)
+    assert np.all(slow["acoustics.lane8_packet_seq"][1:] > 0)  # eight lanes filled at each step's end
+    assert _horizontal_rms(event) < 1.5 * _horizontal_rms(reference)
+    assert _horizontal_rms(slow) < 1.5 * _horizontal_rms(reference)
 
 
 @pytest.mark.parametrize("name, overrides", [("semicircle", []), ("lbl-field", ["simulation.duration=60"])])

@@ -23,7 +23,7 @@ import pytest
 from scipy import integrate, stats
 
 from sblsim.models.acoustics import Acoustics, profile_table
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY, PROPAGATION, RANGING
+from sblsim.models.acoustics.core import FLIGHT_CAPACITY, LANES, PROPAGATION, RANGING
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
 from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms
@@ -127,44 +127,59 @@ def test_round_robin_order_sequence_and_tx_time():
                                    rtol=1e-13)
 
 
-def test_step_reaching_several_slots_sends_each_and_delivers_one_per_step():
+def test_step_reaching_several_slots_sends_each_and_delivers_every_arrived_packet_on_its_lane():
     """Slot k ends at t0 + k T whatever the host step; a step that reaches several sends each (with its own
-    random draws); the channel delivers one packet per step, the earliest arrived, and keeps the others in flight
-    (a step within a slot adds nothing)."""
+    random draws); at its end the channel delivers every packet that has arrived, on the lanes of the delivery in
+    the order of arrival (lane 1: the packet outputs; lane m: ``lane<m>_*``; an empty lane shows packet_seq 0),
+    keeps the others in flight, and shows the last delivery until the next (a step within a slot adds nothing).
+    The expectation is stepped here: the slots sent, the eight in-flight places, the arrivals."""
     T, t0 = 0.125, 10.0  # binary fractions: the slot counts below are exact
     params = dict(sigma_range=0.4, loss_pct=30.0, outlier_pct=30.0, slot_period=T, seed=5, scenario_key=2, cell=3)
     reps = list(range(40))
     core = make(params, replicates=reps, t0=t0)
     d = np.linalg.norm(TARGET - TRUE_BEACONS, axis=1)
-    t, shown, waiting = t0, [], 1  # the next slot to deliver (arrivals are in slot order here)
-    for h in (0.3125, 0.0625, 0.03125, 0.5, 0.125, 0.875):
+
+    def arrival(j):
+        return t0 + j * T + d[(j - 1) % 4] / 1500.0
+
+    t, sent, flight, shown, lanes_seen = t0, 0, [], [], 1
+    for h in (0.3125, 0.0625, 0.03125, 0.5, 0.125, 0.875, 2.0):
         core.step(t, h)
         t += h
         k = int(math.floor((t - t0) / T + 1e-9))  # slots whose epoch the step reached: all sent
         assert np.all(core.state["k"][:, 0] == k), (t, k)
-        if waiting <= k and t0 + waiting * T + d[(waiting - 1) % 4] / 1500.0 <= t:
-            waiting += 1
-        seq = waiting - 1
+        for j in range(sent + 1, k + 1):  # each into a free in-flight place, none free: refused
+            if len(flight) < FLIGHT_CAPACITY:
+                flight.append(j)
+        sent = k
+        arrived = sorted((j for j in flight if arrival(j) <= t), key=lambda j: (arrival(j), j))
+        flight = [j for j in flight if j not in arrived]
         out = core.outputs
-        assert np.all(out["packet_seq"] == seq), (t, seq)
-        assert np.all(out["beacon_id"] == (seq - 1) % 4 + 1)
-        np.testing.assert_allclose(out["tx_time"], t0 + seq * T, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(out["rx_time"], t0 + seq * T + d[(seq - 1) % 4] / 1500.0, rtol=0, atol=1e-12)
-        # the last step sends slots 9 … 15 with 6, 7 and 8 in flight: 14 and 15 find no room (8 places); the
-        # refusal keeps the longest flight of them and of those in flight (every beacon's)
-        refused = np.max(d) / 1500.0 if k == 15 else 0.0
+        if arrived:
+            shown = arrived
+        for m in range(1, LANES + 1):
+            seq = shown[m - 1] if m <= len(shown) else 0
+            name = (lambda n: n) if m == 1 else (lambda n, m=m: f"lane{m}_{n}")
+            assert np.all(out[name("packet_seq")] == seq), (t, m, seq)
+            if seq == 0:
+                assert np.all(out[name("packet_valid")] == 0) and np.all(out[name("range")] == 0.0)
+                continue
+            lanes_seen = max(lanes_seen, m)
+            assert np.all(out[name("beacon_id")] == (seq - 1) % 4 + 1)
+            np.testing.assert_allclose(out[name("tx_time")], t0 + seq * T, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(out[name("rx_time")], arrival(seq), rtol=0, atol=1e-12)
+            for r in reps:  # the packet of slot seq, with the random numbers of draw seq - 1
+                u, w = slot_draws(5, 2, 3, r, seq)
+                valid = u[0] >= 0.3
+                excess = -2.0 * math.log1p(-u[2]) if u[1] < 0.3 else 0.0
+                want = 1500.0 * d[(seq - 1) % 4] / 1500.0 + 0.4 * w + excess
+                assert out[name("packet_valid")][r] == valid
+                assert out[name("range")][r] == pytest.approx(want if valid else 0.0, rel=1e-12, abs=1e-12)
+        # the last step sends slots 16 … 31, of which 8 find a place: the refusal keeps the longest flight
+        refused = np.max(d) / 1500.0 if k == 31 else 0.0
         np.testing.assert_allclose(out["overflow_travel_time"], refused, rtol=1e-13)
-        # the shown packet is slot seq's, with the random numbers of draw seq - 1
-        for r in reps:
-            u, w = slot_draws(5, 2, 3, r, seq)
-            valid = u[0] >= 0.3
-            excess = -2.0 * math.log1p(-u[2]) if u[1] < 0.3 else 0.0
-            want = 1500.0 * d[(seq - 1) % 4] / 1500.0 + 0.4 * w + excess
-            assert out["packet_valid"][r] == valid
-            assert out["range"][r] == pytest.approx(want if valid else 0.0, rel=1e-12, abs=1e-12)
-        shown.append(seq)
-    assert shown == [1, 2, 3, 4, 5, 6]  # one per step: slots 7 … 13 are still in flight
-    assert FLIGHT_CAPACITY == 8 and np.all(core.state["q_used"].sum(axis=1) == 13 - 6)
+    assert lanes_seen == LANES  # a delivery filled every lane
+    assert np.all(core.state["q_used"].sum(axis=1) == len(flight))
 
 
 def test_packets_do_not_depend_on_host_step():

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from sblsim.models.acoustics.core import lane_variables
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
 from sblsim.models.receiver.core import arrival_interface, beacon_parameters, clock_parameters
@@ -363,8 +364,11 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     lsq, ekf = LeastSquaresReceiver.variables(4), PaperEKF.variables(4)
     signals = [key(v) for v in lsq if v.causality != "parameter"]
     assert signals == [key(v) for v in ekf if v.causality != "parameter"]
-    assert signals == [key(v) for v in receiver_interface() + arrival_interface()]
-    assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface() + arrival_interface()
+    lanes = lane_variables(4, "input")  # the later lanes of a delivery, declared last of all
+    assert lanes and signals == [key(v) for v in receiver_interface() + arrival_interface() + lanes]
+    assert tuple(v for v in lsq if v.causality != "parameter") == receiver_interface() + arrival_interface() + lanes
+    assert lsq[-len(lanes):] == ekf[-len(lanes):] == lanes
+    ekf = ekf[:-len(lanes)]
     # parameters: the EKF's own declarations of the shared ones, then the seed keys, then the receiver's clock and
     # the USBL angle (declared after it), then the receiver's sound-speed profile, then the transceiver's
     # uncertainty the USBL packet fix weighs (declared last)
@@ -380,7 +384,7 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
     assert LeastSquaresReceiver.name == "receiver_lsq" and LeastSquaresReceiver.component_index == 3
     core = Core(LeastSquaresReceiver, {"seed": 3, "scenario_key": 1, "cell": 2, "replicate": 4}).initialize(0.0)
     assert list(core.outputs) == OUTPUTS
-    assert core.handle.input_names == [v.name for v in receiver_interface() + arrival_interface()
+    assert core.handle.input_names == [v.name for v in receiver_interface() + arrival_interface() + lanes
                                        if v.causality == "input"]
     with pytest.raises(ModelError, match=r"^receiver_lsq\.q_horizontal: not a parameter"):
         Core(LeastSquaresReceiver, {"q_horizontal": 0.1}).initialize(0.0)

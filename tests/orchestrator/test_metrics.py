@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import casadi as ca
-
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -259,7 +258,7 @@ def test_the_compiled_pass_takes_the_later_lanes_of_a_delivery_as_slots_of_the_b
             *[f[k][r] for k in FIXED])
         last, held = 0.0, {2: 0.0, 3: 0.0}
 
-        def update(B, dt, beacon, beacon_id, valid, slot):
+        def update(B, dt, beacon, beacon_id, valid, slot, r, k):
             received = float(slot and valid > 0.5 and 1 <= beacon_id <= 4)
             arm = arms[r, int(np.clip(beacon_id, 1, 4)) - 1]
             return step(B, dt, f["q_horizontal"][r], f["q_vertical"][r], truth[k, r], beacon, arm,
@@ -268,13 +267,13 @@ def test_the_compiled_pass_takes_the_later_lanes_of_a_delivery_as_slots_of_the_b
         for k in range(n):
             slot = float(seq[k, r] != last)
             last = seq[k, r]
-            B = update(B, f["dt"][r], beacons[k, r], col["beacon_id"][k, r], 1.0, slot)
+            B = update(B, f["dt"][r], beacons[k, r], col["beacon_id"][k, r], 1.0, slot, r, k)
             for m in (2, 3):
                 s = lanes[f"lane{m}_packet_seq"][k, r]
                 if s > 0 and s != held[m]:
                     held[m] = s
                     B = update(B, 0.0, [lanes[f"lane{m}_beacon_{a}"][k, r] for a in "xyz"],
-                               lanes[f"lane{m}_beacon_id"][k, r], lanes[f"lane{m}_packet_valid"][k, r], 1.0)
+                               lanes[f"lane{m}_beacon_id"][k, r], lanes[f"lane{m}_packet_valid"][k, r], 1.0, r, k)
             B_ = np.asarray(B).reshape(6, 6, order="F")
             want[k, r] = np.sqrt(B_[0, 0] + B_[2, 2] + B_[4, 4])
     np.testing.assert_allclose(bound, want, rtol=1e-12, atol=0)

@@ -222,7 +222,7 @@ def test_the_embedded_receiver_with_a_profile_reproduces_the_recorded_estimate(t
                     *map(str, sorted(out.glob("*.c"))), "-lm", "-o", str(exe)], check=True, capture_output=True)
     T = cfg["simulation"]["sampling_time"]
     inputs = [v.name for v in model.inputs(n)]
-    lines = [" ".join(repr(float(x)) for x in [k * T, T, *(getattr(row, n) for n in inputs)])
+    lines = [" ".join(repr(float(x)) for x in [k * T, T, *(getattr(row, n, 0.0) for n in inputs)])
              for k, row in enumerate(series.itertuples(index=False))]
     done = subprocess.run([str(exe), *args], input="\n".join(lines) + "\n", capture_output=True, text=True, env={},
                           timeout=300)

@@ -53,7 +53,7 @@ def new_packets(ts):
         held = pd.Series(np.where(seq > 0, seq, np.nan)).ffill().shift(1).fillna(0).to_numpy()
         new = (seq != held) & (seq > 0) & ts[prefix + "packet_valid"].to_numpy(bool)
         mine = [c for c in ts if (c.startswith(prefix) if m > 1 else not c.startswith("lane"))]
-        frames.append(ts.loc[new, mine].rename(columns=lambda c: c[len(prefix):]).assign(
+        frames.append(ts.loc[new, mine].rename(columns={c: c[len(prefix):] for c in mine}).assign(
             time=ts["time"].to_numpy()[new]))
     return pd.concat(frames).sort_values(["time", "rx_time"], kind="stable")
 
