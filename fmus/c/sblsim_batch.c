@@ -229,19 +229,31 @@ static void feed(sblsim_batch** batches, int c, const int* link_offsets, const i
     int i, k, n_u = dst->m->n_u, first = link_offsets[c], n = link_offsets[c + 1] - link_offsets[c];
     if (n <= 0) return;
     {
-        /* each link's source output (replicate 0), the stride between replicates and the input, found once */
+        /* each run of links that copy consecutive outputs of one source to consecutive inputs (the lanes of a
+           delivery: one block), its first source output (replicate 0), the stride between replicates, its first
+           input and its length, found once */
         const double* from[n];
         size_t stride[n];
-        int to[n];
-        for (k = 0; k < n; k++) {
+        int to[n], length[n], runs = 0, r;
+        for (k = 0; k < n; k += length[runs++]) {
             const sblsim_batch* src = batches[link_src[first + k]];
-            from[k] = src->vectors[SBLSIM_VECTOR_Y] + link_out[first + k];
-            stride[k] = (size_t)src->m->n_y;
-            to[k] = link_in[first + k];
+            from[runs] = src->vectors[SBLSIM_VECTOR_Y] + link_out[first + k];
+            stride[runs] = (size_t)src->m->n_y;
+            to[runs] = link_in[first + k];
+            length[runs] = 1;
+            while (k + length[runs] < n && link_src[first + k + length[runs]] == link_src[first + k] &&
+                   link_out[first + k + length[runs]] == link_out[first + k] + length[runs] &&
+                   link_in[first + k + length[runs]] == link_in[first + k] + length[runs])
+                length[runs]++;
         }
         for (i = 0; i < dst->B; i++) { /* replicate by replicate: each touches a few cache lines */
             double* u = dst->vectors[SBLSIM_VECTOR_U] + (size_t)i * n_u;
-            for (k = 0; k < n; k++) u[to[k]] = from[k][(size_t)i * stride[k]];
+            for (r = 0; r < runs; r++) {
+                if (length[r] == 1)
+                    u[to[r]] = from[r][(size_t)i * stride[r]];
+                else
+                    memcpy(u + to[r], from[r] + (size_t)i * stride[r], sizeof(double) * (size_t)length[r]);
+            }
         }
     }
 }

@@ -449,11 +449,13 @@ def lane_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
     ``"input"``) or the channel's outputs (``"output"``, with the truth of each exchange, :data:`EXCHANGE`):
     declared after every other variable of either, so that their value references stay what they were before the
     lanes existed."""
-    fields = lane_fields(n_beacons) + (EXCHANGE if causality == "output" else ())
-    return tuple(replace(v, name=lane_name(m, v.name), causality=causality,
-                         description=f"Lane {m} of a delivery (the packets that arrived in a step, in order; "
-                                     f"packet_seq 0: none): {v.description}")
-                 for m in range(2, LANES + 1) for v in fields)
+    def lanes(fields):
+        return tuple(replace(v, name=lane_name(m, v.name), causality=causality,
+                             description=f"Lane {m} of a delivery (the packets that arrived in a step, in order; "
+                                         f"packet_seq 0: none): {v.description}")
+                     for m in range(2, LANES + 1) for v in fields)
+    # the receiver's fields of every lane first, in the receiver's order (a host copies them as one block)
+    return lanes(lane_fields(n_beacons)) + (lanes(EXCHANGE) if causality == "output" else ())
 
 
 def check_in_flight(slot_period: float, turnaround: float, elapsed: float | None = None,
@@ -933,7 +935,8 @@ class Acoustics(Component):
                    if name not in {v.name for v in OVERFLOW + OVERRUN} | {"beacon_id", "tx_time"} | lanes]
         queue = [(f"q_{name}", FLIGHT_CAPACITY) for name in carried] + [("q_used", FLIGHT_CAPACITY)]
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
-                           + [("delivered_end", 1), ("ocean_frequency", OCEAN_FEATURES),
+                           + [("delivered_end", 1), ("lanes_used", 1), ("lanes_held", 1),
+                              ("ocean_frequency", OCEAN_FEATURES),
                               ("ocean_phase", OCEAN_FEATURES)],
                            derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
                                     ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
@@ -965,7 +968,7 @@ class Acoustics(Component):
             zero = {name: 0 for name in packet}
             empty = {name: ca.SX.zeros(size) for name, size in queue}
             return {"t0": t0, "k": 0, **zero, "tx_time": t0, "rx_time": t0, **empty,
-                    "delivered_end": t0 - p["slot_period"],
+                    "delivered_end": t0 - p["slot_period"], "lanes_used": 1, "lanes_held": 1,
                     # the moving ocean's features, drawn once per run (their own streams)
                     "ocean_frequency": w[_OCEAN_FREQUENCY] / p["ntd_time_scale"],
                     "ocean_phase": 2.0 * math.pi * w[_OCEAN_PHASE]}
@@ -983,36 +986,49 @@ class Acoustics(Component):
                 any_arrived = ca.logic_or(any_arrived, flag)
             return ca.logic_and(any_arrived, x["delivered_end"] < t + 0.5 * h)
 
-        def deliver(x, u, p, d, w, t, h):
-            """Every arrived packet leaves the in-flight places, on its lane in the order of arrival (then of slot
-            counter): the earliest becomes the outputs (lane 1), the next ones lanes 2, 3, …; a lane left
-            empty shows packet_seq 0."""
-            arrived = _arrived(x, t, h)
-            rx, seq = x["q_rx_time"], x["q_packet_seq"]
+        def earliest(x, p, t, h):
+            """The in-flight place of the arrived packet of earliest arrival (then lowest slot counter), and its
+            packet (carried outputs, the beacon and the transmit epoch) by output name."""
             best, best_rx, best_seq = 0, ca.inf, ca.inf
-            for j, flag in enumerate(arrived):
-                better = ca.logic_and(flag, ca.logic_or(rx[j] < best_rx,
-                                                        ca.logic_and(rx[j] == best_rx, seq[j] < best_seq)))
+            for j, flag in enumerate(_arrived(x, t, h)):
+                rx, seq = x["q_rx_time"][j], x["q_packet_seq"][j]
+                better = ca.logic_and(flag, ca.logic_or(rx < best_rx, ca.logic_and(rx == best_rx, seq < best_seq)))
                 best = ca.if_else(better, j, best)
-                best_rx, best_seq = ca.if_else(better, rx[j], best_rx), ca.if_else(better, seq[j], best_seq)
+                best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
             out = dict(zip(carried, get_row([x[f"q_{name}"] for name in carried], best)))
-            first = out["packet_seq"]
-            out.update(beacon_id=ca.fmod(first - 1, n) + 1, tx_time=x["t0"] + first * p["slot_period"])
-            # each arrived packet's place in the order of arrival (0: lane 1's)
-            rank = [sum(ca.logic_and(arrived[i], ca.logic_or(rx[i] < rx[j], ca.logic_and(rx[i] == rx[j],
-                                                                                       seq[i] < seq[j])))
-                        for i in range(FLIGHT_CAPACITY) if i != j) for j in range(FLIGHT_CAPACITY)]
-            lane_carried = [name for name in fields if name in carried]
-            for m in range(2, LANES + 1):
-                on = [ca.logic_and(arrived[j], rank[j] == m - 1) for j in range(FLIGHT_CAPACITY)]
-                filled = sum(on)
-                row = dict(zip(lane_carried, get_row([x[f"q_{name}"] for name in lane_carried],
-                                                     sum(ca.if_else(on[j], j, 0) for j in range(FLIGHT_CAPACITY)))))
-                sequence = row["packet_seq"]
-                row.update(beacon_id=ca.fmod(sequence - 1, n) + 1, tx_time=x["t0"] + sequence * p["slot_period"])
-                out.update({lane_name(m, name): ca.if_else(filled > 0.5, row[name], 0.0) for name in fields})
-            used = ca.vertcat(*[ca.if_else(arrived[j], 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
-            return {**out, "q_used": used, "delivered_end": t + h}
+            seq = out["packet_seq"]
+            out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
+            used = ca.vertcat(*[ca.if_else(best == j, 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
+            return out, used
+
+        def deliver(x, u, p, d, w, t, h):
+            """The arrived packet of earliest arrival (then lowest slot counter) becomes the outputs (lane 1)."""
+            out, used = earliest(x, p, t, h)
+            return {**out, "q_used": used, "delivered_end": t + h, "lanes_used": 1}
+
+        def another(x, u, p, d, t, h):
+            """Guard of the later lanes: the step delivered (lane 1), another packet has arrived, a lane is free."""
+            any_arrived = 0
+            for flag in _arrived(x, t, h):
+                any_arrived = ca.logic_or(any_arrived, flag)
+            return ca.logic_and(ca.logic_and(any_arrived, x["delivered_end"] == t + h), x["lanes_used"] < LANES)
+
+        def deliver_lane(x, u, p, d, w, t, h):
+            """The next arrived packet (in the order of arrival) on the next lane of the delivery."""
+            out, used = earliest(x, p, t, h)
+            lane = x["lanes_used"] + 1
+            placed = {lane_name(m, name): ca.if_else(lane == m, out[name], x[lane_name(m, name)])
+                      for m in range(2, LANES + 1) for name in fields}
+            return {**placed, "q_used": used, "lanes_used": lane, "lanes_held": ca.fmax(x["lanes_held"], lane)}
+
+        def stale(x, u, p, d, t, h):
+            """Guard of the clearing: lanes hold packets of an earlier delivery than this one's."""
+            return x["lanes_held"] > x["lanes_used"]
+
+        def clear(x, u, p, d, w, t, h):
+            """Empty the lanes beyond this delivery's (packet_seq and every field 0)."""
+            return {**{lane_name(m, name): ca.if_else(m > x["lanes_used"], 0.0, x[lane_name(m, name)])
+                       for m in range(2, LANES + 1) for name in fields}, "lanes_held": x["lanes_used"]}
 
         def output(x, p, d, t):
             return {name: x[name] for name in packet}
@@ -1035,6 +1051,7 @@ class Acoustics(Component):
                 events.append(b.event(f"slot_{ranging}_{suffix}", due, slot(ranging, propagation, detection),
                                       streams + extra + heard, when={"ranging": (ranging,), **chosen}))
         events.append(b.event("deliver", deliverable, deliver))  # after the slots: a packet is sent, then arrives
+        events += [b.event("deliver_lane", another, deliver_lane), b.event("clear_lanes", stale, clear)]
         ocean = (Stream(_OCEAN_FREQUENCY, "normal", OCEAN_FEATURES), Stream(_OCEAN_PHASE, "uniform", OCEAN_FEATURES))
         return b.program(b.prepare(prepare), b.init(init, ocean), b.output(output), events=events)
 

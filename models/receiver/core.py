@@ -45,7 +45,7 @@ import casadi as ca
 from sblsim.models.acoustics.core import ARRIVAL, LANES, PACKET, lane_fields, lane_name, lane_variables
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
-from sblsim.models.expressions import sample_due, select
+from sblsim.models.expressions import get_row, sample_due, select
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.gate import gate
@@ -205,9 +205,9 @@ def next_lane(x, u, p, t, h, n_beacons: int) -> tuple[ca.SX, dict[str, ca.SX]]:
     lane = LANES - 1
     for m in reversed(range(LANES - 1)):
         lane = ca.if_else(due[m], m, lane)
-    chosen = {v.name: select(lane, [u[lane_name(m, v.name)] for m in range(1, LANES + 1)])
-              for v in lane_fields(n_beacons)}
-    return lane, {**u, **chosen}
+    names = [v.name for v in lane_fields(n_beacons)]  # read at the lane (a parametric index: no if_else per lane)
+    chosen = get_row([ca.vertcat(*[u[lane_name(m, name)] for m in range(1, LANES + 1)]) for name in names], lane)
+    return lane, {**u, **dict(zip(names, chosen))}
 
 
 def lane_used(x, out, lane, seq) -> dict[str, ca.SX]:
