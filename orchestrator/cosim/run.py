@@ -387,9 +387,7 @@ def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
     arms = np.stack([p.lever_arms for p in plans], axis=0)  # (B, n, 3)
     system = plans[0].system
     own = np.array([system.own_bound(p) for p in parameters])  # the runs that step the system's own bound
-    recorded = _lane_sources({})  # recorded all where a step delivered two packets (lane 2's counter alone: none)
-    lanes = {name: rec[source] for name, source in recorded.items()} \
-        if all(source in rec for source in recorded.values()) else {}
+    lanes = _recorded_lanes(rec, _lane_sources({}))
     values, bound = run_metrics({**{name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, **lanes},
                                 fixed, arms, with_bound and not own.all())
     if own.any():
@@ -439,9 +437,9 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
     # the later lanes of a delivery (recorded where a step delivered two packets): each lane's packet in place of
     # lane 1's, at the same true position
-    recorded = _lane_sources(system.bound_columns)
-    lanes = {name: column_of(source) for name, source in recorded.items()} \
-        if all(source in rec for source in recorded.values()) else {}
+    recorded = _recorded_lanes(rec, _lane_sources(system.bound_columns))
+    lanes = {name: column_of(source) for name, source in _lane_sources(system.bound_columns).items()
+             if name in recorded}
     lane_steps, lane_new = [], []
     for m, new, heard in lane_slots(lanes, arms.shape[1]):
         on_lane = {name[len(f"lane{m}_"):]: values for name, values in lanes.items() if name.startswith(f"lane{m}_")}
@@ -467,6 +465,18 @@ def _lane_less(handles: Mapping[str, Any], n_beacons: int) -> set[str]:
     inputs = {p.name for p in receiver.ports if p.causality == "input"}
     wanted = {c.input for c in default_connections(n_beacons) if c.destination == "receiver"}
     return {name for name in wanted - inputs if name.startswith("lane")}
+
+
+def _recorded_lanes(rec: Mapping[str, np.ndarray], sources: Mapping[str, str]) -> dict[str, np.ndarray]:
+    """The lanes' columns (``sources``: name -> recorded output) of each later lane whose every column was recorded
+    (a run records them all where a step delivered two packets, lane 2's counter alone where not; a replay the
+    lanes it used)."""
+    out = {}
+    for m in range(2, LANES + 1):
+        mine = {name: source for name, source in sources.items() if name.startswith(f"lane{m}_")}
+        if mine and all(source in rec for source in mine.values()):
+            out.update({name: rec[source] for name, source in mine.items()})
+    return out
 
 
 def _lane_sources(own_columns: Mapping[str, str]) -> dict[str, str]:
