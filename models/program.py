@@ -67,6 +67,12 @@ class Stream:
             raise ValueError(f"stream {self.purpose}: kind {self.kind!r} is not 'uniform' or 'normal'")
 
 
+#: The share of its states above which an event's handler computes the whole state (written in sequence, then
+#: swapped in) rather than the states it changes (each then copied into place by the runtime, about the cost of
+#: computing one more state: the channel's slot, 130 of its 268 states, costs less whole).
+WHOLE_STATE = 0.45
+
+
 @dataclass(frozen=True)
 class Event:
     """A handler run while its guard holds, after the step function of a ``doStep``.
@@ -80,7 +86,7 @@ class Event:
         ``(x, u, p, d, w, t, h) -> x_written``: the new values of the states in :attr:`writes`, in that order.
     writes : tuple of int or None
         The indices in ``x`` of the states the handler computes (the states it changes, when they are at most
-        half of them; every other state keeps its value: the runtime writes these alone, so that an event that
+        :data:`WHOLE_STATE` of them; every other state keeps its value: the runtime writes these alone, so that an event that
         changes a few states costs no copy of the others); None: the handler computes every state
         (``x_written`` is the whole ``x``), which costs less when it changes most of them.
     streams : tuple of Stream
@@ -319,7 +325,7 @@ class ProgramBuilder:
         x_next = self.X.pack(values, x)
         # the states the handler changes: an element that is not the state's own symbol
         writes = tuple(k for k in range(x_next.numel()) if not ca.is_equal(x_next[k], self.x[k]))
-        if 2 * len(writes) > x_next.numel():
+        if len(writes) > WHOLE_STATE * x_next.numel():
             writes, x_next = None, ca.densify(x_next)  # most of them: the whole state, written in sequence
         else:
             x_next = ca.densify(x_next[list(writes)])
@@ -344,4 +350,4 @@ class ProgramBuilder:
         return Program(self.X.blocks, prepare, init_f, step_f, output, init_streams, step_streams, tuple(events))
 
 
-__all__ = ["Blocks", "Event", "Program", "ProgramBuilder", "Stream"]
+__all__ = ["Blocks", "Event", "Program", "ProgramBuilder", "Stream", "WHOLE_STATE"]
