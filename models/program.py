@@ -86,8 +86,8 @@ class Event:
         ``(x, u, p, d, w, t, h) -> x_written``: the new values of the states in :attr:`writes`, in that order.
     writes : tuple of int or None
         The indices in ``x`` of the states the handler computes (the states it changes, when they are at most
-        :data:`WHOLE_STATE` of them; every other state keeps its value: the runtime writes these alone, so that an event that
-        changes a few states costs no copy of the others); None: the handler computes every state
+        :data:`WHOLE_STATE` of them; every other state keeps its value: the runtime writes these alone, so that an
+        event that changes a few states costs no copy of the others); None: the handler computes every state
         (``x_written`` is the whole ``x``), which costs less when it changes most of them.
     streams : tuple of Stream
         Random numbers of the handler.
