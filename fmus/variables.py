@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import re
-
 from tabulate import tabulate
 
 from sblsim.models import MODELS
-from sblsim.models.acoustics.core import LANES
+from sblsim.models.acoustics.core import LANES, lane_of
 
 BEGIN, END = "<!-- fmu-variables:begin -->", "<!-- fmu-variables:end -->"
-#: A variable of a later lane of a delivery (:func:`sblsim.models.acoustics.core.lane_variables`): its lane and field.
-LANE = re.compile(r"^lane(\d+)_(.+)$")
 
 
 def markdown_tables(n_beacons: int = 4) -> str:
@@ -33,13 +29,13 @@ def markdown_tables(n_beacons: int = 4) -> str:
         for v in model.fmu_variables(n_beacons):
             if v.in_table:
                 continue
-            lane = LANE.match(v.name)
-            if lane and int(lane.group(1)) > 2:
+            lane = lane_of(v.name)
+            if lane and lane[0] > 2:
                 continue  # the lanes of a delivery: one row for all, lane 2's
             description = v.fmi_description()
             if v.causality == "input" and v.fmi_type != "Boolean":  # the FMU refuses a value outside the range
                 description += f", allowed {v.allowed()}"
-            shown = f"`lane<m>_{lane.group(2)}` (m = 2…{LANES})" if lane else f"`{v.name}`"
+            shown = f"`lane<m>_{lane[1]}` (m = 2…{LANES})" if lane else f"`{v.name}`"
             if lane:
                 description = description.replace("Lane 2 ", "Lane m ", 1)
             rows.append((shown, v.causality, v.variability, v.fmi_type, v.unit, _start(v), description))

@@ -31,6 +31,7 @@ from sblsim.models.systems import System
 from sblsim.orchestrator.cosim.config import (
     to_toml,
 )
+from sblsim.orchestrator.cosim.metrics import new_on_lane
 from sblsim.orchestrator.cosim.plan import as_plan
 from sblsim.orchestrator.cosim.run import (
     RunRecord,
@@ -398,9 +399,8 @@ def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataF
         seq = ts[prefix + "packet_seq"].to_numpy()
         if m == 1:
             new = (seq != np.concatenate([[0], seq[:-1]])) & (seq > 0)
-        else:  # a new packet on the lane: not 0 (empty), not the last one it held
-            held = pd.Series(np.where(seq > 0, seq, np.nan)).ffill().shift(1).fillna(0).to_numpy()
-            new = (seq > 0) & (seq != held)
+        else:
+            new = new_on_lane(seq)
         steps = np.flatnonzero(new)
         columns = {c[len(prefix):]: ts[c].to_numpy()[steps] for c in ts.columns if c.startswith(prefix)}
         columns["depth"] = ts["depth"].to_numpy()[steps]

@@ -37,7 +37,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-import re
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -48,7 +47,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
-from sblsim.models.acoustics.core import LANES, lane_name
+from sblsim.models.acoustics.core import LANES, lane_name, lane_of
 from sblsim.models.columns import LANE_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
@@ -85,9 +84,6 @@ from sblsim.orchestrator.receiver_log import (
     Log,
     log_config,
 )
-
-#: An input of a later lane of a delivery (``lane<m>_<field>``).
-LANE = re.compile(r"^lane(\d+)_(.+)$")
 
 #: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
 DEFAULT_CONFIG = "semicircle"
@@ -399,20 +395,19 @@ def _row_values(log: Log, rel: np.ndarray, start: float) -> dict[str, np.ndarray
             "depth": log.depth, **system_inputs(log)}
 
 
-def _inputs(log: Log, names: Sequence[str], rel: np.ndarray, start: float):
+def _inputs(values: dict[str, np.ndarray], names: Sequence[str]):
     """``vector(rows)``: the receiver's input vector (n_in,) that shows the log's ``rows`` (LANES, −1: none) on the
-    lanes of a delivery, the depth of the newest of them; ``rel`` the rows' arrivals from the start ``start`` [s].
+    lanes of a delivery, the depth of the newest of them; ``values`` the rows' inputs by name (:func:`_row_values`).
 
     Raises
     ------
     ModelError
         An input of the receiver a log does not have.
     """
-    values = _row_values(log, rel, start)
     where = []  # per input: (lane index, its field)
     for n in names:
-        lane = LANE.match(n)
-        m, field_name = (int(lane.group(1)), lane.group(2)) if lane else (1, n)
+        lane = lane_of(n)
+        m, field_name = lane if lane else (1, n)
         if field_name not in values or (lane and field_name == "depth"):
             raise ModelError(f"receiver: input {n!r} is not in a log")
         where.append((m - 1, field_name))
@@ -459,13 +454,14 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
         if not np.isfinite(true[:, 0]).any():
             raise ModelError(f"--truth: its times ({truth[0][0]:.10g} … {truth[0][-1]:.10g} s) cover no step of "
                              f"the log ({times[0]:.10g} … {times[-1]:.10g} s); are they on the log's clock?")
+    values = _row_values(log, plan.rel, plan.start)  # every row's inputs, by name
     handles = make_handles(engine, fmu_dir, cfg.n_beacons, {"receiver": cfg.sources["receiver"]})
     handle = handles["receiver"]
     start = time.perf_counter()
     try:
         params, replicates = merge_params([cfg], "receiver", handle.parameters)
         handle.setup(params, replicates, 0.0)
-        inputs = _inputs(log, handle.input_names, plan.rel, plan.start)
+        inputs = _inputs(values, handle.input_names)
         outputs = np.empty((plan.steps, len(handle.output_names)))
         sub = T / ratio
         current = np.full(LANES, -1)
@@ -497,7 +493,6 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     def packet(values: np.ndarray, empty: float = 0.0) -> np.ndarray:
         return np.where(none, empty, values[rows])
 
-    values = _row_values(log, plan.rel, plan.start)
     lanes = {}  # the later lanes a delivery used: each lane's packet as a run records it
     for m in range(2, LANES + 1):
         on = plan.shown[:, m - 1]

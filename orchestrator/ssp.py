@@ -55,6 +55,7 @@ from xml.etree import ElementTree as ET
 
 from sblsim.fmus.arrays import element_positions, fmi3_variables
 from sblsim.models import COMPONENTS, RECEIVERS
+from sblsim.models.acoustics.core import lane_of
 from sblsim.models.declarations import SEED_NAMES, UNITS
 from sblsim.models.errors import ArchiveError
 from sblsim.orchestrator.cosim.config import (
@@ -324,7 +325,7 @@ def _write_package(plan: RunPlan, paths: dict[str, Path], connections: Sequence[
         ET.SubElement(bindings, _q("ssd:ParameterBinding"), type=PARAMETER_SET_TYPE, source=ssv)
     wires = ET.SubElement(system, _q("ssd:Connections"))
     for c in connections:
-        if c.input.startswith("lane") and c.input not in inputs[c.destination]:
+        if lane_of(c.input) and c.input not in inputs[c.destination]:
             continue  # a user's receiver without the later lanes of a delivery: lane 1 alone
         ET.SubElement(wires, _q("ssd:Connection"), startElement=c.source, startConnector=c.output,
                       endElement=c.destination, endConnector=c.input)

@@ -93,6 +93,7 @@ vehicles", J. Field Robotics 28(1), 2011 (OWTT with synchronized clocks).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 from functools import lru_cache, partial
 from typing import Any, Callable, Mapping, NamedTuple
@@ -442,6 +443,16 @@ def lane_fields(n_beacons: int) -> tuple[Variable, ...]:
 def lane_name(lane: int, name: str) -> str:
     """The name of the field ``name`` of a packet on ``lane`` (1-based; lane 1: the name itself)."""
     return name if lane == 1 else f"lane{lane}_{name}"
+
+
+_LANE_NAME = re.compile(r"^lane(\d+)_(.+)$")
+
+
+def lane_of(name: str) -> tuple[int, str] | None:
+    """The lane (2 … :data:`LANES`) and the field of a later lane's variable ``name`` (:func:`lane_name`'s
+    inverse); None for any other name."""
+    match = _LANE_NAME.match(name)
+    return None if match is None else (int(match.group(1)), match.group(2))
 
 
 def lane_variables(n_beacons: int, causality: str) -> tuple[Variable, ...]:
@@ -1058,6 +1069,6 @@ class Acoustics(Component):
 
 __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
            "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields",
-           "lane_name", "lane_variables", "OCEAN_FEATURES",
+           "lane_name", "lane_of", "lane_variables", "OCEAN_FEATURES",
            "ocean_perturbation", "OCEAN_VARIABLES", "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PROPAGATION",
            "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS"]

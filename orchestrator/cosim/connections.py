@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS, lane_variables
+from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS, lane_of, lane_variables
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
 from sblsim.models.systems import interface_system
@@ -131,7 +131,7 @@ def check_interface(component: str, ports: Sequence[Variable], expected: Sequenc
     have = {p.name: p for p in ports}
     wanted = [v for v in expected if v.causality != "parameter"]
     names = {v.name for v in wanted}
-    lanes = {v.name for v in lane_variables(1, "input") + lane_variables(2, "input")}
+    lanes = {v.name for v in wanted if lane_of(v.name)}
     if component == "receiver" and not lanes & set(have):
         # a receiver without the later lanes of a delivery: allowed (a run refuses to leave a packet on them unused)
         wanted = [v for v in wanted if v.name not in lanes]

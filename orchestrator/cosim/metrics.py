@@ -203,6 +203,27 @@ def slots(packet_seq: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, np.
     return slot, slot & np.asarray(received, bool)
 
 
+def new_on_lane(packet_seq: np.ndarray) -> np.ndarray:
+    """The steps at which a later lane of a delivery holds a new packet: its counter not 0 (an empty lane) and not
+    the last packet the lane held (an empty lane keeps it in mind, as the receivers do).
+
+    Parameters
+    ----------
+    packet_seq : ndarray, shape (N, ...)
+        The lane's slot counter at each step (0: empty).
+
+    Returns
+    -------
+    ndarray of bool, shape (N, ...)
+    """
+    seq = np.asarray(packet_seq)
+    steps = np.arange(seq.shape[0]).reshape((-1,) + (1,) * (seq.ndim - 1))
+    last = np.maximum.accumulate(np.where(seq > 0, steps, -1), axis=0)  # the last step that held a packet
+    before = np.concatenate([np.full_like(last[:1], -1), last[:-1]])
+    held = np.where(before >= 0, np.take_along_axis(seq, np.maximum(before, 0), axis=0), 0)
+    return (seq > 0) & (seq != held)
+
+
 def lane_slots(columns: Mapping[str, np.ndarray], n_beacons: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """Per later lane m of a delivery recorded in ``columns`` (``lane<m>_packet_seq``, ``_packet_valid``,
     ``_beacon_id``, (N, B) each): ``(m, new, fresh)``, the steps with a new packet on it (not 0, not the last one
@@ -213,12 +234,7 @@ def lane_slots(columns: Mapping[str, np.ndarray], n_beacons: int) -> list[tuple[
         prefix = name[:-len("packet_seq")]
         if name not in columns:
             continue
-        seq = np.asarray(columns[name])
-        held = np.zeros_like(seq[:1])  # the last packet on the lane (an empty lane keeps it)
-        new = np.zeros(seq.shape, bool)
-        for k in range(seq.shape[0]):
-            new[k] = (seq[k] > 0) & (seq[k] != held[0])
-            held = np.where(seq[k:k + 1] > 0, seq[k:k + 1], held)
+        new = new_on_lane(columns[name])
         beacon = np.asarray(columns[prefix + "beacon_id"])
         received = (np.asarray(columns[prefix + "packet_valid"]) > 0.5) & (beacon >= 1) & (beacon <= n_beacons)
         out.append((lane, new, new & received))

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
-from sblsim.models.acoustics.core import LANES, check_in_flight, lane_name
+from sblsim.models.acoustics.core import LANES, check_in_flight, lane_name, lane_of
 from sblsim.models.bound import FIXED
 from sblsim.models.columns import LANE_COLUMNS, LANE_METRIC_INPUTS, TIMESERIES_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
@@ -262,13 +262,13 @@ def run_batch(cfgs: Sequence[RunPlan], engine: str = "local", fmu_dir: Path | st
                                      record=None if record is None else record + [LANE_SENTINEL], timing=timing,
                                      progress=advance, algorithm=first.master,
                                      buffer=records if len(groups) == 1 else None))
-                if lane_less and np.any(recs[-1][LANE_SENTINEL]):
+                crowded = np.any(recs[-1][LANE_SENTINEL])  # a step delivered two packets
+                if lane_less and crowded:
                     raise ModelError(f"simulation.receiver: {first.sources['receiver']} has no inputs for the later "
                                      "lanes of a delivery (lane2_packet_seq ...), and packets arrived two in a step "
                                      "in this run: it would lose them; give it those inputs (docs/interop.md) or a "
                                      "shorter simulation.sampling_time")
-                if record is not None and np.any(recs[-1][LANE_SENTINEL]):
-                    # a step delivered two packets: the same runs again (the same numbers), recording the lanes
+                if record is not None and crowded:  # the same runs again (the same numbers), recording the lanes
                     for name, handle in handles.items():
                         handle.setup(*merge_params(group, name, handle.parameters, distinct))
                     recs[-1] = simulate(handles, connections, rates, T, n_steps, record=record + lanes,
@@ -464,7 +464,7 @@ def _lane_less(handles: Mapping[str, Any], n_beacons: int) -> set[str]:
         return set()
     inputs = {p.name for p in receiver.ports if p.causality == "input"}
     wanted = {c.input for c in default_connections(n_beacons) if c.destination == "receiver"}
-    return {name for name in wanted - inputs if name.startswith("lane")}
+    return {name for name in wanted - inputs if lane_of(name)}
 
 
 def _recorded_lanes(rec: Mapping[str, np.ndarray], sources: Mapping[str, str]) -> dict[str, np.ndarray]:

@@ -281,3 +281,24 @@ def test_the_compiled_pass_takes_the_later_lanes_of_a_delivery_as_slots_of_the_b
     for name in RUN_METRICS:
         if name != "pcrb_rms":
             np.testing.assert_allclose(got[name], alone[name], rtol=0, atol=0, err_msg=name)
+
+
+def test_a_new_packet_on_a_later_lane_is_one_it_did_not_hold_last():
+    """new_on_lane against a plain loop over the steps: a lane's packet is new when its counter is not 0 (empty)
+    and not the last packet the lane held (emptying keeps it in mind), per run."""
+    from sblsim.orchestrator.cosim.metrics import new_on_lane
+
+    rng = np.random.default_rng(5)
+    seq = rng.integers(1, 4, (200, 6)) * (rng.random((200, 6)) < 0.6)  # repeats, empties and returns
+    seq[:, 0] = 0  # a lane never used
+    want = np.zeros(seq.shape, bool)
+    for r in range(seq.shape[1]):
+        held = 0
+        for k in range(seq.shape[0]):
+            if seq[k, r] > 0:
+                want[k, r] = seq[k, r] != held
+                held = seq[k, r]
+    got = new_on_lane(seq)
+    np.testing.assert_array_equal(got, want)
+    assert want.any() and (~want & (seq > 0)).any()  # new packets, and held ones that are not
+    np.testing.assert_array_equal(new_on_lane(seq[:, 3]), want[:, 3])  # one run: (N,)
