@@ -258,9 +258,13 @@ def error_bound_step() -> ca.Function:
     error states as random parameters with their priors; Van Trees, Bell, Bayesian Bounds for Parameter
     Estimation and Nonlinear Filtering/Tracking, Wiley 2007).
 
+    At a slot whose packet is the first of a new ping of an inverted LBL (``new_ping``), the clock offset (the
+    pinger's emission offset) first takes its random step of std ``ping_jitter``
+    (:meth:`~sblsim.models.receiver.motion.WithErrorStates.new_ping`), as the receivers do.
+
     Inputs ``B (n²), dt, q_h, q_v, position (3), beacon (3), arm (3), noise_variance, attitude_variance,
     depth_variance, gps_sigma [m], gps_tau [s], clock_drift_sigma [1], attitude_sigma [rad], clock [m/s], slot,
-    received``; output ``B_next``.
+    received, ping_jitter [s], new_ping``; output ``B_next``.
     """
     motion = ERROR_MOTION
     errors = error_symbols()
@@ -269,6 +273,8 @@ def error_bound_step() -> ca.Function:
     noise, attitude, d_var, clock, slot, received = (
         ca.SX.sym(name) for name in ("noise_variance", "attitude_variance", "depth_variance", "clock", "slot",
                                      "received"))
+    jitter, new_ping = ca.SX.sym("ping_jitter"), ca.SX.sym("new_ping")
+    P = motion.new_ping(P, jitter, ca.logic_and(slot, new_ping))  # a new ping's emission offset, before its rows
     depth_row = ca.SX.zeros(1, motion.state_size)
     depth_row[motion.position_index[2]] = 1.0
     P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
@@ -277,27 +283,28 @@ def error_bound_step() -> ca.Function:
     variance = effective_range_variance(position, beacon, arm, noise, attitude)
     P = information_update(P, H, variance, ca.logic_and(slot, received))
     names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
-             "depth_variance", *ERROR_NAMES, "clock", "slot", "received"]
+             "depth_variance", *ERROR_NAMES, "clock", "slot", "received", "ping_jitter", "new_ping"]
     return ca.Function("sblsim_error_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var,
-                                                   *errors.values(), clock, slot, received], [ca.vec(P)], names,
-                       ["B_next"])
+                                                   *errors.values(), clock, slot, received, jitter, new_ping],
+                       [ca.vec(P)], names, ["B_next"])
 
 
 #: Per-replicate inputs of the bound with error states, in the order of its ``fixed`` columns (the compiled bound
 #: numbers them: :func:`compiled_error_bound`, :mod:`sblsim.fmus.contract`).
 ERROR_FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance",
-               "attitude_variance", "depth_variance", *ERROR_NAMES, "clock")
+               "attitude_variance", "depth_variance", *ERROR_NAMES, "clock", "ping_jitter")
 #: Per-step inputs of the bound with error states: the true position, the transmitting beacon's broadcast
-#: position and lever arm (NED), the slot and the packet's reception.
+#: position and lever arm (NED), the slot, the packet's reception and whether it is the first of a new ping (an
+#: inverted LBL's).
 ERROR_STEPS = ("true_x", "true_y", "true_z", "beacon_x", "beacon_y", "beacon_z", "arm_x", "arm_y", "arm_z", "slot",
-               "received")
+               "received", "new_ping")
 
 
 def _error_inputs(f, s):
     """The inputs of :func:`error_bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name and a
     step's columns (:data:`ERROR_STEPS` order)."""
     return (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"], f["depth_variance"],
-            *(f[k] for k in ERROR_NAMES), f["clock"], s[9:10], s[10:11])
+            *(f[k] for k in ERROR_NAMES), f["clock"], s[9:10], s[10:11], f["ping_jitter"], s[11:12])
 
 
 def error_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:

@@ -140,11 +140,14 @@ from sblsim.models.program import ProgramBuilder, Stream
 from sblsim.models.systems import interface_system
 
 (_CHANNEL_UNIFORM, _RANGE_NOISE, _TURNAROUND, _ANGLE_NOISE, _DOWNLINK, _DETECTION, _OCEAN_FREQUENCY,
- _OCEAN_PHASE) = range(8)
+ _OCEAN_PHASE, _PING_JITTER) = range(9)
 #: Random Fourier features of the moving ocean's travel-time perturbation (:func:`ocean_perturbation`).
 OCEAN_FEATURES = 16
-#: Ranging modes: one-way travel time (synchronized clocks) or two-way (interrogation and reply).
-RANGING = ("owtt", "twtt")
+#: Ranging modes: one-way travel time (synchronized clocks), two-way (interrogation and reply), or the times of
+#: arrival of the target's own pings at fixed receivers (``toa``: an inverted LBL, the emission epochs unknown).
+RANGING = ("owtt", "twtt", "toa")
+#: The index of ``toa`` in :data:`RANGING` (the ``ranging`` parameter's encoding).
+TOA = RANGING.index("toa")
 #: The packet a slot delivers: outputs of the channel, inputs of every receiver (whose FMUs refuse a value outside
 #: the declared ranges, :data:`sblsim.models.declarations.SIGNAL_RANGES`).
 PACKET: tuple[Variable, ...] = (
@@ -213,6 +216,18 @@ def ocean_perturbation(t, sigma, frequency, phase) -> ca.SX:
     """
     m = frequency.shape[0]
     return sigma * math.sqrt(2.0 / m) * ca.sum1(ca.cos(frequency * t + phase))
+
+
+#: The target's pinger of an inverted LBL (``ranging = "toa"``; declared after every other variable of the
+#: channel, the lanes included: their value references stay): the pings' nominal interval and their jitter.
+PING_VARIABLES: tuple[Variable, ...] = (
+    Variable("ping_interval", "parameter", "Real", 0.0, "s",
+             "toa: the target pinger's nominal interval between pings on its own clock (0: the round-robin cycle, "
+             "beacons x slot_period: one range per receiver per cycle, as SBL and LBL)", min=0.0, max=3600.0),
+    Variable("ping_jitter", "parameter", "Real", 0.0, "s",
+             "toa: std of each interval's random part (uniform, zero mean: a tag's random delay; the emission "
+             "epochs then walk away from the nominal schedule, unknown to the receivers)", min=0.0, max=600.0),
+)
 
 
 #: The Euler angles of an attitude, in the order of :func:`~sblsim.models.platform.geometry.rotation_ned`'s arguments.
@@ -743,6 +758,80 @@ def _slot(n: int, true_names: list[str], sent_names: list[str], direction: bool,
     return handler
 
 
+def _ping(n: int, true_names: list[str], sent_names: list[str], queue: list, carried: list, propagation: str,
+          detection: str):
+    """The handler of one leg of a ping of an inverted LBL (``ranging = "toa"``, a channel of ``n`` fixed
+    receivers): the target's pinger emits at ``ping_epoch`` (its own clock: the nominal interval P stretched by
+    its drift, plus the jitter), and receiver ``ping_leg + 1`` (its input names ``true_names``, ``sent_names``)
+    hears it a travel time later; the packet joins the in-flight ``queue`` (:func:`_send`). The event runs once
+    per receiver of the ping (``ping_leg`` 0 … n − 1), then draws the next ping's epoch.
+
+    The travel time is the one way from the target where it is at the emission (its position input moved back
+    along its velocity from the step's end) to the fixed receiver, by the travel times of ``propagation``
+    (reciprocal: the eigenray between the two points) and what ``detection`` hears; the receivers' clocks are
+    synchronized (GPS), the emission epoch is unknown to them: the packet carries the nominal epoch of the ping,
+    ``t0 + c P`` (ping c), as ``tx_time`` and the pseudo-range ``c_assumed (rx_time − tx_time)``, which holds the
+    emission's offset from the nominal schedule."""
+    snr_mode = detection == "snr"
+
+    def handler(x, u, p, d, w, t, h):
+        leg, count, emitted = x["ping_leg"], x["ping_count"], x["ping_epoch"]
+        nominal = x["t0"] + (count + 1) * d["ping_interval"]
+        receiver = ca.vertcat(*[select(leg, [u[true_names[3 * j + a]] for j in range(n)]) for a in range(3)])
+        sent = ca.vertcat(*[select(leg, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
+        velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
+        source = ca.vertcat(*[u[name] for name in TARGET_INPUTS[:3]]) + velocity * (emitted - (t + h))
+        heard_draws = w[_DETECTION] if snr_mode else None
+        # the leg between two fixed points: the target at the emission, the receiver (no iteration)
+        e = _Slot(propagation, emitted, receiver, source, ca.SX.zeros(3), x, p, d, heard_draws)
+        draws, noise = w[_CHANNEL_UNIFORM], w[_RANGE_NOISE][0]
+        if snr_mode:
+            valid, outlier, excess = 1, 0, 0.0
+        else:
+            valid = draws[0] >= p["loss_pct"] / 100.0
+            outlier = draws[1] < p["outlier_pct"] / 100.0
+            excess = ca.if_else(outlier, -p["outlier_excess"] * ca.log1p(-draws[2]), 0.0)
+        one_way = _leg(e, None, False)
+        tau, distance = one_way[0], one_way[1]
+        launch, arrival_angle, kind = one_way[3]
+        valid = ca.logic_and(valid, kind > 0)
+        scale = 1.0
+        if snr_mode:  # the ping's data (the tag's id) decoded, a reflected arrival's excess, the timing noise
+            decoded = heard_draws[DETECTION_DRAWS - 1] < sonar.detection_probability(
+                one_way[4], p["detection_threshold"] + p["decoding_margin"], p["fluctuation"])
+            valid = ca.logic_and(valid, decoded)
+            outlier = ca.logic_or(outlier, kind > 1.5)
+            scale = sonar.accuracy_scale(one_way[4], p["reference_snr"])
+        arrival = emitted + tau
+        rng = p["sound_speed_assumed"] * (arrival - nominal) + p["sigma_range"] * scale * noise + excess
+        # the eigenray was traced from the receiver: reversed, it leaves the target
+        out = {"launch_angle": -arrival_angle, "arrival_angle": -launch, "arrival": kind,
+               "packet_seq": count * n + leg + 1, "beacon_id": leg + 1, "packet_valid": valid, "tx_time": nominal,
+               "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
+               "outlier": ca.logic_and(outlier, valid), "rx_time": arrival,
+               "snr": one_way[4], "detection_probability": one_way[5]}
+        out.update({f"beacon_{a}": ca.if_else(valid, sent[j], 0.0) for j, a in enumerate(AXES)})
+        overrun = {}
+        if snr_mode:  # the leg's last heard arrival after the next ping: flagged
+            spread_end = one_way[6]
+            overrun = {"slot_overrun": ca.if_else(spread_end > d["ping_interval"], ca.fmax(
+                x["slot_overrun"], spread_end), x["slot_overrun"])}
+        # after the last receiver's leg, the next emission: the interval on the pinger's clock plus its jitter
+        # (uniform, zero mean, std ping_jitter)
+        last = leg + 1 >= n
+        interval = d["ping_interval"] * (1.0 + p["clock_drift_ppm"] * 1e-6)
+        jitter = p["ping_jitter"] * math.sqrt(3.0) * (2.0 * w[_PING_JITTER][0] - 1.0)
+        return {"ping_leg": ca.if_else(last, 0, leg + 1), "ping_count": ca.if_else(last, count + 1, count),
+                "ping_epoch": ca.if_else(last, emitted + interval + jitter, emitted),
+                **_send(queue, carried, x, p, out, tau), **overrun}
+    return handler
+
+
+def ping_due(x, u, p, d, t, h):
+    """Guard of a ping's legs (``ranging = "toa"``): the emission epoch has been reached by the end of the step."""
+    return x["ping_epoch"] <= t + h + ARRIVAL_SLACK
+
+
 def _hear(source, receive, p, d, draws):
     """The first detected eigenray from ``source`` to ``receive`` (3, 1) [m, NED] with the uniforms
     ``draws`` (3: one per family): :func:`~sblsim.models.acoustics.detection.first_detected` (the families
@@ -752,6 +841,13 @@ def _hear(source, receive, p, d, draws):
         p["water_depth"], p["sound_speed_rows"] > 0, p["sound_speed_true"], d["nodes"], d["speeds"],
         d["site"], d["ray_bounds"], d["ray_grid"], d["family_values"])
     return first_detected(*families, draws)
+
+
+def sent_epoch(x, p, d, seq, n: int):
+    """The transmit epoch a packet's slot counter ``seq`` gives [s]: slot k's ``t0 + k T``, or (``ranging =
+    "toa"``) its ping's nominal epoch ``t0 + c P``, ping c = ⌈seq / n⌉ of a channel of ``n`` receivers."""
+    ping = ca.floor((seq - 1) / n) + 1
+    return ca.if_else(p["ranging"] == TOA, x["t0"] + ping * d["ping_interval"], x["t0"] + seq * p["slot_period"])
 
 
 def _send(queue, carried, x, p, out, elapsed):
@@ -768,7 +864,9 @@ def _send(queue, carried, x, p, out, elapsed):
     longest = elapsed  # the longest in flight then, for the refusal's message
     for j in range(FLIGHT_CAPACITY):
         sent_at = x["t0"] + x["q_packet_seq"][j] * p["slot_period"]
-        longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, x["q_rx_time"][j] - sent_at, 0.0))
+        # a ping's packet (toa) left at its emission, a travel time before it arrives
+        flight = ca.if_else(p["ranging"] == TOA, x["q_travel_time"][j], x["q_rx_time"][j] - sent_at)
+        longest = ca.fmax(longest, ca.if_else(x["q_used"][j] > 0.5, flight, 0.0))
     refused = ca.if_else(placed, x["overflow_travel_time"], ca.fmax(x["overflow_travel_time"], longest))
     return {**new, "overflow_travel_time": refused}
 
@@ -855,14 +953,15 @@ class Acoustics(Component):
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
                     + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES + OCEAN_VARIABLES
-                    + lane_variables(n_beacons, "output"))
+                    + lane_variables(n_beacons, "output") + PING_VARIABLES)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
             v for prefix, what, discrete in USBL_ATTITUDES for v in attitude_variables(prefix, "input", what, discrete))
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
-                + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES + lane_variables(n_beacons, "output"))
+                + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES + lane_variables(n_beacons, "output")
+                + PING_VARIABLES)
 
     @classmethod
     def uses_ray_table(cls, values: Mapping[str, Any], parameters: Mapping[str, Any]) -> bool:
@@ -948,11 +1047,13 @@ class Acoustics(Component):
         b = ProgramBuilder(cls, n, states=[("t0", 1), ("k", 1)] + [(name, 1) for name in packet] + queue
                            + [("delivered_end", 1), ("lanes_used", 1), ("lanes_held", 1),
                               ("ocean_frequency", OCEAN_FEATURES),
-                              ("ocean_phase", OCEAN_FEATURES)],
+                              ("ocean_phase", OCEAN_FEATURES), ("ping_epoch", 1), ("ping_count", 1),
+                              ("ping_leg", 1)],
                            derived=[("nodes", NODES), ("slowness", NODES), ("speeds", NODES),
                                     ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
                                     ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS), ("site", len(SITE)),
-                                    ("family_values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS)])
+                                    ("family_values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS),
+                                    ("ping_interval", 1)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
@@ -973,7 +1074,9 @@ class Acoustics(Component):
             return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:],
                     "ray_bounds": bounds, "ray_grid": ray_grid([bounds[j] for j in range(len(RAY_BOUNDS))]),
                     "ray_values": table,
-                    "site": site_numbers(p), "family_values": family}
+                    "site": site_numbers(p), "family_values": family,
+                    # toa: the pinger's nominal interval (0: the round-robin cycle of the n receivers)
+                    "ping_interval": ca.if_else(p["ping_interval"] > 0, p["ping_interval"], n * p["slot_period"])}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -982,7 +1085,11 @@ class Acoustics(Component):
                     "delivered_end": t0 - p["slot_period"], "lanes_used": 1, "lanes_held": 1,
                     # the moving ocean's features, drawn once per run (their own streams)
                     "ocean_frequency": w[_OCEAN_FREQUENCY] / p["ntd_time_scale"],
-                    "ocean_phase": 2.0 * math.pi * w[_OCEAN_PHASE]}
+                    "ocean_phase": 2.0 * math.pi * w[_OCEAN_PHASE],
+                    # toa: the first ping, an interval of the pinger's clock after the start, with its jitter
+                    "ping_epoch": t0 + d["ping_interval"] * (1.0 + p["clock_drift_ppm"] * 1e-6)
+                    + p["ping_jitter"] * math.sqrt(3.0) * (2.0 * w[_PING_JITTER][0] - 1.0),
+                    "ping_count": 0, "ping_leg": 0}
 
         def due(x, u, p, d, t, h):
             return sample_due(x["k"], x["t0"], p["slot_period"], t, h)
@@ -997,7 +1104,7 @@ class Acoustics(Component):
                 any_arrived = ca.logic_or(any_arrived, flag)
             return ca.logic_and(any_arrived, x["delivered_end"] < t + 0.5 * h)
 
-        def earliest(x, p, t, h):
+        def earliest(x, p, d, t, h):
             """The in-flight place of the arrived packet of earliest arrival (then lowest slot counter), and its
             packet (carried outputs, the beacon and the transmit epoch) by output name."""
             best, best_rx, best_seq = 0, ca.inf, ca.inf
@@ -1008,13 +1115,13 @@ class Acoustics(Component):
                 best_rx, best_seq = ca.if_else(better, rx, best_rx), ca.if_else(better, seq, best_seq)
             out = dict(zip(carried, get_row([x[f"q_{name}"] for name in carried], best)))
             seq = out["packet_seq"]
-            out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=x["t0"] + seq * p["slot_period"])
+            out.update(beacon_id=ca.fmod(seq - 1, n) + 1, tx_time=sent_epoch(x, p, d, seq, n))
             used = ca.vertcat(*[ca.if_else(best == j, 0.0, x["q_used"][j]) for j in range(FLIGHT_CAPACITY)])
             return out, used
 
         def deliver(x, u, p, d, w, t, h):
             """The arrived packet of earliest arrival (then lowest slot counter) becomes the outputs (lane 1)."""
-            out, used = earliest(x, p, t, h)
+            out, used = earliest(x, p, d, t, h)
             return {**out, "q_used": used, "delivered_end": t + h, "lanes_used": 1}
 
         def another(x, u, p, d, t, h):
@@ -1026,7 +1133,7 @@ class Acoustics(Component):
 
         def deliver_lane(x, u, p, d, w, t, h):
             """The next arrived packet (in the order of arrival) on the next lane of the delivery."""
-            out, used = earliest(x, p, t, h)
+            out, used = earliest(x, p, d, t, h)
             lane = x["lanes_used"] + 1
             placed = {lane_name(m, name): ca.if_else(lane == m, out[name], x[lane_name(m, name)])
                       for m in range(2, LANES + 1) for name in fields}
@@ -1057,18 +1164,24 @@ class Acoustics(Component):
                     Stream(_TURNAROUND, "normal", 1), Stream(_ANGLE_NOISE, "normal", 2),
                     Stream(_DOWNLINK, "uniform", 1)) + heard, when=chosen))
                 continue
-            for ranging in RANGING:
+            for ranging in RANGING[:TOA]:
                 extra = (Stream(_TURNAROUND, "normal", 1),) if ranging == "twtt" else ()
                 events.append(b.event(f"slot_{ranging}_{suffix}", due, slot(ranging, propagation, detection),
                                       streams + extra + heard, when={"ranging": (ranging,), **chosen}))
+            # an inverted LBL: one leg per receiver of each of the target's pings
+            events.append(b.event(f"ping_{suffix}", ping_due, partial(_ping, n, true_names, sent_names, queue,
+                                                                      carried)(propagation, detection),
+                                  streams + (Stream(_PING_JITTER, "uniform", 1),) + heard,
+                                  when={"ranging": ("toa",), **chosen}))
         events.append(b.event("deliver", deliverable, deliver))  # after the slots: a packet is sent, then arrives
         events += [b.event("deliver_lane", another, deliver_lane), b.event("clear_lanes", stale, clear)]
-        ocean = (Stream(_OCEAN_FREQUENCY, "normal", OCEAN_FEATURES), Stream(_OCEAN_PHASE, "uniform", OCEAN_FEATURES))
+        ocean = (Stream(_OCEAN_FREQUENCY, "normal", OCEAN_FEATURES), Stream(_OCEAN_PHASE, "uniform", OCEAN_FEATURES),
+                 Stream(_PING_JITTER, "uniform", 1, when=("ranging", "toa")))
         return b.program(b.prepare(prepare), b.init(init, ocean), b.output(output), events=events)
 
 
 __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
            "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields",
-           "lane_name", "lane_of", "lane_variables", "OCEAN_FEATURES",
-           "ocean_perturbation", "OCEAN_VARIABLES", "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PROPAGATION",
-           "RANGING", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS"]
+           "lane_name", "lane_of", "lane_variables", "OCEAN_FEATURES", "ocean_perturbation", "OCEAN_VARIABLES",
+           "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PING_VARIABLES", "ping_due", "PROPAGATION", "RANGING",
+           "sent_epoch", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS", "TOA"]

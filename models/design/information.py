@@ -32,7 +32,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from sblsim.models.bound import MODEL, effective_range_variance, horizontal_drms, per_point, position_information
+from sblsim.models.bound import (
+    MODEL,
+    effective_range_variance,
+    horizontal_drms,
+    per_point,
+    position_information,
+    state_at,
+)
 
 #: The transducer counts of the compiled functions; a layout is padded to the smallest that holds it.
 SLOTS = (4, 8, 16)
@@ -43,8 +50,14 @@ OUTPUTS = ("drms", "drms_3d", "log_det")
 
 
 @lru_cache(maxsize=None)
-def layout_information(n: int, model=MODEL) -> ca.Function:
+def layout_information(n: int, model=MODEL, emission: bool = False) -> ca.Function:
     """casadi Function of a layout's Fisher information at a point (module docstring).
+
+    With ``emission``, the ranges are the times of arrival of one ping of the vehicle at the transducers (an
+    inverted LBL), whose emission epoch is unknown: each range carries the same unknown offset ``o`` (the
+    emission epoch's, times the sound speed), a nuisance parameter removed by the Schur complement of the
+    information of ``(p, o)``, ``J = J_pp − j_po j_poᵀ / j_oo`` with ``j_po = Σ_i q_i g_i / σ_i²`` and
+    ``j_oo = Σ_i q_i / σ_i²`` (Kay 1993, Section 3.7, the nuisance parameters' bound).
 
     ``(p[3], beacons[3 n], arms[3 n], heard[n], noise_variance[n], attitude_variance, depth_variance) ->
     (J (3, 3), drms, drms_3d, log_det)``.
@@ -76,8 +89,16 @@ def layout_information(n: int, model=MODEL) -> ca.Function:
     variances = ca.vertcat(*[effective_range_variance(p, beacon, a[3 * i:3 * i + 3], noise[i], attitude, model)
                              for i, beacon in enumerate(beacons)], d_var)
     J = position_information(model, p, beacons, variances, ca.vertcat(heard, 1.0))
+    if emission:  # the ping's unknown emission: the offset common to every range removed
+        x, index = state_at(model.motion, p), list(model.motion.position_index)
+        weights = [heard[i] / variances[i] for i in range(n)]
+        j_po = sum(w * model.range_row(x, beacon)[1][index].T for w, beacon in zip(weights, beacons))
+        j_oo = sum(weights)
+        heard_any = j_oo > 0
+        J = J - ca.if_else(heard_any, ca.mtimes(j_po, j_po.T) / ca.if_else(heard_any, j_oo, 1.0), ca.SX.zeros(3, 3))
     inverse = ca.inv(J)
-    return ca.Function(f"sblsim_layout_information_{n}", [p, b, a, heard, noise, attitude, d_var],
+    name = f"sblsim_layout_information_{n}" + ("_toa" if emission else "")
+    return ca.Function(name, [p, b, a, heard, noise, attitude, d_var],
                        [J, horizontal_drms(J), ca.sqrt(ca.trace(inverse)), ca.log(ca.det(J))],
                        ["p", "beacons", "arms", "heard", "noise_variance", "attitude_variance", "depth_variance"],
                        ["J", *OUTPUTS])
@@ -125,7 +146,7 @@ def padded(beacons: np.ndarray, arms: np.ndarray, heard: np.ndarray, noise_varia
 
 
 def layout_values(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, heard, noise_variance,
-                  attitude_variance, depth_variance, model=MODEL) -> dict[str, np.ndarray]:
+                  attitude_variance, depth_variance, model=MODEL, emission: bool = False) -> dict[str, np.ndarray]:
     """:func:`layout_information` at each point (casadi's evaluation, mapped over the points).
 
     Parameters
@@ -141,6 +162,9 @@ def layout_values(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, hea
     attitude_variance, depth_variance : float or ndarray, shape (M,)
         [rad²], [m²].
     model : RangeDepthModel, optional
+    emission : bool, optional
+        The ranges are one ping's times of arrival, its emission epoch unknown (an inverted LBL,
+        :func:`layout_information`).
 
     Returns
     -------
@@ -153,7 +177,7 @@ def layout_values(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, hea
     heard = np.broadcast_to(np.asarray(heard, dtype=float), (m, n))
     noise = np.asarray(noise_variance, dtype=float)
     noise = np.broadcast_to(noise[:, None] if noise.ndim == 1 else noise, (m, n))
-    f = layout_information(n, model).map(m)
+    f = layout_information(n, model, emission).map(m)
     out = f(points.T, beacons.reshape(-1, 1), arms.reshape(-1, 1), heard.T, noise.T, per_point(attitude_variance),
             per_point(depth_variance))
     values = {"J": np.asarray(out[0]).reshape(3, m, 3).transpose(1, 0, 2)}

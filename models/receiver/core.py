@@ -42,7 +42,16 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import ARRIVAL, LANES, PACKET, lane_fields, lane_name, lane_variables
+from sblsim.models.acoustics.core import (
+    ARRIVAL,
+    LANES,
+    PACKET,
+    RANGING,
+    TOA,
+    lane_fields,
+    lane_name,
+    lane_variables,
+)
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import get_row, sample_due, select
@@ -238,6 +247,15 @@ def take_packet(x, u, n_beacons: int) -> dict[str, ca.SX]:
             "last_seq": u["packet_seq"], "slot_time": u["tx_time"]}
 
 
+def ping_heard(heard, x, u, p, n_beacons: int) -> ca.SX:
+    """The held ranges' heard flags (n, 1) after a slot whose packet is the first of a new ping of an inverted LBL
+    (:func:`new_ping`): that packet's beacon alone (the earlier ping's ranges carry another emission offset);
+    ``heard`` where the slot's packet is not."""
+    first, index = new_ping(x, u, p), u["beacon_id"] - 1
+    mine = ca.vertcat(*[ca.logic_and(fresh_packet(u, n_beacons), index == j) for j in range(n_beacons)])
+    return ca.if_else(first, mine, heard)
+
+
 def lm_active(x, u, p, d, t, h) -> ca.SX:
     """Guard of the least-squares iteration event: a fix is still moving."""
     return x["lm_active"] > 0.5
@@ -246,7 +264,8 @@ def lm_active(x, u, p, d, t, h) -> ca.SX:
 def lm_step(x, p, iterations: int, tolerance: float) -> dict[str, ca.SX]:
     """One iteration of the least-squares fix in progress (after :func:`lm_begin`)."""
     w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
-    return lm_iteration(x, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d, iterations, tolerance)
+    return lm_iteration(x, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d, iterations, tolerance,
+                        toa_ranging(p))
 
 
 def lm_states() -> list[tuple[str, int]]:
@@ -258,7 +277,8 @@ def lm_begin(x, guess, depth, p) -> dict[str, ca.SX]:
     """Start a least-squares fix of the held ranges (after :func:`take_packet`) at a slot."""
     w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
     valid = ca.sum1(x["heard"]) >= 3
-    return {**lm_start(guess, x["ranges"], x["beacons"], x["heard"], depth, w_r, w_d, valid), "lm_depth": depth}
+    return {**lm_start(guess, x["ranges"], x["beacons"], x["heard"], depth, w_r, w_d, valid, toa_ranging(p)),
+            "lm_depth": depth}
 
 
 def lm_idle() -> dict[str, ca.SX]:
@@ -305,9 +325,11 @@ def error_parameters() -> tuple[Variable, ...]:
     dates its ranges declares: the ranging, the GPS error's correlation time, the clock's states and the constant
     attitude error (declared after the profile's: the value references of every earlier variable stay)."""
     return (
-        Variable("ranging", "parameter", "String", "owtt", choices=("owtt", "twtt"), scope="fmu",
+        Variable("ranging", "parameter", "String", "owtt", choices=RANGING, scope="fmu",
                  description="The channel's ranging (acoustics.ranging): a one-way range refers to its reception "
-                             "and carries the clock's offset; a two-way one refers to the mean of its legs"),
+                             "and carries the clock's offset; a two-way one refers to the mean of its legs; a "
+                             "time of arrival (toa, an inverted LBL) refers to the ping's emission and carries the "
+                             "emission's offset as the clock's"),
         Variable("gps_correlation_time", "parameter", "Real", 0.0, "s",
                  "0: the GPS error of the broadcast positions is white, in R; > 0: carried as three Gauss-Markov "
                  "states of this correlation time (default: platform.gps_tau with platform.gps_model = "
@@ -326,6 +348,40 @@ def error_parameters() -> tuple[Variable, ...]:
     )
 
 
+def ping_parameters() -> tuple[Variable, ...]:
+    """What a receiver that carries error states declares for an inverted LBL's pinger, after every other variable
+    (so that the value references of every earlier one stay what they were before it existed)."""
+    return (Variable("ping_jitter", "parameter", "Real", 0.0, "s",
+                     "toa: std of the random step the emission offset (the clock offset state) takes at each new "
+                     "ping, the pinger's interval jitter (default: acoustics.ping_jitter)", min=0.0, max=600.0),)
+
+
+def toa_ranging(p: dict):
+    """Whether the receiver's packets are an inverted LBL's times of arrival (``ranging = "toa"``); None for a
+    receiver that declares no ranging."""
+    return p["ranging"] == TOA if "ranging" in p else None
+
+
+#: What the last depth reading a receiver used starts as: no reading (below every depth a sensor gives).
+NO_DEPTH = -1e300
+
+
+def depth_fresh(x: dict, u: dict, p: dict):
+    """The slot may use the depth reading: always, but for an inverted LBL's times of arrival (``ranging =
+    "toa"``), which arrive several in one sample of the depth sensor (a ping's burst): there a reading is used
+    once, at the first slot it differs from the last one used (``depth_seen``); 1 for a receiver that declares no
+    ranging."""
+    if "ranging" not in p:
+        return 1.0
+    return ca.logic_or(p["ranging"] != TOA, u["depth"] != x["depth_seen"])
+
+
+def new_ping(x: dict, u: dict, p: dict):
+    """The slot's packet is the first the receiver takes of a new ping of an inverted LBL (its nominal epoch,
+    ``tx_time``, is not the last slot's); 0 for other ranging."""
+    return ca.logic_and(toa_ranging(p), u["tx_time"] != x["slot_time"]) if "ranging" in p else 0
+
+
 def errors_of(p: dict) -> dict:
     """The ``errors`` mapping of :class:`~sblsim.models.receiver.motion.WithErrorStates` from a receiver's
     parameters (:func:`error_parameters`, :func:`beacon_parameters`): the GPS error as states where its
@@ -338,11 +394,13 @@ def errors_of(p: dict) -> dict:
 
 def clock_scale(p: dict):
     """What the clock's offset [s] adds to a range [m/s]: the assumed sound speed for a one-way range of a
-    receiver with clock states, else 0."""
+    receiver with clock states and for an inverted LBL's time of arrival (the emission's offset), else 0."""
     if "clock_states" not in p:
         return 0.0
     one_way = p["ranging"] == 0  # the index of "owtt"
-    return ca.if_else(ca.logic_and(p["clock_states"], one_way), p["sound_speed_assumed"], 0.0)
+    # an inverted LBL's time of arrival carries the pinger's emission offset, whatever clock_states says
+    offset = ca.logic_or(ca.logic_and(p["clock_states"], one_way), p["ranging"] == TOA)
+    return ca.if_else(offset, p["sound_speed_assumed"], 0.0)
 
 
 def rejected_states(n_beacons: int) -> list[tuple[str, int]]:
@@ -446,16 +504,21 @@ class KalmanReceiver(RangesWithProfile, Component):
     backdate = False
 
     @classmethod
-    def epoch(cls, u: dict, p: dict):
+    def epoch(cls, u: dict, p: dict, x: dict | None = None):
         """The reference epoch of a range packet [s]: where its range refers. A one-way range is the travel time
         to the diver where the packet arrives: its reception ``rx_time`` (a receiver that declares its
         ``ranging``); a two-way range is the mean of its two legs, to the diver at interrogation and at
         reception: the midpoint ``(tx_time + rx_time) / 2``, which equals the legs' mean to second order
-        (``v² Δt² / (8 r)``: micrometres at a diver's speed)."""
+        (``v² Δt² / (8 r)``: micrometres at a diver's speed); an inverted LBL's time of arrival is the one way
+        from the diver's pinger at its emission: the ping's nominal epoch ``tx_time`` plus the emission offset the
+        state ``x`` holds (its clock offset)."""
         middle = 0.5 * (u["tx_time"] + u["rx_time"])
         if "ranging" not in p:
             return middle
-        return ca.if_else(p["ranging"] == 0, u["rx_time"], middle)  # 0: "owtt"
+        epoch = ca.if_else(p["ranging"] == 0, u["rx_time"], middle)  # 0: "owtt"
+        if x is None:
+            return epoch
+        return ca.if_else(p["ranging"] == TOA, u["tx_time"] + cls.motion.clock_offset(x["x"]), epoch)
 
     @classmethod
     def reference(cls, x: dict, u: dict, epoch) -> ca.SX | None:
@@ -480,8 +543,10 @@ class KalmanReceiver(RangesWithProfile, Component):
 
     @classmethod
     def variables(cls, n_beacons: int = 4) -> tuple[Variable, ...]:
+        errors = cls.motion.state_size > CONSTANT_VELOCITY.state_size
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
-                + arrival_interface() + profile_parameters() + cls.late_parameters() + late_inputs(n_beacons))
+                + arrival_interface() + profile_parameters() + cls.late_parameters() + late_inputs(n_beacons)
+                + (ping_parameters() if errors else ()))
 
     @classmethod
     def errors(cls, p: dict) -> dict | None:
@@ -587,13 +652,16 @@ class KalmanReceiver(RangesWithProfile, Component):
         n = n_beacons
         size, position = cls.motion.state_size, list(cls.motion.position_index)
         rejected = rejected_states(n)
+        # a receiver with error states may take an inverted LBL's pings: the depth reading it used last
+        pinged = [("depth_seen", 1)] if cls.motion.state_size > CONSTANT_VELOCITY.state_size else []
         b = ProgramBuilder(cls, n, states=[("x", size), ("P", size * size)] + packet_states(n) + [
-            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states() + rejected)
+            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states() + rejected + pinged)
 
         def init(p, d, w, t0):
             x0, P0 = cls.initial(p)
             return {"x": x0, "P": ca.vec(P0), **packet_init(n, t0), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
-                    "gated": 0, "failed": ca.SX.zeros(n), **lm_idle(), **rejected_init(n)}
+                    "gated": 0, "failed": ca.SX.zeros(n), **lm_idle(), **rejected_init(n),
+                    **{name: NO_DEPTH for name, _ in pinged}}
 
         def remembered(out):
             """The re-acquisition's states a receiver's update returned (one that returns none keeps them)."""
@@ -608,13 +676,19 @@ class KalmanReceiver(RangesWithProfile, Component):
         def slot(x, u, p, d, w, t, h):
             if not system.takes_ranges:
                 return packet_slot(x, u, p, t, h)
-            out = cls.correct({**x, "P": ca.reshape(x["P"], size, size), "now": t + h}, u, p, n)
+            P = ca.reshape(x["P"], size, size)
+            if "ping_jitter" in p:  # an inverted LBL's new ping: its emission offset's random step first
+                P = cls.motion.new_ping(P, p["ping_jitter"], new_ping(x, u, p))
+            out = cls.correct({**x, "P": P, "now": t + h}, u, p, n)
             held = {**x, **{k: out[k] for k in ("ranges", "beacons", "heard", "last_seq", "slot_time")}}
+            if "ping_jitter" in p:  # an inverted LBL's fix takes one ping's ranges: a new ping's first alone
+                held["heard"] = ping_heard(out["heard"], x, u, p, n)
             # the instrumentation fix: from the last fix, else from the filter's position (a start point only)
             guess = ca.if_else(x["fix_valid"], x["fix"], cls.motion.position(out["x"]))
             fix = lm_begin(held, guess, u["depth"], p)
+            seen = {"depth_seen": ca.if_else(depth_fresh(x, u, p), u["depth"], x["depth_seen"])} if pinged else {}
             return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"],
-                    "failed": out["failed"], **remembered(out), **fix,
+                    "failed": out["failed"], **remembered(out), **fix, **seen,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
         def packet_slot(x, u, p, t, h):
@@ -690,10 +764,10 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 
 __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_scale", "clock_step",
-           "clock_tick", "COVARIANCE", "covariance_outputs", "earlier_innovation", "error_parameters", "errors_of",
-           "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
+           "clock_tick", "COVARIANCE", "covariance_outputs", "depth_fresh", "earlier_innovation", "error_parameters",
+           "errors_of", "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
-           "lm_step", "lanes_due", "lane_used", "next_lane", "packet_init", "packet_states", "RangesWithProfile",
-           "receiver_interface",
-           "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch",
-           "slot_due", "slot_events", "STATE_NAMES", "system_interface", "take_packet"]
+           "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH", "packet_init", "packet_states",
+           "ping_heard", "ping_parameters", "RangesWithProfile", "receiver_interface", "REFERENCE_SOUND_SPEED",
+           "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due", "slot_events",
+           "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

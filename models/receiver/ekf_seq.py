@@ -39,6 +39,7 @@ from sblsim.models.receiver.core import (
     KalmanReceiver,
     beacon_parameters,
     clock_scale,
+    depth_fresh,
     earlier_innovation,
     filter_parameters,
     fresh_range,
@@ -67,9 +68,11 @@ class SequentialReceiver(KalmanReceiver):
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
+        depth = depth_fresh(x, u, p)  # an inverted LBL's burst of pings uses a depth reading once
         state, P, nis_depth = kalman.scalar_update(x["x"], x["P"], u["depth"] - m.depth(x["x"]), m.depth_jacobian(),
-                                                   p["sigma_depth"] ** 2)
-        epoch = cls.epoch(u, p)
+                                                   p["sigma_depth"] ** 2, depth)
+        nis_depth = ca.if_else(depth, nis_depth, 0.0)
+        epoch = cls.epoch(u, p, x)
         clock = clock_scale(p)
 
         def row(then, beacon):  # a range at the state ``then``: prediction, Jacobian row, variance

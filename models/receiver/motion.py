@@ -118,7 +118,9 @@ class WithErrorStates(ConstantVelocity):
       ``gps_model = "gauss-markov"``): the broadcast position is the true one plus it;
     * ``clock_offset`` [s] and ``clock_drift`` [1]: the receiver clock's error after its power-on
       synchronization, ``offset_k+1 = offset_k + Δt drift_k``, the drift constant (a one-way travel time is
-      measured late by the offset at reception);
+      measured late by the offset at reception); of an inverted LBL, the target pinger's emission offset from its
+      nominal schedule and its interval's drift, the offset taking a random step of the pinger's jitter at each
+      ping (:meth:`new_ping`);
     * ``attitude_*`` [rad]: a constant error of the attitude the surface turns directions with (the IMU's
       bias, a USBL array's mounting misalignment), per Euler angle.
 
@@ -181,6 +183,15 @@ class WithErrorStates(ConstantVelocity):
         decay = ca.exp(-dt / ca.fmax(errors["gps_tau"], 1e-9))
         return linear_predict(x, P, self.transition(dt, decay), self.process_noise(
             dt, q_horizontal, q_vertical, errors["gps_sigma"] ** 2 * (1.0 - decay * decay)))
+
+    def new_ping(self, P, jitter, new) -> ca.SX:
+        """P (14, 14) after the clock offset's random step ``jitter`` [s] (its std) where ``new`` is 1: the emission
+        offset of an inverted LBL's pinger, whose every interval is the nominal one plus an independent jitter
+        (the offset from the nominal schedule a random walk of one step per ping); unchanged where ``new`` is 0."""
+        o = self.clock_index[0]
+        step = ca.SX.zeros(self.state_size, self.state_size)
+        step[o, o] = jitter * jitter * new
+        return P + step
 
     def initial_covariance(self, position_std, velocity_std, errors=None) -> ca.SX:
         """Diagonal initial covariance (14, 14): the constant velocity's, the GPS error's stationary σ_g², the

@@ -50,8 +50,15 @@ def weights(sigma_range, sigma_depth) -> tuple[ca.SX, ca.SX]:
     return 1.0 / ca.fmax(sigma_range, SIGMA_FLOOR) ** 2, 1.0 / ca.fmax(sigma_depth, SIGMA_FLOOR) ** 2
 
 
-def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.SX, ca.SX, ca.SX]:
+def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common=None) -> tuple[ca.SX, ca.SX, ca.SX]:
     """Normal matrix ``JᵀWJ`` (3, 3), gradient ``JᵀW res`` (3, 1) and cost F at ``point``.
+
+    Where ``common`` (None: never) holds, the ranges share an unknown offset (an inverted LBL's ping: the
+    emission's), which the fix eliminates: ``F(p) = min_o Σ_i w_r (r_i − ‖p − b_i‖ − o)² + w_d (d − p_z)²``,
+    whose optimal ``o`` is the mean residual, so the residuals and their Jacobian rows are taken about their means
+    over the heard ranges
+    (variable projection: Golub, Pereyra, "The differentiation of pseudo-inverses and nonlinear least squares
+    problems whose variables separate", SIAM J. Numer. Anal. 10(2), 1973).
 
     Parameters
     ----------
@@ -72,10 +79,19 @@ def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca
     a = [0] * len(upper)  # the upper triangle of A (it is symmetric)
     g = ca.SX.zeros(3, 1)
     cost = 0
+    rows = []
     for i in range(ranges.numel()):
         h, J = position_range_function()(point, beacons[3 * i:3 * i + 3])
         J = ca.if_else(heard[i], J, ca.SX.zeros(3))  # an unheard beacon may give 0/0 at its placeholder
-        res = ca.if_else(heard[i], ranges[i] - h, 0.0)
+        rows.append((J, ca.if_else(heard[i], ranges[i] - h, 0.0)))
+    if common is not None:  # the offset common to the ranges eliminated: residuals and rows about their means
+        count = ca.fmax(ca.sum1(heard), 1.0)
+        mean_J = sum(J for J, _ in rows) / count
+        mean_res = sum(res for _, res in rows) / count
+        rows = [(ca.if_else(common, ca.if_else(heard[i], J - mean_J, ca.SX.zeros(3)), J),
+                 ca.if_else(common, ca.if_else(heard[i], res - mean_res, 0.0), res))
+                for i, (J, res) in enumerate(rows)]
+    for i, (J, res) in enumerate(rows):
         w = w_r * heard[i]
         wJ = w * J
         a = [a[k] + wJ[r] * J[c] for k, (r, c) in enumerate(upper)]
@@ -150,26 +166,29 @@ def _finite(value) -> ca.SX:
     return ca.logic_and(value == value, ca.fabs(value) < 1e308)
 
 
-def lm_start(guess, ranges, beacons, heard, depth, w_r, w_d, valid) -> dict[str, ca.SX]:
+def lm_start(guess, ranges, beacons, heard, depth, w_r, w_d, valid, common=None) -> dict[str, ca.SX]:
     """The iteration state at the start: the guess or the linear fix, whichever costs less.
 
-    ``valid`` (enough ranges) decides whether iterations follow.
+    ``valid`` (enough ranges) decides whether iterations follow; ``common``: the ranges share an unknown offset
+    (:func:`normal_equations`).
     """
-    cost_guess = normal_equations(guess, ranges, beacons, heard, depth, w_r, w_d)[2]
+    cost_guess = normal_equations(guess, ranges, beacons, heard, depth, w_r, w_d, common)[2]
     alternative = linear_fix(ranges, beacons, heard, depth)
-    cost_alt = normal_equations(alternative, ranges, beacons, heard, depth, w_r, w_d)[2]
+    cost_alt = normal_equations(alternative, ranges, beacons, heard, depth, w_r, w_d, common)[2]
     better = cost_alt < cost_guess
     return {"lm_point": ca.if_else(better, alternative, guess), "lm_cost": ca.if_else(better, cost_alt, cost_guess),
             "lm_mu": 1e-3, "lm_iter": 0, "lm_active": valid}
 
 
-def lm_iteration(x, ranges, beacons, heard, depth, w_r, w_d, iterations: int, tolerance: float) -> dict[str, ca.SX]:
-    """One Levenberg-Marquardt iteration of the state in ``x`` (blocks :data:`LM_STATE`)."""
+def lm_iteration(x, ranges, beacons, heard, depth, w_r, w_d, iterations: int, tolerance: float,
+                 common=None) -> dict[str, ca.SX]:
+    """One Levenberg-Marquardt iteration of the state in ``x`` (blocks :data:`LM_STATE`; ``common``: the ranges
+    share an unknown offset, :func:`normal_equations`)."""
     point, cost, mu = x["lm_point"], x["lm_cost"], x["lm_mu"]
-    A, g, _ = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d)
+    A, g, _ = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common)
     step = solve_damped3(A, g, mu)
     trial = point + step
-    trial_cost = normal_equations(trial, ranges, beacons, heard, depth, w_r, w_d)[2]
+    trial_cost = normal_equations(trial, ranges, beacons, heard, depth, w_r, w_d, common)[2]
     better = trial_cost < cost
     size = ca.dot(step, ca.mtimes(A, step))  # δᵀ JᵀWJ δ
     new_cost = ca.if_else(better, trial_cost, cost)

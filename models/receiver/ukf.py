@@ -28,6 +28,7 @@ from sblsim.models.receiver.core import (
     KalmanReceiver,
     beacon_parameters,
     clock_scale,
+    depth_fresh,
     earlier_innovation,
     filter_parameters,
     first_row,
@@ -65,6 +66,11 @@ def unscented_update(x, P, points, wm, wc, z_points, z, R) -> tuple[ca.SX, ca.SX
     return x + ca.mtimes(K, y), 0.5 * (P_new + P_new.T), y, S, ca.dot(y, solved[:, x.shape[0]])
 
 
+#: The variance [m²] of a depth row whose reading was used already (an inverted LBL's burst of pings in one sample of
+#: the depth sensor): no information.
+STALE_DEPTH_VARIANCE = 1e30
+
+
 class UnscentedReceiver(KalmanReceiver):
     """Unscented Kalman filter: fresh range and depth, beacon uncertainty in R, error states, NIS gate."""
 
@@ -87,7 +93,7 @@ class UnscentedReceiver(KalmanReceiver):
     def correct(cls, x: dict, u: dict, p: dict, n_beacons: int) -> dict:
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
         m = cls.measurement
-        epoch = cls.epoch(u, p)
+        epoch = cls.epoch(u, p, x)
         clock = clock_scale(p)
         A = cls.reference(x, u, epoch)  # each sigma point's range at the packet's reference epoch
         variance = m.fresh_range_variance(ca.mtimes(A, x["x"]), beacon, p)
@@ -132,9 +138,16 @@ class UnscentedReceiver(KalmanReceiver):
         sigma = MerweScaledSigmaPoints(cls.motion.state_size, p["alpha"], p["beta"], p["kappa"])
         wm, wc = sigma.weights()
         points = sigma.points(state, P)
+        # a depth reading an inverted LBL's burst used already carries no more information: its row's variance
+        # STALE_DEPTH_VARIANCE (a gain of 0 to the last bit), and the depth alone is no update
+        fresh_depth = depth_fresh(x, u, p)
+        R = ca.SX(R)
+        last = R.shape[0] - 1
+        R[last, last] = ca.if_else(fresh_depth, R[last, last], STALE_DEPTH_VARIANCE)
         joint = unscented_update(state, P, points, wm, wc, [h(c) for c in points], ca.vertcat(z, u["depth"]), R)
         depth = unscented_update(state, P, points, wm, wc, [m.depth(c) for c in points], u["depth"],
                                  ca.SX(p["sigma_depth"] ** 2))
+        depth = [ca.if_else(fresh_depth, new, old) for new, old in zip(depth, (state, P, 0.0, 0.0, 0.0))]
         y, S = joint[2], joint[3]
         checked = gate(y[0], S[0, 0], fresh, x, u, p, earlier)
         use = checked["use"]
@@ -143,4 +156,4 @@ class UnscentedReceiver(KalmanReceiver):
                 "gated": checked["gated"], "failed": checked["failed"], "rejecting": checked["rejecting"]}
 
 
-__all__ = ["UnscentedReceiver", "unscented_update"]
+__all__ = ["STALE_DEPTH_VARIANCE", "UnscentedReceiver", "unscented_update"]

@@ -96,6 +96,9 @@ class System:
     design_grades : tuple of str
         The kinds of hardware grade that change the system's accuracy (what a design chooses among for it:
         ``gps``, ``imu``, ``usbl_head``, ``ranging``).
+    designed : bool
+        ``sblsim design`` may propose the system (its search evaluates the layout information of ranges whose
+        emission is known: an inverted LBL is not among its candidates).
     """
 
     name: ClassVar[str] = ""
@@ -117,6 +120,7 @@ class System:
     fix_packets: ClassVar[int] = 3
     design_layout: ClassVar[str] = ""
     design_grades: ClassVar[tuple[str, ...]] = ()
+    designed: ClassVar[bool] = True
 
     def __repr__(self) -> str:
         return f"<positioning system {self.name}>"
@@ -204,6 +208,16 @@ class System:
             Naming the field and what is allowed.
         """
 
+    def check_receiver(self, receiver: str, field: str = "simulation.receiver") -> None:
+        """Refuse a built-in receiver (``simulation.receiver`` value) that cannot track the system (default: any
+        is taken).
+
+        Raises
+        ------
+        ModelError
+            Naming ``field`` and the receivers the system takes.
+        """
+
     def check_diver(self, cfg: Mapping[str, Any], depth: float | None = None) -> None:
         """Check the diver against the system's geometry (default: nothing to check).
 
@@ -226,17 +240,18 @@ class System:
                 "attitude_bias_sigma_deg": 0.0}
 
     def bound_errors(self, cfg: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
-        """The error states of the system's bound (:data:`sblsim.models.bound.ERROR_NAMES`, and ``clock``): the GPS
-        error's std [m] and correlation time [s] where it is a Gauss-Markov process, the clock drift's prior std
-        [1] and what its offset adds to a range [m/s] (one-way ranging), the constant attitude error's std [rad]
-        (the IMU's bias and axis misalignment); 0 where there is none (default: an SBL's)."""
+        """The error states of the system's bound (:data:`sblsim.models.bound.ERROR_NAMES`, ``clock`` and
+        ``ping_jitter``): the GPS error's std [m] and correlation time [s] where it is a Gauss-Markov process, the
+        clock drift's prior std [1] and what its offset adds to a range [m/s] (one-way ranging), the constant
+        attitude error's std [rad] (the IMU's bias and axis misalignment), the clock offset's random step at each
+        ping [s] (an inverted LBL's pinger); 0 where there is none (default: an SBL's)."""
         platform, acoustics = cfg["platform"], cfg["acoustics"]
         markov, one_way = platform["gps_model"] == "gauss-markov", acoustics["ranging"] == "owtt"
         return {"gps_sigma": platform["gps_sigma"] if markov else 0.0,
                 "gps_tau": platform["gps_tau"] if markov else 0.0,
                 "clock_drift_sigma": abs(acoustics["clock_drift_ppm"]) * 1e-6 if one_way else 0.0,
                 "attitude_sigma": math.radians(math.hypot(platform["imu_bias_deg"], platform["imu_misalignment_deg"])),
-                "clock": acoustics["sound_speed_assumed"] if one_way else 0.0}
+                "clock": acoustics["sound_speed_assumed"] if one_way else 0.0, "ping_jitter": 0.0}
 
     def own_bound(self, parameters: Mapping[str, float]) -> bool:
         """A run of the bound's ``parameters`` steps the system's own bound (:meth:`bound_function`), not the

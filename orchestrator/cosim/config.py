@@ -719,6 +719,23 @@ def _check_system(cfg: dict[str, dict], given: set[str]) -> None:
         raise ConfigError(str(exc)) from None
     if len(system.ranging) == 1:
         cfg["acoustics"]["ranging"] = system.ranging[0]
+    elif cfg["acoustics"]["ranging"] not in system.ranging:
+        takes = [s.name for s in SYSTEMS.values() if cfg["acoustics"]["ranging"] in s.ranging]
+        raise ConfigError(f"acoustics.ranging: {cfg['acoustics']['ranging']!r} is the ranging of platform.system = "
+                          f"{' or '.join(map(repr, takes))}; platform.system = {system.name!r} allows "
+                          f"{', '.join(system.ranging)}")
+    try:
+        system.check_receiver(cfg["simulation"]["receiver"])
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+    acoustics = cfg["acoustics"]
+    if acoustics["ranging"] == "toa":  # the pinger's interval stays positive
+        interval = acoustics["ping_interval"] or cfg["platform"]["beacons"] * cfg["simulation"]["sampling_time"]
+        limit = interval / math.sqrt(3.0)
+        if acoustics["ping_jitter"] >= limit:
+            raise ConfigError(f"acoustics.ping_jitter: {acoustics['ping_jitter']:g} s; a uniform jitter reaches "
+                              f"sqrt(3) times its std, and the ping interval ({interval:g} s) must stay positive: "
+                              f"allowed [0, {limit:.6g}) s")
 
 
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
@@ -745,6 +762,9 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     acoustics = cfg["acoustics"]
     if acoustics["clock_drift_ppm"] != 0.0 and acoustics["ranging"] == "owtt":  # the clock's states, its prior
         ties.update(clock_states=True, clock_drift_sigma_ppm=abs(acoustics["clock_drift_ppm"]))
+    if acoustics["ranging"] == "toa":  # an inverted LBL: the pinger's emission offset and its interval's drift
+        ties.update(clock_states=True, clock_drift_sigma_ppm=abs(acoustics["clock_drift_ppm"]),
+                    ping_jitter=acoustics["ping_jitter"])
     target = cfg["target"]
     if target["trajectory"] == "random-walk":  # the receiver's motion model and prior are the walk's
         ties.update({k: target[f"walk_{k}"] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")})

@@ -50,7 +50,7 @@ which the FMU build reads too.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -222,6 +222,36 @@ def new_on_lane(packet_seq: np.ndarray) -> np.ndarray:
     before = np.concatenate([np.full_like(last[:1], -1), last[:-1]])
     held = np.where(before >= 0, np.take_along_axis(seq, np.maximum(before, 0), axis=0), 0)
     return (seq > 0) & (seq != held)
+
+
+def new_pings(packet_seqs: Sequence[np.ndarray], slots_taken: Sequence[np.ndarray], n_beacons: int) -> list[np.ndarray]:
+    """The slots whose packet is the first a receiver takes of a new ping of an inverted LBL (its ping, ``⌈seq /
+    n⌉``, not the previous slot's), as the receivers find them: the slots in the order they are taken, step by step
+    and in each step lane by lane.
+
+    Parameters
+    ----------
+    packet_seqs, slots_taken : sequence of ndarray, shapes (N, B)
+        Per lane of a delivery (lane 1 first), its slot counter and the steps it holds a slot the receiver takes
+        (:func:`slots`, :func:`lane_slots`).
+    n_beacons : int
+        The receivers of the array.
+
+    Returns
+    -------
+    list of ndarray of bool, shapes (N, B)
+        Per lane.
+    """
+    ping = np.stack([np.where(taken, np.ceil(np.asarray(seq, dtype=float) / n_beacons), np.nan)
+                     for seq, taken in zip(packet_seqs, slots_taken)], axis=1)  # (N, L, B)
+    shape = ping.shape
+    flat = ping.reshape(shape[0] * shape[1], shape[2])  # in the order they are taken
+    index = np.where(np.isnan(flat), -1, np.arange(flat.shape[0])[:, None])
+    last = np.maximum.accumulate(index, axis=0)
+    before = np.concatenate([np.full_like(last[:1], -1), last[:-1]])
+    previous = np.where(before >= 0, np.take_along_axis(flat, np.maximum(before, 0), axis=0), np.nan)
+    new = ~np.isnan(flat) & (flat != previous)
+    return list(new.reshape(shape).transpose(1, 0, 2))
 
 
 def lane_slots(columns: Mapping[str, np.ndarray], n_beacons: int) -> list[tuple[int, np.ndarray, np.ndarray]]:

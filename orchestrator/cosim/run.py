@@ -34,7 +34,15 @@ from sblsim.orchestrator.cosim.engines import (
 )
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
-from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, errors, lane_slots, run_flags, run_metrics, slots
+from sblsim.orchestrator.cosim.metrics import (
+    METRIC_INPUTS,
+    errors,
+    lane_slots,
+    new_pings,
+    run_flags,
+    run_metrics,
+    slots,
+)
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, with_replicates
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec, progress_of
@@ -430,8 +438,6 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
                **{f"{kind}_{a}": column[f"beacon_{a}"] for kind in ("transceiver", "beacon") for a in "xyz"},
                **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": slot, "received": fresh,
                **{name: column_of(source) for name, source in system.bound_columns.items() if source in rec}}
-    steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
-                                          axis=-1))
     per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])
                                                       for k in system.bound_fixed[1:]}}
     fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
@@ -441,16 +447,23 @@ def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, param
     lanes = {name: column_of(source) for name, source in _lane_sources(system.bound_columns).items()
              if name in recorded}
     lane_steps, lane_new = [], []
-    for m, new, heard in lane_slots(lanes, arms.shape[1]):
+    taken = lane_slots(lanes, arms.shape[1])
+    # the first packet of each ping of an inverted LBL, in the order the receivers take them (every lane's)
+    pinged = new_pings([column["packet_seq"]] + [lanes[f"lane{m}_packet_seq"] for m, _, _ in taken],
+                       [slot] + [new for _, new, _ in taken], arms.shape[1])
+    sources["new_ping"] = pinged[0]
+    for (m, new, heard), first in zip(taken, pinged[1:]):
         on_lane = {name[len(f"lane{m}_"):]: values for name, values in lanes.items() if name.startswith(f"lane{m}_")}
         index = np.clip(np.rint(on_lane["beacon_id"]).astype(int) - 1, 0, arms.shape[1] - 1)
         arm = arms[np.arange(arms.shape[0])[None, :], index]
         mine = {**sources, **{f"{kind}_{a}": on_lane[f"beacon_{a}"] for kind in ("transceiver", "beacon")
                               for a in "xyz"},
                 **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": new, "received": heard,
-                **{name: on_lane[name] for name in system.bound_columns if name in on_lane}}
+                "new_ping": first, **{name: on_lane[name] for name in system.bound_columns if name in on_lane}}
         lane_steps.append(np.stack([np.asarray(mine[k], dtype=float) for k in system.bound_steps], axis=-1))
         lane_new.append(new)
+    steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
+                                          axis=-1))
     if not lane_steps:
         return native.system_pcrb(arms.shape[1], fixed, steps)
     return native.system_pcrb(arms.shape[1], fixed, steps, np.stack(lane_steps), np.stack(lane_new))
