@@ -84,6 +84,8 @@ SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
     "survey": ("LBL transponders' survey error", ("platform.survey_sigma=0",)),
     "installation": ("transducer installation error", ("platform.installation_sigma=0",)),
     "turnaround_jitter": ("two-way ranging: turnaround jitter", ("acoustics.turnaround_sigma=0",)),
+    "ping_jitter": ("inverted LBL: the pinger's interval jitter (its emission epochs a random walk)",
+                    ("acoustics.ping_jitter=0",)),
     "usbl_angle": ("USBL direction-of-arrival noise", ("platform.usbl_angle_sigma_deg=0",)),
     "usbl_misalignment": ("USBL array misalignment", ("platform.usbl_misalignment_deg=0",)),
     "latency": ("the receiver's processing latency (the diver sees an older estimate)", ("receiver.latency=0",)),

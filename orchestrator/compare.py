@@ -45,7 +45,8 @@ import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.cosim.config import apply_overrides, check_receiver, scenario_system
+from sblsim.models.systems import system
+from sblsim.orchestrator.cosim.config import apply_overrides, check_receiver, note, scenario_system
 from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw, with_replicates
@@ -97,8 +98,25 @@ def plans(scenario: str | Mapping, receivers: Sequence[str], overrides: Sequence
     if systems is None:
         return [plan_of([*overrides, f"simulation.receiver={r}"]) for r in receivers]
     own = scenario_system(scenario)
-    return [plan_of(system_overrides(s, [*overrides, f"simulation.receiver={r}"], own=own))
-            for s in systems for r in receivers]
+    out = []
+    for s in systems:  # a receiver a system cannot take (the inverted LBL's without an emission epoch) is left out
+        taken = [r for r in receivers if _takes(s, r)]
+        if not taken:
+            system(s).check_receiver(receivers[0], "--receivers")  # raises, naming the receivers it takes
+        if len(taken) < len(receivers):
+            note(f"{s}: {', '.join(r for r in receivers if r not in taken)} left out (it cannot track {s}: "
+                 f"{', '.join(taken)} compared)")
+        out += [plan_of(system_overrides(s, [*overrides, f"simulation.receiver={r}"], own=own)) for r in taken]
+    return out
+
+
+def _takes(name: str, receiver: str) -> bool:
+    """The system ``name`` can take the receiver (:meth:`~sblsim.models.systems.System.check_receiver`)."""
+    try:
+        system(name).check_receiver(receiver)
+    except ModelError:
+        return False
+    return True
 
 
 def compare(scenario: str | Sequence[RunPlan], receivers: Sequence[str] = (), replicates: int = 20,

@@ -165,6 +165,15 @@ CASES = {
     "run loss above 100": (["run", "semicircle", "--set", "acoustics.loss_pct=101"], "acoustics.loss_pct"),
     "run negative sigma": (["run", "semicircle", "--set", "acoustics.sigma_range=-1"], "acoustics.sigma_range"),
     "run beaufort 9": (["run", "semicircle", "--set", "platform.beaufort=9"], "platform.beaufort"),
+    # the inverted LBL: a receiver without the emission epoch, toa for another system, a jitter that would make
+    # an interval negative, more hydrophones than a ping's arrivals in flight
+    "run ilbl with the paper's ekf": (["run", "semicircle", "--set", "platform.system=ilbl"], "simulation.receiver"),
+    "run toa on sbl": (["run", "semicircle", "--set", "acoustics.ranging=toa"], "acoustics.ranging"),
+    "run ilbl jitter too large": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
+                                   "--set", "acoustics.ping_jitter=0.5"], "acoustics.ping_jitter"),
+    "run ilbl 9 hydrophones": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
+                                "--set", "platform.layout=circle", "--set", "platform.beacons=9"],
+                               "platform.beacons"),
     "run beaufort 2.5": (["run", "semicircle", "--set", "platform.beaufort=2.5"], "platform.beaufort"),
     "run sampling time 0": (["run", "semicircle", "--set", "simulation.sampling_time=0"],
                             "simulation.sampling_time"),

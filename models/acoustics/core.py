@@ -941,7 +941,8 @@ class Acoustics(Component):
         # declared after the OWTT ones, so that their value references stay what they were
         ranging = (
             Variable("ranging", "parameter", "String", "owtt",
-                     description="Ranging of SBL and LBL: one-way or two-way travel time (USBL: always two-way)",
+                     description="Ranging of SBL and LBL: one-way or two-way travel time (USBL: always two-way; "
+                                 "ilbl: always toa, the times of arrival of the target's pings)",
                      choices=RANGING),
             Variable("turnaround", "parameter", "Real", 0.05, "s",
                      "TWTT: the replying transponder's nominal turnaround time", min=0.0, max=10.0),

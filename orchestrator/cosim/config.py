@@ -430,6 +430,11 @@ def _note(line: str) -> None:
         notes.setdefault(line, False)
 
 
+def note(line: str) -> None:
+    """Add a one-line note for the command line to print (:func:`collected_notes`; dropped where none collects)."""
+    _note(line)
+
+
 def take_notes() -> list[str]:
     """The notes collected (:func:`collected_notes`) and not taken yet, in order."""
     notes = _NOTES.get() or {}

@@ -34,8 +34,9 @@ from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, PATH_KEYS
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.tables import regular_file
 
-#: The systems a design may propose (the registry's), in the order they are searched.
-SYSTEM_NAMES = tuple(SYSTEMS)
+#: The systems a design may propose (the registry's that it can search: :attr:`~sblsim.models.systems.System.designed`),
+#: in the order they are searched.
+SYSTEM_NAMES = tuple(name for name, system in SYSTEMS.items() if system.designed)
 #: The hardware grades a design chooses among: category -> grade -> (configuration key, value). The figures and
 #: their sources: docs/hardware-grades.md ("Grades a design chooses among").
 GRADES: dict[str, dict[str, tuple[str, float]]] = {

@@ -187,17 +187,19 @@ def np_error_range(position, beacon, arm, errors, clock):
 
 def test_the_bound_with_error_states_equals_an_augmented_kalman_filter_and_the_plain_bound_without_them():
     """The ranging bound with error states (models/bound.py error_pcrb) against FilterPy's KalmanFilter with the
-    augmented state (a Gauss-Markov GPS error, the clock's offset and drift, a constant attitude error), its range
-    row by central differences of the numpy range; with every error prior 0 it is the plain bound bit for bit."""
+    augmented state (a Gauss-Markov GPS error, the clock's offset and drift, a constant attitude error, the offset's
+    random step of an inverted LBL's ping jitter at each new ping), its range row by central differences of the
+    numpy range; with every error prior 0 it is the plain bound bit for bit."""
     from sblsim.models.bound import ERROR_FIXED, error_pcrb
 
     truth, slot, received, beacons, arms, fixed = case()
     n, b = slot.shape
     errors = dict(gps_sigma=np.array([0.0, 1.0, 0.3]), gps_tau=np.array([0.0, 60.0, 5.0]),
                   clock_drift_sigma=np.array([5e-6, 0.0, 2e-5]), attitude_sigma=np.radians([0.0, 1.0, 2.0]),
-                  clock=np.array([1500.0, 0.0, 1480.0]))
+                  clock=np.array([1500.0, 0.0, 1480.0]), ping_jitter=np.array([0.0, 0.0, 0.03]))
+    new_ping = np.random.default_rng(3).random(slot.shape) < 0.3  # the first packet of a ping, at some slots
     columns = np.stack([np.broadcast_to({**fixed, **errors}[k], (b,)) for k in ERROR_FIXED], axis=1)
-    steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None]], axis=-1)
+    steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None], new_ping[..., None]], axis=-1)
     bound = error_pcrb(columns, steps)
     for r in range(b):
         f = {k: float(np.broadcast_to(v, (b,))[r]) for k, v in {**fixed, **errors}.items()}
@@ -205,6 +207,8 @@ def test_the_bound_with_error_states_equals_an_augmented_kalman_filter_and_the_p
         for k in range(n):
             kf.predict()
             if slot[k, r]:
+                if new_ping[k, r]:  # the emission offset's random step, before the ping's rows
+                    kf.P[9, 9] += f["ping_jitter"] ** 2
                 depth = np.zeros((1, 14))
                 depth[0, 4] = 1.0
                 kf.update(np.zeros((1, 1)), R=f["depth_variance"], H=depth)
@@ -239,9 +243,11 @@ def test_the_compiled_bound_with_error_states_is_the_reference_one():
 
     truth, slot, received, beacons, arms, fixed = case(seed=8, n=200)
     b = slot.shape[1]
-    errors = dict(gps_sigma=1.0, gps_tau=60.0, clock_drift_sigma=5e-6, attitude_sigma=np.radians(1.0), clock=1500.0)
+    errors = dict(gps_sigma=1.0, gps_tau=60.0, clock_drift_sigma=5e-6, attitude_sigma=np.radians(1.0), clock=1500.0,
+                  ping_jitter=0.02)
+    new_ping = np.random.default_rng(9).random(slot.shape) < 0.3
     columns = np.stack([np.broadcast_to({**fixed, **errors}[k], (b,)) for k in ERROR_FIXED], axis=1)
-    steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None]], axis=-1)
+    steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None], new_ping[..., None]], axis=-1)
     np.testing.assert_allclose(native.system_pcrb(4, columns, steps), error_pcrb(columns, steps), rtol=1e-12, atol=0)
 
 

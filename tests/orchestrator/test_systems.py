@@ -307,6 +307,11 @@ ENGINE_CASES = {
     "lbl-cross-owtt": ["platform.system=lbl", "platform.survey_sigma=0.2"],
     "usbl-ekf": ["platform.system=usbl", "platform.usbl_misalignment_deg=1", "acoustics.turnaround_sigma=1e-4"],
     "usbl-ekf-seq": ["platform.system=usbl", "receiver=ekf-seq", "acoustics.outlier_pct=10"],
+    # the inverted LBL: the pinger's jitter and drift, a ping's arrivals on the lanes of a delivery
+    "ilbl-ekf-seq": ["platform.system=ilbl", "platform.layout=circle", "receiver=ekf-seq",
+                     "acoustics.ping_jitter=0.02", "acoustics.clock_drift_ppm=20"],
+    "ilbl-ukf-circle6": ["platform.system=ilbl", "platform.layout=circle", "platform.beacons=6", "receiver=ukf",
+                         "acoustics.ping_jitter=0.01", "acoustics.outlier_pct=10", "acoustics.ping_interval=0.7"],
 }
 
 
@@ -334,6 +339,8 @@ RAY_CASES = {
     "lbl-ray-receiver-profile": ["platform.system=lbl", *RAY, "receiver.sound_speed_profile=acoustics"],
     "usbl-ray-receiver-profile": ["platform.system=usbl", *RAY, "receiver.sound_speed_profile=munk",
                                   "simulation.receiver=ekf-seq"],
+    "ilbl-ray-water-depth": ["platform.system=ilbl", *RAY, "acoustics.water_depth=50", "simulation.receiver=ukf",
+                             "acoustics.ping_jitter=0.01"],
 }
 
 

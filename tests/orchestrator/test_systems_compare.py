@@ -22,10 +22,12 @@ LBL_BY_HAND = ["platform.system=lbl", "platform.layout=circle", "platform.beacon
 
 
 def test_the_defaults_table_names_every_system_and_the_documented_values():
-    assert tuple(SYSTEMS) == ("sbl", "lbl", "usbl")
+    assert tuple(SYSTEMS) == ("sbl", "lbl", "usbl", "ilbl")
     assert set(SYSTEMS["sbl"].compare_defaults) == {"platform.layout=cross", "platform.baseline=3"}
     assert set(LBL_BY_HAND[1:]) == set(SYSTEMS["lbl"].compare_defaults)
     assert "platform.usbl_angle_sigma_deg=0.5" in SYSTEMS["usbl"].compare_defaults
+    # the inverted LBL: LBL's field, its hydrophones tracked by a receiver with the emission epoch as a state
+    assert set(SYSTEMS["ilbl"].compare_defaults) == {*LBL_BY_HAND[1:], "simulation.receiver=ekf-seq"}
 
 
 @pytest.mark.parametrize("scenario", ["semicircle", "spiral", "random", "square", "harbour", "random-walk"])
