@@ -57,7 +57,7 @@ from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import get_row, sample_due, select
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.gate import gate
+from sblsim.models.receiver.gate import gate, gate_threshold
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
@@ -245,6 +245,22 @@ def take_packet(x, u, n_beacons: int) -> dict[str, ca.SX]:
         heard.append(ca.if_else(mine, 1.0, x["heard"][j]))
     return {"ranges": ca.vertcat(*ranges), "beacons": ca.vertcat(*beacons), "heard": ca.vertcat(*heard),
             "last_seq": u["packet_seq"], "slot_time": u["tx_time"]}
+
+
+def reopened(motion, P, p: dict, innovation, H, variance) -> ca.SX:
+    """P (n, n) before an inverted LBL's arrival that is far shorter than predicted: its innovation ``innovation``
+    [m] negative beyond the gate's threshold against its innovation variance ``H P Hᵀ + variance`` (H (1, n), the
+    range's row; ``variance`` [m²] its own). A multipath arrival is late, never early: the ping's earlier arrivals
+    came late and the emission offset they set is wrong, so the offset takes the ping's jitter step again
+    (:meth:`~sblsim.models.receiver.motion.WithErrorStates.new_ping`) and this arrival sets it anew (a ping's first
+    arrival sets the offset and moves the position by little, a share ``P_pp / (c² σ_jitter²)`` of its excess). P
+    unchanged for other ranging, or a receiver without the pinger's parameter."""
+    if "ping_jitter" not in p:
+        return P
+    short = ca.logic_and(ca.logic_and(toa_ranging(p), innovation < 0.0),
+                         innovation * innovation > gate_threshold(p["gate_probability"])
+                         * (ca.mtimes([H, P, H.T]) + variance))
+    return motion.new_ping(P, p["ping_jitter"], short)
 
 
 def ping_heard(heard, x, u, p, n_beacons: int) -> ca.SX:
@@ -769,5 +785,6 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
            "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH", "packet_init", "packet_states",
            "ping_heard", "ping_parameters", "RangesWithProfile", "receiver_interface", "REFERENCE_SOUND_SPEED",
+           "reopened",
            "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due", "slot_events",
            "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

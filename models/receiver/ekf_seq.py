@@ -44,6 +44,7 @@ from sblsim.models.receiver.core import (
     filter_parameters,
     fresh_range,
     remember_rejected,
+    reopened,
     take_packet,
 )
 from sblsim.models.receiver.gate import gate, gate_parameters
@@ -82,6 +83,8 @@ class SequentialReceiver(KalmanReceiver):
         h, H, variance = row(ca.mtimes(A, state), beacon)
         H = ca.mtimes(H, A)
         y = rng - h
+        # an inverted LBL's arrival far earlier than the ping's earlier ones said: they came late, re-open the epoch
+        P = reopened(cls.motion, P, p, y, H, variance)
         S = ca.mtimes([H, P, H.T]) + variance
         nis_range = y * y / S
         checked = gate(y, S, fresh, x, u, p, earlier_innovation(cls, x, u, state, P, row, n_beacons))

@@ -34,6 +34,7 @@ from sblsim.models.receiver.core import (
     first_row,
     fresh_range,
     remember_rejected,
+    reopened,
     reply_epoch,
     take_packet,
 )
@@ -104,6 +105,11 @@ class UnscentedReceiver(KalmanReceiver):
         def row(then, beacon):  # a range at the state ``then`` (the re-acquisition's linearized test)
             return (*m.range_row(then, beacon, clock), m.fresh_range_variance(then, beacon, p))
 
+        if "ping_jitter" in p:  # an inverted LBL's arrival far earlier than the ping's earlier ones said: they came
+            # late, re-open the epoch (tested on the range linearized at the mean)
+            h, H, _ = row(ca.mtimes(A, x["x"]), beacon)
+            H = ca.mtimes(H, A)
+            x = {**x, "P": reopened(cls.motion, x["P"], p, rng - h, H, variance)}
         earlier = earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons)
         out = cls._update(x, u, p, n_beacons, fresh, predicted, rng,
                           ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)), earlier)

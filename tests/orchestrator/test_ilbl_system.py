@@ -104,13 +104,19 @@ def test_the_times_of_arrival_are_one_way_times_from_the_diver_at_the_emission()
     assert np.ptp(offset) > 5 * jitter
 
 
+@pytest.mark.parametrize("multipath", [0, 10])
 @pytest.mark.parametrize("receiver", ["ekf-seq", "ukf"])
-def test_the_receivers_are_consistent_and_reach_their_bound(receiver):
+def test_the_receivers_are_consistent_and_reach_their_bound(receiver, multipath):
     """A random walk drawn from the receivers' own motion model (the PCRB a true bound), with the pinger's 50 ms
     jitter and 20 ppm of drift, 20 seeds: 3-D NEES in [1.5, 4.5], 2-D NEES (North, East) in [1, 3], and the RMS error
-    within 1.3 of the bound with the emission offset as a state (the bound with error states)."""
-    cfg = load_config("random-walk", ILBL + [f"simulation.receiver={receiver}", "acoustics.ping_jitter=0.05",
-                                             "acoustics.clock_drift_ppm=20"], seed=1)
+    within 1.3 of the bound with the emission offset as a state (the bound with error states). With 10 % of
+    multipath arrivals (late by 2 m on average: a ping's first arrival, which sets its emission, cannot be judged;
+    an arrival far earlier than predicted re-opens the epoch) on the scenario's own layout, the consistency
+    benchmark's (docs/receivers.md: the 50 m circle's first ping can leave a seed confidently wrong)."""
+    layout = ILBL if not multipath else ["platform.system=ilbl"]
+    cfg = load_config("random-walk", layout + [f"simulation.receiver={receiver}", "acoustics.ping_jitter=0.05",
+                                               "acoustics.clock_drift_ppm=20", f"acoustics.outlier_pct={multipath}"],
+                      seed=1)
     assert cfg["receiver"]["clock_states"] and cfg["receiver"]["ping_jitter"] == 0.05
     result = run_batch(with_replicates(cfg, range(20)), "local", timeseries=True)
     nees = float(result.metrics["nees_mean"].mean())
@@ -122,6 +128,10 @@ def test_the_receivers_are_consistent_and_reach_their_bound(receiver):
     assert 1.0 <= nees_2d <= 3.0, nees_2d
     ratio = math.sqrt(np.mean(result.metrics["e_tot_rms"] ** 2) / np.mean(result.metrics["pcrb_rms"] ** 2))
     assert 1.0 <= ratio <= 1.3, ratio
+    assert not result.metrics["diverged"].any()
+    if multipath:
+        assert ts["outlier"].sum() > 500  # late arrivals there were
+        return
     # the jitter costs accuracy: the same walks with a pinger on its schedule have a lower bound
     exact = run_batch(with_replicates(load_config("random-walk", ILBL + [f"simulation.receiver={receiver}"], seed=1),
                                       range(20)), "local", timeseries=False).metrics
