@@ -189,7 +189,9 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
       not finite, or outside the receiver's declared input range), a missing required column, or both
       ``range_m`` and ``travel_time_s``: **refused**;
     * a beacon id that is not a whole number in 1 … n_beacons: the row is **skipped** (``unknown_beacon``);
-    * an ``rx_time`` before the row's ``time_s``: **refused** (an arrival before its transmission);
+    * an ``rx_time`` before the row's ``time_s``: **refused** (an arrival before its transmission), but in a log of
+      an inverted LBL (``system`` of ``toa`` ranging), whose ``time_s`` is the ping's nominal epoch and whose
+      emission may come before it;
     * a row with the same time and beacon id as an earlier one: **skipped** (``duplicate``);
     * a row that arrives (``rx_time``, else ``time_s``) up to :data:`REORDER_WINDOW` earlier than a row before
       it: **sorted** into place
@@ -229,10 +231,15 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     has_arrival = "rx_time" in index
     if has_arrival:
         used.add("rx_time")
+    # an inverted LBL's log: time_s is a ping's nominal epoch, not its emission, and a range its pseudo-range
+    # against that epoch (negative where the ping left early)
+    nominal = system is not None and "toa" in system.ranging
     ignored = [c for c in table.header if c not in used]
     speeds = next(v for v in Acoustics.variables() if v.name == "sound_speed_assumed")
     t_lo, t_hi = -1e12, 1e12  # any clock; the receiver runs on times from the log's start
     r_lo, r_hi = 0.0, SIGNAL_RANGES["range"][1]
+    if nominal:
+        r_lo = SIGNAL_RANGES["range"][0]
     p_lo, p_hi = SIGNAL_RANGES["position"]
     d_lo, d_hi = SIGNAL_RANGES["depth"]
 
@@ -245,7 +252,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
         t = sent  # the row's arrival: when the receiver uses it
         if has_arrival and cells[index["rx_time"]]:
             t = _number(cells[index["rx_time"]], where, "rx_time", t_lo, t_hi)
-            if t < sent:
+            if t < sent and not nominal:
                 raise ModelError(f"{where}: rx_time {t:.10g} s is before the row's time_s {sent:.10g} s: a packet "
                                  "arrives after it is sent; leave rx_time empty where the arrival is not known")
         beacon = _beacon(cells[index["beacon_id"]], n_beacons)

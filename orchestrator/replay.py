@@ -5,7 +5,9 @@ Timing (the slot rule of the receivers, :func:`sblsim.models.receiver.core.slot_
 The replay runs on the grid of the configuration: macro steps of T =
 ``simulation.sampling_time``, each of ``simulation.ekf_rate_ratio``
 communication steps of the receiver. It starts at the last multiple of T
-before the first row's time (``start_time``) and ends with the macro step
+before the first row's time (``start_time``; an inverted LBL's log, whose first
+row is a ping's nominal epoch, a ping interval before it, where its run
+started) and ends with the macro step
 that reaches the last row's arrival. A row's arrival is its ``rx_time``
 (an exported log's: when the packet reached the diver), else its ``time_s``;
 rows are taken in the order of arrival. In each communication step
@@ -122,8 +124,10 @@ def _step_ends(n_steps: int, T: float, ratio: int) -> np.ndarray:
     return t + sub
 
 
-def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
-    """The replay's start, length and the row of every communication step (module docstring, "Timing").
+def schedule(log: Log, T: float, ratio: int, jacobi: bool = False, lead: float = 0.0) -> Schedule:
+    """The replay's start, length and the row of every communication step (module docstring, "Timing"); ``lead``
+    [s]: how long before the first row's ``time_s`` less T the run started (an inverted LBL's: its pinger's
+    interval less T, its first ping's nominal epoch being an interval after the start).
 
     Raises
     ------
@@ -131,7 +135,7 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False) -> Schedule:
         When the log's span is more macro steps than fit in memory (naming its longest gap).
     """
     tol = stamp_tolerance(log, T)
-    first = float(np.min(log.transmit))  # the grid starts before the first transmission (the run's slot grid)
+    first = float(np.min(log.transmit)) - lead  # the grid starts before the first transmission (the run's slot grid)
     start = T * (math.ceil(first / T - max(1e-9, tol / T)) - 1)
     rel = log.time - start
     slot = 0.0 + np.rint(rel / T) * T  # the slot epochs k T as the channel computes them (t0 + k T, t0 = 0)
@@ -443,7 +447,10 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     """
     cfg = as_plan(cfg)
     T, ratio = cfg.sampling_time, cfg.ekf_rate_ratio
-    plan = schedule(log, T, ratio, cfg.master == "jacobi")
+    lead = 0.0
+    if "toa" in cfg.system.ranging:  # an inverted LBL's first ping: an interval of its pinger after the start
+        lead = (cfg["acoustics"]["ping_interval"] or cfg.n_beacons * T) - T
+    plan = schedule(log, T, ratio, cfg.master == "jacobi", lead)
     rel_times = 0.0 + T * np.arange(1, plan.steps + 1)  # the end of each macro step, as the master records it
     times = plan.start + rel_times
     true = np.full((plan.steps, 3), np.nan)
