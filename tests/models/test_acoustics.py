@@ -23,7 +23,7 @@ import pytest
 from scipy import integrate, stats
 
 from sblsim.models.acoustics import Acoustics, profile_table
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY, LANES, PROPAGATION, RANGING
+from sblsim.models.acoustics.core import FLIGHT_CAPACITY, LANES, PROPAGATION, RANGING, TOA, lane_name
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
 from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms
@@ -696,16 +696,16 @@ def test_step_with_moving_target_reports_reception_distance():
 
 
 @pytest.mark.parametrize("propagation", PROPAGATION)
-@pytest.mark.parametrize("ranging", RANGING)
+@pytest.mark.parametrize("ranging", RANGING[:TOA])
 def test_each_ranging_runs_its_own_slot_event_once_per_slot(ranging, propagation):
     """SBL and LBL have a slot event per (ranging, propagation), each in the runs of its pair only
-    (``Event.when``): a step that reaches one slot epoch emits one packet (not none, not one per event), timed as
-    that ranging times it: OWTT ``τ = d / c``, TWTT the round trip ``2 d / c + t_ta`` of a diver at rest (the
-    eigenray of isovelocity water is the straight line)."""
+    (``Event.when``; the inverted LBL's pings an event of their own, below): a step that reaches one slot epoch
+    emits one packet (not none, not one per event), timed as that ranging times it: OWTT ``τ = d / c``, TWTT the
+    round trip ``2 d / c + t_ta`` of a diver at rest (the eigenray of isovelocity water is the straight line)."""
     pairs = [dict(e.when) for e in Acoustics.program(4).events if e.when]
     assert sorted((w["ranging"], w["propagation"]) for w in pairs if w["detection"] == ("fixed",)) == sorted(
         ((r,), (q,)) for r in RANGING for q in PROPAGATION)  # every pair, each once (and detection by snr's
-    assert sorted(w["ranging"] for w in pairs if w["detection"] == ("snr",)) == [(r,) for r in RANGING]  # own)
+    assert sorted(w["ranging"] for w in pairs if w["detection"] == ("snr",)) == sorted((r,) for r in RANGING)  # own)
     T, turnaround = 0.25, 0.05
     core = make(dict(sigma_range=0.0, slot_period=T, ranging=ranging, turnaround=turnaround,
                      propagation=propagation), replicates=(0, 1))
@@ -716,6 +716,40 @@ def test_each_ranging_runs_its_own_slot_event_once_per_slot(ranging, propagation
         expected = d / 1500.0 if ranging == "owtt" else 2.0 * d / 1500.0 + turnaround
         np.testing.assert_allclose(out["travel_time"], expected, rtol=1e-12)
         np.testing.assert_allclose(out["range"], d, rtol=1e-12)
+
+
+@pytest.mark.parametrize("propagation", PROPAGATION)
+def test_a_ping_reaches_every_receiver_one_way_at_its_emission(propagation):
+    """``ranging = "toa"`` (the inverted LBL): the diver at rest pings every P = 4 T (the round-robin cycle) on its
+    own clock; the step that reaches the emission sends one packet per receiver, each arriving ``‖p − b_i‖ / c``
+    after the emission (isovelocity water: the eigenray is the straight line), carrying the ping's nominal epoch
+    as ``tx_time``, ``c (rx_time − tx_time)`` as its range and the slot counter ``4 (c − 1) + i``; all four are
+    delivered together (lane 1 the earliest, then lanes 2 to 4 in the order of arrival). With 100 ppm of the
+    pinger's drift the second ping leaves ``100e-6 P`` late and its ranges are ``c`` times that longer."""
+    T = 0.25
+    for ppm in (0.0, 100.0):
+        core = make(dict(sigma_range=0.0, slot_period=T, ranging="toa", clock_drift_ppm=ppm,
+                         propagation=propagation), replicates=(0, 1))
+        pings, t = [], 0.0
+        while len(pings) < 2:
+            out = core.step(t, T)
+            t += T
+            if out["packet_seq"][0] and (not pings or out["packet_seq"][0] != pings[-1]["packet_seq"][0]):
+                pings.append({name: v.copy() for name, v in out.items()})
+        for c, out in enumerate(pings, start=1):
+            emitted = c * 4 * T * (1.0 + ppm * 1e-6)
+            lanes = [{name: out[lane_name(m, name)][0] for name in ("packet_seq", "beacon_id", "tx_time", "rx_time",
+                                                                     "travel_time", "range")} for m in range(1, 5)]
+            assert [lane["rx_time"] for lane in lanes] == sorted(lane["rx_time"] for lane in lanes)
+            assert sorted(lane["packet_seq"] for lane in lanes) == [4 * (c - 1) + i for i in range(1, 5)]
+            for lane in lanes:
+                d = np.linalg.norm(TARGET - TRUE_BEACONS[int(lane["beacon_id"]) - 1])
+                assert lane["packet_seq"] == 4 * (c - 1) + lane["beacon_id"]
+                assert lane["travel_time"] == pytest.approx(d / 1500.0, rel=1e-12)
+                assert lane["rx_time"] == pytest.approx(emitted + d / 1500.0, rel=1e-12)
+                assert lane["tx_time"] == pytest.approx(c * 4 * T, rel=1e-15)
+                assert lane["range"] == pytest.approx(1500.0 * (lane["rx_time"] - lane["tx_time"]), rel=1e-12)
+                assert lane["range"] == pytest.approx(d + 1500.0 * (emitted - c * 4 * T), rel=1e-12)
 
 
 def test_an_event_names_choices_of_a_choice_parameter():

@@ -24,7 +24,7 @@ from sblsim.orchestrator.receiver_log import log_frames
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Where a system may be named: its own module (and the registry, which names none).
-SYSTEM_MODULES = {ROOT / "models" / "systems" / f"{name}.py" for name in ("sbl", "lbl", "usbl")}
+SYSTEM_MODULES = {ROOT / "models" / "systems" / f"{name}.py" for name in ("sbl", "lbl", "usbl", "ilbl")}
 
 
 def _clear_caches() -> None:
@@ -50,8 +50,8 @@ def without_lbl():
 
 
 def test_the_registry_lists_the_systems_in_the_order_of_their_codes():
-    assert list(SYSTEMS) == ["sbl", "lbl", "usbl"]
-    assert [s.code for s in SYSTEMS.values()] == [0, 1, 2]
+    assert list(SYSTEMS) == ["sbl", "lbl", "usbl", "ilbl"]
+    assert [s.code for s in SYSTEMS.values()] == [0, 1, 2, 3]
     assert all(isinstance(s, System) and s.name == name for name, s in SYSTEMS.items())
     # the platform's system parameter is the registry, in order (the FMUs encode a choice by its index)
     choice = next(v for v in Platform.variables(4) if v.name == "system")
@@ -59,17 +59,18 @@ def test_the_registry_lists_the_systems_in_the_order_of_their_codes():
 
 
 def test_compare_refuses_a_system_taken_out_of_the_registry_with_the_registrys_list(without_lbl, capsys):
-    with pytest.raises(Exception, match=r"--systems: 'lbl' is not one of sbl, usbl$"):
+    with pytest.raises(Exception, match=r"--systems: 'lbl' is not one of sbl, usbl, ilbl$"):
         parse_systems("sbl,lbl")
     status = cli.main(["compare", "semicircle", "--systems", "sbl,lbl", "--replicates", "1", "--out",
                        str(ROOT / "results" / "never_written")])
     assert status == 2
     err = capsys.readouterr().err
-    assert err.strip() == "sblsim: error: --systems: 'lbl' is not one of sbl, usbl"
+    assert err.strip() == "sblsim: error: --systems: 'lbl' is not one of sbl, usbl, ilbl"
     assert not (ROOT / "results" / "never_written").exists()
     # the command line's words come from the registry too
-    assert "lbl" not in describe_defaults() and "usbl:" in describe_defaults()
-    with pytest.raises(Exception, match="not one of sbl, usbl"):
+    named = [part.split(":")[0] for part in describe_defaults().split("; ")]
+    assert named == ["sbl", "usbl", "ilbl"] and "usbl:" in describe_defaults()
+    with pytest.raises(Exception, match="not one of sbl, usbl, ilbl"):
         system_overrides("lbl")
 
 
@@ -77,7 +78,7 @@ def test_the_command_lines_choices_are_the_registrys(without_lbl, capsys, tmp_pa
     with pytest.raises(SystemExit) as exc:
         cli._parser().parse_args(["codegen", "receiver", "--system", "lbl", "--out", str(tmp_path / "x")])
     assert exc.value.code == 2
-    assert "invalid choice: 'lbl' (choose from 'sbl', 'usbl')" in capsys.readouterr().err
+    assert "invalid choice: 'lbl' (choose from 'sbl', 'usbl', 'ilbl')" in capsys.readouterr().err
 
 
 def test_the_compare_defaults_are_the_objects(monkeypatch):
