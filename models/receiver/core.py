@@ -247,20 +247,36 @@ def take_packet(x, u, n_beacons: int) -> dict[str, ca.SX]:
             "last_seq": u["packet_seq"], "slot_time": u["tx_time"]}
 
 
-def reopened(motion, P, p: dict, innovation, H, variance) -> ca.SX:
-    """P (n, n) before an inverted LBL's arrival that is far shorter than predicted: its innovation ``innovation``
-    [m] negative beyond the gate's threshold against its innovation variance ``H P Hᵀ + variance`` (H (1, n), the
-    range's row; ``variance`` [m²] its own). A multipath arrival is late, never early: the ping's earlier arrivals
-    came late and the emission offset they set is wrong, so the offset takes the ping's jitter step again
-    (:meth:`~sblsim.models.receiver.motion.WithErrorStates.new_ping`) and this arrival sets it anew (a ping's first
-    arrival sets the offset and moves the position by little, a share ``P_pp / (c² σ_jitter²)`` of its excess). P
-    unchanged for other ranging, or a receiver without the pinger's parameter."""
+def reanchored(motion, state, p: dict, fresh, innovation, H, S) -> tuple[ca.SX, ca.SX]:
+    """An inverted LBL's arrival far shorter than predicted re-anchors its ping's emission offset.
+
+    A multipath arrival is late, never early: an arrival whose innovation ``innovation`` [m] is negative beyond the
+    NIS gate's threshold against its innovation variance ``S`` [m²], and within that threshold of the ping's jitter
+    (the std of the offset's random step, ``ping_jitter``, times the sound speed: what the jitter could have made
+    of the offset), says that the ping's earlier arrivals came late and set the emission offset wrong. The offset is moved so that this arrival has no innovation (``y / H_o``,
+    ``H`` (1, n) the range's row, ``H_o`` the offset's entry: the sound speed) and the arrival is not taken as an
+    update: as re-opening the offset (the ping's jitter step again) and updating with the arrival would do, the
+    offset then set by this arrival and the position moved by a share ``P_pp / (c² σ_jitter²)`` of the innovation
+    (little); its covariance is kept, that of an offset set by one arrival. Nothing for other ranging, or for a
+    receiver without the pinger's parameter.
+
+    Returns
+    -------
+    state : casadi.SX, (n, 1)
+    short : casadi.SX
+        The arrival re-anchored the offset (the update skips it).
+    """
     if "ping_jitter" not in p:
-        return P
-    short = ca.logic_and(ca.logic_and(toa_ranging(p), innovation < 0.0),
-                         innovation * innovation > gate_threshold(p["gate_probability"])
-                         * (ca.mtimes([H, P, H.T]) + variance))
-    return motion.new_ping(P, p["ping_jitter"], short)
+        return state, 0
+    o = motion.clock_index[0]
+    q = gate_threshold(p["gate_probability"])
+    # beyond the gate, and within what the ping's jitter could make of an emission's offset (a pinger on its
+    # schedule, whose offset the state knows, has nothing to re-anchor: its short arrival updates as LBL's does)
+    short = ca.logic_and(ca.logic_and(ca.logic_and(fresh, toa_ranging(p)), innovation < 0.0),
+                         ca.logic_and(innovation * innovation > q * S,
+                                      innovation * innovation < q * (H[o] * p["ping_jitter"]) ** 2))
+    moved = ca.vertcat(*[state[i] + (innovation / H[o] if i == o else 0.0) for i in range(motion.state_size)])
+    return ca.if_else(short, moved, state), short
 
 
 def ping_heard(heard, x, u, p, n_beacons: int) -> ca.SX:
@@ -436,12 +452,15 @@ def _pick(u: dict, block, width: int, n_beacons: int) -> ca.SX:
     return ca.vertcat(*[select(index, [block[width * j + a] for j in range(n_beacons)]) for a in range(width)])
 
 
-def earlier_innovation(receiver, x: dict, u: dict, state, P, row, n_beacons: int) -> tuple[ca.SX, ca.SX]:
+def earlier_innovation(receiver, x: dict, u: dict, state, P, row, n_beacons: int, toa=None) -> tuple[ca.SX, ca.SX]:
     """The fresh beacon's last failed range predicted from the current state: its innovation [m] and innovation
     variance [m²] (the gate's re-acquisition).
 
     ``row(then, beacon)`` gives ``(h, H (1, n), variance)`` of a range from ``beacon`` (3, 1) at the state
-    ``then``; the state is moved to the failed range's reference epoch (:meth:`KalmanReceiver.reference`).
+    ``then``; the state is moved to the failed range's reference epoch (:meth:`KalmanReceiver.reference`). Where
+    ``toa`` holds (an inverted LBL), the failed range belongs to an earlier ping, whose emission offset the state
+    no longer holds: the innovation it had then is remembered instead (:func:`remember_rejected`), and compared
+    as it is (two pings whose arrivals from one hydrophone miss alike say the position has drifted).
     """
     rng = _pick(u, x["rejected_range"], 1, n_beacons)
     beacon = _pick(u, x["rejected_beacon"], 3, n_beacons)
@@ -449,12 +468,14 @@ def earlier_innovation(receiver, x: dict, u: dict, state, P, row, n_beacons: int
     then = state if A is None else ca.mtimes(A, state)
     h, H, variance = row(then, beacon)
     H = H if A is None else ca.mtimes(H, A)
-    return rng - h, ca.mtimes([H, P, H.T]) + variance
+    innovation = rng - h if toa is None else ca.if_else(toa, rng, rng - h)
+    return innovation, ca.mtimes([H, P, H.T]) + variance
 
 
 def remember_rejected(x: dict, u: dict, rejecting, rng, beacon, epoch, n_beacons: int) -> dict[str, ca.SX]:
     """The re-acquisition's states after a slot: a fresh range that failed its test (``rejecting``) replaces its
-    beacon's range, position and epoch."""
+    beacon's range (an inverted LBL's receiver gives its innovation instead: :func:`earlier_innovation`), position
+    and epoch."""
     index = u["beacon_id"] - 1
     out = {"rejected_range": [], "rejected_beacon": [], "rejected_epoch": []}
     for j in range(n_beacons):
@@ -785,6 +806,6 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
            "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH", "packet_init", "packet_states",
            "ping_heard", "ping_parameters", "RangesWithProfile", "receiver_interface", "REFERENCE_SOUND_SPEED",
-           "reopened",
+           "reanchored",
            "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due", "slot_events",
            "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

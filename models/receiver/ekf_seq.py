@@ -43,9 +43,10 @@ from sblsim.models.receiver.core import (
     earlier_innovation,
     filter_parameters,
     fresh_range,
+    reanchored,
     remember_rejected,
-    reopened,
     take_packet,
+    toa_ranging,
 )
 from sblsim.models.receiver.gate import gate, gate_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
@@ -83,16 +84,18 @@ class SequentialReceiver(KalmanReceiver):
         h, H, variance = row(ca.mtimes(A, state), beacon)
         H = ca.mtimes(H, A)
         y = rng - h
-        # an inverted LBL's arrival far earlier than the ping's earlier ones said: they came late, re-open the epoch
-        P = reopened(cls.motion, P, p, y, H, variance)
         S = ca.mtimes([H, P, H.T]) + variance
         nis_range = y * y / S
-        checked = gate(y, S, fresh, x, u, p, earlier_innovation(cls, x, u, state, P, row, n_beacons))
-        state, P, _ = kalman.scalar_update(state, P, y, H, variance, checked["use"])
+        toa = toa_ranging(p)
+        checked = gate(y, S, fresh, x, u, p, earlier_innovation(cls, x, u, state, P, row, n_beacons, toa))
+        # an inverted LBL's arrival far earlier than the ping's earlier ones said: they came late, re-anchor the epoch
+        state, short = reanchored(cls.motion, state, p, fresh, y, H, S)
+        use = ca.logic_and(checked["use"], ca.logic_not(short))
+        state, P, _ = kalman.scalar_update(state, P, y, H, variance, use)
         return {**take_packet(x, u, n_beacons), "x": state, "P": P,
-                "nis": nis_depth + ca.if_else(checked["use"], nis_range, 0.0), "gated": checked["gated"],
-                "failed": checked["failed"], **remember_rejected(x, u, checked["rejecting"], rng, beacon, epoch,
-                                                                 n_beacons)}
+                "nis": nis_depth + ca.if_else(use, nis_range, 0.0), "gated": checked["gated"],
+                "failed": checked["failed"],
+                **remember_rejected(x, u, checked["rejecting"], ca.if_else(toa, y, rng), beacon, epoch, n_beacons)}
 
 
 __all__ = ["SequentialReceiver"]

@@ -85,12 +85,10 @@ def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common=None
         J = ca.if_else(heard[i], J, ca.SX.zeros(3))  # an unheard beacon may give 0/0 at its placeholder
         rows.append((J, ca.if_else(heard[i], ranges[i] - h, 0.0)))
     if common is not None:  # the offset common to the ranges eliminated: residuals and rows about their means
-        count = ca.fmax(ca.sum1(heard), 1.0)
-        mean_J = sum(J for J, _ in rows) / count
-        mean_res = sum(res for _, res in rows) / count
-        rows = [(ca.if_else(common, ca.if_else(heard[i], J - mean_J, ca.SX.zeros(3)), J),
-                 ca.if_else(common, ca.if_else(heard[i], res - mean_res, 0.0), res))
-                for i, (J, res) in enumerate(rows)]
+        share = common / ca.fmax(ca.sum1(heard), 1.0)  # 0 where nothing is common: the rows as they are
+        mean_J = share * sum(J for J, _ in rows)
+        mean_res = share * sum(res for _, res in rows)
+        rows = [((J - mean_J) * heard[i], (res - mean_res) * heard[i]) for i, (J, res) in enumerate(rows)]
     for i, (J, res) in enumerate(rows):
         w = w_r * heard[i]
         wJ = w * J

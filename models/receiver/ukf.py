@@ -33,8 +33,8 @@ from sblsim.models.receiver.core import (
     filter_parameters,
     first_row,
     fresh_range,
+    reanchored,
     remember_rejected,
-    reopened,
     reply_epoch,
     take_packet,
 )
@@ -105,14 +105,19 @@ class UnscentedReceiver(KalmanReceiver):
         def row(then, beacon):  # a range at the state ``then`` (the re-acquisition's linearized test)
             return (*m.range_row(then, beacon, clock), m.fresh_range_variance(then, beacon, p))
 
+        short, moved = 0, None
         if "ping_jitter" in p:  # an inverted LBL's arrival far earlier than the ping's earlier ones said: they came
-            # late, re-open the epoch (tested on the range linearized at the mean)
+            # late, re-anchor the epoch (tested on the range linearized at the mean; the offset moved after the
+            # depth's update, which does not read it)
             h, H, _ = row(ca.mtimes(A, x["x"]), beacon)
             H = ca.mtimes(H, A)
-            x = {**x, "P": reopened(cls.motion, x["P"], p, rng - h, H, variance)}
+            moved, short = reanchored(cls.motion, ca.SX.zeros(cls.motion.state_size), p, fresh, rng - h, H,
+                                      ca.mtimes([H, x["P"], H.T]) + variance)
         earlier = earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons)
         out = cls._update(x, u, p, n_beacons, fresh, predicted, rng,
-                          ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)), earlier)
+                          ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)), earlier, short)
+        if moved is not None:
+            out["x"] = out["x"] + moved
         return {**out, **remember_rejected(x, u, out["rejecting"], rng, beacon, epoch, n_beacons)}
 
     @classmethod
@@ -135,10 +140,10 @@ class UnscentedReceiver(KalmanReceiver):
         return {**out, **remember_rejected(x, u, out["rejecting"], z[0], context[0], epoch, 1)}
 
     @classmethod
-    def _update(cls, x: dict, u: dict, p: dict, n_beacons: int, fresh, h, z, R, earlier=None) -> dict:
+    def _update(cls, x: dict, u: dict, p: dict, n_beacons: int, fresh, h, z, R, earlier=None, skip=0) -> dict:
         """The unscented update with the packet's rows ``z`` (predicted by ``h``) and the depth (their noise
         ``R``), the first row through the gate (``earlier``: its re-acquisition test); the depth alone when the
-        packet is not used."""
+        packet is not used (or ``skip``: an inverted LBL's arrival that re-anchored its ping's emission)."""
         m = cls.measurement
         state, P = x["x"], x["P"]
         sigma = MerweScaledSigmaPoints(cls.motion.state_size, p["alpha"], p["beta"], p["kappa"])
@@ -156,7 +161,7 @@ class UnscentedReceiver(KalmanReceiver):
         depth = [ca.if_else(fresh_depth, new, old) for new, old in zip(depth, (state, P, 0.0, 0.0, 0.0))]
         y, S = joint[2], joint[3]
         checked = gate(y[0], S[0, 0], fresh, x, u, p, earlier)
-        use = checked["use"]
+        use = ca.logic_and(checked["use"], ca.logic_not(skip))
         return {**take_packet(x, u, n_beacons), "x": ca.if_else(use, joint[0], depth[0]),
                 "P": ca.if_else(use, joint[1], depth[1]), "nis": ca.if_else(use, joint[4], depth[4]),
                 "gated": checked["gated"], "failed": checked["failed"], "rejecting": checked["rejecting"]}

@@ -111,7 +111,7 @@ def test_the_receivers_are_consistent_and_reach_their_bound(receiver, multipath)
     jitter and 20 ppm of drift, 20 seeds: 3-D NEES in [1.5, 4.5], 2-D NEES (North, East) in [1, 3], and the RMS error
     within 1.3 of the bound with the emission offset as a state (the bound with error states). With 10 % of
     multipath arrivals (late by 2 m on average: a ping's first arrival, which sets its emission, cannot be judged;
-    an arrival far earlier than predicted re-opens the epoch) on the scenario's own layout, the consistency
+    an arrival far earlier than predicted re-anchors the epoch) on the scenario's own layout, the consistency
     benchmark's (docs/receivers.md: the 50 m circle's first ping can leave a seed confidently wrong)."""
     layout = ILBL if not multipath else ["platform.system=ilbl"]
     cfg = load_config("random-walk", layout + [f"simulation.receiver={receiver}", "acoustics.ping_jitter=0.05",
