@@ -253,12 +253,12 @@ def reanchored(motion, state, p: dict, fresh, innovation, H, S) -> tuple[ca.SX, 
     A multipath arrival is late, never early: an arrival whose innovation ``innovation`` [m] is negative beyond the
     NIS gate's threshold against its innovation variance ``S`` [m²], and within that threshold of the ping's jitter
     (the std of the offset's random step, ``ping_jitter``, times the sound speed: what the jitter could have made
-    of the offset), says that the ping's earlier arrivals came late and set the emission offset wrong. The offset is moved so that this arrival has no innovation (``y / H_o``,
-    ``H`` (1, n) the range's row, ``H_o`` the offset's entry: the sound speed) and the arrival is not taken as an
-    update: as re-opening the offset (the ping's jitter step again) and updating with the arrival would do, the
-    offset then set by this arrival and the position moved by a share ``P_pp / (c² σ_jitter²)`` of the innovation
-    (little); its covariance is kept, that of an offset set by one arrival. Nothing for other ranging, or for a
-    receiver without the pinger's parameter.
+    of the offset), says that the ping's earlier arrivals came late and set the emission offset wrong. The offset
+    is moved so that this arrival has no innovation (``y / H_o``, ``H`` (1, n) the range's row, ``H_o`` the
+    offset's entry: the sound speed) and the arrival is not taken as an update: as re-opening the offset (the
+    ping's jitter step again) and updating with the arrival would do, the offset then set by this arrival and the
+    position moved by a share ``P_pp / (c² σ_jitter²)`` of the innovation (little); its covariance is kept, that of
+    an offset set by one arrival. Nothing for other ranging, or for a receiver without the pinger's parameter.
 
     Returns
     -------
