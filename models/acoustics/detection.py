@@ -310,5 +310,16 @@ def direct_first(tau, pd, snr=None, threshold: float = 0.0, margin: float = 0.0,
     return share * decoded
 
 
-__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "direct_first", "family_levels", "family_levels_grid",
-           "first_detected", "first_shares", "level_table", "packet_probability"]
+def eigenray_functions() -> list[ca.Function]:
+    """The eigenray functions the components' programs call: the channel's first arrival, its arrivals and its
+    families (interpolated in the run's tables where they hold), the receivers' slant range and bending. None of
+    them depends on a component or a beacon count, so their generated C (and that of what they call) is compiled
+    once, in a file of its own, and every component's code calls it there (:mod:`sblsim.fmus.codegen`)."""
+    from sblsim.models.acoustics.ray_tables import _arrivals_grid, _first_arrival_grid
+    from sblsim.models.acoustics.rays import _ray_bending, _slant_range
+
+    return [_first_arrival_grid(), _arrivals_grid(), family_levels_grid(), _slant_range(), _ray_bending()]
+
+
+__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "direct_first", "eigenray_functions", "family_levels",
+           "family_levels_grid", "first_detected", "first_shares", "level_table", "packet_probability"]

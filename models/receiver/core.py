@@ -62,11 +62,13 @@ from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 from sblsim.models.receiver.profile import (
+    PROFILE_DERIVED,
     SOUND_SPEED_MODELS,
     declares_profile,
     profile_config_values,
     profile_fmu_parameters,
     profile_parameters,
+    profile_prepare,
     profile_range,
     profile_when,
 )
@@ -693,7 +695,8 @@ class KalmanReceiver(RangesWithProfile, Component):
         # a receiver with error states may take an inverted LBL's pings: the depth reading it used last
         pinged = [("depth_seen", 1)] if cls.motion.state_size > CONSTANT_VELOCITY.state_size else []
         b = ProgramBuilder(cls, n, states=[("x", size), ("P", size * size)] + packet_states(n) + [
-            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states() + rejected + pinged)
+            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states() + rejected + pinged,
+                           derived=profile_derived(cls, n))
 
         def init(p, d, w, t0):
             x0, P0 = cls.initial(p)
@@ -750,7 +753,7 @@ class KalmanReceiver(RangesWithProfile, Component):
                        gated=x["gated"], **covariance_outputs(P))
             return out
 
-        return b.program(b.prepare(None), b.init(init), b.output(output), step=b.step(step),
+        return b.program(b.prepare(profile_prepare_of(cls, n)), b.init(init), b.output(output), step=b.step(step),
                          events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, slot),
                                  b.event("lm", lm_active, iterate)])
 
@@ -769,22 +772,35 @@ def slot_events(b: ProgramBuilder, model, n_beacons: int, slot) -> list:
     def handler(x, u, p, d, w, t, h):
         lane, packet = next_lane(x, u, p, t, h, n_beacons)
         if profiled:
-            packet = profile_packet(packet, p)
+            packet = profile_packet(packet, p, d)
         out = slot(x, packet, p, d, w, t, h)
         return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
 
     return [b.event("slot", due, handler)]
 
 
-def profile_packet(u: dict, p: dict) -> dict:
+def profile_derived(model, n_beacons: int) -> list[tuple[str, int]]:
+    """The derived blocks of a receiver's ``prepare``: the padded profile of its table where it declares one
+    (:data:`~sblsim.models.receiver.profile.PROFILE_DERIVED`), else none."""
+    return list(PROFILE_DERIVED) if declares_profile(model.fmu_parameters_declared(n_beacons)) else []
+
+
+def profile_prepare_of(model, n_beacons: int):
+    """The body of a receiver's ``prepare`` (:func:`~sblsim.models.receiver.profile.profile_prepare` where it
+    declares a profile; None: nothing derived)."""
+    return profile_prepare if profile_derived(model, n_beacons) else None
+
+
+def profile_packet(u: dict, p: dict, d: dict) -> dict:
     """The packet ``u`` with the fields :func:`~sblsim.models.receiver.profile.profile_range` turns (its range; a
     USBL packet's elevation and direction cosines) taken from it where the receiver ranges with its profile
-    (``sound_speed_model = "profile"``), computed only there; as it came where not."""
+    (``sound_speed_model = "profile"``), computed only there; as it came where not (``d``: the derived data, the
+    profile's padded nodes)."""
     fields = [name for name in ("range", "elevation", "doa_x", "doa_y") if name in u]
     chosen = p["sound_speed_model"] == SOUND_SPEED_MODELS.index("profile")
 
     def converted(*values):
-        out = profile_range({**u, **dict(zip(fields, values))}, p)
+        out = profile_range({**u, **dict(zip(fields, values))}, p, d)
         return ca.vertcat(*[out[name] for name in fields])
 
     turned = only_where("sblsim_profile_range", chosen, converted, *[u[name] for name in fields])
@@ -817,6 +833,7 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "errors_of", "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
            "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH", "packet_init", "packet_states",
-           "ping_heard", "ping_parameters", "profile_packet", "RangesWithProfile", "reanchored", "receiver_interface",
+           "ping_heard", "ping_parameters", "profile_derived", "profile_packet", "profile_prepare_of",
+           "RangesWithProfile", "reanchored", "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",
            "slot_events", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

@@ -60,6 +60,8 @@ from sblsim.models.receiver.core import (
     lm_step,
     packet_init,
     packet_states,
+    profile_derived,
+    profile_prepare_of,
     receiver_interface,
     slot_events,
     system_interface,
@@ -93,7 +95,8 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
         n = n_beacons
         b = ProgramBuilder(cls, n, states=packet_states(n) + [
             ("fix", 3), ("has_fix", 1), ("fix_time", 1), ("velocity", 3), ("instr", 3), ("instr_valid", 1),
-            ("nis", 1), ("pos_std", 1), ("cov", 9), ("pending", 1), ("fresh", 1)] + lm_states())
+            ("nis", 1), ("pos_std", 1), ("cov", 9), ("pending", 1), ("fresh", 1)] + lm_states(),
+                           derived=profile_derived(cls, n))
 
         def init(p, d, w, t0):
             return {**packet_init(n, t0), "fix": ca.vertcat(p["x0_x"], p["x0_y"], p["x0_z"]), "has_fix": 0,
@@ -150,7 +153,7 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
                        **covariance_outputs(ca.reshape(x["cov"], 3, 3)))
             return out
 
-        return b.program(b.prepare(None), b.init(init), b.output(output),
+        return b.program(b.prepare(profile_prepare_of(cls, n)), b.init(init), b.output(output),
                          events=[b.event("clock", clock_due, clock_tick), *slot_events(b, cls, n, slot),
                                  b.event("lm", lm_active, iterate),
                                  b.event("finish", finished, finish)])

@@ -38,7 +38,7 @@ from typing import Any, Mapping
 import casadi as ca
 
 from sblsim.models.acoustics.rays import ray_bending, slant_range
-from sblsim.models.acoustics.sound_speed import PROFILE, node_speeds, profile_table
+from sblsim.models.acoustics.sound_speed import NODES, PROFILE, node_speeds, profile_table
 from sblsim.models.declarations import ModelError, Variable, format_table
 from sblsim.models.platform.geometry import rotation_ned, unit_vector
 
@@ -164,7 +164,18 @@ def _nodes() -> ca.Function:
     return ca.Function("sblsim_receiver_profile_nodes", [count, depth, speed], list(node_speeds(count, depth, speed)))
 
 
-def profile_range(u: dict, p: dict) -> dict:
+#: What a receiver that declares a profile derives once per run (its ``prepare``): the padded profile of its
+#: table, the eigenrays' nodes [m] and speeds [m/s].
+PROFILE_DERIVED = (("profile_nodes", NODES), ("profile_speeds", NODES))
+
+
+def profile_prepare(p: dict) -> dict:
+    """The derived blocks :data:`PROFILE_DERIVED` of a receiver's parameters ``p`` (MX, its ``prepare``)."""
+    nodes, speeds = _nodes()(p["sound_speed_rows"], p[PROFILE.columns[0].name], p[PROFILE.columns[1].name])
+    return {"profile_nodes": nodes, "profile_speeds": speeds}
+
+
+def profile_range(u: dict, p: dict, d: dict) -> dict:
     """The packet with its range turned into the slant range of the receiver's profile (``sound_speed_model`` =
     profile): ``τ = range / c_a``, the direct eigenray between ``beacon_z`` and the depth reading ``depth``
     (:func:`~sblsim.models.acoustics.rays.slant_range`, from ``range``). A lost packet, or one whose eigenray lies
@@ -180,14 +191,16 @@ def profile_range(u: dict, p: dict) -> dict:
         The receiver's inputs (``range`` [m], ``beacon_z`` [m], ``depth`` [m], ``packet_valid``; USBL:
         ``elevation`` [rad]).
     p : dict
-        The parameters (``sound_speed_assumed`` [m/s], ``sound_speed_rows`` and the table's columns).
+        The parameters (``sound_speed_assumed`` [m/s]).
+    d : dict
+        The derived data, with the padded profile of the table (:data:`PROFILE_DERIVED`, :func:`profile_prepare`).
 
     Returns
     -------
     dict
         ``u`` with ``range`` [m] (and ``elevation`` [rad]) replaced.
     """
-    nodes, speeds = _nodes()(p["sound_speed_rows"], p[PROFILE.columns[0].name], p[PROFILE.columns[1].name])
+    nodes, speeds = d["profile_nodes"], d["profile_speeds"]
     tau = u["range"] / p["sound_speed_assumed"]
     rho, found = slant_range(u["beacon_z"], u["depth"], tau, u["range"], nodes, speeds)
     use = ca.logic_and(ca.logic_and(u["packet_valid"], found), u["range"] > 0)
@@ -206,5 +219,6 @@ def profile_range(u: dict, p: dict) -> dict:
 
 
 
-__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "SOUND_SPEED_MODELS", "declares_profile", "profile_config_values",
-           "profile_fmu_parameters", "profile_parameters", "profile_range", "profile_when", "resolve_channel_profile"]
+__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "PROFILE_DERIVED", "SOUND_SPEED_MODELS", "declares_profile",
+           "profile_config_values", "profile_fmu_parameters", "profile_parameters", "profile_prepare", "profile_range",
+           "profile_when", "resolve_channel_profile"]
