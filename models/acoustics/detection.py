@@ -26,6 +26,8 @@ from sblsim.models.acoustics.ray_tables import (
     FAMILY_TABLE,
     RAY_GRID,
     RAY_TABLE_ROWS,
+    _arrivals_grid,
+    _first_arrival_grid,
     arrivals_grid,
     cell_centres,
     cell_corners,
@@ -34,7 +36,7 @@ from sblsim.models.acoustics.ray_tables import (
     ray_grid,
     ray_values,
 )
-from sblsim.models.acoustics.rays import arrivals, profile_arrays, sound_speed_at
+from sblsim.models.acoustics.rays import _ray_bending, _slant_range, arrivals, profile_arrays, sound_speed_at
 from sblsim.models.acoustics.sound_speed import NODES
 
 #: The site's numbers :func:`family_levels` takes, in this order (units: dB, dB, dB, dB, Hz, dB/m, dB, m, 1, m/s,
@@ -315,9 +317,6 @@ def eigenray_functions() -> list[ca.Function]:
     families (interpolated in the run's tables where they hold), the receivers' slant range and bending. None of
     them depends on a component or a beacon count, so their generated C (and that of what they call) is compiled
     once, in a file of its own, and every component's code calls it there (:mod:`sblsim.fmus.codegen`)."""
-    from sblsim.models.acoustics.ray_tables import _arrivals_grid, _first_arrival_grid
-    from sblsim.models.acoustics.rays import _ray_bending, _slant_range
-
     return [_first_arrival_grid(), _arrivals_grid(), family_levels_grid(), _slant_range(), _ray_bending()]
 
 
