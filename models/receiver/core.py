@@ -54,7 +54,7 @@ from sblsim.models.acoustics.core import (
 )
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
-from sblsim.models.expressions import get_row, only_where, sample_due, select
+from sblsim.models.expressions import get_row, sample_due, select
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.gate import gate, gate_threshold
@@ -63,7 +63,6 @@ from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 from sblsim.models.receiver.multilateration import LM_STATE, lm_iteration, lm_start, weights
 from sblsim.models.receiver.profile import (
     PROFILE_DERIVED,
-    SOUND_SPEED_MODELS,
     declares_profile,
     profile_config_values,
     profile_fmu_parameters,
@@ -760,23 +759,28 @@ class KalmanReceiver(RangesWithProfile, Component):
 
 def slot_events(b: ProgramBuilder, model, n_beacons: int, slot) -> list:
     """The slot event of a receiver, run while a lane of the delivery holds a packet it may use
-    (:func:`slot_due`), each time with the first such lane's packet (:func:`next_lane`): ``slot`` with the packet
-    as it came for the single assumed speed, and, in a run with a profile, its range turned into the slant range of
-    the receiver's profile first (:func:`~sblsim.models.receiver.profile.profile_range`; computed only in such a
-    run, :func:`~sblsim.models.expressions.only_where`: one update in the generated code, not one per choice)."""
+    (:func:`slot_due`), each time with the first such lane's packet (:func:`next_lane`): ``slot`` as it always was
+    for the single assumed speed, and ``slot_profile`` (its packet's range turned into the slant range of the
+    receiver's profile first, :func:`~sblsim.models.receiver.profile.profile_range`) for a run with a profile (an
+    event each: a run of the assumed speed computes nothing of the profile's, not even its choice)."""
     def due(x, u, p, d, t, h):
         return slot_due(x, u, p, t, h)
 
-    profiled = len(profile_when(model.fmu_parameters_declared(n_beacons))) > 1
+    def on_lane(inner):
+        def handler(x, u, p, d, w, t, h):
+            lane, packet = next_lane(x, u, p, t, h, n_beacons)
+            out = inner(x, packet, p, d, w, t, h)
+            return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
+        return handler
 
-    def handler(x, u, p, d, w, t, h):
-        lane, packet = next_lane(x, u, p, t, h, n_beacons)
-        if profiled:
-            packet = profile_packet(packet, p, d)
-        out = slot(x, packet, p, d, w, t, h)
-        return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
-
-    return [b.event("slot", due, handler)]
+    events = []
+    for choice, when in profile_when(model.fmu_parameters_declared(n_beacons)).items():
+        if choice == "assumed":
+            events.append(b.event("slot", due, on_lane(slot), when=when))
+        else:
+            events.append(b.event("slot_profile", due, on_lane(
+                lambda x, u, p, d, w, t, h: slot(x, profile_range(u, p, d), p, d, w, t, h)), when=when))
+    return events
 
 
 def profile_derived(model, n_beacons: int) -> list[tuple[str, int]]:
@@ -789,22 +793,6 @@ def profile_prepare_of(model, n_beacons: int):
     """The body of a receiver's ``prepare`` (:func:`~sblsim.models.receiver.profile.profile_prepare` where it
     declares a profile; None: nothing derived)."""
     return profile_prepare if profile_derived(model, n_beacons) else None
-
-
-def profile_packet(u: dict, p: dict, d: dict) -> dict:
-    """The packet ``u`` with the fields :func:`~sblsim.models.receiver.profile.profile_range` turns (its range; a
-    USBL packet's elevation and direction cosines) taken from it where the receiver ranges with its profile
-    (``sound_speed_model = "profile"``), computed only there; as it came where not (``d``: the derived data, the
-    profile's padded nodes)."""
-    fields = [name for name in ("range", "elevation", "doa_x", "doa_y") if name in u]
-    chosen = p["sound_speed_model"] == SOUND_SPEED_MODELS.index("profile")
-
-    def converted(*values):
-        out = profile_range({**u, **dict(zip(fields, values))}, p, d)
-        return ca.vertcat(*[out[name] for name in fields])
-
-    turned = only_where("sblsim_profile_range", chosen, converted, *[u[name] for name in fields])
-    return {**u, **{name: ca.if_else(chosen, turned[k], u[name]) for k, name in enumerate(fields)}}
 
 
 def first_row(model, context, covariance):
@@ -833,7 +821,7 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "errors_of", "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
            "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
            "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH", "packet_init", "packet_states",
-           "ping_heard", "ping_parameters", "profile_derived", "profile_packet", "profile_prepare_of",
+           "ping_heard", "ping_parameters", "profile_derived", "profile_prepare_of",
            "RangesWithProfile", "reanchored", "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",
            "slot_events", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]
