@@ -58,6 +58,17 @@ then errs long on average); the range is the mean
 of the two legs (``range_true``), so it refers to the diver's positions at
 interrogation and at reception (their mean, to first order).
 
+Times of arrival (``ranging = "toa"``, the inverted LBL: the roles turned round). The target's pinger emits
+ping c at ``e_c = e_{c−1} + P (1 + δ) + j_c`` on its own clock (P = ``ping_interval``, 0 taking the cycle
+``n T``; δ the drift ``clock_drift_ppm``; ``j_c`` uniform of zero mean and std ``ping_jitter``), from where the
+target is then (its position input moved back along its velocity from the step's end); the fixed receivers (the
+beacon inputs, up to :data:`FLIGHT_CAPACITY`) hear it one way, ``τ_i`` after the emission (the eigenray between
+the two points is reciprocal). Each receiver's arrival is a packet of its own (slot counter ``(c − 1) n + i``),
+all n sent when the step reaches the emission (an event run once per receiver) and delivered at their arrivals
+on the lanes like every packet; it carries the ping's nominal epoch ``t0 + c P`` as ``tx_time`` (the receivers
+know the schedule, not the emission; the receivers' clocks are synchronized) and the pseudo-range
+``r = c_assumed (e_c + τ_i − t0 − c P) + σ_r w + e_mp``: the range plus the emission's offset.
+
 USBL (the interface of one beacon: the platform's transceiver). At ``t_k``
 the transceiver interrogates the diver's transponder (up leg to the diver at
 reception), which replies after its turnaround from where it is then; the
@@ -897,7 +908,8 @@ def _direction_of_arrival(direction, u, p, w_angle, scale=1.0):
 
 
 class Acoustics(Component):
-    """Round-robin one-way-travel-time acoustic channel."""
+    """The acoustic channel: round-robin one- or two-way ranging, USBL's range and direction, an inverted LBL's
+    times of arrival (module docstring)."""
 
     name = "acoustics"
     component_index = 1
