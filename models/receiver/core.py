@@ -209,16 +209,59 @@ def slot_due(x, u, p, t, h) -> ca.SX:
     return any_due
 
 
-def next_lane(x, u, p, t, h, n_beacons: int) -> tuple[ca.SX, dict[str, ca.SX]]:
-    """The lane a slot uses (0-based: the first due one, lanes being in the order of arrival) and the inputs with
-    that lane's packet in place of lane 1's (its fields :func:`~sblsim.models.acoustics.core.lane_fields`)."""
-    due = lanes_due(x, u, p, t, h)
+def first_lane(due) -> ca.SX:
+    """The first due lane (0-based) of the flags ``due`` (:func:`lanes_due`; the last lane where none is)."""
     lane = LANES - 1
     for m in reversed(range(LANES - 1)):
         lane = ca.if_else(due[m], m, lane)
+    return lane
+
+
+def next_lane(x, u, p, t, h, n_beacons: int, model=None) -> tuple[ca.SX, dict[str, ca.SX]]:
+    """The lane a slot uses (0-based: the first due one, lanes being in the order of arrival; for an inverted LBL's
+    new ping, the receiver ``model``'s :func:`ping_anchor`) and the inputs with that lane's packet in place of lane
+    1's (its fields :func:`~sblsim.models.acoustics.core.lane_fields`)."""
+    due = lanes_due(x, u, p, t, h)
+    lane = first_lane(due)
+    if model is not None and "ping_jitter" in p:
+        lane = ping_anchor(model, x, u, p, t, h, n_beacons, due, lane)
     names = [v.name for v in lane_fields(n_beacons)]  # read at the lane (a parametric index: no if_else per lane)
     chosen = get_row([ca.vertcat(*[u[lane_name(m, name)] for m in range(1, LANES + 1)]) for name in names], lane)
     return lane, {**u, **dict(zip(names, chosen))}
+
+
+def ping_anchor(model, x, u, p, t, h, n_beacons: int, due, first) -> ca.SX:
+    """The lane an inverted LBL's receiver takes first of a new ping's arrivals delivered in one step: the one whose
+    range is the shortest against the prediction (its innovation the least; the emission offset of the state,
+    the ranges at the ping's emission), where ``first`` (the first due lane) is as said for any other slot.
+
+    A ping's first update sets its emission offset (the jitter's step leaves it open) and cannot be judged; a
+    multipath arrival is late, never early, so the arrival that is the least late against the others is the one
+    to set it, whatever the order in which they arrived; the gate then judges the others against it (the same
+    information as in the order of arrival, for a filter that takes every arrival: Kalman updates commute).
+
+    Returns
+    -------
+    casadi.SX
+        The lane (0-based).
+    """
+    field = [{name: u[lane_name(m, name)] for name in ("tx_time", "range", "beacon_id", "packet_valid", "beacon_x",
+                                                        "beacon_y", "beacon_z")} for m in range(1, LANES + 1)]
+    ping = select(first, [f["tx_time"] for f in field])
+    state = x["x"]
+    epoch = ping + model.motion.clock_offset(state)
+    then = ca.mtimes(model.motion.transition(-ca.fmax(t + h - epoch, 0.0)), state)
+    clock = clock_scale(p)
+    best, least = first, ca.inf
+    for m, f in enumerate(field):
+        index = f["beacon_id"] - 1
+        taken = ca.logic_and(ca.logic_and(due[m], f["tx_time"] == ping),
+                             ca.logic_and(f["packet_valid"], ca.logic_and(index >= 0, index < n_beacons)))
+        beacon = ca.vertcat(f["beacon_x"], f["beacon_y"], f["beacon_z"])
+        y = f["range"] - model.measurement.range_row(then, beacon, clock)[0]
+        better = ca.logic_and(taken, y < least)
+        best, least = ca.if_else(better, m, best), ca.if_else(better, y, least)
+    return ca.if_else(new_ping(x, {"tx_time": ping}, p), best, first)
 
 
 def lane_used(x, out, lane, seq) -> dict[str, ca.SX]:
@@ -768,7 +811,7 @@ def slot_events(b: ProgramBuilder, model, n_beacons: int, slot) -> list:
 
     def on_lane(inner):
         def handler(x, u, p, d, w, t, h):
-            lane, packet = next_lane(x, u, p, t, h, n_beacons)
+            lane, packet = next_lane(x, u, p, t, h, n_beacons, model)
             out = inner(x, packet, p, d, w, t, h)
             return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
         return handler
@@ -818,10 +861,10 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_scale", "clock_step",
            "clock_tick", "COVARIANCE", "covariance_outputs", "depth_fresh", "earlier_innovation", "error_parameters",
-           "errors_of", "filter_parameters", "first_row", "fresh_packet", "fresh_range", "INSTRUMENT_ITERATIONS",
-           "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin", "lm_idle", "lm_states",
-           "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH", "packet_init", "packet_states",
-           "ping_heard", "ping_parameters", "profile_derived", "profile_prepare_of",
-           "RangesWithProfile", "reanchored", "receiver_interface",
-           "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",
-           "slot_events", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]
+           "errors_of", "filter_parameters", "first_lane", "first_row", "fresh_packet", "fresh_range",
+           "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin",
+           "lm_idle", "lm_states", "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH",
+           "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters", "profile_derived",
+           "profile_prepare_of", "RangesWithProfile", "reanchored", "receiver_interface", "REFERENCE_SOUND_SPEED",
+           "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due", "slot_events",
+           "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

@@ -37,6 +37,7 @@ from sblsim.models.receiver.core import (
     remember_rejected,
     reply_epoch,
     take_packet,
+    toa_ranging,
 )
 from sblsim.models.receiver.gate import gate, gate_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
@@ -105,20 +106,22 @@ class UnscentedReceiver(KalmanReceiver):
         def row(then, beacon):  # a range at the state ``then`` (the re-acquisition's linearized test)
             return (*m.range_row(then, beacon, clock), m.fresh_range_variance(then, beacon, p))
 
-        short, moved = 0, None
+        short, moved, toa, remembered = 0, None, None, rng
         if "ping_jitter" in p:  # an inverted LBL's arrival far earlier than the ping's earlier ones said: they came
             # late, re-anchor the epoch (tested on the range linearized at the mean; the offset moved after the
-            # depth's update, which does not read it)
+            # depth's update, which does not read it); its failed arrivals remembered by their innovations
             h, H, _ = row(ca.mtimes(A, x["x"]), beacon)
             H = ca.mtimes(H, A)
             moved, short = reanchored(cls.motion, ca.SX.zeros(cls.motion.state_size), p, fresh, rng - h, H,
                                       ca.mtimes([H, x["P"], H.T]) + variance)
-        earlier = earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons)
+            toa = toa_ranging(p)
+            remembered = ca.if_else(toa, rng - h, rng)
+        earlier = earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons, toa)
         out = cls._update(x, u, p, n_beacons, fresh, predicted, rng,
                           ca.diag(ca.vertcat(variance, p["sigma_depth"] ** 2)), earlier, short)
         if moved is not None:
             out["x"] = out["x"] + moved
-        return {**out, **remember_rejected(x, u, out["rejecting"], rng, beacon, epoch, n_beacons)}
+        return {**out, **remember_rejected(x, u, out["rejecting"], remembered, beacon, epoch, n_beacons)}
 
     @classmethod
     def packet_update(cls, x: dict, u: dict, p: dict, fresh, model, context, z, covariance) -> dict:

@@ -110,9 +110,9 @@ def test_the_receivers_are_consistent_and_reach_their_bound(receiver, multipath)
     """A random walk drawn from the receivers' own motion model (the PCRB a true bound), with the pinger's 50 ms
     jitter and 20 ppm of drift, 20 seeds: 3-D NEES in [1.5, 4.5], 2-D NEES (North, East) in [1, 3], and the RMS error
     within 1.3 of the bound with the emission offset as a state (the bound with error states). With 10 % of
-    multipath arrivals (late by 2 m on average: a ping's first arrival, which sets its emission, cannot be judged;
-    an arrival far earlier than predicted re-anchors the epoch) on the scenario's own layout, the consistency
-    benchmark's (docs/receivers.md: the 50 m circle's first ping can leave a seed confidently wrong)."""
+    multipath arrivals (late by 2 m on average: a ping's first update, which sets its emission, cannot be judged, so
+    the arrival least late is taken first; an arrival far earlier than predicted re-anchors the epoch) on the
+    scenario's own layout, the consistency benchmark's, and on the 50 m circle: NEES in the band, no track lost."""
     layout = ILBL if not multipath else ["platform.system=ilbl"]
     cfg = load_config("random-walk", layout + [f"simulation.receiver={receiver}", "acoustics.ping_jitter=0.05",
                                                "acoustics.clock_drift_ppm=20", f"acoustics.outlier_pct={multipath}"],
@@ -131,6 +131,14 @@ def test_the_receivers_are_consistent_and_reach_their_bound(receiver, multipath)
     assert not result.metrics["diverged"].any()
     if multipath:
         assert ts["outlier"].sum() > 500  # late arrivals there were
+        # on the 50 m circle (one ping fixes the position tightly) a late arrival taken first would set the ping's
+        # emission: the least late is taken first, and no seed loses the track (RMS 1.49 times the bound there, as
+        # LBL's 1.38: docs/receivers.md)
+        wide = run_batch(with_replicates(load_config("random-walk", ILBL + [
+            f"simulation.receiver={receiver}", "acoustics.ping_jitter=0.05", "acoustics.clock_drift_ppm=20",
+            "acoustics.outlier_pct=10"], seed=1), range(20)), "local", timeseries=False).metrics
+        assert 1.5 <= float(wide["nees_mean"].mean()) <= 4.5 and not wide["diverged"].any()
+        assert wide["nees_mean"].max() < 15.0
         return
     # the jitter costs accuracy: the same walks with a pinger on its schedule have a lower bound
     exact = run_batch(with_replicates(load_config("random-walk", ILBL + [f"simulation.receiver={receiver}"], seed=1),
