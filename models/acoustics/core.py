@@ -908,8 +908,9 @@ def _direction_of_arrival(direction, u, p, w_angle, scale=1.0):
 
 
 class Acoustics(Component):
-    """The acoustic channel: round-robin one- or two-way ranging, USBL's range and direction, an inverted LBL's
-    times of arrival (module docstring)."""
+    """Acoustic channel: round-robin OWTT or TWTT ranging, USBL range and direction, inverted-LBL times of arrival.
+
+    The timing and the exchanges are the module docstring's."""
 
     name = "acoustics"
     component_index = 1
