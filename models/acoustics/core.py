@@ -838,6 +838,12 @@ def _ping(n: int, true_names: list[str], sent_names: list[str], queue: list, car
     return handler
 
 
+def nominal_ping_interval(ping_interval: float, n_beacons: int, slot_period: float) -> float:
+    """The pinger's nominal interval [s] of an inverted LBL's run (numbers): ``ping_interval``, or where it is 0 the
+    round-robin cycle ``n T`` (the channel's ``prepare`` derives the same)."""
+    return ping_interval if ping_interval > 0 else n_beacons * slot_period
+
+
 def ping_due(x, u, p, d, t, h):
     """Guard of a ping's legs (``ranging = "toa"``): the emission epoch has been reached by the end of the step."""
     return x["ping_epoch"] <= t + h + ARRIVAL_SLACK
@@ -1196,6 +1202,7 @@ class Acoustics(Component):
 
 __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
            "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields",
-           "lane_name", "lane_of", "lane_variables", "OCEAN_FEATURES", "ocean_perturbation", "OCEAN_VARIABLES",
+           "lane_name", "lane_of", "lane_variables", "nominal_ping_interval", "OCEAN_FEATURES", "ocean_perturbation",
+           "OCEAN_VARIABLES",
            "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PING_VARIABLES", "ping_due", "PROPAGATION", "RANGING",
            "sent_epoch", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS", "TOA"]

@@ -29,7 +29,6 @@ Statistical Signal Processing: Estimation Theory, Prentice Hall 1993, Section 3.
 
 from __future__ import annotations
 
-import math
 from typing import Any, Mapping
 
 import numpy as np
@@ -116,10 +115,4 @@ class InvertedLBL(LBL):
                              MODEL if model is None else model, emission=True)
 
 
-def jitter_limit(interval: float) -> float:
-    """The largest ``acoustics.ping_jitter`` [s] of a nominal ping interval [s]: a uniform jitter of that std
-    reaches ``±√3 σ``, and an interval must stay positive."""
-    return interval / math.sqrt(3.0)
-
-
-__all__ = ["EMISSION_RECEIVERS", "InvertedLBL", "jitter_limit"]
+__all__ = ["EMISSION_RECEIVERS", "InvertedLBL"]

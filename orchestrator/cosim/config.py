@@ -36,7 +36,7 @@ from typing import Any, Iterable
 import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
-from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight
+from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight, nominal_ping_interval
 from sblsim.models.acoustics.sound_speed import PROFILE_SOURCES
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
@@ -735,7 +735,8 @@ def _check_system(cfg: dict[str, dict], given: set[str]) -> None:
         raise ConfigError(str(exc)) from None
     acoustics = cfg["acoustics"]
     if acoustics["ranging"] == "toa":  # the pinger's interval stays positive
-        interval = acoustics["ping_interval"] or cfg["platform"]["beacons"] * cfg["simulation"]["sampling_time"]
+        interval = nominal_ping_interval(acoustics["ping_interval"], cfg["platform"]["beacons"],
+                                         cfg["simulation"]["sampling_time"])
         limit = interval / math.sqrt(3.0)
         if acoustics["ping_jitter"] >= limit:
             raise ConfigError(f"acoustics.ping_jitter: {acoustics['ping_jitter']:g} s; a uniform jitter reaches "
