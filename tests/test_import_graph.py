@@ -18,11 +18,11 @@ PACKAGES = {"sblsim.models": sblsim.models, "sblsim.fmus": sblsim.fmus, "sblsim.
 MAY_IMPORT = {"sblsim.models": set(), "sblsim.fmus": {"sblsim.models"},
               "sblsim.orchestrator": {"sblsim.models", "sblsim.fmus"}}
 #: Libraries heavy enough to import only when used (seconds, or a process's worth of threads; scipy.integrate: half a
-#: second of every command's start-up; casadi: what
+#: second of every command's start-up, scipy.optimize a third; casadi: what
 #: ``import sblsim`` must not load): a function-level import is allowed where it defers one of these, directly or
 #: through the sblsim module it imports.
 HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats", "pyDOE3",
-         "casadi", "scipy.integrate")
+         "casadi", "scipy.integrate", "scipy.optimize")
 #: Function-level imports that defer nothing heavy but ask whether an optional package is installed.
 PROBES = {"ziglang"}
 
@@ -355,7 +355,8 @@ def test_the_function_level_check_can_fail():
     assert "pyarrow" in _heavy_at_load("sblsim.orchestrator.campaign.merge")
     assert _heavy_at_load("sblsim.models.declarations") == set()
     assert "matplotlib" in _heavy_at_load("sblsim.orchestrator.io.plots")
-    assert not _heavy_at_load("sblsim.orchestrator.cli") & {"pandas", "scipy.stats", "matplotlib", "scipy.integrate"}
+    assert not _heavy_at_load("sblsim.orchestrator.cli") & {"pandas", "scipy.stats", "matplotlib", "scipy.integrate",
+                                                                  "scipy.optimize"}
 
 
 def test_a_campaign_worker_loads_no_statistics_or_plotting():

@@ -35,7 +35,6 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_bound as tb
@@ -222,6 +221,8 @@ def estimate_lag(t: np.ndarray, xy: np.ndarray, truth: np.ndarray, bound: float 
     def rms(lag: float) -> float:
         g = _truth_at(truth[:, :3], t + lag)
         return float(np.sqrt(np.mean(((xy - g) ** 2).sum(axis=1))))
+
+    from scipy.optimize import minimize_scalar  # scipy.optimize: a third of a second of every command's start-up
 
     step = 0.25
     grid = np.arange(-bound, bound + step / 2, step)
