@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import re
 import shutil
 import tempfile
@@ -36,12 +37,15 @@ from typing import Sequence
 
 import casadi as ca
 
+import sblsim.models
 from sblsim.fmus.arrays import arrival_outputs, fmi3_table_source, fmi3_variables
+from sblsim.fmus.compiler import cache_dir
 from sblsim.fmus.contract import CONTRACT, contract_header
 from sblsim.models.acoustics.detection import eigenray_functions
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_NAMES
 from sblsim.models.program import Stream
+from sblsim.models.systems import SYSTEMS
 
 C_DIR = Path(__file__).resolve().parent / "c"
 #: Runtime sources every build needs (the FMU adds the FMI shell, the local engine the batch API).
@@ -195,10 +199,46 @@ def _without_unused(source: str) -> str:
         source = "\n".join(line for i, line in enumerate(lines) if i not in drop)
 
 
+@lru_cache(maxsize=1)
+def package_digest() -> bytes | None:
+    """A hash of every source the generated code is made from: the ``.py`` files of ``sblsim.models`` and
+    ``sblsim.fmus``, the runtime's C (``fmus/c``) and casadi's version (None when the files are not there)."""
+    models, fmus = Path(sblsim.models.__file__).parent, Path(__file__).parent
+    files = sorted(models.rglob("*.py")) + sorted(fmus.glob("*.py")) + sorted(C_DIR.glob("*.[ch]"))
+    digest = hashlib.sha256(ca.__version__.encode())
+    for path in files:
+        digest.update(path.name.encode() + path.read_bytes())
+    return digest.digest() if files else None
+
+
+def built_in(models: Sequence[type]) -> bool:
+    """Every one of ``models`` and every registered system comes from this package (their code is what
+    :func:`package_digest` hashes)."""
+    classes = list(models) + [type(s) for s in SYSTEMS.values()]
+    return all(c.__module__.startswith("sblsim.") for c in classes)
+
+
+def _code_cache(model: type, n_beacons: int) -> Path | None:
+    """Where :func:`casadi_code` keeps a built-in model's generated code between processes (the compile cache's
+    ``code/`` folder, keyed by :func:`package_digest`, the model and the beacon count), None for another model."""
+    package = package_digest()
+    if package is None or not built_in((model,)):
+        return None
+    key = hashlib.sha256(package + f"{model.__module__}.{model.__qualname__} {int(n_beacons)}".encode()).hexdigest()
+    return cache_dir() / "code" / key[:24]
+
+
 @lru_cache(maxsize=None)
 def casadi_code(model: type, n_beacons: int) -> tuple[str, str]:
-    """The casadi-generated C source and header of a model's program (cached per process), the shared eigenray
-    functions called in their own file (:func:`shared_code`)."""
+    """The casadi-generated C source and header of a model's program, the shared eigenray functions called in
+    their own file (:func:`shared_code`); cached per process and, for a built-in model, in the compile cache (a
+    process that builds an FMU or asks for its GUID does not generate it again: about 4 s for the seven models)."""
+    kept = _code_cache(model, n_beacons)
+    if kept is not None:
+        try:
+            return (kept.with_suffix(".c").read_text(), kept.with_suffix(".h").read_text())
+        except (OSError, UnicodeDecodeError):  # not there yet (or unreadable): generated below
+            pass
     program = model.program(n_beacons)
     name = f"{stem(model, n_beacons)}_casadi"
     cg = ca.CodeGenerator(f"{name}.c", {"with_header": True, "casadi_real": "double",
@@ -207,7 +247,26 @@ def casadi_code(model: type, n_beacons: int) -> tuple[str, str]:
         cg.add(f)
     with tempfile.TemporaryDirectory(prefix="sblsim_casadi_") as tmp:
         cg.generate(tmp + "/")
-        return (_shared_calls(Path(tmp, f"{name}.c").read_text()), Path(tmp, f"{name}.h").read_text())
+        code = (_shared_calls(Path(tmp, f"{name}.c").read_text()), Path(tmp, f"{name}.h").read_text())
+    if kept is not None:
+        _keep(kept, code)
+    return code
+
+
+def _keep(kept: Path, code: tuple[str, str]) -> None:
+    """Write generated code into the cache, each file whole or not at all (the header, which is looked for
+    second, last); a cache that cannot be written is left as it is (the code is generated again next time)."""
+    try:
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        for suffix, text in zip((".c", ".h"), code):
+            partial = kept.parent / f".{kept.name}{suffix}.{os.getpid()}.partial"
+            try:
+                partial.write_text(text)
+                os.replace(partial, kept.with_suffix(suffix))
+            finally:
+                partial.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def _function(name: str, f: ca.Function | None, streams: tuple[Stream, ...], slots: dict[int, int],

@@ -35,8 +35,7 @@ from typing import Any, Callable
 import casadi as ca
 import numpy as np
 
-import sblsim.models
-from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, stem, write_runtime, write_sources
+from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, built_in, package_digest, stem, write_runtime, write_sources
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, cache_dir, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
 from sblsim.models import MODELS
@@ -123,24 +122,6 @@ def _library_models(models: tuple[type, ...] | None) -> tuple[type, ...]:
     return tuple(MODELS.values()) if models is None else models
 
 
-def _built_in(models: tuple[type, ...] | None) -> bool:
-    """Every model compiled in and every registered system comes from this package."""
-    classes = list(_library_models(models)) + [type(s) for s in SYSTEMS.values()]
-    return all(c.__module__.startswith("sblsim.") for c in classes)
-
-
-@lru_cache(maxsize=1)
-def _package_digest() -> bytes | None:
-    """A hash of every source the generated code is made from: the ``.py`` files of ``sblsim.models`` and
-    ``sblsim.fmus``, the runtime's C (``fmus/c``) and casadi's version (None when the files are not there)."""
-    models, fmus = Path(sblsim.models.__file__).parent, Path(__file__).parent
-    files = sorted(models.rglob("*.py")) + sorted(fmus.glob("*.py")) + sorted(C_DIR.glob("*.[ch]"))
-    digest = hashlib.sha256(ca.__version__.encode())
-    for path in files:
-        digest.update(path.name.encode() + path.read_bytes())
-    return digest.digest() if files else None
-
-
 @lru_cache(maxsize=None)
 def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type, ...] | None = None) -> Path:
     """The compiled batch library for ``n_beacons`` beacons, built into the cache if missing.
@@ -162,7 +143,7 @@ def library_path(n_beacons: int = 4, compiler: str = "auto", models: tuple[type,
     """
     cc = find_compiler(compiler)
     flags = " ".join(FLAGS + cc.command[-1:]).encode()
-    package = _package_digest() if _built_in(models) else None
+    package = package_digest() if built_in(_library_models(models)) else None
     with tempfile.TemporaryDirectory(prefix="sblsim_native_") as tmp:
         digest = hashlib.sha256(flags)
         if package is not None:  # what the sources are generated from: no need to generate them to know them

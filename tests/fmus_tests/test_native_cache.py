@@ -1,7 +1,9 @@
-"""The local engine's compiled library is found by a key of what its sources are generated from."""
+"""The local engine's compiled library, and a model's generated C, are found by a key of what they are generated
+from."""
 
 from __future__ import annotations
 
+import sblsim.fmus.codegen as codegen
 import sblsim.fmus.native as native
 from sblsim.models import MODELS
 from sblsim.models.systems import SYSTEMS, System
@@ -26,31 +28,31 @@ def test_a_process_finds_the_cached_library_without_generating_its_sources(monke
 def test_the_key_hashes_the_generated_sources_when_a_model_or_system_is_not_the_packages(monkeypatch):
     """A user's model or a registered system from outside the package can change the generated code in ways the
     package's files do not show: then the key is the generated sources' hash (they are generated)."""
-    assert native._built_in(None) and native._built_in(tuple(MODELS.values()))
+    assert codegen.built_in(tuple(MODELS.values()))
 
     class Mine(list(MODELS.values())[0]):
         pass
 
-    assert not native._built_in((Mine,))
+    assert not codegen.built_in((Mine,))
     monkeypatch.setitem(SYSTEMS, "mine", type("Mine", (System,), {})())
-    assert not native._built_in(None)
+    assert not codegen.built_in(tuple(MODELS.values()))
 
 
 def test_the_package_digest_covers_the_model_and_runtime_sources(monkeypatch, tmp_path):
     """The digest changes when the runtime's C changes (a copy of the folder with one byte more)."""
-    before = native._package_digest()
+    before = codegen.package_digest()
     copy = tmp_path / "c"
     copy.mkdir()
-    for path in native.C_DIR.iterdir():
+    for path in codegen.C_DIR.iterdir():
         if path.is_file():
             (copy / path.name).write_bytes(path.read_bytes())
     (copy / "sblsim_runtime.h").write_bytes((copy / "sblsim_runtime.h").read_bytes() + b"\n")
-    native._package_digest.cache_clear()
-    monkeypatch.setattr(native, "C_DIR", copy)
+    codegen.package_digest.cache_clear()
+    monkeypatch.setattr(codegen, "C_DIR", copy)
     try:
-        assert native._package_digest() != before
+        assert codegen.package_digest() != before
     finally:
-        native._package_digest.cache_clear()
+        codegen.package_digest.cache_clear()
 
 
 def test_libraries_of_other_models_share_their_objects(monkeypatch, tmp_path):
@@ -101,3 +103,37 @@ def test_a_run_s_local_handles_share_the_library_of_the_models_it_runs():
 
     handles = make_handles("local", sources={**paper_sources(), "receiver": Mine})
     assert handles["receiver"].library is None and handles["platform"].library == paper[:3]
+
+
+def test_generated_code_is_kept_between_processes_for_built_in_models_only(monkeypatch, tmp_path):
+    """A process that needs a built-in model's generated C (an FMU's build, its GUID) reads what an earlier one
+    generated, the same text as casadi generates it; a user's model is always generated; a cache that cannot be
+    read or written is generated around."""
+    monkeypatch.setenv("SBLSIM_CACHE_DIR", str(tmp_path / "cache"))
+    target = MODELS["target"]
+    codegen.casadi_code.cache_clear()
+    try:
+        generated = codegen.casadi_code(target, 3)
+        kept = codegen._code_cache(target, 3)
+        assert kept.parent == tmp_path / "cache" / "code"
+        assert (kept.with_suffix(".c").read_text(), kept.with_suffix(".h").read_text()) == generated
+        assert not list(kept.parent.glob(".*partial"))
+        codegen.casadi_code.cache_clear()  # a new process: what the cache holds is what it gets
+        kept.with_suffix(".c").write_text(generated[0] + "/* kept */\n")
+        assert codegen.casadi_code(target, 3)[0].endswith("/* kept */\n")
+        codegen.casadi_code.cache_clear()  # the header missing: generated again, and kept again
+        kept.with_suffix(".h").unlink()
+        assert codegen.casadi_code(target, 3) == generated
+        assert kept.with_suffix(".h").read_text() == generated[1]
+
+        class Mine(target):
+            pass
+
+        assert codegen._code_cache(Mine, 3) is None
+        assert codegen._code_cache(target, 4) != kept  # the beacon count is in the key
+        codegen.casadi_code.cache_clear()  # a cache folder that is a file: nothing kept, the code still made
+        (tmp_path / "blocked").write_text("")
+        monkeypatch.setenv("SBLSIM_CACHE_DIR", str(tmp_path / "blocked"))
+        assert codegen.casadi_code(target, 3) == generated
+    finally:
+        codegen.casadi_code.cache_clear()
