@@ -191,13 +191,30 @@ def lanes_due(x, u, p, t, h) -> list[ca.SX]:
     after the step's start; the clock event runs first). Lane 1 is new when its ``packet_seq`` differs from the last
     one used there (``last_seq``), lane m when it holds a packet (``packet_seq`` > 0) other than the last one used
     there (``lane_seq``)."""
-    ticked = x["tick_t0"] + x["tick"] * p["communication_step"] > t + 1e-6 * p["communication_step"]
-    due = [ca.logic_and(ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["rx_time"] - SLOT_SLACK), ticked)]
+    ticked = _ticked(x, p, t)
+    due = [_lane_one_due(x, u, t, h, ticked)]
     for m in range(2, LANES + 1):
         seq, rx = u[lane_name(m, "packet_seq")], u[lane_name(m, "rx_time")]
         new = ca.logic_and(ca.logic_and(seq > 0, seq != x["lane_seq"][m - 2]), t + h >= rx - SLOT_SLACK)
         due.append(ca.logic_and(new, ticked))
     return due
+
+
+def _ticked(x, p, t) -> ca.SX:
+    """The step reached a tick of the receiver's clock (its last tick lies after the step's start)."""
+    return x["tick_t0"] + x["tick"] * p["communication_step"] > t + 1e-6 * p["communication_step"]
+
+
+def _lane_one_due(x, u, t, h, ticked) -> ca.SX:
+    """Lane 1 of the delivery (the packet inputs themselves) is due (:func:`lanes_due`)."""
+    return ca.logic_and(ca.logic_and(u["packet_seq"] != x["last_seq"], t + h >= u["rx_time"] - SLOT_SLACK), ticked)
+
+
+def lane_one_due(x, u, p, t, h) -> ca.SX:
+    """Lane 1 holds a packet the receiver may use now and takes first (:func:`lanes_due`; not the first of an
+    inverted LBL's new ping, whose lane :func:`ping_anchor` chooses among the ping's arrivals)."""
+    due = _lane_one_due(x, u, t, h, _ticked(x, p, t))
+    return ca.logic_and(due, ca.logic_not(new_ping(x, u, p))) if "ping_jitter" in p else due
 
 
 def slot_due(x, u, p, t, h) -> ca.SX:
@@ -811,32 +828,44 @@ def slot_update(b: ProgramBuilder, slot) -> ca.Function:
 
 
 def slot_events(b: ProgramBuilder, model, n_beacons: int, slot) -> list:
-    """The slot event of a receiver, run while a lane of the delivery holds a packet it may use
-    (:func:`slot_due`), each time with the first such lane's packet (:func:`next_lane`): ``slot`` as it always was
-    for the single assumed speed, and ``slot_profile`` (its packet's range turned into the slant range of the
-    receiver's profile first, :func:`~sblsim.models.receiver.profile.profile_range`) for a run with a profile (an
-    event each: a run of the assumed speed computes nothing of the profile's, not even its choice). Both call the
-    one :func:`slot_update`."""
+    """The slot events of a receiver: ``slot``, run when lane 1 of the delivery holds a packet it takes first
+    (:func:`lane_one_due`: the packet inputs as they are, almost every slot), then ``slot_lanes``, run while a lane
+    holds a packet it may use (:func:`slot_due`), each time with the first such lane's packet (:func:`next_lane`:
+    the packets that arrived in the same step after lane 1's, and the anchor of an inverted LBL's new ping), in
+    that order, as one event taking the first due lane each time would. They are for the single assumed speed;
+    ``slot_profile`` and ``slot_profile_lanes`` (the packet's range turned into the slant range of the receiver's
+    profile first, :func:`~sblsim.models.receiver.profile.profile_range`) for a run with a profile (a run of the
+    assumed speed computes nothing of the profile's, not even its choice). Each calls the one :func:`slot_update`,
+    and lane 1's reads its packet where it is rather than at a parametric lane (what every step of a run pays)."""
     update = slot_update(b, slot)
 
     def due(x, u, p, d, t, h):
         return slot_due(x, u, p, t, h)
 
+    def due_one(x, u, p, d, t, h):
+        return lane_one_due(x, u, p, t, h)
+
+    def updated(x, packet, p, d, packet_of, lane):
+        packet = packet_of(packet, p, d)
+        out = b.X.unpack(update(b.x, ca.vertcat(*[packet[v.name] for v in b.input_vars]), b.p, b.d, b.t, b.h))
+        return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
+
+    def on_lane_one(packet_of):
+        def handler(x, u, p, d, w, t, h):
+            return updated(x, u, p, d, packet_of, 0)
+        return handler
+
     def on_lane(packet_of):
         def handler(x, u, p, d, w, t, h):
             lane, packet = next_lane(x, u, p, t, h, n_beacons, model)
-            packet = packet_of(packet, p, d)
-            inputs = ca.vertcat(*[packet[v.name] for v in b.input_vars])
-            out = b.X.unpack(update(b.x, inputs, b.p, b.d, b.t, b.h))
-            return {**out, **lane_used(x, out, lane, packet["packet_seq"])}
+            return updated(x, packet, p, d, packet_of, lane)
         return handler
 
     events = []
     for choice, when in profile_when(model.fmu_parameters_declared(n_beacons)).items():
-        if choice == "assumed":
-            events.append(b.event("slot", due, on_lane(lambda u, p, d: u), when=when))
-        else:
-            events.append(b.event("slot_profile", due, on_lane(profile_range), when=when))
+        packet_of, name = ((lambda u, p, d: u), "slot") if choice == "assumed" else (profile_range, "slot_profile")
+        events.append(b.event(name, due_one, on_lane_one(packet_of), when=when))
+        events.append(b.event(f"{name}_lanes", due, on_lane(packet_of), when=when))
     return events
 
 
@@ -877,8 +906,8 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "clock_tick", "COVARIANCE", "covariance_outputs", "depth_fresh", "earlier_innovation", "error_parameters",
            "errors_of", "filter_parameters", "first_lane", "first_row", "fresh_packet", "fresh_range",
            "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin",
-           "lm_idle", "lm_states", "lm_step", "lanes_due", "lane_used", "new_ping", "next_lane", "NO_DEPTH",
-           "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters", "profile_derived",
-           "profile_prepare_of", "RangesWithProfile", "reanchored", "receiver_interface", "REFERENCE_SOUND_SPEED",
-           "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due", "slot_events",
-           "slot_update", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]
+           "lm_idle", "lm_states", "lm_step", "lane_one_due", "lanes_due", "lane_used", "new_ping", "next_lane",
+           "NO_DEPTH", "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters",
+           "profile_derived", "profile_prepare_of", "RangesWithProfile", "reanchored", "receiver_interface",
+           "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",
+           "slot_events", "slot_update", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]
