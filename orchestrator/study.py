@@ -287,8 +287,18 @@ def read_record(path: Path | str, name: str = "study", scenarios: list[str] | No
         raise StudyError(f"study.toml: invalid entry in {str(path)!r} ({type(exc).__name__}: {exc})") from None
 
 
+def full_factorial(k: int) -> np.ndarray:
+    """The coded 2-level full factorial of ``k`` factors, shape (2^k, k), in the rows of pyDOE3's ``ff2n`` (cell c's
+    factor j at +1 where bit k − 1 − j of c is set: the first factor varies slowest). Written here because pyDOE3's
+    import loads scipy.stats, half a second of every campaign's start for a table of signs;
+    ``tests/orchestrator/test_campaign.py`` compares it with ``ff2n``."""
+    cells = np.arange(2 ** k, dtype=np.int64)[:, None]
+    return np.where((cells >> np.arange(k - 1, -1, -1)) & 1, 1, -1).astype(np.int64)
+
+
 def design_matrix(k: int, design: str = "full", resolution: int = 0, generators: str = "") -> np.ndarray:
-    """Coded 2-level design matrix from pyDOE3.
+    """Coded 2-level design matrix: the full factorial (:func:`full_factorial`, pyDOE3's rows) or pyDOE3's
+    fractional one.
 
     Parameters
     ----------
@@ -310,10 +320,10 @@ def design_matrix(k: int, design: str = "full", resolution: int = 0, generators:
     StudyError
         If the design cannot be built.
     """
+    if design == "full":
+        return full_factorial(k)
     import pyDOE3  # here, not at the top: it imports scipy.stats (a second), which a campaign's workers never need
 
-    if design == "full":
-        return pyDOE3.ff2n(k).astype(np.int64)
     if generators:
         words = generators.split()
         if len(words) != k:

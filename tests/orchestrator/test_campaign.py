@@ -26,7 +26,7 @@ from sblsim.orchestrator.campaign import plan, run_campaign
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.study import design_matrix, load_study
+from sblsim.orchestrator.study import design_matrix, full_factorial, load_study
 from tests.helpers import start_for_signals
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -448,6 +448,20 @@ def test_saturated_resolution_three_design_from_generators():
     for i in range(7):
         aliases = sum(np.array_equal(m[:, i], s * p) for p in _products(m, i) for s in (1, -1))
         assert aliases == 3, (i, aliases)
+
+
+def test_the_full_factorial_is_pydoe3s():
+    """The full factorial is written in sblsim (pyDOE3's import costs every campaign half a second): the same
+    rows as pyDOE3's ff2n, for every factor count a study may have."""
+    import pyDOE3
+
+    for k in range(1, 13):
+        np.testing.assert_array_equal(full_factorial(k), pyDOE3.ff2n(k))
+        assert full_factorial(k).dtype == np.int64
+    assert "pyDOE3" not in subprocess.run(
+        [sys.executable, "-c", "import sys; from sblsim.orchestrator.study import design_matrix; design_matrix(7); "
+                               "print(sorted(m for m in sys.modules if m.startswith('pyDOE3')))"],
+        capture_output=True, text=True, check=True).stdout
 
 
 def test_full_design_and_explicit_generators():
