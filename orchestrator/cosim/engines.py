@@ -334,6 +334,28 @@ def _ports(md: Any) -> list[Port]:
     return [Port(v.name, v.causality, v.type, v.unit or "") for v in md.modelVariables]
 
 
+#: Model descriptions read in this process, by file and FMI versions allowed: (file signature, description).
+_DESCRIPTIONS: dict[tuple[str, tuple[str, ...]], tuple[tuple, Any]] = {}
+
+
+def _description(component: str, path: Path, versions: tuple[str, ...]) -> tuple[Any, os.stat_result]:
+    """:func:`read_description` of a file, read again only when the file has changed (its size, modification time
+    or inode) since this process last read it (a pooled instance is reopened for every run), and its ``stat``."""
+    try:
+        stat = path.resolve().stat()
+    except OSError:  # read_description names what is wrong
+        stat = None
+    key = (str(path.resolve()), versions)
+    signature = None if stat is None else (stat.st_size, stat.st_mtime_ns, stat.st_ino)
+    cached = _DESCRIPTIONS.get(key)
+    if signature is not None and cached is not None and cached[0] == signature:
+        return cached[1], stat
+    md = read_description(component, path, versions)
+    stat = path.resolve().stat()
+    _DESCRIPTIONS[key] = ((stat.st_size, stat.st_mtime_ns, stat.st_ino), md)
+    return md, stat
+
+
 def open_fmu(component: str, path: Path | str, model: type | None = None,
              n_beacons: int = FMU_BEACONS, early_return: bool = False) -> "FmuHandle":
     """An instance of an FMU file for a run: an idle one made earlier in this process, else a new one.
@@ -361,8 +383,7 @@ def open_fmu(component: str, path: Path | str, model: type | None = None,
         If the file is missing or unreadable, or a once-per-process FMU is in use by another run.
     """
     path = Path(path)
-    md = read_description(component, path, ("2.0", "3.0") if model is not None else ("2.0",))
-    stat = path.resolve().stat()
+    md, stat = _description(component, path, ("2.0", "3.0") if model is not None else ("2.0",))
     signature = (stat.st_size, stat.st_mtime_ns, md.guid)
     key = str(path.resolve()) + ("\0early" if early_return and md.fmiVersion == "3.0" else "")
     if key not in _LOADED or _LOADED[key][0] != signature:

@@ -48,3 +48,36 @@ def test_an_fmu_that_declares_one_instance_per_process_is_not_instantiated_twice
         handle.terminate()
     assert open_fmu("receiver", once) is handle  # released: the same instance again
     handle.terminate()
+
+
+def test_a_description_is_read_once_per_file_and_again_when_the_file_changes(fmu_dir, tmp_path, monkeypatch):
+    """A pooled instance is reopened for every run: its model description is parsed once, and again (a new
+    instance of the new file) when the file at that path has been replaced."""
+    import shutil
+
+    import sblsim.orchestrator.cosim.engines as engines
+
+    reads = []
+    real = engines.read_description
+    monkeypatch.setattr(engines, "read_description", lambda *a, **k: reads.append(a[1]) or real(*a, **k))
+    path = tmp_path / "receiver.fmu"
+    shutil.copyfile(fmu_dir / "sblsim_receiver.fmu", path)
+    first = open_fmu("receiver", path)
+    first.terminate()
+    assert open_fmu("receiver", path) is first and len(reads) == 1  # the same file: not parsed again
+    first.terminate()
+    with zipfile.ZipFile(fmu_dir / "sblsim_receiver.fmu") as src, zipfile.ZipFile(path, "w") as dst:
+        for item in src.namelist():  # the same FMU with another description, written over the file
+            data = src.read(item)
+            if item == "modelDescription.xml":
+                data = data.replace(b'description="', b'description="Rewritten. ', 1)
+            dst.writestr(item, data)
+    second = open_fmu("receiver", path)
+    try:
+        assert len(reads) == 2 and second is not first
+        assert second.variables.keys() == first.variables.keys()
+    finally:
+        second.terminate()
+    path.unlink()
+    with pytest.raises(ModelError, match="not found"):
+        open_fmu("receiver", path)
