@@ -341,17 +341,17 @@ _DESCRIPTIONS: dict[tuple[str, tuple[str, ...]], tuple[tuple, Any]] = {}
 def _description(component: str, path: Path, versions: tuple[str, ...]) -> tuple[Any, os.stat_result]:
     """:func:`read_description` of a file, read again only when the file has changed (its size, modification time
     or inode) since this process last read it (a pooled instance is reopened for every run), and its ``stat``."""
+    resolved = path.resolve()
+    key = (str(resolved), versions)
     try:
-        stat = path.resolve().stat()
+        stat = resolved.stat()
     except OSError:  # read_description names what is wrong
         stat = None
-    key = (str(path.resolve()), versions)
-    signature = None if stat is None else (stat.st_size, stat.st_mtime_ns, stat.st_ino)
     cached = _DESCRIPTIONS.get(key)
-    if signature is not None and cached is not None and cached[0] == signature:
+    if stat is not None and cached is not None and cached[0] == (stat.st_size, stat.st_mtime_ns, stat.st_ino):
         return cached[1], stat
     md = read_description(component, path, versions)
-    stat = path.resolve().stat()
+    stat = resolved.stat()
     _DESCRIPTIONS[key] = ((stat.st_size, stat.st_mtime_ns, stat.st_ino), md)
     return md, stat
 
