@@ -114,6 +114,20 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(getattr(signal, name), handler)
 
 
+def _from_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` was caused by a KeyboardInterrupt (Ctrl-C, or SIGTERM and SIGHUP as :func:`_terminate`
+    raises them): a signal handled while an extension's function ran (casadi's ``DM.__array__``) and that
+    function then returned a value makes Python raise ``SystemError(... returned a result with an exception
+    set)`` from it."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def _command(args: argparse.Namespace) -> int:
     try:
         with collected_notes():  # the configurations' notes: printed with the output folder, or at the end
@@ -131,6 +145,11 @@ def _command(args: argparse.Namespace) -> int:
         print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced{resume}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
+        print("sblsim: interrupted", file=sys.stderr)
+        return interrupted_status()
+    except SystemError as exc:  # Ctrl-C inside an extension's call that then returned: Python's SystemError
+        if not _from_interrupt(exc):
+            raise
         print("sblsim: interrupted", file=sys.stderr)
         return interrupted_status()
     finally:

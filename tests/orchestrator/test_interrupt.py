@@ -139,3 +139,36 @@ def test_ctrl_c_during_a_moving_ocean_search(tmp_path):
                                       "--set", "solver.n_bases=[100, 200, 300, 400]",
                                       "--set", "solver.outlier_factor=100", into=3.0)
     _ended_cleanly(tmp_path, status, took, stderr, signal.SIGINT)
+
+
+def _raising(exc: BaseException):
+    def main(args):
+        raise exc
+    return main
+
+
+def test_ctrl_c_inside_an_extension_s_call_is_an_interruption(monkeypatch, capsys):
+    """A Ctrl-C handled while an extension's function ran, which then returned a value (casadi's ``DM.__array__``
+    in a map's chunk), reaches the command as CPython's ``SystemError(... returned a result with an exception
+    set)`` caused by the KeyboardInterrupt: one line and 130, as any Ctrl-C. Another SystemError stays an error."""
+    import argparse
+    import types
+
+    from sblsim.orchestrator import cli
+
+    def system_error(cause):
+        try:
+            raise cause
+        except BaseException as exc:
+            try:
+                raise SystemError("<function DM.__array__> returned a result with an exception set") from exc
+            except SystemError as wrapped:
+                return wrapped
+
+    args = argparse.Namespace(command="map")
+    monkeypatch.setitem(cli.COMMANDS, "map", types.SimpleNamespace(main=_raising(system_error(KeyboardInterrupt()))))
+    assert cli._command(args) == 130
+    assert capsys.readouterr().err.splitlines() == ["sblsim: interrupted"]
+    monkeypatch.setitem(cli.COMMANDS, "map", types.SimpleNamespace(main=_raising(system_error(ValueError("x")))))
+    with pytest.raises(SystemError):
+        cli._command(args)
