@@ -144,10 +144,7 @@ def _command(args: argparse.Namespace) -> int:
                   else "")
         print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced{resume}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("sblsim: interrupted", file=sys.stderr)
-        return interrupted_status()
-    except SystemError as exc:  # Ctrl-C inside an extension's call that then returned: Python's SystemError
+    except (KeyboardInterrupt, SystemError) as exc:  # a SystemError: Ctrl-C inside an extension's call
         if not _from_interrupt(exc):
             raise
         print("sblsim: interrupted", file=sys.stderr)
