@@ -338,10 +338,11 @@ def _ports(md: Any) -> list[Port]:
 _DESCRIPTIONS: dict[tuple[str, tuple[str, ...]], tuple[tuple, Any]] = {}
 
 
-def _description(component: str, path: Path, versions: tuple[str, ...]) -> tuple[Any, os.stat_result]:
-    """:func:`read_description` of a file, read again only when the file has changed (its size, modification time
-    or inode) since this process last read it (a pooled instance is reopened for every run), and its ``stat``."""
-    resolved = path.resolve()
+def _description(component: str, path: Path, resolved: Path, versions: tuple[str, ...]
+                 ) -> tuple[Any, os.stat_result]:
+    """:func:`read_description` of a file (``path`` as given, ``resolved`` its resolved path), read again only when
+    the file has changed (its size, modification time or inode) since this process last read it (a pooled instance
+    is reopened for every run), and its ``stat``."""
     key = (str(resolved), versions)
     try:
         stat = resolved.stat()
@@ -383,9 +384,10 @@ def open_fmu(component: str, path: Path | str, model: type | None = None,
         If the file is missing or unreadable, or a once-per-process FMU is in use by another run.
     """
     path = Path(path)
-    md, stat = _description(component, path, ("2.0", "3.0") if model is not None else ("2.0",))
+    resolved = path.resolve()
+    md, stat = _description(component, path, resolved, ("2.0", "3.0") if model is not None else ("2.0",))
     signature = (stat.st_size, stat.st_mtime_ns, md.guid)
-    key = str(path.resolve()) + ("\0early" if early_return and md.fmiVersion == "3.0" else "")
+    key = str(resolved) + ("\0early" if early_return and md.fmiVersion == "3.0" else "")
     if key not in _LOADED or _LOADED[key][0] != signature:
         _LOADED[key] = (signature, [])
     pool = _LOADED[key][1]
