@@ -178,34 +178,67 @@ class MotionModel:
                    settings.sigma_interval)
 
 
-def predict(x: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """The tracker's motion model from one ping to the next, for states ``x`` (k, 2 dim + 2) = ``[p, v, t_e, Δ]``:
-    ``p + Δ v``, ``v``, ``t_e + Δ``, ``Δ`` (k, s), and its Jacobians F (k, s, s)."""
-    T = x[:, -1]
+def predict(x: np.ndarray, dim: int, count: np.ndarray | None = None, offset: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The tracker's motion model from one ping to the next, for states ``x`` (k, 2 dim + 2) = ``[p, v, t_e, Δ]``
+    over steps of ``T = n Δ + o`` [s] (:mod:`sblsim.models.tracking.schedule`: ``n`` the intervals elapsed, ``o``
+    a fixed duration): ``p + T v``, ``v``, ``t_e + T``, ``Δ`` (k, s), and its Jacobians F (k, s, s).
+
+    Parameters
+    ----------
+    x : ndarray, (k, s)
+        States [m, m/s, s, s].
+    dim : int
+        2 or 3.
+    count : ndarray, (k,), optional
+        ``n`` per step (default 1: one stable interval).
+    offset : ndarray, (k,), optional
+        ``o`` per step [s] (default 0).
+    """
+    n = np.ones(len(x)) if count is None else np.asarray(count, float)
+    T = n * x[:, -1] + (0.0 if offset is None else np.asarray(offset, float))
     predicted = x.copy()
     predicted[:, :dim] += T[:, None] * x[:, dim:2 * dim]
     predicted[:, -2] += T
     F = np.tile(np.eye(x.shape[1]), (len(x), 1, 1))
     F[:, :dim, dim:2 * dim] = T[:, None, None] * np.eye(dim)
-    F[:, :dim, -1] = x[:, dim:2 * dim]
-    F[:, -2, -1] = 1.0
+    F[:, :dim, -1] = n[:, None] * x[:, dim:2 * dim]
+    F[:, -2, -1] = n
     return predicted, F
 
 
-def transition(velocity: np.ndarray, interval: float, motion: MotionModel) -> tuple[np.ndarray, np.ndarray]:
+def process_noise(steps: np.ndarray, acceleration_psd: float, te_sigma: np.ndarray, drift_sigma: np.ndarray,
+                  dim: int) -> np.ndarray:
+    """The process noise Q (k, s, s) of steps of ``steps`` (k,) [s]: the white-noise acceleration's
+    ``q [T³/3, T²/2; T²/2, T]`` per axis (Bar-Shalom, Li & Kirubarajan 2001, Eq. (6.2.3-8)), ``te_sigma²`` (k,) [s²]
+    on the emission time and ``drift_sigma²`` (k,) [s²] on the interval."""
+    T = np.asarray(steps, float)
+    s = 2 * dim + 2
+    Q = np.zeros((len(T), s, s))
+    eye = np.eye(dim)
+    Q[:, :dim, :dim] = (acceleration_psd * T**3 / 3)[:, None, None] * eye
+    Q[:, :dim, dim:2 * dim] = Q[:, dim:2 * dim, :dim] = (acceleration_psd * T**2 / 2)[:, None, None] * eye
+    Q[:, dim:2 * dim, dim:2 * dim] = (acceleration_psd * T)[:, None, None] * eye
+    Q[:, -2, -2] = np.asarray(te_sigma, float) ** 2
+    Q[:, -1, -1] = np.asarray(drift_sigma, float) ** 2
+    return Q
+
+
+def transition(velocity: np.ndarray, interval: float, motion: MotionModel, count: float = 1.0,
+               te_sigma: float | None = None, drift_sigma: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The Jacobian F (s, s) and the process noise Q (s, s) of one step of the state ``[p, v, t_e, Δ]``
-    (s = 2 dim + 2) at the true velocity (dim,) [m/s] and interval [s] (the tracker's model, :func:`predict`)."""
+    (s = 2 dim + 2) at the true velocity (dim,) [m/s] over a step of ``interval`` [s] (the tracker's model,
+    :func:`predict`): ``count`` stable intervals (``interval / count`` each; 0: a step of its own, the random and
+    pseudo-random burst intervals), the emission time's step error ``te_sigma`` [s] (default the motion's jitter)
+    and the interval's ``drift_sigma`` [s] (default its drift)."""
     d = len(velocity)
-    s, T, q = 2 * d + 2, float(interval), motion.acceleration_psd
+    s, T = 2 * d + 2, float(interval)
     state = np.zeros(s)
-    state[d:2 * d], state[-1] = velocity, T
-    F = predict(state[None], d)[1][0]
-    Q = np.zeros((s, s))
-    Q[:d, :d] = q * T**3 / 3 * np.eye(d)
-    Q[:d, d:2 * d] = Q[d:2 * d, :d] = q * T**2 / 2 * np.eye(d)
-    Q[d:2 * d, d:2 * d] = q * T * np.eye(d)
-    Q[-2, -2] = motion.jitter**2
-    Q[-1, -1] = motion.interval_drift**2
+    state[d:2 * d], state[-1] = velocity, T / count if count else 0.0
+    F = predict(state[None], d, np.array([count]), np.array([0.0 if count else T]))[1][0]
+    Q = process_noise(np.array([T]), motion.acceleration_psd,
+                      np.array([motion.jitter if te_sigma is None else te_sigma]),
+                      np.array([motion.interval_drift if drift_sigma is None else drift_sigma]), d)[0]
     return F, Q
 
 
@@ -230,7 +263,7 @@ class TrackBound:
 
 
 def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, heard: np.ndarray,
-         receivers: np.ndarray, c: float, sigma_toa: float, motion: MotionModel) -> TrackBound:
+         receivers: np.ndarray, c: float, sigma_toa: float, motion: MotionModel, schedule=None) -> TrackBound:
     """The tracker's PCRB along a true track, and the smoothing bound (module docstring).
 
     Parameters
@@ -251,6 +284,10 @@ def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, h
         Standard deviation of a time of arrival [s].
     motion : MotionModel
         The tracker's motion model.
+    schedule : PingSchedule, optional
+        The steps' ping type (:class:`~sblsim.models.tracking.schedule.PingSchedule`, m − 1 steps): each step's
+        intervals elapsed and its emission-time and interval errors, the prior of the ping type's emission times
+        (default: one stable interval per step, the motion's jitter and drift).
 
     Returns
     -------
@@ -273,7 +310,9 @@ def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, h
     B[0] = np.linalg.inv(J)
     Bp[0] = B[0]
     for k in range(m - 1):
-        F, Q = transition(velocities[k], intervals[k], motion)
+        F, Q = transition(velocities[k], intervals[k], motion) if schedule is None else \
+            transition(velocities[k], intervals[k], motion, schedule.count[k], schedule.te_sigma[k],
+                       schedule.drift_sigma[k])
         Qi = np.linalg.inv(Q)
         D11 = F.T @ Qi @ F
         D12 = -F.T @ Qi
@@ -302,4 +341,4 @@ def rms(values: np.ndarray) -> float:
 
 
 __all__ = ["MotionModel", "TrackBound", "directions", "drms", "fix_drms", "ping_information", "pcrb",
-           "position_information", "predict", "rms", "transition"]
+           "position_information", "predict", "process_noise", "rms", "transition"]

@@ -48,8 +48,8 @@ from scipy.linalg import solveh_banded
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
-from sblsim.models.receiver.toa_bound import MotionModel, predict
-from sblsim.models.receiver.toa_bound import transition as motion_step
+from sblsim.models.receiver.toa_bound import predict, process_noise
+from sblsim.models.tracking.schedule import PingSchedule
 
 #: The sound speeds a tracker accepts and the calibration searches [m/s].
 SOUND_SPEED_RANGE = (1300.0, 1700.0)
@@ -562,10 +562,20 @@ class ToaTracker:
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
 
-    def transition(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s)."""
-        xp, F = predict(x[None], self.dim)
-        Q = motion_step(x[self.dim:2 * self.dim], float(x[-1]), MotionModel.of(self.settings))[1]
+    def transition(self, x: np.ndarray, step: int | None = None, schedule: PingSchedule | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s), over the
+        step ``step`` of ``schedule`` (:class:`~sblsim.models.tracking.schedule.PingSchedule`; default one stable
+        interval), its duration at the state's interval."""
+        s = self.settings
+        if schedule is None or step is None:
+            count, offset, te, drift = 1.0, 0.0, s.jitter, s.interval_drift
+        else:
+            count, offset = schedule.count[step], schedule.offset[step]
+            te, drift = schedule.te_sigma[step], schedule.drift_sigma[step]
+        xp, F = predict(x[None], self.dim, np.array([count]), np.array([offset]))
+        Q = process_noise(np.array([count * float(x[-1]) + offset]), s.acceleration_psd, np.array([te]),
+                          np.array([drift]), self.dim)[0]
         return xp[0], F[0], Q
 
     def initial(self, fix: Fix) -> tuple[np.ndarray, np.ndarray]:
@@ -647,7 +657,7 @@ class ToaTracker:
         return used if kept is None else used & kept
 
     def run(self, toa: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-            kept: np.ndarray | None = None) -> TrackRecord:
+            kept: np.ndarray | None = None, schedule: PingSchedule | None = None) -> TrackRecord:
         """The EKF over every ping (rows of ``toa``, (m, n) [s], NaN: not heard), started at the first ping with a
         single-ping fix of dim + 2 receivers or more, and started again from a fix after ``reinit_after``
         pings whose arrivals were all refused or, given ``fixes`` (the single-ping fixes of every ping: positions
@@ -656,8 +666,13 @@ class ToaTracker:
         prediction's ``fix_gate``, or after ``agree_after`` consecutive mutually consistent fixes of dim + 2
         receivers or more outside it (:class:`TrackerSettings`). ``kept`` (m, n): the arrivals each ping's
         single-ping fix keeps (:func:`fix_pings`' ``used``), for the screening of a set that fails its test
-        (computed ping by ping where needed when not given)."""
+        (computed ping by ping where needed when not given). ``schedule``: the steps between the rows
+        (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each); the first ping
+        after each of its gaps starts a new segment (the filter started again from a fix there)."""
         m, size, s = len(toa), self.size, self.settings
+        if schedule is None:
+            schedule = PingSchedule.stable(m, s.interval, s.jitter, s.interval_drift)
+        times, gaps = schedule.times(), set(schedule.gaps)
         rec = TrackRecord(np.full((m, size), np.nan), np.full((m, size, size), np.nan), np.full((m, size), np.nan),
                           np.full((m, size, size), np.nan), np.tile(np.eye(size), (m, 1, 1)),
                           np.zeros((m, self.n), bool), m)
@@ -668,11 +683,12 @@ class ToaTracker:
         heard = np.isfinite(toa).sum(axis=1)
         for k in range(m):
             if x is not None:
-                xp, F, Q = self.transition(x)
+                xp, F, Q = self.transition(x, k - 1, schedule)
                 P = F @ P @ F.T + Q
                 x = xp
                 rec.x_predicted[k], rec.P_predicted[k], rec.F[k] = x, P, F
-                if fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 2:
+                segment = k - 1 in gaps  # a new segment: started again from a fix
+                if not segment and fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 2:
                     # an overdetermined single-ping fix far outside the prediction's ellipse: the filter may be lost
                     e = fixes[0][k] - x[:d]
                     far = float(e @ np.linalg.solve(P[:d, :d] + fixes[1][k][:d, :d], e)) > s.fix_gate
@@ -687,14 +703,17 @@ class ToaTracker:
                         if chain is not None:
                             gap = fixes[0][k] - fixes[0][chain]
                             allowed = fixes[1][k][:d, :d] + fixes[1][chain][:d, :d] + \
-                                (s.fix_speed * (k - chain) * x[-1]) ** 2 / s.fix_gate * np.eye(d)
+                                (s.fix_speed * (times[k] - times[chain])) ** 2 / s.fix_gate * np.eye(d)
                             agreeing = agreeing + 1 if float(gap @ np.linalg.solve(allowed, gap)) <= s.fix_gate else 1
                         else:
                             agreeing = 1
                         chain = k
-                x, P, used = self.update(x, P, toa[k], None if kept is None else kept[k])
-                rec.used[k] = used
-                refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
+                if segment:
+                    refused = s.reinit_after
+                else:
+                    x, P, used = self.update(x, P, toa[k], None if kept is None else kept[k])
+                    rec.used[k] = used
+                    refused = refused + 1 if heard[k] >= self.dim + 2 and not used.any() else 0
                 if disagree >= s.disagree_after or (s.agree_after is not None and agreeing >= s.agree_after):
                     refused = s.reinit_after
             if x is None or refused >= s.reinit_after:
@@ -702,6 +721,8 @@ class ToaTracker:
                 fix = single_ping_fix(toa[k], self.receivers, s.sound_speed, s.sigma_toa) \
                     if heard[k] >= self.dim + 2 else None
                 if fix is None:
+                    if x is not None:  # no fix to start again from: the prediction kept (coasting, not positioned)
+                        rec.x_filtered[k], rec.P_filtered[k] = x, P
                     continue
                 if x is None:
                     rec.start = k
@@ -954,14 +975,21 @@ def observed_information(z: np.ndarray, dof: float = ROBUST_DOF) -> np.ndarray:
     return np.maximum((dof + 1.0) * (dof - z**2) / (dof + z**2) ** 2, 0.0)
 
 
-def _process(settings: TrackerSettings, dim: int) -> np.ndarray:
-    """The inverse of the Cholesky factor of the tracker's process noise Q over the nominal interval
-    (:func:`~sblsim.models.receiver.toa_bound.transition`)."""
-    Q = motion_step(np.zeros(dim), settings.interval, MotionModel.of(settings))[1]
+def _process(settings: TrackerSettings, dim: int, schedule: PingSchedule) -> np.ndarray:
+    """The inverses of the Cholesky factors of the tracker's process noise Q_k over each step of ``schedule`` at the
+    nominal interval (:func:`~sblsim.models.receiver.toa_bound.process_noise`): (m − 1, s, s)."""
+    Q = process_noise(schedule.steps(settings.interval), settings.acceleration_psd, schedule.te_sigma,
+                      schedule.drift_sigma, dim)
     return np.linalg.inv(np.linalg.cholesky(Q))
 
 
-def _robust_terms(toa, heard, receivers, settings, X, Li, dof):
+def _interval_prior(settings: TrackerSettings, X: np.ndarray) -> float:
+    """The first ping's interval's normalised distance from the nominal one, ``(Δ_0 − Δ) / σ_Δ`` (the filters'
+    start, :meth:`ToaTracker.initial`)."""
+    return float((X[0, -1] - settings.interval) / settings.sigma_interval)
+
+
+def _robust_terms(toa, heard, receivers, settings, X, Li, dof, schedule):
     """The robust smoother's residuals at the states X (m, s): the arrivals' normalised ones z (h,), the weights
     (h,), the TOA Jacobians (h, dim + 1) [1/σ units], the whitened process residuals e (m − 1, s) and the
     transitions' Jacobians F (m − 1, s, s); and the cost."""
@@ -970,9 +998,9 @@ def _robust_terms(toa, heard, receivers, settings, X, Li, dof):
     model, J = _evaluate_arrivals(receivers[i], settings.sound_speed, X[k, :dim], X[k, -2])
     z = (toa[k, i] - model) / settings.sigma_toa
     Jz = -J / settings.sigma_toa
-    predicted, F = predict(X[:-1], dim)
-    e = (X[1:] - predicted) @ Li.T
-    cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum())
+    predicted, F = predict(X[:-1], dim, schedule.count, schedule.offset)
+    e = np.einsum("kij,kj->ki", Li, X[1:] - predicted)
+    cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum() + _interval_prior(settings, X) ** 2)
     return z, (dof + 1.0) / (dof + z**2), Jz, e, F, cost
 
 
@@ -986,18 +1014,19 @@ def _per_ping(m: int, pings: np.ndarray, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def _normal_blocks(m, s, dim, heard, w, Jz, Li, prev):
+def _normal_blocks(m, s, dim, heard, w, Jz, Li, prev, settings):
     """The Gauss-Newton Hessian of the robust cost, block tridiagonal: diagonal blocks (m, s, s) and the blocks
-    (k, k + 1) (m − 1, s, s); ``prev`` (m − 1, s, s) the whitened process residuals' Jacobians with respect to the
-    previous state, ``−L⁻¹ F_k``."""
+    (k, k + 1) (m − 1, s, s); ``Li`` (m − 1, s, s) the steps' whitening, ``prev`` (m − 1, s, s) the whitened process
+    residuals' Jacobians with respect to the previous state, ``−L_k⁻¹ F_k``; the first interval's prior."""
     D = np.zeros((m, s, s))
     cols = list(range(dim)) + [s - 2]
     outer = w[:, None, None] * Jz[:, :, None] * Jz[:, None, :]
     D[np.ix_(np.arange(m), cols, cols)] += _per_ping(m, heard[0], outer)
-    now = Li.T @ Li  # e_k's Jacobian with respect to x_k is Li, with respect to x_k−1 is −Li F_k
-    D[1:] += now
+    # e_k's Jacobian with respect to x_k is L_k⁻¹, with respect to x_k−1 is −L_k⁻¹ F_k
+    D[1:] += np.einsum("kji,kjl->kil", Li, Li)
     D[:-1] += np.einsum("kji,kjl->kil", prev, prev)
-    B = np.einsum("kji,jl->kil", prev, Li)
+    D[0, -1, -1] += 1.0 / settings.sigma_interval**2
+    B = np.einsum("kji,kjl->kil", prev, Li)
     return D, B
 
 
@@ -1033,18 +1062,20 @@ def _block_covariance(D, B):
 
 
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
-                  dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS, covariance: bool = True
-                  ) -> RobustTrack:
+                  dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS, covariance: bool = True,
+                  schedule: PingSchedule | None = None) -> RobustTrack:
     """The robust fixed-interval smoother: the track's maximum a-posteriori states with heavy-tailed times of arrival.
 
     Over the whole record at once (YAPS's approach, Baktoft et al. 2017: the state-space model fitted to every
     time of arrival, here its MAP rather than its marginal likelihood), the states ``x_k = [p, v, t_e, Δ]`` of
     :class:`ToaTracker` minimise
 
-        ``Σ_k ‖L⁻¹ (x_k − f(x_k−1))‖² + Σ_(k,i) heard (ν + 1) ln(1 + z_ki² / ν)``,
+        ``Σ_k ‖L_k⁻¹ (x_k − f_k(x_k−1))‖² + Σ_(k,i) heard (ν + 1) ln(1 + z_ki² / ν) + ((Δ_0 − Δ) / σ_Δ)²``,
         ``z_ki = (toa_ki − t_e,k − ‖p_k − r_i‖ / c) / σ_toa``,
 
-    the tracker's motion model (``f``, ``Q = L Lᵀ`` over the nominal interval) and a Student-t error of ν degrees of
+    the tracker's motion model over each step of the ping schedule (``f_k``, ``Q_k = L_k L_kᵀ`` over the step's
+    duration at the nominal interval Δ, :mod:`sblsim.models.tracking.schedule`: the ping type, gaps), the filters'
+    prior of the first interval (σ_Δ ``sigma_interval``) and a Student-t error of ν degrees of
     freedom for each time of arrival (σ_toa its scale): a late multipath arrival is weighed down where the rest of
     the track disagrees with it, with no gate and no restart. Gauss-Newton with iteratively reweighted least
     squares (weights ``(ν + 1) / (ν + z²)``, the EM weights of the Student-t; Lange, Little, Taylor, "Robust
@@ -1071,6 +1102,9 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         Gauss-Newton iterations at most (of the start kept, its screening steps among them).
     covariance : bool
         Compute the covariance ``P`` (else None: a start's states alone, :func:`graduated_start`).
+    schedule : PingSchedule, optional
+        The steps between the rows (:class:`~sblsim.models.tracking.schedule.PingSchedule`, m − 1 steps; default
+        one stable interval each).
 
     Returns
     -------
@@ -1088,14 +1122,17 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     if not starts:
         raise ModelError("robust smoother: no starting track")
     heard = np.nonzero(np.isfinite(toa))
-    Li = _process(settings, dim)
+    if schedule is None:
+        schedule = PingSchedule.stable(m, settings.interval, settings.jitter, settings.interval_drift)
+    Li = _process(settings, dim, schedule)
     runs = []
     for start in starts:
         X = np.array(start, float)
         if X.shape != (m, s) or not np.isfinite(X).all():
             raise ModelError(f"robust smoother: a starting track of shape {X.shape} or not finite; allowed: "
                              f"({m}, {s}), finite")
-        runs.append({"X": X, "terms": _robust_terms(toa, heard, receivers, settings, X, Li, dof), "done": 0,
+        runs.append({"X": X, "terms": _robust_terms(toa, heard, receivers, settings, X, Li, dof, schedule),
+                     "done": 0,
                      "converged": False})
 
     def iterate(run, count):
@@ -1104,17 +1141,18 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         for _ in range(count):
             if run["converged"]:
                 return
-            prev = -Li @ F
-            D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, prev)
+            prev = -np.einsum("kij,kjl->kil", Li, F)
+            D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, prev, settings)
             g = np.zeros((m, s))  # the gradient's half: Jᵀ W r
             g[:, list(range(dim)) + [s - 2]] += _per_ping(m, heard[0], (w * z)[:, None] * Jz)
-            g[1:] += e @ Li
+            g[1:] += np.einsum("ki,kij->kj", e, Li)
+            g[0, -1] += _interval_prior(settings, X) / settings.sigma_interval
             g[:-1] += np.einsum("kji,kj->ki", prev, e)
             step = _banded_solve(D + 1e-12 * np.eye(s), B, -g)
             scale = 1.0
             while scale > 1e-6:
                 trial = X + scale * step
-                terms = _robust_terms(toa, heard, receivers, settings, trial, Li, dof)
+                terms = _robust_terms(toa, heard, receivers, settings, trial, Li, dof, schedule)
                 if terms[-1] < cost:
                     break
                 scale *= 0.5
@@ -1135,14 +1173,15 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     X, (z, w, Jz, _, F, cost) = best["X"], best["terms"]
     P = None
     if covariance:
-        P = _block_covariance(*_normal_blocks(m, s, dim, heard, observed_information(z, dof), Jz, Li, -Li @ F))
+        P = _block_covariance(*_normal_blocks(m, s, dim, heard, observed_information(z, dof), Jz, Li,
+                                              -np.einsum("kij,kjl->kil", Li, F), settings))
     weights = np.zeros((m, n))
     weights[heard] = w
     return RobustTrack(X, P, weights, cost, best["done"], index)
 
 
-def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray
-                    ) -> np.ndarray:
+def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray,
+                    schedule: PingSchedule | None = None) -> np.ndarray:
     """A start for :func:`robust_smooth` by graduated non-convexity (Blake & Zisserman, *Visual Reconstruction*,
     MIT Press 1987): the robust smoother with the timing noise's scale :data:`ROBUST_COARSE_SCALE` times larger
     (the arrivals' Student-t cost flatter over the residuals seen, the motion model weighing more: fewer local
@@ -1154,34 +1193,41 @@ def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSet
         As :func:`robust_smooth`.
     """
     coarse = replace(settings, sigma_toa=settings.sigma_toa * ROBUST_COARSE_SCALE)
-    return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS, covariance=False).x
+    return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS, covariance=False,
+                         schedule=schedule).x
 
 
 def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
-                 fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray) -> RobustTrack:
+                 fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray,
+                 schedule: PingSchedule | None = None) -> RobustTrack:
     """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
     that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2); the lowest
     cost kept (:func:`robust_smooth`). ``fixes``: positions (m, dim), emission times (m,) and the arrivals used
-    (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n).
+    (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
+    (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each).
 
     Raises
     ------
     ModelError
         As :func:`robust_smooth`.
     """
+    if schedule is None:
+        schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
     starts = {"rts": rts}
-    anchored = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, receivers.shape[1])
+    anchored = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, receivers.shape[1], schedule.times())
     if anchored is not None:
-        starts = {"fixes": anchored, "graduated": graduated_start(toa, receivers, settings, anchored), **starts}
-    return replace(robust_smooth(toa, receivers, settings, list(starts.values())), start_names=tuple(starts))
+        starts = {"fixes": anchored, "graduated": graduated_start(toa, receivers, settings, anchored, schedule),
+                  **starts}
+    return replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule),
+                   start_names=tuple(starts))
 
 
 def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,
-                   dim: int) -> np.ndarray | None:
+                   dim: int, times: np.ndarray | None = None) -> np.ndarray | None:
     """A starting track for :func:`robust_smooth` from the single-ping fixes alone: the fixes of dim + 2 receivers or
     more that kept every arrival of their ping (each within ``fix_speed`` × elapsed time + 5 m of the median of its
-    six neighbours among them), interpolated linearly over the pings (the velocity their differences, the emission
-    time advanced by the nominal interval from the nearest such fix before); None when fewer than 2 remain.
+    six neighbours among them), interpolated linearly in time (the velocity their differences, the emission
+    time advanced by the time elapsed since the nearest such fix before); None when fewer than 2 remain.
 
     Parameters
     ----------
@@ -1191,16 +1237,20 @@ def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.n
         The arrivals of each ping.
     settings : TrackerSettings
     dim : int
+    times : ndarray, (m,), optional
+        Each ping's time from the first [s] (:meth:`~sblsim.models.tracking.schedule.PingSchedule.times`; default
+        the nominal interval per ping).
     """
     position, emission, used = fixes
     m = len(position)
+    times = np.arange(m) * settings.interval if times is None else np.asarray(times, float)
     good = np.flatnonzero(np.isfinite(emission) & (used.sum(axis=1) >= dim + 2) & (used.sum(axis=1) == heard))
     keep = np.ones(len(good), bool)
     for j in range(len(good)):
         near = [i for i in range(max(0, j - 3), min(len(good), j + 4)) if i != j]
         if not near:
             continue
-        elapsed = np.abs(good[near] - good[j]).max() * settings.interval
+        elapsed = np.abs(times[good[near]] - times[good[j]]).max()
         keep[j] = np.linalg.norm(position[good[j]] - np.median(position[good[near]], axis=0)) <= \
             settings.fix_speed * elapsed + 5.0
     good = good[keep]
@@ -1209,23 +1259,28 @@ def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.n
     pings = np.arange(m)
     X = np.empty((m, 2 * dim + 2))
     for a in range(dim):
-        X[:, a] = np.interp(pings, good, position[good, a])
-        X[:, dim + a] = np.gradient(X[:, a]) / settings.interval
+        X[:, a] = np.interp(times, times[good], position[good, a])
+        X[:, dim + a] = np.gradient(X[:, a], times) if m > 1 else 0.0
     before = good[np.clip(np.searchsorted(good, pings, side="right") - 1, 0, len(good) - 1)]
-    X[:, -2] = emission[before] + (pings - before) * settings.interval
+    X[:, -2] = emission[before] + (times - times[before])
     X[:, -1] = settings.interval
     return X
 
 
 def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSettings, rng: np.random.Generator,
                    start: np.ndarray | None = None, speed: float = 1.0, detection: float = 0.8,
-                   first_emission: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   first_emission: float = 0.0, ping_type: str = "sbi",
+                   burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pings of a target moving as the tracker's model says, heard by an array.
 
     The target starts at ``start`` (default the array's centroid) at ``speed`` [m/s] in a random direction and
-    moves by the discrete white-noise-acceleration model of ``settings.acceleration_psd``; ping k is emitted at
-    ``t_e,k = t_e,k−1 + Δ_k−1 + jitter`` and the interval walks by ``interval_drift``; each receiver hears each
-    ping with probability ``detection`` with Gaussian timing noise ``sigma_toa``.
+    moves by the discrete white-noise-acceleration model of ``settings.acceleration_psd`` over each step's
+    duration; the ping types (:mod:`sblsim.models.tracking.schedule`): ``sbi``, ping k emitted at
+    ``t_e,k = t_e,k−1 + Δ_k−1 + jitter`` and the interval walking by ``interval_drift``; ``rbi``, each step a draw
+    of ``U(min, max)`` (``burst_interval``); ``pbi``, the steps of ``burst_sequence`` in turn (from its start) plus
+    the jitter. Each receiver hears each ping with probability ``detection`` with Gaussian timing noise
+    ``sigma_toa``.
 
     Returns
     -------
@@ -1242,16 +1297,28 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
     p = receivers.mean(axis=0) if start is None else np.asarray(start, float)
     heading = rng.normal(size=dim)
     v = speed * heading / np.linalg.norm(heading)
+    if ping_type == "rbi" and burst_interval is None:
+        raise ModelError("simulate_pings: a random burst interval needs burst_interval (min, max) [s]")
+    if ping_type == "pbi" and (burst_sequence is None or not len(burst_sequence)):
+        raise ModelError("simulate_pings: a pseudo-random burst interval needs burst_sequence [s]")
     te, interval = first_emission, s.interval
     positions, emissions = np.empty((n_pings, dim)), np.empty(n_pings)
     for k in range(n_pings):
         positions[k], emissions[k] = p, te
-        T = interval
+        if ping_type == "rbi":
+            T = rng.uniform(*burst_interval)
+        elif ping_type == "pbi":
+            T = float(burst_sequence[k % len(burst_sequence)]) + s.jitter * rng.normal()
+        else:
+            T = interval
         cov = s.acceleration_psd * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
         w = rng.multivariate_normal(np.zeros(2), cov, size=dim)  # (dim, 2): position and velocity noise per axis
         p, v = p + T * v + w[:, 0], v + w[:, 1]
-        te = te + interval + s.jitter * rng.normal()
-        interval = interval + s.interval_drift * rng.normal()
+        if ping_type == "sbi":
+            te = te + interval + s.jitter * rng.normal()
+            interval = interval + s.interval_drift * rng.normal()
+        else:
+            te = te + T
     ranges = np.linalg.norm(positions[:, None, :] - receivers[None, :, :], axis=2)
     toa = emissions[:, None] + ranges / s.sound_speed + s.sigma_toa * rng.normal(size=(n_pings, n))
     toa[rng.random((n_pings, n)) > detection] = np.nan

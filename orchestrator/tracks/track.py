@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -38,6 +38,7 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_bound as tb
+from sblsim.models.tracking import quality as qa
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
@@ -86,7 +87,7 @@ ROBUST_FROM_MEDIAN = 1.0 / np.sqrt(np.log(2.0))
 
 
 def bound_along_track(toa: np.ndarray, receivers: np.ndarray, times: np.ndarray, truth: np.ndarray,
-                      settings) -> Any:
+                      settings, schedule=None, estimates: np.ndarray | None = None) -> Any:
     """The accuracy limit per ping along a true track (``bound.csv``, a pandas.DataFrame).
 
     ``toa`` (m, n) [s] (NaN: not heard), ``receivers`` (n, dim) [m], ``times`` (m,) [s] each ping's emission time
@@ -94,7 +95,10 @@ def bound_along_track(toa: np.ndarray, receivers: np.ndarray, times: np.ndarray,
     ``settings`` the tracker's (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`). The true position
     is the truth interpolated at ``times``, the true velocity its difference over ±0.5 s. Columns: ``ping``,
     ``time``, ``heard``, ``fix_drms_m`` (:func:`~sblsim.models.receiver.toa_bound.fix_drms`), ``pcrb_m`` and
-    ``pcrb_smoothed_m`` (:func:`~sblsim.models.receiver.toa_bound.pcrb` from the first ping with a time).
+    ``pcrb_smoothed_m`` (:func:`~sblsim.models.receiver.toa_bound.pcrb` from the first ping with a time, over the
+    steps of ``schedule``, the ping type's, :class:`~sblsim.models.tracking.schedule.PingSchedule`). With 3-D
+    receivers and a 2-D truth, the depth of each true position is the tracker's own (``estimates`` (m, 3) [m]; 0
+    without them).
     """
     import pandas as pd
 
@@ -109,8 +113,12 @@ def bound_along_track(toa: np.ndarray, receivers: np.ndarray, times: np.ndarray,
     t = times[k0:]
     p = _truth_at(truth, t)[:, :dim]
     v = _truth_at(truth, t + 0.5)[:, :dim] - _truth_at(truth, t - 0.5)[:, :dim]
+    if p.shape[1] < dim:  # a 2-D truth of a 3-D array: the tracker's depth, not moving vertically
+        depth = np.zeros(len(t)) if estimates is None else np.nan_to_num(np.asarray(estimates)[k0:, 2])
+        p, v = np.column_stack([p, depth]), np.column_stack([v, np.zeros(len(t))])
     frame.loc[k0:, "fix_drms_m"] = tb.fix_drms(p, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa)
-    b = tb.pcrb(p, v, t, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa, tb.MotionModel.of(settings))
+    b = tb.pcrb(p, v, t, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa, tb.MotionModel.of(settings),
+                None if schedule is None else schedule.sliced(k0))
     frame.loc[k0:, "pcrb_m"], frame.loc[k0:, "pcrb_smoothed_m"] = b.filtered, b.smoothed
     return frame
 
@@ -278,12 +286,35 @@ def score(t: np.ndarray, p: np.ndarray, truth: np.ndarray, cov: np.ndarray | Non
     return stats, err, err3
 
 
+def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: str | None = None,
+                  burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None):
+    """The steps between the rows of ``toa`` (m, n) [s] (:class:`~sblsim.models.tracking.schedule.PingSchedule`)
+    for the tracker's ``settings`` at the receivers ``positions`` (n, dim) [m]: the ping type given (``sbi``,
+    ``rbi``, ``pbi``), else the one the first arrivals' spacing shows (``rbi`` when ``burst_interval`` (min, max)
+    [s] is given, ``pbi`` when ``burst_sequence`` (the intervals [s]) is), and what was seen of the spacing."""
+    from sblsim.models.tracking import schedule as ps
+
+    crossing = ps.crossing_time(positions, settings.sound_speed)
+    seen = ps.infer_ping_type(toa, crossing)
+    kind = ping_type or ("pbi" if burst_sequence is not None else "rbi" if burst_interval is not None else seen.kind)
+    source = "given" if (ping_type or burst_interval is not None or burst_sequence is not None) else "inferred"
+    interval = settings.interval if kind == "sbi" else float(np.mean(burst_interval)) if burst_interval else \
+        seen.interval
+    bounds = burst_interval if burst_interval is not None else (seen.bounds if kind == "rbi" else None)
+    schedule = ps.build_schedule(toa, kind, interval, settings.jitter, settings.interval_drift, crossing,
+                                 burst_interval, burst_sequence, source)
+    return replace(schedule, bounds=bounds), seen
+
+
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
-          drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0) -> TrackOutcome:
+          drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
+          burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None
+          ) -> TrackOutcome:
     """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
     (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`); ``truth_sigma`` [m] the truth's
-    own error per horizontal axis in the NEES (:func:`score`)."""
+    own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval``,
+    ``burst_sequence`` as :func:`ping_schedule`."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -304,23 +335,33 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     else:
         c = sound_speed
         speed = {"sound_speed_m_s": c, "source": "given"}
-    fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
+    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA)
     settings = tracker_settings(c, fe)
+    schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
+    settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
     tracker = tt.ToaTracker(positions, settings)
     # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
-    record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused)
-    filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused)
+    record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
+    filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
                for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
+    heard_count = np.isfinite(toa).sum(axis=1)
+    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim)
     columns = ["x", "y", "z"][:dim]
-    frames, covariances = {}, {}
+    frames, covariances, flagged = {}, {}, {}
+    segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
 
-    def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray):
+    def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
+             restarts: np.ndarray | None = None):
+        checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
+                                 None if restarts is None else np.isin(ping, restarts))
+        with np.errstate(invalid="ignore"):
+            sigmas = {f"sigma_{a}": np.sqrt(np.maximum(cov[:, k, k], 0.0)) for k, a in enumerate(columns)}
         frames[estimator] = pd.DataFrame({"estimator": estimator, "ping": ping, "time": t,
-                                          **{a: p[:, k] for k, a in enumerate(columns)},
-                                          **{f"sigma_{a}": np.sqrt(cov[:, k, k]) for k, a in enumerate(columns)},
-                                          "receivers_heard": heard})
+                                          **{a: p[:, k] for k, a in enumerate(columns)}, **sigmas,
+                                          "receivers_heard": heard, "quality": checked.quality})
         covariances[estimator] = cov[:, :2, :2]
+        flagged[estimator] = checked.flagged
 
     positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
     k = np.flatnonzero(positioned)
@@ -329,17 +370,19 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         xs, Ps = tracker.smooth(record)
         k0 = record.start
         if k0 < len(toa) - 1:
-            robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:])
+            robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:],
+                                     schedule.sliced(k0))
             kr = np.arange(k0, len(toa))
             rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
-                 (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1))
-        rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1))
+                 (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts)
+        rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
+             np.r_[record.restarts, segment_starts])
     rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
-         record.used[k].sum(axis=1))
+         record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts])
     for name, other in filters.items():
         u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
         rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
-             other.used[u].sum(axis=1))
+             other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
     f = np.flatnonzero(np.isfinite(fe))
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1))
     main = next(iter(frames)) if smooth else "ekf"  # the robust smoother where it ran, else the RTS smoother
@@ -352,28 +395,42 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "receivers_kept": None if receivers_kept is None else list(receivers_kept),
         "drop_detections": drop, "seed": seed if drop > 0 else None, "detections_dropped": dropped,
         "dimensions": dim, "sound_speed": speed, "sigma_toa_s": SIGMA_TOA, "ping_interval_s": interval,
+        "ping_type": {"type": schedule.kind, "source": schedule.source,
+                      "burst_interval_s": None if schedule.bounds is None else list(schedule.bounds),
+                      "seen": {"typical_step_s": seen.interval, "steps_s": list(seen.bounds),
+                               "spread_s": seen.spread, "type": seen.kind}},
+        "segments": [[int(a), int(b - 1)] for a, b in schedule.segments()],
+        "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
         "restarts": len(record.restarts), "fixed": {e: int(len(fr)) for e, fr in frames.items()},
+        "flagged": flagged, "trusted_fixes": int(trusted.sum()),
         "truth": None if truth_path is None else str(truth_path),
         "reference": None if reference_path is None else str(reference_path)}
     errors = result = bound = None
     if truth is not None:
         parts, entries = [], {}
 
-        def scored(estimator: str, ping: Any, t: np.ndarray, p: np.ndarray, cov: np.ndarray | None) -> None:
+        def scored(estimator: str, ping: Any, t: np.ndarray, p: np.ndarray, cov: np.ndarray | None,
+                   quality: np.ndarray | None = None) -> None:
             stats, err, err3 = score(t, p, truth, cov, truth_sigma=truth_sigma)
             entries[estimator] = {"n_pings": int(len(toa)), "n_fixed": int(len(t)),
                                   "share_fixed": len(t) / len(toa)} | stats
+            if quality is not None:
+                ok = (quality != "flagged") & np.isfinite(err)
+                entries[estimator] |= {
+                    "n_flagged": int((quality == "flagged").sum()),
+                    "share_flagged": float((quality == "flagged").mean()) if len(quality) else 0.0,
+                    "max_error_unflagged_m": float(err[ok].max()) if ok.any() else None}
             parts.append(pd.DataFrame({"estimator": estimator, "ping": ping, "time": t, "error_2d_m": err,
                                        **({} if err3 is None else {"error_3d_m": err3})}))
 
         for estimator, frame in frames.items():
             scored(estimator, frame["ping"].to_numpy(), frame["time"].to_numpy(), frame[columns].to_numpy(),
-                   covariances[estimator])
+                   covariances[estimator], frame["quality"].to_numpy())
         if reference is not None:
             scored("reference", -1, reference[:, 0], reference[:, 1:], None)
         errors = pd.concat(parts, ignore_index=True)
-        bound = bound_along_track(toa, positions, record.x_filtered[:, -2] if not smooth else xs[:, -2], truth,
-                                  settings)
+        source = record.x_filtered if not smooth else xs
+        bound = bound_along_track(toa, positions, source[:, -2], truth, settings, schedule, source[:, :dim])
         thirds = bound_thirds(bound, errors)
         first = entries.pop(main)
         result = {key: first.get(key) for key in SCORE_KEYS}

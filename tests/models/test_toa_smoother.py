@@ -29,25 +29,37 @@ def late_arrivals(toa: np.ndarray, rng: np.random.Generator, share: float) -> np
     return np.where(late, toa + rng.uniform(1e-3, 3e-3, toa.shape), toa)
 
 
-def cost_residuals(theta: np.ndarray, toa: np.ndarray, receivers: np.ndarray, s: tt.TrackerSettings, dof: float):
+def cost_residuals(theta: np.ndarray, toa: np.ndarray, receivers: np.ndarray, s: tt.TrackerSettings, dof: float,
+                   schedule=None):
     """The smoother's cost as a vector r with Σ r² the cost, written from its docstring with numpy alone: per heard
     arrival ``sign(z) sqrt((ν + 1) ln(1 + z² / ν))`` (z / ... as ν → ∞), per ping after the first the process noise's
-    whitened innovation (Q over the nominal interval, as the EKF's model)."""
+    whitened innovation (Q over the step's duration at the nominal interval, as the EKF's model: one interval per
+    row, or a schedule's ``n_k Δ + o_k``), and the first interval's prior."""
     m, n = toa.shape
     X = theta.reshape(m, 6)
     p, v, te, interval = X[:, :2], X[:, 2:4], X[:, 4], X[:, 5]
     k, i = np.nonzero(np.isfinite(toa))
     z = (toa[k, i] - te[k] - np.sqrt(((p[k] - receivers[i]) ** 2).sum(axis=1)) / s.sound_speed) / s.sigma_toa
     arrival = z if dof == np.inf else np.sign(z) * np.sqrt((dof + 1) * np.log1p(z**2 / dof))
-    T, q = s.interval, s.acceleration_psd
-    Q = np.zeros((6, 6))
-    for a in range(2):
-        Q[np.ix_([a, 2 + a], [a, 2 + a])] = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
-    Q[4, 4], Q[5, 5] = s.jitter**2, s.interval_drift**2
-    W = np.linalg.inv(np.linalg.cholesky(Q))  # Q = L Lᵀ: the innovation whitened by L⁻¹
-    predicted = np.column_stack([p[:-1] + interval[:-1, None] * v[:-1], v[:-1], te[:-1] + interval[:-1],
-                                 interval[:-1]])
-    return np.concatenate([arrival, ((X[1:] - predicted) @ W.T).ravel()])
+    if schedule is None:
+        count, offset = np.ones(m - 1), np.zeros(m - 1)
+        te_sigma, drift = np.full(m - 1, s.jitter), np.full(m - 1, s.interval_drift)
+    else:
+        count, offset, te_sigma, drift = schedule.count, schedule.offset, schedule.te_sigma, schedule.drift_sigma
+    q = s.acceleration_psd
+    process = []
+    for j in range(m - 1):
+        T = count[j] * s.interval + offset[j]
+        Q = np.zeros((6, 6))
+        for a in range(2):
+            Q[np.ix_([a, 2 + a], [a, 2 + a])] = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+        Q[4, 4], Q[5, 5] = te_sigma[j] ** 2, drift[j] ** 2
+        W = np.linalg.inv(np.linalg.cholesky(Q))  # Q = L Lᵀ: the innovation whitened by L⁻¹
+        step = count[j] * interval[j] + offset[j]
+        predicted = np.r_[p[j] + step * v[j], v[j], te[j] + step, interval[j]]
+        process.append(W @ (X[j + 1] - predicted))
+    prior = [(interval[0] - s.interval) / s.sigma_interval]
+    return np.concatenate([arrival, np.ravel(process), prior])
 
 
 def small_problem(seed: int = 2, pings: int = 30, late: float = 0.1):

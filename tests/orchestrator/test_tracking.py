@@ -225,7 +225,8 @@ def test_written_files_keep_the_issue_names(full):
     import pandas as pd
 
     track = pd.read_csv(full.out / "track.csv")
-    assert list(track.columns) == ["time", "x", "y", "sigma_x", "sigma_y", "receivers_heard"]
+    assert list(track.columns) == ["time", "x", "y", "sigma_x", "sigma_y", "receivers_heard", "quality"]
+    assert set(track["quality"]) <= {"ok", "restart", "flagged"}
     robust = full.estimates[full.estimates["estimator"] == "robust"]
     assert np.allclose(track["x"], robust["x"], rtol=0, atol=1e-9) and len(track) == len(robust)
     score = json.loads((full.out / "score.json").read_text())

@@ -1,0 +1,179 @@
+"""Never silently lost: a track checked against its own data, each ping marked ``ok``, ``restart`` or ``flagged``.
+
+A tracker that has lost its target still writes positions, often with small covariances. Each estimate is therefore
+checked against what the same data say without the motion model:
+
+* the **trusted single-ping fixes**: a fix of dim + 2 receivers or more (one redundant arrival at least) that kept
+  every arrival of its ping or still has dim + 3, passed its own χ² test, and whose DRMS is at most
+  :data:`TRUSTED_FIX_DRMS`. At a ping with such a fix, the track must lie within the χ² gate :data:`FIX_GATE` of
+  it, against the two covariances summed (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking
+  and Navigation*, Wiley 2001, § 5.4: the normalised distance of two independent estimates of one quantity);
+  between two trusted fixes the track disagrees with, and no trusted fix it agrees with, the whole stretch is lost;
+* at a ping without a trusted fix, the track must be reachable from the nearest trusted fixes before and after it:
+  within the gate's radius plus :data:`MAX_SPEED` times the time between (a tag does not outrun that);
+* the **physical speed** between successive estimates: at most :data:`MAX_SPEED` beyond their own uncertainty.
+
+A ping that fails is ``flagged``; a ping where a filter started again (a restart, a new segment after a gap) is
+``restart``; the rest ``ok``. A track kilometres from every fix is never ``ok``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: χ²(2) at 1 − 10⁻⁴: the gate of a track against a trusted fix (2-D, the horizontal position).
+FIX_GATE = 18.42
+#: The largest DRMS of a trusted single-ping fix [m].
+TRUSTED_FIX_DRMS = 10.0
+#: The fastest a tracked tag moves [m/s] (a towed pinger, a fish's burst; a limit, not a typical speed).
+MAX_SPEED = 10.0
+#: The quality marks, in order of severity.
+QUALITY = ("ok", "restart", "flagged")
+
+
+@dataclass(frozen=True)
+class Quality:
+    """What :func:`check_track` returns for m pings: ``quality`` (m,) of str (:data:`QUALITY`), and the reasons per
+    ping as bool (m,) arrays: ``fix`` (outside its own trusted fix), ``stretch`` (between two such), ``reach`` (out
+    of reach of the nearest trusted fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`)."""
+
+    quality: np.ndarray
+    fix: np.ndarray
+    stretch: np.ndarray
+    reach: np.ndarray
+    speed: np.ndarray
+
+    @property
+    def flagged(self) -> int:
+        """The pings flagged."""
+        return int((self.quality == "flagged").sum())
+
+
+def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarray, heard: np.ndarray,
+                  chi2: np.ndarray, dim: int) -> np.ndarray:
+    """Which single-ping fixes are trusted (module docstring).
+
+    Parameters
+    ----------
+    positions : ndarray, (m, dim)
+        The fixes [m], NaN where none.
+    covariances : ndarray, (m, ≥dim, ≥dim)
+        Their covariances [m²] (the position block first).
+    used : ndarray, (m,)
+        The arrivals each fix kept.
+    heard : ndarray, (m,)
+        The arrivals of each ping.
+    chi2 : ndarray, (m,)
+        Each fix's sum of squared normalised residuals.
+    dim : int
+
+    Returns
+    -------
+    ndarray of bool, (m,)
+    """
+    from scipy.stats import chi2 as chi2_dist
+
+    used, heard = np.asarray(used), np.asarray(heard)
+    finite = np.isfinite(positions).all(axis=1) & np.isfinite(chi2)
+    redundant = (used >= dim + 2) & ((used == heard) | (used >= dim + 3))
+    dof = np.maximum(used - dim - 1, 1)
+    passes = np.where(finite, chi2, np.inf) <= chi2_dist.ppf(0.999, dof)
+    with np.errstate(invalid="ignore"):
+        spread = np.sqrt(np.trace(covariances[:, :dim, :dim], axis1=1, axis2=2))
+    return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS)
+
+
+def _distance2(e: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """``eᵀ C⁻¹ e`` per row of e (k, 2) and C (k, 2, 2); inf where C is singular."""
+    det = C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] * C[:, 1, 0]
+    num = C[:, 1, 1] * e[:, 0] ** 2 - (C[:, 0, 1] + C[:, 1, 0]) * e[:, 0] * e[:, 1] + C[:, 0, 0] * e[:, 1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(det > 0, num / det, np.inf)
+
+
+def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarray, fixes: np.ndarray,
+                fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
+                max_speed: float = MAX_SPEED) -> Quality:
+    """Each estimate of a track checked against the trusted single-ping fixes and the physical speed (module
+    docstring), on the horizontal position.
+
+    Parameters
+    ----------
+    times : ndarray, (m,)
+        The estimates' emission times [s], increasing.
+    positions : ndarray, (m, ≥2)
+        The estimates [m].
+    covariances : ndarray, (m, ≥2, ≥2)
+        Their covariances [m²].
+    fixes : ndarray, (m, ≥2)
+        The single-ping fixes of the same pings [m], NaN where none.
+    fix_covariances : ndarray, (m, ≥2, ≥2)
+        Their covariances [m²].
+    trusted : ndarray of bool, (m,)
+        Which fixes are trusted (:func:`trusted_fixes`).
+    restarts : ndarray of bool, (m,), optional
+        Where the estimator started again (``restart`` unless flagged).
+    max_speed : float
+        [m/s].
+
+    Returns
+    -------
+    Quality
+    """
+    t = np.asarray(times, float)
+    p = np.asarray(positions, float)[:, :2]
+    P = np.asarray(covariances, float)[:, :2, :2]
+    m = len(t)
+    fx, C = np.asarray(fixes, float)[:, :2], np.asarray(fix_covariances, float)[:, :2, :2]
+    trusted = np.asarray(trusted, bool) & np.isfinite(fx).all(axis=1)
+    P = np.where(np.isfinite(P), P, 0.0)
+    fix_bad = np.zeros(m, bool)
+    agree = np.zeros(m, bool)
+    k = np.flatnonzero(trusted)
+    if len(k):
+        d2 = _distance2(p[k] - fx[k], P[k] + C[k])
+        fix_bad[k] = ~(d2 <= FIX_GATE)
+        agree[k] = d2 <= FIX_GATE
+    # a stretch between two disagreeing trusted fixes with no agreeing one between
+    stretch = np.zeros(m, bool)
+    checked = np.flatnonzero(trusted)
+    bad_runs = fix_bad[checked]
+    for a, b in zip(checked[:-1][bad_runs[:-1] & bad_runs[1:]], checked[1:][bad_runs[:-1] & bad_runs[1:]]):
+        stretch[a:b + 1] = True
+    # out of reach of the nearest trusted fixes before and after
+    reach = np.zeros(m, bool)
+    if len(k):
+        before = np.searchsorted(k, np.arange(m), side="right") - 1
+        after = np.searchsorted(k, np.arange(m), side="left")
+        ok_any = np.zeros(m, bool)
+        has_any = np.zeros(m, bool)
+        for side in (before, after):
+            valid = (side >= 0) & (side < len(k))
+            j = k[np.clip(side, 0, len(k) - 1)]
+            spread = np.sqrt(np.clip(np.linalg.eigvalsh(P + C[j])[:, -1], 0, None))
+            dist = np.linalg.norm(p - fx[j], axis=1)
+            ok_any |= valid & (dist <= np.sqrt(FIX_GATE) * spread + max_speed * np.abs(t - t[j]))
+            has_any |= valid
+        reach = has_any & ~ok_any & ~trusted
+    # the physical speed between successive estimates
+    speed = np.zeros(m, bool)
+    if m > 1:
+        dt = np.diff(t)
+        step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        slack = 3.0 * np.sqrt(np.trace(P[1:], axis1=1, axis2=2) + np.trace(P[:-1], axis1=1, axis2=2))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fast = ~(step <= max_speed * np.abs(dt) + slack)
+        speed[1:] |= fast
+        speed[:-1] |= fast
+    finite = np.isfinite(p).all(axis=1)
+    flagged = fix_bad | stretch | reach | speed | ~finite
+    quality = np.full(m, "ok", dtype=object)
+    if restarts is not None:
+        quality[np.asarray(restarts, bool)] = "restart"
+    quality[flagged] = "flagged"
+    return Quality(quality.astype(str), fix_bad, stretch, reach, speed)
+
+
+__all__ = ["FIX_GATE", "MAX_SPEED", "QUALITY", "TRUSTED_FIX_DRMS", "Quality", "check_track", "trusted_fixes"]

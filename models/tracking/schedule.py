@@ -1,0 +1,335 @@
+"""When a tag pings: the field's ping types as the time between successive rows of a TOA matrix.
+
+A tag emits on its own clock. The ping types of acoustic telemetry (Baktoft et al. 2017; YAPS's ``pingType``):
+
+* ``sbi``, a **stable burst interval**: every ``Δ`` seconds, ``Δ`` known only roughly and drifting slowly (the
+  tracker's state carries it). Successive rows of the matrix are ``n_k Δ`` apart, ``n_k`` the pings elapsed
+  (1, or more where rows are missing: a gap, a ping nobody heard);
+* ``rbi``, a **random burst interval**: each emission a uniform draw ``U(min, max)`` after the previous one (the
+  collision avoidance of Innovasea/Vemco, Thelma Biotel and Lotek fish tags, e.g. 20–40 s or 60–180 s). The
+  interval is not a state that drifts: each step is its own unknown;
+* ``pbi``, a **pseudo-random burst interval**: the intervals follow a sequence the maker gives (a table), aligned
+  here to the rows by their first arrivals.
+
+The tracker's motion model runs on **time, not ping count**: step k (from row k to row k + 1) lasts
+``T_k = n_k Δ + o_k`` [s], where ``(n_k, o_k)`` is ``(n_k, 0)`` for ``sbi`` and ``(0, o_k)`` for ``rbi`` and ``pbi``
+(``o_k`` the step's own duration), and the white-noise acceleration's covariance grows with ``T_k`` (Bar-Shalom, Li
+& Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001, § 6.2), so gaps, missing
+rows and random intervals are one case.
+
+How the random interval enters a Gaussian filter and the smoother's quadratic cost: the emission time's step is
+``T_k`` with a Gaussian error ``σ_k``. For ``rbi`` its centre ``o_k`` is the step of the rows' **first arrivals**
+(each ping's earliest time of arrival), which differs from the step of the emissions by the change of the first
+arrival's travel time, at most the array's crossing time ``D / c`` (D the largest distance between two receivers):
+``σ_k = D / c``. This is tighter than the uniform's own spread (its standard deviation ``(max − min) / √12``, 5.8 s
+for U(20, 40) s) by two orders of magnitude, and it holds for any ``min``, ``max`` and any missing row; the
+arrivals then fix each emission time to ``σ_toa`` (the uniform's bounds add nothing the arrivals do not). The
+bounds are kept as a check (:func:`build_schedule`).
+
+Units: seconds [s].
+
+References
+----------
+Baktoft, Gjelland, Økland, Thygesen, "Positioning of aquatic animals based on time-of-arrival and random walk
+models using YAPS (Yet Another Positioning Solver)", Scientific Reports 7:14294, 2017,
+doi:10.1038/s41598-017-14278-z (the ping types and their emission-time models).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+
+#: The ping types, by the field's names.
+PING_TYPES = {"sbi": "stable burst interval", "rbi": "random burst interval",
+              "pbi": "pseudo-random burst interval (a known sequence)"}
+#: A step counts as a gap (a new track segment, reported) when it is longer than this many typical steps and than
+#: :data:`GAP_MIN_S`.
+GAP_FACTOR = 10.0
+GAP_MIN_S = 60.0
+#: The smallest emission-time step error of ``rbi`` and ``pbi`` steps [s] (a compact array's crossing time).
+MIN_STEP_SIGMA = 1e-3
+#: Most missed pings one step of a ``pbi`` sequence's alignment bridges.
+PBI_MAX_MISSED = 64
+
+
+@dataclass(frozen=True)
+class PingSchedule:
+    """The steps between successive rows of a TOA matrix (m rows, m − 1 steps).
+
+    Attributes
+    ----------
+    kind : str
+        ``sbi``, ``rbi`` or ``pbi`` (:data:`PING_TYPES`).
+    interval : float
+        The nominal interval Δ [s] (``sbi``: the state's start; ``rbi``, ``pbi``: the typical step).
+    count : ndarray, (m − 1,)
+        ``n_k``: intervals Δ in step k (``sbi``; 0 otherwise).
+    offset : ndarray, (m − 1,)
+        ``o_k``: the step's fixed duration [s] (``rbi``, ``pbi``; 0 for ``sbi``).
+    te_sigma : ndarray, (m − 1,)
+        The standard deviation of the emission time's step about ``n_k Δ + o_k`` [s].
+    drift_sigma : ndarray, (m − 1,)
+        The standard deviation of Δ's random-walk step [s].
+    bounds : tuple of float or None
+        ``rbi``: the interval's (min, max) [s], given or seen.
+    gaps : tuple of int
+        The steps longer than the gap bound (:data:`GAP_FACTOR`): each starts a new track segment.
+    source : str
+        How the type was chosen: ``given`` or ``inferred``.
+    """
+
+    kind: str
+    interval: float
+    count: np.ndarray
+    offset: np.ndarray
+    te_sigma: np.ndarray
+    drift_sigma: np.ndarray
+    bounds: tuple[float, float] | None = None
+    gaps: tuple[int, ...] = ()
+    source: str = "given"
+
+    def steps(self, interval: float | None = None) -> np.ndarray:
+        """The steps' durations ``n_k Δ + o_k`` [s] (m − 1,), at Δ = ``interval`` (default the nominal one)."""
+        return self.count * (self.interval if interval is None else interval) + self.offset
+
+    def times(self) -> np.ndarray:
+        """The rows' times from the first [s] (m,) at the nominal Δ."""
+        return np.r_[0.0, np.cumsum(self.steps())]
+
+    def segments(self) -> list[tuple[int, int]]:
+        """The track's segments: (first row, last row + 1) between the gaps."""
+        edges = [0, *[g + 1 for g in self.gaps], len(self.count) + 1]
+        return list(zip(edges[:-1], edges[1:]))
+
+    def sliced(self, start: int) -> PingSchedule:
+        """The schedule of the rows from ``start`` on."""
+        return replace(self, count=self.count[start:], offset=self.offset[start:], te_sigma=self.te_sigma[start:],
+                       drift_sigma=self.drift_sigma[start:], gaps=tuple(g - start for g in self.gaps if g >= start))
+
+    @classmethod
+    def stable(cls, m: int, interval: float, jitter: float, drift: float) -> PingSchedule:
+        """Every row one interval after the previous (the stable burst interval with no row missing)."""
+        ones = np.ones(max(m - 1, 0))
+        return cls("sbi", float(interval), ones, 0.0 * ones, jitter * ones, drift * ones)
+
+
+def first_arrivals(toa: np.ndarray) -> np.ndarray:
+    """Each row's earliest time of arrival [s] (m,), NaN where nobody heard the ping; ``toa`` (m, n) [s]."""
+    toa = np.asarray(toa, float)
+    heard = np.isfinite(toa).any(axis=1)
+    out = np.full(len(toa), np.nan)
+    out[heard] = np.nanmin(toa[heard], axis=1)
+    return out
+
+
+def first_arrival_steps(toa: np.ndarray) -> np.ndarray:
+    """The steps of the rows' first arrivals [s] (m − 1,); a row nobody heard takes a share of the step across it
+    (its time interpolated by row).
+
+    Raises
+    ------
+    ModelError
+        If fewer than 2 rows were heard, or the first arrivals decrease (the rows are not in time order).
+    """
+    first = first_arrivals(toa)
+    heard = np.flatnonzero(np.isfinite(first))
+    if len(heard) < 2:
+        raise ModelError(f"toa: {len(heard)} pings heard; allowed: at least 2")
+    back = np.flatnonzero(np.diff(first[heard]) <= 0)
+    if len(back):
+        k = heard[back[0] + 1]
+        raise ModelError(f"toa: row {k + 1}'s first arrival ({first[k]:.6f} s) is earlier than row "
+                         f"{heard[back[0]] + 1}'s "
+                         f"({first[heard[back[0]]]:.6f} s) or the same; allowed: rows of successive pings in time order")
+    times = np.interp(np.arange(len(first)), heard, first[heard])
+    return np.diff(times)
+
+
+def crossing_time(receivers: np.ndarray, c: float) -> float:
+    """The array's crossing time [s]: the largest distance between two receivers (n, dim) [m] over the sound speed
+    ``c`` [m/s], at least :data:`MIN_STEP_SIGMA`."""
+    r = np.asarray(receivers, float)
+    span = float(np.max(np.linalg.norm(r[:, None] - r[None], axis=2))) if len(r) > 1 else 0.0
+    return max(span / c, MIN_STEP_SIGMA)
+
+
+@dataclass(frozen=True)
+class InferredType:
+    """What :func:`infer_ping_type` saw: the type, the typical step Δ [s], the spacing's bounds (2nd and 98th
+    percentiles of the single steps) [s] and the residual spread (the 90th percentile of the steps' distance to a
+    whole number of Δ) [s]."""
+
+    kind: str
+    interval: float
+    bounds: tuple[float, float]
+    spread: float
+
+
+def infer_ping_type(toa: np.ndarray, crossing: float) -> InferredType:
+    """The ping type the rows' first arrivals show: ``sbi`` when their steps lie within the array's crossing time
+    (the first arrival's travel time changes by less) of a whole number of the typical step, else ``rbi``.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    crossing : float
+        The array's crossing time [s] (:func:`crossing_time`).
+
+    Returns
+    -------
+    InferredType
+
+    Raises
+    ------
+    ModelError
+        As :func:`first_arrival_steps`, or if no two rows are apart in time.
+    """
+    d = first_arrival_steps(toa)
+    positive = d[d > 0]
+    if not len(positive):
+        raise ModelError("toa: no two pings are apart in time; allowed: rows of successive pings")
+    delta = float(np.median(positive))
+    n = np.maximum(np.round(d / delta), 1.0)
+    residual = np.abs(d - n * delta)
+    spread = float(np.percentile(residual, 90))
+    single = d[n == 1]
+    bounds = (float(np.percentile(single, 2)), float(np.percentile(single, 98))) if len(single) else (delta, delta)
+    kind = "sbi" if spread <= 2.0 * crossing else "rbi"
+    return InferredType(kind, delta, bounds, spread)
+
+
+def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, drift: float, crossing: float,
+                   bounds: tuple[float, float] | None = None, sequence: np.ndarray | None = None,
+                   source: str = "given") -> PingSchedule:
+    """The steps between the rows of ``toa`` for a ping type (module docstring).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    kind : str
+        ``sbi``, ``rbi`` or ``pbi``.
+    interval : float
+        The nominal interval Δ [s] (``sbi``), or the typical step (``rbi``).
+    jitter : float
+        The emission time's error per ping beyond the model [s] (``sbi``, ``pbi``).
+    drift : float
+        Δ's random-walk step per ping [s].
+    crossing : float
+        The array's crossing time [s] (:func:`crossing_time`): the step error of ``rbi`` steps.
+    bounds : (float, float), optional
+        ``rbi``: the interval's (min, max) [s]; a single step (no row missing) shorter than ``min`` by more than
+        the crossing time is refused.
+    sequence : ndarray, optional
+        ``pbi``: the intervals [s] in the tag's order, repeating (:func:`align_sequence`).
+    source : str
+        ``given`` or ``inferred`` (kept in the schedule).
+
+    Returns
+    -------
+    PingSchedule
+
+    Raises
+    ------
+    ModelError
+        An unknown type, a bad interval, a ``pbi`` without a sequence, or steps that break the given bounds.
+    """
+    if kind not in PING_TYPES:
+        raise ModelError(f"ping type: {kind!r}; allowed: {', '.join(PING_TYPES)}")
+    if not (np.isfinite(interval) and interval > 0):
+        raise ModelError(f"burst interval: {interval} s; allowed: a positive number of seconds")
+    d = first_arrival_steps(toa)
+    zeros = np.zeros_like(d)
+    if kind == "sbi":
+        n = np.maximum(np.round(d / interval), 1.0)
+        count, offset, te, dr = n, zeros, jitter * np.sqrt(n), drift * np.sqrt(n)
+    elif kind == "rbi":
+        if bounds is not None:
+            low, high = bounds
+            if not 0 < low <= high:
+                raise ModelError(f"burst interval: {low}:{high} s; allowed: 0 < min <= max")
+            short = np.flatnonzero(d < low - crossing)
+            if len(short):
+                k = int(short[0])
+                raise ModelError(f"burst interval: rows {k + 1} and {k + 2} are {d[k]:.3f} s apart by their first "
+                                 f"arrivals, below the random interval's min {low:g} s; allowed: the tag's "
+                                 "--burst-interval MIN:MAX")
+        count, offset, te, dr = zeros, d.copy(), np.full_like(d, crossing), np.full_like(d, drift)
+    else:
+        if sequence is None or not len(sequence):
+            raise ModelError("ping type pbi: no burst sequence; allowed: --burst-sequence FILE (the intervals [s])")
+        offset, matched = align_sequence(d, np.asarray(sequence, float), crossing)
+        count = zeros
+        te = np.where(matched, np.maximum(jitter, MIN_STEP_SIGMA), crossing)
+        dr = np.full_like(d, drift)
+    steps = count * interval + offset
+    typical = float(np.median(steps)) if len(steps) else interval
+    gaps = tuple(int(k) for k in np.flatnonzero(steps > max(GAP_FACTOR * typical, GAP_MIN_S)))
+    return PingSchedule(kind, float(interval), count, offset, te, dr, bounds, gaps, source)
+
+
+def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> tuple[np.ndarray, np.ndarray]:
+    """A pseudo-random tag's interval sequence aligned to the rows' first-arrival steps.
+
+    Every phase of the (repeating) sequence is tried: from it, each step of the rows takes as many of the next
+    intervals (1 to :data:`PBI_MAX_MISSED`: pings nobody heard) as bring their sum nearest to the step; a step
+    matches when that sum is within twice the crossing time. The phase with the most matches is kept.
+
+    Parameters
+    ----------
+    steps : ndarray, (k,)
+        The rows' first-arrival steps [s] (:func:`first_arrival_steps`).
+    sequence : ndarray, (L,)
+        The tag's intervals [s], positive.
+    crossing : float
+        The array's crossing time [s].
+
+    Returns
+    -------
+    durations : ndarray, (k,)
+        Each step's duration [s]: the sequence's sum where it matched, the first-arrival step elsewhere.
+    matched : ndarray of bool, (k,)
+
+    Raises
+    ------
+    ModelError
+        A sequence of non-positive or non-finite intervals, or one no phase of which matches half the steps.
+    """
+    if not (np.isfinite(sequence).all() and (sequence > 0).all()):
+        raise ModelError("burst sequence: allowed: positive intervals [s]")
+    L, tolerance = len(sequence), 2.0 * crossing
+    period, partial = float(sequence.sum()), np.r_[0.0, np.cumsum(sequence)]
+    mean = period / L
+
+    def elapsed(a: np.ndarray | int) -> np.ndarray:
+        """The sum of the first ``a`` intervals of the repeating sequence [s]."""
+        return (np.asarray(a) // L) * period + partial[np.asarray(a) % L]
+
+    ahead = np.arange(1, PBI_MAX_MISSED + 1)
+    best = (-1, None, None)
+    for phase in range(L):
+        j, durations, matched = phase, np.array(steps, float), np.zeros(len(steps), bool)
+        for k, d in enumerate(steps):
+            sums = elapsed(j + ahead) - elapsed(j)
+            r = int(np.argmin(np.abs(sums - d)))
+            if abs(sums[r] - d) <= tolerance:
+                durations[k], matched[k] = sums[r], True
+                j += r + 1
+            else:  # lost the sequence here: the nearest whole ping count by the mean interval
+                j += max(int(round(d / mean)), 1)
+        if matched.sum() > best[0]:
+            best = (int(matched.sum()), durations, matched)
+    if best[0] < 0.5 * len(steps):
+        raise ModelError(f"burst sequence: {max(best[0], 0)} of {len(steps)} steps match the sequence at its best "
+                         "phase; allowed: the tag's own sequence (its intervals in order)")
+    return best[1], best[2]
+
+
+__all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PBI_MAX_MISSED", "PING_TYPES", "InferredType", "PingSchedule",
+           "align_sequence", "build_schedule", "crossing_time", "first_arrival_steps", "first_arrivals",
+           "infer_ping_type"]
