@@ -142,9 +142,9 @@ def first_arrival_steps(toa: np.ndarray) -> np.ndarray:
     back = np.flatnonzero(np.diff(first[heard]) <= 0)
     if len(back):
         k = heard[back[0] + 1]
-        raise ModelError(f"toa: row {k + 1}'s first arrival ({first[k]:.6f} s) is earlier than row "
-                         f"{heard[back[0]] + 1}'s "
-                         f"({first[heard[back[0]]]:.6f} s) or the same; allowed: rows of successive pings in time order")
+        j = heard[back[0]]
+        raise ModelError(f"toa: row {k + 1}'s first arrival ({first[k]:.6f} s) is not after row {j + 1}'s "
+                         f"({first[j]:.6f} s); allowed: rows of successive pings in time order")
     times = np.interp(np.arange(len(first)), heard, first[heard])
     return np.diff(times)
 
