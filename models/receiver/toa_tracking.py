@@ -940,6 +940,9 @@ class RobustTrack:
         Which of the starts given gave ``x`` (the lowest cost).
     start_names : tuple of str
         What each start was (:func:`robust_track`: ``fixes``, ``graduated``, ``rts``; empty when not named).
+    P_lag : ndarray, (m − 1, s, s), or None
+        The covariances of successive states, ``cov(x_k+1, x_k)`` (with ``P``; the lag-one blocks of the same
+        inverse).
     """
 
     x: np.ndarray
@@ -949,6 +952,7 @@ class RobustTrack:
     iterations: int
     start: int
     start_names: tuple[str, ...] = ()
+    P_lag: np.ndarray | None = None
 
 
 def observed_information(z: np.ndarray, dof: float = ROBUST_DOF) -> np.ndarray:
@@ -1045,20 +1049,24 @@ def _banded_solve(D, B, g):
     return solveh_banded(ab, g.ravel()).reshape(m, s)
 
 
-def _block_covariance(D, B):
+def _block_covariance(D, B, lag=False):
     """The diagonal blocks (m, s, s) of N⁻¹ for the block-tridiagonal N of :func:`_banded_solve` (the block
-    elimination and its backward pass: the Rauch-Tung-Striebel recursion in information form)."""
+    elimination and its backward pass: the Rauch-Tung-Striebel recursion in information form); with ``lag`` also
+    its blocks (k + 1, k) (m − 1, s, s), ``−(S_k⁻¹ B_k N⁻¹_k+1,k+1)ᵀ``."""
     m = len(D)
     Sinv = np.empty_like(D)
     Sinv[0] = np.linalg.inv(D[0])
     for k in range(1, m):
         Sinv[k] = np.linalg.inv(D[k] - B[k - 1].T @ Sinv[k - 1] @ B[k - 1])
     cov = np.empty_like(D)
+    cross = np.empty((max(m - 1, 0),) + D.shape[1:])
     cov[-1] = Sinv[-1]
     for k in range(m - 2, -1, -1):
         G = Sinv[k] @ B[k]
+        cross[k] = -(G @ cov[k + 1]).T
         cov[k] = Sinv[k] + G @ cov[k + 1] @ G.T
-    return 0.5 * (cov + cov.transpose(0, 2, 1))
+    cov = 0.5 * (cov + cov.transpose(0, 2, 1))
+    return (cov, cross) if lag else cov
 
 
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
@@ -1171,13 +1179,13 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     best = runs[index]
     iterate(best, iterations - best["done"])
     X, (z, w, Jz, _, F, cost) = best["X"], best["terms"]
-    P = None
+    P = lag = None
     if covariance:
-        P = _block_covariance(*_normal_blocks(m, s, dim, heard, observed_information(z, dof), Jz, Li,
-                                              -np.einsum("kij,kjl->kil", Li, F), settings))
+        P, lag = _block_covariance(*_normal_blocks(m, s, dim, heard, observed_information(z, dof), Jz, Li,
+                                                   -np.einsum("kij,kjl->kil", Li, F), settings), lag=True)
     weights = np.zeros((m, n))
     weights[heard] = w
-    return RobustTrack(X, P, weights, cost, best["done"], index)
+    return RobustTrack(X, P, weights, cost, best["done"], index, P_lag=lag)
 
 
 def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray,

@@ -5,11 +5,19 @@ checked against what the same data say without the motion model:
 
 * the **trusted single-ping fixes**: a fix of dim + 2 receivers or more (one redundant arrival at least) that kept
   every arrival of its ping or still has dim + 3, passed its own χ² test, and whose DRMS is at most
-  :data:`TRUSTED_FIX_DRMS`. At a ping with such a fix, the track must lie within the χ² gate :data:`FIX_GATE` of
-  it, against the two covariances summed (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking
-  and Navigation*, Wiley 2001, § 5.4: the normalised distance of two independent estimates of one quantity);
-  between two trusted fixes the track disagrees with, and no trusted fix it agrees with, the whole stretch is lost;
-* at a ping without a trusted fix, the track must be reachable from the nearest trusted fixes before and after it:
+  :data:`TRUSTED_FIX_DRMS`. At a ping with such a fix, the track agrees with it when it lies within the χ² gate
+  :data:`FIX_GATE` of it against the two covariances summed (Bar-Shalom, Li & Kirubarajan, *Estimation with
+  Applications to Tracking and Navigation*, Wiley 2001, § 5.4: the normalised distance of two independent estimates
+  of one quantity), or within :data:`FIX_SLACK` (a multipath arrival the fix kept moves it by metres, where the two
+  covariances are of decimetres). Where they disagree, the one more of the ping's arrivals agree with
+  (:func:`explained`) is taken as right: the track is off at that ping when the fix explains more arrivals than the
+  track, else the fix is off (a multipath arrival it kept). An estimate that explains fewer than three arrivals of
+  its ping (too few to position itself) agrees with no fix beyond :data:`FIX_SLACK`, however large its covariance,
+  and is flagged there on its own;
+* one ping where the track is off, between pings where it agrees, may be multipath the fix and the track read
+  differently: from two successive trusted fixes where the track is off, with no agreeing fix between, the whole
+  stretch is lost (to the end of the record where no agreeing fix follows, from its start where none precedes);
+* at a ping without a trusted fix, the track must be reachable from the nearest trusted fixes before or after it:
   within the gate's radius plus :data:`MAX_SPEED` times the time between (a tag does not outrun that);
 * the **physical speed** between successive estimates: at most :data:`MAX_SPEED` beyond their own uncertainty.
 
@@ -25,19 +33,26 @@ import numpy as np
 
 #: χ²(2) at 1 − 10⁻⁴: the gate of a track against a trusted fix (2-D, the horizontal position).
 FIX_GATE = 18.42
+#: A track within this distance of a trusted fix agrees with it, whatever their covariances [m].
+FIX_SLACK = 5.0
 #: The largest DRMS of a trusted single-ping fix [m].
 TRUSTED_FIX_DRMS = 10.0
 #: The fastest a tracked tag moves [m/s] (a towed pinger, a fish's burst; a limit, not a typical speed).
 MAX_SPEED = 10.0
+#: An arrival agrees with a position when its time, less the travel time from there, is within this many standard
+#: deviations of a time of arrival of the median over the ping's arrivals (the robust smoother's weight of 0.1 at
+#: ν = 3, :data:`~sblsim.models.receiver.toa_tracking.ROBUST_KEPT_WEIGHT`).
+EXPLAINED_SIGMAS = 6.1
 #: The quality marks, in order of severity.
 QUALITY = ("ok", "restart", "flagged")
 
 
 @dataclass(frozen=True)
 class Quality:
-    """What :func:`check_track` returns for m pings: ``quality`` (m,) of str (:data:`QUALITY`), and the reasons per
-    ping as bool (m,) arrays: ``fix`` (outside its own trusted fix), ``stretch`` (between two such), ``reach`` (out
-    of reach of the nearest trusted fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`)."""
+    """What :func:`check_track` returns for m pings: ``quality`` (m,) of str (:data:`QUALITY`), and per ping as bool
+    (m,) arrays: ``fix`` (outside its own trusted fix: not flagged alone), and the reasons of a flag, ``stretch``
+    (from one such ping to the next with no agreeing fix between), ``reach`` (out of reach of the nearest trusted
+    fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`)."""
 
     quality: np.ndarray
     fix: np.ndarray
@@ -85,6 +100,38 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS)
 
 
+def explained(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, c: float, sigma_toa: float) -> np.ndarray:
+    """How many of each ping's arrivals agree with a position (module docstring).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        [m].
+    positions : ndarray, (m, dim)
+        The positions to test [m] (NaN: none agree).
+    c : float
+        Sound speed [m/s].
+    sigma_toa : float
+        [s].
+
+    Returns
+    -------
+    ndarray of int, (m,)
+    """
+    toa = np.asarray(toa, float)
+    d = np.linalg.norm(np.asarray(positions, float)[:, None, :] - np.asarray(receivers, float)[None], axis=2)
+    emitted = toa - d / c
+    heard = np.isfinite(emitted)
+    out = np.zeros(len(toa), int)
+    rows = heard.any(axis=1)
+    if rows.any():
+        centre = np.nanmedian(emitted[rows], axis=1)
+        out[rows] = (np.abs(emitted[rows] - centre[:, None]) <= EXPLAINED_SIGMAS * sigma_toa).sum(axis=1)
+    return out
+
+
 def _distance2(e: np.ndarray, C: np.ndarray) -> np.ndarray:
     """``eᵀ C⁻¹ e`` per row of e (k, 2) and C (k, 2, 2); inf where C is singular."""
     det = C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] * C[:, 1, 0]
@@ -95,7 +142,8 @@ def _distance2(e: np.ndarray, C: np.ndarray) -> np.ndarray:
 
 def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarray, fixes: np.ndarray,
                 fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
-                max_speed: float = MAX_SPEED) -> Quality:
+                max_speed: float = MAX_SPEED, explained: np.ndarray | None = None,
+                fix_used: np.ndarray | None = None) -> Quality:
     """Each estimate of a track checked against the trusted single-ping fixes and the physical speed (module
     docstring), on the horizontal position.
 
@@ -117,6 +165,9 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         Where the estimator started again (``restart`` unless flagged).
     max_speed : float
         [m/s].
+    explained, fix_used : ndarray, (m,), optional
+        The arrivals that agree with the estimate and with the fix at each ping (:func:`explained`); without them a
+        disagreeing fix counts against the track.
 
     Returns
     -------
@@ -130,18 +181,32 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     trusted = np.asarray(trusted, bool) & np.isfinite(fx).all(axis=1)
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
+    alone = np.zeros(m, bool)  # off a trusted fix while explaining too few arrivals to position itself
     agree = np.zeros(m, bool)
     k = np.flatnonzero(trusted)
     if len(k):
         d2 = _distance2(p[k] - fx[k], P[k] + C[k])
-        fix_bad[k] = ~(d2 <= FIX_GATE)
-        agree[k] = d2 <= FIX_GATE
+        near = np.linalg.norm(p[k] - fx[k], axis=1) <= FIX_SLACK
+        agree[k] = (d2 <= FIX_GATE) | near
+        fix_bad[k] = ~agree[k]
+        if explained is not None and fix_used is not None:
+            ours, theirs = np.asarray(explained)[k], np.asarray(fix_used)[k]
+            # an estimate that explains too few of its ping's arrivals to position itself agrees with nothing, however
+            # large its covariance
+            blind = (ours <= 2) & ~near
+            fix_bad[k] = (fix_bad[k] | blind) & (theirs > ours)
+            alone[k] = blind & (theirs > ours)
     # a stretch between two disagreeing trusted fixes with no agreeing one between
     stretch = np.zeros(m, bool)
     checked = np.flatnonzero(trusted)
     bad_runs = fix_bad[checked]
-    for a, b in zip(checked[:-1][bad_runs[:-1] & bad_runs[1:]], checked[1:][bad_runs[:-1] & bad_runs[1:]]):
-        stretch[a:b + 1] = True
+    for j in np.flatnonzero(bad_runs[:-1] & bad_runs[1:]):
+        stretch[checked[j]:checked[j + 1] + 1] = True
+    if len(checked) >= 2:  # a run of off pings at either end: lost to the end (no agreeing fix to come back to)
+        if bad_runs[-1] and bad_runs[-2]:
+            stretch[checked[-1]:] = True
+        if bad_runs[0] and bad_runs[1]:
+            stretch[:checked[0] + 1] = True
     # out of reach of the nearest trusted fixes before and after
     reach = np.zeros(m, bool)
     if len(k):
@@ -168,7 +233,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         speed[1:] |= fast
         speed[:-1] |= fast
     finite = np.isfinite(p).all(axis=1)
-    flagged = fix_bad | stretch | reach | speed | ~finite
+    flagged = stretch | alone | reach | speed | ~finite
     quality = np.full(m, "ok", dtype=object)
     if restarts is not None:
         quality[np.asarray(restarts, bool)] = "restart"
@@ -176,4 +241,5 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     return Quality(quality.astype(str), fix_bad, stretch, reach, speed)
 
 
-__all__ = ["FIX_GATE", "MAX_SPEED", "QUALITY", "TRUSTED_FIX_DRMS", "Quality", "check_track", "trusted_fixes"]
+__all__ = ["EXPLAINED_SIGMAS", "FIX_GATE", "FIX_SLACK", "MAX_SPEED", "QUALITY", "TRUSTED_FIX_DRMS", "Quality",
+           "check_track", "explained", "trusted_fixes"]

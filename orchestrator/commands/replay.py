@@ -184,10 +184,57 @@ def _receivers_kept(value: Any, where: str) -> list[str] | None:
     return names
 
 
+#: The ping types ``--ping-type`` takes (:data:`sblsim.models.tracking.schedule.PING_TYPES`).
+PING_TYPE_NAMES = ("sbi", "rbi", "pbi")
+#: The burst intervals ``--burst-interval`` takes [s].
+BURST_LIMITS = (0.1, 86400.0)
+
+
+def burst_interval_argument(value: Any, where: str) -> tuple[float, float] | None:
+    """A random burst interval: None, ``"MIN:MAX"`` [s] or a pair of numbers, 0.1 ≤ MIN ≤ MAX ≤ 86,400 s."""
+    if value is None:
+        return None
+    allowed = f"MIN:MAX [s] with {BURST_LIMITS[0]:g} <= MIN <= MAX <= {BURST_LIMITS[1]:g}, e.g. 20:40"
+    if isinstance(value, str):
+        parts = value.split(":")
+        try:
+            pair = tuple(float(p) for p in parts)
+        except ValueError:
+            raise ConfigError(f"{where}: {value[:40]!r}; allowed: {allowed}") from None
+    elif isinstance(value, (list, tuple)):
+        pair = tuple(value)
+    else:
+        raise ConfigError(f"{where}: {type(value).__name__}; allowed: {allowed}")
+    if len(pair) != 2 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in pair) or \
+            not all(np.isfinite(pair)) or not BURST_LIMITS[0] <= pair[0] <= pair[1] <= BURST_LIMITS[1]:
+        raise ConfigError(f"{where}: {str(value)[:40]!r}; allowed: {allowed}")
+    return float(pair[0]), float(pair[1])
+
+
+def ping_type_arguments(ping_type: Any, burst_interval: Any, burst_sequence: Any, names: tuple[str, str, str]
+                        ) -> tuple[str | None, tuple[float, float] | None, Path | None]:
+    """The ping type's arguments checked together (``names``: how the three are called where they were given)."""
+    if ping_type is not None and ping_type not in PING_TYPE_NAMES:
+        raise ConfigError(f"{names[0]}: {str(ping_type)[:40]!r}; allowed: {', '.join(PING_TYPE_NAMES)}")
+    interval = burst_interval_argument(burst_interval, names[1])
+    sequence = path_argument(burst_sequence, names[2])
+    if interval is not None and ping_type not in (None, "rbi"):
+        raise ConfigError(f"{names[1]}: only with a random burst interval ({names[0]} rbi)")
+    if sequence is not None and ping_type not in (None, "pbi"):
+        raise ConfigError(f"{names[2]}: only with a pseudo-random burst interval ({names[0]} pbi)")
+    if interval is not None and sequence is not None:
+        raise ConfigError(f"{names[1]}: not with {names[2]} (one ping type: rbi or pbi)")
+    if ping_type == "pbi" and sequence is None:
+        raise ConfigError(f"{names[0]} pbi: needs {names[2]} (the tag's intervals [s], one per row)")
+    return ping_type, interval, sequence
+
+
 def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | None = None,
                reference: str | Path | None = None, smooth: bool = True, sound_speed: float | None = None,
                receivers_kept: str | Sequence[str] | None = None, drop_detections: float = 0.0, seed: int = 0,
-               truth_sigma: float = 0.0, out: str | Path | None = None, force: bool = False) -> TrackResult:
+               truth_sigma: float = 0.0, ping_type: str | None = None,
+               burst_interval: str | tuple[float, float] | None = None, burst_sequence: str | Path | None = None,
+               out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -218,6 +265,13 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         In [0, 100] m: the truth's own error per horizontal axis (a GPS's, the tow's lever arm), added to each
         estimate's covariance in the NEES against it (``score.json``'s ``nees``, ``nees_median`` and
         ``truth_sigma_m``); default 0, the truth taken as exact.
+    ping_type : str, optional
+        ``sbi`` (a stable burst interval), ``rbi`` (random) or ``pbi`` (pseudo-random, a known sequence); default
+        the one the first arrivals' spacing shows (``summary["ping_type"]``; :mod:`sblsim.models.tracking.schedule`).
+    burst_interval : str or (float, float), optional
+        ``rbi``: the interval's bounds, ``"MIN:MAX"`` [s] (e.g. ``"20:40"``).
+    burst_sequence : str or Path, optional
+        ``pbi``: a file of the tag's intervals [s] in order, one per row (a file key).
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
         ``errors.csv`` there.
@@ -247,8 +301,11 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     if seed is None:
         raise ConfigError(f"seed: None is not allowed; allowed: an integer in [0, {MAX_SEED}]")
     truth_sigma = real_argument(truth_sigma, "truth_sigma", 0.0, MAX_TRUTH_SIGMA, "m")
+    kind, interval, sequence = ping_type_arguments(ping_type, burst_interval, burst_sequence,
+                                                   ("ping_type", "burst_interval", "burst_sequence"))
     target = prepare_out(out, force, "track.csv", "track")
-    outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed, truth_sigma)
+    outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed, truth_sigma, kind,
+                    interval, sequence)
     if target is not None:
         write(outcome, target)
     return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
@@ -306,6 +363,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, metavar="CONFIG",
                    help="the receiver's parameters, T and rate ratio: a built-in scenario or CONFIG.toml (default: "
                         "the configuration an exported log carries, else the semicircle scenario's)")
+    p.add_argument("--ping-type", choices=PING_TYPE_NAMES, default=None,
+                   help="--format toa: the tag's ping type: sbi (stable burst interval), rbi (random), pbi "
+                        "(pseudo-random, --burst-sequence); default inferred from the first arrivals' spacing")
+    p.add_argument("--burst-interval", default=None, metavar="MIN:MAX",
+                   help="--format toa: a random burst interval's bounds [s], e.g. 20:40 (rbi)")
+    p.add_argument("--burst-sequence", type=Path, default=None, metavar="FILE",
+                   help="--format toa: a pseudo-random tag's intervals [s] in order, one per row (pbi)")
     p.add_argument("--truth-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the truth's own error per horizontal axis [m] in [0, 100] (GPS, lever arm), "
                         "in the NEES against it (default 0: the truth taken as exact)")
@@ -327,7 +391,9 @@ def main(args: argparse.Namespace) -> int:
     given = [o for o, v in (("--receivers", args.receivers), ("--reference", args.reference),
                             ("--smooth", args.smooth), ("--sound-speed", args.sound_speed),
                             ("--receivers-kept", args.receivers_kept), ("--drop-detections", args.drop_detections),
-                            ("--seed", args.seed is not None), ("--truth-sigma", args.truth_sigma is not None)) if v]
+                            ("--seed", args.seed is not None), ("--truth-sigma", args.truth_sigma is not None),
+                            ("--ping-type", args.ping_type), ("--burst-interval", args.burst_interval),
+                            ("--burst-sequence", args.burst_sequence)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -382,6 +448,31 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
+def ping_type_line(summary: dict[str, Any]) -> str:
+    """The console's line on the ping type and the gaps of a track's ``summary``."""
+    from sblsim.models.tracking.schedule import PING_TYPES
+
+    p = summary["ping_type"]
+    seen = p["seen"]
+    how = "given" if p["source"] == "given" else (
+        f"inferred from the first arrivals' spacing: steps of {seen['steps_s'][0]:.4g}-{seen['steps_s'][1]:.4g} s, "
+        f"90 % within {seen['spread_s']:.3g} s of a whole number of {seen['typical_step_s']:.4g} s")
+    bounds = f" [{p['burst_interval_s'][0]:.4g}, {p['burst_interval_s'][1]:.4g}] s" if p["burst_interval_s"] else ""
+    gaps = summary["gaps_s"]
+    segments = (f"; {len(gaps)} gap{'s' * (len(gaps) > 1)} (longest {max(gaps):.0f} s): {len(gaps) + 1} track "
+                "segments") if gaps else ""
+    return f"ping type {p['type']} ({PING_TYPES[p['type']]}{bounds}; {how}){segments}"
+
+
+def quality_line(summary: dict[str, Any]) -> str:
+    """The console's line on the track's quality marks."""
+    main = summary["track"]
+    flagged = summary["flagged"].get(main, 0)
+    n = summary["fixed"].get(main, 0)
+    return (f"quality: {flagged} of {n} track rows flagged (off their own trusted single-ping fixes, or faster than "
+            f"the tag can move), {summary['restarts']} restarts of the EKF, {summary['trusted_fixes']} trusted fixes")
+
+
 def _main_toa(args: argparse.Namespace) -> int:
     """``sblsim replay TOA_FILE --format toa``: the track's lines printed."""
     if args.receivers is None:
@@ -391,7 +482,7 @@ def _main_toa(args: argparse.Namespace) -> int:
     if other or args.engine != "local":
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
-                          "--drop-detections, --seed, --out, --force")
+                          "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, --out, --force")
     speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", 1300.0, 1700.0,
                                                                 "m/s")
     kept = _receivers_kept(args.receivers_kept, "--receivers-kept")
@@ -405,8 +496,10 @@ def _main_toa(args: argparse.Namespace) -> int:
         if args.truth is None:
             raise ConfigError("--truth-sigma: only with --truth (the truth's own error in the NEES against it)")
         truth_sigma = real_argument(args.truth_sigma, "--truth-sigma", 0.0, MAX_TRUTH_SIGMA, "m")
+    kind, interval, sequence = ping_type_arguments(args.ping_type, args.burst_interval, args.burst_sequence,
+                                                   ("--ping-type", "--burst-interval", "--burst-sequence"))
     outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed,
-                    truth_sigma)
+                    truth_sigma, kind, interval, sequence)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
     write(outcome, out)
@@ -417,6 +510,11 @@ def _main_toa(args: argparse.Namespace) -> int:
     print(f"track of {args.log}: {s['pings']} pings at "
           f"{len(s['receivers'])} receivers{thinned}, sound speed {c['sound_speed_m_s']:.1f} m/s ({c['source']}), "
           f"ping interval {s['ping_interval_s']:.4f} s, in {s['wall_time_s']:.1f} s")
+    print("  " + ping_type_line(s))
+    quality = quality_line(s)
+    print("  " + quality)
+    if s["flagged"].get(s["track"]):
+        print(f"sblsim: warning: {quality}; see the quality column of track.csv", file=sys.stderr)
     names = ESTIMATOR_NAMES
     if outcome.score is not None:
         r = outcome.score

@@ -309,22 +309,24 @@ def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: s
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
           drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
-          burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None
+          burst_interval: tuple[float, float] | None = None, burst_sequence_path: Path | None = None
           ) -> TrackOutcome:
     """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
     (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`); ``truth_sigma`` [m] the truth's
-    own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval``,
-    ``burst_sequence`` as :func:`ping_schedule`."""
+    own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
+    :func:`ping_schedule`, ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
+    (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.toa import read_receivers, read_toa, read_track
+    from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
     matrix = read_toa(toa_path)
     receivers = read_receivers(receivers_path)
     truth = read_track(truth_path, "truth") if truth_path is not None else None
     reference = read_track(reference_path, "reference", increasing=False) if reference_path is not None else None
+    burst_sequence = read_burst_sequence(burst_sequence_path) if burst_sequence_path is not None else None
     toa, positions, names = _usable(matrix, receivers, receivers_kept)
     toa, dropped = drop_detections(toa, drop, seed)
     dim = positions.shape[1]
@@ -347,6 +349,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
     heard_count = np.isfinite(toa).sum(axis=1)
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim)
+    fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}
     segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
@@ -354,7 +357,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
              restarts: np.ndarray | None = None):
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
-                                 None if restarts is None else np.isin(ping, restarts))
+                                 None if restarts is None else np.isin(ping, restarts),
+                                 explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
+                                 fix_used=fix_explained[ping])
         with np.errstate(invalid="ignore"):
             sigmas = {f"sigma_{a}": np.sqrt(np.maximum(cov[:, k, k], 0.0)) for k, a in enumerate(columns)}
         frames[estimator] = pd.DataFrame({"estimator": estimator, "ping": ping, "time": t,
