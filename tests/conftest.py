@@ -9,6 +9,8 @@ another core idles. ``docs/architecture.md`` lists the slowest tests and the com
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -60,8 +62,14 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """Longest units first, the site build last (a stable sort: each unit keeps its order)."""
+    """Longest units first, the site build last (a stable sort: each unit keeps its order). Where the environment
+    names a file in ``SBLSIM_COLLECTED_MARKERS`` (tests/test_tiers.py), each test's id and markers are written there
+    (JSON) as collected, before ``-m`` selects."""
     items.sort(key=lambda item: _rank(unit_of(item.nodeid)))
+    target = os.environ.get("SBLSIM_COLLECTED_MARKERS")
+    if target and not hasattr(config, "workerinput"):
+        Path(target).write_text(json.dumps({item.nodeid: sorted({m.name for m in item.iter_markers()})
+                                            for item in items}))
 
 
 def pytest_xdist_make_scheduler(config, log):

@@ -304,6 +304,7 @@ def _cli_number(tmp_path: Path) -> float:
     return json.loads((tmp_path / "cli" / "summary.json").read_text())["e_tot_rms"]
 
 
+@pytest.mark.slow
 def test_the_one_line_example_prints_the_cli_number(tmp_path):
     line = "import sblsim; r = sblsim.run('semicircle', seed=1); print(r.summary['e_tot_rms'])"
     done = subprocess.run([sys.executable, "-c", line], cwd=tmp_path, capture_output=True, text=True, timeout=600)
@@ -324,6 +325,7 @@ NOTEBOOK = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_a_notebook_script_of_public_names_reproduces_the_cli_result(tmp_path):
     tree = ast.parse(NOTEBOOK)
     used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name)

@@ -545,6 +545,7 @@ def test_the_corpus_is_large():
     assert len(CASES) >= 60
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_bad_input_is_one_line_exit_2_and_changes_nothing(outcomes, case):
     proc, before, after = outcomes[case]

@@ -6,11 +6,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 import bench_design  # noqa: E402
 
 
+@pytest.mark.slow
 def test_the_timed_layouts_are_the_maps_and_the_search_is_faster():
     timed = bench_design.candidate_times(4, 1, map_samples=2)
     assert 0.0 < timed["search"] < timed["map"]

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import bench_campaign  # noqa: E402
@@ -13,6 +14,7 @@ from sblsim.orchestrator.cosim.config import load_config  # noqa: E402
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates  # noqa: E402
 
 
+@pytest.mark.slow
 def test_the_snr_chunk_times_both_detections_of_every_system(capsys):
     timed = bench_campaign.detection_timing(runs=3, duration=2.0, rounds=1)
     assert list(timed) == ["SBL", "LBL", "USBL"]

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -16,6 +17,7 @@ from sblsim.orchestrator.commands.common import load  # noqa: E402
 from sblsim.orchestrator.commands.run import run  # noqa: E402
 
 
+@pytest.mark.slow
 def test_the_site_run_is_timed_and_its_digest_is_the_runs():
     timed = bench_site.timed(bench_site._here, "lbl-field", 1)
     series = run(load("lbl-field", seed=0)).timeseries.select_dtypes("number").to_numpy(dtype=float)

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -15,6 +16,7 @@ import bench_tracking  # noqa: E402
 THINNED = "H2,H4,H6,H7,H11,H12,H17,H23"
 
 
+@pytest.mark.slow
 def test_the_replay_and_the_smoothers_are_timed_on_the_same_pings():
     r = bench_tracking.measure(1, THINNED, warm=False)
     assert r["pings"] == 3244 and r["replay_s"] > 0 and r["ekf_rts_s"] > 0 and r["robust_s"] > 0

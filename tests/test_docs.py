@@ -94,6 +94,7 @@ def site(tmp_path_factory):
     return out / "html"
 
 
+@pytest.mark.slow
 @pytest.mark.network
 def test_every_page_is_built(site):
     for page in PAGES:
@@ -107,6 +108,7 @@ def test_every_page_is_built(site):
         assert command in cli
 
 
+@pytest.mark.slow
 @pytest.mark.network
 def test_internal_links_reach_a_page_and_anchor_and_nothing_loads_from_the_network(site):
     parsed = {}

@@ -58,6 +58,7 @@ def _one_line(proc) -> str:
     return lines[0]
 
 
+@pytest.mark.slow
 def test_run_on_a_full_disk_writes_nothing(small_disk, tmp_path):
     disk, _ = small_disk
     line = _one_line(_sblsim("run", "semicircle", "--out", disk / "r", cwd=tmp_path))
@@ -65,6 +66,7 @@ def test_run_on_a_full_disk_writes_nothing(small_disk, tmp_path):
     assert list(disk.iterdir()) == []  # no half-written results, no staging folder
 
 
+@pytest.mark.slow
 def test_campaign_on_a_full_disk_resumes_to_the_same_runs(small_disk, tmp_path):
     disk, resize = small_disk
     (tmp_path / "tiny.toml").write_text(STUDY)
@@ -128,6 +130,7 @@ def test_the_log_and_its_truth_track_are_written_together(tmp_path):
     assert not (tmp_path / "new").exists()  # the folders made for it went with it
 
 
+@pytest.mark.slow
 def test_calibrate_a_log_on_a_full_disk_is_one_line(small_disk, tmp_path):
     """A log's calibration has a note (its a-priori positions are guessed): it is said after the write, so that a
     write that fails says one line."""
@@ -165,6 +168,7 @@ path = false
 """
 
 
+@pytest.mark.slow
 def test_design_on_a_full_disk_writes_nothing(small_disk, tmp_path):
     """The design's files (its json, its table, its scenario files and figures) are written at once: a full disk
     leaves none of them."""

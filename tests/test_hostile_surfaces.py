@@ -135,6 +135,7 @@ def test_the_gnatss_cases_differ_from_a_survey_that_converts(tmp_path):
     assert f"replies of {PINGS} pings written to log.csv" in proc.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_hostile_input_is_one_line_exit_2_and_changes_nothing(outcomes, case):
     proc, before, after, outside, untouched = outcomes[case]

@@ -29,6 +29,8 @@ import pytest
 
 from tests.helpers import share_compiled_objects
 
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("models", "orchestrator", "fmus", "pyproject.toml", "README.md")
 

@@ -52,7 +52,7 @@ SETUP_INSTALL = "python3 -m venv .venv && .venv/bin/pip install -e . && "
 #: the set-up's install, as this test leaves it out: the README's (followed by its commands) or a page's (alone)
 INSTALL = re.compile(r"^python3 -m venv \.venv && \.venv/bin/pip install -e \.(?: && |$)")
 NOT_RUN = {
-    'python3 -m venv .venv && .venv/bin/pip install -e ".[test]" && .venv/bin/python -m pytest -q':
+    'python3 -m venv .venv && .venv/bin/pip install -e ".[test]" && .venv/bin/python -m pytest -q -m "not slow"':
         "the test command itself",
 }
 NOT_RUN_MARK = "# not run:"
@@ -248,6 +248,7 @@ def _say_chain(tmp_path_factory, config, chain: str, outcome: str, copy: Path | 
     (folder / f"{chain}.{outcome}").write_text(str(copy or ""))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", PAGES)
 def test_the_page_blocks_run_in_order(chains, tmp_path_factory, request, page):
     name = CHAIN_OF[page]
@@ -309,6 +310,7 @@ def _run_page(fresh_copy: Path, shell: dict, page: str) -> None:
 CHAIN_WAIT = 3600.0
 
 
+@pytest.mark.slow
 def test_the_site_builds_from_the_copy_with_the_figures_the_run_made(tmp_path_factory, request, tmp_path):
     """After every page has run: ``sphinx-build -W`` of the first chain's copy of docs/, with the figures the
     second chain's pages made added, whose images are the bytes the pages' blocks wrote (the committed figures

@@ -57,6 +57,7 @@ def parse(stdout: str) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in rows.items()}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_plain_c_host_with_an_empty_environment_two_instances_and_both_uri_forms(fmu_dir, c_host, tmp_path, name):
     binary, guid, outputs = unpack(fmu_path(fmu_dir, name), tmp_path)
@@ -80,12 +81,14 @@ def test_plain_c_host_with_an_empty_environment_two_instances_and_both_uri_forms
     np.testing.assert_allclose(np.column_stack([ref[n][1:] for n in names]), a, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_wrong_guid_is_refused_with_a_log_line(fmu_dir, c_host, tmp_path):
     binary, guid, outputs = unpack(fmu_path(fmu_dir, "target"), tmp_path)
     proc = run_host(c_host, binary, "{not-the-guid}", f"file://{tmp_path}", outputs, "")
     assert proc.returncode == 3 and "does not match" in proc.stderr and "NULL" in proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
 @pytest.mark.parametrize("name", NAMES)
 def test_memcheck_finds_no_error_and_no_leak(fmu_dir, c_host, tmp_path, name):
@@ -118,6 +121,7 @@ def test_the_binary_needs_only_the_c_library(fmu_dir, tmp_path, name):
     assert not any(s.startswith(("sblsim_", "casadi_")) for s in exported)  # nothing else leaks out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_fmu_manipulation_toolbox_checker_reports_compliance(fmu_dir, name):
     from fmu_manipulation_toolbox.checker import get_checkers
@@ -149,6 +153,7 @@ def binary_format(path: Path) -> tuple[str, str]:
     raise AssertionError(f"{path.name}: unknown binary format")
 
 
+@pytest.mark.slow
 def test_zig_cross_compiles_windows_and_macos_binaries(tmp_path):
     """With zig (the ziglang package) an FMU also carries win64 and darwin64 binaries; darwin64, the one macOS
     folder of FMI 2.0, is a universal library with an x86_64 and an arm64 slice (read by macholib)."""
@@ -174,6 +179,7 @@ def test_zig_cross_compiles_windows_and_macos_binaries(tmp_path):
     assert {"linux64", "win64", "darwin64"} <= set(supported_platforms(str(fmu)))
 
 
+@pytest.mark.slow
 def test_zig_and_the_system_compiler_give_the_same_numbers(tmp_path):
     """A machine without a C compiler builds with zig; its FMU computes the same outputs to the bit."""
     from fmpy import simulate_fmu
@@ -187,6 +193,7 @@ def test_zig_and_the_system_compiler_give_the_same_numbers(tmp_path):
         np.testing.assert_array_equal(results[0][column], results[1][column])
 
 
+@pytest.mark.slow
 def test_the_fmu_rebuilds_from_its_own_sources(fmu_dir, c_host, tmp_path):
     """sources/ holds everything: compiling it gives a binary with the same outputs."""
     binary, guid, outputs = unpack(fmu_path(fmu_dir, "receiver_lsq"), tmp_path)
@@ -262,6 +269,7 @@ def run_channel(c_host: Path, fmu_dir: Path, tmp_path: Path, values: dict, steps
 TABLE = np.array([[0.0, 1500.0], [50.0, 1490.0], [200.0, 1470.0], [500.0, 1485.0], [1000.0, 1500.0]])
 
 
+@pytest.mark.slow
 def test_the_ray_channel_runs_in_the_plain_c_host_with_an_empty_environment(fmu_dir, c_host, tmp_path):
     """The channel FMU set by a plain C host (no Python, an empty environment) to ``propagation = ray`` through a
     table profile, with no eigenray table (every eigenray solved), a diver 300 m out and 178 m below beacon 1: the
@@ -282,6 +290,7 @@ def test_the_ray_channel_runs_in_the_plain_c_host_with_an_empty_environment(fmu_
     assert abs(tau - math.hypot(x, 178.0) / TABLE[:, 1].mean()) > 1e-5  # refraction shows
 
 
+@pytest.mark.slow
 def test_the_snr_channel_runs_in_the_plain_c_host_like_the_casadi_model_and_the_local_engine(fmu_dir, c_host,
                                                                                              tmp_path):
     """The channel FMU set by a plain C host (an empty environment) to ``detection = snr`` (eigenrays through a

@@ -189,6 +189,7 @@ def assert_sblsim_numbers(host: dict, ours: pd.DataFrame) -> None:
     assert ours["packet_valid"].any()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("site", SITES)
 def test_the_site_scenario_fmi3_fmus_setting_nothing_give_the_sblsim_run(site, fmu_dir, tmp_path):
     duration = f"simulation.duration={STEPS * load_plan(site).sampling_time!r}"

@@ -68,6 +68,7 @@ def test_fmpy_simulate_fmu_fed_a_recorded_run_reproduces_its_estimate(recorded, 
         np.testing.assert_allclose(result[f"est_{a}"][1:], series[f"est_{a}"].to_numpy(), rtol=0, atol=TOL)
 
 
+@pytest.mark.slow
 def test_codegen_receiver_example_reproduces_the_recorded_estimate(recorded, tmp_path):
     receiver, cfg, series = recorded
     _, params = receiver_parameters(cfg, receiver)
@@ -109,6 +110,7 @@ def test_codegen_refuses_a_bad_receiver_and_a_used_directory(tmp_path):
     assert (tmp_path / "b" / "keep.txt").read_text() == "mine" and len(list((tmp_path / "b").iterdir())) == 1
 
 
+@pytest.mark.slow
 def test_codegen_readme_run_line_reproduces_its_example(tmp_path):
     """The generated folder's own example, as its README runs it: ./receiver $(cat parameters.txt) < packets.txt
     gives the recorded run's estimates (expected.txt)."""

@@ -92,6 +92,7 @@ def _survey(rng, legs_true, c0, truth, n=200, noise=0.0):
     return Replies(tx, sigma, rx, sigma, twtt, k)
 
 
+@pytest.mark.slow
 def test_the_solver_recovers_a_rigid_shift_through_the_profile(ctd):
     """Noise-free times through the profile: the eigenray solver recovers the shift exactly, a straight ray at
     the harmonic means does not (the bending it leaves is the difference the NCL1 table reports)."""
@@ -114,6 +115,7 @@ def test_the_solver_recovers_a_rigid_shift_through_the_profile(ctd):
     assert np.linalg.norm(straight.offset[0] - shift) > 1e-3
 
 
+@pytest.mark.slow
 def test_a_straight_profile_of_one_speed_equals_the_solver_at_that_speed():
     rng = np.random.default_rng(7)
     c = 1495.0

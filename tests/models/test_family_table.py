@@ -62,6 +62,7 @@ CASES = [("munk", 20.0, (0.0, 2.5, 4.0, 6.0, 2.0, 28.0), 0.8),
          ("munk", 1500.0, (0.0, 50.0, 100.0, 1400.0, 0.0, 2500.0), 0.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, depth, bounds, share", CASES)
 def test_the_family_table_holds_the_exact_solve(name, depth, bounds, share):
     """Inside the box, the channel's levels equal the exact solve of every family within 1 µs, 2e-4 rad and 0.02 dB

@@ -183,6 +183,7 @@ def _table(name):
     return {"munk": munk_table(), "NCL1": profile_table("ctd:NCL1", "", 15.0, 35.0), "strong": STRONG}[name]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, zs, zr, x", IVP_CASES)
 def test_against_solve_ivp(name, zs, zr, x):
     """Within 1 µs of the ray equations integrated numerically (DOP853, tolerance 1e-12), shooting the launch
@@ -433,6 +434,7 @@ def _compare_with_bellhop(name, solve):
     return compared, len(separatrix), ducted
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["munk", "NCL1", "strong"])
 def test_against_bellhop(name):
     """Direct eigenray times within 10 µs of Bellhop's, surface- and bottom-reflected within 20 µs, over 168
@@ -555,6 +557,7 @@ TABLE_CASES = [("munk", 0.0, (0.0, 2.5, 4.0, 6.0, 2.0, 28.0), 0.8),
                ("strong", 0.0, (20.0, 40.0, 100.0, 120.0, 0.0, 800.0), 0.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, depth, bounds, share", TABLE_CASES)
 def test_the_eigenray_table_holds_the_exact_solve(name, depth, bounds, share):
     """Inside the box, the channel's lookup equals the exact solve within 1 µs and 1e-5 rad with the same path,
@@ -595,6 +598,7 @@ def test_without_a_table_the_lookup_is_the_exact_solve():
         np.testing.assert_array_equal(g, w)
 
 
+@pytest.mark.slow
 def test_an_isovelocity_table_is_the_straight_line():
     table = np.array([[0.0, 1493.0], [100.0, 1493.0], [5000.0, 1493.0]])
     bounds = (0.0, 30.0, 10.0, 200.0, 0.0, 500.0)
@@ -608,6 +612,7 @@ def test_an_isovelocity_table_is_the_straight_line():
     np.testing.assert_array_equal(kind, rays.DIRECT)
 
 
+@pytest.mark.slow
 def test_the_compiled_builder_is_the_model():
     """The table built with the exact solve compiled in the local engine's library equals the one built by casadi
     itself."""

@@ -102,6 +102,7 @@ def _compare(name, offset=0.0, beyond=False):
     return (ours + offset - theirs)[keep], int((masked & columns[None, :]).sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(SITES))
 def test_site_tl_against_bellhop(name):
     """At least 200 points per site within 3 dB of Bellhop's incoherent TL outside the mask."""

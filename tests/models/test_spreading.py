@@ -182,6 +182,7 @@ IVP_CASES = [("munk", 1000.0, 1000.0, 4700.0), ("munk", 1300.0, 1300.0, 5000.0),
              ("strong", 3000.0, 300.0, 4500.0), ("strong", 700.0, 700.0, 2500.0), ("strong", 2050.0, 3800.0, 892.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, zs, zr, x", IVP_CASES)
 def test_spreading_against_solve_ivp(name, zs, zr, x):
     """Every family's spreading within 0.5 dB of the integrated rays' tube (finite differences of the launch angle),
@@ -333,6 +334,7 @@ def _compare_with_bellhop(name, offset=0.0):
     return int(keep.sum()), int((~keep).sum()), float(error.max()), float(np.median(error))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(BELLHOP_SITES))
 def test_bellhop_incoherent_tl(name):
     """The families' summed intensities within 3 dB of Bellhop's incoherent TL at ≥ 200 receiver points outside the

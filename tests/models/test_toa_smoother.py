@@ -77,6 +77,7 @@ def start_of(toa, receivers, s):
     return record.start, xs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dof", [tt.ROBUST_DOF, np.inf], ids=["student-t", "gaussian"])
 def test_the_smoother_is_the_minimum_of_its_cost(dof):
     """scipy's trust-region least squares (finite-difference Jacobian) on the cost written again with numpy, started

@@ -75,6 +75,7 @@ def test_a_custom_layout_fills_the_beacon_count():
     assert again["platform"] == cfg["platform"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", list(LAYOUTS))
 def test_both_engines_give_the_same_numbers_for_any_number_of_beacons(beacon_fmus, layout):
     overrides, n = LAYOUTS[layout]
@@ -86,6 +87,7 @@ def test_both_engines_give_the_same_numbers_for_any_number_of_beacons(beacon_fmu
     assert_same_frames(local, fmu)
 
 
+@pytest.mark.slow
 def test_the_fmu_engine_builds_the_fmus_it_needs_out_of_the_box(beacon_fmus, tmp_path):
     """``sblsim run --engine fmu`` with 6 beacons and no FMUs built for 6: they are built into the cache (an empty
     one, given the objects the module's FMUs for 6 beacons compiled)."""
@@ -127,6 +129,7 @@ def c_host_runs(c_host: Path, directory: Path, tmp_path: Path):
         yield name, md, rows
 
 
+@pytest.mark.slow
 def test_six_beacon_fmus_run_in_a_plain_c_host_with_an_empty_environment(beacon_fmus, c_host, tmp_path):
     for name, md, rows in c_host_runs(c_host, beacons_dir(beacon_fmus, 6), tmp_path):
         if name == "platform":  # six beacons 60° apart (whatever the waves' yaw; their tilt is a few degrees)
@@ -137,6 +140,7 @@ def test_six_beacon_fmus_run_in_a_plain_c_host_with_an_empty_environment(beacon_
             assert (turn + 180.0) % 360.0 - 180.0 == pytest.approx(-60.0, abs=2.0)
 
 
+@pytest.mark.slow
 def test_six_beacon_ssp_runs_in_libcosim_like_the_jacobi_master(beacon_fmus, tmp_path):
     pytest.importorskip("libcosimpy")
     cfg = load_config("semicircle", LAYOUTS["circle6"][0] + ["simulation.duration=10"], seed=12)
@@ -227,6 +231,7 @@ def _libcosim_against_jacobi(cfg: dict, fmu_dir: Path, tmp_path: Path, channel: 
     return jacobi
 
 
+@pytest.mark.slow
 def test_a_six_transponder_lbl_ssp_runs_in_libcosim_like_the_jacobi_master(beacon_fmus, tmp_path):
     cfg = load_config("semicircle", LAYOUTS["circle6"][0] + ["platform.system=lbl", "platform.baseline=40",
                                                              "platform.survey_sigma=0.2", "acoustics.ranging=twtt",
@@ -234,12 +239,14 @@ def test_a_six_transponder_lbl_ssp_runs_in_libcosim_like_the_jacobi_master(beaco
     _libcosim_against_jacobi(cfg, beacon_fmus, tmp_path)
 
 
+@pytest.mark.slow
 def test_a_usbl_ssp_runs_in_libcosim_like_the_jacobi_master(usbl_fmus, tmp_path):
     cfg = load_config("semicircle", ["platform.system=usbl", "platform.usbl_misalignment_deg=1",
                                      "simulation.duration=5"], seed=3)
     _libcosim_against_jacobi(cfg, usbl_fmus, tmp_path)
 
 
+@pytest.mark.slow
 def test_usbl_fmus_run_in_a_plain_c_host_with_an_empty_environment(usbl_fmus, c_host, tmp_path):
     """Each USBL FMU in the plain C host (no Python, empty environment): 30 finite steps; the channel declares
     the direction of arrival and the attitudes it reads, the platform one transceiver."""
@@ -256,6 +263,7 @@ def test_fmus_build_refuses_beacons_with_the_usbl_system(capsys):
     assert "--beacons: 6 with --system usbl" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_ray_ssp_with_a_profile_receiver_runs_in_libcosim_like_the_jacobi_master(fmu_dir, tmp_path):
     """Eigenrays through Munk's profile (the channel's eigenray table and its exact solve) and a receiver ranging
     with that profile, stepped by libcosim from the SSP: the fmu engine's Jacobi numbers."""
@@ -266,6 +274,7 @@ def test_a_ray_ssp_with_a_profile_receiver_runs_in_libcosim_like_the_jacobi_mast
     assert back["acoustics"]["propagation"] == "ray" and back["receiver"]["sound_speed_profile"] != "assumed"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", SNR_CASES)
 def test_an_snr_ssp_runs_in_libcosim_like_the_jacobi_master(request, fmu_dir, tmp_path, case):
     """Detection by signal-to-noise on each system (:data:`~tests.orchestrator.test_systems.SNR_CASES`), stepped by

@@ -50,6 +50,7 @@ def example():
     return calibrate(load_survey("seagap-example"))
 
 
+@pytest.mark.slow
 def test_pos_array_all_is_seagap_s_published_solution(example, tmp_path):
     s = example.solution
     d = s["array_displacement"]
@@ -72,6 +73,7 @@ def test_pos_array_all_is_seagap_s_published_solution(example, tmp_path):
     assert json.loads((tmp_path / "out" / "solution.json").read_text())["array_displacement"] == d
 
 
+@pytest.mark.slow
 def test_the_bic_search_picks_seagap_s_number_of_bases(example):
     survey = example.survey
     replies = survey.log.replies(survey.ids)
@@ -87,6 +89,7 @@ def test_the_bic_search_picks_seagap_s_number_of_bases(example):
     assert rows[100]["aic"] == pytest.approx(example.solution["aic"], abs=1e-3)
 
 
+@pytest.mark.slow
 def test_pos_array_pvg_with_the_deep_gradient(example):
     survey = example.survey
     replies = survey.log.replies(survey.ids)
@@ -222,6 +225,7 @@ def test_a_folder_is_needed_and_one_file_per_role(tmp_path, capsys):
     assert "is not a folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_perturbation_and_the_search(tmp_path, capsys):
     _folder(tmp_path / "g", n=400)
     out = tmp_path / "out"

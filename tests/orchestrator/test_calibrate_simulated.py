@@ -98,6 +98,7 @@ def two_hundred():
     return run_simulated(load_simulated("box-in"), 200)
 
 
+@pytest.mark.slow
 def test_200_replicates_meet_the_bound_and_are_consistent(two_hundred):
     _, table = two_hundred
     assert list(table.columns) == list(REPLICATE_COLUMNS) and len(table) == 200

@@ -48,6 +48,7 @@ def replicates():
     return modelled, ignored
 
 
+@pytest.mark.slow
 def test_the_ntd_solution_meets_its_bound_and_is_consistent(replicates):
     (result, table), _ = replicates
     r = result.solution["replicates"]

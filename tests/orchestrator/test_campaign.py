@@ -580,6 +580,7 @@ def test_unknown_study_name(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler(tmp_path):
     study_file = write_study(tmp_path / "s.toml", study_table())
     out = tmp_path / "out"
@@ -633,6 +634,7 @@ LONG_TABLE = {
 }
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_the_worker_processes_at_once(tmp_path):
     """Ctrl-C with two worker processes busy: exit 130 within seconds (the chunks under way are dropped, not
     finished), and --resume finishes the campaign as an uninterrupted one."""
@@ -667,6 +669,7 @@ def test_ctrl_c_stops_the_worker_processes_at_once(tmp_path):
     assert_same_runs(read_runs(out), want)
 
 
+@pytest.mark.slow
 def test_scheduler_local_starts_a_dask_local_cluster(reference, tmp_path):
     study, ref = reference
     study_file = write_study(tmp_path / "tiny.toml", study_table())
@@ -696,6 +699,7 @@ print(base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform != "linux", reason="/proc/self/status and ru_maxrss in kB as on Linux")
 def test_peak_memory_is_bounded_by_the_chunk_not_the_study(tmp_path):
     """Twice the design cells (twice the chunks, of the same 500 runs: 32,000 against 64,000 runs) raise the

@@ -66,6 +66,7 @@ def short_run(tmp_path_factory):
     return base, out, proc
 
 
+@pytest.mark.slow
 def test_run_writes_all_outputs(short_run):
     base, out, proc = short_run
     expected = {"summary.json", "config.toml", "timeseries.parquet", *FIGURES}
@@ -114,6 +115,7 @@ def test_config_toml_is_the_resolved_configuration(short_run):
     assert written == load_config("semicircle", ["simulation.duration=5"], seed=3)
 
 
+@pytest.mark.slow
 def test_rerun_from_config_reproduces_timeseries(short_run):
     base, out, _ = short_run
     out2 = base / "run2"
@@ -127,6 +129,7 @@ def test_rerun_from_config_reproduces_timeseries(short_run):
     assert {k: v for k, v in s1.items() if k != "wall_time"} == {k: v for k, v in s2.items() if k != "wall_time"}
 
 
+@pytest.mark.slow
 def test_fmu_engine_run_matches_local(short_run, fmu_dir):
     base, out, _ = short_run
     out3 = base / "run_fmu"
@@ -157,6 +160,7 @@ def test_fmus_validate_missing_dir(tmp_path):
 
 # --------------------------------------------------------------------------- outputs
 
+@pytest.mark.slow
 def test_exported_log_and_truth_have_the_mode_of_the_run_s_files(tmp_path):
     """0666 less the umask, as every other file of the run (not mkstemp's 0600); under two umasks."""
     for umask in (0o022, 0o027):
@@ -171,6 +175,7 @@ def test_exported_log_and_truth_have_the_mode_of_the_run_s_files(tmp_path):
         assert modes["l.csv"] == modes["l_truth.csv"] == modes["summary.json"] == 0o666 & ~umask, modes
 
 
+@pytest.mark.slow
 def test_a_closed_pipe_does_not_fail_a_finished_run(tmp_path):
     """``sblsim run ... | head -1``: every result is written, no error about the pipe, exit status 0."""
     command = (f"{sys.executable} -m sblsim.orchestrator.cli run semicircle --set simulation.duration=3 --out o "
@@ -183,6 +188,7 @@ def test_a_closed_pipe_does_not_fail_a_finished_run(tmp_path):
     assert proc.stderr.strip() == "status 0", proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", [["budget", "semicircle", "--replicates", "4000"],
                                      ["compare", "semicircle", "--replicates", "4000", "--receivers", "ekf,ukf"]],
                          ids=["budget", "compare"])

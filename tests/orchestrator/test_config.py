@@ -291,6 +291,7 @@ def test_duration_limits_say_what_fits(monkeypatch):
 SHORT_RUN = "simulation.duration=15"  # 150 steps
 
 
+@pytest.mark.slow
 def test_a_saved_configuration_runs_and_compares_with_any_receiver(tmp_path, capsys):
     """A run's config.toml holds every key of its receiver (the ekf's): another receiver drops the keys it does not
     have, said in one note line, and runs as the scenario with that receiver does."""

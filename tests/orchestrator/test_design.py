@@ -68,6 +68,7 @@ def worked(tmp_path_factory):
     return sblsim.design("lbl-field-2km", out=out, candidates={"systems": ["lbl"]}, monte_carlo={"path": False})
 
 
+@pytest.mark.slow
 def test_the_worked_question_gets_the_cheapest_design_that_meets_confirmed_by_monte_carlo(worked):
     document = json.loads((worked.out / "design.json").read_text())
     assert document == json.loads(json.dumps(worked.document))
@@ -98,6 +99,7 @@ def test_the_worked_question_gets_the_cheapest_design_that_meets_confirmed_by_mo
         assert (worked.out / name).stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_the_written_scenario_maps_to_the_designs_prediction_and_runs(worked, tmp_path):
     """``sblsim map NAME.toml`` over the work area's grid equals the design's predicted DRMS and availability at
     every work-area point; ``sblsim run NAME.toml`` runs it; its FMUs carry its transponders."""
@@ -190,6 +192,7 @@ def test_the_optimiser_on_a_ring_equals_the_exhaustive_search(criterion):
         assert abs(found.variables[0] - radii[np.argmin(values)]) <= 0.25
 
 
+@pytest.mark.slow
 def test_the_least_cost_that_meets_never_grows_as_the_prescription_loosens():
     costs = []
     for drms in (0.06, 0.1, 0.14, 0.2):
@@ -201,6 +204,7 @@ def test_the_least_cost_that_meets_never_grows_as_the_prescription_loosens():
     assert math.isinf(costs[0]) and costs[-1] == 3.0, costs  # the tightest is out of reach, the loosest needs 3
 
 
+@pytest.mark.slow
 def test_a_transponder_in_the_shadow_adds_nothing_where_it_is_not_heard():
     """The lbl-field site: four transponders on the floor around the centre and a fifth moored 5 m deep, 2.5 km East.
     The thermocline bends every eigenray between the fifth and a vehicle 150 m deep away beyond about 3.7 km (the
@@ -306,6 +310,7 @@ def test_a_prescription_none_meets_is_said_in_one_line_with_the_best_found(tmp_p
     assert (tmp_path / "out" / "tight-lbl4.toml").is_file() or (tmp_path / "out" / "tight-lbl3.toml").is_file()
 
 
+@pytest.mark.slow
 def test_each_systems_best_is_proposed_checked_and_ranked_and_workers_do_not_change_them():
     """The three systems for the small problem, their grades priced: the best of each is proposed, each with its
     Monte Carlo at the worst and the median point, those that meet first (cheapest first); two worker processes
@@ -369,6 +374,7 @@ def test_the_path_check_is_the_scenarios_receiver_compared_on_that_path(tmp_path
     assert row["nees"] == pytest.approx(float(table["nees"].iloc[0]), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_the_update_interval_bounds_the_cycle():
     """An LBL's cycle is one sampling time per transponder (0.1 s at the paper's site): with a fix wanted every
     0.35 s, 3 transponders meet a loose prescription; every 0.25 s, none does (3 slots are 0.3 s)."""

@@ -129,6 +129,7 @@ def test_fix_probability_is_the_poisson_binomial_tail():
     np.testing.assert_allclose(fix_probability(p, 3), want, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_the_availability_map_is_the_channel_heard():
     """A one-beacon-at-a-time USBL site: the map's probability of a packet equals the fraction of packets a
     long run of a static diver receives there (no fluctuation of geometry: the same path every slot)."""
@@ -145,6 +146,7 @@ def test_the_availability_map_is_the_channel_heard():
     assert grid[0, 0] == pytest.approx(predicted, rel=1e-12)  # USBL: one packet is a fix
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["usbl-deep", "lbl-field"])
 def test_ekf_seq_is_consistent_at_the_sites(scenario):
     result = sblsim.run(scenario, seed=11, replicates=3)

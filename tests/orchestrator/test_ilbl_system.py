@@ -190,6 +190,7 @@ def test_the_map_removes_the_emission_and_is_what_a_static_divers_fixes_get():
     assert rms == pytest.approx(mapped, rel=0.10), (rms, mapped)
 
 
+@pytest.mark.slow
 def test_compare_map_budget_and_campaign_take_the_inverted_lbl(tmp_path, monkeypatch):
     """``compare --systems`` runs the inverted LBL beside the others (its defaults: LBL's field and ekf-seq), ``map
     --compare platform.system`` maps it, ``budget`` finds the pinger's jitter among the error sources, and a

@@ -76,6 +76,7 @@ def _ended_cleanly(tmp_path: Path, status: int, took: float, stderr: str, sig: i
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no lock, no output, no staging folder
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_large_site_map(built, tmp_path):
     """USBL at the deep site, ±2 km every 10 m: the eigenrays of 160,000 points (about two minutes)."""
     status, took, stderr = _interrupt(tmp_path, signal.SIGINT, "map", "usbl-deep", "--extent", "2000", "--step", "10",
@@ -83,12 +84,14 @@ def test_ctrl_c_during_a_large_site_map(built, tmp_path):
     _ended_cleanly(tmp_path, status, took, stderr, signal.SIGINT)
 
 
+@pytest.mark.slow
 def test_sigterm_during_a_site_budget(built, tmp_path):
     """The LBL field's budget: 13 configurations of 500 replicates, each step of the master loop seconds long."""
     status, took, stderr = _interrupt(tmp_path, signal.SIGTERM, "budget", "lbl-field", into=5.0)
     _ended_cleanly(tmp_path, status, took, stderr, signal.SIGTERM)
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_first_compile(tmp_path):
     """A first run on a machine compiles the local engine's models (a minute of the compiler): Ctrl-C one second
     into a compilation stops the compilers, keeps the objects already made and leaves no partial one."""
@@ -120,6 +123,7 @@ def _reads(cmdline: Path, text: str) -> bool:
         return False
 
 
+@pytest.mark.slow
 def test_sigterm_during_a_design_searched_by_worker_processes(tmp_path):
     """``sblsim design`` with two worker processes searching candidates: SIGTERM to the command (not to its workers)
     ends it within 2 s, the candidates under way stopped (their processes terminated, not awaited), nothing
@@ -129,6 +133,7 @@ def test_sigterm_during_a_design_searched_by_worker_processes(tmp_path):
     _ended_cleanly(tmp_path, status, took, stderr, signal.SIGTERM)
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_moving_ocean_search(tmp_path):
     """A day-long simulated figure-eight (21,601 replies) whose moving ocean is searched over four numbers of bases
     (each Gauss-Newton iteration up to half a second, the whole some 15 s): Ctrl-C three seconds into the search

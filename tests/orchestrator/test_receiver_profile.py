@@ -52,6 +52,7 @@ def test_the_conversion_inverts_a_linear_gradients_closed_form():
         assert float(rho) == pytest.approx(r, abs=1e-6), (zs, zr, x)
 
 
+@pytest.mark.slow
 def test_the_true_profile_removes_the_sound_speed_error_of_a_deep_cast():
     """Travel times of the direct eigenray through the NCL1 cast (1220 m) at about 1 km slant range: the
     conversion gives the geometric range to below 1 cm (from 5 % off), the single assumed speed metres off."""
@@ -159,6 +160,7 @@ def test_a_bad_profile_is_refused_in_one_line(value, message, tmp_path, capsys):
     assert len(err.splitlines()) == 1 and message in err, err
 
 
+@pytest.mark.slow
 def test_a_profile_receiver_reaches_its_pcrb_at_a_1000_m_site_where_the_assumed_speed_is_biased():
     """With the single assumed speed ekf-seq is tens of metres off (NEES in the thousands); with the true profile
     its NEES is in [1.5, 4.5] and its RMS error that of the same receiver in isovelocity water at the assumed
@@ -182,6 +184,7 @@ def test_a_profile_receiver_reaches_its_pcrb_at_a_1000_m_site_where_the_assumed_
     assert rms(aware) <= 1.5 * pcrb, (rms(aware), pcrb)
 
 
+@pytest.mark.slow
 def test_the_budget_names_the_profile_error():
     assert "profile error" in SOURCES["profile_error"][0]
     short = ["simulation.duration=10"]
@@ -197,6 +200,7 @@ def test_the_budget_names_the_profile_error():
     assert off.table.set_index("source").loc["profile_error", "status"] == OFF
 
 
+@pytest.mark.slow
 def test_the_embedded_receiver_with_a_profile_reproduces_the_recorded_estimate(tmp_path):
     from sblsim.fmus.compiler import find_compiler
     from sblsim.fmus.embedded import write_receiver

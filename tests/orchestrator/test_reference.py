@@ -26,6 +26,7 @@ def stored(name: str) -> dict:
     return json.loads((REFERENCE / f"{name}.json").read_text())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", BUILTIN_SCENARIOS)
 def test_a_fresh_run_equals_the_reference(name):
     want, got = stored(name), reference(name)

@@ -68,6 +68,7 @@ def shifted_times(line: str, offset: float) -> str:
     return f"{float(sent) + offset!r},{float(arrival) + offset!r},{rest}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("system", list(SYSTEMS))
 @pytest.mark.parametrize("receiver", list(RECEIVERS))
 def test_export_then_replay_equals_the_run(tmp_path, receiver, system):
@@ -136,6 +137,7 @@ def test_a_user_model_receiver_replays_its_run(tmp_path):
     assert_same_receiver(result.timeseries, replay_file(path, receiver=model).timeseries)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("system", list(SYSTEMS))
 @pytest.mark.parametrize("receiver", list(RECEIVERS))
 def test_export_then_replay_equals_the_run_on_the_fmu_engine(tmp_path, fmu_dir, receiver, system):

@@ -149,6 +149,7 @@ def test_switching_receivers_does_not_import_the_logs(exported, folders, suffix,
     assert config["simulation"]["receiver"] == switch[1].split("=")[-1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_a_log_naming_an_fmu_is_refused_and_never_loaded(exported, folders, suffix):
     work, outside = folders

@@ -77,6 +77,7 @@ def component_fmus(plan, folder: Path) -> dict[str, Path]:
     return {component: fmu_path(folder, plan.model(component).name) for component in plan.sources}
 
 
+@pytest.mark.slow
 def test_every_bound_parameter_is_the_start_value_and_the_value_after_an_initialization_that_set_nothing(
         site, tmp_path):
     name, plan, folder, ssp = site
@@ -161,6 +162,7 @@ def host_and_sblsim(site, c_host, fmu_dir, tmp_path_factory):
     return plan, host, ours
 
 
+@pytest.mark.slow
 def test_the_c_host_setting_nothing_gives_the_sblsim_run_step_by_step(host_and_sblsim, c_host, fmu_dir, tmp_path):
     plan, host, ours = host_and_sblsim
     assert len(ours) == plan.n_steps

@@ -103,6 +103,7 @@ def expected():
     return study, np.array([100.0 * expected_detected(study.cell_plan("lbl-field", c)) for c in range(study.cells)])
 
 
+@pytest.mark.slow
 def test_each_cell_receives_the_packets_the_sonar_equation_predicts(campaign, expected):
     study, want = expected
     runs = pd.read_parquet(campaign / "runs.parquet")

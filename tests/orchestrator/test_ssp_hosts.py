@@ -36,6 +36,8 @@ from sblsim.orchestrator.cosim.master import simulate
 from sblsim.orchestrator.cosim.run import merge_params, run
 from sblsim.orchestrator.ssp import export_ssp
 
+pytestmark = pytest.mark.slow
+
 HOSTS = Path(__file__).with_name("ssp_hosts.py")
 TOL = 1e-9  # [m]
 OVERRIDES = ["simulation.duration=30", "acoustics.loss_pct=10", "acoustics.outlier_pct=5"]

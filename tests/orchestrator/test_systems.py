@@ -315,6 +315,7 @@ ENGINE_CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides", ENGINE_CASES.values(), ids=ENGINE_CASES.keys())
 def test_engines_agree_for_every_system(fmu_dir, overrides):
     """5 s with 10 % loss through both engines: every time-series column (est_x … and the bound) and every metric
@@ -371,6 +372,7 @@ SNR_CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("scenario", "overrides"), SNR_CASES.values(), ids=SNR_CASES.keys())
 def test_engines_agree_with_detection_by_snr(fmu_dir, scenario, overrides):
     """``snr`` through both engines: every time-series column (the SNR and detection probability of each

@@ -199,6 +199,7 @@ def full(tmp_path_factory):
                              reference=DATA / "umap.txt", out=out)
 
 
+@pytest.mark.slow
 def test_lake_hald_beats_umap(full):
     r = full
     umap = np.genfromtxt(DATA / "umap.txt", skip_header=1)
@@ -236,6 +237,7 @@ def test_written_files_keep_the_issue_names(full):
     assert not (full.out / "tracks.csv").exists()
 
 
+@pytest.mark.slow
 def test_thinned_array_gives_larger_errors(full):
     """The authors' 8-hydrophone array against the full one, each scored here against the GPS."""
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
@@ -400,6 +402,7 @@ def test_the_nees_holds_the_truth_s_own_error_against_numpy():
     assert exact["nees"] > 1.5 * stats_["nees"]
 
 
+@pytest.mark.slow
 def test_lake_hald_with_a_gps_error_in_the_budget(tmp_path, capsys, full):
     """The robust smoother against the GPS with 0.1 m per axis of the truth's own error in the budget: the median
     NEES is near a consistent estimator's (2 ln 2), the mean above 2 (a tail of gross errors) but under half the RTS
@@ -457,6 +460,7 @@ def test_fixes_restart_a_lost_filter_and_only_then():
     assert np.median(np.hypot(*(record.x_filtered[k, :2] - truth[k]).T)) < 1.0
 
 
+@pytest.mark.slow
 def test_bound_predicts_the_observed_errors_on_lake_hald(full):
     """The accuracy limit per third of the track (score.json's bound, bound.csv) against the errors observed here
     against the GPS: the robust RMS (median / sqrt(ln 2)) of the single-ping fix and of the EKF within a factor 1.5
@@ -523,6 +527,7 @@ def test_consistent_fixes_restart_holds_the_thinned_track(full):
     assert p95 < p95_off / 2 and rms < rms_off / 2 and restarts > restarts_off, figures
 
 
+@pytest.mark.slow
 def test_the_robust_smoother_holds_the_thinned_track(full):
     """The authors' 8 hydrophones: the robust smoother's RMS and 95 % errors against the GPS (scored here) below 3
     and 5 m (the issue's 5 m; measured 1.9 and 4.4 m; the RTS smoother's 18 and 31 m, U-MAP's on the full array 15

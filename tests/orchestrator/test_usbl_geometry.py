@@ -162,6 +162,7 @@ def far_fix_error(scenario: str, sets, *more: str, replicates: int = 200) -> tup
     return static_fix_error(cfg, ts)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", FAR)
 def test_the_map_is_what_a_static_vehicle_gets_off_the_vertical_to_kilometres(where):
     """The USBL map at a point against a static-vehicle Monte Carlo there: the ``lsq`` receiver's fix of each
@@ -173,6 +174,7 @@ def test_the_map_is_what_a_static_vehicle_gets_off_the_vertical_to_kilometres(wh
     assert rms == pytest.approx(drms, rel=0.15), (where, rms, drms)
 
 
+@pytest.mark.slow
 def test_where_only_echoes_are_heard_the_map_is_the_reflected_fix_and_says_so(tmp_path, capsys):
     """3 km off at ``lbl-field`` every packet is a bottom reflection. The map holds the fix that reflection gives:
     the static vehicle's fixes (40 replicates) scatter about a point off the diver along its azimuth, by the offset
@@ -239,6 +241,7 @@ def test_straight_below_and_near_the_vertical_the_map_is_what_a_static_vehicle_g
         assert drms > 1.05 * far, (drms, far)
 
 
+@pytest.mark.slow
 def test_straight_below_with_the_array_s_noise_alone_and_at_a_deep_site():
     """With the IMU's error removed (the direction noise alone, 0.5°), and straight below the transceiver at the
     ``usbl-deep`` site (800 m, its eigenrays and detection, 0.14° array), the map is the fix's error within 10 %."""
