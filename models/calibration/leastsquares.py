@@ -32,6 +32,9 @@ from sblsim.models.declarations import ModelError
 #: radius: every reply at one elevation angle, so that depth and speed trade one for the other) and the solution
 #: is refused. Surveys that determine it give 0.05-1 m/s (NCL1, Xie et al.'s days, a box or figure-eight).
 MAX_SOUND_SPEED_SIGMA = 10.0
+#: The largest condition number of the normal matrix scaled to a unit diagonal with which a solved sound speed is
+#: taken as determined (surveys that determine it: 10² to 10³; a noise-free circle at one radius: 10¹⁵).
+MAX_SCALED_CONDITION = 1e12
 
 
 def _check_solved_speed(speed: float, sigma: float, what: str) -> None:
@@ -212,8 +215,11 @@ def _solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
     factor = float(np.sum(wu * ru**2) / dof)
     covariance = q * factor
     variance = np.diag(covariance)
-    if solve_sound_speed:  # a negative variance (a numerically singular normal matrix): no sigma, refused
-        speed_sigma = sound_speed * np.sqrt(variance[-1]) if variance[-1] >= 0.0 else np.nan
+    if solve_sound_speed:  # a numerically singular normal matrix (a negative variance, or noise-free replies that
+        # leave its scaled condition number beyond MAX_SCALED_CONDITION with a residual of zero): no sigma, refused
+        scale = np.sqrt(np.diag(normal))
+        singular = np.linalg.cond(normal / np.outer(scale, scale)) > MAX_SCALED_CONDITION
+        speed_sigma = sound_speed * np.sqrt(variance[-1]) if variance[-1] >= 0.0 and not singular else np.nan
         _check_solved_speed(float(c), float(speed_sigma), what)
     if not np.all(variance >= 0.0):  # born of a numerically singular normal matrix: refused, never a NaN sigma
         raise ModelError(f"{what}: the replies do not determine the positions (a negative variance: the normal "
@@ -230,4 +236,4 @@ def _solve(replies: Replies, apriori: Sequence[Sequence[float]] | np.ndarray, so
                     converged=converged, determination=det)
 
 
-__all__ = ["MAX_SOUND_SPEED_SIGMA", "judge", "solve"]
+__all__ = ["MAX_SCALED_CONDITION", "MAX_SOUND_SPEED_SIGMA", "judge", "solve"]

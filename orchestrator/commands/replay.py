@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 import numpy as np
 
 from sblsim.models.acoustics.core import LANES
+from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.common import (
     MAX_SEED,
     Overrides,
@@ -185,7 +186,7 @@ def _receivers_kept(value: Any, where: str) -> list[str] | None:
 
 
 #: The ping types ``--ping-type`` takes (:data:`sblsim.models.tracking.schedule.PING_TYPES`).
-PING_TYPE_NAMES = ("sbi", "rbi", "pbi")
+PING_TYPE_NAMES = tuple(PING_TYPES)
 #: The burst intervals ``--burst-interval`` takes [s].
 BURST_LIMITS = (0.1, 86400.0)
 
@@ -450,8 +451,6 @@ def main(args: argparse.Namespace) -> int:
 
 def ping_type_line(summary: dict[str, Any]) -> str:
     """The console's line on the ping type and the gaps of a track's ``summary``."""
-    from sblsim.models.tracking.schedule import PING_TYPES
-
     p = summary["ping_type"]
     seen = p["seen"]
     how = "given" if p["source"] == "given" else (

@@ -39,6 +39,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.tracking import quality as qa
+from sblsim.models.tracking import schedule as ps
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
@@ -292,8 +293,6 @@ def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: s
     for the tracker's ``settings`` at the receivers ``positions`` (n, dim) [m]: the ping type given (``sbi``,
     ``rbi``, ``pbi``), else the one the first arrivals' spacing shows (``rbi`` when ``burst_interval`` (min, max)
     [s] is given, ``pbi`` when ``burst_sequence`` (the intervals [s]) is), and what was seen of the spacing."""
-    from sblsim.models.tracking import schedule as ps
-
     crossing = ps.crossing_time(positions, settings.sound_speed)
     seen = ps.infer_ping_type(toa, crossing)
     kind = ping_type or ("pbi" if burst_sequence is not None else "rbi" if burst_interval is not None else seen.kind)
