@@ -305,16 +305,40 @@ def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: s
     return replace(schedule, bounds=bounds), seen
 
 
+def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fixes, acceleration_psd: float | None):
+    """The tracker's settings with the motion model's ``q`` [m²/s³]: ``acceleration_psd`` where given, else
+    estimated by EM (:func:`~sblsim.models.tracking.motion_noise.estimate_acceleration_psd`) from the single-ping
+    fixes' own track (``fixes``: positions, emission times and the arrivals used, as
+    :func:`~sblsim.models.receiver.toa_tracking.fix_pings` gives them), the default kept where they give no track;
+    and what was done (``summary.json``'s ``motion``)."""
+    from sblsim.models.receiver.toa_tracking import anchored_start
+    from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
+
+    if acceleration_psd is not None:
+        return replace(settings, acceleration_psd=acceleration_psd), {
+            "acceleration_psd_m2_s3": acceleration_psd, "source": "given"}
+    dim = positions.shape[1]
+    start = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, dim, schedule.times())
+    if start is None:
+        return settings, {"acceleration_psd_m2_s3": settings.acceleration_psd,
+                          "source": "default (too few fixes to estimate it)"}
+    found = estimate_acceleration_psd(toa, positions, settings, start, schedule)
+    return replace(settings, acceleration_psd=found.q), {
+        "acceleration_psd_m2_s3": found.q, "source": "estimated (EM)", "iterations": found.iterations,
+        "converged": found.converged, "history": list(found.history)}
+
+
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
           drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
-          burst_interval: tuple[float, float] | None = None, burst_sequence_path: Path | None = None
-          ) -> TrackOutcome:
+          burst_interval: tuple[float, float] | None = None, burst_sequence_path: Path | None = None,
+          acceleration_psd: float | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
     (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`); ``truth_sigma`` [m] the truth's
     own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
     :func:`ping_schedule`, ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
-    (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`)."""
+    (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
+    [m²/s³] (None: estimated from the pings by EM, :mod:`sblsim.models.tracking.motion_noise`)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -341,12 +365,13 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
+    heard_count = np.isfinite(toa).sum(axis=1)
+    settings, motion = motion_model(toa, positions, settings, schedule, (fx, fe, fused), acceleration_psd)
     tracker = tt.ToaTracker(positions, settings)
     # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
     filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
                for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
-    heard_count = np.isfinite(toa).sum(axis=1)
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim)
     fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
     columns = ["x", "y", "z"][:dim]
@@ -399,6 +424,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "receivers_kept": None if receivers_kept is None else list(receivers_kept),
         "drop_detections": drop, "seed": seed if drop > 0 else None, "detections_dropped": dropped,
         "dimensions": dim, "sound_speed": speed, "sigma_toa_s": SIGMA_TOA, "ping_interval_s": interval,
+        "motion": motion,
         "ping_type": {"type": schedule.kind, "source": schedule.source,
                       "burst_interval_s": None if schedule.bounds is None else list(schedule.bounds),
                       "seen": {"typical_step_s": seen.interval, "steps_s": list(seen.bounds),

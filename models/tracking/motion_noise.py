@@ -1,0 +1,148 @@
+"""How much the tag's velocity wanders: the motion model's acceleration noise estimated from the data by EM.
+
+The tracker's motion model is the white-noise acceleration (nearly constant velocity) model: over a step of ``T``
+seconds each axis's position and velocity take a Gaussian error of covariance ``q [T³/3, T²/2; T²/2, T]`` (Bar-Shalom,
+Li & Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001, § 6.2), ``q`` the
+acceleration's power spectral density [m²/s³]. A towed pinger, a cod and a swimming eel differ in ``q`` by orders of
+magnitude, and ``q`` decides how far the smoother trusts the motion between pings: at a 2 s stable interval the
+arrivals outweigh it whatever it is, at a 20–40 s random interval it is what tells a ping's multipath fix from its
+neighbours. YAPS estimates its movement model's variance by maximum likelihood (Baktoft et al. 2017); here ``q`` is
+the maximum-likelihood estimate of the state-space model by expectation-maximisation (Shumway & Stoffer, "An
+approach to time series smoothing and forecasting using the EM algorithm", J. Time Series Analysis 3(4), 1982;
+Ghahramani & Hinton, "Parameter estimation for linear dynamical systems", 1996): each E-step is the robust smoother
+at the current ``q`` (its states, covariances and lag-one covariances: the Laplace approximation of the posterior),
+each M-step the closed form
+
+    ``q ← (1 / (2 dim (m − 1))) Σ_k Σ_axes tr(A_k⁻¹ E[w_k w_kᵀ])``,
+    ``E[w_k w_kᵀ] = ŵ_k ŵ_kᵀ + P_k + F_k P_k−1 F_kᵀ − C_k F_kᵀ − F_k C_kᵀ``,
+
+``w_k = x_k − f(x_k−1)`` the process error of step k on one axis's (position, velocity), ``A_k`` its unit-``q``
+covariance, ``P`` the smoothed covariances and ``C_k = cov(x_k, x_k−1)``. EM's steps are short where the data
+determine ``q`` well; each is lengthened in ``log q`` by :data:`EM_OVERRELAXATION` (an over-relaxed EM; Salakhutdinov
+& Roweis, "Adaptive overrelaxed bound optimization methods", ICML 2003), and a step that overshoots (the M-step turns
+back) is taken at EM's own length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from sblsim.models.receiver.toa_bound import predict
+
+#: The range of ``q`` searched [m²/s³].
+PSD_RANGE = (1e-6, 1.0)
+#: EM's iterations at most, and the change of ``log q`` it stops below.
+EM_ITERATIONS = 15
+EM_TOLERANCE = 0.02
+#: The over-relaxation of EM's steps in ``log q``.
+EM_OVERRELAXATION = 2.0
+#: The robust smoother's Gauss-Newton iterations in each E-step (warm-started at the previous states).
+E_STEP_ITERATIONS = 10
+
+
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """What :func:`estimate_acceleration_psd` returns: ``q`` [m²/s³], the EM ``iterations``, whether it
+    ``converged``, the ``history`` of ``q`` and the last smoother's track (``track``, a
+    :class:`~sblsim.models.receiver.toa_tracking.RobustTrack` at ``q``)."""
+
+    q: float
+    iterations: int
+    converged: bool
+    history: tuple[float, ...]
+    track: object
+
+
+def m_step(x: np.ndarray, P: np.ndarray, lag: np.ndarray, steps: np.ndarray, count: np.ndarray,
+           offset: np.ndarray, dim: int) -> float:
+    """EM's closed-form ``q`` from smoothed states (module docstring).
+
+    Parameters
+    ----------
+    x : ndarray, (m, s)
+        The smoothed states ``[p, v, t_e, Δ]``.
+    P : ndarray, (m, s, s)
+        Their covariances.
+    lag : ndarray, (m − 1, s, s)
+        ``cov(x_k+1, x_k)``.
+    steps : ndarray, (m − 1,)
+        The steps' durations [s] (the unit-``q`` covariances' ``T``).
+    count, offset : ndarray, (m − 1,)
+        The steps' intervals elapsed and fixed durations (:func:`~sblsim.models.receiver.toa_bound.predict`).
+    dim : int
+
+    Returns
+    -------
+    float
+        [m²/s³].
+    """
+    predicted, F = predict(x[:-1], dim, count, offset)
+    w = x[1:] - predicted
+    E = (np.einsum("ki,kj->kij", w, w) + P[1:] + np.einsum("kij,kjl,kml->kim", F, P[:-1], F)
+         - np.einsum("kij,klj->kil", lag, F) - np.einsum("kij,klj->kil", F, lag))
+    T = np.asarray(steps, float)
+    A = np.stack([np.stack([T**3 / 3, T**2 / 2], -1), np.stack([T**2 / 2, T], -1)], -2)
+    Ai = np.linalg.inv(A)
+    total = np.zeros(len(T))
+    for a in range(dim):
+        axis = [a, dim + a]
+        total += np.einsum("kij,kji->k", Ai, E[:, axis][:, :, axis])
+    return float(total.mean() / (2 * dim))
+
+
+def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, start: np.ndarray,
+                              schedule) -> NoiseEstimate:
+    """The motion model's ``q`` by over-relaxed EM (module docstring), from the robust smoother started at
+    ``start``.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        [m].
+    settings : TrackerSettings
+        The tracker's model; its ``acceleration_psd`` the first ``q``.
+    start : ndarray, (m, 2 dim + 2)
+        The first E-step's start (e.g. the single-ping fixes' track).
+    schedule : PingSchedule
+        The steps between the rows.
+
+    Returns
+    -------
+    NoiseEstimate
+    """
+    from sblsim.models.receiver.toa_tracking import robust_smooth
+
+    dim = receivers.shape[1]
+    steps = schedule.steps(settings.interval)
+    q = float(np.clip(settings.acceleration_psd, *PSD_RANGE))
+    X = np.asarray(start, float)
+    history = [q]
+    previous = None
+    track = None
+    converged = False
+    for iteration in range(1, EM_ITERATIONS + 1):
+        track = robust_smooth(toa, receivers, replace(settings, acceleration_psd=q), [X], schedule=schedule,
+                              iterations=E_STEP_ITERATIONS if iteration > 1 else 3 * E_STEP_ITERATIONS)
+        X = track.x
+        target = float(np.clip(m_step(track.x, track.P, track.P_lag, steps, schedule.count, schedule.offset, dim),
+                               *PSD_RANGE))
+        change = np.log(target / q)
+        if abs(change) < EM_TOLERANCE:
+            converged = True
+            q = target
+            history.append(q)
+            break
+        # over-relaxed, unless the last step overshot (EM turned back)
+        relax = EM_OVERRELAXATION if previous is None or np.sign(previous) == np.sign(change) else 1.0
+        q = float(np.clip(q * np.exp(relax * change), *PSD_RANGE))
+        previous = change
+        history.append(q)
+    return NoiseEstimate(q, iteration, converged, tuple(history), track)
+
+
+__all__ = ["EM_ITERATIONS", "EM_OVERRELAXATION", "EM_TOLERANCE", "E_STEP_ITERATIONS", "NoiseEstimate", "PSD_RANGE",
+           "estimate_acceleration_psd", "m_step"]

@@ -1,0 +1,99 @@
+"""The ping types as the steps between the rows of a TOA matrix (models/tracking/schedule.py), against the pings a
+simulation emitted: the type seen, each step's duration, the gaps, a pseudo-random sequence aligned."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.receiver import toa_tracking as tt
+from sblsim.models.tracking import schedule as ps
+
+RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
+SETTINGS = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-4)
+SEQUENCE = np.array([22.0, 37.0, 29.0, 31.0, 25.0, 39.0, 21.0, 33.0])
+
+
+def pings(kind: str, n: int = 120, seed: int = 0, detection: float = 0.9):
+    rng = np.random.default_rng(seed)
+    return tt.simulate_pings(RECEIVERS, n, SETTINGS, rng, speed=0.2, detection=detection, ping_type=kind,
+                             burst_interval=(20.0, 40.0), burst_sequence=SEQUENCE)
+
+
+def crossing() -> float:
+    return ps.crossing_time(RECEIVERS, SETTINGS.sound_speed)
+
+
+def test_the_crossing_time_is_the_array_s_largest_distance_over_the_speed():
+    span = max(np.hypot(*(a - b)) for a in RECEIVERS for b in RECEIVERS)
+    assert crossing() == pytest.approx(span / 1480.0, rel=1e-12)
+    assert ps.crossing_time(RECEIVERS[:1], 1480.0) == ps.MIN_STEP_SIGMA
+
+
+@pytest.mark.parametrize("kind", ["sbi", "rbi", "pbi"])
+def test_the_type_seen_in_the_first_arrivals(kind):
+    toa, _, emissions = pings(kind)
+    seen = ps.infer_ping_type(toa, crossing())
+    assert seen.kind == ("sbi" if kind == "sbi" else "rbi")  # a sequence looks random without its table
+    steps = np.diff(emissions)
+    assert seen.interval == pytest.approx(np.median(steps), abs=crossing())
+    if kind == "rbi":
+        assert 20.0 - crossing() <= seen.bounds[0] < 22.0 and 38.0 < seen.bounds[1] <= 40.0 + crossing()
+
+
+def test_a_stable_interval_counts_the_pings_a_gap_skipped():
+    toa, _, emissions = pings("sbi", n=400)
+    kept = np.r_[0:150, 300:400]  # 150 pings (300 s) cut out
+    schedule = ps.build_schedule(toa[kept], "sbi", 2.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing())
+    expected = np.round(np.diff(emissions[kept]) / 2.0)
+    assert np.array_equal(schedule.count, expected) and schedule.count[149] == 151
+    assert np.allclose(schedule.steps(), np.diff(emissions[kept]), rtol=0.01)  # the nominal interval; it drifts
+    # the 302 s step is a gap: a new segment there
+    assert schedule.gaps == (149,) and schedule.segments() == [(0, 150), (150, 250)]
+    assert np.allclose(schedule.te_sigma, SETTINGS.jitter * np.sqrt(expected))
+
+
+def test_a_random_interval_s_steps_are_the_emissions_within_the_crossing_time():
+    toa, _, emissions = pings("rbi")
+    schedule = ps.build_schedule(toa, "rbi", 30.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(),
+                                 bounds=(20.0, 40.0))
+    assert (schedule.count == 0).all() and np.allclose(schedule.te_sigma, crossing())
+    assert np.abs(schedule.steps() - np.diff(emissions)).max() <= crossing()
+    # a step shorter than the interval's min by more than the crossing time is refused
+    with pytest.raises(ModelError, match="below the random interval's min 25"):
+        ps.build_schedule(toa, "rbi", 30.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(), bounds=(25.0, 40.0))
+
+
+def test_a_pseudo_random_sequence_is_aligned_through_missing_pings():
+    toa, _, emissions = pings("pbi", n=150)
+    kept = np.sort(np.random.default_rng(3).choice(150, 110, replace=False))  # 40 pings nobody heard
+    schedule = ps.build_schedule(toa[kept], "pbi", 30.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(),
+                                 sequence=SEQUENCE)
+    true = np.diff(emissions[kept])
+    matched = schedule.te_sigma < crossing()
+    assert matched.mean() > 0.95
+    # where matched, the step is the sequence's sum: the emissions' step to the jitter
+    assert np.abs(schedule.steps()[matched] - true[matched]).max() < 10 * SETTINGS.jitter * np.sqrt(5)
+    with pytest.raises(ModelError, match="match the sequence"):
+        ps.build_schedule(toa[kept], "pbi", 30.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(),
+                          sequence=np.array([5.0, 7.0, 11.0]))
+
+
+def test_rows_out_of_time_order_or_too_few_are_refused_in_one_line():
+    toa, _, _ = pings("sbi", n=20)
+    with pytest.raises(ModelError, match=r"row 6's first arrival .* is not after row 5's"):
+        ps.first_arrival_steps(toa[[0, 1, 2, 3, 5, 4, 6]])
+    with pytest.raises(ModelError, match="1 pings heard; allowed: at least 2"):
+        ps.first_arrival_steps(toa[:1])
+    with pytest.raises(ModelError, match="ping type: 'xyz'"):
+        ps.build_schedule(toa, "xyz", 2.0, 1e-3, 1e-4, crossing())
+
+
+def test_a_stable_schedule_is_today_s_model_and_slices_keep_their_gaps():
+    stable = ps.PingSchedule.stable(5, 2.0, 1e-3, 1e-4)
+    assert np.array_equal(stable.times(), [0.0, 2.0, 4.0, 6.0, 8.0])
+    toa, _, _ = pings("sbi", n=400)
+    schedule = ps.build_schedule(toa[np.r_[0:150, 300:400]], "sbi", 2.0, 1e-3, 1e-4, crossing())
+    tail = schedule.sliced(100)
+    assert tail.gaps == (49,) and len(tail.count) == len(schedule.count) - 100

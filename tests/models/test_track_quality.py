@@ -1,0 +1,75 @@
+"""A track checked against its own data (models/tracking/quality.py): a lost track is flagged, never ``ok``; a
+multipath fix does not flag a right track; the arrivals that agree with a position counted independently."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sblsim.models.receiver import toa_tracking as tt
+from sblsim.models.tracking import quality as qa
+
+RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
+C, SIGMA = 1480.0, 1e-4
+
+
+def simulated(seed: int = 0, n: int = 60):
+    s = tt.TrackerSettings(sound_speed=C, sigma_toa=SIGMA, interval=2.0, acceleration_psd=1e-4)
+    toa, truth, emissions = tt.simulate_pings(RECEIVERS, n, s, np.random.default_rng(seed), speed=0.3, detection=1.0)
+    fx, fe, fc, fu, chi2 = tt.fix_pings(toa, RECEIVERS, C, SIGMA)
+    trusted = qa.trusted_fixes(fx, fc, fu.sum(axis=1), np.isfinite(toa).sum(axis=1), chi2, 2)
+    return toa, truth, emissions, fx, fc, fu, trusted
+
+
+def check(toa, track, emissions, fx, fc, trusted, cov):
+    return qa.check_track(emissions, track, cov, fx, fc, trusted,
+                          explained=qa.explained(toa, RECEIVERS, track, C, SIGMA),
+                          fix_used=qa.explained(toa, RECEIVERS, fx, C, SIGMA))
+
+
+def test_explained_counts_the_arrivals_within_their_sigmas_of_the_best_emission():
+    toa, truth, emissions, *_ = simulated()
+    # independently: at the truth every arrival is within 6.1 sigma of the true emission time
+    assert (qa.explained(toa, RECEIVERS, truth, C, SIGMA) == 6).all()
+    late = toa.copy()
+    late[:, 2] += 5e-3  # one receiver's arrivals 7 m late: no longer explained by the true positions
+    assert (qa.explained(late, RECEIVERS, truth, C, SIGMA) == 5).all()
+    # 1 km away a position explains at most the few arrivals that happen to line up
+    assert (qa.explained(toa, RECEIVERS, truth + [1000.0, 0.0], C, SIGMA) <= 2).all()
+
+
+def test_a_track_on_its_fixes_is_ok_and_one_multipath_fix_does_not_flag_it():
+    toa, truth, emissions, fx, fc, fu, trusted = simulated()
+    assert trusted.mean() > 0.9
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    assert set(check(toa, truth, emissions, fx, fc, trusted, cov).quality) == {"ok"}
+    bad = fx.copy()
+    bad[30] += [12.0, 0.0]  # a fix 12 m off (a multipath arrival it kept): the track explains more than it does
+    toa_bad = toa.copy()
+    assert check(toa_bad, truth, emissions, bad, fc, trusted, cov).flagged == 0
+
+
+@pytest.mark.parametrize("offset", [50.0, 1000.0])
+def test_a_track_off_its_fixes_is_flagged_whatever_its_covariance(offset):
+    toa, truth, emissions, fx, fc, fu, trusted = simulated()
+    lost = truth + [offset, 0.0]
+    for sigma in (0.1, 5000.0):  # tight and wrong, or loose and wrong: never ok
+        cov = np.tile(sigma**2 * np.eye(2), (len(truth), 1, 1))
+        q = check(toa, lost, emissions, fx, fc, trusted, cov)
+        assert q.flagged == len(truth), (offset, sigma, q.quality)
+    # lost over a stretch in the middle only: those rows flagged, the rest ok
+    stretch = truth.copy()
+    stretch[20:35] += [offset, 0.0]
+    q = check(toa, stretch, emissions, fx, fc, trusted, np.tile(0.01 * np.eye(2), (len(truth), 1, 1)))
+    assert q.quality[20:35].tolist() == ["flagged"] * 15
+    assert "flagged" not in q.quality[:19].tolist() + q.quality[36:].tolist()
+
+
+def test_a_jump_faster_than_a_tag_moves_is_flagged_and_restarts_are_marked():
+    toa, truth, emissions, fx, fc, fu, _ = simulated()
+    jump = truth.copy()
+    jump[40] += [60.0, 0.0]  # 60 m in 2 s and back
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    q = qa.check_track(emissions, jump, cov, fx, fc, np.zeros(len(truth), bool), restarts=np.arange(60) == 10)
+    assert q.speed[39:42].all() and q.quality[40] == "flagged" and q.quality[10] == "restart"
+    assert (q.quality == "flagged").sum() == 3
