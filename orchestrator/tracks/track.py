@@ -39,6 +39,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.tracking import quality as qa
+from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking import schedule as ps
 from sblsim.orchestrator.io.output import staged_directory
 
@@ -131,6 +132,8 @@ def bound_thirds(bound, errors) -> list[dict[str, Any]]:
     ``observed_median_m``, ``observed_robust_rms_m`` = median / sqrt(ln 2)) [m]."""
     thirds = []
     for part in np.array_split(np.arange(len(bound)), 3):
+        if not len(part):  # fewer than 3 pings
+            continue
         entry: dict[str, Any] = {"first_ping": int(part[0]), "last_ping": int(part[-1])}
         for estimator, column in BOUND_COLUMNS.items():
             e = errors[(errors["estimator"] == estimator) & errors["error_2d_m"].notna()]
@@ -353,6 +356,14 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     toa, positions, names = _usable(matrix, receivers, receivers_kept)
     toa, dropped = drop_detections(toa, drop, seed)
     dim = positions.shape[1]
+    check_array(positions, names, toa, tt.SOUND_SPEED_RANGE[0])
+    if truth is not None:
+        first = ps.first_arrivals(toa)
+        span = (float(np.nanmin(first)), float(np.nanmax(first))) if np.isfinite(first).any() else (np.nan, np.nan)
+        if not (truth[0, 0] <= span[1] + LAG_RANGE_S and truth[-1, 0] >= span[0] - LAG_RANGE_S):
+            raise ModelError(f"truth: its times [{truth[0, 0]:.10g}, {truth[-1, 0]:.10g}] s do not overlap the pings' "
+                             f"[{span[0]:.10g}, {span[1]:.10g}] s; allowed: a truth on the time base of the times of "
+                             "arrival")
     if sound_speed is None:
         c, sigma_c, calibration_pings = tt.calibrate_sound_speed_robust(toa, positions, SIGMA_TOA)
         speed = {"sound_speed_m_s": c, "source": "calibrated", "method": "joint soft-L1", "sigma_m_s": sigma_c,
