@@ -212,8 +212,11 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
         chi2[active] = z2.sum(axis=1)
         A = J * used[active][:, :, None] / sigma_toa
         info = np.einsum("mki,mkj->mij", A, A)
+        finite = np.isfinite(info).all(axis=(1, 2))  # a diverged iteration's (the fix refused below)
+        cov = np.full(info.shape, np.nan)
         with np.errstate(all="ignore"):
-            covariances[active] = np.linalg.pinv(info)
+            cov[finite] = np.linalg.pinv(info[finite])
+        covariances[active] = cov
         again = (used[active].sum(axis=1) >= dim + 3) & (z2.max(axis=1) > gate)
         if not again.any():
             break
@@ -1049,15 +1052,41 @@ def _banded_solve(D, B, g):
     return solveh_banded(ab, g.ravel()).reshape(m, s)
 
 
+def _damped_solve(D, B, g):
+    """:func:`_banded_solve` of the Gauss-Newton step, damped where the system is numerically indefinite (a track far
+    from its arrivals, each weighed down to nothing): ``μ diag(N)`` added (Levenberg–Marquardt; Nocedal & Wright,
+    *Numerical Optimization*, Springer 2006, § 10.3), μ from 10⁻¹² up by tenfold steps to 1 after an undamped try;
+    None if none holds."""
+    s = D.shape[1]
+    diagonal = np.einsum("kii->ki", D)
+    for mu in [None, *10.0 ** np.arange(-12, 1)]:  # first undamped (a 10⁻¹² ridge)
+        damped = D + 1e-12 * np.eye(s) if mu is None else D + np.einsum("ki,ij->kij", mu * (diagonal + 1.0), np.eye(s))
+        try:
+            step = _banded_solve(damped, B, g)
+        except np.linalg.LinAlgError:
+            continue
+        if np.isfinite(step).all():
+            return step
+    return None
+
+
+def _inverse(a: np.ndarray) -> np.ndarray:
+    """The inverse of a block, its pseudo-inverse where it is singular."""
+    try:
+        return np.linalg.inv(a)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(a)
+
+
 def _block_covariance(D, B, lag=False):
     """The diagonal blocks (m, s, s) of N⁻¹ for the block-tridiagonal N of :func:`_banded_solve` (the block
     elimination and its backward pass: the Rauch-Tung-Striebel recursion in information form); with ``lag`` also
     its blocks (k + 1, k) (m − 1, s, s), ``−(S_k⁻¹ B_k N⁻¹_k+1,k+1)ᵀ``."""
     m = len(D)
     Sinv = np.empty_like(D)
-    Sinv[0] = np.linalg.inv(D[0])
+    Sinv[0] = _inverse(D[0])
     for k in range(1, m):
-        Sinv[k] = np.linalg.inv(D[k] - B[k - 1].T @ Sinv[k - 1] @ B[k - 1])
+        Sinv[k] = _inverse(D[k] - B[k - 1].T @ Sinv[k - 1] @ B[k - 1])
     cov = np.empty_like(D)
     cross = np.empty((max(m - 1, 0),) + D.shape[1:])
     cov[-1] = Sinv[-1]
@@ -1156,7 +1185,10 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
             g[1:] += np.einsum("ki,kij->kj", e, Li)
             g[0, -1] += _interval_prior(settings, X) / settings.sigma_interval
             g[:-1] += np.einsum("kji,kj->ki", prev, e)
-            step = _banded_solve(D + 1e-12 * np.eye(s), B, -g)
+            step = _damped_solve(D, B, -g)
+            if step is None:  # no damping makes the system positive definite: stopped where it is
+                run["converged"] = True
+                return
             scale = 1.0
             while scale > 1e-6:
                 trial = X + scale * step

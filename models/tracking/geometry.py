@@ -59,9 +59,10 @@ def check_array(receivers: np.ndarray, names: list[str], toa: np.ndarray, slowes
                          f"at least {MIN_SPAN:g} m across (positions in metres)")
     length, width = spread[0], spread[1]
     if width < MIN_WIDTH_SHARE * length or width * 2.0 / np.sqrt(len(r)) < MIN_SPAN:
-        raise ModelError(f"receivers: {', '.join(names[:3])}{', ...' if len(names) > 3 else ''} lie on one line "
-                         f"(within {width * 2.0 / np.sqrt(len(r)):.3g} m of it): every fix has a mirror image across it; "
-                         "allowed: receivers off the line (at least 3 not in a row)")
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        raise ModelError(f"receivers: {shown} lie on one line (within {width * 2.0 / np.sqrt(len(r)):.3g} m of it): "
+                         "every fix has a mirror image across it; allowed: receivers off the line (at least 3 not in "
+                         "a row)")
     heard = np.isfinite(toa)
     rows = heard.sum(axis=1) >= 2
     if rows.any():

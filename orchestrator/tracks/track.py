@@ -39,8 +39,8 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.tracking import quality as qa
-from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking.geometry import check_array
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms

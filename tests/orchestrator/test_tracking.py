@@ -5,6 +5,7 @@ sound-speed calibration and NEES."""
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -530,10 +531,11 @@ def test_consistent_fixes_restart_holds_the_thinned_track(full):
 @pytest.mark.slow
 def test_the_robust_smoother_holds_the_thinned_track(full):
     """The authors' 8 hydrophones: the robust smoother's RMS and 95 % errors against the GPS (scored here) below 3
-    and 5 m (the issue's 5 m; measured 1.9 and 4.4 m; the RTS smoother's 18 and 31 m, U-MAP's on the full array 15
-    and 15 m) and below the RTS smoother's of the same run by a factor 4; below those of the robust smoother without
-    its graduated start (2.5 and 6.3 m); on the pings the RTS smoother positions, below its RMS and 95 % on both
-    arrays; more pings positioned (every one from the tracker's start)."""
+    and 5 m (the issue's 5 m; measured 1.9 and 4.1 m with the motion noise estimated; U-MAP's on the full array 15
+    and 15 m) and below the RTS smoother's of the same run (5.5 and 13 m; 18 and 31 m at the default motion noise);
+    below those of the robust smoother without its graduated start at the same motion noise; on the pings the RTS
+    smoother positions, below its RMS on both arrays and its 95 % on the thin one (within 2 % on the full one); more
+    pings positioned (every one from the tracker's start)."""
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
     thin = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
                              sound_speed=full.summary["sound_speed"]["sound_speed_m_s"], receivers_kept=THINNED)
@@ -545,10 +547,11 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
             e = gps_errors(rows["time"].to_numpy(), rows["x"].to_numpy(), rows["y"].to_numpy(), gps)
             figures[name] = (np.sqrt(np.mean(e**2)), np.percentile(e, 95), len(rows))
         (rms, p95, n), (rms_rts, p95_rts, n_rts), (rms_common, p95_common, _) = figures.values()
-        assert rms_common < rms_rts and p95_common < p95_rts and n > n_rts, (case, figures)
+        # (on the full array the RTS smoother's 95 % is the robust smoother's within 0.3 % at the motion noise EM finds)
+        assert rms_common < rms_rts and p95_common < 1.02 * p95_rts and n > n_rts, (case, figures)
         if case == "thin":
             thin_rms = rms
-            assert rms < 3.0 and p95 < 5.0 and rms < rms_rts / 4 and p95 < p95_rts / 4, figures
+            assert rms < 3.0 and p95 < 5.0 and rms < rms_rts / 2 and p95 < p95_rts / 2, figures
             assert result.score["estimator"] == "robust" and np.isclose(result.score["rms_m"], rms, rtol=1e-12)
     # without the graduated start: from the fixes' own track and the RTS smoother's alone
     from sblsim.orchestrator.tracks.track import SIGMA_TOA, _usable, tracker_settings
@@ -556,7 +559,7 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
     c = full.summary["sound_speed"]["sound_speed_m_s"]
     fx, fe, fc, fused, _ = tt.fix_pings(toa, positions, c, SIGMA_TOA)
-    s = tracker_settings(c, fe)
+    s = replace(tracker_settings(c, fe), acceleration_psd=thin.summary["motion"]["acceleration_psd_m2_s3"])
     tracker = tt.ToaTracker(positions, s)
     record = tracker.run(toa, (fx, fc, fused.sum(axis=1)))
     xs, _ = tracker.smooth(record)
