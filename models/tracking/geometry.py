@@ -4,16 +4,16 @@ Refused in one line (:class:`~sblsim.models.declarations.ModelError`), whether o
 
 * receivers all at one point (the array's largest distance below :data:`MIN_SPAN`): no time difference of arrival
   exists;
-* receivers on one line (the array's width across its longest axis below :data:`MIN_WIDTH_SHARE` of its length,
-  and below :data:`MIN_SPAN`): every fix has a mirror image across the line, equally likely, which no estimator can
-  tell apart (in 3-D the same holds about the line's axis);
 * positions in the wrong unit: two arrivals of one ping can differ by no more than the travel time between their
   receivers, ``‖r_i − r_j‖ / c`` (the triangle inequality); when the typical ping's arrivals spread over more than
   :data:`SPREAD_FACTOR` times the array's crossing time at the slowest sound speed accepted, the positions cannot be
-  in metres (kilometres, or another array's).
+  in metres (kilometres, or another array's);
+* receivers on one line (the array's width across its longest axis below :data:`MIN_WIDTH_SHARE` of its length,
+  or below :data:`MIN_SPAN`): every fix has a mirror image across the line, equally likely, which no estimator can
+  tell apart (in 3-D the same holds about the line's axis).
 
 Receivers on one plane in 3-D (all at one depth) are allowed: the tag's depth then has a mirror image above and below
-the plane, which a depth sensor or a fixed depth settles (docs/tracking.md).
+the plane, while its horizontal position is still determined.
 """
 
 from __future__ import annotations
@@ -57,12 +57,6 @@ def check_array(receivers: np.ndarray, names: list[str], toa: np.ndarray, slowes
     if span < MIN_SPAN:
         raise ModelError(f"receivers: the {len(r)} receivers lie within {span:.3g} m of each other; allowed: an array "
                          f"at least {MIN_SPAN:g} m across (positions in metres)")
-    length, width = spread[0], spread[1]
-    if width < MIN_WIDTH_SHARE * length or width * 2.0 / np.sqrt(len(r)) < MIN_SPAN:
-        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
-        raise ModelError(f"receivers: {shown} lie on one line (within {width * 2.0 / np.sqrt(len(r)):.3g} m of it): "
-                         "every fix has a mirror image across it; allowed: receivers off the line (at least 3 not in "
-                         "a row)")
     heard = np.isfinite(toa)
     rows = heard.sum(axis=1) >= 2
     if rows.any():
@@ -73,6 +67,12 @@ def check_array(receivers: np.ndarray, names: list[str], toa: np.ndarray, slowes
             raise ModelError(f"receivers: a typical ping's arrivals spread over {typical:.4g} s, more than the "
                              f"{crossing:.4g} s a sound wave takes across the array ({span:.4g} m at {slowest:g} "
                              "m/s); allowed: the receivers' positions in metres, in the frame of the times of arrival")
+    length, width = spread[0], spread[1]
+    if width < MIN_WIDTH_SHARE * length or width * 2.0 / np.sqrt(len(r)) < MIN_SPAN:
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        raise ModelError(f"receivers: {shown} lie on one line (within {width * 2.0 / np.sqrt(len(r)):.3g} m of it): "
+                         "every fix has a mirror image across it; allowed: receivers off the line (at least 3 not in "
+                         "a row)")
 
 
 __all__ = ["MIN_SPAN", "MIN_WIDTH_SHARE", "SPREAD_FACTOR", "check_array"]

@@ -98,6 +98,26 @@ def test_codegen_receiver_example_reproduces_the_recorded_estimate(recorded, tmp
     np.testing.assert_allclose(printed[:, 1:], series[["est_x", "est_y", "est_z"]].to_numpy(), rtol=0, atol=TOL)
 
 
+def test_the_example_files_are_the_recorded_run_as_text():
+    """orchestrator/codegen.py's example (no C compiled): the run's own estimates, one row per step at its times, the
+    packets one row per step with the receiver's inputs, every [receiver] parameter but the seeds, as a fresh run of
+    the same scenario gives them (sblsim.run, the command line's)."""
+    import sblsim
+    from sblsim.orchestrator.codegen import EXAMPLE, example_files
+
+    files, about, n_beacons = example_files("ekf")
+    scenario, overrides, seed = EXAMPLE
+    series = sblsim.run(scenario, seed=seed, set=[*overrides, "receiver=ekf"]).timeseries
+    expected = np.array([[float(x) for x in line.split()] for line in files["expected.txt"].splitlines()])
+    np.testing.assert_array_equal(expected, series[["time", "est_x", "est_y", "est_z"]].to_numpy())
+    packets = files["packets.txt"].splitlines()
+    model = MODELS[RECEIVERS["ekf"]]
+    assert len(packets) == len(series) and all(len(p.split()) == 2 + len(model.inputs(n_beacons)) for p in packets)
+    parameters = dict(item.split("=", 1) for item in files["parameters.txt"].split())
+    assert "seed" not in parameters and "x0_vx" in parameters and n_beacons == 4
+    assert "sblsim run semicircle --seed 1" in about
+
+
 def test_codegen_refuses_a_bad_receiver_and_a_used_directory(tmp_path):
     from sblsim.models.declarations import ModelError
 

@@ -178,3 +178,71 @@ def test_a_track_started_1_km_off_ends_on_the_truth_or_flagged():
                              fix_used=qa.explained(toa, RECEIVERS, fx, s.sound_speed, s.sigma_toa)).quality
     error = np.hypot(*(track.x[:, :2] - truth).T)
     assert not ((error > 10.0) & (quality != "flagged")).any(), (error.round(1), quality)
+
+
+def _hydrophones(tmp_path: Path, change) -> Path:
+    import pandas as pd
+
+    table = pd.read_csv(DATA / "hydrophones.csv")
+    change(table)
+    path = tmp_path / "receivers.csv"
+    table.to_csv(path, index=False)
+    return path
+
+
+def _first_rows(tmp_path: Path, rows: list[int]) -> Path:
+    lines = (DATA / "toa.txt").read_text().splitlines()
+    path = tmp_path / "toa.txt"
+    path.write_text("\n".join(lines[r] for r in rows) + "\n")
+    return path
+
+
+def _far_truth(tmp_path: Path) -> Path:
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    path = tmp_path / "gps.txt"
+    np.savetxt(path, gps + [0.0, 0.0, 1e6], header="x y t", comments="")
+    return path
+
+
+@pytest.mark.parametrize("case,message", [
+    ("at one point", "lie within 0 m of each other; allowed: an array at least 1 m across"),
+    ("in kilometres", "allowed: an array at least 1 m across (positions in metres)"),
+    ("in hectometres", "allowed: the receivers' positions in metres"),
+    ("on a line", "lie on one line"),
+    ("rows reversed", "is not after row"),
+    ("a truth elsewhere", "do not overlap the pings'"),
+])
+def test_what_cannot_be_tracked_is_refused_in_one_line_and_writes_nothing(tmp_path, capsys, case, message):
+    """The tracebacks of before (LinAlgError, TypeError), and the silent wrong answers (collinear receivers, positions
+    in km), whether or not the sound speed is given: one line, exit 2, no folder."""
+    from sblsim.orchestrator.cli import main
+
+    toa, receivers, truth = DATA / "toa.txt", DATA / "hydrophones.csv", DATA / "gps.txt"
+    if case == "at one point":
+        receivers = _hydrophones(tmp_path, lambda t: t.update(t[["x_m", "y_m"]].where(t["x_m"].isna(), 0.0)))
+    elif case in ("in kilometres", "in hectometres"):
+        scale = 1000.0 if case == "in kilometres" else 100.0
+        receivers = _hydrophones(tmp_path, lambda t: t.update(t[["x_m", "y_m"]] / scale))
+    elif case == "on a line":
+        receivers = _hydrophones(tmp_path, lambda t: t.update(t[["y_m"]].where(t["y_m"].isna(), 0.0)))
+    elif case == "rows reversed":
+        toa = _first_rows(tmp_path, list(range(40, 0, -1)))
+    else:
+        truth = _far_truth(tmp_path)
+    for speed in ([], ["--sound-speed", "1417"]):
+        out = tmp_path / f"out{len(speed)}"
+        code = main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--truth", str(truth),
+                     "--out", str(out), *speed])
+        err = capsys.readouterr().err
+        assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, (case, err)
+        assert not out.exists()
+
+
+def test_two_pings_with_the_speed_given_are_tracked_and_scored(tmp_path, capsys):
+    """Two pings (before: an IndexError in the bound's thirds): tracked, scored, written."""
+    from sblsim.orchestrator.cli import main
+
+    toa = _first_rows(tmp_path, [100, 101])
+    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"), "--truth",
+                 str(DATA / "gps.txt"), "--sound-speed", "1417", "--out", str(tmp_path / "o")]) == 0
+    assert (tmp_path / "o" / "score.json").is_file() and "ping type" in capsys.readouterr().out
