@@ -41,6 +41,7 @@ from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.geometry import check_array
+from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
@@ -315,7 +316,6 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
     :func:`~sblsim.models.receiver.toa_tracking.fix_pings` gives them), the default kept where they give no track;
     and what was done (``summary.json``'s ``motion``)."""
     from sblsim.models.receiver.toa_tracking import anchored_start
-    from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 
     if acceleration_psd is not None:
         return replace(settings, acceleration_psd=acceleration_psd), {
