@@ -18,7 +18,7 @@ so only the spread of the directions locates the target (a TDOA geometry). The p
 fix is ``sqrt(trace I_p⁻¹)`` [m] (infinite when ``I_p`` is singular: fewer than dim + 1 receivers, or all on a
 line through the target).
 
-**The tracker** (:class:`~sblsim.models.receiver.toa_tracking.ToaTracker`'s EKF). With the state
+**The tracker** (:class:`~sblsim.models.tracking.ekf.ToaTracker`'s EKF). With the state
 ``x = [p, v, t_e, Δ]`` and the transition ``x_k+1 = f(x_k) + w_k``, ``w_k ~ N(0, Q_k)`` (nearly constant
 velocity, ``t_e ← t_e + Δ`` with jitter, ``Δ`` a random walk), the posterior Cramér–Rao bound's information
 ``J_k`` obeys (Tichavský, Muravchik, Nehorai, "Posterior Cramér–Rao bounds for discrete-time nonlinear
@@ -149,7 +149,7 @@ def fix_drms(positions: np.ndarray, heard: np.ndarray, receivers: np.ndarray, c:
 
 @dataclass
 class MotionModel:
-    """The tracker's motion model (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`'s names).
+    """The tracker's motion model (:class:`~sblsim.models.tracking.ekf.TrackerSettings`'s names).
 
     Attributes
     ----------

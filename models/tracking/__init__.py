@@ -1,10 +1,18 @@
-"""Tracking a pinger heard by a fixed array (an inverted LBL): what the tracker needs beyond the TOA model.
+"""Tracking a pinger heard by a fixed array (an inverted LBL), one job per module.
 
-* :mod:`sblsim.models.tracking.schedule`: the ping types of the field (stable, random and pseudo-random burst
+* :mod:`~sblsim.models.tracking.toa`: the TOA model and its Jacobian;
+* :mod:`~sblsim.models.tracking.fix`: the single-ping fix;
+* :mod:`~sblsim.models.tracking.calibration`: the sound speed fitted with the pings;
+* :mod:`~sblsim.models.tracking.schedule`: the field's ping types (stable, random and pseudo-random burst
   intervals) as the time between successive pings, which the motion model's process noise follows;
-* :mod:`sblsim.models.tracking.quality`: every estimate checked against its own data (the single-ping fixes, the
-  physical speed), a lost stretch flagged per ping.
+* :mod:`~sblsim.models.tracking.ekf`, :mod:`~sblsim.models.tracking.filters`: the causal filters and the RTS
+  smoother;
+* :mod:`~sblsim.models.tracking.smoother`, :mod:`~sblsim.models.tracking.starts`: the robust smoother and its
+  starts; :mod:`~sblsim.models.tracking.motion_noise`: the motion model's noise estimated by EM;
+* :mod:`~sblsim.models.tracking.quality`: every estimate checked against its own data, a lost stretch flagged;
+* :mod:`~sblsim.models.tracking.geometry`: an array that cannot position a tag refused;
+* :mod:`~sblsim.models.tracking.simulate`: simulated pings.
 
-The TOA model, the fix, the filters and the smoothers are :mod:`sblsim.models.receiver.toa_tracking`; the accuracy
-limit is :mod:`sblsim.models.receiver.toa_bound`.
+The public names are gathered in :mod:`sblsim.models.receiver.toa_tracking`; the accuracy limit is
+:mod:`sblsim.models.receiver.toa_bound`.
 """

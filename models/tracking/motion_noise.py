@@ -46,7 +46,7 @@ E_STEP_ITERATIONS = 10
 class NoiseEstimate:
     """What :func:`estimate_acceleration_psd` returns: ``q`` [m²/s³], the EM ``iterations``, whether it
     ``converged``, the ``history`` of ``q`` and the last smoother's track (``track``, a
-    :class:`~sblsim.models.receiver.toa_tracking.RobustTrack` at ``q``)."""
+    :class:`~sblsim.models.tracking.smoother.RobustTrack` at ``q``)."""
 
     q: float
     iterations: int
@@ -114,7 +114,7 @@ def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, 
     -------
     NoiseEstimate
     """
-    from sblsim.models.receiver.toa_tracking import robust_smooth
+    from sblsim.models.tracking.smoother import robust_smooth
 
     dim = receivers.shape[1]
     steps = schedule.steps(settings.interval)

@@ -41,7 +41,7 @@ TRUSTED_FIX_DRMS = 10.0
 MAX_SPEED = 10.0
 #: An arrival agrees with a position when its time, less the travel time from there, is within this many standard
 #: deviations of a time of arrival of the median over the ping's arrivals (the robust smoother's weight of 0.1 at
-#: ν = 3, :data:`~sblsim.models.receiver.toa_tracking.ROBUST_KEPT_WEIGHT`).
+#: ν = 3, :data:`~sblsim.models.tracking.smoother.ROBUST_KEPT_WEIGHT`).
 EXPLAINED_SIGMAS = 6.1
 #: The quality marks, in order of severity.
 QUALITY = ("ok", "restart", "flagged")

@@ -31,7 +31,8 @@ from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
-from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, track, write
+from sblsim.orchestrator.tracks.outputs import write
+from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, track
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -158,7 +159,7 @@ class TrackResult:
     out : Path or None
     bound : pandas.DataFrame or None
         ``bound.csv`` (with a truth track): the accuracy limit per ping at the truth
-        (:func:`sblsim.orchestrator.tracks.track.bound_along_track`); its thirds are ``score["bound"]``.
+        (:func:`sblsim.orchestrator.tracks.bound.bound_along_track`); its thirds are ``score["bound"]``.
     """
 
     track: pd.DataFrame

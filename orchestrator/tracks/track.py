@@ -1,34 +1,16 @@
 """A recorded inverted-LBL track: the times of arrival through the single-ping fix, the EKF, the RTS smoother and
-the robust smoother (:mod:`sblsim.models.receiver.toa_tracking`), scored against a truth track, written to a
-folder.
+the robust smoother (:mod:`sblsim.models.tracking`), scored against a truth track (:mod:`.scoring`, :mod:`.bound`),
+written to a folder (:mod:`.outputs`).
 
 The track is the robust smoother's rows (``smooth``: every ping from the tracker's start), else the causal EKF's;
-the other estimators are kept beside it.
-Before tracking, the array may be thinned (``receivers_kept``: the other receivers' columns not used) and a
-share of the detections removed at random (``drop_detections``, seeded).
-
-Scoring (:func:`score`): the truth (t, x, y[, z]) interpolated linearly at each estimate's emission time; per
-ping the 2-D error [m] (and the 3-D one where both the estimates and the truth have z); over the pings an
-estimator positions inside the truth's span, the count, mean, median, RMS, 90th and 95th percentiles, and the
-mean 2-D NEES (the estimator's covariance against the truth, whose own error is not in it). Reported beside,
-never applied to those errors: ``lag_s``, the constant shift of the truth's time (the truth taken at
-``t + lag_s``) that minimises the RMS 2-D error, searched in ±:data:`LAG_RANGE_S` (a 0.25 s grid, then scipy's
-bounded scalar minimiser around its best point) over the pings whose shifted times stay inside the truth's span;
-and the mean error along and across the truth's heading (a lever arm; at a steady speed a lag and an along-track
-offset look alike). A reference solution (x, y, t rows) is scored the same way on the rows it reports.
-
-The accuracy limit along the track (:func:`bound_along_track`, with a truth): at each ping's true position (the
-truth at the tracker's emission time of that ping) with the receivers that heard it, the predicted DRMS of a
-single-ping fix and the tracker's PCRB, filtered and smoothed (:mod:`sblsim.models.receiver.toa_bound`);
-``bound.csv`` per ping, and in ``score.json`` under ``bound`` the track split into thirds by ping index, each with
-the predicted DRMS (the RMS and the median over the pings an estimator positioned) against the observed 2-D errors
-(RMS, median and the robust RMS ``median / sqrt(ln 2)``: the RMS of a circular Gaussian error with that median,
-blind to up to half the pings being gross outliers).
+the other estimators are kept beside it. Before tracking, the array may be thinned (``receivers_kept``: the other
+receivers' columns not used) and a share of the detections removed at random (``drop_detections``, seeded); the
+ping type and the steps between the pings are found (:func:`ping_schedule`), the motion model's noise estimated
+(:func:`motion_model`), and each estimate checked against its own data (the ``quality`` column).
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -37,30 +19,40 @@ from typing import Any, Sequence
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
-from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
+from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
 #: by their median absolute deviation, 0.15 ms by their standard deviation).
 SIGMA_TOA = 1.5e-4
+
+
 #: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
-#: a lost EKF (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings` ``agree_after``).
+#: a lost EKF (:class:`~sblsim.models.tracking.ekf.TrackerSettings` ``agree_after``).
 AGREE_AFTER = 4
+
+
 #: The estimators, in the order of the outputs, and their names in words (the console, the figure).
 ESTIMATOR_NAMES = {"robust": "robust smoother", "rts": "RTS smoother", "ekf": "EKF (causal)",
                    "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)", "fix": "single-ping fix",
                    "reference": "reference"}
+
+
 ESTIMATORS = ("robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
-#: The time lags between the truth and the track searched [s]: ±this.
-LAG_RANGE_S = 30.0
+
+
 #: The keys of ``score.json`` for the track (the issue's names), before the further ones.
 SCORE_KEYS = ("n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95_m", "nees", "lag_s")
+
+
 #: The largest share of detections removed at random.
 MAX_DROP = 0.99
+
+
 #: The largest truth error per axis ``--truth-sigma`` takes [m].
 MAX_TRUTH_SIGMA = 100.0
 
@@ -79,82 +71,6 @@ class TrackOutcome:
     summary: dict[str, Any]
     bound: Any = None  # pandas.DataFrame or None (bound.csv)
     truth: np.ndarray | None = None
-
-
-#: The predicted DRMS of each estimator in ``bound.csv``: the single-ping fix's, the PCRB of the causal filter, the
-#: smoothing bound.
-BOUND_COLUMNS = {"fix": "fix_drms_m", "ekf": "pcrb_m", "ekf-seq": "pcrb_m", "ukf": "pcrb_m",
-                 "rts": "pcrb_smoothed_m", "robust": "pcrb_smoothed_m"}
-#: The RMS of a circular Gaussian 2-D error over its median: ``1 / sqrt(ln 2)``.
-ROBUST_FROM_MEDIAN = 1.0 / np.sqrt(np.log(2.0))
-
-
-def bound_along_track(toa: np.ndarray, receivers: np.ndarray, times: np.ndarray, truth: np.ndarray,
-                      settings, schedule=None, estimates: np.ndarray | None = None) -> Any:
-    """The accuracy limit per ping along a true track (``bound.csv``, a pandas.DataFrame).
-
-    ``toa`` (m, n) [s] (NaN: not heard), ``receivers`` (n, dim) [m], ``times`` (m,) [s] each ping's emission time
-    (the tracker's estimate; NaN before the tracker starts: no bound there), ``truth`` rows (t, x, y[, z]),
-    ``settings`` the tracker's (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`). The true position
-    is the truth interpolated at ``times``, the true velocity its difference over ±0.5 s. Columns: ``ping``,
-    ``time``, ``heard``, ``fix_drms_m`` (:func:`~sblsim.models.receiver.toa_bound.fix_drms`), ``pcrb_m`` and
-    ``pcrb_smoothed_m`` (:func:`~sblsim.models.receiver.toa_bound.pcrb` from the first ping with a time, over the
-    steps of ``schedule``, the ping type's, :class:`~sblsim.models.tracking.schedule.PingSchedule`). With 3-D
-    receivers and a 2-D truth, the depth of each true position is the tracker's own (``estimates`` (m, 3) [m]; 0
-    without them).
-    """
-    import pandas as pd
-
-    m, dim = len(toa), receivers.shape[1]
-    heard = np.isfinite(toa)
-    rows = np.flatnonzero(np.isfinite(times))
-    frame = pd.DataFrame({"ping": np.arange(m), "time": times, "heard": heard.sum(axis=1),
-                          **{v: np.nan for v in BOUND_COLUMNS.values()}})
-    if len(rows) < 2:
-        return frame
-    k0 = rows[0]
-    t = times[k0:]
-    p = _truth_at(truth, t)[:, :dim]
-    v = _truth_at(truth, t + 0.5)[:, :dim] - _truth_at(truth, t - 0.5)[:, :dim]
-    if p.shape[1] < dim:  # a 2-D truth of a 3-D array: the tracker's depth, not moving vertically
-        depth = np.zeros(len(t)) if estimates is None else np.nan_to_num(np.asarray(estimates)[k0:, 2])
-        p, v = np.column_stack([p, depth]), np.column_stack([v, np.zeros(len(t))])
-    frame.loc[k0:, "fix_drms_m"] = tb.fix_drms(p, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa)
-    b = tb.pcrb(p, v, t, heard[k0:], receivers, settings.sound_speed, settings.sigma_toa, tb.MotionModel.of(settings),
-                None if schedule is None else schedule.sliced(k0))
-    frame.loc[k0:, "pcrb_m"], frame.loc[k0:, "pcrb_smoothed_m"] = b.filtered, b.smoothed
-    return frame
-
-
-def bound_thirds(bound, errors) -> list[dict[str, Any]]:
-    """The thirds of the track by ping index: per estimator of ``errors`` (``errors.csv``) with a column in
-    ``bound`` (``bound.csv``), over the pings it positioned inside the truth's span, ``n``, the predicted DRMS
-    (``predicted_rms_m``, ``predicted_median_m``) and the observed 2-D errors (``observed_rms_m``,
-    ``observed_median_m``, ``observed_robust_rms_m`` = median / sqrt(ln 2)) [m]."""
-    thirds = []
-    for part in np.array_split(np.arange(len(bound)), 3):
-        if not len(part):  # fewer than 3 pings
-            continue
-        entry: dict[str, Any] = {"first_ping": int(part[0]), "last_ping": int(part[-1])}
-        for estimator, column in BOUND_COLUMNS.items():
-            e = errors[(errors["estimator"] == estimator) & errors["error_2d_m"].notna()]
-            e = e[(e["ping"] >= part[0]) & (e["ping"] <= part[-1])]
-            if not len(e):
-                continue
-            predicted = bound[column].to_numpy()[e["ping"].to_numpy()]
-            observed = e["error_2d_m"].to_numpy()
-            # a ping before the tracker's start has no bound (NaN); an unbounded one (a degenerate geometry, inf)
-            # counts in the median, not in the RMS
-            finite, known = np.isfinite(predicted), ~np.isnan(predicted)
-            entry[estimator] = {
-                "n": int(len(e)), "n_bounded": int(finite.sum()),
-                "predicted_rms_m": float(np.sqrt(np.mean(predicted[finite] ** 2))) if finite.any() else None,
-                "predicted_median_m": float(np.median(predicted[known])) if finite.any() else None,
-                "observed_rms_m": float(np.sqrt(np.mean(observed**2))),
-                "observed_median_m": float(np.median(observed)),
-                "observed_robust_rms_m": float(np.median(observed) * ROBUST_FROM_MEDIAN)}
-        thirds.append(entry)
-    return thirds
 
 
 def _usable(toa_matrix, receivers, kept: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -197,7 +113,7 @@ def drop_detections(toa: np.ndarray, share: float, seed: int) -> tuple[np.ndarra
 
 
 def tracker_settings(sound_speed: float, emissions: np.ndarray):
-    """The replay's tracker (:class:`~sblsim.models.receiver.toa_tracking.TrackerSettings`) at ``sound_speed``
+    """The replay's tracker (:class:`~sblsim.models.tracking.ekf.TrackerSettings`) at ``sound_speed``
     [m/s]: the timing noise :data:`SIGMA_TOA`, the ping interval the median step of the single-ping fixes' emission
     times ``emissions`` (m,) [s] (NaN where no fix; 2 s when no two consecutive pings have one), and a lost filter
     restarted on :data:`AGREE_AFTER` consecutive consistent fixes of dim + 2 receivers too (an array of few
@@ -207,88 +123,6 @@ def tracker_settings(sound_speed: float, emissions: np.ndarray):
     steps = np.diff(emissions)
     interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
     return TrackerSettings(sound_speed=sound_speed, sigma_toa=SIGMA_TOA, interval=interval, agree_after=AGREE_AFTER)
-
-
-def _truth_at(truth: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The truth's (x, y[, z]) interpolated linearly at the times ``t``."""
-    return np.column_stack([np.interp(t, truth[:, 0], truth[:, k]) for k in range(1, truth.shape[1])])
-
-
-def _stats(e: np.ndarray, suffix: str = "") -> dict[str, float]:
-    return {f"mean{suffix}_m": float(e.mean()), f"median{suffix}_m": float(np.median(e)),
-            f"rms{suffix}_m": float(np.sqrt(np.mean(e**2))), f"p90{suffix}_m": float(np.percentile(e, 90)),
-            f"p95{suffix}_m": float(np.percentile(e, 95))}
-
-
-def estimate_lag(t: np.ndarray, xy: np.ndarray, truth: np.ndarray, bound: float = LAG_RANGE_S
-                 ) -> tuple[float | None, float | None]:
-    """The constant shift ``lag`` [s] of the truth's time (the truth taken at ``t + lag``) in [−bound, bound] that
-    minimises the RMS 2-D error of the estimates at times ``t`` (m,) and positions ``xy`` (m, 2), over the
-    estimates whose times shifted by any lag in the range stay inside the truth's span; and that RMS [m]. None
-    where fewer than 3 estimates qualify."""
-    ok = (t - bound >= truth[0, 0]) & (t + bound <= truth[-1, 0]) & np.isfinite(xy).all(axis=1)
-    if ok.sum() < 3:
-        return None, None
-    t, xy = t[ok], xy[ok]
-
-    def rms(lag: float) -> float:
-        g = _truth_at(truth[:, :3], t + lag)
-        return float(np.sqrt(np.mean(((xy - g) ** 2).sum(axis=1))))
-
-    from scipy.optimize import minimize_scalar  # scipy.optimize: a third of a second of every command's start-up
-
-    step = 0.25
-    grid = np.arange(-bound, bound + step / 2, step)
-    best = float(grid[int(np.argmin([rms(g) for g in grid]))])
-    found = minimize_scalar(rms, bounds=(max(-bound, best - step), min(bound, best + step)), method="bounded",
-                            options={"xatol": 1e-3})
-    return (float(found.x), float(found.fun)) if found.fun <= rms(best) else (best, rms(best))
-
-
-def score(t: np.ndarray, p: np.ndarray, truth: np.ndarray, cov: np.ndarray | None = None,
-          lag_bound: float = LAG_RANGE_S, truth_sigma: float = 0.0
-          ) -> tuple[dict[str, Any], np.ndarray, np.ndarray | None]:
-    """The errors of estimates at times ``t`` (m,) [s], positions ``p`` (m, 2 or 3) [m] against the truth (rows
-    t, x, y[, z]) interpolated at those times, and their statistics (module docstring; the estimates outside the
-    truth's span not scored); ``cov`` (m, 2, 2) [m²] adds the 2-D NEES, its mean (``nees``: 2 when consistent)
-    and median (``nees_median``: 2 ln 2 = 1.386 when consistent, the χ² of 2 degrees of freedom), with the truth's
-    own error ``truth_sigma`` [m] per horizontal axis in the budget (``cov`` + σ² I; 0: the truth taken as exact).
-    Returns the statistics, the 2-D errors (m,) (NaN where not scored) and the 3-D ones (None unless both have
-    z)."""
-    inside = (t >= truth[0, 0]) & (t <= truth[-1, 0])
-    g = _truth_at(truth, t)
-    e = p[:, :2] - g[:, :2]
-    err = np.where(inside, np.hypot(e[:, 0], e[:, 1]), np.nan)
-    err3 = None
-    if p.shape[1] == 3 and truth.shape[1] == 4:
-        err3 = np.where(inside, np.sqrt((e**2).sum(axis=1) + (p[:, 2] - g[:, 2]) ** 2), np.nan)
-    ok = np.isfinite(err)
-    stats: dict[str, Any] = {"n_scored": int(ok.sum())}
-    if not ok.any():
-        return stats, err, err3
-    stats |= _stats(err[ok])
-    stats["nees"] = stats["nees_median"] = None
-    if cov is not None:
-        c = cov[ok] + truth_sigma**2 * np.eye(2)
-        det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0]
-        good = np.isfinite(det) & (det > 1e-9 * c[:, 0, 0] * c[:, 1, 1])  # a 3-receiver fix may have none
-        x, y, c, det = e[ok][good, 0], e[ok][good, 1], c[good], det[good]
-        nees = (c[:, 1, 1] * x**2 - (c[:, 0, 1] + c[:, 1, 0]) * x * y + c[:, 0, 0] * y**2) / det
-        if good.any():
-            stats["nees"], stats["nees_median"] = float(nees.mean()), float(np.median(nees))
-    stats["lag_s"], stats["rms_at_lag_m"] = estimate_lag(t, p[:, :2], truth, lag_bound)
-    stats["lag_range_s"] = lag_bound
-    # the truth's heading at each ping (its motion over ±0.5 s), where it moves at 0.1 m/s or more
-    d = _truth_at(truth[:, :3], t + 0.5) - _truth_at(truth[:, :3], t - 0.5)
-    speed = np.hypot(d[:, 0], d[:, 1])
-    moving = ok & (speed >= 0.1)
-    if moving.any():
-        u = d[moving] / speed[moving, None]
-        stats["along_track_m"] = float(np.mean((e[moving] * u).sum(axis=1)))
-        stats["across_track_m"] = float(np.mean(e[moving, 1] * u[:, 0] - e[moving, 0] * u[:, 1]))
-    if err3 is not None:
-        stats |= _stats(err3[ok], "_3d")
-    return stats, err, err3
 
 
 def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: str | None = None,
@@ -482,54 +316,5 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
 
 
-def figure(outcome: TrackOutcome):
-    """The track against the truth, and the 2-D errors along the time with the track's 2σ band (a matplotlib
-    figure)."""
-    import matplotlib.pyplot as plt
-
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.5))
-    best, tr, truth = outcome.summary["track"], outcome.track, outcome.truth
-    if truth is not None:
-        ax.plot(truth[:, 1], truth[:, 2], "-", color="0.6", lw=1, label="truth")
-    ax.plot(tr["x"], tr["y"], ".", ms=2, label=ESTIMATOR_NAMES[best])
-    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title="track")
-    ax.legend()
-    if outcome.errors is not None:
-        for estimator in ("fix", "ekf", "rts", "robust", "reference"):
-            e = outcome.errors[outcome.errors["estimator"] == estimator]
-            if len(e):
-                bx.semilogy(e["time"], e["error_2d_m"], ".", ms=2, label=ESTIMATOR_NAMES[estimator])
-        # the track's own 2σ of the 2-D error (2 √(σx² + σy²), its covariance's DRMS doubled)
-        bx.semilogy(tr["time"], 2 * np.hypot(tr["sigma_x"], tr["sigma_y"]), "-", color="k", lw=0.8,
-                    label=f"{ESTIMATOR_NAMES[best]} 2σ (2 DRMS)")
-        bx.set(xlabel="emission time [s]", ylabel="2-D error [m]", title="error against the truth")
-        bx.legend()
-    fig.tight_layout()
-    return fig
-
-
-def write(outcome: TrackOutcome, out: Path) -> None:
-    """``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json``,
-    ``errors.csv`` and ``bound.csv``, all or nothing."""
-    import matplotlib.pyplot as plt
-
-    fig = figure(outcome)
-    try:
-        with staged_directory(out) as tmp:
-            outcome.track.to_csv(tmp / "track.csv", index=False)
-            outcome.estimates.to_csv(tmp / "estimates.csv", index=False)
-            if outcome.errors is not None:
-                outcome.errors.to_csv(tmp / "errors.csv", index=False)
-            if outcome.bound is not None:
-                outcome.bound.to_csv(tmp / "bound.csv", index=False)
-            if outcome.score is not None:
-                (tmp / "score.json").write_text(json.dumps(outcome.score, indent=2, allow_nan=False) + "\n")
-            (tmp / "summary.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")
-            fig.savefig(tmp / "track.png", dpi=110)
-    finally:
-        plt.close(fig)
-
-
-__all__ = ["BOUND_COLUMNS", "ESTIMATOR_NAMES", "ESTIMATORS", "LAG_RANGE_S", "MAX_DROP", "MAX_TRUTH_SIGMA",
-           "ROBUST_FROM_MEDIAN", "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "bound_along_track", "bound_thirds",
-           "drop_detections", "estimate_lag", "figure", "score", "track", "tracker_settings", "write"]
+__all__ = ["AGREE_AFTER", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "SCORE_KEYS", "SIGMA_TOA",
+           "TrackOutcome", "drop_detections", "motion_model", "ping_schedule", "track", "tracker_settings"]

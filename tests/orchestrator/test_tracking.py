@@ -252,7 +252,7 @@ def test_thinned_array_gives_larger_errors(full):
 
 
 def test_lag_is_estimated_and_not_applied():
-    from sblsim.orchestrator.tracks.track import score
+    from sblsim.orchestrator.tracks.scoring import score
 
     rng = np.random.default_rng(5)
     tt_ = np.arange(0.0, 600.0, 1.0)
@@ -363,7 +363,7 @@ def test_robust_calibration_against_scipy_least_squares():
 
 
 def test_score_in_3d_against_numpy():
-    from sblsim.orchestrator.tracks.track import score
+    from sblsim.orchestrator.tracks.scoring import score
 
     rng = np.random.default_rng(2)
     tt_ = np.arange(0.0, 100.0, 1.0)
@@ -382,7 +382,7 @@ def test_the_nees_holds_the_truth_s_own_error_against_numpy():
     """score's 2-D NEES with the truth's error σ per axis in the budget: each estimate's eᵀ(P + σ² I)⁻¹e by numpy,
     their mean and median; a consistent estimator against a truth of that error gives a mean near 2 and a median
     near 2 ln 2, and without σ in the budget more."""
-    from sblsim.orchestrator.tracks.track import score
+    from sblsim.orchestrator.tracks.scoring import score
 
     rng = np.random.default_rng(4)
     tt_ = np.arange(0.0, 2000.0, 1.0)

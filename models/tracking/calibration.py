@@ -1,0 +1,165 @@
+"""The sound speed calibrated from the pings themselves: a joint robust fit of the speed and every ping's position
+and emission time (the replay's calibration when no speed is given).
+
+References
+----------
+The soft-L1 loss of scipy's ``least_squares``; Triggs, McLauchlan, Hartley, Fitzgibbon, "Bundle adjustment — a modern
+synthesis", Vision Algorithms 1999, § 6.1 (the Schur complement onto the shared parameter).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.fix import FIX_ITERATIONS, fix_pings
+from sblsim.models.tracking.toa import SOUND_SPEED_RANGE
+
+#: The robust calibration's soft-L1 scale, in standard deviations of a time of arrival: residuals beyond it weigh
+#: as in an L1 fit (late multipath arrivals).
+ROBUST_SCALE = 2.0
+
+
+#: The robust calibration's most joint steps, and the change of the sound speed [m/s] it stops below.
+JOINT_ITERATIONS = 200
+
+
+JOINT_TOLERANCE = 0.01
+
+
+def _calibration_pings(toa: np.ndarray, dim: int, max_pings: int) -> np.ndarray:
+    """The rows of ``toa`` (m, n) a sound-speed calibration uses: at most ``max_pings`` pings, evenly spread, of
+    those heard by at least dim + 3 receivers (redundant ones); ModelError (one line) if fewer than 3."""
+    rich = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= dim + 3)
+    if len(rich) < 3:
+        raise ModelError(f"sound speed calibration: {len(rich)} pings heard by at least {dim + 3} receivers; at "
+                         "least 3 are needed (give the sound speed)")
+    return rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
+
+
+def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
+                                 scale: float = ROBUST_SCALE,
+                                 bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> tuple[float, float, int]:
+    """The sound speed, the pings' positions and their emission times fitted jointly with a robust loss (a
+    calibration step).
+
+    Over at most ``max_pings`` pings (evenly spread) heard by at least dim + 3 receivers, every arrival kept, the
+    sum ``Σ ρ((toa_ij − t_e,i − ‖p_i − r_j‖/c)² / (scale σ_toa)²)`` with the soft-L1 loss
+    ``ρ(z) = 2 (√(1 + z) − 1)`` (the objective of scipy's ``least_squares(loss="soft_l1")``) is minimised over c
+    and every ``(p_i, t_e,i)``. From the middle of ``bounds``, the pings started from their single-ping fixes
+    there: each iteration solves the weighted normal equations (the soft-L1 weights) with the pings' blocks
+    eliminated (a Schur complement onto c), and takes the joint step, halved until the cost falls once every
+    ping's ``(p_i, t_e,i)`` has been fitted again at the new c (reweighted Gauss-Newton, each ping its own step
+    halving), until c moves by less than :data:`JOINT_TOLERANCE`. The search follows one continuous solution
+    from the start (a global scalar search over c jumps between the local solutions of pings with late
+    arrivals). The standard error is that of the weighted normal equations at the solution, reduced onto c.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    max_pings : int
+        Most pings used.
+    scale : float
+        The soft-L1 scale [σ_toa].
+    bounds : (float, float)
+        The speeds allowed [m/s]; a solution outside is refused.
+    Returns
+    -------
+    c : float
+        Sound speed [m/s].
+    sigma_c : float
+        Its standard error [m/s].
+    pings : int
+        Pings used.
+    """
+    receivers = np.asarray(receivers, float)
+    dim = receivers.shape[1]
+    rich = _calibration_pings(toa, dim, max_pings)
+    c = 0.5 * (bounds[0] + bounds[1])
+    p, te, _, _, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
+    ok = np.isfinite(p).all(axis=1) & np.isfinite(te)
+    if ok.sum() < 3:
+        raise ModelError("sound speed calibration: fewer than 3 pings could be fixed; give the sound speed")
+    T, p, te = toa[rich][ok], p[ok], te[ok]
+    heard = np.isfinite(T)
+    y = np.where(heard, T, 0.0)
+    f = scale * sigma_toa
+
+    def residuals(c, p, te):
+        diff = p[:, None, :] - receivers[None]
+        d = np.linalg.norm(diff, axis=2)
+        return np.where(heard, y - te[:, None] - d / c, 0.0), diff, d
+
+    def cost(r):
+        return float((2 * (np.sqrt(1 + (r / f) ** 2) - 1))[heard].sum())
+
+    def ping_costs(r):
+        return np.where(heard, 2 * (np.sqrt(1 + (r / f) ** 2) - 1), 0.0).sum(axis=1)
+
+    def normal(c, p, te):
+        """The weighted normal equations' blocks at (c, p, te): per ping A (k, dim+1, dim+1), b (k, dim+1), the
+        gradient gp (k, dim+1); for c the scalars Jc·W·Jc and gc."""
+        r, diff, d = residuals(c, p, te)
+        w = np.where(heard, 1 / np.sqrt(1 + (r / f) ** 2), 0.0)  # the soft-L1 weights ρ'
+        # the derivatives of the model (not of the residual) with respect to p_i, t_e,i and c
+        Jp = np.concatenate([diff / (np.maximum(d, 1e-9)[..., None] * c), np.ones(d.shape + (1,))], axis=2)
+        Jc = -d / c**2
+        A = np.einsum("kn,kni,knj->kij", w, Jp, Jp) + 1e-18 * np.eye(dim + 1)
+        return r, A, np.einsum("kn,kni,kn->ki", w, Jp, Jc), np.einsum("kn,kni,kn->ki", w, Jp, r), \
+            float((w * Jc**2).sum()), float((w * Jc * r).sum())
+
+    def pings_at(c, p, te):
+        """Every ping's (p, t_e) fitted at the sound speed c (reweighted Gauss-Newton, each ping's own step
+        halving)."""
+        p, te = p.copy(), te.copy()
+        for _ in range(FIX_ITERATIONS):
+            r, A, _, gp, _, _ = normal(c, p, te)
+            dq = np.linalg.solve(A, gp[..., None])[..., 0]
+            scale = (np.abs(dq[:, :dim]).max(axis=1) >= 1e-4).astype(float)  # moving by a tenth of a mm or more
+            if not scale.any():
+                break
+            before = ping_costs(r)
+            for _halving in range(12):
+                r_try = residuals(c, p + scale[:, None] * dq[:, :dim], te + scale * dq[:, dim])[0]
+                worse = (ping_costs(r_try) > before) & (scale > 0)
+                if not worse.any():
+                    break
+                scale[worse] *= 0.5
+            scale[worse] = 0.0
+            p, te = p + scale[:, None] * dq[:, :dim], te + scale * dq[:, dim]
+        return p, te
+
+    p, te = pings_at(c, p, te)
+    current = cost(residuals(c, p, te)[0])
+    for _iteration in range(JOINT_ITERATIONS):
+        _, A, b, gp, cc, gc = normal(c, p, te)
+        Ainv_b = np.linalg.solve(A, b[..., None])[..., 0]
+        Ainv_g = np.linalg.solve(A, gp[..., None])[..., 0]
+        dc = (gc - float(np.einsum("ki,ki->", b, Ainv_g))) / (cc - float(np.einsum("ki,ki->", b, Ainv_b)))
+        dq = Ainv_g - Ainv_b * dc
+        for halving in range(20):  # the joint step halved until the cost, the pings fitted again, falls
+            step = 0.5**halving
+            c_try = c + step * dc
+            p_try, te_try = pings_at(c_try, p + step * dq[:, :dim], te + step * dq[:, dim])
+            cost_try = cost(residuals(c_try, p_try, te_try)[0])
+            if cost_try <= current:
+                break
+        else:
+            break
+        c, p, te, current = c_try, p_try, te_try, cost_try
+        if abs(step * dc) < JOINT_TOLERANCE:
+            break
+    _, A, b, _, cc, _ = normal(c, p, te)
+    S = cc - float(np.einsum("ki,ki->", b, np.linalg.solve(A, b[..., None])[..., 0]))
+    if not bounds[0] <= c <= bounds[1]:
+        raise ModelError(f"sound speed calibration: {c:.1f} m/s is outside [{bounds[0]:g}, {bounds[1]:g}] m/s; give "
+                         "the sound speed")
+    return float(c), float(sigma_toa / np.sqrt(S)) if S > 0 else float("inf"), int(len(T))
+
+
+__all__ = ["JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_SCALE", "calibrate_sound_speed_robust"]

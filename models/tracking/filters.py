@@ -1,0 +1,140 @@
+"""The other causal filters of a pinger's track: the sequential EKF and the unscented Kalman filter, on
+:class:`~sblsim.models.tracking.ekf.ToaTracker`'s motion model, start and restarts.
+
+References
+----------
+Bar-Shalom, Li, Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001, § 3.6
+(sequential processing); Wan & van der Merwe, "The unscented Kalman filter for nonlinear estimation", Proc. IEEE
+AS-SPCC 2000.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
+from sblsim.models.tracking.ekf import ToaTracker, TrackerSettings
+from sblsim.models.tracking.toa import _evaluate_pings
+
+
+class ToaSeqTracker(ToaTracker):
+    """The sequential EKF of the same track (the ``ekf-seq`` receiver's update): :class:`ToaTracker`'s motion model,
+    start and restarts, with one scalar update per time of arrival (sequential processing, Bar-Shalom, Li &
+    Kirubarajan 2001, section 3.6), each gated alone by its NIS (``settings.gate``) against the state and
+    covariance the arrivals before it left, the model linearised once at the prediction; the ping's arrivals are
+    first screened as the EKF's are (by the ping's own single-ping fix where the set fails its test).
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+    """
+
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The arrivals of one ping (n,) (NaN: not heard) one at a time, in the receivers' order (``kept`` as
+        :meth:`ToaTracker.update`'s); returns the state, the covariance (Joseph form) and the arrivals used (n,)."""
+        d, s = self.dim, self.settings
+        R = s.sigma_toa**2
+        model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
+        model, J = np.asarray(model).ravel(), np.asarray(J)
+        H = np.zeros((self.n, self.size))
+        H[:, :d], H[:, -2] = J[:, :d], J[:, d]
+        heard = np.isfinite(toa)
+        if heard.any() and not self._set_passes(heard, toa - model,
+                                                H[heard] @ P @ H[heard].T + R * np.eye(int(heard.sum()))):
+            heard = self._fix_kept(toa, heard, kept)
+        prediction, eye = x, np.eye(self.size)
+        used = np.zeros(self.n, bool)
+        for i in np.flatnonzero(heard):
+            h = H[i]
+            nu = toa[i] - (model[i] + h @ (x - prediction))
+            S = h @ P @ h + R
+            if nu**2 / S > s.gate:
+                continue
+            k = P @ h / S
+            x = x + k * nu
+            A = eye - np.outer(k, h)
+            P = A @ P @ A.T + R * np.outer(k, k)
+            P = 0.5 * (P + P.T)
+            used[i] = True
+        return x, P, used
+
+
+#: The scaled sigma points of :class:`ToaUkfTracker`: spread α, prior weight β (2: Gaussian), secondary scaling κ
+#: (the ``ukf`` receiver's defaults; λ = α²(n + κ) − n = 0: the points at ±√n standard deviations, the centre
+#: weighted in the covariance only).
+UKF_ALPHA, UKF_BETA, UKF_KAPPA = 1.0, 2.0, 0.0
+
+
+@lru_cache(maxsize=None)
+def _sigma_function(size: int, alpha: float, beta: float, kappa: float) -> ca.Function:
+    """``(x (size,), P (size, size)) -> (points (size, 2 size + 1), wm, wc (2 size + 1,))``: the scaled sigma points
+    of :class:`~sblsim.models.receiver.sigma_points.MerweScaledSigmaPoints` (the ``ukf`` receiver's) as a
+    function."""
+    x, P = ca.SX.sym("x", size), ca.SX.sym("P", size, size)
+    points = MerweScaledSigmaPoints(size, alpha, beta, kappa)
+    wm, wc = points.weights()
+    return ca.Function("sblsim_toa_sigma_points", [x, P], [ca.horzcat(*points.points(x, P)), wm, wc])
+
+
+class ToaUkfTracker(ToaTracker):
+    """The unscented Kalman filter of the same track: :class:`ToaTracker`'s motion model, start, gates and restarts,
+    with the unscented measurement update (the motion model is linear, so its prediction is the EKF's).
+
+    The scaled sigma points of the predicted state (α, β, κ: :data:`UKF_ALPHA`, :data:`UKF_BETA`,
+    :data:`UKF_KAPPA`; Wan & van der Merwe, "The unscented Kalman filter for nonlinear estimation", Proc. IEEE
+    AS-SPCC 2000) go through :func:`toa_function`; their weighted mean, covariance and cross-covariance with the
+    state take the place of the EKF's linearisation, in the same gates (each arrival's NIS, then the set's).
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+    alpha, beta, kappa : float
+        The sigma points' parameters.
+    """
+
+    def __init__(self, receivers: np.ndarray, settings: TrackerSettings, alpha: float = UKF_ALPHA,
+                 beta: float = UKF_BETA, kappa: float = UKF_KAPPA) -> None:
+        super().__init__(receivers, settings)
+        self._sigma = _sigma_function(self.size, float(alpha), float(beta), float(kappa))
+
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unscented update with one ping's times of arrival (n,) (NaN: not heard), gated as the EKF's
+        (``kept`` as :meth:`ToaTracker.update`'s); returns the state, the covariance and the arrivals used (n,)."""
+        d, s = self.dim, self.settings
+        points, wm, wc = (np.asarray(v) for v in self._sigma(x, P))
+        wm, wc = wm.ravel(), wc.ravel()
+        Z = _evaluate_pings(self.receivers, s.sound_speed, points[:d].T, points[-2])[0]  # (2 size + 1, n)
+        predicted = wm @ Z
+        dZ, dX = Z - predicted, points.T - x
+        Pzz = (wc[:, None] * dZ).T @ dZ
+        Pxz = (wc[:, None] * dX).T @ dZ
+        R = s.sigma_toa**2
+        nu = toa - predicted
+
+        def S(used):
+            return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
+
+        used, Su = self._gated(toa, nu, np.diag(Pzz) + R, S, kept)
+        if Su is not None:
+            K = np.linalg.solve(Su, Pxz[:, used].T).T
+            x = x + K @ nu[used]
+            P = P - K @ Su @ K.T
+            P = 0.5 * (P + P.T)
+        return x, P, used
+
+
+#: The causal filters of a pinger's track by their receivers' names (one model, start and restarts; their own
+#: measurement update).
+CAUSAL_TRACKERS = {"ekf": ToaTracker, "ekf-seq": ToaSeqTracker, "ukf": ToaUkfTracker}
+
+
+__all__ = ["CAUSAL_TRACKERS", "UKF_ALPHA", "UKF_BETA", "UKF_KAPPA", "ToaSeqTracker", "ToaUkfTracker"]

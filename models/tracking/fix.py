@@ -1,0 +1,185 @@
+"""The single-ping fix: each ping alone, its position and emission time by Gauss-Newton least squares.
+
+Needs dim + 1 receivers; the receiver with the largest normalised residual is dropped while it fails the χ² test of
+one arrival (:data:`GATE_ONE`) and redundancy remains (a late multipath arrival). Every ping of a record is fixed at
+once (one casadi call per Gauss-Newton iteration for all of them).
+
+References
+----------
+Kay, *Fundamentals of Statistical Signal Processing: Estimation Theory*, Prentice Hall 1993, § 8.9 (Gauss-Newton
+for nonlinear least squares); Bar-Shalom, Li, Kirubarajan, *Estimation with Applications to Tracking and
+Navigation*, Wiley 2001, § 5.4 (the χ² gate).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sblsim.models.tracking.toa import _evaluate_pings
+
+#: χ²(1) quantile of probability 0.999: the gate of one time of arrival.
+GATE_ONE = 10.828
+
+
+#: Iterations of a single-ping Gauss-Newton fix.
+FIX_ITERATIONS = 30
+
+
+@dataclass
+class Fix:
+    """A single-ping fix: position [m] (dim,), emission time [s], covariance of ``(p, t_e)`` (dim + 1, dim + 1)
+    [m², m·s, s²], the receivers used (n,) and the normalised residuals' sum of squares."""
+
+    position: np.ndarray
+    emission: float
+    covariance: np.ndarray
+    used: np.ndarray
+    chi2: float
+
+
+def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float,
+                    guess: np.ndarray | None = None, gate: float = GATE_ONE) -> Fix | None:
+    """The least-squares fix of one ping from its times of arrival, the emission time unknown (TOA/TDOA).
+
+    Gauss-Newton on ``Σ_i (toa_i − t_e − ‖p − r_i‖/c)²`` with step halving; while the ping keeps at least
+    dim + 2 receivers, the one with the largest squared normalised residual is dropped when that exceeds
+    ``gate`` (multipath arrivals are late) and the fix is made again.
+
+    Parameters
+    ----------
+    toa : ndarray, (n,)
+        Times of arrival [s]; NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c : float
+        Sound speed [m/s].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    guess : ndarray, (dim,), optional
+        Start position [m] (default between the first receiver to hear and the centroid of those heard).
+    gate : float
+        χ²(1) threshold of one residual.
+
+    Returns
+    -------
+    Fix or None
+        None when fewer than dim + 1 receivers heard the ping or the iteration failed.
+    """
+    positions, emissions, covariances, used, chi2 = fix_pings(
+        np.asarray(toa, float)[None, :], receivers, c, sigma_toa, None if guess is None else np.asarray(guess)[None],
+        gate)
+    if not np.isfinite(emissions[0]):
+        return None
+    return Fix(positions[0], float(emissions[0]), covariances[0], used[0], float(chi2[0]))
+
+
+def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, guesses: np.ndarray | None = None,
+              gate: float = GATE_ONE) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`single_ping_fix` of every ping at once (one casadi call per Gauss-Newton iteration for all pings).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c, sigma_toa, gate
+        As :func:`single_ping_fix`.
+    guesses : ndarray, (m, dim), optional
+        Start positions [m].
+
+    Returns
+    -------
+    positions : ndarray, (m, dim)
+        [m]; NaN where a ping has no fix (fewer than dim + 1 receivers, or no convergence).
+    emissions : ndarray, (m,)
+        [s]; NaN likewise.
+    covariances : ndarray, (m, dim + 1, dim + 1)
+        Of ``(p, t_e)`` [m², m·s, s²].
+    used : ndarray of bool, (m, n)
+        The arrivals each fix used.
+    chi2 : ndarray, (m,)
+        Sum of the squared normalised residuals.
+    """
+    toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    m, (n, dim) = len(toa), receivers.shape
+    used = np.isfinite(toa)
+    valid = used.sum(axis=1) >= dim + 1
+    positions = np.full((m, dim), np.nan)
+    emissions = np.full(m, np.nan)
+    covariances = np.full((m, dim + 1, dim + 1), np.nan)
+    chi2 = np.full(m, np.nan)
+    rows = np.flatnonzero(valid)
+    if not len(rows):
+        return positions, emissions, covariances, used & valid[:, None], chi2
+    filled = np.where(used, toa, 0.0)
+    first = np.argmin(np.where(used, toa, np.inf), axis=1)
+    centroid = (used[:, :, None] * receivers[None]).sum(axis=1) / np.maximum(used.sum(axis=1), 1)[:, None]
+    p = 0.5 * (receivers[first] + centroid) if guesses is None else np.array(guesses, float)
+    te = toa[np.arange(m), first] - np.linalg.norm(p - receivers[first], axis=1) / c
+    p, te = p[rows], te[rows]
+    active = rows
+    for _ in range(n + 1):  # outlier rounds: the worst residual dropped while it fails the gate and redundancy remains
+        p_a, te_a, J, res = _gauss_newton_pings(toa[active], filled[active], used[active], receivers, c, p, te)
+        positions[active], emissions[active] = p_a, te_a
+        z2 = np.where(used[active], (res / sigma_toa) ** 2, 0.0)
+        chi2[active] = z2.sum(axis=1)
+        A = J * used[active][:, :, None] / sigma_toa
+        info = np.einsum("mki,mkj->mij", A, A)
+        finite = np.isfinite(info).all(axis=(1, 2))  # a diverged iteration's (the fix refused below)
+        cov = np.full(info.shape, np.nan)
+        with np.errstate(all="ignore"):
+            cov[finite] = np.linalg.pinv(info[finite])
+        covariances[active] = cov
+        again = (used[active].sum(axis=1) >= dim + 3) & (z2.max(axis=1) > gate)
+        if not again.any():
+            break
+        worst = np.argmax(z2[again], axis=1)
+        used[active[again], worst] = False
+        active, p, te = active[again], p_a[again], te_a[again]
+    bad = ~(np.isfinite(positions).all(axis=1) & np.isfinite(emissions)) | ~valid
+    positions[bad], emissions[bad], chi2[bad] = np.nan, np.nan, np.nan
+    return positions, emissions, covariances, used & ~bad[:, None], chi2
+
+
+def _gauss_newton_pings(toa, filled, used, receivers, c, p, te):
+    """Gauss-Newton iterations with step halving of many pings' fixes at once: positions (k, dim), emission times
+    (k,), Jacobians (k, n, dim + 1) and residuals (k, n) (0 where not used) at the end."""
+    dim = receivers.shape[1]
+    p, te = p.copy(), te.copy()
+
+    def evaluate(idx, p, te):
+        model, J = _evaluate_pings(receivers, c, p, te)
+        return np.where(used[idx], filled[idx] - model, 0.0), J
+
+    res, J = evaluate(slice(None), p, te)
+    cost = (res**2).sum(axis=1)
+    moving = np.arange(len(p))
+    for _ in range(FIX_ITERATIONS):
+        Jw = J[moving] * used[moving][:, :, None]
+        normal = np.einsum("mki,mkj->mij", Jw, Jw) + 1e-12 * np.eye(dim + 1)
+        step = np.linalg.solve(normal, np.einsum("mki,mk->mi", Jw, res[moving])[..., None])[..., 0]
+        big = np.abs(step[:, :-1]).max(axis=1) >= 1e-6  # converged: a step below a micrometre
+        moving, step = moving[big], step[big]
+        trying, scale = moving, 1.0
+        for _halving in range(10):
+            if not len(trying):
+                break
+            p_try, te_try = p[trying] + scale * step[:, :-1], te[trying] + scale * step[:, -1]
+            res_try, J_try = evaluate(trying, p_try, te_try)
+            cost_try = (res_try**2).sum(axis=1)
+            better = cost_try <= cost[trying]
+            done = trying[better]
+            p[done], te[done], res[done], J[done], cost[done] = (p_try[better], te_try[better], res_try[better],
+                                                                 J_try[better], cost_try[better])
+            trying, step, scale = trying[~better], step[~better], 0.5 * scale
+        moving = np.setdiff1d(moving, trying)  # no step lowers the cost: done
+        if not len(moving):
+            break
+    return p, te, J, res
+
+
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "Fix", "fix_pings", "single_ping_fix"]
