@@ -27,9 +27,13 @@ Hald data).
 from __future__ import annotations
 
 from sblsim.models.tracking.calibration import (
+    BATCHES,
     JOINT_ITERATIONS,
     JOINT_TOLERANCE,
+    MAX_SIGMA,
     ROBUST_SCALE,
+    Calibration,
+    calibrate_sound_speed,
     calibrate_sound_speed_robust,
 )
 from sblsim.models.tracking.ekf import ToaTracker, TrackerSettings, TrackRecord, rts_smooth
@@ -58,10 +62,10 @@ from sblsim.models.tracking.smoother import (
 from sblsim.models.tracking.starts import anchored_start, graduated_start, robust_track
 from sblsim.models.tracking.toa import SOUND_SPEED_RANGE, toa_function, toa_model
 
-__all__ = ["CAUSAL_TRACKERS", "FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE",
-           "ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT",
-           "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA", "UKF_BETA",
-           "UKF_KAPPA", "Fix", "RobustTrack", "ToaSeqTracker", "ToaTracker", "ToaUkfTracker", "TrackRecord",
-           "TrackerSettings", "anchored_start", "calibrate_sound_speed_robust", "fix_pings", "graduated_start",
-           "observed_information", "robust_smooth", "robust_track", "rts_smooth", "simulate_pings",
-           "single_ping_fix", "toa_function", "toa_model"]
+__all__ = ["BATCHES", "CAUSAL_TRACKERS", "FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE",
+           "MAX_SIGMA", "ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS",
+           "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA",
+           "UKF_BETA", "UKF_KAPPA", "Calibration", "Fix", "RobustTrack", "ToaSeqTracker", "ToaTracker", "ToaUkfTracker",
+           "TrackRecord", "TrackerSettings", "anchored_start", "calibrate_sound_speed", "calibrate_sound_speed_robust",
+           "fix_pings", "graduated_start", "observed_information", "robust_smooth", "robust_track", "rts_smooth",
+           "simulate_pings", "single_ping_fix", "toa_function", "toa_model"]

@@ -1,5 +1,6 @@
 """The sound speed calibrated from the pings themselves: a joint robust fit of the speed and every ping's position
-and emission time (the replay's calibration when no speed is given).
+and emission time (:func:`calibrate_sound_speed_robust`), made over stretches of the record and their median kept
+(:func:`calibrate_sound_speed`: the replay's calibration when no speed is given).
 
 References
 ----------
@@ -8,6 +9,8 @@ synthesis", Vision Algorithms 1999, § 6.1 (the Schur complement onto the shared
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -162,4 +165,86 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     return float(c), float(sigma_toa / np.sqrt(S)) if S > 0 else float("inf"), int(len(T))
 
 
-__all__ = ["JOINT_ITERATIONS", "JOINT_TOLERANCE", "ROBUST_SCALE", "calibrate_sound_speed_robust"]
+#: The calibration's batches (consecutive stretches of the record) and the most pings each fits.
+BATCHES = 8
+BATCH_PINGS = 60
+#: The largest standard error [m/s] of a calibrated sound speed: beyond it the array does not determine the speed.
+MAX_SIGMA = 5.0
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """What :func:`calibrate_sound_speed` returns: the sound speed ``c`` [m/s], its standard error ``sigma`` [m/s],
+    the pings used, and each batch's own speed (``batches`` [m/s], NaN where a batch could not be fitted)."""
+
+    c: float
+    sigma: float
+    pings: int
+    batches: tuple[float, ...]
+
+
+def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, batches: int = BATCHES,
+                          max_pings: int = BATCH_PINGS,
+                          bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> Calibration:
+    """The sound speed calibrated from the pings: the median of the joint robust fits
+    (:func:`calibrate_sound_speed_robust`) of ``batches`` consecutive stretches of the record, each of at most
+    ``max_pings`` pings.
+
+    One fit over the whole record is one estimate whose error its normal equations do not show: a stretch of pings
+    whose late arrivals agree on a wrong speed (a thin array's, where most pings are heard by few receivers) moves
+    it by more than its standard error, and its local minimum is then far from the truth (Lake Hald's 8 hydrophones:
+    1,429.8 m/s, standard error 0.28 m/s, where the 28 give 1,416.9). The stretches' fits are independent estimates
+    of the same speed: their median is robust to a few wrong ones (Huber & Ronchetti, *Robust Statistics*, Wiley
+    2009, § 3.2), and their spread is the speed's real uncertainty: the standard error of the median of K estimates,
+    ``1.2533 s / √K`` (s their standard deviation; the median's efficiency 2/π for Gaussian estimates).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    sigma_toa : float
+        Standard deviation of a time of arrival [s].
+    batches : int
+        K, at least 3.
+    max_pings : int
+        Most pings of a batch's fit.
+    bounds : (float, float)
+        The speeds allowed [m/s].
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    ModelError
+        Fewer than 3 batches could be fitted, or their standard error exceeds :data:`MAX_SIGMA` (the array does not
+        determine the speed: give it).
+    """
+    values, used = [], 0
+    for rows in np.array_split(np.arange(len(toa)), max(int(batches), 3)):
+        try:
+            c, _, n = calibrate_sound_speed_robust(toa[rows], receivers, sigma_toa, max_pings, bounds=bounds)
+        except ModelError:
+            values.append(np.nan)
+            continue
+        values.append(c)
+        used += n
+    fitted = np.array([v for v in values if np.isfinite(v)])
+    if len(fitted) < 3:
+        raise ModelError(f"sound speed calibration: {len(fitted)} of {len(values)} stretches of the record could be "
+                         "fitted (each needs 3 pings heard by dim + 3 receivers); at least 3 are needed (give the "
+                         "sound speed)")
+    sigma = float(1.2533 * np.std(fitted, ddof=1) / np.sqrt(len(fitted)))
+    c = float(np.median(fitted))
+    if sigma > MAX_SIGMA:
+        raise ModelError(f"sound speed calibration: the stretches of the record give {np.min(fitted):.1f} to "
+                         f"{np.max(fitted):.1f} m/s (standard error {sigma:.2g} m/s, allowed at most {MAX_SIGMA:g}): "
+                         "the array does not determine it (give the sound speed)")
+    return Calibration(c, sigma, used, tuple(float(v) for v in values))
+
+
+__all__ = ["BATCHES", "BATCH_PINGS", "JOINT_ITERATIONS", "JOINT_TOLERANCE", "MAX_SIGMA", "ROBUST_SCALE",
+           "Calibration", "calibrate_sound_speed", "calibrate_sound_speed_robust"]

@@ -21,6 +21,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking.calibration import calibrate_sound_speed
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
@@ -199,9 +200,12 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                              f"[{span[0]:.10g}, {span[1]:.10g}] s; allowed: a truth on the time base of the times of "
                              "arrival")
     if sound_speed is None:
-        c, sigma_c, calibration_pings = tt.calibrate_sound_speed_robust(toa, positions, SIGMA_TOA)
-        speed = {"sound_speed_m_s": c, "source": "calibrated", "method": "joint soft-L1", "sigma_m_s": sigma_c,
-                 "pings": calibration_pings}
+        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA)
+        c = calibration.c
+        speed = {"sound_speed_m_s": c, "source": "calibrated",
+                 "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits",
+                 "sigma_m_s": calibration.sigma, "pings": calibration.pings,
+                 "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
     else:
         c = sound_speed
         speed = {"sound_speed_m_s": c, "source": "given"}
