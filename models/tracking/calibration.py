@@ -175,7 +175,8 @@ MAX_SIGMA = 5.0
 @dataclass(frozen=True)
 class Calibration:
     """What :func:`calibrate_sound_speed` returns: the sound speed ``c`` [m/s], its standard error ``sigma`` [m/s],
-    the pings used, and each batch's own speed (``batches`` [m/s], NaN where a batch could not be fitted)."""
+    the pings used, and each batch's own speed (``batches`` [m/s], NaN where a batch could not be fitted; empty where
+    the record was too short for stretches and one joint fit gave ``c``)."""
 
     c: float
     sigma: float
@@ -220,8 +221,9 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
     Raises
     ------
     ModelError
-        Fewer than 3 batches could be fitted, or their standard error exceeds :data:`MAX_SIGMA` (the array does not
-        determine the speed: give it).
+        Their standard error exceeds :data:`MAX_SIGMA` (the array does not determine the speed: give it), or, where
+        fewer than 3 stretches can be fitted (a short record: one joint fit of it all is returned then, ``batches``
+        empty), that fit fails.
     """
     values, used = [], 0
     for rows in np.array_split(np.arange(len(toa)), max(int(batches), 3)):
@@ -233,10 +235,9 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
         values.append(c)
         used += n
     fitted = np.array([v for v in values if np.isfinite(v)])
-    if len(fitted) < 3:
-        raise ModelError(f"sound speed calibration: {len(fitted)} of {len(values)} stretches of the record could be "
-                         "fitted (each needs 3 pings heard by dim + 3 receivers); at least 3 are needed (give the "
-                         "sound speed)")
+    if len(fitted) < 3:  # too short a record for stretches: one joint fit of it all (raises where even that fails)
+        c, sigma, used = calibrate_sound_speed_robust(toa, receivers, sigma_toa, bounds=bounds)
+        return Calibration(c, sigma, used, ())
     sigma = float(1.2533 * np.std(fitted, ddof=1) / np.sqrt(len(fitted)))
     c = float(np.median(fitted))
     if sigma > MAX_SIGMA:

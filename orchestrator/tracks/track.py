@@ -192,6 +192,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     toa, dropped = drop_detections(toa, drop, seed)
     dim = positions.shape[1]
     check_array(positions, names, toa, tt.SOUND_SPEED_RANGE[0])
+    ps.first_arrival_steps(toa)  # the rows in time order, before anything is fitted to them
     if truth is not None:
         first = ps.first_arrivals(toa)
         span = (float(np.nanmin(first)), float(np.nanmax(first))) if np.isfinite(first).any() else (np.nan, np.nan)
@@ -203,7 +204,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA)
         c = calibration.c
         speed = {"sound_speed_m_s": c, "source": "calibrated",
-                 "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits",
+                 "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits"
+                 if calibration.batches else "one joint soft-L1 fit (a record too short for stretches)",
                  "sigma_m_s": calibration.sigma, "pings": calibration.pings,
                  "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
     else:
