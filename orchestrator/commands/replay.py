@@ -513,6 +513,10 @@ def _main_toa(args: argparse.Namespace) -> int:
     print("  " + ping_type_line(s))
     quality = quality_line(s)
     print("  " + quality)
+    for late in s["receivers_late"]:
+        print(f"sblsim: warning: receiver {late['receiver']} is out of line of sight: its arrivals are late by "
+              f"{late['median_residual_sigmas']:.1f} σ in the median over {late['arrivals']} (the track kept "
+              f"{100 * late['kept_share']:.0f} % of them)", file=sys.stderr)
     if s["flagged"].get(s["track"]):
         print(f"sblsim: warning: {quality}; see the quality column of track.csv", file=sys.stderr)
     names = ESTIMATOR_NAMES

@@ -24,6 +24,7 @@ from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.calibration import calibrate_sound_speed
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
+from sblsim.models.tracking.receivers import receiver_residuals
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 
@@ -268,6 +269,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     main = next(iter(frames)) if smooth else "ekf"  # the robust smoother where it ran, else the RTS smoother
     estimates = pd.concat(frames.values(), ignore_index=True)
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
+    at = np.full((len(toa), dim), np.nan)
+    emitted = np.full(len(toa), np.nan)
+    ping = frames[main]["ping"].to_numpy()
+    at[ping], emitted[ping] = frames[main][columns].to_numpy(), frames[main]["time"].to_numpy()
+    judged = receiver_residuals(toa, positions, at, emitted, c, SIGMA_TOA)
     summary: dict[str, Any] = {
         "track": main, "pings": int(len(toa)), "receivers": names,
         "robust_smoother": None if robust is None else {
@@ -284,6 +290,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
         "restarts": len(record.restarts), "fixed": {e: int(len(fr)) for e, fr in frames.items()},
         "flagged": flagged, "trusted_fixes": int(trusted.sum()),
+        "receivers_late": [{"receiver": names[k], "arrivals": int(judged.arrivals[k]),
+                            "median_residual_sigmas": float(judged.median_z[k]), "kept_share": float(judged.kept[k])}
+                           for k in np.flatnonzero(judged.late)],
         "truth": None if truth_path is None else str(truth_path),
         "reference": None if reference_path is None else str(reference_path)}
     errors = result = bound = None
