@@ -11,7 +11,9 @@ the tracker, gathered from :mod:`sblsim.models.tracking`, where each part is a m
   :mod:`~sblsim.models.tracking.filters`: the sequential EKF and the UKF;
 * :mod:`~sblsim.models.tracking.smoother` and :mod:`~sblsim.models.tracking.starts`: the robust smoother and where
   it starts; :mod:`~sblsim.models.tracking.motion_noise`: the motion model's noise estimated by EM;
+* :mod:`~sblsim.models.tracking.stationary`: a stationary tag's pings pooled into one position;
 * :mod:`~sblsim.models.tracking.quality`: each estimate checked against its own data;
+  :mod:`~sblsim.models.tracking.receivers`: a receiver out of line of sight named;
 * :mod:`~sblsim.models.tracking.simulate`: simulated pings of any ping type.
 
 Units: seconds [s], metres [m], metres per second [m/s].
@@ -60,12 +62,13 @@ from sblsim.models.tracking.smoother import (
     robust_smooth,
 )
 from sblsim.models.tracking.starts import anchored_start, graduated_start, robust_track
+from sblsim.models.tracking.stationary import StationaryFix, stationary_fix
 from sblsim.models.tracking.toa import SOUND_SPEED_RANGE, toa_function, toa_model
 
 __all__ = ["BATCHES", "CAUSAL_TRACKERS", "FIX_ITERATIONS", "GATE_ONE", "JOINT_ITERATIONS", "JOINT_TOLERANCE",
            "MAX_SIGMA", "ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS",
            "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA",
-           "UKF_BETA", "UKF_KAPPA", "Calibration", "Fix", "RobustTrack", "ToaSeqTracker", "ToaTracker", "ToaUkfTracker",
-           "TrackRecord", "TrackerSettings", "anchored_start", "calibrate_sound_speed", "calibrate_sound_speed_robust",
+           "UKF_BETA", "UKF_KAPPA", "Calibration", "Fix", "RobustTrack", "StationaryFix", "ToaSeqTracker", "ToaTracker",
+           "ToaUkfTracker", "TrackRecord", "TrackerSettings", "anchored_start", "calibrate_sound_speed", "calibrate_sound_speed_robust",
            "fix_pings", "graduated_start", "observed_information", "robust_smooth", "robust_track", "rts_smooth",
-           "simulate_pings", "single_ping_fix", "toa_function", "toa_model"]
+           "simulate_pings", "single_ping_fix", "stationary_fix", "toa_function", "toa_model"]

@@ -11,6 +11,8 @@
   starts; :mod:`~sblsim.models.tracking.motion_noise`: the motion model's noise estimated by EM;
 * :mod:`~sblsim.models.tracking.quality`: every estimate checked against its own data, a lost stretch flagged;
 * :mod:`~sblsim.models.tracking.geometry`: an array that cannot position a tag refused;
+* :mod:`~sblsim.models.tracking.receivers`: a receiver out of line of sight named from its residuals;
+* :mod:`~sblsim.models.tracking.stationary`: a stationary tag's pings pooled into one position;
 * :mod:`~sblsim.models.tracking.simulate`: simulated pings.
 
 The public names are gathered in :mod:`sblsim.models.receiver.toa_tracking`; the accuracy limit is

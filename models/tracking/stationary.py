@@ -1,0 +1,138 @@
+"""A stationary tag (a sync tag, a reference tag, a dead fish): one position for all its pings, the pings pooled.
+
+Every ping k has its own emission time ``t_k``; the position ``p`` is shared:
+
+    ``min over p, t_1..t_m  Σ_(k,i) heard (ν + 1) ln(1 + z_ki² / ν)``,
+    ``z_ki = (toa_ki − t_k − ‖p − r_i‖ / c) / σ_toa``,
+
+the robust smoother's Student-t error of each arrival (:data:`~sblsim.models.tracking.smoother.ROBUST_DOF`). Solved by
+iteratively reweighted Gauss-Newton with the emission times eliminated: at fixed weights, each ``t_k`` is the
+weighted mean of its arrivals' ``toa_ki − ‖p − r_i‖ / c``, so the position's normal equations are those of the
+arrivals centred per ping (the Schur complement of the arrowhead system; Triggs et al., "Bundle adjustment — a modern
+synthesis", 1999, § 6.1), a dim × dim solve per iteration whatever the number of pings. The covariance is the inverse
+of the arrivals' observed information (:func:`~sblsim.models.tracking.smoother.observed_information`) in the same
+reduced form.
+
+Units: seconds [s], metres [m].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.smoother import ROBUST_DOF, observed_information
+
+#: Gauss-Newton iterations at most, and the step [m] below which the position has converged.
+ITERATIONS = 100
+TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class StationaryFix:
+    """What :func:`stationary_fix` returns: ``position`` (dim,) [m], its ``covariance`` (dim, dim) [m²], each ping's
+    ``emissions`` (m,) [s] (NaN for a ping nobody heard), the arrivals' ``weights`` (m, n) (0 where not heard),
+    the ``pings`` that had arrivals and the Gauss-Newton ``iterations``."""
+
+    position: np.ndarray
+    covariance: np.ndarray
+    emissions: np.ndarray
+    weights: np.ndarray
+    pings: int
+    iterations: int
+
+
+def _centred(values: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``values`` (m, n[, dim]) less their per-ping weighted mean over the heard arrivals (weights ``w`` (m, n), 0
+    where not heard)."""
+    total = np.maximum(w.sum(axis=1), 1e-300)
+    if values.ndim == 3:
+        return values - (np.einsum("mn,mnd->md", w, values) / total[:, None])[:, None, :]
+    return values - ((w * values).sum(axis=1) / total)[:, None]
+
+
+def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, start: np.ndarray,
+                   dof: float = ROBUST_DOF) -> StationaryFix:
+    """The position of a stationary tag from all its pings (module docstring).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        [m].
+    c : float
+        Sound speed [m/s].
+    sigma_toa : float
+        [s].
+    start : ndarray, (dim,)
+        The first position [m] (e.g. the median of the single-ping fixes).
+    dof : float
+        ν.
+
+    Returns
+    -------
+    StationaryFix
+
+    Raises
+    ------
+    ModelError
+        Fewer than dim + 1 receivers heard the tag, or the start is not finite.
+    """
+    toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    heard = np.isfinite(toa)
+    n, dim = receivers.shape
+    if heard.any(axis=0).sum() < dim + 1:
+        raise ModelError(f"stationary tag: {int(heard.any(axis=0).sum())} receivers heard it; allowed: at least "
+                         f"{dim + 1}")
+    p = np.asarray(start, float).copy()
+    if p.shape != (dim,) or not np.isfinite(p).all():
+        raise ModelError(f"stationary tag: a start of shape {p.shape} or not finite; allowed: ({dim},), finite")
+    y = np.where(heard, toa, 0.0)
+
+    def terms(p: np.ndarray):
+        diff = p[None, :] - receivers
+        d = np.linalg.norm(diff, axis=1)
+        emitted = y - d[None, :] / c  # each arrival's emission time at p
+        return diff / np.maximum(d, 1e-9)[:, None] / c, emitted
+
+    w = heard.astype(float)
+
+    def settle(emitted: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The emission times and the weights at a position: each ping's emission time the weighted mean of its
+        arrivals' (IRLS of the Student-t location, to its fixed point), the normalised residuals and weights there."""
+        for _ in range(50):
+            r = np.where(heard, _centred(emitted, w), 0.0) / sigma_toa
+            new = np.where(heard, (dof + 1.0) / (dof + r**2), 0.0)
+            if np.abs(new - w).max() < 1e-12:
+                break
+            w = new
+        return np.where(heard, _centred(emitted, w), 0.0) / sigma_toa, w
+
+    iterations = 0
+    for _ in range(ITERATIONS):
+        iterations += 1
+        unit, emitted = terms(p)
+        r, w = settle(emitted, w)
+        J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), w), 0.0) / sigma_toa
+        normal = np.einsum("mn,mni,mnj->ij", w, J, J)
+        gradient = np.einsum("mn,mni,mn->i", w, J, r)
+        step = np.linalg.lstsq(normal, -gradient, rcond=None)[0]
+        p = p + step
+        if np.abs(step).max() < TOLERANCE:
+            break
+    unit, emitted = terms(p)
+    r, w = settle(emitted, w)
+    info = np.where(heard, observed_information(r, dof), 0.0)
+    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), info), 0.0) / sigma_toa
+    covariance = np.linalg.pinv(np.einsum("mn,mni,mnj->ij", info, J, J))
+    total = w.sum(axis=1)
+    emissions = np.where(total > 0, (w * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)
+    return StationaryFix(p, 0.5 * (covariance + covariance.T), emissions, w, int(heard.any(axis=1).sum()),
+                         iterations)
+
+
+__all__ = ["ITERATIONS", "TOLERANCE", "StationaryFix", "stationary_fix"]
