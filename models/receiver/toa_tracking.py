@@ -69,6 +69,7 @@ __all__ = ["BATCHES", "CAUSAL_TRACKERS", "FIX_ITERATIONS", "GATE_ONE", "JOINT_IT
            "MAX_SIGMA", "ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS",
            "ROBUST_KEPT_WEIGHT", "ROBUST_SCALE", "ROBUST_SCREEN", "ROBUST_TOLERANCE", "SOUND_SPEED_RANGE", "UKF_ALPHA",
            "UKF_BETA", "UKF_KAPPA", "Calibration", "Fix", "RobustTrack", "StationaryFix", "ToaSeqTracker", "ToaTracker",
-           "ToaUkfTracker", "TrackRecord", "TrackerSettings", "anchored_start", "calibrate_sound_speed", "calibrate_sound_speed_robust",
-           "fix_pings", "graduated_start", "observed_information", "robust_smooth", "robust_track", "rts_smooth",
-           "simulate_pings", "single_ping_fix", "stationary_fix", "toa_function", "toa_model"]
+           "ToaUkfTracker", "TrackRecord", "TrackerSettings", "anchored_start", "calibrate_sound_speed",
+           "calibrate_sound_speed_robust", "fix_pings", "graduated_start", "observed_information", "robust_smooth",
+           "robust_track", "rts_smooth", "simulate_pings", "single_ping_fix", "stationary_fix", "toa_function",
+           "toa_model"]
