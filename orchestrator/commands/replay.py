@@ -236,7 +236,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                receivers_kept: str | Sequence[str] | None = None, drop_detections: float = 0.0, seed: int = 0,
                truth_sigma: float = 0.0, ping_type: str | None = None,
                burst_interval: str | tuple[float, float] | None = None, burst_sequence: str | Path | None = None,
-               out: str | Path | None = None, force: bool = False) -> TrackResult:
+               acceleration_psd: float | None = None, out: str | Path | None = None,
+               force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -274,6 +275,9 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         ``rbi``: the interval's bounds, ``"MIN:MAX"`` [s] (e.g. ``"20:40"``).
     burst_sequence : str or Path, optional
         ``pbi``: a file of the tag's intervals [s] in order, one per row (a file key).
+    acceleration_psd : float, optional
+        The motion model's white-noise acceleration ``q`` [m²/s³] in (0, 1]; default estimated from the pings by EM
+        (``summary["motion"]``; :mod:`sblsim.models.tracking.motion_noise`).
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
         ``errors.csv`` there.
@@ -305,9 +309,11 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     truth_sigma = real_argument(truth_sigma, "truth_sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     kind, interval, sequence = ping_type_arguments(ping_type, burst_interval, burst_sequence,
                                                    ("ping_type", "burst_interval", "burst_sequence"))
+    if acceleration_psd is not None:
+        acceleration_psd = real_argument(acceleration_psd, "acceleration_psd", 0.0, 1.0, "m²/s³", low_open=True)
     target = prepare_out(out, force, "track.csv", "track")
     outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed, truth_sigma, kind,
-                    interval, sequence)
+                    interval, sequence, acceleration_psd)
     if target is not None:
         write(outcome, target)
     return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
@@ -372,6 +378,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="--format toa: a random burst interval's bounds [s], e.g. 20:40 (rbi)")
     p.add_argument("--burst-sequence", type=Path, default=None, metavar="FILE",
                    help="--format toa: a pseudo-random tag's intervals [s] in order, one per row (pbi)")
+    p.add_argument("--acceleration-psd", type=float, default=None, metavar="M2_S3",
+                   help="--format toa: the motion model's white-noise acceleration [m²/s³] in (0, 1] (default: "
+                        "estimated from the pings by EM)")
     p.add_argument("--truth-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the truth's own error per horizontal axis [m] in [0, 100] (GPS, lever arm), "
                         "in the NEES against it (default 0: the truth taken as exact)")
@@ -395,7 +404,8 @@ def main(args: argparse.Namespace) -> int:
                             ("--receivers-kept", args.receivers_kept), ("--drop-detections", args.drop_detections),
                             ("--seed", args.seed is not None), ("--truth-sigma", args.truth_sigma is not None),
                             ("--ping-type", args.ping_type), ("--burst-interval", args.burst_interval),
-                            ("--burst-sequence", args.burst_sequence)) if v]
+                            ("--burst-sequence", args.burst_sequence),
+                            ("--acceleration-psd", args.acceleration_psd is not None)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -482,7 +492,8 @@ def _main_toa(args: argparse.Namespace) -> int:
     if other or args.engine != "local":
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
-                          "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, --out, --force")
+                          "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
+                          "--acceleration-psd, --out, --force")
     speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", 1300.0, 1700.0,
                                                                 "m/s")
     kept = _receivers_kept(args.receivers_kept, "--receivers-kept")
@@ -498,8 +509,10 @@ def _main_toa(args: argparse.Namespace) -> int:
         truth_sigma = real_argument(args.truth_sigma, "--truth-sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     kind, interval, sequence = ping_type_arguments(args.ping_type, args.burst_interval, args.burst_sequence,
                                                    ("--ping-type", "--burst-interval", "--burst-sequence"))
+    q = None if args.acceleration_psd is None else real_argument(args.acceleration_psd, "--acceleration-psd", 0.0,
+                                                                  1.0, "m²/s³", low_open=True)
     outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed,
-                    truth_sigma, kind, interval, sequence)
+                    truth_sigma, kind, interval, sequence, q)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
     write(outcome, out)

@@ -173,7 +173,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           burst_interval: tuple[float, float] | None = None, burst_sequence_path: Path | None = None,
           acceleration_psd: float | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
-    (:func:`~sblsim.models.receiver.toa_tracking.calibrate_sound_speed_robust`); ``truth_sigma`` [m] the truth's
+    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); ``truth_sigma`` [m] the truth's
     own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
     :func:`ping_schedule`, ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
     (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
@@ -237,7 +237,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
                                  fix_used=fix_explained[ping])
         with np.errstate(invalid="ignore"):
-            sigmas = {f"sigma_{a}": np.sqrt(np.maximum(cov[:, k, k], 0.0)) for k, a in enumerate(columns)}
+            # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0
+            sigmas = {f"sigma_{a}": np.sqrt(np.where(cov[:, k, k] >= 0, cov[:, k, k], np.nan))
+                      for k, a in enumerate(columns)}
         frames[estimator] = pd.DataFrame({"estimator": estimator, "ping": ping, "time": t,
                                           **{a: p[:, k] for k, a in enumerate(columns)}, **sigmas,
                                           "receivers_heard": heard, "quality": checked.quality})

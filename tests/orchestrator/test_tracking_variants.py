@@ -276,10 +276,16 @@ def test_what_cannot_be_tracked_is_refused_in_one_line_and_writes_nothing(tmp_pa
 
 
 def test_two_pings_with_the_speed_given_are_tracked_and_scored(tmp_path, capsys):
-    """Two pings (before: an IndexError in the bound's thirds): tracked, scored, written."""
+    """Two pings (before: an IndexError in the bound's thirds): tracked, scored, written; the motion noise given
+    is the one used."""
+    import json
+
     from sblsim.orchestrator.cli import main
 
     toa = _first_rows(tmp_path, [100, 101])
     assert main(["replay", str(toa), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"), "--truth",
-                 str(DATA / "gps.txt"), "--sound-speed", "1417", "--out", str(tmp_path / "o")]) == 0
+                 str(DATA / "gps.txt"), "--sound-speed", "1417", "--acceleration-psd", "0.002",
+                 "--out", str(tmp_path / "o")]) == 0
     assert (tmp_path / "o" / "score.json").is_file() and "ping type" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["motion"] == {"acceleration_psd_m2_s3": 0.002, "source": "given"}
