@@ -21,7 +21,6 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
-from sblsim.models.tracking.calibration import calibrate_sound_speed
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.models.tracking.receivers import receiver_residuals
@@ -181,6 +180,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.models.tracking.calibration import calibrate_sound_speed
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
