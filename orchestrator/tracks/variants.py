@@ -22,15 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-
-
-def first_arrivals(toa: np.ndarray) -> np.ndarray:
-    """Each ping's earliest time of arrival [s] (m,), NaN for a ping nobody heard; ``toa`` (m, n) [s]."""
-    toa = np.asarray(toa, float)
-    heard = np.isfinite(toa).any(axis=1)
-    out = np.full(len(toa), np.nan)
-    out[heard] = np.nanmin(toa[heard], axis=1)
-    return out
+from sblsim.models.tracking.schedule import first_arrivals
 
 
 def random_interval_pings(toa: np.ndarray, low: float, high: float, seed: int) -> np.ndarray:
@@ -95,4 +87,4 @@ def write_toa(path: str | Path, toa: np.ndarray, names: Sequence[str]) -> None:
     frame.to_csv(path, sep=" ", na_rep="NA", index=False, float_format="%.9f")
 
 
-__all__ = ["cut_gap", "first_arrivals", "random_interval_pings", "write_toa"]
+__all__ = ["cut_gap", "random_interval_pings", "write_toa"]
