@@ -182,31 +182,29 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
     alone = np.zeros(m, bool)  # off a trusted fix while explaining too few arrivals to position itself
-    agree = np.zeros(m, bool)
     k = np.flatnonzero(trusted)
     if len(k):
         d2 = _distance2(p[k] - fx[k], P[k] + C[k])
         near = np.linalg.norm(p[k] - fx[k], axis=1) <= FIX_SLACK
-        agree[k] = (d2 <= FIX_GATE) | near
-        fix_bad[k] = ~agree[k]
+        fix_bad[k] = ~((d2 <= FIX_GATE) | near)
         if explained is not None and fix_used is not None:
             ours, theirs = np.asarray(explained)[k], np.asarray(fix_used)[k]
             # an estimate that explains too few of its ping's arrivals to position itself agrees with nothing, however
             # large its covariance
             blind = (ours <= 2) & ~near
-            fix_bad[k] = (fix_bad[k] | blind) & (theirs > ours)
-            alone[k] = blind & (theirs > ours)
+            fix_more = theirs > ours
+            fix_bad[k] = (fix_bad[k] | blind) & fix_more
+            alone[k] = blind & fix_more
     # a stretch between two disagreeing trusted fixes with no agreeing one between
     stretch = np.zeros(m, bool)
-    checked = np.flatnonzero(trusted)
-    bad_runs = fix_bad[checked]
+    bad_runs = fix_bad[k]
     for j in np.flatnonzero(bad_runs[:-1] & bad_runs[1:]):
-        stretch[checked[j]:checked[j + 1] + 1] = True
-    if len(checked) >= 2:  # a run of off pings at either end: lost to the end (no agreeing fix to come back to)
+        stretch[k[j]:k[j + 1] + 1] = True
+    if len(k) >= 2:  # a run of off pings at either end: lost to the end (no agreeing fix to come back to)
         if bad_runs[-1] and bad_runs[-2]:
-            stretch[checked[-1]:] = True
+            stretch[k[-1]:] = True
         if bad_runs[0] and bad_runs[1]:
-            stretch[:checked[0] + 1] = True
+            stretch[:k[0] + 1] = True
     # out of reach of the nearest trusted fixes before and after
     reach = np.zeros(m, bool)
     if len(k):
