@@ -44,28 +44,74 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
         raise ModelError("simulate_pings: a random burst interval needs burst_interval (min, max) [s]")
     if ping_type == "pbi" and (burst_sequence is None or not len(burst_sequence)):
         raise ModelError("simulate_pings: a pseudo-random burst interval needs burst_sequence [s]")
-    te, interval = first_emission, s.interval
-    positions, emissions = np.empty((n_pings, dim)), np.empty(n_pings)
-    for k in range(n_pings):
-        positions[k], emissions[k] = p, te
-        if ping_type == "rbi":
-            T = rng.uniform(*burst_interval)
-        elif ping_type == "pbi":
-            T = float(burst_sequence[k % len(burst_sequence)]) + s.jitter * rng.normal()
-        else:
-            T = interval
-        cov = s.acceleration_psd * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
-        w = rng.multivariate_normal(np.zeros(2), cov, size=dim)  # (dim, 2): position and velocity noise per axis
-        p, v = p + T * v + w[:, 0], v + w[:, 1]
-        if ping_type == "sbi":
-            te = te + interval + s.jitter * rng.normal()
-            interval = interval + s.interval_drift * rng.normal()
-        else:
-            te = te + T
+    if ping_type == "rbi":
+        positions, emissions = _walk_random_interval(p, v, n_pings, settings, rng, burst_interval, first_emission)
+    else:
+        positions, emissions = _walk(p, v, n_pings, settings, rng, ping_type, burst_sequence, first_emission)
     ranges = np.linalg.norm(positions[:, None, :] - receivers[None, :, :], axis=2)
     toa = emissions[:, None] + ranges / s.sound_speed + s.sigma_toa * rng.normal(size=(n_pings, n))
     toa[rng.random((n_pings, n)) > detection] = np.nan
     return toa, positions, emissions
+
+
+def _step_noise(steps: np.ndarray, q: float, normals: np.ndarray) -> np.ndarray:
+    """The white-noise acceleration's position and velocity errors (k, dim, 2) over steps (k,) [s] from standard
+    normals (k, dim, 2), as :meth:`numpy.random.Generator.multivariate_normal` (its ``svd`` method) makes them from
+    the same draws: ``x Fᵀ`` with ``F = U √S`` of the covariance ``q [T³/3, T²/2; T²/2, T]`` (the same numbers)."""
+    T = steps.tolist()  # Python floats: the powers as a scalar step computes them
+    cov = np.array([[[q * (t**3 / 3), q * (t**2 / 2)], [q * (t**2 / 2), q * t]] for t in T]).reshape(-1, 2, 2)
+    u, sv, _ = np.linalg.svd(cov)
+    return normals @ (u * np.sqrt(sv)[:, None, :]).transpose(0, 2, 1)
+
+
+def _accumulate(first: np.ndarray, *increments: np.ndarray) -> np.ndarray:
+    """The recursion ``y_k+1 = ((y_k + a_k) + b_k) + …`` over the increments (k, ...) each, added in that order
+    step by step (:func:`numpy.cumsum` adds sequentially): y (k, ...), y_0 = ``first``, the last sum left out."""
+    k = len(increments[0])
+    flat = np.empty((k * len(increments) + 1,) + np.shape(first))
+    flat[0] = first
+    for j, a in enumerate(increments):
+        flat[1 + j::len(increments)] = a
+    return np.cumsum(flat, axis=0)[:-1:len(increments)]
+
+
+def _walk(p, v, n_pings, s, rng, ping_type, burst_sequence, first_emission):
+    """The positions (n_pings, dim) and emission times (n_pings,) of the stable and pseudo-random burst intervals,
+    all pings at once: each step's draws (the jitter and the drift for ``sbi`` after the motion's, the jitter before
+    it for ``pbi``) taken from one block of standard normals in the order a step-by-step loop draws them."""
+    dim = len(p)
+    if ping_type == "sbi":
+        z = rng.standard_normal((n_pings, 2 * dim + 2))
+        motion, jitter, drift = z[:, :2 * dim], z[:, -2], z[:, -1]
+        intervals = np.cumsum(np.r_[s.interval, s.interval_drift * drift[:-1]])[:n_pings]
+        steps = intervals
+        emissions = _accumulate(first_emission, intervals, s.jitter * jitter)
+    else:
+        z = rng.standard_normal((n_pings, 2 * dim + 1))
+        jitter, motion = z[:, 0], z[:, 1:]
+        sequence = np.asarray(burst_sequence, float)
+        steps = sequence[np.arange(n_pings) % len(sequence)] + s.jitter * jitter
+        emissions = _accumulate(first_emission, steps)
+    w = _step_noise(steps, s.acceleration_psd, motion.reshape(n_pings, dim, 2))
+    velocities = _accumulate(v, w[:, :, 1])
+    positions = _accumulate(p, steps[:, None] * velocities, w[:, :, 0])
+    return positions, emissions
+
+
+def _walk_random_interval(p, v, n_pings, s, rng, burst_interval, first_emission):
+    """The positions (n_pings, dim) and emission times (n_pings,) of the random burst interval, step by step (its
+    uniform and normal draws interleave)."""
+    dim = len(p)
+    te = first_emission
+    positions, emissions = np.empty((n_pings, dim)), np.empty(n_pings)
+    for k in range(n_pings):
+        positions[k], emissions[k] = p, te
+        T = rng.uniform(*burst_interval)
+        cov = s.acceleration_psd * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+        w = rng.multivariate_normal(np.zeros(2), cov, size=dim)  # (dim, 2): position and velocity noise per axis
+        p, v = p + T * v + w[:, 0], v + w[:, 1]
+        te = te + T
+    return positions, emissions
 
 
 __all__ = ["simulate_pings"]
