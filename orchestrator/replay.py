@@ -49,7 +49,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
-from sblsim.models.acoustics.core import LANES, lane_name, lane_of, nominal_ping_interval
+from sblsim.models.acoustics.core import LANES, lane_name, lane_of, ping_intervals
 from sblsim.models.columns import LANE_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver.core import SLOT_SLACK
@@ -449,7 +449,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     T, ratio = cfg.sampling_time, cfg.ekf_rate_ratio
     lead = 0.0
     if "toa" in cfg.system.ranging:  # an inverted LBL's first ping: an interval of its pinger after the start
-        lead = nominal_ping_interval(cfg["acoustics"]["ping_interval"], cfg.n_beacons, T) - T
+        lead = float(ping_intervals(cfg["acoustics"], cfg.n_beacons, T)[0]) - T
     plan = schedule(log, T, ratio, cfg.master == "jacobi", lead)
     rel_times = 0.0 + T * np.arange(1, plan.steps + 1)  # the end of each macro step, as the master records it
     times = plan.start + rel_times

@@ -135,9 +135,28 @@ from sblsim.models.acoustics.ray_tables import (
 from sblsim.models.acoustics.rays import profile_arrays
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, node_speeds, profile_nodes, profile_table
 from sblsim.models.component import Component
-from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
+from sblsim.models.declarations import (
+    SEED_PARAMETERS,
+    Column,
+    Table,
+    Variable,
+    format_table,
+    parse_table,
+    shown,
+    signal_range,
+)
 from sblsim.models.errors import ModelError
-from sblsim.models.expressions import NO_ROW, get_row, lookup, map_in_chunks, only_where, put_row, sample_due, select
+from sblsim.models.expressions import (
+    NO_ROW,
+    cumulative_sum,
+    get_row,
+    lookup,
+    map_in_chunks,
+    only_where,
+    put_row,
+    sample_due,
+    select,
+)
 from sblsim.models.platform.core import (
     AXES,
     USBL_ATTITUDES,
@@ -229,15 +248,49 @@ def ocean_perturbation(t, sigma, frequency, phase) -> ca.SX:
     return sigma * math.sqrt(2.0 / m) * ca.sum1(ca.cos(frequency * t + phase))
 
 
+#: The pinger's types (Baktoft et al. 2017, YAPS's names; the tracker's, :mod:`sblsim.models.tracking.schedule`): a
+#: stable burst interval (``sbi``: every ``ping_interval``, plus a uniform jitter), a random one (``rbi``: each
+#: interval a uniform draw ``U(burst_interval_min, burst_interval_max)``), a pseudo-random one (``pbi``: the intervals
+#: of a known table, ``burst_sequence``, in turn, plus the jitter).
+PING_TYPES = ("sbi", "rbi", "pbi")
+#: The indices of ``rbi`` and ``pbi`` in :data:`PING_TYPES` (the ``ping_type`` parameter's encoding).
+RBI, PBI = PING_TYPES.index("rbi"), PING_TYPES.index("pbi")
+#: Most intervals of a ``pbi`` pinger's table.
+MAX_BURSTS = 64
+#: The longest interval between two pings [s].
+MAX_PING_INTERVAL = 3600.0
+#: A ``pbi`` pinger's intervals in the order it emits them (cycled), carried in FMU arrays as the sound-speed
+#: table is: one column, ``burst_sequence_rows`` rows in use.
+BURSTS = Table(columns=(Column("burst_sequence_interval", "s", "pbi: interval of the pinger's table", 1e-3,
+                               MAX_PING_INTERVAL),),
+               max_rows=MAX_BURSTS, min_rows=1, when=("ping_type", "pbi"))
 #: The target's pinger of an inverted LBL (``ranging = "toa"``; declared after every other variable of the
-#: channel, the lanes included: their value references stay): the pings' nominal interval and their jitter.
+#: channel, the lanes included: their value references stay; the ping types' after the first two, for the same
+#: reason): its type, the pings' nominal interval and their jitter (``sbi``, the jitter also ``pbi``'s), a random
+#: interval's bounds (``rbi``) and a pseudo-random interval's table (``pbi``).
 PING_VARIABLES: tuple[Variable, ...] = (
     Variable("ping_interval", "parameter", "Real", 0.0, "s",
              "toa: the target pinger's nominal interval between pings on its own clock (0: the round-robin cycle, "
-             "beacons x slot_period: one range per receiver per cycle, as SBL and LBL)", min=0.0, max=3600.0),
+             "beacons x slot_period: one range per receiver per cycle, as SBL and LBL)", min=0.0,
+             max=MAX_PING_INTERVAL),
     Variable("ping_jitter", "parameter", "Real", 0.0, "s",
              "toa: std of each interval's random part (uniform, zero mean: a tag's random delay; the emission "
              "epochs then walk away from the nominal schedule, unknown to the receivers)", min=0.0, max=600.0),
+    Variable("ping_type", "parameter", "String", "sbi", choices=PING_TYPES,
+             description="toa: the pinger's intervals: stable (sbi: ping_interval plus ping_jitter), random (rbi: "
+                         "each a uniform draw between burst_interval_min and burst_interval_max) or pseudo-random "
+                         "(pbi: burst_sequence's in turn, plus ping_jitter)"),
+    Variable("burst_interval_min", "parameter", "Real", 0.0, "s",
+             "toa, rbi: the shortest interval between pings on the pinger's clock (0: not set)", min=0.0,
+             max=MAX_PING_INTERVAL),
+    Variable("burst_interval_max", "parameter", "Real", 0.0, "s",
+             "toa, rbi: the longest interval between pings on the pinger's clock (0: not set)", min=0.0,
+             max=MAX_PING_INTERVAL),
+    Variable("burst_sequence", "parameter", "String", "", scope="config",
+             description=f"toa, pbi: the pinger's intervals in the order it emits them, cycled, 'interval; ...' "
+                         f"or 'interval interval ...' [s] (1 to {MAX_BURSTS})"),
+    Variable("burst_sequence_rows", "parameter", "Integer", 0, scope="fmu", table=BURSTS,
+             description="toa, pbi: intervals of the pinger's table in use (burst_sequence)", min=0, max=MAX_BURSTS),
 )
 
 
@@ -772,22 +825,23 @@ def _slot(n: int, true_names: list[str], sent_names: list[str], direction: bool,
 def _ping(n: int, true_names: list[str], sent_names: list[str], queue: list, carried: list, propagation: str,
           detection: str):
     """The handler of one leg of a ping of an inverted LBL (``ranging = "toa"``, a channel of ``n`` fixed
-    receivers): the target's pinger emits at ``ping_epoch`` (its own clock: the nominal interval P stretched by
-    its drift, plus the jitter), and receiver ``ping_leg + 1`` (its input names ``true_names``, ``sent_names``)
-    hears it a travel time later; the packet joins the in-flight ``queue`` (:func:`_send`). The event runs once
-    per receiver of the ping (``ping_leg`` 0 … n − 1), then draws the next ping's epoch.
+    receivers): the target's pinger emits at ``ping_epoch`` (its own clock: the nominal interval stretched by its
+    drift, plus the jitter: :func:`ping_interval_drawn`), and receiver ``ping_leg + 1`` (its input names
+    ``true_names``, ``sent_names``) hears it a travel time later; the packet joins the in-flight ``queue``
+    (:func:`_send`). The event runs once per receiver of the ping (``ping_leg`` 0 … n − 1), then draws the next
+    ping's epoch.
 
     The travel time is the one way from the target where it is at the emission (its position input moved back
     along its velocity from the step's end) to the fixed receiver, by the travel times of ``propagation``
     (reciprocal: the eigenray between the two points) and what ``detection`` hears; the receivers' clocks are
-    synchronized (GPS), the emission epoch is unknown to them: the packet carries the nominal epoch of the ping,
-    ``t0 + c P`` (ping c), as ``tx_time`` and the pseudo-range ``c_assumed (rx_time − tx_time)``, which holds the
-    emission's offset from the nominal schedule."""
+    synchronized (GPS), the emission epoch is unknown to them: the packet carries the nominal epoch of the ping
+    (:func:`ping_nominal`: ``t0 + c P`` of ping c, or its table's) as ``tx_time`` and the pseudo-range
+    ``c_assumed (rx_time − tx_time)``, which holds the emission's offset from the nominal schedule."""
     snr_mode = detection == "snr"
 
     def handler(x, u, p, d, w, t, h):
         leg, count, emitted = x["ping_leg"], x["ping_count"], x["ping_epoch"]
-        nominal = x["t0"] + (count + 1) * d["ping_interval"]
+        nominal = ping_nominal(x, d, count + 1)
         receiver = ca.vertcat(*[select(leg, [u[true_names[3 * j + a]] for j in range(n)]) for a in range(3)])
         sent = ca.vertcat(*[select(leg, [u[sent_names[3 * j + a]] for j in range(n)]) for a in range(3)])
         velocity = ca.vertcat(*[u[name] for name in TARGET_INPUTS[3:]])
@@ -825,15 +879,13 @@ def _ping(n: int, true_names: list[str], sent_names: list[str], queue: list, car
         overrun = {}
         if snr_mode:  # the leg's last heard arrival after the next ping: flagged
             spread_end = one_way[6]
-            overrun = {"slot_overrun": ca.if_else(spread_end > d["ping_interval"], ca.fmax(
+            overrun = {"slot_overrun": ca.if_else(spread_end > d["ping_shortest"], ca.fmax(
                 x["slot_overrun"], spread_end), x["slot_overrun"])}
-        # after the last receiver's leg, the next emission: the interval on the pinger's clock plus its jitter
-        # (uniform, zero mean, std ping_jitter)
+        # after the last receiver's leg, the next emission: the next ping's interval on the pinger's clock
         last = leg + 1 >= n
-        interval = d["ping_interval"] * (1.0 + p["clock_drift_ppm"] * 1e-6)
-        jitter = p["ping_jitter"] * math.sqrt(3.0) * (2.0 * w[_PING_JITTER][0] - 1.0)
+        interval = ping_interval_drawn(p, d, count + 2, w[_PING_JITTER][0])
         return {"ping_leg": ca.if_else(last, 0, leg + 1), "ping_count": ca.if_else(last, count + 1, count),
-                "ping_epoch": ca.if_else(last, emitted + interval + jitter, emitted),
+                "ping_epoch": ca.if_else(last, emitted + interval, emitted),
                 **_send(queue, carried, x, p, out, tau), **overrun}
     return handler
 
@@ -842,6 +894,125 @@ def nominal_ping_interval(ping_interval: float, n_beacons: int, slot_period: flo
     """The pinger's nominal interval [s] of an inverted LBL's run (numbers): ``ping_interval``, or where it is 0 the
     round-robin cycle ``n T`` (the channel's ``prepare`` derives the same)."""
     return ping_interval if ping_interval > 0 else n_beacons * slot_period
+
+
+#: The keys of ``[acoustics]`` each ping type reads beyond ``ping_type`` (a key of another type, given with a value
+#: other than its default, is refused: :func:`check_pinger`).
+PING_KEYS = {"sbi": ("ping_interval", "ping_jitter"), "rbi": ("burst_interval_min", "burst_interval_max"),
+             "pbi": ("burst_sequence", "ping_jitter")}
+_PING_DEFAULTS = {v.name: v.start for v in PING_VARIABLES}
+
+
+def burst_sequence(text: str, where: str = "acoustics.burst_sequence") -> np.ndarray:
+    """A ``pbi`` pinger's intervals from their text: values separated by ``;``, commas or blanks.
+
+    Returns
+    -------
+    ndarray, shape (rows, 1)
+        The intervals [s] (0 rows for a blank text).
+
+    Raises
+    ------
+    ModelError
+        Naming ``where``: a value that is not a number, outside ``[0.001, 3600]`` s, or more than
+        :data:`MAX_BURSTS` of them.
+    """
+    return parse_table(";".join(s for s in re.split(r"[;,\s]+", text) if s), BURSTS, where)
+
+
+def ping_intervals(acoustics: Mapping[str, Any], n_beacons: int, slot_period: float) -> np.ndarray:
+    """The pinger's nominal intervals [s] in the order they repeat (numbers; the channel's ``prepare`` derives the
+    same): ``sbi`` its one interval (:func:`nominal_ping_interval`), ``rbi`` the uniform's mean
+    ``(min + max) / 2``, ``pbi`` its table.
+
+    Returns
+    -------
+    ndarray, shape (L,)
+    """
+    kind = acoustics.get("ping_type", "sbi")
+    if kind == "rbi":
+        return np.array([0.5 * (acoustics["burst_interval_min"] + acoustics["burst_interval_max"])])
+    if kind == "pbi":
+        return burst_sequence(acoustics.get("burst_sequence", ""))[:, 0]
+    return np.array([nominal_ping_interval(acoustics["ping_interval"], n_beacons, slot_period)])
+
+
+def ping_spread(acoustics: Mapping[str, Any]) -> float:
+    """The std [s] of the random step the emission's offset from the nominal schedule takes at each ping (numbers;
+    the receivers' ``ping_jitter``): the uniform ``U(min, max)``'s ``(max − min) / √12`` for ``rbi``, the jitter
+    ``ping_jitter`` for ``sbi`` and ``pbi``."""
+    if acoustics.get("ping_type", "sbi") == "rbi":
+        return (acoustics["burst_interval_max"] - acoustics["burst_interval_min"]) / math.sqrt(12.0)
+    return float(acoustics["ping_jitter"])
+
+
+def check_pinger(acoustics: Mapping[str, Any], given: set[str] | frozenset[str], n_beacons: int,
+                 slot_period: float) -> None:
+    """Refuse an inverted LBL's pinger the channel cannot emit (``acoustics`` the resolved section, ``given`` the
+    keys the user set, the channel's ``n_beacons`` receivers and slot period [s]).
+
+    Raises
+    ------
+    ModelError
+        One line naming the key and what is allowed: a key of another ping type given with a value other than its
+        default (:data:`PING_KEYS`), an ``rbi`` without ``0 < burst_interval_min < burst_interval_max``, a ``pbi``
+        without a table (or a bad one, :func:`burst_sequence`), a jitter whose uniform (``±√3`` std) would reach
+        the shortest interval.
+    """
+    kind = acoustics.get("ping_type", "sbi")
+    own = PING_KEYS[kind]
+    for key in sorted({key for keys in PING_KEYS.values() for key in keys} - set(own)):
+        if key not in given or acoustics.get(key, _PING_DEFAULTS[key]) == _PING_DEFAULTS[key]:
+            continue
+        readers = " or ".join(repr(other) for other, keys in PING_KEYS.items() if key in keys)
+        raise ModelError(f"acoustics.{key}: {shown(acoustics[key])} is read by acoustics.ping_type = {readers}, "
+                         f"not by {kind!r} (which reads {', '.join(own)}); allowed: its default "
+                         f"{shown(_PING_DEFAULTS[key])}, or ping_type = {readers}")
+    if kind == "rbi":
+        low, high = acoustics["burst_interval_min"], acoustics["burst_interval_max"]
+        if low <= 0.0:
+            upper = f"{high:g}" if high > 0.0 else "burst_interval_max"
+            raise ModelError(f"acoustics.burst_interval_min: {low:g} s; ping_type = 'rbi' draws each interval "
+                             f"from U(burst_interval_min, burst_interval_max): allowed (0, {upper}) s")
+        if high <= low:
+            raise ModelError(f"acoustics.burst_interval_max: {high:g} s; ping_type = 'rbi' draws each interval "
+                             f"from U(burst_interval_min, burst_interval_max): allowed ({low:g}, "
+                             f"{MAX_PING_INTERVAL:g}] s")
+        return
+    if kind == "pbi" and not burst_sequence(acoustics.get("burst_sequence", "")).shape[0]:
+        raise ModelError(f"acoustics.burst_sequence: empty; ping_type = 'pbi' cycles a known table of intervals: "
+                         f"allowed 1 to {MAX_BURSTS} intervals in [0.001, {MAX_PING_INTERVAL:g}] s, e.g. "
+                         f"'0.6 0.9 0.7'")
+    if acoustics.get("ranging") != "toa":
+        return  # the pinger's interval is the inverted LBL's (another system does not read it)
+    shortest = float(ping_intervals(acoustics, n_beacons, slot_period).min())
+    limit = shortest / math.sqrt(3.0)
+    if acoustics["ping_jitter"] >= limit:
+        what = "ping interval" if kind == "sbi" else "shortest interval of burst_sequence"
+        raise ModelError(f"acoustics.ping_jitter: {acoustics['ping_jitter']:g} s; a uniform jitter reaches "
+                         f"sqrt(3) times its std, and the {what} ({shortest:g} s) must stay positive: "
+                         f"allowed [0, {limit:.6g}) s")
+
+
+def ping_nominal(x, d, ping) -> ca.SX:
+    """The nominal epoch [s] of ping ``ping`` (1, 2, …; symbolic, whole), what the receivers know of the schedule:
+    ``t0 + q S + Σ_{k<r} Δ_k`` with ``ping = q L + r`` (the pinger's derived intervals ``ping_steps`` Δ, ``L``
+    of them in a cycle of ``S`` seconds: ``pbi``'s table; ``sbi`` and ``rbi`` one, ``t0 + c P``)."""
+    rows = d["ping_rows"]
+    cycles = ca.floor(ping / rows)
+    return x["t0"] + cycles * d["ping_cycle"] + get_row([d["ping_prefix"]], ping - cycles * rows)[0]
+
+
+def ping_interval_drawn(p, d, ping, uniform) -> ca.SX:
+    """The pinger's interval [s] before ping ``ping`` (1, 2, …; symbolic), on its own clock, drawn with the uniform
+    number ``uniform`` in [0, 1): its nominal interval Δ (:func:`ping_nominal`'s) stretched by the drift δ plus a
+    uniform of zero mean and std σ (``ping_spread``): ``sbi`` and ``pbi`` ``Δ (1 + δ) + j``, ``j`` the jitter;
+    ``rbi`` ``(Δ + j)(1 + δ)``, ``U(min, max)`` stretched (its mean Δ, its std ``(max − min) / √12``)."""
+    rows = d["ping_rows"]
+    r = ping - 1.0 - ca.floor((ping - 1.0) / rows) * rows
+    drift = 1.0 + p["clock_drift_ppm"] * 1e-6
+    jitter = d["ping_spread"] * math.sqrt(3.0) * (2.0 * uniform - 1.0)
+    return get_row([d["ping_steps"]], r)[0] * drift + ca.if_else(p["ping_type"] == RBI, jitter * drift, jitter)
 
 
 def ping_due(x, u, p, d, t, h):
@@ -862,9 +1033,10 @@ def _hear(source, receive, p, d, draws):
 
 def sent_epoch(x, p, d, seq, n: int):
     """The transmit epoch a packet's slot counter ``seq`` gives [s]: slot k's ``t0 + k T``, or (``ranging =
-    "toa"``) its ping's nominal epoch ``t0 + c P``, ping c = ⌈seq / n⌉ of a channel of ``n`` receivers."""
+    "toa"``) its ping's nominal epoch (:func:`ping_nominal`), ping c = ⌈seq / n⌉ of a channel of ``n``
+    receivers."""
     ping = ca.floor((seq - 1) / n) + 1
-    return ca.if_else(p["ranging"] == TOA, x["t0"] + ping * d["ping_interval"], x["t0"] + seq * p["slot_period"])
+    return ca.if_else(p["ranging"] == TOA, ping_nominal(x, d, ping), x["t0"] + seq * p["slot_period"])
 
 
 def _send(queue, carried, x, p, out, elapsed):
@@ -1026,17 +1198,20 @@ class Acoustics(Component):
 
     @classmethod
     def fmu_parameters(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
-        """FMU parameters of a configuration section: the profile setting becomes the sound-speed table.
+        """FMU parameters of a configuration section: the profile setting becomes the sound-speed table, a ``pbi``
+        pinger's ``burst_sequence`` its table of intervals.
 
         Raises
         ------
         ModelError
-            On an unknown cast or an unreadable or malformed profile.
+            On an unknown cast or an unreadable or malformed profile, a malformed ``burst_sequence``.
         """
         out = super().fmu_parameters(values, n_beacons)
         rows = profile_table(values.get("sound_speed_profile", "constant"), values.get("sound_speed_table", ""),
                              values.get("temperature", 15.0), values.get("salinity", 35.0))
         out.update(PROFILE.values(rows, "sound_speed_rows"))
+        # a pbi pinger's intervals (none: an empty table, what every other pinger has)
+        out.update(BURSTS.values(burst_sequence(values.get("burst_sequence", "")), "burst_sequence_rows"))
         # volume absorption at the signal's frequency in the site's own water (the column's mean, each depth at
         # the temperature its cast gives)
         out["absorption"] = sonar.water_column_absorption(
@@ -1046,11 +1221,13 @@ class Acoustics(Component):
 
     @classmethod
     def config_values(cls, values: Mapping[str, Any], n_beacons: int = 4) -> dict[str, Any]:
-        """Configuration keys from FMU parameters: a sound-speed table becomes ``sound_speed_profile = table``."""
+        """Configuration keys from FMU parameters: a sound-speed table becomes ``sound_speed_profile = table``, a
+        pinger's table of intervals ``burst_sequence``."""
         out = super().config_values(values, n_beacons)
         rows = PROFILE.rows(values, "sound_speed_rows")
         out["sound_speed_profile"] = "table" if rows.shape[0] else "constant"
         out["sound_speed_table"] = format_table(rows)
+        out["burst_sequence"] = format_table(BURSTS.rows(values, "burst_sequence_rows"))
         return out
 
     @classmethod
@@ -1073,10 +1250,32 @@ class Acoustics(Component):
                                     ("ray_bounds", len(RAY_BOUNDS)), ("ray_grid", sum(RAY_GRID)),
                                     ("ray_values", len(RAY_TABLE.columns) * RAY_TABLE_ROWS), ("site", len(SITE)),
                                     ("family_values", len(FAMILY_TABLE.columns) * RAY_TABLE_ROWS),
-                                    ("ping_interval", 1)])
+                                    ("ping_steps", MAX_BURSTS), ("ping_prefix", MAX_BURSTS + 1),
+                                    ("ping_rows", 1), ("ping_cycle", 1), ("ping_shortest", 1), ("ping_spread", 1)])
         true_names, sent_names = beacon_names(n, "true"), beacon_names(n, "broadcast")
         # the interface's system measures a direction of arrival (USBL): it interrogates, the array measures
         direction = interface_system(n).measures_direction
+
+        def pinger(p):
+            """toa: the pinger's nominal intervals (``ping_steps``: ``pbi``'s table, zeros past its rows; ``sbi``,
+            ``rbi`` one, P or the uniform's mean), their count, the running sums from 0, the cycle's length, the
+            shortest and the std of an interval's random part (:func:`ping_nominal`,
+            :func:`ping_interval_drawn`)."""
+            rbi, pbi = p["ping_type"] == RBI, p["ping_type"] == PBI
+            # sbi: ping_interval, 0 taking the round-robin cycle of the n receivers
+            single = ca.if_else(rbi, 0.5 * (p["burst_interval_min"] + p["burst_interval_max"]),
+                                ca.if_else(p["ping_interval"] > 0, p["ping_interval"], n * p["slot_period"]))
+            table, rows = p[BURSTS.columns[0].name], p["burst_sequence_rows"]
+            in_use = ca.DM(list(range(MAX_BURSTS))) < rows
+            first = ca.DM([1.0] + [0.0] * (MAX_BURSTS - 1))
+            steps = ca.if_else(pbi, table * in_use, first * single)
+            shortest = ca.if_else(pbi, ca.mmin(table + (1 - in_use) * 2.0 * MAX_PING_INTERVAL),
+                                  ca.if_else(rbi, p["burst_interval_min"], single))
+            return {"ping_steps": steps, "ping_prefix": ca.vertcat(0.0, cumulative_sum(steps)),
+                    "ping_rows": ca.if_else(pbi, ca.fmax(rows, 1), 1), "ping_cycle": ca.sum1(steps),
+                    "ping_shortest": shortest,
+                    "ping_spread": ca.if_else(rbi, (p["burst_interval_max"] - p["burst_interval_min"])
+                                              / math.sqrt(12.0), p["ping_jitter"])}
 
         def prepare(p):
             depth, speed = p[PROFILE.columns[0].name], p[PROFILE.columns[1].name]
@@ -1094,9 +1293,7 @@ class Acoustics(Component):
             return {"nodes": values[:NODES], "slowness": values[NODES:2 * NODES], "speeds": values[2 * NODES:],
                     "ray_bounds": bounds, "ray_grid": ray_grid([bounds[j] for j in range(len(RAY_BOUNDS))]),
                     "ray_values": table,
-                    "site": site_numbers(p), "family_values": family,
-                    # toa: the pinger's nominal interval (0: the round-robin cycle of the n receivers)
-                    "ping_interval": ca.if_else(p["ping_interval"] > 0, p["ping_interval"], n * p["slot_period"])}
+                    "site": site_numbers(p), "family_values": family, **pinger(p)}
 
         def init(p, d, w, t0):
             zero = {name: 0 for name in packet}
@@ -1106,9 +1303,8 @@ class Acoustics(Component):
                     # the moving ocean's features, drawn once per run (their own streams)
                     "ocean_frequency": w[_OCEAN_FREQUENCY] / p["ntd_time_scale"],
                     "ocean_phase": 2.0 * math.pi * w[_OCEAN_PHASE],
-                    # toa: the first ping, an interval of the pinger's clock after the start, with its jitter
-                    "ping_epoch": t0 + d["ping_interval"] * (1.0 + p["clock_drift_ppm"] * 1e-6)
-                    + p["ping_jitter"] * math.sqrt(3.0) * (2.0 * w[_PING_JITTER][0] - 1.0),
+                    # toa: the first ping, an interval of the pinger's clock after the start
+                    "ping_epoch": t0 + ping_interval_drawn(p, d, 1, w[_PING_JITTER][0]),
                     "ping_count": 0, "ping_leg": 0}
 
         def due(x, u, p, d, t, h):
@@ -1200,7 +1396,9 @@ class Acoustics(Component):
         return b.program(b.prepare(prepare), b.init(init, ocean), b.output(output), events=events)
 
 
-__all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "check_in_flight", "DETECTION", "DIRECTION",
+__all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "BURSTS", "burst_sequence", "check_in_flight",
+           "check_pinger", "MAX_BURSTS", "MAX_PING_INTERVAL", "PBI", "PING_KEYS", "PING_TYPES", "ping_interval_drawn",
+           "ping_intervals", "ping_nominal", "ping_spread", "RBI", "DETECTION", "DIRECTION",
            "DOA_ARRAY", "EXCHANGE", "FAMILY_TABLE_VARIABLES", "FIXED_KEYS", "FLIGHT_CAPACITY", "LANES", "lane_fields",
            "lane_name", "lane_of", "lane_variables", "nominal_ping_interval", "OCEAN_FEATURES", "ocean_perturbation",
            "OCEAN_VARIABLES",

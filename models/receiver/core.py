@@ -45,6 +45,7 @@ import casadi as ca
 from sblsim.models.acoustics.core import (
     ARRIVAL,
     LANES,
+    MAX_PING_INTERVAL,
     PACKET,
     RANGING,
     TOA,
@@ -447,7 +448,9 @@ def ping_parameters() -> tuple[Variable, ...]:
     (so that the value references of every earlier one stay what they were before it existed)."""
     return (Variable("ping_jitter", "parameter", "Real", 0.0, "s",
                      "toa: std of the random step the emission offset (the clock offset state) takes at each new "
-                     "ping, the pinger's interval jitter (default: acoustics.ping_jitter)", min=0.0, max=600.0),)
+                     "ping, the std of the pinger's interval's random part (default: acoustics.ping_jitter; "
+                     "ping_type rbi: (burst_interval_max - burst_interval_min) / sqrt(12))", min=0.0,
+                     max=MAX_PING_INTERVAL),)
 
 
 def toa_ranging(p: dict):

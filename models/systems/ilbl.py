@@ -5,14 +5,18 @@ clock and a **fixed array listens** with synchronized clocks (GPS); the position
 of each ping at the receivers, whose emission epoch the receivers do not know. Receiver i stands where an LBL's
 transponder would (the layout's points at ``platform.seafloor_depth``, or a custom layout's NED positions), its
 surveyed position ``b_i + s_i`` is the one the packets carry (:mod:`sblsim.models.systems.lbl`), and the channel
-runs in ``ranging = "toa"`` (:mod:`sblsim.models.acoustics.core`): the pinger emits every
-``acoustics.ping_interval`` on its clock (drift ``acoustics.clock_drift_ppm``) with a uniform jitter of std
-``acoustics.ping_jitter``, and each ping reaches every receiver one way. A packet is one receiver's time of arrival
+runs in ``ranging = "toa"`` (:mod:`sblsim.models.acoustics.core`): the pinger emits on its clock (drift
+``acoustics.clock_drift_ppm``) at the intervals of its type, ``acoustics.ping_type`` (Baktoft et al.'s): ``sbi``
+every ``acoustics.ping_interval`` with a uniform jitter of std ``acoustics.ping_jitter``, ``rbi`` each interval a
+uniform draw between ``acoustics.burst_interval_min`` and ``burst_interval_max`` (the nominal schedule their mean),
+``pbi`` the intervals of a known table ``acoustics.burst_sequence`` in turn, with the jitter; each ping reaches
+every receiver one way. A packet is one receiver's time of arrival
 as a pseudo-range ``c (t_arrival − t_nominal)`` against the ping's nominal epoch: the true range plus ``c`` times
 the emission's offset from the nominal schedule, a random walk of the jitter plus the drift.
 
 The receivers that carry the clock's error states (``ekf-seq``, ``ukf``) take that offset as their clock offset
-state and the interval's drift as its drift, the jitter as the offset's process noise at each new ping, and the
+state and the interval's drift as its drift, the std of the interval's random part (the jitter; ``rbi``'s
+``(max − min) / √12``) as the offset's process noise at each new ping, and the
 range at the emission epoch (:mod:`sblsim.models.receiver.core`); the paper's EKF and ``lsq`` have no such state
 and are refused. The bound is the ranging systems' bound with error states, the same process noise at each
 ping (:func:`sblsim.models.bound.error_bound_step`); the accuracy map is one ping heard by every receiver plus the
@@ -33,7 +37,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY
+from sblsim.models.acoustics.core import FLIGHT_CAPACITY, ping_spread
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.design.information import layout_values
@@ -94,12 +98,13 @@ class InvertedLBL(LBL):
                              f"epoch, which platform.system = 'ilbl' needs; use {' or '.join(EMISSION_RECEIVERS)}")
 
     def bound_errors(self, cfg: Mapping[str, Mapping[str, Any]]) -> dict[str, float]:
-        """The emission's offset: the pinger's interval drift (``acoustics.clock_drift_ppm``) and its jitter
-        (``acoustics.ping_jitter``), the offset adding ``c_assumed`` times itself to every range; surveyed receivers
-        have no GPS or attitude error."""
+        """The emission's offset: the pinger's interval drift (``acoustics.clock_drift_ppm``) and the std of its
+        random step per ping (:func:`~sblsim.models.acoustics.core.ping_spread`: the jitter ``acoustics.ping_jitter``,
+        or ``rbi``'s uniform interval's), the offset adding ``c_assumed`` times itself to every range; surveyed
+        receivers have no GPS or attitude error."""
         acoustics = cfg["acoustics"]
         return {**super().bound_errors(cfg), "clock_drift_sigma": abs(acoustics["clock_drift_ppm"]) * 1e-6,
-                "clock": acoustics["sound_speed_assumed"], "ping_jitter": acoustics["ping_jitter"]}
+                "clock": acoustics["sound_speed_assumed"], "ping_jitter": ping_spread(acoustics)}
 
     def own_bound(self, parameters: Mapping[str, float]) -> bool:
         """The bound with error states wherever the emission's offset is not known (a jitter or a drift)."""

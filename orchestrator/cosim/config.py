@@ -36,7 +36,7 @@ from typing import Any, Iterable
 import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
-from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight, nominal_ping_interval
+from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight, check_pinger, ping_spread
 from sblsim.models.acoustics.sound_speed import PROFILE_SOURCES
 from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
 from sblsim.models.errors import ConfigError
@@ -521,6 +521,7 @@ def resolve(raw: dict[str, Any]) -> dict[str, dict]:
             cfg[s] = resolve_parameters(section_variables(s, receiver), raw.get(s, {}), s)
     _check_trajectory_file(cfg["target"])
     _check_system(cfg, set(raw.get("platform", {})))
+    _check_pinger(cfg, set(raw.get("acoustics", {})))
     try:  # a turnaround the channel cannot hold in flight, whatever the travel time (that one is checked in a run)
         check_in_flight(sim["sampling_time"], turnaround(cfg))
     except ModelError as exc:
@@ -733,15 +734,22 @@ def _check_system(cfg: dict[str, dict], given: set[str]) -> None:
         system.check_receiver(cfg["simulation"]["receiver"])
     except ModelError as exc:
         raise ConfigError(str(exc)) from None
-    acoustics = cfg["acoustics"]
-    if acoustics["ranging"] == "toa":  # the pinger's interval stays positive
-        interval = nominal_ping_interval(acoustics["ping_interval"], cfg["platform"]["beacons"],
-                                         cfg["simulation"]["sampling_time"])
-        limit = interval / math.sqrt(3.0)
-        if acoustics["ping_jitter"] >= limit:
-            raise ConfigError(f"acoustics.ping_jitter: {acoustics['ping_jitter']:g} s; a uniform jitter reaches "
-                              f"sqrt(3) times its std, and the ping interval ({interval:g} s) must stay positive: "
-                              f"allowed [0, {limit:.6g}) s")
+
+
+def _check_pinger(cfg: dict[str, dict], given: set[str]) -> None:
+    """The pinger's keys (an inverted LBL's, ``acoustics.ping_type`` and the keys of its type; ``given`` the
+    ``[acoustics]`` keys the user set): :func:`sblsim.models.acoustics.core.check_pinger`, after the system set the
+    ranging.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key and what is allowed.
+    """
+    try:
+        check_pinger(cfg["acoustics"], given, cfg["platform"]["beacons"], cfg["simulation"]["sampling_time"])
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
@@ -770,7 +778,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
         ties.update(clock_states=True, clock_drift_sigma_ppm=abs(acoustics["clock_drift_ppm"]))
     if acoustics["ranging"] == "toa":  # an inverted LBL: the pinger's emission offset and its interval's drift
         ties.update(clock_states=True, clock_drift_sigma_ppm=abs(acoustics["clock_drift_ppm"]),
-                    ping_jitter=acoustics["ping_jitter"])
+                    ping_jitter=ping_spread(acoustics))
     target = cfg["target"]
     if target["trajectory"] == "random-walk":  # the receiver's motion model and prior are the walk's
         ties.update({k: target[f"walk_{k}"] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")})
