@@ -14,6 +14,7 @@ import numpy as np
 
 from sblsim.models.acoustics.core import LANES
 from sblsim.models.tracking.schedule import PING_TYPES
+from sblsim.models.tracking.sound_speed import SALINITY_RANGE, TEMPERATURE_RANGE
 from sblsim.orchestrator.commands.common import (
     MAX_SEED,
     Overrides,
@@ -32,7 +33,7 @@ from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.tracks.outputs import write
-from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, track
+from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -231,13 +232,50 @@ def ping_type_arguments(ping_type: Any, burst_interval: Any, burst_sequence: Any
     return ping_type, interval, sequence
 
 
+def medium_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, salinity: Any, motion: Any,
+                     acceleration_psd: Any, names: tuple[str, ...]) -> tuple:
+    """The sound speed's and the motion model's arguments checked (``names``: how the caller spells
+    ``sound_speed``, ``sound_speed_file``, ``temperature``, ``salinity``, ``motion``, ``acceleration_psd``):
+    returns them as :func:`~sblsim.orchestrator.tracks.track.track` takes them.
+
+    Raises
+    ------
+    ConfigError
+        A value outside its range, or options that exclude each other (one line).
+    """
+    speed = None if sound_speed is None else real_argument(sound_speed, names[0], 1300.0, 1700.0, "m/s")
+    series = path_argument(sound_speed_file, names[1])
+    if speed is not None and series is not None:
+        raise ConfigError(f"{names[1]}: not with {names[0]} (one sound speed: given, or a measured series)")
+    if (temperature is None) != (salinity is None):
+        raise ConfigError(f"{names[3] if salinity is None else names[2]}: needed with "
+                          f"{names[2] if salinity is None else names[3]} (the fallback sound speed's water: "
+                          "0 g/kg for fresh water, about 35 for the open sea)")
+    if temperature is not None:
+        if speed is not None or series is not None:
+            raise ConfigError(f"{names[2]}: only where the sound speed is calibrated from the pings (its fallback); "
+                              f"not with {names[0] if speed is not None else names[1]}")
+        temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
+        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "g/kg")
+    motion = "moving" if motion is None else motion
+    if motion not in MOTIONS:
+        raise ConfigError(f"{names[4]}: {str(motion)[:40]!r} is not allowed; allowed: {', '.join(MOTIONS)}")
+    if acceleration_psd is not None:
+        if motion == "stationary":
+            raise ConfigError(f"{names[5]}: not with {names[4]} stationary (one position for all pings: no motion "
+                              "model)")
+        acceleration_psd = real_argument(acceleration_psd, names[5], 0.0, 1.0, "m²/s³", low_open=True)
+    return speed, series, temperature, salinity, motion, acceleration_psd
+
+
 def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | None = None,
                reference: str | Path | None = None, smooth: bool = True, sound_speed: float | None = None,
                receivers_kept: str | Sequence[str] | None = None, drop_detections: float = 0.0, seed: int = 0,
                truth_sigma: float = 0.0, ping_type: str | None = None,
                burst_interval: str | tuple[float, float] | None = None, burst_sequence: str | Path | None = None,
-               acceleration_psd: float | None = None, out: str | Path | None = None,
-               force: bool = False) -> TrackResult:
+               acceleration_psd: float | None = None, sound_speed_file: str | Path | None = None,
+               temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
+               out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -256,7 +294,15 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         causal EKF's).
     sound_speed : float, optional
         [m/s] in [1300, 1700]; default calibrated from the pings (a robust joint fit of the sound speed and the
-        pings' positions and emission times, docs/tracking.md).
+        pings' positions and emission times, docs/tracking.md); where the array cannot determine it, the fallback
+        of ``temperature`` and ``salinity``, else 1,500 m/s (stated in ``summary["sound_speed"]``).
+    sound_speed_file : str or Path, optional
+        A measured sound-speed series (a file key): ``time_s`` [s] on the times of arrival's time base and
+        ``sound_speed_m_s`` [m/s] under a header; each ping's arrivals rescaled to the series' median
+        (:mod:`sblsim.models.tracking.sound_speed`). Not with ``sound_speed``.
+    temperature, salinity : float, optional
+        The water's temperature [°C] in [-2, 40] and absolute salinity [g/kg] in [0, 42], both or neither: the
+        fallback sound speed (TEOS-10) where the pings cannot determine it.
     receivers_kept : str or sequence of str, optional
         Use only these receivers (their names in the receivers file; a text separated by commas, or a list):
         a thinned array. Default every receiver.
@@ -278,6 +324,9 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     acceleration_psd : float, optional
         The motion model's white-noise acceleration ``q`` [m²/s³] in (0, 1]; default estimated from the pings by EM
         (``summary["motion"]``; :mod:`sblsim.models.tracking.motion_noise`).
+    motion : str
+        ``moving`` (default: the filters and smoothers) or ``stationary`` (a sync or reference tag: one position
+        for all pings, :mod:`sblsim.models.tracking.stationary`, the estimator ``stationary``).
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
         ``errors.csv`` there.
@@ -299,8 +348,9 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     truth = path_argument(truth, "truth")
     reference = path_argument(reference, "reference")
     smooth = flag_argument(smooth, "smooth")
-    if sound_speed is not None:
-        sound_speed = real_argument(sound_speed, "sound_speed", 1300.0, 1700.0, "m/s")
+    sound_speed, series, temperature, salinity, motion, acceleration_psd = medium_arguments(
+        sound_speed, sound_speed_file, temperature, salinity, motion, acceleration_psd,
+        ("sound_speed", "sound_speed_file", "temperature", "salinity", "motion", "acceleration_psd"))
     kept = _receivers_kept(receivers_kept, "receivers_kept")
     drop = real_argument(drop_detections, "drop_detections", 0.0, MAX_DROP, "")
     seed = check_seed(seed)
@@ -309,11 +359,9 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     truth_sigma = real_argument(truth_sigma, "truth_sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     kind, interval, sequence = ping_type_arguments(ping_type, burst_interval, burst_sequence,
                                                    ("ping_type", "burst_interval", "burst_sequence"))
-    if acceleration_psd is not None:
-        acceleration_psd = real_argument(acceleration_psd, "acceleration_psd", 0.0, 1.0, "m²/s³", low_open=True)
     target = prepare_out(out, force, "track.csv", "track")
     outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed, truth_sigma, kind,
-                    interval, sequence, acceleration_psd)
+                    interval, sequence, acceleration_psd, series, temperature, salinity, motion)
     if target is not None:
         write(outcome, target)
     return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
@@ -381,6 +429,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--acceleration-psd", type=float, default=None, metavar="M2_S3",
                    help="--format toa: the motion model's white-noise acceleration [m²/s³] in (0, 1] (default: "
                         "estimated from the pings by EM)")
+    p.add_argument("--sound-speed-file", type=Path, default=None, metavar="CSV",
+                   help="--format toa: a measured sound-speed series (time_s, sound_speed_m_s under a header; the "
+                        "times on the times of arrival's base)")
+    p.add_argument("--temperature", type=float, default=None, metavar="C",
+                   help="--format toa: the water's temperature [°C] for the fallback sound speed (TEOS-10) where the "
+                        "pings cannot determine it (with --salinity; default fallback 1500 m/s)")
+    p.add_argument("--salinity", type=float, default=None, metavar="G_KG",
+                   help="--format toa: the water's absolute salinity [g/kg] for the fallback (0 fresh water, about "
+                        "35 the open sea)")
+    p.add_argument("--motion", choices=MOTIONS, default=None,
+                   help="--format toa: moving (default) or stationary (a sync or reference tag: one position for all "
+                        "pings)")
     p.add_argument("--truth-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the truth's own error per horizontal axis [m] in [0, 100] (GPS, lever arm), "
                         "in the NEES against it (default 0: the truth taken as exact)")
@@ -405,7 +465,10 @@ def main(args: argparse.Namespace) -> int:
                             ("--seed", args.seed is not None), ("--truth-sigma", args.truth_sigma is not None),
                             ("--ping-type", args.ping_type), ("--burst-interval", args.burst_interval),
                             ("--burst-sequence", args.burst_sequence),
-                            ("--acceleration-psd", args.acceleration_psd is not None)) if v]
+                            ("--acceleration-psd", args.acceleration_psd is not None),
+                            ("--sound-speed-file", args.sound_speed_file),
+                            ("--temperature", args.temperature is not None),
+                            ("--salinity", args.salinity is not None), ("--motion", args.motion)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -493,9 +556,11 @@ def _main_toa(args: argparse.Namespace) -> int:
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
                           "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
-                          "--acceleration-psd, --out, --force")
-    speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", 1300.0, 1700.0,
-                                                                "m/s")
+                          "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --motion, --out, "
+                          "--force")
+    speed, series, temperature, salinity, motion, q = medium_arguments(
+        args.sound_speed, args.sound_speed_file, args.temperature, args.salinity, args.motion, args.acceleration_psd,
+        ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"))
     kept = _receivers_kept(args.receivers_kept, "--receivers-kept")
     drop = 0.0 if args.drop_detections is None else real_argument(args.drop_detections, "--drop-detections", 0.0,
                                                                   MAX_DROP, "")
@@ -509,10 +574,8 @@ def _main_toa(args: argparse.Namespace) -> int:
         truth_sigma = real_argument(args.truth_sigma, "--truth-sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     kind, interval, sequence = ping_type_arguments(args.ping_type, args.burst_interval, args.burst_sequence,
                                                    ("--ping-type", "--burst-interval", "--burst-sequence"))
-    q = None if args.acceleration_psd is None else real_argument(args.acceleration_psd, "--acceleration-psd", 0.0,
-                                                                  1.0, "m²/s³", low_open=True)
     outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed,
-                    truth_sigma, kind, interval, sequence, q)
+                    truth_sigma, kind, interval, sequence, q, series, temperature, salinity, motion)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
     write(outcome, out)
@@ -524,6 +587,10 @@ def _main_toa(args: argparse.Namespace) -> int:
           f"{len(s['receivers'])} receivers{thinned}, sound speed {c['sound_speed_m_s']:.1f} m/s ({c['source']}), "
           f"ping interval {s['ping_interval_s']:.4f} s, in {s['wall_time_s']:.1f} s")
     print("  " + ping_type_line(s))
+    if c["source"] == "fallback":
+        print(f"sblsim: warning: the pings do not determine the sound speed ({c['calibration']}); taken: "
+              f"{c['method']} (every range scales with it: give --sound-speed, --sound-speed-file or --temperature "
+              "with --salinity)", file=sys.stderr)
     quality = quality_line(s)
     print("  " + quality)
     for late in s["receivers_late"]:

@@ -6,7 +6,9 @@
   ``x``, ``y``, ``z``), a receiver without a position not used (Lake Hald's ``hydrophones.csv``), or a TOML
   file of ``[[receiver]]`` tables with ``name``, ``x_m``, ``y_m`` [, ``z_m``];
 * a track (the truth, or a reference solution): columns ``x``, ``y`` [, ``z``] [m] and ``t`` (or ``time``,
-  ``top``) [s] under a header line (Lake Hald's ``gps.txt``, ``umap.txt``).
+  ``top``) [s] under a header line (Lake Hald's ``gps.txt``, ``umap.txt``);
+* a measured sound-speed series: columns ``time_s`` (or ``t``, ``time``) [s] and ``sound_speed_m_s`` (or ``c``,
+  ``sound_speed``) [m/s] under a header line (a temperature logger's series converted, a CTD's time series).
 
 Each file must be a regular file (a FIFO or a device such as ``/dev/zero`` is refused before it is opened) and is
 read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read. The cells are
@@ -292,5 +294,49 @@ def read_burst_sequence(path: Path | str) -> np.ndarray:
     return values[:, found[0] if found else 0]
 
 
+#: The sound speeds a measured series may hold [m/s] (the tracker's own range).
+SERIES_SPEED_RANGE = (1300.0, 1700.0)
+
+
+def read_sound_speed_series(path: Path | str) -> np.ndarray:
+    """Read a measured sound-speed series: ``time_s`` [s] (on the times of arrival's time base) and
+    ``sound_speed_m_s`` [m/s] columns under a header (aliases ``t``, ``time`` and ``c``, ``sound_speed``), the times
+    increasing; returns (k, 2) ``t, c``.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the line and column, and the allowed range (each speed in
+        :data:`SERIES_SPEED_RANGE`, the times increasing, at least one row).
+    """
+    path, what = Path(path), "sound speed file"
+    name = str(path)
+    lines = _lines(path, what)
+    if len(lines) < 2:
+        raise ModelError(f"{what}: {name!r} needs a header (time_s, sound_speed_m_s) and at least one row")
+    header = [h.lower() for h in _split(lines[0])]
+    index = {}
+    for key, aliases in (("t", ("time_s", "t", "time", "t_s")), ("c", ("sound_speed_m_s", "sound_speed", "c"))):
+        found = [k for k, h in enumerate(header) if h in aliases]
+        if not found:
+            raise ModelError(f"{what}: {name!r}: the header needs time_s and sound_speed_m_s columns, got "
+                             f"{' '.join(header)[:80]}")
+        index[key] = found[0]
+    values = _numbers(lines[1:], name, what, 2, header, -MAX_TIME, MAX_TIME, False)
+    series = values[:, [index["t"], index["c"]]]
+    low, high = SERIES_SPEED_RANGE
+    bad = np.flatnonzero((series[:, 1] < low) | (series[:, 1] > high))
+    if len(bad):
+        raise ModelError(f"{what}: {name!r} line {bad[0] + 2} column {header[index['c']]}: {series[bad[0], 1]:.6g} "
+                         f"m/s is not allowed; allowed: [{low:g}, {high:g}] m/s")
+    steps = np.diff(series[:, 0])
+    if (steps <= 0).any():
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise ModelError(f"{what}: {name!r} line {k + 3}: the time {series[k + 1, 0]:.10g} s does not increase; "
+                         "allowed: times in increasing order")
+    return series
+
+
 __all__ = ["BURST_RANGE", "MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_TIME", "MAX_TOA_BYTES", "Receivers",
-           "ToaMatrix", "read_burst_sequence", "read_receivers", "read_toa", "read_track"]
+           "SERIES_SPEED_RANGE", "ToaMatrix", "read_burst_sequence", "read_receivers", "read_sound_speed_series",
+           "read_toa", "read_track"]

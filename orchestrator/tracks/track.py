@@ -21,6 +21,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking import sound_speed as ss
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.models.tracking.receivers import receiver_residuals
@@ -38,16 +39,21 @@ AGREE_AFTER = 4
 
 
 #: The estimators, in the order of the outputs, and their names in words (the console, the figure).
-ESTIMATOR_NAMES = {"robust": "robust smoother", "rts": "RTS smoother", "ekf": "EKF (causal)",
-                   "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)", "fix": "single-ping fix",
-                   "reference": "reference"}
+ESTIMATOR_NAMES = {"stationary": "stationary fix", "robust": "robust smoother", "rts": "RTS smoother",
+                   "ekf": "EKF (causal)", "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)",
+                   "fix": "single-ping fix", "reference": "reference"}
 
 
-ESTIMATORS = ("robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
+ESTIMATORS = ("stationary", "robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
 
 
 #: The keys of ``score.json`` for the track (the issue's names), before the further ones.
 SCORE_KEYS = ("n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95_m", "nees", "lag_s")
+
+
+#: The motion models of ``--motion``: a moving tag (the filters and smoothers), or a stationary one (one position for
+#: all pings, :func:`stationary_track`).
+MOTIONS = ("moving", "stationary")
 
 
 #: The largest share of detections removed at random.
@@ -166,13 +172,79 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         "converged": found.converged, "history": list(found.history)}
 
 
+def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray):
+    """A stationary tag's pooled fix (:func:`~sblsim.models.tracking.stationary.stationary_fix`) from the median of
+    its single-ping fixes ``fixes`` (m, dim) [m], else the receivers' centroid.
+
+    Raises
+    ------
+    ModelError
+        Too few receivers heard it (one line).
+    """
+    from sblsim.models.tracking.stationary import stationary_fix
+
+    finite = np.isfinite(fixes).all(axis=1)
+    start = np.median(fixes[finite], axis=0) if finite.any() else positions.mean(axis=0)
+    return stationary_fix(toa, positions, c, SIGMA_TOA, start)
+
+
+def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
+                      series_path: Path | None = None, temperature: float | None = None,
+                      salinity: float | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
+    """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
+    given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
+    whose median is the reference speed and to which each ping's arrivals are rescaled
+    (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`); else calibrated from the pings
+    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`), and where the array cannot determine it,
+    the fallback (:func:`~sblsim.models.tracking.sound_speed.fallback_sound_speed`: ``temperature`` [°C] and
+    ``salinity`` [g/kg], else the stated default). Returns ``toa`` (m, n) [s], the speed [m/s] and what was done
+    (``summary.json``'s ``sound_speed``)."""
+    from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.models.tracking.calibration import calibrate_sound_speed
+
+    fallback = None if temperature is None and salinity is None else ss.fallback_sound_speed(temperature, salinity)
+    if sound_speed is not None:
+        return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"}
+    if series_path is not None:
+        from sblsim.orchestrator.tracks.toa import read_sound_speed_series
+
+        series = read_sound_speed_series(series_path)
+        first = ps.first_arrivals(toa)
+        span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
+        inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])
+        c = float(np.median(series[inside, 1] if inside.any() else series[:, 1]))
+        emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, SIGMA_TOA)[1])
+        scaled, speeds, outside = ss.rescale_to_reference(toa, emissions, series, c)
+        return scaled, c, {"sound_speed_m_s": c, "source": "measured series", "file": str(series_path),
+                           "method": "each ping's arrivals rescaled from the series' speed at its emission to the "
+                                     "series' median over the record",
+                           "range_m_s": [float(np.nanmin(speeds)), float(np.nanmax(speeds))]
+                           if np.isfinite(speeds).any() else None,
+                           "pings_outside_series": int(outside.sum())}
+    try:
+        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA)
+    except ModelError as exc:
+        c, words = fallback or ss.fallback_sound_speed()
+        return toa, c, {"sound_speed_m_s": c, "source": "fallback", "method": words,
+                        "calibration": str(exc)}
+    speed = {"sound_speed_m_s": calibration.c, "source": "calibrated",
+             "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits"
+             if calibration.batches else "one joint soft-L1 fit (a record too short for stretches)",
+             "sigma_m_s": calibration.sigma, "pings": calibration.pings,
+             "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
+    if fallback is not None:
+        speed["fallback_m_s"], speed["fallback"] = fallback
+    return toa, calibration.c, speed
+
+
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
           drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
           burst_interval: tuple[float, float] | None = None, burst_sequence_path: Path | None = None,
-          acceleration_psd: float | None = None) -> TrackOutcome:
-    """Read, thin, track and score (module docstring); ``sound_speed`` None: calibrated from the pings
-    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); ``truth_sigma`` [m] the truth's
+          acceleration_psd: float | None = None, sound_speed_path: Path | None = None,
+          temperature: float | None = None, salinity: float | None = None, motion: str = "moving") -> TrackOutcome:
+    """Read, thin, track and score (module docstring); the sound speed as :func:`sound_speed_stage` takes
+    ``sound_speed``, ``sound_speed_path``, ``temperature`` and ``salinity``; ``truth_sigma`` [m] the truth's
     own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
     :func:`ping_schedule`, ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
     (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
@@ -180,7 +252,6 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.models.tracking.calibration import calibrate_sound_speed
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
@@ -201,29 +272,26 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             raise ModelError(f"truth: its times [{truth[0, 0]:.10g}, {truth[-1, 0]:.10g}] s do not overlap the pings' "
                              f"[{span[0]:.10g}, {span[1]:.10g}] s; allowed: a truth on the time base of the times of "
                              "arrival")
-    if sound_speed is None:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA)
-        c = calibration.c
-        speed = {"sound_speed_m_s": c, "source": "calibrated",
-                 "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits"
-                 if calibration.batches else "one joint soft-L1 fit (a record too short for stretches)",
-                 "sigma_m_s": calibration.sigma, "pings": calibration.pings,
-                 "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
-    else:
-        c = sound_speed
-        speed = {"sound_speed_m_s": c, "source": "given"}
+    toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity)
     fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA)
     settings = tracker_settings(c, fe)
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
     heard_count = np.isfinite(toa).sum(axis=1)
-    settings, motion = motion_model(toa, positions, settings, schedule, (fx, fe, fused), acceleration_psd)
-    tracker = tt.ToaTracker(positions, settings)
-    # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
-    record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
-    filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
-               for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
+    stationary = motion == "stationary"
+    if stationary:  # one position for all pings: no motion model, no filters
+        motion_info: dict[str, Any] = {"model": "stationary", "acceleration_psd_m2_s3": None,
+                                       "source": "not used (one position for all pings)"}
+        record, filters = None, {}
+    else:
+        settings, motion_info = motion_model(toa, positions, settings, schedule, (fx, fe, fused), acceleration_psd)
+        motion_info = {"model": "moving"} | motion_info
+        tracker = tt.ToaTracker(positions, settings)
+        # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
+        record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
+        filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
+                   for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim)
     fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
     columns = ["x", "y", "z"][:dim]
@@ -246,29 +314,37 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         covariances[estimator] = cov[:, :2, :2]
         flagged[estimator] = checked.flagged
 
-    positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
-    k = np.flatnonzero(positioned)
     robust = None
-    if smooth:
-        xs, Ps = tracker.smooth(record)
-        k0 = record.start
-        if k0 < len(toa) - 1:
-            robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:],
-                                     schedule.sliced(k0))
-            kr = np.arange(k0, len(toa))
-            rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
-                 (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts)
-        rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
-             np.r_[record.restarts, segment_starts])
-    rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
-         record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts])
-    for name, other in filters.items():
-        u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
-        rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
-             other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
+    if stationary:
+        pooled = stationary_track(toa, positions, c, fx)
+        kp = np.flatnonzero(np.isfinite(pooled.emissions))
+        rows("stationary", kp, pooled.emissions[kp], np.repeat(pooled.position[None], len(kp), axis=0),
+             np.repeat(pooled.covariance[None], len(kp), axis=0),
+             (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1))
+    else:
+        positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
+        k = np.flatnonzero(positioned)
+        if smooth:
+            xs, Ps = tracker.smooth(record)
+            k0 = record.start
+            if k0 < len(toa) - 1:
+                robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:],
+                                         schedule.sliced(k0))
+                kr = np.arange(k0, len(toa))
+                rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
+                     (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts)
+            rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
+                 np.r_[record.restarts, segment_starts])
+        rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
+             record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts])
+        for name, other in filters.items():
+            u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
+            rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
+                 other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
     f = np.flatnonzero(np.isfinite(fe))
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1))
-    main = next(iter(frames)) if smooth else "ekf"  # the robust smoother where it ran, else the RTS smoother
+    # the stationary fix, else the robust smoother where it ran, else the causal EKF
+    main = next(iter(frames)) if smooth or stationary else "ekf"
     estimates = pd.concat(frames.values(), ignore_index=True)
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
     at = np.full((len(toa), dim), np.nan)
@@ -283,14 +359,15 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "receivers_kept": None if receivers_kept is None else list(receivers_kept),
         "drop_detections": drop, "seed": seed if drop > 0 else None, "detections_dropped": dropped,
         "dimensions": dim, "sound_speed": speed, "sigma_toa_s": SIGMA_TOA, "ping_interval_s": interval,
-        "motion": motion,
+        "motion": motion_info,
         "ping_type": {"type": schedule.kind, "source": schedule.source,
                       "burst_interval_s": None if schedule.bounds is None else list(schedule.bounds),
                       "seen": {"typical_step_s": seen.interval, "steps_s": list(seen.bounds),
                                "spread_s": seen.spread, "type": seen.kind}},
         "segments": [[int(a), int(b - 1)] for a, b in schedule.segments()],
         "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
-        "restarts": len(record.restarts), "fixed": {e: int(len(fr)) for e, fr in frames.items()},
+        "restarts": 0 if record is None else len(record.restarts),
+        "fixed": {e: int(len(fr)) for e, fr in frames.items()},
         "flagged": flagged, "trusted_fixes": int(trusted.sum()),
         "receivers_late": [{"receiver": names[k], "arrivals": int(judged.arrivals[k]),
                             "median_residual_sigmas": float(judged.median_z[k]), "kept_share": float(judged.kept[k])}
@@ -321,17 +398,20 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         if reference is not None:
             scored("reference", -1, reference[:, 0], reference[:, 1:], None)
         errors = pd.concat(parts, ignore_index=True)
-        source = record.x_filtered if not smooth else xs
-        bound = bound_along_track(toa, positions, source[:, -2], truth, settings, schedule, source[:, :dim])
-        thirds = bound_thirds(bound, errors)
+        if not stationary:
+            source = record.x_filtered if not smooth else xs
+            bound = bound_along_track(toa, positions, source[:, -2], truth, settings, schedule, source[:, :dim])
         first = entries.pop(main)
         result = {key: first.get(key) for key in SCORE_KEYS}
         result |= {key: value for key, value in first.items() if key not in result}
         result |= {"estimator": main, "others": entries, "truth_sigma_m": truth_sigma}
-        result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS, "thirds": thirds}
+        if bound is not None:
+            result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS,
+                               "thirds": bound_thirds(bound, errors)}
     summary["wall_time_s"] = time.perf_counter() - start
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
 
 
-__all__ = ["AGREE_AFTER", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "SCORE_KEYS", "SIGMA_TOA",
-           "TrackOutcome", "drop_detections", "motion_model", "ping_schedule", "track", "tracker_settings"]
+__all__ = ["AGREE_AFTER", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "SCORE_KEYS",
+           "SIGMA_TOA", "TrackOutcome", "drop_detections", "motion_model", "ping_schedule", "sound_speed_stage",
+           "stationary_track", "track", "tracker_settings"]

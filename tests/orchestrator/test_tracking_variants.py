@@ -288,4 +288,4 @@ def test_two_pings_with_the_speed_given_are_tracked_and_scored(tmp_path, capsys)
                  "--out", str(tmp_path / "o")]) == 0
     assert (tmp_path / "o" / "score.json").is_file() and "ping type" in capsys.readouterr().out
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
-    assert summary["motion"] == {"acceleration_psd_m2_s3": 0.002, "source": "given"}
+    assert summary["motion"] == {"model": "moving", "acceleration_psd_m2_s3": 0.002, "source": "given"}

@@ -1,0 +1,161 @@
+"""The tracker's medium and motion beyond one constant speed and a moving tag (orchestrator/tracks/track.py,
+models/tracking/sound_speed.py): a measured sound-speed series, the fallback where the pings cannot determine the
+speed, and a stationary tag pooled into one position."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sblsim
+from sblsim.models.receiver import toa_tracking as tt
+from sblsim.models.tracking import sound_speed as ss
+from sblsim.orchestrator.tracks.variants import write_toa
+
+DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
+RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
+NAMES = [f"R{k + 1}" for k in range(len(RECEIVERS))]
+
+
+def _receivers(tmp_path: Path) -> Path:
+    path = tmp_path / "receivers.csv"
+    rows = "\n".join(f"{n},{x:g},{y:g}" for n, (x, y) in zip(NAMES, RECEIVERS))
+    path.write_text("name,x_m,y_m\n" + rows + "\n")
+    return path
+
+
+def _truth(tmp_path: Path, emissions: np.ndarray, positions: np.ndarray) -> Path:
+    path = tmp_path / "truth.txt"
+    np.savetxt(path, np.column_stack([positions, emissions]), header="x y t", comments="")
+    return path
+
+
+def _error(result) -> np.ndarray:
+    e = result.errors
+    return e.loc[e["estimator"] == result.score["estimator"], "error_2d_m"].to_numpy()
+
+
+def test_rescaled_arrivals_give_each_ping_its_own_range_at_the_reference_speed():
+    """At exact emission times the rescaled travel times times the reference speed are the ranges (computed here
+    from the positions); the speed is the series' at each emission, held beyond its ends and flagged there."""
+    rng = np.random.default_rng(3)
+    emissions = np.arange(10) * 30.0
+    points = rng.uniform(0, 150, (10, 2))
+    ranges = np.linalg.norm(points[:, None] - RECEIVERS[None], axis=2)
+    series = np.array([[0.0, 1440.0], [200.0, 1460.0]])
+    speeds = np.interp(emissions, series[:, 0], series[:, 1])
+    toa = emissions[:, None] + ranges / speeds[:, None]
+    toa[2, 1] = np.nan
+    scaled, found, outside = ss.rescale_to_reference(toa, emissions, series, 1450.0)
+    heard = np.isfinite(toa)
+    assert np.allclose(((scaled - emissions[:, None]) * 1450.0)[heard], ranges[heard], atol=1e-6)
+    assert np.isnan(scaled[2, 1]) and np.allclose(found, speeds)
+    assert outside.tolist() == [t > 200.0 for t in emissions]
+
+
+def test_emission_estimates_take_the_fix_and_else_the_median_delay():
+    """A ping without a fix: its first arrival less the median delay the fixed pings show."""
+    toa = np.array([[1.10, 1.20], [2.15, 2.30], [3.12, 3.40], [np.nan, np.nan]])
+    fixed = np.array([1.0, 2.0, np.nan, np.nan])
+    out = ss.emission_estimates(toa, fixed)
+    assert out[:2].tolist() == [1.0, 2.0] and out[2] == pytest.approx(3.12 - np.median([0.10, 0.15]))
+    assert np.isnan(out[3])
+
+
+def _warming(tmp_path: Path, low: float, high: float, seed: int = 5):
+    """400 pings of a simulated tag in water whose speed goes from ``low`` to ``high`` [m/s] over the record: the
+    times of arrival, the series and the truth written to ``tmp_path``; returns the files and the speeds."""
+    s = tt.TrackerSettings(sound_speed=1455.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-3)
+    _, truth, emissions = tt.simulate_pings(RECEIVERS, 400, s, np.random.default_rng(seed), speed=0.1,
+                                            detection=0.9)
+    rng = np.random.default_rng(seed + 1)
+    series = np.column_stack([np.linspace(emissions[0] - 10, emissions[-1] + 10, 50), np.linspace(low, high, 50)])
+    speeds = np.interp(emissions, series[:, 0], series[:, 1])
+    ranges = np.linalg.norm(truth[:, None] - RECEIVERS[None], axis=2)
+    toa = emissions[:, None] + ranges / speeds[:, None] + 1e-4 * rng.normal(size=ranges.shape)
+    toa[rng.random(toa.shape) > 0.9] = np.nan
+    write_toa(tmp_path / "toa.txt", toa, NAMES)
+    speed_file = tmp_path / "speed.csv"
+    speed_file.write_text("time_s,sound_speed_m_s\n" + "\n".join(f"{t:.6f},{c:.6f}" for t, c in series) + "\n")
+    return {"receivers": _receivers(tmp_path), "truth": _truth(tmp_path, emissions, truth)}, speed_file, speeds
+
+
+def test_a_measured_series_tracks_a_tag_in_water_that_warms(tmp_path):
+    """The water warms from 1,440 to 1,470 m/s over the record: with the series the track is as good as the same
+    tag's in water of one speed given exactly (RMS within 5 %); with one speed given (the series' median) it is
+    worse by at least twice."""
+    (tmp_path / "still").mkdir()
+    files, _, _ = _warming(tmp_path / "still", 1455.0, 1455.0)
+    still = sblsim.replay_toa(tmp_path / "still" / "toa.txt", sound_speed=1455.0, **files)
+    files, speed_file, speeds = _warming(tmp_path, 1440.0, 1470.0)
+    measured = sblsim.replay_toa(tmp_path / "toa.txt", sound_speed_file=speed_file, **files)
+    one = sblsim.replay_toa(tmp_path / "toa.txt", sound_speed=1455.0, **files)
+    summary = measured.summary["sound_speed"]
+    assert summary["source"] == "measured series" and summary["pings_outside_series"] == 0
+    assert summary["range_m_s"][0] == pytest.approx(speeds.min(), abs=0.05)
+    rms = [float(np.sqrt(np.nanmean(_error(r) ** 2))) for r in (still, measured, one)]
+    assert rms[1] <= 1.05 * rms[0] + 0.01 and rms[2] >= 2 * rms[1], rms
+
+
+def test_where_the_pings_cannot_give_the_speed_the_fallback_is_stated(tmp_path, capsys):
+    """Two pings cannot calibrate the speed: TEOS-10's for fresh water at 20 °C (1,482.3 m/s, Marczak 1997's
+    1,482.35 within 0.5 m/s) is taken with --temperature and --salinity, the default 1,500 m/s without, and a
+    warning says so in one line."""
+    from sblsim.orchestrator.cli import main
+
+    lines = (DATA / "toa.txt").read_text().splitlines()
+    toa = tmp_path / "toa.txt"
+    toa.write_text("\n".join([lines[0], lines[100], lines[101]]) + "\n")
+    base = ["replay", str(toa), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv")]
+    assert main(base + ["--temperature", "20", "--salinity", "0", "--out", str(tmp_path / "t")]) == 0
+    speed = json.loads((tmp_path / "t" / "summary.json").read_text())["sound_speed"]
+    assert speed["source"] == "fallback" and abs(speed["sound_speed_m_s"] - 1482.35) <= 0.5, speed
+    warning = [line for line in capsys.readouterr().err.splitlines() if "sound speed" in line]
+    assert len(warning) == 1 and "do not determine the sound speed" in warning[0] and "TEOS-10" in warning[0]
+    assert main(base + ["--out", str(tmp_path / "d")]) == 0
+    speed = json.loads((tmp_path / "d" / "summary.json").read_text())["sound_speed"]
+    assert speed["sound_speed_m_s"] == ss.DEFAULT_SOUND_SPEED and "1500 m/s" in capsys.readouterr().err
+
+
+def test_a_stationary_tag_is_one_position_within_its_covariance(tmp_path):
+    """A tag that does not move (speed 0, no process noise), 300 pings: one position for every row, within 3.5 of
+    its own sigmas of the truth (χ²(2) at 0.998), and closer than the single-ping fixes' median error."""
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1.5e-4, interval=5.0, acceleration_psd=1e-12)
+    rng = np.random.default_rng(8)
+    toa, truth, emissions = tt.simulate_pings(RECEIVERS, 300, s, rng, start=np.array([120.0, 40.0]), speed=0.0,
+                                              detection=0.7)
+    write_toa(tmp_path / "toa.txt", toa, NAMES)
+    result = sblsim.replay_toa(tmp_path / "toa.txt", receivers=_receivers(tmp_path), sound_speed=1480.0,
+                               truth=_truth(tmp_path, emissions, truth), motion="stationary")
+    track = result.track
+    assert result.score["estimator"] == "stationary" and track[["x", "y"]].nunique().max() == 1
+    cov = np.diag([track["sigma_x"].iloc[0] ** 2, track["sigma_y"].iloc[0] ** 2])
+    e = track[["x", "y"]].to_numpy()[0] - [120.0, 40.0]
+    assert e @ np.linalg.inv(cov) @ e <= 12.4, (e, cov)
+    fixes = result.errors.loc[result.errors["estimator"] == "fix", "error_2d_m"]
+    assert np.hypot(*e) < np.nanmedian(fixes)
+    assert result.summary["motion"]["model"] == "stationary" and (track["quality"] != "flagged").mean() > 0.95
+
+
+@pytest.mark.parametrize("options,message", [
+    (["--temperature", "10"], "--salinity: needed with --temperature"),
+    (["--sound-speed", "1417", "--sound-speed-file", "x.csv"], "--sound-speed-file: not with --sound-speed"),
+    (["--sound-speed", "1417", "--temperature", "10", "--salinity", "0"], "--temperature: only where"),
+    (["--temperature", "80", "--salinity", "0"], "--temperature: 80"),
+    (["--motion", "stationary", "--acceleration-psd", "0.01"], "--acceleration-psd: not with --motion stationary"),
+    (["--sound-speed-file", "speed.csv"], "line 3 column sound_speed_m_s: 2000 m/s is not allowed"),
+])
+def test_bad_medium_options_are_refused_in_one_line(tmp_path, capsys, monkeypatch, options, message):
+    """Each bad combination or value: one line naming it, exit 2, nothing written."""
+    from sblsim.orchestrator.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "speed.csv").write_text("time_s,sound_speed_m_s\n0,1417\n10,2000\n")
+    code = main(["replay", str(DATA / "toa.txt"), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"),
+                 "--out", str(tmp_path / "o"), *options])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "o").exists()
