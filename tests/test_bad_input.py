@@ -171,6 +171,13 @@ CASES = {
     "run toa on sbl": (["run", "semicircle", "--set", "acoustics.ranging=toa"], "acoustics.ranging"),
     "run ilbl jitter too large": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
                                    "--set", "acoustics.ping_jitter=0.5"], "acoustics.ping_jitter"),
+    # the pinger's types: rbi without its bounds, a key of another type, pbi without its table
+    "run ilbl rbi without bounds": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
+                                     "--set", "acoustics.ping_type=rbi"], "acoustics.burst_interval_min"),
+    "run ilbl sbi with rbi's key": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
+                                     "--set", "acoustics.burst_interval_max=2"], "acoustics.burst_interval_max"),
+    "run ilbl pbi without table": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
+                                    "--set", "acoustics.ping_type=pbi"], "acoustics.burst_sequence"),
     "run ilbl 9 hydrophones": (["run", "semicircle", "--set", "platform.system=ilbl", "--set", "receiver=ukf",
                                 "--set", "platform.layout=circle", "--set", "platform.beacons=9"],
                                "platform.beacons"),

@@ -60,12 +60,16 @@ interrogation and at reception (their mean, to first order).
 
 Times of arrival (``ranging = "toa"``, the inverted LBL: the roles turned round). The target's pinger emits
 ping c at ``e_c = e_{c−1} + P (1 + δ) + j_c`` on its own clock (P = ``ping_interval``, 0 taking the cycle
-``n T``; δ the drift ``clock_drift_ppm``; ``j_c`` uniform of zero mean and std ``ping_jitter``), from where the
+``n T``; δ the drift ``clock_drift_ppm``; ``j_c`` uniform of zero mean and std ``ping_jitter``: the stable burst
+interval, ``ping_type = "sbi"``; ``rbi`` draws ``e_c = e_{c−1} + U(min, max)(1 + δ)``, the same with P the uniform's
+mean and ``j_c`` its zero-mean part, stretched too; ``pbi`` takes P_c from its table ``burst_sequence`` in turn,
+cycled), from where the
 target is then (its position input moved back along its velocity from the step's end); the fixed receivers (the
 beacon inputs, up to :data:`FLIGHT_CAPACITY`) hear it one way, ``τ_i`` after the emission (the eigenray between
 the two points is reciprocal). Each receiver's arrival is a packet of its own (slot counter ``(c − 1) n + i``),
 all n sent when the step reaches the emission (an event run once per receiver) and delivered at their arrivals
-on the lanes like every packet; it carries the ping's nominal epoch ``t0 + c P`` as ``tx_time`` (the receivers
+on the lanes like every packet; it carries the ping's nominal epoch ``t0 + c P`` (``pbi``: ``t0 + Σ_{k≤c} P_k``)
+as ``tx_time`` (the receivers
 know the schedule, not the emission; the receivers' clocks are synchronized) and the pseudo-range
 ``r = c_assumed (e_c + τ_i − t0 − c P) + σ_r w + e_mp``: the range plus the emission's offset.
 
