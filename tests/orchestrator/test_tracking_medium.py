@@ -101,9 +101,9 @@ def test_a_measured_series_tracks_a_tag_in_water_that_warms(tmp_path):
 
 
 def test_where_the_pings_cannot_give_the_speed_the_fallback_is_stated(tmp_path, capsys):
-    """Two pings cannot calibrate the speed: TEOS-10's for fresh water at 20 °C (1,482.3 m/s, Marczak 1997's
-    1,482.35 within 0.5 m/s) is taken with --temperature and --salinity, the default 1,500 m/s without, and a
-    warning says so in one line."""
+    """Two pings cannot calibrate the speed: TEOS-10's for fresh water at 20 °C (within 0.5 m/s of pure water's
+    1,482.35 m/s, Marczak, J. Acoust. Soc. Am. 102, 2776, 1997) is taken with --temperature and --salinity, the
+    default 1,500 m/s without, and a warning says so in one line."""
     from sblsim.orchestrator.cli import main
 
     lines = (DATA / "toa.txt").read_text().splitlines()
