@@ -1,8 +1,10 @@
-"""Pings of a simulated tag moving as the tracker's model says, of any ping type, heard by an array: the tracker's
-reference of truth in the tests.
+"""Pings of a simulated tag moving as the tracker's model says (or along a path given), of any ping type, heard by an
+array: the tracker's reference of truth in the tests and the benchmarks.
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
@@ -13,7 +15,8 @@ from sblsim.models.tracking.ekf import TrackerSettings
 def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSettings, rng: np.random.Generator,
                    start: np.ndarray | None = None, speed: float = 1.0, detection: float = 0.8,
                    first_emission: float = 0.0, ping_type: str = "sbi",
-                   burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None
+                   burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None,
+                   path: Callable[[np.ndarray], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pings of a target moving as the tracker's model says, heard by an array.
 
@@ -23,7 +26,11 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
     ``t_e,k = t_e,k−1 + Δ_k−1 + jitter`` and the interval walking by ``interval_drift``; ``rbi``, each step a draw
     of ``U(min, max)`` (``burst_interval``); ``pbi``, the steps of ``burst_sequence`` in turn (from its start) plus
     the jitter. Each receiver hears each ping with probability ``detection`` with Gaussian timing noise
-    ``sigma_toa``.
+    ``sigma_toa``. With ``path`` (the target's positions (k, dim) [m] at emission times (k,) [s]), the target is
+    where the path says at each emission instead: the motion is still drawn (the clock, the timing noise and the
+    detections are the same numbers as without it), its positions left aside. A walk of the motion model drifts
+    without bound over many pings (its velocity's variance grows as ``q t``); a path keeps a long record's
+    target in the array.
 
     Returns
     -------
@@ -48,6 +55,8 @@ def simulate_pings(receivers: np.ndarray, n_pings: int, settings: TrackerSetting
         positions, emissions = _walk_random_interval(p, v, n_pings, settings, rng, burst_interval, first_emission)
     else:
         positions, emissions = _walk(p, v, n_pings, settings, rng, ping_type, burst_sequence, first_emission)
+    if path is not None:
+        positions = np.asarray(path(emissions), float).reshape(n_pings, dim)
     ranges = np.linalg.norm(positions[:, None, :] - receivers[None, :, :], axis=2)
     toa = emissions[:, None] + ranges / s.sound_speed + s.sigma_toa * rng.normal(size=(n_pings, n))
     toa[rng.random((n_pings, n)) > detection] = np.nan

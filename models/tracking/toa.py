@@ -8,8 +8,8 @@ of receiver i is
 
 with the target's position ``p`` at emission (2-D, or 3-D), the sound speed ``c`` [m/s] and the timing noise
 ``σ_toa`` [s]. Only differences of arrival times locate the target (TDOA); the emission time is estimated beside the
-position. The model and its Jacobian are casadi expressions (:func:`toa_function`), evaluated over many pings or
-arrivals at once by casadi's ``map``.
+position. The model and its Jacobian are casadi expressions (:func:`toa_function`, the EKF's); over many pings or
+arrivals at once (the fixes, the smoother) the same closed form is evaluated in numpy.
 
 Units: seconds [s], metres [m], metres per second [m/s].
 
@@ -76,37 +76,39 @@ def toa_model(position: np.ndarray, emission: float, receivers: np.ndarray, c: f
     return np.asarray(toa).ravel(), np.asarray(J)
 
 
-@lru_cache(maxsize=32)
-def _mapped(n: int, dim: int, m: int) -> ca.Function:
-    """:func:`toa_function` over m pings at once (the receivers and the sound speed shared)."""
-    return toa_function(n, dim).map("toa_pings", "serial", m, [2, 3], [])
+def _ranges(d: np.ndarray, c: float, single: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The travel times ``‖d‖ / c`` [s] (...) of the offsets ``d`` (..., dim) [m] from the receivers to the target,
+    and their derivatives ``d / (c ‖d‖)`` [s/m] (..., dim), by the operations of :func:`toa_function`'s own
+    algorithm in its order (the same numbers to the last bit; its derivative of one receiver, ``single``, is
+    written ``(2 d) ((1 / (2 ‖d‖)) / c)``, of several ``(d / ‖d‖) / c``): NaN where the target is on a receiver."""
+    squares = np.square(d[..., 0])
+    for a in range(1, d.shape[-1]):
+        squares += np.square(d[..., a])
+    rho = np.sqrt(squares)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        grad = (2.0 * d) * ((1.0 / (2.0 * rho)) / c)[..., None] if single else (d / rho[..., None]) / c
+    return rho / c, grad
 
 
 def _evaluate_pings(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`toa_function` at k pings' positions (k, dim) and emission times (k,): times of arrival (k, n) and
-    Jacobians (k, n, dim + 1); evaluated by a mapped function of the next power of two of k (few sizes made)."""
+    Jacobians (k, n, dim + 1); the same closed form in numpy (no casadi call: a record of 10⁶ pings is one pass)."""
     k, (n, dim) = len(p), receivers.shape
-    size = 1 << max(k - 1, 0).bit_length()
-    pad = size - k
-    model, J = _mapped(n, dim, size)(np.pad(p, ((0, pad), (0, 0))).T, np.pad(te, (0, pad))[None, :], receivers.T, c)
-    return np.asarray(model).T[:k], np.asarray(J).reshape(n, size, dim + 1).transpose(1, 0, 2)[:k]
+    travel, grad = _ranges(np.asarray(p, float)[:, None, :] - receivers[None, :, :], c, n == 1)
+    J = np.empty((k, n, dim + 1))
+    J[:, :, :dim], J[:, :, dim] = grad, 1.0
+    return np.asarray(te, float)[:, None] + travel, J
 
 
 def _evaluate_arrivals(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`toa_function` of one receiver at each of h arrivals: the receiver (h, dim) [m], the target's position
-    (h, dim) [m] and emission time (h,) [s] of each; times of arrival (h,) and Jacobians (h, dim + 1) (a mapped
-    function of the next power of two of h)."""
+    (h, dim) [m] and emission time (h,) [s] of each; times of arrival (h,) and Jacobians (h, dim + 1) (numpy, as
+    :func:`_evaluate_pings`)."""
     h, dim = p.shape
-    size = 1 << max(h - 1, 0).bit_length()
-    pad = ((0, size - h), (0, 0))
-    model, J = _mapped_arrivals(dim, size)(np.pad(p, pad).T, np.pad(te, pad[0])[None, :], np.pad(receivers, pad).T, c)
-    return np.asarray(model).ravel()[:h], np.asarray(J).reshape(size, dim + 1)[:h]
-
-
-@lru_cache(maxsize=32)
-def _mapped_arrivals(dim: int, h: int) -> ca.Function:
-    """:func:`toa_function` of one receiver over h arrivals at once (each its own receiver; the sound speed shared)."""
-    return toa_function(1, dim).map("toa_arrivals", "serial", h, [3], [])
+    travel, grad = _ranges(p - receivers, c, True)
+    J = np.empty((h, dim + 1))
+    J[:, :dim], J[:, dim] = grad, 1.0
+    return np.asarray(te, float) + travel, J
 
 
 __all__ = ["SOUND_SPEED_RANGE", "toa_function", "toa_model"]
