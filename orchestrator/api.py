@@ -39,16 +39,24 @@ from sblsim.orchestrator.commands.common import load
 from sblsim.orchestrator.commands.compare import CompareResult, compare
 from sblsim.orchestrator.commands.design import DesignResult, design
 from sblsim.orchestrator.commands.map import MapResult, accuracy_map
-from sblsim.orchestrator.commands.replay import ReplayResult, TrackResult, replay, replay_toa
+from sblsim.orchestrator.commands.replay import (
+    ReplayResult,
+    TagsResult,
+    TrackResult,
+    replay,
+    replay_toa,
+    replay_toa_tags,
+)
 from sblsim.orchestrator.commands.run import RunResult, run
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, ConfigError
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "calibrate", "campaign",
+    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
+    "calibrate", "campaign",
     "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
-    "TrackResult",
+    "TrackResult", "TagsResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS",
 ]

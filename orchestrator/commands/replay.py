@@ -5,6 +5,8 @@ consistency against a truth track when one is given (:mod:`sblsim.orchestrator.r
 from __future__ import annotations
 
 import argparse
+import inspect
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +34,7 @@ from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
 from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
 
@@ -170,6 +173,26 @@ class TrackResult:
     errors: pd.DataFrame | None
     out: Path | None = None
     bound: pd.DataFrame | None = None
+
+
+@dataclass
+class TagsResult:
+    """The outcome of :func:`replay_toa_tags`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        ``tags.csv``: one row per tag (``tag``, ``status`` ``tracked`` or ``refused``, ``reason``, ``pings``,
+        ``positioned``, ``flagged``, ``share_flagged``, ``track`` (the estimator), ``sound_speed_m_s``,
+        ``sound_speed_source``, ``ping_type``, ``segments``, ``wall_time_s``).
+    tracks : dict of str to TrackResult
+        Each tracked tag's result, by its name.
+    out : Path or None
+    """
+
+    table: pd.DataFrame
+    tracks: dict[str, TrackResult]
+    out: Path | None = None
 
 
 def _receivers_kept(value: Any, where: str) -> list[str] | None:
@@ -347,6 +370,29 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     receivers = path_argument(receivers, "receivers", optional=False)
     truth = path_argument(truth, "truth")
     reference = path_argument(reference, "reference")
+    target = prepare_out(out, force, "track.csv", "track")
+    options = toa_options(smooth, sound_speed, receivers_kept, drop_detections, seed, truth_sigma, ping_type,
+                          burst_interval, burst_sequence, acceleration_psd, sound_speed_file, temperature, salinity,
+                          motion)
+    outcome = track(toa, receivers, truth, reference, **options)
+    if target is not None:
+        write(outcome, target)
+    return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
+                       outcome.bound)
+
+
+def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any = None, drop_detections: Any = 0.0,
+                seed: Any = 0, truth_sigma: Any = 0.0, ping_type: Any = None, burst_interval: Any = None,
+                burst_sequence: Any = None, acceleration_psd: Any = None, sound_speed_file: Any = None,
+                temperature: Any = None, salinity: Any = None, motion: Any = "moving") -> dict[str, Any]:
+    """:func:`replay_toa`'s tracking arguments checked (each named as the function names it), as keyword arguments
+    of :func:`~sblsim.orchestrator.tracks.track.track`.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        One line naming the argument and the allowed values.
+    """
     smooth = flag_argument(smooth, "smooth")
     sound_speed, series, temperature, salinity, motion, acceleration_psd = medium_arguments(
         sound_speed, sound_speed_file, temperature, salinity, motion, acceleration_psd,
@@ -359,13 +405,67 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     truth_sigma = real_argument(truth_sigma, "truth_sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     kind, interval, sequence = ping_type_arguments(ping_type, burst_interval, burst_sequence,
                                                    ("ping_type", "burst_interval", "burst_sequence"))
-    target = prepare_out(out, force, "track.csv", "track")
-    outcome = track(toa, receivers, truth, reference, smooth, sound_speed, kept, drop, seed, truth_sigma, kind,
-                    interval, sequence, acceleration_psd, series, temperature, salinity, motion)
-    if target is not None:
-        write(outcome, target)
-    return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
-                       outcome.bound)
+    return {"smooth": smooth, "sound_speed": sound_speed, "receivers_kept": kept, "drop": drop, "seed": seed,
+            "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval, "burst_sequence_path": sequence,
+            "acceleration_psd": acceleration_psd, "sound_speed_path": series, "temperature": temperature,
+            "salinity": salinity, "motion": motion}
+
+
+def replay_toa_tags(folder: str | Path, *, receivers: str | Path, workers: int | None = None,
+                    scheduler: str | None = None, out: str | Path | None = None, force: bool = False,
+                    **options: Any) -> TagsResult:
+    """Track many tags at one array in parallel: ``sblsim replay FOLDER --format toa`` (docs/tracking.md).
+
+    Parameters
+    ----------
+    folder : str or Path
+        A folder of one times-of-arrival file per tag (``*.txt``, ``*.csv``, ``*.toa``; the tag named by the
+        file's stem), each as :func:`replay_toa` reads one.
+    receivers : str or Path
+        The receivers' positions, shared by the tags.
+    workers : int, optional
+        Worker processes in [1, 256] (default the CPU count; 1: one tag after another in this process).
+    scheduler : str, optional
+        A Dask scheduler, ``tcp://HOST:PORT`` or ``local``: the tags run on its workers.
+    out : str or Path, optional
+        Write each tag's folder (``out/TAG/``) and ``tags.csv`` there, all or nothing.
+    force : bool
+        Replace an earlier result in ``out``.
+    **options
+        :func:`replay_toa`'s tracking arguments (``smooth``, ``sound_speed``, ``ping_type``, ...), the same for every
+        tag; no ``truth`` or ``reference`` (one per tag).
+
+    Returns
+    -------
+    TagsResult
+
+    Raises
+    ------
+    ModelError, ConfigError
+        A folder without tag files, a bad option (one line). A tag whose own file is refused is a row of
+        ``tags.csv`` (``status`` ``refused``, the reason), the others tracked.
+    """
+    folder = path_argument(folder, "folder", optional=False)
+    receivers = path_argument(receivers, "receivers", optional=False)
+    if not folder.is_dir():
+        raise ConfigError(f"folder: {str(folder)!r} is not a folder; allowed: a folder of one times-of-arrival file "
+                          "per tag (replay_toa tracks one file)")
+    unknown = sorted(set(options) - set(inspect.signature(toa_options).parameters) - {"truth_sigma"})
+    if unknown or "truth_sigma" in options:
+        raise ConfigError(f"{(unknown or ['truth_sigma'])[0]}: not an option of replay_toa_tags; allowed: "
+                          f"{', '.join(k for k in inspect.signature(toa_options).parameters if k != 'truth_sigma')}")
+    if workers is not None:
+        workers = int(real_argument(workers, "workers", 1, 256, ""))
+    if scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import check_address
+
+        scheduler = check_address(str(scheduler))
+    files = tag_files(folder)
+    target = prepare_out(out, force, "tags.csv", "tags")
+    done = track_tags(files, receivers, toa_options(**options), workers, scheduler, target)
+    return TagsResult(done.table, {name: TrackResult(o.track, o.score, o.summary, o.estimates, o.errors,
+                                                     None if target is None else target / name, o.bound)
+                                   for name, o in done.outcomes.items()}, target)
 
 
 def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,
@@ -393,7 +493,7 @@ HELP = "run a receiver on a recorded log (docs/log-format.md)"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim replay``'s arguments."""
     p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one); with "
-                   "--format toa, the matrix of times of arrival (docs/tracking.md)")
+                   "--format toa, the matrix of times of arrival (docs/tracking.md), or a folder of one per tag")
     p.add_argument("--format", choices=("log", "toa"), default="log",
                    help="log: a receiver's log (default); toa: times of arrival of a pinger at a fixed array "
                         "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS and robust "
@@ -438,6 +538,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--salinity", type=float, default=None, metavar="G_KG",
                    help="--format toa: the water's absolute salinity [g/kg] for the fallback (0 fresh water, about "
                         "35 the open sea)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="--format toa with a folder of tags: worker processes in [1, 256] (default: the CPU count)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="--format toa with a folder of tags: a Dask scheduler (tcp://HOST:PORT, or local) whose "
+                        "workers track the tags")
     p.add_argument("--motion", choices=MOTIONS, default=None,
                    help="--format toa: moving (default) or stationary (a sync or reference tag: one position for all "
                         "pings)")
@@ -468,7 +573,8 @@ def main(args: argparse.Namespace) -> int:
                             ("--acceleration-psd", args.acceleration_psd is not None),
                             ("--sound-speed-file", args.sound_speed_file),
                             ("--temperature", args.temperature is not None),
-                            ("--salinity", args.salinity is not None), ("--motion", args.motion)) if v]
+                            ("--salinity", args.salinity is not None), ("--motion", args.motion),
+                            ("--workers", args.workers is not None), ("--scheduler", args.scheduler)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -546,6 +652,39 @@ def quality_line(summary: dict[str, Any]) -> str:
             f"the tag can move), {summary['restarts']} restarts of the EKF, {summary['trusted_fixes']} trusted fixes")
 
 
+def _main_tags(args: argparse.Namespace, options: dict[str, Any]) -> int:
+    """``sblsim replay FOLDER --format toa``: each tag's line as it ends, then the table's summary."""
+    given = [o for o, v in (("--truth", args.truth), ("--reference", args.reference)) if v]
+    if given:
+        raise ConfigError(f"{given[0]}: not with a folder of tags (one truth per tag: replay each tag's file)")
+    workers = None if args.workers is None else int(real_argument(args.workers, "--workers", 1, 256, ""))
+    scheduler = None
+    if args.scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import check_address
+
+        scheduler = check_address(args.scheduler)
+    files = tag_files(args.log)
+    out = output_folder(args.out, Path("results") / f"tags_{folder_name(args.log.name)}", args.force, "tags.csv",
+                        "tags")
+
+    def progress(row: dict[str, Any], count: int, total: int) -> None:
+        if row["status"] == "tracked":
+            print(f"  [{count}/{total}] {row['tag']}: {row['pings']} pings, {row['positioned']} positioned, "
+                  f"{row['flagged']} flagged, {row['ping_type']}, {row['wall_time_s']:.1f} s", flush=True)
+        else:
+            print(f"sblsim: warning: [{count}/{total}] tag {row['tag']} refused: {row['reason']}", file=sys.stderr,
+                  flush=True)
+
+    where = f"on {scheduler}" if scheduler else f"in {workers or os.cpu_count() or 1} worker processes"
+    print(f"tracking {len(files)} tags of {args.log} at {args.receivers} {where}", flush=True)
+    done = track_tags(files, args.receivers, options, workers, scheduler, out, progress)
+    table = done.table
+    tracked = table[table["status"] == "tracked"]
+    print(f"  {len(tracked)} of {len(table)} tags tracked, {int(tracked['flagged'].sum())} of "
+          f"{int(tracked['positioned'].sum())} rows flagged; written to {out}/ (tags.csv, one folder per tag)")
+    return 0
+
+
 def _main_toa(args: argparse.Namespace) -> int:
     """``sblsim replay TOA_FILE --format toa``: the track's lines printed."""
     if args.receivers is None:
@@ -556,8 +695,8 @@ def _main_toa(args: argparse.Namespace) -> int:
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
                           "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
-                          "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --motion, --out, "
-                          "--force")
+                          "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --motion, --workers, "
+                          "--scheduler, --out, --force")
     speed, series, temperature, salinity, motion, q = medium_arguments(
         args.sound_speed, args.sound_speed_file, args.temperature, args.salinity, args.motion, args.acceleration_psd,
         ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"))
@@ -574,8 +713,16 @@ def _main_toa(args: argparse.Namespace) -> int:
         truth_sigma = real_argument(args.truth_sigma, "--truth-sigma", 0.0, MAX_TRUTH_SIGMA, "m")
     kind, interval, sequence = ping_type_arguments(args.ping_type, args.burst_interval, args.burst_sequence,
                                                    ("--ping-type", "--burst-interval", "--burst-sequence"))
-    outcome = track(args.log, args.receivers, args.truth, args.reference, args.smooth, speed, kept, drop, seed,
-                    truth_sigma, kind, interval, sequence, q, series, temperature, salinity, motion)
+    options = {"smooth": args.smooth, "sound_speed": speed, "receivers_kept": kept, "drop": drop, "seed": seed,
+               "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval,
+               "burst_sequence_path": sequence, "acceleration_psd": q, "sound_speed_path": series,
+               "temperature": temperature, "salinity": salinity, "motion": motion}
+    if args.log.is_dir():
+        return _main_tags(args, options)
+    if args.workers is not None or args.scheduler is not None:
+        raise ConfigError(f"{'--workers' if args.workers is not None else '--scheduler'}: only with a folder of tags "
+                          "(one times-of-arrival file per tag, tracked in parallel)")
+    outcome = track(args.log, args.receivers, args.truth, args.reference, **options)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
     write(outcome, out)

@@ -22,9 +22,9 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "calibrate", "campaign",
-    "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
-    "TrackResult",
+    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
+    "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
+    "DesignResult", "ReplayResult", "TrackResult", "TagsResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS", "__version__",
 ]

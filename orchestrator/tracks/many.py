@@ -1,0 +1,172 @@
+"""Many tags at one array, tracked in parallel: one times-of-arrival file per tag, each tracked by
+:func:`~sblsim.orchestrator.tracks.track.track` in a worker of its own (a pool of worker processes on this machine,
+or a Dask cluster's workers, :mod:`sblsim.orchestrator.campaign.executors`), as a campaign runs its chunks.
+
+The tags' folders and ``tags.csv`` (one row per tag: whether it was tracked or refused and why, its pings, the rows
+positioned and flagged, the sound speed and ping type taken, its time) are written together, all or nothing, when
+every tag has ended; a tag whose file is refused is a row saying so, never the end of the others.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.tracks.outputs import write
+from sblsim.orchestrator.tracks.track import track
+
+#: The most tags one call tracks.
+MAX_TAGS = 10_000
+#: The file names taken as one tag's times of arrival in a folder.
+TAG_SUFFIXES = (".txt", ".csv", ".toa")
+#: The columns of ``tags.csv``.
+TAG_COLUMNS = ("tag", "status", "reason", "pings", "positioned", "flagged", "share_flagged", "track",
+               "sound_speed_m_s", "sound_speed_source", "ping_type", "segments", "wall_time_s")
+
+
+@dataclass
+class TagsOutcome:
+    """What :func:`track_tags` returns: ``table`` (``tags.csv``: :data:`TAG_COLUMNS`, one row per tag, in the
+    files' order) and ``outcomes`` (tag name → its :class:`~sblsim.orchestrator.tracks.track.TrackOutcome`, the
+    tracked tags only)."""
+
+    table: Any  # pandas.DataFrame
+    outcomes: dict[str, Any]
+
+
+def tag_files(folder: Path) -> list[Path]:
+    """The tag files of a folder: its regular files named ``*.txt``, ``*.csv`` or ``*.toa`` (not a symbolic link, not
+    hidden), sorted by name, one tag each (named by the file's stem).
+
+    Raises
+    ------
+    ModelError
+        No such file, more than :data:`MAX_TAGS`, or two files of one stem.
+    """
+    folder = Path(folder)
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in TAG_SUFFIXES and not p.name.startswith(".")
+                   and not p.is_symlink() and p.is_file())
+    if not files:
+        raise ModelError(f"toa: {str(folder)!r} holds no tag file; allowed: a folder of one times-of-arrival file "
+                         f"per tag ({', '.join('*' + s for s in TAG_SUFFIXES)})")
+    if len(files) > MAX_TAGS:
+        raise ModelError(f"toa: {str(folder)!r} holds {len(files):,} tag files; allowed at most {MAX_TAGS:,}")
+    stems = [p.stem for p in files]
+    twice = next((s for s in stems if stems.count(s) > 1), None)
+    if twice is not None:
+        raise ModelError(f"toa: two tag files named {twice!r} in {str(folder)!r}; allowed: one file per tag name")
+    return files
+
+
+def track_tag(toa_path: Path, receivers: Path, options: dict[str, Any]):
+    """One tag tracked (:func:`~sblsim.orchestrator.tracks.track.track` with ``options``): its outcome, or the one
+    line of its refusal (a :class:`ModelError`)."""
+    try:
+        return track(toa_path, receivers, **options)
+    except ModelError as exc:
+        return str(exc)
+
+
+def _row(name: str, result, elapsed: float) -> dict[str, Any]:
+    if isinstance(result, str):
+        return {"tag": name, "status": "refused", "reason": result, "wall_time_s": elapsed}
+    s = result.summary
+    main = s["track"]
+    positioned = s["fixed"].get(main, 0)
+    flagged = s["flagged"].get(main, 0)
+    return {"tag": name, "status": "tracked", "reason": "", "pings": s["pings"], "positioned": positioned,
+            "flagged": flagged, "share_flagged": flagged / positioned if positioned else 0.0, "track": main,
+            "sound_speed_m_s": s["sound_speed"]["sound_speed_m_s"], "sound_speed_source": s["sound_speed"]["source"],
+            "ping_type": s["ping_type"]["type"], "segments": len(s["segments"]), "wall_time_s": s["wall_time_s"]}
+
+
+def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], workers: int | None = None,
+               scheduler: str | None = None, out: Path | None = None,
+               progress: Callable[[dict[str, Any], int, int], None] | None = None) -> TagsOutcome:
+    """Track each tag file at the array of ``receivers`` (module docstring).
+
+    Parameters
+    ----------
+    files : sequence of Path
+        One times-of-arrival file per tag (:func:`tag_files`), the tag named by the file's stem.
+    receivers : Path
+        The receivers' positions, shared by every tag.
+    options : dict
+        Keyword arguments of :func:`~sblsim.orchestrator.tracks.track.track`, the same for every tag.
+    workers : int, optional
+        Worker processes on this machine (default the CPU count; 1: in this process, one tag after another).
+    scheduler : str, optional
+        A Dask scheduler (``tcp://HOST:PORT``, or ``local`` for a local cluster of ``workers``): the tags run on its
+        workers instead.
+    out : Path, optional
+        Write each tracked tag's folder (``out/TAG/``, as ``sblsim replay --format toa``) and ``tags.csv`` there,
+        all or nothing when every tag has ended.
+    progress : callable, optional
+        Called with each tag's row, the tags ended and their number, as each ends.
+
+    Returns
+    -------
+    TagsOutcome
+    """
+    import pandas as pd
+
+    files = [Path(f) for f in files]
+    names = [f.stem for f in files]
+    started = time.perf_counter()
+    results: dict[str, Any] = {}
+    rows: dict[str, dict[str, Any]] = {}
+
+    def ended(name: str, result) -> None:
+        results[name] = result
+        rows[name] = _row(name, result, time.perf_counter() - started)
+        if progress is not None:
+            progress(rows[name], len(rows), len(files))
+
+    workers = workers or os.cpu_count() or 1
+    if scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import close_client, connect
+
+        client = connect(scheduler, workers=workers)
+        try:
+            from distributed import as_completed
+
+            futures = {client.submit(track_tag, f, receivers, options, pure=False): n for f, n in zip(files, names)}
+            for future in as_completed(futures, loop=client.loop):
+                ended(futures[future], future.result())
+        finally:
+            close_client(client)
+    elif workers == 1 or len(files) == 1:
+        for f, n in zip(files, names):
+            ended(n, track_tag(f, receivers, options))
+    else:
+        from sblsim.orchestrator.campaign.worker import watch_parent
+
+        with ProcessPoolExecutor(max_workers=min(workers, len(files)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=watch_parent, initargs=(os.getpid(),)) as pool:
+            pending = {pool.submit(track_tag, f, receivers, options): n for f, n in zip(files, names)}
+            try:
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in finished:
+                        ended(pending.pop(future), future.result())
+            finally:
+                for future in pending:
+                    future.cancel()
+    table = pd.DataFrame([rows[n] for n in names], columns=list(TAG_COLUMNS))
+    outcomes = {n: r for n, r in results.items() if not isinstance(r, str)}
+    if out is not None:
+        with staged_directory(out) as tmp:
+            for name, outcome in outcomes.items():
+                write(outcome, tmp / name)
+            table.to_csv(tmp / "tags.csv", index=False)
+    return TagsOutcome(table, outcomes)
+
+
+__all__ = ["MAX_TAGS", "TAG_COLUMNS", "TAG_SUFFIXES", "TagsOutcome", "tag_files", "track_tag", "track_tags"]

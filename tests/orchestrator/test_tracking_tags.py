@@ -1,0 +1,97 @@
+"""Many tags at one array tracked in parallel (orchestrator/tracks/many.py, ``sblsim replay FOLDER --format toa``):
+each tag's track is the one its file gives alone, a refused file is a row saying why, and the folder is written all
+or nothing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import sblsim
+from sblsim.models.receiver import toa_tracking as tt
+from sblsim.orchestrator.tracks.variants import write_toa
+
+RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
+NAMES = [f"R{k + 1}" for k in range(len(RECEIVERS))]
+
+
+def _array(tmp_path: Path, tags: int = 3) -> tuple[Path, Path]:
+    """``tags`` simulated tags' files (60 pings each, seeded) and one file that is not a TOA matrix."""
+    folder = tmp_path / "tags"
+    folder.mkdir()
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-3)
+    for k in range(tags):
+        toa, _, _ = tt.simulate_pings(RECEIVERS, 60, s, np.random.default_rng(k), speed=0.3, detection=0.8)
+        write_toa(folder / f"tag{k}.txt", toa, NAMES)
+    (folder / "broken.txt").write_text("R1 R2\n1.0 not-a-time\n")
+    receivers = tmp_path / "receivers.csv"
+    receivers.write_text("name,x_m,y_m\n" + "\n".join(f"{n},{x:g},{y:g}" for n, (x, y) in zip(NAMES, RECEIVERS)))
+    return folder, receivers
+
+
+def test_each_tag_is_tracked_as_alone_and_a_refused_file_is_a_row(tmp_path):
+    """In one process: every tag's track equal to replay_toa's of its file alone; the broken file a refused row with
+    its one-line reason; tags.csv and one folder per tracked tag written."""
+    folder, receivers = _array(tmp_path)
+    result = sblsim.replay_toa_tags(folder, receivers=receivers, workers=1, sound_speed=1480.0, smooth=True,
+                                    out=tmp_path / "out")
+    table = result.table.set_index("tag")
+    assert list(result.table["tag"]) == ["broken", "tag0", "tag1", "tag2"]
+    assert table.loc["broken", "status"] == "refused" and "not-a-time" in table.loc["broken", "reason"]
+    for k in range(3):
+        alone = sblsim.replay_toa(folder / f"tag{k}.txt", receivers=receivers, sound_speed=1480.0, smooth=True)
+        pd.testing.assert_frame_equal(result.tracks[f"tag{k}"].track, alone.track)
+        assert table.loc[f"tag{k}", "pings"] == 60 and table.loc[f"tag{k}", "positioned"] == len(alone.track)
+    written = pd.read_csv(tmp_path / "out" / "tags.csv")
+    assert list(written["tag"]) == list(result.table["tag"])
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["tag0", "tag1", "tag2", "tags.csv"]
+    assert (tmp_path / "out" / "tag1" / "track.csv").is_file()
+
+
+@pytest.mark.parametrize("options,message", [
+    (["--truth", "x.txt"], "--truth: not with a folder of tags"),
+    (["--workers", "0"], "--workers"),
+    (["--scheduler", "nowhere"], "--scheduler: 'nowhere' is not a scheduler address"),
+])
+def test_bad_folder_options_are_refused_in_one_line(tmp_path, capsys, options, message):
+    """One line, exit 2, no folder written."""
+    from sblsim.orchestrator.cli import main
+
+    folder, receivers = _array(tmp_path, tags=1)
+    code = main(["replay", str(folder), "--format", "toa", "--receivers", str(receivers), "--out",
+                 str(tmp_path / "o"), *options])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_workers_are_refused_for_one_file(tmp_path, capsys):
+    from sblsim.orchestrator.cli import main
+
+    folder, receivers = _array(tmp_path, tags=1)
+    code = main(["replay", str(folder / "tag0.txt"), "--format", "toa", "--receivers", str(receivers), "--workers",
+                 "2", "--out", str(tmp_path / "o")])
+    assert code == 2 and "--workers: only with a folder of tags" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", [["--workers", "2"], ["--workers", "2", "--scheduler", "local"]])
+def test_worker_processes_and_a_dask_cluster_give_the_tracks_of_one_process(tmp_path, capsys, how):
+    """The command line in two worker processes, and on a local Dask cluster: the same tracks as in one process,
+    a line per tag as it ends."""
+    from sblsim.orchestrator.cli import main
+
+    folder, receivers = _array(tmp_path, tags=4)
+    base = ["replay", str(folder), "--format", "toa", "--receivers", str(receivers), "--sound-speed", "1480"]
+    assert main(base + ["--workers", "1", "--out", str(tmp_path / "one")]) == 0
+    capsys.readouterr()
+    assert main(base + how + ["--out", str(tmp_path / "many")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("pings,") == 4 and "refused" not in out
+    for k in range(4):
+        one = pd.read_csv(tmp_path / "one" / f"tag{k}" / "track.csv")
+        many = pd.read_csv(tmp_path / "many" / f"tag{k}" / "track.csv")
+        pd.testing.assert_frame_equal(one, many)
