@@ -35,22 +35,23 @@ def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSet
 
 
 def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
-                 fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray,
+                 fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray | None,
                  schedule: PingSchedule | None = None) -> RobustTrack:
     """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
-    that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2); the lowest
-    cost kept (:func:`robust_smooth`). ``fixes``: positions (m, dim), emission times (m,) and the arrivals used
-    (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
+    that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2; None: the
+    fixes' two starts alone, e.g. a record too long for the EKF's ping-by-ping loop); the lowest cost kept
+    (:func:`robust_smooth`). ``fixes``: positions (m, dim), emission times (m,) and the arrivals used (m, n) of
+    :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
     (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each).
 
     Raises
     ------
     ModelError
-        As :func:`robust_smooth`.
+        As :func:`robust_smooth` (no start: ``rts`` None and too few fixes).
     """
     if schedule is None:
         schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
-    starts = {"rts": rts}
+    starts = {} if rts is None else {"rts": rts}
     anchored = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, receivers.shape[1], schedule.times())
     if anchored is not None:
         starts = {"fixes": anchored, "graduated": graduated_start(toa, receivers, settings, anchored, schedule),
@@ -82,14 +83,7 @@ def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.n
     m = len(position)
     times = np.arange(m) * settings.interval if times is None else np.asarray(times, float)
     good = np.flatnonzero(np.isfinite(emission) & (used.sum(axis=1) >= dim + 2) & (used.sum(axis=1) == heard))
-    keep = np.ones(len(good), bool)
-    for j in range(len(good)):
-        near = [i for i in range(max(0, j - 3), min(len(good), j + 4)) if i != j]
-        if not near:
-            continue
-        elapsed = np.abs(times[good[near]] - times[good[j]]).max()
-        keep[j] = np.linalg.norm(position[good[j]] - np.median(position[good[near]], axis=0)) <= \
-            settings.fix_speed * elapsed + 5.0
+    keep = _near_the_neighbours(position[good], times[good], settings.fix_speed)
     good = good[keep]
     if len(good) < 2:
         return None
@@ -104,4 +98,28 @@ def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.n
     return X
 
 
-__all__ = ["anchored_start", "graduated_start", "robust_track"]
+#: The neighbours of a fix :func:`anchored_start` checks it against: up to three on each side.
+NEIGHBOURS = 3
+
+
+def _near_the_neighbours(position: np.ndarray, times: np.ndarray, fix_speed: float) -> np.ndarray:
+    """Whether each fix (g, dim) [m] at ``times`` (g,) [s] lies within ``fix_speed`` × the time elapsed to the
+    farthest of its (up to) six neighbours + 5 m of their median (per axis, :func:`numpy.median`'s value: the middle
+    one, or the mean of the two middle ones), all fixes at once: (g,) bool; True for a fix without neighbours."""
+    g = len(position)
+    offsets = np.r_[-NEIGHBOURS:0, 1:NEIGHBOURS + 1]
+    index = np.arange(g)[:, None] + offsets[None, :]  # (g, 6)
+    inside = (index >= 0) & (index < g)
+    index = np.clip(index, 0, max(g - 1, 0))
+    count = inside.sum(axis=1)
+    ordered = np.sort(np.where(inside[:, :, None], position[index], np.nan), axis=1)  # NaN last
+    rows = np.arange(g)
+    upper, lower = ordered[rows, count // 2], ordered[rows, np.maximum(count - 1, 0) // 2]
+    median = np.where((count % 2 == 1)[:, None], upper, (lower + upper) / 2)
+    elapsed = np.where(inside, np.abs(times[index] - times[:, None]), -np.inf).max(axis=1, initial=-np.inf)
+    with np.errstate(invalid="ignore"):
+        near = np.sqrt(np.square(position - median).sum(axis=1)) <= fix_speed * elapsed + 5.0
+    return near | (count == 0)
+
+
+__all__ = ["NEIGHBOURS", "anchored_start", "graduated_start", "robust_track"]
