@@ -1,0 +1,3 @@
+"""``sblsim sync``'s work: the raw detections read (:mod:`~sblsim.orchestrator.sync.detections`), the receivers'
+clocks synchronised from the sync tags (:mod:`~sblsim.orchestrator.sync.run`, on the model of
+:mod:`sblsim.models.sync`) and its files and figures (:mod:`~sblsim.orchestrator.sync.outputs`)."""
