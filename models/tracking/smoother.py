@@ -16,7 +16,6 @@ import numpy as np
 from scipy.linalg import solveh_banded
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.toa_bound import predict, process_noise
 from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.schedule import PingSchedule
 from sblsim.models.tracking.toa import _evaluate_arrivals
@@ -114,74 +113,184 @@ def observed_information(z: np.ndarray, dof: float = ROBUST_DOF) -> np.ndarray:
     return np.maximum((dof + 1.0) * (dof - z**2) / (dof + z**2) ** 2, 0.0)
 
 
-def _process(settings: TrackerSettings, dim: int, schedule: PingSchedule) -> np.ndarray:
-    """The inverses of the Cholesky factors of the tracker's process noise Q_k over each step of ``schedule`` at the
-    nominal interval (:func:`~sblsim.models.receiver.toa_bound.process_noise`): (m − 1, s, s)."""
-    Q = process_noise(schedule.steps(settings.interval), settings.acceleration_psd, schedule.te_sigma,
-                      schedule.drift_sigma, dim)
-    return np.linalg.inv(np.linalg.cholesky(Q))
-
-
 def _interval_prior(settings: TrackerSettings, X: np.ndarray) -> float:
     """The first ping's interval's normalised distance from the nominal one, ``(Δ_0 − Δ) / σ_Δ`` (the filters'
     start, :meth:`ToaTracker.initial`)."""
     return float((X[0, -1] - settings.interval) / settings.sigma_interval)
 
 
-def _robust_terms(toa, heard, receivers, settings, X, Li, dof, schedule):
+class _Problem:
+    """What every Gauss-Newton step of :func:`robust_smooth` shares: the arrivals, flattened (h of them: the ping
+    ``k`` (h,), sorted, and receiver ``i`` (h,) of each, its time ``toa`` (h,) [s] and its receiver's position
+    (h, dim) [m]), and the whitening of each step's process noise ``L_k⁻¹``, stored by its few distinct entries
+    (m − 1,) each: per axis ``[[a, 0], [b, c]]`` on (position, velocity) (the inverse of the Cholesky factor of the
+    white-noise acceleration's ``q [T³/3, T²/2; T²/2, T]`` over the step at the nominal interval,
+    :func:`~sblsim.models.receiver.toa_bound.process_noise`), ``1 / σ_te`` on the emission time and ``1 / σ_drift``
+    on the interval. Nothing of size m × m, nor (m, s, s) but the covariance's own blocks."""
+
+    def __init__(self, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule):
+        self.m, self.dim = len(toa), receivers.shape[1]
+        self.s = 2 * self.dim + 2
+        self.k, self.i = np.nonzero(np.isfinite(toa))
+        self.toa, self.at = toa[self.k, self.i], receivers[self.i]
+        self.settings, self.count, self.offset = settings, schedule.count, schedule.offset
+        T = schedule.steps(settings.interval)
+        q = settings.acceleration_psd
+        with np.errstate(divide="ignore", invalid="ignore"):
+            l11 = np.sqrt(q * T**3 / 3)
+            l21 = q * T**2 / 2 / l11
+            l22 = np.sqrt(q * T - l21**2)
+            self.a, self.b, self.c = 1.0 / l11, -l21 / (l11 * l22), 1.0 / l22
+            self.te_w, self.dr_w = 1.0 / np.asarray(schedule.te_sigma, float), 1.0 / np.asarray(schedule.drift_sigma,
+                                                                                                  float)
+        if not all(np.isfinite(v).all() for v in (self.a, self.b, self.c, self.te_w, self.dr_w)):
+            raise np.linalg.LinAlgError("robust smoother: a step's process noise is not positive definite")
+
+    def per_ping(self, values: np.ndarray) -> np.ndarray:
+        """The sums of ``values`` (h,) per ping: (m,), 0 for a ping none arrived from."""
+        return np.bincount(self.k, weights=values, minlength=self.m)
+
+
+def _robust_terms(problem: _Problem, X: np.ndarray, dof: float):
     """The robust smoother's residuals at the states X (m, s): the arrivals' normalised ones z (h,), the weights
-    (h,), the TOA Jacobians (h, dim + 1) [1/σ units], the whitened process residuals e (m − 1, s) and the
-    transitions' Jacobians F (m − 1, s, s); and the cost."""
-    dim = receivers.shape[1]
-    k, i = heard
-    model, J = _evaluate_arrivals(receivers[i], settings.sound_speed, X[k, :dim], X[k, -2])
-    z = (toa[k, i] - model) / settings.sigma_toa
+    (h,), the TOA Jacobians (h, dim + 1) [1/σ units], the whitened process residuals e (m − 1, s) (per axis
+    position and velocity, then the emission time and the interval) and the steps' durations T (m − 1,) at X's
+    intervals (the transitions' Jacobians F follow from T and the velocities,
+    :func:`~sblsim.models.receiver.toa_bound.predict`); and the cost."""
+    P, dim, settings = problem, problem.dim, problem.settings
+    model, J = _evaluate_arrivals(P.at, settings.sound_speed, X[P.k, :dim], X[P.k, -2])
+    z = (P.toa - model) / settings.sigma_toa
     Jz = -J / settings.sigma_toa
-    predicted, F = predict(X[:-1], dim, schedule.count, schedule.offset)
-    e = np.einsum("kij,kj->ki", Li, X[1:] - predicted)
+    T = P.count * X[:-1, -1] + P.offset
+    r = np.empty((len(T), 2 * dim + 2))  # x_k+1 − f(x_k), the state's order
+    r[:, :dim] = X[1:, :dim] - (X[:-1, :dim] + T[:, None] * X[:-1, dim:2 * dim])
+    r[:, dim:2 * dim] = X[1:, dim:2 * dim] - X[:-1, dim:2 * dim]
+    r[:, -2] = X[1:, -2] - (X[:-1, -2] + T)
+    r[:, -1] = X[1:, -1] - X[:-1, -1]
+    e = np.empty_like(r)
+    e[:, :dim] = P.a[:, None] * r[:, :dim]
+    e[:, dim:2 * dim] = P.b[:, None] * r[:, :dim] + P.c[:, None] * r[:, dim:2 * dim]
+    e[:, -2], e[:, -1] = P.te_w * r[:, -2], P.dr_w * r[:, -1]
     cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum() + _interval_prior(settings, X) ** 2)
-    return z, (dof + 1.0) / (dof + z**2), Jz, e, F, cost
+    return z, (dof + 1.0) / (dof + z**2), Jz, e, T, cost
 
 
-def _per_ping(m: int, pings: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """The sums of ``values`` (h, ...) per ping of the arrivals ``pings`` (h,), sorted (as :func:`numpy.nonzero`
-    gives them): (m, ...), 0 for a ping none arrived from."""
-    out = np.zeros((m,) + values.shape[1:])
-    if len(pings):
-        first = np.flatnonzero(np.r_[True, pings[1:] != pings[:-1]])
-        out[pings[first]] = np.add.reduceat(values, first, axis=0)
-    return out
+def _normal_blocks(problem: _Problem, X: np.ndarray, w: np.ndarray, Jz: np.ndarray, T: np.ndarray) -> tuple:
+    """The Gauss-Newton Hessian of the robust cost, block tridiagonal (Bell 1994), by its nonzero entries: ``D``
+    {(i, j): (m,)} of the diagonal blocks (i ≤ j, the state's indices) and ``B`` {(i, j): (m − 1,)} of the blocks
+    (k, k + 1); the arrivals' weights ``w`` (h,) and Jacobians ``Jz`` (h, dim + 1), the steps' durations ``T``
+    (m − 1,) at X's intervals.
 
+    A step's whitened residual ``e_k = L_k⁻¹ (x_k+1 − f(x_k))`` has the Jacobian ``L_k⁻¹`` in ``x_k+1`` and
+    ``−M_k = −L_k⁻¹ F_k`` in ``x_k`` (F_k: ``∂p/∂v = T``, ``∂p/∂Δ = n v``, ``∂t_e/∂Δ = n``); so the blocks gain
+    ``M_kᵀ M_k`` (k), ``L_k⁻ᵀ L_k⁻¹`` (k + 1) and ``−M_kᵀ L_k⁻¹`` (k, k + 1), written out entry by entry."""
+    P, dim = problem, problem.dim
+    s, m = P.s, P.m
+    te, dl = s - 2, s - 1
+    D, B = {}, {}
 
-def _normal_blocks(m, s, dim, heard, w, Jz, Li, prev, settings):
-    """The Gauss-Newton Hessian of the robust cost, block tridiagonal: diagonal blocks (m, s, s) and the blocks
-    (k, k + 1) (m − 1, s, s); ``Li`` (m − 1, s, s) the steps' whitening, ``prev`` (m − 1, s, s) the whitened process
-    residuals' Jacobians with respect to the previous state, ``−L_k⁻¹ F_k``; the first interval's prior."""
-    D = np.zeros((m, s, s))
-    cols = list(range(dim)) + [s - 2]
-    outer = w[:, None, None] * Jz[:, :, None] * Jz[:, None, :]
-    D[np.ix_(np.arange(m), cols, cols)] += _per_ping(m, heard[0], outer)
-    # e_k's Jacobian with respect to x_k is L_k⁻¹, with respect to x_k−1 is −L_k⁻¹ F_k
-    D[1:] += np.einsum("kji,kjl->kil", Li, Li)
-    D[:-1] += np.einsum("kji,kjl->kil", prev, prev)
-    D[0, -1, -1] += 1.0 / settings.sigma_interval**2
-    B = np.einsum("kji,kjl->kil", prev, Li)
+    def add(blocks, key, value, rows=slice(None)):
+        """Add ``value`` to the entry ``key`` of the blocks (``rows`` of them)."""
+        key = (min(key), max(key)) if blocks is D else key
+        if key not in blocks:
+            blocks[key] = np.zeros(m if blocks is D else m - 1)
+        blocks[key][rows] += value
+
+    cols = list(range(dim)) + [te]
+    for x in range(dim + 1):
+        for y in range(x, dim + 1):
+            add(D, (cols[x], cols[y]), P.per_ping(w * Jz[:, x] * Jz[:, y]))
+    n, a, b, c, tw, dw = P.count, P.a, P.b, P.c, P.te_w, P.dr_w
+    early, late = slice(None, -1), slice(1, None)
+    A2, bT = a * a + b * b, b * T + c
+    PV, VV = a * (a * T) + b * bT, (a * T) ** 2 + bT**2
+    delta = (tw * n) ** 2 + dw**2
+    for ax in range(dim):
+        p, v = ax, dim + ax
+        nv = n * X[:-1, v]
+        add(D, (p, p), A2, early)
+        add(D, (p, v), PV, early)
+        add(D, (v, v), VV, early)
+        add(D, (p, dl), nv * A2, early)
+        add(D, (v, dl), nv * PV, early)
+        delta = delta + (a * nv) ** 2 + (b * nv) ** 2
+        add(D, (p, p), A2, late)
+        add(D, (p, v), b * c, late)
+        add(D, (v, v), c * c, late)
+        add(B, (p, p), -A2)
+        add(B, (p, v), -b * c)
+        add(B, (v, p), -PV)
+        add(B, (v, v), -bT * c)
+        add(B, (dl, p), -nv * A2)
+        add(B, (dl, v), -nv * b * c)
+    add(D, (te, te), tw**2, early)
+    add(D, (te, dl), tw**2 * n, early)
+    add(D, (dl, dl), delta, early)
+    add(D, (te, te), tw**2, late)
+    add(D, (dl, dl), dw**2, late)
+    add(B, (te, te), -(tw**2))
+    add(B, (dl, te), -n * tw**2)
+    add(B, (dl, dl), -(dw**2))
+    D[(dl, dl)][0] += 1.0 / P.settings.sigma_interval**2
     return D, B
 
 
-def _banded_solve(D, B, g):
-    """Solve ``N δ = g`` for the symmetric positive definite block-tridiagonal N (diagonal blocks D (m, s, s), upper
-    blocks B (m − 1, s, s)) by LAPACK's banded Cholesky (:func:`scipy.linalg.solveh_banded`); δ (m, s)."""
-    m, s = D.shape[:2]
-    u = 2 * s - 1
+def _gradient(problem: _Problem, X: np.ndarray, z: np.ndarray, w: np.ndarray, Jz: np.ndarray, e: np.ndarray,
+              T: np.ndarray) -> np.ndarray:
+    """The robust cost's gradient's half, ``Jᵀ W r`` (m, s) (:func:`_normal_blocks`' Jacobians)."""
+    P, dim = problem, problem.dim
+    g = np.zeros((P.m, P.s))
+    for x, col in enumerate(list(range(dim)) + [P.s - 2]):
+        g[:, col] += P.per_ping(w * z * Jz[:, x])
+    n, a, b, c = P.count, P.a[:, None], P.b[:, None], P.c[:, None]
+    ep, ev = e[:, :dim], e[:, dim:2 * dim]
+    lp = a * ep + b * ev  # (L⁻ᵀ e) on the positions
+    g[1:, :dim] += lp
+    g[1:, dim:2 * dim] += c * ev
+    g[1:, -2] += P.te_w * e[:, -2]
+    g[1:, -1] += P.dr_w * e[:, -1]
+    g[:-1, :dim] -= lp
+    g[:-1, dim:2 * dim] -= (a * T[:, None]) * ep + (b * T[:, None] + c) * ev
+    g[:-1, -2] -= P.te_w * e[:, -2]
+    g[:-1, -1] -= (n[:, None] * X[:-1, dim:2 * dim] * lp).sum(axis=1) + P.te_w * n * e[:, -2] + P.dr_w * e[:, -1]
+    g[0, -1] += _interval_prior(P.settings, X) / P.settings.sigma_interval
+    return g
+
+
+def _band_order(dim: int) -> np.ndarray:
+    """Each state index's place in the banded system, ``[p_1, v_1, p_2, v_2, …, t_e, Δ]``: a block of s unknowns
+    then reaches s + 1 places into the next (an axis's position and velocity side by side), against 3 dim + 2 in
+    the state's own order."""
+    place = np.empty(2 * dim + 2, int)
+    place[:dim], place[dim:2 * dim], place[-2:] = 2 * np.arange(dim), 2 * np.arange(dim) + 1, [2 * dim, 2 * dim + 1]
+    return place
+
+
+def _banded_solve(D: dict, B: dict, g: np.ndarray, ridge: np.ndarray | float = 0.0) -> np.ndarray:
+    """Solve ``(N + diag(ridge)) δ = g`` for the symmetric positive definite block-tridiagonal N
+    (:func:`_normal_blocks`' entries; ``ridge`` (m, s) or a number, added to the diagonal) by LAPACK's banded Cholesky
+    (:func:`scipy.linalg.solveh_banded`, its lower form, bandwidth s + 1 in :func:`_band_order`); δ (m, s).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where N is not positive definite.
+    """
+    m, s = g.shape
+    place = _band_order((s - 2) // 2)
+    u = s + 1
     ab = np.zeros((u + 1, m * s))
-    starts = np.arange(m) * s
-    for a in range(s):
-        for b in range(a, s):
-            ab[u + a - b, starts + b] = D[:, a, b]
-        for b in range(s):
-            ab[u + a - s - b, starts[1:] + b] = B[:, a, b]
-    return solveh_banded(ab, g.ravel()).reshape(m, s)
+    view = ab.reshape(u + 1, m, s)
+    for (i, j), value in D.items():
+        lo, hi = sorted((place[i], place[j]))
+        view[hi - lo, :, lo] = value
+    diagonal = view[0][:, place]  # (m, s): N's diagonal, the state's order
+    view[0][:, place] = diagonal + ridge
+    for (i, j), value in B.items():  # N[(k, i), (k + 1, j)] → lower N[(k + 1, j), (k, i)]
+        view[s + place[j] - place[i], :-1, place[i]] = value
+    rhs = np.empty_like(g)
+    rhs[:, place] = g
+    return solveh_banded(ab, rhs.ravel(), overwrite_ab=True, lower=True, check_finite=False).reshape(m, s)[:, place]
 
 
 def _damped_solve(D, B, g):
@@ -189,12 +298,12 @@ def _damped_solve(D, B, g):
     from its arrivals, each weighed down to nothing): ``μ diag(N)`` added (Levenberg–Marquardt; Nocedal & Wright,
     *Numerical Optimization*, Springer 2006, § 10.3), μ from 10⁻¹² up by tenfold steps to 1 after an undamped try;
     None if none holds."""
-    s = D.shape[1]
-    diagonal = np.einsum("kii->ki", D)
+    m, s = g.shape
+    diagonal = np.stack([D.get((i, i), np.zeros(m)) for i in range(s)], axis=1)
     for mu in [None, *10.0 ** np.arange(-12, 1)]:  # first undamped (a 10⁻¹² ridge)
-        damped = D + 1e-12 * np.eye(s) if mu is None else D + np.einsum("ki,ij->kij", mu * (diagonal + 1.0), np.eye(s))
+        ridge = 1e-12 if mu is None else mu * (diagonal + 1.0)
         try:
-            step = _banded_solve(damped, B, g)
+            step = _banded_solve(D, B, g, ridge)
         except np.linalg.LinAlgError:
             continue
         if np.isfinite(step).all():
@@ -202,8 +311,18 @@ def _damped_solve(D, B, g):
     return None
 
 
+def _dense_blocks(D: dict, B: dict, m: int, s: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_normal_blocks`' entries as the blocks themselves: diagonal (m, s, s) and (k, k + 1) (m − 1, s, s)."""
+    Dd, Bd = np.zeros((m, s, s)), np.zeros((max(m - 1, 0), s, s))
+    for (i, j), value in D.items():
+        Dd[:, i, j] = Dd[:, j, i] = value
+    for (i, j), value in B.items():
+        Bd[:, i, j] = value
+    return Dd, Bd
+
+
 def _inverse(a: np.ndarray) -> np.ndarray:
-    """The inverse of a block, its pseudo-inverse where it is singular."""
+    """The inverses of blocks (k, s, s), their pseudo-inverses where one is singular."""
     try:
         return np.linalg.inv(a)
     except np.linalg.LinAlgError:
@@ -211,23 +330,53 @@ def _inverse(a: np.ndarray) -> np.ndarray:
 
 
 def _block_covariance(D, B, lag=False):
-    """The diagonal blocks (m, s, s) of N⁻¹ for the block-tridiagonal N of :func:`_banded_solve` (the block
-    elimination and its backward pass: the Rauch-Tung-Striebel recursion in information form); with ``lag`` also
-    its blocks (k + 1, k) (m − 1, s, s), ``−(S_k⁻¹ B_k N⁻¹_k+1,k+1)ᵀ``."""
-    m = len(D)
-    Sinv = np.empty_like(D)
-    Sinv[0] = _inverse(D[0])
-    for k in range(1, m):
-        Sinv[k] = _inverse(D[k] - B[k - 1].T @ Sinv[k - 1] @ B[k - 1])
-    cov = np.empty_like(D)
-    cross = np.empty((max(m - 1, 0),) + D.shape[1:])
-    cov[-1] = Sinv[-1]
-    for k in range(m - 2, -1, -1):
-        G = Sinv[k] @ B[k]
-        cross[k] = -(G @ cov[k + 1]).T
-        cov[k] = Sinv[k] + G @ cov[k + 1] @ G.T
+    """The diagonal blocks (m, s, s) of N⁻¹ for the symmetric block-tridiagonal N of diagonal blocks D (m, s, s) and
+    upper blocks B (m − 1, s, s); with ``lag`` also its blocks (k + 1, k) (m − 1, s, s).
+
+    By block cyclic reduction (all blocks of a level at once, log₂ m levels; Heller, "Some aspects of the cyclic
+    reduction algorithm for block tridiagonal linear systems", SIAM J. Numer. Anal. 13(4), 1976): the odd rows are
+    eliminated (the Schur complement on the even ones is again block tridiagonal, half the size), the even rows'
+    blocks of the inverse found, then the odd rows' from them, ``Σ_oo = D_o⁻¹ − Y₁ Σ_(o−1),o − Y₂ Σ_(o+1),o`` and
+    ``Σ_o,e = −(Y₁ Σ_(o−1),e + Y₂ Σ_(o+1),e)`` with ``Y₁ = D_o⁻¹ N_o,(o−1)``, ``Y₂ = D_o⁻¹ N_o,(o+1)``. The same
+    blocks as the Rauch-Tung-Striebel recursion in information form, without a Python step per ping."""
+    cov, cross = _cyclic_reduction(np.asarray(D, float), np.asarray(B, float))
     cov = 0.5 * (cov + cov.transpose(0, 2, 1))
     return (cov, cross) if lag else cov
+
+
+def _cyclic_reduction(D: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_block_covariance`'s recursion: the diagonal blocks of N⁻¹ (m, s, s) and its blocks (k + 1, k)
+    (m − 1, s, s)."""
+    m = len(D)
+    if m == 1:
+        return _inverse(D), np.empty((0,) + D.shape[1:])
+    odd = np.arange(1, m, 2)
+    has_next = odd + 1 < m
+    Di = _inverse(D[odd])
+    Bt = B.transpose(0, 2, 1)
+    Y1 = Di @ Bt[odd - 1]  # D_o⁻¹ N_o,(o−1)
+    Y2 = np.zeros_like(Y1)
+    Y2[has_next] = Di[has_next] @ B[odd[has_next]]  # D_o⁻¹ N_o,(o+1)
+    reduced = D[0::2].copy()
+    reduced[odd // 2] -= B[odd - 1] @ Y1
+    nxt = odd[has_next]
+    reduced[nxt // 2 + 1] -= Bt[nxt] @ Y2[has_next]
+    coupling = -(B[odd - 1][has_next] @ Y2[has_next])  # N'_(o−1),(o+1)
+    even_cov, even_cross = _cyclic_reduction(reduced, coupling)
+    before = even_cov[odd // 2]  # Σ_(o−1),(o−1)
+    after = np.zeros_like(before)
+    after[has_next] = even_cov[nxt // 2 + 1]  # Σ_(o+1),(o+1)
+    between = np.zeros_like(before)
+    between[has_next] = even_cross[odd[has_next] // 2]  # Σ_(o+1),(o−1)
+    to_before = -(Y1 @ before + Y2 @ between)  # Σ_o,(o−1)
+    to_after = -(Y1 @ between.transpose(0, 2, 1) + Y2 @ after)  # Σ_o,(o+1)
+    cov = np.empty_like(D)
+    cov[0::2] = even_cov
+    cov[odd] = Di - Y1 @ to_before.transpose(0, 2, 1) - Y2 @ to_after.transpose(0, 2, 1)
+    cross = np.empty((m - 1,) + D.shape[1:])
+    cross[odd - 1] = to_before  # Σ_o,(o−1)
+    cross[nxt] = to_after[has_next].transpose(0, 2, 1)  # Σ_(o+1),o
+    return cov, cross
 
 
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
@@ -290,41 +439,38 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     s = 2 * dim + 2
     if not starts:
         raise ModelError("robust smoother: no starting track")
-    heard = np.nonzero(np.isfinite(toa))
     if schedule is None:
         schedule = PingSchedule.stable(m, settings.interval, settings.jitter, settings.interval_drift)
-    Li = _process(settings, dim, schedule)
+    problem = _Problem(toa, receivers, settings, schedule)
     runs = []
     for start in starts:
         X = np.array(start, float)
         if X.shape != (m, s) or not np.isfinite(X).all():
             raise ModelError(f"robust smoother: a starting track of shape {X.shape} or not finite; allowed: "
                              f"({m}, {s}), finite")
-        runs.append({"X": X, "terms": _robust_terms(toa, heard, receivers, settings, X, Li, dof, schedule),
-                     "done": 0,
-                     "converged": False})
+        # a start's residuals are made again where its steps go on (the same numbers): none kept beside it
+        runs.append({"X": X, "cost": _robust_terms(problem, X, dof)[-1], "done": 0, "converged": False})
 
     def iterate(run, count):
         """Up to ``count`` more Gauss-Newton steps of a start (stopping where it has converged)."""
-        X, (z, w, Jz, e, F, cost) = run["X"], run["terms"]
+        if run["converged"] or count <= 0:
+            return
+        X = run["X"]
+        z, w, Jz, e, T, cost = _robust_terms(problem, X, dof)
         for _ in range(count):
             if run["converged"]:
                 return
-            prev = -np.einsum("kij,kjl->kil", Li, F)
-            D, B = _normal_blocks(m, s, dim, heard, w, Jz, Li, prev, settings)
-            g = np.zeros((m, s))  # the gradient's half: Jᵀ W r
-            g[:, list(range(dim)) + [s - 2]] += _per_ping(m, heard[0], (w * z)[:, None] * Jz)
-            g[1:] += np.einsum("ki,kij->kj", e, Li)
-            g[0, -1] += _interval_prior(settings, X) / settings.sigma_interval
-            g[:-1] += np.einsum("kji,kj->ki", prev, e)
+            D, B = _normal_blocks(problem, X, w, Jz, T)
+            g = _gradient(problem, X, z, w, Jz, e, T)
             step = _damped_solve(D, B, -g)
+            del D, B
             if step is None:  # no damping makes the system positive definite: stopped where it is
                 run["converged"] = True
                 return
             scale = 1.0
             while scale > 1e-6:
                 trial = X + scale * step
-                terms = _robust_terms(toa, heard, receivers, settings, trial, Li, dof, schedule)
+                terms = _robust_terms(problem, trial, dof)
                 if terms[-1] < cost:
                     break
                 scale *= 0.5
@@ -332,23 +478,24 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
                 run["converged"] = True
                 return
             gain = cost - terms[-1]
-            X, (z, w, Jz, e, F, cost) = trial, terms
-            run.update(X=X, terms=terms, done=run["done"] + 1, converged=gain <= ROBUST_TOLERANCE * cost)
+            X, (z, w, Jz, e, T, cost) = trial, terms
+            run.update(X=X, cost=cost, done=run["done"] + 1, converged=gain <= ROBUST_TOLERANCE * cost)
 
     # each start a few steps, then the one of the lowest cost to the end (the ranking of the starts' costs is
     # settled within a few steps)
     for run in runs:
         iterate(run, min(ROBUST_SCREEN, iterations))
-    index = int(np.argmin([run["terms"][-1] for run in runs]))
+    index = int(np.argmin([run["cost"] for run in runs]))
     best = runs[index]
     iterate(best, iterations - best["done"])
-    X, (z, w, Jz, _, F, cost) = best["X"], best["terms"]
+    X = best["X"]
+    z, w, Jz, _, T, cost = _robust_terms(problem, X, dof)
     P = lag = None
     if covariance:
-        P, lag = _block_covariance(*_normal_blocks(m, s, dim, heard, observed_information(z, dof), Jz, Li,
-                                                   -np.einsum("kij,kjl->kil", Li, F), settings), lag=True)
+        P, lag = _block_covariance(*_dense_blocks(*_normal_blocks(problem, X, observed_information(z, dof), Jz, T),
+                                                  m, s), lag=True)
     weights = np.zeros((m, n))
-    weights[heard] = w
+    weights[problem.k, problem.i] = w
     return RobustTrack(X, P, weights, cost, best["done"], index, P_lag=lag)
 
 
