@@ -48,6 +48,7 @@ from sblsim.orchestrator.commands.replay import (
     replay_toa_tags,
 )
 from sblsim.orchestrator.commands.run import RunResult, run
+from sblsim.orchestrator.commands.sync import SyncResult, sync
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, ConfigError
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config
@@ -56,7 +57,7 @@ __all__ = [
     "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign",
     "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
-    "TrackResult", "TagsResult",
+    "TrackResult", "TagsResult", "sync", "SyncResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS",
 ]

@@ -1,0 +1,364 @@
+"""Receiver clocks synchronised from sync tags: the model, the emissions grouped, the robust sparse solve.
+
+The model follows the structure of the sync model of YAPS (Baktoft, Gjelland, Økland & Thygesen 2017, *Positioning
+of aquatic animals based on time-of-arrival and random walk models using YAPS*, Sci. Rep. 7:14294, and its R
+package's sync model): the arrival of sync-tag emission ``e`` at receiver ``j``, logged on ``j``'s own clock, is
+
+    r_ej = T_e + d_ij / c + o_j(r_ej) + ε_ej,
+
+with ``T_e`` the emission time (an unknown per emission, on the reference receiver's clock), ``d_ij`` the distance
+from the sync tag ``i`` (at its receiver's known position) to receiver ``j``, ``c`` the sound speed, ``o_j`` the
+receiver's **clock offset** (the reference receiver's is 0: the "timekeeper") and ``ε`` a heavy-tailed error
+(multipath arrivals are late; false detections anywhere).
+
+What is chosen here, and why:
+
+* ``o_j`` is **piecewise linear in time bins and continuous across them**: one value per bin edge (a knot), the
+  **drift** [s/s] constant within a bin. YAPS fits an offset and a slope (and a quadratic term) per bin, each bin on
+  its own; a crystal's offset is continuous (a jump is a reset, which the readers refuse), so sharing each edge
+  between two bins halves the unknowns and lets a bin with few sync detections be **bridged** by its neighbours.
+  The offset is a function of the receiver's own clock (``o_j(r)``: the correction to subtract from a time it
+  logged), which keeps the model linear: the unknowns enter linearly, so one weighted least-squares solve per
+  reweighting step fits them, no starting point needed.
+* the drift changes little from one bin to the next: a weak prior on the knots' second differences (the drift's
+  change between adjacent bins, σ ``drift_change`` × the bin width) bridges a gap in the data and keeps the normal
+  equations positive definite; it is 20 times the timing noise over an hour's bin, so the data decide wherever
+  they exist.
+* the sound speed is given per arrival (a constant, or a temperature/sound-speed series), or **estimated** as one
+  slowness ``1/c``, which enters linearly (``d_ij · s``).
+* robust: iteratively reweighted least squares with Student-t weights (ν = 3) on each residual standardised by its
+  receiver's scale (the median absolute deviation, corrected for the leverage of the emission time, which the
+  emission's other arrivals share), until no knot moves by a twentieth of the smallest scale, then the
+  arrivals beyond ``reject`` scales **rejected** and the rest fitted by
+  least squares, each receiver's noise scale re-estimated from its kept residuals; the covariance of that final
+  weighted fit gives the sigmas.
+* sparse: the emission times are eliminated (each is in its own arrivals' rows only: a diagonal block), leaving the
+  knots' normal equations (receivers × bins), assembled with :mod:`scipy.sparse` and solved densely (Cholesky) up
+  to :data:`DENSE_LIMIT` unknowns, with :func:`scipy.sparse.linalg.splu` beyond (then without sigmas).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg
+
+from sblsim.models.declarations import ModelError
+
+#: The most knot unknowns whose covariance is computed (a dense inverse of that size: 6000² doubles, 288 MB).
+DENSE_LIMIT = 6000
+#: Student-t degrees of freedom of the reweighting, and the rejection threshold [standardised residuals].
+NU = 3.0
+REJECT = 4.0
+#: The smallest noise scale a receiver is given [s] (a millisecond-resolution logger rounds to 0.5 ms).
+MIN_SCALE = 1e-6
+
+
+def group_emissions(tag: np.ndarray, time: np.ndarray, gap: np.ndarray) -> np.ndarray:
+    """The emission each arrival belongs to: a tag's arrivals (at every receiver) sorted by time, a new emission
+    where the next arrival is more than the tag's ``gap`` later.
+
+    Parameters
+    ----------
+    tag : numpy.ndarray
+        (n,) int, the tag's index.
+    time : numpy.ndarray
+        (n,) [s] the arrival on its receiver's clock.
+    gap : numpy.ndarray
+        (tags,) [s] the largest spread of one emission's arrivals (a third of the tag's burst interval: the
+        receivers' clocks may differ by up to that).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) int, the emission's index, numbered by tag, then time.
+    """
+    order = np.lexsort((time, tag))
+    t, g = time[order], tag[order]
+    new = np.ones(len(t), bool)
+    new[1:] = (g[1:] != g[:-1]) | (np.diff(t) > gap[g[1:]])
+    emission = np.empty(len(t), np.int64)
+    emission[order] = np.cumsum(new) - 1
+    return emission
+
+
+def later_duplicates(emission: np.ndarray, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+    """(n,) bool: an arrival of an emission at a receiver that logged the same emission earlier (a multipath echo
+    or a false detection): only the first is kept."""
+    order = np.lexsort((time, receiver, emission))
+    e, r = emission[order], receiver[order]
+    dup = np.zeros(len(e), bool)
+    dup[1:] = (e[1:] == e[:-1]) & (r[1:] == r[:-1])
+    out = np.zeros(len(e), bool)
+    out[order] = dup
+    return out
+
+
+def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, start: int) -> np.ndarray:
+    """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (a
+    union-find over the emissions' receivers)."""
+    parent = np.arange(n_receivers)
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    order = np.lexsort((receiver, emission))
+    e, r = emission[order], receiver[order]
+    same = np.flatnonzero(e[1:] == e[:-1])
+    for k in same:
+        a, b = root(int(r[k])), root(int(r[k + 1]))
+        if a != b:
+            parent[a] = b
+    roots = np.array([root(j) for j in range(n_receivers)])
+    heard = np.zeros(n_receivers, bool)
+    heard[np.unique(r[np.r_[same, same + 1]])] = True
+    return (roots == roots[start]) & heard
+
+
+@dataclass
+class ClockFit:
+    """The synchronised clocks.
+
+    Attributes
+    ----------
+    edges : numpy.ndarray
+        (K+1,) [s] the bins' edges on the receivers' own clocks (relative to the caller's origin).
+    knots, knot_sigma : numpy.ndarray
+        (R, K+1) [s] each receiver's offset at each edge and its sigma (the reference receiver's 0 and 0; a
+        receiver not synchronised NaN).
+    drift, drift_sigma : numpy.ndarray
+        (R, K) [s/s] the drift in each bin and its sigma.
+    counts : numpy.ndarray
+        (R, K) int, the kept arrivals in each bin.
+    emission_time : numpy.ndarray
+        (E,) [s] each emission's time on the reference clock (NaN for an emission not used).
+    residual : numpy.ndarray
+        (n,) [s] each arrival's residual (NaN where not used).
+    standardised : numpy.ndarray
+        (n,) the residual over its receiver's scale and leverage.
+    kept : numpy.ndarray
+        (n,) bool, used and not rejected.
+    scale : numpy.ndarray
+        (R,) [s] each receiver's noise scale (its kept residuals' RMS, corrected for the leverage).
+    slowness, slowness_sigma : float or None
+        [s/m] the estimated slowness (1 / sound speed) and its sigma, None where it was given.
+    iterations : int
+    """
+
+    edges: np.ndarray
+    knots: np.ndarray
+    knot_sigma: np.ndarray
+    drift: np.ndarray
+    drift_sigma: np.ndarray
+    counts: np.ndarray
+    emission_time: np.ndarray
+    residual: np.ndarray
+    standardised: np.ndarray
+    kept: np.ndarray
+    scale: np.ndarray
+    slowness: float | None
+    slowness_sigma: float | None
+    iterations: int
+
+    def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+        """(n,) [s] the offset of ``receiver`` (n,) int at its own clock's ``time`` (n,) [s]: the knots
+        interpolated, extended beyond the edges with the end bin's drift."""
+        width = self.edges[1] - self.edges[0]
+        k = np.clip(np.floor((time - self.edges[0]) / width).astype(np.int64), 0, len(self.edges) - 2)
+        f = (time - self.edges[k]) / width
+        return self.knots[receiver, k] * (1 - f) + self.knots[receiver, k + 1] * f
+
+
+def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
+               slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray, reference: int,
+               bin_width: float, drift_change: float = 1e-6, reject: float = REJECT, max_iterations: int = 20,
+               keep: np.ndarray | None = None, scale: np.ndarray | None = None, sigmas: bool = True) -> ClockFit:
+    """Fit the receivers' clocks to the sync tags' arrivals (the module docstring's model).
+
+    Parameters
+    ----------
+    receiver, emission : numpy.ndarray
+        (n,) int, each arrival's receiver (in [0, R)) and emission (in [0, E)).
+    time : numpy.ndarray
+        (n,) [s] the arrival on its receiver's clock, from an origin the caller chose (at most days away: the
+        precision of a double).
+    distance : numpy.ndarray
+        (n,) [m] from the sync tag to the receiver.
+    slowness : numpy.ndarray or None
+        (n,) [s/m] 1 / the sound speed at each arrival; None: one slowness estimated.
+    used : numpy.ndarray
+        (n,) bool, the arrivals to fit (not a later duplicate, at a synchronised receiver).
+    synchronised : numpy.ndarray
+        (R,) bool, the receivers to synchronise (tied to the reference: :func:`connected`).
+    reference : int
+        The reference receiver (its offset 0).
+    bin_width : float
+        [s] the time bins' width.
+    drift_change : float
+        [s/s] the prior sigma of the drift's change from one bin to the next.
+    reject : float
+        The standardised residual beyond which an arrival is rejected.
+    max_iterations : int
+        The reweighting's most steps.
+    keep, scale : numpy.ndarray, optional
+        (n,) bool and (R,) [s]: the arrivals kept and the receivers' scales of an earlier fit: no reweighting, the
+        kept arrivals' least squares only (a fit with some arrivals left out, e.g. a sync tag's).
+    sigmas : bool
+        Compute the offsets' and drifts' sigmas (a dense inverse of the knots' normal equations); else NaN.
+
+    Returns
+    -------
+    ClockFit
+
+    Raises
+    ------
+    ModelError
+        Fewer than two synchronised receivers, or no arrival used.
+    """
+    n_receivers = len(synchronised)
+    used = used & synchronised[receiver]
+    if synchronised.sum() < 2 or not used.any():
+        raise ModelError("sync: fewer than two receivers hear common sync-tag emissions; nothing to synchronise")
+    rows = np.flatnonzero(used)
+    rec, em, t, d = receiver[rows], emission[rows], time[rows], distance[rows]
+    start = np.floor(t.min() / bin_width) * bin_width
+    n_bins = max(1, int(np.ceil((t.max() - start) / bin_width + 1e-12)))
+    edges = start + bin_width * np.arange(n_bins + 1)
+    k = np.clip(np.floor((t - start) / bin_width).astype(np.int64), 0, n_bins - 1)
+    f = (t - edges[k]) / bin_width
+    free = synchronised.copy()
+    free[reference] = False
+    base = np.full(n_receivers, -1, np.int64)
+    base[free] = np.arange(free.sum()) * (n_bins + 1)
+    n_knots = int(free.sum()) * (n_bins + 1)
+    estimate = slowness is None
+    p = n_knots + int(estimate)
+    on = base[rec] >= 0
+    r_on = np.flatnonzero(on)
+    cols = np.r_[base[rec[on]] + k[on], base[rec[on]] + k[on] + 1]
+    vals = np.r_[1 - f[on], f[on]]
+    rr = np.r_[r_on, r_on]
+    y = t.copy()
+    if estimate:
+        rr, cols, vals = np.r_[rr, np.arange(len(t))], np.r_[cols, np.full(len(t), n_knots)], np.r_[vals, d]
+    else:
+        y = y - d * slowness[rows]
+    B = sp.csr_matrix((vals, (rr, cols)), shape=(len(t), p))
+    emissions, em_local = np.unique(em, return_inverse=True)
+    E = sp.csr_matrix((np.ones(len(t)), (np.arange(len(t)), em_local)), shape=(len(t), len(emissions)))
+    prior = _prior(free, base, n_bins, p, drift_change * bin_width)
+
+    def solve(w: np.ndarray, covariance: bool = False):
+        W = sp.diags(w)
+        D = np.asarray(E.T @ w).ravel()
+        Dinv = sp.diags(1.0 / np.maximum(D, 1e-300))
+        NEB = (E.T @ W @ B).tocsr()
+        S = (B.T @ W @ B - NEB.T @ Dinv @ NEB + prior).tocsc()
+        ety = E.T @ (w * y)
+        rhs = B.T @ (w * y) - NEB.T @ (ety / np.maximum(D, 1e-300))
+        cov = None
+        if covariance and p <= DENSE_LIMIT:
+            factor = scipy.linalg.cho_factor(S.toarray(), lower=True, check_finite=False)
+            x = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
+            if covariance:
+                cov = scipy.linalg.cho_solve(factor, np.eye(p), check_finite=False)
+        else:
+            x = scipy.sparse.linalg.splu(S).solve(rhs)
+        T = (ety - NEB @ x) / np.maximum(D, 1e-300)
+        return x, T, D, cov
+
+    given = keep is not None
+    scale = np.full(n_receivers, 1e-3) if scale is None else np.where(np.isfinite(scale), scale, 1e-3)
+    tw = np.ones(len(t))
+    previous = None
+    iterations = 0
+    for step in range(1, 0 if given else max_iterations + 1):
+        iterations = step
+        w = tw / scale[rec] ** 2
+        x, T, D, _ = solve(w)
+        residual = y - B @ x - T[em_local]
+        one = np.clip(1 - w / D[em_local], 0.0, 1.0)
+        scale = _scales(residual, one, rec, n_receivers, robust=True)
+        u = np.where(one > 1e-9, residual / np.sqrt(np.maximum(one, 1e-9)) / scale[rec], 0.0)
+        tw = (NU + 1) / (NU + u ** 2)
+        if previous is not None and np.max(np.abs(x[:n_knots] - previous[:n_knots]), initial=0.0) \
+                < 0.05 * scale[synchronised].min():
+            break
+        previous = x
+    keep = keep[rows] if given else np.abs(u) <= reject
+    for last in (False, False, True):  # the kept arrivals' least squares, each receiver's scale from its own
+        w = keep / scale[rec] ** 2
+        x, T, D, cov = solve(w, covariance=last and sigmas)
+        residual = y - B @ x - T[em_local]
+        one = np.clip(1 - w / np.maximum(D[em_local], 1e-300), 0.0, 1.0)
+        scale = _scales(np.where(keep, residual, np.nan), one, rec, n_receivers, robust=False)
+    u = np.where(one > 1e-9, residual / np.sqrt(np.maximum(one, 1e-9)) / scale[rec], 0.0)
+
+    knots = np.full((n_receivers, n_bins + 1), np.nan)
+    sigma = np.full((n_receivers, n_bins + 1), np.nan)
+    drift_sigma = np.full((n_receivers, n_bins), np.nan)
+    knots[reference] = sigma[reference] = drift_sigma[reference] = 0.0
+    for j in np.flatnonzero(free):
+        block = slice(base[j], base[j] + n_bins + 1)
+        knots[j] = x[block]
+        if cov is not None:
+            c = cov[block, block]
+            sigma[j] = np.sqrt(np.diag(c))
+            diag = np.diag(c)
+            drift_sigma[j] = np.sqrt(np.maximum(diag[1:] + diag[:-1] - 2 * np.diag(c, 1), 0.0)) / bin_width
+    drift = np.diff(knots, axis=1) / bin_width
+    counts = np.zeros((n_receivers, n_bins), np.int64)
+    np.add.at(counts, (rec[keep], k[keep]), 1)
+    n = len(time)
+    full = np.full(n, np.nan)
+    residual_all, standard_all, kept_all = full.copy(), full.copy(), np.zeros(n, bool)
+    residual_all[rows], standard_all[rows], kept_all[rows] = residual, u, keep
+    emission_time = np.full(int(emission.max()) + 1 if len(emission) else 0, np.nan)
+    emission_time[emissions] = T
+    s_hat = s_sigma = None
+    if estimate:
+        s_hat = float(x[n_knots])
+        s_sigma = float(np.sqrt(cov[n_knots, n_knots])) if cov is not None else None
+    return ClockFit(edges, knots, sigma, drift, drift_sigma, counts, emission_time, residual_all, standard_all,
+                    kept_all, scale, s_hat, s_sigma, iterations)
+
+
+def _prior(free: np.ndarray, base: np.ndarray, n_bins: int, p: int, sigma: float) -> sp.csr_matrix:
+    """The knots' prior information: each free receiver's second differences of its knots, of sigma ``sigma``."""
+    if n_bins < 2:
+        return sp.csr_matrix((p, p))
+    rows, cols, vals = [], [], []
+    count = 0
+    for j in np.flatnonzero(free):
+        for k in range(1, n_bins):
+            rows += [count] * 3
+            cols += [base[j] + k - 1, base[j] + k, base[j] + k + 1]
+            vals += [1.0, -2.0, 1.0]
+            count += 1
+    L = sp.csr_matrix((vals, (rows, cols)), shape=(count, p))
+    return (L.T @ L) / sigma ** 2
+
+
+def _scales(residual: np.ndarray, one: np.ndarray, rec: np.ndarray, n_receivers: int, robust: bool) -> np.ndarray:
+    """Each receiver's noise scale [s]: its residuals over √(1 − leverage), by the median absolute deviation
+    (``robust``) or the root mean square (NaN residuals left out); a receiver with fewer than 10 the median of
+    the others'."""
+    scale = np.full(n_receivers, np.nan)
+    ok = (one > 0.05) & np.isfinite(residual)
+    z = np.where(ok, residual / np.sqrt(np.where(ok, one, 1.0)), np.nan)
+    for j in range(n_receivers):
+        values = z[(rec == j) & ok]
+        if len(values) >= 10:
+            scale[j] = 1.4826 * np.median(np.abs(values)) if robust else np.sqrt(np.mean(values ** 2))
+    fallback = np.nanmedian(scale) if np.isfinite(scale).any() else 1e-3
+    return np.maximum(np.where(np.isfinite(scale), scale, fallback), MIN_SCALE)
+
+
+__all__ = ["ClockFit", "DENSE_LIMIT", "NU", "REJECT", "connected", "fit_clocks", "group_emissions",
+           "later_duplicates"]

@@ -1,0 +1,220 @@
+"""``sblsim sync`` and ``sblsim.sync``: the receivers' clocks of a telemetry array synchronised from its sync tags
+(the raw detections read by :mod:`sblsim.orchestrator.sync.detections`, the model of :mod:`sblsim.models.sync`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sblsim.orchestrator.commands.common import (
+    flag_argument,
+    path_argument,
+    prepare_out,
+    real_argument,
+    text_argument,
+)
+from sblsim.orchestrator.commands.console import output_folder
+from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.output import folder_name
+
+if TYPE_CHECKING:  # the heavy modules are imported when a function runs
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+#: The formats of the detections file, the bins' allowed width [h] and the sound speed's range [m/s].
+FORMATS = ("yaps", "vue")
+BIN_HOURS = (0.05, 168.0)
+SOUND_SPEED = (1300.0, 1700.0)
+
+
+@dataclass
+class SyncResult:
+    """The outcome of :func:`sync`.
+
+    Attributes
+    ----------
+    summary : dict
+        ``sync.json``: the model, the reference receiver, the bins' edges, per receiver its offsets [s] and drifts
+        [s/s] per bin with their sigmas, its rejected share and residuals, the receivers not synchronised, notes.
+    offsets : pandas.DataFrame
+        ``offsets.csv``: one row per synchronised receiver and time bin (offset at the bin's start and end [s],
+        drift [s/s], their sigmas, the kept arrivals, ``bridged``).
+    residuals : pandas.DataFrame
+        ``residuals.csv``: every sync-tag arrival: receiver, tag, emission, ``time`` (its clock) and ``time_sync``
+        [s], residual [s] and [m], ``kept`` and the reason of a rejection.
+    sync_tags : pandas.DataFrame
+        ``sync_tags.csv``: each sync tag positioned from the other receivers' synchronised arrivals (its own left
+        out, the clocks fitted without it): errors [m] against its known position and the fixes' own sigmas.
+    out : Path or None
+    """
+
+    summary: dict[str, Any]
+    offsets: pd.DataFrame
+    residuals: pd.DataFrame
+    sync_tags: pd.DataFrame
+    out: Path | None = None
+    _outcome: Any = None
+
+    def plot(self) -> dict[str, Figure]:
+        """The figures: ``offsets``, ``residuals`` and ``coverage``."""
+        from sblsim.orchestrator.sync.outputs import figures
+
+        return figures(self._outcome)
+
+    def correct(self, receiver: str, times: Any) -> Any:
+        """Times logged by ``receiver`` [s since 1970 UTC on its clock] on the reference receiver's clock.
+
+        Raises
+        ------
+        ConfigError
+            A receiver that was not synchronised.
+        """
+        names = self._outcome.receivers["receiver"].tolist()
+        if receiver not in self.summary["synchronised"]:
+            raise ConfigError(f"receiver: {receiver!r} was not synchronised; allowed: one of "
+                              f"{', '.join(self.summary['synchronised'])}")
+        t = np.asarray(times, float) - self._outcome.origin
+        j = np.full(t.shape, names.index(receiver))
+        return t + self._outcome.origin - self._outcome.fit.offset(j, t)
+
+
+def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps", sound_speed: float | None = None,
+         sound_speed_file: str | Path | None = None, bin_hours: float = 1.0, reference: str | None = None,
+         out: str | Path | None = None, force: bool = False) -> SyncResult:
+    """Synchronise the receivers' clocks from the sync tags: ``sblsim sync``.
+
+    Parameters
+    ----------
+    detections : str or Path
+        Raw detections: the YAPS table (``epo, frac, tag, serial``) or a VUE export CSV (``format="vue"``).
+    receivers : str or Path
+        The receivers: ``serial, sync_tag, x_m, y_m[, z_m]`` (or ``x, y, z``).
+    format : str
+        ``yaps`` or ``vue``.
+    sound_speed : float, optional
+        [m/s] in [1300, 1700], constant.
+    sound_speed_file : str or Path, optional
+        A series ``epo, sound_speed_m_s`` interpolated at each arrival. Neither given: the sound speed is estimated
+        with the clocks.
+    bin_hours : float
+        [h] in [0.05, 168]: the time bins' width (one drift per bin).
+    reference : str, optional
+        The reference receiver's serial (its clock the time base); default the one with the most shared arrivals.
+    out : str or Path, optional
+        Write ``sync.json``, ``offsets.csv``, ``residuals.csv``, ``sync_tags.csv`` and the figures there.
+    force : bool
+        Replace an earlier result in ``out``.
+
+    Returns
+    -------
+    SyncResult
+
+    Raises
+    ------
+    ModelError, ConfigError
+        A file that cannot be read or holds a value outside its range (one line naming the file, line and column),
+        a receiver clock going back, bad options.
+    """
+    detections = path_argument(detections, "detections", optional=False)
+    receivers = path_argument(receivers, "receivers", optional=False)
+    if format not in FORMATS:
+        raise ConfigError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
+    if sound_speed is not None and sound_speed_file is not None:
+        raise ConfigError("sound_speed: give sound_speed or sound_speed_file, not both")
+    if sound_speed is not None:
+        sound_speed = real_argument(sound_speed, "sound_speed", *SOUND_SPEED, "m/s")
+    sound_speed_file = path_argument(sound_speed_file, "sound_speed_file")
+    bin_hours = real_argument(bin_hours, "bin_hours", *BIN_HOURS, "h")
+    reference = text_argument(reference, "reference")
+    flag_argument(force, "force")
+    target = prepare_out(out, force, "sync.json", "synchronisation")
+    outcome = _synchronise(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference)
+    if target is not None:
+        from sblsim.orchestrator.sync.outputs import write
+
+        write(outcome, target)
+    return SyncResult(outcome.summary, outcome.offsets, outcome.residuals, outcome.sync_tags, target, outcome)
+
+
+def _synchronise(detections: Path, receivers: Path, format: str, sound_speed: float | None,
+                 sound_speed_file: Path | None, bin_hours: float, reference: str | None):
+    from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones, read_sound_speed
+    from sblsim.orchestrator.sync.run import synchronise
+
+    data = read_detections(detections, format)
+    table = read_hydrophones(receivers)
+    series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
+    return synchronise(data, table, sound_speed, series, bin_hours, reference)
+
+
+NAME = "sync"
+HELP = "synchronise the receivers' clocks of a telemetry array from its sync tags (raw detections)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """``sblsim sync``'s arguments."""
+    p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial) or a VUE "
+                   "export CSV (--format vue)")
+    p.add_argument("--receivers", type=Path, required=True, metavar="HYDROPHONES",
+                   help="the receivers: serial,sync_tag,x_m,y_m[,z_m] (or x,y,z)")
+    p.add_argument("--format", choices=FORMATS, default="yaps", help="the detections' format (default yaps)")
+    speed = p.add_mutually_exclusive_group()
+    speed.add_argument("--sound-speed", type=float, default=None, metavar="M_S",
+                       help="a constant sound speed [m/s] (default: estimated with the clocks)")
+    speed.add_argument("--sound-speed-file", type=Path, default=None, metavar="CSV",
+                       help="a sound-speed series (epo,sound_speed_m_s), interpolated at each arrival")
+    p.add_argument("--bin-hours", type=float, default=1.0, metavar="H",
+                   help="the time bins' width [h] in [0.05, 168] (one drift per receiver and bin; default 1)")
+    p.add_argument("--reference", default=None, metavar="SERIAL",
+                   help="the reference receiver (default: the one with the most arrivals shared with others)")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default results/sync_DETECTIONS)")
+    p.add_argument("--force", action="store_true", help="replace an earlier synchronisation in --out")
+
+
+def main(args: argparse.Namespace) -> int:
+    """``sblsim sync`` from its parsed arguments: its lines printed, its exit status returned."""
+    speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", *SOUND_SPEED,
+                                                                "m/s")
+    hours = real_argument(args.bin_hours, "--bin-hours", *BIN_HOURS, "h")
+    outcome = _synchronise(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
+                           args.reference)
+    out = output_folder(args.out, Path("results") / f"sync_{folder_name(args.detections.stem)}", args.force,
+                        "sync.json", "synchronisation")
+    from sblsim.orchestrator.sync.outputs import write
+
+    write(outcome, out)
+    s = outcome.summary
+    d = s["detections"]
+    c = s["sound_speed"]
+    speed_text = (f"{c['sound_speed_m_s']:.1f} m/s ({c['source']})" if "sound_speed_m_s" in c
+                  else "from the series")
+    print(f"sync of {args.detections}: {d['sync_arrivals']} sync-tag arrivals of {d['rows']} detections, "
+          f"{len(s['synchronised'])} receivers synchronised against {s['reference_receiver']} in "
+          f"{len(s['bin_edges']) - 1} bins of {s['bin_hours']:g} h, sound speed {speed_text}, in "
+          f"{s['wall_time_s']:.1f} s")
+    rejected = d["used"] - d["kept"]
+    print(f"  arrivals: {d['kept']} kept, {rejected} rejected, {d['multipath']} multipath, {d['single_receiver']} "
+          f"heard by one receiver only; median |residual| {s['median_abs_residual_m']:.3g} m")
+    if s["sync_tags"]:
+        t = s["sync_tags"]
+        nees = t["nees_mean_inside"]
+        print(f"  sync tags positioned without their own receiver ({t['tags']}): median error "
+              f"{t['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else
+                                                 f", NEES {nees:.3g} inside the array (2 when consistent)"))
+    for note in s["notes"]:
+        print(f"note: {note}", file=sys.stderr)
+    if s["not_synchronised"]:
+        print(f"sblsim: warning: not synchronised: {', '.join(s['not_synchronised'])}", file=sys.stderr)
+    print(f"  written to {out}/ (sync.json, offsets.csv, residuals.csv, sync_tags.csv, offsets.png, residuals.png, "
+          "coverage.png)")
+    return 0
+
+
+__all__ = ["SyncResult", "sync"]

@@ -1,0 +1,99 @@
+"""``sblsim sync``'s files and figures: ``sync.json``, ``offsets.csv``, ``residuals.csv``, ``sync_tags.csv`` and
+``offsets.png``, ``residuals.png``, ``coverage.png``, written all or nothing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.sync.run import SyncOutcome
+
+
+def figures(outcome: SyncOutcome) -> dict:
+    """The figures (matplotlib): ``offsets`` (each receiver's offset against time, its 2σ band), ``residuals``
+    (the kept residuals' distribution per receiver) and ``coverage`` (the array: which receiver hears which sync
+    tag, the lines' width by the number of arrivals)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    o, r, rec = outcome.offsets, outcome.residuals, outcome.receivers
+    fig1, ax = plt.subplots(figsize=(10, 6))
+    for name, g in o.groupby("receiver", sort=False):
+        t = np.r_[g["start"].to_numpy(), g["end"].to_numpy()[-1:]]
+        y = np.r_[g["offset_start_s"].to_numpy(), g["offset_end_s"].to_numpy()[-1:]]
+        s = np.r_[g["offset_start_sigma_s"].to_numpy(), g["offset_end_sigma_s"].to_numpy()[-1:]]
+        hours = (t - t[0]) / 3600
+        line, = ax.plot(hours, y, "-", lw=1, label=name)
+        ax.fill_between(hours, y - 2 * s, y + 2 * s, color=line.get_color(), alpha=0.2)
+    ax.set(xlabel="time from the first bin [h]", ylabel="clock offset [s]",
+           title=f"clock offsets against the reference receiver {outcome.summary['reference_receiver']}")
+    ax.legend(fontsize=6, ncol=4)
+    fig1.tight_layout()
+    fig2, bx = plt.subplots(figsize=(10, 5))
+    kept = r[r["kept"]]
+    names = [n for n in rec["receiver"] if (kept["receiver"] == n).any()]
+    bx.boxplot([kept.loc[kept["receiver"] == n, "residual_m"].to_numpy() for n in names], showfliers=False)
+    bx.set_xticks(range(1, len(names) + 1), names, rotation=90, fontsize=7)
+    bx.axhline(0, color="k", lw=0.5)
+    bx.set(ylabel="residual [m]", title="sync residuals per receiver (kept arrivals; whiskers 1.5 IQR)")
+    fig2.tight_layout()
+    fig3, cx = plt.subplots(figsize=(7, 7))
+    xy = rec[["x", "y"]].to_numpy()
+    home = {t: k for k, t in enumerate(rec["sync_tag"]) if t}
+    index = {n: k for k, n in enumerate(rec["receiver"])}
+    pairs = kept.groupby(["tag", "receiver"]).size()
+    top = pairs.max() if len(pairs) else 1
+    for (tag, name), n in pairs.items():
+        a, b = xy[home[tag]], xy[index[name]]
+        cx.plot([a[0], b[0]], [a[1], b[1]], "-", color="tab:blue", lw=0.3 + 2.5 * n / top, alpha=0.5)
+    synced = rec["synchronised"].to_numpy(bool)
+    cx.plot(xy[synced, 0], xy[synced, 1], "o", color="k", label="synchronised")
+    cx.plot(xy[~synced, 0], xy[~synced, 1], "x", color="tab:red", label="not synchronised")
+    for name, (x, y) in zip(rec["receiver"], xy):
+        cx.annotate(name, (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    cx.ticklabel_format(useOffset=False, style="plain")
+    cx.set(aspect="equal", xlabel="x [m]", ylabel="y [m]", title="which receiver hears which sync tag")
+    cx.legend(fontsize=8)
+    fig3.tight_layout()
+    return {"offsets": fig1, "residuals": fig2, "coverage": fig3}
+
+
+def _plain(value):
+    """A summary as JSON takes it: NaN and infinities None, numpy scalars Python's."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def write(outcome: SyncOutcome, out: Path) -> None:
+    """The files and figures (the module docstring), all or nothing."""
+    import matplotlib.pyplot as plt
+
+    made = figures(outcome)
+    try:
+        with staged_directory(out) as tmp:
+            (tmp / "sync.json").write_text(json.dumps(_plain(outcome.summary), indent=2, allow_nan=False) + "\n")
+            outcome.offsets.to_csv(tmp / "offsets.csv", index=False)
+            outcome.residuals.to_csv(tmp / "residuals.csv", index=False)
+            outcome.sync_tags.to_csv(tmp / "sync_tags.csv", index=False)
+            for name, fig in made.items():
+                fig.savefig(tmp / f"{name}.png", dpi=110)
+    finally:
+        for fig in made.values():
+            plt.close(fig)
+
+
+__all__ = ["figures", "write"]

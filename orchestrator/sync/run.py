@@ -1,0 +1,336 @@
+"""``sblsim sync``'s work: the sync tags' arrivals picked from raw detections, grouped into emissions, the clocks
+fitted (:func:`sblsim.models.sync.clocks.fit_clocks`) and each sync tag positioned with the clocks fitted without
+it (:func:`sblsim.models.sync.positions.position_emissions`), as tables and a summary.
+
+Which arrivals are used: a detection of a tag that the receivers table names as a receiver's ``sync_tag``, at a
+receiver of that table. A tag without a receiver row (its position unknown) is left out (named: a ``species``
+column's ``Sync`` label shows it); so are the detections at receivers missing from the table. A receiver that never
+hears a sync-tag emission that another receiver hears cannot be synchronised: named, left out, the rest synchronised.
+"""
+
+from __future__ import annotations
+
+import time as clock
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import Delaunay
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.sync.clocks import ClockFit, connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync.positions import position_emissions
+from sblsim.orchestrator.sync.detections import Detections
+
+#: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
+MIN_BIN_ARRIVALS = 5
+#: The bins' allowed width [h].
+BIN_HOURS_RANGE = (0.05, 168.0)
+
+
+@dataclass
+class SyncOutcome:
+    """What :func:`synchronise` computed: ``summary`` (``sync.json``), ``offsets``, ``residuals`` and
+    ``sync_tags`` (the CSV files' tables), the receivers' table and the fit."""
+
+    summary: dict[str, Any]
+    offsets: pd.DataFrame
+    residuals: pd.DataFrame
+    sync_tags: pd.DataFrame
+    receivers: pd.DataFrame
+    fit: ClockFit = field(repr=False)
+    origin: float = 0.0
+
+
+def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) -> np.ndarray:
+    """(tags,) [s]: a third of each tag's typical interval between detections at the receiver hearing it most
+    (the largest spread of one emission's arrivals the grouping allows), in [1, 3600] s."""
+    gap = np.full(n_tags, 60.0)
+    for i in range(n_tags):
+        mine = tag == i
+        if mine.sum() < 3:
+            continue
+        best = np.bincount(receiver[mine]).argmax()
+        steps = np.diff(np.sort(time[mine & (receiver == best)]))
+        steps = steps[steps > 0]
+        if len(steps):
+            gap[i] = np.clip(np.median(steps) / 3, 1.0, 3600.0)
+    return gap
+
+
+def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
+                series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
+                reference: str | None = None, leave_one_out: bool = True) -> SyncOutcome:
+    """Synchronise the receivers' clocks (the module docstring).
+
+    Parameters
+    ----------
+    detections : Detections
+        The raw detections (:func:`~sblsim.orchestrator.sync.detections.read_detections`).
+    hydrophones : pandas.DataFrame
+        The receivers (:func:`~sblsim.orchestrator.sync.detections.read_hydrophones`).
+    sound_speed : float, optional
+        [m/s] a constant sound speed.
+    series : (numpy.ndarray, numpy.ndarray), optional
+        A sound-speed series: times [s] and speeds [m/s], interpolated at each arrival. Neither given: one sound
+        speed estimated with the clocks.
+    bin_hours : float
+        [h] the time bins' width.
+    reference : str, optional
+        The reference receiver's serial; default the receiver with the most arrivals shared with others.
+    leave_one_out : bool
+        Position each sync tag with the clocks fitted without its arrivals (else with the full fit).
+
+    Returns
+    -------
+    SyncOutcome
+
+    Raises
+    ------
+    ModelError
+        No sync tag heard by two receivers, a reference receiver not in the table or not synchronisable.
+    """
+    started = clock.perf_counter()
+    notes: list[str] = []
+    frame = detections.frame
+    names = hydrophones["receiver"].tolist()
+    index = {name: k for k, name in enumerate(names)}
+    tags = hydrophones.loc[hydrophones["sync_tag"] != "", ["sync_tag", "receiver"]]
+    tag_names = tags["sync_tag"].tolist()
+    tag_index = {t: k for k, t in enumerate(tag_names)}
+    tag_home = np.array([index[r] for r in tags["receiver"]], np.int64)
+    unknown = sorted(set(frame["receiver"]) - set(index))
+    if unknown:
+        notes.append(f"receivers not in the receivers table, their detections left out: {', '.join(unknown[:20])}")
+    if "species" in frame:
+        labelled = set(frame.loc[frame["species"].str.lower() == "sync", "tag"]) - set(tag_index)
+        if labelled:
+            notes.append("tags labelled Sync without a receiver row (position unknown), left out: "
+                         + ", ".join(sorted(labelled)[:20]))
+    pick = frame["tag"].isin(tag_index).to_numpy() & frame["receiver"].isin(index).to_numpy()
+    sync = frame[pick]
+    if len(sync) < 2:
+        raise ModelError("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
+                         "detections in which receivers hear the sync tags named in the table's sync_tag column")
+    receiver = sync["receiver"].map(index).to_numpy(np.int64)
+    tag = sync["tag"].map(tag_index).to_numpy(np.int64)
+    origin = float(np.floor(sync["time"].min()))
+    time = sync["time"].to_numpy(float) - origin
+    n_receivers = len(names)
+    never = [tag_names[i] for i in range(len(tag_names)) if not (tag == i).any()]
+    if never:
+        notes.append(f"sync tags never heard: {', '.join(never)}")
+
+    emission = group_emissions(tag, time, _gaps(tag, receiver, time, len(tag_names)))
+    duplicate = later_duplicates(emission, receiver, time)
+    heard_by = np.bincount(emission[~duplicate], minlength=emission.max() + 1)
+    single = heard_by[emission] < 2
+    used = ~duplicate & ~single
+
+    xyz = hydrophones[["x", "y", "z"]].to_numpy(float)
+    dim = 3 if np.isfinite(xyz[:, 2]).all() else 2
+    positions = xyz[:, :dim]
+    distance = np.linalg.norm(positions[tag_home[tag]] - positions[receiver], axis=1)
+
+    if sound_speed is not None:
+        slowness = np.full(len(time), 1.0 / sound_speed)
+        speed_source = "given"
+    elif series is not None:
+        times, speeds = series
+        absolute = time + origin
+        if absolute.min() < times[0] - 86400 or absolute.max() > times[-1] + 86400:
+            notes.append("the sound-speed series does not cover the detections' span (more than a day outside): "
+                         "its end values held")
+        slowness = 1.0 / np.interp(absolute, times, speeds)
+        speed_source = "series"
+    else:
+        slowness = None
+        speed_source = "estimated"
+
+    counts = np.bincount(receiver[used], minlength=n_receivers)
+    if reference is None:
+        start = int(np.argmax(counts))
+    else:
+        if reference not in index:
+            raise ModelError(f"reference: receiver {reference!r} is not in the receivers table; allowed: one of "
+                             f"{', '.join(names[:30])}")
+        start = index[reference]
+    linked = connected(receiver[used], emission[used], n_receivers, start)
+    if not linked[start]:
+        raise ModelError(f"reference: receiver {names[start]} hears no sync-tag emission that another receiver hears; "
+                         "allowed: a receiver that can be synchronised")
+    left_out = [names[j] for j in range(n_receivers) if not linked[j]]
+    if left_out:
+        notes.append("receivers that cannot be synchronised (they hear no sync-tag emission another synchronised "
+                     f"receiver hears), left out: {', '.join(left_out)}")
+    width = bin_hours * 3600.0
+    fit = fit_clocks(receiver, emission, time, distance, slowness, used, linked, start, width)
+    bridged = (fit.counts < MIN_BIN_ARRIVALS) & linked[:, None]
+    bridged[start] = False
+
+    reason = np.where(duplicate, "multipath", np.where(single, "single receiver", np.where(
+        ~linked[receiver], "not synchronised", np.where(fit.kept, "", "rejected"))))
+    emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
+    residuals = pd.DataFrame({
+        "receiver": np.array(names, dtype=object)[receiver], "tag": np.array(tag_names, dtype=object)[tag],
+        "emission": emission, "time": time + origin,
+        "time_sync": time + origin - np.where(linked[receiver], fit.offset(receiver, time), np.nan),
+        "distance_m": distance, "residual_s": fit.residual, "residual_m": fit.residual / emission_slowness,
+        "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": sync["line"].to_numpy()})
+
+    offsets = _offsets(fit, names, linked, bridged, origin)
+    sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
+                           positions, tag_names, tag_home, names, leave_one_out, notes)
+    summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
+                       residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
+                       dim, clock.perf_counter() - started)
+    receivers = pd.DataFrame({"receiver": names, "x": positions[:, 0], "y": positions[:, 1],
+                              "sync_tag": hydrophones["sync_tag"].to_numpy(), "synchronised": linked})
+    return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin)
+
+
+def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.ndarray, origin: float
+             ) -> pd.DataFrame:
+    """``offsets.csv``: one row per synchronised receiver and bin."""
+    rows = []
+    edges = fit.edges + origin
+    for j in np.flatnonzero(linked):
+        for k in range(len(edges) - 1):
+            rows.append((names[j], k, edges[k], edges[k + 1], fit.knots[j, k], fit.knot_sigma[j, k],
+                         fit.knots[j, k + 1], fit.knot_sigma[j, k + 1], fit.drift[j, k], fit.drift_sigma[j, k],
+                         int(fit.counts[j, k]), bool(bridged[j, k])))
+    return pd.DataFrame(rows, columns=["receiver", "bin", "start", "end", "offset_start_s", "offset_start_sigma_s",
+                                       "offset_end_s", "offset_end_sigma_s", "drift", "drift_sigma", "arrivals",
+                                       "bridged"])
+
+
+def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
+               positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str]) -> pd.DataFrame:
+    """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
+    arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
+    its known position."""
+    dim = positions.shape[1]
+    rows = []
+    for i, name in enumerate(tag_names):
+        home = tag_home[i]
+        mine = (tag == i) & used & linked[receiver] & (receiver != home)
+        if mine.sum() < dim + 2:
+            continue
+        this = fit
+        if leave_one_out:
+            without = used & (tag != i)
+            still = connected(receiver[without], emission[without], len(names), start)
+            try:
+                this = fit_clocks(receiver, emission, time, distance, slowness, without, still, start, width,
+                                  keep=fit.kept, scale=fit.scale, sigmas=False)
+            except ModelError:
+                notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
+                continue
+            mine &= still[receiver]
+        rows_e = np.flatnonzero(mine)
+        ems, local = np.unique(emission[rows_e], return_inverse=True)
+        arrival = np.full((len(ems), len(names)), np.nan)
+        arrival[local, receiver[rows_e]] = time[rows_e] - this.offset(receiver[rows_e], time[rows_e])
+        s = np.full(len(ems), this.slowness if slowness is None else np.nan)
+        if slowness is not None:
+            s = np.bincount(local, slowness[rows_e]) / np.bincount(local)
+        sigma = np.where(np.isfinite(this.scale), this.scale, 1e-3)
+        known = np.isfinite(fit.knot_sigma)
+        offset_sigma = np.array([np.median(fit.knot_sigma[j][known[j]]) if known[j].any() else 0.0
+                                 for j in range(len(names))])
+        sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
+        fixes = position_emissions(arrival, positions, sigma, s)
+        ok = fixes.ok
+        if not ok.any():
+            continue
+        truth = positions[home]
+        error = fixes.position[ok] - truth
+        error_m = np.linalg.norm(error, axis=1)
+        own_sigma = np.sqrt(np.trace(fixes.covariance[ok], axis1=1, axis2=2))
+        nees = np.einsum("ek,ekl,el->e", error, np.linalg.inv(fixes.covariance[ok]), error)
+        heard = np.flatnonzero(fixes.used[ok].any(axis=0))
+        mean = np.median(fixes.position[ok], axis=0)
+        rows.append({"tag": name, "receiver": names[home], "x_m": truth[0], "y_m": truth[1],
+                     "emissions": len(ems), "fixes": int(ok.sum()), "receivers_used": len(heard),
+                     "median_error_m": float(np.median(error_m)), "median_sigma_m": float(np.median(own_sigma)),
+                     "rms_error_m": float(np.sqrt(np.mean(error_m ** 2))),
+                     "p90_error_m": float(np.percentile(error_m, 90)), "nees_mean": float(np.mean(nees)),
+                     "nees_median": float(np.median(nees)), "median_x_m": mean[0], "median_y_m": mean[1],
+                     "median_position_error_m": float(np.linalg.norm(mean - truth)),
+                     "inside_array": _inside(truth, positions[heard]), "leave_one_out": leave_one_out})
+    return pd.DataFrame(rows, columns=["tag", "receiver", "x_m", "y_m", "emissions", "fixes", "receivers_used",
+                                       "median_error_m", "median_sigma_m", "rms_error_m", "p90_error_m", "nees_mean",
+                                       "nees_median", "median_x_m", "median_y_m", "median_position_error_m",
+                                       "inside_array", "leave_one_out"])
+
+
+def _inside(point: np.ndarray, points: np.ndarray) -> bool:
+    """Whether ``point`` is inside the convex hull of ``points`` (horizontally)."""
+    try:
+        return bool(Delaunay(points[:, :2]).find_simplex(point[:2]) >= 0)
+    except Exception:  # fewer than three points, or all on a line
+        return False
+
+
+def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged, residuals,
+             sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections, dim, wall) -> dict[str, Any]:
+    """``sync.json``: the model, per receiver and bin the offset, drift and their sigmas, and the diagnostics."""
+    per_receiver = {}
+    edges = (fit.edges + origin).tolist()
+    for j, name in enumerate(names):
+        mine = receiver == j
+        fitted = mine & used
+        kept = fit.kept & mine
+        entry: dict[str, Any] = {
+            "synchronised": bool(linked[j]), "reference": j == start, "arrivals": int(mine.sum()),
+            "used": int(fitted.sum()), "kept": int(kept.sum()),
+            "rejected_share": float(1 - kept.sum() / fitted.sum()) if fitted.sum() else None,
+            "multipath": int((duplicate & mine).sum()),
+            "sync_tags_heard": sorted({tag_names[i] for i in np.unique(tag[fitted])}),
+        }
+        if linked[j]:
+            r = residuals.loc[residuals["kept"].to_numpy() & mine]
+            entry.update({
+                "noise_scale_s": float(fit.scale[j]),
+                "median_abs_residual_m": float(np.median(np.abs(r["residual_m"]))) if len(r) else None,
+                "median_abs_residual_s": float(np.median(np.abs(r["residual_s"]))) if len(r) else None,
+                "bins_bridged": int(bridged[j].sum()),
+                "offset_s": fit.knots[j].tolist(), "offset_sigma_s": _finite(fit.knot_sigma[j]),
+                "drift": fit.drift[j].tolist(), "drift_sigma": _finite(fit.drift_sigma[j])})
+        per_receiver[name] = entry
+    speed = {"source": speed_source}
+    if speed_source == "given":
+        speed["sound_speed_m_s"] = sound_speed
+    elif speed_source == "estimated":
+        speed["sound_speed_m_s"] = 1.0 / fit.slowness
+        speed["sound_speed_sigma_m_s"] = fit.slowness_sigma / fit.slowness ** 2 if fit.slowness_sigma else None
+    loo = {}
+    if len(sync_tags):
+        loo = {"median_error_m": float(sync_tags["median_error_m"].median()),
+               "tags": int(len(sync_tags)), "nees_mean_inside": float(sync_tags.loc[sync_tags["inside_array"],
+                                                                              "nees_mean"].mean())
+               if sync_tags["inside_array"].any() else None}
+    kept = residuals["kept"].to_numpy()
+    return {
+        "model": "piecewise-linear clock offset per receiver, continuous across time bins (drift constant in a bin), "
+                 "the reference receiver fixed, sync-tag emission times unknown; robust IRLS (Student-t, nu=3) then "
+                 "arrivals beyond 4 sigma rejected (Baktoft et al. 2017, Sci. Rep. 7:14294; YAPS's sync model)",
+        "detections": {"file": detections.source, "format": detections.format, "rows": int(len(detections.frame)),
+                       "sync_arrivals": int(len(receiver)), "used": int(used.sum()), "kept": int(kept.sum()),
+                       "multipath": int(duplicate.sum()), "single_receiver": int(single.sum()),
+                       "ignored_columns": detections.ignored_columns},
+        "reference_receiver": names[start], "bin_hours": bin_hours, "bin_edges": edges, "dimensions": dim,
+        "sound_speed": speed, "receivers": per_receiver,
+        "synchronised": [n for j, n in enumerate(names) if linked[j]],
+        "not_synchronised": [n for j, n in enumerate(names) if not linked[j]],
+        "median_abs_residual_m": float(np.median(np.abs(residuals.loc[kept, "residual_m"]))) if kept.any() else None,
+        "sync_tags": loo, "iterations": fit.iterations, "notes": notes, "wall_time_s": wall,
+    }
+
+
+def _finite(values: np.ndarray) -> list[float | None]:
+    return [float(v) if np.isfinite(v) else None for v in values]
+
+
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "synchronise"]

@@ -1,0 +1,177 @@
+"""``sblsim sync`` and ``sblsim.sync``: receiver clocks synchronised from sync tags, checked against simulated clocks
+(:mod:`sblsim.models.sync.simulate`) and on the boats array end to end; bad input refused with exit status 2 and
+nothing written."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import sblsim
+from sblsim.models.sync.simulate import simulate_sync
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.cosim.config import ConfigError
+
+BOATS = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
+#: The simulated files' epoch [s since 1970 UTC] (the clocks' τ = 0).
+EPOCH = 1_700_000_000
+
+
+def _write_simulation(folder: Path, sim, extra_receiver: bool = True) -> tuple[Path, Path]:
+    """The simulation as YAPS tables (times with 0.1 µs digits), one receiver ``Z`` far away that hears nothing
+    and one tag heard without a receiver row (``999``)."""
+    t = sim.time + EPOCH
+    epo = np.floor(t).astype(np.int64)
+    detections = pd.DataFrame({"epo": epo, "frac": [f"{v:.7f}" for v in np.clip(t - epo, 0, 0.9999999)],
+                               "tag": [f"S{i}" for i in sim.tag], "serial": [f"R{j}" for j in sim.receiver]})
+    extra = pd.DataFrame({"epo": [int(t[0]) + 5], "frac": ["0.5"], "tag": ["999"], "serial": ["R0"]})
+    detections = pd.concat([detections, extra]).sort_values("epo", kind="stable")
+    # each receiver's rows stay in its own order: the file sorted by whole seconds, then by the receivers' order
+    detections = detections.iloc[np.lexsort((detections["frac"].astype(float).to_numpy(),
+                                             detections["epo"].to_numpy()))]
+    path = folder / "detections.csv"
+    detections.to_csv(path, index=False)
+    receivers = pd.DataFrame({"serial": [f"R{j}" for j in range(len(sim.positions))],
+                              "sync_tag": [f"S{j}" for j in range(len(sim.positions))],
+                              "x_m": sim.positions[:, 0], "y_m": sim.positions[:, 1]})
+    if extra_receiver:
+        receivers.loc[len(receivers)] = ["Z", "", 50_000.0, 50_000.0]
+    hydrophones = folder / "hydrophones.csv"
+    receivers.to_csv(hydrophones, index=False)
+    return path, hydrophones
+
+
+#: The simulated case runs through the files and the command's function (8 s on 2 shared cores) and the boats case
+#: end to end (4 s): the slow tier; the model alone on a simulation is a fast test (tests/models/test_sync_clocks.py).
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("sim")
+    sim = simulate_sync(n_receivers=20, hours=24.0, seed=3, offset=2.0, drift=20e-6, interval=(540.0, 660.0),
+                        noise=0.15e-3, echo_share=0.05)
+    detections, hydrophones = _write_simulation(folder, sim)
+    started = time.perf_counter()
+    result = sblsim.sync(detections, receivers=hydrophones, sound_speed=sim.sound_speed, bin_hours=1.0,
+                         reference="R0", out=folder / "out")
+    return sim, result, time.perf_counter() - started, folder
+
+
+@pytest.mark.slow
+def test_simulated_offsets_recovered_within_their_sigmas(simulated):
+    sim, result, seconds, _ = simulated
+    o = result.offsets
+    assert set(o["receiver"]) == {f"R{j}" for j in range(20)}
+    j = o["receiver"].str.slice(1).astype(int).to_numpy()
+    truth = sim.offset(j, o["start"].to_numpy() - EPOCH, reference=0)
+    error = o["offset_start_s"].to_numpy() - truth
+    sigma = o["offset_start_sigma_s"].to_numpy()
+    others = j != 0
+    within = np.abs(error[others]) <= 3 * sigma[others]
+    print(f"sync of 20 simulated receivers (24 h): {seconds:.2f} s; offsets within 3 sigma: {within.mean():.3f} of "
+          f"{others.sum()} receiver-bins; |error| median {np.median(np.abs(error[others])) * 1e6:.1f} us, sigma "
+          f"median {np.median(sigma[others]) * 1e6:.1f} us")
+    assert within.mean() >= 0.95
+    assert np.abs(error[others]).max() < 0.5e-3  # and they are small: the truth spans ±2 s
+    assert np.ptp(truth) > 1.0
+    truth_drift = sim.drift[j] - sim.drift[0]  # to first order in the drifts
+    assert np.abs(o["drift"].to_numpy()[others] - truth_drift[others]).max() < 2e-6
+    assert (o.loc[o["receiver"] == "R0", "offset_start_s"] == 0).all()
+
+
+@pytest.mark.slow
+def test_simulated_echoes_flagged_and_outliers_rejected(simulated):
+    sim, result, _, _ = simulated
+    r = result.residuals
+    s = result.summary
+    multipath = (r["reason"] == "multipath").sum()
+    assert multipath == sim.echo.sum()
+    kept = r[r["kept"]]
+    assert abs(np.median(np.abs(kept["residual_s"])) - 0.6745 * 0.15e-3) < 0.3e-4  # half-normal median of the noise
+    for name, entry in s["receivers"].items():
+        if name != "Z":
+            assert entry["rejected_share"] < 0.05 and 0.1e-3 < entry["noise_scale_s"] < 0.2e-3
+
+
+@pytest.mark.slow
+def test_simulated_notes_the_receiver_never_heard_and_the_tag_without_a_row(simulated):
+    _, result, _, folder = simulated
+    s = result.summary
+    assert s["not_synchronised"] == ["Z"] and not s["receivers"]["Z"]["synchronised"]
+    assert any("left out: Z" in n for n in s["notes"])
+    assert s["reference_receiver"] == "R0"
+    written = json.loads((folder / "out" / "sync.json").read_text())
+    assert written["not_synchronised"] == ["Z"]
+    for name in ("offsets.csv", "residuals.csv", "sync_tags.csv", "offsets.png", "residuals.png", "coverage.png"):
+        assert (folder / "out" / name).stat().st_size > 0
+    t = result.sync_tags
+    assert len(t) == 20 and (t["median_error_m"] < 1.0).all()  # 0.15 ms is 0.22 m
+    inside = t[t["inside_array"]]
+    assert 1.0 < inside["nees_mean"].median() < 4.0  # the fixes' own sigmas consistent with their errors
+
+
+@pytest.mark.slow
+def test_the_correction_of_a_receivers_times(simulated):
+    sim, result, _, _ = simulated
+    k = np.flatnonzero(sim.receiver == 5)[:50]
+    corrected = result.correct("R5", sim.time[k] + EPOCH) - EPOCH
+    tau = sim.true_time(sim.receiver[k], sim.time[k])
+    reference = tau + sim.offset0[0] + sim.drift[0] * tau
+    assert np.abs(corrected - reference).max() < 0.5e-3
+    with pytest.raises(ConfigError, match="not synchronised"):
+        result.correct("Z", [1.0])
+
+
+@pytest.mark.slow
+def test_the_boats_array_synchronised_end_to_end():
+    started = time.perf_counter()
+    result = sblsim.sync(BOATS / "detections.csv", receivers=BOATS / "hydrophones.csv",
+                         sound_speed_file=BOATS / "sound_speed.csv")
+    seconds = time.perf_counter() - started
+    s = result.summary
+    heard = set(result.residuals["receiver"]) | {r for r, t in zip(*pd.read_csv(BOATS / "hydrophones.csv",
+                                                                              dtype=str)[["serial", "sync_tag"]]
+                                                                  .fillna("").T.values) if t in
+                                                  set(result.residuals["tag"])}
+    assert set(s["synchronised"]) == heard and len(heard) == 20 and s["not_synchronised"] == []
+    medians = {name: e["median_abs_residual_m"] for name, e in s["receivers"].items()}
+    print(f"boats sync: {seconds:.2f} s; median |residual| {s['median_abs_residual_m']:.2f} m (per receiver "
+          f"{min(medians.values()):.2f}-{max(medians.values()):.2f} m); sync tags' leave-one-out median error "
+          f"{s['sync_tags']['median_error_m']:.2f} m")
+    assert s["median_abs_residual_m"] < 3.0 and all(m < 30 for m in medians.values())
+    assert len(result.sync_tags) >= 9 and s["sync_tags"]["median_error_m"] < 10.0
+    assert any("802524" in n and "802849" in n for n in s["notes"])
+    assert seconds < 20.0
+
+
+@pytest.mark.parametrize("args, found", [
+    (["--bin-hours", "0"], "--bin-hours: 0.0 is outside the allowed range [0.05, 168] h"),
+    (["--sound-speed", "2000"], "--sound-speed: 2000.0 is outside"),
+    (["--reference", "nope"], "reference: receiver 'nope' is not in the receivers table"),
+])
+def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys, args, found):
+    out = tmp_path / "out"
+    code = main(["sync", str(BOATS / "detections.csv"), "--receivers", str(BOATS / "hydrophones.csv"),
+                 "--out", str(out), *args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and found in err[0] and not out.exists()
+
+
+def test_a_hostile_detections_file_exits_2_in_one_line(tmp_path, capsys):
+    bad = tmp_path / "d.csv"
+    bad.write_text("epo,frac,tag,serial\n100,0.5,7,A\n90,0.5,7,A\n")
+    out = tmp_path / "out"
+    code = main(["sync", str(bad), "--receivers", str(BOATS / "hydrophones.csv"), "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "receiver A's clock goes back 10 s" in err[0] and not out.exists()
+
+
+def test_the_function_checks_its_arguments(tmp_path):
+    with pytest.raises(ConfigError, match="format"):
+        sblsim.sync(BOATS / "detections.csv", receivers=BOATS / "hydrophones.csv", format="lotek")
+    with pytest.raises(ConfigError, match="not both"):
+        sblsim.sync(BOATS / "detections.csv", receivers=BOATS / "hydrophones.csv", sound_speed=1480,
+                    sound_speed_file=BOATS / "sound_speed.csv")
