@@ -279,15 +279,15 @@ def _banded_solve(D: dict, B: dict, g: np.ndarray, ridge: np.ndarray | float = 0
     m, s = g.shape
     place = _band_order((s - 2) // 2)
     u = s + 1
-    ab = np.zeros((u + 1, m * s))
-    view = ab.reshape(u + 1, m, s)
+    columns = np.zeros((m * s, u + 1))  # ab's transpose: ab itself in Fortran order, which LAPACK takes in place
+    ab, view = columns.T, columns.reshape(m, s, u + 1)
     for (i, j), value in D.items():
         lo, hi = sorted((place[i], place[j]))
-        view[hi - lo, :, lo] = value
-    diagonal = view[0][:, place]  # (m, s): N's diagonal, the state's order
-    view[0][:, place] = diagonal + ridge
+        view[:, lo, hi - lo] = value
+    diagonal = view[:, place, 0]  # (m, s): N's diagonal, the state's order
+    view[:, place, 0] = diagonal + ridge
     for (i, j), value in B.items():  # N[(k, i), (k + 1, j)] → lower N[(k + 1, j), (k, i)]
-        view[s + place[j] - place[i], :-1, place[i]] = value
+        view[:-1, place[i], s + place[j] - place[i]] = value
     rhs = np.empty_like(g)
     rhs[:, place] = g
     return solveh_banded(ab, rhs.ravel(), overwrite_ab=True, lower=True, check_finite=False).reshape(m, s)[:, place]
