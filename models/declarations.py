@@ -142,6 +142,44 @@ class Table:
 
 
 @dataclass(frozen=True)
+class FileKey:
+    """How a free-text configuration key names a file: the one declaration every rule for files reads.
+
+    A value names a file unless it is one of ``names`` or starts with one of ``name_prefixes`` (a built-in source
+    such as ``ctd:NAME``); it then names the path after the first of ``prefixes`` it starts with (``""``: the
+    whole value is the path). Every key whose value may be a path is declared with one (:attr:`Variable.file`):
+    the configuration makes its relative paths absolute from the folder of the file that gives it, a design's
+    overrides, a log's configuration and an SSP package's parameters may not name one.
+
+    Parameters
+    ----------
+    prefixes : tuple of str
+        What comes before the path (``model:``, ``fmu:``); ``""`` for a bare path.
+    names : tuple of str
+        Values that name no file.
+    name_prefixes : tuple of str
+        Starts of values that name no file.
+    """
+
+    prefixes: tuple[str, ...] = ("",)
+    names: tuple[str, ...] = ("",)
+    name_prefixes: tuple[str, ...] = ()
+
+    def path(self, value: Any) -> str:
+        """The path a value names; empty when it names no file (not text, a name, or a prefix alone)."""
+        if not isinstance(value, str) or value in self.names or value.startswith(self.name_prefixes):
+            return ""
+        for prefix in sorted(self.prefixes, key=len, reverse=True):
+            if value.startswith(prefix):
+                return value[len(prefix):]
+        return ""
+
+    def with_path(self, value: str, path: str) -> str:
+        """``value`` with the path it names replaced by ``path`` (its prefix kept)."""
+        return value[:len(value) - len(self.path(value))] + path
+
+
+@dataclass(frozen=True)
 class Variable:
     """One declared variable of a component (an FMI 2.0 ScalarVariable), or a configuration key.
 
@@ -181,6 +219,8 @@ class Variable:
         FMU arrays (:meth:`Table.array_variables`).
     in_table : bool
         An entry of a table column (checked only in the rows in use).
+    file : FileKey, optional
+        This free-text configuration key may name a file, and how (every key that does is declared so).
     """
 
     name: str
@@ -197,6 +237,7 @@ class Variable:
     scope: str = "both"
     table: Table | None = None
     in_table: bool = False
+    file: FileKey | None = None
 
     def __post_init__(self) -> None:
         if self.causality not in CAUSALITIES:
@@ -213,6 +254,8 @@ class Variable:
             raise ValueError(f"{self.name}: a free-text String can only be a configuration key (scope='config')")
         if self.table is not None and self.type != "Integer":
             raise ValueError(f"{self.name}: the row count of a table is an Integer")
+        if self.file is not None and (self.type != "String" or self.choices is not None or self.in_fmu):
+            raise ValueError(f"{self.name}: a file key is a free-text String configuration key (scope='config')")
 
     @property
     def variability(self) -> str:
@@ -471,6 +514,6 @@ def resolve_parameters(variables: Sequence[Variable], values: Mapping[str, Any],
     return out
 
 
-__all__ = ["CAUSALITIES", "Column", "ModelError", "SCOPES", "SEED_NAMES", "SEED_PARAMETERS", "TYPES", "Table", "UNITS",
-           "SIGNAL_RANGES", "Variable", "check_entry", "check_increasing", "format_table", "parameters",
-           "parse_table", "resolve_parameters", "shown", "signal_range"]
+__all__ = ["CAUSALITIES", "Column", "FileKey", "ModelError", "SCOPES", "SEED_NAMES", "SEED_PARAMETERS", "TYPES",
+           "Table", "UNITS", "SIGNAL_RANGES", "Variable", "check_entry", "check_increasing", "format_table",
+           "parameters", "parse_table", "resolve_parameters", "shown", "signal_range"]

@@ -59,9 +59,9 @@ from sblsim.orchestrator.cosim.config import (
     EXTERNAL_PREFIX,
     MODEL_PREFIX,
     ConfigError,
-    _is_path,
     apply_overrides,
     check_receiver,
+    named_files,
     parse_override,
     read_source,
     section_variables,
@@ -218,7 +218,7 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
 
     A log is data (:func:`_as_data`): of the configuration it carries only plain numbers and names are
     used. A receiver it names as ``model:PATH.py`` or ``fmu:PATH`` is refused unless ``receiver`` replaces
-    it, and the files it names (:data:`sblsim.orchestrator.cosim.config.PATH_KEYS`) are neither opened nor kept.
+    it, and the files it names (:func:`sblsim.orchestrator.cosim.config.named_files`) are neither opened nor kept.
 
     Parameters
     ----------
@@ -259,7 +259,8 @@ def replay_config(log_path: Path | str, config: str | None = None, receiver: str
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"log: the configuration {str(log_path)!r} carries is not valid TOML "
                               f"({' '.join(str(exc).split())[:200]}); give --config") from None
-        said = _as_data(raw, str(log_path), receiver is not None)
+        given = {parse_override(o)[:2] for o in overrides}
+        said = _as_data(raw, str(log_path), receiver is not None, given)
         if notes is not None:
             notes.extend(said)
         source = "the log's own (its run's configuration)"
@@ -289,20 +290,21 @@ _INSTEAD = {("target", "trajectory_file"): ("trajectory", "semicircle"),
             ("acoustics", "sound_speed_profile"): ("sound_speed_profile", "constant")}
 
 
-def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
+def _as_data(raw: dict, log: str, receiver_given: bool, given: set = frozenset()) -> list[str]:
     """Make the configuration a log carries plain data, in place (:func:`replay_config`); returns the notes.
 
     * ``simulation.receiver`` naming a program (``model:PATH.py``, ``fmu:PATH``: anything but a built-in
       receiver) is refused, unless the user's ``--receiver`` replaces it (it is then never imported);
-    * a file named by :data:`sblsim.orchestrator.cosim.config.PATH_KEYS` is not opened: a replay needs neither the
-      diver's track nor the channel (the log holds what the receiver was given), so ``target.trajectory =
-      file`` becomes the semicircle (and the duration one pass of it) and a profile file a constant sound
-      speed, said in a note.
+    * a file named in a key declared to take one (:func:`sblsim.orchestrator.cosim.config.named_files`) is never
+      opened: a replay needs neither the diver's track nor the channel (the log holds what the receiver was
+      given), so ``target.trajectory = file`` becomes the semicircle (and the duration one pass of it) and the
+      channel's profile file a constant sound speed, said in a note; a file the receiver would read (its own
+      profile) is refused, unless the user's ``--set`` (``given``: its ``(section, key)`` pairs) replaces it.
 
     Raises
     ------
     ConfigError
-        A receiver program without ``--receiver``.
+        A receiver program without ``--receiver``, a file the receiver would read without ``--set``.
     """
     sim = raw.get("simulation")
     value = sim.get("receiver") if isinstance(sim, dict) else None
@@ -328,7 +330,7 @@ def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
                 changed = f"{section}.{switch} = {instead!r}"
                 if isinstance(sim, dict):
                     sim["duration"] = 0.0  # one pass of it: a replay's length is the log's
-        elif not _is_path(section, named):
+        elif not named_files({section: {key: named}}):
             continue
         else:
             table[key] = instead
@@ -336,6 +338,13 @@ def _as_data(raw: dict, log: str, receiver_given: bool) -> list[str]:
         notes.append(f"the log's configuration names a file in {section}.{key}, which a replay does not open (it "
                      f"needs no {'diver track' if section == 'target' else 'sound-speed profile'}: the log holds "
                      f"what the receiver was given); its config.toml has {changed}")
+    for section, key, _ in named_files(raw):
+        if (section, key) == ("simulation", "receiver"):
+            continue  # refused above, or replaced by --receiver
+        if (section, key) not in given:
+            raise ConfigError(f"log: the configuration {log!r} carries names a file in {section}.{key}, which a "
+                              f"replay never opens from a log; give --set {section}.{key}=... or --config")
+        del raw[section][key]  # the user's --set gives it
     return notes
 
 

@@ -61,6 +61,7 @@ from sblsim.models.errors import ArchiveError
 from sblsim.orchestrator.cosim.config import (
     EXTERNAL_PREFIX,
     apply_overrides,
+    named_files,
     section_variables,
 )
 from sblsim.orchestrator.cosim.connections import Connection, default_connections
@@ -429,7 +430,10 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
     is the channel's ``slot_period``, the EKF rate ratio is T over the base
     step, the duration is stop − start. A receiver FMU other than sblsim's
     EKF or least-squares receiver becomes ``receiver = "fmu:PATH"``; of its
-    parameter set, the keys of sblsim's ``[receiver]`` section are kept.
+    parameter set, the keys of sblsim's ``[receiver]`` section are kept. A
+    parameter value naming a file (in a key declared to take one,
+    :func:`sblsim.orchestrator.cosim.config.named_files`) is refused: a
+    package names no file sblsim opens.
 
     Parameters
     ----------
@@ -503,6 +507,10 @@ def read_ssp(path: Path | str, overrides: Iterable[str] = (), seed: int | None =
         raw["simulation"]["duration"] = stop - start
     if start != 0.0:
         raise SspError(f"ssp: DefaultExperiment startTime {start} s; sblsim starts at 0 s")
+    for section, key, named in named_files(raw):  # a package's parameters are data: they never name a file we open
+        if (section, key) != ("simulation", "receiver"):  # the package's own receiver FMU, extracted above
+            raise SspError(f"ssp: component {section}'s parameter {key} names a file ({named[:80]!r}), which a "
+                           "package may not; sblsim reads no file an SSP package names")
     connections = [Connection(c.startElement, c.startConnector, c.endElement, c.endConnector)
                    for c in system.connections]
     if any(c.source is None or c.destination is None for c in connections):

@@ -137,7 +137,15 @@ from sblsim.models.acoustics.ray_tables import (
     ray_values,
 )
 from sblsim.models.acoustics.rays import profile_arrays
-from sblsim.models.acoustics.sound_speed import NODES, PROFILE, harmonic_mean, node_speeds, profile_nodes, profile_table
+from sblsim.models.acoustics.sound_speed import (
+    NODES,
+    PROFILE,
+    PROFILE_FILE,
+    harmonic_mean,
+    node_speeds,
+    profile_nodes,
+    profile_table,
+)
 from sblsim.models.component import Component
 from sblsim.models.declarations import (
     SEED_PARAMETERS,
@@ -1104,7 +1112,7 @@ class Acoustics(Component):
                      "Sound speed the receiver assumes to turn travel time into range", min=1300.0, max=1700.0),
             Variable("sound_speed_true", "parameter", "Real", 1500.0, "m/s",
                      "True sound speed when the profile is constant", min=1300.0, max=1700.0),
-            Variable("sound_speed_profile", "parameter", "String", "constant", scope="config",
+            Variable("sound_speed_profile", "parameter", "String", "constant", scope="config", file=PROFILE_FILE,
                      description="True sound speed: constant, teos10, table, munk, ctd:NAME or a CSV cast path"),
             Variable("sound_speed_table", "parameter", "String", "", scope="config",
                      description="Sound-speed profile 'depth speed; ...' [m, m/s] (sound_speed_profile = table)"),

@@ -36,7 +36,7 @@ import casadi as ca
 import gsw
 import numpy as np
 
-from sblsim.models.declarations import Column, ModelError, Table, check_entry, check_increasing, parse_table
+from sblsim.models.declarations import Column, FileKey, ModelError, Table, check_entry, check_increasing, parse_table
 from sblsim.models.expressions import cumulative_sum, padded_rows, switch
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md): the two coastal Castaway casts
@@ -340,6 +340,8 @@ def temperature_from_speed(depth: np.ndarray, speed: np.ndarray, salinity: float
 
 
 PROFILE_SOURCES = ("constant", "teos10", "table", "munk")
+#: ``acoustics.sound_speed_profile`` names a CSV cast unless it is one of :data:`PROFILE_SOURCES` or ``ctd:NAME``.
+PROFILE_FILE = FileKey(names=("", *PROFILE_SOURCES), name_prefixes=("ctd:",))
 
 
 def munk_speed(z):
@@ -416,7 +418,7 @@ def profile_table(spec: str, text: str, temperature: float, salinity: float,
     ``allowed`` what the error of a missing file lists (default the channel's sources).
     """
     stamp = None
-    if spec not in PROFILE_SOURCES and spec not in ("",) and not spec.startswith("ctd:") and Path(spec).is_file():
+    if PROFILE_FILE.path(spec) and Path(spec).is_file():
         info = Path(spec).stat()
         stamp = (info.st_size, info.st_mtime_ns)
     return _profile_table(spec, text, float(temperature), float(salinity), stamp, field, table_field,
@@ -473,5 +475,5 @@ def _profile_table(spec: str, text: str, temperature: float, salinity: float, st
 
 
 __all__ = ["BUILTIN_CASTS", "harmonic_mean", "MAX_CAST_BYTES", "MAX_CAST_ROWS", "MAX_PROFILE_ROWS", "munk_speed",
-           "munk_table", "node_speeds", "NODES", "PROFILE", "profile_nodes", "PROFILE_SOURCES", "profile_table",
-           "read_cast_csv", "read_gnatss_ctd", "temperature_from_speed", "teos10_table"]
+           "munk_table", "node_speeds", "NODES", "PROFILE", "profile_nodes", "PROFILE_FILE", "PROFILE_SOURCES",
+           "profile_table", "read_cast_csv", "read_gnatss_ctd", "temperature_from_speed", "teos10_table"]

@@ -38,8 +38,8 @@ from typing import Any, Mapping
 import casadi as ca
 
 from sblsim.models.acoustics.rays import ray_bending, slant_range
-from sblsim.models.acoustics.sound_speed import NODES, PROFILE, node_speeds, profile_table
-from sblsim.models.declarations import ModelError, Variable, format_table
+from sblsim.models.acoustics.sound_speed import NODES, PROFILE, PROFILE_SOURCES, node_speeds, profile_table
+from sblsim.models.declarations import FileKey, ModelError, Variable, format_table
 from sblsim.models.platform.geometry import rotation_ned, unit_vector
 
 #: ``receiver.sound_speed_profile``'s default: the single assumed speed.
@@ -51,12 +51,15 @@ SOUND_SPEED_MODELS = ("assumed", "profile")
 _FIELD, _TABLE_FIELD = "receiver.sound_speed_profile", "receiver.sound_speed_table"
 #: What a receiver's ``sound_speed_profile`` may be besides a CSV path (one-line errors list them).
 ALLOWED = "assumed, acoustics, munk, teos10, table, ctd:NAME or a CSV cast path"
+#: ``receiver.sound_speed_profile`` names a CSV cast unless it is one of the names of :data:`ALLOWED` (or
+#: ``constant``, refused by name) or ``ctd:NAME``.
+PROFILE_FILE = FileKey(names=("", ASSUMED, CHANNEL, *PROFILE_SOURCES), name_prefixes=("ctd:",))
 
 
 def profile_parameters() -> tuple[Variable, ...]:
     """The receiver's profile parameters (declared last: the value references of every earlier variable stay)."""
     return (
-        Variable("sound_speed_profile", "parameter", "String", ASSUMED, scope="config",
+        Variable("sound_speed_profile", "parameter", "String", ASSUMED, scope="config", file=PROFILE_FILE,
                  description="Travel time to range: assumed (the single assumed speed), or ray tracing through a "
                              "profile: acoustics (the true one), munk, teos10, table, ctd:NAME or a CSV cast path"),
         Variable("sound_speed_table", "parameter", "String", "", scope="config",
@@ -219,6 +222,6 @@ def profile_range(u: dict, p: dict, d: dict) -> dict:
 
 
 
-__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "PROFILE_DERIVED", "SOUND_SPEED_MODELS", "declares_profile",
+__all__ = ["ALLOWED", "ASSUMED", "CHANNEL", "PROFILE_DERIVED", "PROFILE_FILE", "SOUND_SPEED_MODELS", "declares_profile",
            "profile_config_values", "profile_fmu_parameters", "profile_parameters", "profile_prepare", "profile_range",
            "profile_when", "resolve_channel_profile"]

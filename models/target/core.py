@@ -35,6 +35,7 @@ from sblsim.models.component import Component
 from sblsim.models.declarations import (
     SEED_PARAMETERS,
     Column,
+    FileKey,
     ModelError,
     Table,
     Variable,
@@ -86,7 +87,7 @@ class Target(Component):
         params = (
             Variable("trajectory", "parameter", "String", "semicircle", description="Reference trajectory",
                      choices=TRAJECTORIES),
-            Variable("trajectory_file", "parameter", "String", "", scope="config",
+            Variable("trajectory_file", "parameter", "String", "", scope="config", file=FileKey(),
                      description="CSV of time [s], N, E, D [m] (trajectory = file)"),
             Variable("waypoints", "parameter", "String", "", scope="config",
                      description="Waypoints 'time N E D; ...' [s, m] (trajectory = file, instead of a file)"),

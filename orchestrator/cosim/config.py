@@ -29,6 +29,7 @@ import tomllib
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Iterable
@@ -37,8 +38,15 @@ import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
 from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight, check_pinger, ping_spread
-from sblsim.models.acoustics.sound_speed import PROFILE_SOURCES
-from sblsim.models.declarations import SEED_NAMES, SEED_PARAMETERS, UNITS, ModelError, Variable, resolve_parameters
+from sblsim.models.declarations import (
+    SEED_NAMES,
+    SEED_PARAMETERS,
+    UNITS,
+    FileKey,
+    ModelError,
+    Variable,
+    resolve_parameters,
+)
 from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
 from sblsim.models.receiver.core import clock_parameters
@@ -57,26 +65,8 @@ SECTIONS = ("run", "simulation", *COMPONENTS)
 MIN_SIGMA = 1e-3  # floor of the tied R standard deviations [m]
 
 
-#: Keys holding file paths: relative paths are taken from the TOML file's folder
-#: (or the working directory for ``--set``) and stored absolute in the resolved config.
-PATH_KEYS = (("target", "trajectory_file"), ("acoustics", "sound_speed_profile"))
-
-
-def _is_path(section: str, value: Any) -> bool:
-    special = section == "acoustics" and (value in ("", *PROFILE_SOURCES) or str(value).startswith("ctd:"))
-    return isinstance(value, str) and bool(value) and not special
-
-
-def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
-    for section, name in PATH_KEYS:
-        value = raw.get(section, {}).get(name) if isinstance(raw.get(section), dict) else None
-        if _is_path(section, value):
-            raw[section][name] = str((base / Path(value).expanduser()).resolve())
-    sim = raw.get("simulation")
-    for prefix in (EXTERNAL_PREFIX, MODEL_PREFIX):
-        path = external_path(sim.get("receiver"), prefix) if isinstance(sim, dict) else ""
-        if path:
-            sim["receiver"] = f"{prefix}{(base / Path(path).expanduser()).resolve()}"
+EXTERNAL_PREFIX = "fmu:"
+MODEL_PREFIX = "model:"
 
 
 RUN_VARIABLES: tuple[Variable, ...] = (
@@ -95,6 +85,7 @@ SIMULATION_VARIABLES: tuple[Variable, ...] = (
                          "FMUs: a step ends at each acoustic arrival)",
              choices=ALGORITHMS, scope="config"),
     Variable("receiver", "parameter", "String", "ekf", scope="config",
+             file=FileKey(prefixes=(MODEL_PREFIX, EXTERNAL_PREFIX)),
              description="Receiver component: ekf (the paper's), ekf-seq, ukf, lsq, model:PATH.py or fmu:PATH"),
     Variable("fmi_version", "parameter", "Integer", 2, scope="config", min=2, max=3,
              description="FMI version of the fmu engine's FMUs: 2, or 3 (the fmi3 folder of the FMU folder; "
@@ -118,8 +109,6 @@ KEY_TIES = ((("acoustics", "usbl_angle_sigma_deg"), ("platform", "usbl_angle_sig
             (("receiver", "sound_speed_assumed"), ("acoustics", "sound_speed_assumed")),
             (("receiver", "ranging"), ("acoustics", "ranging")),
             (("acoustics", "beaufort"), ("platform", "beaufort")))
-EXTERNAL_PREFIX = "fmu:"
-MODEL_PREFIX = "model:"
 
 
 def external_path(value: Any, prefix: str = EXTERNAL_PREFIX) -> str:
@@ -169,6 +158,55 @@ def section_variables(section: str, receiver: str = "ekf") -> tuple[Variable, ..
     if section in COMPONENTS:
         return tuple(v for v in COMPONENTS[section].config_parameters() if v.name not in SEED_NAMES)
     raise ConfigError(f"{section}: unknown section; one of {', '.join(SECTIONS)}")
+
+
+@lru_cache(maxsize=1)
+def _declared_file_keys() -> tuple[tuple[tuple[str, str], FileKey], ...]:
+    found: dict[tuple[str, str], FileKey] = {}
+    for section in SECTIONS:
+        for receiver in (RECEIVER_MODELS if section == "receiver" else ("ekf",)):
+            found.update({(section, v.name): v.file for v in section_variables(section, receiver) if v.file})
+    return tuple(found.items())
+
+
+def file_keys() -> dict[tuple[str, str], FileKey]:
+    """Every configuration key declared to name a file (:attr:`sblsim.models.declarations.Variable.file`), by
+    ``(section, key)``: the one list every rule for files reads. The ``receiver`` section's are those of every
+    built-in receiver (a user's receiver is never imported to learn its keys: its own are taken as given).
+
+    Returns
+    -------
+    dict
+        ``(section, key)`` -> its :class:`~sblsim.models.declarations.FileKey`.
+    """
+    return dict(_declared_file_keys())
+
+
+def named_files(raw: Mapping[str, Any]) -> list[tuple[str, str, str]]:
+    """The files a raw configuration names: ``(section, key, path)`` of every declared file key (:func:`file_keys`)
+    whose value names a file, in the order of the sections.
+
+    Returns
+    -------
+    list of tuple
+        Section, key and the path as written (``fmu:``/``model:`` left out).
+    """
+    out = []
+    for (section, name), key in file_keys().items():
+        table = raw.get(section)
+        path = key.path(table.get(name)) if isinstance(table, Mapping) else ""
+        if path:
+            out.append((section, name, path))
+    return out
+
+
+def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
+    """Make every file a raw configuration names absolute (in place): a relative path is taken from ``base``, the
+    folder of the file that gives it (the working directory for ``--set`` and the API)."""
+    keys = file_keys()
+    for section, name, path in named_files(raw):
+        value = raw[section][name]
+        raw[section][name] = keys[section, name].with_path(value, str((base / Path(path).expanduser()).resolve()))
 
 
 def external_receiver_variables(path: Path) -> tuple[Variable, ...]:

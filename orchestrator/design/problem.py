@@ -11,7 +11,8 @@ choices), checked by :func:`check_problem` with one-line errors naming ``section
 docs' table of keys is made from the same declarations (docs/design.md).
 
 A design file is data: it never names a file that is read or written (the base scenario is a built-in one, or the
-command line's ``--scenario``), and the overrides it gives refuse the keys that name files or code.
+command line's ``--scenario``), and the overrides it gives refuse a value that names a file or code in any key
+declared to take one (:func:`sblsim.orchestrator.cosim.config.file_keys`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from sblsim.models.declarations import ModelError, Variable, shown
 from sblsim.models.design.criteria import CRITERIA, DIMENSIONS
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, PATH_KEYS
+from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, named_files, parse_override
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.tables import regular_file
 
@@ -47,8 +48,6 @@ GRADES: dict[str, dict[str, tuple[str, float]]] = {
                   "survey": ("platform.usbl_angle_sigma_deg", 0.14)},
     "ranging": {"cw": ("acoustics.sigma_range", 0.1), "wide-band": ("acoustics.sigma_range", 0.02)},
 }
-#: The keys an override of a design file may not set: they name files or code.
-FILE_KEYS = {f"{section}.{key}" for section, key in PATH_KEYS} | {"simulation.receiver", "receiver"}
 #: The largest design file read [bytes].
 MAX_BYTES = 1 << 20
 #: The most vertices of a polygon, areas to avoid, overrides and vehicle depths.
@@ -274,9 +273,13 @@ def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) ->
         key = item.split("=", 1)[0].strip()
         if "=" not in item or not key:
             raise ConfigError(f"design.set: expected 'section.key=value', got {item[:60]!r}")
-        if key in FILE_KEYS:
-            raise ConfigError(f"design.set: {key} names a file or code, which a design file may not (give a "
-                              "configuration with --scenario)")
+        try:
+            section, name, value = parse_override(item)
+        except ConfigError:
+            continue  # the scenario's overrides name it when they are applied
+        if named_files({section: {name: value}}):  # a declared file key naming a file (or code): never opened
+            raise ConfigError(f"design.set: {section}.{name} names a file or code, which a design file may not (give "
+                              "a configuration with --scenario)")
     low, high = candidates["transponders"]
     if low > high:
         raise ConfigError(f"candidates.transponders: the fewest ({low}) is above the most ({high})")
@@ -446,5 +449,5 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
     return np.vstack([np.column_stack([plane, np.full(len(plane), d)]) for d in depths])
 
 
-__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "FILE_KEYS", "GRADES", "Key", "SECTIONS", "SYSTEM_NAMES",
+__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "SECTIONS", "SYSTEM_NAMES",
            "check_problem", "defaults", "polygon", "read_problem", "signed_distance", "work_area_points"]

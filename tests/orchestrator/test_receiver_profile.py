@@ -148,7 +148,7 @@ def test_acoustics_gives_the_receiver_the_channels_table():
 @pytest.mark.parametrize("value, message", [
     ("ctd:NOPE", "receiver.sound_speed_profile: unknown cast 'NOPE'"),
     ("constant", "receiver.sound_speed_profile: 'constant' is not a receiver's profile; one of assumed,"),
-    ("no-such-cast.csv", "receiver.sound_speed_profile: no such file 'no-such-cast.csv'; use assumed,"),
+    ("no-such-cast.csv", ("receiver.sound_speed_profile: no such file '", "no-such-cast.csv'; use assumed,")),
     ("table", "receiver.sound_speed_table: sound_speed_profile = table needs rows"),
 ])
 def test_a_bad_profile_is_refused_in_one_line(value, message, tmp_path, capsys):
@@ -157,7 +157,8 @@ def test_a_bad_profile_is_refused_in_one_line(value, message, tmp_path, capsys):
                  f"receiver.sound_speed_profile={value}", "--out", str(out)])
     err = capsys.readouterr().err.strip()
     assert code == 2 and not out.exists()
-    assert len(err.splitlines()) == 1 and message in err, err
+    needles = message if isinstance(message, tuple) else (message,)  # a relative path is made absolute
+    assert len(err.splitlines()) == 1 and all(needle in err for needle in needles), err
 
 
 @pytest.mark.slow

@@ -181,6 +181,28 @@ def test_files_a_log_names_are_not_opened(exported, folders, suffix):
     assert config["target"]["trajectory_file"] == "" and config["acoustics"]["sound_speed_profile"] == "constant"
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_logs_receiver_naming_a_private_csv_is_refused_unopened(exported, folders, suffix):
+    """``receiver.sound_speed_profile`` is a file key as the channel's is: a log naming a CSV there is refused in one
+    line (a replay needs the receiver's profile, so none is put in its place), the file never opened, nothing
+    written; the user's own ``--set`` of the key replaces it."""
+    work, outside = folders
+
+    def edit(raw):
+        raw["receiver"]["sound_speed_profile"] = str(outside / "profile.csv")
+
+    log = hostile_log(exported[suffix], work, edit)
+    proc, seen = audited(work, outside, "replay", log.name, "--out", "r")
+    assert_one_line(proc, "receiver.sound_speed_profile")
+    assert seen == [] and str(outside) not in proc.stderr
+    assert sorted(p.name for p in work.iterdir()) == [log.name]  # nothing written
+    proc, seen = audited(work, outside, "replay", log.name, "--out", "r", "--set",
+                         "receiver.sound_speed_profile=assumed")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert seen == []
+    assert tomllib.loads((work / "r" / "config.toml").read_text())["receiver"]["sound_speed_profile"] == "assumed"
+
+
 def test_controls_the_hook_sees_a_model_and_a_file_given_on_the_command_line(exported, folders):
     """What the user names is used, and said: the model is imported (the canary) and its file opened, the
     trajectory file read; so the empty records above are not the hook's blindness."""
