@@ -1,0 +1,215 @@
+"""Time the robust smoother's track of a long synthetic record (issue 67, "Scale") on one core: 10⁶ pings, a month
+of a 2.5 s tag.
+
+Run:  python benchmarks/bench_tracking_scale.py [--pings N] [--replay-pings N] [--seed S]
+
+The record (:func:`simulate`): a tag on a stable 2.5 s interval (its clock's jitter and drift as the tracker's
+model says, :func:`~sblsim.models.tracking.simulate.simulate_pings`, seeded) moving along a Lissajous path of
+±150 m (periods 1 h and 1.41 h, up to 0.26 m/s) inside 8 receivers on a 200 m circle, each hearing each ping with
+probability 0.8 with 0.15 ms of timing noise, 1 % of the arrivals late by 2 to 20 ms (multipath).
+
+What is timed, at N/100, N/10 and N pings (each size once, after a first untimed run at the smallest that loads
+the modules), the sound speed given (the simulation's): the **robust smoother's track** = the single-ping fixes
+(:func:`fix_pings`), the tracker's settings and the ping schedule (the replay's own functions), and
+:func:`robust_track` without the RTS smoother's start (the fixes' anchored start, its graduated start, each
+screened, the better one on to convergence, the covariances by block cyclic reduction); the motion noise is
+the simulation's (no EM). Each stage's time and the peak resident memory over the track (the process's high-water
+mark, reset before it where Linux allows, else since the start); the per-ping time against the smallest size's
+(1.00 for linear scaling); at the smallest size, the EKF with the RTS smoother on the same pings (a ping-by-ping
+loop) per ping beside it; and the whole replay (``sblsim.replay_toa`` from files: the EM of the motion noise,
+the EKF, the sequential EKF, the UKF, both smoothers, the quality marks, scoring) at ``--replay-pings``. A JSON
+line last.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # one core, before numpy loads
+    os.environ.setdefault(_name, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import resource  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+#: The issue's targets for the robust smoother's track of 10⁶ pings on one core: seconds and bytes.
+TARGET_S = 60.0
+TARGET_BYTES = 2 * 1024**3
+#: The record's tag and array (module docstring).
+SOUND_SPEED = 1480.0
+INTERVAL_S = 2.5
+RADIUS_M = 200.0
+AMPLITUDE_M = 150.0
+PERIOD_S = 3600.0
+DETECTION = 0.8
+MULTIPATH = 0.01
+
+
+def simulate(n_pings: int, seed: int = 0):
+    """The synthetic record (module docstring): times of arrival (n_pings, 8) [s], receivers (8, 2) [m], the tag's
+    positions (n_pings, 2) [m] and emission times (n_pings,) [s], and the tracker's settings it was drawn with."""
+    from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.orchestrator.tracks.track import SIGMA_TOA
+
+    angles = np.arange(8) * np.pi / 4
+    receivers = RADIUS_M * np.c_[np.cos(angles), np.sin(angles)]
+
+    def path(t):
+        w = 2 * np.pi / PERIOD_S
+        return AMPLITUDE_M * np.c_[np.sin(w * t), np.sin(w * t / np.sqrt(2) + 1.0)]
+
+    settings = tt.TrackerSettings(sound_speed=SOUND_SPEED, sigma_toa=SIGMA_TOA, interval=INTERVAL_S)
+    rng = np.random.default_rng(seed)
+    toa, truth, emissions = tt.simulate_pings(receivers, n_pings, settings, rng, detection=DETECTION, path=path)
+    late = np.isfinite(toa) & (rng.random(toa.shape) < MULTIPATH)
+    toa[late] += rng.uniform(2e-3, 2e-2, int(late.sum()))
+    return toa, receivers, truth, emissions, settings
+
+
+def _reset_peak() -> bool:
+    """Reset the process's resident high-water mark (Linux's ``clear_refs`` 5); whether it could."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+def _peak_bytes() -> int:
+    """The process's resident high-water mark [bytes] (``VmHWM``, else ``ru_maxrss``)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> dict:
+    """The robust smoother's track of a record (module docstring) with each stage's time [s]: ``fixes_s``,
+    ``schedule_s`` (the settings and the schedule), ``robust_s`` (:func:`robust_track`), ``track_s`` (their sum),
+    ``peak_bytes`` (the high-water mark over them), ``peak_reset`` (whether it was reset before) and ``robust``
+    (the :class:`RobustTrack`)."""
+    from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.orchestrator.tracks.track import SIGMA_TOA, ping_schedule, tracker_settings
+
+    reset = _reset_peak()
+    start = time.perf_counter()
+    fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
+    fixed = time.perf_counter()
+    settings = replace(tracker_settings(sound_speed, fe), acceleration_psd=acceleration_psd)
+    schedule, _ = ping_schedule(toa, receivers, settings)
+    settings = replace(settings, interval=schedule.interval)
+    scheduled = time.perf_counter()
+    robust = tt.robust_track(toa, receivers, settings, (fx, fe, fused), None, schedule)
+    done = time.perf_counter()
+    return {"fixes_s": fixed - start, "schedule_s": scheduled - fixed, "robust_s": done - scheduled,
+            "track_s": done - start, "peak_bytes": _peak_bytes(), "peak_reset": reset, "robust": robust}
+
+
+def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> float:
+    """The EKF with the RTS smoother on the same pings, from the same fixes and schedule [s] (their time alone)."""
+    from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.orchestrator.tracks.track import SIGMA_TOA, ping_schedule, tracker_settings
+
+    fx, fe, fc, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
+    settings = replace(tracker_settings(sound_speed, fe), acceleration_psd=acceleration_psd)
+    schedule, _ = ping_schedule(toa, receivers, settings)
+    tracker = tt.ToaTracker(receivers, replace(settings, interval=schedule.interval))
+    start = time.perf_counter()
+    tracker.smooth(tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule))
+    return time.perf_counter() - start
+
+
+def replay(n_pings: int, seed: int = 0) -> dict:
+    """The whole replay (``sblsim.replay_toa``, the sound speed given) of the record of ``n_pings`` written to files:
+    its time [s] (``replay_s``, the files' reading among it) and the track's RMS error [m] (``replay_rms_m``)."""
+    import sblsim
+
+    toa, receivers, truth, emissions, settings = simulate(n_pings, seed)
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        names = [f"R{k + 1}" for k in range(len(receivers))]
+        rows = [" ".join(names)] + [" ".join("NA" if not np.isfinite(v) else repr(float(v)) for v in row)
+                                    for row in toa]
+        (folder / "toa.txt").write_text("\n".join(rows) + "\n")
+        (folder / "receivers.csv").write_text("name,x_m,y_m\n" + "".join(
+            f"{n},{float(x)!r},{float(y)!r}\n" for n, (x, y) in zip(names, receivers)))
+        (folder / "truth.txt").write_text('"x" "y" "t"\n' + "".join(
+            f"{float(x)!r} {float(y)!r} {float(t)!r}\n" for (x, y), t in zip(truth, emissions)))
+        start = time.perf_counter()
+        result = sblsim.replay_toa(folder / "toa.txt", receivers=folder / "receivers.csv",
+                                   truth=folder / "truth.txt", sound_speed=settings.sound_speed)
+        return {"replay_s": time.perf_counter() - start, "replay_rms_m": result.score["rms_m"]}
+
+
+def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3) -> dict:
+    """The timings (module docstring) at ``sizes`` sizes up to ``n_pings`` (each a tenth of the next), and the whole
+    replay at ``replay_pings`` (0: not run). Returns the JSON's fields and ``runs`` (per size: ``pings``, the
+    stages' times, ``per_ping_us`` [µs], ``ratio`` to the smallest size's per-ping time, ``peak_bytes``,
+    ``rms_m`` of the robust track against the simulated truth, ``sigma_m`` the timing noise's own position scale
+    (σ_toa c), ``iterations``, ``start``) and ``robust`` (the largest size's :class:`RobustTrack`)."""
+    counts = sorted({max(n_pings // 10**k, 100) for k in range(sizes)})
+    small = simulate(counts[0], seed)
+    track(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)  # loads the modules, untimed
+    ekf_s = ekf_rts(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)
+    runs, robust = [], None
+    for count in counts:
+        toa, receivers, truth, _, settings = simulate(count, seed)
+        r = track(toa, receivers, SOUND_SPEED, settings.acceleration_psd)
+        robust = r.pop("robust")
+        error = np.hypot(*(robust.x[:, :2] - truth).T)
+        runs.append({"pings": count, **r, "per_ping_us": 1e6 * r["track_s"] / count,
+                     "rms_m": float(np.sqrt(np.mean(error**2))), "sigma_m": settings.sigma_toa * SOUND_SPEED,
+                     "iterations": robust.iterations, "start": robust.start_names[robust.start],
+                     "arrivals": int(np.isfinite(toa).sum())})
+        del toa, receivers, truth
+    for run in runs:
+        run["ratio"] = run["per_ping_us"] / runs[0]["per_ping_us"]
+    last = runs[-1]
+    out = {"pings": last["pings"], "track_s": last["track_s"], "fixes_s": last["fixes_s"],
+           "schedule_s": last["schedule_s"], "robust_s": last["robust_s"], "peak_gib": last["peak_bytes"] / 1024**3,
+           "target_s": TARGET_S, "target_gib": TARGET_BYTES / 1024**3,
+           "per_ping_us": [run["per_ping_us"] for run in runs], "ratio": [run["ratio"] for run in runs],
+           "sizes": counts, "rms_m": last["rms_m"], "ekf_rts_per_ping_us": 1e6 * ekf_s / counts[0],
+           "cores": os.cpu_count(), "runs": runs, "robust": robust}
+    if replay_pings:
+        out |= {"replay_pings": replay_pings, **replay(replay_pings, seed)}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--pings", type=int, default=10**6, help="the largest record's pings (default 10⁶)")
+    parser.add_argument("--replay-pings", type=int, default=10**4, help="the whole replay's pings (0: not run)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    if args.pings < 100:
+        parser.error("--pings: must be at least 100")
+    if args.replay_pings < 0:
+        parser.error("--replay-pings: must be 0 or more")
+    r = measure(args.pings, args.seed, args.replay_pings)
+    for run in r["runs"]:
+        print(f"{run['pings']:>9,} pings ({run['arrivals']:,} arrivals): the track {run['track_s']:7.2f} s (fixes "
+              f"{run['fixes_s']:.2f}, schedule {run['schedule_s']:.2f}, robust_track {run['robust_s']:.2f}; "
+              f"{run['iterations']} steps from the {run['start']} start), {run['per_ping_us']:.1f} µs per ping "
+              f"({run['ratio']:.2f}× the smallest), peak {run['peak_bytes'] / 1024**3:.2f} GiB"
+              f"{'' if run['peak_reset'] else ' (since the start)'}; RMS error {run['rms_m']:.3f} m")
+    print(f"the EKF with the RTS smoother at {r['sizes'][0]:,} pings: {r['ekf_rts_per_ping_us']:.1f} µs per ping; "
+          f"targets at 10⁶ pings: {r['target_s']:g} s and {r['target_gib']:g} GiB on one core")
+    if "replay_s" in r:
+        print(f"the whole replay (EM, EKF, sequential EKF, UKF, both smoothers, quality, scoring) of "
+              f"{r['replay_pings']:,} pings: {r['replay_s']:.2f} s, RMS error {r['replay_rms_m']:.3f} m")
+    r.pop("robust")
+    print(json.dumps(r))
+
+
+if __name__ == "__main__":
+    main()
