@@ -49,6 +49,7 @@ from sblsim.orchestrator.commands.replay import (
 )
 from sblsim.orchestrator.commands.run import RunResult, run
 from sblsim.orchestrator.commands.sync import SyncResult, sync
+from sblsim.orchestrator.commands.toa import ToaResult, toa
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, ConfigError
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config
@@ -57,7 +58,7 @@ __all__ = [
     "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign",
     "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
-    "TrackResult", "TagsResult", "sync", "SyncResult",
+    "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS",
 ]

@@ -123,4 +123,40 @@ def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, sid
                          echo[order], sound_speed)
 
 
-__all__ = ["SimulatedSync", "simulate_sync"]
+@dataclass
+class TagDetections:
+    """A tag's pings as raw detections on the receivers' own clocks (:func:`tag_detections`): ``receiver``,
+    ``time`` [s] (the receiver's clock), ``ping`` (the simulator's row) and ``echo`` (a multipath copy), each (n,), in
+    each receiver's order of logging."""
+
+    receiver: np.ndarray
+    time: np.ndarray
+    ping: np.ndarray
+    echo: np.ndarray
+
+
+def tag_detections(toa: np.ndarray, offset0: np.ndarray, drift: np.ndarray, rng: np.random.Generator,
+                   echo_share: float = 0.0, echo_delay: tuple[float, float] = (0.5e-3, 50e-3)) -> TagDetections:
+    """A times-of-arrival matrix in true time (e.g. :func:`sblsim.models.tracking.simulate.simulate_pings`'s) as
+    the receivers log it: each arrival ``τ`` read on receiver ``j``'s clock as ``τ + a_j + b_j τ`` (the module
+    docstring's clocks: ``offset0`` (R,) [s], ``drift`` (R,) [s/s]); a share ``echo_share`` of the arrivals followed
+    by a multipath echo ``U(echo_delay)`` [s] later on the same receiver.
+
+    Returns
+    -------
+    TagDetections
+    """
+    ping, rec = np.nonzero(np.isfinite(toa))
+    tau = toa[ping, rec]
+    echo = np.zeros(len(tau), bool)
+    if echo_share > 0:
+        pick = rng.random(len(tau)) < echo_share
+        ping, rec = np.r_[ping, ping[pick]], np.r_[rec, rec[pick]]
+        tau = np.r_[tau, tau[pick] + rng.uniform(*echo_delay, pick.sum())]
+        echo = np.r_[echo, np.ones(pick.sum(), bool)]
+    clock = tau + offset0[rec] + drift[rec] * tau
+    order = np.lexsort((clock, rec))
+    return TagDetections(rec[order], clock[order], ping[order], echo[order])
+
+
+__all__ = ["SimulatedSync", "TagDetections", "simulate_sync", "tag_detections"]

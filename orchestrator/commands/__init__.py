@@ -1,5 +1,5 @@
-"""The commands a user types, one module each: ``sblsim run``, ``replay``, ``sync``, ``calibrate``, ``compare``,
-``budget``, ``map``, ``design``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and ``codegen``.
+"""The commands a user types, one module each: ``sblsim run``, ``replay``, ``sync``, ``toa``, ``calibrate``,
+``compare``, ``budget``, ``map``, ``design``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and ``codegen``.
 
 A command's module holds what the command is, from Python and from the command line:
 
@@ -37,9 +37,10 @@ from sblsim.orchestrator.commands import (
     run,
     ssp,
     sync,
+    toa,
 )
 from sblsim.orchestrator.commands import map as accuracy_map
 
 #: The commands, in the order of ``sblsim --help``: name -> module.
 COMMANDS: dict[str, ModuleType] = {module.NAME: module for module in (
-    run, replay, sync, calibrate, compare, budget, accuracy_map, design, campaign, ssp, analyze, fmus, codegen)}
+    run, replay, sync, toa, calibrate, compare, budget, accuracy_map, design, campaign, ssp, analyze, fmus, codegen)}

@@ -24,7 +24,7 @@ from importlib.metadata import PackageNotFoundError, version
 __all__ = [
     "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
-    "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "sync", "SyncResult",
+    "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS", "__version__",
 ]

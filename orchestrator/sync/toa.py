@@ -1,0 +1,311 @@
+"""``sblsim toa``'s work: one tag's raw detections on the synchronised clocks, grouped into pings, as the times-of-
+arrival matrix the tracker reads (``toa.txt``), with ``pings.csv``, ``receivers.csv`` and ``toa.json``.
+
+The clocks are read back from a synchronisation's folder (``sblsim sync --out DIR``): its ``offsets.csv`` only, by
+that fixed name, as hostile input like any table (bounded, every cell checked, nothing in it taken as a path); each
+receiver's offset is the file's knots interpolated at the detection's own time (the sync's model: piecewise linear,
+continuous across the bins), extended by at most one bin beyond the synchronised span (detections further out are
+left out and counted). The grouping is :mod:`sblsim.models.sync.pings`'s, its window the array's largest travel time
+at the slowest sound speed allowed (1,300 m/s) plus :data:`TOLERANCE`, the echo limit the shortest burst interval
+(the ping type's, else as the detections show it) less that window.
+"""
+
+from __future__ import annotations
+
+import json
+import time as clock
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.sync.pings import build_pings, inferred_shortest, largest_travel_time
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.tables import NUMBER
+from sblsim.orchestrator.sync.detections import (
+    IDENTIFIER,
+    MAX_EPOCH,
+    Detections,
+    _numbers,
+    _pattern,
+    _table,
+)
+
+#: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
+SLOWEST_SOUND_SPEED = 1300.0
+TOLERANCE = 0.02
+#: The most rows of ``offsets.csv`` read (receivers × bins) and the largest offset [s] it may hold.
+MAX_OFFSET_ROWS = 1_000_000
+MAX_OFFSET = 86400.0
+#: The sensor units given a column name of their own in ``pings.csv`` (others: ``sensor_<unit>``).
+SENSOR_COLUMNS = {"m": "depth_m", "°c": "temperature_c", "c": "temperature_c", "m/s²": "acceleration_m_s2",
+                  "m/s2": "acceleration_m_s2"}
+
+
+@dataclass
+class Clocks:
+    """A synchronisation read back: ``receivers`` (R,) the synchronised receivers, ``edges`` (K+1,) [s since 1970
+    UTC] the bins' edges, ``knots`` (R, K+1) [s] each receiver's offset at each edge."""
+
+    receivers: list[str]
+    edges: np.ndarray
+    knots: np.ndarray
+
+    def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+        """(n,) [s] the offset of ``receiver`` (n,) int (rows of :attr:`knots`) at its own clock's ``time`` (n,)
+        [s]: the knots interpolated, extended with the end bin's drift."""
+        width = np.diff(self.edges)
+        k = np.clip(np.searchsorted(self.edges, time, side="right") - 1, 0, len(width) - 1)
+        f = (time - self.edges[k]) / width[k]
+        return self.knots[receiver, k] * (1 - f) + self.knots[receiver, k + 1] * f
+
+
+def read_clocks(folder: Path | str) -> Clocks:
+    """Read ``offsets.csv`` of a synchronisation's folder (``receiver``, ``bin``, ``start``, ``end``,
+    ``offset_start_s``, ``offset_end_s``; other columns ignored).
+
+    Raises
+    ------
+    ModelError
+        One line: the folder or its file missing, a cell outside its pattern or range, bins that are not the same
+        contiguous edges for every receiver, an offset not continuous across a bin's edge.
+    """
+    folder = Path(folder)
+    what = "sync"
+    if not folder.is_dir():
+        raise ModelError(f"{what}: {str(folder)!r} is not a folder; allowed: the folder sblsim sync --out wrote "
+                         "(its offsets.csv)")
+    path = folder / "offsets.csv"
+    if not path.exists():
+        raise ModelError(f"{what}: {str(folder)!r} holds no offsets.csv; allowed: the folder sblsim sync --out wrote")
+    header, body, lines = _table(path, what, MAX_OFFSET_ROWS)
+    name = str(path)
+    lower = [h.lower() for h in header]
+    needed = ("receiver", "bin", "start", "end", "offset_start_s", "offset_end_s")
+    missing = [c for c in needed if c not in lower]
+    if missing or not len(body):
+        raise ModelError(f"{what}: {name!r}: needs the columns {', '.join(needed)} and rows (sblsim sync's "
+                         f"offsets.csv); {', '.join(missing) or 'no rows'} missing")
+    col = {c: lower.index(c) for c in needed}
+    receiver = _pattern(body[col["receiver"]], IDENTIFIER, what, name, lines, "receiver",
+                        "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").to_numpy()
+    bins = _numbers(body[col["bin"]], what, name, lines, "bin", 0, MAX_OFFSET_ROWS)
+    if (bins != np.round(bins)).any():
+        k = int(np.flatnonzero(bins != np.round(bins))[0])
+        raise ModelError(f"{what}: {name!r} line {lines[k]} column bin: {bins[k]:g} is not allowed; allowed: a whole "
+                         "number")
+    start = _numbers(body[col["start"]], what, name, lines, "start", 0.0, float(MAX_EPOCH), unit="s")
+    end = _numbers(body[col["end"]], what, name, lines, "end", 0.0, float(MAX_EPOCH), unit="s")
+    first = _numbers(body[col["offset_start_s"]], what, name, lines, "offset_start_s", -MAX_OFFSET, MAX_OFFSET,
+                     unit="s")
+    last = _numbers(body[col["offset_end_s"]], what, name, lines, "offset_end_s", -MAX_OFFSET, MAX_OFFSET, unit="s")
+    names = list(dict.fromkeys(receiver.tolist()))
+    index = {n: j for j, n in enumerate(names)}
+    j = np.array([index[n] for n in receiver])
+    n_bins = int(bins.max()) + 1
+    if len(body) != len(names) * n_bins:
+        raise ModelError(f"{what}: {name!r} has {len(body)} rows for {len(names)} receivers and {n_bins} bins; "
+                         "allowed: one row per receiver and bin (sblsim sync's offsets.csv)")
+    seen = np.zeros((len(names), n_bins), bool)
+    seen[j, bins.astype(np.int64)] = True
+    if not seen.all():
+        raise ModelError(f"{what}: {name!r}: receiver {names[int(np.argwhere(~seen)[0][0])]} lacks a bin or has one "
+                         "twice; allowed: one row per receiver and bin")
+    b = bins.astype(np.int64)
+    edges = np.full(n_bins + 1, np.nan)
+    edges[b] = start
+    edges[b + 1] = end
+    if not (np.allclose(edges[b], start, rtol=0, atol=1e-6) and np.allclose(edges[b + 1], end, rtol=0, atol=1e-6)
+            and (np.diff(edges) > 0).all()):
+        raise ModelError(f"{what}: {name!r}: the bins' start and end are not the same increasing edges for every "
+                         "receiver; allowed: sblsim sync's offsets.csv")
+    knots = np.full((len(names), n_bins + 1), np.nan)
+    knots[j, b] = first
+    knots[j, b + 1] = last
+    if not (np.allclose(knots[j, b], first, rtol=0, atol=1e-6) and np.allclose(knots[j, b + 1], last, rtol=0,
+                                                                                  atol=1e-6)):
+        raise ModelError(f"{what}: {name!r}: an offset is not continuous across a bin's edge (a bin's end differs "
+                         "from the next bin's start); allowed: sblsim sync's offsets.csv")
+    return Clocks(names, edges, knots)
+
+
+@dataclass
+class ToaOutcome:
+    """What :func:`build_toa` computed: ``toa`` (P, R) [s] on the base ``origin`` [s since 1970 UTC], ``names`` the
+    receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``) and ``summary`` (``toa.json``)."""
+
+    toa: np.ndarray
+    names: list[str]
+    positions: np.ndarray
+    pings: pd.DataFrame
+    summary: dict[str, Any]
+    origin: float
+
+
+def tags_present(detections: Detections, limit: int = 8) -> str:
+    """The tags with the most detections, for a refusal's allowed values."""
+    counts = detections.frame["tag"].value_counts()
+    return ", ".join(f"{t} ({n})" for t, n in counts.head(limit).items())
+
+
+def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks, tag: str,
+              shortest: float | None = None, ping_type: dict[str, Any] | None = None) -> ToaOutcome:
+    """One tag's times-of-arrival matrix (the module docstring).
+
+    Parameters
+    ----------
+    detections : Detections
+        The raw detections (:func:`~sblsim.orchestrator.sync.detections.read_detections`).
+    hydrophones : pandas.DataFrame
+        The receivers (:func:`~sblsim.orchestrator.sync.detections.read_hydrophones`).
+    clocks : Clocks
+        The synchronisation (:func:`read_clocks`).
+    tag : str
+        The tag's id.
+    shortest : float, optional
+        [s] the tag's shortest burst interval; default as the detections show it
+        (:func:`~sblsim.models.sync.pings.inferred_shortest`).
+    ping_type : dict, optional
+        The ping type's options as given, recorded in ``toa.json``.
+
+    Returns
+    -------
+    ToaOutcome
+
+    Raises
+    ------
+    ModelError
+        A tag never detected, or detected at no synchronised receiver of the table; too few detections to infer
+        the shortest interval; a shortest interval not above twice the window.
+    """
+    started = clock.perf_counter()
+    frame = detections.frame
+    mine = frame[frame["tag"] == tag]
+    if not len(mine):
+        raise ModelError(f"tag: {tag!r} is never detected in {detections.source!r}; allowed: one of "
+                         f"{tags_present(detections)}")
+    table = {n: k for k, n in enumerate(hydrophones["receiver"])}
+    synced = {n: k for k, n in enumerate(clocks.receivers)}
+    xyz = hydrophones[["x", "y", "z"]].to_numpy(float)
+    dim = 3 if np.isfinite(xyz[:, 2]).all() else 2
+    columns = [n for n in hydrophones["receiver"] if n in synced]
+    if len(columns) < 2:
+        raise ModelError("sync: fewer than two receivers of the receivers table are in the synchronisation's "
+                         "offsets.csv; allowed: the receivers table the synchronisation was made with")
+    column = {n: k for k, n in enumerate(columns)}
+    positions = xyz[[table[n] for n in columns], :dim]
+    unknown = sorted(set(mine["receiver"]) - set(table))
+    unsynced = sorted(set(mine["receiver"]) & set(table) - set(synced))
+    at = mine["receiver"].isin(column).to_numpy()
+    use = mine[at]
+    if not len(use):
+        raise ModelError(f"tag: {tag!r} is detected only at receivers that are not synchronised or not in the "
+                         f"receivers table ({', '.join(sorted(set(mine['receiver']))[:10])})")
+    j_sync = use["receiver"].map(synced).to_numpy(np.int64)
+    raw = use["time"].to_numpy(float)
+    width = float(np.max(np.diff(clocks.edges)))
+    inside = (raw >= clocks.edges[0] - width) & (raw <= clocks.edges[-1] + width)
+    times = raw - clocks.offset(j_sync, raw)
+    receiver = use["receiver"].map(column).to_numpy(np.int64)
+    window = largest_travel_time(positions, SLOWEST_SOUND_SPEED) + TOLERANCE
+    source = "given"
+    if shortest is None:
+        shortest = inferred_shortest(receiver[inside], times[inside], window)
+        source = "inferred"
+        if shortest is None:
+            raise ModelError(f"tag: {tag!r} has too few successive detections at one receiver to show its shortest "
+                             "burst interval; allowed: give it (--ping-type rbi --burst-interval MIN:MAX)")
+    pings = build_pings(receiver[inside], times[inside], len(columns), window, shortest)
+    toa = pings.toa
+    order = np.argsort(np.nanmin(toa, axis=1), kind="stable")  # rows by first arrival (they are already)
+    toa = toa[order]
+    first = np.nanmin(toa, axis=1)
+    origin = float(np.floor(first[0]))
+    heard = np.isfinite(toa)
+    table_pings = pd.DataFrame({
+        "ping": np.arange(len(toa)), "time": first, "time_toa": first - origin,
+        "receivers": heard.sum(axis=1),
+        "heard": [";".join(columns[k] for k in np.flatnonzero(h)) for h in heard],
+        "spread_s": np.nanmax(toa, axis=1) - first})
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    ping_of = np.full(len(use), -1, np.int64)
+    kept_rows = np.flatnonzero(inside)
+    ping_of[kept_rows[pings.ping >= 0]] = rank[pings.ping[pings.ping >= 0]]
+    sensors = _sensors(use, ping_of, len(toa))
+    for key, values in sensors.items():
+        table_pings[key] = values
+    echoes = np.zeros(len(use), bool)
+    echoes[kept_rows] = pings.echo
+    per_receiver = pd.Series(use["receiver"].to_numpy()[echoes]).value_counts()
+    summary = {
+        "tag": tag, "detections": {"file": detections.source, "format": detections.format, "of_tag": int(len(mine)),
+                                   "used": int(inside.sum() - pings.echo.sum()),
+                                   "multipath": int(pings.echo.sum()),
+                                   "multipath_per_receiver": {str(k): int(v) for k, v in per_receiver.items()},
+                                   "outside_sync_span": int((~inside).sum()),
+                                   "at_receivers_not_in_table": int(mine["receiver"].isin(unknown).sum()),
+                                   "at_receivers_not_synchronised": int(mine["receiver"].isin(unsynced).sum())},
+        "receivers_not_in_table": unknown, "receivers_not_synchronised": unsynced, "receivers": columns,
+        "pings": int(len(toa)), "heard_per_ping": {str(k): int(v) for k, v in
+                                                   sorted(pd.Series(heard.sum(axis=1)).value_counts().items())},
+        "origin_epoch_s": origin, "window_s": window, "echo_limit_s": pings.echo_limit,
+        "shortest_interval_s": shortest, "shortest_interval_source": source, "ping_type": ping_type or {},
+        "sensors": sorted(sensors), "dimensions": dim, "toa_header": header_line(columns),
+        "wall_time_s": clock.perf_counter() - started}
+    return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin)
+
+
+def _sensors(use: pd.DataFrame, ping: np.ndarray, n_pings: int) -> dict[str, np.ndarray]:
+    """Each sensor unit's value per ping: the median of the ping's detections' ``sensor_value`` of that unit (NaN
+    where none), the column named by :data:`SENSOR_COLUMNS`."""
+    out: dict[str, np.ndarray] = {}
+    values = use["sensor_value"].to_numpy(float)
+    units = use["sensor_unit"].astype(str).str.strip().to_numpy()
+    ok = np.isfinite(values) & (ping >= 0)
+    for unit in sorted(set(units[ok])):
+        key = SENSOR_COLUMNS.get(unit.lower(), "sensor_" + ("".join(c if c.isalnum() else "_" for c in unit)
+                                                            or "value"))
+        rows = ok & (units == unit)
+        column = np.full(n_pings, np.nan)
+        frame = pd.DataFrame({"ping": ping[rows], "value": values[rows]}).groupby("ping")["value"].median()
+        column[frame.index.to_numpy()] = frame.to_numpy()
+        out[key] = column
+    return out
+
+
+def write_toa_folder(outcome: ToaOutcome, out: Path) -> None:
+    """``toa.txt`` (the replay's format: a header of receiver names, ``NA`` where not heard, [s] from
+    ``origin_epoch_s``; no header where every name is a number: :func:`header_line`), ``receivers.csv`` (``name,
+    x_m, y_m[, z_m]``), ``pings.csv`` and ``toa.json``, all or nothing."""
+    with staged_directory(out) as tmp:
+        write_matrix(outcome, tmp)
+        outcome.pings.to_csv(tmp / "pings.csv", index=False, float_format="%.9f")
+        (tmp / "toa.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")
+
+
+def header_line(names: list[str]) -> bool:
+    """Whether ``toa.txt`` has a header of the receivers' names: not where every name reads as a number (serials
+    such as ``1623``), which the replay would take for a row of times; then the columns are ``receivers.csv``'s rows
+    in order, as the replay reads a matrix without a header."""
+    return not all(NUMBER.fullmatch(n) for n in names)
+
+
+def write_matrix(outcome: ToaOutcome, folder: Path) -> tuple[Path, Path]:
+    """``toa.txt`` and ``receivers.csv`` in ``folder`` (what the replay reads); returns their paths."""
+    frame = pd.DataFrame(outcome.toa, columns=outcome.names)
+    toa = folder / "toa.txt"
+    frame.to_csv(toa, sep=" ", na_rep="NA", index=False, float_format="%.9f", header=header_line(outcome.names))
+    axes = ["x_m", "y_m", "z_m"][:outcome.positions.shape[1]]
+    receivers = folder / "receivers.csv"
+    table = pd.DataFrame(outcome.positions, columns=axes)
+    table.insert(0, "name", outcome.names)
+    table.to_csv(receivers, index=False, float_format="%.4f")
+    return toa, receivers
+
+
+__all__ = ["Clocks", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build_toa", "read_clocks",
+           "header_line", "tags_present", "write_matrix", "write_toa_folder"]
