@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.common import path_argument, prepare_out, text_argument
 from sblsim.orchestrator.commands.console import output_folder
-from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.output import folder_name
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -24,8 +23,6 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
 #: The detections' formats, and the ping types' names.
 FORMATS = ("yaps", "vue")
 PING_TYPE_NAMES = tuple(PING_TYPES)
-#: The burst intervals taken [s].
-BURST_LIMITS = (0.1, 86400.0)
 
 
 @dataclass
@@ -55,67 +52,6 @@ class ToaResult:
     pings: pd.DataFrame
     summary: dict[str, Any]
     out: Path | None = None
-
-
-def _burst(value: Any, where: str) -> tuple[float, float] | None:
-    """``MIN:MAX`` [s] (a text or a pair), 0.1 ≤ MIN ≤ MAX ≤ 86,400 s."""
-    if value is None:
-        return None
-    allowed = f"MIN:MAX [s] with {BURST_LIMITS[0]:g} <= MIN <= MAX <= {BURST_LIMITS[1]:g}, e.g. 60:120"
-    try:
-        pair = tuple(float(p) for p in (value.split(":") if isinstance(value, str) else value))
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: {str(value)[:40]!r}; allowed: {allowed}") from None
-    if len(pair) != 2 or not BURST_LIMITS[0] <= pair[0] <= pair[1] <= BURST_LIMITS[1]:
-        raise ConfigError(f"{where}: {str(value)[:40]!r}; allowed: {allowed}")
-    return pair
-
-
-def check_ping_type(ping_type: Any, burst_interval: Any, burst_sequence: Any, names: tuple[str, str, str]
-                    ) -> tuple[str | None, tuple[float, float] | None, Path | None]:
-    """The ping type's three options checked together (``names``: how they are spelled where they were given)."""
-    if ping_type is not None and ping_type not in PING_TYPE_NAMES:
-        raise ConfigError(f"{names[0]}: {str(ping_type)[:40]!r}; allowed: {', '.join(PING_TYPE_NAMES)}")
-    interval = _burst(burst_interval, names[1])
-    sequence = path_argument(burst_sequence, names[2])
-    if interval is not None and ping_type != "rbi":
-        raise ConfigError(f"{names[1]}: only with {names[0]} rbi (a random burst interval)")
-    if sequence is not None and ping_type != "pbi":
-        raise ConfigError(f"{names[2]}: only with {names[0]} pbi (a pseudo-random burst interval)")
-    if ping_type == "pbi" and sequence is None:
-        raise ConfigError(f"{names[0]} pbi: needs {names[2]} (the tag's intervals [s], one per row)")
-    return ping_type, interval, sequence
-
-
-def _shortest(ping_type: str | None, interval: tuple[float, float] | None, sequence: Path | None) -> float | None:
-    """[s] the shortest burst interval the ping type states (rbi: MIN; pbi: the sequence's least), else None."""
-    if interval is not None:
-        return interval[0]
-    if sequence is not None:
-        from sblsim.orchestrator.tracks.toa import read_burst_sequence
-
-        return float(read_burst_sequence(sequence).min())
-    return None
-
-
-def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str, ping_type: str | None,
-          interval: tuple[float, float] | None, sequence: Path | None):
-    """Read the files and build the tag's matrix (:func:`sblsim.orchestrator.sync.toa.build_toa`)."""
-    from sblsim.orchestrator.sync.detections import IDENTIFIER, read_detections, read_hydrophones
-    from sblsim.orchestrator.sync.toa import build_toa, read_clocks
-
-    if not IDENTIFIER.fullmatch(tag):
-        raise ConfigError(f"tag: {tag[:40]!r} is not allowed; allowed: a tag id of 1 to 40 letters, digits, '.', '_' "
-                          "or '-'")
-    if format not in FORMATS:
-        raise ConfigError(f"format: {str(format)[:40]!r} is not one of {', '.join(FORMATS)}")
-    clocks = read_clocks(sync)
-    shortest = _shortest(ping_type, interval, sequence)
-    data = read_detections(detections, format)
-    table = read_hydrophones(receivers)
-    given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
-             "burst_sequence": None if sequence is None else sequence.name}
-    return build_toa(data, table, clocks, tag, shortest, given)
 
 
 def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag: str, format: str = "yaps",
@@ -162,6 +98,8 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
     receivers = path_argument(receivers, "receivers", optional=False)
     sync = path_argument(sync, "sync", optional=False)
     tag = text_argument(tag, "tag", optional=False)
+    from sblsim.orchestrator.sync.toa import build, check_ping_type
+
     kind, interval, sequence = check_ping_type(ping_type, burst_interval, burst_sequence,
                                                ("ping_type", "burst_interval", "burst_sequence"))
     target = prepare_out(out, force, "toa.txt", "times of arrival")
@@ -204,28 +142,10 @@ def add_ping_type(p: argparse.ArgumentParser) -> None:
                    help="a pseudo-random tag's intervals [s] in order, one per row (pbi)")
 
 
-def run_lines(outcome, where: str) -> list[str]:
-    """The console's lines on a built matrix."""
-    s = outcome.summary
-    d = s["detections"]
-    heard = s["heard_per_ping"]
-    lines = [f"times of arrival of tag {s['tag']}: {s['pings']} pings at {len(s['receivers'])} receivers from "
-             f"{d['of_tag']} detections ({d['used']} used, {d['multipath']} multipath echoes dropped, "
-             f"{d['outside_sync_span']} outside the synchronised span, {d['at_receivers_not_in_table']} at receivers "
-             f"not in the table, {d['at_receivers_not_synchronised']} at receivers not synchronised) in "
-             f"{s['wall_time_s']:.2f} s",
-             f"  window {s['window_s'] * 1e3:.0f} ms (the array's largest travel time at 1300 m/s and 20 ms), shortest "
-             f"burst interval {s['shortest_interval_s']:.4g} s ({s['shortest_interval_source']}); receivers per ping: "
-             + ", ".join(f"{k}: {v}" for k, v in heard.items()),
-             f"  time base of toa.txt: {s['origin_epoch_s']:.0f} s since 1970-01-01 UTC"
-             + (f"; sensor values per ping: {', '.join(s['sensors'])}" if s["sensors"] else "")]
-    if where:
-        lines.append(f"  written to {where}/ (toa.txt, receivers.csv, pings.csv, toa.json)")
-    return lines
-
-
 def main(args: argparse.Namespace) -> int:
     """``sblsim toa`` from its parsed arguments: its lines printed, its exit status returned."""
+    from sblsim.orchestrator.sync.toa import build, check_ping_type, run_lines
+
     kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
                                                ("--ping-type", "--burst-interval", "--burst-sequence"))
     outcome = build(args.detections, args.receivers, args.sync, args.tag, args.format, kind, interval, sequence)

@@ -12,17 +12,23 @@ at the slowest sound speed allowed (1,300 m/s) plus :data:`TOLERANCE`, the echo 
 
 from __future__ import annotations
 
+import argparse
 import json
+import os
+import tempfile
 import time as clock
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.pings import build_pings, inferred_shortest, largest_travel_time
+from sblsim.models.tracking.schedule import PING_TYPES
+from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.sync.detections import (
@@ -32,7 +38,10 @@ from sblsim.orchestrator.sync.detections import (
     _numbers,
     _pattern,
     _table,
+    read_detections,
+    read_hydrophones,
 )
+from sblsim.orchestrator.tracks.toa import read_burst_sequence
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
@@ -40,6 +49,10 @@ TOLERANCE = 0.02
 #: The most rows of ``offsets.csv`` read (receivers × bins) and the largest offset [s] it may hold.
 MAX_OFFSET_ROWS = 1_000_000
 MAX_OFFSET = 86400.0
+#: The detections' formats, the ping types and the burst intervals taken [s].
+FORMATS = ("yaps", "vue")
+PING_TYPE_NAMES = tuple(PING_TYPES)
+BURST_LIMITS = (0.1, 86400.0)
 #: The sensor units given a column name of their own in ``pings.csv`` (others: ``sensor_<unit>``).
 SENSOR_COLUMNS = {"m": "depth_m", "°c": "temperature_c", "c": "temperature_c", "m/s²": "acceleration_m_s2",
                   "m/s2": "acceleration_m_s2"}
@@ -307,5 +320,128 @@ def write_matrix(outcome: ToaOutcome, folder: Path) -> tuple[Path, Path]:
     return toa, receivers
 
 
-__all__ = ["Clocks", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build_toa", "read_clocks",
-           "header_line", "tags_present", "write_matrix", "write_toa_folder"]
+# --------------------------------------------------------------------------- the commands' shared steps
+
+def _burst(value: Any, where: str) -> tuple[float, float] | None:
+    """``MIN:MAX`` [s] (a text or a pair), 0.1 ≤ MIN ≤ MAX ≤ 86,400 s."""
+    if value is None:
+        return None
+    allowed = f"MIN:MAX [s] with {BURST_LIMITS[0]:g} <= MIN <= MAX <= {BURST_LIMITS[1]:g}, e.g. 60:120"
+    try:
+        pair = tuple(float(p) for p in (value.split(":") if isinstance(value, str) else value))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: {str(value)[:40]!r}; allowed: {allowed}") from None
+    if len(pair) != 2 or not BURST_LIMITS[0] <= pair[0] <= pair[1] <= BURST_LIMITS[1]:
+        raise ConfigError(f"{where}: {str(value)[:40]!r}; allowed: {allowed}")
+    return pair
+
+
+def check_ping_type(ping_type: Any, burst_interval: Any, burst_sequence: Any, names: tuple[str, str, str]
+                    ) -> tuple[str | None, tuple[float, float] | None, Path | None]:
+    """The ping type's three options checked together (``names``: how they are spelled where they were given)."""
+    if ping_type is not None and ping_type not in PING_TYPE_NAMES:
+        raise ConfigError(f"{names[0]}: {str(ping_type)[:40]!r}; allowed: {', '.join(PING_TYPE_NAMES)}")
+    interval = _burst(burst_interval, names[1])
+    if burst_sequence is not None and not isinstance(burst_sequence, (str, os.PathLike)):
+        raise ConfigError(f"{names[2]}: {type(burst_sequence).__name__}; allowed: a file (a text or a path)")
+    sequence = None if burst_sequence is None else Path(burst_sequence)
+    if interval is not None and ping_type != "rbi":
+        raise ConfigError(f"{names[1]}: only with {names[0]} rbi (a random burst interval)")
+    if sequence is not None and ping_type != "pbi":
+        raise ConfigError(f"{names[2]}: only with {names[0]} pbi (a pseudo-random burst interval)")
+    if ping_type == "pbi" and sequence is None:
+        raise ConfigError(f"{names[0]} pbi: needs {names[2]} (the tag's intervals [s], one per row)")
+    return ping_type, interval, sequence
+
+
+def _shortest(ping_type: str | None, interval: tuple[float, float] | None, sequence: Path | None) -> float | None:
+    """[s] the shortest burst interval the ping type states (rbi: MIN; pbi: the sequence's least), else None."""
+    if interval is not None:
+        return interval[0]
+    if sequence is not None:
+        return float(read_burst_sequence(sequence).min())
+    return None
+
+
+def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str, ping_type: str | None,
+          interval: tuple[float, float] | None, sequence: Path | None):
+    """Read the files and build the tag's matrix (:func:`build_toa`): :class:`ToaOutcome`.
+
+    Raises
+    ------
+    ModelError, ConfigError
+        One line: a bad tag id or format, a file refused by its reader.
+    """
+    if not IDENTIFIER.fullmatch(tag):
+        raise ConfigError(f"tag: {tag[:40]!r} is not allowed; allowed: a tag id of 1 to 40 letters, digits, '.', '_' "
+                          "or '-'")
+    if format not in FORMATS:
+        raise ConfigError(f"format: {str(format)[:40]!r} is not one of {', '.join(FORMATS)}")
+    clocks = read_clocks(sync)
+    shortest = _shortest(ping_type, interval, sequence)
+    data = read_detections(detections, format)
+    table = read_hydrophones(receivers)
+    given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
+             "burst_sequence": None if sequence is None else sequence.name}
+    return build_toa(data, table, clocks, tag, shortest, given)
+
+
+def run_lines(outcome, where: str) -> list[str]:
+    """The console's lines on a built matrix."""
+    s = outcome.summary
+    d = s["detections"]
+    heard = s["heard_per_ping"]
+    lines = [f"times of arrival of tag {s['tag']}: {s['pings']} pings at {len(s['receivers'])} receivers from "
+             f"{d['of_tag']} detections ({d['used']} used, {d['multipath']} multipath echoes dropped, "
+             f"{d['outside_sync_span']} outside the synchronised span, {d['at_receivers_not_in_table']} at receivers "
+             f"not in the table, {d['at_receivers_not_synchronised']} at receivers not synchronised) in "
+             f"{s['wall_time_s']:.2f} s",
+             f"  window {s['window_s'] * 1e3:.0f} ms (the array's largest travel time at 1300 m/s and 20 ms), shortest "
+             f"burst interval {s['shortest_interval_s']:.4g} s ({s['shortest_interval_source']}); receivers per ping: "
+             + ", ".join(f"{k}: {v}" for k, v in heard.items()),
+             f"  time base of toa.txt: {s['origin_epoch_s']:.0f} s since 1970-01-01 UTC"
+             + (f"; sensor values per ping: {', '.join(s['sensors'])}" if s["sensors"] else "")]
+    if where:
+        lines.append(f"  written to {where}/ (toa.txt, receivers.csv, pings.csv, toa.json)")
+    return lines
+
+
+#: ``sblsim replay --format``'s names of raw detections (``detections``: the YAPS table).
+REPLAY_FORMATS = {"detections": "yaps", "yaps": "yaps", "vue": "vue"}
+
+
+@contextmanager
+def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
+    """``sblsim replay DETECTIONS --format detections|yaps|vue --receivers HYDROPHONES --sync DIR --tag ID``: the
+    tag's matrix built as ``sblsim toa`` builds it (its lines printed), written with its receivers into a temporary
+    folder (named by the tag, so the track's default folder is ``results/track_TAG``), and yielded as the arguments
+    of ``replay --format toa`` on them; the folder is removed when the replay ends.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        ``--sync``, ``--tag`` or ``--receivers`` missing; what :func:`build` refuses.
+    """
+    missing = [o for o, v in (("--receivers", args.receivers), ("--sync", args.sync), ("--tag", args.tag)) if v is None]
+    if missing:
+        raise ConfigError(f"{missing[0]}: required with --format {args.format} (raw detections: --receivers "
+                          "HYDROPHONES --sync DIR --tag ID)")
+    kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
+                                               ("--ping-type", "--burst-interval", "--burst-sequence"))
+    outcome = build(args.log, args.receivers, args.sync, args.tag, REPLAY_FORMATS[args.format], kind, interval,
+                    sequence)
+    for line in run_lines(outcome, ""):
+        print(line, flush=True)
+    with tempfile.TemporaryDirectory(prefix="sblsim-toa-") as tmp:
+        folder = Path(tmp) / "".join(c if c.isalnum() or c in "._-" else "_" for c in args.tag)
+        folder.mkdir()
+        toa, receivers = write_matrix(outcome, folder)
+        named = toa.with_name(f"{folder.name}.txt")
+        toa.rename(named)
+        yield argparse.Namespace(**{**vars(args), "log": named, "receivers": receivers, "format": "toa",
+                                    "sync": None, "tag": None})
+
+
+__all__ = ["BURST_LIMITS", "Clocks", "FORMATS", "PING_TYPE_NAMES", "REPLAY_FORMATS", "SENSOR_COLUMNS",
+           "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa", "check_ping_type", "header_line",
+           "read_clocks", "replay_matrix", "run_lines", "tags_present", "write_matrix", "write_toa_folder"]

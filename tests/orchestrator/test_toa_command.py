@@ -236,3 +236,33 @@ def test_a_sync_folder_naming_paths_is_not_followed(tmp_path, array):
         sblsim.toa(detections, receivers=hydrophones, sync=None, tag="T1")
     with pytest.raises(sblsim.SblsimError, match="is not a folder"):
         sblsim.toa(detections, receivers=hydrophones, sync=sync / "offsets.csv", tag="T1")
+
+
+def test_replay_of_raw_detections_is_toa_then_the_tracker(tmp_path, capsys, array):
+    """``sblsim replay DETECTIONS --format detections --sync DIR --tag ID``: the matrix ``sblsim toa`` writes,
+    tracked as ``replay --format toa`` tracks that file."""
+    detections, hydrophones, sync = _case(tmp_path, array)
+    common = ["--receivers", str(hydrophones), "--sound-speed", "1480", "--acceleration-psd", "0.01"]
+    assert main(["replay", str(detections), "--format", "detections", "--sync", str(sync), "--tag", "T1",
+                 "--out", str(tmp_path / "track"), *common]) == 0
+    assert main(["toa", str(detections), "--receivers", str(hydrophones), "--sync", str(sync), "--tag", "T1",
+                 "--out", str(tmp_path / "toa")]) == 0
+    assert main(["replay", str(tmp_path / "toa" / "toa.txt"), "--format", "toa", "--out", str(tmp_path / "alone"),
+                 *common[:1], str(tmp_path / "toa" / "receivers.csv"), *common[2:]]) == 0
+    one, two = (pd.read_csv(tmp_path / f / "track.csv") for f in ("track", "alone"))
+    assert len(one) > 30 and np.allclose(one[["x", "y"]], two[["x", "y"]])
+    assert "times of arrival of tag T1" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, found", [
+    (["--format", "detections", "--tag", "T1"], "--sync: required with --format detections"),
+    (["--format", "toa", "--tag", "T1", "--receivers", "x.csv"], "--tag: only with --format detections, yaps or vue"),
+    (["--sync", "somewhere"], "--sync: only with --format detections"),
+])
+def test_replay_refuses_detection_options_out_of_place(tmp_path, capsys, array, args, found):
+    detections, hydrophones, _ = _case(tmp_path, array)
+    extra = [] if "--receivers" in args else ["--receivers", str(hydrophones)]
+    code = main(["replay", str(detections), *args, *extra, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and found in err[0], err
+    assert not (tmp_path / "out").exists()
