@@ -51,7 +51,11 @@ class SyncResult:
         [s], residual [s] and [m], ``kept`` and the reason of a rejection.
     sync_tags : pandas.DataFrame
         ``sync_tags.csv``: each sync tag positioned from the other receivers' synchronised arrivals (its own left
-        out, the clocks fitted without it): errors [m] against its known position and the fixes' own sigmas.
+        out, the clocks fitted without it): errors [m] against its known position and the fixes' own sigmas. The
+        sigmas hold the timing noise and the geometry, not an error of the table's positions (a tag that is not
+        where the table says is positioned where it is): an error far above its sigma and the same for all of a
+        tag's emissions (``median_position_error_m`` near ``median_error_m``) is the table's, as on the boats
+        array (docs/sync.md: its clock-free two-way distances differ from the table's by 5.8 m RMS).
     out : Path or None
     """
 
