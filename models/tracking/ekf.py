@@ -75,6 +75,15 @@ class TrackerSettings:
         [m/s]. Two consecutive fixes of the ``agree_after`` sequence agree when their squared Mahalanobis distance,
         against their position covariances summed plus ``(fix_speed · elapsed time)² / fix_gate`` per axis (so
         that a move of ``fix_speed`` over the elapsed time sits on the gate), is at most ``fix_gate``.
+    depth_sigma : float
+        Standard deviation of a tag's depth-sensor reading [m] (the fix and the robust smoother take a reading as a
+        measurement of the height ``z = −depth``): 0.3 m, a pressure sensor of 0.5 % of a 50 m range, the class of
+        the telemetry tags' depth sensors.
+    survey_sigma : ndarray, (n,), or None
+        Standard deviation of each receiver's surveyed position per axis [m] (None: exact). The fix's and the
+        robust smoother's covariances hold its effect as a consider covariance (the positions not estimated, their
+        error propagated: Tapley, Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004, § 6.3); the
+        causal filters leave it out.
     """
 
     sound_speed: float
@@ -92,6 +101,8 @@ class TrackerSettings:
     disagree_after: int = 5
     agree_after: int | None = None
     fix_speed: float = 2.0
+    depth_sigma: float = 0.3
+    survey_sigma: np.ndarray | None = None
 
 
 @dataclass

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.toa import _evaluate_pings
 
 #: χ²(1) quantile of probability 0.999: the gate of one time of arrival.
@@ -76,8 +77,17 @@ def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa:
 
 
 def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, guesses: np.ndarray | None = None,
-              gate: float = GATE_ONE) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`single_ping_fix` of every ping at once (one casadi call per Gauss-Newton iteration for all pings).
+              gate: float = GATE_ONE, depth: np.ndarray | None = None, depth_sigma: float = 0.3,
+              survey_sigma: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`single_ping_fix` of every ping at once (one evaluation per Gauss-Newton iteration for all pings).
+
+    A tag's depth-sensor reading (``depth``) is one more measurement of the ping, ``z = −depth`` with standard
+    deviation ``depth_sigma`` (the receivers' z up): a ping with a reading is fixed from dim receivers. The
+    receivers' survey error (``survey_sigma``) enters the covariance as a consider covariance: receiver i's position
+    error δr_i moves the fix by ``−S_i δr_i``, ``S_i = C Jᵢᵀ J_p,i / σ²`` (C the fix's covariance, J_i its arrival's
+    row, J_p,i that row's position part), so ``C + Σ_i σ_i² S_i S_iᵀ`` (Tapley, Schutz & Born, *Statistical Orbit
+    Determination*, Elsevier 2004, § 6.3).
 
     Parameters
     ----------
@@ -89,6 +99,12 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
         As :func:`single_ping_fix`.
     guesses : ndarray, (m, dim), optional
         Start positions [m].
+    depth : ndarray, (m,), optional
+        The tag's depth-sensor reading per ping [m], positive down, NaN where none; needs receivers in 3-D.
+    depth_sigma : float
+        Its standard deviation [m].
+    survey_sigma : ndarray, (n,), optional
+        Each receiver's survey error per axis [m] (standard deviation; None: exact).
 
     Returns
     -------
@@ -101,13 +117,25 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     used : ndarray of bool, (m, n)
         The arrivals each fix used.
     chi2 : ndarray, (m,)
-        Sum of the squared normalised residuals.
+        Sum of the squared normalised residuals of the arrivals.
+
+    Raises
+    ------
+    ModelError
+        A depth given with receivers in 2-D, or not one per ping.
     """
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     m, (n, dim) = len(toa), receivers.shape
     used = np.isfinite(toa)
-    valid = used.sum(axis=1) >= dim + 1
+    known = np.zeros(m, bool)
+    if depth is not None:
+        depth = np.asarray(depth, float)
+        if dim != 3 or depth.shape != (m,):
+            raise ModelError(f"depth_m: {depth.shape} readings for {m} pings at receivers in {dim}-D; allowed: one "
+                             "per ping (NaN where none), with the receivers' depths (z_m)")
+        known = np.isfinite(depth)
+    valid = used.sum(axis=1) + known >= dim + 1
     positions = np.full((m, dim), np.nan)
     emissions = np.full(m, np.nan)
     covariances = np.full((m, dim + 1, dim + 1), np.nan)
@@ -119,22 +147,33 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     first = np.argmin(np.where(used, toa, np.inf), axis=1)
     centroid = (used[:, :, None] * receivers[None]).sum(axis=1) / np.maximum(used.sum(axis=1), 1)[:, None]
     p = 0.5 * (receivers[first] + centroid) if guesses is None else np.array(guesses, float)
+    # a depth reading: the height z = −depth one more measurement, in the arrivals' units (its row weighed by
+    # σ_toa / depth_sigma), and the start at it
+    height = np.where(known, -np.nan_to_num(depth) if depth is not None else 0.0, 0.0)
+    if known.any():
+        p[known, 2] = height[known]
     te = toa[np.arange(m), first] - np.linalg.norm(p - receivers[first], axis=1) / c
     p, te = p[rows], te[rows]
+    prior = (height, known, sigma_toa / depth_sigma) if known.any() else None
     active = rows
     for _ in range(n + 1):  # outlier rounds: the worst residual dropped while it fails the gate and redundancy remains
-        p_a, te_a, J, res = _gauss_newton_pings(toa[active], filled[active], used[active], receivers, c, p, te)
+        p_a, te_a, J, res = _gauss_newton_pings(toa[active], filled[active], used[active], receivers, c, p, te,
+                                                None if prior is None else (prior[0][active], prior[1][active],
+                                                                            prior[2]))
         positions[active], emissions[active] = p_a, te_a
-        z2 = np.where(used[active], (res / sigma_toa) ** 2, 0.0)
+        z2 = np.where(used[active], (res[:, :n] / sigma_toa) ** 2, 0.0)
         chi2[active] = z2.sum(axis=1)
-        A = J * used[active][:, :, None] / sigma_toa
+        rows_used = used[active] if prior is None else np.column_stack([used[active], prior[1][active]])
+        A = J * rows_used[:, :, None] / sigma_toa
         info = np.einsum("mki,mkj->mij", A, A)
         finite = np.isfinite(info).all(axis=(1, 2))  # a diverged iteration's (the fix refused below)
         cov = np.full(info.shape, np.nan)
         with np.errstate(all="ignore"):
             cov[finite] = np.linalg.pinv(info[finite])
+        if survey_sigma is not None:
+            cov = cov + _survey_term(cov, J[:, :n], used[active], sigma_toa, np.asarray(survey_sigma, float), dim)
         covariances[active] = cov
-        again = (used[active].sum(axis=1) >= dim + 3) & (z2.max(axis=1) > gate)
+        again = (used[active].sum(axis=1) + known[active] >= dim + 3) & (z2.max(axis=1) > gate)
         if not again.any():
             break
         worst = np.argmax(z2[again], axis=1)
@@ -145,14 +184,33 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     return positions, emissions, covariances, used & ~bad[:, None], chi2
 
 
-def _gauss_newton_pings(toa, filled, used, receivers, c, p, te):
+def _survey_term(cov: np.ndarray, J: np.ndarray, used: np.ndarray, sigma_toa: float, survey: np.ndarray,
+                 dim: int) -> np.ndarray:
+    """The fixes' consider covariance of the receivers' survey error (:func:`fix_pings`): ``Σ_i σ_i² S_i S_iᵀ``,
+    ``S_i = C J_iᵀ J_p,i / σ_toa²`` (k, dim + 1, dim + 1) for the fixes' covariances C (k, dim + 1, dim + 1), their
+    arrivals' rows J (k, n, dim + 1), the arrivals used (k, n) and the survey errors (n,) [m]."""
+    G = np.einsum("kab,knb->kna", np.nan_to_num(cov), J * used[:, :, None]) / sigma_toa**2  # C J_iᵀ / σ²: (k, n, d+1)
+    S = G[:, :, :, None] * J[:, :, None, :dim]  # (k, n, dim + 1, dim)
+    return np.einsum("n,knab,kncb->kac", survey**2, S, S)
+
+
+def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
     """Gauss-Newton iterations with step halving of many pings' fixes at once: positions (k, dim), emission times
-    (k,), Jacobians (k, n, dim + 1) and residuals (k, n) (0 where not used) at the end."""
+    (k,), Jacobians (k, n[ + 1], dim + 1) and residuals (k, n[ + 1]) (0 where not used) at the end; ``prior``
+    (heights (k,) [m], which are known (k,), their weight σ_toa / σ_depth [s/m]) one more row, the height's."""
     dim = receivers.shape[1]
     p, te = p.copy(), te.copy()
+    if prior is not None:
+        height, known, weight = prior
+        used = np.column_stack([used, known])
+        filled = np.column_stack([filled, np.where(known, height * weight, 0.0)])
 
     def evaluate(idx, p, te):
         model, J = _evaluate_pings(receivers, c, p, te)
+        if prior is not None:  # the height's row: weight · z, its Jacobian weight on z
+            row = np.zeros((len(p), 1, dim + 1))
+            row[:, 0, 2] = weight
+            model, J = np.column_stack([model, weight * p[:, 2]]), np.concatenate([J, row], axis=1)
         return np.where(used[idx], filled[idx] - model, 0.0), J
 
     res, J = evaluate(slice(None), p, te)

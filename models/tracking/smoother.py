@@ -128,9 +128,15 @@ class _Problem:
     :func:`~sblsim.models.receiver.toa_bound.process_noise`), ``1 / σ_te`` on the emission time and ``1 / σ_drift``
     on the interval. Nothing of size m × m, nor (m, s, s) but the covariance's own blocks."""
 
-    def __init__(self, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule):
+    def __init__(self, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule,
+                 depth: np.ndarray | None = None):
         self.m, self.dim = len(toa), receivers.shape[1]
         self.s = 2 * self.dim + 2
+        # the pings with a depth reading: their height z = −depth, weighed by 1 / depth_sigma
+        known = np.zeros(self.m, bool) if depth is None else np.isfinite(depth)
+        self.depth_at = np.flatnonzero(known)
+        self.height = -np.asarray(depth, float)[self.depth_at] if depth is not None else np.zeros(0)
+        self.depth_w = 1.0 / settings.depth_sigma
         self.k, self.i = np.nonzero(np.isfinite(toa))
         self.toa, self.at = toa[self.k, self.i], receivers[self.i]
         self.settings, self.count, self.offset = settings, schedule.count, schedule.offset
@@ -171,8 +177,14 @@ def _robust_terms(problem: _Problem, X: np.ndarray, dof: float):
     e[:, :dim] = P.a[:, None] * r[:, :dim]
     e[:, dim:2 * dim] = P.b[:, None] * r[:, :dim] + P.c[:, None] * r[:, dim:2 * dim]
     e[:, -2], e[:, -1] = P.te_w * r[:, -2], P.dr_w * r[:, -1]
-    cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum() + _interval_prior(settings, X) ** 2)
+    cost = float((dof + 1.0) * np.log1p(z**2 / dof).sum() + (e**2).sum() + _interval_prior(settings, X) ** 2
+                 + (_depth_residual(problem, X) ** 2).sum())
     return z, (dof + 1.0) / (dof + z**2), Jz, e, T, cost
+
+
+def _depth_residual(problem: _Problem, X: np.ndarray) -> np.ndarray:
+    """The depth readings' normalised residuals ``(z_k − (−depth_k)) / σ_depth`` at the pings that have one."""
+    return (X[problem.depth_at, 2] - problem.height) * problem.depth_w
 
 
 def _normal_blocks(problem: _Problem, X: np.ndarray, w: np.ndarray, Jz: np.ndarray, T: np.ndarray) -> tuple:
@@ -232,6 +244,8 @@ def _normal_blocks(problem: _Problem, X: np.ndarray, w: np.ndarray, Jz: np.ndarr
     add(B, (dl, te), -n * tw**2)
     add(B, (dl, dl), -(dw**2))
     D[(dl, dl)][0] += 1.0 / P.settings.sigma_interval**2
+    if len(P.depth_at):
+        D[(2, 2)][P.depth_at] += P.depth_w**2
     return D, B
 
 
@@ -254,6 +268,8 @@ def _gradient(problem: _Problem, X: np.ndarray, z: np.ndarray, w: np.ndarray, Jz
     g[:-1, -2] -= P.te_w * e[:, -2]
     g[:-1, -1] -= (n[:, None] * X[:-1, dim:2 * dim] * lp).sum(axis=1) + P.te_w * n * e[:, -2] + P.dr_w * e[:, -1]
     g[0, -1] += _interval_prior(P.settings, X) / P.settings.sigma_interval
+    if len(P.depth_at):
+        g[P.depth_at, 2] += _depth_residual(P, X) * P.depth_w
     return g
 
 
@@ -379,9 +395,32 @@ def _cyclic_reduction(D: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndar
     return cov, cross
 
 
+def _survey_covariance(problem: _Problem, D: dict, B: dict, information: np.ndarray, Jz: np.ndarray,
+                       survey: np.ndarray) -> np.ndarray:
+    """The receivers' survey error's share of the track's covariance (m, s, s), a consider covariance (Tapley,
+    Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004, § 6.3): receiver i's position error δr_i, the
+    same at every ping, moves the whole track by ``δx = −N⁻¹ (∂g/∂r_i) δr_i`` (N the cost's Hessian of the
+    covariance, ``D``, ``B``; g its gradient, whose arrivals from receiver i change with r_i as their normalised
+    residuals do, ``∂z/∂r_i = −∂z/∂p``), so each axis a adds ``σ_i² S S_kᵀ`` per ping with ``S = N⁻¹ u_(i,a)``:
+    one banded solve per receiver and axis."""
+    P, dim = problem, problem.dim
+    cols = list(range(dim)) + [P.s - 2]
+    out = np.zeros((P.m, P.s, P.s))
+    for i in np.flatnonzero(survey > 0):
+        mine = P.i == i
+        for a in range(dim):
+            u = np.zeros((P.m, P.s))
+            for x, col in enumerate(cols):
+                u[:, col] = np.bincount(P.k[mine], weights=-information[mine] * Jz[mine, x] * Jz[mine, a],
+                                        minlength=P.m)
+            S = _banded_solve(D, B, u, 1e-12)
+            out += survey[i] ** 2 * S[:, :, None] * S[:, None, :]
+    return out
+
+
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
                   dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS, covariance: bool = True,
-                  schedule: PingSchedule | None = None) -> RobustTrack:
+                  schedule: PingSchedule | None = None, depth: np.ndarray | None = None) -> RobustTrack:
     """The robust fixed-interval smoother: the track's maximum a-posteriori states with heavy-tailed times of arrival.
 
     Over the whole record at once (YAPS's approach, Baktoft et al. 2017: the state-space model fitted to every
@@ -391,9 +430,10 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         ``Σ_k ‖L_k⁻¹ (x_k − f_k(x_k−1))‖² + Σ_(k,i) heard (ν + 1) ln(1 + z_ki² / ν) + ((Δ_0 − Δ) / σ_Δ)²``,
         ``z_ki = (toa_ki − t_e,k − ‖p_k − r_i‖ / c) / σ_toa``,
 
-    the tracker's motion model over each step of the ping schedule (``f_k``, ``Q_k = L_k L_kᵀ`` over the step's
-    duration at the nominal interval Δ, :mod:`sblsim.models.tracking.schedule`: the ping type, gaps), the filters'
-    prior of the first interval (σ_Δ ``sigma_interval``) and a Student-t error of ν degrees of
+    (and, where the tag reads its depth, ``Σ_k ((z_k + depth_k) / σ_depth)²``: the receivers' z up, ``depth_sigma``
+    of the settings), the tracker's motion model over each step of the ping schedule (``f_k``, ``Q_k = L_k L_kᵀ``
+    over the step's duration at the nominal interval Δ, :mod:`sblsim.models.tracking.schedule`: the ping type,
+    gaps), the filters' prior of the first interval (σ_Δ ``sigma_interval``) and a Student-t error of ν degrees of
     freedom for each time of arrival (σ_toa its scale): a late multipath arrival is weighed down where the rest of
     the track disagrees with it, with no gate and no restart. Gauss-Newton with iteratively reweighted least
     squares (weights ``(ν + 1) / (ν + z²)``, the EM weights of the Student-t; Lange, Little, Taylor, "Robust
@@ -423,15 +463,20 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     schedule : PingSchedule, optional
         The steps between the rows (:class:`~sblsim.models.tracking.schedule.PingSchedule`, m − 1 steps; default
         one stable interval each).
+    depth : ndarray, (m,), optional
+        The tag's depth-sensor reading per ping [m], positive down, NaN where none (receivers in 3-D).
 
     Returns
     -------
     RobustTrack
+        With the settings' ``survey_sigma``, ``P`` holds the receivers' survey error as a consider covariance
+        (:func:`_survey_covariance`).
 
     Raises
     ------
     ModelError
-        If no start is given, a start is not finite or of the wrong shape.
+        If no start is given, a start is not finite or of the wrong shape, or a depth is given with receivers in
+        2-D.
     """
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
@@ -441,7 +486,10 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         raise ModelError("robust smoother: no starting track")
     if schedule is None:
         schedule = PingSchedule.stable(m, settings.interval, settings.jitter, settings.interval_drift)
-    problem = _Problem(toa, receivers, settings, schedule)
+    if depth is not None and (dim != 3 or np.shape(depth) != (m,)):
+        raise ModelError(f"depth_m: {np.shape(depth)} readings for {m} pings at receivers in {dim}-D; allowed: one "
+                         "per ping, with the receivers' depths (z_m)")
+    problem = _Problem(toa, receivers, settings, schedule, depth)
     runs = []
     for start in starts:
         X = np.array(start, float)
@@ -492,8 +540,11 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     z, w, Jz, _, T, cost = _robust_terms(problem, X, dof)
     P = lag = None
     if covariance:
-        P, lag = _block_covariance(*_dense_blocks(*_normal_blocks(problem, X, observed_information(z, dof), Jz, T),
-                                                  m, s), lag=True)
+        information = observed_information(z, dof)
+        D, B = _normal_blocks(problem, X, information, Jz, T)
+        P, lag = _block_covariance(*_dense_blocks(D, B, m, s), lag=True)
+        if settings.survey_sigma is not None:
+            P = P + _survey_covariance(problem, D, B, information, Jz, np.asarray(settings.survey_sigma, float))
     weights = np.zeros((m, n))
     weights[problem.k, problem.i] = w
     return RobustTrack(X, P, weights, cost, best["done"], index, P_lag=lag)

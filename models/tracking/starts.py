@@ -18,7 +18,7 @@ from sblsim.models.tracking.smoother import ROBUST_COARSE_ITERATIONS, ROBUST_COA
 
 
 def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray,
-                    schedule: PingSchedule | None = None) -> np.ndarray:
+                    schedule: PingSchedule | None = None, depth: np.ndarray | None = None) -> np.ndarray:
     """A start for :func:`robust_smooth` by graduated non-convexity (Blake & Zisserman, *Visual Reconstruction*,
     MIT Press 1987): the robust smoother with the timing noise's scale :data:`ROBUST_COARSE_SCALE` times larger
     (the arrivals' Student-t cost flatter over the residuals seen, the motion model weighing more: fewer local
@@ -31,18 +31,19 @@ def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSet
     """
     coarse = replace(settings, sigma_toa=settings.sigma_toa * ROBUST_COARSE_SCALE)
     return robust_smooth(toa, receivers, coarse, [start], iterations=ROBUST_COARSE_ITERATIONS, covariance=False,
-                         schedule=schedule).x
+                         schedule=schedule, depth=depth).x
 
 
 def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
                  fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray | None,
-                 schedule: PingSchedule | None = None) -> RobustTrack:
+                 schedule: PingSchedule | None = None, depth: np.ndarray | None = None) -> RobustTrack:
     """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
     that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2; None: the
     fixes' two starts alone, e.g. a record too long for the EKF's ping-by-ping loop); the lowest cost kept
     (:func:`robust_smooth`). ``fixes``: positions (m, dim), emission times (m,) and the arrivals used (m, n) of
     :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
-    (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each).
+    (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each); ``depth`` (m,) the
+    tag's depth readings [m] (:func:`robust_smooth`).
 
     Raises
     ------
@@ -54,9 +55,9 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     starts = {} if rts is None else {"rts": rts}
     anchored = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, receivers.shape[1], schedule.times())
     if anchored is not None:
-        starts = {"fixes": anchored, "graduated": graduated_start(toa, receivers, settings, anchored, schedule),
-                  **starts}
-    return replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule),
+        starts = {"fixes": anchored,
+                  "graduated": graduated_start(toa, receivers, settings, anchored, schedule, depth), **starts}
+    return replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule, depth=depth),
                    start_names=tuple(starts))
 
 

@@ -36,7 +36,7 @@ from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
-from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
+from sblsim.orchestrator.tracks.track import DEPTH_SIGMA, ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -298,6 +298,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                burst_interval: str | tuple[float, float] | None = None, burst_sequence: str | Path | None = None,
                acceleration_psd: float | None = None, sound_speed_file: str | Path | None = None,
                temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
+               tag_depth: float | None = None, depth_sigma: float | None = None, survey_sigma: float | None = None,
                out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
@@ -347,6 +348,16 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     acceleration_psd : float, optional
         The motion model's white-noise acceleration ``q`` [m²/s³] in (0, 1]; default estimated from the pings by EM
         (``summary["motion"]``; :mod:`sblsim.models.tracking.motion_noise`).
+    tag_depth : float, optional
+        The tag's depth [m] in [-10, 11000] at every ping (receivers with ``z_m``), where the TOA file has no
+        ``depth_m`` column (a pressure sensor's reading per ping, positive down, ``NA`` where none): the fix and the
+        robust smoother take either as a measurement of the height ``z = −depth``.
+    depth_sigma : float, optional
+        A depth reading's standard deviation [m] in (0, 100] (default 0.3).
+    survey_sigma : float, optional
+        The receivers' survey error per axis [m] in [0, 1000], for those without a ``sigma_m`` column in the
+        receivers file: the fix's and the robust smoother's covariances hold it (a consider covariance,
+        :mod:`sblsim.models.tracking.smoother`); the causal filters' do not.
     motion : str
         ``moving`` (default: the filters and smoothers) or ``stationary`` (a sync or reference tag: one position
         for all pings, :mod:`sblsim.models.tracking.stationary`, the estimator ``stationary``).
@@ -373,7 +384,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     target = prepare_out(out, force, "track.csv", "track")
     options = toa_options(smooth, sound_speed, receivers_kept, drop_detections, seed, truth_sigma, ping_type,
                           burst_interval, burst_sequence, acceleration_psd, sound_speed_file, temperature, salinity,
-                          motion)
+                          motion, tag_depth, depth_sigma, survey_sigma)
     outcome = track(toa, receivers, truth, reference, **options)
     if target is not None:
         write(outcome, target)
@@ -381,10 +392,29 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                        outcome.bound)
 
 
+def geometry_arguments(tag_depth: Any, depth_sigma: Any, survey_sigma: Any, names: tuple[str, str, str]) -> dict:
+    """The tag's depth and the receivers' survey error checked (``names``: how the caller spells ``tag_depth``,
+    ``depth_sigma``, ``survey_sigma``), as :func:`~sblsim.orchestrator.tracks.track.track`'s keyword arguments.
+
+    Raises
+    ------
+    ConfigError
+        A value outside its range (one line).
+    """
+    from sblsim.orchestrator.tracks.toa import DEPTH_RANGE, SURVEY_SIGMA_RANGE
+
+    return {"fixed_depth": None if tag_depth is None else real_argument(tag_depth, names[0], *DEPTH_RANGE, "m"),
+            "depth_sigma": DEPTH_SIGMA if depth_sigma is None else real_argument(depth_sigma, names[1], 0.0, 100.0,
+                                                                                 "m", low_open=True),
+            "survey_sigma": None if survey_sigma is None else real_argument(survey_sigma, names[2],
+                                                                            *SURVEY_SIGMA_RANGE, "m")}
+
+
 def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any = None, drop_detections: Any = 0.0,
                 seed: Any = 0, truth_sigma: Any = 0.0, ping_type: Any = None, burst_interval: Any = None,
                 burst_sequence: Any = None, acceleration_psd: Any = None, sound_speed_file: Any = None,
-                temperature: Any = None, salinity: Any = None, motion: Any = "moving") -> dict[str, Any]:
+                temperature: Any = None, salinity: Any = None, motion: Any = "moving", tag_depth: Any = None,
+                depth_sigma: Any = None, survey_sigma: Any = None) -> dict[str, Any]:
     """:func:`replay_toa`'s tracking arguments checked (each named as the function names it), as keyword arguments
     of :func:`~sblsim.orchestrator.tracks.track.track`.
 
@@ -408,7 +438,8 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
     return {"smooth": smooth, "sound_speed": sound_speed, "receivers_kept": kept, "drop": drop, "seed": seed,
             "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval, "burst_sequence_path": sequence,
             "acceleration_psd": acceleration_psd, "sound_speed_path": series, "temperature": temperature,
-            "salinity": salinity, "motion": motion}
+            "salinity": salinity, "motion": motion} | geometry_arguments(
+        tag_depth, depth_sigma, survey_sigma, ("tag_depth", "depth_sigma", "survey_sigma"))
 
 
 def replay_toa_tags(folder: str | Path, *, receivers: str | Path, workers: int | None = None,
@@ -547,6 +578,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="--format toa with a folder of tags: a Dask scheduler (tcp://HOST:PORT, or local) whose "
                         "workers track the tags")
+    p.add_argument("--tag-depth", type=float, default=None, metavar="M",
+                   help="--format toa: the tag's depth [m] at every ping (a tag at a known depth; receivers with z_m), "
+                        "where the times of arrival carry no depth_m column")
+    p.add_argument("--depth-sigma", type=float, default=None, metavar="M",
+                   help="--format toa: the standard deviation of a depth reading [m] in (0, 100] (default 0.3)")
+    p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
+                   help="--format toa: the receivers' survey error per axis [m] in [0, 1000], for those without a "
+                        "sigma_m column, in the fix's and the smoother's covariances")
     p.add_argument("--motion", choices=MOTIONS, default=None,
                    help="--format toa: moving (default) or stationary (a sync or reference tag: one position for all "
                         "pings)")
@@ -586,7 +625,10 @@ def main(args: argparse.Namespace) -> int:
                             ("--sound-speed-file", args.sound_speed_file),
                             ("--temperature", args.temperature is not None),
                             ("--salinity", args.salinity is not None), ("--motion", args.motion),
-                            ("--workers", args.workers is not None), ("--scheduler", args.scheduler)) if v]
+                            ("--workers", args.workers is not None), ("--scheduler", args.scheduler),
+                            ("--tag-depth", args.tag_depth is not None),
+                            ("--depth-sigma", args.depth_sigma is not None),
+                            ("--survey-sigma", args.survey_sigma is not None)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -708,7 +750,7 @@ def _main_toa(args: argparse.Namespace) -> int:
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
                           "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
                           "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --motion, --workers, "
-                          "--scheduler, --out, --force")
+                          "--scheduler, --tag-depth, --depth-sigma, --survey-sigma, --out, --force")
     speed, series, temperature, salinity, motion, q = medium_arguments(
         args.sound_speed, args.sound_speed_file, args.temperature, args.salinity, args.motion, args.acceleration_psd,
         ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"))
@@ -728,7 +770,8 @@ def _main_toa(args: argparse.Namespace) -> int:
     options = {"smooth": args.smooth, "sound_speed": speed, "receivers_kept": kept, "drop": drop, "seed": seed,
                "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval,
                "burst_sequence_path": sequence, "acceleration_psd": q, "sound_speed_path": series,
-               "temperature": temperature, "salinity": salinity, "motion": motion}
+               "temperature": temperature, "salinity": salinity, "motion": motion} | geometry_arguments(
+        args.tag_depth, args.depth_sigma, args.survey_sigma, ("--tag-depth", "--depth-sigma", "--survey-sigma"))
     if args.log.is_dir():
         return _main_tags(args, options)
     if args.workers is not None or args.scheduler is not None:

@@ -98,10 +98,18 @@ def _numbers(rows: list[str], name: str, what: str, first_line: int, header: lis
 @dataclass
 class ToaMatrix:
     """Times of arrival: ``toa`` (pings, receivers) [s], NaN where not heard; ``names`` the columns' receiver names
-    (None: no header, the columns in the receivers file's order)."""
+    (None: no header, the columns in the receivers file's order); ``depth`` the tag's depth-sensor reading per ping
+    [m] (a ``depth_m`` column of the header: positive down, NaN where none; None without one)."""
 
     toa: np.ndarray
     names: list[str] | None
+    depth: np.ndarray | None = None
+
+
+#: The column of a TOA matrix's header that holds the tag's depth reading per ping, not a receiver's times.
+DEPTH_COLUMN = "depth_m"
+#: The depth readings allowed [m] (a pressure sensor reads a little above the surface; the deepest trench).
+DEPTH_RANGE = (-10.0, 11000.0)
 
 
 def read_toa(path: Path | str) -> ToaMatrix:
@@ -128,22 +136,42 @@ def read_toa(path: Path | str) -> ToaMatrix:
     if not 1 <= width <= MAX_RECEIVERS:
         raise ModelError(f"{what}: {str(path)!r} has {width} columns; allowed 1 to {MAX_RECEIVERS}")
     header = names or [f"{k + 1}" for k in range(width)]
-    toa = _numbers(lines, str(path), what, 2 if names else 1, header, 0.0, MAX_TIME, True)
-    return ToaMatrix(toa, names)
+    if names is None or DEPTH_COLUMN not in names:
+        return ToaMatrix(_numbers(lines, str(path), what, 2 if names else 1, header, 0.0, MAX_TIME, True), names)
+    values = _numbers(lines, str(path), what, 2, header, -MAX_TIME, MAX_TIME, True)
+    at = names.index(DEPTH_COLUMN)
+    depth, toa = values[:, at], np.delete(values, at, axis=1)
+    receivers = [n for n in names if n != DEPTH_COLUMN]
+    for cells, low, high, columns in ((depth[:, None], *DEPTH_RANGE, [DEPTH_COLUMN]), (toa, 0.0, MAX_TIME, receivers)):
+        bad = np.argwhere((cells < low) | (cells > high))
+        if len(bad):
+            i, j = map(int, bad[0])
+            raise ModelError(f"{what}: {str(path)!r} line {i + 2} column {columns[j]}: {cells[i, j]:.10g} is not "
+                             f"allowed; allowed: a finite number in [{low:g}, {high:g}] or NA/empty")
+    if not receivers:
+        raise ModelError(f"{what}: {str(path)!r} holds a depth column and no receiver's")
+    return ToaMatrix(toa, receivers, depth)
 
 
 @dataclass
 class Receivers:
     """The receivers: ``names`` (n,), ``positions`` (n, dim) [m], NaN rows where a receiver has no position
-    (not used)."""
+    (not used), and ``sigma`` (n,) each one's survey error per axis [m] (a ``sigma_m`` column; NaN where not given,
+    None without the column)."""
 
     names: list[str]
     positions: np.ndarray
+    sigma: np.ndarray | None = None
+
+
+#: The survey errors a receivers file's ``sigma_m`` column may give [m] (a standard deviation per axis).
+SURVEY_SIGMA_RANGE = (0.0, 1000.0)
 
 
 def read_receivers(path: Path | str) -> Receivers:
     """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``]
-    [, ``status``]) or a TOML file (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``]). A receiver
+    [, ``sigma_m``] [, ``status``]) or a TOML file (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``]
+    [, ``sigma_m``]); ``sigma_m`` the survey's standard deviation per axis [m] (:data:`SURVEY_SIGMA_RANGE`). A receiver
     whose coordinates are empty is kept without a position (its column of the TOA matrix is not used).
 
     Raises
@@ -170,12 +198,16 @@ def read_receivers(path: Path | str) -> Receivers:
         raise ModelError(f"{what}: {name!r}: the header needs x_m and y_m (or x, y) columns, got {','.join(header)}")
     used = [k for k in axes if k is not None]
     status = header.index("status") if "status" in header else None
-    label = next((k for k in range(len(header)) if k not in used and k != status), None)
-    names, positions = [], []
+    survey = header.index("sigma_m") if "sigma_m" in header else None
+    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey)), None)
+    names, positions, sigma = [], [], []
     for lineno, cells in enumerate(rows, start=2):
         if len(cells) != len(header):
             raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} fields, the header {len(header)}")
         names.append(cells[label] if label is not None else str(lineno - 1))
+        if survey is not None:
+            sigma.append(math.nan if cells[survey] in MISSING else number(
+                cells[survey], f"{what}: {name!r} line {lineno}", "sigma_m", *SURVEY_SIGMA_RANGE))
         coordinates = [cells[k] for k in used]
         if all(c in MISSING for c in coordinates):
             positions.append([math.nan] * len(used))
@@ -184,7 +216,7 @@ def read_receivers(path: Path | str) -> Receivers:
                           for c, k in zip(coordinates, used)])
     if len(set(names)) != len(names):
         raise ModelError(f"{what}: {name!r}: a receiver name is given twice")
-    return Receivers(names, np.array(positions, float))
+    return Receivers(names, np.array(positions, float), np.array(sigma, float) if survey is not None else None)
 
 
 def _receivers_toml(path: Path, what: str) -> Receivers:
@@ -198,13 +230,20 @@ def _receivers_toml(path: Path, what: str) -> Receivers:
     if unknown or not isinstance(data.get("receiver"), list) or not data["receiver"]:
         raise ModelError(f"{what}: {name!r}: expected [[receiver]] tables only (name, x_m, y_m[, z_m]), got "
                          f"{', '.join(sorted(unknown)) or 'no receiver'}")
-    names, positions = [], []
+    names, positions, sigma = [], [], []
     dims = set()
     for k, table in enumerate(data["receiver"], start=1):
-        extra = set(table) - {"name", "x_m", "y_m", "z_m"}
+        extra = set(table) - {"name", "x_m", "y_m", "z_m", "sigma_m"}
         if extra or "x_m" not in table or "y_m" not in table:
-            raise ModelError(f"{what}: {name!r}: receiver {k}: the keys are name, x_m, y_m[, z_m]; got "
+            raise ModelError(f"{what}: {name!r}: receiver {k}: the keys are name, x_m, y_m[, z_m][, sigma_m]; got "
                              f"{', '.join(sorted(table))}")
+        value = table.get("sigma_m", math.nan)
+        low, high = SURVEY_SIGMA_RANGE
+        if "sigma_m" in table and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                   or not low <= value <= high):
+            raise ModelError(f"{what}: {name!r}: receiver {k}: sigma_m = {value!r} is not allowed; allowed: a "
+                             f"number in [{low:g}, {high:g}] m")
+        sigma.append(float(value))
         row = []
         for key in ("x_m", "y_m", "z_m"):
             if key not in table:
@@ -220,7 +259,8 @@ def _receivers_toml(path: Path, what: str) -> Receivers:
         positions.append(row)
     if len(dims) != 1:
         raise ModelError(f"{what}: {name!r}: every receiver needs the same coordinates (all with z_m or none)")
-    return Receivers(names, np.array(positions, float))
+    given = np.array(sigma, float)
+    return Receivers(names, np.array(positions, float), given if np.isfinite(given).any() else None)
 
 
 def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarray:
@@ -337,6 +377,6 @@ def read_sound_speed_series(path: Path | str) -> np.ndarray:
     return series
 
 
-__all__ = ["BURST_RANGE", "MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_TIME", "MAX_TOA_BYTES", "Receivers",
-           "SERIES_SPEED_RANGE", "ToaMatrix", "read_burst_sequence", "read_receivers", "read_sound_speed_series",
-           "read_toa", "read_track"]
+__all__ = ["BURST_RANGE", "DEPTH_COLUMN", "DEPTH_RANGE", "MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_TIME",
+           "MAX_TOA_BYTES", "Receivers", "SERIES_SPEED_RANGE", "SURVEY_SIGMA_RANGE", "ToaMatrix", "read_burst_sequence",
+           "read_receivers", "read_sound_speed_series", "read_toa", "read_track"]

@@ -56,6 +56,11 @@ SCORE_KEYS = ("n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95
 MOTIONS = ("moving", "stationary")
 
 
+#: The standard deviation of a tag's depth reading the tracker assumes by default [m]
+#: (:class:`~sblsim.models.tracking.ekf.TrackerSettings` ``depth_sigma``).
+DEPTH_SIGMA = 0.3
+
+
 #: The largest share of detections removed at random.
 MAX_DROP = 0.99
 
@@ -172,6 +177,40 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         "converged": found.converged, "history": list(found.history)}
 
 
+def tag_depth(readings: np.ndarray | None, m: int, dim: int, fixed: float | None,
+              sigma: float) -> tuple[np.ndarray | None, dict[str, Any]]:
+    """The tag's depth per ping [m] (m,) the fix and the robust smoother take as a measurement (σ ``sigma`` [m]):
+    the TOA file's ``depth_m`` column (a pressure sensor's reading per ping), else one ``fixed`` depth for every ping
+    (a tag at a known depth), else None (the depth estimated with the position where the receivers are in 3-D);
+    and what was done (``summary.json``'s ``depth``).
+
+    Raises
+    ------
+    ModelError
+        Both given, or a depth with receivers in 2-D (one line).
+    """
+    if readings is not None and fixed is not None:
+        raise ModelError("tag_depth: not with a depth_m column in the times of arrival (one depth per ping given)")
+    depth = readings if readings is not None else None if fixed is None else np.full(m, float(fixed))
+    if depth is not None and dim != 3:
+        raise ModelError("depth_m: the tag's depth needs the receivers' depths (a z_m column in the receivers file); "
+                         "allowed: receivers in 3-D")
+    if depth is None:
+        return None, {"source": "estimated with the position" if dim == 3 else "none (2-D)"}
+    return depth, {"source": "sensor (depth_m)" if readings is not None else "given (one depth)",
+                   "readings": int(np.isfinite(depth).sum()), "sigma_m": sigma}
+
+
+def survey_sigmas(receivers, names: Sequence[str], one: float | None) -> np.ndarray | None:
+    """Each used receiver's survey error [m] (len(names),): its ``sigma_m`` in the receivers file, else ``one``
+    (one value for the receivers without), else 0; None where none is given (the positions taken as exact)."""
+    given = np.full(len(names), np.nan) if receivers.sigma is None else \
+        receivers.sigma[[receivers.names.index(n) for n in names]]
+    if one is not None:
+        given = np.where(np.isfinite(given), given, one)
+    return None if not np.isfinite(given).any() else np.nan_to_num(given)
+
+
 def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray):
     """A stationary tag's pooled fix (:func:`~sblsim.models.tracking.stationary.stationary_fix`) from the median of
     its single-ping fixes ``fixes`` (m, dim) [m], else the receivers' centroid.
@@ -242,9 +281,13 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
           burst_interval: tuple[float, float] | None = None, burst_sequence_path: Path | None = None,
           acceleration_psd: float | None = None, sound_speed_path: Path | None = None,
-          temperature: float | None = None, salinity: float | None = None, motion: str = "moving") -> TrackOutcome:
+          temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
+          fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
+          survey_sigma: float | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as :func:`sound_speed_stage` takes
-    ``sound_speed``, ``sound_speed_path``, ``temperature`` and ``salinity``; ``truth_sigma`` [m] the truth's
+    ``sound_speed``, ``sound_speed_path``, ``temperature`` and ``salinity``; the tag's depth as :func:`tag_depth`
+    takes ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as :func:`survey_sigmas` takes
+    ``survey_sigma``; ``truth_sigma`` [m] the truth's
     own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
     :func:`ping_schedule`, ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
     (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
@@ -272,9 +315,12 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             raise ModelError(f"truth: its times [{truth[0, 0]:.10g}, {truth[-1, 0]:.10g}] s do not overlap the pings' "
                              f"[{span[0]:.10g}, {span[1]:.10g}] s; allowed: a truth on the time base of the times of "
                              "arrival")
+    depth, depth_info = tag_depth(matrix.depth, len(toa), dim, fixed_depth, depth_sigma)
+    survey = survey_sigmas(receivers, names, survey_sigma)
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity)
-    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA)
-    settings = tracker_settings(c, fe)
+    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma,
+                                            survey_sigma=survey)
+    settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma, survey_sigma=survey)
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
@@ -329,7 +375,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             k0 = record.start
             if k0 < len(toa) - 1:
                 robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:],
-                                         schedule.sliced(k0))
+                                         schedule.sliced(k0), None if depth is None else depth[k0:])
                 kr = np.arange(k0, len(toa))
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts)
@@ -359,7 +405,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "receivers_kept": None if receivers_kept is None else list(receivers_kept),
         "drop_detections": drop, "seed": seed if drop > 0 else None, "detections_dropped": dropped,
         "dimensions": dim, "sound_speed": speed, "sigma_toa_s": SIGMA_TOA, "ping_interval_s": interval,
-        "motion": motion_info,
+        "motion": motion_info, "depth": depth_info,
+        "survey_sigma_m": None if survey is None else dict(zip(names, map(float, survey))),
         "ping_type": {"type": schedule.kind, "source": schedule.source,
                       "burst_interval_s": None if schedule.bounds is None else list(schedule.bounds),
                       "seen": {"typical_step_s": seen.interval, "steps_s": list(seen.bounds),
@@ -412,6 +459,6 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
 
 
-__all__ = ["AGREE_AFTER", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "SCORE_KEYS",
-           "SIGMA_TOA", "TrackOutcome", "drop_detections", "motion_model", "ping_schedule", "sound_speed_stage",
-           "stationary_track", "track", "tracker_settings"]
+__all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS",
+           "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "drop_detections", "motion_model", "ping_schedule",
+           "sound_speed_stage", "stationary_track", "survey_sigmas", "tag_depth", "track", "tracker_settings"]

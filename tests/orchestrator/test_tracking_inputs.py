@@ -1,0 +1,109 @@
+"""The tracker's inputs beyond the times of arrival (orchestrator/tracks/toa.py, track.py): a ``depth_m`` column of
+the tag's depth readings, the receivers' ``sigma_m`` survey errors, read against independent parses and carried to
+the track; and their refusals."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import sblsim
+from sblsim.models.receiver import toa_tracking as tt
+from sblsim.orchestrator.tracks.toa import read_receivers, read_toa
+
+R3 = np.array([[0.0, 0.0, -2.0], [200.0, 0.0, -15.0], [200.0, 150.0, -4.0], [0.0, 150.0, -20.0], [100.0, 75.0, -8.0],
+               [60.0, 140.0, -3.0], [140.0, 20.0, -12.0], [30.0, 80.0, -6.0]])
+NAMES = [f"R{k + 1}" for k in range(len(R3))]
+
+
+def _files(tmp_path: Path, seed: int = 2, sigma: bool = True) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    """A simulated tag in 3-D (80 pings) with its depth readings (0.3 m noise) as a depth_m column, the receivers'
+    file with z_m (and sigma_m, 0.5 m); the truth and the readings."""
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-3)
+    rng = np.random.default_rng(seed)
+    toa, truth, _ = tt.simulate_pings(R3, 80, s, rng, start=np.array([100.0, 75.0, -10.0]), speed=0.2,
+                                      detection=0.6)
+    depth = -truth[:, 2] + 0.3 * rng.normal(size=len(truth))
+    depth[5] = np.nan
+    table = pd.DataFrame(toa, columns=NAMES)
+    table["depth_m"] = depth
+    table.to_csv(tmp_path / "toa.csv", index=False, na_rep="NA", float_format="%.9f")
+    receivers = pd.DataFrame({"name": NAMES, "x_m": R3[:, 0], "y_m": R3[:, 1], "z_m": R3[:, 2]})
+    if sigma:
+        receivers["sigma_m"] = 0.5
+        receivers.loc[2, "sigma_m"] = np.nan
+    receivers.to_csv(tmp_path / "receivers.csv", index=False)
+    return tmp_path / "toa.csv", tmp_path / "receivers.csv", truth, depth
+
+
+def test_the_depth_column_and_the_survey_errors_read_as_pandas_reads_them(tmp_path):
+    toa_path, receivers_path, _, depth = _files(tmp_path)
+    matrix = read_toa(toa_path)
+    independent = pd.read_csv(toa_path)
+    assert matrix.names == NAMES and np.allclose(matrix.depth, independent["depth_m"], equal_nan=True)
+    assert np.allclose(matrix.toa, independent[NAMES].to_numpy(), equal_nan=True, rtol=0, atol=1e-9)
+    receivers = read_receivers(receivers_path)
+    assert np.allclose(receivers.sigma, pd.read_csv(receivers_path)["sigma_m"], equal_nan=True)
+    assert receivers.names == NAMES and receivers.positions.shape == (8, 3)
+    toml = tmp_path / "receivers.toml"
+    toml.write_text('[[receiver]]\nname = "A"\nx_m = 0\ny_m = 0\nsigma_m = 0.2\n'
+                    '[[receiver]]\nname = "B"\nx_m = 100\ny_m = 0\n')
+    assert np.allclose(read_receivers(toml).sigma, [0.2, np.nan], equal_nan=True)
+
+
+def test_a_tag_with_depth_readings_and_surveyed_receivers_is_tracked_at_its_depth(tmp_path):
+    """The replay takes the readings (the track's height within 0.4 m RMS of the truth: the readings' own 0.3 m,
+    smoothed) and the survey errors (their share of the track's sigma: larger than without them)."""
+    toa_path, receivers_path, truth, _ = _files(tmp_path)
+    result = sblsim.replay_toa(toa_path, receivers=receivers_path, sound_speed=1480.0, survey_sigma=0.25)
+    summary = result.summary
+    assert summary["depth"] == {"source": "sensor (depth_m)", "readings": 79, "sigma_m": 0.3}
+    assert summary["survey_sigma_m"] == {n: (0.25 if n == "R3" else 0.5) for n in NAMES}
+    track = result.track
+    k = len(truth) - len(track)
+    assert np.sqrt(np.mean((track["z"].to_numpy() - truth[k:, 2]) ** 2)) <= 0.4
+    (tmp_path / "plain").mkdir()
+    _, plain, _, _ = _files(tmp_path / "plain", sigma=False)
+    exact = sblsim.replay_toa(toa_path, receivers=plain, sound_speed=1480.0)
+    assert exact.summary["survey_sigma_m"] is None
+    assert (track["sigma_x"].median() > exact.track["sigma_x"].median()), (track["sigma_x"].median(),
+                                                                             exact.track["sigma_x"].median())
+
+
+@pytest.mark.parametrize("case,options,message", [
+    ("2-D receivers", ["--tag-depth", "5"], "depth_m: the tag's depth needs the receivers' depths"),
+    ("depth column", ["--tag-depth", "5"], "tag_depth: not with a depth_m column"),
+    ("depth column", ["--depth-sigma", "0"], "--depth-sigma: 0"),
+    ("depth column", ["--survey-sigma", "-1"], "--survey-sigma: -1"),
+    ("bad depth", [], "column depth_m: -20 is not allowed; allowed: a finite number in [-10, 11000]"),
+])
+def test_bad_depths_and_survey_errors_are_refused_in_one_line(tmp_path, capsys, case, options, message):
+    from sblsim.orchestrator.cli import main
+
+    toa_path, receivers_path, _, _ = _files(tmp_path)
+    if case == "2-D receivers":
+        pd.read_csv(receivers_path).drop(columns=["z_m"]).to_csv(receivers_path, index=False)
+        table = pd.read_csv(toa_path).drop(columns=["depth_m"])
+        table.to_csv(toa_path, index=False, na_rep="NA")
+    elif case == "bad depth":
+        table = pd.read_csv(toa_path)
+        table.loc[3, "depth_m"] = -20.0
+        table.to_csv(toa_path, index=False, na_rep="NA")
+    code = main(["replay", str(toa_path), "--format", "toa", "--receivers", str(receivers_path), "--sound-speed",
+                 "1480", "--out", str(tmp_path / "o"), *options])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0], (case, err)
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_summary_says_the_depth_was_estimated_without_readings(tmp_path):
+    toa_path, receivers_path, _, _ = _files(tmp_path)
+    pd.read_csv(toa_path).drop(columns=["depth_m"]).to_csv(toa_path, index=False, na_rep="NA")
+    result = sblsim.replay_toa(toa_path, receivers=receivers_path, sound_speed=1480.0, out=tmp_path / "o")
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["depth"] == {
+        "source": "estimated with the position"}
+    assert result.summary["survey_sigma_m"]["R1"] == 0.5
