@@ -184,6 +184,34 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     return positions, emissions, covariances, used & ~bad[:, None], chi2
 
 
+def survey_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, positions: np.ndarray,
+                          emissions: np.ndarray, covariances: np.ndarray, used: np.ndarray,
+                          survey_sigma: np.ndarray) -> np.ndarray:
+    """The receivers' survey error's share of fixes' covariances (the term :func:`fix_pings` adds where
+    ``survey_sigma`` is given), for fixes made without it.
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        [m].
+    c, sigma_toa : float
+        [m/s], [s].
+    positions, emissions, covariances, used : ndarray
+        What :func:`fix_pings` returned: (m, dim) [m], (m,) [s], (m, dim + 1, dim + 1), (m, n).
+    survey_sigma : ndarray, (n,)
+        Each receiver's survey error per axis [m].
+
+    Returns
+    -------
+    ndarray, (m, dim + 1, dim + 1)
+        NaN where a ping has no fix.
+    """
+    receivers = np.asarray(receivers, float)
+    _, J = _evaluate_pings(receivers, c, np.nan_to_num(positions), np.nan_to_num(emissions))
+    return _survey_term(np.asarray(covariances, float), J, np.asarray(used, bool), sigma_toa,
+                        np.asarray(survey_sigma, float), receivers.shape[1])
+
+
 def _survey_term(cov: np.ndarray, J: np.ndarray, used: np.ndarray, sigma_toa: float, survey: np.ndarray,
                  dim: int) -> np.ndarray:
     """The fixes' consider covariance of the receivers' survey error (:func:`fix_pings`): ``Σ_i σ_i² S_i S_iᵀ``,
@@ -240,4 +268,4 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
     return p, te, J, res
 
 
-__all__ = ["FIX_ITERATIONS", "GATE_ONE", "Fix", "fix_pings", "single_ping_fix"]
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "Fix", "fix_pings", "single_ping_fix", "survey_fix_covariance"]

@@ -418,6 +418,42 @@ def _survey_covariance(problem: _Problem, D: dict, B: dict, information: np.ndar
     return out
 
 
+def survey_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, X: np.ndarray,
+                      schedule: PingSchedule | None = None, depth: np.ndarray | None = None,
+                      dof: float = ROBUST_DOF) -> np.ndarray:
+    """The receivers' survey error's share of a robust track's covariance at its states (the term
+    :func:`robust_smooth` adds to ``P`` where ``settings.survey_sigma`` is given; :func:`_survey_covariance`), for
+    a track solved without it.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        [m].
+    settings : TrackerSettings
+        With ``survey_sigma`` (n,) [m] (None: a zero term).
+    X : ndarray, (m, 2 dim + 2)
+        The track's states (:class:`RobustTrack` ``x``).
+    schedule, depth, dof
+        As :func:`robust_smooth`.
+
+    Returns
+    -------
+    ndarray, (m, 2 dim + 2, 2 dim + 2)
+    """
+    toa, X = np.asarray(toa, float), np.asarray(X, float)
+    if schedule is None:
+        schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
+    if settings.survey_sigma is None:
+        return np.zeros((len(toa), X.shape[1], X.shape[1]))
+    problem = _Problem(toa, np.asarray(receivers, float), settings, schedule, depth)
+    z, _, Jz, _, T, _ = _robust_terms(problem, X, dof)
+    information = observed_information(z, dof)
+    D, B = _normal_blocks(problem, X, information, Jz, T)
+    return _survey_covariance(problem, D, B, information, Jz, np.asarray(settings.survey_sigma, float))
+
+
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
                   dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS, covariance: bool = True,
                   schedule: PingSchedule | None = None, depth: np.ndarray | None = None) -> RobustTrack:
@@ -551,4 +587,5 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
 
 
 __all__ = ["ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_DOF", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT",
-           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "RobustTrack", "observed_information", "robust_smooth"]
+           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "RobustTrack", "observed_information", "robust_smooth",
+           "survey_covariance"]

@@ -295,6 +295,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.models.tracking.fix import survey_fix_covariance
+    from sblsim.models.tracking.smoother import survey_covariance
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
@@ -318,9 +320,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     depth, depth_info = tag_depth(matrix.depth, len(toa), dim, fixed_depth, depth_sigma)
     survey = survey_sigmas(receivers, names, survey_sigma)
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity)
-    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma,
-                                            survey_sigma=survey)
-    settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma, survey_sigma=survey)
+    # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
+    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
+    settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
@@ -345,11 +347,15 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
 
     def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
-             restarts: np.ndarray | None = None):
+             restarts: np.ndarray | None = None, survey_term: np.ndarray | None = None):
+        """An estimator's rows, checked against the data with its own covariance ``cov``; reported with
+        ``survey_term`` (the receivers' survey error's share) added."""
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
                                  fix_used=fix_explained[ping])
+        if survey_term is not None:
+            cov = cov + survey_term
         with np.errstate(invalid="ignore"):
             # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0
             sigmas = {f"sigma_{a}": np.sqrt(np.where(cov[:, k, k] >= 0, cov[:, k, k], np.nan))
@@ -377,8 +383,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:],
                                          schedule.sliced(k0), None if depth is None else depth[k0:])
                 kr = np.arange(k0, len(toa))
+                extra = None if survey is None else survey_covariance(
+                    toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, schedule.sliced(k0),
+                    None if depth is None else depth[k0:])[:, :dim, :dim]
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
-                     (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts)
+                     (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
                  np.r_[record.restarts, segment_starts])
         rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
@@ -388,7 +397,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
     f = np.flatnonzero(np.isfinite(fe))
-    rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1))
+    rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None,
+         None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f], fused[f],
+                                                           survey)[:, :dim, :dim])
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
     estimates = pd.concat(frames.values(), ignore_index=True)

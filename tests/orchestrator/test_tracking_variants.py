@@ -289,3 +289,23 @@ def test_two_pings_with_the_speed_given_are_tracked_and_scored(tmp_path, capsys)
     assert (tmp_path / "o" / "score.json").is_file() and "ping type" in capsys.readouterr().out
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert summary["motion"] == {"model": "moving", "acceleration_psd_m2_s3": 0.002, "source": "given"}
+
+
+@pytest.mark.slow
+def test_lake_hald_receivers_surveyed_to_1_m_with_their_survey_error(tmp_path):
+    """The hydrophones moved by 1 m per axis (seed 1), as a survey to 1 m gives them: the track the same with or
+    without --survey-sigma 1 (the positions as surveyed either way), its NEES against the GPS from far above 3 to
+    within [1, 3] with it (before: the covariance knew nothing of the survey)."""
+    import pandas as pd
+
+    table = pd.read_csv(DATA / "hydrophones.csv")
+    rng = np.random.default_rng(1)
+    placed = table["x_m"].notna()
+    for axis in ("x_m", "y_m"):
+        table.loc[placed, axis] += rng.normal(0.0, 1.0, placed.sum())
+    table.to_csv(tmp_path / "hydrophones.csv", index=False)
+    plain, surveyed = (sblsim.replay_toa(DATA / "toa.txt", receivers=tmp_path / "hydrophones.csv",
+                                         truth=DATA / "gps.txt", survey_sigma=sigma) for sigma in (None, 1.0))
+    assert np.array_equal(plain.track[["x", "y"]].to_numpy(), surveyed.track[["x", "y"]].to_numpy())
+    assert plain.score["nees"] > 10.0 and 1.0 <= surveyed.score["nees"] <= 3.0, (plain.score["nees"],
+                                                                                  surveyed.score["nees"])
