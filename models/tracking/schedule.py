@@ -54,6 +54,8 @@ GAP_MIN_S = 60.0
 MIN_STEP_SIGMA = 1e-3
 #: Most missed pings one step of a ``pbi`` sequence's alignment bridges.
 PBI_MAX_MISSED = 64
+#: The first steps over which every phase of a pseudo-random tag's sequence is tried (:func:`align_sequence`).
+PBI_PHASE_STEPS = 256
 
 
 @dataclass(frozen=True)
@@ -276,9 +278,11 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
 def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> tuple[np.ndarray, np.ndarray]:
     """A pseudo-random tag's interval sequence aligned to the rows' first-arrival steps.
 
-    Every phase of the (repeating) sequence is tried: from it, each step of the rows takes as many of the next
-    intervals (1 to :data:`PBI_MAX_MISSED`: pings nobody heard) as bring their sum nearest to the step; a step
-    matches when that sum is within twice the crossing time. The phase with the most matches is kept.
+    Every phase of the (repeating) sequence is tried on the first :data:`PBI_PHASE_STEPS` steps: from it, each step
+    of the rows takes as many of the next intervals (1 to :data:`PBI_MAX_MISSED`: pings nobody heard) as bring their
+    sum nearest to the step; a step matches when that sum is within twice the crossing time. The phase with the most
+    matches there aligns the whole record (one pass, not one per phase: a long record's alignment in linear time),
+    and where that matches under half of the steps every phase is tried over the whole record.
 
     Parameters
     ----------
@@ -311,8 +315,9 @@ def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> 
         return (np.asarray(a) // L) * period + partial[np.asarray(a) % L]
 
     ahead = np.arange(1, PBI_MAX_MISSED + 1)
-    best = (-1, None, None)
-    for phase in range(L):
+
+    def walk(phase: int, steps: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """The steps aligned from ``phase``: the matches, the durations and which matched."""
         j, durations, matched = phase, np.array(steps, float), np.zeros(len(steps), bool)
         for k, d in enumerate(steps):
             sums = elapsed(j + ahead) - elapsed(j)
@@ -322,14 +327,25 @@ def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> 
                 j += r + 1
             else:  # lost the sequence here: the nearest whole ping count by the mean interval
                 j += max(int(round(d / mean)), 1)
-        if matched.sum() > best[0]:
-            best = (int(matched.sum()), durations, matched)
+        return int(matched.sum()), durations, matched
+
+    # the phase chosen on the first PBI_PHASE_STEPS steps (every phase tried there), then the whole record aligned
+    # from it; every phase over the whole record where that matches under half of the steps
+    steps = np.asarray(steps, float)
+    head = steps[:PBI_PHASE_STEPS]
+    phase = max(range(L), key=lambda f: (walk(f, head)[0], -f))
+    best = walk(phase, steps)
+    if len(steps) > PBI_PHASE_STEPS and best[0] < 0.5 * len(steps):
+        for other in range(L):
+            found = walk(other, steps)
+            if found[0] > best[0]:
+                best = found
     if best[0] < 0.5 * len(steps):
         raise ModelError(f"burst sequence: {max(best[0], 0)} of {len(steps)} steps match the sequence at its best "
                          "phase; allowed: the tag's own sequence (its intervals in order)")
     return best[1], best[2]
 
 
-__all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PBI_MAX_MISSED", "PING_TYPES", "InferredType", "PingSchedule",
-           "align_sequence", "build_schedule", "crossing_time", "first_arrival_steps", "first_arrivals",
-           "infer_ping_type"]
+__all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PBI_MAX_MISSED", "PBI_PHASE_STEPS", "PING_TYPES",
+           "InferredType", "PingSchedule", "align_sequence", "build_schedule", "crossing_time", "first_arrival_steps",
+           "first_arrivals", "infer_ping_type"]

@@ -97,3 +97,20 @@ def test_a_stable_schedule_is_today_s_model_and_slices_keep_their_gaps():
     schedule = ps.build_schedule(toa[np.r_[0:150, 300:400]], "sbi", 2.0, 1e-3, 1e-4, crossing())
     tail = schedule.sliced(100)
     assert tail.gaps == (49,) and len(tail.count) == len(schedule.count) - 100
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_long_pseudo_random_record_is_aligned_from_its_first_steps_phase(seed):
+    """2,000 emissions of a 64-interval sequence started at a random phase, 20 % of the pings unheard (runs of them
+    at the start too), the steps seen with 10 ms of travel-time change: every step matched, each duration the true
+    emission step (the sum of the intervals it spans) to 1e-9 s, though only the first steps tried every phase."""
+    rng = np.random.default_rng(seed)
+    sequence = rng.uniform(20.0, 40.0, 64)
+    start = int(rng.integers(64))
+    emissions = np.cumsum(np.r_[0.0, sequence[(start + np.arange(1999)) % 64]])
+    heard = rng.random(2000) > 0.2
+    heard[1:6] = False
+    steps = np.diff(emissions[heard])
+    durations, matched = ps.align_sequence(steps + rng.normal(0.0, 0.01, len(steps)), sequence, 0.17)
+    assert matched.all() and len(steps) > ps.PBI_PHASE_STEPS
+    assert np.allclose(durations, steps, rtol=0, atol=1e-9)
