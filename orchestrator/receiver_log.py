@@ -64,7 +64,8 @@ LOG_COLUMNS = {
                 "at its first step that reaches it; empty or no column: time_s", "optional"),
     "beacon_id": ("1", "the beacon the packet came from, 1 … N (USBL: 1); empty: the row is a depth reading only",
                   "always (the column)"),
-    "range_m": ("m", "the measured range (one-way: c · travel time; two-way: c · (round trip − turnaround) / 2)",
+    "range_m": ("m", "the measured range (one-way: c · travel time; two-way: c · (round trip − nominal turnaround) / "
+                "2, negative where the turnaround's jitter exceeds the travel)",
                 "one of range_m, travel_time_s"),
     "travel_time_s": ("s", "the one-way travel time (two-way ranging: (round trip − turnaround) / 2); range = "
                       "sound speed · travel time", "one of range_m, travel_time_s"),
@@ -237,9 +238,11 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     ignored = [c for c in table.header if c not in used]
     speeds = next(v for v in Acoustics.variables() if v.name == "sound_speed_assumed")
     t_lo, t_hi = -1e12, 1e12  # any clock; the receiver runs on times from the log's start
-    r_lo, r_hi = 0.0, SIGNAL_RANGES["range"][1]
-    if nominal:
-        r_lo = SIGNAL_RANGES["range"][0]
+    # a range is a measurement, not a distance: c times a measured time (two-way: the round trip less the nominal
+    # turnaround, halved; one-way: on clocks that may be offset; an inverted LBL's: against a nominal epoch) plus
+    # its noise, negative where the turnaround's jitter, a clock's offset or the noise exceeds the distance; the
+    # run hands it to the receiver as it is, so the replay takes the receiver's input range, negative included
+    r_lo, r_hi = SIGNAL_RANGES["range"]
     p_lo, p_hi = SIGNAL_RANGES["position"]
     d_lo, d_hi = SIGNAL_RANGES["depth"]
 
@@ -276,7 +279,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
         if has_range:
             rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
         else:
-            travel = _number(cells[index["travel_time_s"]], where, "travel_time_s", 0.0, 1e3)
+            travel = _number(cells[index["travel_time_s"]], where, "travel_time_s", -1e3, 1e3)
             speed = sound_speed
             if "sound_speed_mps" in index and cells[index["sound_speed_mps"]]:
                 speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)

@@ -328,7 +328,7 @@ REFUSED = {
     "empty time": (rows(",1,6,1,0,1,2", *GOOD), "line 2: time_s is empty"),
     "empty range on a packet row": (rows(*GOOD[:1], "0.2,2,,1,0,1,2"), "line 3: range_m is empty"),
     "empty depth on a depth row": (rows(*GOOD[:1], "0.2,,,,,,"), "line 3: depth_m is empty"),
-    "negative range": (rows(*GOOD[:1], "0.2,2,-6,1,0,1,2"), "line 3: range_m: -6 is outside"),
+    "range beyond the input range": (rows(*GOOD[:1], "0.2,2,-2e7,1,0,1,2"), "line 3: range_m: -20000000 is outside"),
     "infinite beacon position": (rows("0.1,1,6,inf,0,1,2"), "line 2: beacon_n_m: 'inf' is not a finite number"),
     "missing column": ("time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,depth_m\n0.1,1,6,1,0,2\n",
                        "has no column beacon_d_m"),
