@@ -10,7 +10,12 @@ cycle of measurements at the points of a **work area**, the same information as 
 * :mod:`~sblsim.models.design.criteria`: the criteria over a work area (D-optimal, A-optimal, worst point,
   percentile), the prescription's coverage, and the closed forms of the optimal geometries that the tests hold
   the search to (Bishop, Fidan, Anderson, Doğançay, Pathirana, "Optimality analysis of sensor-target
-  localization geometries", Automatica 46(3):479-492, 2010).
+  localization geometries", Automatica 46(3):479-492, 2010);
+* a telemetry array (receivers hearing a tag, the emission unknown), its own modules, imported by name:
+  :mod:`~sblsim.models.design.detection_curve` (a range test's detection range curve),
+  :mod:`~sblsim.models.design.telemetry` (the positioning yield, the DRMS of a fix, the sync coverage),
+  :mod:`~sblsim.models.design.area` (the study area's polygon) and :mod:`~sblsim.models.design.lake_hald` (a
+  layout evaluated over an area; the Lake Hald array's).
 
 No optimiser lives here: the search, the Monte Carlo confirmation and the outputs are the orchestrator's
 (``sblsim design``). This package imports nothing from the FMI or orchestrator layers.
