@@ -16,7 +16,7 @@ import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -166,6 +166,49 @@ def read_lines(path: Path, what: str, encoding: str = "utf-8-sig", *, max_bytes:
         raise ModelError(f"{what}: {name!r} is not {kind} text (byte {exc.start})") from None
 
 
+def csv_cells(lines: Sequence[tuple[int, str]], where: str, delimiter: str = ",") -> list[tuple[int, list[str]]]:
+    """Each numbered line's cells, parsed by the csv module (quotes honoured: ``"a, b"`` is one cell, ``""`` a quote
+    inside one); a cell keeps its trailing spaces (the caller strips).
+
+    Parameters
+    ----------
+    lines : sequence of (int, str)
+        The lines to parse with their line numbers in the file (blank and comment lines already dropped); each is
+        one row: a quoted cell never spans lines.
+    where : str
+        The error's start, e.g. ``"toa: 'x.csv'"``.
+    delimiter : str
+        ``","`` (a CSV file) or ``" "``: a whitespace-separated table (a run of spaces and tabs outside quotes is
+        one separator; a tab inside quotes is read as a space).
+
+    Raises
+    ------
+    ModelError
+        ``where line N does not parse as CSV (...)``: a quote not closed on its line, text after a closing quote.
+    """
+    texts = [line.strip().replace("\t", " ") if delimiter == " " else line.strip() for _, line in lines]
+    reader = csv.reader(texts, delimiter=delimiter, skipinitialspace=True, strict=True)
+    try:
+        rows = list(reader)
+        if len(rows) == len(texts) and reader.line_num == len(texts):  # each line one row: the usual case
+            return [(number, cells) for (number, _), cells in zip(lines, rows)]
+    except csv.Error:
+        pass
+    reader = csv.reader(texts, delimiter=delimiter, skipinitialspace=True, strict=True)  # find the line, one by one
+    out: list[tuple[int, list[str]]] = []
+    for number, _ in lines:
+        try:
+            cells = next(reader)
+        except (csv.Error, StopIteration) as exc:
+            reason = str(exc) or "unexpected end of data"
+            raise ModelError(f"{where} line {number} does not parse as CSV ({reason}: a quote not closed on its "
+                             "line?)") from None
+        if reader.line_num != len(out) + 1:
+            raise ModelError(f"{where} line {number} does not parse as CSV (a quoted cell runs past the line's end)")
+        out.append((number, cells))
+    return out
+
+
 def read_table(path: Path, what: str) -> TextTable:
     """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
 
@@ -188,8 +231,7 @@ def read_table(path: Path, what: str) -> TextTable:
             raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
         return read_parquet(path, what)
     lines = read_lines(path, what)
-    header: list[str] | None = None
-    rows: list[tuple[str, list[str]]] = []
+    data: list[tuple[int, str]] = []
     config: list[str] = []
     title = ""
     for number, line in enumerate(lines, start=1):
@@ -197,26 +239,24 @@ def read_table(path: Path, what: str) -> TextTable:
         if not stripped:
             continue
         if stripped.startswith("#"):
-            if header is None and line.startswith(CONFIG_PREFIX.rstrip()):
+            if not data and line.startswith(CONFIG_PREFIX.rstrip()):
                 config.append(line[len(CONFIG_PREFIX):] if line.startswith(CONFIG_PREFIX) else "")
-            elif header is None and not title:
+            elif not data and not title:
                 title = stripped.lstrip("#").strip()
             continue
-        try:
-            cells = [c.strip() for c in next(csv.reader([line]))]
-        except csv.Error as exc:
-            raise ModelError(f"{what}: {name!r} line {number} does not parse ({exc})") from None
-        if header is None:
-            header = cells
-            continue
+        data.append((number, line))
+        if len(data) > MAX_LOG_ROWS + 1:  # the header and the rows
+            raise too_large(name, what, f"has more than {MAX_LOG_ROWS:,} rows (line {number})")
+    if not data:
+        raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
+    parsed = csv_cells(data, f"{what}: {name!r}")
+    header = [c.strip() for c in parsed[0][1]]
+    rows: list[tuple[str, list[str]]] = []
+    for number, cells in parsed[1:]:
         if len(cells) != len(header):
             raise ModelError(f"{what}: {name!r} line {number} has {len(cells)} fields, the header "
                              f"{len(header)} ({','.join(header)})")
-        rows.append((f"line {number}", cells))
-        if len(rows) > MAX_LOG_ROWS:
-            raise too_large(name, what, f"has more than {MAX_LOG_ROWS:,} rows (line {number})")
-    if header is None:
-        raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
+        rows.append((f"line {number}", [c.strip() for c in cells]))
     return TextTable(path, header, rows, "\n".join(config), title)
 
 
@@ -251,5 +291,5 @@ def number(text: str, where: str, column: str, low: float, high: float) -> float
 
 
 __all__ = ["CONFIG_PREFIX", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES",
-           "TextTable", "cell", "columns", "number", "read_lines", "read_parquet", "read_table", "regular_file",
-           "text_lines", "too_large"]
+           "TextTable", "cell", "columns", "csv_cells", "number", "read_lines", "read_parquet", "read_table",
+           "regular_file", "text_lines", "too_large"]

@@ -73,7 +73,7 @@ from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, harmonic_mean,
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.output import write_atomic
-from sblsim.orchestrator.io.tables import NUMBER, read_lines
+from sblsim.orchestrator.io.tables import NUMBER, csv_cells, read_lines
 from sblsim.orchestrator.io.tables import number as table_number
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, POSITION_RANGE
 
@@ -257,10 +257,8 @@ def read_pxp_tt(path: Path | str, columns: int) -> pd.DataFrame:
     path = Path(path)
     what = "pxp_tt"
     rows = []
-    for number, line in enumerate(read_lines(path, what, "ascii"), start=1):
-        fields = line.split()
-        if not fields:
-            continue
+    lines = [(number, line) for number, line in enumerate(read_lines(path, what, "ascii"), start=1) if line.strip()]
+    for number, fields in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, by the csv module
         where = f"{what}: {str(path)!r} line {number}"
         if len(fields) < 2 + columns:
             raise ModelError(f"{where} has {len(fields)} fields; date, time and {columns} travel times [us] needed "
@@ -295,8 +293,8 @@ def read_posfilter(path: Path | str) -> pd.DataFrame:
     names = ["time [s since J2000]", "x [m]", "y [m]", "z [m]", *[f"covariance {a}{b} [m^2]" for a in "xyz"
                                                                   for b in "xyz"]]
     ranges = [J2000_RANGE] + [(-MAX_ECEF_M, MAX_ECEF_M)] * 3 + [(-MAX_COV_M2, MAX_COV_M2)] * 9
-    lines = [(number, line.split()) for number, line in enumerate(read_lines(path, what, "ascii"), start=1)]
-    lines = [(number, fields) for number, fields in lines if fields]
+    lines = csv_cells([(number, line) for number, line in enumerate(read_lines(path, what, "ascii"), start=1)
+                       if line.strip()], f"{what}: {str(path)!r}", " ")  # whitespace-separated, by the csv module
     if not lines:
         raise ModelError(f"{what}: {str(path)!r} holds no positions")
     low, high = np.array(ranges).T

@@ -45,7 +45,7 @@ from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS
 from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.calibration.boxin import lever_enu
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import number, read_lines
+from sblsim.orchestrator.io.tables import csv_cells, number, read_lines
 from sblsim.orchestrator.surveys.gnatss import J2000_POSIX, J2000_RANGE
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
 
@@ -113,10 +113,9 @@ def _rows(path: Path, what: str, width: tuple[int, int]) -> list[tuple[int, list
     """The non-blank, non-comment lines of a file, each as (line number, fields), with a field count in
     ``width``."""
     out = []
-    for k, line in enumerate(read_lines(path, what, "ascii"), start=1):
-        cells = line.split()
-        if not cells or cells[0].startswith("#"):
-            continue
+    lines = [(k, line) for k, line in enumerate(read_lines(path, what, "ascii"), start=1)
+             if line.strip() and not line.lstrip().startswith("#")]
+    for k, cells in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, parsed by the csv module
         if not width[0] <= len(cells) <= width[1]:
             count = f"{width[0]}" if width[0] == width[1] else f"{width[0]} to {width[1]}"
             raise ModelError(f"{what}: {str(path)!r} line {k} has {len(cells)} fields, the format {count}")

@@ -19,7 +19,7 @@ from pathlib import Path
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import number, read_lines
+from sblsim.orchestrator.io.tables import csv_cells, number, read_lines
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
 
 #: The files' clock: seconds after this instant (UTC) [s since 1970-01-01].
@@ -79,11 +79,9 @@ def read_xie(path: Path | str) -> SurveyLog:
     what = "log"
     rows: list[list[float]] = []
     where: list[str] = []
-    for k, line in enumerate(read_lines(path, what), start=1):
-        stripped = line.strip()
-        if not stripped or stripped.startswith("#"):
-            continue
-        cells = stripped.split()
+    lines = [(k, line) for k, line in enumerate(read_lines(path, what), start=1)
+             if line.strip() and not line.lstrip().startswith("#")]
+    for k, cells in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, parsed by the csv module
         here = f"{what}: {str(path)!r} line {k}"
         if len(cells) != len(FIELDS):
             raise ModelError(f"{here} has {len(cells)} fields, the format {len(FIELDS)} ({' '.join(FIELDS)})")

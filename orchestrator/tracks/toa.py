@@ -1,7 +1,8 @@
 """Reading recorded times of arrival at a fixed array (an inverted LBL), as hostile input.
 
-* the TOA matrix: one row per ping, one column per receiver, whitespace- or comma-separated, an optional header
-  of receiver names; ``NA`` or an empty cell where the ping was not heard (Lake Hald's ``toa.txt``);
+* the TOA matrix: one row per ping, one column per receiver, comma-separated (if its first row holds a comma) or
+  whitespace-separated, an optional header of receiver names; ``NA`` or an empty cell where the ping was not
+  heard (Lake Hald's ``toa.txt``);
 * the receivers' positions: a CSV with a name column and ``x_m``, ``y_m`` [, ``z_m``] [, ``status``] (or
   ``x``, ``y``, ``z``), a receiver without a position not used (Lake Hald's ``hydrophones.csv``), or a TOML
   file of ``[[receiver]]`` tables with ``name``, ``x_m``, ``y_m`` [, ``z_m``];
@@ -11,14 +12,15 @@
   ``sound_speed``) [m/s] under a header line (a temperature logger's series converted, a CTD's time series).
 
 Each file must be a regular file (a FIFO or a device such as ``/dev/zero`` is refused before it is opened) and is
-read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read. The cells are
-parsed by pandas and every one checked (finite, within its range); no name or text in a file is ever taken as a
-path. An error is one line naming the file, its line or column and the allowed range (:class:`ModelError`).
+read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read. Its rows are
+parsed by the csv module (:func:`~sblsim.orchestrator.io.tables.csv_cells`: a quoted cell may hold the separator),
+every row must have the header's (or the first row's) number of cells, and every cell is checked (finite, within
+its range); no name or text in a file is ever taken as a path. An error is one line naming the file, the line as
+an editor numbers it, the column and the allowed range (:class:`ModelError`).
 """
 
 from __future__ import annotations
 
-import io
 import math
 import tomllib
 from dataclasses import dataclass
@@ -28,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import NUMBER, number, read_lines
+from sblsim.orchestrator.io.tables import NUMBER, csv_cells, number, read_lines
 
 #: The largest file read [bytes] and the most rows (pings, receivers, track points).
 MAX_TOA_BYTES = 64 * 2**20
@@ -46,38 +48,44 @@ def _too_large(name: str, what: str, amount: str) -> ModelError:
                       "rows")
 
 
-def _lines(path: Path, what: str) -> list[str]:
-    """The lines of a regular text file (:func:`~sblsim.orchestrator.io.tables.read_lines`), refused when it holds
-    more than :data:`MAX_TOA_BYTES` bytes or :data:`MAX_PINGS` rows and 1,000 lines besides (counted in what was
-    read); comments (``#``) and blank lines dropped."""
+def _lines(path: Path, what: str) -> list[tuple[int, str]]:
+    """The numbered lines of a regular text file (:func:`~sblsim.orchestrator.io.tables.read_lines`), refused when
+    it holds more than :data:`MAX_TOA_BYTES` bytes or :data:`MAX_PINGS` rows and 1,000 lines besides (counted in
+    what was read); comments (``#``) and blank lines dropped, the others with their line numbers from 1."""
     lines = read_lines(path, what, max_bytes=MAX_TOA_BYTES, max_rows=MAX_PINGS, extra_lines=1000, refuse=_too_large)
-    return [line for line in lines if line.strip() and not line.lstrip().startswith("#")]
+    return [(k, line) for k, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
 
 
-def _split(line: str) -> list[str]:
-    """The cells of a line: comma-separated if it holds a comma, else whitespace-separated; quotes removed."""
-    cells = line.split(",") if "," in line else line.split()
-    return [c.strip().strip('"').strip("'").strip() for c in cells]
+def _rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
+    """The file's rows (:func:`_lines`) as (line number, cells), parsed by the csv module: comma-separated if the
+    first row holds a comma, else whitespace-separated; quotes honoured (``"H1, north"`` is one cell). The cells
+    keep trailing spaces (:func:`_stripped`, :func:`_numbers` strip them)."""
+    lines = _lines(path, what)
+    delimiter = "," if lines and "," in lines[0][1] else " "
+    return csv_cells(lines, f"{what}: {str(path)!r}", delimiter)
+
+
+def _stripped(cells: list[str]) -> list[str]:
+    return [c.strip() for c in cells]
 
 
 def _is_cell(text: str) -> bool:
     return text in MISSING or bool(NUMBER.fullmatch(text))
 
 
-def _numbers(rows: list[str], name: str, what: str, first_line: int, header: list[str], low: float, high: float,
-             missing: bool) -> np.ndarray:
-    """The cells of ``rows`` parsed by pandas as a float matrix, each checked: a number (``NA``/empty allowed
-    only where ``missing``), finite, within [low, high]; an error names the line and the column."""
+def _numbers(rows: list[tuple[int, list[str]]], name: str, what: str, header: list[str], low: float, high: float,
+             missing: bool, named: bool = True) -> np.ndarray:
+    """The cells of ``rows`` (:func:`_rows`) as a float matrix, each checked: a number (``NA``/empty allowed only
+    where ``missing``), finite, within [low, high]; every row with the header's number of cells (``named``: the
+    file's header; else the first row's). An error names the line and the column, or the line and its cells."""
     width = len(header)
-    sep = "," if any("," in r for r in rows[:1]) else r"\s+"
-    try:
-        frame = pd.read_csv(io.StringIO("\n".join(rows)), sep=sep, header=None, dtype=str, keep_default_na=False,
-                            engine="python" if sep != "," else "c", quotechar='"', skipinitialspace=True)
-    except Exception as exc:  # pandas' parser errors name the line
-        raise ModelError(f"{what}: {name!r} does not parse ({' '.join(str(exc).split())[:160]})") from None
-    if frame.shape[1] != width:
-        raise ModelError(f"{what}: {name!r} has {frame.shape[1]} columns, the first row {width}")
-    cells = frame.to_numpy(dtype=str)
+    ragged = next(((number, len(cells)) for number, cells in rows if len(cells) != width), None)
+    if ragged is not None:
+        against = f"the header {width} ({','.join(header)[:80]})" if named else f"the first row {width}"
+        raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, {against}; allowed: "
+                         f"{width} cells a row" + (" (NA or an empty cell where not heard)" if missing else ""))
+    lines = [number for number, _ in rows]
+    cells = np.array([row for _, row in rows], dtype=str).reshape(len(rows), width)
     stripped = np.char.strip(cells)
     values = np.array(pd.to_numeric(pd.Series(stripped.ravel()), errors="coerce"), float).reshape(cells.shape)
     empty = np.isin(stripped, MISSING)
@@ -89,7 +97,7 @@ def _numbers(rows: list[str], name: str, what: str, first_line: int, header: lis
         i, j = map(int, np.argwhere(bad)[0])
         text = stripped[i, j]
         allowed = f"a finite number in [{low:g}, {high:g}]" + (" or NA/empty (not heard)" if missing else "")
-        raise ModelError(f"{what}: {name!r} line {first_line + i} column {header[j]}: {text[:40]!r} is not "
+        raise ModelError(f"{what}: {name!r} line {lines[i]} column {header[j]}: {text[:40]!r} is not "
                          f"allowed; allowed: {allowed}")
     values[empty] = np.nan
     return values
@@ -121,24 +129,24 @@ def read_toa(path: Path | str) -> ToaMatrix:
         One line naming the file, the line and column, and the allowed range.
     """
     path, what = Path(path), "toa"
-    lines = _lines(path, what)
-    if not lines:
+    rows = _rows(path, what)
+    if not rows:
         raise ModelError(f"{what}: {str(path)!r} holds no rows; allowed: a matrix of times of arrival [s]")
-    first = _split(lines[0])
+    first = _stripped(rows[0][1])
     names = None
     if not all(_is_cell(c) for c in first):
-        names, lines = first, lines[1:]
+        names, rows = first, rows[1:]
         if len(set(names)) != len(names):
             raise ModelError(f"{what}: {str(path)!r}: a receiver name is given twice in the header")
-        if not lines:
+        if not rows:
             raise ModelError(f"{what}: {str(path)!r} holds a header and no rows")
     width = len(names) if names else len(first)
     if not 1 <= width <= MAX_RECEIVERS:
         raise ModelError(f"{what}: {str(path)!r} has {width} columns; allowed 1 to {MAX_RECEIVERS}")
     header = names or [f"{k + 1}" for k in range(width)]
     if names is None or DEPTH_COLUMN not in names:
-        return ToaMatrix(_numbers(lines, str(path), what, 2 if names else 1, header, 0.0, MAX_TIME, True), names)
-    values = _numbers(lines, str(path), what, 2, header, -MAX_TIME, MAX_TIME, True)
+        return ToaMatrix(_numbers(rows, str(path), what, header, 0.0, MAX_TIME, True, names is not None), names)
+    values = _numbers(rows, str(path), what, header, -MAX_TIME, MAX_TIME, True)
     at = names.index(DEPTH_COLUMN)
     depth, toa = values[:, at], np.delete(values, at, axis=1)
     receivers = [n for n in names if n != DEPTH_COLUMN]
@@ -146,7 +154,7 @@ def read_toa(path: Path | str) -> ToaMatrix:
         bad = np.argwhere((cells < low) | (cells > high))
         if len(bad):
             i, j = map(int, bad[0])
-            raise ModelError(f"{what}: {str(path)!r} line {i + 2} column {columns[j]}: {cells[i, j]:.10g} is not "
+            raise ModelError(f"{what}: {str(path)!r} line {rows[i][0]} column {columns[j]}: {cells[i, j]:.10g} is not "
                              f"allowed; allowed: a finite number in [{low:g}, {high:g}] or NA/empty")
     if not receivers:
         raise ModelError(f"{what}: {str(path)!r} holds a depth column and no receiver's")
@@ -183,11 +191,11 @@ def read_receivers(path: Path | str) -> Receivers:
     name = str(path)
     if path.suffix.lower() == ".toml":
         return _receivers_toml(path, what)
-    lines = _lines(path, what)
-    if len(lines) < 2:
+    parsed = _rows(path, what)
+    if len(parsed) < 2:
         raise ModelError(f"{what}: {name!r} holds no receivers; allowed: a header (name, x_m, y_m[, z_m]) and rows")
-    header = [h.lower() for h in _split(lines[0])]
-    rows = [_split(line) for line in lines[1:]]
+    header = [h.lower() for h in _stripped(parsed[0][1])]
+    rows = [(lineno, _stripped(cells)) for lineno, cells in parsed[1:]]
     if len(rows) > MAX_RECEIVERS:
         raise ModelError(f"{what}: {name!r} has {len(rows)} receivers; allowed at most {MAX_RECEIVERS}")
     axes = []
@@ -201,10 +209,11 @@ def read_receivers(path: Path | str) -> Receivers:
     survey = header.index("sigma_m") if "sigma_m" in header else None
     label = next((k for k in range(len(header)) if k not in used and k not in (status, survey)), None)
     names, positions, sigma = [], [], []
-    for lineno, cells in enumerate(rows, start=2):
+    for k, (lineno, cells) in enumerate(rows, start=1):
         if len(cells) != len(header):
-            raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} fields, the header {len(header)}")
-        names.append(cells[label] if label is not None else str(lineno - 1))
+            raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} cells, the header {len(header)} "
+                             f"({','.join(header)[:80]})")
+        names.append(cells[label] if label is not None else str(k))
         if survey is not None:
             sigma.append(math.nan if cells[survey] in MISSING else number(
                 cells[survey], f"{what}: {name!r} line {lineno}", "sigma_m", *SURVEY_SIGMA_RANGE))
@@ -221,7 +230,7 @@ def read_receivers(path: Path | str) -> Receivers:
 
 def _receivers_toml(path: Path, what: str) -> Receivers:
     name = str(path)
-    text = "\n".join(_lines(path, what))
+    text = "\n".join(line for _, line in _lines(path, what))
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -276,10 +285,10 @@ def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarr
     """
     path = Path(path)
     name = str(path)
-    lines = _lines(path, what)
-    if len(lines) < 3:
+    rows = _rows(path, what)
+    if len(rows) < 3:
         raise ModelError(f"{what}: {name!r} needs a header (x y t) and at least two rows")
-    header = [h.lower() for h in _split(lines[0])]
+    header = [h.lower() for h in _stripped(rows[0][1])]
     index = {}
     for key, aliases in (("t", ("t", "time", "top", "time_s", "t_s")), ("x", ("x", "x_m")), ("y", ("y", "y_m")),
                          ("z", ("z", "z_m"))):
@@ -288,7 +297,7 @@ def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarr
             index[key] = found[0]
     if not {"t", "x", "y"} <= set(index):
         raise ModelError(f"{what}: {name!r}: the header needs x, y and t columns, got {' '.join(header)}")
-    values = _numbers(lines[1:], name, what, 2, header, -MAX_TIME, MAX_TIME, False)
+    values = _numbers(rows[1:], name, what, header, -MAX_TIME, MAX_TIME, False)
     track = values[:, [index[k] for k in ("t", "x", "y", "z") if k in index]]
     if np.abs(track[:, 1:]).max() > MAX_COORDINATE:
         raise ModelError(f"{what}: {name!r}: a coordinate is outside the allowed range [{-MAX_COORDINATE:g}, "
@@ -296,7 +305,8 @@ def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarr
     steps = np.diff(track[:, 0])
     if increasing and (steps <= 0).any():
         k = int(np.flatnonzero(steps <= 0)[0])
-        raise ModelError(f"{what}: {name!r} line {k + 3}: the time {track[k + 1, 0]:.10g} s does not increase; "
+        raise ModelError(f"{what}: {name!r} line {rows[k + 2][0]}: the time {track[k + 1, 0]:.10g} s does not "
+                         "increase; "
                          "allowed: times in increasing order")
     return track
 
@@ -317,20 +327,20 @@ def read_burst_sequence(path: Path | str) -> np.ndarray:
     """
     path, what = Path(path), "burst sequence"
     name = str(path)
-    lines = _lines(path, what)
-    if not lines:
+    parsed = _rows(path, what)
+    if not parsed:
         raise ModelError(f"{what}: {name!r} holds no rows; allowed: the tag's intervals [s], one per row")
-    first = _split(lines[0])
+    first = _stripped(parsed[0][1])
     headed = not all(_is_cell(c) for c in first)
     header = [h.lower() for h in first] if headed else ["interval_s"] + [str(k + 2) for k in range(len(first) - 1)]
-    rows = lines[1:] if headed else lines
+    rows = parsed[1:] if headed else parsed
     if not rows:
         raise ModelError(f"{what}: {name!r} holds no intervals; allowed: the tag's intervals [s], one per row")
     found = [k for k, h in enumerate(header) if h in ("interval_s", "interval")]
     if len(header) > 1 and not found:
         raise ModelError(f"{what}: {name!r}: {len(header)} columns and none named interval_s; allowed: one column, "
                          "or a header naming interval_s")
-    values = _numbers(rows, name, what, 2 if headed else 1, header, *BURST_RANGE, False)
+    values = _numbers(rows, name, what, header, *BURST_RANGE, False, headed)
     return values[:, found[0] if found else 0]
 
 
@@ -351,10 +361,10 @@ def read_sound_speed_series(path: Path | str) -> np.ndarray:
     """
     path, what = Path(path), "sound speed file"
     name = str(path)
-    lines = _lines(path, what)
-    if len(lines) < 2:
+    rows = _rows(path, what)
+    if len(rows) < 2:
         raise ModelError(f"{what}: {name!r} needs a header (time_s, sound_speed_m_s) and at least one row")
-    header = [h.lower() for h in _split(lines[0])]
+    header = [h.lower() for h in _stripped(rows[0][1])]
     index = {}
     for key, aliases in (("t", ("time_s", "t", "time", "t_s")), ("c", ("sound_speed_m_s", "sound_speed", "c"))):
         found = [k for k, h in enumerate(header) if h in aliases]
@@ -362,17 +372,19 @@ def read_sound_speed_series(path: Path | str) -> np.ndarray:
             raise ModelError(f"{what}: {name!r}: the header needs time_s and sound_speed_m_s columns, got "
                              f"{' '.join(header)[:80]}")
         index[key] = found[0]
-    values = _numbers(lines[1:], name, what, 2, header, -MAX_TIME, MAX_TIME, False)
+    values = _numbers(rows[1:], name, what, header, -MAX_TIME, MAX_TIME, False)
     series = values[:, [index["t"], index["c"]]]
     low, high = SERIES_SPEED_RANGE
     bad = np.flatnonzero((series[:, 1] < low) | (series[:, 1] > high))
     if len(bad):
-        raise ModelError(f"{what}: {name!r} line {bad[0] + 2} column {header[index['c']]}: {series[bad[0], 1]:.6g} "
+        raise ModelError(f"{what}: {name!r} line {rows[bad[0] + 1][0]} column {header[index['c']]}: "
+                         f"{series[bad[0], 1]:.6g} "
                          f"m/s is not allowed; allowed: [{low:g}, {high:g}] m/s")
     steps = np.diff(series[:, 0])
     if (steps <= 0).any():
         k = int(np.flatnonzero(steps <= 0)[0])
-        raise ModelError(f"{what}: {name!r} line {k + 3}: the time {series[k + 1, 0]:.10g} s does not increase; "
+        raise ModelError(f"{what}: {name!r} line {rows[k + 2][0]}: the time {series[k + 1, 0]:.10g} s does not "
+                         "increase; "
                          "allowed: times in increasing order")
     return series
 
