@@ -15,6 +15,7 @@ from typing import Any, Callable, Union
 import numpy as np
 import tomli_w
 
+from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import shown
 from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
@@ -22,7 +23,9 @@ from sblsim.orchestrator.cosim.config import (
     apply_overrides,
     load_config,
     parse_compare,
+    parse_override,
     resolve,
+    section_variables,
 )
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, load_plan, make_plan, thaw
@@ -60,7 +63,9 @@ def check_seed(seed: Any, where: str = "seed") -> int | None:
 
 def override_items(overrides: Overrides) -> list[str]:
     """``set`` as the ``section.key=value`` items of ``--set``: a mapping's values written as TOML values
-    (a text stays a text, a number keeps every digit)."""
+    (a text stays a text, a number keeps every digit), but a text that the command line reads as a number
+    (``"105.0"``, ``"3"``, ``"1e3"``) given to a key declared as a number, which is that number, as
+    ``--set KEY=105.0`` is."""
     if overrides is None:
         return []
     if isinstance(overrides, str):
@@ -71,6 +76,9 @@ def override_items(overrides: Overrides) -> list[str]:
         for key, value in overrides.items():
             if not isinstance(key, str) or "=" in key:
                 raise ConfigError(f"set: a key must be a text 'section.key', got {shown(key)}")
+            if isinstance(value, str) and _number_text(key, value):
+                items.append(f"{key}={value.strip()}")  # read as --set reads it
+                continue
             try:
                 text = tomli_w.dumps({"v": _plain(value)}).split("=", 1)[1].strip()
             except TypeError:
@@ -85,6 +93,27 @@ def override_items(overrides: Overrides) -> list[str]:
         if not isinstance(item, str):
             raise ConfigError(f"set: expected 'section.key=value' texts, got {shown(item)}")
     return items
+
+
+def _number_text(key: str, text: str) -> bool:
+    """Whether ``--set key=text`` reads ``text`` as a number (an integer or a float of TOML, not a boolean) for a
+    key declared as a number (a built-in receiver's key for ``receiver.*``); a key not found: False (its value
+    stays a text, and the configuration names the key)."""
+    try:
+        section, name, value = parse_override(f"{key}={text}")
+    except ConfigError:
+        return False
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or "\n" in text:
+        return False
+    try:
+        if section == "receiver":
+            declared = [v for model in RECEIVER_MODELS.values() for v in model.config_parameters() if v.name == name]
+            declared += [v for v in section_variables("receiver") if v.name == name]
+        else:
+            declared = [v for v in section_variables(section) if v.name == name]
+    except (ConfigError, KeyError):
+        return False
+    return bool(declared) and all(v.type in ("Real", "Integer") for v in declared)
 
 
 def _plain(value: Any) -> Any:

@@ -8,6 +8,10 @@ point a designer would take, its object's
 
 * the system the scenario configures itself (``platform.system``: SBL for the paper's scenarios, LBL for the
   ``lbl-field`` site, USBL for ``usbl-deep``): the scenario's own platform;
+* a system whose transducers stand where the scenario's system's do (the same
+  :attr:`~sblsim.models.systems.System.design_layout`: LBL's transponders and the inverted LBL's hydrophones on
+  the seafloor): the scenario's layout (its ``platform.layout``, ``beacons``, ``baseline``), the rest of its
+  defaults over it (the inverted LBL's receiver);
 * ``sbl``: the paper's cross at 3 m (``platform.layout=cross``, ``platform.baseline=3``);
 * ``lbl``: 4 transponders on a circle of 50 m radius (``platform.layout=circle``,
   ``platform.beacons=4``, ``platform.baseline=50``) on the seafloor at
@@ -35,13 +39,36 @@ from typing import Sequence
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS, system
 
+#: The keys of a system's compare defaults that place its transducers (kept from the scenario by a system that
+#: places them where the scenario's system does, :func:`system_overrides`).
+LAYOUT_KEYS = ("platform.layout", "platform.beacons", "platform.baseline")
+
+
+def _defaults(name: str, own: str | None, option: str = "--systems") -> tuple[str, ...]:
+    """The compare defaults of ``name`` against the scenario's system ``own`` (:func:`system_overrides`)."""
+    if name == own:
+        return ()
+    compared_system = system(name, option)
+    defaults = tuple(compared_system.compare_defaults)
+    if own is not None and own in SYSTEMS and compared_system.design_layout \
+            and compared_system.design_layout == system(own).design_layout:
+        defaults = tuple(d for d in defaults if d.split("=", 1)[0].strip() not in LAYOUT_KEYS)
+    return defaults
+
 
 def describe_defaults(systems: Sequence[str] | None = None, own: str | None = None) -> str:
     """The compare defaults of ``systems`` (default every registered one) in one line (the command's help, the
     table's heading); ``own``, the scenario's system, keeps the scenario's platform."""
     objects = [system(s) for s in (SYSTEMS if systems is None else systems)]
-    return "; ".join(f"{s.name}: the scenario's platform" if s.name == own else f"{s.name}: {s.words}" + (
-        f" ({', '.join(s.compare_defaults)})" if s.compare_defaults else "") for s in objects)
+    words = []
+    for s in objects:
+        defaults = _defaults(s.name, own)
+        if s.name == own:
+            words.append(f"{s.name}: the scenario's platform")
+            continue
+        kept = " on the scenario's layout" if len(defaults) < len(s.compare_defaults) else ""
+        words.append(f"{s.name}: {s.words}{kept}" + (f" ({', '.join(defaults)})" if defaults else ""))
+    return "; ".join(words)
 
 
 def parse_systems(text: str, option: str = "--systems") -> list[str]:
@@ -66,7 +93,9 @@ def system_overrides(name: str, overrides: Sequence[str] = (), option: str = "--
                      own: str | None = None) -> list[str]:
     """The overrides of one compared system: ``platform.system``, its
     :attr:`~sblsim.models.systems.System.compare_defaults` (not for ``own``, the system the scenario configures
-    itself: it keeps the scenario's platform, e.g. a site's LBL field), then the user's (which win).
+    itself: it keeps the scenario's platform, e.g. a site's LBL field; without their :data:`LAYOUT_KEYS` for a
+    system that places its transducers where ``own`` does: the inverted LBL on an LBL scenario's layout, and the
+    reverse), then the user's (which win).
 
     Raises
     ------
@@ -74,7 +103,7 @@ def system_overrides(name: str, overrides: Sequence[str] = (), option: str = "--
         If the system is not registered, or the user's overrides set ``platform.system`` themselves (``option``
         sets it).
     """
-    defaults = () if name == own else system(name, option).compare_defaults
+    defaults = _defaults(name, own, option)
     for item in overrides:
         if item.split("=", 1)[0].strip() == "platform.system":
             raise ModelError(f"--set {item}: the system is set by {option}, not by --set")
@@ -112,4 +141,4 @@ def check_diver(cfg: dict, depth: float | None = None) -> None:
     system(cfg["platform"]["system"]).check_diver(cfg, depth)
 
 
-__all__ = ["check_diver", "compared", "describe_defaults", "parse_systems", "system_overrides"]
+__all__ = ["LAYOUT_KEYS", "check_diver", "compared", "describe_defaults", "parse_systems", "system_overrides"]

@@ -181,59 +181,70 @@ def _plt():
 
 
 def layout_figure(run: DesignRun):
-    """Each proposed design on its accuracy map over the work area (module docstring)."""
+    """Each proposed design on its accuracy map over the work area (module docstring): a row of panels per
+    work-area depth, the Monte Carlo points of that depth labelled inside the panel."""
     plt = _plt()
-    from matplotlib.colors import LogNorm
-
     r = run.resolved
     p = r.sections["prescription"]
     key = "drms" if p["dimensions"] == "horizontal" else "drms_3d"
-    depth = r.depths[0]
-    rows = np.isclose(r.points[:, 2], depth)
-    north, east = np.unique(r.points[rows, 0]), np.unique(r.points[rows, 1])
     designs = run.proposed
-    fig, axes = plt.subplots(1, len(designs), figsize=(6.4 * len(designs), 6.0), squeeze=False)
-    for ax, design in zip(axes[0], designs):
-        v = design.values[key][rows]
-        finite = v[np.isfinite(v)] if np.isfinite(v).any() else np.array([p["drms_m"]])
-        low = max(float(finite.min()), 1e-4)
-        norm = LogNorm(vmin=low, vmax=max(float(finite.max()), 1.01 * low))
-        grid = np.full((len(north), len(east)), np.nan)
-        grid[np.searchsorted(north, r.points[rows, 0]), np.searchsorted(east, r.points[rows, 1])] = v
-        mesh = ax.pcolormesh(east, north, grid, norm=norm, cmap="viridis", shading="nearest")
-        if np.isfinite(grid).sum() > 3 and np.nanmin(grid) < p["drms_m"] < np.nanmax(grid):
-            lines = ax.contour(east, north, grid, levels=[p["drms_m"]], colors="w", linewidths=1.2)
-            ax.clabel(lines, fmt=lambda x: f"{x:g} m", fontsize=8)
-        for area, style in [(r.area, dict(color="k", lw=1.0, ls="-", label="work area"))] + (
-                [(r.seafloor, dict(color="0.4", lw=1.0, ls="--", label="seafloor region"))]
-                if design.candidate.layout == "seafloor" else []):
-            outline = area.outline()
-            ax.plot(outline[:, 1], outline[:, 0], **style)
-        if design.candidate.layout == "seafloor":
-            for k, a in enumerate(r.avoid):
-                outline = a.outline()
-                ax.fill(outline[:, 1], outline[:, 0], facecolor="none", edgecolor="r", hatch="//", lw=0.8,
-                        label="avoid" if k == 0 else None)
-        else:
-            arms = np.asarray(plan_of(r, design.items).lever_arms)
-            ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="transducers", zorder=4)
-        for m in design.monte_carlo:
-            ax.plot(m["east_m"], m["north_m"], "wo", mfc="none", ms=9, zorder=3)
-            ax.annotate(f"{m['point']}: MC/map {m['ratio']:.2f}", (m["east_m"], m["north_m"]), color="w", fontsize=7,
-                        xytext=(5, 5), textcoords="offset points")
-        if design.candidate.layout == "seafloor":
-            ax.plot(design.transponders[:, 1], design.transponders[:, 0], "r^", ms=9, mec="w", label="transponders",
-                    zorder=4)
-        ax.set_aspect("equal")
-        ax.set_xlabel("East [m]")
-        ax.set_ylabel("North [m]")
-        verdict = "meets" if design.meets else "does not meet"
-        ax.set_title(f"{design.name}\n{design.candidate.label}\ncost {design.candidate.cost:g}, {verdict} "
-                     f"({design.coverage:.1f} % of the area), vehicle at {depth:g} m", fontsize=8)
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, fontsize=7, frameon=False)
-        fig.colorbar(mesh, ax=ax, shrink=0.8, label=f"{p['dimensions']} DRMS of one cycle [m]")
-    fig.subplots_adjust(wspace=0.5)
+    depths = list(r.depths)
+    fig, axes = plt.subplots(len(depths), len(designs), figsize=(6.4 * len(designs), 6.4 * len(depths)),
+                             squeeze=False, layout="constrained")
+    for row_axes, depth in zip(axes, depths):
+        rows = np.isclose(r.points[:, 2], depth)
+        north, east = np.unique(r.points[rows, 0]), np.unique(r.points[rows, 1])
+        for ax, design in zip(row_axes, designs):
+            _layout_panel(ax, design, r, p, key, depth, rows, north, east, fig)
     return fig
+
+
+def _layout_panel(ax, design, r, p, key, depth, rows, north, east, fig) -> None:
+    """One design's accuracy map at one depth (:func:`layout_figure`)."""
+    from matplotlib.colors import LogNorm
+
+    v = design.values[key][rows]
+    finite = v[np.isfinite(v)] if np.isfinite(v).any() else np.array([p["drms_m"]])
+    low = max(float(finite.min()), 1e-4)
+    norm = LogNorm(vmin=low, vmax=max(float(finite.max()), 1.01 * low))
+    grid = np.full((len(north), len(east)), np.nan)
+    grid[np.searchsorted(north, r.points[rows, 0]), np.searchsorted(east, r.points[rows, 1])] = v
+    mesh = ax.pcolormesh(east, north, grid, norm=norm, cmap="viridis", shading="nearest")
+    if np.isfinite(grid).sum() > 3 and np.nanmin(grid) < p["drms_m"] < np.nanmax(grid):
+        lines = ax.contour(east, north, grid, levels=[p["drms_m"]], colors="w", linewidths=1.2)
+        ax.clabel(lines, fmt=lambda x: f"{x:g} m", fontsize=8)
+    for area, style in [(r.area, dict(color="k", lw=1.0, ls="-", label="work area"))] + (
+            [(r.seafloor, dict(color="0.4", lw=1.0, ls="--", label="seafloor region"))]
+            if design.candidate.layout == "seafloor" else []):
+        outline = area.outline()
+        ax.plot(outline[:, 1], outline[:, 0], **style)
+    if design.candidate.layout == "seafloor":
+        for k, a in enumerate(r.avoid):
+            outline = a.outline()
+            ax.fill(outline[:, 1], outline[:, 0], facecolor="none", edgecolor="r", hatch="//", lw=0.8,
+                    label="avoid" if k == 0 else None)
+    else:
+        arms = np.asarray(plan_of(r, design.items).lever_arms)
+        ax.plot(arms[:, 1], arms[:, 0], "r^", ms=6, label="transducers", zorder=4)
+    middle = 0.5 * (float(east.min()) + float(east.max())) if len(east) else 0.0
+    for m in design.monte_carlo:
+        if not np.isclose(m["depth_m"], depth):
+            continue
+        right = m["east_m"] > middle  # a label towards the panel's middle, never past its edge
+        ax.plot(m["east_m"], m["north_m"], "wo", mfc="none", ms=9, zorder=3)
+        ax.annotate(f"{m['point']}: MC/map {m['ratio']:.2f}", (m["east_m"], m["north_m"]), color="w", fontsize=7,
+                    xytext=(-6 if right else 6, 5), textcoords="offset points", ha="right" if right else "left")
+    if design.candidate.layout == "seafloor":
+        ax.plot(design.transponders[:, 1], design.transponders[:, 0], "r^", ms=9, mec="w", label="transponders",
+                zorder=4)
+    ax.set_aspect("equal")
+    ax.set_xlabel("East [m]")
+    ax.set_ylabel("North [m]")
+    verdict = "meets" if design.meets else "does not meet"
+    ax.set_title(f"{design.name}\n{design.candidate.label}\ncost {design.candidate.cost:g}, {verdict} "
+                 f"({design.coverage:.1f} % of the area), vehicle at {depth:g} m", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=4, fontsize=7, frameon=False)
+    fig.colorbar(mesh, ax=ax, shrink=0.8, label=f"{p['dimensions']} DRMS of one cycle [m]")
 
 
 def pareto_figure(run: DesignRun):

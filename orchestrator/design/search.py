@@ -258,17 +258,26 @@ def optimise_baseline(objective: Objective, unit_arms: np.ndarray, shortest: flo
     """The best arm length of an SBL whose beacons' lever arms at an arm of 1 m are ``unit_arms`` (n, 3): their
     horizontal parts scale with the arm, their depth stays (module docstring); searched on the logarithm of the arm
     in ``[shortest, longest]`` [m]."""
-    def layouts(x):
-        arm = np.exp(np.asarray(x, dtype=float).reshape(1, -1)[0])
+    def scaled(arm):
         out = np.repeat(unit_arms[None], arm.size, axis=0).copy()
         out[..., :2] *= arm[:, None, None]
         return out
 
+    def layouts(x):
+        return scaled(np.exp(np.asarray(x, dtype=float).reshape(1, -1)[0]))
+
     bounds = [(math.log(shortest), math.log(longest))] if longest > shortest else [(math.log(shortest),) * 2]
     if bounds[0][0] == bounds[0][1]:
-        x = np.array([bounds[0][0]])
-        return Result(layouts(x[:, None])[0], float(objective.values(layouts(x[:, None]))[0]), [], np.exp(x))
+        arm = np.array([float(shortest)])
+        return Result(scaled(arm)[0], float(objective.values(scaled(arm))[0]), [], arm)
     x, value, history = _evolve(objective, bounds, layouts, None, seed, population, generations)
+    # an arm at a bound where the criterion falls all the way to it (the evolution stops short of it: 9.977 m of
+    # 10 m), the bound itself
+    ends = np.array([float(shortest), float(longest)])
+    at_ends = objective.values(scaled(ends))
+    if float(at_ends.min()) <= value:
+        arm = ends[[int(np.argmin(at_ends))]]
+        return Result(scaled(arm)[0], float(at_ends.min()), history, arm)
     return Result(layouts(x[:, None])[0], value, history, np.exp(x))
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 __all__ = [
-    "load", "run", "compare", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
+    "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
     "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
