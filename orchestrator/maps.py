@@ -54,7 +54,7 @@ from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.design.criteria import ECHO_LIMIT
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator.cosim.config import scenario_system
+from sblsim.orchestrator.cosim.config import check_site_keys, scenario_system
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, as_plan, load_plan, thaw
 from sblsim.orchestrator.cosim.systems import check_diver, compared
 from sblsim.orchestrator.io.output import staged_directory
@@ -651,6 +651,7 @@ def make_maps(scenario: str, overrides: Sequence[str] = (), seed: int | None = N
         labels = [f"{key} = {v}" for v in values]
     if depth is not None and not 0.0 <= depth <= 11000.0:
         raise ModelError(f"{option}: {depth!r} is outside the allowed range [0, 11000] m")
+    check_site_keys(plans, overrides, str(scenario))  # a key no panel's site reads: refused (given) or noted
     configs = []
     for plan in plans:
         configs.append(MapConfig(plan, diver_depth(plan)[0] if depth is None else float(depth)))

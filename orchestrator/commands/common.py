@@ -21,6 +21,7 @@ from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     ConfigError,
     apply_overrides,
+    check_site_keys,
     load_config,
     parse_compare,
     parse_override,
@@ -153,9 +154,12 @@ def resolve_plan(source: Any, seed: int | None = None, overrides: Overrides = No
     if isinstance(source, RunPlan) and not items and seed is None:
         return source
     if isinstance(source, Mapping):
-        return make_plan(apply_overrides(thaw(source), items, seed))
-    check_source(source)
-    return load_plan(source, items, seed)
+        plan = make_plan(apply_overrides(thaw(source), items, seed))
+    else:
+        check_source(source)
+        plan = load_plan(source, items, seed)
+    check_site_keys([plan], items, "the configuration" if isinstance(source, Mapping) else str(source))
+    return plan
 
 
 def load(scenario_or_path: str | Path | Mapping, *, seed: int | None = None, set: Overrides = None) -> Config:

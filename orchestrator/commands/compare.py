@@ -29,7 +29,7 @@ from sblsim.orchestrator.commands.console import (
     output_folder,
     output_name,
 )
-from sblsim.orchestrator.cosim.config import ConfigError, load_config, scenario_system
+from sblsim.orchestrator.cosim.config import ConfigError, check_site_keys, load_config, scenario_system
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
@@ -134,6 +134,7 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
         system_overrides(chosen[0], items)  # refuses a platform.system override before any work
     check_replicates(replicates)
     compared = plans(source, names, items, seed, chosen)  # each system and receiver resolved once
+    check_site_keys(compared, items, "the configuration" if isinstance(source, Mapping) else str(source))
     target = prepare_out(out, force, "compare.csv", "comparison")
     table = _compare(compared, replicates=replicates, engine=engine, fmu_dir=fmu_dir, progress=progress,
                      systems=chosen)

@@ -94,7 +94,8 @@ class DesignResult:
 
 def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path | Mapping | None = None,
            out: str | Path | None = None, workers: int = 1, seed: int | None = None, force: bool = False,
-           progress: Progress = False, **sections: Mapping[str, Any]) -> DesignResult:
+           progress: Progress = False, max_minutes: float | None = None, **sections: Mapping[str, Any]
+           ) -> DesignResult:
     """Design a positioning system for a site: ``sblsim design``.
 
     Searches the candidates (systems, LBL transponder counts and places, an SBL's arm, hardware grades) for the
@@ -119,7 +120,13 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
     force : bool
         Replace an earlier design in ``out``.
     progress : bool or callable
-        Report each candidate searched.
+        Report the layouts the search evaluates (of the most it may: the estimate's), then each proposal's Monte
+        Carlo.
+    max_minutes : float, optional
+        The longest the design may be estimated to take [min], (0, 525960]; default 60
+        (:data:`~sblsim.orchestrator.design.effort.MAX_MINUTES`). A problem estimated longer is refused before
+        anything is computed (:func:`~sblsim.orchestrator.design.effort.estimate`; ``result.document["search"]
+        ["estimate"]`` holds the estimate of one that runs).
     **sections : mapping
         Sections of the problem over the file's (``work_area={"radius_m": 2000}``, ``prescription={...}``,
         ``candidates``, ``seafloor``, ``search``, ``monte_carlo``, ``design``), each key declared with its unit,
@@ -132,9 +139,13 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
     Raises
     ------
     ConfigError, SblsimError
-        Bad input, naming the key and its allowed range (nothing is computed or written).
+        Bad input, naming the key and its allowed range, or a problem estimated above ``max_minutes`` (nothing is
+        computed or written).
     """
+    from sblsim.orchestrator.design.effort import check_minutes
+
     seed = check_seed(seed)
+    max_minutes = check_minutes(max_minutes)
     workers = check_count(workers, "workers", 1, MAX_WORKERS)
     check_progress(progress)
     raw = _problem(problem)
@@ -146,7 +157,8 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
         raw.setdefault("search", {})["seed"] = seed
     if scenario is not None and not isinstance(scenario, Mapping):
         scenario = path_argument(scenario, "scenario", optional=False)
-    return _design(raw, scenario, workers, progress, lambda: prepare_out(out, force, "design.json", "design"))
+    return _design(raw, scenario, workers, progress, lambda: prepare_out(out, force, "design.json", "design"),
+                   max_minutes)
 
 
 def _problem(problem: Any) -> dict:
@@ -162,10 +174,13 @@ def _problem(problem: Any) -> dict:
     return read_problem(problem)
 
 
-def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare) -> DesignResult:
+def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare, max_minutes: float | None = None,
+            say=None, option: str = "max_minutes") -> DesignResult:
     """:func:`design` (and ``sblsim design``) after the checks of its arguments: ``prepare()`` the output folder
-    (None: nothing written)."""
+    (None: nothing written); the estimate checked against ``max_minutes`` (named ``option``) and told to ``say``
+    before the work starts."""
     from sblsim.orchestrator.design.confirm import confirm
+    from sblsim.orchestrator.design.effort import check_effort, estimate
     from sblsim.orchestrator.design.output import document, write
     from sblsim.orchestrator.design.problem import check_problem
     from sblsim.orchestrator.design.run import resolve, search_all
@@ -176,16 +191,20 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare) -> D
     if scenario is not None:
         sections["design"]["scenario"] = str(scenario) if not isinstance(scenario, Mapping) else "(a configuration)"
     resolved = resolve(sections, source)
+    effort = estimate(resolved, workers)
+    check_effort(effort, max_minutes, option)
+    if say is not None:
+        say(f"{sections['design']['name']}: {effort.line()}")
     target = prepare()
-    run = search_all(resolved, workers, progress)
+    run = search_all(resolved, workers, progress, effort.layouts)
     with ProgressBar(len(run.proposed), "monte carlo", "design", progress) as bar:
         for proposal in run.proposed:
             confirm(proposal, resolved)
             bar.update(1)
     seconds = time.perf_counter() - start
     if target is not None:
-        write(run, target, seconds)
-    return DesignResult(document(run, seconds), run, target)
+        write(run, target, seconds, effort)
+    return DesignResult(document(run, seconds, effort), run, target)
 
 
 NAME = "design"
@@ -202,20 +221,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default=None,
                    help="the base scenario in place of design.scenario: a built-in scenario or CONFIG.toml")
     p.add_argument("--force", action="store_true", help="replace an earlier design in --out")
+    p.add_argument("--max-minutes", type=float, default=None, dest="max_minutes",
+                   help="the longest the design may be estimated to take [min] (default 60; a problem estimated "
+                        "longer is refused with its estimate)")
 
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim design`` from its parsed arguments: its lines printed, its exit status returned."""
     check_seed_option(args.seed)
     check_count(args.workers, "--workers", 1, MAX_WORKERS)
+    from sblsim.orchestrator.design.effort import check_minutes
+
+    max_minutes = check_minutes(args.max_minutes, "--max-minutes")
     raw = _problem(args.problem)
     if args.seed is not None:
         raw.setdefault("search", {})["seed"] = args.seed
     default = Path("results") / f"design_{output_name(args.problem)}"
     result = _design(raw, args.scenario, args.workers, "auto",
-                     lambda: output_folder(args.out, default, args.force, "design.json", "design"))
+                     lambda: output_folder(args.out, default, args.force, "design.json", "design"), max_minutes,
+                     lambda line: print(line, flush=True), "--max-minutes")
     for record in result.designs:
-        verdict = "meets" if record["meets"] else "does not meet"
+        verdict = "meets" if record["meets"] else f"does not meet ({', '.join(f['part'] for f in record['fails'])})"
         p = record["predicted"]
         checks = ", ".join(f"{m['point']} {m['ratio']:.2f}" for m in record["monte_carlo"] if m["ratio"] is not None)
         flag = "" if record["confirmed"] else "  NOT CONFIRMED by the Monte Carlo"

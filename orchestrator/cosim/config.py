@@ -37,7 +37,14 @@ from typing import Any, Iterable
 import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
-from sblsim.models.acoustics.core import MAX_WATER_DEPTH, check_in_flight, check_pinger, ping_spread
+from sblsim.models.acoustics.core import (
+    FIXED_KEYS,
+    MAX_WATER_DEPTH,
+    SNR_KEYS,
+    check_in_flight,
+    check_pinger,
+    ping_spread,
+)
 from sblsim.models.declarations import (
     SEED_NAMES,
     SEED_PARAMETERS,
@@ -710,6 +717,72 @@ def _check_detection(acoustics: dict[str, Any]) -> None:
         raise ConfigError(f"acoustics.detection: snr needs acoustics.propagation = ray (the transmission loss along "
                           f"each eigenray), got propagation = {acoustics['propagation']!r}; allowed: fixed, or snr "
                           "with ray")
+
+
+def unread_site_keys(cfg: Mapping[str, Mapping[str, Any]]) -> list[tuple[str, Any, str]]:
+    """The ``[acoustics]`` keys of a resolved configuration that its detection does not read and that are not at
+    their default: the fixed percentages (:data:`~sblsim.models.acoustics.core.FIXED_KEYS`) with detection by
+    signal-to-noise, the site's keys (:data:`~sblsim.models.acoustics.core.SNR_KEYS`) with the fixed detection.
+
+    Returns
+    -------
+    list of (str, object, str)
+        Each key's name, its value and the detection that would read it.
+    """
+    acoustics = cfg["acoustics"]
+    detection = acoustics["detection"]
+    unread, reads = (FIXED_KEYS, "fixed") if detection == "snr" else (SNR_KEYS, "snr")
+    defaults = {v.name: v.start for v in section_variables("acoustics")}
+    return [(name, acoustics[name], reads) for name in unread
+            if name in acoustics and acoustics[name] != defaults[name]]
+
+
+def check_site_keys(configs: Iterable[Mapping[str, Mapping[str, Any]]], overrides: Iterable[str] = (),
+                    what: str = "the scenario") -> None:
+    """Refuse an override of a key that no configuration of a command reads at its site (``acoustics.loss_pct`` with
+    detection by signal-to-noise, ``acoustics.frequency`` with the fixed detection: :func:`unread_site_keys`), and
+    note (:func:`note`) such keys that the scenario itself gives: a value that changes nothing is never taken
+    silently. ``sblsim run``, ``compare``, ``map`` and ``design`` call it with their configurations (a map's
+    panels: a key read by one of them is read).
+
+    Parameters
+    ----------
+    configs : iterable of mapping
+        The command's resolved configurations (or plans).
+    overrides : iterable of str
+        The user's ``section.key=value`` overrides.
+    what : str
+        The scenario's name in the note.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the key, the site's detection and what is allowed.
+    """
+    configs = list(configs)
+    unread = [{name: (value, reads) for name, value, reads in unread_site_keys(cfg)} for cfg in configs]
+    if not configs:
+        return
+    given = set()
+    for item in overrides:
+        try:
+            section, name, _ = parse_override(item)
+        except ConfigError:
+            continue
+        if section == "acoustics" and all(name in keys for keys in unread):
+            value, reads = unread[0][name]
+            detection = configs[0]["acoustics"]["detection"]
+            default = next(v.start for v in section_variables("acoustics") if v.name == name)
+            raise ConfigError(f"acoustics.{name}: {value!r} has no effect at this site: only acoustics.detection = "
+                              f"{reads} reads it, and the site has {detection}; allowed: its default {default!r}, or "
+                              f"acoustics.detection = {reads}")
+        given.add(name)
+    left = [(name, value, reads) for name, (value, reads) in unread[0].items()
+            if name not in given and all(name in keys for keys in unread)]
+    if left:
+        keys = ", ".join(f"acoustics.{name} = {value!r}" for name, value, _ in left)
+        _note(f"{what}'s {keys}: no effect at this site (only acoustics.detection = {left[0][2]} reads "
+              f"{'it' if len(left) == 1 else 'them'}; the site has {configs[0]['acoustics']['detection']})")
 
 
 def _check_water_depth(cfg: dict[str, dict]) -> None:

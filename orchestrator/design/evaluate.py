@@ -18,6 +18,7 @@ layouts, so:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -133,6 +134,7 @@ class LayoutEvaluator:
         self._padded_points = np.concatenate([self.points, np.repeat(self.points[-1:], chunks * LAYOUT_CHUNK - self.m,
                                                                      axis=0)])
         self.evaluations = 0
+        self.counted: Callable[[int], object] | None = None  # told the layouts of each evaluation (the progress)
 
     def heard(self, layouts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per layout, point and transducer: the weight of its range, its noise variance [m²], its packet's
@@ -181,6 +183,8 @@ class LayoutEvaluator:
             for name in OUTPUTS:
                 out[name][k] = values[name]
         self.evaluations += s
+        if self.counted is not None:
+            self.counted(s)
         out["availability"] = fix_probability(received.reshape(s * self.m, n),
                                               self.levels.fix_packets).reshape(s, self.m)
         out["echo"] = 1.0 - np.prod(1.0 - received * echo, axis=-1)

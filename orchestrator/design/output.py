@@ -31,12 +31,13 @@ from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import apply_overrides, read_source
 from sblsim.orchestrator.cosim.plan import thaw
 from sblsim.orchestrator.design.problem import GRADES
-from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles
+from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles, ranked
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The columns of ``designs.csv``.
 CSV_COLUMNS = ("rank", "name", "system", "count", *GRADES, "baseline_m", "cost", "criterion", "drms_p50_m",
-               "drms_p95_m", "drms_max_m", "coverage", "availability", "echo", "meets", "cycle_s", "evaluated_by")
+               "drms_p95_m", "drms_max_m", "coverage", "availability", "echo", "meets", "fails", "cycle_s",
+               "evaluated_by")
 #: The files of a design's output folder (besides one ``NAME.toml`` per proposed design).
 OUTPUT_FILES = ("design.json", "designs.csv", "layout.png", "pareto.png", "convergence.png")
 
@@ -63,6 +64,8 @@ def design_record(design: Design, run: DesignRun) -> dict[str, Any]:
     """One proposed design as ``design.json`` holds it (module docstring)."""
     c = design.candidate
     record = {"name": design.name, "system": c.system, "cost": c.cost, "meets": design.meets,
+              "fails": [{k: (_finite(v) if isinstance(v, float) else v) for k, v in s.items()}
+                        for s in design.shortfalls],
               "scenario": f"{design.name}.toml", "label": c.label}
     if design.transponders is not None:
         record["transponders_m"] = [[float(t[1]), float(t[0]), float(t[2])] for t in design.transponders]
@@ -98,17 +101,19 @@ def summary(run: DesignRun) -> str:
                                                    f"{run.resolved.sections['monte_carlo']['tolerance_pct']:g} %)")
     if best.meets:
         return f"{run.resolved.sections['design']['name']}: {what}: {found}"
-    return f"{run.resolved.sections['design']['name']}: no candidate meets {what}; the best found: {found}"
+    failed = "; ".join(s["text"] for s in best.shortfalls)
+    return (f"{run.resolved.sections['design']['name']}: no candidate meets {what}; the best found: {found}; "
+            f"what fails: {failed}")
 
 
 def table(run: DesignRun) -> pd.DataFrame:
-    """``designs.csv``: every candidate searched, ranked (those that meet, cheapest first; then by coverage)."""
+    """``designs.csv``: every candidate searched, ranked (:func:`~sblsim.orchestrator.design.run.ranked`: those that
+    meet, cheapest first; then by coverage and by how much they miss, the cheapest of the near ones first), with
+    the parts each fails (``fails``)."""
     dimensions = run.resolved.sections["prescription"]["dimensions"]
     proposed = {id(d): d.name for d in run.proposed}
-    ranked = sorted(run.searched, key=lambda d: (not d.meets, d.candidate.cost if d.meets else -d.coverage, d.value,
-                                                 d.candidate.order))
     rows = []
-    for k, d in enumerate(ranked, start=1):
+    for k, d in enumerate(ranked(run.searched), start=1):
         c = d.candidate
         q = quantiles(d, dimensions)
         rows.append({"rank": k, "name": proposed.get(id(d), ""), "system": c.system, "count": c.count,
@@ -117,6 +122,7 @@ def table(run: DesignRun) -> pd.DataFrame:
                      "criterion": d.value, **q, "coverage": d.coverage / 100.0,
                      "availability": float(np.mean(d.values["availability"])),
                      "echo": float(np.mean(d.values["echo"] > ECHO_LIMIT)), "meets": d.meets,
+                     "fails": "; ".join(s["part"] for s in d.shortfalls),
                      "cycle_s": d.cycle, "evaluated_by": d.evaluated_by})
     return pd.DataFrame(rows, columns=list(CSV_COLUMNS))
 
@@ -136,8 +142,9 @@ def scenario_text(design: Design, run: DesignRun) -> str:
     return header + tomli_w.dumps({section: dict(table) for section, table in raw.items()})
 
 
-def document(run: DesignRun, seconds: float | None = None) -> dict[str, Any]:
-    """``design.json`` as a mapping (module docstring)."""
+def document(run: DesignRun, seconds: float | None = None, effort: Any = None) -> dict[str, Any]:
+    """``design.json`` as a mapping (module docstring); ``effort`` the problem's
+    :class:`~sblsim.orchestrator.design.effort.Estimate` (``search.estimate``)."""
     problem = json.loads(json.dumps(run.resolved.sections, default=str))
     problem["design"]["scenario"] = str(run.resolved.sections["design"]["scenario"])
     out = {"problem": problem, "summary": summary(run), "meets": run.best.meets,
@@ -148,15 +155,18 @@ def document(run: DesignRun, seconds: float | None = None) -> dict[str, Any]:
                       "criterion_meaning": CRITERIA[run.resolved.sections["search"]["criterion"]]}}
     if seconds is not None:
         out["search"]["seconds"] = round(seconds, 1)
+    if effort is not None:
+        out["search"]["estimate"] = {"candidates": effort.candidates, "layouts": effort.layouts,
+                                     "runs": effort.runs, "seconds": round(effort.seconds, 1)}
     return out
 
 
-def write(run: DesignRun, out: Path | str, seconds: float | None = None) -> Path:
+def write(run: DesignRun, out: Path | str, seconds: float | None = None, effort: Any = None) -> Path:
     """Write the design's files into ``out`` at once (module docstring); return ``out``."""
     import matplotlib.pyplot as plt
 
     with staged_directory(out) as tmp:
-        (tmp / "design.json").write_text(json.dumps(document(run, seconds), indent=2, allow_nan=False) + "\n")
+        (tmp / "design.json").write_text(json.dumps(document(run, seconds, effort), indent=2, allow_nan=False) + "\n")
         table(run).to_csv(tmp / "designs.csv", index=False)
         for design in run.proposed:
             (tmp / f"{design.name}.toml").write_text(scenario_text(design, run))

@@ -23,18 +23,18 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from multiprocessing import get_context
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from sblsim.models.acoustics.core import FLIGHT_CAPACITY
 from sblsim.models.declarations import ModelError
-from sblsim.models.design.criteria import coverage, criterion
+from sblsim.models.design.criteria import ECHO_LIMIT, coverage, criterion
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.campaign.executors import stop_pool
 from sblsim.orchestrator.campaign.worker import watch_parent
-from sblsim.orchestrator.cosim.config import apply_overrides
+from sblsim.orchestrator.cosim.config import apply_overrides, check_site_keys
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
 from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import GRADES, SYSTEM_NAMES, Area, polygon, work_area_points
@@ -46,6 +46,12 @@ from sblsim.orchestrator.maps import diver_depth, point_accuracy
 SLOWEST_SOUND = 1400.0
 #: The quantiles of the DRMS over the work area that a design reports [%].
 QUANTILES = (50.0, 95.0)
+#: The grid per axis over the seafloor region on which some room outside the areas to avoid must be found.
+ROOM_GRID = 201
+#: Designs that do not meet and miss the prescription by at most this much more than the nearest one (relatively)
+#: are taken as near: the cheapest of them is ranked first (a costlier design is not proposed for a few tenths of a
+#: millimetre).
+NEAR = 0.01
 
 
 @dataclass
@@ -133,6 +139,17 @@ class Design:
         ``map`` (the accuracy map itself) or ``search`` (the search's tables).
     evaluations : int
         The layouts the search evaluated over the work area.
+    meets : bool
+        Whether it meets every part of the prescription (:meth:`Searcher.judge`).
+    coverage : float
+        The share of the work area's points that meet the prescription [%].
+    feasible : bool
+        Every transponder inside the seafloor region and outside the areas to avoid.
+    shortfalls : list of dict
+        What fails (:func:`shortfalls`); empty where it meets.
+    miss : float
+        By how much the nearest-to-failing part misses, as a ratio (:func:`shortfalls`; at most 1 where every part
+        but the coverage holds).
     """
 
     candidate: Candidate
@@ -147,6 +164,9 @@ class Design:
     evaluations: int = 1
     meets: bool = False
     coverage: float = 0.0
+    feasible: bool = True
+    shortfalls: list = field(default_factory=list)
+    miss: float = 0.0
     name: str = ""
     monte_carlo: list = field(default_factory=list)
     path: list = field(default_factory=list)
@@ -180,6 +200,7 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
             apply_overrides(thaw(source), items, None))
     except ModelError as exc:
         raise ConfigError(f"design.scenario: {exc}") from None
+    check_site_keys([plan], items, str(source) if not isinstance(source, Mapping) else "the configuration")
     sections = {k: dict(v) for k, v in sections.items()}
     work, floor = sections["work_area"], sections["seafloor"]
     if not work["depths_m"]:
@@ -189,8 +210,11 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
         field = plan.system.design_layout == "seafloor" or water == 0.0
         floor["depth_m"] = float(plan["platform"]["seafloor_depth"]) if field else water - 1.0
     deepest = max(work["depths_m"])
-    seafloor = any(SYSTEMS[s].design_layout == "seafloor" for s in sections["candidates"]["systems"])
-    if seafloor and not floor["depth_m"] > deepest:
+    if water > 0.0 and not deepest < water:  # every system: no vehicle in the seabed
+        raise ConfigError(f"work_area.depths_m: {deepest:g} m is outside the allowed range [0, {water:g}) m: the "
+                          f"site's water is {water:g} m deep (acoustics.water_depth)")
+    fielded = any(SYSTEMS[s].design_layout == "seafloor" for s in sections["candidates"]["systems"])
+    if fielded and not floor["depth_m"] > deepest:
         raise ConfigError(f"seafloor.depth_m: {floor['depth_m']:g} m is not below the work area's deepest vehicle "
                           f"({deepest:g} m, work_area.depths_m)")
     if water > 0.0 and floor["depth_m"] > water:
@@ -201,8 +225,27 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
         (floor["centre_north_m"], floor["centre_east_m"]), floor["radius_m"] = area.middle, area.reach
     seafloor = Area.of(floor, "seafloor")
     avoid = [Area(vertices=polygon(text, f"seafloor.avoid[{k}]")) for k, text in enumerate(floor["avoid"])]
+    if fielded and avoid and not room(seafloor, avoid):
+        raise ConfigError(f"seafloor.avoid: the areas to avoid cover the whole seafloor region (no point of a "
+                          f"{ROOM_GRID} × {ROOM_GRID} grid over it is outside them); leave room for the transponders "
+                          "(seafloor.radius_m, seafloor.polygon or fewer areas)")
     points = work_area_points(area, work["points"], work["depths_m"])
     return Resolved(sections, source, items, plan, area, seafloor, avoid, points)
+
+
+def room(region: Area, avoid: list[Area], count: int = 0) -> bool:
+    """Whether a point of a ``count`` × ``count`` grid over the region (default :data:`ROOM_GRID`; its centre and
+    vertices too) lies inside it and outside every area to avoid."""
+    count = count or ROOM_GRID
+    low, high = region.bounds()
+    N, E = np.meshgrid(np.linspace(low[0], high[0], count), np.linspace(low[1], high[1], count), indexing="ij")
+    extra = [region.middle] + ([] if region.vertices is None else list(region.vertices))
+    points = np.vstack([np.column_stack([N.ravel(), E.ravel()]), np.asarray(extra, dtype=float)])
+    points = points[region.contains(points)]
+    for area in avoid:  # the points left, a chunk at a time (a polygon's distances are points × vertices)
+        points = np.concatenate([part[area.distance(part) >= 0.0] for part in np.array_split(
+            points, max(1, len(points) // 4096))]) if len(points) else points
+    return len(points) > 0
 
 
 def candidates(resolved: Resolved) -> list[Candidate]:
@@ -264,10 +307,18 @@ def _sampling_items(plan: RunPlan, period: float) -> list[str]:
 
 
 class Searcher:
-    """The search of a resolved problem's candidates (module docstring, step 3); one per process."""
+    """The search of a resolved problem's candidates (module docstring, step 3); one per process.
 
-    def __init__(self, resolved: Resolved) -> None:
+    Parameters
+    ----------
+    resolved : Resolved
+    counted : callable, optional
+        Called with the number of layouts of each evaluation over the work area (the progress).
+    """
+
+    def __init__(self, resolved: Resolved, counted: Callable[[int], object] | None = None) -> None:
         self.resolved = resolved
+        self.counted = counted
         self._detections: dict = {}
 
     def detection(self, plan: RunPlan, transducer_depth: float) -> Detection:
@@ -288,6 +339,7 @@ class Searcher:
         detection = self.detection(plan, transducer_depth) if plan["acoustics"]["detection"] == "snr" else None
         loss = plan["acoustics"]["loss_pct"] / 100.0
         evaluator = LayoutEvaluator(r.points, Levels.of(plan), detection, loss)
+        evaluator.counted = self.counted
         s, p = r.sections["search"], r.sections["prescription"]
         return Objective(evaluator, s["criterion"], p["dimensions"], p["coverage_pct"])
 
@@ -299,6 +351,7 @@ class Searcher:
         options = dict(seed=s["seed"], population=s["population"], generations=s["generations"])
         transponders = baseline = None
         history: list[float] = []
+        feasible = True
         name, n = candidate.system, candidate.count
         if candidate.layout == "seafloor":
             provisional = plan_of(r, [*layout_items(name, n, _provisional_ring(r, n)), *grades])
@@ -307,8 +360,10 @@ class Searcher:
                                        **options)
             found = optimise_free(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
                                   start=ring_found.layout, **options)
-            if ring_found.value <= found.value and _feasible(ring_found.layout, r):
+            ring_ok, free_ok = _feasible(ring_found.layout, r), _feasible(found.layout, r)
+            if ring_ok and (ring_found.value <= found.value or not free_ok):
                 found = ring_found
+            feasible = ring_ok or free_ok  # neither: the free layout, which cannot meet
             transponders, history = found.layout, ring_found.history + found.history
             layout = layout_items(name, n, transponders)
             value, values = found.value, objective.evaluator.evaluate(transponders[None])
@@ -333,13 +388,15 @@ class Searcher:
             layout, positions = layout_items(name, n), arms
             value = self.criterion(values)
             values = {k: v[None] for k, v in values.items()}
+            if self.counted is not None:
+                self.counted(1)
         evaluations = objective.evaluator.evaluations if candidate.layout else 1
         plan = plan_of(r, [*layout, *grades])
         period = slot_period(plan, positions, r.points)
         items = [*layout, *grades, *_sampling_items(plan, period)]
         slots = 1 if plan.system.measures_direction else candidate.count
         design = Design(candidate, items, transponders, baseline, float(value), {k: v[0] for k, v in values.items()},
-                        history, slots * period, evaluations=evaluations)
+                        history, slots * period, evaluations=evaluations, feasible=feasible)
         self.judge(design)
         return design
 
@@ -358,9 +415,8 @@ class Searcher:
         drms = self.drms(design.values)
         design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"],
                                          design.values["echo"]))
-        interval = p["update_interval_s"]
-        design.meets = bool(design.coverage >= p["coverage_pct"] - 1e-9 and (interval == 0.0 or
-                                                                             design.cycle <= interval + 1e-9))
+        design.shortfalls, design.miss = shortfalls(design, drms, p)
+        design.meets = not design.shortfalls
 
     def on_the_map(self, design: Design) -> None:
         """A design evaluated again through the accuracy map itself (:func:`point_accuracy`), and judged."""
@@ -372,6 +428,77 @@ class Searcher:
         self.judge(design)
 
 
+def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any]) -> tuple[list[dict], float]:
+    """What of the prescription a design fails, and by how much.
+
+    The parts: the transponders' places (``transponders``: inside the seafloor region, outside the areas to avoid),
+    the ``coverage`` (the share of the work area's points that meet; below ``coverage_pct`` it fails, and the line
+    says why: the ``drms`` at the coverage's percentile of the points, a point without a fix of direct rays counting
+    as infinite, above ``drms_m``; the ``availability`` that that share of the points reaches, below
+    ``availability_pct``) and the ``cycle`` (above ``update_interval_s``).
+
+    Returns
+    -------
+    list of dict
+        Each failing part: ``part``, ``required``, ``achieved`` (in the prescription's units: m, %, s) and ``text``
+        (one clause); empty where the design meets.
+    float
+        The largest ratio by which a part misses (achieved over required for the DRMS and the cycle, required over
+        achieved for the availability; ``inf`` for misplaced transponders or no fix): the nearer to 1, the nearer
+        the design is to meeting.
+    """
+    out: list[dict] = []
+    share = prescription["coverage_pct"]
+    values = np.where(np.isfinite(drms) & (design.values["echo"] <= ECHO_LIMIT), drms, np.inf)
+    at = float(np.percentile(values, share, method="higher"))
+    reached = 100.0 * float(np.percentile(design.values["availability"], 100.0 - share, method="lower"))
+    ratios = [at / prescription["drms_m"]]
+    ratios.append(prescription["availability_pct"] / reached if reached > 0.0 else
+                  (math.inf if prescription["availability_pct"] > 0.0 else 0.0))
+    if not design.feasible:
+        out.append({"part": "transponders", "required": 0.0, "achieved": 1.0,
+                    "text": "a transponder outside the seafloor region or in an area to avoid"})
+        ratios.append(math.inf)
+    if design.coverage < share - 1e-9:
+        out.append({"part": "coverage", "required": share, "achieved": design.coverage,
+                    "text": f"coverage {design.coverage:.1f} % of the work area against {share:g} %"})
+        if at > prescription["drms_m"]:
+            how = ("no fix of direct rays there" if not math.isfinite(at) else
+                   f"{at:.3g} m against {prescription['drms_m']:g} m, {100.0 * (at / prescription['drms_m'] - 1.0):.0f}"
+                   " % above")
+            out.append({"part": "drms", "required": prescription["drms_m"], "achieved": at,
+                        "text": f"DRMS at {share:g} % of the work area {how}"})
+        if reached < prescription["availability_pct"] - 1e-9:
+            out.append({"part": "availability", "required": prescription["availability_pct"], "achieved": reached,
+                        "text": f"availability at {share:g} % of the work area {reached:.1f} % against "
+                                f"{prescription['availability_pct']:g} %, "
+                                f"{prescription['availability_pct'] - reached:.1f} points short"})
+    interval = prescription["update_interval_s"]
+    if interval > 0.0:
+        ratios.append(design.cycle / interval)
+        if design.cycle > interval + 1e-9:
+            out.append({"part": "cycle", "required": interval, "achieved": design.cycle,
+                        "text": f"cycle {design.cycle:.3g} s against {interval:g} s"})
+    return out, max(ratios)
+
+
+def ranked(designs: list[Design]) -> list[Design]:
+    """Designs best first: those that meet, cheapest first (then by criterion); then the others by coverage, and
+    among the same coverage by how much they miss (:attr:`Design.miss`), those within :data:`NEAR` of the nearest
+    cheapest first."""
+    meeting = sorted((d for d in designs if d.meets), key=lambda d: (d.candidate.cost, d.value, d.candidate.order))
+    rest = sorted((d for d in designs if not d.meets),
+                  key=lambda d: (-d.coverage, d.miss, d.candidate.cost, d.candidate.order))
+    out = meeting
+    while rest:
+        top = rest[0]
+        near = [d for d in rest if d.coverage == top.coverage and (d.miss <= top.miss * (1.0 + NEAR))]
+        out = out + sorted(near, key=lambda d: (d.candidate.cost, d.miss, d.candidate.order))
+        taken = {id(d) for d in near}
+        rest = [d for d in rest if id(d) not in taken]
+    return out
+
+
 def _provisional_ring(r: Resolved, n: int) -> np.ndarray:
     """A ring of n transponders inside the seafloor region (the plan of a candidate before its layout is known)."""
     centre = r.seafloor.middle
@@ -380,8 +507,9 @@ def _provisional_ring(r: Resolved, n: int) -> np.ndarray:
 
 
 def _feasible(layout: np.ndarray, r: Resolved) -> bool:
+    """Every transponder inside the seafloor region and outside the areas to avoid (their boundaries allowed)."""
     xy = layout[:, :2]
-    return bool(np.all(r.seafloor.contains(xy)) and all(np.all(a.distance(xy) >= 0.0) for a in r.avoid))
+    return bool(np.all(r.seafloor.contains(xy)) and all(np.all(a.distance(xy) >= -1e-9) for a in r.avoid))
 
 
 _WORKER: Searcher | None = None
@@ -412,19 +540,18 @@ class DesignRun:
         return self.proposed[0]
 
 
-def _rank(design: Design) -> tuple:
-    return (not design.meets, design.candidate.cost if design.meets else -design.coverage, design.value,
-            design.candidate.order)
-
-
-def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = False) -> DesignRun:
+def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = False, layouts: int = 0) -> DesignRun:
     """Steps 3 and 4 of the module docstring: the candidates searched in the order of cost, the proposals made and
-    evaluated on the map."""
-    searcher = Searcher(resolved)
+    evaluated on the map.
+
+    ``progress`` reports the layouts evaluated against ``layouts``, the most the search evaluates
+    (:func:`~sblsim.orchestrator.design.effort.estimate`; the search may stop before), or the candidates searched
+    where ``layouts`` is 0."""
     todo = candidates(resolved)
     pareto = resolved.sections["search"]["pareto"]
     searched: list[Design] = []
-    bar = Progress(len(todo), "design", "candidate", progress)
+    bar = Progress(layouts or len(todo), "design", "layout" if layouts else "candidate", progress)
+    searcher = Searcher(resolved, bar.update if layouts and bar.active else None)
     pool, finished = None, False
     if workers > 1 and len(todo) > 1:
         pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=_start_worker,
@@ -441,7 +568,8 @@ def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = Fa
                 if design.meets:  # a table's verdict, checked on the map itself
                     searcher.on_the_map(design)
                 searched.append(design)
-                bar.update(1)
+                if not layouts or pool is not None:  # a worker's evaluations counted when its candidate is done
+                    bar.update(design.evaluations if layouts else 1)
                 if design.meets:
                     met_cost = min(met_cost, design.candidate.cost)
             start += len(batch)
@@ -458,13 +586,13 @@ def search_all(resolved: Resolved, workers: int = 1, progress: ProgressSpec = Fa
     for system in SYSTEM_NAMES:
         mine = [d for d in searched if d.candidate.system == system]
         if mine:
-            proposed.append(min(mine, key=_rank))
+            proposed.append(ranked(mine)[0])
     if pareto:
         proposed += [d for d in pareto_front(searched) if d not in proposed]
     for design in proposed:
         if design.evaluated_by != "map":
             searcher.on_the_map(design)
-    proposed.sort(key=_rank)
+    proposed = ranked(proposed)
     names = set()
     for design in proposed:
         design.name = _name(resolved.sections["design"]["name"], design, names)
@@ -499,6 +627,6 @@ def quantiles(design: Design, dimensions: str) -> dict[str, float]:
     return out
 
 
-__all__ = ["Candidate", "Design", "DesignRun", "QUANTILES", "Resolved", "SLOWEST_SOUND", "Searcher", "candidates",
-           "grade_items", "layout_items", "pareto_front", "plan_of", "quantiles", "resolve", "search_all",
-           "slot_period"]
+__all__ = ["Candidate", "Design", "DesignRun", "NEAR", "QUANTILES", "ROOM_GRID", "Resolved", "SLOWEST_SOUND",
+           "Searcher", "candidates", "grade_items", "layout_items", "pareto_front", "plan_of", "quantiles", "ranked",
+           "resolve", "room", "search_all", "shortfalls", "slot_period"]

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -385,3 +386,210 @@ def test_the_update_interval_bounds_the_cycle():
 
     assert meeting(0.35) == [(3, pytest.approx(0.3))]
     assert meeting(0.25) == []
+
+
+# --------------------------------------------------------------------------- a design never meets what it does not
+
+
+def test_areas_to_avoid_that_leave_no_room_are_refused_and_every_proposed_transponder_is_outside_them():
+    """An area to avoid covering the whole seafloor region is refused in one line (it gave "meets" with every
+    transponder inside it); one covering the region's northern half leaves room, and every layout searched stands
+    outside it (or its design does not meet, saying why)."""
+    everything = {**SMALL, "seafloor": {**SMALL["seafloor"], "avoid": ["-100 -100; -100 100; 100 100; 100 -100"]}}
+    with pytest.raises(sblsim.ConfigError, match=r"^seafloor\.avoid: the areas to avoid cover the whole seafloor "
+                                                 r"region"):
+        resolve(check_problem(everything), "semicircle")
+    half = {**SMALL, "candidates": {"systems": ["lbl"], "transponders": [3, 4]},
+            "search": {"seed": 4, "generations": 5},
+            "seafloor": {**SMALL["seafloor"], "avoid": ["0 -100; 0 100; 100 100; 100 -100"]}}
+    run = search_all(resolve(check_problem(half), "semicircle"))
+    for design in run.searched:
+        north, east = design.transponders[:, 0], design.transponders[:, 1]
+        outside = (north <= 1e-9) & (np.hypot(north, east) <= 60.0 + 1e-6)  # the region's south half, by hand
+        assert outside.all() or (not design.meets and "transponders" in [s["part"] for s in design.shortfalls])
+
+
+def test_room_outside_the_areas_to_avoid_is_found_by_its_grid():
+    """A strip 1 m wide left between two areas is room; the same strip closed is not."""
+    from sblsim.orchestrator.design.run import room
+
+    region = Area(centre=(0.0, 0.0), radius=50.0)
+    west = Area(vertices=np.array([[-60.0, -60.0], [60.0, -60.0], [60.0, -0.5], [-60.0, -0.5]]))
+    east = Area(vertices=np.array([[-60.0, 0.5], [60.0, 0.5], [60.0, 60.0], [-60.0, 60.0]]))
+    closed = Area(vertices=np.array([[-60.0, -0.6], [60.0, -0.6], [60.0, 0.6], [-60.0, 0.6]]))
+    assert room(region, [west, east])
+    assert not room(region, [west, east, closed])
+
+
+@pytest.mark.parametrize("system", ["usbl", "sbl", "lbl"])
+def test_a_vehicle_below_the_site_s_water_is_refused_for_every_system(system):
+    """A vehicle at 5,000 m at the 1,000 m deep site: refused for the USBL as for the LBL (the USBL gave an
+    availability for a point inside the seabed)."""
+    problem = {"design": {"scenario": "usbl-deep"}, "work_area": {"radius_m": 500.0, "depths_m": [800.0, 5000.0]},
+               "candidates": {"systems": [system]}}
+    with pytest.raises(sblsim.ConfigError, match=r"^work_area\.depths_m: 5000 m is outside the allowed range "
+                                                 r"\[0, 1000\) m: the site's water is 1000 m deep"):
+        resolve(check_problem(problem), "usbl-deep")
+
+
+@pytest.mark.parametrize("command", [
+    ["run", "lbl-field", "--set", "acoustics.loss_pct=10"],
+    ["compare", "lbl-field", "--set", "acoustics.loss_pct=10"],
+    ["map", "lbl-field", "--set", "acoustics.loss_pct=10"],
+    ["run", "semicircle", "--set", "acoustics.frequency=12000"],
+])
+def test_a_key_the_site_does_not_read_is_refused_wherever_it_is_given(command, tmp_path, capsys):
+    """``acoustics.loss_pct`` at a site whose detection is by signal-to-noise (and a site key with the fixed
+    detection) changes nothing: one line naming it and what is allowed, exit 2, nothing written."""
+    assert main([*command, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    key = command[-1].split("=")[0]
+    assert err.startswith(f"sblsim: error: {key}: ") and "has no effect at this site" in err and len(
+        err.splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_key_the_site_does_not_read_is_refused_by_design_and_noted_from_a_scenario_file(tmp_path, capsys):
+    """A design's ``set`` with the loss at a site of signal-to-noise (it gave "meets" with 100 % availability) is
+    refused; a scenario file giving it is run with a one-line note."""
+    problem = {"design": {"scenario": "lbl-field", "set": ["acoustics.loss_pct=10"]},
+               "work_area": {"radius_m": 500.0, "depths_m": [150.0]}, "prescription": {"availability_pct": 100.0}}
+    with pytest.raises(sblsim.ConfigError, match=r"^acoustics\.loss_pct: 10\.0 has no effect at this site: only "
+                                                 r"acoustics\.detection = fixed reads it"):
+        sblsim.design(None, **problem)
+    config = tmp_path / "lossy.toml"
+    from importlib.resources import files
+
+    text = (files("sblsim.orchestrator") / "scenarios" / "lbl-field.toml").read_text(encoding="utf-8")
+    config.write_text(text.replace("[acoustics]", "[acoustics]\nloss_pct = 10.0", 1))
+    assert main(["map", str(config), "--extent", "20", "--step", "10", "--out", str(tmp_path / "m")]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "no effect at this site" in line]
+    assert notes == [f"note: {config}'s acoustics.loss_pct = 10.0: no effect at this site (only acoustics.detection = "
+                     "fixed reads it; the site has snr)"]
+
+
+def _design_of(coverage, drms, availability, cost, order, feasible=True, cycle=1.0, echo=None):
+    from sblsim.orchestrator.design.run import Candidate, Design
+
+    values = {"drms": np.asarray(drms, float), "availability": np.asarray(availability, float),
+              "echo": np.zeros(len(drms)) if echo is None else np.asarray(echo, float)}
+    return Design(Candidate("lbl", 3, {}, cost, order), [], None, None, 0.0, values, [], cycle, coverage=coverage,
+                  feasible=feasible)
+
+
+def test_what_fails_is_named_with_by_how_much():
+    """Twenty points: their DRMS at the 90th percentile (the search's criterion: the virtual index 19 · 0.9 = 17.1
+    rounded up, the 19th smallest, a point without a fix counting as infinite) and the availability at the 10th
+    (17.1's mirror 1.9 rounded down: the 2nd smallest), against the prescription, by hand."""
+    from sblsim.orchestrator.design.run import shortfalls
+
+    drms = np.r_[np.linspace(0.05, 0.2, 19), np.nan]
+    availability = np.r_[0.5, 0.6, np.full(18, 0.9)]
+    prescription = {"drms_m": 0.1, "coverage_pct": 90.0, "availability_pct": 95.0, "update_interval_s": 2.0}
+    design = _design_of(10.0, drms, availability, 3.0, 0, feasible=False, cycle=3.0)
+    fails, miss = shortfalls(design, design.values["drms"], prescription)
+    parts = {f["part"]: f for f in fails}
+    assert list(parts) == ["transponders", "coverage", "drms", "availability", "cycle"]
+    assert parts["drms"]["achieved"] == pytest.approx(0.2)
+    assert parts["drms"]["text"] == "DRMS at 90 % of the work area 0.2 m against 0.1 m, 100 % above"
+    assert parts["availability"]["achieved"] == pytest.approx(60.0)
+    assert parts["availability"]["text"] == ("availability at 90 % of the work area 60.0 % against 95 %, 35.0 points "
+                                             "short")
+    assert parts["cycle"]["text"] == "cycle 3 s against 2 s" and miss == math.inf
+    ok = _design_of(100.0, np.full(20, 0.05), np.ones(20), 3.0, 0)
+    assert shortfalls(ok, ok.values["drms"], prescription) == ([], pytest.approx(0.95))
+
+
+def test_among_designs_that_do_not_meet_the_cheapest_of_the_nearest_is_first():
+    """The same coverage: a costlier design nearer by 0.25 mm in 0.1 m is not ranked over a cheaper one; one
+    nearer by 20 % is."""
+    from sblsim.orchestrator.design.run import ranked, shortfalls
+
+    prescription = {"drms_m": 0.1, "coverage_pct": 95.0, "availability_pct": 0.0, "update_interval_s": 0.0}
+    designs = []
+    for drms, cost, order in ((0.15025, 2.0, 0), (0.15, 3.0, 1), (0.12, 5.0, 2)):
+        d = _design_of(0.0, np.full(10, drms), np.ones(10), cost, order)
+        d.shortfalls, d.miss = shortfalls(d, d.values["drms"], prescription)
+        designs.append(d)
+    assert [d.candidate.cost for d in ranked(designs)] == [5.0, 2.0, 3.0]
+    assert [d.candidate.cost for d in ranked(designs[:2])] == [2.0, 3.0]
+
+
+@pytest.mark.slow
+def test_a_design_failing_on_availability_says_so(tmp_path, capsys):
+    """The harbour basin (half the packets lost): 8 transponders give a fix (3 ranges of one cycle) with the
+    binomial 1 - (1 + 8 + 28)/256 = 0.855; the line says the availability fails and by how much."""
+    problem = tmp_path / "basin.toml"
+    problem.write_text(
+        '[design]\nname = "basin"\nscenario = "harbour"\n[work_area]\nradius_m = 20.0\ndepths_m = [2.0]\n'
+        'points = 7\n[prescription]\ndrms_m = 0.1\n[candidates]\nsystems = ["lbl"]\ntransponders = [7, 8]\n'
+        '[seafloor]\nradius_m = 40.0\ndepth_m = 3.5\n[search]\ngenerations = 5\n'
+        '[monte_carlo]\nreplicates = 10\npath = false\n')
+    assert main(["design", str(problem), "--out", str(tmp_path / "out")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("basin: 2 candidates, at most ")
+    p = 1.0 - (1 + 8 + 28) / 256
+    summary = lines[-2]
+    assert "the best found: LBL, 8 transponders (cost 8)" in summary
+    assert f"availability at 95 % of the work area {100 * p:.1f} % against 95 %, {95 - 100 * p:.1f} points short" \
+        in summary
+    best = json.loads((tmp_path / "out" / "design.json").read_text())["designs"][0]
+    assert [f["part"] for f in best["fails"]] == ["coverage", "availability"]
+    assert all(m["predicted_availability"] == pytest.approx(p) for m in best["monte_carlo"])
+
+
+# --------------------------------------------------------------------------- bounded effort
+
+
+def test_every_effort_key_at_its_maximum_is_refused_with_its_estimate_within_5_s(tmp_path):
+    """Every key of a design's effort at its largest: the estimate, one line, exit 2 within 5 s, nothing written;
+    ``--max-minutes`` cannot allow years; a value outside its range is refused."""
+    import subprocess
+    import sys
+    import time
+
+    problem = tmp_path / "most.toml"
+    problem.write_text(
+        '[design]\nname = "most"\nscenario = "lbl-field"\n[work_area]\nradius_m = 100000.0\n'
+        f'depths_m = {[10.0 * k for k in range(1, 11)]}\npoints = 201\n[prescription]\ndrms_m = 0.01\n'
+        '[candidates]\nsystems = ["sbl", "lbl", "usbl"]\ntransponders = [3, 16]\ngps = ["standalone", "dgps", '
+        '"rtk"]\nimu = ["mems", "survey"]\nusbl_head = ["low-cost", "survey"]\nranging = ["cw", "wide-band"]\n'
+        '[seafloor]\nradius_m = 100000.0\n[search]\npareto = true\npopulation = 200\ngenerations = 10000\n'
+        '[monte_carlo]\nreplicates = 10000\ncycles = 100\npath_replicates = 1000\n')
+    for extra, expected in (([], r"above the bound of 60 min; give less effort"),
+                            (["--max-minutes", "525960"], r"above the bound of 525960 min; give less effort"),
+                            (["--max-minutes", "1e9"], r"--max-minutes: 1000000000\.0 is outside the allowed range")):
+        start = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "design", str(problem), "--out",
+                               str(tmp_path / "o"), *extra], capture_output=True, text=True, timeout=60)
+        took = time.monotonic() - start
+        assert done.returncode == 2 and done.stdout == "" and len(done.stderr.splitlines()) == 1, done
+        assert re.search(expected, done.stderr), done.stderr
+        if not extra or extra[1] == "525960":
+            assert "64 candidates, at most " in done.stderr and " days" in done.stderr
+        assert took < 5.0, took
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_estimate_bounds_the_search_and_the_progress_counts_its_layouts():
+    """The estimate's layouts bound what the search evaluates (every candidate searched: the Pareto front), the
+    progress reports the layouts against that bound, and a bound below the estimate refuses the problem."""
+    from sblsim.orchestrator.design.effort import POLISH_PER_VARIABLE, estimate
+
+    problem = {**SMALL, "search": {"seed": 4, "generations": 5, "pareto": True},
+               "candidates": {"systems": ["lbl"], "transponders": [3, 4]}}
+    reports = []
+    result = sblsim.design(None, **problem, progress=lambda done, total: reports.append((done, total)))
+    search = result.document["search"]
+    # by hand: a ring of 2 variables, a free placement of 2n, each a population of 10 per variable (twice for the
+    # free placement) over 6 generations and a polish
+    by_hand = sum(10 * 2 * 6 + POLISH_PER_VARIABLE * 2 + 2 * 10 * 2 * n * 6 + POLISH_PER_VARIABLE * 2 * n
+                  for n in (3, 4))
+    assert search["estimate"]["layouts"] == by_hand
+    assert 0 < search["layouts"] <= by_hand
+    layouts = [r for r in reports if r[1] == by_hand]
+    assert layouts and layouts[-1][0] == search["layouts"]
+    assert estimate(resolve(check_problem(problem), "semicircle")).layouts == by_hand
+    with pytest.raises(sblsim.ConfigError, match=r"^design: estimated 2 candidates, at most .* above the bound of "
+                                                 r"1e-05 min; give max_minutes 1 to allow it"):
+        sblsim.design(None, **problem, max_minutes=1e-5)

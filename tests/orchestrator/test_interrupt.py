@@ -134,6 +134,15 @@ def test_sigterm_during_a_design_searched_by_worker_processes(tmp_path):
 
 
 @pytest.mark.slow
+def test_ctrl_c_during_a_design_whose_estimate_was_allowed(tmp_path):
+    """``sblsim design`` in one process, its effort allowed by ``--max-minutes``: Ctrl-C three seconds into its
+    search ends it within 2 s with 130 and one line, nothing written."""
+    status, took, stderr = _interrupt(tmp_path, signal.SIGINT, "design", "lbl-field-2km", "--max-minutes", "600",
+                                      into=3.0)
+    _ended_cleanly(tmp_path, status, took, stderr, signal.SIGINT)
+
+
+@pytest.mark.slow
 def test_ctrl_c_during_a_moving_ocean_search(tmp_path):
     """A day-long simulated figure-eight (21,601 replies) whose moving ocean is searched over four numbers of bases
     (each Gauss-Newton iteration up to half a second, the whole some 15 s): Ctrl-C three seconds into the search
