@@ -390,7 +390,8 @@ def _range_offsets(plan: RunPlan, zt: float, depth: float, distances: np.ndarray
     reference = chord.copy()
     if direct.any():
         reference[direct] = _received_as_direct(plan, zt, zr[direct], tau[direct, 0], np.zeros(direct.sum()))[0]
-    combos = [(j,) for j in range(3)] if legs == 1 else [(j, i) for j in range(3) for i in range(3)]
+    rays = range(tau.shape[1])  # the eigenrays of each leg (detection.family_levels: direct, surface, bottom, other)
+    combos = [(j,) for j in rays] if legs == 1 else [(j, i) for j in rays for i in rays]
     offsets = []  # (weights, offsets) of each pair whose range is not the direct ray's
     for combo in combos:
         w = np.prod([weight[:, j] for j in combo], axis=0)
@@ -417,8 +418,9 @@ def _reflected_offsets(plan: RunPlan, geometry: np.ndarray, bound: dict) -> tupl
     k = geometry.shape[0]
     levels, weight = _first_arrivals(plan, np.repeat(b[None, :], k, axis=0), geometry)
     out = np.zeros((2, k))
-    for up in range(3):
-        for reply in range(3):
+    rays = range(levels["tau"].shape[1])  # direct, surface, bottom, the direct family's other eigenray
+    for up in rays:
+        for reply in rays:
             w = weight[:, up] * weight[:, reply]
             sel = np.flatnonzero(w > 0.0) if (up, reply) != (0, 0) else np.zeros(0, dtype=int)
             if sel.size == 0:
@@ -445,7 +447,7 @@ def _sampled(distances: np.ndarray) -> np.ndarray:
 
 def _first_arrivals(plan: RunPlan, sources: np.ndarray, receivers: np.ndarray) -> tuple[dict, np.ndarray]:
     """The site's eigenrays between pairs of points (:func:`~sblsim.models.acoustics.core.site_levels`) and each
-    family's probability of being a heard leg's first detected arrival, (K, 3)
+    family's probability of being a heard leg's first detected arrival, (K, 4)
     (:func:`~sblsim.models.acoustics.detection.first_shares`, given that the leg is heard; 0 where none is)."""
     levels = site_levels(plan.component_parameters("acoustics"), sources, receivers, compiled_family_levels())
     shares = first_shares(levels["tau"], levels["pd"])

@@ -365,8 +365,9 @@ PROPAGATION_VARIABLES: tuple[Variable, ...] = (
              "Grazing angle of the ranging's last leg at its receiver, positive downward (straight: the chord's)",
              discrete=True, min=-2.0, max=2.0),
     Variable("arrival", "output", "Integer", 0,
-             description="Path of the range: 1 direct, 2 surface-reflected, 3 bottom-reflected (0: none, lost)",
-             min=0, max=3),
+             description="Path of the range: 1 direct, 2 surface-reflected, 3 bottom-reflected, 4 the direct "
+                         "family's other eigenray (a refracted ray turning beyond the faster end; 0: none, lost)",
+             min=0, max=4),
 )
 #: The eigenray table of a ``ray`` run (:func:`sblsim.models.acoustics.ray_tables.eigenray_table`), built once by the
 #: orchestrator for the run's profile and geometry (declared after the rest: their value references stay). Without
@@ -505,7 +506,7 @@ def site_levels(parameters: Mapping[str, Any], sources: Any, receivers: Any,
     -------
     dict
         ``tau`` [s], ``launch`` (the grazing angle at the source [rad], positive downward), ``valid``,
-        ``snr`` [dB], ``pd``, each (K, 3) (families direct, surface, bottom;
+        ``snr`` [dB], ``pd``, each (K, 4) (direct, surface, bottom, the direct family's other eigenray;
         :func:`~sblsim.models.acoustics.detection.family_levels`).
     """
     p, site = _site(parameters)

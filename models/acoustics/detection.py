@@ -1,7 +1,8 @@
 """What is heard at a site: the SNR and detection probability of every eigenray between two depths.
 
-For each eigenray family of :func:`sblsim.models.acoustics.rays.arrivals` (direct, surface-reflected,
-bottom-reflected), the transmission loss is the ray tube's geometric spreading plus the volume absorption along
+For each eigenray of :func:`sblsim.models.acoustics.rays.arrivals` (direct, surface-reflected, bottom-reflected,
+and the earliest other eigenray of the direct family: a refracted ray that turns beyond the faster end), the
+transmission loss is the ray tube's geometric spreading plus the volume absorption along
 the path plus the boundary's reflection loss (the surface's roughness at the grazing angle where the ray meets
 it, the sea floor's Rayleigh coefficient likewise; Snell's invariant gives those angles from the launch angle),
 and the sonar equation gives the arrival's SNR and its detection probability (:mod:`sblsim.models.acoustics.sonar`).
@@ -64,7 +65,8 @@ def family_levels() -> ca.Function:
 
     Returns (of the function)
     -------------------------
-    Each (3, 1), rows direct, surface-reflected, bottom-reflected: travel time [s], launch and arrival grazing
+    Each (4, 1), rows direct, surface-reflected, bottom-reflected and the direct family's other eigenray
+    (:data:`~sblsim.models.acoustics.rays.OTHER`): travel time [s], launch and arrival grazing
     angles [rad] (positive downward), valid (1: the eigenray exists), SNR [dB] (floored at :data:`NO_SNR`, which
     it is when the eigenray does not exist) and detection probability (0 when it does not).
     """
@@ -92,9 +94,9 @@ def _levels(families, zs, depth, profile, constant, nodes, speeds, site):
     at_bottom = ca.acos(ca.fmin(ca.cos(launch[2]) * bottom_speed / source_speed, 1.0))
     boundary = (0.0, sonar.surface_loss(at_surface, s["frequency"], s["wave_height"], surface_speed),
                 sonar.half_space_loss(at_bottom, s["bottom_density"], s["bottom_speed"] / bottom_speed,
-                                      s["bottom_attenuation"]))
+                                      s["bottom_attenuation"]), 0.0)  # the direct family's other ray meets none
     levels, chances = [], []
-    for j in range(3):
+    for j in range(tau.shape[0]):
         loss = spreading[j] + s["absorption"] * length[j] + boundary[j]
         level = sonar.snr(s["source_level"], loss, s["noise"], s["directivity_index"])
         exists = valid[j] > 0.5
@@ -120,7 +122,7 @@ def family_levels_grid() -> ca.Function:
 
     Returns (of the function)
     -------------------------
-    As :func:`family_levels`, each (3, 1).
+    As :func:`family_levels`, each (4, 1).
     """
     names = ["use", "zs", "zr", "x", "depth", "profile", "constant"]
     use, zs, zr, x, depth, profile, constant = (ca.MX.sym(n) for n in names)
@@ -147,7 +149,8 @@ def level_table(table, depth: float, bounds, site, paths: ca.Function | None = N
     """The family table of a run (:data:`~sblsim.models.acoustics.ray_tables.FAMILY_TABLE`), built once for its profile,
     water depth, box and site from exact solves at the eigenray table's nodes.
 
-    ``ray_family_exact`` is 1 at every node of a cell whose nodes differ in which families exist, or whose
+    ``ray_family_exact`` is 1 at every node of a cell whose nodes differ in which families exist, where the direct
+    family's other eigenray (not tabled) exists at a node or at its centre, or whose
     interpolation misses the exact :func:`family_levels` at the cell's centre, for a family that exists, by more
     than :data:`LEVEL_TABLE_TOLERANCE` (time, an angle or the SNR) or differs in which exist: there the channel
     solves exactly.
@@ -178,6 +181,8 @@ def level_table(table, depth: float, bounds, site, paths: ca.Function | None = N
     valid = columns.pop("valid")
     corners = cell_corners(valid[0] + 2 * valid[1] + 4 * valid[2])  # which families exist
     uniform = np.all([c == corners[0] for c in corners], axis=0)
+    # the direct family's other eigenray is not tabled: a cell where it exists at a node is solved exactly
+    uniform &= ~np.any(cell_corners(valid[3]), axis=0)
     grid = ray_grid(bounds)
     czs, czr, cx = cell_centres(bounds)
     n = czs.size
@@ -202,28 +207,44 @@ def level_table(table, depth: float, bounds, site, paths: ca.Function | None = N
     return out
 
 
+#: The direct family's other eigenray (row 4) is detected with the fraction of ``2^24`` times the direct ray's
+#: uniform: the 29 low bits of a 53-bit uniform, independent of the 24 high bits that decide the direct ray (to
+#: 6e-8 in probability), so that a leg takes the three uniforms it always took and every stream stays as it was.
+OTHER_DRAW_SCALE = 16777216.0
+
+
+def other_draw(u):
+    """The uniform on [0, 1) that decides the direct family's other eigenray from the direct ray's ``u``
+    (:data:`OTHER_DRAW_SCALE`): ``frac(2^24 u)``, exact in binary floating point."""
+    scaled = u * OTHER_DRAW_SCALE
+    return scaled - ca.floor(scaled)
+
+
 def first_detected(tau, launch, arrive, valid, snr, pd, draws):
     """The first detected arrival of a leg: ``(τ, launch, arrival, kind, SNR, P_d)``.
 
     Parameters
     ----------
-    tau, launch, arrive, valid, snr, pd : casadi.SX, shape (3, 1)
-        The families of :func:`family_levels`.
+    tau, launch, arrive, valid, snr, pd : casadi.SX, shape (4, 1)
+        The eigenrays of :func:`family_levels` (direct, surface, bottom, the direct family's other).
     draws : casadi.SX, shape (3, 1)
-        Uniform numbers on [0, 1): family j is detected when it exists and ``draws[j] < pd[j]``.
+        Uniform numbers on [0, 1): eigenray j (of the first three) is detected when it exists and
+        ``draws[j] < pd[j]``; the fourth with :func:`other_draw` of ``draws[0]``.
 
     Returns
     -------
     tuple of casadi.SX
         The earliest detected arrival's travel time [s], launch and arrival angles [rad], kind (1 direct,
-        2 surface, 3 bottom; 0 when none is detected), SNR [dB] and detection probability; when none is
-        detected, τ of the earliest eigenray (0 without any), and the SNR and P_d of the strongest. Last, the
-        travel time of the latest detected arrival [s] (the end of the leg's multipath spread; 0 when none).
+        2 surface, 3 bottom, 4 the direct family's other eigenray; 0 when none is detected), SNR [dB] and
+        detection probability; when none is detected, τ of the earliest eigenray (0 without any), and the SNR and
+        P_d of the strongest. Last, the travel time of the latest detected arrival [s] (the end of the leg's
+        multipath spread; 0 when none).
     """
     best_tau, best, strongest, earliest, latest = ca.inf, [0.0] * 5, [NO_SNR, 0.0], ca.inf, 0.0
-    for j in range(3):
+    uniforms = [draws[0], draws[1], draws[2], other_draw(draws[0])]
+    for j in range(tau.shape[0]):
         exists = valid[j] > 0.5
-        found = ca.logic_and(exists, draws[j] < pd[j])
+        found = ca.logic_and(exists, uniforms[j] < pd[j])
         latest = ca.if_else(found, ca.fmax(latest, tau[j]), latest)
         better = ca.logic_and(found, tau[j] < best_tau)
         best_tau = ca.if_else(better, tau[j], best_tau)
@@ -246,8 +267,9 @@ def packet_probability(tau, pd, snr, threshold, margin, fluctuation) -> np.ndarr
 
     Parameters
     ----------
-    tau, pd, snr : ndarray, shape (..., 3)
-        Travel times [s], detection probabilities and SNRs [dB] of the families (an absent one: pd 0).
+    tau, pd, snr : ndarray, shape (..., F)
+        Travel times [s], detection probabilities and SNRs [dB] of the eigenrays (:func:`family_levels`' four;
+        an absent one: pd 0).
     threshold, margin, fluctuation : float
         Detection threshold, decoding margin and fluctuation std [dB].
 
@@ -270,12 +292,13 @@ def first_shares(tau, pd) -> np.ndarray:
 
     Parameters
     ----------
-    tau, pd : ndarray, shape (..., 3)
-        Travel times [s] and detection probabilities of the families (direct, surface, bottom; an absent one: pd 0).
+    tau, pd : ndarray, shape (..., F)
+        Travel times [s] and detection probabilities of the eigenrays (direct, surface, bottom, the direct family's
+        other; an absent one: pd 0).
 
     Returns
     -------
-    ndarray, shape (..., 3)
+    ndarray, shape (..., F)
         Their sum is the probability that the leg is heard at all.
     """
     tau, pd = np.asarray(tau, dtype=float), np.asarray(pd, dtype=float)
@@ -293,9 +316,10 @@ def direct_first(tau, pd, snr=None, threshold: float = 0.0, margin: float = 0.0,
 
     Parameters
     ----------
-    tau, pd : ndarray, shape (..., 3)
-        Travel times [s] and detection probabilities of the families (direct, surface, bottom; an absent one: pd 0).
-    snr : ndarray, shape (..., 3), optional
+    tau, pd : ndarray, shape (..., F)
+        Travel times [s] and detection probabilities of the eigenrays (direct, surface, bottom, the direct family's
+        other; an absent one: pd 0).
+    snr : ndarray, shape (..., F), optional
         SNRs [dB]; None: the detection alone (a leg whose data is not decoded, an interrogation).
     threshold, margin, fluctuation : float
         As for :func:`packet_probability`.
@@ -320,5 +344,6 @@ def eigenray_functions() -> list[ca.Function]:
     return [_first_arrival_grid(), _arrivals_grid(), family_levels_grid(), _slant_range(), _ray_bending()]
 
 
-__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "SITE", "direct_first", "eigenray_functions", "family_levels",
-           "family_levels_grid", "first_detected", "first_shares", "level_table", "packet_probability"]
+__all__ = ["LEVEL_TABLE_TOLERANCE", "NO_SNR", "OTHER_DRAW_SCALE", "SITE", "direct_first", "eigenray_functions",
+           "family_levels", "family_levels_grid", "first_detected", "first_shares", "level_table", "other_draw",
+           "packet_probability"]

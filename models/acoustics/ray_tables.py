@@ -41,7 +41,9 @@ RAY_TABLE = Table(
     columns=(Column("ray_slowness", "s/m", "Eigenray table: travel time over the image path's length", 0.0, 1.0),
              Column("ray_launch_offset", "rad", "Eigenray table: launch angle less the image path's", -4.0, 4.0),
              Column("ray_arrival_offset", "rad", "Eigenray table: arrival angle less the image path's", -4.0, 4.0),
-             Column("ray_kind", "1", "Eigenray table: path (1 direct, 2 surface, 3 bottom; 0 none)", 0.0, 3.0),
+             Column("ray_kind", "1",
+                    "Eigenray table: path (1 direct, 2 surface, 3 bottom, 4 the direct family's other; 0 none)",
+                    0.0, 4.0),
              Column("ray_exact", "1", "Eigenray table: 1 where a cell at the node needs the exact solve", 0.0, 1.0)),
     max_rows=RAY_TABLE_ROWS)
 #: The table's box: source depth, receiver depth [m] and horizontal distance [m], each (min, max).
@@ -299,7 +301,7 @@ FAMILY_COLUMNS = 5
 
 @lru_cache(maxsize=1)
 def family_points() -> ca.Function:
-    """``(zs, zr, x, depth, nodes, speeds) -> (tau, launch, arrival, valid, spreading, length)``, each (3, 1):
+    """``(zs, zr, x, depth, nodes, speeds) -> (tau, launch, arrival, valid, spreading, length)``, each (4, 1):
     :func:`arrivals` through a profile table, as the family table's builder evaluates it at its nodes (the local
     engine's library compiles it)."""
     args = [ca.MX.sym(n) for n in ("zs", "zr", "x", "depth")]
@@ -316,9 +318,11 @@ def _family_interpolant() -> ca.Function:
 
 @lru_cache(maxsize=1)
 def _family_row() -> ca.Function:
-    """``(zs, zr, x, depth, row) -> (tau, launch, arrival, valid, spreading, length)``, each (3, 1): the families a
+    """``(zs, zr, x, depth, row) -> (tau, launch, arrival, valid, spreading, length)``, each (4, 1): the families a
     row of :data:`FAMILY_TABLE` gives at a geometry (``τ / L``, ``S / L`` times the image's length ``L``, the
-    image's angles plus the offsets, the image's spherical spreading plus the offset; valid where ``τ / L > 0``)."""
+    image's angles plus the offsets, the image's spherical spreading plus the offset; valid where ``τ / L > 0``);
+    the direct family's other eigenray is not tabled (row 4 invalid, zero: a cell where it exists is solved
+    exactly, :func:`sblsim.models.acoustics.detection.level_table`)."""
     zs, zr, x, depth = (ca.SX.sym(n) for n in ("zs", "zr", "x", "depth"))
     row = ca.SX.sym("row", len(FAMILY_TABLE.columns))
     out = [[] for _ in range(6)]
@@ -328,6 +332,8 @@ def _family_row() -> ca.Function:
         for k, v in enumerate((slowness * length, launch + d_launch, arrival + d_arrival, slowness > 0,
                                spherical_spreading(length) + d_spreading, ratio * length)):
             out[k].append(v)
+    for o in out:
+        o.append(ca.SX(0.0))
     return ca.Function("sblsim_ray_family_row", [zs, zr, x, depth, row], [ca.vertcat(*o) for o in out])
 
 
@@ -382,8 +388,9 @@ def arrivals_grid(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bou
 
     Returns
     -------
-    tau, launch, arrival, valid, spreading, length : casadi.SX, each shape (3, 1)
-        As :func:`arrivals` (an invalid family's other values are 0 where the table answers).
+    tau, launch, arrival, valid, spreading, length : casadi.SX, each shape (4, 1)
+        As :func:`arrivals` (an invalid family's other values are 0 where the table answers; the direct family's
+        other eigenray is never tabled: invalid there).
     """
     return _arrivals_grid()(use, zs, zr, x, depth, use_table, constant, nodes, speeds, bounds, grid, values)
 
@@ -406,7 +413,8 @@ def family_nodes(table, depth: float, bounds, paths: ca.Function | None = None) 
     -------
     dict
         Column name -> (RAY_TABLE_ROWS,) values (every column of :data:`FAMILY_TABLE` but ``ray_family_exact``),
-        and ``"valid"``: (3, RAY_TABLE_ROWS) whether each family exists at each node.
+        and ``"valid"``: (4, RAY_TABLE_ROWS) whether each eigenray of :func:`arrivals` exists at each node (the
+        fourth, the direct family's other, is not tabled).
     """
     nodes, speeds = profile_arrays(table)
     paths = family_points() if paths is None else paths

@@ -110,6 +110,8 @@ def test_the_family_table_is_the_image_paths_in_isovelocity_water():
     out = ray_tables._arrivals_grid().map(40)(1.0, zs[None], zr[None], x[None], depth, 1.0, 1500.0, nodes, speeds,
                                               bounds_a, ray_tables.ray_grid(bounds_a), _values(columns))
     tau, launch, _arrival, valid, spreading, length = (np.asarray(o) for o in out)
+    np.testing.assert_array_equal(valid[3], 0.0)  # one straight line: no other eigenray of the direct family
+    tau, launch, valid, spreading, length = (v[:3] for v in (tau, launch, valid, spreading, length))
     images = np.vstack([zr - zs, zs + zr, 2.0 * depth - zs - zr])
     paths = np.hypot(x, images)
     np.testing.assert_array_equal(valid, 1.0)
