@@ -114,10 +114,11 @@ def path_check(design: Design, resolved: Resolved) -> list[dict]:
                               f"simulation.duration={duration!r}"])
     row = next(compare([plan], replicates=mc["path_replicates"]).itertuples())
     along = np.column_stack([np.linspace(start, end, 101), np.full(101, centre[1]), np.full(101, depth)])
-    drms = point_accuracy(plan, along)["drms_3d"]
+    drms = np.asarray(point_accuracy(plan, along)["drms_3d"], float)
+    fixed = np.isfinite(drms)  # none where no point of the path is positioned (a work area out of reach): null
     return [{"receiver": row.receiver, "runs": int(row.runs), "length_m": length, "rms_e_tot_m": float(row.rms_e_tot),
              "pcrb_rms_m": float(row.pcrb_rms), "nees": float(row.nees),
-             "map_rms_drms_m": float(np.sqrt(np.nanmean(drms ** 2)))}]
+             "map_rms_drms_m": float(np.sqrt(np.mean(drms[fixed] ** 2))) if fixed.any() else None}]
 
 
 def confirm(design: Design, resolved: Resolved) -> None:

@@ -303,7 +303,15 @@ def slot_period(plan: RunPlan, transducers: np.ndarray, points: np.ndarray) -> f
 
 
 def _sampling_items(plan: RunPlan, period: float) -> list[str]:
-    return [] if period == plan["simulation"]["sampling_time"] else [f"simulation.sampling_time={period!r}"]
+    """The overrides of a design's longer sampling time ``period`` [s]: it, and the scenario's duration made a whole
+    number of it (the next one up), as the run requires."""
+    if period == plan["simulation"]["sampling_time"]:
+        return []
+    items = [f"simulation.sampling_time={period!r}"]
+    ratio = float(plan["simulation"]["duration"]) / period
+    if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):  # not whole already: the next whole number of them
+        items.append(f"simulation.duration={math.ceil(ratio) * period!r}")
+    return items
 
 
 class Searcher:

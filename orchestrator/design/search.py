@@ -122,6 +122,8 @@ def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, regi
         return np.concatenate([-region.distance(pos)] + [a.distance(pos) for a in avoid])
 
     start = objective.values(layout_of(x[:, None]))[0]
+    if not np.isfinite(start):  # no work-area point positioned from anywhere the search went: nothing to polish
+        return x
     low, high = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
     if objective.criterion in SMOOTH:
         found = _gradient_polish(objective, x, layout_of, bounds, n, inside)
