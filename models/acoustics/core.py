@@ -305,6 +305,28 @@ PING_VARIABLES: tuple[Variable, ...] = (
              description="toa, pbi: intervals of the pinger's table in use (burst_sequence)", min=0, max=MAX_BURSTS),
 )
 
+#: The hydrophones' own clocks and their sync tags (an inverted LBL's raw detections: ``sblsim run
+#: --export-detections``). Configuration keys only, declared after every other variable: the channel and the
+#: receivers never read them (their packets keep synchronised times), so no FMU and no number of a run changes.
+#: The grade: a VR2-class telemetry receiver's clock drifts by up to 4 s a day (46 ppm) by its manufacturer's
+#: specification (VEMCO, "VR2 Troubleshooting", http://www.vemco.com/support/vr2_troubleshoot.php); the default
+#: ±20 ppm (1.7 s a day) is a common watch crystal's tolerance, inside that grade.
+RECEIVER_CLOCK_VARIABLES: tuple[Variable, ...] = (
+    Variable("receiver_clock_offset", "parameter", "Real", 2.0, "s",
+             "ilbl raw detections: each hydrophone's clock offset at the run's start, uniform in +-this (drawn "
+             "from the run's seed; a clock set by hand at deployment)", min=0.0, max=86400.0, scope="config"),
+    Variable("receiver_clock_drift_ppm", "parameter", "Real", 20.0, "ppm",
+             "ilbl raw detections: each hydrophone's clock drift, uniform in +-this (a VR2-class crystal: up to "
+             "46 ppm, 4 s a day; 20 ppm is 1.7 s a day)", min=0.0, max=1000.0, scope="config"),
+    Variable("sync_interval_min", "parameter", "Real", 540.0, "s",
+             "ilbl raw detections: the shortest burst interval of the sync tag at each hydrophone (each interval "
+             "uniform between sync_interval_min and sync_interval_max)", min=1.0, max=MAX_PING_INTERVAL,
+             scope="config"),
+    Variable("sync_interval_max", "parameter", "Real", 660.0, "s",
+             "ilbl raw detections: the longest burst interval of the sync tags", min=1.0, max=MAX_PING_INTERVAL,
+             scope="config"),
+)
+
 
 #: The Euler angles of an attitude, in the order of :func:`~sblsim.models.platform.geometry.rotation_ned`'s arguments.
 ATTITUDE_ANGLES = ("roll", "pitch", "yaw")
@@ -1158,7 +1180,7 @@ class Acoustics(Component):
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
                     + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES + OCEAN_VARIABLES
-                    + lane_variables(n_beacons, "output") + PING_VARIABLES)
+                    + lane_variables(n_beacons, "output") + PING_VARIABLES + RECEIVER_CLOCK_VARIABLES)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
@@ -1166,7 +1188,7 @@ class Acoustics(Component):
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
                 + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES + lane_variables(n_beacons, "output")
-                + PING_VARIABLES)
+                + PING_VARIABLES + RECEIVER_CLOCK_VARIABLES)
 
     @classmethod
     def uses_ray_table(cls, values: Mapping[str, Any], parameters: Mapping[str, Any]) -> bool:
@@ -1416,4 +1438,5 @@ __all__ = ["Acoustics", "ARRIVAL", "ARRIVAL_SLACK", "ATTITUDE_ANGLES", "BURSTS",
            "lane_name", "lane_of", "lane_variables", "nominal_ping_interval", "OCEAN_FEATURES", "ocean_perturbation",
            "OCEAN_VARIABLES",
            "OVERFLOW", "OVERRUN", "OWTT_ITERATIONS", "PACKET", "PING_VARIABLES", "ping_due", "PROPAGATION", "RANGING",
+           "RECEIVER_CLOCK_VARIABLES",
            "sent_epoch", "site_levels", "site_numbers", "site_vector", "SNR_KEYS", "TARGET_INPUTS", "TOA"]

@@ -159,4 +159,62 @@ def tag_detections(toa: np.ndarray, offset0: np.ndarray, drift: np.ndarray, rng:
     return TagDetections(rec[order], clock[order], ping[order], echo[order])
 
 
-__all__ = ["SimulatedSync", "TagDetections", "simulate_sync", "tag_detections"]
+def draw_clocks(n_receivers: int, offset: float, drift: float, rng: np.random.Generator,
+                reference: int | None = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Each receiver's clock (the module docstring's ``a``, ``b``): its offset at τ = 0 uniform in ±``offset`` [s]
+    and its drift uniform in ±``drift`` [s/s], the ``reference`` receiver's clock the true time (offset and drift 0:
+    a receiver on GPS time, whose clock the others are synchronised to; None: every clock drawn).
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        (R,) offsets [s] and (R,) drifts [s/s].
+    """
+    offsets = rng.uniform(-offset, offset, n_receivers)
+    drifts = rng.uniform(-drift, drift, n_receivers)
+    if reference is not None:
+        offsets[reference] = drifts[reference] = 0.0
+    return offsets, drifts
+
+
+def sync_tag_arrivals(positions: np.ndarray, span: float, interval: tuple[float, float], sound_speed: float,
+                      p_detect: float, noise: float, rng: np.random.Generator
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arrivals of a sync tag at each receiver (tag ``i`` at receiver ``i``'s position) in true time: each tag's
+    first emission uniform in ``[0, interval[1])``, then intervals ``U(interval)``, until ``span`` [s]; each emission
+    heard by every receiver (its own too) with the probability ``p_detect``, along the straight line at
+    ``sound_speed`` [m/s], with a Gaussian timing noise of sigma ``noise`` [s].
+
+    Parameters
+    ----------
+    positions : numpy.ndarray
+        (R, 2) or (R, 3) [m] the receivers.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray, numpy.ndarray)
+        Each arrival's receiver, its sync tag (int) and its time τ [s], in the order of emission.
+    """
+    positions = np.asarray(positions, dtype=float)
+    n = len(positions)
+    distance = np.linalg.norm(positions[:, None] - positions[None], axis=2)
+    rec, tag, tau = [], [], []
+    for i in range(n):
+        count = int(span / interval[0]) + 2
+        times = rng.uniform(0, interval[1]) + np.r_[0.0, np.cumsum(rng.uniform(*interval, count - 1))]
+        times = times[times < span]
+        heard = rng.random((len(times), n)) < p_detect
+        e, j = np.nonzero(heard)
+        rec.append(j)
+        tag.append(np.full(len(j), i))
+        tau.append(times[e] + distance[i, j] / sound_speed + rng.normal(0, noise, len(j)))
+    return np.concatenate(rec), np.concatenate(tag), np.concatenate(tau)
+
+
+def on_clocks(receiver: np.ndarray, tau: np.ndarray, offset0: np.ndarray, drift: np.ndarray) -> np.ndarray:
+    """(n,) [s] true times ``tau`` read on ``receiver``'s clock: ``τ + a + b τ`` (the module docstring)."""
+    return tau + offset0[receiver] + drift[receiver] * tau
+
+
+__all__ = ["SimulatedSync", "TagDetections", "draw_clocks", "on_clocks", "simulate_sync", "sync_tag_arrivals",
+           "tag_detections"]

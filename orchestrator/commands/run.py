@@ -1,6 +1,7 @@
 """``sblsim run`` and ``sblsim.run``: one scenario, configuration file or SSP package, run for its replicates
 (:mod:`sblsim.orchestrator.cosim.run`); the command also writes its output folder and, with ``--export-log``, the
-receiver's inputs as a log that ``sblsim replay`` reproduces.
+receiver's inputs as a log that ``sblsim replay`` reproduces, and with ``--export-detections`` an inverted LBL's run
+as the raw detections of a telemetry array (:mod:`sblsim.orchestrator.sync.export`).
 """
 
 from __future__ import annotations
@@ -226,6 +227,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--export-log", type=Path, default=None, metavar="FILE",
                    help="also write the receiver's inputs as a log (.csv or .parquet; docs/log-format.md) and the "
                         "truth track beside it (FILE's stem + _truth): `sblsim replay FILE` reproduces the receiver")
+    p.add_argument("--export-detections", type=Path, default=None, metavar="DIR",
+                   help="platform.system = ilbl: also write the run as raw detections on the hydrophones' own "
+                        "clocks, with a sync tag at each (acoustics.receiver_clock_*, sync_interval_*): the YAPS "
+                        "tables detections.csv and hydrophones.csv that sblsim sync and sblsim toa read, and the "
+                        "truth (clocks.csv, truth.csv)")
     config_options(p)
 
 
@@ -251,6 +257,14 @@ def main(args: argparse.Namespace) -> int:
 
         check_export(args.export_log, args.force)
         check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
+    if args.export_detections is not None:
+        from sblsim.orchestrator.sync.export import check_folder, check_keys
+
+        if plan.config["platform"]["system"] != "ilbl":
+            raise ModelError(f"--export-detections: raw detections are an inverted LBL's (platform.system = 'ilbl'); "
+                             f"this run's system is {plan.config['platform']['system']!r}")
+        check_keys(plan.config["acoustics"])
+        check_folder(args.export_detections, args.force)
     out = output_folder(args.out, Path("results") / folder_name(plan.scenario), args.force, "summary.json",
                   "run", before=lambda out: _check_export_apart(args.export_log, out))
     if system is None:
@@ -278,6 +292,16 @@ def main(args: argparse.Namespace) -> int:
         except ModelError as exc:  # e.g. a full disk: the run's own files are written, say so
             raise ModelError(f"{exc}; the run's results were written to {out}/") from None
         print(f"  log of the receiver's inputs: {log} (replay it: sblsim replay {log} --truth {truth})")
+    if args.export_detections is not None:
+        from sblsim.orchestrator.sync.export import export_detections
+
+        try:
+            export = export_detections(result._result, args.export_detections)
+        except ModelError as exc:
+            raise ModelError(f"{exc}; the run's results were written to {out}/") from None
+        sync = (export.detections["tag"] != "T1").sum()
+        print(f"  raw detections: {args.export_detections}/ (detections.csv: {len(export.detections) - sync} of the "
+              f"tag T1, {sync} of the sync tags; hydrophones.csv; the truth in clocks.csv and truth.csv)")
     return 0
 
 
