@@ -67,7 +67,10 @@ class DesignResult:
     def table(self) -> pd.DataFrame:
         """``designs.csv``: every candidate searched, ranked."""
         from sblsim.orchestrator.design.output import table
+        from sblsim.orchestrator.design.telemetry import TelemetryRun
 
+        if isinstance(self.run, TelemetryRun):
+            from sblsim.orchestrator.design.telemetry_output import table
         return table(self.run)
 
     def scenario(self, name: str | None = None) -> str:
@@ -79,7 +82,11 @@ class DesignResult:
             If no proposed design has that name.
         """
         from sblsim.orchestrator.design.output import scenario_text
+        from sblsim.orchestrator.design.telemetry import TelemetryRun
 
+        if isinstance(self.run, TelemetryRun):
+            raise ConfigError("name: an ilbl design (a telemetry array) has no scenario file; its receivers are "
+                              "design.json's receivers_m")
         for design in self.run.proposed:
             if name is None or design.name == name:
                 return scenario_text(design, self.run)
@@ -88,7 +95,10 @@ class DesignResult:
     def plot(self) -> dict[str, Figure]:
         """The figures by name: ``layout``, ``pareto``, ``convergence``."""
         from sblsim.orchestrator.design.output import figures
+        from sblsim.orchestrator.design.telemetry import TelemetryRun
 
+        if isinstance(self.run, TelemetryRun):
+            from sblsim.orchestrator.design.telemetry_output import figures
         return figures(self.run)
 
 
@@ -106,7 +116,8 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
     Parameters
     ----------
     problem : str, Path or mapping, optional
-        A built-in problem (``lbl-field-2km``, ``usbl-deep-head``), a ``DESIGN.toml`` file, or its sections as a
+        A built-in problem (``lbl-field-2km``, ``usbl-deep-head``, ``lake-hald-array``: a telemetry array), a
+        ``DESIGN.toml`` file, or its sections as a
         mapping; default none (the sections from the keyword arguments alone).
     scenario : str, Path or mapping, optional
         The base scenario in place of ``design.scenario``: a built-in scenario, a ``CONFIG.toml`` or a
@@ -182,10 +193,12 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare, max_
     from sblsim.orchestrator.design.confirm import confirm
     from sblsim.orchestrator.design.effort import check_effort, estimate
     from sblsim.orchestrator.design.output import document, write
-    from sblsim.orchestrator.design.problem import check_problem
+    from sblsim.orchestrator.design.problem import check_problem, is_telemetry
     from sblsim.orchestrator.design.run import resolve, search_all
 
     sections = check_problem(raw, scenario_given=scenario is not None)
+    if is_telemetry(sections):
+        return _telemetry(sections, progress, prepare, max_minutes, say, option)
     start = time.perf_counter()
     source = scenario if scenario is not None else sections["design"]["scenario"]
     if scenario is not None:
@@ -207,13 +220,41 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare, max_
     return DesignResult(document(run, seconds, effort), run, target)
 
 
+def _telemetry(sections: dict, progress: Any, prepare, max_minutes: float | None, say, option: str
+               ) -> DesignResult:
+    """:func:`_design` of a telemetry array (``candidates.systems = ["ilbl"]``:
+    :mod:`~sblsim.orchestrator.design.telemetry`)."""
+    from sblsim.orchestrator.design import telemetry
+    from sblsim.orchestrator.design.effort import check_effort
+    from sblsim.orchestrator.design.telemetry_output import document, write
+
+    start = time.perf_counter()
+    resolved = telemetry.resolve(sections)
+    effort = telemetry.estimate(resolved)
+    check_effort(effort, max_minutes, option)
+    if say is not None:
+        say(f"{sections['design']['name']}: {effort.line()}")
+    target = prepare()
+    with ProgressBar(effort.candidates, "design", "count", progress) as bar:
+        run = telemetry.search_all(resolved, bar.update)
+    with ProgressBar(len(run.proposed), "monte carlo", "design", progress) as bar:
+        for proposal in run.proposed:
+            telemetry.confirm(proposal, resolved)
+            bar.update(1)
+    seconds = time.perf_counter() - start
+    if target is not None:
+        write(run, target, seconds, effort)
+    return DesignResult(document(run, seconds, effort), run, target)
+
+
 NAME = "design"
 HELP = "design: the cheapest system and layout that meets an accuracy prescription over a work area"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim design``'s arguments."""
-    p.add_argument("problem", help="built-in design problem (lbl-field-2km, usbl-deep-head) or DESIGN.toml")
+    p.add_argument("problem", help="built-in design problem (lbl-field-2km, usbl-deep-head, lake-hald-array) or "
+                                   "DESIGN.toml")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/design_PROBLEM)")
     p.add_argument("--workers", type=int, default=1, help=f"processes searching candidates at once (default 1; at "
                                                           f"most {MAX_WORKERS}; the result does not depend on it)")
@@ -246,9 +287,14 @@ def main(args: argparse.Namespace) -> int:
         checks = ", ".join(f"{m['point']} {m['ratio']:.2f}" for m in record["monte_carlo"] if m["ratio"] is not None)
         flag = "" if record["confirmed"] else "  NOT CONFIRMED by the Monte Carlo"
         p95 = "no fix" if p["drms_p95_m"] is None else f"{p['drms_p95_m']:.3g} m"
+        if record["system"] == "ilbl":
+            p95 += (f", yield {100 * p['positioning_yield']:.1f} %, sync {100 * p['sync_coverage']:.0f} %"
+                    + "".join(f", simulated yield at the {m['point']} point {100 * m['simulated_yield']:.1f} %"
+                              for m in record["monte_carlo"]))
         print(f"{record['name']}: {record['label']}, cost {record['cost']:g}: {verdict} "
               f"({100 * p['coverage']:.1f} % of the work area, DRMS p95 {p95}); Monte Carlo / map: {checks}{flag}")
     print(result.summary)
-    print(f"written to {result.out}/ (design.json, designs.csv, "
-          f"{', '.join(d['scenario'] for d in result.designs)}, layout.png, pareto.png, convergence.png)")
+    files = [d["scenario"] for d in result.designs if d["scenario"]]
+    figures = "layout.png" if result.designs[0]["system"] == "ilbl" else "layout.png, pareto.png, convergence.png"
+    print(f"written to {result.out}/ (design.json, designs.csv, {''.join(f + ', ' for f in files)}{figures})")
     return 0

@@ -11,8 +11,9 @@ choices), checked by :func:`check_problem` with one-line errors naming ``section
 docs' table of keys is made from the same declarations (docs/design.md).
 
 A design file is data: it never names a file that is read or written (the base scenario is a built-in one, or the
-command line's ``--scenario``), and the overrides it gives refuse a value that names a file or code in any key
-declared to take one (:func:`sblsim.orchestrator.cosim.config.file_keys`).
+command line's ``--scenario``) but the water's outline of a telemetry array (``site.area.file``, a declared file
+key read by :mod:`~sblsim.orchestrator.design.area_file`, bounded), and the overrides it gives refuse a value
+that names a file or code in any key declared to take one (:func:`sblsim.orchestrator.cosim.config.file_keys`).
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from sblsim.models.declarations import ModelError, Variable, shown
+from sblsim.models.declarations import FileKey, ModelError, Variable, shown
 from sblsim.models.design.criteria import CRITERIA, DIMENSIONS
+from sblsim.models.design.detection_curve import DetectionCurve
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, named_files, parse_override
@@ -38,6 +40,11 @@ from sblsim.orchestrator.io.tables import regular_file
 #: The systems a design may propose (the registry's that it can search: :attr:`~sblsim.models.systems.System.designed`),
 #: in the order they are searched.
 SYSTEM_NAMES = tuple(name for name, system in SYSTEMS.items() if system.designed)
+#: The system a telemetry array is designed as (receivers hearing a tag: :mod:`~sblsim.orchestrator.design.telemetry`),
+#: designed alone.
+TELEMETRY = "ilbl"
+#: What ``candidates.systems`` accepts.
+SYSTEM_CHOICES = (*SYSTEM_NAMES, TELEMETRY)
 #: The hardware grades a design chooses among: category -> grade -> (configuration key, value). The figures and
 #: their sources: docs/hardware-grades.md ("Grades a design chooses among").
 GRADES: dict[str, dict[str, tuple[str, float]]] = {
@@ -52,10 +59,12 @@ GRADES: dict[str, dict[str, tuple[str, float]]] = {
 MAX_BYTES = 1 << 20
 #: The most vertices of a polygon, areas to avoid, overrides and vehicle depths.
 MAX_VERTICES, MAX_AVOID, MAX_SET, MAX_DEPTHS = 200, 50, 200, 10
+#: The most receivers of a telemetry array.
+MAX_RECEIVERS = 100
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 _FOLDER = files("sblsim.orchestrator") / "designs"
 #: The built-in design problems: name -> its TOML file in this package.
-BUILTIN_DESIGNS = {name: f"{name}.toml" for name in ("lbl-field-2km", "usbl-deep-head")}
+BUILTIN_DESIGNS = {name: f"{name}.toml" for name in ("lbl-field-2km", "usbl-deep-head", "lake-hald-array")}
 
 
 @dataclass(frozen=True)
@@ -86,12 +95,12 @@ class Key:
 
 
 def _key(name: str, type_: str, start: Any, unit: str, description: str, length: tuple[int, int] | None = None,
-         **allowed: Any) -> Key:
+         file: FileKey | None = None, **allowed: Any) -> Key:
     item = start[0] if isinstance(start, list) and start else (start if not isinstance(start, list) else None)
     if item is None:
         item = {"Real": 0.0, "Integer": 0, "String": (allowed.get("choices") or ("",))[0], "Boolean": False}[type_]
     variable = Variable(name, "parameter", type_, start if length else item, unit, description, scope="config",
-                        **allowed)
+                        file=file, **allowed)
     return Key(variable, length)
 
 
@@ -110,7 +119,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              (0, MAX_SET)),
     ),
     "work_area": (
-        _key("shape", "String", "circle", "", "the work area: a circle or a polygon", choices=("circle", "polygon")),
+        _key("shape", "String", "circle", "", "the work area: a circle, a polygon, or the site's water (site.area, "
+                                              "an ilbl design)", choices=("circle", "polygon", "site")),
         _key("centre_north_m", "Real", 0.0, "m", "North of the circle's centre", **_POSITION),
         _key("centre_east_m", "Real", 0.0, "m", "East of the circle's centre", **_POSITION),
         _key("radius_m", "Real", 100.0, "m", "the circle's radius", min=0.0, max=1e5, min_exclusive=True),
@@ -130,10 +140,19 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              min=0.0, max=100.0),
         _key("update_interval_s", "Real", 0.0, "s", "the longest cycle (a fix at least this often; 0: any)",
              min=0.0, max=3600.0),
+        _key("positioning_yield_pct", "Real", 80.0, "%", "an ilbl design: the share of a tag's pings heard by "
+                                                          "enough receivers to be fixed, at those points",
+             min=0.0, max=100.0),
+        _key("fix_receivers", "Integer", 3, "", "an ilbl design: the receivers a ping's fix needs (3, the least in "
+                                                 "2-D; 4, a redundant fix without three's two solutions)",
+             min=3, max=10),
+        _key("fix_gate_m", "Real", 0.0, "m", "an ilbl design: a ping's fix counts only where the DRMS of its "
+                                            "receivers' geometry is at most this (an HPE filter; 0: every fix)",
+             min=0.0, max=1e4),
     ),
     "candidates": (
-        _key("systems", "String", list(SYSTEM_NAMES), "", "the systems to design", (1, len(SYSTEM_NAMES)),
-             choices=SYSTEM_NAMES),
+        _key("systems", "String", list(SYSTEM_NAMES), "", "the systems to design (ilbl: a telemetry array, alone)",
+             (1, len(SYSTEM_NAMES)), choices=SYSTEM_CHOICES),
         _key("transponders", "Integer", [3, 8], "", "the LBL's fewest and most seafloor transponders", (2, 2),
              min=3, max=16),
         _key("transponder_cost", "Real", 1.0, "1", "the cost of one seafloor transponder", **_COST),
@@ -142,6 +161,10 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("sbl_baseline_m", "Real", [0.4, 3.0], "m", "the SBL's shortest and longest arm", (2, 2),
              min=0.0, max=1000.0, min_exclusive=True),
         _key("sbl_beacons", "Integer", 4, "", "the SBL's beacons on their circle", min=3, max=16),
+        _key("receivers", "Integer", [3, 40], "", "an ilbl array's fewest and most receivers", (2, 2),
+             min=3, max=MAX_RECEIVERS),
+        _key("receiver_cost", "Real", 1.0, "1", "the cost of one receiver (an ilbl array's)", **_COST),
+        _key("sync_tag_cost", "Real", 0.0, "1", "the cost of the sync tag moored at each receiver", **_COST),
         *(k for category, grades in GRADES.items() for k in (
             _key(category, "String", [], "", f"the {category.replace('_', ' ')} grades to choose among "
                                               f"(empty: the scenario's)", _GRADE_LIST, choices=tuple(grades)),
@@ -159,6 +182,26 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              (0, MAX_AVOID)),
         _key("depth_m", "Real", 0.0, "m", "the transponders' depth (0: an LBL scenario's platform.seafloor_depth, "
                                           "else 1 m above acoustics.water_depth)", min=0.0, max=11000.0),
+    ),
+    "site.area": (
+        _key("polygon", "String", "", "", "an ilbl design: the water, its vertices 'north east; north east; ...' [m] "
+                                          "(or site.area.file)"),
+        _key("file", "String", "", "", "the water's outline: a CSV of vertices (north_m, east_m) or a GeoJSON "
+                                       "polygon [m] (relative: from the design file's folder)", file=FileKey()),
+        _key("min_shore_m", "Real", 0.0, "m", "the least distance of a receiver from the shore", min=0.0, max=1e5),
+        _key("max_shore_m", "Real", 0.0, "m", "the largest distance of a receiver from the shore (0: any)",
+             min=0.0, max=1e5),
+    ),
+    "detection": (
+        _key("range_50_m", "Real", 0.0, "m", "the distance at which half the pings are heard (with slope; 0: the "
+                                            "table)", min=0.0, max=1e5),
+        _key("slope", "Real", 0.0, "1", "the logistic curve's steepness at range_50_m [1/m]", min=0.0, max=1e3),
+        _key("table", "String", "", "", "the range test's curve 'distance_m probability; ...', non-increasing"),
+        _key("sync_p", "Real", 0.5, "1", "the probability per sync ping a sync link needs", min=0.0, max=1.0,
+             min_exclusive=True),
+        _key("sigma_toa_s", "Real", 1.5e-4, "s", "the timing noise of an arrival", min=0.0, max=1.0,
+             min_exclusive=True),
+        _key("sound_speed", "Real", 1480.0, "m/s", "the sound speed of the water", min=1000.0, max=2000.0),
     ),
     "search": (
         _key("criterion", "String", "percentile", "", "what a layout minimises over the work area (docs/design.md: "
@@ -244,6 +287,7 @@ def check_problem(raw: Mapping[str, Any], scenario_given: bool = False) -> dict[
     if not isinstance(raw, Mapping):
         raise ConfigError(f"design: expected sections {', '.join(SECTIONS)}, got {shown(raw)}")
     problem = defaults()
+    raw = _nested_sections(raw)
     for section, values in raw.items():
         if section not in DESIGN_KEYS:
             raise ConfigError(f"design: unknown section [{str(section)[:40]}]; the sections: {', '.join(SECTIONS)}")
@@ -259,13 +303,92 @@ def check_problem(raw: Mapping[str, Any], scenario_given: bool = False) -> dict[
     return problem
 
 
+def _nested_sections(raw: Mapping[str, Any]) -> dict[str, Any]:
+    """TOML's ``[site.area]`` (``{"site": {"area": {...}}}``) as the section ``site.area``."""
+    out = dict(raw)
+    site = out.get("site")
+    if isinstance(site, Mapping):
+        del out["site"]
+        for name, values in site.items():
+            if not isinstance(values, Mapping):
+                raise ConfigError(f"site.{str(name)[:40]}: expected the table [site.area], got {shown(values)}")
+            out[f"site.{name}"] = values
+    return out
+
+
+def is_telemetry(problem: Mapping[str, Mapping[str, Any]]) -> bool:
+    """Whether a checked problem designs a telemetry array (``candidates.systems = ["ilbl"]``)."""
+    return TELEMETRY in problem["candidates"]["systems"]
+
+
+def _check_telemetry(problem: dict[str, dict[str, Any]]) -> None:
+    """An ilbl design's keys together: alone among the systems, its water given once, its detection curve."""
+    if problem["candidates"]["systems"] != [TELEMETRY]:
+        raise ConfigError(f"candidates.systems: {', '.join(problem['candidates']['systems'])}; ilbl (a telemetry "
+                          f"array) is designed alone: allowed ['ilbl'] or any of {', '.join(SYSTEM_NAMES)}")
+    low, high = problem["candidates"]["receivers"]
+    if low > high:
+        raise ConfigError(f"candidates.receivers: the fewest ({low}) is above the most ({high})")
+    area = problem["site.area"]
+    if bool(area["polygon"]) == bool(area["file"]):
+        raise ConfigError("site.area: give the water as site.area.polygon or site.area.file (one of them)")
+    if area["polygon"]:
+        polygon(area["polygon"], "site.area.polygon")
+    if area["max_shore_m"] and area["max_shore_m"] < area["min_shore_m"]:
+        raise ConfigError(f"site.area.max_shore_m: {area['max_shore_m']:g} m is below site.area.min_shore_m "
+                          f"({area['min_shore_m']:g} m); allowed 0 (any) or at least it")
+    if problem["work_area"]["shape"] == "polygon":
+        polygon(problem["work_area"]["polygon"], "work_area.polygon")
+    elif problem["work_area"]["shape"] != "site":
+        raise ConfigError(f"work_area.shape: {problem['work_area']['shape']!r} for an ilbl design; allowed site or "
+                          "polygon")
+    detection_curve(problem["detection"])
+
+
+def detection_curve(section: Mapping[str, Any]) -> DetectionCurve:
+    """The detection range curve of a checked ``[detection]`` section
+    (:meth:`~sblsim.models.design.detection_curve.DetectionCurve.from_mapping`).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``detection.range_50_m``, ``detection.slope`` or ``detection.table`` and what is allowed.
+    """
+    values: dict[str, Any] = {}
+    if section["table"]:
+        rows = [r for r in section["table"].replace(",", " ").split(";") if r.strip()]
+        try:
+            values["table"] = [[float(x) for x in r.split()] for r in rows[:MAX_VERTICES + 1]]
+        except ValueError:
+            raise ConfigError("detection.table: expected 'distance_m probability; ...' in numbers") from None
+        if not 2 <= len(rows) <= MAX_VERTICES or any(len(r) != 2 for r in values["table"]):
+            raise ConfigError(f"detection.table: {len(rows)} rows; allowed 2 to {MAX_VERTICES} rows "
+                              "'distance_m probability'")
+    for name in ("range_50_m", "slope"):
+        if section[name] > 0.0:
+            values[name] = section[name]
+    if not values:
+        raise ConfigError("detection: missing; give detection.range_50_m and detection.slope, or detection.table")
+    try:
+        return DetectionCurve.from_mapping(values, "detection")
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+
+
 def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) -> None:
     """What one key cannot check alone (module docstring of :func:`check_problem`)."""
     design, candidates = problem["design"], problem["candidates"]
     if not _NAME.fullmatch(design["name"]):
         raise ConfigError(f"design.name: {design['name'][:40]!r} is not a name of 1 to 64 letters, digits, '.', '_' "
                           "or '-' (starting with a letter or digit)")
-    if not scenario_given and design["scenario"] not in BUILTIN_SCENARIOS:  # a file names no file to read
+    if is_telemetry(problem):
+        _check_telemetry(problem)
+    elif problem["work_area"]["shape"] == "site":
+        raise ConfigError("work_area.shape: site is the water of an ilbl design (candidates.systems = ['ilbl']); "
+                          "allowed circle or polygon")
+    telemetry = is_telemetry(problem)
+    # a file names no file to read
+    if not scenario_given and not telemetry and design["scenario"] not in BUILTIN_SCENARIOS:
         given = f"{design['scenario'][:60]!r} is not a built-in scenario" if design["scenario"] else "missing"
         raise ConfigError(f"design.scenario: {given}; give one of {', '.join(BUILTIN_SCENARIOS)} (a CONFIG.toml: "
                           "--scenario)")
@@ -296,7 +419,7 @@ def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) ->
     if len(set(candidates["systems"])) != len(candidates["systems"]):
         raise ConfigError("candidates.systems: a system is listed twice")
     for section in ("work_area", "seafloor"):
-        if problem[section]["shape"] == "polygon":
+        if problem[section]["shape"] == "polygon" and not is_telemetry(problem):
             polygon(problem[section]["polygon"], f"{section}.polygon")
     for k, text in enumerate(problem["seafloor"]["avoid"]):
         polygon(text, f"seafloor.avoid[{k}]")
@@ -351,11 +474,15 @@ def read_problem(source: str | Path) -> dict[str, Any]:
     try:
         with open(path, "rb") as handle:
             data = handle.read(MAX_BYTES + 1)
-        return tomlfile.loads(data.decode("utf-8"))
+        raw = tomlfile.loads(data.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"design: {name[:80]!r} is not valid TOML ({' '.join(str(exc).split())[:160]})") from None
     except OSError as exc:
         raise ConfigError(f"design: {name[:80]!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    area = raw.get("site", {}).get("area") if isinstance(raw.get("site"), Mapping) else None
+    if isinstance(area, dict) and isinstance(area.get("file"), str) and area["file"]:  # from the file's folder
+        area["file"] = str((path.parent / Path(area["file"]).expanduser()).resolve())
+    return raw
 
 
 # --------------------------------------------------------------------------- geometry of the areas
@@ -449,5 +576,6 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
     return np.vstack([np.column_stack([plane, np.full(len(plane), d)]) for d in depths])
 
 
-__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "SECTIONS", "SYSTEM_NAMES",
-           "check_problem", "defaults", "polygon", "read_problem", "signed_distance", "work_area_points"]
+__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SYSTEM_CHOICES",
+           "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve", "is_telemetry", "polygon",
+           "read_problem", "signed_distance", "work_area_points"]

@@ -342,7 +342,7 @@ def test_every_design_key_and_grade_is_documented_as_it_is_declared():
     from sblsim.orchestrator.design.problem import DESIGN_KEYS, GRADES
 
     docs = Path(__file__).resolve().parents[2] / "docs"
-    rows = re.findall(r"^\| `(\w+)\.(\w+)` \|(.*)\|$", (docs / "design.md").read_text(), flags=re.M)
+    rows = re.findall(r"^\| `([\w.]+)\.(\w+)` \|(.*)\|$", (docs / "design.md").read_text(), flags=re.M)
     table = {(section, name): [c.strip() for c in rest.split("|")] for section, name, rest in rows}
     assert len(rows) == len(table) == sum(len(keys) for keys in DESIGN_KEYS.values())
     for section, keys in DESIGN_KEYS.items():

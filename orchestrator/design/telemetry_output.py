@@ -1,0 +1,197 @@
+"""What ``sblsim design`` writes for a telemetry array (:mod:`~sblsim.orchestrator.design.telemetry`):
+``design.json``, ``designs.csv`` and ``layout.png``, all at once (an interrupted run leaves ``--out`` as it was).
+
+``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``;
+each design its ``name``, ``system`` (``ilbl``), ``label``, ``cost``, ``meets``, ``fails`` (``part`` one of
+``receivers``, ``coverage``, ``drms``, ``positioning_yield``, ``sync_coverage``), ``scenario`` (None: a telemetry
+design has no scenario file), ``receivers_m`` (North, East [m]), ``sync_links`` (the pairs of receivers that hear
+each other's sync tags with probability ≥ ``detection.sync_p``), ``predicted`` and ``monte_carlo`` (rows of
+``point``, ``north_m``, ``east_m``, ``predicted_drms_m``, ``simulated_drms_m``, ``ratio``, ``pings``, ``fixes``,
+``predicted_yield``, ``simulated_yield``, ``confirmed``), ``confirmed``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.design import telemetry as tm
+from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked
+from sblsim.orchestrator.io.output import staged_directory
+
+#: The columns of ``designs.csv``.
+CSV_COLUMNS = ("rank", "name", "system", "count", "cost", "criterion", "drms_p50_m", "drms_p95_m", "drms_max_m",
+               "coverage", "positioning_yield", "sync_coverage", "meets", "fails")
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    return value
+
+
+def _percentile(values: np.ndarray, q: float) -> float:
+    return float(np.percentile(np.where(np.isfinite(values), values, np.inf), q, method="higher"))
+
+
+def predicted(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
+    """A design's predicted numbers over the work area: the DRMS of the fixed pings' quantiles (``drms_p50_m``,
+    ``drms_p95_m``, ``drms_max_m``, and ``drms_at_coverage_m`` at the prescription's coverage percentile; None where
+    a point has no fixed ping), the averaged information's at the coverage percentile (``drms_expected_m``, the
+    search's optimistic figure), ``coverage``, ``positioning_yield`` (the mean over the points),
+    ``positioning_yield_at_coverage`` (reached at the coverage's share of the points), ``fixable``, and
+    ``sync_coverage`` (the share of receivers hearing two other sync tags), ``sync_components``, ``sync_met``."""
+    share = run.resolved.prescription["coverage_pct"]
+    out = {"drms_p50_m": _percentile(design.drms_fixed, 50.0), "drms_p95_m": _percentile(design.drms_fixed, 95.0),
+           "drms_max_m": _percentile(design.drms_fixed, 100.0),
+           "drms_at_coverage_m": _percentile(design.drms_fixed, share),
+           "drms_expected_m": _percentile(design.drms_expected, share)}
+    out = {k: _finite(v) for k, v in out.items()}
+    out.update({"coverage": design.coverage / 100.0,
+                "positioning_yield": float(np.mean(design.positioning_yield)),
+                "positioning_yield_at_coverage": float(np.percentile(design.positioning_yield, 100.0 - share,
+                                                                     method="lower")),
+                "fixable": float(np.mean(design.fixable)),
+                "sync_coverage": float(design.sync.share), "sync_components": int(design.sync.components),
+                "sync_met": bool(design.sync.met)})
+    return out
+
+
+def sync_links(design: TelemetryDesign, run: TelemetryRun) -> list[list[int]]:
+    """The pairs (i < j) of receivers whose sync link holds (either hears the other's sync tag with probability
+    ≥ ``detection.sync_p``)."""
+    p = tm.sync_probabilities(design.receivers, run.resolved.curve.probability)
+    linked = p >= run.resolved.sections["detection"]["sync_p"]
+    linked = linked | linked.T
+    return [[int(i), int(j)] for i, j in zip(*np.nonzero(np.triu(linked, 1)))]
+
+
+def design_record(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
+    """One proposed design as ``design.json`` holds it (module docstring)."""
+    rows = [{k: _finite(v) for k, v in m.items()} for m in design.monte_carlo]
+    return {"name": design.name, "system": "ilbl", "label": design.label, "cost": design.cost, "meets": design.meets,
+            "fails": [{k: _finite(v) for k, v in s.items()} for s in design.shortfalls], "scenario": None,
+            "receivers_m": [[float(r[0]), float(r[1])] for r in design.receivers],
+            "sync_links": sync_links(design, run),
+            "criterion": {"name": "expected-information", "value": _finite(design.value)},
+            "predicted": predicted(design, run), "evaluated_by": "telemetry", "monte_carlo": rows,
+            "confirmed": bool(rows) and all(m["confirmed"] for m in rows), "path": []}
+
+
+def summary(run: TelemetryRun) -> str:
+    """The outcome in one line."""
+    p = run.resolved.prescription
+    best = run.best
+    what = (f"{p['drms_m']:g} m DRMS of a tag's fixes at {p['coverage_pct']:g} % of the water with a positioning "
+            f"yield of {p['positioning_yield_pct']:g} % and a synchronisable array")
+    pred = predicted(best, run)
+    at = pred["drms_at_coverage_m"]
+    found = (f"{best.label} (cost {best.cost:g}), covering {best.coverage:.1f} % (DRMS p{p['coverage_pct']:g} "
+             f"{'no fix' if at is None else f'{at:.3g} m'}, yield {100 * pred['positioning_yield']:.1f} %, sync "
+             f"{100 * pred['sync_coverage']:.0f} %)")
+    if best.monte_carlo:
+        found += "; simulated / predicted DRMS " + ", ".join(
+            f"{m['ratio']:.2f} at the {m['point']} point (yield {100 * m['simulated_yield']:.1f} % against "
+            f"{100 * m['predicted_yield']:.1f} %)" for m in best.monte_carlo)
+    name = run.resolved.sections["design"]["name"]
+    if best.meets:
+        return f"{name}: {what}: {found}"
+    return (f"{name}: no count of receivers meets {what}; the best found: {found}; what fails: "
+            f"{'; '.join(s['text'] for s in best.shortfalls)}")
+
+
+def table(run: TelemetryRun) -> pd.DataFrame:
+    """``designs.csv``: every count searched, ranked."""
+    names = {id(d): d.name for d in run.proposed}
+    rows = []
+    for k, d in enumerate(ranked(run.searched), start=1):
+        pred = predicted(d, run)
+        rows.append({"rank": k, "name": names.get(id(d), ""), "system": "ilbl", "count": d.count, "cost": d.cost,
+                     "criterion": d.value, **{q: pred[q] if pred[q] is not None else math.inf
+                                              for q in ("drms_p50_m", "drms_p95_m", "drms_max_m")},
+                     "coverage": pred["coverage"], "positioning_yield": pred["positioning_yield"],
+                     "sync_coverage": pred["sync_coverage"], "meets": d.meets,
+                     "fails": "; ".join(s["part"] for s in d.shortfalls)})
+    return pd.DataFrame(rows, columns=list(CSV_COLUMNS))
+
+
+def document(run: TelemetryRun, seconds: float | None = None, effort: Any = None) -> dict[str, Any]:
+    """``design.json`` as a mapping (module docstring)."""
+    problem = json.loads(json.dumps(run.resolved.sections, default=str))
+    out = {"problem": problem, "summary": summary(run), "meets": run.best.meets,
+           "designs": [design_record(d, run) for d in run.proposed],
+           "search": {"candidates": len(run.searched), "layouts": sum(d.evaluations for d in run.searched),
+                      "work_area_points": int(len(run.resolved.points)), "criterion": "expected-information",
+                      "criterion_meaning": "the DRMS of the information averaged over the detections over the "
+                                           "prescription's, plus the yield's and the sync graph's shortfalls"}}
+    if seconds is not None:
+        out["search"]["seconds"] = round(seconds, 1)
+    if effort is not None:
+        out["search"]["estimate"] = {"candidates": effort.candidates, "layouts": effort.layouts,
+                                     "runs": effort.runs, "seconds": round(effort.seconds, 1)}
+    return out
+
+
+def layout_figure(run: TelemetryRun):
+    """Each proposed design on the water: the positioning yield and the DRMS of the fixed pings at the work area's
+    points, the receivers, the sync links and the Monte Carlo's points."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    r = run.resolved
+    fig, axes = plt.subplots(len(run.proposed), 2, figsize=(11, 4.6 * len(run.proposed)), squeeze=False,
+                             layout="constrained")
+    outline = [np.asarray(g.exterior.coords) for g in getattr(r.water, "geoms", [r.water])]
+    for row, design in zip(axes, run.proposed):
+        drms = np.where(np.isfinite(design.drms_fixed), design.drms_fixed, np.nan)
+        panels = ((design.positioning_yield, "positioning yield", dict(vmin=0.0, vmax=1.0, cmap="viridis")),
+                  (drms, "DRMS of the fixed pings [m]", dict(norm=LogNorm(vmin=max(np.nanmin(drms), 1e-3),
+                                                                           vmax=max(np.nanmax(drms), 1e-2)),
+                                                            cmap="magma_r")))
+        for ax, (values, label, style) in zip(row, panels):
+            for ring in outline:
+                ax.plot(ring[:, 1], ring[:, 0], color="0.3", lw=1)
+            shown = ax.scatter(r.points[:, 1], r.points[:, 0], c=values, s=14, marker="s", **style)
+            fig.colorbar(shown, ax=ax, label=label)
+            for i, j in sync_links(design, run):
+                a, b = design.receivers[i], design.receivers[j]
+                ax.plot([a[1], b[1]], [a[0], b[0]], color="tab:blue", lw=0.4, alpha=0.5)
+            ax.plot(design.receivers[:, 1], design.receivers[:, 0], "^", color="tab:red", ms=6,
+                    label="receiver (with its sync tag)")
+            for m in design.monte_carlo:
+                ax.plot(m["east_m"], m["north_m"], "o", mfc="none", color="k", ms=9)
+                ax.annotate(f"{m['point']}: {m['ratio']:.2f}", (m["east_m"], m["north_m"]), fontsize=7,
+                            xytext=(5, 5), textcoords="offset points")
+            ax.set_aspect("equal")
+            ax.set_xlabel("East [m]")
+            ax.set_ylabel("North [m]")
+            ax.set_title(f"{design.name}: {design.label}, coverage {design.coverage:.1f} %", fontsize=9)
+        row[0].legend(loc="lower left", fontsize=7)
+    return fig
+
+
+def figures(run: TelemetryRun) -> dict[str, Any]:
+    """The figures by name: ``layout``."""
+    return {"layout": layout_figure(run)}
+
+
+def write(run: TelemetryRun, out: Path | str, seconds: float | None = None, effort: Any = None) -> Path:
+    """Write ``design.json``, ``designs.csv`` and ``layout.png`` into ``out`` at once; return ``out``."""
+    import matplotlib.pyplot as plt
+
+    with staged_directory(out) as tmp:
+        (tmp / "design.json").write_text(json.dumps(document(run, seconds, effort), indent=2, allow_nan=False) + "\n")
+        table(run).to_csv(tmp / "designs.csv", index=False)
+        for name, figure in figures(run).items():
+            figure.savefig(tmp / f"{name}.png", dpi=110, bbox_inches="tight")
+            plt.close(figure)
+    return Path(out)
+
+
+__all__ = ["CSV_COLUMNS", "design_record", "document", "figures", "layout_figure", "predicted", "summary",
+           "sync_links", "table", "write"]
