@@ -298,6 +298,10 @@ CASES = {
     "run missing ssp": (["run", "--ssp", "none.ssp"], "ssp"),
     "run ssp not a zip": (["run", "--ssp", "notzip.ssp"], "ssp"),
     "run export-log suffix": (["run", "semicircle", "--export-log", "log.txt"], "--export-log"),
+    "run export-detections of an lbl": (["run", "semicircle", "--export-detections", "det"], "--export-detections"),
+    "run export-detections under /proc": (["run", "semicircle", "--set", "platform.system=ilbl", "--set",
+                                           "platform.layout=circle", "--set", "simulation.receiver=ekf-seq",
+                                           "--export-detections", "/proc/det"], "--export-detections"),
     "run export-log over a file": (["run", "semicircle", "--export-log", "exported.csv"], "--force"),
     # replay
     "replay missing log": (["replay", "none.csv"], "log: no such file"),

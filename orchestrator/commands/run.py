@@ -265,6 +265,7 @@ def main(args: argparse.Namespace) -> int:
                              f"this run's system is {plan.config['platform']['system']!r}")
         check_keys(plan.config["acoustics"])
         check_folder(args.export_detections, args.force)
+        check_writable(args.export_detections, "--export-detections")
     out = output_folder(args.out, Path("results") / folder_name(plan.scenario), args.force, "summary.json",
                   "run", before=lambda out: _check_export_apart(args.export_log, out))
     if system is None:
