@@ -23,7 +23,9 @@ simulated tags.
 4. **Confirm** (:func:`confirm`): tags at the work area's worst and median points ping
    (:func:`~sblsim.models.tracking.simulate.simulate_pings`, random burst intervals), each receiver hears each
    ping with the curve's probability at its distance, and each ping heard by ≥ 3 receivers is fixed by least
-   squares with its emission time unknown (:func:`fixes`): the simulated yield and DRMS beside the predicted.
+   squares with its emission time unknown (:func:`fixes`): the simulated yield and DRMS beside the predicted;
+   with ``monte_carlo.path``, the same along an animal's correlated random walk through the work area
+   (:func:`path_check`).
 """
 
 from __future__ import annotations
@@ -57,6 +59,9 @@ BURST_INTERVAL = (20.0, 40.0)
 #: Seconds per layout, point and receiver of the search's criterion (0.5 µs measured), of the judgement (40 µs
 #: measured: the fixed pings' patterns) and per simulated ping fixed.
 SEARCH_SECONDS, JUDGE_SECONDS, PING_SECONDS = 1.0e-6, 1.0e-4, 1.0e-3
+#: The path's animal: its speed [m/s] and the standard deviation of its turn per ping [rad]; the positions of the
+#: path at which the prediction is made.
+WALK_SPEED, WALK_TURN, PATH_PREDICTED = 0.3, 0.5, 200
 #: A simulated yield within this many percentage points of the predicted is confirmed.
 YIELD_TOLERANCE_PP = 5.0
 
@@ -108,6 +113,7 @@ class TelemetryDesign:
     meets: bool = False
     name: str = ""
     monte_carlo: list = field(default_factory=list)
+    path: list = field(default_factory=list)
 
     @property
     def label(self) -> str:
@@ -504,11 +510,83 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
             "predicted_fixed": predicted_fixed, "simulated_fixed": simulated_fixed}
 
 
+def walk(problem: TelemetryProblem, times: np.ndarray, rng: np.random.Generator, speed: float = WALK_SPEED,
+         turn: float = WALK_TURN) -> np.ndarray:
+    """A tagged animal's correlated random walk inside the work area (and the water) at the emission ``times``
+    [s]: from the work area's point nearest its centroid, at ``speed`` [m/s], its heading turning by a normal of
+    ``turn`` [rad] each ping; a step that would leave turns again (up to 50 draws, else the animal stays).
+
+    Returns
+    -------
+    ndarray, shape (K, 2)
+        (North, East) [m].
+    """
+    points = problem.points
+    position = points[np.argmin(np.linalg.norm(points - points.mean(axis=0), axis=1))].copy()
+    heading = rng.uniform(0.0, 2.0 * math.pi)
+    out = np.empty((len(times), 2))
+    steps = np.diff(np.asarray(times, float), prepend=float(times[0]))
+    for k, dt in enumerate(steps):
+        for _ in range(50):
+            heading += rng.normal(0.0, turn)
+            nxt = position + speed * dt * np.array([math.cos(heading), math.sin(heading)])
+            if areas.inside(problem.work, nxt[None])[0] and areas.inside(problem.water, nxt[None])[0]:
+                position = nxt
+                break
+            heading += rng.uniform(0.5, 1.5) * math.pi
+        out[k] = position
+    return out
+
+
+def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Generator) -> dict:
+    """A tagged animal on a correlated random walk (:func:`walk`) through the work area, pinging as in
+    :func:`static_check`: the simulated yield, share fixed and DRMS over the path beside the predicted at the
+    path's positions (the RMS over the fixes that count of each ping position's predicted DRMS, weighted by its
+    probability of a fix; :data:`PATH_PREDICTED` positions of the path, evenly spaced)."""
+    mc, detection = problem.sections["monte_carlo"], problem.sections["detection"]
+    pings = mc["replicates"] * PINGS_PER_REPLICATE
+    settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
+    walked = np.random.default_rng(rng.integers(2**63))
+    toa, positions, _ = simulate_pings(design.receivers, pings, settings, rng, detection=1.0, ping_type="rbi",
+                                       burst_interval=BURST_INTERVAL, path=lambda t: walk(problem, t, walked))
+    d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
+    q = problem.curve.probability(d)
+    toa[rng.random(toa.shape) >= q] = np.nan
+    heard = np.isfinite(toa)
+    sigma = tm.range_sigma(d, problem.sigma_m)
+    own = tm.fix_drms(positions, design.receivers, sigma, heard)
+    gate = problem.prescription["fix_gate_m"]
+    enough = heard.sum(axis=1) >= problem.needed
+    counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
+    k = np.flatnonzero(counted)
+    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water)
+    errors = (estimates - positions[k])[np.isfinite(estimates).all(axis=1)]
+    simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
+    chosen = np.linspace(0, pings - 1, min(PATH_PREDICTED, pings)).astype(int)
+    rms, fixed = fixed_pings(positions[chosen], design.receivers, sigma[chosen], q[chosen], gate, rng,
+                             needed=problem.needed)
+    ok = np.isfinite(rms) & (fixed > 0.0)
+    predicted = float(np.sqrt(np.sum(fixed[ok] * rms[ok] ** 2) / np.sum(fixed[ok]))) if ok.any() else math.inf
+    ratio = simulated / predicted if math.isfinite(simulated) and math.isfinite(predicted) else math.nan
+    predicted_yield = float(np.mean(tm.positioning_yield(q[chosen], problem.needed)))
+    simulated_yield = float(np.mean(enough))
+    return {"path": "correlated random walk", "pings": int(pings), "fixes": int(len(errors)),
+            "length_m": float(np.sum(np.linalg.norm(np.diff(positions, axis=0), axis=1))),
+            "predicted_drms_m": predicted, "simulated_drms_m": simulated, "ratio": ratio,
+            "predicted_yield": predicted_yield, "simulated_yield": simulated_yield,
+            "predicted_fixed": float(np.mean(fixed)), "simulated_fixed": float(np.mean(counted)),
+            "confirmed": bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
+                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)}
+
+
 def confirm(design: TelemetryDesign, problem: TelemetryProblem) -> None:
-    """A proposed design's Monte Carlo rows (:func:`static_check` at :func:`checked_points`)."""
+    """A proposed design's Monte Carlo rows (:func:`static_check` at :func:`checked_points`) and, with
+    ``monte_carlo.path``, its path's row (:func:`path_check`)."""
     rng = np.random.default_rng([problem.sections["search"]["seed"], design.count, 1])
     design.monte_carlo = [static_check(design, problem, where, index, rng)
                           for where, index in checked_points(design, problem)]
+    if problem.sections["monte_carlo"]["path"]:
+        design.path = [path_check(design, problem, rng)]
 
 
 def within(problem: TelemetryProblem, receivers: np.ndarray) -> bool:
@@ -532,7 +610,8 @@ def estimate(problem: TelemetryProblem):
     return Estimate(len(counts), moves * len(counts), m, runs, seconds + runs * PING_SECONDS)
 
 
-__all__ = ["BURST_INTERVAL", "JUDGE_SECONDS", "MOVES_PER_GENERATION", "PATTERN_SAMPLES", "PINGS_PER_REPLICATE",
-           "PING_SECONDS", "SEARCH_SECONDS", "SITE_POINTS", "TelemetryDesign", "TelemetryProblem", "TelemetryRun",
-           "YIELD_TOLERANCE_PP", "checked_points", "confirm", "estimate", "fixed_pings", "fixes", "judge", "ranked",
-           "resolve", "search_all", "search_count", "shortfalls", "static_check", "water_polygon", "within"]
+__all__ = ["BURST_INTERVAL", "JUDGE_SECONDS", "MOVES_PER_GENERATION", "PATH_PREDICTED", "PATTERN_SAMPLES",
+           "PINGS_PER_REPLICATE", "PING_SECONDS", "SEARCH_SECONDS", "SITE_POINTS", "TelemetryDesign",
+           "TelemetryProblem", "TelemetryRun", "WALK_SPEED", "WALK_TURN", "YIELD_TOLERANCE_PP", "checked_points",
+           "confirm", "estimate", "fixed_pings", "fixes", "judge", "path_check", "ranked", "resolve", "search_all",
+           "search_count", "shortfalls", "static_check", "walk", "water_polygon", "within"]

@@ -7,7 +7,9 @@ each design its ``name``, ``system`` (``ilbl``), ``label``, ``cost``, ``meets``,
 design has no scenario file), ``receivers_m`` (North, East [m]), ``sync_links`` (the pairs of receivers that hear
 each other's sync tags with probability ≥ ``detection.sync_p``), ``predicted`` and ``monte_carlo`` (rows of
 ``point``, ``north_m``, ``east_m``, ``predicted_drms_m``, ``simulated_drms_m``, ``ratio``, ``pings``, ``fixes``,
-``predicted_yield``, ``simulated_yield``, ``confirmed``), ``confirmed``.
+``predicted_yield``, ``simulated_yield``, ``predicted_fixed``, ``simulated_fixed``, ``confirmed``),
+``confirmed`` (the static points'), and ``path`` (the same along an animal's correlated random walk, with
+``monte_carlo.path``).
 """
 
 from __future__ import annotations
@@ -80,7 +82,8 @@ def design_record(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
             "sync_links": sync_links(design, run),
             "criterion": {"name": "expected-information", "value": _finite(design.value)},
             "predicted": predicted(design, run), "evaluated_by": "telemetry", "monte_carlo": rows,
-            "confirmed": bool(rows) and all(m["confirmed"] for m in rows), "path": []}
+            "confirmed": bool(rows) and all(m["confirmed"] for m in rows),
+            "path": [{k: _finite(v) for k, v in m.items()} for m in design.path]}
 
 
 def summary(run: TelemetryRun) -> str:

@@ -23,7 +23,7 @@ SMALL = {
     "prescription": {"drms_m": 2.0, "coverage_pct": 90.0, "positioning_yield_pct": 80.0},
     "candidates": {"systems": ["ilbl"], "receivers": [4, 7]},
     "search": {"generations": 6, "seed": 3},
-    "monte_carlo": {"replicates": 10},
+    "monte_carlo": {"replicates": 10, "path": False},
 }
 
 
@@ -221,25 +221,41 @@ def test_the_command_line_refuses_in_one_line_and_writes_nothing(tmp_path, capsy
     assert err.count("\n") == 0 and "candidates.systems" in err
 
 
+def test_the_walk_of_the_path_stays_in_the_water():
+    """The path's animal walks ~10 m a ping in the concave lake for 2,000 pings: every position inside it by an
+    independent ray casting, and it goes round (both arms of the L visited)."""
+    from sblsim.orchestrator.design.problem import check_problem
+    from sblsim.orchestrator.design.telemetry import resolve, walk
+
+    problem = resolve(check_problem(_problem()))
+    positions = walk(problem, np.arange(2000) * 30.0, np.random.default_rng(1))
+    assert _inside(_lake(), positions).all()
+    assert (positions[:, 0] > 200.0).any() and (positions[:, 1] > 200.0).any()
+    assert np.median(np.linalg.norm(np.diff(positions, axis=0), axis=1)) == pytest.approx(9.0)
+
+
 def test_the_telemetry_design_writes_its_outputs(tmp_path):
-    result = sblsim.design(None, **_problem(), out=tmp_path / "d")
+    result = sblsim.design(None, **_problem(monte_carlo={"path": True}), out=tmp_path / "d")
     document = json.loads((tmp_path / "d" / "design.json").read_text())
     best = document["designs"][0]
     assert best["system"] == "ilbl" and best["scenario"] is None and best["meets"]
     assert {"positioning_yield", "sync_coverage"} <= set(best["predicted"])
     assert all({"simulated_yield", "predicted_yield", "ratio"} <= set(m) for m in best["monte_carlo"])
+    (path,) = best["path"]
+    assert path["pings"] == 250 and 0 < path["fixes"] <= 250 and path["simulated_yield"] >= path["simulated_fixed"]
     assert (tmp_path / "d" / "designs.csv").exists() and (tmp_path / "d" / "layout.png").exists()
     assert result.table["count"].iloc[0] == len(best["receivers_m"]) and result.table["meets"].iloc[0]
 
 
 @pytest.mark.slow
 def test_the_lake_hald_array_is_confirmed_by_simulated_tags():
-    """The worked case: the proposed array meets, and at its worst and median points the simulated tags' DRMS is
-    within [0.85, 1.15] of the predicted and their yield within 5 percentage points."""
+    """The worked case: the proposed array meets, and at its worst and median points and along an animal's walk
+    the simulated tags' DRMS is within [0.85, 1.15] of the predicted and their yield within 5 percentage
+    points."""
     result = sblsim.design("lake-hald-array")
     best = result.designs[0]
     assert best["meets"] and len(best["monte_carlo"]) == 2
-    for row in best["monte_carlo"]:
+    for row in best["monte_carlo"] + best["path"]:
         assert 0.85 <= row["ratio"] <= 1.15, row
         assert abs(row["simulated_yield"] - row["predicted_yield"]) <= 0.05, row
         assert abs(row["simulated_fixed"] - row["predicted_fixed"]) <= 0.05, row
