@@ -259,3 +259,20 @@ def test_the_lake_hald_array_is_confirmed_by_simulated_tags():
         assert 0.85 <= row["ratio"] <= 1.15, row
         assert abs(row["simulated_yield"] - row["predicted_yield"]) <= 0.05, row
         assert abs(row["simulated_fixed"] - row["predicted_fixed"]) <= 0.05, row
+
+
+def test_the_built_in_lake_hald_array_is_lake_halds_stated_case():
+    """``lake-hald-array``'s water, detection table, timing and sync probability are ``lake_hald``'s constants (the
+    water's vertices (x, y) given as (North, East) = (y, x))."""
+    from sblsim.models.design import lake_hald as lh
+    from sblsim.orchestrator.design.problem import check_problem, read_problem
+
+    sections = check_problem(read_problem("lake-hald-array"))
+    vertices = np.array([[float(v) for v in r.split()] for r in sections["site.area"]["polygon"].split(";")])
+    np.testing.assert_array_equal(vertices[:, ::-1], np.array(lh.LAKE_HALD_AREA))
+    table = np.array([[float(v) for v in r.split()] for r in sections["detection"]["table"].split(";")])
+    np.testing.assert_array_equal(table, np.array(lh.LAKE_HALD_DETECTION))
+    assert sections["detection"]["sigma_toa_s"] == lh.LAKE_HALD_SIGMA_TOA
+    assert sections["detection"]["sound_speed"] == lh.LAKE_HALD_SOUND_SPEED
+    assert sections["detection"]["sync_p"] == lh.LAKE_HALD_SYNC_P
+    assert sections["candidates"]["systems"] == ["ilbl"] and sections["work_area"]["shape"] == "site"
