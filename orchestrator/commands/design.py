@@ -198,6 +198,10 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare, max_
 
     sections = check_problem(raw, scenario_given=scenario is not None)
     if is_telemetry(sections):
+        if scenario is not None:
+            raise ConfigError(f"{'--scenario' if option == '--max-minutes' else 'scenario'}: an ilbl design (a "
+                              "telemetry array) reads no base scenario; allowed none (the site is [site.area] and "
+                              "[detection])")
         return _telemetry(sections, progress, prepare, max_minutes, say, option)
     start = time.perf_counter()
     source = scenario if scenario is not None else sections["design"]["scenario"]

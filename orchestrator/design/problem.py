@@ -326,6 +326,10 @@ def _check_telemetry(problem: dict[str, dict[str, Any]]) -> None:
     if problem["candidates"]["systems"] != [TELEMETRY]:
         raise ConfigError(f"candidates.systems: {', '.join(problem['candidates']['systems'])}; ilbl (a telemetry "
                           f"array) is designed alone: allowed ['ilbl'] or any of {', '.join(SYSTEM_NAMES)}")
+    for name, empty in (("scenario", ""), ("set", [])):
+        if problem["design"][name] != empty:
+            raise ConfigError(f"design.{name}: an ilbl design (a telemetry array) reads no base scenario; allowed "
+                              f"{empty!r} (the site is [site.area] and [detection])")
     low, high = problem["candidates"]["receivers"]
     if low > high:
         raise ConfigError(f"candidates.receivers: the fewest ({low}) is above the most ({high})")

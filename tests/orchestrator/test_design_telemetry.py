@@ -205,10 +205,17 @@ def test_a_bad_geojson_is_refused_in_one_line(tmp_path, content, message):
     ({"candidates": {"receivers": [9, 4]}}, "candidates.receivers: the fewest"),
     ({"work_area": {"shape": "circle"}}, "work_area.shape: 'circle' for an ilbl design"),
     ({"detection": {"sync_p": 0.0}}, "detection.sync_p"),
+    ({"design": {"scenario": "lbl-field"}}, "design.scenario: an ilbl design .*reads no base scenario"),
+    ({"design": {"set": ["acoustics.sigma_range=0.1"]}}, "design.set: an ilbl design"),
 ])
 def test_a_bad_telemetry_problem_is_refused_naming_its_key(changes, message):
     with pytest.raises(ConfigError, match=message):
         sblsim.design(None, **_problem(**changes))
+
+
+def test_a_base_scenario_is_refused_for_a_telemetry_design():
+    with pytest.raises(ConfigError, match="^scenario: an ilbl design"):
+        sblsim.design(None, scenario="lbl-field", **_problem())
 
 
 def test_the_command_line_refuses_in_one_line_and_writes_nothing(tmp_path, capsys):
