@@ -123,10 +123,9 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             run_acc* s = &acc[r];
             const double* f = fixed + (size_t)r * SBLSIM_N_FIXED;
             double v[SBLSIM_COLUMN_LANE2_PACKET_SEQ], e[4], signed_error[3], slot, fresh, epsilon, error, reach;
-            int c, id, m, estimated;
+            int c, id, m;
             for (c = 0; c < SBLSIM_COLUMN_LANE2_PACKET_SEQ; c++) v[c] = at(columns, strides, c, k, r);
-            estimated = errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_EST_X], e);
-            if (estimated) add_errors(&s->est, e);
+            if (errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_EST_X], e)) add_errors(&s->est, e);
             if (v[SBLSIM_COLUMN_INSTR_VALID] > 0.5 && errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_INSTR_X], e))
                 add_errors(&s->instr, e);
             for (a = 0; a < 3; a++) signed_error[a] = v[SBLSIM_COLUMN_TRUE_X + a] - v[SBLSIM_COLUMN_EST_X + a];
@@ -197,7 +196,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
                 memcpy(s->bound, next, sizeof next);
             }
             error = sqrt(next[0] + next[2 * (SBLSIM_BOUND_STATE + 1)] + next[4 * (SBLSIM_BOUND_STATE + 1)]);
-            if (estimated) s->trace_sum += error * error; /* pcrb_rms: over the steps with an estimate */
+            s->trace_sum += error * error;
             if (bound != NULL) bound[(size_t)k * (size_t)b + (size_t)r] = error;
         }
     }
@@ -233,7 +232,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
         o[SBLSIM_METRIC_COVERAGE_95] = (double)s->covered / (double)s->nees_count;
         o[SBLSIM_METRIC_NIS_MEAN] = s->nis_sum / (double)s->started;
         o[SBLSIM_METRIC_GATED_PCT] = 100.0 * (double)s->gated / (double)s->fresh;
-        o[SBLSIM_METRIC_PCRB_RMS] = sqrt(s->trace_sum / (double)s->est.count);
+        o[SBLSIM_METRIC_PCRB_RMS] = sqrt(s->trace_sum / (double)n);
         o[SBLSIM_METRIC_DIVERGED] = s->lost ? 1.0 : 0.0;
     }
     free(w);
