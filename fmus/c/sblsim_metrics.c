@@ -32,7 +32,7 @@ typedef struct {
     errors_acc est, instr;
     double nees_sum, nis_sum, trace_sum, previous_seq, lane_seq[SBLSIM_LANES - 1];
     long nees_count, covered, started, fresh, gated, rejected;
-    int lost, fixed; /* fixed: an estimate was finite at a step before (NaN before a receiver's first fix) */
+    int lost;
     double bound[N_BOUND];
 } run_acc;
 
@@ -140,8 +140,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             reach = sqrt(v[SBLSIM_COLUMN_TRUE_X] * v[SBLSIM_COLUMN_TRUE_X] +
                          v[SBLSIM_COLUMN_TRUE_Y] * v[SBLSIM_COLUMN_TRUE_Y] +
                          v[SBLSIM_COLUMN_TRUE_Z] * v[SBLSIM_COLUMN_TRUE_Z]);
-            if (isfinite(error)) s->fixed = 1;
-            if ((s->fixed && !isfinite(error)) || (error > limits[1] && error > limits[2] * reach)) s->lost = 1;
+            if (!isfinite(error) || (error > limits[1] && error > limits[2] * reach)) s->lost = 1;
             if (rint(v[SBLSIM_COLUMN_PACKET_SEQ]) > 0) {
                 s->nis_sum += v[SBLSIM_COLUMN_NIS];
                 s->started++;

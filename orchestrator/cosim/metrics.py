@@ -3,8 +3,7 @@
 Per step: ``e_x = |x − x̂|``, ``e_y``, ``e_z`` and
 ``e_tot = sqrt(e_x² + e_y² + e_z²)``; per run: the time-average of each, the
 RMS of e_tot and its standard deviation (population, ddof = 0). Steps where an
-estimate is not available (NaN: a receiver's estimate before its first fix, which
-is never its starting guess, or no instrumentation fix yet) are left out.
+estimate is not available (NaN, e.g. no instrumentation fix yet) are left out.
 
 Consistency (Bar-Shalom, Li, Kirubarajan, Estimation with Applications to
 Tracking and Navigation, Wiley 2001, Section 5.4): the position NEES
@@ -17,7 +16,7 @@ the receiver's ``nis`` output from the first slot on; ``gated_pct`` the share
 of received slots whose range the gate rejected [%]; ``pcrb_rms`` the RMS of
 the position PCRB along the run (:mod:`sblsim.models.bound`), comparable
 with ``e_tot_rms``. ``diverged`` flags a run whose receiver lost the diver: an
-estimate that is not finite after its first fix, or farther from the truth than both
+estimate that is not finite, or farther from the truth than both
 :data:`DIVERGENCE_DISTANCE` and :data:`DIVERGENCE_RATIO` times the diver's
 distance from the platform, or, by the receiver's own statistics, a run of
 :data:`DIVERGENCE_REJECTIONS` received packets in a row that its NIS gate
@@ -31,7 +30,7 @@ Two flags say when the numbers are not what they seem (:func:`run_flags`):
 ``updates`` counts the slots whose received range the receiver used (new,
 received, not gated) and ``fix_steps`` the steps with a multilateration fix
 (``instr_valid``); with no update the receiver never made a fix and reports
-no estimate (NaN: its error metrics are NaN). And
+its starting guess (and what its motion model predicts from it). And
 ``beyond_geometry`` flags a diver farther from the platform reference
 (``max_distance``, horizontal) than :data:`REACH_RATIO` times the beacons'
 horizontal spread: the horizontal position comes from range differences
@@ -327,8 +326,7 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
     e = runs(nees(err, cov))
     error = runs(np.sqrt(np.sum(np.asarray(err, dtype=float) ** 2, axis=-1)))
     reach = 0.0 if truth is None else runs(np.sqrt(np.sum(np.asarray(truth, dtype=float) ** 2, axis=-1)))
-    fixed = np.logical_or.accumulate(np.isfinite(error), axis=-1)  # from the first fix on (NaN before it)
-    lost = (fixed & ~np.isfinite(error)) | ((error > DIVERGENCE_DISTANCE) & (error > DIVERGENCE_RATIO * reach))
+    lost = ~np.isfinite(error) | ((error > DIVERGENCE_DISTANCE) & (error > DIVERGENCE_RATIO * reach))
     lost = lost.any(axis=-1) | (rejected_run(runs(fresh, bool) & runs(gated, bool), runs(fresh, bool))
                                 >= DIVERGENCE_REJECTIONS)
     valid = np.isfinite(e)
