@@ -761,8 +761,9 @@ def _arrivals() -> ca.Function:
 
 def arrivals(use_table, zs, zr, x, depth, constant, nodes, speeds):
     """Every eigenray family between two depths with its geometric spreading and its length, for the sonar
-    equation: ``(tau, launch, arrival, valid, spreading, length)``, each (3, 1), rows direct, surface-reflected,
-    bottom-reflected (the ``arrival`` codes 1, 2, 3 less one).
+    equation: ``(tau, launch, arrival, valid, spreading, length)``, each (4, 1), rows direct, surface-reflected,
+    bottom-reflected and the direct family's earliest other eigenray (a ray turning in the water; the ``arrival``
+    codes 1 to 4 less one; the fourth never valid in water of one speed).
 
     Through the profile table (``use_table``) the eigenrays of :func:`eigenray_paths` (only the direct one solved
     without a water depth); in water of the constant speed ``constant`` the straight line and its images in the
@@ -786,17 +787,17 @@ def arrivals(use_table, zs, zr, x, depth, constant, nodes, speeds):
 
     Returns
     -------
-    tau : casadi.SX, shape (3, 1)
+    tau : casadi.SX, shape (4, 1)
         Travel times [s].
-    launch, arrival : casadi.SX, shape (3, 1)
+    launch, arrival : casadi.SX, shape (4, 1)
         Grazing angles [rad] at the source and at the receiver, positive downward, in the direction of travel.
-    valid : casadi.SX, shape (3, 1)
+    valid : casadi.SX, shape (4, 1)
         1 where the eigenray exists (0: shadow zone or no boundary; the row's other values are then meaningless).
-    spreading : casadi.SX, shape (3, 1)
+    spreading : casadi.SX, shape (4, 1)
         Geometric spreading loss [dB re 1 m], ``−10 log10 |p/p0|²`` of the ray tube (Jensen, Kuperman, Porter,
         Schmidt, *Computational Ocean Acoustics*, 2nd ed., 2011, ch. 3), at most :data:`CAUSTIC_GAIN` below the
         spherical spreading ``20 log10`` of the isovelocity image's length (caustics), and at least 0 dB.
-    length : casadi.SX, shape (3, 1)
+    length : casadi.SX, shape (4, 1)
         Path length along the ray [m] (for absorption): per c-linear layer ``(θ_a − θ_b) / (ξ g)`` in a form that
         holds for a zero gradient too.
     """
