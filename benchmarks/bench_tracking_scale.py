@@ -12,9 +12,10 @@ What is timed, at N/100, N/10 and N pings (each size once, after a first untimed
 the modules), the sound speed given (the simulation's): the **robust smoother's track** = the single-ping fixes
 (:func:`fix_pings`), the tracker's settings and the ping schedule (the replay's own functions), and
 :func:`robust_track` without the RTS smoother's start (the fixes' anchored start, its graduated start, each
-screened, the better one on to convergence, the covariances by block cyclic reduction); the motion noise is
-the simulation's (no EM). Each stage's time and the peak resident memory over the track (the process's high-water
-mark, reset before it where Linux allows, else since the start); the per-ping time against the smallest size's
+screened, the better one on to convergence, the covariances by block cyclic reduction in place); the motion noise is
+the simulation's (no EM). Each stage's time (wall clock, and the process's CPU time: on a shared machine the time on
+a core whatever else runs) and the peak resident memory over the track (the process's high-water mark, reset
+before it where Linux allows, else since the start); the per-ping time against the smallest size's
 (1.00 for linear scaling); at the smallest size, the EKF with the RTS smoother on the same pings (a ping-by-ping
 loop) per ping beside it; and the whole replay (``sblsim.replay_toa`` from files: the EM of the motion noise,
 the EKF, the sequential EKF, the UKF, both smoothers, the quality marks, scoring) at ``--replay-pings``. A JSON
@@ -95,23 +96,26 @@ def _peak_bytes() -> int:
 def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> dict:
     """The robust smoother's track of a record (module docstring) with each stage's time [s]: ``fixes_s``,
     ``schedule_s`` (the settings and the schedule), ``robust_s`` (:func:`robust_track`), ``track_s`` (their sum),
-    ``peak_bytes`` (the high-water mark over them), ``peak_reset`` (whether it was reset before) and ``robust``
-    (the :class:`RobustTrack`)."""
+    the process's CPU time of the fixes, of :func:`robust_track` and of the track (``fixes_cpu_s``,
+    ``robust_cpu_s``, ``track_cpu_s``: the time on a core, whatever else the machine runs), ``peak_bytes`` (the
+    high-water mark over them), ``peak_reset`` (whether it was reset before) and ``robust`` (the
+    :class:`RobustTrack`)."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.orchestrator.tracks.track import SIGMA_TOA, ping_schedule, tracker_settings
 
     reset = _reset_peak()
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
-    fixed = time.perf_counter()
+    fixed, fixed_cpu = time.perf_counter(), time.process_time()
     settings = replace(tracker_settings(sound_speed, fe), acceleration_psd=acceleration_psd)
     schedule, _ = ping_schedule(toa, receivers, settings)
     settings = replace(settings, interval=schedule.interval)
-    scheduled = time.perf_counter()
+    scheduled, scheduled_cpu = time.perf_counter(), time.process_time()
     robust = tt.robust_track(toa, receivers, settings, (fx, fe, fused), None, schedule)
-    done = time.perf_counter()
+    done, done_cpu = time.perf_counter(), time.process_time()
     return {"fixes_s": fixed - start, "schedule_s": scheduled - fixed, "robust_s": done - scheduled,
-            "track_s": done - start, "peak_bytes": _peak_bytes(), "peak_reset": reset, "robust": robust}
+            "track_s": done - start, "fixes_cpu_s": fixed_cpu - cpu, "robust_cpu_s": done_cpu - scheduled_cpu,
+            "track_cpu_s": done_cpu - cpu, "peak_bytes": _peak_bytes(), "peak_reset": reset, "robust": robust}
 
 
 def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> float:
@@ -174,7 +178,8 @@ def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3) 
     for run in runs:
         run["ratio"] = run["per_ping_us"] / runs[0]["per_ping_us"]
     last = runs[-1]
-    out = {"pings": last["pings"], "track_s": last["track_s"], "fixes_s": last["fixes_s"],
+    out = {"pings": last["pings"], "track_s": last["track_s"], "track_cpu_s": last["track_cpu_s"],
+           "fixes_s": last["fixes_s"],
            "schedule_s": last["schedule_s"], "robust_s": last["robust_s"], "peak_gib": last["peak_bytes"] / 1024**3,
            "target_s": TARGET_S, "target_gib": TARGET_BYTES / 1024**3,
            "per_ping_us": [run["per_ping_us"] for run in runs], "ratio": [run["ratio"] for run in runs],
@@ -199,8 +204,9 @@ def main() -> None:
     for run in r["runs"]:
         print(f"{run['pings']:>9,} pings ({run['arrivals']:,} arrivals): the track {run['track_s']:7.2f} s (fixes "
               f"{run['fixes_s']:.2f}, schedule {run['schedule_s']:.2f}, robust_track {run['robust_s']:.2f}; "
-              f"{run['iterations']} steps from the {run['start']} start), {run['per_ping_us']:.1f} µs per ping "
-              f"({run['ratio']:.2f}× the smallest), peak {run['peak_bytes'] / 1024**3:.2f} GiB"
+              f"{run['iterations']} steps from the {run['start']} start; CPU {run['track_cpu_s']:.2f} s: fixes "
+              f"{run['fixes_cpu_s']:.2f}, robust_track {run['robust_cpu_s']:.2f}), {run['per_ping_us']:.1f} µs per "
+              f"ping ({run['ratio']:.2f}× the smallest), peak {run['peak_bytes'] / 1024**3:.2f} GiB"
               f"{'' if run['peak_reset'] else ' (since the start)'}; RMS error {run['rms_m']:.3f} m")
     print(f"the EKF with the RTS smoother at {r['sizes'][0]:,} pings: {r['ekf_rts_per_ping_us']:.1f} µs per ping; "
           f"targets at 10⁶ pings: {r['target_s']:g} s and {r['target_gib']:g} GiB on one core")

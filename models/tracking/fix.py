@@ -1,8 +1,8 @@
 """The single-ping fix: each ping alone, its position and emission time by Gauss-Newton least squares.
 
 Needs dim + 1 receivers; the receiver with the largest normalised residual is dropped while it fails the χ² test of
-one arrival (:data:`GATE_ONE`) and redundancy remains (a late multipath arrival). Every ping of a record is fixed at
-once (one casadi call per Gauss-Newton iteration for all of them).
+one arrival (:data:`GATE_ONE`) and redundancy remains (a late multipath arrival). A record's pings are fixed together,
+:data:`FIX_CHUNK` at a time (each Gauss-Newton iteration one numpy pass over a chunk: each ping's fix its own).
 
 References
 ----------
@@ -26,6 +26,11 @@ GATE_ONE = 10.828
 
 #: Iterations of a single-ping Gauss-Newton fix.
 FIX_ITERATIONS = 30
+
+
+#: Pings :func:`fix_pings` fixes together: a chunk's arrays stay in the processor's cache (each ping's fix is its
+#: own, the same whatever the chunk).
+FIX_CHUNK = 8192
 
 
 @dataclass
@@ -127,14 +132,28 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     m, (n, dim) = len(toa), receivers.shape
-    used = np.isfinite(toa)
-    known = np.zeros(m, bool)
     if depth is not None:
         depth = np.asarray(depth, float)
         if dim != 3 or depth.shape != (m,):
             raise ModelError(f"depth_m: {depth.shape} readings for {m} pings at receivers in {dim}-D; allowed: one "
                              "per ping (NaN where none), with the receivers' depths (z_m)")
-        known = np.isfinite(depth)
+    if m <= FIX_CHUNK:
+        return _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, survey_sigma)
+    out = (np.empty((m, dim)), np.empty(m), np.empty((m, dim + 1, dim + 1)), np.empty((m, n), bool), np.empty(m))
+    for lo in range(0, m, FIX_CHUNK):
+        rows = slice(lo, lo + FIX_CHUNK)
+        part = _fix_chunk(toa[rows], receivers, c, sigma_toa, None if guesses is None else np.asarray(guesses)[rows],
+                          gate, None if depth is None else depth[rows], depth_sigma, survey_sigma)
+        for whole, piece in zip(out, part):
+            whole[rows] = piece
+    return out
+
+
+def _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, survey_sigma):
+    """:func:`fix_pings` of a chunk of pings (its arguments checked)."""
+    m, (n, dim) = len(toa), receivers.shape
+    used = np.isfinite(toa)
+    known = np.zeros(m, bool) if depth is None else np.isfinite(depth)
     valid = used.sum(axis=1) + known >= dim + 1
     positions = np.full((m, dim), np.nan)
     emissions = np.full(m, np.nan)
@@ -250,19 +269,22 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
         step = np.linalg.solve(normal, np.einsum("mki,mk->mi", Jw, res[moving])[..., None])[..., 0]
         big = np.abs(step[:, :-1]).max(axis=1) >= 1e-6  # converged: a step below a micrometre
         moving, step = moving[big], step[big]
-        trying, scale = moving, 1.0
+        trying, scale = np.arange(len(moving)), 1.0  # places in moving
         for _halving in range(10):
             if not len(trying):
                 break
-            p_try, te_try = p[trying] + scale * step[:, :-1], te[trying] + scale * step[:, -1]
-            res_try, J_try = evaluate(trying, p_try, te_try)
+            rows = moving[trying]
+            p_try, te_try = p[rows] + scale * step[:, :-1], te[rows] + scale * step[:, -1]
+            res_try, J_try = evaluate(rows, p_try, te_try)
             cost_try = (res_try**2).sum(axis=1)
-            better = cost_try <= cost[trying]
-            done = trying[better]
+            better = cost_try <= cost[rows]
+            done = rows[better]
             p[done], te[done], res[done], J[done], cost[done] = (p_try[better], te_try[better], res_try[better],
                                                                  J_try[better], cost_try[better])
             trying, step, scale = trying[~better], step[~better], 0.5 * scale
-        moving = np.setdiff1d(moving, trying)  # no step lowers the cost: done
+        stuck = np.zeros(len(moving), bool)
+        stuck[trying] = True
+        moving = moving[~stuck]  # no step lowers the cost: done
         if not len(moving):
             break
     return p, te, J, res

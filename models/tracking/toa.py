@@ -100,15 +100,4 @@ def _evaluate_pings(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarr
     return np.asarray(te, float)[:, None] + travel, J
 
 
-def _evaluate_arrivals(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`toa_function` of one receiver at each of h arrivals: the receiver (h, dim) [m], the target's position
-    (h, dim) [m] and emission time (h,) [s] of each; times of arrival (h,) and Jacobians (h, dim + 1) (numpy, as
-    :func:`_evaluate_pings`)."""
-    h, dim = p.shape
-    travel, grad = _ranges(p - receivers, c, True)
-    J = np.empty((h, dim + 1))
-    J[:, :dim], J[:, dim] = grad, 1.0
-    return np.asarray(te, float) + travel, J
-
-
 __all__ = ["SOUND_SPEED_RANGE", "toa_function", "toa_model"]
