@@ -291,7 +291,7 @@ def main(args: argparse.Namespace) -> int:
         checks = ", ".join(f"{m['point']} {m['ratio']:.2f}" for m in record["monte_carlo"] if m["ratio"] is not None)
         flag = "" if record["confirmed"] else "  NOT CONFIRMED by the Monte Carlo"
         p95 = "no fix" if p["drms_p95_m"] is None else f"{p['drms_p95_m']:.3g} m"
-        if record["system"] == "ilbl":
+        if "positioning_yield" in p:  # a telemetry array's design
             p95 += (f", yield {100 * p['positioning_yield']:.1f} %, sync {100 * p['sync_coverage']:.0f} %"
                     + "".join(f", simulated yield at the {m['point']} point {100 * m['simulated_yield']:.1f} %"
                               for m in record["monte_carlo"]))
@@ -299,6 +299,7 @@ def main(args: argparse.Namespace) -> int:
               f"({100 * p['coverage']:.1f} % of the work area, DRMS p95 {p95}); Monte Carlo / map: {checks}{flag}")
     print(result.summary)
     files = [d["scenario"] for d in result.designs if d["scenario"]]
-    figures = "layout.png" if result.designs[0]["system"] == "ilbl" else "layout.png, pareto.png, convergence.png"
+    telemetry = "positioning_yield" in result.designs[0]["predicted"]
+    figures = "layout.png" if telemetry else "layout.png, pareto.png, convergence.png"
     print(f"written to {result.out}/ (design.json, designs.csv, {''.join(f + ', ' for f in files)}{figures})")
     return 0

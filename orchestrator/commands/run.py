@@ -260,7 +260,7 @@ def main(args: argparse.Namespace) -> int:
     if args.export_detections is not None:
         from sblsim.orchestrator.sync.export import check_folder, check_keys
 
-        if plan.config["platform"]["system"] != "ilbl":
+        if "toa" not in plan.system.ranging:  # the system whose receivers hear the target's pinger
             raise ModelError(f"--export-detections: raw detections are an inverted LBL's (platform.system = 'ilbl'); "
                              f"this run's system is {plan.config['platform']['system']!r}")
         check_keys(plan.config["acoustics"])

@@ -42,7 +42,7 @@ from sblsim.orchestrator.io.tables import regular_file
 SYSTEM_NAMES = tuple(name for name, system in SYSTEMS.items() if system.designed)
 #: The system a telemetry array is designed as (receivers hearing a tag: :mod:`~sblsim.orchestrator.design.telemetry`),
 #: designed alone.
-TELEMETRY = "ilbl"
+TELEMETRY = next(name for name, system in SYSTEMS.items() if "toa" in system.ranging)
 #: What ``candidates.systems`` accepts.
 SYSTEM_CHOICES = (*SYSTEM_NAMES, TELEMETRY)
 #: The hardware grades a design chooses among: category -> grade -> (configuration key, value). The figures and

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.design import telemetry as tm
+from sblsim.orchestrator.design.problem import TELEMETRY
 from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked
 from sblsim.orchestrator.io.output import staged_directory
 
@@ -76,7 +77,7 @@ def sync_links(design: TelemetryDesign, run: TelemetryRun) -> list[list[int]]:
 def design_record(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
     """One proposed design as ``design.json`` holds it (module docstring)."""
     rows = [{k: _finite(v) for k, v in m.items()} for m in design.monte_carlo]
-    return {"name": design.name, "system": "ilbl", "label": design.label, "cost": design.cost, "meets": design.meets,
+    return {"name": design.name, "system": TELEMETRY, "label": design.label, "cost": design.cost, "meets": design.meets,
             "fails": [{k: _finite(v) for k, v in s.items()} for s in design.shortfalls], "scenario": None,
             "receivers_m": [[float(r[0]), float(r[1])] for r in design.receivers],
             "sync_links": sync_links(design, run),
@@ -114,7 +115,7 @@ def table(run: TelemetryRun) -> pd.DataFrame:
     rows = []
     for k, d in enumerate(ranked(run.searched), start=1):
         pred = predicted(d, run)
-        rows.append({"rank": k, "name": names.get(id(d), ""), "system": "ilbl", "count": d.count, "cost": d.cost,
+        rows.append({"rank": k, "name": names.get(id(d), ""), "system": TELEMETRY, "count": d.count, "cost": d.cost,
                      "criterion": d.value, **{q: pred[q] if pred[q] is not None else math.inf
                                               for q in ("drms_p50_m", "drms_p95_m", "drms_max_m")},
                      "coverage": pred["coverage"], "positioning_yield": pred["positioning_yield"],

@@ -39,6 +39,7 @@ import pandas as pd
 from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.simulate import draw_clocks, on_clocks, sync_tag_arrivals
+from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.io.output import write_together
 from sblsim.orchestrator.receiver_log import log_frames
 
@@ -97,7 +98,7 @@ def detections_of(result: Any) -> DetectionExport:
     """
     result = getattr(result, "_result", None) or result  # sblsim.run's result holds the kernel's record
     cfg = result.config
-    if cfg["platform"]["system"] != "ilbl":
+    if "toa" not in SYSTEMS[cfg["platform"]["system"]].ranging:  # the system whose receivers hear the pinger
         raise ModelError(f"--export-detections: raw detections are an inverted LBL's (platform.system = 'ilbl'); "
                          f"this run's system is {cfg['platform']['system']!r}")
     acoustics = cfg["acoustics"]
