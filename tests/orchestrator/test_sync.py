@@ -175,3 +175,24 @@ def test_the_function_checks_its_arguments(tmp_path):
     with pytest.raises(ConfigError, match="not both"):
         sblsim.sync(BOATS / "detections.csv", receivers=BOATS / "hydrophones.csv", sound_speed=1480,
                     sound_speed_file=BOATS / "sound_speed.csv")
+
+
+def test_a_small_array_s_outputs_are_written_and_read_back(tmp_path):
+    """6 receivers over 3 hours (the fast tier's run of the outputs): every file written, offsets.csv and sync.json
+    what the result holds, and the offsets within 3 of their sigmas of the simulated clocks."""
+    sim = simulate_sync(n_receivers=6, hours=3.0, seed=5, offset=2.0, drift=20e-6, interval=(540.0, 660.0),
+                        noise=0.15e-3, echo_share=0.0)
+    detections, hydrophones = _write_simulation(tmp_path, sim, extra_receiver=False)
+    result = sblsim.sync(detections, receivers=hydrophones, sound_speed=sim.sound_speed, bin_hours=1.0,
+                         reference="R0", out=tmp_path / "out")
+    for name in ("sync.json", "offsets.csv", "residuals.csv", "sync_tags.csv", "offsets.png", "residuals.png",
+                 "coverage.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 0, name
+    written = pd.read_csv(tmp_path / "out" / "offsets.csv")
+    np.testing.assert_allclose(written["offset_start_s"], result.offsets["offset_start_s"], rtol=0, atol=1e-9)
+    assert json.loads((tmp_path / "out" / "sync.json").read_text())["reference_receiver"] == "R0"
+    o = result.offsets
+    j = o["receiver"].str.slice(1).astype(int).to_numpy()
+    error = o["offset_start_s"].to_numpy() - sim.offset(j, o["start"].to_numpy() - EPOCH, reference=0)
+    others = j != 0
+    assert (np.abs(error[others]) <= 3 * o["offset_start_sigma_s"].to_numpy()[others]).mean() >= 0.9
