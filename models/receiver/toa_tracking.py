@@ -52,15 +52,14 @@ from sblsim.models.tracking.simulate import simulate_pings
 from sblsim.models.tracking.smoother import (
     ROBUST_COARSE_ITERATIONS,
     ROBUST_COARSE_SCALE,
-    ROBUST_DOF,
     ROBUST_ITERATIONS,
     ROBUST_KEPT_WEIGHT,
     ROBUST_SCREEN,
     ROBUST_TOLERANCE,
     RobustTrack,
-    observed_information,
     robust_smooth,
 )
+from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
 from sblsim.models.tracking.starts import anchored_start, graduated_start, robust_track
 from sblsim.models.tracking.stationary import StationaryFix, stationary_fix
 from sblsim.models.tracking.toa import SOUND_SPEED_RANGE, toa_function, toa_model

@@ -8,7 +8,10 @@
 * :mod:`~sblsim.models.tracking.ekf`, :mod:`~sblsim.models.tracking.filters`: the causal filters and the RTS
   smoother;
 * :mod:`~sblsim.models.tracking.smoother`, :mod:`~sblsim.models.tracking.starts`: the robust smoother and its
-  starts; :mod:`~sblsim.models.tracking.motion_noise`: the motion model's noise estimated by EM;
+  starts; its problem and sums over the arrivals (:mod:`~sblsim.models.tracking.smoother_cost`), its normal
+  equations and banded solves (:mod:`~sblsim.models.tracking.smoother_system`), its covariances
+  (:mod:`~sblsim.models.tracking.smoother_covariance`); :mod:`~sblsim.models.tracking.motion_noise`: the motion
+  model's noise estimated by EM;
 * :mod:`~sblsim.models.tracking.quality`: every estimate checked against its own data, a lost stretch flagged;
 * :mod:`~sblsim.models.tracking.geometry`: an array that cannot position a tag refused;
 * :mod:`~sblsim.models.tracking.receivers`: a receiver out of line of sight named from its residuals;

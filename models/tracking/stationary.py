@@ -5,12 +5,12 @@ Every ping k has its own emission time ``t_k``; the position ``p`` is shared:
     ``min over p, t_1..t_m  Σ_(k,i) heard (ν + 1) ln(1 + z_ki² / ν)``,
     ``z_ki = (toa_ki − t_k − ‖p − r_i‖ / c) / σ_toa``,
 
-the robust smoother's Student-t error of each arrival (:data:`~sblsim.models.tracking.smoother.ROBUST_DOF`). Solved by
-iteratively reweighted Gauss-Newton with the emission times eliminated: at fixed weights, each ``t_k`` is the
-weighted mean of its arrivals' ``toa_ki − ‖p − r_i‖ / c``, so the position's normal equations are those of the
+the robust smoother's Student-t error of each arrival (:data:`~sblsim.models.tracking.smoother_cost.ROBUST_DOF`).
+Solved by iteratively reweighted Gauss-Newton with the emission times eliminated: at fixed weights, each ``t_k`` is
+the weighted mean of its arrivals' ``toa_ki − ‖p − r_i‖ / c``, so the position's normal equations are those of the
 arrivals centred per ping (the Schur complement of the arrowhead system; Triggs et al., "Bundle adjustment — a modern
 synthesis", 1999, § 6.1), a dim × dim solve per iteration whatever the number of pings. The covariance is the inverse
-of the arrivals' observed information (:func:`~sblsim.models.tracking.smoother.observed_information`) in the same
+of the arrivals' observed information (:func:`~sblsim.models.tracking.smoother_cost.observed_information`) in the same
 reduced form.
 
 Units: seconds [s], metres [m].
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.tracking.smoother import ROBUST_DOF, observed_information
+from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
 
 #: Gauss-Newton iterations at most, and the step [m] below which the position has converged.
 ITERATIONS = 100

@@ -296,7 +296,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.fix import survey_fix_covariance
-    from sblsim.models.tracking.smoother import survey_covariance
+    from sblsim.models.tracking.smoother_covariance import survey_covariance
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
