@@ -32,6 +32,15 @@ What is chosen here, and why:
   arrivals beyond ``reject`` scales **rejected** and the rest fitted by
   least squares, each receiver's noise scale re-estimated from its kept residuals; the covariance of that final
   weighted fit gives the sigmas.
+* the receivers' horizontal positions **fixed** (the table's) or **refined** (:class:`Geometry`): each receiver's
+  shift from the table's position an unknown pair with a Gaussian prior of the survey's sigma (a network adjustment
+  with a priori information: Tapley, Schutz & Born 2004, *Statistical Orbit Determination*, ch. 4.6), its sync tag
+  at the same position (the model's assumption: the tag hangs at its receiver). The distance is not linear in the
+  positions: each solve is a Gauss–Newton step, linearised at the current positions (``d ≈ d₀ + u·(δ_tag −
+  δ_receiver)``, ``u`` the horizontal unit vector from the receiver to the tag; depths fixed). The arrivals fix
+  the array's shape only: a translation or a rotation of the whole array changes no distance, so the datum is
+  fixed by the prior alone (a finite survey sigma is required; the array's mean shift and rotation come out near
+  the table's with a sigma of about the survey sigma over √receivers).
 * sparse: the emission times are eliminated (each is in its own arrivals' rows only: a diagonal block), leaving the
   knots' normal equations (receivers × bins), assembled with :mod:`scipy.sparse` and solved densely (Cholesky) up
   to :data:`DENSE_LIMIT` unknowns, with :func:`scipy.sparse.linalg.splu` beyond (then without sigmas).
@@ -122,6 +131,28 @@ def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, star
 
 
 @dataclass
+class Geometry:
+    """The receivers' positions refined with the clocks (the module docstring).
+
+    Attributes
+    ----------
+    source : numpy.ndarray
+        (n,) int, the receiver at which each arrival's sync tag sits.
+    positions : numpy.ndarray
+        (R, dim) [m] the table's (the survey's) positions; dim 2 or 3 (depths fixed).
+    sigma : float
+        [m] the survey's horizontal sigma per axis: the prior of each receiver's shift from its table position.
+    shift : numpy.ndarray, optional
+        (R, 2) [m] the shifts to start from (default 0: the table).
+    """
+
+    source: np.ndarray
+    positions: np.ndarray
+    sigma: float
+    shift: np.ndarray | None = None
+
+
+@dataclass
 class ClockFit:
     """The synchronised clocks.
 
@@ -149,6 +180,11 @@ class ClockFit:
     slowness, slowness_sigma : float or None
         [s/m] the estimated slowness (1 / sound speed) and its sigma, None where it was given.
     iterations : int
+    shift, shift_covariance : numpy.ndarray or None
+        (R, 2) [m] and (R, 2, 2) [m²] each receiver's horizontal shift from the table and its covariance (refined
+        positions: :class:`Geometry`), else None.
+    distance : numpy.ndarray or None
+        (n,) [m] with refined positions, each arrival's distance at the refined positions (NaN where not used).
     """
 
     edges: np.ndarray
@@ -165,6 +201,9 @@ class ClockFit:
     slowness: float | None
     slowness_sigma: float | None
     iterations: int
+    shift: np.ndarray | None = None
+    shift_covariance: np.ndarray | None = None
+    distance: np.ndarray | None = None
 
     def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
         """(n,) [s] the offset of ``receiver`` (n,) int at its own clock's ``time`` (n,) [s]: the knots
@@ -178,7 +217,8 @@ class ClockFit:
 def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
                slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray, reference: int,
                bin_width: float, drift_change: float = 1e-6, reject: float = REJECT, max_iterations: int = 20,
-               keep: np.ndarray | None = None, scale: np.ndarray | None = None, sigmas: bool = True) -> ClockFit:
+               keep: np.ndarray | None = None, scale: np.ndarray | None = None, sigmas: bool = True,
+               geometry: Geometry | None = None) -> ClockFit:
     """Fit the receivers' clocks to the sync tags' arrivals (the module docstring's model).
 
     Parameters
@@ -189,7 +229,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         (n,) [s] the arrival on its receiver's clock, from an origin the caller chose (at most days away: the
         precision of a double).
     distance : numpy.ndarray
-        (n,) [m] from the sync tag to the receiver.
+        (n,) [m] from the sync tag to the receiver (with ``geometry``, recomputed from its positions).
     slowness : numpy.ndarray or None
         (n,) [s/m] 1 / the sound speed at each arrival; None: one slowness estimated.
     used : numpy.ndarray
@@ -210,7 +250,10 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         (n,) bool and (R,) [s]: the arrivals kept and the receivers' scales of an earlier fit: no reweighting, the
         kept arrivals' least squares only (a fit with some arrivals left out, e.g. a sync tag's).
     sigmas : bool
-        Compute the offsets' and drifts' sigmas (a dense inverse of the knots' normal equations); else NaN.
+        Compute the offsets' and drifts' sigmas; else NaN.
+    geometry : Geometry, optional
+        Refine the receivers' horizontal positions with the clocks, a prior of the survey's sigma at the table's
+        positions (the module docstring); default the positions fixed. The shifts' covariance is always computed.
 
     Returns
     -------
@@ -238,23 +281,54 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     base[free] = np.arange(free.sum()) * (n_bins + 1)
     n_knots = int(free.sum()) * (n_bins + 1)
     estimate = slowness is None
-    p = n_knots + int(estimate)
+    first = n_knots + int(estimate)  # the first shift's column
+    p = first + (2 * n_receivers if geometry is not None else 0)
     on = base[rec] >= 0
     r_on = np.flatnonzero(on)
     cols = np.r_[base[rec[on]] + k[on], base[rec[on]] + k[on] + 1]
     vals = np.r_[1 - f[on], f[on]]
     rr = np.r_[r_on, r_on]
-    y = t.copy()
-    if estimate:
-        rr, cols, vals = np.r_[rr, np.arange(len(t))], np.r_[cols, np.full(len(t), n_knots)], np.r_[vals, d]
-    else:
-        y = y - d * slowness[rows]
-    B = sp.csr_matrix((vals, (rr, cols)), shape=(len(t), p))
+    s_given = None if estimate else slowness[rows]
     emissions, em_local = np.unique(em, return_inverse=True)
     E = sp.csr_matrix((np.ones(len(t)), (np.arange(len(t)), em_local)), shape=(len(t), len(emissions)))
     prior = _prior(free, base, n_bins, p, drift_change * bin_width)
+    if geometry is not None:
+        if not np.isfinite(geometry.sigma) or geometry.sigma <= 0:
+            raise ModelError("sync: the survey sigma must be finite and positive (the prior fixes the datum)")
+        prior = prior + sp.diags(np.r_[np.zeros(first), np.full(2 * n_receivers, geometry.sigma ** -2)])
+        src = geometry.source[rows]
+        shift = np.zeros((n_receivers, 2)) if geometry.shift is None else np.array(geometry.shift, float)
+    s_now = 1.0 / 1480.0
 
-    def solve(w: np.ndarray, covariance: bool = False):
+    def design(shift: np.ndarray | None, s_now: float):
+        """The design matrix and the observations, linearised at the current shifts and slowness."""
+        if geometry is None:
+            dd = d
+        else:
+            where = np.array(geometry.positions, float)
+            where[:, :2] += shift
+            diff = where[src] - where[rec]
+            dd = np.linalg.norm(diff, axis=1)
+            ok = (dd > 1e-6) & (src != rec)
+            u = np.where(ok[:, None], diff[:, :2] / np.where(ok, dd, 1.0)[:, None], 0.0)
+        y = t.copy() if estimate else t - dd * s_given
+        r_, c_, v_ = [rr], [cols], [vals]
+        if estimate:
+            r_.append(np.arange(len(t)))
+            c_.append(np.full(len(t), n_knots))
+            v_.append(dd)
+        if geometry is not None:
+            s = np.full(len(t), s_now) if estimate else s_given
+            y = y + s * np.sum(u * (shift[src] - shift[rec]), axis=1)
+            m = np.flatnonzero(ok)
+            for axis in (0, 1):
+                r_ += [m, m]
+                c_ += [first + 2 * src[m] + axis, first + 2 * rec[m] + axis]
+                v_ += [s[m] * u[m, axis], -s[m] * u[m, axis]]
+        B = sp.csr_matrix((np.concatenate(v_), (np.concatenate(r_), np.concatenate(c_))), shape=(len(t), p))
+        return B, y, dd
+
+    def solve(w: np.ndarray, B, y, covariance: bool = False, shifts: bool = False):
         W = sp.diags(w)
         D = np.asarray(E.T @ w).ravel()
         Dinv = sp.diags(1.0 / np.maximum(D, 1e-300))
@@ -262,17 +336,34 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         S = (B.T @ W @ B - NEB.T @ Dinv @ NEB + prior).tocsc()
         ety = E.T @ (w * y)
         rhs = B.T @ (w * y) - NEB.T @ (ety / np.maximum(D, 1e-300))
-        cov = None
+        cov = shift_cov = None
         if covariance and p <= DENSE_LIMIT:
             factor = scipy.linalg.cho_factor(S.toarray(), lower=True, check_finite=False)
             x = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
-            if covariance:
-                cov = scipy.linalg.cho_solve(factor, np.eye(p), check_finite=False)
+            cov = scipy.linalg.cho_solve(factor, np.eye(p), check_finite=False)
+            if shifts:
+                shift_cov = cov[first:, first:]
         else:
-            x = scipy.sparse.linalg.splu(S).solve(rhs)
+            lu = scipy.sparse.linalg.splu(S)
+            x = lu.solve(rhs)
+            if shifts:
+                shift_cov = lu.solve(np.eye(p)[:, first:])[first:]
         T = (ety - NEB @ x) / np.maximum(D, 1e-300)
-        return x, T, D, cov
+        return x, T, D, cov, shift_cov
 
+    def update(x: np.ndarray):
+        """The current slowness and shifts from a solve."""
+        nonlocal s_now, shift
+        if estimate:
+            s_now = float(x[n_knots])
+        moved = 0.0
+        if geometry is not None:
+            new = x[first:].reshape(n_receivers, 2)
+            moved = float(np.max(np.abs(new - shift)))
+            shift = new
+        return moved
+
+    shift_now = lambda: shift if geometry is not None else None  # noqa: E731
     given = keep is not None
     scale = np.full(n_receivers, 1e-3) if scale is None else np.where(np.isfinite(scale), scale, 1e-3)
     tw = np.ones(len(t))
@@ -281,7 +372,9 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     for step in range(1, 0 if given else max_iterations + 1):
         iterations = step
         w = tw / scale[rec] ** 2
-        x, T, D, _ = solve(w)
+        B, y, _ = design(shift_now(), s_now)
+        x, T, D, _, _ = solve(w, B, y)
+        update(x)
         residual = y - B @ x - T[em_local]
         one = np.clip(1 - w / D[em_local], 0.0, 1.0)
         scale = _scales(residual, one, rec, n_receivers, robust=True)
@@ -292,12 +385,20 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
             break
         previous = x
     keep = keep[rows] if given else np.abs(u) <= reject
-    for last in (False, False, True):  # the kept arrivals' least squares, each receiver's scale from its own
+    # the kept arrivals' least squares, each receiver's scale from its own; with the positions refined, Gauss-Newton
+    # steps until no shift moves by a millimetre; the covariance in the pass after the last
+    last = False
+    for passes in range(1, 21):
         w = keep / scale[rec] ** 2
-        x, T, D, cov = solve(w, covariance=last and sigmas)
+        B, y, dd = design(shift_now(), s_now)
+        x, T, D, cov, shift_cov = solve(w, B, y, covariance=last and sigmas, shifts=last and geometry is not None)
+        moved = update(x)
         residual = y - B @ x - T[em_local]
         one = np.clip(1 - w / np.maximum(D[em_local], 1e-300), 0.0, 1.0)
         scale = _scales(np.where(keep, residual, np.nan), one, rec, n_receivers, robust=False)
+        if last:
+            break
+        last = (passes >= 2 and moved < 1e-3) or passes == 19
     u = np.where(one > 1e-9, residual / np.sqrt(np.maximum(one, 1e-9)) / scale[rec], 0.0)
 
     knots = np.full((n_receivers, n_bins + 1), np.nan)
@@ -325,8 +426,14 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     if estimate:
         s_hat = float(x[n_knots])
         s_sigma = float(np.sqrt(cov[n_knots, n_knots])) if cov is not None else None
+    shift_out = shift_covariance = distance_all = None
+    if geometry is not None:
+        shift_out = shift.copy()
+        shift_covariance = np.stack([shift_cov[2 * j:2 * j + 2, 2 * j:2 * j + 2] for j in range(n_receivers)])
+        distance_all = full.copy()
+        distance_all[rows] = dd
     return ClockFit(edges, knots, sigma, drift, drift_sigma, counts, emission_time, residual_all, standard_all,
-                    kept_all, scale, s_hat, s_sigma, iterations)
+                    kept_all, scale, s_hat, s_sigma, iterations, shift_out, shift_covariance, distance_all)
 
 
 def _prior(free: np.ndarray, base: np.ndarray, n_bins: int, p: int, sigma: float) -> sp.csr_matrix:
@@ -360,5 +467,5 @@ def _scales(residual: np.ndarray, one: np.ndarray, rec: np.ndarray, n_receivers:
     return np.maximum(np.where(np.isfinite(scale), scale, fallback), MIN_SCALE)
 
 
-__all__ = ["ClockFit", "DENSE_LIMIT", "NU", "REJECT", "connected", "fit_clocks", "group_emissions",
+__all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "connected", "fit_clocks", "group_emissions",
            "later_duplicates"]

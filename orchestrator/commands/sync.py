@@ -32,6 +32,9 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
 FORMATS = ("yaps", "vue")
 BIN_HOURS = (0.05, 168.0)
 SOUND_SPEED = (1300.0, 1700.0)
+#: The survey's horizontal sigma per axis [m] by default and its allowed range (the refinement's prior).
+SURVEY_SIGMA = 3.0
+SURVEY_SIGMA_RANGE = (0.01, 1000.0)
 
 
 @dataclass
@@ -55,8 +58,13 @@ class SyncResult:
         sigmas hold the timing noise and the geometry, not an error of the table's positions (a tag that is not
         where the table says is positioned where it is): an error far above its sigma and the same for all of a
         tag's emissions (``median_position_error_m`` near ``median_error_m``) is the table's, as on the boats
-        array (docs/sync.md: its clock-free two-way distances differ from the table's by 5.8 m RMS).
+        array (docs/sync.md: its clock-free two-way distances differ from the table's by 5.8 m RMS). With the
+        positions refined, the errors are against the tag's receiver's position refined without the tag's
+        arrivals (``truth_x_m``, ``truth_y_m``, ``truth_sigma_m``), the table's error beside them.
     out : Path or None
+    positions : pandas.DataFrame or None
+        ``positions.csv`` with ``refine_positions``: per receiver ``serial``, the refined ``x_m``, ``y_m`` [m], the
+        table's, the shift [m] and its sigmas [m]; else None.
     """
 
     summary: dict[str, Any]
@@ -65,6 +73,7 @@ class SyncResult:
     sync_tags: pd.DataFrame
     out: Path | None = None
     _outcome: Any = None
+    positions: pd.DataFrame | None = None
 
     def plot(self) -> dict[str, Figure]:
         """The figures: ``offsets``, ``residuals`` and ``coverage``."""
@@ -91,7 +100,8 @@ class SyncResult:
 
 def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps", sound_speed: float | None = None,
          sound_speed_file: str | Path | None = None, bin_hours: float = 1.0, reference: str | None = None,
-         out: str | Path | None = None, force: bool = False) -> SyncResult:
+         out: str | Path | None = None, force: bool = False, refine_positions: bool = False,
+         survey_sigma: float | None = None) -> SyncResult:
     """Synchronise the receivers' clocks from the sync tags: ``sblsim sync``.
 
     Parameters
@@ -115,6 +125,12 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps",
         Write ``sync.json``, ``offsets.csv``, ``residuals.csv``, ``sync_tags.csv`` and the figures there.
     force : bool
         Replace an earlier result in ``out``.
+    refine_positions : bool
+        Refine the receivers' horizontal positions with the clocks (their sync tags with them), a Gaussian prior at
+        the table's positions; written as ``positions.csv``. Default: the table's positions fixed.
+    survey_sigma : float, optional
+        [m] in [0.01, 1000], the table's horizontal sigma per axis (the prior; default 3 m, a handheld GPS's);
+        only with ``refine_positions``.
 
     Returns
     -------
@@ -138,24 +154,40 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps",
     bin_hours = real_argument(bin_hours, "bin_hours", *BIN_HOURS, "h")
     reference = text_argument(reference, "reference")
     flag_argument(force, "force")
+    flag_argument(refine_positions, "refine_positions")
+    survey_sigma = _survey_sigma(survey_sigma, refine_positions, "survey_sigma")
     target = prepare_out(out, force, "sync.json", "synchronisation")
-    outcome = _synchronise(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference)
+    outcome = _synchronise(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference,
+                           refine_positions, survey_sigma)
     if target is not None:
         from sblsim.orchestrator.sync.outputs import write
 
         write(outcome, target)
-    return SyncResult(outcome.summary, outcome.offsets, outcome.residuals, outcome.sync_tags, target, outcome)
+    return SyncResult(outcome.summary, outcome.offsets, outcome.residuals, outcome.sync_tags, target, outcome,
+                      outcome.positions)
+
+
+def _survey_sigma(value: Any, refine: bool, where: str) -> float:
+    """The survey sigma [m] checked: in its range, given only with the refinement."""
+    if value is None:
+        return SURVEY_SIGMA
+    if not refine:
+        raise ConfigError(f"{where}: given without refining the positions; allowed: with "
+                          f"{'--refine-positions' if where.startswith('--') else 'refine_positions=True'}")
+    return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
 
 
 def _synchronise(detections: Path, receivers: Path, format: str, sound_speed: float | None,
-                 sound_speed_file: Path | None, bin_hours: float, reference: str | None):
+                 sound_speed_file: Path | None, bin_hours: float, reference: str | None,
+                 refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA):
     from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones, read_sound_speed
     from sblsim.orchestrator.sync.run import synchronise
 
     data = read_detections(detections, format)
     table = read_hydrophones(receivers)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
-    return synchronise(data, table, sound_speed, series, bin_hours, reference)
+    return synchronise(data, table, sound_speed, series, bin_hours, reference,
+                       refine_positions=refine_positions, survey_sigma=survey_sigma)
 
 
 NAME = "sync"
@@ -178,6 +210,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the time bins' width [h] in [0.05, 168] (one drift per receiver and bin; default 1)")
     p.add_argument("--reference", default=None, metavar="SERIAL",
                    help="the reference receiver (default: the one with the most arrivals shared with others)")
+    p.add_argument("--refine-positions", action="store_true",
+                   help="refine the receivers' horizontal positions with the clocks (a prior of --survey-sigma at "
+                   "the table's); writes positions.csv")
+    p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
+                   help=f"the table's horizontal sigma per axis [m] in [0.01, 1000] (default {SURVEY_SIGMA:g}: a "
+                   "handheld GPS's); only with --refine-positions")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/sync_DETECTIONS)")
     p.add_argument("--force", action="store_true", help="replace an earlier synchronisation in --out")
 
@@ -187,8 +225,9 @@ def main(args: argparse.Namespace) -> int:
     speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", *SOUND_SPEED,
                                                                 "m/s")
     hours = real_argument(args.bin_hours, "--bin-hours", *BIN_HOURS, "h")
+    survey = _survey_sigma(args.survey_sigma, args.refine_positions, "--survey-sigma")
     outcome = _synchronise(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
-                           args.reference)
+                           args.reference, args.refine_positions, survey)
     out = output_folder(args.out, Path("results") / f"sync_{folder_name(args.detections.stem)}", args.force,
                         "sync.json", "synchronisation")
     from sblsim.orchestrator.sync.outputs import write
@@ -206,18 +245,25 @@ def main(args: argparse.Namespace) -> int:
     rejected = d["used"] - d["kept"]
     print(f"  arrivals: {d['kept']} kept, {rejected} rejected, {d['multipath']} multipath, {d['single_receiver']} "
           f"heard by one receiver only; median |residual| {s['median_abs_residual_m']:.3g} m")
+    if "positions" in s:
+        q = s["positions"]
+        print(f"  positions refined (prior {q['survey_sigma_m']:g} m per axis): median shift "
+              f"{q['median_shift_m']:.3g} m, the largest {q['largest_shift_m']:.3g} m "
+              f"({q['largest_shift_receiver']})")
     if s["sync_tags"]:
         t = s["sync_tags"]
         nees = t["nees_mean_inside"]
-        print(f"  sync tags positioned without their own receiver ({t['tags']}): median error "
+        against = " (against their receivers' positions refined without them)" if "positions" in s else ""
+        print(f"  sync tags positioned without their own receiver ({t['tags']}){against}: median error "
               f"{t['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else
                                                  f", NEES {nees:.3g} inside the array (2 when consistent)"))
     for note in s["notes"]:
         print(f"note: {note}", file=sys.stderr)
     if s["not_synchronised"]:
         print(f"sblsim: warning: not synchronised: {', '.join(s['not_synchronised'])}", file=sys.stderr)
-    print(f"  written to {out}/ (sync.json, offsets.csv, residuals.csv, sync_tags.csv, offsets.png, residuals.png, "
-          "coverage.png)")
+    extra = "positions.csv, " if outcome.positions is not None else ""
+    print(f"  written to {out}/ (sync.json, offsets.csv, residuals.csv, sync_tags.csv, {extra}offsets.png, "
+          "residuals.png, coverage.png)")
     return 0
 
 

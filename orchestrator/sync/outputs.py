@@ -1,4 +1,5 @@
-"""``sblsim sync``'s files and figures: ``sync.json``, ``offsets.csv``, ``residuals.csv``, ``sync_tags.csv`` and
+"""``sblsim sync``'s files and figures: ``sync.json``, ``offsets.csv``, ``residuals.csv``, ``sync_tags.csv`` (and
+``positions.csv`` with the positions refined) and
 ``offsets.png``, ``residuals.png``, ``coverage.png``, written all or nothing."""
 
 from __future__ import annotations
@@ -54,6 +55,11 @@ def figures(outcome: SyncOutcome) -> dict:
     synced = rec["synchronised"].to_numpy(bool)
     cx.plot(xy[synced, 0], xy[synced, 1], "o", color="k", label="synchronised")
     cx.plot(xy[~synced, 0], xy[~synced, 1], "x", color="tab:red", label="not synchronised")
+    if outcome.positions is not None:  # the table's positions, a line to the refined ones
+        q = outcome.positions
+        for a, b, c, d in q[["table_x_m", "table_y_m", "x_m", "y_m"]].to_numpy():
+            cx.plot([a, c], [b, d], "-", color="tab:orange", lw=1)
+        cx.plot(q["table_x_m"], q["table_y_m"], ".", color="tab:orange", label="the table's position (refined: black)")
     for name, (x, y) in zip(rec["receiver"], xy):
         cx.annotate(name, (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
     cx.ticklabel_format(useOffset=False, style="plain")
@@ -89,6 +95,8 @@ def write(outcome: SyncOutcome, out: Path) -> None:
             outcome.offsets.to_csv(tmp / "offsets.csv", index=False)
             outcome.residuals.to_csv(tmp / "residuals.csv", index=False)
             outcome.sync_tags.to_csv(tmp / "sync_tags.csv", index=False)
+            if outcome.positions is not None:
+                outcome.positions.to_csv(tmp / "positions.csv", index=False)
             for name, fig in made.items():
                 fig.savefig(tmp / f"{name}.png", dpi=110)
     finally:

@@ -6,6 +6,11 @@ Which arrivals are used: a detection of a tag that the receivers table names as 
 receiver of that table. A tag without a receiver row (its position unknown) is left out (named: a ``species``
 column's ``Sync`` label shows it); so are the detections at receivers missing from the table. A receiver that never
 hears a sync-tag emission that another receiver hears cannot be synchronised: named, left out, the rest synchronised.
+
+With ``refine_positions`` the receivers' horizontal positions are refined with the clocks (a prior of the survey's
+sigma at the table's positions: :class:`sblsim.models.sync.clocks.Geometry`), written as ``positions.csv``, and each
+sync tag's leave-one-out fixes are compared with its receiver's position refined **without that tag's arrivals**
+(from the other tags its receiver hears, and the prior), their NEES with the two covariances summed.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ import pandas as pd
 from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.clocks import ClockFit, connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, group_emissions, later_duplicates
 from sblsim.models.sync.positions import position_emissions
 from sblsim.orchestrator.sync.detections import Detections
 
@@ -27,12 +32,17 @@ from sblsim.orchestrator.sync.detections import Detections
 MIN_BIN_ARRIVALS = 5
 #: The bins' allowed width [h].
 BIN_HOURS_RANGE = (0.05, 168.0)
+#: The survey's horizontal sigma per axis [m] by default (a handheld GPS's at the surface above a moored receiver),
+#: and its allowed range.
+SURVEY_SIGMA = 3.0
+SURVEY_SIGMA_RANGE = (0.01, 1000.0)
 
 
 @dataclass
 class SyncOutcome:
     """What :func:`synchronise` computed: ``summary`` (``sync.json``), ``offsets``, ``residuals`` and
-    ``sync_tags`` (the CSV files' tables), the receivers' table and the fit."""
+    ``sync_tags`` (the CSV files' tables), the receivers' table, the fit and, with the positions refined,
+    ``positions`` (``positions.csv``)."""
 
     summary: dict[str, Any]
     offsets: pd.DataFrame
@@ -41,6 +51,7 @@ class SyncOutcome:
     receivers: pd.DataFrame
     fit: ClockFit = field(repr=False)
     origin: float = 0.0
+    positions: pd.DataFrame | None = None
 
 
 def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) -> np.ndarray:
@@ -61,7 +72,8 @@ def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) 
 
 def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
-                reference: str | None = None, leave_one_out: bool = True) -> SyncOutcome:
+                reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
+                survey_sigma: float = SURVEY_SIGMA) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
 
     Parameters
@@ -81,6 +93,10 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         The reference receiver's serial; default the receiver with the most arrivals shared with others.
     leave_one_out : bool
         Position each sync tag with the clocks fitted without its arrivals (else with the full fit).
+    refine_positions : bool
+        Refine the receivers' horizontal positions with the clocks (default: the table's fixed).
+    survey_sigma : float
+        [m] the table's horizontal sigma per axis: the refinement's prior.
 
     Returns
     -------
@@ -165,7 +181,12 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         notes.append("receivers that cannot be synchronised (they hear no sync-tag emission another synchronised "
                      f"receiver hears), left out: {', '.join(left_out)}")
     width = bin_hours * 3600.0
-    fit = fit_clocks(receiver, emission, time, distance, slowness, used, linked, start, width)
+    geometry = Geometry(tag_home[tag], positions, float(survey_sigma)) if refine_positions else None
+    fit = fit_clocks(receiver, emission, time, distance, slowness, used, linked, start, width, geometry=geometry)
+    if refine_positions:
+        moved = positions.copy()
+        moved[:, :2] += fit.shift
+        distance = np.linalg.norm(moved[tag_home[tag]] - moved[receiver], axis=1)
     bridged = (fit.counts < MIN_BIN_ARRIVALS) & linked[:, None]
     bridged[start] = False
 
@@ -181,13 +202,42 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
 
     offsets = _offsets(fit, names, linked, bridged, origin)
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
-                           positions, tag_names, tag_home, names, leave_one_out, notes)
+                           positions, tag_names, tag_home, names, leave_one_out, notes, geometry)
+    refined = _positions(fit, positions, names, linked) if refine_positions else None
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)
-    receivers = pd.DataFrame({"receiver": names, "x": positions[:, 0], "y": positions[:, 1],
+    xy = positions[:, :2] + (fit.shift if refine_positions else 0.0)
+    receivers = pd.DataFrame({"receiver": names, "x": xy[:, 0], "y": xy[:, 1],
                               "sync_tag": hydrophones["sync_tag"].to_numpy(), "synchronised": linked})
-    return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin)
+    if refine_positions:
+        summary["model"] += (f"; receivers' horizontal positions refined with a prior of {survey_sigma:g} m per axis "
+                             "at the table's (network adjustment with a priori information: Tapley, Schutz & Born "
+                             "2004, ch. 4)")
+        shift = refined.loc[refined["refined"], "shift_m"]
+        summary["positions"] = {
+            "refined": True, "survey_sigma_m": float(survey_sigma),
+            "median_shift_m": float(shift.median()) if len(shift) else None,
+            "largest_shift_m": float(shift.max()) if len(shift) else None,
+            "largest_shift_receiver": str(refined.loc[shift.idxmax(), "serial"]) if len(shift) else None,
+            "gauge": "the arrivals fix the array's shape only; its translation and rotation come from the prior"}
+        summary["wall_time_s"] = clock.perf_counter() - started
+    return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
+
+
+def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: np.ndarray) -> pd.DataFrame:
+    """``positions.csv``: each receiver's refined horizontal position, the table's, the shift and its sigmas (a
+    receiver not synchronised keeps the table's: ``refined`` false)."""
+    shift = np.where(linked[:, None], fit.shift, 0.0)
+    cov = fit.shift_covariance
+    return pd.DataFrame({
+        "serial": names, "x_m": positions[:, 0] + shift[:, 0], "y_m": positions[:, 1] + shift[:, 1],
+        "table_x_m": positions[:, 0], "table_y_m": positions[:, 1], "shift_x_m": shift[:, 0],
+        "shift_y_m": shift[:, 1], "shift_m": np.hypot(shift[:, 0], shift[:, 1]),
+        "sigma_x_m": np.where(linked, np.sqrt(cov[:, 0, 0]), np.nan),
+        "sigma_y_m": np.where(linked, np.sqrt(cov[:, 1, 1]), np.nan),
+        "correlation_xy": np.where(linked, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
+        "refined": linked})
 
 
 def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.ndarray, origin: float
@@ -206,10 +256,14 @@ def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.nd
 
 
 def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
-               positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str]) -> pd.DataFrame:
+               positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
+               geometry: Geometry | None = None) -> pd.DataFrame:
     """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
     arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
-    its known position."""
+    its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
+    arrivals (``truth_x_m``, ``truth_y_m``, its sigma ``truth_sigma_m``; the NEES with the fix's covariance and
+    that position's summed: two estimates from disjoint arrivals), the error against the table beside it
+    (``table_error_m``)."""
     dim = positions.shape[1]
     rows = []
     for i, name in enumerate(tag_names):
@@ -222,8 +276,10 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
             without = used & (tag != i)
             still = connected(receiver[without], emission[without], len(names), start)
             try:
+                loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma,
+                                                             fit.shift)
                 this = fit_clocks(receiver, emission, time, distance, slowness, without, still, start, width,
-                                  keep=fit.kept, scale=fit.scale, sigmas=False)
+                                  keep=fit.kept, scale=fit.scale, sigmas=False, geometry=loo)
             except ModelError:
                 notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
                 continue
@@ -240,15 +296,23 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
         offset_sigma = np.array([np.median(fit.knot_sigma[j][known[j]]) if known[j].any() else 0.0
                                  for j in range(len(names))])
         sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
-        fixes = position_emissions(arrival, positions, sigma, s)
+        where = positions
+        truth_cov = np.zeros((dim, dim))
+        if geometry is not None:  # the receivers where the fit without this tag puts them
+            where = positions.copy()
+            where[:, :2] += this.shift
+            truth_cov[:2, :2] = this.shift_covariance[home]
+            ranging = np.nanmedian(s) * np.sqrt(np.trace(this.shift_covariance, axis1=1, axis2=2) / 2)
+            sigma = np.sqrt(sigma ** 2 + ranging ** 2)
+        fixes = position_emissions(arrival, where, sigma, s)
         ok = fixes.ok
         if not ok.any():
             continue
-        truth = positions[home]
+        truth = where[home]
         error = fixes.position[ok] - truth
         error_m = np.linalg.norm(error, axis=1)
         own_sigma = np.sqrt(np.trace(fixes.covariance[ok], axis1=1, axis2=2))
-        nees = np.einsum("ek,ekl,el->e", error, np.linalg.inv(fixes.covariance[ok]), error)
+        nees = np.einsum("ek,ekl,el->e", error, np.linalg.inv(fixes.covariance[ok] + truth_cov), error)
         heard = np.flatnonzero(fixes.used[ok].any(axis=0))
         mean = np.median(fixes.position[ok], axis=0)
         rows.append({"tag": name, "receiver": names[home], "x_m": truth[0], "y_m": truth[1],
@@ -258,11 +322,18 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                      "p90_error_m": float(np.percentile(error_m, 90)), "nees_mean": float(np.mean(nees)),
                      "nees_median": float(np.median(nees)), "median_x_m": mean[0], "median_y_m": mean[1],
                      "median_position_error_m": float(np.linalg.norm(mean - truth)),
-                     "inside_array": _inside(truth, positions[heard]), "leave_one_out": leave_one_out})
-    return pd.DataFrame(rows, columns=["tag", "receiver", "x_m", "y_m", "emissions", "fixes", "receivers_used",
-                                       "median_error_m", "median_sigma_m", "rms_error_m", "p90_error_m", "nees_mean",
-                                       "nees_median", "median_x_m", "median_y_m", "median_position_error_m",
-                                       "inside_array", "leave_one_out"])
+                     "inside_array": _inside(truth, where[heard]), "leave_one_out": leave_one_out})
+        if geometry is not None:
+            rows[-1].update({"x_m": positions[home, 0], "y_m": positions[home, 1], "truth_x_m": truth[0],
+                             "truth_y_m": truth[1], "truth_sigma_m": float(np.sqrt(np.trace(truth_cov))),
+                             "table_error_m": float(np.median(np.linalg.norm(fixes.position[ok] - positions[home],
+                                                                             axis=1)))})
+    columns = ["tag", "receiver", "x_m", "y_m", "emissions", "fixes", "receivers_used", "median_error_m",
+               "median_sigma_m", "rms_error_m", "p90_error_m", "nees_mean", "nees_median", "median_x_m", "median_y_m",
+               "median_position_error_m", "inside_array", "leave_one_out"]
+    if geometry is not None:
+        columns += ["truth_x_m", "truth_y_m", "truth_sigma_m", "table_error_m"]
+    return pd.DataFrame(rows, columns=columns)
 
 
 def _inside(point: np.ndarray, points: np.ndarray) -> bool:

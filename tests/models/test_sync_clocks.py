@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.clocks import connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync.clocks import Geometry, connected, fit_clocks, group_emissions, later_duplicates
 from sblsim.models.sync.positions import position_emissions
 from sblsim.models.sync.simulate import simulate_sync
 
@@ -76,3 +76,53 @@ def test_nothing_to_synchronise_is_refused():
     with pytest.raises(ModelError, match="fewer than two receivers"):
         fit_clocks(np.array([0, 0]), np.array([0, 1]), np.array([1.0, 2.0]), np.zeros(2), None, np.ones(2, bool),
                    np.array([True, False]), 0, 3600.0)
+
+
+@pytest.fixture(scope="module")
+def surveyed():
+    """12 receivers over 12 h whose table positions are the truth plus a survey error of 2 m per axis."""
+    sim = simulate_sync(n_receivers=12, hours=12.0, seed=2)
+    origin = np.floor(sim.time.min())
+    t = sim.time - origin
+    emission = group_emissions(sim.tag, t, np.full(12, 180.0))
+    duplicate = later_duplicates(emission, sim.receiver, t)
+    table = sim.positions + np.random.default_rng(7).normal(0, 2.0, sim.positions.shape)
+    distance = np.linalg.norm(table[sim.tag] - table[sim.receiver], axis=1)
+    linked = connected(sim.receiver, emission, 12, 0)
+    args = (sim.receiver, emission, t, distance, np.full(len(t), 1 / sim.sound_speed), ~duplicate, linked, 0, 3600.0)
+    return sim, origin, table, args
+
+
+def _within(sim, origin, fit) -> float:
+    z = [(fit.knots[j] - sim.offset(np.full(len(fit.edges), j), fit.edges + origin, reference=0)) / fit.knot_sigma[j]
+         for j in range(1, len(sim.positions))]
+    return float(np.mean(np.abs(np.concatenate(z)) <= 3))
+
+
+def test_the_positions_refined_with_the_clocks_from_a_surveyed_table(surveyed):
+    sim, origin, table, args = surveyed
+    fixed = fit_clocks(*args)
+    fit = fit_clocks(*args, geometry=Geometry(sim.tag, table, 2.0))
+    refined = table + fit.shift
+    error, before = refined - sim.positions, table - sim.positions
+    assert np.sqrt(np.mean(error ** 2)) < 0.75 * np.sqrt(np.mean(before ** 2))  # closer than the table
+    sigma = np.sqrt(np.stack([fit.shift_covariance[:, 0, 0], fit.shift_covariance[:, 1, 1]], axis=1))
+    assert np.all(np.abs(error) <= 3 * sigma)  # and within 3 of its own sigmas
+    # the arrivals fix the array's shape: without its translation (the prior's, the gauge) the error is centimetres
+    assert np.sqrt(np.mean((error - error.mean(axis=0)) ** 2)) < 0.1
+    # the table's error biased the fixed fit's clocks; the refined fit's are within their sigmas again
+    assert _within(sim, origin, fit) >= 0.95 > _within(sim, origin, fixed)
+    assert np.median(fit.scale) < 0.2e-3 < np.median(fixed.scale)
+
+
+def test_a_tight_survey_prior_is_the_fixed_positions(surveyed):
+    """The refinement reduces to the fixed fit when the survey sigma is tiny (its code path checked against the
+    fixed one), and a survey sigma that is not finite is refused (the prior must fix the datum)."""
+    sim, _, table, args = surveyed
+    fixed = fit_clocks(*args)
+    tight = fit_clocks(*args, geometry=Geometry(sim.tag, table, 1e-4))
+    np.testing.assert_allclose(tight.knots[1:], fixed.knots[1:], rtol=0, atol=2e-7)
+    np.testing.assert_allclose(tight.knot_sigma[1:], fixed.knot_sigma[1:], rtol=1e-3)
+    assert np.abs(tight.shift).max() < 1e-3 and np.array_equal(tight.kept, fixed.kept)
+    with pytest.raises(ModelError, match="survey sigma"):
+        fit_clocks(*args, geometry=Geometry(sim.tag, table, np.inf))
