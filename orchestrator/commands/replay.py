@@ -793,6 +793,10 @@ def _main_toa(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: the pings do not determine the sound speed ({c['calibration']}); taken: "
               f"{c['method']} (every range scales with it: give --sound-speed, --sound-speed-file or --temperature "
               "with --salinity)", file=sys.stderr)
+    if c.get("pings_outside_series"):
+        print(f"sblsim: warning: {c['pings_outside_series']} of {s['pings']} pings lie outside the sound-speed "
+              f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "
+              "the speed at its nearer end", file=sys.stderr)
     quality = quality_line(s)
     print("  " + quality)
     for late in s["receivers_late"]:

@@ -350,8 +350,8 @@ SERIES_SPEED_RANGE = (1300.0, 1700.0)
 
 def read_sound_speed_series(path: Path | str) -> np.ndarray:
     """Read a measured sound-speed series: ``time_s`` [s] (on the times of arrival's time base) and
-    ``sound_speed_m_s`` [m/s] columns under a header (aliases ``t``, ``time`` and ``c``, ``sound_speed``), the times
-    increasing; returns (k, 2) ``t, c``.
+    ``sound_speed_m_s`` [m/s] columns under a header (aliases ``t``, ``time``, ``epo`` and ``c``, ``sound_speed``,
+    ``ss``: YAPS's and ``sblsim sync``'s names), the times increasing; returns (k, 2) ``t, c``.
 
     Raises
     ------
@@ -366,7 +366,8 @@ def read_sound_speed_series(path: Path | str) -> np.ndarray:
         raise ModelError(f"{what}: {name!r} needs a header (time_s, sound_speed_m_s) and at least one row")
     header = [h.lower() for h in _stripped(rows[0][1])]
     index = {}
-    for key, aliases in (("t", ("time_s", "t", "time", "t_s")), ("c", ("sound_speed_m_s", "sound_speed", "c"))):
+    for key, aliases in (("t", ("time_s", "t", "time", "t_s", "epo")),
+                         ("c", ("sound_speed_m_s", "sound_speed", "c", "ss"))):
         found = [k for k, h in enumerate(header) if h in aliases]
         if not found:
             raise ModelError(f"{what}: {name!r}: the header needs time_s and sound_speed_m_s columns, got "

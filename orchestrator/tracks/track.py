@@ -251,6 +251,11 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
         first = ps.first_arrivals(toa)
         span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
         inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])
+        if np.isfinite(span[0]) and (series[-1, 0] < span[0] or series[0, 0] > span[1]):
+            raise ModelError(f"sound speed file: {str(series_path)!r}: its times [{series[0, 0]:.10g}, "
+                             f"{series[-1, 0]:.10g}] s do not overlap the pings' first arrivals [{span[0]:.10g}, "
+                             f"{span[1]:.10g}] s; allowed: a series on the times of arrival's time base (toa.txt "
+                             "from sblsim toa: seconds since its origin_epoch_s)")
         c = float(np.median(series[inside, 1] if inside.any() else series[:, 1]))
         emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, SIGMA_TOA)[1])
         scaled, speeds, outside = ss.rescale_to_reference(toa, emissions, series, c)
@@ -259,7 +264,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                                      "series' median over the record",
                            "range_m_s": [float(np.nanmin(speeds)), float(np.nanmax(speeds))]
                            if np.isfinite(speeds).any() else None,
-                           "pings_outside_series": int(outside.sum())}
+                           "pings_outside_series": int(outside.sum()),
+                           "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
     try:
         calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA)
     except ModelError as exc:

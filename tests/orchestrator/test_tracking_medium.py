@@ -159,3 +159,31 @@ def test_bad_medium_options_are_refused_in_one_line(tmp_path, capsys, monkeypatc
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and message in err[0], err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_series_off_the_records_time_base_is_refused_and_a_short_one_warned(tmp_path, capsys):
+    """A series in seconds since 1970 (YAPS's and ``sblsim sync``'s ``epo, ss`` columns: read) against a record on
+    its own time base overlaps no ping: refused in one line naming both spans, nothing written; a series that ends
+    half way through the record: the pings after it counted on the console (one warning line) and in
+    summary.json, their count the simulated pings emitted after the series' last time."""
+    from sblsim.orchestrator.cli import main
+
+    files, speed_file, _ = _warming(tmp_path, 1450.0, 1460.0)
+    series = np.loadtxt(speed_file, delimiter=",", skiprows=1)
+    base = ["replay", str(tmp_path / "toa.txt"), "--format", "toa", "--receivers", str(files["receivers"])]
+    epoch = tmp_path / "epoch.csv"
+    epoch.write_text("epo,ss\n" + "".join(f"{t + 1.6e9:.3f},{c:.3f}\n" for t, c in series))
+    assert main(base + ["--sound-speed-file", str(epoch), "--out", str(tmp_path / "e")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "do not overlap the pings' first arrivals" in err[0] and "1600000" in err[0], err
+    assert not (tmp_path / "e").exists()
+    half = tmp_path / "half.csv"
+    kept = series[: len(series) // 2]
+    half.write_text("time_s,sound_speed_m_s\n" + "".join(f"{t:.6f},{c:.6f}\n" for t, c in kept))
+    assert main(base + ["--sound-speed-file", str(half), "--out", str(tmp_path / "h")]) == 0
+    summary = json.loads((tmp_path / "h" / "summary.json").read_text())
+    emitted = np.loadtxt(files["truth"], skiprows=1)[:, 2]  # the simulated emission times
+    after = int((emitted > kept[-1, 0]).sum())
+    assert summary["sound_speed"]["pings_outside_series"] == after and after > 100, after
+    warning = [line for line in capsys.readouterr().err.splitlines() if "sound-speed series" in line]
+    assert len(warning) == 1 and f"{after} of {summary['pings']} pings" in warning[0], warning
