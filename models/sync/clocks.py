@@ -42,23 +42,29 @@ What is chosen here, and why:
   fixed by the prior alone (a finite survey sigma is required; the array's mean shift and rotation come out near
   the table's with a sigma of about the survey sigma over √receivers).
 * sparse: the emission times are eliminated (each is in its own arrivals' rows only: a diagonal block), leaving the
-  knots' normal equations (receivers × bins), assembled with :mod:`scipy.sparse` and solved densely (Cholesky) up
-  to :data:`DENSE_LIMIT` unknowns, with :func:`scipy.sparse.linalg.splu` beyond (then without sigmas).
+  knots' normal equations (receivers × bins), assembled with :mod:`scipy.sparse`; the reweighting's solves by
+  :func:`scipy.sparse.linalg.splu`, the last one with the sigmas densely (Cholesky and the inverse) up to
+  :data:`DENSE_LIMIT` unknowns and beyond by :func:`selected_inverse`: in time order the knots' normal equations
+  are block tridiagonal (an edge's receivers couple to the next edges' only), so the inverse's entries the sigmas
+  need (each knot's variance, its covariance with the next edge's) cost blocks × block³, not unknowns³ (a month
+  of 70 receivers: 50,000 knots).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from time import perf_counter
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+import scipy.sparse.csgraph
 import scipy.sparse.linalg
 
 from sblsim.models.declarations import ModelError
 
-#: The most knot unknowns whose covariance is computed (a dense inverse of that size: 6000² doubles, 288 MB).
-DENSE_LIMIT = 6000
+#: The most unknowns whose covariance is a dense inverse (2000² doubles, 32 MB); beyond, :func:`selected_inverse`.
+DENSE_LIMIT = 2000
 #: Student-t degrees of freedom of the reweighting, and the rejection threshold [standardised residuals].
 NU = 3.0
 REJECT = 4.0
@@ -107,24 +113,13 @@ def later_duplicates(emission: np.ndarray, receiver: np.ndarray, time: np.ndarra
 
 
 def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, start: int) -> np.ndarray:
-    """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (a
-    union-find over the emissions' receivers)."""
-    parent = np.arange(n_receivers)
-
-    def root(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
+    """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (the
+    connected components of the graph linking the receivers that hear one emission)."""
     order = np.lexsort((receiver, emission))
     e, r = emission[order], receiver[order]
     same = np.flatnonzero(e[1:] == e[:-1])
-    for k in same:
-        a, b = root(int(r[k])), root(int(r[k + 1]))
-        if a != b:
-            parent[a] = b
-    roots = np.array([root(j) for j in range(n_receivers)])
+    graph = sp.csr_matrix((np.ones(len(same)), (r[same], r[same + 1])), shape=(n_receivers, n_receivers))
+    _, roots = scipy.sparse.csgraph.connected_components(graph, directed=False)
     heard = np.zeros(n_receivers, bool)
     heard[np.unique(r[np.r_[same, same + 1]])] = True
     return (roots == roots[start]) & heard
@@ -218,7 +213,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
                slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray, reference: int,
                bin_width: float, drift_change: float = 1e-6, reject: float = REJECT, max_iterations: int = 20,
                keep: np.ndarray | None = None, scale: np.ndarray | None = None, sigmas: bool = True,
-               geometry: Geometry | None = None) -> ClockFit:
+               geometry: Geometry | None = None, timings: dict | None = None) -> ClockFit:
     """Fit the receivers' clocks to the sync tags' arrivals (the module docstring's model).
 
     Parameters
@@ -250,10 +245,14 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         (n,) bool and (R,) [s]: the arrivals kept and the receivers' scales of an earlier fit: no reweighting, the
         kept arrivals' least squares only (a fit with some arrivals left out, e.g. a sync tag's).
     sigmas : bool
-        Compute the offsets' and drifts' sigmas; else NaN.
+        Compute the offsets' and drifts' sigmas (a dense inverse up to :data:`DENSE_LIMIT` unknowns, beyond it the
+        selected inverse of the block-tridiagonal normal equations: :func:`selected_inverse`); else NaN.
     geometry : Geometry, optional
         Refine the receivers' horizontal positions with the clocks, a prior of the survey's sigma at the table's
         positions (the module docstring); default the positions fixed. The shifts' covariance is always computed.
+    timings : dict, optional
+        Filled with the seconds of the stages (``reweighting``, ``least_squares``, ``covariance``: the last
+        solve's, with the sigmas) for a benchmark.
 
     Returns
     -------
@@ -292,6 +291,13 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     emissions, em_local = np.unique(em, return_inverse=True)
     E = sp.csr_matrix((np.ones(len(t)), (np.arange(len(t)), em_local)), shape=(len(t), len(emissions)))
     prior = _prior(free, base, n_bins, p, drift_change * bin_width)
+    # the knots in time order (each edge's receivers together: the normal equations are block tridiagonal in that
+    # order) and each knot's pair with the next edge's (the drift's covariance)
+    n_free = int(free.sum())
+    order = (np.arange(n_free)[None, :] * (n_bins + 1) + np.arange(n_bins + 1)[:, None]).ravel()
+    pairs = (np.arange(n_free)[:, None] * (n_bins + 1) + np.arange(n_bins)[None, :]).ravel()
+    pairs = np.c_[pairs, pairs + 1]
+    dense_limit = DENSE_LIMIT
     if geometry is not None:
         if not np.isfinite(geometry.sigma) or geometry.sigma <= 0:
             raise ModelError("sync: the survey sigma must be finite and positive (the prior fixes the datum)")
@@ -337,12 +343,19 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         ety = E.T @ (w * y)
         rhs = B.T @ (w * y) - NEB.T @ (ety / np.maximum(D, 1e-300))
         cov = shift_cov = None
-        if covariance and p <= DENSE_LIMIT:
+        if covariance and p <= dense_limit:
             factor = scipy.linalg.cho_factor(S.toarray(), lower=True, check_finite=False)
             x = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
-            cov = scipy.linalg.cho_solve(factor, np.eye(p), check_finite=False)
+            full = scipy.linalg.cho_solve(factor, np.eye(p), check_finite=False)
+            cov = SelectedCovariance(np.diag(full)[:n_knots].copy(), full[pairs[:, 0], pairs[:, 1]],
+                                     full[n_knots:, n_knots:])
             if shifts:
-                shift_cov = cov[first:, first:]
+                shift_cov = full[first:, first:]
+        elif p > dense_limit:  # the block-tridiagonal factorisation (faster than splu's at this size)
+            x, selected = selected_inverse(S, n_knots, order, rhs, pairs if covariance else None)
+            cov = selected if covariance else None
+            if shifts:
+                shift_cov = selected.border[int(estimate):, int(estimate):]
         else:
             lu = scipy.sparse.linalg.splu(S)
             x = lu.solve(rhs)
@@ -365,6 +378,8 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
 
     shift_now = lambda: shift if geometry is not None else None  # noqa: E731
     given = keep is not None
+    timings = {} if timings is None else timings
+    tick = perf_counter()
     scale = np.full(n_receivers, 1e-3) if scale is None else np.where(np.isfinite(scale), scale, 1e-3)
     tw = np.ones(len(t))
     previous = None
@@ -385,18 +400,24 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
             break
         previous = x
     keep = keep[rows] if given else np.abs(u) <= reject
+    timings["reweighting"] = perf_counter() - tick
+    tick = perf_counter()
     # the kept arrivals' least squares, each receiver's scale from its own; with the positions refined, Gauss-Newton
     # steps until no shift moves by a millimetre; the covariance in the pass after the last
     last = False
     for passes in range(1, 21):
         w = keep / scale[rec] ** 2
         B, y, dd = design(shift_now(), s_now)
+        if last:
+            timings["least_squares"] = perf_counter() - tick
+            tick = perf_counter()
         x, T, D, cov, shift_cov = solve(w, B, y, covariance=last and sigmas, shifts=last and geometry is not None)
         moved = update(x)
         residual = y - B @ x - T[em_local]
         one = np.clip(1 - w / np.maximum(D[em_local], 1e-300), 0.0, 1.0)
         scale = _scales(np.where(keep, residual, np.nan), one, rec, n_receivers, robust=False)
         if last:
+            timings["covariance"] = perf_counter() - tick
             break
         last = (passes >= 2 and moved < 1e-3) or passes == 19
     u = np.where(one > 1e-9, residual / np.sqrt(np.maximum(one, 1e-9)) / scale[rec], 0.0)
@@ -405,14 +426,14 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     sigma = np.full((n_receivers, n_bins + 1), np.nan)
     drift_sigma = np.full((n_receivers, n_bins), np.nan)
     knots[reference] = sigma[reference] = drift_sigma[reference] = 0.0
-    for j in np.flatnonzero(free):
+    for count, j in enumerate(np.flatnonzero(free)):
         block = slice(base[j], base[j] + n_bins + 1)
         knots[j] = x[block]
         if cov is not None:
-            c = cov[block, block]
-            sigma[j] = np.sqrt(np.diag(c))
-            diag = np.diag(c)
-            drift_sigma[j] = np.sqrt(np.maximum(diag[1:] + diag[:-1] - 2 * np.diag(c, 1), 0.0)) / bin_width
+            diag = cov.variance[block]
+            sigma[j] = np.sqrt(diag)
+            following = cov.following[count * n_bins:(count + 1) * n_bins]
+            drift_sigma[j] = np.sqrt(np.maximum(diag[1:] + diag[:-1] - 2 * following, 0.0)) / bin_width
     drift = np.diff(knots, axis=1) / bin_width
     counts = np.zeros((n_receivers, n_bins), np.int64)
     np.add.at(counts, (rec[keep], k[keep]), 1)
@@ -425,7 +446,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     s_hat = s_sigma = None
     if estimate:
         s_hat = float(x[n_knots])
-        s_sigma = float(np.sqrt(cov[n_knots, n_knots])) if cov is not None else None
+        s_sigma = float(np.sqrt(cov.border[0, 0])) if cov is not None else None
     shift_out = shift_covariance = distance_all = None
     if geometry is not None:
         shift_out = shift.copy()
@@ -434,6 +455,126 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         distance_all[rows] = dd
     return ClockFit(edges, knots, sigma, drift, drift_sigma, counts, emission_time, residual_all, standard_all,
                     kept_all, scale, s_hat, s_sigma, iterations, shift_out, shift_covariance, distance_all)
+
+
+@dataclass
+class SelectedCovariance:
+    """The entries of the knots' covariance a fit reports: ``variance`` (knots,) [s²] each knot's, ``following``
+    (pairs,) [s²] the covariance of each pair asked for (a knot and the next edge's), ``border`` (b, b) the
+    unknowns after the knots' (slowness, shifts) among themselves."""
+
+    variance: np.ndarray
+    following: np.ndarray
+    border: np.ndarray
+
+
+def selected_inverse(S: sp.spmatrix, n_band: int, order: np.ndarray, rhs: np.ndarray, pairs: np.ndarray | None
+                     ) -> tuple[np.ndarray, SelectedCovariance]:
+    """Solve ``S x = rhs`` and the entries of ``S⁻¹`` a fit reports, without the dense inverse.
+
+    The first ``n_band`` unknowns (the knots), put in ``order`` (time order), make a block-tridiagonal matrix ``A``
+    (its blocks as wide as its bandwidth); the rest (a border ``b``: the slowness, the shifts) couple to all. ``A``
+    is factored block by block (``A = Uᵀ diag(Sᵢ) U``, ``U`` unit upper with ``U_{i,i+1} = Xᵢ = Sᵢ⁻¹ A_{i,i+1}``),
+    the border by its Schur complement ``G − Cᵀ A⁻¹ C``, and the inverse's diagonal blocks and first off-diagonal
+    blocks by the backward recursion ``Σ_{i,i+1} = −Xᵢ Σ_{i+1,i+1}``, ``Σ_{ii} = Sᵢ⁻¹ + Xᵢ Σ_{i+1,i+1} Xᵢᵀ`` (the
+    block form of Takahashi, Fagan & Chin 1973's selected inverse; the RTS smoother's covariance recursion), plus
+    ``Z Σ_bb Zᵀ`` for the border (``Z = A⁻¹ C``). Cost: blocks × block³ and memory two blocks per block, where the
+    dense inverse is unknowns³ and unknowns².
+
+    Parameters
+    ----------
+    S : scipy.sparse.spmatrix
+        (p, p) symmetric positive definite.
+    n_band : int
+        The banded unknowns (the first ``n_band``).
+    order : numpy.ndarray
+        (n_band,) int, the banded unknowns in the order that makes ``A`` banded (``order[new] = old``).
+    rhs : numpy.ndarray
+        (p,) the right-hand side.
+    pairs : numpy.ndarray or None
+        (P, 2) int, the pairs of banded unknowns (original indices) whose covariance is wanted; each pair within the
+        bandwidth in ``order``. None: the solution and the border's covariance only (no backward recursion; the
+        variances and pairs' covariances empty).
+
+    Returns
+    -------
+    (numpy.ndarray, SelectedCovariance)
+        The solution (p,) and the selected entries.
+    """
+    p = S.shape[0]
+    perm = np.r_[np.asarray(order, np.int64), np.arange(n_band, p)]
+    P = sp.csr_matrix(S)[perm][:, perm].tocsr()
+    A = P[:n_band, :n_band].tocoo()
+    m = max(int(np.max(np.abs(A.row - A.col), initial=0)), 1)
+    A = A.tocsr()
+    nb = -(-n_band // m)
+    edge = np.minimum(np.arange(nb + 1) * m, n_band)
+    blk = [slice(edge[i], edge[i + 1]) for i in range(nb)]
+    C = P[:n_band, n_band:].toarray()
+    G = P[n_band:, n_band:].toarray()
+    r = np.asarray(rhs, float)[perm]
+    factors, X = [], []
+    Si = A[blk[0], blk[0]].toarray()
+    for i in range(nb):
+        factor = scipy.linalg.cho_factor(Si, lower=True, check_finite=False)
+        factors.append(factor)
+        if i + 1 < nb:
+            upper = A[blk[i], blk[i + 1]].toarray()
+            X.append(scipy.linalg.cho_solve(factor, upper, check_finite=False))
+            Si = A[blk[i + 1], blk[i + 1]].toarray() - upper.T @ X[i]
+
+    def solve_band(R: np.ndarray) -> np.ndarray:
+        z = [R[b].copy() for b in blk]
+        for i in range(nb - 1):
+            z[i + 1] -= X[i].T @ z[i]
+        out = np.empty_like(R)
+        out[blk[-1]] = scipy.linalg.cho_solve(factors[-1], z[-1], check_finite=False)
+        for i in range(nb - 2, -1, -1):
+            out[blk[i]] = scipy.linalg.cho_solve(factors[i], z[i], check_finite=False) - X[i] @ out[blk[i + 1]]
+        return out
+
+    Z = solve_band(C)
+    border = np.linalg.inv(G - C.T @ Z) if p > n_band else np.zeros((0, 0))
+    ya = solve_band(r[:n_band])
+    xb = border @ (r[n_band:] - C.T @ ya)
+    x = np.empty(p)
+    x[perm] = np.r_[ya - Z @ xb, xb]
+    if pairs is None:
+        return x, SelectedCovariance(np.zeros(0), np.zeros(0), border)
+    # the selected inverse: where each original knot sits, and each pair's blocks
+    where = np.empty(n_band, np.int64)
+    where[perm[:n_band]] = np.arange(n_band)
+    a, b = where[pairs[:, 0]], where[pairs[:, 1]]
+    a, b = np.minimum(a, b), np.maximum(a, b)
+    if np.any(b // m - a // m > 1):
+        raise ModelError("sync: a covariance asked for outside the normal equations' band")
+    variance = np.empty(n_band)
+    following = np.empty(len(pairs))
+    by_block = np.argsort(a // m, kind="stable")
+    starts = np.searchsorted(a[by_block] // m, np.arange(nb + 1))
+    sigma_next = None
+    for i in range(nb - 1, -1, -1):
+        inverse = scipy.linalg.cho_solve(factors[i], np.eye(edge[i + 1] - edge[i]), check_finite=False)
+        if i + 1 < nb:
+            M = X[i] @ sigma_next
+            sigma_ii = inverse + M @ X[i].T
+            sigma_up = -M  # Σ_{i,i+1}
+        else:
+            sigma_ii, sigma_up = inverse, None
+        variance[blk[i]] = np.diag(sigma_ii)
+        mine = by_block[starts[i]:starts[i + 1]]
+        same = b[mine] // m == i
+        following[mine[same]] = sigma_ii[a[mine[same]] - edge[i], b[mine[same]] - edge[i]]
+        if (~same).any():
+            following[mine[~same]] = sigma_up[a[mine[~same]] - edge[i], b[mine[~same]] - edge[i + 1]]
+        sigma_next = sigma_ii
+    if p > n_band:  # the border's share: Z Σ_bb Zᵀ
+        ZS = Z @ border
+        variance += np.einsum("ij,ij->i", ZS, Z)
+        following += np.einsum("ij,ij->i", ZS[a], Z[b])
+    back = np.empty(n_band)
+    back[perm[:n_band]] = variance
+    return x, SelectedCovariance(back, following, border)
 
 
 def _prior(free: np.ndarray, base: np.ndarray, n_bins: int, p: int, sigma: float) -> sp.csr_matrix:
@@ -467,5 +608,5 @@ def _scales(residual: np.ndarray, one: np.ndarray, rec: np.ndarray, n_receivers:
     return np.maximum(np.where(np.isfinite(scale), scale, fallback), MIN_SCALE)
 
 
-__all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "connected", "fit_clocks", "group_emissions",
-           "later_duplicates"]
+__all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "SelectedCovariance", "connected", "fit_clocks",
+           "group_emissions", "later_duplicates", "selected_inverse"]

@@ -73,7 +73,7 @@ def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) 
 def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
-                survey_sigma: float = SURVEY_SIGMA) -> SyncOutcome:
+                survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
 
     Parameters
@@ -97,6 +97,9 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         Refine the receivers' horizontal positions with the clocks (default: the table's fixed).
     survey_sigma : float
         [m] the table's horizontal sigma per axis: the refinement's prior.
+    timings : dict, optional
+        Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
+        ``tables``) for a benchmark.
 
     Returns
     -------
@@ -181,8 +184,13 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         notes.append("receivers that cannot be synchronised (they hear no sync-tag emission another synchronised "
                      f"receiver hears), left out: {', '.join(left_out)}")
     width = bin_hours * 3600.0
+    timings = {} if timings is None else timings
+    timings["grouping"] = clock.perf_counter() - started
+    tick = clock.perf_counter()
     geometry = Geometry(tag_home[tag], positions, float(survey_sigma)) if refine_positions else None
-    fit = fit_clocks(receiver, emission, time, distance, slowness, used, linked, start, width, geometry=geometry)
+    fit = fit_clocks(receiver, emission, time, distance, slowness, used, linked, start, width, geometry=geometry,
+                     timings=timings)
+    timings["fit"] = clock.perf_counter() - tick
     if refine_positions:
         moved = positions.copy()
         moved[:, :2] += fit.shift
@@ -201,9 +209,11 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": sync["line"].to_numpy()})
 
     offsets = _offsets(fit, names, linked, bridged, origin)
+    tick = clock.perf_counter()
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
                            positions, tag_names, tag_home, names, leave_one_out, notes, geometry)
     refined = _positions(fit, positions, names, linked) if refine_positions else None
+    timings["leave_one_out"] = clock.perf_counter() - tick
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)

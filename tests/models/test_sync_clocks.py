@@ -6,9 +6,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.clocks import Geometry, connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync import clocks
+from sblsim.models.sync.clocks import (
+    Geometry,
+    connected,
+    fit_clocks,
+    group_emissions,
+    later_duplicates,
+    selected_inverse,
+)
 from sblsim.models.sync.positions import position_emissions
 from sblsim.models.sync.simulate import simulate_sync
 
@@ -126,3 +135,51 @@ def test_a_tight_survey_prior_is_the_fixed_positions(surveyed):
     assert np.abs(tight.shift).max() < 1e-3 and np.array_equal(tight.kept, fixed.kept)
     with pytest.raises(ModelError, match="survey sigma"):
         fit_clocks(*args, geometry=Geometry(sim.tag, table, np.inf))
+
+
+def test_the_selected_inverse_is_the_dense_inverse():
+    """:func:`selected_inverse` on a random block-tridiagonal matrix (a shuffled order, as the knots' receiver-major
+    numbering is) with a dense border: the solution, the diagonal, the pairs' covariances and the border's block
+    against the dense inverse."""
+    rng = np.random.default_rng(4)
+    n, width, border = 60, 5, 3
+    band = np.zeros((n, n))
+    for off in range(width + 1):
+        v = rng.normal(size=n - off)
+        band += np.diag(v, off) + (np.diag(v, -off) if off else 0)
+    band = band @ band.T  # SPD, bandwidth 2 * width
+    full = np.zeros((n + border, n + border))
+    full[:n, :n] = band + n * np.eye(n)
+    C = rng.normal(size=(n, border))
+    full[:n, n:], full[n:, :n] = C, C.T
+    full[n:, n:] = C.T @ C + np.eye(border) * 5
+    shuffle = rng.permutation(n)  # order[new] = old
+    old = np.r_[shuffle, np.arange(n, n + border)]
+    S = np.empty_like(full)
+    S[np.ix_(old, old)] = full
+    rhs = rng.normal(size=n + border)
+    pairs = np.c_[shuffle[:-3], shuffle[3:]]  # three apart in the band's order
+    x, sel = selected_inverse(sp.csr_matrix(S), n, shuffle, rhs, pairs)
+    inverse = np.linalg.inv(S)
+    np.testing.assert_allclose(x, inverse @ rhs, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(sel.variance, np.diag(inverse)[:n], rtol=1e-10)
+    np.testing.assert_allclose(sel.following, inverse[pairs[:, 0], pairs[:, 1]], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(sel.border, inverse[n:, n:], rtol=1e-10)
+
+
+def test_the_sparse_sigmas_are_the_dense_ones(surveyed, monkeypatch):
+    """The fit's sigmas by the selected inverse (beyond :data:`DENSE_LIMIT`) equal the dense inverse's on a small
+    problem: the offsets', the drifts', the slowness's and the refined positions' (to 1e-3: the reweighting's
+    solves differ in rounding between the two paths; the inverse itself is exact, the test above)."""
+    sim, _, table, args = surveyed
+    args = args[:4] + (None,) + args[5:]  # the slowness estimated: a border unknown
+    geometry = Geometry(sim.tag, table, 2.0)
+    dense = fit_clocks(*args, geometry=geometry)
+    monkeypatch.setattr(clocks, "DENSE_LIMIT", 0)
+    sparse = fit_clocks(*args, geometry=geometry)
+    np.testing.assert_allclose(sparse.knots[1:], dense.knots[1:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sparse.knot_sigma[1:], dense.knot_sigma[1:], rtol=1e-3)
+    np.testing.assert_allclose(sparse.drift_sigma[1:], dense.drift_sigma[1:], rtol=1e-3)
+    np.testing.assert_allclose(sparse.slowness_sigma, dense.slowness_sigma, rtol=1e-3)
+    np.testing.assert_allclose(sparse.shift_covariance, dense.shift_covariance, rtol=1e-3, atol=1e-12)
+    assert len(dense.edges) > 10  # many blocks: the recursion exercised
