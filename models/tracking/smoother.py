@@ -28,6 +28,8 @@ from sblsim.models.tracking.smoother_cost import (
     _arrival_sums,
     _Problem,
     _robust_terms,
+    _trial_cost,
+    _trial_sums,
     observed_information,
 )
 from sblsim.models.tracking.smoother_covariance import _block_covariance, _survey_covariance
@@ -177,35 +179,48 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         if X.shape != (m, s) or not np.isfinite(X).all():
             raise ModelError(f"robust smoother: a starting track of shape {X.shape} or not finite; allowed: "
                              f"({m}, {s}), finite")
-        # a start's residuals are made again where its steps go on (the same numbers): none kept beside it
-        runs.append({"X": X, "cost": _robust_terms(problem, X, dof)[-1], "done": 0, "converged": False})
+        # a start's terms are made where its steps begin (its cost for the ranking with them)
+        runs.append({"X": X, "cost": None, "done": 0, "converged": False})
+    last = {"run": None, "terms": None}  # the terms at the states of the start that stepped last
 
     def iterate(run, count):
-        """Up to ``count`` more Gauss-Newton steps of a start (stopping where it has converged)."""
+        """Up to ``count`` more Gauss-Newton steps of a start (stopping where it has converged); its cost known."""
+        X = run["X"]
+        if last["run"] is run:
+            sums, e, T, cost = last["terms"]
+        elif run["cost"] is None or not (run["converged"] or count <= 0):
+            sums, e, T, cost = _robust_terms(problem, X, dof)
+            run["cost"] = cost
         if run["converged"] or count <= 0:
             return
-        X = run["X"]
-        sums, e, T, cost = _robust_terms(problem, X, dof)
+        # the trial's terms and states written into a second set of arrays, the two swapped when a step is taken
+        spare, trial = (np.empty_like(sums), np.empty_like(e), np.empty_like(T)), np.empty_like(X)
+        step = np.empty_like(X)
         for _ in range(count):
             if run["converged"]:
-                return
-            step = _damped_solve(problem, partial(_step_system, problem, X, sums, e, T))
+                break
+            step = _damped_solve(problem, partial(_step_system, problem, X, sums, e, T), step)
             if step is None:  # no damping makes the system positive definite: stopped where it is
                 run["converged"] = True
-                return
+                break
             scale = 1.0
-            while scale > 1e-6:
-                trial = X + scale * step
-                terms = _robust_terms(problem, trial, dof)
-                if terms[-1] < cost:
+            while scale > 1e-6:  # each trial's cost alone, its sums for the next step where it is taken
+                np.multiply(step, scale, out=trial)
+                trial += X
+                lower = _trial_cost(problem, trial, dof, spare)
+                if lower < cost:
+                    _trial_sums(problem, dof, spare[0])
+                    terms = (*spare, lower)
                     break
                 scale *= 0.5
             else:  # no step lowers the cost: a minimum
                 run["converged"] = True
-                return
+                break
             gain = cost - terms[-1]
-            X, (sums, e, T, cost) = trial, terms
+            spare, (sums, e, T, cost) = (sums, e, T), terms
+            X, trial = trial, X
             run.update(X=X, cost=cost, done=run["done"] + 1, converged=gain <= ROBUST_TOLERANCE * cost)
+        last.update(run=run, terms=(sums, e, T, cost))
 
     # each start a few steps, then the one of the lowest cost to the end (the ranking of the starts' costs is
     # settled within a few steps)
@@ -217,10 +232,12 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         if run is not best:
             run["X"] = None
     iterate(best, iterations - best["done"])
+    last.update(run=None, terms=None)
     X, cost = best["X"], best["cost"]  # the cost at X (its residuals' own)
     w = np.empty(len(problem.k))
     sums = _arrival_sums(problem, X, dof, information=True, weights=w)  # the Gauss-Newton weights beside
     problem.band = problem.rhs = problem.logs = problem.values = problem.squares = None  # the steps' buffers
+    problem.z = problem.J = problem.rows = None
     P = lag = None
     if covariance:
         blocks = partial(_normal_blocks, problem, X, sums, problem.count * X[:-1, -1] + problem.offset)

@@ -80,7 +80,10 @@ class _Problem:
         self.k, self.i = (v.astype(np.int32) for v in np.nonzero(np.isfinite(toa)))  # m < 2³¹
         self.toa = toa[self.k, self.i]
         self.r = [receivers[self.i, a] for a in range(self.dim)]
-        self.band = self.rhs = self.logs = self.values = self.squares = self._chunks = None
+        self.band = self.rhs = self.logs = self.values = self.rows = self.squares = self.z = self.J = None
+        self.entries = None  # the Hessian's entries' keys (smoother_system._normal_blocks)
+        self._chunks = None
+        self.heard = np.bincount(self.k, minlength=self.m)  # each ping's arrivals (:func:`_arrivals`' gathers)
         self.settings, self.count, self.offset = settings, schedule.count, schedule.offset
         T = schedule.steps(settings.interval)
         q = settings.acceleration_psd
@@ -123,59 +126,87 @@ class _Problem:
                 slice(j0 + 1 - lo, hi - lo))
 
 
-def _arrivals(problem: _Problem, X: np.ndarray, lo: int, hi: int, a0: int, a1: int) -> tuple:
+def _arrivals(problem: _Problem, X: np.ndarray, lo: int, hi: int, a0: int, a1: int, keep: bool = False) -> tuple:
     """The arrivals ``a0:a1`` (those of the pings ``lo:hi``) at the states X (m, s): their normalised residuals z
     (a,) and the position columns of their Jacobians [1/σ units], one (a,) array per axis (the emission time's
     column is −1/σ_toa); by the operations of :func:`~sblsim.models.tracking.toa.toa_function`'s algorithm in its
-    order (as :func:`~sblsim.models.tracking.toa._ranges`: the same numbers)."""
+    order (as :func:`~sblsim.models.tracking.toa._ranges`: the same numbers). With ``keep``, written into the
+    problem's buffers ``z`` (h,) and ``J`` (dim, h) (:func:`_trial_cost`)."""
     P, settings = problem, problem.settings
     c, sigma = settings.sound_speed, settings.sigma_toa
-    kk = P.k[a0:a1] - lo
-    d = [X[lo:hi, a][kk] - P.r[a][a0:a1] for a in range(P.dim)]
+    heard = P.heard[lo:hi]  # each ping's value repeated for its arrivals (in order: the pings' own)
+    if keep:
+        d = [np.subtract(np.repeat(X[lo:hi, a], heard), P.r[a][a0:a1], out=P.J[a, a0:a1]) for a in range(P.dim)]
+    else:
+        d = [np.repeat(X[lo:hi, a], heard) - P.r[a][a0:a1] for a in range(P.dim)]
     squares = np.square(d[0])
+    work = np.empty_like(squares)
     for da in d[1:]:
-        squares += np.square(da)
-    rho = np.sqrt(squares)
+        squares += np.square(da, out=work)
+    rho = np.sqrt(squares, out=squares)
     with np.errstate(invalid="ignore", divide="ignore"):
-        scale = (1.0 / (2.0 * rho)) / c
-    for da in d:  # −(2 d) ((1 / (2 ρ)) / c) / σ, in place
-        da *= 2.0
+        scale = np.multiply(rho, 2.0, out=work)  # (1 / (2 ρ)) / c
+        np.divide(1.0, scale, out=scale)
+        scale /= c
+    for da in d:  # −(2 d) ((1 / (2 ρ)) / c) / σ, in place (−2 d exact, and the rounding even in the sign)
+        da *= -2.0
         da *= scale
-        np.negative(da, out=da)
         da /= sigma
     rho /= c
-    z = P.toa[a0:a1] - (X[lo:hi, -2][kk] + rho)
+    rho += np.repeat(X[lo:hi, -2], heard)
+    z = np.subtract(P.toa[a0:a1], rho, out=P.z[a0:a1] if keep else rho)
     z /= sigma
     return z, d
+
+
+def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tuple, sums: np.ndarray,
+                information: bool = False, weights: np.ndarray | None = None):
+    """A chunk's rows of :func:`_arrival_sums`' ``sums`` from its arrivals' normalised residuals z (a,) and their
+    Jacobians' position columns J (:func:`_arrivals`)."""
+    P = problem
+    lo, hi, a0, a1, S = chunk
+    J = [*J, -1.0 / P.settings.sigma_toa]  # the emission time's column of every Jacobian
+    z2 = z**2
+    robust = np.add(dof, z2, out=z2)  # (ν + 1) / (ν + z²)
+    np.divide(dof + 1.0, robust, out=robust)
+    if weights is not None:
+        weights[a0:a1] = robust
+    w = observed_information(z, dof) if information else robust
+    # each product a contiguous row, then the rows side by side (a, q) for the sparse sum (a column at a time into
+    # an array of rows of q would be strided: twice the time)
+    rows = P.rows[:sums.shape[1], :a1 - a0]
+    wx = np.empty_like(z)
+    row = 0
+    for x in range(len(J)):
+        np.multiply(w, J[x], out=wx)
+        for y in range(x, len(J)):
+            np.multiply(wx, J[y], out=rows[row])
+            row += 1
+    if not information:
+        wz = np.multiply(w, z, out=wx)
+        for x in range(len(J)):
+            np.multiply(wz, J[x], out=rows[row + x])
+    values = P.values[:(a1 - a0) * sums.shape[1]].reshape(a1 - a0, sums.shape[1])
+    values[...] = rows.T
+    sums[lo:hi] = S @ values
 
 
 def _arrival_chunk(problem: _Problem, X: np.ndarray, dof: float, chunk: tuple, sums: np.ndarray,
                    information: bool = False, weights: np.ndarray | None = None):
     """:func:`_arrival_sums` over one chunk of pings (:meth:`_Problem.chunks`): its rows of ``sums`` filled, its
     arrivals' cost terms ``ln(1 + z² / ν)`` into the problem's buffer (not with ``information``)."""
-    P = problem
     lo, hi, a0, a1, S = chunk
-    z, J = _arrivals(P, X, lo, hi, a0, a1)
-    J.append(-1.0 / P.settings.sigma_toa)  # the emission time's column of every Jacobian
-    z2 = z**2
-    robust = (dof + 1.0) / (dof + z2)
-    if weights is not None:
-        weights[a0:a1] = robust
-    w = observed_information(z, dof) if information else robust
-    values = P.values[:a1 - a0, :sums.shape[1]]
-    row = 0
-    for x in range(len(J)):
-        wx = w * J[x]
-        for y in range(x, len(J)):
-            np.multiply(wx, J[y], out=values[:, row])
-            row += 1
+    z, J = _arrivals(problem, X, lo, hi, a0, a1)
     if not information:
-        wz = w * z
-        for x in range(len(J)):
-            np.multiply(wz, J[x], out=values[:, row + x])
-        z2 /= dof
-        np.log1p(z2, out=P.logs[a0:a1])
-    sums[lo:hi] = S @ values
+        _cost_terms(problem, z, dof, a0, a1)
+    _chunk_sums(problem, z, J, dof, chunk, sums, information, weights)
+
+
+def _cost_terms(problem: _Problem, z: np.ndarray, dof: float, a0: int, a1: int):
+    """The arrivals ``a0:a1``'s cost terms ``ln(1 + z² / ν)`` into the problem's buffer ``logs``."""
+    z2 = np.square(z, out=problem.logs[a0:a1])
+    z2 /= dof
+    np.log1p(z2, out=z2)
 
 
 def _arrival_sums(problem: _Problem, X: np.ndarray, dof: float, information: bool = False,
@@ -196,13 +227,15 @@ def _arrival_sums(problem: _Problem, X: np.ndarray, dof: float, information: boo
 
 
 def _buffers(problem: _Problem):
-    """The buffers the passes reuse: each chunk's arrivals' values (a, q), every arrival's cost term (h,) and every
-    process residual's square (m − 1, s)."""
+    """The buffers the passes reuse: each chunk's arrivals' values (a, q) and the same as rows (q, a), every
+    arrival's cost term (h,), residual (h,) and Jacobian's position columns (dim, h) (a trial's,
+    :func:`_trial_cost`), and every process residual's square (m − 1, s)."""
     P, cols = problem, problem.dim + 1
     if P.logs is None:
         P.logs, P.squares = np.empty(len(P.k)), np.empty((P.m - 1, P.s))
-        P.values = np.empty((max((a1 - a0 for _, _, a0, a1, _ in P.chunks()), default=0),
-                             cols * (cols + 1) // 2 + cols))
+        P.z, P.J = np.empty(len(P.k)), np.empty((P.dim, len(P.k)))
+        longest, q = max((a1 - a0 for _, _, a0, a1, _ in P.chunks()), default=0), cols * (cols + 1) // 2 + cols
+        P.values, P.rows = np.empty(longest * q), np.empty((q, longest))
 
 
 def _process_residuals(problem: _Problem, X: np.ndarray, T: np.ndarray, e: np.ndarray, j: int, k: int):
@@ -223,22 +256,59 @@ def _process_residuals(problem: _Problem, X: np.ndarray, T: np.ndarray, e: np.nd
     np.square(e[j:k], out=P.squares[j:k])
 
 
-def _robust_terms(problem: _Problem, X: np.ndarray, dof: float) -> tuple:
+def _robust_terms(problem: _Problem, X: np.ndarray, dof: float, into: tuple | None = None) -> tuple:
     """The robust smoother's terms at the states X (m, s), in one pass over chunks of pings: the arrivals' per-ping
     sums (:func:`_arrival_sums`), the whitened process residuals e (m − 1, s) (:func:`_process_residuals`), the
     steps' durations T (m − 1,) at X's intervals (the transitions' Jacobians F follow from T and the velocities,
-    :func:`~sblsim.models.receiver.toa_bound.predict`) and the cost."""
+    :func:`~sblsim.models.receiver.toa_bound.predict`) and the cost. ``into``: the arrays ``(sums, e, T)`` of an
+    earlier call to write them into (of 10⁶ pings each new array would cost its pages' faults again), else new."""
     P, cols = problem, problem.dim + 1
     _buffers(P)
-    sums = np.empty((P.m, cols * (cols + 1) // 2 + cols))
-    T = P.count * X[:-1, -1] + P.offset
-    e = np.empty((P.m - 1, P.s))
+    if into is None:
+        sums, e, T = np.empty((P.m, cols * (cols + 1) // 2 + cols)), np.empty((P.m - 1, P.s)), np.empty(P.m - 1)
+    else:
+        sums, e, T = into
+    np.multiply(P.count, X[:-1, -1], out=T)
+    T += P.offset
     for chunk in P.chunks():
         _arrival_chunk(P, X, dof, chunk, sums)
         _process_residuals(P, X, T, e, chunk[0], min(chunk[1], P.m - 1))
-    cost = float((dof + 1.0) * P.logs.sum() + P.squares.sum() + _interval_prior(P.settings, X) ** 2
+    return sums, e, T, _cost(P, X, dof)
+
+
+def _cost(problem: _Problem, X: np.ndarray, dof: float) -> float:
+    """The cost at the states X from the terms of the last pass (the arrivals' ``logs``, the process residuals'
+    ``squares``) and the priors."""
+    P = problem
+    return float((dof + 1.0) * P.logs.sum() + P.squares.sum() + _interval_prior(P.settings, X) ** 2
                  + (_depth_residual(P, X) ** 2).sum())
-    return sums, e, T, cost
+
+
+def _trial_cost(problem: _Problem, X: np.ndarray, dof: float, into: tuple) -> float:
+    """The cost at a trial's states X (m, s) alone (a line search's trial that may not be taken), in one pass over
+    chunks of pings: the arrivals' residuals and Jacobians kept in the problem's buffers, the process residuals
+    and the steps' durations into ``into`` ``(sums, e, T)`` (:func:`_robust_terms`'s), for :func:`_trial_sums` to
+    complete the terms where the trial is taken (the same numbers as :func:`_robust_terms`)."""
+    P = problem
+    _buffers(P)
+    _, e, T = into
+    np.multiply(P.count, X[:-1, -1], out=T)
+    T += P.offset
+    for chunk in P.chunks():
+        lo, hi, a0, a1, _ = chunk
+        z, _ = _arrivals(P, X, lo, hi, a0, a1, keep=True)
+        _cost_terms(P, z, dof, a0, a1)
+        _process_residuals(P, X, T, e, lo, min(hi, P.m - 1))
+    return _cost(P, X, dof)
+
+
+def _trial_sums(problem: _Problem, dof: float, sums: np.ndarray):
+    """The arrivals' per-ping sums (:func:`_arrival_sums`) of the trial whose cost :func:`_trial_cost` made last,
+    into ``sums`` (m, q), from its kept residuals and Jacobians."""
+    P = problem
+    for chunk in P.chunks():
+        a0, a1 = chunk[2], chunk[3]
+        _chunk_sums(P, P.z[a0:a1], list(P.J[:, a0:a1]), dof, chunk, sums)
 
 
 def _arrival_jacobians(problem: _Problem, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -33,6 +33,11 @@ def _normal_blocks(problem: _Problem, X: np.ndarray, sums: np.ndarray, T: np.nda
     te, dl = s - 2, s - 1
     rows, brows = hi - lo, max(min(hi, m - 1) - lo, 0)
     D, B = {}, {}
+    known = P.entries  # the entries' keys of an earlier call: their arrays at once, zero
+    if known is not None:
+        store = np.zeros((len(known[0]) + len(known[1]), rows))
+        D.update(zip(known[0], store))
+        B.update(zip(known[1], store[len(known[0]):, :brows]))
 
     def add(blocks, key, value, at=slice(None)):
         """Add ``value`` to the entry ``key`` of the blocks (the rows ``at`` of them)."""
@@ -84,6 +89,8 @@ def _normal_blocks(problem: _Problem, X: np.ndarray, sums: np.ndarray, T: np.nda
     first, last = np.searchsorted(P.depth_at, (lo, hi))
     if last > first:
         D[(2, 2)][P.depth_at[first:last] - lo] += P.depth_w**2
+    if known is None:
+        P.entries = (tuple(D), tuple(B))  # the same keys every call (the state's size and the model's entries)
     return D, B
 
 
@@ -138,7 +145,8 @@ def _step_system(problem: _Problem, X: np.ndarray, sums: np.ndarray, e: np.ndarr
     """The Gauss-Newton step's system over the pings ``lo:hi`` (:func:`_banded_solve`'s ``system``): the Hessian's
     entries (:func:`_normal_blocks`) and minus the gradient (:func:`_gradient`)."""
     D, B = _normal_blocks(problem, X, sums, T, lo, hi)
-    return D, B, -_gradient(problem, X, sums, e, T, lo, hi)
+    g = _gradient(problem, X, sums, e, T, lo, hi)
+    return D, B, np.negative(g, out=g)
 
 
 def _given_system(D: dict, B: dict, g: np.ndarray):
@@ -149,12 +157,14 @@ def _given_system(D: dict, B: dict, g: np.ndarray):
     return system
 
 
-def _banded_solve(problem: _Problem, system, ridge: np.ndarray | float = 0.0) -> np.ndarray:
+def _banded_solve(problem: _Problem, system, ridge: np.ndarray | float = 0.0, out: np.ndarray | None = None
+                  ) -> np.ndarray:
     """Solve ``(N + diag(ridge)) δ = g`` for the symmetric positive definite block-tridiagonal N by LAPACK's banded
     Cholesky (:func:`scipy.linalg.solveh_banded`, its lower form, bandwidth s + 1 in :func:`_band_order`); δ (m, s).
     ``system(lo, hi)`` gives N's entries over the pings ``lo:hi`` as :func:`_normal_blocks` does, and g's rows
     (hi − lo, s); ``ridge`` (m, s) or a number is added to N's diagonal. The band and the right-hand side are written
-    a chunk of pings at a time into the problem's buffers (which the solve then overwrites).
+    a chunk of pings at a time into the problem's buffers (which the solve then overwrites); δ into ``out`` (m, s)
+    where given.
 
     Raises
     ------
@@ -181,14 +191,14 @@ def _banded_solve(problem: _Problem, system, ridge: np.ndarray | float = 0.0) ->
         problem.rhs[lo:hi, place] = g
     solved = solveh_banded(problem.band.T, problem.rhs.reshape(-1), overwrite_ab=True, overwrite_b=True, lower=True,
                            check_finite=False)
-    return solved.reshape(m, s)[:, place]
+    return np.take(solved.reshape(m, s), place, axis=1, out=out, mode="clip")
 
 
-def _damped_solve(problem: _Problem, system):
+def _damped_solve(problem: _Problem, system, out: np.ndarray | None = None):
     """:func:`_banded_solve` of the Gauss-Newton step, damped where the system is numerically indefinite (a track far
     from its arrivals, each weighed down to nothing): ``μ diag(N)`` added (Levenberg–Marquardt; Nocedal & Wright,
     *Numerical Optimization*, Springer 2006, § 10.3), μ from 10⁻¹² up by tenfold steps to 1 after an undamped try;
-    None if none holds."""
+    None if none holds. The step into ``out`` (m, s) where given."""
     diagonal = None
     for mu in [None, *10.0 ** np.arange(-12, 1)]:  # first undamped (a 10⁻¹² ridge)
         if mu is not None and diagonal is None:  # N's diagonal (m, s), the state's order
@@ -199,7 +209,7 @@ def _damped_solve(problem: _Problem, system):
                         diagonal[lo:hi, i] = value
         ridge = 1e-12 if mu is None else mu * (diagonal + 1.0)
         try:
-            step = _banded_solve(problem, system, ridge)
+            step = _banded_solve(problem, system, ridge, out)
         except np.linalg.LinAlgError:
             continue
         if np.isfinite(step).all():
