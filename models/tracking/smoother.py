@@ -188,13 +188,16 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         X = run["X"]
         if last["run"] is run:
             sums, e, T, cost = last["terms"]
-        elif run["cost"] is None or not (run["converged"] or count <= 0):
+        else:  # another start's terms no longer kept
+            last.update(run=None, terms=None)
+        if last["run"] is not run and (run["cost"] is None or not (run["converged"] or count <= 0)):
             sums, e, T, cost = _robust_terms(problem, X, dof)
             run["cost"] = cost
         if run["converged"] or count <= 0:
             return
-        # the trial's terms and states written into a second set of arrays, the two swapped when a step is taken
-        spare, trial = (np.empty_like(sums), np.empty_like(e), np.empty_like(T)), np.empty_like(X)
+        # a trial's process residuals, durations and states written into a second set of arrays, the two swapped when
+        # a step is taken; its per-ping sums over the step's own (no longer needed once the step is solved)
+        spare, trial = (sums, np.empty_like(e), np.empty_like(T)), np.empty_like(X)
         step = np.empty_like(X)
         for _ in range(count):
             if run["converged"]:
@@ -209,7 +212,7 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
                 trial += X
                 lower = _trial_cost(problem, trial, dof, spare)
                 if lower < cost:
-                    _trial_sums(problem, dof, spare[0])
+                    _trial_sums(problem, dof, sums)
                     terms = (*spare, lower)
                     break
                 scale *= 0.5
@@ -217,7 +220,7 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
                 run["converged"] = True
                 break
             gain = cost - terms[-1]
-            spare, (sums, e, T, cost) = (sums, e, T), terms
+            spare, (sums, e, T, cost) = (sums, e, T), terms  # the sums the same array in both
             X, trial = trial, X
             run.update(X=X, cost=cost, done=run["done"] + 1, converged=gain <= ROBUST_TOLERANCE * cost)
         last.update(run=run, terms=(sums, e, T, cost))
