@@ -173,7 +173,7 @@ def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tu
         weights[a0:a1] = robust
     w = observed_information(z, dof) if information else robust
     # each product a contiguous row, then the rows side by side (a, q) for the sparse sum (a column at a time into
-    # an array of rows of q would be strided: twice the time)
+    # an array of rows of q would be strided: nearly twice the time)
     rows = P.rows[:sums.shape[1], :a1 - a0]
     wx = np.empty_like(z)
     row = 0
