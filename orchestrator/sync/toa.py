@@ -8,6 +8,9 @@ continuous across the bins), extended by at most one bin beyond the synchronised
 left out and counted). The grouping is :mod:`sblsim.models.sync.pings`'s, its window the array's largest travel time
 at the slowest sound speed allowed (1,300 m/s) plus :data:`TOLERANCE`, the echo limit the shortest burst interval
 (the ping type's, else as the detections show it) less that window.
+
+A synchronisation made with ``--refine-positions`` also wrote ``positions.csv``: its refined horizontal positions
+(read the same way) replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.sync.detections import (
     IDENTIFIER,
+    MAX_COORDINATE,
     MAX_EPOCH,
     Detections,
     _numbers,
@@ -143,6 +147,37 @@ def read_clocks(folder: Path | str) -> Clocks:
         raise ModelError(f"{what}: {name!r}: an offset is not continuous across a bin's edge (a bin's end differs "
                          "from the next bin's start); allowed: sblsim sync's offsets.csv")
     return Clocks(names, edges, knots)
+
+
+def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
+    """The refined positions of a synchronisation's folder (``positions.csv``: ``serial``, ``x_m``, ``y_m``; other
+    columns ignored), None where it has none (the positions were not refined).
+
+    Raises
+    ------
+    ModelError
+        One line: a cell outside its pattern or range, a receiver twice.
+    """
+    path = Path(folder) / "positions.csv"
+    if not path.exists():
+        return None
+    what = "sync"
+    header, body, lines = _table(path, what, MAX_OFFSET_ROWS)
+    name = str(path)
+    lower = [h.lower() for h in header]
+    needed = ("serial", "x_m", "y_m")
+    missing = [c for c in needed if c not in lower]
+    if missing or not len(body):
+        raise ModelError(f"{what}: {name!r}: needs the columns {', '.join(needed)} and rows (sblsim sync "
+                         f"--refine-positions' positions.csv); {', '.join(missing) or 'no rows'} missing")
+    col = {c: lower.index(c) for c in needed}
+    serial = _pattern(body[col["serial"]], IDENTIFIER, what, name, lines, "serial",
+                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").tolist()
+    x = _numbers(body[col["x_m"]], what, name, lines, "x_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
+    y = _numbers(body[col["y_m"]], what, name, lines, "y_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
+    if len(set(serial)) != len(serial):
+        raise ModelError(f"{what}: {name!r}: a receiver is listed twice; allowed: one row per receiver")
+    return {n: (float(a), float(b)) for n, a, b in zip(serial, x, y)}
 
 
 @dataclass
@@ -381,9 +416,19 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str, 
     shortest = _shortest(ping_type, interval, sequence)
     data = read_detections(detections, format)
     table = read_hydrophones(receivers)
+    refined = read_positions(sync)
+    if refined is not None:  # the synchronisation's refined positions replace the table's
+        table = table.copy()
+        moved = table["receiver"].isin(refined).to_numpy()
+        table.loc[moved, "x"] = [refined[n][0] for n in table.loc[moved, "receiver"]]
+        table.loc[moved, "y"] = [refined[n][1] for n in table.loc[moved, "receiver"]]
     given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
              "burst_sequence": None if sequence is None else sequence.name}
-    return build_toa(data, table, clocks, tag, shortest, given)
+    outcome = build_toa(data, table, clocks, tag, shortest, given)
+    if refined is not None:
+        outcome.summary["positions"] = {"source": "the synchronisation's positions.csv (refined)",
+                                        "receivers": int(moved.sum())}
+    return outcome
 
 
 def run_lines(outcome, where: str) -> list[str]:
@@ -401,6 +446,9 @@ def run_lines(outcome, where: str) -> list[str]:
              + ", ".join(f"{k}: {v}" for k, v in heard.items()),
              f"  time base of toa.txt: {s['origin_epoch_s']:.0f} s since 1970-01-01 UTC"
              + (f"; sensor values per ping: {', '.join(s['sensors'])}" if s["sensors"] else "")]
+    if "positions" in s:
+        lines.append(f"  receivers' positions: {s['positions']['receivers']} from the synchronisation's "
+                     "positions.csv (refined)")
     if where:
         lines.append(f"  written to {where}/ (toa.txt, receivers.csv, pings.csv, toa.json)")
     return lines

@@ -223,6 +223,13 @@ def test_the_positions_refined_on_a_small_array(tmp_path, capsys):
     assert t["median_error_m"].median() < t["table_error_m"].median()
     summary = json.loads((out / "sync.json").read_text())
     assert summary["positions"]["survey_sigma_m"] == 2.0 and "Tapley" in summary["model"]
+    # sblsim toa from that folder takes the refined positions (the matrix's receivers.csv), and says so
+    code = main(["toa", str(detections), "--receivers", str(hydrophones), "--sync", str(out), "--tag", "S1",
+                 "--out", str(tmp_path / "toa")])
+    assert code == 0 and "from the synchronisation's positions.csv" in capsys.readouterr().out
+    written = pd.read_csv(tmp_path / "toa" / "receivers.csv")
+    np.testing.assert_allclose(written[["x_m", "y_m"]], q.set_index("serial").loc[written["name"], ["x_m", "y_m"]],
+                               atol=1e-4)  # receivers.csv holds 0.1 mm
     plain = sblsim.sync(detections, receivers=hydrophones, sound_speed=sim.sound_speed, reference="R0",
                         out=tmp_path / "plain")
     assert plain.positions is None and not (tmp_path / "plain" / "positions.csv").exists()
