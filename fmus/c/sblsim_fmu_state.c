@@ -175,12 +175,49 @@ static const sblsim_variable* variable_at(const sblsim_model* m, int causality, 
     return NULL;
 }
 
-/* Why a deserialized state cannot be taken: 0 if it can, else -1 with a message naming what is wrong. */
+/* Whether the outputs a state holds as NaN are NaN where the model's output function puts them, at the state's
+   own x, p, d and t: a receiver's estimate before its first fix (undefined, NaN; models/receiver/core.py's
+   NO_ESTIMATE). 0 if every NaN output is the model's, else -1 with a message naming the first that is not (the
+   output function gives a value there: the state was changed). Called only for a state past initialization whose
+   values are otherwise finite and whose parameters are checked, so the function runs on what a step would. */
+static int check_undefined_outputs(const sblsim_model* m, const sblsim_saved* v, char* message, size_t size) {
+    const double* p = v->values;
+    const double* d = p + m->n_p;
+    const double* x = d + m->n_d;
+    const double* y = x + m->n_x + m->n_u;
+    double* model_y = (double*)calloc((size_t)(m->n_y > 0 ? m->n_y : 1), sizeof(double));
+    int i, failed = 0;
+    if (model_y == NULL) {
+        snprintf(message, size, "out of memory");
+        return -1;
+    }
+    if (sblsim_output_at(m, x, p, d, v->t, model_y)) {
+        snprintf(message, size, "its outputs cannot be computed from its state");
+        failed = -1;
+    }
+    for (i = 0; !failed && i < m->n_y; i++) {
+        if (isnan(y[i]) && !isnan(model_y[i])) {
+            const sblsim_variable* named = variable_at(m, SBLSIM_OUTPUT, i);
+            if (named != NULL)
+                snprintf(message, size, "%s = nan is not finite (its state gives %.17g)", named->name, model_y[i]);
+            else
+                snprintf(message, size, "y[%d] = nan is not finite (its state gives %.17g)", i, model_y[i]);
+            failed = -1;
+        }
+    }
+    free(model_y);
+    return failed;
+}
+
+/* Why a deserialized state cannot be taken: 0 if it can, else -1 with a message naming what is wrong. Every value
+   is finite but for an output that is NaN where the model's output function makes it NaN (an undefined output: a
+   receiver's estimate before its first fix), in a state past initialization. */
 static int check_saved(const sblsim_model* m, const sblsim_saved* v, unsigned past_init_states, char* message,
                        size_t size) {
     static const char* const blocks[N_BLOCKS] = {"p", "d", "x", "u", "y"};
     const double* u = v->values + m->n_p + m->n_d + m->n_x;
     int past_init = (past_init_states >> v->state) & 1u;
+    int undefined = 0; /* NaN outputs, checked against the model's output function once the rest is */
     size_t offset = 0;
     int k, i;
     if (!isfinite(v->start_time) || !isfinite(v->t0) || !isfinite(v->t)) {
@@ -195,6 +232,10 @@ static int check_saved(const sblsim_model* m, const sblsim_saved* v, unsigned pa
     for (k = 0; k < N_BLOCKS; k++) {
         for (i = 0; i < block_size(m, k); i++) {
             double value = v->values[offset + (size_t)i];
+            if (k == 4 && past_init && isnan(value)) {
+                undefined = 1;
+                continue;
+            }
             if (!isfinite(value)) {
                 const sblsim_variable* named = k == 3 ? variable_at(m, SBLSIM_INPUT, i)
                                                : k == 4 ? variable_at(m, SBLSIM_OUTPUT, i) : NULL;
@@ -219,6 +260,7 @@ static int check_saved(const sblsim_model* m, const sblsim_saved* v, unsigned pa
             return -1;
         }
     }
+    if (undefined && check_undefined_outputs(m, v, message, size)) return -1;
     return 0;
 }
 

@@ -68,7 +68,9 @@ void sblsim_serialize(const sblsim_model* m, uint64_t magic, const sblsim_saved*
    purposes of model m, a state number below n_states (at most 32), times finite and ordered, every value
    finite (naming the variable), the inputs within their declared ranges and, when its state number is one of
    `past_init_states` (a bit set over the shell's state numbers), the parameters (sblsim_check_parameters)
-   and t0 not before the start time. 0 if it is taken, copied into `into` (which may be freshly allocated
+   and t0 not before the start time. In such a state an output may be NaN exactly where the model's output
+   function, at the state's own x, p, d and t, gives NaN (an undefined output: a receiver's estimate before its
+   first fix); a NaN output where it gives a value is refused. 0 if it is taken, copied into `into` (which may be freshly allocated
    by the caller); else -1 with a message (the shell prefixes its function name), `into` left as it was.
    `message` takes SBLSIM_STATE_MESSAGE bytes for the whole message. */
 int sblsim_deserialize(const sblsim_model* m, uint64_t magic, int n_states, unsigned past_init_states,

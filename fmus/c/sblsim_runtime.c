@@ -265,6 +265,20 @@ static int output(sblsim_instance* s, double t) {
     return call(s, s->model->output.f, s->y);
 }
 
+int sblsim_output_at(const sblsim_model* m, const double* x, const double* p, const double* d, double t, double* y) {
+    sblsim_work* w = sblsim_work_new(m);
+    int failed;
+    if (w == NULL) return -1;
+    w->arg[0] = x;
+    w->arg[1] = p;
+    w->arg[2] = d;
+    w->arg[3] = &t;
+    w->res[0] = y;
+    failed = m->output.f(w->arg, w->res, w->iw, w->w, 0) ? -1 : 0;
+    sblsim_work_free(w);
+    return failed;
+}
+
 /* Whether event e runs in this run: for each of its conditions, the choice parameter's bit in its mask. */
 static int event_runs(const sblsim_instance* s, const sblsim_event* e) {
     int c;

@@ -164,6 +164,10 @@ int sblsim_initialize_shared(sblsim_instance* s, double t0, int prepare, char* m
    afterwards, as an FMU state's restore does, calls it again). */
 void sblsim_choose_events(sblsim_instance* s);
 
+/* The outputs y of model m at state x, parameters p, derived values d and time t (the model's output function, in
+   a work space of its own: no instance needed). 0 on success, -1 when memory runs out or the function fails. */
+int sblsim_output_at(const sblsim_model* m, const double* x, const double* p, const double* d, double t, double* y);
+
 /* One communication step from t to t + h: step, events, output. 0 on success. */
 int sblsim_do_step(sblsim_instance* s, double t, double h, char* message, size_t size);
 
