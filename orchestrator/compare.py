@@ -14,10 +14,12 @@ table gains a ``system`` column, one row per system and receiver.
 The ``pcrb_rms`` of each system is its own: ranges and depth for SBL and
 LBL, range, azimuth, elevation and depth for USBL (:mod:`sblsim.models.bound`).
 
-Per receiver (and system), over all steps of all replicates:
+Per receiver (and system), over the steps with an estimate of all replicates
+(none before a receiver's first fix: its estimate is NaN there, never its
+starting guess):
 
-* ``rms_e_tot``: RMS of e_tot [m] (``sqrt(mean(e_tot_rms²))``, every run having
-  the same number of steps), and ``rms_e_tot_sd``, the standard deviation of
+* ``rms_e_tot``: RMS of e_tot [m] (``sqrt(mean(e_tot_rms²))``, each run weighted
+  alike: the runs' steps before the first fix may differ in number), and ``rms_e_tot_sd``, the standard deviation of
   the runs' RMS e_tot over the replicates [m] (the spread a designer sees from
   run to run);
 * ``mean_e_tot``: mean e_tot [m];

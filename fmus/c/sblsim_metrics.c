@@ -32,7 +32,7 @@ typedef struct {
     errors_acc est, instr;
     double nees_sum, nis_sum, trace_sum, previous_seq, lane_seq[SBLSIM_LANES - 1];
     long nees_count, covered, started, fresh, gated, rejected;
-    int lost;
+    int lost, fixed; /* fixed: an estimate was finite at a step before (NaN before a receiver's first fix) */
     double bound[N_BOUND];
 } run_acc;
 
@@ -123,9 +123,10 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             run_acc* s = &acc[r];
             const double* f = fixed + (size_t)r * SBLSIM_N_FIXED;
             double v[SBLSIM_COLUMN_LANE2_PACKET_SEQ], e[4], signed_error[3], slot, fresh, epsilon, error, reach;
-            int c, id, m;
+            int c, id, m, estimated;
             for (c = 0; c < SBLSIM_COLUMN_LANE2_PACKET_SEQ; c++) v[c] = at(columns, strides, c, k, r);
-            if (errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_EST_X], e)) add_errors(&s->est, e);
+            estimated = errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_EST_X], e);
+            if (estimated) add_errors(&s->est, e);
             if (v[SBLSIM_COLUMN_INSTR_VALID] > 0.5 && errors(&v[SBLSIM_COLUMN_TRUE_X], &v[SBLSIM_COLUMN_INSTR_X], e))
                 add_errors(&s->instr, e);
             for (a = 0; a < 3; a++) signed_error[a] = v[SBLSIM_COLUMN_TRUE_X + a] - v[SBLSIM_COLUMN_EST_X + a];
@@ -140,7 +141,8 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             reach = sqrt(v[SBLSIM_COLUMN_TRUE_X] * v[SBLSIM_COLUMN_TRUE_X] +
                          v[SBLSIM_COLUMN_TRUE_Y] * v[SBLSIM_COLUMN_TRUE_Y] +
                          v[SBLSIM_COLUMN_TRUE_Z] * v[SBLSIM_COLUMN_TRUE_Z]);
-            if (!isfinite(error) || (error > limits[1] && error > limits[2] * reach)) s->lost = 1;
+            if (isfinite(error)) s->fixed = 1;
+            if ((s->fixed && !isfinite(error)) || (error > limits[1] && error > limits[2] * reach)) s->lost = 1;
             if (rint(v[SBLSIM_COLUMN_PACKET_SEQ]) > 0) {
                 s->nis_sum += v[SBLSIM_COLUMN_NIS];
                 s->started++;
@@ -195,7 +197,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
                 memcpy(s->bound, next, sizeof next);
             }
             error = sqrt(next[0] + next[2 * (SBLSIM_BOUND_STATE + 1)] + next[4 * (SBLSIM_BOUND_STATE + 1)]);
-            s->trace_sum += error * error;
+            if (estimated) s->trace_sum += error * error; /* pcrb_rms: over the steps with an estimate */
             if (bound != NULL) bound[(size_t)k * (size_t)b + (size_t)r] = error;
         }
     }
@@ -231,7 +233,7 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
         o[SBLSIM_METRIC_COVERAGE_95] = (double)s->covered / (double)s->nees_count;
         o[SBLSIM_METRIC_NIS_MEAN] = s->nis_sum / (double)s->started;
         o[SBLSIM_METRIC_GATED_PCT] = 100.0 * (double)s->gated / (double)s->fresh;
-        o[SBLSIM_METRIC_PCRB_RMS] = sqrt(s->trace_sum / (double)n);
+        o[SBLSIM_METRIC_PCRB_RMS] = sqrt(s->trace_sum / (double)s->est.count);
         o[SBLSIM_METRIC_DIVERGED] = s->lost ? 1.0 : 0.0;
     }
     free(w);

@@ -38,6 +38,7 @@ Cario et al., Sensors 21(3):762, 2021, doi:10.3390/s21030762, Section 4.3.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import casadi as ca
@@ -461,6 +462,10 @@ def toa_ranging(p: dict):
 
 #: What the last depth reading a receiver used starts as: no reading (below every depth a sensor gives).
 NO_DEPTH = -1e300
+#: A receiver's estimate before its first fix (its first update with a received packet; the least-squares
+#: receiver's first valid fix): undefined, never its starting guess (``x0_*``, tied to the diver's true start).
+#: Every metric skips it (a step without an estimate).
+NO_ESTIMATE = math.nan
 
 
 def depth_fresh(x: dict, u: dict, p: dict):
@@ -757,13 +762,14 @@ class KalmanReceiver(RangesWithProfile, Component):
         # a receiver with error states may take an inverted LBL's pings: the depth reading it used last
         pinged = [("depth_seen", 1)] if cls.motion.state_size > CONSTANT_VELOCITY.state_size else []
         b = ProgramBuilder(cls, n, states=[("x", size), ("P", size * size)] + packet_states(n) + [
-            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n)] + lm_states() + rejected + pinged,
+            ("fix", 3), ("fix_valid", 1), ("nis", 1), ("gated", 1), ("failed", n), ("updated", 1)] + lm_states()
+            + rejected + pinged,
                            derived=profile_derived(cls, n))
 
         def init(p, d, w, t0):
             x0, P0 = cls.initial(p)
             return {"x": x0, "P": ca.vec(P0), **packet_init(n, t0), "fix": ca.SX.zeros(3), "fix_valid": 0, "nis": 0,
-                    "gated": 0, "failed": ca.SX.zeros(n), **lm_idle(), **rejected_init(n),
+                    "gated": 0, "failed": ca.SX.zeros(n), "updated": 0, **lm_idle(), **rejected_init(n),
                     **{name: NO_DEPTH for name, _ in pinged}}
 
         def remembered(out):
@@ -790,8 +796,10 @@ class KalmanReceiver(RangesWithProfile, Component):
             guess = ca.if_else(x["fix_valid"], x["fix"], cls.motion.position(out["x"]))
             fix = lm_begin(held, guess, u["depth"], p)
             seen = {"depth_seen": ca.if_else(depth_fresh(x, u, p), u["depth"], x["depth_seen"])} if pinged else {}
+            used = ca.logic_and(fresh_packet(u, n), out["gated"] < 0.5)  # a received packet the update took
             return {**held, "x": out["x"], "P": ca.vec(out["P"]), "nis": out["nis"], "gated": out["gated"],
-                    "failed": out["failed"], **remembered(out), **fix, **seen,
+                    "failed": out["failed"], "updated": ca.logic_or(x["updated"], used), **remembered(out), **fix,
+                    **seen,
                     "fix": ca.if_else(fix["lm_active"], fix["lm_point"], x["fix"]), "fix_valid": fix["lm_active"]}
 
         def packet_slot(x, u, p, t, h):
@@ -799,7 +807,8 @@ class KalmanReceiver(RangesWithProfile, Component):
             of a fresh packet and the depth (:meth:`~sblsim.models.systems.System.packet_fix`)."""
             fresh = fresh_packet(u, 1)
             out = system.receiver_update(cls, {**x, "P": ca.reshape(x["P"], size, size), "now": t + h}, u, p, fresh)
-            return {**x, **out, "P": ca.vec(out["P"]),
+            used = ca.logic_and(fresh, out["gated"] < 0.5)
+            return {**x, **out, "P": ca.vec(out["P"]), "updated": ca.logic_or(x["updated"], used),
                     "fix": ca.if_else(fresh, system.packet_fix(u, p, u["depth"])[0], x["fix"]),
                     "fix_valid": ca.logic_or(x["fix_valid"], fresh)}
 
@@ -809,7 +818,8 @@ class KalmanReceiver(RangesWithProfile, Component):
 
         def output(x, p, d, t):
             P = ca.reshape(x["P"], size, size)[position, position]
-            out = {f"est_{name}": x["x"][k] for k, name in enumerate(STATE_NAMES)}
+            updated = x["updated"] > 0.5  # before the first update: no estimate (never the prior, x0_*)
+            out = {f"est_{name}": ca.if_else(updated, x["x"][k], NO_ESTIMATE) for k, name in enumerate(STATE_NAMES)}
             out.update({f"instr_{a}": ca.if_else(x["fix_valid"], x["fix"][k], 0.0) for k, a in enumerate("xyz")})
             out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[1, 1] + P[2, 2]),
                        gated=x["gated"], **covariance_outputs(P))
@@ -910,7 +920,7 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "errors_of", "filter_parameters", "first_lane", "first_row", "fresh_packet", "fresh_range",
            "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin",
            "lm_idle", "lm_states", "lm_step", "lane_one_due", "lanes_due", "lane_used", "new_ping", "next_lane",
-           "NO_DEPTH", "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters",
+           "NO_DEPTH", "NO_ESTIMATE", "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters",
            "profile_derived", "profile_prepare_of", "RangesWithProfile", "reanchored", "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",
            "slot_events", "slot_update", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

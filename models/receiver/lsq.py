@@ -10,13 +10,15 @@ with the Levenberg-Marquardt iteration of :mod:`sblsim.models.receiver.multilate
 (damped Gauss-Newton) started from the previous fix, to a tighter tolerance
 than the instrumentation's (the fix is this receiver's estimate). Nothing is
 filtered: the estimate is the latest valid fix of a slot that brought a fresh
-range (the initial guess x0 until the first one), and the velocity is the
-finite difference of the last two such fixes over the time between their
-slots (a slot whose packet was lost refits the same held ranges: it changes
-neither). With a USBL interface the fix is the least-squares fix of the packet's
-range and direction and the depth, with its covariance and its weighted residual
-(``nis``, one degree of freedom: :func:`sblsim.models.systems.usbl.packet_fix`),
-R with the transceiver's uncertainty of the beacon parameters
+range, and the velocity is the finite difference of the last two such fixes
+over the time between their slots (a slot whose packet was lost refits the
+same held ranges: it changes neither). Before the first fix the estimate is
+undefined (NaN, position and velocity: :data:`~sblsim.models.receiver.core.NO_ESTIMATE`):
+the initial guess x0 only starts the first iteration, it is never reported
+(the configuration ties it to the diver's true start). With a USBL interface
+the fix is the least-squares fix of the packet's range and direction and the
+depth, with its covariance and its weighted residual (``nis``, one degree of
+freedom: :func:`sblsim.models.systems.usbl.packet_fix`), R with the transceiver's uncertainty of the beacon parameters
 (:func:`~sblsim.models.receiver.core.beacon_parameters`, declared last). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
@@ -43,6 +45,7 @@ from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
 from sblsim.models.program import ProgramBuilder
 from sblsim.models.receiver.core import (
+    NO_ESTIMATE,
     RangesWithProfile,
     arrival_interface,
     beacon_parameters,
@@ -146,8 +149,9 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
                     "has_fix": ca.logic_or(x["has_fix"], new)}
 
         def output(x, p, d, t):
-            out = {f"est_{a}": x["fix"][k] for k, a in enumerate("xyz")}
-            out.update({f"est_v{a}": x["velocity"][k] for k, a in enumerate("xyz")})
+            fixed = x["has_fix"] > 0.5  # none yet: no estimate (never the starting guess)
+            out = {f"est_{a}": ca.if_else(fixed, x["fix"][k], NO_ESTIMATE) for k, a in enumerate("xyz")}
+            out.update({f"est_v{a}": ca.if_else(fixed, x["velocity"][k], NO_ESTIMATE) for k, a in enumerate("xyz")})
             out.update({f"instr_{a}": x["instr"][k] for k, a in enumerate("xyz")})
             out.update(instr_valid=x["instr_valid"], nis=x["nis"], pos_std=x["pos_std"], gated=0,
                        **covariance_outputs(ca.reshape(x["cov"], 3, 3)))

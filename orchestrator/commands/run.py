@@ -335,14 +335,14 @@ def _run_warnings(s: dict, plan) -> list[str]:
     out = []
     if s["updates"] == 0:
         out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
-                   "(every packet lost or gated); its numbers measure its starting guess (receiver.x0_*) and what "
-                   "its motion model predicts from it (summary.json: updates = 0)")
+                   "(every packet lost or gated); it has no estimate and its error metrics no value "
+                   "(summary.json: updates = 0)")
     elif s["fix_steps"] == 0 and plan.latency_steps > 0:
         # the record shows what the diver sees: the receiver's outputs receiver.latency late
         latency = f"receiver.latency = {plan['receiver']['latency']:g} s"
         if plan.latency_steps >= s["steps"]:
             what = (f"{latency} is as long as the run: the diver never sees an output the receiver computed from a "
-                    f"packet (every recorded estimate is its starting guess), though it used {s['updates']} ranges")
+                    f"packet (no recorded step has an estimate), though it used {s['updates']} ranges")
         else:
             what = (f"no multilateration fix reached the diver within the run (none was made, or {latency} delayed "
                     "every one past its end)")
@@ -350,7 +350,7 @@ def _run_warnings(s: dict, plan) -> list[str]:
                    "diver saw a fix)")
     elif s["fix_steps"] == 0:
         out.append("no multilateration fix was ever made (never ranges of three beacons): the instr_ metrics have "
-                   "no value, and a receiver that reports that fix (lsq) never left its starting guess "
+                   "no value, and a receiver that reports that fix (lsq) has no estimate "
                    "(summary.json: fix_steps = 0)")
     if s.get("slot_overrun"):
         out.append(f"an exchange was still heard {s['slot_overrun']:.4g} s after its slot began (its last arrival, "

@@ -3,7 +3,8 @@
 Per step: ``e_x = |x − x̂|``, ``e_y``, ``e_z`` and
 ``e_tot = sqrt(e_x² + e_y² + e_z²)``; per run: the time-average of each, the
 RMS of e_tot and its standard deviation (population, ddof = 0). Steps where an
-estimate is not available (NaN, e.g. no instrumentation fix yet) are left out.
+estimate is not available (NaN: a receiver's estimate before its first fix, which
+is never its starting guess, or no instrumentation fix yet) are left out.
 
 Consistency (Bar-Shalom, Li, Kirubarajan, Estimation with Applications to
 Tracking and Navigation, Wiley 2001, Section 5.4): the position NEES
@@ -14,9 +15,15 @@ filter) and ``coverage_95``, the share of steps with ε ≤ χ²₃(0.95) = 7.81
 where P is not positive-definite are left out. ``nis_mean`` is the mean of
 the receiver's ``nis`` output from the first slot on; ``gated_pct`` the share
 of received slots whose range the gate rejected [%]; ``pcrb_rms`` the RMS of
-the position PCRB along the run (:mod:`sblsim.models.bound`), comparable
-with ``e_tot_rms``. ``diverged`` flags a run whose receiver lost the diver: an
-estimate that is not finite, or farther from the truth than both
+the position PCRB (:mod:`sblsim.models.bound`) over the steps ``e_tot_rms``
+averages, those with an estimate (:func:`bound_rms`): the two are comparable
+(over every step it would count the first steps, where the bound is still the
+prior, and the error does not). The PCRB itself is stepped from the start of
+the run, whatever the receiver (it takes every slot from the first); receivers
+whose first fix differs average it over different steps, so their
+``pcrb_rms`` differ a little while their per-step bound is the same.
+``diverged`` flags a run whose receiver lost the diver: an estimate that is
+not finite after its first fix, or farther from the truth than both
 :data:`DIVERGENCE_DISTANCE` and :data:`DIVERGENCE_RATIO` times the diver's
 distance from the platform, or, by the receiver's own statistics, a run of
 :data:`DIVERGENCE_REJECTIONS` received packets in a row that its NIS gate
@@ -30,7 +37,7 @@ Two flags say when the numbers are not what they seem (:func:`run_flags`):
 ``updates`` counts the slots whose received range the receiver used (new,
 received, not gated) and ``fix_steps`` the steps with a multilateration fix
 (``instr_valid``); with no update the receiver never made a fix and reports
-its starting guess (and what its motion model predicts from it). And
+no estimate (NaN: its error metrics are NaN). And
 ``beyond_geometry`` flags a diver farther from the platform reference
 (``max_distance``, horizontal) than :data:`REACH_RATIO` times the beacons'
 horizontal spread: the horizontal position comes from range differences
@@ -292,6 +299,27 @@ def rejected_run(rejected: np.ndarray, fresh: np.ndarray) -> np.ndarray:
     return longest
 
 
+def bound_rms(bound: np.ndarray, estimated: np.ndarray) -> np.ndarray:
+    """``pcrb_rms``: the RMS of the position PCRB over the steps with an estimate, those ``e_tot_rms`` averages.
+
+    Parameters
+    ----------
+    bound : ndarray, shape (N, B)
+        Position PCRB ``sqrt(trace)`` at each step [m] (NaN: not available).
+    estimated : ndarray of bool, shape (N, B)
+        The steps whose estimate is finite (none before a receiver's first fix).
+
+    Returns
+    -------
+    ndarray, shape (B,)
+        [m]; NaN for a run without an estimate.
+    """
+    bound = np.ascontiguousarray(np.asarray(bound, dtype=float).T)  # run-major: each run summed in time order
+    estimated = np.ascontiguousarray(np.asarray(estimated, dtype=bool).T)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(np.where(estimated, bound * bound, 0.0).sum(axis=-1) / estimated.sum(axis=-1))
+
+
 def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: np.ndarray, fresh: np.ndarray,
                 gated: np.ndarray, bound: np.ndarray, truth: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Consistency metrics of B runs (:data:`CONSISTENCY_NAMES`).
@@ -311,7 +339,8 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
     gated : ndarray of bool, shape (N, B)
         The receiver's ``gated`` output.
     bound : ndarray, shape (N, B)
-        Position PCRB ``sqrt(trace)`` [m] (NaN: not available).
+        Position PCRB ``sqrt(trace)`` [m] (NaN: not available); ``pcrb_rms`` its RMS over the steps with an
+        estimate (:func:`bound_rms`).
     truth : ndarray, shape (N, B, 3), optional
         True positions relative to the platform reference [m] (for the divergence test; default: at it).
 
@@ -326,7 +355,8 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
     e = runs(nees(err, cov))
     error = runs(np.sqrt(np.sum(np.asarray(err, dtype=float) ** 2, axis=-1)))
     reach = 0.0 if truth is None else runs(np.sqrt(np.sum(np.asarray(truth, dtype=float) ** 2, axis=-1)))
-    lost = ~np.isfinite(error) | ((error > DIVERGENCE_DISTANCE) & (error > DIVERGENCE_RATIO * reach))
+    fixed = np.logical_or.accumulate(np.isfinite(error), axis=-1)  # from the first fix on (NaN before it)
+    lost = (fixed & ~np.isfinite(error)) | ((error > DIVERGENCE_DISTANCE) & (error > DIVERGENCE_RATIO * reach))
     lost = lost.any(axis=-1) | (rejected_run(runs(fresh, bool) & runs(gated, bool), runs(fresh, bool))
                                 >= DIVERGENCE_REJECTIONS)
     valid = np.isfinite(e)
@@ -339,7 +369,7 @@ def consistency(err: np.ndarray, cov: np.ndarray, nis: np.ndarray, packet_seq: n
             "coverage_95": (valid & (e <= NEES_95)).sum(axis=-1) / count,
             "nis_mean": np.where(started, runs(nis), 0.0).sum(axis=-1) / started.sum(axis=-1),
             "gated_pct": 100.0 * (fresh & runs(gated, bool)).sum(axis=-1) / fresh.sum(axis=-1),
-            "pcrb_rms": np.sqrt(np.mean(runs(bound) ** 2, axis=-1)),
+            "pcrb_rms": bound_rms(bound, np.isfinite(error).T),
             "diverged": lost,
         }
 

@@ -36,6 +36,7 @@ from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
 from sblsim.orchestrator.cosim.metrics import (
     METRIC_INPUTS,
+    bound_rms,
     errors,
     lane_slots,
     new_pings,
@@ -406,7 +407,10 @@ def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
             bound = np.empty((theirs.shape[0], len(plans))) if bound is None else bound
             bound[:, chosen] = theirs
         values["pcrb_rms"] = np.asarray(values["pcrb_rms"], dtype=float).copy()
-        values["pcrb_rms"][chosen] = np.sqrt(np.mean(np.ascontiguousarray(theirs.T) ** 2, axis=-1))
+        position = {kind: np.stack([np.asarray(rec[TIMESERIES_COLUMNS[f"{kind}_{a}"]], dtype=float)[:, chosen]
+                                    for a in "xyz"], axis=-1) for kind in ("true", "est")}
+        estimated = np.isfinite(errors(position["true"], position["est"])).all(axis=-1)  # the steps e_tot_rms takes
+        values["pcrb_rms"][chosen] = bound_rms(theirs, estimated)
     spread = np.array([p.horizontal_spread for p in plans])
     flags = run_flags({**{name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, **lanes}, spread,
                       arms.shape[1])

@@ -78,7 +78,8 @@ def static_check(design: Design, resolved: Resolved, where: str, point: np.ndarr
     seq = ts["packet_seq"].to_numpy()
     first = np.r_[True, ts["replicate"].to_numpy()[1:] != ts["replicate"].to_numpy()[:-1]]
     new = (seq != np.r_[0, seq[:-1]]) & ~first & (seq > 0) & ts["packet_valid"].to_numpy(bool)
-    rows = ts[new & (ts["time"].to_numpy() > warm)]
+    estimated = np.isfinite(ts[["est_x", "est_y", "est_z"]].to_numpy()).all(axis=1)  # NaN: no fix yet, not a fix
+    rows = ts[new & (ts["time"].to_numpy() > warm) & estimated]
     error = rows[["est_x", "est_y", "est_z"]].to_numpy() - rows[["true_x", "true_y", "true_z"]].to_numpy()
     if horizontal:
         error = error[:, :2]

@@ -71,8 +71,10 @@ def plot_trajectory_3d(ts: pd.DataFrame, ax, receiver: str = "receiver") -> plt.
     ax.plot(ts["est_y"], ts["est_x"], ts["est_z"], color="tab:red", lw=1.0, label=f"{receiver} estimate")
     ax.scatter(ts["true_y"].iloc[:1], ts["true_x"].iloc[:1], ts["true_z"].iloc[:1], color="tab:green", s=30,
                label="start")
-    horizontal = max(float(np.ptp(ts[c])) for c in ("true_x", "true_y", "est_x", "est_y"))
-    depth = pd.concat([ts["true_z"], ts["est_z"]])
+    # an estimate is NaN before the receiver's first fix
+    horizontal = max(float(np.ptp(ts[c].dropna())) if ts[c].notna().any() else 0.0
+                     for c in ("true_x", "true_y", "est_x", "est_y"))
+    depth = pd.concat([ts["true_z"], ts["est_z"]]).dropna()
     half = max(0.55 * float(np.ptp(depth)), 0.125 * horizontal, 0.5)
     middle = 0.5 * (float(depth.min()) + float(depth.max()))
     ax.set_zlim(middle + half, middle - half)  # depth grows downwards
@@ -128,7 +130,8 @@ def plot_error_bounds(ts: pd.DataFrame, axes, receiver: str = "receiver") -> plt
 
 def _limits(*series, symmetric: bool = False) -> tuple[float, float]:
     """Axis limits that show the settled values (the 99th percentile of each series, with a margin)."""
-    top = max((float(np.nanpercentile(np.asarray(v, dtype=float), 99)) for v in series if len(v)), default=1.0)
+    top = max((float(np.nanpercentile(np.asarray(v, dtype=float), 99)) for v in series
+               if np.isfinite(np.asarray(v, dtype=float)).any()), default=1.0)  # none: no estimate at all
     top = 1.15 * top if np.isfinite(top) and top > 0 else 1.0
     return (-top, top) if symmetric else (0.0, top)
 

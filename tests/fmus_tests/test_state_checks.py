@@ -3,7 +3,8 @@
 A state from a file or a network is bytes from someone else: a NaN time, a NaN or out-of-range parameter
 or a NaN state entry would make every output after it NaN. The FMU refuses such a state with fmi2Error
 and one log line naming what is wrong, and the host's state object stays as it was (it still restores the
-state it held).
+state it held). An output may be NaN only where the state itself makes it NaN: a receiver's estimate before its
+first fix (no estimate), whose state is taken.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from fmpy.fmi1 import FMICallException
 
 from sblsim.fmus.build import fmu_path
 from sblsim.models import MODELS
-from tests.fmus_tests.test_fmi_semantics import Slave
+from tests.fmus_tests.test_fmi_semantics import Slave, finite_but_the_estimate_before_a_fix
 
 T = 0.1
 #: Words before the values: magic, value count, purposes, state number, start time, t0, t (fmi2_shell.c).
@@ -71,19 +72,38 @@ def _cases(name: str) -> list[tuple[str, int, float | int, str]]:
     return cases
 
 
+#: A still diver and four beacons (NED [m]): the packets fed to a receiver, so that its state has a fix.
+DIVER, BEACONS = np.array([10.0, 5.0, 5.0]), np.array([[1.5, 0.0, 1.0], [0.0, 1.5, 1.0], [-1.5, 0.0, 1.0],
+                                                        [0.0, -1.5, 1.0]])
+
+
+def feed(s: Slave, k: int) -> None:
+    """Step k's packet to a receiver (a round robin over :data:`BEACONS`, the exact range to :data:`DIVER`)."""
+    beacon = BEACONS[k % 4]
+    distance = float(np.linalg.norm(DIVER - beacon))
+    s.set(packet_seq=k + 1, beacon_id=k % 4 + 1, packet_valid=True, tx_time=k * T, rx_time=k * T + distance / 1500.0,
+          range=distance, beacon_x=beacon[0], beacon_y=beacon[1], beacon_z=beacon[2], depth=DIVER[2])
+
+
+def step(s: Slave, name: str, k: int) -> None:
+    if name.startswith("receiver"):
+        feed(s, k)
+    s.fmu.doStep(k * T, T)
+
+
 @pytest.fixture(scope="module", params=list(MODELS))
 def stepped(request, fmu_dir):
-    """An instance of a model's FMU stepped 10 times, its state at step 10 serialized, and the outputs that
-    follow that state (10 more steps)."""
+    """An instance of a model's FMU stepped 10 times (a receiver fed a packet at each: it has a fix), its state at
+    step 10 serialized, and the outputs that follow that state (10 more steps)."""
     s = Slave(str(fmu_path(fmu_dir, request.param))).start()
     for k in range(10):
-        s.fmu.doStep(k * T, T)
+        step(s, request.param, k)
     state = s.fmu.getFMUstate()
     data = s.fmu.serializeFMUstate(state)
     at_save = s.outputs()
     after = []
     for k in range(10, 20):
-        s.fmu.doStep(k * T, T)
+        step(s, request.param, k)
         after.append(s.outputs())
     return request.param, s, state, data, at_save, np.array(after)
 
@@ -110,10 +130,48 @@ def test_a_tampered_state_is_refused_with_one_log_line_and_the_held_state_kept(s
     np.testing.assert_array_equal(s.outputs(), at_save)
     replay = []
     for k in range(10, 20):
-        s.fmu.doStep(k * T, T)
+        step(s, name, k)
         replay.append(s.outputs())
     np.testing.assert_array_equal(np.array(replay), after)
-    assert np.all(np.isfinite(after))
+    assert np.all(np.isfinite(at_save)) and np.all(np.isfinite(after))  # a receiver has its fix: an estimate
+
+
+RECEIVERS = [name for name in MODELS if name.startswith("receiver")]
+
+
+@pytest.mark.parametrize("name", RECEIVERS)
+def test_a_receiver_state_before_its_first_fix_is_taken_and_a_nan_it_does_not_give_refused(fmu_dir, name):
+    """Before its first fix a receiver's estimate outputs are NaN (no estimate): its state then is taken and
+    replays the same steps (packets from step 5 on: its first fix, then estimates). A NaN the state does not give
+    is refused: in another output of that state (pos_std), or in an estimate output of a state with a fix."""
+    s = Slave(str(fmu_path(fmu_dir, name))).start()
+    for k in range(5):
+        s.fmu.doStep(k * T, T)  # no packet
+    at_save = s.outputs()
+    assert not finite_but_the_estimate_before_a_fix(s.output_names(), at_save).any()
+    data = s.fmu.serializeFMUstate(s.fmu.getFMUstate())
+    ahead = []
+    for k in range(5, 15):
+        step(s, name, k)
+        ahead.append(s.outputs())
+    assert finite_but_the_estimate_before_a_fix(s.output_names(), ahead)[-1]  # a fix from the packets
+    taken = s.fmu.deSerializeFMUstate(data)
+    s.fmu.setFMUstate(taken)
+    np.testing.assert_array_equal(s.outputs(), at_save)  # NaN where it was
+    replay = []
+    for k in range(5, 15):
+        step(s, name, k)
+        replay.append(s.outputs())
+    np.testing.assert_array_equal(np.array(replay), np.array(ahead))
+    at = _layout(name)
+    outputs = [v.name for v in MODELS[name].outputs(4)]
+    for label, blob, output in (("before the fix", data, "pos_std"),
+                                ("with a fix", s.fmu.serializeFMUstate(s.fmu.getFMUstate()), "est_y")):
+        s.log.clear()
+        with pytest.raises(FMICallException):
+            s.fmu.deSerializeFMUstate(_tampered(blob, at["y"] + outputs.index(output), float("nan")))
+        assert len(s.log) == 1 and f"{output} = nan is not finite (its state gives " in s.log[0], (label, s.log)
+        assert s.log[0].endswith("; the state is refused"), (label, s.log)
 
 
 def test_a_parameter_out_of_range_is_taken_before_initialization(fmu_dir):

@@ -151,6 +151,17 @@ def instr(out):
     return np.column_stack([out[f"instr_{a}"] for a in "xyz"])
 
 
+def check_estimate(core, b, x_ref, updated, rtol=1e-9, atol=1e-9, err_msg=""):
+    """Replicate b: the filter's state is the reference ``x_ref``; its estimate output is that state from the
+    receiver's first update on (``updated``: a received packet of the array, taken), and NaN before it (no
+    estimate: the prior x0 is not one)."""
+    np.testing.assert_allclose(core.state["x"][b], x_ref, rtol=rtol, atol=atol, err_msg=err_msg)
+    if updated:
+        np.testing.assert_allclose(est(core.outputs)[b], x_ref, rtol=rtol, atol=atol, err_msg=err_msg)
+    else:
+        assert np.isnan(est(core.outputs)[b]).all(), err_msg
+
+
 def covariance(core, b=0):
     """The receiver's 6 × 6 covariance of replicate b (the state block is column-major)."""
     return core.state["P"][b].reshape(6, 6, order="F")
@@ -535,12 +546,15 @@ def _x0_P0(params=RX):
     return x, P
 
 
-def test_initial_outputs_are_the_prior_and_never_nan():
+def test_initial_outputs_have_no_estimate_and_the_prior_covariance():
+    """Before the first update the filter holds its prior (x0, P0), but reports no estimate: est_* are NaN (x0 is
+    tied to the diver's true start, never an estimate); its covariance outputs are the prior's, finite."""
     core = Core(PaperEKF, RX, replicates=[0, 1])
     core.initialize(0.0)
     out = core.outputs
     x0, P0 = _x0_P0()
-    np.testing.assert_array_equal(est(out), np.tile(x0, (2, 1)))
+    assert np.isnan(est(out)).all()
+    np.testing.assert_array_equal(core.state["x"], np.tile(x0, (2, 1)))
     np.testing.assert_array_equal(covariance(core), P0)
     assert out["pos_std"][0] == pytest.approx(np.sqrt(3.0) * RX["p0_position"], rel=1e-15)
     assert out["nis"].tolist() == [0.0, 0.0] and out["instr_valid"].tolist() == [False, False]
@@ -558,9 +572,10 @@ def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_rx_time():
     phi, Q = ref_phi(dt), ref_q(dt, RX["q_horizontal"], RX["q_vertical"])
     held = np.full(4, np.nan)
     beacons = cross(1.0, 1.0)
+    updates = []  # the packets the receiver updated with
 
     def check_no_update():
-        np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-12, atol=1e-12)
+        check_estimate(core, 0, x_ref, updated=bool(updates), rtol=1e-12, atol=1e-12)  # none before the first
         np.testing.assert_allclose(covariance(core), P_ref, rtol=1e-12, atol=1e-15)
         assert core.outputs["pos_std"][0] == pytest.approx(np.sqrt(P_ref[0, 0] + P_ref[2, 2] + P_ref[4, 4]),
                                                            rel=1e-12)
@@ -582,7 +597,8 @@ def test_receiver_uses_a_packet_only_when_the_step_end_reaches_its_rx_time():
             assert t == pytest.approx(rx)
             held[bid - 1] = rng_value
             x_ref, P_ref, nis = ref_update(x_ref, P_ref, held, beacons, depth, RX["sigma_range"], RX["sigma_depth"])
-            np.testing.assert_allclose(est(core.outputs)[0], x_ref, rtol=1e-10, atol=1e-10)
+            updates.append(seq)
+            check_estimate(core, 0, x_ref, updated=True, rtol=1e-10, atol=1e-10)
             np.testing.assert_allclose(covariance(core), P_ref, rtol=1e-8, atol=1e-12)
             assert core.outputs["nis"][0] == pytest.approx(nis, rel=1e-9)
             assert core.state["slot_time"][0, 0] == tx and core.state["last_seq"][0, 0] == seq
@@ -723,7 +739,8 @@ def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parame
     for b in range(B):
         p = {k: v[b] for k, v in per.items()}
         x, P = _x0_P0(p)
-        ref.append(dict(p=p, x=x, P=P, held=np.full(4, np.nan), beacons=np.zeros((4, 3)), seq=0, nis=0.0))
+        ref.append(dict(p=p, x=x, P=P, held=np.full(4, np.nan), beacons=np.zeros((4, 3)), seq=0, nis=0.0,
+                        updated=False))
     beacons = cross(3.0, 1.0)
     t, seq, tx = 0.0, 0, 0.0
     updates = 0
@@ -750,13 +767,14 @@ def test_receiver_run_matches_a_numpy_ekf_with_substeps_and_per_replicate_parame
                     s["seq"] = seq
                     if valid[b] and 1 <= bid <= 4:
                         s["held"][bid - 1], s["beacons"][bid - 1] = rng_value[b], b_pos[b]
+                        s["updated"] = True  # a received packet of the array: an estimate from here on
                     s["x"], s["P"], s["nis"] = ref_update(s["x"], s["P"], s["held"], s["beacons"], depth[b],
                                                           p["sigma_range"], p["sigma_depth"])
                     updates += 1
             t += dt
             out = core.outputs
             for b, s in enumerate(ref):
-                np.testing.assert_allclose(est(out)[b], s["x"], rtol=1e-9, atol=1e-9, err_msg=f"t={t}, b={b}")
+                check_estimate(core, b, s["x"], s["updated"], err_msg=f"t={t}, b={b}")
                 np.testing.assert_allclose(covariance(core, b), s["P"], rtol=1e-8, atol=1e-12)
                 assert out["nis"][b] == pytest.approx(s["nis"], rel=1e-8, abs=1e-12)
                 assert out["pos_std"][b] == pytest.approx(np.sqrt(s["P"][0, 0] + s["P"][2, 2] + s["P"][4, 4]),

@@ -61,12 +61,17 @@ def test_the_gate_passes_and_rejects_at_the_chi_square_quantile(model):
     core.set_inputs(packet(1, 1, 0.5, ranges, np.tile(BEACONS[0], (4, 1)), depth))
     out = core.step(0.0, 0.5)
     assert out["gated"].tolist() == [False, True, False, False]
-    # a gated range leaves the estimate where the depth update put it
+    # a gated range leaves the filter's state where the depth update put it, and, its first packet refused, the
+    # receiver has no estimate yet (NaN); the ranges taken give one
     x_depth_only = Core(model, GATE).initialize(0.0)
     x_depth_only.set_inputs(packet(1, 1, 0.5, 0.0, BEACONS[0], depth, valid=False))
-    ref = x_depth_only.step(0.0, 0.5)
-    assert out["est_x"][1] == pytest.approx(ref["est_x"][0], abs=1e-12)
-    assert out["est_x"][2] != pytest.approx(ref["est_x"][0], abs=1e-3)
+    x_depth_only.step(0.0, 0.5)
+    ref = x_depth_only.state["x"][0]
+    state = core.state["x"]
+    assert state[1][0] == pytest.approx(ref[0], abs=1e-12)
+    assert state[2][0] != pytest.approx(ref[0], abs=1e-3)
+    assert np.isnan(out["est_x"][1]) and np.isfinite(out["est_x"][[0, 2, 3]]).all()
+    np.testing.assert_array_equal(out["est_x"][[0, 2, 3]], state[[0, 2, 3], 0])
 
 
 def feed(core, stream, t=0.0, n_beacons=4, transceiver=None):

@@ -146,7 +146,7 @@ def replay_ekf_seq(ts, cfg, ratio):
     ekf.F, ekf.Q = phi(dt), white_noise_q(dt, rc["q_horizontal"], rc["q_vertical"])
     gate, var = Gate(rc), range_variance(rc)
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
-    nis, gated = 0.0, False
+    nis, gated, fixed = 0.0, False, False
     for last_substep, slot, row, now, epoch in slots(ts, cfg, ratio):
         ekf.predict()
         if slot:
@@ -164,11 +164,12 @@ def replay_ekf_seq(ts, cfg, ratio):
                     ekf.update(np.array([[row.range]]), lambda x, b=b, A=A: range_row(A @ x, b)[1] @ A,
                                lambda x, b=b, A=A: np.array([[range_row(A @ x, b)[0]]]), R=var)
                     nis += y * y / S
+                    fixed = True
                 else:
                     gated = True
         if last_substep:
             for i, n in enumerate(STATE):
-                out[n].append(ekf.x[i, 0])
+                out[n].append(ekf.x[i, 0] if fixed else np.nan)  # no estimate before the first range taken
             out["P"].append(ekf.P[np.ix_([0, 2, 4], [0, 2, 4])].copy())
             out["nis"].append(nis)
             out["gated"].append(gated)
@@ -195,7 +196,7 @@ def replay_ukf(ts, cfg, ratio):
     ukf.Q = grow(white_noise_q(dt, rc["q_horizontal"], rc["q_vertical"]))
     gate, var, sd2 = Gate(rc), range_variance(rc), rc["sigma_depth"] ** 2
     out = {k: [] for k in (*STATE, "P", "nis", "gated")}
-    nis, gated = 0.0, False
+    nis, gated, fixed = 0.0, False, False
     for last_substep, slot, row, now, epoch in slots(ts, cfg, ratio):
         ukf.predict()
         if slot:
@@ -213,13 +214,13 @@ def replay_ukf(ts, cfg, ratio):
                            linearized(ukf.x[:6], ukf.P[:6, :6], var, now))  # the re-acquisition: at the mean
                 gated = not use
             if use:
-                ukf = joint
+                ukf, fixed = joint, True
             else:
                 ukf.update(np.array([row.depth]), R=np.array([[sd2]]), hx=lambda x: x[4:5])
             nis = float(ukf.y @ np.linalg.solve(ukf.S, ukf.y))
         if last_substep:
             for i, n in enumerate(STATE):
-                out[n].append(ukf.x[i])
+                out[n].append(ukf.x[i] if fixed else np.nan)  # no estimate before the first range taken
             out["P"].append(ukf.P[np.ix_([0, 2, 4], [0, 2, 4])].copy())
             out["nis"].append(nis)
             out["gated"].append(gated)
@@ -256,7 +257,9 @@ def test_receiver_equals_an_independent_filterpy_replay(recorded):
         assert (~ts["packet_valid"].astype(bool)).sum() > 10 and ts["outlier"].astype(bool).sum() > 10
         assert 5 < ref["gated"].sum() < 0.5 * ts["packet_valid"].astype(bool).sum()
         np.testing.assert_array_equal(ts["gated"].to_numpy(bool), ref["gated"], err_msg=f"gated, replicate {rep}")
-        for n in STATE:
+        first = int(np.argmax(np.isfinite(ref["x"])))  # the first range taken: an estimate from there on
+        assert 0 < first < 5 and np.isfinite(ref["x"][first:]).all()
+        for n in STATE:  # NaN where the replay has no estimate yet, equal where it has
             np.testing.assert_allclose(ts[f"est_{n}"].to_numpy(), ref[n], rtol=0, atol=1e-9,
                                        err_msg=f"est_{n}, replicate {rep}")
         np.testing.assert_allclose(covariance(ts), ref["P"], rtol=1e-8, atol=1e-14, err_msg=f"cov, replicate {rep}")

@@ -145,6 +145,21 @@ def test_consistency_hand_counted():
     np.testing.assert_allclose(out["pcrb_rms"], [np.sqrt((9 + 16) / 5), 1.0])
 
 
+def test_the_bound_is_averaged_over_the_steps_with_an_estimate():
+    """pcrb_rms is the bound's RMS over the steps e_tot_rms averages: run 0 has no estimate before its first fix at
+    step 2, run 1 none at all (NaN, as its errors)."""
+    err = np.zeros((5, 2, 3))
+    err[:2, 0] = np.nan
+    err[:, 1] = np.nan
+    cov = np.tile([1.0, 0, 0, 1.0, 0, 1.0], (5, 2, 1))
+    seq = np.tile(np.arange(5)[:, None], (1, 2))
+    bound = np.array([[5.0, 5.0], [4.0, 4.0], [3.0, 3.0], [2.0, 2.0], [1.0, 1.0]])
+    out = consistency(err, cov, np.zeros((5, 2)), seq, seq > 0, np.zeros((5, 2), bool), bound)
+    np.testing.assert_allclose(out["pcrb_rms"][0], np.sqrt((9 + 4 + 1) / 3))
+    assert np.isnan(out["pcrb_rms"][1]) and np.isnan(summarize(errors(np.zeros((5, 2, 3)), err))["e_tot_rms"][1])
+    assert not out["diverged"].any()  # no estimate before the first fix is not a lost diver
+
+
 def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     """run_metrics (one compiled pass, sblsim_metrics.c) against summarize, consistency and the bound's casadi
     reference on a record with everything the metrics skip: estimates missing, no fix, covariances not
@@ -160,6 +175,7 @@ def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     truth = np.cumsum(rng.normal(0.0, 0.3, (n, b, 3)), axis=0) + [20.0, 5.0, 10.0]
     estimate = truth + rng.normal(0.0, 0.5, (n, b, 3))
     estimate[rng.random(n) < 0.05, 2] = np.nan  # run 2: steps without an estimate (left out; and so diverged)
+    estimate[:40, 1] = np.nan  # run 1: no estimate before its first fix (left out, the bound's steps too)
     estimate[150:, 4] += [400.0, 0.0, 0.0]  # run 4 loses the diver
     fix = truth + rng.normal(0.0, 0.8, (n, b, 3))
     for k, a in enumerate("xyz"):

@@ -38,7 +38,11 @@ def test_extreme_allowed_values_stay_finite_and_positive_definite(receiver, sigm
         overrides += [f"receiver.p0_position={sigma}", f"receiver.p0_velocity={sigma}"]
     result = run(load_config("random", overrides, seed=3), replicates=[0, 1])
     ts = result.timeseries
-    assert np.isfinite(ts[[f"est_{a}" for a in ("x", "y", "z", "vx", "vy", "vz")]].to_numpy()).all()
+    estimate = ts[[f"est_{a}" for a in ("x", "y", "z", "vx", "vy", "vz")]].to_numpy()
+    for replicate in (0, 1):  # NaN before the first fix (no estimate), finite from it on
+        own = estimate[ts["replicate"].to_numpy() == replicate]
+        fixed = np.isfinite(own).all(axis=1)
+        assert fixed.any() and fixed[np.argmax(fixed):].all() and np.isnan(own[~fixed]).all()
     P = covariances(ts)
     if receiver == "lsq":  # no covariance before its first fix
         P = P[ts["instr_valid"].to_numpy(bool)]
@@ -90,13 +94,15 @@ def test_force_replaces_an_earlier_run_and_stale_staging_folders_are_removed(tmp
 
 
 def test_a_receiver_that_never_made_a_fix_is_flagged(tmp_path, capsys):
-    """Every packet lost: lsq reports its starting guess; summary.json counts no update and the CLI says so."""
+    """Every packet lost: lsq has no estimate (never its starting guess); summary.json counts no update, its error
+    metrics have no value and the CLI says so."""
     out = tmp_path / "lost"
     assert main(["run", "semicircle", "--set", "receiver=lsq", "--set", "simulation.duration=5",
                  "--set", "acoustics.loss_pct=100", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["updates"] == 0 and summary["fix_steps"] == 0
+    assert summary["e_tot_rms"] is None and summary["diverged"] is False
     assert "sblsim: warning: the lsq receiver never made a fix" in err, err
     good = tmp_path / "good"
     assert main(["run", "semicircle", "--set", "receiver=lsq", "--set", "simulation.duration=5",

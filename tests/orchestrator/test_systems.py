@@ -115,23 +115,68 @@ def normalized(m):
 
 
 def test_ekf_seq_reaches_the_bound_and_no_receiver_beats_it(bounded):
-    """ekf-seq: sqrt(mean q) within 10 % of 1. Over 200 runs the standard error of mean q is ≈ 0.03-0.04 (that of
-    its square root half that, ≤ 0.019): the band is ≥ 4 standard errors wide (the test checks it), so sampling alone
-    does not fail it, while a bound off by 10 % (a missing or wrong measurement row: the range-only bound of a USBL
-    run is several times larger) does. Seen: SBL 1.018, LBL 1.015, USBL 1.038. No receiver has mean q below
-    1 − 3 standard errors (seen: ekf-seq and ukf ≈ 1.03-1.08, ekf 1.08 (USBL) to 2.4 (SBL: its held ranges), lsq
-    ≥ 16)."""
+    """Over the steps with an estimate (from each receiver's first fix on: ``e_tot_rms`` and ``pcrb_rms`` alike),
+    ekf-seq's error is what it reports, and it is at the bound or above, within √2 of it.
+
+    * Consistent: its mean NEES within 10 % of 3 (the χ²₃ mean; over 200 runs of 120 steps its sampling error is
+      under 2 %). Seen: SBL 3.03, LBL 3.08, USBL 3.05.
+    * At the bound or above: sqrt(mean q) > 1 − 3 standard errors, and no receiver's mean q below 1 − 3 standard
+      errors (the bound is a lower bound: a bound too large, e.g. the range-only bound of a USBL run, several times
+      the range-direction one, fails here). Over 200 runs the standard error of the ratio is ≤ 0.025 (checked).
+    * Within √2 of it: sqrt(mean q) < 1.3, below √2, the ratio of a bound that counted each packet's information
+      twice. What ekf-seq reaches is its own covariance (the NEES above), and that is larger than the bound, with
+      the same prior, Q and R parameters. Measured over the steps with an estimate: sqrt(mean q) SBL 1.106, LBL
+      1.077, USBL 1.225 (± 0.016, 0.019, 0.009); its reported pos_std over the bound (100 runs) 1.08, 1.05, 1.19
+      from the first packet on (USBL step 1: 0.215 m against 0.171 m), a steady gap, not a start-up transient. The
+      EKF takes H and R at its estimate, the bound at the true path; whether that explains the USBL 19 % is not
+      known (an open question: docs/model.md). Before the estimate of step 0 was left out (NaN: no estimate before
+      the first fix) it counted the prior's first step, where error and bound are both the prior's (its bound² more
+      than the other 119 steps' together), and the ratio read 1.02-1.04.
+
+    Other receivers (seen, sqrt(mean q)): ukf within 0.005 of ekf-seq, ekf 1.66 (LBL) to 2.35 (USBL), lsq 2.7
+    (USBL) to 6.1 (SBL)."""
     system, metrics = bounded
     m = metrics["ekf-seq"]
     assert not m["diverged"].any() and (m["pcrb_rms"] > 0).all()
     q, se = normalized(m)
     ratio, se_ratio = math.sqrt(q), se / (2 * math.sqrt(q))
     assert se_ratio < 0.025, f"{system}: standard error {se_ratio:.3f} of the ratio: too few runs for the tolerance"
-    assert abs(ratio - 1.0) < 0.1, f"{system}: ekf-seq RMS / PCRB = {ratio:.3f} ± {se_ratio:.3f}"
+    nees = float(m["nees_mean"].mean())
+    assert abs(nees / 3.0 - 1.0) < 0.1, f"{system}: ekf-seq mean NEES {nees:.3f}, not its error"
+    assert 1.0 - 3.0 * se_ratio < ratio < 1.3, f"{system}: ekf-seq RMS / PCRB = {ratio:.3f} ± {se_ratio:.3f}"
     for receiver, m in metrics.items():
-        np.testing.assert_array_equal(m["pcrb_rms"], metrics["ekf-seq"]["pcrb_rms"])  # the bound of the path
+        if receiver != "lsq":  # the bound of the path over the same steps: the Kalman receivers' first fix is the same
+            np.testing.assert_array_equal(m["pcrb_rms"], metrics["ekf-seq"]["pcrb_rms"])
         q, se = normalized(m)
         assert q > 1.0 - 3.0 * se, f"{system}: {receiver} beats the bound: mean q = {q:.3f} ± {se:.3f}"
+
+
+@pytest.mark.parametrize("system", SYSTEMS)
+def test_every_receiver_has_the_bound_of_the_path_and_its_rms_over_its_own_estimates(system):
+    """The per-step bound is the path's, the same for every receiver; ``pcrb_rms`` is its RMS over the steps the
+    receiver has an estimate at (those ``e_tot_rms`` averages: none before its first fix), so ``lsq``, whose first
+    fix needs a whole set of ranges (SBL, LBL), averages it over fewer steps than the Kalman receivers."""
+    runs = {}
+    for receiver in RECEIVERS:
+        cfg = load_config("random-walk", WHITE + [f"platform.system={system}", f"receiver={receiver}",
+                                                  "simulation.duration=20"], seed=4)
+        runs[receiver] = run(cfg, replicates=[0, 1, 2])
+    for receiver, result in runs.items():
+        ts, n = result.timeseries, result.steps
+        bound = ts["pcrb"].to_numpy().reshape(3, n).T
+        np.testing.assert_array_equal(bound, runs["ekf-seq"].timeseries["pcrb"].to_numpy().reshape(3, n).T)
+        estimated = np.isfinite(ts["est_x"].to_numpy().reshape(3, n).T)
+        assert not estimated[0].any() and estimated[-1].all(), receiver  # from the first fix on
+        np.testing.assert_allclose(result.metrics["pcrb_rms"],
+                                   np.sqrt(np.sum(np.where(estimated, bound**2, 0.0), axis=0) / estimated.sum(axis=0)),
+                                   rtol=1e-13, err_msg=receiver)
+        every_step = np.sqrt(np.mean(bound**2, axis=0))  # the prior's first steps: a larger RMS
+        assert np.all(result.metrics["pcrb_rms"] < every_step), receiver
+    if system != "usbl":
+        first = {r: np.isfinite(x.timeseries["est_x"].to_numpy().reshape(3, -1).T).argmax(axis=0)
+                 for r, x in runs.items()}
+        assert np.all(first["lsq"] > first["ekf-seq"])
+        assert np.all(runs["lsq"].metrics["pcrb_rms"] != runs["ekf-seq"].metrics["pcrb_rms"])
 
 
 def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
@@ -162,7 +207,11 @@ def test_a_usbl_run_reports_the_usbl_bound_of_its_own_packets():
         rel=1e-12)
     bound = usbl_pcrb(*usbl_pcrb_inputs(truth, slot, fresh, transceiver, attitude, dt=0.1, **fixed))
     np.testing.assert_array_equal(column["pcrb"], bound)
-    np.testing.assert_allclose(result.metrics["pcrb_rms"], np.sqrt(np.mean(bound**2, axis=0)), rtol=1e-14)
+    estimated = np.isfinite(ts["est_x"].to_numpy().reshape(2, n).T)  # pcrb_rms: over the steps with an estimate
+    assert not estimated.all() and estimated[-1].all()  # none before the first fix
+    np.testing.assert_allclose(result.metrics["pcrb_rms"],
+                               np.sqrt(np.sum(np.where(estimated, bound**2, 0.0), axis=0) / estimated.sum(axis=0)),
+                               rtol=1e-14)
     kept = {k: fixed[k] for k in ("q_horizontal", "q_vertical", "p0_position", "p0_velocity", "attitude_variance",
                                   "depth_variance")}
     range_only = pcrb(*pcrb_inputs(truth, slot, fresh, transceiver, np.zeros_like(truth), dt=0.1,
