@@ -289,6 +289,12 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     rr = np.r_[r_on, r_on]
     s_given = None if estimate else slowness[rows]
     emissions, em_local = np.unique(em, return_inverse=True)
+    # with the positions refined, each emission's observations are taken from its first arrival (the emission time
+    # absorbs the constant): times of 10⁶ s otherwise cancel to the millimetres the positions' equations resolve
+    anchor = np.zeros(len(emissions))
+    if geometry is not None:
+        anchor = np.full(len(emissions), np.inf)
+        np.minimum.at(anchor, em_local, t)
     E = sp.csr_matrix((np.ones(len(t)), (np.arange(len(t)), em_local)), shape=(len(t), len(emissions)))
     prior = _prior(free, base, n_bins, p, drift_change * bin_width)
     # the knots in time order (each edge's receivers together: the normal equations are block tridiagonal in that
@@ -332,7 +338,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
                 c_ += [first + 2 * src[m] + axis, first + 2 * rec[m] + axis]
                 v_ += [s[m] * u[m, axis], -s[m] * u[m, axis]]
         B = sp.csr_matrix((np.concatenate(v_), (np.concatenate(r_), np.concatenate(c_))), shape=(len(t), p))
-        return B, y, dd
+        return B, (y - anchor[em_local] if geometry is not None else y), dd
 
     def solve(w: np.ndarray, B, y, covariance: bool = False, shifts: bool = False):
         W = sp.diags(w)
@@ -442,7 +448,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     residual_all, standard_all, kept_all = full.copy(), full.copy(), np.zeros(n, bool)
     residual_all[rows], standard_all[rows], kept_all[rows] = residual, u, keep
     emission_time = np.full(int(emission.max()) + 1 if len(emission) else 0, np.nan)
-    emission_time[emissions] = T
+    emission_time[emissions] = T + anchor
     s_hat = s_sigma = None
     if estimate:
         s_hat = float(x[n_knots])
