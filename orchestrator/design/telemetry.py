@@ -25,7 +25,8 @@ simulated tags.
    ping with the curve's probability at its distance, and each ping heard by ≥ 3 receivers is fixed by least
    squares with its emission time unknown (:func:`fixes`): the simulated yield and DRMS beside the predicted;
    with ``monte_carlo.path``, the same along an animal's correlated random walk through the work area
-   (:func:`path_check`).
+   (:func:`path_check`), whose pings are also tracked as a recorded tag's are, against the tracker's smoothing
+   bound (:func:`~sblsim.orchestrator.design.telemetry_tracking.track_path`).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from sblsim.models.tracking.simulate import simulate_pings
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
 from sblsim.orchestrator.design.problem import detection_curve, polygon
+from sblsim.orchestrator.design.telemetry_tracking import track_path
 
 #: The places a receiver may go: about this many grid points over the water.
 SITE_POINTS = 4000
@@ -547,8 +549,9 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     pings = mc["replicates"] * PINGS_PER_REPLICATE
     settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
     walked = np.random.default_rng(rng.integers(2**63))
-    toa, positions, _ = simulate_pings(design.receivers, pings, settings, rng, detection=1.0, ping_type="rbi",
-                                       burst_interval=BURST_INTERVAL, path=lambda t: walk(problem, t, walked))
+    toa, positions, emissions = simulate_pings(design.receivers, pings, settings, rng, detection=1.0,
+                                               ping_type="rbi", burst_interval=BURST_INTERVAL,
+                                               path=lambda t: walk(problem, t, walked))
     d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
     q = problem.curve.probability(d)
     toa[rng.random(toa.shape) >= q] = np.nan
@@ -576,7 +579,9 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
             "predicted_yield": predicted_yield, "simulated_yield": simulated_yield,
             "predicted_fixed": float(np.mean(fixed)), "simulated_fixed": float(np.mean(counted)),
             "confirmed": bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
-                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)}
+                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
+            } | track_path(design.receivers, toa, positions, emissions, detection["sound_speed"],
+                           detection["sigma_toa_s"], BURST_INTERVAL)
 
 
 def confirm(design: TelemetryDesign, problem: TelemetryProblem) -> None:

@@ -102,6 +102,10 @@ def summary(run: TelemetryRun) -> str:
         found += "; simulated / predicted DRMS " + ", ".join(
             f"{m['ratio']:.2f} at the {m['point']} point (yield {100 * m['simulated_yield']:.1f} % against "
             f"{100 * m['predicted_yield']:.1f} %)" for m in best.monte_carlo)
+    for m in best.path:
+        if m.get("tracked_pings"):
+            found += (f"; tracked along the walk: RMS {m['tracked_rms_m']:.3g} m over {m['tracked_pings']} pings "
+                      f"(smoothing bound {m['tracked_bound_m']:.3g} m, NEES {m['tracked_nees']:.2f})")
     name = run.resolved.sections["design"]["name"]
     if best.meets:
         return f"{name}: {what}: {found}"

@@ -250,6 +250,7 @@ def test_the_telemetry_design_writes_its_outputs(tmp_path):
     assert all({"simulated_yield", "predicted_yield", "ratio"} <= set(m) for m in best["monte_carlo"])
     (path,) = best["path"]
     assert path["pings"] == 250 and 0 < path["fixes"] <= 250 and path["simulated_yield"] >= path["simulated_fixed"]
+    assert 0 < path["tracked_pings"] <= 250 and 1.5 <= path["tracked_nees"] <= 4.5, path  # the tracker's own
     assert (tmp_path / "d" / "designs.csv").exists() and (tmp_path / "d" / "layout.png").exists()
     assert result.table["count"].iloc[0] == len(best["receivers_m"]) and result.table["meets"].iloc[0]
 
@@ -283,3 +284,37 @@ def test_the_built_in_lake_hald_array_is_lake_halds_stated_case():
     assert sections["detection"]["sound_speed"] == lh.LAKE_HALD_SOUND_SPEED
     assert sections["detection"]["sync_p"] == lh.LAKE_HALD_SYNC_P
     assert sections["candidates"]["systems"] == ["ilbl"] and sections["work_area"]["shape"] == "site"
+
+
+def test_the_path_is_tracked_as_the_replay_tracks_a_recorded_tag(tmp_path):
+    """``track_path`` (the design's confirmation by the tracker) on 300 pings of a random burst interval U(20, 40) s
+    among 6 receivers, each heard with probability 0.8, the tag circling inside the array: its RMS equals
+    ``sblsim.replay_toa``'s on the same pings written to files (the replay's own pipeline, scored against the truth
+    file), the track consistent with its covariance (mean NEES in [1, 4]) and within 1.5 times the smoothing
+    bound."""
+    from sblsim.models.tracking.ekf import TrackerSettings
+    from sblsim.models.tracking.simulate import simulate_pings
+    from sblsim.orchestrator.design.telemetry_tracking import track_path
+    from sblsim.orchestrator.tracks.variants import write_toa
+
+    receivers = np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 250.0], [0.0, 250.0], [150.0, 120.0], [90.0, 230.0]])
+    settings = TrackerSettings(sound_speed=1480.0, sigma_toa=1.5e-4, acceleration_psd=1e-4)
+    def circle(t):  # 80 m round the array's middle in an hour (0.14 m/s)
+        a = 2.0 * np.pi * np.asarray(t) / 3600.0
+        return np.column_stack([150.0 + 80.0 * np.cos(a), 125.0 + 80.0 * np.sin(a)])
+
+    toa, positions, emissions = simulate_pings(receivers, 300, settings, np.random.default_rng(3), detection=0.8,
+                                               ping_type="rbi", burst_interval=(20.0, 40.0), path=circle)
+    row = track_path(receivers, toa, positions, emissions, 1480.0, 1.5e-4, (20.0, 40.0))
+    names = [f"R{k + 1}" for k in range(len(receivers))]
+    write_toa(tmp_path / "toa.txt", toa, names)
+    (tmp_path / "receivers.csv").write_text("name,x_m,y_m\n" + "".join(
+        f"{n},{x:.6f},{y:.6f}\n" for n, (x, y) in zip(names, receivers)))
+    np.savetxt(tmp_path / "truth.txt", np.column_stack([positions, emissions]), header="x y t", comments="")
+    replay = sblsim.replay_toa(tmp_path / "toa.txt", receivers=tmp_path / "receivers.csv",
+                               truth=tmp_path / "truth.txt", sound_speed=1480.0, ping_type="rbi",
+                               burst_interval=(20.0, 40.0))
+    # the replay scores the pings whose estimated emission lies within the truth file's times (the first may not)
+    assert 0 <= row["tracked_pings"] - replay.score["n_scored"] <= 2, (row, replay.score["n_scored"])
+    assert row["tracked_rms_m"] == pytest.approx(replay.score["rms_m"], rel=0.02), (row, replay.score["rms_m"])
+    assert 1.0 <= row["tracked_nees"] <= 4.0 and row["tracked_ratio"] <= 1.5, row
