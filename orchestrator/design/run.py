@@ -423,7 +423,7 @@ class Searcher:
         drms = self.drms(design.values)
         design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"],
                                          design.values["echo"]))
-        design.shortfalls, design.miss = shortfalls(design, drms, p)
+        design.shortfalls, design.miss = shortfalls(design, drms, p, self.resolved.points, self.resolved.seafloor)
         design.meets = not design.shortfalls
 
     def on_the_map(self, design: Design) -> None:
@@ -436,14 +436,17 @@ class Searcher:
         self.judge(design)
 
 
-def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any]) -> tuple[list[dict], float]:
+def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any], points: np.ndarray | None = None,
+               seafloor: Area | None = None) -> tuple[list[dict], float]:
     """What of the prescription a design fails, and by how much.
 
     The parts: the transponders' places (``transponders``: inside the seafloor region, outside the areas to avoid),
     the ``coverage`` (the share of the work area's points that meet; below ``coverage_pct`` it fails, and the line
     says why: the ``drms`` at the coverage's percentile of the points, a point without a fix of direct rays counting
     as infinite, above ``drms_m``; the ``availability`` that that share of the points reaches, below
-    ``availability_pct``) and the ``cycle`` (above ``update_interval_s``).
+    ``availability_pct``) and the ``cycle`` (above ``update_interval_s``). Where no point has a fix, the DRMS clause
+    names how far the work area's ``points`` (M, 3) NED [m] lie from the nearest transponder and how far the
+    ``seafloor`` region reaches from its middle (a work area beyond the site's reach, said in the user's terms).
 
     Returns
     -------
@@ -471,7 +474,7 @@ def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any]
         out.append({"part": "coverage", "required": share, "achieved": design.coverage,
                     "text": f"coverage {design.coverage:.1f} % of the work area against {share:g} %"})
         if at > prescription["drms_m"]:
-            how = ("no fix of direct rays there" if not math.isfinite(at) else
+            how = ("no fix of direct rays there" + _reach(design, drms, points, seafloor) if not math.isfinite(at) else
                    f"{at:.3g} m against {prescription['drms_m']:g} m, {100.0 * (at / prescription['drms_m'] - 1.0):.0f}"
                    " % above")
             out.append({"part": "drms", "required": prescription["drms_m"], "achieved": at,
@@ -488,6 +491,18 @@ def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any]
             out.append({"part": "cycle", "required": interval, "achieved": design.cycle,
                         "text": f"cycle {design.cycle:.3g} s against {interval:g} s"})
     return out, max(ratios)
+
+
+def _reach(design: Design, drms: np.ndarray, points: np.ndarray | None, seafloor: Area | None) -> str:
+    """Where no point of the work area has a fix: how far it lies from the transponders, and the seafloor region's
+    reach (a clause for :func:`shortfalls`; empty where some point has a fix or nothing is known)."""
+    if points is None or design.transponders is None or np.isfinite(drms).any():
+        return ""
+    gap = float(np.min(np.hypot(*(points[:, None, :2] - design.transponders[None, :, :2]).transpose(2, 0, 1))))
+    where = "" if seafloor is None else (
+        f", the seafloor region reaching {seafloor.reach / 1000.0:.3g} km from its middle "
+        f"({seafloor.middle[0] / 1000.0:.3g}, {seafloor.middle[1] / 1000.0:.3g}) km North, East")
+    return f" (the work area's nearest point {gap / 1000.0:.3g} km from the nearest transponder{where})"
 
 
 def ranked(designs: list[Design]) -> list[Design]:
