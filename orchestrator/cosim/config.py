@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import tomllib
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -207,13 +208,34 @@ def named_files(raw: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     return out
 
 
-def _absolute_paths(raw: dict[str, Any], base: Path) -> None:
-    """Make every file a raw configuration names absolute (in place): a relative path is taken from ``base``, the
-    folder of the file that gives it (the working directory for ``--set`` and the API)."""
+def path_from(base: Path, path: str, where: str, confined: bool = False) -> str:
+    """A file a configuration names, absolute: a relative ``path`` is taken from ``base``, the folder of the file
+    that gives it (the working directory for ``--set`` and the API). ``confined`` (a configuration file's own
+    paths): a path that a symbolic link takes out of ``base`` is refused (a file given to us names what the user can
+    see in its folder, not what a link hides; the user names another file with ``--set``).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``where`` (the key), the path and where the link leads.
+    """
+    plain = Path(os.path.normpath(base / Path(path).expanduser()))
+    resolved = plain.resolve()
+    if confined and resolved != plain and not resolved.is_relative_to(base.resolve()):
+        raise ConfigError(f"{where}: {path!r} leads through a symbolic link to {str(resolved)!r}, outside the folder "
+                          f"of the file that names it ({str(base)!r}); allowed: a file that folder holds (name "
+                          "another with --set)")
+    return str(resolved)
+
+
+def _absolute_paths(raw: dict[str, Any], base: Path, confined: bool = False) -> None:
+    """Make every file a raw configuration names absolute (in place, :func:`path_from`; ``confined`` for a
+    configuration file's own paths)."""
     keys = file_keys()
     for section, name, path in named_files(raw):
         value = raw[section][name]
-        raw[section][name] = keys[section, name].with_path(value, str((base / Path(path).expanduser()).resolve()))
+        raw[section][name] = keys[section, name].with_path(value, path_from(base, path, f"{section}.{name}",
+                                                                            confined))
 
 
 def external_receiver_variables(path: Path) -> tuple[Variable, ...]:
@@ -322,7 +344,7 @@ def read_source(source: str | Path) -> dict[str, Any]:
             raw = tomlfile.loads(path.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ConfigError(f"config: {str(source)!r} is not valid TOML ({exc})") from None
-        _absolute_paths(raw, path.resolve().parent)
+        _absolute_paths(raw, path.resolve().parent, confined=True)
         return raw
     return scenario_source(str(source))
 

@@ -33,7 +33,7 @@ from sblsim.models.design.criteria import CRITERIA, DIMENSIONS
 from sblsim.models.design.detection_curve import DetectionCurve
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, named_files, parse_override
+from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, named_files, parse_override, path_from
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.tables import regular_file
 
@@ -485,7 +485,7 @@ def read_problem(source: str | Path) -> dict[str, Any]:
         raise ConfigError(f"design: {name[:80]!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
     area = raw.get("site", {}).get("area") if isinstance(raw.get("site"), Mapping) else None
     if isinstance(area, dict) and isinstance(area.get("file"), str) and area["file"]:  # from the file's folder
-        area["file"] = str((path.parent / Path(area["file"]).expanduser()).resolve())
+        area["file"] = path_from(path.resolve().parent, area["file"], "site.area.file", confined=True)
     return raw
 
 

@@ -159,6 +159,12 @@ def test_the_water_from_a_csv_or_geojson_file(tmp_path):
     by_file = resolve(check_problem(read_problem(tmp_path / "pond.toml")))
     by_polygon = resolve(check_problem(_problem()))
     np.testing.assert_array_equal(by_file.points, by_polygon.points)
+    # the design file's folder holding a symbolic link to a file elsewhere: refused, naming the key and the target
+    (tmp_path / "designs").mkdir()
+    (tmp_path / "designs" / "pond.toml").write_text((tmp_path / "pond.toml").read_text())
+    (tmp_path / "designs" / "lake.csv").symlink_to(tmp_path / "lake.csv")
+    with pytest.raises(ConfigError, match=r"site\.area\.file: 'lake\.csv' leads through a symbolic link"):
+        read_problem(tmp_path / "designs" / "pond.toml")
 
 
 @pytest.mark.parametrize("content, message", [

@@ -129,3 +129,37 @@ def test_a_scenario_files_relative_paths_are_taken_from_its_folder(tmp_path, mon
     cfg = load_config(folder / "s.toml")
     cast = str((folder / "cast.csv").resolve())
     assert cfg["receiver"]["sound_speed_profile"] == cast and cfg["acoustics"]["sound_speed_profile"] == cast
+
+
+def test_a_scenario_files_path_led_out_of_its_folder_by_a_symlink_is_refused(tmp_path, monkeypatch, capsys):
+    """``cast.csv`` in the scenario's folder a symbolic link to a file elsewhere: refused in one line naming the key
+    and where the link leads, exit 2, the file never opened (the audit hook); a link to a file inside the folder is
+    taken; the same outside file named with ``--set`` (the user named it) is taken."""
+    from sblsim.orchestrator.cli import main
+
+    folder, elsewhere = tmp_path / "site", tmp_path / "private"
+    folder.mkdir()
+    elsewhere.mkdir()
+    secret = elsewhere / "cast.csv"
+    secret.write_text("depth,sound_speed\n0,1500\n100,1490\n")
+    (folder / "cast.csv").symlink_to(secret)
+    (folder / "s.toml").write_text('[simulation]\nduration = 1.0\n[acoustics]\nsound_speed_profile = "cast.csv"\n')
+    monkeypatch.chdir(tmp_path)
+    _WATCHED.add(os.path.realpath(secret))
+    _OPENED.clear()
+    try:
+        assert main(["run", str(folder / "s.toml"), "--out", str(tmp_path / "o")]) == 2
+        assert not _OPENED, _OPENED
+    finally:
+        _WATCHED.clear()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "acoustics.sound_speed_profile: 'cast.csv' leads through a symbolic link" in err[0], err
+    assert str(secret) in err[0] and not (tmp_path / "o").exists()
+    (folder / "inside.csv").write_text(secret.read_text())
+    (folder / "cast.csv").unlink()
+    (folder / "cast.csv").symlink_to(folder / "inside.csv")
+    assert load_config(folder / "s.toml")["acoustics"]["sound_speed_profile"] == str((folder / "inside.csv"))
+    (folder / "cast.csv").unlink()
+    (folder / "s.toml").write_text('[simulation]\nduration = 1.0\n')
+    cfg = load_config(folder / "s.toml", [f"acoustics.sound_speed_profile={secret}"])
+    assert cfg["acoustics"]["sound_speed_profile"] == str(secret)
