@@ -202,7 +202,11 @@ def test_compare_map_budget_and_campaign_take_the_inverted_lbl(tmp_path, monkeyp
     table = pd.read_csv(tmp_path / "cmp" / "compare.csv")  # the paper's EKF left out of the inverted LBL's rows
     assert list(zip(table["system"], table["receiver"])) == [("lbl", "ekf"), ("lbl", "ekf-seq"),
                                                              ("ilbl", "ekf-seq")]
-    assert 1.0 < table["nees"].iloc[2] < 6.0 and table["rms_e_tot"].iloc[2] > table["rms_e_tot"].iloc[1]
+    # honest (NEES) and near its bound over the steps with an estimate. (Not "worse than LBL's ekf-seq" over these
+    # 20 s: LBL's first fix is one range from its prior, 1.6-2.7 m off, its first steps dominate its RMS (0.16-0.22 m
+    # against 0.11 from its tenth on), while the inverted LBL's first fix waits for a whole ping, 0.15 m off: 0.115
+    # m, 0.114 from its tenth on. Both have no estimate before their first fix, f1d05a4.)
+    assert 1.0 < table["nees"].iloc[2] < 6.0 and 1.0 < table["ratio_to_pcrb"].iloc[2] < 1.5
     assert main(["compare", "random-walk", "--systems", "lbl,ilbl", "--receivers", "lsq", "--out", "none"]) == 2
     assert main(["map", "random-walk", "--compare", "platform.system=lbl,ilbl", "--out", "map"]) == 0
     maps = pd.read_csv(tmp_path / "map" / "map.csv")
