@@ -410,6 +410,9 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     tick = perf_counter()
     # the kept arrivals' least squares, each receiver's scale from its own; with the positions refined, Gauss-Newton
     # steps until no shift moves by a millimetre; the covariance in the pass after the last
+    # beyond DENSE_LIMIT every block solve gives the shifts' covariance (the border's): without the sigmas (a
+    # leave-one-out refit) the pass that converges is the last
+    quick = geometry is not None and not sigmas and p > dense_limit
     last = False
     for passes in range(1, 21):
         w = keep / scale[rec] ** 2
@@ -417,7 +420,8 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         if last:
             timings["least_squares"] = perf_counter() - tick
             tick = perf_counter()
-        x, T, D, cov, shift_cov = solve(w, B, y, covariance=last and sigmas, shifts=last and geometry is not None)
+        x, T, D, cov, shift_cov = solve(w, B, y, covariance=last and sigmas,
+                                        shifts=(last or quick) and geometry is not None)
         moved = update(x)
         residual = y - B @ x - T[em_local]
         one = np.clip(1 - w / np.maximum(D[em_local], 1e-300), 0.0, 1.0)
@@ -426,6 +430,9 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
             timings["covariance"] = perf_counter() - tick
             break
         last = (passes >= 2 and moved < 1e-3) or passes == 19
+        if quick and last:
+            timings["least_squares"] = timings["covariance"] = perf_counter() - tick
+            break
     u = np.where(one > 1e-9, residual / np.sqrt(np.maximum(one, 1e-9)) / scale[rec], 0.0)
 
     knots = np.full((n_receivers, n_bins + 1), np.nan)
