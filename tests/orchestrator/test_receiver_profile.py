@@ -166,7 +166,8 @@ def test_a_profile_receiver_reaches_its_pcrb_at_a_1000_m_site_where_the_assumed_
     """With the single assumed speed ekf-seq is tens of metres off (NEES in the thousands); with the true profile
     its NEES is in [1.5, 4.5] and its RMS error that of the same receiver in isovelocity water at the assumed
     speed (no sound-speed error at all: the straight line at 1500 m/s), within 10 %: the PCRB's ratio of this
-    receiver at this geometry (about 1.2-1.3, its own: the same without any sound-speed error)."""
+    receiver at this geometry (about 1.55, its own: 1.54 without any sound-speed error, over the steps with an
+    estimate; 1.2-1.3 when the steps before the first fix counted, reporting the truth under the prior's bound)."""
     def metrics(*more):
         cfg = load_config("random-walk", [*SITE, *more], seed=1)
         return run_batch(with_replicates(cfg, range(12)), "local", timeseries=False).metrics
@@ -182,7 +183,7 @@ def test_a_profile_receiver_reaches_its_pcrb_at_a_1000_m_site_where_the_assumed_
     nees = float(aware["nees_mean"].mean())
     assert 1.5 <= nees <= 4.5, nees
     assert rms(aware) == pytest.approx(rms(isovelocity), rel=0.10), (rms(aware), rms(isovelocity))
-    assert rms(aware) <= 1.5 * pcrb, (rms(aware), pcrb)
+    assert rms(aware) <= 1.75 * pcrb, (rms(aware), pcrb)
 
 
 @pytest.mark.slow
@@ -237,4 +238,5 @@ def test_the_embedded_receiver_with_a_profile_reproduces_the_recorded_estimate(t
     # the profile did something: the same run with the single assumed speed estimates elsewhere
     plain = run(load_config("random-walk", [*SITE[1:], "simulation.duration=20", "simulation.receiver=ekf-seq"],
                             seed=2)).timeseries
-    assert np.abs(plain["est_x"].to_numpy() - series["est_x"].to_numpy()).max() > 1.0
+    # (over the steps where both have an estimate: neither has one before its first fix)
+    assert np.nanmax(np.abs(plain["est_x"].to_numpy() - series["est_x"].to_numpy())) > 1.0
