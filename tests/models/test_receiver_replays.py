@@ -13,11 +13,12 @@ feed the same inputs to FilterPy:
   variance ``σ_r² + σ_GPS² + (σ_att · arm)²`` (the beacon's isotropic position error through the unit vector
   ∂h/∂b, whose norm is 1);
 * ``ukf``: ``filterpy.kalman.UnscentedKalmanFilter`` with
-  ``MerweScaledSigmaPoints(14, alpha, beta, kappa)`` over the receiver's 14 states (the six of position and
-  velocity, and its error states: GPS, clock, attitude, here with no prior: their rows and columns of P zero, a
-  square root that takes zero pivots); sigma points are redrawn from the predicted mean and covariance before each
-  update, as the receiver does, and each carries its range from ``Φ(−age) x``; the joint update (range, depth)
-  when the range is used, else the depth alone.
+  ``MerweScaledSigmaPoints(14, alpha, beta, kappa + 6 - 14)`` over the receiver's 14 states (the six of position
+  and velocity, and its error states: GPS, clock, attitude, here with no prior: their rows and columns of P zero, a
+  square root that takes zero pivots; κ + 6 − 14 makes the 14-state set's spread and weights the six uncertain
+  states', as the receiver's ``uncertain_states`` does); sigma points are redrawn from the predicted mean and
+  covariance before each update, as the receiver does, and each carries its range from ``Φ(−age) x``; the joint
+  update (range, depth) when the range is used, else the depth alone.
 
 The slot rule, the one-sided NIS gate (χ²(1) quantile from scipy) and its
 re-acquisition (when ``gate_max_rejections`` beacons' latest ranges failed, a failing range is used if it agrees
@@ -180,7 +181,8 @@ def replay_ukf(ts, cfg, ratio):
     rc = cfg["receiver"]
     dt = cfg["simulation"]["sampling_time"] / ratio
     size = UKF_STATES
-    points = MerweScaledSigmaPoints(size, alpha=rc["alpha"], beta=rc["beta"], kappa=rc["kappa"],
+    # the six kinematic states are the uncertain ones: the set of six's spread and weights over the 14 states
+    points = MerweScaledSigmaPoints(size, alpha=rc["alpha"], beta=rc["beta"], kappa=rc["kappa"] + 6 - size,
                                     sqrt_method=psd_sqrt)
 
     def grow(M, eye=False):  # a 6×6 block of the kinematic states in the whole (the error states constant, no prior)
