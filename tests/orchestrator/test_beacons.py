@@ -22,6 +22,7 @@ from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.maps import accuracy_map
 from sblsim.orchestrator.ssp import export_ssp, read_ssp
+from tests.fmus_tests.test_fmi_semantics import finite_but_the_estimate_before_a_fix
 from tests.helpers import share_compiled_objects
 from tests.orchestrator.test_systems import SNR_CASES
 
@@ -108,7 +109,8 @@ def test_the_fmu_engine_builds_the_fmus_it_needs_out_of_the_box(beacon_fmus, tmp
 
 def c_host_runs(c_host: Path, directory: Path, tmp_path: Path):
     """Each component's FMU of ``directory`` run for 30 steps of 0.1 s in the plain C host (no Python, an empty
-    environment): yields the component, its model description and its Real outputs (30, m), checked finite."""
+    environment): yields the component, its model description and its Real outputs (30, m), checked finite but a
+    receiver's estimate, which without a packet is never defined (NaN throughout, printed as nan or -nan)."""
     import zipfile
 
     from fmpy import read_model_description
@@ -125,7 +127,10 @@ def c_host_runs(c_host: Path, directory: Path, tmp_path: Path):
         assert proc.returncode == 0, proc.stderr[-2000:]
         rows = np.array([[float(x) for x in line.split()[2:]] for line in proc.stdout.splitlines()
                          if line.startswith("a")])
-        assert rows.shape == (30, len(outputs)) and np.all(np.isfinite(rows))
+        assert rows.shape == (30, len(outputs))
+        names = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        estimated = finite_but_the_estimate_before_a_fix(names, rows)
+        assert not (name == "receiver" and estimated.any())
         yield name, md, rows
 
 
