@@ -98,15 +98,8 @@ def read_clocks(folder: Path | str) -> Clocks:
     path = folder / "offsets.csv"
     if not path.exists():
         raise ModelError(f"{what}: {str(folder)!r} holds no offsets.csv; allowed: the folder sblsim sync --out wrote")
-    header, body, lines = _table(path, what, MAX_OFFSET_ROWS)
-    name = str(path)
-    lower = [h.lower() for h in header]
-    needed = ("receiver", "bin", "start", "end", "offset_start_s", "offset_end_s")
-    missing = [c for c in needed if c not in lower]
-    if missing or not len(body):
-        raise ModelError(f"{what}: {name!r}: needs the columns {', '.join(needed)} and rows (sblsim sync's "
-                         f"offsets.csv); {', '.join(missing) or 'no rows'} missing")
-    col = {c: lower.index(c) for c in needed}
+    body, lines, name, col = _columns(path, what, ("receiver", "bin", "start", "end", "offset_start_s",
+                                                   "offset_end_s"), "sblsim sync's offsets.csv")
     receiver = _pattern(body[col["receiver"]], IDENTIFIER, what, name, lines, "receiver",
                         "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").to_numpy()
     bins = _numbers(body[col["bin"]], what, name, lines, "bin", 0, MAX_OFFSET_ROWS)
@@ -149,6 +142,26 @@ def read_clocks(folder: Path | str) -> Clocks:
     return Clocks(names, edges, knots)
 
 
+def _columns(path: Path, what: str, needed: tuple[str, ...], source: str) -> tuple:
+    """One of ``sblsim sync``'s own tables read back (:func:`_table`, at most :data:`MAX_OFFSET_ROWS` rows): its
+    body, line numbers, name and the index of each ``needed`` column (header case ignored, other columns ignored).
+
+    Raises
+    ------
+    ModelError
+        One line naming the columns needed and ``source`` (what writes the table), where one is missing or there
+        are no rows.
+    """
+    header, body, lines = _table(path, what, MAX_OFFSET_ROWS)
+    name = str(path)
+    lower = [h.lower() for h in header]
+    missing = [c for c in needed if c not in lower]
+    if missing or not len(body):
+        raise ModelError(f"{what}: {name!r}: needs the columns {', '.join(needed)} and rows ({source}); "
+                         f"{', '.join(missing) or 'no rows'} missing")
+    return body, lines, name, {c: lower.index(c) for c in needed}
+
+
 def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     """The refined positions of a synchronisation's folder (``positions.csv``: ``serial``, ``x_m``, ``y_m``; other
     columns ignored), None where it has none (the positions were not refined).
@@ -162,15 +175,8 @@ def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     if not path.exists():
         return None
     what = "sync"
-    header, body, lines = _table(path, what, MAX_OFFSET_ROWS)
-    name = str(path)
-    lower = [h.lower() for h in header]
-    needed = ("serial", "x_m", "y_m")
-    missing = [c for c in needed if c not in lower]
-    if missing or not len(body):
-        raise ModelError(f"{what}: {name!r}: needs the columns {', '.join(needed)} and rows (sblsim sync "
-                         f"--refine-positions' positions.csv); {', '.join(missing) or 'no rows'} missing")
-    col = {c: lower.index(c) for c in needed}
+    body, lines, name, col = _columns(path, what, ("serial", "x_m", "y_m"),
+                                      "sblsim sync --refine-positions' positions.csv")
     serial = _pattern(body[col["serial"]], IDENTIFIER, what, name, lines, "serial",
                       "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").tolist()
     x = _numbers(body[col["x_m"]], what, name, lines, "x_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
