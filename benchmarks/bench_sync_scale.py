@@ -36,12 +36,12 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # 
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import resource  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from bench_memory import peak_bytes, reset_peak  # noqa: E402
 
 #: The issue's targets for a month of 70 receivers on one core: seconds and bytes.
 TARGET_S = 300.0
@@ -124,26 +124,6 @@ def inputs(sim: Simulated, table: np.ndarray | None = None):
     return Detections(frame, "simulated", "yaps"), hydrophones
 
 
-def _reset_peak() -> bool:
-    """Reset the process's resident high-water mark (Linux's ``clear_refs`` 5); whether it could."""
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-        return True
-    except OSError:
-        return False
-
-
-def _peak_bytes() -> int:
-    """The process's resident high-water mark [bytes] (``VmHWM``, else ``ru_maxrss``)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-
-
 def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = True, write: bool = False,
             refine: bool = False) -> dict:
     """One size's sync (module docstring): its stages' times [s], CPU time, peak memory and the offsets' check."""
@@ -154,7 +134,7 @@ def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = 
     if refine:
         table = sim.positions + np.random.default_rng(seed + 1000).normal(0, SURVEY_SIGMA_M, sim.positions.shape)
     detections, hydrophones = inputs(sim, table)
-    reset = _reset_peak()
+    reset = reset_peak()
     timings: dict = {}
     start, cpu = time.perf_counter(), time.process_time()
     outcome = synchronise(detections, hydrophones, sound_speed=SOUND_SPEED, bin_hours=1.0, reference="R0",
@@ -169,7 +149,7 @@ def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = 
             tick = time.perf_counter()
             write_files(outcome, Path(folder) / "out")
             write_s = time.perf_counter() - tick
-    peak = _peak_bytes()
+    peak = peak_bytes()
     o = outcome.offsets
     j = o["receiver"].str.slice(1).astype(int).to_numpy()
     others = j != 0

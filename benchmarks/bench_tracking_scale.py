@@ -31,13 +31,13 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # 
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import resource  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from bench_memory import peak_bytes, reset_peak  # noqa: E402
 
 #: The issue's targets for the robust smoother's track of 10⁶ pings on one core: seconds and bytes.
 TARGET_S = 60.0
@@ -73,26 +73,6 @@ def simulate(n_pings: int, seed: int = 0):
     return toa, receivers, truth, emissions, settings
 
 
-def _reset_peak() -> bool:
-    """Reset the process's resident high-water mark (Linux's ``clear_refs`` 5); whether it could."""
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-        return True
-    except OSError:
-        return False
-
-
-def _peak_bytes() -> int:
-    """The process's resident high-water mark [bytes] (``VmHWM``, else ``ru_maxrss``)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-
-
 def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> dict:
     """The robust smoother's track of a record (module docstring) with each stage's time [s]: ``fixes_s``,
     ``schedule_s`` (the settings and the schedule), ``robust_s`` (:func:`robust_track`), ``track_s`` (their sum),
@@ -103,7 +83,7 @@ def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelerati
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.orchestrator.tracks.track import SIGMA_TOA, ping_schedule, tracker_settings
 
-    reset = _reset_peak()
+    reset = reset_peak()
     start, cpu = time.perf_counter(), time.process_time()
     fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
     fixed, fixed_cpu = time.perf_counter(), time.process_time()
@@ -115,7 +95,7 @@ def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelerati
     done, done_cpu = time.perf_counter(), time.process_time()
     return {"fixes_s": fixed - start, "schedule_s": scheduled - fixed, "robust_s": done - scheduled,
             "track_s": done - start, "fixes_cpu_s": fixed_cpu - cpu, "robust_cpu_s": done_cpu - scheduled_cpu,
-            "track_cpu_s": done_cpu - cpu, "peak_bytes": _peak_bytes(), "peak_reset": reset, "robust": robust}
+            "track_cpu_s": done_cpu - cpu, "peak_bytes": peak_bytes(), "peak_reset": reset, "robust": robust}
 
 
 def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> float:
