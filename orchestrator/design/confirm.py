@@ -5,8 +5,9 @@
   ``monte_carlo.replicates`` runs of the design's scenario with the ``lsq`` receiver (a fix from each cycle's latest
   measurements and the depth, no motion model: what the map describes), its fixes after the first cycle; the
   horizontal (or 3-D) RMS error of those fixes against the map's DRMS there. A ratio outside
-  ``1 ± monte_carlo.tolerance_pct`` is flagged (``confirmed`` false), never hidden. The share of cycles with a fix
-  is reported beside the predicted availability.
+  ``1 ± monte_carlo.tolerance_pct`` is flagged (``confirmed`` false), never hidden. The share of the runs' cycles whose own packets give a
+  fix (:func:`fresh_fix_cycles`: at least the system's packets of a fix received among the cycle's slots, every
+  lane of a delivery counted) is reported beside the predicted availability, the probability of just that.
 * **A path** (:func:`path_check`): the scenario's receiver on a straight path across the work area (through its
   centre, North to South, at the first depth, at :data:`PATH_SPEED`, at most :data:`PATH_SLOTS` sampling times
   long), ``monte_carlo.path_replicates`` runs (:func:`sblsim.orchestrator.compare.compare`): its RMS error, NEES and
@@ -19,7 +20,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 
+from sblsim.models.acoustics.core import LANES, lane_name
 from sblsim.models.design.criteria import ECHO_LIMIT
 from sblsim.orchestrator.compare import compare
 from sblsim.orchestrator.cosim.plan import with_replicates
@@ -59,7 +62,8 @@ def static_check(design: Design, resolved: Resolved, where: str, point: np.ndarr
     dict
         ``point`` (its name), ``east_m``, ``north_m``, ``depth_m``, ``predicted_drms_m``, ``simulated_drms_m``,
         ``ratio`` (simulated over predicted), ``confirmed``, ``fixes``, ``predicted_availability``,
-        ``simulated_availability`` (the share of cycles with at least one fix).
+        ``simulated_availability`` (the share of the runs' complete cycles whose own packets give a fix,
+        :func:`fresh_fix_cycles`: what ``predicted_availability`` predicts).
     """
     mc = resolved.sections["monte_carlo"]
     horizontal = resolved.sections["prescription"]["dimensions"] == "horizontal"
@@ -85,14 +89,54 @@ def static_check(design: Design, resolved: Resolved, where: str, point: np.ndarr
         error = error[:, :2]
     simulated = float(np.sqrt(np.mean(np.sum(error ** 2, axis=1)))) if len(rows) else math.nan
     ratio = simulated / predicted_drms if np.isfinite(predicted_drms) and predicted_drms > 0 else math.nan
-    cycles = mc["replicates"] * mc["cycles"]
-    heard = rows.assign(cycle=((rows["time"] - warm - 1e-9) // (slots * period)).astype(int))
-    with_fix = heard.groupby(["replicate", "cycle"]).size().shape[0] if len(rows) else 0
+    fresh, complete = fresh_fix_cycles(ts, slots, probe.system.fix_packets)
     return {"point": where, "east_m": e, "north_m": n, "depth_m": d, "predicted_drms_m": predicted_drms,
             "simulated_drms_m": simulated, "ratio": ratio,
             "confirmed": bool(np.isfinite(ratio) and abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0),
             "fixes": int(len(rows)), "predicted_availability": float(predicted["availability"][0]),
-            "simulated_availability": min(1.0, with_fix / cycles)}
+            "simulated_availability": fresh / complete if complete else math.nan}
+
+
+def fresh_fix_cycles(ts: pd.DataFrame, slots: int, fix_packets: int) -> tuple[int, int]:
+    """The cycles of a run's time series whose own packets give a fix, and its complete cycles.
+
+    A cycle is ``slots`` successive slots of the channel's counter (slot k of cycle ``(k − 1) // slots``: every
+    transducer's once, :mod:`sblsim.models.acoustics.core`); it is complete where every one of its packets was
+    delivered (received or lost) before the run ended, and it gives a fix where at least ``fix_packets`` of them
+    were received from distinct transducers: the event whose probability the availability map gives
+    (:func:`sblsim.orchestrator.maps.availability_map`), ranges of earlier cycles not counted. Every lane of a
+    delivery is read (``lane2_packet_seq`` ..., where the run recorded them): two packets arriving within one
+    sampling time are both counted.
+
+    Parameters
+    ----------
+    ts : DataFrame
+        A run's time series (:func:`~sblsim.orchestrator.cosim.run.run_batch`): ``replicate``, ``packet_seq``,
+        ``packet_valid``, ``beacon_id`` and the later lanes' same columns where recorded.
+    slots, fix_packets : int
+        The slots of a cycle and the packets of one cycle a fix needs
+        (:attr:`~sblsim.models.systems.System.fix_packets`).
+
+    Returns
+    -------
+    fresh, complete : int
+        Over all replicates.
+    """
+    parts = []
+    for prefix in ["", *(lane_name(m, "") for m in range(2, LANES + 1))]:
+        if prefix + "packet_seq" not in ts:
+            continue
+        part = ts[["replicate", prefix + "packet_seq", prefix + "beacon_id", prefix + "packet_valid"]]
+        parts.append(part.set_axis(["replicate", "seq", "beacon", "valid"], axis=1))
+    packets = pd.concat(parts, ignore_index=True)
+    # a packet shows on the outputs until the next delivery: each slot once, whichever steps and lanes held it
+    packets = packets[packets["seq"] > 0].drop_duplicates(["replicate", "seq"])
+    packets = packets.assign(cycle=(np.rint(packets["seq"]).astype(np.int64) - 1) // slots)
+    heard = packets[packets["valid"].to_numpy(float) > 0.5]
+    delivered = packets.groupby(["replicate", "cycle"]).size()
+    complete = delivered.index[delivered.to_numpy() == slots]
+    fixes = heard.groupby(["replicate", "cycle"])["beacon"].nunique().reindex(complete, fill_value=0)
+    return int(np.count_nonzero(fixes.to_numpy() >= fix_packets)), int(len(complete))
 
 
 def path_check(design: Design, resolved: Resolved) -> list[dict]:
@@ -128,4 +172,4 @@ def confirm(design: Design, resolved: Resolved) -> None:
     design.path = path_check(design, resolved) if resolved.sections["monte_carlo"]["path"] else []
 
 
-__all__ = ["PATH_SLOTS", "PATH_SPEED", "checked_points", "confirm", "path_check", "static_check"]
+__all__ = ["PATH_SLOTS", "PATH_SPEED", "checked_points", "confirm", "fresh_fix_cycles", "path_check", "static_check"]

@@ -515,6 +515,50 @@ def test_among_designs_that_do_not_meet_the_cheapest_of_the_nearest_is_first():
     assert [d.candidate.cost for d in ranked(designs[:2])] == [2.0, 3.0]
 
 
+def test_the_simulated_availability_is_the_share_of_cycles_whose_own_packets_give_a_fix(tmp_path):
+    """Five transponders, 40 % of the packets lost: a cycle's own packets give a fix (three ranges) with the
+    binomial sum over k >= 3 of C(5, k) 0.6^k 0.4^(5-k) = 0.68256; the static runs' fresh fixes agree within four
+    binomial standard deviations (the ``lsq`` receiver's fixes from ranges of earlier cycles, counted before,
+    gave every cycle a fix)."""
+    problem = {**SMALL, "design": {**SMALL["design"], "set": ["acoustics.loss_pct=40"]},
+               "candidates": {"systems": ["lbl"], "transponders": [5, 5]},
+               "monte_carlo": {"replicates": 40, "cycles": 20, "path": False}}
+    best = sblsim.design(None, **problem, out=tmp_path / "d").designs[0]
+    p = sum(math.comb(5, k) * 0.6 ** k * 0.4 ** (5 - k) for k in (3, 4, 5))
+    cycles = 40 * 21  # the static runs' complete cycles: 106 slots each, 21 cycles of 5
+    for check in best["monte_carlo"]:
+        assert check["predicted_availability"] == pytest.approx(p, rel=1e-9)
+        assert abs(check["simulated_availability"] - p) < 4 * math.sqrt(p * (1 - p) / cycles), check
+
+
+def test_fresh_fix_cycles_count_each_slot_once_on_every_lane():
+    """A synthetic record of two replicates, three slots a cycle, two packets a fix: packets held over steps, a
+    packet on lane 2, lost ones and a cycle cut by the run's end, against a count by hand."""
+    from sblsim.orchestrator.design.confirm import fresh_fix_cycles
+
+    rng = np.random.default_rng(3)
+    rows, truth = [], {}
+    for replicate in (0, 1):
+        packets = []  # (seq, beacon, valid), seq 1..14: four complete cycles of three and two slots of a fifth
+        for seq in range(1, 15):
+            packets.append((seq, (seq - 1) % 3 + 1, int(rng.random() < 0.6)))
+        for cycle in range(4):
+            heard = {b for s, b, v in packets if (s - 1) // 3 == cycle and v}
+            truth[replicate, cycle] = len(heard) >= 2
+        k = 0
+        while k < len(packets):  # one or two packets a step (the second on lane 2), each shown for 1-3 steps
+            two = k + 1 < len(packets) and rng.random() < 0.3
+            first, second = packets[k], packets[k + 1] if two else (0, 0, 0)
+            for _ in range(int(rng.integers(1, 4))):
+                rows.append({"replicate": replicate, "packet_seq": first[0], "beacon_id": first[1],
+                             "packet_valid": first[2], "lane2_packet_seq": second[0], "lane2_beacon_id": second[1],
+                             "lane2_packet_valid": second[2]})
+            k += 2 if two else 1
+    ts = pd.DataFrame(rows)
+    assert (ts["lane2_packet_seq"] > 0).any()
+    assert fresh_fix_cycles(ts, 3, 2) == (sum(truth.values()), 8)
+
+
 @pytest.mark.slow
 def test_a_design_failing_on_availability_says_so(tmp_path, capsys):
     """The harbour basin (half the packets lost): 8 transponders give a fix (3 ranges of one cycle) with the
@@ -536,6 +580,8 @@ def test_a_design_failing_on_availability_says_so(tmp_path, capsys):
     best = json.loads((tmp_path / "out" / "design.json").read_text())["designs"][0]
     assert [f["part"] for f in best["fails"]] == ["coverage", "availability"]
     assert all(m["predicted_availability"] == pytest.approx(p) for m in best["monte_carlo"])
+    # the static runs' cycles whose own packets give a fix: the same event (10 replicates of 4 complete cycles)
+    assert all(abs(m["simulated_availability"] - p) < 4 * math.sqrt(p * (1 - p) / 40) for m in best["monte_carlo"])
 
 
 # --------------------------------------------------------------------------- bounded effort
