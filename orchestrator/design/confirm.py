@@ -5,9 +5,10 @@
   ``monte_carlo.replicates`` runs of the design's scenario with the ``lsq`` receiver (a fix from each cycle's latest
   measurements and the depth, no motion model: what the map describes), its fixes after the first cycle; the
   horizontal (or 3-D) RMS error of those fixes against the map's DRMS there. A ratio outside
-  ``1 ± monte_carlo.tolerance_pct`` is flagged (``confirmed`` false), never hidden. The share of the runs' cycles whose own packets give a
-  fix (:func:`fresh_fix_cycles`: at least the system's packets of a fix received among the cycle's slots, every
-  lane of a delivery counted) is reported beside the predicted availability, the probability of just that.
+  ``1 ± monte_carlo.tolerance_pct`` is flagged (``confirmed`` false), never hidden. The share of the runs'
+  cycles whose own packets give a fix (:func:`fresh_fix_cycles`: at least the system's packets of a fix received
+  among the cycle's slots, every lane of a delivery counted) is reported beside the predicted availability, the
+  probability of just that.
 * **A path** (:func:`path_check`): the scenario's receiver on a straight path across the work area (through its
   centre, North to South, at the first depth, at :data:`PATH_SPEED`, at most :data:`PATH_SLOTS` sampling times
   long), ``monte_carlo.path_replicates`` runs (:func:`sblsim.orchestrator.compare.compare`): its RMS error, NEES and
