@@ -176,4 +176,24 @@ def grid(area: Polygon | MultiPolygon, spacing_m: float, min_shore_m: float = 0.
     return points[inside(area, points, min_shore_m)]
 
 
-__all__ = ["MAX_GRID_POINTS", "MAX_VERTICES", "grid", "inside", "polygon", "shore_distance"]
+def spread(points: np.ndarray) -> np.ndarray:
+    """The largest distance between any two of a layout's devices (its footprint), per layout.
+
+    Parameters
+    ----------
+    points : ndarray, shape (..., n, d)
+        The devices' positions [m] (d = 2: North, East; or any number of coordinates); leading axes: layouts.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        [m]; 0 for fewer than two devices.
+    """
+    points = np.asarray(points, float)
+    if points.shape[-2] < 2:
+        return np.zeros(points.shape[:-2])
+    gaps = np.linalg.norm(points[..., :, None, :] - points[..., None, :, :], axis=-1)
+    return gaps.max(axis=(-2, -1))
+
+
+__all__ = ["MAX_GRID_POINTS", "MAX_VERTICES", "grid", "inside", "polygon", "shore_distance", "spread"]

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
+from sblsim.models.design.area import spread
 from sblsim.models.design.criteria import CRITERIA, ECHO_LIMIT
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import apply_overrides, read_source
@@ -69,6 +70,10 @@ def design_record(design: Design, run: DesignRun) -> dict[str, Any]:
               "scenario": f"{design.name}.toml", "label": c.label}
     if design.transponders is not None:
         record["transponders_m"] = [[float(t[1]), float(t[0]), float(t[2])] for t in design.transponders]
+        if c.kept:  # those in place (candidates.existing_m) first, kept where they are
+            record["existing"] = [k < c.kept for k in range(len(design.transponders))]
+        if run.resolved.footprint > 0.0:
+            record["spread_m"] = float(spread(design.transponders[:, :2]))
     if design.baseline is not None:
         record["baseline_m"] = design.baseline
     record["grades"] = dict(c.grades)
@@ -247,6 +252,9 @@ def _layout_panel(ax, design, r, p, key, depth, rows, north, east, fig) -> None:
     if design.candidate.layout == "seafloor":
         ax.plot(design.transponders[:, 1], design.transponders[:, 0], "r^", ms=9, mec="w", label="transponders",
                 zorder=4)
+        kept = design.transponders[:design.candidate.kept]
+        if len(kept):
+            ax.plot(kept[:, 1], kept[:, 0], "s", ms=13, mfc="none", mec="k", label="in place", zorder=5)
     ax.set_aspect("equal")
     ax.set_xlabel("East [m]")
     ax.set_ylabel("North [m]")

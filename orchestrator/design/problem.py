@@ -165,6 +165,11 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              min=3, max=MAX_RECEIVERS),
         _key("receiver_cost", "Real", 1.0, "1", "the cost of one receiver (an ilbl array's)", **_COST),
         _key("sync_tag_cost", "Real", 0.0, "1", "the cost of the sync tag moored at each receiver", **_COST),
+        _key("existing_m", "String", "", "", "devices already in place, kept: 'north east [depth]; ...' [m] (an "
+                                             "LBL's transponders, depth default seafloor.depth_m; an ilbl array's "
+                                             "receivers, 'north east'); only the devices added are paid for"),
+        _key("footprint_m", "Real", 0.0, "m", "the largest distance between any two devices (an LBL's transponders, "
+                                              "an ilbl array's receivers; 0: any)", min=0.0, max=1e6),
         *(k for category, grades in GRADES.items() for k in (
             _key(category, "String", [], "", f"the {category.replace('_', ' ')} grades to choose among "
                                               f"(empty: the scenario's)", _GRADE_LIST, choices=tuple(grades)),
@@ -427,6 +432,68 @@ def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) ->
             polygon(problem[section]["polygon"], f"{section}.polygon")
     for k, text in enumerate(problem["seafloor"]["avoid"]):
         polygon(text, f"seafloor.avoid[{k}]")
+    _check_kept(problem)
+
+
+def _check_kept(problem: dict[str, dict[str, Any]]) -> None:
+    """``candidates.existing_m`` and ``footprint_m`` against the systems and the counts (the places against the
+    region or the water: when they are resolved)."""
+    c = problem["candidates"]
+    if not c["existing_m"] and not c["footprint_m"]:
+        return
+    telemetry = is_telemetry(problem)
+    placed = telemetry or any(SYSTEMS[s].design_layout == "seafloor" for s in c["systems"])
+    for name in ("existing_m", "footprint_m"):
+        if c[name] and not placed:
+            raise ConfigError(f"candidates.{name}: the systems {', '.join(c['systems'])} place no device (an SBL's "
+                              "beacons and a USBL's transceiver stand on the platform: the SBL's arm is "
+                              "candidates.sbl_baseline_m); allowed with an LBL's transponders or an ilbl array's "
+                              "receivers")
+    kept = existing_devices(c["existing_m"])
+    if telemetry and np.isfinite(kept[:, 2]).any():
+        raise ConfigError("candidates.existing_m: an ilbl array's receivers are placed in the plane; allowed "
+                          "'north east; north east; ...' [m] without a depth")
+    most = c["receivers" if telemetry else "transponders"][1]
+    if len(kept) > most:
+        raise ConfigError(f"candidates.existing_m: {len(kept)} devices exist, more than the most designed "
+                          f"(candidates.{'receivers' if telemetry else 'transponders'}: {most}); allowed at most "
+                          f"{most}")
+    spread = float(np.max(np.hypot(*(kept[:, None, :2] - kept[None, :, :2]).transpose(2, 0, 1)))) if len(kept) else 0.0
+    if c["footprint_m"] and spread > c["footprint_m"]:
+        raise ConfigError(f"candidates.footprint_m: {c['footprint_m']:g} m is below the existing devices' own "
+                          f"spread ({spread:.6g} m, candidates.existing_m); allowed 0 (any) or at least it")
+
+
+def existing_devices(text: str, where: str = "candidates.existing_m") -> np.ndarray:
+    """The devices already in place from ``"north east [depth]; ..."`` [m], (k, 3) North, East, depth; the depth
+    NaN where not given (k = 0 for an empty text).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where``: rows of other than two or three numbers, a value not finite or beyond ±100000 m, a
+        negative depth, more than :data:`MAX_RECEIVERS` rows, two devices at one place.
+    """
+    rows = [r for r in text.replace(",", " ").split(";") if r.strip()]
+    if len(rows) > MAX_RECEIVERS:
+        raise ConfigError(f"{where}: {len(rows)} devices; allowed at most {MAX_RECEIVERS}")
+    out = np.full((len(rows), 3), np.nan)
+    for k, row in enumerate(rows):
+        try:
+            values = [float(x) for x in row.split()]
+        except ValueError:
+            raise ConfigError(f"{where}: expected 'north east [depth]; ...' in metres, got {row.strip()[:40]!r}") \
+                from None
+        if len(values) not in (2, 3) or not np.all(np.isfinite(values)) or max(abs(v) for v in values) > 1e5 \
+                or (len(values) == 3 and values[2] < 0.0):
+            raise ConfigError(f"{where}: {row.strip()[:40]!r}; allowed 'north east [depth]' in metres, each within "
+                              "±100000, the depth at least 0")
+        out[k, :len(values)] = values
+    if len(out) > 1:
+        gaps = np.hypot(*(out[:, None, :2] - out[None, :, :2]).transpose(2, 0, 1)) + np.diag(np.full(len(out), np.inf))
+        if gaps.min() < 1e-6:
+            raise ConfigError(f"{where}: two devices at one place; allowed distinct places")
+    return out
 
 
 def polygon(text: str, where: str) -> np.ndarray:
@@ -581,5 +648,5 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
 
 
 __all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SYSTEM_CHOICES",
-           "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve", "is_telemetry", "polygon",
-           "read_problem", "signed_distance", "work_area_points"]
+           "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve", "existing_devices",
+           "is_telemetry", "polygon", "read_problem", "signed_distance", "work_area_points"]

@@ -29,6 +29,7 @@ import numpy as np
 
 from sblsim.models.acoustics.core import FLIGHT_CAPACITY
 from sblsim.models.declarations import ModelError
+from sblsim.models.design.area import spread
 from sblsim.models.design.criteria import ECHO_LIMIT, coverage, criterion
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
@@ -36,9 +37,9 @@ from sblsim.orchestrator.campaign.executors import stop_pool
 from sblsim.orchestrator.campaign.worker import watch_parent
 from sblsim.orchestrator.cosim.config import apply_overrides, check_site_keys
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
-from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels
-from sblsim.orchestrator.design.problem import GRADES, SYSTEM_NAMES, Area, polygon, work_area_points
-from sblsim.orchestrator.design.search import Objective, optimise_baseline, optimise_free, optimise_ring
+from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels, judged, problem_items
+from sblsim.orchestrator.design.problem import GRADES, SYSTEM_NAMES, Area, existing_devices, polygon, work_area_points
+from sblsim.orchestrator.design.search import Objective, Result, optimise_baseline, optimise_free, optimise_ring
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.maps import diver_depth, point_accuracy
 
@@ -72,6 +73,10 @@ class Resolved:
     avoid : list of Area
     points : ndarray, shape (M, 3)
         The work area's points, NED [m].
+    kept : ndarray, shape (k, 3)
+        An LBL's transponders in place (``candidates.existing_m``), NED [m]: every layout holds them, first.
+    footprint : float
+        The largest distance between any two of an LBL's transponders (``candidates.footprint_m``; 0: any) [m].
     """
 
     sections: dict
@@ -82,6 +87,8 @@ class Resolved:
     seafloor: Area
     avoid: list[Area]
     points: np.ndarray
+    kept: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    footprint: float = 0.0
 
     @property
     def depths(self) -> list[float]:
@@ -101,11 +108,13 @@ class Candidate:
     grades: dict[str, str]
     cost: float
     order: int = 0
+    kept: int = 0
 
     @property
     def label(self) -> str:
         grades = ", ".join(f"{k} {v}" for k, v in self.grades.items())
         what = f"{self.system.upper()}, {self.count} {SYSTEMS[self.system].marker}"
+        what += f" ({self.kept} in place)" if self.kept else ""
         return what + (f", {grades}" if grades else "")
 
     @property
@@ -205,6 +214,11 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
     work, floor = sections["work_area"], sections["seafloor"]
     if not work["depths_m"]:
         work["depths_m"] = [_depth_default(plan)]
+    extra = problem_items(sections, plan)  # the problem's own keys as the scenario's: no depth sensor, its depth
+    if extra:
+        items = [*items, *extra]
+        plan = load_plan(source, items) if not isinstance(source, Mapping) else make_plan(
+            apply_overrides(thaw(source), items, None))
     water = float(plan["acoustics"]["water_depth"])
     if floor["depth_m"] == 0.0:  # the scenario's seafloor field, else 1 m above the site's floor
         field = plan.system.design_layout == "seafloor" or water == 0.0
@@ -230,18 +244,70 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
                           f"{ROOM_GRID} × {ROOM_GRID} grid over it is outside them); leave room for the transponders "
                           "(seafloor.radius_m, seafloor.polygon or fewer areas)")
     points = work_area_points(area, work["points"], work["depths_m"])
-    return Resolved(sections, source, items, plan, area, seafloor, avoid, points)
+    kept, footprint = np.zeros((0, 3)), 0.0
+    if fielded:
+        kept, footprint = _kept(sections, seafloor, avoid, deepest, water)
+    return Resolved(sections, source, items, plan, area, seafloor, avoid, points, kept, footprint)
 
 
-def room(region: Area, avoid: list[Area], count: int = 0) -> bool:
+def _kept(sections: dict, seafloor: Area, avoid: list[Area], deepest: float, water: float
+          ) -> tuple[np.ndarray, float]:
+    """An LBL's transponders in place (k, 3) NED [m] (``candidates.existing_m``, a depth not given the seafloor's)
+    and its footprint [m] (``candidates.footprint_m``), checked against the seafloor region, the areas to avoid,
+    the vehicle's and the water's depths, and the room left for the transponders added.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``candidates.existing_m`` or ``candidates.footprint_m``: a transponder in place outside the region,
+        in an area to avoid, not below the deepest vehicle or below the water; no room within the footprint of every
+        transponder in place (where one is to be added).
+    """
+    c = sections["candidates"]
+    kept = existing_devices(c["existing_m"])
+    kept[:, 2] = np.where(np.isfinite(kept[:, 2]), kept[:, 2], sections["seafloor"]["depth_m"])
+    footprint = float(c["footprint_m"])
+    for north, east, depth in kept:
+        where = f"candidates.existing_m: the transponder at {north:g} m North, {east:g} m East"
+        if not seafloor.contains(np.array([north, east])):
+            raise ConfigError(f"{where} stands outside the seafloor region (seafloor.*); allowed places inside it")
+        for j, area in enumerate(avoid):
+            if area.distance(np.array([north, east])) < -1e-9:
+                raise ConfigError(f"{where} stands inside an area to avoid (seafloor.avoid[{j}]); allowed places "
+                                  "outside them")
+        if not depth > deepest or (water > 0.0 and depth > water):
+            bottom = f" and the water's {water:g} m (acoustics.water_depth)" if water > 0.0 else ""
+            raise ConfigError(f"{where}: its depth {depth:g} m; allowed below the deepest vehicle's {deepest:g} m "
+                              f"(work_area.depths_m){bottom}")
+    if footprint > 0.0 and len(kept) and len(kept) < c["transponders"][1] and \
+            not room(seafloor, avoid, kept=kept, footprint=footprint):
+        raise ConfigError(f"candidates.footprint_m: {footprint:g} m leaves no place in the seafloor region, outside "
+                          "the areas to avoid, within it of every transponder in place (candidates.existing_m); "
+                          "allowed a larger footprint")
+    return kept, footprint
+
+
+def room(region: Area, avoid: list[Area], count: int = 0, kept: np.ndarray | None = None,
+         footprint: float = 0.0) -> bool:
     """Whether a point of a ``count`` × ``count`` grid over the region (default :data:`ROOM_GRID`; its centre and
-    vertices too) lies inside it and outside every area to avoid."""
+    vertices too) lies inside it and outside every area to avoid (and, with ``kept`` (k, 2+) and a ``footprint``
+    [m], within the footprint of each of those: the grid then over the part of the region's box that is)."""
     count = count or ROOM_GRID
     low, high = region.bounds()
-    N, E = np.meshgrid(np.linspace(low[0], high[0], count), np.linspace(low[1], high[1], count), indexing="ij")
+    near = kept is not None and len(kept) and footprint > 0.0
     extra = [region.middle] + ([] if region.vertices is None else list(region.vertices))
+    if near:
+        low = np.maximum(low, kept[:, :2].max(axis=0) - footprint)
+        high = np.minimum(high, kept[:, :2].min(axis=0) + footprint)
+        if np.any(low > high):
+            return False
+        extra += list(kept[:, :2])
+    N, E = np.meshgrid(np.linspace(low[0], high[0], count), np.linspace(low[1], high[1], count), indexing="ij")
     points = np.vstack([np.column_stack([N.ravel(), E.ravel()]), np.asarray(extra, dtype=float)])
     points = points[region.contains(points)]
+    if near:
+        points = points[np.all(np.hypot(*(points[:, None, :] - kept[None, :, :2]).transpose(2, 0, 1))
+                               <= footprint + 1e-9, axis=1)]
     for area in avoid:  # the points left, a chunk at a time (a polygon's distances are points × vertices)
         points = np.concatenate([part[area.distance(part) >= 0.0] for part in np.array_split(
             points, max(1, len(points) // 4096))]) if len(points) else points
@@ -249,23 +315,29 @@ def room(region: Area, avoid: list[Area], count: int = 0) -> bool:
 
 
 def candidates(resolved: Resolved) -> list[Candidate]:
-    """Every candidate of the problem, in the order of cost (then of the systems, counts and grades as listed)."""
+    """Every candidate of the problem, in the order of cost (then of the systems, counts and grades as listed).
+
+    With transponders in place (:attr:`Resolved.kept`, k of them), an LBL's counts start at k and only the
+    transponders added are paid for."""
     c = resolved.sections["candidates"]
+    kept = len(resolved.kept)
     out = []
     for name in [s for s in SYSTEM_NAMES if s in c["systems"]]:
         system = SYSTEMS[name]
         categories = [k for k in system.design_grades if c[k]]
         choices = [[(k, grade, (c[f"{k}_cost"] or [0.0] * len(c[k]))[i]) for i, grade in enumerate(c[k])]
                    for k in categories]
-        if system.design_layout == "seafloor":  # each transponder paid
-            counts, base, each = range(c["transponders"][0], c["transponders"][1] + 1), 0.0, c["transponder_cost"]
+        paid = 0
+        if system.design_layout == "seafloor":  # each transponder added paid
+            counts = range(max(c["transponders"][0], kept), c["transponders"][1] + 1)
+            base, each, paid = 0.0, c["transponder_cost"], kept
         else:  # the system paid: an SBL's beacons on their circle, or one transceiver
             counts = [c["sbl_beacons"] if system.design_layout == "platform" else 1]
             base, each = c.get(f"{name}_cost", 0.0), 0.0
         for count in counts:
             for combo in itertools.product(*choices):
-                cost = base + count * each + sum(x[2] for x in combo)
-                out.append(Candidate(name, count, {k: g for k, g, _ in combo}, float(cost), len(out)))
+                cost = base + (count - paid) * each + sum(x[2] for x in combo)
+                out.append(Candidate(name, count, {k: g for k, g, _ in combo}, float(cost), len(out), paid))
     return sorted(out, key=lambda x: (x.cost, x.order))
 
 
@@ -346,7 +418,8 @@ class Searcher:
         r = self.resolved
         detection = self.detection(plan, transducer_depth) if plan["acoustics"]["detection"] == "snr" else None
         loss = plan["acoustics"]["loss_pct"] / 100.0
-        evaluator = LayoutEvaluator(r.points, Levels.of(plan), detection, loss)
+        evaluator = LayoutEvaluator(r.points, Levels.of(plan), detection, loss,
+                                    echo_margin_pct=r.sections["prescription"]["echo_margin_pct"])
         evaluator.counted = self.counted
         s, p = r.sections["search"], r.sections["prescription"]
         return Objective(evaluator, s["criterion"], p["dimensions"], p["coverage_pct"])
@@ -364,15 +437,21 @@ class Searcher:
         if candidate.layout == "seafloor":
             provisional = plan_of(r, [*layout_items(name, n, _provisional_ring(r, n)), *grades])
             objective = self.objective(provisional, r.seafloor_depth)
-            ring_found = optimise_ring(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
-                                       **options)
-            found = optimise_free(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
-                                  start=ring_found.layout, **options)
-            ring_ok, free_ok = _feasible(ring_found.layout, r), _feasible(found.layout, r)
-            if ring_ok and (ring_found.value <= found.value or not free_ok):
-                found = ring_found
-            feasible = ring_ok or free_ok  # neither: the free layout, which cannot meet
-            transponders, history = found.layout, ring_found.history + found.history
+            if n == len(r.kept):  # every transponder in place: nothing to search
+                transponders = r.kept.copy()
+                found = Result(transponders, float(objective.values(transponders[None])[0]), [], np.zeros(0))
+            else:
+                kept = dict(fixed=r.kept, footprint=r.footprint) if len(r.kept) or r.footprint else {}
+                ring_found = optimise_ring(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
+                                           **options, **kept)
+                found = optimise_free(objective, n, r.seafloor, r.avoid, r.seafloor_depth, polish=s["polish"],
+                                      start=ring_found.layout, **options, **kept)
+                ring_ok, free_ok = _feasible(ring_found.layout, r), _feasible(found.layout, r)
+                if ring_ok and (ring_found.value <= found.value or not free_ok):
+                    found = ring_found
+                history = ring_found.history + found.history  # neither feasible: the free layout, which cannot meet
+            transponders = found.layout
+            feasible = _placed(transponders, r.seafloor, r.avoid)  # the footprint: its own part (shortfalls)
             layout = layout_items(name, n, transponders)
             value, values = found.value, objective.evaluator.evaluate(transponders[None])
             positions = transponders
@@ -392,7 +471,7 @@ class Searcher:
             detection = None
             if plan["acoustics"]["detection"] == "snr":
                 detection = tuple(a[0] for a in self.detection(plan, float(arms[0, 2]))(r.points, arms[None]))
-            values = point_accuracy(plan, r.points, detection=detection)
+            values = judged(point_accuracy(plan, r.points, detection=detection), r.sections)
             layout, positions = layout_items(name, n), arms
             value = self.criterion(values)
             values = {k: v[None] for k, v in values.items()}
@@ -423,24 +502,26 @@ class Searcher:
         drms = self.drms(design.values)
         design.coverage = float(coverage(drms, design.values["availability"], p["drms_m"], p["availability_pct"],
                                          design.values["echo"]))
-        design.shortfalls, design.miss = shortfalls(design, drms, p, self.resolved.points, self.resolved.seafloor)
+        design.shortfalls, design.miss = shortfalls(design, drms, p, self.resolved.points, self.resolved.seafloor,
+                                                    self.resolved.footprint)
         design.meets = not design.shortfalls
 
     def on_the_map(self, design: Design) -> None:
         """A design evaluated again through the accuracy map itself (:func:`point_accuracy`), and judged."""
         r = self.resolved
         plan = plan_of(r, design.items)
-        design.values = point_accuracy(plan, r.points)
+        design.values = judged(point_accuracy(plan, r.points), r.sections)
         design.value = self.criterion(design.values)
         design.evaluated_by = "map"
         self.judge(design)
 
 
 def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any], points: np.ndarray | None = None,
-               seafloor: Area | None = None) -> tuple[list[dict], float]:
+               seafloor: Area | None = None, footprint: float = 0.0) -> tuple[list[dict], float]:
     """What of the prescription a design fails, and by how much.
 
     The parts: the transponders' places (``transponders``: inside the seafloor region, outside the areas to avoid),
+    their ``footprint`` (the largest distance between two of them against ``footprint`` [m], where it is given),
     the ``coverage`` (the share of the work area's points that meet; below ``coverage_pct`` it fails, and the line
     says why: the ``drms`` at the coverage's percentile of the points, a point without a fix of direct rays counting
     as infinite, above ``drms_m``; the ``availability`` that that share of the points reaches, below
@@ -466,10 +547,17 @@ def shortfalls(design: Design, drms: np.ndarray, prescription: Mapping[str, Any]
     ratios = [at / prescription["drms_m"]]
     ratios.append(prescription["availability_pct"] / reached if reached > 0.0 else
                   (math.inf if prescription["availability_pct"] > 0.0 else 0.0))
+    wide = footprint > 0.0 and design.transponders is not None and float(spread(design.transponders[:, :2])) > \
+        footprint + 1e-6
     if not design.feasible:
         out.append({"part": "transponders", "required": 0.0, "achieved": 1.0,
                     "text": "a transponder outside the seafloor region or in an area to avoid"})
         ratios.append(math.inf)
+    if wide:
+        achieved = float(spread(design.transponders[:, :2]))
+        out.append({"part": "footprint", "required": footprint, "achieved": achieved,
+                    "text": f"the transponders spread over {achieved:.4g} m against the footprint of {footprint:g} m"})
+        ratios.append(achieved / footprint)
     if design.coverage < share - 1e-9:
         out.append({"part": "coverage", "required": share, "achieved": design.coverage,
                     "text": f"coverage {design.coverage:.1f} % of the work area against {share:g} %"})
@@ -530,9 +618,17 @@ def _provisional_ring(r: Resolved, n: int) -> np.ndarray:
 
 
 def _feasible(layout: np.ndarray, r: Resolved) -> bool:
-    """Every transponder inside the seafloor region and outside the areas to avoid (their boundaries allowed)."""
+    """Every transponder inside the seafloor region and outside the areas to avoid (their boundaries allowed), and
+    within the footprint (:attr:`Resolved.footprint`) of one another."""
+    return _placed(layout, r.seafloor, r.avoid) and not (r.footprint > 0.0 and float(spread(layout[:, :2])) >
+                                                          r.footprint + 1e-6)
+
+
+def _placed(layout: np.ndarray, seafloor: Area | None, avoid: list[Area]) -> bool:
+    """Every transponder inside the seafloor region (where known) and outside the areas to avoid."""
     xy = layout[:, :2]
-    return bool(np.all(r.seafloor.contains(xy)) and all(np.all(a.distance(xy) >= -1e-9) for a in r.avoid))
+    inside = seafloor is None or bool(np.all(seafloor.contains(xy)))
+    return inside and all(np.all(a.distance(xy) >= -1e-9) for a in avoid)
 
 
 _WORKER: Searcher | None = None

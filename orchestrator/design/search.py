@@ -81,15 +81,31 @@ def _free(x: np.ndarray, n: int, depth: float) -> np.ndarray:
     return np.stack([x[:n].T, x[n:].T, np.full((x.shape[1], n), depth)], axis=-1)
 
 
-def _constraints(n: int, region: Area, avoid: list[Area], layouts) -> list:
-    """The region and the areas to avoid as one vectorised constraint on the variables (D, S): each transponder's
-    signed distance to the region (≤ 0: inside) and to each area (≥ 0: outside)."""
+def _pairs(n: int, kept: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i < j) of n devices of which at least one is placed (not among the first ``kept``)."""
+    i, j = np.triu_indices(n, 1)
+    placed = j >= kept
+    return i[placed], j[placed]
+
+
+def _constraints(n: int, region: Area, avoid: list[Area], layouts, kept: int = 0, footprint: float = 0.0) -> list:
+    """The region and the areas to avoid as one vectorised constraint on the variables (D, S): each placed
+    transponder's signed distance to the region (≤ 0: inside) and to each area (≥ 0: outside); with a
+    ``footprint`` [m], the distance of every pair with a placed transponder (≤ it). The first ``kept`` transponders
+    of a layout are in place already (not placed)."""
+    placed = n - kept
+    i, j = _pairs(n, kept)
+
     def distances(x):
-        positions = layouts(x)[..., :2]  # (S, n, 2)
+        layout = layouts(x)
+        positions = layout[:, kept:, :2]  # (S, n - kept, 2)
         parts = [region.distance(positions).T] + [a.distance(positions).T for a in avoid]
+        if footprint > 0.0:
+            parts.append(np.linalg.norm(layout[:, i, :2] - layout[:, j, :2], axis=-1).T)
         return np.concatenate(parts, axis=0)
-    low = np.concatenate([np.full(n, -np.inf), np.zeros(n * len(avoid))])
-    high = np.concatenate([np.zeros(n), np.full(n * len(avoid), np.inf)])
+    pairs = len(i) if footprint > 0.0 else 0
+    low = np.concatenate([np.full(placed, -np.inf), np.zeros(placed * len(avoid)), np.zeros(pairs)])
+    high = np.concatenate([np.zeros(placed), np.full(placed * len(avoid), np.inf), np.full(pairs, footprint)])
     return [NonlinearConstraint(distances, low, high)]
 
 
@@ -111,15 +127,21 @@ def _evolve(objective: Objective, bounds, layouts, constraints, seed: int, popul
     return x, float(energy(x[:, None])[0]), history
 
 
-def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, region: Area, avoid: list[Area]
-            ) -> np.ndarray:
+def _polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: int, region: Area, avoid: list[Area],
+            kept: int = 0, footprint: float = 0.0) -> np.ndarray:
     """The variables ``x`` polished: by SLSQP on the criterion's gradient for a smooth criterion (:data:`SMOOTH`;
     the site's weights and noises held at their values at ``x``), else by Powell's derivative-free search within
-    the bounds (a layout outside the region or in an area to avoid penalised); ``x`` where the polish does not lower
-    the criterion of a feasible layout."""
+    the bounds (a layout outside the region, in an area to avoid or beyond the ``footprint`` penalised); ``x`` where
+    the polish does not lower the criterion of a feasible layout. The first ``kept`` transponders are in place."""
+    i, j = _pairs(n, kept)
+
     def inside(v):
-        pos = layout_of(np.asarray(v)[:, None])[0, :, :2]
-        return np.concatenate([-region.distance(pos)] + [a.distance(pos) for a in avoid])
+        layout = layout_of(np.asarray(v)[:, None])[0, :, :2]
+        pos = layout[kept:]
+        parts = [-region.distance(pos)] + [a.distance(pos) for a in avoid]
+        if footprint > 0.0:
+            parts.append(footprint - np.linalg.norm(layout[i] - layout[j], axis=-1))
+        return np.concatenate(parts)
 
     start = objective.values(layout_of(x[:, None]))[0]
     if not np.isfinite(start):  # no work-area point positioned from anywhere the search went: nothing to polish
@@ -168,9 +190,23 @@ def _gradient_polish(objective: Objective, x: np.ndarray, layout_of, bounds, n: 
                     options={"maxiter": 300, "ftol": 1e-15}).x
 
 
+def _kept(fixed: np.ndarray | None) -> np.ndarray:
+    """The devices in place (k, 3) NED [m] (none: (0, 3))."""
+    return np.zeros((0, 3)) if fixed is None else np.asarray(fixed, dtype=float).reshape(-1, 3)
+
+
+def _with_kept(kept: np.ndarray, placed):
+    """A layout of the devices in place followed by those placed: numpy (S, n, 3) or casadi (n, 3)."""
+    if isinstance(placed, ca.MX):
+        return ca.vertcat(ca.DM(kept), placed) if len(kept) else placed
+    if not len(kept):
+        return placed
+    return np.concatenate([np.broadcast_to(kept, (placed.shape[0],) + kept.shape), placed], axis=1)
+
+
 def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area], depth: float,
                   bearing: float | None = None, seed: int = 0, population: int = 10, generations: int = 60,
-                  polish: bool = True) -> Result:
+                  polish: bool = True, fixed: np.ndarray | None = None, footprint: float = 0.0) -> Result:
     """The best regular ring of n transponders around the region's centre, its radius (and its bearing) searched
     (module docstring).
 
@@ -178,6 +214,7 @@ def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area],
     ----------
     objective : Objective
     n : int
+        The transponders, those in place (``fixed``) included.
     region : Area
         Where the transponders may go; the ring's centre is its circle's centre or its vertices' mean.
     avoid : list of Area
@@ -187,32 +224,38 @@ def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area],
         The first transponder's bearing from North [rad]; default searched in [0, 2π/n).
     seed, population, generations, polish
         The differential evolution's (population per variable) and the gradient polish.
+    fixed : ndarray, shape (k, 3), optional
+        Transponders in place, NED [m], k < n: every layout holds them first; the ring is of the n − k others.
+    footprint : float, optional
+        The largest distance between any two transponders [m] (0: any), a constraint like the region's.
 
     Returns
     -------
     Result
         Its ``variables`` the radius [m] (and the bearing [rad]).
     """
+    kept = _kept(fixed)
+    placed = n - len(kept)
     centre, reach = region.middle, region.reach
-    bounds = [(min(1.0, reach), reach)] + ([] if bearing is not None else [(0.0, 2.0 * math.pi / n)])
-    steps = 2.0 * math.pi * np.arange(n) / n
+    bounds = [(min(1.0, reach), reach)] + ([] if bearing is not None else [(0.0, 2.0 * math.pi / placed)])
+    steps = 2.0 * math.pi * np.arange(placed) / placed
 
     def layouts(x):
         if isinstance(x, ca.MX):
             angle = (x[1] if bearing is None else bearing) + ca.DM(steps)
-            return ca.horzcat(centre[0] + x[0] * ca.cos(angle), centre[1] + x[0] * ca.sin(angle),
-                              ca.DM.ones(n) * depth)
+            return _with_kept(kept, ca.horzcat(centre[0] + x[0] * ca.cos(angle), centre[1] + x[0] * ca.sin(angle),
+                                               ca.DM.ones(placed) * depth))
         x = np.asarray(x, dtype=float).reshape(len(bounds), -1)
         radius, first = x[0], (x[1] if bearing is None else np.full(x.shape[1], bearing))
         angle = first[:, None] + steps[None, :]
         north = centre[0] + radius[:, None] * np.cos(angle)
         east = centre[1] + radius[:, None] * np.sin(angle)
-        return np.stack([north, east, np.full_like(north, depth)], axis=-1)
+        return _with_kept(kept, np.stack([north, east, np.full_like(north, depth)], axis=-1))
 
-    constraints = _constraints(n, region, avoid, layouts)
+    constraints = _constraints(n, region, avoid, layouts, len(kept), footprint)
     x, value, history = _evolve(objective, bounds, layouts, constraints, seed, population, generations)
     if polish:
-        x = _polish(objective, x, layouts, bounds, n, region, avoid)
+        x = _polish(objective, x, layouts, bounds, n, region, avoid, len(kept), footprint)
         value = float(objective.values(layouts(x[:, None]))[0])
         history.append(value)
     return Result(layouts(x[:, None])[0], value, history, x)
@@ -220,13 +263,14 @@ def optimise_ring(objective: Objective, n: int, region: Area, avoid: list[Area],
 
 def optimise_free(objective: Objective, n: int, region: Area, avoid: list[Area], depth: float, seed: int = 0,
                   population: int = 10, generations: int = 60, polish: bool = True,
-                  start: np.ndarray | None = None) -> Result:
+                  start: np.ndarray | None = None, fixed: np.ndarray | None = None, footprint: float = 0.0) -> Result:
     """The best placement of n transponders anywhere in the region outside the areas to avoid (module docstring).
 
     Parameters
     ----------
-    objective, n, region, avoid, depth, seed, population, generations, polish
-        As :func:`optimise_ring`.
+    objective, n, region, avoid, depth, seed, population, generations, polish, fixed, footprint
+        As :func:`optimise_ring`; with transponders in place (``fixed``) the n − k others are placed, within
+        ``footprint`` of each of them (the search's box narrowed to it).
     start : ndarray, shape (n, 3), optional
         A layout the population starts from (a ring's), where it is feasible.
 
@@ -234,22 +278,27 @@ def optimise_free(objective: Objective, n: int, region: Area, avoid: list[Area],
     -------
     Result
     """
+    kept = _kept(fixed)
+    placed = n - len(kept)
     low, high = region.bounds()
-    bounds = [(low[0], high[0])] * n + [(low[1], high[1])] * n
+    if footprint > 0.0 and len(kept):  # within the footprint of every transponder in place
+        low = np.maximum(low, kept[:, :2].max(axis=0) - footprint)
+        high = np.maximum(low, np.minimum(high, kept[:, :2].min(axis=0) + footprint))
+    bounds = [(low[0], high[0])] * placed + [(low[1], high[1])] * placed
 
     def layouts(x):
         if isinstance(x, ca.MX):
-            return ca.horzcat(x[:n], x[n:], ca.DM.ones(n) * depth)
-        return _free(x, n, depth)
+            return _with_kept(kept, ca.horzcat(x[:placed], x[placed:], ca.DM.ones(placed) * depth))
+        return _with_kept(kept, _free(x, placed, depth))
 
     x0 = None
     if start is not None:
-        x0 = np.concatenate([start[:, 0], start[:, 1]])
+        x0 = np.concatenate([start[len(kept):, 0], start[len(kept):, 1]])
         x0 = np.clip(x0, [b[0] for b in bounds], [b[1] for b in bounds])
-    constraints = _constraints(n, region, avoid, layouts)
+    constraints = _constraints(n, region, avoid, layouts, len(kept), footprint)
     x, value, history = _evolve(objective, bounds, layouts, constraints, seed, population * 2, generations, x0)
     if polish:
-        x = _polish(objective, x, layouts, bounds, n, region, avoid)
+        x = _polish(objective, x, layouts, bounds, n, region, avoid, len(kept), footprint)
         value = float(objective.values(layouts(x[:, None]))[0])
         history.append(value)
     return Result(layouts(x[:, None])[0], value, history, x)
