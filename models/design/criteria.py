@@ -46,12 +46,18 @@ CRITERIA = {
 }
 #: The largest probability that a cycle's fix takes a range of reflections at a point the prediction holds for [1].
 ECHO_LIMIT = 0.01
+#: The largest margin from :data:`ECHO_LIMIT` a prescription may keep, in percentage points [%] (below the limit's
+#: own 1 %: a margin of 1 would leave no probability of reflections at all).
+MAX_ECHO_MARGIN_PCT = 0.99
 #: The prescription's dimensions: horizontal (the DRMS of North and East) or 3d (North, East and Down).
 DIMENSIONS = ("horizontal", "3d")
 #: The 3-D ring's optimal radius over the height below the target [1].
 RING_RADIUS_RATIO = math.sqrt(2.0)
 #: The optimal ring's lines of sight below the horizontal [deg]: atan(1/√2), 35.2644°.
 RING_ELEVATION_DEG = math.degrees(math.atan(1.0 / math.sqrt(2.0)))
+#: The D-optimal ring's radius over its height where each range's σ is proportional to it [1]: 1/√2, 0.7071
+#: (:func:`ring_noise_drms`).
+RING_RATIO_PROPORTIONAL = 1.0 / math.sqrt(2.0)
 
 
 def criterion(name: str, drms: np.ndarray, log_det: np.ndarray, coverage_pct: float,
@@ -121,6 +127,76 @@ def coverage(drms: np.ndarray, availability: np.ndarray, drms_m: float, availabi
     return 100.0 * met.mean(axis=-1)
 
 
+def judged_echo(echo: np.ndarray, margin_pct: float = 0.0) -> np.ndarray:
+    """The probability that a point's fix takes a range of reflections on the scale of :data:`ECHO_LIMIT`, with a
+    margin from it: a point counts only where its probability is at most ``ECHO_LIMIT − margin`` (the direct
+    arrival heard first with that margin), that is where the value returned is at most :data:`ECHO_LIMIT`.
+
+    ``echo · ECHO_LIMIT / (ECHO_LIMIT − margin)``: every comparison with :data:`ECHO_LIMIT` (:func:`criterion`,
+    :func:`coverage`, a design's checked points and its share of points failing for reflections) then applies the
+    margin; a margin of 0 returns ``echo`` itself (the same array, bit for bit).
+
+    Parameters
+    ----------
+    echo : ndarray, shape (...)
+        The probability that a cycle's fix takes a range of reflections [0–1].
+    margin_pct : float, optional
+        The margin [%, percentage points of probability], in [0, :data:`MAX_ECHO_MARGIN_PCT`].
+
+    Returns
+    -------
+    ndarray, shape (...)
+        [1], the probability scaled by ``ECHO_LIMIT / (ECHO_LIMIT − margin)`` (it may exceed 1: only its
+        comparison with :data:`ECHO_LIMIT` means something).
+
+    Raises
+    ------
+    ValueError
+        For a margin outside [0, :data:`MAX_ECHO_MARGIN_PCT`] %.
+    """
+    if not 0.0 <= margin_pct <= MAX_ECHO_MARGIN_PCT:
+        raise ValueError(f"echo margin: {margin_pct!r} %; allowed [0, {MAX_ECHO_MARGIN_PCT:g}] %")
+    if margin_pct == 0.0:
+        return echo
+    return np.asarray(echo, dtype=float) * (ECHO_LIMIT / (ECHO_LIMIT - margin_pct / 100.0))
+
+
+def ring_noise_drms(n: int, radius: float, height: float, sigma0: float, per_m: float = 0.0,
+                    horizontal: bool = True) -> float:
+    """The DRMS at the centre of N ≥ 3 transponders equally spaced on a ring of ``radius`` at ``height`` below
+    (or above) the point, every range of the standard deviation ``σ = σ₀ + k ρ`` at the slant range
+    ``ρ = √(r² + h²)`` (:func:`sblsim.models.design.information.range_noise_variance`), no depth sensor [m].
+
+    Every range has the same σ, so the ring's closed form holds with σ at the ring's slant range: the lines of
+    sight ``(r cos θ, r sin θ, h) / ρ`` give ``J = N / (σ² ρ²) diag(r² / 2, r² / 2, h²)``, the horizontal DRMS
+    ``2 σ ρ / (r √N)`` and the 3-D ``σ ρ √(4 / r² + 1 / h²) / √N``. With ``σ₀ = 0`` (σ ∝ range), ``det J ∝
+    r⁴ h² / ρ¹²``, largest at ``r / h = 1 / √2`` (:data:`RING_RATIO_PROPORTIONAL`; the constant σ's √2,
+    :data:`RING_RADIUS_RATIO`, otherwise).
+
+    Parameters
+    ----------
+    n : int
+    radius, height : float
+        [m], positive (the height: any sign).
+    sigma0 : float
+        [m].
+    per_m : float, optional
+        [m/m].
+    horizontal : bool, optional
+        The horizontal DRMS (else the 3-D).
+
+    Returns
+    -------
+    float
+        [m].
+    """
+    rho = math.hypot(radius, height)
+    sigma = sigma0 + per_m * rho
+    if horizontal:
+        return 2.0 * sigma * rho / (radius * math.sqrt(n))
+    return sigma * rho * math.sqrt(4.0 / radius ** 2 + 1.0 / height ** 2) / math.sqrt(n)
+
+
 def bishop_2d_determinant(n: int, sigma: float) -> float:
     """The largest ``det J`` of N range sensors around a target in 2-D, ``N² / (4σ⁴)`` [1/m⁴] (Bishop et al. 2010)."""
     return n ** 2 / (4.0 * sigma ** 4)
@@ -143,5 +219,6 @@ def ring_crb_trace(n: int, sigma: float) -> float:
     return 9.0 * sigma ** 2 / n
 
 
-__all__ = ["CRITERIA", "DIMENSIONS", "ECHO_LIMIT", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO", "bishop_2d_crb_trace",
-           "bishop_2d_determinant", "coverage", "criterion", "ring_crb_trace", "ring_determinant"]
+__all__ = ["CRITERIA", "DIMENSIONS", "ECHO_LIMIT", "MAX_ECHO_MARGIN_PCT", "RING_ELEVATION_DEG", "RING_RADIUS_RATIO",
+           "RING_RATIO_PROPORTIONAL", "bishop_2d_crb_trace", "bishop_2d_determinant", "coverage", "criterion",
+           "judged_echo", "ring_crb_trace", "ring_determinant", "ring_noise_drms"]

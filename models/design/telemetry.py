@@ -98,6 +98,13 @@ def range_sigma(distance_m, sigma0_m: float, per_m: float = 0.0) -> np.ndarray:
     ``σ₀ = c σ_toa`` (the timing's, [m]); ``k`` [m/m] the growth with range the designer states (the timing error
     grows as the signal weakens; a range test's residuals against distance give it), 0 for a constant σ.
 
+    The source of the law: the Cramér-Rao bound of a time delay's estimate is proportional to ``1 / √SNR`` (Quazi,
+    "An overview on the time delay estimate in active and passive systems for target localization", IEEE Trans.
+    Acoustics, Speech and Signal Processing 29(3):527–533, 1981), and with spherical spreading the SNR falls as
+    ``1 / d²``: the noise of an arrival that is not at its floor grows in proportion to the distance, as the
+    ranging accuracy that acoustic positioning equipment states as a share of the range (0.1 % of the range:
+    ``k = 0.001``); ``σ₀`` is the floor (the clock's, the detector's sampling).
+
     Parameters
     ----------
     distance_m : array_like
@@ -122,6 +129,45 @@ def range_sigma(distance_m, sigma0_m: float, per_m: float = 0.0) -> np.ndarray:
     if not (np.isfinite(per_m) and per_m >= 0.0):
         raise ModelError(f"timing sigma per metre of range: {per_m!r}; allowed [0, inf)")
     return sigma0_m + per_m * np.asarray(distance_m, float)
+
+
+def range_noise(toa: np.ndarray, distance_m, sigma0_m: float, per_m: float, sound_speed: float,
+                rng: np.random.Generator) -> np.ndarray:
+    """Times of arrival drawn with the timing σ₀ alone (``sigma0_m / sound_speed``) given the range-dependent law's
+    rest: an independent normal of ``sqrt((σ₀ + k d)² − σ₀²) / c`` [s] added to each, so that an arrival over the
+    distance d has the standard deviation :func:`range_sigma` ``σ₀ + k d`` [m] of sound travel in all.
+
+    Where ``per_m`` is 0 the same array is returned and ``rng`` is not drawn from (the constant σ's simulation bit
+    for bit).
+
+    Parameters
+    ----------
+    toa : ndarray, shape (K, n)
+        [s]; NaN where not heard (kept).
+    distance_m : ndarray, broadcastable to (K, n)
+        Each ping's distance to each receiver [m].
+    sigma0_m, per_m : float
+        :func:`range_sigma`'s [m], [m/m].
+    sound_speed : float
+        [m/s].
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, shape (K, n)
+        [s].
+
+    Raises
+    ------
+    ModelError
+        As :func:`range_sigma`.
+    """
+    total = range_sigma(distance_m, sigma0_m, per_m)
+    if per_m == 0.0:
+        return toa
+    toa = np.asarray(toa, float)
+    extra = np.sqrt(np.maximum(np.broadcast_to(total, toa.shape) ** 2 - sigma0_m ** 2, 0.0)) / sound_speed
+    return toa + extra * rng.standard_normal(toa.shape)
 
 
 def count_distribution(q: np.ndarray) -> np.ndarray:
@@ -471,4 +517,4 @@ def sync_coverage(q: np.ndarray, p: float, needed: int = SYNC_NEEDED) -> SyncCov
 
 __all__ = ["CERTAIN", "ENUMERATE_MAX", "SINGULAR_CONDITION", "SYNC_NEEDED", "SyncCoverage", "count_distribution",
            "distances", "drms", "expected_information_drms", "fix_drms", "fixed_ping_drms", "position_information",
-           "positioning_yield", "range_sigma", "ring_fix_drms", "sync_coverage", "sync_probabilities"]
+           "positioning_yield", "range_noise", "range_sigma", "ring_fix_drms", "sync_coverage", "sync_probabilities"]

@@ -23,12 +23,50 @@ from typing import Callable
 import numpy as np
 
 from sblsim.fmus.native import LAYOUT_CHUNK, compiled_layout
+from sblsim.models.design.criteria import judged_echo
 from sblsim.models.design.information import OUTPUTS, layout_values, padded, slots_for
+from sblsim.models.target.core import Target
 from sblsim.orchestrator.cosim.plan import RunPlan
 from sblsim.orchestrator.maps import MIN_AVAILABILITY, fix_probability, grown_noise, packet_probabilities
 
 #: The step of a detection table [m].
 TABLE_STEP = 5.0
+#: A vehicle without a depth sensor (``work_area.depth_sensor = false``): its scenario's depth sensor at the largest
+#: standard deviation ``target.depth_sigma`` takes [m] (1000 m: an information of 1e-6 /m² about the depth, which
+#: moves a fix of ranges by a relative 1e-6 or less; the map, the search and the Monte Carlo's receiver all take it).
+NO_DEPTH_SIGMA = float(next(v.max for v in Target.variables() if v.name == "depth_sigma"))
+
+
+def problem_items(sections: dict, plan: RunPlan) -> list[str]:
+    """The overrides of the base scenario that a design problem's own keys make (each design's scenario carries
+    them, as the search, the map and the Monte Carlo do).
+
+    * ``work_area.depth_sensor = false``: ``target.depth_sigma`` at :data:`NO_DEPTH_SIGMA`;
+    * the work area's depth: ``target.depth`` the first of ``work_area.depths_m`` where it differs from the
+      scenario's and its trajectory takes a depth (not a file's waypoints), so that the design's scenario (and its
+      map, drawn at ``target.depth`` by default) is at the work area's depth.
+
+    Parameters
+    ----------
+    sections : dict
+        The checked problem (``work_area.depths_m`` resolved: never empty).
+    plan : RunPlan
+        The base scenario's plan.
+
+    Returns
+    -------
+    list of str
+        ``section.key=value`` items (empty where the problem's keys ask nothing of the scenario).
+    """
+    work = sections["work_area"]
+    items = []
+    if not work.get("depth_sensor", True):
+        items.append(f"target.depth_sigma={NO_DEPTH_SIGMA!r}")
+    target = plan["target"]
+    depth = float(work["depths_m"][0])
+    if target.get("trajectory") != "file" and float(target["depth"]) != depth:
+        items.append(f"target.depth={depth!r}")
+    return items
 
 
 @dataclass(frozen=True)
@@ -58,6 +96,14 @@ class Levels:
         bound = plan.bound
         return cls(bound["noise_variance"], plan["acoustics"]["sigma_range"] ** 2, bound["attitude_variance"],
                    bound["depth_variance"], plan.system.fix_packets)
+
+
+def judged(values: dict, sections: dict) -> dict:
+    """A map's values (:func:`~sblsim.orchestrator.maps.point_accuracy`'s) with ``echo`` judged with the
+    prescription's margin from the echo limit (``prescription.echo_margin_pct``,
+    :func:`~sblsim.models.design.criteria.judged_echo`); the same dict where the margin is 0."""
+    margin = sections["prescription"]["echo_margin_pct"]
+    return values if margin == 0.0 else {**values, "echo": judged_echo(values["echo"], margin)}
 
 
 class Detection:
@@ -123,12 +169,16 @@ class LayoutEvaluator:
         The probability that a packet is lost where the site does not decide it [0–1].
     compiled : bool
         Run the layout function compiled where a compiler is found (False: casadi's evaluation, the same numbers).
+    echo_margin_pct : float
+        The prescription's margin from the echo limit [%] (``prescription.echo_margin_pct``: ``echo`` judged by
+        :func:`~sblsim.models.design.criteria.judged_echo`).
     """
 
     def __init__(self, points: np.ndarray, levels: Levels, detection: Detection | None = None, loss: float = 0.0,
-                 compiled: bool = True) -> None:
+                 compiled: bool = True, echo_margin_pct: float = 0.0) -> None:
         self.points = np.ascontiguousarray(points, dtype=float)
         self.levels, self.detection, self.loss, self.compiled = levels, detection, float(loss), compiled
+        self.echo_margin_pct = float(echo_margin_pct)
         self.m = self.points.shape[0]
         chunks = -(-self.m // LAYOUT_CHUNK)
         self._padded_points = np.concatenate([self.points, np.repeat(self.points[-1:], chunks * LAYOUT_CHUNK - self.m,
@@ -164,7 +214,8 @@ class LayoutEvaluator:
         -------
         dict
             ``drms``, ``drms_3d`` [m], ``log_det``, ``availability`` and ``echo`` [0–1] (as
-            :func:`~sblsim.orchestrator.maps.point_accuracy` gives them), each (S, M); the accuracies NaN
+            :func:`~sblsim.orchestrator.maps.point_accuracy` gives them; ``echo`` on the scale of the echo limit
+            with the margin, :func:`~sblsim.models.design.criteria.judged_echo`), each (S, M); the accuracies NaN
             where the probability of a fix is below the map's :data:`~sblsim.orchestrator.maps.MIN_AVAILABILITY`
             (with the site's detection).
         """
@@ -187,7 +238,7 @@ class LayoutEvaluator:
             self.counted(s)
         out["availability"] = fix_probability(received.reshape(s * self.m, n),
                                               self.levels.fix_packets).reshape(s, self.m)
-        out["echo"] = 1.0 - np.prod(1.0 - received * echo, axis=-1)
+        out["echo"] = judged_echo(1.0 - np.prod(1.0 - received * echo, axis=-1), self.echo_margin_pct)
         if self.detection is not None and self.detection.snr:
             blank = out["availability"] < MIN_AVAILABILITY
             for name in OUTPUTS:
@@ -211,4 +262,4 @@ class LayoutEvaluator:
         return {name: x[:self.m] for name, x in zip(OUTPUTS, values)}
 
 
-__all__ = ["Detection", "LayoutEvaluator", "Levels", "TABLE_STEP"]
+__all__ = ["Detection", "LayoutEvaluator", "Levels", "NO_DEPTH_SIGMA", "TABLE_STEP", "judged", "problem_items"]

@@ -29,7 +29,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from sblsim.models.declarations import FileKey, ModelError, Variable, shown
-from sblsim.models.design.criteria import CRITERIA, DIMENSIONS
+from sblsim.models.design.criteria import CRITERIA, DIMENSIONS, MAX_ECHO_MARGIN_PCT
 from sblsim.models.design.detection_curve import DetectionCurve
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
@@ -129,6 +129,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              (0, MAX_DEPTHS), min=0.0, max=11000.0),
         _key("points", "Integer", 21, "", "grid points across the work area's bounding box per axis (21: 441 in "
                                           "the box)", min=3, max=201),
+        _key("depth_sensor", "Boolean", True, "", "the vehicle reports its depth (false: no depth sensor, its fix of "
+                                                 "the ranges alone; not for an ilbl design)"),
     ),
     "prescription": (
         _key("drms_m", "Real", 1.0, "m", "the DRMS to meet", min=0.0, max=1e4, min_exclusive=True),
@@ -149,6 +151,9 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("fix_gate_m", "Real", 0.0, "m", "an ilbl design: a ping's fix counts only where the DRMS of its "
                                             "receivers' geometry is at most this (an HPE filter; 0: every fix)",
              min=0.0, max=1e4),
+        _key("echo_margin_pct", "Real", 0.0, "%", "a margin from the echo limit: a point counts only where its fix "
+                                                 "takes ranges of reflections in at most 1 % minus this of the cycles",
+             min=0.0, max=MAX_ECHO_MARGIN_PCT),
     ),
     "candidates": (
         _key("systems", "String", list(SYSTEM_NAMES), "", "the systems to design (ilbl: a telemetry array, alone)",
@@ -207,6 +212,9 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("sigma_toa_s", "Real", 1.5e-4, "s", "the timing noise of an arrival", min=0.0, max=1.0,
              min_exclusive=True),
         _key("sound_speed", "Real", 1480.0, "m/s", "the sound speed of the water", min=1000.0, max=2000.0),
+        _key("range_k", "Real", 0.0, "1", "an ilbl design: the timing noise's growth with distance, sigma = "
+                                          "sound_speed * sigma_toa_s + range_k * distance [m/m] (0: constant)",
+             min=0.0, max=0.1),
     ),
     "search": (
         _key("criterion", "String", "percentile", "", "what a layout minimises over the work area (docs/design.md: "
@@ -396,6 +404,7 @@ def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) ->
         raise ConfigError("work_area.shape: site is the water of an ilbl design (candidates.systems = ['ilbl']); "
                           "allowed circle or polygon")
     telemetry = is_telemetry(problem)
+    _check_noise_and_depth(problem, telemetry)
     # a file names no file to read
     if not scenario_given and not telemetry and design["scenario"] not in BUILTIN_SCENARIOS:
         given = f"{design['scenario'][:60]!r} is not a built-in scenario" if design["scenario"] else "missing"
@@ -494,6 +503,23 @@ def existing_devices(text: str, where: str = "candidates.existing_m") -> np.ndar
         if gaps.min() < 1e-6:
             raise ConfigError(f"{where}: two devices at one place; allowed distinct places")
     return out
+
+
+def _check_noise_and_depth(problem: dict[str, dict[str, Any]], telemetry: bool) -> None:
+    """The keys that apply to some systems only (a range-dependent noise, no depth sensor, an echo margin), each
+    refused in one line naming it and the systems where it cannot apply."""
+    systems = ", ".join(problem["candidates"]["systems"])
+    if problem["detection"]["range_k"] > 0.0 and not telemetry:
+        raise ConfigError(f"detection.range_k: {problem['detection']['range_k']:g} for {systems}; a range-dependent "
+                          f"noise applies to an {TELEMETRY} design only (the simulation of {systems} draws its range "
+                          "noise independently of range); allowed 0")
+    if telemetry and not problem["work_area"]["depth_sensor"]:
+        raise ConfigError(f"work_area.depth_sensor: false for {systems}; an {TELEMETRY} design's tag and receivers "
+                          "are in one plane (no depth to sense); allowed true")
+    if telemetry and problem["prescription"]["echo_margin_pct"] > 0.0:
+        raise ConfigError(f"prescription.echo_margin_pct: {problem['prescription']['echo_margin_pct']:g} % for "
+                          f"{systems}; an {TELEMETRY} design's detection curve has no reflections to keep a margin "
+                          "from; allowed 0")
 
 
 def polygon(text: str, where: str) -> np.ndarray:

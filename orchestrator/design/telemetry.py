@@ -79,6 +79,7 @@ class TelemetryProblem:
     sites: np.ndarray
     curve: Any
     sigma_m: float
+    sigma_per_m: float = 0.0  # detection.range_k: the timing noise's growth with distance [m/m]
 
     @property
     def prescription(self) -> dict:
@@ -181,7 +182,8 @@ def resolve(sections: dict) -> TelemetryProblem:
                           f"fewer than candidates.receivers' most ({most}); allowed distances that leave room")
     curve = detection_curve(sections["detection"])
     sigma = sections["detection"]["sound_speed"] * sections["detection"]["sigma_toa_s"]
-    return TelemetryProblem(sections, water, work, points, sites, curve, float(sigma))
+    return TelemetryProblem(sections, water, work, points, sites, curve, float(sigma),
+                            float(sections["detection"]["range_k"]))
 
 
 class _Objective:
@@ -196,7 +198,7 @@ class _Objective:
         self.evaluations += 1
         d = tm.distances(p.points, receivers)
         q = p.curve.probability(d)
-        drms = tm.expected_information_drms(p.points, receivers, tm.range_sigma(d, p.sigma_m), q)
+        drms = tm.expected_information_drms(p.points, receivers, tm.range_sigma(d, p.sigma_m, p.sigma_per_m), q)
         score = np.minimum(np.where(np.isfinite(drms), drms, np.inf) / p.prescription["drms_m"], 1e3)
         score = score + 10.0 * np.maximum(0.0, p.required_yield - tm.positioning_yield(q, p.needed))
         value = float(np.percentile(score, p.prescription["coverage_pct"]) + 0.1 * np.mean(score))
@@ -267,7 +269,7 @@ def judge(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Gen
     receivers = design.receivers
     d = tm.distances(problem.points, receivers)
     q = problem.curve.probability(d)
-    sigma = tm.range_sigma(d, problem.sigma_m)
+    sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
     design.positioning_yield = tm.positioning_yield(q, problem.needed)
     design.drms_expected = tm.expected_information_drms(problem.points, receivers, sigma, q)
     design.drms_fixed, design.fixable = fixed_pings(problem.points, receivers, sigma, q, p["fix_gate_m"], rng,
@@ -414,7 +416,7 @@ def checked_points(design: TelemetryDesign, problem: TelemetryProblem) -> list[t
 
 
 def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any = None,
-          iterations: int = 30) -> np.ndarray:
+          iterations: int = 30, sigma_m: np.ndarray | None = None) -> np.ndarray:
     """Each ping's position [m] from its times of arrival at the receivers that heard it (NaN: not heard), the
     emission unknown: least squares on ``‖p − r_i‖ + c t_e = c toa_i`` over the receivers that heard, by
     Gauss-Newton from several starts at once (the centroid of those receivers, each receiver, a 5 × 5 grid over the
@@ -432,6 +434,9 @@ def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any
         [m/s].
     water : shapely Polygon, optional
     iterations : int, optional
+    sigma_m : ndarray, broadcastable to (K, n), optional
+        Each arrival's standard deviation [m] where it differs between receivers (a range-dependent noise,
+        ``detection.range_k``): each residual weighted by the smallest over it (None: every arrival alike).
 
     Returns
     -------
@@ -441,6 +446,7 @@ def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any
     toa = np.asarray(toa, float)
     heard = np.isfinite(toa)
     w = heard.astype(float)
+    wr = w if sigma_m is None else w * np.min(sigma_m, axis=-1, keepdims=True) / np.broadcast_to(sigma_m, w.shape)
     count = np.maximum(w.sum(axis=1), 1.0)
     ranges = sound_speed * np.where(heard, toa - np.nanmin(np.where(heard, toa, np.inf), axis=1, keepdims=True),
                                     0.0)
@@ -456,15 +462,15 @@ def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any
     for _ in range(iterations):
         diff = x[:, :, None, :2] - receivers  # (K, S, n, 2)
         dist = np.maximum(np.linalg.norm(diff, axis=-1), 1e-9)
-        residual = w[:, None] * (ranges[:, None] - (dist + x[..., 2:3]))
-        J = np.concatenate([diff / dist[..., None], np.ones(dist.shape + (1,))], axis=-1) * w[:, None, :, None]
+        residual = wr[:, None] * (ranges[:, None] - (dist + x[..., 2:3]))
+        J = np.concatenate([diff / dist[..., None], np.ones(dist.shape + (1,))], axis=-1) * wr[:, None, :, None]
         A = np.einsum("ksni,ksnj->ksij", J, J) + 1e-9 * np.eye(3)
         step = np.linalg.solve(A, np.einsum("ksni,ksn->ksi", J, residual)[..., None])[..., 0]
         x = x + step
         if np.all(np.linalg.norm(step, axis=-1) < 1e-9):
             break
     dist = np.linalg.norm(x[:, :, None, :2] - receivers, axis=-1)
-    cost = np.sum((w[:, None] * (ranges[:, None] - (dist + x[..., 2:3]))) ** 2, axis=-1)
+    cost = np.sum((wr[:, None] * (ranges[:, None] - (dist + x[..., 2:3]))) ** 2, axis=-1)
     ok = np.isfinite(cost) & (np.linalg.norm(step, axis=-1) < 1e-4)
     if water is not None:
         ok &= areas.inside(water, np.where(np.isfinite(x[..., :2]), x[..., :2], 0.0))
@@ -489,15 +495,18 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
                                                ping_type="rbi", burst_interval=BURST_INTERVAL,
                                                path=lambda t: np.repeat(point[None], len(t), axis=0))
     q = problem.curve.probability(np.linalg.norm(design.receivers - point, axis=1))
+    d = np.linalg.norm(design.receivers - point, axis=1)
+    sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
+    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, detection["sound_speed"], rng)  # range_k
     toa[rng.random(toa.shape) >= q[None, :]] = np.nan  # the curve, receiver by receiver
     heard = np.isfinite(toa)
     enough = heard.sum(axis=1) >= problem.needed
     gate = problem.prescription["fix_gate_m"]
-    sigma = tm.range_sigma(np.linalg.norm(design.receivers - point, axis=1), problem.sigma_m)
     own = tm.fix_drms(point[None], design.receivers, sigma[None], heard[:, None, :])[:, 0]
     counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
     k = np.flatnonzero(counted)
-    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water)
+    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water,
+                      sigma_m=sigma[None] if problem.sigma_per_m else None)
     errors = (estimates - positions[k])[np.isfinite(estimates).all(axis=1)]
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     predicted = float(design.drms_fixed[index])
@@ -554,15 +563,17 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
                                                path=lambda t: walk(problem, t, walked))
     d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
     q = problem.curve.probability(d)
+    sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
+    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, detection["sound_speed"], rng)
     toa[rng.random(toa.shape) >= q] = np.nan
     heard = np.isfinite(toa)
-    sigma = tm.range_sigma(d, problem.sigma_m)
     own = tm.fix_drms(positions, design.receivers, sigma, heard)
     gate = problem.prescription["fix_gate_m"]
     enough = heard.sum(axis=1) >= problem.needed
     counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
     k = np.flatnonzero(counted)
-    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water)
+    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water,
+                      sigma_m=sigma[k] if problem.sigma_per_m else None)
     errors = (estimates - positions[k])[np.isfinite(estimates).all(axis=1)]
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     chosen = np.linspace(0, pings - 1, min(PATH_PREDICTED, pings)).astype(int)
