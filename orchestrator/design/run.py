@@ -219,11 +219,6 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
         items = [*items, *extra]
         plan = load_plan(source, items) if not isinstance(source, Mapping) else make_plan(
             apply_overrides(thaw(source), items, None))
-    extra = problem_items(sections, plan)  # the problem's own keys as the scenario's: no depth sensor, its depth
-    if extra:
-        items = [*items, *extra]
-        plan = load_plan(source, items) if not isinstance(source, Mapping) else make_plan(
-            apply_overrides(thaw(source), items, None))
     water = float(plan["acoustics"]["water_depth"])
     if floor["depth_m"] == 0.0:  # the scenario's seafloor field, else 1 m above the site's floor
         field = plan.system.design_layout == "seafloor" or water == 0.0
