@@ -45,7 +45,7 @@ from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.simulate import simulate_pings
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
-from sblsim.orchestrator.design.problem import detection_curve, polygon
+from sblsim.orchestrator.design.problem import detection_curve, existing_devices, polygon
 from sblsim.orchestrator.design.telemetry_tracking import track_path
 
 #: The places a receiver may go: about this many grid points over the water.
@@ -66,6 +66,8 @@ SEARCH_SECONDS, JUDGE_SECONDS, PING_SECONDS = 1.0e-6, 1.0e-4, 1.0e-3
 WALK_SPEED, WALK_TURN, PATH_PREDICTED = 0.3, 0.5, 200
 #: A simulated yield within this many percentage points of the predicted is confirmed.
 YIELD_TOLERANCE_PP = 5.0
+#: The search's criterion grows by this times the share by which a layout's spread exceeds the footprint.
+FOOTPRINT_PENALTY = 10.0
 
 
 @dataclass
@@ -94,6 +96,18 @@ class TelemetryProblem:
     def required_yield(self) -> float:
         return self.prescription["positioning_yield_pct"] / 100.0
 
+    @property
+    def kept(self) -> np.ndarray:
+        """The receivers in place (``candidates.existing_m``), (k, 2) (North, East) [m]: every layout holds them,
+        first."""
+        return existing_devices(self.sections["candidates"]["existing_m"])[:, :2]
+
+    @property
+    def footprint(self) -> float:
+        """The largest distance between any two receivers (``candidates.footprint_m``; 0: any) [m]."""
+        return float(self.sections["candidates"]["footprint_m"])
+
+
 
 @dataclass
 class TelemetryDesign:
@@ -117,10 +131,11 @@ class TelemetryDesign:
     name: str = ""
     monte_carlo: list = field(default_factory=list)
     path: list = field(default_factory=list)
+    kept: int = 0
 
     @property
     def label(self) -> str:
-        return f"ILBL, {self.count} receivers"
+        return f"ILBL, {self.count} receivers" + (f" ({self.kept} in place)" if self.kept else "")
 
 
 @dataclass
@@ -180,10 +195,46 @@ def resolve(sections: dict) -> TelemetryProblem:
     if len(sites) < most:
         raise ConfigError(f"site.area.min_shore_m: {len(sites)} places for a receiver within the shore distances, "
                           f"fewer than candidates.receivers' most ({most}); allowed distances that leave room")
+    sites = _kept_sites(sections, water, sites, step)
     curve = detection_curve(sections["detection"])
     sigma = sections["detection"]["sound_speed"] * sections["detection"]["sigma_toa_s"]
     return TelemetryProblem(sections, water, work, points, sites, curve, float(sigma),
                             float(sections["detection"]["range_k"]))
+
+
+def _kept_sites(sections: dict, water: Any, sites: np.ndarray, step: float) -> np.ndarray:
+    """The places left for the receivers added: within ``candidates.footprint_m`` of each receiver in place
+    (``candidates.existing_m``, checked against the water and the shore distances).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``candidates.existing_m``: a receiver in place outside the water or the shore distances; naming
+        ``candidates.footprint_m``: fewer places within it than receivers to add, or no two places within it
+        (``step`` [m], the places' spacing).
+    """
+    c, site = sections["candidates"], sections["site.area"]
+    kept = existing_devices(c["existing_m"])[:, :2]
+    footprint = float(c["footprint_m"])
+    for north, east in kept:
+        if not areas.inside(water, np.array([[north, east]]), site["min_shore_m"], site["max_shore_m"] or None)[0]:
+            raise ConfigError(f"candidates.existing_m: the receiver at {north:g} m North, {east:g} m East stands "
+                              "outside the water (site.area) or its shore distances (site.area.min_shore_m, "
+                              "max_shore_m); allowed places in the water within them")
+    if footprint <= 0.0:
+        return sites
+    added = c["receivers"][1] - len(kept)
+    if len(kept):
+        sites = sites[np.all(np.linalg.norm(sites[:, None] - kept[None], axis=-1) <= footprint, axis=1)]
+    if added > 0 and len(sites) < added:
+        raise ConfigError(f"candidates.footprint_m: {footprint:g} m leaves {len(sites)} places for a receiver within "
+                          f"it of every receiver in place, fewer than the {added} to add (candidates.receivers' "
+                          "most); allowed a larger footprint")
+    if not len(kept) and (len(sites) < 2 or cKDTree(sites).query(sites, k=2)[0][:, 1].min() > footprint):
+        raise ConfigError(f"candidates.footprint_m: {footprint:g} m is below the spacing of the places for a "
+                          f"receiver ({step:.3g} m): no two receivers can be placed within it; allowed a larger "
+                          "footprint")
+    return sites
 
 
 class _Objective:
@@ -208,20 +259,47 @@ class _Objective:
 
 
 def search_count(problem: TelemetryProblem, count: int, rng: np.random.Generator) -> TelemetryDesign:
-    """A count's layout (module docstring, step 2), judged (:func:`judge`)."""
+    """A count's layout (module docstring, step 2), judged (:func:`judge`). The receivers in place
+    (:attr:`TelemetryProblem.kept`) are in every layout, first, and only the others are placed and paid for; with a
+    footprint (:attr:`TelemetryProblem.footprint`) the placed start within half of it of the middle of those in
+    place (or of the work area) and the criterion grows by :data:`FOOTPRINT_PENALTY` times the share by which the
+    layout's spread exceeds it."""
     sections = problem.sections
-    tree = cKDTree(problem.sites)
-    chosen = problem.points[rng.choice(len(problem.points), size=min(count, len(problem.points)), replace=False)]
-    if len(chosen) < count:
-        chosen = np.vstack([chosen, problem.sites[rng.choice(len(problem.sites), count - len(chosen), False)]])
-    for _ in range(30):  # Lloyd's iterations over the work area's points
-        label = np.argmin(np.linalg.norm(problem.points[:, None] - chosen[None], axis=-1), axis=1)
-        for k in range(count):
-            if np.any(label == k):
-                chosen[k] = problem.points[label == k].mean(axis=0)
-    index = _distinct(tree.query(chosen)[1], tree, chosen)
+    kept, footprint = problem.kept, problem.footprint
+    placed = count - len(kept)
+    c = sections["candidates"]
+    cost = placed * (c["receiver_cost"] + c["sync_tag_cost"])
     objective = _Objective(problem)
-    best = objective(problem.sites[index])
+
+    def value_of(receivers: np.ndarray) -> float:
+        value = objective(receivers)
+        if footprint > 0.0:
+            value += FOOTPRINT_PENALTY * max(0.0, float(areas.spread(receivers)) / footprint - 1.0)
+        return value
+
+    if placed == 0:  # every receiver in place: nothing to search
+        design = TelemetryDesign(count, cost, kept.copy(), value_of(kept), [], objective.evaluations, kept=len(kept))
+        judge(design, problem, rng)
+        return design
+    tree = cKDTree(problem.sites)
+    pool = problem.points
+    if footprint > 0.0:
+        middle = 0.5 * (kept.min(axis=0) + kept.max(axis=0)) if len(kept) else problem.points.mean(axis=0)
+        pool = problem.points[np.linalg.norm(problem.points - middle, axis=1) <= 0.5 * footprint]
+        if len(pool) < placed:
+            pool = problem.sites[np.argsort(np.linalg.norm(problem.sites - middle, axis=1), kind="stable")[:placed]]
+    chosen = pool[rng.choice(len(pool), size=min(placed, len(pool)), replace=False)]
+    if len(chosen) < placed:
+        chosen = np.vstack([chosen, problem.sites[rng.choice(len(problem.sites), placed - len(chosen), False)]])
+    centres = np.vstack([kept, chosen])
+    for _ in range(30):  # Lloyd's iterations over the work area's points, the receivers in place held
+        label = np.argmin(np.linalg.norm(pool[:, None] - centres[None], axis=-1), axis=1)
+        for k in range(len(kept), count):
+            if np.any(label == k):
+                centres[k] = pool[label == k].mean(axis=0)
+    chosen = centres[len(kept):]
+    index = _distinct(tree.query(chosen)[1], tree, chosen)
+    best = value_of(np.vstack([kept, problem.sites[index]]))
     history = [best]
     x0, y0, x1, y1 = problem.water.bounds
     reach = 0.25 * max(x1 - x0, y1 - y0)
@@ -229,21 +307,20 @@ def search_count(problem: TelemetryProblem, count: int, rng: np.random.Generator
     moves = sections["search"]["generations"] * MOVES_PER_GENERATION
     for move in range(moves):
         radius = max(2.0 * step, reach * (1.0 - move / moves))
-        k = int(rng.integers(count))
+        k = int(rng.integers(placed))
         target = problem.sites[index[k]] + rng.uniform(-radius, radius, 2)
         place = int(tree.query(target)[1])
         if place in index:
             continue
         trial = index.copy()
         trial[k] = place
-        value = objective(problem.sites[trial])
+        value = value_of(np.vstack([kept, problem.sites[trial]]))
         if value < best:
             index, best = trial, value
         if (move + 1) % MOVES_PER_GENERATION == 0:
             history.append(best)
-    c = sections["candidates"]
-    design = TelemetryDesign(count, count * (c["receiver_cost"] + c["sync_tag_cost"]), problem.sites[index].copy(),
-                             best, history, objective.evaluations)
+    design = TelemetryDesign(count, cost, np.vstack([kept, problem.sites[index]]), best, history,
+                             objective.evaluations, kept=len(kept))
     judge(design, problem, rng)
     return design
 
@@ -351,6 +428,12 @@ def shortfalls(design: TelemetryDesign, problem: TelemetryProblem) -> tuple[list
             out.append({"part": "positioning_yield", "required": required, "achieved": reached,
                         "text": f"positioning yield at {share:g} % of the work area {reached:.1f} % against "
                                 f"{required:g} %"})
+    spread = float(areas.spread(design.receivers))
+    if problem.footprint > 0.0 and spread > problem.footprint + 1e-6:
+        out.append({"part": "footprint", "required": problem.footprint, "achieved": spread,
+                    "text": f"the receivers spread over {spread:.4g} m against the footprint of "
+                            f"{problem.footprint:g} m"})
+        ratios.append(spread / problem.footprint)
     sync = design.sync
     if not bool(sync.met):
         sync_share = 100.0 * float(sync.share)
@@ -376,6 +459,7 @@ def search_all(problem: TelemetryProblem, progress: Any = None) -> TelemetryRun:
     seeded by ``search.seed`` and the count alone, so the counts searched do not change one another's layout."""
     sections = problem.sections
     low, high = sections["candidates"]["receivers"]
+    low = max(low, len(problem.kept))  # the receivers in place, at least
     done: dict[int, TelemetryDesign] = {}
 
     def searched_at(count: int) -> TelemetryDesign:
@@ -617,7 +701,7 @@ def estimate(problem: TelemetryProblem):
     receiver each, and its judgement, :data:`JUDGE_SECONDS`), and the Monte Carlo's simulated pings."""
     sections = problem.sections
     low, high = sections["candidates"]["receivers"]
-    counts = range(low, high + 1)
+    counts = range(max(low, len(problem.kept)), high + 1)
     moves = sections["search"]["generations"] * MOVES_PER_GENERATION + 1
     m = len(problem.points)
     seconds = sum(moves * m * n * SEARCH_SECONDS + m * n * JUDGE_SECONDS for n in counts)

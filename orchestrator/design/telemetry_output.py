@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.design import telemetry as tm
+from sblsim.models.design.area import spread
 from sblsim.orchestrator.design.problem import TELEMETRY
 from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked
 from sblsim.orchestrator.io.output import staged_directory
@@ -77,9 +78,14 @@ def sync_links(design: TelemetryDesign, run: TelemetryRun) -> list[list[int]]:
 def design_record(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
     """One proposed design as ``design.json`` holds it (module docstring)."""
     rows = [{k: _finite(v) for k, v in m.items()} for m in design.monte_carlo]
+    kept = {}
+    if design.kept:  # those in place (candidates.existing_m) first, kept where they are
+        kept["existing"] = [k < design.kept for k in range(len(design.receivers))]
+    if run.resolved.footprint > 0.0:
+        kept["spread_m"] = float(spread(design.receivers))
     return {"name": design.name, "system": TELEMETRY, "label": design.label, "cost": design.cost, "meets": design.meets,
             "fails": [{k: _finite(v) for k, v in s.items()} for s in design.shortfalls], "scenario": None,
-            "receivers_m": [[float(r[0]), float(r[1])] for r in design.receivers],
+            "receivers_m": [[float(r[0]), float(r[1])] for r in design.receivers], **kept,
             "sync_links": sync_links(design, run),
             "criterion": {"name": "expected-information", "value": _finite(design.value)},
             "predicted": predicted(design, run), "evaluated_by": "telemetry", "monte_carlo": rows,
@@ -171,6 +177,9 @@ def layout_figure(run: TelemetryRun):
                 ax.plot([a[1], b[1]], [a[0], b[0]], color="tab:blue", lw=0.4, alpha=0.5)
             ax.plot(design.receivers[:, 1], design.receivers[:, 0], "^", color="tab:red", ms=6,
                     label="receiver (with its sync tag)")
+            if design.kept:
+                ax.plot(design.receivers[:design.kept, 1], design.receivers[:design.kept, 0], "s", mfc="none",
+                        mec="k", ms=10, label="in place")
             for m in design.monte_carlo:
                 ax.plot(m["east_m"], m["north_m"], "o", mfc="none", color="k", ms=9)
                 ax.annotate(f"{m['point']}: {m['ratio']:.2f}", (m["east_m"], m["north_m"]), fontsize=7,
