@@ -3,11 +3,36 @@ against the sync tags' known positions (``sync_tags.csv``).
 
 One emission's unknowns are the tag's position ``p`` (2-D or 3-D) and its emission time ``T``; an arrival at
 receiver ``j`` is ``a_j = T + |p − p_j| s + ε_j`` with ``s`` the slowness and ``ε_j`` of sigma ``σ_j`` (the
-receiver's timing noise). All emissions are solved at once by Gauss–Newton on padded arrays (emissions × receivers),
-from the centroid of the receivers that heard it, each step at most :data:`MAX_STEP`; an arrival whose residual is
-beyond :data:`OUTLIER` sigmas is dropped and the fix solved again (twice at most) while more than ``dim + 2``
-remain. A fix's covariance is ``(Jᵀ Σ⁻¹ J)⁻¹`` at its solution (its own sigma, from the receivers' noise and the
-geometry).
+receiver's timing noise), plus, for some arrivals, a multipath excess (an echo or a path around an obstacle: late)
+or a false detection. A fix is robust to such arrivals and says what it could not check:
+
+1. **The robust fix, from several starts.** Gauss–Newton with iteratively reweighted least squares, Student-t
+   weights ``(ν + 1) / (ν + u²)`` (ν = :data:`NU`, ``u`` the residual over ``σ_j``: the t distribution's maximum
+   likelihood, Lange, Little & Taylor 1989, *JASA* 84:881; the loss of the clock fit), from the centroid of the
+   receivers that heard the emission and from a metre beside each of them (the ranges' cost has local minima, and a
+   single start from the centroid converged to a wrong one 100 m away on the boats array); the start whose solution
+   has the lowest t cost is kept. The arrivals beyond the critical value ``k`` of the w-test (below) at that
+   solution are rejected.
+2. **Data snooping** (Baarda 1968, *A testing procedure for use in geodetic networks*, Netherlands Geodetic
+   Commission, Publ. Geodesy 2(5); Teunissen 2006, *Testing theory*, ch. 4): the kept arrivals' least squares, each
+   arrival's w statistic (its residual over its own sigma ``σ_j √(1 − h_jj)``, ``h`` the hat matrix's diagonal),
+   the largest beyond ``k`` rejected and the fix solved again, while the **redundancy** (arrivals less ``dim + 1``
+   unknowns) is at least 2: with a redundancy of 1 an outlier can be detected but not identified (every w is the
+   same). ``k`` is the two-sided normal critical value of the test size :data:`TEST_SIZE` (0.001, Baarda's: 3.29).
+3. **The overall model test**: the kept arrivals' ``χ² = Σ u²`` against the χ² distribution with the redundancy's
+   degrees of freedom at the same test size. Failed with a redundancy of 1: the fix is **failed** (an outlier that
+   cannot be found), not trusted. Failed with more: the covariance is scaled by the a-posteriori variance factor
+   ``χ² / redundancy`` (Koch 1999, *Parameter Estimation and Hypothesis Testing in Linear Models*, 3.2.4); a fix
+   that passes keeps its own covariance (scaling every fix by ``max(1, χ²/r)`` would inflate the sigmas of
+   consistent fixes as well).
+4. **No redundancy, no check**: a fix with ``dim + 1`` arrivals kept (3 in 2-D: x, y and the emission time) fits
+   them exactly whatever they are: **unchecked**, reported as such and not trusted (``ok`` false); fewer: **too few**.
+
+The final least squares on the kept arrivals is solved from every start as well and the lowest χ² kept. A fix's
+covariance is ``(Jᵀ Σ⁻¹ J)⁻¹`` at its solution (times the variance factor where the overall test failed).
+
+All emissions are solved at once on padded arrays (emissions × starts × the receivers that hear the tag), in chunks
+of :data:`CHUNK` rows, each Gauss–Newton step at most :data:`MAX_STEP`.
 """
 
 from __future__ import annotations
@@ -15,58 +40,121 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import chdtri, ndtri
 
-#: The largest Gauss–Newton step of a position [m], the iterations and the outlier threshold [sigmas].
+#: The largest Gauss–Newton step of a position [m], the most iterations.
 MAX_STEP = 200.0
-ITERATIONS = 20
-OUTLIER = 5.0
+ITERATIONS = 30
+#: A solution has converged when its last step is below this [m].
+CONVERGED = 1e-2
+#: Student-t degrees of freedom of the robust fix (the clock fit's).
+NU = 3.0
+#: The test size of the w-test and of the overall model test (Baarda's α₀), and the w-test's critical value.
+TEST_SIZE = 1e-3
+W_CRITICAL = float(-ndtri(TEST_SIZE / 2))
+#: The most (emission, start) rows solved at once (bounds the memory: rows × receivers × (dim + 1) doubles).
+CHUNK = 20000
+#: A fix's status: trusted; its arrivals fitted exactly (redundancy 0); fewer than dim + 1 arrivals; the overall
+#: test failed with a redundancy of 1; no converged solution.
+CHECKED, UNCHECKED, TOO_FEW, FAILED, NOT_CONVERGED = "checked", "unchecked", "too few", "failed", "not converged"
 
 
 @dataclass
 class Fixes:
     """Positioned emissions: ``position`` (E, dim) [m] and ``covariance`` (E, dim, dim) [m²] (NaN where not
-    positioned), ``emission_time`` (E,) [s], ``used`` (E, R) bool (the arrivals kept), ``ok`` (E,) bool (at least
-    ``dim + 2`` arrivals kept and converged)."""
+    trusted), ``emission_time`` (E,) [s], ``used`` (E, R) bool (the arrivals kept), ``ok`` (E,) bool (``status``
+    ``checked``: redundancy ≥ 1, the overall test passed or its variance factor applied, converged), ``redundancy``
+    (E,) int (kept arrivals less ``dim + 1``), ``chi2`` (E,) (the kept arrivals' sum of squared standardised
+    residuals), ``variance_factor`` (E,) (1, or ``χ²/redundancy`` where the overall test failed), ``status`` (E,)
+    str (``checked``, ``unchecked``, ``too few``, ``failed``, ``not converged``) and ``rejected`` (E,) int (the
+    arrivals rejected)."""
 
     position: np.ndarray
     covariance: np.ndarray
     emission_time: np.ndarray
     used: np.ndarray
     ok: np.ndarray
+    redundancy: np.ndarray | None = None
+    chi2: np.ndarray | None = None
+    variance_factor: np.ndarray | None = None
+    status: np.ndarray | None = None
+    rejected: np.ndarray | None = None
 
 
-def _solve(arrival: np.ndarray, mask: np.ndarray, receivers: np.ndarray, sigma: np.ndarray, slowness: np.ndarray,
-           start: np.ndarray):
-    E, dim = len(arrival), receivers.shape[1]
-    p = start.copy()
-    a = np.where(mask, arrival, 0.0)
-    weight = np.where(mask, 1.0 / sigma[None, :] ** 2, 0.0)
-    T = np.array([np.min(a[e][mask[e]]) if mask[e].any() else 0.0 for e in range(E)])
-    info = np.zeros((E, dim + 1, dim + 1))
-    for _ in range(ITERATIONS):
-        delta = p[:, None, :] - receivers[None, :, :]
-        rng = np.maximum(np.linalg.norm(delta, axis=2), 1e-6)
-        residual = a - T[:, None] - rng * slowness[:, None]
-        J = np.concatenate([delta / rng[..., None] * slowness[:, None, None], np.ones((E, len(sigma), 1))], axis=2)
-        info = np.einsum("erk,er,erl->ekl", J, weight, J)
-        grad = np.einsum("erk,er,er->ek", J, weight, residual)
-        info_reg = info + 1e-12 * np.eye(dim + 1)
-        step = np.linalg.solve(info_reg, grad[..., None])[..., 0]
-        move = np.linalg.norm(step[:, :dim], axis=1)
-        shrink = np.minimum(1.0, MAX_STEP / np.maximum(move, 1e-12))
-        p = p + step[:, :dim] * shrink[:, None]
-        T = T + step[:, dim] * shrink
-        if np.max(move, initial=0.0) < 1e-4:
-            break
+def _jacobian(p, receivers, slowness):
     delta = p[:, None, :] - receivers[None, :, :]
-    rng = np.linalg.norm(delta, axis=2)
+    rng = np.maximum(np.linalg.norm(delta, axis=2), 1e-6)
+    J = np.concatenate([delta / rng[..., None] * slowness[:, None, None], np.ones(rng.shape + (1,))], axis=2)
+    return rng, J
+
+
+def _gauss_newton(a, mask, receivers, sigma, slowness, p, T, robust: bool):
+    """Batched Gauss–Newton (IRLS with Student-t weights if ``robust``) of rows ``a``, ``mask`` (N, R) from ``p``
+    (N, dim), ``T`` (N,): the solution, its residuals (N, R) [s], Jacobian (N, R, dim + 1), least-squares
+    information (N, dim + 1, dim + 1) and last step [m]. A row whose step is below 0.1 mm is left as it is."""
+    dim = p.shape[1]
+    p, T = p.copy(), T.copy()
+    base = np.where(mask, 1.0 / sigma[None, :] ** 2, 0.0)
+    move = np.full(len(p), np.inf)
+    active = np.arange(len(p))
+    for _ in range(ITERATIONS):
+        if not len(active):
+            break
+        pa, Ta, ba, sa = p[active], T[active], base[active], slowness[active]
+        rng, J = _jacobian(pa, receivers, sa)
+        residual = np.where(mask[active], a[active] - Ta[:, None] - rng * sa[:, None], 0.0)
+        w = ba * (NU + 1) / (NU + residual ** 2 * ba) if robust else ba
+        Jw = J * w[..., None]
+        info = np.matmul(Jw.transpose(0, 2, 1), J) + 1e-12 * np.eye(dim + 1)
+        step = np.linalg.solve(info, np.matmul(Jw.transpose(0, 2, 1), residual[..., None]))[..., 0]
+        m = np.linalg.norm(step[:, :dim], axis=1)
+        m = np.where(np.isfinite(m), m, np.inf)
+        shrink = np.minimum(1.0, MAX_STEP / np.maximum(m, 1e-12))
+        p[active] = pa + np.nan_to_num(step[:, :dim]) * shrink[:, None]
+        T[active] = Ta + np.nan_to_num(step[:, dim]) * shrink
+        move[active] = m
+        active = active[m >= 1e-4]
+    rng, J = _jacobian(p, receivers, slowness)
     residual = np.where(mask, a - T[:, None] - rng * slowness[:, None], 0.0)
-    return p, T, info, residual, move
+    return p, T, residual, J, np.matmul((J * base[..., None]).transpose(0, 2, 1), J), move
+
+
+def _solve_rows(a, mask, receivers, sigma, slowness, p, T, robust: bool):
+    """:func:`_gauss_newton` in chunks of :data:`CHUNK` rows."""
+    parts = [_gauss_newton(a[i:i + CHUNK], mask[i:i + CHUNK], receivers, sigma, slowness[i:i + CHUNK],
+                           p[i:i + CHUNK], T[i:i + CHUNK], robust) for i in range(0, len(a), CHUNK)]
+    return tuple(np.concatenate([q[k] for q in parts]) for k in range(6))
+
+
+def _starts(mask: np.ndarray, receivers: np.ndarray) -> np.ndarray:
+    """(E, S, dim) [m]: the centroid of the receivers that heard each emission, then a metre from each of them
+    towards it (on a receiver the range's gradient is undefined); an emission heard by fewer repeats the centroid."""
+    E, R = mask.shape
+    count = mask.sum(axis=1)
+    centroid = (mask @ receivers) / np.maximum(count, 1)[:, None]
+    S = 1 + int(count.max(initial=0))
+    starts = np.repeat(centroid[:, None, :], S, axis=1)
+    e, j = np.nonzero(mask)
+    rank = np.cumsum(mask, axis=1)[e, j]  # 1 for an emission's first receiver
+    towards = centroid[e] - receivers[j]
+    towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-9)
+    starts[e, rank] = receivers[j] + towards
+    return starts
+
+
+def _w_statistics(residual: np.ndarray, J: np.ndarray, mask: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(E, R) Baarda's w statistic of each kept arrival: its standardised residual over ``√(1 − h)``, ``h`` the
+    whitened hat matrix's diagonal (0 where not kept)."""
+    white = np.where(mask, 1.0 / sigma[None, :], 0.0)
+    A = J * white[..., None]
+    N = np.einsum("nrk,nrl->nkl", A, A) + 1e-12 * np.eye(J.shape[2])
+    h = np.einsum("nrk,nkl,nrl->nr", A, np.linalg.inv(N), A)
+    return np.where(mask, residual * white / np.sqrt(np.clip(1.0 - h, 1e-12, None)), 0.0)
 
 
 def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.ndarray, slowness: np.ndarray
                        ) -> Fixes:
-    """Position each emission (the module docstring).
+    """Position each emission robustly, with its redundancy and the overall test (the module docstring).
 
     Parameters
     ----------
@@ -82,29 +170,90 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
     Returns
     -------
     Fixes
+        Per emission; ``ok`` only where the fix was checked (redundancy ≥ 1) and passed.
+
+    Raises
+    ------
+    ValueError
+        Arrays of inconsistent shapes (a programming error: the callers build them).
     """
-    E, dim = len(arrival), receivers.shape[1]
-    mask = np.isfinite(arrival)
-    enough = mask.sum(axis=1) >= dim + 2
-    start = np.array([receivers[m].mean(axis=0) if m.any() else np.zeros(dim) for m in mask])
-    for _ in range(3):
-        p, T, info, residual, move = _solve(arrival, mask, receivers, sigma, slowness, start)
-        u = np.abs(residual) / sigma[None, :]
-        worst = np.argmax(np.where(mask, u, -1.0), axis=1)
-        bad = (u[np.arange(E), worst] > OUTLIER) & (mask.sum(axis=1) > dim + 2)
+    arrival = np.asarray(arrival, float)
+    receivers = np.asarray(receivers, float)
+    sigma, slowness = np.asarray(sigma, float), np.asarray(slowness, float)
+    E, R = arrival.shape
+    dim = receivers.shape[1]
+    if receivers.shape[0] != R or sigma.shape != (R,) or slowness.shape != (E,):
+        raise ValueError("position_emissions: arrival (E, R), receivers (R, dim), sigma (R,), slowness (E,)")
+    heard = np.isfinite(arrival)
+    cols = np.flatnonzero(heard.any(axis=0))  # only the receivers that hear this tag
+    a, mask0, rec, sig = np.where(heard, arrival, 0.0)[:, cols], heard[:, cols], receivers[cols], sigma[cols]
+    count0 = mask0.sum(axis=1)
+    starts = _starts(mask0, rec)
+    S = starts.shape[1]
+    T0 = np.where(mask0, a, np.inf).min(axis=1, initial=np.inf)
+    T0 = np.where(np.isfinite(T0), T0, 0.0)
+
+    def every_start(mask: np.ndarray, robust: bool):
+        rows = (np.repeat(a, S, axis=0), np.repeat(mask, S, axis=0))
+        return _solve_rows(*rows, rec, sig, np.repeat(slowness, S), starts.reshape(E * S, dim), np.repeat(T0, S),
+                           robust)
+
+    # 1. the robust fix from every start; the lowest t cost kept, the arrivals beyond the w-test's value rejected
+    pS, TS, resS, _, _, moveS = every_start(mask0, robust=True)
+    u = resS / sig[None, :]
+    cost = np.where(np.repeat(mask0, S, axis=0), (NU + 1) / 2 * np.log1p(u ** 2 / NU), 0.0).sum(axis=1)
+    cost = np.where(np.isfinite(cost) & np.isfinite(pS).all(axis=1), cost, np.inf).reshape(E, S)
+    pick = np.arange(E) * S + np.argmin(cost, axis=1)
+    p, T = pS[pick], TS[pick]
+    mask = mask0 & (np.abs(u[pick]) <= W_CRITICAL)
+    # 2. data snooping while the redundancy identifies the outlier
+    p, T, residual, J, info, move = _solve_rows(a, mask, rec, sig, slowness, p, T, robust=False)
+    rows = np.arange(E)  # the fixes still snooped: solved again only where an arrival was rejected
+    for _ in range(int(count0.max(initial=0))):
+        w = np.abs(_w_statistics(residual[rows], J[rows], mask[rows], sig))
+        worst = np.argmax(w, axis=1)
+        bad = (w[np.arange(len(rows)), worst] > W_CRITICAL) & (mask[rows].sum(axis=1) - (dim + 1) >= 2)
         if not bad.any():
             break
-        mask[np.flatnonzero(bad), worst[bad]] = False
-        start = p
-    enough &= mask.sum(axis=1) >= dim + 2
-    ok = enough & np.isfinite(p).all(axis=1) & (move < 1e-2)
+        rows, worst = rows[bad], worst[bad]
+        mask[rows, worst] = False
+        p[rows], T[rows], residual[rows], J[rows], info[rows], move[rows] = _solve_rows(
+            a[rows], mask[rows], rec, sig, slowness[rows], p[rows], T[rows], robust=False)
+    chi2 = np.where(mask, (residual / sig[None, :]) ** 2, 0.0).sum(axis=1)
+    # the kept arrivals' least squares from every start: the lowest χ² of the converged solutions
+    pS, TS, resS, _, infoS, moveS = every_start(mask, robust=False)
+    chiS = np.where(np.repeat(mask, S, axis=0), (resS / sig[None, :]) ** 2, 0.0).sum(axis=1)
+    chiS = np.where((moveS < CONVERGED) & np.isfinite(pS).all(axis=1), chiS, np.inf).reshape(E, S)
+    best = np.argmin(chiS, axis=1)
+    better = (chiS[np.arange(E), best] < chi2 - 1e-9) | ~(move < CONVERGED)
+    pick = np.arange(E) * S + best
+    p = np.where(better[:, None], pS[pick], p)
+    T = np.where(better, TS[pick], T)
+    info = np.where(better[:, None, None], infoS[pick], info)
+    move = np.where(better, moveS[pick], move)
+    chi2 = np.where(better, chiS[np.arange(E), best], chi2)
+    # 3. and 4. the overall test, the redundancy
+    redundancy = mask.sum(axis=1) - (dim + 1)
+    limit = chdtri(np.maximum(redundancy, 1), TEST_SIZE)
+    fail = (redundancy >= 1) & (chi2 > limit)
+    factor = np.where(fail & (redundancy >= 2), chi2 / np.maximum(redundancy, 1), 1.0)
+    status = np.full(E, CHECKED, dtype=object)
+    status[fail & (redundancy == 1)] = FAILED
+    status[redundancy == 0] = UNCHECKED
+    status[redundancy < 0] = TOO_FEW
+    status[(redundancy >= 0) & ~((move < CONVERGED) & np.isfinite(p).all(axis=1))] = NOT_CONVERGED
+    ok = status == CHECKED
     covariance = np.full((E, dim, dim), np.nan)
     if ok.any():
-        full = np.linalg.inv(info[ok] + 1e-12 * np.eye(dim + 1))
-        covariance[ok] = full[:, :dim, :dim]
+        covariance[ok] = np.linalg.inv(info[ok] + 1e-12 * np.eye(dim + 1))[:, :dim, :dim] * factor[ok, None, None]
+    p, T = p.copy(), T.copy()
     p[~ok] = np.nan
     T[~ok] = np.nan
-    return Fixes(p, covariance, T, mask, ok)
+    used = np.zeros((E, R), bool)
+    used[:, cols] = mask
+    return Fixes(p, covariance, T, used, ok, redundancy, np.where(redundancy >= 0, chi2, np.nan), factor, status,
+                 count0 - mask.sum(axis=1))
 
 
-__all__ = ["Fixes", "ITERATIONS", "MAX_STEP", "OUTLIER", "position_emissions"]
+__all__ = ["CHECKED", "CHUNK", "FAILED", "Fixes", "ITERATIONS", "MAX_STEP", "NOT_CONVERGED", "NU", "TEST_SIZE",
+           "TOO_FEW", "UNCHECKED", "W_CRITICAL", "position_emissions"]

@@ -25,7 +25,7 @@ from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, group_emissions, later_duplicates
-from sblsim.models.sync.positions import position_emissions
+from sblsim.models.sync.positions import FAILED, UNCHECKED, position_emissions
 from sblsim.orchestrator.sync.detections import Detections
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
@@ -273,7 +273,15 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
     arrivals (``truth_x_m``, ``truth_y_m``, its sigma ``truth_sigma_m``; the NEES with the fix's covariance and
     that position's summed: two estimates from disjoint arrivals), the error against the table beside it
-    (``table_error_m``)."""
+    (``table_error_m``).
+
+    Each fix is robust and checked (:func:`~sblsim.models.sync.positions.position_emissions`): the statistics are
+    over the trusted fixes (``fixes``); ``fixes_unchecked`` (no redundancy: the arrivals fitted exactly, nothing to
+    check them) and ``fixes_failed`` (the overall test failed with a redundancy of 1: an outlier not identifiable)
+    are counted beside them, ``fixes_scaled`` the fixes whose covariance the a-posteriori variance factor scaled,
+    ``arrivals_rejected`` the arrivals the trusted fixes rejected, ``median_redundancy`` theirs. The clock fit's
+    own rejections of the tag's arrivals are not carried into its fixes: that fit saw the tag at its known
+    position, so its rejections would use the position the fixes are checked against."""
     dim = positions.shape[1]
     rows = []
     for i, name in enumerate(tag_names):
@@ -338,11 +346,17 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                              "truth_y_m": truth[1], "truth_sigma_m": float(np.sqrt(np.trace(truth_cov))),
                              "table_error_m": float(np.median(np.linalg.norm(fixes.position[ok] - positions[home],
                                                                              axis=1)))})
+        rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
+                         "fixes_failed": int((fixes.status == FAILED).sum()),
+                         "fixes_scaled": int((fixes.variance_factor[ok] > 1).sum()),
+                         "arrivals_rejected": int(fixes.rejected[ok].sum()),
+                         "median_redundancy": float(np.median(fixes.redundancy[ok]))})
     columns = ["tag", "receiver", "x_m", "y_m", "emissions", "fixes", "receivers_used", "median_error_m",
                "median_sigma_m", "rms_error_m", "p90_error_m", "nees_mean", "nees_median", "median_x_m", "median_y_m",
                "median_position_error_m", "inside_array", "leave_one_out"]
     if geometry is not None:
         columns += ["truth_x_m", "truth_y_m", "truth_sigma_m", "table_error_m"]
+    columns += ["fixes_unchecked", "fixes_failed", "fixes_scaled", "arrivals_rejected", "median_redundancy"]
     return pd.DataFrame(rows, columns=columns)
 
 
@@ -388,10 +402,16 @@ def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, link
         speed["sound_speed_sigma_m_s"] = fit.slowness_sigma / fit.slowness ** 2 if fit.slowness_sigma else None
     loo = {}
     if len(sync_tags):
+        inside = sync_tags[sync_tags["inside_array"]]
         loo = {"median_error_m": float(sync_tags["median_error_m"].median()),
-               "tags": int(len(sync_tags)), "nees_mean_inside": float(sync_tags.loc[sync_tags["inside_array"],
-                                                                              "nees_mean"].mean())
-               if sync_tags["inside_array"].any() else None}
+               "tags": int(len(sync_tags)), "nees_mean_inside": float(inside["nees_mean"].mean())
+               if len(inside) else None,
+               "nees_median_inside": float(inside["nees_median"].median()) if len(inside) else None,
+               "median_sigma_m": float(sync_tags["median_sigma_m"].median()),
+               "fixes": int(sync_tags["fixes"].sum()), "fixes_unchecked": int(sync_tags["fixes_unchecked"].sum()),
+               "fixes_failed": int(sync_tags["fixes_failed"].sum()),
+               "fix_model": "robust (Student-t IRLS from several starts, then Baarda's data snooping and the overall "
+                            "test at a test size of 0.001); a fix without redundancy is unchecked, not counted"}
     kept = residuals["kept"].to_numpy()
     return {
         "model": "piecewise-linear clock offset per receiver, continuous across time bins (drift constant in a bin), "
