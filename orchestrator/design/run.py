@@ -291,7 +291,8 @@ def room(region: Area, avoid: list[Area], count: int = 0, kept: np.ndarray | Non
          footprint: float = 0.0) -> bool:
     """Whether a point of a ``count`` × ``count`` grid over the region (default :data:`ROOM_GRID`; its centre and
     vertices too) lies inside it and outside every area to avoid (and, with ``kept`` (k, 2+) and a ``footprint``
-    [m], within the footprint of each of those: the grid then over the part of the region's box that is)."""
+    [m], within the footprint of each of those and not at one of their places: the grid then over the part of the
+    region's box that is)."""
     count = count or ROOM_GRID
     low, high = region.bounds()
     near = kept is not None and len(kept) and footprint > 0.0
@@ -301,13 +302,12 @@ def room(region: Area, avoid: list[Area], count: int = 0, kept: np.ndarray | Non
         high = np.minimum(high, kept[:, :2].min(axis=0) + footprint)
         if np.any(low > high):
             return False
-        extra += list(kept[:, :2])
     N, E = np.meshgrid(np.linspace(low[0], high[0], count), np.linspace(low[1], high[1], count), indexing="ij")
     points = np.vstack([np.column_stack([N.ravel(), E.ravel()]), np.asarray(extra, dtype=float)])
     points = points[region.contains(points)]
-    if near:
-        points = points[np.all(np.hypot(*(points[:, None, :] - kept[None, :, :2]).transpose(2, 0, 1))
-                               <= footprint + 1e-9, axis=1)]
+    if near:  # within the footprint of each, and not at one of their places
+        gaps = np.hypot(*(points[:, None, :] - kept[None, :, :2]).transpose(2, 0, 1))
+        points = points[np.all(gaps <= footprint + 1e-9, axis=1) & np.all(gaps > 1e-6, axis=1)]
     for area in avoid:  # the points left, a chunk at a time (a polygon's distances are points × vertices)
         points = np.concatenate([part[area.distance(part) >= 0.0] for part in np.array_split(
             points, max(1, len(points) // 4096))]) if len(points) else points
