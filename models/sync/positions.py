@@ -11,8 +11,11 @@ or a false detection. A fix is robust to such arrivals and says what it could no
    likelihood, Lange, Little & Taylor 1989, *JASA* 84:881; the loss of the clock fit), from the centroid of the
    receivers that heard the emission and from a metre beside each of them (the ranges' cost has local minima, and a
    single start from the centroid converged to a wrong one 100 m away on the boats array); the start whose solution
-   has the lowest t cost is kept. The arrivals beyond the critical value ``k`` of the w-test (below) at that
-   solution are rejected.
+   has the lowest t cost is kept. Where that solution has an arrival beyond the critical value ``k`` of the w-test
+   (below), the fix is started again from the least squares of the arrivals less each one and each pair (up to
+   :data:`LEAVE_OUT_MAX` arrivals: RANSAC's minimal-subset idea, Fischler & Bolles 1981, made exhaustive): with
+   two arrivals late by a hundred sigmas the t cost has so many local minima that no start near a receiver reaches
+   its lowest. The arrivals beyond ``k`` at the lowest are rejected.
 2. **Data snooping** (Baarda 1968, *A testing procedure for use in geodetic networks*, Netherlands Geodetic
    Commission, Publ. Geodesy 2(5); Teunissen 2006, *Testing theory*, ch. 4): the kept arrivals' least squares, each
    arrival's w statistic (its residual over its own sigma ``σ_j √(1 − h_jj)``, ``h`` the hat matrix's diagonal),
@@ -37,6 +40,8 @@ of :data:`CHUNK` rows, each Gauss–Newton step at most :data:`MAX_STEP`.
 
 from __future__ import annotations
 
+import itertools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,11 +57,16 @@ NU = 3.0
 #: The test size of the w-test and of the overall model test (Baarda's α₀), and the w-test's critical value.
 TEST_SIZE = 1e-3
 W_CRITICAL = float(-ndtri(TEST_SIZE / 2))
+#: The most arrivals of an emission whose leave-one-or-two-out least squares start the robust fix again where its
+#: first pass rejects one (C(12, 2) + 12 = 78 starts).
+LEAVE_OUT_MAX = 12
 #: The most (emission, start) rows solved at once (bounds the memory: rows × receivers × (dim + 1) doubles).
 CHUNK = 20000
 #: A fix's status: trusted; its arrivals fitted exactly (redundancy 0); fewer than dim + 1 arrivals; the overall
 #: test failed with a redundancy of 1; no converged solution.
 CHECKED, UNCHECKED, TOO_FEW, FAILED, NOT_CONVERGED = "checked", "unchecked", "too few", "failed", "not converged"
+#: A fix whose rejected arrival could be swapped for a kept one, both solutions passing the overall test.
+AMBIGUOUS = "ambiguous"
 
 
 @dataclass
@@ -152,6 +162,75 @@ def _w_statistics(residual: np.ndarray, J: np.ndarray, mask: np.ndarray, sigma: 
     return np.where(mask, residual * white / np.sqrt(np.clip(1.0 - h, 1e-12, None)), 0.0)
 
 
+def _t_cost(residual: np.ndarray, mask: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(N,) the Student-t negative log-likelihood Σ (ν+1)/2 log(1 + u²/ν) of the rows' kept residuals [s]."""
+    return np.where(mask, (NU + 1) / 2 * np.log1p((residual / sigma[None, :]) ** 2 / NU), 0.0).sum(axis=1)
+
+
+def _leave_out_starts(a, mask, receivers, sigma, slowness, p, T, cost):
+    """The robust fix started also from the least squares of the arrivals less each one and each pair (while dim + 2
+    remain; RANSAC's idea, Fischler & Bolles 1981, *Comm. ACM* 24:381, exhaustively over the small subsets): two
+    arrivals late by a hundred sigmas leave the t cost so many local minima that no start near the receivers may
+    reach its lowest. Returns the rows' (p, T, residual, cost) of the lowest t cost."""
+    N, dim = p.shape
+    row, left = [], []
+    for n in range(N):
+        heard = np.flatnonzero(mask[n])
+        drop = [(i,) for i in heard]
+        if len(heard) - 2 >= dim + 2:
+            drop += list(itertools.combinations(heard, 2))
+        row += [n] * len(drop)
+        left += drop
+    row = np.asarray(row, np.int64)
+    sub = mask[row].copy()
+    for k, d in enumerate(left):
+        sub[k, list(d)] = False
+    q, U, *_ = _solve_rows(a[row], sub, receivers, sigma, slowness[row], p[row], T[row], robust=False)
+    q, U, residual, _, _, _ = _solve_rows(a[row], mask[row], receivers, sigma, slowness[row], q, U, robust=True)
+    trial = np.where(np.isfinite(q).all(axis=1), _t_cost(residual, mask[row], sigma), np.inf)
+    best = np.full(N, -1)
+    low = cost.copy()
+    for k in np.argsort(trial):  # the lowest trial of each row, where below the row's cost
+        if trial[k] < low[row[k]]:
+            low[row[k]] = trial[k]
+            best[row[k]] = k
+    p, T = p.copy(), T.copy()
+    rng = np.linalg.norm(p[:, None, :] - receivers[None], axis=2)
+    res = np.where(mask, a - T[:, None] - rng * slowness[:, None], 0.0)
+    take = best >= 0
+    p[take], T[take], res[take] = q[best[take]], U[best[take]], residual[best[take]]
+    return p, T, res, low
+
+
+def _not_separable(a, heard, mask, receivers, sigma, slowness, p, T, info, factor, redundancy) -> np.ndarray:
+    """(E,) bool: a fix whose rejection cannot be told from another: a rejected arrival ``k`` restored and a kept
+    one ``j`` left out instead gives a solution that passes the overall test too, farther from the fix than its
+    χ²_dim critical value in the fix's own covariance (Teunissen 2006, ch. 4: an outlier identifiable only if its
+    w-test is separable from the others'). One receiver alone on one side of the array is the typical case: drop
+    it, or the one beside it, and either fits."""
+    E, dim = p.shape
+    e, k = np.nonzero(heard & ~mask & (redundancy >= 1)[:, None])
+    if not len(e):
+        return np.zeros(E, bool)
+    kept = mask[e]
+    pair_e = np.repeat(e, kept.sum(axis=1))
+    pair_k = np.repeat(k, kept.sum(axis=1))
+    pair_j = np.nonzero(kept)[1]
+    swap = mask[pair_e].copy()
+    swap[np.arange(len(pair_e)), pair_k] = True
+    swap[np.arange(len(pair_e)), pair_j] = False
+    q, _, residual, _, _, move = _solve_rows(a[pair_e], swap, receivers, sigma, slowness[pair_e], p[pair_e],
+                                             T[pair_e], robust=False)
+    chi2 = np.where(swap, (residual / sigma[None, :]) ** 2, 0.0).sum(axis=1)
+    passes = (move < CONVERGED) & (chi2 <= chdtri(redundancy[pair_e], TEST_SIZE))
+    cov = np.linalg.inv(info[pair_e] + 1e-12 * np.eye(dim + 1))[:, :dim, :dim] * factor[pair_e, None, None]
+    d = q - p[pair_e]
+    far = np.einsum("nk,nkl,nl->n", d, np.linalg.inv(cov), d) > chdtri(dim, TEST_SIZE)
+    out = np.zeros(E, bool)
+    out[pair_e[passes & far]] = True
+    return out
+
+
 def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.ndarray, slowness: np.ndarray
                        ) -> Fixes:
     """Position each emission robustly, with its redundancy and the overall test (the module docstring).
@@ -190,12 +269,18 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
     count0 = mask0.sum(axis=1)
     starts = _starts(mask0, rec)
     S = starts.shape[1]
-    T0 = np.where(mask0, a, np.inf).min(axis=1, initial=np.inf)
-    T0 = np.where(np.isfinite(T0), T0, 0.0)
+    # each start's emission time: the median of its arrivals less their travel times from it (the robust weights of
+    # the first step are then the start's, not those of a time off by the ranges)
+    flight = np.linalg.norm(starts[:, :, None, :] - rec[None, None], axis=3) * slowness[:, None, None]
+    with warnings.catch_warnings():  # an emission heard by none: its start time 0
+        warnings.simplefilter("ignore", RuntimeWarning)
+        T0 = np.nanmedian(np.where(mask0[:, None, :], a[:, None, :] - flight, np.nan), axis=2) if E and len(rec) \
+            else np.zeros((E, S))
+    T0 = np.where(np.isfinite(T0), T0, 0.0).reshape(E * S)
 
     def every_start(mask: np.ndarray, robust: bool):
         rows = (np.repeat(a, S, axis=0), np.repeat(mask, S, axis=0))
-        return _solve_rows(*rows, rec, sig, np.repeat(slowness, S), starts.reshape(E * S, dim), np.repeat(T0, S),
+        return _solve_rows(*rows, rec, sig, np.repeat(slowness, S), starts.reshape(E * S, dim), T0,
                            robust)
 
     # 1. the robust fix from every start; the lowest t cost kept, the arrivals beyond the w-test's value rejected
@@ -205,7 +290,19 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
     cost = np.where(np.isfinite(cost) & np.isfinite(pS).all(axis=1), cost, np.inf).reshape(E, S)
     pick = np.arange(E) * S + np.argmin(cost, axis=1)
     p, T = pS[pick], TS[pick]
-    mask = mask0 & (np.abs(u[pick]) <= W_CRITICAL)
+    best_cost = cost[np.arange(E), np.argmin(cost, axis=1)]
+    residual = resS[pick]
+    # where that rejects an arrival: also from the least squares of the arrivals less one or two of them
+    suspect = np.flatnonzero((mask0 & (np.abs(residual / sig[None, :]) > W_CRITICAL)).any(axis=1)
+                             & (count0 <= LEAVE_OUT_MAX))
+    if len(suspect):
+        p[suspect], T[suspect], residual[suspect], best_cost[suspect] = _leave_out_starts(
+            a[suspect], mask0[suspect], rec, sig, slowness[suspect], p[suspect], T[suspect], best_cost[suspect])
+    mask = mask0 & (np.abs(residual / sig[None, :]) <= W_CRITICAL)
+    # a rejection that would leave no redundancy identifies nothing (any dim + 1 arrivals fit exactly): all kept,
+    # the overall test judges
+    blind = (mask.sum(axis=1) < dim + 2) & (count0 >= dim + 2)
+    mask[blind] = mask0[blind]
     # 2. data snooping while the redundancy identifies the outlier
     p, T, residual, J, info, move = _solve_rows(a, mask, rec, sig, slowness, p, T, robust=False)
     rows = np.arange(E)  # the fixes still snooped: solved again only where an arrival was rejected
@@ -239,6 +336,7 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
     factor = np.where(fail & (redundancy >= 2), chi2 / np.maximum(redundancy, 1), 1.0)
     status = np.full(E, CHECKED, dtype=object)
     status[fail & (redundancy == 1)] = FAILED
+    status[_not_separable(a, mask0, mask, rec, sig, slowness, p, T, info, factor, redundancy)] = AMBIGUOUS
     status[redundancy == 0] = UNCHECKED
     status[redundancy < 0] = TOO_FEW
     status[(redundancy >= 0) & ~((move < CONVERGED) & np.isfinite(p).all(axis=1))] = NOT_CONVERGED
@@ -255,5 +353,5 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
                  count0 - mask.sum(axis=1))
 
 
-__all__ = ["CHECKED", "CHUNK", "FAILED", "Fixes", "ITERATIONS", "MAX_STEP", "NOT_CONVERGED", "NU", "TEST_SIZE",
-           "TOO_FEW", "UNCHECKED", "W_CRITICAL", "position_emissions"]
+__all__ = ["AMBIGUOUS", "CHECKED", "CHUNK", "FAILED", "Fixes", "ITERATIONS", "MAX_STEP", "NOT_CONVERGED", "NU",
+           "TEST_SIZE", "TOO_FEW", "UNCHECKED", "W_CRITICAL", "position_emissions"]
