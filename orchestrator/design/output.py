@@ -2,7 +2,8 @@
 
 * ``design.json``: the problem as resolved (``problem``), a one-line ``summary``, and ``designs``, the proposed
   designs best first (:func:`design_record`): each its ``name``, ``system``, ``cost``, ``meets``, ``scenario`` (its
-  file), ``transponders_m`` (East, North, depth [m]), ``grades``, ``predicted`` (the map's DRMS quantiles over the
+  file), ``transponders_m`` (East, North, depth [m]; ``existing`` marks those in place, ``spread_m`` the largest
+  distance between two where a footprint is given), ``grades``, ``predicted`` (the map's DRMS quantiles over the
   work area, ``coverage`` and ``availability``) and ``monte_carlo`` (the static vehicles' checks), ``path``;
 * ``designs.csv``: every candidate searched, one row each (:data:`CSV_COLUMNS`), in the order of the ranking;
 * ``NAME.toml`` per proposed design: its scenario, the base scenario's keys and the design's (``sblsim run``,

@@ -14,6 +14,11 @@
 * **An SBL's arm** (:func:`optimise_baseline`): the beacons' circle on the platform, its radius the unknown
   (bounded by ``candidates.sbl_baseline_m``).
 
+Transponders already in place (``fixed``: ``candidates.existing_m``) are the first of every layout, where they are;
+only the others are placed (the ring is of those). A footprint (``candidates.footprint_m``) bounds the distance of
+every pair with a placed transponder, a constraint of the evolution and the polish like the region's (the free
+placement's box narrowed to within it of every transponder in place).
+
 Each returns the layout, its criterion and the search's history (the best criterion after each generation).
 """
 
