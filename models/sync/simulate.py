@@ -189,6 +189,10 @@ def sync_tag_arrivals(positions: np.ndarray, span: float, interval: tuple[float,
     ----------
     positions : numpy.ndarray
         (R, 2) or (R, 3) [m] the receivers.
+    p_detect : float or numpy.ndarray
+        [0–1] the probability that a receiver hears an emission: one for every pair, or (R, R) with ``[i, j]``
+        receiver ``j``'s of tag ``i`` (e.g. a detection range curve at their distance; a zero diagonal: a receiver
+        deaf to its own tag). The draws are the same either way.
 
     Returns
     -------
@@ -203,7 +207,7 @@ def sync_tag_arrivals(positions: np.ndarray, span: float, interval: tuple[float,
         count = int(span / interval[0]) + 2
         times = rng.uniform(0, interval[1]) + np.r_[0.0, np.cumsum(rng.uniform(*interval, count - 1))]
         times = times[times < span]
-        heard = rng.random((len(times), n)) < p_detect
+        heard = rng.random((len(times), n)) < (p_detect if np.ndim(p_detect) == 0 else np.asarray(p_detect)[i])
         e, j = np.nonzero(heard)
         rec.append(j)
         tag.append(np.full(len(j), i))

@@ -235,6 +235,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              min=0.0, max=100.0, min_exclusive=True),
         _key("path", "Boolean", True, "", "also run the scenario's receiver on a path across the work area"),
         _key("path_replicates", "Integer", 2, "", "replicates of the path", min=1, max=1000),
+        _key("sync_clocks", "Boolean", True, "", "an ilbl design: also track the path's pings through receiver "
+                                                 "clocks synchronised from the sync tags"),
     ),
 }
 #: The sections of a design problem.

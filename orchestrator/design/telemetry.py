@@ -46,7 +46,7 @@ from sblsim.models.tracking.simulate import simulate_pings
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
 from sblsim.orchestrator.design.problem import detection_curve, existing_devices, polygon
-from sblsim.orchestrator.design.telemetry_tracking import track_path
+from sblsim.orchestrator.design.telemetry_tracking import SYNC_STREAM, track_path, track_synchronised
 
 #: The places a receiver may go: about this many grid points over the water.
 SITE_POINTS = 4000
@@ -668,15 +668,21 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     ratio = simulated / predicted if math.isfinite(simulated) and math.isfinite(predicted) else math.nan
     predicted_yield = float(np.mean(tm.positioning_yield(q[chosen], problem.needed)))
     simulated_yield = float(np.mean(enough))
-    return {"path": "correlated random walk", "pings": int(pings), "fixes": int(len(errors)),
-            "length_m": float(np.sum(np.linalg.norm(np.diff(positions, axis=0), axis=1))),
-            "predicted_drms_m": predicted, "simulated_drms_m": simulated, "ratio": ratio,
-            "predicted_yield": predicted_yield, "simulated_yield": simulated_yield,
-            "predicted_fixed": float(np.mean(fixed)), "simulated_fixed": float(np.mean(counted)),
-            "confirmed": bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
-                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
-            } | track_path(design.receivers, toa, positions, emissions, detection["sound_speed"],
-                           detection["sigma_toa_s"], BURST_INTERVAL)
+    row = {"path": "correlated random walk", "pings": int(pings), "fixes": int(len(errors)),
+           "length_m": float(np.sum(np.linalg.norm(np.diff(positions, axis=0), axis=1))),
+           "predicted_drms_m": predicted, "simulated_drms_m": simulated, "ratio": ratio,
+           "predicted_yield": predicted_yield, "simulated_yield": simulated_yield,
+           "predicted_fixed": float(np.mean(fixed)), "simulated_fixed": float(np.mean(counted)),
+           "confirmed": bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
+                             abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
+           } | track_path(design.receivers, toa, positions, emissions, detection["sound_speed"],
+                          detection["sigma_toa_s"], BURST_INTERVAL)
+    if mc["sync_clocks"] and np.isfinite(toa).any():  # the same pings through clocks synchronised from sync tags
+        clocks = np.random.default_rng([problem.sections["search"]["seed"], design.count, SYNC_STREAM])
+        row |= track_synchronised(design.receivers, toa, positions, emissions,
+                                  tm.sync_probabilities(design.receivers, problem.curve.probability),
+                                  detection["sound_speed"], detection["sigma_toa_s"], BURST_INTERVAL, clocks, row)
+    return row
 
 
 def confirm(design: TelemetryDesign, problem: TelemetryProblem) -> None:

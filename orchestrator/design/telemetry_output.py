@@ -4,12 +4,15 @@
 ``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``;
 each design its ``name``, ``system`` (``ilbl``), ``label``, ``cost``, ``meets``, ``fails`` (``part`` one of
 ``receivers``, ``coverage``, ``drms``, ``positioning_yield``, ``sync_coverage``), ``scenario`` (None: a telemetry
-design has no scenario file), ``receivers_m`` (North, East [m]), ``sync_links`` (the pairs of receivers that hear
-each other's sync tags with probability ≥ ``detection.sync_p``), ``predicted`` and ``monte_carlo`` (rows of
+design has no scenario file), ``receivers_m`` (North, East [m]; ``existing`` marks those in place,
+``spread_m`` the largest distance between two where a footprint is given), ``sync_links`` (the pairs of receivers
+that hear each other's sync tags with probability ≥ ``detection.sync_p``), ``predicted`` and ``monte_carlo`` (rows of
 ``point``, ``north_m``, ``east_m``, ``predicted_drms_m``, ``simulated_drms_m``, ``ratio``, ``pings``, ``fixes``,
 ``predicted_yield``, ``simulated_yield``, ``predicted_fixed``, ``simulated_fixed``, ``confirmed``),
 ``confirmed`` (the static points'), and ``path`` (the same along an animal's correlated random walk, with
-``monte_carlo.path``).
+``monte_carlo.path``, and the walk tracked: ``tracked_*`` with the true clocks, and with ``monte_carlo.sync_clocks``
+``synced_*`` through clocks synchronised from the sync tags, ``sync_residual_m``, ``sync_within_3_sigma`` and the
+clocks' grade: :func:`~sblsim.orchestrator.design.telemetry_tracking.track_synchronised`).
 """
 
 from __future__ import annotations
@@ -112,6 +115,10 @@ def summary(run: TelemetryRun) -> str:
         if m.get("tracked_pings"):
             found += (f"; tracked along the walk: RMS {m['tracked_rms_m']:.3g} m over {m['tracked_pings']} pings "
                       f"(smoothing bound {m['tracked_bound_m']:.3g} m, NEES {m['tracked_nees']:.2f})")
+        if m.get("synced_pings"):
+            found += (f"; through clocks synchronised from the sync tags: RMS {m['synced_rms_m']:.3g} m "
+                      f"({m['synced_ratio']:.2f} times the true clocks', their error {m['sync_residual_m']:.2g} m "
+                      f"RMS)")
     name = run.resolved.sections["design"]["name"]
     if best.meets:
         return f"{name}: {what}: {found}"
