@@ -13,6 +13,9 @@ simulated tags.
    detections (:func:`~sblsim.models.design.telemetry.expected_information_drms`) over the prescription's DRMS,
    plus 10 × the positioning yield's shortfall, at the prescription's coverage percentile (plus a tenth of its
    mean), plus the sync graph's shortfall (receivers hearing fewer than two sync tags, parts beyond one).
+   Receivers already moored (``candidates.existing_m``) are in every layout, first, and only the others are
+   placed and paid for; a footprint (``candidates.footprint_m``) keeps the places within it of every receiver in
+   place and penalises a layout whose spread exceeds it.
 3. **Judge** (:func:`judge`) with the criteria of the field: the positioning yield (a ping heard by ≥ 3 receivers,
    the exact Poisson-binomial), the DRMS as the RMS over the pings that are fixed
    (:func:`~sblsim.models.design.telemetry.fixed_ping_drms`, what single-ping fixes measure) and the sync coverage
@@ -106,7 +109,6 @@ class TelemetryProblem:
     def footprint(self) -> float:
         """The largest distance between any two receivers (``candidates.footprint_m``; 0: any) [m]."""
         return float(self.sections["candidates"]["footprint_m"])
-
 
 
 @dataclass
