@@ -246,15 +246,17 @@ def resolve(sections: dict, source: Any, scenario_items: list[str] | None = None
     points = work_area_points(area, work["points"], work["depths_m"])
     kept, footprint = np.zeros((0, 3)), 0.0
     if fielded:
-        kept, footprint = _kept(sections, seafloor, avoid, deepest, water)
+        kept, footprint = _kept(sections, seafloor, avoid, deepest, water, plan["acoustics"]["detection"] == "snr")
     return Resolved(sections, source, items, plan, area, seafloor, avoid, points, kept, footprint)
 
 
-def _kept(sections: dict, seafloor: Area, avoid: list[Area], deepest: float, water: float
+def _kept(sections: dict, seafloor: Area, avoid: list[Area], deepest: float, water: float, snr: bool = False
           ) -> tuple[np.ndarray, float]:
     """An LBL's transponders in place (k, 3) NED [m] (``candidates.existing_m``, a depth not given the seafloor's)
     and its footprint [m] (``candidates.footprint_m``), checked against the seafloor region, the areas to avoid,
-    the vehicle's and the water's depths, and the room left for the transponders added.
+    the vehicle's and the water's depths (at a site whose detection is by signal-to-noise, ``snr``, the seafloor's:
+    the search tabulates the site's detection at one transducer depth), and the room left for the transponders
+    added.
 
     Raises
     ------
@@ -279,6 +281,11 @@ def _kept(sections: dict, seafloor: Area, avoid: list[Area], deepest: float, wat
             bottom = f" and the water's {water:g} m (acoustics.water_depth)" if water > 0.0 else ""
             raise ConfigError(f"{where}: its depth {depth:g} m; allowed below the deepest vehicle's {deepest:g} m "
                               f"(work_area.depths_m){bottom}")
+        floor = sections["seafloor"]["depth_m"]
+        if snr and abs(depth - floor) > 1e-9:
+            raise ConfigError(f"{where}: its depth {depth:g} m at a site whose detection is by signal-to-noise; "
+                              f"allowed the seafloor's, {floor:g} m (seafloor.depth_m), at which the search tabulates "
+                              "the site")
     if footprint > 0.0 and len(kept) and len(kept) < c["transponders"][1] and \
             not room(seafloor, avoid, kept=kept, footprint=footprint):
         raise ConfigError(f"candidates.footprint_m: {footprint:g} m leaves no place in the seafloor region, outside "

@@ -104,6 +104,20 @@ def test_the_lbl_design_s_map_is_an_independent_fisher_computation_with_the_tran
         assert best.values["drms"][j] == pytest.approx(np.sqrt(cov[0, 0] + cov[1, 1]), rel=1e-9)
 
 
+def test_a_transponder_in_place_keeps_its_own_depth_on_the_paper_s_fixed_channel():
+    """A depth given (18 m, the floor 20 m) is kept: the layout holds it, and the map's DRMS is the numpy Fisher
+    computation of that layout (the fixed channel hears every packet wherever the transponder is)."""
+    result = sblsim.design(None, **_with(LBL, candidates={"existing_m": "40 0 18; -20 34.6", "transponders": [3, 3]},
+                                         search={"generations": 5}))
+    best = result.run.best
+    np.testing.assert_array_equal(best.transponders[:2], [[40.0, 0.0, 18.0], [-20.0, 34.6, 20.0]])
+    levels = Levels.of(plan_of(result.run.resolved, best.items))
+    for j, p in enumerate(result.run.resolved.points):
+        g = (p - best.transponders) / np.linalg.norm(p - best.transponders, axis=1)[:, None]
+        cov = np.linalg.inv(g.T @ g / levels.noise_variance + np.diag([0.0, 0.0, 1.0 / levels.depth_variance]))
+        assert best.values["drms"][j] == pytest.approx(np.sqrt(cov[0, 0] + cov[1, 1]), rel=1e-9)
+
+
 def test_the_transponder_added_to_two_in_place_is_no_worse_than_a_brute_force_over_its_place():
     """Three transponders, two in place: the search's one added transponder gives a criterion (A-optimal, the
     search's own) no worse than the best of every place of a 2 m grid over the seafloor region."""
@@ -202,6 +216,9 @@ def test_every_pair_of_an_ilbl_design_s_receivers_is_within_the_footprint():
     (_with(LBL, candidates={"systems": ["usbl"], "existing_m": "", "footprint_m": 5.0}), "candidates.footprint_m",
      "place no device"),
     (_with(LBL, candidates={"existing_m": "40 0 3"}), "candidates.existing_m", "below the deepest vehicle"),
+    (_with(LBL, design={"scenario": "lbl-field"}, work_area={"radius_m": 500.0, "depths_m": [150.0]},
+           seafloor={"depth_m": 0.0}, candidates={"existing_m": "40 0 250"}), "candidates.existing_m",
+     "allowed the seafloor's, 299 m"),
     (_with(ILBL, candidates={"existing_m": "200 200"}), "candidates.existing_m", "outside the water"),
     (_with(ILBL, candidates={"existing_m": "20 20 4"}), "candidates.existing_m", "in the plane"),
     (_with(ILBL, candidates={"existing_m": "", "footprint_m": 1.0}), "candidates.footprint_m",
