@@ -5,7 +5,8 @@ References
 ----------
 Bar-Shalom, Li, Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001, § 3.6
 (sequential processing); Wan & van der Merwe, "The unscented Kalman filter for nonlinear estimation", Proc. IEEE
-AS-SPCC 2000.
+AS-SPCC 2000; García-Fernández, Svensson, Morelande & Särkkä, "Posterior linearization filter: principles and
+implementation using sigma points", IEEE Trans. Signal Processing 63(20), 2015.
 """
 
 from __future__ import annotations
@@ -84,12 +85,22 @@ def _sigma_function(size: int, alpha: float, beta: float, kappa: float) -> ca.Fu
 
 class ToaUkfTracker(ToaTracker):
     """The unscented Kalman filter of the same track: :class:`ToaTracker`'s motion model, start, gates and restarts,
-    with the unscented measurement update (the motion model is linear, so its prediction is the EKF's).
+    with the unscented measurement update (the motion model is linear, so its prediction is the EKF's), iterated about
+    the posterior.
 
-    The scaled sigma points of the predicted state (α, β, κ: :data:`UKF_ALPHA`, :data:`UKF_BETA`,
-    :data:`UKF_KAPPA`; Wan & van der Merwe, "The unscented Kalman filter for nonlinear estimation", Proc. IEEE
-    AS-SPCC 2000) go through :func:`toa_function`; their weighted mean, covariance and cross-covariance with the
-    state take the place of the EKF's linearisation, in the same gates (each arrival's NIS, then the set's).
+    The scaled sigma points (α, β, κ: :data:`UKF_ALPHA`, :data:`UKF_BETA`, :data:`UKF_KAPPA`; Wan & van der Merwe,
+    "The unscented Kalman filter for nonlinear estimation", Proc. IEEE AS-SPCC 2000) go through
+    :func:`toa_function`; their weighted mean, covariance and cross-covariance give the arrivals' statistical
+    linearisation ``z ≈ H x + b`` with its error's covariance Ω (García-Fernández, Svensson, Morelande & Särkkä,
+    "Posterior linearization filter: principles and implementation using sigma points", IEEE Trans. Signal
+    Processing 63(20), 2015), which takes the place of the EKF's linearisation in the same gates (each arrival's
+    NIS, then the set's) and in the Kalman update of the prediction. The first linearisation is about the
+    prediction: with one iteration the update is the plain UKF's. Each further one is about the last update's
+    mean and covariance (the iterated posterior linearisation filter), until the position moves by less than
+    :data:`UKF_TOLERANCE` or :data:`UKF_ITERATIONS`: where the prediction is wide (a random burst interval's
+    20–40 s after a start with the speed unknown: tens of metres across a ping heard by two receivers), sigma points
+    spread over the prediction straddle the array and their statistics describe no arrival; about the posterior
+    they shrink to where the arrivals put the tag.
 
     Parameters
     ----------
@@ -98,38 +109,60 @@ class ToaUkfTracker(ToaTracker):
     settings : TrackerSettings
     alpha, beta, kappa : float
         The sigma points' parameters.
+    iterations : int
+        The linearisations of an update, at most (1: the plain UKF).
     """
 
     def __init__(self, receivers: np.ndarray, settings: TrackerSettings, alpha: float = UKF_ALPHA,
-                 beta: float = UKF_BETA, kappa: float = UKF_KAPPA) -> None:
+                 beta: float = UKF_BETA, kappa: float = UKF_KAPPA, iterations: int | None = None) -> None:
         super().__init__(receivers, settings)
         self._sigma = _sigma_function(self.size, float(alpha), float(beta), float(kappa))
+        self.iterations = UKF_ITERATIONS if iterations is None else int(iterations)
 
-    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The unscented update with one ping's times of arrival (n,) (NaN: not heard), gated as the EKF's
-        (``kept`` as :meth:`ToaTracker.update`'s); returns the state, the covariance and the arrivals used (n,)."""
+    def _linearised(self, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The arrivals' statistical linearisation about ``N(x, P)``: H (n, s), b (n,) [s] and Ω (n, n) [s²]."""
         d, s = self.dim, self.settings
         points, wm, wc = (np.asarray(v) for v in self._sigma(x, P))
         wm, wc = wm.ravel(), wc.ravel()
         Z = _evaluate_pings(self.receivers, s.sound_speed, points[:d].T, points[-2])[0]  # (2 size + 1, n)
-        predicted = wm @ Z
-        dZ, dX = Z - predicted, points.T - x
+        mean = wm @ Z
+        dZ, dX = Z - mean, points.T - x
         Pzz = (wc[:, None] * dZ).T @ dZ
         Pxz = (wc[:, None] * dX).T @ dZ
-        R = s.sigma_toa**2
-        nu = toa - predicted
+        H = np.linalg.lstsq(P, Pxz, rcond=None)[0].T  # Pxzᵀ P⁻¹ (P symmetric)
+        return H, mean - H @ x, Pzz - H @ P @ H.T
 
-        def S(used):
-            return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
+    def update(self, x: np.ndarray, P: np.ndarray, toa: np.ndarray, kept: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The iterated unscented update with one ping's times of arrival (n,) (NaN: not heard), gated as the EKF's
+        (``kept`` as :meth:`ToaTracker.update`'s); returns the state, the covariance and the arrivals used (n,)."""
+        R = self.settings.sigma_toa**2
+        at, spread = x, P
+        used = np.zeros(self.n, bool)
+        for _ in range(max(self.iterations, 1)):
+            H, b, omega = self._linearised(at, spread)
+            Pzz = H @ P @ H.T + omega
+            nu = toa - (H @ x + b)
 
-        used, Su = self._gated(toa, nu, np.diag(Pzz) + R, S, kept)
-        if Su is not None:
-            K = np.linalg.solve(Su, Pxz[:, used].T).T
-            x = x + K @ nu[used]
-            P = P - K @ Su @ K.T
-            P = 0.5 * (P + P.T)
-        return x, P, used
+            def S(used, Pzz=Pzz):
+                return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
+
+            used, Su = self._gated(toa, nu, np.diag(Pzz) + R, S, kept)
+            if Su is None:
+                return x, P, used
+            K = np.linalg.solve(Su, H[used] @ P).T
+            moved = x + K @ nu[used]
+            covariance = P - K @ Su @ K.T
+            covariance = 0.5 * (covariance + covariance.T)
+            done = np.abs(moved[:self.dim] - at[:self.dim]).max() < UKF_TOLERANCE
+            at, spread = moved, covariance
+            if done:
+                break
+        return at, spread, used
+
+
+#: The linearisations of :class:`ToaUkfTracker`'s update, at most, and the position change [m] below which it stops.
+UKF_ITERATIONS, UKF_TOLERANCE = 10, 1e-4
 
 
 #: The causal filters of a pinger's track by their receivers' names (one model, start and restarts; their own
@@ -137,4 +170,5 @@ class ToaUkfTracker(ToaTracker):
 CAUSAL_TRACKERS = {"ekf": ToaTracker, "ekf-seq": ToaSeqTracker, "ukf": ToaUkfTracker}
 
 
-__all__ = ["CAUSAL_TRACKERS", "UKF_ALPHA", "UKF_BETA", "UKF_KAPPA", "ToaSeqTracker", "ToaUkfTracker"]
+__all__ = ["CAUSAL_TRACKERS", "UKF_ALPHA", "UKF_BETA", "UKF_ITERATIONS", "UKF_KAPPA", "UKF_TOLERANCE", "ToaSeqTracker",
+           "ToaUkfTracker"]
