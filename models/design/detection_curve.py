@@ -14,7 +14,8 @@ distances and shares. Two forms here:
   curve, monotone), linearly interpolated between rows and held at the first and last rows' values outside them.
 
 The keys a design names them by are ``detection.range_50_m``, ``detection.slope`` and ``detection.table``
-(:meth:`DetectionCurve.from_mapping`).
+(:meth:`DetectionCurve.from_mapping`); a curve per receiver (``detection.per_receiver``: the receivers in place,
+each with its own range test's logistic curve) is a :class:`ReceiverCurves`.
 """
 
 from __future__ import annotations
@@ -213,6 +214,50 @@ class DetectionCurve:
         return f"table of {len(self.distances_m)} rows, {self.distances_m[0]:g}–{self.distances_m[-1]:g} m"
 
 
+@dataclass(frozen=True)
+class ReceiverCurves:
+    """Detection range curves receiver by receiver: a layout's ``k``-th receiver hears with ``curves[k]`` (its own
+    range test's), or with ``site`` where that is None or beyond ``curves`` (the receivers with a curve of their own
+    come first in every layout: those already in place).
+
+    Attributes
+    ----------
+    site : DetectionCurve
+        The site-wide curve.
+    curves : tuple of DetectionCurve or None
+        The first receivers' own curves.
+    """
+
+    site: DetectionCurve
+    curves: tuple[DetectionCurve | None, ...] = ()
+
+    def probability(self, distance_m) -> np.ndarray:
+        """The probability that one ping is heard by each receiver at each distance.
+
+        Parameters
+        ----------
+        distance_m : array_like, shape (..., n)
+            [m], 0 or more; the last axis a layout's receivers, in its order.
+
+        Returns
+        -------
+        ndarray, shape (..., n)
+            [0–1]: column ``k`` by ``curves[k]``, the others by ``site``.
+        """
+        d = np.asarray(distance_m, dtype=float)
+        p = np.array(self.site.probability(d), dtype=float)
+        if d.ndim:
+            for k, curve in enumerate(self.curves[:d.shape[-1]]):
+                if curve is not None:
+                    p[..., k] = curve.probability(d[..., k])
+        return p
+
+    def describe(self) -> str:
+        """One line: the site's curve and how many receivers have their own."""
+        own = sum(c is not None for c in self.curves)
+        return f"{self.site.describe()}; {own} receiver(s) with a curve of their own"
+
+
 def _number(value, name: str, allowed: str) -> float:
     """``value`` as a finite float, or a :class:`ModelError` naming ``name`` and ``allowed``."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
@@ -228,4 +273,4 @@ def _shown(values: np.ndarray, most: int = 6) -> str:
     return f"[{text}{', …' if len(values) > most else ''}]"
 
 
-__all__ = ["RANGE_50_MAX_M", "SLOPE_MAX", "TABLE_MAX_ROWS", "DetectionCurve"]
+__all__ = ["RANGE_50_MAX_M", "SLOPE_MAX", "TABLE_MAX_ROWS", "DetectionCurve", "ReceiverCurves"]

@@ -30,7 +30,7 @@ import numpy as np
 
 from sblsim.models.declarations import FileKey, ModelError, Variable, shown
 from sblsim.models.design.criteria import CRITERIA, DIMENSIONS, MAX_ECHO_MARGIN_PCT
-from sblsim.models.design.detection_curve import DetectionCurve
+from sblsim.models.design.detection_curve import DetectionCurve, ReceiverCurves
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, named_files, parse_override, path_from
@@ -215,6 +215,9 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("range_k", "Real", 0.0, "1", "an ilbl design: the timing noise's growth with distance, sigma = "
                                           "sound_speed * sigma_toa_s + range_k * distance [m/m] (0: constant)",
              min=0.0, max=0.1),
+        _key("per_receiver", "String", "", "", "an ilbl design: receivers in place with their own range test's "
+                                               "curve, 'north east range_50_m slope; ...' [m, m, m, 1/m], each at a "
+                                               "place of candidates.existing_m (the others: the site's curve)"),
     ),
     "search": (
         _key("criterion", "String", "percentile", "", "what a layout minimises over the work area (docs/design.md: "
@@ -361,7 +364,53 @@ def _check_telemetry(problem: dict[str, dict[str, Any]]) -> None:
     elif problem["work_area"]["shape"] != "site":
         raise ConfigError(f"work_area.shape: {problem['work_area']['shape']!r} for an ilbl design; allowed site or "
                           "polygon")
-    detection_curve(problem["detection"])
+    receiver_curves(problem)
+
+
+def receiver_curves(problem: Mapping[str, Mapping[str, Any]]) -> DetectionCurve | ReceiverCurves:
+    """An ilbl design's detection curves: the site's (:func:`detection_curve`), and with ``detection.per_receiver``
+    each receiver in place (``candidates.existing_m``, first in every layout, in its order) with its own logistic
+    curve (:class:`~sblsim.models.design.detection_curve.ReceiverCurves`; a range test at that receiver, Kessel et
+    al. 2014 as the module's).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``detection.per_receiver``: a row of other than four numbers, more rows than
+        :data:`MAX_RECEIVERS`, a row at no receiver of ``candidates.existing_m``, two rows for one receiver, a
+        ``range_50_m`` or ``slope`` outside the logistic curve's allowed range.
+    """
+    site = detection_curve(problem["detection"])
+    text = problem["detection"]["per_receiver"]
+    rows = [r for r in text.replace(",", " ").split(";") if r.strip()]
+    if not rows:
+        return site
+    where = "detection.per_receiver"
+    if len(rows) > MAX_RECEIVERS:
+        raise ConfigError(f"{where}: {len(rows)} rows; allowed at most {MAX_RECEIVERS}")
+    kept = existing_devices(problem["candidates"]["existing_m"])[:, :2]
+    curves: list[DetectionCurve | None] = [None] * len(kept)
+    for k, row in enumerate(rows):
+        try:
+            values = [float(x) for x in row.split()]
+        except ValueError:
+            values = []
+        if len(values) != 4 or not all(math.isfinite(v) for v in values):
+            raise ConfigError(f"{where}: expected 'north east range_50_m slope; ...' in numbers, got "
+                              f"{row.strip()[:40]!r}")
+        north, east, range_50_m, slope = values
+        at = np.flatnonzero(np.hypot(kept[:, 0] - north, kept[:, 1] - east) <= 1e-6) if len(kept) else []
+        if not len(at):
+            raise ConfigError(f"{where}: no receiver of candidates.existing_m at {north:g} m North, {east:g} m East; "
+                              "allowed the places of the receivers in place")
+        if curves[at[0]] is not None:
+            raise ConfigError(f"{where}: two curves for the receiver at {north:g} m North, {east:g} m East; allowed "
+                              "one per receiver in place")
+        try:
+            curves[at[0]] = DetectionCurve.logistic(range_50_m, slope, f"{where}[{k}]")
+        except ModelError as exc:
+            raise ConfigError(str(exc)) from None
+    return ReceiverCurves(site, tuple(curves))
 
 
 def detection_curve(section: Mapping[str, Any]) -> DetectionCurve:
@@ -406,6 +455,9 @@ def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) ->
         raise ConfigError("work_area.shape: site is the water of an ilbl design (candidates.systems = ['ilbl']); "
                           "allowed circle or polygon")
     telemetry = is_telemetry(problem)
+    if problem["detection"]["per_receiver"].strip() and not telemetry:
+        raise ConfigError(f"detection.per_receiver: for {', '.join(candidates['systems'])}; a curve per receiver "
+                          f"applies to an {TELEMETRY} design only; allowed ''")
     _check_noise_and_depth(problem, telemetry)
     # a file names no file to read
     if not scenario_given and not telemetry and design["scenario"] not in BUILTIN_SCENARIOS:
@@ -677,4 +729,4 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
 
 __all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SYSTEM_CHOICES",
            "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve", "existing_devices",
-           "is_telemetry", "polygon", "read_problem", "signed_distance", "work_area_points"]
+           "is_telemetry", "polygon", "read_problem", "receiver_curves", "signed_distance", "work_area_points"]

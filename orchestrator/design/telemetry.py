@@ -48,7 +48,7 @@ from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.simulate import simulate_pings
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
-from sblsim.orchestrator.design.problem import detection_curve, existing_devices, polygon
+from sblsim.orchestrator.design.problem import existing_devices, polygon, receiver_curves
 from sblsim.orchestrator.design.telemetry_tracking import SYNC_STREAM, track_path, track_synchronised
 
 #: The places a receiver may go: about this many grid points over the water.
@@ -163,6 +163,14 @@ def water_polygon(section: Mapping[str, Any]):
         raise ConfigError(str(exc)) from None
 
 
+def sync_hearing(receivers: np.ndarray, curve: Any) -> np.ndarray:
+    """(..., n, n) [0–1], ``[i, j]`` the probability that receiver ``i`` hears the sync tag moored at receiver ``j``
+    with receiver ``i``'s own curve (``detection.per_receiver``), else the site's; its own tag 0
+    (:func:`~sblsim.models.design.telemetry.sync_probabilities`, whose curve is applied along the tags' axis:
+    transposed, which changes nothing where every receiver hears with the site's curve)."""
+    return tm.sync_probabilities(receivers, curve.probability).swapaxes(-1, -2)
+
+
 def resolve(sections: dict) -> TelemetryProblem:
     """The problem resolved (module docstring, step 1).
 
@@ -198,7 +206,7 @@ def resolve(sections: dict) -> TelemetryProblem:
         raise ConfigError(f"site.area.min_shore_m: {len(sites)} places for a receiver within the shore distances, "
                           f"fewer than candidates.receivers' most ({most}); allowed distances that leave room")
     sites = _kept_sites(sections, water, sites, step)
-    curve = detection_curve(sections["detection"])
+    curve = receiver_curves(sections)
     sigma = sections["detection"]["sound_speed"] * sections["detection"]["sigma_toa_s"]
     return TelemetryProblem(sections, water, work, points, sites, curve, float(sigma),
                             float(sections["detection"]["range_k"]))
@@ -255,7 +263,7 @@ class _Objective:
         score = np.minimum(np.where(np.isfinite(drms), drms, np.inf) / p.prescription["drms_m"], 1e3)
         score = score + 10.0 * np.maximum(0.0, p.required_yield - tm.positioning_yield(q, p.needed))
         value = float(np.percentile(score, p.prescription["coverage_pct"]) + 0.1 * np.mean(score))
-        sync = tm.sync_coverage(tm.sync_probabilities(receivers, p.curve.probability),
+        sync = tm.sync_coverage(sync_hearing(receivers, p.curve),
                                 p.sections["detection"]["sync_p"])
         return value + 5.0 * (1.0 - float(sync.share)) + 5.0 * (int(sync.components) - 1)
 
@@ -353,7 +361,7 @@ def judge(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Gen
     design.drms_expected = tm.expected_information_drms(problem.points, receivers, sigma, q)
     design.drms_fixed, design.fixable = fixed_pings(problem.points, receivers, sigma, q, p["fix_gate_m"], rng,
                                                     needed=problem.needed)
-    design.sync = tm.sync_coverage(tm.sync_probabilities(receivers, problem.curve.probability),
+    design.sync = tm.sync_coverage(sync_hearing(receivers, problem.curve),
                                    problem.sections["detection"]["sync_p"])
     drms = np.where(np.isfinite(design.drms_fixed), design.drms_fixed, np.inf)
     good = (drms <= p["drms_m"]) & (design.positioning_yield >= problem.required_yield - 1e-12)
@@ -682,7 +690,7 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     if mc["sync_clocks"] and np.isfinite(toa).any():  # the same pings through clocks synchronised from sync tags
         clocks = np.random.default_rng([problem.sections["search"]["seed"], design.count, SYNC_STREAM])
         row |= track_synchronised(design.receivers, toa, positions, emissions,
-                                  tm.sync_probabilities(design.receivers, problem.curve.probability),
+                                  sync_hearing(design.receivers, problem.curve),
                                   detection["sound_speed"], detection["sigma_toa_s"], BURST_INTERVAL, clocks, row)
     return row
 
@@ -722,4 +730,4 @@ __all__ = ["BURST_INTERVAL", "JUDGE_SECONDS", "MOVES_PER_GENERATION", "PATH_PRED
            "PINGS_PER_REPLICATE", "PING_SECONDS", "SEARCH_SECONDS", "SITE_POINTS", "TelemetryDesign",
            "TelemetryProblem", "TelemetryRun", "WALK_SPEED", "WALK_TURN", "YIELD_TOLERANCE_PP", "checked_points",
            "confirm", "estimate", "fixed_pings", "fixes", "judge", "path_check", "ranked", "resolve", "search_all",
-           "search_count", "shortfalls", "static_check", "walk", "water_polygon", "within"]
+           "search_count", "shortfalls", "static_check", "sync_hearing", "walk", "water_polygon", "within"]

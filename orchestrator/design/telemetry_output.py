@@ -25,10 +25,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sblsim.models.design import telemetry as tm
 from sblsim.models.design.area import spread
 from sblsim.orchestrator.design.problem import TELEMETRY
-from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked
+from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked, sync_hearing
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The columns of ``designs.csv``.
@@ -72,7 +71,7 @@ def predicted(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
 def sync_links(design: TelemetryDesign, run: TelemetryRun) -> list[list[int]]:
     """The pairs (i < j) of receivers whose sync link holds (either hears the other's sync tag with probability
     ≥ ``detection.sync_p``)."""
-    p = tm.sync_probabilities(design.receivers, run.resolved.curve.probability)
+    p = sync_hearing(design.receivers, run.resolved.curve)
     linked = p >= run.resolved.sections["detection"]["sync_p"]
     linked = linked | linked.T
     return [[int(i), int(j)] for i, j in zip(*np.nonzero(np.triu(linked, 1)))]
