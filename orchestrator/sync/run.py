@@ -25,7 +25,7 @@ from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, group_emissions, later_duplicates
-from sblsim.models.sync.positions import FAILED, UNCHECKED, position_emissions
+from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.orchestrator.sync.detections import Detections
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
@@ -277,10 +277,11 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
 
     Each fix is robust and checked (:func:`~sblsim.models.sync.positions.position_emissions`): the statistics are
     over the trusted fixes (``fixes``); ``fixes_unchecked`` (no redundancy: the arrivals fitted exactly, nothing to
-    check them) and ``fixes_failed`` (the overall test failed with a redundancy of 1: an outlier not identifiable)
-    are counted beside them, ``fixes_scaled`` the fixes whose covariance the a-posteriori variance factor scaled,
-    ``arrivals_rejected`` the arrivals the trusted fixes rejected, ``median_redundancy`` theirs. The clock fit's
-    own rejections of the tag's arrivals are not carried into its fixes: that fit saw the tag at its known
+    check them), ``fixes_failed`` (the overall test failed with a redundancy of 1: an outlier not identifiable) and
+    ``fixes_ambiguous`` (a rejected arrival could be swapped for a kept one) are counted beside them,
+    ``fixes_scaled`` the fixes whose covariance the a-posteriori variance factor scaled, ``arrivals_rejected`` the
+    arrivals the trusted fixes rejected, ``median_redundancy`` theirs. The clock fit's own rejections of the tag's
+    arrivals are not carried into its fixes: that fit saw the tag at its known
     position, so its rejections would use the position the fixes are checked against."""
     dim = positions.shape[1]
     rows = []
@@ -348,6 +349,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                                                                              axis=1)))})
         rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
                          "fixes_failed": int((fixes.status == FAILED).sum()),
+                         "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
                          "fixes_scaled": int((fixes.variance_factor[ok] > 1).sum()),
                          "arrivals_rejected": int(fixes.rejected[ok].sum()),
                          "median_redundancy": float(np.median(fixes.redundancy[ok]))})
@@ -356,7 +358,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                "median_position_error_m", "inside_array", "leave_one_out"]
     if geometry is not None:
         columns += ["truth_x_m", "truth_y_m", "truth_sigma_m", "table_error_m"]
-    columns += ["fixes_unchecked", "fixes_failed", "fixes_scaled", "arrivals_rejected", "median_redundancy"]
+    columns += ["fixes_unchecked", "fixes_failed", "fixes_ambiguous", "fixes_scaled", "arrivals_rejected",
+                "median_redundancy"]
     return pd.DataFrame(rows, columns=columns)
 
 
@@ -410,8 +413,10 @@ def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, link
                "median_sigma_m": float(sync_tags["median_sigma_m"].median()),
                "fixes": int(sync_tags["fixes"].sum()), "fixes_unchecked": int(sync_tags["fixes_unchecked"].sum()),
                "fixes_failed": int(sync_tags["fixes_failed"].sum()),
+               "fixes_ambiguous": int(sync_tags["fixes_ambiguous"].sum()),
                "fix_model": "robust (Student-t IRLS from several starts, then Baarda's data snooping and the overall "
-                            "test at a test size of 0.001); a fix without redundancy is unchecked, not counted"}
+                            "test at a test size of 0.001: Baarda 1968); a fix without redundancy is unchecked, not "
+                            "counted"}
     kept = residuals["kept"].to_numpy()
     return {
         "model": "piecewise-linear clock offset per receiver, continuous across time bins (drift constant in a bin), "
