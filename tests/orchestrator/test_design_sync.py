@@ -169,3 +169,30 @@ def test_the_design_reports_the_synchronised_track_beside_the_true_clocks(tmp_pa
     assert row["sync_receivers"] == len(with_sync["designs"][0]["receivers_m"])
     assert abs(row["synced_ratio"] - 1.0) <= 0.10 and row["sync_within_3_sigma"] >= 0.9, row
     assert row["synced_ratio"] == pytest.approx(row["synced_rms_m"] / row["tracked_rms_m"], rel=1e-12)
+
+
+def test_an_array_that_cannot_be_synchronised_gives_no_synchronised_track(walk):
+    """No receiver hears another's sync tag: the fit has nothing to synchronise, the row says so (no pings, NaN
+    figures, no receiver synchronised) instead of failing the design; three receivers hearing one another (a
+    receiver deaf to its own tag, as the design's sync coverage counts: an emission ties clocks where two others
+    hear it) and the rest none: those three synchronised, the rest's arrivals left out."""
+    toa, positions, emissions = walk
+    row = track_synchronised(RECEIVERS, toa, positions, emissions, np.zeros((8, 8)), SOUND_SPEED, SIGMA_TOA,
+                             (20.0, 40.0), np.random.default_rng(1))
+    assert row["synced_pings"] == 0 and row["sync_receivers"] == 0 and np.isnan(row["synced_rms_m"]), row
+    three = np.zeros((8, 8))
+    three[:3, :3] = 0.9
+    np.fill_diagonal(three, 0.0)
+    synced = synchronised_toa(RECEIVERS, toa, three, SIGMA_TOA, SOUND_SPEED, np.random.default_rng(1))
+    assert synced.synchronised.tolist() == [True] * 3 + [False] * 5
+    assert np.isnan(synced.toa[:, 3:]).all() and np.array_equal(np.isfinite(synced.toa[:, :3]),
+                                                                np.isfinite(toa[:, :3]))
+
+
+@pytest.mark.slow
+def test_the_lake_hald_array_tracked_through_synchronised_clocks():
+    """The worked case: every receiver synchronised, the offsets within 3 sigmas at >= 95 % of the receiver-bins
+    and the walk's track through the synchronised clocks within 10 % (RMS) of the true clocks'."""
+    (row,) = sblsim.design("lake-hald-array").designs[0]["path"]
+    assert row["sync_receivers"] == 22 and row["sync_within_3_sigma"] >= 0.95, row
+    assert abs(row["synced_ratio"] - 1.0) <= 0.10 and row["synced_pings"] == row["tracked_pings"], row
