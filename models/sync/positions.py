@@ -131,6 +131,8 @@ def _gauss_newton(a, mask, receivers, sigma, slowness, p, T, robust: bool):
 
 def _solve_rows(a, mask, receivers, sigma, slowness, p, T, robust: bool):
     """:func:`_gauss_newton` in chunks of :data:`CHUNK` rows."""
+    if not len(a):
+        return _gauss_newton(a, mask, receivers, sigma, slowness, p, T, robust)
     parts = [_gauss_newton(a[i:i + CHUNK], mask[i:i + CHUNK], receivers, sigma, slowness[i:i + CHUNK],
                            p[i:i + CHUNK], T[i:i + CHUNK], robust) for i in range(0, len(a), CHUNK)]
     return tuple(np.concatenate([q[k] for q in parts]) for k in range(6))

@@ -198,3 +198,12 @@ def test_a_start_away_from_the_centroid_finds_the_global_minimum():
                 x = x + step
             best = min(best, float(np.sum(r ** 2)))
         assert fixes.chi2[e] <= best + 1e-6, (e, fixes.chi2[e], best)
+
+
+def test_no_emission_and_emissions_heard_by_none_give_no_fix():
+    """No emission: empty fixes; emissions heard by no receiver (all NaN): ``too few``, not trusted, NaN."""
+    receivers = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0], [100.0, 100.0]])
+    empty = position_emissions(np.zeros((0, 4)), receivers, np.full(4, SIGMA), np.zeros(0))
+    assert empty.position.shape == (0, 2) and empty.ok.shape == (0,)
+    none = position_emissions(np.full((2, 4), np.nan), receivers, np.full(4, SIGMA), np.full(2, 1 / C))
+    assert none.status.tolist() == [positions.TOO_FEW] * 2 and not none.ok.any() and np.isnan(none.position).all()
