@@ -264,3 +264,25 @@ def test_the_base_scenarios_depth_is_the_work_areas():
     assert "target.depth=12.0" in resolved.items
     same = resolve(check_problem(FIELD), "semicircle")
     assert problem_items(same.sections, same.plan) == [] and same.items == []
+
+
+@pytest.mark.slow
+def test_a_design_without_a_depth_sensor_is_confirmed_by_its_monte_carlo(tmp_path):
+    """``work_area.depth_sensor = false`` with a 3-D prescription: the design's scenario has no depth sensor to
+    speak of (``target.depth_sigma`` 1000 m), it needs more transponders than with one, and the static runs of its
+    ``lsq`` receiver give the predicted 3-D DRMS within 15 % at the worst and the median point."""
+    import sblsim
+
+    problem = _with(FIELD, work_area={"radius_m": 30.0, "points": 11}, candidates={"transponders": [3, 8]},
+                    prescription={"drms_m": 0.12, "coverage_pct": 90.0, "dimensions": "3d"},
+                    search={"seed": 4, "generations": 30}, monte_carlo={"replicates": 10, "path": False})
+    counts = {}
+    for sensor in (True, False):
+        result = sblsim.design(None, **_with(problem, work_area={"depth_sensor": sensor}), out=tmp_path / str(sensor))
+        best = result.designs[0]
+        counts[sensor] = len(best["transponders_m"])
+        assert best["meets"]
+        assert all(0.85 <= row["ratio"] <= 1.15 for row in best["monte_carlo"]), best["monte_carlo"]
+        text = (tmp_path / str(sensor) / f"{best['name']}.toml").read_text()
+        assert (f"depth_sigma = {NO_DEPTH_SIGMA}" in text) != sensor
+    assert counts[False] > counts[True]
