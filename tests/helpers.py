@@ -1,5 +1,5 @@
 """Test helpers: step one model's compiled code directly, as the local engine does; start a child to signal; give
-an empty cache the objects the suite compiled.
+an empty cache the objects the suite compiled; a design problem with some of its keys changed.
 
 ``Core(model, params, replicates)`` takes configuration keys (e.g.
 ``trajectory_file``, ``sound_speed_profile``, ``beacon_offsets``) or FMU
@@ -121,3 +121,11 @@ def share_compiled_objects(cache: Path) -> int:
 
 __all__ = ["Core", "fmu_values", "share_compiled_objects", "start_for_signals"]
 
+
+def problem_with(problem: Mapping[str, Mapping[str, Any]], **changes: Mapping[str, Any]) -> dict:
+    """A copy of a design problem (section -> keys) with the keys of ``changes`` (section -> keys) set; the original
+    untouched."""
+    out = {k: dict(v) for k, v in problem.items()}
+    for section, values in changes.items():
+        out.setdefault(section, {}).update(values)
+    return out

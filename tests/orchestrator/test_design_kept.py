@@ -26,6 +26,7 @@ from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import check_problem
 from sblsim.orchestrator.design.run import plan_of, resolve, shortfalls
 from sblsim.orchestrator.design.search import Objective
+from tests.helpers import problem_with as _with
 
 #: Two LBL transponders in place on a 20 m deep floor, a 30 m work area (the paper's fixed channel).
 IN_PLACE = np.array([[40.0, 0.0, 20.0], [-20.0, 34.6, 20.0]])
@@ -54,12 +55,6 @@ ILBL = {
     "monte_carlo": {"replicates": 10, "path": False},
 }
 
-
-def _with(problem: dict, **changes) -> dict:
-    out = {k: dict(v) for k, v in problem.items()}
-    for section, values in changes.items():
-        out.setdefault(section, {}).update(values)
-    return out
 
 
 @pytest.fixture(scope="module")

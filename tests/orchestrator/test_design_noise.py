@@ -27,6 +27,7 @@ from sblsim.orchestrator.design.evaluate import NO_DEPTH_SIGMA, LayoutEvaluator,
 from sblsim.orchestrator.design.problem import TELEMETRY, check_problem
 from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
 from sblsim.orchestrator.maps import diver_depth, point_accuracy
+from tests.helpers import problem_with as _with
 
 #: A small LBL problem at the semicircle site (fixed detection: every range heard, one σ).
 FIELD = {
@@ -47,12 +48,6 @@ POND = {
     "monte_carlo": {"replicates": 40, "path": False},
 }
 
-
-def _with(base: dict, **changes) -> dict:
-    out = {k: dict(v) for k, v in base.items()}
-    for section, values in changes.items():
-        out.setdefault(section, {}).update(values)
-    return out
 
 
 def _numpy_drms(points, beacons, variance, depth_variance):

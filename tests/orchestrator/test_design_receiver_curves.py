@@ -17,6 +17,7 @@ import tomli_w
 import sblsim
 from sblsim.models.design.detection_curve import DetectionCurve, ReceiverCurves
 from sblsim.orchestrator.cli import main
+from tests.helpers import problem_with as _with
 
 L_LAKE = "0 0; 0 300; 150 300; 150 150; 300 150; 300 0"
 #: Three receivers in place; two with a range test of their own (a short range: a noisy corner, a weed bed).
@@ -37,12 +38,6 @@ PROBLEM = {
     "monte_carlo": {"replicates": 10, "path": False},
 }
 
-
-def _with(problem: dict, **changes) -> dict:
-    out = {k: dict(v) for k, v in problem.items()}
-    for section, values in changes.items():
-        out.setdefault(section, {}).update(values)
-    return out
 
 
 def _logistic(d, range_50_m: float, slope: float) -> np.ndarray:
