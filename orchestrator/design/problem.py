@@ -130,7 +130,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("points", "Integer", 21, "", "grid points across the work area's bounding box per axis (21: 441 in "
                                           "the box)", min=3, max=201),
         _key("depth_sensor", "Boolean", True, "", "the vehicle reports its depth (false: no depth sensor, its fix of "
-                                                 "the ranges alone; not for an ilbl design)"),
+                                                 "the ranges alone; an ilbl design: in 3-D only, with "
+                                                 "candidates.receiver_depth_m)"),
     ),
     "prescription": (
         _key("drms_m", "Real", 1.0, "m", "the DRMS to meet", min=0.0, max=1e4, min_exclusive=True),
@@ -172,7 +173,13 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("sync_tag_cost", "Real", 0.0, "1", "the cost of the sync tag moored at each receiver", **_COST),
         _key("existing_m", "String", "", "", "devices already in place, kept: 'north east [depth]; ...' [m] (an "
                                              "LBL's transponders, depth default seafloor.depth_m; an ilbl array's "
-                                             "receivers, 'north east'); only the devices added are paid for"),
+                                             "receivers, 'north east', a depth in 3-D only, default "
+                                             "candidates.receiver_depth_m's first); only the devices added are paid "
+                                             "for"),
+        _key("receiver_depth_m", "Real", [], "m", "an ilbl design: the added receivers' mooring depths, one receiver "
+                                                  "each in turn (empty: planar, the receivers and the tag in one "
+                                                  "plane; given: 3-D, with work_area.depths_m)", (0, MAX_DEPTHS),
+             min=0.0, max=11000.0),
         _key("footprint_m", "Real", 0.0, "m", "the largest distance between any two devices (an LBL's transponders, "
                                               "an ilbl array's receivers; 0: any)", min=0.0, max=1e6),
         *(k for category, grades in GRADES.items() for k in (
@@ -215,6 +222,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("range_k", "Real", 0.0, "1", "an ilbl design: the timing noise's growth with distance, sigma = "
                                           "sound_speed * sigma_toa_s + range_k * distance [m/m] (0: constant)",
              min=0.0, max=0.1),
+        _key("depth_sigma_m", "Real", 0.3, "m", "an ilbl design in 3-D: the tag's depth sensor's standard deviation "
+                                                "(work_area.depth_sensor)", min=0.0, max=1000.0, min_exclusive=True),
         _key("per_receiver", "String", "", "", "an ilbl design: receivers in place with their own range test's "
                                                "curve, 'north east range_50_m slope; ...' [m, m, m, 1/m], each at a "
                                                "place of candidates.existing_m (the others: the site's curve)"),
@@ -513,9 +522,10 @@ def _check_kept(problem: dict[str, dict[str, Any]]) -> None:
                               "candidates.sbl_baseline_m); allowed with an LBL's transponders or an ilbl array's "
                               "receivers")
     kept = existing_devices(c["existing_m"])
-    if telemetry and np.isfinite(kept[:, 2]).any():
-        raise ConfigError("candidates.existing_m: an ilbl array's receivers are placed in the plane; allowed "
-                          "'north east; north east; ...' [m] without a depth")
+    if telemetry and np.isfinite(kept[:, 2]).any() and not c["receiver_depth_m"]:
+        raise ConfigError("candidates.existing_m: an ilbl array's receivers are placed in the plane without "
+                          "candidates.receiver_depth_m; allowed 'north east; north east; ...' [m] without a depth "
+                          "(or the added receivers' depths in candidates.receiver_depth_m: 3-D)")
     most = c["receivers" if telemetry else "transponders"][1]
     if len(kept) > most:
         raise ConfigError(f"candidates.existing_m: {len(kept)} devices exist, more than the most designed "
@@ -567,13 +577,58 @@ def _check_noise_and_depth(problem: dict[str, dict[str, Any]], telemetry: bool) 
         raise ConfigError(f"detection.range_k: {problem['detection']['range_k']:g} for {systems}; a range-dependent "
                           f"noise applies to an {TELEMETRY} design only (the simulation of {systems} draws its range "
                           "noise independently of range); allowed 0")
-    if telemetry and not problem["work_area"]["depth_sensor"]:
-        raise ConfigError(f"work_area.depth_sensor: false for {systems}; an {TELEMETRY} design's tag and receivers "
-                          "are in one plane (no depth to sense); allowed true")
+    if telemetry:
+        _check_telemetry_depths(problem)
+    elif problem["candidates"]["receiver_depth_m"]:
+        raise ConfigError(f"candidates.receiver_depth_m: for {systems}; the receivers' depths apply to an "
+                          f"{TELEMETRY} design only; allowed []")
     if telemetry and problem["prescription"]["echo_margin_pct"] > 0.0:
         raise ConfigError(f"prescription.echo_margin_pct: {problem['prescription']['echo_margin_pct']:g} % for "
                           f"{systems}; an {TELEMETRY} design's detection curve has no reflections to keep a margin "
                           "from; allowed 0")
+
+
+def is_three_d(problem: Mapping[str, Mapping[str, Any]]) -> bool:
+    """Whether a checked ilbl problem is in 3-D (``candidates.receiver_depth_m`` given)."""
+    return bool(problem["candidates"]["receiver_depth_m"])
+
+
+def _check_telemetry_depths(problem: dict[str, dict[str, Any]]) -> None:
+    """An ilbl design's depths: planar (no receiver depth, no tag depth, a depth sensor implied) or 3-D (both);
+    without a depth sensor in 3-D, a fix of four unknowns and receivers at more than one depth.
+
+    Raises
+    ------
+    ConfigError
+        In one line naming the key: ``work_area.depth_sensor`` false or ``work_area.depths_m`` given in a planar
+        design; ``work_area.depths_m`` empty in 3-D; ``prescription.fix_receivers`` below 4 without a sensor;
+        ``candidates.receiver_depth_m`` at one depth (the receivers in place too) without a sensor.
+    """
+    c, work = problem["candidates"], problem["work_area"]
+    if not is_three_d(problem):
+        if not work["depth_sensor"]:
+            raise ConfigError(f"work_area.depth_sensor: false for a planar {TELEMETRY} design; its tag and receivers "
+                              "are in one plane (no depth to sense): allowed true, or the receivers' depths "
+                              "(candidates.receiver_depth_m) and the tag's (work_area.depths_m) for a 3-D design")
+        if work["depths_m"]:
+            raise ConfigError(f"work_area.depths_m: the tag's depths for a planar {TELEMETRY} design; allowed [] or "
+                              "with the receivers' depths (candidates.receiver_depth_m: 3-D)")
+        return
+    if not work["depths_m"]:
+        raise ConfigError(f"work_area.depths_m: empty for a 3-D {TELEMETRY} design (candidates.receiver_depth_m "
+                          "given); allowed 1 to 10 depths of the tag [m]")
+    if work["depth_sensor"]:
+        return
+    if problem["prescription"]["fix_receivers"] < 4:
+        raise ConfigError(f"prescription.fix_receivers: {problem['prescription']['fix_receivers']} without a depth "
+                          "sensor in 3-D (a fix of north, east, depth and the emission); allowed 4 to 10")
+    kept = existing_devices(c["existing_m"])
+    depths = set(c["receiver_depth_m"]) | {d if np.isfinite(d) else c["receiver_depth_m"][0] for d in kept[:, 2]}
+    if len(depths) < 2:
+        raise ConfigError(f"candidates.receiver_depth_m: every receiver at {min(depths):g} m without a depth sensor "
+                          "(work_area.depth_sensor = false): a planar array cannot fix a tag's depth (no information "
+                          "about it at the receivers' depth, a mirror solution elsewhere); allowed two depths or "
+                          "more, or a depth sensor")
 
 
 def polygon(text: str, where: str) -> np.ndarray:
@@ -729,4 +784,5 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
 
 __all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SYSTEM_CHOICES",
            "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve", "existing_devices",
-           "is_telemetry", "polygon", "read_problem", "receiver_curves", "signed_distance", "work_area_points"]
+           "is_telemetry", "is_three_d", "polygon", "read_problem", "receiver_curves", "signed_distance",
+           "work_area_points"]

@@ -48,7 +48,7 @@ from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.simulate import simulate_pings
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
-from sblsim.orchestrator.design.problem import existing_devices, polygon, receiver_curves
+from sblsim.orchestrator.design.problem import existing_devices, is_three_d, polygon, receiver_curves
 from sblsim.orchestrator.design.telemetry_tracking import SYNC_STREAM, track_path, track_synchronised
 
 #: The places a receiver may go: about this many grid points over the water.
@@ -71,6 +71,11 @@ WALK_SPEED, WALK_TURN, PATH_PREDICTED = 0.3, 0.5, 200
 YIELD_TOLERANCE_PP = 5.0
 #: The search's criterion grows by this times the share by which a layout's spread exceeds the footprint.
 FOOTPRINT_PENALTY = 10.0
+#: In 3-D, the walk's tag swims between the work area's shallowest and deepest depths as a sine of this period [s].
+DEPTH_PERIOD = 3600.0
+#: In 3-D a simulated ping's fix more than this above the surface [m] is discarded (a fish is below it; the margin
+#: keeps a shallow tag's fixes whose depth errs upward).
+SURFACE_MARGIN = 1.0
 
 
 @dataclass
@@ -85,6 +90,32 @@ class TelemetryProblem:
     curve: Any
     sigma_m: float
     sigma_per_m: float = 0.0  # detection.range_k: the timing noise's growth with distance [m/m]
+    receiver_depths: np.ndarray | None = None  # 3-D: the added receivers' depths in turn [m]; None: planar
+
+    @property
+    def three_d(self) -> bool:
+        """Receivers and tag at depths (``candidates.receiver_depth_m``): points and receivers (North, East, depth)
+        [m], depth positive down."""
+        return self.receiver_depths is not None
+
+    @property
+    def depth_sigma(self) -> float | None:
+        """The tag's depth sensor's σ [m] in 3-D (``detection.depth_sigma_m``); None: planar or no sensor."""
+        if not self.three_d or not self.sections["work_area"]["depth_sensor"]:
+            return None
+        return float(self.sections["detection"]["depth_sigma_m"])
+
+    @property
+    def horizontal(self) -> bool:
+        """The DRMS of North and East (else of all axes: ``prescription.dimensions = "3d"``)."""
+        return self.prescription["dimensions"] != "3d"
+
+    def layout(self, kept: np.ndarray, placed: np.ndarray) -> np.ndarray:
+        """The receivers in place and the ``placed`` (k, 2) [m], each added receiver at its depth in 3-D."""
+        if self.three_d:
+            depths = self.receiver_depths[np.arange(len(placed)) % len(self.receiver_depths)]
+            placed = np.column_stack([placed, depths])
+        return np.vstack([kept, placed])
 
     @property
     def prescription(self) -> dict:
@@ -101,9 +132,12 @@ class TelemetryProblem:
 
     @property
     def kept(self) -> np.ndarray:
-        """The receivers in place (``candidates.existing_m``), (k, 2) (North, East) [m]: every layout holds them,
-        first."""
-        return existing_devices(self.sections["candidates"]["existing_m"])[:, :2]
+        """The receivers in place (``candidates.existing_m``), (k, 2) (North, East) [m], in 3-D (k, 3) with their
+        depth (default the first of ``candidates.receiver_depth_m``): every layout holds them, first."""
+        kept = existing_devices(self.sections["candidates"]["existing_m"])
+        if not self.three_d:
+            return kept[:, :2]
+        return np.column_stack([kept[:, :2], np.where(np.isfinite(kept[:, 2]), kept[:, 2], self.receiver_depths[0])])
 
     @property
     def footprint(self) -> float:
@@ -196,6 +230,11 @@ def resolve(sections: dict) -> TelemetryProblem:
     if len(points) == 0:
         raise ConfigError("work_area: no grid point lies in the water (site.area); give more work_area.points or a "
                           "work_area.polygon inside the water")
+    depths = None
+    if is_three_d(sections):  # every horizontal point at each of the tag's depths, the shallowest first
+        depths = np.asarray(sections["candidates"]["receiver_depth_m"], float)
+        points = np.vstack([np.column_stack([points, np.full(len(points), z)])
+                            for z in sorted(work_section["depths_m"])])
     step = math.sqrt(water.area / SITE_POINTS)
     max_shore = site["max_shore_m"] or None
     sites = areas.grid(water, step, site["min_shore_m"])
@@ -209,7 +248,7 @@ def resolve(sections: dict) -> TelemetryProblem:
     curve = receiver_curves(sections)
     sigma = sections["detection"]["sound_speed"] * sections["detection"]["sigma_toa_s"]
     return TelemetryProblem(sections, water, work, points, sites, curve, float(sigma),
-                            float(sections["detection"]["range_k"]))
+                            float(sections["detection"]["range_k"]), depths)
 
 
 def _kept_sites(sections: dict, water: Any, sites: np.ndarray, step: float) -> np.ndarray:
@@ -259,7 +298,8 @@ class _Objective:
         self.evaluations += 1
         d = tm.distances(p.points, receivers)
         q = p.curve.probability(d)
-        drms = tm.expected_information_drms(p.points, receivers, tm.range_sigma(d, p.sigma_m, p.sigma_per_m), q)
+        drms = tm.expected_information_drms(p.points, receivers, tm.range_sigma(d, p.sigma_m, p.sigma_per_m), q,
+                                            p.depth_sigma, p.horizontal)
         score = np.minimum(np.where(np.isfinite(drms), drms, np.inf) / p.prescription["drms_m"], 1e3)
         score = score + 10.0 * np.maximum(0.0, p.required_yield - tm.positioning_yield(q, p.needed))
         value = float(np.percentile(score, p.prescription["coverage_pct"]) + 0.1 * np.mean(score))
@@ -284,7 +324,7 @@ def search_count(problem: TelemetryProblem, count: int, rng: np.random.Generator
     def value_of(receivers: np.ndarray) -> float:
         value = objective(receivers)
         if footprint > 0.0:
-            value += FOOTPRINT_PENALTY * max(0.0, float(areas.spread(receivers)) / footprint - 1.0)
+            value += FOOTPRINT_PENALTY * max(0.0, float(areas.spread(receivers[:, :2])) / footprint - 1.0)
         return value
 
     if placed == 0:  # every receiver in place: nothing to search
@@ -292,16 +332,17 @@ def search_count(problem: TelemetryProblem, count: int, rng: np.random.Generator
         judge(design, problem, rng)
         return design
     tree = cKDTree(problem.sites)
-    pool = problem.points
+    flat = problem.points[:, :2]  # the work area's horizontal points (each once per depth in 3-D)
+    pool = flat
     if footprint > 0.0:
-        middle = 0.5 * (kept.min(axis=0) + kept.max(axis=0)) if len(kept) else problem.points.mean(axis=0)
-        pool = problem.points[np.linalg.norm(problem.points - middle, axis=1) <= 0.5 * footprint]
+        middle = 0.5 * (kept[:, :2].min(axis=0) + kept[:, :2].max(axis=0)) if len(kept) else flat.mean(axis=0)
+        pool = flat[np.linalg.norm(flat - middle, axis=1) <= 0.5 * footprint]
         if len(pool) < placed:
             pool = problem.sites[np.argsort(np.linalg.norm(problem.sites - middle, axis=1), kind="stable")[:placed]]
     chosen = pool[rng.choice(len(pool), size=min(placed, len(pool)), replace=False)]
     if len(chosen) < placed:
         chosen = np.vstack([chosen, problem.sites[rng.choice(len(problem.sites), placed - len(chosen), False)]])
-    centres = np.vstack([kept, chosen])
+    centres = np.vstack([kept[:, :2], chosen])
     for _ in range(30):  # Lloyd's iterations over the work area's points, the receivers in place held
         label = np.argmin(np.linalg.norm(pool[:, None] - centres[None], axis=-1), axis=1)
         for k in range(len(kept), count):
@@ -309,7 +350,7 @@ def search_count(problem: TelemetryProblem, count: int, rng: np.random.Generator
                 centres[k] = pool[label == k].mean(axis=0)
     chosen = centres[len(kept):]
     index = _distinct(tree.query(chosen)[1], tree, chosen)
-    best = value_of(np.vstack([kept, problem.sites[index]]))
+    best = value_of(problem.layout(kept, problem.sites[index]))
     history = [best]
     x0, y0, x1, y1 = problem.water.bounds
     reach = 0.25 * max(x1 - x0, y1 - y0)
@@ -324,12 +365,12 @@ def search_count(problem: TelemetryProblem, count: int, rng: np.random.Generator
             continue
         trial = index.copy()
         trial[k] = place
-        value = value_of(np.vstack([kept, problem.sites[trial]]))
+        value = value_of(problem.layout(kept, problem.sites[trial]))
         if value < best:
             index, best = trial, value
         if (move + 1) % MOVES_PER_GENERATION == 0:
             history.append(best)
-    design = TelemetryDesign(count, cost, np.vstack([kept, problem.sites[index]]), best, history,
+    design = TelemetryDesign(count, cost, problem.layout(kept, problem.sites[index]), best, history,
                              objective.evaluations, kept=len(kept))
     judge(design, problem, rng)
     return design
@@ -358,9 +399,11 @@ def judge(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Gen
     q = problem.curve.probability(d)
     sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
     design.positioning_yield = tm.positioning_yield(q, problem.needed)
-    design.drms_expected = tm.expected_information_drms(problem.points, receivers, sigma, q)
+    design.drms_expected = tm.expected_information_drms(problem.points, receivers, sigma, q, problem.depth_sigma,
+                                                        problem.horizontal)
     design.drms_fixed, design.fixable = fixed_pings(problem.points, receivers, sigma, q, p["fix_gate_m"], rng,
-                                                    needed=problem.needed)
+                                                    needed=problem.needed, depth_sigma_m=problem.depth_sigma,
+                                                    horizontal=problem.horizontal)
     design.sync = tm.sync_coverage(sync_hearing(receivers, problem.curve),
                                    problem.sections["detection"]["sync_p"])
     drms = np.where(np.isfinite(design.drms_fixed), design.drms_fixed, np.inf)
@@ -371,13 +414,15 @@ def judge(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Gen
 
 
 def fixed_pings(points: np.ndarray, receivers: np.ndarray, sigma_m, q: np.ndarray, gate_m: float,
-                rng: np.random.Generator, samples: int = PATTERN_SAMPLES, needed: int = 3
-                ) -> tuple[np.ndarray, np.ndarray]:
+                rng: np.random.Generator, samples: int = PATTERN_SAMPLES, needed: int = 3,
+                depth_sigma_m: float | None = None, horizontal: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The RMS over the fixes that count of each detection pattern's DRMS, and the probability that a ping gives
     one: :func:`~sblsim.models.design.telemetry.fixed_ping_drms` where ``gate_m`` is 0 and ``needed`` 3, else the
     same over the patterns of at least ``needed`` receivers whose own DRMS is at most ``gate_m`` (a fix of a worse
     geometry is discarded, as a filter on the estimated horizontal position error discards it; 0: any), its
-    patterns enumerated or drawn alike.
+    patterns enumerated or drawn alike. Points and receivers (M, dim), (n, dim) [m] in 2-D or 3-D;
+    ``depth_sigma_m`` and ``horizontal`` as :func:`~sblsim.models.design.telemetry.fix_drms` takes them (3-D: the
+    depth sensor's σ [m], None for none; the DRMS of North and East or of all axes).
 
     Returns
     -------
@@ -387,7 +432,7 @@ def fixed_pings(points: np.ndarray, receivers: np.ndarray, sigma_m, q: np.ndarra
         [0–1].
     """
     if gate_m <= 0.0 and needed <= 3:
-        return tm.fixed_ping_drms(points, receivers, sigma_m, q, rng, samples)
+        return tm.fixed_ping_drms(points, receivers, sigma_m, q, rng, samples, depth_sigma_m, horizontal)
     m, n = len(points), len(receivers)
     q = np.broadcast_to(np.asarray(q, float), (m, n))
     sigma = np.broadcast_to(np.asarray(sigma_m, float), (m, n))
@@ -403,7 +448,8 @@ def fixed_pings(points: np.ndarray, receivers: np.ndarray, sigma_m, q: np.ndarra
         else:
             patterns = rng.random((samples, n)) < q[j]
             weight = np.full(samples, 1.0 / samples)
-        value = tm.fix_drms(points[j:j + 1], receivers, sigma[j], patterns[:, None, :])[:, 0]
+        value = tm.fix_drms(points[j:j + 1], receivers, sigma[j], patterns[:, None, :], depth_sigma_m,
+                            horizontal)[:, 0]
         ok = np.isfinite(value) & (patterns.sum(axis=1) >= needed) & ((value <= gate_m) if gate_m > 0.0 else True)
         fixed[j] = weight[ok].sum()
         if fixed[j] > 0.0:
@@ -423,7 +469,7 @@ def shortfalls(design: TelemetryDesign, problem: TelemetryProblem) -> tuple[list
     reached = 100.0 * float(np.percentile(design.positioning_yield, 100.0 - share, method="lower"))
     required = p["positioning_yield_pct"]
     ratios = [at / p["drms_m"], required / reached if reached > 0.0 else (math.inf if required > 0.0 else 0.0)]
-    if not np.all(areas.inside(problem.water, design.receivers)):
+    if not np.all(areas.inside(problem.water, design.receivers[:, :2])):
         out.append({"part": "receivers", "required": 0.0, "achieved": 1.0, "text": "a receiver outside the water"})
         ratios.append(math.inf)
     if design.coverage < share - 1e-9:
@@ -438,7 +484,7 @@ def shortfalls(design: TelemetryDesign, problem: TelemetryProblem) -> tuple[list
             out.append({"part": "positioning_yield", "required": required, "achieved": reached,
                         "text": f"positioning yield at {share:g} % of the work area {reached:.1f} % against "
                                 f"{required:g} %"})
-    spread = float(areas.spread(design.receivers))
+    spread = float(areas.spread(design.receivers[:, :2]))
     if problem.footprint > 0.0 and spread > problem.footprint + 1e-6:
         out.append({"part": "footprint", "required": problem.footprint, "achieved": spread,
                     "text": f"the receivers spread over {spread:.4g} m against the footprint of "
@@ -510,18 +556,21 @@ def checked_points(design: TelemetryDesign, problem: TelemetryProblem) -> list[t
 
 
 def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any = None,
-          iterations: int = 30, sigma_m: np.ndarray | None = None) -> np.ndarray:
+          iterations: int = 30, sigma_m: np.ndarray | None = None, depth: np.ndarray | None = None,
+          depth_weight: float = 1.0) -> np.ndarray:
     """Each ping's position [m] from its times of arrival at the receivers that heard it (NaN: not heard), the
     emission unknown: least squares on ``‖p − r_i‖ + c t_e = c toa_i`` over the receivers that heard, by
     Gauss-Newton from several starts at once (the centroid of those receivers, each receiver, a 5 × 5 grid over the
-    receivers' box grown by half), the solution of the least residual in the ``water`` kept (a tie, as the two
-    exact solutions three receivers can give: the nearest that centroid); NaN where no start converges in the
-    water (a fix on land is discarded).
+    receivers' box grown by half, in 3-D at three depths over their depths grown by half), the solution of the
+    least residual in the ``water`` kept (a tie, as the two exact solutions three receivers can give: the nearest
+    that centroid); NaN where no start converges in the water (a fix on land, or in 3-D more than
+    :data:`SURFACE_MARGIN` above the surface, is discarded). In 3-D (receivers (North, East, depth), depth positive
+    down) a depth sensor's ``depth`` reading is one more row, ``depth_weight (depth − z)``.
 
     Parameters
     ----------
-    receivers : ndarray, shape (n, 2)
-        [m].
+    receivers : ndarray, shape (n, dim)
+        [m]; dim 2 or 3.
     toa : ndarray, shape (K, n)
         [s]; NaN where not heard.
     sound_speed : float
@@ -531,13 +580,19 @@ def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any
     sigma_m : ndarray, broadcastable to (K, n), optional
         Each arrival's standard deviation [m] where it differs between receivers (a range-dependent noise,
         ``detection.range_k``): each residual weighted by the smallest over it (None: every arrival alike).
+    depth : ndarray, shape (K,), optional
+        3-D: the tag's depth reading per ping [m] (None: no sensor).
+    depth_weight : float, optional
+        The reading's weight against an arrival's of the smallest σ: that σ over the sensor's [1].
 
     Returns
     -------
-    ndarray, shape (K, 2)
+    ndarray, shape (K, dim)
         [m].
     """
     toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    dim = receivers.shape[1]
     heard = np.isfinite(toa)
     w = heard.astype(float)
     wr = w if sigma_m is None else w * np.min(sigma_m, axis=-1, keepdims=True) / np.broadcast_to(sigma_m, w.shape)
@@ -548,38 +603,85 @@ def fixes(receivers: np.ndarray, toa: np.ndarray, sound_speed: float, water: Any
     low, high = receivers.min(axis=0), receivers.max(axis=0)
     pad = 0.5 * (high - low) + 1.0
     axes = [np.linspace(low[k] - pad[k], high[k] + pad[k], 5) for k in range(2)]
-    common = np.vstack([receivers + 1e-3, np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)])
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
+    if dim == 3:
+        levels = np.linspace(max(low[2] - pad[2], 0.0), high[2] + pad[2], 3)
+        grid = np.column_stack([np.repeat(grid, len(levels), axis=0), np.tile(levels, len(grid))])
+    common = np.vstack([receivers + 1e-3, grid])
     starts = np.concatenate([centre[:, None], np.broadcast_to(common, (len(toa),) + common.shape)], axis=1)
-    x = np.concatenate([starts, np.zeros(starts.shape[:2] + (1,))], axis=-1)  # (K, S, 3)
-    dist = np.linalg.norm(x[:, :, None, :2] - receivers, axis=-1)
-    x[..., 2] = np.sum(w[:, None] * (ranges[:, None] - dist), axis=-1) / count[:, None]
+    x = np.concatenate([starts, np.zeros(starts.shape[:2] + (1,))], axis=-1)  # (K, S, dim + 1)
+    dist = np.linalg.norm(x[:, :, None, :dim] - receivers, axis=-1)
+    x[..., dim] = np.sum(w[:, None] * (ranges[:, None] - dist), axis=-1) / count[:, None]
+    read = None
+    if depth is not None:
+        read = np.asarray(depth, float)[:, None]
+        wd = np.where(np.isfinite(read), depth_weight, 0.0)  # (K, 1)
+        read = np.where(np.isfinite(read), read, 0.0)
+        row = np.zeros(dim + 1)
+        row[2] = 1.0
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        dist = np.linalg.norm(x[:, :, None, :dim] - receivers, axis=-1)
+        r = wr[:, None] * (ranges[:, None] - (dist + x[..., dim:dim + 1]))
+        return r if read is None else np.concatenate([r, (wd * (read - x[..., 2]))[..., None]], axis=-1)
+
     for _ in range(iterations):
-        diff = x[:, :, None, :2] - receivers  # (K, S, n, 2)
+        diff = x[:, :, None, :dim] - receivers  # (K, S, n, dim)
         dist = np.maximum(np.linalg.norm(diff, axis=-1), 1e-9)
-        residual = wr[:, None] * (ranges[:, None] - (dist + x[..., 2:3]))
+        residual = wr[:, None] * (ranges[:, None] - (dist + x[..., dim:dim + 1]))
         J = np.concatenate([diff / dist[..., None], np.ones(dist.shape + (1,))], axis=-1) * wr[:, None, :, None]
-        A = np.einsum("ksni,ksnj->ksij", J, J) + 1e-9 * np.eye(3)
+        if read is not None:
+            residual = np.concatenate([residual, (wd * (read - x[..., 2]))[..., None]], axis=-1)
+            J = np.concatenate([J, np.broadcast_to(wd[:, :, None, None] * row, J.shape[:2] + (1, dim + 1))],
+                               axis=2)
+        A = np.einsum("ksni,ksnj->ksij", J, J) + 1e-9 * np.eye(dim + 1)
         step = np.linalg.solve(A, np.einsum("ksni,ksn->ksi", J, residual)[..., None])[..., 0]
         x = x + step
         if np.all(np.linalg.norm(step, axis=-1) < 1e-9):
             break
-    dist = np.linalg.norm(x[:, :, None, :2] - receivers, axis=-1)
-    cost = np.sum((wr[:, None] * (ranges[:, None] - (dist + x[..., 2:3]))) ** 2, axis=-1)
+    cost = np.sum(residuals(x) ** 2, axis=-1)
     ok = np.isfinite(cost) & (np.linalg.norm(step, axis=-1) < 1e-4)
     if water is not None:
         ok &= areas.inside(water, np.where(np.isfinite(x[..., :2]), x[..., :2], 0.0))
+    if dim == 3:
+        ok &= x[..., 2] >= -SURFACE_MARGIN  # a fish is below the surface
     cost = np.where(ok, cost, np.inf)
     best = cost.min(axis=1, keepdims=True)
     tied = np.isfinite(cost) & (cost <= best + 1e-6 * count[:, None] + 1e-9 * best)
-    near = np.where(tied, np.linalg.norm(x[..., :2] - centre[:, None], axis=-1), np.inf)
+    near = np.where(tied, np.linalg.norm(x[..., :dim] - centre[:, None], axis=-1), np.inf)
     pick = np.argmin(near, axis=1)
-    out = x[np.arange(len(x)), pick, :2]
+    out = x[np.arange(len(x)), pick, :dim]
     return np.where(np.isfinite(best), out, np.nan)
+
+
+def _readings(problem: TelemetryProblem, positions: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
+    """The tag's depth sensor's readings at the pings' true positions (K, 3) [m] (σ ``detection.depth_sigma_m``);
+    None without a sensor, or in a planar design (``rng`` not drawn from)."""
+    if problem.depth_sigma is None:
+        return None
+    return positions[:, 2] + problem.depth_sigma * rng.standard_normal(len(positions))
+
+
+def _fixed(problem: TelemetryProblem, receivers: np.ndarray, toa: np.ndarray, sigma: np.ndarray,
+           readings: np.ndarray | None) -> np.ndarray:
+    """:func:`fixes` of a design's pings (3-D: with the depth readings weighted by the smallest arrival's σ over
+    the sensor's)."""
+    weight = 1.0 if readings is None else float(np.min(sigma)) / problem.depth_sigma
+    return fixes(receivers, toa, problem.sections["detection"]["sound_speed"], problem.water,
+                 sigma_m=sigma if problem.sigma_per_m else None, depth=readings, depth_weight=weight)
+
+
+def _errors(problem: TelemetryProblem, estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """The fixes' errors (rows where a fix was made) on the prescription's axes (North, East; or all in 3-D with
+    ``prescription.dimensions = "3d"``) [m]."""
+    axes = 2 if problem.horizontal else truth.shape[1]
+    return (estimates - truth)[np.isfinite(estimates).all(axis=1)][:, :axes]
 
 
 def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str, index: int,
                  rng: np.random.Generator) -> dict:
-    """A tag at one point, pinging: its simulated yield and DRMS beside the predicted (module docstring, step 4)."""
+    """A tag at one point, pinging: its simulated yield and DRMS beside the predicted (module docstring, step 4);
+    in 3-D at the point's depth, fixed in 3-D (with the depth sensor's readings where it has one)."""
     mc = problem.sections["monte_carlo"]
     detection = problem.sections["detection"]
     point = problem.points[index]
@@ -596,12 +698,13 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
     heard = np.isfinite(toa)
     enough = heard.sum(axis=1) >= problem.needed
     gate = problem.prescription["fix_gate_m"]
-    own = tm.fix_drms(point[None], design.receivers, sigma[None], heard[:, None, :])[:, 0]
+    own = tm.fix_drms(point[None], design.receivers, sigma[None], heard[:, None, :], problem.depth_sigma,
+                      problem.horizontal)[:, 0]
     counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
     k = np.flatnonzero(counted)
-    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water,
-                      sigma_m=sigma[None] if problem.sigma_per_m else None)
-    errors = (estimates - positions[k])[np.isfinite(estimates).all(axis=1)]
+    readings = _readings(problem, positions, rng)
+    estimates = _fixed(problem, design.receivers, toa[k], sigma[None], None if readings is None else readings[k])
+    errors = _errors(problem, estimates, positions[k])
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     predicted = float(design.drms_fixed[index])
     ratio = simulated / predicted if math.isfinite(simulated) and predicted > 0.0 else math.nan
@@ -609,10 +712,19 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
     predicted_fixed, simulated_fixed = float(design.fixable[index]), float(np.mean(counted))
     confirmed = bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
                      abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
-    return {"point": where, "north_m": float(point[0]), "east_m": float(point[1]), "predicted_drms_m": predicted,
-            "simulated_drms_m": simulated, "ratio": ratio, "confirmed": confirmed, "pings": int(pings),
-            "fixes": int(len(errors)), "predicted_yield": predicted_yield, "simulated_yield": simulated_yield,
-            "predicted_fixed": predicted_fixed, "simulated_fixed": simulated_fixed}
+    depth = {"depth_m": float(point[2])} if problem.three_d else {}
+    return {"point": where, "north_m": float(point[0]), "east_m": float(point[1]), **depth,
+            "predicted_drms_m": predicted, "simulated_drms_m": simulated, "ratio": ratio, "confirmed": confirmed,
+            "pings": int(pings), "fixes": int(len(errors)), "predicted_yield": predicted_yield,
+            "simulated_yield": simulated_yield, "predicted_fixed": predicted_fixed, "simulated_fixed": simulated_fixed}
+
+
+def walk_depth(problem: TelemetryProblem, times: np.ndarray) -> np.ndarray:
+    """The walk's depth in 3-D at the emission ``times`` [s]: the work area's one depth, or between its shallowest
+    and deepest as a sine of :data:`DEPTH_PERIOD` starting at their middle [m] (K,)."""
+    depths = problem.sections["work_area"]["depths_m"]
+    low, high = min(depths), max(depths)
+    return 0.5 * (low + high) + 0.5 * (high - low) * np.sin(2.0 * math.pi * np.asarray(times, float) / DEPTH_PERIOD)
 
 
 def walk(problem: TelemetryProblem, times: np.ndarray, rng: np.random.Generator, speed: float = WALK_SPEED,
@@ -626,7 +738,7 @@ def walk(problem: TelemetryProblem, times: np.ndarray, rng: np.random.Generator,
     ndarray, shape (K, 2)
         (North, East) [m].
     """
-    points = problem.points
+    points = problem.points[:, :2]  # in 3-D: the horizontal walk (its depth :func:`walk_depth`'s)
     position = points[np.argmin(np.linalg.norm(points - points.mean(axis=0), axis=1))].copy()
     heading = rng.uniform(0.0, 2.0 * math.pi)
     out = np.empty((len(times), 2))
@@ -647,32 +759,38 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     """A tagged animal on a correlated random walk (:func:`walk`) through the work area, pinging as in
     :func:`static_check`: the simulated yield, share fixed and DRMS over the path beside the predicted at the
     path's positions (the RMS over the fixes that count of each ping position's predicted DRMS, weighted by its
-    probability of a fix; :data:`PATH_PREDICTED` positions of the path, evenly spaced)."""
+    probability of a fix; :data:`PATH_PREDICTED` positions of the path, evenly spaced). In 3-D the walk's depth is
+    :func:`walk_depth`'s, its pings fixed and tracked in 3-D (with the depth sensor's readings where it has one)."""
     mc, detection = problem.sections["monte_carlo"], problem.sections["detection"]
     pings = mc["replicates"] * PINGS_PER_REPLICATE
     settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
     walked = np.random.default_rng(rng.integers(2**63))
+
+    def path(t: np.ndarray) -> np.ndarray:
+        out = walk(problem, t, walked)
+        return np.column_stack([out, walk_depth(problem, t)]) if problem.three_d else out
+
     toa, positions, emissions = simulate_pings(design.receivers, pings, settings, rng, detection=1.0,
-                                               ping_type="rbi", burst_interval=BURST_INTERVAL,
-                                               path=lambda t: walk(problem, t, walked))
+                                               ping_type="rbi", burst_interval=BURST_INTERVAL, path=path)
     d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
     q = problem.curve.probability(d)
     sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
     toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, detection["sound_speed"], rng)
     toa[rng.random(toa.shape) >= q] = np.nan
     heard = np.isfinite(toa)
-    own = tm.fix_drms(positions, design.receivers, sigma, heard)
+    own = tm.fix_drms(positions, design.receivers, sigma, heard, problem.depth_sigma, problem.horizontal)
     gate = problem.prescription["fix_gate_m"]
     enough = heard.sum(axis=1) >= problem.needed
     counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
     k = np.flatnonzero(counted)
-    estimates = fixes(design.receivers, toa[k], detection["sound_speed"], problem.water,
-                      sigma_m=sigma[k] if problem.sigma_per_m else None)
-    errors = (estimates - positions[k])[np.isfinite(estimates).all(axis=1)]
+    readings = _readings(problem, positions, rng)
+    estimates = _fixed(problem, design.receivers, toa[k], sigma[k], None if readings is None else readings[k])
+    errors = _errors(problem, estimates, positions[k])
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     chosen = np.linspace(0, pings - 1, min(PATH_PREDICTED, pings)).astype(int)
     rms, fixed = fixed_pings(positions[chosen], design.receivers, sigma[chosen], q[chosen], gate, rng,
-                             needed=problem.needed)
+                             needed=problem.needed, depth_sigma_m=problem.depth_sigma,
+                             horizontal=problem.horizontal)
     ok = np.isfinite(rms) & (fixed > 0.0)
     predicted = float(np.sqrt(np.sum(fixed[ok] * rms[ok] ** 2) / np.sum(fixed[ok]))) if ok.any() else math.inf
     ratio = simulated / predicted if math.isfinite(simulated) and math.isfinite(predicted) else math.nan
@@ -686,12 +804,13 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
            "confirmed": bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
            } | track_path(design.receivers, toa, positions, emissions, detection["sound_speed"],
-                          detection["sigma_toa_s"], BURST_INTERVAL)
+                          detection["sigma_toa_s"], BURST_INTERVAL, readings, problem.depth_sigma or 0.3)
     if mc["sync_clocks"] and np.isfinite(toa).any():  # the same pings through clocks synchronised from sync tags
         clocks = np.random.default_rng([problem.sections["search"]["seed"], design.count, SYNC_STREAM])
         row |= track_synchronised(design.receivers, toa, positions, emissions,
                                   sync_hearing(design.receivers, problem.curve),
-                                  detection["sound_speed"], detection["sigma_toa_s"], BURST_INTERVAL, clocks, row)
+                                  detection["sound_speed"], detection["sigma_toa_s"], BURST_INTERVAL, clocks, row,
+                                  readings, problem.depth_sigma or 0.3)
     return row
 
 
@@ -708,7 +827,8 @@ def confirm(design: TelemetryDesign, problem: TelemetryProblem) -> None:
 def within(problem: TelemetryProblem, receivers: np.ndarray) -> bool:
     """Whether every receiver is in the water, within the shore distances."""
     site = problem.sections["site.area"]
-    return bool(np.all(areas.inside(problem.water, receivers, site["min_shore_m"], site["max_shore_m"] or None)))
+    return bool(np.all(areas.inside(problem.water, receivers[:, :2], site["min_shore_m"],
+                                    site["max_shore_m"] or None)))
 
 
 def estimate(problem: TelemetryProblem):
@@ -726,8 +846,10 @@ def estimate(problem: TelemetryProblem):
     return Estimate(len(counts), moves * len(counts), m, runs, seconds + runs * PING_SECONDS)
 
 
-__all__ = ["BURST_INTERVAL", "JUDGE_SECONDS", "MOVES_PER_GENERATION", "PATH_PREDICTED", "PATTERN_SAMPLES",
-           "PINGS_PER_REPLICATE", "PING_SECONDS", "SEARCH_SECONDS", "SITE_POINTS", "TelemetryDesign",
+__all__ = ["BURST_INTERVAL", "DEPTH_PERIOD", "JUDGE_SECONDS", "MOVES_PER_GENERATION", "PATH_PREDICTED",
+           "PATTERN_SAMPLES", "PINGS_PER_REPLICATE", "PING_SECONDS", "SEARCH_SECONDS", "SITE_POINTS", "SURFACE_MARGIN",
+           "TelemetryDesign",
            "TelemetryProblem", "TelemetryRun", "WALK_SPEED", "WALK_TURN", "YIELD_TOLERANCE_PP", "checked_points",
            "confirm", "estimate", "fixed_pings", "fixes", "judge", "path_check", "ranked", "resolve", "search_all",
-           "search_count", "shortfalls", "static_check", "sync_hearing", "walk", "water_polygon", "within"]
+           "search_count", "shortfalls", "static_check", "sync_hearing", "walk", "walk_depth", "water_polygon",
+           "within"]

@@ -4,15 +4,16 @@
 ``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``;
 each design its ``name``, ``system`` (``ilbl``), ``label``, ``cost``, ``meets``, ``fails`` (``part`` one of
 ``receivers``, ``coverage``, ``drms``, ``positioning_yield``, ``sync_coverage``), ``scenario`` (None: a telemetry
-design has no scenario file), ``receivers_m`` (North, East [m]; ``existing`` marks those in place,
+design has no scenario file), ``receivers_m`` (North, East [m], in 3-D and depth; ``existing`` marks those in place,
 ``spread_m`` the largest distance between two where a footprint is given), ``sync_links`` (the pairs of receivers
 that hear each other's sync tags with probability ≥ ``detection.sync_p``), ``predicted`` and ``monte_carlo`` (rows of
-``point``, ``north_m``, ``east_m``, ``predicted_drms_m``, ``simulated_drms_m``, ``ratio``, ``pings``, ``fixes``,
-``predicted_yield``, ``simulated_yield``, ``predicted_fixed``, ``simulated_fixed``, ``confirmed``),
-``confirmed`` (the static points'), and ``path`` (the same along an animal's correlated random walk, with
-``monte_carlo.path``, and the walk tracked: ``tracked_*`` with the true clocks, and with ``monte_carlo.sync_clocks``
-``synced_*`` through clocks synchronised from the sync tags, ``sync_residual_m``, ``sync_within_3_sigma`` and the
-clocks' grade: :func:`~sblsim.orchestrator.design.telemetry_tracking.track_synchronised`).
+``point``, ``north_m``, ``east_m`` (in 3-D ``depth_m``), ``predicted_drms_m``, ``simulated_drms_m``, ``ratio``,
+``pings``, ``fixes``, ``predicted_yield``, ``simulated_yield``, ``predicted_fixed``, ``simulated_fixed``,
+``confirmed``), ``confirmed`` (the static points'), and ``path`` (the same along an animal's correlated random
+walk, with ``monte_carlo.path``, and the walk tracked: ``tracked_*`` with the true clocks, and with
+``monte_carlo.sync_clocks`` ``synced_*`` through clocks synchronised from the sync tags,
+``sync_residual_m``, ``sync_within_3_sigma`` and the clocks' grade:
+:func:`~sblsim.orchestrator.design.telemetry_tracking.track_synchronised`).
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ def design_record(design: TelemetryDesign, run: TelemetryRun) -> dict[str, Any]:
         kept["spread_m"] = float(spread(design.receivers))
     return {"name": design.name, "system": TELEMETRY, "label": design.label, "cost": design.cost, "meets": design.meets,
             "fails": [{k: _finite(v) for k, v in s.items()} for s in design.shortfalls], "scenario": None,
-            "receivers_m": [[float(r[0]), float(r[1])] for r in design.receivers], **kept,
+            "receivers_m": [[float(x) for x in r] for r in design.receivers], **kept,
             "sync_links": sync_links(design, run),
             "criterion": {"name": "expected-information", "value": _finite(design.value)},
             "predicted": predicted(design, run), "evaluated_by": "telemetry", "monte_carlo": rows,
@@ -159,7 +160,8 @@ def document(run: TelemetryRun, seconds: float | None = None, effort: Any = None
 
 def layout_figure(run: TelemetryRun):
     """Each proposed design on the water: the positioning yield and the DRMS of the fixed pings at the work area's
-    points, the receivers, the sync links and the Monte Carlo's points."""
+    points (in 3-D, at each horizontal point its worst over the depths), the receivers, the sync links and the Monte
+    Carlo's points."""
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
@@ -167,16 +169,23 @@ def layout_figure(run: TelemetryRun):
     fig, axes = plt.subplots(len(run.proposed), 2, figsize=(11, 4.6 * len(run.proposed)), squeeze=False,
                              layout="constrained")
     outline = [np.asarray(g.exterior.coords) for g in getattr(r.water, "geoms", [r.water])]
+    flat, at = np.unique(r.points[:, :2], axis=0, return_inverse=True)  # in 3-D each point's worst depth
+    if r.points.shape[1] == 2:
+        flat, at = r.points, np.arange(len(r.points))
     for row, design in zip(axes, run.proposed):
-        drms = np.where(np.isfinite(design.drms_fixed), design.drms_fixed, np.nan)
-        panels = ((design.positioning_yield, "positioning yield", dict(vmin=0.0, vmax=1.0, cmap="viridis")),
+        drms = np.full(len(flat), -np.inf)
+        np.maximum.at(drms, at.ravel(), np.where(np.isfinite(design.drms_fixed), design.drms_fixed, np.inf))
+        drms = np.where(np.isfinite(drms), drms, np.nan)
+        worst_yield = np.full(len(flat), np.inf)
+        np.minimum.at(worst_yield, at.ravel(), design.positioning_yield)
+        panels = ((worst_yield, "positioning yield", dict(vmin=0.0, vmax=1.0, cmap="viridis")),
                   (drms, "DRMS of the fixed pings [m]", dict(norm=LogNorm(vmin=max(np.nanmin(drms), 1e-3),
                                                                            vmax=max(np.nanmax(drms), 1e-2)),
                                                             cmap="magma_r")))
         for ax, (values, label, style) in zip(row, panels):
             for ring in outline:
                 ax.plot(ring[:, 1], ring[:, 0], color="0.3", lw=1)
-            shown = ax.scatter(r.points[:, 1], r.points[:, 0], c=values, s=14, marker="s", **style)
+            shown = ax.scatter(flat[:, 1], flat[:, 0], c=values, s=14, marker="s", **style)
             fig.colorbar(shown, ax=ax, label=label)
             for i, j in sync_links(design, run):
                 a, b = design.receivers[i], design.receivers[j]

@@ -41,17 +41,19 @@ SYNC_STREAM = 0x5C10C
 
 
 def track_path(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, emissions: np.ndarray,
-               sound_speed: float, sigma_toa: float, burst_interval: tuple[float, float]) -> dict:
-    """Track a simulated tag's pings and score the track against its path.
+               sound_speed: float, sigma_toa: float, burst_interval: tuple[float, float],
+               depth: np.ndarray | None = None, depth_sigma: float = 0.3) -> dict:
+    """Track a simulated tag's pings and score the track against its path (in 3-D: tracked in 3-D, scored
+    horizontally).
 
     Parameters
     ----------
-    receivers : ndarray, shape (n, 2)
-        [m].
+    receivers : ndarray, shape (n, 2) or (n, 3)
+        [m] (North, East[, depth]; depth positive down, given to the tracker as its height z = −depth).
     toa : ndarray, shape (K, n)
         Times of arrival [s], NaN where not heard.
-    positions : ndarray, shape (K, 2)
-        The tag's true position at each emission [m].
+    positions : ndarray, shape (K, dim)
+        The tag's true position at each emission [m], as the receivers'.
     emissions : ndarray, shape (K,)
         The true emission times [s], increasing.
     sound_speed : float
@@ -60,13 +62,19 @@ def track_path(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, em
         The timing σ [s].
     burst_interval : tuple of float
         The tag's random burst interval (min, max) [s] (``--ping-type rbi --burst-interval MIN:MAX``).
+    depth : ndarray, shape (K,), optional
+        3-D: the tag's depth sensor's reading per ping [m] (positive down; None: no sensor), taken by the fixes and
+        the robust smoother as the replay takes a ``depth_m`` column.
+    depth_sigma : float, optional
+        The readings' σ [m].
 
     Returns
     -------
     dict
         ``tracked_pings`` (the pings from the first heard by three receivers to the last heard by one: the rows
         the tracker positions and the bound starts from), ``tracked_rms_m`` (the robust smoother's 2-D RMS error
-        over them), ``tracked_bound_m`` (the smoothing bound's RMS DRMS over the same pings), ``tracked_ratio``
+        over them), ``tracked_bound_m`` (the smoothing bound's RMS DRMS over the same pings, its horizontal part in
+        3-D, without the depth readings), ``tracked_ratio``
         (their ratio), ``tracked_nees`` (the mean 2-D NEES against the track's covariance; 2 when consistent),
         ``tracked_p95_m`` and ``acceleration_psd_m2_s3`` (the EM's motion noise). NaN figures where fewer than
         ten pings can be tracked.
@@ -80,18 +88,29 @@ def track_path(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, em
         return nothing
     rows = slice(starts[0], ends[-1] + 1)
     toa, positions, emissions = toa[rows], positions[rows], emissions[rows]
-    fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, sigma_toa)
-    settings = replace(tracker_settings(sound_speed, fe), sigma_toa=sigma_toa)
+    three_d = receivers.shape[1] == 3
+    if three_d:  # the tracker's z is up
+        up = np.array([1.0, 1.0, -1.0])
+        receivers, positions = receivers * up, positions * up
+        depth = None if depth is None else depth[rows]
+        fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, sigma_toa, depth=depth,
+                                           depth_sigma=depth_sigma)
+        settings = replace(tracker_settings(sound_speed, fe), sigma_toa=sigma_toa, depth_sigma=depth_sigma)
+    else:
+        fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, sigma_toa)
+        settings = replace(tracker_settings(sound_speed, fe), sigma_toa=sigma_toa)
     schedule, _ = ping_schedule(toa, receivers, settings, "rbi", burst_interval)
     settings = replace(settings, interval=schedule.interval)
     settings, motion = motion_model(toa, receivers, settings, schedule, (fx, fe, fused), None)
-    robust = tt.robust_track(toa, receivers, settings, (fx, fe, fused), None, schedule)
-    error = robust.x[:, :2] - positions
+    robust = tt.robust_track(toa, receivers, settings, (fx, fe, fused), None, schedule,
+                             depth if three_d else None)
+    error = robust.x[:, :2] - positions[:, :2]
     squared = np.sum(error**2, axis=1)
     nees = np.einsum("ki,kij,kj->k", error, np.linalg.inv(robust.P[:, :2, :2]), error)
     velocities = np.gradient(positions, emissions, axis=0)
     bound = tb.pcrb(positions, velocities, emissions, np.isfinite(toa), receivers, sound_speed, sigma_toa,
-                    tb.MotionModel.of(settings), schedule).smoothed
+                    tb.MotionModel.of(settings), schedule)
+    bound = np.sqrt(np.abs(np.trace(bound.B_smoothed[:, :2, :2], axis1=1, axis2=2))) if three_d else bound.smoothed
     rms, limit = float(np.sqrt(np.mean(squared))), float(np.sqrt(np.mean(np.square(bound))))
     return {"tracked_pings": int(len(toa)), "tracked_rms_m": rms, "tracked_bound_m": limit,
             "tracked_ratio": rms / limit if limit > 0.0 else math.nan, "tracked_nees": float(np.mean(nees)),
@@ -174,7 +193,7 @@ def synchronised_toa(receivers: np.ndarray, toa: np.ndarray, hears: np.ndarray, 
     Parameters
     ----------
     receivers : numpy.ndarray
-        (n, 2) [m].
+        (n, 2) or (n, 3) [m].
     toa : numpy.ndarray
         (K, n) [s] the tag's arrivals in true time, NaN where not heard.
     hears : numpy.ndarray
@@ -242,7 +261,8 @@ def synchronised_toa(receivers: np.ndarray, toa: np.ndarray, hears: np.ndarray, 
 
 def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, emissions: np.ndarray,
                        hears: np.ndarray, sound_speed: float, sigma_toa: float, burst_interval: tuple[float, float],
-                       rng: np.random.Generator, tracked: dict | None = None) -> dict:
+                       rng: np.random.Generator, tracked: dict | None = None, depth: np.ndarray | None = None,
+                       depth_sigma: float = 0.3) -> dict:
     """The walk's pings tracked through clocks synchronised from sync tags (:func:`synchronised_toa`, then
     :func:`track_path`), beside the same pings tracked with the true clocks (``tracked``: :func:`track_path`'s row
     of the same pings, computed here where not given).
@@ -257,6 +277,8 @@ def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.nda
         The clocks' and sync tags' draws.
     tracked : dict, optional
         :func:`track_path`'s row of the same pings with the true clocks.
+    depth, depth_sigma
+        As :func:`track_path` (3-D: the tag's depth readings [m] and their σ [m]).
 
     Returns
     -------
@@ -277,7 +299,8 @@ def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.nda
     if not np.isfinite(toa).any():
         raise ValueError("track_synchronised: no arrival heard")
     if tracked is None:
-        tracked = track_path(receivers, toa, positions, emissions, sound_speed, sigma_toa, burst_interval)
+        tracked = track_path(receivers, toa, positions, emissions, sound_speed, sigma_toa, burst_interval, depth,
+                             depth_sigma)
     grade = {"clock_offset_s": CLOCK_GRADE["receiver_clock_offset"],
              "clock_drift_ppm": CLOCK_GRADE["receiver_clock_drift_ppm"],
              "sync_interval_s": [CLOCK_GRADE["sync_interval_min"], CLOCK_GRADE["sync_interval_max"]]}
@@ -287,7 +310,8 @@ def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.nda
         return {"synced_pings": 0, "synced_rms_m": math.nan, "synced_nees": math.nan, "synced_p95_m": math.nan,
                 "synced_ratio": math.nan, "sync_residual_m": math.nan, "sync_within_3_sigma": math.nan,
                 "sync_receivers": 0, "sync_arrivals": 0, "sync_bins": 0} | grade
-    row = track_path(receivers, synced.toa, positions, emissions, sound_speed, sigma_toa, burst_interval)
+    row = track_path(receivers, synced.toa, positions, emissions, sound_speed, sigma_toa, burst_interval, depth,
+                     depth_sigma)
     rms, truth = row["tracked_rms_m"], tracked["tracked_rms_m"]
     return {"synced_pings": row["tracked_pings"], "synced_rms_m": rms, "synced_nees": row["tracked_nees"],
             "synced_p95_m": row["tracked_p95_m"],
