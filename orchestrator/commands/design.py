@@ -230,6 +230,7 @@ def _telemetry(sections: dict, progress: Any, prepare, max_minutes: float | None
     :mod:`~sblsim.orchestrator.design.telemetry`)."""
     from sblsim.orchestrator.design import telemetry
     from sblsim.orchestrator.design.effort import check_effort
+    from sblsim.orchestrator.design.telemetry_confirm import confirm
     from sblsim.orchestrator.design.telemetry_output import document, write
 
     start = time.perf_counter()
@@ -243,7 +244,7 @@ def _telemetry(sections: dict, progress: Any, prepare, max_minutes: float | None
         run = telemetry.search_all(resolved, bar.update)
     with ProgressBar(len(run.proposed), "monte carlo", "design", progress) as bar:
         for proposal in run.proposed:
-            telemetry.confirm(proposal, resolved)
+            confirm(proposal, resolved)
             bar.update(1)
     seconds = time.perf_counter() - start
     if target is not None:

@@ -23,6 +23,7 @@ from sblsim.models.design.criteria import (
 from sblsim.models.design.information import layout_values
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design import telemetry as telemetry_design
+from sblsim.orchestrator.design import telemetry_confirm
 from sblsim.orchestrator.design.evaluate import NO_DEPTH_SIGMA, LayoutEvaluator, Levels, judged, problem_items
 from sblsim.orchestrator.design.problem import TELEMETRY, check_problem
 from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
@@ -157,7 +158,7 @@ def test_the_ilbl_confirmation_with_the_law_agrees_with_the_prediction():
     design = telemetry_design.TelemetryDesign(n, float(n), receivers, 0.0)
     telemetry_design.judge(design, problem, np.random.default_rng(0))
     index = int(np.argmin(np.linalg.norm(problem.points - 150.0, axis=1)))
-    row = telemetry_design.static_check(design, problem, "median", index, np.random.default_rng(11))
+    row = telemetry_confirm.static_check(design, problem, "median", index, np.random.default_rng(11))
     assert row["fixes"] >= 900
     assert 0.9 <= row["ratio"] <= 1.1, row
     point = problem.points[index]

@@ -238,7 +238,8 @@ def test_the_walk_of_the_path_stays_in_the_water():
     """The path's animal walks ~10 m a ping in the concave lake for 2,000 pings: every position inside it by an
     independent ray casting, and it goes round (both arms of the L visited)."""
     from sblsim.orchestrator.design.problem import check_problem
-    from sblsim.orchestrator.design.telemetry import resolve, walk
+    from sblsim.orchestrator.design.telemetry import resolve
+    from sblsim.orchestrator.design.telemetry_confirm import walk
 
     problem = resolve(check_problem(_problem()))
     positions = walk(problem, np.arange(2000) * 30.0, np.random.default_rng(1))

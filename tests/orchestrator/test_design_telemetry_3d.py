@@ -14,6 +14,7 @@ import pytest
 
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design import telemetry as t
+from sblsim.orchestrator.design import telemetry_confirm as tc
 from sblsim.orchestrator.design import telemetry_output as out
 from sblsim.orchestrator.design.problem import TELEMETRY, check_problem
 
@@ -159,7 +160,7 @@ def test_the_3d_monte_carlo_agrees_with_the_prediction(sensor):
                                             monte_carlo={"replicates": 40})))
     design = t.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
     t.judge(design, problem, np.random.default_rng(0))
-    t.confirm(design, problem)
+    tc.confirm(design, problem)
     assert len(design.monte_carlo) == 2
     for row in design.monte_carlo:
         assert row["depth_m"] in (4.0, 10.0) and row["fixes"] >= 0.9 * row["pings"] * row["predicted_fixed"]
@@ -173,10 +174,10 @@ def test_the_3d_walk_is_tracked_in_3d():
     problem = t.resolve(check_problem(_with(POND, monte_carlo={"path": True, "sync_clocks": False})))
     design = t.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
     t.judge(design, problem, np.random.default_rng(0))
-    row = t.path_check(design, problem, np.random.default_rng(1))
+    row = tc.path_check(design, problem, np.random.default_rng(1))
     assert row["tracked_pings"] > 100 and np.isfinite(row["tracked_rms_m"]) and row["tracked_rms_m"] < 1.0, row
     assert 0.85 <= row["ratio"] <= 1.15, row
-    depths = t.walk_depth(problem, np.linspace(0.0, 3600.0, 101))
+    depths = tc.walk_depth(problem, np.linspace(0.0, 3600.0, 101))
     assert depths.min() == pytest.approx(4.0) and depths.max() == pytest.approx(10.0)
 
 
@@ -191,7 +192,7 @@ def test_the_planar_case_is_unchanged():
     for problem in (a, b):
         run = t.search_all(problem)
         for design in run.proposed:
-            t.confirm(design, problem)
+            tc.confirm(design, problem)
         docs.append(json.loads(json.dumps(out.document(run), allow_nan=True)))
     for doc in docs:
         doc.pop("problem")
