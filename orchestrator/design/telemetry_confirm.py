@@ -176,6 +176,39 @@ def _errors(problem: TelemetryProblem, estimates: np.ndarray, truth: np.ndarray)
     return (estimates - truth)[np.isfinite(estimates).all(axis=1)][:, :axes]
 
 
+def _heard(problem: TelemetryProblem, toa: np.ndarray, d: np.ndarray, q: np.ndarray, rng: np.random.Generator
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Simulated times of arrival (K, n) [s] as the receivers hear them: the range-dependent law's noise added
+    (``detection.range_k``), then each arrival kept with the curve's probability ``q`` at its distance ``d`` (both
+    broadcastable to (K, n)), NaN where not heard; and each arrival's σ [m] (``d``'s shape)."""
+    sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
+    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, problem.sections["detection"]["sound_speed"],
+                         rng)
+    toa[rng.random(toa.shape) >= q] = np.nan  # the curve, receiver by receiver
+    return toa, sigma
+
+
+def _counted(problem: TelemetryProblem, heard: np.ndarray, own: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pings (K,) heard by the receivers a fix needs, and those of them whose own pattern's DRMS ``own`` (K,)
+    [m] is finite and within ``prescription.fix_gate_m`` (the fixes that count)."""
+    enough = heard.sum(axis=1) >= problem.needed
+    gate = problem.prescription["fix_gate_m"]
+    return enough, enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
+
+
+def _simulated_fixes(problem: TelemetryProblem, design: TelemetryDesign, toa: np.ndarray, positions: np.ndarray,
+                     sigma: np.ndarray, counted: np.ndarray, rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The fixes that count (``counted`` (K,)) made (:func:`_fixed`, σ ``sigma`` broadcastable to (K, n), with the
+    depth sensor's readings where it has one): their errors on the prescription's axes [m], and the readings of
+    every ping (K,) (None without a sensor)."""
+    k = np.flatnonzero(counted)
+    readings = _readings(problem, positions, rng)
+    estimates = _fixed(problem, design.receivers, toa[k], np.broadcast_to(sigma, toa.shape)[k],
+                       None if readings is None else readings[k])
+    return _errors(problem, estimates, positions[k]), readings
+
+
 def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str, index: int,
                  rng: np.random.Generator) -> dict:
     """A tag at one point, pinging: its simulated yield and DRMS beside the predicted (module docstring, step 4);
@@ -188,21 +221,14 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
     toa, positions, emissions = simulate_pings(design.receivers, pings, settings, rng, start=point, detection=1.0,
                                                ping_type="rbi", burst_interval=BURST_INTERVAL,
                                                path=lambda t: np.repeat(point[None], len(t), axis=0))
-    q = problem.curve.probability(np.linalg.norm(design.receivers - point, axis=1))
     d = np.linalg.norm(design.receivers - point, axis=1)
-    sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
-    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, detection["sound_speed"], rng)  # range_k
-    toa[rng.random(toa.shape) >= q[None, :]] = np.nan  # the curve, receiver by receiver
+    q = problem.curve.probability(d)
+    toa, sigma = _heard(problem, toa, d, q, rng)
     heard = np.isfinite(toa)
-    enough = heard.sum(axis=1) >= problem.needed
-    gate = problem.prescription["fix_gate_m"]
     own = tm.fix_drms(point[None], design.receivers, sigma[None], heard[:, None, :], problem.depth_sigma,
                       problem.horizontal)[:, 0]
-    counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
-    k = np.flatnonzero(counted)
-    readings = _readings(problem, positions, rng)
-    estimates = _fixed(problem, design.receivers, toa[k], sigma[None], None if readings is None else readings[k])
-    errors = _errors(problem, estimates, positions[k])
+    enough, counted = _counted(problem, heard, own)
+    errors, _ = _simulated_fixes(problem, design, toa, positions, sigma[None], counted, rng)
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     predicted = float(design.drms_fixed[index])
     ratio = simulated / predicted if math.isfinite(simulated) and predicted > 0.0 else math.nan
@@ -272,20 +298,14 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
                                                ping_type="rbi", burst_interval=BURST_INTERVAL, path=path)
     d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
     q = problem.curve.probability(d)
-    sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
-    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, detection["sound_speed"], rng)
-    toa[rng.random(toa.shape) >= q] = np.nan
+    toa, sigma = _heard(problem, toa, d, q, rng)
     heard = np.isfinite(toa)
     own = tm.fix_drms(positions, design.receivers, sigma, heard, problem.depth_sigma, problem.horizontal)
-    gate = problem.prescription["fix_gate_m"]
-    enough = heard.sum(axis=1) >= problem.needed
-    counted = enough & np.isfinite(own) & ((own <= gate) if gate > 0.0 else True)
-    k = np.flatnonzero(counted)
-    readings = _readings(problem, positions, rng)
-    estimates = _fixed(problem, design.receivers, toa[k], sigma[k], None if readings is None else readings[k])
-    errors = _errors(problem, estimates, positions[k])
+    enough, counted = _counted(problem, heard, own)
+    errors, readings = _simulated_fixes(problem, design, toa, positions, sigma, counted, rng)
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     chosen = np.linspace(0, pings - 1, min(PATH_PREDICTED, pings)).astype(int)
+    gate = problem.prescription["fix_gate_m"]
     rms, fixed = fixed_pings(positions[chosen], design.receivers, sigma[chosen], q[chosen], gate, rng,
                              needed=problem.needed, depth_sigma_m=problem.depth_sigma,
                              horizontal=problem.horizontal)
