@@ -112,6 +112,28 @@ def later_duplicates(emission: np.ndarray, receiver: np.ndarray, time: np.ndarra
     return out
 
 
+def sync_emissions(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, gap: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The sync-tag arrivals' emissions and which of them the clocks' fit takes: ``emission``
+    (:func:`group_emissions`), ``duplicate`` (:func:`later_duplicates`: a receiver's later arrival of one emission,
+    a multipath echo) and ``single`` (an emission heard by one receiver alone, its duplicates not counted: it ties
+    no clock to another), each (n,); the fit takes ``~duplicate & ~single``.
+
+    Parameters
+    ----------
+    tag, receiver : numpy.ndarray
+        (n,) int, each arrival's tag and receiver.
+    time : numpy.ndarray
+        (n,) [s] the arrival on its receiver's clock.
+    gap : numpy.ndarray
+        (tags,) [s] as :func:`group_emissions`'.
+    """
+    emission = group_emissions(tag, time, gap)
+    duplicate = later_duplicates(emission, receiver, time)
+    heard_by = np.bincount(emission[~duplicate], minlength=int(emission.max(initial=-1)) + 1)
+    return emission, duplicate, heard_by[emission] < 2
+
+
 def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, start: int) -> np.ndarray:
     """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (the
     connected components of the graph linking the receivers that hear one emission)."""
@@ -622,4 +644,4 @@ def _scales(residual: np.ndarray, one: np.ndarray, rec: np.ndarray, n_receivers:
 
 
 __all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "SelectedCovariance", "connected", "fit_clocks",
-           "group_emissions", "later_duplicates", "selected_inverse"]
+           "group_emissions", "later_duplicates", "selected_inverse", "sync_emissions"]

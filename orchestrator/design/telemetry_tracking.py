@@ -25,7 +25,7 @@ from sblsim.models.acoustics.core import RECEIVER_CLOCK_VARIABLES
 from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.receiver import toa_tracking as tt
-from sblsim.models.sync.clocks import ClockFit, connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync.clocks import ClockFit, connected, fit_clocks, sync_emissions
 from sblsim.models.sync.simulate import draw_clocks, on_clocks, sync_tag_arrivals
 from sblsim.orchestrator.tracks.track import motion_model, ping_schedule, tracker_settings
 
@@ -232,10 +232,8 @@ def synchronised_toa(receivers: np.ndarray, toa: np.ndarray, hears: np.ndarray, 
     rec, tag, tau = sync_tag_arrivals(receivers, span, interval, sound_speed, np.asarray(hears, float).T,
                                       sigma_toa, rng)
     time = on_clocks(rec, tau, offset0, drifts)
-    emission = group_emissions(tag, time, np.full(n, interval[0] / 3.0))
-    duplicate = later_duplicates(emission, rec, time)
-    heard_by = np.bincount(emission[~duplicate], minlength=int(emission.max()) + 1 if len(emission) else 1)
-    used = ~duplicate & (heard_by[emission] >= 2)
+    emission, duplicate, single = sync_emissions(tag, rec, time, np.full(n, interval[0] / 3.0))
+    used = ~duplicate & ~single
     reference = 0
     linked = connected(rec[used], emission[used], n, reference)
     if linked.sum() < n:

@@ -24,7 +24,7 @@ import pandas as pd
 from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, sync_emissions
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.orchestrator.sync.detections import Detections
 
@@ -141,10 +141,7 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     if never:
         notes.append(f"sync tags never heard: {', '.join(never)}")
 
-    emission = group_emissions(tag, time, _gaps(tag, receiver, time, len(tag_names)))
-    duplicate = later_duplicates(emission, receiver, time)
-    heard_by = np.bincount(emission[~duplicate], minlength=emission.max() + 1)
-    single = heard_by[emission] < 2
+    emission, duplicate, single = sync_emissions(tag, receiver, time, _gaps(tag, receiver, time, len(tag_names)))
     used = ~duplicate & ~single
 
     xyz = hydrophones[["x", "y", "z"]].to_numpy(float)
