@@ -18,6 +18,10 @@ the assumed sound speed, ``r = c_assumed τ_m + σ_r w + e_mp``, where
 the beacon's broadcast position; a lost packet has ``packet_valid = false``
 and range and position 0.
 
+The range noise's std ``σ_r`` of every system (below: ``σ_r w``) is ``σ_r = sigma_range + range_k · d`` with d the
+range's true length (``range_true``; :mod:`sblsim.models.acoustics.range_law`, after Quazi 1981: a time delay's
+bound ∝ 1/√SNR, the SNR ∝ 1/d² with spherical spreading); ``range_k = 0`` (the default) keeps it constant.
+
 Delivery at arrival. The packet of slot k is computed at ``t_k`` (from the
 inputs of the step that reaches ``t_k``) with its **arrival** ``a_k`` at the
 diver: ``t_k + τ`` (OWTT), ``t_k`` plus the round trip the truth gives
@@ -125,6 +129,7 @@ from sblsim.models.acoustics.detection import (
     first_detected,
     level_table,
 )
+from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.acoustics.ray_tables import (
     FAMILY_TABLE,
     RAY_BOUNDS,
@@ -828,7 +833,7 @@ def _slot(n: int, true_names: list[str], sent_names: list[str], direction: bool,
             scales = [sonar.accuracy_scale(part[4], p["reference_snr"]) for part in timing]
             scale = ca.sqrt(sum(s_ * s_ for s_ in scales) / len(scales))
             angle_scale = scales[-1]
-        rng = rng + p["sigma_range"] * scale * noise + excess
+        rng = rng + range_noise_sigma(p, distance) * scale * noise + excess
         out = {"launch_angle": launch, "arrival_angle": arrival_angle, "arrival": kind,
                "packet_seq": k, "beacon_id": i + 1, "packet_valid": valid, "tx_time": t_k,
                "range": ca.if_else(valid, rng, 0.0), "travel_time": tau, "range_true": distance,
@@ -903,7 +908,8 @@ def _ping(n: int, true_names: list[str], sent_names: list[str], queue: list, car
             outlier = ca.logic_or(outlier, kind > 1.5)
             scale = sonar.accuracy_scale(one_way[4], p["reference_snr"])
         arrival = emitted + tau
-        rng = p["sound_speed_assumed"] * (arrival - nominal) + p["sigma_range"] * scale * noise + excess
+        rng = (p["sound_speed_assumed"] * (arrival - nominal) + range_noise_sigma(p, distance) * scale * noise
+               + excess)
         # the eigenray was traced from the receiver: reversed, it leaves the target
         out = {"launch_angle": -arrival_angle, "arrival_angle": -launch, "arrival": kind,
                "packet_seq": count * n + leg + 1, "beacon_id": leg + 1, "packet_valid": valid, "tx_time": nominal,
@@ -924,6 +930,15 @@ def _ping(n: int, true_names: list[str], sent_names: list[str], queue: list, car
                 **_send(queue, carried, x, p, out, tau), **overrun}
     return handler
 
+
+#: The range noise's growth with distance (the law of :mod:`sblsim.models.acoustics.range_law`: ``σ = σ₀ + k d``,
+#: d the range's true length, ``range_true``), declared after every other variable so that the value references of
+#: every earlier one stay; 0 keeps every number a run prints.
+RANGE_LAW: tuple[Variable, ...] = (
+    Variable("range_k", "parameter", "Real", 0.0, "1",
+             "range noise growth with distance: sigma = sigma_range + range_k * range (0: constant)",
+             min=0.0, max=0.1),
+)
 
 def nominal_ping_interval(ping_interval: float, n_beacons: int, slot_period: float) -> float:
     """The pinger's nominal interval [s] of an inverted LBL's run (numbers): ``ping_interval``, or where it is 0 the
@@ -1180,7 +1195,7 @@ class Acoustics(Component):
         if not interface_system(n_beacons).measures_direction:
             return (params + SEED_PARAMETERS + inputs + outputs + ranging + ARRIVAL + OVERFLOW + PROPAGATION_VARIABLES
                     + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN + FAMILY_TABLE_VARIABLES + OCEAN_VARIABLES
-                    + lane_variables(n_beacons, "output") + PING_VARIABLES + RECEIVER_CLOCK_VARIABLES)
+                    + lane_variables(n_beacons, "output") + PING_VARIABLES + RECEIVER_CLOCK_VARIABLES + RANGE_LAW)
         usbl = (Variable("usbl_angle_sigma_deg", "parameter", "Real", 0.5, "deg",
                          "Direction-of-arrival error std on the array's axis (platform.usbl_angle_sigma_deg)",
                          min=0.0, max=45.0, scope="fmu"),) + tuple(
@@ -1188,7 +1203,7 @@ class Acoustics(Component):
         return (params + SEED_PARAMETERS + inputs + outputs + ranging + usbl + DIRECTION + ARRIVAL + OVERFLOW
                 + PROPAGATION_VARIABLES + RAY_TABLE_VARIABLES + DETECTION_VARIABLES + OVERRUN
                 + FAMILY_TABLE_VARIABLES + DOA_ARRAY + OCEAN_VARIABLES + lane_variables(n_beacons, "output")
-                + PING_VARIABLES + RECEIVER_CLOCK_VARIABLES)
+                + PING_VARIABLES + RECEIVER_CLOCK_VARIABLES + RANGE_LAW)
 
     @classmethod
     def uses_ray_table(cls, values: Mapping[str, Any], parameters: Mapping[str, Any]) -> bool:

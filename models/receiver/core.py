@@ -361,7 +361,7 @@ def lm_step(x, p, iterations: int, tolerance: float) -> dict[str, ca.SX]:
     """One iteration of the least-squares fix in progress (after :func:`lm_begin`)."""
     w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
     return lm_iteration(x, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r, w_d, iterations, tolerance,
-                        toa_ranging(p))
+                        toa_ranging(p), range_law(p))
 
 
 def lm_states() -> list[tuple[str, int]]:
@@ -373,7 +373,8 @@ def lm_begin(x, guess, depth, p) -> dict[str, ca.SX]:
     """Start a least-squares fix of the held ranges (after :func:`take_packet`) at a slot."""
     w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
     valid = ca.sum1(x["heard"]) >= 3
-    return {**lm_start(guess, x["ranges"], x["beacons"], x["heard"], depth, w_r, w_d, valid, toa_ranging(p)),
+    return {**lm_start(guess, x["ranges"], x["beacons"], x["heard"], depth, w_r, w_d, valid, toa_ranging(p),
+                       range_law(p)),
             "lm_depth": depth}
 
 
@@ -452,6 +453,20 @@ def ping_parameters() -> tuple[Variable, ...]:
                      "ping, the std of the pinger's interval's random part (default: acoustics.ping_jitter; "
                      "ping_type rbi: (burst_interval_max - burst_interval_min) / sqrt(12))", min=0.0,
                      max=MAX_PING_INTERVAL),)
+
+
+def range_law_parameters() -> tuple[Variable, ...]:
+    """The range law every built-in receiver takes in R (:mod:`sblsim.models.acoustics.range_law`), declared after
+    every other variable (so that the value references of every earlier one stay what they were before it
+    existed)."""
+    return (Variable("range_k", "parameter", "Real", 0.0, "1",
+                     "Range noise growth with distance in R: sigma = sigma_range + range_k * predicted range "
+                     "(default: acoustics.range_k)", min=0.0, max=0.1),)
+
+
+def range_law(p: dict):
+    """``(sigma_range, range_k)`` of a receiver that declares the range law, else None (a constant σ)."""
+    return (p["sigma_range"], p["range_k"]) if "range_k" in p else None
 
 
 def toa_ranging(p: dict):
@@ -653,7 +668,7 @@ class KalmanReceiver(RangesWithProfile, Component):
         errors = cls.motion.state_size > CONSTANT_VELOCITY.state_size
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
                 + arrival_interface() + profile_parameters() + cls.late_parameters() + late_inputs(n_beacons)
-                + (ping_parameters() if errors else ()))
+                + (ping_parameters() if errors else ()) + range_law_parameters())
 
     @classmethod
     def errors(cls, p: dict) -> dict | None:
@@ -921,6 +936,7 @@ __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_paramet
            "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin",
            "lm_idle", "lm_states", "lm_step", "lane_one_due", "lanes_due", "lane_used", "new_ping", "next_lane",
            "NO_DEPTH", "NO_ESTIMATE", "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters",
-           "profile_derived", "profile_prepare_of", "RangesWithProfile", "reanchored", "receiver_interface",
+           "profile_derived", "profile_prepare_of", "range_law",
+           "range_law_parameters", "RangesWithProfile", "reanchored", "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",
            "slot_events", "slot_update", "STATE_NAMES", "system_interface", "take_packet", "toa_ranging"]

@@ -36,7 +36,7 @@ from sblsim.models.receiver.measurement import RangeDepthModel
 
 
 def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, depth, sigma_range, sigma_depth,
-           model: RangeDepthModel | None = None) -> tuple[ca.SX, ca.SX, ca.SX]:
+           model: RangeDepthModel | None = None, range_k=None) -> tuple[ca.SX, ca.SX, ca.SX]:
     """The paper's EKF update with the latest range of each beacon heard so far and the depth.
 
     Parameters
@@ -57,6 +57,9 @@ def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, dept
         Standard deviations in R [m].
     model : RangeDepthModel, optional
         The measurement model (default a :class:`RangeDepthModel`).
+    range_k : casadi.SX, optional
+        The range law's growth [m/m]: each range's σ is ``sigma_range + range_k ‖p̂ − b_i‖`` at the predicted
+        position (:meth:`RangeDepthModel.noise_variance`); None: ``sigma_range`` for every range.
 
     Returns
     -------
@@ -65,8 +68,11 @@ def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, dept
     """
     model = model or RangeDepthModel()
     n = ranges.numel()
-    return kalman.ekf_update(x, P, ca.vertcat(ranges, depth), model, [beacons[3 * i:3 * i + 3] for i in range(n)],
-                             ca.vertcat(*([sigma_range**2] * n), sigma_depth**2),
+    context = [beacons[3 * i:3 * i + 3] for i in range(n)]
+    law = {"sigma_range": sigma_range, "sigma_depth": sigma_depth}
+    if range_k is not None:
+        law["range_k"] = range_k
+    return kalman.ekf_update(x, P, ca.vertcat(ranges, depth), model, context, model.variances(x, context, law),
                              available=[heard[i] for i in range(n)] + [None])
 
 
@@ -85,14 +91,14 @@ class PaperEKF(KalmanReceiver):
         fresh, rng, beacon = fresh_range(x, u, n_beacons)
 
         def row(state, beacon):  # a range at the state: prediction, Jacobian row, variance
-            return (*cls.measurement.range_row(state, beacon), p["sigma_range"] ** 2)
+            return (*cls.measurement.range_row(state, beacon), cls.measurement.noise_variance(state, beacon, p))
 
         h, H, variance = row(x["x"], beacon)
         S = ca.mtimes([H, x["P"], H.T]) + variance
         checked = gate(rng - h, S, fresh, x, u, p, earlier_innovation(cls, x, u, x["x"], x["P"], row, n_beacons))
         held = take_packet(x, {**u, "packet_valid": checked["use"]}, n_beacons)
         state, P, nis = update(x["x"], x["P"], held["ranges"], held["beacons"], held["heard"], u["depth"],
-                               p["sigma_range"], p["sigma_depth"], cls.measurement)
+                               p["sigma_range"], p["sigma_depth"], cls.measurement, p.get("range_k"))
         return {**held, "x": state, "P": P, "nis": nis, "gated": checked["gated"], "failed": checked["failed"],
                 **remember_rejected(x, u, checked["rejecting"], rng, beacon, cls.epoch(u, p), n_beacons)}
 

@@ -65,6 +65,8 @@ from sblsim.models.receiver.core import (
     packet_states,
     profile_derived,
     profile_prepare_of,
+    range_law,
+    range_law_parameters,
     receiver_interface,
     slot_events,
     system_interface,
@@ -91,7 +93,7 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
                 + clock_parameters() + system_interface(n_beacons) + arrival_interface() + profile_parameters()
-                + beacon_parameters() + late_inputs(n_beacons))
+                + beacon_parameters() + late_inputs(n_beacons) + range_law_parameters())
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -134,7 +136,7 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
                 valid = ca.sum1(x["heard"]) >= 3
                 w_r, w_d = weights(p["sigma_range"], p["sigma_depth"])
                 rss, covariance, _ = fix_covariance(point, x["ranges"], x["beacons"], x["heard"], x["lm_depth"], w_r,
-                                                    w_d)
+                                                    w_d, range_law(p))
             new = ca.logic_and(valid, x["fresh"])  # a fix with new information
             spread = ca.sqrt(ca.fmax(ca.trace(covariance), 0.0))
             elapsed = x["slot_time"] - x["fix_time"]

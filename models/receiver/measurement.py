@@ -13,7 +13,8 @@ arguments, or Stone Soup's measurement models, it gives (:class:`MeasurementMode
   (m, n), never written by hand: casadi differentiates the expression, and
   the generated C evaluates it;
 * ``variances(x, context, p)``: the diagonal of R, (m, 1), from the
-  receiver's parameters ``p``;
+  receiver's parameters ``p`` (a range's σ = ``sigma_range + range_k ‖p̂ − b‖`` at the predicted range:
+  :meth:`RangeDepthModel.noise_variance`, the law of :mod:`sblsim.models.acoustics.range_law`);
 * ``residual(z, h)``: ``z − h`` with the angle rows wrapped to (−π, π].
 
 Two implementations: :class:`RangeDepthModel`, ranges to broadcast beacons
@@ -41,6 +42,7 @@ from functools import lru_cache
 
 import casadi as ca
 
+from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 
 #: State size and position entries of the receivers' motion model
@@ -242,8 +244,24 @@ class RangeDepthModel(MeasurementModel):
         return ca.horzcat(*self.depth_row)
 
     def variances(self, x, beacons, p: dict) -> ca.SX:
-        """``[σ_r², …, σ_r², σ_d²]``, (m + 1, 1) [m²], from ``p["sigma_range"]`` and ``p["sigma_depth"]``."""
-        return ca.vertcat(*([p["sigma_range"] ** 2] * len(beacons)), p["sigma_depth"] ** 2)
+        """``[σ_1², …, σ_m², σ_d²]``, (m + 1, 1) [m²]: each range's :meth:`noise_variance` at ``x`` and
+        ``p["sigma_depth"]²``."""
+        return ca.vertcat(*[self.noise_variance(x, b, p) for b in beacons], p["sigma_depth"] ** 2)
+
+    def noise_variance(self, x, beacon, p: dict) -> ca.SX:
+        """The variance of a range's own noise in R [m²] at the state ``x`` (n, 1) for the beacon ``beacon`` (3, 1)
+        [m]: ``(σ₀ + k ‖p̂ − b‖)²``, the range-dependent law (:func:`~sblsim.models.acoustics.range_law.
+        range_noise_sigma`: ``sigma_range`` σ₀ [m], ``range_k`` k [m/m]) at the predicted range, R state-dependent
+        as the standard EKF takes it (Bar-Shalom, Li, Kirubarajan 2001, Section 10.3); ``σ₀²`` where the receiver
+        does not declare ``range_k``.
+
+        References
+        ----------
+        Quazi, IEEE Trans. ASSP 29(3):527–533, 1981 (the law's source).
+        """
+        if "range_k" not in p:
+            return p["sigma_range"] ** 2
+        return range_noise_sigma(p, ca.norm_2(self.position(x) - beacon)) ** 2
 
     @staticmethod
     def range_variance(position, beacon, noise_variance, position_variance=None, attitude_variance=None,
@@ -297,12 +315,13 @@ class RangeDepthModel(MeasurementModel):
         return total
 
     def fresh_range_variance(self, x, beacon, p: dict) -> ca.SX:
-        """A fresh range's variance in R [m²] from the receiver's parameters: :meth:`range_variance` with σ_r²
-        and an isotropic beacon error ``σ_GPS² + (σ_att · arm)²`` per axis (``beacon_gps_sigma`` [m],
-        ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m]: the attitude error taken isotropic); the GPS
-        term is left out where the receiver carries the GPS error as states (``gps_correlation_time`` > 0)."""
+        """A fresh range's variance in R [m²] from the receiver's parameters: :meth:`range_variance` with σ_r² of
+        the range law at ``x`` (:meth:`noise_variance`) and an isotropic beacon error ``σ_GPS² + (σ_att · arm)²``
+        per axis (``beacon_gps_sigma`` [m], ``beacon_attitude_sigma_deg`` [deg], ``beacon_arm`` [m]: the attitude
+        error taken isotropic); the GPS term is left out where the receiver carries the GPS error as states
+        (``gps_correlation_time`` > 0)."""
         attitude = p["beacon_attitude_sigma_deg"] * math.pi / 180.0
-        return self.range_variance(self.position(x), beacon, p["sigma_range"] ** 2,
+        return self.range_variance(self.position(x), beacon, self.noise_variance(x, beacon, p),
                                    white_gps_sigma(p) ** 2 + (attitude * p["beacon_arm"]) ** 2)
 
 

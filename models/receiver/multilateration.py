@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import casadi as ca
 
+from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.receiver.measurement import position_range_function
 
 #: Smallest standard deviation used in the weights [m].
@@ -50,8 +51,19 @@ def weights(sigma_range, sigma_depth) -> tuple[ca.SX, ca.SX]:
     return 1.0 / ca.fmax(sigma_range, SIGMA_FLOOR) ** 2, 1.0 / ca.fmax(sigma_depth, SIGMA_FLOOR) ** 2
 
 
-def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common=None) -> tuple[ca.SX, ca.SX, ca.SX]:
+def law_weight(law, distance) -> ca.SX:
+    """A range's weight ``1 / max(σ₀ + k d, 1 mm)²`` [1/m²] of the range law ``law = (σ₀, k)`` at the predicted
+    range ``distance`` [m] (:func:`~sblsim.models.acoustics.range_law.range_noise_sigma`)."""
+    return 1.0 / ca.fmax(range_noise_sigma({"sigma_range": law[0], "range_k": law[1]}, distance), SIGMA_FLOOR) ** 2
+
+
+def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common=None,
+                     law=None) -> tuple[ca.SX, ca.SX, ca.SX]:
     """Normal matrix ``JᵀWJ`` (3, 3), gradient ``JᵀW res`` (3, 1) and cost F at ``point``.
+
+    Where ``law = (σ₀, k)`` is given (the range law, :mod:`sblsim.models.acoustics.range_law`), each range's
+    weight is :func:`law_weight` at its predicted range ``‖point − b_i‖`` in place of ``w_r`` (the weights taken
+    at ``point``: iteratively reweighted least squares).
 
     Where ``common`` (None: never) holds, the ranges share an unknown offset (an inverted LBL's ping: the
     emission's), which the fix eliminates: ``F(p) = min_o Σ_i w_r (r_i − ‖p − b_i‖ − o)² + w_d (d − p_z)²``,
@@ -73,15 +85,20 @@ def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common=None
     depth : casadi.SX
         Depth reading [m].
     w_r, w_d : casadi.SX
-        Weights [1/m²].
+        Weights [1/m²] (``w_r`` a list: one per range).
+    common : casadi.SX, optional
+        The ranges share an unknown offset (1) or not (0).
+    law : tuple of 2 casadi.SX, optional
+        ``(σ₀ [m], k [m/m])`` of the range law; None: ``w_r`` for every range.
     """
     upper = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
     a = [0] * len(upper)  # the upper triangle of A (it is symmetric)
     g = ca.SX.zeros(3, 1)
     cost = 0
-    rows = []
+    rows, range_weights = [], []
     for i in range(ranges.numel()):
         h, J = position_range_function()(point, beacons[3 * i:3 * i + 3])
+        range_weights.append(law_weight(law, h) if law is not None else w_r[i] if isinstance(w_r, list) else w_r)
         J = ca.if_else(heard[i], J, ca.SX.zeros(3))  # an unheard beacon may give 0/0 at its placeholder
         rows.append((J, ca.if_else(heard[i], ranges[i] - h, 0.0)))
     if common is not None:  # the offset common to the ranges eliminated: residuals and rows about their means
@@ -90,7 +107,7 @@ def normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common=None
         mean_res = share * sum(res for _, res in rows)
         rows = [((J - mean_J) * heard[i], (res - mean_res) * heard[i]) for i, (J, res) in enumerate(rows)]
     for i, (J, res) in enumerate(rows):
-        w = w_r * heard[i]
+        w = range_weights[i] * heard[i]
         wJ = w * J
         a = [a[k] + wJ[r] * J[c] for k, (r, c) in enumerate(upper)]
         g = g + wJ * res
@@ -164,29 +181,36 @@ def _finite(value) -> ca.SX:
     return ca.logic_and(value == value, ca.fabs(value) < 1e308)
 
 
-def lm_start(guess, ranges, beacons, heard, depth, w_r, w_d, valid, common=None) -> dict[str, ca.SX]:
+def lm_start(guess, ranges, beacons, heard, depth, w_r, w_d, valid, common=None, law=None) -> dict[str, ca.SX]:
     """The iteration state at the start: the guess or the linear fix, whichever costs less.
 
-    ``valid`` (enough ranges) decides whether iterations follow; ``common``: the ranges share an unknown offset
-    (:func:`normal_equations`).
+    ``valid`` (enough ranges) decides whether iterations follow; ``common``: the ranges share an unknown offset,
+    ``law``: the range law's weights (:func:`normal_equations`).
     """
-    cost_guess = normal_equations(guess, ranges, beacons, heard, depth, w_r, w_d, common)[2]
+    cost_guess = normal_equations(guess, ranges, beacons, heard, depth, w_r, w_d, common, law)[2]
     alternative = linear_fix(ranges, beacons, heard, depth)
-    cost_alt = normal_equations(alternative, ranges, beacons, heard, depth, w_r, w_d, common)[2]
+    cost_alt = normal_equations(alternative, ranges, beacons, heard, depth, w_r, w_d, common, law)[2]
     better = cost_alt < cost_guess
     return {"lm_point": ca.if_else(better, alternative, guess), "lm_cost": ca.if_else(better, cost_alt, cost_guess),
             "lm_mu": 1e-3, "lm_iter": 0, "lm_active": valid}
 
 
 def lm_iteration(x, ranges, beacons, heard, depth, w_r, w_d, iterations: int, tolerance: float,
-                 common=None) -> dict[str, ca.SX]:
+                 common=None, law=None) -> dict[str, ca.SX]:
     """One Levenberg-Marquardt iteration of the state in ``x`` (blocks :data:`LM_STATE`; ``common``: the ranges
-    share an unknown offset, :func:`normal_equations`)."""
+    share an unknown offset, :func:`normal_equations`). With the range ``law`` and ``k > 0`` the weights are those
+    at the iteration's point, the trial's cost compared with the point's at the same weights (iteratively
+    reweighted)."""
     point, cost, mu = x["lm_point"], x["lm_cost"], x["lm_mu"]
-    A, g, _ = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common)
+    A, g, here = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, common, law)
     step = solve_damped3(A, g, mu)
     trial = point + step
-    trial_cost = normal_equations(trial, ranges, beacons, heard, depth, w_r, w_d, common)[2]
+    frozen = w_r
+    if law is not None:  # the trial's cost at the point's weights
+        cost = ca.if_else(law[1] > 0.0, here, cost)
+        frozen = [law_weight(law, position_range_function()(point, beacons[3 * i:3 * i + 3])[0])
+                  for i in range(ranges.numel())]
+    trial_cost = normal_equations(trial, ranges, beacons, heard, depth, frozen, w_d, common)[2]
     better = trial_cost < cost
     size = ca.dot(step, ca.mtimes(A, step))  # δᵀ JᵀWJ δ
     new_cost = ca.if_else(better, trial_cost, cost)
@@ -196,8 +220,9 @@ def lm_iteration(x, ranges, beacons, heard, depth, w_r, w_d, iterations: int, to
             "lm_active": ca.logic_and(moving, x["lm_iter"] + 1 < iterations)}
 
 
-def fix_covariance(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """Gauss-Newton covariance ``(JᵀWJ)⁻¹`` of a fix (by the adjugate), with the fit's cost.
+def fix_covariance(point, ranges, beacons, heard, depth, w_r, w_d, law=None) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """Gauss-Newton covariance ``(JᵀWJ)⁻¹`` of a fix (by the adjugate), with the fit's cost (``law``: the range
+    law's weights at the fix, :func:`normal_equations`).
 
     Returns
     -------
@@ -208,7 +233,7 @@ def fix_covariance(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.S
     positive : casadi.SX
         ``JᵀWJ`` is positive-definite.
     """
-    A, _, rss = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d)
+    A, _, rss = normal_equations(point, ranges, beacons, heard, depth, w_r, w_d, law=law)
     c = ca.SX.zeros(3, 3)
     c[0, 0] = A[1, 1] * A[2, 2] - A[1, 2] * A[1, 2]
     c[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[0, 2]
@@ -235,5 +260,5 @@ def fit_statistics(point, ranges, beacons, heard, depth, w_r, w_d) -> tuple[ca.S
     return rss, ca.sqrt(ca.fmax(ca.trace(covariance), 0.0))
 
 
-__all__ = ["EPS", "LM_STATE", "SIGMA_FLOOR", "fit_statistics", "fix_covariance", "linear_fix", "lm_iteration",
-           "lm_start", "normal_equations", "solve_damped3", "weights"]
+__all__ = ["EPS", "LM_STATE", "SIGMA_FLOOR", "fit_statistics", "fix_covariance", "law_weight", "linear_fix",
+           "lm_iteration", "lm_start", "normal_equations", "solve_damped3", "weights"]

@@ -60,6 +60,7 @@ from functools import lru_cache
 
 import casadi as ca
 
+from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.platform.geometry import rotation_ned
 from sblsim.models.receiver.measurement import MeasurementModel
 from sblsim.models.receiver.motion import CONSTANT_VELOCITY
@@ -165,10 +166,12 @@ class RangeDirectionModel(MeasurementModel):
         return own + position_variance * ca.mtimes(H_b, H_b.T) + attitude_variance * ca.mtimes(H_a, H_a.T)
 
     def variances(self, x, context, p: dict) -> ca.SX:
-        """The diagonal of R from the parameters ``sigma_range`` [m], ``sigma_angle_deg`` [deg] (the array's noise
-        only: :meth:`covariance` has the rest)."""
+        """The diagonal of R from the parameters ``sigma_range`` [m], ``range_k`` [m/m] (the range law at the
+        predicted slant range: :func:`~sblsim.models.acoustics.range_law.range_noise_sigma`; σ₀ where ``range_k``
+        is not declared), ``sigma_angle_deg`` [deg] (the array's noise only: :meth:`covariance` has the rest)."""
         angle = (p["sigma_angle_deg"] * ca.pi / 180.0) ** 2
-        return ca.vertcat(p["sigma_range"] ** 2, angle, angle)
+        sigma = range_noise_sigma(p, self.h(x, context)[0]) if "range_k" in p else p["sigma_range"]
+        return ca.vertcat(sigma ** 2, angle, angle)
 
 
 __all__ = ["RangeDirectionModel", "line_of_sight", "range_direction_function"]

@@ -175,7 +175,8 @@ def transceiver_variance(p: dict, states: bool = True):
 
 def covariance(x, ctx, p: dict, model: RangeDirectionModel = MODEL, states: bool = True) -> ca.SX:
     """The receivers' R (3, 3) at the state ``x`` (n, 1) of ``model``: :meth:`RangeDirectionModel.covariance
-    <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>` with ``σ_r = sigma_range``,
+    <sblsim.models.receiver.range_direction.RangeDirectionModel.covariance>` with ``σ_r = sigma_range + range_k r̂``
+    at the predicted slant range r̂ (:meth:`~sblsim.models.receiver.range_direction.RangeDirectionModel.variances`),
     ``σ_u = sigma_angle_deg`` [rad], ``σ_b² =`` :func:`transceiver_variance` and ``σ_θ = beacon_attitude_sigma_deg``
     (a receiver that declares no beacon uncertainty: σ_b = σ_θ = 0). With ``states`` (a filter that carries the
     error states), what they carry is left out: the GPS error of a positive ``gps_correlation_time`` and the
@@ -184,7 +185,7 @@ def covariance(x, ctx, p: dict, model: RangeDirectionModel = MODEL, states: bool
     att = (p.get("beacon_attitude_sigma_deg", 0.0) * (math.pi / 180.0)) ** 2
     if not states:
         att = att + (p.get("attitude_bias_sigma_deg", 0.0) * (math.pi / 180.0)) ** 2
-    return model.covariance(x, ctx, p["sigma_range"] ** 2, (p["sigma_angle_deg"] * (math.pi / 180.0)) ** 2,
+    return model.covariance(x, ctx, model.variances(x, ctx, p)[0], (p["sigma_angle_deg"] * (math.pi / 180.0)) ** 2,
                             transceiver_variance(p, states), att)
 
 

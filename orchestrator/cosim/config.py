@@ -12,7 +12,7 @@ every receiver (:data:`RECEIVER_KEYS`: ``latency``); they are never passed to
 the receiver component.
 
 Ties (applied only where the user did not set the key):
-``receiver.sigma_range`` ← ``acoustics.sigma_range`` and
+``receiver.sigma_range`` ← ``acoustics.sigma_range``, ``receiver.range_k`` ← ``acoustics.range_k`` and
 ``receiver.sigma_depth`` ← ``target.depth_sigma`` (both floored at 1 mm: R must
 be positive), ``receiver.x0_*`` ← the diver's start state, and
 ``simulation.duration`` ← one pass of the trajectory. The FMU parameters the
@@ -888,8 +888,8 @@ def _check_pinger(cfg: dict[str, dict], given: set[str]) -> None:
 def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     """Fill the receiver keys the user did not set from the rest of the configuration (where it declares them).
 
-    ``sigma_range`` ← ``acoustics.sigma_range`` and ``sigma_depth`` ←
-    ``target.depth_sigma`` (floored at 1 mm: R must be positive); ``x0_*`` ←
+    ``sigma_range`` ← ``acoustics.sigma_range``, ``range_k`` ← ``acoustics.range_k`` (the range law) and
+    ``sigma_depth`` ← ``target.depth_sigma`` (floored at 1 mm: R must be positive); ``x0_*`` ←
     the diver's start state; ``beacon_gps_sigma`` ← ``platform.gps_sigma``,
     ``beacon_attitude_sigma_deg`` ← ``platform.imu_sigma_deg``,
     ``beacon_arm`` ← the largest distance of a beacon from the platform
@@ -902,6 +902,7 @@ def _receiver_ties(cfg: dict[str, dict], given: set[str]) -> None:
     pos, vel = start_state(cfg["target"])
     ties = {"sigma_range": max(cfg["acoustics"]["sigma_range"], MIN_SIGMA),
             "sigma_depth": max(cfg["target"]["depth_sigma"], MIN_SIGMA),
+            "range_k": cfg["acoustics"].get("range_k", 0.0),
             **{f"x0_{a}": float(pos[k]) for k, a in enumerate("xyz")},
             **{f"x0_v{a}": float(vel[k]) for k, a in enumerate("xyz")},
             **SYSTEMS[platform["system"]].receiver_ties(platform),

@@ -15,7 +15,7 @@ from scipy.optimize import least_squares
 from sblsim.models.acoustics.core import lane_variables
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
-from sblsim.models.receiver.core import arrival_interface, beacon_parameters, clock_parameters
+from sblsim.models.receiver.core import arrival_interface, beacon_parameters, clock_parameters, range_law_parameters
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
 from sblsim.models.receiver.profile import profile_parameters
 from sblsim.models.systems.usbl import receiver_parameters as usbl_parameters
@@ -363,6 +363,9 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
         return (v.name, v.causality, v.type, v.unit)
 
     lsq, ekf = LeastSquaresReceiver.variables(4), PaperEKF.variables(4)
+    law = range_law_parameters()  # the range law, declared after every other variable
+    assert lsq[-len(law):] == ekf[-len(law):] == law and [v.name for v in law] == ["range_k"]
+    lsq, ekf = lsq[:-len(law)], ekf[:-len(law)]
     signals = [key(v) for v in lsq if v.causality != "parameter"]
     assert signals == [key(v) for v in ekf if v.causality != "parameter"]
     lanes = lane_variables(4, "input")  # the later lanes of a delivery, declared last of all
