@@ -11,7 +11,15 @@ distances and shares. Two forms here:
   time [m] (``−β₀ / β₁``) and ``slope`` how fast the probability falls there [1/m] (``−β₁``): P falls from 0.9 to
   0.1 over ``2 ln 9 / slope`` ≈ ``4.39 / slope`` metres;
 * **table**: distances [m] (increasing, from 0 or more) and probabilities [0–1] (non-increasing: a range test's
-  curve, monotone), linearly interpolated between rows and held at the first and last rows' values outside them.
+  curve, monotone), linearly interpolated between rows and held at the first and last rows' values outside them;
+* **the site's SNR model** (:meth:`DetectionCurve.sonar_equation`), where no range test is at hand: the passive
+  sonar equation of the tag's source level (its power class) at the site, ``P(d) = Φ((SL − TL(d) − NL + DI − DT) /
+  σ_f)`` with ``TL(d) = 20 log10 d + α d`` (spherical spreading and absorption; Urick, *Principles of Underwater
+  Sound*, 3rd ed., McGraw-Hill 1983, ch. 2 and §12.1–12.3), α of Francois & Garrison (1982) and NL of the Wenz
+  curves (:mod:`sblsim.models.acoustics.sonar`), tabulated once on :data:`SNR_TABLE_ROWS` distances and then a
+  table as above. Range testing's practice (Kessel et al. 2014 below) is to measure the curve at the site, the
+  sonar equation being the prediction a study makes before it; fish tags' source levels are about 136–165 dB re
+  1 µPa at 1 m (Kessel et al. 2014, the tags they review).
 
 The keys a design names them by are ``detection.range_50_m``, ``detection.slope`` and ``detection.table``
 (:meth:`DetectionCurve.from_mapping`); a curve per receiver (``detection.per_receiver``: the receivers in place,
@@ -24,8 +32,10 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+import casadi as ca
 import numpy as np
 
+from sblsim.models.acoustics import sonar
 from sblsim.models.errors import ModelError
 
 #: The allowed ``detection.range_50_m`` [m]: (0, this].
@@ -34,6 +44,9 @@ RANGE_50_MAX_M = 100_000.0
 SLOPE_MAX = 10.0
 #: The most rows of ``detection.table``.
 TABLE_MAX_ROWS = 10_000
+#: The rows of the site's SNR model's table (:meth:`DetectionCurve.sonar_equation`), evenly spaced from 0 m to where
+#: the mean SNR is :data:`SNR_TAIL` fluctuations (at least 1 dB) below the detection threshold.
+SNR_TABLE_ROWS, SNR_TAIL = 4000, 6.0
 
 
 @dataclass(frozen=True)
@@ -58,6 +71,76 @@ class DetectionCurve:
     slope: float | None = None
     distances_m: tuple[float, ...] = ()
     probabilities: tuple[float, ...] = ()
+    model: str = ""
+
+    @classmethod
+    def sonar_equation(cls, source_level_db: float, frequency_hz: float, bandwidth_hz: float, beaufort: int,
+                       shipping: float, threshold_db: float, fluctuation_db: float, directivity_db: float = 0.0,
+                       temperature_c: float = 10.0, salinity: float = 35.0,
+                       rows: int = SNR_TABLE_ROWS) -> DetectionCurve:
+        """The site's SNR model (module docstring) as a table of ``rows`` distances.
+
+        ``P(d) = detection_probability(snr(SL, TL(d), NL, DI), DT, σ_f)`` with ``TL(d) = 20 log10 max(d, 1 m) +
+        α max(d, 1 m)`` (the source level holds at 1 m), ``α = absorption(f, T, S, 0 m)``, ``NL =
+        noise_level(f, B, wind_speed(beaufort), shipping)`` (:mod:`sblsim.models.acoustics.sonar`); the table
+        from 0 m to the distance where the mean SNR is :data:`SNR_TAIL` σ_f (at least 1 dB) below DT
+        (:func:`~sblsim.models.acoustics.sonar.detection_range`), held at its last value (about 0) beyond.
+
+        Parameters
+        ----------
+        source_level_db : float
+            SL, the tag's source level [dB re 1 µPa at 1 m].
+        frequency_hz, bandwidth_hz : float
+            The tag's frequency and the receiver's noise band [Hz].
+        beaufort : int
+            The sea state of the wind noise (0–8).
+        shipping : float
+            The shipping activity, 0 to 1.
+        threshold_db : float
+            DT, the SNR heard half the time [dB].
+        fluctuation_db : float
+            σ_f, the received level's log-normal fluctuation [dB] (0: a step).
+        directivity_db : float, optional
+            DI, the receiver's directivity index [dB].
+        temperature_c, salinity : float, optional
+            The water's temperature [°C] and salinity [g/kg] (the absorption; 0 g/kg: fresh water, the pure
+            water's term alone).
+        rows : int, optional
+            The table's rows.
+
+        Returns
+        -------
+        DetectionCurve
+            A table whose ``model`` says the SNR model's numbers.
+
+        Raises
+        ------
+        ModelError
+            Naming ``tag.source_level_db``: a tag heard nowhere (the mean SNR at 1 m below the table's floor), or
+            one heard beyond 1,000 km.
+        """
+        wind = sonar.wind_speed(beaufort)
+        alpha = float(sonar.absorption(frequency_hz, temperature_c, salinity, 0.0))
+        noise = float(sonar.noise_level(frequency_hz, bandwidth_hz, wind, shipping))
+        floor = threshold_db - max(SNR_TAIL * fluctuation_db, 1.0)
+        try:
+            far = sonar.detection_range(frequency_hz, bandwidth_hz, source_level_db, directivity_db, floor, wind,
+                                        shipping, temperature_c, salinity, 0.0)
+        except ModelError:
+            excess = source_level_db - noise + directivity_db - threshold_db
+            raise ModelError(f"tag.source_level_db: {source_level_db:g} dB gives an SNR {excess:.1f} dB from the "
+                             f"detection threshold at 1 m (noise {noise:.1f} dB re 1 uPa in the band): heard nowhere "
+                             "or beyond 1000 km; allowed a source level the site hears within them") from None
+        d = np.linspace(0.0, far, rows)
+        r = np.maximum(d, 1.0)
+        mean_snr = sonar.snr(source_level_db, 20.0 * np.log10(r) + alpha * r, noise, directivity_db)
+        p = np.asarray(sonar.detection_probability(ca.DM(mean_snr), threshold_db, fluctuation_db), dtype=float)
+        p = np.minimum.accumulate(np.clip(p.ravel(), 0.0, 1.0))  # monotone to round-off
+        curve = cls(distances_m=tuple(d.tolist()), probabilities=tuple(p.tolist()))
+        model = (f"SNR model: SL {source_level_db:g} dB, {frequency_hz / 1000:g} kHz, NL {noise:.1f} dB in "
+                 f"{bandwidth_hz:g} Hz, absorption {1000 * alpha:.3g} dB/km, DT {threshold_db:g} dB, fluctuation "
+                 f"{fluctuation_db:g} dB: 50 % at {curve.range_at(0.5):.0f} m, 10 % at {curve.range_at(0.1):.0f} m")
+        return cls(distances_m=curve.distances_m, probabilities=curve.probabilities, model=model)
 
     @classmethod
     def logistic(cls, range_50_m: float, slope: float, key: str = "detection") -> DetectionCurve:
@@ -208,6 +291,8 @@ class DetectionCurve:
 
     def describe(self) -> str:
         """One line: the curve's form and numbers."""
+        if self.model:
+            return self.model
         if self.kind == "logistic":
             return (f"logistic: 50 % at {self.range_50_m:g} m, slope {self.slope:g} 1/m (90 % at "
                     f"{self.range_at(0.9):.0f} m, 10 % at {self.range_at(0.1):.0f} m)")
@@ -273,4 +358,5 @@ def _shown(values: np.ndarray, most: int = 6) -> str:
     return f"[{text}{', …' if len(values) > most else ''}]"
 
 
-__all__ = ["RANGE_50_MAX_M", "SLOPE_MAX", "TABLE_MAX_ROWS", "DetectionCurve", "ReceiverCurves"]
+__all__ = ["RANGE_50_MAX_M", "SLOPE_MAX", "SNR_TABLE_ROWS", "SNR_TAIL", "TABLE_MAX_ROWS", "DetectionCurve",
+           "ReceiverCurves"]

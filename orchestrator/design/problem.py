@@ -32,7 +32,9 @@ from sblsim.models.declarations import FileKey, ModelError, Variable, shown
 from sblsim.models.design.criteria import CRITERIA, DIMENSIONS, MAX_ECHO_MARGIN_PCT
 from sblsim.models.design.detection_curve import DetectionCurve, ReceiverCurves
 from sblsim.models.errors import ConfigError
+from sblsim.models.platform.waves import WAVE_HEIGHT
 from sblsim.models.systems import SYSTEMS
+from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, named_files, parse_override, path_from
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.tables import regular_file
@@ -227,6 +229,38 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("per_receiver", "String", "", "", "an ilbl design: receivers in place with their own range test's "
                                                "curve, 'north east range_50_m slope; ...' [m, m, m, 1/m], each at a "
                                                "place of candidates.existing_m (the others: the site's curve)"),
+        _key("frequency_hz", "Real", 69000.0, "Hz", "an ilbl design's SNR model (tag.source_level_db): the tag's "
+                                                    "frequency", min=1000.0, max=1e6),
+        _key("bandwidth_hz", "Real", 5000.0, "Hz", "the SNR model: the receiver's noise band", min=1.0, max=1e6),
+        _key("beaufort", "Integer", 2, "", "the SNR model: the sea state of the wind noise (Wenz)", min=0,
+             max=len(WAVE_HEIGHT) - 1),
+        _key("shipping", "Real", 0.5, "1", "the SNR model: the shipping activity of the ambient noise (Wenz), 0 "
+                                          "to 1", min=0.0, max=1.0),
+        _key("threshold_db", "Real", 12.0, "dB", "the SNR model: the SNR of a 50 % detection", min=-30.0,
+             max=60.0),
+        _key("fluctuation_db", "Real", 3.0, "dB", "the SNR model: the received level's log-normal fluctuation (0: "
+                                                  "a sharp threshold)", min=0.0, max=20.0),
+        _key("directivity_db", "Real", 0.0, "dB", "the SNR model: the receiver's directivity index", min=0.0,
+             max=40.0),
+        _key("temperature_c", "Real", 10.0, "degC", "the SNR model: the water's temperature (absorption)",
+             min=-2.0, max=40.0),
+        _key("salinity", "Real", 35.0, "g/kg", "the SNR model: the water's salinity (absorption; 0: fresh "
+                                               "water)", min=0.0, max=45.0),
+    ),
+    "tag": (
+        _key("ping_type", "String", "rbi", "", "an ilbl design: the tag's ping type as the tracker names it (sbi: "
+                                               "stable, rbi: random, pbi: pseudo-random burst interval)",
+             choices=tuple(PING_TYPES)),
+        _key("burst_interval_s", "Real", [], "s", "an ilbl design: rbi, the burst interval's [min, max] (empty: "
+                                                 "[20, 40]); sbi, its one interval [D] or [D, D]; pbi, empty",
+             (0, 2), min=0.1, max=86400.0),
+        _key("burst_sequence", "String", "", "", "an ilbl design, pbi: a file of the tag's intervals [s] in order, "
+                                                 "one per row (relative: from the design file's folder)",
+             file=FileKey()),
+        _key("source_level_db", "Real", 0.0, "dB", "an ilbl design: the tag's power class as its source level [dB re "
+                                                   "1 uPa at 1 m] (0: none); given without detection.range_50_m or "
+                                                   "table, the detection curve is the site's SNR model",
+             min=0.0, max=250.0),
     ),
     "search": (
         _key("criterion", "String", "percentile", "", "what a layout minimises over the work area (docs/design.md: "
@@ -253,6 +287,9 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
 }
 #: The sections of a design problem.
 SECTIONS = tuple(DESIGN_KEYS)
+#: The keys of ``[detection]`` that only the site's SNR model reads (``tag.source_level_db``).
+SNR_KEYS = ("frequency_hz", "bandwidth_hz", "beaufort", "shipping", "threshold_db", "fluctuation_db",
+            "directivity_db", "temperature_c", "salinity")
 
 
 def defaults() -> dict[str, dict[str, Any]]:
@@ -389,7 +426,7 @@ def receiver_curves(problem: Mapping[str, Mapping[str, Any]]) -> DetectionCurve 
         :data:`MAX_RECEIVERS`, a row at no receiver of ``candidates.existing_m``, two rows for one receiver, a
         ``range_50_m`` or ``slope`` outside the logistic curve's allowed range.
     """
-    site = detection_curve(problem["detection"])
+    site = site_curve(problem)
     text = problem["detection"]["per_receiver"]
     rows = [r for r in text.replace(",", " ").split(";") if r.strip()]
     if not rows:
@@ -422,6 +459,29 @@ def receiver_curves(problem: Mapping[str, Mapping[str, Any]]) -> DetectionCurve 
     return ReceiverCurves(site, tuple(curves))
 
 
+def site_curve(problem: Mapping[str, Mapping[str, Any]]) -> DetectionCurve:
+    """An ilbl design's site-wide detection curve: the range test's (:func:`detection_curve`), or, with
+    ``tag.source_level_db`` and neither ``detection.range_50_m`` nor ``detection.table``, the site's SNR model
+    (:meth:`~sblsim.models.design.detection_curve.DetectionCurve.sonar_equation`, the ``[detection]`` keys of
+    :data:`SNR_KEYS`).
+
+    Raises
+    ------
+    ConfigError
+        As :func:`detection_curve`; naming ``tag.source_level_db`` where the site hears the tag nowhere.
+    """
+    section, level = problem["detection"], problem["tag"]["source_level_db"]
+    if level <= 0.0 or section["range_50_m"] > 0.0 or section["table"]:
+        return detection_curve(section)
+    try:
+        return DetectionCurve.sonar_equation(level, section["frequency_hz"], section["bandwidth_hz"],
+                                             section["beaufort"], section["shipping"], section["threshold_db"],
+                                             section["fluctuation_db"], section["directivity_db"],
+                                             section["temperature_c"], section["salinity"])
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+
+
 def detection_curve(section: Mapping[str, Any]) -> DetectionCurve:
     """The detection range curve of a checked ``[detection]`` section
     (:meth:`~sblsim.models.design.detection_curve.DetectionCurve.from_mapping`).
@@ -445,7 +505,8 @@ def detection_curve(section: Mapping[str, Any]) -> DetectionCurve:
         if section[name] > 0.0:
             values[name] = section[name]
     if not values:
-        raise ConfigError("detection: missing; give detection.range_50_m and detection.slope, or detection.table")
+        raise ConfigError("detection: missing; give detection.range_50_m and detection.slope, or detection.table "
+                          "(or the tag's tag.source_level_db: the site's SNR model)")
     try:
         return DetectionCurve.from_mapping(values, "detection")
     except ModelError as exc:
@@ -579,13 +640,62 @@ def _check_noise_and_depth(problem: dict[str, dict[str, Any]], telemetry: bool) 
                           "noise independently of range); allowed 0")
     if telemetry:
         _check_telemetry_depths(problem)
-    elif problem["candidates"]["receiver_depth_m"]:
+        _check_tag(problem)
+    else:
+        _refuse_tag(problem, systems)
+    if not telemetry and problem["candidates"]["receiver_depth_m"]:
         raise ConfigError(f"candidates.receiver_depth_m: for {systems}; the receivers' depths apply to an "
                           f"{TELEMETRY} design only; allowed []")
     if telemetry and problem["prescription"]["echo_margin_pct"] > 0.0:
         raise ConfigError(f"prescription.echo_margin_pct: {problem['prescription']['echo_margin_pct']:g} % for "
                           f"{systems}; an {TELEMETRY} design's detection curve has no reflections to keep a margin "
                           "from; allowed 0")
+
+
+def _refuse_tag(problem: dict[str, dict[str, Any]], systems: str) -> None:
+    """The tag's keys (``[tag]``) and the site's SNR model (:data:`SNR_KEYS`) changed for other systems than an
+    ilbl design: refused in one line naming the first."""
+    start = defaults()
+    for section, names in (("tag", [k.name for k in DESIGN_KEYS["tag"]]), ("detection", SNR_KEYS)):
+        for name in names:
+            if problem[section][name] != start[section][name]:
+                raise ConfigError(f"{section}.{name}: {shown(problem[section][name])} for {systems}; a tag's ping "
+                                  f"type, burst interval, power class and the site's SNR model apply to an "
+                                  f"{TELEMETRY} design only; allowed {shown(start[section][name])}")
+
+
+def _check_tag(problem: dict[str, dict[str, Any]]) -> None:
+    """An ilbl design's tag: its burst interval as its ping type takes it (``rbi`` [min, max] with min <= max or
+    empty, ``sbi`` [D] or [D, D], ``pbi`` empty and a ``burst_sequence`` file), and the detection curve's source
+    (a range test's curve or the site's SNR model, not both).
+
+    Raises
+    ------
+    ConfigError
+        In one line naming ``tag.burst_interval_s``, ``tag.burst_sequence`` or ``tag.source_level_db``.
+    """
+    tag = problem["tag"]
+    kind, interval, sequence = tag["ping_type"], tag["burst_interval_s"], tag["burst_sequence"]
+    given = f"[{', '.join(f'{v:g}' for v in interval)}] s"
+    if kind == "rbi" and len(interval) == 2 and interval[0] > interval[1]:
+        raise ConfigError(f"tag.burst_interval_s: {given}, the shortest above the longest; allowed [min, max] with "
+                          "0.1 <= min <= max <= 86400 s")
+    if kind == "rbi" and len(interval) == 1:
+        raise ConfigError(f"tag.burst_interval_s: {given} for rbi; allowed [min, max] [s] (empty: [20, 40])")
+    if kind == "sbi" and (not interval or interval[0] != interval[-1]):
+        raise ConfigError(f"tag.burst_interval_s: {given} for sbi; allowed its one interval [D] or [D, D] [s]")
+    if kind == "pbi" and interval:
+        raise ConfigError(f"tag.burst_interval_s: {given} for pbi; allowed [] (the intervals: tag.burst_sequence)")
+    if kind == "pbi" and not sequence:
+        raise ConfigError("tag.burst_sequence: missing for pbi; allowed a file of the tag's intervals [s], one per "
+                          "row")
+    if kind != "pbi" and sequence:
+        raise ConfigError(f"tag.burst_sequence: given for {kind}; allowed '' (a sequence is pbi's)")
+    detection = problem["detection"]
+    if tag["source_level_db"] > 0.0 and (detection["range_50_m"] > 0.0 or detection["table"]):
+        raise ConfigError(f"tag.source_level_db: {tag['source_level_db']:g} dB with a range test's curve "
+                          "(detection.range_50_m or detection.table); allowed one of them: 0 (the range test's "
+                          "curve) or the site's SNR model without range_50_m and table")
 
 
 def is_three_d(problem: Mapping[str, Mapping[str, Any]]) -> bool:
@@ -688,6 +798,10 @@ def read_problem(source: str | Path) -> dict[str, Any]:
     area = raw.get("site", {}).get("area") if isinstance(raw.get("site"), Mapping) else None
     if isinstance(area, dict) and isinstance(area.get("file"), str) and area["file"]:  # from the file's folder
         area["file"] = path_from(path.resolve().parent, area["file"], "site.area.file", confined=True)
+    tag = raw.get("tag")
+    if isinstance(tag, dict) and isinstance(tag.get("burst_sequence"), str) and tag["burst_sequence"]:
+        tag["burst_sequence"] = path_from(path.resolve().parent, tag["burst_sequence"], "tag.burst_sequence",
+                                          confined=True)
     return raw
 
 
@@ -782,7 +896,7 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
     return np.vstack([np.column_stack([plane, np.full(len(plane), d)]) for d in depths])
 
 
-__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SYSTEM_CHOICES",
-           "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve", "existing_devices",
-           "is_telemetry", "is_three_d", "polygon", "read_problem", "receiver_curves", "signed_distance",
-           "work_area_points"]
+__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SNR_KEYS",
+           "SYSTEM_CHOICES", "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve",
+           "existing_devices", "is_telemetry", "is_three_d", "polygon", "read_problem", "receiver_curves",
+           "signed_distance", "site_curve", "work_area_points"]

@@ -43,6 +43,7 @@ from sblsim.models.errors import ConfigError, ModelError
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
 from sblsim.orchestrator.design.problem import existing_devices, is_three_d, polygon, receiver_curves
+from sblsim.orchestrator.tracks.toa import read_burst_sequence
 
 #: The places a receiver may go: about this many grid points over the water.
 SITE_POINTS = 4000
@@ -59,6 +60,68 @@ SEARCH_SECONDS, JUDGE_SECONDS, PING_SECONDS = 1.0e-6, 1.0e-4, 1.0e-3
 FOOTPRINT_PENALTY = 10.0
 
 
+#: A random-interval tag's burst interval where ``tag.burst_interval_s`` is empty [s] (a common fish tag's
+#: collision-avoidance setting, e.g. Baktoft et al. 2017's 20–40 s).
+DEFAULT_BURST_INTERVAL = (20.0, 40.0)
+
+
+@dataclass(frozen=True)
+class Tag:
+    """The tag a design is confirmed with (``[tag]``): its ping type as the tracker names it
+    (:data:`~sblsim.models.tracking.schedule.PING_TYPES`) and its intervals.
+
+    Attributes
+    ----------
+    ping_type : str
+        ``sbi``, ``rbi`` or ``pbi``.
+    burst_interval : tuple of float
+        ``rbi``: (min, max) [s]; ``sbi``: (Δ, Δ) [s]; ``pbi``: the sequence's (shortest, longest) [s].
+    burst_sequence : numpy.ndarray or None
+        ``pbi``: the tag's intervals in order [s] (k,); else None.
+    source_level_db : float
+        The tag's source level [dB re 1 µPa at 1 m] (0: none given; the detection curve is a range test's).
+    """
+
+    ping_type: str = "rbi"
+    burst_interval: tuple[float, float] = DEFAULT_BURST_INTERVAL
+    burst_sequence: np.ndarray | None = None
+    source_level_db: float = 0.0
+
+    def record(self) -> dict[str, Any]:
+        """What ``design.json`` records of the tag."""
+        out: dict[str, Any] = {"ping_type": self.ping_type, "burst_interval_s": list(self.burst_interval)}
+        if self.burst_sequence is not None:
+            out["burst_sequence_intervals"] = int(len(self.burst_sequence))
+        if self.source_level_db > 0.0:
+            out["source_level_db"] = self.source_level_db
+        return out
+
+
+def tag_of(section: Mapping[str, Any]) -> Tag:
+    """The tag of a checked ``[tag]`` section (its keys checked together by the problem); a ``pbi`` tag's
+    sequence read from its file (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`, the tracker's
+    ``--burst-sequence`` reader: bounded, one line naming the file and line where a row is bad).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``tag.burst_sequence`` and the reader's reason.
+    """
+    kind, interval = section["ping_type"], tuple(float(v) for v in section["burst_interval_s"])
+    sequence = None
+    if kind == "pbi":
+        try:
+            sequence = read_burst_sequence(section["burst_sequence"])
+        except ModelError as exc:
+            raise ConfigError(f"tag.burst_sequence: {exc}") from None
+        interval = (float(sequence.min()), float(sequence.max()))
+    elif kind == "sbi":
+        interval = (interval[0], interval[0])
+    else:
+        interval = interval or DEFAULT_BURST_INTERVAL
+    return Tag(kind, interval, sequence, float(section["source_level_db"]))
+
+
 @dataclass
 class TelemetryProblem:
     """A telemetry array's design problem resolved (module docstring, step 1); coordinates (North, East) [m]."""
@@ -72,6 +135,7 @@ class TelemetryProblem:
     sigma_m: float
     sigma_per_m: float = 0.0  # detection.range_k: the timing noise's growth with distance [m/m]
     receiver_depths: np.ndarray | None = None  # 3-D: the added receivers' depths in turn [m]; None: planar
+    tag: Tag = field(default_factory=Tag)  # the tag the confirmation simulates and tracks ([tag])
 
     @property
     def three_d(self) -> bool:
@@ -229,7 +293,7 @@ def resolve(sections: dict) -> TelemetryProblem:
     curve = receiver_curves(sections)
     sigma = sections["detection"]["sound_speed"] * sections["detection"]["sigma_toa_s"]
     return TelemetryProblem(sections, water, work, points, sites, curve, float(sigma),
-                            float(sections["detection"]["range_k"]), depths)
+                            float(sections["detection"]["range_k"]), depths, tag_of(sections["tag"]))
 
 
 def _kept_sites(sections: dict, water: Any, sites: np.ndarray, step: float) -> np.ndarray:
@@ -546,7 +610,8 @@ def estimate(problem: TelemetryProblem):
     return Estimate(len(counts), moves * len(counts), m, runs, seconds + runs * PING_SECONDS)
 
 
-__all__ = ["JUDGE_SECONDS", "MOVES_PER_GENERATION", "PATTERN_SAMPLES", "PINGS_PER_REPLICATE", "PING_SECONDS",
-           "SEARCH_SECONDS", "SITE_POINTS", "TelemetryDesign", "TelemetryProblem", "TelemetryRun", "estimate",
+__all__ = ["DEFAULT_BURST_INTERVAL", "JUDGE_SECONDS",
+           "MOVES_PER_GENERATION", "PATTERN_SAMPLES", "PINGS_PER_REPLICATE", "PING_SECONDS",
+           "SEARCH_SECONDS", "SITE_POINTS", "Tag", "TelemetryDesign", "TelemetryProblem", "TelemetryRun", "estimate",
            "fixed_pings", "judge", "ranked", "resolve", "search_all", "search_count", "shortfalls", "sync_hearing",
-           "water_polygon", "within"]
+           "tag_of", "water_polygon", "within"]

@@ -1,6 +1,7 @@
 """Each proposed telemetry array confirmed by simulated tags (``sblsim design`` of an inverted LBL, step 4 of
 :mod:`sblsim.orchestrator.design.telemetry`): tags at the work area's worst and median points ping
-(:func:`~sblsim.models.tracking.simulate.simulate_pings`, random burst intervals), each receiver hears each ping
+(:func:`~sblsim.models.tracking.simulate.simulate_pings`, the tag's ping type and intervals: ``[tag]``), each
+receiver hears each ping
 with the curve's probability at its distance, and each ping heard by enough receivers is fixed by least squares with
 its emission time unknown (:func:`fixes`): the simulated yield and DRMS beside the predicted (:func:`static_check`);
 with ``monte_carlo.path``, the same along an animal's correlated random walk through the work area
@@ -29,8 +30,6 @@ from sblsim.orchestrator.design.telemetry import (
 )
 from sblsim.orchestrator.design.telemetry_tracking import SYNC_STREAM, track_path, track_synchronised
 
-#: The tag's random burst interval [s] of the confirmation (the single ping's criteria do not depend on it).
-BURST_INTERVAL = (20.0, 40.0)
 #: The path's animal: its speed [m/s] and the standard deviation of its turn per ping [rad]; the positions of the
 #: path at which the prediction is made.
 WALK_SPEED, WALK_TURN, PATH_PREDICTED = 0.3, 0.5, 200
@@ -214,13 +213,10 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
     """A tag at one point, pinging: its simulated yield and DRMS beside the predicted (module docstring, step 4);
     in 3-D at the point's depth, fixed in 3-D (with the depth sensor's readings where it has one)."""
     mc = problem.sections["monte_carlo"]
-    detection = problem.sections["detection"]
     point = problem.points[index]
     pings = mc["replicates"] * PINGS_PER_REPLICATE
-    settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
-    toa, positions, emissions = simulate_pings(design.receivers, pings, settings, rng, start=point, detection=1.0,
-                                               ping_type="rbi", burst_interval=BURST_INTERVAL,
-                                               path=lambda t: np.repeat(point[None], len(t), axis=0))
+    toa, positions, emissions = simulated_pings(problem, design.receivers, pings, rng, start=point,
+                                                path=lambda t: np.repeat(point[None], len(t), axis=0))
     d = np.linalg.norm(design.receivers - point, axis=1)
     q = problem.curve.probability(d)
     toa, sigma = _heard(problem, toa, d, q, rng)
@@ -241,6 +237,26 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
             "predicted_drms_m": predicted, "simulated_drms_m": simulated, "ratio": ratio, "confirmed": confirmed,
             "pings": int(pings), "fixes": int(len(errors)), "predicted_yield": predicted_yield,
             "simulated_yield": simulated_yield, "predicted_fixed": predicted_fixed, "simulated_fixed": simulated_fixed}
+
+
+def simulated_pings(problem: TelemetryProblem, receivers: np.ndarray, pings: int, rng: np.random.Generator,
+                    **where: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The tag's ``pings`` as :func:`~sblsim.models.tracking.simulate.simulate_pings` makes them (every receiver
+    hearing: the curve is applied after), with the problem's tag (``[tag]``: its ping type, burst interval or
+    sequence; a stable interval's Δ as the simulator's ``interval``) and ``where`` (``start``, ``path``).
+
+    Returns
+    -------
+    toa, positions, emissions
+        As :func:`~sblsim.models.tracking.simulate.simulate_pings`: (K, n) [s], (K, dim) [m], (K,) [s].
+    """
+    detection, tag = problem.sections["detection"], problem.tag
+    settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
+    if tag.ping_type == "sbi":
+        settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"],
+                                   interval=tag.burst_interval[0])
+    return simulate_pings(receivers, pings, settings, rng, detection=1.0, ping_type=tag.ping_type,
+                          burst_interval=tag.burst_interval, burst_sequence=tag.burst_sequence, **where)
 
 
 def walk_depth(problem: TelemetryProblem, times: np.ndarray) -> np.ndarray:
@@ -285,17 +301,15 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     path's positions (the RMS over the fixes that count of each ping position's predicted DRMS, weighted by its
     probability of a fix; :data:`PATH_PREDICTED` positions of the path, evenly spaced). In 3-D the walk's depth is
     :func:`walk_depth`'s, its pings fixed and tracked in 3-D (with the depth sensor's readings where it has one)."""
-    mc, detection = problem.sections["monte_carlo"], problem.sections["detection"]
+    mc, detection, tag = problem.sections["monte_carlo"], problem.sections["detection"], problem.tag
     pings = mc["replicates"] * PINGS_PER_REPLICATE
-    settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
     walked = np.random.default_rng(rng.integers(2**63))
 
     def path(t: np.ndarray) -> np.ndarray:
         out = walk(problem, t, walked)
         return np.column_stack([out, walk_depth(problem, t)]) if problem.three_d else out
 
-    toa, positions, emissions = simulate_pings(design.receivers, pings, settings, rng, detection=1.0,
-                                               ping_type="rbi", burst_interval=BURST_INTERVAL, path=path)
+    toa, positions, emissions = simulated_pings(problem, design.receivers, pings, rng, path=path)
     d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
     q = problem.curve.probability(d)
     toa, sigma = _heard(problem, toa, d, q, rng)
@@ -322,13 +336,15 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
            "confirmed": bool(abs(ratio - 1.0) <= mc["tolerance_pct"] / 100.0 and
                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
            } | track_path(design.receivers, toa, positions, emissions, detection["sound_speed"],
-                          detection["sigma_toa_s"], BURST_INTERVAL, readings, problem.depth_sigma or 0.3)
+                          detection["sigma_toa_s"], tag.burst_interval, readings, problem.depth_sigma or 0.3,
+                          ping_type=tag.ping_type, burst_sequence=tag.burst_sequence)
     if mc["sync_clocks"] and np.isfinite(toa).any():  # the same pings through clocks synchronised from sync tags
         clocks = np.random.default_rng([problem.sections["search"]["seed"], design.count, SYNC_STREAM])
         row |= track_synchronised(design.receivers, toa, positions, emissions,
                                   sync_hearing(design.receivers, problem.curve),
-                                  detection["sound_speed"], detection["sigma_toa_s"], BURST_INTERVAL, clocks, row,
-                                  readings, problem.depth_sigma or 0.3)
+                                  detection["sound_speed"], detection["sigma_toa_s"], tag.burst_interval, clocks, row,
+                                  readings, problem.depth_sigma or 0.3, ping_type=tag.ping_type,
+                                  burst_sequence=tag.burst_sequence)
     return row
 
 
@@ -341,6 +357,6 @@ def confirm(design: TelemetryDesign, problem: TelemetryProblem) -> None:
     if problem.sections["monte_carlo"]["path"]:
         design.path = [path_check(design, problem, rng)]
 
-__all__ = ["BURST_INTERVAL", "DEPTH_PERIOD", "PATH_PREDICTED", "SURFACE_MARGIN", "WALK_SPEED", "WALK_TURN",
-           "YIELD_TOLERANCE_PP", "checked_points", "confirm", "fixes", "path_check", "static_check", "walk",
-           "walk_depth"]
+__all__ = ["DEPTH_PERIOD", "PATH_PREDICTED", "SURFACE_MARGIN", "WALK_SPEED", "WALK_TURN",
+           "YIELD_TOLERANCE_PP", "checked_points", "confirm", "fixes", "path_check", "simulated_pings", "static_check",
+           "walk", "walk_depth"]

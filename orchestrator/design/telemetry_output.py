@@ -1,7 +1,9 @@
 """What ``sblsim design`` writes for a telemetry array (:mod:`~sblsim.orchestrator.design.telemetry`):
 ``design.json``, ``designs.csv`` and ``layout.png``, all at once (an interrupted run leaves ``--out`` as it was).
 
-``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``;
+``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``,
+and ``tag`` (the tag simulated: ``ping_type``, ``burst_interval_s``, a ``pbi`` tag's ``burst_sequence_intervals``,
+``source_level_db`` where given, and the ``detection_curve`` in one line);
 each design its ``name``, ``system`` (``ilbl``), ``label``, ``cost``, ``meets``, ``fails`` (``part`` one of
 ``receivers``, ``coverage``, ``drms``, ``positioning_yield``, ``sync_coverage``), ``scenario`` (None: a telemetry
 design has no scenario file), ``receivers_m`` (North, East [m], in 3-D and depth; ``existing`` marks those in place,
@@ -144,7 +146,8 @@ def table(run: TelemetryRun) -> pd.DataFrame:
 def document(run: TelemetryRun, seconds: float | None = None, effort: Any = None) -> dict[str, Any]:
     """``design.json`` as a mapping (module docstring)."""
     problem = json.loads(json.dumps(run.resolved.sections, default=str))
-    out = {"problem": problem, "summary": summary(run), "meets": run.best.meets,
+    tag = run.resolved.tag.record() | {"detection_curve": run.resolved.curve.describe()}
+    out = {"problem": problem, "tag": tag, "summary": summary(run), "meets": run.best.meets,
            "designs": [design_record(d, run) for d in run.proposed],
            "search": {"candidates": len(run.searched), "layouts": sum(d.evaluations for d in run.searched),
                       "work_area_points": int(len(run.resolved.points)), "criterion": "expected-information",
