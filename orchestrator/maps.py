@@ -53,6 +53,7 @@ from sblsim.models.acoustics.sound_speed import PROFILE
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.design.criteria import ECHO_LIMIT
+from sblsim.models.design.information import law_range_variance
 from sblsim.models.target.core import file_waypoints
 from sblsim.orchestrator.cosim.config import check_site_keys, scenario_system
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, as_plan, load_plan, thaw
@@ -176,7 +177,9 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     :func:`~sblsim.models.acoustics.sonar.accuracy_scale`, each range's information is weighted by the probability
     that its packet is heard (:func:`~sblsim.models.design.information.layout_information`: a transducer in a
     shadow zone or beyond detection adds nothing; a USBL's fix is its one packet's, unweighted), and the accuracy
-    is NaN where the probability of a fix is below :data:`MIN_AVAILABILITY`.
+    is NaN where the probability of a fix is below :data:`MIN_AVAILABILITY`. With the range law
+    (``acoustics.range_k`` > 0) each range's own noise is ``σ₀ + k ‖p − b_i‖`` at each point
+    (:func:`~sblsim.models.design.information.law_range_variance`; the broadcast position's error as it is).
 
     Parameters
     ----------
@@ -201,15 +204,26 @@ def point_accuracy(plan: RunPlan, points: np.ndarray, model=MODEL,
     bound, sigma = dict(plan.bound), plan["acoustics"]["sigma_range"]
     probability, scale, echo = packet_probabilities(plan, points, echo=True) if detection is None else detection
     available = fix_probability(probability, plan.system.fix_packets)
-    heard = None
+    heard, own = None, sigma ** 2  # a range's own variance: σ₀², or the range law's per point and transducer
+    range_k = float(plan["acoustics"].get("range_k", 0.0))
+    if range_k > 0.0:  # σ₀ + k ‖p − b_i‖ in place of σ₀ (the broadcast position's error stays)
+        own = law_range_variance(points, plan.lever_arms, sigma, range_k)
+        if plan.system.takes_ranges:
+            bound["noise_variance"] = bound["noise_variance"] - sigma ** 2 + own
+        else:  # one packet's range, from the transceiver
+            own = own[:, 0]
+            for key in ("noise_variance", "range_variance"):
+                if key in bound:
+                    bound[key] = bound[key] - sigma ** 2 + own
+            sigma = np.sqrt(own)
     if plan["acoustics"]["detection"] == "snr" and plan.system.takes_ranges:  # each range its own noise and weight
         heard = probability
-        bound["noise_variance"] = grown_noise(bound["noise_variance"], sigma ** 2, probability, scale)
+        bound["noise_variance"] = grown_noise(bound["noise_variance"], own, probability, scale)
     elif plan["acoustics"]["detection"] == "snr":  # one packet's noise grown below the reference SNR, per point
         grown = np.sqrt(np.mean(scale ** 2, axis=1))
         for key in ("noise_variance", "range_variance"):
             if key in bound:
-                bound[key] = bound[key] + sigma ** 2 * (grown ** 2 - 1.0)
+                bound[key] = bound[key] + own * (grown ** 2 - 1.0)
         if "angle_sigma_deg" in bound:
             bound["angle_sigma_deg"] = bound["angle_sigma_deg"] * grown
         sigma = sigma * grown
@@ -480,9 +494,10 @@ def _received_as_direct(plan: RunPlan, zt: float, depth: np.ndarray, one_way: np
     return rho, np.where(turned, elevation + np.asarray(bending).ravel(), elevation)
 
 
-def grown_noise(noise_variance, range_variance: float, probability: np.ndarray, scale: np.ndarray) -> np.ndarray:
+def grown_noise(noise_variance, range_variance, probability: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """Each range's variance where the site decides what is heard [m²]: the range noise ``range_variance`` (σ_r²,
-    part of ``noise_variance``, which holds the transducer position's error too) grown by the square of the
+    or the range law's per point and transducer; part of ``noise_variance``, which holds the transducer position's
+    error too) grown by the square of the
     accuracy scale of the packet's SNR; a packet never heard keeps ``noise_variance`` (its weight is 0)."""
     return np.where(probability > 0.0, noise_variance + range_variance * (scale ** 2 - 1.0), noise_variance)
 

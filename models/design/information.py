@@ -13,7 +13,9 @@ range (its noise, the broadcast position's error and the attitude error through 
 (1 with the paper's fixed channel; the site's detection by signal-to-noise otherwise): the expected information of
 a range received with probability q_i (the information reduction factor of Niu, Willett and Bar-Shalom, IEEE
 Trans. Signal Processing 49(7), 2001). A transducer that is never heard (a shadow zone, beyond detection)
-contributes nothing. With every q_i = 1 it is the map's information of one round of fresh ranges
+contributes nothing. With the range law (``acoustics.range_k`` k > 0) the range's own noise is
+``σ₀ + k ‖p − b_i‖`` per point (:func:`law_noise_variance`, given to the function as a variance per point and
+transducer). With every q_i = 1 it is the map's information of one round of fresh ranges
 (:func:`sblsim.models.bound.fix_information`), the same numbers.
 
 From J: the horizontal DRMS ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)``, its 3-D form ``sqrt(tr J⁻¹)`` and ``log det J`` [m],
@@ -32,6 +34,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.bound import (
     MODEL,
     effective_range_variance,
@@ -183,6 +186,43 @@ def layout_values(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, hea
     values = {"J": np.asarray(out[0]).reshape(3, m, 3).transpose(1, 0, 2)}
     values.update({name: np.asarray(v).ravel() for name, v in zip(OUTPUTS, out[1:])})
     return values
+
+
+def law_range_variance(points: np.ndarray, transducers: np.ndarray, sigma_range: float,
+                       range_k: float) -> np.ndarray:
+    """The range law's variance of each range at each point, ``(σ₀ + k ‖p − b_i‖)²`` [m²]
+    (:func:`~sblsim.models.acoustics.range_law.range_noise_sigma`: the noise the channel draws, at the true range).
+
+    Parameters
+    ----------
+    points : ndarray, shape (M, 3)
+        Vehicle positions, NED [m].
+    transducers : ndarray, shape (..., n, 3)
+        Transducer positions, NED [m] (leading axes: several layouts).
+    sigma_range, range_k : float
+        σ₀ [m] and k [m/m].
+
+    Returns
+    -------
+    ndarray, shape (..., M, n)
+        [m²].
+
+    References
+    ----------
+    Quazi, IEEE Trans. ASSP 29(3):527–533, 1981 (the law's source, :mod:`sblsim.models.acoustics.range_law`).
+    """
+    points, transducers = np.asarray(points, dtype=float), np.asarray(transducers, dtype=float)
+    distance = np.linalg.norm(points[:, None, :] - transducers[..., None, :, :], axis=-1)
+    return range_noise_sigma({"sigma_range": float(sigma_range), "range_k": float(range_k)}, distance) ** 2
+
+
+def law_noise_variance(points: np.ndarray, transducers: np.ndarray, noise_variance, sigma_range: float,
+                       range_k: float) -> np.ndarray:
+    """Each range's own variance at each point with the range law in place of the constant σ₀: ``noise_variance
+    − σ₀² + (σ₀ + k ‖p − b_i‖)²`` [m²] (``noise_variance`` = σ₀² plus the broadcast position's error, which stays
+    as it is; :func:`law_range_variance`), shape (..., M, n); for :func:`layout_values`' ``noise_variance``."""
+    return np.asarray(noise_variance, dtype=float) - float(sigma_range) ** 2 + law_range_variance(
+        points, transducers, sigma_range, range_k)
 
 
 def layout_horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, heard, noise_variance,

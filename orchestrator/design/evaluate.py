@@ -24,7 +24,7 @@ import numpy as np
 
 from sblsim.fmus.native import LAYOUT_CHUNK, compiled_layout
 from sblsim.models.design.criteria import judged_echo
-from sblsim.models.design.information import OUTPUTS, layout_values, padded, slots_for
+from sblsim.models.design.information import OUTPUTS, law_range_variance, layout_values, padded, slots_for
 from sblsim.models.target.core import Target
 from sblsim.orchestrator.cosim.plan import RunPlan
 from sblsim.orchestrator.maps import MIN_AVAILABILITY, fix_probability, grown_noise, packet_probabilities
@@ -44,7 +44,9 @@ def problem_items(sections: dict, plan: RunPlan) -> list[str]:
     * ``work_area.depth_sensor = false``: ``target.depth_sigma`` at :data:`NO_DEPTH_SIGMA`;
     * the work area's depth: ``target.depth`` the first of ``work_area.depths_m`` where it differs from the
       scenario's and its trajectory takes a depth (not a file's waypoints), so that the design's scenario (and its
-      map, drawn at ``target.depth`` by default) is at the work area's depth.
+      map, drawn at ``target.depth`` by default) is at the work area's depth;
+    * ``detection.range_k`` > 0: ``acoustics.range_k`` (the range law, :mod:`sblsim.models.acoustics.range_law`),
+      which the channel draws, the receivers weigh and the map and the search predict.
 
     Parameters
     ----------
@@ -66,6 +68,9 @@ def problem_items(sections: dict, plan: RunPlan) -> list[str]:
     depth = float(work["depths_m"][0])
     if target.get("trajectory") != "file" and float(target["depth"]) != depth:
         items.append(f"target.depth={depth!r}")
+    range_k = float(sections.get("detection", {}).get("range_k", 0.0))
+    if range_k > 0.0 and float(plan["acoustics"].get("range_k", 0.0)) != range_k:
+        items.append(f"acoustics.range_k={range_k!r}")
     return items
 
 
@@ -83,6 +88,8 @@ class Levels:
         [rad²], [m²] (``inf``: no depth sensor).
     fix_packets : int
         The packets of one cycle a fix needs.
+    range_k : float
+        The range law's growth [m/m] (``acoustics.range_k``; 0: the constant σ_r).
     """
 
     noise_variance: float
@@ -90,12 +97,23 @@ class Levels:
     attitude_variance: float
     depth_variance: float
     fix_packets: int = 3
+    range_k: float = 0.0
 
     @classmethod
     def of(cls, plan: RunPlan) -> Levels:
         bound = plan.bound
         return cls(bound["noise_variance"], plan["acoustics"]["sigma_range"] ** 2, bound["attitude_variance"],
-                   bound["depth_variance"], plan.system.fix_packets)
+                   bound["depth_variance"], plan.system.fix_packets, float(plan["acoustics"].get("range_k", 0.0)))
+
+    def noise(self, points: np.ndarray, layouts: np.ndarray) -> tuple[np.ndarray | float, np.ndarray | float]:
+        """Each range's variance with the position error folded in and its own part [m²], per layout, point and
+        transducer (S, M, n) with the range law (:func:`~sblsim.models.design.information.law_noise_variance`),
+        else the constant :attr:`noise_variance` and :attr:`range_variance`."""
+        if self.range_k == 0.0:
+            return self.noise_variance, self.range_variance
+        sigma = float(np.sqrt(self.range_variance))
+        own = law_range_variance(points, layouts, sigma, self.range_k)
+        return self.noise_variance - self.range_variance + own, own
 
 
 def judged(values: dict, sections: dict) -> dict:
@@ -191,13 +209,14 @@ class LayoutEvaluator:
         probability of being received and the probability that its range is of reflections, each (S, M, n)."""
         s, n = layouts.shape[0], layouts.shape[1]
         shape = (s, self.m, n)
+        variance, own = self.levels.noise(self.points, layouts)
         if self.detection is None:
-            return (np.ones(shape), np.full(shape, self.levels.noise_variance),
+            return (np.ones(shape), np.broadcast_to(variance, shape).copy(),
                     np.full(shape, 1.0 - self.loss), np.zeros(shape))
         probability, scale, echo = self.detection(self.points, layouts)
         if not self.detection.snr:
-            return np.ones(shape), np.full(shape, self.levels.noise_variance), probability, echo
-        noise = grown_noise(self.levels.noise_variance, self.levels.range_variance, probability, scale)
+            return np.ones(shape), np.broadcast_to(variance, shape).copy(), probability, echo
+        noise = grown_noise(variance, own, probability, scale)
         return probability, noise, probability, echo
 
     def evaluate(self, layouts: np.ndarray, arms: np.ndarray | None = None) -> dict[str, np.ndarray]:

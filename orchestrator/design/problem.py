@@ -221,8 +221,10 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("sigma_toa_s", "Real", 1.5e-4, "s", "the timing noise of an arrival", min=0.0, max=1.0,
              min_exclusive=True),
         _key("sound_speed", "Real", 1480.0, "m/s", "the sound speed of the water", min=1000.0, max=2000.0),
-        _key("range_k", "Real", 0.0, "1", "an ilbl design: the timing noise's growth with distance, sigma = "
-                                          "sound_speed * sigma_toa_s + range_k * distance [m/m] (0: constant)",
+        _key("range_k", "Real", 0.0, "1", "the range noise's growth with distance [m/m] (0: constant), every "
+                                          "system: an ilbl design's sigma = sound_speed * sigma_toa_s + range_k * "
+                                          "distance; lbl, sbl, usbl: the design scenario's acoustics.range_k, "
+                                          "sigma = sigma_range + range_k * range",
              min=0.0, max=0.1),
         _key("depth_sigma_m", "Real", 0.3, "m", "an ilbl design in 3-D: the tag's depth sensor's standard deviation "
                                                 "(work_area.depth_sensor)", min=0.0, max=1000.0, min_exclusive=True),
@@ -631,13 +633,10 @@ def existing_devices(text: str, where: str = "candidates.existing_m") -> np.ndar
 
 
 def _check_noise_and_depth(problem: dict[str, dict[str, Any]], telemetry: bool) -> None:
-    """The keys that apply to some systems only (a range-dependent noise, no depth sensor, an echo margin), each
-    refused in one line naming it and the systems where it cannot apply."""
+    """The keys that apply to some systems only (no depth sensor, an echo margin, ...), each refused in one line
+    naming it and the systems where it cannot apply (a range-dependent noise, ``detection.range_k``, applies to
+    every system)."""
     systems = ", ".join(problem["candidates"]["systems"])
-    if problem["detection"]["range_k"] > 0.0 and not telemetry:
-        raise ConfigError(f"detection.range_k: {problem['detection']['range_k']:g} for {systems}; a range-dependent "
-                          f"noise applies to an {TELEMETRY} design only (the simulation of {systems} draws its range "
-                          "noise independently of range); allowed 0")
     if telemetry:
         _check_telemetry_depths(problem)
         _check_tag(problem)

@@ -1,5 +1,5 @@
-"""The design keys a designer lacks (issue 70, part 4): a range-dependent noise law (``detection.range_k``, an ilbl
-design's), no depth sensor (``work_area.depth_sensor``), a margin from the echo limit
+"""The design keys a designer lacks (issue 70, part 4): a range-dependent noise law (``detection.range_k``, every
+system's), no depth sensor (``work_area.depth_sensor``), a margin from the echo limit
 (``prescription.echo_margin_pct``) and the base scenario's depth taken from the work area; each against a closed
 form or an independent numpy computation, and the refusals where a key cannot apply."""
 
@@ -166,13 +166,16 @@ def test_the_ilbl_confirmation_with_the_law_agrees_with_the_prediction():
     assert row["simulated_drms_m"] > 1.5 * constant
 
 
-def test_a_range_dependent_noise_is_refused_where_the_simulation_cannot_carry_it():
-    """LBL, SBL, USBL: their simulation draws the range noise independently of range: refused in one line naming
-    the key and the systems."""
-    with pytest.raises(ConfigError) as error:
-        check_problem(_with(FIELD, detection={"range_k": 0.001}))
-    text = str(error.value)
-    assert text.startswith("detection.range_k:") and "\n" not in text and "allowed 0" in text
+@pytest.mark.parametrize("system", ["lbl", "sbl", "usbl"])
+def test_a_range_dependent_noise_is_taken_by_every_system(system):
+    """LBL, SBL, USBL: the channel draws and the receivers weigh the range law (``acoustics.range_k``): the key is
+    accepted and becomes the design scenario's (tests/orchestrator/test_range_law.py: the prediction)."""
+    problem = check_problem(_with(FIELD, detection={"range_k": 0.001}, candidates={"systems": [system]}))
+    assert problem["detection"]["range_k"] == 0.001
+    assert resolve(problem, "semicircle").plan["acoustics"]["range_k"] == 0.001
+    with pytest.raises(ConfigError) as error:  # its allowed range
+        check_problem(_with(FIELD, detection={"range_k": 0.2}))
+    assert str(error.value).startswith("detection.range_k:") and "\n" not in str(error.value)
 
 
 # --------------------------------------------------------------------------- no depth sensor

@@ -1,14 +1,22 @@
-"""The range-dependent noise law ``σ = σ₀ + k d`` in runs: ``acoustics.range_k`` ties the receivers' ``range_k``,
-and a receiver that weighs the law is consistent (its NEES near the 3 of a position's chi-square) where one that
-ignores it is not."""
+"""The range-dependent noise law ``σ = σ₀ + k d`` in runs and designs: ``acoustics.range_k`` ties the receivers'
+``range_k``, and a receiver that weighs the law is consistent (its NEES near the 3 of a position's chi-square) where
+one that ignores it is not; a design's ``detection.range_k`` is its scenario's ``acoustics.range_k`` for every
+system, and its prediction an independent numpy Fisher computation with σ_i(p) = σ₀ + k ‖p − b_i‖."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates
+from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
+from sblsim.orchestrator.design.problem import check_problem, read_problem
+from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
+from sblsim.orchestrator.maps import point_accuracy
+from tests.helpers import problem_with
 
 #: The scenarios' fixed-detection, straight-path variants: an LBL of 250 m radius with a vehicle at 150 m depth
 #: (ranges of 200–400 m) and a USBL with a vehicle 300 m out at 100 m depth (a slant range of ~320 m).
@@ -41,3 +49,83 @@ def test_the_default_receiver_is_consistent_under_the_law_and_not_without_it(sce
                                       .metrics["nees_mean"]))
     assert 1.5 <= nees[K] <= 4.5, nees
     assert not 1.5 <= nees[0.0] <= 4.5, nees
+
+
+# --------------------------------------------------------------------------- the design with the law
+
+#: A small LBL problem at the semicircle site (fixed detection: every range heard; σ₀ 0.1 m, survey 0.1 m by
+#: default), the law's k large enough to change every figure.
+FIELD = {
+    "design": {"name": "law", "scenario": "semicircle"},
+    "work_area": {"radius_m": 30.0, "depths_m": [5.0], "points": 7},
+    "candidates": {"systems": ["lbl"]},
+    "seafloor": {"radius_m": 60.0, "depth_m": 20.0},
+    "detection": {"range_k": 0.01},
+}
+
+
+def _numpy_drms(points, beacons, variance, depth_variance):
+    """Horizontal and 3-D DRMS of one cycle of ranges plus a depth, the information summed and inverted by numpy;
+    ``variance`` (M, n) [m²]."""
+    out = []
+    for p, v in zip(points, variance):
+        u = p - beacons
+        u = u / np.linalg.norm(u, axis=1, keepdims=True)
+        J = (u / v[:, None]).T @ u
+        J[2, 2] += 1.0 / depth_variance
+        C = np.linalg.inv(J)
+        out.append((math.sqrt(C[0, 0] + C[1, 1]), math.sqrt(np.trace(C))))
+    return np.array(out).T
+
+
+@pytest.mark.parametrize("system", ["lbl", "usbl"])
+def test_the_designs_prediction_with_the_law_is_an_independent_fisher_computation(system):
+    """detection.range_k = 0.01 in an LBL design (and a USBL's: the key accepted, its scenario's
+    acoustics.range_k set): the design's scenario carries acoustics.range_k; the search's evaluator and the map's
+    DRMS at the work-area points equal a numpy Fisher sum with σ_i² = (σ₀ + k ‖p − b_i‖)² + σ_survey², to 1e-9;
+    and they differ from the constant σ₀'s."""
+    problem = check_problem(problem_with(FIELD, candidates={"systems": [system]}))
+    resolved = resolve(problem, "semicircle")
+    assert resolved.plan["acoustics"]["range_k"] == 0.01 and "acoustics.range_k=0.01" in resolved.items
+    assert resolved.plan["receiver"]["range_k"] == 0.01
+    if system != "lbl":
+        return
+    n = 4
+    angle = 2.0 * np.pi * np.arange(n) / n + 0.2
+    beacons = np.column_stack([55.0 * np.cos(angle), 50.0 * np.sin(angle), np.full(n, 20.0)])
+    plan = plan_of(resolved, layout_items("lbl", n, beacons))
+    sigma0, survey = plan["acoustics"]["sigma_range"], plan["platform"]["survey_sigma"]
+    points = resolved.points
+    d = np.linalg.norm(points[:, None, :] - beacons[None], axis=-1)
+    variance = (sigma0 + 0.01 * d) ** 2 + survey ** 2
+    depth_variance = plan["target"]["depth_sigma"] ** 2
+    horizontal, total = _numpy_drms(points, beacons, variance, depth_variance)
+    values = LayoutEvaluator(points, Levels.of(plan), compiled=False).evaluate(beacons[None])
+    mapped = point_accuracy(plan, points)
+    for drms, drms_3d in ((values["drms"][0], values["drms_3d"][0]), (mapped["drms"], mapped["drms_3d"])):
+        np.testing.assert_allclose(drms, horizontal, rtol=1e-9)
+        np.testing.assert_allclose(drms_3d, total, rtol=1e-9)
+    constant = _numpy_drms(points, beacons, np.full_like(d, sigma0 ** 2 + survey ** 2), depth_variance)[0]
+    assert np.all(horizontal > 1.5 * constant)
+
+
+@pytest.mark.slow
+def test_an_lbl_design_with_the_law_is_confirmed_by_its_monte_carlo(tmp_path):
+    """The built-in lbl-field-2km problem's LBL with detection.range_k = 0.0005 (σ grows by 0.5 mm per metre over
+    ranges of up to ~3 km at an SNR site) and 1 m at 95 %: the design meets, its scenario carries the law, and
+    its Monte Carlo (the static runs at the worst and the median point) gives simulated / predicted DRMS in
+    [0.85, 1.15]; the same problem without the law predicts smaller figures (the law is in the prediction)."""
+    import sblsim
+
+    problem = problem_with(read_problem("lbl-field-2km"), candidates={"systems": ["lbl"]},
+                           detection={"range_k": 0.0005}, prescription={"drms_m": 1.0}, work_area={"points": 11},
+                           search={"seed": 1, "generations": 10}, monte_carlo={"path": False, "replicates": 20})
+    result = sblsim.design(None, **problem, out=tmp_path / "law")
+    best = result.designs[0]
+    assert best["meets"]
+    assert "range_k = 0.0005" in (tmp_path / "law" / f"{best['name']}.toml").read_text()
+    rows = {row["point"]: row for row in best["monte_carlo"]}
+    assert set(rows) == {"worst", "median"}
+    assert all(0.85 <= row["ratio"] <= 1.15 for row in rows.values()), best["monte_carlo"]
+    constant = sblsim.design(None, **problem_with(problem, detection={"range_k": 0.0}), out=tmp_path / "constant")
+    assert best["predicted"]["drms_p95_m"] > 2.0 * constant.designs[0]["predicted"]["drms_p95_m"]
