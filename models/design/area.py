@@ -9,7 +9,8 @@ boundary, islands' included), a grid of points inside.
 
 A receiver's place is allowed (:func:`inside`) when it is inside the water and, optionally, at least
 ``min_shore_m`` from the shore (a mooring's margin) and at most ``max_shore_m`` from it (receivers moored from the
-shore).
+shore); with mooring lines, only on them (:func:`line_places`: points at a spacing along each polyline by shapely's
+``interpolate``, every line inside the water).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any, Mapping
 
 import numpy as np
 import shapely
-from shapely.geometry import MultiPolygon, Polygon, shape
+from shapely.geometry import LineString, MultiPolygon, Polygon, shape
 
 from sblsim.models.errors import ModelError
 
@@ -176,6 +177,59 @@ def grid(area: Polygon | MultiPolygon, spacing_m: float, min_shore_m: float = 0.
     return points[inside(area, points, min_shore_m)]
 
 
+def line_places(area: Polygon | MultiPolygon, lines: list[np.ndarray], spacing_m: float,
+                key: str = "site.area.lines") -> np.ndarray:
+    """The places along mooring lines: on each polyline, points evenly spaced by about ``spacing_m`` from its first
+    vertex to its last, both included (shapely's :meth:`~shapely.LineString.interpolate` at ``linspace(0, length,
+    max(2, round(length / spacing_m) + 1))``); a place shared by two lines counted once.
+
+    Parameters
+    ----------
+    area : shapely Polygon or MultiPolygon
+        The water.
+    lines : list of ndarray, each of shape (V, 2)
+        Each line's vertices (x, y) [m], V ≥ 2, in order.
+    spacing_m : float
+        [m], positive.
+    key : str, optional
+        The key the errors name.
+
+    Returns
+    -------
+    ndarray, shape (M, 2)
+        [m], line by line in order.
+
+    Raises
+    ------
+    ModelError
+        Naming ``key[k]``: a line of fewer than two vertices or of no length, or one that leaves the water (or runs
+        along its shore): where, in one line.
+    """
+    if not (math.isfinite(spacing_m) and spacing_m > 0.0):
+        raise ModelError(f"{key}: a spacing of {spacing_m!r} m; allowed (0, inf)")
+    out = []
+    for k, vertices in enumerate(lines):
+        vertices = np.asarray(vertices, float)
+        if vertices.ndim != 2 or vertices.shape[0] < 2 or vertices.shape[1] != 2 or not np.isfinite(vertices).all():
+            raise ModelError(f"{key}[{k}]: expected 2 or more vertices 'north east; north east' [m]")
+        line = LineString(vertices)
+        if not line.length > 0.0:
+            raise ModelError(f"{key}[{k}]: the line has no length; allowed 2 or more distinct vertices")
+        along = np.linspace(0.0, line.length, max(2, round(line.length / spacing_m) + 1))
+        places = shapely.get_coordinates(line.interpolate(along))
+        outside = ~shapely.contains_xy(area, places[:, 0], places[:, 1])
+        if not area.contains(line) or outside.any():
+            leaves = line.difference(area)
+            where = shapely.get_coordinates(leaves.representative_point())[0] if not leaves.is_empty else \
+                places[np.argmax(outside)]
+            raise ModelError(f"{key}[{k}]: the line leaves the water (site.area) near {where[0]:.6g} m North, "
+                             f"{where[1]:.6g} m East; allowed lines inside the water")
+        out.append(places)
+    places = np.vstack(out) if out else np.empty((0, 2))
+    _, first = np.unique(np.round(places, 6), axis=0, return_index=True)
+    return places[np.sort(first)]
+
+
 def spread(points: np.ndarray) -> np.ndarray:
     """The largest distance between any two of a layout's devices (its footprint), per layout.
 
@@ -196,4 +250,5 @@ def spread(points: np.ndarray) -> np.ndarray:
     return gaps.max(axis=(-2, -1))
 
 
-__all__ = ["MAX_GRID_POINTS", "MAX_VERTICES", "grid", "inside", "polygon", "shore_distance", "spread"]
+__all__ = ["MAX_GRID_POINTS", "MAX_VERTICES", "grid", "inside", "line_places", "polygon", "shore_distance",
+           "spread"]

@@ -210,6 +210,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
         _key("min_shore_m", "Real", 0.0, "m", "the least distance of a receiver from the shore", min=0.0, max=1e5),
         _key("max_shore_m", "Real", 0.0, "m", "the largest distance of a receiver from the shore (0: any)",
              min=0.0, max=1e5),
+        _key("lines", "String", "", "", "receivers only on these mooring lines, each 'north east; north east; ...' "
+                                        "[m], the lines apart by a vertical bar (empty: anywhere in the water)"),
     ),
     "detection": (
         _key("range_50_m", "Real", 0.0, "m", "the distance at which half the pings are heard (with slope; 0: the "

@@ -4,7 +4,8 @@ simulated tags.
 
 1. **Resolve** (:func:`resolve`): the water (``[site.area]``: a polygon, or a CSV or GeoJSON file), the work area's
    points (a grid over the water, or over ``work_area.polygon`` within it), the places a receiver may go (a finer
-   grid over the water, ``site.area.min_shore_m`` / ``max_shore_m`` from the shore), the detection range curve
+   grid over the water, ``site.area.min_shore_m`` / ``max_shore_m`` from the shore; or points along the mooring
+   lines ``site.area.lines`` at the grid's step), the detection range curve
    (``[detection]``) and the timing σ = c σ_toa.
 2. **Search** each receiver count from ``candidates.receivers``' fewest (:func:`search_count`): the layout starts
    as the k-means centres of the work area's points, then a seeded local search moves one receiver at a time to
@@ -47,6 +48,8 @@ from sblsim.orchestrator.tracks.toa import read_burst_sequence
 
 #: The places a receiver may go: about this many grid points over the water.
 SITE_POINTS = 4000
+#: The most mooring lines (``site.area.lines``) and vertices of one.
+MAX_LINES, MAX_LINE_VERTICES = 100, 200
 #: Local-search moves per receiver count: ``search.generations`` times this.
 MOVES_PER_GENERATION = 5
 #: Patterns per point of the fixed pings' Monte Carlo, where the enumeration does not reach.
@@ -242,6 +245,33 @@ def water_polygon(section: Mapping[str, Any]):
         raise ConfigError(str(exc)) from None
 
 
+def mooring_lines(text: str, where: str = "site.area.lines") -> list[np.ndarray]:
+    """The mooring lines of ``'north east; north east; ... | north east; ...'`` [m]: a list of (V, 2) arrays.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where``: more than :data:`MAX_LINES` lines, a line of fewer than 2 or more than
+        :data:`MAX_LINE_VERTICES` vertices, a vertex not two finite numbers within ±100000 m.
+    """
+    lines = [line for line in text.split("|") if line.strip()]
+    if len(lines) > MAX_LINES:
+        raise ConfigError(f"{where}: {len(lines)} lines; allowed at most {MAX_LINES}")
+    out = []
+    for k, line in enumerate(lines):
+        rows = [r for r in line.replace(",", " ").split(";") if r.strip()]
+        try:
+            vertices = np.array([[float(x) for x in r.split()] for r in rows[:MAX_LINE_VERTICES + 1]], dtype=float)
+        except ValueError:
+            vertices = np.empty((0, 0))
+        if not 2 <= len(rows) <= MAX_LINE_VERTICES or vertices.ndim != 2 or vertices.shape[1] != 2 \
+                or not np.isfinite(vertices).all() or np.abs(vertices).max() > 1e5:
+            raise ConfigError(f"{where}[{k}]: {line.strip()[:40]!r}; allowed 2 to {MAX_LINE_VERTICES} vertices "
+                              "'north east; north east; ...' in metres, each within ±100000")
+        out.append(vertices)
+    return out
+
+
 def sync_hearing(receivers: np.ndarray, curve: Any) -> np.ndarray:
     """(..., n, n) [0–1], ``[i, j]`` the probability that receiver ``i`` hears the sync tag moored at receiver ``j``
     with receiver ``i``'s own curve (``detection.per_receiver``), else the site's; its own tag 0
@@ -282,13 +312,22 @@ def resolve(sections: dict) -> TelemetryProblem:
                             for z in sorted(work_section["depths_m"])])
     step = math.sqrt(water.area / SITE_POINTS)
     max_shore = site["max_shore_m"] or None
-    sites = areas.grid(water, step, site["min_shore_m"])
-    if max_shore is not None:
+    if site["lines"].strip():  # only on the mooring lines, at the grid's step
+        try:
+            sites = areas.line_places(water, mooring_lines(site["lines"]), step)
+        except ModelError as exc:
+            raise ConfigError(str(exc)) from None
         sites = sites[areas.inside(water, sites, site["min_shore_m"], max_shore)]
+    else:
+        sites = areas.grid(water, step, site["min_shore_m"])
+        if max_shore is not None:
+            sites = sites[areas.inside(water, sites, site["min_shore_m"], max_shore)]
     most = sections["candidates"]["receivers"][1]
     if len(sites) < most:
-        raise ConfigError(f"site.area.min_shore_m: {len(sites)} places for a receiver within the shore distances, "
-                          f"fewer than candidates.receivers' most ({most}); allowed distances that leave room")
+        where = "site.area.lines" if site["lines"].strip() else "site.area.min_shore_m"
+        raise ConfigError(f"{where}: {len(sites)} places for a receiver within the shore distances, "
+                          f"fewer than candidates.receivers' most ({most}); allowed lines or distances that leave "
+                          "room")
     sites = _kept_sites(sections, water, sites, step)
     curve = receiver_curves(sections)
     sigma = sections["detection"]["sound_speed"] * sections["detection"]["sigma_toa_s"]
@@ -610,8 +649,8 @@ def estimate(problem: TelemetryProblem):
     return Estimate(len(counts), moves * len(counts), m, runs, seconds + runs * PING_SECONDS)
 
 
-__all__ = ["DEFAULT_BURST_INTERVAL", "JUDGE_SECONDS",
-           "MOVES_PER_GENERATION", "PATTERN_SAMPLES", "PINGS_PER_REPLICATE", "PING_SECONDS",
+__all__ = ["DEFAULT_BURST_INTERVAL", "JUDGE_SECONDS", "MAX_LINES",
+           "MAX_LINE_VERTICES", "MOVES_PER_GENERATION", "PATTERN_SAMPLES", "PINGS_PER_REPLICATE", "PING_SECONDS",
            "SEARCH_SECONDS", "SITE_POINTS", "Tag", "TelemetryDesign", "TelemetryProblem", "TelemetryRun", "estimate",
            "fixed_pings", "judge", "ranked", "resolve", "search_all", "search_count", "shortfalls", "sync_hearing",
-           "tag_of", "water_polygon", "within"]
+           "mooring_lines", "tag_of", "water_polygon", "within"]
