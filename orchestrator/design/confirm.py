@@ -142,8 +142,9 @@ def fresh_fix_cycles(ts: pd.DataFrame, slots: int, fix_packets: int) -> tuple[in
 
 def path_check(design: Design, resolved: Resolved) -> list[dict]:
     """The scenario's receiver on a path across the work area (module docstring): one row, ``receiver``, ``runs``,
-    ``length_m`` (the path's), ``rms_e_tot_m`` (the receiver's RMS 3-D error over the runs), ``pcrb_rms_m``,
-    ``nees`` and ``map_rms_drms_m`` (the map's RMS 3-D DRMS along the path: the one-round fix's prediction)."""
+    ``length_m`` (the path's), ``rms_e_tot_m`` (the receiver's RMS 3-D error over the runs), ``pcrb_rms_m`` (None
+    where the run has no bound: the range law, ``acoustics.range_k`` > 0), ``nees`` and ``map_rms_drms_m`` (the
+    map's RMS 3-D DRMS along the path: the one-round fix's prediction)."""
     mc = resolved.sections["monte_carlo"]
     low, high = resolved.area.bounds()
     centre = [float(v) for v in (low + high) / 2.0]
@@ -162,7 +163,7 @@ def path_check(design: Design, resolved: Resolved) -> list[dict]:
     drms = np.asarray(point_accuracy(plan, along)["drms_3d"], float)
     fixed = np.isfinite(drms)  # none where no point of the path is positioned (a work area out of reach): null
     return [{"receiver": row.receiver, "runs": int(row.runs), "length_m": length, "rms_e_tot_m": float(row.rms_e_tot),
-             "pcrb_rms_m": float(row.pcrb_rms), "nees": float(row.nees),
+             "pcrb_rms_m": float(row.pcrb_rms) if np.isfinite(row.pcrb_rms) else None, "nees": float(row.nees),
              "map_rms_drms_m": float(np.sqrt(np.mean(drms[fixed] ** 2))) if fixed.any() else None}]
 
 

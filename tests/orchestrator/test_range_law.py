@@ -10,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
+from sblsim.orchestrator.budget import SOURCES, switched_off
 from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.plan import as_plan
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import check_problem, read_problem
@@ -129,3 +131,38 @@ def test_an_lbl_design_with_the_law_is_confirmed_by_its_monte_carlo(tmp_path):
     assert all(0.85 <= row["ratio"] <= 1.15 for row in rows.values()), best["monte_carlo"]
     constant = sblsim.design(None, **problem_with(problem, detection={"range_k": 0.0}), out=tmp_path / "constant")
     assert best["predicted"]["drms_p95_m"] > 2.0 * constant.designs[0]["predicted"]["drms_p95_m"]
+
+
+# --------------------------------------------------------------------------- the bound and the budget
+
+def test_a_run_with_the_law_has_no_bound_and_its_budget_switches_the_law_off():
+    """The PCRB takes a constant range noise: a run with acoustics.range_k > 0 has none (NaN in the metrics, n/a
+    where printed, null in summary.json), a run without it keeps its bound; the budget's range_noise source
+    switches the law off with σ₀ (what it costs is the white range noise's)."""
+    items = ["simulation.duration=30"]
+    law = run_batch(with_replicates(load_config("semicircle", items + ["acoustics.range_k=0.01"], seed=1),
+                                    range(2))).metrics
+    constant = run_batch(with_replicates(load_config("semicircle", items, seed=1), range(2))).metrics
+    assert np.all(np.isnan(law["pcrb_rms"])) and np.all(np.isfinite(constant["pcrb_rms"]))
+    assert np.all(np.isfinite(law["e_tot_rms"]))
+    cfg = load_config("semicircle", ["acoustics.range_k=0.01"], seed=1)
+    off = switched_off(cfg, SOURCES["range_noise"][1])
+    assert off["acoustics"]["sigma_range"] == 0.0 and off["acoustics"]["range_k"] == 0.0
+    assert off["receiver"] == cfg["receiver"] and off["receiver"]["range_k"] == 0.01
+
+
+def test_the_usbl_map_with_the_law_is_the_constant_map_at_the_laws_sigma_of_each_point():
+    """A USBL's one packet: the map with acoustics.range_k = 0.002 at a point p equals the map of the constant
+    σ = σ₀ + k ‖p − transceiver‖ there (σ₀ 0.2 m; fixed detection), to 1e-12, at two points of different slant
+    ranges, and is larger than the constant σ₀'s."""
+    base = ["acoustics.detection=fixed", "acoustics.propagation=straight"]
+    plan = as_plan(load_config("usbl-deep", base + ["acoustics.range_k=0.002"], seed=1))
+    points = np.array([[300.0, 0.0, 100.0], [900.0, 400.0, 600.0]])
+    mapped = point_accuracy(plan, points)["drms"]
+    transceiver = plan.lever_arms[0]
+    for k, p in enumerate(points):
+        sigma = float(0.2 + 0.002 * np.linalg.norm(p - transceiver))
+        constant = as_plan(load_config("usbl-deep", base + [f"acoustics.sigma_range={sigma!r}"], seed=1))
+        assert math.isclose(mapped[k], point_accuracy(constant, p[None])["drms"][0], rel_tol=1e-12)
+    plain = point_accuracy(as_plan(load_config("usbl-deep", base, seed=1)), points)["drms"]
+    assert np.all(mapped > plain)
