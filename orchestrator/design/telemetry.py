@@ -63,8 +63,8 @@ SEARCH_SECONDS, JUDGE_SECONDS, PING_SECONDS = 1.0e-6, 1.0e-4, 1.0e-3
 FOOTPRINT_PENALTY = 10.0
 
 
-#: A random-interval tag's burst interval where ``tag.burst_interval_s`` is empty [s] (a common fish tag's
-#: collision-avoidance setting, e.g. Baktoft et al. 2017's 20–40 s).
+#: A random-interval tag's burst interval where ``tag.burst_interval_s`` is empty [s]: the worked case's
+#: (``lake-hald-array``), the one the confirmation simulated before the tag was a key.
 DEFAULT_BURST_INTERVAL = (20.0, 40.0)
 
 
