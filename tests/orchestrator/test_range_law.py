@@ -21,11 +21,15 @@ from sblsim.orchestrator.maps import point_accuracy
 from tests.helpers import problem_with
 
 #: The scenarios' fixed-detection, straight-path variants: an LBL of 250 m radius with a vehicle at 150 m depth
-#: (ranges of 200–400 m) and a USBL with a vehicle 300 m out at 100 m depth (a slant range of ~320 m).
+#: (ranges of 200–400 m), the same field as an inverted LBL (the vehicle's pings heard by the four), and a USBL
+#: with a vehicle 300 m out at 100 m depth (a slant range of ~320 m).
 SCENARIOS = {
-    "lbl-field": ["acoustics.detection=fixed", "acoustics.propagation=straight", "simulation.duration=300"],
-    "usbl-deep": ["acoustics.detection=fixed", "acoustics.propagation=straight", "simulation.duration=800",
-                  "target.radius=300", "target.depth=100"],
+    "lbl-field": ("lbl-field", ["acoustics.detection=fixed", "acoustics.propagation=straight",
+                                "simulation.duration=300"]),
+    "lbl-field as ilbl": ("lbl-field", ["platform.system=ilbl", "acoustics.detection=fixed",
+                                        "acoustics.propagation=straight", "simulation.duration=300"]),
+    "usbl-deep": ("usbl-deep", ["acoustics.detection=fixed", "acoustics.propagation=straight",
+                                "simulation.duration=800", "target.radius=300", "target.depth=100"]),
 }
 K = 0.002  # k d of 0.4–0.8 m against σ₀ 0.05 and 0.2 m: the law dominates
 
@@ -45,8 +49,8 @@ def test_the_default_receiver_is_consistent_under_the_law_and_not_without_it(sce
     position in [1.5, 4.5]; the same runs with the receiver's range_k forced to 0 (R of σ₀ alone): out of it."""
     nees = {}
     for weighed in (K, 0.0):
-        cfg = load_config(scenario, SCENARIOS[scenario] + [f"acoustics.range_k={K}", f"receiver.range_k={weighed}"],
-                          seed=1)
+        name, items = SCENARIOS[scenario]
+        cfg = load_config(name, items + [f"acoustics.range_k={K}", f"receiver.range_k={weighed}"], seed=1)
         nees[weighed] = float(np.mean(run_batch(with_replicates(cfg, range(20)), timeseries=False)
                                       .metrics["nees_mean"]))
     assert 1.5 <= nees[K] <= 4.5, nees
