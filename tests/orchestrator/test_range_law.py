@@ -13,7 +13,7 @@ import pytest
 from sblsim.orchestrator.budget import SOURCES, switched_off
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import as_plan
-from sblsim.orchestrator.cosim.run import run_batch, with_replicates
+from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import check_problem, read_problem
 from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
@@ -170,3 +170,16 @@ def test_the_usbl_map_with_the_law_is_the_constant_map_at_the_laws_sigma_of_each
         assert math.isclose(mapped[k], point_accuracy(constant, p[None])["drms"][0], rel_tol=1e-12)
     plain = point_accuracy(as_plan(load_config("usbl-deep", base, seed=1)), points)["drms"]
     assert np.all(mapped > plain)
+
+
+@pytest.mark.slow
+def test_the_fmus_carry_the_law_as_the_local_engine_does():
+    """The FMUs generated from the same declarations: a run with acoustics.range_k = 0.01 on the fmu engine gives
+    the local engine's metrics (the channel's draws and the receiver's R alike), and they differ from k = 0's."""
+    items = ["simulation.duration=20", "simulation.receiver=ekf-seq"]
+    cfg = load_config("semicircle", items + ["acoustics.range_k=0.01"], seed=2)
+    local, fmu = run(cfg).metrics, run(cfg, engine="fmu").metrics
+    for key in ("e_tot_rms", "nees_mean", "nis_mean"):
+        np.testing.assert_allclose(fmu[key], local[key], rtol=1e-9)
+    constant = run(load_config("semicircle", items, seed=2)).metrics
+    assert not np.isclose(constant["e_tot_rms"][0], local["e_tot_rms"][0], rtol=1e-3)
