@@ -5,12 +5,14 @@ system, and its prediction an independent numpy Fisher computation with σ_i(p) 
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
 from sblsim.orchestrator.budget import SOURCES, switched_off
+from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import as_plan
 from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
@@ -183,3 +185,16 @@ def test_the_fmus_carry_the_law_as_the_local_engine_does():
         np.testing.assert_allclose(fmu[key], local[key], rtol=1e-9)
     constant = run(load_config("semicircle", items, seed=2)).metrics
     assert not np.isclose(constant["e_tot_rms"][0], local["e_tot_rms"][0], rtol=1e-3)
+
+
+def test_sblsim_run_with_the_law_says_why_it_has_no_bound(tmp_path, capsys):
+    """``sblsim run`` with acoustics.range_k > 0: the PCRB printed n/a with a one-line warning naming the key,
+    null in summary.json; the errors and the NEES printed as ever (exit 0)."""
+    code = main(["run", "semicircle", "--set", "acoustics.range_k=0.01", "--set", "simulation.duration=20",
+                 "--out", str(tmp_path / "run")])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "PCRB RMS n/a m" in captured.out and "NEES" in captured.out
+    warning = [line for line in captured.err.splitlines() if "no PCRB" in line]
+    assert len(warning) == 1 and "acoustics.range_k = 0.01" in warning[0]
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["pcrb_rms"] is None
