@@ -19,7 +19,12 @@ checked against what the same data say without the motion model:
   stretch is lost (to the end of the record where no agreeing fix follows, from its start where none precedes);
 * at a ping without a trusted fix, the track must be reachable from the nearest trusted fixes before or after it:
   within the gate's radius plus :data:`MAX_SPEED` times the time between (a tag does not outrun that);
-* the **physical speed** between successive estimates: at most :data:`MAX_SPEED` beyond their own uncertainty.
+* the **physical speed** between successive estimates: at most :data:`MAX_SPEED` beyond their own uncertainty;
+* the estimate's **own uncertainty**: its horizontal DRMS (√ of the trace of its 2×2 position covariance) at most
+  :data:`TRUSTED_FIX_DRMS`, the limit a trusted fix must meet. One limit for both: a row is ``ok`` only where it is
+  placed at least as well as a fix the checks trust. A row the arrivals cannot place (a ping heard by one receiver
+  or none, held only by the motion model) is not a position a user should take as good, however near its neighbours
+  it is; a covariance that is not finite says nothing of where the row is, and fails too.
 
 A ping that fails is ``flagged``; a ping where a filter started again (a restart, a new segment after a gap) is
 ``restart``; the rest ``ok``. A track kilometres from every fix is never ``ok``.
@@ -52,13 +57,15 @@ class Quality:
     """What :func:`check_track` returns for m pings: ``quality`` (m,) of str (:data:`QUALITY`), and per ping as bool
     (m,) arrays: ``fix`` (outside its own trusted fix: not flagged alone), and the reasons of a flag, ``stretch``
     (from one such ping to the next with no agreeing fix between), ``reach`` (out of reach of the nearest trusted
-    fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`)."""
+    fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`), ``uncertain`` (a horizontal DRMS of its own above
+    :data:`TRUSTED_FIX_DRMS`, or not finite)."""
 
     quality: np.ndarray
     fix: np.ndarray
     stretch: np.ndarray
     reach: np.ndarray
     speed: np.ndarray
+    uncertain: np.ndarray
 
     @property
     def flagged(self) -> int:
@@ -144,8 +151,8 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
                 fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
                 max_speed: float = MAX_SPEED, explained: np.ndarray | None = None,
                 fix_used: np.ndarray | None = None) -> Quality:
-    """Each estimate of a track checked against the trusted single-ping fixes and the physical speed (module
-    docstring), on the horizontal position.
+    """Each estimate of a track checked against the trusted single-ping fixes, the physical speed and its own
+    uncertainty (module docstring), on the horizontal position.
 
     Parameters
     ----------
@@ -179,6 +186,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     m = len(t)
     fx, C = np.asarray(fixes, float)[:, :2], np.asarray(fix_covariances, float)[:, :2, :2]
     trusted = np.asarray(trusted, bool) & np.isfinite(fx).all(axis=1)
+    # the estimate's own horizontal DRMS: above a trusted fix's limit (or not finite), the row is not placed
+    with np.errstate(invalid="ignore"):
+        drms = np.sqrt(P[:, 0, 0] + P[:, 1, 1])
+    uncertain = ~(drms <= TRUSTED_FIX_DRMS) | ~np.isfinite(P).all(axis=(1, 2))
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
     alone = np.zeros(m, bool)  # off a trusted fix while explaining too few arrivals to position itself
@@ -231,12 +242,12 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         speed[1:] |= fast
         speed[:-1] |= fast
     finite = np.isfinite(p).all(axis=1)
-    flagged = stretch | alone | reach | speed | ~finite
+    flagged = stretch | alone | reach | speed | uncertain | ~finite
     quality = np.full(m, "ok", dtype=object)
     if restarts is not None:
         quality[np.asarray(restarts, bool)] = "restart"
     quality[flagged] = "flagged"
-    return Quality(quality.astype(str), fix_bad, stretch, reach, speed)
+    return Quality(quality.astype(str), fix_bad, stretch, reach, speed, uncertain)
 
 
 __all__ = ["EXPLAINED_SIGMAS", "FIX_GATE", "FIX_SLACK", "MAX_SPEED", "QUALITY", "TRUSTED_FIX_DRMS", "Quality",

@@ -702,8 +702,9 @@ def quality_line(summary: dict[str, Any]) -> str:
     main = summary["track"]
     flagged = summary["flagged"].get(main, 0)
     n = summary["fixed"].get(main, 0)
-    return (f"quality: {flagged} of {n} track rows flagged (off their own trusted single-ping fixes, or faster than "
-            f"the tag can move), {summary['restarts']} restarts of the EKF, {summary['trusted_fixes']} trusted fixes")
+    return (f"quality: {flagged} of {n} track rows flagged (off their own trusted single-ping fixes, faster than "
+            f"the tag can move, or placed less well than a trusted fix), {summary['restarts']} restarts of the EKF, "
+            f"{summary['trusted_fixes']} trusted fixes")
 
 
 def _main_tags(args: argparse.Namespace, options: dict[str, Any]) -> int:

@@ -97,3 +97,61 @@ def test_a_receiver_heard_by_a_reflection_is_named_and_the_others_are_not():
     on_track = receiver_residuals(toa[k0:], RECEIVERS, robust.x[:, :2], robust.x[:, 4], C, SIGMA)
     assert on_track.late.tolist() == [False, False, False, True, False, False]
     assert np.abs(np.delete(on_track.median_z, 3)).max() < 1.0 and on_track.kept[3] < 0.2
+
+
+def test_a_track_whose_covariance_grows_over_a_silent_stretch_is_flagged_from_10_m_drms():
+    """Pings 20-49 not heard: the track's covariance there is the motion model's prediction alone (the tracker's own
+    transition, nearly constant velocity, from a position and velocity known exactly at ping 19), and the rows are
+    flagged ``uncertain`` exactly from the ping where the closed form of white-noise acceleration, a position variance
+    of q t³ / 3 per axis (Bar-Shalom, Li & Kirubarajan 2001, § 6.2.2), puts the DRMS √(2 q t³ / 3) above 10 m."""
+    toa, truth, emissions, fx, fc, fu, trusted = simulated()
+    q, interval = 0.05, 2.0
+    silent = np.arange(20, 50)
+    toa, fx, trusted = toa.copy(), fx.copy(), trusted.copy()
+    toa[silent], fx[silent], trusted[silent] = np.nan, np.nan, False
+    s = tt.TrackerSettings(sound_speed=C, sigma_toa=SIGMA, interval=interval, acceleration_psd=q)
+    tracker = tt.ToaTracker(RECEIVERS, s)
+    x = np.concatenate([truth[19], [0.0, 0.0], [emissions[19], interval]])
+    P = np.zeros((6, 6))
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    for k in silent:
+        x, F, Q = tracker.transition(x)
+        P = F @ P @ F.T + Q
+        cov[k] = P[:2, :2]
+    elapsed = (silent - 19) * interval
+    closed = np.sqrt(2 * q * elapsed**3 / 3)
+    assert np.allclose(np.sqrt(np.trace(cov[silent], axis1=1, axis2=2)), closed, rtol=1e-9)
+    crossing = silent[np.argmax(closed > 10.0)]
+    assert 20 < crossing < 49  # the threshold is crossed inside the stretch, with rows ok before it
+    quality = check(toa, truth, emissions, fx, fc, trusted, cov)
+    expected = np.zeros(len(truth), bool)
+    expected[crossing:50] = True
+    assert quality.uncertain.tolist() == expected.tolist()
+    assert quality.quality.tolist() == np.where(expected, "flagged", "ok").tolist()
+
+
+def test_a_row_of_9_9_m_drms_stays_ok_and_one_of_10_1_m_is_flagged():
+    """The limit is the DRMS, √ of the covariance's trace (not its largest axis): 9 m along x and 4.12 m along y is
+    9.9 m, ok; the same ellipse turned 30° with 10.1 m, flagged; the other rows' marks unchanged."""
+    toa, truth, emissions, fx, fc, fu, trusted = simulated()
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    cov[30] = np.diag([9.0**2, 9.9**2 - 9.0**2])
+    turn = np.array([[np.cos(0.5236), -np.sin(0.5236)], [np.sin(0.5236), np.cos(0.5236)]])
+    cov[40] = turn @ np.diag([9.0**2, 10.1**2 - 9.0**2]) @ turn.T
+    quality = check(toa, truth, emissions, fx, fc, trusted, cov)
+    assert quality.quality[30] == "ok" and not quality.uncertain[30]
+    assert quality.quality[40] == "flagged" and quality.uncertain[40]
+    assert quality.flagged == 1 and quality.uncertain.sum() == 1
+
+
+def test_a_covariance_that_is_not_finite_is_flagged_without_a_crash():
+    """A NaN covariance (a filter's broken by round-off) says nothing of where the row is: flagged ``uncertain``, on a
+    ping with a trusted fix as well as without; every other row ok."""
+    toa, truth, emissions, fx, fc, fu, trusted = simulated()
+    assert trusted[12]
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    cov[12] = np.nan
+    cov[13, 0, 1] = cov[13, 1, 0] = np.nan
+    quality = check(toa, truth, emissions, fx, fc, trusted, cov)
+    assert np.flatnonzero(quality.uncertain).tolist() == [12, 13]
+    assert np.flatnonzero(quality.quality == "flagged").tolist() == [12, 13]
