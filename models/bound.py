@@ -99,6 +99,21 @@ def effective_range_variance(position, beacon, arm, noise_variance, attitude_var
     return model.range_variance(position, beacon, noise_variance, attitude_variance=attitude_variance, arm=arm)
 
 
+def law_variance(position, beacon, sigma_range, range_k):
+    """What the range-dependent noise law adds to a range's variance at its true length [m²]:
+    ``(σ₀ + k d)² − σ₀² = k d (2 σ₀ + k d)``, ``d = ‖position − beacon‖`` [m] (exactly 0 with ``k = 0``: the
+    constant noise's bound unchanged to the last bit).
+
+    ``sigma_range`` σ₀ [m] and ``range_k`` k [m/m] are ``acoustics.sigma_range`` and ``acoustics.range_k``
+    (:func:`~sblsim.models.acoustics.range_law.range_noise_sigma`: the law the channel draws and the receivers'
+    R weighs, Quazi, IEEE Trans. ASSP 29(3), 1981). The information a position gets from the variance's own
+    dependence on it, ``2 k² / σ²`` per range (Kay 1993, Eq. 3.31), is left out: at most 2 k² (2 % at the
+    largest k, 0.1) of the range's own ``1 / σ²``.
+    """
+    d = ca.norm_2(position - beacon)
+    return range_k * d * (2.0 * sigma_range + range_k * d)
+
+
 def information_update(P: ca.SX, H: ca.SX, variance, use) -> ca.SX:
     """``(P⁻¹ + Hᵀ H / variance)⁻¹ = P − g gᵀ / (H g + variance)``, ``g = P Hᵀ``, for a scalar measurement
     (where ``use`` is 0, P unchanged): the bound's information added, in covariance form (its upper triangle
@@ -204,7 +219,9 @@ def bound_step(model=MODEL) -> ca.Function:
     Inputs ``B (n²: the n × n bound, column-major; n = 6 for the receivers'
     motion model), dt [s], q_h, q_v [m²/s³], position (3) [m], beacon (3) [m],
     arm (3) [m], noise_variance [m²], attitude_variance [rad²],
-    depth_variance [m²], slot, received (0 or 1)``; output the bound after the
+    depth_variance [m²], slot, received (0 or 1), sigma_range [m], range_k [m/m]``
+    (the range law's σ₀ and k: :func:`law_variance` added to ``noise_variance`` at the true range); output the
+    bound after the
     prediction over ``dt`` with ``model.motion`` and, at a slot, the
     information of ``model``'s rows for the transmitting beacon
     (:func:`measurement_information`): the depth row, then (for a received
@@ -223,13 +240,15 @@ def bound_step(model=MODEL) -> ca.Function:
     beacon, arm = ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
     noise, attitude, d_var, slot, received = (ca.SX.sym(name) for name in ("noise_variance", "attitude_variance",
                                                                           "depth_variance", "slot", "received"))
-    variances = ca.vertcat(effective_range_variance(position, beacon, arm, noise, attitude, model), d_var)
+    sigma0, growth = ca.SX.sym("sigma_range"), ca.SX.sym("range_k")
+    noise_at = noise + law_variance(position, beacon, sigma0, growth)  # the range law at the true range
+    variances = ca.vertcat(effective_range_variance(position, beacon, arm, noise_at, attitude, model), d_var)
     # rows of the model for one beacon: 0 the range, 1 the depth; the depth is added first
     P = measurement_information(P, model, x, [beacon], variances, (ca.logic_and(slot, received), slot), rows=(1, 0))
     names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
-             "depth_variance", "slot", "received"]
+             "depth_variance", "slot", "received", "sigma_range", "range_k"]
     return ca.Function("sblsim_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var, slot,
-                                             received], [ca.vec(P)], names, ["B_next"])
+                                             received, sigma0, growth], [ca.vec(P)], names, ["B_next"])
 
 
 #: The motion model of the bound with error states: the receivers' that carry them.
@@ -264,7 +283,8 @@ def error_bound_step() -> ca.Function:
 
     Inputs ``B (n²), dt, q_h, q_v, position (3), beacon (3), arm (3), noise_variance, attitude_variance,
     depth_variance, gps_sigma [m], gps_tau [s], clock_drift_sigma [1], attitude_sigma [rad], clock [m/s], slot,
-    received, ping_jitter [s], new_ping``; output ``B_next``.
+    received, ping_jitter [s], new_ping, sigma_range [m], range_k [m/m]`` (the range law, as :func:`bound_step`);
+    output ``B_next``.
     """
     motion = ERROR_MOTION
     errors = error_symbols()
@@ -280,19 +300,22 @@ def error_bound_step() -> ca.Function:
     P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
     s = ca.SX.sym("x", motion.state_size)
     H = ca.substitute(ca.jacobian(error_range(s, beacon, arm, clock), s), s, x)
-    variance = effective_range_variance(position, beacon, arm, noise, attitude)
+    sigma0, growth = ca.SX.sym("sigma_range"), ca.SX.sym("range_k")
+    variance = effective_range_variance(position, beacon, arm, noise + law_variance(position, beacon, sigma0, growth),
+                                        attitude)
     P = information_update(P, H, variance, ca.logic_and(slot, received))
     names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
-             "depth_variance", *ERROR_NAMES, "clock", "slot", "received", "ping_jitter", "new_ping"]
+             "depth_variance", *ERROR_NAMES, "clock", "slot", "received", "ping_jitter", "new_ping", "sigma_range",
+             "range_k"]
     return ca.Function("sblsim_error_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var,
-                                                   *errors.values(), clock, slot, received, jitter, new_ping],
-                       [ca.vec(P)], names, ["B_next"])
+                                                   *errors.values(), clock, slot, received, jitter, new_ping, sigma0,
+                                                   growth], [ca.vec(P)], names, ["B_next"])
 
 
 #: Per-replicate inputs of the bound with error states, in the order of its ``fixed`` columns (the compiled bound
 #: numbers them: :func:`compiled_error_bound`, :mod:`sblsim.fmus.contract`).
 ERROR_FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance",
-               "attitude_variance", "depth_variance", *ERROR_NAMES, "clock", "ping_jitter")
+               "attitude_variance", "depth_variance", *ERROR_NAMES, "clock", "ping_jitter", "sigma_range", "range_k")
 #: Per-step inputs of the bound with error states: the true position, the transmitting beacon's broadcast
 #: position and lever arm (NED), the slot, the packet's reception and whether it is the first of a new ping (an
 #: inverted LBL's).
@@ -304,7 +327,8 @@ def _error_inputs(f, s):
     """The inputs of :func:`error_bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name and a
     step's columns (:data:`ERROR_STEPS` order)."""
     return (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"], f["depth_variance"],
-            *(f[k] for k in ERROR_NAMES), f["clock"], s[9:10], s[10:11], f["ping_jitter"], s[11:12])
+            *(f[k] for k in ERROR_NAMES), f["clock"], s[9:10], s[10:11], f["ping_jitter"], s[11:12], f["sigma_range"],
+            f["range_k"])
 
 
 def error_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -340,7 +364,10 @@ def compiled_error_bound() -> tuple[ca.Function, ca.Function]:
 #: Per-replicate inputs of the bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled metrics pass
 #: numbers them from this tuple: :mod:`sblsim.fmus.contract`).
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance", "attitude_variance",
-         "depth_variance")
+         "depth_variance", "sigma_range", "range_k")
+#: The per-run inputs of the bounds that may be left out of their packing: the range law's σ₀ and k
+#: (:func:`law_variance`), 0 (a constant range noise) unless given.
+LAW_DEFAULTS = {"sigma_range": 0.0, "range_k": 0.0}
 
 
 def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, beacons: np.ndarray, arms: np.ndarray,
@@ -363,20 +390,28 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, beaco
         white-noise-acceleration model composes), the acceleration spectral
         densities [m²/s³], the prior standard deviations at t_0 [m], [m/s],
         ``noise_variance = σ_r² + σ_GPS²`` [m²], ``attitude_variance = σ_att²``
-        [rad²] and ``depth_variance = σ_d²`` [m²] (> 0).
+        [rad²] and ``depth_variance = σ_d²`` [m²] (> 0); ``sigma_range`` σ₀ [m] and ``range_k`` k [m/m], the
+        range law (:func:`law_variance`), may be left out (0: a constant noise).
 
     Returns
     -------
-    fixed : ndarray, shape (B, 8)
+    fixed : ndarray, shape (B, len(FIXED))
     steps : ndarray, shape (N, B, 11)
     """
     truth = np.asarray(truth, dtype=float)
     b = truth.shape[1]
-    columns = np.stack([np.broadcast_to(np.asarray(fixed[k], dtype=float), (b,)) for k in FIXED], axis=1)
+    columns = packed_fixed({**LAW_DEFAULTS, **fixed}, FIXED, b)
     steps = np.concatenate([truth, np.asarray(beacons, dtype=float), np.asarray(arms, dtype=float),
                             np.asarray(slot, dtype=float)[..., None], np.asarray(received, dtype=float)[..., None]],
                            axis=-1)
     return np.ascontiguousarray(columns), np.ascontiguousarray(steps)
+
+
+def packed_fixed(fixed: dict, names: Sequence[str], b: int) -> np.ndarray:
+    """The per-run inputs ``fixed`` (by name: a float or a (b,) array each) as columns in ``names``' order, (b,
+    len(names)), C-contiguous."""
+    return np.ascontiguousarray(np.stack([np.broadcast_to(np.asarray(fixed[k], dtype=float), (b,)) for k in names],
+                                         axis=1))
 
 
 def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
@@ -404,7 +439,7 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
     """
     return stepped(bound_step(model), model.motion, FIXED, fixed, steps,
                     lambda f, s: (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"],
-                                  f["depth_variance"], s[9:10], s[10:11]))
+                                  f["depth_variance"], s[9:10], s[10:11], f["sigma_range"], f["range_k"]))
 
 
 def stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, steps: np.ndarray,
@@ -614,5 +649,6 @@ def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.nd
 __all__ = ["bound_step", "compiled_error_bound", "effective_range_variance", "error_bound_step", "ERROR_FIXED",
            "ERROR_MOTION", "ERROR_NAMES", "error_pcrb", "error_prior", "error_range", "ERROR_STEPS", "error_symbols",
            "fisher_information", "fix_information", "FIXED", "horizontal_drms", "horizontal_std",
-           "information_update", "measurement_information", "MODEL", "model_horizontal_std", "MOTION", "packed_bound",
-           "pcrb", "pcrb_inputs", "per_point", "position_information", "predicted", "state_at", "stepped"]
+           "information_update", "LAW_DEFAULTS", "law_variance", "measurement_information", "MODEL",
+           "model_horizontal_std", "MOTION", "packed_bound", "packed_fixed", "pcrb", "pcrb_inputs", "per_point",
+           "position_information", "predicted", "state_at", "stepped"]

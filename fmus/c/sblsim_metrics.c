@@ -170,6 +170,8 @@ SBLSIM_EXPORT int sblsim_run_metrics(int n, int b, const double* const* columns,
             arg[SBLSIM_BOUND_IN_NOISE_VARIANCE] = f + SBLSIM_FIXED_NOISE_VARIANCE;
             arg[SBLSIM_BOUND_IN_ATTITUDE_VARIANCE] = f + SBLSIM_FIXED_ATTITUDE_VARIANCE;
             arg[SBLSIM_BOUND_IN_DEPTH_VARIANCE] = f + SBLSIM_FIXED_DEPTH_VARIANCE;
+            arg[SBLSIM_BOUND_IN_SIGMA_RANGE] = f + SBLSIM_FIXED_SIGMA_RANGE; /* the range law, sigma_0 + k d */
+            arg[SBLSIM_BOUND_IN_RANGE_K] = f + SBLSIM_FIXED_RANGE_K;
             arg[SBLSIM_BOUND_IN_SLOT] = &slot;
             arg[SBLSIM_BOUND_IN_RECEIVED] = &fresh;
             res[0] = next;

@@ -80,8 +80,11 @@ import numpy as np
 from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ARRAY
 from sblsim.models.bound import (
     ERROR_MOTION,
+    LAW_DEFAULTS,
     information_update,
+    law_variance,
     packed_bound,
+    packed_fixed,
     per_point,
     predicted,
     stepped,
@@ -257,7 +260,9 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
 
     Inputs ``B (n², column-major), dt [s], q_h, q_v [m²/s³], position (3) [m], transceiver (3) [m], attitude (3)
     [rad], range_variance [m²], position_variance [m²], angle_sigma_deg [deg], attitude_variance [rad²],
-    depth_variance [m²], gps_sigma [m], gps_tau [s], attitude_sigma [rad], slot, received (0 or 1)``; output the
+    depth_variance [m²], gps_sigma [m], gps_tau [s], attitude_sigma [rad], slot, received (0 or 1), sigma_range
+    [m], range_k [m/m]`` (the range law: :func:`sblsim.models.bound.law_variance` added to ``range_variance`` at
+    the true range); output the
     bound after the prediction over ``dt`` with ``model.motion`` (its error states: the GPS error a Gauss-Markov
     process of std ``gps_sigma`` and correlation time ``gps_tau`` where that is positive, a constant attitude
     error of prior std ``attitude_sigma``) and, at a slot, the depth row, then (for a received packet) the three
@@ -287,23 +292,26 @@ def bound_step(model=BOUND_MODEL) -> ca.Function:
     P = information_update(P, _depth_row(motion.state_size, motion.position_index[2]), d_var, slot)  # depth first
     use = ca.logic_and(slot, received)
     ctx = (beacon, att)
-    R = model.covariance(x, ctx, noise, (angle * (math.pi / 180.0)) ** 2, position_var, attitude_var)
+    sigma0, growth = ca.SX.sym("sigma_range"), ca.SX.sym("range_k")
+    noise_at = noise + law_variance(position, beacon, sigma0, growth)  # the range law at the true range
+    R = model.covariance(x, ctx, noise_at, (angle * (math.pi / 180.0)) ** 2, position_var, attitude_var)
     _, Hw = kalman.whiten(ca.SX.zeros(3), model.jacobian(x, ctx), R)
     for k in range(3):
         P = information_update(P, Hw[k, :], 1.0, use)
     names = ["B", "dt", "q_h", "q_v", "position", "transceiver", "attitude", "range_variance", "position_variance",
              "angle_sigma_deg", "attitude_variance", "depth_variance", "gps_sigma", "gps_tau", "attitude_sigma",
-             "slot", "received"]
+             "slot", "received", "sigma_range", "range_k"]
     return ca.Function("sblsim_usbl_bound_step", [B, dt, qh, qv, position, beacon, att, noise, position_var, angle,
                                                   attitude_var, d_var, gps_sigma, gps_tau, attitude_sigma, slot,
-                                                  received], [ca.vec(P)], names, ["B_next"])
+                                                  received, sigma0, growth], [ca.vec(P)], names, ["B_next"])
 
 
 #: Per-replicate inputs of the USBL bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled bound
 #: numbers them from this tuple: :func:`compiled_bound`, :mod:`sblsim.fmus.contract`); the error states' priors
 #: (of :data:`sblsim.models.bound.ERROR_NAMES`, not the clock's: the USBL ranges two-way) after the rest.
 FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "range_variance", "position_variance",
-         "angle_sigma_deg", "attitude_variance", "depth_variance", "gps_sigma", "gps_tau", "attitude_sigma")
+         "angle_sigma_deg", "attitude_variance", "depth_variance", "gps_sigma", "gps_tau", "attitude_sigma",
+         "sigma_range", "range_k")
 #: Per-step inputs of the USBL bound, in the order of :func:`pcrb`'s ``steps`` columns: the true position, the
 #: transceiver and the attitude the packet carries, the slot and the packet's reception.
 STEPS = ("true_x", "true_y", "true_z", "transceiver_x", "transceiver_y", "transceiver_z",
@@ -315,7 +323,7 @@ def _step_inputs(f, s):
     step columns ``s`` (in :data:`STEPS` order)."""
     return (s[0:3], s[3:6], s[6:9], f["range_variance"], f["position_variance"], f["angle_sigma_deg"],
             f["attitude_variance"], f["depth_variance"], f["gps_sigma"], f["gps_tau"], f["attitude_sigma"],
-            s[9:10], s[10:11])
+            s[9:10], s[10:11], f["sigma_range"], f["range_k"])
 
 
 def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, transceivers: np.ndarray,
@@ -336,7 +344,7 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, trans
         [m²] the range noise alone, ``position_variance = σ_b²`` [m²] the broadcast transceiver position's error
         per axis (GPS and the lever arm turned by the attitude error, :func:`transceiver_variance`),
         ``angle_sigma_deg`` the array's direction std on its axis [deg], > 0, and ``attitude_variance`` the
-        attitude error per Euler angle [rad²]).
+        attitude error per Euler angle [rad²]; the range law's ``sigma_range`` and ``range_k`` may be left out).
 
     Returns
     -------
@@ -345,7 +353,7 @@ def pcrb_inputs(truth: np.ndarray, slot: np.ndarray, received: np.ndarray, trans
     """
     truth = np.asarray(truth, dtype=float)
     b = truth.shape[1]
-    columns = np.stack([np.broadcast_to(np.asarray(fixed[k], dtype=float), (b,)) for k in FIXED], axis=1)
+    columns = packed_fixed({**LAW_DEFAULTS, **fixed}, FIXED, b)
     steps = np.concatenate([truth, np.asarray(transceivers, dtype=float), np.asarray(attitudes, dtype=float),
                             np.asarray(slot, dtype=float)[..., None], np.asarray(received, dtype=float)[..., None]],
                            axis=-1)

@@ -365,7 +365,4 @@ def _run_warnings(s: dict, plan) -> list[str]:
                    f"spread ({spread:.4g} m; the geometry serves up to {REACH_RATIO:g} times): the errors are the "
                    f"system's real accuracy there (PCRB RMS {bound} m), not a divergence "
                    "(summary.json: beyond_geometry)")
-    if float(plan["acoustics"].get("range_k", 0.0)) > 0.0:
-        out.append(f"no PCRB: the bound takes a constant range noise, not the range law of acoustics.range_k = "
-                   f"{plan['acoustics']['range_k']:g} (summary.json: pcrb_rms null)")
     return out

@@ -359,7 +359,8 @@ def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> di
     [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
     :func:`sblsim.models.systems.usbl.pcrb`); the error states of the bound, the system's
     :meth:`~sblsim.models.systems.System.bound_errors` (a Gauss-Markov GPS error then leaves the white
-    variances).
+    variances); ``sigma_range`` and ``range_k``, the range law's σ₀ and k (``acoustics.range_k``: each bound adds
+    :func:`sblsim.models.bound.law_variance` at the true range).
     """
     target, platform = cfg["target"], cfg["platform"]
     names = ("q_horizontal", "q_vertical", "p0_position", "p0_velocity")
@@ -377,7 +378,8 @@ def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> di
             "position_variance": position ** 2 + (attitude * arm) ** 2,
             "attitude_variance": attitude ** 2,
             "depth_variance": max(target["depth_sigma"], MIN_SIGMA) ** 2,
-            "angle_sigma_deg": system.angle_sigma_deg(platform), **errors}
+            "angle_sigma_deg": system.angle_sigma_deg(platform), **errors,
+            "sigma_range": cfg["acoustics"]["sigma_range"], "range_k": cfg["acoustics"].get("range_k", 0.0)}
 
 
 def make_plan(config: Mapping[str, Any]) -> RunPlan:

@@ -411,11 +411,6 @@ def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
                                     for a in "xyz"], axis=-1) for kind in ("true", "est")}
         estimated = np.isfinite(errors(position["true"], position["est"])).all(axis=-1)  # the steps e_tot_rms takes
         values["pcrb_rms"][chosen] = bound_rms(theirs, estimated)
-    grown = np.array([float(p["acoustics"].get("range_k", 0.0)) > 0.0 for p in plans])
-    if grown.any():  # the bound takes a constant range noise: none (NaN, n/a) where the range law grows it
-        values["pcrb_rms"] = np.where(grown, np.nan, np.asarray(values["pcrb_rms"], dtype=float))
-        if bound is not None:
-            bound = np.where(grown[None, :], np.nan, bound)
     spread = np.array([p.horizontal_spread for p in plans])
     flags = run_flags({**{name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, **lanes}, spread,
                       arms.shape[1])

@@ -143,7 +143,7 @@ def fresh_fix_cycles(ts: pd.DataFrame, slots: int, fix_packets: int) -> tuple[in
 def path_check(design: Design, resolved: Resolved) -> list[dict]:
     """The scenario's receiver on a path across the work area (module docstring): one row, ``receiver``, ``runs``,
     ``length_m`` (the path's), ``rms_e_tot_m`` (the receiver's RMS 3-D error over the runs), ``pcrb_rms_m`` (None
-    where the run has no bound: the range law, ``acoustics.range_k`` > 0), ``nees`` and ``map_rms_drms_m`` (the
+    where the run has no finite bound), ``nees`` and ``map_rms_drms_m`` (the
     map's RMS 3-D DRMS along the path: the one-round fix's prediction)."""
     mc = resolved.sections["monte_carlo"]
     low, high = resolved.area.bounds()

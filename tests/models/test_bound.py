@@ -66,7 +66,7 @@ def case(seed=3, n=300, b=3):
     fixed = dict(dt=0.2, q_horizontal=np.array([0.01, 0.1, 0.002]), q_vertical=np.array([1e-3, 1e-2, 1e-4]),
                  p0_position=np.array([1.0, 2.0, 0.5]), p0_velocity=np.array([0.5, 0.2, 0.3]),
                  noise_variance=np.array([0.02, 0.5, 0.01]), attitude_variance=np.radians([1.0, 5.0, 0.5]) ** 2,
-                 depth_variance=np.array([1e-4, 1e-2, 1e-6]))
+                 depth_variance=np.array([1e-4, 1e-2, 1e-6]), sigma_range=0.0, range_k=0.0)  # no range law
     return truth, slot, received, beacons, arms, fixed
 
 
@@ -74,8 +74,13 @@ def range_variance(position, beacon, arm, noise, attitude):
     return noise + fd_attitude_variance(position, beacon, arm, attitude)
 
 
-def test_pcrb_equals_a_kalman_filter_covariance_and_tichavsky_information_recursion():
+@pytest.mark.parametrize("law", [None, (0.1, 0.01)], ids=["constant", "range-law"])
+def test_pcrb_equals_a_kalman_filter_covariance_and_tichavsky_information_recursion(law):
+    """With the range law (σ₀ 0.1 m, k 0.01), each range's variance in the filter is the noise variance with σ₀²
+    replaced by (σ₀ + k d)², d the true range (numpy)."""
     truth, slot, received, beacons, arms, fixed = case()
+    if law is not None:
+        fixed = {**fixed, "sigma_range": law[0], "range_k": law[1]}
     n, b = slot.shape
     bound = pcrb(*pcrb_inputs(truth, slot, received, beacons, arms, **fixed))
     assert slot.sum() > 300 and (slot & ~received).sum() > 50  # depth-only slots and range slots
@@ -97,8 +102,11 @@ def test_pcrb_equals_a_kalman_filter_covariance_and_tichavsky_information_recurs
                 info += H.T @ H / f["depth_variance"]
                 if received[k, r]:
                     H = fd_range_row(truth[k, r], beacons[k, r])
-                    var = range_variance(truth[k, r], beacons[k, r], arms[k, r], f["noise_variance"],
-                                         f["attitude_variance"])
+                    noise = f["noise_variance"]
+                    if law is not None:
+                        d = np.linalg.norm(truth[k, r] - beacons[k, r])
+                        noise = noise - law[0] ** 2 + (law[0] + law[1] * d) ** 2
+                    var = range_variance(truth[k, r], beacons[k, r], arms[k, r], noise, f["attitude_variance"])
                     kf.update(np.zeros((1, 1)), R=var, H=H)
                     info += H.T @ H / var
             J = Qi + info - D12.T @ np.linalg.solve(J + D11, D12)
@@ -244,7 +252,7 @@ def test_the_compiled_bound_with_error_states_is_the_reference_one():
     truth, slot, received, beacons, arms, fixed = case(seed=8, n=200)
     b = slot.shape[1]
     errors = dict(gps_sigma=1.0, gps_tau=60.0, clock_drift_sigma=5e-6, attitude_sigma=np.radians(1.0), clock=1500.0,
-                  ping_jitter=0.02)
+                  ping_jitter=0.02, sigma_range=0.1, range_k=0.005)  # with the range law
     new_ping = np.random.default_rng(9).random(slot.shape) < 0.3
     columns = np.stack([np.broadcast_to({**fixed, **errors}[k], (b,)) for k in ERROR_FIXED], axis=1)
     steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None], new_ping[..., None]], axis=-1)
@@ -302,7 +310,7 @@ def usbl_case(seed=4, n=200, b=3):
                  angle_sigma_deg=np.array([0.5, 1.0, 0.2]),
                  attitude_variance=np.radians([1.0, 0.0, 0.5]) ** 2, depth_variance=np.array([1e-4, 1e-2, 1e-6]),
                  gps_sigma=np.array([0.0, 0.0, 0.5]), gps_tau=np.array([0.0, 0.0, 30.0]),
-                 attitude_sigma=np.radians([0.0, 0.0, 1.0]))
+                 attitude_sigma=np.radians([0.0, 0.0, 1.0]), sigma_range=0.0, range_k=0.0)  # no range law
     return truth, slot, received, transceivers, attitudes, fixed
 
 
@@ -362,6 +370,7 @@ def test_the_compiled_usbl_bound_is_the_reference_one():
     from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
 
     truth, slot, received, transceivers, attitudes, fixed = usbl_case(seed=11)
+    fixed = {**fixed, "sigma_range": np.array([0.1, 0.2, 0.05]), "range_k": np.array([0.0, 0.01, 0.002])}
     fixed, steps = usbl_pcrb_inputs(truth, slot, received, transceivers, attitudes, **fixed)
     reference = usbl_pcrb(fixed, steps)
     np.testing.assert_allclose(native.system_pcrb(1, fixed, steps), reference, rtol=1e-12, atol=0)

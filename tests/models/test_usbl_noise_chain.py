@@ -123,7 +123,7 @@ def one_packet_bound(position, transceiver, attitude, fixed):
     prior = np.diag([PRIOR] * 6 + [0.0] * (n - 6)).reshape(-1)
     B = np.array(step(prior, 1e-12, 0.0, 0.0, position, transceiver, attitude, fixed["range_variance"],
                       fixed["position_variance"], fixed["angle_sigma_deg"], fixed["attitude_variance"],
-                      fixed["depth_variance"], 0.0, 0.0, 0.0, 1.0, 1.0)).reshape(n, n, order="F")
+                      fixed["depth_variance"], 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)).reshape(n, n, order="F")
     return np.linalg.inv(B[np.ix_([0, 2, 4], [0, 2, 4])]) - np.eye(3) / PRIOR
 
 

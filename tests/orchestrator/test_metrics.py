@@ -201,7 +201,8 @@ def test_the_compiled_pass_equals_the_numpy_metrics_and_the_casadi_bound():
     arms = rng.normal(0.0, 1.5, (b, 4, 3))
     fixed = np.column_stack([np.full(b, 0.1), rng.uniform(0.01, 0.1, b), rng.uniform(0.001, 0.01, b),
                              rng.uniform(1.0, 10.0, b), rng.uniform(0.5, 2.0, b), rng.uniform(0.01, 0.1, b),
-                             rng.uniform(1e-5, 1e-3, b), rng.uniform(1e-4, 1e-2, b)])
+                             rng.uniform(1e-5, 1e-3, b), rng.uniform(1e-4, 1e-2, b),
+                             rng.uniform(0.05, 0.3, b), rng.uniform(0.0, 0.01, b)])  # the range law's σ₀ and k
 
     got, bound = run_metrics(col, fixed, arms, with_bound=True)
 
@@ -261,7 +262,8 @@ def test_the_compiled_pass_takes_the_later_lanes_of_a_delivery_as_slots_of_the_b
     arms = rng.normal(0.0, 1.5, (b, 4, 3))
     fixed = np.column_stack([np.full(b, 0.1), rng.uniform(0.01, 0.1, b), rng.uniform(0.001, 0.01, b),
                              rng.uniform(1.0, 10.0, b), rng.uniform(0.5, 2.0, b), rng.uniform(0.01, 0.1, b),
-                             rng.uniform(1e-5, 1e-3, b), rng.uniform(1e-4, 1e-2, b)])
+                             rng.uniform(1e-5, 1e-3, b), rng.uniform(1e-4, 1e-2, b),
+                             rng.uniform(0.05, 0.3, b), rng.uniform(0.0, 0.01, b)])  # the range law's σ₀ and k
 
     got, bound = run_metrics({**col, **lanes}, fixed, arms, with_bound=True)
     alone, alone_bound = run_metrics(col, fixed, arms, with_bound=True)
@@ -278,7 +280,8 @@ def test_the_compiled_pass_takes_the_later_lanes_of_a_delivery_as_slots_of_the_b
             received = float(slot and valid > 0.5 and 1 <= beacon_id <= 4)
             arm = arms[r, int(np.clip(beacon_id, 1, 4)) - 1]
             return step(B, dt, f["q_horizontal"][r], f["q_vertical"][r], truth[k, r], beacon, arm,
-                        f["noise_variance"][r], f["attitude_variance"][r], f["depth_variance"][r], slot, received)
+                        f["noise_variance"][r], f["attitude_variance"][r], f["depth_variance"][r], slot, received,
+                        f["sigma_range"][r], f["range_k"][r])
 
         for k in range(n):
             slot = float(seq[k, r] != last)
