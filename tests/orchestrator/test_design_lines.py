@@ -10,28 +10,18 @@ import pytest
 import sblsim
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design.problem import check_problem
+from tests.helpers import problem_with
+from tests.orchestrator.test_design_telemetry import L_LAKE
+from tests.orchestrator.test_design_telemetry import SMALL as TELEMETRY_SMALL
 
-#: The small L-shaped lake of tests/orchestrator/test_design_telemetry.py (its North-East quarter is land).
-L_LAKE = "0 0; 0 300; 150 300; 150 150; 300 150; 300 0"
 #: Three mooring lines: along the West arm, across the corner, down the South arm (a bend in the second).
 LINES = "20 20; 20 280 | 130 280; 130 130; 280 130 | 280 20; 60 20"
-SMALL = {
-    "design": {"name": "pond"},
-    "site.area": {"polygon": L_LAKE, "lines": LINES},
-    "detection": {"range_50_m": 350.0, "slope": 0.02, "sync_p": 0.5, "sigma_toa_s": 1e-4, "sound_speed": 1480.0},
-    "work_area": {"shape": "site", "points": 8},
-    "prescription": {"drms_m": 2.0, "coverage_pct": 90.0, "positioning_yield_pct": 80.0},
-    "candidates": {"systems": ["ilbl"], "receivers": [4, 7]},
-    "search": {"generations": 6, "seed": 3},
-    "monte_carlo": {"replicates": 10, "path": False},
-}
+#: The small L-shaped lake of tests/orchestrator/test_design_telemetry.py (its North-East quarter is land) with them.
+SMALL = problem_with(TELEMETRY_SMALL, **{"site.area": {"polygon": L_LAKE, "lines": LINES}})
 
 
 def _problem(**changes):
-    problem = {k: dict(v) for k, v in SMALL.items()}
-    for section, values in changes.items():
-        problem.setdefault(section, {}).update(values)
-    return problem
+    return problem_with(SMALL, **changes)
 
 
 def _vertices(text: str) -> np.ndarray:

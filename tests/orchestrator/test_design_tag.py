@@ -16,28 +16,15 @@ import sblsim
 from sblsim.models.acoustics import sonar
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design.problem import check_problem, read_problem
+from tests.helpers import problem_with
+from tests.orchestrator.test_design_telemetry import SMALL  # the small L-shaped lake, a logistic curve
 
-#: The small L-shaped lake of tests/orchestrator/test_design_telemetry.py, a logistic detection curve.
-L_LAKE = "0 0; 0 300; 150 300; 150 150; 300 150; 300 0"
-SMALL = {
-    "design": {"name": "pond"},
-    "site.area": {"polygon": L_LAKE},
-    "detection": {"range_50_m": 350.0, "slope": 0.02, "sync_p": 0.5, "sigma_toa_s": 1e-4, "sound_speed": 1480.0},
-    "work_area": {"shape": "site", "points": 8},
-    "prescription": {"drms_m": 2.0, "coverage_pct": 90.0, "positioning_yield_pct": 80.0},
-    "candidates": {"systems": ["ilbl"], "receivers": [4, 7]},
-    "search": {"generations": 6, "seed": 3},
-    "monte_carlo": {"replicates": 10, "path": False},
-}
 #: A pseudo-random tag's intervals [s] (a maker's table: not a uniform draw, repeated in turn).
 SEQUENCE = [31.7, 22.4, 38.9, 27.0, 35.3, 20.8, 29.6, 24.1]
 
 
 def _problem(**changes):
-    problem = {k: dict(v) for k, v in SMALL.items()}
-    for section, values in changes.items():
-        problem.setdefault(section, {}).update(values)
-    return problem
+    return problem_with(SMALL, **changes)
 
 
 def _toml(problem: dict) -> str:
