@@ -18,10 +18,9 @@ distances and shares. Two forms here:
   Sound*, 3rd ed., McGraw-Hill 1983, ch. 2 and §12.1–12.3), α of Francois & Garrison (1982) and NL of the Wenz
   curves (:mod:`sblsim.models.acoustics.sonar`), tabulated once on :data:`SNR_TABLE_ROWS` distances and then a
   table as above. Range testing's practice (Kessel et al. 2014 above) is to measure the curve at the site, the
-  sonar equation being the prediction a study makes before it. Fish tags' source levels as measured: 146–149 dB
-  re 1 µPa at 1 m for five 69 kHz coded tags of one maker, 129–137 dB for five of another (Bowles, Denes, Shane,
-  "Acoustic characteristics of ultrasonic coded transmitters for fishery applications: could marine mammals hear
-  them?", J. Acoust. Soc. Am. 128(5):3223–3231, 2010, doi:10.1121/1.3493438).
+  sonar equation being the prediction a study makes before it. Coded fish tags' source levels as measured:
+  Bowles, Denes, Shane, "Acoustic characteristics of ultrasonic coded transmitters for fishery applications:
+  could marine mammals hear them?", J. Acoust. Soc. Am. 128(5):3223–3231, 2010.
 
 The keys a design names them by are ``detection.range_50_m``, ``detection.slope`` and ``detection.table``
 (:meth:`DetectionCurve.from_mapping`); a curve per receiver (``detection.per_receiver``: the receivers in place,
