@@ -40,7 +40,7 @@ import numpy as np
 FIX_GATE = 18.42
 #: A track within this distance of a trusted fix agrees with it, whatever their covariances [m].
 FIX_SLACK = 5.0
-#: The largest DRMS of a trusted single-ping fix [m].
+#: The largest DRMS of a trusted single-ping fix, and of an estimate marked ``ok`` (its own covariance's) [m].
 TRUSTED_FIX_DRMS = 10.0
 #: The fastest a tracked tag moves [m/s] (a towed pinger, a fish's burst; a limit, not a typical speed).
 MAX_SPEED = 10.0
