@@ -228,6 +228,13 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
                                           "distance; lbl, sbl, usbl: the design scenario's acoustics.range_k, "
                                           "sigma = sigma_range + range_k * range",
              min=0.0, max=0.1),
+        _key("multipath_pct", "Real", 0.0, "%", "an ilbl design's confirmation: the share of heard arrivals that are "
+                                                "a reflection, late by an exponential excess path (the channel's "
+                                                "acoustics.outlier_pct; the prediction leaves it out)",
+             min=0.0, max=100.0),
+        _key("multipath_excess_m", "Real", 2.0, "m", "an ilbl design's confirmation: a reflection's mean excess path "
+                                                     "(exponential; the channel's acoustics.outlier_excess)",
+             min=0.0, max=1e4, min_exclusive=True),
         _key("depth_sigma_m", "Real", 0.3, "m", "an ilbl design in 3-D: the tag's depth sensor's standard deviation "
                                                 "(work_area.depth_sensor)", min=0.0, max=1000.0, min_exclusive=True),
         _key("per_receiver", "String", "", "", "an ilbl design: receivers in place with their own range test's "
@@ -292,6 +299,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
 #: The sections of a design problem.
 SECTIONS = tuple(DESIGN_KEYS)
 #: The keys of ``[detection]`` that only the site's SNR model reads (``tag.source_level_db``).
+#: The keys of ``[detection]`` of an ilbl design's multipath (its confirmation's late arrivals).
+MULTIPATH_KEYS = ("multipath_pct", "multipath_excess_m")
 SNR_KEYS = ("frequency_hz", "bandwidth_hz", "beaufort", "shipping", "threshold_db", "fluctuation_db",
             "directivity_db", "temperature_c", "salinity")
 
@@ -654,8 +663,8 @@ def _check_noise_and_depth(problem: dict[str, dict[str, Any]], telemetry: bool) 
 
 
 def _refuse_tag(problem: dict[str, dict[str, Any]], systems: str) -> None:
-    """The tag's keys (``[tag]``) and the site's SNR model (:data:`SNR_KEYS`) changed for other systems than an
-    ilbl design: refused in one line naming the first."""
+    """The tag's keys (``[tag]``), the site's SNR model (:data:`SNR_KEYS`) and the confirmation's multipath
+    (:data:`MULTIPATH_KEYS`) changed for other systems than an ilbl design: refused in one line naming the first."""
     start = defaults()
     for section, names in (("tag", [k.name for k in DESIGN_KEYS["tag"]]), ("detection", SNR_KEYS)):
         for name in names:
@@ -663,6 +672,12 @@ def _refuse_tag(problem: dict[str, dict[str, Any]], systems: str) -> None:
                 raise ConfigError(f"{section}.{name}: {shown(problem[section][name])} for {systems}; a tag's ping "
                                   f"type, burst interval, power class and the site's SNR model apply to an "
                                   f"{TELEMETRY} design only; allowed {shown(start[section][name])}")
+    for name in MULTIPATH_KEYS:
+        if problem["detection"][name] != start["detection"][name]:
+            raise ConfigError(f"detection.{name}: {shown(problem['detection'][name])} for {systems}; the "
+                              f"confirmation's multipath applies to an {TELEMETRY} design only (the others' channel "
+                              f"has its own: design.set acoustics.outlier_pct, outlier_excess); allowed "
+                              f"{shown(start['detection'][name])}")
 
 
 def _check_tag(problem: dict[str, dict[str, Any]]) -> None:
@@ -897,7 +912,7 @@ def work_area_points(area: Area, count: int, depths: list[float]) -> np.ndarray:
     return np.vstack([np.column_stack([plane, np.full(len(plane), d)]) for d in depths])
 
 
-__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "SECTIONS", "SNR_KEYS",
-           "SYSTEM_CHOICES", "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve",
+__all__ = ["Area", "BUILTIN_DESIGNS", "DESIGN_KEYS", "GRADES", "Key", "MAX_RECEIVERS", "MULTIPATH_KEYS", "SECTIONS",
+           "SNR_KEYS", "SYSTEM_CHOICES", "SYSTEM_NAMES", "TELEMETRY", "check_problem", "defaults", "detection_curve",
            "existing_devices", "is_telemetry", "is_three_d", "polygon", "read_problem", "receiver_curves",
            "signed_distance", "site_curve", "work_area_points"]

@@ -7,7 +7,9 @@ its emission time unknown (:func:`fixes`): the simulated yield and DRMS beside t
 with ``monte_carlo.path``, the same along an animal's correlated random walk through the work area
 (:func:`path_check`), whose pings are also tracked as a recorded tag's are, against the tracker's smoothing bound
 (:func:`~sblsim.orchestrator.design.telemetry_tracking.track_path`), and through clocks synchronised from the sync
-tags (:func:`~sblsim.orchestrator.design.telemetry_tracking.track_synchronised`).
+tags (:func:`~sblsim.orchestrator.design.telemetry_tracking.track_synchronised`). With ``detection.multipath_pct``
+a share of the heard arrivals is late by a reflection's excess path (:func:`multipath_delays`), which the prediction
+leaves out: the rows show what it costs.
 """
 
 from __future__ import annotations
@@ -37,6 +39,9 @@ WALK_SPEED, WALK_TURN, PATH_PREDICTED = 0.3, 0.5, 200
 YIELD_TOLERANCE_PP = 5.0
 #: In 3-D, the walk's tag swims between the work area's shallowest and deepest depths as a sine of this period [s].
 DEPTH_PERIOD = 3600.0
+#: The stream of the multipath's draws (beside the design's seed and the receiver count), so that no other draw of
+#: the confirmation moves with ``detection.multipath_pct``: the same pings, walk and detections, only some late.
+MULTIPATH_STREAM = 0x3A7B
 #: In 3-D a simulated ping's fix more than this above the surface [m] is discarded (a fish is below it; the margin
 #: keeps a shallow tag's fixes whose depth errs upward).
 SURFACE_MARGIN = 1.0
@@ -175,15 +180,62 @@ def _errors(problem: TelemetryProblem, estimates: np.ndarray, truth: np.ndarray)
     return (estimates - truth)[np.isfinite(estimates).all(axis=1)][:, :axes]
 
 
-def _heard(problem: TelemetryProblem, toa: np.ndarray, d: np.ndarray, q: np.ndarray, rng: np.random.Generator
-           ) -> tuple[np.ndarray, np.ndarray]:
+def multipath_delays(shape: tuple[int, ...], pct: float, excess_m: float, sound_speed: float,
+                     rng: np.random.Generator) -> np.ndarray:
+    """Each arrival's lateness [s] by multipath: with probability ``pct`` / 100 a reflection, late by an excess path
+    drawn from an exponential of mean ``excess_m`` over the sound speed, else 0. The channel's multipath
+    (:mod:`sblsim.models.acoustics.core`, ``acoustics.outlier_pct`` and ``outlier_excess``, the fixed channel of
+    Cario, Casavola, Gagliardi, Lupia, Severino, Sensors 21(3):762, 2021), drawn with one uniform u per arrival:
+    a reflection where u < p, its excess ``−excess_m log(1 − u / p)`` (u / p is uniform given u < p). Nothing is
+    drawn where ``pct`` is 0.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The arrivals' shape, (K, n).
+    pct : float
+        [%] the share of reflections, 0 to 100.
+    excess_m : float
+        [m] a reflection's mean excess path, > 0.
+    sound_speed : float
+        [m/s].
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, shape ``shape``
+        [s], ≥ 0.
+
+    Raises
+    ------
+    ValueError
+        ``pct`` outside 0–100 or ``excess_m`` not positive.
+    """
+    if not 0.0 <= pct <= 100.0 or not excess_m > 0.0:
+        raise ValueError(f"multipath_delays: pct {pct} (allowed 0 to 100), excess_m {excess_m} (allowed > 0)")
+    if pct == 0.0:
+        return np.zeros(shape)
+    p = pct / 100.0
+    u = rng.random(shape)
+    late = u < p
+    return np.where(late, -excess_m * np.log1p(-np.where(late, u, 0.0) / p), 0.0) / sound_speed
+
+
+def _heard(problem: TelemetryProblem, toa: np.ndarray, d: np.ndarray, q: np.ndarray, rng: np.random.Generator,
+           late: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Simulated times of arrival (K, n) [s] as the receivers hear them: the range-dependent law's noise added
     (``detection.range_k``), then each arrival kept with the curve's probability ``q`` at its distance ``d`` (both
-    broadcastable to (K, n)), NaN where not heard; and each arrival's σ [m] (``d``'s shape)."""
+    broadcastable to (K, n)), NaN where not heard, then each heard arrival made late by multipath
+    (:func:`multipath_delays`, ``detection.multipath_pct`` and ``multipath_excess_m``, drawn from ``late``, else
+    from ``rng`` after the others; nothing drawn at 0 %); and each arrival's σ [m] (``d``'s shape)."""
+    detection = problem.sections["detection"]
     sigma = tm.range_sigma(d, problem.sigma_m, problem.sigma_per_m)
-    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, problem.sections["detection"]["sound_speed"],
-                         rng)
+    toa = tm.range_noise(toa, d, problem.sigma_m, problem.sigma_per_m, detection["sound_speed"], rng)
     toa[rng.random(toa.shape) >= q] = np.nan  # the curve, receiver by receiver
+    pct = detection.get("multipath_pct", 0.0)
+    if pct > 0.0:  # the prediction (the Fisher information) leaves it out: the Monte Carlo shows what it costs
+        toa = toa + multipath_delays(toa.shape, pct, detection["multipath_excess_m"], detection["sound_speed"],
+                                     rng if late is None else late)
     return toa, sigma
 
 
@@ -209,9 +261,10 @@ def _simulated_fixes(problem: TelemetryProblem, design: TelemetryDesign, toa: np
 
 
 def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str, index: int,
-                 rng: np.random.Generator) -> dict:
+                 rng: np.random.Generator, late: np.random.Generator | None = None) -> dict:
     """A tag at one point, pinging: its simulated yield and DRMS beside the predicted (module docstring, step 4);
-    in 3-D at the point's depth, fixed in 3-D (with the depth sensor's readings where it has one)."""
+    in 3-D at the point's depth, fixed in 3-D (with the depth sensor's readings where it has one); with
+    ``detection.multipath_pct``, some arrivals late (drawn from ``late``: :func:`_heard`)."""
     mc = problem.sections["monte_carlo"]
     point = problem.points[index]
     pings = mc["replicates"] * PINGS_PER_REPLICATE
@@ -219,7 +272,7 @@ def static_check(design: TelemetryDesign, problem: TelemetryProblem, where: str,
                                                 path=lambda t: np.repeat(point[None], len(t), axis=0))
     d = np.linalg.norm(design.receivers - point, axis=1)
     q = problem.curve.probability(d)
-    toa, sigma = _heard(problem, toa, d, q, rng)
+    toa, sigma = _heard(problem, toa, d, q, rng, late)
     heard = np.isfinite(toa)
     own = tm.fix_drms(point[None], design.receivers, sigma[None], heard[:, None, :], problem.depth_sigma,
                       problem.horizontal)[:, 0]
@@ -295,12 +348,15 @@ def walk(problem: TelemetryProblem, times: np.ndarray, rng: np.random.Generator,
     return out
 
 
-def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Generator) -> dict:
+def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.random.Generator,
+               late: np.random.Generator | None = None) -> dict:
     """A tagged animal on a correlated random walk (:func:`walk`) through the work area, pinging as in
     :func:`static_check`: the simulated yield, share fixed and DRMS over the path beside the predicted at the
     path's positions (the RMS over the fixes that count of each ping position's predicted DRMS, weighted by its
     probability of a fix; :data:`PATH_PREDICTED` positions of the path, evenly spaced). In 3-D the walk's depth is
-    :func:`walk_depth`'s, its pings fixed and tracked in 3-D (with the depth sensor's readings where it has one)."""
+    :func:`walk_depth`'s, its pings fixed and tracked in 3-D (with the depth sensor's readings where it has one).
+    With ``detection.multipath_pct`` some arrivals are late (drawn from ``late``: :func:`_heard`), for the fixes, the
+    tracking and the tracking through synchronised clocks alike (the sync tags' own arrivals are not)."""
     mc, detection, tag = problem.sections["monte_carlo"], problem.sections["detection"], problem.tag
     pings = mc["replicates"] * PINGS_PER_REPLICATE
     walked = np.random.default_rng(rng.integers(2**63))
@@ -312,7 +368,7 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     toa, positions, emissions = simulated_pings(problem, design.receivers, pings, rng, path=path)
     d = np.linalg.norm(positions[:, None] - design.receivers[None], axis=-1)
     q = problem.curve.probability(d)
-    toa, sigma = _heard(problem, toa, d, q, rng)
+    toa, sigma = _heard(problem, toa, d, q, rng, late)
     heard = np.isfinite(toa)
     own = tm.fix_drms(positions, design.receivers, sigma, heard, problem.depth_sigma, problem.horizontal)
     enough, counted = _counted(problem, heard, own)
@@ -350,13 +406,15 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
 
 def confirm(design: TelemetryDesign, problem: TelemetryProblem) -> None:
     """A proposed design's Monte Carlo rows (:func:`static_check` at :func:`checked_points`) and, with
-    ``monte_carlo.path``, its path's row (:func:`path_check`)."""
+    ``monte_carlo.path``, its path's row (:func:`path_check`); the multipath drawn from a stream of its own
+    (:data:`MULTIPATH_STREAM`)."""
     rng = np.random.default_rng([problem.sections["search"]["seed"], design.count, 1])
-    design.monte_carlo = [static_check(design, problem, where, index, rng)
+    late = np.random.default_rng([problem.sections["search"]["seed"], design.count, MULTIPATH_STREAM])
+    design.monte_carlo = [static_check(design, problem, where, index, rng, late)
                           for where, index in checked_points(design, problem)]
     if problem.sections["monte_carlo"]["path"]:
-        design.path = [path_check(design, problem, rng)]
+        design.path = [path_check(design, problem, rng, late)]
 
-__all__ = ["DEPTH_PERIOD", "PATH_PREDICTED", "SURFACE_MARGIN", "WALK_SPEED", "WALK_TURN",
-           "YIELD_TOLERANCE_PP", "checked_points", "confirm", "fixes", "path_check", "simulated_pings", "static_check",
-           "walk", "walk_depth"]
+__all__ = ["DEPTH_PERIOD", "MULTIPATH_STREAM", "PATH_PREDICTED", "SURFACE_MARGIN", "WALK_SPEED", "WALK_TURN",
+           "YIELD_TOLERANCE_PP", "checked_points", "confirm", "fixes", "multipath_delays", "path_check",
+           "simulated_pings", "static_check", "walk", "walk_depth"]

@@ -3,7 +3,8 @@
 
 ``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``,
 and ``tag`` (the tag simulated: ``ping_type``, ``burst_interval_s``, a ``pbi`` tag's ``burst_sequence_intervals``,
-``source_level_db`` where given, and the ``detection_curve`` in one line);
+``source_level_db`` where given, the ``detection_curve`` in one line, and the confirmation's multipath,
+``multipath_pct`` and ``multipath_excess_m``: ``detection``'s, not in the prediction);
 each design its ``name``, ``system`` (``ilbl``), ``label``, ``cost``, ``meets``, ``fails`` (``part`` one of
 ``receivers``, ``coverage``, ``drms``, ``positioning_yield``, ``sync_coverage``), ``scenario`` (None: a telemetry
 design has no scenario file), ``receivers_m`` (North, East [m], in 3-D and depth; ``existing`` marks those in place,
@@ -109,6 +110,10 @@ def summary(run: TelemetryRun) -> str:
     found = (f"{best.label} (cost {best.cost:g}), covering {best.coverage:.1f} % (DRMS p{p['coverage_pct']:g} "
              f"{'no fix' if at is None else f'{at:.3g} m'}, yield {100 * pred['positioning_yield']:.1f} %, sync "
              f"{100 * pred['sync_coverage']:.0f} %)")
+    detection = run.resolved.sections["detection"]
+    if best.monte_carlo and detection["multipath_pct"] > 0.0:
+        found += (f"; with {detection['multipath_pct']:g} % of the arrivals late by multipath (mean excess "
+                  f"{detection['multipath_excess_m']:g} m; not in the prediction)")
     if best.monte_carlo:
         found += "; simulated / predicted DRMS " + ", ".join(
             f"{m['ratio']:.2f} at the {m['point']} point (yield {100 * m['simulated_yield']:.1f} % against "
@@ -146,7 +151,10 @@ def table(run: TelemetryRun) -> pd.DataFrame:
 def document(run: TelemetryRun, seconds: float | None = None, effort: Any = None) -> dict[str, Any]:
     """``design.json`` as a mapping (module docstring)."""
     problem = json.loads(json.dumps(run.resolved.sections, default=str))
-    tag = run.resolved.tag.record() | {"detection_curve": run.resolved.curve.describe()}
+    detection = run.resolved.sections["detection"]
+    tag = run.resolved.tag.record() | {"detection_curve": run.resolved.curve.describe(),
+                                       "multipath_pct": detection["multipath_pct"],
+                                       "multipath_excess_m": detection["multipath_excess_m"]}
     out = {"problem": problem, "tag": tag, "summary": summary(run), "meets": run.best.meets,
            "designs": [design_record(d, run) for d in run.proposed],
            "search": {"candidates": len(run.searched), "layouts": sum(d.evaluations for d in run.searched),
