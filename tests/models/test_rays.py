@@ -465,9 +465,11 @@ def test_against_bellhop(name):
         assert ducted >= 5, ducted
 
 
-@pytest.mark.parametrize("name, family, offset, check", [("strong", 0, 2e-6, "separatrix"),
-                                                         ("munk", 0, 12e-6, "Bellhop's times"),
-                                                         ("munk", 1, 25e-6, "Bellhop's times")])
+@pytest.mark.parametrize("name, family, offset, check", [
+    ("strong", 0, 2e-6, "separatrix"),
+    # the deep Munk profile's eigenrays take about 20 s: with the comparison they guard (slow, above)
+    pytest.param("munk", 0, 12e-6, "Bellhop's times", marks=pytest.mark.slow),
+    pytest.param("munk", 1, 25e-6, "Bellhop's times", marks=pytest.mark.slow)])
 def test_against_bellhop_can_fail(name, family, offset, check):
     """The comparison fails for eigenray times off by a little more than its tolerances: 2 µs near a separatrix
     (solve_ivp), 12 µs direct and 25 µs reflected elsewhere (Bellhop)."""
