@@ -11,7 +11,7 @@ import sblsim
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design.problem import check_problem
 from tests.helpers import problem_with
-from tests.orchestrator.test_design_telemetry import L_LAKE
+from tests.orchestrator.test_design_telemetry import L_LAKE, _inside  # even-odd ray casting
 from tests.orchestrator.test_design_telemetry import SMALL as TELEMETRY_SMALL
 
 #: Three mooring lines: along the West arm, across the corner, down the South arm (a bend in the second).
@@ -37,15 +37,6 @@ def _line_distance(points: np.ndarray) -> np.ndarray:
             t = np.clip((points - a) @ (b - a) / np.dot(b - a, b - a), 0.0, 1.0)
             best = np.minimum(best, np.linalg.norm(points - (a + t[:, None] * (b - a)), axis=1))
     return best
-
-
-def _inside(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Even-odd ray casting, independent of the project's polygon code."""
-    x, y = points[:, 0][:, None], points[:, 1][:, None]
-    a, b = vertices, np.roll(vertices, -1, axis=0)
-    crosses = ((a[:, 1] > y) != (b[:, 1] > y)) & (
-        x < a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / np.where(b[:, 1] == a[:, 1], 1.0, b[:, 1] - a[:, 1]))
-    return crosses.sum(axis=1) % 2 == 1
 
 
 def test_the_places_are_points_along_the_lines_in_the_water():

@@ -12,6 +12,7 @@ import pytest
 
 import sblsim
 from sblsim.models.errors import ConfigError
+from tests.helpers import problem_with
 
 #: A small lake: an L of 300 m × 300 m without its North-East quarter (concave), a logistic detection curve.
 L_LAKE = "0 0; 0 300; 150 300; 150 150; 300 150; 300 0"
@@ -28,10 +29,7 @@ SMALL = {
 
 
 def _problem(**changes):
-    problem = {k: dict(v) for k, v in SMALL.items()}
-    for section, values in changes.items():
-        problem.setdefault(section, {}).update(values)
-    return problem
+    return problem_with(SMALL, **changes)
 
 
 def _inside(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
