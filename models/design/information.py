@@ -14,7 +14,7 @@ range (its noise, the broadcast position's error and the attitude error through 
 a range received with probability q_i (the information reduction factor of Niu, Willett and Bar-Shalom, IEEE
 Trans. Signal Processing 49(7), 2001). A transducer that is never heard (a shadow zone, beyond detection)
 contributes nothing. With the range law (``acoustics.range_k`` k > 0) the range's own noise is
-``σ₀ + k ‖p − b_i‖`` per point (:func:`law_noise_variance`, given to the function as a variance per point and
+``σ₀ + k ‖p − b_i‖`` per point (:func:`law_range_variance`, given to the function as a variance per point and
 transducer). With every q_i = 1 it is the map's information of one round of fresh ranges
 (:func:`sblsim.models.bound.fix_information`), the same numbers.
 
@@ -214,15 +214,6 @@ def law_range_variance(points: np.ndarray, transducers: np.ndarray, sigma_range:
     points, transducers = np.asarray(points, dtype=float), np.asarray(transducers, dtype=float)
     distance = np.linalg.norm(points[:, None, :] - transducers[..., None, :, :], axis=-1)
     return range_noise_sigma({"sigma_range": float(sigma_range), "range_k": float(range_k)}, distance) ** 2
-
-
-def law_noise_variance(points: np.ndarray, transducers: np.ndarray, noise_variance, sigma_range: float,
-                       range_k: float) -> np.ndarray:
-    """Each range's own variance at each point with the range law in place of the constant σ₀: ``noise_variance
-    − σ₀² + (σ₀ + k ‖p − b_i‖)²`` [m²] (``noise_variance`` = σ₀² plus the broadcast position's error, which stays
-    as it is; :func:`law_range_variance`), shape (..., M, n); for :func:`layout_values`' ``noise_variance``."""
-    return np.asarray(noise_variance, dtype=float) - float(sigma_range) ** 2 + law_range_variance(
-        points, transducers, sigma_range, range_k)
 
 
 def layout_horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, heard, noise_variance,

@@ -61,6 +61,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.errors import ModelError
 
 #: The condition number of J above which a fix's information counts as singular (no fix).
@@ -96,14 +97,9 @@ def range_sigma(distance_m, sigma0_m: float, per_m: float = 0.0) -> np.ndarray:
     """The standard deviation of a time of arrival in metres of travel, ``σ = σ₀ + k · range``.
 
     ``σ₀ = c σ_toa`` (the timing's, [m]); ``k`` [m/m] the growth with range the designer states (the timing error
-    grows as the signal weakens; a range test's residuals against distance give it), 0 for a constant σ.
-
-    The source of the law: the Cramér-Rao bound of a time delay's estimate is proportional to ``1 / √SNR`` (Quazi,
-    "An overview on the time delay estimate in active and passive systems for target localization", IEEE Trans.
-    Acoustics, Speech and Signal Processing 29(3):527–533, 1981), and with spherical spreading the SNR falls as
-    ``1 / d²``: the noise of an arrival that is not at its floor grows in proportion to the distance, as the
-    ranging accuracy that acoustic positioning equipment states as a share of the range (0.1 % of the range:
-    ``k = 0.001``); ``σ₀`` is the floor (the clock's, the detector's sampling).
+    grows as the signal weakens; a range test's residuals against distance give it), 0 for a constant σ. The law
+    and its source (Quazi, IEEE Trans. ASSP 29(3):527–533, 1981) are the channel's
+    (:func:`~sblsim.models.acoustics.range_law.range_noise_sigma`), checked here for a design's numbers.
 
     Parameters
     ----------
@@ -128,7 +124,7 @@ def range_sigma(distance_m, sigma0_m: float, per_m: float = 0.0) -> np.ndarray:
         raise ModelError(f"timing sigma: {sigma0_m!r} m; allowed (0, inf)")
     if not (np.isfinite(per_m) and per_m >= 0.0):
         raise ModelError(f"timing sigma per metre of range: {per_m!r}; allowed [0, inf)")
-    return sigma0_m + per_m * np.asarray(distance_m, float)
+    return range_noise_sigma({"sigma_range": sigma0_m, "range_k": per_m}, np.asarray(distance_m, float))
 
 
 def range_noise(toa: np.ndarray, distance_m, sigma0_m: float, per_m: float, sound_speed: float,

@@ -107,7 +107,7 @@ class Levels:
 
     def noise(self, points: np.ndarray, layouts: np.ndarray) -> tuple[np.ndarray | float, np.ndarray | float]:
         """Each range's variance with the position error folded in and its own part [m²], per layout, point and
-        transducer (S, M, n) with the range law (:func:`~sblsim.models.design.information.law_noise_variance`),
+        transducer (S, M, n) with the range law (:func:`~sblsim.models.design.information.law_range_variance`),
         else the constant :attr:`noise_variance` and :attr:`range_variance`."""
         if self.range_k == 0.0:
             return self.noise_variance, self.range_variance

@@ -304,10 +304,8 @@ def simulated_pings(problem: TelemetryProblem, receivers: np.ndarray, pings: int
         As :func:`~sblsim.models.tracking.simulate.simulate_pings`: (K, n) [s], (K, dim) [m], (K,) [s].
     """
     detection, tag = problem.sections["detection"], problem.tag
-    settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"])
-    if tag.ping_type == "sbi":
-        settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"],
-                                   interval=tag.burst_interval[0])
+    stable = {"interval": tag.burst_interval[0]} if tag.ping_type == "sbi" else {}
+    settings = TrackerSettings(sound_speed=detection["sound_speed"], sigma_toa=detection["sigma_toa_s"], **stable)
     return simulate_pings(receivers, pings, settings, rng, detection=1.0, ping_type=tag.ping_type,
                           burst_interval=tag.burst_interval, burst_sequence=tag.burst_sequence, **where)
 
