@@ -84,6 +84,15 @@ class TrackerSettings:
         robust smoother's covariances hold its effect as a consider covariance (the positions not estimated, their
         error propagated: Tapley, Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004, § 6.3); the
         causal filters leave it out.
+    delay_share : float
+        Probability that a time of arrival is late (multipath, a blocked direct path), in [0, 1): the robust
+        smoother's one-sided delay term (:mod:`~sblsim.models.tracking.arrival_model`); 0: the Student-t alone.
+    delay_mean : float
+        A late arrival's mean delay beyond the direct path [s] (> 0 where ``delay_share`` > 0).
+    delay_dof : float
+        ν of the direct arrivals' Student-t core where late arrivals are modelled (``delay_share`` > 0; else the
+        smoother's own ν, :data:`~sblsim.models.tracking.smoother_cost.ROBUST_DOF`): the late ones no longer in its
+        tail, an early residual is costly (a track that makes arrivals early to explain late ones is not a minimum).
     """
 
     sound_speed: float
@@ -103,6 +112,9 @@ class TrackerSettings:
     fix_speed: float = 2.0
     depth_sigma: float = 0.3
     survey_sigma: np.ndarray | None = None
+    delay_share: float = 0.0
+    delay_mean: float = 1e-3
+    delay_dof: float = 10.0
 
 
 @dataclass

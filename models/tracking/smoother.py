@@ -14,7 +14,7 @@ Gauss-Newton method", SIAM J. Optim. 4(3), 1994.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -26,11 +26,11 @@ from sblsim.models.tracking.smoother_cost import (
     ROBUST_DOF,
     _arrival_jacobians,
     _arrival_sums,
+    _information,
     _Problem,
     _robust_terms,
     _trial_cost,
     _trial_sums,
-    observed_information,
 )
 from sblsim.models.tracking.smoother_covariance import _block_covariance, _survey_covariance
 from sblsim.models.tracking.smoother_system import _damped_solve, _dense_blocks, _normal_blocks, _step_system
@@ -78,7 +78,8 @@ class RobustTrack:
         as in Gauss-Newton).
     weights : ndarray, (m, n)
         Each time of arrival's weight at the end, ``(ν + 1) / (ν + z²)`` (1 for an arrival as expected, near 0
-        for an outlier; 0 where not heard).
+        for an outlier; 0 where not heard); with late arrivals modelled the EM weight ``(1 − γ) w_t + γ`` (a late
+        arrival explained by its delay near 1).
     cost : float
         The cost at ``x`` (:func:`robust_smooth`) [1].
     iterations : int
@@ -130,6 +131,12 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     weights. The cost is not convex: each start given takes :data:`ROBUST_SCREEN` steps, and the one of the lowest
     cost then goes on to the end.
 
+    With the settings' ``delay_share`` > 0 an arrival may also be late by an exponential delay (multipath: the
+    mixture of :mod:`~sblsim.models.tracking.arrival_model`, its core's ν the settings' ``delay_dof``), each term
+    ``(ν + 1) ln(1 + z²/ν)`` then that mixture's ``−2 ln p(z)`` (the same constant off), its Gauss-Newton weights the
+    mixture's EM weights and its covariance the mixture's observed information; the Student-t's own minimum (this
+    smoother with ``delay_share`` 0 from the same starts) is then screened as one more start.
+
     Parameters
     ----------
     toa : ndarray, (m, n)
@@ -175,6 +182,12 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     if depth is not None and (dim != 3 or np.shape(depth) != (m,)):
         raise ModelError(f"depth_m: {np.shape(depth)} readings for {m} pings at receivers in {dim}-D; allowed: one "
                          "per ping, with the receivers' depths (z_m)")
+    given = len(starts)
+    if settings.delay_share > 0.0:  # the Student-t's minimum one more start (the mixture's cost is steep for early
+        # residuals: from a start far off, Gauss-Newton on it can stall where the Student-t's does not)
+        first = robust_smooth(toa, receivers, replace(settings, delay_share=0.0), starts, dof, iterations, False,
+                              schedule, depth)
+        starts = [*starts, first.x]
     problem = _Problem(toa, receivers, settings, schedule, depth)
     runs = []
     for start in starts:
@@ -250,11 +263,11 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         P, lag = _block_covariance(*_dense_blocks(problem, blocks))
         if settings.survey_sigma is not None:
             z, Jz = _arrival_jacobians(problem, X)
-            P += _survey_covariance(problem, *blocks(0, m), observed_information(z, dof), Jz,
+            P += _survey_covariance(problem, *blocks(0, m), _information(problem, z, dof), Jz,
                                     np.asarray(settings.survey_sigma, float))
     weights = np.zeros((m, n))
     weights[problem.k, problem.i] = w
-    return RobustTrack(X, P, weights, cost, best["done"], index, P_lag=lag)
+    return RobustTrack(X, P, weights, cost, best["done"], index if index < given else first.start, P_lag=lag)
 
 
 __all__ = ["ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT",

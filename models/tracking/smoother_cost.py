@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 
+from sblsim.models.tracking.arrival_model import ArrivalModel
 from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.schedule import PingSchedule
 
@@ -85,6 +86,7 @@ class _Problem:
         self._chunks = None
         self.heard = np.bincount(self.k, minlength=self.m)  # each ping's arrivals (:func:`_arrivals`' gathers)
         self.settings, self.count, self.offset = settings, schedule.count, schedule.offset
+        self._delay = None  # the arrival model with late arrivals (:meth:`delay`)
         T = schedule.steps(settings.interval)
         q = settings.acceleration_psd
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -100,6 +102,18 @@ class _Problem:
         a, b, c, n, tw, dw = self.a, self.b, self.c, self.count, self.te_w, self.dr_w
         self.A2, self.bc, self.cc, self.tw2, self.dw2 = a * a + b * b, b * c, c * c, tw**2, dw**2
         self.tw2n, self.delta = self.tw2 * n, (tw * n) ** 2 + self.dw2
+
+    def delay(self) -> ArrivalModel | None:
+        """The arrivals' error with the settings' late arrivals (``delay_share`` > 0; its core's ν the settings'
+        ``delay_dof``, in place of the ν the passes are given), else None (the Student-t alone: its own, faster,
+        operations)."""
+        settings = self.settings
+        if settings.delay_share <= 0.0:
+            return None
+        if self._delay is None:
+            self._delay = ArrivalModel(settings.delay_dof, settings.delay_share,
+                                       settings.delay_mean / settings.sigma_toa)
+        return self._delay
 
     def chunks(self) -> list[tuple]:
         """The chunks of pings in order, each ``(lo, hi, a0, a1, S)``: the pings ``lo:hi``, their arrivals
@@ -166,12 +180,17 @@ def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tu
     P = problem
     lo, hi, a0, a1, S = chunk
     J = [*J, -1.0 / P.settings.sigma_toa]  # the emission time's column of every Jacobian
-    z2 = z**2
-    robust = np.add(dof, z2, out=z2)  # (ν + 1) / (ν + z²)
-    np.divide(dof + 1.0, robust, out=robust)
+    model = P.delay()
+    if model is None:
+        z2 = z**2
+        robust = np.add(dof, z2, out=z2)  # (ν + 1) / (ν + z²)
+        np.divide(dof + 1.0, robust, out=robust)
+        gradient = None
+    else:  # the late arrivals' EM weight and half gradient (arrival_model)
+        _, robust, gradient = model.terms(z)
     if weights is not None:
         weights[a0:a1] = robust
-    w = observed_information(z, dof) if information else robust
+    w = _information(P, z, dof) if information else robust
     # each product a contiguous row, then the rows side by side (a, q) for the sparse sum (a column at a time into
     # an array of rows of q would be strided: nearly twice the time)
     rows = P.rows[:sums.shape[1], :a1 - a0]
@@ -183,7 +202,7 @@ def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tu
             np.multiply(wx, J[y], out=rows[row])
             row += 1
     if not information:
-        wz = np.multiply(w, z, out=wx)
+        wz = np.multiply(w, z, out=wx) if gradient is None else gradient
         for x in range(len(J)):
             np.multiply(wz, J[x], out=rows[row + x])
     values = P.values[:(a1 - a0) * sums.shape[1]].reshape(a1 - a0, sums.shape[1])
@@ -203,7 +222,12 @@ def _arrival_chunk(problem: _Problem, X: np.ndarray, dof: float, chunk: tuple, s
 
 
 def _cost_terms(problem: _Problem, z: np.ndarray, dof: float, a0: int, a1: int):
-    """The arrivals ``a0:a1``'s cost terms ``ln(1 + z² / ν)`` into the problem's buffer ``logs``."""
+    """The arrivals ``a0:a1``'s cost terms ``ln(1 + z² / ν)`` into the problem's buffer ``logs`` (with late
+    arrivals, :meth:`~sblsim.models.tracking.arrival_model.ArrivalModel.terms`' cost over ν + 1)."""
+    model = problem.delay()
+    if model is not None:
+        problem.logs[a0:a1] = model.terms(z)[0] / (dof + 1.0)
+        return
     z2 = np.square(z, out=problem.logs[a0:a1])
     z2 /= dof
     np.log1p(z2, out=z2)
@@ -316,6 +340,13 @@ def _arrival_jacobians(problem: _Problem, X: np.ndarray) -> tuple[np.ndarray, np
     pass, :func:`_arrivals`: for the survey's consider covariance)."""
     z, J = _arrivals(problem, X, 0, problem.m, 0, len(problem.k))
     return z, np.column_stack([*J, np.full(len(z), -1.0 / problem.settings.sigma_toa)])
+
+
+def _information(problem: _Problem, z: np.ndarray, dof: float) -> np.ndarray:
+    """The arrivals' observed information at their normalised residuals z (h,): the Student-t's
+    (:func:`observed_information`) or, with late arrivals, the mixture's."""
+    model = problem.delay()
+    return observed_information(z, dof) if model is None else model.information(z)
 
 
 def _depth_residual(problem: _Problem, X: np.ndarray, at: slice = slice(None)) -> np.ndarray:

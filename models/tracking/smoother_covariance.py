@@ -17,8 +17,8 @@ from sblsim.models.tracking.smoother_cost import (
     ROBUST_DOF,
     _arrival_jacobians,
     _arrival_sums,
+    _information,
     _Problem,
-    observed_information,
 )
 from sblsim.models.tracking.smoother_system import _banded_solve, _given_system, _normal_blocks
 
@@ -152,7 +152,7 @@ def _survey_share(problem: _Problem, X: np.ndarray, dof: float, survey: np.ndarr
     z, Jz = _arrival_jacobians(problem, X)
     sums = _arrival_sums(problem, X, dof, information=True)
     D, B = _normal_blocks(problem, X, sums, problem.count * X[:-1, -1] + problem.offset)
-    return _survey_covariance(problem, D, B, observed_information(z, dof), Jz, survey)
+    return _survey_covariance(problem, D, B, _information(problem, z, dof), Jz, survey)
 
 
 __all__ = ["REDUCTION_CHUNK", "survey_covariance"]

@@ -370,6 +370,9 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     heard = np.isfinite(toa)
     own = tm.fix_drms(positions, design.receivers, sigma, heard, problem.depth_sigma, problem.horizontal)
     enough, counted = _counted(problem, heard, own)
+    # the tracker models the late arrivals it is given (their share and mean delay, as drawn: multipath_delays)
+    multipath = (detection.get("multipath_pct", 0.0) / 100.0,
+                 detection.get("multipath_excess_m", 0.0) / detection["sound_speed"])
     errors, readings = _simulated_fixes(problem, design, toa, positions, sigma, counted, rng)
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     chosen = np.linspace(0, pings - 1, min(PATH_PREDICTED, pings)).astype(int)
@@ -391,14 +394,14 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
                              abs(simulated_yield - predicted_yield) <= YIELD_TOLERANCE_PP / 100.0)
            } | track_path(design.receivers, toa, positions, emissions, detection["sound_speed"],
                           detection["sigma_toa_s"], tag.burst_interval, readings, problem.depth_sigma or 0.3,
-                          ping_type=tag.ping_type, burst_sequence=tag.burst_sequence)
+                          ping_type=tag.ping_type, burst_sequence=tag.burst_sequence, multipath=multipath)
     if mc["sync_clocks"] and np.isfinite(toa).any():  # the same pings through clocks synchronised from sync tags
         clocks = np.random.default_rng([problem.sections["search"]["seed"], design.count, SYNC_STREAM])
         row |= track_synchronised(design.receivers, toa, positions, emissions,
                                   sync_hearing(design.receivers, problem.curve),
                                   detection["sound_speed"], detection["sigma_toa_s"], tag.burst_interval, clocks, row,
                                   readings, problem.depth_sigma or 0.3, ping_type=tag.ping_type,
-                                  burst_sequence=tag.burst_sequence)
+                                  burst_sequence=tag.burst_sequence, multipath=multipath)
     return row
 
 

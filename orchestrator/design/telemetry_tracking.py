@@ -43,7 +43,7 @@ SYNC_STREAM = 0x5C10C
 def track_path(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, emissions: np.ndarray,
                sound_speed: float, sigma_toa: float, burst_interval: tuple[float, float],
                depth: np.ndarray | None = None, depth_sigma: float = 0.3, ping_type: str = "rbi",
-               burst_sequence: np.ndarray | None = None) -> dict:
+               burst_sequence: np.ndarray | None = None, multipath: tuple[float, float] | None = None) -> dict:
     """Track a simulated tag's pings and score the track against its path (in 3-D: tracked in 3-D, scored
     horizontally).
 
@@ -73,6 +73,10 @@ def track_path(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, em
         ``rbi`` (default), ``sbi`` or ``pbi``, as ``--ping-type`` takes it.
     burst_sequence : ndarray, shape (k,), optional
         ``pbi``: the tag's intervals in order [s] (``--burst-sequence``).
+    multipath : tuple of float, optional
+        The simulated multipath, ``(share, mean delay)`` [1, s]: a share of the arrivals late by an exponential
+        delay of that mean, which the robust smoother then models (the tracker's ``delay_share``, ``delay_mean``:
+        :mod:`sblsim.models.tracking.arrival_model`); None or a share of 0: not modelled.
 
     Returns
     -------
@@ -107,6 +111,8 @@ def track_path(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, em
         settings = replace(tracker_settings(sound_speed, fe), sigma_toa=sigma_toa)
     if ping_type == "sbi":  # the tracker's nominal interval Δ
         settings = replace(settings, interval=float(burst_interval[0]))
+    if multipath is not None and multipath[0] > 0.0:
+        settings = replace(settings, delay_share=float(multipath[0]), delay_mean=float(multipath[1]))
     schedule, _ = ping_schedule(toa, receivers, settings, ping_type, burst_interval if ping_type == "rbi" else None,
                                 burst_sequence if ping_type == "pbi" else None)
     settings = replace(settings, interval=schedule.interval)
@@ -269,8 +275,8 @@ def synchronised_toa(receivers: np.ndarray, toa: np.ndarray, hears: np.ndarray, 
 def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.ndarray, emissions: np.ndarray,
                        hears: np.ndarray, sound_speed: float, sigma_toa: float, burst_interval: tuple[float, float],
                        rng: np.random.Generator, tracked: dict | None = None, depth: np.ndarray | None = None,
-                       depth_sigma: float = 0.3, ping_type: str = "rbi", burst_sequence: np.ndarray | None = None
-                       ) -> dict:
+                       depth_sigma: float = 0.3, ping_type: str = "rbi", burst_sequence: np.ndarray | None = None,
+                       multipath: tuple[float, float] | None = None) -> dict:
     """The walk's pings tracked through clocks synchronised from sync tags (:func:`synchronised_toa`, then
     :func:`track_path`), beside the same pings tracked with the true clocks (``tracked``: :func:`track_path`'s row
     of the same pings, computed here where not given).
@@ -287,8 +293,8 @@ def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.nda
         :func:`track_path`'s row of the same pings with the true clocks.
     depth, depth_sigma
         As :func:`track_path` (3-D: the tag's depth readings [m] and their σ [m]).
-    ping_type, burst_sequence
-        As :func:`track_path` (the tag's ping type and a ``pbi`` tag's intervals [s]).
+    ping_type, burst_sequence, multipath
+        As :func:`track_path` (the tag's ping type, a ``pbi`` tag's intervals [s] and the multipath modelled).
 
     Returns
     -------
@@ -310,7 +316,7 @@ def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.nda
         raise ValueError("track_synchronised: no arrival heard")
     if tracked is None:
         tracked = track_path(receivers, toa, positions, emissions, sound_speed, sigma_toa, burst_interval, depth,
-                             depth_sigma, ping_type, burst_sequence)
+                             depth_sigma, ping_type, burst_sequence, multipath)
     grade = {"clock_offset_s": CLOCK_GRADE["receiver_clock_offset"],
              "clock_drift_ppm": CLOCK_GRADE["receiver_clock_drift_ppm"],
              "sync_interval_s": [CLOCK_GRADE["sync_interval_min"], CLOCK_GRADE["sync_interval_max"]]}
@@ -321,7 +327,7 @@ def track_synchronised(receivers: np.ndarray, toa: np.ndarray, positions: np.nda
                 "synced_ratio": math.nan, "sync_residual_m": math.nan, "sync_within_3_sigma": math.nan,
                 "sync_receivers": 0, "sync_arrivals": 0, "sync_bins": 0} | grade
     row = track_path(receivers, synced.toa, positions, emissions, sound_speed, sigma_toa, burst_interval, depth,
-                     depth_sigma, ping_type, burst_sequence)
+                     depth_sigma, ping_type, burst_sequence, multipath)
     rms, truth = row["tracked_rms_m"], tracked["tracked_rms_m"]
     return {"synced_pings": row["tracked_pings"], "synced_rms_m": rms, "synced_nees": row["tracked_nees"],
             "synced_p95_m": row["tracked_p95_m"],
