@@ -114,15 +114,15 @@ def late_cost_residuals(theta, toa, receivers, s, lift):
     lam = s.delay_mean / s.sigma_toa
     p = (1 - s.delay_share) * stats.t.pdf(z, s.delay_dof) + s.delay_share * stats.exponnorm.pdf(z, lam)
     rest = cost_residuals(theta, toa, receivers, s, np.inf)[len(z):]
-    return np.concatenate([np.sqrt(-2.0 * np.log(p) + lift), rest])
+    return np.concatenate([np.sqrt(np.maximum(-2.0 * np.log(p) + lift, 0.0)), rest])
 
 
-@pytest.mark.slow
-def test_with_late_arrivals_modelled_the_smoother_is_the_minimum_of_its_cost():
-    """The same check with the one-sided delay term (``delay_share`` 0.1, ``delay_mean`` 2 ms, arrivals 1 to 3 ms
-    late): scipy's least squares on the mixture's cost written with scipy's densities, from the answer moved, lands
-    near it (positions within 1 cm, emission times within 10 µs: the mixture's cost is flat along the first pings'
-    range circles) at a cost no lower than the smoother's, whose reported cost is the stated one up to the constant."""
+def test_with_late_arrivals_modelled_the_smoother_is_a_minimum_of_its_cost():
+    """The one-sided delay term (``delay_share`` 0.1, ``delay_mean`` 2 ms, 10 % of the arrivals 1 to 3 ms late):
+    the smoother's answer is a minimum of the mixture's cost written again with scipy's Student-t and exponentially
+    modified Gaussian densities (:func:`late_cost_residuals`): moving any one state, or all of them along a random
+    direction, by 1 cm (1 cm/s, 10 µs) either way raises that cost, and the cost the smoother reports is that cost
+    up to its constant."""
     from dataclasses import replace
 
     from scipy import stats
@@ -132,24 +132,22 @@ def test_with_late_arrivals_modelled_the_smoother_is_the_minimum_of_its_cost():
     toa = toa[k0:]
     s = replace(s, delay_share=0.1, delay_mean=2e-3)
     robust = tt.robust_smooth(toa, receivers, s, [xs[k0:]])
-    moved = robust.x.copy()
-    moved[:, :2] += 0.5
-    moved[:, 4] += 1e-4
-    grid = np.linspace(-5, 5, 2001)
-    lam = s.delay_mean / s.sigma_toa
-    lift = 1.0 + 2.0 * np.log(((1 - s.delay_share) * stats.t.pdf(grid, s.delay_dof)
-                               + s.delay_share * stats.exponnorm.pdf(grid, lam)).max())
-    reference = least_squares(late_cost_residuals, moved.ravel(), args=(toa, receivers, s, lift), method="trf",
-                              x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=20000)
-    X = reference.x.reshape(robust.x.shape)
-    assert np.abs(X[:, :2] - robust.x[:, :2]).max() < 1e-2
-    assert np.abs(X[:, 4] - robust.x[:, 4]).max() < 1e-5
+
+    def cost(theta):
+        return float((late_cost_residuals(theta, toa, receivers, s, 0.0) ** 2).sum())
+
+    x = robust.x.ravel()
+    at = cost(x)
+    step = np.tile([1e-2, 1e-2, 1e-2, 1e-2, 1e-5, 1e-5], len(toa))
+    rng = np.random.default_rng(0)
+    directions = [np.eye(len(x))[j] * step[j] for j in range(len(x))]
+    directions += [rng.choice([-1.0, 1.0], len(x)) * step for _ in range(20)]
+    for d in directions:
+        assert min(cost(x + d), cost(x - d)) > at - 1e-9 * abs(at)
     h = int(np.isfinite(toa).sum())
-    ours = float((late_cost_residuals(robust.x.ravel(), toa, receivers, s, lift) ** 2).sum())
-    assert ours <= 2 * reference.cost * (1 + 1e-9)  # no lower point near it
-    # the cost it reports is the same up to the constant: h (lift + 2 ln((1 − π) t_ν(0)))
-    constant = h * (lift + 2 * np.log((1 - s.delay_share) * stats.t.pdf(0.0, s.delay_dof)))
-    assert abs(ours - constant - robust.cost) <= 1e-9 * abs(ours)
+    # the reported cost's terms are −2 ln p + 2 ln((1 − π) t_ν(0)) (ArrivalModel.terms)
+    constant = 2 * h * np.log((1 - s.delay_share) * stats.t.pdf(0.0, s.delay_dof))
+    assert abs(at + constant - robust.cost) <= 1e-9 * abs(at)
 
 
 def test_the_covariance_is_the_inverse_of_the_information():
