@@ -230,7 +230,8 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              min=0.0, max=0.1),
         _key("multipath_pct", "Real", 0.0, "%", "an ilbl design's confirmation: the share of heard arrivals that are "
                                                 "a reflection, late by an exponential excess path (the channel's "
-                                                "acoustics.outlier_pct; the prediction leaves it out)",
+                                                "acoustics.outlier_pct; the prediction leaves it out, the "
+                                                "walk's tracker models it)",
              min=0.0, max=100.0),
         _key("multipath_excess_m", "Real", 2.0, "m", "an ilbl design's confirmation: a reflection's mean excess path "
                                                      "(exponential; the channel's acoustics.outlier_excess)",

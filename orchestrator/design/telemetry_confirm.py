@@ -354,7 +354,8 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     probability of a fix; :data:`PATH_PREDICTED` positions of the path, evenly spaced). In 3-D the walk's depth is
     :func:`walk_depth`'s, its pings fixed and tracked in 3-D (with the depth sensor's readings where it has one).
     With ``detection.multipath_pct`` some arrivals are late (drawn from ``late``: :func:`_heard`), for the fixes, the
-    tracking and the tracking through synchronised clocks alike (the sync tags' own arrivals are not)."""
+    tracking and the tracking through synchronised clocks alike (the sync tags' own arrivals are not); the tracker is
+    told their share and mean delay (``track_path``'s ``multipath``)."""
     mc, detection, tag = problem.sections["monte_carlo"], problem.sections["detection"], problem.tag
     pings = mc["replicates"] * PINGS_PER_REPLICATE
     walked = np.random.default_rng(rng.integers(2**63))
