@@ -54,28 +54,24 @@ class ArrivalModel:
             raise ValueError(f"arrival model: delay share {self.share} (allowed [0, 1)), mean delay {self.mean} σ "
                              f"and ν {self.dof} (allowed > 0)")
 
-    @property
-    def delayed(self) -> bool:
-        """Whether late arrivals are modelled (π > 0)."""
-        return self.share > 0.0
-
     def _parts(self, z: np.ndarray) -> tuple:
-        """γ, δ̂, var δ and the Student-t weight w_t at the normalised residuals z, and ``ln p(z)`` (normalised)."""
+        """γ, δ̂, var δ, the Student-t weight w_t, the half gradient g and ``ln p(z) − ln((1 − π) t_ν(0))`` at the
+        normalised residuals z."""
         nu, lam = self.dof, self.mean
         w_t = (nu + 1.0) / (nu + z**2)
-        log_t = (gammaln((nu + 1) / 2) - gammaln(nu / 2) - 0.5 * np.log(nu * np.pi)
-                 - 0.5 * (nu + 1.0) * np.log1p(z**2 / nu))
+        log_t = -0.5 * (nu + 1.0) * np.log1p(z**2 / nu)  # ln(t_ν(z) / t_ν(0))
         m = z - 1.0 / lam
         log_phi_m = log_ndtr(m)
-        log_f = -np.log(lam) + 0.5 / lam**2 - z / lam + log_phi_m
-        a = np.log1p(-self.share) + log_t
-        b = np.log(self.share) + log_f if self.share > 0.0 else np.full_like(log_f, -np.inf)
-        log_p = np.logaddexp(a, b)
+        log_t0 = gammaln((nu + 1) / 2) - gammaln(nu / 2) - 0.5 * np.log(nu * np.pi)
+        log_f = -np.log(lam) + 0.5 / lam**2 - z / lam + log_phi_m - log_t0  # ln(f(z) / t_ν(0))
+        b = np.log(self.share / (1.0 - self.share)) + log_f if self.share > 0.0 else np.full_like(log_f, -np.inf)
+        log_p = np.logaddexp(log_t, b)  # ln(p(z) / ((1 − π) t_ν(0)))
         gamma = np.exp(b - log_p)
         mills = np.exp(-0.5 * m**2 - _LOG_SQRT_2PI - log_phi_m)
         delay = m + mills
         var = np.maximum(1.0 - mills * (m + mills), 0.0)
-        return gamma, delay, var, w_t, log_p, log_t
+        g = (1.0 - gamma) * w_t * z + gamma * (z - delay)
+        return gamma, delay, var, w_t, g, log_p
 
     def terms(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Each arrival's cost term, EM weight and half gradient at the normalised residuals z.
@@ -94,13 +90,8 @@ class ArrivalModel:
         g : ndarray, (h,)
             The half gradient of the cost in z, ``(1 − γ) w_t z + γ (z − δ̂)`` [1].
         """
-        z = np.asarray(z, float)
-        gamma, delay, _, w_t, log_p, log_t = self._parts(z)
-        log_t0 = gammaln((self.dof + 1) / 2) - gammaln(self.dof / 2) - 0.5 * np.log(self.dof * np.pi)
-        cost = -2.0 * (log_p - np.log1p(-self.share) - log_t0)
-        h = (1.0 - gamma) * w_t + gamma
-        g = (1.0 - gamma) * w_t * z + gamma * (z - delay)
-        return cost, h, g
+        gamma, _, _, w_t, g, log_p = self._parts(np.asarray(z, float))
+        return -2.0 * log_p, (1.0 - gamma) * w_t + gamma, g
 
     def information(self, z: np.ndarray) -> np.ndarray:
         """Each arrival's observed information, ``−(ln p)''(z)`` [1], 0 where negative (as the Student-t's,
@@ -119,8 +110,7 @@ class ArrivalModel:
         """
         z = np.asarray(z, float)
         nu = self.dof
-        gamma, delay, var, w_t, _, _ = self._parts(z)
-        g = (1.0 - gamma) * w_t * z + gamma * (z - delay)
+        gamma, delay, var, w_t, g, _ = self._parts(z)
         t2 = (w_t * z) ** 2 - (nu + 1.0) * (nu - z**2) / (nu + z**2) ** 2
         f2 = (z - delay) ** 2 + var - 1.0
         return np.maximum(g**2 - ((1.0 - gamma) * t2 + gamma * f2), 0.0)

@@ -174,9 +174,10 @@ def _arrivals(problem: _Problem, X: np.ndarray, lo: int, hi: int, a0: int, a1: i
 
 
 def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tuple, sums: np.ndarray,
-                information: bool = False, weights: np.ndarray | None = None):
+                information: bool = False, weights: np.ndarray | None = None, late: tuple | None = None):
     """A chunk's rows of :func:`_arrival_sums`' ``sums`` from its arrivals' normalised residuals z (a,) and their
-    Jacobians' position columns J (:func:`_arrivals`)."""
+    Jacobians' position columns J (:func:`_arrivals`); ``late``: with late arrivals modelled, their EM weights and
+    half gradients at z where already computed (:func:`_cost_terms`)."""
     P = problem
     lo, hi, a0, a1, S = chunk
     J = [*J, -1.0 / P.settings.sigma_toa]  # the emission time's column of every Jacobian
@@ -187,7 +188,7 @@ def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tu
         np.divide(dof + 1.0, robust, out=robust)
         gradient = None
     else:  # the late arrivals' EM weight and half gradient (arrival_model)
-        _, robust, gradient = model.terms(z)
+        robust, gradient = late if late is not None else model.terms(z)[1:]
     if weights is not None:
         weights[a0:a1] = robust
     w = _information(P, z, dof) if information else robust
@@ -216,21 +217,23 @@ def _arrival_chunk(problem: _Problem, X: np.ndarray, dof: float, chunk: tuple, s
     arrivals' cost terms ``ln(1 + z² / ν)`` into the problem's buffer (not with ``information``)."""
     lo, hi, a0, a1, S = chunk
     z, J = _arrivals(problem, X, lo, hi, a0, a1)
-    if not information:
-        _cost_terms(problem, z, dof, a0, a1)
-    _chunk_sums(problem, z, J, dof, chunk, sums, information, weights)
+    late = None if information else _cost_terms(problem, z, dof, a0, a1)
+    _chunk_sums(problem, z, J, dof, chunk, sums, information, weights, late)
 
 
-def _cost_terms(problem: _Problem, z: np.ndarray, dof: float, a0: int, a1: int):
-    """The arrivals ``a0:a1``'s cost terms ``ln(1 + z² / ν)`` into the problem's buffer ``logs`` (with late
-    arrivals, :meth:`~sblsim.models.tracking.arrival_model.ArrivalModel.terms`' cost over ν + 1)."""
+def _cost_terms(problem: _Problem, z: np.ndarray, dof: float, a0: int, a1: int) -> tuple | None:
+    """The arrivals ``a0:a1``'s cost terms ``ln(1 + z² / ν)`` into the problem's buffer ``logs``; with late
+    arrivals, :meth:`~sblsim.models.tracking.arrival_model.ArrivalModel.terms`' cost over ν + 1, and its EM weights
+    and half gradients returned (for :func:`_chunk_sums`; else None)."""
     model = problem.delay()
     if model is not None:
-        problem.logs[a0:a1] = model.terms(z)[0] / (dof + 1.0)
-        return
+        cost, h, g = model.terms(z)
+        problem.logs[a0:a1] = cost / (dof + 1.0)
+        return h, g
     z2 = np.square(z, out=problem.logs[a0:a1])
     z2 /= dof
     np.log1p(z2, out=z2)
+    return None
 
 
 def _arrival_sums(problem: _Problem, X: np.ndarray, dof: float, information: bool = False,

@@ -371,9 +371,9 @@ def path_check(design: TelemetryDesign, problem: TelemetryProblem, rng: np.rando
     heard = np.isfinite(toa)
     own = tm.fix_drms(positions, design.receivers, sigma, heard, problem.depth_sigma, problem.horizontal)
     enough, counted = _counted(problem, heard, own)
-    # the tracker models the late arrivals it is given (their share and mean delay, as drawn: multipath_delays)
-    multipath = (detection.get("multipath_pct", 0.0) / 100.0,
-                 detection.get("multipath_excess_m", 0.0) / detection["sound_speed"])
+    # the tracker models the late arrivals it is given (their share and mean delay, as _heard draws them)
+    pct = detection.get("multipath_pct", 0.0)
+    multipath = (pct / 100.0, detection["multipath_excess_m"] / detection["sound_speed"]) if pct > 0.0 else None
     errors, readings = _simulated_fixes(problem, design, toa, positions, sigma, counted, rng)
     simulated = float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if len(errors) else math.inf
     chosen = np.linspace(0, pings - 1, min(PATH_PREDICTED, pings)).astype(int)
