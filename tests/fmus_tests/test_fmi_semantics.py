@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 
 import fmpy
 import numpy as np
@@ -47,7 +48,9 @@ class Slave:
         self.md = read_model_description(fmu)
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.log: list[str] = []
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=extract(fmu),
+        # fmpy's extract() alone leaves its folder behind: this one goes with the instance (or at exit)
+        self._unzipped = tempfile.TemporaryDirectory(prefix="sblsim-test-")
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=extract(fmu, self._unzipped.name),
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
         self.fmu.instantiate(callbacks=self._callbacks())
 

@@ -10,6 +10,8 @@ take every packet as before.
 
 from __future__ import annotations
 
+import tempfile
+
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
@@ -38,7 +40,8 @@ class Receiver:
         md = read_model_description(str(path))
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         self.types = {v.name: v.type for v in md.modelVariables}
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)),
+        self._unzipped = tempfile.TemporaryDirectory(prefix="sblsim-test-")  # removed with the instance
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path), self._unzipped.name),
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName="receiver")
         self.fmu.instantiate()
         self.fmu.setupExperiment(startTime=0.0)
