@@ -106,7 +106,8 @@ class RobustTrack:
 
 def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, starts: list[np.ndarray],
                   dof: float = ROBUST_DOF, iterations: int = ROBUST_ITERATIONS, covariance: bool = True,
-                  schedule: PingSchedule | None = None, depth: np.ndarray | None = None) -> RobustTrack:
+                  schedule: PingSchedule | None = None, depth: np.ndarray | None = None,
+                  student_start: bool = True) -> RobustTrack:
     """The robust fixed-interval smoother: the track's maximum a-posteriori states with heavy-tailed times of arrival.
 
     Over the whole record at once (YAPS's approach, Baktoft et al. 2017: the state-space model fitted to every
@@ -158,6 +159,9 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         one stable interval each).
     depth : ndarray, (m,), optional
         The tag's depth-sensor reading per ping [m], positive down, NaN where none (receivers in 3-D).
+    student_start : bool
+        With late arrivals modelled, screen the Student-t's own minimum as one more start (False: the starts given
+        alone, e.g. starts already near a minimum of this cost).
 
     Returns
     -------
@@ -183,8 +187,9 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         raise ModelError(f"depth_m: {np.shape(depth)} readings for {m} pings at receivers in {dim}-D; allowed: one "
                          "per ping, with the receivers' depths (z_m)")
     given = len(starts)
-    if settings.delay_share > 0.0:  # the Student-t's minimum one more start (the mixture's cost is steep for early
-        # residuals: from a start far off, Gauss-Newton on it can stall where the Student-t's does not)
+    if settings.delay_share > 0.0 and student_start:  # the Student-t's minimum one more start (the mixture's cost
+        # is steep for early residuals: from a start far off, Gauss-Newton on it can stall where the Student-t's
+        # does not)
         first = robust_smooth(toa, receivers, replace(settings, delay_share=0.0), starts, dof, iterations, False,
                               schedule, depth)
         starts = [*starts, first.x]

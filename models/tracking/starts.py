@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from sblsim.models.tracking.ekf import TrackerSettings
+from sblsim.models.tracking.modes import with_modes
 from sblsim.models.tracking.schedule import PingSchedule
 from sblsim.models.tracking.smoother import ROBUST_COARSE_ITERATIONS, ROBUST_COARSE_SCALE, RobustTrack, robust_smooth
 
@@ -40,8 +41,9 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
     that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2; None: the
     fixes' two starts alone, e.g. a record too long for the EKF's ping-by-ping loop); the lowest cost kept
-    (:func:`robust_smooth`). ``fixes``: positions (m, dim), emission times (m,) and the arrivals used (m, n) of
-    :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
+    (:func:`robust_smooth`); with late arrivals modelled, its other local modes searched
+    (:func:`~sblsim.models.tracking.modes.with_modes`). ``fixes``: positions (m, dim), emission times (m,) and the
+    arrivals used (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
     (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each); ``depth`` (m,) the
     tag's depth readings [m] (:func:`robust_smooth`).
 
@@ -57,8 +59,9 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     if anchored is not None:
         starts = {"fixes": anchored,
                   "graduated": graduated_start(toa, receivers, settings, anchored, schedule, depth), **starts}
-    return replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule, depth=depth),
-                   start_names=tuple(starts))
+    track = replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule, depth=depth),
+                    start_names=tuple(starts))
+    return with_modes(track, toa, receivers, settings, schedule, depth)
 
 
 def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,

@@ -10,6 +10,7 @@ import pytest
 from scipy import stats
 
 from sblsim.models.errors import ConfigError
+from sblsim.models.tracking import starts
 from sblsim.orchestrator.design import telemetry_confirm
 from sblsim.orchestrator.design.problem import check_problem, read_problem
 from sblsim.orchestrator.design.telemetry import TelemetryDesign, judge, resolve
@@ -100,10 +101,11 @@ def test_the_walk_with_five_percent_multipath_is_tracked_within_the_measured_ban
     """The walk of the L lake (seven receivers, 250 pings, seed 0), 5 % of its arrivals late by 2 m on average
     (13 σ of 0.148 m): the same walk and detections as at 0 % (the multipath's own stream), so the least-squares
     fixes' RMS grows at least twice (measured 2.8 to 5.3 times over 12 seeds), while the robust smoother, told the
-    multipath's share and mean delay (its one-sided delay term), keeps its track within 4 times the tracker's
-    smoothing bound and its NEES within 17 (measured over 12 seeds: 1.36 to 2.55 times, NEES 3.4 to 11.1, where
-    without multipath 0.95 to 2.79 and 2.0 to 2.6; the band is the largest measured times 1.5), and below the NEES
-    of the same pings tracked without that term (4.0 to 19.8 over the 12 seeds, higher on each)."""
+    multipath's share and mean delay (its one-sided delay term and its other local modes), keeps its track within 6
+    times the tracker's smoothing bound and its NEES within 14 (measured over 12 seeds: 1.20 to 4.03 times, NEES
+    2.1 to 9.5, where without multipath 0.95 to 2.79 and 2.0 to 2.6; the band is the largest measured times 1.5),
+    below the NEES of the same pings tracked without the delay term (4.0 to 19.8 over the 12 seeds, higher on each)
+    and below that of the delay term without the search for other modes (3.4 to 11.1, higher on each)."""
     rows = {}
 
     def walk(pct):
@@ -118,7 +120,7 @@ def test_the_walk_with_five_percent_multipath_is_tracked_within_the_measured_ban
     assert clean["simulated_yield"] == late["simulated_yield"] and clean["length_m"] == late["length_m"]
     assert late["simulated_drms_m"] >= 2.0 * clean["simulated_drms_m"], (clean, late)
     assert late["tracked_pings"] == clean["tracked_pings"] >= 240, late
-    assert late["tracked_ratio"] <= 4.0 and late["tracked_nees"] <= 17.0, late
+    assert late["tracked_ratio"] <= 6.0 and late["tracked_nees"] <= 14.0, late
     assert late["tracked_rms_m"] > clean["tracked_rms_m"], (clean, late)
     unmodelled = telemetry_confirm.track_path
 
@@ -126,10 +128,14 @@ def test_the_walk_with_five_percent_multipath_is_tracked_within_the_measured_ban
         kwargs.pop("multipath")
         return unmodelled(*args, **kwargs)
 
+    with monkeypatch.context() as patch:
+        patch.setattr(starts, "with_modes", lambda track, *args: track)
+        one_mode = walk(5.0)
     monkeypatch.setattr(telemetry_confirm, "track_path", without_the_delay_term)
     blind = walk(5.0)
-    assert blind["tracked_pings"] == late["tracked_pings"]
+    assert blind["tracked_pings"] == late["tracked_pings"] == one_mode["tracked_pings"]
     assert blind["tracked_nees"] > late["tracked_nees"], (blind, late)
+    assert one_mode["tracked_nees"] > late["tracked_nees"], (one_mode, late)
 
 
 @pytest.mark.parametrize("detection, message", [

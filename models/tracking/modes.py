@@ -1,0 +1,227 @@
+"""The robust smoother's other local modes where late arrivals are modelled, and the covariance of their mixture.
+
+With late (multipath) arrivals in the model (:mod:`~sblsim.models.tracking.arrival_model`) the posterior of a ping
+heard by few receivers can have two modes: the position that explains every arrival as direct, and one where an
+arrival is late and the position lies elsewhere. A Gaussian about the better one (the Laplace approximation of
+:func:`~sblsim.models.tracking.smoother.robust_smooth`) is then too tight. Here each hypothesis "arrival j of ping
+k is late" is solved locally — the pings k − W … k + W re-solved with that arrival left out, from the track and
+from ping k's neighbours' mean, then with it back — and scored by the whole cost's change Δ (the window's own
+arrivals and steps and the steps joining it to the track). A mode of lower cost is a better start (the track
+re-solved from it, screened against the track); the others are weighed ``exp(−Δ/2)`` against the track's 1 and
+their spread about the track added to its covariance: the second moment of the mixture about the reported
+estimate, ``P + Σ_h w_h (x_h − x)(x_h − x)ᵀ`` (moment matching of a Gaussian mixture, Bar-Shalom, Li &
+Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001, § 11.6.6; each mode's own
+covariance taken as the track's).
+
+The windows are solved together, as one problem whose windows follow one another across steps so long that they do
+not couple (:data:`SEPARATION`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from sblsim.models.tracking.ekf import TrackerSettings
+from sblsim.models.tracking.schedule import PingSchedule
+from sblsim.models.tracking.smoother import RobustTrack, robust_smooth
+from sblsim.models.tracking.smoother_cost import ROBUST_DOF, _depth_residual, _Problem, _robust_terms
+
+#: Pings each side of a hypothesis's ping that its window re-solves.
+MODE_WINDOW = 2
+
+#: Gauss-Newton iterations of a window's solve without the arrival, and then with it back.
+MODE_ITERATIONS = (30, 10)
+
+#: The duration [s] (and the emission time's and interval's spread) of the step between two windows solved
+#: together: its process noise so large that neither window weighs on the other.
+SEPARATION = 1e7
+
+#: Hypotheses solved together at most (their windows' rows about five times as many).
+MODE_BATCH = 5000
+
+#: A mode counts as another one where it lies outside the track's 1-σ ellipse at the hypothesis's ping (squared
+#: Mahalanobis distance above this) and differs from the modes kept for that ping by more than that too.
+MODE_DISTINCT = 1.0
+
+#: A mode lower in cost than the track by more than this is a better start (not a spread about the track).
+MODE_BETTER = 1.0
+
+
+@dataclass
+class Modes:
+    """What :func:`local_modes` found about a track (m pings).
+
+    Attributes
+    ----------
+    spread : ndarray, (m, dim, dim)
+        ``Σ_h w_h (p_h − p)(p_h − p)ᵀ`` of each ping's position over the modes found [m²] (0 where none).
+    better : ndarray, (m, s), or None
+        The track with the windows of the modes lower in cost than it (by :data:`MODE_BETTER`) put in, each
+        window's lowest; None where none is.
+    hypotheses : int
+        The hypotheses solved.
+    modes : int
+        The modes kept (other than the track, the better ones among them).
+    """
+
+    spread: np.ndarray
+    better: np.ndarray | None
+    hypotheses: int
+    modes: int
+
+
+def _windows(lo: np.ndarray, hi: np.ndarray, schedule: PingSchedule) -> tuple:
+    """The rows (N,) of the windows ``lo:hi`` (B each) one after another, the block of each row (N,), and their
+    schedule (N − 1 steps: each window's own, a :data:`SEPARATION` between two)."""
+    lengths = hi - lo
+    block = np.repeat(np.arange(len(lo)), lengths)
+    first = np.r_[0, np.cumsum(lengths)[:-1]]
+    rows = np.repeat(lo, lengths) + np.arange(lengths.sum()) - np.repeat(first, lengths)
+    inside = block[:-1] == block[1:]
+    step = np.where(inside, np.minimum(rows[:-1], len(schedule.count) - 1), 0)
+    count = np.where(inside, schedule.count[step], 0.0)
+    offset = np.where(inside, schedule.offset[step], SEPARATION)
+    te = np.where(inside, schedule.te_sigma[step], SEPARATION)
+    drift = np.where(inside, schedule.drift_sigma[step], SEPARATION)
+    return rows, block, inside, replace(schedule, count=count, offset=offset, te_sigma=te, drift_sigma=drift,
+                                        gaps=())
+
+
+def _window_costs(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule,
+                  depth: np.ndarray | None, X: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  states: np.ndarray | None = None) -> np.ndarray:
+    """Each window's share of the robust cost (B,): the arrivals of the pings ``lo − 1 : hi + 1`` and the steps
+    between them, the track's states X (m, s) with the window's own ``states`` (N, s: the rows of
+    :func:`_windows` of ``lo:hi``) put in where given."""
+    m = len(X)
+    ext_lo, ext_hi = np.maximum(lo - 1, 0), np.minimum(hi + 1, m)
+    rows, block, inside, sched = _windows(ext_lo, ext_hi, schedule)
+    Y = X[rows].copy()
+    if states is not None:  # the window's rows within the extended ones
+        own = (rows >= np.repeat(lo, ext_hi - ext_lo)) & (rows < np.repeat(hi, ext_hi - ext_lo))
+        Y[own] = states
+    problem = _Problem(toa[rows], receivers, settings, sched, None if depth is None else depth[rows])
+    _robust_terms(problem, Y, ROBUST_DOF)
+    cost = np.bincount(block[problem.k], (ROBUST_DOF + 1.0) * problem.logs, minlength=len(lo))
+    cost += np.bincount(block[:-1][inside], problem.squares[inside].sum(axis=1), minlength=len(lo))
+    if len(problem.depth_at):
+        cost += np.bincount(block[problem.depth_at], _depth_residual(problem, Y) ** 2, minlength=len(lo))
+    return cost
+
+
+def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule,
+           depth: np.ndarray | None, X: np.ndarray, k: np.ndarray, j: np.ndarray, start_mean: bool) -> tuple:
+    """The hypotheses (k, j) (H,) solved in their windows, all at once: the window's states with arrival j of ping
+    k left out, then with it back (:data:`MODE_ITERATIONS`), from the track's states or (``start_mean``) with
+    ping k's replaced by its neighbours' mean. Returns the states (N, s), the windows' bounds and the rows'
+    blocks."""
+    m = len(X)
+    lo, hi = np.maximum(k - MODE_WINDOW, 0), np.minimum(k + MODE_WINDOW + 1, m)
+    rows, block, _, sched = _windows(lo, hi, schedule)
+    start = X[rows].copy()
+    at = np.flatnonzero(rows == np.repeat(k, hi - lo))  # ping k's row in each window (one per block)
+    if start_mean:
+        inner = (k > 0) & (k < m - 1)
+        start[at[inner]] = 0.5 * (X[k[inner] - 1] + X[k[inner] + 1])
+    sub, sub_depth = toa[rows], None if depth is None else depth[rows]
+    left = sub.copy()
+    left[at, j] = np.nan
+    out = robust_smooth(left, receivers, settings, [start], iterations=MODE_ITERATIONS[0], covariance=False,
+                        schedule=sched, depth=sub_depth, student_start=False).x
+    out = robust_smooth(sub, receivers, settings, [out], iterations=MODE_ITERATIONS[1], covariance=False,
+                        schedule=sched, depth=sub_depth, student_start=False).x
+    return out, lo, hi, rows, block, at
+
+
+def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
+                schedule: PingSchedule, depth: np.ndarray | None = None) -> Modes:
+    """The other local modes of the robust smoother's cost near a track, one hypothesis per arrival of each ping
+    heard by dim + 1 receivers or more (the module's method).
+
+    Parameters
+    ----------
+    track : RobustTrack
+        :func:`~sblsim.models.tracking.smoother.robust_smooth`'s answer, with its covariance.
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+        As the track was solved with (its late arrivals' share and mean among them).
+    schedule : PingSchedule
+        The steps between the rows.
+    depth : ndarray, (m,), optional
+        The tag's depth readings [m].
+
+    Returns
+    -------
+    Modes
+    """
+    X, P = track.x, track.P
+    m, dim = X.shape[0], receivers.shape[1]
+    heard = np.isfinite(toa)
+    k_all, j_all = np.nonzero(heard & (heard.sum(axis=1) >= dim + 1)[:, None])
+    spread = np.zeros((m, dim, dim))
+    better_cost = np.zeros(m)
+    better = X.copy()
+    found = hypotheses = 0
+    kept: dict[int, list[np.ndarray]] = {}  # each ping's modes kept, by their positions
+    information = np.linalg.inv(P[:, :dim, :dim])
+    for b0 in range(0, len(k_all), MODE_BATCH):
+        k, j = k_all[b0:b0 + MODE_BATCH], j_all[b0:b0 + MODE_BATCH]
+        hypotheses += len(k)
+        runs = [_solve(toa, receivers, settings, schedule, depth, X, k, j, mean) for mean in (False, True)]
+        lo, hi = runs[0][1], runs[0][2]
+        base = _window_costs(toa, receivers, settings, schedule, depth, X, lo, hi)
+        deltas = [_window_costs(toa, receivers, settings, schedule, depth, X, lo, hi, run[0]) - base for run in runs]
+        for run, delta in zip(runs, deltas):
+            states, _, _, rows, block, at = run
+            shift = states[:, :dim] - X[rows, :dim]
+            d2 = np.einsum("hi,hij,hj->h", shift[at], information[k], shift[at])
+            for h in np.flatnonzero(d2 > MODE_DISTINCT):  # a mode other than the track's, at ping k
+                window = block == h
+                kk = k[h]
+                if delta[h] < -MODE_BETTER:  # a better start: the window's lowest such mode kept
+                    if delta[h] < better_cost[kk]:
+                        better_cost[kk] = delta[h]
+                        better[rows[window]] = states[window]
+                    found += 1
+                    continue
+                # the mode's weight against the track's 1 (a mode within the ellipse of one kept for the same
+                # ping: the same mode, counted once)
+                here = states[at[h], :dim]
+                if any((here - p) @ information[kk] @ (here - p) <= MODE_DISTINCT for p in kept.get(kk, ())):
+                    continue
+                kept.setdefault(kk, []).append(here)
+                w = np.exp(-0.5 * delta[h])
+                s = shift[window]
+                spread[rows[window]] += (w / (1.0 + w)) * np.einsum("ki,kj->kij", s, s)
+                found += 1
+    return Modes(spread, better if (better_cost < 0).any() else None, hypotheses, found)
+
+
+
+def with_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
+               schedule: PingSchedule, depth: np.ndarray | None = None) -> RobustTrack:
+    """The track re-solved from its better local modes where it has any (kept where its cost is lower), and its
+    covariance widened by the spread of its other modes (:func:`local_modes`); the track itself where late
+    arrivals are not modelled (``delay_share`` 0) or it has no covariance."""
+    if settings.delay_share <= 0.0 or track.P is None:
+        return track
+    modes = local_modes(track, toa, receivers, settings, schedule, depth)
+    if modes.better is not None:
+        again = robust_smooth(toa, receivers, settings, [track.x, modes.better], schedule=schedule, depth=depth,
+                              student_start=False)
+        if again.cost < track.cost:
+            track = replace(again, start=track.start, start_names=track.start_names)
+            modes = local_modes(track, toa, receivers, settings, schedule, depth)
+    P = track.P.copy()
+    dim = receivers.shape[1]
+    P[:, :dim, :dim] += modes.spread
+    return replace(track, P=P)
+
+
+__all__ = ["MODE_BATCH", "MODE_BETTER", "MODE_DISTINCT", "MODE_ITERATIONS", "MODE_WINDOW", "Modes", "SEPARATION",
+           "local_modes", "with_modes"]
