@@ -322,25 +322,29 @@ def _run(compiler: Compiler, command: list[str], built: Path, target: str, what:
 
     The compiler runs in a process group of its own (on POSIX), so a terminal's Ctrl-C reaches this process
     only; an exception here (KeyboardInterrupt in the main thread) or a set ``stop`` (a worker thread) kills
-    the group — the compiler and what it started (zig's wrapper starts zig) — before anything is returned."""
+    the group — the compiler and what it started (zig's wrapper starts zig) — before anything is returned. Its
+    temporary files (``TMPDIR``, ``TMP``, ``TEMP``) go to a folder of its own, removed after it even when killed."""
     posix = os.name == "posix"
-    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=built.parent,
-                            start_new_session=posix)
-    try:
-        while True:
-            try:
-                stdout, stderr = proc.communicate(timeout=None if stop is None else _POLL)
-                break
-            except subprocess.TimeoutExpired:
-                if stop is not None and stop.is_set():
-                    raise _Stopped from None
-    except BaseException:
+    # the compiler's own temporary files (gcc's assembly, a killed compiler's leftovers) in a folder removed after it
+    with tempfile.TemporaryDirectory(prefix="sblsim_cc_") as scratch:
+        env = {**os.environ, "TMPDIR": scratch, "TMP": scratch, "TEMP": scratch}
+        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                cwd=built.parent, start_new_session=posix, env=env)
         try:
-            os.killpg(proc.pid, signal.SIGKILL) if posix else proc.kill()
-        except ProcessLookupError:
-            pass
-        proc.communicate()
-        raise
+            while True:
+                try:
+                    stdout, stderr = proc.communicate(timeout=None if stop is None else _POLL)
+                    break
+                except subprocess.TimeoutExpired:
+                    if stop is not None and stop.is_set():
+                        raise _Stopped from None
+        except BaseException:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL) if posix else proc.kill()
+            except ProcessLookupError:
+                pass
+            proc.communicate()
+            raise
     if proc.returncode != 0 or not built.is_file():
         errors = [line for line in (stderr or stdout).splitlines() if "error" in line.lower()]
         detail = " | ".join((errors or (stderr or stdout).splitlines())[:3])

@@ -94,12 +94,15 @@ def test_sigterm_during_a_site_budget(built, tmp_path):
 @pytest.mark.slow
 def test_ctrl_c_during_a_first_compile(tmp_path):
     """A first run on a machine compiles the local engine's models (a minute of the compiler): Ctrl-C one second
-    into a compilation stops the compilers, keeps the objects already made and leaves no partial one."""
-    work, cache = tmp_path / "work", tmp_path / "cache"
+    into a compilation stops the compilers, keeps the objects already made and leaves no partial one, nor a killed
+    compiler's temporary file (gcc's assembly) in the temporary folder."""
+    work, cache, scratch = tmp_path / "work", tmp_path / "cache", tmp_path / "tmp"
     work.mkdir()
+    scratch.mkdir()
     objects = cache / "objects"
     status, took, stderr = _interrupt(work, signal.SIGINT, "run", "semicircle", into=1.0,
-                                      env={**os.environ, "SBLSIM_CACHE_DIR": str(cache)}, begun=objects / "*.lock")
+                                      env={**os.environ, "SBLSIM_CACHE_DIR": str(cache), "TMPDIR": str(scratch)},
+                                      begun=objects / "*.lock")
     _ended_cleanly(work, status, took, stderr, signal.SIGINT)
     names = {p.name for p in objects.iterdir()}
     assert not [n for n in names if n.endswith(".partial") or n.startswith(".")], names
@@ -113,6 +116,7 @@ def test_ctrl_c_during_a_first_compile(tmp_path):
                 break
             time.sleep(0.05)
         assert not left, left
+    assert not list(scratch.iterdir()), list(scratch.iterdir())
 
 
 def _reads(cmdline: Path, text: str) -> bool:

@@ -22,6 +22,7 @@ Tolerances, and why they are not zero:
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -51,8 +52,10 @@ def package(fmu_dir, tmp_path_factory):
 
 def host_run(host: str, ssp: Path) -> dict[str, np.ndarray]:
     out = ssp.with_name(f"{host}.npz")
+    scratch = ssp.with_name(f"{host}-tmp")  # the host's own temporary folders (ecos leaves its SSP's unpacked)
+    scratch.mkdir(exist_ok=True)
     done = subprocess.run([sys.executable, str(HOSTS), host, str(ssp), str(out)], capture_output=True, text=True,
-                          timeout=600)
+                          timeout=600, env={**os.environ, "TMPDIR": str(scratch)})
     assert done.returncode == 0, done.stderr[-2000:]
     return dict(np.load(out))
 
