@@ -9,9 +9,9 @@ from ping k's neighbours' mean, then with it back — and scored by the whole co
 arrivals and steps and the steps joining it to the track). A mode of lower cost is a better start (the track
 re-solved from it, screened against the track); the others are weighed ``exp(−Δ/2)`` against the track's 1 and
 their spread about the track added to its covariance: the second moment of the mixture about the reported
-estimate, ``P + Σ_h w_h (x_h − x)(x_h − x)ᵀ`` (moment matching of a Gaussian mixture, Bar-Shalom, Li &
-Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001, § 11.6.6; each mode's own
-covariance taken as the track's).
+estimate, ``P + Σ_h w_h (x_h − x)(x_h − x)ᵀ`` (moment matching of a Gaussian mixture, as the IMM estimator combines its
+modes: Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and Navigation*, Wiley 2001,
+§ 11.6; each mode's own covariance taken as the track's).
 
 The windows are solved together, as one problem whose windows follow one another across steps so long that they do
 not couple (:data:`SEPARATION`).
