@@ -115,8 +115,8 @@ def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, sc
            depth: np.ndarray | None, X: np.ndarray, k: np.ndarray, j: np.ndarray, start_mean: bool) -> tuple:
     """The hypotheses (k, j) (H,) solved in their windows, all at once: the window's states with arrival j of ping
     k left out, then with it back (:data:`MODE_ITERATIONS`), from the track's states or (``start_mean``) with
-    ping k's replaced by its neighbours' mean. Returns the states (N, s), the windows' bounds and the rows'
-    blocks."""
+    ping k's replaced by its neighbours' mean. Returns the states (N, s), the windows' bounds ``lo``, ``hi``
+    (H,), the track's row of each state (N,) and ping k's index among the states (H,)."""
     m = len(X)
     lo, hi = np.maximum(k - MODE_WINDOW, 0), np.minimum(k + MODE_WINDOW + 1, m)
     rows, block, _, sched = _windows(lo, hi, schedule)
@@ -132,7 +132,7 @@ def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, sc
                         schedule=sched, depth=sub_depth, student_start=False).x
     out = robust_smooth(sub, receivers, settings, [out], iterations=MODE_ITERATIONS[1], covariance=False,
                         schedule=sched, depth=sub_depth, student_start=False).x
-    return out, lo, hi, rows, block, at
+    return out, lo, hi, rows, at
 
 
 def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
@@ -176,12 +176,13 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
         lo, hi = runs[0][1], runs[0][2]
         base = _window_costs(toa, receivers, settings, schedule, depth, X, lo, hi)
         deltas = [_window_costs(toa, receivers, settings, schedule, depth, X, lo, hi, run[0]) - base for run in runs]
+        edges = np.r_[0, np.cumsum(hi - lo)]  # each window's states: edges[h]:edges[h + 1]
         for run, delta in zip(runs, deltas):
-            states, _, _, rows, block, at = run
+            states, _, _, rows, at = run
             shift = states[:, :dim] - X[rows, :dim]
             d2 = np.einsum("hi,hij,hj->h", shift[at], information[k], shift[at])
             for h in np.flatnonzero(d2 > MODE_DISTINCT):  # a mode other than the track's, at ping k
-                window = block == h
+                window = slice(edges[h], edges[h + 1])
                 kk = k[h]
                 if delta[h] < -MODE_BETTER:  # a better start: the window's lowest such mode kept
                     if delta[h] < better_cost[kk]:
@@ -205,9 +206,30 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
 
 def with_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
                schedule: PingSchedule, depth: np.ndarray | None = None) -> RobustTrack:
-    """The track re-solved from its better local modes where it has any (kept where its cost is lower), and its
-    covariance widened by the spread of its other modes (:func:`local_modes`); the track itself where late
-    arrivals are not modelled (``delay_share`` 0) or it has no covariance."""
+    """The track re-solved from its better local modes where it has any (kept where its cost is lower; once), and
+    its position covariance widened by the spread of its other modes (:func:`local_modes`).
+
+    Parameters
+    ----------
+    track : RobustTrack
+        :func:`~sblsim.models.tracking.smoother.robust_smooth`'s answer (m pings).
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    settings : TrackerSettings
+        As the track was solved with.
+    schedule : PingSchedule
+        The steps between the rows.
+    depth : ndarray, (m,), optional
+        The tag's depth readings [m].
+
+    Returns
+    -------
+    RobustTrack
+        The track itself where late arrivals are not modelled (``delay_share`` 0) or it has no covariance; else its
+        states (re-solved or not) with ``P[:, :dim, :dim]`` [m²] the mixture's second moment about them.
+    """
     if settings.delay_share <= 0.0 or track.P is None:
         return track
     modes = local_modes(track, toa, receivers, settings, schedule, depth)

@@ -56,7 +56,8 @@ def test_windows_solved_together_are_each_solved_alone():
     X = robust.x
     k = np.array([5, 6, 14])
     j = np.array([np.flatnonzero(np.isfinite(toa[p]))[0] for p in k])
-    together, lo, hi, rows, block, at = modes._solve(toa, receivers, s, schedule, None, X, k, j, start_mean=True)
+    together, lo, hi, rows, at = modes._solve(toa, receivers, s, schedule, None, X, k, j, start_mean=True)
+    edges = np.r_[0, np.cumsum(hi - lo)]
     for h in range(len(k)):
         a, b = lo[h], hi[h]
         alone_toa = toa[a:b].copy()
@@ -68,7 +69,8 @@ def test_windows_solved_together_are_each_solved_alone():
                                  covariance=False, schedule=window, student_start=False).x
         alone = tt.robust_smooth(toa[a:b], receivers, s, [alone], iterations=modes.MODE_ITERATIONS[1],
                                  covariance=False, schedule=window, student_start=False).x
-        mine = together[block == h]
+        mine = together[edges[h]:edges[h + 1]]
+        assert np.array_equal(rows[edges[h]:edges[h + 1]], np.arange(a, b))
         assert np.abs(mine[:, :2] - alone[:, :2]).max() < 1e-3
         assert np.abs(mine[:, 4] - alone[:, 4]).max() < 1e-6
 
