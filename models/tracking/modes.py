@@ -119,7 +119,7 @@ def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, sc
     (H,), the track's row of each state (N,) and ping k's index among the states (H,)."""
     m = len(X)
     lo, hi = np.maximum(k - MODE_WINDOW, 0), np.minimum(k + MODE_WINDOW + 1, m)
-    rows, block, _, sched = _windows(lo, hi, schedule)
+    rows, _, _, sched = _windows(lo, hi, schedule)
     start = X[rows].copy()
     at = np.flatnonzero(rows == np.repeat(k, hi - lo))  # ping k's row in each window (one per block)
     if start_mean:
@@ -201,7 +201,6 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
                 spread[rows[window]] += (w / (1.0 + w)) * np.einsum("ki,kj->kij", s, s)
                 found += 1
     return Modes(spread, better if (better_cost < 0).any() else None, hypotheses, found)
-
 
 
 def with_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
