@@ -62,14 +62,11 @@ class Modes:
         window's lowest; None where none is.
     hypotheses : int
         The hypotheses solved.
-    modes : int
-        The modes kept (other than the track, the better ones among them).
     """
 
     spread: np.ndarray
     better: np.ndarray | None
     hypotheses: int
-    modes: int
 
 
 def _windows(lo: np.ndarray, hi: np.ndarray, schedule: PingSchedule) -> tuple:
@@ -91,24 +88,26 @@ def _windows(lo: np.ndarray, hi: np.ndarray, schedule: PingSchedule) -> tuple:
 
 def _window_costs(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule,
                   depth: np.ndarray | None, X: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                  states: np.ndarray | None = None) -> np.ndarray:
-    """Each window's share of the robust cost (B,): the arrivals of the pings ``lo − 1 : hi + 1`` and the steps
-    between them, the track's states X (m, s) with the window's own ``states`` (N, s: the rows of
-    :func:`_windows` of ``lo:hi``) put in where given."""
+                  candidates: list[np.ndarray] = ()) -> np.ndarray:
+    """Each window's share of the robust cost: the arrivals of the pings ``lo − 1 : hi + 1`` and the steps between
+    them, at the track's states X (m, s), then with each candidate's states (N, s: the rows of :func:`_windows` of
+    ``lo:hi``) put in (1 + candidates, B), all on one problem."""
     m = len(X)
     ext_lo, ext_hi = np.maximum(lo - 1, 0), np.minimum(hi + 1, m)
     rows, block, inside, sched = _windows(ext_lo, ext_hi, schedule)
-    Y = X[rows].copy()
-    if states is not None:  # the window's rows within the extended ones
-        own = (rows >= np.repeat(lo, ext_hi - ext_lo)) & (rows < np.repeat(hi, ext_hi - ext_lo))
-        Y[own] = states
+    own = (rows >= np.repeat(lo, ext_hi - ext_lo)) & (rows < np.repeat(hi, ext_hi - ext_lo))  # the windows' rows
     problem = _Problem(toa[rows], receivers, settings, sched, None if depth is None else depth[rows])
-    _robust_terms(problem, Y, ROBUST_DOF)
-    cost = np.bincount(block[problem.k], (ROBUST_DOF + 1.0) * problem.logs, minlength=len(lo))
-    cost += np.bincount(block[:-1][inside], problem.squares[inside].sum(axis=1), minlength=len(lo))
-    if len(problem.depth_at):
-        cost += np.bincount(block[problem.depth_at], _depth_residual(problem, Y) ** 2, minlength=len(lo))
-    return cost
+    costs = np.empty((1 + len(candidates), len(lo)))
+    for c, states in enumerate([None, *candidates]):
+        Y = X[rows].copy()
+        if states is not None:
+            Y[own] = states
+        _robust_terms(problem, Y, ROBUST_DOF)
+        costs[c] = np.bincount(block[problem.k], (ROBUST_DOF + 1.0) * problem.logs, minlength=len(lo))
+        costs[c] += np.bincount(block[:-1][inside], problem.squares[inside].sum(axis=1), minlength=len(lo))
+        if len(problem.depth_at):
+            costs[c] += np.bincount(block[problem.depth_at], _depth_residual(problem, Y) ** 2, minlength=len(lo))
+    return costs
 
 
 def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule,
@@ -121,7 +120,7 @@ def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, sc
     lo, hi = np.maximum(k - MODE_WINDOW, 0), np.minimum(k + MODE_WINDOW + 1, m)
     rows, _, _, sched = _windows(lo, hi, schedule)
     start = X[rows].copy()
-    at = np.flatnonzero(rows == np.repeat(k, hi - lo))  # ping k's row in each window (one per block)
+    at = np.r_[0, np.cumsum(hi - lo)[:-1]] + (k - lo)  # ping k's row in each window
     if start_mean:
         inner = (k > 0) & (k < m - 1)
         start[at[inner]] = 0.5 * (X[k[inner] - 1] + X[k[inner] + 1])
@@ -166,7 +165,7 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
     spread = np.zeros((m, dim, dim))
     better_cost = np.zeros(m)
     better = X.copy()
-    found = hypotheses = 0
+    hypotheses = 0
     kept: dict[int, list[np.ndarray]] = {}  # each ping's modes kept, by their positions
     information = np.linalg.inv(P[:, :dim, :dim])
     for b0 in range(0, len(k_all), MODE_BATCH):
@@ -174,8 +173,8 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
         hypotheses += len(k)
         runs = [_solve(toa, receivers, settings, schedule, depth, X, k, j, mean) for mean in (False, True)]
         lo, hi = runs[0][1], runs[0][2]
-        base = _window_costs(toa, receivers, settings, schedule, depth, X, lo, hi)
-        deltas = [_window_costs(toa, receivers, settings, schedule, depth, X, lo, hi, run[0]) - base for run in runs]
+        costs = _window_costs(toa, receivers, settings, schedule, depth, X, lo, hi, [run[0] for run in runs])
+        deltas = costs[1:] - costs[0]
         edges = np.r_[0, np.cumsum(hi - lo)]  # each window's states: edges[h]:edges[h + 1]
         for run, delta in zip(runs, deltas):
             states, _, _, rows, at = run
@@ -188,7 +187,6 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
                     if delta[h] < better_cost[kk]:
                         better_cost[kk] = delta[h]
                         better[rows[window]] = states[window]
-                    found += 1
                     continue
                 # the mode's weight against the track's 1 (a mode within the ellipse of one kept for the same
                 # ping: the same mode, counted once)
@@ -199,8 +197,7 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
                 w = np.exp(-0.5 * delta[h])
                 s = shift[window]
                 spread[rows[window]] += (w / (1.0 + w)) * np.einsum("ki,kj->kij", s, s)
-                found += 1
-    return Modes(spread, better if (better_cost < 0).any() else None, hypotheses, found)
+    return Modes(spread, better if (better_cost < 0).any() else None, hypotheses)
 
 
 def with_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,

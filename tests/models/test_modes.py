@@ -33,10 +33,9 @@ def test_a_windows_cost_is_the_whole_costs_change():
     rng = np.random.default_rng(5)
     k = np.array([3, 8, 12, len(toa) - 1])  # windows inside the track, and one at its end
     lo, hi = np.maximum(k - modes.MODE_WINDOW, 0), np.minimum(k + modes.MODE_WINDOW + 1, len(toa))
-    base = modes._window_costs(toa, receivers, s, schedule, None, X, lo, hi)
     states = np.concatenate([X[a:b] for a, b in zip(lo, hi)])
     states = states + rng.normal(0.0, 1.0, states.shape) * np.array([1.0, 1.0, 0.01, 0.01, 1e-4, 1e-6])
-    moved = modes._window_costs(toa, receivers, s, schedule, None, X, lo, hi, states)
+    base, moved = modes._window_costs(toa, receivers, s, schedule, None, X, lo, hi, [states])
     whole = late_cost(X.ravel(), toa, receivers, s)
     first = 0
     for h, (a, b) in enumerate(zip(lo, hi)):
