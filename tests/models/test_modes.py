@@ -5,6 +5,7 @@ solved alone, and the covariance widened only where the model has late arrivals.
 from __future__ import annotations
 
 from dataclasses import replace
+from itertools import combinations
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def test_a_windows_cost_is_the_whole_costs_change():
     lo, hi = np.maximum(k - modes.MODE_WINDOW, 0), np.minimum(k + modes.MODE_WINDOW + 1, len(toa))
     states = np.concatenate([X[a:b] for a, b in zip(lo, hi)])
     states = states + rng.normal(0.0, 1.0, states.shape) * np.array([1.0, 1.0, 0.01, 0.01, 1e-4, 1e-6])
-    base, moved = modes._window_costs(toa, receivers, s, schedule, None, X, lo, hi, [states])
+    (base, moved), _ = modes._window_costs(toa, receivers, s, schedule, None, X, lo, hi, [states])
     whole = late_cost(X.ravel(), toa, receivers, s)
     first = 0
     for h, (a, b) in enumerate(zip(lo, hi)):
@@ -47,20 +48,77 @@ def test_a_windows_cost_is_the_whole_costs_change():
         assert abs(change) > 1.0  # a change that could be missed
 
 
+def test_a_windows_log_determinant_is_its_hessians():
+    """The ln det that weighs a mode (:func:`modes._window_costs`' second part, Laplace's evidence) at the track's
+    end (three pings, 18 states): the same as the ln det of the Hessian of the whole cost written again with scipy's
+    densities (:func:`late_cost`, halved: the cost is −2 ln p) by central differences over the window's states, the
+    rest of the track held, to 10⁻³ (the Gauss-Newton Hessian leaves the model's second derivatives out: small at a
+    minimum); and at states moved from it, the ln det of the whole track's Hessian (the smoother's covariance's)
+    restricted to the window's rows, to 10⁻⁴ (a mode's weight to 10⁻⁴ of itself: the windows solved together
+    hardly couple, the velocity's variance across a step of :data:`modes.SEPARATION` about 10³ m²/s²)."""
+    from functools import partial
+
+    from sblsim.models.tracking.smoother_cost import ROBUST_DOF, _arrival_sums, _Problem
+    from sblsim.models.tracking.smoother_system import _dense_blocks, _normal_blocks
+
+    toa, receivers, s, schedule, robust, _ = _late_track()
+    X, m = robust.x, len(robust.x)
+    lo, hi = np.array([m - 3, 4]), np.array([m, 9])
+    rng = np.random.default_rng(7)
+    moved = np.concatenate([X[a:b] for a, b in zip(lo, hi)])
+    moved = moved + rng.normal(0.0, 1.0, moved.shape) * np.array([1.0, 1.0, 0.01, 0.01, 1e-4, 1e-6])
+    _, (at_track, at_moved) = modes._window_costs(toa, receivers, s, schedule, None, X, lo, hi, [moved])
+    a, b = lo[0], hi[0]
+    step = np.tile([1e-3, 1e-3, 1e-3, 1e-3, 1e-6, 1e-7], b - a)
+    n = len(step)
+
+    def cost(v):
+        Y = X.copy()
+        Y[a:b] += (v * step).reshape(b - a, -1)
+        return late_cost(Y.ravel(), toa, receivers, s)
+
+    E, H = np.eye(n), np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            H[i, j] = H[j, i] = (cost(E[i] + E[j]) - cost(E[i] - E[j]) - cost(E[j] - E[i]) + cost(-E[i] - E[j])) / 4
+    sign, numeric = np.linalg.slogdet(H / np.outer(step, step) / 2)
+    assert sign > 0 and abs(at_track[0] - numeric) < 1e-3, (at_track[0], numeric)
+    first = 0
+    for h, (a, b) in enumerate(zip(lo, hi)):
+        Y = X.copy()
+        Y[a:b] = moved[first:first + b - a]
+        first += b - a
+        problem = _Problem(toa, receivers, s, schedule)
+        sums = _arrival_sums(problem, Y, ROBUST_DOF, information=True)
+        D, B = _dense_blocks(problem, partial(_normal_blocks, problem, Y, sums, problem.count * Y[:-1, -1]
+                                              + problem.offset))
+        dense = np.zeros((m * 6, m * 6))
+        for r in range(m):
+            dense[6 * r:6 * r + 6, 6 * r:6 * r + 6] = D[r]
+            if r < m - 1:
+                dense[6 * r:6 * r + 6, 6 * r + 6:6 * r + 12] = B[r]
+                dense[6 * r + 6:6 * r + 12, 6 * r:6 * r + 6] = B[r].T
+        sign, whole = np.linalg.slogdet(dense[6 * a:6 * b, 6 * a:6 * b])
+        assert sign > 0 and abs(at_moved[h] - whole) < 1e-4, (h, at_moved[h], whole)
+        assert abs(at_moved[h] - at_track[h]) > 1e-3  # moved states that change it
+
+
 def test_windows_solved_together_are_each_solved_alone():
     """The hypotheses' windows, solved as one problem across :data:`modes.SEPARATION` steps, give each window's
-    states as the same window solved alone (the arrival left out, then back), to 1 mm and 1 µs (each stops where
-    a step gains less than 10⁻⁸ of its own cost, the windows together at a larger cost)."""
+    states as the same window solved alone (the arrivals left out, then back; one hypothesis of two late
+    arrivals), to 1 mm and 1 µs (each stops where a step gains less than 10⁻⁸ of its own cost, the windows together
+    at a larger cost)."""
     toa, receivers, s, schedule, robust, _ = _late_track()
     X = robust.x
     k = np.array([5, 6, 14])
-    j = np.array([np.flatnonzero(np.isfinite(toa[p]))[0] for p in k])
+    j = np.array([np.flatnonzero(np.isfinite(toa[p]))[:2] for p in k])
+    j[1:, 1] = -1  # the first a pair, the others one arrival each
     together, lo, hi, rows, at = modes._solve(toa, receivers, s, schedule, None, X, k, j, start_mean=True)
     edges = np.r_[0, np.cumsum(hi - lo)]
     for h in range(len(k)):
         a, b = lo[h], hi[h]
         alone_toa = toa[a:b].copy()
-        alone_toa[k[h] - a, j[h]] = np.nan
+        alone_toa[k[h] - a, j[h][j[h] >= 0]] = np.nan
         start = X[a:b].copy()
         start[k[h] - a] = 0.5 * (X[k[h] - 1] + X[k[h] + 1])
         window = PingSchedule.stable(b - a, s.interval, s.jitter, s.interval_drift)
@@ -87,4 +145,5 @@ def test_the_covariance_widens_only_with_late_arrivals_modelled():
         assert np.linalg.eigvalsh(extra).min() > -1e-12
     found = modes.local_modes(robust, toa, receivers, s, schedule)
     heard = np.isfinite(toa).sum(axis=1)
-    assert found.hypotheses == int(heard[heard >= 3].sum())
+    pairs = sum(len(list(combinations(range(n), 2))) for n in heard if n >= 4)
+    assert pairs > 0 and found.hypotheses == int(heard[heard >= 3].sum()) + pairs
