@@ -54,10 +54,11 @@ MODE_DISTINCT = 1.0
 #: A mode lower in cost than the track by more than this is a better start (not a spread about the track).
 MODE_BETTER = 1.0
 
-#: The late arrivals of one ping a hypothesis takes, at most: each arrival of a ping heard by dim + 1 receivers or
-#: more, and each pair of arrivals of a ping heard by dim + 2 or more (one arrival of the ping's own still redundant
-#: without the pair). Where reflections are common a ping of four or more receivers often has two late: at 10 % of
-#: 5 m, three of the eight worst pings of lake-hald-array's walk (seed 1) had (docs/tracking.md).
+#: The late arrivals of one ping a hypothesis takes, at most (1 or 2): each arrival of a ping heard by dim + 1
+#: receivers or more, and with 2 each pair of arrivals of a ping heard by dim + 2 or more (one arrival of the ping's
+#: own still redundant without the pair). Where reflections are common a ping of four or more receivers often has
+#: two late: at 10 % of 5 m, three of the eight worst pings of lake-hald-array's walk (seed 1) had
+#: (docs/tracking.md).
 MODE_LATE = 2
 
 
