@@ -52,9 +52,11 @@ DETECTION = 0.8
 MULTIPATH = 0.01
 
 
-def simulate(n_pings: int, seed: int = 0):
+def simulate(n_pings: int, seed: int = 0, multipath: tuple[float, float] | None = None):
     """The synthetic record (module docstring): times of arrival (n_pings, 8) [s], receivers (8, 2) [m], the tag's
-    positions (n_pings, 2) [m] and emission times (n_pings,) [s], and the tracker's settings it was drawn with."""
+    positions (n_pings, 2) [m] and emission times (n_pings,) [s], and the tracker's settings it was drawn with.
+    ``multipath`` (share [1], mean excess path [m]): the late arrivals drawn as the design's walk draws them
+    (:func:`~sblsim.orchestrator.design.telemetry_confirm.multipath_delays`) in place of the 1 % of 2 to 20 ms."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.orchestrator.tracks.track import SIGMA_TOA
 
@@ -68,6 +70,11 @@ def simulate(n_pings: int, seed: int = 0):
     settings = tt.TrackerSettings(sound_speed=SOUND_SPEED, sigma_toa=SIGMA_TOA, interval=INTERVAL_S)
     rng = np.random.default_rng(seed)
     toa, truth, emissions = tt.simulate_pings(receivers, n_pings, settings, rng, detection=DETECTION, path=path)
+    if multipath is not None:
+        from sblsim.orchestrator.design.telemetry_confirm import multipath_delays
+
+        return (toa + multipath_delays(toa.shape, 100.0 * multipath[0], multipath[1], SOUND_SPEED, rng), receivers,
+                truth, emissions, settings)
     late = np.isfinite(toa) & (rng.random(toa.shape) < MULTIPATH)
     toa[late] += rng.uniform(2e-3, 2e-2, int(late.sum()))
     return toa, receivers, truth, emissions, settings
