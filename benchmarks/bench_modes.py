@@ -37,10 +37,9 @@ EXCESS_M = 5.0
 
 
 def smoother(toa: np.ndarray, receivers: np.ndarray, settings) -> tuple:
-    """The robust smoother of the record with the delay term (module docstring), without the search: its track
-    (:class:`RobustTrack`), its schedule and its settings."""
+    """The robust smoother of the record with the delay term (module docstring; :func:`robust_track` without the
+    search of its other modes): its track (:class:`RobustTrack`), its schedule and its settings."""
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.models.tracking.starts import anchored_start, graduated_start
     from sblsim.orchestrator.tracks.track import SIGMA_TOA, ping_schedule, tracker_settings
 
     fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, settings.sound_speed, SIGMA_TOA)
@@ -48,10 +47,7 @@ def smoother(toa: np.ndarray, receivers: np.ndarray, settings) -> tuple:
                    delay_share=settings.delay_share, delay_mean=settings.delay_mean)
     schedule, _ = ping_schedule(toa, receivers, told)
     told = replace(told, interval=schedule.interval)
-    anchored = anchored_start((fx, fe, fused), np.isfinite(toa).sum(axis=1), told, receivers.shape[1],
-                              schedule.times())
-    starts = [anchored, graduated_start(toa, receivers, told, anchored, schedule)]
-    return tt.robust_smooth(toa, receivers, told, starts, schedule=schedule), schedule, told
+    return tt.robust_track(toa, receivers, told, (fx, fe, fused), None, schedule, modes=False), schedule, told
 
 
 def nees(x: np.ndarray, P: np.ndarray, truth: np.ndarray) -> float:

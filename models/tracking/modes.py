@@ -25,6 +25,7 @@ not couple (:data:`SEPARATION`).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -148,24 +149,24 @@ def _window_costs(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         Y = X[rows].copy()
         if states is not None:
             Y[own] = states
-        _robust_terms(problem, Y, ROBUST_DOF)
+        _, _, T, _ = _robust_terms(problem, Y, ROBUST_DOF)
         costs[c] = np.bincount(block[problem.k], (ROBUST_DOF + 1.0) * problem.logs, minlength=len(lo))
         costs[c] += np.bincount(block[:-1][inside], problem.squares[inside].sum(axis=1), minlength=len(lo))
         if len(problem.depth_at):
             costs[c] += np.bincount(block[problem.depth_at], _depth_residual(problem, Y) ** 2, minlength=len(lo))
-        logdets[c] = _window_logdets(problem, Y, own, hi - lo)
+        logdets[c] = _window_logdets(problem, Y, T, own, hi - lo)
     return costs, logdets
 
 
-def _window_logdets(problem: _Problem, Y: np.ndarray, own: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+def _window_logdets(problem: _Problem, Y: np.ndarray, T: np.ndarray, own: np.ndarray,
+                    lengths: np.ndarray) -> np.ndarray:
     """ln det of each window's Gauss-Newton Hessian (the arrivals' observed information, as the smoother's
-    covariance) over its own rows ``own`` (N,) of the windows' problem at the states Y (N, s), the rows about it
-    held: the Hessian's submatrix on those rows, block tridiagonal, its determinant the product of its block
-    Cholesky pivots' ``S_i = D_i − B_(i−1)ᵀ S_(i−1)⁻¹ B_(i−1)`` (all windows at once; ``lengths`` (B,) their
-    rows)."""
+    covariance) over its own rows ``own`` (N,) of the windows' problem at the states Y (N, s) (T (N − 1,): the
+    steps' durations there, :func:`~sblsim.models.tracking.smoother_cost._robust_terms`'), the rows about it held:
+    the Hessian's submatrix on those rows, block tridiagonal, its determinant the product of its block Cholesky
+    pivots' ``S_i = D_i − B_(i−1)ᵀ S_(i−1)⁻¹ B_(i−1)`` (all windows at once; ``lengths`` (B,) their rows)."""
     sums = _arrival_sums(problem, Y, ROBUST_DOF, information=True)
-    D, B = _dense_blocks(problem, lambda a, b: _normal_blocks(problem, Y, sums, problem.count * Y[:-1, -1]
-                                                             + problem.offset, a, b))
+    D, B = _dense_blocks(problem, partial(_normal_blocks, problem, Y, sums, T))
     rows, first = np.flatnonzero(own), np.r_[0, np.cumsum(lengths)[:-1]]
     total = np.zeros(len(lengths))
     pivot = np.broadcast_to(np.eye(problem.s), (len(lengths), problem.s, problem.s)).copy()

@@ -37,7 +37,8 @@ def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSet
 
 def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
                  fixes: tuple[np.ndarray, np.ndarray, np.ndarray], rts: np.ndarray | None,
-                 schedule: PingSchedule | None = None, depth: np.ndarray | None = None) -> RobustTrack:
+                 schedule: PingSchedule | None = None, depth: np.ndarray | None = None,
+                 modes: bool = True) -> RobustTrack:
     """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
     that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2; None: the
     fixes' two starts alone, e.g. a record too long for the EKF's ping-by-ping loop); the lowest cost kept
@@ -45,7 +46,8 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     (:func:`~sblsim.models.tracking.modes.with_modes`). ``fixes``: positions (m, dim), emission times (m,) and the
     arrivals used (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
     (:class:`~sblsim.models.tracking.schedule.PingSchedule`, default one stable interval each); ``depth`` (m,) the
-    tag's depth readings [m] (:func:`robust_smooth`).
+    tag's depth readings [m] (:func:`robust_smooth`); ``modes`` False: the smoother alone, its other modes not
+    searched (e.g. to time the search apart: benchmarks/bench_modes.py).
 
     Raises
     ------
@@ -61,7 +63,7 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
                   "graduated": graduated_start(toa, receivers, settings, anchored, schedule, depth), **starts}
     track = replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule, depth=depth),
                     start_names=tuple(starts))
-    return with_modes(track, toa, receivers, settings, schedule, depth)
+    return with_modes(track, toa, receivers, settings, schedule, depth) if modes else track
 
 
 def anchored_start(fixes: tuple[np.ndarray, np.ndarray, np.ndarray], heard: np.ndarray, settings: TrackerSettings,
