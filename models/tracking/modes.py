@@ -55,6 +55,11 @@ MODE_DISTINCT = 1.0
 #: A mode lower in cost than the track by more than this is a better start (not a spread about the track).
 MODE_BETTER = 1.0
 
+#: After the track is re-solved from its better modes, a ping's state counts as moved where a component changed by
+#: more than this many of its own standard deviations; only the hypotheses whose windows (with the rows joining them
+#: to the track) hold a moved row are searched again, the others' spread kept.
+MODE_MOVED = 0.1
+
 #: The late arrivals of one ping a hypothesis takes, at most (1 or 2): each arrival of a ping heard by dim + 1
 #: receivers or more, and with 2 each pair of arrivals of a ping heard by dim + 2 or more (one arrival of the ping's
 #: own still redundant without the pair). Where reflections are common a ping of four or more receivers often has
@@ -70,7 +75,9 @@ class Modes:
     Attributes
     ----------
     spread : ndarray, (m, dim, dim)
-        ``Σ_h w_h (p_h − p)(p_h − p)ᵀ`` of each ping's position over the modes found [m²] (0 where none).
+        ``Σ_h w_h (p_h − p)(p_h − p)ᵀ / (1 + w_h)`` of each ping's position over the modes found [m²] (0 where none).
+    by_ping : ndarray, (m, 2 W + 1, dim, dim)
+        The same sum split by the hypotheses' ping k: its share at rows k − W … k + W (W :data:`MODE_WINDOW`) [m²].
     better : ndarray, (m, s), or None
         The track with the windows of the modes lower in cost than it (by :data:`MODE_BETTER`) put in, each
         window's lowest; None where none is.
@@ -79,8 +86,30 @@ class Modes:
     """
 
     spread: np.ndarray
+    by_ping: np.ndarray
     better: np.ndarray | None
     hypotheses: int
+
+
+def _spread(by_ping: np.ndarray) -> np.ndarray:
+    """:attr:`Modes.spread` from :attr:`Modes.by_ping`: each ping's share summed onto the rows it reaches."""
+    m, width = by_ping.shape[:2]
+    spread = np.zeros((m,) + by_ping.shape[2:])
+    for a in range(width):  # offset a − W from the hypothesis's ping
+        shift = a - MODE_WINDOW
+        lo, hi = max(0, -shift), min(m, m - shift)
+        spread[lo + shift:hi + shift] += by_ping[lo:hi, a]
+    return spread
+
+
+def moved_pings(before: np.ndarray, after: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """The pings (m,) bool whose hypotheses' windows hold a state moved from ``before`` to ``after`` (m, s) by more
+    than :data:`MODE_MOVED` of its standard deviation (the diagonal of ``P`` (m, s, s)), or within
+    :data:`MODE_WINDOW` + 1 rows of one (the rows joining a window to the track)."""
+    sigma = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 1e-300, None))
+    moved = (np.abs(after - before) > MODE_MOVED * sigma).any(axis=1)
+    reach = MODE_WINDOW + 1
+    return np.convolve(moved.astype(float), np.ones(2 * reach + 1), mode="same") > 0
 
 
 def _windows(lo: np.ndarray, hi: np.ndarray, schedule: PingSchedule) -> tuple:
@@ -209,7 +238,8 @@ def _solve(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, sc
 
 
 def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
-                schedule: PingSchedule, depth: np.ndarray | None = None) -> Modes:
+                schedule: PingSchedule, depth: np.ndarray | None = None, pings: np.ndarray | None = None,
+                base: Modes | None = None) -> Modes:
     """The other local modes of the robust smoother's cost near a track, one hypothesis per arrival of each ping
     heard by dim + 1 receivers or more and per pair of arrivals of each ping heard by dim + 2 or more
     (:func:`hypotheses`; the module's method).
@@ -228,6 +258,11 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
         The steps between the rows.
     depth : ndarray, (m,), optional
         The tag's depth readings [m].
+    pings : ndarray of bool, (m,), optional
+        Only the hypotheses of these pings solved (default all), the others' share of the spread taken from ``base``
+        (:func:`moved_pings`: after the track moved there).
+    base : Modes, optional
+        An earlier search of the same record, whose :attr:`Modes.by_ping` the pings not in ``pings`` keep.
 
     Returns
     -------
@@ -236,7 +271,12 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
     X, P = track.x, track.P
     m, dim = X.shape[0], receivers.shape[1]
     k_all, j_all = hypotheses(np.isfinite(toa), dim)
-    spread = np.zeros((m, dim, dim))
+    by_ping = np.zeros((m, 2 * MODE_WINDOW + 1, dim, dim))
+    if pings is not None:
+        if base is not None:
+            by_ping[~pings] = base.by_ping[~pings]
+        chosen = pings[k_all]
+        k_all, j_all = k_all[chosen], j_all[chosen]
     better_cost = np.zeros(m)
     better = X.copy()
     solved = 0
@@ -271,14 +311,15 @@ def local_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, sett
                 kept.setdefault(kk, []).append(here)
                 w = np.exp(-0.5 * (delta[h] + width[h]))
                 s = shift[window]
-                spread[rows[window]] += (w / (1.0 + w)) * np.einsum("ki,kj->kij", s, s)
-    return Modes(spread, better if (better_cost < 0).any() else None, solved)
+                by_ping[kk, rows[window] - kk + MODE_WINDOW] += (w / (1.0 + w)) * np.einsum("ki,kj->kij", s, s)
+    return Modes(_spread(by_ping), by_ping, better if (better_cost < 0).any() else None, solved)
 
 
 def with_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
                schedule: PingSchedule, depth: np.ndarray | None = None) -> RobustTrack:
     """The track re-solved from its better local modes where it has any (kept where its cost is lower; once), and
-    its position covariance widened by the spread of its other modes (:func:`local_modes`).
+    its position covariance widened by the spread of its other modes (:func:`local_modes`; after a re-solve searched
+    again only where the track moved, :func:`moved_pings`).
 
     Parameters
     ----------
@@ -308,13 +349,14 @@ def with_modes(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, setti
         again = robust_smooth(toa, receivers, settings, [track.x, modes.better], schedule=schedule, depth=depth,
                               student_start=False)
         if again.cost < track.cost:
+            moved = moved_pings(track.x, again.x, again.P)
             track = replace(again, start=track.start, start_names=track.start_names)
-            modes = local_modes(track, toa, receivers, settings, schedule, depth)
+            modes = local_modes(track, toa, receivers, settings, schedule, depth, pings=moved, base=modes)
     P = track.P.copy()
     dim = receivers.shape[1]
     P[:, :dim, :dim] += modes.spread
     return replace(track, P=P)
 
 
-__all__ = ["MODE_BATCH", "MODE_BETTER", "MODE_DISTINCT", "MODE_ITERATIONS", "MODE_LATE", "MODE_WINDOW", "Modes",
-           "SEPARATION", "hypotheses", "local_modes", "with_modes"]
+__all__ = ["MODE_BATCH", "MODE_BETTER", "MODE_DISTINCT", "MODE_ITERATIONS", "MODE_LATE", "MODE_MOVED", "MODE_WINDOW",
+           "Modes", "SEPARATION", "hypotheses", "local_modes", "moved_pings", "with_modes"]

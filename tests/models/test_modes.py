@@ -11,8 +11,10 @@ import numpy as np
 
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking import modes
+from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.schedule import PingSchedule
-from tests.models.test_toa_smoother import late_cost, small_problem, start_of
+from tests.models.test_toa_smoother import late_arrivals, late_cost, small_problem, start_of
+from tests.orchestrator.test_tracking_variants import RECEIVERS
 
 
 def _late_track(seed: int = 2, pings: int = 24):
@@ -147,3 +149,39 @@ def test_the_covariance_widens_only_with_late_arrivals_modelled():
     heard = np.isfinite(toa).sum(axis=1)
     pairs = sum(len(list(combinations(range(n), 2))) for n in heard if n >= 4)
     assert pairs > 0 and found.hypotheses == int(heard[heard >= 3].sum()) + pairs
+
+
+def _random_interval_track(seed: int = 5):
+    """A tag at a random burst interval U(20, 40) s among 8 receivers, 10 % of its arrivals late, the robust smoother
+    told (its other modes of weight: each ping placed nearly alone by its own arrivals)."""
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=30.0, acceleration_psd=1e-5)
+    rng = np.random.default_rng(seed)
+    toa, _, _ = tt.simulate_pings(RECEIVERS, 40, s, rng, speed=0.05, detection=0.5, ping_type="rbi",
+                                  burst_interval=(20.0, 40.0))
+    toa = late_arrivals(toa, rng, 0.1)
+    schedule = ps.build_schedule(toa, "rbi", s.interval, s.jitter, s.interval_drift,
+                                 ps.crossing_time(RECEIVERS, s.sound_speed), (20.0, 40.0))
+    fx, fe, _, fu, _ = tt.fix_pings(toa, RECEIVERS, s.sound_speed, s.sigma_toa)
+    s = replace(s, delay_share=0.1, delay_mean=2e-3)
+    return toa, s, schedule, tt.robust_track(toa, RECEIVERS, s, (fx, fe, fu), None, schedule, modes=False)
+
+
+def test_a_search_of_some_pings_keeps_the_others_share():
+    """The spread split by the hypotheses' ping: the pings searched in two halves, the second keeping the first's
+    share, sum to the whole search's spread (to 1e-6 of it: the windows solved together hardly couple); after a
+    re-solve only the pings within the window (and its joining row) of a state moved by more than
+    :data:`MODE_MOVED` σ are searched again (counted here from the moved rows by hand)."""
+    toa, s, schedule, robust = _random_interval_track()
+    whole = modes.local_modes(robust, toa, RECEIVERS, s, schedule)
+    assert (np.abs(whole.spread).max(axis=(1, 2)) > 1e-3).sum() >= 2 and whole.better is not None
+    first = np.arange(len(toa)) < len(toa) // 2
+    half = modes.local_modes(robust, toa, RECEIVERS, s, schedule, pings=first)
+    both = modes.local_modes(robust, toa, RECEIVERS, s, schedule, pings=~first, base=half)
+    assert np.allclose(both.spread, whole.spread, rtol=0.0, atol=1e-6 * np.abs(whole.spread).max())
+    assert not half.by_ping[~first].any() and half.hypotheses + both.hypotheses == whole.hypotheses
+    after = robust.x.copy()
+    after[10, 4] += 0.2 * np.sqrt(robust.P[10, 4, 4])  # ping 10's emission time moved by 0.2 σ, ping 3's x by 0.05
+    after[3, 0] += 0.05 * np.sqrt(robust.P[3, 0, 0])
+    reach = modes.MODE_WINDOW + 1
+    assert np.array_equal(np.flatnonzero(modes.moved_pings(robust.x, after, robust.P)),
+                          np.arange(10 - reach, 10 + reach + 1))
