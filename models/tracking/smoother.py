@@ -264,7 +264,7 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     problem.z = problem.J = problem.rows = None
     P = lag = None
     if covariance:
-        blocks = partial(_normal_blocks, problem, X, sums, problem.count * X[:-1, -1] + problem.offset)
+        blocks = partial(_normal_blocks, problem, X, sums, problem.durations(X))
         P, lag = _block_covariance(*_dense_blocks(problem, blocks))
         if settings.survey_sigma is not None:
             z, Jz = _arrival_jacobians(problem, X)

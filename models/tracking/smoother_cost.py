@@ -115,6 +115,13 @@ class _Problem:
                                        settings.delay_mean / settings.sigma_toa)
         return self._delay
 
+    def durations(self, X: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The steps' durations ``n_k Δ_k + o_k`` [s] (m − 1,) at the states X (m, s) (their intervals Δ the last
+        column), into ``out`` where given."""
+        T = np.multiply(self.count, X[:-1, -1], out=out)
+        T += self.offset
+        return T
+
     def chunks(self) -> list[tuple]:
         """The chunks of pings in order, each ``(lo, hi, a0, a1, S)``: the pings ``lo:hi``, their arrivals
         ``a0:a1``, and ``S`` (hi − lo, a1 − a0), sparse, whose product with the arrivals' values sums them per ping
@@ -295,8 +302,7 @@ def _robust_terms(problem: _Problem, X: np.ndarray, dof: float, into: tuple | No
         sums, e, T = np.empty((P.m, cols * (cols + 1) // 2 + cols)), np.empty((P.m - 1, P.s)), np.empty(P.m - 1)
     else:
         sums, e, T = into
-    np.multiply(P.count, X[:-1, -1], out=T)
-    T += P.offset
+    P.durations(X, T)
     for chunk in P.chunks():
         _arrival_chunk(P, X, dof, chunk, sums)
         _process_residuals(P, X, T, e, chunk[0], min(chunk[1], P.m - 1))
@@ -319,8 +325,7 @@ def _trial_cost(problem: _Problem, X: np.ndarray, dof: float, into: tuple) -> fl
     P = problem
     _buffers(P)
     _, e, T = into
-    np.multiply(P.count, X[:-1, -1], out=T)
-    T += P.offset
+    P.durations(X, T)
     for chunk in P.chunks():
         lo, hi, a0, a1, _ = chunk
         z, _ = _arrivals(P, X, lo, hi, a0, a1, keep=True)

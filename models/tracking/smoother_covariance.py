@@ -151,7 +151,7 @@ def _survey_share(problem: _Problem, X: np.ndarray, dof: float, survey: np.ndarr
     """:func:`_survey_covariance` at the states X (its Hessian from the arrivals' observed information)."""
     z, Jz = _arrival_jacobians(problem, X)
     sums = _arrival_sums(problem, X, dof, information=True)
-    D, B = _normal_blocks(problem, X, sums, problem.count * X[:-1, -1] + problem.offset)
+    D, B = _normal_blocks(problem, X, sums, problem.durations(X))
     return _survey_covariance(problem, D, B, _information(problem, z, dof), Jz, survey)
 
 
