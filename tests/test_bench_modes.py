@@ -1,6 +1,6 @@
 """The modes benchmark (``bench_modes.py``), run small: its hypotheses are the arrivals and their pairs counted
-again, its NEES the track's against the simulated truth computed again, its ratios its own times', and a bad
-argument is one line, exit 2."""
+again, its NEES the track's against the truth simulated again (the record drawn again from its seed), its ratios
+its own times', and a bad argument is one line, exit 2."""
 
 import subprocess
 import sys
@@ -13,15 +13,18 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 import bench_modes  # noqa: E402
+import bench_tracking_scale  # noqa: E402
 
 
 def test_the_searches_count_their_hypotheses_and_their_nees_is_the_tracks():
     r = bench_modes.measure(100, seed=2)
+    toa, _, truth, _, _ = bench_tracking_scale.simulate(100, 2, (bench_modes.SHARE, bench_modes.EXCESS_M))
+    assert np.array_equal(r["toa"], toa, equal_nan=True) and np.array_equal(r["truth"], truth)
     heard = np.isfinite(r["toa"]).sum(axis=1)
     singles = int(heard[heard >= 3].sum())
     pairs = sum(len(list(combinations(range(n), 2))) for n in heard if n >= 4)
     assert [s["hypotheses"] for s in r["searches"]] == [singles, singles + pairs] and pairs > 0
-    x, P, truth = r["track"].x[:, :2], r["track"].P[:, :2, :2], r["truth"]
+    x, P = r["track"].x[:, :2], r["track"].P[:, :2, :2]
     for s in r["searches"]:
         C = P + r["spread"][s["late"]]
         e = x - truth
