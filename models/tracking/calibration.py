@@ -186,7 +186,7 @@ class Calibration:
 
 def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, batches: int = BATCHES,
                           max_pings: int = BATCH_PINGS,
-                          bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> Calibration:
+                          bounds: tuple[float, float] = SOUND_SPEED_RANGE, strict: bool = True) -> Calibration:
     """The sound speed calibrated from the pings: the median of the joint robust fits
     (:func:`calibrate_sound_speed_robust`) of ``batches`` consecutive stretches of the record, each of at most
     ``max_pings`` pings.
@@ -213,6 +213,9 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
         Most pings of a batch's fit.
     bounds : (float, float)
         The speeds allowed [m/s].
+    strict : bool
+        False: returned whatever its standard error (for a caller that combines a weak calibration with a prior,
+        :func:`~sblsim.models.tracking.sound_speed.combine_speeds`).
 
     Returns
     -------
@@ -221,7 +224,8 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
     Raises
     ------
     ModelError
-        Their standard error exceeds :data:`MAX_SIGMA` (the array does not determine the speed: give it), or, where
+        ``strict`` and their standard error exceeds :data:`MAX_SIGMA` (the array does not determine the speed: give
+        it), or, where
         fewer than 3 stretches can be fitted (a short record: one joint fit of it all is returned then, ``batches``
         empty), that fit fails.
     """
@@ -240,7 +244,7 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
         return Calibration(c, sigma, used, ())
     sigma = float(1.2533 * np.std(fitted, ddof=1) / np.sqrt(len(fitted)))
     c = float(np.median(fitted))
-    if sigma > MAX_SIGMA:
+    if strict and sigma > MAX_SIGMA:
         raise ModelError(f"sound speed calibration: the stretches of the record give {np.min(fitted):.1f} to "
                          f"{np.max(fitted):.1f} m/s (standard error {sigma:.2g} m/s, allowed at most {MAX_SIGMA:g}): "
                          "the array does not determine it (give the sound speed)")

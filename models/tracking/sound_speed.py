@@ -11,7 +11,9 @@ array cannot determine it.
   from the reference.
 * The **fallback** where the calibration finds the array cannot determine the speed: the TEOS-10 speed of sound
   (IOC, SCOR and IAPSO, *The international thermodynamic equation of seawater – 2010*, Manual and Guides 56,
-  UNESCO 2010; via ``gsw``) of a given temperature and salinity at the surface, else :data:`DEFAULT_SOUND_SPEED`.
+  UNESCO 2010; via ``gsw``) of a given temperature and salinity at the surface, else :data:`DEFAULT_SOUND_SPEED`;
+  with its standard deviation (:func:`fallback_prior`), so that a calibration the array determines only weakly is
+  combined with it rather than thrown away (:func:`combine_speeds`).
 
 Units: seconds [s], metres per second [m/s], degrees Celsius [°C], grams per kilogram [g/kg].
 """
@@ -30,6 +32,11 @@ DEFAULT_SOUND_SPEED = 1500.0
 #: The water temperatures [°C] and salinities [g/kg] the fallback takes.
 TEMPERATURE_RANGE = (-2.0, 40.0)
 SALINITY_RANGE = (0.0, 42.0)
+#: The standard deviations [°C], [g/kg] taken for a given temperature and salinity in the fallback's spread
+#: (:func:`fallback_prior`): a surface reading or a season's mean stands for the water the pings crossed to about
+#: this (a stated assumption).
+FALLBACK_TEMPERATURE_SIGMA = 1.0
+FALLBACK_SALINITY_SIGMA = 1.0
 
 
 def emission_estimates(toa: np.ndarray, fix_emissions: np.ndarray) -> np.ndarray:
@@ -119,10 +126,58 @@ def fallback_sound_speed(temperature: float | None = None, salinity: float | Non
                                            ("salinity", salinity, SALINITY_RANGE, "g/kg")):
         if not (np.isfinite(value) and low <= value <= high):
             raise ModelError(f"{name}: {value!r} {unit} is not allowed; allowed: [{low:g}, {high:g}] {unit}")
-    conservative = gsw.CT_from_t(salinity, temperature, 0.0)
-    c = float(gsw.sound_speed(salinity, conservative, 0.0))
-    return c, f"TEOS-10 at {temperature:g} °C and {salinity:g} g/kg"
+    return float(_teos10(temperature, salinity)), f"TEOS-10 at {temperature:g} °C and {salinity:g} g/kg"
 
 
-__all__ = ["DEFAULT_SOUND_SPEED", "SALINITY_RANGE", "TEMPERATURE_RANGE", "emission_estimates", "fallback_sound_speed",
+def _teos10(temperature: np.ndarray, salinity: np.ndarray) -> np.ndarray:
+    """TEOS-10's speed of sound [m/s] at the surface (0 dbar) at in-situ ``temperature`` [°C] and absolute
+    ``salinity`` [g/kg]."""
+    return np.asarray(gsw.sound_speed(salinity, gsw.CT_from_t(salinity, temperature, 0.0), 0.0), float)
+
+
+def fallback_prior(temperature: float | None = None, salinity: float | None = None) -> tuple[float, float, str]:
+    """The fallback speed (:func:`fallback_sound_speed`) with its standard deviation: where a temperature and a
+    salinity are given, TEOS-10's change over ±:data:`FALLBACK_TEMPERATURE_SIGMA` and
+    ±:data:`FALLBACK_SALINITY_SIGMA` (central differences, in quadrature); else the spread of the speeds TEOS-10
+    gives at the surface over :data:`TEMPERATURE_RANGE` × :data:`SALINITY_RANGE` taken as a uniform's,
+    (max − min) / √12 (51 m/s: nothing is known of the water but that it is water).
+
+    Returns
+    -------
+    tuple
+        The speed [m/s], its standard deviation [m/s] and its source in words.
+
+    Raises
+    ------
+    ModelError
+        As :func:`fallback_sound_speed`.
+    """
+    c, words = fallback_sound_speed(temperature, salinity)
+    if temperature is None:
+        t = np.linspace(*TEMPERATURE_RANGE, 43)
+        speeds = _teos10(*np.meshgrid(t, np.linspace(*SALINITY_RANGE, 43)))
+        return c, float((speeds.max() - speeds.min()) / np.sqrt(12.0)), words
+    dt, ds = FALLBACK_TEMPERATURE_SIGMA, FALLBACK_SALINITY_SIGMA
+    t, s = np.array([temperature + dt, temperature - dt]), np.array([salinity + ds, max(salinity - ds, 0.0)])
+    along_t = np.diff(_teos10(t, np.full(2, salinity)))[0] / (t[1] - t[0]) * dt
+    along_s = np.diff(_teos10(np.full(2, temperature), s))[0] / (s[1] - s[0]) * ds
+    return c, float(np.hypot(along_t, along_s)), words
+
+
+def combine_speeds(c: float, sigma: float, prior: float, prior_sigma: float) -> tuple[float, float]:
+    """Two independent estimates of one sound speed, each with its standard deviation [m/s], combined by inverse
+    variance: the posterior mean and standard deviation of a Gaussian prior (``prior``, ``prior_sigma``) updated by
+    a Gaussian estimate (``c``, ``sigma``; Gelman et al., *Bayesian Data Analysis*, 3rd ed., CRC 2013, § 2.5).
+
+    Returns
+    -------
+    tuple of float
+        The speed [m/s] and its standard deviation [m/s].
+    """
+    w, w0 = 1.0 / sigma**2, 1.0 / prior_sigma**2
+    return float((w * c + w0 * prior) / (w + w0)), float(1.0 / np.sqrt(w + w0))
+
+
+__all__ = ["DEFAULT_SOUND_SPEED", "FALLBACK_SALINITY_SIGMA", "FALLBACK_TEMPERATURE_SIGMA", "SALINITY_RANGE",
+           "TEMPERATURE_RANGE", "combine_speeds", "emission_estimates", "fallback_prior", "fallback_sound_speed",
            "rescale_to_reference"]

@@ -794,6 +794,12 @@ def _main_toa(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: the pings do not determine the sound speed ({c['calibration']}); taken: "
               f"{c['method']} (every range scales with it: give --sound-speed, --sound-speed-file or --temperature "
               "with --salinity)", file=sys.stderr)
+    elif c["source"] == "calibrated with the fallback's prior":
+        print(f"sblsim: warning: the pings determine the sound speed only to {c['calibrated_sigma_m_s']:.2g} m/s "
+              f"({c['calibrated_m_s']:.1f} m/s); combined with {c['prior']} (± {c['prior_sigma_m_s']:.2g} m/s): "
+              f"{c['sound_speed_m_s']:.1f} ± {c['sigma_m_s']:.2g} m/s, the two {c['disagreement_sigmas']:.1f} σ apart "
+              "(every range scales with it: give --sound-speed, --sound-speed-file or --temperature with --salinity)",
+              file=sys.stderr)
     if c.get("pings_outside_series"):
         print(f"sblsim: warning: {c['pings_outside_series']} of {s['pings']} pings lie outside the sound-speed "
               f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "

@@ -234,12 +234,14 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
     whose median is the reference speed and to which each ping's arrivals are rescaled
     (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`); else calibrated from the pings
-    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`), and where the array cannot determine it,
-    the fallback (:func:`~sblsim.models.tracking.sound_speed.fallback_sound_speed`: ``temperature`` [°C] and
-    ``salinity`` [g/kg], else the stated default). Returns ``toa`` (m, n) [s], the speed [m/s] and what was done
-    (``summary.json``'s ``sound_speed``)."""
+    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); where its standard error is above
+    :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` (the array determines it only weakly), combined by inverse
+    variance with the fallback and its spread (:func:`~sblsim.models.tracking.sound_speed.fallback_prior`:
+    ``temperature`` [°C] and ``salinity`` [g/kg], else the stated default; a calibration 5.6 m/s uncertain is far
+    better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone.
+    Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.models.tracking.calibration import calibrate_sound_speed
+    from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
 
     fallback = None if temperature is None and salinity is None else ss.fallback_sound_speed(temperature, salinity)
     if sound_speed is not None:
@@ -266,12 +268,12 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                            if np.isfinite(speeds).any() else None,
                            "pings_outside_series": int(outside.sum()),
                            "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
+    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity)
     try:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA)
+        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False)
     except ModelError as exc:
-        c, words = fallback or ss.fallback_sound_speed()
-        return toa, c, {"sound_speed_m_s": c, "source": "fallback", "method": words,
-                        "calibration": str(exc)}
+        return toa, prior, {"sound_speed_m_s": prior, "source": "fallback", "method": words,
+                            "sigma_m_s": prior_sigma, "calibration": str(exc)}
     speed = {"sound_speed_m_s": calibration.c, "source": "calibrated",
              "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits"
              if calibration.batches else "one joint soft-L1 fit (a record too short for stretches)",
@@ -279,7 +281,13 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
              "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
     if fallback is not None:
         speed["fallback_m_s"], speed["fallback"] = fallback
-    return toa, calibration.c, speed
+    if calibration.sigma > MAX_SIGMA:  # weakly determined: the fallback's prior weighs in
+        c, sigma = ss.combine_speeds(calibration.c, calibration.sigma, prior, prior_sigma)
+        speed |= {"sound_speed_m_s": c, "source": "calibrated with the fallback's prior", "sigma_m_s": sigma,
+                  "calibrated_m_s": calibration.c, "calibrated_sigma_m_s": calibration.sigma, "prior_m_s": prior,
+                  "prior_sigma_m_s": prior_sigma, "prior": words,
+                  "disagreement_sigmas": abs(calibration.c - prior) / float(np.hypot(calibration.sigma, prior_sigma))}
+    return toa, speed["sound_speed_m_s"], speed
 
 
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,

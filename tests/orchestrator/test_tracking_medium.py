@@ -120,6 +120,33 @@ def test_where_the_pings_cannot_give_the_speed_the_fallback_is_stated(tmp_path, 
     assert speed["sound_speed_m_s"] == ss.DEFAULT_SOUND_SPEED and "1500 m/s" in capsys.readouterr().err
 
 
+def test_the_fallback_has_a_spread_and_a_weak_calibration_is_combined_with_it():
+    """The fallback's standard deviation: without a temperature the spread of TEOS-10's surface speeds over the
+    temperatures and salinities allowed as a uniform's, its extremes at the range's corners (computed with gsw
+    directly, and no grid point outside them); with 20 °C and 0 g/kg, TEOS-10's change over 1 °C and 1 g/kg in
+    quadrature. Two estimates combined: the mean and standard deviation of their normalised product, integrated
+    numerically on a grid."""
+    import gsw
+
+    def speed(t, s):
+        return gsw.sound_speed(s, gsw.CT_from_t(s, t, 0.0), 0.0)
+
+    c, sigma, words = ss.fallback_prior()
+    (t0, t1), (s0, s1) = ss.TEMPERATURE_RANGE, ss.SALINITY_RANGE
+    low, high = speed(t0, s0), speed(t1, s1)
+    grid = speed(*np.meshgrid(np.linspace(t0, t1, 31), np.linspace(s0, s1, 31)))
+    assert c == ss.DEFAULT_SOUND_SPEED and grid.min() >= low - 1e-9 and grid.max() <= high + 1e-9
+    assert sigma == pytest.approx((high - low) / np.sqrt(12.0), rel=1e-9) and "1500" in words
+    c, sigma, _ = ss.fallback_prior(20.0, 0.0)
+    expected = np.hypot((speed(21.0, 0.0) - speed(19.0, 0.0)) / 2, speed(20.0, 1.0) - speed(20.0, 0.0))
+    assert abs(c - 1482.35) <= 0.5 and sigma == pytest.approx(expected, rel=1e-9)
+    x = np.linspace(1300.0, 1600.0, 600001)
+    density = np.exp(-0.5 * ((x - 1417.7) / 5.6) ** 2 - 0.5 * ((x - 1500.0) / 51.4) ** 2)
+    mean = np.sum(x * density) / np.sum(density)
+    sd = np.sqrt(np.sum((x - mean) ** 2 * density) / np.sum(density))
+    assert ss.combine_speeds(1417.7, 5.6, 1500.0, 51.4) == pytest.approx((mean, sd), rel=1e-7)
+
+
 def test_a_stationary_tag_is_one_position_within_its_covariance(tmp_path):
     """A tag that does not move (speed 0, no process noise), 300 pings: one position for every row, within 3.5 of
     its own sigmas of the truth (χ²(2) at 0.998), and closer than the single-ping fixes' median error."""
