@@ -133,14 +133,16 @@ def test_a_random_interval_on_the_thin_array_combines_its_weak_calibration_with_
     off: the track's median error 5.8 m); combined with that default's spread (51 m/s) it stays within 3 of its
     standard errors of the full array's 1,416.9 m/s, the console says so in one line, and the median error is below
     1.5 m (measured 1.08 m)."""
+    import json
+
     from sblsim.orchestrator.cli import main
 
     toa = read_toa(DATA / "toa.txt").toa
     path = lake_hald(tmp_path, "rbi", variants.random_interval_pings(toa, 20.0, 40.0, seed=1))
     out = tmp_path / "out"
     assert main(["replay", str(path), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"), "--truth",
-                 str(DATA / "gps.txt"), "--receivers-kept", "H2,H4,H6,H7,H11,H12,H17,H23", "--smooth", "--out", str(out)]) == 0
-    import json
+                 str(DATA / "gps.txt"), "--receivers-kept", "H2,H4,H6,H7,H11,H12,H17,H23", "--smooth", "--out",
+                 str(out)]) == 0
 
     summary = json.loads((out / "summary.json").read_text())
     speed = summary["sound_speed"]
