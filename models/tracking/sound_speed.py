@@ -20,6 +20,8 @@ Units: seconds [s], metres per second [m/s], degrees Celsius [°C], grams per ki
 
 from __future__ import annotations
 
+from functools import cache
+
 import gsw
 import numpy as np
 
@@ -135,6 +137,15 @@ def _teos10(temperature: np.ndarray, salinity: np.ndarray) -> np.ndarray:
     return np.asarray(gsw.sound_speed(salinity, gsw.CT_from_t(salinity, temperature, 0.0), 0.0), float)
 
 
+@cache
+def _natural_spread() -> float:
+    """The spread of TEOS-10's surface speeds over :data:`TEMPERATURE_RANGE` × :data:`SALINITY_RANGE` as a
+    uniform's, (max − min) / √12 [m/s] (:func:`fallback_prior`; computed once)."""
+    t = np.linspace(*TEMPERATURE_RANGE, 43)
+    speeds = _teos10(*np.meshgrid(t, np.linspace(*SALINITY_RANGE, 43)))
+    return float((speeds.max() - speeds.min()) / np.sqrt(12.0))
+
+
 def fallback_prior(temperature: float | None = None, salinity: float | None = None) -> tuple[float, float, str]:
     """The fallback speed (:func:`fallback_sound_speed`) with its standard deviation: where a temperature and a
     salinity are given, TEOS-10's change over ±:data:`FALLBACK_TEMPERATURE_SIGMA` and
@@ -154,9 +165,7 @@ def fallback_prior(temperature: float | None = None, salinity: float | None = No
     """
     c, words = fallback_sound_speed(temperature, salinity)
     if temperature is None:
-        t = np.linspace(*TEMPERATURE_RANGE, 43)
-        speeds = _teos10(*np.meshgrid(t, np.linspace(*SALINITY_RANGE, 43)))
-        return c, float((speeds.max() - speeds.min()) / np.sqrt(12.0)), words
+        return c, _natural_spread(), words
     dt, ds = FALLBACK_TEMPERATURE_SIGMA, FALLBACK_SALINITY_SIGMA
     t, s = np.array([temperature + dt, temperature - dt]), np.array([salinity + ds, max(salinity - ds, 0.0)])
     along_t = np.diff(_teos10(t, np.full(2, salinity)))[0] / (t[1] - t[0]) * dt

@@ -243,7 +243,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
 
-    fallback = None if temperature is None and salinity is None else ss.fallback_sound_speed(temperature, salinity)
+    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity)  # refuses a bad temperature or salinity
     if sound_speed is not None:
         return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"}
     if series_path is not None:
@@ -268,7 +268,6 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                            if np.isfinite(speeds).any() else None,
                            "pings_outside_series": int(outside.sum()),
                            "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
-    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity)
     try:
         calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False)
     except ModelError as exc:
@@ -279,8 +278,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
              if calibration.batches else "one joint soft-L1 fit (a record too short for stretches)",
              "sigma_m_s": calibration.sigma, "pings": calibration.pings,
              "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
-    if fallback is not None:
-        speed["fallback_m_s"], speed["fallback"] = fallback
+    if temperature is not None:  # both given (fallback_prior refuses one alone)
+        speed["fallback_m_s"], speed["fallback"] = prior, words
     if calibration.sigma > MAX_SIGMA:  # weakly determined: the fallback's prior weighs in
         c, sigma = ss.combine_speeds(calibration.c, calibration.sigma, prior, prior_sigma)
         speed |= {"sound_speed_m_s": c, "source": "calibrated with the fallback's prior", "sigma_m_s": sigma,
