@@ -107,7 +107,8 @@ def test_an_object_another_process_compiles_is_waited_for_and_ctrl_c_ends_the_wa
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, handler)
-    assert time.monotonic() - began < 2.0 and compiled() == []
+    # a hang guard, not a speed test: the wait ends at the signal (0.5 s in), not at a poll seconds later
+    assert time.monotonic() - began < 10.0 and compiled() == []
     waiting = threading.Thread(target=_library, args=(tmp_path, "waiting", files, cc))
     waiting.start()
     time.sleep(0.5)

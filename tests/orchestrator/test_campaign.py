@@ -660,7 +660,7 @@ def test_ctrl_c_stops_the_worker_processes_at_once(tmp_path):
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
     assert "interrupted" in stderr.splitlines()[-1], stderr
-    assert delay < 3.0, delay
+    assert delay < 10.0, delay  # a hang guard: the campaign's chunks would run on for minutes
     saved = len(chunk_files(out))
     resumed = sblsim("campaign", study_file, "--workers", "2", "--out", out, "--resume", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr

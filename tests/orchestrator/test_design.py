@@ -587,12 +587,13 @@ def test_a_design_failing_on_availability_says_so(tmp_path, capsys):
 # --------------------------------------------------------------------------- bounded effort
 
 
-def test_every_effort_key_at_its_maximum_is_refused_with_its_estimate_within_5_s(tmp_path):
-    """Every key of a design's effort at its largest: the estimate, one line, exit 2 within 5 s, nothing written;
-    ``--max-minutes`` cannot allow years; a value outside its range is refused."""
+def test_every_effort_key_at_its_maximum_is_refused_with_its_estimate_before_any_work(tmp_path):
+    """Every key of a design's effort at its largest: the estimate, one line, exit 2, nothing written;
+    ``--max-minutes`` cannot allow years; a value outside its range is refused. The estimate is days of work: a
+    refusal that came after any of it would not end within the subprocess's 60 s (a hang guard: the refusal itself
+    takes 1-5 s by the machine's load, and no test asserts how fast)."""
     import subprocess
     import sys
-    import time
 
     problem = tmp_path / "most.toml"
     problem.write_text(
@@ -605,15 +606,12 @@ def test_every_effort_key_at_its_maximum_is_refused_with_its_estimate_within_5_s
     for extra, expected in (([], r"above the bound of 60 min; give less effort"),
                             (["--max-minutes", "525960"], r"above the bound of 525960 min; give less effort"),
                             (["--max-minutes", "1e9"], r"--max-minutes: 1000000000\.0 is outside the allowed range")):
-        start = time.monotonic()
         done = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "design", str(problem), "--out",
                                str(tmp_path / "o"), *extra], capture_output=True, text=True, timeout=60)
-        took = time.monotonic() - start
         assert done.returncode == 2 and done.stdout == "" and len(done.stderr.splitlines()) == 1, done
         assert re.search(expected, done.stderr), done.stderr
         if not extra or extra[1] == "525960":
             assert "64 candidates, at most " in done.stderr and " days" in done.stderr
-        assert took < 5.0, took
     assert not (tmp_path / "o").exists()
 
 

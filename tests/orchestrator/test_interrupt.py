@@ -22,8 +22,9 @@ from pathlib import Path
 
 import pytest
 
-#: The signal's end: within this [s] of the signal (the worst measured on two busy cores: 0.6 s).
-WITHIN = 2.0
+#: The signal's end: within this [s] of the signal, where the work would run minutes more (a hang guard, not a
+#: speed test: the worst measured on two busy cores 0.6 s, on a machine 2.8 times slower not measured).
+WITHIN = 10.0
 
 
 @pytest.fixture(scope="module")
