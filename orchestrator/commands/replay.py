@@ -800,6 +800,11 @@ def _main_toa(args: argparse.Namespace) -> int:
               f"{c['sound_speed_m_s']:.1f} ± {c['sigma_m_s']:.2g} m/s, the two {c['disagreement_sigmas']:.1f} σ apart "
               "(every range scales with it: give --sound-speed, --sound-speed-file or --temperature with --salinity)",
               file=sys.stderr)
+    d = s["depth"]
+    if d["source"].startswith("prior"):
+        print(f"sblsim: warning: the receivers do not determine the tag's depth (the fixes' depth σ is "
+              f"{d['fixes_ratio']:.2f} of their heights' scale): taken at the receivers' mean depth "
+              f"{d['depth_m']:.2f} ± {d['sigma_m']:.2g} m (give --tag-depth or a depth_m column)", file=sys.stderr)
     if c.get("pings_outside_series"):
         print(f"sblsim: warning: {c['pings_outside_series']} of {s['pings']} pings lie outside the sound-speed "
               f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "

@@ -26,6 +26,7 @@ from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.models.tracking.receivers import receiver_residuals
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
+from sblsim.orchestrator.tracks.depth import depth_term, prior_info, tag_depth, undetermined_depth
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
@@ -177,28 +178,9 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         "converged": found.converged, "history": list(found.history)}
 
 
-def tag_depth(readings: np.ndarray | None, m: int, dim: int, fixed: float | None,
-              sigma: float) -> tuple[np.ndarray | None, dict[str, Any]]:
-    """The tag's depth per ping [m] (m,) the fix and the robust smoother take as a measurement (σ ``sigma`` [m]):
-    the TOA file's ``depth_m`` column (a pressure sensor's reading per ping), else one ``fixed`` depth for every ping
-    (a tag at a known depth), else None (the depth estimated with the position where the receivers are in 3-D);
-    and what was done (``summary.json``'s ``depth``).
-
-    Raises
-    ------
-    ModelError
-        Both given, or a depth with receivers in 2-D (one line).
-    """
-    if readings is not None and fixed is not None:
-        raise ModelError("tag_depth: not with a depth_m column in the times of arrival (one depth per ping given)")
-    depth = readings if readings is not None else None if fixed is None else np.full(m, float(fixed))
-    if depth is not None and dim != 3:
-        raise ModelError("depth_m: the tag's depth needs the receivers' depths (a z_m column in the receivers file); "
-                         "allowed: receivers in 3-D")
-    if depth is None:
-        return None, {"source": "estimated with the position" if dim == 3 else "none (2-D)"}
-    return depth, {"source": "sensor (depth_m)" if readings is not None else "given (one depth)",
-                   "readings": int(np.isfinite(depth).sum()), "sigma_m": sigma}
+def _plus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """Two terms of a reported covariance summed, either None (absent)."""
+    return b if a is None else a if b is None else a + b
 
 
 def survey_sigmas(receivers, names: Sequence[str], one: float | None) -> np.ndarray | None:
@@ -298,7 +280,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
           survey_sigma: float | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as :func:`sound_speed_stage` takes
-    ``sound_speed``, ``sound_speed_path``, ``temperature`` and ``salinity``; the tag's depth as :func:`tag_depth`
+    ``sound_speed``, ``sound_speed_path``, ``temperature`` and ``salinity``; the tag's depth as
+    :func:`~sblsim.orchestrator.tracks.depth.tag_depth`
     takes ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as :func:`survey_sigmas` takes
     ``survey_sigma``; ``truth_sigma`` [m] the truth's
     own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
@@ -335,6 +318,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity)
     # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
     fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
+    prior = undetermined_depth(depth, fx, fc, fused.sum(axis=1), positions)
+    if prior is not None:  # the arrivals do not determine the depth: the fixes made again with the prior
+        depth, depth_sigma, depth_info = np.full(len(toa), prior.depth), prior.sigma, prior_info(prior)
+        fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
@@ -399,6 +386,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 extra = None if survey is None else survey_covariance(
                     toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, schedule.sliced(k0),
                     None if depth is None else depth[k0:])[:, :dim, :dim]
+                extra = _plus(extra, depth_term(depth_info, robust.P[:, :dim, :dim]))
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
@@ -411,8 +399,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
     f = np.flatnonzero(np.isfinite(fe))
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None,
-         None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f], fused[f],
-                                                           survey)[:, :dim, :dim])
+         _plus(None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f],
+                                                                 fused[f], survey)[:, :dim, :dim],
+               depth_term(depth_info, fc[f][:, :dim, :dim])))
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
     estimates = pd.concat(frames.values(), ignore_index=True)
@@ -485,4 +474,4 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
 __all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS",
            "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "drop_detections", "motion_model", "ping_schedule",
-           "sound_speed_stage", "stationary_track", "survey_sigmas", "tag_depth", "track", "tracker_settings"]
+           "sound_speed_stage", "stationary_track", "survey_sigmas", "track", "tracker_settings"]

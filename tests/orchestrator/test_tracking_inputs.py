@@ -107,3 +107,52 @@ def test_the_summary_says_the_depth_was_estimated_without_readings(tmp_path):
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["depth"] == {
         "source": "estimated with the position"}
     assert result.summary["survey_sigma_m"]["R1"] == 0.5
+
+
+
+#: 8 receivers moored 1-5 m deep over 200 x 150 m (a lake's array).
+SHALLOW = np.column_stack([R3[:, :2], -np.array([1.0, 4.5, 2.0, 5.0, 3.0, 1.5, 4.0, 2.5])])
+
+
+def _shallow_array(tmp_path: Path) -> tuple[Path, Path, Path, np.ndarray]:
+    """A tag 2 m deep crossing :data:`SHALLOW` at 0.5 m/s, a ping every 2 s for 400 s, 0.15 ms of noise: the times
+    of arrival, the receivers and the truth files, and the truth (m, 3)."""
+    rng = np.random.default_rng(1)
+    m, c = 200, 1480.0
+    t = 10.0 + 2.0 * np.arange(m)
+    heading = 0.6 + np.cumsum(0.05 * rng.normal(size=m))
+    xy = np.array([40.0, 30.0]) + np.cumsum(np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
+    truth = np.column_stack([xy, np.full(m, -2.0)])
+    toa = t[:, None] + np.linalg.norm(truth[:, None] - SHALLOW[None], axis=2) / c + 1.5e-4 * rng.normal(size=(m, 8))
+    pd.DataFrame(toa, columns=NAMES).to_csv(tmp_path / "toa.csv", index=False, float_format="%.9f")
+    pd.DataFrame({"name": NAMES, "x_m": SHALLOW[:, 0], "y_m": SHALLOW[:, 1], "z_m": SHALLOW[:, 2]}).to_csv(
+        tmp_path / "receivers.csv", index=False)
+    pd.DataFrame({"x": xy[:, 0], "y": xy[:, 1], "t": t}).to_csv(tmp_path / "truth.csv", index=False)
+    return tmp_path / "toa.csv", tmp_path / "receivers.csv", tmp_path / "truth.csv", truth
+
+
+def test_a_depth_the_receivers_do_not_determine_is_taken_with_a_prior_and_said(tmp_path, capsys):
+    """Receivers moored 1-5 m deep, a tag among their heights, no depth given: the summary and one console line say
+    the depth was taken with a prior at the receivers' mean depth (read here with pandas), no row's depth σ is below
+    the prior's, and the horizontal track is as good as with the tag's true depth given (within 10 % and 2 cm RMS)."""
+    from sblsim.orchestrator.cli import main
+
+    toa_path, receivers_path, truth_path, _ = _shallow_array(tmp_path)
+    common = ["replay", str(toa_path), "--format", "toa", "--receivers", str(receivers_path), "--truth",
+              str(truth_path), "--sound-speed", "1480", "--smooth"]
+    assert main([*common, "--out", str(tmp_path / "prior")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    said = [line for line in err if "do not determine the tag's depth" in line]
+    assert len(said) == 1 and said[0].startswith("sblsim: warning: "), err
+    summary = json.loads((tmp_path / "prior" / "summary.json").read_text())
+    depth = summary["depth"]
+    assert depth["source"] == "prior (the arrivals do not determine it)"
+    assert np.isclose(depth["depth_m"], -pd.read_csv(receivers_path)["z_m"].mean())
+    track = pd.read_csv(tmp_path / "prior" / "track.csv")
+    assert (track["sigma_z"] >= depth["sigma_m"] - 1e-9).all()
+    assert main([*common, "--tag-depth", "2", "--out", str(tmp_path / "given")]) == 0
+    assert "do not determine" not in capsys.readouterr().err
+    given = json.loads((tmp_path / "given" / "summary.json").read_text())
+    assert given["depth"]["source"] == "given (one depth)"
+    rms = {name: json.loads((tmp_path / name / "score.json").read_text())["rms_m"] for name in ("prior", "given")}
+    assert rms["prior"] <= 1.1 * rms["given"] + 0.02, rms
