@@ -14,6 +14,7 @@
   model's noise estimated by EM;
 * :mod:`~sblsim.models.tracking.quality`: every estimate checked against its own data, a lost stretch flagged;
 * :mod:`~sblsim.models.tracking.geometry`: an array that cannot position a tag refused;
+* :mod:`~sblsim.models.tracking.depth`: a tag's depth the receivers do not determine, taken with a prior;
 * :mod:`~sblsim.models.tracking.receivers`: a receiver out of line of sight named from its residuals;
 * :mod:`~sblsim.models.tracking.stationary`: a stationary tag's pings pooled into one position;
 * :mod:`~sblsim.models.tracking.simulate`: simulated pings.
