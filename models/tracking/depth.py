@@ -13,9 +13,9 @@ among those heights the tag is, and the depth is taken with a prior: one pseudo-
 mean height, with a σ of the fixes' median depth σ or the receivers' vertical extent, the larger, which the fix and
 the robust smoother take as they take a pressure sensor's reading; the depth reported is never more certain than the
 prior (:func:`at_least`). Lake Hald with its receivers at 1-5 m depths (a 2-D truth; the fixes' median depth σ
-against the extent): 0.86 over the full array, 1.35 over the authors' 8 hydrophones; simulated arrays 200 m across,
-1-5 m deep with tags at 2 m: 0.83 (a prior), with tags at 13 m: 0.24; 2-20 m deep: 0.05
-(``tests/models/test_tracking_depth.py``, docs/tracking.md).
+against the extent): 0.67 over the full array, 2.2 over the authors' 8 hydrophones; simulated arrays 200 m across,
+1-5 m deep with tags at 2 m: 0.93 (a prior), with tags at 13 m: 0.18 (and below the receivers' heights); 2-20 m
+deep: 0.05 (``tests/models/test_tracking_depth.py``, docs/tracking.md).
 """
 
 from __future__ import annotations
