@@ -90,7 +90,6 @@ def test_lake_hald_with_ten_minutes_cut_out(tmp_path):
     assert figures["wrong_ok"] == 0, figures
 
 
-@pytest.mark.slow
 def _at_depths(tmp_path: Path, seed: int = 1) -> Path:
     """Lake Hald's receivers moored at depths U(1, 5) m drawn with ``seed`` (the variants' depths)."""
     import pandas as pd
@@ -102,6 +101,7 @@ def _at_depths(tmp_path: Path, seed: int = 1) -> Path:
     return tmp_path / "hydrophones.csv"
 
 
+@pytest.mark.slow
 def test_lake_hald_with_receiver_depths_and_a_2d_truth(tmp_path):
     """The documented input a 3-D array with a 2-D truth (a traceback before): the track within 1.5 times the full
     2-D track's figures (median 0.20, RMS 0.62, 95 % 0.95 m); its bound has a row per ping. Receivers 1-5 m deep do
