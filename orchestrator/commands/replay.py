@@ -34,6 +34,7 @@ from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.tracks.depth import PRIOR_SOURCE
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
 from sblsim.orchestrator.tracks.track import DEPTH_SIGMA, ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
@@ -801,7 +802,7 @@ def _main_toa(args: argparse.Namespace) -> int:
               "(every range scales with it: give --sound-speed, --sound-speed-file or --temperature with --salinity)",
               file=sys.stderr)
     d = s["depth"]
-    if d["source"].startswith("prior"):
+    if d["source"] == PRIOR_SOURCE:
         print(f"sblsim: warning: the receivers do not determine the tag's depth (the fixes' depth σ is "
               f"{d['fixes_ratio']:.2f} of their heights' scale): taken at the receivers' mean depth "
               f"{d['depth_m']:.2f} ± {d['sigma_m']:.2g} m (give --tag-depth or a depth_m column)", file=sys.stderr)

@@ -12,6 +12,9 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.depth import DepthPrior, at_least, depth_prior
 
+#: ``summary.json``'s ``depth`` ``source`` where the depth is taken with a prior.
+PRIOR_SOURCE = "prior (the arrivals do not determine it)"
+
 
 def tag_depth(readings: np.ndarray | None, m: int, dim: int, fixed: float | None,
               sigma: float) -> tuple[np.ndarray | None, dict[str, Any]]:
@@ -63,17 +66,15 @@ def undetermined_depth(depth: np.ndarray | None, fixes: np.ndarray, fix_covarian
 
 
 def prior_info(prior: DepthPrior) -> dict[str, Any]:
-    """``summary.json``'s ``depth`` where the depth is the prior's."""
-    return {"source": "prior (the arrivals do not determine it)", "depth_m": prior.depth, "sigma_m": prior.sigma,
-            "fixes_ratio": prior.ratio, "fixes": prior.fixes}
+    """``summary.json``'s ``depth`` where the depth is the prior's (``source`` :data:`PRIOR_SOURCE`)."""
+    return {"source": PRIOR_SOURCE, "depth_m": prior.depth, "sigma_m": prior.sigma, "fixes_ratio": prior.ratio,
+            "fixes": prior.fixes}
 
 
-def depth_term(info: dict[str, Any], covariances: np.ndarray) -> np.ndarray | None:
-    """What an estimate that took the prior adds to its reported covariances (m, 3, 3) [m²]: its depth's variance
-    raised to the prior's (:func:`~sblsim.models.tracking.depth.at_least`); None where the depth is no prior's."""
-    if not info["source"].startswith("prior"):
-        return None
-    return at_least(covariances, info["sigma_m"])
+def depth_term(prior: DepthPrior | None, covariances: np.ndarray) -> np.ndarray | None:
+    """What an estimate that took ``prior`` adds to its reported covariances (m, 3, 3) [m²]: its depth's variance
+    raised to the prior's (:func:`~sblsim.models.tracking.depth.at_least`); None where no prior was taken."""
+    return None if prior is None else at_least(covariances, prior.sigma)
 
 
-__all__ = ["depth_term", "prior_info", "tag_depth", "undetermined_depth"]
+__all__ = ["PRIOR_SOURCE", "depth_term", "prior_info", "tag_depth", "undetermined_depth"]

@@ -386,7 +386,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 extra = None if survey is None else survey_covariance(
                     toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, schedule.sliced(k0),
                     None if depth is None else depth[k0:])[:, :dim, :dim]
-                extra = _plus(extra, depth_term(depth_info, robust.P[:, :dim, :dim]))
+                extra = _plus(extra, depth_term(prior, robust.P[:, :dim, :dim]))
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
@@ -401,7 +401,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None,
          _plus(None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f],
                                                                  fused[f], survey)[:, :dim, :dim],
-               depth_term(depth_info, fc[f][:, :dim, :dim])))
+               depth_term(prior, fc[f][:, :dim, :dim])))
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
     estimates = pd.concat(frames.values(), ignore_index=True)
