@@ -233,3 +233,56 @@ def test_the_anchored_start_follows_the_agreeing_fixes():
     kept = np.setdiff1d(good, [gross])
     assert np.abs(X[kept, :2] - truth[kept]).max() < 1.0 and np.abs(X[kept, 4] - emissions[kept]).max() < 1e-3
     assert tt.anchored_start((fx[:1], fe[:1], fused[:1]), heard[:1], s, 2) is None
+
+
+def test_a_splice_puts_the_track_on_the_fixes_it_disagrees_with_and_tapers_to_its_neighbours():
+    """Six pings of a simulated random-interval tag moved 60 m off the truth: :func:`splice_pings` names exactly the
+    moved pings that a fix of dim + 1 arrivals or more explains better; :func:`spliced` puts each on its fix
+    (position and emission time), moves the pings beside by the share 1 − |j − k| / (W + 1) of the fix's offset
+    (the nearer fix's where two windows meet) and leaves the rest; the smoother from the track and the splice lands
+    on the truth's own minimum."""
+    from sblsim.models.tracking import schedule as ps
+    from sblsim.models.tracking.starts import SPLICE_WINDOW, splice_pings, spliced, with_fixes_spliced
+
+    receivers = lake_hald_receivers()
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=30.0, acceleration_psd=1e-5)
+    toa, truth, emissions = tt.simulate_pings(receivers, 40, s, np.random.default_rng(3), speed=0.3, detection=0.4,
+                                              ping_type="rbi", burst_interval=(20.0, 40.0))
+    schedule = ps.build_schedule(toa, "rbi", s.interval, s.jitter, s.interval_drift,
+                                 ps.crossing_time(receivers, s.sound_speed), (20.0, 40.0))
+    fixes = tt.fix_pings(toa, receivers, s.sound_speed, s.sigma_toa)
+    fx, fe, fused = fixes[0], fixes[1], fixes[3]
+    X = np.zeros((40, 6))
+    X[:, :2], X[:, 2:4] = truth, np.gradient(truth, emissions, axis=0)
+    X[:, 4], X[:, 5] = emissions, s.interval
+    right = tt.robust_smooth(toa, receivers, s, [X], schedule=schedule)
+    off = right.x.copy()
+    stretch = np.arange(15, 21)
+    off[stretch, 0] += 60.0
+    # by hand: a fix of 3 arrivals or more, that many of them within 6.1 σ of its ping's median emission time at the
+    # fix (more than at the moved track), 5 m or more from the track
+    def agree(p):
+        e = toa - np.linalg.norm(p[:, None, :] - receivers[None], axis=2) / s.sound_speed
+        return (np.abs(e - np.nanmedian(e, axis=1)[:, None]) <= 6.1 * s.sigma_toa).sum(axis=1)
+    with np.errstate(invalid="ignore"):
+        theirs = np.where(np.isfinite(fe), agree(np.nan_to_num(fx, nan=1e9)), 0)
+        expected = np.flatnonzero((theirs >= 3) & (theirs > agree(off[:, :2]))
+                                  & (np.hypot(*(off[:, :2] - fx).T) > 5.0))
+    pings = splice_pings(off, toa, receivers, s, (fx, fe, fused))
+    assert np.array_equal(pings, expected) and set(pings) <= set(stretch) and len(pings) >= 3, (pings, expected)
+    start = spliced(off, (fx, fe, fused), pings)
+    assert np.array_equal(start[pings, :2], fx[pings]) and np.array_equal(start[pings, 4], fe[pings])
+    share, nearest = np.zeros(40), np.full(40, -1)
+    for k in pings:
+        for j in range(max(k - SPLICE_WINDOW, 0), min(k + SPLICE_WINDOW, 39) + 1):
+            if 1 - abs(j - k) / (SPLICE_WINDOW + 1) > share[j]:
+                share[j], nearest[j] = 1 - abs(j - k) / (SPLICE_WINDOW + 1), k
+    for j in np.flatnonzero(share > 0):
+        assert np.allclose(start[j, :2], off[j, :2] + share[j] * (fx[nearest[j]] - off[nearest[j], :2]))
+    untouched = share == 0
+    assert untouched.any() and np.array_equal(start[untouched], off[untouched])
+    track = tt.robust_smooth(toa, receivers, s, [off], iterations=0, schedule=schedule)  # held where it was put
+    mended = with_fixes_spliced(track, toa, receivers, s, (fx, fe, fused), schedule)
+    assert np.hypot(*(mended.x[:, :2] - right.x[:, :2]).T).max() < 0.01
+    assert mended.cost == pytest.approx(right.cost, rel=1e-6) and mended.P is not None
+    assert with_fixes_spliced(right, toa, receivers, s, (fx, fe, fused), schedule) is right
