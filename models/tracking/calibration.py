@@ -42,7 +42,8 @@ def _calibration_pings(toa: np.ndarray, dim: int, max_pings: int) -> np.ndarray:
 
 def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
                                  scale: float = ROBUST_SCALE,
-                                 bounds: tuple[float, float] = SOUND_SPEED_RANGE) -> tuple[float, float, int]:
+                                 bounds: tuple[float, float] = SOUND_SPEED_RANGE, depth: np.ndarray | None = None,
+                                 depth_sigma: float = 0.3) -> tuple[float, float, int]:
     """The sound speed, the pings' positions and their emission times fitted jointly with a robust loss (a
     calibration step).
 
@@ -56,6 +57,11 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     halving), until c moves by less than :data:`JOINT_TOLERANCE`. The search follows one continuous solution
     from the start (a global scalar search over c jumps between the local solutions of pings with late
     arrivals). The standard error is that of the weighted normal equations at the solution, reduced onto c.
+    Where the tag's depth is known (``depth``: a sensor's reading, a depth given, or a prior where the receivers do
+    not determine it), each ping's depth is one more measurement, ``z_i = −depth_i`` with standard deviation
+    ``depth_sigma``, its term ``((z_i + depth_i) / σ_depth)²`` beside the arrivals' (as :func:`fix_pings` takes it):
+    receivers a few metres apart in height otherwise leave each ping's depth free to take a mirror image about
+    them, which the speed follows.
 
     Parameters
     ----------
@@ -71,6 +77,11 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
         The soft-L1 scale [σ_toa].
     bounds : (float, float)
         The speeds allowed [m/s]; a solution outside is refused.
+    depth : ndarray, (m,), optional
+        The tag's depth per ping [m], positive down, NaN where none; needs receivers in 3-D.
+    depth_sigma : float
+        Its standard deviation [m].
+
     Returns
     -------
     c : float
@@ -84,7 +95,11 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     dim = receivers.shape[1]
     rich = _calibration_pings(toa, dim, max_pings)
     c = 0.5 * (bounds[0] + bounds[1])
-    p, te, _, _, _ = fix_pings(toa[rich], receivers, c, sigma_toa)
+    if depth is not None and (dim != 3 or np.shape(depth) != (len(toa),)):
+        raise ModelError(f"depth_m: {np.shape(depth)} depths for {len(toa)} pings at receivers in {dim}-D; allowed: "
+                         "one per ping, with the receivers' depths (z_m)")
+    reading = None if depth is None else np.asarray(depth, float)[rich]
+    p, te, _, _, _ = fix_pings(toa[rich], receivers, c, sigma_toa, depth=reading, depth_sigma=depth_sigma)
     ok = np.isfinite(p).all(axis=1) & np.isfinite(te)
     if ok.sum() < 3:
         raise ModelError("sound speed calibration: fewer than 3 pings could be fixed; give the sound speed")
@@ -92,17 +107,24 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     heard = np.isfinite(T)
     y = np.where(heard, T, 0.0)
     f = scale * sigma_toa
+    # the depth's term: (z + depth)² / σ_depth², in the normal equations' units (those of the arrivals' f² r² / f²)
+    read = np.zeros(len(T), bool) if reading is None else np.isfinite(reading[ok])
+    target = np.zeros(len(T)) if reading is None else -np.where(read, reading[ok], 0.0)
+    weight = np.where(read, (f / depth_sigma) ** 2, 0.0)
+
+    def depth_costs(p):
+        return np.where(read, ((p[:, -1] - target) / depth_sigma) ** 2, 0.0)
 
     def residuals(c, p, te):
         diff = p[:, None, :] - receivers[None]
         d = np.linalg.norm(diff, axis=2)
         return np.where(heard, y - te[:, None] - d / c, 0.0), diff, d
 
-    def cost(r):
-        return float((2 * (np.sqrt(1 + (r / f) ** 2) - 1))[heard].sum())
+    def cost(r, p):
+        return float((2 * (np.sqrt(1 + (r / f) ** 2) - 1))[heard].sum() + depth_costs(p).sum())
 
-    def ping_costs(r):
-        return np.where(heard, 2 * (np.sqrt(1 + (r / f) ** 2) - 1), 0.0).sum(axis=1)
+    def ping_costs(r, p):
+        return np.where(heard, 2 * (np.sqrt(1 + (r / f) ** 2) - 1), 0.0).sum(axis=1) + depth_costs(p)
 
     def normal(c, p, te):
         """The weighted normal equations' blocks at (c, p, te): per ping A (k, dim+1, dim+1), b (k, dim+1), the
@@ -113,8 +135,11 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
         Jp = np.concatenate([diff / (np.maximum(d, 1e-9)[..., None] * c), np.ones(d.shape + (1,))], axis=2)
         Jc = -d / c**2
         A = np.einsum("kn,kni,knj->kij", w, Jp, Jp) + 1e-18 * np.eye(dim + 1)
-        return r, A, np.einsum("kn,kni,kn->ki", w, Jp, Jc), np.einsum("kn,kni,kn->ki", w, Jp, r), \
-            float((w * Jc**2).sum()), float((w * Jc * r).sum())
+        gp = np.einsum("kn,kni,kn->ki", w, Jp, r)
+        if read.any():  # the depth's measurement of z (its row e_z)
+            A[:, dim - 1, dim - 1] += weight
+            gp[:, dim - 1] += weight * (target - p[:, -1])
+        return r, A, np.einsum("kn,kni,kn->ki", w, Jp, Jc), gp, float((w * Jc**2).sum()), float((w * Jc * r).sum())
 
     def pings_at(c, p, te):
         """Every ping's (p, t_e) fitted at the sound speed c (reweighted Gauss-Newton, each ping's own step
@@ -126,10 +151,11 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
             scale = (np.abs(dq[:, :dim]).max(axis=1) >= 1e-4).astype(float)  # moving by a tenth of a mm or more
             if not scale.any():
                 break
-            before = ping_costs(r)
+            before = ping_costs(r, p)
             for _halving in range(12):
-                r_try = residuals(c, p + scale[:, None] * dq[:, :dim], te + scale * dq[:, dim])[0]
-                worse = (ping_costs(r_try) > before) & (scale > 0)
+                p_try = p + scale[:, None] * dq[:, :dim]
+                r_try = residuals(c, p_try, te + scale * dq[:, dim])[0]
+                worse = (ping_costs(r_try, p_try) > before) & (scale > 0)
                 if not worse.any():
                     break
                 scale[worse] *= 0.5
@@ -138,7 +164,7 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
         return p, te
 
     p, te = pings_at(c, p, te)
-    current = cost(residuals(c, p, te)[0])
+    current = cost(residuals(c, p, te)[0], p)
     for _iteration in range(JOINT_ITERATIONS):
         _, A, b, gp, cc, gc = normal(c, p, te)
         Ainv_b = np.linalg.solve(A, b[..., None])[..., 0]
@@ -149,7 +175,7 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
             step = 0.5**halving
             c_try = c + step * dc
             p_try, te_try = pings_at(c_try, p + step * dq[:, :dim], te + step * dq[:, dim])
-            cost_try = cost(residuals(c_try, p_try, te_try)[0])
+            cost_try = cost(residuals(c_try, p_try, te_try)[0], p_try)
             if cost_try <= current:
                 break
         else:
@@ -186,7 +212,8 @@ class Calibration:
 
 def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, batches: int = BATCHES,
                           max_pings: int = BATCH_PINGS,
-                          bounds: tuple[float, float] = SOUND_SPEED_RANGE, strict: bool = True) -> Calibration:
+                          bounds: tuple[float, float] = SOUND_SPEED_RANGE, strict: bool = True,
+                          depth: np.ndarray | None = None, depth_sigma: float = 0.3) -> Calibration:
     """The sound speed calibrated from the pings: the median of the joint robust fits
     (:func:`calibrate_sound_speed_robust`) of ``batches`` consecutive stretches of the record, each of at most
     ``max_pings`` pings.
@@ -216,6 +243,8 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
     strict : bool
         False: returned whatever its standard error (for a caller that combines a weak calibration with a prior,
         :func:`~sblsim.models.tracking.sound_speed.combine_speeds`).
+    depth, depth_sigma
+        The tag's depth per ping (m,) [m] and its standard deviation [m], as :func:`calibrate_sound_speed_robust`.
 
     Returns
     -------
@@ -232,7 +261,9 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
     values, used = [], 0
     for rows in np.array_split(np.arange(len(toa)), max(int(batches), 3)):
         try:
-            c, _, n = calibrate_sound_speed_robust(toa[rows], receivers, sigma_toa, max_pings, bounds=bounds)
+            c, _, n = calibrate_sound_speed_robust(toa[rows], receivers, sigma_toa, max_pings, bounds=bounds,
+                                                   depth=None if depth is None else np.asarray(depth)[rows],
+                                                   depth_sigma=depth_sigma)
         except ModelError:
             values.append(np.nan)
             continue
@@ -240,7 +271,8 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
         used += n
     fitted = np.array([v for v in values if np.isfinite(v)])
     if len(fitted) < 3:  # too short a record for stretches: one joint fit of it all (raises where even that fails)
-        c, sigma, used = calibrate_sound_speed_robust(toa, receivers, sigma_toa, bounds=bounds)
+        c, sigma, used = calibrate_sound_speed_robust(toa, receivers, sigma_toa, bounds=bounds, depth=depth,
+                                                      depth_sigma=depth_sigma)
         return Calibration(c, sigma, used, ())
     sigma = float(1.2533 * np.std(fitted, ddof=1) / np.sqrt(len(fitted)))
     c = float(np.median(fitted))

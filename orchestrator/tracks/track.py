@@ -211,7 +211,8 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
 
 def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
                       series_path: Path | None = None, temperature: float | None = None,
-                      salinity: float | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
+                      salinity: float | None = None, depth: np.ndarray | None = None,
+                      depth_sigma: float = DEPTH_SIGMA) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
     given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
     whose median is the reference speed and to which each ping's arrivals are rescaled
@@ -220,7 +221,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` (the array determines it only weakly), combined by inverse
     variance with the fallback and its spread (:func:`~sblsim.models.tracking.sound_speed.fallback_prior`:
     ``temperature`` [°C] and ``salinity`` [g/kg], else the stated default; a calibration 5.6 m/s uncertain is far
-    better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone.
+    better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone. The
+    calibration takes the tag's depth per ping (``depth`` [m], NaN where none) with ``depth_sigma`` [m] where known.
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
@@ -251,7 +253,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                            "pings_outside_series": int(outside.sum()),
                            "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
     try:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False)
+        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False, depth=depth,
+                                            depth_sigma=depth_sigma)
     except ModelError as exc:
         return toa, prior, {"sound_speed_m_s": prior, "source": "fallback", "method": words,
                             "sigma_m_s": prior_sigma, "calibration": str(exc)}
@@ -315,12 +318,18 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                              "arrival")
     depth, depth_info = tag_depth(matrix.depth, len(toa), dim, fixed_depth, depth_sigma)
     survey = survey_sigmas(receivers, names, survey_sigma)
-    toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity)
+    heard_toa = toa
+    toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
+                                      depth_sigma)
     # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
     fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     prior = undetermined_depth(depth, fx, fc, fused.sum(axis=1), positions)
-    if prior is not None:  # the arrivals do not determine the depth: the fixes made again with the prior
+    if prior is not None:  # the arrivals do not determine the depth: the speed calibrated (where it was) and the
+        # fixes made again with the prior
         depth, depth_sigma, depth_info = np.full(len(toa), prior.depth), prior.sigma, prior_info(prior)
+        if speed["source"].startswith("calibrated"):
+            toa, c, speed = sound_speed_stage(heard_toa, positions, None, None, temperature, salinity, depth,
+                                              depth_sigma)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)

@@ -387,6 +387,47 @@ def test_robust_calibration_against_scipy_least_squares():
     assert abs(c - ref.x[0]) <= 0.01
 
 
+def test_robust_calibration_with_the_tag_s_depth_against_scipy_least_squares():
+    """Receivers 1-5 m deep, a tag whose depth sensor reads its depth to 0.3 m: the calibration's objective with
+    each ping's depth term, ``Σ 2 (√(1 + (r/f)²) − 1) + Σ ((z + depth) / σ_depth)²``, minimised by scipy's
+    least_squares (a callable loss: soft-L1 on the arrivals, none on the depths), gives the same sound speed; the
+    depth makes the speed better determined; a depth at receivers in 2-D, or not one per ping, is refused."""
+    from scipy.optimize import least_squares
+
+    plan = np.genfromtxt(DATA / "hydrophones.csv", delimiter=",", skip_header=1, usecols=(1, 2))
+    plan = plan[np.isfinite(plan).all(axis=1)]
+    rng = np.random.default_rng(8)
+    receivers = np.column_stack([plan, -rng.uniform(1.0, 5.0, len(plan))])
+    s = tt.TrackerSettings(sound_speed=1420.0, sigma_toa=1.5e-4, interval=2.0, jitter=1e-3, acceleration_psd=1e-4)
+    toa, truth, emissions = tt.simulate_pings(receivers, 15, s, rng, speed=0.3, detection=0.4)
+    toa = late_arrivals(toa, rng)
+    depth = -truth[:, 2] + rng.normal(scale=0.3, size=len(truth))
+    c, sigma, pings = tt.calibrate_sound_speed_robust(toa, receivers, s.sigma_toa, depth=depth, depth_sigma=0.3)
+    rows = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 6)
+    assert pings == len(rows)
+    i, j = np.nonzero(np.isfinite(toa[rows]))
+    y, k, scale = toa[rows][i, j], len(rows), tt.ROBUST_SCALE
+
+    def residuals(z):
+        p, te = z[1:1 + 3 * k].reshape(k, 3), z[1 + 3 * k:]
+        arrivals = (y - te[i] - np.linalg.norm(p[i] - receivers[j], axis=1) / z[0]) / s.sigma_toa
+        return np.concatenate([arrivals, scale * (p[:, 2] + depth[rows]) / 0.3])
+
+    def loss(z):  # soft-L1 on the arrivals' residuals, the depths' squared as they are
+        out = np.vstack([2 * (np.sqrt(1 + z) - 1), 1 / np.sqrt(1 + z), -0.5 * (1 + z) ** -1.5])
+        out[:, len(i):] = [z[len(i):], np.ones(k), np.zeros(k)]
+        return out
+
+    z0 = np.concatenate([[1425.0], truth[rows].ravel() + 0.5, emissions[rows]])
+    ref = least_squares(residuals, z0, loss=loss, f_scale=scale,
+                        x_scale=np.r_[1.0, np.full(3 * k, 0.1), np.full(k, 1e-4)], xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    assert abs(c - ref.x[0]) <= 0.01, (c, ref.x[0])
+    assert sigma < tt.calibrate_sound_speed_robust(toa, receivers, s.sigma_toa)[1]
+    for bad, where in ((depth[:-1], receivers), (depth, plan)):
+        with pytest.raises(ModelError, match="depth_m"):
+            tt.calibrate_sound_speed_robust(toa, where, s.sigma_toa, depth=bad)
+
+
 def test_score_in_3d_against_numpy():
     from sblsim.orchestrator.tracks.scoring import score
 
