@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.depth import checked_depth
 from sblsim.models.tracking.fix import FIX_ITERATIONS, fix_pings
 from sblsim.models.tracking.toa import SOUND_SPEED_RANGE
 
@@ -95,10 +96,8 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     dim = receivers.shape[1]
     rich = _calibration_pings(toa, dim, max_pings)
     c = 0.5 * (bounds[0] + bounds[1])
-    if depth is not None and (dim != 3 or np.shape(depth) != (len(toa),)):
-        raise ModelError(f"depth_m: {np.shape(depth)} depths for {len(toa)} pings at receivers in {dim}-D; allowed: "
-                         "one per ping, with the receivers' depths (z_m)")
-    reading = None if depth is None else np.asarray(depth, float)[rich]
+    depth = checked_depth(depth, len(toa), dim)
+    reading = None if depth is None else depth[rich]
     p, te, _, _, _ = fix_pings(toa[rich], receivers, c, sigma_toa, depth=reading, depth_sigma=depth_sigma)
     ok = np.isfinite(p).all(axis=1) & np.isfinite(te)
     if ok.sum() < 3:
@@ -256,13 +255,15 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
         ``strict`` and their standard error exceeds :data:`MAX_SIGMA` (the array does not determine the speed: give
         it), or, where
         fewer than 3 stretches can be fitted (a short record: one joint fit of it all is returned then, ``batches``
-        empty), that fit fails.
+        empty), that fit fails; a depth given with receivers in 2-D or not one per ping
+        (:func:`~sblsim.models.tracking.depth.checked_depth`).
     """
+    depth = checked_depth(depth, len(toa), np.shape(receivers)[1])
     values, used = [], 0
     for rows in np.array_split(np.arange(len(toa)), max(int(batches), 3)):
         try:
             c, _, n = calibrate_sound_speed_robust(toa[rows], receivers, sigma_toa, max_pings, bounds=bounds,
-                                                   depth=None if depth is None else np.asarray(depth)[rows],
+                                                   depth=None if depth is None else depth[rows],
                                                    depth_sigma=depth_sigma)
         except ModelError:
             values.append(np.nan)

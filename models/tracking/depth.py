@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sblsim.models.declarations import ModelError
+
 #: Above this ratio of the fixes' median depth σ to the receivers' vertical extent, the arrivals do not determine the
 #: depth among the receivers' heights (mirror images about them within 2 σ of each other).
 UNDETERMINED_RATIO = 0.5
@@ -126,4 +128,23 @@ def at_least(covariances: np.ndarray, sigma: float) -> np.ndarray:
     return term
 
 
-__all__ = ["MIN_FIXES", "UNDETERMINED_RATIO", "DepthPrior", "at_least", "depth_prior", "fixes_depth"]
+def checked_depth(depth: np.ndarray | None, m: int, dim: int) -> np.ndarray | None:
+    """The tag's depth per ping as the fix, the calibration and the robust smoother take it: ``depth`` as floats
+    (m,) [m], positive down, NaN where none; None where none is given.
+
+    Raises
+    ------
+    ModelError
+        A depth given with receivers in 2-D (``dim`` not 3), or not one per ping (not ``m`` of them).
+    """
+    if depth is None:
+        return None
+    depth = np.asarray(depth, float)
+    if dim != 3 or depth.shape != (m,):
+        raise ModelError(f"depth_m: {depth.shape} readings for {m} pings at receivers in {dim}-D; allowed: one per "
+                         "ping (NaN where none), with the receivers' depths (z_m)")
+    return depth
+
+
+__all__ = ["MIN_FIXES", "UNDETERMINED_RATIO", "DepthPrior", "at_least", "checked_depth", "depth_prior",
+           "fixes_depth"]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.depth import checked_depth
 from sblsim.models.tracking.toa import _evaluate_pings
 
 #: χ²(1) quantile of probability 0.999: the gate of one time of arrival.
@@ -132,11 +132,7 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     m, (n, dim) = len(toa), receivers.shape
-    if depth is not None:
-        depth = np.asarray(depth, float)
-        if dim != 3 or depth.shape != (m,):
-            raise ModelError(f"depth_m: {depth.shape} readings for {m} pings at receivers in {dim}-D; allowed: one "
-                             "per ping (NaN where none), with the receivers' depths (z_m)")
+    depth = checked_depth(depth, m, dim)
     if m <= FIX_CHUNK:
         return _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, survey_sigma)
     out = (np.empty((m, dim)), np.empty(m), np.empty((m, dim + 1, dim + 1)), np.empty((m, n), bool), np.empty(m))

@@ -20,6 +20,7 @@ from functools import partial
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.depth import checked_depth
 from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.schedule import PingSchedule
 from sblsim.models.tracking.smoother_cost import (
@@ -183,9 +184,7 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
         raise ModelError("robust smoother: no starting track")
     if schedule is None:
         schedule = PingSchedule.stable(m, settings.interval, settings.jitter, settings.interval_drift)
-    if depth is not None and (dim != 3 or np.shape(depth) != (m,)):
-        raise ModelError(f"depth_m: {np.shape(depth)} readings for {m} pings at receivers in {dim}-D; allowed: one "
-                         "per ping, with the receivers' depths (z_m)")
+    checked_depth(depth, m, dim)
     given = len(starts)
     if settings.delay_share > 0.0 and student_start:  # the Student-t's minimum one more start (the mixture's cost
         # is steep for early residuals: from a start far off, Gauss-Newton on it can stall where the Student-t's

@@ -318,7 +318,6 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                              "arrival")
     depth, depth_info = tag_depth(matrix.depth, len(toa), dim, fixed_depth, depth_sigma)
     survey = survey_sigmas(receivers, names, survey_sigma)
-    heard_toa = toa
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
                                       depth_sigma)
     # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
@@ -327,9 +326,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     if prior is not None:  # the arrivals do not determine the depth: the speed calibrated (where it was) and the
         # fixes made again with the prior
         depth, depth_sigma, depth_info = np.full(len(toa), prior.depth), prior.sigma, prior_info(prior)
-        if speed["source"].startswith("calibrated"):
-            toa, c, speed = sound_speed_stage(heard_toa, positions, None, None, temperature, salinity, depth,
-                                              depth_sigma)
+        if speed["source"].startswith("calibrated"):  # the times of arrival as they were read (none rescaled)
+            toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
