@@ -326,7 +326,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     if prior is not None:  # the arrivals do not determine the depth: the speed calibrated (where it was) and the
         # fixes made again with the prior
         depth, depth_sigma, depth_info = np.full(len(toa), prior.depth), prior.sigma, prior_info(prior)
-        if speed["source"].startswith("calibrated"):  # the times of arrival as they were read (none rescaled)
+        if sound_speed is None and sound_speed_path is None:  # calibrated from the pings (or fallen back where
+            # they could not be fitted): again with the prior; the times of arrival as read (none rescaled)
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
