@@ -28,6 +28,10 @@ GATE_ONE = 10.828
 FIX_ITERATIONS = 30
 
 
+#: A start on a receiver is moved off it by this share of the array's span on each horizontal axis.
+START_OFFSET = 0.01
+
+
 #: Pings :func:`fix_pings` fixes together: a chunk's arrays stay in the processor's cache (each ping's fix is its
 #: own, the same whatever the chunk).
 FIX_CHUNK = 8192
@@ -162,6 +166,12 @@ def _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, 
     first = np.argmin(np.where(used, toa, np.inf), axis=1)
     centroid = (used[:, :, None] * receivers[None]).sum(axis=1) / np.maximum(used.sum(axis=1), 1)[:, None]
     p = 0.5 * (receivers[first] + centroid) if guesses is None else np.array(guesses, float)
+    # a start on a receiver has no gradient (its range's derivative is 0 / 0): the first receiver heard at the
+    # centroid of those heard, a receiver at the middle of a symmetric array, started Gauss-Newton nowhere; moved off
+    # it horizontally by START_OFFSET of the array's span
+    span = max(float(np.ptp(receivers, axis=0).max()), 1.0)
+    on = (np.linalg.norm(p[:, None, :] - receivers[None], axis=-1) < 1e-9 * span).any(axis=1)
+    p[on, :2] += START_OFFSET * span
     # a depth reading: the height z = −depth one more measurement, in the arrivals' units (its row weighed by
     # σ_toa / depth_sigma), and the start at it
     height = np.where(known, -np.nan_to_num(depth) if depth is not None else 0.0, 0.0)
@@ -194,7 +204,8 @@ def _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, 
         worst = np.argmax(z2[again], axis=1)
         used[active[again], worst] = False
         active, p, te = active[again], p_a[again], te_a[again]
-    bad = ~(np.isfinite(positions).all(axis=1) & np.isfinite(emissions)) | ~valid
+    bad = ~(np.isfinite(positions).all(axis=1) & np.isfinite(emissions) & np.isfinite(covariances).all(axis=(1, 2))) \
+        | ~valid
     positions[bad], emissions[bad], chi2[bad] = np.nan, np.nan, np.nan
     return positions, emissions, covariances, used & ~bad[:, None], chi2
 
@@ -286,4 +297,4 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
     return p, te, J, res
 
 
-__all__ = ["FIX_ITERATIONS", "GATE_ONE", "Fix", "fix_pings", "single_ping_fix", "survey_fix_covariance"]
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "START_OFFSET", "Fix", "fix_pings", "single_ping_fix", "survey_fix_covariance"]

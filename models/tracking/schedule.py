@@ -130,7 +130,8 @@ def first_arrivals(toa: np.ndarray) -> np.ndarray:
 
 def first_arrival_steps(toa: np.ndarray) -> np.ndarray:
     """The steps of the rows' first arrivals [s] (m − 1,); a row nobody heard takes a share of the step across it
-    (its time interpolated by row).
+    (its time interpolated by row), and one before the first row heard or after the last the heard rows' median
+    step per row (its time extrapolated: a step of no duration would have no process noise).
 
     Raises
     ------
@@ -147,7 +148,11 @@ def first_arrival_steps(toa: np.ndarray) -> np.ndarray:
         j = heard[back[0]]
         raise ModelError(f"toa: row {k + 1}'s first arrival ({first[k]:.6f} s) is not after row {j + 1}'s "
                          f"({first[j]:.6f} s); allowed: rows of successive pings in time order")
-    times = np.interp(np.arange(len(first)), heard, first[heard])
+    rows = np.arange(len(first))
+    times = np.interp(rows, heard, first[heard])
+    per_row = float(np.median(np.diff(first[heard]) / np.diff(heard)))
+    times = np.where(rows < heard[0], first[heard[0]] - (heard[0] - rows) * per_row, times)
+    times = np.where(rows > heard[-1], first[heard[-1]] + (rows - heard[-1]) * per_row, times)
     return np.diff(times)
 
 

@@ -114,3 +114,23 @@ def test_a_long_pseudo_random_record_is_aligned_from_its_first_steps_phase(seed)
     durations, matched = ps.align_sequence(steps + rng.normal(0.0, 0.01, len(steps)), sequence, 0.17)
     assert matched.all() and len(steps) > ps.PBI_PHASE_STEPS
     assert np.allclose(durations, steps, rtol=0, atol=1e-9)
+
+
+def test_rows_nobody_heard_at_the_ends_take_the_median_step_per_row():
+    """Blank rows before the first heard row and after the last: each step the median over the heard rows of their
+    first arrivals' step per row (a step of no duration had no process noise, and a random interval's bounds refused
+    it); the steps between heard rows as before, a blank row inside sharing the step across it."""
+    toa, _, _ = pings("rbi", n=40, detection=1.0)
+    blank = toa.copy()
+    blank[[0, 1, 20, 38, 39]] = np.nan
+    first = np.nanmin(toa, axis=1)
+    heard = np.setdiff1d(np.arange(40), [0, 1, 20, 38, 39])
+    per_row = np.median(np.diff(first[heard]) / np.diff(heard))
+    steps = ps.first_arrival_steps(blank)
+    assert np.allclose(steps[[0, 1, 37, 38]], per_row, rtol=1e-12)
+    assert np.allclose(steps[[19, 20]], (first[21] - first[19]) / 2, rtol=1e-12)
+    inside = np.setdiff1d(np.arange(2, 37), [19, 20])
+    assert np.allclose(steps[inside], np.diff(first)[inside], rtol=1e-12)
+    schedule = ps.build_schedule(blank, "rbi", 30.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(),
+                                 bounds=(20.0, 40.0))
+    assert (schedule.steps() > 0).all() and 20.0 <= per_row <= 40.0

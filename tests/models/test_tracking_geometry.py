@@ -1,7 +1,7 @@
 """The tag's depth from its sensor and the receivers' survey error in the covariance (models/tracking/fix.py,
 models/tracking/smoother.py), against simulated truths: a depth reading makes a ping of dim receivers fixable and the
 track's depth right; a consider covariance makes the fixes and the track consistent with receivers surveyed to 1 m,
-where the same estimates without it are overconfident."""
+where the same estimates without it are overconfident; a fix whose start falls on a receiver."""
 
 from __future__ import annotations
 
@@ -135,3 +135,23 @@ def test_the_track_holds_the_receivers_survey_error():
             nees.extend(_nees(track.x[:, :2] - truth[k0:], track.P[:, :2, :2]))
         means[survey] = float(np.mean(nees))
     assert 1.5 <= means[1.0] <= 3.0 and means[None] >= 20.0, means
+
+
+def test_a_fix_whose_start_falls_on_a_receiver_is_the_least_squares_solution():
+    """A square with a receiver at its middle: a ping that receiver hears first starts Gauss-Newton at the middle
+    (half way from that receiver to the centroid of those heard, which is it), where its range has no gradient. The
+    fixes are scipy's least_squares solutions from the truth, with finite covariances (they were the start itself,
+    covariance NaN, and a filter started from one failed)."""
+    from scipy.optimize import least_squares
+
+    square = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 200.0], [0.0, 200.0], [100.0, 100.0]])
+    rng = np.random.default_rng(5)
+    truth = 100.0 + rng.uniform(-30.0, 30.0, (20, 2))
+    toa = 50.0 + np.linalg.norm(truth[:, None] - square[None], axis=-1) / 1480.0 + 1e-4 * rng.normal(size=(20, 5))
+    assert (np.argmin(toa, axis=1) == 4).all()  # the middle receiver heard first: the start on it
+    fx, fe, fc, fu, _ = fix_pings(toa, square, 1480.0, 1e-4, gate=np.inf)
+    for k in range(len(truth)):
+        ref = least_squares(lambda v, t=toa[k]: (t - v[2] - np.linalg.norm(v[:2] - square, axis=1) / 1480.0) / 1e-4,
+                            np.r_[truth[k], 50.0], xtol=1e-14, ftol=1e-14, gtol=1e-14).x
+        assert np.linalg.norm(fx[k] - ref[:2]) < 1e-3, (k, fx[k], ref)
+        assert np.isfinite(fc[k]).all() and fu[k].all()

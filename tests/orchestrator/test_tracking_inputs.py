@@ -156,3 +156,46 @@ def test_a_depth_the_receivers_do_not_determine_is_taken_with_a_prior_and_said(t
     assert given["depth"]["source"] == "given (one depth)"
     rms = {name: json.loads((tmp_path / name / "score.json").read_text())["rms_m"] for name in ("prior", "given")}
     assert rms["prior"] <= 1.1 * rms["given"] + 0.02, rms
+
+
+@pytest.mark.parametrize("kind", ["rbi", "sbi"])
+def test_a_record_whose_first_and_last_rows_nobody_heard_is_tracked(tmp_path, kind):
+    """Rows no receiver heard before the first heard row and after the last (a receiver left out, detections lost at
+    the ends of a record) take the heard rows' median step (a step of no duration has no process noise: the smoother
+    refused such a record with LinAlgError): the record is tracked, its heard rows as without the blank rows, and
+    the last row by the motion model alone."""
+    receivers = R3[:6, :2]
+    names = NAMES[:6]
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-3)
+    def circle(t):  # 50 m round the array's middle in an hour
+        a = 2.0 * np.pi * np.asarray(t) / 3600.0
+        return np.column_stack([100.0 + 50.0 * np.cos(a), 75.0 + 50.0 * np.sin(a)])
+
+    toa, truth, emissions = tt.simulate_pings(receivers, 60, s, np.random.default_rng(4), detection=0.9,
+                                              ping_type=kind, burst_interval=(20.0, 40.0), path=circle)
+    pd.DataFrame({"name": names, "x_m": receivers[:, 0], "y_m": receivers[:, 1]}).to_csv(tmp_path / "r.csv",
+                                                                                         index=False)
+    np.savetxt(tmp_path / "truth.txt", np.column_stack([truth, emissions]), header="x y t", comments="")
+    blank = toa.copy()
+    blank[[0, 1, -1]] = np.nan
+    rows = {}
+    for name, matrix in (("blank", blank), ("cut", blank[2:-1])):
+        pd.DataFrame(matrix, columns=names).to_csv(tmp_path / f"{name}.csv", index=False, na_rep="NA",
+                                                   float_format="%.9f")
+        rows[name] = sblsim.replay_toa(tmp_path / f"{name}.csv", receivers=tmp_path / "r.csv",
+                                       truth=tmp_path / "truth.txt", sound_speed=1480.0, ping_type=kind,
+                                       burst_interval=(20.0, 40.0) if kind == "rbi" else None,
+                                       acceleration_psd=1e-3)  # given: EM's q not moved by the blank rows' steps
+    robust = {name: r.estimates[r.estimates.estimator == "robust"].set_index("ping") for name, r in rows.items()}
+    blank_rows, cut_rows = robust["blank"], robust["cut"].rename(index=lambda k: k + 2)  # the cut's row 0 is row 2
+    assert blank_rows.index[-1] == 59 and cut_rows.index[-1] == 58  # the track runs to the last row, blank or not
+    both = cut_rows.index.intersection(blank_rows.index)
+    assert len(both) >= 50
+    e = np.hypot(blank_rows.x[both] - cut_rows.x[both], blank_rows.y[both] - cut_rows.y[both])
+    assert e.max() < 0.05, e.max()  # the blank rows add motion-model steps only
+    errors = np.hypot(blank_rows.x[both] - truth[both, 0], blank_rows.y[both] - truth[both, 1])
+    assert np.median(errors) < 0.5, np.median(errors)
+    # the last row, heard by none, held by the motion model alone: later than the one before, less certain
+    last, before = blank_rows.loc[59], blank_rows.loc[58]
+    assert last.receivers_heard == 0 and last.time > before.time, (last, before)
+    assert np.hypot(last.sigma_x, last.sigma_y) > np.hypot(before.sigma_x, before.sigma_y), (last, before)
