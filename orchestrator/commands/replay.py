@@ -801,6 +801,12 @@ def _main_toa(args: argparse.Namespace) -> int:
               f"{c['sound_speed_m_s']:.1f} ± {c['sigma_m_s']:.2g} m/s, the two {c['disagreement_sigmas']:.1f} σ apart "
               "(every range scales with it: give --sound-speed, --sound-speed-file or --temperature with --salinity)",
               file=sys.stderr)
+    if c.get("disagrees"):
+        print(f"sblsim: warning: the sound speed given, {c['sound_speed_m_s']:.1f} m/s, is "
+              f"{c['disagreement_sigmas']:.1f} σ from the pings' own calibration ({c['calibrated_m_s']:.1f} ± "
+              f"{c['calibrated_sigma_m_s']:.2g} m/s): every range scales with it, by "
+              f"{100 * abs(c['sound_speed_m_s'] / c['calibrated_m_s'] - 1):.2g} %; the track takes the speed given",
+              file=sys.stderr)
     d = s["depth"]
     if d["source"] == PRIOR_SOURCE:
         print(f"sblsim: warning: the receivers do not determine the tag's depth (the fixes' depth σ is "

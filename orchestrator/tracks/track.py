@@ -62,6 +62,12 @@ MOTIONS = ("moving", "stationary")
 DEPTH_SIGMA = 0.3
 
 
+#: A given sound speed is said to disagree with the pings where their own calibration, determined to
+#: :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` or better, lies more than this many of its standard errors
+#: from it (the speed is still the one given: a user may know the water better than a thin array does).
+SPEED_CHECK_SIGMAS = 3.0
+
+
 #: The largest share of detections removed at random.
 MAX_DROP = 0.99
 
@@ -209,6 +215,27 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
     return stationary_fix(toa, positions, c, SIGMA_TOA, start)
 
 
+def _speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.ndarray | None,
+                 depth_sigma: float) -> dict[str, Any]:
+    """A given sound speed [m/s] against the pings' own calibration
+    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`): ``calibrated_m_s``, its
+    ``calibrated_sigma_m_s`` and the two's ``disagreement_sigmas`` where the pings determine the speed (to
+    :data:`~sblsim.models.tracking.calibration.MAX_SIGMA`), ``disagrees`` where that is above
+    :data:`SPEED_CHECK_SIGMAS`; nothing where they do not."""
+    from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
+
+    try:
+        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False, depth=depth,
+                                            depth_sigma=depth_sigma)
+    except ModelError:
+        return {}
+    if not calibration.sigma <= MAX_SIGMA:
+        return {}
+    sigmas = abs(given - calibration.c) / calibration.sigma if calibration.sigma > 0 else float("inf")
+    return {"calibrated_m_s": calibration.c, "calibrated_sigma_m_s": calibration.sigma,
+            "disagreement_sigmas": sigmas, "disagrees": bool(sigmas > SPEED_CHECK_SIGMAS)}
+
+
 def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
                       series_path: Path | None = None, temperature: float | None = None,
                       salinity: float | None = None, depth: np.ndarray | None = None,
@@ -223,13 +250,15 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     ``temperature`` [°C] and ``salinity`` [g/kg], else the stated default; a calibration 5.6 m/s uncertain is far
     better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone. The
     calibration takes the tag's depth per ping (``depth`` [m], NaN where none) with ``depth_sigma`` [m] where known.
+    A given speed is checked against the pings' own calibration (:func:`_speed_check`: said, not replaced).
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
 
     prior, prior_sigma, words = ss.fallback_prior(temperature, salinity)  # refuses a bad temperature or salinity
     if sound_speed is not None:
-        return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"}
+        return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | _speed_check(
+            toa, positions, sound_speed, depth, depth_sigma)
     if series_path is not None:
         from sblsim.orchestrator.tracks.toa import read_sound_speed_series
 
@@ -481,5 +510,5 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
 
 __all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS",
-           "SCORE_KEYS", "SIGMA_TOA", "TrackOutcome", "drop_detections", "motion_model", "ping_schedule",
-           "sound_speed_stage", "stationary_track", "survey_sigmas", "track", "tracker_settings"]
+           "SCORE_KEYS", "SIGMA_TOA", "SPEED_CHECK_SIGMAS", "TrackOutcome", "drop_detections", "motion_model",
+           "ping_schedule", "sound_speed_stage", "stationary_track", "survey_sigmas", "track", "tracker_settings"]

@@ -199,3 +199,30 @@ def test_a_record_whose_first_and_last_rows_nobody_heard_is_tracked(tmp_path, ki
     last, before = blank_rows.loc[59], blank_rows.loc[58]
     assert last.receivers_heard == 0 and last.time > before.time, (last, before)
     assert np.hypot(last.sigma_x, last.sigma_y) > np.hypot(before.sigma_x, before.sigma_y), (last, before)
+
+
+def test_a_sound_speed_given_that_the_pings_contradict_is_said_and_kept(tmp_path, capsys):
+    """A tag simulated at 1,480 m/s among six receivers: given 1,480 m/s, the summary holds the pings' own
+    calibration (within 3 of its σ of the truth) and no warning; given 1,495 m/s (1 % off), one console line says the
+    two disagree by more than SPEED_CHECK_SIGMAS of the calibration's σ, and the track still takes 1,495 m/s."""
+    from sblsim.orchestrator.cli import main
+    from sblsim.orchestrator.tracks.track import SPEED_CHECK_SIGMAS
+
+    receivers = R3[:6, :2]
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-3)
+    toa, _, _ = tt.simulate_pings(receivers, 300, s, np.random.default_rng(6), speed=0.2, detection=0.9)
+    pd.DataFrame(toa, columns=NAMES[:6]).to_csv(tmp_path / "toa.csv", index=False, na_rep="NA", float_format="%.9f")
+    pd.DataFrame({"name": NAMES[:6], "x_m": receivers[:, 0], "y_m": receivers[:, 1]}).to_csv(tmp_path / "r.csv",
+                                                                                             index=False)
+    said = {}
+    for given in (1480.0, 1495.0):
+        out = tmp_path / f"c{given:.0f}"
+        assert main(["replay", str(tmp_path / "toa.csv"), "--format", "toa", "--receivers", str(tmp_path / "r.csv"),
+                     "--sound-speed", f"{given:g}", "--out", str(out)]) == 0
+        said[given] = [line for line in capsys.readouterr().err.splitlines() if "sound speed given" in line]
+        speed = json.loads((out / "summary.json").read_text())["sound_speed"]
+        assert speed["sound_speed_m_s"] == given and speed["source"] == "given"
+        assert abs(speed["calibrated_m_s"] - 1480.0) <= 3.0 * speed["calibrated_sigma_m_s"], speed
+        assert speed["disagrees"] == (abs(given - speed["calibrated_m_s"]) > SPEED_CHECK_SIGMAS *
+                                      speed["calibrated_sigma_m_s"])
+    assert said[1480.0] == [] and len(said[1495.0]) == 1 and said[1495.0][0].startswith("sblsim: warning: "), said
