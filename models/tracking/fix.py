@@ -238,6 +238,41 @@ def survey_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, pos
                         np.asarray(survey_sigma, float), receivers.shape[1])
 
 
+def speed_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, positions: np.ndarray,
+                         emissions: np.ndarray, covariances: np.ndarray, used: np.ndarray,
+                         sigma_c: float) -> np.ndarray:
+    """The sound speed's error's share of fixes' covariances, a consider covariance (Tapley, Schutz & Born,
+    *Statistical Orbit Determination*, Elsevier 2004, § 6.3): an error δc moves a fix by ``δx = C Σ_i J_iᵀ
+    (∂m_i/∂c) δc / σ_toa²`` (C its covariance, J_i the arrival's row, ``∂m_i/∂c = −ρ_i / c²`` its travel time's
+    derivative), so the term is ``σ_c² S Sᵀ`` with that S.
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        [m].
+    c, sigma_toa : float
+        The speed the fixes were made at [m/s], [s].
+    positions, emissions, covariances, used : ndarray
+        What :func:`fix_pings` returned: (m, dim) [m], (m,) [s], (m, dim + 1, dim + 1), (m, n).
+    sigma_c : float
+        The speed's standard error [m/s].
+
+    Returns
+    -------
+    ndarray, (m, dim + 1, dim + 1)
+        NaN where a ping has no fix.
+    """
+    receivers = np.asarray(receivers, float)
+    positions = np.asarray(positions, float)
+    travel, J = _evaluate_pings(receivers, c, np.nan_to_num(positions), np.zeros(len(positions)))
+    dm = -travel / c  # the travel time ρ / c differentiated by c: −ρ / c²
+    S = np.einsum("kab,knb,kn->ka", np.nan_to_num(np.asarray(covariances, float)),
+                  J * np.asarray(used, bool)[:, :, None], dm) / sigma_toa**2
+    out = float(sigma_c) ** 2 * S[:, :, None] * S[:, None, :]
+    out[~np.isfinite(positions).all(axis=1)] = np.nan
+    return out
+
+
 def _survey_term(cov: np.ndarray, J: np.ndarray, used: np.ndarray, sigma_toa: float, survey: np.ndarray,
                  dim: int) -> np.ndarray:
     """The fixes' consider covariance of the receivers' survey error (:func:`fix_pings`): ``Σ_i σ_i² S_i S_iᵀ``,
@@ -297,4 +332,5 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
     return p, te, J, res
 
 
-__all__ = ["FIX_ITERATIONS", "GATE_ONE", "START_OFFSET", "Fix", "fix_pings", "single_ping_fix", "survey_fix_covariance"]
+__all__ = ["FIX_ITERATIONS", "GATE_ONE", "START_OFFSET", "Fix", "fix_pings", "single_ping_fix", "speed_fix_covariance",
+           "survey_fix_covariance"]

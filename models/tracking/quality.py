@@ -150,7 +150,7 @@ def _distance2(e: np.ndarray, C: np.ndarray) -> np.ndarray:
 def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarray, fixes: np.ndarray,
                 fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
                 max_speed: float = MAX_SPEED, explained: np.ndarray | None = None,
-                fix_used: np.ndarray | None = None) -> Quality:
+                fix_used: np.ndarray | None = None, reported: np.ndarray | None = None) -> Quality:
     """Each estimate of a track checked against the trusted single-ping fixes, the physical speed and its own
     uncertainty (module docstring), on the horizontal position.
 
@@ -175,6 +175,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     explained, fix_used : ndarray, (m,), optional
         The arrivals that agree with the estimate and with the fix at each ping (:func:`explained`); without them a
         disagreeing fix counts against the track.
+    reported : ndarray, (m, ≥2, ≥2), optional
+        The covariances the estimates are reported with [m²], where they hold errors common to the track and its
+        fixes (the receivers' survey, the sound speed: consider terms): the own-uncertainty limit takes these (a
+        row that error leaves unplaced is not ``ok``), the fixes' gates ``covariances`` (default: ``covariances``).
 
     Returns
     -------
@@ -187,9 +191,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     fx, C = np.asarray(fixes, float)[:, :2], np.asarray(fix_covariances, float)[:, :2, :2]
     trusted = np.asarray(trusted, bool) & np.isfinite(fx).all(axis=1)
     # the estimate's own horizontal DRMS: above a trusted fix's limit (or not finite), the row is not placed
+    R = P if reported is None else np.asarray(reported, float)[:, :2, :2]
     with np.errstate(invalid="ignore"):
-        drms = np.sqrt(P[:, 0, 0] + P[:, 1, 1])
-    uncertain = ~(drms <= TRUSTED_FIX_DRMS) | ~np.isfinite(P).all(axis=(1, 2))
+        drms = np.sqrt(R[:, 0, 0] + R[:, 1, 1])
+    uncertain = ~(drms <= TRUSTED_FIX_DRMS) | ~np.isfinite(R).all(axis=(1, 2))
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
     alone = np.zeros(m, bool)  # off a trusted fix while explaining too few arrivals to position itself

@@ -1,5 +1,6 @@
 """The robust smoother's covariances: the diagonal and lag-one blocks of the inverse of its block tridiagonal Hessian by
-block cyclic reduction, and the receivers' survey error's share as a consider covariance.
+block cyclic reduction, and the receivers' survey error's and the sound speed's error's shares as consider
+covariances.
 
 References
 ----------
@@ -147,6 +148,60 @@ def survey_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerS
     return _survey_share(problem, X, dof, np.asarray(settings.survey_sigma, float))
 
 
+def _speed_covariance(problem: _Problem, D: dict, B: dict, information: np.ndarray, Jz: np.ndarray, X: np.ndarray,
+                      sigma_c: float) -> np.ndarray:
+    """The sound speed's error's share of the track's covariance (m, s, s), a consider covariance as
+    :func:`_survey_covariance`'s: an error δc, the same at every arrival, moves the whole track by
+    ``δx = −N⁻¹ (∂g/∂c) δc``, each arrival's normalised residual changing by ``∂z/∂c = ρ / (c² σ_toa)`` (ρ its
+    range at the states), so the term is ``σ_c² S S_kᵀ`` per ping with ``S = N⁻¹ u``: one banded solve."""
+    P, dim = problem, problem.dim
+    c = P.settings.sound_speed
+    rho = np.sqrt(sum((X[P.k, a] - P.r[a]) ** 2 for a in range(dim)))
+    dz = information * rho / (c * c * P.settings.sigma_toa)
+    u = np.zeros((P.m, P.s))
+    for x, col in enumerate(list(range(dim)) + [P.s - 2]):
+        u[:, col] = np.bincount(P.k, weights=dz * Jz[:, x], minlength=P.m)
+    S = _banded_solve(problem, _given_system(D, B, u), 1e-12)
+    return sigma_c**2 * S[:, :, None] * S[:, None, :]
+
+
+def speed_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, X: np.ndarray,
+                     sigma_c: float, schedule: PingSchedule | None = None, depth: np.ndarray | None = None,
+                     dof: float = ROBUST_DOF) -> np.ndarray:
+    """The sound speed's error's share of a robust track's covariance at its states (:func:`_speed_covariance`; a
+    consider covariance, Tapley, Schutz & Born 2004, § 6.3): what a speed calibrated from the pings, or a fallback,
+    leaves uncertain in every range.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        [m].
+    settings : TrackerSettings
+        The speed the track was solved at (``sound_speed`` [m/s]).
+    X : ndarray, (m, 2 dim + 2)
+        The track's states (:class:`~sblsim.models.tracking.smoother.RobustTrack` ``x``).
+    sigma_c : float
+        The speed's standard error [m/s].
+    schedule, depth, dof
+        As :func:`~sblsim.models.tracking.smoother.robust_smooth`.
+
+    Returns
+    -------
+    ndarray, (m, 2 dim + 2, 2 dim + 2)
+        [m², ...].
+    """
+    toa, X = np.asarray(toa, float), np.asarray(X, float)
+    if schedule is None:
+        schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
+    problem = _Problem(toa, np.asarray(receivers, float), settings, schedule, depth)
+    z, Jz = _arrival_jacobians(problem, X)
+    sums = _arrival_sums(problem, X, dof, information=True)
+    D, B = _normal_blocks(problem, X, sums, problem.durations(X))
+    return _speed_covariance(problem, D, B, _information(problem, z, dof), Jz, X, float(sigma_c))
+
+
 def _survey_share(problem: _Problem, X: np.ndarray, dof: float, survey: np.ndarray) -> np.ndarray:
     """:func:`_survey_covariance` at the states X (its Hessian from the arrivals' observed information)."""
     z, Jz = _arrival_jacobians(problem, X)
@@ -155,4 +210,4 @@ def _survey_share(problem: _Problem, X: np.ndarray, dof: float, survey: np.ndarr
     return _survey_covariance(problem, D, B, _information(problem, z, dof), Jz, survey)
 
 
-__all__ = ["REDUCTION_CHUNK", "survey_covariance"]
+__all__ = ["REDUCTION_CHUNK", "speed_covariance", "survey_covariance"]

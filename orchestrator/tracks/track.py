@@ -323,8 +323,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.models.tracking.fix import survey_fix_covariance
-    from sblsim.models.tracking.smoother_covariance import survey_covariance
+    from sblsim.models.tracking.fix import speed_fix_covariance, survey_fix_covariance
+    from sblsim.models.tracking.smoother_covariance import speed_covariance, survey_covariance
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
@@ -360,6 +360,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
+    # the speed's standard error where it came from the pings or a fallback (given or measured: none), a consider
+    # term of the fixes' and the robust track's covariances as reported
+    speed_sigma = speed.get("sigma_m_s") if speed["source"] not in ("given", "measured series") else None
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
@@ -386,13 +389,14 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
              restarts: np.ndarray | None = None, survey_term: np.ndarray | None = None):
         """An estimator's rows, checked against the data with its own covariance ``cov``; reported with
-        ``survey_term`` (the receivers' survey error's share) added."""
+        ``survey_term`` (the consider terms: the receivers' survey, the sound speed, the depth's prior) added, which
+        its own-uncertainty limit takes too."""
+        reported = cov if survey_term is None else cov + survey_term
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
-                                 fix_used=fix_explained[ping])
-        if survey_term is not None:
-            cov = cov + survey_term
+                                 fix_used=fix_explained[ping], reported=reported)
+        cov = reported
         with np.errstate(invalid="ignore"):
             # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0
             sigmas = {f"sigma_{a}": np.sqrt(np.where(cov[:, k, k] >= 0, cov[:, k, k], np.nan))
@@ -424,6 +428,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                     toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, schedule.sliced(k0),
                     None if depth is None else depth[k0:])[:, :dim, :dim]
                 extra = _plus(extra, depth_term(prior, robust.P[:, :dim, :dim]))
+                if speed_sigma:  # a speed calibrated or fallen back to: its error in every range
+                    extra = _plus(extra, speed_covariance(toa[k0:], positions, settings, robust.x, speed_sigma,
+                                                          schedule.sliced(k0), None if depth is None else depth[k0:]
+                                                          )[:, :dim, :dim])
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
@@ -435,10 +443,13 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
     f = np.flatnonzero(np.isfinite(fe))
-    rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None,
-         _plus(None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f],
-                                                                 fused[f], survey)[:, :dim, :dim],
-               depth_term(prior, fc[f][:, :dim, :dim])))
+    fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f],
+                                                                        fused[f], survey)[:, :dim, :dim],
+                      depth_term(prior, fc[f][:, :dim, :dim]))
+    if speed_sigma:
+        fix_extra = _plus(fix_extra, speed_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f], fused[f],
+                                                          speed_sigma)[:, :dim, :dim])
+    rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None, fix_extra)
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
     estimates = pd.concat(frames.values(), ignore_index=True)

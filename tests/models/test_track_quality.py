@@ -155,3 +155,26 @@ def test_a_covariance_that_is_not_finite_is_flagged_without_a_crash():
     quality = check(toa, truth, emissions, fx, fc, trusted, cov)
     assert np.flatnonzero(quality.uncertain).tolist() == [12, 13]
     assert np.flatnonzero(quality.quality == "flagged").tolist() == [12, 13]
+
+
+def test_the_reported_covariance_decides_the_own_uncertainty_and_the_own_one_the_fixes_gates():
+    """A consider term (an error common to the track and its fixes: the sound speed's, the survey's) reported with the
+    rows: a row whose reported DRMS is above the limit is flagged ``uncertain`` though its own covariance is small; a
+    row 8 m off its trusted fix disagrees with it under its own covariance, not under one widened by the term."""
+    toa, truth, emissions, fx, fc, fu, trusted = simulated()
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    reported = cov.copy()
+    reported[20] += np.diag([8.0**2, 7.0**2])  # DRMS 10.6 m with the term
+    k = int(np.flatnonzero(trusted)[5])
+    moved = truth.copy()
+    moved[k] += [8.0, 0.0]
+    reported[k] += 25.0 * np.eye(2)  # DRMS 7.1 m: within the limit, wide enough to take the fix in
+    plain = qa.check_track(emissions, moved, cov, fx, fc, trusted, explained=qa.explained(toa, RECEIVERS, moved, C,
+                                                                                       SIGMA),
+                           fix_used=qa.explained(toa, RECEIVERS, fx, C, SIGMA))
+    said = qa.check_track(emissions, moved, cov, fx, fc, trusted, explained=qa.explained(toa, RECEIVERS, moved, C,
+                                                                                      SIGMA),
+                          fix_used=qa.explained(toa, RECEIVERS, fx, C, SIGMA), reported=reported)
+    assert not plain.uncertain[20] and said.uncertain[20] and said.quality[20] == "flagged"
+    assert plain.fix[k] and said.fix[k]  # the gate of the fix the same
+    assert np.flatnonzero(said.uncertain).tolist() == [20]

@@ -155,3 +155,66 @@ def test_a_fix_whose_start_falls_on_a_receiver_is_the_least_squares_solution():
                             np.r_[truth[k], 50.0], xtol=1e-14, ftol=1e-14, gtol=1e-14).x
         assert np.linalg.norm(fx[k] - ref[:2]) < 1e-3, (k, fx[k], ref)
         assert np.isfinite(fc[k]).all() and fu[k].all()
+
+
+def test_the_speed_terms_are_the_estimates_sensitivity_to_the_speed():
+    """The sound speed's consider terms (fix.speed_fix_covariance, smoother_covariance.speed_covariance) against the
+    estimates' own change with the speed, by central differences of the fixes and of the robust smoother solved again
+    at c ± 0.5 m/s: σ_c² S Sᵀ with S that derivative, to 2 % of each fix's; each track ping's spread within 0.8 to
+    1.25 times the re-solves' and 10 % over the track (the consider term is the first order of a smoother whose
+    weights move with the speed)."""
+    from sblsim.models.tracking.fix import speed_fix_covariance
+    from sblsim.models.tracking.smoother import robust_smooth
+    from sblsim.models.tracking.smoother_covariance import speed_covariance
+
+    rng = np.random.default_rng(8)
+    toa, _, _ = tt.simulate_pings(R2, 60, SETTINGS, rng, speed=0.2, detection=0.9)
+    c, h, sigma_c = 1480.0, 0.5, 3.0
+    fixes = {d: fix_pings(toa, R2, c + d, 1e-4, gate=np.inf) for d in (-h, 0.0, h)}
+    fx, fe, fc, fu, _ = fixes[0.0]
+    ok = np.isfinite(fe)
+    S = (fixes[h][0] - fixes[-h][0])[ok] / (2 * h)
+    term = speed_fix_covariance(R2, c, 1e-4, fx, fe, fc, fu, sigma_c)[ok][:, :2, :2]
+    expected = sigma_c**2 * S[:, :, None] * S[:, None, :]
+    per_ping = np.trace(expected, axis1=1, axis2=2)[:, None, None]
+    assert (np.abs(term - expected) <= 0.02 * per_ping).all(), (term[:2], expected[:2])
+    track, k0 = _smoothed(toa, R2, SETTINGS)
+    at = {d: robust_smooth(toa[k0:], R2, replace(SETTINGS, sound_speed=c + d), [track.x], covariance=False,
+                           student_start=False, iterations=200).x for d in (-h, h)}
+    S = (at[h] - at[-h])[:, :2] / (2 * h)
+    term = speed_covariance(toa[k0:], R2, SETTINGS, track.x, sigma_c)[:, :2, :2]
+    ours, theirs = np.trace(term, axis1=1, axis2=2), sigma_c**2 * (S**2).sum(axis=1)
+    ratio = np.sqrt(ours / theirs)  # each ping's spread against the re-solves' (measured: 0.86 to 1.17)
+    assert theirs.max() > 1e-4 and 0.8 <= ratio.min() and ratio.max() <= 1.25, ratio
+    assert abs(np.sqrt(ours.sum() / theirs.sum()) - 1.0) <= 0.1, np.sqrt(ours.sum() / theirs.sum())
+
+
+def test_the_fixes_and_the_track_hold_the_sound_speed_error():
+    """A speed 10 m/s uncertain (each run solved at 1,480 + 10 N(0, 1) m/s, the pings simulated at 1,480 m/s, among
+    receivers 200 m apart): the fixes' 2-D NEES (30 runs) and the robust smoother's (12) in [1.5, 4.5] with the speed's
+    consider term, well above without."""
+    from sblsim.models.tracking.fix import speed_fix_covariance
+    from sblsim.models.tracking.smoother_covariance import speed_covariance
+
+    fixes, tracks = {False: [], True: []}, {False: [], True: []}
+    for seed in range(30):
+        rng = np.random.default_rng(100 + seed)
+        toa, truth, _ = tt.simulate_pings(R2, 60, SETTINGS, rng, speed=0.2, detection=0.9)
+        c = 1480.0 + 10.0 * rng.normal()
+        fx, fe, fc, fu, _ = fix_pings(toa, R2, c, 1e-4)
+        ok = np.isfinite(fe)
+        extra = speed_fix_covariance(R2, c, 1e-4, fx, fe, fc, fu, 10.0)
+        for told in (False, True):
+            C = fc + extra if told else fc
+            fixes[told].extend(_nees(fx[ok] - truth[ok], C[ok][:, :2, :2]))
+        if seed < 12:
+            settings = replace(SETTINGS, sound_speed=c)
+            track, k0 = _smoothed(toa, R2, settings)
+            extra = speed_covariance(toa[k0:], R2, settings, track.x, 10.0)
+            for told in (False, True):
+                P = track.P + extra if told else track.P
+                tracks[told].extend(_nees(track.x[:, :2] - truth[k0:], P[:, :2, :2]))
+    means = {f"{name} {told}": float(np.mean(v[told])) for name, v in (("fix", fixes), ("track", tracks))
+             for told in (False, True)}
+    assert 1.5 <= means["fix True"] <= 4.5 and 1.5 <= means["track True"] <= 4.5, means
+    assert means["fix False"] >= 2 * means["fix True"] and means["track False"] >= 2 * means["track True"], means
