@@ -170,44 +170,28 @@ def speed_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSe
                      dof: float = ROBUST_DOF) -> np.ndarray:
     """The sound speed's error's share of a robust track's covariance at its states (:func:`_speed_covariance`; a
     consider covariance, Tapley, Schutz & Born 2004, § 6.3): what a speed calibrated from the pings, or a fallback,
-    leaves uncertain in every range.
-
-    Parameters
-    ----------
-    toa : ndarray, (m, n)
-        Times of arrival [s], NaN where not heard.
-    receivers : ndarray, (n, dim)
-        [m].
-    settings : TrackerSettings
-        The speed the track was solved at (``sound_speed`` [m/s]).
-    X : ndarray, (m, 2 dim + 2)
-        The track's states (:class:`~sblsim.models.tracking.smoother.RobustTrack` ``x``).
-    sigma_c : float
-        The speed's standard error [m/s].
-    schedule, depth, dof
-        As :func:`~sblsim.models.tracking.smoother.robust_smooth`.
-
-    Returns
-    -------
-    ndarray, (m, 2 dim + 2, 2 dim + 2)
-        [m², ...].
-    """
+    leaves uncertain in every range. ``toa``, ``receivers``, ``X``, ``schedule``, ``depth``, ``dof`` as
+    :func:`survey_covariance`'s; ``settings`` with the speed the track was solved at (``sound_speed`` [m/s]);
+    ``sigma_c`` the speed's standard error [m/s]. Returns (m, 2 dim + 2, 2 dim + 2) [m², ...]."""
     toa, X = np.asarray(toa, float), np.asarray(X, float)
     if schedule is None:
         schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
     problem = _Problem(toa, np.asarray(receivers, float), settings, schedule, depth)
+    return _speed_covariance(problem, *_at_states(problem, X, dof), X, float(sigma_c))
+
+
+def _at_states(problem: _Problem, X: np.ndarray, dof: float) -> tuple:
+    """What a consider term takes at the states X: the Hessian's blocks D, B (from the arrivals' observed
+    information), each arrival's information and its Jacobian Jz."""
     z, Jz = _arrival_jacobians(problem, X)
     sums = _arrival_sums(problem, X, dof, information=True)
     D, B = _normal_blocks(problem, X, sums, problem.durations(X))
-    return _speed_covariance(problem, D, B, _information(problem, z, dof), Jz, X, float(sigma_c))
+    return D, B, _information(problem, z, dof), Jz
 
 
 def _survey_share(problem: _Problem, X: np.ndarray, dof: float, survey: np.ndarray) -> np.ndarray:
     """:func:`_survey_covariance` at the states X (its Hessian from the arrivals' observed information)."""
-    z, Jz = _arrival_jacobians(problem, X)
-    sums = _arrival_sums(problem, X, dof, information=True)
-    D, B = _normal_blocks(problem, X, sums, problem.durations(X))
-    return _survey_covariance(problem, D, B, _information(problem, z, dof), Jz, survey)
+    return _survey_covariance(problem, *_at_states(problem, X, dof), survey)
 
 
 __all__ = ["REDUCTION_CHUNK", "speed_covariance", "survey_covariance"]
