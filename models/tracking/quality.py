@@ -20,7 +20,8 @@ checked against what the same data say without the motion model:
 * at a ping without a trusted fix, the track must be reachable from the nearest trusted fixes before or after it:
   within the gate's radius plus :data:`MAX_SPEED` times the time between (a tag does not outrun that);
 * the **physical speed** between successive estimates: at most :data:`MAX_SPEED` beyond their own uncertainty;
-* the estimate's **own uncertainty**: its horizontal DRMS (√ of the trace of its 2×2 position covariance) at most
+* the estimate's **own uncertainty**: its horizontal DRMS (√ of the trace of its 2×2 position covariance as
+  reported, with the errors common to the track and its fixes in it: the receivers' survey, the sound speed) at most
   :data:`TRUSTED_FIX_DRMS`, the limit a trusted fix must meet. One limit for both: a row is ``ok`` only where it is
   placed at least as well as a fix the checks trust. A row the arrivals cannot place (a ping heard by one receiver
   or none, held only by the motion model) is not a position a user should take as good, however near its neighbours

@@ -387,11 +387,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
 
     def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
-             restarts: np.ndarray | None = None, survey_term: np.ndarray | None = None):
+             restarts: np.ndarray | None = None, consider: np.ndarray | None = None):
         """An estimator's rows, checked against the data with its own covariance ``cov``; reported with
-        ``survey_term`` (the consider terms: the receivers' survey, the sound speed, the depth's prior) added, which
+        ``consider`` (the consider terms: the receivers' survey, the sound speed, the depth's prior) added, which
         its own-uncertainty limit takes too."""
-        reported = cov if survey_term is None else cov + survey_term
+        reported = cov if consider is None else cov + consider
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
