@@ -816,6 +816,13 @@ def _main_toa(args: argparse.Namespace) -> int:
         print(f"sblsim: warning: {c['pings_outside_series']} of {s['pings']} pings lie outside the sound-speed "
               f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "
               "the speed at its nearer end", file=sys.stderr)
+    m = s["motion"]
+    if m.get("moved"):
+        t = m["moved_test"]
+        print(f"sblsim: warning: the tag moved: its {t['trusted_fixes']} trusted single-ping fixes lie in order in "
+              f"time (successive ones {t['successive_ratio']:.2f} of their spread apart, below every one of "
+              f"{t['permutations']} random orders); every row flagged (track it with --motion moving)",
+              file=sys.stderr)
     quality = quality_line(s)
     print("  " + quality)
     for late in s["receivers_late"]:

@@ -325,6 +325,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.fix import speed_fix_covariance, survey_fix_covariance
     from sblsim.models.tracking.smoother_covariance import speed_covariance, survey_covariance
+    from sblsim.models.tracking.stationary import PERMUTATIONS
+    from sblsim.models.tracking.stationary import moved as tag_moved
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
 
     start = time.perf_counter()
@@ -414,6 +416,12 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         rows("stationary", kp, pooled.emissions[kp], np.repeat(pooled.position[None], len(kp), axis=0),
              np.repeat(pooled.covariance[None], len(kp), axis=0),
              (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1))
+        count, ratio, went = tag_moved(fx, fe, trusted)
+        motion_info |= {"moved_test": {"trusted_fixes": count, "successive_ratio": None if np.isnan(ratio) else ratio,
+                                       "permutations": PERMUTATIONS}, "moved": went}
+        if went:  # one position refuted by the tag's own fixes: no row of it is a position to take
+            frames["stationary"]["quality"] = "flagged"
+            flagged["stationary"] = len(kp)
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
         k = np.flatnonzero(positioned)

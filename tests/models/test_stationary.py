@@ -68,3 +68,21 @@ def test_consistent_over_20_seeds_with_late_arrivals():
         e = found.position - truth
         nees.append(e @ np.linalg.solve(found.covariance, e))
     assert 1.0 <= np.mean(nees) <= 3.0, np.mean(nees)
+
+
+def test_the_moved_test_holds_its_level_and_finds_a_walk():
+    """:func:`moved`: for fixes independent about one point the ratio is √2 (successive differences Rayleigh with
+    σ√2, the distances from the middle Rayleigh with σ: the ratio of their medians) and the test says moved in about
+    0.1 % of records (200 records of 60 fixes: at most 2); of a random walk (σ 1 m a step, fixes 1 m noisy) it says
+    moved in every record (steps of half the noise: 43 of 50, measured); fewer than MIN_FIXES: undecided."""
+    from sblsim.models.tracking.stationary import MIN_FIXES, moved
+
+    rng = np.random.default_rng(3)
+    big = rng.normal(size=(5000, 2))
+    assert abs(moved(big, np.arange(5000.0), np.ones(5000, bool))[1] - np.sqrt(2.0)) < 0.06  # medians of 5,000: ±2 %
+    still = [moved(rng.normal(size=(60, 2)), np.arange(60.0), np.ones(60, bool), seed=s)[2] for s in range(200)]
+    walks = [moved(np.cumsum(rng.normal(size=(60, 2)), axis=0) + rng.normal(size=(60, 2)), np.arange(60.0),
+                   np.ones(60, bool), seed=s)[2] for s in range(50)]
+    assert sum(still) <= 2 and all(walks), (sum(still), sum(walks))
+    few = moved(rng.normal(size=(MIN_FIXES - 1, 2)), np.arange(MIN_FIXES - 1.0), np.ones(MIN_FIXES - 1, bool))
+    assert few[0] == MIN_FIXES - 1 and np.isnan(few[1]) and not few[2]

@@ -165,6 +165,34 @@ def test_a_stationary_tag_is_one_position_within_its_covariance(tmp_path):
     fixes = result.errors.loc[result.errors["estimator"] == "fix", "error_2d_m"]
     assert np.hypot(*e) < np.nanmedian(fixes)
     assert result.summary["motion"]["model"] == "stationary" and (track["quality"] != "flagged").mean() > 0.95
+    motion = result.summary["motion"]
+    assert not motion["moved"] and motion["moved_test"]["trusted_fixes"] >= 100, motion
+
+
+def test_a_moving_tag_tracked_as_stationary_is_said_and_flagged(tmp_path, capsys):
+    """A tag moving at 0.3 m/s through the array tracked with --motion stationary: its trusted fixes lie in order in
+    time (the summary's ratio recomputed here from the fixes of four receivers or more: the median distance of
+    successive ones over their median distance from their median, far below √2, the ratio of fixes in no order), the
+    summary says it moved, one warning line, and every row flagged: never one confident position written as ok."""
+    from sblsim.models.tracking.fix import fix_pings
+    from sblsim.orchestrator.cli import main
+
+    s = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1.5e-4, interval=5.0, acceleration_psd=1e-3)
+    toa, truth, emissions = tt.simulate_pings(RECEIVERS, 200, s, np.random.default_rng(9), start=np.array([60.0, 60.0]),
+                                              speed=0.3, detection=0.8)
+    write_toa(tmp_path / "toa.txt", toa, NAMES)
+    out = tmp_path / "o"
+    assert main(["replay", str(tmp_path / "toa.txt"), "--format", "toa", "--receivers", str(_receivers(tmp_path)),
+                 "--sound-speed", "1480", "--motion", "stationary", "--out", str(out)]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "the tag moved" in line]
+    summary = json.loads((out / "summary.json").read_text())
+    track = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(said) == 1 and summary["motion"]["moved"], (said, summary["motion"])
+    assert (track["quality"] == "flagged").all()
+    fx, fe, _, fu, _ = fix_pings(toa, RECEIVERS, 1480.0, 1.5e-4)
+    p = fx[np.isfinite(fe) & (fu.sum(axis=1) >= 4)]
+    ratio = np.median(np.hypot(*np.diff(p, axis=0).T)) / np.median(np.hypot(*(p - np.median(p, axis=0)).T))
+    assert ratio < 0.3 and summary["motion"]["moved_test"]["successive_ratio"] < 0.3, (ratio, summary["motion"])
 
 
 @pytest.mark.parametrize("options,message", [
