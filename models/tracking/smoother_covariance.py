@@ -10,6 +10,8 @@ Heller, "Some aspects of the cyclic reduction algorithm for block tridiagonal li
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from sblsim.models.tracking.ekf import TrackerSettings
@@ -139,13 +141,7 @@ def survey_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerS
     -------
     ndarray, (m, 2 dim + 2, 2 dim + 2)
     """
-    toa, X = np.asarray(toa, float), np.asarray(X, float)
-    if schedule is None:
-        schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
-    if settings.survey_sigma is None:
-        return np.zeros((len(toa), X.shape[1], X.shape[1]))
-    problem = _Problem(toa, np.asarray(receivers, float), settings, schedule, depth)
-    return _survey_share(problem, X, dof, np.asarray(settings.survey_sigma, float))
+    return consider_covariance(toa, receivers, settings, X, None, schedule, depth, dof)
 
 
 def _speed_covariance(problem: _Problem, D: dict, B: dict, information: np.ndarray, Jz: np.ndarray, X: np.ndarray,
@@ -173,11 +169,30 @@ def speed_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSe
     leaves uncertain in every range. ``toa``, ``receivers``, ``X``, ``schedule``, ``depth``, ``dof`` as
     :func:`survey_covariance`'s; ``settings`` with the speed the track was solved at (``sound_speed`` [m/s]);
     ``sigma_c`` the speed's standard error [m/s]. Returns (m, 2 dim + 2, 2 dim + 2) [m², ...]."""
+    return consider_covariance(toa, receivers, replace(settings, survey_sigma=None), X, sigma_c, schedule, depth,
+                               dof)
+
+
+def consider_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, X: np.ndarray,
+                        sigma_c: float | None = None, schedule: PingSchedule | None = None,
+                        depth: np.ndarray | None = None, dof: float = ROBUST_DOF) -> np.ndarray:
+    """The consider terms of a robust track's covariance at its states, from one Hessian: the receivers' survey
+    error's (``settings.survey_sigma``, :func:`survey_covariance`) and the sound speed's (``sigma_c`` [m/s],
+    :func:`speed_covariance`), each where given; arguments as theirs. Returns (m, 2 dim + 2, 2 dim + 2) [m², ...],
+    zero where neither is given."""
     toa, X = np.asarray(toa, float), np.asarray(X, float)
+    out = np.zeros((len(toa), X.shape[1], X.shape[1]))
+    if settings.survey_sigma is None and not sigma_c:
+        return out
     if schedule is None:
         schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
     problem = _Problem(toa, np.asarray(receivers, float), settings, schedule, depth)
-    return _speed_covariance(problem, *_at_states(problem, X, dof), X, float(sigma_c))
+    states = _at_states(problem, X, dof)
+    if settings.survey_sigma is not None:
+        out += _survey_covariance(problem, *states, np.asarray(settings.survey_sigma, float))
+    if sigma_c:
+        out += _speed_covariance(problem, *states, X, float(sigma_c))
+    return out
 
 
 def _at_states(problem: _Problem, X: np.ndarray, dof: float) -> tuple:
@@ -189,9 +204,5 @@ def _at_states(problem: _Problem, X: np.ndarray, dof: float) -> tuple:
     return D, B, _information(problem, z, dof), Jz
 
 
-def _survey_share(problem: _Problem, X: np.ndarray, dof: float, survey: np.ndarray) -> np.ndarray:
-    """:func:`_survey_covariance` at the states X (its Hessian from the arrivals' observed information)."""
-    return _survey_covariance(problem, *_at_states(problem, X, dof), survey)
 
-
-__all__ = ["REDUCTION_CHUNK", "speed_covariance", "survey_covariance"]
+__all__ = ["REDUCTION_CHUNK", "consider_covariance", "speed_covariance", "survey_covariance"]

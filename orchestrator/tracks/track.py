@@ -324,7 +324,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.fix import speed_fix_covariance, survey_fix_covariance
-    from sblsim.models.tracking.smoother_covariance import speed_covariance, survey_covariance
+    from sblsim.models.tracking.smoother_covariance import consider_covariance
     from sblsim.models.tracking.stationary import PERMUTATIONS
     from sblsim.models.tracking.stationary import moved as tag_moved
     from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
@@ -362,9 +362,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
-    # the speed's standard error where it came from the pings or a fallback (given or measured: none), a consider
-    # term of the fixes' and the robust track's covariances as reported
-    speed_sigma = speed.get("sigma_m_s") if speed["source"] not in ("given", "measured series") else None
+    # the speed's standard error where it came from the pings or a fallback (a given or measured speed has none), a
+    # consider term of the fixes' and the robust track's covariances as reported
+    speed_sigma = speed.get("sigma_m_s")
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
@@ -432,14 +432,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 robust = tt.robust_track(toa[k0:], positions, settings, (fx[k0:], fe[k0:], fused[k0:]), xs[k0:],
                                          schedule.sliced(k0), None if depth is None else depth[k0:])
                 kr = np.arange(k0, len(toa))
-                extra = None if survey is None else survey_covariance(
-                    toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, schedule.sliced(k0),
-                    None if depth is None else depth[k0:])[:, :dim, :dim]
+                # the survey's error and the speed's (calibrated or fallen back to: its error in every range)
+                extra = None if survey is None and not speed_sigma else consider_covariance(
+                    toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, speed_sigma,
+                    schedule.sliced(k0), None if depth is None else depth[k0:])[:, :dim, :dim]
                 extra = _plus(extra, depth_term(prior, robust.P[:, :dim, :dim]))
-                if speed_sigma:  # a speed calibrated or fallen back to: its error in every range
-                    extra = _plus(extra, speed_covariance(toa[k0:], positions, settings, robust.x, speed_sigma,
-                                                          schedule.sliced(k0), None if depth is None else depth[k0:]
-                                                          )[:, :dim, :dim])
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
