@@ -41,7 +41,8 @@ def measure(repeats: int, kept: str | None = None, warm: bool = True) -> dict:
     import sblsim
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.orchestrator.tracks.toa import read_receivers, read_toa
-    from sblsim.orchestrator.tracks.track import SIGMA_TOA, _usable, tracker_settings
+    from sblsim.orchestrator.tracks.track import _usable
+    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, tracker_settings
 
     def replay():
         return sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",

@@ -6,7 +6,8 @@
 * :mod:`~sblsim.models.tracking.schedule`: the field's ping types (stable, random and pseudo-random burst
   intervals) as the time between successive pings, which the motion model's process noise follows;
 * :mod:`~sblsim.models.tracking.ekf`, :mod:`~sblsim.models.tracking.filters`: the causal filters and the RTS
-  smoother;
+  smoother; :mod:`~sblsim.models.tracking.filter_consider`: the survey's and the speed's consider terms of their
+  covariances;
 * :mod:`~sblsim.models.tracking.smoother`, :mod:`~sblsim.models.tracking.starts`: the robust smoother and its
   starts; its problem and sums over the arrivals (:mod:`~sblsim.models.tracking.smoother_cost`), its normal
   equations and banded solves (:mod:`~sblsim.models.tracking.smoother_system`), its covariances

@@ -83,7 +83,8 @@ class TrackerSettings:
         Standard deviation of each receiver's surveyed position per axis [m] (None: exact). The fix's and the
         robust smoother's covariances hold its effect as a consider covariance (the positions not estimated, their
         error propagated: Tapley, Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004, § 6.3); the
-        causal filters leave it out.
+        causal filters and the RTS smoother take none (their consider terms are
+        :mod:`~sblsim.models.tracking.filter_consider`'s, from their records).
     delay_share : float
         Probability that a time of arrival is late (multipath, a blocked direct path), in [0, 1): the robust
         smoother's one-sided delay term (:mod:`~sblsim.models.tracking.arrival_model`); 0: the Student-t alone.

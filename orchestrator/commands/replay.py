@@ -37,7 +37,8 @@ from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.tracks.depth import PRIOR_SOURCE
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
-from sblsim.orchestrator.tracks.track import DEPTH_SIGMA, ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
+from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
+from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd

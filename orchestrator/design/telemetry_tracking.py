@@ -27,7 +27,7 @@ from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.sync.clocks import ClockFit, connected, fit_clocks, sync_emissions
 from sblsim.models.sync.simulate import draw_clocks, on_clocks, sync_tag_arrivals
-from sblsim.orchestrator.tracks.track import motion_model, ping_schedule, tracker_settings
+from sblsim.orchestrator.tracks.tracker import motion_model, ping_schedule, tracker_settings
 
 #: The receivers' clocks and sync tags of :func:`track_synchronised`: the declared defaults of the simulated inverted
 #: LBL's raw detections (``acoustics.receiver_clock_offset`` ±2 s, ``receiver_clock_drift_ppm`` ±20 ppm, a

@@ -5,8 +5,9 @@ written to a folder (:mod:`.outputs`).
 The track is the robust smoother's rows (``smooth``: every ping from the tracker's start), else the causal EKF's;
 the other estimators are kept beside it. Before tracking, the array may be thinned (``receivers_kept``: the other
 receivers' columns not used) and a share of the detections removed at random (``drop_detections``, seeded); the
-ping type and the steps between the pings are found (:func:`ping_schedule`), the motion model's noise estimated
-(:func:`motion_model`), and each estimate checked against its own data (the ``quality`` column).
+ping type and the steps between the pings are found (:func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`), the
+motion model's noise estimated (:func:`~sblsim.orchestrator.tracks.tracker.motion_model`), the sound speed taken
+(:mod:`.speed`), and each estimate checked against its own data (the ``quality`` column).
 """
 
 from __future__ import annotations
@@ -21,23 +22,13 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
-from sblsim.models.tracking import sound_speed as ss
 from sblsim.models.tracking.geometry import check_array
-from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.models.tracking.receivers import receiver_residuals
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
 from sblsim.orchestrator.tracks.depth import depth_term, prior_info, tag_depth, undetermined_depth
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
-
-#: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
-#: by their median absolute deviation, 0.15 ms by their standard deviation).
-SIGMA_TOA = 1.5e-4
-
-
-#: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
-#: a lost EKF (:class:`~sblsim.models.tracking.ekf.TrackerSettings` ``agree_after``).
-AGREE_AFTER = 4
-
+from sblsim.orchestrator.tracks.speed import sound_speed_stage
+from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, SIGMA_TOA, motion_model, ping_schedule, tracker_settings
 
 #: The estimators, in the order of the outputs, and their names in words (the console, the figure).
 ESTIMATOR_NAMES = {"stationary": "stationary fix", "robust": "robust smoother", "rts": "RTS smoother",
@@ -55,17 +46,6 @@ SCORE_KEYS = ("n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95
 #: The motion models of ``--motion``: a moving tag (the filters and smoothers), or a stationary one (one position for
 #: all pings, :func:`stationary_track`).
 MOTIONS = ("moving", "stationary")
-
-
-#: The standard deviation of a tag's depth reading the tracker assumes by default [m]
-#: (:class:`~sblsim.models.tracking.ekf.TrackerSettings` ``depth_sigma``).
-DEPTH_SIGMA = 0.3
-
-
-#: A given sound speed is said to disagree with the pings where their own calibration, determined to
-#: :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` or better, lies more than this many of its standard errors
-#: from it (the speed is still the one given: a user may know the water better than a thin array does).
-SPEED_CHECK_SIGMAS = 3.0
 
 
 #: The largest share of detections removed at random.
@@ -131,59 +111,6 @@ def drop_detections(toa: np.ndarray, share: float, seed: int) -> tuple[np.ndarra
     return np.where(gone, np.nan, toa), int(gone.sum())
 
 
-def tracker_settings(sound_speed: float, emissions: np.ndarray):
-    """The replay's tracker (:class:`~sblsim.models.tracking.ekf.TrackerSettings`) at ``sound_speed``
-    [m/s]: the timing noise :data:`SIGMA_TOA`, the ping interval the median step of the single-ping fixes' emission
-    times ``emissions`` (m,) [s] (NaN where no fix; 2 s when no two consecutive pings have one), and a lost filter
-    restarted on :data:`AGREE_AFTER` consecutive consistent fixes of dim + 2 receivers too (an array of few
-    receivers rarely gives the dim + 3 of the disagreement rule, docs/tracking.md)."""
-    from sblsim.models.receiver.toa_tracking import TrackerSettings
-
-    steps = np.diff(emissions)
-    interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
-    return TrackerSettings(sound_speed=sound_speed, sigma_toa=SIGMA_TOA, interval=interval, agree_after=AGREE_AFTER)
-
-
-def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: str | None = None,
-                  burst_interval: tuple[float, float] | None = None, burst_sequence: np.ndarray | None = None):
-    """The steps between the rows of ``toa`` (m, n) [s] (:class:`~sblsim.models.tracking.schedule.PingSchedule`)
-    for the tracker's ``settings`` at the receivers ``positions`` (n, dim) [m]: the ping type given (``sbi``,
-    ``rbi``, ``pbi``), else the one the first arrivals' spacing shows (``rbi`` when ``burst_interval`` (min, max)
-    [s] is given, ``pbi`` when ``burst_sequence`` (the intervals [s]) is), and what was seen of the spacing."""
-    crossing = ps.crossing_time(positions, settings.sound_speed)
-    seen = ps.infer_ping_type(toa, crossing)
-    kind = ping_type or ("pbi" if burst_sequence is not None else "rbi" if burst_interval is not None else seen.kind)
-    source = "given" if (ping_type or burst_interval is not None or burst_sequence is not None) else "inferred"
-    interval = settings.interval if kind == "sbi" else float(np.mean(burst_interval)) if burst_interval else \
-        seen.interval
-    bounds = burst_interval if burst_interval is not None else (seen.bounds if kind == "rbi" else None)
-    schedule = ps.build_schedule(toa, kind, interval, settings.jitter, settings.interval_drift, crossing,
-                                 burst_interval, burst_sequence, source)
-    return replace(schedule, bounds=bounds), seen
-
-
-def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fixes, acceleration_psd: float | None):
-    """The tracker's settings with the motion model's ``q`` [m²/s³]: ``acceleration_psd`` where given, else
-    estimated by EM (:func:`~sblsim.models.tracking.motion_noise.estimate_acceleration_psd`) from the single-ping
-    fixes' own track (``fixes``: positions, emission times and the arrivals used, as
-    :func:`~sblsim.models.receiver.toa_tracking.fix_pings` gives them), the default kept where they give no track;
-    and what was done (``summary.json``'s ``motion``)."""
-    from sblsim.models.receiver.toa_tracking import anchored_start
-
-    if acceleration_psd is not None:
-        return replace(settings, acceleration_psd=acceleration_psd), {
-            "acceleration_psd_m2_s3": acceleration_psd, "source": "given"}
-    dim = positions.shape[1]
-    start = anchored_start(fixes, np.isfinite(toa).sum(axis=1), settings, dim, schedule.times())
-    if start is None:
-        return settings, {"acceleration_psd_m2_s3": settings.acceleration_psd,
-                          "source": "default (too few fixes to estimate it)"}
-    found = estimate_acceleration_psd(toa, positions, settings, start, schedule)
-    return replace(settings, acceleration_psd=found.q), {
-        "acceleration_psd_m2_s3": found.q, "source": "estimated (EM)", "iterations": found.iterations,
-        "converged": found.converged, "history": list(found.history)}
-
-
 def _plus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     """Two terms of a reported covariance summed, either None (absent)."""
     return b if a is None else a if b is None else a + b
@@ -215,94 +142,6 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
     return stationary_fix(toa, positions, c, SIGMA_TOA, start)
 
 
-def _speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.ndarray | None,
-                 depth_sigma: float) -> dict[str, Any]:
-    """A given sound speed [m/s] against the pings' own calibration
-    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`): ``calibrated_m_s``, its
-    ``calibrated_sigma_m_s`` and the two's ``disagreement_sigmas`` where the pings determine the speed (to
-    :data:`~sblsim.models.tracking.calibration.MAX_SIGMA`), ``disagrees`` where that is above
-    :data:`SPEED_CHECK_SIGMAS`; nothing where they do not."""
-    from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
-
-    try:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False, depth=depth,
-                                            depth_sigma=depth_sigma)
-    except ModelError:
-        return {}
-    if not calibration.sigma <= MAX_SIGMA:
-        return {}
-    sigmas = abs(given - calibration.c) / calibration.sigma if calibration.sigma > 0 else float("inf")
-    return {"calibrated_m_s": calibration.c, "calibrated_sigma_m_s": calibration.sigma,
-            "disagreement_sigmas": sigmas, "disagrees": bool(sigmas > SPEED_CHECK_SIGMAS)}
-
-
-def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
-                      series_path: Path | None = None, temperature: float | None = None,
-                      salinity: float | None = None, depth: np.ndarray | None = None,
-                      depth_sigma: float = DEPTH_SIGMA) -> tuple[np.ndarray, float, dict[str, Any]]:
-    """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
-    given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
-    whose median is the reference speed and to which each ping's arrivals are rescaled
-    (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`); else calibrated from the pings
-    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); where its standard error is above
-    :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` (the array determines it only weakly), combined by inverse
-    variance with the fallback and its spread (:func:`~sblsim.models.tracking.sound_speed.fallback_prior`:
-    ``temperature`` [°C] and ``salinity`` [g/kg], else the stated default; a calibration 5.6 m/s uncertain is far
-    better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone. The
-    calibration takes the tag's depth per ping (``depth`` [m], NaN where none) with ``depth_sigma`` [m] where known.
-    A given speed is checked against the pings' own calibration (:func:`_speed_check`: said, not replaced).
-    Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
-    from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
-
-    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity)  # refuses a bad temperature or salinity
-    if sound_speed is not None:
-        return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | _speed_check(
-            toa, positions, sound_speed, depth, depth_sigma)
-    if series_path is not None:
-        from sblsim.orchestrator.tracks.toa import read_sound_speed_series
-
-        series = read_sound_speed_series(series_path)
-        first = ps.first_arrivals(toa)
-        span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
-        inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])
-        if np.isfinite(span[0]) and (series[-1, 0] < span[0] or series[0, 0] > span[1]):
-            raise ModelError(f"sound speed file: {str(series_path)!r}: its times [{series[0, 0]:.10g}, "
-                             f"{series[-1, 0]:.10g}] s do not overlap the pings' first arrivals [{span[0]:.10g}, "
-                             f"{span[1]:.10g}] s; allowed: a series on the times of arrival's time base (toa.txt "
-                             "from sblsim toa: seconds since its origin_epoch_s)")
-        c = float(np.median(series[inside, 1] if inside.any() else series[:, 1]))
-        emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, SIGMA_TOA)[1])
-        scaled, speeds, outside = ss.rescale_to_reference(toa, emissions, series, c)
-        return scaled, c, {"sound_speed_m_s": c, "source": "measured series", "file": str(series_path),
-                           "method": "each ping's arrivals rescaled from the series' speed at its emission to the "
-                                     "series' median over the record",
-                           "range_m_s": [float(np.nanmin(speeds)), float(np.nanmax(speeds))]
-                           if np.isfinite(speeds).any() else None,
-                           "pings_outside_series": int(outside.sum()),
-                           "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
-    try:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False, depth=depth,
-                                            depth_sigma=depth_sigma)
-    except ModelError as exc:
-        return toa, prior, {"sound_speed_m_s": prior, "source": "fallback", "method": words,
-                            "sigma_m_s": prior_sigma, "calibration": str(exc)}
-    speed = {"sound_speed_m_s": calibration.c, "source": "calibrated",
-             "method": f"median of {len(calibration.batches)} stretches' joint soft-L1 fits"
-             if calibration.batches else "one joint soft-L1 fit (a record too short for stretches)",
-             "sigma_m_s": calibration.sigma, "pings": calibration.pings,
-             "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
-    if temperature is not None:  # both given (fallback_prior refuses one alone)
-        speed["fallback_m_s"], speed["fallback"] = prior, words
-    if calibration.sigma > MAX_SIGMA:  # weakly determined: the fallback's prior weighs in
-        c, sigma = ss.combine_speeds(calibration.c, calibration.sigma, prior, prior_sigma)
-        speed |= {"sound_speed_m_s": c, "source": "calibrated with the fallback's prior", "sigma_m_s": sigma,
-                  "calibrated_m_s": calibration.c, "calibrated_sigma_m_s": calibration.sigma, "prior_m_s": prior,
-                  "prior_sigma_m_s": prior_sigma, "prior": words,
-                  "disagreement_sigmas": abs(calibration.c - prior) / float(np.hypot(calibration.sigma, prior_sigma))}
-    return toa, speed["sound_speed_m_s"], speed
-
-
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
           drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
@@ -311,18 +150,19 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
           fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
           survey_sigma: float | None = None) -> TrackOutcome:
-    """Read, thin, track and score (module docstring); the sound speed as :func:`sound_speed_stage` takes
-    ``sound_speed``, ``sound_speed_path``, ``temperature`` and ``salinity``; the tag's depth as
-    :func:`~sblsim.orchestrator.tracks.depth.tag_depth`
-    takes ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as :func:`survey_sigmas` takes
-    ``survey_sigma``; ``truth_sigma`` [m] the truth's
-    own error per horizontal axis in the NEES (:func:`score`); ``ping_type``, ``burst_interval`` as
-    :func:`ping_schedule`, ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
+    """Read, thin, track and score (module docstring); the sound speed as
+    :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
+    ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
+    ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as :func:`survey_sigmas` takes
+    ``survey_sigma``; ``truth_sigma`` [m] the truth's own error per horizontal axis in the NEES (:func:`score`);
+    ``ping_type``, ``burst_interval`` as :func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`,
+    ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
     (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
     [m²/s³] (None: estimated from the pings by EM, :mod:`sblsim.models.tracking.motion_noise`)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
+    from sblsim.models.tracking.filter_consider import consider_terms, filter_sensitivity, smoothed_sensitivity
     from sblsim.models.tracking.fix import speed_fix_covariance, survey_fix_covariance
     from sblsim.models.tracking.smoother_covariance import consider_covariance
     from sblsim.models.tracking.stationary import PERMUTATIONS
@@ -393,7 +233,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         """An estimator's rows, checked against the data with its own covariance ``cov``; reported with
         ``consider`` (the consider terms: the receivers' survey, the sound speed, the depth's prior) added, which
         its own-uncertainty limit takes too."""
-        reported = cov if consider is None else cov + consider
+        reported = cov if consider is None else cov + consider[:, :dim, :dim]
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
@@ -425,6 +265,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
         k = np.flatnonzero(positioned)
+        # the filters' and the RTS smoother's consider terms of the same survey and speed errors
+        sensitivity = None if survey is None and not speed_sigma else filter_sensitivity(
+            record, positions, c, SIGMA_TOA, survey, speed_sigma)
         if smooth:
             xs, Ps = tracker.smooth(record)
             k0 = record.start
@@ -440,13 +283,17 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
-                 np.r_[record.restarts, segment_starts])
+                 np.r_[record.restarts, segment_starts],
+                 None if sensitivity is None else consider_terms(smoothed_sensitivity(record, sensitivity)[k]))
         rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
-             record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts])
+             record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts],
+             None if sensitivity is None else consider_terms(sensitivity[k]))
         for name, other in filters.items():
             u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
-                 other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts])
+                 other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts],
+                 None if sensitivity is None else consider_terms(filter_sensitivity(
+                     other, positions, c, SIGMA_TOA, survey, speed_sigma)[u]))
     f = np.flatnonzero(np.isfinite(fe))
     fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f],
                                                                         fused[f], survey)[:, :dim, :dim],
@@ -525,6 +372,5 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
 
 
-__all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS",
-           "SCORE_KEYS", "SIGMA_TOA", "SPEED_CHECK_SIGMAS", "TrackOutcome", "drop_detections", "motion_model",
-           "ping_schedule", "sound_speed_stage", "stationary_track", "survey_sigmas", "track", "tracker_settings"]
+__all__ = ["ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "SCORE_KEYS", "TrackOutcome",
+           "drop_detections", "stationary_track", "survey_sigmas", "track"]

@@ -575,7 +575,8 @@ def test_consistent_fixes_restart_holds_the_thinned_track(full):
     of the same tracker without that rule (the disagreement rule of 5 receivers alone)."""
     import dataclasses
 
-    from sblsim.orchestrator.tracks.track import AGREE_AFTER, SIGMA_TOA, _usable, tracker_settings
+    from sblsim.orchestrator.tracks.track import _usable
+    from sblsim.orchestrator.tracks.tracker import AGREE_AFTER, SIGMA_TOA, tracker_settings
 
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
@@ -622,7 +623,8 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
             assert rms < 3.0 and p95 < 5.0 and rms < rms_rts / 2 and p95 < p95_rts / 2, figures
             assert result.score["estimator"] == "robust" and np.isclose(result.score["rms_m"], rms, rtol=1e-12)
     # without the graduated start: from the fixes' own track and the RTS smoother's alone
-    from sblsim.orchestrator.tracks.track import SIGMA_TOA, _usable, tracker_settings
+    from sblsim.orchestrator.tracks.track import _usable
+    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, tracker_settings
 
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
     c = full.summary["sound_speed"]["sound_speed_m_s"]
