@@ -85,6 +85,12 @@ class TrackerSettings:
         error propagated: Tapley, Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004, § 6.3); the
         causal filters and the RTS smoother take none (their consider terms are
         :mod:`~sblsim.models.tracking.filter_consider`'s, from their records).
+    sound_speed_sigma : float or None
+        The sound speed's standard error [m/s] (None: exact). With ``survey_sigma``, the causal filters' gates take
+        the arrivals' error from both (each receiver's ``(σ_i / c)²``, the speed's ``σ_c² g gᵀ`` with
+        ``g_i = ρ_i / c²``, common to the ping's arrivals) beside their innovations' covariance, so that an arrival
+        the bias moved is not refused for it; their gains stay their own (the consider terms of their covariances
+        are :mod:`~sblsim.models.tracking.filter_consider`'s).
     delay_share : float
         Probability that a time of arrival is late (multipath, a blocked direct path), in [0, 1): the robust
         smoother's one-sided delay term (:mod:`~sblsim.models.tracking.arrival_model`); 0: the Student-t alone.
@@ -113,6 +119,7 @@ class TrackerSettings:
     fix_speed: float = 2.0
     depth_sigma: float = 0.3
     survey_sigma: np.ndarray | None = None
+    sound_speed_sigma: float | None = None
     delay_share: float = 0.0
     delay_mean: float = 1e-3
     delay_dof: float = 10.0
@@ -220,18 +227,34 @@ class ToaTracker:
         R = s.sigma_toa**2
         nu = toa - model
 
-        def S(used):
-            return H[used] @ P @ H[used].T + R * np.eye(int(used.sum()))
+        W = self._consider_spread(model, x[-2])
 
-        used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R, S, kept)
+        def S(used):
+            return H[used] @ P @ H[used].T + R * np.eye(int(used.sum())) + W[np.ix_(used, used)]
+
+        used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R + np.diag(W), S, kept)
         if Su is not None:
             Hu = H[used]
-            K = np.linalg.solve(Su, Hu @ P).T
+            K = np.linalg.solve(Su - W[np.ix_(used, used)], Hu @ P).T
             x = x + K @ nu[used]
             A = np.eye(self.size) - K @ Hu
             P = A @ P @ A.T + R * K @ K.T
             P = 0.5 * (P + P.T)
         return x, P, used
+
+    def _consider_spread(self, model: np.ndarray, emission: float) -> np.ndarray:
+        """The covariance (n, n) [s²] of the arrivals' error from the receivers' survey and the sound speed's error
+        (``settings.survey_sigma``, ``settings.sound_speed_sigma``; zero without), for the gates: ``diag((σ_i /
+        c)²) + σ_c² g gᵀ``, ``g_i = (m_i − t_e) / c`` the travel times' derivative by the speed (``model`` (n,) [s]
+        the arrivals' model, ``emission`` [s])."""
+        s = self.settings
+        W = np.zeros((self.n, self.n))
+        if s.survey_sigma is not None:
+            W[np.diag_indices(self.n)] = (np.asarray(s.survey_sigma, float) / s.sound_speed) ** 2
+        if s.sound_speed_sigma:
+            g = (np.asarray(model, float) - emission) / s.sound_speed * s.sound_speed_sigma
+            W += np.outer(g, g)
+        return W
 
     def _gated(self, toa: np.ndarray, nu: np.ndarray, variance: np.ndarray, S, kept: np.ndarray | None
                ) -> tuple[np.ndarray, np.ndarray | None]:

@@ -46,8 +46,9 @@ class ToaSeqTracker(ToaTracker):
         H = np.zeros((self.n, self.size))
         H[:, :d], H[:, -2] = J[:, :d], J[:, d]
         heard = np.isfinite(toa)
-        if heard.any() and not self._set_passes(heard, toa - model,
-                                                H[heard] @ P @ H[heard].T + R * np.eye(int(heard.sum()))):
+        W = self._consider_spread(model, x[-2])
+        if heard.any() and not self._set_passes(heard, toa - model, H[heard] @ P @ H[heard].T + R * np.eye(
+                int(heard.sum())) + W[np.ix_(heard, heard)]):
             heard = self._fix_kept(toa, heard, kept)
         prediction, eye = x, np.eye(self.size)
         used = np.zeros(self.n, bool)
@@ -55,7 +56,7 @@ class ToaSeqTracker(ToaTracker):
             h = H[i]
             nu = toa[i] - (model[i] + h @ (x - prediction))
             S = h @ P @ h + R
-            if nu**2 / S > s.gate:
+            if nu**2 / (S + W[i, i]) > s.gate:
                 continue
             k = P @ h / S
             x = x + k * nu
@@ -143,13 +144,15 @@ class ToaUkfTracker(ToaTracker):
             H, b, omega = self._linearised(at, spread)
             Pzz = H @ P @ H.T + omega
             nu = toa - (H @ x + b)
+            W = self._consider_spread(H @ at + b, at[-2])
 
-            def S(used, Pzz=Pzz):
-                return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum()))
+            def S(used, Pzz=Pzz, W=W):
+                return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum())) + W[np.ix_(used, used)]
 
-            used, Su = self._gated(toa, nu, np.diag(Pzz) + R, S, kept)
+            used, Su = self._gated(toa, nu, np.diag(Pzz) + R + np.diag(W), S, kept)
             if Su is None:
                 return x, P, used
+            Su = Su - W[np.ix_(used, used)]
             K = np.linalg.solve(Su, H[used] @ P).T
             moved = x + K @ nu[used]
             covariance = P - K @ Su @ K.T

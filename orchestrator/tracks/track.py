@@ -217,10 +217,12 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     else:
         settings, motion_info = motion_model(toa, positions, settings, schedule, (fx, fe, fused), acceleration_psd)
         motion_info = {"model": "moving"} | motion_info
-        tracker = tt.ToaTracker(positions, settings)
+        # the filters' gates take the survey's and the speed's errors beside their own covariance
+        gated = replace(settings, survey_sigma=survey, sound_speed_sigma=speed_sigma)
+        tracker = tt.ToaTracker(positions, gated)
         # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
         record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
-        filters = {name: kind(positions, settings).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
+        filters = {name: kind(positions, gated).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
                    for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim)
     fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
