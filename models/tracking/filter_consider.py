@@ -12,9 +12,10 @@ Sequential Estimation*, Academic Press 1977, ch. VIII):
 ``H_k`` and ``H_θ,k`` the Jacobians of the arrivals the update used by the state and by θ at the prediction, ``K_k``
 their gain; at a start or restart from a single-ping fix, the fix's own, ``−C Jᵀ H_θ / σ_toa²`` (C its covariance,
 J its arrivals' rows). The RTS smoother's follows its gain ``C_k = P_k|k F_{k+1}ᵀ P_{k+1|k}⁻¹``:
-``S^s_k = S_k + C_k (S^s_{k+1} − F_{k+1} S_k)``. The term added to a covariance is ``S Sᵀ``; the estimates are the
-filters' own (the gates too). Of a time of arrival ``m_i = t_e + ‖p − r_i‖ / c``: ``∂m_i/∂c = −(m_i − t_e) / c``
-and ``∂m_i/∂r_i = −∂m_i/∂p``.
+``S^s_k = S_k + C_k (S^s_{k+1} − F_{k+1} S_k)``. The term added to a covariance is ``S Sᵀ``; the estimates and
+gains are the filters' own (their gates take the errors' spread where their settings hold it:
+:class:`~sblsim.models.tracking.ekf.TrackerSettings` ``survey_sigma``, ``sound_speed_sigma``). Of a time of arrival
+``m_i = t_e + ‖p − r_i‖ / c``: ``∂m_i/∂c = −(m_i − t_e) / c`` and ``∂m_i/∂r_i = −∂m_i/∂p``.
 """
 
 from __future__ import annotations
