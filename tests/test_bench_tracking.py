@@ -35,13 +35,3 @@ def test_a_bad_repeat_count_is_one_line_exit_2():
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "--repeats: must be at least 1" in done.stderr and done.stdout == ""
 
-
-@pytest.mark.slow
-def test_against_a_revision_times_the_tracking_here_and_there():
-    """``--against HEAD`` (this tree's own last commit, checked out apart): both times positive, the ratio theirs."""
-    import json
-
-    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_tracking.py"), "--repeats", "1", "--receivers-kept",
-                           THINNED, "--against", "HEAD"], capture_output=True, text=True, timeout=1800, check=True)
-    r = json.loads(done.stdout.splitlines()[-1])
-    assert r["now_s"] > 0 and r["then_s"] > 0 and np.isclose(r["ratio"], r["now_s"] / r["then_s"], rtol=1e-12)
