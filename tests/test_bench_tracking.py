@@ -34,4 +34,3 @@ def test_a_bad_repeat_count_is_one_line_exit_2():
     done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_tracking.py"), "--repeats", "0"],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "--repeats: must be at least 1" in done.stderr and done.stdout == ""
-

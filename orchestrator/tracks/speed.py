@@ -22,7 +22,7 @@ SPEED_CHECK_SIGMAS = 3.0
 
 
 def speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.ndarray | None,
-                 depth_sigma: float) -> dict[str, Any]:
+                depth_sigma: float) -> dict[str, Any]:
     """A given sound speed [m/s] against the pings' own calibration
     (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`): ``calibrated_m_s``, its
     ``calibrated_sigma_m_s`` and the two's ``disagreement_sigmas`` where the pings determine the speed (to
