@@ -26,19 +26,11 @@ from sblsim.models.tracking.ekf import TrackRecord
 from sblsim.models.tracking.toa import _evaluate_pings
 
 
-def _parameters(n: int, dim: int, survey_sigma: np.ndarray | None, sigma_c: float | None
-                ) -> tuple[np.ndarray, float]:
-    """The whitened parameters' scales: each receiver's axes' survey errors [m] (n, dim) (0 where none) and the
-    speed's [m/s]."""
-    survey = np.zeros((n, dim)) if survey_sigma is None else np.repeat(np.asarray(survey_sigma, float)[:, None], dim,
-                                                                        axis=1)
-    return survey, float(sigma_c or 0.0)
-
-
 def _jacobians(receivers: np.ndarray, c: float, states: np.ndarray, survey: np.ndarray, sigma_c: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """The arrivals' Jacobians at states (m, s) (NaN rows: zero): by the position and emission time (m, n, dim + 1),
-    and by the whitened parameters (m, n, n dim + 1: each receiver's axes, then the speed)."""
+    and by the whitened parameters (m, n, n dim + 1: each receiver's axes, then the speed), for the receivers'
+    survey errors (n,) [m] and the speed's [m/s]."""
     n, dim = receivers.shape
     finite = np.isfinite(states).all(axis=1)
     model, J = _evaluate_pings(receivers, c, np.where(finite[:, None], states[:, :dim], 0.0),
@@ -75,12 +67,14 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
     """
     receivers = np.asarray(receivers, float)
     n, dim = receivers.shape
-    survey, sc = _parameters(n, dim, survey_sigma, sigma_c)
+    survey = np.zeros(n) if survey_sigma is None else np.asarray(survey_sigma, float)
+    sc = float(sigma_c or 0.0)
     m, size = record.x_filtered.shape
     out = np.full((m, size, n * dim + 1), np.nan)
     starts = {record.start, *record.restarts}
     at = np.array(record.x_predicted, float)  # an update linearised at the prediction, a start at its fix
-    at[sorted(starts & set(range(m)))] = record.x_filtered[sorted(starts & set(range(m)))]
+    fixed = sorted(starts & set(range(m)))
+    at[fixed] = record.x_filtered[fixed]
     J_all, Ht_all = _jacobians(receivers, c, at, survey, sc)
     R = sigma_toa**2
     idx = list(range(dim)) + [2 * dim]
