@@ -25,7 +25,14 @@ checked against what the same data say without the motion model:
   :data:`TRUSTED_FIX_DRMS`, the limit a trusted fix must meet. One limit for both: a row is ``ok`` only where it is
   placed at least as well as a fix the checks trust. A row the arrivals cannot place (a ping heard by one receiver
   or none, held only by the motion model) is not a position a user should take as good, however near its neighbours
-  it is; a covariance that is not finite says nothing of where the row is, and fails too.
+  it is; a covariance that is not finite says nothing of where the row is, and fails too;
+* a row its own arrivals do not place (fewer than three of them agree with it) is placed by the motion model
+  alone, from the pings around it: it is **unverified** where that placement, from the nearest trusted fix, would
+  not meet the same limit, ``√(DRMS_fix² + 2 q τ³ / 3) > TRUSTED_FIX_DRMS`` with τ the time to that fix and q the
+  motion model's acceleration PSD (the white-noise-acceleration model's position variance per axis, q τ³ / 3: Bar-
+  Shalom, Li & Kirubarajan 2001, § 6.2.2). Between trusted fixes a chain of such rows can settle on a wrong branch
+  of each ping's hyperbola (a thin array's pings heard by two receivers) with a small covariance of its own: nothing
+  in the data checks it there.
 
 A ping that fails is ``flagged``; a ping where a filter started again (a restart, a new segment after a gap) is
 ``restart``; the rest ``ok``. A track kilometres from every fix is never ``ok``.
@@ -59,7 +66,8 @@ class Quality:
     (m,) arrays: ``fix`` (outside its own trusted fix: not flagged alone), and the reasons of a flag, ``stretch``
     (from one such ping to the next with no agreeing fix between), ``reach`` (out of reach of the nearest trusted
     fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`), ``uncertain`` (a horizontal DRMS of its own above
-    :data:`TRUSTED_FIX_DRMS`, or not finite)."""
+    :data:`TRUSTED_FIX_DRMS`, or not finite), ``unverified`` (not placed by its own arrivals and beyond the motion
+    model's reach of a trusted fix: module docstring)."""
 
     quality: np.ndarray
     fix: np.ndarray
@@ -67,6 +75,7 @@ class Quality:
     reach: np.ndarray
     speed: np.ndarray
     uncertain: np.ndarray
+    unverified: np.ndarray
 
     @property
     def flagged(self) -> int:
@@ -151,7 +160,8 @@ def _distance2(e: np.ndarray, C: np.ndarray) -> np.ndarray:
 def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarray, fixes: np.ndarray,
                 fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
                 max_speed: float = MAX_SPEED, explained: np.ndarray | None = None,
-                fix_used: np.ndarray | None = None, reported: np.ndarray | None = None) -> Quality:
+                fix_used: np.ndarray | None = None, reported: np.ndarray | None = None,
+                acceleration_psd: float | None = None) -> Quality:
     """Each estimate of a track checked against the trusted single-ping fixes, the physical speed and its own
     uncertainty (module docstring), on the horizontal position.
 
@@ -180,6 +190,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         The covariances the estimates are reported with [m²], where they hold errors common to the track and its
         fixes (the receivers' survey, the sound speed: consider terms): the own-uncertainty limit takes these (a
         row that error leaves unplaced is not ``ok``), the fixes' gates ``covariances`` (default: ``covariances``).
+    acceleration_psd : float, optional
+        The motion model's q [m²/s³]: with ``explained``, a row its own arrivals do not place is ``unverified``
+        beyond the motion model's reach of the nearest trusted fix (module docstring); without it, not checked (a
+        tag that does not move).
 
     Returns
     -------
@@ -247,13 +261,24 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
             fast = ~(step <= max_speed * np.abs(dt) + slack)
         speed[1:] |= fast
         speed[:-1] |= fast
+    # a row its own arrivals do not place, held by the motion model beyond its reach of a trusted fix
+    unverified = np.zeros(m, bool)
+    if acceleration_psd is not None and explained is not None:
+        unverified = (np.asarray(explained) <= 2) & ~trusted  # too few to position itself (as ``blind`` above)
+        if len(k):
+            tk = t[k]
+            j = np.searchsorted(tk, t)
+            lo, hi = np.clip(j - 1, 0, len(k) - 1), np.clip(j, 0, len(k) - 1)
+            near = k[np.where(np.abs(t - tk[lo]) <= np.abs(tk[hi] - t), lo, hi)]
+            placed2 = np.trace(C[near], axis1=1, axis2=2) + 2.0 * acceleration_psd * np.abs(t - t[near]) ** 3 / 3.0
+            unverified &= ~(placed2 <= TRUSTED_FIX_DRMS ** 2)
     finite = np.isfinite(p).all(axis=1)
-    flagged = stretch | alone | reach | speed | uncertain | ~finite
+    flagged = stretch | alone | reach | speed | uncertain | unverified | ~finite
     quality = np.full(m, "ok", dtype=object)
     if restarts is not None:
         quality[np.asarray(restarts, bool)] = "restart"
     quality[flagged] = "flagged"
-    return Quality(quality.astype(str), fix_bad, stretch, reach, speed, uncertain)
+    return Quality(quality.astype(str), fix_bad, stretch, reach, speed, uncertain, unverified)
 
 
 __all__ = ["EXPLAINED_SIGMAS", "FIX_GATE", "FIX_SLACK", "MAX_SPEED", "QUALITY", "TRUSTED_FIX_DRMS", "Quality",

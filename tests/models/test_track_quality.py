@@ -178,3 +178,46 @@ def test_the_reported_covariance_decides_the_own_uncertainty_and_the_own_one_the
     assert not plain.uncertain[20] and said.uncertain[20] and said.quality[20] == "flagged"
     assert plain.fix[k] and said.fix[k]  # the gate of the fix the same
     assert np.flatnonzero(said.uncertain).tolist() == [20]
+
+
+def test_rows_no_arrivals_place_are_unverified_beyond_the_motion_models_reach_of_a_trusted_fix():
+    """Pings 30-89 heard by receivers 0 and 1 only (a thin array's): a track mirrored across the line through them
+    explains both arrivals of each ping exactly, with a tight covariance, far from the truth. The reach of the
+    fastest tag leaves its middle ``ok``; with the motion model's q, each row more than the time at which
+    √(DRMS_fix² + 2 q τ³ / 3) passes 10 m from its nearest trusted fix is ``unverified`` (written again here as a
+    loop over the rows), the right track's rows there too (nothing in the data checks either), and a row its own
+    arrivals place is not."""
+    toa, truth, emissions, fx, fc, fu, trusted = simulated(n=120)
+    stretch = np.arange(30, 90)
+    toa, fx, trusted = toa.copy(), fx.copy(), trusted.copy()
+    toa[stretch, 2:] = np.nan
+    fx[stretch], trusted[stretch] = np.nan, False
+    mirrored = truth.copy()
+    mirrored[stretch, 1] *= -1.0
+    assert (np.abs(mirrored - truth)[stretch, 1] > 10.0).all()
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    q = 0.01
+    expected = np.zeros(len(truth), bool)
+    for i in stretch:
+        tau = np.abs(emissions[trusted] - emissions[i])
+        j = np.flatnonzero(trusted)[np.argmin(tau)]
+        expected[i] = np.trace(fc[j]) + 2.0 * q * tau.min() ** 3 / 3.0 > 10.0**2
+    assert 20 < expected.sum() < len(stretch)  # rows near the fixes stay within reach
+    for track in (mirrored, truth):
+        plain = check(toa, track, emissions, fx, fc, trusted, cov)
+        said = qa.check_track(emissions, track, cov, fx, fc, trusted,
+                              explained=qa.explained(toa, RECEIVERS, track, C, SIGMA),
+                              fix_used=qa.explained(toa, RECEIVERS, fx, C, SIGMA), acceleration_psd=q)
+        assert not plain.unverified.any()
+        assert said.unverified.tolist() == expected.tolist()
+        assert (said.quality[expected] == "flagged").all()
+        assert (said.quality[~expected] == plain.quality[~expected]).all()
+    assert (plain.quality[expected] == "ok").all()  # the right track: ok without the rule
+    wrong_ok = check(toa, mirrored, emissions, fx, fc, trusted, cov).quality[stretch] == "ok"
+    assert wrong_ok.sum() >= expected.sum()  # the mirrored middle: ok without it
+    # four receivers heard, no fix trusted: the rows place themselves and are not unverified
+    heard = simulated(n=120)[0]
+    placed = qa.check_track(emissions, truth, cov, fx, fc, trusted,
+                            explained=qa.explained(heard, RECEIVERS, truth, C, SIGMA),
+                            fix_used=qa.explained(heard, RECEIVERS, fx, C, SIGMA), acceleration_psd=q)
+    assert not placed.unverified.any()
