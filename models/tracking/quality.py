@@ -3,8 +3,9 @@
 A tracker that has lost its target still writes positions, often with small covariances. Each estimate is therefore
 checked against what the same data say without the motion model:
 
-* the **trusted single-ping fixes**: a fix of dim + 2 receivers or more (one redundant arrival at least) that kept
-  every arrival of its ping or still has dim + 3, passed its own χ² test, and whose DRMS is at most
+* the **trusted single-ping fixes**: a fix of dim + 2 receivers or more (one redundant arrival at least; a depth
+  the fix was given, a reading or a prior, counts as one more, as the fix counts it) that kept every arrival of its
+  ping or still has dim + 3, passed its own χ² test, and whose DRMS is at most
   :data:`TRUSTED_FIX_DRMS`. At a ping with such a fix, the track agrees with it when it lies within the χ² gate
   :data:`FIX_GATE` of it against the two covariances summed (Bar-Shalom, Li & Kirubarajan, *Estimation with
   Applications to Tracking and Navigation*, Wiley 2001, § 5.4: the normalised distance of two independent estimates
@@ -84,7 +85,7 @@ class Quality:
 
 
 def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarray, heard: np.ndarray,
-                  chi2: np.ndarray, dim: int) -> np.ndarray:
+                  chi2: np.ndarray, dim: int, known_depth: np.ndarray | None = None) -> np.ndarray:
     """Which single-ping fixes are trusted (module docstring).
 
     Parameters
@@ -100,6 +101,9 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     chi2 : ndarray, (m,)
         Each fix's sum of squared normalised residuals.
     dim : int
+    known_depth : ndarray of bool, (m,), optional
+        The pings whose depth was one more measurement of the fix (a depth-sensor reading, a depth given or a prior:
+        :func:`~sblsim.models.tracking.fix.fix_pings`): counted with its arrivals, as the fix counts it.
 
     Returns
     -------
@@ -108,9 +112,10 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     from scipy.stats import chi2 as chi2_dist
 
     used, heard = np.asarray(used), np.asarray(heard)
+    measured = used + (0 if known_depth is None else np.asarray(known_depth, bool))
     finite = np.isfinite(positions).all(axis=1) & np.isfinite(chi2)
-    redundant = (used >= dim + 2) & ((used == heard) | (used >= dim + 3))
-    dof = np.maximum(used - dim - 1, 1)
+    redundant = (measured >= dim + 2) & ((used == heard) | (measured >= dim + 3))
+    dof = np.maximum(measured - dim - 1, 1)
     passes = np.where(finite, chi2, np.inf) <= chi2_dist.ppf(0.999, dof)
     with np.errstate(invalid="ignore"):
         spread = np.sqrt(np.trace(covariances[:, :dim, :dim], axis1=1, axis2=2))

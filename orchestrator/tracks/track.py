@@ -224,7 +224,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
         filters = {name: kind(positions, gated).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
                    for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
-    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim)
+    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim,
+                               None if depth is None else np.isfinite(depth))
     fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}

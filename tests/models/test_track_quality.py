@@ -221,3 +221,30 @@ def test_rows_no_arrivals_place_are_unverified_beyond_the_motion_models_reach_of
                             explained=qa.explained(heard, RECEIVERS, truth, C, SIGMA),
                             fix_used=qa.explained(heard, RECEIVERS, fx, C, SIGMA), acceleration_psd=q)
     assert not placed.unverified.any()
+
+
+def test_a_depth_the_fix_was_given_counts_as_one_more_measurement_of_a_trusted_fix():
+    """Receivers in 3-D (moored at 1-9 m), a tag at 4 m heard by four of them: with no depth a fix has no arrival to
+    spare (dim + 1 = 4) and is never trusted; with the tag's depth-sensor reading it has one (the fix counts the
+    reading as a measurement), so the ones that pass χ²(1) at 0.999 are trusted; a ping heard by three with the
+    reading still is not (nothing to spare)."""
+    rng = np.random.default_rng(3)
+    receivers = np.column_stack([RECEIVERS[:4], -np.array([1.0, 9.0, 3.0, 6.0])])
+    tags = np.column_stack([rng.uniform(20, 180, 200), rng.uniform(20, 130, 200), np.full(200, -4.0)])
+    emissions = np.arange(200) * 2.0
+    toa = emissions[:, None] + np.linalg.norm(tags[:, None] - receivers[None], axis=2) / C
+    toa += SIGMA * rng.standard_normal(toa.shape)
+    depth = np.full(200, 4.0)
+    heard = np.isfinite(toa).sum(axis=1)
+    fx, fe, fc, fu, chi2 = tt.fix_pings(toa, receivers, C, SIGMA, depth=depth, depth_sigma=0.05)
+    known = np.isfinite(depth)
+    assert not qa.trusted_fixes(fx, fc, fu.sum(axis=1), heard, chi2, 3).any()
+    trusted = qa.trusted_fixes(fx, fc, fu.sum(axis=1), heard, chi2, 3, known)
+    from scipy.stats import chi2 as chi2_dist
+    assert trusted.tolist() == (chi2 <= chi2_dist.ppf(0.999, 1)).tolist()
+    assert trusted.mean() > 0.95
+    three = toa.copy()
+    three[:, 3] = np.nan
+    fx3, fe3, fc3, fu3, chi23 = tt.fix_pings(three, receivers, C, SIGMA, depth=depth, depth_sigma=0.05)
+    assert np.isfinite(fx3).all()  # fixed from three arrivals and the reading, none to spare
+    assert not qa.trusted_fixes(fx3, fc3, fu3.sum(axis=1), np.isfinite(three).sum(axis=1), chi23, 3, known).any()
