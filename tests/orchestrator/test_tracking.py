@@ -263,6 +263,20 @@ def test_written_files_keep_the_issue_names(full):
     assert not (full.out / "tracks.csv").exists()
 
 
+def test_a_fix_the_checks_do_not_trust_is_flagged(full):
+    """The single-ping fixes' rows: one with no arrival to spare (three in 2-D) can fit a reflection exactly and is
+    never trusted, so never ``ok``; among the rows left ``ok`` a share more than 10 m from the GPS well below the
+    flagged rows' (numpy, the GPS interpolated as the score does)."""
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    fix = full.estimates[full.estimates["estimator"] == "fix"]
+    assert (fix.loc[fix["receivers_heard"] <= 3, "quality"] == "flagged").all()
+    assert (fix["receivers_heard"] <= 3).sum() >= 50
+    fix = fix[(fix["time"] >= gps[0, 2]) & (fix["time"] <= gps[-1, 2])]  # the GPS's span, as gps_errors keeps
+    e = gps_errors(fix["time"].to_numpy(), fix["x"].to_numpy(), fix["y"].to_numpy(), gps)
+    ok = (fix["quality"] == "ok").to_numpy()
+    assert np.mean(e[ok] > 10) < 0.2 * np.mean(e[~ok] > 10), (np.mean(e[ok] > 10), np.mean(e[~ok] > 10))
+
+
 @pytest.mark.slow
 def test_thinned_array_gives_larger_errors(full):
     """The authors' 8-hydrophone array against the full one, each scored here against the GPS."""
