@@ -705,7 +705,8 @@ def quality_line(summary: dict[str, Any]) -> str:
     flagged = summary["flagged"].get(main, 0)
     n = summary["fixed"].get(main, 0)
     return (f"quality: {flagged} of {n} track rows flagged (off their own trusted single-ping fixes, faster than "
-            f"the tag can move, or placed less well than a trusted fix), {summary['restarts']} restarts of the EKF, "
+            f"the tag can move, placed less well than a trusted fix, or held by the motion model alone beyond its "
+            f"reach of one), {summary['restarts']} restarts of the EKF, "
             f"{summary['trusted_fixes']} trusted fixes")
 
 
