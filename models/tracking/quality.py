@@ -243,7 +243,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
             stretch[:k[0] + 1] = True
     # out of reach of the nearest trusted fixes before and after
     reach = np.zeros(m, bool)
-    if len(k):
+    if len(k):  # each row's trusted fixes before and after it (out of range where there is none)
         before = np.searchsorted(k, np.arange(m), side="right") - 1
         after = np.searchsorted(k, np.arange(m), side="left")
         ok_any = np.zeros(m, bool)
@@ -270,11 +270,9 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     unverified = np.zeros(m, bool)
     if acceleration_psd is not None and explained is not None:
         unverified = (np.asarray(explained) <= 2) & ~trusted  # too few to position itself (as ``blind`` above)
-        if len(k):
-            tk = t[k]
-            j = np.searchsorted(tk, t)
-            lo, hi = np.clip(j - 1, 0, len(k) - 1), np.clip(j, 0, len(k) - 1)
-            near = k[np.where(np.abs(t - tk[lo]) <= np.abs(tk[hi] - t), lo, hi)]
+        if len(k):  # the nearer of the trusted fixes before and after (reach's)
+            lo, hi = k[np.clip(before, 0, len(k) - 1)], k[np.clip(after, 0, len(k) - 1)]
+            near = np.where(np.abs(t - t[lo]) <= np.abs(t[hi] - t), lo, hi)
             placed2 = np.trace(C[near], axis1=1, axis2=2) + 2.0 * acceleration_psd * np.abs(t - t[near]) ** 3 / 3.0
             unverified &= ~(placed2 <= TRUSTED_FIX_DRMS ** 2)
     finite = np.isfinite(p).all(axis=1)
