@@ -12,9 +12,9 @@ checked against what the same data say without the motion model:
   of one quantity), or within :data:`FIX_SLACK` (a multipath arrival the fix kept moves it by metres, where the two
   covariances are of decimetres). Where they disagree, the one more of the ping's arrivals agree with
   (:func:`explained`) is taken as right: the track is off at that ping when the fix explains more arrivals than the
-  track, else the fix is off (a multipath arrival it kept). An estimate that explains fewer than three arrivals of
-  its ping (too few to position itself) agrees with no fix beyond :data:`FIX_SLACK`, however large its covariance,
-  and is flagged there on its own;
+  track, else the fix is off (a multipath arrival it kept). An estimate its own measurements do not place (fewer
+  than dim + 1 of them, below) agrees with no fix beyond :data:`FIX_SLACK`, however large its covariance, and is
+  flagged there on its own;
 * one ping where the track is off, between pings where it agrees, may be multipath the fix and the track read
   differently: from two successive trusted fixes where the track is off, with no agreeing fix between, the whole
   stretch is lost (to the end of the record where no agreeing fix follows, from its start where none precedes);
@@ -27,8 +27,10 @@ checked against what the same data say without the motion model:
   placed at least as well as a fix the checks trust. A row the arrivals cannot place (a ping heard by one receiver
   or none, held only by the motion model) is not a position a user should take as good, however near its neighbours
   it is; a covariance that is not finite says nothing of where the row is, and fails too;
-* a row its own arrivals do not place (fewer than three of them agree with it) is placed by the motion model
-  alone, from the pings around it: it is **unverified** where that placement, from the nearest trusted fix, would
+* a row its own arrivals do not place (fewer than dim + 1 measurements agree with it, its position's dim
+  coordinates and its emission time: the arrivals within :data:`EXPLAINED_SIGMAS` of it, and a depth it was given
+  counted as one more, as a trusted fix counts it) is placed by the motion model alone, from the pings around it:
+  it is **unverified** where that placement, from the nearest trusted fix, would
   not meet the same limit, ``√(DRMS_fix² + 2 q τ³ / 3) > TRUSTED_FIX_DRMS`` with τ the time to that fix and q the
   motion model's acceleration PSD (the white-noise-acceleration model's position variance per axis, q τ³ / 3: Bar-
   Shalom, Li & Kirubarajan 2001, § 6.2.2). Between trusted fixes a chain of such rows can settle on a wrong branch
@@ -166,7 +168,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
                 fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
                 max_speed: float = MAX_SPEED, explained: np.ndarray | None = None,
                 fix_used: np.ndarray | None = None, reported: np.ndarray | None = None,
-                acceleration_psd: float | None = None) -> Quality:
+                acceleration_psd: float | None = None, known_depth: np.ndarray | None = None) -> Quality:
     """Each estimate of a track checked against the trusted single-ping fixes, the physical speed and its own
     uncertainty (module docstring), on the horizontal position.
 
@@ -174,8 +176,9 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     ----------
     times : ndarray, (m,)
         The estimates' emission times [s], increasing.
-    positions : ndarray, (m, ≥2)
-        The estimates [m].
+    positions : ndarray, (m, dim)
+        The estimates [m], dim 2 or 3 (the checks take the horizontal position; dim decides how many measurements
+        place an estimate).
     covariances : ndarray, (m, ≥2, ≥2)
         Their covariances [m²].
     fixes : ndarray, (m, ≥2)
@@ -199,12 +202,17 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         The motion model's q [m²/s³]: with ``explained``, a row its own arrivals do not place is ``unverified``
         beyond the motion model's reach of the nearest trusted fix (module docstring); without it, not checked (a
         tag that does not move).
+    known_depth : ndarray of bool, (m,), optional
+        The estimates that were given the tag's depth (a depth-sensor reading, a depth given or a prior): one more
+        measurement beside the arrivals that agree with them, as :func:`trusted_fixes` counts it. An estimate places
+        itself with dim + 1 measurements: in 3-D, four arrivals, or three and its depth. Default: none given.
 
     Returns
     -------
     Quality
     """
     t = np.asarray(times, float)
+    dim = np.asarray(positions).shape[1]
     p = np.asarray(positions, float)[:, :2]
     P = np.asarray(covariances, float)[:, :2, :2]
     m = len(t)
@@ -217,6 +225,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     uncertain = ~(drms <= TRUSTED_FIX_DRMS) | ~np.isfinite(R).all(axis=(1, 2))
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
+    # too few measurements to place the estimate by themselves (its position and emission time): its arrivals that
+    # agree with it, and a depth it was given
+    given = np.zeros(m, int) if known_depth is None else np.asarray(known_depth, bool).astype(int)
+    too_few = None if explained is None else np.asarray(explained) + given < dim + 1
     alone = np.zeros(m, bool)  # off a trusted fix while explaining too few arrivals to position itself
     k = np.flatnonzero(trusted)
     if len(k):
@@ -227,7 +239,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
             ours, theirs = np.asarray(explained)[k], np.asarray(fix_used)[k]
             # an estimate that explains too few of its ping's arrivals to position itself agrees with nothing, however
             # large its covariance
-            blind = (ours <= 2) & ~near
+            blind = too_few[k] & ~near
             fix_more = theirs > ours
             fix_bad[k] = (fix_bad[k] | blind) & fix_more
             alone[k] = blind & fix_more
@@ -269,7 +281,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     # a row its own arrivals do not place, held by the motion model beyond its reach of a trusted fix
     unverified = np.zeros(m, bool)
     if acceleration_psd is not None and explained is not None:
-        unverified = (np.asarray(explained) <= 2) & ~trusted  # too few to position itself (as ``blind`` above)
+        unverified = too_few & ~trusted  # (as ``blind`` above)
         if len(k):  # the nearer of the trusted fixes before and after (reach's)
             lo, hi = k[np.clip(before, 0, len(k) - 1)], k[np.clip(after, 0, len(k) - 1)]
             near = np.where(np.abs(t - t[lo]) <= np.abs(t[hi] - t), lo, hi)

@@ -241,7 +241,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                  None if restarts is None else np.isin(ping, restarts),
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
                                  fix_used=fix_explained[ping], reported=reported,
-                                 acceleration_psd=None if stationary else settings.acceleration_psd)
+                                 acceleration_psd=None if stationary else settings.acceleration_psd,
+                                 known_depth=None if depth is None else np.isfinite(depth)[ping])
         cov = reported
         with np.errstate(invalid="ignore"):
             # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0
