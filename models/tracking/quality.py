@@ -12,9 +12,9 @@ checked against what the same data say without the motion model:
   of one quantity), or within :data:`FIX_SLACK` (a multipath arrival the fix kept moves it by metres, where the two
   covariances are of decimetres). Where they disagree, the one more of the ping's arrivals agree with
   (:func:`explained`) is taken as right: the track is off at that ping when the fix explains more arrivals than the
-  track, else the fix is off (a multipath arrival it kept). An estimate its own measurements do not place (fewer
-  than dim + 1 of them, below) agrees with no fix beyond :data:`FIX_SLACK`, however large its covariance, and is
-  flagged there on its own;
+  track, else the fix is off (a multipath arrival it kept). An estimate its own measurements do not check (none to
+  spare, below) agrees with no fix beyond :data:`FIX_SLACK`, however large its covariance, and is flagged there on
+  its own;
 * one ping where the track is off, between pings where it agrees, may be multipath the fix and the track read
   differently: from two successive trusted fixes where the track is off, with no agreeing fix between, the whole
   stretch is lost (to the end of the record where no agreeing fix follows, from its start where none precedes);
@@ -27,15 +27,17 @@ checked against what the same data say without the motion model:
   placed at least as well as a fix the checks trust. A row the arrivals cannot place (a ping heard by one receiver
   or none, held only by the motion model) is not a position a user should take as good, however near its neighbours
   it is; a covariance that is not finite says nothing of where the row is, and fails too;
-* a row its own arrivals do not place (fewer than dim + 1 measurements agree with it, its position's dim
-  coordinates and its emission time: the arrivals within :data:`EXPLAINED_SIGMAS` of it, and a depth it was given
-  counted as one more, as a trusted fix counts it) is placed by the motion model alone, from the pings around it:
-  it is **unverified** where that placement, from the nearest trusted fix, would
-  not meet the same limit, ``√(DRMS_fix² + 2 q τ³ / 3) > TRUSTED_FIX_DRMS`` with τ the time to that fix and q the
-  motion model's acceleration PSD (the white-noise-acceleration model's position variance per axis, q τ³ / 3: Bar-
-  Shalom, Li & Kirubarajan 2001, § 6.2.2). Between trusted fixes a chain of such rows can settle on a wrong branch
-  of each ping's hyperbola (a thin array's pings heard by two receivers) with a small covariance of its own: nothing
-  in the data checks it there.
+* a row its own measurements do not check: fewer than dim + 2 agree with it (the arrivals within
+  :data:`EXPLAINED_SIGMAS` of it, and a depth it was given counted as one more, as a trusted fix counts it), none
+  to spare beyond its position's dim coordinates and its emission time. With dim + 1 they are fitted exactly
+  whatever one of them is (a reflection moves the row by metres to tens of metres and nothing in its ping says
+  so), with fewer they do not place it. Such a row is **unverified** where the motion model alone, from the
+  nearest trusted fix, would not place it within the same limit, ``√(DRMS_fix² + 2 q τ³ / 3) >
+  TRUSTED_FIX_DRMS`` with τ the time to that fix and q the motion model's acceleration PSD (the
+  white-noise-acceleration model's position variance per axis, q τ³ / 3: Bar-Shalom, Li & Kirubarajan 2001,
+  § 6.2.2). Between trusted fixes a chain of such rows can settle on a wrong branch of each ping's hyperbola (a
+  thin array's pings heard by two receivers), or on a reflection that pings of three receivers fit exactly, with
+  a small covariance of its own: nothing in the data checks it there.
 
 A ping that fails is ``flagged``; a ping where a filter started again (a restart, a new segment after a gap) is
 ``restart``; the rest ``ok``. A track kilometres from every fix is never ``ok``.
@@ -69,7 +71,7 @@ class Quality:
     (m,) arrays: ``fix`` (outside its own trusted fix: not flagged alone), and the reasons of a flag, ``stretch``
     (from one such ping to the next with no agreeing fix between), ``reach`` (out of reach of the nearest trusted
     fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`), ``uncertain`` (a horizontal DRMS of its own above
-    :data:`TRUSTED_FIX_DRMS`, or not finite), ``unverified`` (not placed by its own arrivals and beyond the motion
+    :data:`TRUSTED_FIX_DRMS`, or not finite), ``unverified`` (not checked by its own measurements and beyond the motion
     model's reach of a trusted fix: module docstring)."""
 
     quality: np.ndarray
@@ -178,7 +180,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         The estimates' emission times [s], increasing.
     positions : ndarray, (m, dim)
         The estimates [m], dim 2 or 3 (the checks take the horizontal position; dim decides how many measurements
-        place an estimate).
+        check an estimate).
     covariances : ndarray, (m, ≥2, ≥2)
         Their covariances [m²].
     fixes : ndarray, (m, ≥2)
@@ -199,13 +201,14 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         fixes (the receivers' survey, the sound speed: consider terms): the own-uncertainty limit takes these (a
         row that error leaves unplaced is not ``ok``), the fixes' gates ``covariances`` (default: ``covariances``).
     acceleration_psd : float, optional
-        The motion model's q [m²/s³]: with ``explained``, a row its own arrivals do not place is ``unverified``
+        The motion model's q [m²/s³]: with ``explained``, a row its own measurements do not check is ``unverified``
         beyond the motion model's reach of the nearest trusted fix (module docstring); without it, not checked (a
         tag that does not move).
     known_depth : ndarray of bool, (m,), optional
         The estimates that were given the tag's depth (a depth-sensor reading, a depth given or a prior): one more
-        measurement beside the arrivals that agree with them, as :func:`trusted_fixes` counts it. An estimate places
-        itself with dim + 1 measurements: in 3-D, four arrivals, or three and its depth. Default: none given.
+        measurement beside the arrivals that agree with them, as :func:`trusted_fixes` counts it. An estimate's own
+        measurements check it with dim + 2 (one to spare, as a trusted fix's): in 3-D five arrivals, or four and
+        its depth; in 2-D four arrivals. Default: none given.
 
     Returns
     -------
@@ -225,11 +228,11 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     uncertain = ~(drms <= TRUSTED_FIX_DRMS) | ~np.isfinite(R).all(axis=(1, 2))
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
-    # too few measurements to place the estimate by themselves (its position and emission time): its arrivals that
-    # agree with it, and a depth it was given
+    # the measurements that agree with the estimate (its arrivals, and a depth it was given) have none to spare
+    # beyond its position and emission time: they do not check it
     given = np.zeros(m, int) if known_depth is None else np.asarray(known_depth, bool).astype(int)
-    too_few = None if explained is None else np.asarray(explained) + given < dim + 1
-    alone = np.zeros(m, bool)  # off a trusted fix while explaining too few arrivals to position itself
+    unchecked = None if explained is None else np.asarray(explained) + given < dim + 2
+    alone = np.zeros(m, bool)  # off a trusted fix while its own measurements do not check it
     k = np.flatnonzero(trusted)
     if len(k):
         d2 = _distance2(p[k] - fx[k], P[k] + C[k])
@@ -237,9 +240,9 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         fix_bad[k] = ~((d2 <= FIX_GATE) | near)
         if explained is not None and fix_used is not None:
             ours, theirs = np.asarray(explained)[k], np.asarray(fix_used)[k]
-            # an estimate that explains too few of its ping's arrivals to position itself agrees with nothing, however
-            # large its covariance
-            blind = too_few[k] & ~near
+            # an estimate its own measurements do not check agrees with nothing beyond the slack, however large its
+            # covariance, where the fix explains more of the ping's arrivals
+            blind = unchecked[k] & ~near
             fix_more = theirs > ours
             fix_bad[k] = (fix_bad[k] | blind) & fix_more
             alone[k] = blind & fix_more
@@ -278,10 +281,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
             fast = ~(step <= max_speed * np.abs(dt) + slack)
         speed[1:] |= fast
         speed[:-1] |= fast
-    # a row its own arrivals do not place, held by the motion model beyond its reach of a trusted fix
+    # a row its own measurements do not check, held by the motion model beyond its reach of a trusted fix
     unverified = np.zeros(m, bool)
     if acceleration_psd is not None and explained is not None:
-        unverified = too_few & ~trusted  # (as ``blind`` above)
+        unverified = unchecked & ~trusted  # (as ``blind`` above)
         if len(k):  # the nearer of the trusted fixes before and after (reach's)
             lo, hi = k[np.clip(before, 0, len(k) - 1)], k[np.clip(after, 0, len(k) - 1)]
             near = np.where(np.abs(t - t[lo]) <= np.abs(t[hi] - t), lo, hi)

@@ -250,14 +250,14 @@ def test_a_depth_the_fix_was_given_counts_as_one_more_measurement_of_a_trusted_f
     assert not qa.trusted_fixes(fx3, fc3, fu3.sum(axis=1), np.isfinite(three).sum(axis=1), chi23, 3, known).any()
 
 
-def test_an_estimate_in_3d_needs_four_measurements_to_place_itself_its_depth_counted_as_one():
-    """Receivers in 3-D (moored at 1-9 m), a tag at 4 m, pings 60-139 heard by three of the four: an estimate in
-    3-D places itself (x, y, z and its emission time) with four measurements, so three arrivals and no depth leave
-    it to the motion model, ``unverified`` beyond its reach of the nearest trusted fix; with the tag's depth given
-    the three arrivals and the depth place it. Written again here as a loop over the rows; in 2-D (the same
-    receivers' x and y) three arrivals place an estimate, as before."""
+def test_an_estimates_own_measurements_check_it_with_one_to_spare_its_depth_counted_as_one():
+    """Receivers in 3-D (moored at 1-9 m), a tag at 4 m, pings 60-139 heard by four of the five and no fix there:
+    an estimate in 3-D is fitted exactly by four measurements (x, y, z and its emission time), so its own
+    measurements check it with five; four arrivals and no depth leave it to the motion model, ``unverified``
+    beyond its reach of the nearest trusted fix; four and the tag's depth check it. In 2-D (the same receivers'
+    x and y) four arrivals check an estimate, and three do not. Written again here as a loop over the rows."""
     rng = np.random.default_rng(5)
-    receivers = np.column_stack([RECEIVERS[:4], -np.array([1.0, 9.0, 3.0, 6.0])])
+    receivers = np.column_stack([RECEIVERS[:5], -np.array([1.0, 9.0, 3.0, 6.0, 2.0])])
     n = 200
     tags = np.column_stack([100 + 40 * np.cos(np.arange(n) / 40), 75 + 30 * np.sin(np.arange(n) / 40),
                             np.full(n, -4.0)])
@@ -265,34 +265,43 @@ def test_an_estimate_in_3d_needs_four_measurements_to_place_itself_its_depth_cou
     toa = emissions[:, None] + np.linalg.norm(tags[:, None] - receivers[None], axis=2) / C
     toa += SIGMA * rng.standard_normal(toa.shape)
     stretch = np.arange(60, 140)
-    toa[stretch, 3] = np.nan
+    toa[stretch, 4] = np.nan
     depth = np.full(n, 4.0)
     fx, fe, fc, fu, chi2 = tt.fix_pings(toa, receivers, C, SIGMA, depth=depth, depth_sigma=0.05)
+    fx[stretch] = np.nan  # no fix there (as where one is refused)
     trusted = qa.trusted_fixes(fx, fc, fu.sum(axis=1), np.isfinite(toa).sum(axis=1), chi2, 3, np.isfinite(depth))
-    assert trusted[:60].all() and not trusted[stretch].any()
+    assert trusted[:60].mean() > 0.9 and not trusted[stretch].any()
     cov = np.tile(0.01 * np.eye(3), (n, 1, 1))
     agree = qa.explained(toa, receivers, tags, C, SIGMA)
-    assert (agree[stretch] == 3).all()
+    assert (agree[stretch] == 4).all()
     q = 0.01
     k = np.flatnonzero(trusted)
-    for known, needed in ((np.zeros(n, bool), 4), (np.ones(n, bool), 3)):
+
+    def expected_rows(measured, dim):
         expected = np.zeros(n, bool)
         for i in range(n):
-            if agree[i] + known[i] >= 4 or trusted[i]:
+            if measured[i] >= dim + 2 or trusted[i]:
                 continue
             tau = np.abs(emissions[k] - emissions[i])
             j = k[np.argmin(tau)]
             expected[i] = np.trace(fc[j][:2, :2]) + 2.0 * q * tau.min() ** 3 / 3.0 > 10.0**2
-        said = qa.check_track(emissions, tags, cov, fx, fc, trusted, explained=agree,
-                              fix_used=qa.explained(toa, receivers, fx, C, SIGMA), acceleration_psd=q,
-                              known_depth=known)
+        return expected
+
+    fix_used = qa.explained(toa, receivers, fx, C, SIGMA)
+    for known in (np.zeros(n, bool), np.ones(n, bool)):
+        expected = expected_rows(agree + known, 3)
+        said = qa.check_track(emissions, tags, cov, fx, fc, trusted, explained=agree, fix_used=fix_used,
+                              acceleration_psd=q, known_depth=known)
         assert said.unverified.tolist() == expected.tolist()
-        if needed == 4:  # the stretch's middle, beyond the reach of the fixes either side
+        if known.any():
+            assert not expected.any()
+        else:  # the stretch's middle, beyond the reach of the fixes either side
             assert 20 < expected.sum() < len(stretch) and expected[stretch].sum() == expected.sum()
             assert (said.quality[expected] == "flagged").all()
-        else:
-            assert not expected.any()
-    flat = qa.check_track(emissions, tags[:, :2], cov[:, :2, :2], fx[:, :2], fc[:, :2, :2], trusted,
-                          explained=qa.explained(toa, receivers[:, :2], tags[:, :2], C, SIGMA),
-                          fix_used=qa.explained(toa, receivers[:, :2], fx[:, :2], C, SIGMA), acceleration_psd=q)
-    assert not flat.unverified[stretch].any()  # in 2-D three arrivals place an estimate
+    flat_agree = qa.explained(toa, receivers[:, :2], tags[:, :2], C, SIGMA)
+    assert (flat_agree[stretch] == 4).all()
+    for heard, checked in ((flat_agree, True), (np.minimum(flat_agree, 3), False)):
+        flat = qa.check_track(emissions, tags[:, :2], cov[:, :2, :2], fx[:, :2], fc[:, :2, :2], trusted,
+                              explained=heard, fix_used=fix_used, acceleration_psd=q)
+        assert flat.unverified.tolist() == expected_rows(heard, 2).tolist()
+        assert flat.unverified[stretch].any() != checked
