@@ -88,6 +88,13 @@ class Quality:
         return int((self.quality == "flagged").sum())
 
 
+def _to_spare(count: np.ndarray, known_depth: np.ndarray | None, dim: int) -> np.ndarray:
+    """The measurements of each ping beyond the dim + 1 that fit a position and emission time exactly: its ``count``
+    (m,) arrivals, and a depth it was given (``known_depth`` (m,) bool: a reading, a depth given or a prior) as one
+    more."""
+    return count + (0 if known_depth is None else np.asarray(known_depth, bool)) - (dim + 1)
+
+
 def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarray, heard: np.ndarray,
                   chi2: np.ndarray, dim: int, known_depth: np.ndarray | None = None) -> np.ndarray:
     """Which single-ping fixes are trusted (module docstring).
@@ -116,10 +123,10 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     from scipy.stats import chi2 as chi2_dist
 
     used, heard = np.asarray(used), np.asarray(heard)
-    measured = used + (0 if known_depth is None else np.asarray(known_depth, bool))
+    spare = _to_spare(used, known_depth, dim)
     finite = np.isfinite(positions).all(axis=1) & np.isfinite(chi2)
-    redundant = (measured >= dim + 2) & ((used == heard) | (measured >= dim + 3))
-    dof = np.maximum(measured - dim - 1, 1)
+    redundant = (spare >= 1) & ((used == heard) | (spare >= 2))
+    dof = np.maximum(spare, 1)
     passes = np.where(finite, chi2, np.inf) <= chi2_dist.ppf(0.999, dof)
     with np.errstate(invalid="ignore"):
         spread = np.sqrt(np.trace(covariances[:, :dim, :dim], axis1=1, axis2=2))
@@ -228,10 +235,8 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     uncertain = ~(drms <= TRUSTED_FIX_DRMS) | ~np.isfinite(R).all(axis=(1, 2))
     P = np.where(np.isfinite(P), P, 0.0)
     fix_bad = np.zeros(m, bool)
-    # the measurements that agree with the estimate (its arrivals, and a depth it was given) have none to spare
-    # beyond its position and emission time: they do not check it
-    given = np.zeros(m, int) if known_depth is None else np.asarray(known_depth, bool).astype(int)
-    unchecked = None if explained is None else np.asarray(explained) + given < dim + 2
+    # the measurements that agree with the estimate have none to spare: they do not check it
+    unchecked = None if explained is None else _to_spare(np.asarray(explained), known_depth, dim) < 1
     alone = np.zeros(m, bool)  # off a trusted fix while its own measurements do not check it
     k = np.flatnonzero(trusted)
     if len(k):

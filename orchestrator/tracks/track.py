@@ -224,8 +224,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
         filters = {name: kind(positions, gated).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
                    for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
-    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim,
-                               None if depth is None else np.isfinite(depth))
+    depth_known = None if depth is None else np.isfinite(depth)  # a measurement of each fix and row where given
+    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known)
     fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}
@@ -242,7 +242,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                  explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
                                  fix_used=fix_explained[ping], reported=reported,
                                  acceleration_psd=None if stationary else settings.acceleration_psd,
-                                 known_depth=None if depth is None else np.isfinite(depth)[ping])
+                                 known_depth=None if depth_known is None else depth_known[ping])
         cov = reported
         with np.errstate(invalid="ignore"):
             # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0
