@@ -301,6 +301,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                acceleration_psd: float | None = None, sound_speed_file: str | Path | None = None,
                temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
                tag_depth: float | None = None, depth_sigma: float | None = None, survey_sigma: float | None = None,
+               crs: str | None = None, frame: str | None = None, time_origin: str | float | None = None,
                out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
@@ -363,6 +364,17 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     motion : str
         ``moving`` (default: the filters and smoothers) or ``stationary`` (a sync or reference tag: one position
         for all pings, :mod:`sblsim.models.tracking.stationary`, the estimator ``stationary``).
+    crs : str, optional
+        The receivers file's CRS (``EPSG:…``): ``lat``, ``lon`` columns in a geographic one (WGS 84 by default where
+        the file has them), ``x_m``, ``y_m`` in a projected one (kept in it). With a CRS every row of the outputs
+        has ``lat``, ``lon`` [° WGS 84], and a truth may be given in latitude and longitude.
+    frame : str, optional
+        The metric frame latitude and longitude are projected to (a projected CRS in metres; default the UTM zone of
+        the array's centre).
+    time_origin : str or float, optional
+        The UTC time of the TOA file's zero (ISO 8601, or seconds since 1970): every row of the outputs has
+        ``epoch_s`` and ``time_utc``, and a truth or sound-speed series may be in absolute times (ISO 8601, or
+        ``epo`` seconds since 1970).
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
         ``errors.csv`` there.
@@ -386,7 +398,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     target = prepare_out(out, force, "track.csv", "track")
     options = toa_options(smooth, sound_speed, receivers_kept, drop_detections, seed, truth_sigma, ping_type,
                           burst_interval, burst_sequence, acceleration_psd, sound_speed_file, temperature, salinity,
-                          motion, tag_depth, depth_sigma, survey_sigma)
+                          motion, tag_depth, depth_sigma, survey_sigma, crs, frame, time_origin)
     outcome = track(toa, receivers, truth, reference, **options)
     if target is not None:
         write(outcome, target)
@@ -412,11 +424,30 @@ def geometry_arguments(tag_depth: Any, depth_sigma: Any, survey_sigma: Any, name
                                                                             *SURVEY_SIGMA_RANGE, "m")}
 
 
+def place_arguments(crs: Any, frame: Any, time_origin: Any, names: tuple[str, str, str]) -> dict[str, Any]:
+    """The receivers' CRS, the metric frame and the TOA file's time origin checked (``names``: how the caller spells
+    them), as :func:`~sblsim.orchestrator.tracks.track.track`'s keyword arguments.
+
+    Raises
+    ------
+    ConfigError, ModelError
+        A CRS pyproj does not know, a frame that is not metric, a time that is neither ISO 8601 nor epoch seconds.
+    """
+    from sblsim.orchestrator.io.frames import check_crs, check_metric
+    from sblsim.orchestrator.io.times import parse_instant
+
+    crs, frame = text_argument(crs, names[0]), text_argument(frame, names[1])
+    return {"crs": None if crs is None else check_crs(crs, names[0]),
+            "frame": None if frame is None else check_metric(frame, names[1]),
+            "time_origin": None if time_origin is None else parse_instant(time_origin, names[2])}
+
+
 def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any = None, drop_detections: Any = 0.0,
                 seed: Any = 0, truth_sigma: Any = 0.0, ping_type: Any = None, burst_interval: Any = None,
                 burst_sequence: Any = None, acceleration_psd: Any = None, sound_speed_file: Any = None,
                 temperature: Any = None, salinity: Any = None, motion: Any = "moving", tag_depth: Any = None,
-                depth_sigma: Any = None, survey_sigma: Any = None) -> dict[str, Any]:
+                depth_sigma: Any = None, survey_sigma: Any = None, crs: Any = None, frame: Any = None,
+                time_origin: Any = None) -> dict[str, Any]:
     """:func:`replay_toa`'s tracking arguments checked (each named as the function names it), as keyword arguments
     of :func:`~sblsim.orchestrator.tracks.track.track`.
 
@@ -441,7 +472,8 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
             "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval, "burst_sequence_path": sequence,
             "acceleration_psd": acceleration_psd, "sound_speed_path": series, "temperature": temperature,
             "salinity": salinity, "motion": motion} | geometry_arguments(
-        tag_depth, depth_sigma, survey_sigma, ("tag_depth", "depth_sigma", "survey_sigma"))
+        tag_depth, depth_sigma, survey_sigma, ("tag_depth", "depth_sigma", "survey_sigma")) | place_arguments(
+        crs, frame, time_origin, ("crs", "frame", "time_origin"))
 
 
 def replay_toa_tags(folder: str | Path, *, receivers: str | Path, workers: int | None = None,
@@ -594,6 +626,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the truth's own error per horizontal axis [m] in [0, 100] (GPS, lever arm), "
                         "in the NEES against it (default 0: the truth taken as exact)")
+    p.add_argument("--crs", default=None, metavar="EPSG",
+                   help="--format toa: the receivers file's CRS (lat,lon in a geographic one, WGS 84 by default; x_m,"
+                        "y_m in a projected one): the outputs gain lat, lon")
+    p.add_argument("--frame", default=None, metavar="EPSG",
+                   help="--format toa: the metric frame lat, lon are projected to (default: the UTM zone of the "
+                        "array's centre)")
+    p.add_argument("--time-origin", default=None, metavar="UTC",
+                   help="--format toa: the UTC time of the TOA file's zero (ISO 8601 or epoch seconds): the outputs "
+                        "gain epoch_s and time_utc, and a truth or sound-speed series may be in UTC")
     p.add_argument("--truth", type=Path, default=None, metavar="FILE",
                    help="truth track (time_s, n_m, e_m, d_m; .csv or .parquet): errors, consistency, figures; with "
                         "--format toa: x y t [m, m, s] under a header (e.g. GPS)")
@@ -630,7 +671,8 @@ def main(args: argparse.Namespace) -> int:
                             ("--workers", args.workers is not None), ("--scheduler", args.scheduler),
                             ("--tag-depth", args.tag_depth is not None),
                             ("--depth-sigma", args.depth_sigma is not None),
-                            ("--survey-sigma", args.survey_sigma is not None)) if v]
+                            ("--survey-sigma", args.survey_sigma is not None),
+                            ("--crs", args.crs), ("--frame", args.frame), ("--time-origin", args.time_origin)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -754,7 +796,8 @@ def _main_toa(args: argparse.Namespace) -> int:
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
                           "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
                           "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --motion, --workers, "
-                          "--scheduler, --tag-depth, --depth-sigma, --survey-sigma, --out, --force")
+                          "--scheduler, --tag-depth, --depth-sigma, --survey-sigma, --crs, --frame, --time-origin, "
+                          "--out, --force")
     speed, series, temperature, salinity, motion, q = medium_arguments(
         args.sound_speed, args.sound_speed_file, args.temperature, args.salinity, args.motion, args.acceleration_psd,
         ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"))
@@ -775,7 +818,8 @@ def _main_toa(args: argparse.Namespace) -> int:
                "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval,
                "burst_sequence_path": sequence, "acceleration_psd": q, "sound_speed_path": series,
                "temperature": temperature, "salinity": salinity, "motion": motion} | geometry_arguments(
-        args.tag_depth, args.depth_sigma, args.survey_sigma, ("--tag-depth", "--depth-sigma", "--survey-sigma"))
+        args.tag_depth, args.depth_sigma, args.survey_sigma, ("--tag-depth", "--depth-sigma", "--survey-sigma")) | \
+        place_arguments(args.crs, args.frame, args.time_origin, ("--crs", "--frame", "--time-origin"))
     if args.log.is_dir():
         return _main_tags(args, options)
     if args.workers is not None or args.scheduler is not None:

@@ -27,6 +27,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, sync_emissions
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.orchestrator.sync.detections import Detections
+from sblsim.orchestrator.sync.transmitters import match
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
 MIN_BIN_ARRIVALS = 5
@@ -116,7 +117,13 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     names = hydrophones["receiver"].tolist()
     index = {name: k for k, name in enumerate(names)}
     tags = hydrophones.loc[hydrophones["sync_tag"] != "", ["sync_tag", "receiver"]]
-    tag_names = tags["sync_tag"].tolist()
+    # each sync tag as the detections name it (a full ID for an id, or the other way round: transmitters.match)
+    detected = frame["tag"].unique()
+    tag_names = [match(t, detected) or t for t in tags["sync_tag"]]
+    if len(set(tag_names)) != len(tag_names):
+        twice = next(t for t in tag_names if tag_names.count(t) > 1)
+        raise ModelError(f"sync: sync tag {twice} is named at two receivers (as an id and as a full ID); allowed: "
+                         "one receiver per sync tag")
     tag_index = {t: k for k, t in enumerate(tag_names)}
     tag_home = np.array([index[r] for r in tags["receiver"]], np.int64)
     unknown = sorted(set(frame["receiver"]) - set(index))

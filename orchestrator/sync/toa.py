@@ -237,6 +237,7 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     """
     started = clock.perf_counter()
     frame = detections.frame
+    tag = detections.tag(tag) or tag  # a full ID, or an id alone where one code space has it
     mine = frame[frame["tag"] == tag]
     if not len(mine):
         raise ModelError(f"tag: {tag!r} is never detected in {detections.source!r}; allowed: one of "

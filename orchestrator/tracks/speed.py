@@ -45,7 +45,8 @@ def speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.
 def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
                       series_path: Path | None = None, temperature: float | None = None,
                       salinity: float | None = None, depth: np.ndarray | None = None,
-                      depth_sigma: float = DEPTH_SIGMA) -> tuple[np.ndarray, float, dict[str, Any]]:
+                      depth_sigma: float = DEPTH_SIGMA, time_origin: float | None = None
+                      ) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
     given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
     whose median is the reference speed and to which each ping's arrivals are rescaled
@@ -56,7 +57,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     ``temperature`` [°C] and ``salinity`` [g/kg], else the stated default; a calibration 5.6 m/s uncertain is far
     better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone. The
     calibration takes the tag's depth per ping (``depth`` [m], NaN where none) with ``depth_sigma`` [m] where known.
-    A given speed is checked against the pings' own calibration (:func:`speed_check`: said, not replaced).
+    A given speed is checked against the pings' own calibration (:func:`speed_check`: said, not replaced). A series
+    in absolute times is taken to the times of arrival's base by ``time_origin`` [s since 1970 UTC].
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
@@ -68,7 +70,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     if series_path is not None:
         from sblsim.orchestrator.tracks.toa import read_sound_speed_series
 
-        series = read_sound_speed_series(series_path)
+        series = read_sound_speed_series(series_path, time_origin)
         first = ps.first_arrivals(toa)
         span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
         inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])

@@ -5,11 +5,21 @@
   heard (Lake Hald's ``toa.txt``);
 * the receivers' positions: a CSV with a name column and ``x_m``, ``y_m`` [, ``z_m``] [, ``status``] (or
   ``x``, ``y``, ``z``), a receiver without a position not used (Lake Hald's ``hydrophones.csv``), or a TOML
-  file of ``[[receiver]]`` tables with ``name``, ``x_m``, ``y_m`` [, ``z_m``];
-* a track (the truth, or a reference solution): columns ``x``, ``y`` [, ``z``] [m] and ``t`` (or ``time``,
-  ``top``) [s] under a header line (Lake Hald's ``gps.txt``, ``umap.txt``);
+  file of ``[[receiver]]`` tables with ``name``, ``x_m``, ``y_m`` [, ``z_m``]; in a CSV the positions may be
+  ``lat``, ``lon`` (or ``latitude``, ``longitude``) instead, WGS 84 degrees (or the geographic ``crs`` given),
+  projected to a metric frame (:mod:`sblsim.orchestrator.io.frames`: the UTM zone of the array's centre, or the
+  ``frame`` given), and x, y may be given in a projected ``crs`` (kept in it): then every output has latitude and
+  longitude too;
+* a track (the truth, or a reference solution): columns ``x``, ``y`` [, ``z``] [m] (or ``lat``, ``lon`` [°] where
+  the receivers have a CRS) and ``t`` (or ``time``, ``top``) [s] under a header line (Lake Hald's ``gps.txt``,
+  ``umap.txt``);
 * a measured sound-speed series: columns ``time_s`` (or ``t``, ``time``) [s] and ``sound_speed_m_s`` (or ``c``,
   ``sound_speed``) [m/s] under a header line (a temperature logger's series converted, a CTD's time series).
+
+A time column holds seconds on the times of arrival's own base, or **absolute** times: ISO 8601 text (UTC unless a
+zone is given) or, under a column named ``epo``, ``epoch``, ``epoch_s``, ``time_utc``, ``timestamp`` or
+``datetime``, seconds since 1970-01-01 UTC (:mod:`sblsim.orchestrator.io.times`), taken to the base by the times of
+arrival's stated origin (``origin``: the UTC time of their zero; refused in one line without one).
 
 Each file must be a regular file (a FIFO or a device such as ``/dev/zero`` is refused before it is opened) and is
 read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read. Its rows are
@@ -30,7 +40,18 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.frames import (
+    CHOSEN_INPUT,
+    Frame,
+    check_crs,
+    check_latlon,
+    check_metric,
+    frame_for,
+    is_geographic,
+    transform,
+)
 from sblsim.orchestrator.io.tables import NUMBER, csv_cells, number, read_lines
+from sblsim.orchestrator.io.times import utc_seconds
 
 #: The largest file read [bytes] and the most rows (pings, receivers, track points).
 MAX_TOA_BYTES = 64 * 2**20
@@ -164,32 +185,44 @@ def read_toa(path: Path | str) -> ToaMatrix:
 @dataclass
 class Receivers:
     """The receivers: ``names`` (n,), ``positions`` (n, dim) [m], NaN rows where a receiver has no position
-    (not used), and ``sigma`` (n,) each one's survey error per axis [m] (a ``sigma_m`` column; NaN where not given,
-    None without the column)."""
+    (not used), ``sigma`` (n,) each one's survey error per axis [m] (a ``sigma_m`` column; NaN where not given,
+    None without the column), and ``frame`` the metric frame of the positions (None: a local frame without a
+    CRS)."""
 
     names: list[str]
     positions: np.ndarray
     sigma: np.ndarray | None = None
+    frame: Frame | None = None
 
 
 #: The survey errors a receivers file's ``sigma_m`` column may give [m] (a standard deviation per axis).
 SURVEY_SIGMA_RANGE = (0.0, 1000.0)
 
 
-def read_receivers(path: Path | str) -> Receivers:
-    """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``]
-    [, ``sigma_m``] [, ``status``]) or a TOML file (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``]
-    [, ``sigma_m``]); ``sigma_m`` the survey's standard deviation per axis [m] (:data:`SURVEY_SIGMA_RANGE`). A receiver
-    whose coordinates are empty is kept without a position (its column of the TOA matrix is not used).
+#: The header names of latitude and longitude (a receivers file's, a track's).
+LATITUDE, LONGITUDE = ("lat", "latitude"), ("lon", "long", "longitude")
+
+
+def read_receivers(path: Path | str, crs: str | None = None, frame: str | None = None) -> Receivers:
+    """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``], or
+    ``lat``, ``lon`` [°] [, ``z_m``]; [, ``sigma_m``] [, ``status``]) or a TOML file (``[[receiver]]`` with ``name``,
+    ``x_m``, ``y_m`` [, ``z_m``] [, ``sigma_m``]); ``sigma_m`` the survey's standard deviation per axis [m]
+    (:data:`SURVEY_SIGMA_RANGE`). A receiver whose coordinates are empty is kept without a position (its column of
+    the TOA matrix is not used). Latitude and longitude (WGS 84, or the geographic ``crs``) are projected to
+    ``frame`` (a metric CRS; default the UTM zone of their centre); x and y in a projected ``crs`` stay in it.
 
     Raises
     ------
     ModelError
-        One line naming the file, its row or key, and the allowed range.
+        One line naming the file, its row or key, and the allowed range; a CRS that does not fit the columns.
     """
     path, what = Path(path), "receivers"
     name = str(path)
+    if crs is not None:
+        check_crs(crs, "crs")
     if path.suffix.lower() == ".toml":
+        if crs is not None or frame is not None:
+            raise ModelError("crs: not with a TOML receivers file (x_m, y_m in a local frame); allowed: a CSV")
         return _receivers_toml(path, what)
     parsed = _rows(path, what)
     if len(parsed) < 2:
@@ -199,11 +232,21 @@ def read_receivers(path: Path | str) -> Receivers:
     if len(rows) > MAX_RECEIVERS:
         raise ModelError(f"{what}: {name!r} has {len(rows)} receivers; allowed at most {MAX_RECEIVERS}")
     axes = []
-    for axis in "xyz":
-        found = [k for k, h in enumerate(header) if h in (f"{axis}_m", axis)]
+    geographic = any(h in LATITUDE for h in header) and any(h in LONGITUDE for h in header) and \
+        (crs is None or is_geographic(crs))
+    horizontal = (LONGITUDE, LATITUDE) if geographic else (("x_m", "x"), ("y_m", "y"))
+    for aliases in (*horizontal, ("z_m", "z")):
+        found = [k for k, h in enumerate(header) if h in aliases]
         axes.append(found[0] if found else None)
     if axes[0] is None or axes[1] is None:
-        raise ModelError(f"{what}: {name!r}: the header needs x_m and y_m (or x, y) columns, got {','.join(header)}")
+        raise ModelError(f"{what}: {name!r}: the header needs x_m and y_m (or x, y; or lat, lon) columns, got "
+                         f"{','.join(header)[:120]}")
+    if crs is not None and not geographic and is_geographic(crs):
+        raise ModelError(f"crs: {crs!r} is geographic (degrees); allowed: lat and lon columns with it, or a projected "
+                         "CRS for x_m and y_m")
+    if frame is not None and crs is None and not geographic:
+        raise ModelError("frame: given for positions without a CRS; allowed: with --crs (the positions' CRS), or "
+                         "positions as lat and lon")
     used = [k for k in axes if k is not None]
     status = header.index("status") if "status" in header else None
     survey = header.index("sigma_m") if "sigma_m" in header else None
@@ -225,7 +268,21 @@ def read_receivers(path: Path | str) -> Receivers:
                           for c, k in zip(coordinates, used)])
     if len(set(names)) != len(names):
         raise ModelError(f"{what}: {name!r}: a receiver name is given twice")
-    return Receivers(names, np.array(positions, float), np.array(sigma, float) if survey is not None else None)
+    positions = np.array(positions, float)
+    chosen = None
+    if geographic:
+        lon, lat = positions[:, 0], positions[:, 1]
+        check_latlon(lat, lon, f"{what}: {name!r}")
+        if crs is not None:
+            lon, lat = transform(crs, "EPSG:4326", lon, lat)
+        chosen = frame_for(lat, lon, frame)
+        positions[:, 0], positions[:, 1] = chosen.from_latlon(lat, lon)
+    elif crs is not None:
+        chosen = Frame(check_metric(crs, "crs"), CHOSEN_INPUT) if frame is None else Frame(check_metric(frame,
+                                                                                                        "frame"))
+        if frame is not None:
+            positions[:, 0], positions[:, 1] = transform(crs, chosen.crs, positions[:, 0], positions[:, 1])
+    return Receivers(names, positions, np.array(sigma, float) if survey is not None else None, chosen)
 
 
 def _receivers_toml(path: Path, what: str) -> Receivers:
@@ -272,16 +329,45 @@ def _receivers_toml(path: Path, what: str) -> Receivers:
     return Receivers(names, np.array(positions, float), given if np.isfinite(given).any() else None)
 
 
-def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarray:
-    """Read a track (the truth, or a reference solution): columns x, y [, z] [m] and t (``time``, ``top``) [s]
-    under a header, the times increasing (a truth track, which is interpolated) or in any order (``increasing``
+#: The time columns whose numbers are absolute times (seconds since 1970-01-01 UTC), not on the TOA file's base.
+ABSOLUTE_TIME_NAMES = ("epo", "epoch", "epoch_s", "time_utc", "timestamp", "datetime", "date_time")
+
+
+def _times(rows: list[tuple[int, list[str]]], k: int, header: list[str], name: str, what: str,
+           origin: float | None) -> np.ndarray | None:
+    """The time column ``k`` of ``rows`` on the times of arrival's base [s] where it holds absolute times (ISO 8601
+    text, or numbers under a name of :data:`ABSOLUTE_TIME_NAMES`): less ``origin``; None where it holds numbers on
+    that base already (the caller checks them).
+
+    Raises
+    ------
+    ModelError
+        Absolute times without an origin, or a time that is neither form (one line).
+    """
+    cells = [cells[k].strip() for _, cells in rows]
+    if header[k] not in ABSOLUTE_TIME_NAMES and all(NUMBER.fullmatch(c) for c in cells):
+        return None
+    seconds = utc_seconds(cells, f"{what}: {name!r}", [line for line, _ in rows], header[k])
+    if origin is None:
+        raise ModelError(f"{what}: {name!r}: its times are absolute (UTC: ISO 8601 or {header[k]}) and the times of "
+                         "arrival have no stated origin; allowed: --time-origin (the UTC time of the TOA file's zero), "
+                         "or times on the TOA file's own base")
+    return seconds - origin
+
+
+def read_track(path: Path | str, what: str, increasing: bool = True, origin: float | None = None,
+               frame: Frame | None = None) -> np.ndarray:
+    """Read a track (the truth, or a reference solution): columns x, y [, z] [m] (or lat, lon [°, WGS 84], projected
+    to ``frame``) and t (``time``, ``top``; absolute times: the module docstring, taken to the base by ``origin``)
+    [s] under a header, the times increasing (a truth track, which is interpolated) or in any order (``increasing``
     False: a reference solution, which is only compared at its own rows); returns (m, 3) ``t, x, y`` or (m, 4)
     ``t, x, y, z``.
 
     Raises
     ------
     ModelError
-        One line naming the file, the line and column, and the allowed range.
+        One line naming the file, the line and column, and the allowed range; latitude and longitude without a
+        frame (receivers without a CRS), absolute times without an origin.
     """
     path = Path(path)
     name = str(path)
@@ -289,16 +375,36 @@ def read_track(path: Path | str, what: str, increasing: bool = True) -> np.ndarr
     if len(rows) < 3:
         raise ModelError(f"{what}: {name!r} needs a header (x y t) and at least two rows")
     header = [h.lower() for h in _stripped(rows[0][1])]
+    geographic = any(h in LATITUDE for h in header) and any(h in LONGITUDE for h in header)
     index = {}
-    for key, aliases in (("t", ("t", "time", "top", "time_s", "t_s")), ("x", ("x", "x_m")), ("y", ("y", "y_m")),
-                         ("z", ("z", "z_m"))):
+    for key, aliases in (("t", ("t", "time", "top", "time_s", "t_s") + ABSOLUTE_TIME_NAMES),
+                         ("x", LONGITUDE if geographic else ("x", "x_m")),
+                         ("y", LATITUDE if geographic else ("y", "y_m")), ("z", ("z", "z_m"))):
         found = [k for k, h in enumerate(header) if h in aliases]
         if found:
             index[key] = found[0]
     if not {"t", "x", "y"} <= set(index):
-        raise ModelError(f"{what}: {name!r}: the header needs x, y and t columns, got {' '.join(header)}")
-    values = _numbers(rows[1:], name, what, header, -MAX_TIME, MAX_TIME, False)
+        raise ModelError(f"{what}: {name!r}: the header needs x, y (or lat, lon) and t columns, got "
+                         f"{' '.join(header)[:120]}")
+    if geographic and frame is None:
+        raise ModelError(f"{what}: {name!r}: given in latitude and longitude and the receivers have no CRS; allowed: "
+                         "receivers with lat and lon (or --crs), or x and y in the receivers' frame")
+    ragged = next(((line, len(cells)) for line, cells in rows[1:] if len(cells) != len(header)), None)
+    if ragged is not None:
+        raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, the header {len(header)} "
+                         f"({','.join(header)[:80]}); allowed: {len(header)} cells a row")
+    times = _times(rows[1:], index["t"], header, name, what, origin)
+    keep = [k for k in range(len(header)) if times is None or k != index["t"]]
+    used = [k for k in keep if k in index.values()]
+    values = np.full((len(rows) - 1, len(header)), np.nan)
+    values[:, used] = _numbers([(line, [cells[k] for k in used]) for line, cells in rows[1:]], name, what,
+                               [header[k] for k in used], -MAX_TIME, MAX_TIME, False)
+    if times is not None:
+        values[:, index["t"]] = times
     track = values[:, [index[k] for k in ("t", "x", "y", "z") if k in index]]
+    if geographic:
+        check_latlon(track[:, 2], track[:, 1], f"{what}: {name!r}")
+        track[:, 1], track[:, 2] = frame.from_latlon(track[:, 2], track[:, 1])
     if np.abs(track[:, 1:]).max() > MAX_COORDINATE:
         raise ModelError(f"{what}: {name!r}: a coordinate is outside the allowed range [{-MAX_COORDINATE:g}, "
                          f"{MAX_COORDINATE:g}] m")
@@ -348,16 +454,17 @@ def read_burst_sequence(path: Path | str) -> np.ndarray:
 SERIES_SPEED_RANGE = (1300.0, 1700.0)
 
 
-def read_sound_speed_series(path: Path | str) -> np.ndarray:
-    """Read a measured sound-speed series: ``time_s`` [s] (on the times of arrival's time base) and
-    ``sound_speed_m_s`` [m/s] columns under a header (aliases ``t``, ``time``, ``epo`` and ``c``, ``sound_speed``,
-    ``ss``: YAPS's and ``sblsim sync``'s names), the times increasing; returns (k, 2) ``t, c``.
+def read_sound_speed_series(path: Path | str, origin: float | None = None) -> np.ndarray:
+    """Read a measured sound-speed series: ``time_s`` [s] (on the times of arrival's time base; or absolute times,
+    ISO 8601 or ``epo`` seconds since 1970 UTC, taken to that base by ``origin``: the module docstring) and
+    ``sound_speed_m_s`` [m/s] columns under a header (aliases ``t``, ``time`` and ``c``, ``sound_speed``, ``ss``:
+    YAPS's and ``sblsim sync``'s names), the times increasing; returns (k, 2) ``t, c``.
 
     Raises
     ------
     ModelError
         One line naming the file, the line and column, and the allowed range (each speed in
-        :data:`SERIES_SPEED_RANGE`, the times increasing, at least one row).
+        :data:`SERIES_SPEED_RANGE`, the times increasing, at least one row); absolute times without an origin.
     """
     path, what = Path(path), "sound speed file"
     name = str(path)
@@ -366,15 +473,22 @@ def read_sound_speed_series(path: Path | str) -> np.ndarray:
         raise ModelError(f"{what}: {name!r} needs a header (time_s, sound_speed_m_s) and at least one row")
     header = [h.lower() for h in _stripped(rows[0][1])]
     index = {}
-    for key, aliases in (("t", ("time_s", "t", "time", "t_s", "epo")),
+    for key, aliases in (("t", ("time_s", "t", "time", "t_s") + ABSOLUTE_TIME_NAMES),
                          ("c", ("sound_speed_m_s", "sound_speed", "c", "ss"))):
         found = [k for k, h in enumerate(header) if h in aliases]
         if not found:
             raise ModelError(f"{what}: {name!r}: the header needs time_s and sound_speed_m_s columns, got "
                              f"{' '.join(header)[:80]}")
         index[key] = found[0]
-    values = _numbers(rows[1:], name, what, header, -MAX_TIME, MAX_TIME, False)
-    series = values[:, [index["t"], index["c"]]]
+    ragged = next(((line, len(cells)) for line, cells in rows[1:] if len(cells) != len(header)), None)
+    if ragged is not None:
+        raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, the header {len(header)} "
+                         f"({','.join(header)[:80]}); allowed: {len(header)} cells a row")
+    times = _times(rows[1:], index["t"], header, name, what, origin)
+    columns = [index["c"]] if times is not None else [index["t"], index["c"]]
+    values = _numbers([(line, [cells[k] for k in columns]) for line, cells in rows[1:]], name, what,
+                      [header[k] for k in columns], -MAX_TIME, MAX_TIME, False)
+    series = np.c_[times, values[:, 0]] if times is not None else values
     low, high = SERIES_SPEED_RANGE
     bad = np.flatnonzero((series[:, 1] < low) | (series[:, 1] > high))
     if len(bad):
@@ -390,6 +504,7 @@ def read_sound_speed_series(path: Path | str) -> np.ndarray:
     return series
 
 
-__all__ = ["BURST_RANGE", "DEPTH_COLUMN", "DEPTH_RANGE", "MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_TIME",
-           "MAX_TOA_BYTES", "Receivers", "SERIES_SPEED_RANGE", "SURVEY_SIGMA_RANGE", "ToaMatrix", "read_burst_sequence",
-           "read_receivers", "read_sound_speed_series", "read_toa", "read_track"]
+__all__ = ["ABSOLUTE_TIME_NAMES", "BURST_RANGE", "DEPTH_COLUMN", "DEPTH_RANGE", "LATITUDE", "LONGITUDE",
+           "MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_TIME", "MAX_TOA_BYTES", "Receivers",
+           "SERIES_SPEED_RANGE", "SURVEY_SIGMA_RANGE", "ToaMatrix", "read_burst_sequence", "read_receivers",
+           "read_sound_speed_series", "read_toa", "read_track"]

@@ -24,6 +24,8 @@ from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.receivers import receiver_residuals
+from sblsim.orchestrator.io.frames import frame_summary
+from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
 from sblsim.orchestrator.tracks.depth import depth_term, prior_info, tag_depth, undetermined_depth
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
@@ -149,7 +151,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           acceleration_psd: float | None = None, sound_speed_path: Path | None = None,
           temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
           fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
-          survey_sigma: float | None = None) -> TrackOutcome:
+          survey_sigma: float | None = None, crs: str | None = None, frame: str | None = None,
+          time_origin: float | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -158,7 +161,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     ``ping_type``, ``burst_interval`` as :func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`,
     ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
     (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
-    [m²/s³] (None: estimated from the pings by EM, :mod:`sblsim.models.tracking.motion_noise`)."""
+    [m²/s³] (None: estimated from the pings by EM, :mod:`sblsim.models.tracking.motion_noise`); ``crs`` and ``frame``
+    as :func:`~sblsim.orchestrator.tracks.toa.read_receivers` takes them (receivers with a CRS: every row gains
+    ``lat``, ``lon`` [° WGS 84], a truth may be in latitude and longitude); ``time_origin`` [s since 1970 UTC] the
+    UTC time of the TOA file's zero (every row gains ``epoch_s`` and ``time_utc``, a truth or a sound-speed series
+    may be in absolute times)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -171,9 +178,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
     start = time.perf_counter()
     matrix = read_toa(toa_path)
-    receivers = read_receivers(receivers_path)
-    truth = read_track(truth_path, "truth") if truth_path is not None else None
-    reference = read_track(reference_path, "reference", increasing=False) if reference_path is not None else None
+    receivers = read_receivers(receivers_path, crs, frame)
+    truth = read_track(truth_path, "truth", origin=time_origin, frame=receivers.frame) \
+        if truth_path is not None else None
+    reference = read_track(reference_path, "reference", increasing=False, origin=time_origin,
+                           frame=receivers.frame) if reference_path is not None else None
     burst_sequence = read_burst_sequence(burst_sequence_path) if burst_sequence_path is not None else None
     toa, positions, names = _usable(matrix, receivers, receivers_kept)
     toa, dropped = drop_detections(toa, drop, seed)
@@ -190,7 +199,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     depth, depth_info = tag_depth(matrix.depth, len(toa), dim, fixed_depth, depth_sigma)
     survey = survey_sigmas(receivers, names, survey_sigma)
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
-                                      depth_sigma)
+                                      depth_sigma, time_origin)
     # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
     fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
     prior = undetermined_depth(depth, fx, fc, fused.sum(axis=1), positions)
@@ -231,6 +240,16 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     frames, covariances, flagged = {}, {}, {}
     segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
 
+    def placed(t: np.ndarray, p: np.ndarray) -> dict[str, Any]:
+        """A row's time and place: the coordinates, and where known the UTC time and the latitude and longitude."""
+        out: dict[str, Any] = {}
+        if time_origin is not None:
+            out |= {"epoch_s": t + time_origin, "time_utc": iso_utc(t + time_origin)}
+        out |= {a: p[:, k] for k, a in enumerate(columns)}
+        if receivers.frame is not None:
+            out["lat"], out["lon"] = receivers.frame.to_latlon(p[:, 0], p[:, 1])
+        return out
+
     def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
              restarts: np.ndarray | None = None, consider: np.ndarray | None = None):
         """An estimator's rows, checked against the data with its own covariance ``cov``; reported with
@@ -249,8 +268,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             sigmas = {f"sigma_{a}": np.sqrt(np.where(cov[:, k, k] >= 0, cov[:, k, k], np.nan))
                       for k, a in enumerate(columns)}
         frames[estimator] = pd.DataFrame({"estimator": estimator, "ping": ping, "time": t,
-                                          **{a: p[:, k] for k, a in enumerate(columns)}, **sigmas,
-                                          "receivers_heard": heard, "quality": checked.quality})
+                                          **placed(t, p), **sigmas, "receivers_heard": heard,
+                                          "quality": checked.quality})
         covariances[estimator] = cov[:, :2, :2]
         flagged[estimator] = checked.flagged
 
@@ -341,6 +360,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "receivers_late": [{"receiver": names[k], "arrivals": int(judged.arrivals[k]),
                             "median_residual_sigmas": float(judged.median_z[k]), "kept_share": float(judged.kept[k])}
                            for k in np.flatnonzero(judged.late)],
+        "time_origin_utc": None if time_origin is None else iso_utc([time_origin])[0],
+        "time_origin_epoch_s": time_origin,
+        "frame": frame_summary(receivers.frame, positions[:, 0], positions[:, 1]),
         "truth": None if truth_path is None else str(truth_path),
         "reference": None if reference_path is None else str(reference_path)}
     errors = result = bound = None

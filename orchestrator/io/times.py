@@ -1,0 +1,148 @@
+"""Times as a study's files give them, read to seconds since 1970-01-01 UTC, and written back as ISO 8601 UTC.
+
+A column of times is either **ISO 8601** text (``2023-08-31T21:15:42.123456Z``, ``2023-08-31 21:15:42.1``, a
+date alone ``2023-08-31`` for midnight, a zone ``+02:00`` / ``-0500`` / ``Z`` / ``UTC``; without a zone the time is
+UTC, as every export this project reads states: VUE's ``Date and Time (UTC)``, Fathom's ``Device Time (UTC)``,
+GLATOS's ``detection_timestamp_utc``, OTN's ``dateCollectedUTC``) or **epoch seconds** (a number of seconds since
+1970-01-01 UTC, a fraction kept), never both in one column. The fraction of a second is kept to the nanosecond
+the text gives (pandas' ``datetime64[ns]``), returned as float seconds (a microsecond resolves at 1e-7 s near
+2030, below a millimetre of sound's travel).
+
+Every cell is matched against its pattern before pandas parses it (:data:`ISO_TIME`: no free text reaches the
+parser) and the first bad one is refused in one line naming the file, its line and column and the allowed forms.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+
+#: An ISO 8601 date and time: a date, optionally a time (``T`` or a space, seconds optional, a fraction of up to
+#: nine digits after ``.`` or ``,``) and optionally a zone (``Z``, ``UTC``, ``±hh``, ``±hh:mm``, ``±hhmm``).
+ISO_TIME = re.compile(r"[0-9]{4}-[0-9]{2}-[0-9]{2}"
+                      r"(?:[T ][0-9]{2}:[0-9]{2}(?::[0-9]{2}(?:[.,][0-9]{1,9})?)?)?"
+                      r"(?: ?(?:Z|UTC|[+-][0-9]{2}(?::?[0-9]{2})?))?")
+#: Epoch seconds: a plain decimal number (no exponent, no sign: 1970 onwards).
+EPOCH = re.compile(r"[0-9]{1,11}(?:\.[0-9]{0,9})?")
+#: The times allowed [s since 1970-01-01 UTC]: to the year 2286.
+MAX_EPOCH = 10_000_000_000
+#: What a refusal names as allowed.
+ALLOWED = ("an ISO 8601 time (2023-08-31T21:15:42.123Z; UTC unless a zone is given) or epoch seconds "
+           "(1693516542.123)")
+
+
+def _refuse(where: str, line: int, column: str, text: str, allowed: str = ALLOWED) -> ModelError:
+    shown = text if len(text) <= 40 else text[:40] + "..."
+    return ModelError(f"{where} line {line} column {column}: {shown!r} is not allowed; allowed: {allowed}")
+
+
+def is_epoch(cells: pd.Series) -> bool:
+    """Whether a column's non-empty cells are all epoch seconds (else they must all be ISO 8601)."""
+    text = cells.astype(str).str.strip()
+    text = text[text != ""]
+    return bool(len(text)) and bool(text.str.fullmatch(EPOCH.pattern).all())
+
+
+def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[int], column: str,
+                missing: bool = False) -> np.ndarray:
+    """A column of times (module docstring) as seconds since 1970-01-01 UTC.
+
+    Parameters
+    ----------
+    cells : pandas.Series or sequence of str
+        The column's text cells.
+    where : str
+        The file, as a refusal names it (``"detections: 'x.csv'"``).
+    lines : sequence of int
+        Each cell's line in the file.
+    column : str
+        The column's name in the file.
+    missing : bool
+        Empty cells allowed (NaN).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) [s since 1970-01-01 UTC], float; NaN for an empty cell where ``missing``.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the line and the column: a cell neither form, an ISO time that does not exist
+        (``2023-02-30``), a column mixing the forms, a time before 1970 or after 2286.
+    """
+    text = pd.Series(cells, dtype=object).astype(str).str.strip().reset_index(drop=True)
+    empty = (text == "").to_numpy(bool)
+    if empty.any() and not missing:
+        k = int(np.flatnonzero(empty)[0])
+        raise _refuse(where, lines[k], column, "", ALLOWED)
+    given = text[~empty]
+    seconds = np.full(len(text), np.nan)
+    if not len(given):
+        return seconds
+    if is_epoch(given):
+        values = pd.to_numeric(given, errors="coerce").to_numpy(float)
+    else:
+        iso = given.str.fullmatch(ISO_TIME.pattern).to_numpy(bool)
+        if not iso.all():
+            k = int(given.index[np.flatnonzero(~iso)[0]])
+            allowed = ALLOWED + (" (one form per column)" if given.str.fullmatch(EPOCH.pattern).any() else "")
+            raise _refuse(where, lines[k], column, text[k], allowed)
+        normal = given.str.replace(",", ".", regex=False).str.replace(r" ?UTC$", "Z", regex=True)
+        normal = normal.str.replace(r"(?<=[0-9]) (?=[Z+-])", "", regex=True)
+        stamps = pd.to_datetime(normal, format="ISO8601", utc=True, errors="coerce")
+        bad = stamps.isna().to_numpy(bool)
+        if bad.any():
+            k = int(given.index[np.flatnonzero(bad)[0]])
+            raise _refuse(where, lines[k], column, text[k], "a date and time that exists (ISO 8601)")
+        nanoseconds = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+        whole, rest = np.divmod(nanoseconds, 1_000_000_000)
+        values = whole.astype(float) + rest / 1e9
+    outside = (values < 0) | (values > MAX_EPOCH) | ~np.isfinite(values)
+    if outside.any():
+        k = int(given.index[np.flatnonzero(outside)[0]])
+        raise _refuse(where, lines[k], column, text[k], "a time from 1970 to 2286 (UTC)")
+    seconds[~empty] = values
+    return seconds
+
+
+def iso_utc(seconds: np.ndarray | Sequence[float]) -> list[str]:
+    """Seconds since 1970-01-01 UTC as ISO 8601 UTC texts to the microsecond (``2023-08-31T21:15:42.123456Z``),
+    ``""`` where NaN."""
+    values = np.asarray(seconds, float)
+    out = [""] * len(values)
+    ok = np.isfinite(values)
+    if ok.any():
+        whole = np.floor(values[ok])
+        micro = np.round((values[ok] - whole) * 1e6).astype(np.int64)
+        stamps = pd.to_datetime(whole.astype(np.int64), unit="s", utc=True) + pd.to_timedelta(micro, unit="us")
+        for k, text in zip(np.flatnonzero(ok), stamps.strftime("%Y-%m-%dT%H:%M:%S.%fZ")):
+            out[k] = text
+    return out
+
+
+def parse_instant(value: str | float | int, where: str) -> float:
+    """One time given on the command line or to a function (ISO 8601 or epoch seconds) as seconds since
+    1970-01-01 UTC.
+
+    Raises
+    ------
+    ModelError
+        One line naming ``where`` and the allowed forms.
+    """
+    text = str(value).strip() if isinstance(value, str) else repr(float(value)) if isinstance(
+        value, (int, float, np.floating, np.integer)) and not isinstance(value, bool) else None
+    if text is None or len(text) > 64:
+        raise ModelError(f"{where}: {str(value)[:40]!r} is not allowed; allowed: {ALLOWED}")
+    try:
+        return float(utc_seconds([text], where, [1], "value")[0])
+    except ModelError:
+        raise ModelError(f"{where}: {text[:40]!r} is not allowed; allowed: {ALLOWED}") from None
+
+
+__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "is_epoch", "iso_utc", "parse_instant", "utc_seconds"]

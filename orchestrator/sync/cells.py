@@ -1,0 +1,170 @@
+"""The text of a telemetry table read as hostile input, and its cells checked: what every reader of raw detections,
+receivers, deployments, tag sheets and sound-speed series shares.
+
+A file must be a regular file (a FIFO or a device is refused before it is opened), is read to at most a stated
+number of bytes and rows (counted in what was read), must be UTF-8 text (a byte-order mark is dropped) without a NUL
+byte, and is parsed by pandas into text cells, every one of which the reader then checks itself (its pattern,
+finite, within its range); no name or text in a file is ever taken as a path. Every error is one line naming the
+file, its line and column and the allowed range (:class:`ModelError`).
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.tables import NUMBER, regular_file
+
+
+def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int) -> ModelError:
+    return ModelError(f"{what}: {name!r} {amount}; allowed at most {max_bytes // 2**20} MiB and {rows:,} rows")
+
+
+def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int | None = None) -> str:
+    """A regular file's text, refused before it is read whole when it is larger than ``max_bytes`` or holds more
+    than ``max_rows`` lines and 1,000 besides; UTF-8 (a byte-order mark dropped), no NUL byte. With ``prefix``,
+    only the file's first ``prefix`` bytes (a character cut at the end dropped), its size not checked.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file and the limit or the fault.
+    """
+    name = str(path)
+    size = regular_file(path, what)
+    if prefix is not None:
+        try:
+            with open(path, "rb") as handle:
+                head = handle.read(prefix)
+        except OSError as exc:
+            raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+        nul = head.find(b"\0")
+        if nul >= 0:
+            raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
+        return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else _decoded(head, name, what)
+    if size > max_bytes:
+        raise too_large(name, what, f"is {size / 2**20:.0f} MiB", max_bytes, max_rows)
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(max_bytes + 1)
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > max_bytes:
+        raise too_large(name, what, f"is more than {max_bytes // 2**20} MiB", max_bytes, max_rows)
+    count = data.count(b"\n")
+    if count > max_rows + 1000:
+        raise too_large(name, what, f"has {count:,} lines", max_bytes, max_rows)
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
+    return _decoded(data, name, what)
+
+
+def _decoded(data: bytes, name: str, what: str) -> str:
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
+
+
+def text_table(text: str, name: str, what: str, max_rows: int, first_line: int = 1
+               ) -> tuple[list[str], pd.DataFrame, list[int]]:
+    """A CSV text's header (stripped) and its rows as text cells (pandas, every cell a str; a short row padded with
+    empty cells), with each row's line in the file (``first_line``: the header's); blank lines skipped.
+
+    Raises
+    ------
+    ModelError
+        One line: a text pandas cannot parse (a row longer than the header), no header, a column named twice, more
+        than ``max_rows`` rows.
+    """
+    try:
+        frame = pd.read_csv(io.StringIO(text), header=None, dtype=str, keep_default_na=False, na_filter=False,
+                            skip_blank_lines=False, engine="c", quotechar='"', on_bad_lines="error")
+    except pd.errors.EmptyDataError:
+        raise ModelError(f"{what}: {name!r} is empty; allowed: a header line and rows") from None
+    except Exception as exc:  # pandas' parser errors name the line
+        raise ModelError(f"{what}: {name!r} does not parse as CSV ({' '.join(str(exc).split())[:160]})") from None
+    blank = (frame.apply(lambda column: column.str.strip()) == "").all(axis=1).to_numpy(bool)
+    lines = np.flatnonzero(~blank) + first_line
+    frame = frame[~blank]
+    if not len(frame):
+        raise ModelError(f"{what}: {name!r} holds no header; allowed: a header line and rows")
+    header = [str(h).strip() for h in frame.iloc[0].tolist()]
+    lower = [h.lower() for h in header]
+    twice = next((h for h, low in zip(header, lower) if low and lower.count(low) > 1), None)
+    if twice is not None:
+        raise ModelError(f"{what}: {name!r}: the column {twice[:40]!r} is given twice in the header")
+    body = frame.iloc[1:].reset_index(drop=True)
+    if len(body) > max_rows:
+        raise too_large(name, what, f"has {len(body):,} rows", 2**62, max_rows)
+    body.columns = range(body.shape[1])
+    return header, body, lines[1:].tolist()
+
+
+def refuse(what: str, name: str, line: int, column: str, text: str, allowed: str) -> ModelError:
+    shown = text if len(text) <= 40 else text[:40] + "..."
+    return ModelError(f"{what}: {name!r} line {line} column {column}: {shown!r} is not allowed; allowed: {allowed}")
+
+
+def pattern(values: pd.Series, regex: re.Pattern, what: str, name: str, lines: list[int], column: str,
+            allowed: str) -> pd.Series:
+    """The stripped cells of one column, each matching ``regex`` (else the first bad one refused)."""
+    cells = values.astype(str).str.strip()
+    bad = ~cells.str.fullmatch(regex.pattern).fillna(False).to_numpy(bool)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise refuse(what, name, lines[k], column, cells.iloc[k], allowed)
+    return cells
+
+
+def numbers(values: pd.Series, what: str, name: str, lines: list[int], column: str, low: float, high: float,
+            high_open: bool = False, missing: bool = False, unit: str = "") -> np.ndarray:
+    """The cells of one column as floats, each a number (:data:`NUMBER`), finite, in [low, high] (``[low, high)``
+    with ``high_open``); empty cells NaN where ``missing``."""
+    cells = values.astype(str).str.strip()
+    parsed = np.array(pd.to_numeric(cells.where(cells != "", "nan"), errors="coerce"), float)
+    text_ok = cells.str.fullmatch(NUMBER.pattern).fillna(False).to_numpy(bool)
+    empty = (cells == "").to_numpy(bool)
+    inside = np.isfinite(parsed) & (parsed >= low) & ((parsed < high) if high_open else (parsed <= high))
+    bad = ~((text_ok & inside) | (empty & missing))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        allowed = f"a finite number in [{low:g}, {high:g}{')' if high_open else ']'}{' ' + unit if unit else ''}" \
+            + (" or empty" if missing else "")
+        raise refuse(what, name, lines[k], column, cells.iloc[k], allowed)
+    parsed[empty] = np.nan
+    return parsed
+
+
+def column(header: list[str], names: tuple[str, ...]) -> int | None:
+    """The index of the first of ``names`` in the header (case ignored), None where none is there."""
+    lower = [h.lower() for h in header]
+    return next((lower.index(n) for n in names if n in lower), None)
+
+
+def normal_name(text: str) -> str:
+    """A header's name as the readers match it: lower case, a trailing unit or note in brackets dropped
+    (``DEPLOY_DATE_TIME   (yyyy-mm-ddThh:mm:ss)``, ``depth [m]``), spaces, dashes and dots as one ``_``."""
+    text = re.sub(r"\s*[\(\[][^\)\]]*[\)\]]\s*$", "", text.strip().lower())
+    return re.sub(r"[\s\-.]+", "_", text).strip("_")
+
+
+def named(header: list[str], names: tuple[str, ...]) -> int | None:
+    """The index of the first of ``names`` among the header's :func:`normal_name` s, None where none is there."""
+    normal = [normal_name(h) for h in header]
+    return next((normal.index(n) for n in names if n in normal), None)
+
+
+def shown_header(header: list[str]) -> str:
+    """A header as a refusal shows it: its first twelve names, each cut to 20 characters."""
+    return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
+
+
+__all__ = ["column", "named", "normal_name", "numbers", "pattern", "read_text", "refuse", "shown_header",
+           "text_table", "too_large"]

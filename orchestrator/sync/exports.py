@@ -1,0 +1,214 @@
+"""The detection exports of Innovasea's Fathom software and of the GLATOS and OTN networks, read into the table of
+:func:`sblsim.orchestrator.sync.detections.read_detections` (which reads the text, bounded, and calls these).
+
+* **Fathom (VDAT) CSV** (the export of Innovasea's current receivers: HR2, VR2Tx, VR2AR, NexTrak; glatos's
+  ``vdat_csv_schema`` lists its record types and columns): a first line ``VEMCO DATA LOG,<format version>,<writer>``,
+  then record types interleaved, each line's first field naming its type, each type's columns given once by a
+  ``<TYPE>_DESC`` line. The ``DET`` records are the detections: ``Device Time (UTC)`` (the receiver's own clock,
+  before Fathom's corrections: what the clocks' synchronisation needs), ``Serial Number``, ``Model``, ``Full ID``
+  (the transmitter), ``Raw Data`` (a sensor tag's raw value, format 2) or ``Sensor Value`` and ``Sensor Unit``
+  (format 1), ``Station Name``; the ``DET_SENS`` records (format 2) give a sensor detection's converted ``Sensor
+  Value`` and ``Sensor Unit``: where one is also a ``DET`` record (the same time, receiver and transmitter) its
+  value is that detection's, else it is a detection of its own. Only these record types are parsed: the lines of
+  the others are skipped unread by their first field (a regular expression selects the lines; pandas parses them).
+* **GLATOS** detection extracts: ``detection_timestamp_utc``, ``receiver_sn``, ``transmitter_codespace``,
+  ``transmitter_id``, ``sensor_value``, ``sensor_unit``, ``station`` (else ``station_no``).
+* **OTN** detection extracts: ``dateCollectedUTC``, ``receiver``, ``tagName`` (the full ID; else ``codeSpace`` and
+  the id), ``sensorValue``, ``sensorUnit``, ``station`` (the extracts before 2025: ``datecollected``, ``receiver``,
+  ``tagname``, ``codespace``, ``sensorvalue``, ``sensorunit``, ``station``; header case ignored).
+
+Times are ISO 8601 (UTC unless a zone is given) or epoch seconds (:mod:`sblsim.orchestrator.io.times`), the fraction
+of a second kept. Each transmitter is its full ID (code space and id): one id in two code spaces is two tags.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.times import utc_seconds
+from sblsim.orchestrator.sync.cells import column, numbers, pattern, shown_header, text_table
+from sblsim.orchestrator.sync.transmitters import FULL_ID, TRANSMITTER, full_ids, split
+
+#: Fathom's first line.
+FATHOM_MARK = "VEMCO DATA LOG"
+#: The Fathom record types read: the detections and the sensor detections.
+FATHOM_RECORDS = ("DET", "DET_SENS")
+#: A receiver's serial as the exports give it (``VR2W-128355`` keeps ``128355``).
+RECEIVER = re.compile(r"(?:[A-Za-z0-9._]{1,20}-){0,2}[A-Za-z0-9._]{1,40}")
+#: A code space alone (``A69-1602``).
+CODE_SPACE = re.compile(r"[A-Za-z0-9._]{1,20}(?:-[A-Za-z0-9._]{1,20}){0,2}")
+#: A transmitter's id alone.
+TAG_ID = re.compile(r"[A-Za-z0-9._]{1,40}")
+#: A sensor's unit: at most 20 printable characters.
+UNIT = re.compile(r"[^\x00-\x1f\x7f]{0,20}")
+
+
+def format_of(first: str) -> str | None:
+    """The export a file's first line shows (``fathom``, ``vue``, ``glatos``, ``otn``), None for none of them."""
+    lower = first.lower()
+    if first.lstrip('"').startswith(FATHOM_MARK):
+        return "fathom"
+    if "date and time (utc" in lower:
+        return "vue"
+    if "detection_timestamp_utc" in lower:
+        return "glatos"
+    if "datecollectedutc" in lower or "datecollected" in lower:
+        return "otn"
+    return None
+
+
+def fathom_records(text: str, name: str, what: str, max_rows: int) -> tuple[list[str], pd.DataFrame, list[int]]:
+    """A Fathom CSV's ``DET`` records as a table (:func:`~sblsim.orchestrator.sync.cells.text_table`: the
+    ``DET_DESC`` line its header, each row's line in the file), the ``DET_SENS`` records' table attached as
+    ``body.attrs["sensors"]`` (header, body, lines) where there are any.
+
+    Raises
+    ------
+    ModelError
+        One line: a first line that is not Fathom's, no ``DET_DESC`` line, a record pandas cannot parse.
+    """
+    if not text.lstrip('"').startswith(FATHOM_MARK):
+        raise ModelError(f"{what}: {name!r}: a Fathom CSV starts with the line {FATHOM_MARK},…; allowed: the file "
+                         "Fathom (or vdat.exe) wrote, unchanged")
+    newlines = np.fromiter((m.start() for m in re.finditer("\n", text)), np.int64)
+    tables = {}
+    for record in FATHOM_RECORDS:
+        chosen = list(re.finditer(rf'^"?{record}(?:_DESC)?"?,[^\n]*', text, flags=re.M))
+        descs = [m for m in chosen if m.group(0).lstrip('"').startswith(f"{record}_DESC")]
+        if not descs:
+            if record == "DET":
+                raise ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom "
+                                 "CSV holding detection records")
+            continue
+        rows = [m for m in chosen if m not in descs]
+        lines = (np.searchsorted(newlines, [descs[0].start()] + [m.start() for m in rows]) + 1).tolist()
+        table = "\n".join([descs[0].group(0).rstrip("\r")] + [m.group(0).rstrip("\r") for m in rows]) + "\n"
+        header, body, numbered = text_table(table, name, what, max_rows, first_line=0)
+        tables[record] = (header, body, [lines[k] for k in numbered])
+    header, body, lines = tables["DET"]
+    if "DET_SENS" in tables:
+        body.attrs["sensors"] = tables["DET_SENS"]
+    return header, body, lines
+
+
+def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+                  ) -> tuple[pd.DataFrame, set[int]]:
+    """One Fathom record type's rows as detections (receiver, tag, code space, time, sensor value and unit, model,
+    station) and the columns used."""
+    index = {key: column(header, (key,)) for key in ("device time (utc)", "serial number", "full id", "model",
+                                                     "raw data", "sensor value", "sensor unit", "station name")}
+    missing = [key for key in ("device time (utc)", "serial number", "full id") if index[key] is None]
+    if missing:
+        raise ModelError(f"{what}: {name!r}: Fathom's {header[0] or 'DET_DESC'} line needs the columns Device Time "
+                         f"(UTC), Serial Number and Full ID; {', '.join(missing)} missing, got {shown_header(header)}")
+    time = utc_seconds(body[index["device time (utc)"]], f"{what}: {name!r}", lines, "Device Time (UTC)")
+    serial = pattern(body[index["serial number"]], TAG_ID, what, name, lines, "Serial Number",
+                     "a receiver's serial of 1 to 40 letters, digits, '.' or '_'")
+    tag = pattern(body[index["full id"]], TRANSMITTER, what, name, lines, "Full ID",
+                  "a transmitter's full ID CODESPACE-ID, e.g. A69-1602-4555")
+    frame = pd.DataFrame({"receiver": serial.to_numpy(), "tag": tag.to_numpy(),
+                          "code_space": [split(t)[0] for t in tag], "time": time})
+    if index["sensor value"] is not None:
+        frame["sensor_value"], frame["sensor_unit"] = sensor_columns(
+            body, index["sensor value"], index["sensor unit"], header, lines, name, what)
+    else:  # format 2's DET: a sensor tag's raw value
+        frame["sensor_value"], _ = sensor_columns(body, index["raw data"], None, header, lines, name, what)
+        frame["sensor_unit"] = np.where(np.isfinite(frame["sensor_value"].to_numpy(float)), "raw", "")
+    frame["receiver_model"] = "" if index["model"] is None else \
+        body[index["model"]].astype(str).str.strip().str.slice(0, 40).to_numpy()
+    if index["station name"] is not None:
+        frame["station"] = body[index["station name"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
+    return frame, {k for k in index.values() if k is not None} | {0}
+
+
+def fathom(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+           ) -> tuple[pd.DataFrame, set[int]]:
+    """Fathom's ``DET`` records (and ``DET_SENS``: the module docstring) as detections, in the file's order, with
+    their lines in the file (``line``)."""
+    frame, used = _fathom_table(header, body, lines, name, what)
+    frame["line"] = lines
+    sensors = body.attrs.get("sensors")
+    if sensors is not None:
+        extra, _ = _fathom_table(*sensors, name, what)
+        extra["line"] = sensors[2]
+        keys = ["time", "receiver", "tag"]
+        both = frame.reset_index().merge(extra[keys + ["sensor_value", "sensor_unit"]], on=keys, how="inner",
+                                         suffixes=("", "_sens")).drop_duplicates("index")
+        at = both["index"].to_numpy()
+        frame.loc[at, "sensor_value"] = both["sensor_value_sens"].to_numpy()
+        frame.loc[at, "sensor_unit"] = both["sensor_unit_sens"].to_numpy()
+        alone = extra.merge(frame[keys], on=keys, how="left", indicator=True)
+        alone = alone[alone["_merge"] == "left_only"].drop(columns="_merge")
+        frame = pd.concat([frame, alone], ignore_index=True).sort_values("line", kind="stable")
+    return frame.reset_index(drop=True), used
+
+
+def sensor_columns(body: pd.DataFrame, value: int | None, unit: int | None, header: list[str], lines: list[int],
+                   name: str, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor's value (NaN where empty) and unit (``""`` where none) per detection, checked."""
+    values = np.full(len(body), np.nan) if value is None else numbers(
+        body[value], what, name, lines, header[value], -1e6, 1e6, missing=True)
+    units = np.full(len(body), "", dtype=object) if unit is None else pattern(
+        body[unit], UNIT, what, name, lines, header[unit], "a unit of at most 20 printable characters").to_numpy()
+    return values, units
+
+
+def _network(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str, network: str,
+             names: dict[str, tuple[str, ...]]) -> tuple[pd.DataFrame, set[int]]:
+    """A network's detection extract: ``names`` gives each of ``time``, ``receiver``, ``full_id``, ``space``,
+    ``id``, ``value``, ``unit``, ``station`` the header names it may have (case ignored)."""
+    index = {key: column(header, aliases) for key, aliases in names.items()}
+    has_tag = index["full_id"] is not None or index["id"] is not None
+    missing = [names[key][0] for key in ("time", "receiver") if index[key] is None] + \
+        ([] if has_tag else [names["full_id"][0]])
+    if missing:
+        raise ModelError(f"{what}: {name!r}: an {network} detection extract needs the columns "
+                         f"{', '.join(names[k][0] for k in ('time', 'receiver'))} and "
+                         f"{names['full_id'][0]} (or {names['space'][0]} and {names['id'][0]}); "
+                         f"{', '.join(missing)} missing, got {shown_header(header)}")
+    time = utc_seconds(body[index["time"]], f"{what}: {name!r}", lines, header[index["time"]])
+    receiver = pattern(body[index["receiver"]], RECEIVER, what, name, lines, header[index["receiver"]],
+                       "a receiver's serial (or MODEL-SERIAL, e.g. VR2W-128355)").str.rpartition("-")[2]
+    if index["full_id"] is not None and (index["id"] is None or index["space"] is None):
+        tag = pattern(body[index["full_id"]], FULL_ID, what, name, lines, header[index["full_id"]],
+                      "a transmitter's full ID CODESPACE-ID, e.g. A69-1602-4555")
+    else:
+        space = pattern(body[index["space"]], CODE_SPACE, what, name, lines, header[index["space"]],
+                        "a code space, e.g. A69-1602") if index["space"] is not None else \
+            pd.Series([""] * len(body))
+        ident = pattern(body[index["id"]], TAG_ID, what, name, lines, header[index["id"]],
+                        "a transmitter's id of 1 to 40 letters, digits, '.' or '_'")
+        tag = full_ids(space, ident)
+    frame = pd.DataFrame({"receiver": receiver.to_numpy(), "tag": tag.to_numpy(),
+                          "code_space": [split(t)[0] for t in tag], "time": time})
+    frame["sensor_value"], frame["sensor_unit"] = sensor_columns(body, index["value"], index["unit"], header, lines,
+                                                                 name, what)
+    if index["station"] is not None:
+        frame["station"] = body[index["station"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
+    return frame, {k for k in index.values() if k is not None}
+
+
+def glatos(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+           ) -> tuple[pd.DataFrame, set[int]]:
+    """A GLATOS detection extract (the module docstring) as detections."""
+    return _network(header, body, lines, name, what, "GLATOS", {
+        "time": ("detection_timestamp_utc",), "receiver": ("receiver_sn",), "full_id": ("transmitter",),
+        "space": ("transmitter_codespace",), "id": ("transmitter_id",), "value": ("sensor_value",),
+        "unit": ("sensor_unit",), "station": ("station", "station_no")})
+
+
+def otn(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+        ) -> tuple[pd.DataFrame, set[int]]:
+    """An OTN detection extract (the module docstring) as detections."""
+    return _network(header, body, lines, name, what, "OTN", {
+        "time": ("datecollectedutc", "datecollected"), "receiver": ("receiver",), "full_id": ("tagname",),
+        "space": ("codespace",), "id": ("tagid",), "value": ("sensorvalue",), "unit": ("sensorunit",),
+        "station": ("station",)})
+
+
+__all__ = ["FATHOM_MARK", "FATHOM_RECORDS", "fathom", "fathom_records", "format_of", "glatos", "otn",
+           "sensor_columns"]

@@ -1,0 +1,343 @@
+"""A study's receivers as the field keeps them: deployments in latitude and longitude (or in any CRS), with dates,
+one serial at several stations over time; and each detection assigned to the deployment that logged it.
+
+A deployments table (CSV, one row per deployment; header names matched case-insensitively, a trailing unit or note
+in brackets ignored: :func:`~sblsim.orchestrator.sync.cells.normal_name`) takes the community's names (GLATOS
+``receiver_locations``, OTN deployments) or sblsim's own:
+
+* the receiver: ``serial`` (or ``ins_serial_no``, ``receiver_sn``, ``receiver_serial_number``, ``receiver``);
+  ``station`` (or ``station_no``, ``station_name``), kept for the outputs;
+* its position: ``lat``, ``lon`` (or ``latitude``/``longitude``, ``deploy_lat``/``deploy_long``,
+  ``stn_lat``/``stn_long``) in WGS 84 degrees, or in the geographic CRS given (``crs``); else ``x_m``, ``y_m`` (or
+  ``x``, ``y``) [m] in the projected CRS given, or in a local frame without one (no latitude and longitude out);
+* its depth: ``z_m`` (height, up) or ``instrument_depth`` (or ``depth``) [m, positive down]; ``bottom_depth`` [m]
+  kept;
+* its dates: ``deploy_date_time`` (or ``deploy_date``, ``start``) and ``recover_date_time`` (or ``recovery_date``,
+  ``recover_date``, ``end``), ISO 8601 (UTC unless a zone is given) or epoch seconds; empty: open;
+* its co-located sync tag: ``sync_tag`` (or ``transmitter``), a full ID or an id, empty for none.
+
+Positions given as latitude and longitude are projected to the study's metric frame
+(:func:`sblsim.orchestrator.io.frames.frame_for`: the UTM zone of the array's centre, or ``frame``); x and y given in
+a projected CRS stay in it (it is the frame). A serial deployed more than once is one receiver per deployment,
+named ``SERIAL.1``, ``SERIAL.2``, … in order of deployment (a serial deployed once keeps its name); two deployments
+of one serial that overlap in time are refused, as is a sync tag at two places at once.
+
+:func:`assign` gives each detection its deployment by the receiver's serial and the detection's time (on the
+receiver's clock, seconds off at most, against deployments days long); detections before a deployment, after its
+recovery, between two, or at a serial the table does not list are set aside and counted, never used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.frames import (
+    CHOSEN_INPUT,
+    Frame,
+    check_crs,
+    check_latlon,
+    check_metric,
+    frame_for,
+    is_geographic,
+    transform,
+)
+from sblsim.orchestrator.io.times import iso_utc, utc_seconds
+from sblsim.orchestrator.sync.cells import named, numbers, pattern, read_text, shown_header, text_table
+from sblsim.orchestrator.sync.detections import IDENTIFIER, MAX_COORDINATE, MAX_DETECTION_BYTES, Detections
+from sblsim.orchestrator.sync.transmitters import TRANSMITTER, match
+
+#: The most deployments a table holds.
+MAX_DEPLOYMENTS = 10_000
+#: Each field's header names (as :func:`~sblsim.orchestrator.sync.cells.normal_name` makes them), first preferred.
+ALIASES = {
+    "serial": ("serial", "ins_serial_no", "receiver_sn", "receiver_serial_number", "receiver", "name"),
+    "station": ("station", "station_no", "station_name"),
+    "sync_tag": ("sync_tag", "transmitter", "sync_transmitter"),
+    "lat": ("lat", "latitude", "deploy_lat", "stn_lat", "decimallatitude"),
+    "lon": ("lon", "long", "longitude", "deploy_long", "deploy_lon", "stn_long", "decimallongitude"),
+    "x": ("x_m", "x", "easting"), "y": ("y_m", "y", "northing"), "z": ("z_m", "z"),
+    "depth": ("instrument_depth", "depth", "receiver_depth", "depth_m"), "bottom": ("bottom_depth",),
+    "start": ("deploy_date_time", "deploy_date", "deploy_time", "start"),
+    "end": ("recover_date_time", "recovery_date_time", "recovery_date", "recover_date", "recovery_datetime_utc",
+            "end"),
+}
+#: The depths allowed [m] (an instrument's and the bottom's; positive down).
+DEPTH_RANGE = (-10.0, 11000.0)
+#: The columns of :attr:`Deployments.table`.
+COLUMNS = ("receiver", "serial", "station", "sync_tag", "x", "y", "z", "lat", "lon", "start", "end",
+           "bottom_depth", "line")
+
+
+@dataclass
+class Deployments:
+    """A study's receivers, one row per deployment.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        :data:`COLUMNS`: ``receiver`` (the deployment's name: the serial, or ``SERIAL.k``), ``serial``,
+        ``station`` (``""`` where not given), ``sync_tag`` (as given, ``""`` for none), ``x``, ``y`` [m] in the
+        frame, ``z`` [m, up; NaN where not given], ``lat``, ``lon`` [° WGS 84; NaN without a CRS], ``start``,
+        ``end`` [s since 1970 UTC; -inf, +inf where open], ``bottom_depth`` [m; NaN], ``line`` (the file's).
+    frame : Frame or None
+        The metric frame of ``x``, ``y``; None where the positions were given as x, y without a CRS.
+    source : str
+        The file read.
+    notes : list of str
+        What the reader decided that a user should know (columns ignored, depths partly given).
+    """
+
+    table: pd.DataFrame
+    frame: Frame | None
+    source: str
+    notes: list[str] = field(default_factory=list)
+
+    def hydrophones(self) -> pd.DataFrame:
+        """The receivers as the clocks' synchronisation and the times-of-arrival matrix take them: ``receiver``,
+        ``sync_tag``, ``x``, ``y``, ``z``."""
+        return self.table[["receiver", "sync_tag", "x", "y", "z"]].reset_index(drop=True)
+
+    def summary(self) -> dict[str, Any]:
+        """The frame and the deployments as every output's summary states them."""
+        t = self.table
+        lat, lon = t["lat"].to_numpy(float), t["lon"].to_numpy(float)
+        centre = (float(np.nanmean(lat)), float(np.nanmean(lon))) if np.isfinite(lat).any() else (None, None)
+        return {"file": self.source, "deployments": int(len(t)), "receivers": int(t["serial"].nunique()),
+                "redeployed": sorted(t.loc[t["serial"].duplicated(), "serial"].unique().tolist()),
+                "frame": None if self.frame is None else self.frame.summary(*centre),
+                "notes": list(self.notes)}
+
+    def written(self) -> pd.DataFrame:
+        """``receivers.csv``: each deployment's name, serial, station, sync tag, position in the frame and in
+        latitude and longitude, depth and dates (ISO 8601 UTC, empty where open)."""
+        t = self.table
+        out = pd.DataFrame({"receiver": t["receiver"], "serial": t["serial"], "station": t["station"],
+                            "sync_tag": t["sync_tag"], "x_m": t["x"], "y_m": t["y"], "z_m": t["z"],
+                            "lat": t["lat"], "lon": t["lon"]})
+        for key in ("start", "end"):
+            values = t[key].to_numpy(float)
+            out[f"{key}_utc"] = iso_utc(np.where(np.isfinite(values), values, np.nan))
+        out["bottom_depth_m"] = t["bottom_depth"]
+        return out
+
+
+def _index(header: list[str]) -> dict[str, int | None]:
+    return {key: named(header, aliases) for key, aliases in ALIASES.items()}
+
+
+def read_deployments(path: Path | str, crs: str | None = None, frame: str | None = None) -> Deployments:
+    """Read a study's receivers (the module docstring's columns) into one row per deployment, projected.
+
+    Parameters
+    ----------
+    path : str or Path
+        The table (CSV).
+    crs : str, optional
+        The CRS of its positions (``EPSG:4326`` by default for ``lat``/``lon``; for ``x_m``/``y_m``, a projected
+        CRS, else they are taken in a local frame without one).
+    frame : str, optional
+        The metric frame (a projected CRS in metres; default the UTM zone of the array's centre for positions
+        given as latitude and longitude).
+
+    Returns
+    -------
+    Deployments
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, its line and column and the allowed values: no serial or position column, a
+        cell outside its pattern or range, a recovery before its deployment, one serial's deployments overlapping,
+        one sync tag at two places at once, a CRS pyproj does not know or that does not fit the columns.
+    """
+    path, what = Path(path), "receivers"
+    name = str(path)
+    header, body, lines = text_table(read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS), name, what,
+                                     MAX_DEPLOYMENTS)
+    if not len(body):
+        raise ModelError(f"{what}: {name!r} holds a header and no receivers")
+    index = _index(header)
+    geographic = index["lat"] is not None and index["lon"] is not None
+    projected = index["x"] is not None and index["y"] is not None
+    if crs is not None:
+        check_crs(crs, "crs")
+        geographic = geographic and is_geographic(crs)
+        projected = projected and not is_geographic(crs)
+    if index["serial"] is None or not (geographic or projected):
+        given = "" if crs is None else f" (in {crs})"
+        raise ModelError(f"{what}: {name!r}: the header needs a serial (or ins_serial_no) column and positions{given}: "
+                         "lat and lon (or deploy_lat and deploy_long), or x_m and y_m; got "
+                         f"{shown_header(header)}")
+    serial = pattern(body[index["serial"]], IDENTIFIER, what, name, lines, header[index["serial"]],
+                     "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'")
+
+    def text(key: str, regex=None, allowed: str = "") -> np.ndarray:
+        if index[key] is None:
+            return np.full(len(body), "", dtype=object)
+        cells = body[index[key]].astype(str).str.strip()
+        if regex is not None:
+            given = (cells != "").to_numpy()
+            pattern(cells[given], regex, what, name, [lines[k] for k in np.flatnonzero(given)], header[index[key]],
+                    allowed)
+        return cells.str.slice(0, 80).to_numpy(dtype=object)
+
+    def values(key: str, low: float, high: float, unit: str, missing: bool = True) -> np.ndarray:
+        if index[key] is None:
+            return np.full(len(body), np.nan)
+        return numbers(body[index[key]], what, name, lines, header[index[key]], low, high, missing=missing,
+                       unit=unit)
+
+    notes: list[str] = []
+    if geographic:
+        lat = values("lat", -90.0, 90.0, "°", missing=False)
+        lon = values("lon", -180.0, 180.0, "°", missing=False)
+        check_latlon(lat, lon, f"{what}: {name!r}", lines)
+        if crs is not None and check_crs(crs, "crs") not in ("EPSG:4326", "epsg:4326"):
+            lon, lat = transform(crs, "EPSG:4326", lon, lat)
+        chosen = frame_for(lat, lon, frame)
+        x, y = chosen.from_latlon(lat, lon)
+        if projected:
+            notes.append(f"the columns {header[index['x']]}, {header[index['y']]} ignored: the positions are "
+                         f"{header[index['lat']]}, {header[index['lon']]}")
+    else:
+        x = values("x", -MAX_COORDINATE, MAX_COORDINATE, "m", missing=False)
+        y = values("y", -MAX_COORDINATE, MAX_COORDINATE, "m", missing=False)
+        if crs is None:
+            if frame is not None:
+                raise ModelError("frame: given for positions without a CRS; allowed: with --crs (the positions' CRS), "
+                                 "or positions as lat and lon")
+            chosen, lat, lon = None, np.full(len(x), np.nan), np.full(len(x), np.nan)
+        else:
+            chosen = Frame(check_metric(crs, "crs"), CHOSEN_INPUT) if frame is None else \
+                Frame(check_metric(frame, "frame"))
+            if frame is not None:
+                x, y = transform(crs, chosen.crs, x, y)
+            lat, lon = chosen.to_latlon(x, y)
+    z = values("z", -DEPTH_RANGE[1], -DEPTH_RANGE[0], "m (up)")
+    if index["z"] is None and index["depth"] is not None:
+        z = -values("depth", *DEPTH_RANGE, "m (positive down)")
+    if np.isfinite(z).any() and not np.isfinite(z).all():
+        notes.append(f"depths given for {int(np.isfinite(z).sum())} of {len(z)} deployments: the geometry is 2-D "
+                     "(give every deployment's depth for 3-D)")
+    start = utc_seconds(body[index["start"]], f"{what}: {name!r}", lines, header[index["start"]], missing=True) \
+        if index["start"] is not None else np.full(len(body), np.nan)
+    end = utc_seconds(body[index["end"]], f"{what}: {name!r}", lines, header[index["end"]], missing=True) \
+        if index["end"] is not None else np.full(len(body), np.nan)
+    start, end = np.where(np.isnan(start), -np.inf, start), np.where(np.isnan(end), np.inf, end)
+    backwards = np.flatnonzero(end <= start)
+    if len(backwards):
+        k = int(backwards[0])
+        raise ModelError(f"{what}: {name!r} line {lines[k]}: the recovery {iso_utc([end[k]])[0]} is not after the "
+                         f"deployment {iso_utc([start[k]])[0]}; allowed: a recovery after its deployment")
+    table = pd.DataFrame({"receiver": "", "serial": serial.to_numpy(dtype=object),
+                          "station": text("station"),
+                          "sync_tag": text("sync_tag", TRANSMITTER, "a transmitter's full ID (A69-1601-60123) or "
+                                                                    "id, or empty"),
+                          "x": x, "y": y, "z": z, "lat": lat, "lon": lon, "start": start, "end": end,
+                          "bottom_depth": values("bottom", *DEPTH_RANGE, "m (positive down)"),
+                          "line": np.asarray(lines, np.int64)})
+    _check_overlaps(table, "serial", "receiver", name, what)
+    _check_overlaps(table[table["sync_tag"] != ""], "sync_tag", "sync tag", name, what)
+    order = table.sort_values(["serial", "start"], kind="stable")
+    counts = order.groupby("serial", sort=False)["serial"].transform("size").to_numpy()
+    rank = order.groupby("serial", sort=False).cumcount().to_numpy() + 1
+    names = np.where(counts > 1, order["serial"].astype(str) + "." + rank.astype(str), order["serial"].astype(str))
+    table.loc[order.index, "receiver"] = names
+    used = {k for k in index.values() if k is not None}
+    ignored = [h for k, h in enumerate(header) if k not in used and h]
+    if ignored:
+        notes.append(f"columns not used: {', '.join(h[:30] for h in ignored[:12])}")
+    return Deployments(table, chosen, name, notes)
+
+
+def _check_overlaps(table: pd.DataFrame, key: str, what_key: str, name: str, what: str) -> None:
+    """Refuse two deployments of one ``key`` (a serial, a sync tag) whose windows overlap, with both lines."""
+    order = table.sort_values([key, "start"], kind="stable")
+    same = (order[key].to_numpy()[1:] == order[key].to_numpy()[:-1])
+    overlap = same & (order["start"].to_numpy()[1:] < order["end"].to_numpy()[:-1])
+    if overlap.any():
+        k = int(np.flatnonzero(overlap)[0])
+        a, b = order.iloc[k], order.iloc[k + 1]
+        raise ModelError(f"{what}: {name!r} lines {a['line']} and {b['line']}: {what_key} {a[key]} is deployed twice "
+                         f"at once (from {iso_utc([b['start']])[0] or 'the start'}, before the recovery "
+                         f"{iso_utc([a['end']])[0] or 'at the end'}); allowed: one place at a time")
+
+
+#: The reasons a detection is set aside, in :attr:`Assigned.set_aside`'s keys.
+SET_ASIDE = ("receiver_not_in_table", "outside_deployment", "sync_tag_outside_deployment")
+
+
+@dataclass
+class Assigned:
+    """The detections of :func:`assign`: ``detections`` (each at its deployment: ``receiver`` the deployment's
+    name, ``serial`` the serial logged; a sync tag deployed more than once named per deployment), ``hydrophones``
+    (the deployments as :meth:`Deployments.hydrophones`, sync tags named as the detections name them),
+    ``set_aside`` (counts per reason of :data:`SET_ASIDE`, and per serial) and ``mask`` (the file's rows kept)."""
+
+    detections: Detections
+    hydrophones: pd.DataFrame
+    set_aside: dict[str, Any]
+    mask: np.ndarray
+
+
+def assign(detections: Detections, deployments: Deployments) -> Assigned:
+    """Each detection at the deployment that logged it (the module docstring), the others set aside and counted.
+
+    Raises
+    ------
+    ModelError
+        No detection inside a deployment of the table (one line naming the serials of each).
+    """
+    frame = detections.frame
+    table = deployments.table
+    serial = frame["receiver"].to_numpy(dtype=object)
+    time = frame["time"].to_numpy(float)
+    where = np.full(len(frame), -1, np.int64)
+    known = np.isin(serial, table["serial"].to_numpy(dtype=object))
+    for s, rows in table.groupby("serial", sort=False).groups.items():
+        part = table.loc[rows].sort_values("start")
+        mine = np.flatnonzero(serial == s)
+        k = np.searchsorted(part["start"].to_numpy(float), time[mine], side="right") - 1
+        inside = (k >= 0) & (time[mine] <= part["end"].to_numpy(float)[np.clip(k, 0, None)])
+        where[mine[inside]] = np.asarray(part.index)[k[inside]]
+    outside = known & (where < 0)
+    hydrophones = deployments.hydrophones()
+    names = table["receiver"].to_numpy(dtype=object)
+    renamed = frame.assign(serial=serial, receiver=np.where(where >= 0, names[np.clip(where, 0, None)], serial))
+    # each sync tag as the detections name it, and per deployment where it was deployed more than once
+    tags = renamed["tag"].to_numpy(dtype=object).copy()
+    detected = frame["tag"].unique()
+    stray = np.zeros(len(frame), bool)
+    carried = table[table["sync_tag"] != ""]
+    for given, rows in carried.groupby("sync_tag", sort=False).groups.items():
+        key = match(given, detected) or given
+        part = carried.loc[rows].sort_values("start")
+        mine = np.flatnonzero(tags == key)
+        k = np.searchsorted(part["start"].to_numpy(float), time[mine], side="right") - 1
+        inside = (k >= 0) & (time[mine] <= part["end"].to_numpy(float)[np.clip(k, 0, None)])
+        stray[mine[~inside]] = True
+        labels = [key] if len(part) == 1 else [f"{key}.{j + 1}" for j in range(len(part))]
+        tags[mine[inside]] = np.asarray(labels, dtype=object)[k[inside]]
+        hydrophones.loc[np.asarray(part.index), "sync_tag"] = labels
+    keep = (where >= 0) & ~stray
+    kept = renamed.assign(tag=tags)[keep].reset_index(drop=True)
+    if not len(kept):
+        raise ModelError(f"detections: none of {detections.source!r} is inside a deployment of {deployments.source!r} "
+                         f"(serials detected: {', '.join(sorted(map(str, set(serial)))[:8])}; in the table: "
+                         f"{', '.join(sorted(map(str, table['serial'].unique()))[:8])}); allowed: detections at the "
+                         "table's receivers between their deployment and recovery")
+    per = pd.Series(serial[~keep]).value_counts()
+    set_aside = {"receiver_not_in_table": int((~known).sum()), "outside_deployment": int(outside.sum()),
+                 "sync_tag_outside_deployment": int((stray & (where >= 0)).sum()),
+                 "per_serial": {str(k): int(v) for k, v in per.items()}}
+    return Assigned(replace(detections, frame=kept), hydrophones, set_aside, keep)
+
+
+__all__ = ["ALIASES", "Assigned", "COLUMNS", "DEPTH_RANGE", "Deployments", "MAX_DEPLOYMENTS", "SET_ASIDE", "assign",
+           "read_deployments"]

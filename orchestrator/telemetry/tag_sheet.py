@@ -1,0 +1,279 @@
+"""A study's tag sheet: each transmitter's ping type, role and sensor, as a CSV with Vemco tag specifications' names.
+
+One row per transmitter (header names matched case-insensitively, a trailing unit in brackets ignored):
+
+* ``transmitter`` (or ``tag``, ``vue_tag_id``, ``full_id``): the full ID (``A69-1602-4555``) or the id alone;
+* the ping type: ``ping_type`` (``sbi``, ``rbi`` or ``pbi``) and its figures: ``min_delay`` and ``max_delay`` [s]
+  (Vemco's ``Step 1 Min Delay (sec)``/``Max Delay``; a random interval, or a stable one where they are equal),
+  ``interval`` [s] (a nominal stable interval) or ``burst_sequence`` (a file of a pseudo-random tag's intervals, one
+  per row, named relative to the sheet's folder and refused where it, links followed, leaves that folder). Without
+  ``ping_type`` the figures decide it (equal delays or an interval: ``sbi``; a range: ``rbi``; a sequence:
+  ``pbi``); without any, the tracker infers it from the detections;
+* ``role``: ``animal`` (default), ``sync`` (a sync tag: used by the clocks' synchronisation, not tracked) or
+  ``reference`` (a tag at a fixed place: tracked as stationary unless ``motion`` says ``moving``);
+* ``motion``: ``moving`` or ``stationary``, overriding the role's;
+* a sensor: ``sensor_type`` (``P``/``pressure``/``depth``, ``T``/``temperature``, ``A``/``acceleration``),
+  ``sensor_slope`` and ``sensor_intercept`` (Vemco's ``Slope``, ``Intercept``): a raw value ``r`` the detections
+  carry (VUE's ``ADC`` unit, Fathom's ``Raw Data``) is ``slope × r + intercept`` in the sensor's unit (a depth in
+  metres, positive down); a value a file gives converted (unit ``m``) is taken as it is;
+* ``name`` (or ``animal_id``): a label kept in the outputs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.schedule import PING_TYPES
+from sblsim.orchestrator.sync.cells import named, numbers, pattern, read_text, refuse, shown_header, text_table
+from sblsim.orchestrator.sync.detections import MAX_DETECTION_BYTES
+from sblsim.orchestrator.sync.transmitters import TRANSMITTER
+from sblsim.orchestrator.tracks.toa import BURST_RANGE, read_burst_sequence
+
+#: The most transmitters a sheet lists.
+MAX_TAGS = 10_000
+#: The roles a tag may have.
+ROLES = ("animal", "sync", "reference")
+#: The motion models of ``motion`` (as :data:`sblsim.orchestrator.tracks.track.MOTIONS`).
+MOTIONS = ("moving", "stationary")
+#: The sensor types, by the names a sheet may give them.
+SENSORS = {"p": "depth", "pressure": "depth", "depth": "depth", "d": "depth", "t": "temperature",
+           "temperature": "temperature", "temp": "temperature", "a": "acceleration", "acceleration": "acceleration",
+           "accel": "acceleration"}
+#: The units of a sensor value taken as raw (converted by the sheet's slope and intercept).
+RAW_UNITS = ("", "adc", "raw")
+#: Each field's header names (normalised), first preferred.
+ALIASES = {
+    "transmitter": ("transmitter", "tag", "vue_tag_id", "full_id", "transmitter_id", "tag_id"),
+    "ping_type": ("ping_type",), "min_delay": ("min_delay", "step_1_min_delay", "min_delay_s"),
+    "max_delay": ("max_delay", "step_1_max_delay", "max_delay_s"), "interval": ("interval", "interval_s",
+                                                                                "nominal_interval", "delay"),
+    "burst_sequence": ("burst_sequence", "sequence"), "role": ("role",), "motion": ("motion",),
+    "sensor_type": ("sensor_type",), "slope": ("sensor_slope", "slope"), "intercept": ("sensor_intercept",
+                                                                                       "intercept"),
+    "name": ("name", "animal_id"),
+}
+
+
+@dataclass(frozen=True)
+class TagSpec:
+    """One transmitter of a tag sheet.
+
+    Attributes
+    ----------
+    transmitter : str
+        As the sheet names it (a full ID or an id).
+    role : str
+        One of :data:`ROLES`.
+    motion : str
+        ``moving`` or ``stationary``.
+    ping_type : str or None
+        ``sbi``, ``rbi``, ``pbi``, or None (inferred from the detections).
+    burst_interval : (float, float) or None
+        [s] a random interval's bounds (``rbi``).
+    interval : float or None
+        [s] a stable interval (``sbi``) where given.
+    burst_sequence : Path or None
+        A ``pbi`` tag's intervals (a file in the sheet's folder).
+    sensor : str
+        ``depth``, ``temperature``, ``acceleration`` or ``""``.
+    slope, intercept : float
+        The raw value's conversion (NaN where not given).
+    name : str
+        A label (``""``).
+    line : int
+        The sheet's line.
+    """
+
+    transmitter: str
+    role: str = "animal"
+    motion: str = "moving"
+    ping_type: str | None = None
+    burst_interval: tuple[float, float] | None = None
+    interval: float | None = None
+    burst_sequence: Path | None = None
+    sensor: str = ""
+    slope: float = float("nan")
+    intercept: float = float("nan")
+    name: str = ""
+    line: int = 0
+
+    def shortest_interval(self) -> float | None:
+        """[s] the shortest interval the sheet states (the echo limit of the times-of-arrival matrix), None where
+        it states none."""
+        if self.burst_interval is not None:
+            return self.burst_interval[0]
+        if self.interval is not None:
+            return self.interval
+        if self.burst_sequence is not None:
+            return float(read_burst_sequence(self.burst_sequence).min())
+        return None
+
+    def described(self) -> str:
+        """The ping type as the console and the tags' table say it."""
+        if self.ping_type == "rbi":
+            return f"rbi {self.burst_interval[0]:g}-{self.burst_interval[1]:g} s"
+        if self.ping_type == "sbi":
+            return "sbi" + (f" {self.interval:g} s" if self.interval is not None else "")
+        if self.ping_type == "pbi":
+            return f"pbi ({self.burst_sequence.name})"
+        return "inferred"
+
+    def depths(self, values: np.ndarray, units: np.ndarray) -> np.ndarray:
+        """(n,) [m, positive down] the depth each detection's sensor value gives (NaN where none): converted by
+        the slope and intercept where raw, as given where in metres; all NaN for a tag without a depth sensor.
+
+        Raises
+        ------
+        ModelError
+            Raw values of a depth sensor without a slope and an intercept (one line naming the transmitter).
+        """
+        values = np.asarray(values, float)
+        units = np.char.lower(np.asarray(units, dtype=str))
+        out = np.full(len(values), np.nan)
+        if self.sensor != "depth":
+            return out
+        metres = units == "m"
+        out[metres] = values[metres]
+        raw = np.isin(units, RAW_UNITS) & np.isfinite(values)
+        if raw.any():
+            if not (np.isfinite(self.slope) and np.isfinite(self.intercept)):
+                raise ModelError(f"tags: transmitter {self.transmitter} (line {self.line}) is a depth sensor whose "
+                                 "detections carry raw values, and the sheet gives no sensor_slope and "
+                                 "sensor_intercept; allowed: both, as the tag's specification states them")
+            out[raw] = self.slope * values[raw] + self.intercept
+        return out
+
+
+@dataclass
+class TagSheet:
+    """A tag sheet read: ``tags`` (one :class:`TagSpec` per row, in the sheet's order) and ``source``."""
+
+    tags: list[TagSpec]
+    source: str
+
+    def of_role(self, *roles: str) -> list[TagSpec]:
+        """The sheet's tags of these roles, in its order."""
+        return [t for t in self.tags if t.role in roles]
+
+    def table(self) -> pd.DataFrame:
+        """The sheet as read (``tags.json``'s and the console's view)."""
+        return pd.DataFrame([{"transmitter": t.transmitter, "role": t.role, "motion": t.motion,
+                              "ping_type": t.described(), "sensor": t.sensor, "name": t.name} for t in self.tags])
+
+
+def _inside(folder: Path, text: str, where: str) -> Path:
+    """A file a sheet names, taken from the sheet's folder; refused where it (links followed) leaves the folder."""
+    base = folder.resolve()
+    path = (folder / text).resolve()
+    if Path(text).is_absolute() or not path.is_relative_to(base):
+        raise ModelError(f"{where}: {text[:60]!r} is outside the tag sheet's folder; allowed: a file in the folder "
+                         "that holds the tag sheet (named relative to it)")
+    return path
+
+
+def read_tag_sheet(path: Path | str) -> TagSheet:
+    """Read a tag sheet (the module docstring).
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, its line and column and the allowed values: no transmitter column, a cell outside
+        its pattern or range, a transmitter listed twice, a ping type its figures contradict, a sequence file
+        outside the sheet's folder.
+    """
+    path, what = Path(path), "tags"
+    name = str(path)
+    header, body, lines = text_table(read_text(path, what, MAX_DETECTION_BYTES, MAX_TAGS), name, what, MAX_TAGS)
+    index = {key: named(header, aliases) for key, aliases in ALIASES.items()}
+    if index["transmitter"] is None:
+        raise ModelError(f"{what}: {name!r}: the header needs a transmitter column (a full ID or an id per row); got "
+                         f"{shown_header(header)}")
+    if not len(body):
+        raise ModelError(f"{what}: {name!r} holds a header and no transmitters")
+    transmitter = pattern(body[index["transmitter"]], TRANSMITTER, what, name, lines, header[index["transmitter"]],
+                          "a transmitter's full ID (A69-1602-4555) or id")
+    twice = transmitter[transmitter.duplicated()]
+    if len(twice):
+        raise ModelError(f"{what}: {name!r} line {lines[int(twice.index[0])]}: transmitter {twice.iloc[0]} is listed "
+                         "twice; allowed: one row per transmitter")
+
+    def text(key: str) -> pd.Series:
+        if index[key] is None:
+            return pd.Series([""] * len(body))
+        return body[index[key]].astype(str).str.strip()
+
+    def values(key: str, low: float, high: float, unit: str) -> np.ndarray:
+        if index[key] is None:
+            return np.full(len(body), np.nan)
+        return numbers(body[index[key]], what, name, lines, header[index[key]], low, high, missing=True, unit=unit)
+
+    def choice(key: str, allowed: dict | tuple, default: str) -> list[str]:
+        cells = text(key).str.lower()
+        out = []
+        for k, cell in enumerate(cells):
+            if cell == "":
+                out.append(default)
+            elif cell in allowed:
+                out.append(allowed[cell] if isinstance(allowed, dict) else cell)
+            else:
+                options = sorted(set(allowed)) if isinstance(allowed, dict) else allowed
+                raise refuse(what, name, lines[k], header[index[key]], cell, ", ".join(options) + " or empty")
+        return out
+
+    low, high = BURST_RANGE
+    least, most, nominal = (values(k, low, high, "s") for k in ("min_delay", "max_delay", "interval"))
+    slope, intercept = values("slope", -1e6, 1e6, ""), values("intercept", -1e6, 1e6, "")
+    kinds = choice("ping_type", tuple(PING_TYPES), "")
+    roles = choice("role", ROLES, "animal")
+    motions = choice("motion", MOTIONS, "")
+    sensors = choice("sensor_type", SENSORS, "")
+    sequences = text("burst_sequence")
+    labels = text("name").str.slice(0, 80)
+    tags = []
+    for k in range(len(body)):
+        where = f"{what}: {name!r} line {lines[k]}"
+        has_range = np.isfinite(least[k]) or np.isfinite(most[k])
+        if has_range and not (np.isfinite(least[k]) and np.isfinite(most[k]) and least[k] <= most[k]):
+            raise ModelError(f"{where}: min_delay {least[k]:g} and max_delay {most[k]:g} s; allowed: both, "
+                             "min_delay <= max_delay")
+        sequence = _inside(path.parent, sequences[k], f"{where} column burst_sequence") if sequences[k] else None
+        kind = kinds[k] or ("pbi" if sequence is not None else "rbi" if has_range and least[k] < most[k] else
+                            "sbi" if has_range or np.isfinite(nominal[k]) else None)
+        stable = nominal[k] if np.isfinite(nominal[k]) else least[k] if has_range and least[k] == most[k] else None
+        bounds = (float(least[k]), float(most[k])) if has_range and least[k] < most[k] else None
+        if kind == "rbi" and bounds is None:
+            raise ModelError(f"{where}: ping_type rbi needs min_delay < max_delay [s] (the random interval's bounds)")
+        if kind == "pbi" and sequence is None:
+            raise ModelError(f"{where}: ping_type pbi needs burst_sequence (a file of the tag's intervals)")
+        if kind == "sbi" and bounds is not None:
+            raise ModelError(f"{where}: ping_type sbi with min_delay {least[k]:g} < max_delay {most[k]:g} s: a stable "
+                             "interval has one delay; allowed: equal delays, an interval, or ping_type rbi")
+        if kind != "pbi" and sequence is not None:
+            raise ModelError(f"{where}: burst_sequence only with ping_type pbi")
+        motion = motions[k] or ("stationary" if roles[k] == "reference" else "moving")
+        tags.append(TagSpec(transmitter.iloc[k], roles[k], motion, kind, bounds if kind == "rbi" else None,
+                            float(stable) if kind == "sbi" and stable is not None else None, sequence, sensors[k],
+                            float(slope[k]), float(intercept[k]), labels.iloc[k], lines[k]))
+    return TagSheet(tags, name)
+
+
+def spec_for(sheet: TagSheet | None, transmitter: str) -> TagSpec:
+    """The sheet's row of a transmitter, else an animal tag whose ping type the detections show."""
+    found = next((t for t in sheet.tags if t.transmitter == transmitter), None) if sheet is not None else None
+    return found or TagSpec(transmitter)
+
+
+def described(spec: TagSpec) -> dict[str, Any]:
+    """A tag's row as ``tags.csv`` states it."""
+    return {"role": spec.role, "motion": spec.motion, "ping_type_stated": spec.described(), "sensor": spec.sensor,
+            "name": spec.name}
+
+
+__all__ = ["ALIASES", "MAX_TAGS", "MOTIONS", "RAW_UNITS", "ROLES", "SENSORS", "TagSheet", "TagSpec", "described",
+           "read_tag_sheet", "spec_for"]
