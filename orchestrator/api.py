@@ -50,6 +50,7 @@ from sblsim.orchestrator.commands.replay import (
 from sblsim.orchestrator.commands.run import RunResult, run
 from sblsim.orchestrator.commands.sync import SyncResult, sync
 from sblsim.orchestrator.commands.toa import ToaResult, toa
+from sblsim.orchestrator.commands.track import StudyResult, track
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, ConfigError
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config
@@ -62,7 +63,7 @@ __all__ = [
     "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign",
     "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
-    "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult",
+    "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult", "track", "StudyResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS",
 ]

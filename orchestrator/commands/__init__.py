@@ -1,4 +1,4 @@
-"""The commands a user types, one module each: ``sblsim run``, ``replay``, ``sync``, ``toa``, ``calibrate``,
+"""The commands a user types, one module each: ``sblsim run``, ``replay``, ``track``, ``sync``, ``toa``, ``calibrate``,
 ``compare``, ``budget``, ``map``, ``design``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and ``codegen``.
 
 A command's module holds what the command is, from Python and from the command line:
@@ -38,9 +38,11 @@ from sblsim.orchestrator.commands import (
     ssp,
     sync,
     toa,
+    track,
 )
 from sblsim.orchestrator.commands import map as accuracy_map
 
 #: The commands, in the order of ``sblsim --help``: name -> module.
 COMMANDS: dict[str, ModuleType] = {module.NAME: module for module in (
-    run, replay, sync, toa, calibrate, compare, budget, accuracy_map, design, campaign, ssp, analyze, fmus, codegen)}
+    run, replay, track, sync, toa, calibrate, compare, budget, accuracy_map, design, campaign, ssp, analyze, fmus,
+    codegen)}

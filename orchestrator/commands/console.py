@@ -84,6 +84,18 @@ def output_folder(given: Path | None, default: Path, force: bool, marker: str, w
     return out
 
 
+def add_receivers(p: argparse.ArgumentParser) -> None:
+    """``--receivers``, ``--crs``, ``--frame``: a study's receivers and where they are."""
+    p.add_argument("--receivers", type=Path, required=True, metavar="FILE",
+                   help="the receivers: serial,sync_tag,x_m,y_m[,z_m], or deployments with lat,lon and dates (GLATOS "
+                        "receiver_locations and OTN deployments' names: ins_serial_no, deploy_lat, deploy_long, "
+                        "deploy_date_time, recover_date_time, instrument_depth, transmitter)")
+    p.add_argument("--crs", default=None, metavar="EPSG",
+                   help="the receivers' CRS (default WGS 84 for lat,lon; a projected one for x_m,y_m)")
+    p.add_argument("--frame", default=None, metavar="EPSG",
+                   help="the metric frame lat,lon are projected to (default: the UTM zone of the array's centre)")
+
+
 def print_notes() -> None:
     """The notes of the configurations read so far (:func:`sblsim.orchestrator.cosim.config.take_notes`), one
     ``note:`` line each on standard error."""

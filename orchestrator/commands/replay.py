@@ -559,14 +559,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim replay``'s arguments."""
     p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one); with "
                    "--format toa, the matrix of times of arrival (docs/tracking.md), or a folder of one per tag")
-    p.add_argument("--format", choices=("log", "toa", "detections", "yaps", "vue"), default="log",
+    p.add_argument("--format", choices=("log", "toa", "detections", "yaps", "vue", "fathom", "glatos", "otn"),
+                   default="log",
                    help="log: a receiver's log (default); toa: times of arrival of a pinger at a fixed array "
                         "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS and robust "
-                        "smoothers; detections (a YAPS table) or vue (a VUE export): raw detections, with --sync and "
-                        "--tag, made into the tag's times of arrival as sblsim toa makes them, then tracked")
+                        "smoothers; detections (the format read from the file's first line), yaps, vue, fathom, "
+                        "glatos or otn: raw detections, with --sync and --tag, made into the tag's times of arrival "
+                        "as sblsim toa makes them, then tracked")
     p.add_argument("--sync", type=Path, default=None, metavar="DIR",
-                   help="--format detections|yaps|vue: the synchronisation's folder (sblsim sync --out DIR)")
-    p.add_argument("--tag", default=None, metavar="ID", help="--format detections|yaps|vue: the tag's id")
+                   help="raw detections: the synchronisation's folder (sblsim sync --out DIR)")
+    p.add_argument("--tag", default=None, metavar="ID", help="raw detections: the tag's full ID or id")
     p.add_argument("--receivers", type=Path, default=None, metavar="FILE",
                    help="--format toa: the receivers' positions (CSV name,x_m,y_m[,z_m][,status], or TOML)")
     p.add_argument("--reference", type=Path, default=None, metavar="FILE",
@@ -648,14 +650,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim replay`` from its parsed arguments: its lines printed, its exit status returned."""
-    if args.format in ("detections", "yaps", "vue"):  # raw detections: the tag's matrix (sblsim toa), then tracked
+    if args.format in ("detections", "yaps", "vue", "fathom", "glatos", "otn"):  # raw detections: the tag's matrix
+        # (sblsim toa), then tracked
         from sblsim.orchestrator.sync.toa import replay_matrix
 
         with replay_matrix(args) as toa_args:
             return _main_toa(toa_args)
     if args.sync is not None or args.tag is not None:
-        raise ConfigError(f"{'--sync' if args.sync is not None else '--tag'}: only with --format detections, yaps "
-                          "or vue (raw detections)")
+        raise ConfigError(f"{'--sync' if args.sync is not None else '--tag'}: only with --format detections, yaps, "
+                          "vue, fathom, glatos or otn (raw detections)")
     if args.format == "toa":
         return _main_toa(args)
     given = [o for o, v in (("--receivers", args.receivers), ("--reference", args.reference),

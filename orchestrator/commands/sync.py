@@ -20,7 +20,7 @@ from sblsim.orchestrator.commands.common import (
     real_argument,
     text_argument,
 )
-from sblsim.orchestrator.commands.console import output_folder
+from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.output import folder_name
 
@@ -28,8 +28,9 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
     from matplotlib.figure import Figure
 
-#: The formats of the detections file, the bins' allowed width [h] and the sound speed's range [m/s].
-FORMATS = ("yaps", "vue")
+#: The formats of the detections file (None: read from its first line), the bins' allowed width [h] and the sound
+#: speed's range [m/s].
+FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
 BIN_HOURS = (0.05, 168.0)
 SOUND_SPEED = (1300.0, 1700.0)
 #: The survey's horizontal sigma per axis [m] by default and its allowed range (the refinement's prior).
@@ -98,20 +99,23 @@ class SyncResult:
         return t + self._outcome.origin - self._outcome.fit.offset(j, t)
 
 
-def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps", sound_speed: float | None = None,
-         sound_speed_file: str | Path | None = None, bin_hours: float = 1.0, reference: str | None = None,
-         out: str | Path | None = None, force: bool = False, refine_positions: bool = False,
-         survey_sigma: float | None = None) -> SyncResult:
+def sync(detections: str | Path, *, receivers: str | Path, format: str | None = None,
+         sound_speed: float | None = None, sound_speed_file: str | Path | None = None, bin_hours: float = 1.0,
+         reference: str | None = None, out: str | Path | None = None, force: bool = False,
+         refine_positions: bool = False, survey_sigma: float | None = None, crs: str | None = None,
+         frame: str | None = None) -> SyncResult:
     """Synchronise the receivers' clocks from the sync tags: ``sblsim sync``.
 
     Parameters
     ----------
     detections : str or Path
-        Raw detections: the YAPS table (``epo, frac, tag, serial``) or a VUE export CSV (``format="vue"``).
+        Raw detections: the YAPS table (``epo, frac, tag, serial``), a VUE export, a Fathom (VDAT) CSV, a GLATOS or
+        an OTN detection extract.
     receivers : str or Path
-        The receivers: ``serial, sync_tag, x_m, y_m[, z_m]`` (or ``x, y, z``).
-    format : str
-        ``yaps`` or ``vue``.
+        The receivers: ``serial, sync_tag, x_m, y_m[, z_m]`` (or ``x, y, z``), or a study's deployments (``lat``,
+        ``lon``, dates, GLATOS and OTN names: :mod:`sblsim.orchestrator.telemetry.deployments`).
+    format : str, optional
+        ``yaps``, ``vue``, ``fathom``, ``glatos`` or ``otn``; default read from the file's first line.
     sound_speed : float, optional
         [m/s] in [1300, 1700], constant.
     sound_speed_file : str or Path, optional
@@ -131,6 +135,10 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps",
     survey_sigma : float, optional
         [m] in [0.01, 1000], the table's horizontal sigma per axis (the prior; default 3 m, a handheld GPS's);
         only with ``refine_positions``.
+    crs : str, optional
+        The receivers' CRS (``EPSG:…``; WGS 84 for ``lat``, ``lon`` by default).
+    frame : str, optional
+        The metric frame (a projected CRS in metres; default the UTM zone of the array's centre).
 
     Returns
     -------
@@ -144,8 +152,9 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps",
     """
     detections = path_argument(detections, "detections", optional=False)
     receivers = path_argument(receivers, "receivers", optional=False)
-    if format not in FORMATS:
+    if format is not None and format not in FORMATS:
         raise ConfigError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
+    crs, frame = text_argument(crs, "crs"), text_argument(frame, "frame")
     if sound_speed is not None and sound_speed_file is not None:
         raise ConfigError("sound_speed: give sound_speed or sound_speed_file, not both")
     if sound_speed is not None:
@@ -158,7 +167,7 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str = "yaps",
     survey_sigma = _survey_sigma(survey_sigma, refine_positions, "survey_sigma")
     target = prepare_out(out, force, "sync.json", "synchronisation")
     outcome = _synchronise(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference,
-                           refine_positions, survey_sigma)
+                           refine_positions, survey_sigma, crs, frame)
     if target is not None:
         from sblsim.orchestrator.sync.outputs import write
 
@@ -177,17 +186,19 @@ def _survey_sigma(value: Any, refine: bool, where: str) -> float:
     return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
 
 
-def _synchronise(detections: Path, receivers: Path, format: str, sound_speed: float | None,
+def _synchronise(detections: Path, receivers: Path, format: str | None, sound_speed: float | None,
                  sound_speed_file: Path | None, bin_hours: float, reference: str | None,
-                 refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA):
-    from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones, read_sound_speed
-    from sblsim.orchestrator.sync.run import synchronise
+                 refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
+                 frame: str | None = None):
+    from sblsim.orchestrator.sync.detections import read_detections, read_sound_speed
+    from sblsim.orchestrator.sync.run import synchronise_study
+    from sblsim.orchestrator.telemetry.deployments import read_deployments
 
     data = read_detections(detections, format)
-    table = read_hydrophones(receivers)
+    deployments = read_deployments(receivers, crs, frame)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
-    return synchronise(data, table, sound_speed, series, bin_hours, reference,
-                       refine_positions=refine_positions, survey_sigma=survey_sigma)
+    return synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
+                             refine_positions=refine_positions, survey_sigma=survey_sigma)
 
 
 NAME = "sync"
@@ -196,11 +207,11 @@ HELP = "synchronise the receivers' clocks of a telemetry array from its sync tag
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim sync``'s arguments."""
-    p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial) or a VUE "
-                   "export CSV (--format vue)")
-    p.add_argument("--receivers", type=Path, required=True, metavar="HYDROPHONES",
-                   help="the receivers: serial,sync_tag,x_m,y_m[,z_m] (or x,y,z)")
-    p.add_argument("--format", choices=FORMATS, default="yaps", help="the detections' format (default yaps)")
+    p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial), a VUE export, "
+                   "a Fathom (VDAT) CSV, a GLATOS or an OTN detection extract")
+    add_receivers(p)
+    p.add_argument("--format", choices=FORMATS, default=None,
+                   help="the detections' format (default: read from the file's first line)")
     speed = p.add_mutually_exclusive_group()
     speed.add_argument("--sound-speed", type=float, default=None, metavar="M_S",
                        help="a constant sound speed [m/s] (default: estimated with the clocks)")
@@ -227,7 +238,7 @@ def main(args: argparse.Namespace) -> int:
     hours = real_argument(args.bin_hours, "--bin-hours", *BIN_HOURS, "h")
     survey = _survey_sigma(args.survey_sigma, args.refine_positions, "--survey-sigma")
     outcome = _synchronise(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
-                           args.reference, args.refine_positions, survey)
+                           args.reference, args.refine_positions, survey, args.crs, args.frame)
     out = output_folder(args.out, Path("results") / f"sync_{folder_name(args.detections.stem)}", args.force,
                         "sync.json", "synchronisation")
     from sblsim.orchestrator.sync.outputs import write

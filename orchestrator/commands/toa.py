@@ -13,15 +13,15 @@ from typing import TYPE_CHECKING, Any
 
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.common import path_argument, prepare_out, text_argument
-from sblsim.orchestrator.commands.console import output_folder
+from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.io.output import folder_name
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import numpy as np
     import pandas as pd
 
-#: The detections' formats, and the ping types' names.
-FORMATS = ("yaps", "vue")
+#: The detections' formats (None: read from the file's first line), and the ping types' names.
+FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
 PING_TYPE_NAMES = tuple(PING_TYPES)
 
 
@@ -54,23 +54,26 @@ class ToaResult:
     out: Path | None = None
 
 
-def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag: str, format: str = "yaps",
+def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag: str, format: str | None = None,
         ping_type: str | None = None, burst_interval: str | tuple[float, float] | None = None,
-        burst_sequence: str | Path | None = None, out: str | Path | None = None, force: bool = False) -> ToaResult:
+        burst_sequence: str | Path | None = None, out: str | Path | None = None, force: bool = False,
+        crs: str | None = None, frame: str | None = None) -> ToaResult:
     """One tag's times-of-arrival matrix from raw detections on synchronised clocks: ``sblsim toa``.
 
     Parameters
     ----------
     detections : str or Path
-        Raw detections: the YAPS table (``epo, frac, tag, serial``) or a VUE export CSV (``format="vue"``).
+        Raw detections: the YAPS table (``epo, frac, tag, serial``), a VUE export, a Fathom (VDAT) CSV, a GLATOS or
+        an OTN detection extract.
     receivers : str or Path
-        The receivers: ``serial, sync_tag, x_m, y_m[, z_m]`` (the table the synchronisation was made with).
+        The receivers: ``serial, sync_tag, x_m, y_m[, z_m]``, or a study's deployments (the table the
+        synchronisation was made with).
     sync : str or Path
         A synchronisation's folder (``sblsim sync --out DIR``): its ``offsets.csv`` is read, nothing else.
     tag : str
-        The tag's id.
-    format : str
-        ``yaps`` or ``vue``.
+        The tag: its full ID (``A69-1602-4555``) or its id.
+    format : str, optional
+        ``yaps``, ``vue``, ``fathom``, ``glatos`` or ``otn``; default read from the file's first line.
     ping_type : str, optional
         ``sbi``, ``rbi`` (with ``burst_interval``) or ``pbi`` (with ``burst_sequence``): the shortest burst
         interval, below which a second arrival at one receiver is a multipath echo; default as the detections show
@@ -83,6 +86,8 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
         Write ``toa.txt``, ``receivers.csv``, ``pings.csv`` and ``toa.json`` there.
     force : bool
         Replace an earlier result in ``out``.
+    crs, frame : str, optional
+        The receivers' CRS and the metric frame (as :func:`sync` takes them).
 
     Returns
     -------
@@ -103,7 +108,8 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
     kind, interval, sequence = check_ping_type(ping_type, burst_interval, burst_sequence,
                                                ("ping_type", "burst_interval", "burst_sequence"))
     target = prepare_out(out, force, "toa.txt", "times of arrival")
-    outcome = build(detections, receivers, sync, tag, format, kind, interval, sequence)
+    outcome = build(detections, receivers, sync, tag, format, kind, interval, sequence, text_argument(crs, "crs"),
+                    text_argument(frame, "frame"))
     if target is not None:
         from sblsim.orchestrator.sync.toa import write_toa_folder
 
@@ -117,14 +123,14 @@ HELP = "one tag's times-of-arrival matrix from raw detections and a synchronisat
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim toa``'s arguments."""
-    p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial) or a VUE "
-                   "export CSV (--format vue)")
-    p.add_argument("--receivers", type=Path, required=True, metavar="HYDROPHONES",
-                   help="the receivers: serial,sync_tag,x_m,y_m[,z_m] (the table of the synchronisation)")
+    p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial), a VUE export, "
+                   "a Fathom (VDAT) CSV, a GLATOS or an OTN detection extract")
+    add_receivers(p)
     p.add_argument("--sync", type=Path, required=True, metavar="DIR",
                    help="the synchronisation's folder (sblsim sync --out DIR): its offsets.csv")
-    p.add_argument("--tag", required=True, metavar="ID", help="the tag's id")
-    p.add_argument("--format", choices=FORMATS, default="yaps", help="the detections' format (default yaps)")
+    p.add_argument("--tag", required=True, metavar="ID", help="the tag: its full ID (A69-1602-4555) or id")
+    p.add_argument("--format", choices=FORMATS, default=None,
+                   help="the detections' format (default: read from the file's first line)")
     add_ping_type(p)
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/toa_TAG)")
     p.add_argument("--force", action="store_true", help="replace an earlier result in --out")
@@ -148,7 +154,8 @@ def main(args: argparse.Namespace) -> int:
 
     kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
                                                ("--ping-type", "--burst-interval", "--burst-sequence"))
-    outcome = build(args.detections, args.receivers, args.sync, args.tag, args.format, kind, interval, sequence)
+    outcome = build(args.detections, args.receivers, args.sync, args.tag, args.format, kind, interval, sequence,
+                    args.crs, args.frame)
     out = output_folder(args.out, Path("results") / f"toa_{folder_name(args.tag)}", args.force, "toa.txt",
                         "times of arrival")
     from sblsim.orchestrator.sync.toa import write_toa_folder

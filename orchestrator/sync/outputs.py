@@ -23,17 +23,27 @@ def figures(outcome: SyncOutcome) -> dict:
     import matplotlib.pyplot as plt
 
     o, r, rec = outcome.offsets, outcome.residuals, outcome.receivers
-    fig1, ax = plt.subplots(figsize=(10, 6))
-    for name, g in o.groupby("receiver", sort=False):
+    fig1, ax = plt.subplots(figsize=(11, 6.5))
+    groups = list(o.groupby("receiver", sort=False))
+    colours = plt.get_cmap("tab20").colors
+    for k, (name, g) in enumerate(groups):
         t = np.r_[g["start"].to_numpy(), g["end"].to_numpy()[-1:]]
         y = np.r_[g["offset_start_s"].to_numpy(), g["offset_end_s"].to_numpy()[-1:]]
         s = np.r_[g["offset_start_sigma_s"].to_numpy(), g["offset_end_sigma_s"].to_numpy()[-1:]]
-        hours = (t - t[0]) / 3600
-        line, = ax.plot(hours, y, "-", lw=1, label=name)
-        ax.fill_between(hours, y - 2 * s, y + 2 * s, color=line.get_color(), alpha=0.2)
-    ax.set(xlabel="time from the first bin [h]", ylabel="clock offset [s]",
-           title=f"clock offsets against the reference receiver {outcome.summary['reference_receiver']}")
-    ax.legend(fontsize=6, ncol=4)
+        hours = (t - o["start"].min()) / 3600
+        # the offset less its own straight line (least squares over the knots): the drift's wander and its band
+        slope, intercept = np.polyfit(hours, y, 1) if len(hours) > 1 else (0.0, float(y[0]))
+        rest = (y - (slope * hours + intercept)) * 1e3
+        colour, style = colours[k % len(colours)], ("-", "--", ":", "-.")[(k // len(colours)) % 4]
+        ax.plot(hours, rest, style, color=colour, lw=1.2,
+                label=f"{name}: {intercept:+.3f} s, {slope / 3600 * 1e6:+.2f} ppm")
+        ax.fill_between(hours, rest - 2e3 * s, rest + 2e3 * s, color=colour, alpha=0.15)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set(xlabel="time from the first bin [h]", ylabel="offset less its linear trend [ms]",
+           title=f"clock offsets against the reference receiver {outcome.summary['reference_receiver']}, each less its "
+                 "linear trend (legend: the trend's offset at the first bin and drift), 2σ bands")
+    ax.title.set_fontsize(9)
+    ax.legend(fontsize=6, ncol=4, loc="upper left", bbox_to_anchor=(1.01, 1.0) if len(groups) > 24 else None)
     fig1.tight_layout()
     fig2, bx = plt.subplots(figsize=(10, 5))
     kept = r[r["kept"]]

@@ -443,4 +443,34 @@ def _finite(values: np.ndarray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in values]
 
 
-__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "synchronise"]
+
+
+def synchronise_study(detections: Detections, deployments, sound_speed: float | None = None,
+                      series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
+                      reference: str | None = None, **options: Any) -> SyncOutcome:
+    """:func:`synchronise` on a study's receivers (a
+    :class:`~sblsim.orchestrator.telemetry.deployments.Deployments`): each detection at its deployment first (the
+    others set aside, counted in ``summary["set_aside"]``), the frame and the deployments in
+    ``summary["receivers_file"]``, and the refined positions (``positions.csv``) in latitude and longitude too where
+    the frame is known; ``options`` as :func:`synchronise` takes them.
+
+    Raises
+    ------
+    ModelError
+        As :func:`synchronise`, or no detection inside a deployment.
+    """
+    from sblsim.orchestrator.telemetry.deployments import assign
+
+    assigned = assign(detections, deployments)
+    outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
+                          **options)
+    outcome.summary["set_aside"] = assigned.set_aside
+    outcome.summary["receivers_file"] = deployments.summary()
+    frame = deployments.frame
+    if outcome.positions is not None and frame is not None:
+        outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),
+                                                                             outcome.positions["y_m"].to_numpy())
+    return outcome
+
+
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "synchronise", "synchronise_study"]

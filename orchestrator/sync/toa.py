@@ -32,8 +32,10 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.pings import build_pings, inferred_shortest, largest_travel_time
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.tables import NUMBER
+from sblsim.orchestrator.sync.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.sync.detections import (
     IDENTIFIER,
     MAX_COORDINATE,
@@ -43,9 +45,8 @@ from sblsim.orchestrator.sync.detections import (
     _pattern,
     _table,
     read_detections,
-    read_hydrophones,
 )
-from sblsim.orchestrator.tracks.toa import read_burst_sequence
+from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN, read_burst_sequence
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
@@ -54,7 +55,7 @@ TOLERANCE = 0.02
 MAX_OFFSET_ROWS = 1_000_000
 MAX_OFFSET = 86400.0
 #: The detections' formats, the ping types and the burst intervals taken [s].
-FORMATS = ("yaps", "vue")
+FORMATS = DETECTION_FORMATS
 PING_TYPE_NAMES = tuple(PING_TYPES)
 BURST_LIMITS = (0.1, 86400.0)
 #: The sensor units given a column name of their own in ``pings.csv`` (others: ``sensor_<unit>``).
@@ -95,7 +96,7 @@ def read_clocks(folder: Path | str) -> Clocks:
     if not folder.is_dir():
         raise ModelError(f"{what}: {str(folder)!r} is not a folder; allowed: the folder sblsim sync --out wrote "
                          "(its offsets.csv)")
-    path = folder / "offsets.csv"
+    path = _in_folder(folder, "offsets.csv")
     if not path.exists():
         raise ModelError(f"{what}: {str(folder)!r} holds no offsets.csv; allowed: the folder sblsim sync --out wrote")
     body, lines, name, col = _columns(path, what, ("receiver", "bin", "start", "end", "offset_start_s",
@@ -112,33 +113,71 @@ def read_clocks(folder: Path | str) -> Clocks:
     first = _numbers(body[col["offset_start_s"]], what, name, lines, "offset_start_s", -MAX_OFFSET, MAX_OFFSET,
                      unit="s")
     last = _numbers(body[col["offset_end_s"]], what, name, lines, "offset_end_s", -MAX_OFFSET, MAX_OFFSET, unit="s")
+    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}")
+
+
+def _in_folder(folder: Path, name: str) -> Path:
+    """A synchronisation's own file in its folder; refused where a symbolic link takes it out of the folder (the
+    folder a user names holds the tables, it does not point at others)."""
+    path = folder / name
+    if path.is_symlink() and not path.resolve().is_relative_to(folder.resolve()):
+        raise ModelError(f"sync: {str(path)!r} is a symbolic link out of the folder; allowed: the folder sblsim sync "
+                         f"--out wrote, its {name} a file in it")
+    return path
+
+
+def offsets_clocks(offsets: pd.DataFrame) -> Clocks:
+    """The clocks of a synchronisation made in this process (its ``offsets.csv`` table:
+    :attr:`~sblsim.orchestrator.sync.run.SyncOutcome.offsets`)."""
+    return clocks_of(offsets["receiver"].astype(str).to_numpy(), offsets["bin"].to_numpy(float),
+                     offsets["start"].to_numpy(float), offsets["end"].to_numpy(float),
+                     offsets["offset_start_s"].to_numpy(float), offsets["offset_end_s"].to_numpy(float),
+                     "sync: the synchronisation's offsets")
+
+
+def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
+    """Clocks taken as logged (every offset zero from ``start`` to ``end`` [s since 1970 UTC]): receivers whose
+    times are synchronised already, where the study has no sync tag."""
+    return Clocks(list(receivers), np.array([start, max(end, start + 1.0)]), np.zeros((len(receivers), 2)))
+
+
+def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np.ndarray, first: np.ndarray,
+              last: np.ndarray, where: str) -> Clocks:
+    """Each receiver's offsets at the bins' edges from one row per receiver and bin (``offsets.csv``'s columns).
+
+    Raises
+    ------
+    ModelError
+        One line naming ``where``: bins that are not the same contiguous edges for every receiver, a receiver
+        lacking a bin, an offset not continuous across a bin's edge.
+    """
     names = list(dict.fromkeys(receiver.tolist()))
     index = {n: j for j, n in enumerate(names)}
     j = np.array([index[n] for n in receiver])
     n_bins = int(bins.max()) + 1
-    if len(body) != len(names) * n_bins:
-        raise ModelError(f"{what}: {name!r} has {len(body)} rows for {len(names)} receivers and {n_bins} bins; "
+    if len(receiver) != len(names) * n_bins:
+        raise ModelError(f"{where} has {len(receiver)} rows for {len(names)} receivers and {n_bins} bins; "
                          "allowed: one row per receiver and bin (sblsim sync's offsets.csv)")
     seen = np.zeros((len(names), n_bins), bool)
     seen[j, bins.astype(np.int64)] = True
     if not seen.all():
-        raise ModelError(f"{what}: {name!r}: receiver {names[int(np.argwhere(~seen)[0][0])]} lacks a bin or has one "
-                         "twice; allowed: one row per receiver and bin")
+        raise ModelError(f"{where}: receiver {names[int(np.argwhere(~seen)[0][0])]} lacks a bin or has one twice; "
+                         "allowed: one row per receiver and bin")
     b = bins.astype(np.int64)
     edges = np.full(n_bins + 1, np.nan)
     edges[b] = start
     edges[b + 1] = end
     if not (np.allclose(edges[b], start, rtol=0, atol=1e-6) and np.allclose(edges[b + 1], end, rtol=0, atol=1e-6)
             and (np.diff(edges) > 0).all()):
-        raise ModelError(f"{what}: {name!r}: the bins' start and end are not the same increasing edges for every "
-                         "receiver; allowed: sblsim sync's offsets.csv")
+        raise ModelError(f"{where}: the bins' start and end are not the same increasing edges for every receiver; "
+                         "allowed: sblsim sync's offsets.csv")
     knots = np.full((len(names), n_bins + 1), np.nan)
     knots[j, b] = first
     knots[j, b + 1] = last
     if not (np.allclose(knots[j, b], first, rtol=0, atol=1e-6) and np.allclose(knots[j, b + 1], last, rtol=0,
                                                                                   atol=1e-6)):
-        raise ModelError(f"{what}: {name!r}: an offset is not continuous across a bin's edge (a bin's end differs "
-                         "from the next bin's start); allowed: sblsim sync's offsets.csv")
+        raise ModelError(f"{where}: an offset is not continuous across a bin's edge (a bin's end differs from the "
+                         "next bin's start); allowed: sblsim sync's offsets.csv")
     return Clocks(names, edges, knots)
 
 
@@ -171,7 +210,7 @@ def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     ModelError
         One line: a cell outside its pattern or range, a receiver twice.
     """
-    path = Path(folder) / "positions.csv"
+    path = _in_folder(Path(folder), "positions.csv")
     if not path.exists():
         return None
     what = "sync"
@@ -189,7 +228,8 @@ def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
 @dataclass
 class ToaOutcome:
     """What :func:`build_toa` computed: ``toa`` (P, R) [s] on the base ``origin`` [s since 1970 UTC], ``names`` the
-    receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``) and ``summary`` (``toa.json``)."""
+    receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``), ``summary`` (``toa.json``) and
+    ``frame`` (the positions' metric frame; None without a CRS)."""
 
     toa: np.ndarray
     names: list[str]
@@ -197,6 +237,7 @@ class ToaOutcome:
     pings: pd.DataFrame
     summary: dict[str, Any]
     origin: float
+    frame: Frame | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
@@ -349,11 +390,16 @@ def header_line(names: list[str]) -> bool:
     return not all(NUMBER.fullmatch(n) for n in names)
 
 
-def write_matrix(outcome: ToaOutcome, folder: Path) -> tuple[Path, Path]:
-    """``toa.txt`` and ``receivers.csv`` in ``folder`` (what the replay reads); returns their paths."""
+def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = None) -> tuple[Path, Path]:
+    """``toa.txt`` and ``receivers.csv`` in ``folder`` (what the replay reads); returns their paths. With ``depth``
+    (P,) [m] the tag's depth per ping (NaN where none), ``toa.txt`` has a ``depth_m`` column first (and a header
+    whatever the receivers' names: the column's name is not a number)."""
     frame = pd.DataFrame(outcome.toa, columns=outcome.names)
+    if depth is not None:
+        frame.insert(0, DEPTH_COLUMN, depth)
     toa = folder / "toa.txt"
-    frame.to_csv(toa, sep=" ", na_rep="NA", index=False, float_format="%.9f", header=header_line(outcome.names))
+    frame.to_csv(toa, sep=" ", na_rep="NA", index=False, float_format="%.9f",
+                 header=depth is not None or header_line(outcome.names))
     axes = ["x_m", "y_m", "z_m"][:outcome.positions.shape[1]]
     receivers = folder / "receivers.csv"
     table = pd.DataFrame(outcome.positions, columns=axes)
@@ -405,24 +451,30 @@ def _shortest(ping_type: str | None, interval: tuple[float, float] | None, seque
     return None
 
 
-def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str, ping_type: str | None,
-          interval: tuple[float, float] | None, sequence: Path | None):
-    """Read the files and build the tag's matrix (:func:`build_toa`): :class:`ToaOutcome`.
+def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str | None, ping_type: str | None,
+          interval: tuple[float, float] | None, sequence: Path | None, crs: str | None = None,
+          frame: str | None = None):
+    """Read the files and build the tag's matrix (:func:`build_toa`): :class:`ToaOutcome`. The receivers are a
+    study's deployments (:func:`~sblsim.orchestrator.telemetry.deployments.read_deployments`, in ``crs``, projected
+    to ``frame``), each detection at its deployment (the others set aside: ``summary["set_aside"]``).
 
     Raises
     ------
     ModelError, ConfigError
         One line: a bad tag id or format, a file refused by its reader.
     """
+    from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
+
     if not IDENTIFIER.fullmatch(tag):
         raise ConfigError(f"tag: {tag[:40]!r} is not allowed; allowed: a tag id of 1 to 40 letters, digits, '.', '_' "
                           "or '-'")
-    if format not in FORMATS:
+    if format is not None and format not in FORMATS:
         raise ConfigError(f"format: {str(format)[:40]!r} is not one of {', '.join(FORMATS)}")
     clocks = read_clocks(sync)
     shortest = _shortest(ping_type, interval, sequence)
-    data = read_detections(detections, format)
-    table = read_hydrophones(receivers)
+    deployments = read_deployments(receivers, crs, frame)
+    assigned = assign(read_detections(detections, format), deployments)
+    data, table = assigned.detections, assigned.hydrophones
     refined = read_positions(sync)
     if refined is not None:  # the synchronisation's refined positions replace the table's
         table = table.copy()
@@ -432,6 +484,9 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str, 
     given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
              "burst_sequence": None if sequence is None else sequence.name}
     outcome = build_toa(data, table, clocks, tag, shortest, given)
+    outcome.frame = deployments.frame
+    outcome.summary["set_aside"] = assigned.set_aside
+    outcome.summary["receivers_file"] = deployments.summary()
     if refined is not None:
         outcome.summary["positions"] = {"source": "the synchronisation's positions.csv (refined)",
                                         "receivers": int(moved.sum())}
@@ -461,8 +516,8 @@ def run_lines(outcome, where: str) -> list[str]:
     return lines
 
 
-#: ``sblsim replay --format``'s names of raw detections (``detections``: the YAPS table).
-REPLAY_FORMATS = {"detections": "yaps", "yaps": "yaps", "vue": "vue"}
+#: ``sblsim replay --format``'s names of raw detections (``detections``: read from the file's first line).
+REPLAY_FORMATS = {"detections": None, **{f: f for f in DETECTION_FORMATS}}
 
 
 @contextmanager
@@ -484,7 +539,7 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
                                                ("--ping-type", "--burst-interval", "--burst-sequence"))
     outcome = build(args.log, args.receivers, args.sync, args.tag, REPLAY_FORMATS[args.format], kind, interval,
-                    sequence)
+                    sequence, args.crs, args.frame)
     for line in run_lines(outcome, ""):
         print(line, flush=True)
     with tempfile.TemporaryDirectory(prefix="sblsim-toa-") as tmp:
@@ -494,9 +549,11 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
         named = toa.with_name(f"{folder.name}.txt")
         toa.rename(named)
         yield argparse.Namespace(**{**vars(args), "log": named, "receivers": receivers, "format": "toa",
-                                    "sync": None, "tag": None})
+                                    "sync": None, "tag": None, "time_origin": outcome.origin,
+                                    "crs": None if outcome.frame is None else outcome.frame.crs, "frame": None})
 
 
 __all__ = ["BURST_LIMITS", "Clocks", "FORMATS", "PING_TYPE_NAMES", "REPLAY_FORMATS", "SENSOR_COLUMNS",
-           "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa", "check_ping_type", "header_line",
-           "read_clocks", "replay_matrix", "run_lines", "tags_present", "write_matrix", "write_toa_folder"]
+           "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa", "check_ping_type", "clocks_of",
+           "header_line", "logged_clocks", "offsets_clocks", "read_clocks", "replay_matrix", "run_lines",
+           "tags_present", "write_matrix", "write_toa_folder"]

@@ -24,7 +24,8 @@ from importlib.metadata import PackageNotFoundError, version
 __all__ = [
     "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
-    "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult",
+    "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult", "track",
+    "StudyResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS", "__version__",
 ]

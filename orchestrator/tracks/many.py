@@ -67,11 +67,13 @@ def tag_files(folder: Path) -> list[Path]:
 
 def track_tag(toa_path: Path, receivers: Path, options: dict[str, Any]):
     """One tag tracked (:func:`~sblsim.orchestrator.tracks.track.track` with ``options``): its outcome, or the one
-    line of its refusal (a :class:`ModelError`)."""
+    line of its refusal (a :class:`ModelError`, or any other fault, named as one)."""
     try:
         return track(toa_path, receivers, **options)
     except ModelError as exc:
         return str(exc)
+    except Exception as exc:  # a fault of ours on this tag's data: said in its row, the other tags go on
+        return f"internal error ({type(exc).__name__}: {' '.join(str(exc).split())[:200]}); please report it"
 
 
 def _row(name: str, result, elapsed: float) -> dict[str, Any]:
@@ -85,6 +87,54 @@ def _row(name: str, result, elapsed: float) -> dict[str, Any]:
             "flagged": flagged, "share_flagged": flagged / positioned if positioned else 0.0, "track": main,
             "sound_speed_m_s": s["sound_speed"]["sound_speed_m_s"], "sound_speed_source": s["sound_speed"]["source"],
             "ping_type": s["ping_type"]["type"], "segments": len(s["segments"]), "wall_time_s": s["wall_time_s"]}
+
+
+def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: int | None = None,
+               scheduler: str | None = None, ended: Callable[[str, Any], None] | None = None) -> dict[str, Any]:
+    """Track each job ``(name, toa_path, receivers_path, options)`` (:func:`track_tag`, each with its own options) in
+    worker processes (``workers``, default the CPU count; 1: one after another in this process) or on a Dask
+    scheduler's workers; ``ended(name, result)`` called as each ends. Returns name → the
+    :class:`~sblsim.orchestrator.tracks.track.TrackOutcome`, or the one line of its refusal."""
+    results: dict[str, Any] = {}
+
+    def done(name: str, result) -> None:
+        results[name] = result
+        if ended is not None:
+            ended(name, result)
+
+    workers = workers or os.cpu_count() or 1
+    if scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import close_client, connect
+
+        client = connect(scheduler, workers=workers)
+        try:
+            from distributed import as_completed
+
+            futures = {client.submit(track_tag, toa, receivers, options, pure=False): name
+                       for name, toa, receivers, options in jobs}
+            for future in as_completed(futures, loop=client.loop):
+                done(futures[future], future.result())
+        finally:
+            close_client(client)
+    elif workers == 1 or len(jobs) == 1:
+        for name, toa, receivers, options in jobs:
+            done(name, track_tag(toa, receivers, options))
+    else:
+        from sblsim.orchestrator.campaign.worker import watch_parent
+
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=watch_parent, initargs=(os.getpid(),)) as pool:
+            pending = {pool.submit(track_tag, toa, receivers, options): name
+                       for name, toa, receivers, options in jobs}
+            try:
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in finished:
+                        done(pending.pop(future), future.result())
+            finally:
+                for future in pending:
+                    future.cancel()
+    return results
 
 
 def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], workers: int | None = None,
@@ -120,45 +170,14 @@ def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], 
     files = [Path(f) for f in files]
     names = [f.stem for f in files]
     started = time.perf_counter()
-    results: dict[str, Any] = {}
     rows: dict[str, dict[str, Any]] = {}
 
     def ended(name: str, result) -> None:
-        results[name] = result
         rows[name] = _row(name, result, time.perf_counter() - started)
         if progress is not None:
             progress(rows[name], len(rows), len(files))
 
-    workers = workers or os.cpu_count() or 1
-    if scheduler is not None:
-        from sblsim.orchestrator.campaign.executors import close_client, connect
-
-        client = connect(scheduler, workers=workers)
-        try:
-            from distributed import as_completed
-
-            futures = {client.submit(track_tag, f, receivers, options, pure=False): n for f, n in zip(files, names)}
-            for future in as_completed(futures, loop=client.loop):
-                ended(futures[future], future.result())
-        finally:
-            close_client(client)
-    elif workers == 1 or len(files) == 1:
-        for f, n in zip(files, names):
-            ended(n, track_tag(f, receivers, options))
-    else:
-        from sblsim.orchestrator.campaign.worker import watch_parent
-
-        with ProcessPoolExecutor(max_workers=min(workers, len(files)), mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=watch_parent, initargs=(os.getpid(),)) as pool:
-            pending = {pool.submit(track_tag, f, receivers, options): n for f, n in zip(files, names)}
-            try:
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for future in finished:
-                        ended(pending.pop(future), future.result())
-            finally:
-                for future in pending:
-                    future.cancel()
+    results = run_tracks([(n, f, Path(receivers), options) for f, n in zip(files, names)], workers, scheduler, ended)
     table = pd.DataFrame([rows[n] for n in names], columns=list(TAG_COLUMNS))
     outcomes = {n: r for n, r in results.items() if not isinstance(r, str)}
     if out is not None:
@@ -169,4 +188,5 @@ def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], 
     return TagsOutcome(table, outcomes)
 
 
-__all__ = ["MAX_TAGS", "TAG_COLUMNS", "TAG_SUFFIXES", "TagsOutcome", "tag_files", "track_tag", "track_tags"]
+__all__ = ["MAX_TAGS", "TAG_COLUMNS", "TAG_SUFFIXES", "TagsOutcome", "run_tracks", "tag_files", "track_tag",
+           "track_tags"]

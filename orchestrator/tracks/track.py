@@ -63,7 +63,8 @@ class TrackOutcome:
     """The outcome of :func:`track`: ``track`` (the track's rows, ``track.csv``), ``estimates`` (every estimator's
     rows, ``estimates.csv``), ``errors`` (``errors.csv``, None without a truth), ``score`` (``score.json``, None
     without a truth), ``summary`` (how the run went, ``summary.json``), ``bound`` (``bound.csv``, None without a
-    truth) and ``truth`` (the truth track as read, rows ``t, x, y[, z]``, for the figure; None without one)."""
+    truth), ``truth`` (the truth track as read, rows ``t, x, y[, z]``, for the figure; None without one) and
+    ``array`` (the receivers used: their names and positions (k, dim) [m], for the figure)."""
 
     track: Any  # pandas.DataFrame
     estimates: Any  # pandas.DataFrame
@@ -72,6 +73,7 @@ class TrackOutcome:
     summary: dict[str, Any]
     bound: Any = None  # pandas.DataFrame or None (bound.csv)
     truth: np.ndarray | None = None
+    array: tuple[list[str], np.ndarray] | None = None
 
 
 def _usable(toa_matrix, receivers, kept: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -400,7 +402,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS,
                                "thirds": bound_thirds(bound, errors)}
     summary["wall_time_s"] = time.perf_counter() - start
-    return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth)
+    return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth, (names, positions))
 
 
 __all__ = ["ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "SCORE_KEYS", "TrackOutcome",

@@ -1,0 +1,358 @@
+"""``sblsim track`` and ``sblsim.track``: a telemetry study in one command, its people's own files in (the receivers'
+deployments in latitude and longitude with dates, their detection exports, a tag sheet), every tag tracked with its
+own ping type, the tracks out in latitude, longitude and UTC (:mod:`sblsim.orchestrator.telemetry.study`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Sequence
+
+from sblsim.models.tracking.sound_speed import SALINITY_RANGE, TEMPERATURE_RANGE
+from sblsim.orchestrator.commands.common import (
+    path_argument,
+    prepare_out,
+    real_argument,
+    text_argument,
+)
+from sblsim.orchestrator.commands.console import add_receivers, output_folder
+from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.io.progress import ProgressSpec, check_progress, progress_of
+
+if TYPE_CHECKING:  # the heavy modules are imported when a function runs
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+#: The detections' formats (None: read from the file's first line).
+FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
+#: The synchronisation's bins [h] and the sound speeds [m/s] taken.
+BIN_HOURS = (0.05, 168.0)
+SOUND_SPEED = (1300.0, 1700.0)
+#: The most worker processes.
+MAX_WORKERS = 256
+
+
+@dataclass
+class StudyResult:
+    """The outcome of :func:`track`.
+
+    Attributes
+    ----------
+    tracks : pandas.DataFrame
+        ``tracks.csv``: every tracked tag's rows: ``tag``, ``time_utc`` (the emission, ISO 8601 UTC), ``epoch_s``
+        [s since 1970 UTC], ``lat``, ``lon`` [° WGS 84; NaN without a CRS], ``x``, ``y`` [m in the frame] (``z``),
+        ``sigma_x``, ``sigma_y`` [m] (``sigma_z``), ``receivers_heard``, ``quality`` (``ok``, ``restart``,
+        ``flagged``).
+    tags : pandas.DataFrame
+        ``tags.csv``: one row per tag asked for: ``status`` ``tracked`` or ``refused`` and the ``reason``, its
+        detections, pings, rows positioned and flagged, the median 2-D σ of its rows not flagged [m], the ping type
+        stated and taken, the sound speed, its first and last row's UTC time, its folder.
+    receivers : pandas.DataFrame
+        ``receivers.csv``: the deployments, in the frame and in latitude and longitude, with their dates.
+    summary : dict
+        ``study.json``: the files, the frame (its CRS and scale factor), the detections used and set aside (per
+        reason and serial), the clocks, the tags, the notes.
+    tracked : dict
+        Each tracked tag's own outcome (:class:`~sblsim.orchestrator.tracks.track.TrackOutcome`: ``track``,
+        ``estimates`` (every estimator's rows), ``summary``), by tag.
+    out : Path or None
+    """
+
+    tracks: pd.DataFrame
+    tags: pd.DataFrame
+    receivers: pd.DataFrame
+    summary: dict[str, Any]
+    tracked: dict[str, Any] = field(default_factory=dict)
+    out: Path | None = None
+    _outcome: Any = field(default=None, repr=False)
+
+    def plot(self) -> dict[str, Figure]:
+        """The figures: ``map`` (every track over the receivers) and each tag's own (``track_TAG``)."""
+        from sblsim.orchestrator.telemetry.outputs import study_map
+        from sblsim.orchestrator.tracks.outputs import figure
+
+        figures = {"map": study_map(self._outcome)}
+        for folder, outcome in self._outcome.outcomes.items():
+            figures[f"track_{folder}"] = figure(outcome)
+        return figures
+
+
+def _tag_list(value: Any, where: str) -> list[str] | None:
+    """``--tag``: transmitters separated by commas (or a list), each named once."""
+    if value is None:
+        return None
+    names = value.split(",") if isinstance(value, str) else value
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        raise ConfigError(f"{where}: expected transmitters (full IDs or ids) separated by commas, or a list")
+    names = [n.strip() for n in names]
+    if not names or not all(names) or len(set(names)) != len(names):
+        raise ConfigError(f"{where}: {','.join(names)[:80]!r}; allowed: distinct, non-empty transmitters (full IDs or "
+                          "ids) separated by commas")
+    return names
+
+
+def _medium(sound_speed: Any, sound_speed_file: Any, temperature: Any, salinity: Any,
+            names: tuple[str, str, str, str]) -> tuple:
+    """The sound speed's options checked together: one of a constant, a series or a fallback's water."""
+    speed = None if sound_speed is None else real_argument(sound_speed, names[0], *SOUND_SPEED, "m/s")
+    series = path_argument(sound_speed_file, names[1])
+    if speed is not None and series is not None:
+        raise ConfigError(f"{names[1]}: not with {names[0]} (one sound speed: given, or a measured series)")
+    if (temperature is None) != (salinity is None):
+        raise ConfigError(f"{names[3] if salinity is None else names[2]}: needed with "
+                          f"{names[2] if salinity is None else names[3]} (the fallback sound speed's water)")
+    if temperature is not None:
+        if speed is not None or series is not None:
+            raise ConfigError(f"{names[2]}: only where the sound speed is calibrated from the pings (its fallback)")
+        temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
+        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "g/kg")
+    return speed, series, temperature, salinity
+
+
+def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
+             medium: tuple, names: dict[str, str]) -> dict[str, Any]:
+    """Every option of a study checked (``names``: how each is spelled where it was given), as
+    :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
+    from sblsim.orchestrator.io.frames import check_crs, check_metric
+
+    if format is not None and format not in FORMATS:
+        raise ConfigError(f"{names['format']}: {str(format)[:40]!r}; allowed: {', '.join(FORMATS)} (or none: read "
+                          "from the file's first line)")
+    crs, frame = text_argument(crs, names["crs"]), text_argument(frame, names["frame"])
+    speed, series, temperature, salinity = medium
+    if workers is not None:
+        workers = int(real_argument(workers, names["workers"], 1, MAX_WORKERS, ""))
+    if scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import check_address
+
+        scheduler = check_address(str(scheduler))
+    return {"format": format, "crs": None if crs is None else check_crs(crs, names["crs"]),
+            "frame": None if frame is None else check_metric(frame, names["frame"]),
+            "chosen": _tag_list(tag, names["tag"]), "sound_speed": speed, "sound_speed_file": series,
+            "temperature": temperature, "salinity": salinity,
+            "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
+            "scheduler": scheduler}
+
+
+def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | None = None,
+          tag: str | Sequence[str] | None = None, sync: str | Path | None = None, format: str | None = None,
+          crs: str | None = None, frame: str | None = None, sound_speed: float | None = None,
+          sound_speed_file: str | Path | None = None, temperature: float | None = None,
+          salinity: float | None = None, bin_hours: float = 1.0, workers: int | None = None,
+          scheduler: str | None = None, out: str | Path | None = None, force: bool = False,
+          progress: ProgressSpec = False) -> StudyResult:
+    """Track every tag of a telemetry study: ``sblsim track`` (docs/telemetry.md).
+
+    Parameters
+    ----------
+    detections : str or Path
+        The receivers' detections: a YAPS table, a VUE export, a Fathom (VDAT) CSV, a GLATOS or an OTN detection
+        extract (raw: each receiver's own clock).
+    receivers : str or Path
+        The receivers: deployments in ``lat``, ``lon`` with dates (GLATOS ``receiver_locations``, OTN deployments:
+        ``ins_serial_no``, ``deploy_lat``, ``deploy_long``, ``deploy_date_time``, ``recover_date_time``,
+        ``instrument_depth``, ``transmitter`` for a co-located sync tag), or ``serial, sync_tag, x_m, y_m``.
+    tags : str or Path, optional
+        The tag sheet (``transmitter``, ``ping_type``, ``min_delay``, ``max_delay``, ``role``, sensor columns:
+        :mod:`sblsim.orchestrator.telemetry.tag_sheet`). Without one every detected tag that is not a sync tag is
+        tracked, its ping type inferred.
+    tag : str or sequence of str, optional
+        Only these transmitters (full IDs or ids; a text separated by commas, or a list).
+    sync : str or Path, optional
+        A synchronisation's folder (``sblsim sync --out DIR``); default: synchronised here from the deployments'
+        sync tags (or the clocks taken as logged where there are none, said).
+    format : str, optional
+        ``yaps``, ``vue``, ``fathom``, ``glatos`` or ``otn``; default read from the file's first line.
+    crs : str, optional
+        The receivers' CRS (default WGS 84 for ``lat``, ``lon``; a projected one for ``x_m``, ``y_m``).
+    frame : str, optional
+        The metric frame (a projected CRS in metres; default the UTM zone of the array's centre).
+    sound_speed : float, optional
+        [m/s] in [1300, 1700], constant.
+    sound_speed_file : str or Path, optional
+        A series (``epo`` or ISO 8601 ``time_utc``, and ``sound_speed_m_s``) for the synchronisation and the tracks.
+    temperature, salinity : float, optional
+        The water's temperature [°C] and absolute salinity [g/kg], both or neither: the fallback sound speed
+        (TEOS-10) where the pings cannot determine it.
+    bin_hours : float
+        [h] in [0.05, 168]: the synchronisation's bins.
+    workers : int, optional
+        Worker processes in [1, 256] (default the CPU count).
+    scheduler : str, optional
+        A Dask scheduler (``tcp://HOST:PORT`` or ``local``): the tags run on its workers.
+    out : str or Path, optional
+        Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
+        ``tracks.geojson``, ``map.png``, ``sync/``, a folder per tag), all or nothing.
+    force : bool
+        Replace an earlier study in ``out``.
+    progress : bool, str or callable
+        ``True``: a bar on standard error as the tags end; a callable ``(done, total)``.
+
+    Returns
+    -------
+    StudyResult
+
+    Raises
+    ------
+    ModelError, ConfigError
+        A file refused by its reader (one line naming the file, its line and column and the allowed values), no
+        detection inside a deployment, bad options. A tag that cannot be tracked is a row of ``tags.csv`` saying why.
+    """
+    detections = path_argument(detections, "detections", optional=False)
+    receivers = path_argument(receivers, "receivers", optional=False)
+    tags = path_argument(tags, "tags")
+    sync = path_argument(sync, "sync")
+    check_progress(progress)
+    medium = _medium(sound_speed, sound_speed_file, temperature, salinity,
+                     ("sound_speed", "sound_speed_file", "temperature", "salinity"))
+    options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
+                       {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers")})
+    target = prepare_out(out, force, "study.json", "study")
+    outcome = _run(detections, receivers, tags, sync, options, target, progress)
+    return _result(outcome, target)
+
+
+def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None, options: dict[str, Any],
+         target: Path | None, progress: ProgressSpec, lines: bool = False):
+    """The study run into ``target`` (all or nothing; a temporary folder where None), its progress reported."""
+    from sblsim.orchestrator.io.output import staged_directory
+    from sblsim.orchestrator.telemetry.outputs import write_study
+    from sblsim.orchestrator.telemetry.study import run_study
+
+    bar: list[Any] = []
+
+    def started(folders: list[str], summary: dict[str, Any]) -> None:
+        if lines:
+            for line in opening_lines(detections, summary, len(folders), options):
+                print(line, flush=True)
+        bar.append(progress_of(progress, len(folders), "tracking", "tag")[0])
+
+    def ended(row: dict[str, Any]) -> None:
+        if bar:
+            bar[0].update(1)
+
+    try:
+        if target is None:
+            with tempfile.TemporaryDirectory(prefix="sblsim-study-") as tmp:
+                return run_study(detections, receivers, tags, workdir=Path(tmp), sync=sync, started=started,
+                                 ended=ended, **options)
+        with staged_directory(target) as tmp:
+            outcome = run_study(detections, receivers, tags, workdir=tmp, sync=sync, started=started, ended=ended,
+                                **options)
+            if bar:
+                bar[0].close()
+            write_study(outcome, tmp)
+        return outcome
+    finally:
+        if bar:
+            bar[0].close()
+
+
+def _result(outcome, target: Path | None) -> StudyResult:
+    return StudyResult(outcome.tracks, outcome.tags, outcome.deployments.written(), outcome.summary,
+                       {outcome.matrices[f].summary["tag"]: o for f, o in outcome.outcomes.items()}, target, outcome)
+
+
+def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict[str, Any]) -> list[str]:
+    """The console's lines before the tracking: the detections, the frame, the clocks, the tags."""
+    d, r, c = s["detections"], s["receivers"], s["clocks"]
+    why = d["reasons"]
+    frame = s["frame"]
+    where = (f"frame {frame['name']} ({frame['crs']}, {frame['chosen']}; scale factor "
+             f"{frame.get('scale_factor', float('nan')):.5f})") if frame else \
+        "a local frame without a CRS (no lat/lon out)"
+    out = [f"study of {detections} ({d['format']}): {d['rows']} detections, {d['used']} used at {r['deployments']} "
+           f"deployments of {r['receivers']} receivers, {d['set_aside']} set aside ({why['outside_deployment']} "
+           f"outside a deployment, {why['receiver_not_in_table']} at serials not in the receivers file, "
+           f"{why['sync_tag_outside_deployment']} of sync tags out of the water); {d['first_utc']} to {d['last_utc']}",
+           f"  {where}"]
+    if c["source"] == "synchronised here":
+        out.append(f"  clocks synchronised here against {c['reference_receiver']}: {c['receivers']} receivers, median "
+                   f"|residual| {c['median_abs_residual_m']:.3g} m" + (f"; not synchronised: "
+                                                                      f"{', '.join(c['not_synchronised'])}"
+                                                                      if c["not_synchronised"] else ""))
+    elif c["source"] == "given":
+        out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
+    else:
+        out.append("  clocks taken as logged (no sync tag in the receivers file)")
+    where = "on " + options["scheduler"] if options["scheduler"] else \
+        f"in {min(options['workers'] or os.cpu_count() or 1, max(count, 1))} worker processes"
+    out.append(f"  tracking {count} tags {where}")
+    return out
+
+
+NAME = "track"
+HELP = "track every tag of a telemetry study: deployments, detection exports and a tag sheet in, tracks in lat/lon out"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """``sblsim track``'s arguments."""
+    p.add_argument("detections", type=Path, help="the receivers' detections: a YAPS table, a VUE export, a Fathom "
+                   "(VDAT) CSV, a GLATOS or an OTN detection extract")
+    add_receivers(p)
+    p.add_argument("--tags", type=Path, default=None, metavar="SHEET",
+                   help="the tag sheet: transmitter, ping_type (sbi/rbi/pbi), min_delay, max_delay [s], role "
+                        "(animal/sync/reference), sensor_type, sensor_slope, sensor_intercept (default: every detected "
+                        "tag that is not a sync tag, its ping type inferred)")
+    p.add_argument("--tag", default=None, metavar="IDS",
+                   help="only these transmitters (full IDs or ids, separated by commas)")
+    p.add_argument("--sync", type=Path, default=None, metavar="DIR",
+                   help="a synchronisation's folder (sblsim sync --out DIR); default: synchronised here from the "
+                        "receivers' sync tags")
+    p.add_argument("--format", choices=FORMATS, default=None,
+                   help="the detections' format (default: read from the file's first line)")
+    speed = p.add_mutually_exclusive_group()
+    speed.add_argument("--sound-speed", type=float, default=None, metavar="M_S",
+                       help="a constant sound speed [m/s] (default: calibrated from each tag's pings)")
+    speed.add_argument("--sound-speed-file", type=Path, default=None, metavar="CSV",
+                       help="a sound-speed series (epo or time_utc, sound_speed_m_s)")
+    p.add_argument("--temperature", type=float, default=None, metavar="C",
+                   help="the water's temperature [°C] for the fallback sound speed (TEOS-10; with --salinity)")
+    p.add_argument("--salinity", type=float, default=None, metavar="G_KG",
+                   help="the water's absolute salinity [g/kg] for the fallback (0 fresh water, about 35 the open sea)")
+    p.add_argument("--bin-hours", type=float, default=1.0, metavar="H",
+                   help="the synchronisation's bins [h] in [0.05, 168] (default 1)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes in [1, 256] (default: the CPU count)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="a Dask scheduler (tcp://HOST:PORT, or local) whose workers track the tags")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default results/study_DETECTIONS)")
+    p.add_argument("--force", action="store_true", help="replace an earlier study in --out")
+
+
+def main(args: argparse.Namespace) -> int:
+    """``sblsim track`` from its parsed arguments: its lines printed, its exit status returned."""
+    medium = _medium(args.sound_speed, args.sound_speed_file, args.temperature, args.salinity,
+                     ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity"))
+    options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
+                       medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
+                                                                       "workers")})
+    out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
+                        "study.json", "study")
+    outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
+    table = outcome.tags
+    for row in table.itertuples(index=False):
+        if row.status == "tracked":
+            print(f"  {row.tag}: {row.pings} pings, {row.positioned} positioned, {row.flagged} flagged, median σ "
+                  f"{row.median_sigma_m:.2g} m, {row.ping_type} ({row.ping_type_stated}), sound speed "
+                  f"{row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}), {row.first_utc} to {row.last_utc}")
+        else:
+            print(f"sblsim: warning: tag {row.transmitter} not tracked: {row.reason}", file=sys.stderr)
+    for note in outcome.summary["notes"]:
+        print(f"note: {note}", file=sys.stderr)
+    tracked = table[table["status"] == "tracked"]
+    print(f"  {len(tracked)} of {len(table)} tags tracked, {int(tracked['flagged'].sum())} of "
+          f"{int(tracked['positioned'].sum())} rows flagged, in {outcome.summary['wall_time_s']:.1f} s; written to "
+          f"{out}/ (tracks.csv, tags.csv, receivers.csv, study.json, "
+          f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, "
+          f"{'sync/, ' if outcome.sync is not None else ''}a folder per tag)")
+    return 0
+
+
+__all__ = ["StudyResult", "track"]

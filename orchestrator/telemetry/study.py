@@ -1,0 +1,337 @@
+"""A telemetry study in one call (``sblsim track``, :func:`sblsim.track`): the receivers' deployments, their own
+detection exports and a tag sheet in; every tag tracked with its own ping type, in parallel; the tracks out in
+latitude, longitude and UTC.
+
+1. The deployments are read and projected (:mod:`.deployments`), the detections read in any export
+   (:func:`~sblsim.orchestrator.sync.detections.read_detections`) and each put at its deployment, those outside one
+   set aside and counted (:func:`~.deployments.assign`); the tag sheet is read (:mod:`.tag_sheet`).
+2. The clocks: a synchronisation's folder given (``sync``: its ``offsets.csv``, its refined positions where it has
+   them); else synchronised here, once, from the deployments' sync tags
+   (:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag, taken as logged
+   (the receivers' times synchronised already: said).
+3. The tags: those named (``tags``), else the sheet's animal and reference tags, else every detected tag that is not
+   a sync tag. Each is found among the detections by its full ID or id
+   (:func:`~sblsim.orchestrator.sync.transmitters.match`); its depth per detection from its sensor values and the
+   sheet's slope and intercept; its times-of-arrival matrix built with the ping type the sheet states
+   (:func:`~sblsim.orchestrator.sync.toa.build_toa`) and written into the tag's folder; then every matrix tracked
+   (:func:`~sblsim.orchestrator.tracks.track.track`, the robust smoother's rows the track, a reference tag as
+   stationary) in worker processes or on a Dask scheduler (:func:`~sblsim.orchestrator.tracks.many.run_tracks`).
+   A tag that cannot be tracked is a row saying why; the others finish.
+4. The tracks together (``tracks.csv``: ``tag``, ``time_utc``, ``epoch_s``, ``lat``, ``lon``, ``x``, ``y``,
+   ``sigma_x``, ``sigma_y``, ``quality``, ...), a row per tag (``tags.csv``), the deployments (``receivers.csv``)
+   and the summary (``study.json``): :mod:`.outputs`.
+"""
+
+from __future__ import annotations
+
+import time as clock
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
+from sblsim.orchestrator.sync.transmitters import match
+from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
+from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
+
+#: The columns of ``tags.csv``.
+TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
+               "pings", "positioned", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
+               "sound_speed_m_s", "sound_speed_source", "first_utc", "last_utc", "folder", "wall_time_s")
+#: The columns of ``tracks.csv`` (``z`` and ``sigma_z`` after ``y`` and ``sigma_y`` in 3-D).
+TRACK_COLUMNS = ("tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "receivers_heard",
+                 "quality")
+
+
+@dataclass
+class StudyOutcome:
+    """What :func:`run_study` computed.
+
+    Attributes
+    ----------
+    tracks : pandas.DataFrame
+        ``tracks.csv``: every tracked tag's rows (:data:`TRACK_COLUMNS`), by tag and time.
+    tags : pandas.DataFrame
+        ``tags.csv``: one row per tag asked for (:data:`TAG_COLUMNS`).
+    deployments : Deployments
+        The receivers as read (``receivers.csv``: :meth:`Deployments.written`).
+    summary : dict
+        ``study.json``.
+    outcomes : dict
+        Each tracked tag's :class:`~sblsim.orchestrator.tracks.track.TrackOutcome`, by its folder's name.
+    matrices : dict
+        Each tag's :class:`~sblsim.orchestrator.sync.toa.ToaOutcome`, by its folder's name.
+    sync : SyncOutcome or None
+        The synchronisation made here (None where given or taken as logged).
+    """
+
+    tracks: pd.DataFrame
+    tags: pd.DataFrame
+    deployments: Deployments
+    summary: dict[str, Any]
+    outcomes: dict[str, Any] = field(default_factory=dict)
+    matrices: dict[str, Any] = field(default_factory=dict)
+    sync: Any = None
+
+
+def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
+            series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
+    """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
+    synchronisation made here (or None)."""
+    from sblsim.orchestrator.sync.run import synchronise
+    from sblsim.orchestrator.sync.toa import logged_clocks, offsets_clocks, read_clocks, read_positions
+
+    table = assigned.hydrophones
+    if sync_dir is not None:
+        clocks = read_clocks(sync_dir)
+        refined = read_positions(sync_dir)
+        if refined is not None:
+            table = table.copy()
+            moved = table["receiver"].isin(refined).to_numpy()
+            table.loc[moved, "x"] = [refined[n][0] for n in table.loc[moved, "receiver"]]
+            table.loc[moved, "y"] = [refined[n][1] for n in table.loc[moved, "receiver"]]
+        missing = sorted(set(table["receiver"]) - set(clocks.receivers))
+        return clocks, table, {"source": "given", "folder": str(sync_dir), "receivers": len(clocks.receivers),
+                               "not_synchronised": missing,
+                               "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
+    if (table["sync_tag"] != "").any():
+        outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours)
+        s = outcome.summary
+        return offsets_clocks(outcome.offsets), table, {
+            "source": "synchronised here", "reference_receiver": s["reference_receiver"],
+            "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
+            "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
+            "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
+    times = assigned.detections.frame["time"].to_numpy(float)
+    notes.append("no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
+                 "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
+    return logged_clocks(table["receiver"].tolist(), float(np.floor(times.min())), float(np.ceil(times.max()))), \
+        table, {"source": "as logged (no sync tag)", "receivers": int(len(table)), "not_synchronised": []}, None
+
+
+def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Detections,
+            sync_tags: set[str]) -> list[tuple[str, TagSpec]]:
+    """The tags to track (module docstring, step 3): each as named, with its spec."""
+    if names:
+        return [(n, spec_for(sheet, n)) for n in names]
+    if sheet is not None:
+        return [(t.transmitter, t) for t in sheet.of_role("animal", "reference")]
+    frame = detections.frame
+    counts = frame["tag"].value_counts()
+    labelled = set(frame.loc[frame["species"].str.lower() == "sync", "tag"]) if "species" in frame else set()
+    base = {t.rsplit(".", 1)[0] for t in sync_tags}  # a sync tag named per deployment (SYNC.k)
+    return [(t, TagSpec(t)) for t in counts.index if t not in sync_tags and t not in base and t not in labelled]
+
+
+def _tag_detections(mine: pd.DataFrame, spec: TagSpec) -> pd.DataFrame:
+    """A tag's detections with its depth sensor's values as depths [m] (unit ``m``) where the sheet says how."""
+    if spec.sensor != "depth":
+        return mine
+    depth = spec.depths(mine["sensor_value"].to_numpy(float), mine["sensor_unit"].to_numpy(dtype=str))
+    return mine.assign(sensor_value=depth, sensor_unit=np.where(np.isfinite(depth), "m", ""))
+
+
+def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, workdir: Path,
+              sync: Path | None = None, format: str | None = None, crs: str | None = None, frame: str | None = None,
+              chosen: Sequence[str] | None = None, sound_speed: float | None = None,
+              sound_speed_file: Path | None = None, temperature: float | None = None, salinity: float | None = None,
+              bin_hours: float = 1.0, workers: int | None = None, scheduler: str | None = None,
+              started: Callable[[list[str], dict[str, Any]], None] | None = None,
+              ended: Callable[[dict[str, Any]], None] | None = None) -> StudyOutcome:
+    """Every tag of a study tracked (the module docstring).
+
+    Parameters
+    ----------
+    detections, receivers : Path
+        The detections (any export) and the receivers or deployments.
+    tags : Path, optional
+        The tag sheet.
+    workdir : Path
+        The folder each tag's folder is written into (its matrix, then its track).
+    sync : Path, optional
+        A synchronisation's folder (``sblsim sync --out DIR``).
+    format, crs, frame
+        The detections' format (None: read from the file) and the receivers' CRS and metric frame.
+    chosen : sequence of str, optional
+        The tags to track (full IDs or ids).
+    sound_speed, sound_speed_file, temperature, salinity
+        The sound speed: constant [m/s], a series (``epo`` or ISO times, ``sound_speed_m_s``), or calibrated from
+        the pings with the fallback of a temperature [°C] and salinity [g/kg].
+    bin_hours : float
+        [h] the synchronisation's bins.
+    workers, scheduler
+        Worker processes, or a Dask scheduler.
+    started : callable, optional
+        Called with the tags' folders and the summary so far, before the tracking.
+    ended : callable, optional
+        Called with each tracked tag's ``tags.csv`` row as its tracking ends.
+
+    Returns
+    -------
+    StudyOutcome
+
+    Raises
+    ------
+    ModelError
+        A file refused by its reader, no detection inside a deployment, a synchronisation that cannot be made
+        (one line). A tag that cannot be tracked is a row of ``tags.csv``.
+    """
+    from sblsim.orchestrator.sync.toa import build_toa
+    from sblsim.orchestrator.tracks.many import run_tracks
+
+    begun = clock.perf_counter()
+    notes: list[str] = []
+    deployments = read_deployments(receivers, crs, frame)
+    data = read_detections(detections, format)
+    sheet = read_tag_sheet(tags) if tags is not None else None
+    series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
+    assigned = assign(data, deployments)
+    clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours, notes)
+    frame_crs = None if deployments.frame is None else deployments.frame.crs
+    detected = assigned.detections.frame["tag"].unique()
+    sync_tags = set(table["sync_tag"]) - {""}
+    if sheet is not None:
+        sync_tags |= {k for t in sheet.of_role("sync") if (k := match(t.transmitter, detected)) is not None}
+    asked = _chosen(chosen, sheet, assigned.detections, sync_tags)
+    if not asked:
+        raise ModelError("tags: no tag to track (the tag sheet lists no animal or reference tag, and every detected "
+                         "tag is a sync tag); allowed: a sheet with animal or reference tags, or --tag")
+    groups = assigned.detections.frame.groupby("tag", sort=False).groups
+    rows: dict[str, dict[str, Any]] = {}
+    jobs, matrices, folders = [], {}, {}
+    for name, spec in asked:
+        row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
+               "ping_type_stated": spec.described(), "status": "refused", "reason": "", "detections": 0}
+        try:
+            key = match(name, detected)
+            if key is None:
+                raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
+            folder = folder_name(key, "tag")
+            if folder in folders.values():
+                raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
+            mine = _tag_detections(assigned.detections.frame.loc[groups[key]], spec)
+            row |= {"tag": key, "detections": int(len(mine))}
+            kind = {"type": spec.ping_type, "burst_interval_s": None if spec.burst_interval is None else
+                    list(spec.burst_interval), "interval_s": spec.interval,
+                    "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
+            matrix = build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
+                               spec.shortest_interval(), kind)
+            matrix.frame = deployments.frame
+            _write_matrix(matrix, workdir / folder, notes, key)
+            matrices[folder] = matrix
+            folders[name] = folder
+            options = {"smooth": True, "sound_speed": sound_speed,
+                       "sound_speed_path": None if sound_speed_file is None else Path(sound_speed_file).absolute(),
+                       "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
+                       "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
+                       "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin}
+            jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
+            row["folder"] = folder
+        except ModelError as exc:
+            row["reason"] = str(exc)
+        rows[name] = row
+    summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
+    if started is not None:
+        started([j[0] for j in jobs], summary)
+    by_folder = {folder: name for name, folder in folders.items()}
+    tick = clock.perf_counter()
+
+    def done(folder: str, result) -> None:
+        name = by_folder[folder]
+        rows[name] |= _tracked(result, clock.perf_counter() - tick)
+        if ended is not None:
+            ended(rows[name])
+
+    results = run_tracks(jobs, workers, scheduler, done) if jobs else {}
+    outcomes = {f: r for f, r in results.items() if not isinstance(r, str)}
+    table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
+    tracks = combined_tracks(outcomes, {f: by_folder[f] for f in outcomes}, matrices)
+    summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
+                       "refused": int((table_tags["status"] == "refused").sum())}
+    summary["wall_time_s"] = clock.perf_counter() - begun
+    return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced)
+
+
+def _write_matrix(matrix, folder: Path, notes: list[str], key: str) -> None:
+    """A tag's ``toa.txt`` (with its depth per ping where the sensor gives one and the receivers are in 3-D),
+    ``receivers.csv``, ``pings.csv`` and ``toa.json``."""
+    import json
+
+    from sblsim.orchestrator.sync.toa import write_matrix
+
+    folder.mkdir(parents=True, exist_ok=True)
+    depth = matrix.pings["depth_m"].to_numpy(float) if "depth_m" in matrix.pings else None
+    if depth is not None and matrix.positions.shape[1] != 3:
+        notes.append(f"tag {key}: its depth readings are not used by the tracker (the receivers have no depths: "
+                     "2-D); they are in its pings.csv")
+        depth = None
+    write_matrix(matrix, folder, depth)
+    matrix.pings.to_csv(folder / "pings.csv", index=False, float_format="%.9f")
+    (folder / "toa.json").write_text(json.dumps(matrix.summary, indent=2, allow_nan=False) + "\n")
+
+
+def _tracked(result, elapsed: float) -> dict[str, Any]:
+    """A tag's ``tags.csv`` fields from its tracking's outcome (or the one line of its refusal)."""
+    if isinstance(result, str):
+        return {"status": "refused", "reason": result, "wall_time_s": elapsed}
+    s = result.summary
+    main = s["track"]
+    track = result.track
+    positioned, flagged = int(len(track)), int(s["flagged"].get(main, 0))
+    sigma = np.hypot(track["sigma_x"].to_numpy(float), track["sigma_y"].to_numpy(float))
+    ok = (track["quality"] != "flagged").to_numpy() & np.isfinite(sigma)
+    times = track["epoch_s"].to_numpy(float) if "epoch_s" in track else np.array([])
+    return {"status": "tracked", "reason": "", "pings": s["pings"], "positioned": positioned, "flagged": flagged,
+            "share_flagged": flagged / positioned if positioned else 0.0,
+            "median_sigma_m": float(np.median(sigma[ok])) if ok.any() else float("nan"),
+            "ping_type": s["ping_type"]["type"], "track": main,
+            "sound_speed_m_s": s["sound_speed"]["sound_speed_m_s"], "sound_speed_source": s["sound_speed"]["source"],
+            "first_utc": iso_utc(times[:1])[0] if len(times) else "",
+            "last_utc": iso_utc(times[-1:])[0] if len(times) else "", "wall_time_s": s["wall_time_s"]}
+
+
+def combined_tracks(outcomes: dict[str, Any], names: dict[str, str], matrices: dict[str, Any]) -> pd.DataFrame:
+    """``tracks.csv``: each tracked tag's track rows (its folder's ``track.csv``) with its tag, in
+    :data:`TRACK_COLUMNS`' order (``z``, ``sigma_z`` where the geometry is 3-D; ``lat``, ``lon`` NaN without a
+    frame), by tag and time."""
+    parts = []
+    for folder, outcome in outcomes.items():
+        t = outcome.track.copy()
+        t.insert(0, "tag", matrices[folder].summary["tag"])
+        for key in ("lat", "lon", "epoch_s", "time_utc"):
+            if key not in t:
+                t[key] = np.nan if key != "time_utc" else ""
+        parts.append(t)
+    if not parts:
+        return pd.DataFrame(columns=list(TRACK_COLUMNS))
+    tracks = pd.concat(parts, ignore_index=True)
+    columns = list(TRACK_COLUMNS)
+    if "z" in tracks:
+        columns[columns.index("y") + 1:columns.index("y") + 1] = ["z"]
+        columns[columns.index("sigma_y") + 1:columns.index("sigma_y") + 1] = ["sigma_z"]
+    return tracks[columns].sort_values(["tag", "epoch_s"], kind="stable").reset_index(drop=True)
+
+
+def _summary(data: Detections, deployments: Deployments, assigned, clocks: dict[str, Any], sheet: TagSheet | None,
+             notes: list[str]) -> dict[str, Any]:
+    """``study.json`` before the tracking (the files, the frame, the detections used and set aside, the clocks)."""
+    times = assigned.detections.frame["time"].to_numpy(float)
+    aside = assigned.set_aside
+    return {"detections": {"file": data.source, "format": data.format, "rows": int(len(data.frame)),
+                           "used": int(len(assigned.detections.frame)),
+                           "set_aside": int(len(data.frame) - len(assigned.detections.frame)), "reasons": aside,
+                           "ignored_columns": data.ignored_columns,
+                           "first_utc": iso_utc([times.min()])[0], "last_utc": iso_utc([times.max()])[0]},
+            "receivers": deployments.summary(), "frame": deployments.summary()["frame"], "clocks": clocks,
+            "tag_sheet": None if sheet is None else {"file": sheet.source, "transmitters": len(sheet.tags)},
+            "times": "UTC: each row's time is its estimated emission on the reference receiver's clock, which "
+                     "the synchronisation takes as UTC", "notes": notes}
+
+
+__all__ = ["StudyOutcome", "TAG_COLUMNS", "TRACK_COLUMNS", "combined_tracks", "run_study"]
