@@ -33,7 +33,9 @@ from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, pr
 from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external_path
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
+from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.io.times import parse_instant
 from sblsim.orchestrator.tracks.depth import PRIOR_SOURCE
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
@@ -433,9 +435,6 @@ def place_arguments(crs: Any, frame: Any, time_origin: Any, names: tuple[str, st
     ConfigError, ModelError
         A CRS pyproj does not know, a frame that is not metric, a time that is neither ISO 8601 nor epoch seconds.
     """
-    from sblsim.orchestrator.io.frames import check_crs, check_metric
-    from sblsim.orchestrator.io.times import parse_instant
-
     crs, frame = text_argument(crs, names[0]), text_argument(frame, names[1])
     return {"crs": None if crs is None else check_crs(crs, names[0]),
             "frame": None if frame is None else check_metric(frame, names[1]),

@@ -22,8 +22,10 @@ from sblsim.orchestrator.commands.common import (
 )
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.io.frames import check_crs, check_metric
+from sblsim.orchestrator.io.output import folder_name, staged_directory
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress, progress_of
+from sblsim.orchestrator.tracks.outputs import figure
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -75,7 +77,6 @@ class StudyResult:
     def plot(self) -> dict[str, Figure]:
         """The figures: ``map`` (every track over the receivers) and each tag's own (``track_TAG``)."""
         from sblsim.orchestrator.telemetry.outputs import study_map
-        from sblsim.orchestrator.tracks.outputs import figure
 
         figures = {"map": study_map(self._outcome)}
         for folder, outcome in self._outcome.outcomes.items():
@@ -119,8 +120,6 @@ def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, worker
              medium: tuple, names: dict[str, str]) -> dict[str, Any]:
     """Every option of a study checked (``names``: how each is spelled where it was given), as
     :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
-    from sblsim.orchestrator.io.frames import check_crs, check_metric
-
     if format is not None and format not in FORMATS:
         raise ConfigError(f"{names['format']}: {str(format)[:40]!r}; allowed: {', '.join(FORMATS)} (or none: read "
                           "from the file's first line)")
@@ -221,7 +220,6 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
 def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None, options: dict[str, Any],
          target: Path | None, progress: ProgressSpec, lines: bool = False):
     """The study run into ``target`` (all or nothing; a temporary folder where None), its progress reported."""
-    from sblsim.orchestrator.io.output import staged_directory
     from sblsim.orchestrator.telemetry.outputs import write_study
     from sblsim.orchestrator.telemetry.study import run_study
 

@@ -15,12 +15,14 @@ parser) and the first bad one is refused in one line naming the file, its line a
 from __future__ import annotations
 
 import re
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
-import pandas as pd
 
 from sblsim.models.declarations import ModelError
+
+if TYPE_CHECKING:  # pandas is imported when a function runs (the commands' modules load without it)
+    import pandas as pd
 
 #: An ISO 8601 date and time: a date, optionally a time (``T`` or a space, seconds optional, a fraction of up to
 #: nine digits after ``.`` or ``,``) and optionally a zone (``Z``, ``UTC``, ``±hh``, ``±hh:mm``, ``±hhmm``).
@@ -76,6 +78,8 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
         One line naming the file, the line and the column: a cell neither form, an ISO time that does not exist
         (``2023-02-30``), a column mixing the forms, a time before 1970 or after 2286.
     """
+    import pandas as pd
+
     text = pd.Series(cells, dtype=object).astype(str).str.strip().reset_index(drop=True)
     empty = (text == "").to_numpy(bool)
     if empty.any() and not missing:
@@ -114,6 +118,8 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
 def iso_utc(seconds: np.ndarray | Sequence[float]) -> list[str]:
     """Seconds since 1970-01-01 UTC as ISO 8601 UTC texts to the microsecond (``2023-08-31T21:15:42.123456Z``),
     ``""`` where NaN."""
+    import pandas as pd
+
     values = np.asarray(seconds, float)
     out = [""] * len(values)
     ok = np.isfinite(values)

@@ -45,7 +45,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.sync import exports
 from sblsim.orchestrator.sync.cells import column, numbers, pattern, read_text, refuse, shown_header, text_table
-from sblsim.orchestrator.sync.transmitters import TRANSMITTER, split
+from sblsim.orchestrator.sync.transmitters import TRANSMITTER, match, split
 
 #: The largest file read [bytes] and the most rows (detections; receivers; points of a sound-speed series).
 MAX_DETECTION_BYTES = 256 * 2**20
@@ -95,8 +95,6 @@ class Detections:
     def tag(self, given: str) -> str | None:
         """The detected tag a user's name stands for (a full ID, or an id where it is unique:
         :func:`~sblsim.orchestrator.sync.transmitters.match`), None where none."""
-        from sblsim.orchestrator.sync.transmitters import match
-
         return match(given, self.frame["tag"].unique())
 
 

@@ -28,6 +28,7 @@ from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks,
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.orchestrator.sync.detections import Detections
 from sblsim.orchestrator.sync.transmitters import match
+from sblsim.orchestrator.telemetry.deployments import assign
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
 MIN_BIN_ARRIVALS = 5
@@ -459,8 +460,6 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     ModelError
         As :func:`synchronise`, or no detection inside a deployment.
     """
-    from sblsim.orchestrator.telemetry.deployments import assign
-
     assigned = assign(detections, deployments)
     outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
                           **options)

@@ -46,6 +46,7 @@ from sblsim.orchestrator.sync.detections import (
     _table,
     read_detections,
 )
+from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
 from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN, read_burst_sequence
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
@@ -463,8 +464,6 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     ModelError, ConfigError
         One line: a bad tag id or format, a file refused by its reader.
     """
-    from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
-
     if not IDENTIFIER.fullmatch(tag):
         raise ConfigError(f"tag: {tag[:40]!r} is not allowed; allowed: a tag id of 1 to 40 letters, digits, '.', '_' "
                           "or '-'")

@@ -17,7 +17,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry.study import StudyOutcome
+from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
 #: The files a study writes beside its tags' folders.
 STUDY_FILES = ("study.json", "tracks.csv", "tags.csv", "receivers.csv", "tracks.geojson", "map.png")
@@ -70,8 +72,6 @@ def study_map(outcome: StudyOutcome):
     """Every tag's track (the rows not flagged) over the receivers in the frame, with a scale bar (matplotlib)."""
     import matplotlib.pyplot as plt
 
-    from sblsim.orchestrator.tracks.outputs import scale_bar
-
     fig, ax = plt.subplots(figsize=(10, 8))
     table = outcome.deployments.table
     ax.plot(table["x"], table["y"], "^", color="k", ms=7, label="receivers", zorder=3)
@@ -102,13 +102,9 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
     matrices): each tracked tag's track files, the synchronisation made, then the study's own files."""
     import matplotlib.pyplot as plt
 
-    from sblsim.orchestrator.tracks.outputs import write
-
     for name, tag in outcome.outcomes.items():
         write(tag, folder / name)
     if outcome.sync is not None:
-        from sblsim.orchestrator.sync.outputs import write as write_sync
-
         write_sync(outcome.sync, folder / "sync")
     outcome.tracks.to_csv(folder / "tracks.csv", index=False)
     outcome.tags.to_csv(folder / "tags.csv", index=False)

@@ -24,6 +24,7 @@ latitude, longitude and UTC.
 
 from __future__ import annotations
 
+import json
 import time as clock
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,9 +37,11 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
+from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
 from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
+from sblsim.orchestrator.tracks.many import run_tracks
 
 #: The columns of ``tags.csv``.
 TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
@@ -84,7 +87,6 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
             series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
     """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
     synchronisation made here (or None)."""
-    from sblsim.orchestrator.sync.run import synchronise
     from sblsim.orchestrator.sync.toa import logged_clocks, offsets_clocks, read_clocks, read_positions
 
     table = assigned.hydrophones
@@ -183,7 +185,6 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         (one line). A tag that cannot be tracked is a row of ``tags.csv``.
     """
     from sblsim.orchestrator.sync.toa import build_toa
-    from sblsim.orchestrator.tracks.many import run_tracks
 
     begun = clock.perf_counter()
     notes: list[str] = []
@@ -261,8 +262,6 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
 def _write_matrix(matrix, folder: Path, notes: list[str], key: str) -> None:
     """A tag's ``toa.txt`` (with its depth per ping where the sensor gives one and the receivers are in 3-D),
     ``receivers.csv``, ``pings.csv`` and ``toa.json``."""
-    import json
-
     from sblsim.orchestrator.sync.toa import write_matrix
 
     folder.mkdir(parents=True, exist_ok=True)

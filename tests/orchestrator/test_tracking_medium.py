@@ -217,10 +217,11 @@ def test_bad_medium_options_are_refused_in_one_line(tmp_path, capsys, monkeypatc
 
 
 def test_a_series_off_the_records_time_base_is_refused_and_a_short_one_warned(tmp_path, capsys):
-    """A series in seconds since 1970 (YAPS's and ``sblsim sync``'s ``epo, ss`` columns: read) against a record on
-    its own time base overlaps no ping: refused in one line naming both spans, nothing written; a series that ends
-    half way through the record: the pings after it counted on the console (one warning line) and in
-    summary.json, their count the simulated pings emitted after the series' last time."""
+    """A series in seconds since 1970 (YAPS's and ``sblsim sync``'s ``epo, ss`` columns) against a record on its own
+    time base: refused in one line without the record's stated origin (``--time-origin``), and with an origin a day
+    off it overlaps no ping (refused, naming both spans); nothing written either way. A series that ends half way
+    through the record: the pings after it counted on the console (one warning line) and in summary.json, their
+    count the simulated pings emitted after the series' last time."""
     from sblsim.orchestrator.cli import main
 
     files, speed_file, _ = _warming(tmp_path, 1450.0, 1460.0)
@@ -230,7 +231,11 @@ def test_a_series_off_the_records_time_base_is_refused_and_a_short_one_warned(tm
     epoch.write_text("epo,ss\n" + "".join(f"{t + 1.6e9:.3f},{c:.3f}\n" for t, c in series))
     assert main(base + ["--sound-speed-file", str(epoch), "--out", str(tmp_path / "e")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "do not overlap the pings' first arrivals" in err[0] and "1600000" in err[0], err
+    assert len(err) == 1 and "its times are absolute" in err[0] and "--time-origin" in err[0], err
+    assert main(base + ["--sound-speed-file", str(epoch), "--time-origin", "1599913600", "--out",
+                        str(tmp_path / "e")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "do not overlap the pings' first arrivals" in err[0] and "[86390," in err[0], err
     assert not (tmp_path / "e").exists()
     half = tmp_path / "half.csv"
     kept = series[: len(series) // 2]
