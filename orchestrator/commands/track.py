@@ -338,8 +338,9 @@ def main(args: argparse.Namespace) -> int:
     for row in table.itertuples(index=False):
         if row.status == "tracked":
             print(f"  {row.tag}: {row.pings} pings, {row.positioned} positioned, {row.flagged} flagged, median σ "
-                  f"{row.median_sigma_m:.2g} m, {row.ping_type} ({row.ping_type_stated}), sound speed "
-                  f"{row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}), {row.first_utc} to {row.last_utc}")
+                  f"{row.median_sigma_m:.2g} m, ping type {row.ping_type} (the sheet: {row.ping_type_stated}), "
+                  f"sound speed {row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}), {row.first_utc} to "
+                  f"{row.last_utc}")
         else:
             print(f"sblsim: warning: tag {row.transmitter} not tracked: {row.reason}", file=sys.stderr)
     for note in outcome.summary["notes"]:

@@ -101,7 +101,8 @@ def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name:
     station) and the columns used."""
     index = {key: column(header, (key,)) for key in ("device time (utc)", "serial number", "full id", "model",
                                                      "raw data", "sensor value", "sensor unit", "station name")}
-    missing = [key for key in ("device time (utc)", "serial number", "full id") if index[key] is None]
+    shown = {"device time (utc)": "Device Time (UTC)", "serial number": "Serial Number", "full id": "Full ID"}
+    missing = [shown[key] for key in shown if index[key] is None]
     if missing:
         raise ModelError(f"{what}: {name!r}: Fathom's {header[0] or 'DET_DESC'} line needs the columns Device Time "
                          f"(UTC), Serial Number and Full ID; {', '.join(missing)} missing, got {shown_header(header)}")

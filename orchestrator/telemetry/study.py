@@ -15,8 +15,9 @@ latitude, longitude and UTC.
    sheet's slope and intercept; its times-of-arrival matrix built with the ping type the sheet states
    (:func:`~sblsim.orchestrator.sync.toa.build_toa`) and written into the tag's folder; then every matrix tracked
    (:func:`~sblsim.orchestrator.tracks.track.track`, the robust smoother's rows the track, a reference tag as
-   stationary) in worker processes or on a Dask scheduler (:func:`~sblsim.orchestrator.tracks.many.run_tracks`).
-   A tag that cannot be tracked is a row saying why; the others finish.
+   stationary; of the causal filters only the EKF the smoothers start from) in worker processes or on a Dask
+   scheduler (:func:`~sblsim.orchestrator.tracks.many.run_tracks`). A tag that cannot be tracked is a row saying
+   why; the others finish.
 4. The tracks together (``tracks.csv``: ``tag``, ``time_utc``, ``epoch_s``, ``lat``, ``lon``, ``x``, ``y``,
    ``sigma_x``, ``sigma_y``, ``quality``, ...), a row per tag (``tags.csv``), the deployments (``receivers.csv``)
    and the summary (``study.json``): :mod:`.outputs`.
@@ -231,7 +232,8 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                        "sound_speed_path": None if sound_speed_file is None else Path(sound_speed_file).absolute(),
                        "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                        "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
-                       "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin}
+                       "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
+                       "other_filters": False}
             jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
             row["folder"] = folder
         except ModelError as exc:

@@ -121,7 +121,7 @@ class TagSpec:
         if self.ping_type == "sbi":
             return "sbi" + (f" {self.interval:g} s" if self.interval is not None else "")
         if self.ping_type == "pbi":
-            return f"pbi ({self.burst_sequence.name})"
+            return f"pbi {self.burst_sequence.name}"
         return "inferred"
 
     def depths(self, values: np.ndarray, units: np.ndarray) -> np.ndarray:

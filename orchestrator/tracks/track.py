@@ -154,7 +154,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
           fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
           survey_sigma: float | None = None, crs: str | None = None, frame: str | None = None,
-          time_origin: float | None = None) -> TrackOutcome:
+          time_origin: float | None = None, other_filters: bool = True) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -167,7 +167,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     as :func:`~sblsim.orchestrator.tracks.toa.read_receivers` takes them (receivers with a CRS: every row gains
     ``lat``, ``lon`` [° WGS 84], a truth may be in latitude and longitude); ``time_origin`` [s since 1970 UTC] the
     UTC time of the TOA file's zero (every row gains ``epoch_s`` and ``time_utc``, a truth or a sound-speed series
-    may be in absolute times)."""
+    may be in absolute times); ``other_filters`` False leaves out the causal filters the track does not need (the
+    sequential EKF and the UKF, run beside for comparison: half the time of a track)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -234,7 +235,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         # the fixes restart a lost filter, and screen a ping's arrivals that fail the set's test
         record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
         filters = {name: kind(positions, gated).run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
-                   for name, kind in tt.CAUSAL_TRACKERS.items() if name != "ekf"}  # the EKF's record is the RTS's
+                   for name, kind in tt.CAUSAL_TRACKERS.items()
+                   if name != "ekf" and other_filters}  # the EKF's record is the RTS's
     depth_known = None if depth is None else np.isfinite(depth)  # a measurement of each fix and row where given
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known)
     fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
