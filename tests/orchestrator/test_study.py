@@ -1,0 +1,192 @@
+"""A telemetry study in one command (``sblsim track``, :func:`sblsim.track`) on a simulated study written as its
+people bring one (:mod:`sblsim.orchestrator.telemetry.simulate`: deployments in lat/lon with dates and a
+redeployment, a VUE export and a Fathom CSV of the same detections on drifting clocks, a tag sheet of every ping
+type): every tag tracked, its errors against the simulated truth within its own stated uncertainty; ``tracks.csv``
+the tags' own tracks together; the UTC times the inputs'; lat/lon pyproj's; the GeoJSON the tracks'; the same tracks
+from both exports; a tag never detected a row saying so; bad input refused in one line with nothing written. The
+boats study from its lat/lon deployments and tag sheet (slow)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from pyproj import Transformer
+
+import sblsim
+from sblsim.orchestrator.io.times import utc_seconds
+from sblsim.orchestrator.telemetry.simulate import simulate_study
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """A small simulated study (9 receivers, one redeployed; a tag of each ping type; 6 hours) written both ways,
+    and the study run on its VUE export."""
+    folder = tmp_path_factory.mktemp("study")
+    sim = simulate_study(n_receivers=9, n_tags=3, days=0.25, redeployed=1, seed=4)
+    files = sim.write(folder / "vue", "vue")
+    sim.write(folder / "fathom", "fathom")
+    result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
+                          out=folder / "out", workers=1)
+    return sim, files, result, folder
+
+
+def _truth_at(sim, result, tag: str, epoch: np.ndarray) -> np.ndarray:
+    """The simulated position of ``tag`` at the track's times (on the reference receiver's clock, which the
+    synchronisation takes as UTC): the truth's true times read on that clock, interpolated."""
+    reference = result.summary["clocks"]["reference_receiver"]
+    k = int(np.flatnonzero(result.receivers["receiver"].to_numpy() == reference)[0])
+    truth = sim.truth[tag]
+    on_reference = sim.clock_time(k, truth["tau"].to_numpy())
+    return np.c_[np.interp(epoch, on_reference, truth["x"]), np.interp(epoch, on_reference, truth["y"])]
+
+
+def test_every_tag_tracked_within_its_own_uncertainty(study):
+    sim, _, result, _ = study
+    tags = result.tags
+    assert (tags["status"] == "tracked").all() and len(tags) == 3
+    assert sorted(tags["ping_type"]) == ["pbi", "rbi", "sbi"]  # each the sheet's, given (not inferred)
+    for tag, rows in result.tracks.groupby("tag"):
+        truth = _truth_at(sim, result, tag, rows["epoch_s"].to_numpy())
+        error = np.hypot(rows["x"] - truth[:, 0], rows["y"] - truth[:, 1]).to_numpy()
+        drms = np.hypot(rows["sigma_x"], rows["sigma_y"]).to_numpy()
+        # against an independent truth: the RMS error within 1.5 times the RMS of the track's own DRMS, below 0.5 m
+        assert np.sqrt(np.mean(error**2)) < 1.5 * np.sqrt(np.mean(drms**2)), tag
+        assert np.sqrt(np.mean(error**2)) < 0.5 and (rows["quality"] == "flagged").mean() < 0.05, tag
+
+
+def test_the_detections_outside_a_deployment_are_set_aside_and_counted(study):
+    sim, _, result, _ = study
+    aside = result.summary["detections"]["reasons"]
+    # the redeployed receiver logs its own sync tag five times on deck; a clock a second behind the deployment's
+    # time may put a first detection before it
+    assert aside["outside_deployment"] >= 5 and aside["receiver_not_in_table"] == 0
+    moved = sim.deployments["ins_serial_no"][sim.deployments["ins_serial_no"].duplicated()].iloc[0]
+    assert aside["per_serial"][moved] >= 5
+    assert result.summary["receivers"]["redeployed"] == [moved]
+    assert sorted(result.receivers.loc[result.receivers["serial"] == moved, "receiver"]) == [f"{moved}.1",
+                                                                                           f"{moved}.2"]
+
+
+def test_tracks_csv_is_the_tags_own_tracks_with_utc_times_and_lat_lon(study):
+    sim, files, result, folder = study
+    out = folder / "out"
+    tracks = pd.read_csv(out / "tracks.csv", dtype={"tag": str, "time_utc": str})
+    assert {"tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "quality"} <= set(tracks)
+    own = []
+    for row in result.tags.itertuples():
+        t = pd.read_csv(out / row.folder / "track.csv", dtype={"time_utc": str})
+        own.append(t.assign(tag=row.tag))
+    own = pd.concat(own)[list(tracks.columns)].sort_values(["tag", "epoch_s"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(tracks, own)
+    # the UTC texts are the epoch seconds, to the microsecond
+    assert np.max(np.abs(utc_seconds(tracks["time_utc"], "t", list(range(len(tracks))), "time_utc")
+                         - tracks["epoch_s"])) < 1e-6
+    # latitude and longitude are pyproj's of x, y in the frame study.json states
+    crs = json.loads((out / "study.json").read_text())["frame"]["crs"]
+    lon, lat = Transformer.from_crs(crs, "EPSG:4326", always_xy=True).transform(tracks["x"], tracks["y"])
+    assert np.max(np.abs(lat - tracks["lat"])) < 1e-9 and np.max(np.abs(lon - tracks["lon"])) < 1e-9
+    # the GeoJSON's lines are the rows not flagged, longitude before latitude
+    shapes = json.loads((out / "tracks.geojson").read_text())
+    lines = {f["properties"]["tag"]: f["geometry"]["coordinates"] for f in shapes["features"]
+             if f["properties"]["kind"] == "track"}
+    points = [f for f in shapes["features"] if f["properties"]["kind"] == "receiver"]
+    assert len(points) == len(sim.deployments)
+    for tag, rows in tracks.groupby("tag"):
+        ok = rows[rows["quality"] != "flagged"]
+        assert np.allclose(lines[tag], np.c_[ok["lon"], ok["lat"]], rtol=0, atol=1e-8)
+
+
+def test_the_reference_receivers_arrivals_are_its_logged_utc_times(study):
+    """At the reference receiver (offset 0 by definition) a tag's times of arrival plus the matrix's origin are the
+    times the export logged, to the microsecond the export writes."""
+    sim, files, result, folder = study
+    reference = result.summary["clocks"]["reference_receiver"]
+    logged = pd.read_csv(files["detections"], dtype=str)
+    logged = logged[logged["Receiver"].str.endswith("-" + reference.split(".")[0])]
+    for row in result.tags.itertuples():
+        summary = json.loads((folder / "out" / row.folder / "toa.json").read_text())
+        toa = pd.read_csv(folder / "out" / row.folder / "toa.txt", sep=" ", na_values="NA")
+        if reference not in toa:
+            continue
+        heard = toa[reference].dropna().to_numpy() + summary["origin_epoch_s"]
+        mine = logged[logged["Transmitter"] == row.tag]["Date and Time (UTC)"]
+        times = utc_seconds(mine, "vue", list(range(len(mine))), "t")
+        assert len(heard) and np.max(np.min(np.abs(heard[:, None] - times[None]), axis=1)) < 2e-6
+
+
+def test_the_same_tracks_from_the_fathom_export(study, tmp_path):
+    _, files, result, folder = study
+    other = sblsim.track(folder / "fathom" / "detections.csv", receivers=files["deployments"], tags=files["tags"],
+                         workers=1)
+    assert other.summary["detections"]["format"] == "fathom"
+    pd.testing.assert_frame_equal(other.tracks, result.tracks, check_exact=False, rtol=0, atol=1e-6)
+
+
+def test_a_tag_never_detected_is_a_row_saying_so(study):
+    _, files, _, _ = study
+    result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
+                          tag="1000,A69-1602-9999", workers=1)
+    rows = result.tags.set_index("transmitter")
+    assert rows.loc["1000", "status"] == "tracked" and rows.loc["1000", "tag"] == "A69-1602-1000"
+    assert rows.loc["A69-1602-9999", "status"] == "refused"
+    assert "never detected" in rows.loc["A69-1602-9999", "reason"]
+
+
+@pytest.mark.parametrize("extra, edit, found", [
+    ([], lambda d: d.assign(deploy_lat=95.0), "column deploy_lat: '95"),
+    (["--format", "fathom"], None, "starts with the line VEMCO DATA LOG"),
+    (["--crs", "EPSG:999999"], None, "not a CRS pyproj knows"),
+    (["--tag", "a,a"], None, "distinct"),
+    (["--sound-speed", "1480", "--temperature", "10", "--salinity", "0"], None, "--temperature: only where"),
+])
+def test_bad_input_is_refused_in_one_line_and_nothing_written(study, tmp_path, capsys, extra, edit, found):
+    from sblsim.orchestrator.cli import main
+
+    _, files, _, _ = study
+    receivers = files["deployments"]
+    if edit is not None:
+        receivers = tmp_path / "deployments.csv"
+        edit(pd.read_csv(files["deployments"], dtype=str)).to_csv(receivers, index=False)
+    code = main(["track", str(files["detections"]), "--receivers", str(receivers), "--tags", str(files["tags"]),
+                 "--out", str(tmp_path / "o"), *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and found in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_command_line_says_what_it_did(study, tmp_path, capsys):
+    from sblsim.orchestrator.cli import main
+
+    _, files, _, _ = study
+    assert main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",
+                 str(files["tags"]), "--out", str(tmp_path / "o"), "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "study of" in out and "set aside" in out and "UTM zone" in out and "3 of 3 tags tracked" in out
+    for name in ("study.json", "tracks.csv", "tags.csv", "receivers.csv", "tracks.geojson", "map.png", "sync"):
+        assert (tmp_path / "o" / name).exists(), name
+
+
+@pytest.mark.slow
+def test_the_boats_study_from_its_lat_lon_deployments_and_tag_sheet(tmp_path):
+    """The boats data's deployments.csv is pyproj's conversion of hydrophones.csv (ETRS89 / UTM 33N) to the
+    millimetre, and the study tracks both animals in one call, synchronised as ``sblsim sync`` synchronises."""
+    data = ROOT / "data" / "boats-norway"
+    table = pd.read_csv(data / "hydrophones.csv", dtype=str)
+    sheet = pd.read_csv(data / "deployments.csv", dtype=str)
+    assert sheet["ins_serial_no"].tolist() == table["serial"].tolist()
+    x, y = Transformer.from_crs("EPSG:4326", "EPSG:25833", always_xy=True).transform(
+        sheet["deploy_long"].astype(float), sheet["deploy_lat"].astype(float))
+    assert np.max(np.hypot(x - table["x_m"].astype(float), y - table["y_m"].astype(float))) < 1e-3
+    result = sblsim.track(data / "detections.csv", receivers=data / "deployments.csv", tags=data / "tags.csv",
+                          out=tmp_path / "study")
+    assert result.tags["status"].tolist() == ["tracked", "tracked"]
+    assert result.tags["tag"].tolist() == ["4555", "7953"]
+    alone = sblsim.sync(data / "detections.csv", receivers=data / "deployments.csv")
+    assert result.summary["clocks"]["median_abs_residual_m"] == alone.summary["median_abs_residual_m"]
+    assert np.isfinite(result.tracks["lat"]).all() and (result.tracks["lat"].between(60.37, 60.39)).all()
