@@ -8,8 +8,8 @@ deployment's clock ``τ + a + b τ`` at the true time ``τ`` (seconds from the s
 ±``offset``, ``b`` in ±``drift``; a redeployed receiver's clock set again at its redeployment). A receiver hears an
 emission at distance ``d`` with the logistic detection range curve ``1 / (1 + exp((d − r50) / (r50 / 6)))``
 (50 % at ``range_50``), along the straight line at ``sound_speed``, with a Gaussian timing noise ``sigma_toa``;
-only while it is deployed. A redeployed receiver logs its own sync tag on deck (out of the water) between its two
-deployments: detections a study must set aside. The animals move along smooth paths inside the array (sums of
+only while it is deployed. A redeployed receiver, out of the water for an hour (a tenth of a short study), logs
+its own sync tag on deck between its two deployments: detections a study must set aside. The animals move along smooth paths inside the array (sums of
 sinusoids of periods of hours), emitting with a stable (``sbi``), random (``rbi``) or pseudo-random (``pbi``) burst
 interval in turn; sync tags at a random interval of 540 to 660 s (Vemco's).
 """
@@ -214,12 +214,13 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     serials = [str(461000 + k) for k in range(n_receivers)]
     rows = [{"receiver": k, "x": grid[k, 0], "y": grid[k, 1], "start": 0.0, "end": span} for k in range(n_receivers)]
     moved = rng.choice(np.arange(1, n_receivers), size=min(redeployed, n_receivers - 1), replace=False)
+    gap = min(3600.0, span / 10)  # out of the water an hour (less in a short study)
     for k in moved:
         out = rng.uniform(span / 3, 2 * span / 3)
         rows[k]["end"] = out
         shift = rng.normal(0, 1, 2)
         rows.append({"receiver": k, "x": grid[k, 0] + spacing / 2 * shift[0] / np.hypot(*shift),
-                     "y": grid[k, 1] + spacing / 2 * shift[1] / np.hypot(*shift), "start": out + 3600.0, "end": span})
+                     "y": grid[k, 1] + spacing / 2 * shift[1] / np.hypot(*shift), "start": out + gap, "end": span})
     table = pd.DataFrame(rows)
     positions = table[["x", "y"]].to_numpy()
     clocks = pd.DataFrame({"deployment": np.arange(len(table)), "serial": [serials[k] for k in table["receiver"]],
@@ -253,7 +254,7 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
         heard(tau_e, np.repeat(positions[j][None], len(tau_e), axis=0), sync_ids[int(row["receiver"])], j)
     for k in moved:  # on deck between the two deployments: the receiver logs its own sync tag
         first = table.index[(table["receiver"] == k)][0]
-        tau = np.linspace(table.loc[first, "end"] + 600, table.loc[first, "end"] + 3000, 5)
+        tau = table.loc[first, "end"] + gap * np.linspace(0.15, 0.85, 5)
         parts.append(pd.DataFrame({"deployment": first, "transmitter": sync_ids[k], "tau": tau, "deck": True}))
     sheet, sequences, truth = [], {}, {}
     for k in range(n_tags):
