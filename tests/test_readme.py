@@ -89,7 +89,8 @@ PAGES = ["README.md", *reading_order()]
 FIGURES = "docs/figures"
 #: The pages of the second chain (the first: every other page), each of which reads nothing another page wrote.
 SECOND_CHAIN = ("docs/systems-compare.md", "docs/design.md", "docs/receivers.md", "docs/campaigns.md",
-                "docs/budget.md", "docs/replay.md", "docs/tracking.md", "docs/sync.md", "docs/log-format.md",
+                "docs/budget.md", "docs/replay.md", "docs/tracking.md", "docs/sync.md", "docs/telemetry.md",
+                "docs/log-format.md",
                 "docs/calibration.md")
 #: Chain -> its pages in reading order.
 CHAINS = {"pages-1": [p for p in PAGES if p not in SECOND_CHAIN], "pages-2": [p for p in PAGES if p in SECOND_CHAIN]}

@@ -9,9 +9,10 @@ deployment's clock ``τ + a + b τ`` at the true time ``τ`` (seconds from the s
 emission at distance ``d`` with the logistic detection range curve ``1 / (1 + exp((d − r50) / (r50 / 6)))``
 (50 % at ``range_50``), along the straight line at ``sound_speed``, with a Gaussian timing noise ``sigma_toa``;
 only while it is deployed. A redeployed receiver, out of the water for an hour (a tenth of a short study), logs
-its own sync tag on deck between its two deployments: detections a study must set aside. The animals move along smooth paths inside the array (sums of
-sinusoids of periods of hours), emitting with a stable (``sbi``), random (``rbi``) or pseudo-random (``pbi``) burst
-interval in turn; sync tags at a random interval of 540 to 660 s (Vemco's).
+its own sync tag on deck between its two deployments: detections a study must set aside. The animals move along
+smooth paths inside the array (sums of sinusoids of periods of hours), emitting with a stable (``sbi``), random
+(``rbi``) or pseudo-random (``pbi``) burst interval in turn; sync tags at a random interval of 540 to 660 s
+(Vemco's).
 """
 
 from __future__ import annotations
