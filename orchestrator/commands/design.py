@@ -301,6 +301,6 @@ def main(args: argparse.Namespace) -> int:
     print(result.summary)
     files = [d["scenario"] for d in result.designs if d["scenario"]]
     telemetry = "positioning_yield" in result.designs[0]["predicted"]
-    figures = "layout.png" if telemetry else "layout.png, pareto.png, convergence.png"
+    figures = "receivers.csv, layout.png" if telemetry else "layout.png, pareto.png, convergence.png"
     print(f"written to {result.out}/ (design.json, designs.csv, {''.join(f + ', ' for f in files)}{figures})")
     return 0

@@ -212,6 +212,9 @@ DESIGN_KEYS: dict[str, tuple[Key, ...]] = {
              min=0.0, max=1e5),
         _key("lines", "String", "", "", "receivers only on these mooring lines, each 'north east; north east; ...' "
                                         "[m], the lines apart by a vertical bar (empty: anywhere in the water)"),
+        _key("origin", "String", "", "", "where north 0, east 0 is: 'latitude longitude' [°, WGS 84]; the "
+                                         "design's receivers.csv then gives each receiver's lat, lon (projected by "
+                                         "pyproj in the UTM zone of the origin; empty: no lat, lon)"),
     ),
     "detection": (
         _key("range_50_m", "Real", 0.0, "m", "the distance at which half the pings are heard (with slope; 0: the "
@@ -416,6 +419,8 @@ def _check_telemetry(problem: dict[str, dict[str, Any]]) -> None:
         raise ConfigError("site.area: give the water as site.area.polygon or site.area.file (one of them)")
     if area["polygon"]:
         polygon(area["polygon"], "site.area.polygon")
+    if area["origin"]:
+        area_origin(area["origin"])
     if area["max_shore_m"] and area["max_shore_m"] < area["min_shore_m"]:
         raise ConfigError(f"site.area.max_shore_m: {area['max_shore_m']:g} m is below site.area.min_shore_m "
                           f"({area['min_shore_m']:g} m); allowed 0 (any) or at least it")
@@ -425,6 +430,25 @@ def _check_telemetry(problem: dict[str, dict[str, Any]]) -> None:
         raise ConfigError(f"work_area.shape: {problem['work_area']['shape']!r} for an ilbl design; allowed site or "
                           "polygon")
     receiver_curves(problem)
+
+
+def area_origin(text: str) -> tuple[float, float]:
+    """``site.area.origin``: 'latitude longitude' [°, WGS 84] as two numbers.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the key and the allowed ranges.
+    """
+    parts = text.replace(",", " ").split()
+    try:
+        lat, lon = (float(v) for v in parts)
+    except ValueError:
+        lat = lon = math.nan
+    if len(parts) != 2 or not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise ConfigError(f"site.area.origin: {text[:40]!r}; allowed 'latitude longitude' with a latitude in "
+                          "[-90, 90] and a longitude in [-180, 180] (WGS 84 degrees), e.g. '60.38 5.34'")
+    return lat, lon
 
 
 def receiver_curves(problem: Mapping[str, Mapping[str, Any]]) -> DetectionCurve | ReceiverCurves:

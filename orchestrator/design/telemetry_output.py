@@ -1,5 +1,6 @@
 """What ``sblsim design`` writes for a telemetry array (:mod:`~sblsim.orchestrator.design.telemetry`):
-``design.json``, ``designs.csv`` and ``layout.png``, all at once (an interrupted run leaves ``--out`` as it was).
+``design.json``, ``designs.csv``, ``receivers.csv`` (:func:`receivers_table`) and ``layout.png``, all at once (an
+interrupted run leaves ``--out`` as it was).
 
 ``design.json`` holds, as for the other systems, ``problem``, ``summary``, ``meets``, ``search`` and ``designs``,
 and ``tag`` (the tag simulated: ``ping_type``, ``burst_interval_s``, a ``pbi`` tag's ``burst_sequence_intervals``,
@@ -30,8 +31,9 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.design.area import spread
-from sblsim.orchestrator.design.problem import TELEMETRY
+from sblsim.orchestrator.design.problem import TELEMETRY, area_origin
 from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked, sync_hearing
+from sblsim.orchestrator.io.frames import Frame, utm_zone
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The columns of ``designs.csv``.
@@ -148,6 +150,33 @@ def table(run: TelemetryRun) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(CSV_COLUMNS))
 
 
+def receivers_table(run: TelemetryRun) -> pd.DataFrame:
+    """``receivers.csv``: each proposed design's receivers (best first), as a study's receivers are given: ``x_m``
+    (east), ``y_m`` (north) [m] in the design's frame (``depth_m`` in 3-D), ``in_place`` (one of
+    ``candidates.existing_m``), and where ``site.area.origin`` places the frame, ``lat``, ``lon`` [° WGS 84] (the
+    origin and the receivers projected by pyproj in the UTM zone of the origin; NaN without one)."""
+    origin = run.resolved.sections["site.area"]["origin"]
+    frame = None
+    if origin:
+        lat0, lon0 = area_origin(origin)
+        frame = Frame(utm_zone(lat0, lon0))
+        x0, y0 = frame.from_latlon(np.array([lat0]), np.array([lon0]))
+    parts = []
+    for design in run.proposed:
+        r = np.asarray(design.receivers, float)
+        rows = pd.DataFrame({"design": design.name, "receiver": np.arange(1, len(r) + 1), "x_m": r[:, 1],
+                             "y_m": r[:, 0]})
+        if r.shape[1] > 2:
+            rows["depth_m"] = r[:, 2]
+        rows["in_place"] = np.arange(len(r)) < design.kept
+        if frame is not None:
+            rows["lat"], rows["lon"] = frame.to_latlon(x0[0] + r[:, 1], y0[0] + r[:, 0])
+        else:
+            rows["lat"] = rows["lon"] = np.nan
+        parts.append(rows)
+    return pd.concat(parts, ignore_index=True)
+
+
 def document(run: TelemetryRun, seconds: float | None = None, effort: Any = None) -> dict[str, Any]:
     """``design.json`` as a mapping (module docstring)."""
     problem = json.loads(json.dumps(run.resolved.sections, default=str))
@@ -224,12 +253,14 @@ def figures(run: TelemetryRun) -> dict[str, Any]:
 
 
 def write(run: TelemetryRun, out: Path | str, seconds: float | None = None, effort: Any = None) -> Path:
-    """Write ``design.json``, ``designs.csv`` and ``layout.png`` into ``out`` at once; return ``out``."""
+    """Write ``design.json``, ``designs.csv``, ``receivers.csv`` and ``layout.png`` into ``out`` at once; return
+    ``out``."""
     import matplotlib.pyplot as plt
 
     with staged_directory(out) as tmp:
         (tmp / "design.json").write_text(json.dumps(document(run, seconds, effort), indent=2, allow_nan=False) + "\n")
         table(run).to_csv(tmp / "designs.csv", index=False)
+        receivers_table(run).to_csv(tmp / "receivers.csv", index=False)
         for name, figure in figures(run).items():
             figure.savefig(tmp / f"{name}.png", dpi=110, bbox_inches="tight")
             plt.close(figure)
@@ -237,4 +268,4 @@ def write(run: TelemetryRun, out: Path | str, seconds: float | None = None, effo
 
 
 __all__ = ["CSV_COLUMNS", "design_record", "document", "figures", "layout_figure", "predicted", "summary",
-           "sync_links", "table", "write"]
+           "receivers_table", "sync_links", "table", "write"]

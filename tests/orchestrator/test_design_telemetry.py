@@ -8,6 +8,7 @@ import itertools
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import sblsim
@@ -211,6 +212,8 @@ def test_a_bad_geojson_is_refused_in_one_line(tmp_path, content, message):
     ({"detection": {"sync_p": 0.0}}, "detection.sync_p"),
     ({"design": {"scenario": "lbl-field"}}, "design.scenario: an ilbl design .*reads no base scenario"),
     ({"design": {"set": ["acoustics.sigma_range=0.1"]}}, "design.set: an ilbl design"),
+    ({"site.area": {"origin": "95 5"}}, "site.area.origin: '95 5'; allowed 'latitude longitude'"),
+    ({"site.area": {"origin": "60.38"}}, "site.area.origin"),
 ])
 def test_a_bad_telemetry_problem_is_refused_naming_its_key(changes, message):
     with pytest.raises(ConfigError, match=message):
@@ -258,6 +261,24 @@ def test_the_telemetry_design_writes_its_outputs(tmp_path):
     assert 0 < path["tracked_pings"] <= 250 and 1.5 <= path["tracked_nees"] <= 4.5, path  # the tracker's own
     assert (tmp_path / "d" / "designs.csv").exists() and (tmp_path / "d" / "layout.png").exists()
     assert result.table["count"].iloc[0] == len(best["receivers_m"]) and result.table["meets"].iloc[0]
+    # receivers.csv: the design's receivers as a study gives them, x east and y north; no lat, lon without an origin
+    table = pd.read_csv(tmp_path / "d" / "receivers.csv")
+    first = table[table["design"] == best["name"]]
+    assert np.array_equal(first[["y_m", "x_m"]].to_numpy(), np.array(best["receivers_m"]))
+    assert first["lat"].isna().all()
+
+
+def test_a_design_placed_by_its_origin_gives_its_receivers_lat_lon(tmp_path):
+    """``site.area.origin``: the receivers' lat, lon are the origin's UTM coordinates plus (east, north), back
+    through pyproj (computed here with pyproj's own transformer)."""
+    from pyproj import Transformer
+
+    sblsim.design(None, **_problem(**{"site.area": {"polygon": L_LAKE, "origin": "60.38 5.34"}}), out=tmp_path / "d")
+    table = pd.read_csv(tmp_path / "d" / "receivers.csv")
+    x0, y0 = Transformer.from_crs("EPSG:4326", "EPSG:32631", always_xy=True).transform(5.34, 60.38)
+    lon, lat = Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True).transform(x0 + table["x_m"],
+                                                                                        y0 + table["y_m"])
+    assert np.max(np.abs(table["lat"] - lat)) < 1e-9 and np.max(np.abs(table["lon"] - lon)) < 1e-9
 
 
 @pytest.mark.slow
