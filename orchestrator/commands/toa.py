@@ -37,7 +37,8 @@ class ToaResult:
     receivers : list of str
         The matrix's columns: the synchronised receivers of the receivers table, in its order.
     pings : pandas.DataFrame
-        ``pings.csv``: ``ping``, ``time`` (the first arrival [s since 1970 UTC, reference clock]), ``time_toa`` (on
+        ``pings.csv``: ``ping``, ``time`` (the first arrival [s since 1970 UTC, reference clock]), ``time_utc`` (the
+        same, ISO 8601), ``time_toa`` (on
         ``toa.txt``'s base [s]), ``receivers`` (how many heard it), ``heard`` (their names, ``;``-separated),
         ``spread_s``; from a VUE file the tag's sensor values per ping (``depth_m``, ``temperature_c``, ...).
     summary : dict

@@ -35,6 +35,7 @@ from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.tables import NUMBER
+from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.sync.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.sync.detections import (
     IDENTIFIER,
@@ -323,7 +324,7 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     origin = float(np.floor(first[0]))
     heard = np.isfinite(toa)
     table_pings = pd.DataFrame({
-        "ping": np.arange(len(toa)), "time": first, "time_toa": first - origin,
+        "ping": np.arange(len(toa)), "time": first, "time_utc": iso_utc(first), "time_toa": first - origin,
         "receivers": heard.sum(axis=1),
         "heard": [";".join(columns[k] for k in np.flatnonzero(h)) for h in heard],
         "spread_s": np.nanmax(toa, axis=1) - first})

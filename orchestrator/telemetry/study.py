@@ -132,6 +132,15 @@ def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Det
     return [(t, TagSpec(t)) for t in counts.index if t not in sync_tags and t not in base and t not in labelled]
 
 
+def _found(name: str, detected, ambiguous: str | None = None) -> str | None:
+    """The detected tag ``name`` stands for (:func:`~sblsim.orchestrator.sync.transmitters.match`), None where none;
+    a name two code spaces share is ``ambiguous`` (None: not found)."""
+    try:
+        return match(name, detected)
+    except ModelError:
+        return ambiguous
+
+
 def _tag_detections(mine: pd.DataFrame, spec: TagSpec) -> pd.DataFrame:
     """A tag's detections with its depth sensor's values as depths [m] (unit ``m``) where the sheet says how."""
     if spec.sensor != "depth":
@@ -194,16 +203,21 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     sheet = read_tag_sheet(tags) if tags is not None else None
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     assigned = assign(data, deployments)
-    clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours, notes)
-    frame_crs = None if deployments.frame is None else deployments.frame.crs
     detected = assigned.detections.frame["tag"].unique()
-    sync_tags = set(table["sync_tag"]) - {""}
+    sync_tags = set(assigned.hydrophones["sync_tag"]) - {""}
     if sheet is not None:
-        sync_tags |= {k for t in sheet.of_role("sync") if (k := match(t.transmitter, detected)) is not None}
+        sync_tags |= {k for t in sheet.of_role("sync") if (k := _found(t.transmitter, detected)) is not None}
     asked = _chosen(chosen, sheet, assigned.detections, sync_tags)
     if not asked:
         raise ModelError("tags: no tag to track (the tag sheet lists no animal or reference tag, and every detected "
                          "tag is a sync tag); allowed: a sheet with animal or reference tags, or --tag")
+    if all(_found(n, detected, ambiguous=n) is None for n, _ in asked):  # said before the clocks are fitted
+        counts = assigned.detections.frame["tag"].value_counts()
+        raise ModelError(f"tag: none of the tags asked for ({', '.join(n for n, _ in asked[:8])}) is detected inside "
+                         f"a deployment in {data.source!r}; allowed: a detected tag, e.g. "
+                         + ", ".join(f"{t} ({c} detections)" for t, c in counts.head(6).items()))
+    clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours, notes)
+    frame_crs = None if deployments.frame is None else deployments.frame.crs
     groups = assigned.detections.frame.groupby("tag", sort=False).groups
     rows: dict[str, dict[str, Any]] = {}
     jobs, matrices, folders = [], {}, {}

@@ -143,6 +143,7 @@ def test_a_tag_never_detected_is_a_row_saying_so(study):
     (["--format", "fathom"], None, "starts with the line VEMCO DATA LOG"),
     (["--crs", "EPSG:999999"], None, "not a CRS pyproj knows"),
     (["--tag", "a,a"], None, "distinct"),
+    (["--tag", "A69-1602-9999"], None, "none of the tags asked for (A69-1602-9999) is detected"),
     (["--sound-speed", "1480", "--temperature", "10", "--salinity", "0"], None, "--temperature: only where"),
 ])
 def test_bad_input_is_refused_in_one_line_and_nothing_written(study, tmp_path, capsys, extra, edit, found):
