@@ -120,6 +120,34 @@ def read_parquet(path: Path, what: str) -> TextTable:
                   meta.get(META_TITLE, b"").decode("utf-8", "replace"))
 
 
+def read_bounded(path: Path, what: str, max_bytes: int, max_lines: int,
+                 refuse: Callable[[str, str, str], ModelError]) -> bytes:
+    """A regular file's bytes, refused before it is read whole when it is larger than ``max_bytes`` or holds more
+    than ``max_lines`` lines (counted in what was read, not only from the file's size): ``refuse(name, what,
+    amount)`` the error of a file too large.
+
+    Raises
+    ------
+    ModelError
+        ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large.
+    """
+    name = str(path)
+    size = regular_file(path, what)
+    if size > max_bytes:
+        raise refuse(name, what, f"is {size / 2**20:.0f} MiB")
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(max_bytes + 1)
+    except OSError as exc:
+        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if len(data) > max_bytes:
+        raise refuse(name, what, f"is more than {max_bytes // 2**20} MiB")
+    lines = data.count(b"\n")
+    if lines > max_lines:  # a header and comment lines besides the rows
+        raise refuse(name, what, f"has {lines:,} lines")
+    return data
+
+
 def read_lines(path: Path, what: str, encoding: str = "utf-8-sig", *, max_bytes: int | None = None,
                max_rows: int | None = None, extra_lines: int = 10_000,
                refuse: Callable[[str, str, str], ModelError] | None = None) -> list[str]:
@@ -142,23 +170,10 @@ def read_lines(path: Path, what: str, encoding: str = "utf-8-sig", *, max_bytes:
         ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large, or one
         that is not text in ``encoding`` ("utf-8-sig" or "ascii").
     """
-    name = str(path)
     max_bytes = MAX_LOG_BYTES if max_bytes is None else max_bytes
     max_rows = MAX_LOG_ROWS if max_rows is None else max_rows
-    refuse = refuse or too_large
-    size = regular_file(path, what)
-    if size > max_bytes:
-        raise refuse(name, what, f"is {size / 2**20:.0f} MiB")
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(max_bytes + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > max_bytes:
-        raise refuse(name, what, f"is more than {max_bytes // 2**20} MiB")
-    lines = data.count(b"\n")
-    if lines > max_rows + extra_lines:  # a header and comment lines besides the rows
-        raise refuse(name, what, f"has {lines:,} lines")
+    data = read_bounded(path, what, max_bytes, max_rows + extra_lines, refuse or too_large)
+    name = str(path)
     try:
         return text_lines(data.decode(encoding))
     except UnicodeDecodeError as exc:
@@ -291,5 +306,5 @@ def number(text: str, where: str, column: str, low: float, high: float) -> float
 
 
 __all__ = ["CONFIG_PREFIX", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES",
-           "TextTable", "cell", "columns", "csv_cells", "number", "read_lines", "read_parquet", "read_table",
-           "regular_file", "text_lines", "too_large"]
+           "TextTable", "cell", "columns", "csv_cells", "number", "read_bounded", "read_lines", "read_parquet",
+           "read_table", "regular_file", "text_lines", "too_large"]

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import NUMBER, regular_file
+from sblsim.orchestrator.io.tables import NUMBER, read_bounded, regular_file
 
 
 def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int) -> ModelError:
@@ -36,8 +36,8 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         One line naming the file and the limit or the fault.
     """
     name = str(path)
-    size = regular_file(path, what)
     if prefix is not None:
+        regular_file(path, what)
         try:
             with open(path, "rb") as handle:
                 head = handle.read(prefix)
@@ -47,18 +47,8 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         if nul >= 0:
             raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
         return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else _decoded(head, name, what)
-    if size > max_bytes:
-        raise too_large(name, what, f"is {size / 2**20:.0f} MiB", max_bytes, max_rows)
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(max_bytes + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    if len(data) > max_bytes:
-        raise too_large(name, what, f"is more than {max_bytes // 2**20} MiB", max_bytes, max_rows)
-    count = data.count(b"\n")
-    if count > max_rows + 1000:
-        raise too_large(name, what, f"has {count:,} lines", max_bytes, max_rows)
+    data = read_bounded(path, what, max_bytes, max_rows + 1000,
+                        lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows))
     nul = data.find(b"\0")
     if nul >= 0:
         raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
