@@ -191,3 +191,31 @@ def test_the_boats_study_from_its_lat_lon_deployments_and_tag_sheet(tmp_path):
     alone = sblsim.sync(data / "detections.csv", receivers=data / "deployments.csv")
     assert result.summary["clocks"]["median_abs_residual_m"] == alone.summary["median_abs_residual_m"]
     assert np.isfinite(result.tracks["lat"]).all() and (result.tracks["lat"].between(60.37, 60.39)).all()
+
+
+def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
+    """A depth sensor's raw values converted by the sheet's slope and intercept (a value in metres kept), and the
+    depth per ping written into the matrix the tracker reads (a ``depth_m`` column, the receivers' serials numbers
+    kept as the header) only where the receivers have depths; in 2-D it is said in a note and left out."""
+    from sblsim.orchestrator.sync.toa import ToaOutcome
+    from sblsim.orchestrator.telemetry.study import _tag_detections, _write_matrix
+    from sblsim.orchestrator.telemetry.tag_sheet import TagSpec
+    from sblsim.orchestrator.tracks.toa import read_toa
+
+    spec = TagSpec("A69-9002-1", sensor="depth", slope=0.5, intercept=-1.0)
+    mine = pd.DataFrame({"sensor_value": [10.0, 4.5, np.nan], "sensor_unit": ["ADC", "m", ""]})
+    depth = _tag_detections(mine, spec)
+    assert np.allclose(depth["sensor_value"][:2], [4.0, 4.5]) and np.isnan(depth["sensor_value"][2])
+    assert depth["sensor_unit"].tolist() == ["m", "m", ""]
+    pings = pd.DataFrame({"depth_m": [4.0, np.nan]})
+    toa = np.array([[0.1, np.nan], [2.0, 2.1]])
+    for dim, expected in ((3, [4.0, np.nan]), (2, None)):
+        matrix = ToaOutcome(toa, ["1623", "1626"], np.zeros((2, dim)), pings, {"tag": "A"}, 0.0)
+        notes: list[str] = []
+        _write_matrix(matrix, tmp_path / str(dim), notes, "A")
+        read = read_toa(tmp_path / str(dim) / "toa.txt")
+        if expected is None:
+            assert read.depth is None and read.names is None and "not used by the tracker" in notes[0]
+        else:
+            assert read.names == ["1623", "1626"] and np.allclose(read.depth, expected, equal_nan=True) and not notes
+        assert np.allclose(read.toa, toa, equal_nan=True)
