@@ -238,7 +238,6 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                     "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
             matrix = build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
                                spec.shortest_interval(), kind)
-            matrix.frame = deployments.frame
             _write_matrix(matrix, workdir / folder, notes, key)
             matrices[folder] = matrix
             folders[name] = folder
@@ -268,7 +267,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     results = run_tracks(jobs, workers, scheduler, done) if jobs else {}
     outcomes = {f: r for f, r in results.items() if not isinstance(r, str)}
     table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
-    tracks = combined_tracks(outcomes, {f: by_folder[f] for f in outcomes}, matrices)
+    tracks = combined_tracks(outcomes, matrices)
     summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
                        "refused": int((table_tags["status"] == "refused").sum())}
     summary["wall_time_s"] = clock.perf_counter() - begun
@@ -311,7 +310,7 @@ def _tracked(result, elapsed: float) -> dict[str, Any]:
             "last_utc": iso_utc(times[-1:])[0] if len(times) else "", "wall_time_s": s["wall_time_s"]}
 
 
-def combined_tracks(outcomes: dict[str, Any], names: dict[str, str], matrices: dict[str, Any]) -> pd.DataFrame:
+def combined_tracks(outcomes: dict[str, Any], matrices: dict[str, Any]) -> pd.DataFrame:
     """``tracks.csv``: each tracked tag's track rows (its folder's ``track.csv``) with its tag, in
     :data:`TRACK_COLUMNS`' order (``z``, ``sigma_z`` where the geometry is 3-D; ``lat``, ``lon`` NaN without a
     frame), by tag and time."""
