@@ -261,18 +261,56 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     sums = _arrival_sums(problem, X, dof, information=True, weights=w)  # the Gauss-Newton weights beside
     problem.band = problem.rhs = problem.logs = problem.values = problem.squares = None  # the steps' buffers
     problem.z = problem.J = problem.rows = None
-    P = lag = None
-    if covariance:
-        blocks = partial(_normal_blocks, problem, X, sums, problem.durations(X))
-        P, lag = _block_covariance(*_dense_blocks(problem, blocks))
-        if settings.survey_sigma is not None:
-            z, Jz = _arrival_jacobians(problem, X)
-            P += _survey_covariance(problem, *blocks(0, m), _information(problem, z, dof), Jz,
-                                    np.asarray(settings.survey_sigma, float))
+    P, lag = _covariance(problem, X, sums, dof) if covariance else (None, None)
     weights = np.zeros((m, n))
     weights[problem.k, problem.i] = w
     return RobustTrack(X, P, weights, cost, best["done"], index if index < given else first.start, P_lag=lag)
 
 
+def _covariance(problem: _Problem, X: np.ndarray, sums: np.ndarray, dof: float) -> tuple[np.ndarray, np.ndarray]:
+    """:class:`RobustTrack`'s ``P`` (m, s, s) and ``P_lag`` (m − 1, s, s) at the states X (m, s): the diagonal and
+    lag-one blocks of the inverse of the cost's Hessian from the arrivals' observed information ``sums`` (m, q)
+    (:func:`~sblsim.models.tracking.smoother_cost._arrival_sums` with ``information``), the receivers' survey error
+    added to ``P`` as a consider covariance where the problem's settings give one."""
+    settings = problem.settings
+    blocks = partial(_normal_blocks, problem, X, sums, problem.durations(X))
+    P, lag = _block_covariance(*_dense_blocks(problem, blocks))
+    if settings.survey_sigma is not None:
+        z, Jz = _arrival_jacobians(problem, X)
+        P += _survey_covariance(problem, *blocks(0, problem.m), _information(problem, z, dof), Jz,
+                                np.asarray(settings.survey_sigma, float))
+    return P, lag
+
+
+def with_covariance(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
+                    schedule: PingSchedule | None = None, depth: np.ndarray | None = None,
+                    dof: float = ROBUST_DOF) -> RobustTrack:
+    """A track :func:`robust_smooth` solved without its covariances (``covariance`` False) with them: ``P`` and
+    ``P_lag`` at its states, the same numbers as :func:`robust_smooth` makes with ``covariance``. For a search that
+    re-solves a record several times and keeps one answer (:func:`~sblsim.models.tracking.starts.robust_track`):
+    the covariance made once, for the track kept, and no earlier track's (m, s, s) blocks held while it re-solves.
+
+    Parameters
+    ----------
+    track : RobustTrack
+        :func:`robust_smooth`'s answer (m pings).
+    toa, receivers, settings, schedule, depth, dof
+        As the track was solved with (:func:`robust_smooth`).
+
+    Returns
+    -------
+    RobustTrack
+        ``track`` with ``P`` and ``P_lag``.
+    """
+    toa = np.asarray(toa, float)
+    if schedule is None:
+        schedule = PingSchedule.stable(len(toa), settings.interval, settings.jitter, settings.interval_drift)
+    problem = _Problem(toa, np.asarray(receivers, float), settings, schedule, depth)
+    sums = _arrival_sums(problem, track.x, dof, information=True)
+    problem.logs = problem.values = problem.squares = problem.z = problem.J = problem.rows = None  # the pass's buffers
+    P, lag = _covariance(problem, track.x, sums, dof)
+    return replace(track, P=P, P_lag=lag)
+
+
 __all__ = ["ROBUST_COARSE_ITERATIONS", "ROBUST_COARSE_SCALE", "ROBUST_ITERATIONS", "ROBUST_KEPT_WEIGHT",
-           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "RobustTrack", "robust_smooth"]
+           "ROBUST_SCREEN", "ROBUST_TOLERANCE", "RobustTrack", "robust_smooth", "with_covariance"]

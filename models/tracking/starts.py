@@ -17,7 +17,13 @@ from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.modes import MODE_BETTER, with_modes
 from sblsim.models.tracking.quality import FIX_SLACK, explained
 from sblsim.models.tracking.schedule import PingSchedule
-from sblsim.models.tracking.smoother import ROBUST_COARSE_ITERATIONS, ROBUST_COARSE_SCALE, RobustTrack, robust_smooth
+from sblsim.models.tracking.smoother import (
+    ROBUST_COARSE_ITERATIONS,
+    ROBUST_COARSE_SCALE,
+    RobustTrack,
+    robust_smooth,
+    with_covariance,
+)
 
 
 def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray,
@@ -44,7 +50,8 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     """The robust smoother of a record from its starts: the single-ping fixes' own track (:func:`anchored_start`),
     that track graduated (:func:`graduated_start`) and the RTS smoother's states ``rts`` (m, 2 dim + 2; None: the
     fixes' two starts alone, e.g. a record too long for the EKF's ping-by-ping loop); the lowest cost kept
-    (:func:`robust_smooth`), then re-solved from the fixes it disagrees with (:func:`with_fixes_spliced`); with late
+    (:func:`robust_smooth`), then re-solved from the fixes it disagrees with (:func:`with_fixes_spliced`), its
+    covariance made once, for the track kept (:func:`~sblsim.models.tracking.smoother.with_covariance`); with late
     arrivals modelled, its other local modes searched
     (:func:`~sblsim.models.tracking.modes.with_modes`). ``fixes``: positions (m, dim), emission times (m,) and the
     arrivals used (m, n) of :func:`fix_pings` for the same pings as ``toa`` (m, n); ``schedule`` the steps between them
@@ -64,9 +71,15 @@ def robust_track(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettin
     if anchored is not None:
         starts = {"fixes": anchored,
                   "graduated": graduated_start(toa, receivers, settings, anchored, schedule, depth), **starts}
-    track = replace(robust_smooth(toa, receivers, settings, list(starts.values()), schedule=schedule, depth=depth),
-                    start_names=tuple(starts))
-    track = with_fixes_spliced(track, toa, receivers, settings, fixes, schedule, depth)
+    names = tuple(starts)
+    del anchored  # each start's states (m, 2 dim + 2) held by the solve alone, released once it has copied them
+    # the first track handed on unnamed, held by the splices alone (released once a round improves on it), and the
+    # covariance made once, for the track kept: of 10⁶ pings each of these arrays is tens of MB
+    track = with_fixes_spliced(
+        replace(robust_smooth(toa, receivers, settings, [starts.pop(name) for name in names], covariance=False,
+                              schedule=schedule, depth=depth), start_names=names),
+        toa, receivers, settings, fixes, schedule, depth)
+    track = with_covariance(track, toa, receivers, settings, schedule, depth)
     return with_modes(track, toa, receivers, settings, schedule, depth) if modes else track
 
 
@@ -221,17 +234,21 @@ def with_fixes_spliced(track: RobustTrack, toa: np.ndarray, receivers: np.ndarra
     Returns
     -------
     RobustTrack
-        The track of the lowest cost found (``start`` and ``start_names`` the given track's).
+        The track of the lowest cost found (``start`` and ``start_names`` the given track's), with its covariance
+        where the given track has one (made once, for the track kept: a round's re-solve makes none).
     """
+    covariance, improved = track.P is not None, False
     for _ in range(SPLICE_ROUNDS):
         pings = splice_pings(track.x, toa, receivers, settings, fixes)
         if not len(pings):
             break
         again = robust_smooth(toa, receivers, settings, [track.x, spliced(track.x, fixes, pings)],
-                              schedule=schedule, depth=depth, covariance=track.P is not None, student_start=False)
+                              schedule=schedule, depth=depth, covariance=False, student_start=False)
         if not again.cost < track.cost - MODE_BETTER:
             break
-        track = replace(again, start=track.start, start_names=track.start_names)
+        track, improved = replace(again, start=track.start, start_names=track.start_names), True
+    if improved and covariance:
+        track = with_covariance(track, toa, receivers, settings, schedule, depth)
     return track
 
 
