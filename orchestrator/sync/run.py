@@ -444,8 +444,6 @@ def _finite(values: np.ndarray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in values]
 
 
-
-
 def synchronise_study(detections: Detections, deployments, sound_speed: float | None = None,
                       series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                       reference: str | None = None, **options: Any) -> SyncOutcome:
