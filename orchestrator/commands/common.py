@@ -17,6 +17,7 @@ import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.declarations import shown
+from sblsim.models.tracking.sound_speed import SALINITY_RANGE, TEMPERATURE_RANGE
 from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     ConfigError,
@@ -291,3 +292,52 @@ def compared(compare: str | tuple[str, Sequence[Any]] | None) -> tuple[str, list
     if isinstance(values, (str, bytes)) or not isinstance(values, Sequence) or not values:
         raise ConfigError(f"compare: the values of {key} must be a list of at least one value, got {shown(values)}")
     return parse_compare(f"{key}={','.join(str(v) for v in values)}")
+
+
+def names_argument(value: Any, where: str, what: str) -> list[str] | None:
+    """A list of names: None, a text of names separated by commas, or a sequence of texts; each named once.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``where`` and ``what`` the names are (one line).
+    """
+    if value is None:
+        return None
+    names = value.split(",") if isinstance(value, str) else value
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        raise ConfigError(f"{where}: expected {what} (a list, or separated by commas), got {type(value).__name__}")
+    names = [n.strip() for n in names]
+    if not names or not all(names) or len(set(names)) != len(names):
+        raise ConfigError(f"{where}: {','.join(names)[:80]!r}: allowed: distinct, non-empty {what}, separated by "
+                          "commas")
+    return names
+
+
+def sound_speed_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, salinity: Any,
+                          names: tuple[str, str, str, str]) -> tuple:
+    """The sound speed's arguments checked together (``names``: how the caller spells ``sound_speed``,
+    ``sound_speed_file``, ``temperature``, ``salinity``): a constant [m/s] in [1300, 1700], a measured series, or a
+    fallback's water (a temperature [°C] and an absolute salinity [g/kg], both or neither) where the speed is
+    calibrated from the pings; returned as given, checked.
+
+    Raises
+    ------
+    ConfigError
+        A value outside its range, or options that exclude each other (one line).
+    """
+    speed = None if sound_speed is None else real_argument(sound_speed, names[0], 1300.0, 1700.0, "m/s")
+    series = path_argument(sound_speed_file, names[1])
+    if speed is not None and series is not None:
+        raise ConfigError(f"{names[1]}: not with {names[0]} (one sound speed: given, or a measured series)")
+    if (temperature is None) != (salinity is None):
+        raise ConfigError(f"{names[3] if salinity is None else names[2]}: needed with "
+                          f"{names[2] if salinity is None else names[3]} (the fallback sound speed's water: "
+                          "0 g/kg for fresh water, about 35 for the open sea)")
+    if temperature is not None:
+        if speed is not None or series is not None:
+            raise ConfigError(f"{names[2]}: only where the sound speed is calibrated from the pings (its fallback); "
+                              f"not with {names[0] if speed is not None else names[1]}")
+        temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
+        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "g/kg")
+    return speed, series, temperature, salinity

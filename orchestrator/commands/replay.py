@@ -16,17 +16,18 @@ import numpy as np
 
 from sblsim.models.acoustics.core import LANES
 from sblsim.models.tracking.schedule import PING_TYPES
-from sblsim.models.tracking.sound_speed import SALINITY_RANGE, TEMPERATURE_RANGE
 from sblsim.orchestrator.commands.common import (
     MAX_SEED,
     Overrides,
     check_engine,
     check_seed,
     flag_argument,
+    names_argument,
     override_items,
     path_argument,
     prepare_out,
     real_argument,
+    sound_speed_arguments,
     text_argument,
 )
 from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, print_metrics
@@ -199,21 +200,8 @@ class TagsResult:
     out: Path | None = None
 
 
-def _receivers_kept(value: Any, where: str) -> list[str] | None:
-    """A ``receivers_kept`` argument: None, names separated by commas, or a sequence of names."""
-    if value is None:
-        return None
-    names = value.split(",") if isinstance(value, str) else value
-    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
-        raise ConfigError(f"{where}: expected receiver names (a list, or separated by commas), got "
-                          f"{type(value).__name__}")
-    names = [n.strip() for n in names]
-    if not names or not all(names) or len(set(names)) != len(names):
-        raise ConfigError(f"{where}: {','.join(names)[:80]!r}: allowed: distinct, non-empty receiver names of the "
-                          "receivers file, separated by commas")
-    return names
-
-
+#: What ``receivers_kept`` names, as its refusals say.
+RECEIVER_NAMES = "receiver names of the receivers file"
 #: The ping types ``--ping-type`` takes (:data:`sblsim.models.tracking.schedule.PING_TYPES`).
 PING_TYPE_NAMES = tuple(PING_TYPES)
 #: The burst intervals ``--burst-interval`` takes [s].
@@ -270,20 +258,8 @@ def medium_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, 
     ConfigError
         A value outside its range, or options that exclude each other (one line).
     """
-    speed = None if sound_speed is None else real_argument(sound_speed, names[0], 1300.0, 1700.0, "m/s")
-    series = path_argument(sound_speed_file, names[1])
-    if speed is not None and series is not None:
-        raise ConfigError(f"{names[1]}: not with {names[0]} (one sound speed: given, or a measured series)")
-    if (temperature is None) != (salinity is None):
-        raise ConfigError(f"{names[3] if salinity is None else names[2]}: needed with "
-                          f"{names[2] if salinity is None else names[3]} (the fallback sound speed's water: "
-                          "0 g/kg for fresh water, about 35 for the open sea)")
-    if temperature is not None:
-        if speed is not None or series is not None:
-            raise ConfigError(f"{names[2]}: only where the sound speed is calibrated from the pings (its fallback); "
-                              f"not with {names[0] if speed is not None else names[1]}")
-        temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
-        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "g/kg")
+    speed, series, temperature, salinity = sound_speed_arguments(sound_speed, sound_speed_file, temperature,
+                                                                 salinity, names[:4])
     motion = "moving" if motion is None else motion
     if motion not in MOTIONS:
         raise ConfigError(f"{names[4]}: {str(motion)[:40]!r} is not allowed; allowed: {', '.join(MOTIONS)}")
@@ -459,7 +435,7 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
     sound_speed, series, temperature, salinity, motion, acceleration_psd = medium_arguments(
         sound_speed, sound_speed_file, temperature, salinity, motion, acceleration_psd,
         ("sound_speed", "sound_speed_file", "temperature", "salinity", "motion", "acceleration_psd"))
-    kept = _receivers_kept(receivers_kept, "receivers_kept")
+    kept = names_argument(receivers_kept, "receivers_kept", RECEIVER_NAMES)
     drop = real_argument(drop_detections, "drop_detections", 0.0, MAX_DROP, "")
     seed = check_seed(seed)
     if seed is None:
@@ -803,7 +779,7 @@ def _main_toa(args: argparse.Namespace) -> int:
     speed, series, temperature, salinity, motion, q = medium_arguments(
         args.sound_speed, args.sound_speed_file, args.temperature, args.salinity, args.motion, args.acceleration_psd,
         ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"))
-    kept = _receivers_kept(args.receivers_kept, "--receivers-kept")
+    kept = names_argument(args.receivers_kept, "--receivers-kept", RECEIVER_NAMES)
     drop = 0.0 if args.drop_detections is None else real_argument(args.drop_detections, "--drop-detections", 0.0,
                                                                   MAX_DROP, "")
     seed = check_seed(0 if args.seed is None else args.seed, "--seed")

@@ -13,11 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
-from sblsim.models.tracking.sound_speed import SALINITY_RANGE, TEMPERATURE_RANGE
 from sblsim.orchestrator.commands.common import (
+    names_argument,
     path_argument,
     prepare_out,
     real_argument,
+    sound_speed_arguments,
     text_argument,
 )
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
@@ -84,38 +85,6 @@ class StudyResult:
         return figures
 
 
-def _tag_list(value: Any, where: str) -> list[str] | None:
-    """``--tag``: transmitters separated by commas (or a list), each named once."""
-    if value is None:
-        return None
-    names = value.split(",") if isinstance(value, str) else value
-    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
-        raise ConfigError(f"{where}: expected transmitters (full IDs or ids) separated by commas, or a list")
-    names = [n.strip() for n in names]
-    if not names or not all(names) or len(set(names)) != len(names):
-        raise ConfigError(f"{where}: {','.join(names)[:80]!r}; allowed: distinct, non-empty transmitters (full IDs or "
-                          "ids) separated by commas")
-    return names
-
-
-def _medium(sound_speed: Any, sound_speed_file: Any, temperature: Any, salinity: Any,
-            names: tuple[str, str, str, str]) -> tuple:
-    """The sound speed's options checked together: one of a constant, a series or a fallback's water."""
-    speed = None if sound_speed is None else real_argument(sound_speed, names[0], *SOUND_SPEED, "m/s")
-    series = path_argument(sound_speed_file, names[1])
-    if speed is not None and series is not None:
-        raise ConfigError(f"{names[1]}: not with {names[0]} (one sound speed: given, or a measured series)")
-    if (temperature is None) != (salinity is None):
-        raise ConfigError(f"{names[3] if salinity is None else names[2]}: needed with "
-                          f"{names[2] if salinity is None else names[3]} (the fallback sound speed's water)")
-    if temperature is not None:
-        if speed is not None or series is not None:
-            raise ConfigError(f"{names[2]}: only where the sound speed is calibrated from the pings (its fallback)")
-        temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
-        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "g/kg")
-    return speed, series, temperature, salinity
-
-
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
              medium: tuple, names: dict[str, str]) -> dict[str, Any]:
     """Every option of a study checked (``names``: how each is spelled where it was given), as
@@ -133,8 +102,8 @@ def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, worker
         scheduler = check_address(str(scheduler))
     return {"format": format, "crs": None if crs is None else check_crs(crs, names["crs"]),
             "frame": None if frame is None else check_metric(frame, names["frame"]),
-            "chosen": _tag_list(tag, names["tag"]), "sound_speed": speed, "sound_speed_file": series,
-            "temperature": temperature, "salinity": salinity,
+            "chosen": names_argument(tag, names["tag"], "transmitters (full IDs or ids)"), "sound_speed": speed,
+            "sound_speed_file": series, "temperature": temperature, "salinity": salinity,
             "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
             "scheduler": scheduler}
 
@@ -208,8 +177,8 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     tags = path_argument(tags, "tags")
     sync = path_argument(sync, "sync")
     check_progress(progress)
-    medium = _medium(sound_speed, sound_speed_file, temperature, salinity,
-                     ("sound_speed", "sound_speed_file", "temperature", "salinity"))
+    medium = sound_speed_arguments(sound_speed, sound_speed_file, temperature, salinity,
+                                   ("sound_speed", "sound_speed_file", "temperature", "salinity"))
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
                        {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers")})
     target = prepare_out(out, force, "study.json", "study")
@@ -326,8 +295,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim track`` from its parsed arguments: its lines printed, its exit status returned."""
-    medium = _medium(args.sound_speed, args.sound_speed_file, args.temperature, args.salinity,
-                     ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity"))
+    medium = sound_speed_arguments(args.sound_speed, args.sound_speed_file, args.temperature, args.salinity,
+                                   ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity"))
     options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
                                                                        "workers")})
