@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -79,18 +80,20 @@ def figures(outcome: SyncOutcome) -> dict:
     return {"offsets": fig1, "residuals": fig2, "coverage": fig3}
 
 
-def _plain(value):
-    """A summary as JSON takes it: NaN and infinities None, numpy scalars Python's."""
+def plain(value: Any) -> Any:
+    """A summary as JSON takes it: NaN and infinities None, numpy scalars Python's, paths texts."""
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, (np.bool_,)):
+        return [plain(v) for v in value]
+    if isinstance(value, np.bool_):
         return bool(value)
-    if isinstance(value, (np.integer,)):
+    if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, (float, np.floating)):
         return float(value) if np.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
     return value
 
 
@@ -101,7 +104,7 @@ def write(outcome: SyncOutcome, out: Path) -> None:
     made = figures(outcome)
     try:
         with staged_directory(out) as tmp:
-            (tmp / "sync.json").write_text(json.dumps(_plain(outcome.summary), indent=2, allow_nan=False) + "\n")
+            (tmp / "sync.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
             outcome.offsets.to_csv(tmp / "offsets.csv", index=False)
             outcome.residuals.to_csv(tmp / "residuals.csv", index=False)
             outcome.sync_tags.to_csv(tmp / "sync_tags.csv", index=False)
@@ -114,4 +117,4 @@ def write(outcome: SyncOutcome, out: Path) -> None:
             plt.close(fig)
 
 
-__all__ = ["figures", "write"]
+__all__ = ["figures", "plain", "write"]

@@ -227,6 +227,18 @@ def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     return {n: (float(a), float(b)) for n, a, b in zip(serial, x, y)}
 
 
+def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] | None) -> tuple[pd.DataFrame, int]:
+    """The receivers table (``receiver``, ``x``, ``y``, ...) with a synchronisation's refined horizontal positions
+    (:func:`read_positions`; None: none) in place of the table's for the receivers it lists; and how many it moved."""
+    if refined is None:
+        return table, 0
+    table = table.copy()
+    moved = table["receiver"].isin(refined).to_numpy()
+    table.loc[moved, "x"] = [refined[n][0] for n in table.loc[moved, "receiver"]]
+    table.loc[moved, "y"] = [refined[n][1] for n in table.loc[moved, "receiver"]]
+    return table, int(moved.sum())
+
+
 @dataclass
 class ToaOutcome:
     """What :func:`build_toa` computed: ``toa`` (P, R) [s] on the base ``origin`` [s since 1970 UTC], ``names`` the
@@ -476,11 +488,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     assigned = assign(read_detections(detections, format), deployments)
     data, table = assigned.detections, assigned.hydrophones
     refined = read_positions(sync)
-    if refined is not None:  # the synchronisation's refined positions replace the table's
-        table = table.copy()
-        moved = table["receiver"].isin(refined).to_numpy()
-        table.loc[moved, "x"] = [refined[n][0] for n in table.loc[moved, "receiver"]]
-        table.loc[moved, "y"] = [refined[n][1] for n in table.loc[moved, "receiver"]]
+    table, moved = with_positions(table, refined)
     given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
              "burst_sequence": None if sequence is None else sequence.name}
     outcome = build_toa(data, table, clocks, tag, shortest, given)
@@ -489,7 +497,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     outcome.summary["receivers_file"] = deployments.summary()
     if refined is not None:
         outcome.summary["positions"] = {"source": "the synchronisation's positions.csv (refined)",
-                                        "receivers": int(moved.sum())}
+                                        "receivers": moved}
     return outcome
 
 
@@ -556,4 +564,4 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
 __all__ = ["BURST_LIMITS", "Clocks", "FORMATS", "PING_TYPE_NAMES", "REPLAY_FORMATS", "SENSOR_COLUMNS",
            "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa", "check_ping_type", "clocks_of",
            "header_line", "logged_clocks", "offsets_clocks", "read_clocks", "replay_matrix", "run_lines",
-           "tags_present", "write_matrix", "write_toa_folder"]
+           "tags_present", "with_positions", "write_matrix", "write_toa_folder"]

@@ -17,29 +17,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry.study import StudyOutcome
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
 #: The files a study writes beside its tags' folders.
 STUDY_FILES = ("study.json", "tracks.csv", "tags.csv", "receivers.csv", "tracks.geojson", "map.png")
-
-
-def _plain(value: Any) -> Any:
-    """A summary as JSON takes it: NaN and infinities None, numpy scalars Python's, paths texts."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, Path):
-        return str(value)
-    return value
 
 
 def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
@@ -65,7 +49,7 @@ def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
                          "properties": {"kind": "track", "tag": tag, "rows": int(len(ok)),
                                         "flagged_rows_left_out": int((rows["quality"] == "flagged").sum()),
                                         "first_utc": ok["time_utc"].iloc[0], "last_utc": ok["time_utc"].iloc[-1]}})
-    return {"type": "FeatureCollection", "features": _plain(features)}
+    return {"type": "FeatureCollection", "features": plain(features)}
 
 
 def study_map(outcome: StudyOutcome):
@@ -109,7 +93,7 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
     outcome.tracks.to_csv(folder / "tracks.csv", index=False)
     outcome.tags.to_csv(folder / "tags.csv", index=False)
     outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
-    (folder / "study.json").write_text(json.dumps(_plain(outcome.summary), indent=2, allow_nan=False) + "\n")
+    (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
     shapes = geojson(outcome)
     if shapes is not None:
         (folder / "tracks.geojson").write_text(json.dumps(shapes, allow_nan=False) + "\n")

@@ -88,17 +88,19 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
             series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
     """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
     synchronisation made here (or None)."""
-    from sblsim.orchestrator.sync.toa import logged_clocks, offsets_clocks, read_clocks, read_positions
+    from sblsim.orchestrator.sync.toa import (
+        logged_clocks,
+        offsets_clocks,
+        read_clocks,
+        read_positions,
+        with_positions,
+    )
 
     table = assigned.hydrophones
     if sync_dir is not None:
         clocks = read_clocks(sync_dir)
         refined = read_positions(sync_dir)
-        if refined is not None:
-            table = table.copy()
-            moved = table["receiver"].isin(refined).to_numpy()
-            table.loc[moved, "x"] = [refined[n][0] for n in table.loc[moved, "receiver"]]
-            table.loc[moved, "y"] = [refined[n][1] for n in table.loc[moved, "receiver"]]
+        table, _ = with_positions(table, refined)
         missing = sorted(set(table["receiver"]) - set(clocks.receivers))
         return clocks, table, {"source": "given", "folder": str(sync_dir), "receivers": len(clocks.receivers),
                                "not_synchronised": missing,

@@ -333,6 +333,15 @@ def _receivers_toml(path: Path, what: str) -> Receivers:
 ABSOLUTE_TIME_NAMES = ("epo", "epoch", "epoch_s", "time_utc", "timestamp", "datetime", "date_time")
 
 
+def _same_width(rows: list[tuple[int, list[str]]], header: list[str], name: str, what: str) -> None:
+    """Refuse the first row whose cells are not as many as the header's (one line, its line number), before some of
+    its columns are read."""
+    ragged = next(((line, len(cells)) for line, cells in rows if len(cells) != len(header)), None)
+    if ragged is not None:
+        raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, the header {len(header)} "
+                         f"({','.join(header)[:80]}); allowed: {len(header)} cells a row")
+
+
 def _times(rows: list[tuple[int, list[str]]], k: int, header: list[str], name: str, what: str,
            origin: float | None) -> np.ndarray | None:
     """The time column ``k`` of ``rows`` on the times of arrival's base [s] where it holds absolute times (ISO 8601
@@ -389,10 +398,7 @@ def read_track(path: Path | str, what: str, increasing: bool = True, origin: flo
     if geographic and frame is None:
         raise ModelError(f"{what}: {name!r}: given in latitude and longitude and the receivers have no CRS; allowed: "
                          "receivers with lat and lon (or --crs), or x and y in the receivers' frame")
-    ragged = next(((line, len(cells)) for line, cells in rows[1:] if len(cells) != len(header)), None)
-    if ragged is not None:
-        raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, the header {len(header)} "
-                         f"({','.join(header)[:80]}); allowed: {len(header)} cells a row")
+    _same_width(rows[1:], header, name, what)
     times = _times(rows[1:], index["t"], header, name, what, origin)
     keep = [k for k in range(len(header)) if times is None or k != index["t"]]
     used = [k for k in keep if k in index.values()]
@@ -480,10 +486,7 @@ def read_sound_speed_series(path: Path | str, origin: float | None = None) -> np
             raise ModelError(f"{what}: {name!r}: the header needs time_s and sound_speed_m_s columns, got "
                              f"{' '.join(header)[:80]}")
         index[key] = found[0]
-    ragged = next(((line, len(cells)) for line, cells in rows[1:] if len(cells) != len(header)), None)
-    if ragged is not None:
-        raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, the header {len(header)} "
-                         f"({','.join(header)[:80]}); allowed: {len(header)} cells a row")
+    _same_width(rows[1:], header, name, what)
     times = _times(rows[1:], index["t"], header, name, what, origin)
     columns = [index["c"]] if times is not None else [index["t"], index["c"]]
     values = _numbers([(line, [cells[k] for k in columns]) for line, cells in rows[1:]], name, what,
