@@ -15,15 +15,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry.study import StudyOutcome
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
-
-#: The files a study writes beside its tags' folders.
-STUDY_FILES = ("study.json", "tracks.csv", "tags.csv", "receivers.csv", "tracks.geojson", "map.png")
 
 
 def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
@@ -104,9 +100,4 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
         plt.close(fig)
 
 
-def read_tracks(path: Path | str) -> pd.DataFrame:
-    """A study's ``tracks.csv`` read back with its columns' types (``tag`` and ``time_utc`` texts)."""
-    return pd.read_csv(path, dtype={"tag": str, "time_utc": str, "quality": str})
-
-
-__all__ = ["STUDY_FILES", "geojson", "read_tracks", "study_map", "write_study"]
+__all__ = ["geojson", "study_map", "write_study"]

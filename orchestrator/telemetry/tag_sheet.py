@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -161,11 +160,6 @@ class TagSheet:
         """The sheet's tags of these roles, in its order."""
         return [t for t in self.tags if t.role in roles]
 
-    def table(self) -> pd.DataFrame:
-        """The sheet as read (``tags.json``'s and the console's view)."""
-        return pd.DataFrame([{"transmitter": t.transmitter, "role": t.role, "motion": t.motion,
-                              "ping_type": t.described(), "sensor": t.sensor, "name": t.name} for t in self.tags])
-
 
 def _inside(folder: Path, text: str, where: str) -> Path:
     """A file a sheet names, taken from the sheet's folder; refused where it (links followed) leaves the folder."""
@@ -269,11 +263,5 @@ def spec_for(sheet: TagSheet | None, transmitter: str) -> TagSpec:
     return found or TagSpec(transmitter)
 
 
-def described(spec: TagSpec) -> dict[str, Any]:
-    """A tag's row as ``tags.csv`` states it."""
-    return {"role": spec.role, "motion": spec.motion, "ping_type_stated": spec.described(), "sensor": spec.sensor,
-            "name": spec.name}
-
-
-__all__ = ["ALIASES", "MAX_TAGS", "MOTIONS", "RAW_UNITS", "ROLES", "SENSORS", "TagSheet", "TagSpec", "described",
-           "read_tag_sheet", "spec_for"]
+__all__ = ["ALIASES", "MAX_TAGS", "MOTIONS", "RAW_UNITS", "ROLES", "SENSORS", "TagSheet", "TagSpec", "read_tag_sheet",
+           "spec_for"]
