@@ -62,6 +62,7 @@ from sblsim.orchestrator.cosim.config import (
 from sblsim.orchestrator.cosim.metrics import RUN_METRICS
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan
 from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.paths import inside
 
 BUILTIN_STUDIES = ("paper", "million")
 DESIGNS = ("full", "fractional")
@@ -409,8 +410,11 @@ def load_study(source: str | Path | dict[str, Any], seed: int | None = None) -> 
     scenarios = _check_type(table, "scenarios", (list,), "a list of scenario names or files", "study")
     if not scenarios or not all(isinstance(s, str) for s in scenarios):
         raise StudyError("study.scenarios: expected a non-empty list of scenario names or .toml files")
-    scenarios = [s if (base is None or s in BUILTIN_SCENARIOS) else str((base / s).resolve())
-                 for s in scenarios]
+    try:  # a scenario file the study file names: in the study file's folder (sblsim.orchestrator.io.paths)
+        scenarios = [s if (base is None or s in BUILTIN_SCENARIOS) else
+                     str(inside(base, s, "study.scenarios", "study file")) for s in scenarios]
+    except ModelError as exc:
+        raise StudyError(str(exc)) from None
     replicates = _check_type(table, "replicates", (int,), "a whole number of replicates", "study")
     if not 1 <= replicates <= 1_000_000:
         raise StudyError(f"study.replicates: {replicates} is outside the allowed range [1, 1000000]")

@@ -67,6 +67,7 @@ from sblsim.orchestrator.cosim.master import ALGORITHMS
 from sblsim.orchestrator.cosim.plugins import user_model
 from sblsim.orchestrator.cosim.systems import check_diver
 from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.paths import inside
 
 BUILTIN_SCENARIOS = ("semicircle", "spiral", "random", "square", "harbour", "random-walk", "usbl-deep", "lbl-field")
 SECTIONS = ("run", "simulation", *COMPONENTS)
@@ -211,21 +212,21 @@ def named_files(raw: Mapping[str, Any]) -> list[tuple[str, str, str]]:
 def path_from(base: Path, path: str, where: str, confined: bool = False) -> str:
     """A file a configuration names, absolute: a relative ``path`` is taken from ``base``, the folder of the file
     that gives it (the working directory for ``--set`` and the API). ``confined`` (a configuration file's own
-    paths): a path that a symbolic link takes out of ``base`` is refused (a file given to us names what the user can
-    see in its folder, not what a link hides; the user names another file with ``--set``).
+    paths): a path that leaves ``base`` (absolute, ``..`` or through a symbolic link) is refused
+    (:func:`sblsim.orchestrator.io.paths.inside`: a file given to us names what its folder holds; the user names
+    another file with ``--set``).
 
     Raises
     ------
     ConfigError
-        One line naming ``where`` (the key), the path and where the link leads.
+        One line naming ``where`` (the key), the path as written and the folder.
     """
-    plain = Path(os.path.normpath(base / Path(path).expanduser()))
-    resolved = plain.resolve()
-    if confined and resolved != plain and not resolved.is_relative_to(base.resolve()):
-        raise ConfigError(f"{where}: {path!r} leads through a symbolic link to {str(resolved)!r}, outside the folder "
-                          f"of the file that names it ({str(base)!r}); allowed: a file that folder holds (name "
-                          "another with --set)")
-    return str(resolved)
+    if confined:
+        try:
+            return str(inside(base, path, where, "file"))
+        except ModelError as exc:
+            raise ConfigError(str(exc)) from None
+    return str(Path(os.path.normpath(base / Path(path).expanduser())).resolve())
 
 
 def _absolute_paths(raw: dict[str, Any], base: Path, confined: bool = False) -> None:

@@ -34,6 +34,7 @@ from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.sync.detections import FORMATS as DETECTION_FORMATS
@@ -119,13 +120,10 @@ def read_clocks(folder: Path | str) -> Clocks:
 
 
 def _in_folder(folder: Path, name: str) -> Path:
-    """A synchronisation's own file in its folder; refused where a symbolic link takes it out of the folder (the
-    folder a user names holds the tables, it does not point at others)."""
-    path = folder / name
-    if path.is_symlink() and not path.resolve().is_relative_to(folder.resolve()):
-        raise ModelError(f"sync: {str(path)!r} is a symbolic link out of the folder; allowed: the folder sblsim sync "
-                         f"--out wrote, its {name} a file in it")
-    return path
+    """A synchronisation's own file in its folder; refused where it (links followed) leaves the folder
+    (:func:`sblsim.orchestrator.io.paths.inside`: the folder a user names holds the tables, it does not point at
+    others)."""
+    return inside(folder, name, f"sync: {str(folder)[:80]!r}", "synchronisation")
 
 
 def offsets_clocks(offsets: pd.DataFrame) -> Clocks:

@@ -29,6 +29,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.schedule import PING_TYPES
+from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.sync.cells import named, numbers, pattern, read_text, refuse, shown_header, text_table
 from sblsim.orchestrator.sync.detections import MAX_DETECTION_BYTES
 from sblsim.orchestrator.sync.transmitters import TRANSMITTER
@@ -161,16 +162,6 @@ class TagSheet:
         return [t for t in self.tags if t.role in roles]
 
 
-def _inside(folder: Path, text: str, where: str) -> Path:
-    """A file a sheet names, taken from the sheet's folder; refused where it (links followed) leaves the folder."""
-    base = folder.resolve()
-    path = (folder / text).resolve()
-    if Path(text).is_absolute() or not path.is_relative_to(base):
-        raise ModelError(f"{where}: {text[:60]!r} is outside the tag sheet's folder; allowed: a file in the folder "
-                         "that holds the tag sheet (named relative to it)")
-    return path
-
-
 def read_tag_sheet(path: Path | str) -> TagSheet:
     """Read a tag sheet (the module docstring).
 
@@ -236,7 +227,8 @@ def read_tag_sheet(path: Path | str) -> TagSheet:
         if has_range and not (np.isfinite(least[k]) and np.isfinite(most[k]) and least[k] <= most[k]):
             raise ModelError(f"{where}: min_delay {least[k]:g} and max_delay {most[k]:g} s; allowed: both, "
                              "min_delay <= max_delay")
-        sequence = _inside(path.parent, sequences[k], f"{where} column burst_sequence") if sequences[k] else None
+        sequence = (inside(path.parent, sequences[k], f"{where} column burst_sequence", "tag sheet") if sequences[k]
+                    else None)
         kind = kinds[k] or ("pbi" if sequence is not None else "rbi" if has_range and least[k] < most[k] else
                             "sbi" if has_range or np.isfinite(nominal[k]) else None)
         stable = nominal[k] if np.isfinite(nominal[k]) else least[k] if has_range and least[k] == most[k] else None
