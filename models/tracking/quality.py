@@ -63,6 +63,11 @@ MAX_SPEED = 10.0
 EXPLAINED_SIGMAS = 6.1
 #: The quality marks, in order of severity.
 QUALITY = ("ok", "restart", "flagged")
+#: The reasons of a flag, in the order a row's ``quality_reason`` lists them: each :class:`Quality` field and the
+#: reason's name in the tables (module docstring).
+REASONS = (("stretch", "off_trusted_fixes"), ("alone", "off_a_trusted_fix"), ("reach", "out_of_reach"),
+           ("speed", "too_fast"), ("uncertain", "placed_less_well_than_a_fix"), ("unverified", "unverified"),
+           ("unplaced", "no_position"))
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,9 @@ class Quality:
     (from one such ping to the next with no agreeing fix between), ``reach`` (out of reach of the nearest trusted
     fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`), ``uncertain`` (a horizontal DRMS of its own above
     :data:`TRUSTED_FIX_DRMS`, or not finite), ``unverified`` (not checked by its own measurements and beyond the motion
-    model's reach of a trusted fix: module docstring)."""
+    model's reach of a trusted fix: module docstring), ``alone`` (off a trusted fix that explains more of its ping's
+    arrivals, its own measurements not checking it), ``unplaced`` (no finite position). A flagged row has one of
+    these reasons at least (:attr:`reason`)."""
 
     quality: np.ndarray
     fix: np.ndarray
@@ -81,11 +88,39 @@ class Quality:
     speed: np.ndarray
     uncertain: np.ndarray
     unverified: np.ndarray
+    alone: np.ndarray
+    unplaced: np.ndarray
 
     @property
     def flagged(self) -> int:
         """The pings flagged."""
         return int((self.quality == "flagged").sum())
+
+    @property
+    def reason(self) -> np.ndarray:
+        """(m,) of str: each flagged row's reasons (:data:`REASONS`' names, joined by ``;``), ``""`` for a row not
+        flagged."""
+        return reasons(self.quality == "flagged", {name: getattr(self, field) for field, name in REASONS})
+
+
+def reasons(flagged: np.ndarray, why: dict[str, np.ndarray]) -> np.ndarray:
+    """Each flagged row's reasons joined by ``;`` in the order of ``why`` (``""`` where not flagged).
+
+    Parameters
+    ----------
+    flagged : ndarray of bool, (m,)
+    why : dict
+        A reason's name -> (m,) bool, the rows it holds for.
+
+    Returns
+    -------
+    ndarray of str, (m,)
+    """
+    out = np.full(len(flagged), "", dtype=object)
+    for name, holds in why.items():
+        at = np.asarray(flagged, bool) & np.asarray(holds, bool)
+        out[at] = np.where(out[at] == "", name, out[at] + ";" + name)
+    return out.astype(str)
 
 
 def _to_spare(count: np.ndarray, known_depth: np.ndarray | None, dim: int) -> np.ndarray:
@@ -301,8 +336,8 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     if restarts is not None:
         quality[np.asarray(restarts, bool)] = "restart"
     quality[flagged] = "flagged"
-    return Quality(quality.astype(str), fix_bad, stretch, reach, speed, uncertain, unverified)
+    return Quality(quality.astype(str), fix_bad, stretch, reach, speed, uncertain, unverified, alone, ~finite)
 
 
-__all__ = ["EXPLAINED_SIGMAS", "FIX_GATE", "FIX_SLACK", "MAX_SPEED", "QUALITY", "TRUSTED_FIX_DRMS", "Quality",
-           "check_track", "explained", "trusted_fixes"]
+__all__ = ["EXPLAINED_SIGMAS", "FIX_GATE", "FIX_SLACK", "MAX_SPEED", "QUALITY", "REASONS", "TRUSTED_FIX_DRMS",
+           "Quality", "check_track", "explained", "reasons", "trusted_fixes"]

@@ -724,9 +724,9 @@ def quality_line(summary: dict[str, Any]) -> str:
     main = summary["track"]
     flagged = summary["flagged"].get(main, 0)
     n = summary["fixed"].get(main, 0)
-    return (f"quality: {flagged} of {n} track rows flagged (off their own trusted single-ping fixes, faster than "
-            f"the tag can move, placed less well than a trusted fix, or held by the motion model alone beyond its "
-            f"reach of one), {summary['restarts']} restarts of the EKF, "
+    why = ", ".join(f"{name} {count}" for name, count in summary.get("flag_reasons", {}).items())
+    return (f"quality: {flagged} of {n} track rows ({ESTIMATOR_NAMES[main]}) flagged"
+            f"{f' ({why}: the quality_reason column)' if why else ''}, {summary['restarts']} restarts of the EKF, "
             f"{summary['trusted_fixes']} trusted fixes")
 
 

@@ -50,7 +50,7 @@ TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated
                "sound_speed_m_s", "sound_speed_source", "first_utc", "last_utc", "folder", "wall_time_s")
 #: The columns of ``tracks.csv`` (``z`` and ``sigma_z`` after ``y`` and ``sigma_y`` in 3-D).
 TRACK_COLUMNS = ("tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "receivers_heard",
-                 "quality")
+                 "quality", "quality_reason")
 
 
 @dataclass

@@ -15,9 +15,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
@@ -36,6 +39,17 @@ from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, SIGMA_TOA, motion_mo
 ESTIMATOR_NAMES = {"stationary": "stationary fix", "robust": "robust smoother", "rts": "RTS smoother",
                    "ekf": "EKF (causal)", "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)",
                    "fix": "single-ping fix", "reference": "reference"}
+
+
+def _with_reason(reason: pd.Series, name: str) -> pd.Series:
+    """A quality reason added to each row's (``;`` between: :func:`sblsim.models.tracking.quality.reasons`)."""
+    return reason.where(reason == "", reason + ";") + name
+
+
+def _reason_counts(reason: pd.Series) -> dict[str, int]:
+    """The rows each quality reason holds for, most first (a row of several counted under each)."""
+    named = reason[reason != ""].str.split(";").explode()
+    return {str(k): int(v) for k, v in named.value_counts().items()}
 
 
 ESTIMATORS = ("stationary", "robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
@@ -273,7 +287,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                       for k, a in enumerate(columns)}
         frames[estimator] = pd.DataFrame({"estimator": estimator, "ping": ping, "time": t,
                                           **placed(t, p), **sigmas, "receivers_heard": heard,
-                                          "quality": checked.quality})
+                                          "quality": checked.quality, "quality_reason": checked.reason})
         covariances[estimator] = cov[:, :2, :2]
         flagged[estimator] = checked.flagged
 
@@ -289,6 +303,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                        "permutations": PERMUTATIONS}, "moved": went}
         if went:  # one position refuted by the tag's own fixes: no row of it is a position to take
             frames["stationary"]["quality"] = "flagged"
+            frames["stationary"]["quality_reason"] = _with_reason(frames["stationary"]["quality_reason"], "tag_moved")
             flagged["stationary"] = len(kp)
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
@@ -333,6 +348,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     # a fix the checks do not trust (no arrival to spare, or its own chi2 test failed) is a position its own data
     # cannot vouch for: on the full array 39 of the 112 such rows were more than 10 m from the GPS
     frames["fix"].loc[~trusted[f], "quality"] = "flagged"
+    frames["fix"].loc[~trusted[f], "quality_reason"] = _with_reason(frames["fix"]["quality_reason"][~trusted[f]],
+                                                                    "untrusted_fix")
     flagged["fix"] = int((frames["fix"]["quality"] == "flagged").sum())
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
@@ -360,7 +377,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
         "restarts": 0 if record is None else len(record.restarts),
         "fixed": {e: int(len(fr)) for e, fr in frames.items()},
-        "flagged": flagged, "trusted_fixes": int(trusted.sum()),
+        "flagged": flagged, "flag_reasons": _reason_counts(frames[main]["quality_reason"]),
+        "trusted_fixes": int(trusted.sum()),
         "receivers_late": [{"receiver": names[k], "arrivals": int(judged.arrivals[k]),
                             "median_residual_sigmas": float(judged.median_z[k]), "kept_share": float(judged.kept[k])}
                            for k in np.flatnonzero(judged.late)],

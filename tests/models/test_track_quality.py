@@ -75,6 +75,27 @@ def test_a_jump_faster_than_a_tag_moves_is_flagged_and_restarts_are_marked():
     assert (q.quality == "flagged").sum() == 3
 
 
+def test_each_flagged_row_names_its_reasons_and_no_other_row_any():
+    """A 60 m jump at ping 40 (too fast on both sides: 39, 40, 41), a NaN covariance at 12 (placed less well than a
+    fix) and a NaN position at 20 (no position): each row's ``quality_reason`` is exactly the
+    reasons set for it, in :data:`~sblsim.models.tracking.quality.REASONS`' order; every other row ``""``."""
+    toa, truth, emissions, fx, fc, fu, _ = simulated()
+    track = truth.copy()
+    track[40] += [60.0, 0.0]
+    track[20] = np.nan
+    cov = np.tile(0.01 * np.eye(2), (len(truth), 1, 1))
+    cov[12] = np.nan
+    q = qa.check_track(emissions, track, cov, fx, fc, np.zeros(len(truth), bool))
+    # a step to or from no position is not within the speed limit: its neighbours too fast as well
+    expected = {12: "placed_less_well_than_a_fix", 39: "too_fast", 40: "too_fast", 41: "too_fast",
+                19: "too_fast", 20: "too_fast;no_position", 21: "too_fast"}
+    reason = q.reason
+    assert {int(k): str(reason[k]) for k in np.flatnonzero(reason != "")} == expected
+    assert set(np.flatnonzero(q.quality == "flagged")) == set(expected)
+    assert qa.reasons(np.array([True, True, False]), {"a": np.array([1, 0, 1]), "b": np.array([1, 1, 1])}).tolist(
+        ) == ["a;b", "b", ""]
+
+
 def test_a_receiver_heard_by_a_reflection_is_named_and_the_others_are_not():
     """One receiver's arrivals all 3 ms late (4.4 m of extra path; a reflection around a corner): its median residual
     against the robust smoother's track far beyond 3 σ, named; every other receiver's within a few tenths, not named;

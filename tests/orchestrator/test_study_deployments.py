@@ -195,8 +195,8 @@ def test_a_tag_sheet_of_every_ping_type_role_and_sensor(tmp_path):
     ("A,rbi,,,,", "ping_type rbi needs min_delay < max_delay"),
     ("A,sbi,60,120,,", "a stable interval has one delay"),
     ("A,pbi,,,,", "ping_type pbi needs burst_sequence"),
-    ("A,,,,../outside.txt,", "outside the tag sheet's folder"),
-    ("A,,,,/etc/hostname,", "outside the tag sheet's folder"),
+    ("A,,,,../outside.txt,", "outside the folder of the tag sheet"),
+    ("A,,,,/etc/hostname,", "outside the folder of the tag sheet"),
     ("A,abi,,,,", "column ping_type: 'abi'"),
     ("A,,,,,whale", "column role: 'whale'"),
     ("A,,0.01,0.02,,", "column min_delay: '0.01'"),
@@ -220,5 +220,5 @@ def test_a_sequence_file_linked_out_of_the_sheets_folder_is_refused(tmp_path):
     os.symlink(tmp_path / "private.txt", folder / "seq.txt")
     path = folder / "tags.csv"
     path.write_text("transmitter,ping_type,burst_sequence\nA,pbi,seq.txt\n")
-    with pytest.raises(ModelError, match="outside the tag sheet's folder"):
+    with pytest.raises(ModelError, match="outside the folder of the tag sheet"):
         read_tag_sheet(path)

@@ -14,6 +14,7 @@ import pytest
 import sblsim
 from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_tracking as tt
+from sblsim.models.tracking.quality import REASONS
 from sblsim.orchestrator.tracks.toa import read_receivers, read_toa, read_track
 
 # the recording is in the repository (tests and docs), not in the wheel
@@ -252,8 +253,14 @@ def test_written_files_keep_the_issue_names(full):
     import pandas as pd
 
     track = pd.read_csv(full.out / "track.csv")
-    assert list(track.columns) == ["time", "x", "y", "sigma_x", "sigma_y", "receivers_heard", "quality"]
+    assert list(track.columns) == ["time", "x", "y", "sigma_x", "sigma_y", "receivers_heard", "quality",
+                                   "quality_reason"]
     assert set(track["quality"]) <= {"ok", "restart", "flagged"}
+    # a flagged row names its reasons, of the documented ones; a row not flagged none
+    why = track["quality_reason"].fillna("")
+    flagged = track["quality"] == "flagged"
+    assert (why[flagged] != "").all() and (why[~flagged] == "").all() and flagged.any()
+    assert set(";".join(why[flagged]).split(";")) <= {name for _, name in REASONS}
     robust = full.estimates[full.estimates["estimator"] == "robust"]
     assert np.allclose(track["x"], robust["x"], rtol=0, atol=1e-9) and len(track) == len(robust)
     score = json.loads((full.out / "score.json").read_text())
