@@ -270,6 +270,8 @@ def main(args: argparse.Namespace) -> int:
                                                  f", NEES {nees:.3g} inside the array (2 when consistent)"))
     for note in s["notes"]:
         print(f"note: {note}", file=sys.stderr)
+    for warning in s.get("warnings", []):
+        print(f"sblsim: warning: {warning}", file=sys.stderr)
     if s["not_synchronised"]:
         print(f"sblsim: warning: not synchronised: {', '.join(s['not_synchronised'])}", file=sys.stderr)
     extra = "positions.csv, " if outcome.positions is not None else ""

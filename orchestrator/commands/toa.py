@@ -151,7 +151,7 @@ def add_ping_type(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim toa`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.sync.toa import build, check_ping_type, run_lines
+    from sblsim.orchestrator.sync.toa import build, check_ping_type, run_lines, say_warnings
 
     kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
                                                ("--ping-type", "--burst-interval", "--burst-sequence"))
@@ -164,6 +164,7 @@ def main(args: argparse.Namespace) -> int:
     write_toa_folder(outcome, out)
     for line in run_lines(outcome, str(out)):
         print(line)
+    say_warnings(outcome.summary)
     s = outcome.summary
     for what, names in (("not in the receivers table", s["receivers_not_in_table"]),
                         ("not synchronised", s["receivers_not_synchronised"])):

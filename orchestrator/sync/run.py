@@ -25,7 +25,9 @@ from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, sync_emissions
+from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
+from sblsim.models.sync.resolution import resolution_warning
 from sblsim.orchestrator.sync.detections import Detections
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import assign
@@ -444,6 +446,16 @@ def _finite(values: np.ndarray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in values]
 
 
+def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None) -> str | None:
+    """One line where the detections' times are rounded too coarsely for the array
+    (:func:`sblsim.models.sync.resolution.resolution_warning`; ``hydrophones``' ``x``, ``y``, ``z`` [m] give the
+    largest travel time at ``sound_speed`` [m/s], 1,480 m/s where not known), else None."""
+    speed = sound_speed or 1480.0
+    xyz = np.nan_to_num(hydrophones[["x", "y", "z"]].to_numpy(float))  # a depth not given: the horizontal alone
+    return resolution_warning(detections.frame["time"].to_numpy(float), largest_travel_time(xyz, speed), speed,
+                              f"detections {detections.source!r}")
+
+
 def synchronise_study(detections: Detections, deployments, sound_speed: float | None = None,
                       series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                       reference: str | None = None, **options: Any) -> SyncOutcome:
@@ -463,6 +475,10 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
                           **options)
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
+    line = rounding_warning(assigned.detections, assigned.hydrophones, outcome.summary["sound_speed"].get(
+        "sound_speed_m_s"))
+    if line:  # times rounded so coarsely that the clocks and every position from them are poor
+        outcome.summary.setdefault("warnings", []).append(line)
     frame = deployments.frame
     if outcome.positions is not None and frame is not None:
         outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),
@@ -470,4 +486,5 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     return outcome
 
 
-__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "synchronise", "synchronise_study"]
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "rounding_warning", "synchronise",
+           "synchronise_study"]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import tempfile
 import time as clock
 from contextlib import contextmanager
@@ -48,6 +49,7 @@ from sblsim.orchestrator.sync.detections import (
     _table,
     read_detections,
 )
+from sblsim.orchestrator.sync.run import rounding_warning
 from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
 from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN, read_burst_sequence
 
@@ -491,6 +493,8 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
              "burst_sequence": None if sequence is None else sequence.name}
     outcome = build_toa(data, table, clocks, tag, shortest, given)
     outcome.frame = deployments.frame
+    rounded = rounding_warning(data, table, None)
+    outcome.summary["warnings"] = [rounded] if rounded else []
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
     if refined is not None:
@@ -522,6 +526,12 @@ def run_lines(outcome, where: str) -> list[str]:
     return lines
 
 
+def say_warnings(summary: dict[str, Any]) -> None:
+    """A built matrix's warnings (``summary["warnings"]``: times rounded too coarsely), each a line on stderr."""
+    for warning in summary.get("warnings", []):
+        print(f"sblsim: warning: {warning}", file=sys.stderr)
+
+
 #: ``sblsim replay --format``'s names of raw detections (``detections``: read from the file's first line).
 REPLAY_FORMATS = {"detections": None, **{f: f for f in DETECTION_FORMATS}}
 
@@ -548,6 +558,7 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
                     sequence, args.crs, args.frame)
     for line in run_lines(outcome, ""):
         print(line, flush=True)
+    say_warnings(outcome.summary)
     with tempfile.TemporaryDirectory(prefix="sblsim-toa-") as tmp:
         folder = Path(tmp) / "".join(c if c.isalnum() or c in "._-" else "_" for c in args.tag)
         folder.mkdir()
@@ -562,4 +573,4 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
 __all__ = ["BURST_LIMITS", "Clocks", "FORMATS", "PING_TYPE_NAMES", "REPLAY_FORMATS", "SENSOR_COLUMNS",
            "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa", "check_ping_type", "clocks_of",
            "header_line", "logged_clocks", "offsets_clocks", "read_clocks", "replay_matrix", "run_lines",
-           "tags_present", "with_positions", "write_matrix", "write_toa_folder"]
+           "say_warnings", "tags_present", "with_positions", "write_matrix", "write_toa_folder"]

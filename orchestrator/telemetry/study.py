@@ -38,7 +38,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
-from sblsim.orchestrator.sync.run import synchronise
+from sblsim.orchestrator.sync.run import rounding_warning, synchronise
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
 from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
@@ -218,6 +218,9 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         raise ModelError(f"tag: none of the tags asked for ({', '.join(n for n, _ in asked[:8])}) is detected inside "
                          f"a deployment in {data.source!r}; allowed: a detected tag, e.g. "
                          + ", ".join(f"{t} ({c} detections)" for t, c in counts.head(6).items()))
+    rounded = rounding_warning(assigned.detections, assigned.hydrophones, sound_speed)
+    if rounded:
+        notes.append(rounded)
     clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours, notes)
     frame_crs = None if deployments.frame is None else deployments.frame.crs
     groups = assigned.detections.frame.groupby("tag", sort=False).groups

@@ -301,3 +301,26 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     print(f"simulated sync tags' NEES inside the array over 20 seeds: {np.mean(means):.2f} (seeds {min(means):.2f} "
           f"to {max(means):.2f})")
     assert 1.5 <= np.mean(means) <= 4.5, means
+
+
+def test_whole_second_times_are_said_in_one_line_and_milliseconds_not(tmp_path, capsys):
+    """A small simulated array (6 receivers, 3 h) exported with whole seconds: ``sync`` says so in one warning line
+    naming the file and the rounding (1 s); the same times to the millisecond: no such line."""
+    sim = simulate_sync(n_receivers=6, hours=3.0, seed=5, offset=0.5, drift=5e-6, interval=(540.0, 660.0),
+                        noise=0.15e-3, echo_share=0.0)
+    lines = {}
+    for name, digits in (("whole", 0), ("ms", 3)):
+        folder = tmp_path / name
+        folder.mkdir()
+        detections, hydrophones = _write_simulation(folder, sim, extra_receiver=False)
+        table = pd.read_csv(detections, dtype={"frac": str})
+        table["frac"] = [f"{round(float(v), digits):.{digits}f}" for v in table["frac"]]
+        if digits == 0:  # a whole second: the fraction's rounding carried into epo
+            table["epo"] += table["frac"].astype(float).astype(int)
+            table["frac"] = "0"
+        table.to_csv(detections, index=False)
+        main(["sync", str(detections), "--receivers", str(hydrophones), "--sound-speed", f"{sim.sound_speed}",
+              "--out", str(folder / "out")])
+        lines[name] = [line for line in capsys.readouterr().err.splitlines() if "whole multiple" in line]
+    assert len(lines["whole"]) == 1 and "every time is a whole multiple of 1 s" in lines["whole"][0]
+    assert "detections.csv" in lines["whole"][0] and lines["ms"] == []
