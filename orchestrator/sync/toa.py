@@ -387,12 +387,32 @@ def _sensors(use: pd.DataFrame, ping: np.ndarray, n_pings: int) -> dict[str, np.
     return out
 
 
+def sensor_depth(outcome: ToaOutcome) -> tuple[np.ndarray | None, str | None]:
+    """The tag's depth per ping from its depth sensor (``pings``' ``depth_m``: readings in metres, a VUE export's
+    calibrated depth or a tag sheet's conversion) for the tracker, where the receivers are in 3-D; else None, and a
+    note where readings are left to ``pings.csv`` (a 2-D array has no depth to take them).
+
+    Returns
+    -------
+    depth : ndarray, (P,) or None
+        [m] per ping, NaN where the ping has no reading.
+    note : str or None
+    """
+    if "depth_m" not in outcome.pings or not np.isfinite(outcome.pings["depth_m"].to_numpy(float)).any():
+        return None, None
+    if outcome.positions.shape[1] != 3:
+        return None, (f"tag {outcome.summary['tag']}: its depth readings are not used by the tracker (the receivers "
+                      "have no depths: 2-D); they are in its pings.csv")
+    return outcome.pings["depth_m"].to_numpy(float), None
+
+
 def write_toa_folder(outcome: ToaOutcome, out: Path) -> None:
     """``toa.txt`` (the replay's format: a header of receiver names, ``NA`` where not heard, [s] from
-    ``origin_epoch_s``; no header where every name is a number: :func:`header_line`), ``receivers.csv`` (``name,
-    x_m, y_m[, z_m]``), ``pings.csv`` and ``toa.json``, all or nothing."""
+    ``origin_epoch_s``; no header where every name is a number: :func:`header_line`; the tag's depth per ping
+    first where its sensor gives one in 3-D, :func:`sensor_depth`), ``receivers.csv`` (``name, x_m, y_m[, z_m]``),
+    ``pings.csv`` and ``toa.json``, all or nothing."""
     with staged_directory(out) as tmp:
-        write_matrix(outcome, tmp)
+        write_matrix(outcome, tmp, sensor_depth(outcome)[0])
         outcome.pings.to_csv(tmp / "pings.csv", index=False, float_format="%.9f")
         (tmp / "toa.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")
 
@@ -562,7 +582,10 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     with tempfile.TemporaryDirectory(prefix="sblsim-toa-") as tmp:
         folder = Path(tmp) / "".join(c if c.isalnum() or c in "._-" else "_" for c in args.tag)
         folder.mkdir()
-        toa, receivers = write_matrix(outcome, folder)
+        depth, note = sensor_depth(outcome)
+        if note:
+            print(f"note: {note}", file=sys.stderr)
+        toa, receivers = write_matrix(outcome, folder, depth)
         named = toa.with_name(f"{folder.name}.txt")
         toa.rename(named)
         yield argparse.Namespace(**{**vars(args), "log": named, "receivers": receivers, "format": "toa",
@@ -573,4 +596,4 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
 __all__ = ["BURST_LIMITS", "Clocks", "FORMATS", "PING_TYPE_NAMES", "REPLAY_FORMATS", "SENSOR_COLUMNS",
            "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa", "check_ping_type", "clocks_of",
            "header_line", "logged_clocks", "offsets_clocks", "read_clocks", "replay_matrix", "run_lines",
-           "say_warnings", "tags_present", "with_positions", "write_matrix", "write_toa_folder"]
+           "say_warnings", "sensor_depth", "tags_present", "with_positions", "write_matrix", "write_toa_folder"]

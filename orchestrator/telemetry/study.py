@@ -243,7 +243,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                     "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
             matrix = build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
                                spec.shortest_interval(), kind)
-            _write_matrix(matrix, workdir / folder, notes, key)
+            _write_matrix(matrix, workdir / folder, notes)
             matrices[folder] = matrix
             folders[name] = folder
             options = {"smooth": True, "sound_speed": sound_speed,
@@ -279,17 +279,15 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced)
 
 
-def _write_matrix(matrix, folder: Path, notes: list[str], key: str) -> None:
+def _write_matrix(matrix, folder: Path, notes: list[str]) -> None:
     """A tag's ``toa.txt`` (with its depth per ping where the sensor gives one and the receivers are in 3-D),
     ``receivers.csv``, ``pings.csv`` and ``toa.json``."""
-    from sblsim.orchestrator.sync.toa import write_matrix
+    from sblsim.orchestrator.sync.toa import sensor_depth, write_matrix
 
     folder.mkdir(parents=True, exist_ok=True)
-    depth = matrix.pings["depth_m"].to_numpy(float) if "depth_m" in matrix.pings else None
-    if depth is not None and matrix.positions.shape[1] != 3:
-        notes.append(f"tag {key}: its depth readings are not used by the tracker (the receivers have no depths: "
-                     "2-D); they are in its pings.csv")
-        depth = None
+    depth, note = sensor_depth(matrix)
+    if note:
+        notes.append(note)
     write_matrix(matrix, folder, depth)
     matrix.pings.to_csv(folder / "pings.csv", index=False, float_format="%.9f")
     (folder / "toa.json").write_text(json.dumps(matrix.summary, indent=2, allow_nan=False) + "\n")

@@ -212,7 +212,7 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
     for dim, expected in ((3, [4.0, np.nan]), (2, None)):
         matrix = ToaOutcome(toa, ["1623", "1626"], np.zeros((2, dim)), pings, {"tag": "A"}, 0.0)
         notes: list[str] = []
-        _write_matrix(matrix, tmp_path / str(dim), notes, "A")
+        _write_matrix(matrix, tmp_path / str(dim), notes)
         read = read_toa(tmp_path / str(dim) / "toa.txt")
         if expected is None:
             assert read.depth is None and read.names is None and "not used by the tracker" in notes[0]

@@ -267,3 +267,26 @@ def test_replay_refuses_detection_options_out_of_place(tmp_path, capsys, array, 
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and found in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_depth_sensors_readings_reach_the_tracker_in_3d_and_are_said_left_out_in_2d(tmp_path, array):
+    """``sblsim toa``'s ``toa.txt`` takes the readings in metres (``pings``' ``depth_m``) as its first column where
+    the receivers are in 3-D (what ``replay --format toa`` reads as the tag's depth), the same values per ping;
+    in 2-D none, and a note says they stay in ``pings.csv``; without readings neither."""
+    from sblsim.orchestrator.sync.toa import ToaOutcome, sensor_depth, write_toa_folder
+    from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN
+
+    reading = np.array([3.0, np.nan, 4.5])
+    toa = np.array([[0.1, 0.2], [10.1, np.nan], [20.3, 20.2]])
+    flat = ToaOutcome(toa, ["A", "B"], np.array([[0.0, 0.0], [100.0, 0.0]]),
+                      pd.DataFrame({"ping": [0, 1, 2], "depth_m": reading}), {"tag": "T9"}, EPOCH)
+    deep = ToaOutcome(toa, ["A", "B"], np.array([[0.0, 0.0, 5.0], [100.0, 0.0, 6.0]]), flat.pings, {"tag": "T9"},
+                      EPOCH)
+    depth, note = sensor_depth(flat)
+    assert depth is None and "T9" in note and "pings.csv" in note
+    assert sensor_depth(ToaOutcome(toa, ["A", "B"], deep.positions, flat.pings[["ping"]], {"tag": "T9"}, EPOCH)) == (
+        None, None)
+    write_toa_folder(deep, tmp_path / "out")
+    written = pd.read_csv(tmp_path / "out" / "toa.txt", sep=" ")
+    assert list(written.columns) == [DEPTH_COLUMN, "A", "B"]
+    np.testing.assert_array_equal(written[DEPTH_COLUMN].to_numpy(), reading)
