@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+#: A truth whose horizontal positions span at most this is still: no lag is searched against it [m].
+STILL_M = 0.01
 #: The time lags between the truth and the track searched [s]: ±this.
 LAG_RANGE_S = 30.0
 
@@ -37,9 +39,10 @@ def estimate_lag(t: np.ndarray, xy: np.ndarray, truth: np.ndarray, bound: float 
     """The constant shift ``lag`` [s] of the truth's time (the truth taken at ``t + lag``) in [−bound, bound] that
     minimises the RMS 2-D error of the estimates at times ``t`` (m,) and positions ``xy`` (m, 2), over the
     estimates whose times shifted by any lag in the range stay inside the truth's span; and that RMS [m]. None
-    where fewer than 3 estimates qualify."""
+    where fewer than 3 estimates qualify, or where the truth does not move (its horizontal positions within
+    :data:`STILL_M` of each other over the span: a surveyed position), which no lag changes."""
     ok = (t - bound >= truth[0, 0]) & (t + bound <= truth[-1, 0]) & np.isfinite(xy).all(axis=1)
-    if ok.sum() < 3:
+    if ok.sum() < 3 or np.ptp(truth[:, 1:3], axis=0).max() <= STILL_M:
         return None, None
     t, xy = t[ok], xy[ok]
 
@@ -103,4 +106,4 @@ def score(t: np.ndarray, p: np.ndarray, truth: np.ndarray, cov: np.ndarray | Non
     return stats, err, err3
 
 
-__all__ = ["LAG_RANGE_S", "estimate_lag", "score"]
+__all__ = ["LAG_RANGE_S", "STILL_M", "estimate_lag", "score"]

@@ -314,6 +314,23 @@ def test_lag_is_estimated_and_not_applied():
     assert np.isclose(stats_["along_track_m"], 0.83 * lag, rtol=0.1)  # a lag seen as an along-track offset
 
 
+def test_no_lag_is_searched_against_a_truth_that_does_not_move():
+    """A surveyed position (the same point at every time): no lag (None), the errors scored; the same estimates
+    against a truth that moves 2 m over the span: a lag found."""
+    from sblsim.orchestrator.tracks.scoring import score
+
+    rng = np.random.default_rng(6)
+    t = np.arange(40.0, 560.0, 2.0)
+    still = np.array([[0.0, 10.0, -5.0], [600.0, 10.0, -5.0]])
+    xy = np.array([10.0, -5.0]) + 0.3 * rng.normal(size=(len(t), 2))
+    stats_, err, _ = score(t, xy, still)
+    assert stats_["lag_s"] is None and stats_["rms_at_lag_m"] is None
+    assert np.isclose(stats_["median_m"], np.median(np.hypot(xy[:, 0] - 10.0, xy[:, 1] + 5.0)), rtol=1e-12)
+    moving = still.copy()
+    moving[1, 1] += 2.0
+    assert score(t, xy, moving)[0]["lag_s"] is not None
+
+
 def test_drop_detections_is_seeded_and_takes_its_share():
     from sblsim.orchestrator.tracks.track import drop_detections
 
