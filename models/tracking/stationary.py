@@ -135,6 +135,53 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
                          iterations)
 
 
+def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, fix: StationaryFix,
+                     dof: float = ROBUST_DOF) -> np.ndarray:
+    """How a constant time bias at each receiver moves a stationary tag's pooled position: the columns of
+    ``∂p / ∂β_i`` [m/s].
+
+    An error common to all the pings of one receiver is not averaged away by pooling them: the receiver's survey
+    error (its range to a still tag is the same every ping), its clock offset's error and the sound speed's error
+    (``−ρ_i δc / c²``, different at each receiver) are each such a bias ``β_i`` of its arrivals. At the solution
+    the estimating equations ``Σ J ψ(z) = 0`` hold (``ψ`` the Student-t score), so a bias moves the position by
+    ``δp = −(Σ Jᵀ ψ' J)⁻¹ Σ Jᵀ ψ' δz`` (the M-estimator's influence: Huber & Ronchetti, *Robust Statistics*, Wiley
+    2009, § 6.2), ``ψ'`` the observed information, ``(Σ Jᵀ ψ' J)⁻¹`` the fix's covariance, ``δz = β_i / σ_toa`` at
+    receiver i's arrivals; a bias common to every receiver moves only the emission times (the rows centred per
+    ping). Given the biases' covariance B (n, n) [s²], the position's consider covariance is ``S B Sᵀ`` (Tapley,
+    Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004, § 6.3).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    receivers : ndarray, (n, dim)
+        [m].
+    c, sigma_toa : float
+        [m/s], [s]: those of the fix.
+    fix : StationaryFix
+        :func:`stationary_fix`'s result on the same data.
+    dof : float
+        ν.
+
+    Returns
+    -------
+    ndarray, (dim, n)
+        S [m/s].
+    """
+    toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    heard = np.isfinite(toa)
+    dim = receivers.shape[1]
+    diff = fix.position[None, :] - receivers
+    d = np.linalg.norm(diff, axis=1)
+    unit = diff / np.maximum(d, 1e-9)[:, None] / c
+    emitted = np.where(heard, toa, 0.0) - d[None, :] / c
+    r = np.where(heard, _centred(emitted, fix.weights), 0.0) / sigma_toa
+    info = np.where(heard, observed_information(r, dof), 0.0)
+    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), info), 0.0) / sigma_toa
+    return -fix.covariance @ np.einsum("mn,mni->in", info, J) / sigma_toa
+
+
 #: The permutations of :func:`moved`'s test, and its level: the tag moved where the fixes' order is more orderly than
 #: in every permutation (p = 1 / (PERMUTATIONS + 1) = 0.001).
 PERMUTATIONS = 999
@@ -193,5 +240,5 @@ def moved(fixes: np.ndarray, times: np.ndarray, trusted: np.ndarray, seed: int =
     return len(k), observed, bool(observed < lowest)
 
 
-__all__ = ["ITERATIONS", "MAX_FIXES", "MIN_FIXES", "PERMUTATIONS", "TOLERANCE", "StationaryFix", "moved",
-           "stationary_fix"]
+__all__ = ["ITERATIONS", "MAX_FIXES", "MIN_FIXES", "PERMUTATIONS", "TOLERANCE", "StationaryFix", "bias_sensitivity",
+           "moved", "stationary_fix"]

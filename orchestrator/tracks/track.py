@@ -160,6 +160,26 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
     return stationary_fix(toa, positions, c, SIGMA_TOA, start)
 
 
+def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled, survey: np.ndarray | None,
+                        speed_sigma: float | None) -> np.ndarray | None:
+    """A stationary tag's pooled position's consider covariance (dim, dim) [m²] of the errors pooling does not
+    average: the receivers' survey ``survey`` (n,) [m per axis] and the sound speed's ``speed_sigma`` [m/s], each a
+    constant bias of one receiver's arrivals (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`); None
+    where neither is known."""
+    from sblsim.models.tracking.stationary import bias_sensitivity
+
+    if survey is None and not speed_sigma:
+        return None
+    S = bias_sensitivity(toa, positions, c, SIGMA_TOA, pooled)
+    B = np.zeros((len(positions), len(positions)))
+    if survey is not None:  # a still tag's range to receiver i is off by u_i · δr_i, of variance σ_i² (|u_i| = 1)
+        B += np.diag(np.asarray(survey, float) ** 2 / c**2)
+    if speed_sigma:  # the travel time ρ_i / c off by −ρ_i δc / c² at every receiver at once
+        rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
+        B += float(speed_sigma) ** 2 * np.outer(rho, rho) / c**4
+    return S @ B @ S.T
+
+
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
           smooth: bool = True, sound_speed: float | None = None, receivers_kept: Sequence[str] | None = None,
           drop: float = 0.0, seed: int = 0, truth_sigma: float = 0.0, ping_type: str | None = None,
@@ -295,9 +315,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     if stationary:
         pooled = stationary_track(toa, positions, c, fx)
         kp = np.flatnonzero(np.isfinite(pooled.emissions))
+        pooled_extra = stationary_consider(toa, positions, c, pooled, survey, speed_sigma)
         rows("stationary", kp, pooled.emissions[kp], np.repeat(pooled.position[None], len(kp), axis=0),
              np.repeat(pooled.covariance[None], len(kp), axis=0),
-             (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1))
+             (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), None,
+             None if pooled_extra is None else np.repeat(pooled_extra[None], len(kp), axis=0))
         count, ratio, went = tag_moved(fx, fe, trusted)
         motion_info |= {"moved_test": {"trusted_fixes": count, "successive_ratio": None if np.isnan(ratio) else ratio,
                                        "permutations": PERMUTATIONS}, "moved": went}

@@ -86,3 +86,51 @@ def test_the_moved_test_holds_its_level_and_finds_a_walk():
     assert sum(still) <= 2 and all(walks), (sum(still), sum(walks))
     few = moved(rng.normal(size=(MIN_FIXES - 1, 2)), np.arange(MIN_FIXES - 1.0), np.ones(MIN_FIXES - 1, bool))
     assert few[0] == MIN_FIXES - 1 and np.isnan(few[1]) and not few[2]
+
+
+def test_the_bias_sensitivity_is_the_pooled_positions_central_difference():
+    """∂p/∂β_i (models.tracking.stationary.bias_sensitivity) against the pooled fix solved again with receiver i's
+    arrivals shifted by ±2 µs (a central difference, the weights re-found each time); a bias common to every
+    receiver moves nothing."""
+    from sblsim.models.tracking.stationary import bias_sensitivity
+
+    toa, _ = pings(4, m=60, late=0.0)
+    start = start_of(toa)
+    fix = stationary_fix(toa, RECEIVERS, C, SIGMA, start)
+    S = bias_sensitivity(toa, RECEIVERS, C, SIGMA, fix)
+    h = 2e-6
+    numeric = np.empty_like(S)
+    for i in range(len(RECEIVERS)):
+        shifted = [toa.copy(), toa.copy()]
+        shifted[0][:, i] += h
+        shifted[1][:, i] -= h
+        plus, minus = (stationary_fix(t, RECEIVERS, C, SIGMA, start).position for t in shifted)
+        numeric[:, i] = (plus - minus) / (2 * h)
+    np.testing.assert_allclose(S, numeric, rtol=0.02, atol=1e-3 * np.abs(numeric).max())
+    np.testing.assert_allclose(S.sum(axis=1), 0.0, atol=1e-6 * np.abs(S).max())
+
+
+def test_a_still_tags_covariance_with_the_survey_and_speed_terms_is_consistent_over_20_seeds():
+    """Each seed: the receivers' surveyed positions off by N(0, 0.5 m) per axis and the sound speed off by
+    N(0, 2 m/s), 200 pings of a still tag. The pooled covariance alone is far too small (its NEES against the true
+    position ≫ 2); with the consider term S B Sᵀ of those two errors the 2-D NEES averages within [1, 3]."""
+    from sblsim.models.tracking.stationary import bias_sensitivity
+
+    survey, speed = 0.5, 2.0
+    alone, considered = [], []
+    for seed in range(20):
+        rng = np.random.default_rng(100 + seed)
+        toa, p = pings(seed, m=200, late=0.0)  # true receivers, true speed C
+        table = RECEIVERS + survey * rng.normal(size=RECEIVERS.shape)
+        c = C + speed * rng.normal()
+        fixes = tt.fix_pings(toa, table, c, SIGMA)[0]
+        fix = stationary_fix(toa, table, c, SIGMA, np.nanmedian(fixes, axis=0))
+        S = bias_sensitivity(toa, table, c, SIGMA, fix)
+        rho = np.linalg.norm(fix.position - table, axis=1)
+        B = np.diag(np.full(len(table), survey**2 / c**2)) + speed**2 * np.outer(rho, rho) / c**4
+        e = fix.position - p
+        alone.append(e @ np.linalg.solve(fix.covariance, e))
+        full = fix.covariance + S @ B @ S.T
+        considered.append(e @ np.linalg.solve(full, e))
+    assert np.mean(alone) > 20
+    assert 1.0 <= np.mean(considered) <= 3.0, np.mean(considered)
