@@ -226,7 +226,8 @@ def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES,
     Raises
     ------
     ConfigError, ModelError
-        On a source that cannot be switched off in this configuration (nothing is run).
+        On a source that cannot be switched off in this configuration (nothing is run); a configuration whose
+        receiver has no estimate in a replicate (it heard nothing, made no fix: its error is not a number).
     """
     check_budget_replicates(replicates)
     start = time.perf_counter()
@@ -236,7 +237,7 @@ def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES,
     records = records if records is not None else RecordBuffer()
     done: list[tuple[RunPlan, np.ndarray, int]] = []  # (plan, per-replicate MSE, diverged runs)
 
-    def mse(c: RunPlan) -> np.ndarray:
+    def mse(c: RunPlan, what: str) -> np.ndarray:
         for other, values, _ in done:
             if other == c:  # the same configuration: the same runs
                 return values
@@ -244,17 +245,19 @@ def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES,
                            progress=bar if bar is not None else False)
         m = result.metrics
         values = m["e_tot_rms"].to_numpy(dtype=float) ** 2
+        if not np.isfinite(values).all():  # a receiver without a fix has no estimate: no error to share out
+            raise ModelError(_no_estimate(label or cfg.scenario, c, what, m))
         done.append((c, values, int(m["diverged"].sum())))
         return values
 
-    on = mse(cfg)
-    floor = mse(floor_cfg)
+    on = mse(cfg, "every source on")
+    floor = mse(floor_cfg, "every source off")
     rows, differences = [], {}
     for name, (description, _) in names.items():
         if off[name] == cfg:
             rows.append((name, description, OFF, 0.0, 0.0))
             continue
-        without = mse(off[name])
+        without = mse(off[name], f"{name} off")
         d = on - without
         differences[name] = d
         status = NO_EFFECT if not np.any(d) else ON
@@ -272,6 +275,26 @@ def budget(cfg: RunPlan | dict[str, dict], replicates: int = DEFAULT_REPLICATES,
     return Budget(label or cfg.scenario, cfg, replicates, total, _se(on), floor_mean, _se(floor),
                   remainder, _se(per_replicate), table, sum(d for _, _, d in done), len(done) * replicates,
                   time.perf_counter() - start, differences)
+
+
+def _no_estimate(label: str, plan: RunPlan, what: str, metrics: pd.DataFrame) -> str:
+    """The one line of a budget refused because a configuration's receiver had no estimate in some replicates
+    (``what``: which configuration of the budget, e.g. ``every source on``): whether it heard nothing (no update),
+    the system and the settings that decide what is heard."""
+    none = ~np.isfinite(metrics["e_tot_rms"].to_numpy(dtype=float))
+    unheard = none & (metrics["updates"].to_numpy() == 0)
+    a = plan["acoustics"]
+    if a["detection"] == "snr":
+        setting = (f"acoustics.detection snr, acoustics.source_level = {a['source_level']:g} dB re 1 µPa at 1 m, "
+                   f"acoustics.detection_threshold = {a['detection_threshold']:g} dB")
+    else:
+        setting = f"acoustics.detection fixed, acoustics.loss_pct = {a['loss_pct']:g} %"
+    verb = "heard nothing" if unheard.sum() == none.sum() else "had no estimate"
+    return (f"budget: {label}: the {plan.receiver_label} receiver {verb} with {what} (platform.system "
+            f"{plan['platform']['system']}, {setting}): {int(none.sum())} of its {len(none)} replicates made no fix "
+            f"({int(unheard.sum())} without a single update) and have no estimate, so no error to share out; "
+            "allowed: a configuration whose receiver hears its beacons (sblsim run shows its updates); nothing "
+            "written")
 
 
 #: The switched-off plans of the plans of this process's budgets, by the plan's id: (plan, switches); each plan's

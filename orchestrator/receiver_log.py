@@ -20,7 +20,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -89,6 +89,57 @@ LOG_COLUMNS = {
 #: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
 TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
 _PACKET_COLUMNS = ("beacon_n_m", "beacon_e_m", "beacon_d_m")
+#: How far below its distance a range's noise reaches, in its standard deviations (a Gaussian draw beyond 8 σ: one
+#: in 8e14): the margin of :func:`range_floor` [1].
+NOISE_SIGMAS = 8.0
+
+
+def range_floor(acoustics: Mapping[str, Any] | None) -> tuple[float, float, str]:
+    """The lowest range a configuration's channel measures (docs/log-format.md, "A range is a measurement").
+
+    A range is ``c`` times a measured time plus its noise: below 0 only by the noise (:data:`NOISE_SIGMAS` of
+    ``acoustics.sigma_range``, grown by ``range_k`` and, with detection by signal-to-noise, to its accuracy at an SNR
+    3 fluctuations below the detection threshold), by a two-way turnaround that jitters short (``turnaround_sigma``
+    > 0: down to ``c · turnaround / 2``) and by a one-way clock's drift (``clock_drift_ppm``, growing with the time
+    since the log's first row). An inverted LBL's pseudo-range (``ranging = "toa"``) has no such floor.
+
+    Parameters
+    ----------
+    acoustics : mapping or None
+        The configuration's ``[acoustics]`` (None: not known; the receiver's input range is taken).
+
+    Returns
+    -------
+    floor : float
+        The lowest range at the log's first row [m].
+    fall : float
+        How much lower it goes per second after the log's first row [m/s] (a one-way clock's drift).
+    reason : str
+        What makes the floor, for a refusal.
+    """
+    lowest = SIGNAL_RANGES["range"][0]
+    if acoustics is None or acoustics.get("ranging") == "toa":
+        return lowest, 0.0, "the receiver's input range"
+    c = float(acoustics.get("sound_speed_assumed", 1500.0))
+    sigma = float(acoustics.get("sigma_range", 0.0))
+    jitter = 0.0
+    two_way = acoustics.get("ranging") == "twtt"
+    if two_way and float(acoustics.get("turnaround_sigma", 0.0)) > 0.0:
+        jitter = c * float(acoustics.get("turnaround", 0.0)) / 2.0
+        sigma += float(acoustics.get("range_k", 0.0)) * jitter  # the noise where the jitter makes a range negative
+    if acoustics.get("detection") == "snr":
+        weakest = float(acoustics["detection_threshold"]) - 3.0 * float(acoustics["fluctuation"])
+        sigma *= max(1.0, 10.0 ** ((float(acoustics["reference_snr"]) - weakest) / 20.0))
+    margin = NOISE_SIGMAS * sigma
+    fall = abs(float(acoustics.get("clock_drift_ppm", 0.0))) * 1e-6 * c if not two_way else 0.0
+    parts = [f"{NOISE_SIGMAS:g} σ_r = {margin:.4g} m of range noise (acoustics.sigma_range = "
+             f"{float(acoustics.get('sigma_range', 0.0)):g} m)"]
+    if jitter:
+        parts.append(f"c · acoustics.turnaround / 2 = {jitter:.4g} m of turnaround jitter")
+    if fall:
+        parts.append(f"{fall:.3g} m per second of the log of clock drift (acoustics.clock_drift_ppm)")
+    ranging = "two-way" if two_way else "one-way"
+    return max(-(jitter + margin), lowest), fall, f"{ranging} ranging: " + " and ".join(parts)
 
 
 
@@ -168,7 +219,8 @@ def log_config(path: Path | str) -> str:
     return _read_table(Path(path), "log").config
 
 
-def read_log(path: Path | str, n_beacons: int, system: System | None = None, sound_speed: float = 1500.0) -> Log:
+def read_log(path: Path | str, n_beacons: int, system: System | None = None, sound_speed: float = 1500.0,
+             acoustics: Mapping[str, Any] | None = None) -> Log:
     """Read and check a log (docs/log-format.md).
 
     Parameters
@@ -183,12 +235,16 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
         cosines and the attitude) are required. Default: none added.
     sound_speed : float
         The sound speed that turns ``travel_time_s`` into range where the log gives none [m/s].
+    acoustics : mapping, optional
+        The configuration's ``[acoustics]``: a range (or travel time) below the lowest its channel measures
+        (:func:`range_floor`) is refused. Default: not known, any range within the receiver's input range.
 
     Flaws (each a clear decision; a refusal is one line naming the file, the line and the column):
 
     * a line that does not parse (field count, a number that is not one, a required value that is empty or
-      not finite, or outside the receiver's declared input range), a missing required column, or both
-      ``range_m`` and ``travel_time_s``: **refused**;
+      not finite, or outside the receiver's declared input range), a range below the lowest the configuration's
+      channel measures (:func:`range_floor`), a missing required column, or both ``range_m`` and
+      ``travel_time_s``: **refused**;
     * a beacon id that is not a whole number in 1 … n_beacons: the row is **skipped** (``unknown_beacon``);
     * an ``rx_time`` before the row's ``time_s``: **refused** (an arrival before its transmission), but in a log of
       an inverted LBL (``system`` of ``toa`` ranging), whose ``time_s`` is the ping's nominal epoch and whose
@@ -243,6 +299,8 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     # its noise, negative where the turnaround's jitter, a clock's offset or the noise exceeds the distance; the
     # run hands it to the receiver as it is, so the replay takes the receiver's input range, negative included
     r_lo, r_hi = SIGNAL_RANGES["range"]
+    floor, fall, reason = range_floor(None if nominal else acoustics)
+    start = math.nan  # the first row's time_s: a drifting clock's floor falls from there
     p_lo, p_hi = SIGNAL_RANGES["position"]
     d_lo, d_hi = SIGNAL_RANGES["depth"]
 
@@ -252,6 +310,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     for where_short, cells in table.rows:
         where = f"log: {name!r} {where_short}"
         sent = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
+        start = sent if math.isnan(start) else start
         t = sent  # the row's arrival: when the receiver uses it
         if has_arrival and cells[index["rx_time"]]:
             t = _number(cells[index["rx_time"]], where, "rx_time", t_lo, t_hi)
@@ -284,6 +343,13 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
             if "sound_speed_mps" in index and cells[index["sound_speed_mps"]]:
                 speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)
             rng = speed * travel
+        lowest = floor - fall * (abs(sent - start) + REORDER_WINDOW)
+        if rng < lowest:
+            column, value, low, high = (("range_m", rng, lowest, r_hi) if has_range else
+                                        ("travel_time_s", travel, lowest / speed, 1e3))
+            raise ModelError(f"{where}: {column}: {value:.10g} is outside the allowed range [{low:.6g}, {high:g}]: "
+                             f"the lowest range this configuration's channel measures ({reason}); see "
+                             "docs/log-format.md")
         position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
         own = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra)
         kept.append((t, beacon, rng, position, depth, own, where_short, sent))
@@ -512,5 +578,5 @@ def export_log(result: RunRecord, path: Path | str) -> tuple[Path, Path]:
     return path, target
 
 
-__all__ = ["FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "TRUTH_COLUMNS", "check_export", "export_log",
-           "log_config", "log_frames", "read_log", "read_truth", "truth_path"]
+__all__ = ["FORMAT", "LOG_COLUMNS", "Log", "NOISE_SIGMAS", "REORDER_WINDOW", "TRUTH_COLUMNS", "check_export",
+           "export_log", "log_config", "log_frames", "range_floor", "read_log", "read_truth", "truth_path"]

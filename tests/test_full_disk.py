@@ -87,15 +87,15 @@ def test_campaign_on_a_full_disk_resumes_to_the_same_runs(small_disk, tmp_path):
     assert not [p.name for p in Path(disk / "c").iterdir() if p.name.endswith(".tmp")]
 
 
-def test_export_log_on_a_full_disk_says_what_was_written(small_disk, tmp_path):
-    """The run's own files are written (on another disk) before the log: the error says so, not that nothing
-    was replaced, and leaves no partial log."""
+def test_export_log_on_a_full_disk_leaves_no_run_folder(small_disk, tmp_path):
+    """The run's own files (on another disk) move into place only once its log is written: a log that does not fit
+    leaves neither a partial log nor the run's folder, and the error says so."""
     disk, _ = small_disk
     line = _one_line(_sblsim("run", "semicircle", "--out", tmp_path / "o", "--export-log", disk / "log.csv",
                              cwd=tmp_path))
     assert line.startswith("sblsim: error: --export-log: No space left on device; neither the log nor")
-    assert f"the run's results were written to {tmp_path / 'o'}/" in line and "nothing in the output" not in line
-    assert (tmp_path / "o" / "summary.json").is_file()
+    assert f"nor were the run's results ({str(tmp_path / 'o')!r} is as it was)" in line, line
+    assert not (tmp_path / "o").exists()
     assert list(disk.iterdir()) == []
 
 

@@ -272,7 +272,24 @@ def main(args: argparse.Namespace) -> int:
         result = run(plan, engine=engine, fmu_dir=args.fmu_dir, progress="auto")
     else:  # the package's connections and, on the fmu engine, its FMUs
         result = _run_result(_simulate(plan, engine, fmu_dir=args.fmu_dir, progress="auto", ssp=system))
-    write_run(result._result, out)
+    exported: dict[str, Any] = {}
+
+    def exports() -> None:
+        """The run's exports, written before its own files move into place: a failed one leaves no run folder."""
+        try:
+            if args.export_log is not None:
+                from sblsim.orchestrator.receiver_log import export_log
+
+                exported["log"] = export_log(result._result, args.export_log)
+            if args.export_detections is not None:
+                from sblsim.orchestrator.sync.export import export_detections
+
+                exported["detections"] = export_detections(result._result, args.export_detections)
+        except ModelError as exc:  # e.g. a full disk
+            done = f"; the log was written ({exported['log'][0]})" if "log" in exported else ""
+            raise ModelError(f"{exc}; nor were the run's results ({str(out)!r} is as it was){done}") from None
+
+    write_run(result._result, out, exports)
     s = result.summary
     print(f"{s['scenario']} on the {s['engine']} engine ({plan.master}, receiver {s['receiver']}), "
           f"seed {s['seed']}: {s['steps']} steps in {s['wall_time']:.2f} s")
@@ -285,21 +302,11 @@ def main(args: argparse.Namespace) -> int:
     for line in _run_warnings(s, plan):
         print(f"sblsim: warning: {line}", file=sys.stderr)
     print(f"  written to {out}/ (summary.json, config.toml, timeseries.parquet, figures)")
-    if args.export_log is not None:
-        from sblsim.orchestrator.receiver_log import export_log
-
-        try:
-            log, truth = export_log(result._result, args.export_log)
-        except ModelError as exc:  # e.g. a full disk: the run's own files are written, say so
-            raise ModelError(f"{exc}; the run's results were written to {out}/") from None
+    if "log" in exported:
+        log, truth = exported["log"]
         print(f"  log of the receiver's inputs: {log} (replay it: sblsim replay {log} --truth {truth})")
-    if args.export_detections is not None:
-        from sblsim.orchestrator.sync.export import export_detections
-
-        try:
-            export = export_detections(result._result, args.export_detections)
-        except ModelError as exc:
-            raise ModelError(f"{exc}; the run's results were written to {out}/") from None
+    if "detections" in exported:
+        export = exported["detections"]
         sync = (export.detections["tag"] != "T1").sum()
         print(f"  raw detections: {args.export_detections}/ (detections.csv: {len(export.detections) - sync} of the "
               f"tag T1, {sync} of the sync tags; hydrophones.csv; the truth in clocks.csv and truth.csv)")

@@ -8,7 +8,7 @@ import time
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -16,7 +16,7 @@ import pandas as pd
 from sblsim.fmus import native
 from sblsim.models.acoustics.core import LANES, check_in_flight, lane_name, lane_of
 from sblsim.models.bound import FIXED
-from sblsim.models.columns import LANE_COLUMNS, LANE_METRIC_INPUTS, TIMESERIES_COLUMNS, lane_source
+from sblsim.models.columns import LANE_COLUMNS, LANE_METRIC_INPUTS, OPTIONAL_COLUMNS, TIMESERIES_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import receiver_label, to_toml, turnaround
@@ -512,7 +512,9 @@ LANE_SENTINEL = f"acoustics.{lane_name(2, 'packet_seq')}"
 def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarray) -> pd.DataFrame:
     """The per-step table, replicate-major (all steps of replicate 0, then replicate 1, ...)."""
     batch = len(replicates)
-    cols = {name: rec[TIMESERIES_COLUMNS[name]] for name in TIMESERIES_COLUMNS}
+    # every column (one a user's FMU may lack, OPTIONAL_COLUMNS: where recorded)
+    cols = {name: rec[source] for name, source in TIMESERIES_COLUMNS.items()
+            if source in rec or name not in OPTIONAL_COLUMNS}
     for system in SYSTEMS.values():  # a system's own columns (USBL's direction of arrival), where recorded
         if system.timeseries_columns and all(source in rec for source in system.timeseries_columns.values()):
             cols.update({name: rec[source] for name, source in system.timeseries_columns.items()})
@@ -567,12 +569,20 @@ def _label(result: RunRecord) -> str:
     return result.plan.receiver_label if result.plan is not None else receiver_label(result.config)
 
 
-def write_run(result: RunRecord, out_dir: Path | str) -> Path:
+def write_run(result: RunRecord, out_dir: Path | str, then: Callable[[], object] | None = None) -> Path:
     """Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and figures atomically.
 
     Everything is written into a temporary directory beside ``out_dir`` and
     moved into place only when complete, so an error leaves nothing
     half-written.
+
+    Parameters
+    ----------
+    result : RunRecord
+    out_dir : path
+    then : callable, optional
+        What else the run writes (``sblsim run --export-log``'s log), called when the run's own files are written
+        and before they are moved into place: if it raises, ``out_dir`` is left as it was.
 
     Returns
     -------
@@ -589,4 +599,6 @@ def write_run(result: RunRecord, out_dir: Path | str) -> Path:
         receiver = _label(result)
         save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']}, {receiver} "
                          f"({result.engine})", receiver=receiver)
+        if then is not None:
+            then()
     return out_dir
