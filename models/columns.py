@@ -10,7 +10,7 @@ import the other for a list of names.
 from __future__ import annotations
 
 from sblsim.models.acoustics.core import LANES, lane_name
-from sblsim.models.receiver.core import COVARIANCE
+from sblsim.models.receiver.core import COVARIANCE, OPTIONAL_OUTPUTS
 
 #: Per-run error metrics of an estimator (the receiver's; prefixed ``instr_`` for the instrumentation fix) [m].
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
@@ -31,6 +31,7 @@ TIMESERIES_COLUMNS = {
     **{f"true_v{a}": f"target.vel_{a}" for a in "xyz"},
     **{f"est_{a}": f"receiver.est_{a}" for a in "xyz"},
     **{f"est_v{a}": f"receiver.est_v{a}" for a in "xyz"},
+    "est_valid": "receiver.est_valid",
     **{f"instr_{a}": f"receiver.instr_{a}" for a in "xyz"},
     "instr_valid": "receiver.instr_valid",
     "packet_seq": "acoustics.packet_seq",
@@ -58,6 +59,11 @@ TIMESERIES_COLUMNS = {
     "yaw": "platform.yaw",
 }
 
+#: Time-series columns a run's table has where its receiver has their output (a user's FMU may lack the receiver's
+#: :data:`~sblsim.models.receiver.core.OPTIONAL_OUTPUTS`; every built-in receiver has them).
+OPTIONAL_COLUMNS = tuple(name for name, source in TIMESERIES_COLUMNS.items()
+                         if source in {f"receiver.{output}" for output in OPTIONAL_OUTPUTS})
+
 #: What the time series records of each lane 2 … :data:`~sblsim.models.acoustics.core.LANES` of a delivery (the
 #: packets that arrived in a step after lane 1's, whose fields are the columns above): name -> recorded
 #: ``component.variable``; a run's table has the columns of the lanes it used.
@@ -80,4 +86,4 @@ def lane_source(lane: int, source: str) -> str:
 
 
 __all__ = ["CONSISTENCY_NAMES", "LANE_COLUMNS", "LANE_FIELDS", "LANE_METRIC_INPUTS", "lane_source", "METRIC_INPUTS",
-           "METRIC_NAMES", "RUN_METRICS", "TIMESERIES_COLUMNS"]
+           "METRIC_NAMES", "OPTIONAL_COLUMNS", "RUN_METRICS", "TIMESERIES_COLUMNS"]

@@ -27,9 +27,11 @@ A Kalman-type receiver is one class: its parameter declarations, a
 (:class:`KalmanReceiver`); the base class makes the program: a prediction
 every step, the correction at every slot, the raw instrumentation fix (a
 least-squares multilateration of the latest range of every beacon and the
-depth, no filter) at the same instants, and the outputs. No output is ever
-NaN: before the first update the filter reports its initial state, ``nis``
-is 0, and ``instr_valid`` is false with ``instr_*`` 0.
+depth, no filter) at the same instants, and the outputs. Before the first
+update with a received packet the estimate ``est_*`` is undefined (NaN,
+:data:`NO_ESTIMATE`, never the initial state) and ``est_valid`` is false (true
+from that update on), ``nis`` is 0, and ``instr_valid`` is false with
+``instr_*`` 0; every other output is finite.
 
 References
 ----------
@@ -95,7 +97,8 @@ def receiver_interface() -> tuple[Variable, ...]:
     )
     outputs = tuple(
         Variable(f"est_{n}", "output", "Real", 0.0, "m" if n[0] != "v" else "m/s",
-                 f"Estimated {'position' if n[0] != 'v' else 'velocity'}, {_AXES[n[-1]]}", discrete=True)
+                 f"Estimated {'position' if n[0] != 'v' else 'velocity'}, {_AXES[n[-1]]} (NaN before the first fix: "
+                 "est_valid false)", discrete=True)
         for n in ("x", "y", "z", "vx", "vy", "vz")
     ) + tuple(
         Variable(f"instr_{a}", "output", "Real", 0.0, "m",
@@ -117,6 +120,22 @@ def receiver_interface() -> tuple[Variable, ...]:
 
 #: The six unique entries of the position covariance, by axis pair.
 COVARIANCE = ("xx", "xy", "xz", "yy", "yz", "zz")
+
+
+def estimate_validity() -> tuple[Variable, ...]:
+    """``est_valid``, what says whether the estimate ``est_*`` is defined: false before the receiver's first fix (a
+    Kalman-type receiver's first update with a received packet, the least-squares receiver's first valid fix), when
+    ``est_*`` are NaN (:data:`NO_ESTIMATE`), true from it on. Every built-in receiver declares it after every other
+    variable (so that the value references of every earlier one stay what they were before it existed); a user's
+    FMU may lack it (:data:`OPTIONAL_OUTPUTS`)."""
+    return (Variable("est_valid", "output", "Boolean", False,
+                     description="The receiver has made its first fix: est_* defined from then on (false: no fix "
+                                 "yet, est_* NaN)"),)
+
+
+#: The receiver's outputs a user's FMU may lack (written before they existed): a run records them where the
+#: receiver has them.
+OPTIONAL_OUTPUTS = tuple(v.name for v in estimate_validity())
 
 
 def covariance_outputs(P) -> dict[str, ca.SX]:
@@ -668,7 +687,7 @@ class KalmanReceiver(RangesWithProfile, Component):
         errors = cls.motion.state_size > CONSTANT_VELOCITY.state_size
         return (cls.parameters(n_beacons) + receiver_interface() + clock_parameters() + system_interface(n_beacons)
                 + arrival_interface() + profile_parameters() + cls.late_parameters() + late_inputs(n_beacons)
-                + (ping_parameters() if errors else ()) + range_law_parameters())
+                + (ping_parameters() if errors else ()) + range_law_parameters() + estimate_validity())
 
     @classmethod
     def errors(cls, p: dict) -> dict | None:
@@ -837,7 +856,7 @@ class KalmanReceiver(RangesWithProfile, Component):
             out = {f"est_{name}": ca.if_else(updated, x["x"][k], NO_ESTIMATE) for k, name in enumerate(STATE_NAMES)}
             out.update({f"instr_{a}": ca.if_else(x["fix_valid"], x["fix"][k], 0.0) for k, a in enumerate("xyz")})
             out.update(instr_valid=x["fix_valid"], nis=x["nis"], pos_std=ca.sqrt(P[0, 0] + P[1, 1] + P[2, 2]),
-                       gated=x["gated"], **covariance_outputs(P))
+                       gated=x["gated"], est_valid=updated, **covariance_outputs(P))
             return out
 
         return b.program(b.prepare(profile_prepare_of(cls, n)), b.init(init), b.output(output), step=b.step(step),
@@ -932,10 +951,12 @@ def fresh_range(x: dict, u: dict, n_beacons: int) -> tuple[ca.SX, ca.SX, ca.SX]:
 
 __all__ = ["arrival_interface", "beacon_parameters", "clock_due", "clock_parameters", "clock_scale", "clock_step",
            "clock_tick", "COVARIANCE", "covariance_outputs", "depth_fresh", "earlier_innovation", "error_parameters",
-           "errors_of", "filter_parameters", "first_lane", "first_row", "fresh_packet", "fresh_range",
+           "errors_of", "estimate_validity", "filter_parameters", "first_lane", "first_row", "fresh_packet",
+           "fresh_range",
            "INSTRUMENT_ITERATIONS", "INSTRUMENT_TOLERANCE", "KalmanReceiver", "late_inputs", "lm_active", "lm_begin",
            "lm_idle", "lm_states", "lm_step", "lane_one_due", "lanes_due", "lane_used", "new_ping", "next_lane",
-           "NO_DEPTH", "NO_ESTIMATE", "packet_init", "packet_states", "ping_anchor", "ping_heard", "ping_parameters",
+           "NO_DEPTH", "NO_ESTIMATE", "OPTIONAL_OUTPUTS", "packet_init", "packet_states", "ping_anchor", "ping_heard",
+           "ping_parameters",
            "profile_derived", "profile_prepare_of", "range_law",
            "range_law_parameters", "RangesWithProfile", "reanchored", "receiver_interface",
            "REFERENCE_SOUND_SPEED", "rejected_init", "rejected_states", "remember_rejected", "reply_epoch", "slot_due",

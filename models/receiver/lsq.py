@@ -13,9 +13,10 @@ filtered: the estimate is the latest valid fix of a slot that brought a fresh
 range, and the velocity is the finite difference of the last two such fixes
 over the time between their slots (a slot whose packet was lost refits the
 same held ranges: it changes neither). Before the first fix the estimate is
-undefined (NaN, position and velocity: :data:`~sblsim.models.receiver.core.NO_ESTIMATE`):
-the initial guess x0 only starts the first iteration, it is never reported
-(the configuration ties it to the diver's true start). With a USBL interface
+undefined (NaN, position and velocity: :data:`~sblsim.models.receiver.core.NO_ESTIMATE`,
+and ``est_valid`` false; true from the first fix on): the initial guess x0 only
+starts the first iteration, it is never reported (the configuration ties it to
+the diver's true start). With a USBL interface
 the fix is the least-squares fix of the packet's range and direction and the
 depth, with its covariance and its weighted residual (``nis``, one degree of
 freedom: :func:`sblsim.models.systems.usbl.packet_fix`), R with the transceiver's uncertainty of the beacon parameters
@@ -53,6 +54,7 @@ from sblsim.models.receiver.core import (
     clock_parameters,
     clock_tick,
     covariance_outputs,
+    estimate_validity,
     filter_parameters,
     fresh_packet,
     late_inputs,
@@ -93,7 +95,7 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
         shared = {v.name: v for v in filter_parameters()}
         return (tuple(shared[n] for n in SHARED_PARAMETERS) + SEED_PARAMETERS + receiver_interface()
                 + clock_parameters() + system_interface(n_beacons) + arrival_interface() + profile_parameters()
-                + beacon_parameters() + late_inputs(n_beacons) + range_law_parameters())
+                + beacon_parameters() + late_inputs(n_beacons) + range_law_parameters() + estimate_validity())
 
     @classmethod
     def build(cls, n_beacons: int):
@@ -155,7 +157,7 @@ class LeastSquaresReceiver(RangesWithProfile, Component):
             out = {f"est_{a}": ca.if_else(fixed, x["fix"][k], NO_ESTIMATE) for k, a in enumerate("xyz")}
             out.update({f"est_v{a}": ca.if_else(fixed, x["velocity"][k], NO_ESTIMATE) for k, a in enumerate("xyz")})
             out.update({f"instr_{a}": x["instr"][k] for k, a in enumerate("xyz")})
-            out.update(instr_valid=x["instr_valid"], nis=x["nis"], pos_std=x["pos_std"], gated=0,
+            out.update(instr_valid=x["instr_valid"], nis=x["nis"], pos_std=x["pos_std"], gated=0, est_valid=fixed,
                        **covariance_outputs(ca.reshape(x["cov"], 3, 3)))
             return out
 

@@ -15,6 +15,7 @@ from typing import Mapping, Sequence
 from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS, lane_of, lane_variables
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
+from sblsim.models.receiver.core import OPTIONAL_OUTPUTS
 from sblsim.models.systems import interface_system
 
 #: What the channel sends every receiver: the packet, then its arrival epoch.
@@ -104,6 +105,10 @@ def check_connections(connections: Sequence[Connection], interfaces: Mapping[str
                 raise ConnectionMismatch(f"{comp}.{name}: input is not connected")
 
 
+#: An interface's refusal (:func:`check_interface`) names this many of its mismatches and counts the rest.
+SHOWN_PROBLEMS = 5
+
+
 def check_interface(component: str, ports: Sequence[Variable], expected: Sequence[Variable], where: object) -> None:
     """Check that a user's FMU offers a component's inputs and outputs (name, causality, type, unit).
 
@@ -120,13 +125,14 @@ def check_interface(component: str, ports: Sequence[Variable], expected: Sequenc
 
     A receiver may lack the inputs of the later lanes of a delivery (``lane<m>_*``) altogether: it is then given
     lane 1 alone, and a run in which a packet arrived in a step after another is refused
-    (:func:`sblsim.orchestrator.cosim.run.run_batch`).
+    (:func:`sblsim.orchestrator.cosim.run.run_batch`). It may lack the outputs every built-in receiver added later
+    (:data:`~sblsim.models.receiver.core.OPTIONAL_OUTPUTS`: ``est_valid``): a run records them where it has them.
 
     Raises
     ------
     ConnectionMismatch
-        Listing every missing variable and every causality, type or unit
-        that differs, and every extra input (it would stay unconnected).
+        In one line: the first :data:`SHOWN_PROBLEMS` of the missing variables, the causalities, types or units
+        that differ and the extra inputs (each would stay unconnected), and how many more there are.
     """
     have = {p.name: p for p in ports}
     wanted = [v for v in expected if v.causality != "parameter"]
@@ -135,6 +141,8 @@ def check_interface(component: str, ports: Sequence[Variable], expected: Sequenc
     if component == "receiver" and not lanes & set(have):
         # a receiver without the later lanes of a delivery: allowed (a run refuses to leave a packet on them unused)
         wanted = [v for v in wanted if v.name not in lanes]
+    if component == "receiver":  # an output added after a user's FMU was written: checked where it has it
+        wanted = [v for v in wanted if v.name not in OPTIONAL_OUTPUTS or v.name in have]
     problems = []
     for v in wanted:
         p = have.get(v.name)
@@ -147,8 +155,10 @@ def check_interface(component: str, ports: Sequence[Variable], expected: Sequenc
                 problems.append(f"{v.name!r} has {field} {got!r}, expected {exp!r}")
     problems += [f"extra input {p.name!r}" for p in ports if p.causality == "input" and p.name not in names]
     if problems:
+        more = len(problems) - SHOWN_PROBLEMS
         raise ConnectionMismatch(f"{component}: {where} does not match the {component} interface: "
-                                 + "; ".join(problems))
+                                 + "; ".join(problems[:SHOWN_PROBLEMS])
+                                 + (f"; ... and {more} more ({len(problems)} in all)" if more > 0 else ""))
 
 
 def execution_order(components: Sequence[str], connections: Sequence[Connection]) -> list[str]:

@@ -28,7 +28,7 @@ from fmpy.fmi3 import FMU3Slave
 
 from sblsim.fmus.arrays import fmi3_variables
 from sblsim.fmus.build import beacons_dir, build_all, fmu_path, validate, version_dir
-from sblsim.models import MODELS
+from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.models.errors import ModelError
 from sblsim.orchestrator.cli import main
@@ -37,6 +37,7 @@ from sblsim.orchestrator.cosim.engines import close_handles, make_handles
 from sblsim.orchestrator.cosim.master import simulate
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.cosim.run import merge_params, run
+from tests.fmus_tests.test_est_valid import ESTIMATE, START, Fmi3Receiver, T, check, check_description, drive
 
 OK, ERROR = 0, 3
 SHORT = ["simulation.duration=10", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"]
@@ -86,6 +87,27 @@ def test_fmpy_validates_every_fmi3_fmu_and_every_fmi2_variable_is_one_element(fm
     assert "beacon_positions" in arrays and arrays["beacon_positions"].dimensions[0].valueReference is not None
     assert len(md.modelVariables) < 110 < len(read_model_description(str(fmu_path(fmu_dir, "acoustics"))
                                                                        ).modelVariables)
+
+
+def test_the_fmi3_model_description_lists_est_valid_as_a_boolean_output(fmu3_root):
+    for name in RECEIVERS.values():
+        check_description(fmu_path(version_dir(fmu3_root, 3), name))
+
+
+@pytest.mark.parametrize("name", list(RECEIVERS.values()))
+def test_fmi3_est_valid_is_false_before_the_first_fix_and_true_from_it_on(fmu3_root, name, tmp_path):
+    """fmpy's FMI 3.0 bindings read est_valid false while est is NaN, before the first fix, and true from it on
+    (test_est_valid.py: the packets and the step of the first fix)."""
+    s = Fmi3Receiver(fmu_path(version_dir(fmu3_root, 3), name), name, tmp_path)
+    try:
+        s.set(**START)  # in initialization mode
+        s.fmu.exitInitializationMode()
+        valid, estimate = drive(lambda inputs: s.set(**inputs), lambda t: s.fmu.doStep(t, T),
+                                lambda: (bool(s.get("est_valid")[0]), s.get(*ESTIMATE)))
+    finally:
+        s.fmu.terminate()
+        s.fmu.freeInstance()
+    check(name, valid, estimate)
 
 
 def _same(a: pd.DataFrame, b: pd.DataFrame) -> None:

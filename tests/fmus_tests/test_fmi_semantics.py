@@ -30,7 +30,8 @@ ESTIMATE_OUTPUTS = tuple(f"est_{a}" for a in ("x", "y", "z", "vx", "vy", "vz"))
 def finite_but_the_estimate_before_a_fix(names, rows) -> np.ndarray:
     """Checks the outputs ``rows`` (steps, outputs) of the variables ``names``: every one finite but a receiver's
     estimate outputs, which are NaN, all of them, at each step before the receiver's first fix and finite, all of
-    them, at every step from it on. Returns whether each step has an estimate."""
+    them, at every step from it on; where ``names`` holds the receiver's ``est_valid``, it is true exactly at the
+    steps with an estimate. Returns whether each step has an estimate."""
     rows = np.atleast_2d(np.asarray(rows, dtype=float))
     estimate = np.isin(np.asarray(names), ESTIMATE_OUTPUTS)
     assert np.all(np.isfinite(rows[:, ~estimate])), "an output that is not finite"
@@ -38,6 +39,8 @@ def finite_but_the_estimate_before_a_fix(names, rows) -> np.ndarray:
     assert np.all(np.isnan(rows[~defined][:, estimate])), "an estimate defined in part, or infinite"
     if defined.any():
         assert defined[int(np.argmax(defined)):].all(), "an estimate undefined after the first fix"
+    if "est_valid" in names:
+        np.testing.assert_array_equal(rows[:, list(names).index("est_valid")] != 0.0, defined, "est_valid")
     return defined
 
 

@@ -15,14 +15,20 @@ from scipy.optimize import least_squares
 from sblsim.models.acoustics.core import lane_variables
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
-from sblsim.models.receiver.core import arrival_interface, beacon_parameters, clock_parameters, range_law_parameters
+from sblsim.models.receiver.core import (
+    arrival_interface,
+    beacon_parameters,
+    clock_parameters,
+    estimate_validity,
+    range_law_parameters,
+)
 from sblsim.models.receiver.lsq import SHARED_PARAMETERS
 from sblsim.models.receiver.profile import profile_parameters
 from sblsim.models.systems.usbl import receiver_parameters as usbl_parameters
 from tests.helpers import Core
 
 AXES = ("x", "y", "z")
-OUTPUTS = [v.name for v in receiver_interface() if v.causality == "output"]
+OUTPUTS = [v.name for v in receiver_interface() + estimate_validity() if v.causality == "output"]
 LSQ = dict(sigma_range=0.3, sigma_depth=0.05, x0_x=2.0, x0_y=-1.0, x0_z=4.0)
 
 
@@ -363,7 +369,10 @@ def test_lsq_interface_equals_the_receiver_interface_of_the_ekf():
         return (v.name, v.causality, v.type, v.unit)
 
     lsq, ekf = LeastSquaresReceiver.variables(4), PaperEKF.variables(4)
-    law = range_law_parameters()  # the range law, declared after every other variable
+    valid = estimate_validity()  # est_valid, declared after every other variable
+    assert lsq[-len(valid):] == ekf[-len(valid):] == valid and [v.name for v in valid] == ["est_valid"]
+    lsq, ekf = lsq[:-len(valid)], ekf[:-len(valid)]
+    law = range_law_parameters()  # the range law, declared after every other but est_valid
     assert lsq[-len(law):] == ekf[-len(law):] == law and [v.name for v in law] == ["range_k"]
     lsq, ekf = lsq[:-len(law)], ekf[:-len(law)]
     signals = [key(v) for v in lsq if v.causality != "parameter"]

@@ -29,8 +29,8 @@ from sblsim.orchestrator.study import load_study
 SHORT = ["simulation.duration=5", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"]
 #: Every recorded output of the receiver a diver sees, in the time series (its slot diagnostics nis and gated
 #: are not delayed).
-RECEIVER_COLUMNS = ["est_x", "est_y", "est_z", "est_vx", "est_vy", "est_vz", "instr_x", "instr_y", "instr_z",
-                    "instr_valid", "pos_std", "cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"]
+RECEIVER_COLUMNS = ["est_x", "est_y", "est_z", "est_vx", "est_vy", "est_vz", "est_valid", "instr_x", "instr_y",
+                    "instr_z", "instr_valid", "pos_std", "cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"]
 STEPS = 7  # the latency in sampling times (T = 0.1 s)
 #: A user's receiver model (``model:PATH.py``): the example of docs/extending.md.
 EXAMPLE_MODEL = Path(__file__).parents[2] / "docs" / "examples" / "constant_position.py"
