@@ -89,8 +89,8 @@ def ping_information(positions: np.ndarray, heard: np.ndarray, receivers: np.nda
         Receiver positions [m].
     c : float
         Sound speed [m/s].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s].
+    sigma_toa : float or ndarray, (n,)
+        Standard deviation of a time of arrival [s]: one, or each receiver's.
 
     Returns
     -------
@@ -99,6 +99,9 @@ def ping_information(positions: np.ndarray, heard: np.ndarray, receivers: np.nda
     """
     u = directions(positions, receivers)
     h = np.concatenate([u / c, np.ones(u.shape[:2] + (1,))], axis=2) * np.asarray(heard, float)[:, :, None]
+    if np.ndim(sigma_toa) > 0:  # each receiver's own σ_i: h_i / σ_i
+        h = h / np.asarray(sigma_toa, float)[None, :, None]
+        return np.einsum("mki,mkj->mij", h, h)
     return np.einsum("mki,mkj->mij", h, h) / sigma_toa**2
 
 
@@ -280,8 +283,8 @@ def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, h
         Receiver positions [m].
     c : float
         Sound speed [m/s].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s].
+    sigma_toa : float or ndarray, (n,)
+        Standard deviation of a time of arrival [s]: one, or each receiver's.
     motion : MotionModel
         The tracker's motion model.
     schedule : PingSchedule, optional

@@ -15,7 +15,8 @@ What is chosen here, and why:
 
 * ``o_j`` is **piecewise linear in time bins and continuous across them**: one value per bin edge (a knot), the
   **drift** [s/s] constant within a bin. YAPS fits an offset and a slope (and a quadratic term) per bin, each bin on
-  its own; a crystal's offset is continuous (a jump is a reset, which the readers refuse), so sharing each edge
+  its own; a crystal's offset is continuous (a jump, a reset or a download, is a **break**: the clock split into
+  segments there, :mod:`sblsim.models.sync.breaks`), so sharing each edge
   between two bins halves the unknowns and lets a bin with few sync detections be **bridged** by its neighbours.
   The offset is a function of the receiver's own clock (``o_j(r)``: the correction to subtract from a time it
   logged), which keeps the model linear: the unknowns enter linearly, so one weighted least-squares solve per
@@ -70,6 +71,8 @@ NU = 3.0
 REJECT = 4.0
 #: The smallest noise scale a receiver is given [s] (a millisecond-resolution logger rounds to 0.5 ms).
 MIN_SCALE = 1e-6
+#: A steady clock's drift prior, as a share of the drift prior's sigma (``fit_clocks``'s ``steady``).
+STEADY = 1e-3
 
 
 def group_emissions(tag: np.ndarray, time: np.ndarray, gap: np.ndarray) -> np.ndarray:
@@ -161,12 +164,17 @@ class Geometry:
         [m] the survey's horizontal sigma per axis: the prior of each receiver's shift from its table position.
     shift : numpy.ndarray, optional
         (R, 2) [m] the shifts to start from (default 0: the table).
+    site : numpy.ndarray, optional
+        (clocks,) int, the receiver (row of ``positions``) of each clock the fit is given, where a receiver's clock
+        was split into segments at a break (:mod:`sblsim.models.sync.breaks`): its segments share one position;
+        default one clock per receiver.
     """
 
     source: np.ndarray
     positions: np.ndarray
     sigma: float
     shift: np.ndarray | None = None
+    site: np.ndarray | None = None
 
 
 @dataclass
@@ -202,6 +210,12 @@ class ClockFit:
         positions: :class:`Geometry`), else None.
     distance : numpy.ndarray or None
         (n,) [m] with refined positions, each arrival's distance at the refined positions (NaN where not used).
+    site, span, clock, breaks : numpy.ndarray, numpy.ndarray, numpy.ndarray, list or None
+        Where a receiver's clock broke (:func:`sblsim.models.sync.breaks.fit_with_breaks`) the rows above are its
+        **clock segments**: ``site`` (R,) the receiver of each row, ``span`` (R, 2) [s] the times of the receiver's
+        own clock each row's offsets hold for (±inf open; between two segments a stretch neither holds: set aside),
+        ``clock`` (n,) each arrival's row (-1: in such a stretch, not fitted), ``breaks`` the
+        :class:`~sblsim.models.sync.breaks.ClockBreak` s; else None (one row per receiver).
     """
 
     edges: np.ndarray
@@ -221,6 +235,24 @@ class ClockFit:
     shift: np.ndarray | None = None
     shift_covariance: np.ndarray | None = None
     distance: np.ndarray | None = None
+    site: np.ndarray | None = None
+    span: np.ndarray | None = None
+    clock: np.ndarray | None = None
+    breaks: list | None = None
+
+    def rows_at(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+        """(n,) int, the row of :attr:`knots` that holds ``receiver`` (n,) int's clock at its own ``time`` (n,)
+        [s]: the receiver itself where its clock never broke, else the segment whose :attr:`span` holds the time;
+        -1 where none does (a stretch set aside at a break)."""
+        receiver = np.asarray(receiver, np.int64)
+        if self.site is None:
+            return receiver.copy()
+        time = np.asarray(time, float)
+        out = np.full(receiver.shape, -1, np.int64)
+        for row in range(len(self.site)):
+            hit = (receiver == self.site[row]) & (time >= self.span[row, 0]) & (time <= self.span[row, 1])
+            out[hit] = row
+        return out
 
     def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
         """(n,) [s] the offset of ``receiver`` (n,) int at its own clock's ``time`` (n,) [s]: the knots
@@ -235,7 +267,8 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
                slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray, reference: int,
                bin_width: float, drift_change: float = 1e-6, reject: float = REJECT, max_iterations: int = 20,
                keep: np.ndarray | None = None, scale: np.ndarray | None = None, sigmas: bool = True,
-               geometry: Geometry | None = None, timings: dict | None = None) -> ClockFit:
+               geometry: Geometry | None = None, timings: dict | None = None,
+               steady: np.ndarray | None = None, ties: np.ndarray | None = None) -> ClockFit:
     """Fit the receivers' clocks to the sync tags' arrivals (the module docstring's model).
 
     Parameters
@@ -275,6 +308,13 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     timings : dict, optional
         Filled with the seconds of the stages (``reweighting``, ``least_squares``, ``covariance``: the last
         solve's, with the sigmas) for a benchmark.
+    steady : numpy.ndarray, optional
+        (R,) bool, the clocks whose offset is a constant (its drift held at 0 within :data:`STEADY` of the drift
+        prior): the reference receiver's segments after a break of its clock (the same crystal as the time base;
+        :mod:`sblsim.models.sync.breaks`). Default none.
+    ties : numpy.ndarray, optional
+        (T, 3) int: two clocks and a bin whose drifts in that bin are tied by the drift prior's sigma (a clock's two
+        segments either side of a break: its crystal runs on at its rate). Default none.
 
     Returns
     -------
@@ -303,7 +343,10 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     n_knots = int(free.sum()) * (n_bins + 1)
     estimate = slowness is None
     first = n_knots + int(estimate)  # the first shift's column
-    p = first + (2 * n_receivers if geometry is not None else 0)
+    # with the positions refined, each clock's receiver (its site: the segments of a broken clock share one)
+    n_sites = 0 if geometry is None else len(geometry.positions)
+    site = np.arange(n_receivers) if geometry is None or geometry.site is None else np.asarray(geometry.site)
+    p = first + 2 * n_sites
     on = base[rec] >= 0
     r_on = np.flatnonzero(on)
     cols = np.r_[base[rec[on]] + k[on], base[rec[on]] + k[on] + 1]
@@ -318,7 +361,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         anchor = np.full(len(emissions), np.inf)
         np.minimum.at(anchor, em_local, t)
     E = sp.csr_matrix((np.ones(len(t)), (np.arange(len(t)), em_local)), shape=(len(t), len(emissions)))
-    prior = _prior(free, base, n_bins, p, drift_change * bin_width)
+    prior = _prior(free, base, n_bins, p, drift_change * bin_width, steady, ties)
     # the knots in time order (each edge's receivers together: the normal equations are block tridiagonal in that
     # order) and each knot's pair with the next edge's (the drift's covariance)
     n_free = int(free.sum())
@@ -329,9 +372,10 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     if geometry is not None:
         if not np.isfinite(geometry.sigma) or geometry.sigma <= 0:
             raise ModelError("sync: the survey sigma must be finite and positive (the prior fixes the datum)")
-        prior = prior + sp.diags(np.r_[np.zeros(first), np.full(2 * n_receivers, geometry.sigma ** -2)])
+        prior = prior + sp.diags(np.r_[np.zeros(first), np.full(2 * n_sites, geometry.sigma ** -2)])
         src = geometry.source[rows]
-        shift = np.zeros((n_receivers, 2)) if geometry.shift is None else np.array(geometry.shift, float)
+        at = site[rec]
+        shift = np.zeros((n_sites, 2)) if geometry.shift is None else np.array(geometry.shift, float)
     s_now = 1.0 / 1480.0
 
     def design(shift: np.ndarray | None, s_now: float):
@@ -341,9 +385,9 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         else:
             where = np.array(geometry.positions, float)
             where[:, :2] += shift
-            diff = where[src] - where[rec]
+            diff = where[src] - where[at]
             dd = np.linalg.norm(diff, axis=1)
-            ok = (dd > 1e-6) & (src != rec)
+            ok = (dd > 1e-6) & (src != at)
             u = np.where(ok[:, None], diff[:, :2] / np.where(ok, dd, 1.0)[:, None], 0.0)
         y = t.copy() if estimate else t - dd * s_given
         r_, c_, v_ = [rr], [cols], [vals]
@@ -353,11 +397,11 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
             v_.append(dd)
         if geometry is not None:
             s = np.full(len(t), s_now) if estimate else s_given
-            y = y + s * np.sum(u * (shift[src] - shift[rec]), axis=1)
+            y = y + s * np.sum(u * (shift[src] - shift[at]), axis=1)
             m = np.flatnonzero(ok)
             for axis in (0, 1):
                 r_ += [m, m]
-                c_ += [first + 2 * src[m] + axis, first + 2 * rec[m] + axis]
+                c_ += [first + 2 * src[m] + axis, first + 2 * at[m] + axis]
                 v_ += [s[m] * u[m, axis], -s[m] * u[m, axis]]
         B = sp.csr_matrix((np.concatenate(v_), (np.concatenate(r_), np.concatenate(c_))), shape=(len(t), p))
         return B, (y - anchor[em_local] if geometry is not None else y), dd
@@ -399,7 +443,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
             s_now = float(x[n_knots])
         moved = 0.0
         if geometry is not None:
-            new = x[first:].reshape(n_receivers, 2)
+            new = x[first:].reshape(n_sites, 2)
             moved = float(np.max(np.abs(new - shift)))
             shift = new
         return moved
@@ -485,7 +529,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     shift_out = shift_covariance = distance_all = None
     if geometry is not None:
         shift_out = shift.copy()
-        shift_covariance = np.stack([shift_cov[2 * j:2 * j + 2, 2 * j:2 * j + 2] for j in range(n_receivers)])
+        shift_covariance = np.stack([shift_cov[2 * j:2 * j + 2, 2 * j:2 * j + 2] for j in range(n_sites)])
         distance_all = full.copy()
         distance_all[rows] = dd
     return ClockFit(edges, knots, sigma, drift, drift_sigma, counts, emission_time, residual_all, standard_all,
@@ -612,18 +656,33 @@ def selected_inverse(S: sp.spmatrix, n_band: int, order: np.ndarray, rhs: np.nda
     return x, SelectedCovariance(back, following, border)
 
 
-def _prior(free: np.ndarray, base: np.ndarray, n_bins: int, p: int, sigma: float) -> sp.csr_matrix:
-    """The knots' prior information: each free receiver's second differences of its knots, of sigma ``sigma``."""
-    if n_bins < 2:
-        return sp.csr_matrix((p, p))
+def _prior(free: np.ndarray, base: np.ndarray, n_bins: int, p: int, sigma: float,
+           steady: np.ndarray | None = None, ties: np.ndarray | None = None) -> sp.csr_matrix:
+    """The knots' prior information: each free receiver's second differences of its knots, of sigma ``sigma``;
+    a ``steady`` one's first differences too, of sigma :data:`STEADY` × ``sigma``; each tie's two clocks' first
+    differences in its bin, the one less the other, of sigma ``sigma`` (both free)."""
     rows, cols, vals = [], [], []
     count = 0
     for j in np.flatnonzero(free):
-        for k in range(1, n_bins):
+        for k in range(1, n_bins if n_bins >= 2 else 1):
             rows += [count] * 3
             cols += [base[j] + k - 1, base[j] + k, base[j] + k + 1]
             vals += [1.0, -2.0, 1.0]
             count += 1
+        if steady is not None and steady[j]:
+            for k in range(n_bins):
+                rows += [count] * 2
+                cols += [base[j] + k, base[j] + k + 1]
+                vals += [1.0 / STEADY, -1.0 / STEADY]
+                count += 1
+    for a, b, k in ([] if ties is None else np.asarray(ties, np.int64)):
+        if free[a] and free[b] and 0 <= k < n_bins:
+            rows += [count] * 4
+            cols += [base[a] + k + 1, base[a] + k, base[b] + k + 1, base[b] + k]
+            vals += [1.0, -1.0, -1.0, 1.0]
+            count += 1
+    if not count:
+        return sp.csr_matrix((p, p))
     L = sp.csr_matrix((vals, (rows, cols)), shape=(count, p))
     return (L.T @ L) / sigma ** 2
 
@@ -643,5 +702,5 @@ def _scales(residual: np.ndarray, one: np.ndarray, rec: np.ndarray, n_receivers:
     return np.maximum(np.where(np.isfinite(scale), scale, fallback), MIN_SCALE)
 
 
-__all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "SelectedCovariance", "connected", "fit_clocks",
-           "group_emissions", "later_duplicates", "selected_inverse", "sync_emissions"]
+__all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "STEADY", "SelectedCovariance", "connected",
+           "fit_clocks", "group_emissions", "later_duplicates", "selected_inverse", "sync_emissions"]

@@ -2,8 +2,10 @@
 at its position emitting at random burst intervals, heard by the receivers in range with a timing noise.
 
 The truth of a receiver's clock: its time ``r = τ + a + b τ`` at the true time ``τ`` (offset ``a`` [s], drift
-``b`` [s/s]). The offsets :func:`sblsim.models.sync.clocks.fit_clocks` estimates are on the reference receiver's
-clock; :meth:`SimulatedSync.offset` gives that truth for any receiver at its own clock's times.
+``b`` [s/s]); optionally one receiver's clock **jumps** by ``Δ`` [s] at ``τ_b`` (a reset, a download: ``r = τ + a + b
+τ + Δ`` from then on; ``Δ < 0`` its time goes back). The offsets :func:`sblsim.models.sync.clocks.fit_clocks`
+estimates are on the reference receiver's clock; :meth:`SimulatedSync.offset` gives that truth for any receiver at
+its own clock's times.
 """
 
 from __future__ import annotations
@@ -33,6 +35,10 @@ class SimulatedSync:
         (n,) bool, a late multipath arrival.
     sound_speed : float
         [m/s].
+    jump : (int, float, float) or None
+        The clock jump: the receiver, the true time ``τ_b`` [s] and the size ``Δ`` [s]; None: no jump.
+    after : numpy.ndarray or None
+        (n,) bool, each detection logged after the jump (None without one).
     """
 
     positions: np.ndarray
@@ -44,22 +50,48 @@ class SimulatedSync:
     emission: np.ndarray
     echo: np.ndarray
     sound_speed: float
+    jump: tuple[int, float, float] | None = None
+    after: np.ndarray | None = None
 
-    def true_time(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
-        """(n,) [s] the true time τ of ``receiver``'s clock reading ``time``."""
-        return (time - self.offset0[receiver]) / (1 + self.drift[receiver])
+    def _jumped(self, receiver: np.ndarray, time: np.ndarray, after: np.ndarray | None) -> np.ndarray:
+        """(n,) [s] the jump in ``receiver``'s reading ``time``: Δ where logged after it (``after``; default a
+        reading at or beyond the first one after the jump, ``r_b + Δ``; for a jump back the readings both clocks
+        make count as before), else 0."""
+        out = np.zeros(np.shape(time))
+        if self.jump is None:
+            return out
+        j, tau_b, size = self.jump
+        if after is None:
+            first = tau_b + self.offset0[j] + self.drift[j] * tau_b + size
+            after = np.asarray(time) >= (first if size >= 0 else first - size)
+        return np.where((np.asarray(receiver) == j) & after, size, 0.0)
 
-    def offset(self, receiver: np.ndarray, time: np.ndarray, reference: int) -> np.ndarray:
+    def true_time(self, receiver: np.ndarray, time: np.ndarray, after: np.ndarray | None = None) -> np.ndarray:
+        """(n,) [s] the true time τ of ``receiver``'s clock reading ``time`` (``after``: read after the jump,
+        as :attr:`after`)."""
+        return (time - self._jumped(receiver, time, after) - self.offset0[receiver]) / (1 + self.drift[receiver])
+
+    def reading(self, receiver: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """(n,) [s] ``receiver``'s clock at the true time ``tau``, its jump included."""
+        r = np.asarray(tau) + self.offset0[receiver] + self.drift[receiver] * np.asarray(tau)
+        if self.jump is not None:
+            j, tau_b, size = self.jump
+            r = r + np.where((np.asarray(receiver) == j) & (np.asarray(tau) >= tau_b), size, 0.0)
+        return r
+
+    def offset(self, receiver: np.ndarray, time: np.ndarray, reference: int,
+               after: np.ndarray | None = None) -> np.ndarray:
         """(n,) [s] the true offset of ``receiver`` at its clock's ``time`` against the ``reference`` receiver's
-        clock: ``time`` minus the reference's reading at the same instant."""
-        tau = self.true_time(receiver, time)
-        return time - (tau + self.offset0[reference] + self.drift[reference] * tau)
+        clock: ``time`` minus the reference's reading at the same instant (``after`` as :meth:`true_time`)."""
+        tau = self.true_time(receiver, time, after)
+        return time - self.reading(np.full(np.shape(tau), reference), tau)
 
 
 def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, side: float = 1000.0,
                   detection_range: float = 700.0, offset: float = 2.0, drift: float = 20e-6,
                   interval: tuple[float, float] = (540.0, 660.0), noise: float = 0.15e-3, p_detect: float = 0.9,
-                  echo_share: float = 0.0, sound_speed: float = 1480.0) -> SimulatedSync:
+                  echo_share: float = 0.0, sound_speed: float = 1480.0,
+                  jump: tuple[int, float, float] | None = None) -> SimulatedSync:
     """Simulate sync-tag detections (the module docstring).
 
     Parameters
@@ -84,6 +116,9 @@ def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, sid
         The share of detections followed by a multipath echo, 0.5 to 5 ms late on the same receiver.
     sound_speed : float
         [m/s].
+    jump : (int, float, float), optional
+        One receiver's clock jump: the receiver, the true time [s] and the size [s] (the module docstring); the
+        draws are the same with it or without.
 
     Returns
     -------
@@ -118,9 +153,15 @@ def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, sid
         tau = np.r_[tau, tau[pick] + rng.uniform(0.5e-3, 5e-3, pick.sum())]
         echo = np.r_[echo, np.ones(pick.sum(), bool)]
     clock = tau + offset0[rec] + drifts[rec] * tau
+    after = None
+    if jump is not None:
+        after = (rec == jump[0]) & (tau >= jump[1])
+        clock = clock + np.where(after, jump[2], 0.0)
     order = np.lexsort((clock, rec))
     return SimulatedSync(positions, offset0, drifts, rec[order], tag[order], clock[order], emission[order],
-                         echo[order], sound_speed)
+                         echo[order], sound_speed, None if jump is None else (int(jump[0]), float(jump[1]),
+                                                                              float(jump[2])),
+                         None if after is None else after[order])
 
 
 @dataclass

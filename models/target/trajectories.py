@@ -29,6 +29,13 @@ from sblsim.models.declarations import ModelError, Table, check_entry, check_inc
 OPEN_DURATION = 100.0
 #: Newton iterations of the spiral's arc-length inversion (quadratic convergence from the asymptotic start).
 SPIRAL_ITERATIONS = 8
+#: The longest line of a trajectory file [characters] (four numbers and a comment fit many times over): a longer one
+#: is refused before the csv module splits it into cells (a line of commas is a cell a character; the memory of its
+#: cells, not the file's size, is what a hostile file inflates), and read no further than this.
+MAX_LINE_CHARS = 4096
+#: The most characters a trajectory file's lines hold [characters] (a row whose quoted cell spans lines gathers the
+#: cells of all of them: bounded by the whole).
+MAX_FILE_CHARS = 16 * 2**20
 
 
 def semicircle(t, radius, speed, depth) -> tuple[ca.SX, ca.SX]:
@@ -147,7 +154,7 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
     lines = []
     try:
         with open(path, newline="") as handle:
-            for i, row in enumerate(csv.reader(handle), start=1):
+            for i, row in enumerate(csv.reader(_bounded_lines(handle, f"{field}: {str(path)!r}")), start=1):
                 if row and not row[0].lstrip().startswith("#") and any(c.strip() for c in row):
                     lines.append((i, row))
                     if len(lines) > table.max_rows + 1:  # a header and max_rows + 1 rows: too many, stop reading
@@ -181,6 +188,28 @@ def read_trajectory_file(path: str | Path, table: Table, field: str = "target.tr
     data = np.array(rows)
     check_increasing(data, table, f"{field}: {str(path)!r}", numbers, "line")
     return data
+
+
+def _bounded_lines(handle, where: str):
+    """The lines of a text file open with ``newline=""``, each read to at most :data:`MAX_LINE_CHARS` characters and
+    its line end, at most :data:`MAX_FILE_CHARS` in all.
+
+    Raises
+    ------
+    ModelError
+        ``where line N is longer than ... characters; allowed at most ...`` for a longer line or file.
+    """
+    number = total = 0
+    while line := handle.readline(MAX_LINE_CHARS + 1):
+        number += 1
+        total += len(line)
+        if len(line) > MAX_LINE_CHARS and not line.endswith(("\n", "\r")):
+            raise ModelError(f"{where} line {number} is longer than {MAX_LINE_CHARS:,} characters; allowed at most "
+                             f"{MAX_LINE_CHARS:,} a line")
+        if total > MAX_FILE_CHARS:
+            raise ModelError(f"{where} is longer than {MAX_FILE_CHARS:,} characters (line {number}); allowed at most "
+                             f"{MAX_FILE_CHARS:,} (the waypoints and comments)")
+        yield line
 
 
 #: Header names of the four columns of a trajectory file (case-insensitive; a unit in brackets is ignored).

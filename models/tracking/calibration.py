@@ -17,7 +17,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.depth import checked_depth
 from sblsim.models.tracking.fix import FIX_ITERATIONS, fix_pings
-from sblsim.models.tracking.toa import SOUND_SPEED_RANGE
+from sblsim.models.tracking.toa import SOUND_SPEED_RANGE, checked_sigma, per_receiver, reference_sigma
 
 #: The robust calibration's soft-L1 scale, in standard deviations of a time of arrival: residuals beyond it weigh
 #: as in an L1 fit (late multipath arrivals).
@@ -41,7 +41,8 @@ def _calibration_pings(toa: np.ndarray, dim: int, max_pings: int) -> np.ndarray:
     return rich[np.unique(np.linspace(0, len(rich) - 1, min(max_pings, len(rich))).round().astype(int))]
 
 
-def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, max_pings: int = 300,
+def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float | np.ndarray,
+                                 max_pings: int = 300,
                                  scale: float = ROBUST_SCALE,
                                  bounds: tuple[float, float] = SOUND_SPEED_RANGE, depth: np.ndarray | None = None,
                                  depth_sigma: float = 0.3) -> tuple[float, float, int]:
@@ -50,7 +51,8 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
 
     Over at most ``max_pings`` pings (evenly spread) heard by at least dim + 3 receivers, every arrival kept, the
     sum ``Σ ρ((toa_ij − t_e,i − ‖p_i − r_j‖/c)² / (scale σ_toa)²)`` with the soft-L1 loss
-    ``ρ(z) = 2 (√(1 + z) − 1)`` (the objective of scipy's ``least_squares(loss="soft_l1")``) is minimised over c
+    ``ρ(z) = 2 (√(1 + z) − 1)`` (the objective of scipy's ``least_squares(loss="soft_l1")``; with a timing noise
+    per receiver, each arrival's own ``scale σ_i``) is minimised over c
     and every ``(p_i, t_e,i)``. From the middle of ``bounds``, the pings started from their single-ping fixes
     there: each iteration solves the weighted normal equations (the soft-L1 weights) with the pings' blocks
     eliminated (a Schur complement onto c), and takes the joint step, halved until the cost falls once every
@@ -70,8 +72,8 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
         Times of arrival [s], NaN where not heard.
     receivers : ndarray, (n, dim)
         Receiver positions [m].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s].
+    sigma_toa : float or ndarray, (n,)
+        Standard deviation of a time of arrival [s]: one, or each receiver's.
     max_pings : int
         Most pings used.
     scale : float
@@ -94,6 +96,7 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     """
     receivers = np.asarray(receivers, float)
     dim = receivers.shape[1]
+    sigma_toa = checked_sigma(sigma_toa, len(receivers))
     rich = _calibration_pings(toa, dim, max_pings)
     c = 0.5 * (bounds[0] + bounds[1])
     depth = checked_depth(depth, len(toa), dim)
@@ -105,11 +108,14 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     T, p, te = toa[rich][ok], p[ok], te[ok]
     heard = np.isfinite(T)
     y = np.where(heard, T, 0.0)
-    f = scale * sigma_toa
+    f = scale * sigma_toa  # one, or each receiver's (n,)
+    # the normal equations' unit f0 (a timing noise per receiver: each arrival's weight times (f0 / f_i)²)
+    f0 = scale * reference_sigma(sigma_toa)
+    relative = (f0 / f) ** 2 if per_receiver(sigma_toa) else None
     # the depth's term: (z + depth)² / σ_depth², in the normal equations' units (those of the arrivals' f² r² / f²)
     read = np.zeros(len(T), bool) if reading is None else np.isfinite(reading[ok])
     target = np.zeros(len(T)) if reading is None else -np.where(read, reading[ok], 0.0)
-    weight = np.where(read, (f / depth_sigma) ** 2, 0.0)
+    weight = np.where(read, (f0 / depth_sigma) ** 2, 0.0)
 
     def depth_costs(p):
         return np.where(read, ((p[:, -1] - target) / depth_sigma) ** 2, 0.0)
@@ -130,6 +136,8 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
         gradient gp (k, dim+1); for c the scalars Jc·W·Jc and gc."""
         r, diff, d = residuals(c, p, te)
         w = np.where(heard, 1 / np.sqrt(1 + (r / f) ** 2), 0.0)  # the soft-L1 weights ρ'
+        if relative is not None:
+            w = w * relative
         # the derivatives of the model (not of the residual) with respect to p_i, t_e,i and c
         Jp = np.concatenate([diff / (np.maximum(d, 1e-9)[..., None] * c), np.ones(d.shape + (1,))], axis=2)
         Jc = -d / c**2
@@ -187,7 +195,7 @@ def calibrate_sound_speed_robust(toa: np.ndarray, receivers: np.ndarray, sigma_t
     if not bounds[0] <= c <= bounds[1]:
         raise ModelError(f"sound speed calibration: {c:.1f} m/s is outside [{bounds[0]:g}, {bounds[1]:g}] m/s; give "
                          "the sound speed")
-    return float(c), float(sigma_toa / np.sqrt(S)) if S > 0 else float("inf"), int(len(T))
+    return float(c), float(reference_sigma(sigma_toa) / np.sqrt(S)) if S > 0 else float("inf"), int(len(T))
 
 
 #: The calibration's batches (consecutive stretches of the record) and the most pings each fits.
@@ -209,7 +217,8 @@ class Calibration:
     batches: tuple[float, ...]
 
 
-def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float, batches: int = BATCHES,
+def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: float | np.ndarray,
+                          batches: int = BATCHES,
                           max_pings: int = BATCH_PINGS,
                           bounds: tuple[float, float] = SOUND_SPEED_RANGE, strict: bool = True,
                           depth: np.ndarray | None = None, depth_sigma: float = 0.3) -> Calibration:
@@ -231,8 +240,8 @@ def calibrate_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_toa: flo
         Times of arrival [s], NaN where not heard.
     receivers : ndarray, (n, dim)
         Receiver positions [m].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s].
+    sigma_toa : float or ndarray, (n,)
+        Standard deviation of a time of arrival [s]: one, or each receiver's.
     batches : int
         K, at least 3.
     max_pings : int

@@ -22,7 +22,7 @@ import numpy as np
 from sblsim.models.receiver.toa_bound import predict, process_noise
 from sblsim.models.tracking.fix import GATE_ONE, Fix, single_ping_fix
 from sblsim.models.tracking.schedule import PingSchedule
-from sblsim.models.tracking.toa import toa_function
+from sblsim.models.tracking.toa import checked_sigma, per_receiver, toa_function
 
 
 @dataclass
@@ -33,8 +33,11 @@ class TrackerSettings:
     ----------
     sound_speed : float
         [m/s].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s].
+    sigma_toa : float or ndarray, (n,)
+        Standard deviation of a time of arrival [s]: one for every receiver, or each receiver's own in the
+        receivers' order (a synchronisation's residuals per receiver), the measurement covariance then
+        ``diag(σ_i²)`` in every estimator (the fix, the filters, the smoothers). What takes a single value (a late
+        arrival's ``delay_mean`` in units of σ_toa) takes the receivers' median.
     acceleration_psd : float
         Power spectral density of the white-noise acceleration, per axis [m²/s³].
     interval : float
@@ -103,7 +106,7 @@ class TrackerSettings:
     """
 
     sound_speed: float
-    sigma_toa: float = 2e-4
+    sigma_toa: float | np.ndarray = 2e-4
     acceleration_psd: float = 0.01
     interval: float = 2.0
     sigma_interval: float = 0.05
@@ -182,6 +185,7 @@ class ToaTracker:
         self.settings = settings
         self.size = 2 * self.dim + 2
         self._f = toa_function(self.n, self.dim)
+        self._R = checked_sigma(settings.sigma_toa, self.n) ** 2  # [s²]: one, or each receiver's (n,)
         from scipy.stats import chi2
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
@@ -224,13 +228,13 @@ class ToaTracker:
         H = np.zeros((self.n, self.size))
         H[:, :d] = J[:, :d]
         H[:, -2] = J[:, d]
-        R = s.sigma_toa**2
+        R = self._R
         nu = toa - model
 
         W = self._consider_spread(model, x[-2])
 
         def S(used):
-            return H[used] @ P @ H[used].T + R * np.eye(int(used.sum())) + W[np.ix_(used, used)]
+            return H[used] @ P @ H[used].T + self._noise(used) + W[np.ix_(used, used)]
 
         used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R + np.diag(W), S, kept)
         if Su is not None:
@@ -238,9 +242,22 @@ class ToaTracker:
             K = np.linalg.solve(Su - W[np.ix_(used, used)], Hu @ P).T
             x = x + K @ nu[used]
             A = np.eye(self.size) - K @ Hu
-            P = A @ P @ A.T + R * K @ K.T
+            P = A @ P @ A.T + self._gain_noise(K, used)
             P = 0.5 * (P + P.T)
         return x, P, used
+
+    def _noise(self, used: np.ndarray) -> np.ndarray:
+        """The measurement covariance R [s²] of the arrivals ``used`` (n,) bool: ``σ² I``, or ``diag(σ_i²)`` with a
+        timing noise per receiver."""
+        if per_receiver(self._R):
+            return np.diag(self._R[used])
+        return self._R * np.eye(int(used.sum()))
+
+    def _gain_noise(self, K: np.ndarray, used: np.ndarray) -> np.ndarray:
+        """``K R Kᵀ`` of the Joseph form for the gain K (s, k) of the arrivals ``used`` (n,) bool."""
+        if per_receiver(self._R):
+            return (K * self._R[used]) @ K.T
+        return self._R * K @ K.T
 
     def _consider_spread(self, model: np.ndarray, emission: float) -> np.ndarray:
         """The covariance (n, n) [s²] of the arrivals' error from the receivers' survey and the sound speed's error

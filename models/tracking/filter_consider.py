@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from sblsim.models.tracking.ekf import TrackRecord
-from sblsim.models.tracking.toa import _evaluate_pings
+from sblsim.models.tracking.toa import _evaluate_pings, per_receiver
 
 
 def _jacobians(receivers: np.ndarray, c: float, states: np.ndarray, survey: np.ndarray, sigma_c: float
@@ -42,7 +42,7 @@ def _jacobians(receivers: np.ndarray, c: float, states: np.ndarray, survey: np.n
     return J, Ht
 
 
-def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sigma_toa: float,
+def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
                        survey_sigma: np.ndarray | None = None, sigma_c: float | None = None) -> np.ndarray:
     """The sensitivity of a causal filter's states to the whitened survey and speed errors, along its record.
 
@@ -53,8 +53,10 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
         the UKF's, whose update is linearised as the EKF's here).
     receivers : ndarray, (n, dim)
         [m].
-    c, sigma_toa : float
-        The speed the filter ran at [m/s]; a time of arrival's standard deviation [s].
+    c : float
+        The speed the filter ran at [m/s].
+    sigma_toa : float or ndarray, (n,)
+        A time of arrival's standard deviation [s], one or each receiver's (as the filter ran with).
     survey_sigma : ndarray, (n,), or None
         Each receiver's survey error per axis [m].
     sigma_c : float or None
@@ -76,14 +78,17 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
     fixed = sorted(starts & set(range(m)))
     at[fixed] = record.x_filtered[fixed]
     J_all, Ht_all = _jacobians(receivers, c, at, survey, sc)
-    R = sigma_toa**2
+    R = np.asarray(sigma_toa, float) ** 2 if per_receiver(sigma_toa) else sigma_toa**2
     idx = list(range(dim)) + [2 * dim]
     S = None
     for k in range(record.start, m):
         used = record.used[k]
         J, Ht = J_all[k][used], Ht_all[k][used]
         if k in starts:  # the fix the filter started from: its position, emission time, covariance and arrivals
-            G = -record.P_filtered[k][np.ix_(idx, idx)] @ J.T @ Ht / R  # the fix's (dim + 1, θ)
+            if per_receiver(R):
+                G = -record.P_filtered[k][np.ix_(idx, idx)] @ J.T @ (Ht / R[used][:, None])  # the fix's (dim + 1, θ)
+            else:
+                G = -record.P_filtered[k][np.ix_(idx, idx)] @ J.T @ Ht / R
             interval = np.zeros(n * dim + 1) if S is None else (record.F[k] @ S)[-1]
             S = np.zeros((size, n * dim + 1))
             S[:dim], S[-2], S[-1] = G[:dim], G[dim], interval
@@ -93,7 +98,8 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
                 Pp = record.P_predicted[k]
                 H = np.zeros((len(J), size))
                 H[:, :dim], H[:, -2] = J[:, :dim], J[:, dim]
-                K = np.linalg.solve(H @ Pp @ H.T + R * np.eye(len(J)), H @ Pp).T
+                noise = np.diag(R[used]) if per_receiver(R) else R * np.eye(len(J))
+                K = np.linalg.solve(H @ Pp @ H.T + noise, H @ Pp).T
                 S = S - K @ (H @ S + Ht)
         out[k] = np.nan if S is None else S
     return out

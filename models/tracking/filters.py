@@ -18,7 +18,7 @@ import numpy as np
 
 from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 from sblsim.models.tracking.ekf import ToaTracker, TrackerSettings
-from sblsim.models.tracking.toa import _evaluate_pings
+from sblsim.models.tracking.toa import _evaluate_pings, per_receiver
 
 
 class ToaSeqTracker(ToaTracker):
@@ -40,28 +40,29 @@ class ToaSeqTracker(ToaTracker):
         """The arrivals of one ping (n,) (NaN: not heard) one at a time, in the receivers' order (``kept`` as
         :meth:`ToaTracker.update`'s); returns the state, the covariance (Joseph form) and the arrivals used (n,)."""
         d, s = self.dim, self.settings
-        R = s.sigma_toa**2
+        R = self._R  # [s²]: one, or each receiver's (n,)
         model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
         model, J = np.asarray(model).ravel(), np.asarray(J)
         H = np.zeros((self.n, self.size))
         H[:, :d], H[:, -2] = J[:, :d], J[:, d]
         heard = np.isfinite(toa)
         W = self._consider_spread(model, x[-2])
-        if heard.any() and not self._set_passes(heard, toa - model, H[heard] @ P @ H[heard].T + R * np.eye(
-                int(heard.sum())) + W[np.ix_(heard, heard)]):
+        if heard.any() and not self._set_passes(heard, toa - model, H[heard] @ P @ H[heard].T + self._noise(heard)
+                                                + W[np.ix_(heard, heard)]):
             heard = self._fix_kept(toa, heard, kept)
         prediction, eye = x, np.eye(self.size)
         used = np.zeros(self.n, bool)
         for i in np.flatnonzero(heard):
             h = H[i]
+            Ri = R[i] if per_receiver(R) else R
             nu = toa[i] - (model[i] + h @ (x - prediction))
-            S = h @ P @ h + R
+            S = h @ P @ h + Ri
             if nu**2 / (S + W[i, i]) > s.gate:
                 continue
             k = P @ h / S
             x = x + k * nu
             A = eye - np.outer(k, h)
-            P = A @ P @ A.T + R * np.outer(k, k)
+            P = A @ P @ A.T + Ri * np.outer(k, k)
             P = 0.5 * (P + P.T)
             used[i] = True
         return x, P, used
@@ -137,7 +138,7 @@ class ToaUkfTracker(ToaTracker):
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The iterated unscented update with one ping's times of arrival (n,) (NaN: not heard), gated as the EKF's
         (``kept`` as :meth:`ToaTracker.update`'s); returns the state, the covariance and the arrivals used (n,)."""
-        R = self.settings.sigma_toa**2
+        R = self._R  # [s²]: one, or each receiver's (n,)
         at, spread = x, P
         used = np.zeros(self.n, bool)
         for _ in range(max(self.iterations, 1)):
@@ -147,7 +148,7 @@ class ToaUkfTracker(ToaTracker):
             W = self._consider_spread(H @ at + b, at[-2])
 
             def S(used, Pzz=Pzz, W=W):
-                return Pzz[np.ix_(used, used)] + R * np.eye(int(used.sum())) + W[np.ix_(used, used)]
+                return Pzz[np.ix_(used, used)] + self._noise(used) + W[np.ix_(used, used)]
 
             used, Su = self._gated(toa, nu, np.diag(Pzz) + R + np.diag(W), S, kept)
             if Su is None:

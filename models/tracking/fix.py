@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sblsim.models.tracking.depth import checked_depth
-from sblsim.models.tracking.toa import _evaluate_pings
+from sblsim.models.tracking.toa import _evaluate_pings, checked_sigma, per_receiver, reference_sigma
 
 #: χ²(1) quantile of probability 0.999: the gate of one time of arrival.
 GATE_ONE = 10.828
@@ -49,11 +49,11 @@ class Fix:
     chi2: float
 
 
-def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float,
+def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
                     guess: np.ndarray | None = None, gate: float = GATE_ONE) -> Fix | None:
     """The least-squares fix of one ping from its times of arrival, the emission time unknown (TOA/TDOA).
 
-    Gauss-Newton on ``Σ_i (toa_i − t_e − ‖p − r_i‖/c)²`` with step halving; while the ping keeps at least
+    Gauss-Newton on ``Σ_i ((toa_i − t_e − ‖p − r_i‖/c) / σ_i)²`` with step halving; while the ping keeps at least
     dim + 2 receivers, the one with the largest squared normalised residual is dropped when that exceeds
     ``gate`` (multipath arrivals are late) and the fix is made again.
 
@@ -65,8 +65,9 @@ def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa:
         Receiver positions [m].
     c : float
         Sound speed [m/s].
-    sigma_toa : float
-        Standard deviation of a time of arrival [s].
+    sigma_toa : float or ndarray, (n,)
+        Standard deviation of a time of arrival [s]: one for every receiver, or each receiver's own (the
+        arrivals weighed by ``1 / σ_i²``).
     guess : ndarray, (dim,), optional
         Start position [m] (default between the first receiver to hear and the centroid of those heard).
     gate : float
@@ -85,7 +86,8 @@ def single_ping_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa:
     return Fix(positions[0], float(emissions[0]), covariances[0], used[0], float(chi2[0]))
 
 
-def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, guesses: np.ndarray | None = None,
+def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
+              guesses: np.ndarray | None = None,
               gate: float = GATE_ONE, depth: np.ndarray | None = None, depth_sigma: float = 0.3,
               survey_sigma: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -131,12 +133,13 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
     Raises
     ------
     ModelError
-        A depth given with receivers in 2-D, or not one per ping.
+        A depth given with receivers in 2-D, or not one per ping; a timing noise not one value or one per receiver.
     """
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     m, (n, dim) = len(toa), receivers.shape
     depth = checked_depth(depth, m, dim)
+    sigma_toa = checked_sigma(sigma_toa, n)
     if m <= FIX_CHUNK:
         return _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, survey_sigma)
     out = (np.empty((m, dim)), np.empty(m), np.empty((m, dim + 1, dim + 1)), np.empty((m, n), bool), np.empty(m))
@@ -150,8 +153,12 @@ def fix_pings(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float
 
 
 def _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, survey_sigma):
-    """:func:`fix_pings` of a chunk of pings (its arguments checked)."""
+    """:func:`fix_pings` of a chunk of pings (its arguments checked). With a timing noise per receiver each arrival's
+    row is weighed by ``σ / σ_i`` (σ the receivers' median, :func:`~sblsim.models.tracking.toa.reference_sigma`), so
+    that the sums below, in units of σ, are those of the arrivals' own noise."""
     m, (n, dim) = len(toa), receivers.shape
+    relative = np.asarray(reference_sigma(sigma_toa) / sigma_toa) if per_receiver(sigma_toa) else None
+    sigma_toa = reference_sigma(sigma_toa)
     used = np.isfinite(toa)
     known = np.zeros(m, bool) if depth is None else np.isfinite(depth)
     valid = used.sum(axis=1) + known >= dim + 1
@@ -184,7 +191,7 @@ def _fix_chunk(toa, receivers, c, sigma_toa, guesses, gate, depth, depth_sigma, 
     for _ in range(n + 1):  # outlier rounds: the worst residual dropped while it fails the gate and redundancy remains
         p_a, te_a, J, res = _gauss_newton_pings(toa[active], filled[active], used[active], receivers, c, p, te,
                                                 None if prior is None else (prior[0][active], prior[1][active],
-                                                                            prior[2]))
+                                                                            prior[2]), relative)
         positions[active], emissions[active] = p_a, te_a
         z2 = np.where(used[active], (res[:, :n] / sigma_toa) ** 2, 0.0)
         chi2[active] = z2.sum(axis=1)
@@ -220,8 +227,10 @@ def survey_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, pos
     ----------
     receivers : ndarray, (n, dim)
         [m].
-    c, sigma_toa : float
-        [m/s], [s].
+    c : float
+        [m/s].
+    sigma_toa : float or ndarray, (n,)
+        [s], as the fixes were made with.
     positions, emissions, covariances, used : ndarray
         What :func:`fix_pings` returned: (m, dim) [m], (m,) [s], (m, dim + 1, dim + 1), (m, n).
     survey_sigma : ndarray, (n,)
@@ -250,8 +259,10 @@ def speed_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, posi
     ----------
     receivers : ndarray, (n, dim)
         [m].
-    c, sigma_toa : float
-        The speed the fixes were made at [m/s], [s].
+    c : float
+        The speed the fixes were made at [m/s].
+    sigma_toa : float or ndarray, (n,)
+        [s], as the fixes were made with.
     positions, emissions, covariances, used : ndarray
         What :func:`fix_pings` returned: (m, dim) [m], (m,) [s], (m, dim + 1, dim + 1), (m, n).
     sigma_c : float
@@ -266,29 +277,39 @@ def speed_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, posi
     positions = np.asarray(positions, float)
     travel, J = _evaluate_pings(receivers, c, np.nan_to_num(positions), np.zeros(len(positions)))
     dm = -travel / c  # the travel time ρ / c differentiated by c: −ρ / c²
-    S = np.einsum("kab,knb,kn->ka", np.nan_to_num(np.asarray(covariances, float)),
-                  J * np.asarray(used, bool)[:, :, None], dm) / sigma_toa**2
+    if per_receiver(sigma_toa):  # each arrival's row over its own σ_i²
+        S = np.einsum("kab,knb,kn->ka", np.nan_to_num(np.asarray(covariances, float)),
+                      J * np.asarray(used, bool)[:, :, None], dm / np.asarray(sigma_toa, float) ** 2)
+    else:
+        S = np.einsum("kab,knb,kn->ka", np.nan_to_num(np.asarray(covariances, float)),
+                      J * np.asarray(used, bool)[:, :, None], dm) / sigma_toa**2
     out = float(sigma_c) ** 2 * S[:, :, None] * S[:, None, :]
     out[~np.isfinite(positions).all(axis=1)] = np.nan
     return out
 
 
-def _survey_term(cov: np.ndarray, J: np.ndarray, used: np.ndarray, sigma_toa: float, survey: np.ndarray,
-                 dim: int) -> np.ndarray:
+def _survey_term(cov: np.ndarray, J: np.ndarray, used: np.ndarray, sigma_toa: float | np.ndarray,
+                 survey: np.ndarray, dim: int) -> np.ndarray:
     """The fixes' consider covariance of the receivers' survey error (:func:`fix_pings`): ``Σ_i σ_i² S_i S_iᵀ``,
     ``S_i = C J_iᵀ J_p,i / σ_toa²`` (k, dim + 1, dim + 1) for the fixes' covariances C (k, dim + 1, dim + 1), their
-    arrivals' rows J (k, n, dim + 1), the arrivals used (k, n) and the survey errors (n,) [m]."""
-    G = np.einsum("kab,knb->kna", np.nan_to_num(cov), J * used[:, :, None]) / sigma_toa**2  # C J_iᵀ / σ²: (k, n, d+1)
+    arrivals' rows J (k, n, dim + 1), the arrivals used (k, n) and the survey errors (n,) [m] (``σ_toa`` one, or
+    each receiver's (n,))."""
+    G = np.einsum("kab,knb->kna", np.nan_to_num(cov), J * used[:, :, None])  # C J_iᵀ: (k, n, d+1)
+    G = G / np.asarray(sigma_toa, float)[None, :, None] ** 2 if per_receiver(sigma_toa) else G / sigma_toa**2
     S = G[:, :, :, None] * J[:, :, None, :dim]  # (k, n, dim + 1, dim)
     return np.einsum("n,knab,kncb->kac", survey**2, S, S)
 
 
-def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
+def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None, relative=None):
     """Gauss-Newton iterations with step halving of many pings' fixes at once: positions (k, dim), emission times
     (k,), Jacobians (k, n[ + 1], dim + 1) and residuals (k, n[ + 1]) (0 where not used) at the end; ``prior``
-    (heights (k,) [m], which are known (k,), their weight σ_toa / σ_depth [s/m]) one more row, the height's."""
+    (heights (k,) [m], which are known (k,), their weight σ_toa / σ_depth [s/m]) one more row, the height's;
+    ``relative`` (n,) each arrival's row weight ``σ_toa / σ_i`` (None: all 1), applied to the residuals and the
+    Jacobians returned."""
     dim = receivers.shape[1]
     p, te = p.copy(), te.copy()
+    if relative is not None:
+        filled = filled * relative
     if prior is not None:
         height, known, weight = prior
         used = np.column_stack([used, known])
@@ -296,6 +317,8 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None):
 
     def evaluate(idx, p, te):
         model, J = _evaluate_pings(receivers, c, p, te)
+        if relative is not None:  # each arrival's row weighed by σ_toa / σ_i
+            model, J = model * relative, J * relative[:, None]
         if prior is not None:  # the height's row: weight · z, its Jacobian weight on z
             row = np.zeros((len(p), 1, dim + 1))
             row[:, 0, 2] = weight

@@ -168,7 +168,8 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS)
 
 
-def explained(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, c: float, sigma_toa: float) -> np.ndarray:
+def explained(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, c: float,
+              sigma_toa: float | np.ndarray) -> np.ndarray:
     """How many of each ping's arrivals agree with a position (module docstring).
 
     Parameters
@@ -181,8 +182,8 @@ def explained(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, c: 
         The positions to test [m] (NaN: none agree).
     c : float
         Sound speed [m/s].
-    sigma_toa : float
-        [s].
+    sigma_toa : float or ndarray, (n,)
+        [s]: one, or each receiver's.
 
     Returns
     -------

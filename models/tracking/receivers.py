@@ -43,7 +43,7 @@ class ReceiverResiduals:
 
 
 def receiver_residuals(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, emissions: np.ndarray,
-                       c: float, sigma_toa: float) -> ReceiverResiduals:
+                       c: float, sigma_toa: float | np.ndarray) -> ReceiverResiduals:
     """Every receiver's residuals against a track (module docstring).
 
     Parameters
@@ -58,8 +58,8 @@ def receiver_residuals(toa: np.ndarray, receivers: np.ndarray, positions: np.nda
         Its emission times [s].
     c : float
         Sound speed [m/s].
-    sigma_toa : float
-        [s].
+    sigma_toa : float or ndarray, (n,)
+        [s]: one, or each receiver's (the residuals normalised by their receiver's).
 
     Returns
     -------

@@ -56,6 +56,13 @@ MIN_STEP_SIGMA = 1e-3
 PBI_MAX_MISSED = 64
 #: The first steps over which every phase of a pseudo-random tag's sequence is tried (:func:`align_sequence`).
 PBI_PHASE_STEPS = 256
+#: A stable interval stated for a tag is refused where the rows' steps miss whole multiples of their best interval
+#: by more than this many crossing times (90 % of them; the inference calls a spread of 2 stable,
+#: :func:`infer_ping_type`), or by more than :data:`SBI_SHARE` of the interval (:func:`check_stable`).
+SBI_CROSSINGS = 4.0
+SBI_SHARE = 0.02
+#: The divisors of the typical step tried as the stable interval (a tag heard at every second ping or less).
+SBI_DIVISORS = (1, 2, 3, 4)
 
 
 @dataclass(frozen=True)
@@ -210,6 +217,53 @@ def infer_ping_type(toa: np.ndarray, crossing: float) -> InferredType:
     return InferredType(kind, delta, bounds, spread)
 
 
+def check_stable(toa: np.ndarray, crossing: float) -> None:
+    """Refuse a stable burst interval (``sbi``) that the rows' first arrivals contradict: their steps are not whole
+    multiples of one interval within the tolerance, ``max(SBI_CROSSINGS × crossing, SBI_SHARE × interval)`` for 90 %
+    of them, at the best of the typical step divided by :data:`SBI_DIVISORS` (a tag heard at every second ping or
+    less has a typical step of several intervals), each refined by least squares on its whole numbers.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard.
+    crossing : float
+        The array's crossing time [s] (:func:`crossing_time`): how much the first arrival's travel time may change.
+
+    Raises
+    ------
+    ModelError
+        One line naming the stated type, the range of the steps the pings show, their misfit and what is allowed;
+        as :func:`first_arrival_steps`.
+    """
+    d = first_arrival_steps(toa)
+    positive = d[d > 0]
+    if len(positive) < 3:
+        return
+    typical = float(np.median(positive))
+    best = (np.inf, typical, np.inf)
+    for k in SBI_DIVISORS:
+        delta = typical / k
+        n = np.maximum(np.round(d / delta), 1.0)
+        delta = float(np.sum(n * d) / np.sum(n * n))  # the interval that fits these whole numbers best
+        n = np.maximum(np.round(d / delta), 1.0)
+        spread = float(np.percentile(np.abs(d - n * delta), 90))
+        tolerance = max(SBI_CROSSINGS * crossing, SBI_SHARE * delta)
+        if spread <= tolerance:
+            return
+        if spread / tolerance < best[0]:
+            best = (spread / tolerance, delta, spread)
+    n = np.maximum(np.round(d / typical), 1.0)
+    single = d[n == 1] if (n == 1).any() else d
+    low, high = np.percentile(single, [2, 98])
+    raise ModelError(f"ping type sbi: the pings' first arrivals are {low:.4g} to {high:.4g} s apart (2nd to 98th "
+                     f"percentile of {len(d)} steps), not whole multiples of one interval: at the best, "
+                     f"{best[1]:.4g} s, 90 % of the steps are off by up to {best[2]:.3g} s, beyond the "
+                     f"{max(SBI_CROSSINGS * crossing, SBI_SHARE * best[1]):.3g} s a stable interval allows; allowed: "
+                     f"the tag's own ping type (a random interval: rbi with --burst-interval {np.floor(low):g}:"
+                     f"{np.ceil(high):g}; or none, inferred)")
+
+
 def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, drift: float, crossing: float,
                    bounds: tuple[float, float] | None = None, sequence: np.ndarray | None = None,
                    source: str = "given") -> PingSchedule:
@@ -244,7 +298,8 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
     Raises
     ------
     ModelError
-        An unknown type, a bad interval, a ``pbi`` without a sequence, or steps that break the given bounds.
+        An unknown type, a bad interval, a ``pbi`` without a sequence, steps that break the given bounds, or a
+        stable interval given that the steps contradict (:func:`check_stable`).
     """
     if kind not in PING_TYPES:
         raise ModelError(f"ping type: {kind!r}; allowed: {', '.join(PING_TYPES)}")
@@ -252,6 +307,8 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
         raise ModelError(f"burst interval: {interval} s; allowed: a positive number of seconds")
     d = first_arrival_steps(toa)
     zeros = np.zeros_like(d)
+    if kind == "sbi" and source == "given":
+        check_stable(toa, crossing)
     if kind == "sbi":
         n = np.maximum(np.round(d / interval), 1.0)
         count, offset, te, dr = n, zeros, jitter * np.sqrt(n), drift * np.sqrt(n)
@@ -260,12 +317,7 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
             low, high = bounds
             if not 0 < low <= high:
                 raise ModelError(f"burst interval: {low}:{high} s; allowed: 0 < min <= max")
-            short = np.flatnonzero(d < low - crossing)
-            if len(short):
-                k = int(short[0])
-                raise ModelError(f"burst interval: rows {k + 1} and {k + 2} are {d[k]:.3f} s apart by their first "
-                                 f"arrivals, below the random interval's min {low:g} s; allowed: the tag's "
-                                 "--burst-interval MIN:MAX")
+            _check_shortest(toa, low, crossing)
         count, offset, te, dr = zeros, d.copy(), np.full_like(d, crossing), np.full_like(d, drift)
     else:
         if sequence is None or not len(sequence):
@@ -278,6 +330,36 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
     typical = float(np.median(steps)) if len(steps) else interval
     gaps = tuple(int(k) for k in np.flatnonzero(steps > max(GAP_FACTOR * typical, GAP_MIN_S)))
     return PingSchedule(kind, float(interval), count, offset, te, dr, bounds, gaps, source)
+
+
+def _check_shortest(toa: np.ndarray, low: float, crossing: float) -> None:
+    """Refuse rows whose first arrivals come sooner than a random interval's min ``low`` [s] allows, less the
+    crossing time [s]: between two heard rows ``k`` apart, ``k`` intervals (the rows between them nobody heard,
+    each a ping nobody heard). Only the heard rows' steps are checked (a blank row's time is interpolated, not
+    measured), and a refusal names the rows between that nobody heard.
+
+    Raises
+    ------
+    ModelError
+        One line naming the rows, their step, and the rows heard by nobody between them.
+    """
+    first = first_arrivals(toa)
+    heard = np.flatnonzero(np.isfinite(first))
+    span, count = np.diff(first[heard]), np.diff(heard)
+    short = np.flatnonzero(span < count * (low - crossing))
+    if not len(short):
+        return
+    k = int(short[0])
+    a, b, n = int(heard[k]) + 1, int(heard[k + 1]) + 1, int(count[k])
+    if n == 1:
+        raise ModelError(f"burst interval: rows {a} and {b} are {span[k]:.3f} s apart by their first arrivals, below "
+                         f"the random interval's min {low:g} s; allowed: the tag's --burst-interval MIN:MAX")
+    blank = f"row {a + 1}" if n == 2 else f"rows {a + 1} to {b - 1}"
+    raise ModelError(f"burst interval: rows {a} and {b} are {span[k]:.3f} s apart by their first arrivals, with "
+                     f"{blank} between them heard by nobody (no arrival): as pings nobody heard they make {n} "
+                     f"intervals, at least {n * low:g} s at the random interval's min {low:g} s; allowed: the tag's "
+                     "--burst-interval MIN:MAX, and a row of no arrival only where a ping was missed (remove the "
+                     "others)")
 
 
 def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -352,5 +434,6 @@ def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> 
 
 
 __all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PBI_MAX_MISSED", "PBI_PHASE_STEPS", "PING_TYPES",
-           "InferredType", "PingSchedule", "align_sequence", "build_schedule", "crossing_time", "first_arrival_steps",
-           "first_arrivals", "infer_ping_type"]
+           "SBI_CROSSINGS", "SBI_DIVISORS", "SBI_SHARE", "InferredType", "PingSchedule", "align_sequence",
+           "build_schedule", "check_stable", "crossing_time", "first_arrival_steps", "first_arrivals",
+           "infer_ping_type"]

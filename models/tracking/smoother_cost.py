@@ -16,6 +16,7 @@ from scipy.sparse import csr_matrix
 from sblsim.models.tracking.arrival_model import ArrivalModel
 from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.schedule import PingSchedule
+from sblsim.models.tracking.toa import checked_sigma, per_receiver, reference_sigma
 
 #: Degrees of freedom of the Student-t error of a time of arrival in the robust smoother
 #: (:func:`~sblsim.models.tracking.smoother.robust_smooth`): a heavy tail (a late multipath arrival 10 σ off weighs
@@ -67,7 +68,8 @@ class _Problem:
     velocity) (the inverse of the Cholesky factor of the white-noise acceleration's ``q [T³/3, T²/2; T²/2, T]`` over the
     step at the nominal interval, :func:`~sblsim.models.receiver.toa_bound.process_noise`), ``1 / σ_te`` on the emission
     time and ``1 / σ_drift`` on the interval; and the buffers the steps reuse (the band, its right-hand side, the
-    arrivals' cost terms). Nothing of size m × m, nor (m, s, s) but the covariance's own blocks."""
+    arrivals' cost terms). Nothing of size m × m, nor (m, s, s) but the covariance's own blocks. ``sigma``: the
+    timing noise [s], one, or each arrival's (h,) where the settings give one per receiver (:meth:`scale`)."""
 
     def __init__(self, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, schedule: PingSchedule,
                  depth: np.ndarray | None = None):
@@ -81,6 +83,8 @@ class _Problem:
         self.k, self.i = (v.astype(np.int32) for v in np.nonzero(np.isfinite(toa)))  # m < 2³¹
         self.toa = toa[self.k, self.i]
         self.r = [receivers[self.i, a] for a in range(self.dim)]
+        sigma = checked_sigma(settings.sigma_toa, receivers.shape[0])
+        self.sigma = sigma[self.i] if per_receiver(sigma) else sigma
         self.band = self.rhs = self.logs = self.values = self.rows = self.squares = self.z = self.J = None
         self.entries = None  # the Hessian's entries' keys (smoother_system._normal_blocks)
         self._chunks = None
@@ -112,8 +116,12 @@ class _Problem:
             return None
         if self._delay is None:
             self._delay = ArrivalModel(settings.delay_dof, settings.delay_share,
-                                       settings.delay_mean / settings.sigma_toa)
+                                       settings.delay_mean / reference_sigma(settings.sigma_toa))
         return self._delay
+
+    def scale(self, a0: int, a1: int) -> float | np.ndarray:
+        """The timing noise [s] of the arrivals ``a0:a1``: the one value, or theirs (a1 − a0,)."""
+        return self.sigma[a0:a1] if per_receiver(self.sigma) else self.sigma
 
     def durations(self, X: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The steps' durations ``n_k Δ_k + o_k`` [s] (m − 1,) at the states X (m, s) (their intervals Δ the last
@@ -154,7 +162,7 @@ def _arrivals(problem: _Problem, X: np.ndarray, lo: int, hi: int, a0: int, a1: i
     order (as :func:`~sblsim.models.tracking.toa._ranges`: the same numbers). With ``keep``, written into the
     problem's buffers ``z`` (h,) and ``J`` (dim, h) (:func:`_trial_cost`)."""
     P, settings = problem, problem.settings
-    c, sigma = settings.sound_speed, settings.sigma_toa
+    c, sigma = settings.sound_speed, P.scale(a0, a1)
     heard = P.heard[lo:hi]  # each ping's value repeated for its arrivals (in order: the pings' own)
     if keep:
         d = [np.subtract(np.repeat(X[lo:hi, a], heard), P.r[a][a0:a1], out=P.J[a, a0:a1]) for a in range(P.dim)]
@@ -187,7 +195,7 @@ def _chunk_sums(problem: _Problem, z: np.ndarray, J: list, dof: float, chunk: tu
     half gradients at z where already computed (:func:`_cost_terms`)."""
     P = problem
     lo, hi, a0, a1, S = chunk
-    J = [*J, -1.0 / P.settings.sigma_toa]  # the emission time's column of every Jacobian
+    J = [*J, -1.0 / P.scale(a0, a1)]  # the emission time's column of every Jacobian
     model = P.delay()
     if model is None:
         z2 = z**2
@@ -347,7 +355,8 @@ def _arrival_jacobians(problem: _Problem, X: np.ndarray) -> tuple[np.ndarray, np
     """Every arrival's normalised residual z (h,) and TOA Jacobian (h, dim + 1) [1/σ units] at the states X (one
     pass, :func:`_arrivals`: for the survey's consider covariance)."""
     z, J = _arrivals(problem, X, 0, problem.m, 0, len(problem.k))
-    return z, np.column_stack([*J, np.full(len(z), -1.0 / problem.settings.sigma_toa)])
+    return z, np.column_stack([*J, -1.0 / problem.sigma if per_receiver(problem.sigma) else
+                               np.full(len(z), -1.0 / problem.sigma)])
 
 
 def _information(problem: _Problem, z: np.ndarray, dof: float) -> np.ndarray:

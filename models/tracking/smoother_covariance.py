@@ -153,7 +153,7 @@ def _speed_covariance(problem: _Problem, D: dict, B: dict, information: np.ndarr
     P, dim = problem, problem.dim
     c = P.settings.sound_speed
     rho = np.sqrt(sum((X[P.k, a] - P.r[a]) ** 2 for a in range(dim)))
-    dz = information * rho / (c * c * P.settings.sigma_toa)
+    dz = information * rho / (c * c * P.sigma)  # P.sigma: one, or each arrival's
     u = np.zeros((P.m, P.s))
     for x, col in enumerate(list(range(dim)) + [P.s - 2]):
         u[:, col] = np.bincount(P.k, weights=dz * Jz[:, x], minlength=P.m)

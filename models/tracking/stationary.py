@@ -24,6 +24,7 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
+from sblsim.models.tracking.toa import checked_sigma, per_receiver
 
 #: Gauss-Newton iterations at most, and the step [m] below which the position has converged.
 ITERATIONS = 100
@@ -44,6 +45,12 @@ class StationaryFix:
     iterations: int
 
 
+def _per_ping(w: np.ndarray, sigma_toa: float | np.ndarray) -> np.ndarray:
+    """The weights (m, n) of each ping's emission time over its arrivals: the arrivals' own ``w``, over ``σ_i²``
+    where the timing noise is each receiver's (one σ for all: ``w`` as it is, the mean the same)."""
+    return w / np.asarray(sigma_toa, float) ** 2 if per_receiver(sigma_toa) else w
+
+
 def _centred(values: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``values`` (m, n[, dim]) less their per-ping weighted mean over the heard arrivals (weights ``w`` (m, n), 0
     where not heard)."""
@@ -53,7 +60,7 @@ def _centred(values: np.ndarray, w: np.ndarray) -> np.ndarray:
     return values - ((w * values).sum(axis=1) / total)[:, None]
 
 
-def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, start: np.ndarray,
+def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray, start: np.ndarray,
                    dof: float = ROBUST_DOF) -> StationaryFix:
     """The position of a stationary tag from all its pings (module docstring).
 
@@ -65,8 +72,8 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
         [m].
     c : float
         Sound speed [m/s].
-    sigma_toa : float
-        [s].
+    sigma_toa : float or ndarray, (n,)
+        [s]: one, or each receiver's.
     start : ndarray, (dim,)
         The first position [m] (e.g. the median of the single-ping fixes).
     dof : float
@@ -91,6 +98,7 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
     p = np.asarray(start, float).copy()
     if p.shape != (dim,) or not np.isfinite(p).all():
         raise ModelError(f"stationary tag: a start of shape {p.shape} or not finite; allowed: ({dim},), finite")
+    sigma_toa = checked_sigma(sigma_toa, n)
     y = np.where(heard, toa, 0.0)
 
     def terms(p: np.ndarray):
@@ -105,19 +113,20 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
         """The emission times and the weights at a position: each ping's emission time the weighted mean of its
         arrivals' (IRLS of the Student-t location, to its fixed point), the normalised residuals and weights there."""
         for _ in range(50):
-            r = np.where(heard, _centred(emitted, w), 0.0) / sigma_toa
+            r = np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa
             new = np.where(heard, (dof + 1.0) / (dof + r**2), 0.0)
             if np.abs(new - w).max() < 1e-12:
                 break
             w = new
-        return np.where(heard, _centred(emitted, w), 0.0) / sigma_toa, w
+        return np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa, w
 
     iterations = 0
     for _ in range(ITERATIONS):
         iterations += 1
         unit, emitted = terms(p)
         r, w = settle(emitted, w)
-        J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), w), 0.0) / sigma_toa
+        J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(w, sigma_toa)),
+                     0.0) / _columns(sigma_toa)
         normal = np.einsum("mn,mni,mnj->ij", w, J, J)
         gradient = np.einsum("mn,mni,mn->i", w, J, r)
         step = np.linalg.lstsq(normal, -gradient, rcond=None)[0]
@@ -127,15 +136,18 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
     unit, emitted = terms(p)
     r, w = settle(emitted, w)
     info = np.where(heard, observed_information(r, dof), 0.0)
-    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), info), 0.0) / sigma_toa
+    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(info, sigma_toa)),
+                 0.0) / _columns(sigma_toa)
     covariance = np.linalg.pinv(np.einsum("mn,mni,mnj->ij", info, J, J))
-    total = w.sum(axis=1)
-    emissions = np.where(total > 0, (w * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)
+    wp = _per_ping(w, sigma_toa)
+    total = wp.sum(axis=1)
+    emissions = np.where(total > 0, (wp * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)
     return StationaryFix(p, 0.5 * (covariance + covariance.T), emissions, w, int(heard.any(axis=1).sum()),
                          iterations)
 
 
-def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float, fix: StationaryFix,
+def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
+                     fix: StationaryFix,
                      dof: float = ROBUST_DOF) -> np.ndarray:
     """How a constant time bias at each receiver moves a stationary tag's pooled position: the columns of
     ``∂p / ∂β_i`` [m/s].
@@ -156,8 +168,10 @@ def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
         Times of arrival [s], NaN where not heard.
     receivers : ndarray, (n, dim)
         [m].
-    c, sigma_toa : float
-        [m/s], [s]: those of the fix.
+    c : float
+        [m/s]: that of the fix.
+    sigma_toa : float or ndarray, (n,)
+        [s]: that of the fix (one, or each receiver's).
     fix : StationaryFix
         :func:`stationary_fix`'s result on the same data.
     dof : float
@@ -176,10 +190,18 @@ def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
     d = np.linalg.norm(diff, axis=1)
     unit = diff / np.maximum(d, 1e-9)[:, None] / c
     emitted = np.where(heard, toa, 0.0) - d[None, :] / c
-    r = np.where(heard, _centred(emitted, fix.weights), 0.0) / sigma_toa
+    sigma_toa = checked_sigma(sigma_toa, len(receivers))
+    r = np.where(heard, _centred(emitted, _per_ping(fix.weights, sigma_toa)), 0.0) / sigma_toa
     info = np.where(heard, observed_information(r, dof), 0.0)
-    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), info), 0.0) / sigma_toa
+    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(info, sigma_toa)),
+                 0.0) / _columns(sigma_toa)
     return -fix.covariance @ np.einsum("mn,mni->in", info, J) / sigma_toa
+
+
+def _columns(sigma_toa: float | np.ndarray) -> float | np.ndarray:
+    """The timing noise as a divisor of the arrivals' Jacobians (m, n, dim): the one value, or (n, 1) per
+    receiver."""
+    return np.asarray(sigma_toa, float)[:, None] if per_receiver(sigma_toa) else sigma_toa
 
 
 #: The permutations of :func:`moved`'s test, and its level: the tag moved where the fixes' order is more orderly than

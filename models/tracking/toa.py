@@ -7,9 +7,11 @@ of receiver i is
     ``toa_i = t_e + ‖p − r_i‖ / c + w_i``,   ``w_i ~ N(0, σ_toa²)``,
 
 with the target's position ``p`` at emission (2-D, or 3-D), the sound speed ``c`` [m/s] and the timing noise
-``σ_toa`` [s]. Only differences of arrival times locate the target (TDOA); the emission time is estimated beside the
-position. The model and its Jacobian are casadi expressions (:func:`toa_function`, the EKF's); over many pings or
-arrivals at once (the fixes, the smoother) the same closed form is evaluated in numpy.
+``σ_toa`` [s]: one for every receiver, or each receiver's own ``σ_i`` (a synchronisation's residuals differ from
+receiver to receiver: :func:`checked_sigma`), the measurement covariance then ``diag(σ_i²)``. Only differences of
+arrival times locate the target (TDOA); the emission time is estimated beside the position. The model and its
+Jacobian are casadi expressions (:func:`toa_function`, the EKF's); over many pings or arrivals at once (the fixes,
+the smoother) the same closed form is evaluated in numpy.
 
 Units: seconds [s], metres [m], metres per second [m/s].
 
@@ -26,6 +28,8 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
+
+from sblsim.models.errors import ModelError
 
 #: The sound speeds a tracker accepts and the calibration searches [m/s].
 SOUND_SPEED_RANGE = (1300.0, 1700.0)
@@ -100,4 +104,36 @@ def _evaluate_pings(receivers: np.ndarray, c: float, p: np.ndarray, te: np.ndarr
     return np.asarray(te, float)[:, None] + travel, J
 
 
-__all__ = ["SOUND_SPEED_RANGE", "toa_function", "toa_model"]
+def checked_sigma(sigma_toa: float | np.ndarray, n: int) -> float | np.ndarray:
+    """The timing noise of n receivers' times of arrival checked: one standard deviation for all (returned as given),
+    or one per receiver (n,) [s] (returned as a float array; :func:`per_receiver` tells the two apart).
+
+    Raises
+    ------
+    ModelError
+        Not one value or n, or a value not finite and positive (one line).
+    """
+    if np.ndim(sigma_toa) == 0:
+        if not (np.isfinite(sigma_toa) and sigma_toa > 0):
+            raise ModelError(f"sigma_toa: {sigma_toa!r} s is not allowed; allowed: a finite number above 0")
+        return sigma_toa
+    sigma = np.asarray(sigma_toa, float)
+    if sigma.shape != (n,) or not (np.isfinite(sigma).all() and (sigma > 0).all()):
+        raise ModelError(f"sigma_toa: {sigma.shape[0] if sigma.ndim == 1 else sigma.shape} values, not all finite "
+                         f"and above 0, or not one per receiver; allowed: one value, or {n} finite values above 0 "
+                         "(one per receiver)")
+    return sigma
+
+
+def per_receiver(sigma_toa: float | np.ndarray) -> bool:
+    """Whether a timing noise is one per receiver (an array) rather than one for all (a number)."""
+    return np.ndim(sigma_toa) > 0
+
+
+def reference_sigma(sigma_toa: float | np.ndarray) -> float:
+    """One timing noise [s] for what takes a single one (a depth reading's weight against the arrivals, a late
+    arrival's delay in units of σ_toa): the value itself, or the median of the receivers' own."""
+    return sigma_toa if np.ndim(sigma_toa) == 0 else float(np.median(sigma_toa))
+
+
+__all__ = ["SOUND_SPEED_RANGE", "checked_sigma", "per_receiver", "reference_sigma", "toa_function", "toa_model"]

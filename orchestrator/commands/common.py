@@ -315,11 +315,13 @@ def names_argument(value: Any, where: str, what: str) -> list[str] | None:
 
 
 def sound_speed_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, salinity: Any,
-                          names: tuple[str, str, str, str]) -> tuple:
+                          names: tuple[str, str, str, str], temperature_file: Any = None,
+                          file_name: str = "temperature_file") -> tuple:
     """The sound speed's arguments checked together (``names``: how the caller spells ``sound_speed``,
-    ``sound_speed_file``, ``temperature``, ``salinity``): a constant [m/s] in [1300, 1700], a measured series, or a
-    fallback's water (a temperature [°C] and an absolute salinity [g/kg], both or neither) where the speed is
-    calibrated from the pings; returned as given, checked.
+    ``sound_speed_file``, ``temperature``, ``salinity``; ``file_name`` ``temperature_file``): a constant [m/s] in
+    [1300, 1700], a measured series, a water-temperature series (``temperature_file``, with the salinity), or a
+    fallback's water (a temperature [°C] and a practical salinity, both or neither) where the speed is calibrated
+    from the pings; returned as given, checked (the temperature file as the caller gives it on: ``path_argument``).
 
     Raises
     ------
@@ -330,14 +332,24 @@ def sound_speed_arguments(sound_speed: Any, sound_speed_file: Any, temperature: 
     series = path_argument(sound_speed_file, names[1])
     if speed is not None and series is not None:
         raise ConfigError(f"{names[1]}: not with {names[0]} (one sound speed: given, or a measured series)")
+    if path_argument(temperature_file, file_name) is not None:
+        other = next((n for n, v in ((names[0], speed), (names[1], series), (names[2], temperature)) if v is not None),
+                     None)
+        if other is not None:
+            raise ConfigError(f"{file_name}: not with {other} (one sound speed: a temperature series made the speed "
+                              "by TEOS-10)")
+        if salinity is None:
+            raise ConfigError(f"{names[3]}: needed with {file_name} (the water's practical salinity: 0 for fresh "
+                              "water, about 35 for the open sea)")
+        return speed, series, None, real_argument(salinity, names[3], *SALINITY_RANGE, "(practical salinity)")
     if (temperature is None) != (salinity is None):
         raise ConfigError(f"{names[3] if salinity is None else names[2]}: needed with "
                           f"{names[2] if salinity is None else names[3]} (the fallback sound speed's water: "
-                          "0 g/kg for fresh water, about 35 for the open sea)")
+                          "practical salinity 0 for fresh water, about 35 for the open sea)")
     if temperature is not None:
         if speed is not None or series is not None:
             raise ConfigError(f"{names[2]}: only where the sound speed is calibrated from the pings (its fallback); "
                               f"not with {names[0] if speed is not None else names[1]}")
         temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
-        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "g/kg")
+        salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "(practical salinity)")
     return speed, series, temperature, salinity

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 import numpy as np
 
 from sblsim.models.acoustics.core import LANES
+from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.common import (
     MAX_SEED,
@@ -37,11 +38,12 @@ from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import parse_instant
-from sblsim.orchestrator.tracks.depth import PRIOR_SOURCE
+from sblsim.orchestrator.tracks.depth import MAX_WATER_DEPTH, prior_line
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
+from sblsim.orchestrator.tracks.speed import replaced_line
 from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS, track
-from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
+from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, TOA_SIGMA_RANGE, noise_line
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -248,10 +250,12 @@ def ping_type_arguments(ping_type: Any, burst_interval: Any, burst_sequence: Any
 
 
 def medium_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, salinity: Any, motion: Any,
-                     acceleration_psd: Any, names: tuple[str, ...]) -> tuple:
+                     acceleration_psd: Any, names: tuple[str, ...], temperature_file: Any = None,
+                     file_name: str = "temperature_file") -> tuple:
     """The sound speed's and the motion model's arguments checked (``names``: how the caller spells
-    ``sound_speed``, ``sound_speed_file``, ``temperature``, ``salinity``, ``motion``, ``acceleration_psd``):
-    returns them as :func:`~sblsim.orchestrator.tracks.track.track` takes them.
+    ``sound_speed``, ``sound_speed_file``, ``temperature``, ``salinity``, ``motion``, ``acceleration_psd``; a
+    ``temperature_file`` spelled ``file_name`` checked against them, :func:`water_arguments` takes it on): returns
+    them as :func:`~sblsim.orchestrator.tracks.track.track` takes them.
 
     Raises
     ------
@@ -259,7 +263,7 @@ def medium_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, 
         A value outside its range, or options that exclude each other (one line).
     """
     speed, series, temperature, salinity = sound_speed_arguments(sound_speed, sound_speed_file, temperature,
-                                                                 salinity, names[:4])
+                                                                 salinity, names[:4], temperature_file, file_name)
     motion = "moving" if motion is None else motion
     if motion not in MOTIONS:
         raise ConfigError(f"{names[4]}: {str(motion)[:40]!r} is not allowed; allowed: {', '.join(MOTIONS)}")
@@ -280,7 +284,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
                tag_depth: float | None = None, depth_sigma: float | None = None, survey_sigma: float | None = None,
                crs: str | None = None, frame: str | None = None, time_origin: str | float | None = None,
-               out: str | Path | None = None, force: bool = False) -> TrackResult:
+               toa_sigma: float | None = None, temperature_file: str | Path | None = None,
+               water_depth: float | None = None, out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -306,8 +311,17 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         ``sound_speed_m_s`` [m/s] under a header; each ping's arrivals rescaled to the series' median
         (:mod:`sblsim.models.tracking.sound_speed`). Not with ``sound_speed``.
     temperature, salinity : float, optional
-        The water's temperature [°C] in [-2, 40] and absolute salinity [g/kg] in [0, 42], both or neither: the
-        fallback sound speed (TEOS-10) where the pings cannot determine it.
+        The water's temperature [°C] in [-2, 40] and practical salinity (PSS-78) in [0, 42], both or neither: the
+        fallback sound speed (TEOS-10) where the pings cannot determine it, and the speeds the water can have (a
+        calibration outside them is replaced by the fallback, said in ``summary["sound_speed"]``).
+    temperature_file : str or Path, optional
+        A water-temperature series (a file key): a time column (``time_s`` on the times of arrival's base, or ISO
+        8601 / epoch seconds in UTC with ``time_origin``) and ``temperature_c`` [°C] under a header, made the sound
+        speed by TEOS-10 at ``salinity`` (needed with it) and taken as a measured series
+        (:mod:`sblsim.orchestrator.tracks.water`). Not with ``sound_speed``, ``sound_speed_file``, ``temperature``.
+    water_depth : float, optional
+        The water's depth [m] in (0, 11000] (receivers with ``z_m``, none below it): the tag's depth is held within
+        the water column (a prior over it), at mid-water where the receivers lie in one plane.
     receivers_kept : str or sequence of str, optional
         Use only these receivers (their names in the receivers file; a text separated by commas, or a list):
         a thinned array. Default every receiver.
@@ -334,7 +348,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         ``depth_m`` column (a pressure sensor's reading per ping, positive down, ``NA`` where none): the fix and the
         robust smoother take either as a measurement of the height ``z = −depth``.
     depth_sigma : float, optional
-        A depth reading's standard deviation [m] in (0, 100] (default 0.3).
+        A depth reading's standard deviation [m] in (0, 100] (default 0.3); only with a depth (``tag_depth`` or a
+        ``depth_m`` column: refused without one, where it has no effect).
     survey_sigma : float, optional
         The receivers' survey error per axis [m] in [0, 1000], for those without a ``sigma_m`` column in the
         receivers file: the fix's and the robust smoother's covariances hold it (a consider covariance,
@@ -353,6 +368,10 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         The UTC time of the TOA file's zero (ISO 8601, or seconds since 1970): every row of the outputs has
         ``epoch_s`` and ``time_utc``, and a truth or sound-speed series may be in absolute times (ISO 8601, or
         ``epo`` seconds since 1970).
+    toa_sigma : float, optional
+        The timing noise of every time of arrival [s] in [1e-6, 1], in every estimator's measurement covariance;
+        default each receiver's ``toa_sigma_s`` in the receivers file (what ``sblsim toa`` writes from a
+        synchronisation's residuals), else 0.15 ms (``summary["toa_noise"]`` says which).
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
         ``errors.csv`` there.
@@ -376,12 +395,55 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     target = prepare_out(out, force, "track.csv", "track")
     options = toa_options(smooth, sound_speed, receivers_kept, drop_detections, seed, truth_sigma, ping_type,
                           burst_interval, burst_sequence, acceleration_psd, sound_speed_file, temperature, salinity,
-                          motion, tag_depth, depth_sigma, survey_sigma, crs, frame, time_origin)
+                          motion, tag_depth, depth_sigma, survey_sigma, crs, frame, time_origin, toa_sigma,
+                          temperature_file, water_depth)
+    check_depth_sigma(toa, tag_depth, depth_sigma, ("tag_depth", "depth_sigma"))
     outcome = track(toa, receivers, truth, reference, **options)
+    check_positioned(outcome, toa)
     if target is not None:
         write(outcome, target)
     return TrackResult(outcome.track, outcome.score, outcome.summary, outcome.estimates, outcome.errors, target,
                        outcome.bound)
+
+
+def check_positioned(outcome: Any, toa: Path) -> None:
+    """Refuse a track in which no estimator positioned a single ping (every ping heard by too few receivers: a
+    fix needs ``dimensions + 1`` with a position), before anything is written: it has no track to write.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, its pings and what a fix needs.
+    """
+    s = outcome.summary
+    if any(s["fixed"].values()):
+        return
+    dropped = (f" after {s['detections_dropped']} detections were removed at random (drop {s['drop_detections']:g})"
+               if s["drop_detections"] else "")
+    raise ModelError(f"toa: {str(toa)!r}: no ping could be positioned: no estimator placed any of its {s['pings']} "
+                     f"pings{dropped} (a fix, and every estimator's start, needs a ping heard by at least "
+                     f"{s['dimensions'] + 1} of its {len(s['receivers'])} receivers with a position); nothing "
+                     "written")
+
+
+def check_depth_sigma(toa: Path, tag_depth: Any, depth_sigma: Any, names: tuple[str, str]) -> None:
+    """Refuse the tag's depth σ given without a depth to weigh (``names``: how the caller spells ``tag_depth`` and
+    ``depth_sigma``): no ``tag_depth`` and no ``depth_m`` column in the times of arrival ``toa`` (a folder of tags:
+    not checked, the σ applies to the tags with a depth).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option, its value and what it needs.
+    """
+    if depth_sigma is None or tag_depth is not None or Path(toa).is_dir():
+        return
+    from sblsim.orchestrator.tracks.toa import read_toa
+
+    if read_toa(toa).depth is None:
+        raise ConfigError(f"{names[1]}: {float(depth_sigma):g} m has no effect: no depth of the tag is given (no "
+                          f"{names[0]}, no depth_m column in {str(toa)!r}); allowed: with {names[0]} or a depth_m "
+                          "column (the σ of that depth)")
 
 
 def geometry_arguments(tag_depth: Any, depth_sigma: Any, survey_sigma: Any, names: tuple[str, str, str]) -> dict:
@@ -422,7 +484,8 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
                 burst_sequence: Any = None, acceleration_psd: Any = None, sound_speed_file: Any = None,
                 temperature: Any = None, salinity: Any = None, motion: Any = "moving", tag_depth: Any = None,
                 depth_sigma: Any = None, survey_sigma: Any = None, crs: Any = None, frame: Any = None,
-                time_origin: Any = None) -> dict[str, Any]:
+                time_origin: Any = None, toa_sigma: Any = None, temperature_file: Any = None,
+                water_depth: Any = None) -> dict[str, Any]:
     """:func:`replay_toa`'s tracking arguments checked (each named as the function names it), as keyword arguments
     of :func:`~sblsim.orchestrator.tracks.track.track`.
 
@@ -434,7 +497,7 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
     smooth = flag_argument(smooth, "smooth")
     sound_speed, series, temperature, salinity, motion, acceleration_psd = medium_arguments(
         sound_speed, sound_speed_file, temperature, salinity, motion, acceleration_psd,
-        ("sound_speed", "sound_speed_file", "temperature", "salinity", "motion", "acceleration_psd"))
+        ("sound_speed", "sound_speed_file", "temperature", "salinity", "motion", "acceleration_psd"), temperature_file)
     kept = names_argument(receivers_kept, "receivers_kept", RECEIVER_NAMES)
     drop = real_argument(drop_detections, "drop_detections", 0.0, MAX_DROP, "")
     seed = check_seed(seed)
@@ -446,9 +509,38 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
     return {"smooth": smooth, "sound_speed": sound_speed, "receivers_kept": kept, "drop": drop, "seed": seed,
             "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval, "burst_sequence_path": sequence,
             "acceleration_psd": acceleration_psd, "sound_speed_path": series, "temperature": temperature,
-            "salinity": salinity, "motion": motion} | geometry_arguments(
+            "salinity": salinity, "motion": motion, "toa_sigma": toa_sigma_argument(toa_sigma, "toa_sigma")
+            } | geometry_arguments(
         tag_depth, depth_sigma, survey_sigma, ("tag_depth", "depth_sigma", "survey_sigma")) | place_arguments(
-        crs, frame, time_origin, ("crs", "frame", "time_origin"))
+        crs, frame, time_origin, ("crs", "frame", "time_origin")) | water_arguments(
+        temperature_file, water_depth, ("temperature_file", "water_depth"))
+
+
+def water_arguments(temperature_file: Any, water_depth: Any, names: tuple[str, str]) -> dict[str, Any]:
+    """A water-temperature series and the water's depth checked (``names``: how the caller spells them; the file's
+    exclusions are :func:`~sblsim.orchestrator.commands.common.sound_speed_arguments`'), as
+    :func:`~sblsim.orchestrator.tracks.track.track`'s keyword arguments.
+
+    Raises
+    ------
+    ConfigError
+        A value outside its range (one line).
+    """
+    return {"temperature_path": path_argument(temperature_file, names[0]),
+            "water_depth": None if water_depth is None else real_argument(water_depth, names[1], 0.0,
+                                                                          MAX_WATER_DEPTH, "m", low_open=True)}
+
+
+def toa_sigma_argument(value: Any, where: str) -> float | None:
+    """The timing noise given [s] checked (None: not given), in
+    :data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`.
+
+    Raises
+    ------
+    ConfigError
+        A value outside it (one line).
+    """
+    return None if value is None else real_argument(value, where, *TOA_SIGMA_RANGE, "s")
 
 
 def replay_toa_tags(folder: str | Path, *, receivers: str | Path, workers: int | None = None,
@@ -516,7 +608,7 @@ def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engi
     from sblsim.orchestrator.replay import replay as _replay
     from sblsim.orchestrator.replay import write_replay
 
-    data = read_log(log, plan.n_beacons, plan.system, plan["acoustics"]["sound_speed_assumed"])
+    data = read_log(log, plan.n_beacons, plan.system, plan["acoustics"]["sound_speed_assumed"], plan["acoustics"])
     track = read_truth(truth) if truth is not None else None
     target = prepare()
     result = _replay(data, plan, engine, fmu_dir, track)
@@ -581,9 +673,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--temperature", type=float, default=None, metavar="C",
                    help="--format toa: the water's temperature [°C] for the fallback sound speed (TEOS-10) where the "
                         "pings cannot determine it (with --salinity; default fallback 1500 m/s)")
-    p.add_argument("--salinity", type=float, default=None, metavar="G_KG",
-                   help="--format toa: the water's absolute salinity [g/kg] for the fallback (0 fresh water, about "
-                        "35 the open sea)")
+    p.add_argument("--salinity", type=float, default=None, metavar="S",
+                   help="--format toa: the water's practical salinity (PSS-78) for the fallback or --temperature-file "
+                        "(0 fresh water, about 35 the open sea)")
+    p.add_argument("--temperature-file", type=Path, default=None, metavar="CSV",
+                   help="--format toa: a water-temperature series (time_s, or time_utc / epo with --time-origin; "
+                        "temperature_c [°C]) made the sound speed by TEOS-10 at --salinity")
+    p.add_argument("--water-depth", type=float, default=None, metavar="M",
+                   help="--format toa: the water's depth [m] (receivers with z_m): the tag's depth kept within the "
+                        "water column, at mid-water where the receivers lie in one plane")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="--format toa with a folder of tags: worker processes in [1, 256] (default: the CPU count)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -593,13 +691,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="--format toa: the tag's depth [m] at every ping (a tag at a known depth; receivers with z_m), "
                         "where the times of arrival carry no depth_m column")
     p.add_argument("--depth-sigma", type=float, default=None, metavar="M",
-                   help="--format toa: the standard deviation of a depth reading [m] in (0, 100] (default 0.3)")
+                   help="--format toa: the standard deviation of a depth reading [m] in (0, 100] (default 0.3); "
+                        "only with a depth (--tag-depth or a depth_m column)")
     p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the receivers' survey error per axis [m] in [0, 1000], for those without a "
                         "sigma_m column, in the fix's and the smoother's covariances")
     p.add_argument("--motion", choices=MOTIONS, default=None,
                    help="--format toa: moving (default) or stationary (a sync or reference tag: one position for all "
                         "pings)")
+    p.add_argument("--toa-sigma", type=float, default=None, metavar="S",
+                   help="--format toa: the timing noise of every time of arrival [s] in [1e-6, 1] (default: each "
+                        "receiver's toa_sigma_s in the receivers file, from a synchronisation's residuals; else "
+                        "0.00015)")
     p.add_argument("--truth-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the truth's own error per horizontal axis [m] in [0, 100] (GPS, lever arm), "
                         "in the NEES against it (default 0: the truth taken as exact)")
@@ -646,10 +749,13 @@ def main(args: argparse.Namespace) -> int:
                             ("--sound-speed-file", args.sound_speed_file),
                             ("--temperature", args.temperature is not None),
                             ("--salinity", args.salinity is not None), ("--motion", args.motion),
+                            ("--temperature-file", args.temperature_file),
+                            ("--water-depth", args.water_depth is not None),
                             ("--workers", args.workers is not None), ("--scheduler", args.scheduler),
                             ("--tag-depth", args.tag_depth is not None),
                             ("--depth-sigma", args.depth_sigma is not None),
                             ("--survey-sigma", args.survey_sigma is not None),
+                            ("--toa-sigma", args.toa_sigma is not None),
                             ("--crs", args.crs), ("--frame", args.frame), ("--time-origin", args.time_origin)) if v]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
@@ -773,12 +879,13 @@ def _main_toa(args: argparse.Namespace) -> int:
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
                           "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
-                          "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --motion, --workers, "
-                          "--scheduler, --tag-depth, --depth-sigma, --survey-sigma, --crs, --frame, --time-origin, "
-                          "--out, --force")
+                          "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --temperature-file, "
+                          "--motion, --workers, --scheduler, --tag-depth, --depth-sigma, --survey-sigma, "
+                          "--water-depth, --toa-sigma, --crs, --frame, --time-origin, --out, --force")
     speed, series, temperature, salinity, motion, q = medium_arguments(
         args.sound_speed, args.sound_speed_file, args.temperature, args.salinity, args.motion, args.acceleration_psd,
-        ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"))
+        ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity", "--motion", "--acceleration-psd"),
+        args.temperature_file, "--temperature-file")
     kept = names_argument(args.receivers_kept, "--receivers-kept", RECEIVER_NAMES)
     drop = 0.0 if args.drop_detections is None else real_argument(args.drop_detections, "--drop-detections", 0.0,
                                                                   MAX_DROP, "")
@@ -795,15 +902,19 @@ def _main_toa(args: argparse.Namespace) -> int:
     options = {"smooth": args.smooth, "sound_speed": speed, "receivers_kept": kept, "drop": drop, "seed": seed,
                "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval,
                "burst_sequence_path": sequence, "acceleration_psd": q, "sound_speed_path": series,
-               "temperature": temperature, "salinity": salinity, "motion": motion} | geometry_arguments(
+               "temperature": temperature, "salinity": salinity, "motion": motion,
+               "toa_sigma": toa_sigma_argument(args.toa_sigma, "--toa-sigma")} | geometry_arguments(
         args.tag_depth, args.depth_sigma, args.survey_sigma, ("--tag-depth", "--depth-sigma", "--survey-sigma")) | \
-        place_arguments(args.crs, args.frame, args.time_origin, ("--crs", "--frame", "--time-origin"))
+        place_arguments(args.crs, args.frame, args.time_origin, ("--crs", "--frame", "--time-origin")) | \
+        water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
     if args.log.is_dir():
         return _main_tags(args, options)
     if args.workers is not None or args.scheduler is not None:
         raise ConfigError(f"{'--workers' if args.workers is not None else '--scheduler'}: only with a folder of tags "
                           "(one times-of-arrival file per tag, tracked in parallel)")
+    check_depth_sigma(args.log, args.tag_depth, args.depth_sigma, ("--tag-depth", "--depth-sigma"))
     outcome = track(args.log, args.receivers, args.truth, args.reference, **options)
+    check_positioned(outcome, args.log)
     out = output_folder(args.out, Path("results") / f"track_{folder_name(args.log.stem)}", args.force,
                         "track.csv", "track")
     write(outcome, out)
@@ -815,6 +926,7 @@ def _main_toa(args: argparse.Namespace) -> int:
           f"{len(s['receivers'])} receivers{thinned}, sound speed {c['sound_speed_m_s']:.1f} m/s ({c['source']}), "
           f"ping interval {s['ping_interval_s']:.4f} s, in {s['wall_time_s']:.1f} s")
     print("  " + ping_type_line(s))
+    print("  " + noise_line(s["toa_noise"]))
     if c["source"] == "fallback":
         print(f"sblsim: warning: the pings do not determine the sound speed ({c['calibration']}); taken: "
               f"{c['method']} (every range scales with it: give --sound-speed, --sound-speed-file or --temperature "
@@ -831,11 +943,10 @@ def _main_toa(args: argparse.Namespace) -> int:
               f"{c['calibrated_sigma_m_s']:.2g} m/s): every range scales with it, by "
               f"{100 * abs(c['sound_speed_m_s'] / c['calibrated_m_s'] - 1):.2g} %; the track takes the speed given",
               file=sys.stderr)
-    d = s["depth"]
-    if d["source"] == PRIOR_SOURCE:
-        print(f"sblsim: warning: the receivers do not determine the tag's depth (the fixes' depth σ is "
-              f"{d['fixes_ratio']:.2f} of their heights' scale): taken at the receivers' mean depth "
-              f"{d['depth_m']:.2f} ± {d['sigma_m']:.2g} m (give --tag-depth or a depth_m column)", file=sys.stderr)
+    if replaced_line(c):
+        print(f"sblsim: warning: {replaced_line(c)}", file=sys.stderr)
+    if prior_line(s["depth"]):
+        print(f"sblsim: warning: {prior_line(s['depth'])}", file=sys.stderr)
     if c.get("pings_outside_series"):
         print(f"sblsim: warning: {c['pings_outside_series']} of {s['pings']} pings lie outside the sound-speed "
               f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "
@@ -862,12 +973,15 @@ def _main_toa(args: argparse.Namespace) -> int:
         print(f"  {'estimator':<16} {'fixed':>6} {'scored':>6} {'mean':>7} {'median':>7} {'RMS':>8} {'p90':>7} "
               f"{'p95':>7} {'NEES':>7} {'lag [s]':>7}")
         for key, e in [(r["estimator"], r)] + list(r["others"].items()):
-            if "median_m" in e:
+            if e.get("median_m") is not None:
                 nees = "-" if e["nees"] is None else f"{e['nees']:.3g}"
                 lag = "-" if e["lag_s"] is None else f"{e['lag_s']:+.2f}"
                 print(f"  {names[key]:<16} {e['n_fixed']:>6} {e['n_scored']:>6} {e['mean_m']:>7.3f} "
                       f"{e['median_m']:>7.3f} {e['rms_m']:>8.3f} {e['p90_m']:>7.3f} {e['p95_m']:>7.3f} {nees:>7} "
                       f"{lag:>7}")
+        if not r.get("n_scored"):
+            print(f"  no ping inside the truth's times [{outcome.truth[0, 0]:.10g}, {outcome.truth[-1, 0]:.10g}] s: "
+                  f"none of the {names[r['estimator']]}'s {r['n_fixed']} positions scored")
         if r["nees"] is not None:
             print(f"  NEES of the {names[r['estimator']]} against the truth: mean {r['nees']:.3g}, median "
                   f"{r['nees_median']:.3g} (2 and 1.39 when consistent), the truth's own error "

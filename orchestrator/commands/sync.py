@@ -49,7 +49,9 @@ class SyncResult:
         [s/s] per bin with their sigmas, its rejected share and residuals, the receivers not synchronised, notes.
     offsets : pandas.DataFrame
         ``offsets.csv``: one row per synchronised receiver and time bin (offset at the bin's start and end [s],
-        drift [s/s], their sigmas, the kept arrivals, ``bridged``).
+        drift [s/s], their sigmas, the kept arrivals, ``bridged``); where a receiver's clock broke (jumped or went
+        back: ``summary["clock_breaks"]``, each named in a warning), one row per clock segment and bin, with
+        ``segment``, ``clock_from`` and ``clock_to`` (the times of its own clock the segment holds for).
     residuals : pandas.DataFrame
         ``residuals.csv``: every sync-tag arrival: receiver, tag, emission, ``time`` (its clock) and ``time_sync``
         [s], residual [s] and [m], ``kept`` and the reason of a rejection.
@@ -83,7 +85,8 @@ class SyncResult:
         return figures(self._outcome)
 
     def correct(self, receiver: str, times: Any) -> Any:
-        """Times logged by ``receiver`` [s since 1970 UTC on its clock] on the reference receiver's clock.
+        """Times logged by ``receiver`` [s since 1970 UTC on its clock] on the reference receiver's clock (NaN where
+        its clock broke: a time between two of its clock segments, set aside).
 
         Raises
         ------
@@ -95,8 +98,9 @@ class SyncResult:
             raise ConfigError(f"receiver: {receiver!r} was not synchronised; allowed: one of "
                               f"{', '.join(self.summary['synchronised'])}")
         t = np.asarray(times, float) - self._outcome.origin
-        j = np.full(t.shape, names.index(receiver))
-        return t + self._outcome.origin - self._outcome.fit.offset(j, t)
+        fit = self._outcome.fit
+        j = fit.rows_at(np.full(t.shape, names.index(receiver)), t)  # its clock segment where its clock broke
+        return np.where(j >= 0, t + self._outcome.origin - fit.offset(np.maximum(j, 0), t), np.nan)
 
 
 def sync(detections: str | Path, *, receivers: str | Path, format: str | None = None,
@@ -190,6 +194,7 @@ def _synchronise(detections: Path, receivers: Path, format: str | None, sound_sp
                  sound_speed_file: Path | None, bin_hours: float, reference: str | None,
                  refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
                  frame: str | None = None):
+    from sblsim.orchestrator.sync.declared import check_sync_positions
     from sblsim.orchestrator.sync.detections import read_detections, read_sound_speed
     from sblsim.orchestrator.sync.run import synchronise_study
     from sblsim.orchestrator.telemetry.deployments import read_deployments
@@ -197,8 +202,12 @@ def _synchronise(detections: Path, receivers: Path, format: str | None, sound_sp
     data = read_detections(detections, format)
     deployments = read_deployments(receivers, crs, frame)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
-    return synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
-                             refine_positions=refine_positions, survey_sigma=survey_sigma)
+    outcome = synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
+                                refine_positions=refine_positions, survey_sigma=survey_sigma)
+    # the table's positions against the sync tags' clock-free travel times: kilometres or degrees refused
+    check_sync_positions(outcome.residuals, outcome.receivers, deployments.hydrophones(), deployments.source,
+                         sound_speed)
+    return outcome
 
 
 NAME = "sync"
@@ -256,6 +265,12 @@ def main(args: argparse.Namespace) -> int:
     rejected = d["used"] - d["kept"]
     print(f"  arrivals: {d['kept']} kept, {rejected} rejected, {d['multipath']} multipath, {d['single_receiver']} "
           f"heard by one receiver only; median |residual| {s['median_abs_residual_m']:.3g} m")
+    noise = {r: v["toa_sigma_s"] for r, v in s.get("toa_noise", {}).items() if math.isfinite(v["toa_sigma_s"])}
+    if noise:
+        low, high = min(noise, key=noise.get), max(noise, key=noise.get)
+        print(f"  TOA noise per receiver (offsets.csv's toa_sigma_s, the tracker's): median "
+              f"{np.median(list(noise.values())) * 1e3:.3g} ms, {noise[low] * 1e3:.3g} ms ({low}) to "
+              f"{noise[high] * 1e3:.3g} ms ({high})")
     if "positions" in s:
         q = s["positions"]
         print(f"  positions refined (prior {q['survey_sigma_m']:g} m per axis): median shift "

@@ -27,6 +27,7 @@ from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.output import folder_name, staged_directory
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress, progress_of
 from sblsim.orchestrator.tracks.outputs import figure
+from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE, noise_line
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -86,7 +87,7 @@ class StudyResult:
 
 
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
-             medium: tuple, names: dict[str, str]) -> dict[str, Any]:
+             medium: tuple, names: dict[str, str], toa_sigma: Any = None) -> dict[str, Any]:
     """Every option of a study checked (``names``: how each is spelled where it was given), as
     :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
     if format is not None and format not in FORMATS:
@@ -105,7 +106,8 @@ def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, worker
             "chosen": names_argument(tag, names["tag"], "transmitters (full IDs or ids)"), "sound_speed": speed,
             "sound_speed_file": series, "temperature": temperature, "salinity": salinity,
             "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
-            "scheduler": scheduler}
+            "scheduler": scheduler, "toa_sigma": None if toa_sigma is None else real_argument(
+                toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s")}
 
 
 def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | None = None,
@@ -113,8 +115,8 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
           crs: str | None = None, frame: str | None = None, sound_speed: float | None = None,
           sound_speed_file: str | Path | None = None, temperature: float | None = None,
           salinity: float | None = None, bin_hours: float = 1.0, workers: int | None = None,
-          scheduler: str | None = None, out: str | Path | None = None, force: bool = False,
-          progress: ProgressSpec = False) -> StudyResult:
+          scheduler: str | None = None, toa_sigma: float | None = None, out: str | Path | None = None,
+          force: bool = False, progress: ProgressSpec = False) -> StudyResult:
     """Track every tag of a telemetry study: ``sblsim track`` (docs/telemetry.md).
 
     Parameters
@@ -146,7 +148,7 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     sound_speed_file : str or Path, optional
         A series (``epo`` or ISO 8601 ``time_utc``, and ``sound_speed_m_s``) for the synchronisation and the tracks.
     temperature, salinity : float, optional
-        The water's temperature [°C] and absolute salinity [g/kg], both or neither: the fallback sound speed
+        The water's temperature [°C] and practical salinity (PSS-78), both or neither: the fallback sound speed
         (TEOS-10) where the pings cannot determine it.
     bin_hours : float
         [h] in [0.05, 168]: the synchronisation's bins.
@@ -154,6 +156,9 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
         Worker processes in [1, 256] (default the CPU count).
     scheduler : str, optional
         A Dask scheduler (``tcp://HOST:PORT`` or ``local``): the tags run on its workers.
+    toa_sigma : float, optional
+        The timing noise of every time of arrival [s] in [1e-6, 1]; default each receiver's from the
+        synchronisation's residuals (``offsets.csv``'s ``toa_sigma_s``), else 0.15 ms (``summary["toa_noise"]``).
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``tracks.geojson``, ``map.png``, ``sync/``, a folder per tag), all or nothing.
@@ -180,7 +185,8 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     medium = sound_speed_arguments(sound_speed, sound_speed_file, temperature, salinity,
                                    ("sound_speed", "sound_speed_file", "temperature", "salinity"))
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
-                       {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers")})
+                       {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma")},
+                       toa_sigma)
     target = prepare_out(out, force, "study.json", "study")
     outcome = _run(detections, receivers, tags, sync, options, target, progress)
     return _result(outcome, target)
@@ -248,6 +254,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
     else:
         out.append("  clocks taken as logged (no sync tag in the receivers file)")
+    if "toa_noise" in s:
+        out.append("  " + noise_line(s["toa_noise"]))
     where = "on " + options["scheduler"] if options["scheduler"] else \
         f"in {min(options['workers'] or os.cpu_count() or 1, max(count, 1))} worker processes"
     out.append(f"  tracking {count} tags {where}")
@@ -281,8 +289,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        help="a sound-speed series (epo or time_utc, sound_speed_m_s)")
     p.add_argument("--temperature", type=float, default=None, metavar="C",
                    help="the water's temperature [°C] for the fallback sound speed (TEOS-10; with --salinity)")
-    p.add_argument("--salinity", type=float, default=None, metavar="G_KG",
-                   help="the water's absolute salinity [g/kg] for the fallback (0 fresh water, about 35 the open sea)")
+    p.add_argument("--salinity", type=float, default=None, metavar="S",
+                   help="the water's practical salinity (PSS-78) for the fallback (0 fresh water, about 35 the open "
+                        "sea)")
+    p.add_argument("--toa-sigma", type=float, default=None, metavar="S",
+                   help="the timing noise of every time of arrival [s] in [1e-6, 1] (default: each receiver's from "
+                        "the synchronisation's residuals; else 0.00015)")
     p.add_argument("--bin-hours", type=float, default=1.0, metavar="H",
                    help="the synchronisation's bins [h] in [0.05, 168] (default 1)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
@@ -299,7 +311,7 @@ def main(args: argparse.Namespace) -> int:
                                    ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity"))
     options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
-                                                                       "workers")})
+                                                                       "workers", "toa_sigma")}, args.toa_sigma)
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
                         "study.json", "study")
     outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)

@@ -8,7 +8,9 @@ GeoJSON polygon, read bounded.
 
 Either is refused in one line naming ``site.area.file`` where it is not a regular file, larger than
 :data:`MAX_BYTES`, not UTF-8 text, holds more than :data:`~sblsim.models.design.area.MAX_VERTICES` vertices, a
-number that is not finite, or an outline that is not a valid polygon.
+number that is not finite, or an outline that is not a valid polygon; a CSV also where a line is longer than 1 MiB or
+holds more than 512 cells, or the file more than :data:`MAX_CELLS`, counted before it is parsed
+(:func:`~sblsim.orchestrator.io.tables.check_cells`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from sblsim.orchestrator.io.tables import csv_cells, read_lines
 
 #: The largest outline file read [bytes].
 MAX_BYTES = 16 << 20
+#: The most cells a CSV outline holds [1]: two a vertex, and as many again for a header, blank cells and comments.
+MAX_CELLS = 4 * areas.MAX_VERTICES
 #: The key the errors name.
 KEY = "site.area.file"
 
@@ -55,9 +59,11 @@ def read_area(path: str | Path):
         Naming ``site.area.file`` (module docstring).
     """
     path = Path(path)
-    try:
-        lines = read_lines(path, KEY, max_bytes=MAX_BYTES, max_rows=areas.MAX_VERTICES, refuse=_refuse)
-        if path.suffix.lower() in (".geojson", ".json"):
+    geojson = path.suffix.lower() in (".geojson", ".json")
+    try:  # a CSV's cells counted before it is parsed (a GeoJSON's numbers are bounded by MAX_BYTES alone)
+        lines = read_lines(path, KEY, max_bytes=MAX_BYTES, max_rows=areas.MAX_VERTICES, refuse=_refuse,
+                           delimiter=None if geojson else ",", max_cells=MAX_CELLS, comments=True)
+        if geojson:
             return _geojson("\n".join(lines))
         return _csv(lines)
     except ModelError as exc:
@@ -104,4 +110,4 @@ def _geojson(text: str):
     return shapely.transform(geometry, lambda xy: xy[:, ::-1])  # GeoJSON's (east, north) -> (north, east)
 
 
-__all__ = ["KEY", "MAX_BYTES", "read_area"]
+__all__ = ["KEY", "MAX_BYTES", "MAX_CELLS", "read_area"]

@@ -559,6 +559,12 @@ def _check_together(problem: dict[str, dict[str, Any]], scenario_given: bool) ->
                           "or '-' (starting with a letter or digit)")
     if is_telemetry(problem):
         _check_telemetry(problem)
+    elif problem["site.area"] != defaults()["site.area"]:  # the water places receivers of a telemetry array only
+        given = next(k for k, v in problem["site.area"].items() if v != defaults()["site.area"][k])
+        raise ConfigError(f"site.area.{given}: no effect in a design of {', '.join(candidates['systems'])} "
+                          f"([site.area] is the water of an {TELEMETRY} design, candidates.systems = "
+                          f"['{TELEMETRY}']); allowed: no [site.area] (where transponders may go: [seafloor] shape, "
+                          "polygon, avoid; the work area: [work_area])")
     elif problem["work_area"]["shape"] == "site":
         raise ConfigError("work_area.shape: site is the water of an ilbl design (candidates.systems = ['ilbl']); "
                           "allowed circle or polygon")
@@ -713,7 +719,8 @@ def _check_tag(problem: dict[str, dict[str, Any]]) -> None:
     Raises
     ------
     ConfigError
-        In one line naming ``tag.burst_interval_s``, ``tag.burst_sequence`` or ``tag.source_level_db``.
+        In one line naming ``tag.burst_interval_s``, ``tag.burst_sequence`` or ``tag.source_level_db``; or a key of
+        the SNR model (:data:`SNR_KEYS`) changed where the curve is the range test's (it has no effect).
     """
     tag = problem["tag"]
     kind, interval, sequence = tag["ping_type"], tag["burst_interval_s"], tag["burst_sequence"]
@@ -737,6 +744,14 @@ def _check_tag(problem: dict[str, dict[str, Any]]) -> None:
         raise ConfigError(f"tag.source_level_db: {tag['source_level_db']:g} dB with a range test's curve "
                           "(detection.range_50_m or detection.table); allowed one of them: 0 (the range test's "
                           "curve) or the site's SNR model without range_50_m and table")
+    if tag["source_level_db"] <= 0.0:  # the range test's curve: the SNR model's keys are read by nothing
+        start = defaults()["detection"]
+        for name in SNR_KEYS:
+            if detection[name] != start[name]:
+                raise ConfigError(f"detection.{name}: {shown(detection[name])} has no effect: the detection curve "
+                                  "is the range test's (detection.range_50_m or detection.table), not the site's SNR "
+                                  f"model, which alone reads it; allowed its default {shown(start[name])}, or "
+                                  "tag.source_level_db without range_50_m and table (the SNR model)")
 
 
 def is_three_d(problem: Mapping[str, Mapping[str, Any]]) -> bool:

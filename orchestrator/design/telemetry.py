@@ -41,6 +41,7 @@ from scipy.spatial import cKDTree
 from sblsim.models.design import area as areas
 from sblsim.models.design import telemetry as tm
 from sblsim.models.errors import ConfigError, ModelError
+from sblsim.models.sync.scale import looks_like_degrees
 from sblsim.orchestrator.design.area_file import read_area
 from sblsim.orchestrator.design.effort import Estimate
 from sblsim.orchestrator.design.problem import existing_devices, is_three_d, polygon, receiver_curves
@@ -48,6 +49,10 @@ from sblsim.orchestrator.tracks.toa import read_burst_sequence
 
 #: The places a receiver may go: about this many grid points over the water.
 SITE_POINTS = 4000
+#: The least extent of the water [m]: an outline smaller is no telemetry site (degrees or kilometres taken for
+#: metres), and metres per degree of latitude (the size such an outline would have in degrees).
+MIN_WATER_M = 1.0
+DEGREE_M = 111_195.0
 #: The most mooring lines (``site.area.lines``) and vertices of one.
 MAX_LINES, MAX_LINE_VERTICES = 100, 200
 #: Local-search moves per receiver count: ``search.generations`` times this.
@@ -236,13 +241,33 @@ class TelemetryRun:
 
 
 def water_polygon(section: Mapping[str, Any]):
-    """The water of a checked ``[site.area]`` section, (North, East) [m]."""
+    """The water of a checked ``[site.area]`` section, (North, East) [m].
+
+    Raises
+    ------
+    ConfigError
+        An outline that does not read or is not a polygon; one less than :data:`MIN_WATER_M` across (no acoustic
+        range is that short: an outline in degrees or kilometres, named).
+    """
     if section["file"]:
-        return read_area(section["file"])
-    try:
-        return areas.polygon(polygon(section["polygon"], "site.area.polygon"), "site.area.polygon")
-    except ModelError as exc:
-        raise ConfigError(str(exc)) from None
+        water, where = read_area(section["file"]), "site.area.file"
+    else:
+        where = "site.area.polygon"
+        try:
+            water = areas.polygon(polygon(section["polygon"], where), where)
+        except ModelError as exc:
+            raise ConfigError(str(exc)) from None
+    north0, east0, north1, east1 = water.bounds
+    across = max(north1 - north0, east1 - east0)
+    if across < MIN_WATER_M:
+        degrees = looks_like_degrees(np.array([east0, east1]), np.array([north0, north1]))
+        unit = (f"degrees (latitude, longitude: about {across * DEGREE_M / 1e3:.3g} km across)" if degrees else
+                f"kilometres ({across * 1e3:.3g} m across)")
+        raise ConfigError(f"{where}: the water is {across:.3g} m across (North {north0:.6g} to {north1:.6g}, East "
+                          f"{east0:.6g} to {east1:.6g}), less than any acoustic range; it looks like {unit}; allowed: "
+                          f"an outline at least {MIN_WATER_M:g} m across, in metres North and East of an origin "
+                          "(site.area.origin 'latitude longitude' places it)")
+    return water
 
 
 def mooring_lines(text: str, where: str = "site.area.lines") -> list[np.ndarray]:

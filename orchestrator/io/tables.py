@@ -4,7 +4,10 @@ A table is a CSV file (a header row, ``#`` comment lines and blank lines skipped
 into text cells so that every reader checks every cell itself (:func:`number`) and names the line and the
 column of a bad one. A file is checked to be a regular file before it is opened (a FIFO would block), and one
 larger than :data:`MAX_LOG_BYTES` or with more than :data:`MAX_LOG_ROWS` rows is refused before it is read
-whole. A table never names a path that is then read or written.
+whole, and one whose line is longer than :data:`MAX_LINE_BYTES`, holds more than :data:`MAX_LINE_CELLS` cells, or
+whose lines hold more than :data:`MAX_CELLS` in all is refused before anything parses it (:func:`check_cells`, which
+every table reader of sblsim goes through: a file's bytes alone do not bound the memory its cells take, a line of
+commas being a cell a byte). A table never names a path that is then read or written.
 """
 
 from __future__ import annotations
@@ -32,6 +35,15 @@ SUFFIXES = (".csv", ".parquet")
 #: The largest log read [bytes] and the most rows (a log is read whole, checked before reading it).
 MAX_LOG_BYTES = 256 * 2**20
 MAX_LOG_ROWS = 2_000_000
+#: The most cells a line of a table holds [1] (the widest a reader takes, a GLATOS or OTN extract, has about 40
+#: columns; a TOA matrix, one a receiver, passes its own), the most cells a table holds [1] (its rows times its widest
+#: row: 2**24, parsed into text cells at 20 to 70 bytes each, well under 1 GiB) and the longest line [bytes].
+MAX_LINE_CELLS = 512
+MAX_CELLS = 2**24
+MAX_LINE_BYTES = 2**20
+#: The bytes :func:`check_cells` scans at once (its temporaries: 10 to 70 bytes a byte scanned, the most for a
+#: piece of line ends alone).
+_PIECE = 2**20
 #: A number in a log: ASCII digits, an optional sign, point and exponent, or inf / nan (refused as not finite
 #: where a finite number is needed); not what else Python's float() takes (``1_0.0``, other scripts' digits).
 NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", re.IGNORECASE)
@@ -96,15 +108,138 @@ def text_lines(text: str) -> list[str]:
     return [line[:-1] if line.endswith("\r") else line for line in lines]
 
 
+def _first_row(data: bytes, longest: int) -> bytes:
+    """The first line of ``data`` that is neither blank nor a comment (``#``), at most ``longest`` bytes of it."""
+    found = re.search(rb"^[ \t]*[^#\s][^\r\n]{0,%d}" % longest, data, re.M)
+    return found.group(0) if found else b""
+
+
+def check_cells(data: bytes, name: str, what: str, delimiter: str = ",", *, max_line_cells: int | None = None,
+                max_cells: int | None = None, max_line_bytes: int | None = None, comments: bool = False) -> int:
+    """Refuse a table's text before anything parses it into cells: a line longer than ``max_line_bytes``, a line of
+    more than ``max_line_cells`` cells, or more than ``max_cells`` cells in all. The cells are counted in the bytes,
+    :data:`_PIECE` bytes at a time (at most about 70 MiB besides the text, whatever its shape).
+
+    A line ends at ``\\n``, ``\\r\\n`` or a lone ``\\r`` (pandas' parser ends a row at each). Its cells: with
+    ``delimiter`` ``","``, its commas and one (a comma inside quotes counted too: an upper bound of what a parser
+    makes of it; a row whose quoted cell spans lines holds at most the cells of its lines); with ``" "``, its runs of
+    characters other than spaces and tabs (a whitespace-separated table); with ``"auto"``, ``","`` where the first
+    line that is neither blank nor a comment holds a comma, else ``" "`` (the rule of a TOA matrix).
+
+    Parameters
+    ----------
+    data : bytes
+        The file's bytes (before decoding: UTF-8 keeps these ASCII characters single bytes).
+    name, what : str
+        The file and what it is, as the error names them.
+    delimiter : str
+        ``","``, ``" "`` or ``"auto"``.
+    max_line_cells, max_cells : int, optional
+        The most cells a line holds and a table holds [1]; default :data:`MAX_LINE_CELLS`, :data:`MAX_CELLS`.
+    max_line_bytes : int, optional
+        The longest line [bytes], its line end not counted; default :data:`MAX_LINE_BYTES`.
+    comments : bool
+        A line whose first character is ``#`` is a comment the reader drops unparsed: its cells are not counted,
+        its length is.
+
+    Returns
+    -------
+    int
+        The cells counted [1].
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the limit and the count: ``what: 'name' line N holds C cells; allowed at most L
+        cells a line``, ``... line N is B bytes long; allowed at most L bytes a line``, ``... holds C cells; allowed
+        at most L cells in a table``.
+    """
+    max_line_cells = MAX_LINE_CELLS if max_line_cells is None else max_line_cells
+    max_cells = MAX_CELLS if max_cells is None else max_cells
+    max_line_bytes = MAX_LINE_BYTES if max_line_bytes is None else max_line_bytes
+    if delimiter == "auto":
+        delimiter = "," if b"," in _first_row(data, max_line_bytes) else " "
+    if delimiter not in (",", " "):
+        raise ValueError(f"check_cells: delimiter {delimiter!r}; allowed ',', ' ' or 'auto'")
+    comma = delimiter == ","
+    split = ("commas" if comma else "runs of characters between spaces") + " counted before parsing"
+
+    def check(number: int, cells: int, length: int) -> None:  # one line's cells and bytes
+        if cells > max_line_cells:
+            raise ModelError(f"{what}: {name!r} line {number} holds {cells:,} cells; allowed at most "
+                             f"{max_line_cells:,} cells a line ({split})")
+        if length > max_line_bytes:
+            raise ModelError(f"{what}: {name!r} line {number} is {length:,} bytes long; allowed at most "
+                             f"{max_line_bytes:,} bytes a line")
+
+    raw = np.frombuffer(data, np.uint8)
+    size = raw.size
+    line, start, carried, total = 1, 0, 0, 0  # the current line's number, first byte and cells in earlier pieces
+    spaced = True  # the byte before the piece is a space or a line end (or there is none)
+    for at in range(0, size, _PIECE):
+        piece = raw[at:at + _PIECE]
+        newline, cr = piece == 10, piece == 13
+        ends = newline.copy()
+        if cr.any():  # a \r ends a line unless a \n follows it
+            followed = np.zeros(piece.size, bool)
+            followed[:-1] = newline[1:]
+            followed[-1] = at + piece.size < size and raw[at + piece.size] == 10
+            ends |= cr & ~followed
+        if comma:
+            marks = piece == 44
+        else:  # the first byte of each run of non-spaces
+            space = (piece == 32) | (piece == 9) | newline | cr
+            marks = ~space
+            marks[0] &= spaced
+            marks[1:] &= space[:-1]
+            spaced = bool(space[-1])
+        counted = np.cumsum(marks, dtype=np.int32)  # at most _PIECE
+        where = np.flatnonzero(ends)
+        if not where.size:  # the line goes on: checked where it ends
+            carried += int(counted[-1])
+            continue
+        before = counted[where].astype(np.int64)
+        cells = np.diff(before, prepend=0)
+        cells[0] += carried
+        cells += comma
+        firsts = np.concatenate(([start], at + where[:-1] + 1))
+        if comments:
+            cells[raw[firsts] == 35] = 0
+        lengths = at + where - firsts
+        lengths -= (lengths > 0) & (raw[np.maximum(at + where - 1, 0)] == 13)  # a \r\n's \r: the line's end
+        bad = np.flatnonzero((cells > max_line_cells) | (lengths > max_line_bytes))
+        if bad.size:
+            k = int(bad[0])
+            check(line + k, int(cells[k]), int(lengths[k]))
+        total += int(cells.sum())
+        line += where.size
+        start = at + int(where[-1]) + 1
+        carried = int(counted[-1] - before[-1])
+    if start < size:  # the last line, without a line end
+        cells = 0 if comments and raw[start] == 35 else carried + comma
+        check(line, cells, size - start)
+        total += cells
+    if total > max_cells:
+        raise ModelError(f"{what}: {name!r} holds {total:,} cells; allowed at most {max_cells:,} cells in a table "
+                         f"({split})")
+    return total
+
+
 def read_parquet(path: Path, what: str) -> TextTable:
-    """A Parquet file's columns as text cells (:func:`_read_table`); its pandas metadata is not used."""
+    """A Parquet file's columns as text cells (:func:`read_table`); its pandas metadata is not used. One of more
+    than :data:`MAX_LOG_ROWS` rows, :data:`MAX_LINE_CELLS` columns or :data:`MAX_CELLS` cells is refused from its
+    metadata, before a cell is read."""
     name = str(path)
     try:
         import pyarrow.parquet as pq
 
-        rows = pq.ParquetFile(path).metadata.num_rows
+        meta = pq.ParquetFile(path).metadata
+        rows, width = meta.num_rows, meta.num_columns
         if rows > MAX_LOG_ROWS:
             raise too_large(name, what, f"has {rows:,} rows")
+        if width > MAX_LINE_CELLS or rows * width > MAX_CELLS:  # refused before a cell is read: its metadata's
+            raise ModelError(f"{what}: {name!r} holds {rows:,} rows of {width:,} columns; allowed at most "
+                             f"{MAX_LINE_CELLS:,} columns and {MAX_CELLS:,} cells in a table")
         table = pq.read_table(path)
         meta = table.schema.metadata or {}
         header = [str(c).strip() for c in table.column_names]
@@ -121,15 +256,20 @@ def read_parquet(path: Path, what: str) -> TextTable:
 
 
 def read_bounded(path: Path, what: str, max_bytes: int, max_lines: int,
-                 refuse: Callable[[str, str, str], ModelError]) -> bytes:
+                 refuse: Callable[[str, str, str], ModelError], *, delimiter: str | None = ",",
+                 max_line_cells: int | None = None, max_cells: int | None = None, comments: bool = False) -> bytes:
     """A regular file's bytes, refused before it is read whole when it is larger than ``max_bytes`` or holds more
     than ``max_lines`` lines (counted in what was read, not only from the file's size): ``refuse(name, what,
-    amount)`` the error of a file too large.
+    amount)`` the error of a file too large; and, unless ``delimiter`` is None (a file that is not a table), refused
+    before anything parses it when a line is longer than :data:`MAX_LINE_BYTES` or holds more than
+    ``max_line_cells`` cells, or the table more than ``max_cells`` (:func:`check_cells`, with ``delimiter`` and
+    ``comments``).
 
     Raises
     ------
     ModelError
-        ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large.
+        ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large, a line too
+        long or too wide, too many cells.
     """
     name = str(path)
     size = regular_file(path, what)
@@ -145,15 +285,20 @@ def read_bounded(path: Path, what: str, max_bytes: int, max_lines: int,
     lines = data.count(b"\n")
     if lines > max_lines:  # a header and comment lines besides the rows
         raise refuse(name, what, f"has {lines:,} lines")
+    if delimiter is not None:
+        check_cells(data, name, what, delimiter, max_line_cells=max_line_cells, max_cells=max_cells,
+                    comments=comments)
     return data
 
 
 def read_lines(path: Path, what: str, encoding: str = "utf-8-sig", *, max_bytes: int | None = None,
                max_rows: int | None = None, extra_lines: int = 10_000,
-               refuse: Callable[[str, str, str], ModelError] | None = None) -> list[str]:
+               refuse: Callable[[str, str, str], ModelError] | None = None, delimiter: str | None = ",",
+               max_line_cells: int | None = None, max_cells: int | None = None, comments: bool = False) -> list[str]:
     """The lines of a regular text file (split as :func:`text_lines`), refused before it is read whole when it
     is larger than ``max_bytes`` or holds more than ``max_rows`` rows and ``extra_lines`` lines besides (a
-    header and comments); the sizes are checked in what was read, not only from the file's size.
+    header and comments); the sizes are checked in what was read, not only from the file's size. A table's cells are
+    counted before it is decoded (:func:`check_cells`): a line too long or too wide, or too many cells, refused.
 
     Parameters
     ----------
@@ -163,16 +308,24 @@ def read_lines(path: Path, what: str, encoding: str = "utf-8-sig", *, max_bytes:
         The lines allowed besides the rows [1].
     refuse : callable, optional
         ``refuse(name, what, amount)``: the error of a file too large (default :func:`too_large`, a log's).
+    delimiter : str or None
+        The table's: ``","``, ``" "`` (whitespace-separated) or ``"auto"`` (:func:`check_cells`); None for a file
+        that is not a table (its lines' length still bounded by ``max_bytes`` alone).
+    max_line_cells, max_cells : int, optional
+        The most cells a line and the table hold [1] (default :data:`MAX_LINE_CELLS`, :data:`MAX_CELLS`).
+    comments : bool
+        The caller drops the lines that start with ``#`` unparsed: their cells are not counted.
 
     Raises
     ------
     ModelError
-        ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large, or one
-        that is not text in ``encoding`` ("utf-8-sig" or "ascii").
+        ``what: ...`` for a missing or unreadable file, one that is not a regular file, one too large, a line too
+        long or too wide, too many cells, or one that is not text in ``encoding`` ("utf-8-sig" or "ascii").
     """
     max_bytes = MAX_LOG_BYTES if max_bytes is None else max_bytes
     max_rows = MAX_LOG_ROWS if max_rows is None else max_rows
-    data = read_bounded(path, what, max_bytes, max_rows + extra_lines, refuse or too_large)
+    data = read_bounded(path, what, max_bytes, max_rows + extra_lines, refuse or too_large, delimiter=delimiter,
+                        max_line_cells=max_line_cells, max_cells=max_cells, comments=comments)
     name = str(path)
     try:
         return text_lines(data.decode(encoding))
@@ -245,7 +398,7 @@ def read_table(path: Path, what: str) -> TextTable:
         if size > MAX_LOG_BYTES:
             raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
         return read_parquet(path, what)
-    lines = read_lines(path, what)
+    lines = read_lines(path, what, comments=True)
     data: list[tuple[int, str]] = []
     config: list[str] = []
     title = ""
@@ -305,6 +458,7 @@ def number(text: str, where: str, column: str, low: float, high: float) -> float
     return value
 
 
-__all__ = ["CONFIG_PREFIX", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES",
-           "TextTable", "cell", "columns", "csv_cells", "number", "read_bounded", "read_lines", "read_parquet",
-           "read_table", "regular_file", "text_lines", "too_large"]
+__all__ = ["CONFIG_PREFIX", "MAX_CELLS", "MAX_LINE_BYTES", "MAX_LINE_CELLS", "MAX_LOG_BYTES", "MAX_LOG_ROWS",
+           "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES", "TextTable", "cell", "check_cells", "columns",
+           "csv_cells", "number", "read_bounded", "read_lines", "read_parquet", "read_table", "regular_file",
+           "text_lines", "too_large"]

@@ -257,7 +257,8 @@ def read_pxp_tt(path: Path | str, columns: int) -> pd.DataFrame:
     path = Path(path)
     what = "pxp_tt"
     rows = []
-    lines = [(number, line) for number, line in enumerate(read_lines(path, what, "ascii"), start=1) if line.strip()]
+    lines = [(number, line) for number, line in enumerate(read_lines(path, what, "ascii", delimiter=" "), start=1)
+             if line.strip()]
     for number, fields in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, by the csv module
         where = f"{what}: {str(path)!r} line {number}"
         if len(fields) < 2 + columns:
@@ -293,7 +294,8 @@ def read_posfilter(path: Path | str) -> pd.DataFrame:
     names = ["time [s since J2000]", "x [m]", "y [m]", "z [m]", *[f"covariance {a}{b} [m^2]" for a in "xyz"
                                                                   for b in "xyz"]]
     ranges = [J2000_RANGE] + [(-MAX_ECEF_M, MAX_ECEF_M)] * 3 + [(-MAX_COV_M2, MAX_COV_M2)] * 9
-    lines = csv_cells([(number, line) for number, line in enumerate(read_lines(path, what, "ascii"), start=1)
+    lines = csv_cells([(number, line) for number, line in enumerate(read_lines(path, what, "ascii", delimiter=" "),
+                                                                    start=1)
                        if line.strip()], f"{what}: {str(path)!r}", " ")  # whitespace-separated, by the csv module
     if not lines:
         raise ModelError(f"{what}: {str(path)!r} holds no positions")

@@ -113,7 +113,7 @@ def _rows(path: Path, what: str, width: tuple[int, int]) -> list[tuple[int, list
     """The non-blank, non-comment lines of a file, each as (line number, fields), with a field count in
     ``width``."""
     out = []
-    lines = [(k, line) for k, line in enumerate(read_lines(path, what, "ascii"), start=1)
+    lines = [(k, line) for k, line in enumerate(read_lines(path, what, "ascii", delimiter=" ", comments=True), start=1)
              if line.strip() and not line.lstrip().startswith("#")]
     for k, cells in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, parsed by the csv module
         if not width[0] <= len(cells) <= width[1]:

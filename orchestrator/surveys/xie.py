@@ -79,7 +79,7 @@ def read_xie(path: Path | str) -> SurveyLog:
     what = "log"
     rows: list[list[float]] = []
     where: list[str] = []
-    lines = [(k, line) for k, line in enumerate(read_lines(path, what), start=1)
+    lines = [(k, line) for k, line in enumerate(read_lines(path, what, delimiter=" ", comments=True), start=1)
              if line.strip() and not line.lstrip().startswith("#")]
     for k, cells in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, parsed by the csv module
         here = f"{what}: {str(path)!r} line {k}"

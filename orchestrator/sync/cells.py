@@ -3,7 +3,10 @@ receivers, deployments, tag sheets and sound-speed series shares.
 
 A file must be a regular file (a FIFO or a device is refused before it is opened), is read to at most a stated
 number of bytes and rows (counted in what was read), must be UTF-8 text (a byte-order mark is dropped) without a NUL
-byte, and is parsed by pandas into text cells, every one of which the reader then checks itself (its pattern,
+byte, and is refused before pandas builds a cell where a line is longer than 1 MiB or holds more than
+:data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS` cells, or the table more than a stated number of cells in all
+(:func:`~sblsim.orchestrator.io.tables.check_cells`: its rows times its first row's cells, as pandas pads a short
+row); it is then parsed by pandas into text cells, every one of which the reader then checks itself (its pattern,
 finite, within its range); no name or text in a file is ever taken as a path. Every error is one line naming the
 file, its line and column and the allowed range (:class:`ModelError`).
 """
@@ -18,22 +21,39 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import NUMBER, read_bounded, regular_file
+from sblsim.orchestrator.io import tables
+from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, NUMBER, check_cells, read_bounded, regular_file
+
+#: The options every table is parsed with (each cell a str, none taken as missing; blank lines kept as rows).
+_CSV = dict(header=None, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, engine="c",
+            quotechar='"', on_bad_lines="error")
 
 
 def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int) -> ModelError:
     return ModelError(f"{what}: {name!r} {amount}; allowed at most {max_bytes // 2**20} MiB and {rows:,} rows")
 
 
-def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int | None = None) -> str:
+def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int | None = None, *,
+              max_cells: int | None = None, max_line_cells: int | None = None) -> str:
     """A regular file's text, refused before it is read whole when it is larger than ``max_bytes`` or holds more
-    than ``max_rows`` lines and 1,000 besides; UTF-8 (a byte-order mark dropped), no NUL byte. With ``prefix``,
-    only the file's first ``prefix`` bytes (a character cut at the end dropped), its size not checked.
+    than ``max_rows`` lines and 1,000 besides, and before it is decoded when a line is longer than
+    :data:`~sblsim.orchestrator.io.tables.MAX_LINE_BYTES` or holds more than ``max_line_cells`` cells (its commas and
+    one), or its lines more than ``max_cells`` cells in all (:func:`~sblsim.orchestrator.io.tables.check_cells`);
+    UTF-8 (a byte-order mark dropped), no NUL byte. With ``prefix``, only the file's first ``prefix`` bytes (a
+    character cut at the end dropped), its size not checked, its lines' cells checked.
+
+    Parameters
+    ----------
+    max_bytes, max_rows : int
+        The file's limits [bytes], [1].
+    max_cells, max_line_cells : int, optional
+        The most cells the table and one of its lines hold [1]; default
+        :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`, :data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS`.
 
     Raises
     ------
     ModelError
-        One line naming the file and the limit or the fault.
+        One line naming the file and the limit or the fault (with the count: the bytes, lines or cells).
     """
     name = str(path)
     if prefix is not None:
@@ -46,9 +66,11 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         nul = head.find(b"\0")
         if nul >= 0:
             raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
+        check_cells(head, name, what, max_line_cells=max_line_cells, max_cells=max_cells)
         return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else _decoded(head, name, what)
     data = read_bounded(path, what, max_bytes, max_rows + 1000,
-                        lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows))
+                        lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows),
+                        max_line_cells=max_line_cells, max_cells=max_cells)
     nul = data.find(b"\0")
     if nul >= 0:
         raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
@@ -62,27 +84,59 @@ def _decoded(data: bytes, name: str, what: str) -> str:
         raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
 
 
-def text_table(text: str, name: str, what: str, max_rows: int, first_line: int = 1
-               ) -> tuple[list[str], pd.DataFrame, list[int]]:
+def _width(text: str, name: str, what: str) -> int | None:
+    """The cells of a text's first row as pandas parses it, from at most its first 2 MiB (a quoted cell may span
+    lines); None where pandas finds no row there (the whole text's parse then says why)."""
+    head = text[:2 * MAX_LINE_BYTES]
+    try:
+        return pd.read_csv(io.StringIO(head), nrows=1, **_CSV).shape[1]
+    except Exception as exc:
+        if len(head) < len(text) and "EOF inside string" in str(exc):
+            raise ModelError(f"{what}: {name!r}: its first row does not end in its first {len(head):,} characters (a "
+                             "quoted cell spanning lines); allowed: a header line") from None
+        return None
+
+
+def text_table(text: str, name: str, what: str, max_rows: int, first_line: int = 1, *, max_cells: int | None = None,
+               max_line_cells: int | None = None) -> tuple[list[str], pd.DataFrame, list[int]]:
     """A CSV text's header (stripped) and its rows as text cells (pandas, every cell a str; a short row padded with
     empty cells), with each row's line in the file (``first_line``: the header's); blank lines skipped.
+
+    Before pandas parses the text whole, its first row's cells are counted (pandas on at most its first 2 MiB) and the
+    table's, its lines times those (pandas pads a short row to the first's and refuses a longer one): a text whose
+    first row holds more than ``max_line_cells`` cells, or whose table would hold more than ``max_cells``, is refused
+    (default :data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS`, :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`;
+    the text's lines themselves are counted by :func:`read_text`).
 
     Raises
     ------
     ModelError
         One line: a text pandas cannot parse (a row longer than the header), no header, a column named twice, more
-        than ``max_rows`` rows.
+        than ``max_rows`` rows, a first row or a table of too many cells (naming the limit and the count).
     """
+    max_line_cells = tables.MAX_LINE_CELLS if max_line_cells is None else max_line_cells
+    max_cells = tables.MAX_CELLS if max_cells is None else max_cells
+    width = _width(text, name, what)
+    if width is not None:
+        rows = text.count("\n") + text.count("\r") - text.count("\r\n") + (not text.endswith(("\n", "\r")))
+        if width > max_line_cells:
+            raise ModelError(f"{what}: {name!r}: its first row holds {width:,} cells; allowed at most "
+                             f"{max_line_cells:,} cells a row")
+        if rows * width > max_cells:
+            raise ModelError(f"{what}: {name!r} holds {rows:,} lines of {width:,} cells (its first row's: a shorter "
+                             f"row is padded); allowed at most {max_cells:,} cells in a table")
     try:
-        frame = pd.read_csv(io.StringIO(text), header=None, dtype=str, keep_default_na=False, na_filter=False,
-                            skip_blank_lines=False, engine="c", quotechar='"', on_bad_lines="error")
+        frame = pd.read_csv(io.StringIO(text), **_CSV)
     except pd.errors.EmptyDataError:
         raise ModelError(f"{what}: {name!r} is empty; allowed: a header line and rows") from None
     except Exception as exc:  # pandas' parser errors name the line
         raise ModelError(f"{what}: {name!r} does not parse as CSV ({' '.join(str(exc).split())[:160]})") from None
-    blank = (frame.apply(lambda column: column.str.strip()) == "").all(axis=1).to_numpy(bool)
+    blank = np.ones(len(frame), bool)
+    for k in frame.columns:  # column by column: no copy of the whole table
+        blank &= (frame[k].str.strip() == "").to_numpy(bool)
     lines = np.flatnonzero(~blank) + first_line
-    frame = frame[~blank]
+    if blank.any():
+        frame = frame[~blank]
     if not len(frame):
         raise ModelError(f"{what}: {name!r} holds no header; allowed: a header line and rows")
     header = [str(h).strip() for h in frame.iloc[0].tolist()]

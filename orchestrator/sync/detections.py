@@ -25,8 +25,11 @@ ignored (:func:`read_hydrophones`; a study's deployment tables, in latitude and 
 ``ss``) [m/s], other columns ignored (:func:`read_sound_speed`).
 
 Each file must be a regular file (a FIFO or a device is refused before it is opened), is read to at most
-:data:`MAX_DETECTION_BYTES` bytes and :data:`MAX_DETECTIONS` rows (counted in what was read), and its cells are
-parsed by pandas as text and every one checked (its pattern, finite, within its range); no name or text in a file is
+:data:`MAX_DETECTION_BYTES` bytes and :data:`MAX_DETECTIONS` rows (counted in what was read), is refused before
+pandas builds a cell where a line is longer than 1 MiB or holds more than 512 cells, or the table more than
+:data:`MAX_DETECTION_CELLS` cells (the other tables: :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`; counted by
+:func:`~sblsim.orchestrator.io.tables.check_cells`), and its cells are parsed by pandas as text and every one
+checked (its pattern, finite, within its range); no name or text in a file is
 ever taken as a path. A receiver whose times go back in the file's order (its clock reset or jumped back, or the
 rows are not in the order the receiver logged them) is refused, not sorted: the line, the receiver and the jump are
 named. Every error is one line naming the file, its line or column and the allowed range (:class:`ModelError`).
@@ -52,6 +55,10 @@ MAX_DETECTION_BYTES = 256 * 2**20
 MAX_DETECTIONS = 3_000_000
 MAX_HYDROPHONES = 1000
 MAX_SERIES = 1_000_000
+#: The most cells a detections file holds [1]: 3 million detections of 11 cells (a VUE export has 10 columns, a
+#: Fathom DET record about 20, a GLATOS or OTN extract about 30 in rows a few hundred bytes long); a table of as many
+#: cells of one character each is parsed in about 0.9 GiB.
+MAX_DETECTION_CELLS = 2**25
 #: The allowed times [s since 1970-01-01 UTC] (to the year 2286), coordinates [m] and sound speeds [m/s].
 MAX_EPOCH = 10_000_000_000
 MAX_COORDINATE = 1e7
@@ -165,13 +172,13 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
         raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
     path, what = Path(path), "detections"
     name = str(path)
-    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DETECTIONS)
+    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)
     if format is None:
         format = _format_of(text[:65536].split("\n", 1)[0].rstrip("\r"), name)
     if format == "fathom":
-        header, body, lines = exports.fathom_records(text, name, what, MAX_DETECTIONS)
+        header, body, lines = exports.fathom_records(text, name, what, MAX_DETECTIONS, MAX_DETECTION_CELLS)
     else:
-        header, body, lines = text_table(text, name, what, MAX_DETECTIONS)
+        header, body, lines = text_table(text, name, what, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)
     del text
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no detections")
@@ -359,6 +366,7 @@ def read_sound_speed(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     return times, speeds
 
 
-__all__ = ["Detections", "FORMATS", "IDENTIFIER", "MAX_DETECTIONS", "MAX_DETECTION_BYTES", "MAX_EPOCH",
+__all__ = ["Detections", "FORMATS", "IDENTIFIER", "MAX_DETECTIONS", "MAX_DETECTION_BYTES", "MAX_DETECTION_CELLS",
+           "MAX_EPOCH",
            "MAX_HYDROPHONES", "MAX_SERIES", "SOUND_SPEED_RANGE", "read_detections", "read_hydrophones",
            "read_sound_speed"]

@@ -61,15 +61,20 @@ def format_of(first: str) -> str | None:
     return None
 
 
-def fathom_records(text: str, name: str, what: str, max_rows: int) -> tuple[list[str], pd.DataFrame, list[int]]:
+def fathom_records(text: str, name: str, what: str, max_rows: int, max_cells: int | None = None
+                   ) -> tuple[list[str], pd.DataFrame, list[int]]:
     """A Fathom CSV's ``DET`` records as a table (:func:`~sblsim.orchestrator.sync.cells.text_table`: the
     ``DET_DESC`` line its header, each row's line in the file), the ``DET_SENS`` records' table attached as
-    ``body.attrs["sensors"]`` (header, body, lines) where there are any.
+    ``body.attrs["sensors"]`` (header, body, lines) where there are any. Each record type's table is refused before
+    pandas parses it where it would hold more than ``max_cells`` cells [1] (its lines times its ``_DESC`` line's
+    cells; default :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`; the file's own lines are counted as it is
+    read).
 
     Raises
     ------
     ModelError
-        One line: a first line that is not Fathom's, no ``DET_DESC`` line, a record pandas cannot parse.
+        One line: a first line that is not Fathom's, no ``DET_DESC`` line, a record pandas cannot parse, a table of
+        too many cells.
     """
     if not text.lstrip('"').startswith(FATHOM_MARK):
         raise ModelError(f"{what}: {name!r}: a Fathom CSV starts with the line {FATHOM_MARK},…; allowed: the file "
@@ -87,7 +92,7 @@ def fathom_records(text: str, name: str, what: str, max_rows: int) -> tuple[list
         rows = [m for m in chosen if m not in descs]
         lines = (np.searchsorted(newlines, [descs[0].start()] + [m.start() for m in rows]) + 1).tolist()
         table = "\n".join([descs[0].group(0).rstrip("\r")] + [m.group(0).rstrip("\r") for m in rows]) + "\n"
-        header, body, numbered = text_table(table, name, what, max_rows, first_line=0)
+        header, body, numbered = text_table(table, name, what, max_rows, first_line=0, max_cells=max_cells)
         tables[record] = (header, body, [lines[k] for k in numbered])
     header, body, lines = tables["DET"]
     if "DET_SENS" in tables:

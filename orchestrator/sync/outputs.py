@@ -25,6 +25,11 @@ def figures(outcome: SyncOutcome) -> dict:
 
     o, r, rec = outcome.offsets, outcome.residuals, outcome.receivers
     fig1, ax = plt.subplots(figsize=(11, 6.5))
+    if "segment" in o:  # a receiver whose clock broke: each segment over the bins it holds for, named by its number
+        o = o[(o["end"] >= o["clock_from"].fillna(-np.inf)) & (o["start"] <= o["clock_to"].fillna(np.inf))]
+        o = o.assign(receiver=np.where(o.groupby("receiver")["segment"].transform("max") > 1,
+                                       o["receiver"].astype(str) + " (" + o["segment"].astype(str) + ")",
+                                       o["receiver"].astype(str)))
     groups = list(o.groupby("receiver", sort=False))
     colours = plt.get_cmap("tab20").colors
     for k, (name, g) in enumerate(groups):

@@ -24,10 +24,13 @@ import pandas as pd
 from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.breaks import fit_with_breaks
 from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, sync_emissions
+from sblsim.models.sync.noise import receiver_noise
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.models.sync.resolution import resolution_warning
+from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.detections import Detections
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import assign
@@ -195,35 +198,56 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     timings["grouping"] = clock.perf_counter() - started
     tick = clock.perf_counter()
     geometry = Geometry(tag_home[tag], positions, float(survey_sigma)) if refine_positions else None
-    fit = fit_clocks(receiver, emission, time, distance, slowness, used, linked, start, width, geometry=geometry,
-                     timings=timings)
+    # a receiver whose clock jumped or went back split into clock segments (sblsim.models.sync.breaks): each clock
+    # row a receiver's (its first segment) or a later segment's, `rows` each arrival's (-1 set aside at a break)
+    fit = fit_with_breaks(receiver, emission, time, distance, slowness, used, linked, start, width, tag,
+                          geometry=geometry, timings=timings)
+    rows, site = segments.clock_rows(fit, receiver)
+    synced = np.isfinite(fit.knots[:, 0])  # per clock row
+    on = (rows >= 0) & synced[np.maximum(rows, 0)]  # per arrival: on a synchronised clock
     timings["fit"] = clock.perf_counter() - tick
     if refine_positions:
         moved = positions.copy()
         moved[:, :2] += fit.shift
         distance = np.linalg.norm(moved[tag_home[tag]] - moved[receiver], axis=1)
-    bridged = (fit.counts < MIN_BIN_ARRIVALS) & linked[:, None]
+    bridged = (fit.counts < MIN_BIN_ARRIVALS) & synced[:, None]
     bridged[start] = False
 
     reason = np.where(duplicate, "multipath", np.where(single, "single receiver", np.where(
-        ~linked[receiver], "not synchronised", np.where(fit.kept, "", "rejected"))))
+        rows < 0, "clock break", np.where(~on, "not synchronised", np.where(fit.kept, "", "rejected")))))
     emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
     residuals = pd.DataFrame({
         "receiver": np.array(names, dtype=object)[receiver], "tag": np.array(tag_names, dtype=object)[tag],
         "emission": emission, "time": time + origin,
-        "time_sync": time + origin - np.where(linked[receiver], fit.offset(receiver, time), np.nan),
+        "time_sync": time + origin - np.where(on, fit.offset(np.maximum(rows, 0), time), np.nan),
         "distance_m": distance, "residual_s": fit.residual, "residual_m": fit.residual / emission_slowness,
         "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": sync["line"].to_numpy()})
 
-    offsets = _offsets(fit, names, linked, bridged, origin)
+    if fit.site is not None:
+        residuals["segment"] = np.where(rows >= 0, segments.segment_numbers(fit)[np.maximum(rows, 0)], 0)
+    offsets = _offsets(fit, names, synced, bridged, origin)
+    # each receiver's timing noise (its residuals' robust scale and its clock's sigma), for the tracker
+    noise = receiver_noise(receiver, fit.standardised * fit.scale[np.maximum(rows, 0)],
+                           segments.receiver_sigmas(fit, n_receivers), linked)
+    if np.isfinite(noise.sigma[linked]).all():  # (none where no receiver has residuals enough to measure it)
+        offsets["toa_sigma_s"] = noise.sigma[[names.index(r) for r in offsets["receiver"]]]
     tick = clock.perf_counter()
-    sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
-                           positions, tag_names, tag_home, names, leave_one_out, notes, geometry)
+    sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
+                           width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site)
     refined = _positions(fit, positions, names, linked) if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)
+    summary["clock_breaks"] = segments.breaks_summary(fit, names, origin)
+    for entry in summary["clock_breaks"]:  # each named in one line (the command prints the warnings)
+        summary.setdefault("warnings", []).append(segments.break_line(entry))
+        # its entry's offsets and drifts are its first segment's; offsets.csv has every segment's
+        mine = summary["receivers"][entry["receiver"]]
+        mine["clock_segments"] = max(mine.get("clock_segments", 1), entry["segment_after"])
+    summary["toa_noise"] = {names[j]: {"toa_sigma_s": float(noise.sigma[j]), "residuals_s": float(noise.noise[j]),
+                                       "clock_s": float(noise.clock[j]), "arrivals": int(noise.arrivals[j]),
+                                       "measured": bool(noise.measured[j])} for j in np.flatnonzero(linked)}
     xy = positions[:, :2] + (fit.shift if refine_positions else 0.0)
     receivers = pd.DataFrame({"receiver": names, "x": xy[:, 0], "y": xy[:, 1],
                               "sync_tag": hydrophones["sync_tag"].to_numpy(), "synchronised": linked})
@@ -259,22 +283,30 @@ def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: n
 
 def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.ndarray, origin: float
              ) -> pd.DataFrame:
-    """``offsets.csv``: one row per synchronised receiver and bin."""
+    """``offsets.csv``: one row per synchronised receiver (per clock row: ``linked`` (rows,)) and bin; where a
+    receiver's clock broke, its segments' rows each, with ``segment``, ``clock_from`` and ``clock_to``
+    (:func:`~sblsim.orchestrator.sync.segments.segment_columns`)."""
     rows = []
     edges = fit.edges + origin
-    for j in np.flatnonzero(linked):
+    site, number = segments.clock_rows(fit, np.zeros(0, np.int64))[1], segments.segment_numbers(fit)
+    order = sorted(np.flatnonzero(linked), key=lambda j: (site[j], number[j]))  # a receiver's segments together
+    for j in order:
         for k in range(len(edges) - 1):
-            rows.append((names[j], k, edges[k], edges[k + 1], fit.knots[j, k], fit.knot_sigma[j, k],
+            rows.append((names[site[j]], k, edges[k], edges[k + 1], fit.knots[j, k], fit.knot_sigma[j, k],
                          fit.knots[j, k + 1], fit.knot_sigma[j, k + 1], fit.drift[j, k], fit.drift_sigma[j, k],
                          int(fit.counts[j, k]), bool(bridged[j, k])))
-    return pd.DataFrame(rows, columns=["receiver", "bin", "start", "end", "offset_start_s", "offset_start_sigma_s",
-                                       "offset_end_s", "offset_end_sigma_s", "drift", "drift_sigma", "arrivals",
-                                       "bridged"])
+    table = pd.DataFrame(rows, columns=["receiver", "bin", "start", "end", "offset_start_s", "offset_start_sigma_s",
+                                        "offset_end_s", "offset_end_sigma_s", "drift", "drift_sigma", "arrivals",
+                                        "bridged"])
+    for key, values in (segments.segment_columns(fit, origin) or {}).items():
+        table[key] = np.repeat(values[order], len(edges) - 1)
+    return table
 
 
 def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
                positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
-               geometry: Geometry | None = None) -> pd.DataFrame:
+               geometry: Geometry | None = None, clock: np.ndarray | None = None,
+               site: np.ndarray | None = None) -> pd.DataFrame:
     """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
     arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
     its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
@@ -289,37 +321,43 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     ``fixes_scaled`` the fixes whose covariance the a-posteriori variance factor scaled, ``arrivals_rejected`` the
     arrivals the trusted fixes rejected, ``median_redundancy`` theirs. The clock fit's own rejections of the tag's
     arrivals are not carried into its fixes: that fit saw the tag at its known
-    position, so its rejections would use the position the fixes are checked against."""
+    position, so its rejections would use the position the fixes are checked against.
+
+    Where a receiver's clock broke, ``clock`` (n,) is each arrival's clock row and ``site`` each row's receiver
+    (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row."""
     dim = positions.shape[1]
     rows = []
+    c = receiver if clock is None else clock
+    steady = None if site is None or len(site) == len(names) else site == start
+    knot_sigma = segments.receiver_sigmas(fit, len(names))
     for i, name in enumerate(tag_names):
         home = tag_home[i]
-        mine = (tag == i) & used & linked[receiver] & (receiver != home)
+        mine = (tag == i) & used & linked[c] & (receiver != home)
         if mine.sum() < dim + 2:
             continue
         this = fit
         if leave_one_out:
             without = used & (tag != i)
-            still = connected(receiver[without], emission[without], len(names), start)
+            still = connected(c[without], emission[without], len(linked), start)
             try:
                 loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma,
-                                                             fit.shift)
-                this = fit_clocks(receiver, emission, time, distance, slowness, without, still, start, width,
-                                  keep=fit.kept, scale=fit.scale, sigmas=False, geometry=loo)
+                                                             fit.shift, None if clock is None else site)
+                this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width,
+                                  keep=fit.kept, scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
             except ModelError:
                 notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
                 continue
-            mine &= still[receiver]
+            mine &= still[c]
         rows_e = np.flatnonzero(mine)
         ems, local = np.unique(emission[rows_e], return_inverse=True)
         arrival = np.full((len(ems), len(names)), np.nan)
-        arrival[local, receiver[rows_e]] = time[rows_e] - this.offset(receiver[rows_e], time[rows_e])
+        arrival[local, receiver[rows_e]] = time[rows_e] - this.offset(c[rows_e], time[rows_e])
         s = np.full(len(ems), this.slowness if slowness is None else np.nan)
         if slowness is not None:
             s = np.bincount(local, slowness[rows_e]) / np.bincount(local)
-        sigma = np.where(np.isfinite(this.scale), this.scale, 1e-3)
-        known = np.isfinite(fit.knot_sigma)
-        offset_sigma = np.array([np.median(fit.knot_sigma[j][known[j]]) if known[j].any() else 0.0
+        sigma = segments.receiver_values(np.where(np.isfinite(this.scale), this.scale, 1e-3), fit, len(names))
+        known = np.isfinite(knot_sigma)
+        offset_sigma = np.array([np.median(knot_sigma[j][known[j]]) if known[j].any() else 0.0
                                  for j in range(len(names))])
         sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
         where = positions

@@ -9,6 +9,16 @@ left out and counted). The grouping is :mod:`sblsim.models.sync.pings`'s, its wi
 at the slowest sound speed allowed (1,300 m/s) plus :data:`TOLERANCE`, the echo limit the shortest burst interval
 (the ping type's, else as the detections show it) less that window.
 
+A synchronisation also writes each receiver's timing noise from its sync-tag residuals (``offsets.csv``'s
+``toa_sigma_s``): it goes into the matrix's ``receivers.csv`` (a ``toa_sigma_s`` column), whose receivers the tracker
+then weighs each by its own noise. A synchronisation's folder written before that column has none: read all the same,
+the tracker's default then taken (said).
+
+Where a receiver's clock broke (jumped or went back), ``offsets.csv`` has a set of rows per clock segment
+(``segment``, and the times of the receiver's own clock it holds for, ``clock_from`` to ``clock_to``): each
+detection takes the segment that holds its time, and one between two segments (the stretch around the break) is set
+aside and counted (``at_clock_breaks``).
+
 A synchronisation made with ``--refine-positions`` also wrote ``positions.csv``: its refined horizontal positions
 (read the same way) replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so.
 """
@@ -38,6 +48,7 @@ from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.sync.declared import check_matrix
 from sblsim.orchestrator.sync.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.sync.detections import (
     IDENTIFIER,
@@ -52,6 +63,7 @@ from sblsim.orchestrator.sync.detections import (
 from sblsim.orchestrator.sync.run import rounding_warning
 from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
 from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN, read_burst_sequence
+from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, TOA_SIGMA_RANGE
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
@@ -71,11 +83,32 @@ SENSOR_COLUMNS = {"m": "depth_m", "°c": "temperature_c", "c": "temperature_c", 
 @dataclass
 class Clocks:
     """A synchronisation read back: ``receivers`` (R,) the synchronised receivers, ``edges`` (K+1,) [s since 1970
-    UTC] the bins' edges, ``knots`` (R, K+1) [s] each receiver's offset at each edge."""
+    UTC] the bins' edges, ``knots`` (R, K+1) [s] each receiver's offset at each edge, ``toa_sigma`` (R,) [s] each
+    receiver's timing noise from the sync-tag residuals (None: the synchronisation does not give it, an older
+    folder or clocks taken as logged)."""
 
     receivers: list[str]
     edges: np.ndarray
     knots: np.ndarray
+    toa_sigma: np.ndarray | None = None
+    #: Where a receiver's clock broke (``offsets.csv``'s ``segment``, ``clock_from``, ``clock_to``): the rows of
+    #: :attr:`knots` are clock segments, ``owner`` (rows,) the receiver of each (an index into :attr:`receivers`)
+    #: and ``spans`` (rows, 2) [s since 1970 UTC on its own clock] the times each holds for (±inf open); None: a row
+    #: per receiver.
+    owner: np.ndarray | None = None
+    spans: np.ndarray | None = None
+
+    def rows(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+        """(n,) int, the row of :attr:`knots` of ``receiver`` (n,) int (an index into :attr:`receivers`) at its own
+        clock's ``time`` (n,) [s]: the receiver's own, or where its clock broke the segment that holds the time; -1
+        where none does (a stretch set aside between two segments)."""
+        receiver = np.asarray(receiver, np.int64)
+        if self.owner is None:
+            return receiver.copy()
+        out = np.full(receiver.shape, -1, np.int64)
+        for row, j in enumerate(self.owner):
+            out[(receiver == j) & (time >= self.spans[row, 0]) & (time <= self.spans[row, 1])] = row
+        return out
 
     def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
         """(n,) [s] the offset of ``receiver`` (n,) int (rows of :attr:`knots`) at its own clock's ``time`` (n,)
@@ -88,13 +121,16 @@ class Clocks:
 
 def read_clocks(folder: Path | str) -> Clocks:
     """Read ``offsets.csv`` of a synchronisation's folder (``receiver``, ``bin``, ``start``, ``end``,
-    ``offset_start_s``, ``offset_end_s``; other columns ignored).
+    ``offset_start_s``, ``offset_end_s``, and where it has one ``toa_sigma_s``, a receiver's timing noise [s] in
+    :data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`, the same on each of its rows; other columns
+    ignored).
 
     Raises
     ------
     ModelError
         One line: the folder or its file missing, a cell outside its pattern or range, bins that are not the same
-        contiguous edges for every receiver, an offset not continuous across a bin's edge.
+        contiguous edges for every receiver, an offset not continuous across a bin's edge, a receiver's
+        ``toa_sigma_s`` not the same on all its rows.
     """
     folder = Path(folder)
     what = "sync"
@@ -105,7 +141,8 @@ def read_clocks(folder: Path | str) -> Clocks:
     if not path.exists():
         raise ModelError(f"{what}: {str(folder)!r} holds no offsets.csv; allowed: the folder sblsim sync --out wrote")
     body, lines, name, col = _columns(path, what, ("receiver", "bin", "start", "end", "offset_start_s",
-                                                   "offset_end_s"), "sblsim sync's offsets.csv")
+                                                   "offset_end_s"), "sblsim sync's offsets.csv",
+                                      ("toa_sigma_s", "segment", "clock_from", "clock_to"))
     receiver = _pattern(body[col["receiver"]], IDENTIFIER, what, name, lines, "receiver",
                         "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").to_numpy()
     bins = _numbers(body[col["bin"]], what, name, lines, "bin", 0, MAX_OFFSET_ROWS)
@@ -118,7 +155,22 @@ def read_clocks(folder: Path | str) -> Clocks:
     first = _numbers(body[col["offset_start_s"]], what, name, lines, "offset_start_s", -MAX_OFFSET, MAX_OFFSET,
                      unit="s")
     last = _numbers(body[col["offset_end_s"]], what, name, lines, "offset_end_s", -MAX_OFFSET, MAX_OFFSET, unit="s")
-    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}")
+    noise = None
+    if "toa_sigma_s" in col:  # a synchronisation written before the column has none
+        noise = _numbers(body[col["toa_sigma_s"]], what, name, lines, "toa_sigma_s", *TOA_SIGMA_RANGE, unit="s")
+    parts = None
+    if "segment" in col:  # a receiver's clock broke: its segments' rows, each with the times it holds for
+        if not {"clock_from", "clock_to"} <= set(col):
+            raise ModelError(f"{what}: {name!r}: a segment column needs clock_from and clock_to beside it (sblsim "
+                             "sync's offsets.csv)")
+        segment = _numbers(body[col["segment"]], what, name, lines, "segment", 1, MAX_OFFSET_ROWS)
+        if (segment != np.round(segment)).any():
+            k = int(np.flatnonzero(segment != np.round(segment))[0])
+            raise ModelError(f"{what}: {name!r} line {lines[k]} column segment: {segment[k]:g} is not allowed; "
+                             "allowed: a whole number from 1")
+        parts = (segment, *(_numbers(body[col[c]], what, name, lines, c, 0.0, float(MAX_EPOCH), missing=True,
+                                     unit="s") for c in ("clock_from", "clock_to")))
+    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}", noise, parts)
 
 
 def _in_folder(folder: Path, name: str) -> Path:
@@ -130,11 +182,15 @@ def _in_folder(folder: Path, name: str) -> Path:
 
 def offsets_clocks(offsets: pd.DataFrame) -> Clocks:
     """The clocks of a synchronisation made in this process (its ``offsets.csv`` table:
-    :attr:`~sblsim.orchestrator.sync.run.SyncOutcome.offsets`)."""
+    :attr:`~sblsim.orchestrator.sync.run.SyncOutcome.offsets`), with each receiver's timing noise where it has the
+    ``toa_sigma_s`` column."""
     return clocks_of(offsets["receiver"].astype(str).to_numpy(), offsets["bin"].to_numpy(float),
                      offsets["start"].to_numpy(float), offsets["end"].to_numpy(float),
                      offsets["offset_start_s"].to_numpy(float), offsets["offset_end_s"].to_numpy(float),
-                     "sync: the synchronisation's offsets")
+                     "sync: the synchronisation's offsets",
+                     offsets["toa_sigma_s"].to_numpy(float) if "toa_sigma_s" in offsets else None,
+                     tuple(offsets[c].to_numpy(float) for c in ("segment", "clock_from", "clock_to"))
+                     if "segment" in offsets else None)
 
 
 def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
@@ -144,15 +200,23 @@ def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
 
 
 def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np.ndarray, first: np.ndarray,
-              last: np.ndarray, where: str) -> Clocks:
-    """Each receiver's offsets at the bins' edges from one row per receiver and bin (``offsets.csv``'s columns).
+              last: np.ndarray, where: str, toa_sigma: np.ndarray | None = None,
+              segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Clocks:
+    """Each receiver's offsets at the bins' edges from one row per receiver and bin (``offsets.csv``'s columns), and
+    its timing noise where ``toa_sigma`` (one per row [s]) is given; where ``segments`` (``segment``, ``clock_from``,
+    ``clock_to`` per row: a clock broke) is given, one set of rows per receiver and segment, each segment holding
+    for its receiver's own times from ``clock_from`` to ``clock_to`` (NaN: open).
 
     Raises
     ------
     ModelError
         One line naming ``where``: bins that are not the same contiguous edges for every receiver, a receiver
-        lacking a bin, an offset not continuous across a bin's edge.
+        lacking a bin, an offset not continuous across a bin's edge, a receiver's timing noise not the same on all
+        its rows, a segment whose times differ between its rows or overlap another's of its receiver.
     """
+    owner_names = receiver
+    if segments is not None:  # one clock per receiver and segment
+        receiver = np.array([f"{r} segment {int(k)}" for r, k in zip(receiver, segments[0])], dtype=object)
     names = list(dict.fromkeys(receiver.tolist()))
     index = {n: j for j, n in enumerate(names)}
     j = np.array([index[n] for n in receiver])
@@ -180,12 +244,52 @@ def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np
                                                                                   atol=1e-6)):
         raise ModelError(f"{where}: an offset is not continuous across a bin's edge (a bin's end differs from the "
                          "next bin's start); allowed: sblsim sync's offsets.csv")
-    return Clocks(names, edges, knots)
+    noise = None
+    if toa_sigma is not None:
+        noise = np.full(len(names), np.nan)
+        noise[j] = toa_sigma
+        if not np.array_equal(noise[j], toa_sigma):
+            bad = names[int(j[np.flatnonzero(noise[j] != toa_sigma)[0]])]
+            raise ModelError(f"{where}: receiver {bad}'s toa_sigma_s differs between its rows; allowed: one value per "
+                             "receiver (sblsim sync's offsets.csv)")
+    if segments is None:
+        return Clocks(names, edges, knots, noise)
+    return _segmented(names, j, owner_names, segments, edges, knots, noise, where)
 
 
-def _columns(path: Path, what: str, needed: tuple[str, ...], source: str) -> tuple:
+def _segmented(keys: list[str], j: np.ndarray, owner_names: np.ndarray, segments: tuple, edges: np.ndarray,
+               knots: np.ndarray, noise: np.ndarray | None, where: str) -> Clocks:
+    """The clocks of :func:`clocks_of` whose rows are clock segments (``keys``, each file row's ``j``): each
+    segment's receiver and span, checked (the same on all its rows, not overlapping its receiver's others)."""
+    receivers = list(dict.fromkeys(owner_names.tolist()))
+    index = {n: k for k, n in enumerate(receivers)}
+    owner = np.zeros(len(keys), np.int64)
+    owner[j] = [index[n] for n in owner_names]
+    spans = np.zeros((len(keys), 2))
+    low = np.where(np.isnan(segments[1]), -np.inf, segments[1])
+    high = np.where(np.isnan(segments[2]), np.inf, segments[2])
+    spans[j, 0], spans[j, 1] = low, high
+    if not (np.array_equal(spans[j, 0], low) and np.array_equal(spans[j, 1], high)):
+        bad = keys[int(j[np.flatnonzero((spans[j, 0] != low) | (spans[j, 1] != high))[0]])]
+        raise ModelError(f"{where}: receiver {bad}'s clock_from or clock_to differs between its rows; allowed: one "
+                         "span per segment (sblsim sync's offsets.csv)")
+    for k in range(len(receivers)):
+        mine = np.flatnonzero(owner == k)
+        mine = mine[np.argsort(spans[mine, 0], kind="stable")]
+        if (spans[mine, 0] > spans[mine, 1]).any() or (spans[mine[1:], 0] <= spans[mine[:-1], 1]).any():
+            raise ModelError(f"{where}: receiver {receivers[k]}'s clock segments hold for times that overlap or run "
+                             "backwards (clock_from, clock_to); allowed: sblsim sync's offsets.csv")
+    per_receiver = None
+    if noise is not None:
+        per_receiver = np.full(len(receivers), np.nan)
+        per_receiver[owner] = noise
+    return Clocks(receivers, edges, knots, per_receiver, owner, spans)
+
+
+def _columns(path: Path, what: str, needed: tuple[str, ...], source: str, optional: tuple[str, ...] = ()) -> tuple:
     """One of ``sblsim sync``'s own tables read back (:func:`_table`, at most :data:`MAX_OFFSET_ROWS` rows): its
-    body, line numbers, name and the index of each ``needed`` column (header case ignored, other columns ignored).
+    body, line numbers, name and the index of each ``needed`` column and of each ``optional`` one the table has
+    (header case ignored, other columns ignored).
 
     Raises
     ------
@@ -200,7 +304,7 @@ def _columns(path: Path, what: str, needed: tuple[str, ...], source: str) -> tup
     if missing or not len(body):
         raise ModelError(f"{what}: {name!r}: needs the columns {', '.join(needed)} and rows ({source}); "
                          f"{', '.join(missing) or 'no rows'} missing")
-    return body, lines, name, {c: lower.index(c) for c in needed}
+    return body, lines, name, {c: lower.index(c) for c in (*needed, *(o for o in optional if o in lower))}
 
 
 def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
@@ -242,8 +346,9 @@ def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] 
 @dataclass
 class ToaOutcome:
     """What :func:`build_toa` computed: ``toa`` (P, R) [s] on the base ``origin`` [s since 1970 UTC], ``names`` the
-    receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``), ``summary`` (``toa.json``) and
-    ``frame`` (the positions' metric frame; None without a CRS)."""
+    receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``), ``summary`` (``toa.json``),
+    ``frame`` (the positions' metric frame; None without a CRS) and ``toa_sigma`` (R,) [s] each receiver's timing
+    noise from the synchronisation (None where it gives none)."""
 
     toa: np.ndarray
     names: list[str]
@@ -252,6 +357,7 @@ class ToaOutcome:
     summary: dict[str, Any]
     origin: float
     frame: Frame | None = None
+    toa_sigma: np.ndarray | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
@@ -314,11 +420,11 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     if not len(use):
         raise ModelError(f"tag: {tag!r} is detected only at receivers that are not synchronised or not in the "
                          f"receivers table ({', '.join(sorted(set(mine['receiver']))[:10])})")
-    j_sync = use["receiver"].map(synced).to_numpy(np.int64)
     raw = use["time"].to_numpy(float)
+    j_sync = clocks.rows(use["receiver"].map(synced).to_numpy(np.int64), raw)  # -1: between two clock segments
     width = float(np.max(np.diff(clocks.edges)))
-    inside = (raw >= clocks.edges[0] - width) & (raw <= clocks.edges[-1] + width)
-    times = raw - clocks.offset(j_sync, raw)
+    inside = (raw >= clocks.edges[0] - width) & (raw <= clocks.edges[-1] + width) & (j_sync >= 0)
+    times = raw - clocks.offset(np.maximum(j_sync, 0), raw)
     receiver = use["receiver"].map(column).to_numpy(np.int64)
     window = largest_travel_time(positions, SLOWEST_SOUND_SPEED) + TOLERANCE
     source = "given"
@@ -356,7 +462,8 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
                                    "used": int(inside.sum() - pings.echo.sum()),
                                    "multipath": int(pings.echo.sum()),
                                    "multipath_per_receiver": {str(k): int(v) for k, v in per_receiver.items()},
-                                   "outside_sync_span": int((~inside).sum()),
+                                   "outside_sync_span": int((~inside & (j_sync >= 0)).sum()),
+                                   "at_clock_breaks": int((j_sync < 0).sum()),
                                    "at_receivers_not_in_table": int(mine["receiver"].isin(unknown).sum()),
                                    "at_receivers_not_synchronised": int(mine["receiver"].isin(unsynced).sum())},
         "receivers_not_in_table": unknown, "receivers_not_synchronised": unsynced, "receivers": columns,
@@ -366,7 +473,9 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         "shortest_interval_s": shortest, "shortest_interval_source": source, "ping_type": ping_type or {},
         "sensors": sorted(sensors), "dimensions": dim, "toa_header": header_line(columns),
         "wall_time_s": clock.perf_counter() - started}
-    return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin)
+    noise = None if clocks.toa_sigma is None else clocks.toa_sigma[[synced[n] for n in columns]]
+    summary["toa_sigma_s"] = None if noise is None else {n: float(v) for n, v in zip(columns, noise)}
+    return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise)
 
 
 def _sensors(use: pd.DataFrame, ping: np.ndarray, n_pings: int) -> dict[str, np.ndarray]:
@@ -427,7 +536,8 @@ def header_line(names: list[str]) -> bool:
 def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = None) -> tuple[Path, Path]:
     """``toa.txt`` and ``receivers.csv`` in ``folder`` (what the replay reads); returns their paths. With ``depth``
     (P,) [m] the tag's depth per ping (NaN where none), ``toa.txt`` has a ``depth_m`` column first (and a header
-    whatever the receivers' names: the column's name is not a number)."""
+    whatever the receivers' names: the column's name is not a number). ``receivers.csv`` has each receiver's
+    timing noise (``toa_sigma_s`` [s]) where the synchronisation gives it."""
     frame = pd.DataFrame(outcome.toa, columns=outcome.names)
     if depth is not None:
         frame.insert(0, DEPTH_COLUMN, depth)
@@ -438,6 +548,8 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     receivers = folder / "receivers.csv"
     table = pd.DataFrame(outcome.positions, columns=axes)
     table.insert(0, "name", outcome.names)
+    if outcome.toa_sigma is not None:  # seconds: significant figures, not the positions' four decimals
+        table["toa_sigma_s"] = [f"{v:.6g}" for v in outcome.toa_sigma]
     table.to_csv(receivers, index=False, float_format="%.4f")
     return toa, receivers
 
@@ -512,6 +624,9 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
              "burst_sequence": None if sequence is None else sequence.name}
     outcome = build_toa(data, table, clocks, tag, shortest, given)
+    # the table's positions against the tag's arrivals, a stable interval stated against its pings
+    check_matrix(outcome.toa, outcome.positions, outcome.summary["shortest_interval_s"],
+                 outcome.summary["window_s"] - TOLERANCE, TOLERANCE, deployments.source, ping_type)
     outcome.frame = deployments.frame
     rounded = rounding_warning(data, table, None)
     outcome.summary["warnings"] = [rounded] if rounded else []
@@ -530,7 +645,9 @@ def run_lines(outcome, where: str) -> list[str]:
     heard = s["heard_per_ping"]
     lines = [f"times of arrival of tag {s['tag']}: {s['pings']} pings at {len(s['receivers'])} receivers from "
              f"{d['of_tag']} detections ({d['used']} used, {d['multipath']} multipath echoes dropped, "
-             f"{d['outside_sync_span']} outside the synchronised span, {d['at_receivers_not_in_table']} at receivers "
+             f"{d['outside_sync_span']} outside the synchronised span, "
+             + (f"{d['at_clock_breaks']} at clock breaks (set aside), " if d.get("at_clock_breaks") else "")
+             + f"{d['at_receivers_not_in_table']} at receivers "
              f"not in the table, {d['at_receivers_not_synchronised']} at receivers not synchronised) in "
              f"{s['wall_time_s']:.2f} s",
              f"  window {s['window_s'] * 1e3:.0f} ms (the array's largest travel time at 1300 m/s and 20 ms), shortest "
@@ -541,6 +658,15 @@ def run_lines(outcome, where: str) -> list[str]:
     if "positions" in s:
         lines.append(f"  receivers' positions: {s['positions']['receivers']} from the synchronisation's "
                      "positions.csv (refined)")
+    noise = s.get("toa_sigma_s")
+    if noise:
+        values = np.array(list(noise.values()))
+        lines.append(f"  TOA noise per receiver from the synchronisation's residuals (receivers.csv's toa_sigma_s, "
+                     f"the tracker's): median {np.median(values) * 1e3:.3g} ms, {values.min() * 1e3:.3g} to "
+                     f"{values.max() * 1e3:.3g} ms")
+    elif noise is None and "toa_sigma_s" in s:
+        lines.append("  TOA noise: the synchronisation's offsets.csv gives none (written before its toa_sigma_s): the "
+                     f"tracker will assume {SIGMA_TOA * 1e3:g} ms (give --toa-sigma to the replay)")
     if where:
         lines.append(f"  written to {where}/ (toa.txt, receivers.csv, pings.csv, toa.json)")
     return lines

@@ -21,6 +21,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -176,7 +177,8 @@ def _emissions(kind: str, span: float, rng: np.random.Generator, figures) -> np.
 
 def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, redeployed: int = 2, seed: int = 0,
                    spacing: float = 150.0, centre: tuple[float, float] = (60.38, 5.34),
-                   start: str = "2024-06-03T00:00:00Z", sound_speed: float = 1480.0, sigma_toa: float = 0.15e-3,
+                   start: str = "2024-06-03T00:00:00Z", sound_speed: float = 1480.0,
+                   sigma_toa: float | Sequence[float] = 0.15e-3,
                    range_50: float = 220.0, offset: float = 2.0, drift: float = 20e-6) -> SimulatedStudy:
     """Simulate a study (the module docstring).
 
@@ -195,7 +197,8 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     spacing, centre, start
         The grid's spacing [m], its centre (latitude, longitude [°]) and the study's start (ISO 8601 UTC).
     sound_speed, sigma_toa, range_50
-        [m/s], the timing noise [s], the detection range curve's 50 % range [m].
+        [m/s], the timing noise [s] (one, or each receiver's: ``n_receivers`` values, a redeployed receiver's the same
+        at both its stations), the detection range curve's 50 % range [m].
     offset, drift
         The clocks' offsets [s] and drifts [s/s], uniform in ±.
 
@@ -224,6 +227,11 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
                      "y": grid[k, 1] + spacing / 2 * shift[1] / np.hypot(*shift), "start": out + gap, "end": span})
     table = pd.DataFrame(rows)
     positions = table[["x", "y"]].to_numpy()
+    if np.ndim(sigma_toa):  # each receiver's own timing noise, at each of its deployments
+        given = np.asarray(sigma_toa, float)
+        if given.shape != (n_receivers,):
+            raise ValueError(f"simulate_study: {given.size} timing noises for {n_receivers} receivers")
+        sigma_toa = given[table["receiver"].to_numpy()]
     clocks = pd.DataFrame({"deployment": np.arange(len(table)), "serial": [serials[k] for k in table["receiver"]],
                            "a": rng.uniform(-offset, offset, len(table)), "b": rng.uniform(-drift, drift, len(table)),
                            "start": table["start"], "end": table["end"]})

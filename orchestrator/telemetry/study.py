@@ -43,6 +43,7 @@ from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
 from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
 from sblsim.orchestrator.tracks.many import run_tracks
+from sblsim.orchestrator.tracks.tracker import toa_noise
 
 #: The columns of ``tags.csv``.
 TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
@@ -108,9 +109,11 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
     if (table["sync_tag"] != "").any():
         outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours)
         s = outcome.summary
+        notes.extend(s.get("warnings", []))  # each clock break found, in one line
         return offsets_clocks(outcome.offsets), table, {
             "source": "synchronised here", "reference_receiver": s["reference_receiver"],
             "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
+            "clock_breaks": s["clock_breaks"],
             "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
             "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
     times = assigned.detections.frame["time"].to_numpy(float)
@@ -156,7 +159,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
               chosen: Sequence[str] | None = None, sound_speed: float | None = None,
               sound_speed_file: Path | None = None, temperature: float | None = None, salinity: float | None = None,
               bin_hours: float = 1.0, workers: int | None = None, scheduler: str | None = None,
-              started: Callable[[list[str], dict[str, Any]], None] | None = None,
+              toa_sigma: float | None = None, started: Callable[[list[str], dict[str, Any]], None] | None = None,
               ended: Callable[[dict[str, Any]], None] | None = None) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
@@ -176,11 +179,15 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         The tags to track (full IDs or ids).
     sound_speed, sound_speed_file, temperature, salinity
         The sound speed: constant [m/s], a series (``epo`` or ISO times, ``sound_speed_m_s``), or calibrated from
-        the pings with the fallback of a temperature [°C] and salinity [g/kg].
+        the pings with the fallback of a temperature [°C] and a practical salinity.
     bin_hours : float
         [h] the synchronisation's bins.
     workers, scheduler
         Worker processes, or a Dask scheduler.
+    toa_sigma : float, optional
+        [s] the timing noise of every arrival; default each receiver's from the synchronisation's residuals (made
+        here, or the folder's ``offsets.csv`` ``toa_sigma_s``), else the tracker's default (``summary["toa_noise"]``
+        says which: :func:`~sblsim.orchestrator.tracks.tracker.toa_noise`).
     started : callable, optional
         Called with the tags' folders and the summary so far, before the tracking.
     ended : callable, optional
@@ -222,6 +229,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     if rounded:
         notes.append(rounded)
     clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours, notes)
+    _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
     frame_crs = None if deployments.frame is None else deployments.frame.crs
     groups = assigned.detections.frame.groupby("tag", sort=False).groups
     rows: dict[str, dict[str, Any]] = {}
@@ -251,13 +259,14 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                        "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                        "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
                        "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
-                       "other_filters": False}
+                       "other_filters": False, "toa_sigma": toa_sigma}
             jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
             row["folder"] = folder
         except ModelError as exc:
             row["reason"] = str(exc)
         rows[name] = row
     summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
+    summary["toa_noise"] = noise_info
     if started is not None:
         started([j[0] for j in jobs], summary)
     by_folder = {folder: name for name, folder in folders.items()}

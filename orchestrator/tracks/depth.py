@@ -1,7 +1,7 @@
 """The tag's depth the tracker takes: a pressure sensor's readings (a ``depth_m`` column), one given depth, a prior
-where the receivers are in 3-D but their arrivals do not determine the depth
-(:mod:`sblsim.models.tracking.depth`), or none (receivers in 2-D); and what was done, for ``summary.json``'s
-``depth`` and the console."""
+where the receivers are in 3-D but their arrivals do not determine the depth (receivers in one plane, or the fixes'
+depth σ: :mod:`sblsim.models.tracking.depth`), bounded by the water's depth where it is given, or none (receivers in
+2-D); and what was done, for ``summary.json``'s ``depth`` and the console."""
 
 from __future__ import annotations
 
@@ -10,10 +10,47 @@ from typing import Any
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.tracking.depth import DepthPrior, at_least, depth_prior
+from sblsim.models.tracking.depth import (
+    DepthPrior,
+    at_least,
+    bounded_prior,
+    depth_prior,
+    fixes_depth,
+    plane_prior,
+    plane_span,
+)
 
 #: ``summary.json``'s ``depth`` ``source`` where the depth is taken with a prior.
 PRIOR_SOURCE = "prior (the arrivals do not determine it)"
+#: ... where the arrivals determine it and the water's depth bounds it.
+WATER_SOURCE = "estimated with the position, within the water column (a prior)"
+#: The deepest water [m] ``water_depth`` takes.
+MAX_WATER_DEPTH = 11000.0
+
+
+def check_water_depth(water_depth: float | None, positions: np.ndarray, names: list[str],
+                      fixed: float | None = None) -> None:
+    """A water depth [m] (positive down) against the receivers and a tag's depth given: it needs the receivers'
+    depths (3-D), and no receiver and no given depth lies below it.
+
+    Raises
+    ------
+    ModelError
+        One line naming ``water_depth``, the value and what it must be.
+    """
+    if water_depth is None:
+        return
+    if positions.shape[1] != 3:
+        raise ModelError(f"water_depth: {water_depth:g} m needs the receivers' depths (a z_m column in the receivers "
+                         "file); allowed: receivers in 3-D")
+    deepest = int(np.argmin(positions[:, 2]))
+    if -positions[deepest, 2] > water_depth:
+        raise ModelError(f"water_depth: {water_depth:g} m is above receiver {names[deepest]!r} at "
+                         f"{-positions[deepest, 2]:.6g} m; allowed: [{-positions[deepest, 2]:.6g}, "
+                         f"{MAX_WATER_DEPTH:g}] m (at least the deepest receiver's depth)")
+    if fixed is not None and not 0.0 <= fixed <= water_depth:
+        raise ModelError(f"tag_depth: {fixed:g} m is outside the water column [0, {water_depth:g}] m (water_depth); "
+                         "allowed: a depth between the surface and the bottom")
 
 
 def tag_depth(readings: np.ndarray | None, m: int, dim: int, fixed: float | None,
@@ -41,11 +78,25 @@ def tag_depth(readings: np.ndarray | None, m: int, dim: int, fixed: float | None
                    "readings": int(np.isfinite(depth).sum()), "sigma_m": sigma}
 
 
+def plane_depth(depth: np.ndarray | None, positions: np.ndarray, water_depth: float | None = None,
+                sigma: float = 0.0) -> DepthPrior | None:
+    """The depth held for a tag where none is given and the receivers lie in one plane
+    (:func:`~sblsim.models.tracking.depth.plane_prior`: mid-water with ``water_depth`` [m], else the receivers' mean
+    depth, at least ``sigma`` [m] uncertain), decided from the array alone before anything is fitted (the fixes' and
+    the calibration's depth would trade against the sound speed); else None."""
+    if depth is not None or positions.shape[1] != 3:
+        return None
+    return plane_prior(positions, water_depth, sigma)
+
+
 def undetermined_depth(depth: np.ndarray | None, fixes: np.ndarray, fix_covariances: np.ndarray,
-                       fix_used: np.ndarray, positions: np.ndarray) -> DepthPrior | None:
+                       fix_used: np.ndarray, positions: np.ndarray, water_depth: float | None = None
+                       ) -> DepthPrior | None:
     """The prior on the tag's depth where none is given, the receivers are in 3-D and the single-ping fixes (made
     without a depth) do not tell where among the receivers' heights the tag is
-    (:func:`~sblsim.models.tracking.depth.depth_prior`); else None.
+    (:func:`~sblsim.models.tracking.depth.depth_prior`), bounded by the water column where ``water_depth`` [m] is
+    given (:func:`~sblsim.models.tracking.depth.bounded_prior`: the column's own prior where the arrivals determine
+    the depth); else None. (Receivers in one plane hold it before: :func:`plane_depth`.)
 
     Parameters
     ----------
@@ -59,22 +110,57 @@ def undetermined_depth(depth: np.ndarray | None, fixes: np.ndarray, fix_covarian
         The receivers each fix used.
     positions : ndarray, (n, dim)
         The receivers' positions [m].
+    water_depth : float, optional
+        The water's depth [m], positive down.
+
+    Returns
+    -------
+    DepthPrior or None
     """
     if depth is not None or positions.shape[1] != 3:
         return None
-    return depth_prior(fixes, fix_covariances, fix_used, positions)
+    prior = depth_prior(fixes, fix_covariances, fix_used, positions)
+    return bounded_prior(prior, water_depth, fixes_depth(fixes, fix_covariances, fix_used)[2])
 
 
-def prior_info(prior: DepthPrior) -> dict[str, Any]:
-    """``summary.json``'s ``depth`` where the depth is the prior's (``source`` :data:`PRIOR_SOURCE`)."""
-    return {"source": PRIOR_SOURCE, "depth_m": prior.depth, "sigma_m": prior.sigma, "fixes_ratio": prior.ratio,
+def prior_info(prior: DepthPrior, positions: np.ndarray | None = None,
+               water_depth: float | None = None) -> dict[str, Any]:
+    """``summary.json``'s ``depth`` where the depth is the prior's: ``source`` :data:`PRIOR_SOURCE` (or
+    :data:`WATER_SOURCE` where the prior only bounds a depth the arrivals determine), ``basis`` (``fixes``,
+    ``plane``, ``water column``), ``depth_m``, ``sigma_m`` [m]; the fixes' ``fixes_ratio`` and count, the receivers'
+    ``span_m`` and ``aperture_m`` [m] (``positions`` (n, 3) given) and the ``water_depth_m`` where given."""
+    info = {"source": PRIOR_SOURCE if prior.floor else WATER_SOURCE, "basis": prior.basis, "depth_m": prior.depth,
+            "sigma_m": prior.sigma, "fixes_ratio": None if not np.isfinite(prior.ratio) else prior.ratio,
             "fixes": prior.fixes}
+    if positions is not None:
+        span, aperture = plane_span(positions)
+        info |= {"span_m": span, "aperture_m": aperture}
+    return info | {"water_depth_m": water_depth}
+
+
+def prior_line(info: dict[str, Any]) -> str | None:
+    """The console's warning on a prior that holds the tag's depth (``summary.json``'s ``depth``,
+    :func:`prior_info`), after ``sblsim: warning:``; None where no prior holds it."""
+    if info.get("source") != PRIOR_SOURCE:
+        return None
+    water = info.get("water_depth_m")
+    if info.get("fixes_ratio") is None:  # the plane's rule (the fixes did not decide)
+        why = f"their heights span {info['span_m']:.2g} m over {info['aperture_m']:.3g} m: one plane"
+    else:
+        why = f"the fixes' depth σ is {info['fixes_ratio']:.2f} of their heights' scale"
+    where = f"mid-water of the {water:g} m given" if water is not None and info.get("basis") != "fixes" else \
+        "the receivers' mean depth"
+    ask = "give --tag-depth or a depth_m column" + ("" if water is not None else ", or --water-depth")
+    return (f"the receivers do not determine the tag's depth ({why}): taken at {where} {info['depth_m']:.2f} ± "
+            f"{info['sigma_m']:.2g} m ({ask})")
 
 
 def depth_term(prior: DepthPrior | None, covariances: np.ndarray) -> np.ndarray | None:
     """What an estimate that took ``prior`` adds to its reported covariances (m, 3, 3) [m²]: its depth's variance
-    raised to the prior's (:func:`~sblsim.models.tracking.depth.at_least`); None where no prior was taken."""
-    return None if prior is None else at_least(covariances, prior.sigma)
+    raised to the prior's (:func:`~sblsim.models.tracking.depth.at_least`); None where no prior was taken or the
+    prior only bounds a depth the arrivals determine."""
+    return None if prior is None or not prior.floor else at_least(covariances, prior.sigma)
 
 
-__all__ = ["PRIOR_SOURCE", "depth_term", "prior_info", "tag_depth", "undetermined_depth"]
+__all__ = ["MAX_WATER_DEPTH", "PRIOR_SOURCE", "WATER_SOURCE", "check_water_depth", "depth_term", "plane_depth",
+           "prior_info", "prior_line", "tag_depth", "undetermined_depth"]

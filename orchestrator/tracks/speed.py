@@ -1,10 +1,12 @@
 """The sound speed the replay takes: given (and checked against the pings' own calibration), a measured series
-(each ping's arrivals rescaled to its median), or calibrated from the pings (with a fallback's prior where the array
-determines it weakly, the fallback alone where the pings cannot be fitted); and what was done, for
+(each ping's arrivals rescaled to its median) or a temperature series made one by TEOS-10, or calibrated from the
+pings (with a fallback's prior where the array determines it weakly, the fallback alone where the pings cannot be
+fitted or where the calibration lies outside the speeds the stated water can have); and what was done, for
 ``summary.json``'s ``sound_speed``."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,19 +21,87 @@ from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, SIGMA_TOA
 #: :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` or better, lies more than this many of its standard errors
 #: from it (the speed is still the one given: a user may know the water better than a thin array does).
 SPEED_CHECK_SIGMAS = 3.0
+#: ``summary.json``'s ``sound_speed`` ``source`` where a temperature series gives the speed, and where the stated
+#: water's speed replaces a calibration it cannot have.
+TEMPERATURE_SOURCE = "temperature series (TEOS-10)"
+REPLACED_SOURCE = "fallback (the calibration is outside the stated water's speeds)"
+
+
+@dataclass(frozen=True)
+class Water:
+    """Where the water's TEOS-10 speed is taken: the ``depth`` of the pings' paths [m, positive down] (the receivers'
+    mean depth; 0 in 2-D), the shallowest and deepest depths they cross (``depths`` [m]: the surface or the tag's
+    default to the bottom or the deepest receiver), and the array's ``latitude`` and ``longitude`` [°, WGS 84] where
+    the receivers have a CRS (:func:`~sblsim.models.tracking.sound_speed.water_speed`)."""
+
+    depth: float = 0.0
+    depths: tuple[float, float] = (0.0, 0.0)
+    latitude: float | None = None
+    longitude: float | None = None
+
+    @classmethod
+    def of_array(cls, positions: np.ndarray, frame: Any = None, water_depth: float | None = None) -> Water:
+        """The water of an array: its receivers' positions (n, dim) [m] (z up where dim is 3), its metric ``frame``
+        (:class:`~sblsim.orchestrator.io.frames.Frame` or None) and the ``water_depth`` [m] where given."""
+        depths = -positions[:, 2] if positions.shape[1] == 3 else np.zeros(1)
+        low = 0.0 if water_depth is not None else float(depths.min())
+        high = float(water_depth) if water_depth is not None else float(depths.max())
+        latitude = longitude = None
+        if frame is not None:
+            lat, lon = frame.to_latlon(np.array([positions[:, 0].mean()]), np.array([positions[:, 1].mean()]))
+            latitude, longitude = float(np.asarray(lat)[0]), float(np.asarray(lon)[0])
+        return cls(float(depths.mean()), (low, high), latitude, longitude)
+
+    def info(self) -> dict[str, Any]:
+        """``summary.json``'s words on where the water's speed was taken."""
+        return {"pressure_depth_m": self.depth, "depths_m": list(self.depths), "latitude": self.latitude,
+                "longitude": self.longitude,
+                "absolute_salinity": "gsw.SA_from_SP at the array's position" if self.latitude is not None else
+                "gsw.SR_from_SP (the Reference Salinity: the array's position is not known)"}
+
+
+def _plausible(speed: dict[str, Any], temperature: float | None, salinity: float | None,
+               water: Water) -> dict[str, Any]:
+    """A speed calibrated from the pings (``speed``: ``summary.json``'s ``sound_speed``) against the speeds the stated
+    water can have (:func:`~sblsim.models.tracking.sound_speed.plausible_speeds`): outside them, replaced by the
+    water's own TEOS-10 speed and its spread (:func:`~sblsim.models.tracking.sound_speed.fallback_prior`), the
+    calibration kept beside (``source`` :data:`REPLACED_SOURCE`); inside, ``plausible_m_s`` added."""
+    if temperature is None:
+        return speed
+    low, high, _ = ss.plausible_speeds(temperature, salinity, water.depths, water.latitude, water.longitude)
+    c = speed["sound_speed_m_s"]
+    out = speed | {"plausible_m_s": [low, high]}
+    if low <= c <= high:
+        return out
+    prior, sigma, words = ss.fallback_prior(temperature, salinity, water.depth, water.latitude, water.longitude)
+    return out | {"sound_speed_m_s": prior, "source": REPLACED_SOURCE, "method": words, "sigma_m_s": sigma,
+                  "calibrated_m_s": c, "calibrated_sigma_m_s": speed.get("sigma_m_s"),
+                  "calibrated_source": speed["source"], "water": water.info()}
+
+
+def replaced_line(speed: dict[str, Any]) -> str | None:
+    """The console's warning on a calibration the stated water cannot have (``summary.json``'s ``sound_speed``),
+    after ``sblsim: warning:``; None where the calibration was kept."""
+    if speed.get("source") != REPLACED_SOURCE:
+        return None
+    low, high = speed["plausible_m_s"]
+    return (f"the pings' calibration, {speed['calibrated_m_s']:.1f} m/s, is outside the speeds the stated water can "
+            f"have ({low:.1f} to {high:.1f} m/s: 3 σ of 1 °C and 1 in salinity); taken instead: {speed['method']}, "
+            f"{speed['sound_speed_m_s']:.1f} m/s (every range scales with it)")
 
 
 def speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.ndarray | None,
-                depth_sigma: float) -> dict[str, Any]:
+                depth_sigma: float, sigma_toa: float | np.ndarray = SIGMA_TOA) -> dict[str, Any]:
     """A given sound speed [m/s] against the pings' own calibration
     (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`): ``calibrated_m_s``, its
     ``calibrated_sigma_m_s`` and the two's ``disagreement_sigmas`` where the pings determine the speed (to
     :data:`~sblsim.models.tracking.calibration.MAX_SIGMA`), ``disagrees`` where that is above
-    :data:`SPEED_CHECK_SIGMAS`; nothing where they do not."""
+    :data:`SPEED_CHECK_SIGMAS`; nothing where they do not. ``sigma_toa`` [s]: the timing noise (one, or each
+    receiver's)."""
     from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
 
     try:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False, depth=depth,
+        calibration = calibrate_sound_speed(toa, positions, sigma_toa, strict=False, depth=depth,
                                             depth_sigma=depth_sigma)
     except ModelError:
         return {}
@@ -45,8 +115,9 @@ def speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.
 def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
                       series_path: Path | None = None, temperature: float | None = None,
                       salinity: float | None = None, depth: np.ndarray | None = None,
-                      depth_sigma: float = DEPTH_SIGMA, time_origin: float | None = None
-                      ) -> tuple[np.ndarray, float, dict[str, Any]]:
+                      depth_sigma: float = DEPTH_SIGMA, time_origin: float | None = None,
+                      sigma_toa: float | np.ndarray = SIGMA_TOA, temperature_path: Path | None = None,
+                      water: Water | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
     given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
     whose median is the reference speed and to which each ping's arrivals are rescaled
@@ -54,43 +125,46 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); where its standard error is above
     :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` (the array determines it only weakly), combined by inverse
     variance with the fallback and its spread (:func:`~sblsim.models.tracking.sound_speed.fallback_prior`:
-    ``temperature`` [°C] and ``salinity`` [g/kg], else the stated default; a calibration 5.6 m/s uncertain is far
+    ``temperature`` [°C] and ``salinity`` (practical), else the stated default; a calibration 5.6 m/s uncertain is far
     better than a default 51 m/s uncertain), and where the pings cannot be fitted at all, the fallback alone. The
     calibration takes the tag's depth per ping (``depth`` [m], NaN where none) with ``depth_sigma`` [m] where known.
     A given speed is checked against the pings' own calibration (:func:`speed_check`: said, not replaced). A series
-    in absolute times is taken to the times of arrival's base by ``time_origin`` [s since 1970 UTC].
+    in absolute times is taken to the times of arrival's base by ``time_origin`` [s since 1970 UTC]. ``sigma_toa``
+    [s]: the arrivals' timing noise in the fits (one, or each receiver's (n,)). A temperature series
+    (``temperature_path``, :func:`~sblsim.orchestrator.tracks.water.read_temperature_series`) is made a measured
+    series by TEOS-10 at ``salinity`` (practical) in the ``water`` (:class:`Water`: the depth and position of the
+    pressure and the absolute salinity), which also places the fallback and the speeds the stated water can have: a
+    calibration outside them is replaced by the water's own speed (:data:`REPLACED_SOURCE`).
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
-    from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.calibration import MAX_SIGMA, calibrate_sound_speed
 
-    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity)  # refuses a bad temperature or salinity
+    water = Water() if water is None else water
+    if temperature_path is not None:
+        from sblsim.orchestrator.tracks.water import read_temperature_series
+
+        if salinity is None:
+            raise ModelError("temperature file: needs the water's salinity (practical: 0 for fresh water, about 35 "
+                             "for the open sea)")
+        ss.check_water(0.0, salinity)
+        temperatures = read_temperature_series(temperature_path, time_origin)
+        series = np.column_stack([temperatures[:, 0], ss.water_speed(temperatures[:, 1], salinity, water.depth,
+                                                                     water.latitude, water.longitude)])
+        scaled, c, speed = _series_speed(toa, positions, series, temperature_path, "temperature file", sigma_toa)
+        return scaled, c, speed | {"source": TEMPERATURE_SOURCE, "salinity": salinity,
+                                   "temperature_range_c": [float(temperatures[:, 1].min()),
+                                                           float(temperatures[:, 1].max())], "water": water.info()}
+    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity, water.depth, water.latitude,
+                                                  water.longitude)  # refuses a bad temperature or salinity
     if sound_speed is not None:
         return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | speed_check(
-            toa, positions, sound_speed, depth, depth_sigma)
+            toa, positions, sound_speed, depth, depth_sigma, sigma_toa)
     if series_path is not None:
         from sblsim.orchestrator.tracks.toa import read_sound_speed_series
 
-        series = read_sound_speed_series(series_path, time_origin)
-        first = ps.first_arrivals(toa)
-        span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
-        inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])
-        if np.isfinite(span[0]) and (series[-1, 0] < span[0] or series[0, 0] > span[1]):
-            raise ModelError(f"sound speed file: {str(series_path)!r}: its times [{series[0, 0]:.10g}, "
-                             f"{series[-1, 0]:.10g}] s do not overlap the pings' first arrivals [{span[0]:.10g}, "
-                             f"{span[1]:.10g}] s; allowed: a series on the times of arrival's time base (toa.txt "
-                             "from sblsim toa: seconds since its origin_epoch_s)")
-        c = float(np.median(series[inside, 1] if inside.any() else series[:, 1]))
-        emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, SIGMA_TOA)[1])
-        scaled, speeds, outside = ss.rescale_to_reference(toa, emissions, series, c)
-        return scaled, c, {"sound_speed_m_s": c, "source": "measured series", "file": str(series_path),
-                           "method": "each ping's arrivals rescaled from the series' speed at its emission to the "
-                                     "series' median over the record",
-                           "range_m_s": [float(np.nanmin(speeds)), float(np.nanmax(speeds))]
-                           if np.isfinite(speeds).any() else None,
-                           "pings_outside_series": int(outside.sum()),
-                           "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
+        return _series_speed(toa, positions, read_sound_speed_series(series_path, time_origin), series_path,
+                             "sound speed file", sigma_toa)
     try:
-        calibration = calibrate_sound_speed(toa, positions, SIGMA_TOA, strict=False, depth=depth,
+        calibration = calibrate_sound_speed(toa, positions, sigma_toa, strict=False, depth=depth,
                                             depth_sigma=depth_sigma)
     except ModelError as exc:
         return toa, prior, {"sound_speed_m_s": prior, "source": "fallback", "method": words,
@@ -108,7 +182,41 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                   "calibrated_m_s": calibration.c, "calibrated_sigma_m_s": calibration.sigma, "prior_m_s": prior,
                   "prior_sigma_m_s": prior_sigma, "prior": words,
                   "disagreement_sigmas": abs(calibration.c - prior) / float(np.hypot(calibration.sigma, prior_sigma))}
+    speed = _plausible(speed, temperature, salinity, water)
     return toa, speed["sound_speed_m_s"], speed
 
 
-__all__ = ["SPEED_CHECK_SIGMAS", "sound_speed_stage", "speed_check"]
+def _series_speed(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, path: Path, what: str,
+                  sigma_toa: float | np.ndarray) -> tuple[np.ndarray, float, dict[str, Any]]:
+    """A measured series ``series`` (k, 2) [s, m/s] (read from ``path``, named ``what`` in a refusal) taken: each
+    ping's arrivals rescaled to the series' median over the pings (:func:`sound_speed_stage`).
+
+    Raises
+    ------
+    ModelError
+        The series' times do not overlap the pings' first arrivals (one line).
+    """
+    from sblsim.models.receiver import toa_tracking as tt
+
+    first = ps.first_arrivals(toa)
+    span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
+    inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])
+    if np.isfinite(span[0]) and (series[-1, 0] < span[0] or series[0, 0] > span[1]):
+        raise ModelError(f"{what}: {str(path)!r}: its times [{series[0, 0]:.10g}, "
+                         f"{series[-1, 0]:.10g}] s do not overlap the pings' first arrivals [{span[0]:.10g}, "
+                         f"{span[1]:.10g}] s; allowed: a series on the times of arrival's time base (toa.txt "
+                         "from sblsim toa: seconds since its origin_epoch_s)")
+    c = float(np.median(series[inside, 1] if inside.any() else series[:, 1]))
+    emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, sigma_toa)[1])
+    scaled, speeds, outside = ss.rescale_to_reference(toa, emissions, series, c)
+    return scaled, c, {"sound_speed_m_s": c, "source": "measured series", "file": str(path),
+                       "method": "each ping's arrivals rescaled from the series' speed at its emission to the "
+                                 "series' median over the record",
+                       "range_m_s": [float(np.nanmin(speeds)), float(np.nanmax(speeds))]
+                       if np.isfinite(speeds).any() else None,
+                       "pings_outside_series": int(outside.sum()),
+                       "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
+
+
+__all__ = ["REPLACED_SOURCE", "SPEED_CHECK_SIGMAS", "TEMPERATURE_SOURCE", "Water", "replaced_line",
+           "sound_speed_stage", "speed_check"]

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -52,11 +53,18 @@ from sblsim.orchestrator.io.frames import (
 )
 from sblsim.orchestrator.io.tables import NUMBER, csv_cells, number, read_lines
 from sblsim.orchestrator.io.times import utc_seconds
+from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE
 
 #: The largest file read [bytes] and the most rows (pings, receivers, track points).
 MAX_TOA_BYTES = 64 * 2**20
 MAX_PINGS = 500_000
 MAX_RECEIVERS = 1000
+#: The most cells a line holds [1] (a TOA matrix's: a receiver's each and the depth column) and a file [1] (as many
+#: as a 64 MiB matrix of short cells holds: 500,000 pings at 28 receivers, Lake Hald's, are 14 million).
+MAX_ROW_CELLS = MAX_RECEIVERS + 1
+MAX_TOA_CELLS = 2**24
+#: The longest cell of a number [characters] (a time of arrival's 17 significant digits, sign and exponent, padded).
+MAX_NUMBER_CHARS = 64
 #: The allowed times [s] (a time of arrival or a track's time) and coordinates [m].
 MAX_TIME = 1e10
 MAX_COORDINATE = 1e7
@@ -72,8 +80,11 @@ def _too_large(name: str, what: str, amount: str) -> ModelError:
 def _lines(path: Path, what: str) -> list[tuple[int, str]]:
     """The numbered lines of a regular text file (:func:`~sblsim.orchestrator.io.tables.read_lines`), refused when
     it holds more than :data:`MAX_TOA_BYTES` bytes or :data:`MAX_PINGS` rows and 1,000 lines besides (counted in
-    what was read); comments (``#``) and blank lines dropped, the others with their line numbers from 1."""
-    lines = read_lines(path, what, max_bytes=MAX_TOA_BYTES, max_rows=MAX_PINGS, extra_lines=1000, refuse=_too_large)
+    what was read), or when a line is longer than 1 MiB or holds more than :data:`MAX_ROW_CELLS` cells, or the file
+    more than :data:`MAX_TOA_CELLS` (:func:`~sblsim.orchestrator.io.tables.check_cells`, before it is parsed);
+    comments (``#``) and blank lines dropped, the others with their line numbers from 1."""
+    lines = read_lines(path, what, max_bytes=MAX_TOA_BYTES, max_rows=MAX_PINGS, extra_lines=1000, refuse=_too_large,
+                       delimiter="auto", max_line_cells=MAX_ROW_CELLS, max_cells=MAX_TOA_CELLS, comments=True)
     return [(k, line) for k, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
 
 
@@ -98,13 +109,20 @@ def _numbers(rows: list[tuple[int, list[str]]], name: str, what: str, header: li
              missing: bool, named: bool = True) -> np.ndarray:
     """The cells of ``rows`` (:func:`_rows`) as a float matrix, each checked: a number (``NA``/empty allowed only
     where ``missing``), finite, within [low, high]; every row with the header's number of cells (``named``: the
-    file's header; else the first row's). An error names the line and the column, or the line and its cells."""
+    file's header; else the first row's). An error names the line and the column, or the line and its cells. A cell
+    longer than :data:`MAX_NUMBER_CHARS` is refused before the matrix of text is built (as wide as its widest cell)."""
     width = len(header)
     ragged = next(((number, len(cells)) for number, cells in rows if len(cells) != width), None)
     if ragged is not None:
         against = f"the header {width} ({','.join(header)[:80]})" if named else f"the first row {width}"
         raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, {against}; allowed: "
                          f"{width} cells a row" + (" (NA or an empty cell where not heard)" if missing else ""))
+    allowed = f"a finite number in [{low:g}, {high:g}]" + (" or NA/empty (not heard)" if missing else "")
+    if max(map(len, chain.from_iterable(row for _, row in rows)), default=0) > MAX_NUMBER_CHARS:
+        line, j, text = next((number, j, cell) for number, row in rows for j, cell in enumerate(row)
+                             if len(cell) > MAX_NUMBER_CHARS)
+        raise ModelError(f"{what}: {name!r} line {line} column {header[j]}: {text[:40]!r}... ({len(text):,} "
+                         f"characters) is not allowed; allowed: {allowed}")
     lines = [number for number, _ in rows]
     cells = np.array([row for _, row in rows], dtype=str).reshape(len(rows), width)
     stripped = np.char.strip(cells)
@@ -117,7 +135,6 @@ def _numbers(rows: list[tuple[int, list[str]]], name: str, what: str, header: li
     if bad.any():
         i, j = map(int, np.argwhere(bad)[0])
         text = stripped[i, j]
-        allowed = f"a finite number in [{low:g}, {high:g}]" + (" or NA/empty (not heard)" if missing else "")
         raise ModelError(f"{what}: {name!r} line {lines[i]} column {header[j]}: {text[:40]!r} is not "
                          f"allowed; allowed: {allowed}")
     values[empty] = np.nan
@@ -186,13 +203,15 @@ def read_toa(path: Path | str) -> ToaMatrix:
 class Receivers:
     """The receivers: ``names`` (n,), ``positions`` (n, dim) [m], NaN rows where a receiver has no position
     (not used), ``sigma`` (n,) each one's survey error per axis [m] (a ``sigma_m`` column; NaN where not given,
-    None without the column), and ``frame`` the metric frame of the positions (None: a local frame without a
-    CRS)."""
+    None without the column), ``frame`` the metric frame of the positions (None: a local frame without a
+    CRS), and ``toa_sigma`` (n,) each one's timing noise [s] (a ``toa_sigma_s`` column, as ``sblsim toa`` writes
+    it from a synchronisation's residuals; NaN where not given, None without the column)."""
 
     names: list[str]
     positions: np.ndarray
     sigma: np.ndarray | None = None
     frame: Frame | None = None
+    toa_sigma: np.ndarray | None = None
 
 
 #: The survey errors a receivers file's ``sigma_m`` column may give [m] (a standard deviation per axis).
@@ -205,11 +224,13 @@ LATITUDE, LONGITUDE = ("lat", "latitude"), ("lon", "long", "longitude")
 
 def read_receivers(path: Path | str, crs: str | None = None, frame: str | None = None) -> Receivers:
     """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``], or
-    ``lat``, ``lon`` [°] [, ``z_m``]; [, ``sigma_m``] [, ``status``]) or a TOML file (``[[receiver]]`` with ``name``,
-    ``x_m``, ``y_m`` [, ``z_m``] [, ``sigma_m``]); ``sigma_m`` the survey's standard deviation per axis [m]
-    (:data:`SURVEY_SIGMA_RANGE`). A receiver whose coordinates are empty is kept without a position (its column of
-    the TOA matrix is not used). Latitude and longitude (WGS 84, or the geographic ``crs``) are projected to
-    ``frame`` (a metric CRS; default the UTM zone of their centre); x and y in a projected ``crs`` stay in it.
+    ``lat``, ``lon`` [°] [, ``z_m``]; [, ``sigma_m``] [, ``toa_sigma_s``] [, ``status``]) or a TOML file
+    (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``] [, ``sigma_m``]); ``sigma_m`` the survey's standard
+    deviation per axis [m] (:data:`SURVEY_SIGMA_RANGE`), ``toa_sigma_s`` the receiver's timing noise [s]
+    (:data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`; empty: not known). A receiver whose coordinates
+    are empty is kept without a position (its column of the TOA matrix is not used). Latitude and longitude (WGS 84,
+    or the geographic ``crs``) are projected to ``frame`` (a metric CRS; default the UTM zone of their centre); x and
+    y in a projected ``crs`` stay in it.
 
     Raises
     ------
@@ -250,8 +271,9 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
     used = [k for k in axes if k is not None]
     status = header.index("status") if "status" in header else None
     survey = header.index("sigma_m") if "sigma_m" in header else None
-    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey)), None)
-    names, positions, sigma = [], [], []
+    noise = header.index("toa_sigma_s") if "toa_sigma_s" in header else None
+    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey, noise)), None)
+    names, positions, sigma, timing = [], [], [], []
     for k, (lineno, cells) in enumerate(rows, start=1):
         if len(cells) != len(header):
             raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} cells, the header {len(header)} "
@@ -260,6 +282,9 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
         if survey is not None:
             sigma.append(math.nan if cells[survey] in MISSING else number(
                 cells[survey], f"{what}: {name!r} line {lineno}", "sigma_m", *SURVEY_SIGMA_RANGE))
+        if noise is not None:
+            timing.append(math.nan if cells[noise] in MISSING else number(
+                cells[noise], f"{what}: {name!r} line {lineno}", "toa_sigma_s", *TOA_SIGMA_RANGE))
         coordinates = [cells[k] for k in used]
         if all(c in MISSING for c in coordinates):
             positions.append([math.nan] * len(used))
@@ -282,7 +307,8 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
                                                                                                         "frame"))
         if frame is not None:
             positions[:, 0], positions[:, 1] = transform(crs, chosen.crs, positions[:, 0], positions[:, 1])
-    return Receivers(names, positions, np.array(sigma, float) if survey is not None else None, chosen)
+    return Receivers(names, positions, np.array(sigma, float) if survey is not None else None, chosen,
+                     np.array(timing, float) if noise is not None else None)
 
 
 def _receivers_toml(path: Path, what: str) -> Receivers:

@@ -25,15 +25,31 @@ if TYPE_CHECKING:
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking.depth import check_given_depth
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.receivers import receiver_residuals
+from sblsim.models.tracking.twins import MAX_SPEED, two_places
 from sblsim.orchestrator.io.frames import frame_summary
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
-from sblsim.orchestrator.tracks.depth import depth_term, prior_info, tag_depth, undetermined_depth
+from sblsim.orchestrator.tracks.depth import (
+    check_water_depth,
+    depth_term,
+    plane_depth,
+    prior_info,
+    tag_depth,
+    undetermined_depth,
+)
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
-from sblsim.orchestrator.tracks.speed import sound_speed_stage
-from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, SIGMA_TOA, motion_model, ping_schedule, tracker_settings
+from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
+from sblsim.orchestrator.tracks.tracker import (
+    DEPTH_SIGMA,
+    SIGMA_TOA,
+    motion_model,
+    ping_schedule,
+    toa_noise,
+    tracker_settings,
+)
 
 #: The estimators, in the order of the outputs, and their names in words (the console, the figure).
 ESTIMATOR_NAMES = {"stationary": "stationary fix", "robust": "robust smoother", "rts": "RTS smoother",
@@ -144,9 +160,11 @@ def survey_sigmas(receivers, names: Sequence[str], one: float | None) -> np.ndar
     return None if not np.isfinite(given).any() else np.nan_to_num(given)
 
 
-def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray):
+def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray,
+                     sigma_toa: float | np.ndarray = SIGMA_TOA):
     """A stationary tag's pooled fix (:func:`~sblsim.models.tracking.stationary.stationary_fix`) from the median of
-    its single-ping fixes ``fixes`` (m, dim) [m], else the receivers' centroid.
+    its single-ping fixes ``fixes`` (m, dim) [m], else the receivers' centroid; ``sigma_toa`` the timing noise [s]
+    (one, or each receiver's).
 
     Raises
     ------
@@ -157,11 +175,11 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
 
     finite = np.isfinite(fixes).all(axis=1)
     start = np.median(fixes[finite], axis=0) if finite.any() else positions.mean(axis=0)
-    return stationary_fix(toa, positions, c, SIGMA_TOA, start)
+    return stationary_fix(toa, positions, c, sigma_toa, start)
 
 
 def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled, survey: np.ndarray | None,
-                        speed_sigma: float | None) -> np.ndarray | None:
+                        speed_sigma: float | None, sigma_toa: float | np.ndarray = SIGMA_TOA) -> np.ndarray | None:
     """A stationary tag's pooled position's consider covariance (dim, dim) [m²] of the errors pooling does not
     average: the receivers' survey ``survey`` (n,) [m per axis] and the sound speed's ``speed_sigma`` [m/s], each a
     constant bias of one receiver's arrivals (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`); None
@@ -170,7 +188,7 @@ def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled
 
     if survey is None and not speed_sigma:
         return None
-    S = bias_sensitivity(toa, positions, c, SIGMA_TOA, pooled)
+    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
     B = np.zeros((len(positions), len(positions)))
     if survey is not None:  # a still tag's range to receiver i is off by u_i · δr_i, of variance σ_i² (|u_i| = 1)
         B += np.diag(np.asarray(survey, float) ** 2 / c**2)
@@ -178,6 +196,27 @@ def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled
         rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
         B += float(speed_sigma) ** 2 * np.outer(rho, rho) / c**4
     return S @ B @ S.T
+
+
+def _one_tag(toa_path: Path, fixes: np.ndarray, emissions: np.ndarray, covariances: np.ndarray,
+             trusted: np.ndarray) -> None:
+    """Refuse a times-of-arrival matrix whose trusted single-ping fixes jump between two places as no animal moves:
+    two tags under one transmitter id (:func:`~sblsim.models.tracking.twins.two_places`), named by the file's stem.
+
+    Raises
+    ------
+    ModelError
+        One line naming the transmitter, the two places, the jumps and what is allowed.
+    """
+    found = two_places(fixes[trusted], emissions[trusted], covariances[trusted])
+    if found is None:
+        return
+    (x0, y0), (x1, y1) = found.centres
+    raise ModelError(f"transmitter {Path(toa_path).stem}: looks like two tags, at ({x0:.0f}, {y0:.0f}) m and "
+                     f"({x1:.0f}, {y1:.0f}) m, {found.separation:.0f} m apart ({found.shares[0]:.0%} and "
+                     f"{found.shares[1]:.0%} of {found.fixes} trusted fixes): {found.jumps} of {found.steps} steps "
+                     f"between consecutive fixes are faster than {MAX_SPEED:g} m/s; allowed: one tag's pings (two "
+                     "tags sharing an id: split its detections by place or by receiver)")
 
 
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
@@ -188,7 +227,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           temperature: float | None = None, salinity: float | None = None, motion: str = "moving",
           fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
           survey_sigma: float | None = None, crs: str | None = None, frame: str | None = None,
-          time_origin: float | None = None, other_filters: bool = True) -> TrackOutcome:
+          time_origin: float | None = None, other_filters: bool = True, toa_sigma: float | None = None,
+          temperature_path: Path | None = None, water_depth: float | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -202,7 +242,14 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     ``lat``, ``lon`` [° WGS 84], a truth may be in latitude and longitude); ``time_origin`` [s since 1970 UTC] the
     UTC time of the TOA file's zero (every row gains ``epoch_s`` and ``time_utc``, a truth or a sound-speed series
     may be in absolute times); ``other_filters`` False leaves out the causal filters the track does not need (the
-    sequential EKF and the UKF, run beside for comparison: half the time of a track)."""
+    sequential EKF and the UKF, run beside for comparison: half the time of a track); ``toa_sigma`` [s] the timing
+    noise of every arrival (None: each receiver's ``toa_sigma_s`` in the receivers file, as ``sblsim toa`` writes it
+    from a synchronisation's residuals, else :data:`~sblsim.orchestrator.tracks.tracker.SIGMA_TOA`:
+    :func:`~sblsim.orchestrator.tracks.tracker.toa_noise`, ``summary["toa_noise"]``), in every estimator's
+    measurement covariance and in the sound speed's calibration; ``temperature_path`` a water-temperature series made
+    the sound speed by TEOS-10 at ``salinity`` (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`);
+    ``water_depth`` [m] the water's depth, which bounds the tag's (:mod:`sblsim.orchestrator.tracks.depth`; receivers
+    in one plane hold it at mid-water, else at their mean depth)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -222,6 +269,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                            frame=receivers.frame) if reference_path is not None else None
     burst_sequence = read_burst_sequence(burst_sequence_path) if burst_sequence_path is not None else None
     toa, positions, names = _usable(matrix, receivers, receivers_kept)
+    sigma, noise_info = toa_noise(toa_sigma, None if receivers.toa_sigma is None else
+                                  receivers.toa_sigma[[receivers.names.index(n) for n in names]], names)
     toa, dropped = drop_detections(toa, drop, seed)
     dim = positions.shape[1]
     check_array(positions, names, toa, tt.SOUND_SPEED_RANGE[0])
@@ -234,20 +283,40 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                              f"[{span[0]:.10g}, {span[1]:.10g}] s; allowed: a truth on the time base of the times of "
                              "arrival")
     depth, depth_info = tag_depth(matrix.depth, len(toa), dim, fixed_depth, depth_sigma)
+    check_water_depth(water_depth, positions, names, fixed_depth)
+    water = Water.of_array(positions, receivers.frame, water_depth)
+    plane = plane_depth(depth, positions, water_depth, depth_sigma)
+    if plane is not None:  # receivers in one plane: the depth held before anything is fitted (free, it would trade
+        # against the sound speed)
+        depth, depth_sigma, depth_info = np.full(len(toa), plane.depth), plane.sigma, prior_info(plane, positions,
+                                                                                                   water_depth)
     survey = survey_sigmas(receivers, names, survey_sigma)
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
-                                      depth_sigma, time_origin)
+                                      depth_sigma, time_origin, sigma_toa=sigma, temperature_path=temperature_path,
+                                      water=water)
+    if fixed_depth is not None:  # one depth given: against where the arrivals put the tag with its depth free, at a
+        # speed the given depth did not calibrate
+        free_c = c if speed["source"] in ("given", "measured series", TEMPERATURE_SOURCE) else sound_speed_stage(
+            toa, positions, None, None, temperature, salinity, None, depth_sigma, sigma_toa=sigma, water=water)[1]
+        free = tt.fix_pings(toa, positions, free_c, sigma)
+        check_given_depth(fixed_depth, depth_sigma, free[0], free[2], free[3].sum(axis=1), positions)
     # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
-    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
-    prior = undetermined_depth(depth, fx, fc, fused.sum(axis=1), positions)
-    if prior is not None:  # the arrivals do not determine the depth: the speed calibrated (where it was) and the
-        # fixes made again with the prior
-        depth, depth_sigma, depth_info = np.full(len(toa), prior.depth), prior.sigma, prior_info(prior)
-        if sound_speed is None and sound_speed_path is None:  # calibrated from the pings (or fallen back where
-            # they could not be fitted): again with the prior; the times of arrival as read (none rescaled)
-            toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma)
-        fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, SIGMA_TOA, depth=depth, depth_sigma=depth_sigma)
-    settings = replace(tracker_settings(c, fe), depth_sigma=depth_sigma)
+    fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
+    prior = plane if plane is not None else undetermined_depth(depth, fx, fc, fused.sum(axis=1), positions,
+                                                               water_depth)
+    if prior is not None and plane is None:  # the arrivals do not determine the depth (or the water bounds it): the
+        # speed calibrated (where it was) and the fixes made again with the prior
+        depth, depth_sigma, depth_info = np.full(len(toa), prior.depth), prior.sigma, prior_info(prior, positions,
+                                                                                                   water_depth)
+        if sound_speed is None and sound_speed_path is None and temperature_path is None:  # calibrated from the
+            # pings (or fallen back where they could not be fitted): again with the prior; the times of arrival as
+            # read (none rescaled)
+            toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma,
+                                              sigma_toa=sigma, water=water)
+        fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
+    _one_tag(toa_path, fx, fe, fc, qa.trusted_fixes(fx, fc, fused.sum(axis=1), np.isfinite(toa).sum(axis=1), fchi2,
+                                                    dim, None if depth is None else np.isfinite(depth)))
+    settings = replace(tracker_settings(c, fe, sigma), depth_sigma=depth_sigma)
     # the speed's standard error where it came from the pings or a fallback (a given or measured speed has none), a
     # consider term of the fixes' and the robust track's covariances as reported
     speed_sigma = speed.get("sigma_m_s")
@@ -273,7 +342,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                    if name != "ekf" and other_filters}  # the EKF's record is the RTS's
     depth_known = None if depth is None else np.isfinite(depth)  # a measurement of each fix and row where given
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known)
-    fix_explained = qa.explained(toa, positions, fx, c, SIGMA_TOA)
+    fix_explained = qa.explained(toa, positions, fx, c, sigma)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}
     segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
@@ -296,7 +365,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         reported = cov if consider is None else cov + consider[:, :dim, :dim]
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
-                                 explained=qa.explained(toa[ping], positions, p, c, SIGMA_TOA),
+                                 explained=qa.explained(toa[ping], positions, p, c, sigma),
                                  fix_used=fix_explained[ping], reported=reported,
                                  acceleration_psd=None if stationary else settings.acceleration_psd,
                                  known_depth=None if depth_known is None else depth_known[ping])
@@ -313,9 +382,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
     robust = None
     if stationary:
-        pooled = stationary_track(toa, positions, c, fx)
+        pooled = stationary_track(toa, positions, c, fx, sigma)
         kp = np.flatnonzero(np.isfinite(pooled.emissions))
-        pooled_extra = stationary_consider(toa, positions, c, pooled, survey, speed_sigma)
+        pooled_extra = stationary_consider(toa, positions, c, pooled, survey, speed_sigma, sigma)
         rows("stationary", kp, pooled.emissions[kp], np.repeat(pooled.position[None], len(kp), axis=0),
              np.repeat(pooled.covariance[None], len(kp), axis=0),
              (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), None,
@@ -332,7 +401,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         k = np.flatnonzero(positioned)
         # the filters' and the RTS smoother's consider terms of the same survey and speed errors
         sensitivity = None if survey is None and not speed_sigma else filter_sensitivity(
-            record, positions, c, SIGMA_TOA, survey, speed_sigma)
+            record, positions, c, sigma, survey, speed_sigma)
         if smooth:
             xs, Ps = tracker.smooth(record)
             k0 = record.start
@@ -358,13 +427,13 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts],
                  None if sensitivity is None else consider_terms(filter_sensitivity(
-                     other, positions, c, SIGMA_TOA, survey, speed_sigma)[u]))
+                     other, positions, c, sigma, survey, speed_sigma)[u]))
     f = np.flatnonzero(np.isfinite(fe))
-    fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f],
+    fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, sigma, fx[f], fe[f], fc[f],
                                                                         fused[f], survey)[:, :dim, :dim],
                       depth_term(prior, fc[f][:, :dim, :dim]))
     if speed_sigma:
-        fix_extra = _plus(fix_extra, speed_fix_covariance(positions, c, SIGMA_TOA, fx[f], fe[f], fc[f], fused[f],
+        fix_extra = _plus(fix_extra, speed_fix_covariance(positions, c, sigma, fx[f], fe[f], fc[f], fused[f],
                                                           speed_sigma)[:, :dim, :dim])
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None, fix_extra)
     # a fix the checks do not trust (no arrival to spare, or its own chi2 test failed) is a position its own data
@@ -381,14 +450,15 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     emitted = np.full(len(toa), np.nan)
     ping = frames[main]["ping"].to_numpy()
     at[ping], emitted[ping] = frames[main][columns].to_numpy(), frames[main]["time"].to_numpy()
-    judged = receiver_residuals(toa, positions, at, emitted, c, SIGMA_TOA)
+    judged = receiver_residuals(toa, positions, at, emitted, c, sigma)
     summary: dict[str, Any] = {
         "track": main, "pings": int(len(toa)), "receivers": names,
         "robust_smoother": None if robust is None else {
             "start": robust.start_names[robust.start], "iterations": robust.iterations, "cost": robust.cost},
         "receivers_kept": None if receivers_kept is None else list(receivers_kept),
         "drop_detections": drop, "seed": seed if drop > 0 else None, "detections_dropped": dropped,
-        "dimensions": dim, "sound_speed": speed, "sigma_toa_s": SIGMA_TOA, "ping_interval_s": interval,
+        "dimensions": dim, "sound_speed": speed, "sigma_toa_s": noise_info["sigma_s"], "toa_noise": noise_info,
+        "ping_interval_s": interval,
         "motion": motion_info, "depth": depth_info,
         "survey_sigma_m": None if survey is None else dict(zip(names, map(float, survey))),
         "ping_type": {"type": schedule.kind, "source": schedule.source,

@@ -1,10 +1,12 @@
-"""The replay's tracker model: the timing noise and depth noise it assumes, its settings
+"""The replay's tracker model: the timing noise and depth noise it assumes (the timing noise given, each receiver's
+from a synchronisation's residuals, else :data:`SIGMA_TOA`: :func:`toa_noise`), its settings
 (:class:`~sblsim.models.tracking.ekf.TrackerSettings`), the steps between the pings (:func:`ping_schedule`: the ping
 type given or inferred) and the motion model's noise (:func:`motion_model`: given, or estimated by EM)."""
 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -12,8 +14,12 @@ from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
-#: by their median absolute deviation, 0.15 ms by their standard deviation).
+#: by their median absolute deviation, 0.15 ms by their standard deviation), where nothing else is known: neither
+#: given (``--toa-sigma``) nor a synchronisation's per receiver (a receivers file's ``toa_sigma_s``).
 SIGMA_TOA = 1.5e-4
+
+#: The timing noise a user may give, and a receivers file's ``toa_sigma_s`` may hold [s]: a microsecond to a second.
+TOA_SIGMA_RANGE = (1e-6, 1.0)
 
 
 #: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
@@ -26,9 +32,46 @@ AGREE_AFTER = 4
 DEPTH_SIGMA = 0.3
 
 
-def tracker_settings(sound_speed: float, emissions: np.ndarray):
+def toa_noise(given: float | None, per_receiver: np.ndarray | None, names: list[str]
+              ) -> tuple[float | np.ndarray, dict[str, Any]]:
+    """The timing noise the tracker takes [s], and what was done (``summary.json``'s ``toa_noise``): ``given``
+    (``--toa-sigma``, one for every receiver) where given; else each receiver's own, ``per_receiver`` (len(names),)
+    [s] (a receivers file's ``toa_sigma_s``: what a synchronisation measured, NaN where a receiver has none, which
+    takes the others' median, said); else :data:`SIGMA_TOA`, assumed (said)."""
+    if given is not None:
+        return given, {"source": "given", "sigma_s": given}
+    known = None if per_receiver is None else np.asarray(per_receiver, float)
+    if known is None or not np.isfinite(known).any():
+        return SIGMA_TOA, {"source": "assumed", "sigma_s": SIGMA_TOA}
+    missing = [n for n, v in zip(names, known) if not np.isfinite(v)]
+    sigma = np.where(np.isfinite(known), known, np.nanmedian(known))
+    return sigma, {"source": "synchronisation", "sigma_s": float(np.median(sigma)),
+                   "per_receiver_s": {n: float(v) for n, v in zip(names, sigma)},
+                   "median_s": float(np.median(sigma)), "min_s": float(sigma.min()), "max_s": float(sigma.max()),
+                   "min_receiver": names[int(np.argmin(sigma))], "max_receiver": names[int(np.argmax(sigma))],
+                   "without": missing}
+
+
+def noise_line(info: dict[str, Any], option: str = "--toa-sigma") -> str:
+    """The console's line on the timing noise taken (:func:`toa_noise`'s ``info``; ``option`` how the caller spells
+    the option that gives it)."""
+    if info["source"] == "given":
+        return f"TOA noise: {info['sigma_s'] * 1e3:.4g} ms (given, {option})"
+    if info["source"] == "assumed":
+        return (f"TOA noise: {info['sigma_s'] * 1e3:.4g} ms assumed (no synchronisation residuals); give "
+                f"{option}")
+    line = (f"TOA noise per receiver from the synchronisation's residuals: median {info['median_s'] * 1e3:.3g} ms, "
+            f"{info['min_s'] * 1e3:.3g} ms ({info['min_receiver']}) to {info['max_s'] * 1e3:.3g} ms "
+            f"({info['max_receiver']}), {len(info['per_receiver_s'])} receivers")
+    if info["without"]:
+        line += f"; the others' median for {', '.join(info['without'][:10])} (none measured)"
+    return line
+
+
+def tracker_settings(sound_speed: float, emissions: np.ndarray, sigma_toa: float | np.ndarray = SIGMA_TOA):
     """The replay's tracker (:class:`~sblsim.models.tracking.ekf.TrackerSettings`) at ``sound_speed``
-    [m/s]: the timing noise :data:`SIGMA_TOA`, the ping interval the median step of the single-ping fixes' emission
+    [m/s]: the timing noise ``sigma_toa`` [s] (one, or each receiver's (n,); default :data:`SIGMA_TOA`), the ping
+    interval the median step of the single-ping fixes' emission
     times ``emissions`` (m,) [s] (NaN where no fix; 2 s when no two consecutive pings have one), and a lost filter
     restarted on :data:`AGREE_AFTER` consecutive consistent fixes of dim + 2 receivers too (an array of few
     receivers rarely gives the dim + 3 of the disagreement rule, docs/tracking.md)."""
@@ -36,7 +79,7 @@ def tracker_settings(sound_speed: float, emissions: np.ndarray):
 
     steps = np.diff(emissions)
     interval = float(np.nanmedian(steps)) if np.isfinite(steps).any() else 2.0
-    return TrackerSettings(sound_speed=sound_speed, sigma_toa=SIGMA_TOA, interval=interval, agree_after=AGREE_AFTER)
+    return TrackerSettings(sound_speed=sound_speed, sigma_toa=sigma_toa, interval=interval, agree_after=AGREE_AFTER)
 
 
 def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: str | None = None,
@@ -79,4 +122,5 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         "converged": found.converged, "history": list(found.history)}
 
 
-__all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "SIGMA_TOA", "motion_model", "ping_schedule", "tracker_settings"]
+__all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "SIGMA_TOA", "TOA_SIGMA_RANGE", "motion_model", "noise_line", "ping_schedule",
+           "toa_noise", "tracker_settings"]

@@ -329,6 +329,12 @@ REFUSED = {
     "empty range on a packet row": (rows(*GOOD[:1], "0.2,2,,1,0,1,2"), "line 3: range_m is empty"),
     "empty depth on a depth row": (rows(*GOOD[:1], "0.2,,,,,,"), "line 3: depth_m is empty"),
     "range beyond the input range": (rows(*GOOD[:1], "0.2,2,-2e7,1,0,1,2"), "line 3: range_m: -20000000 is outside"),
+    # the semicircle's one-way channel (sigma_range 0.1 m, no jitter, no drift) measures no range below -8 * 0.1 m
+    "range below what the channel measures": (rows(*GOOD[:1], "0.2,2,-1,1,0,1,2"),
+                                              "line 3: range_m: -1 is outside the allowed range [-0.8, 1e+07]"),
+    "travel time below what the channel measures": (
+        "time_s,beacon_id,travel_time_s,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n0.1,1,0.004,1,0,1,2\n"
+        "0.2,2,-0.001,1,0,1,2\n", "line 3: travel_time_s: -0.001 is outside the allowed range [-0.000533333"),
     "infinite beacon position": (rows("0.1,1,6,inf,0,1,2"), "line 2: beacon_n_m: 'inf' is not a finite number"),
     "missing column": ("time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,depth_m\n0.1,1,6,1,0,2\n",
                        "has no column beacon_d_m"),

@@ -123,13 +123,14 @@ def test_where_the_pings_cannot_give_the_speed_the_fallback_is_stated(tmp_path, 
 def test_the_fallback_has_a_spread_and_a_weak_calibration_is_combined_with_it():
     """The fallback's standard deviation: without a temperature the spread of TEOS-10's surface speeds over the
     temperatures and salinities allowed as a uniform's, its extremes at the range's corners (computed with gsw
-    directly, and no grid point outside them); with 20 °C and 0 g/kg, TEOS-10's change over 1 °C and 1 g/kg in
-    quadrature. Two estimates combined: the mean and standard deviation of their normalised product, integrated
-    numerically on a grid."""
+    directly, and no grid point outside them); with 20 °C and practical salinity 0, TEOS-10's change over 1 °C and 1
+    in salinity in quadrature. Two estimates combined: the mean and standard deviation of their normalised product,
+    integrated numerically on a grid."""
     import gsw
 
-    def speed(t, s):
-        return gsw.sound_speed(s, gsw.CT_from_t(s, t, 0.0), 0.0)
+    def speed(t, s):  # practical salinity s as the Reference Salinity (no position given)
+        sa = gsw.SR_from_SP(s)
+        return gsw.sound_speed(sa, gsw.CT_from_t(sa, t, 0.0), 0.0)
 
     c, sigma, words = ss.fallback_prior()
     (t0, t1), (s0, s1) = ss.TEMPERATURE_RANGE, ss.SALINITY_RANGE

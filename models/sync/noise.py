@@ -1,0 +1,93 @@
+"""Each receiver's timing noise from a synchronisation: what a time of arrival at that receiver is uncertain by once
+its clock is corrected, for the tracker's measurement covariance.
+
+Two parts, added in quadrature (independent errors):
+
+* the **noise of an arrival**: the robust scale of the receiver's sync-tag residuals, ``1.4826 × median |r / √(1 −
+  h)|`` (the median absolute residual, the Gaussian's standard deviation where the residuals are Gaussian; Huber &
+  Ronchetti, *Robust Statistics*, Wiley 2009, § 5.1), each residual ``r`` over the square root of one less its
+  leverage ``h`` (the emission time, which the emission's other arrivals share, and the clock's knots took part of
+  it: Cook & Weisberg, *Residuals and Influence in Regression*, Chapman & Hall 1982, § 2.2), every arrival the fit
+  positioned counted, those it rejected too (the median is robust to them; leaving them out would shrink the scale
+  of a receiver whose arrivals are often late). The residuals are about the sync tags' known positions: a receiver
+  whose position is metres off has residuals of metres, which its arrivals of a tag will have too. An arrival whose
+  leverage is one (its residual 0 whatever its error: the fit cannot check it) is left out;
+* the **clock's own uncertainty**: the root mean square of the receiver's offset sigmas at the bins' edges (the
+  reference receiver's is 0). An offset's error is common to the arrivals of a bin; taken here as each arrival's
+  own, it counts fully in a single ping's fix and over-counts in a smoother that averages the pings of a bin; it is
+  small wherever the receiver hears the sync tags well.
+
+A receiver with fewer than :data:`MIN_ARRIVALS` residuals takes the others' median noise (``measured`` False).
+
+Units: seconds [s].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The fewest residuals a receiver's own noise is measured from.
+MIN_ARRIVALS = 10
+#: The timing noise written [s]: at least a microsecond (a clock's resolution), at most a second.
+NOISE_RANGE = (1e-6, 1.0)
+#: The median absolute deviation's factor to a Gaussian's standard deviation.
+MAD_FACTOR = 1.4826
+
+
+@dataclass(frozen=True)
+class ReceiverNoise:
+    """Per receiver (R,): ``sigma`` [s] the timing noise (``noise`` and ``clock`` in quadrature, NaN where not
+    synchronised), ``noise`` [s] its residuals' robust scale, ``clock`` [s] its offsets' RMS sigma, ``arrivals``
+    the residuals counted and ``measured`` whether ``noise`` is its own (else the others' median)."""
+
+    sigma: np.ndarray
+    noise: np.ndarray
+    clock: np.ndarray
+    arrivals: np.ndarray
+    measured: np.ndarray
+
+
+def receiver_noise(receiver: np.ndarray, corrected: np.ndarray, knot_sigma: np.ndarray,
+                   synchronised: np.ndarray) -> ReceiverNoise:
+    """Each receiver's timing noise (the module docstring).
+
+    Parameters
+    ----------
+    receiver : ndarray of int, (n,)
+        Each sync-tag arrival's receiver (0 ≤ j < R).
+    corrected : ndarray, (n,)
+        Its residual over √(1 − leverage) [s] (the clock fit's standardised residual times its receiver's scale);
+        NaN where the fit did not position it (a multipath echo, a receiver alone, not synchronised), 0 where its
+        leverage is one.
+    knot_sigma : ndarray, (R, K + 1)
+        Each receiver's offset sigma at each bin edge [s] (0 for the reference receiver; NaN where not computed).
+    synchronised : ndarray of bool, (R,)
+
+    Returns
+    -------
+    ReceiverNoise
+    """
+    receiver = np.asarray(receiver, np.int64)
+    corrected = np.asarray(corrected, float)
+    synchronised = np.asarray(synchronised, bool)
+    count = len(synchronised)
+    usable = np.isfinite(corrected) & (corrected != 0.0)
+    arrivals = np.bincount(receiver[usable], minlength=count)
+    noise = np.full(count, np.nan)
+    for j in np.flatnonzero(synchronised & (arrivals >= MIN_ARRIVALS)):
+        noise[j] = MAD_FACTOR * float(np.median(np.abs(corrected[usable & (receiver == j)])))
+    measured = np.isfinite(noise)
+    if measured.any():
+        noise = np.where(measured | ~synchronised, noise, np.median(noise[measured]))
+    knots = np.asarray(knot_sigma, float)
+    finite = np.isfinite(knots)
+    clock = np.sqrt((np.where(finite, knots, 0.0) ** 2).sum(axis=1) / np.maximum(finite.sum(axis=1), 1))
+    clock = np.where(synchronised, clock, np.nan)
+    sigma = np.clip(np.hypot(noise, clock), *NOISE_RANGE)
+    return ReceiverNoise(np.where(synchronised & np.isfinite(noise), sigma, np.nan), noise, clock, arrivals,
+                         measured)
+
+
+__all__ = ["MAD_FACTOR", "MIN_ARRIVALS", "NOISE_RANGE", "ReceiverNoise", "receiver_noise"]

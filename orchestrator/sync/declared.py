@@ -1,0 +1,147 @@
+"""What a user declares about a telemetry study, checked against its detections at the first command that sees
+both: the receivers' positions against the sync tags' travel times (``sblsim sync``:
+:mod:`sblsim.models.sync.scale`), and against the spread of one tag's arrivals (``sblsim toa``); a stated stable
+burst interval against the tag's pings (``sblsim toa``: :func:`sblsim.models.tracking.schedule.check_stable`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.sync.pings import group_pings
+from sblsim.models.sync.scale import check_scale, distance_scale, double_differences, looks_like_degrees
+from sblsim.models.tracking.schedule import check_stable
+from sblsim.orchestrator.sync.transmitters import match
+
+#: The sound speed the scale check takes where none is given [m/s] (the check allows a factor of ten).
+NOMINAL_SOUND_SPEED = 1480.0
+#: What a refusal of the receivers' positions allows.
+ALLOWED = ("positions in metres (x_m, y_m in a local frame or a projected CRS), or latitude and longitude as lat, "
+           "lon columns (or --crs for the table's CRS)")
+#: How far a tag's pings' arrivals may spread beyond the table's crossing time at the slowest sound speed, as a
+#: factor and a synchronisation's tolerance [s], before the table's positions are refused (``sblsim toa``).
+SPREAD_FACTOR = 1.5
+#: The longest window a tag's arrivals are grouped again with to see their spread [s] (an array 6 km across).
+PROBE_WINDOW = 5.0
+
+
+def check_sync_positions(residuals: pd.DataFrame, receivers: pd.DataFrame, table: pd.DataFrame, source: str,
+                         sound_speed: float | None) -> None:
+    """Refuse a receivers table whose distances the sync tags' travel times contradict by more than ten times
+    (:mod:`sblsim.models.sync.scale`: clock-free double differences of the raw arrivals).
+
+    Parameters
+    ----------
+    residuals : pandas.DataFrame
+        A synchronisation's ``residuals.csv``: ``receiver``, ``tag``, ``emission``, ``time`` (raw [s]) and
+        ``reason`` (``multipath`` left out).
+    receivers : pandas.DataFrame
+        Its receivers: ``receiver``, ``sync_tag`` (each tag's home).
+    table : pandas.DataFrame
+        The receivers as the table gives them (never refined): ``receiver``, ``x``, ``y``, ``z`` [m; z NaN: 2-D].
+    source : str
+        The receivers file (for the message).
+    sound_speed : float or None
+        [m/s] the one given, else :data:`NOMINAL_SOUND_SPEED`.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the factor, the unit the positions look like and what is allowed.
+    """
+    use = residuals[residuals["reason"] != "multipath"]
+    names = table["receiver"].tolist()
+    index = {n: k for k, n in enumerate(names)}
+    detected = use["tag"].unique()
+    home = {}
+    for name, tag in zip(receivers["receiver"], receivers["sync_tag"]):
+        if tag:
+            found = match(str(tag), detected) or str(tag)
+            home[found] = index.get(name)
+    use = use[use["tag"].map(lambda t: home.get(t) is not None) & use["receiver"].isin(index)]
+    if not len(use):
+        return
+    xyz = table[["x", "y", "z"]].to_numpy(float)
+    positions = xyz if np.isfinite(xyz[:, 2]).all() else xyz[:, :2]
+    receiver = use["receiver"].map(index).to_numpy(np.int64)
+    tags = sorted(set(use["tag"]))
+    tag = use["tag"].map({t: k for k, t in enumerate(tags)}).to_numpy(np.int64)
+    homes = np.array([home[t] for t in tags], np.int64)
+    distance = np.linalg.norm(positions[homes[tag]] - positions[receiver], axis=1)
+    acoustic, predicted, pair = double_differences(receiver, tag, use["emission"].to_numpy(np.int64),
+                                                   use["time"].to_numpy(float), distance,
+                                                   sound_speed or NOMINAL_SOUND_SPEED)
+    check_scale(distance_scale(acoustic, predicted, pair), f"receivers {source!r}", table["x"].to_numpy(float),
+                table["y"].to_numpy(float), ALLOWED)
+
+
+def check_matrix(toa: np.ndarray, positions: np.ndarray, shortest: float, crossing: float, tolerance: float,
+                 source: str, ping_type: str | None) -> None:
+    """A tag's times-of-arrival matrix against what was declared: the receivers' positions (its arrivals grouped
+    again with a window of a quarter of the ``shortest`` interval [s], at most :data:`PROBE_WINDOW`, whatever the
+    table says: :func:`check_arrival_spread`) and a stable burst interval stated (``ping_type`` ``sbi``:
+    :func:`~sblsim.models.tracking.schedule.check_stable`).
+
+    Parameters
+    ----------
+    toa : ndarray, (P, R)
+        [s] the matrix (NaN where not heard).
+    positions : ndarray, (R, dim)
+        [m] its receivers as the table gives them.
+    shortest : float
+        [s] the tag's shortest burst interval.
+    crossing, tolerance : float
+        [s] the table's largest travel time at the slowest sound speed, and the synchronisation's tolerance.
+    source : str
+        The receivers file.
+    ping_type : str or None
+        The ping type stated.
+
+    Raises
+    ------
+    ModelError
+        One line (:func:`check_arrival_spread`, :func:`~sblsim.models.tracking.schedule.check_stable`).
+    """
+    toa = np.asarray(toa, float)
+    ping, receiver = np.nonzero(np.isfinite(toa))
+    time = toa[ping, receiver]
+    group = group_pings(receiver, time, min(0.25 * shortest, PROBE_WINDOW))
+    frame = pd.DataFrame({"group": group, "time": time})
+    by = frame.groupby("group")["time"]
+    spreads = (by.max() - by.min())[by.size() >= 2].to_numpy()
+    check_arrival_spread(spreads, crossing, tolerance, source, positions[:, 0], positions[:, 1])
+    if ping_type == "sbi" and len(toa) > 1:
+        check_stable(toa, crossing)
+
+
+def check_arrival_spread(spreads: np.ndarray, crossing: float, tolerance: float, source: str,
+                         x: np.ndarray, y: np.ndarray) -> None:
+    """Refuse a receivers table too small for one tag's arrivals: the typical spread of its pings heard by two
+    receivers or more (``spreads`` [s], grouped without the table's window) beyond :data:`SPREAD_FACTOR` times the
+    table's ``crossing`` time [s] (its largest distance at the slowest sound speed) plus ``tolerance`` [s] (the
+    synchronisation's), which no ping can spread over (the triangle inequality).
+
+    Raises
+    ------
+    ModelError
+        One line naming the receivers file ``source``, the typical spread, the crossing time, the unit the
+        positions (``x``, ``y``) look like and what is allowed.
+    """
+    spreads = np.asarray(spreads, float)
+    if not len(spreads):
+        return
+    typical = float(np.median(spreads))
+    if typical <= SPREAD_FACTOR * crossing + tolerance:
+        return
+    ratio = typical / max(crossing, 1e-12)  # a spread is below the array's true crossing: a lower bound of the factor
+    unit = ("degrees (latitude and longitude)" if ratio > 1e4 and looks_like_degrees(x, y) else "kilometres"
+            if ratio >= 100 else "another array's, or not metres")
+    raise ModelError(f"receivers {source!r}: the tag's pings reach the receivers over {typical * 1e3:.4g} ms "
+                     f"(median), more than the {crossing * 1e3:.4g} ms sound takes across the table's positions; "
+                     f"the positions look like {unit}; allowed: {ALLOWED}")
+
+
+__all__ = ["ALLOWED", "NOMINAL_SOUND_SPEED", "PROBE_WINDOW", "SPREAD_FACTOR", "check_arrival_spread", "check_matrix",
+           "check_sync_positions"]

@@ -1,0 +1,119 @@
+"""A synchronisation's clock segments, where a receiver's clock broke (:mod:`sblsim.models.sync.breaks`): the clock
+row of each arrival, each segment's number and span for ``offsets.csv``, the breaks for ``sync.json``
+(``clock_breaks``) and the line that names each.
+
+A receiver whose clock never broke has one clock row, its own; one whose clock broke has one per segment, numbered
+1, 2, … in its own clock's time order. A segment's offsets hold for the times of the receiver's own clock from
+``clock_from`` to ``clock_to`` [s since 1970 UTC on that clock; open where empty]; a time between two segments (the
+stretch between the last sync-tag arrival before the break and the first after it, widened by the jump where the
+time went back) is in neither: a detection there is set aside.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sblsim.models.sync.clocks import ClockFit
+from sblsim.orchestrator.io.times import iso_utc
+
+
+def clock_rows(fit: ClockFit, receiver: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) each arrival's clock row (its receiver where no clock broke; -1 set aside at a break) and (rows,) each
+    row's receiver."""
+    if fit.site is None:
+        return receiver, np.arange(len(fit.knots))
+    return fit.clock, fit.site
+
+
+def segment_numbers(fit: ClockFit) -> np.ndarray:
+    """(rows,) int, each clock row's segment among its receiver's, 1 first (1 everywhere where no clock broke)."""
+    if fit.site is None:
+        return np.ones(len(fit.knots), np.int64)
+    out = np.ones(len(fit.site), np.int64)
+    for j in np.unique(fit.site):
+        mine = np.flatnonzero(fit.site == j)
+        out[mine[np.argsort(fit.span[mine, 0], kind="stable")]] = np.arange(1, len(mine) + 1)
+    return out
+
+
+def segment_columns(fit: ClockFit, origin: float) -> dict[str, np.ndarray] | None:
+    """``offsets.csv``'s columns of the clock rows where a clock broke: ``segment`` (:func:`segment_numbers`),
+    ``clock_from`` and ``clock_to`` [s since 1970 UTC on the receiver's own clock; NaN: open]; None where none
+    broke."""
+    if fit.site is None:
+        return None
+    span = np.where(np.isfinite(fit.span), fit.span + origin, np.nan)
+    return {"segment": segment_numbers(fit), "clock_from": span[:, 0], "clock_to": span[:, 1]}
+
+
+def receiver_sigmas(fit: ClockFit, n_receivers: int) -> np.ndarray:
+    """(R, K+1) [s] each receiver's offset sigmas at the bins' edges: its own row's, or where its clock broke at each
+    edge the sigma of the segment that holds it (the smallest of its segments' in a stretch set aside)."""
+    if fit.site is None:
+        return fit.knot_sigma
+    out = np.full((n_receivers, fit.knot_sigma.shape[1]), np.nan)
+    for j in range(n_receivers):
+        mine = np.flatnonzero(fit.site == j)
+        if len(mine) == 1:
+            out[j] = fit.knot_sigma[mine[0]]
+            continue
+        row = fit.rows_at(np.full(len(fit.edges), j), fit.edges)
+        least = np.nanmin(np.where(np.isfinite(fit.knot_sigma[mine]), fit.knot_sigma[mine], np.inf), axis=0)
+        out[j] = np.where(row >= 0, fit.knot_sigma[np.maximum(row, 0), np.arange(len(fit.edges))], least)
+        out[j] = np.where(np.isfinite(out[j]), out[j], np.nan)
+    return out
+
+
+def receiver_values(values: np.ndarray, fit: ClockFit, n_receivers: int) -> np.ndarray:
+    """(R,) a value per clock row (a noise scale [s]) per receiver: the largest of its segments'."""
+    if fit.site is None:
+        return values
+    out = np.full(n_receivers, np.nan)
+    for j in range(n_receivers):
+        mine = values[fit.site == j]
+        if np.isfinite(mine).any():
+            out[j] = np.nanmax(mine)
+    return out
+
+
+def breaks_summary(fit: ClockFit, names: list[str], origin: float) -> list[dict[str, Any]]:
+    """``sync.json``'s ``clock_breaks``: per break its receiver, segments, instant (s since 1970 and UTC, on the
+    reference clock, within ``within_s``), size and its sigma [s], the receiver's own times of its last sync-tag
+    arrival before and its first after, the stretch of its own clock set aside, its statistic, and whether both
+    segments are synchronised."""
+    if not fit.breaks:
+        return []
+    number = segment_numbers(fit)
+    out = []
+    for b in fit.breaks:
+        linked = bool(np.isfinite(fit.knots[b.before, 0]) and np.isfinite(fit.knots[b.after, 0]))
+        instant = b.time + origin if np.isfinite(b.time) else np.nan
+        out.append({
+            "receiver": names[b.receiver], "segment_before": int(number[b.before]),
+            "segment_after": int(number[b.after]), "time_s": instant, "time_utc": iso_utc([instant])[0] or None,
+            "within_s": b.time_within, "size_s": b.size, "size_sigma_s": b.size_sigma,
+            "last_before_s": b.last + origin, "first_after_s": b.first + origin,
+            "set_aside_from_s": fit.span[b.before, 1] + origin, "set_aside_to_s": fit.span[b.after, 0] + origin,
+            "statistic": b.statistic, "synchronised": linked})
+    return out
+
+
+def break_line(entry: dict[str, Any]) -> str:
+    """One console line naming a break (an entry of :func:`breaks_summary`)."""
+    size = entry["size_s"]
+    how = "jumped ahead" if size >= 0 else "went back"
+    sigma = entry["size_sigma_s"]
+    sigma_text = f" ± {sigma * 1e3:.2g} ms" if sigma is not None and np.isfinite(sigma) else ""
+    when = (f"at {entry['time_utc'][:19]}Z (within {entry['within_s']:.0f} s)" if entry["time_utc"] else
+            f"after its time {entry['last_before_s']:.3f} s")
+    aside = iso_utc([entry["set_aside_from_s"], entry["set_aside_to_s"]])
+    split = (f"its clock split there (segments {entry['segment_before']} and {entry['segment_after']})"
+             if entry["synchronised"] else "the segment not synchronised, its detections set aside")
+    return (f"clock break: receiver {entry['receiver']} {how} {abs(size):.6g} s{sigma_text} {when}; {split}, "
+            f"its own times from {aside[0][11:23]} to {aside[1][11:23]} set aside")
+
+
+__all__ = ["break_line", "breaks_summary", "clock_rows", "receiver_sigmas", "receiver_values", "segment_columns",
+           "segment_numbers"]

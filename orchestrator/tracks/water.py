@@ -1,0 +1,94 @@
+"""A water-temperature series (a logger's record) read for the tracker's sound speed: a CSV of times and in-situ
+temperatures [°C] under a header, read as hostile input (:mod:`sblsim.orchestrator.sync.cells`: bounded in bytes and
+rows, parsed by pandas into text cells, every cell checked, a refusal one line naming the file, its line and column and
+what is allowed).
+
+The time column is ``time_s`` (or ``t``, ``time``) holding numbers on the times of arrival's own base [s], or absolute
+times: ISO 8601 (UTC unless a zone is given) or epoch seconds under a name of :data:`ABSOLUTE_NAMES` (``epo``,
+``time_utc``, ``timestamp``, ``date_and_time``, ...; :mod:`sblsim.orchestrator.io.times`), taken to that base by the
+times of arrival's origin. The temperature column is ``temperature_c`` (or ``temperature``, ``temp``,
+``water_temperature``, ...; a unit in brackets after the name is ignored: ``Temperature (°C)``). Each temperature is
+made a speed by TEOS-10 at the stated salinity (:func:`sblsim.models.tracking.sound_speed.water_speed`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.sound_speed import TEMPERATURE_RANGE
+from sblsim.orchestrator.io.tables import NUMBER
+from sblsim.orchestrator.io.times import utc_seconds
+from sblsim.orchestrator.sync.cells import named, numbers, read_text, shown_header, text_table
+from sblsim.orchestrator.tracks.toa import ABSOLUTE_TIME_NAMES, MAX_TIME
+
+#: The largest temperature file read [bytes] and the most rows: a logger every 30 s for a year is 1.05 million rows.
+MAX_TEMPERATURE_BYTES = 64 * 2**20
+MAX_TEMPERATURE_ROWS = 2_000_000
+#: The time column's names: on the times of arrival's base where its cells are numbers (``time`` too), else absolute.
+RELATIVE_TIME_NAMES = ("time_s", "t", "t_s", "time")
+ABSOLUTE_NAMES = ABSOLUTE_TIME_NAMES + ("date_and_time", "date_time_utc", "time_utc_s")
+#: The temperature column's names (:func:`~sblsim.orchestrator.sync.cells.normal_name`: case, spaces and a unit in
+#: brackets do not matter).
+TEMPERATURE_NAMES = ("temperature_c", "temperature", "temp_c", "temp", "water_temperature", "water_temperature_c",
+                     "temperature_degc", "temp_degc", "t_c")
+
+
+def read_temperature_series(path: Path | str, origin: float | None = None) -> np.ndarray:
+    """Read a water-temperature series (the module docstring).
+
+    Parameters
+    ----------
+    path : Path or str
+        The CSV file.
+    origin : float, optional
+        The UTC time of the times of arrival's zero [s since 1970]: needed where the file's times are absolute.
+
+    Returns
+    -------
+    ndarray, (k, 2)
+        Time [s] on the times of arrival's base (increasing) and in-situ temperature [°C].
+
+    Raises
+    ------
+    ModelError
+        One line naming the file (and the line and column): a file too large or not CSV text, no time or temperature
+        column, a cell that is not a number or a time, a temperature outside
+        :data:`~sblsim.models.tracking.sound_speed.TEMPERATURE_RANGE`, times that do not increase, absolute times
+        without an origin.
+    """
+    path, what = Path(path), "temperature file"
+    name = str(path)
+    text = read_text(path, what, MAX_TEMPERATURE_BYTES, MAX_TEMPERATURE_ROWS)
+    header, body, lines = text_table(text, name, what, MAX_TEMPERATURE_ROWS)
+    t = named(header, ABSOLUTE_NAMES + RELATIVE_TIME_NAMES)
+    c = named(header, TEMPERATURE_NAMES)
+    if t is None or c is None:
+        raise ModelError(f"{what}: {name!r}: the header needs a time (time_s on the times of arrival's base, or "
+                         f"time_utc / epo in UTC) and a temperature_c column; got {shown_header(header)}")
+    if not len(body):
+        raise ModelError(f"{what}: {name!r} holds a header and no rows; allowed: at least one time and temperature")
+    cells = body[t].astype(str).str.strip()
+    absolute = named([header[t]], ABSOLUTE_NAMES) is not None or not cells.str.fullmatch(NUMBER.pattern).all()
+    if absolute:
+        times = utc_seconds(cells, f"{what}: {name!r}", lines, header[t])
+        if origin is None:
+            raise ModelError(f"{what}: {name!r}: its times are absolute (UTC: ISO 8601 or epoch seconds in "
+                             f"{header[t]}) and the times of arrival have no stated origin; allowed: --time-origin "
+                             "(the UTC time of the TOA file's zero), or times on the TOA file's own base (time_s)")
+        times = times - origin
+    else:
+        times = numbers(cells, what, name, lines, header[t], -MAX_TIME, MAX_TIME, unit="s")
+    temperatures = numbers(body[c], what, name, lines, header[c], *TEMPERATURE_RANGE, unit="°C")
+    steps = np.diff(times)
+    if (steps <= 0).any():
+        k = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise ModelError(f"{what}: {name!r} line {lines[k]} column {header[t]}: the time does not increase; allowed: "
+                         "times in increasing order")
+    return np.column_stack([times, temperatures])
+
+
+__all__ = ["ABSOLUTE_NAMES", "MAX_TEMPERATURE_BYTES", "MAX_TEMPERATURE_ROWS", "RELATIVE_TIME_NAMES",
+           "TEMPERATURE_NAMES", "read_temperature_series"]
