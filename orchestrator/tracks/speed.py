@@ -30,9 +30,10 @@ REPLACED_SOURCE = "fallback (the calibration is outside the stated water's speed
 @dataclass(frozen=True)
 class Water:
     """Where the water's TEOS-10 speed is taken: the ``depth`` of the pings' paths [m, positive down] (the receivers'
-    mean depth; 0 in 2-D), the shallowest and deepest depths they cross (``depths`` [m]: the surface or the tag's
-    default to the bottom or the deepest receiver), and the array's ``latitude`` and ``longitude`` [°, WGS 84] where
-    the receivers have a CRS (:func:`~sblsim.models.tracking.sound_speed.water_speed`)."""
+    mean depth; 0 in 2-D), the shallowest and deepest depths they cross (``depths`` [m]: the surface to the bottom
+    where the water's depth is given, else the shallowest receiver's to the deepest's), and the array's ``latitude``
+    and ``longitude`` [°, WGS 84] where the receivers have a CRS
+    (:func:`~sblsim.models.tracking.sound_speed.water_speed`)."""
 
     depth: float = 0.0
     depths: tuple[float, float] = (0.0, 0.0)

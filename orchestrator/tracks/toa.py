@@ -38,7 +38,8 @@ from itertools import chain
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.frames import (
@@ -59,12 +60,11 @@ from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE
 MAX_TOA_BYTES = 64 * 2**20
 MAX_PINGS = 500_000
 MAX_RECEIVERS = 1000
-#: The most cells a line holds [1] (a TOA matrix's: a receiver's each and the depth column) and a file [1] (as many
-#: as a 64 MiB matrix of short cells holds: 500,000 pings at 28 receivers, Lake Hald's, are 14 million).
+#: The most cells a line holds [1] (a TOA matrix's: a receiver's each and the depth column) and a file [1] (150,000
+#: pings at 28 receivers, Lake Hald's, or 60,000 at 70; parsed by the csv module at about 130 bytes a cell, well under
+#: 1 GiB: split a longer matrix in time).
 MAX_ROW_CELLS = MAX_RECEIVERS + 1
-MAX_TOA_CELLS = 2**24
-#: The longest cell of a number [characters] (a time of arrival's 17 significant digits, sign and exponent, padded).
-MAX_NUMBER_CHARS = 64
+MAX_TOA_CELLS = 2**22
 #: The allowed times [s] (a time of arrival or a track's time) and coordinates [m].
 MAX_TIME = 1e10
 MAX_COORDINATE = 1e7
@@ -109,8 +109,8 @@ def _numbers(rows: list[tuple[int, list[str]]], name: str, what: str, header: li
              missing: bool, named: bool = True) -> np.ndarray:
     """The cells of ``rows`` (:func:`_rows`) as a float matrix, each checked: a number (``NA``/empty allowed only
     where ``missing``), finite, within [low, high]; every row with the header's number of cells (``named``: the
-    file's header; else the first row's). An error names the line and the column, or the line and its cells. A cell
-    longer than :data:`MAX_NUMBER_CHARS` is refused before the matrix of text is built (as wide as its widest cell)."""
+    file's header; else the first row's). An error names the line and the column, or the line and its cells. The
+    cells are checked as one column of Arrow text (about 20 bytes a cell, whatever the widest cell's length)."""
     width = len(header)
     ragged = next(((number, len(cells)) for number, cells in rows if len(cells) != width), None)
     if ragged is not None:
@@ -118,23 +118,20 @@ def _numbers(rows: list[tuple[int, list[str]]], name: str, what: str, header: li
         raise ModelError(f"{what}: {name!r} line {ragged[0]} has {ragged[1]} cells, {against}; allowed: "
                          f"{width} cells a row" + (" (NA or an empty cell where not heard)" if missing else ""))
     allowed = f"a finite number in [{low:g}, {high:g}]" + (" or NA/empty (not heard)" if missing else "")
-    if max(map(len, chain.from_iterable(row for _, row in rows)), default=0) > MAX_NUMBER_CHARS:
-        line, j, text = next((number, j, cell) for number, row in rows for j, cell in enumerate(row)
-                             if len(cell) > MAX_NUMBER_CHARS)
-        raise ModelError(f"{what}: {name!r} line {line} column {header[j]}: {text[:40]!r}... ({len(text):,} "
-                         f"characters) is not allowed; allowed: {allowed}")
     lines = [number for number, _ in rows]
-    cells = np.array([row for _, row in rows], dtype=str).reshape(len(rows), width)
-    stripped = np.char.strip(cells)
-    values = np.array(pd.to_numeric(pd.Series(stripped.ravel()), errors="coerce"), float).reshape(cells.shape)
-    empty = np.isin(stripped, MISSING)
-    valid = np.vectorize(lambda t: bool(NUMBER.fullmatch(t)), otypes=[bool])(stripped) if stripped.size else empty
+    shape = (len(rows), width)
+    stripped = pc.utf8_trim_whitespace(pa.array(chain.from_iterable(row for _, row in rows), pa.string(),
+                                                size=shape[0] * width))  # row by row, as str.strip strips
+    valid = pc.match_substring_regex(stripped, f"^(?:{NUMBER.pattern})$", ignore_case=True)
+    values = np.array(pc.cast(pc.if_else(valid, stripped, "nan"), pa.float64()), float).reshape(shape)  # writable
+    empty = pc.is_in(stripped, pa.array(MISSING)).to_numpy(zero_copy_only=False).reshape(shape)
+    valid = valid.to_numpy(zero_copy_only=False).reshape(shape)
     bad = ~(valid | (empty & missing))
     bad |= valid & ~np.isfinite(values)
     bad |= valid & np.isfinite(values) & ((values < low) | (values > high))
     if bad.any():
         i, j = map(int, np.argwhere(bad)[0])
-        text = stripped[i, j]
+        text = stripped[i * width + j].as_py()
         raise ModelError(f"{what}: {name!r} line {lines[i]} column {header[j]}: {text[:40]!r} is not "
                          f"allowed; allowed: {allowed}")
     values[empty] = np.nan

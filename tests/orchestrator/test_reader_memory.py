@@ -213,11 +213,13 @@ def test_a_design_area_and_a_trajectory_file_are_bounded(tmp_path, monkeypatch):
     assert f"line 3 is longer than {MAX_LINE_CHARS:,} characters; allowed at most {MAX_LINE_CHARS:,}" in message
 
 
-def test_a_number_cell_too_long_for_a_toa_matrix_is_refused_before_the_matrix_is_built(tmp_path):
-    cell = "1" * (toa.MAX_NUMBER_CHARS + 1)
-    path = _write(tmp_path, "toa.txt", f"NA 0.5\n{cell} 1.5\n")
+def test_a_long_cell_of_a_toa_matrix_costs_its_bytes_not_the_matrix_s_width(tmp_path):
+    # a text matrix as wide as its widest cell would take 28 x 20,000 x 400 kB here; the cells are one pandas column
+    rows = ["NA 0 " + " ".join(["1.5"] * 26)] * 20_000
+    rows[5] = "9" * 100_000 + rows[5][2:]  # a number too large to be finite
+    path = _write(tmp_path, "toa.txt", "\n".join(rows) + "\n")
     message = _refusal(toa.read_toa, path)
-    assert f"line 2 column 1: {cell[:40]!r}... ({len(cell)} characters) is not allowed" in message
+    assert f"line 6 column 1: {'9' * 40!r} is not allowed; allowed: a finite number" in message
 
 
 # --------------------------------------------------------------------------- the command line, in a subprocess
