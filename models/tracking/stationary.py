@@ -60,6 +60,25 @@ def _centred(values: np.ndarray, w: np.ndarray) -> np.ndarray:
     return values - ((w * values).sum(axis=1) / total)[:, None]
 
 
+def _geometry(y: np.ndarray, receivers: np.ndarray, c: float, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """At position ``p`` (dim,) [m]: each receiver's unit vector from it over ``c`` (n, dim) [s/m], and each arrival's
+    emission time (m, n) [s] of the times of arrival ``y`` (0 where not heard)."""
+    diff = p[None, :] - receivers
+    d = np.linalg.norm(diff, axis=1)
+    return diff / np.maximum(d, 1e-9)[:, None] / c, y - d[None, :] / c
+
+
+def _information(heard: np.ndarray, unit: np.ndarray, emitted: np.ndarray, w: np.ndarray, sigma_toa: np.ndarray,
+                 dof: float) -> tuple[np.ndarray, np.ndarray]:
+    """The arrivals' observed information (m, n) at the normalised residuals the weights ``w`` leave (each ping's
+    emission time their weighted mean), and the position's rows (m, n, dim) centred per ping with it [1/m]."""
+    r = np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa
+    info = np.where(heard, observed_information(r, dof), 0.0)
+    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (unit.shape[1],)),
+                                            _per_ping(info, sigma_toa)), 0.0) / _columns(sigma_toa)
+    return info, J
+
+
 def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray, start: np.ndarray,
                    dof: float = ROBUST_DOF) -> StationaryFix:
     """The position of a stationary tag from all its pings (module docstring).
@@ -101,12 +120,6 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
     sigma_toa = checked_sigma(sigma_toa, n)
     y = np.where(heard, toa, 0.0)
 
-    def terms(p: np.ndarray):
-        diff = p[None, :] - receivers
-        d = np.linalg.norm(diff, axis=1)
-        emitted = y - d[None, :] / c  # each arrival's emission time at p
-        return diff / np.maximum(d, 1e-9)[:, None] / c, emitted
-
     w = heard.astype(float)
 
     def settle(emitted: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -123,7 +136,7 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
     iterations = 0
     for _ in range(ITERATIONS):
         iterations += 1
-        unit, emitted = terms(p)
+        unit, emitted = _geometry(y, receivers, c, p)
         r, w = settle(emitted, w)
         J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(w, sigma_toa)),
                      0.0) / _columns(sigma_toa)
@@ -133,11 +146,9 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
         p = p + step
         if np.abs(step).max() < TOLERANCE:
             break
-    unit, emitted = terms(p)
-    r, w = settle(emitted, w)
-    info = np.where(heard, observed_information(r, dof), 0.0)
-    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(info, sigma_toa)),
-                 0.0) / _columns(sigma_toa)
+    unit, emitted = _geometry(y, receivers, c, p)
+    _, w = settle(emitted, w)
+    info, J = _information(heard, unit, emitted, w, sigma_toa, dof)
     covariance = np.linalg.pinv(np.einsum("mn,mni,mnj->ij", info, J, J))
     wp = _per_ping(w, sigma_toa)
     total = wp.sum(axis=1)
@@ -185,16 +196,9 @@ def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     heard = np.isfinite(toa)
-    dim = receivers.shape[1]
-    diff = fix.position[None, :] - receivers
-    d = np.linalg.norm(diff, axis=1)
-    unit = diff / np.maximum(d, 1e-9)[:, None] / c
-    emitted = np.where(heard, toa, 0.0) - d[None, :] / c
     sigma_toa = checked_sigma(sigma_toa, len(receivers))
-    r = np.where(heard, _centred(emitted, _per_ping(fix.weights, sigma_toa)), 0.0) / sigma_toa
-    info = np.where(heard, observed_information(r, dof), 0.0)
-    J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(info, sigma_toa)),
-                 0.0) / _columns(sigma_toa)
+    unit, emitted = _geometry(np.where(heard, toa, 0.0), receivers, c, fix.position)
+    info, J = _information(heard, unit, emitted, fix.weights, sigma_toa, dof)
     return -fix.covariance @ np.einsum("mn,mni->in", info, J) / sigma_toa
 
 
