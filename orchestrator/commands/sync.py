@@ -251,6 +251,7 @@ def main(args: argparse.Namespace) -> int:
     out = output_folder(args.out, Path("results") / f"sync_{folder_name(args.detections.stem)}", args.force,
                         "sync.json", "synchronisation")
     from sblsim.orchestrator.sync.outputs import write
+    from sblsim.orchestrator.sync.toa import say_warnings
 
     write(outcome, out)
     s = outcome.summary
@@ -285,8 +286,7 @@ def main(args: argparse.Namespace) -> int:
                                                  f", NEES {nees:.3g} inside the array (2 when consistent)"))
     for note in s["notes"]:
         print(f"note: {note}", file=sys.stderr)
-    for warning in s.get("warnings", []):
-        print(f"sblsim: warning: {warning}", file=sys.stderr)
+    say_warnings(s)
     if s["not_synchronised"]:
         print(f"sblsim: warning: not synchronised: {', '.join(s['not_synchronised'])}", file=sys.stderr)
     extra = "positions.csv, " if outcome.positions is not None else ""
