@@ -18,7 +18,7 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
-from sblsim.models.acoustics.core import ARRIVAL_SLACK, LANES
+from sblsim.models.acoustics.channel.interface import ARRIVAL_SLACK, LANES
 from sblsim.models.bound import FIXED, bound_step
 from sblsim.models.columns import LANE_FIELDS, LANE_METRIC_INPUTS, METRIC_INPUTS, RUN_METRICS
 from sblsim.models.declarations import SEED_NAMES

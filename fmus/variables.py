@@ -5,7 +5,8 @@ from __future__ import annotations
 from tabulate import tabulate
 
 from sblsim.models import MODELS
-from sblsim.models.acoustics.core import LANES, lane_of
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import lane_of
 
 BEGIN, END = "<!-- fmu-variables:begin -->", "<!-- fmu-variables:end -->"
 

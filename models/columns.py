@@ -9,7 +9,8 @@ import the other for a list of names.
 
 from __future__ import annotations
 
-from sblsim.models.acoustics.core import LANES, lane_name
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.models.receiver.core import COVARIANCE, OPTIONAL_OUTPUTS
 
 #: Per-run error metrics of an estimator (the receiver's; prefixed ``instr_`` for the instrumentation fix) [m].

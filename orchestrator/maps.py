@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus.native import compiled_family_levels
-from sblsim.models.acoustics.core import site_levels
+from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.models.acoustics.detection import direct_first, first_shares, packet_probability
 from sblsim.models.acoustics.rays import profile_arrays, ray_bending, slant_range
 from sblsim.models.acoustics.sonar import accuracy_scale

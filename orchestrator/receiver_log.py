@@ -25,7 +25,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.acoustics.core import LANES, Acoustics
+from sblsim.models.acoustics.channel.component import Acoustics
+from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.systems import System
 from sblsim.orchestrator.cosim.config import (

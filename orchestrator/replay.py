@@ -49,7 +49,9 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models import RECEIVER_MODELS
-from sblsim.models.acoustics.core import LANES, lane_name, lane_of, ping_intervals
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import lane_name, lane_of
+from sblsim.models.acoustics.channel.pinger import ping_intervals
 from sblsim.models.columns import LANE_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver.core import SLOT_SLACK

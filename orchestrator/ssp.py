@@ -55,7 +55,7 @@ from xml.etree import ElementTree as ET
 
 from sblsim.fmus.arrays import element_positions, fmi3_variables
 from sblsim.models import COMPONENTS, RECEIVERS
-from sblsim.models.acoustics.core import lane_of
+from sblsim.models.acoustics.channel.lanes import lane_of
 from sblsim.models.declarations import SEED_NAMES, UNITS
 from sblsim.models.errors import ArchiveError
 from sblsim.orchestrator.cosim.config import (

@@ -48,7 +48,7 @@ import numpy as np
 import tomli_w
 
 from sblsim.models import RECEIVER_MODELS
-from sblsim.models.acoustics.core import FIXED_KEYS, SNR_KEYS
+from sblsim.models.acoustics.channel.interface import FIXED_KEYS, SNR_KEYS
 from sblsim.models.declarations import ModelError, Variable, shown
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.cosim.config import (

@@ -45,17 +45,9 @@ from dataclasses import replace
 
 import casadi as ca
 
-from sblsim.models.acoustics.core import (
-    ARRIVAL,
-    LANES,
-    MAX_PING_INTERVAL,
-    PACKET,
-    RANGING,
-    TOA,
-    lane_fields,
-    lane_name,
-    lane_variables,
-)
+from sblsim.models.acoustics.channel.interface import ARRIVAL, LANES, PACKET, RANGING, TOA
+from sblsim.models.acoustics.channel.lanes import lane_fields, lane_name, lane_variables
+from sblsim.models.acoustics.channel.pinger import MAX_PING_INTERVAL
 from sblsim.models.component import Component
 from sblsim.models.declarations import Variable, signal_range
 from sblsim.models.expressions import get_row, sample_due, select

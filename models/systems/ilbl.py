@@ -37,7 +37,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY, ping_spread
+from sblsim.models.acoustics.channel.interface import FLIGHT_CAPACITY
+from sblsim.models.acoustics.channel.pinger import ping_spread
 from sblsim.models.bound import MODEL
 from sblsim.models.declarations import ModelError
 from sblsim.models.design.information import layout_values

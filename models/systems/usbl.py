@@ -77,7 +77,7 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics.core import ATTITUDE_ANGLES, DIRECTION, DOA_ARRAY
+from sblsim.models.acoustics.channel.interface import ATTITUDE_ANGLES, DIRECTION, DOA_ARRAY
 from sblsim.models.bound import (
     ERROR_MOTION,
     LAW_DEFAULTS,

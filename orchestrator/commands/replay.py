@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from sblsim.models.acoustics.core import LANES
+from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.common import (

@@ -38,14 +38,9 @@ from typing import Any, Iterable
 import tomli_w
 
 from sblsim.models import COMPONENTS, RECEIVER_MODELS
-from sblsim.models.acoustics.core import (
-    FIXED_KEYS,
-    MAX_WATER_DEPTH,
-    SNR_KEYS,
-    check_in_flight,
-    check_pinger,
-    ping_spread,
-)
+from sblsim.models.acoustics.channel.interface import FIXED_KEYS, MAX_WATER_DEPTH, SNR_KEYS
+from sblsim.models.acoustics.channel.lanes import check_in_flight
+from sblsim.models.acoustics.channel.pinger import check_pinger, ping_spread
 from sblsim.models.declarations import (
     SEED_NAMES,
     SEED_PARAMETERS,

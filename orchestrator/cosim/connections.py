@@ -12,7 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-from sblsim.models.acoustics.core import ARRIVAL, PACKET, TARGET_INPUTS, lane_of, lane_variables
+from sblsim.models.acoustics.channel.interface import ARRIVAL, PACKET, TARGET_INPUTS
+from sblsim.models.acoustics.channel.lanes import lane_of, lane_variables
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
 from sblsim.models.receiver.core import OPTIONAL_OUTPUTS

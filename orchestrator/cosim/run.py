@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.fmus import native
-from sblsim.models.acoustics.core import LANES, check_in_flight, lane_name, lane_of
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import check_in_flight, lane_name, lane_of
 from sblsim.models.bound import FIXED
 from sblsim.models.columns import LANE_COLUMNS, LANE_METRIC_INPUTS, OPTIONAL_COLUMNS, TIMESERIES_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError

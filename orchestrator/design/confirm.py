@@ -23,7 +23,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from sblsim.models.acoustics.core import LANES, lane_name
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.models.design.criteria import ECHO_LIMIT
 from sblsim.orchestrator.compare import compare
 from sblsim.orchestrator.cosim.plan import with_replicates

@@ -27,7 +27,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY
+from sblsim.models.acoustics.channel.interface import FLIGHT_CAPACITY
 from sblsim.models.declarations import ModelError
 from sblsim.models.design.area import spread
 from sblsim.models.design.criteria import ECHO_LIMIT, coverage, criterion

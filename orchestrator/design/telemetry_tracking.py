@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sblsim.models.acoustics.core import RECEIVER_CLOCK_VARIABLES
+from sblsim.models.acoustics.channel.pinger import RECEIVER_CLOCK_VARIABLES
 from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.receiver import toa_tracking as tt

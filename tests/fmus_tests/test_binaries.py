@@ -312,7 +312,8 @@ def test_the_snr_channel_runs_in_the_plain_c_host_like_the_casadi_model_and_the_
     surface-reflected one and some are lost: every Real output of every step equals the local engine's (the same
     parameters and inputs) within 1e-9, and each packet's SNR, detection probability and travel time are those
     of its arrival that the casadi model of the site gives (:func:`~sblsim.models.acoustics.core.site_levels`)."""
-    from sblsim.models.acoustics.core import Acoustics, site_levels
+    from sblsim.models.acoustics.channel.component import Acoustics
+    from sblsim.models.acoustics.channel.site_levels import site_levels
     from sblsim.orchestrator.cosim.engines import LocalHandle
 
     table = "; ".join(f"{z:g} {c:g}" for z, c in TABLE)

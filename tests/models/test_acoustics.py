@@ -23,7 +23,8 @@ import pytest
 from scipy import integrate, stats
 
 from sblsim.models.acoustics import Acoustics, profile_table
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY, LANES, PROPAGATION, RANGING, TOA, lane_name
+from sblsim.models.acoustics.channel.interface import FLIGHT_CAPACITY, LANES, PROPAGATION, RANGING, TOA
+from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, NODES, harmonic_mean, read_cast_csv
 from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms

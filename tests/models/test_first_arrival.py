@@ -123,14 +123,14 @@ def test_a_linear_gradient_has_one_eigenray_and_its_turning_time_is_the_closed_f
 def _site():
     plan = load_plan("lbl-field")
     params = plan.component_parameters("acoustics")
-    from sblsim.models.acoustics.core import _site as site_of
+    from sblsim.models.acoustics.channel.site_levels import _site as site_of
 
     return params, dict(zip(detection.SITE, site_of(params)[1]))
 
 
 def _ours(x):
     """Our eigenrays at ``x`` with their SNR and detection probability (the channel's site function)."""
-    from sblsim.models.acoustics.core import site_levels
+    from sblsim.models.acoustics.channel.site_levels import site_levels
 
     params, _site_numbers = _site()
     levels = site_levels(params, [[0.0, 0.0, ZS]], [[x, 0.0, ZR]])

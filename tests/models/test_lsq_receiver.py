@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from sblsim.models.acoustics.core import lane_variables
+from sblsim.models.acoustics.channel.lanes import lane_variables
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
 from sblsim.models.receiver.core import (

@@ -13,7 +13,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from sblsim.models.acoustics.core import OCEAN_FEATURES, ocean_perturbation
+from sblsim.models.acoustics.channel.ocean import OCEAN_FEATURES, ocean_perturbation
 from sblsim.models.expressions import only_where
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run

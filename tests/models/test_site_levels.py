@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sblsim.models.acoustics.core import site_levels
+from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.models.acoustics.detection import family_levels
 from sblsim.orchestrator.cosim.plan import load_plan
 

@@ -30,7 +30,9 @@ import pytest
 
 from sblsim.fmus.native import compiled_family_levels
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.core import PROFILE, Acoustics, site_levels
+from sblsim.models.acoustics.channel.component import Acoustics
+from sblsim.models.acoustics.channel.site_levels import site_levels
+from sblsim.models.acoustics.sound_speed import PROFILE
 from tests.models.test_spreading import JUMP, _bellhop_tl, _jumps
 
 #: The signal and the water of every site: frequency [Hz], temperature [°C], salinity [PSU], pH (the channel's).

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY
+from sblsim.models.acoustics.channel.interface import FLIGHT_CAPACITY
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config

@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 import sblsim
-from sblsim.models.acoustics.core import FLIGHT_CAPACITY
+from sblsim.models.acoustics.channel.interface import FLIGHT_CAPACITY
 
 SLACK = 1e-9  # [s]
 

@@ -11,7 +11,7 @@ import pytest
 
 import sblsim
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.core import site_levels
+from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.maps import availability_map, fix_probability, packet_probabilities

@@ -21,7 +21,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.models.acoustics.core import LANES, lane_name
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run_batch

@@ -22,7 +22,8 @@ import pandas as pd
 import pytest
 from scipy.stats import chi2
 
-from sblsim.models.acoustics.core import LANES, lane_name
+from sblsim.models.acoustics.channel.interface import LANES
+from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.models.platform.geometry import lever_arms
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cli import main

@@ -23,7 +23,7 @@ import tomli_w
 from scipy.stats import norm
 
 from sblsim.models.acoustics import sonar
-from sblsim.models.acoustics.core import site_levels
+from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.run import run
