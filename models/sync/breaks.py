@@ -31,10 +31,17 @@ rejected). So, after the fit (:func:`fit_with_breaks`):
    ``ties`` in :func:`~sblsim.models.sync.clocks.fit_clocks`), and a later segment of the reference receiver keeps
    its drift (the time base stays its crystal's: ``steady``).
 
+A receiver whose time went back in the file's order (a reset kept in its logging order: its **clock parts**,
+``part`` of :func:`fit_with_breaks`) is split at each part before the search, the break's place certain and its
+size fitted like any other's (no arrival set aside there: two parts may read the same times, each arrival's part
+says which clock read it); its drifts are tied only where the last arrival before and the first after fall in one
+bin. Such a part's arrivals are first aligned to the others' for the emissions' grouping by
+:func:`part_shifts` (a reset of a day puts them a day from their emissions).
+
 A segment's offsets hold for the times of its receiver's own clock it read
-(:attr:`~sblsim.models.sync.clocks.ClockFit.span`); between the last arrival before a break and the first after it
-(widened by the jump where the time went back: the readings both segments make) a time is in neither, and a
-detection there belongs to no synchronised clock (set aside). Units: seconds [s] throughout.
+(:attr:`~sblsim.models.sync.clocks.ClockFit.span`, within its part); between the last arrival before a found break
+and the first after it (widened by the jump where the time went back: the readings both segments make) a time is in
+neither, and a detection there belongs to no synchronised clock (set aside). Units: seconds [s] throughout.
 """
 
 from __future__ import annotations
@@ -55,6 +62,8 @@ MIN_SIDE = 10
 SPIKE = 6.0
 #: The most breaks found in one fit.
 MAX_BREAKS = 20
+#: The bins [s] in which a later clock part's coarse shift is looked for (:func:`part_shifts`).
+PART_BIN = 2.0
 
 
 @dataclass
@@ -76,7 +85,10 @@ class ClockBreak:
         [s] the break's instant on the reference clock (the middle of the two arrivals, each synchronised by its
         segment) and half their interval (the instant is within it).
     statistic : float
-        √F of the jump when it was found (:data:`THRESHOLD`).
+        √F of the jump when it was found (:data:`THRESHOLD`); NaN for a reset from the file's order.
+    part : int or None
+        The clock part the break starts where it is a reset from the file's order (``part`` of
+        :func:`fit_with_breaks`: its place known, not searched for), else None.
     """
 
     receiver: int
@@ -89,6 +101,7 @@ class ClockBreak:
     time: float
     time_within: float
     statistic: float
+    part: int | None = None
 
 
 @dataclass
@@ -368,11 +381,74 @@ def _best(fit: ClockFit, rows: np.ndarray, emission: np.ndarray, time: np.ndarra
     return best
 
 
+def part_shifts(tag: np.ndarray, receiver: np.ndarray, part: np.ndarray, time: np.ndarray, search: float,
+                width: float = PART_BIN) -> tuple[np.ndarray, dict[tuple[int, int], int]]:
+    """Each later clock part's coarse shift against the other receivers' first parts, for the emissions' grouping:
+    the mode (in bins of ``width``, then the median within a bin of it) of the differences between its arrivals and
+    those of the same sync tag at the receiver (another, in its first part) hearing that tag most, within
+    ±``search``; with random burst intervals only the true shift lines them up (a tag's fixed interval makes it
+    ambiguous by multiples of the interval).
+
+    Parameters
+    ----------
+    tag, receiver, part : numpy.ndarray
+        (n,) int, each arrival's sync tag, receiver and clock part (1 first).
+    time : numpy.ndarray
+        (n,) [s] on its receiver's clock.
+    search : float
+        [s] the largest shift looked for.
+    width : float
+        [s] the bins' width: more than the array's largest travel-time difference.
+
+    Returns
+    -------
+    shift : numpy.ndarray
+        (n,) [s] each arrival's part's shift (its time less it is near the others'); 0 in a first part or where
+        none was found.
+    matched : dict
+        Per (receiver, part) the arrivals that matched at the shift (0: none found).
+    """
+    shift = np.zeros(len(time))
+    matched: dict[tuple[int, int], int] = {}
+    first = part == 1
+    for j, p in sorted({(int(a), int(b)) for a, b in zip(receiver[~first], part[~first])}):
+        mine = (receiver == j) & (part == p)
+        diffs = []
+        for i in np.unique(tag[mine]):
+            others = first & (tag == i) & (receiver != j)
+            if not others.any():
+                continue
+            best = np.bincount(receiver[others]).argmax()
+            ref = np.sort(time[others & (receiver == best)])
+            t = time[mine & (tag == i)]
+            lo, hi = np.searchsorted(ref, t - search), np.searchsorted(ref, t + search)
+            for k in range(len(t)):
+                diffs.append(t[k] - ref[lo[k]:hi[k]])
+        d = np.concatenate(diffs) if diffs else np.zeros(0)
+        if len(d) < 3:
+            matched[(j, p)] = 0
+            continue
+        cells = np.floor(d / width).astype(np.int64)
+        values, counts = np.unique(cells, return_counts=True)
+        top = int(np.argmax(counts))
+        near = np.abs(cells - values[top]) <= 1
+        around = np.bincount(cells[near] - values[top] + 1, minlength=3)
+        if counts[top] < 3:
+            matched[(j, p)] = 0
+            continue
+        centre = (values[top] + 0.5) * width
+        centre += 0.5 * width * (around[2] - around[0]) / max(around.sum(), 1)
+        inside = np.abs(d - centre) <= width
+        shift[mine] = float(np.median(d[inside]))
+        matched[(j, p)] = int(inside.sum())
+    return shift, matched
+
+
 def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
                     slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray, reference: int,
                     bin_width: float, tag: np.ndarray, drift_change: float = 1e-6, geometry: Geometry | None = None,
-                    threshold: float = THRESHOLD, max_breaks: int = MAX_BREAKS, timings: dict | None = None
-                    ) -> ClockFit:
+                    threshold: float = THRESHOLD, max_breaks: int = MAX_BREAKS, timings: dict | None = None,
+                    part: np.ndarray | None = None) -> ClockFit:
     """The clocks fitted (:func:`~sblsim.models.sync.clocks.fit_clocks`), their breaks found and each broken clock
     split into segments (the module docstring).
 
@@ -389,6 +465,10 @@ def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray
         The most breaks taken.
     timings : dict, optional
         As :func:`~sblsim.models.sync.clocks.fit_clocks` fills it (its last fit's), with ``breaks`` [s] the search.
+    part : numpy.ndarray, optional
+        (n,) int, each arrival's clock part (1 first; a later one after its receiver's time went back in the
+        file's order): each later part a clock segment of its own from the start, its break's place known (the
+        module docstring). None: one part.
 
     Returns
     -------
@@ -407,6 +487,23 @@ def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray
     site = list(range(n_receivers))
     span = [[-np.inf, np.inf] for _ in range(n_receivers)]
     linked = np.asarray(synchronised, bool).copy()
+    arrival_part = np.ones(len(rows), np.int64) if part is None else np.asarray(part, np.int64)
+    row_part = [1] * n_receivers
+    found: list[dict] = []
+    for j, p in sorted({(int(a), int(b)) for a, b in zip(receiver, arrival_part) if b > 1}):
+        # a reset from the file's order: the part its own clock segment, the break between it and the part before
+        mine = (receiver == j) & (arrival_part == p)
+        earlier = (receiver == j) & (arrival_part < p)
+        new = len(site)
+        before = max((r for r in range(len(site)) if site[r] == j and row_part[r] < p), key=lambda r: row_part[r])
+        site.append(j)
+        span.append([-np.inf, np.inf])
+        row_part.append(p)
+        rows[mine] = new
+        last = time[earlier & (arrival_part == row_part[before])]
+        found.append({"receiver": j, "before": before, "after": new, "statistic": np.nan, "size": np.nan,
+                      "last": float(last.max()) if len(last) else np.nan, "first": float(time[mine].min()),
+                      "part": p})
 
     def refit():
         nonlocal linked
@@ -420,15 +517,19 @@ def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray
                           steady=steady, ties=tied(fit_edges))
 
     def tied(edges: np.ndarray | None) -> np.ndarray | None:
-        """Each break's two segments' drifts tied in the bin of its last arrival before it."""
+        """Each break's two segments' drifts tied in the bin of its last arrival before it (a reset's only where
+        its first arrival after it is in that bin too: its two parts read different times)."""
         if not found or edges is None:
             return None
         width = edges[1] - edges[0]
-        return np.array([(e["before"], e["after"], int(np.clip((e["last"] - edges[0]) // width, 0,
-                                                                len(edges) - 2))) for e in found], np.int64)
 
+        def bin_of(t: float) -> int:
+            return int(np.clip((t - edges[0]) // width, 0, len(edges) - 2)) if np.isfinite(t) else -1
 
-    found: list[dict] = []
+        out = [(e["before"], e["after"], bin_of(e["last"])) for e in found
+               if "part" not in e or (bin_of(e["last"]) == bin_of(e["first"]) >= 0)]
+        return np.array(out, np.int64) if out else None
+
     fit_edges = None
     fit = refit()
     fit_edges = fit.edges  # the same for every refit: the arrivals' span, whatever their clocks
@@ -443,6 +544,7 @@ def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray
         new = len(site)
         site.append(site[jump.row])
         span.append([np.nan, span[jump.row][1]])
+        row_part.append(row_part[jump.row])
         rows[jump.after] = new
         for other in found:  # an earlier break after this one now follows the new segment
             if other["before"] == jump.row and other["last"] >= jump.first:
@@ -452,32 +554,34 @@ def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray
         found.append(entry)
         classified = np.zeros(len(rows), bool)
         classified[jump.after] = classified[jump.before] = True
-        _bounds(entry, rows, receiver, time, classified, jump.size, span)
+        same = arrival_part == row_part[jump.row]  # its part's arrivals alone (another part may read these times)
+        _bounds(entry, rows, receiver, time, classified, jump.size, span, same)
         fit = refit()
         # the arrivals about the break put where the refitted clocks say they belong (where the time went back, the
         # ones the first cut misplaced), and the clocks refitted if one moved
         size = _measured(fit, entry).size
         size = jump.size if not np.isfinite(size) else size
         wide = 2 * abs(size) + 60.0
-        settled, moved = _settle(fit, rows, receiver, used, entry, emission, time, distance, slowness,
+        settled, moved = _settle(fit, rows, receiver, used & same, entry, emission, time, distance, slowness,
                                  min(entry["last"], entry["first"]) - wide, max(entry["last"], entry["first"]) + wide)
         if moved:
-            _bounds(entry, rows, receiver, time, classified | settled, size, span)
+            _bounds(entry, rows, receiver, time, classified | settled, size, span, same)
             fit = refit()
     timings["breaks"] = searched
     if not found:
         return fit
     return replace(fit, site=np.array(site), span=np.array(span), clock=rows,
-                   breaks=[_measured(fit, b) for b in found])
+                   breaks=[_measured(fit, b) for b in found], part=None if part is None else np.array(row_part))
 
 
 def _bounds(entry: dict, rows: np.ndarray, receiver: np.ndarray, time: np.ndarray, classified: np.ndarray,
-            size: float, span: list) -> None:
+            size: float, span: list, same: np.ndarray) -> None:
     """A break's bracket (``entry``'s ``last`` and ``first``: the last arrival ``classified`` before it, the first
     after it), its two segments' spans (the stretch between them widened by the jump where the time went back:
-    the readings both may hold) and the receiver's other arrivals there by their times (-1 in the stretch)."""
+    the readings both may hold) and the receiver's other arrivals there by their times (-1 in the stretch), of its
+    clock part (``same``) alone."""
     before, after = entry["before"], entry["after"]
-    mine = (receiver == entry["receiver"]) & np.isin(rows, (before, after, -1))
+    mine = (receiver == entry["receiver"]) & np.isin(rows, (before, after, -1)) & same
     mine &= (time >= span[before][0]) & (time <= span[after][1])
     fixed = mine & classified
     entry["last"] = float(time[fixed & (rows == before)].max())
@@ -536,16 +640,17 @@ def _measured(fit: ClockFit, found: dict) -> ClockBreak:
     """A break's size and instant from the refitted clocks of its two segments (the scan's where one of them is not
     synchronised)."""
     before, after = found["before"], found["after"]
-    if not (np.isfinite(fit.knots[before, 0]) and np.isfinite(fit.knots[after, 0])):
+    if not (np.isfinite(fit.knots[before, 0]) and np.isfinite(fit.knots[after, 0]) and np.isfinite(found["last"])):
         return ClockBreak(found["receiver"], before, after, found["last"], found["first"], found["size"], np.nan,
-                          np.nan, np.nan, found["statistic"])
+                          np.nan, np.nan, found["statistic"], found.get("part"))
     t0 = found["last"] - float(fit.offset(np.array([before]), np.array([found["last"]]))[0])
     t1 = found["first"] - float(fit.offset(np.array([after]), np.array([found["first"]]))[0])
     instant = 0.5 * (t0 + t1)
     r0, r1 = _reading(fit, before, instant), _reading(fit, after, instant)
     sigma = np.hypot(_sigma(fit, before, r0), _sigma(fit, after, r1))
     return ClockBreak(found["receiver"], before, after, found["last"], found["first"], r1 - r0, float(sigma),
-                      instant, 0.5 * abs(t1 - t0), found["statistic"])
+                      instant, 0.5 * abs(t1 - t0), found["statistic"], found.get("part"))
 
 
-__all__ = ["ClockBreak", "MAX_BREAKS", "MIN_SIDE", "SPIKE", "THRESHOLD", "fit_with_breaks", "offset_samples", "scan"]
+__all__ = ["ClockBreak", "MAX_BREAKS", "MIN_SIDE", "PART_BIN", "SPIKE", "THRESHOLD", "fit_with_breaks",
+           "offset_samples", "part_shifts", "scan"]

@@ -160,8 +160,9 @@ class Geometry:
         (n,) int, the receiver at which each arrival's sync tag sits.
     positions : numpy.ndarray
         (R, dim) [m] the table's (the survey's) positions; dim 2 or 3 (depths fixed).
-    sigma : float
-        [m] the survey's horizontal sigma per axis: the prior of each receiver's shift from its table position.
+    sigma : float or numpy.ndarray
+        [m] the survey's horizontal sigma per axis: the prior of each receiver's shift from its table position; one
+        for all, or (R,) one per receiver (a tiny one holds a receiver at the table's position).
     shift : numpy.ndarray, optional
         (R, 2) [m] the shifts to start from (default 0: the table).
     site : numpy.ndarray, optional
@@ -172,7 +173,7 @@ class Geometry:
 
     source: np.ndarray
     positions: np.ndarray
-    sigma: float
+    sigma: float | np.ndarray
     shift: np.ndarray | None = None
     site: np.ndarray | None = None
 
@@ -216,6 +217,13 @@ class ClockFit:
         own clock each row's offsets hold for (±inf open; between two segments a stretch neither holds: set aside),
         ``clock`` (n,) each arrival's row (-1: in such a stretch, not fitted), ``breaks`` the
         :class:`~sblsim.models.sync.breaks.ClockBreak` s; else None (one row per receiver).
+    part : numpy.ndarray or None
+        (R,) int, each row's **clock part** where a receiver's time went back in the file's order (a reset kept in
+        its logging order: the part of its rows from there, 1 first): a row holds for its part's times within its
+        ``span`` only (two parts may read the same times); None: every row part 1.
+    shift_covariance_all : numpy.ndarray or None
+        (2R, 2R) [m²] with refined positions, all the shifts' joint covariance (x then y per receiver; the
+        blocks of ``shift_covariance`` on its diagonal), else None.
     """
 
     edges: np.ndarray
@@ -239,19 +247,24 @@ class ClockFit:
     span: np.ndarray | None = None
     clock: np.ndarray | None = None
     breaks: list | None = None
+    part: np.ndarray | None = None
+    shift_covariance_all: np.ndarray | None = None
 
-    def rows_at(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+    def rows_at(self, receiver: np.ndarray, time: np.ndarray, part: np.ndarray | None = None) -> np.ndarray:
         """(n,) int, the row of :attr:`knots` that holds ``receiver`` (n,) int's clock at its own ``time`` (n,)
-        [s]: the receiver itself where its clock never broke, else the segment whose :attr:`span` holds the time;
-        -1 where none does (a stretch set aside at a break)."""
+        [s] in its clock ``part`` (n,) int (default 1): the receiver itself where its clock never broke, else the
+        segment of that part whose :attr:`span` holds the time; -1 where none does (a stretch set aside at a
+        break)."""
         receiver = np.asarray(receiver, np.int64)
         if self.site is None:
             return receiver.copy()
         time = np.asarray(time, float)
+        part = np.ones(receiver.shape, np.int64) if part is None else np.asarray(part, np.int64)
+        own = np.ones(len(self.site), np.int64) if self.part is None else self.part
         out = np.full(receiver.shape, -1, np.int64)
         for row in range(len(self.site)):
             hit = (receiver == self.site[row]) & (time >= self.span[row, 0]) & (time <= self.span[row, 1])
-            out[hit] = row
+            out[hit & (part == own[row])] = row
         return out
 
     def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
@@ -370,9 +383,10 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     pairs = np.c_[pairs, pairs + 1]
     dense_limit = DENSE_LIMIT
     if geometry is not None:
-        if not np.isfinite(geometry.sigma) or geometry.sigma <= 0:
+        survey = np.broadcast_to(np.asarray(geometry.sigma, float), (n_sites,))
+        if not np.isfinite(survey).all() or (survey <= 0).any():
             raise ModelError("sync: the survey sigma must be finite and positive (the prior fixes the datum)")
-        prior = prior + sp.diags(np.r_[np.zeros(first), np.full(2 * n_sites, geometry.sigma ** -2)])
+        prior = prior + sp.diags(np.r_[np.zeros(first), np.repeat(survey ** -2, 2)])
         src = geometry.source[rows]
         at = site[rec]
         shift = np.zeros((n_sites, 2)) if geometry.shift is None else np.array(geometry.shift, float)
@@ -533,7 +547,8 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         distance_all = full.copy()
         distance_all[rows] = dd
     return ClockFit(edges, knots, sigma, drift, drift_sigma, counts, emission_time, residual_all, standard_all,
-                    kept_all, scale, s_hat, s_sigma, iterations, shift_out, shift_covariance, distance_all)
+                    kept_all, scale, s_hat, s_sigma, iterations, shift_out, shift_covariance, distance_all,
+                    shift_covariance_all=None if geometry is None else np.array(shift_cov))
 
 
 @dataclass

@@ -30,6 +30,11 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 
+#: The largest share of a receiver's successive arrival steps (those longer than two windows: no echo of the same
+#: transmission) that may fall below a stated shortest interval less one window before the detections contradict it
+#: as a whole (:func:`interval_seen`): a few stray codes and collisions make a few per cent.
+CONTRADICTED_SHARE = 0.10
+
 
 def largest_travel_time(positions: np.ndarray, sound_speed: float) -> float:
     """[s] the largest distance between two receivers ``positions`` (n, dim) [m] over ``sound_speed`` [m/s]."""
@@ -183,18 +188,67 @@ def build_pings(receiver: np.ndarray, time: np.ndarray, n_receivers: int, window
     return Pings(toa, ping, echo, window, limit)
 
 
+def receiver_steps(receiver: np.ndarray, time: np.ndarray, window: float) -> np.ndarray:
+    """[s] the steps between each receiver's successive arrivals longer than two windows ``window`` [s] (a receiver
+    misses pings, so they run from the interval up; echoes are shorter)."""
+    order = np.lexsort((time, receiver))
+    r, t = np.asarray(receiver)[order], np.asarray(time, float)[order]
+    steps = np.diff(t)[r[1:] == r[:-1]]
+    return steps[steps > 2 * window]
+
+
 def inferred_shortest(receiver: np.ndarray, time: np.ndarray, window: float) -> float | None:
     """[s] the shortest burst interval as the detections show it: 0.9 times the 5th percentile of the steps
-    between a receiver's successive arrivals longer than two windows (a receiver misses pings, so the steps run
-    from the interval up; echoes are shorter); None with fewer than 20 such steps."""
-    order = np.lexsort((time, receiver))
-    r, t = receiver[order], time[order]
-    steps = np.diff(t)[r[1:] == r[:-1]]
-    steps = steps[steps > 2 * window]
+    between a receiver's successive arrivals longer than two windows (:func:`receiver_steps`); None with fewer than
+    20 such steps."""
+    steps = receiver_steps(receiver, time, window)
     if len(steps) < 20:
         return None
     return float(0.9 * np.percentile(steps, 5))
 
 
-__all__ = ["Pings", "build_pings", "group_pings", "inferred_shortest", "largest_travel_time", "multipath_echoes",
-           "toa_matrix"]
+@dataclass(frozen=True)
+class IntervalSeen:
+    """A stated shortest interval against the steps at each receiver (:func:`interval_seen`): ``below`` of
+    ``steps`` fall below it less one window; ``low`` and ``high`` [s] the interval the steps show (the 5th
+    percentile, and the 98th of those under twice it: the single steps where the longest interval is under twice
+    the shortest); ``contradicted`` more than :data:`CONTRADICTED_SHARE` below (of 20 steps at least)."""
+
+    below: int
+    steps: int
+    low: float
+    high: float
+    contradicted: bool
+
+
+def interval_seen(receiver: np.ndarray, time: np.ndarray, window: float, shortest: float) -> IntervalSeen:
+    """A stated shortest burst interval ``shortest`` [s] against the detections' steps at each receiver
+    (:func:`receiver_steps`): contradicted as a whole where more than :data:`CONTRADICTED_SHARE` of them fall below
+    it less one window ``window`` [s], the echo limit, which would drop them.
+
+    Parameters
+    ----------
+    receiver : numpy.ndarray
+        (n,) int, each detection's receiver.
+    time : numpy.ndarray
+        (n,) [s] the synchronised times.
+    window : float
+        [s] the largest spread of one ping's arrivals.
+    shortest : float
+        [s] the stated shortest interval.
+
+    Returns
+    -------
+    IntervalSeen
+    """
+    steps = receiver_steps(receiver, time, window)
+    if not len(steps):
+        return IntervalSeen(0, 0, float("nan"), float("nan"), False)
+    below = int((steps < shortest - window).sum())
+    low = float(np.percentile(steps, 5))
+    high = float(np.percentile(steps[steps < 2 * low], 98))
+    return IntervalSeen(below, len(steps), low, high, len(steps) >= 20 and below > CONTRADICTED_SHARE * len(steps))
+
+
+__all__ = ["CONTRADICTED_SHARE", "IntervalSeen", "Pings", "build_pings", "group_pings", "inferred_shortest",
+           "interval_seen", "largest_travel_time", "multipath_echoes", "receiver_steps", "toa_matrix"]

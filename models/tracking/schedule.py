@@ -63,6 +63,12 @@ SBI_CROSSINGS = 4.0
 SBI_SHARE = 0.02
 #: The divisors of the typical step tried as the stable interval (a tag heard at every second ping or less).
 SBI_DIVISORS = (1, 2, 3, 4)
+#: The largest share of a record's heard rows a stated interval may set aside as strays (:func:`stray_rows`): more,
+#: and the detections contradict the interval as a whole (:func:`check_strays`). A raw recording's stray codes and
+#: collisions are a few per cent of its rows.
+STRAY_SHARE = 0.10
+#: The reason a row set aside carries (``quality_reason``, ``set_aside.csv``).
+SET_ASIDE_REASON = "set_aside_not_a_ping"
 
 
 @dataclass(frozen=True)
@@ -155,12 +161,19 @@ def first_arrival_steps(toa: np.ndarray) -> np.ndarray:
         j = heard[back[0]]
         raise ModelError(f"toa: row {k + 1}'s first arrival ({first[k]:.6f} s) is not after row {j + 1}'s "
                          f"({first[j]:.6f} s); allowed: rows of successive pings in time order")
-    rows = np.arange(len(first))
-    times = np.interp(rows, heard, first[heard])
-    per_row = float(np.median(np.diff(first[heard]) / np.diff(heard)))
-    times = np.where(rows < heard[0], first[heard[0]] - (heard[0] - rows) * per_row, times)
-    times = np.where(rows > heard[-1], first[heard[-1]] + (rows - heard[-1]) * per_row, times)
-    return np.diff(times)
+    return _row_steps(first[heard], heard, len(first))
+
+
+def _row_steps(times: np.ndarray, heard: np.ndarray, m: int) -> np.ndarray:
+    """The steps of m rows [s] (m − 1,) from the times [s] of the rows ``heard`` (increasing indices): a row between
+    heard ones takes its time interpolated by row, one before the first or after the last the heard rows' median
+    step per row."""
+    rows = np.arange(m)
+    out = np.interp(rows, heard, times)
+    per_row = float(np.median(np.diff(times) / np.diff(heard)))
+    out = np.where(rows < heard[0], times[0] - (heard[0] - rows) * per_row, out)
+    out = np.where(rows > heard[-1], times[-1] + (rows - heard[-1]) * per_row, out)
+    return np.diff(out)
 
 
 def crossing_time(receivers: np.ndarray, c: float) -> float:
@@ -284,10 +297,12 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
     crossing : float
         The array's crossing time [s] (:func:`crossing_time`): the step error of ``rbi`` steps.
     bounds : (float, float), optional
-        ``rbi``: the interval's (min, max) [s]; a single step (no row missing) shorter than ``min`` by more than
-        the crossing time is refused.
+        ``rbi``: the interval's (min, max) [s]; a step between successive heard rows shorter than ``min`` by more
+        than the crossing time is refused (set such rows aside first: :func:`stray_rows`); a row heard by nobody is
+        no ping and counts as no interval.
     sequence : ndarray, optional
-        ``pbi``: the intervals [s] in the tag's order, repeating (:func:`align_sequence`).
+        ``pbi``: the intervals [s] in the tag's order, repeating (:func:`align_sequence`), aligned on the heard
+        rows' steps.
     source : str
         ``given`` or ``inferred`` (kept in the schedule).
 
@@ -322,7 +337,15 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
     else:
         if sequence is None or not len(sequence):
             raise ModelError("ping type pbi: no burst sequence; allowed: --burst-sequence FILE (the intervals [s])")
-        offset, matched = align_sequence(d, np.asarray(sequence, float), crossing)
+        # aligned on the heard rows' steps: a row heard by nobody is no ping (its time unknown), the step across it
+        # shared by row as first_arrival_steps shares it
+        first = first_arrivals(toa)
+        heard = np.flatnonzero(np.isfinite(first))
+        durations, aligned = align_sequence(np.diff(first[heard]), np.asarray(sequence, float), crossing)
+        offset = _row_steps(first[heard[0]] + np.r_[0.0, np.cumsum(durations)], heard, len(first))
+        matched = np.zeros(len(d), bool)
+        single = np.diff(heard) == 1  # a heard row's step to the next heard row, none between
+        matched[heard[:-1][single]] = aligned[single]
         count = zeros
         te = np.where(matched, np.maximum(jitter, MIN_STEP_SIGMA), crossing)
         dr = np.full_like(d, drift)
@@ -334,32 +357,116 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
 
 def _check_shortest(toa: np.ndarray, low: float, crossing: float) -> None:
     """Refuse rows whose first arrivals come sooner than a random interval's min ``low`` [s] allows, less the
-    crossing time [s]: between two heard rows ``k`` apart, ``k`` intervals (the rows between them nobody heard,
-    each a ping nobody heard). Only the heard rows' steps are checked (a blank row's time is interpolated, not
-    measured), and a refusal names the rows between that nobody heard.
+    crossing time [s], after the previous heard row. A row heard by nobody is no ping (its time is unknown): it
+    neither counts as an interval nor is checked. A caller that sets strays aside first (:func:`stray_rows`) leaves
+    none.
 
     Raises
     ------
     ModelError
-        One line naming the rows, their step, and the rows heard by nobody between them.
+        One line naming the rows and their step.
     """
     first = first_arrivals(toa)
     heard = np.flatnonzero(np.isfinite(first))
-    span, count = np.diff(first[heard]), np.diff(heard)
-    short = np.flatnonzero(span < count * (low - crossing))
+    span = np.diff(first[heard])
+    short = np.flatnonzero(span < low - crossing)
     if not len(short):
         return
     k = int(short[0])
-    a, b, n = int(heard[k]) + 1, int(heard[k + 1]) + 1, int(count[k])
-    if n == 1:
-        raise ModelError(f"burst interval: rows {a} and {b} are {span[k]:.3f} s apart by their first arrivals, below "
-                         f"the random interval's min {low:g} s; allowed: the tag's --burst-interval MIN:MAX")
-    blank = f"row {a + 1}" if n == 2 else f"rows {a + 1} to {b - 1}"
-    raise ModelError(f"burst interval: rows {a} and {b} are {span[k]:.3f} s apart by their first arrivals, with "
-                     f"{blank} between them heard by nobody (no arrival): as pings nobody heard they make {n} "
-                     f"intervals, at least {n * low:g} s at the random interval's min {low:g} s; allowed: the tag's "
-                     "--burst-interval MIN:MAX, and a row of no arrival only where a ping was missed (remove the "
-                     "others)")
+    a, b = int(heard[k]) + 1, int(heard[k + 1]) + 1
+    raise ModelError(f"burst interval: rows {a} and {b} are {span[k]:.3f} s apart by their first arrivals, below "
+                     f"the random interval's min {low:g} s; allowed: the tag's --burst-interval MIN:MAX, and no row "
+                     "closer to the previous one (set aside first: stray_rows)")
+
+
+def stray_rows(toa: np.ndarray, shortest: float, crossing: float) -> np.ndarray:
+    """The rows that cannot be pings of a tag whose pings are at least ``shortest`` [s] apart: a stray code, a
+    collision, an echo beyond the grouping's window.
+
+    The heard rows are walked in time order against the last row kept: a row whose first arrival is less than
+    ``shortest − crossing`` after it (the first arrival's travel time changes by at most the crossing time) conflicts
+    with it, and of the two the row heard by more receivers is kept (a tie: the earlier), the other set aside. A row
+    heard by nobody is no ping (its time is unknown) and takes no part.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard; rows in time order.
+    shortest : float
+        The shortest interval between two pings [s] (``rbi``: its min; ``pbi``: the sequence's least).
+    crossing : float
+        The array's crossing time [s] (:func:`crossing_time`).
+
+    Returns
+    -------
+    ndarray of bool, (m,)
+        True where a row is set aside.
+    """
+    toa = np.asarray(toa, float)
+    first = first_arrivals(toa)
+    count = np.isfinite(toa).sum(axis=1)
+    heard = np.flatnonzero(np.isfinite(first))
+    stray = np.zeros(len(first), bool)
+    limit = shortest - crossing
+    if len(heard) < 2 or not (np.diff(first[heard]) < limit).any():
+        return stray
+    last = int(heard[0])
+    for k in heard[1:]:
+        if first[k] - first[last] >= limit:
+            last = int(k)
+        elif count[k] > count[last]:  # the row heard by more receivers is the ping
+            stray[last], last = True, int(k)
+        else:
+            stray[k] = True
+    return stray
+
+
+def check_strays(toa: np.ndarray, stray: np.ndarray, stated: str, shortest: float, force: bool = False,
+                 option: str = "--force-interval") -> str | None:
+    """Refuse a stated interval the rows contradict as a whole: more than :data:`STRAY_SHARE` of the heard rows set
+    aside by it (:func:`stray_rows`), where a few stray codes and collisions would be a few per cent.
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        Times of arrival [s], NaN where not heard (before any row is set aside).
+    stray : ndarray of bool, (m,)
+        The rows :func:`stray_rows` sets aside.
+    stated : str
+        The interval as stated, for the message (e.g. ``"150:300 s"``).
+    shortest : float
+        Its shortest interval [s].
+    force : bool
+        Take the stated interval whatever the rows show: the message is returned, a warning, not raised.
+    option : str
+        How the caller spells the override.
+
+    Returns
+    -------
+    str or None
+        With ``force``, the line that says how much the stated interval sets aside where it is contradicted; else
+        None.
+
+    Raises
+    ------
+    ModelError
+        One line naming the stated interval, the steps the rows show and how many rows it would set aside.
+    """
+    first = first_arrivals(toa)
+    heard = np.flatnonzero(np.isfinite(first))
+    n_stray = int(np.asarray(stray, bool).sum())
+    if len(heard) < 3 or n_stray <= STRAY_SHARE * len(heard):
+        return None
+    steps = np.diff(first[heard])
+    low, high = np.percentile(steps, [5, 50])
+    seen = (f"the rows' first arrivals are {low:.4g} s apart or more (5th percentile; median {high:.4g} s, "
+            f"{int((steps < shortest).sum())} of {len(steps)} steps below {shortest:g} s)")
+    if force:
+        return (f"burst interval: {stated} stated ({option}) against {seen}: {n_stray} of {len(heard)} heard rows "
+                "set aside as no pings of it")
+    raise ModelError(f"burst interval: {stated} stated, but {seen}: it would set aside {n_stray} of {len(heard)} "
+                     f"heard rows (more than {STRAY_SHARE:.0%}); allowed: the tag's interval, or {option} to use it "
+                     "anyway")
 
 
 def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -434,6 +541,6 @@ def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> 
 
 
 __all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PBI_MAX_MISSED", "PBI_PHASE_STEPS", "PING_TYPES",
-           "SBI_CROSSINGS", "SBI_DIVISORS", "SBI_SHARE", "InferredType", "PingSchedule", "align_sequence",
-           "build_schedule", "check_stable", "crossing_time", "first_arrival_steps", "first_arrivals",
-           "infer_ping_type"]
+           "SBI_CROSSINGS", "SBI_DIVISORS", "SBI_SHARE", "SET_ASIDE_REASON", "STRAY_SHARE", "InferredType",
+           "PingSchedule", "align_sequence", "build_schedule", "check_stable", "check_strays", "crossing_time",
+           "first_arrival_steps", "first_arrivals", "infer_ping_type", "stray_rows"]

@@ -5,6 +5,7 @@ or into a validated configuration (:func:`load`, ``sblsim.load``).
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -32,6 +33,7 @@ from sblsim.orchestrator.cosim.config import (
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, load_plan, make_plan, thaw
 from sblsim.orchestrator.io.output import check_output
+from sblsim.orchestrator.tracks.depth import MAX_WATER_DEPTH
 
 #: What a ``progress`` argument may be: False or None (silent, the default), True (a tqdm bar on standard
 #: error), or a callable ``progress(done, total)`` called as the work advances.
@@ -353,3 +355,31 @@ def sound_speed_arguments(sound_speed: Any, sound_speed_file: Any, temperature: 
         temperature = real_argument(temperature, names[2], *TEMPERATURE_RANGE, "°C")
         salinity = real_argument(salinity, names[3], *SALINITY_RANGE, "(practical salinity)")
     return speed, series, temperature, salinity
+
+
+def water_arguments(temperature_file: Any, water_depth: Any, names: tuple[str, str]) -> dict[str, Any]:
+    """A water-temperature series and the water's depth checked (``names``: how the caller spells them; the file's
+    exclusions are :func:`sound_speed_arguments`'), as :func:`~sblsim.orchestrator.tracks.track.track`'s keyword
+    arguments (``temperature_path``, ``water_depth`` [m]).
+
+    Raises
+    ------
+    ConfigError
+        A value outside its range (one line).
+    """
+    return {"temperature_path": path_argument(temperature_file, names[0]),
+            "water_depth": None if water_depth is None else real_argument(water_depth, names[1], 0.0,
+                                                                          MAX_WATER_DEPTH, "m", low_open=True)}
+
+
+def add_water_arguments(p: argparse.ArgumentParser, prefix: str = "", times: str = "time_s, or time_utc / epo with "
+                        "--time-origin", depth: str = "") -> None:
+    """A command's ``--temperature-file`` and ``--water-depth`` (:func:`water_arguments` checks them): ``prefix``
+    begins their help (where they hold), ``times`` says the file's time column, ``depth`` where the depth may come
+    from without the option."""
+    p.add_argument("--temperature-file", type=Path, default=None, metavar="CSV",
+                   help=f"{prefix}a water-temperature series ({times}; temperature_c [°C]) made the sound speed by "
+                        "TEOS-10 at --salinity")
+    p.add_argument("--water-depth", type=float, default=None, metavar="M",
+                   help=f"{prefix}the water's depth [m] (receivers with z_m): the tag's depth kept within the water "
+                        f"column, at mid-water where the receivers lie in one plane{depth}")

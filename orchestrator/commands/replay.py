@@ -20,6 +20,7 @@ from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.common import (
     MAX_SEED,
     Overrides,
+    add_water_arguments,
     check_engine,
     check_seed,
     flag_argument,
@@ -30,6 +31,7 @@ from sblsim.orchestrator.commands.common import (
     real_argument,
     sound_speed_arguments,
     text_argument,
+    water_arguments,
 )
 from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, print_metrics
 from sblsim.orchestrator.cosim.config import MODEL_PREFIX, ConfigError, external_path
@@ -38,7 +40,7 @@ from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import parse_instant
-from sblsim.orchestrator.tracks.depth import MAX_WATER_DEPTH, prior_line
+from sblsim.orchestrator.tracks.depth import prior_line
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.outputs import write
 from sblsim.orchestrator.tracks.speed import replaced_line
@@ -285,7 +287,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                tag_depth: float | None = None, depth_sigma: float | None = None, survey_sigma: float | None = None,
                crs: str | None = None, frame: str | None = None, time_origin: str | float | None = None,
                toa_sigma: float | None = None, temperature_file: str | Path | None = None,
-               water_depth: float | None = None, out: str | Path | None = None, force: bool = False) -> TrackResult:
+               water_depth: float | None = None, force_interval: bool = False, out: str | Path | None = None,
+               force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -372,9 +375,13 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         The timing noise of every time of arrival [s] in [1e-6, 1], in every estimator's measurement covariance;
         default each receiver's ``toa_sigma_s`` in the receivers file (what ``sblsim toa`` writes from a
         synchronisation's residuals), else 0.15 ms (``summary["toa_noise"]`` says which).
+    force_interval : bool
+        Take the stated ``burst_interval`` (or ``burst_sequence``) where the rows contradict it as a whole (more than
+        10 % of them set aside as no pings; refused otherwise); ``summary["set_aside"]["warning"]`` says how much it
+        sets aside.
     out : str or Path, optional
-        Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json`` and
-        ``errors.csv`` there.
+        Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png``, with a truth ``score.json`` and
+        ``errors.csv``, and ``set_aside.csv`` (the rows a stated interval set aside) there.
     force : bool
         Replace an earlier result in ``out``.
 
@@ -396,7 +403,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     options = toa_options(smooth, sound_speed, receivers_kept, drop_detections, seed, truth_sigma, ping_type,
                           burst_interval, burst_sequence, acceleration_psd, sound_speed_file, temperature, salinity,
                           motion, tag_depth, depth_sigma, survey_sigma, crs, frame, time_origin, toa_sigma,
-                          temperature_file, water_depth)
+                          temperature_file, water_depth, force_interval)
     check_depth_sigma(toa, tag_depth, depth_sigma, ("tag_depth", "depth_sigma"))
     outcome = track(toa, receivers, truth, reference, **options)
     check_positioned(outcome, toa)
@@ -485,7 +492,7 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
                 temperature: Any = None, salinity: Any = None, motion: Any = "moving", tag_depth: Any = None,
                 depth_sigma: Any = None, survey_sigma: Any = None, crs: Any = None, frame: Any = None,
                 time_origin: Any = None, toa_sigma: Any = None, temperature_file: Any = None,
-                water_depth: Any = None) -> dict[str, Any]:
+                water_depth: Any = None, force_interval: Any = False) -> dict[str, Any]:
     """:func:`replay_toa`'s tracking arguments checked (each named as the function names it), as keyword arguments
     of :func:`~sblsim.orchestrator.tracks.track.track`.
 
@@ -509,26 +516,11 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
     return {"smooth": smooth, "sound_speed": sound_speed, "receivers_kept": kept, "drop": drop, "seed": seed,
             "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval, "burst_sequence_path": sequence,
             "acceleration_psd": acceleration_psd, "sound_speed_path": series, "temperature": temperature,
-            "salinity": salinity, "motion": motion, "toa_sigma": toa_sigma_argument(toa_sigma, "toa_sigma")
-            } | geometry_arguments(
+            "salinity": salinity, "motion": motion, "toa_sigma": toa_sigma_argument(toa_sigma, "toa_sigma"),
+            "force_interval": flag_argument(force_interval, "force_interval")} | geometry_arguments(
         tag_depth, depth_sigma, survey_sigma, ("tag_depth", "depth_sigma", "survey_sigma")) | place_arguments(
         crs, frame, time_origin, ("crs", "frame", "time_origin")) | water_arguments(
         temperature_file, water_depth, ("temperature_file", "water_depth"))
-
-
-def water_arguments(temperature_file: Any, water_depth: Any, names: tuple[str, str]) -> dict[str, Any]:
-    """A water-temperature series and the water's depth checked (``names``: how the caller spells them; the file's
-    exclusions are :func:`~sblsim.orchestrator.commands.common.sound_speed_arguments`'), as
-    :func:`~sblsim.orchestrator.tracks.track.track`'s keyword arguments.
-
-    Raises
-    ------
-    ConfigError
-        A value outside its range (one line).
-    """
-    return {"temperature_path": path_argument(temperature_file, names[0]),
-            "water_depth": None if water_depth is None else real_argument(water_depth, names[1], 0.0,
-                                                                          MAX_WATER_DEPTH, "m", low_open=True)}
 
 
 def toa_sigma_argument(value: Any, where: str) -> float | None:
@@ -664,6 +656,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="--format toa: a random burst interval's bounds [s], e.g. 20:40 (rbi)")
     p.add_argument("--burst-sequence", type=Path, default=None, metavar="FILE",
                    help="--format toa: a pseudo-random tag's intervals [s] in order, one per row (pbi)")
+    p.add_argument("--force-interval", action="store_true",
+                   help="take the stated --burst-interval or --burst-sequence where the detections contradict it as "
+                        "a whole (refused otherwise); a warning says how much it sets aside")
     p.add_argument("--acceleration-psd", type=float, default=None, metavar="M2_S3",
                    help="--format toa: the motion model's white-noise acceleration [m²/s³] in (0, 1] (default: "
                         "estimated from the pings by EM)")
@@ -676,12 +671,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--salinity", type=float, default=None, metavar="S",
                    help="--format toa: the water's practical salinity (PSS-78) for the fallback or --temperature-file "
                         "(0 fresh water, about 35 the open sea)")
-    p.add_argument("--temperature-file", type=Path, default=None, metavar="CSV",
-                   help="--format toa: a water-temperature series (time_s, or time_utc / epo with --time-origin; "
-                        "temperature_c [°C]) made the sound speed by TEOS-10 at --salinity")
-    p.add_argument("--water-depth", type=float, default=None, metavar="M",
-                   help="--format toa: the water's depth [m] (receivers with z_m): the tag's depth kept within the "
-                        "water column, at mid-water where the receivers lie in one plane")
+    add_water_arguments(p, "--format toa: ")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="--format toa with a folder of tags: worker processes in [1, 256] (default: the CPU count)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -744,7 +734,7 @@ def main(args: argparse.Namespace) -> int:
                             ("--receivers-kept", args.receivers_kept), ("--drop-detections", args.drop_detections),
                             ("--seed", args.seed is not None), ("--truth-sigma", args.truth_sigma is not None),
                             ("--ping-type", args.ping_type), ("--burst-interval", args.burst_interval),
-                            ("--burst-sequence", args.burst_sequence),
+                            ("--burst-sequence", args.burst_sequence), ("--force-interval", args.force_interval),
                             ("--acceleration-psd", args.acceleration_psd is not None),
                             ("--sound-speed-file", args.sound_speed_file),
                             ("--temperature", args.temperature is not None),
@@ -879,6 +869,7 @@ def _main_toa(args: argparse.Namespace) -> int:
         raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
                           "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
                           "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
+                          "--force-interval, "
                           "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --temperature-file, "
                           "--motion, --workers, --scheduler, --tag-depth, --depth-sigma, --survey-sigma, "
                           "--water-depth, --toa-sigma, --crs, --frame, --time-origin, --out, --force")
@@ -903,7 +894,8 @@ def _main_toa(args: argparse.Namespace) -> int:
                "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval,
                "burst_sequence_path": sequence, "acceleration_psd": q, "sound_speed_path": series,
                "temperature": temperature, "salinity": salinity, "motion": motion,
-               "toa_sigma": toa_sigma_argument(args.toa_sigma, "--toa-sigma")} | geometry_arguments(
+               "toa_sigma": toa_sigma_argument(args.toa_sigma, "--toa-sigma"),
+               "force_interval": args.force_interval} | geometry_arguments(
         args.tag_depth, args.depth_sigma, args.survey_sigma, ("--tag-depth", "--depth-sigma", "--survey-sigma")) | \
         place_arguments(args.crs, args.frame, args.time_origin, ("--crs", "--frame", "--time-origin")) | \
         water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
@@ -926,6 +918,13 @@ def _main_toa(args: argparse.Namespace) -> int:
           f"{len(s['receivers'])} receivers{thinned}, sound speed {c['sound_speed_m_s']:.1f} m/s ({c['source']}), "
           f"ping interval {s['ping_interval_s']:.4f} s, in {s['wall_time_s']:.1f} s")
     print("  " + ping_type_line(s))
+    aside = s["set_aside"]
+    if aside["count"]:
+        print(f"  {aside['count']} rows set aside as no pings of the tag's schedule (first arrivals closer than "
+              f"{aside['shortest_s']:g} s, less the crossing time, to a row heard by more receivers or as many and "
+              "earlier): set_aside.csv, their rows kept in track.csv with no estimate")
+    if aside["warning"]:
+        print(f"sblsim: warning: {aside['warning']}", file=sys.stderr)
     print("  " + noise_line(s["toa_noise"]))
     if c["source"] == "fallback":
         print(f"sblsim: warning: the pings do not determine the sound speed ({c['calibration']}); taken: "

@@ -274,9 +274,16 @@ def main(args: argparse.Namespace) -> int:
               f"{noise[high] * 1e3:.3g} ms ({high})")
     if "positions" in s:
         q = s["positions"]
-        print(f"  positions refined (prior {q['survey_sigma_m']:g} m per axis): median shift "
-              f"{q['median_shift_m']:.3g} m, the largest {q['largest_shift_m']:.3g} m "
-              f"({q['largest_shift_receiver']})")
+        if q["refined"]:
+            print(f"  positions refined (prior {q['survey_sigma_m']:g} m per axis): median shift "
+                  f"{q['median_shift_m']:.3g} m, the largest {q['largest_shift_m']:.3g} m "
+                  f"({q['largest_shift_receiver']}); {q['determined']} of {q['receivers']} receivers determined by "
+                  "the sync tags, the others keep the table's (positions.csv's reason)")
+        loo = q.get("leave_one_out")
+        if loo:
+            print(f"  sync tags' leave-one-out median error: {_loo_text(loo['table'])} with the table's positions "
+                  f"(NEES with the survey sigma), {_loo_text(loo['refined'])} refined; the {loo['kept']} positions "
+                  "kept")
     if s["sync_tags"]:
         t = s["sync_tags"]
         nees = t["nees_mean_inside"]
@@ -293,6 +300,14 @@ def main(args: argparse.Namespace) -> int:
     print(f"  written to {out}/ (sync.json, offsets.csv, residuals.csv, sync_tags.csv, {extra}offsets.png, "
           "residuals.png, coverage.png)")
     return 0
+
+
+def _loo_text(loo: dict | None) -> str:
+    """A leave-one-out's median error [m] and NEES inside the array, as the console says them."""
+    if loo is None:
+        return "none positioned"
+    nees = loo["nees_mean_inside"]
+    return f"{loo['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else f" (NEES {nees:.3g})")
 
 
 __all__ = ["SyncResult", "sync"]

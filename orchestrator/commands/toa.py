@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sblsim.models.tracking.schedule import PING_TYPES
-from sblsim.orchestrator.commands.common import path_argument, prepare_out, text_argument
+from sblsim.orchestrator.commands.common import flag_argument, path_argument, prepare_out, text_argument
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.io.output import folder_name
 
@@ -58,7 +58,7 @@ class ToaResult:
 def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag: str, format: str | None = None,
         ping_type: str | None = None, burst_interval: str | tuple[float, float] | None = None,
         burst_sequence: str | Path | None = None, out: str | Path | None = None, force: bool = False,
-        crs: str | None = None, frame: str | None = None) -> ToaResult:
+        crs: str | None = None, frame: str | None = None, force_interval: bool = False) -> ToaResult:
     """One tag's times-of-arrival matrix from raw detections on synchronised clocks: ``sblsim toa``.
 
     Parameters
@@ -89,6 +89,9 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
         Replace an earlier result in ``out``.
     crs, frame : str, optional
         The receivers' CRS and the metric frame (as :func:`sync` takes them).
+    force_interval : bool
+        Take a stated interval the detections contradict as a whole (more than 10 % of a receiver's steps below its
+        shortest: refused otherwise); ``summary["warnings"]`` says how many detections it drops.
 
     Returns
     -------
@@ -98,7 +101,8 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
     ------
     ModelError, ConfigError
         One line naming the file, line and column or the option, and the allowed values: a file that cannot be
-        read or a cell outside its range, a tag never detected, a shortest interval too short for the array.
+        read or a cell outside its range, a tag never detected, a shortest interval too short for the array, a
+        stated interval the detections contradict (without ``force_interval``).
     """
     detections = path_argument(detections, "detections", optional=False)
     receivers = path_argument(receivers, "receivers", optional=False)
@@ -110,7 +114,7 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
                                                ("ping_type", "burst_interval", "burst_sequence"))
     target = prepare_out(out, force, "toa.txt", "times of arrival")
     outcome = build(detections, receivers, sync, tag, format, kind, interval, sequence, text_argument(crs, "crs"),
-                    text_argument(frame, "frame"))
+                    text_argument(frame, "frame"), flag_argument(force_interval, "force_interval"))
     if target is not None:
         from sblsim.orchestrator.sync.toa import write_toa_folder
 
@@ -147,6 +151,9 @@ def add_ping_type(p: argparse.ArgumentParser) -> None:
                    help="a random burst interval's bounds [s], e.g. 60:120 (rbi)")
     p.add_argument("--burst-sequence", type=Path, default=None, metavar="FILE",
                    help="a pseudo-random tag's intervals [s] in order, one per row (pbi)")
+    p.add_argument("--force-interval", action="store_true",
+                   help="take the stated --burst-interval or --burst-sequence where the detections contradict it as "
+                        "a whole (refused otherwise); a warning says how many detections it drops")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -156,7 +163,7 @@ def main(args: argparse.Namespace) -> int:
     kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
                                                ("--ping-type", "--burst-interval", "--burst-sequence"))
     outcome = build(args.detections, args.receivers, args.sync, args.tag, args.format, kind, interval, sequence,
-                    args.crs, args.frame)
+                    args.crs, args.frame, args.force_interval)
     out = output_folder(args.out, Path("results") / f"toa_{folder_name(args.tag)}", args.force, "toa.txt",
                         "times of arrival")
     from sblsim.orchestrator.sync.toa import write_toa_folder

@@ -14,18 +14,21 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
 from sblsim.orchestrator.commands.common import (
+    add_water_arguments,
     names_argument,
     path_argument,
     prepare_out,
     real_argument,
     sound_speed_arguments,
     text_argument,
+    water_arguments,
 )
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.output import folder_name, staged_directory
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress, progress_of
+from sblsim.orchestrator.tracks.depth import water_line
 from sblsim.orchestrator.tracks.outputs import figure
 from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE, noise_line
 
@@ -115,8 +118,9 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
           crs: str | None = None, frame: str | None = None, sound_speed: float | None = None,
           sound_speed_file: str | Path | None = None, temperature: float | None = None,
           salinity: float | None = None, bin_hours: float = 1.0, workers: int | None = None,
-          scheduler: str | None = None, toa_sigma: float | None = None, out: str | Path | None = None,
-          force: bool = False, progress: ProgressSpec = False) -> StudyResult:
+          scheduler: str | None = None, toa_sigma: float | None = None,
+          temperature_file: str | Path | None = None, water_depth: float | None = None,
+          out: str | Path | None = None, force: bool = False, progress: ProgressSpec = False) -> StudyResult:
     """Track every tag of a telemetry study: ``sblsim track`` (docs/telemetry.md).
 
     Parameters
@@ -159,6 +163,14 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     toa_sigma : float, optional
         The timing noise of every time of arrival [s] in [1e-6, 1]; default each receiver's from the
         synchronisation's residuals (``offsets.csv``'s ``toa_sigma_s``), else 0.15 ms (``summary["toa_noise"]``).
+    temperature_file : str or Path, optional
+        A water-temperature series (``time_utc`` or ``epo`` in UTC, ``temperature_c`` [°C]) made each tag's sound
+        speed by TEOS-10 at ``salinity`` (:mod:`sblsim.orchestrator.tracks.water`); not with ``sound_speed``,
+        ``sound_speed_file`` or ``temperature``.
+    water_depth : float, optional
+        The water's depth [m] in (0, 11000], which bounds each tag's depth (the deployments' depths needed); default
+        the deepest ``bottom_depth`` of the deployments that heard the tag, where the deployments give it
+        (``summary["water_depth"]``).
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``tracks.geojson``, ``map.png``, ``sync/``, a folder per tag), all or nothing.
@@ -183,10 +195,10 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     sync = path_argument(sync, "sync")
     check_progress(progress)
     medium = sound_speed_arguments(sound_speed, sound_speed_file, temperature, salinity,
-                                   ("sound_speed", "sound_speed_file", "temperature", "salinity"))
+                                   ("sound_speed", "sound_speed_file", "temperature", "salinity"), temperature_file)
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
                        {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma")},
-                       toa_sigma)
+                       toa_sigma) | water_arguments(temperature_file, water_depth, ("temperature_file", "water_depth"))
     target = prepare_out(out, force, "study.json", "study")
     outcome = _run(detections, receivers, tags, sync, options, target, progress)
     return _result(outcome, target)
@@ -256,6 +268,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         out.append("  clocks taken as logged (no sync tag in the receivers file)")
     if "toa_noise" in s:
         out.append("  " + noise_line(s["toa_noise"]))
+    if s.get("water_depth"):
+        out.append("  " + water_line(s["water_depth"]))
     where = "on " + options["scheduler"] if options["scheduler"] else \
         f"in {min(options['workers'] or os.cpu_count() or 1, max(count, 1))} worker processes"
     out.append(f"  tracking {count} tags {where}")
@@ -295,6 +309,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--toa-sigma", type=float, default=None, metavar="S",
                    help="the timing noise of every time of arrival [s] in [1e-6, 1] (default: each receiver's from "
                         "the synchronisation's residuals; else 0.00015)")
+    add_water_arguments(p, times="time_utc or epo, in UTC", depth=" (default: the deepest bottom_depth of the "
+                        "deployments that heard the tag, where the receivers file gives it)")
     p.add_argument("--bin-hours", type=float, default=1.0, metavar="H",
                    help="the synchronisation's bins [h] in [0.05, 168] (default 1)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
@@ -308,10 +324,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """``sblsim track`` from its parsed arguments: its lines printed, its exit status returned."""
     medium = sound_speed_arguments(args.sound_speed, args.sound_speed_file, args.temperature, args.salinity,
-                                   ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity"))
+                                   ("--sound-speed", "--sound-speed-file", "--temperature", "--salinity"),
+                                   args.temperature_file, "--temperature-file")
     options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
-                                                                       "workers", "toa_sigma")}, args.toa_sigma)
+                                                                       "workers", "toa_sigma")}, args.toa_sigma) \
+        | water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
                         "study.json", "study")
     outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)

@@ -30,9 +30,14 @@ pandas builds a cell where a line is longer than 1 MiB or holds more than 512 ce
 :data:`MAX_DETECTION_CELLS` cells (the other tables: :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`; counted by
 :func:`~sblsim.orchestrator.io.tables.check_cells`), and its cells are parsed by pandas as text and every one
 checked (its pattern, finite, within its range); no name or text in a file is
-ever taken as a path. A receiver whose times go back in the file's order (its clock reset or jumped back, or the
-rows are not in the order the receiver logged them) is refused, not sorted: the line, the receiver and the jump are
-named. Every error is one line naming the file, its line or column and the allowed range (:class:`ModelError`).
+ever taken as a path. A receiver whose time goes back in the file's order by more than :data:`CLOCK_TOLERANCE` (its
+clock reset at a download, kept in the order it logged) is not sorted: its rows from there on are a new **clock
+part** (the frame's ``clock_part`` column, 1, 2, … per receiver, added where a receiver's time goes back), each
+reset kept in :attr:`Detections.clock_resets` (its line, the step and the times either side) for the
+synchronisation to split the clock there and say it. Rows not in the receiver's logging order are refused, not
+taken for resets: more than :data:`MAX_CLOCK_RESETS` back-steps at one receiver, or parts that share no tag (a file
+sorted by tag). Every error is one line naming the file, its line or column and the allowed range
+(:class:`ModelError`).
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.times import utc_seconds
+from sblsim.orchestrator.io.times import iso_utc, utc_seconds
 from sblsim.orchestrator.sync import exports
 from sblsim.orchestrator.sync.cells import column, numbers, pattern, read_text, refuse, shown_header, text_table
 from sblsim.orchestrator.sync.transmitters import TRANSMITTER, match, split
@@ -71,6 +76,11 @@ _VUE_ZONE = re.compile(r"date and time \(utc(?:([+-])([0-9]{2}):?([0-9]{2}))?\)"
 VUE_COLUMNS = ("receiver", "transmitter", "sensor value", "sensor unit", "station name")
 #: The formats of :func:`read_detections`.
 FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
+#: A receiver's time going back in the file's order by at most this much [s] is taken as rows logged within one
+#: timestamp's resolution (a VR2W's 1 ms), the same clock; by more, a reset: a new clock part.
+CLOCK_TOLERANCE = 1e-3
+#: The most resets (times going back in the file's order) one receiver may have; more: rows not in its order.
+MAX_CLOCK_RESETS = 20
 
 
 @dataclass
@@ -92,12 +102,18 @@ class Detections:
         One of :data:`FORMATS`.
     ignored_columns : list of str
         The file's columns not used.
+    clock_resets : list of dict
+        Each place a receiver's time goes back in the file's order (by more than :data:`CLOCK_TOLERANCE`): its
+        ``receiver``, the ``line`` of the first row after it and the ``previous_line``, the ``step_s`` [s] (< 0),
+        the times ``before_s`` and ``after_s`` [s since 1970 UTC on its clock] and the new ``clock_part``; the frame
+        then has a ``clock_part`` column. Empty where no receiver's time goes back.
     """
 
     frame: pd.DataFrame
     source: str
     format: str
     ignored_columns: list[str] = field(default_factory=list)
+    clock_resets: list[dict] = field(default_factory=list)
 
     def tag(self, given: str) -> str | None:
         """The detected tag a user's name stands for (a full ID, or an id where it is unique:
@@ -166,7 +182,8 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     ------
     ModelError
         One line naming the file, its line and column and the allowed range: a file too large, a cell outside
-        its pattern or range, a missing column, a receiver whose clock goes back in the file's order.
+        its pattern or range, a missing column, a receiver whose rows are not in its logging order (more than
+        :data:`MAX_CLOCK_RESETS` back-steps, or parts that share no tag).
     """
     if format is not None and format not in FORMATS:
         raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
@@ -187,9 +204,10 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     frame, used = reader(header, body, lines, name, what)
     if "line" not in frame:  # a reader that adds rows of its own (Fathom's sensor records) gives their lines
         frame["line"] = np.asarray(lines, np.int64)
-    _check_clocks(frame, name, what)
+    frame = frame.reset_index(drop=True)
+    resets = clock_parts(frame, name, what)
     ignored = [h for k, h in enumerate(header) if k not in used and h]
-    return Detections(frame.reset_index(drop=True), name, format, ignored)
+    return Detections(frame, name, format, ignored, resets)
 
 
 def _yaps(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
@@ -263,22 +281,56 @@ def _vue(header: list[str], body: pd.DataFrame, lines: list[int], name: str, wha
     return frame, used
 
 
-def _check_clocks(frame: pd.DataFrame, name: str, what: str) -> None:
-    """Refuse a receiver whose time goes back in the file's order: its clock reset or jumped back (or the rows are
-    not in the order it logged them), named with the line, the previous line and the jump."""
+def clock_parts(frame: pd.DataFrame, name: str, what: str) -> list[dict]:
+    """Each receiver's clock parts in the file's order (the module docstring): where its time goes back by more than
+    :data:`CLOCK_TOLERANCE`, a ``clock_part`` column (1 first) is added to ``frame`` (in place) and each reset
+    returned (:attr:`Detections.clock_resets`); none: the frame unchanged, an empty list.
+
+    Raises
+    ------
+    ModelError
+        A receiver with more than :data:`MAX_CLOCK_RESETS` resets, or whose parts share no tag (rows sorted by tag,
+        not logged in that order): one line naming the line, the receiver and the step.
+    """
     step = frame.groupby("receiver", sort=False)["time"].diff().to_numpy()
-    back = np.flatnonzero(step < 0)
+    back = np.flatnonzero(step < -CLOCK_TOLERANCE)
     if not len(back):
-        return
-    k = int(back[0])
-    receiver = frame["receiver"].iloc[k]
-    earlier = frame.index[(frame["receiver"] == receiver).to_numpy()]
-    previous = int(earlier[earlier < frame.index[k]][-1])
-    line, before = int(frame["line"].iloc[k]), int(frame["line"].loc[previous])
-    raise ModelError(f"{what}: {name!r} line {line}: receiver {receiver}'s clock goes back {-step[k]:.6g} s from "
-                     f"line {before} ({len(back)} such step{'s' * (len(back) > 1)} in the file): a clock reset or "
-                     "jump, or rows not in the receiver's own order; allowed: each receiver's times not decreasing "
-                     "(split the file at a reset; never sorted here)")
+        return []
+    receiver = frame["receiver"].to_numpy(dtype=object)
+    reset = np.zeros(len(frame), np.int64)
+    reset[back] = 1
+    part = pd.Series(reset).groupby(receiver, sort=False).cumsum().to_numpy() + 1
+    previous = frame.index.to_series().groupby(receiver, sort=False).shift().to_numpy()
+    lines = frame["line"].to_numpy()
+    for r in pd.unique(receiver[back]):
+        mine = np.flatnonzero(receiver == r)
+        steps = back[receiver[back] == r]
+        k = int(steps[0])
+        where = (f"{what}: {name!r} line {lines[k]}: receiver {r}'s clock goes back {-step[k]:.6g} s from line "
+                 f"{lines[int(previous[k])]}")
+        if len(steps) > MAX_CLOCK_RESETS:
+            raise ModelError(f"{where} ({len(steps)} such steps in the file): rows not in the receiver's own order; "
+                             f"allowed: each receiver's rows in the order it logged them, its time going back at "
+                             f"most {MAX_CLOCK_RESETS} times (a clock reset)")
+        tags = frame["tag"].to_numpy(dtype=object)[mine]
+        sets = [set(tags[part[mine] == p]) for p in range(1, len(steps) + 2)]
+        if all(not (a & b) for a, b in zip(sets[:-1], sets[1:])):
+            raise ModelError(f"{where} where its tag changes, its parts sharing no tag: rows sorted by tag, not in "
+                             "the receiver's own order; allowed: each receiver's rows in the order it logged them "
+                             "(its time going back only at a clock reset)")
+    frame["clock_part"] = part
+    time = frame["time"].to_numpy(float)
+    return [{"receiver": str(receiver[k]), "line": int(lines[k]), "previous_line": int(lines[int(previous[k])]),
+             "step_s": float(step[k]), "before_s": float(time[int(previous[k])]), "after_s": float(time[k]),
+             "clock_part": int(part[k])} for k in back]
+
+
+def reset_line(reset: dict) -> str:
+    """One line naming a receiver's time going back in the file's order (an entry of
+    :attr:`Detections.clock_resets`)."""
+    before, after = (text[:23] for text in iso_utc([reset["before_s"], reset["after_s"]]))
+    return (f"receiver {reset['receiver']}: its time goes back {-reset['step_s']:.6g} s at line {reset['line']} "
+            f"(its clock from {before} to {after} UTC): a new clock segment (part {reset['clock_part']})")
 
 
 # --------------------------------------------------------------------------- receivers, sound speed
@@ -366,7 +418,7 @@ def read_sound_speed(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     return times, speeds
 
 
-__all__ = ["Detections", "FORMATS", "IDENTIFIER", "MAX_DETECTIONS", "MAX_DETECTION_BYTES", "MAX_DETECTION_CELLS",
-           "MAX_EPOCH",
-           "MAX_HYDROPHONES", "MAX_SERIES", "SOUND_SPEED_RANGE", "read_detections", "read_hydrophones",
-           "read_sound_speed"]
+__all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "IDENTIFIER", "MAX_CLOCK_RESETS", "MAX_DETECTIONS",
+           "MAX_DETECTION_BYTES", "MAX_DETECTION_CELLS", "MAX_EPOCH", "MAX_HYDROPHONES", "MAX_SERIES",
+           "SOUND_SPEED_RANGE", "clock_parts", "read_detections", "read_hydrophones", "read_sound_speed",
+           "reset_line"]

@@ -24,14 +24,15 @@ import pandas as pd
 from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.breaks import fit_with_breaks
+from sblsim.models.sync.breaks import fit_with_breaks, part_shifts
 from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, sync_emissions
+from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, Identifiability, identify
 from sblsim.models.sync.noise import receiver_noise
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.models.sync.resolution import resolution_warning
 from sblsim.orchestrator.sync import segments
-from sblsim.orchestrator.sync.detections import Detections
+from sblsim.orchestrator.sync.detections import Detections, reset_line
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import assign
 
@@ -39,6 +40,9 @@ from sblsim.orchestrator.telemetry.deployments import assign
 MIN_BIN_ARRIVALS = 5
 #: The bins' allowed width [h].
 BIN_HOURS_RANGE = (0.05, 168.0)
+#: [s] the longest a receiver is taken to have been off between the last detection before its time went back in
+#: the file's order and the first after (a download's), for the search of its new part's shift (breaks.part_shifts).
+RESET_GAP = 86400.0
 #: The survey's horizontal sigma per axis [m] by default (a handheld GPS's at the surface above a moored receiver),
 #: and its allowed range.
 SURVEY_SIGMA = 3.0
@@ -82,6 +86,104 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                 survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
+
+    With ``refine_positions`` the receivers' positions are refined only where the sync tags determine them
+    (:mod:`sblsim.models.sync.identifiability`: the others keep the table's, ``positions.csv``'s ``reason``), and
+    the refinement is kept only where it does not worsen the sync tags' leave-one-out: the synchronisation with the
+    table's positions is made too (its NEES with ``survey_sigma`` as the table's error), and where the refined
+    positions' median leave-one-out error is larger, the table's outcome is returned (``positions.csv`` the
+    table's, ``refined`` false, said in a warning). ``summary["positions"]["leave_one_out"]`` holds both.
+
+    Parameters
+    ----------
+    detections : Detections
+        The raw detections (:func:`~sblsim.orchestrator.sync.detections.read_detections`).
+    hydrophones : pandas.DataFrame
+        The receivers (:func:`~sblsim.orchestrator.sync.detections.read_hydrophones`).
+    sound_speed : float, optional
+        [m/s] a constant sound speed.
+    series : (numpy.ndarray, numpy.ndarray), optional
+        A sound-speed series: times [s] and speeds [m/s], interpolated at each arrival. Neither given: one sound
+        speed estimated with the clocks.
+    bin_hours : float
+        [h] the time bins' width.
+    reference : str, optional
+        The reference receiver's serial; default the receiver with the most arrivals shared with others.
+    leave_one_out : bool
+        Position each sync tag with the clocks fitted without its arrivals (else with the full fit).
+    refine_positions : bool
+        Refine the receivers' horizontal positions with the clocks (default: the table's fixed).
+    survey_sigma : float
+        [m] the table's horizontal sigma per axis: the refinement's prior.
+    timings : dict, optional
+        Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
+        ``tables``) for a benchmark (the refined synchronisation's).
+
+    Returns
+    -------
+    SyncOutcome
+
+    Raises
+    ------
+    ModelError
+        No sync tag heard by two receivers, a reference receiver not in the table or not synchronisable; with
+        ``refine_positions``, no receiver's position determined by the sync tags (a sparse sync array).
+    """
+    started = clock.perf_counter()
+    args = (detections, hydrophones, sound_speed, series, bin_hours, reference, leave_one_out)
+    if not refine_positions:
+        return _synchronise(*args, timings=timings)
+    refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings)
+    table = _synchronise(*args, table_sigma=survey_sigma)
+    outcome = _kept(refined, table, float(survey_sigma))
+    outcome.summary["wall_time_s"] = clock.perf_counter() - started
+    return outcome
+
+
+def _loo(summary: dict[str, Any]) -> dict[str, Any] | None:
+    """The sync tags' leave-one-out in a summary: their median error [m] and NEES inside the array, or None."""
+    t = summary.get("sync_tags") or {}
+    if not t:
+        return None
+    return {"median_error_m": t["median_error_m"], "nees_mean_inside": t["nees_mean_inside"],
+            "nees_median_inside": t["nees_median_inside"], "tags": t["tags"]}
+
+
+def _kept(refined: SyncOutcome, table: SyncOutcome, survey_sigma: float) -> SyncOutcome:
+    """The refined synchronisation where its sync tags' leave-one-out median error is not larger than the table's
+    (both recorded in ``summary["positions"]["leave_one_out"]``), else the table's, said in one warning."""
+    before, after = _loo(table.summary), _loo(refined.summary)
+    worse = after is None or (before is not None and after["median_error_m"] > before["median_error_m"])
+    record = {"table": before, "refined": after, "kept": "table" if worse else "refined",
+              "rule": "the refined positions kept where their sync tags' median leave-one-out error is not larger "
+                      "than the table's (the table's NEES with the survey sigma as its error)"}
+    record["table_nees_survey_sigma_m"] = survey_sigma
+    if not worse:
+        refined.summary["positions"]["leave_one_out"] = record
+        return refined
+    positions = refined.positions.copy()
+    was = "none positioned" if after is None else f"{after['median_error_m']:.3g} m"
+    why = f"the refinement worsened the sync tags' leave-one-out (median error {before['median_error_m']:.3g} m " \
+          f"with the table's, {was} refined)" if before is not None else "the refinement could not be checked"
+    positions["reason"] = np.where(positions["refined"], why, positions["reason"])
+    positions["refined"] = False
+    positions[["x_m", "y_m"]] = positions[["table_x_m", "table_y_m"]].to_numpy()
+    positions[["shift_x_m", "shift_y_m", "shift_m"]] = 0.0
+    positions[["sigma_x_m", "sigma_y_m", "correlation_xy"]] = np.nan
+    table.positions = positions
+    table.summary["positions"] = {**refined.summary["positions"], "refined": False, "leave_one_out": record}
+    table.summary.setdefault("warnings", []).append(f"refine positions: {why}: the table's positions kept")
+    return table
+
+
+def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
+                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
+                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
+                 survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
+                 table_sigma: float | None = None) -> SyncOutcome:
+    """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
+    the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
+    as :func:`synchronise`.
 
     Parameters
     ----------
@@ -154,7 +256,17 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     if never:
         notes.append(f"sync tags never heard: {', '.join(never)}")
 
-    emission, duplicate, single = sync_emissions(tag, receiver, time, _gaps(tag, receiver, time, len(tag_names)))
+    # a receiver whose time went back in the file's order: each later part of its rows a clock of its own, its
+    # arrivals aligned to the others' for the grouping alone (the reader's clock_part; models.sync.breaks)
+    part = sync["clock_part"].to_numpy(np.int64) if "clock_part" in sync else None
+    if part is not None and (part > 1).any():
+        search = max(abs(r["step_s"]) for r in detections.clock_resets) + RESET_GAP
+        shift, _ = part_shifts(tag, receiver, part, time, search)
+        aligned = time - shift
+    else:
+        part, aligned = None, time
+    emission, duplicate, single = sync_emissions(tag, receiver, aligned, _gaps(tag, receiver, aligned,
+                                                                                len(tag_names)))
     used = ~duplicate & ~single
 
     xyz = hydrophones[["x", "y", "z"]].to_numpy(float)
@@ -201,7 +313,14 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     # a receiver whose clock jumped or went back split into clock segments (sblsim.models.sync.breaks): each clock
     # row a receiver's (its first segment) or a later segment's, `rows` each arrival's (-1 set aside at a break)
     fit = fit_with_breaks(receiver, emission, time, distance, slowness, used, linked, start, width, tag,
-                          geometry=geometry, timings=timings)
+                          geometry=geometry, timings=timings, part=part)
+    identified = fits = None
+    if refine_positions:  # refined only where the sync tags determine the positions; else refused
+        args = (receiver, tag, emission, time, distance, slowness, used, start, width)
+        # the others keep the table's positions in positions.csv; the fit keeps every receiver at the survey's
+        # prior (held tightly at the table's, the held receivers would fix the array's datum with a false certainty:
+        # on 8 simulated receivers, one held, the refined ones' sigmas a third of their errors)
+        identified, fits = _identify(fit, args, geometry, positions, names, tag_names, linked, float(survey_sigma))
     rows, site = segments.clock_rows(fit, receiver)
     synced = np.isfinite(fit.knots[:, 0])  # per clock row
     on = (rows >= 0) & synced[np.maximum(rows, 0)]  # per arrival: on a synchronised clock
@@ -231,24 +350,34 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                            segments.receiver_sigmas(fit, n_receivers), linked)
     if np.isfinite(noise.sigma[linked]).all():  # (none where no receiver has residuals enough to measure it)
         offsets["toa_sigma_s"] = noise.sigma[[names.index(r) for r in offsets["receiver"]]]
+        # its clock offset's own uncertainty beside it: a bias common to all its arrivals of a still tag, which
+        # pooling them does not average (the stationary fix's consider term)
+        offsets["clock_sigma_s"] = noise.clock[[names.index(r) for r in offsets["receiver"]]]
     tick = clock.perf_counter()
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
-                           width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site)
-    refined = _positions(fit, positions, names, linked) if refine_positions else None
+                           width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site,
+                           fits, table_sigma)
+    refined = _positions(fit, positions, names, linked, identified, tag_names) if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)
-    summary["clock_breaks"] = segments.breaks_summary(fit, names, origin)
+    summary["clock_breaks"] = segments.breaks_summary(fit, names, origin, _resets(detections, sync))
     for entry in summary["clock_breaks"]:  # each named in one line (the command prints the warnings)
         summary.setdefault("warnings", []).append(segments.break_line(entry))
         # its entry's offsets and drifts are its first segment's; offsets.csv has every segment's
         mine = summary["receivers"][entry["receiver"]]
         mine["clock_segments"] = max(mine.get("clock_segments", 1), entry["segment_after"])
+    fitted = {(e["reset"]["receiver"], e["reset"]["line"]) for e in summary["clock_breaks"] if e.get("reset")}
+    for reset in detections.clock_resets:  # a reset no fit split (no sync-tag arrival after it, or not at a receiver)
+        if (reset["receiver"], reset["line"]) not in fitted:
+            summary.setdefault("warnings", []).append(
+                f"{reset_line(reset)}: not synchronised (no sync-tag arrival of the table's receivers in it), its "
+                "detections set aside")
     summary["toa_noise"] = {names[j]: {"toa_sigma_s": float(noise.sigma[j]), "residuals_s": float(noise.noise[j]),
                                        "clock_s": float(noise.clock[j]), "arrivals": int(noise.arrivals[j]),
                                        "measured": bool(noise.measured[j])} for j in np.flatnonzero(linked)}
-    xy = positions[:, :2] + (fit.shift if refine_positions else 0.0)
+    xy = refined[["x_m", "y_m"]].to_numpy() if refine_positions else positions[:, :2]
     receivers = pd.DataFrame({"receiver": names, "x": xy[:, 0], "y": xy[:, 1],
                               "sync_tag": hydrophones["sync_tag"].to_numpy(), "synchronised": linked})
     if refine_positions:
@@ -261,24 +390,96 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
             "median_shift_m": float(shift.median()) if len(shift) else None,
             "largest_shift_m": float(shift.max()) if len(shift) else None,
             "largest_shift_receiver": str(refined.loc[shift.idxmax(), "serial"]) if len(shift) else None,
-            "gauge": "the arrivals fix the array's shape only; its translation and rotation come from the prior"}
+            "gauge": "the arrivals fix the array's shape only; its translation and rotation come from the prior",
+            "determined": int(identified.determined.sum()), "receivers": len(names),
+            "held": [names[j] for j in np.flatnonzero(~identified.determined)],
+            "identifiability": f"a receiver refined where its posterior sigma in the array's shape is below "
+                               f"{identified.threshold:g} of the survey's in every direction, in the fit with every "
+                               "sync tag and with each one left out (sblsim.models.sync.identifiability); the others' "
+                               "positions the table's (the clocks fitted with every receiver at the survey's prior)"}
         summary["wall_time_s"] = clock.perf_counter() - started
     return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
 
 
-def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: np.ndarray) -> pd.DataFrame:
-    """``positions.csv``: each receiver's refined horizontal position, the table's, the shift and its sigmas (a
-    receiver not synchronised keeps the table's: ``refined`` false)."""
-    shift = np.where(linked[:, None], fit.shift, 0.0)
+def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: np.ndarray,
+               identified: Identifiability, tag_names: list[str]) -> pd.DataFrame:
+    """``positions.csv``: each receiver's refined horizontal position, the table's, the shift and its sigmas; a
+    receiver the sync tags do not determine (``identified``; in the fit at the survey's prior like the others) or
+    not synchronised keeps the table's (``refined`` false, its ``reason``; its sigmas NaN); ``sigma_ratio`` and
+    ``sigma_ratio_without`` its posterior sigma in the array's shape over the survey's, with every sync tag and the
+    worst with one left out (``worst_tag``)."""
+    refined = linked & identified.determined
+    shift = np.where(refined[:, None], fit.shift, 0.0)
     cov = fit.shift_covariance
+    ratio, without = identified.ratio, identified.ratio_without
+    heard = [tag_names[i] for i in identified.tags] if identified.tags is not None else []
+    worst = np.array([heard[k] if 0 <= k < len(heard) else "" for k in identified.worst], dtype=object)
+    reason = np.where(~linked, "not synchronised", np.where(
+        ~(ratio < identified.threshold),
+        [f"its posterior sigma {r:.2f} of the survey's (needs < {identified.threshold:g})" for r in ratio],
+        np.where(~(without < identified.threshold),
+                 [f"determined only with sync tag {t} (without it {r:.2f} of the survey's, needs < "
+                  f"{identified.threshold:g})"
+                  for t, r in zip(worst, without, strict=True)], "")))
     return pd.DataFrame({
         "serial": names, "x_m": positions[:, 0] + shift[:, 0], "y_m": positions[:, 1] + shift[:, 1],
         "table_x_m": positions[:, 0], "table_y_m": positions[:, 1], "shift_x_m": shift[:, 0],
         "shift_y_m": shift[:, 1], "shift_m": np.hypot(shift[:, 0], shift[:, 1]),
-        "sigma_x_m": np.where(linked, np.sqrt(cov[:, 0, 0]), np.nan),
-        "sigma_y_m": np.where(linked, np.sqrt(cov[:, 1, 1]), np.nan),
-        "correlation_xy": np.where(linked, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
-        "refined": linked})
+        "sigma_x_m": np.where(refined, np.sqrt(cov[:, 0, 0]), np.nan),
+        "sigma_y_m": np.where(refined, np.sqrt(cov[:, 1, 1]), np.nan),
+        "correlation_xy": np.where(refined, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
+        "refined": refined, "reason": np.where(refined, "", reason), "sigma_ratio": ratio,
+        "sigma_ratio_without": without, "worst_tag": worst})
+
+
+def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowness, used, start, width, n_rows: int,
+                 geometry: Geometry | None, site, steady) -> tuple[ClockFit, np.ndarray] | None:
+    """The clocks fitted without sync tag ``i``'s arrivals (the kept arrivals and scales of ``fit``; with
+    ``geometry`` the positions refined from ``fit``'s) and the clock rows still synchronised; None where they
+    cannot be fitted without it."""
+    without = used & (tag != i)
+    still = connected(c[without], emission[without], n_rows, start)
+    loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma, fit.shift, site)
+    try:
+        this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width, keep=fit.kept,
+                          scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
+    except ModelError:
+        return None
+    return this, still
+
+
+def _identify(fit: ClockFit, args: tuple, geometry: Geometry, positions: np.ndarray, names: list[str],
+              tag_names: list[str], linked: np.ndarray, survey_sigma: float
+              ) -> tuple[Identifiability, dict[int, tuple[ClockFit, np.ndarray] | None]]:
+    """The identifiability test of the refined positions (:func:`sblsim.models.sync.identifiability.identify`)
+    on ``fit`` and on its fits with each sync tag heard left out (returned too, by tag, for the leave-one-out).
+
+    Raises
+    ------
+    ModelError
+        No receiver's position determined (a sparse sync array): the refinement refused in one line.
+    """
+    receiver, tag, emission, time, distance, slowness, used, start, width = args
+    rows, site = segments.clock_rows(fit, receiver)
+    ok = used & (rows >= 0)
+    steady = None if len(site) == len(names) else site == start
+    heard = [int(i) for i in np.unique(tag[ok])]
+    fits = {i: _fit_without(i, fit, rows, tag, emission, time, distance, slowness, ok, start, width, len(site),
+                            geometry, site, steady) for i in heard}
+    identified = identify(positions[:, :2], fit.shift_covariance_all, survey_sigma, linked,
+                          [None if f is None else f[0].shift_covariance_all for f in fits.values()])
+    identified = Identifiability(identified.ratio, identified.ratio_without, identified.worst, identified.determined,
+                                 identified.threshold, np.array(heard, np.int64))
+    if not identified.determined.any():
+        worst = np.fmax(identified.ratio, np.nan_to_num(identified.ratio_without, nan=1.0))
+        best = int(np.argmin(np.where(linked, worst, np.inf)))
+        raise ModelError(
+            f"refine positions: the {len(heard)} sync tags heard among {len(names)} receivers determine no "
+            f"receiver's position (the best, {names[best]}, has a posterior sigma {worst[best]:.2f} of the "
+            f"survey's with a sync tag left out; needed: < {MAX_SIGMA_RATIO:g}, i.e. 3 sync tags not on one line "
+            "heard by a receiver with any one left out: 4 or more around the array); allowed: the table's positions "
+            "(without refining them)")
+    return identified, fits
 
 
 def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.ndarray, origin: float
@@ -306,7 +507,8 @@ def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.nd
 def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
                positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
                geometry: Geometry | None = None, clock: np.ndarray | None = None,
-               site: np.ndarray | None = None) -> pd.DataFrame:
+               site: np.ndarray | None = None, fits: dict | None = None,
+               table_sigma: float | None = None) -> pd.DataFrame:
     """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
     arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
     its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
@@ -324,7 +526,9 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     position, so its rejections would use the position the fixes are checked against.
 
     Where a receiver's clock broke, ``clock`` (n,) is each arrival's clock row and ``site`` each row's receiver
-    (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row."""
+    (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row. ``fits``: the fits without
+    each tag already made (:func:`_fit_without`, by tag). ``table_sigma`` [m]: without ``geometry``, the table's
+    horizontal sigma per axis, summed into the NEES's covariance (the survey's stated error)."""
     dim = positions.shape[1]
     rows = []
     c = receiver if clock is None else clock
@@ -337,16 +541,13 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
             continue
         this = fit
         if leave_one_out:
-            without = used & (tag != i)
-            still = connected(c[without], emission[without], len(linked), start)
-            try:
-                loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma,
-                                                             fit.shift, None if clock is None else site)
-                this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width,
-                                  keep=fit.kept, scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
-            except ModelError:
+            got = fits[i] if fits is not None and i in fits else _fit_without(
+                i, fit, c, tag, emission, time, distance, slowness, used, start, width, len(linked), geometry,
+                None if clock is None else site, steady)
+            if got is None:
                 notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
                 continue
+            this, still = got
             mine &= still[c]
         rows_e = np.flatnonzero(mine)
         ems, local = np.unique(emission[rows_e], return_inverse=True)
@@ -362,6 +563,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
         sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
         where = positions
         truth_cov = np.zeros((dim, dim))
+        if geometry is None and table_sigma is not None:
+            truth_cov[:2, :2] = table_sigma ** 2 * np.eye(2)
         if geometry is not None:  # the receivers where the fit without this tag puts them
             where = positions.copy()
             where[:, :2] += this.shift
@@ -406,6 +609,17 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     columns += ["fixes_unchecked", "fixes_failed", "fixes_ambiguous", "fixes_scaled", "arrivals_rejected",
                 "median_redundancy"]
     return pd.DataFrame(rows, columns=columns)
+
+
+def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int], dict]:
+    """The reader's resets (:attr:`~sblsim.orchestrator.sync.detections.Detections.clock_resets`) by the
+    synchronisation's receiver and the clock part each starts (a study's receiver is its serial's deployment)."""
+    if not detections.clock_resets or "clock_part" not in sync:
+        return {}
+    serial = sync["serial"] if "serial" in sync else sync["receiver"]
+    named = dict(zip(zip(serial.astype(str), sync["clock_part"].astype(int)), sync["receiver"].astype(str)))
+    return {(named[(r["receiver"], r["clock_part"])], r["clock_part"]): r for r in detections.clock_resets
+            if (r["receiver"], r["clock_part"]) in named}
 
 
 def _inside(point: np.ndarray, points: np.ndarray) -> bool:

@@ -17,7 +17,10 @@ the tracker's default then taken (said).
 Where a receiver's clock broke (jumped or went back), ``offsets.csv`` has a set of rows per clock segment
 (``segment``, and the times of the receiver's own clock it holds for, ``clock_from`` to ``clock_to``): each
 detection takes the segment that holds its time, and one between two segments (the stretch around the break) is set
-aside and counted (``at_clock_breaks``).
+aside and counted (``at_clock_breaks``). Where a receiver's time went back in the detections file's order (a reset
+kept in its logging order), ``offsets.csv`` also says each segment's clock part (``clock_part``) and a detection
+takes a segment of its own part (the detections' ``clock_part``, :mod:`.detections`): two parts may read the same
+times.
 
 A synchronisation made with ``--refine-positions`` also wrote ``positions.csv``: its refined horizontal positions
 (read the same way) replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so.
@@ -40,7 +43,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.pings import build_pings, inferred_shortest, largest_travel_time
+from sblsim.models.sync.pings import build_pings, inferred_shortest, interval_seen, largest_travel_time
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
@@ -63,14 +66,14 @@ from sblsim.orchestrator.sync.detections import (
 from sblsim.orchestrator.sync.run import rounding_warning
 from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
 from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN, read_burst_sequence
-from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, TOA_SIGMA_RANGE
+from sblsim.orchestrator.tracks.tracker import CLOCK_SIGMA_RANGE, SIGMA_TOA, TOA_SIGMA_RANGE
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
 TOLERANCE = 0.02
 #: The most rows of ``offsets.csv`` read (receivers × bins) and the largest offset [s] it may hold.
 MAX_OFFSET_ROWS = 1_000_000
-MAX_OFFSET = 86400.0
+MAX_OFFSET = 30 * 86400.0
 #: The detections' formats, the ping types and the burst intervals taken [s].
 FORMATS = DETECTION_FORMATS
 PING_TYPE_NAMES = tuple(PING_TYPES)
@@ -85,29 +88,38 @@ class Clocks:
     """A synchronisation read back: ``receivers`` (R,) the synchronised receivers, ``edges`` (K+1,) [s since 1970
     UTC] the bins' edges, ``knots`` (R, K+1) [s] each receiver's offset at each edge, ``toa_sigma`` (R,) [s] each
     receiver's timing noise from the sync-tag residuals (None: the synchronisation does not give it, an older
-    folder or clocks taken as logged)."""
+    folder or clocks taken as logged), ``clock_sigma`` (R,) [s] each receiver's clock offset's own uncertainty (part
+    of ``toa_sigma``; a bias a still tag's pooled pings share; None where not given)."""
 
     receivers: list[str]
     edges: np.ndarray
     knots: np.ndarray
     toa_sigma: np.ndarray | None = None
+    clock_sigma: np.ndarray | None = None
     #: Where a receiver's clock broke (``offsets.csv``'s ``segment``, ``clock_from``, ``clock_to``): the rows of
     #: :attr:`knots` are clock segments, ``owner`` (rows,) the receiver of each (an index into :attr:`receivers`)
     #: and ``spans`` (rows, 2) [s since 1970 UTC on its own clock] the times each holds for (±inf open); None: a row
     #: per receiver.
     owner: np.ndarray | None = None
     spans: np.ndarray | None = None
+    #: Where a receiver's time went back in the detections file's order (``offsets.csv``'s ``clock_part``): (rows,)
+    #: the clock part each segment holds for (1 first); None: every segment part 1.
+    parts: np.ndarray | None = None
 
-    def rows(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
+    def rows(self, receiver: np.ndarray, time: np.ndarray, part: np.ndarray | None = None) -> np.ndarray:
         """(n,) int, the row of :attr:`knots` of ``receiver`` (n,) int (an index into :attr:`receivers`) at its own
-        clock's ``time`` (n,) [s]: the receiver's own, or where its clock broke the segment that holds the time; -1
-        where none does (a stretch set aside between two segments)."""
+        clock's ``time`` (n,) [s] in its clock ``part`` (n,) int (the detections' ``clock_part``; default 1): the
+        receiver's own, or where its clock broke the segment of that part that holds the time; -1 where none does
+        (a stretch set aside between two segments, or a part not synchronised)."""
         receiver = np.asarray(receiver, np.int64)
         if self.owner is None:
-            return receiver.copy()
+            return receiver.copy() if part is None else np.where(np.asarray(part) == 1, receiver, -1)
+        part = np.ones(receiver.shape, np.int64) if part is None else np.asarray(part, np.int64)
+        own = np.ones(len(self.owner), np.int64) if self.parts is None else self.parts
         out = np.full(receiver.shape, -1, np.int64)
         for row, j in enumerate(self.owner):
-            out[(receiver == j) & (time >= self.spans[row, 0]) & (time <= self.spans[row, 1])] = row
+            inside = (time >= self.spans[row, 0]) & (time <= self.spans[row, 1])
+            out[(receiver == j) & (part == own[row]) & inside] = row
         return out
 
     def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
@@ -122,15 +134,15 @@ class Clocks:
 def read_clocks(folder: Path | str) -> Clocks:
     """Read ``offsets.csv`` of a synchronisation's folder (``receiver``, ``bin``, ``start``, ``end``,
     ``offset_start_s``, ``offset_end_s``, and where it has one ``toa_sigma_s``, a receiver's timing noise [s] in
-    :data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`, the same on each of its rows; other columns
-    ignored).
+    :data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`, the same on each of its rows, and ``clock_sigma_s``,
+    its clock offset's own uncertainty [s] in [0, 1], likewise; other columns ignored).
 
     Raises
     ------
     ModelError
         One line: the folder or its file missing, a cell outside its pattern or range, bins that are not the same
         contiguous edges for every receiver, an offset not continuous across a bin's edge, a receiver's
-        ``toa_sigma_s`` not the same on all its rows.
+        ``toa_sigma_s`` or ``clock_sigma_s`` not the same on all its rows.
     """
     folder = Path(folder)
     what = "sync"
@@ -142,7 +154,8 @@ def read_clocks(folder: Path | str) -> Clocks:
         raise ModelError(f"{what}: {str(folder)!r} holds no offsets.csv; allowed: the folder sblsim sync --out wrote")
     body, lines, name, col = _columns(path, what, ("receiver", "bin", "start", "end", "offset_start_s",
                                                    "offset_end_s"), "sblsim sync's offsets.csv",
-                                      ("toa_sigma_s", "segment", "clock_from", "clock_to"))
+                                      ("toa_sigma_s", "clock_sigma_s", "segment", "clock_from", "clock_to",
+                                       "clock_part"))
     receiver = _pattern(body[col["receiver"]], IDENTIFIER, what, name, lines, "receiver",
                         "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").to_numpy()
     bins = _numbers(body[col["bin"]], what, name, lines, "bin", 0, MAX_OFFSET_ROWS)
@@ -158,6 +171,10 @@ def read_clocks(folder: Path | str) -> Clocks:
     noise = None
     if "toa_sigma_s" in col:  # a synchronisation written before the column has none
         noise = _numbers(body[col["toa_sigma_s"]], what, name, lines, "toa_sigma_s", *TOA_SIGMA_RANGE, unit="s")
+    clock_sigma = None
+    if "clock_sigma_s" in col:  # (0 at the reference receiver)
+        clock_sigma = _numbers(body[col["clock_sigma_s"]], what, name, lines, "clock_sigma_s", *CLOCK_SIGMA_RANGE,
+                               unit="s")
     parts = None
     if "segment" in col:  # a receiver's clock broke: its segments' rows, each with the times it holds for
         if not {"clock_from", "clock_to"} <= set(col):
@@ -170,7 +187,14 @@ def read_clocks(folder: Path | str) -> Clocks:
                              "allowed: a whole number from 1")
         parts = (segment, *(_numbers(body[col[c]], what, name, lines, c, 0.0, float(MAX_EPOCH), missing=True,
                                      unit="s") for c in ("clock_from", "clock_to")))
-    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}", noise, parts)
+        if "clock_part" in col:  # a receiver's time went back in the detections' order: each segment's part
+            clock_part = _numbers(body[col["clock_part"]], what, name, lines, "clock_part", 1, MAX_OFFSET_ROWS)
+            if (clock_part != np.round(clock_part)).any():
+                k = int(np.flatnonzero(clock_part != np.round(clock_part))[0])
+                raise ModelError(f"{what}: {name!r} line {lines[k]} column clock_part: {clock_part[k]:g} is not "
+                                 "allowed; allowed: a whole number from 1")
+            parts = (*parts, clock_part)
+    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}", noise, parts, clock_sigma)
 
 
 def _in_folder(folder: Path, name: str) -> Path:
@@ -189,8 +213,9 @@ def offsets_clocks(offsets: pd.DataFrame) -> Clocks:
                      offsets["offset_start_s"].to_numpy(float), offsets["offset_end_s"].to_numpy(float),
                      "sync: the synchronisation's offsets",
                      offsets["toa_sigma_s"].to_numpy(float) if "toa_sigma_s" in offsets else None,
-                     tuple(offsets[c].to_numpy(float) for c in ("segment", "clock_from", "clock_to"))
-                     if "segment" in offsets else None)
+                     tuple(offsets[c].to_numpy(float) for c in ("segment", "clock_from", "clock_to", "clock_part")
+                           if c in offsets) if "segment" in offsets else None,
+                     offsets["clock_sigma_s"].to_numpy(float) if "clock_sigma_s" in offsets else None)
 
 
 def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
@@ -201,18 +226,22 @@ def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
 
 def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np.ndarray, first: np.ndarray,
               last: np.ndarray, where: str, toa_sigma: np.ndarray | None = None,
-              segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Clocks:
+              segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+              clock_sigma: np.ndarray | None = None) -> Clocks:
     """Each receiver's offsets at the bins' edges from one row per receiver and bin (``offsets.csv``'s columns), and
-    its timing noise where ``toa_sigma`` (one per row [s]) is given; where ``segments`` (``segment``, ``clock_from``,
-    ``clock_to`` per row: a clock broke) is given, one set of rows per receiver and segment, each segment holding
-    for its receiver's own times from ``clock_from`` to ``clock_to`` (NaN: open).
+    its timing noise where ``toa_sigma`` (one per row [s]) is given, its clock offset's uncertainty where
+    ``clock_sigma`` (one per row [s]) is; where ``segments`` (``segment``, ``clock_from``,
+    ``clock_to`` per row: a clock broke; and ``clock_part`` where its time went back in the detections' order) is
+    given, one set of rows per receiver and segment, each segment holding for its receiver's own times from
+    ``clock_from`` to ``clock_to`` (NaN: open) in its part.
 
     Raises
     ------
     ModelError
         One line naming ``where``: bins that are not the same contiguous edges for every receiver, a receiver
-        lacking a bin, an offset not continuous across a bin's edge, a receiver's timing noise not the same on all
-        its rows, a segment whose times differ between its rows or overlap another's of its receiver.
+        lacking a bin, an offset not continuous across a bin's edge, a receiver's timing noise (or its clock's
+        uncertainty) not the same on all its rows, a segment whose times differ between its rows or overlap
+        another's of its receiver.
     """
     owner_names = receiver
     if segments is not None:  # one clock per receiver and segment
@@ -244,17 +273,32 @@ def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np
                                                                                   atol=1e-6)):
         raise ModelError(f"{where}: an offset is not continuous across a bin's edge (a bin's end differs from the "
                          "next bin's start); allowed: sblsim sync's offsets.csv")
-    noise = None
-    if toa_sigma is not None:
-        noise = np.full(len(names), np.nan)
-        noise[j] = toa_sigma
-        if not np.array_equal(noise[j], toa_sigma):
-            bad = names[int(j[np.flatnonzero(noise[j] != toa_sigma)[0]])]
-            raise ModelError(f"{where}: receiver {bad}'s toa_sigma_s differs between its rows; allowed: one value per "
-                             "receiver (sblsim sync's offsets.csv)")
+    noise = None if toa_sigma is None else _one_per_row(toa_sigma, names, j, "toa_sigma_s", where)
+    offset_sigma = None if clock_sigma is None else _one_per_row(clock_sigma, names, j, "clock_sigma_s", where)
     if segments is None:
-        return Clocks(names, edges, knots, noise)
-    return _segmented(names, j, owner_names, segments, edges, knots, noise, where)
+        return Clocks(names, edges, knots, noise, offset_sigma)
+    clocks = _segmented(names, j, owner_names, segments, edges, knots, noise, where)
+    if offset_sigma is not None:  # per receiver (every segment's the receiver's own)
+        clocks.clock_sigma = np.full(len(clocks.receivers), np.nan)
+        clocks.clock_sigma[clocks.owner] = offset_sigma
+    return clocks
+
+
+def _one_per_row(values: np.ndarray, names: list[str], j: np.ndarray, column: str, where: str) -> np.ndarray:
+    """(len(names),) the value of each clock row from the file's rows (``j`` each one's clock row).
+
+    Raises
+    ------
+    ModelError
+        A clock row's ``column`` differs between its rows (one line).
+    """
+    out = np.full(len(names), np.nan)
+    out[j] = values
+    if not np.array_equal(out[j], values):
+        bad = names[int(j[np.flatnonzero(out[j] != values)[0]])]
+        raise ModelError(f"{where}: receiver {bad}'s {column} differs between its rows; allowed: one value per "
+                         "receiver (sblsim sync's offsets.csv)")
+    return out
 
 
 def _segmented(keys: list[str], j: np.ndarray, owner_names: np.ndarray, segments: tuple, edges: np.ndarray,
@@ -269,21 +313,27 @@ def _segmented(keys: list[str], j: np.ndarray, owner_names: np.ndarray, segments
     low = np.where(np.isnan(segments[1]), -np.inf, segments[1])
     high = np.where(np.isnan(segments[2]), np.inf, segments[2])
     spans[j, 0], spans[j, 1] = low, high
-    if not (np.array_equal(spans[j, 0], low) and np.array_equal(spans[j, 1], high)):
-        bad = keys[int(j[np.flatnonzero((spans[j, 0] != low) | (spans[j, 1] != high))[0]])]
-        raise ModelError(f"{where}: receiver {bad}'s clock_from or clock_to differs between its rows; allowed: one "
-                         "span per segment (sblsim sync's offsets.csv)")
+    part = np.ones(len(keys), np.int64)
+    given = segments[3] if len(segments) > 3 else np.ones(len(j))
+    part[j] = given
+    if not (np.array_equal(spans[j, 0], low) and np.array_equal(spans[j, 1], high)
+            and np.array_equal(part[j], given)):
+        bad = keys[int(j[np.flatnonzero((spans[j, 0] != low) | (spans[j, 1] != high) | (part[j] != given))[0]])]
+        raise ModelError(f"{where}: receiver {bad}'s clock_from, clock_to or clock_part differs between its rows; "
+                         "allowed: one span per segment (sblsim sync's offsets.csv)")
     for k in range(len(receivers)):
-        mine = np.flatnonzero(owner == k)
-        mine = mine[np.argsort(spans[mine, 0], kind="stable")]
-        if (spans[mine, 0] > spans[mine, 1]).any() or (spans[mine[1:], 0] <= spans[mine[:-1], 1]).any():
-            raise ModelError(f"{where}: receiver {receivers[k]}'s clock segments hold for times that overlap or run "
-                             "backwards (clock_from, clock_to); allowed: sblsim sync's offsets.csv")
+        for p in np.unique(part[owner == k]):  # a part's segments one after the other (two parts may overlap)
+            mine = np.flatnonzero((owner == k) & (part == p))
+            mine = mine[np.argsort(spans[mine, 0], kind="stable")]
+            if (spans[mine, 0] > spans[mine, 1]).any() or (spans[mine[1:], 0] <= spans[mine[:-1], 1]).any():
+                raise ModelError(f"{where}: receiver {receivers[k]}'s clock segments hold for times that overlap or "
+                                 "run backwards (clock_from, clock_to); allowed: sblsim sync's offsets.csv")
     per_receiver = None
     if noise is not None:
         per_receiver = np.full(len(receivers), np.nan)
         per_receiver[owner] = noise
-    return Clocks(receivers, edges, knots, per_receiver, owner, spans)
+    return Clocks(receivers, edges, knots, per_receiver, owner=owner, spans=spans,
+                  parts=part if len(segments) > 3 else None)
 
 
 def _columns(path: Path, what: str, needed: tuple[str, ...], source: str, optional: tuple[str, ...] = ()) -> tuple:
@@ -348,7 +398,8 @@ class ToaOutcome:
     """What :func:`build_toa` computed: ``toa`` (P, R) [s] on the base ``origin`` [s since 1970 UTC], ``names`` the
     receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``), ``summary`` (``toa.json``),
     ``frame`` (the positions' metric frame; None without a CRS) and ``toa_sigma`` (R,) [s] each receiver's timing
-    noise from the synchronisation (None where it gives none)."""
+    noise from the synchronisation (None where it gives none), ``clock_sigma`` (R,) [s] its clock offset's own
+    uncertainty (likewise)."""
 
     toa: np.ndarray
     names: list[str]
@@ -358,6 +409,7 @@ class ToaOutcome:
     origin: float
     frame: Frame | None = None
     toa_sigma: np.ndarray | None = None
+    clock_sigma: np.ndarray | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
@@ -367,7 +419,8 @@ def tags_present(detections: Detections, limit: int = 8) -> str:
 
 
 def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks, tag: str,
-              shortest: float | None = None, ping_type: dict[str, Any] | None = None) -> ToaOutcome:
+              shortest: float | None = None, ping_type: dict[str, Any] | None = None,
+              force_interval: bool = False) -> ToaOutcome:
     """One tag's times-of-arrival matrix (the module docstring).
 
     Parameters
@@ -385,6 +438,10 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         (:func:`~sblsim.models.sync.pings.inferred_shortest`).
     ping_type : dict, optional
         The ping type's options as given, recorded in ``toa.json``.
+    force_interval : bool
+        Take a ``shortest`` the detections contradict as a whole
+        (:func:`~sblsim.models.sync.pings.interval_seen`), said in ``summary["interval_warning"]`` with the
+        detections it drops; refused without.
 
     Returns
     -------
@@ -394,7 +451,8 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     ------
     ModelError
         A tag never detected, or detected at no synchronised receiver of the table; too few detections to infer
-        the shortest interval; a shortest interval not above twice the window.
+        the shortest interval; a shortest interval not above twice the window; a stated shortest interval the
+        detections contradict, without ``force_interval``.
     """
     started = clock.perf_counter()
     frame = detections.frame
@@ -421,7 +479,8 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         raise ModelError(f"tag: {tag!r} is detected only at receivers that are not synchronised or not in the "
                          f"receivers table ({', '.join(sorted(set(mine['receiver']))[:10])})")
     raw = use["time"].to_numpy(float)
-    j_sync = clocks.rows(use["receiver"].map(synced).to_numpy(np.int64), raw)  # -1: between two clock segments
+    part = use["clock_part"].to_numpy(np.int64) if "clock_part" in use else None  # a reset in the file's order
+    j_sync = clocks.rows(use["receiver"].map(synced).to_numpy(np.int64), raw, part)  # -1: between two segments
     width = float(np.max(np.diff(clocks.edges)))
     inside = (raw >= clocks.edges[0] - width) & (raw <= clocks.edges[-1] + width) & (j_sync >= 0)
     times = raw - clocks.offset(np.maximum(j_sync, 0), raw)
@@ -434,7 +493,20 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         if shortest is None:
             raise ModelError(f"tag: {tag!r} has too few successive detections at one receiver to show its shortest "
                              "burst interval; allowed: give it (--ping-type rbi --burst-interval MIN:MAX)")
+    seen = interval_seen(receiver[inside], times[inside], window, shortest) if source == "given" else None
+    said = None
+    if seen is not None and seen.contradicted:  # said before the echo limit drops the detections
+        given = (ping_type or {}).get("burst_interval_s")
+        stated = f"{given[0]:g}:{given[1]:g} s" if given else f"a shortest interval of {shortest:g} s"
+        said = (f"burst interval: {stated} stated, but the detections' steps at one receiver show "
+                f"{seen.low:.0f}-{seen.high:.0f} s ({seen.below} of {seen.steps} steps below {shortest:g} s less the "
+                f"{window:.3g} s window)")
+        if not force_interval:
+            raise ModelError(f"{said}; allowed: the tag's interval, or --force-interval to use it anyway")
     pings = build_pings(receiver[inside], times[inside], len(columns), window, shortest)
+    if said is not None:
+        said += (f"; taken (--force-interval): {int(pings.echo.sum())} of {int(inside.sum())} detections dropped as "
+                 "multipath echoes by it")
     toa = pings.toa
     order = np.argsort(np.nanmin(toa, axis=1), kind="stable")  # rows by first arrival (they are already)
     toa = toa[order]
@@ -471,11 +543,17 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
                                                    sorted(pd.Series(heard.sum(axis=1)).value_counts().items())},
         "origin_epoch_s": origin, "window_s": window, "echo_limit_s": pings.echo_limit,
         "shortest_interval_s": shortest, "shortest_interval_source": source, "ping_type": ping_type or {},
+        "interval_seen": None if seen is None else {"steps": seen.steps, "below": seen.below,
+                                                    "low_s": seen.low, "high_s": seen.high,
+                                                    "contradicted": seen.contradicted},
+        "interval_warning": said,
         "sensors": sorted(sensors), "dimensions": dim, "toa_header": header_line(columns),
         "wall_time_s": clock.perf_counter() - started}
     noise = None if clocks.toa_sigma is None else clocks.toa_sigma[[synced[n] for n in columns]]
     summary["toa_sigma_s"] = None if noise is None else {n: float(v) for n, v in zip(columns, noise)}
-    return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise)
+    offset_sigma = None if clocks.clock_sigma is None else clocks.clock_sigma[[synced[n] for n in columns]]
+    return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise,
+                      clock_sigma=offset_sigma)
 
 
 def _sensors(use: pd.DataFrame, ping: np.ndarray, n_pings: int) -> dict[str, np.ndarray]:
@@ -537,7 +615,8 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     """``toa.txt`` and ``receivers.csv`` in ``folder`` (what the replay reads); returns their paths. With ``depth``
     (P,) [m] the tag's depth per ping (NaN where none), ``toa.txt`` has a ``depth_m`` column first (and a header
     whatever the receivers' names: the column's name is not a number). ``receivers.csv`` has each receiver's
-    timing noise (``toa_sigma_s`` [s]) where the synchronisation gives it."""
+    timing noise (``toa_sigma_s`` [s]) and its clock offset's uncertainty (``clock_sigma_s`` [s]) where the
+    synchronisation gives them."""
     frame = pd.DataFrame(outcome.toa, columns=outcome.names)
     if depth is not None:
         frame.insert(0, DEPTH_COLUMN, depth)
@@ -550,6 +629,8 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     table.insert(0, "name", outcome.names)
     if outcome.toa_sigma is not None:  # seconds: significant figures, not the positions' four decimals
         table["toa_sigma_s"] = [f"{v:.6g}" for v in outcome.toa_sigma]
+    if outcome.clock_sigma is not None:
+        table["clock_sigma_s"] = [f"{v:.6g}" for v in outcome.clock_sigma]
     table.to_csv(receivers, index=False, float_format="%.4f")
     return toa, receivers
 
@@ -599,10 +680,11 @@ def _shortest(ping_type: str | None, interval: tuple[float, float] | None, seque
 
 def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str | None, ping_type: str | None,
           interval: tuple[float, float] | None, sequence: Path | None, crs: str | None = None,
-          frame: str | None = None):
+          frame: str | None = None, force_interval: bool = False):
     """Read the files and build the tag's matrix (:func:`build_toa`): :class:`ToaOutcome`. The receivers are a
     study's deployments (:func:`~sblsim.orchestrator.telemetry.deployments.read_deployments`, in ``crs``, projected
-    to ``frame``), each detection at its deployment (the others set aside: ``summary["set_aside"]``).
+    to ``frame``), each detection at its deployment (the others set aside: ``summary["set_aside"]``); a stated
+    interval the detections contradict refused unless ``force_interval`` (then a warning).
 
     Raises
     ------
@@ -623,13 +705,13 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     table, moved = with_positions(table, refined)
     given = {"type": ping_type, "burst_interval_s": list(interval) if interval else None,
              "burst_sequence": None if sequence is None else sequence.name}
-    outcome = build_toa(data, table, clocks, tag, shortest, given)
+    outcome = build_toa(data, table, clocks, tag, shortest, given, force_interval)
     # the table's positions against the tag's arrivals, a stable interval stated against its pings
     check_matrix(outcome.toa, outcome.positions, outcome.summary["shortest_interval_s"],
                  outcome.summary["window_s"] - TOLERANCE, TOLERANCE, deployments.source, ping_type)
     outcome.frame = deployments.frame
     rounded = rounding_warning(data, table, None)
-    outcome.summary["warnings"] = [rounded] if rounded else []
+    outcome.summary["warnings"] = [w for w in (rounded, outcome.summary["interval_warning"]) if w]
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
     if refined is not None:
@@ -701,7 +783,7 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
                                                ("--ping-type", "--burst-interval", "--burst-sequence"))
     outcome = build(args.log, args.receivers, args.sync, args.tag, REPLAY_FORMATS[args.format], kind, interval,
-                    sequence, args.crs, args.frame)
+                    sequence, args.crs, args.frame, args.force_interval)
     for line in run_lines(outcome, ""):
         print(line, flush=True)
     say_warnings(outcome.summary)

@@ -10,8 +10,9 @@ in brackets ignored: :func:`~sblsim.orchestrator.sync.cells.normal_name`) takes 
 * its position: ``lat``, ``lon`` (or ``latitude``/``longitude``, ``deploy_lat``/``deploy_long``,
   ``stn_lat``/``stn_long``) in WGS 84 degrees, or in the geographic CRS given (``crs``); else ``x_m``, ``y_m`` (or
   ``x``, ``y``) [m] in the projected CRS given, or in a local frame without one (no latitude and longitude out);
-* its depth: ``z_m`` (height, up) or ``instrument_depth`` (or ``depth``) [m, positive down]; ``bottom_depth`` [m]
-  kept;
+* its depth: ``z_m`` (height, up) or ``instrument_depth`` (or ``depth``) [m, positive down]; ``bottom_depth`` [m,
+  positive down: the water's depth at the receiver, at least the instrument's], which bounds a tag's depth
+  (``sblsim track``: the deepest of the receivers that heard the tag, where no ``--water-depth`` is given);
 * its dates: ``deploy_date_time`` (or ``deploy_date``, ``start``) and ``recover_date_time`` (or ``recovery_date``,
   ``recover_date``, ``end``), ISO 8601 (UTC unless a zone is given) or epoch seconds; empty: open;
 * its co-located sync tag: ``sync_tag`` (or ``transmitter``), a full ID or an id, empty for none.
@@ -67,8 +68,9 @@ ALIASES = {
     "end": ("recover_date_time", "recovery_date_time", "recovery_date", "recover_date", "recovery_datetime_utc",
             "end"),
 }
-#: The depths allowed [m] (an instrument's and the bottom's; positive down).
+#: The depths allowed [m] (an instrument's; positive down), and the bottom's (below the surface).
 DEPTH_RANGE = (-10.0, 11000.0)
+BOTTOM_RANGE = (0.0, 11000.0)
 #: The columns of :attr:`Deployments.table`.
 COLUMNS = ("receiver", "serial", "station", "sync_tag", "x", "y", "z", "lat", "lon", "start", "end",
            "bottom_depth", "line")
@@ -240,7 +242,9 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
                           "sync_tag": text("sync_tag", TRANSMITTER, "a transmitter's full ID (A69-1601-60123) or "
                                                                     "id, or empty"),
                           "x": x, "y": y, "z": z, "lat": lat, "lon": lon, "start": start, "end": end,
-                          "bottom_depth": values("bottom", *DEPTH_RANGE, "m (positive down)"),
+                          "bottom_depth": _bottom(values("bottom", *BOTTOM_RANGE, "m (positive down)"), z,
+                                                  f"{what}: {name!r}", lines,
+                                                  None if index["bottom"] is None else header[index["bottom"]]),
                           "line": np.asarray(lines, np.int64)})
     _check_overlaps(table, "serial", "receiver", name, what)
     _check_overlaps(table[table["sync_tag"] != ""], "sync_tag", "sync tag", name, what)
@@ -254,6 +258,23 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     if ignored:
         notes.append(f"columns not used: {', '.join(h[:30] for h in ignored[:12])}")
     return Deployments(table, chosen, name, notes)
+
+
+def _bottom(bottom: np.ndarray, z: np.ndarray, where: str, lines: list[int], column: str | None) -> np.ndarray:
+    """The bottom's depth per deployment [m], checked against the instrument's height ``z`` [m, up].
+
+    Raises
+    ------
+    ModelError
+        A bottom above its instrument (one line naming the line and the column).
+    """
+    above = np.flatnonzero(np.isfinite(bottom) & np.isfinite(z) & (bottom < -z))
+    if len(above):
+        k = int(above[0])
+        raise ModelError(f"{where} line {lines[k]} column {column}: {bottom[k]:g} m is above the instrument at "
+                         f"{-z[k]:g} m; allowed: a bottom at least as deep as the instrument, in [{-z[k]:g}, "
+                         f"{BOTTOM_RANGE[1]:g}] m")
+    return bottom
 
 
 def _check_overlaps(table: pd.DataFrame, key: str, what_key: str, name: str, what: str) -> None:
@@ -339,5 +360,5 @@ def assign(detections: Detections, deployments: Deployments) -> Assigned:
     return Assigned(replace(detections, frame=kept), hydrophones, set_aside, keep)
 
 
-__all__ = ["ALIASES", "Assigned", "COLUMNS", "DEPTH_RANGE", "Deployments", "MAX_DEPLOYMENTS", "SET_ASIDE", "assign",
-           "read_deployments"]
+__all__ = ["ALIASES", "Assigned", "BOTTOM_RANGE", "COLUMNS", "DEPTH_RANGE", "Deployments", "MAX_DEPLOYMENTS",
+           "SET_ASIDE", "assign", "read_deployments"]

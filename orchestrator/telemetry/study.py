@@ -42,8 +42,10 @@ from sblsim.orchestrator.sync.run import rounding_warning, synchronise
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
 from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
+from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
 from sblsim.orchestrator.tracks.tracker import toa_noise
+from sblsim.orchestrator.tracks.water import read_temperature_series
 
 #: The columns of ``tags.csv``.
 TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
@@ -160,7 +162,8 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
               sound_speed_file: Path | None = None, temperature: float | None = None, salinity: float | None = None,
               bin_hours: float = 1.0, workers: int | None = None, scheduler: str | None = None,
               toa_sigma: float | None = None, started: Callable[[list[str], dict[str, Any]], None] | None = None,
-              ended: Callable[[dict[str, Any]], None] | None = None) -> StudyOutcome:
+              ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
+              water_depth: float | None = None) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -192,6 +195,13 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         Called with the tags' folders and the summary so far, before the tracking.
     ended : callable, optional
         Called with each tracked tag's ``tags.csv`` row as its tracking ends.
+    temperature_path : Path, optional
+        A water-temperature series in UTC times (:func:`~sblsim.orchestrator.tracks.water.read_temperature_series`,
+        read here first), made each tag's sound speed by TEOS-10 at ``salinity``.
+    water_depth : float, optional
+        [m] the water's depth bounding every tag's depth (the deployments' depths needed); default each tag's the
+        deepest ``bottom_depth`` of the deployments that heard it, where the deployments give it
+        (:func:`~sblsim.orchestrator.tracks.depth.bottom_water_depth`; ``summary["water_depth"]`` says which).
 
     Returns
     -------
@@ -211,6 +221,9 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     data = read_detections(detections, format)
     sheet = read_tag_sheet(tags) if tags is not None else None
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
+    if temperature_path is not None:  # refused here in one line, not once per tag
+        read_temperature_series(temperature_path, 0.0, absolute=True)
+    bottom, water_info = _water(deployments, water_depth, notes)
     assigned = assign(data, deployments)
     detected = assigned.detections.frame["tag"].unique()
     sync_tags = set(assigned.hydrophones["sync_tag"]) - {""}
@@ -259,7 +272,12 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                        "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                        "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
                        "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
-                       "other_filters": False, "toa_sigma": toa_sigma}
+                       "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
+                       "temperature_path": None if temperature_path is None else Path(temperature_path).absolute()}
+            if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
+                options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
+                                                            np.isfinite(matrix.toa).any(axis=0))
+                water_info["per_tag_m"][key] = options["water_depth"]
             jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
             row["folder"] = folder
         except ModelError as exc:
@@ -267,6 +285,8 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         rows[name] = row
     summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
     summary["toa_noise"] = noise_info
+    if water_info:
+        summary["water_depth"] = water_info
     if started is not None:
         started([j[0] for j in jobs], summary)
     by_folder = {folder: name for name, folder in folders.items()}
@@ -286,6 +306,34 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                        "refused": int((table_tags["status"] == "refused").sum())}
     summary["wall_time_s"] = clock.perf_counter() - begun
     return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced)
+
+
+def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
+           ) -> tuple[pd.Series | None, dict[str, Any]]:
+    """The water depth the tags take: ``water_depth`` given (checked against the deployments' depths), else the
+    deployments' ``bottom_depth`` by receiver (each tag's taken from those that heard it) where the geometry is 3-D
+    (said in a note where it is not); returns that series (None where not used) and ``summary["water_depth"]``.
+
+    Raises
+    ------
+    ModelError
+        ``water_depth`` without the deployments' depths, or above a deployment's (one line).
+    """
+    table = deployments.table
+    three_d = bool(np.isfinite(table["z"].to_numpy(float)).all())
+    axes = ["x", "y", "z"] if three_d else ["x", "y"]
+    if water_depth is not None:
+        check_water_depth(water_depth, table[axes].to_numpy(float), table["receiver"].tolist())
+        return None, {"source": "given", "water_depth_m": water_depth}
+    bottom = table.set_index("receiver")["bottom_depth"]
+    if not np.isfinite(bottom.to_numpy(float)).any():
+        return None, {}
+    if not three_d:
+        notes.append("bottom_depth not used: the deployments' own depths are not all given (a 2-D geometry; give "
+                     "instrument_depth or z_m for every deployment)")
+        return None, {}
+    return bottom, {"source": "bottom_depth", "rule": "the deepest bottom_depth of the deployments that heard the tag",
+                    "per_tag_m": {}}
 
 
 def _write_matrix(matrix, folder: Path, notes: list[str]) -> None:

@@ -155,6 +155,28 @@ def prior_line(info: dict[str, Any]) -> str | None:
             f"{info['sigma_m']:.2g} m ({ask})")
 
 
+def bottom_water_depth(bottom: np.ndarray, heard: np.ndarray) -> float | None:
+    """The water depth [m] a tag's depth is bounded by, from its receivers' ``bottom`` (n,) [m, positive down; NaN
+    where not given]: the deepest bottom of those that ``heard`` (n,) the tag (a bound the tag stays above wherever
+    it was heard, and at least every such receiver's depth); None where none of them has one."""
+    known = np.asarray(heard, bool) & np.isfinite(bottom)
+    return float(np.max(np.asarray(bottom, float)[known])) if known.any() else None
+
+
+def water_line(info: dict[str, Any], option: str = "--water-depth") -> str:
+    """The console's line on the water depth a study's tags take (``study.json``'s ``water_depth``): given
+    (``option``), or each tag's from its receivers' ``bottom_depth`` (:func:`bottom_water_depth`)."""
+    if info["source"] == "given":
+        return (f"water depth {info['water_depth_m']:g} m (given, {option}): each tag's depth kept between the "
+                "surface and it")
+    values = [v for v in info["per_tag_m"].values() if v is not None]
+    span = "none of the tags' receivers has one" if not values else (
+        f"{min(values):g} m" if min(values) == max(values) else f"{min(values):g} to {max(values):g} m")
+    return (f"water depth per tag: the deepest bottom_depth of the deployments that heard it ({span}, "
+            f"{len(values)} of {len(info['per_tag_m'])} tags): each tag's depth kept between the surface and it "
+            f"(give {option} for one depth)")
+
+
 def depth_term(prior: DepthPrior | None, covariances: np.ndarray) -> np.ndarray | None:
     """What an estimate that took ``prior`` adds to its reported covariances (m, 3, 3) [m²]: its depth's variance
     raised to the prior's (:func:`~sblsim.models.tracking.depth.at_least`); None where no prior was taken or the
@@ -162,5 +184,5 @@ def depth_term(prior: DepthPrior | None, covariances: np.ndarray) -> np.ndarray 
     return None if prior is None or not prior.floor else at_least(covariances, prior.sigma)
 
 
-__all__ = ["MAX_WATER_DEPTH", "PRIOR_SOURCE", "WATER_SOURCE", "check_water_depth", "depth_term", "plane_depth",
-           "prior_info", "prior_line", "tag_depth", "undetermined_depth"]
+__all__ = ["MAX_WATER_DEPTH", "PRIOR_SOURCE", "WATER_SOURCE", "bottom_water_depth", "check_water_depth", "depth_term",
+           "plane_depth", "prior_info", "prior_line", "tag_depth", "undetermined_depth", "water_line"]

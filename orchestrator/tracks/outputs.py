@@ -97,8 +97,9 @@ def _log_norm(values: np.ndarray):
 
 
 def write(outcome: TrackOutcome, out: Path) -> None:
-    """``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png`` and with a truth ``score.json``,
-    ``errors.csv`` and ``bound.csv``, all or nothing."""
+    """``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png``, with a truth ``score.json``,
+    ``errors.csv`` and ``bound.csv``, and where a stated interval set rows aside ``set_aside.csv``, all or
+    nothing."""
     import matplotlib.pyplot as plt
 
     fig = figure(outcome)
@@ -110,6 +111,8 @@ def write(outcome: TrackOutcome, out: Path) -> None:
                 outcome.errors.to_csv(tmp / "errors.csv", index=False)
             if outcome.bound is not None:
                 outcome.bound.to_csv(tmp / "bound.csv", index=False)
+            if outcome.set_aside is not None and len(outcome.set_aside):
+                outcome.set_aside.to_csv(tmp / "set_aside.csv", index=False)
             if outcome.score is not None:
                 (tmp / "score.json").write_text(json.dumps(outcome.score, indent=2, allow_nan=False) + "\n")
             (tmp / "summary.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")

@@ -47,6 +47,7 @@ from sblsim.orchestrator.tracks.tracker import (
     SIGMA_TOA,
     motion_model,
     ping_schedule,
+    set_aside,
     toa_noise,
     tracker_settings,
 )
@@ -93,8 +94,9 @@ class TrackOutcome:
     """The outcome of :func:`track`: ``track`` (the track's rows, ``track.csv``), ``estimates`` (every estimator's
     rows, ``estimates.csv``), ``errors`` (``errors.csv``, None without a truth), ``score`` (``score.json``, None
     without a truth), ``summary`` (how the run went, ``summary.json``), ``bound`` (``bound.csv``, None without a
-    truth), ``truth`` (the truth track as read, rows ``t, x, y[, z]``, for the figure; None without one) and
-    ``array`` (the receivers used: their names and positions (k, dim) [m], for the figure)."""
+    truth), ``truth`` (the truth track as read, rows ``t, x, y[, z]``, for the figure; None without one),
+    ``array`` (the receivers used: their names and positions (k, dim) [m], for the figure) and ``set_aside`` (the
+    rows the stated interval sets aside as no pings, ``set_aside.csv``; None where no interval is stated)."""
 
     track: Any  # pandas.DataFrame
     estimates: Any  # pandas.DataFrame
@@ -104,6 +106,7 @@ class TrackOutcome:
     bound: Any = None  # pandas.DataFrame or None (bound.csv)
     truth: np.ndarray | None = None
     array: tuple[list[str], np.ndarray] | None = None
+    set_aside: Any = None  # pandas.DataFrame or None (set_aside.csv)
 
 
 def _usable(toa_matrix, receivers, kept: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -179,19 +182,24 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
 
 
 def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled, survey: np.ndarray | None,
-                        speed_sigma: float | None, sigma_toa: float | np.ndarray = SIGMA_TOA) -> np.ndarray | None:
+                        speed_sigma: float | None, sigma_toa: float | np.ndarray = SIGMA_TOA,
+                        clock_sigma: np.ndarray | None = None) -> np.ndarray | None:
     """A stationary tag's pooled position's consider covariance (dim, dim) [m²] of the errors pooling does not
-    average: the receivers' survey ``survey`` (n,) [m per axis] and the sound speed's ``speed_sigma`` [m/s], each a
-    constant bias of one receiver's arrivals (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`); None
-    where neither is known."""
+    average: the receivers' survey ``survey`` (n,) [m per axis], the sound speed's ``speed_sigma`` [m/s] and the
+    receivers' clock offsets' ``clock_sigma`` (n,) [s] (a synchronisation's own uncertainty of each receiver's offset,
+    NaN where not known: taken as 0), each a constant bias of one receiver's arrivals
+    (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`); None where none is known."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
-    if survey is None and not speed_sigma:
+    clock = None if clock_sigma is None else np.nan_to_num(np.asarray(clock_sigma, float), nan=0.0)
+    if survey is None and not speed_sigma and (clock is None or not clock.any()):
         return None
     S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
     B = np.zeros((len(positions), len(positions)))
     if survey is not None:  # a still tag's range to receiver i is off by u_i · δr_i, of variance σ_i² (|u_i| = 1)
         B += np.diag(np.asarray(survey, float) ** 2 / c**2)
+    if clock is not None:  # receiver i's arrivals all off by its offset's error, independent between receivers
+        B += np.diag(clock**2)
     if speed_sigma:  # the travel time ρ_i / c off by −ρ_i δc / c² at every receiver at once
         rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
         B += float(speed_sigma) ** 2 * np.outer(rho, rho) / c**4
@@ -228,7 +236,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           fixed_depth: float | None = None, depth_sigma: float = DEPTH_SIGMA,
           survey_sigma: float | None = None, crs: str | None = None, frame: str | None = None,
           time_origin: float | None = None, other_filters: bool = True, toa_sigma: float | None = None,
-          temperature_path: Path | None = None, water_depth: float | None = None) -> TrackOutcome:
+          temperature_path: Path | None = None, water_depth: float | None = None,
+          force_interval: bool = False) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -249,7 +258,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     measurement covariance and in the sound speed's calibration; ``temperature_path`` a water-temperature series made
     the sound speed by TEOS-10 at ``salinity`` (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`);
     ``water_depth`` [m] the water's depth, which bounds the tag's (:mod:`sblsim.orchestrator.tracks.depth`; receivers
-    in one plane hold it at mid-water, else at their mean depth)."""
+    in one plane hold it at mid-water, else at their mean depth); the rows a stated interval (``burst_interval``,
+    ``burst_sequence_path``) shows to be no pings set aside before anything is fitted
+    (:func:`~sblsim.orchestrator.tracks.tracker.set_aside`: their rows kept in the outputs with no estimate and the
+    reason, listed in ``set_aside``), a stated interval the rows contradict as a whole refused unless
+    ``force_interval``."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -275,6 +288,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     dim = positions.shape[1]
     check_array(positions, names, toa, tt.SOUND_SPEED_RANGE[0])
     ps.first_arrival_steps(toa)  # the rows in time order, before anything is fitted to them
+    # the rows the stated interval shows to be no pings (a stray code, a collision), set aside before anything is
+    # fitted to them; a stated interval the rows contradict as a whole refused (or, forced, said)
+    read = toa
+    toa, stray, aside, aside_warning = set_aside(toa, positions, tt.SOUND_SPEED_RANGE[1], burst_interval,
+                                                 burst_sequence, force_interval)
     if truth is not None:
         first = ps.first_arrivals(toa)
         span = (float(np.nanmin(first)), float(np.nanmax(first))) if np.isfinite(first).any() else (np.nan, np.nan)
@@ -291,6 +309,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         depth, depth_sigma, depth_info = np.full(len(toa), plane.depth), plane.sigma, prior_info(plane, positions,
                                                                                                    water_depth)
     survey = survey_sigmas(receivers, names, survey_sigma)
+    # each receiver's clock offset's own uncertainty from the synchronisation (receivers.csv's clock_sigma_s): a
+    # still tag's consider term
+    clock_sigma = None if receivers.clock_sigma is None else \
+        receivers.clock_sigma[[receivers.names.index(n) for n in names]]
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
                                       depth_sigma, time_origin, sigma_toa=sigma, temperature_path=temperature_path,
                                       water=water)
@@ -384,14 +406,18 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     if stationary:
         pooled = stationary_track(toa, positions, c, fx, sigma)
         kp = np.flatnonzero(np.isfinite(pooled.emissions))
-        pooled_extra = stationary_consider(toa, positions, c, pooled, survey, speed_sigma, sigma)
+        pooled_extra = stationary_consider(toa, positions, c, pooled, survey, speed_sigma, sigma, clock_sigma)
         rows("stationary", kp, pooled.emissions[kp], np.repeat(pooled.position[None], len(kp), axis=0),
              np.repeat(pooled.covariance[None], len(kp), axis=0),
              (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), None,
              None if pooled_extra is None else np.repeat(pooled_extra[None], len(kp), axis=0))
         count, ratio, went = tag_moved(fx, fe, trusted)
         motion_info |= {"moved_test": {"trusted_fixes": count, "successive_ratio": None if np.isnan(ratio) else ratio,
-                                       "permutations": PERMUTATIONS}, "moved": went}
+                                       "permutations": PERMUTATIONS}, "moved": went,
+                        "consider_terms": [term for term, known in (
+                            ("survey", survey is not None), ("sound speed", bool(speed_sigma)),
+                            ("clocks", clock_sigma is not None and bool(np.nan_to_num(clock_sigma).any())))
+                            if known]}
         if went:  # one position refuted by the tag's own fixes: no row of it is a position to take
             frames["stationary"]["quality"] = "flagged"
             frames["stationary"]["quality_reason"] = _with_reason(frames["stationary"]["quality_reason"], "tag_moved")
@@ -444,6 +470,21 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     flagged["fix"] = int((frames["fix"]["quality"] == "flagged").sum())
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
+    if stray.any():  # the rows set aside: in the track with no estimate and their reason, the row numbering kept
+        extra = np.setdiff1d(np.flatnonzero(stray), frames[main]["ping"])
+        combined = pd.concat([frames[main], pd.DataFrame({"estimator": main, "ping": extra})], ignore_index=True)
+        order = np.argsort(combined["ping"].to_numpy(), kind="stable")
+        frames[main] = combined.iloc[order].reset_index(drop=True)
+        covariances[main] = np.concatenate([covariances[main], np.full((len(extra), 2, 2), np.nan)])[order]
+        for estimator, frame in frames.items():
+            at = np.isin(frame["ping"].to_numpy(), np.flatnonzero(stray))
+            if at.any():
+                frame.loc[at, [k for k in frame.columns if k not in ("estimator", "ping")]] = np.nan
+                frame.loc[at, "receivers_heard"] = 0
+                frame.loc[at, "quality"] = "flagged"
+                frame.loc[at, "quality_reason"] = ps.SET_ASIDE_REASON
+                frame["receivers_heard"] = frame["receivers_heard"].astype(int)
+                flagged[estimator] = int((frame["quality"] == "flagged").sum())
     estimates = pd.concat(frames.values(), ignore_index=True)
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
     at = np.full((len(toa), dim), np.nan)
@@ -461,10 +502,13 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "ping_interval_s": interval,
         "motion": motion_info, "depth": depth_info,
         "survey_sigma_m": None if survey is None else dict(zip(names, map(float, survey))),
+        "clock_sigma_s": None if clock_sigma is None else {n: None if np.isnan(v) else float(v)
+                                                           for n, v in zip(names, clock_sigma)},
         "ping_type": {"type": schedule.kind, "source": schedule.source,
                       "burst_interval_s": None if schedule.bounds is None else list(schedule.bounds),
                       "seen": {"typical_step_s": seen.interval, "steps_s": list(seen.bounds),
                                "spread_s": seen.spread, "type": seen.kind}},
+        "set_aside": aside | {"warning": aside_warning},
         "segments": [[int(a), int(b - 1)] for a, b in schedule.segments()],
         "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
         "restarts": 0 if record is None else len(record.restarts),
@@ -498,8 +542,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                        **({} if err3 is None else {"error_3d_m": err3})}))
 
         for estimator, frame in frames.items():
-            scored(estimator, frame["ping"].to_numpy(), frame["time"].to_numpy(), frame[columns].to_numpy(),
-                   covariances[estimator], frame["quality"].to_numpy())
+            kept = (frame["quality_reason"] != ps.SET_ASIDE_REASON).to_numpy()  # a row set aside is no estimate
+            scored(estimator, frame["ping"].to_numpy()[kept], frame["time"].to_numpy()[kept],
+                   frame[columns].to_numpy()[kept], covariances[estimator][kept], frame["quality"].to_numpy()[kept])
         if reference is not None:
             scored("reference", -1, reference[:, 0], reference[:, 1:], None)
         errors = pd.concat(parts, ignore_index=True)
@@ -514,7 +559,26 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             result["bound"] = {"robust_rms": "median / sqrt(ln 2)", "columns": BOUND_COLUMNS,
                                "thirds": bound_thirds(bound, errors)}
     summary["wall_time_s"] = time.perf_counter() - start
-    return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth, (names, positions))
+    return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth, (names, positions),
+                        _set_aside_table(read, stray, names, time_origin) if burst_interval is not None or
+                        burst_sequence is not None else None)
+
+
+def _set_aside_table(toa: np.ndarray, stray: np.ndarray, names: list[str], time_origin: float | None):
+    """``set_aside.csv``: each row set aside (``ping``, 0-based as ``estimates.csv`` counts them), its first arrival
+    [s] on the times of arrival's base (and in UTC where the origin is known), the receivers that heard it and
+    why."""
+    import pandas as pd
+
+    rows = np.flatnonzero(stray)
+    first = ps.first_arrivals(toa[rows])
+    table = {"ping": rows, "time": first}
+    if time_origin is not None:
+        table["time_utc"] = iso_utc(first + time_origin)
+    heard = np.isfinite(toa[rows])
+    return pd.DataFrame(table | {"receivers_heard": heard.sum(axis=1),
+                                 "heard": [";".join(n for n, h in zip(names, row) if h) for row in heard],
+                                 "reason": ps.SET_ASIDE_REASON})
 
 
 __all__ = ["ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "SCORE_KEYS", "TrackOutcome",

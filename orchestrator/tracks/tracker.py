@@ -20,6 +20,9 @@ SIGMA_TOA = 1.5e-4
 
 #: The timing noise a user may give, and a receivers file's ``toa_sigma_s`` may hold [s]: a microsecond to a second.
 TOA_SIGMA_RANGE = (1e-6, 1.0)
+#: A receiver's clock offset's own uncertainty a synchronisation's ``offsets.csv`` and a receivers file's
+#: ``clock_sigma_s`` may hold [s] (0 at the reference receiver): a stationary tag's consider term.
+CLOCK_SIGMA_RANGE = (0.0, 1.0)
 
 
 #: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
@@ -100,6 +103,49 @@ def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: s
     return replace(schedule, bounds=bounds), seen
 
 
+def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_interval: tuple[float, float] | None = None,
+              burst_sequence: np.ndarray | None = None, force: bool = False, option: str = "--force-interval"
+              ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], str | None]:
+    """The rows of ``toa`` (m, n) [s] that cannot be pings of the stated schedule, set aside
+    (:func:`~sblsim.models.tracking.schedule.stray_rows`): a random interval's min (``burst_interval`` (min, max)
+    [s]) or a pseudo-random sequence's least (``burst_sequence`` [s]), at the crossing time of the receivers
+    ``positions`` (n, dim) [m] at ``fastest`` [m/s], the fastest sound speed allowed (the shortest crossing: a row
+    kept here is kept by the schedule at any speed). A stated interval the rows contradict as a whole is refused
+    (:func:`~sblsim.models.tracking.schedule.check_strays`), or with ``force`` taken and said.
+
+    Returns
+    -------
+    toa : ndarray, (m, n)
+        The matrix with the rows set aside blanked (NaN): heard by nobody, no ping.
+    stray : ndarray of bool, (m,)
+    info : dict
+        ``summary.json``'s ``set_aside``: the shortest interval [s], the rows set aside (0-based) and their count.
+    warning : str or None
+        With ``force``, where the rows contradict the interval: the line that says so.
+
+    Raises
+    ------
+    ModelError
+        A stated interval the rows contradict as a whole, without ``force``.
+    """
+    stray = np.zeros(len(toa), bool)
+    if burst_interval is not None:
+        shortest, stated = float(burst_interval[0]), f"{burst_interval[0]:g}:{burst_interval[1]:g} s"
+    elif burst_sequence is not None and len(burst_sequence):
+        shortest = float(np.min(burst_sequence))
+        stated = f"the burst sequence's {shortest:g} s least"
+    else:
+        return toa, stray, {"shortest_s": None, "rows": [], "count": 0, "forced": False}, None
+    crossing = ps.crossing_time(positions, fastest)
+    stray = ps.stray_rows(toa, shortest, crossing)
+    warning = ps.check_strays(toa, stray, stated, shortest, force, option)
+    out = toa.copy()
+    out[stray] = np.nan
+    rows = np.flatnonzero(stray)
+    return out, stray, {"shortest_s": shortest, "rows": [int(k) for k in rows], "count": int(len(rows)),
+                        "forced": warning is not None, "reason": ps.SET_ASIDE_REASON}, warning
+
+
 def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fixes, acceleration_psd: float | None):
     """The tracker's settings with the motion model's ``q`` [m²/s³]: ``acceleration_psd`` where given, else
     estimated by EM (:func:`~sblsim.models.tracking.motion_noise.estimate_acceleration_psd`) from the single-ping
@@ -122,5 +168,5 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         "converged": found.converged, "history": list(found.history)}
 
 
-__all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "SIGMA_TOA", "TOA_SIGMA_RANGE", "motion_model", "noise_line", "ping_schedule",
-           "toa_noise", "tracker_settings"]
+__all__ = ["AGREE_AFTER", "CLOCK_SIGMA_RANGE", "DEPTH_SIGMA", "SIGMA_TOA", "TOA_SIGMA_RANGE", "motion_model",
+           "noise_line", "ping_schedule", "set_aside", "toa_noise", "tracker_settings"]

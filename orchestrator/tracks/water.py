@@ -36,7 +36,7 @@ TEMPERATURE_NAMES = ("temperature_c", "temperature", "temp_c", "temp", "water_te
                      "temperature_degc", "temp_degc", "t_c")
 
 
-def read_temperature_series(path: Path | str, origin: float | None = None) -> np.ndarray:
+def read_temperature_series(path: Path | str, origin: float | None = None, absolute: bool = False) -> np.ndarray:
     """Read a water-temperature series (the module docstring).
 
     Parameters
@@ -45,6 +45,8 @@ def read_temperature_series(path: Path | str, origin: float | None = None) -> np
         The CSV file.
     origin : float, optional
         The UTC time of the times of arrival's zero [s since 1970]: needed where the file's times are absolute.
+    absolute : bool
+        Only absolute times taken (a study, whose tags' times of arrival each have their own base).
 
     Returns
     -------
@@ -57,7 +59,7 @@ def read_temperature_series(path: Path | str, origin: float | None = None) -> np
         One line naming the file (and the line and column): a file too large or not CSV text, no time or temperature
         column, a cell that is not a number or a time, a temperature outside
         :data:`~sblsim.models.tracking.sound_speed.TEMPERATURE_RANGE`, times that do not increase, absolute times
-        without an origin.
+        without an origin, times on the times of arrival's base where ``absolute``.
     """
     path, what = Path(path), "temperature file"
     name = str(path)
@@ -71,8 +73,12 @@ def read_temperature_series(path: Path | str, origin: float | None = None) -> np
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no rows; allowed: at least one time and temperature")
     cells = body[t].astype(str).str.strip()
-    absolute = named([header[t]], ABSOLUTE_NAMES) is not None or not cells.str.fullmatch(NUMBER.pattern).all()
-    if absolute:
+    given = named([header[t]], ABSOLUTE_NAMES) is not None or not cells.str.fullmatch(NUMBER.pattern).all()
+    if absolute and not given:
+        raise ModelError(f"{what}: {name!r} column {header[t]}: times on no stated base; allowed: UTC times (a "
+                         "time_utc column in ISO 8601, or epo in seconds since 1970): each tag's times of arrival "
+                         "have their own base")
+    if given:
         times = utc_seconds(cells, f"{what}: {name!r}", lines, header[t])
         if origin is None:
             raise ModelError(f"{what}: {name!r}: its times are absolute (UTC: ISO 8601 or epoch seconds in "

@@ -14,7 +14,7 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.sync import detections as reader
-from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones, read_sound_speed
+from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones, read_sound_speed, reset_line
 
 BOATS = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 
@@ -89,16 +89,19 @@ def _yaps(tmp_path: Path, rows: str, name: str = "d.csv") -> Path:
     return path
 
 
-def test_a_clock_going_back_is_reported_not_sorted(tmp_path):
-    # receivers interleaved, each in its own order: read
+def test_a_clock_going_back_is_kept_as_a_new_part_not_sorted(tmp_path):
+    # receivers interleaved, each in its own order: read, no clock parts
     fine = _yaps(tmp_path, "100,0.5,7,A\n99,0.1,7,B\n101,0,7,A\n102,0.25,7,B\n")
-    assert len(read_detections(fine).frame) == 4
+    assert len(read_detections(fine).frame) == 4 and read_detections(fine).clock_resets == []
+    # A's time goes back at line 6 (a reset kept in its logging order): its rows from there a second clock part,
+    # the rows' order kept
     back = _yaps(tmp_path, "100,0.5,7,A\n99,0.1,7,B\n3700,0,7,A\n102,0.25,7,B\n101,0.5,7,A\n", "back.csv")
-    with pytest.raises(ModelError) as error:
-        read_detections(back)
-    message = str(error.value)
-    assert "\n" not in message and "line 6" in message and "receiver A" in message
-    assert "goes back 3598.5 s from line 4" in message
+    d = read_detections(back)
+    assert d.frame["time"].tolist() == [100.5, 99.1, 3700.0, 102.25, 101.5]
+    assert d.frame["clock_part"].tolist() == [1, 1, 1, 1, 2]
+    (reset,) = d.clock_resets
+    assert (reset["receiver"], reset["line"], reset["previous_line"], reset["step_s"]) == ("A", 6, 4, -3598.5)
+    assert "receiver A: its time goes back 3598.5 s at line 6" in reset_line(reset)
 
 
 @pytest.mark.parametrize("rows, found", [

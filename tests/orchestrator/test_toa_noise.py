@@ -137,3 +137,21 @@ def test_a_receivers_files_noise_outside_its_range_is_refused(synchronised, tmp_
         sblsim.replay_toa(folder / "toa" / "toa.txt", receivers=tmp_path / "receivers.csv", sound_speed=1480.0)
     text = str(error.value)
     assert "line 3" in text and "toa_sigma_s" in text and "\n" not in text
+
+
+def test_each_receivers_clock_sigma_is_carried_to_the_matrix(synchronised):
+    """``offsets.csv``'s ``clock_sigma_s`` is each receiver's offsets' own RMS sigma (``toa_noise``'s ``clock_s``,
+    the same on every row of the receiver; 0 at the reference), within its ``toa_sigma_s`` (the two in quadrature
+    with the residuals' part), and the matrix's ``receivers.csv`` carries it for the stationary fix's clock term."""
+    _, _, result, folder, _ = synchronised
+    offsets = pd.read_csv(folder / "sync" / "offsets.csv", dtype={"receiver": str})
+    per_receiver = offsets.groupby("receiver")
+    assert (per_receiver["clock_sigma_s"].nunique() == 1).all()
+    first = per_receiver.first()
+    clock = np.array([result.summary["toa_noise"][r]["clock_s"] for r in first.index])
+    np.testing.assert_allclose(first["clock_sigma_s"], clock)
+    parts = np.array([result.summary["toa_noise"][r]["residuals_s"] for r in first.index])
+    np.testing.assert_allclose(first["toa_sigma_s"], np.hypot(parts, clock), rtol=1e-9)
+    assert (clock == 0).sum() == 1 and (clock[clock > 0] < first["toa_sigma_s"].to_numpy()[clock > 0]).all()
+    receivers = pd.read_csv(folder / "toa" / "receivers.csv", dtype={"name": str}).set_index("name")
+    np.testing.assert_allclose(receivers["clock_sigma_s"], first.loc[receivers.index, "clock_sigma_s"], rtol=1e-5)
