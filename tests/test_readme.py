@@ -30,7 +30,8 @@ The figures the pages show (``![...](figures/NAME.png)``, the README's ``docs/fi
 the pages' own blocks: each copy starts without any file of ``docs/figures/``, and after a page's blocks have
 run, every figure it shows must have been written by them (there, and since the page started: not left by an
 earlier page), a PNG of about the size of the committed one (the same figure; matplotlib's bytes are not
-stable, so the bytes are not compared). Once both chains have run, the site is built from the first chain's
+stable, so the bytes are not compared). The figures a page quotes from its runs (marked: tests/page_figures.py) are
+checked against what its blocks printed and wrote. Once both chains have run, the site is built from the first chain's
 copy with the second's figures added (``sphinx-build -W``), and its images are the bytes the runs wrote.
 """
 
@@ -46,6 +47,8 @@ import time
 from pathlib import Path
 
 import pytest
+
+from tests.page_figures import check_page, marked
 
 ROOT = Path(__file__).resolve().parents[1]
 SETUP_INSTALL = "python3 -m venv .venv && .venv/bin/pip install -e . && "
@@ -277,6 +280,7 @@ def _run_page(fresh_copy: Path, shell: dict, page: str) -> None:
               for figure in figures}
     started = time.time_ns()
     blocks = fenced_blocks(text, ("bash", "python"))
+    printed = {}  # each block's first line -> what it printed (the page's marked figures are checked against it)
     for number, (line, language, body) in enumerate(blocks, 1):
         if not_run(body) is not None:
             continue
@@ -285,11 +289,13 @@ def _run_page(fresh_copy: Path, shell: dict, page: str) -> None:
             done = subprocess.run([python, "-c", body], cwd=fresh_copy, env=env, capture_output=True, text=True,
                                   timeout=1200)
             assert done.returncode == 0, f"{where}:\n{done.stderr[-4000:]}"
+            printed[line] = done.stdout + "\n" + done.stderr
             continue
         script = as_run(body, "short-paper.toml")
         done = subprocess.run(["bash", "-e", "-x", "-c", shell["session"] + script], cwd=fresh_copy, env=env,
                               capture_output=True, text=True, timeout=1200)
         assert done.returncode == 0, f"{where}:\n{done.stderr[-4000:]}"
+        printed[line] = done.stdout + "\n" + done.stderr
         if "source .venv/bin/activate" in script:
             shell["session"] = "source .venv/bin/activate\n"
     for figure in figures:
@@ -304,6 +310,9 @@ def _run_page(fresh_copy: Path, shell: dict, page: str) -> None:
         committed = png_size(ROOT / figure)
         assert abs(width / committed[0] - 1) < 0.2 and abs(height / committed[1] - 1) < 0.2, \
             f"{page}: the figure {figure} made is {width}x{height} px, the committed one {committed[0]}x{committed[1]}"
+    if marked(text):  # the figures the page quotes, against what its blocks printed and wrote (tests/page_figures.py)
+        problems = check_page(text, printed, fresh_copy)
+        assert not problems, f"{page}: figures the run does not give:\n" + "\n".join(problems)
     shell["done"].add(page)
     print(f"\n{page}: {len(blocks)} blocks in {time.perf_counter() - start:.0f} s")
 
