@@ -36,8 +36,8 @@ def candidate_times(n: int, repeats: int, map_samples: int = 3) -> dict:
     """Per-layout times [s] of the search's evaluation and of the map's function, and their largest DRMS difference."""
     from sblsim.models.declarations import format_table
     from sblsim.orchestrator.cosim.plan import load_plan
+    from sblsim.orchestrator.design.area import Area, work_area_points
     from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels
-    from sblsim.orchestrator.design.problem import Area, work_area_points
     from sblsim.orchestrator.maps import point_accuracy
 
     points = work_area_points(Area(vertices=np.array([[-1000.0, -1000.0], [-1000.0, 1000.0], [1000.0, 1000.0],

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.acoustics.channel.lanes import lane_name
-from sblsim.models.receiver.core import COVARIANCE, OPTIONAL_OUTPUTS
+from sblsim.models.receiver.interface import COVARIANCE, OPTIONAL_OUTPUTS
 
 #: Per-run error metrics of an estimator (the receiver's; prefixed ``instr_`` for the instrumentation fix) [m].
 METRIC_NAMES = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
@@ -61,7 +61,7 @@ TIMESERIES_COLUMNS = {
 }
 
 #: Time-series columns a run's table has where its receiver has their output (a user's FMU may lack the receiver's
-#: :data:`~sblsim.models.receiver.core.OPTIONAL_OUTPUTS`; every built-in receiver has them).
+#: :data:`~sblsim.models.receiver.interface.OPTIONAL_OUTPUTS`; every built-in receiver has them).
 OPTIONAL_COLUMNS = tuple(name for name, source in TIMESERIES_COLUMNS.items()
                          if source in {f"receiver.{output}" for output in OPTIONAL_OUTPUTS})
 

@@ -1,7 +1,7 @@
 """``sblsim replay``: a receiver run on a recorded log (:mod:`sblsim.orchestrator.receiver_log` reads it) as the
 master steps it in a run.
 
-Timing (the slot rule of the receivers, :func:`sblsim.models.receiver.core.slot_due`).
+Timing (the slot rule of the receivers, :func:`sblsim.models.receiver.slots.slot_due`).
 The replay runs on the grid of the configuration: macro steps of T =
 ``simulation.sampling_time``, each of ``simulation.ekf_rate_ratio``
 communication steps of the receiver. It starts at the last multiple of T
@@ -54,7 +54,7 @@ from sblsim.models.acoustics.channel.lanes import lane_name, lane_of
 from sblsim.models.acoustics.channel.pinger import ping_intervals
 from sblsim.models.columns import LANE_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.core import SLOT_SLACK
+from sblsim.models.receiver.slots import SLOT_SLACK
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
@@ -70,7 +70,8 @@ from sblsim.orchestrator.cosim.config import (
     switch_receiver,
     to_toml,
 )
-from sblsim.orchestrator.cosim.engines import DTYPES, cast_column, close_handles, make_handles
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.handles import DTYPES, cast_column
 from sblsim.orchestrator.cosim.limits import max_steps
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
@@ -187,7 +188,7 @@ def schedule(log: Log, T: float, ratio: int, jacobi: bool = False, lead: float =
 
 def stamp_tolerance(log: Log, T: float) -> float:
     """How far a row's time may lie from a slot epoch and still be taken as it [s]: the slot test's slack
-    (:data:`sblsim.models.receiver.core.SLOT_SLACK`), or four times the resolution of a float64 at the log's
+    (:data:`sblsim.models.receiver.slots.SLOT_SLACK`), or four times the resolution of a float64 at the log's
     times where that is coarser (Unix times near 1.7e9 s are resolved to 2.4e-7 s only).
 
     Raises

@@ -65,7 +65,7 @@ from sblsim.orchestrator.cosim.config import (
     section_variables,
 )
 from sblsim.orchestrator.cosim.connections import Connection, default_connections
-from sblsim.orchestrator.cosim.engines import fmu_paths, read_description
+from sblsim.orchestrator.cosim.fmu_files import fmu_paths, read_description
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
 from sblsim.orchestrator.io.archives import check_members, inside, safe_extract
 from sblsim.orchestrator.scenario_fmus import build_scenario_fmus, check_no_latency

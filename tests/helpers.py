@@ -19,7 +19,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from sblsim.models.declarations import resolve_parameters
-from sblsim.orchestrator.cosim.engines import LocalHandle
+from sblsim.orchestrator.cosim.local_engine import LocalHandle
 
 
 def fmu_values(model: type, params: Mapping[str, Any] | None = None, n_beacons: int = 4) -> dict[str, Any]:

@@ -21,7 +21,7 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import KalmanReceiver, kalman
-from sblsim.models.receiver.core import fresh_range, take_packet
+from sblsim.models.receiver.packets import fresh_range, take_packet
 
 
 class ConstantPositionReceiver(KalmanReceiver):

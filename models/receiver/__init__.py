@@ -11,9 +11,10 @@ motion model (:mod:`sblsim.models.receiver.motion`), the measurement models
 :mod:`sblsim.models.bound`.
 """
 
-from sblsim.models.receiver.core import KalmanReceiver, receiver_interface
+from sblsim.models.receiver.core import KalmanReceiver
 from sblsim.models.receiver.ekf import PaperEKF
 from sblsim.models.receiver.ekf_seq import SequentialReceiver
+from sblsim.models.receiver.interface import receiver_interface
 from sblsim.models.receiver.lsq import LeastSquaresReceiver
 from sblsim.models.receiver.measurement import (
     MeasurementModel,

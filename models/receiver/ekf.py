@@ -23,16 +23,12 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import (
-    KalmanReceiver,
-    earlier_innovation,
-    filter_parameters,
-    fresh_range,
-    remember_rejected,
-    take_packet,
-)
+from sblsim.models.receiver.core import KalmanReceiver
 from sblsim.models.receiver.gate import gate, gate_parameters
+from sblsim.models.receiver.interface import filter_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
+from sblsim.models.receiver.packets import fresh_range, take_packet
+from sblsim.models.receiver.reacquisition import earlier_innovation, remember_rejected
 
 
 def update(x: ca.SX, P: ca.SX, ranges: ca.SX, beacons: ca.SX, heard: ca.SX, depth, sigma_range, sigma_depth,

@@ -15,7 +15,7 @@ reception, a two-way range at the mean of its legs. The state carries the
 error states of :class:`~sblsim.models.receiver.motion.WithErrorStates`
 (the GPS error as a Gauss-Markov process, the clock's offset and drift,
 USBL's constant attitude error), each inert unless its parameter asks for it
-(:func:`~sblsim.models.receiver.core.error_parameters`). A χ² NIS gate (1 dof,
+(:func:`~sblsim.models.receiver.interface.error_parameters`). A χ² NIS gate (1 dof,
 ``gate_probability``) refuses a range that a multipath outlier lengthened;
 the output ``gated`` says so, and a range that fails after a run of failures
 is used again only if it agrees with its beacon's previous one
@@ -35,22 +35,15 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import (
-    KalmanReceiver,
-    beacon_parameters,
-    clock_scale,
-    depth_fresh,
-    earlier_innovation,
-    filter_parameters,
-    fresh_range,
-    reanchored,
-    remember_rejected,
-    take_packet,
-    toa_ranging,
-)
+from sblsim.models.receiver.core import KalmanReceiver
 from sblsim.models.receiver.gate import gate, gate_parameters
+from sblsim.models.receiver.interface import beacon_parameters, filter_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import WITH_ERROR_STATES
+from sblsim.models.receiver.packets import fresh_range, take_packet
+from sblsim.models.receiver.pings import depth_fresh, reanchored
+from sblsim.models.receiver.ranging import clock_scale, toa_ranging
+from sblsim.models.receiver.reacquisition import earlier_innovation, remember_rejected
 
 
 class SequentialReceiver(KalmanReceiver):

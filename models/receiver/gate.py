@@ -94,7 +94,7 @@ def gate(innovation, variance, fresh, x: dict, u: dict, p: dict, earlier=None) -
         The parameters ``gate_probability`` and ``gate_max_rejections`` (:func:`gate_parameters`).
     earlier : tuple of casadi.SX, optional
         ``(innovation, variance)`` of the fresh beacon's previous failed range predicted from the current state
-        (:func:`sblsim.models.receiver.core.earlier_innovation`); None: nothing is re-acquired.
+        (:func:`sblsim.models.receiver.reacquisition.earlier_innovation`); None: nothing is re-acquired.
 
     Returns
     -------

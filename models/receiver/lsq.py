@@ -1,6 +1,6 @@
 """Least-squares receiver: a per-slot Levenberg-Marquardt multilateration fix, no filter.
 
-At every new slot (the packet handling of :mod:`sblsim.models.receiver.core`) the
+At every new slot (the packet handling of :mod:`sblsim.models.receiver.slots`) the
 receiver fits its position to the held range of every beacon heard so far and
 the depth reading by weighted least squares,
 
@@ -20,7 +20,7 @@ the diver's true start). With a USBL interface
 the fix is the least-squares fix of the packet's range and direction and the
 depth, with its covariance and its weighted residual (``nis``, one degree of
 freedom: :func:`sblsim.models.systems.usbl.packet_fix`), R with the transceiver's uncertainty of the beacon parameters
-(:func:`~sblsim.models.receiver.core.beacon_parameters`, declared last). The receiver is its own
+(:func:`~sblsim.models.receiver.interface.beacon_parameters`, declared last). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
 
@@ -45,37 +45,25 @@ import casadi as ca
 from sblsim.models.component import Component
 from sblsim.models.declarations import SEED_PARAMETERS, Variable
 from sblsim.models.program import ProgramBuilder
-from sblsim.models.receiver.core import (
-    NO_ESTIMATE,
-    RangesWithProfile,
+from sblsim.models.receiver.core import NO_ESTIMATE, RangesWithProfile, profile_derived, profile_prepare_of
+from sblsim.models.receiver.instrument import lm_active, lm_begin, lm_idle, lm_states, lm_step
+from sblsim.models.receiver.interface import (
     arrival_interface,
     beacon_parameters,
-    clock_due,
     clock_parameters,
-    clock_tick,
     covariance_outputs,
     estimate_validity,
     filter_parameters,
-    fresh_packet,
     late_inputs,
-    lm_active,
-    lm_begin,
-    lm_idle,
-    lm_states,
-    lm_step,
-    packet_init,
-    packet_states,
-    profile_derived,
-    profile_prepare_of,
-    range_law,
     range_law_parameters,
     receiver_interface,
-    slot_events,
     system_interface,
-    take_packet,
 )
 from sblsim.models.receiver.multilateration import fix_covariance, weights
+from sblsim.models.receiver.packets import fresh_packet, packet_init, packet_states, take_packet
 from sblsim.models.receiver.profile import profile_parameters
+from sblsim.models.receiver.ranging import range_law
+from sblsim.models.receiver.slots import clock_due, clock_tick, slot_events
 from sblsim.models.systems import interface_system
 
 #: The Kalman receivers' parameters this receiver takes (declared once, in sblsim.models.receiver.core).

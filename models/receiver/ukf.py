@@ -25,24 +25,15 @@ import casadi as ca
 
 from sblsim.models.declarations import Variable
 from sblsim.models.receiver import kalman
-from sblsim.models.receiver.core import (
-    KalmanReceiver,
-    beacon_parameters,
-    clock_scale,
-    depth_fresh,
-    earlier_innovation,
-    filter_parameters,
-    first_row,
-    fresh_range,
-    reanchored,
-    remember_rejected,
-    reply_epoch,
-    take_packet,
-    toa_ranging,
-)
+from sblsim.models.receiver.core import KalmanReceiver
 from sblsim.models.receiver.gate import gate, gate_parameters
+from sblsim.models.receiver.interface import beacon_parameters, filter_parameters
 from sblsim.models.receiver.measurement import RangeDepthModel
 from sblsim.models.receiver.motion import WITH_ERROR_STATES
+from sblsim.models.receiver.packets import fresh_range, take_packet
+from sblsim.models.receiver.pings import depth_fresh, reanchored
+from sblsim.models.receiver.ranging import clock_scale, reply_epoch, toa_ranging
+from sblsim.models.receiver.reacquisition import earlier_innovation, first_row, remember_rejected
 from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 
 

@@ -27,7 +27,8 @@ from sblsim.orchestrator.campaign.manifest import (
 )
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
-from sblsim.orchestrator.cosim.engines import ENGINES, fmu_paths
+from sblsim.orchestrator.cosim.engines import ENGINES
+from sblsim.orchestrator.cosim.fmu_files import fmu_paths
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.io.progress import Progress
 from sblsim.orchestrator.study import Study

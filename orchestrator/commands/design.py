@@ -21,6 +21,7 @@ from sblsim.orchestrator.commands.common import (
 )
 from sblsim.orchestrator.commands.console import check_seed_option, output_folder, output_name
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.design.checks import is_telemetry
 from sblsim.orchestrator.io.progress import Progress as ProgressBar
 from sblsim.orchestrator.io.progress import check_progress
 
@@ -193,7 +194,7 @@ def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare, max_
     from sblsim.orchestrator.design.confirm import confirm
     from sblsim.orchestrator.design.effort import check_effort, estimate
     from sblsim.orchestrator.design.output import document, write
-    from sblsim.orchestrator.design.problem import check_problem, is_telemetry
+    from sblsim.orchestrator.design.problem import check_problem
     from sblsim.orchestrator.design.run import resolve, search_all
 
     sections = check_problem(raw, scenario_given=scenario is not None)

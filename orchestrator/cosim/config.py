@@ -52,11 +52,11 @@ from sblsim.models.declarations import (
 )
 from sblsim.models.errors import ConfigError
 from sblsim.models.platform.geometry import check_geometry, platform_offsets
-from sblsim.models.receiver.core import clock_parameters
+from sblsim.models.receiver.interface import clock_parameters
 from sblsim.models.systems import SYSTEMS
 from sblsim.models.target import natural_duration, start_state
 from sblsim.models.target.core import file_waypoints
-from sblsim.orchestrator.cosim.engines import read_description
+from sblsim.orchestrator.cosim.fmu_files import read_description
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import ALGORITHMS
 from sblsim.orchestrator.cosim.plugins import user_model
@@ -621,7 +621,7 @@ def scenario_system(source: str | Path | Mapping) -> str:
 
 def _check_receiver_step(sim: dict[str, Any]) -> None:
     """Refuse a sampling time and rate ratio whose receiver step T / ratio is outside the receiver clock's
-    range (:func:`sblsim.models.receiver.core.clock_parameters`), naming the two keys the user sets.
+    range (:func:`sblsim.models.receiver.interface.clock_parameters`), naming the two keys the user sets.
 
     Raises
     ------

@@ -16,7 +16,7 @@ from sblsim.models.acoustics.channel.interface import ARRIVAL, PACKET, TARGET_IN
 from sblsim.models.acoustics.channel.lanes import lane_of, lane_variables
 from sblsim.models.declarations import ModelError, Variable
 from sblsim.models.platform.core import USBL_ATTITUDES, beacon_names
-from sblsim.models.receiver.core import OPTIONAL_OUTPUTS
+from sblsim.models.receiver.interface import OPTIONAL_OUTPUTS
 from sblsim.models.systems import interface_system
 
 #: What the channel sends every receiver: the packet, then its arrival epoch.
@@ -127,7 +127,7 @@ def check_interface(component: str, ports: Sequence[Variable], expected: Sequenc
     A receiver may lack the inputs of the later lanes of a delivery (``lane<m>_*``) altogether: it is then given
     lane 1 alone, and a run in which a packet arrived in a step after another is refused
     (:func:`sblsim.orchestrator.cosim.run.run_batch`). It may lack the outputs every built-in receiver added later
-    (:data:`~sblsim.models.receiver.core.OPTIONAL_OUTPUTS`: ``est_valid``): a run records them where it has them.
+    (:data:`~sblsim.models.receiver.interface.OPTIONAL_OUTPUTS`: ``est_valid``): a run records them where it has them.
 
     Raises
     ------

@@ -38,7 +38,8 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from sblsim.orchestrator.cosim.connections import Connection, execution_order
-from sblsim.orchestrator.cosim.engines import ComponentHandle, native_system
+from sblsim.orchestrator.cosim.handles import ComponentHandle
+from sblsim.orchestrator.cosim.local_engine import native_system
 
 #: Master algorithms of :func:`simulate`.
 ALGORITHMS = ("gauss-seidel", "jacobi", "event")
@@ -70,7 +71,7 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
              timing: dict[str, float] | None = None, buffer: RecordBuffer | None = None) -> dict[str, np.ndarray]:
     """Run the co-simulation and record every output at each communication point.
 
-    A handle (:class:`sblsim.orchestrator.cosim.engines.ComponentHandle`) names its inputs and outputs
+    A handle (:class:`sblsim.orchestrator.cosim.handles.ComponentHandle`) names its inputs and outputs
     (``input_names``, ``output_names``), takes its inputs as one matrix
     (``set_input_vector``, shape (n_in, B)), gives its outputs as one matrix
     (``output_vector``, shape (n_out, B), numbers as floats) and steps
@@ -98,7 +99,7 @@ def simulate(handles: Mapping[str, ComponentHandle], connections: Sequence[Conne
         The ``"component.variable"`` outputs to record; default all of them.
     algorithm : {'gauss-seidel', 'jacobi', 'event'}
         Where inputs come from and where steps end (see the module); ``event`` needs a handle that can return
-        early (:meth:`sblsim.orchestrator.cosim.engines.Fmu3Handle.step_until`).
+        early (:meth:`sblsim.orchestrator.cosim.fmu3_engine.Fmu3Handle.step_until`).
     timing : dict, optional
         Filled with the wall-clock time [s] spent in each component's ``do_step`` calls (added to).
     buffer : RecordBuffer, optional

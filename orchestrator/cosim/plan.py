@@ -32,7 +32,7 @@ from sblsim.fmus.native import compiled_exact_points, compiled_family_levels, co
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.platform.geometry import transducer_span
-from sblsim.models.receiver.core import filter_parameters
+from sblsim.models.receiver.interface import filter_parameters
 from sblsim.models.receiver.profile import resolve_channel_profile
 from sblsim.models.systems import SYSTEMS, System
 from sblsim.models.target.core import Target
@@ -47,7 +47,7 @@ from sblsim.orchestrator.cosim.config import (
     resolve,
     to_toml,
 )
-from sblsim.orchestrator.cosim.engines import Source, paper_sources
+from sblsim.orchestrator.cosim.handles import Source, paper_sources
 from sblsim.orchestrator.cosim.limits import step_count
 
 

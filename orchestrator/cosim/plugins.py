@@ -13,7 +13,7 @@ from sblsim.models.component import Component
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.cosim.connections import check_interface
-from sblsim.orchestrator.cosim.engines import Port
+from sblsim.orchestrator.cosim.handles import Port
 
 
 @lru_cache(maxsize=None)

@@ -26,13 +26,8 @@ from sblsim.orchestrator.cosim.connections import (
     check_connections,
     default_connections,
 )
-from sblsim.orchestrator.cosim.engines import (
-    DTYPES,
-    ComponentHandle,
-    cast_column,
-    close_handles,
-    make_handles,
-)
+from sblsim.orchestrator.cosim.engines import close_handles, make_handles
+from sblsim.orchestrator.cosim.handles import DTYPES, ComponentHandle, cast_column
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
 from sblsim.orchestrator.cosim.metrics import (

@@ -32,7 +32,7 @@ from sblsim.models.design.criteria import CRITERIA, ECHO_LIMIT
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import apply_overrides, read_source
 from sblsim.orchestrator.cosim.plan import thaw
-from sblsim.orchestrator.design.problem import GRADES
+from sblsim.orchestrator.design.keys import GRADES
 from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles, ranked
 from sblsim.orchestrator.io.output import staged_directory
 

@@ -3,7 +3,7 @@
 1. **Resolve** the problem (:func:`resolve`): the base scenario's plan, the work area's points at the vehicle's
    depths, the seafloor region and the areas to avoid, what the scenario gives to the keys left at 0 or empty.
 2. **Candidates** (:func:`candidates`): per system, every count (LBL transponders) and combination of the grades
-   that change that system's accuracy (:data:`~sblsim.orchestrator.design.problem.SYSTEM_GRADES`), with its cost,
+   that change that system's accuracy (:data:`~sblsim.orchestrator.design.keys.GRADES`), with its cost,
    in the order of their cost.
 3. **Search** each candidate's layout (:mod:`~sblsim.orchestrator.design.search`: an LBL's ring, then its free
    placement started from it; an SBL's arm; a USBL has no layout) for the criterion over the work area, in the order
@@ -37,8 +37,9 @@ from sblsim.orchestrator.campaign.executors import stop_pool
 from sblsim.orchestrator.campaign.worker import watch_parent
 from sblsim.orchestrator.cosim.config import apply_overrides, check_site_keys
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
+from sblsim.orchestrator.design.area import Area, existing_devices, polygon, work_area_points
 from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels, judged, problem_items
-from sblsim.orchestrator.design.problem import GRADES, SYSTEM_NAMES, Area, existing_devices, polygon, work_area_points
+from sblsim.orchestrator.design.keys import GRADES, SYSTEM_NAMES
 from sblsim.orchestrator.design.search import Objective, Result, optimise_baseline, optimise_free, optimise_ring
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.maps import diver_depth, point_accuracy
@@ -349,7 +350,7 @@ def candidates(resolved: Resolved) -> list[Candidate]:
 
 
 def grade_items(candidate: Candidate) -> list[str]:
-    """The overrides of a candidate's grades (:data:`~sblsim.orchestrator.design.problem.GRADES`)."""
+    """The overrides of a candidate's grades (:data:`~sblsim.orchestrator.design.keys.GRADES`)."""
     return [f"{GRADES[k][g][0]}={GRADES[k][g][1]!r}" for k, g in candidate.grades.items()]
 
 

@@ -33,8 +33,8 @@ from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
 from sblsim.models.design.criteria import criterion as criterion_of
 from sblsim.models.design.information import layout_information
+from sblsim.orchestrator.design.area import Area
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator
-from sblsim.orchestrator.design.problem import Area
 
 #: Criteria that are smooth in the layout: polished with their gradient.
 SMOOTH = ("d-optimal", "a-optimal")

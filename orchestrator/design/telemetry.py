@@ -42,9 +42,11 @@ from sblsim.models.design import area as areas
 from sblsim.models.design import telemetry as tm
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.sync.scale import looks_like_degrees
+from sblsim.orchestrator.design.area import existing_devices, polygon
 from sblsim.orchestrator.design.area_file import read_area
+from sblsim.orchestrator.design.checks import is_three_d
+from sblsim.orchestrator.design.curves import receiver_curves
 from sblsim.orchestrator.design.effort import Estimate
-from sblsim.orchestrator.design.problem import existing_devices, is_three_d, polygon, receiver_curves
 from sblsim.orchestrator.tracks.toa import read_burst_sequence
 
 #: The places a receiver may go: about this many grid points over the water.

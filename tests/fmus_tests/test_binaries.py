@@ -314,7 +314,7 @@ def test_the_snr_channel_runs_in_the_plain_c_host_like_the_casadi_model_and_the_
     of its arrival that the casadi model of the site gives (:func:`~sblsim.models.acoustics.core.site_levels`)."""
     from sblsim.models.acoustics.channel.component import Acoustics
     from sblsim.models.acoustics.channel.site_levels import site_levels
-    from sblsim.orchestrator.cosim.engines import LocalHandle
+    from sblsim.orchestrator.cosim.local_engine import LocalHandle
 
     table = "; ".join(f"{z:g} {c:g}" for z, c in TABLE)
     params = Acoustics.fmu_parameters({"propagation": "ray", "detection": "snr", "sound_speed_profile": "table",

@@ -92,7 +92,8 @@ def test_libraries_of_other_models_share_their_objects(monkeypatch, tmp_path):
 def test_a_run_s_local_handles_share_the_library_of_the_models_it_runs():
     """The paper's system on the local engine: the four components' handles run in one library of their four
     models (no other receiver compiled), and a user's model in a library of its own."""
-    from sblsim.orchestrator.cosim.engines import make_handles, paper_sources
+    from sblsim.orchestrator.cosim.engines import make_handles
+    from sblsim.orchestrator.cosim.handles import paper_sources
 
     handles = make_handles("local")
     paper = tuple(MODELS[name] for name in ("platform", "acoustics", "target", "receiver"))

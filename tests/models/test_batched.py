@@ -19,7 +19,7 @@ import pytest
 from sblsim.fmus.native import NativeBatch
 from sblsim.models import Acoustics, LeastSquaresReceiver, PaperEKF, Platform, Target
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.cosim import engines
+from sblsim.orchestrator.cosim import local_engine
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from tests.helpers import Core
@@ -212,7 +212,7 @@ def test_shared_parameter_rows_equal_one_row_per_replicate(model, extra, monkeyp
     got, got_state = _step(model, {**common, **low}, reps, arrays=cells)
     # the reference: one row per replicate, the runtime's draws keyed by each row's replicate parameter
     assign = NativeBatch.assign
-    monkeypatch.setattr(engines, "parameter_rows", lambda params, size: (np.arange(size), np.arange(size)))
+    monkeypatch.setattr(local_engine, "parameter_rows", lambda params, size: (np.arange(size), np.arange(size)))
     monkeypatch.setattr(NativeBatch, "assign", lambda self, row_of, replicate=None: assign(self, row_of, None))
     alone = _core(model, {**common, **low}, reps, arrays=cells).initialize(0.0)
     assert alone.handle.batch.rows == 6
@@ -230,14 +230,15 @@ def test_shared_parameter_rows_equal_one_row_per_replicate(model, extra, monkeyp
 
 def test_parameter_rows_group_runs_bit_for_bit():
     size = 6
-    rows, first = engines.parameter_rows({"a": np.array([1.0, 1.0, -0.0, 0.0, 1.0, np.nan]), "b": 2.0,
+    rows, first = local_engine.parameter_rows({"a": np.array([1.0, 1.0, -0.0, 0.0, 1.0, np.nan]), "b": 2.0,
                                           "replicate": np.arange(size)}, size)
     assert rows.tolist() == [0, 0, 1, 2, 0, 3] and first.tolist() == [0, 2, 3, 5]  # -0.0 is not 0.0
-    rows, first = engines.parameter_rows({"a": 1.0, "replicate": np.arange(size)}, size)
+    rows, first = local_engine.parameter_rows({"a": 1.0, "replicate": np.arange(size)}, size)
     assert rows.tolist() == [0] * size and first.tolist() == [0]
-    rows, first = engines.parameter_rows({"a": np.array(["x", "y", "x"]), "c": np.array([1, 1, 2])}, 3)
+    rows, first = local_engine.parameter_rows({"a": np.array(["x", "y", "x"]), "c": np.array([1, 1, 2])}, 3)
     assert rows.tolist() == [0, 1, 2] and first.tolist() == [0, 1, 2]
-    rows, _ = engines.parameter_rows({"a": np.array([1.0, 2.0])}, 3)  # a wrong length: one row each (refused later)
+    # a wrong length: one row each (refused later)
+    rows, _ = local_engine.parameter_rows({"a": np.array([1.0, 2.0])}, 3)
     assert rows.tolist() == [0, 1, 2]
 
 

@@ -15,7 +15,7 @@ from scipy.optimize import least_squares
 from sblsim.models.acoustics.channel.lanes import lane_variables
 from sblsim.models.declarations import SEED_PARAMETERS, ModelError
 from sblsim.models.receiver import LeastSquaresReceiver, PaperEKF, receiver_interface
-from sblsim.models.receiver.core import (
+from sblsim.models.receiver.interface import (
     arrival_interface,
     beacon_parameters,
     clock_parameters,

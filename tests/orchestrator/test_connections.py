@@ -8,7 +8,9 @@ from sblsim.models import COMPONENTS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.connections import Connection, check_connections, default_connections, execution_order
-from sblsim.orchestrator.cosim.engines import LocalHandle, Port, make_handles
+from sblsim.orchestrator.cosim.engines import make_handles
+from sblsim.orchestrator.cosim.handles import Port
+from sblsim.orchestrator.cosim.local_engine import LocalHandle
 from sblsim.orchestrator.cosim.run import run
 
 

@@ -42,8 +42,9 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates
+from sblsim.orchestrator.design.area import Area
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
-from sblsim.orchestrator.design.problem import Area, check_problem
+from sblsim.orchestrator.design.problem import check_problem
 from sblsim.orchestrator.design.run import resolve, search_all
 from sblsim.orchestrator.design.search import Objective, optimise_free, optimise_ring
 from sblsim.orchestrator.maps import packet_probabilities, point_accuracy, range_echo_spread
@@ -339,7 +340,7 @@ def test_every_design_key_and_grade_is_documented_as_it_is_declared():
     default and meaning; docs/hardware-grades.md's grades table every grade with the key and value it sets."""
     import re
 
-    from sblsim.orchestrator.design.problem import DESIGN_KEYS, GRADES
+    from sblsim.orchestrator.design.keys import DESIGN_KEYS, GRADES
 
     docs = Path(__file__).resolve().parents[2] / "docs"
     rows = re.findall(r"^\| `([\w.]+)\.(\w+)` \|(.*)\|$", (docs / "design.md").read_text(), flags=re.M)

@@ -25,7 +25,8 @@ from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design import telemetry as telemetry_design
 from sblsim.orchestrator.design import telemetry_confirm
 from sblsim.orchestrator.design.evaluate import NO_DEPTH_SIGMA, LayoutEvaluator, Levels, judged, problem_items
-from sblsim.orchestrator.design.problem import TELEMETRY, check_problem
+from sblsim.orchestrator.design.keys import TELEMETRY
+from sblsim.orchestrator.design.problem import check_problem
 from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
 from sblsim.orchestrator.maps import diver_depth, point_accuracy
 from tests.helpers import problem_with as _with

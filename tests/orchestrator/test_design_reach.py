@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sblsim.orchestrator.cosim.plan import load_plan
-from sblsim.orchestrator.design.problem import Area
+from sblsim.orchestrator.design.area import Area
 from sblsim.orchestrator.design.run import _sampling_items, shortfalls
 
 

@@ -16,7 +16,8 @@ from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design import telemetry as t
 from sblsim.orchestrator.design import telemetry_confirm as tc
 from sblsim.orchestrator.design import telemetry_output as out
-from sblsim.orchestrator.design.problem import TELEMETRY, check_problem
+from sblsim.orchestrator.design.keys import TELEMETRY
+from sblsim.orchestrator.design.problem import check_problem
 
 #: A pond of 100 m, receivers at 1 m and 15 m, the tag at 4 m and 10 m; the curve's 50 % at 150 m (each receiver
 #: uncertain: the enumeration of the detection patterns is exercised); a fix of four receivers counts where its own

@@ -8,7 +8,10 @@ import pytest
 
 from sblsim.models.errors import FMICallError, ModelError, SblsimError
 from sblsim.orchestrator.cosim.config import load_config
-from sblsim.orchestrator.cosim.engines import ComponentHandle, FmuHandle, LocalHandle, check_status
+from sblsim.orchestrator.cosim.fmu_engine import FmuHandle
+from sblsim.orchestrator.cosim.fmu_files import check_status
+from sblsim.orchestrator.cosim.handles import ComponentHandle
+from sblsim.orchestrator.cosim.local_engine import LocalHandle
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.run import merge_params
 

@@ -55,11 +55,11 @@ def test_a_description_is_read_once_per_file_and_again_when_the_file_changes(fmu
     instance of the new file) when the file at that path has been replaced."""
     import shutil
 
-    import sblsim.orchestrator.cosim.engines as engines
+    import sblsim.orchestrator.cosim.fmu_files as fmu_files
 
     reads = []
-    real = engines.read_description
-    monkeypatch.setattr(engines, "read_description", lambda *a, **k: reads.append(a[1]) or real(*a, **k))
+    real = fmu_files.read_description
+    monkeypatch.setattr(fmu_files, "read_description", lambda *a, **k: reads.append(a[1]) or real(*a, **k))
     path = tmp_path / "receiver.fmu"
     shutil.copyfile(fmu_dir / "sblsim_receiver.fmu", path)
     first = open_fmu("receiver", path)

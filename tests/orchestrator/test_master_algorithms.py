@@ -90,7 +90,7 @@ def test_the_compiled_master_loop_equals_the_python_one(algorithm, batch, monkey
     receiver at three steps per macro step, loss and multipath."""
     from sblsim.orchestrator.cosim.config import load_config
     from sblsim.orchestrator.cosim.connections import default_connections
-    from sblsim.orchestrator.cosim.engines import LocalHandle
+    from sblsim.orchestrator.cosim.local_engine import LocalHandle
     from sblsim.orchestrator.cosim.run import merge_params, with_replicates
 
     cfg = load_config("random", ["acoustics.loss_pct=20", "acoustics.outlier_pct=10", "simulation.duration=20"],

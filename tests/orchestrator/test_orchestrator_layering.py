@@ -5,14 +5,16 @@ import ast
 from pathlib import Path
 
 import sblsim.orchestrator.cosim
-from sblsim.orchestrator.cosim import engines
+from sblsim.orchestrator.cosim import engines, fmu3_engine, fmu_engine, handles, local_engine
 
 #: The co-simulation kernel's folder (orchestrator/cosim/): the master algorithm and the configuration.
 COSIM = Path(sblsim.orchestrator.cosim.__file__).parent
 
+#: The engines' modules: the choice of the engine, the handles' interface and one module per engine.
+ENGINE_MODULES = (engines, handles, local_engine, fmu_engine, fmu3_engine)
 #: The handle classes of the engines (the master must not know them).
-HANDLE_CLASSES = {name for name, value in vars(engines).items()
-                  if isinstance(value, type) and value.__module__ == engines.__name__ and name.endswith("Handle")}
+HANDLE_CLASSES = {name for module in ENGINE_MODULES for name, value in vars(module).items()
+                  if isinstance(value, type) and value.__module__ == module.__name__ and name.endswith("Handle")}
 
 
 def _imports(path: Path) -> list[tuple[str, str | None]]:
@@ -35,7 +37,8 @@ def test_the_master_imports_neither_the_fmi_layer_nor_handle_classes():
     assert imports
     fmi = [m for m, _ in imports if m.split(".")[:2] == ["sblsim", "fmus"] or m.split(".")[0] in ("fmus", "fmpy")]
     assert fmi == []
-    classes = [name for m, name in imports if m.endswith("engines") and name in HANDLE_CLASSES - {"ComponentHandle"}]
+    classes = [name for m, name in imports if m in {module.__name__ for module in ENGINE_MODULES}
+               and name in HANDLE_CLASSES - {"ComponentHandle"}]
     assert classes == []
 
 

@@ -30,7 +30,7 @@ from sblsim.models import MODELS
 from sblsim.models.columns import TIMESERIES_COLUMNS
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.connections import default_connections
-from sblsim.orchestrator.cosim.engines import fmu_paths
+from sblsim.orchestrator.cosim.fmu_files import fmu_paths
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.ssp import export_ssp

@@ -32,7 +32,7 @@ import pytest
 
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.connections import default_connections
-from sblsim.orchestrator.cosim.engines import LocalHandle
+from sblsim.orchestrator.cosim.local_engine import LocalHandle
 from sblsim.orchestrator.cosim.master import simulate
 from sblsim.orchestrator.cosim.run import merge_params, run
 from sblsim.orchestrator.ssp import export_ssp

@@ -18,7 +18,7 @@ another, and the outputs show the last delivery until the next. A step that
 reaches several slot epochs sends each of them (each with its own random
 numbers).
 Every receiver uses each lane's packet at its first step end that reaches
-its ``rx_time``, in lane order (:func:`sblsim.models.receiver.core.slot_events`). A packet that
+its ``rx_time``, in lane order (:func:`sblsim.models.receiver.slots.slot_events`). A packet that
 finds every place taken is not dropped silently: ``overflow_travel_time``
 keeps the longest arrival − transmit of it and of those in flight, and the
 orchestrator refuses the run (:func:`check_in_flight`: a packet must arrive
