@@ -25,6 +25,10 @@ from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.receiver_log import CONFIG_PREFIX, META_CONFIG, export_log, log_config
 
+#: The log's two formats where a test is the same property read by another reader: the Parquet run in the slow tier
+#: (the fast tier keeps every property once, on the CSV; the tests of both formats that stay fast read Parquet too).
+SUFFIXES_FAST_CSV = [".csv", pytest.param(".parquet", marks=pytest.mark.slow)]
+
 #: The audited command: argv = outside folder, report file, sblsim arguments.
 AUDITED = r"""
 import atexit, json, os, sys
@@ -137,7 +141,7 @@ def test_a_relative_model_beside_the_log_is_not_imported(exported, folders, suff
     assert seen == [] and not (work / "CANARY").exists()
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+@pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 @pytest.mark.parametrize("switch", [["--receiver", "ekf"], ["--set", "receiver=ekf-seq"]], ids=["receiver", "set"])
 def test_switching_receivers_does_not_import_the_logs(exported, folders, suffix, switch):
     work, outside = folders
@@ -162,7 +166,7 @@ def test_a_log_naming_an_fmu_is_refused_and_never_loaded(exported, folders, suff
     assert seen == []
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+@pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 def test_files_a_log_names_are_not_opened(exported, folders, suffix):
     work, outside = folders
 
@@ -181,7 +185,7 @@ def test_files_a_log_names_are_not_opened(exported, folders, suffix):
     assert config["target"]["trajectory_file"] == "" and config["acoustics"]["sound_speed_profile"] == "constant"
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+@pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 def test_a_logs_receiver_naming_a_private_csv_is_refused_unopened(exported, folders, suffix):
     """``receiver.sound_speed_profile`` is a file key as the channel's is: a log naming a CSV there is refused in one
     line (a replay needs the receiver's profile, so none is put in its place), the file never opened, nothing
@@ -229,7 +233,8 @@ def test_the_receiver_a_user_names_is_said(exported, tmp_path):
     assert f"note: the receiver is your own program, model:{model} (--receiver)" in proc.stderr
 
 
-@pytest.mark.parametrize("name", ["../../escape", "/tmp/absolute-escape", "a/../../b", "..", "sub\\..\\x"])
+@pytest.mark.parametrize("name", ["../../escape", *(pytest.param(n, marks=pytest.mark.slow) for n in
+                                                    ("/tmp/absolute-escape", "a/../../b", "..", "sub\\..\\x"))])
 def test_a_scenario_name_never_leaves_results(tmp_path, name):
     """``run.scenario`` of a configuration file is anyone's text: the default folder is one name in results/."""
     work = tmp_path / "deep" / "work"

@@ -11,6 +11,8 @@ and ``usbl-deep`` (USBL on the real NCL1 cast):
   by sblsim) step by step; the same host on the default FMUs runs another system (the check can fail);
 * the outputs' declared ranges (min/max in ``modelDescription.xml``, from the declarations) hold at every step
   of both runs, and fmpy's validation of every scenario FMU finds nothing.
+
+The fast tier builds ``lbl-field``'s scenario FMUs; ``usbl-deep``'s build (about 20 s) is in the slow tier.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ SSV = "{http://ssp-standard.org/SSP1/SystemStructureParameterValues}"
 HOST_TYPES = {"Real": "r", "Integer": "i", "Boolean": "b"}
 
 
-@pytest.fixture(scope="module", params=SITES)
+@pytest.fixture(scope="module", params=[SITES[0], *(pytest.param(s, marks=pytest.mark.slow) for s in SITES[1:])])
 def site(request, tmp_path_factory):
     """The scenario's plan (seed 3, Jacobi), its scenario FMUs (``sblsim fmus build --scenario``) and the SSP
     package ``sblsim ssp export`` makes of them (the FMUs in the folder the export reads for the scenario's
