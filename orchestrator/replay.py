@@ -43,7 +43,7 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -88,6 +88,8 @@ from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.receiver_log import (
     Log,
     log_config,
+    read_log,
+    read_truth,
 )
 
 #: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
@@ -631,4 +633,56 @@ def write_replay(result: ReplayRecord, out_dir: Path | str) -> Path:
     return out_dir
 
 
-__all__ = ["DEFAULT_CONFIG", "ReplayRecord", "Schedule", "replay", "replay_config", "schedule", "write_replay"]
+def replay_files(plan: RunPlan, log: Path, truth: Path | None, engine: str, fmu_dir: str | Path | None,
+                 prepare: Callable[[], Path | None]) -> tuple[ReplayRecord, Path | None]:
+    """A replay of a plan on the files (``sblsim.replay`` and ``sblsim replay``): read the log and the truth track,
+    ``prepare()`` the output folder (None: nothing is written), replay and write; the record and the folder."""
+    data = read_log(log, plan.n_beacons, plan.system, plan["acoustics"]["sound_speed_assumed"], plan["acoustics"])
+    track = read_truth(truth) if truth is not None else None
+    target = prepare()
+    result = replay(data, plan, engine, fmu_dir, track)
+    if target is not None:
+        write_replay(result, target)
+    return result, target
+
+
+def replay_lines(summary: dict[str, Any], plan: RunPlan, source: str, log: Path, truth: Path | None
+                 ) -> tuple[list[str], list[str]]:
+    """What ``sblsim replay LOG`` prints of a replay's ``summary``: the lines before the metrics, and the warnings
+    for standard error after them (``source``: where the configuration came from; ``log``, ``truth``: the files as
+    given)."""
+    s, c = summary, summary["log"]
+    sim = plan["simulation"]
+    lines = [f"replay of {log} on the {s['engine']} engine (receiver {s['receiver']}, configuration {source}): "
+             f"{s['steps']} steps of {sim['sampling_time']:g} s from {s['start_time']:.10g} s in "
+             f"{s['wall_time']:.2f} s"]
+    skipped = c["duplicate"] + c["unknown_beacon"] + c["same_step"] + c["not_reached"]
+    lines.append(
+        f"  log: {c['rows']} rows, {c['used']} used ({c['depth_only']} depth readings only), {skipped} skipped "
+        f"({c['duplicate']} duplicated, {c['unknown_beacon']} with an unknown beacon id, {c['same_step']} in a step "
+        f"that used {LANES} newer rows" + (f", {c['not_reached']} after the last step" if c["not_reached"] else "")
+        + f"), {c['out_of_order']} out of order (sorted); rows every {c['typical_gap_s']:.6g} s (median), the "
+        f"longest gap {c['longest_gap_s']:.6g} s"
+        + (f" (before its {c['longest_gap_before']})" if c["longest_gap_s"] > 1.5 * c["typical_gap_s"] else "")
+        + (f"; ignored columns: {', '.join(c['ignored_columns'])}" if c["ignored_columns"] else ""))
+    if truth is not None:
+        t = s["truth"]
+        lines.append(f"  truth: {truth}, interpolated at {t['steps']} of {s['steps']} steps"
+                     + (f" ({t['steps_without']} outside its span: no errors there)" if t["steps_without"] else ""))
+    warnings = []
+    if c["same_step"]:
+        warnings.append(
+            f"sblsim: warning: {c['same_step']} rows of the log fell in a step that used {LANES} newer rows (at most "
+            f"{LANES} rows per step of {sim['sampling_time'] / sim['ekf_rate_ratio']:g} s, on the lanes of a "
+            "delivery): a smaller simulation.sampling_time or a larger simulation.ekf_rate_ratio (--set) uses them")
+    if truth is not None and s["diverged"]:
+        warnings.append(f"sblsim: warning: the {s['receiver']} receiver diverged: its numbers mean nothing; see "
+                        "error_bounds.png")
+    if s["updates"] == 0:
+        warnings.append(f"sblsim: warning: the {s['receiver']} receiver never made a fix: no row of the log brought "
+                        "a range it used")
+    return lines, warnings
+
+
+__all__ = ["DEFAULT_CONFIG", "ReplayRecord", "Schedule", "replay", "replay_config", "replay_files", "replay_lines",
+           "schedule", "write_replay"]

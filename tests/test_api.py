@@ -202,7 +202,7 @@ def test_what_the_docstrings_allow_is_accepted():
 def test_numpy_integers_are_accepted_where_integers_are():
     """A numpy integer scalar is an integer argument (a seed, a count) and a set value, as a Python integer is, with
     the same result; a bool (Python's or numpy's) is not one."""
-    from sblsim.orchestrator.commands.common import check_count, check_integer, check_seed
+    from sblsim.orchestrator.io.arguments import check_count, check_integer, check_seed
 
     assert sblsim.load("semicircle", seed=np.int64(7)) == sblsim.load("semicircle", seed=7)
     assert type(sblsim.load("semicircle", seed=np.uint16(7))["run"]["seed"]) is int

@@ -10,10 +10,13 @@ A command's module holds what the command is, from Python and from the command l
   arguments and prints its lines, returning the exit status.
 
 :data:`COMMANDS` registers them in the order ``sblsim --help`` lists them; ``sblsim``'s parser and dispatch
-(:mod:`sblsim.orchestrator.cli`) are built from it, so adding a command is a module and a line here. What the
-commands share: :mod:`~sblsim.orchestrator.commands.common` (the API's argument checks and the resolution of a
-configuration) and :mod:`~sblsim.orchestrator.commands.console` (the command line's exit statuses, output folders
-and metric lines). A command imports no other, except ``campaign``, whose ``--analyze`` and
+(:mod:`sblsim.orchestrator.cli`) are built from it, so adding a command is a module and a line here. A command is
+thin: it reads its arguments, calls the library and prints; the work, its argument checks and the lines it prints are
+the library's (``replay --format toa``'s: :mod:`sblsim.orchestrator.tracks`, ``replay_toa`` and ``replay_toa_tags``
+with their results; the plain checks of a number, path or flag: :mod:`sblsim.orchestrator.io.arguments`). What the
+commands share: :mod:`~sblsim.orchestrator.commands.common` (the checks of a scenario, overrides and engine, and the
+resolution of a configuration) and :mod:`~sblsim.orchestrator.commands.console` (the command line's exit statuses,
+output folders and metric lines). A command imports no other, except ``campaign``, whose ``--analyze`` and
 :meth:`CampaignResult.analyze` run ``analyze`` (``tests/test_import_graph.py`` holds the rule).
 
 A module imports at load only what ``sblsim --help`` needs; the modules that run the work (they load pandas,

@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from sblsim.models.declarations import shown
-from sblsim.orchestrator.commands.common import check_count, path_argument, real_argument, text_argument
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.arguments import check_count, path_argument, real_argument, text_argument
 from sblsim.orchestrator.io.output import check_writable
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs

@@ -11,17 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.commands.common import (
-    Overrides,
-    Progress,
-    check_count,
-    check_seed,
-    compared,
-    override_items,
-    prepare_out,
-    scenario_source,
-    text_argument,
-)
+from sblsim.orchestrator.commands.common import Overrides, Progress, compared, override_items, scenario_source
 from sblsim.orchestrator.commands.console import (
     ALL_SYSTEMS,
     check_seed_option,
@@ -29,6 +19,7 @@ from sblsim.orchestrator.commands.console import (
     output_name,
 )
 from sblsim.orchestrator.cosim.config import check_receiver, parse_compare
+from sblsim.orchestrator.io.arguments import check_count, check_seed, prepare_out, text_argument
 from sblsim.orchestrator.io.progress import check_progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs

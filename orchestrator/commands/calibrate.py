@@ -11,17 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
-from sblsim.orchestrator.commands.common import (
-    Overrides,
-    Progress,
-    check_integer,
-    override_items,
-    path_argument,
-    prepare_out,
-    text_argument,
-)
+from sblsim.orchestrator.commands.common import Overrides, Progress, override_items
 from sblsim.orchestrator.commands.console import output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.arguments import check_integer, path_argument, prepare_out, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import check_progress
 

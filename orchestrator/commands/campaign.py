@@ -15,18 +15,11 @@ from typing import TYPE_CHECKING, Any
 
 from sblsim.models.declarations import shown
 from sblsim.orchestrator.commands.analyze import AnalysisResult, analyze, analyze_folder
-from sblsim.orchestrator.commands.common import (
-    Progress,
-    check_engine,
-    check_integer,
-    check_seed,
-    flag_argument,
-    path_argument,
-    text_argument,
-)
+from sblsim.orchestrator.commands.common import Progress, check_engine
 from sblsim.orchestrator.commands.console import interrupted_status
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.cosim.engines import ENGINES
+from sblsim.orchestrator.io.arguments import check_integer, check_seed, flag_argument, path_argument, text_argument
 from sblsim.orchestrator.io.output import check_writable, folder_name
 from sblsim.orchestrator.io.progress import check_progress
 from sblsim.orchestrator.study import Study, load_study

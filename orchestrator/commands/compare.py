@@ -11,17 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sblsim.models.declarations import shown
-from sblsim.orchestrator.commands.common import (
-    Overrides,
-    Progress,
-    check_count,
-    check_engine,
-    check_seed,
-    override_items,
-    path_argument,
-    prepare_out,
-    scenario_source,
-)
+from sblsim.orchestrator.commands.common import Overrides, Progress, check_engine, override_items, scenario_source
 from sblsim.orchestrator.commands.console import (
     ALL_SYSTEMS,
     check_seed_option,
@@ -33,6 +23,7 @@ from sblsim.orchestrator.cosim.config import ConfigError, check_site_keys, load_
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
+from sblsim.orchestrator.io.arguments import check_count, check_seed, path_argument, prepare_out
 from sblsim.orchestrator.io.progress import check_progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs

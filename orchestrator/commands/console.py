@@ -13,8 +13,8 @@ from typing import Callable
 from sblsim.fmus.build import DEFAULT_DIR
 from sblsim.models.declarations import ModelError, shown
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.commands.common import MAX_SEED
 from sblsim.orchestrator.cosim.config import take_notes
+from sblsim.orchestrator.io.arguments import MAX_SEED
 from sblsim.orchestrator.io.output import OutputLock, check_output, folder_name
 
 #: The exit status of bad input (one line ``sblsim: error: ...``, nothing written) and of Ctrl-C.

@@ -12,16 +12,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sblsim.models.declarations import shown
-from sblsim.orchestrator.commands.common import (
-    Progress,
-    check_count,
-    check_seed,
-    path_argument,
-    prepare_out,
-)
+from sblsim.orchestrator.commands.common import Progress
 from sblsim.orchestrator.commands.console import check_seed_option, output_folder, output_name
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.design.checks import is_telemetry
+from sblsim.orchestrator.io.arguments import check_count, check_seed, path_argument, prepare_out
 from sblsim.orchestrator.io.progress import Progress as ProgressBar
 from sblsim.orchestrator.io.progress import check_progress
 

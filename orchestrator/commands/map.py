@@ -13,16 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from sblsim.models.declarations import shown
-from sblsim.orchestrator.commands.common import (
-    Overrides,
-    Progress,
-    check_seed,
-    compared,
-    override_items,
-    prepare_out,
-    real_argument,
-    scenario_source,
-)
+from sblsim.orchestrator.commands.common import Overrides, Progress, compared, override_items, scenario_source
 from sblsim.orchestrator.commands.console import (
     ALL_SYSTEMS,
     check_seed_option,
@@ -31,6 +22,7 @@ from sblsim.orchestrator.commands.console import (
 )
 from sblsim.orchestrator.cosim.config import ConfigError, parse_compare
 from sblsim.orchestrator.cosim.plan import Config
+from sblsim.orchestrator.io.arguments import check_seed, prepare_out, real_argument
 from sblsim.orchestrator.io.progress import check_progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs

@@ -14,15 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.commands.common import (
-    Overrides,
-    Progress,
-    check_count,
-    check_engine,
-    path_argument,
-    prepare_out,
-    resolve_plan,
-)
+from sblsim.orchestrator.commands.common import Overrides, Progress, check_engine, resolve_plan
 from sblsim.orchestrator.commands.console import (
     check_seed_option,
     config_options,
@@ -34,6 +26,7 @@ from sblsim.orchestrator.cosim.engines import ENGINES, close_handles, make_handl
 from sblsim.orchestrator.cosim.master import ALGORITHMS
 from sblsim.orchestrator.cosim.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
+from sblsim.orchestrator.io.arguments import check_count, path_argument, prepare_out
 from sblsim.orchestrator.io.output import check_writable, folder_name
 from sblsim.orchestrator.io.progress import check_progress
 from sblsim.orchestrator.ssp import read_ssp

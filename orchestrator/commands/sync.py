@@ -13,15 +13,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sblsim.orchestrator.commands.common import (
-    flag_argument,
-    path_argument,
-    prepare_out,
-    real_argument,
-    text_argument,
-)
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs

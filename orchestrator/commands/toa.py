@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sblsim.models.tracking.schedule import PING_TYPES
-from sblsim.orchestrator.commands.common import flag_argument, path_argument, prepare_out, text_argument
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
+from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, text_argument
 from sblsim.orchestrator.io.output import folder_name
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs

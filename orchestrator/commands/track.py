@@ -13,22 +13,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
-from sblsim.orchestrator.commands.common import (
-    add_water_arguments,
-    names_argument,
-    path_argument,
-    prepare_out,
-    real_argument,
-    sound_speed_arguments,
-    text_argument,
-    water_arguments,
-)
+from sblsim.orchestrator.commands.common import add_water_arguments
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.arguments import names_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.output import folder_name, staged_directory
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress, progress_of
 from sblsim.orchestrator.tracks.depth import water_line
+from sblsim.orchestrator.tracks.options import sound_speed_arguments, water_arguments
 from sblsim.orchestrator.tracks.outputs import figure
 from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE, noise_line
 

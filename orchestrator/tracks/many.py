@@ -5,6 +5,8 @@ or a Dask cluster's workers, :mod:`sblsim.orchestrator.campaign.executors`), as 
 The tags' folders and ``tags.csv`` (one row per tag: whether it was tracked or refused and why, its pings, the rows
 positioned and flagged, the sound speed and ping type taken, its time) are written together, all or nothing, when
 every tag has ended; a tag whose file is refused is a row saying so, never the end of the others.
+:func:`replay_toa_tags` (``sblsim.replay_toa_tags``, ``sblsim replay FOLDER --format toa``) checks its arguments and
+returns a :class:`TagsResult`.
 """
 
 from __future__ import annotations
@@ -15,12 +17,19 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.errors import ConfigError
+from sblsim.orchestrator.io.arguments import path_argument, prepare_out, real_argument
 from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.tracks.options import TOA_OPTIONS, toa_options
 from sblsim.orchestrator.tracks.outputs import write
+from sblsim.orchestrator.tracks.replay import TrackResult
 from sblsim.orchestrator.tracks.track import track
+
+if TYPE_CHECKING:  # the heavy modules are imported when a function runs
+    import pandas as pd
 
 #: The most tags one call tracks.
 MAX_TAGS = 10_000
@@ -190,3 +199,80 @@ def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], 
 
 __all__ = ["MAX_TAGS", "TAG_COLUMNS", "TAG_SUFFIXES", "TagsOutcome", "run_tracks", "tag_files", "track_tag",
            "track_tags"]
+
+
+@dataclass
+class TagsResult:
+    """The outcome of :func:`replay_toa_tags`.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        ``tags.csv``: one row per tag (``tag``, ``status`` ``tracked`` or ``refused``, ``reason``, ``pings``,
+        ``positioned``, ``flagged``, ``share_flagged``, ``track`` (the estimator), ``sound_speed_m_s``,
+        ``sound_speed_source``, ``ping_type``, ``segments``, ``wall_time_s``).
+    tracks : dict of str to TrackResult
+        Each tracked tag's result, by its name.
+    out : Path or None
+    """
+
+    table: pd.DataFrame
+    tracks: dict[str, TrackResult]
+    out: Path | None = None
+
+
+def replay_toa_tags(folder: str | Path, *, receivers: str | Path, workers: int | None = None,
+                    scheduler: str | None = None, out: str | Path | None = None, force: bool = False,
+                    **options: Any) -> TagsResult:
+    """Track many tags at one array in parallel: ``sblsim replay FOLDER --format toa`` (docs/tracking.md).
+
+    Parameters
+    ----------
+    folder : str or Path
+        A folder of one times-of-arrival file per tag (``*.txt``, ``*.csv``, ``*.toa``; the tag named by the
+        file's stem), each as :func:`~sblsim.orchestrator.tracks.replay.replay_toa` reads one.
+    receivers : str or Path
+        The receivers' positions, shared by the tags.
+    workers : int, optional
+        Worker processes in [1, 256] (default the CPU count; 1: one tag after another in this process).
+    scheduler : str, optional
+        A Dask scheduler, ``tcp://HOST:PORT`` or ``local``: the tags run on its workers.
+    out : str or Path, optional
+        Write each tag's folder (``out/TAG/``) and ``tags.csv`` there, all or nothing.
+    force : bool
+        Replace an earlier result in ``out``.
+    **options
+        :func:`~sblsim.orchestrator.tracks.replay.replay_toa`'s tracking arguments (``smooth``, ``sound_speed``,
+        ``ping_type``, ...), the same for every tag; no ``truth`` or ``reference`` (one per tag).
+
+    Returns
+    -------
+    TagsResult
+
+    Raises
+    ------
+    ModelError, ConfigError
+        A folder without tag files, a bad option (one line). A tag whose own file is refused is a row of
+        ``tags.csv`` (``status`` ``refused``, the reason), the others tracked.
+    """
+    folder = path_argument(folder, "folder", optional=False)
+    receivers = path_argument(receivers, "receivers", optional=False)
+    if not folder.is_dir():
+        raise ConfigError(f"folder: {str(folder)!r} is not a folder; allowed: a folder of one times-of-arrival file "
+                          "per tag (replay_toa tracks one file)")
+    unknown = sorted(set(options) - set(TOA_OPTIONS))
+    if unknown or "truth_sigma" in options:
+        raise ConfigError(f"{(unknown or ['truth_sigma'])[0]}: not an option of replay_toa_tags; allowed: "
+                          f"{', '.join(k for k in TOA_OPTIONS if k != 'truth_sigma')}")
+    if workers is not None:
+        workers = int(real_argument(workers, "workers", 1, 256, ""))
+    if scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import check_address
+
+        scheduler = check_address(str(scheduler))
+    files = tag_files(folder)
+    target = prepare_out(out, force, "tags.csv", "tags")
+    done = track_tags(files, receivers, toa_options(**options), workers, scheduler, target)
+    return TagsResult(done.table, {name: TrackResult(o.track, o.score, o.summary, o.estimates, o.errors,
+                                                     None if target is None else target / name, o.bound)
+                                   for name, o in done.outcomes.items()}, target)

@@ -2,7 +2,7 @@
 a clear message.
 
 * a log's range below what the configuration's channel measures (orchestrator/receiver_log.py);
-* a times-of-arrival record in which no ping can be positioned (orchestrator/commands/replay.py);
+* a times-of-arrival record in which no ping can be positioned (orchestrator/tracks/replay.py);
 * ``sblsim run --export-log`` whose export fails: the run's folder goes with it (orchestrator/commands/run.py);
 * a budget whose receiver heard nothing (orchestrator/budget.py);
 * a row nobody heard in a random-interval record, a long interface mismatch, and options with no effect.

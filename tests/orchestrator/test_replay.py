@@ -286,6 +286,21 @@ def test_replay_command_writes_the_outputs_of_a_run(exported, capsys):
     assert "--force" in capsys.readouterr().err
 
 
+def test_a_replay_s_figures_are_the_ones_it_writes(exported):
+    """``ReplayResult.plot()`` makes the figures ``sblsim replay --truth`` writes (the receiver's label from the plan
+    the replay ran), none without a truth track."""
+    import matplotlib.pyplot as plt
+
+    from sblsim import replay
+
+    result = replay(exported / "h.csv", receiver="ekf", truth=exported / "h_truth.csv")
+    figures = result.plot()
+    assert {f"{name}.png" for name in figures} == {"trajectory_xy.png", "trajectory_3d.png", "errors.png",
+                                                   "error_bounds.png"}
+    for figure in figures.values():
+        plt.close(figure)
+    assert replay(exported / "h.csv", receiver="ekf").plot() == {}
+
 def test_replay_without_truth_writes_the_track(exported, capsys):
     out = exported / "notruth"
     assert main(["replay", str(exported / "h.csv"), "--out", str(out)]) == 0
