@@ -23,7 +23,12 @@ import pytest
 LONGEST = ("pages-1", "pages-2", "tests/test_docs.py", "tests/test_packaging.py", "tests/test_bad_input.py",
            "tests/orchestrator/test_systems.py", "tests/models/test_rays.py", "tests/orchestrator/test_replay.py",
            "tests/orchestrator/test_beacons.py", "tests/orchestrator/test_campaign.py",
-           "tests/orchestrator/test_fmus.py", "tests/fmus_tests/test_binaries.py")
+           "tests/orchestrator/test_fmus.py", "tests/fmus_tests/test_binaries.py",
+           # the fast tier's longest files (its own run, --durations): first, so none is the last one a core waits on
+           "tests/orchestrator/test_design.py", "tests/orchestrator/test_replay_security.py",
+           "tests/orchestrator/test_calibrate_simulated.py", "tests/orchestrator/test_tracking.py",
+           "tests/orchestrator/test_study.py", "tests/orchestrator/test_site_factors.py",
+           "tests/orchestrator/test_design_telemetry_3d.py", "tests/orchestrator/test_scenario_fmus.py")
 LAST = ("pages-site",)
 
 
