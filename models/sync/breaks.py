@@ -382,7 +382,8 @@ def _best(fit: ClockFit, rows: np.ndarray, emission: np.ndarray, time: np.ndarra
 
 
 def part_shifts(tag: np.ndarray, receiver: np.ndarray, part: np.ndarray, time: np.ndarray, search: float,
-                width: float = PART_BIN) -> tuple[np.ndarray, dict[tuple[int, int], int]]:
+                width: float = PART_BIN, steps: dict[tuple[int, int], float] | None = None
+                ) -> tuple[np.ndarray, dict[tuple[int, int], int]]:
     """Each later clock part's coarse shift against the other receivers' first parts, for the emissions' grouping:
     the mode (in bins of ``width``, then the median within a bin of it) of the differences between its arrivals and
     those of the same sync tag at the receiver (another, in its first part) hearing that tag most, within
@@ -399,6 +400,12 @@ def part_shifts(tag: np.ndarray, receiver: np.ndarray, part: np.ndarray, time: n
         [s] the largest shift looked for.
     width : float
         [s] the bins' width: more than the array's largest travel-time difference.
+    steps : dict, optional
+        Per (receiver, part) the step [s] its time went back by in the file's order (the last row before the reset
+        to the first after): the shift is that step less the time the receiver heard nothing, so it is looked for
+        only at or below the step (within ``search``), and of the bins that hold at least half the most
+        differences, the one nearest the step is taken (a sync tag's steady interval makes the differences pile up
+        again at multiples of it, farther from the step).
 
     Returns
     -------
@@ -425,12 +432,17 @@ def part_shifts(tag: np.ndarray, receiver: np.ndarray, part: np.ndarray, time: n
             for k in range(len(t)):
                 diffs.append(t[k] - ref[lo[k]:hi[k]])
         d = np.concatenate(diffs) if diffs else np.zeros(0)
+        step = None if steps is None else steps.get((j, p))
+        if step is not None:  # the shift is the step less the silent time: at or below the step
+            d = d[d <= step + width]
         if len(d) < 3:
             matched[(j, p)] = 0
             continue
         cells = np.floor(d / width).astype(np.int64)
         values, counts = np.unique(cells, return_counts=True)
         top = int(np.argmax(counts))
+        if step is not None:  # of the bins near the most, the one nearest the step (the least silent time)
+            top = int(np.flatnonzero(counts >= 0.5 * counts[top])[-1])
         near = np.abs(cells - values[top]) <= 1
         around = np.bincount(cells[near] - values[top] + 1, minlength=3)
         if counts[top] < 3:

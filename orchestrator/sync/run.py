@@ -261,7 +261,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     part = sync["clock_part"].to_numpy(np.int64) if "clock_part" in sync else None
     if part is not None and (part > 1).any():
         search = max(abs(r["step_s"]) for r in detections.clock_resets) + RESET_GAP
-        shift, _ = part_shifts(tag, receiver, part, time, search)
+        steps = {(index[r["receiver"]], r["clock_part"]): r["step_s"] for r in detections.clock_resets
+                 if r["receiver"] in index}
+        shift, _ = part_shifts(tag, receiver, part, time, search, steps=steps)
         aligned = time - shift
     else:
         part, aligned = None, time
