@@ -183,32 +183,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                  table_sigma: float | None = None) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
     the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
-    as :func:`synchronise`.
-
-    Parameters
-    ----------
-    detections : Detections
-        The raw detections (:func:`~sblsim.orchestrator.sync.detections.read_detections`).
-    hydrophones : pandas.DataFrame
-        The receivers (:func:`~sblsim.orchestrator.sync.detections.read_hydrophones`).
-    sound_speed : float, optional
-        [m/s] a constant sound speed.
-    series : (numpy.ndarray, numpy.ndarray), optional
-        A sound-speed series: times [s] and speeds [m/s], interpolated at each arrival. Neither given: one sound
-        speed estimated with the clocks.
-    bin_hours : float
-        [h] the time bins' width.
-    reference : str, optional
-        The reference receiver's serial; default the receiver with the most arrivals shared with others.
-    leave_one_out : bool
-        Position each sync tag with the clocks fitted without its arrivals (else with the full fit).
-    refine_positions : bool
-        Refine the receivers' horizontal positions with the clocks (default: the table's fixed).
-    survey_sigma : float
-        [m] the table's horizontal sigma per axis: the refinement's prior.
-    timings : dict, optional
-        Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
-        ``tables``) for a benchmark.
+    as :func:`synchronise` (its parameters, ``table_sigma`` aside).
 
     Returns
     -------

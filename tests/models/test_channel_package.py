@@ -11,6 +11,8 @@ import pytest
 
 import sblsim.models.acoustics.channel as channel
 import sblsim.models.acoustics.core as core
+from tests.module_order import out_of_order
+from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.models.acoustics.channel"
 #: Bottom up: each module imports only the package's modules before it here (the package's docstring lists them in
@@ -19,32 +21,14 @@ ORDER = ("interface", "ocean", "site", "lanes", "pinger", "legs", "exchange", "t
 ROOT = Path(channel.__file__).parent
 
 
-def _imported(source: str) -> list[str]:
-    """The sblsim modules a module's source imports from, at any depth."""
-    found = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.ImportFrom) and node.module:
-            found.append(node.module)
-        elif isinstance(node, ast.Import):
-            found += [alias.name for alias in node.names]
-    return [name for name in found if name.startswith("sblsim.")]
-
-
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: a package module not before the importer, the package's face,
     the old ``core`` or anything of the orchestrator or fmus/."""
-    wrong = []
-    for k, name in enumerate(ORDER):
-        allowed = {f"{PACKAGE}.{m}" for m in ORDER[:k]}
-        for imported in _imported(sources[name]):
-            inside = imported == PACKAGE or imported.startswith(PACKAGE + ".")
-            if (inside and imported not in allowed) or imported.startswith(
-                    ("sblsim.orchestrator", "sblsim.fmus", "sblsim.models.acoustics.core")):
-                wrong.append((name, imported))
-    return sorted(set(wrong))
+    return out_of_order(sources, ORDER, PACKAGE, face=True, forbidden=(
+        "sblsim.orchestrator", "sblsim.fmus", "sblsim.models.acoustics.core"))
 
 
-SOURCES = {name: (ROOT / f"{name}.py").read_text(encoding="utf-8") for name in ORDER}
+SOURCES = module_sources(ROOT, ORDER)
 
 
 def test_the_package_holds_exactly_the_listed_modules():

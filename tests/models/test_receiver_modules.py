@@ -9,24 +9,19 @@ from pathlib import Path
 import pytest
 
 import sblsim.models.receiver as receiver
+from tests.module_order import out_of_order
+from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.models.receiver"
 #: Bottom up: each module imports only the ones before it here (of these; the receivers import any of them).
 ORDER = ("interface", "ranging", "packets", "instrument", "pings", "slots", "reacquisition", "core")
 ROOT = Path(receiver.__file__).parent
-SOURCES = {name: (ROOT / f"{name}.py").read_text(encoding="utf-8") for name in ORDER}
+SOURCES = module_sources(ROOT, ORDER)
 
 
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: one of ``ORDER`` not before the importer, or the orchestrator."""
-    wrong = []
-    for k, name in enumerate(ORDER):
-        later = {f"{PACKAGE}.{m}" for m in ORDER[k:]}
-        for node in ast.walk(ast.parse(sources[name])):
-            if isinstance(node, ast.ImportFrom) and node.module and (
-                    node.module in later or node.module.startswith(("sblsim.orchestrator", "sblsim.fmus"))):
-                wrong.append((name, node.module))
-    return sorted(set(wrong))
+    return out_of_order(sources, ORDER, PACKAGE, forbidden=("sblsim.orchestrator", "sblsim.fmus"))
 
 
 def _defined(source: str) -> set[str]:

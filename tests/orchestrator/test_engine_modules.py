@@ -9,23 +9,19 @@ from pathlib import Path
 import pytest
 
 import sblsim.orchestrator.cosim as cosim
+from tests.module_order import out_of_order
+from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.orchestrator.cosim"
 #: Bottom up: each module imports only the ones before it here (of these).
 ORDER = ("handles", "local_engine", "fmu_files", "fmu_engine", "fmu3_engine", "engines")
 ROOT = Path(cosim.__file__).parent
-SOURCES = {name: (ROOT / f"{name}.py").read_text(encoding="utf-8") for name in ORDER}
+SOURCES = module_sources(ROOT, ORDER)
 
 
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: one of ``ORDER`` not before the importer."""
-    wrong = []
-    for k, name in enumerate(ORDER):
-        later = {f"{PACKAGE}.{m}" for m in ORDER[k:]}
-        for node in ast.walk(ast.parse(sources[name])):
-            if isinstance(node, ast.ImportFrom) and node.module in later:
-                wrong.append((name, node.module))
-    return sorted(set(wrong))
+    return out_of_order(sources, ORDER, PACKAGE)
 
 
 def _classes(source: str) -> set[str]:

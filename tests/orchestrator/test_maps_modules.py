@@ -13,29 +13,19 @@ import numpy as np
 import pytest
 
 import sblsim.orchestrator.maps as maps
+from tests.module_order import imported, out_of_order
+from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.orchestrator.maps"
 #: Bottom up: each module imports only the ones before it here (of these).
 ORDER = ("map_grid", "detection", "echoes", "accuracy", "panels", "output")
 ROOT = Path(maps.__file__).parent
-SOURCES = {name: (ROOT / f"{name}.py").read_text(encoding="utf-8") for name in ORDER}
+SOURCES = module_sources(ROOT, ORDER)
 
 
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: one of ``ORDER`` not before the importer, or the package."""
-    wrong = []
-    for k, name in enumerate(ORDER):
-        later = {PACKAGE} | {f"{PACKAGE}.{m}" for m in ORDER[k:]}
-        for node in ast.walk(ast.parse(sources[name])):
-            if isinstance(node, ast.ImportFrom) and node.module in later:
-                wrong.append((name, node.module))
-    return sorted(set(wrong))
-
-
-def _imported(source: str) -> set[str]:
-    tree = ast.parse(source)
-    return ({n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
-            | {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names})
+    return out_of_order(sources, ORDER, PACKAGE, face=True)
 
 
 def test_the_package_holds_exactly_the_listed_modules():
@@ -69,7 +59,7 @@ def test_the_package_re_exports_the_modules_objects_and_defines_nothing():
 
 
 def test_only_the_output_draws_and_only_the_computing_modules_read_the_site():
-    drawing = [m for m in ORDER if any(i.startswith("matplotlib") for i in _imported(SOURCES[m]))]
+    drawing = [m for m in ORDER if any(i.startswith("matplotlib") for i in imported(SOURCES[m]))]
     assert drawing == ["output"]
     assert "staged_directory" in SOURCES["output"] and all("staged_directory" not in SOURCES[m] for m in ORDER[:-1])
 
