@@ -329,10 +329,11 @@ def main(args: argparse.Namespace) -> int:
     table = outcome.tags
     for row in table.itertuples(index=False):
         if row.status == "tracked":
-            print(f"  {row.tag}: {row.pings} pings, {row.positioned} positioned, {row.flagged} flagged, median σ "
-                  f"{row.median_sigma_m:.2g} m, ping type {row.ping_type} (the sheet: {row.ping_type_stated}), "
-                  f"sound speed {row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}), {row.first_utc} to "
-                  f"{row.last_utc}")
+            aside = f"{row.set_aside} set aside (set_aside.csv), " if row.set_aside else ""
+            print(f"  {row.tag}: {row.pings} pings, {aside}{row.positioned} positioned, {row.flagged} flagged, "
+                  f"median σ {row.median_sigma_m:.2g} m, ping type {row.ping_type} (the sheet: "
+                  f"{row.ping_type_stated}), sound speed {row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}), "
+                  f"{row.first_utc} to {row.last_utc}")
         else:
             print(f"sblsim: warning: tag {row.transmitter} not tracked: {row.reason}", file=sys.stderr)
     for note in outcome.summary["notes"]:

@@ -49,7 +49,7 @@ from sblsim.orchestrator.tracks.water import read_temperature_series
 
 #: The columns of ``tags.csv``.
 TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
-               "pings", "positioned", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
+               "pings", "set_aside", "positioned", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
                "sound_speed_m_s", "sound_speed_source", "first_utc", "last_utc", "folder", "wall_time_s")
 #: The columns of ``tracks.csv`` (``z`` and ``sigma_z`` after ``y`` and ``sigma_y`` in 3-D).
 TRACK_COLUMNS = ("tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "receivers_heard",
@@ -357,11 +357,13 @@ def _tracked(result, elapsed: float) -> dict[str, Any]:
     s = result.summary
     main = s["track"]
     track = result.track
-    positioned, flagged = int(len(track)), int(s["flagged"].get(main, 0))
+    aside = int(s.get("set_aside", {}).get("count", 0))  # rows no ping of the tag's schedule: no estimate
+    positioned, flagged = int(len(track)) - aside, int(s["flagged"].get(main, 0)) - aside
     sigma = np.hypot(track["sigma_x"].to_numpy(float), track["sigma_y"].to_numpy(float))
     ok = (track["quality"] != "flagged").to_numpy() & np.isfinite(sigma)
     times = track["epoch_s"].to_numpy(float) if "epoch_s" in track else np.array([])
-    return {"status": "tracked", "reason": "", "pings": s["pings"], "positioned": positioned, "flagged": flagged,
+    return {"status": "tracked", "reason": "", "pings": s["pings"], "set_aside": aside, "positioned": positioned,
+            "flagged": flagged,
             "share_flagged": flagged / positioned if positioned else 0.0,
             "median_sigma_m": float(np.median(sigma[ok])) if ok.any() else float("nan"),
             "ping_type": s["ping_type"]["type"], "track": main,

@@ -3,8 +3,9 @@
 or a Dask cluster's workers, :mod:`sblsim.orchestrator.campaign.executors`), as a campaign runs its chunks.
 
 The tags' folders and ``tags.csv`` (one row per tag: whether it was tracked or refused and why, its pings, the rows
-positioned and flagged, the sound speed and ping type taken, its time) are written together, all or nothing, when
-every tag has ended; a tag whose file is refused is a row saying so, never the end of the others.
+set aside as no pings of its schedule, positioned and flagged (a set-aside row in neither), the sound speed and ping
+type taken, its time) are written together, all or nothing, when every tag has ended; a tag whose file is refused is
+a row saying so, never the end of the others.
 :func:`replay_toa_tags` (``sblsim.replay_toa_tags``, ``sblsim replay FOLDER --format toa``) checks its arguments and
 returns a :class:`TagsResult`.
 """
@@ -36,8 +37,8 @@ MAX_TAGS = 10_000
 #: The file names taken as one tag's times of arrival in a folder.
 TAG_SUFFIXES = (".txt", ".csv", ".toa")
 #: The columns of ``tags.csv``.
-TAG_COLUMNS = ("tag", "status", "reason", "pings", "positioned", "flagged", "share_flagged", "track",
-               "sound_speed_m_s", "sound_speed_source", "ping_type", "segments", "wall_time_s")
+TAG_COLUMNS = ("tag", "status", "reason", "pings", "set_aside", "positioned", "flagged", "share_flagged",
+               "track", "sound_speed_m_s", "sound_speed_source", "ping_type", "segments", "wall_time_s")
 
 
 @dataclass
@@ -90,9 +91,11 @@ def _row(name: str, result, elapsed: float) -> dict[str, Any]:
         return {"tag": name, "status": "refused", "reason": result, "wall_time_s": elapsed}
     s = result.summary
     main = s["track"]
-    positioned = s["fixed"].get(main, 0)
-    flagged = s["flagged"].get(main, 0)
-    return {"tag": name, "status": "tracked", "reason": "", "pings": s["pings"], "positioned": positioned,
+    aside = int(s.get("set_aside", {}).get("count", 0))  # rows no ping of the tag's schedule: no estimate
+    positioned = s["fixed"].get(main, 0) - aside
+    flagged = s["flagged"].get(main, 0) - aside
+    return {"tag": name, "status": "tracked", "reason": "", "pings": s["pings"], "set_aside": aside,
+            "positioned": positioned,
             "flagged": flagged, "share_flagged": flagged / positioned if positioned else 0.0, "track": main,
             "sound_speed_m_s": s["sound_speed"]["sound_speed_m_s"], "sound_speed_source": s["sound_speed"]["source"],
             "ping_type": s["ping_type"]["type"], "segments": len(s["segments"]), "wall_time_s": s["wall_time_s"]}
@@ -209,7 +212,7 @@ class TagsResult:
     ----------
     table : pandas.DataFrame
         ``tags.csv``: one row per tag (``tag``, ``status`` ``tracked`` or ``refused``, ``reason``, ``pings``,
-        ``positioned``, ``flagged``, ``share_flagged``, ``track`` (the estimator), ``sound_speed_m_s``,
+        ``set_aside``, ``positioned``, ``flagged``, ``share_flagged``, ``track`` (the estimator), ``sound_speed_m_s``,
         ``sound_speed_source``, ``ping_type``, ``segments``, ``wall_time_s``).
     tracks : dict of str to TrackResult
         Each tracked tag's result, by its name.

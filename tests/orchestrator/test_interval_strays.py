@@ -105,3 +105,22 @@ def test_the_boats_cod_with_a_wrong_interval_is_refused_in_one_line(tmp_path, ca
     assert "multipath echoes by it" in capsys.readouterr().err
     assert main([*args, "60:120", "--out", str(tmp_path / "right")]) == 0
     assert "0 multipath echoes dropped" in capsys.readouterr().out
+
+
+def test_a_tags_table_counts_the_set_aside_rows_apart(tmp_path, record):
+    """``replay FOLDER --format toa``'s tags.csv (the study's has the same rule): the set-aside rows in
+    ``set_aside``, in neither ``positioned`` nor ``flagged`` (counted from the tag's own track here)."""
+    from sblsim.orchestrator.tracks.many import replay_toa_tags
+
+    folder, matrix, inserted = record
+    tags = tmp_path / "tags"
+    tags.mkdir()
+    (tags / "T1.csv").write_bytes((folder / "toa.csv").read_bytes())
+    result = replay_toa_tags(tags, receivers=folder / "r.csv", workers=1, sound_speed=1480.0, ping_type="rbi",
+                             burst_interval="20:40", smooth=False)
+    row = result.table.set_index("tag").loc["T1"]
+    track = result.tracks["T1"].track
+    estimated = track["x"].notna().to_numpy()
+    assert row["set_aside"] == inserted.sum() == (~estimated).sum()
+    assert row["positioned"] == estimated.sum() == len(matrix) - inserted.sum()
+    assert row["flagged"] == int((track["quality"][estimated] == "flagged").sum())
