@@ -37,3 +37,17 @@ def out_of_order(texts: dict[str, str], order: tuple[str, ...], package: str, fa
             if module in later or (forbidden and module.startswith(forbidden)):
                 wrong.append((name, module))
     return sorted(set(wrong))
+
+
+def top_level_names(source: str) -> set[str]:
+    """The names a module's own top-level statements bind (functions, classes, assignments, unpacked ones
+    included; not those it imports), ``__all__`` among them where it has one."""
+    names = set()
+    for node in ast.parse(source).body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign):
+            names |= {n.id for t in node.targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            names.add(node.target.id)
+    return names

@@ -3,13 +3,12 @@ Kalman-type receivers' base alone."""
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import pytest
 
 import sblsim.models.receiver as receiver
-from tests.module_order import out_of_order
+from tests.module_order import out_of_order, top_level_names
 from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.models.receiver"
@@ -22,17 +21,6 @@ SOURCES = module_sources(ROOT, ORDER)
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: one of ``ORDER`` not before the importer, or the orchestrator."""
     return out_of_order(sources, ORDER, PACKAGE, forbidden=("sblsim.orchestrator", "sblsim.fmus"))
-
-
-def _defined(source: str) -> set[str]:
-    """The names a module's source binds at its top level (not by an import)."""
-    names = set()
-    for node in ast.parse(source).body:
-        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
-            names.add(node.name)
-        elif isinstance(node, ast.Assign):
-            names |= {n.id for t in node.targets for n in ast.walk(t) if isinstance(n, ast.Name)}
-    return names - {"__all__"}
 
 
 def test_each_module_imports_only_the_modules_before_it():
@@ -52,7 +40,7 @@ def test_no_module_is_a_chapter(name):
 
 
 def test_every_name_is_defined_once_and_the_questions_have_one_module_each():
-    defined = {name: _defined(source) for name, source in SOURCES.items()}
+    defined = {name: top_level_names(source) - {"__all__"} for name, source in SOURCES.items()}
     seen: dict[str, str] = {}
     for module, names in defined.items():
         for n in names - {"_AXES"}:  # the axis labels: the interface's alone

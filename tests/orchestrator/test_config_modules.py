@@ -13,7 +13,7 @@ import pytest
 import sblsim.orchestrator.cosim as cosim
 import sblsim.orchestrator.cosim.config as config
 from sblsim.models.errors import ConfigError
-from tests.module_order import out_of_order
+from tests.module_order import out_of_order, top_level_names
 from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.orchestrator.cosim"
@@ -26,19 +26,6 @@ SOURCES = module_sources(ROOT, ORDER)
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: one of ``ORDER`` not before the importer."""
     return out_of_order(sources, ORDER, PACKAGE)
-
-
-def _defined(source: str) -> set[str]:
-    """The names a module's own top-level statements define (not those it imports)."""
-    names = set()
-    for node in ast.parse(source).body:
-        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
-            names.add(node.name)
-        elif isinstance(node, ast.Assign):
-            names |= {t.id for t in node.targets if isinstance(t, ast.Name)}
-        elif isinstance(node, ast.AnnAssign):
-            names.add(node.target.id)
-    return names
 
 
 def test_each_module_imports_only_the_modules_before_it():
@@ -60,7 +47,7 @@ def test_no_module_is_a_chapter(name):
 def test_each_name_is_defined_once():
     seen: dict[str, str] = {}
     for name in ORDER:
-        for defined in _defined(SOURCES[name]) - {"__all__"}:
+        for defined in top_level_names(SOURCES[name]) - {"__all__"}:
             assert defined not in seen, (defined, seen.get(defined), name)
             seen[defined] = name
 
@@ -71,14 +58,14 @@ def test_config_re_exports_every_public_name_and_configerror():
     assert config.ConfigError is ConfigError
     for name in ORDER[:-1]:
         module = importlib.import_module(f"{PACKAGE}.{name}")
-        public = {n for n in _defined(SOURCES[name]) if not n.startswith("_")}
+        public = {n for n in top_level_names(SOURCES[name]) if not n.startswith("_")}
         assert public, name
         assert public <= set(config.__all__), (name, public - set(config.__all__))
         assert all(getattr(config, n) is getattr(module, n) for n in public)
 
 
 def test_the_resolving_module_reads_and_resolves_only():
-    assert _defined(SOURCES["config"]) == {"load_config", "load_raw", "resolve", "to_toml", "__all__"}
+    assert top_level_names(SOURCES["config"]) == {"load_config", "load_raw", "resolve", "to_toml", "__all__"}
 
 
 def test_no_configuration_module_loads_code_or_computes_geometry():
@@ -90,7 +77,7 @@ def test_no_configuration_module_loads_code_or_computes_geometry():
         modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
         assert not modules & {"importlib.util", "importlib.machinery", "runpy"}, name
         assert "exec_module" not in SOURCES[name] and "spec_from_file_location" not in SOURCES[name]
-        assert not _defined(SOURCES[name]) & {"beacon_offsets", "beacon_arms", "platform_offsets", "lever_arms"}
+        assert not top_level_names(SOURCES[name]) & {"beacon_offsets", "beacon_arms", "platform_offsets", "lever_arms"}
 
 
 def test_a_note_said_by_a_check_reaches_the_command_line():
