@@ -52,12 +52,12 @@ import pandas as pd
 from sblsim.fmus.build import build_all
 from sblsim.models.errors import CompileError
 from sblsim.orchestrator.campaign import plan, run_campaign
+from sblsim.orchestrator.campaign.study import load_study, study_source
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.engines import close_handles, make_handles
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.metrics import RUN_METRICS
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates
-from sblsim.orchestrator.study import load_study, study_source
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ekf_floor import filterpy_step, floor_step  # noqa: E402

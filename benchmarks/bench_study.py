@@ -48,7 +48,7 @@ print(time.perf_counter() - start)
 CUT = """
 import sys, tempfile
 from sblsim.orchestrator.campaign import run_campaign
-from sblsim.orchestrator.study import load_study, study_source
+from sblsim.orchestrator.campaign.study import load_study, study_source
 raw, _ = study_source(sys.argv[1])
 study = load_study({**raw, "study": {**raw["study"], "replicates": int(sys.argv[2])}})
 with tempfile.TemporaryDirectory() as tmp:

@@ -141,7 +141,7 @@ def build_fmu(component: str | type, out_dir: Path | str, n_beacons: int = 4, co
     parameters : mapping, optional
         FMU parameter values (String choices as text) compiled in as the defaults and written as the start
         values of ``modelDescription.xml``, so that a host that sets nothing runs them (a scenario's:
-        :func:`sblsim.orchestrator.scenario_fmus.build_scenario_fmus`); every other parameter keeps its
+        :func:`sblsim.orchestrator.cosim.scenario_fmus.build_scenario_fmus`); every other parameter keeps its
         declared start, and a host may still set any of them [default: the declared starts].
     experiment : (float, float), optional
         The default experiment's step size and stop time [s] [default: 0.1 s and 100 s].

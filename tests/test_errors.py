@@ -22,11 +22,11 @@ from sblsim.models.errors import (
 )
 from sblsim.orchestrator.analysis import compute
 from sblsim.orchestrator.campaign import run_campaign
+from sblsim.orchestrator.campaign.study import StudyError, load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.engines import open_fmu
+from sblsim.orchestrator.cosim.ssp import SspError, read_ssp
 from sblsim.orchestrator.io.archives import check_members
-from sblsim.orchestrator.ssp import SspError, read_ssp
-from sblsim.orchestrator.study import StudyError, load_study
 
 KINDS = (ModelError, FMICallError, CompileError, ArchiveError, CampaignError)
 

@@ -125,8 +125,8 @@ from sblsim.orchestrator.analysis.report import (
     report_markdown,
 )
 from sblsim.orchestrator.analysis.tables import best_cell, tables
+from sblsim.orchestrator.campaign.study import Factor, StudyRecord
 from sblsim.orchestrator.io.output import staged_directory
-from sblsim.orchestrator.study import Factor, StudyRecord
 
 
 def compute(directory: Path | str, metric: str = "e_tot_rms", order: int = 2, alpha: float = 0.05,

@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.errors import CampaignError
+from sblsim.orchestrator.campaign.study import Factor, StudyError, StudyRecord, level_value, read_record
 from sblsim.orchestrator.cosim.metrics import METRIC_NAMES
-from sblsim.orchestrator.study import Factor, StudyError, StudyRecord, level_value, read_record
 
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
 #: Every response a fit can take: the error metrics [m] and the share of the slots whose packet was received
@@ -77,8 +77,8 @@ def infer_factors(runs: pd.DataFrame) -> list[Factor]:
 
 
 def load_campaign_study(directory: Path | str, runs: pd.DataFrame) -> tuple[StudyRecord, list[str]]:
-    """Read ``DIR/study.toml`` (:func:`sblsim.orchestrator.study.read_record`), or infer the study from ``runs``
-    when it is missing.
+    """Read ``DIR/study.toml`` (:func:`sblsim.orchestrator.campaign.study.read_record`), or infer the study from
+    ``runs`` when it is missing.
 
     Returns
     -------

@@ -16,8 +16,8 @@ import pandas as pd
 
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
+from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.campaign.worker import run_chunk, watch_parent
-from sblsim.orchestrator.study import Study
 
 #: ``--scheduler`` value that starts a Dask ``LocalCluster`` on this machine.
 LOCAL_CLUSTER = "local"

@@ -15,9 +15,9 @@ import tomli_w
 
 from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
+from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.output import refuse_link, write_atomic
-from sblsim.orchestrator.study import Study
 
 
 def write_parquet(frame: pd.DataFrame, path: Path) -> None:

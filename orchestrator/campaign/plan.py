@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from sblsim.models import COMPONENTS
+from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.cosim.plan import RunPlan
-from sblsim.orchestrator.study import Study
 
 #: Default runs per chunk on each engine.
 DEFAULT_BATCH = {"local": 800, "fmu": 50}

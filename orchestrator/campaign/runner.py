@@ -27,11 +27,11 @@ from sblsim.orchestrator.campaign.manifest import (
 )
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, cell_configs, plan
+from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.fmu_files import fmu_paths
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.io.progress import Progress
-from sblsim.orchestrator.study import Study
 
 
 @dataclass
@@ -81,7 +81,7 @@ def run_campaign(study: Study, out: Path | str, workers: int | None = None, sche
     Parameters
     ----------
     study : Study
-        Validated study (:func:`sblsim.orchestrator.study.load_study`).
+        Validated study (:func:`sblsim.orchestrator.campaign.study.load_study`).
     out : path
         Campaign directory.
     workers : int, optional

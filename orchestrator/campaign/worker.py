@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 
 from sblsim.orchestrator.campaign.plan import Chunk
+from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.cosim.master import RecordBuffer
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.plan import with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
-from sblsim.orchestrator.study import Study
 
 
 @cache

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sblsim.models.declarations import shown
+from sblsim.orchestrator.campaign.study import Study, load_study
 from sblsim.orchestrator.commands.analyze import AnalysisResult, analyze, analyze_folder
 from sblsim.orchestrator.commands.common import Progress, check_engine
 from sblsim.orchestrator.commands.console import interrupted_status
@@ -22,7 +23,6 @@ from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.io.arguments import check_integer, check_seed, flag_argument, path_argument, text_argument
 from sblsim.orchestrator.io.output import check_writable, folder_name
 from sblsim.orchestrator.io.progress import check_progress
-from sblsim.orchestrator.study import Study, load_study
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd

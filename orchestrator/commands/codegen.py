@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim codegen`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.codegen import example_files
+    from sblsim.orchestrator.cosim.codegen import example_files
 
     check_writable(args.out)
     if args.receiver not in RECEIVERS:

@@ -1,5 +1,5 @@
 """``sblsim compare`` and ``sblsim.compare``: several receivers, or positioning systems, on the same replicates
-of a scenario (:mod:`sblsim.orchestrator.compare`).
+of a scenario (:mod:`sblsim.orchestrator.montecarlo.compare`).
 """
 
 from __future__ import annotations
@@ -54,13 +54,13 @@ class CompareResult:
 
     def markdown(self) -> str:
         """The table as ``compare.md`` shows it."""
-        from sblsim.orchestrator.compare import markdown
+        from sblsim.orchestrator.montecarlo.compare import markdown
 
         return markdown(self.table)
 
     def plot(self) -> Figure:
         """The figure ``compare.png``."""
-        from sblsim.orchestrator.compare import plot
+        from sblsim.orchestrator.montecarlo.compare import plot
 
         return plot(self.table, self.title)
 
@@ -109,8 +109,8 @@ def compare(scenario: str | Path | Mapping, *, receivers: str | Sequence[str] = 
     ConfigError, SblsimError
         Bad input (nothing is run or written).
     """
-    from sblsim.orchestrator.compare import compare as _compare
-    from sblsim.orchestrator.compare import parse_receivers, plans, write
+    from sblsim.orchestrator.montecarlo.compare import compare as _compare
+    from sblsim.orchestrator.montecarlo.compare import parse_receivers, plans, write
 
     seed = check_seed(seed)
     check_engine(engine)
@@ -179,7 +179,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim compare`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.compare import markdown, parse_receivers, write
+    from sblsim.orchestrator.montecarlo.compare import markdown, parse_receivers, write
 
     check_seed_option(args.seed)
     receivers = parse_receivers(args.receivers)

@@ -1,6 +1,6 @@
 """``sblsim fmus build|validate|variables``: the FMI 2.0 Co-Simulation FMUs built from the model source
 (:mod:`sblsim.fmus.build`), a scenario's FMUs whose start values are its parameters
-(:mod:`sblsim.orchestrator.scenario_fmus`), fmpy's validation, the variables as Markdown tables.
+(:mod:`sblsim.orchestrator.cosim.scenario_fmus`), fmpy's validation, the variables as Markdown tables.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from sblsim.orchestrator.commands.common import resolve_plan
 from sblsim.orchestrator.commands.console import check_seed_option
 from sblsim.orchestrator.cosim.config import MODEL_PREFIX, check_receiver, external_path
 from sblsim.orchestrator.cosim.plugins import user_model
+from sblsim.orchestrator.cosim.scenario_fmus import build_scenario_fmus
 from sblsim.orchestrator.io.output import check_writable
-from sblsim.orchestrator.scenario_fmus import build_scenario_fmus
 
 #: The systems that own components' interfaces (``fmus build --system``): the layout-sized one first.
 _OWNERS = tuple(s.name for s in interface_owners())

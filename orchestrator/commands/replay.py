@@ -1,5 +1,5 @@
 """``sblsim replay`` and ``sblsim.replay``: a receiver on a recorded log (docs/log-format.md), with its errors and
-consistency against a truth track when one is given (:mod:`sblsim.orchestrator.replay`).
+consistency against a truth track when one is given (:mod:`sblsim.orchestrator.logs.replay`).
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
     ConfigError, SblsimError
         A log or truth track that cannot be read (the message names the row and column), bad options.
     """
-    from sblsim.orchestrator.replay import replay_config
+    from sblsim.orchestrator.logs.replay import replay_config
 
     check_engine(engine)
     log = path_argument(log, "log", optional=False)
@@ -136,8 +136,9 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
 def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,
                  fmu_dir: str | Path | None, prepare: Callable[[], Path | None]) -> ReplayResult:
     """:func:`replay` of a plan (and ``sblsim replay``): read the log and the truth track, ``prepare()`` the
-    output folder (None: nothing is written), replay and write (:func:`sblsim.orchestrator.replay.replay_files`)."""
-    from sblsim.orchestrator.replay import replay_files
+    output folder (None: nothing is written), replay and write
+    (:func:`sblsim.orchestrator.logs.replay.replay_files`)."""
+    from sblsim.orchestrator.logs.replay import replay_files
 
     result, target = replay_files(plan, log, truth, engine, fmu_dir, prepare)
     return ReplayResult(Config(thaw(result.config)), source, result.engine, result.summary, result.timeseries,
@@ -277,7 +278,7 @@ def main(args: argparse.Namespace) -> int:
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
-    from sblsim.orchestrator.replay import replay_config, replay_lines
+    from sblsim.orchestrator.logs.replay import replay_config, replay_lines
 
     notes: list[str] = []
     plan, source = replay_config(args.log, args.config, args.receiver, args.overrides, notes)

@@ -26,10 +26,10 @@ from sblsim.orchestrator.cosim.engines import ENGINES, close_handles, make_handl
 from sblsim.orchestrator.cosim.master import ALGORITHMS
 from sblsim.orchestrator.cosim.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
 from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
+from sblsim.orchestrator.cosim.ssp import read_ssp
 from sblsim.orchestrator.io.arguments import check_count, path_argument, prepare_out
 from sblsim.orchestrator.io.output import check_writable, folder_name
 from sblsim.orchestrator.io.progress import check_progress
-from sblsim.orchestrator.ssp import read_ssp
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -173,7 +173,7 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
 def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Path | None = None,
               progress: Any = False, ssp: Any = None) -> Any:
     """Simulate a plan's replicates ``run.replicate`` … (``sblsim run`` and :func:`run`); ``ssp``, an SSP
-    package read back (:func:`sblsim.orchestrator.ssp.read_ssp`: its plan is ``plan``), brings its connections
+    package read back (:func:`sblsim.orchestrator.cosim.ssp.read_ssp`: its plan is ``plan``), brings its connections
     and, on the fmu engine, its FMUs."""
     from sblsim.orchestrator.cosim.run import run as _run
 
@@ -246,7 +246,7 @@ def main(args: argparse.Namespace) -> int:
         engine = args.engine or "local"
         plan = resolve_plan(args.scenario, args.seed, overrides)  # the run's one resolution
     if args.export_log is not None:
-        from sblsim.orchestrator.receiver_log import check_export
+        from sblsim.orchestrator.logs.receiver_log import check_export
 
         check_export(args.export_log, args.force)
         check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
@@ -271,7 +271,7 @@ def main(args: argparse.Namespace) -> int:
         """The run's exports, written before its own files move into place: a failed one leaves no run folder."""
         try:
             if args.export_log is not None:
-                from sblsim.orchestrator.receiver_log import export_log
+                from sblsim.orchestrator.logs.receiver_log import export_log
 
                 exported["log"] = export_log(result._result, args.export_log)
             if args.export_detections is not None:
@@ -320,7 +320,7 @@ def _check_export_apart(export: Path | None, out: Path) -> None:
     """
     if export is None:
         return
-    from sblsim.orchestrator.receiver_log import truth_path
+    from sblsim.orchestrator.logs.receiver_log import truth_path
 
     folder = out.resolve()
     for target in (export, truth_path(export)):

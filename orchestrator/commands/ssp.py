@@ -1,5 +1,5 @@
 """``sblsim ssp export``: the system as an SSP 1.0 package (SystemStructure.ssd, the FMUs and the parameter
-sets) for other FMI hosts (:mod:`sblsim.orchestrator.ssp`).
+sets) for other FMI hosts (:mod:`sblsim.orchestrator.cosim.ssp`).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from sblsim.fmus.build import FMI_VERSIONS
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.commands.common import resolve_plan
 from sblsim.orchestrator.commands.console import check_seed_option, config_options
+from sblsim.orchestrator.cosim.ssp import export_ssp
 from sblsim.orchestrator.io.output import check_writable
-from sblsim.orchestrator.ssp import export_ssp
 
 NAME = "ssp"
 HELP = "export the system as an SSP 1.0 package for other FMI hosts"

@@ -11,9 +11,9 @@
   probability of just that.
 * **A path** (:func:`path_check`): the scenario's receiver on a straight path across the work area (through its
   centre, North to South, at the first depth, at :data:`PATH_SPEED`, at most :data:`PATH_SLOTS` sampling times
-  long), ``monte_carlo.path_replicates`` runs (:func:`sblsim.orchestrator.compare.compare`): its RMS error, NEES and
-  PCRB beside the map's RMS along the path. A filter averages cycles and a moving vehicle's measurements are of
-  different instants, so this is what a receiver makes of the design, not a check of the map.
+  long), ``monte_carlo.path_replicates`` runs (:func:`sblsim.orchestrator.montecarlo.compare.compare`): its RMS
+  error, NEES and PCRB beside the map's RMS along the path. A filter averages cycles and a moving vehicle's
+  measurements are of different instants, so this is what a receiver makes of the design, not a check of the map.
 """
 
 from __future__ import annotations
@@ -26,11 +26,11 @@ import pandas as pd
 from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.models.design.criteria import ECHO_LIMIT
-from sblsim.orchestrator.compare import compare
 from sblsim.orchestrator.cosim.plan import with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
 from sblsim.orchestrator.design.run import Design, Resolved, plan_of
 from sblsim.orchestrator.maps import point_accuracy
+from sblsim.orchestrator.montecarlo.compare import compare
 
 #: The path's speed [m/s] (an AUV's transit).
 PATH_SPEED = 2.0

@@ -99,11 +99,11 @@ def test_codegen_receiver_example_reproduces_the_recorded_estimate(recorded, tmp
 
 
 def test_the_example_files_are_the_recorded_run_as_text():
-    """orchestrator/codegen.py's example (no C compiled): the run's own estimates, one row per step at its times, the
-    packets one row per step with the receiver's inputs, every [receiver] parameter but the seeds, as a fresh run of
-    the same scenario gives them (sblsim.run, the command line's)."""
+    """orchestrator/cosim/codegen.py's example (no C compiled): the run's own estimates, one row per step at its
+    times, the packets one row per step with the receiver's inputs, every [receiver] parameter but the seeds, as a
+    fresh run of the same scenario gives them (sblsim.run, the command line's)."""
     import sblsim
-    from sblsim.orchestrator.codegen import EXAMPLE, example_files
+    from sblsim.orchestrator.cosim.codegen import EXAMPLE, example_files
 
     files, about, n_beacons = example_files("ekf")
     scenario, overrides, seed = EXAMPLE

@@ -11,9 +11,9 @@ import zipfile
 import pytest
 
 from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.ssp import export_ssp
 from sblsim.orchestrator.io import archives
 from sblsim.orchestrator.io.archives import ArchiveError, inside, safe_extract
-from sblsim.orchestrator.ssp import export_ssp
 
 
 def _zip(path, entries):

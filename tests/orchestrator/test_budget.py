@@ -11,7 +11,10 @@ import pandas as pd
 import pytest
 
 from sblsim.models.platform.geometry import lever_arms
-from sblsim.orchestrator.budget import (
+from sblsim.orchestrator.cli import main
+from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.cosim.run import run
+from sblsim.orchestrator.montecarlo.budget import (
     DEFAULT_REPLICATES,
     NO_EFFECT,
     OFF,
@@ -22,9 +25,6 @@ from sblsim.orchestrator.budget import (
     planned,
     switched_off,
 )
-from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.cosim.config import load_config
-from sblsim.orchestrator.cosim.run import run
 
 SHORT = "simulation.duration=20"
 

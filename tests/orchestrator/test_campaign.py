@@ -23,10 +23,10 @@ import pytest
 import tomli_w
 
 from sblsim.orchestrator.campaign import plan, run_campaign
+from sblsim.orchestrator.campaign.study import design_matrix, full_factorial, load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.study import design_matrix, full_factorial, load_study
 from tests.helpers import start_for_signals
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -459,8 +459,8 @@ def test_the_full_factorial_is_pydoe3s():
         np.testing.assert_array_equal(full_factorial(k), pyDOE3.ff2n(k))
         assert full_factorial(k).dtype == np.int64
     assert "pyDOE3" not in subprocess.run(
-        [sys.executable, "-c", "import sys; from sblsim.orchestrator.study import design_matrix; design_matrix(7); "
-                               "print(sorted(m for m in sys.modules if m.startswith('pyDOE3')))"],
+        [sys.executable, "-c", "import sys; from sblsim.orchestrator.campaign.study import design_matrix; "
+                               "design_matrix(7); print(sorted(m for m in sys.modules if m.startswith('pyDOE3')))"],
         capture_output=True, text=True, check=True).stdout
 
 
@@ -685,7 +685,7 @@ import resource, sys
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run_batch, with_replicates
-from sblsim.orchestrator.study import load_study
+from sblsim.orchestrator.campaign.study import load_study
 run_batch(with_replicates(load_config("semicircle", ["simulation.duration=2"]), range(500)), timeseries=False)
 base = int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0])  # after a chunk's worth of warm-up
 levels = [("platform.baseline", 1.0, 3.0), ("platform.gps_sigma", 0.1, 1.0), ("acoustics.sigma_range", 0.1, 0.5),

@@ -158,7 +158,7 @@ def test_the_rule_takes_what_the_folder_holds_and_nothing_else(tmp_path):
 
 
 def test_a_study_files_scenario_outside_its_folder_is_refused_unopened(tmp_path, private):
-    from sblsim.orchestrator.study import StudyError, load_study
+    from sblsim.orchestrator.campaign.study import StudyError, load_study
 
     scenario = private["outline.csv"].with_name("s.toml")
     scenario.write_text("[simulation]\nduration = 1.0\n")

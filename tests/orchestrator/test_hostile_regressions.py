@@ -1,10 +1,10 @@
 """What a hostile tester found refused unclearly, or not at all: each a one-line refusal (exit 2, nothing written) or
 a clear message.
 
-* a log's range below what the configuration's channel measures (orchestrator/receiver_log.py);
+* a log's range below what the configuration's channel measures (orchestrator/logs/receiver_log.py);
 * a times-of-arrival record in which no ping can be positioned (orchestrator/tracks/replay.py);
 * ``sblsim run --export-log`` whose export fails: the run's folder goes with it (orchestrator/commands/run.py);
-* a budget whose receiver heard nothing (orchestrator/budget.py);
+* a budget whose receiver heard nothing (orchestrator/montecarlo/budget.py);
 * a row nobody heard in a random-interval record, a long interface mismatch, and options with no effect.
 """
 
@@ -26,13 +26,13 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.errors import ConfigError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.receiver.interface import OPTIONAL_OUTPUTS
-from sblsim.orchestrator import receiver_log
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.connections import ConnectionMismatch, check_interface
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.design.problem import check_problem
 from sblsim.orchestrator.io import output, plots
-from sblsim.orchestrator.receiver_log import range_floor, read_log
+from sblsim.orchestrator.logs import receiver_log
+from sblsim.orchestrator.logs.receiver_log import range_floor, read_log
 from tests.helpers import problem_with
 from tests.orchestrator.test_design_telemetry import SMALL  # the small L-shaped lake, a range test's curve
 

@@ -18,13 +18,13 @@ from sblsim.fmus.build import fmu_path
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.campaign import run_campaign
 from sblsim.orchestrator.campaign.plan import batch_key
+from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import ConfigError, load_config, section_variables
 from sblsim.orchestrator.cosim.metrics import RUN_METRICS, nees
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import apply_latency, run, run_batch, with_replicates
-from sblsim.orchestrator.ssp import SspError, export_ssp
-from sblsim.orchestrator.study import load_study
+from sblsim.orchestrator.cosim.ssp import SspError, export_ssp
 
 SHORT = ["simulation.duration=5", "acoustics.loss_pct=20", "acoustics.outlier_pct=5"]
 #: Every recorded output of the receiver a diver sees, in the time series (its slot diagnostics nis and gated

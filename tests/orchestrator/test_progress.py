@@ -13,9 +13,9 @@ import pytest
 
 import sblsim
 from sblsim.orchestrator.campaign import run_campaign
+from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.io import progress as progress_module
 from sblsim.orchestrator.io.progress import Progress
-from sblsim.orchestrator.study import load_study
 
 DURATION, T, REPLICATES = 10.0, 0.1, 2
 

@@ -11,7 +11,6 @@ import math
 import numpy as np
 import pytest
 
-from sblsim.orchestrator.budget import SOURCES, switched_off
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import as_plan
@@ -20,6 +19,7 @@ from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import check_problem, read_problem
 from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
 from sblsim.orchestrator.maps import point_accuracy
+from sblsim.orchestrator.montecarlo.budget import SOURCES, switched_off
 from tests.helpers import problem_with
 
 #: The scenarios' fixed-detection, straight-path variants: an LBL of 250 m radius with a vehicle at 150 m depth

@@ -22,9 +22,9 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.errors import ConfigError
 from sblsim.models.target.core import WAYPOINTS
 from sblsim.models.target.trajectories import MAX_LINE_CHARS, read_trajectory_file
-from sblsim.orchestrator import receiver_log
 from sblsim.orchestrator.design import area_file
 from sblsim.orchestrator.io import tables
+from sblsim.orchestrator.logs import receiver_log
 from sblsim.orchestrator.sync import detections
 from sblsim.orchestrator.sync.toa import read_clocks
 from sblsim.orchestrator.telemetry.deployments import read_deployments

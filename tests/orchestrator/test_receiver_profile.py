@@ -25,11 +25,11 @@ import pytest
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.acoustics.rays import eigenray_families, first_arrival, profile_arrays, ray_bending, slant_range
 from sblsim.models.acoustics.sound_speed import PROFILE, profile_table
-from sblsim.orchestrator.budget import OFF, ON, SOURCES, budget
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
+from sblsim.orchestrator.montecarlo.budget import OFF, ON, SOURCES, budget
 
 #: The 1000 m site: four transponders on the seafloor on an 800 m circle, two-way ranging, eigenrays through the
 #: Munk profile; the random walk near the surface (slant ranges about 1.3 km), 100 s at a 0.5 s sampling time.

@@ -35,7 +35,7 @@ from sblsim.orchestrator.cosim.connections import default_connections
 from sblsim.orchestrator.cosim.fmu_files import fmu_paths
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.ssp import export_ssp
+from sblsim.orchestrator.cosim.ssp import export_ssp
 
 SITES = ("lbl-field", "usbl-deep")
 SEED = 3

@@ -24,10 +24,10 @@ from scipy.stats import norm
 
 from sblsim.models.acoustics import sonar
 from sblsim.models.acoustics.channel.site_levels import site_levels
+from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.study import load_study
 
 DIVER = np.array([0.0, 0.0, 150.0])
 DURATION, REPLICATES = 300.0, 2

@@ -17,7 +17,7 @@ from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.connections import default_connections
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.ssp import SspError, export_ssp, read_ssp, validate_ssp
+from sblsim.orchestrator.cosim.ssp import SspError, export_ssp, read_ssp, validate_ssp
 
 
 @pytest.fixture(scope="module")

@@ -35,7 +35,7 @@ from sblsim.orchestrator.cosim.connections import default_connections
 from sblsim.orchestrator.cosim.local_engine import LocalHandle
 from sblsim.orchestrator.cosim.master import simulate
 from sblsim.orchestrator.cosim.run import merge_params, run
-from sblsim.orchestrator.ssp import export_ssp
+from sblsim.orchestrator.cosim.ssp import export_ssp
 
 pytestmark = pytest.mark.slow
 

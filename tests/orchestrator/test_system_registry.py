@@ -19,8 +19,8 @@ from sblsim.orchestrator import cli
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
+from sblsim.orchestrator.logs.receiver_log import log_frames
 from sblsim.orchestrator.maps import system_line
-from sblsim.orchestrator.receiver_log import log_frames
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Where a system may be named: its own module (and the registry, which names none).

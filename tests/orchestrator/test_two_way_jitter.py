@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.receiver_log import read_log
+from sblsim.orchestrator.logs.receiver_log import read_log
 
 #: 15 s of the harbour, two-way, a jitter of 20 ms on the 50 ms turnaround: some replies come back at once.
 JITTERED = ["simulation.duration=15", "acoustics.ranging=twtt", "acoustics.turnaround_sigma=0.02"]

@@ -8,7 +8,7 @@ beacon id is a depth reading only (a slot whose packet was lost, or a depth
 sensor's sample). :func:`read_log` reads a CSV or Parquet log and decides
 what to do with every kind of flaw a real log has (:func:`read_log`,
 "Flaws"); :func:`export_log` writes a run's receiver inputs in that format, so
-that a replay of the export (:mod:`sblsim.orchestrator.replay`) equals the run.
+that a replay of the export (:mod:`sblsim.orchestrator.logs.replay`) equals the run.
 
 A truth track (``time_s, n_m, e_m, d_m``, :func:`read_truth`) is written beside an exported log.
 """

@@ -1,4 +1,4 @@
-"""``sblsim replay``: a receiver run on a recorded log (:mod:`sblsim.orchestrator.receiver_log` reads it) as the
+"""``sblsim replay``: a receiver run on a recorded log (:mod:`sblsim.orchestrator.logs.receiver_log` reads it) as the
 master steps it in a run.
 
 Timing (the slot rule of the receivers, :func:`sblsim.models.receiver.slots.slot_due`).
@@ -85,7 +85,7 @@ from sblsim.orchestrator.cosim.run import (
 )
 from sblsim.orchestrator.io import tomlfile
 from sblsim.orchestrator.io.output import staged_directory
-from sblsim.orchestrator.receiver_log import (
+from sblsim.orchestrator.logs.receiver_log import (
     Log,
     log_config,
     read_log,
@@ -444,7 +444,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     Parameters
     ----------
     log : Log
-        From :func:`~sblsim.orchestrator.receiver_log.read_log` with the configuration's beacon count.
+        From :func:`~sblsim.orchestrator.logs.receiver_log.read_log` with the configuration's beacon count.
     cfg : RunPlan or dict
         The plan (the receiver, its parameters, T, the rate ratio, the master; a configuration: its plan is made
         once).

@@ -67,8 +67,8 @@ from sblsim.orchestrator.cosim.config import (
 from sblsim.orchestrator.cosim.connections import Connection, default_connections
 from sblsim.orchestrator.cosim.fmu_files import fmu_paths, read_description
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
+from sblsim.orchestrator.cosim.scenario_fmus import build_scenario_fmus, check_no_latency
 from sblsim.orchestrator.io.archives import check_members, inside, safe_extract
-from sblsim.orchestrator.scenario_fmus import build_scenario_fmus, check_no_latency
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -210,7 +210,7 @@ def export_ssp(cfg: RunPlan | dict, out: Path | str, fmu_dir: Path | str | None 
     fmi_version : {2, 3}
         FMI 2.0 (default): the built FMUs and every parameter in the parameter sets. FMI 3.0: the scenario's
         FMI 3.0 FMUs, built for the package with its parameters as their start values
-        (:func:`sblsim.orchestrator.scenario_fmus.build_scenario_fmus`: SSP 1.0 has no array values, so the
+        (:func:`sblsim.orchestrator.cosim.scenario_fmus.build_scenario_fmus`: SSP 1.0 has no array values, so the
         arrays, e.g. ``beacon_offsets`` or a sound-speed table, travel in the FMUs), its scalar parameters in the
         parameter sets, and each connection between two arrays whole (``pos`` to ``target``,
         ``beacon_positions`` to ``beacon_positions``).
