@@ -34,7 +34,7 @@ def layouts(count: int, n: int, seed: int = 0) -> np.ndarray:
 
 def candidate_times(n: int, repeats: int, map_samples: int = 3) -> dict:
     """Per-layout times [s] of the search's evaluation and of the map's function, and their largest DRMS difference."""
-    from sblsim.models.declarations import format_table
+    from sblsim.models.table_text import format_table
     from sblsim.orchestrator.cosim.plan import load_plan
     from sblsim.orchestrator.design.area import Area, work_area_points
     from sblsim.orchestrator.design.evaluate import Detection, LayoutEvaluator, Levels

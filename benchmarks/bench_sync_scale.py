@@ -16,8 +16,8 @@ run of one day that loads the modules: :func:`sblsim.orchestrator.sync.run.synch
 memory (what ``sblsim sync`` runs after reading the files), the sound speed given, 1 h bins, by stage: grouping
 (the sync-tag arrivals picked, emissions grouped, echoes found, the receivers tied), the fit (the robust
 reweighting, the kept arrivals' least squares, the last solve with the offsets' sigmas: the selected inverse of
-the block-tridiagonal normal equations, :func:`sblsim.models.sync.clocks.selected_inverse`), the leave-one-out
-(each sync tag positioned with the clocks refitted without it: one refit per tag) and the tables; with
+the block-tridiagonal normal equations, :func:`sblsim.models.sync.selected_inversion.selected_inverse`), the
+leave-one-out (each sync tag positioned with the clocks refitted without it: one refit per tag) and the tables; with
 ``--write``, the files and figures (:func:`sblsim.orchestrator.sync.outputs.write`) too. Each stage's wall time,
 the process's CPU time (the time on a core whatever else the machine runs), the peak resident memory (the
 process's high-water mark, reset before each size where Linux allows), the time per detection against the

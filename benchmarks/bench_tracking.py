@@ -67,8 +67,9 @@ def measure(repeats: int, kept: str | None = None, warm: bool = True) -> dict:
     timed after a first, untimed run."""
     import sblsim
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.toa import read_receivers, read_toa
-    from sblsim.orchestrator.tracks.track import _usable
+    from sblsim.orchestrator.tracks.receivers_file import read_receivers
+    from sblsim.orchestrator.tracks.thinning import _usable
+    from sblsim.orchestrator.tracks.toa import read_toa
     from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, tracker_settings
 
     def replay():

@@ -18,6 +18,9 @@ generated sources themselves).
 are numpy views of the library's memory (B rows of inputs and outputs; one
 parameter row per design cell of the batch, shared by its replicates, whose
 derived values are prepared once).
+
+The sources come from :mod:`sblsim.fmus.library_sources`; the compiled passes over recorded runs are
+:mod:`sblsim.fmus.compiled_metrics`, the exported casadi functions :mod:`sblsim.fmus.compiled_functions`.
 """
 
 from __future__ import annotations
@@ -32,94 +35,19 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable
 
-import casadi as ca
 import numpy as np
 
-from sblsim.fmus.codegen import BATCH, C_DIR, METRICS, built_in, package_digest, stem, write_runtime, write_sources
+from sblsim.fmus.codegen import built_in, package_digest
 from sblsim.fmus.compiler import FLAGS, PLATFORMS, cache_dir, compile_library, find_compiler, host_platform
 from sblsim.fmus.contract import VECTORS
+from sblsim.fmus.library_sources import _library_models, write_library_sources
 from sblsim.models import MODELS
-from sblsim.models.acoustics.detection import family_levels
-from sblsim.models.acoustics.ray_tables import exact_points, family_points
-from sblsim.models.bound import bound_step
 from sblsim.models.declarations import ModelError
-from sblsim.models.design.information import SLOTS, layout_information
-from sblsim.models.errors import CompileError
-from sblsim.models.systems import SYSTEMS, interface_system
+from sblsim.models.systems import SYSTEMS
 
-#: Exports the eigenray solve's casadi entry points from the library (built with hidden symbols).
-RAY_EXPORT = """#if defined(_WIN32)
-#define CASADI_SYMBOL_EXPORT __declspec(dllexport)
-#else
-#define CASADI_SYMBOL_EXPORT __attribute__((visibility("default")))
-#endif
-"""
-#: The compiled loop of a system's own bound (the library of that system's interface only).
-SYSTEM_BOUND = "sblsim_system_bound.c"
 #: The models of the library of the metrics, the bounds and the eigenray entry points: none (the runtime, the
 #: bound, the eigenray functions and the metrics alone).
 NO_MODELS: tuple[type, ...] = ()
-#: The points one call of a compiled layout function evaluates (:func:`layout_functions`).
-LAYOUT_CHUNK = 64
-
-
-def layout_functions() -> list[ca.Function]:
-    """The design's layout information (:func:`sblsim.models.design.information.layout_information`) of each slot
-    count (:data:`~sblsim.models.design.information.SLOTS`), mapped over :data:`LAYOUT_CHUNK` points that share the
-    layout (the transducers, their lever arms, the attitude and depth variances): ``sblsim_layout_S``, what the
-    library exports for the design's search (:func:`compiled_layout`)."""
-    return [layout_information(slots).map(f"sblsim_layout_{slots}", "serial", LAYOUT_CHUNK, [1, 2, 5, 6], [])
-            for slots in SLOTS]
-
-
-
-def _registry(n_beacons: int, models: tuple[type, ...]) -> str:
-    symbols = [f"{stem(model, n_beacons)}_model" for model in models]
-    lines = ['#include <stddef.h>', '#include "sblsim_runtime.h"']
-    lines += [f"extern const sblsim_model {s};" for s in symbols]
-    lines.append("const sblsim_model* const sblsim_models[] = {" + "".join(f"&{s}, " for s in symbols) + "NULL};")
-    return "\n".join(lines) + "\n"
-
-
-def write_library_sources(n_beacons: int, directory: Path, models: tuple[type, ...] | None = None) -> list[Path]:
-    """The models' sources (default every built-in; ``()``: none), the runtime, the registry, the bound and the
-    batch API into ``directory``; the C files. A model's generated files do not depend on the others compiled
-    with it, so libraries of different models share their objects in the compiler's cache."""
-    models = _library_models(models)
-    directory.mkdir(parents=True, exist_ok=True)
-    for model in models:
-        write_sources(model, n_beacons, directory, shell="")
-    write_runtime(directory)  # (with each model's sources too; a library of no model needs it as well)
-    (directory / "sblsim_models.c").write_text(_registry(n_beacons, models))
-    cg = ca.CodeGenerator("sblsim_bound_casadi.c", {"with_header": True, "casadi_real": "double",
-                                                    "casadi_int": "long long int"})
-    cg.add(bound_step())
-    own = interface_system(n_beacons).bound_function()
-    for function in own or ():  # the interface's system steps a bound of its own (USBL: range, azimuth, elevation)
-        cg.add(function)
-    cg.generate(str(directory) + "/")
-    # the eigenray table's builder (sblsim.models.acoustics.ray_tables.eigenray_table) calls this one through casadi
-    rays = ca.CodeGenerator("sblsim_ray_points.c", {"casadi_real": "double", "casadi_int": "long long int"})
-    rays.add(exact_points())
-    rays.add(family_levels())  # and the availability map (sblsim.orchestrator.maps) this one
-    rays.add(family_points())  # and the family table's (sblsim.models.acoustics.detection.level_table) these two
-    rays.generate(str(directory) + "/")
-    code = (directory / "sblsim_ray_points.c").read_text()
-    (directory / "sblsim_ray_points.c").write_text(RAY_EXPORT + code)
-    # the design's search calls these through ctypes (compiled_layout)
-    layout = ca.CodeGenerator("sblsim_layout.c", {"casadi_real": "double", "casadi_int": "long long int"})
-    for function in layout_functions():
-        layout.add(function)
-    layout.generate(str(directory) + "/")
-    (directory / "sblsim_layout.c").write_text(RAY_EXPORT + (directory / "sblsim_layout.c").read_text())
-    for name in (BATCH, METRICS) + ((SYSTEM_BOUND,) if own else ()):
-        (directory / name).write_text((C_DIR / name).read_text())
-    return sorted(directory.glob("*.c"))
-
-
-def _library_models(models: tuple[type, ...] | None) -> tuple[type, ...]:
-    """The models of a library (None: every built-in)."""
-    return tuple(MODELS.values()) if models is None else models
 
 
 @lru_cache(maxsize=None)
@@ -403,130 +331,6 @@ class NativeSystem:
             batch._check(1 + failed.value, f"step between t = {t:g} s and {t0 + (k0 + n_steps) * T:g} s")
 
 
-def metrics_sizes(n_beacons: int = 4) -> tuple[int, int, int]:
-    """The compiled metrics pass's column, metric and per-run bound input counts (``sblsim_contract.h``)."""
-    sizes = (ctypes.c_int * 3)()
-    load(n_beacons, NO_MODELS).sblsim_metrics_sizes(sizes)
-    return tuple(sizes)
-
-
-def run_metrics(columns, fixed: np.ndarray, arms: np.ndarray, limits: tuple[float, float, float, float],
-                with_bound: bool = False, n_beacons: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
-    """The per-run metrics of :mod:`sblsim.orchestrator.cosim.metrics`, compiled (``fmus/c/sblsim_metrics.c``).
-
-    Parameters
-    ----------
-    columns : sequence of ndarray, shape (N, B) each
-        The recorded outputs in the order of :data:`sblsim.orchestrator.cosim.metrics.METRIC_INPUTS`, as floats; any
-        step stride, replicates contiguous (a column of the master's record array is used in place).
-    fixed : ndarray, shape (B, len(FIXED))
-        The bound's per-run inputs (:data:`sblsim.models.bound.FIXED`).
-    arms : ndarray, shape (B, n_beacons, 3)
-        Each run's beacon lever arms in NED [m].
-    limits : (float, float, float, float)
-        χ²₃(0.95), the divergence distance [m] and ratio, and the received packets in a row the gate rejects when
-        the receiver has lost the diver.
-    with_bound : bool
-        Also return the position PCRB at every step.
-
-    Returns
-    -------
-    metrics : ndarray, shape (B, len(RUN_METRICS))
-        :data:`sblsim.orchestrator.cosim.metrics.RUN_METRICS` in order (``diverged`` 0 or 1).
-    bound : ndarray, shape (N, B), or None
-        ``sqrt(trace)`` of the position PCRB [m].
-
-    Raises
-    ------
-    ValueError
-        If the arrays do not fit together.
-    """
-    lib = load(n_beacons, NO_MODELS)
-    n_columns, n_metrics, n_fixed = metrics_sizes(n_beacons)
-    n, b = columns[0].shape
-    views = [c if c.dtype == np.float64 and c.strides[1] == 8 else np.ascontiguousarray(c, dtype=float)
-             for c in columns]
-    if len(views) != n_columns or any(c.shape != (n, b) for c in views):
-        raise ValueError(f"run_metrics: {n_columns} columns of the shape (N, B) are needed")
-    fixed = np.ascontiguousarray(fixed, dtype=float)
-    arms = np.ascontiguousarray(arms, dtype=float)
-    if fixed.shape != (b, n_fixed) or arms.shape != (b, n_beacons, 3):
-        raise ValueError(f"run_metrics: fixed {fixed.shape} and arms {arms.shape} do not fit {b} runs")
-    pointers = (ctypes.c_void_p * len(views))(*[c.ctypes.data for c in views])
-    strides = (ctypes.c_longlong * len(views))(*[c.strides[0] // 8 for c in views])
-    out = np.empty((b, n_metrics))
-    bound = np.empty((n, b)) if with_bound else None
-    limit = np.asarray(limits, dtype=float)
-    if lib.sblsim_run_metrics(n, b, pointers, strides, n_beacons, fixed.ctypes.data, arms.ctypes.data,
-                                          limit.ctypes.data, out.ctypes.data,
-                                          None if bound is None else bound.ctypes.data):
-        raise MemoryError("run_metrics: out of memory")
-    return out, bound
-
-
-def system_bound_sizes(n_beacons: int) -> tuple[int, int, int]:
-    """The sizes the library of an interface with a system's own bound was built with: (per-run inputs, per-step
-    inputs, entries of the bound)."""
-    sizes = (ctypes.c_int * 3)()
-    load(n_beacons, NO_MODELS).sblsim_system_bound_sizes(sizes)
-    return int(sizes[0]), int(sizes[1]), int(sizes[2])
-
-
-def system_pcrb(n_beacons: int, fixed: np.ndarray, steps: np.ndarray, lane_steps: np.ndarray | None = None,
-                lane_new: np.ndarray | None = None) -> np.ndarray:
-    """The PCRB of the system of the interface of ``n_beacons`` compiled (its
-    :meth:`~sblsim.models.systems.System.bound_function` stepped by ``fmus/c/sblsim_system_bound.c``, in that
-    interface's library): the position PCRB of B runs (USBL: :func:`sblsim.models.systems.usbl.pcrb`).
-
-    Parameters
-    ----------
-    n_beacons : int
-        The interface (1: USBL).
-    fixed, steps : ndarray, shapes (B, len(bound_fixed)) and (N, B, len(bound_steps))
-        The system's per-run and per-step inputs (USBL: :func:`sblsim.models.systems.usbl.pcrb_inputs`).
-    lane_steps, lane_new : ndarray, shapes (L, N, B, len(bound_steps)) and (L, N, B), optional
-        The later lanes of a delivery: each lane's per-step inputs (as ``steps``, from its packet) and where it holds
-        a new packet (1); each new one is a step of the bound after the step's own, in lane order, with no time
-        between them (``dt`` 0). None: no packet on a later lane.
-
-    Returns
-    -------
-    ndarray, shape (N, B)
-        ``sqrt(trace)`` of the position PCRB at each step [m].
-
-    Raises
-    ------
-    ValueError
-        If the interface's system has no bound of its own, or the arrays do not fit together.
-    """
-    system = interface_system(n_beacons)
-    if not system.bound_fixed:
-        raise ValueError(f"system_pcrb: the {system.name} interface of {n_beacons} has no bound of its own")
-    fixed = np.ascontiguousarray(fixed, dtype=float)
-    steps = np.ascontiguousarray(steps, dtype=float)
-    n, b = steps.shape[:2]
-    if fixed.shape != (b, len(system.bound_fixed)) or steps.shape != (n, b, len(system.bound_steps)):
-        raise ValueError(f"system_pcrb: fixed {fixed.shape} and steps {steps.shape} do not fit together")
-    if lane_steps is None:
-        lane_steps, lane_new = np.zeros((0, n, b, steps.shape[2])), np.zeros((0, n, b))
-    lane_steps = np.ascontiguousarray(lane_steps, dtype=float)
-    lane_new = np.ascontiguousarray(lane_new, dtype=float)
-    lanes = lane_steps.shape[0]
-    if lane_steps.shape != (lanes, n, b, steps.shape[2]) or lane_new.shape != (lanes, n, b):
-        raise ValueError(f"system_pcrb: lane_steps {lane_steps.shape} and lane_new {lane_new.shape} do not fit "
-                         f"steps {steps.shape}")
-    lane_fixed = fixed.copy()
-    lane_fixed[:, system.bound_fixed.index("dt")] = 0.0
-    lib = load(n_beacons, NO_MODELS)
-    lib.sblsim_system_pcrb.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int,
-                                       ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-    out = np.empty((n, b))
-    if lib.sblsim_system_pcrb(n, b, fixed.ctypes.data, steps.ctypes.data, lanes, lane_fixed.ctypes.data,
-                              lane_steps.ctypes.data, lane_new.ctypes.data, out.ctypes.data):
-        raise MemoryError("system_pcrb: out of memory")
-    return out
-
-
 def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int, n_beacons: int = 4) -> np.ndarray:
     """One draw of a random stream as the C runtime makes it (for the tests against numpy's Philox)."""
     lib = load(n_beacons, NO_MODELS)
@@ -536,91 +340,6 @@ def stream(kind: str, keys, component: int, purpose: int, draw: int, count: int,
                                             out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
     return out
 
-def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
-    """:func:`sblsim.models.acoustics.ray_tables.exact_points` compiled in the local engine's library (built if
-    missing), or None when no compiler can build it."""
-    try:
-        return ca.external(exact_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
-    except (CompileError, OSError, RuntimeError):
-        return None
 
-
-def compiled_family_points(n_beacons: int = 4) -> ca.Function | None:
-    """:func:`sblsim.models.acoustics.ray_tables.family_points` compiled in the local engine's library (built if
-    missing), or None when no compiler can build it."""
-    try:
-        return ca.external(family_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
-    except (CompileError, OSError, RuntimeError):
-        return None
-
-
-def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
-    """:func:`sblsim.models.acoustics.detection.family_levels` compiled in the local engine's library (built if
-    missing), or None when no compiler can build it."""
-    try:
-        return ca.external(family_levels().name(), str(library_path(n_beacons, models=NO_MODELS)))
-    except (CompileError, OSError, RuntimeError):
-        return None
-
-
-class CompiledFunction:
-    """A casadi-generated function of the local engine's library, called through ctypes on numpy arrays (no
-    conversion to casadi's matrices: a call costs the C function's time).
-
-    Parameters
-    ----------
-    lib : ctypes.CDLL
-        The library (:func:`load`).
-    name : str
-        The generated function's name.
-
-    Notes
-    -----
-    Each input and output is a float64 array laid out as casadi lays out a matrix (column-major: a (rows, K)
-    matrix of K mapped columns is a C-contiguous (K, rows) numpy array).
-    """
-
-    def __init__(self, lib: ctypes.CDLL, name: str) -> None:
-        self.function = getattr(lib, name)
-        self.function.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
-        sizes = [ctypes.c_longlong() for _ in range(4)]
-        work = getattr(lib, f"{name}_work")
-        work(*[ctypes.byref(size) for size in sizes])
-        self.n_arg, self.n_res, n_iw, n_w = (size.value for size in sizes)
-        self._iw = (ctypes.c_longlong * max(n_iw, 1))()
-        self._w = (ctypes.c_double * max(n_w, 1))()
-        self._arg = (ctypes.c_void_p * self.n_arg)()
-        self._res = (ctypes.c_void_p * self.n_res)()
-
-    def __call__(self, inputs, outputs) -> None:
-        """Evaluate into ``outputs`` (each C-contiguous float64, written in place) from ``inputs`` (each
-        C-contiguous float64).
-
-        Raises
-        ------
-        RuntimeError
-            If the generated function reports an error.
-        """
-        for k, array in enumerate(inputs):
-            self._arg[k] = array.ctypes.data
-        for k, array in enumerate(outputs):
-            self._res[k] = array.ctypes.data
-        if self.function(self._arg, self._res, self._iw, self._w, 0):
-            raise RuntimeError("a compiled layout function failed")
-
-
-@lru_cache(maxsize=None)
-def compiled_layout(slots: int) -> CompiledFunction | None:
-    """The design's layout information of ``slots`` transducers over :data:`LAYOUT_CHUNK` points
-    (:func:`layout_functions`), compiled in the local engine's library (built if missing), or None when no
-    compiler can build it; one per process (its work memory is its own: not for two threads at once)."""
-    try:
-        return CompiledFunction(load(4, NO_MODELS), f"sblsim_layout_{slots}")
-    except (CompileError, OSError, RuntimeError, AttributeError):
-        return None
-
-
-__all__ = ["CompiledFunction", "LAYOUT_CHUNK", "NO_MODELS", "NativeBatch", "NativeSystem", "SYSTEM_BOUND", "VECTORS",
-           "abandonable", "cache_dir", "compiled_exact_points", "compiled_family_levels", "compiled_family_points",
-           "compiled_layout", "layout_functions", "library_path", "load", "metrics_sizes", "run_metrics", "stream",
-           "system_bound_sizes", "system_pcrb", "write_library_sources"]
+__all__ = ["NO_MODELS", "NativeBatch", "NativeSystem", "VECTORS", "abandonable", "cache_dir", "library_path", "load",
+           "stream", "write_library_sources"]

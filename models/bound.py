@@ -1,5 +1,4 @@
-"""The accuracy limit: the posterior Cramér-Rao bound (PCRB) along a trajectory, and the
-Fisher information of one measurement (the accuracy maps), both over a measurement model.
+"""The accuracy limit: the posterior Cramér-Rao bound (PCRB) along a trajectory, over a measurement model.
 
 **PCRB.** For the receivers' motion model, a constant velocity driven by
 white-noise acceleration (``x_k+1 = Φ x_k + w_k``, ``w_k ~ N(0, Q(Δt))`` with
@@ -24,13 +23,11 @@ is the accuracy of an ideal filter using the same motion model.
 **Written over models.** The bound and the maps take the measurement model
 as an object (:mod:`sblsim.models.receiver.measurement`), and its motion
 model (``model.motion``) sets the state size, the prediction and where the
-position sits. :func:`fisher_information` is ``Hᵀ R⁻¹ H = Σ_k H_kᵀ H_k / r_k``
-with H from ``model.jacobian`` (casadi's derivative of h);
-:func:`measurement_information` adds the same rows to the bound in
-covariance form, one scalar row at a time (:func:`information_update`), with
-H at the true state (:func:`state_at`). A model with another context (a
-USBL transceiver's position, :class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`)
-goes through the same functions (:func:`model_horizontal_std`).
+position sits. :func:`measurement_information` adds a model's rows (H from
+``model.jacobian``, casadi's derivative of h) to the bound in covariance form,
+one scalar row at a time (:func:`information_update`), with H at the true
+state (:func:`state_at`); the Fisher information of the same rows, the maps',
+is :mod:`sblsim.models.fisher`.
 
 The bound's measurement model is the fresh-range-plus-depth model of ``ekf-seq``
 (:class:`~sblsim.models.receiver.measurement.RangeDepthModel`, :data:`MODEL`):
@@ -41,44 +38,33 @@ range row of the transmitting beacon with its effective variance
 lever arm in NED, the derivatives from casadi. Error sources that are not
 white noise (a sound-speed mismatch, clock drift, a Gauss-Markov GPS error,
 multipath outliers, platform motion between a sample and a transmission,
-the staleness of held ranges) are not in the bound.
+the staleness of held ranges) are not in the bound; the bound with error
+states, :mod:`sblsim.models.error_bound`, carries the GPS error, the clock
+and a constant attitude error as states.
 
 **Other systems.** These are the bounds of the ranging systems (SBL, LBL);
 a system whose packet measures something else brings its own step built from
 the same functions (:func:`predicted`, :func:`measurement_information`,
-:func:`stepped`): the USBL one, :mod:`sblsim.models.systems.usbl`.
-
-**Accuracy map.** The Fisher information of the position from one round of
-fresh ranges (one per beacon) plus depth, :func:`position_information` of
-:data:`MODEL` with the beacons as context,
-``J = Σ_i g_i g_iᵀ / σ_i² + e_z e_zᵀ / σ_d²`` with ``g_i = ∂‖p − b_i‖/∂p``
-(casadi) and σ_i² the effective variance of beacon i's range, gives the
-horizontal standard deviation (DRMS)
-``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` of an unbiased fix at ``p``
-(:func:`horizontal_drms`; Kay, Fundamentals of Statistical Signal
-Processing: Estimation Theory, Prentice Hall 1993, Section 3.7).
-A system's map is its object's (:meth:`sblsim.models.systems.System.horizontal_std`).
+:func:`stepped`): the USBL one, :mod:`sblsim.models.systems.usbl_bound`.
 
 References
 ----------
 Tichavský, Muravchik, Nehorai, "Posterior Cramér-Rao bounds for
 discrete-time nonlinear filtering", IEEE Trans. Signal Processing 46(5),
-1998. Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
-Prentice Hall 1993, Section 3.7.
+1998.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from functools import lru_cache
-from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from sblsim.models.receiver import kalman
 from sblsim.models.receiver.measurement import RangeDepthModel
-from sblsim.models.receiver.motion import CONSTANT_VELOCITY, WITH_ERROR_STATES
+from sblsim.models.receiver.motion import CONSTANT_VELOCITY
 
 #: The motion model of the bound (the receivers').
 MOTION = CONSTANT_VELOCITY
@@ -251,92 +237,6 @@ def bound_step(model=MODEL) -> ca.Function:
                                              received, sigma0, growth], [ca.vec(P)], names, ["B_next"])
 
 
-#: The motion model of the bound with error states: the receivers' that carry them.
-ERROR_MOTION = WITH_ERROR_STATES
-
-
-def error_range(x, beacon, arm, clock) -> ca.SX:
-    """A range at the state ``x`` of :data:`ERROR_MOTION` [m]: from the true beacon, the broadcast one ``beacon``
-    (3, 1) less the state's GPS error and less its attitude error turned through the beacon's lever arm ``arm``
-    (3, 1, NED) [m] (``β × a``, a small rotation), plus ``clock`` [m/s] times the clock's offset."""
-    motion = ERROR_MOTION
-    true = beacon - motion.gps_error(x) - ca.cross(motion.attitude_bias(x), arm)
-    return ca.norm_2(motion.position(x) - true) + clock * motion.clock_offset(x)
-
-
-@lru_cache(maxsize=None)
-def error_bound_step() -> ca.Function:
-    """One step of the bound of a ranging system with error states, as a casadi Function.
-
-    The state is :data:`ERROR_MOTION`'s (the position, the velocity, the broadcast positions' GPS error, a
-    Gauss-Markov process, the clock's offset and drift, a constant attitude error), predicted with their own
-    dynamics; the range row is :func:`error_range`'s at the true position (the error states at 0), with the
-    white part of its variance (the range noise, the white GPS error, the white attitude error through the
-    lever arm: :func:`effective_range_variance`): a bound on the mean squared error of an estimator that knows
-    these error sources as well as the receivers that carry them do (Tichavský et al. 1998, Eq. (21), the
-    error states as random parameters with their priors; Van Trees, Bell, Bayesian Bounds for Parameter
-    Estimation and Nonlinear Filtering/Tracking, Wiley 2007).
-
-    At a slot whose packet is the first of a new ping of an inverted LBL (``new_ping``), the clock offset (the
-    pinger's emission offset) first takes its random step of std ``ping_jitter``
-    (:meth:`~sblsim.models.receiver.motion.WithErrorStates.new_ping`), as the receivers do.
-
-    Inputs ``B (n²), dt, q_h, q_v, position (3), beacon (3), arm (3), noise_variance, attitude_variance,
-    depth_variance, gps_sigma [m], gps_tau [s], clock_drift_sigma [1], attitude_sigma [rad], clock [m/s], slot,
-    received, ping_jitter [s], new_ping, sigma_range [m], range_k [m/m]`` (the range law, as :func:`bound_step`);
-    output ``B_next``.
-    """
-    motion = ERROR_MOTION
-    errors = error_symbols()
-    (B, dt, qh, qv, position), x, P = predicted(motion, errors)
-    beacon, arm = ca.SX.sym("beacon", 3), ca.SX.sym("arm", 3)
-    noise, attitude, d_var, clock, slot, received = (
-        ca.SX.sym(name) for name in ("noise_variance", "attitude_variance", "depth_variance", "clock", "slot",
-                                     "received"))
-    jitter, new_ping = ca.SX.sym("ping_jitter"), ca.SX.sym("new_ping")
-    P = motion.new_ping(P, jitter, ca.logic_and(slot, new_ping))  # a new ping's emission offset, before its rows
-    depth_row = ca.SX.zeros(1, motion.state_size)
-    depth_row[motion.position_index[2]] = 1.0
-    P = information_update(P, depth_row, d_var, slot)  # the depth first, as the receivers
-    s = ca.SX.sym("x", motion.state_size)
-    H = ca.substitute(ca.jacobian(error_range(s, beacon, arm, clock), s), s, x)
-    sigma0, growth = ca.SX.sym("sigma_range"), ca.SX.sym("range_k")
-    variance = effective_range_variance(position, beacon, arm, noise + law_variance(position, beacon, sigma0, growth),
-                                        attitude)
-    P = information_update(P, H, variance, ca.logic_and(slot, received))
-    names = ["B", "dt", "q_h", "q_v", "position", "beacon", "arm", "noise_variance", "attitude_variance",
-             "depth_variance", *ERROR_NAMES, "clock", "slot", "received", "ping_jitter", "new_ping", "sigma_range",
-             "range_k"]
-    return ca.Function("sblsim_error_bound_step", [B, dt, qh, qv, position, beacon, arm, noise, attitude, d_var,
-                                                   *errors.values(), clock, slot, received, jitter, new_ping, sigma0,
-                                                   growth], [ca.vec(P)], names, ["B_next"])
-
-
-#: Per-replicate inputs of the bound with error states, in the order of its ``fixed`` columns (the compiled bound
-#: numbers them: :func:`compiled_error_bound`, :mod:`sblsim.fmus.contract`).
-ERROR_FIXED = ("dt", "q_horizontal", "q_vertical", "p0_position", "p0_velocity", "noise_variance",
-               "attitude_variance", "depth_variance", *ERROR_NAMES, "clock", "ping_jitter", "sigma_range", "range_k")
-#: Per-step inputs of the bound with error states: the true position, the transmitting beacon's broadcast
-#: position and lever arm (NED), the slot, the packet's reception and whether it is the first of a new ping (an
-#: inverted LBL's).
-ERROR_STEPS = ("true_x", "true_y", "true_z", "beacon_x", "beacon_y", "beacon_z", "arm_x", "arm_y", "arm_z", "slot",
-               "received", "new_ping")
-
-
-def _error_inputs(f, s):
-    """The inputs of :func:`error_bound_step` after ``(B, dt, q_h, q_v)`` from the fixed columns by name and a
-    step's columns (:data:`ERROR_STEPS` order)."""
-    return (s[0:3], s[3:6], s[6:9], f["noise_variance"], f["attitude_variance"], f["depth_variance"],
-            *(f[k] for k in ERROR_NAMES), f["clock"], s[9:10], s[10:11], f["ping_jitter"], s[11:12], f["sigma_range"],
-            f["range_k"])
-
-
-def error_pcrb(fixed: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Position PCRB with error states along B runs (:func:`error_bound_step`, casadi's virtual machine), as
-    :func:`pcrb` (``fixed`` (B, len(ERROR_FIXED)), ``steps`` (N, B, len(ERROR_STEPS))); (N, B) [m]."""
-    return stepped(error_bound_step(), ERROR_MOTION, ERROR_FIXED, fixed, steps, _error_inputs)
-
-
 def packed_bound(step: ca.Function, motion, fixed_names: Sequence[str], step_names: Sequence[str],
                  inputs) -> tuple[ca.Function, ca.Function]:
     """A bound step with packed inputs, for code generation: ``sblsim_system_bound_prior(fixed) -> B0``
@@ -352,13 +252,6 @@ def packed_bound(step: ca.Function, motion, fixed_names: Sequence[str], step_nam
     return (ca.Function("sblsim_system_bound_prior", [f], [error_prior(motion, named)], ["fixed"], ["B0"]),
             ca.Function("sblsim_system_bound_step", [B, f, s], [B_next, error], ["B", "fixed", "step"],
                         ["B_next", "error"]))
-
-
-@lru_cache(maxsize=None)
-def compiled_error_bound() -> tuple[ca.Function, ca.Function]:
-    """The bound with error states with packed inputs (:func:`packed_bound` of :func:`error_bound_step`): what
-    the local engine's library of the ranging interface compiles as its system's own bound."""
-    return packed_bound(error_bound_step(), ERROR_MOTION, ERROR_FIXED, ERROR_STEPS, _error_inputs)
 
 
 #: Per-replicate inputs of the bound, in the order of :func:`pcrb`'s ``fixed`` columns (the compiled metrics pass
@@ -418,7 +311,7 @@ def pcrb(fixed: np.ndarray, steps: np.ndarray, model=MODEL) -> np.ndarray:
     """Position PCRB along B true trajectories: ``sqrt(trace)`` of the position block of ``J_k⁻¹``.
 
     The reference evaluation (casadi's virtual machine); the local engine runs
-    the same function compiled, in the metrics pass (``sblsim.fmus.native.run_metrics``).
+    the same function compiled, in the metrics pass (``sblsim.fmus.compiled_metrics.run_metrics``).
 
     Parameters
     ----------
@@ -463,192 +356,6 @@ def stepped(step: ca.Function, motion, names: Sequence[str], fixed: np.ndarray, 
     return out
 
 
-def fisher_information(model, x, context, variances, weights=None) -> ca.SX:
-    """Fisher information of one measurement of a model about the state: ``Σ_k H_kᵀ H_k / r_k = Hᵀ R⁻¹ H``.
-
-    For ``z = h(x) + v``, ``v ~ N(0, R)`` with R diagonal, the information
-    is ``Hᵀ R⁻¹ H`` with ``H = ∂h/∂x`` (Kay 1993, Section 3.7, the vector
-    parameter, for a Gaussian whose covariance does not depend on x; the
-    information of the linearized model); H is ``model.jacobian`` (casadi's
-    derivative of h), the rows added in order. With ``weights`` each row's term
-    is multiplied by its weight ``q_k``, the probability that the row is measured
-    at all: the expected information of a measurement that is received with
-    probability q_k (Niu, Willett, Bar-Shalom, "Matrix CRLB scaling due to
-    measurements of uncertain origin", IEEE Trans. Signal Processing 49(7), 2001:
-    the information reduction factor of a detection probability without clutter).
-
-    Parameters
-    ----------
-    model : MeasurementModel
-        The measurement model (:mod:`sblsim.models.receiver.measurement`); its
-        motion model sets n.
-    x : casadi.SX or array, (n, 1)
-        The state at which H is taken (:func:`state_at` for a position).
-    context
-        What ``model.h`` needs besides the state (beacon positions, a transceiver position, ...).
-    variances : casadi.SX or array, (m, 1)
-        The diagonal of R [units of z squared]: ``model.variances(x, context, p)``
-        or effective variances; all > 0.
-    weights : casadi.SX or array, (m, 1), optional
-        Per row, the probability that it is measured [0–1] (default: every row, unweighted).
-
-    Returns
-    -------
-    casadi.SX, (n, n)
-        The information matrix [1/units of x squared]; with numbers in,
-        ``casadi.evalf`` gives its value.
-
-    References
-    ----------
-    Kay, Fundamentals of Statistical Signal Processing: Estimation Theory,
-    Prentice Hall 1993, Section 3.7. Niu, Willett, Bar-Shalom, IEEE Trans. Signal
-    Processing 49(7), 2001.
-    """
-    H = model.jacobian(x, context)
-    n = model.motion.state_size
-    J = ca.SX.zeros(n, n)
-    for k in range(H.shape[0]):
-        term = ca.mtimes(H[k, :].T, H[k, :]) / variances[k]
-        J += term if weights is None else weights[k] * term
-    return J
-
-
-def position_information(model, position, context, variances, weights=None) -> ca.SX:
-    """Fisher information about the position, (3, 3) [1/m²]: the position block of :func:`fisher_information` at
-    the state :func:`state_at` ``(model.motion, position)`` (the models read only the position, so the other
-    entries do not enter).
-
-    Parameters
-    ----------
-    model : MeasurementModel
-    position : casadi.SX or array, (3, 1)
-        North, East, Down [m].
-    context, variances, weights
-        As for :func:`fisher_information`.
-
-    References
-    ----------
-    Kay 1993, Section 3.7.
-    """
-    index = list(model.motion.position_index)
-    J = fisher_information(model, state_at(model.motion, position), context, variances, weights)
-    return J[index, index]
-
-
-def horizontal_drms(J):
-    """Horizontal standard deviation (DRMS) of an unbiased fix with position information ``J`` (3, 3) [1/m²]:
-    ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m] (Kay 1993, Section 3.7: ``cov ≥ J⁻¹``)."""
-    inverse = ca.inv(J)
-    return ca.sqrt(inverse[0, 0] + inverse[1, 1])
-
-
-@lru_cache(maxsize=None)
-def fix_information(n_beacons: int, model=MODEL) -> ca.Function:
-    """casadi Function of the Fisher information of one round of fresh ranges plus depth.
-
-    ``(p[3], beacons[3 n], arms[3 n], noise_variance, attitude_variance, depth_variance) -> (J (3, 3), drms)``,
-    ``drms = sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m]: :func:`position_information` of
-    ``model`` with the beacons as context and the variances
-    ``[σ_1², …, σ_n², σ_d²]``, σ_i² the effective variance of beacon i's range
-    (:func:`effective_range_variance`).
-
-    Parameters
-    ----------
-    n_beacons : int
-    model : RangeDepthModel, optional
-        The measurement model (default the receivers').
-    """
-    p, b, a = ca.SX.sym("p", 3), ca.SX.sym("beacons", 3 * n_beacons), ca.SX.sym("arms", 3 * n_beacons)
-    noise, attitude, d_var = ca.SX.sym("noise_variance"), ca.SX.sym("attitude_variance"), ca.SX.sym("depth_variance")
-    beacons = [b[3 * i:3 * i + 3] for i in range(n_beacons)]
-    variances = ca.vertcat(*[effective_range_variance(p, beacon, a[3 * i:3 * i + 3], noise, attitude, model)
-                             for i, beacon in enumerate(beacons)], d_var)
-    J = position_information(model, p, beacons, variances)
-    return ca.Function(f"sblsim_fix_information_{n_beacons}", [p, b, a, noise, attitude, d_var],
-                       [J, horizontal_drms(J)],
-                       ["p", "beacons", "arms", "noise_variance", "attitude_variance", "depth_variance"],
-                       ["J", "drms"])
-
-
-def per_point(value: Any) -> Any:
-    """A number of a mapped accuracy function: a float, or an array of one per point as a (1, M) row (the
-    columns of a ``casadi.Function.map``)."""
-    array = np.asarray(value, dtype=float)
-    return float(array) if array.ndim == 0 else array.reshape(1, -1)
-
-
-def horizontal_std(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, noise_variance: float,
-                   attitude_variance: float, depth_variance: float, model=MODEL) -> np.ndarray:
-    """Horizontal standard deviation (DRMS) of a fix from one round of fresh ranges plus depth.
-
-    Parameters
-    ----------
-    points : ndarray, shape (M, 3)
-        Target positions [m].
-    beacons, arms : ndarray, shape (n, 3)
-        Beacon positions and their lever arms in NED [m].
-    noise_variance : float or ndarray, shape (M,)
-        ``σ_r² + σ_GPS²`` [m²] (an array: one per point).
-    attitude_variance : float or ndarray, shape (M,)
-        σ_att² [rad²].
-    depth_variance : float or ndarray, shape (M,)
-        σ_d² [m²], > 0.
-    model : RangeDepthModel, optional
-        The measurement model (:func:`fix_information`).
-
-    Returns
-    -------
-    ndarray, shape (M,)
-        ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)`` [m]; infinite where J is singular (a
-        point on a beacon).
-    """
-    points = np.atleast_2d(np.asarray(points, dtype=float))
-    beacons, arms = np.asarray(beacons, dtype=float), np.asarray(arms, dtype=float)
-    f = fix_information(beacons.shape[0], model).map(points.shape[0])
-    drms = np.asarray(f(points.T, beacons.reshape(-1, 1), arms.reshape(-1, 1), per_point(noise_variance),
-                        per_point(attitude_variance), per_point(depth_variance))[1]).ravel()
-    return np.where(np.isfinite(drms), drms, np.inf)
-
-
-def model_horizontal_std(model, points: np.ndarray, context, variances) -> np.ndarray:
-    """Horizontal DRMS [m] of a fix from one measurement of any model with a fixed context (an accuracy map).
-
-    :func:`horizontal_drms` of :func:`position_information` at each point, the
-    model's Jacobian from casadi. For the range + direction model
-    (:class:`~sblsim.models.receiver.range_direction.RangeDirectionModel`) the
-    context is the transceiver's position and attitude and ``variances`` ``[σ_r², σ_u², σ_u²]`` (the array's
-    noise alone: the USBL map, :func:`sblsim.models.systems.usbl.fix_information`, takes its full R).
-
-    Parameters
-    ----------
-    model : MeasurementModel
-    points : ndarray, shape (M, 3)
-        Target positions, NED [m].
-    context
-        The model's context, numbers (beacon positions, a transceiver position, ...).
-    variances : array, (m,)
-        The diagonal of R [units of z squared], > 0.
-
-    Returns
-    -------
-    ndarray, shape (M,)
-        Infinite where the information is singular.
-
-    References
-    ----------
-    Kay 1993, Section 3.7.
-    """
-    points = np.atleast_2d(np.asarray(points, dtype=float))
-    p = ca.SX.sym("p", 3)
-    J = position_information(model, p, context, ca.DM(np.asarray(variances, dtype=float).reshape(-1, 1)))
-    f = ca.Function("sblsim_model_fix", [p], [horizontal_drms(J)]).map(points.shape[0])
-    drms = np.asarray(f(points.T)).ravel()
-    return np.where(np.isfinite(drms), drms, np.inf)
-
-
-__all__ = ["bound_step", "compiled_error_bound", "effective_range_variance", "error_bound_step", "ERROR_FIXED",
-           "ERROR_MOTION", "ERROR_NAMES", "error_pcrb", "error_prior", "error_range", "ERROR_STEPS", "error_symbols",
-           "fisher_information", "fix_information", "FIXED", "horizontal_drms", "horizontal_std",
-           "information_update", "LAW_DEFAULTS", "law_variance", "measurement_information", "MODEL",
-           "model_horizontal_std", "MOTION", "packed_bound", "packed_fixed", "pcrb", "pcrb_inputs", "per_point",
-           "position_information", "predicted", "state_at", "stepped"]
+__all__ = ["bound_step", "effective_range_variance", "ERROR_NAMES", "error_prior", "error_symbols", "FIXED",
+           "information_update", "LAW_DEFAULTS", "law_variance", "measurement_information", "MODEL", "MOTION",
+           "packed_bound", "packed_fixed", "pcrb", "pcrb_inputs", "predicted", "state_at", "stepped"]

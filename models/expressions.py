@@ -154,6 +154,13 @@ def lookup(index: ca.SX, values: Sequence[float]) -> ca.SX:
     return select(index, [float(v) for v in values])
 
 
+def _value(x: Any) -> Any:
+    """A float for a 1×1 numeric casadi result (``ca.if_else`` of floats gives a ``DM``), else ``x``."""
+    if isinstance(x, ca.DM) and x.numel() == 1:
+        return float(x)
+    return x
+
+
 __all__ = ["cumulative_sum", "get_row", "lookup", "NO_ROW", "only_where", "padded_rows", "put_row", "sample_due",
            "select", "switch"]
 

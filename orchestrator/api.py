@@ -8,7 +8,8 @@ Each function does what the command of the same name does (``sblsim run``, ``com
 ``design``, ``replay``, ``calibrate``, ``campaign``, ``analyze``), with the same numbers: the function and the command
 are one module of :mod:`sblsim.orchestrator.commands`, which this module re-exports (a tracking's functions and results,
 ``replay_toa``, ``replay_toa_tags``, ``TrackResult`` and ``TagsResult``, are the tracking room's,
-:mod:`sblsim.orchestrator.tracks`, which ``sblsim replay --format toa`` calls). Unlike a command, a function
+:mod:`sblsim.orchestrator.tracks`, which ``sblsim replay --format toa`` calls; ``ReplayResult`` is the log room's,
+:mod:`sblsim.orchestrator.logs`). Unlike a command, a function
 
 - returns its results as Python objects: tables as :class:`pandas.DataFrame`, figures as
   :class:`matplotlib.figure.Figure` (made when asked for, by the results' ``plot`` methods);
@@ -41,7 +42,7 @@ from sblsim.orchestrator.commands.common import load
 from sblsim.orchestrator.commands.compare import CompareResult, compare
 from sblsim.orchestrator.commands.design import DesignResult, design
 from sblsim.orchestrator.commands.map import MapResult, accuracy_map
-from sblsim.orchestrator.commands.replay import ReplayResult, replay
+from sblsim.orchestrator.commands.replay import replay
 from sblsim.orchestrator.commands.run import RunResult, run
 from sblsim.orchestrator.commands.sync import SyncResult, sync
 from sblsim.orchestrator.commands.toa import ToaResult, toa
@@ -49,6 +50,7 @@ from sblsim.orchestrator.commands.track import StudyResult, track
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, ConfigError
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.plan import Config
+from sblsim.orchestrator.logs.replay_result import ReplayResult
 from sblsim.orchestrator.tracks.many import TagsResult, replay_toa_tags
 from sblsim.orchestrator.tracks.replay import TrackResult, replay_toa
 

@@ -504,7 +504,8 @@ def _command(args: list[str], folder: str, stdout: str, stderr: str) -> None:
 #: command's start-up, up to a second each, is not what is tested).
 SERVER = multiprocessing.get_context("forkserver")
 SERVER.set_forkserver_preload(["sblsim.orchestrator.cli", *(f"sblsim.orchestrator.{name}" for name in (
-    "cosim.run", "campaign", "analysis", "budget", "maps", "replay", "receiver_log", "io.tables", "design.run"))])
+    "cosim.run", "campaign", "analysis", "montecarlo.budget", "maps", "logs.replay", "logs.receiver_log", "io.tables",
+    "design.solve"))])
 
 
 class _Case:

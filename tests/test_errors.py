@@ -22,10 +22,12 @@ from sblsim.models.errors import (
 )
 from sblsim.orchestrator.analysis import compute
 from sblsim.orchestrator.campaign import run_campaign
-from sblsim.orchestrator.campaign.study import StudyError, load_study
+from sblsim.orchestrator.campaign.errors import StudyError
+from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.engines import open_fmu
-from sblsim.orchestrator.cosim.ssp import SspError, read_ssp
+from sblsim.orchestrator.cosim.ssp import SspError
+from sblsim.orchestrator.cosim.ssp_read import read_ssp
 from sblsim.orchestrator.io.archives import check_members
 
 KINDS = (ModelError, FMICallError, CompileError, ArchiveError, CampaignError)

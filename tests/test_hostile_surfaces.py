@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 
 from sblsim.models.acoustics.sound_speed import MAX_CAST_BYTES, MAX_CAST_ROWS
-from sblsim.orchestrator.surveys.gnatss import J2000_POSIX, ncl1_paths, read_pxp_tt
+from sblsim.orchestrator.surveys.gnatss import ncl1_paths
+from sblsim.orchestrator.surveys.gnatss_files import J2000_POSIX, read_pxp_tt
 
 #: The GNATSS converter, as its docstring tells a user to run it.
 GNATSS = [sys.executable, "-m", "sblsim.orchestrator.surveys.gnatss"]

@@ -364,4 +364,4 @@ def test_a_campaign_worker_loads_no_statistics_or_plotting():
     imports it) or matplotlib, seconds of start-up that the chunks never use (the study's design is made by the
     campaign's process)."""
     assert not _heavy_at_load("sblsim.orchestrator.campaign.worker") & {"scipy.stats", "pyDOE3", "matplotlib"}
-    assert "pyDOE3" in {m for m, _, nested in IMPORTS["sblsim.orchestrator.campaign.study"] if nested}
+    assert "pyDOE3" in {m for m, _, nested in IMPORTS["sblsim.orchestrator.campaign.factorial"] if nested}

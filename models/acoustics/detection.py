@@ -22,7 +22,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import boundary_loss, sonar
+from sblsim.models.acoustics.ray_integrals import sound_speed_at
+from sblsim.models.acoustics.ray_inversion import _ray_bending, _slant_range
 from sblsim.models.acoustics.ray_tables import (
     FAMILY_TABLE,
     RAY_GRID,
@@ -37,13 +39,13 @@ from sblsim.models.acoustics.ray_tables import (
     ray_grid,
     ray_values,
 )
-from sblsim.models.acoustics.rays import _ray_bending, _slant_range, arrivals, profile_arrays, sound_speed_at
+from sblsim.models.acoustics.rays import arrivals, profile_arrays
 from sblsim.models.acoustics.sound_speed import NODES
 
 #: The site's numbers :func:`family_levels` takes, in this order (units: dB, dB, dB, dB, Hz, dB/m, dB, m, 1, m/s,
 #: dB/λ): source level [dB re 1 µPa at 1 m], detection threshold, receiving directivity index, fluctuation std,
 #: frequency, absorption, ambient noise level over the band [dB re 1 µPa], probable wave height, and the sea
-#: floor's density ratio, compressional speed and attenuation (:data:`~sblsim.models.acoustics.sonar.BOTTOMS`).
+#: floor's density ratio, compressional speed and attenuation (:data:`~sblsim.models.acoustics.boundary_loss.BOTTOMS`).
 SITE = ("source_level", "detection_threshold", "directivity_index", "fluctuation", "frequency", "absorption",
         "noise", "wave_height", "bottom_density", "bottom_speed", "bottom_attenuation")
 #: SNR [dB] reported for an eigenray that does not exist.
@@ -92,9 +94,9 @@ def _levels(families, zs, depth, profile, constant, nodes, speeds, site):
     source_speed, surface_speed, bottom_speed = speed(zs), speed(0.0), speed(depth)
     at_surface = ca.acos(ca.fmin(ca.cos(launch[1]) * surface_speed / source_speed, 1.0))
     at_bottom = ca.acos(ca.fmin(ca.cos(launch[2]) * bottom_speed / source_speed, 1.0))
-    boundary = (0.0, sonar.surface_loss(at_surface, s["frequency"], s["wave_height"], surface_speed),
-                sonar.half_space_loss(at_bottom, s["bottom_density"], s["bottom_speed"] / bottom_speed,
-                                      s["bottom_attenuation"]), 0.0)  # the direct family's other ray meets none
+    boundary = (0.0, boundary_loss.surface_loss(at_surface, s["frequency"], s["wave_height"], surface_speed),
+                boundary_loss.half_space_loss(at_bottom, s["bottom_density"], s["bottom_speed"] / bottom_speed,
+                                              s["bottom_attenuation"]), 0.0)  # the direct family's other ray meets none
     levels, chances = [], []
     for j in range(tau.shape[0]):
         loss = spreading[j] + s["absorption"] * length[j] + boundary[j]

@@ -25,9 +25,9 @@ from sblsim.models.acoustics.rays import (
     first_arrival,
     first_arrival_function,
     profile_arrays,
-    spherical_spreading,
 )
 from sblsim.models.acoustics.sound_speed import NODES
+from sblsim.models.acoustics.spreading_loss import spherical_spreading
 from sblsim.models.declarations import Column, Table
 from sblsim.models.expressions import switch
 

@@ -36,8 +36,9 @@ import casadi as ca
 import gsw
 import numpy as np
 
-from sblsim.models.declarations import Column, FileKey, ModelError, Table, check_entry, check_increasing, parse_table
+from sblsim.models.declarations import Column, FileKey, ModelError, Table
 from sblsim.models.expressions import cumulative_sum, padded_rows, switch
+from sblsim.models.table_text import check_entry, check_increasing, parse_table
 
 #: Real CTD casts shipped with sblsim (see models/acoustics/data/README.md): the two coastal Castaway casts
 #: (CSV files of that name) and ``NCL1``, the 1220 m deep cast of GNATSS's NCL1 test site (its file

@@ -13,7 +13,8 @@ cycle of measurements at the points of a **work area**, the same information as 
   localization geometries", Automatica 46(3):479-492, 2010);
 * a telemetry array (receivers hearing a tag, the emission unknown), its own modules, imported by name:
   :mod:`~sblsim.models.design.detection_curve` (a range test's detection range curve),
-  :mod:`~sblsim.models.design.telemetry` (the positioning yield, the DRMS of a fix, the sync coverage),
+  :mod:`~sblsim.models.design.telemetry` (the positioning yield, the DRMS of a fix),
+  :mod:`~sblsim.models.design.sync_graph` (the sync coverage),
   :mod:`~sblsim.models.design.area` (the study area's polygon) and :mod:`~sblsim.models.design.lake_hald` (a
   layout evaluated over an area; the Lake Hald array's).
 

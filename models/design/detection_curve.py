@@ -16,7 +16,8 @@ distances and shares. Two forms here:
   sonar equation of the tag's source level (its power class) at the site, ``P(d) = Φ((SL − TL(d) − NL + DI − DT) /
   σ_f)`` with ``TL(d) = 20 log10 d + α d`` (spherical spreading and absorption; Urick, *Principles of Underwater
   Sound*, 3rd ed., McGraw-Hill 1983, ch. 2 and §12.1–12.3), α of Francois & Garrison (1982) and NL of the Wenz
-  curves (:mod:`sblsim.models.acoustics.sonar`), tabulated once on :data:`SNR_TABLE_ROWS` distances and then a
+  curves (:mod:`sblsim.models.acoustics.volume_absorption`, :mod:`~sblsim.models.acoustics.ambient_noise`,
+  :mod:`~sblsim.models.acoustics.sonar`), tabulated once on :data:`SNR_TABLE_ROWS` distances and then a
   table as above. Range testing's practice (Kessel et al. 2014 above) is to measure the curve at the site, the
   sonar equation being the prediction a study makes before it. Coded fish tags' source levels as measured:
   Bowles, Denes, Shane, "Acoustic characteristics of ultrasonic coded transmitters for fishery applications:
@@ -36,7 +37,7 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import ambient_noise, sonar, volume_absorption
 from sblsim.models.errors import ModelError
 
 #: The allowed ``detection.range_50_m`` [m]: (0, this].
@@ -83,7 +84,8 @@ class DetectionCurve:
 
         ``P(d) = detection_probability(snr(SL, TL(d), NL, DI), DT, σ_f)`` with ``TL(d) = 20 log10 max(d, 1 m) +
         α max(d, 1 m)`` (the source level holds at 1 m), ``α = absorption(f, T, S, 0 m)``, ``NL =
-        noise_level(f, B, wind_speed(beaufort), shipping)`` (:mod:`sblsim.models.acoustics.sonar`); the table
+        noise_level(f, B, wind_speed(beaufort), shipping)`` (:mod:`sblsim.models.acoustics.sonar`,
+        :mod:`~sblsim.models.acoustics.volume_absorption`, :mod:`~sblsim.models.acoustics.ambient_noise`); the table
         from 0 m to the distance where the mean SNR is :data:`SNR_TAIL` σ_f (at least 1 dB) below DT
         (:func:`~sblsim.models.acoustics.sonar.detection_range`), held at its last value (about 0) beyond.
 
@@ -120,9 +122,9 @@ class DetectionCurve:
             Naming ``tag.source_level_db``: a tag heard nowhere (the mean SNR at 1 m below the table's floor), or
             one heard beyond 1,000 km.
         """
-        wind = sonar.wind_speed(beaufort)
-        alpha = float(sonar.absorption(frequency_hz, temperature_c, salinity, 0.0))
-        noise = float(sonar.noise_level(frequency_hz, bandwidth_hz, wind, shipping))
+        wind = ambient_noise.wind_speed(beaufort)
+        alpha = float(volume_absorption.absorption(frequency_hz, temperature_c, salinity, 0.0))
+        noise = float(ambient_noise.noise_level(frequency_hz, bandwidth_hz, wind, shipping))
         floor = threshold_db - max(SNR_TAIL * fluctuation_db, 1.0)
         try:
             far = sonar.detection_range(frequency_hz, bandwidth_hz, source_level_db, directivity_db, floor, wind,

@@ -16,7 +16,7 @@ Trans. Signal Processing 49(7), 2001). A transducer that is never heard (a shado
 contributes nothing. With the range law (``acoustics.range_k`` k > 0) the range's own noise is
 ``σ₀ + k ‖p − b_i‖`` per point (:func:`law_range_variance`, given to the function as a variance per point and
 transducer). With every q_i = 1 it is the map's information of one round of fresh ranges
-(:func:`sblsim.models.bound.fix_information`), the same numbers.
+(:func:`sblsim.models.fisher.fix_information`), the same numbers.
 
 From J: the horizontal DRMS ``sqrt((J⁻¹)_NN + (J⁻¹)_EE)``, its 3-D form ``sqrt(tr J⁻¹)`` and ``log det J`` [m],
 [m], [log 1/m⁶] (Kay, Fundamentals of Statistical Signal Processing: Estimation Theory, Prentice Hall 1993,
@@ -35,14 +35,8 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics.range_law import range_noise_sigma
-from sblsim.models.bound import (
-    MODEL,
-    effective_range_variance,
-    horizontal_drms,
-    per_point,
-    position_information,
-    state_at,
-)
+from sblsim.models.bound import MODEL, effective_range_variance, state_at
+from sblsim.models.fisher import horizontal_drms, per_point, position_information
 
 #: The transducer counts of the compiled functions; a layout is padded to the smallest that holds it.
 SLOTS = (4, 8, 16)

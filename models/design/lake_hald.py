@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sblsim.models.design import area as areas
+from sblsim.models.design import sync_graph as sg
 from sblsim.models.design import telemetry as tm
 from sblsim.models.design.detection_curve import DetectionCurve
 from sblsim.models.errors import ModelError
@@ -73,7 +74,7 @@ class LayoutEvaluation:
     drms_expected: np.ndarray
     drms_fixed: np.ndarray
     fixable: np.ndarray
-    sync: tm.SyncCoverage
+    sync: sg.SyncCoverage
 
     def coverage(self, drms_m: float, yield_min: float, fixed: bool = True) -> float:
         """The share of the points [%] with a DRMS (``fixed``: the RMS over fixed pings; else the averaged
@@ -95,7 +96,7 @@ class LayoutEvaluation:
             f"DRMS, RMS over fixed pings [m]: median {np.median(ff):.3f}, p90 {pct(ff, 90):.3f}",
             f"share with DRMS <= {drms_m:g} m and yield >= {yield_min:g}: {self.coverage(drms_m, yield_min):.1f} % "
             f"(fixed pings), {self.coverage(drms_m, yield_min, fixed=False):.1f} % (averaged information)",
-            f"sync: receivers hearing >= {tm.SYNC_NEEDED} sync tags {100 * float(self.sync.share):.0f} %, "
+            f"sync: receivers hearing >= {sg.SYNC_NEEDED} sync tags {100 * float(self.sync.share):.0f} %, "
             f"components {int(self.sync.components)}, met {bool(self.sync.met)}",
         ]
 
@@ -142,7 +143,7 @@ def evaluate_layout(receivers: np.ndarray, area, curve: DetectionCurve, sigma0_m
     q = curve.probability(d)
     sigma = tm.range_sigma(d, sigma0_m, per_m)
     drms_fixed, fixable = tm.fixed_ping_drms(points, receivers, sigma, q, rng, samples)
-    sync = tm.sync_coverage(tm.sync_probabilities(receivers, curve.probability), sync_p)
+    sync = sg.sync_coverage(sg.sync_probabilities(receivers, curve.probability), sync_p)
     return LayoutEvaluation(points, tm.positioning_yield(q, 3),
                             tm.expected_information_drms(points, receivers, sigma, q), drms_fixed, fixable, sync)
 

@@ -1,5 +1,6 @@
-"""The criteria of a telemetry array that positions tagged animals: the positioning yield, the DRMS of a fix with
-the emission time unknown, and the sync coverage; vectorised over points and layouts.
+"""The criteria of a telemetry array's fix of a tag's ping: the positioning yield and the DRMS of a fix with the
+emission time unknown; vectorised over points and layouts (the array's sync coverage:
+:mod:`~sblsim.models.design.sync_graph`).
 
 A tag emits pings on its own clock; fixed receivers (hydrophones) each hear a ping with the probability of the
 detection range curve (:class:`~sblsim.models.design.detection_curve.DetectionCurve`) at their distance, each
@@ -41,12 +42,7 @@ independently. At a point p, for receivers r_i heard with probabilities q_i:
     patterns otherwise.
 
   In 2-D, N receivers equally spaced on a circle around the tag at its centre, all heard with one σ, give
-  ``DRMS = 2σ / √N`` (:func:`ring_fix_drms`): the emission costs nothing there;
-
-* **sync coverage** (:func:`sync_coverage`): a sync tag moored at each receiver; receiver i hears the sync tag of
-  receiver j with probability ``q_ij``. The array can be synchronised when every receiver hears at least two other
-  receivers' sync tags each with probability ≥ p and the **sync graph** (the receivers as nodes, an edge where one
-  hears the other's sync tag with probability ≥ p) is connected (:mod:`scipy.sparse.csgraph`).
+  ``DRMS = 2σ / √N`` (:func:`ring_fix_drms`): the emission costs nothing there.
 
 Units: metres [m], probabilities [0–1].
 """
@@ -54,12 +50,8 @@ Units: metres [m], probabilities [0–1].
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from sblsim.models.acoustics.range_law import range_noise_sigma
 from sblsim.models.errors import ModelError
@@ -70,8 +62,6 @@ SINGULAR_CONDITION = 1e12
 ENUMERATE_MAX = 10
 #: The probabilities below this count as never heard, above ``1 −`` it as always heard (the enumeration's).
 CERTAIN = 1e-12
-#: The sync tags a receiver must hear (:func:`sync_coverage`).
-SYNC_NEEDED = 2
 
 
 def distances(points: np.ndarray, receivers: np.ndarray) -> np.ndarray:
@@ -412,105 +402,6 @@ def ring_fix_drms(n: int, sigma_m: float) -> float:
     return 2.0 * sigma_m / np.sqrt(n)
 
 
-@dataclass(frozen=True)
-class SyncCoverage:
-    """Whether layouts can be synchronised from sync tags (:func:`sync_coverage`).
-
-    Attributes
-    ----------
-    heard : ndarray of int, shape (..., n)
-        The other receivers' sync tags each receiver hears with probability ≥ p.
-    share : ndarray, shape (...)
-        The share of receivers that hear at least :data:`SYNC_NEEDED` of them [0–1].
-    components : ndarray of int, shape (...)
-        The sync graph's connected components.
-    labels : ndarray of int, shape (..., n)
-        Each receiver's component.
-    connected : ndarray of bool, shape (...)
-        One component.
-    met : ndarray of bool, shape (...)
-        Connected and every receiver hears enough sync tags.
-    """
-
-    heard: np.ndarray
-    share: np.ndarray
-    components: np.ndarray
-    labels: np.ndarray
-    connected: np.ndarray
-    met: np.ndarray
-
-
-def sync_probabilities(receivers: np.ndarray, probability: Callable[[np.ndarray], np.ndarray],
-                       tags: np.ndarray | None = None) -> np.ndarray:
-    """The probability that receiver i hears the sync tag moored at receiver j, ``probability(‖r_i − t_j‖)``, with
-    the receiver's own tag left out (zero on the diagonal).
-
-    Parameters
-    ----------
-    receivers : ndarray, shape (..., n, dim)
-        [m].
-    probability : callable
-        Distance [m] -> probability [0–1] (a :meth:`DetectionCurve.probability
-        <sblsim.models.design.detection_curve.DetectionCurve.probability>`).
-    tags : ndarray, shape (..., n, dim), optional
-        The sync tags' positions [m] (default at the receivers).
-
-    Returns
-    -------
-    ndarray, shape (..., n, n)
-        ``q[i, j]`` [0–1].
-    """
-    receivers = np.asarray(receivers, float)
-    tags = receivers if tags is None else np.asarray(tags, float)
-    d = np.linalg.norm(receivers[..., :, None, :] - tags[..., None, :, :], axis=-1)
-    q = np.asarray(probability(d), float).copy()
-    n = receivers.shape[-2]
-    q[..., np.arange(n), np.arange(n)] = 0.0
-    return q
-
-
-def sync_coverage(q: np.ndarray, p: float, needed: int = SYNC_NEEDED) -> SyncCoverage:
-    """The sync coverage of layouts (module docstring).
-
-    Receiver i counts sync tag j as heard when ``q[i, j] ≥ p``; the sync graph has an edge between i and j where
-    either hears the other's (one way links the two clocks: the tag's emission is timed by its own receiver),
-    and its components are :func:`scipy.sparse.csgraph.connected_components`' (weak connection).
-
-    Parameters
-    ----------
-    q : ndarray, shape (..., n, n)
-        ``q[i, j]``: the probability that receiver i hears the sync tag of receiver j [0–1] (the diagonal ignored).
-    p : float
-        The probability a link needs, in (0, 1].
-    needed : int, optional
-        The other sync tags each receiver must hear.
-
-    Returns
-    -------
-    SyncCoverage
-
-    Raises
-    ------
-    ModelError
-        For p outside (0, 1].
-    """
-    if not 0.0 < p <= 1.0:
-        raise ModelError(f"sync probability: {p!r}; allowed (0, 1]")
-    q = np.asarray(q, float)
-    n = q.shape[-1]
-    links = (q >= p) & ~np.eye(n, dtype=bool)
-    heard = links.sum(axis=-1)
-    flat = links.reshape(-1, n, n)
-    components, labels = np.empty(len(flat), int), np.empty((len(flat), n), int)
-    for k, graph in enumerate(flat):
-        components[k], labels[k] = connected_components(csr_matrix(graph), directed=True, connection="weak")
-    shape = q.shape[:-2]
-    components, labels = components.reshape(shape), labels.reshape(shape + (n,))
-    share = (heard >= needed).mean(axis=-1)
-    connected = components == 1
-    return SyncCoverage(heard, share, components, labels, connected, connected & (share == 1.0))
-
-
-__all__ = ["CERTAIN", "ENUMERATE_MAX", "SINGULAR_CONDITION", "SYNC_NEEDED", "SyncCoverage", "count_distribution",
-           "distances", "drms", "expected_information_drms", "fix_drms", "fixed_ping_drms", "position_information",
-           "positioning_yield", "range_noise", "range_sigma", "ring_fix_drms", "sync_coverage", "sync_probabilities"]
+__all__ = ["CERTAIN", "ENUMERATE_MAX", "SINGULAR_CONDITION", "count_distribution", "distances", "drms",
+           "expected_information_drms", "fix_drms", "fixed_ping_drms", "position_information", "positioning_yield",
+           "range_noise", "range_sigma", "ring_fix_drms"]

@@ -52,12 +52,13 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.component import Component
-from sblsim.models.declarations import SEED_PARAMETERS, ModelError, Variable, format_table, signal_range
+from sblsim.models.declarations import SEED_PARAMETERS, ModelError, Variable, signal_range
 from sblsim.models.expressions import sample_due
 from sblsim.models.platform.geometry import beacon_positions, parse_offsets, rotation_ned
 from sblsim.models.platform.waves import wave_motion
 from sblsim.models.program import ProgramBuilder, Stream
 from sblsim.models.systems import SYSTEMS, interface_system, interface_systems
+from sblsim.models.table_text import format_table
 
 AXES = ("x", "y", "z")
 #: Beacon layouts: the paper's cross of 4, any given offsets, N equally spaced on a circle (appended: the

@@ -161,7 +161,7 @@ def check_geometry(platform: Mapping[str, Any], field: str = "") -> np.ndarray:
     finite numbers that look like an answer. That is a configuration mistake, so it is refused, not
     warned about. A spread that is merely small against the diver's distance is real geometry (the fix
     degrades with distance, the numbers are the system's true accuracy) and is warned about after the
-    run instead (:data:`sblsim.orchestrator.cosim.run.REACH_RATIO`).
+    run instead (:data:`sblsim.orchestrator.cosim.metrics.REACH_RATIO`).
 
     Parameters
     ----------

@@ -19,8 +19,8 @@ starts the first iteration, it is never reported (the configuration ties it to
 the diver's true start). With a USBL interface
 the fix is the least-squares fix of the packet's range and direction and the
 depth, with its covariance and its weighted residual (``nis``, one degree of
-freedom: :func:`sblsim.models.systems.usbl.packet_fix`), R with the transceiver's uncertainty of the beacon parameters
-(:func:`~sblsim.models.receiver.interface.beacon_parameters`, declared last). The receiver is its own
+freedom: :func:`sblsim.models.systems.usbl_fix.packet_fix`), R with the transceiver's uncertainty of the beacon
+parameters (:func:`~sblsim.models.receiver.interface.beacon_parameters`, declared last). The receiver is its own
 instrumentation: ``instr_*`` is the same fix (0 when a slot has fewer than
 three ranges, ``instr_valid`` false).
 

@@ -14,7 +14,7 @@ its measured sound-velocity profile. ``receiver.sound_speed_profile`` chooses wh
   slot the receiver recovers the one-way travel time ``τ = r / c_a`` (two-way ranging: the one-way equivalent,
   ``(Δt − t_ta) / 2``) and replaces the range by the slant range ``√(X² + Δz²)`` of the direct eigenray of
   time τ between the packet's beacon depth and its own depth reading, X found by Newton's iteration on the
-  eigenray (:func:`sblsim.models.acoustics.rays.slant_range`). The filter, the bound and the map keep their
+  eigenray (:func:`sblsim.models.acoustics.ray_inversion.slant_range`). The filter, the bound and the map keep their
   range model: with the true profile the converted range is the geometric one plus the range noise (scaled by
   ``c/c_a``, within a few per mille).
 
@@ -37,10 +37,11 @@ from typing import Any, Mapping
 
 import casadi as ca
 
-from sblsim.models.acoustics.rays import ray_bending, slant_range
+from sblsim.models.acoustics.ray_inversion import ray_bending, slant_range
 from sblsim.models.acoustics.sound_speed import NODES, PROFILE, PROFILE_SOURCES, node_speeds, profile_table
-from sblsim.models.declarations import FileKey, ModelError, Variable, format_table
+from sblsim.models.declarations import FileKey, ModelError, Variable
 from sblsim.models.platform.geometry import rotation_ned, unit_vector
+from sblsim.models.table_text import format_table
 
 #: ``receiver.sound_speed_profile``'s default: the single assumed speed.
 ASSUMED = "assumed"
@@ -181,12 +182,13 @@ def profile_prepare(p: dict) -> dict:
 def profile_range(u: dict, p: dict, d: dict) -> dict:
     """The packet with its range turned into the slant range of the receiver's profile (``sound_speed_model`` =
     profile): ``τ = range / c_a``, the direct eigenray between ``beacon_z`` and the depth reading ``depth``
-    (:func:`~sblsim.models.acoustics.rays.slant_range`, from ``range``). A lost packet, or one whose eigenray lies
-    in the profile's shadow, keeps the range it had. A USBL packet's direction (the reply's eigenray arriving) is
-    turned in its vertical plane by the direct eigenray's bending between the transceiver and the depth reading at
-    that slant range (:func:`~sblsim.models.acoustics.rays.ray_bending`: the chord's elevation minus the eigenray's
-    grazing angle, from the range and the depth, not from the noisy measured elevation): its ``elevation`` and its
-    direction cosines in the array's frame (``doa_x``, ``doa_y``) move as that direction moved.
+    (:func:`~sblsim.models.acoustics.ray_inversion.slant_range`, from ``range``). A lost packet, or one whose
+    eigenray lies in the profile's shadow, keeps the range it had. A USBL packet's direction (the reply's eigenray
+    arriving) is turned in its vertical plane by the direct eigenray's bending between the transceiver and the
+    depth reading at that slant range (:func:`~sblsim.models.acoustics.ray_inversion.ray_bending`: the chord's
+    elevation minus the eigenray's grazing angle, from the range and the depth, not from the noisy measured
+    elevation): its ``elevation`` and its direction cosines in the array's frame (``doa_x``, ``doa_y``) move as
+    that direction moved.
 
     Parameters
     ----------

@@ -5,26 +5,27 @@ The clock model of :mod:`sblsim.models.sync.clocks` is continuous: a jump of a r
 and the robust fit spreads it over the record (a jump of 0.5 s became a ramp of ±0.1 s, most of its arrivals
 rejected). So, after the fit (:func:`fit_with_breaks`):
 
-1. each arrival's **offset sample** (:func:`offset_samples`): its time less its travel time less the emission's
-   time estimated from the *other* receivers' kept arrivals on their fitted clocks, less its receiver's fitted
-   offset (a smooth curve). The receiver itself is left out of the emission's time, so that a broken clock cannot
-   hide its own step there, and a break of the reference receiver shows at the reference (the others agree among
-   themselves), not at every other;
+1. each arrival's **offset sample** (:func:`~sblsim.models.sync.change_points.offset_samples`): its time less its
+   travel time less the emission's time estimated from the *other* receivers' kept arrivals on their fitted clocks,
+   less its receiver's fitted offset (a smooth curve). The receiver itself is left out of the emission's time, so
+   that a broken clock cannot hide its own step there, and a break of the reference receiver shows at the reference
+   (the others agree among themselves), not at every other;
 2. each clock's samples in its own time order are a change-point problem (a mean shift in a series with a smooth
    trend: Bai & Perron 1998, *Econometrica* 66:47). A sample off both the line through the same sync tag's two
-   previous samples and the line through its two next ones, on the same side, by more than :data:`SPIKE` robust
-   sigmas is set aside (a late arrival; a step has one of the two lines through it); the rest are fitted by
-   weighted least squares with the clock model (the knots over the bins, the drift prior) plus a constant per sync
-   tag (a position error of the table is a constant per pair: metres on the boats array) and, for every gap
-   between two successive samples, a **jump** from that gap on (:func:`scan`). The jump's estimate and the drop in
-   chi-square it brings come for every gap at once from the residual-maker's quadratic forms by suffix sums (the
-   knots' part bin by bin), in O(samples × tags² + bins³);
+   previous samples and the line through its two next ones, on the same side, by more than
+   :data:`~sblsim.models.sync.change_points.SPIKE` robust sigmas is set aside (a late arrival; a step has one of the
+   two lines through it); the rest are fitted by weighted least squares with the clock model (the knots over the
+   bins, the drift prior) plus a constant per sync tag (a position error of the table is a constant per pair: metres
+   on the boats array) and, for every gap between two successive samples, a **jump** from that gap on
+   (:func:`~sblsim.models.sync.change_points.scan`). The jump's estimate and the drop in chi-square it brings come
+   for every gap at once from the residual-maker's quadratic forms by suffix sums (the knots' part bin by bin), in
+   O(samples × tags² + bins³);
 3. the best gap's statistic is the square root of its F ratio (the chi-square drop over the variance of the
    residuals of the model with that jump): a break where it exceeds :data:`THRESHOLD`, with at least
-   :data:`MIN_SIDE` samples on each side. A jump below the sync's resolution (a few of its sigmas) is none and
-   stays absorbed by the drifts;
+   :data:`~sblsim.models.sync.change_points.MIN_SIDE` samples on each side. A jump below the sync's resolution (a
+   few of its sigmas) is none and stays absorbed by the drifts;
 4. the clock with the largest statistic is split at that gap (the arrivals after it a new clock row of the same
-   receiver: :attr:`~sblsim.models.sync.clocks.ClockFit.site`) and the clocks refitted; the arrivals about the
+   receiver: :attr:`~sblsim.models.sync.clock_fit.ClockFit.site`) and the clocks refitted; the arrivals about the
    break are then put in the segment against whose refitted clock they fit (where the time went back, the two
    segments read the same times), the clocks refitted again if one moved, and all again until no break is left.
    The two segments' drifts in the break's bin are tied by the drift prior (the crystal runs on at its rate:
@@ -36,10 +37,10 @@ A receiver whose time went back in the file's order (a reset kept in its logging
 size fitted like any other's (no arrival set aside there: two parts may read the same times, each arrival's part
 says which clock read it); its drifts are tied only where the last arrival before and the first after fall in one
 bin. Such a part's arrivals are first aligned to the others' for the emissions' grouping by
-:func:`part_shifts` (a reset of a day puts them a day from their emissions).
+:func:`~sblsim.models.sync.clock_parts.part_shifts` (a reset of a day puts them a day from their emissions).
 
 A segment's offsets hold for the times of its receiver's own clock it read
-(:attr:`~sblsim.models.sync.clocks.ClockFit.span`, within its part); between the last arrival before a found break
+(:attr:`~sblsim.models.sync.clock_fit.ClockFit.span`, within its part); between the last arrival before a found break
 and the first after it (widened by the jump where the time went back: the readings both segments make) a time is in
 neither, and a detection there belongs to no synchronised clock (set aside). Units: seconds [s] throughout.
 """
@@ -50,20 +51,16 @@ from dataclasses import dataclass, replace
 from time import perf_counter
 
 import numpy as np
-import scipy.linalg
 
-from sblsim.models.sync.clocks import MIN_SCALE, ClockFit, Geometry, connected, fit_clocks
+from sblsim.models.sync.change_points import _best
+from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.clocks import Geometry, fit_clocks
+from sblsim.models.sync.emissions import connected
 
 #: The statistic (√F of the best jump) above which a clock break is taken.
 THRESHOLD = 12.0
-#: The fewest samples (outliers not counted) on each side of a break.
-MIN_SIDE = 10
-#: A sample this many sigmas off the lines through its sync tag's two previous and two next samples is an outlier.
-SPIKE = 6.0
 #: The most breaks found in one fit.
 MAX_BREAKS = 20
-#: The bins [s] in which a later clock part's coarse shift is looked for (:func:`part_shifts`).
-PART_BIN = 2.0
 
 
 @dataclass
@@ -73,7 +70,7 @@ class ClockBreak:
     Attributes
     ----------
     receiver : int
-        The receiver (the clock rows' :attr:`~sblsim.models.sync.clocks.ClockFit.site`).
+        The receiver (the clock rows' :attr:`~sblsim.models.sync.clock_fit.ClockFit.site`).
     before, after : int
         The clock rows of the segments before and after it.
     last, first : float
@@ -102,358 +99,6 @@ class ClockBreak:
     time_within: float
     statistic: float
     part: int | None = None
-
-
-@dataclass
-class _Jump:
-    """The best jump of one clock: the arrivals (indices) after it and before it (those compared), the bracket, its
-    size and statistic."""
-
-    row: int
-    after: np.ndarray
-    before: np.ndarray
-    last: float
-    first: float
-    size: float
-    statistic: float
-
-
-def offset_samples(fit: ClockFit, rows: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
-                   slowness: np.ndarray | None, used: np.ndarray) -> np.ndarray:
-    """(n,) [s] each arrival's offset sample less its clock's fitted offset (the module docstring's step 1): its
-    emission time (its time less its clock's offset and its travel time) less the emission's time from the *other*
-    clocks' kept arrivals (weighted by their clocks' noise scales); NaN where no other kept arrival hears the
-    emission, or the arrival is not used or its clock not synchronised.
-
-    Parameters
-    ----------
-    fit : ClockFit
-        The clocks fitted to ``rows`` (:func:`~sblsim.models.sync.clocks.fit_clocks`).
-    rows, emission : numpy.ndarray
-        (n,) int, each arrival's clock row and emission.
-    time, distance : numpy.ndarray
-        (n,) [s] the arrival on its clock and [m] its distance (the fit's own where it refined the positions).
-    slowness : numpy.ndarray or None
-        (n,) [s/m]; None: the fit's estimate.
-    used : numpy.ndarray
-        (n,) bool, the arrivals fitted.
-    """
-    n = len(time)
-    out = np.full(n, np.nan)
-    ok = used & (rows >= 0)
-    ok[ok] = np.isfinite(fit.knots[rows[ok], 0])
-    if not ok.any():
-        return out
-    idx = np.flatnonzero(ok)
-    d = fit.distance[idx] if fit.distance is not None else distance[idx]
-    s = np.full(len(idx), fit.slowness) if slowness is None else slowness[idx]
-    x = time[idx] - fit.offset(rows[idx], time[idx]) - d * s
-    em, local = np.unique(emission[idx], return_inverse=True)
-    anchor = np.full(len(em), np.inf)
-    np.minimum.at(anchor, local, x)
-    x = x - anchor[local]  # small numbers: the sums below keep their digits
-    w = np.where(fit.kept[idx], 1.0 / fit.scale[rows[idx]] ** 2, 0.0)
-    sw = np.bincount(local, w, len(em))
-    swx = np.bincount(local, w * x, len(em))
-    others = sw[local] - w
-    good = others > 1e-12 * np.maximum(sw[local], 1e-300)
-    out[idx[good]] = x[good] - (swx[local][good] - w[good] * x[good]) / others[good]
-    return out
-
-
-def _noise(z: np.ndarray) -> float:
-    """A series' noise sigma [s] from its second differences (blind to a slope, robust to a step and to spikes):
-    1.4826 × their median absolute value / √6."""
-    if len(z) < 4:
-        return np.nan
-    return 1.4826 * float(np.median(np.abs(np.diff(z, 2)))) / np.sqrt(6.0)
-
-
-def _clean(t: np.ndarray, z: np.ndarray, pair: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample's weight 1/σ² [1/s²] (its sync tag's noise, :func:`_noise`) and whether it is an isolated
-    outlier: more than :data:`SPIKE` sigmas (of the extrapolation) off both the line through its tag's two previous
-    samples and the line through its two next, on the same side (a step has one side's line through it, a slope
-    both; a late arrival sticks out of both); a tag heard fewer than four times is left out (weight 0)."""
-    w = np.zeros(len(z))
-    spike = np.zeros(len(z), bool)
-    for p in np.unique(pair):
-        k = np.flatnonzero(pair == p)
-        if len(k) < 4:
-            spike[k] = True
-            continue
-        k = k[np.argsort(t[k], kind="stable")]
-        v = z[k]
-        sigma = max(_noise(v), MIN_SCALE)
-        back = np.full(len(v), np.nan)
-        ahead = np.full(len(v), np.nan)
-        back[2:] = v[2:] - (2 * v[1:-1] - v[:-2])
-        ahead[:-2] = v[:-2] - (2 * v[1:-1] - v[2:])
-        limit = SPIKE * sigma * np.sqrt(6.0)
-        spike[k] = (np.sign(back) == np.sign(ahead)) & (np.minimum(np.abs(back), np.abs(ahead)) > limit)
-        w[k] = 1.0 / sigma ** 2
-    return w, spike
-
-
-def scan(t: np.ndarray, z: np.ndarray, pair: np.ndarray, w: np.ndarray, edges: np.ndarray, prior_sigma: float,
-         min_side: int = MIN_SIDE) -> dict | None:
-    """One clock's best jump (the module docstring's step 2): the weighted least squares of its samples with the
-    clock model, a constant per pair and a jump from each gap on, for every gap at once.
-
-    Parameters
-    ----------
-    t, z : numpy.ndarray
-        (n,) [s] the samples' times on the clock, sorted, and their values (:func:`offset_samples`).
-    pair : numpy.ndarray
-        (n,) int, each sample's sync tag (a constant each).
-    w : numpy.ndarray
-        (n,) [1/s²] the weights (1/σ²), all positive.
-    edges : numpy.ndarray
-        (K+1,) [s] the bins' edges (equal widths).
-    prior_sigma : float
-        [s] the sigma of the knots' second differences (the drift prior of
-        :func:`~sblsim.models.sync.clocks.fit_clocks`).
-    min_side : int
-        The fewest samples on each side of a jump.
-
-    Returns
-    -------
-    dict or None
-        ``gap`` (the first sample after the jump), ``size`` [s], ``size_sigma`` [s], ``statistic`` (√F), ``level``
-        (n,) [s] the model with the jump at each sample before the jump is added (its pre-jump level), or None
-        where there are too few samples.
-    """
-    n = len(t)
-    width = edges[1] - edges[0]
-    b = np.clip(np.floor((t - edges[0]) / width).astype(np.int64), 0, len(edges) - 2)
-    f = (t - edges[b]) / width
-    b = b - b.min()
-    m = int(b.max()) + 2  # the knots of the bins the samples span
-    tags, pl = np.unique(pair, return_inverse=True)
-    main = int(np.argmax(np.bincount(pl, w)))
-    ci = np.where(pl < main, pl, pl - 1)
-    ci[pl == main] = -1
-    n_c = len(tags) - 1
-    q = m + n_c
-    if n < 2 * min_side or n - q - 1 < min_side:
-        return None
-    wa, wb = w * (1 - f), w * f
-    N = np.zeros((q, q))
-    np.add.at(N, (b, b), wa * (1 - f))
-    np.add.at(N, (b, b + 1), wa * f)
-    np.add.at(N, (b + 1, b), wa * f)
-    np.add.at(N, (b + 1, b + 1), wb * f)
-    has = ci >= 0
-    c = m + ci[has]
-    np.add.at(N, (b[has], c), wa[has])
-    np.add.at(N, (c, b[has]), wa[has])
-    np.add.at(N, (b[has] + 1, c), wb[has])
-    np.add.at(N, (c, b[has] + 1), wb[has])
-    np.add.at(N, (c, c), w[has])
-    if m >= 3:
-        L = np.zeros((m - 2, m))
-        k = np.arange(m - 2)
-        L[k, k], L[k, k + 1], L[k, k + 2] = 1.0, -2.0, 1.0
-        N[:m, :m] += L.T @ L / prior_sigma ** 2
-    N += np.eye(q) * 1e-12 * np.max(np.diag(N))
-
-    def design_t(v: np.ndarray) -> np.ndarray:
-        """Zᵀ v."""
-        out = np.zeros(q)
-        out[:m] = np.bincount(b, v * (1 - f), m) + np.bincount(b + 1, v * f, m)
-        out[m:] = np.bincount(ci[has], v[has], n_c) if n_c else 0.0
-        return out
-
-    def design(x: np.ndarray) -> np.ndarray:
-        """Z x."""
-        return x[b] * (1 - f) + x[b + 1] * f + np.where(has, x[m + np.maximum(ci, 0)] if n_c else 0.0, 0.0)
-
-    try:
-        factor = scipy.linalg.cho_factor(N, lower=True, check_finite=False)
-    except np.linalg.LinAlgError:
-        return None
-    G = scipy.linalg.cho_solve(factor, np.eye(q), check_finite=False)
-    x0 = G @ design_t(w * z)
-    e = z - design(x0)
-    # the objective at the fit without a jump: the weighted residuals' squares and the prior's
-    chi0 = float(np.sum(w * e ** 2)) + (float(np.sum((L @ x0[:m]) ** 2)) / prior_sigma ** 2 if m >= 3 else 0.0)
-
-    def suffix(a: np.ndarray) -> np.ndarray:
-        """(n + 1,) the sums from each index to the end (0 at n)."""
-        return np.r_[np.cumsum(a[::-1])[::-1], 0.0]
-
-    num = suffix(w * e)[:n]  # hᵀ M z = hᵀ W e: the residual-maker M = W − W Z N⁻¹ Zᵀ W takes z to W e
-    total = suffix(w)[:n]
-    # the knots' part of Zᵀ W h_g: the bins after g's (R) and g's own bin from g on (alpha, beta)
-    # (each bin's row of Zᵀ W, two entries: its own knot's and the next's; R[b] the sum of the rows after bin b)
-    own, later = np.bincount(b, wa, m - 1), np.bincount(b, wb, m - 1)
-    R = np.zeros((m - 1, m))
-    R[np.arange(m - 1), np.arange(m - 1)] = own
-    R[np.arange(m - 1), np.arange(1, m)] = later
-    R[:-1] = np.cumsum(R[::-1], axis=0)[::-1][1:]
-    R[-1] = 0.0
-    nxt = np.searchsorted(b, b, side="right")
-    sa, sb = suffix(wa), suffix(wb)
-    alpha, beta = sa[:n] - sa[nxt], sb[:n] - sb[nxt]
-    GAA, GAC, GCC = G[:m, :m], G[:m, m:], G[m:, m:]
-
-    def after_bins(M: np.ndarray) -> np.ndarray:
-        """R @ M by the rows' suffix sums: O(bins × columns), not a product of dense matrices."""
-        rows = own[:, None] * M[:-1] + later[:, None] * M[1:]
-        out = np.zeros_like(rows)
-        out[:-1] = np.cumsum(rows[::-1], axis=0)[::-1][1:]
-        return out
-
-    V = after_bins(GAA)
-    s_bin = np.einsum("ij,ij->i", V, R)
-    quad = (s_bin[b] + 2 * (alpha * V[b, b] + beta * V[b, b + 1]) + alpha ** 2 * GAA[b, b]
-            + 2 * alpha * beta * GAA[b, b + 1] + beta ** 2 * GAA[b + 1, b + 1])
-    if n_c:
-        onehot = np.zeros((n, n_c))
-        onehot[np.flatnonzero(has), ci[has]] = w[has]
-        aC = np.cumsum(onehot[::-1], axis=0)[::-1]
-        Y = after_bins(GAC)
-        cross = Y[b] + alpha[:, None] * GAC[b] + beta[:, None] * GAC[b + 1]
-        quad += 2 * np.einsum("gi,gi->g", cross, aC) + np.einsum("gi,ij,gj->g", aC, GCC, aC)
-    den = total - quad
-    valid = np.zeros(n, bool)
-    valid[min_side:n - min_side + 1] = True
-    valid[1:] &= t[1:] > t[:-1]
-    valid[0] = False
-    valid &= den > 1e-9 * total
-    if not valid.any():
-        return None
-    chi = np.where(valid, num ** 2 / np.where(valid, den, 1.0), -np.inf)
-    g = int(np.argmax(chi))
-    dof = n - q - 1
-    rest = max(chi0 - chi[g], 1e-300) / dof
-    size = float(num[g] / den[g])
-    # the model with the jump: x = x0 − G a_g size
-    a = np.zeros(q)
-    if g < n:
-        bg = b[g]
-        a[:m] = R[bg]
-        a[bg] += alpha[g]
-        a[bg + 1] += beta[g]
-        if n_c:
-            a[m:] = aC[g]
-    level = design(x0 - G @ a * size)
-    return {"gap": g, "size": size, "size_sigma": float(np.sqrt(rest / den[g])),
-            "statistic": float(np.sqrt(chi[g] / rest)), "level": level}
-
-
-def _best(fit: ClockFit, rows: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
-          slowness: np.ndarray | None, used: np.ndarray, tag: np.ndarray, prior_sigma: float,
-          threshold: float) -> _Jump | None:
-    """The clock with the largest break statistic above ``threshold`` and its jump, or None."""
-    z_all = offset_samples(fit, rows, emission, time, distance, slowness, used)
-    best = None
-    for row in np.flatnonzero(np.isfinite(fit.knots[:, 0])):
-        idx = np.flatnonzero((rows == row) & np.isfinite(z_all))
-        if len(idx) < 2 * MIN_SIDE:
-            continue
-        idx = idx[np.lexsort((emission[idx], time[idx]))]
-        t, z, pair = time[idx], z_all[idx], tag[idx]
-        w, spike = _clean(t, z, pair)
-        keep = ~spike & (w > 0)
-        if keep.sum() < 2 * MIN_SIDE:
-            continue
-        found = scan(t[keep], z[keep], pair[keep], w[keep], fit.edges, prior_sigma)
-        if found is None or found["statistic"] < threshold or (best is not None and
-                                                                found["statistic"] <= best.statistic):
-            continue
-        size, kk = found["size"], np.flatnonzero(keep)
-        g0, g1 = kk[found["gap"] - 1], kk[found["gap"]]  # the kept samples either side of the jump
-        after = np.arange(len(idx)) >= g1
-        # the samples the two segments both may hold go where they fit: the outliers between the two kept ones,
-        # and where the time went back every sample the jump's width around them
-        level = np.interp(t, t[keep], found["level"])
-        near = np.zeros(len(idx), bool)
-        near[g0 + 1:g1] = True
-        if size < 0:
-            near |= (t >= t[g1] - 2 * abs(size)) & (t <= t[g0] + 2 * abs(size))
-        after[near] = np.abs(z[near] - level[near] - size) < np.abs(z[near] - level[near])
-        if size >= 0 and t[~after].max() > t[after].min():  # not one cut in time: the outliers by their times
-            after = t > 0.5 * (t[g0] + t[g1])
-        if after.all() or not after.any():
-            continue
-        best = _Jump(int(row), idx[after], idx[~after], float(t[~after].max()), float(t[after].min()), size,
-                     found["statistic"])
-    return best
-
-
-def part_shifts(tag: np.ndarray, receiver: np.ndarray, part: np.ndarray, time: np.ndarray, search: float,
-                width: float = PART_BIN, steps: dict[tuple[int, int], float] | None = None
-                ) -> tuple[np.ndarray, dict[tuple[int, int], int]]:
-    """Each later clock part's coarse shift against the other receivers' first parts, for the emissions' grouping:
-    the mode (in bins of ``width``, then the median within a bin of it) of the differences between its arrivals and
-    those of the same sync tag at the receiver (another, in its first part) hearing that tag most, within
-    ±``search``; with random burst intervals only the true shift lines them up (a tag's fixed interval makes it
-    ambiguous by multiples of the interval).
-
-    Parameters
-    ----------
-    tag, receiver, part : numpy.ndarray
-        (n,) int, each arrival's sync tag, receiver and clock part (1 first).
-    time : numpy.ndarray
-        (n,) [s] on its receiver's clock.
-    search : float
-        [s] the largest shift looked for.
-    width : float
-        [s] the bins' width: more than the array's largest travel-time difference.
-    steps : dict, optional
-        Per (receiver, part) the step [s] its time went back by in the file's order (the last row before the reset
-        to the first after): the shift is that step less the time the receiver heard nothing, so it is looked for
-        only at or below the step (within ``search``), and of the bins that hold at least half the most
-        differences, the one nearest the step is taken (a sync tag's steady interval makes the differences pile up
-        again at multiples of it, farther from the step).
-
-    Returns
-    -------
-    shift : numpy.ndarray
-        (n,) [s] each arrival's part's shift (its time less it is near the others'); 0 in a first part or where
-        none was found.
-    matched : dict
-        Per (receiver, part) the arrivals that matched at the shift (0: none found).
-    """
-    shift = np.zeros(len(time))
-    matched: dict[tuple[int, int], int] = {}
-    first = part == 1
-    for j, p in sorted({(int(a), int(b)) for a, b in zip(receiver[~first], part[~first])}):
-        mine = (receiver == j) & (part == p)
-        diffs = []
-        for i in np.unique(tag[mine]):
-            others = first & (tag == i) & (receiver != j)
-            if not others.any():
-                continue
-            best = np.bincount(receiver[others]).argmax()
-            ref = np.sort(time[others & (receiver == best)])
-            t = time[mine & (tag == i)]
-            lo, hi = np.searchsorted(ref, t - search), np.searchsorted(ref, t + search)
-            for k in range(len(t)):
-                diffs.append(t[k] - ref[lo[k]:hi[k]])
-        d = np.concatenate(diffs) if diffs else np.zeros(0)
-        step = None if steps is None else steps.get((j, p))
-        if step is not None:  # the shift is the step less the silent time: at or below the step
-            d = d[d <= step + width]
-        if len(d) < 3:
-            matched[(j, p)] = 0
-            continue
-        cells = np.floor(d / width).astype(np.int64)
-        values, counts = np.unique(cells, return_counts=True)
-        top = int(np.argmax(counts))
-        if step is not None:  # of the bins near the most, the one nearest the step (the least silent time)
-            top = int(np.flatnonzero(counts >= 0.5 * counts[top])[-1])
-        near = np.abs(cells - values[top]) <= 1
-        around = np.bincount(cells[near] - values[top] + 1, minlength=3)
-        if counts[top] < 3:
-            matched[(j, p)] = 0
-            continue
-        centre = (values[top] + 0.5) * width
-        centre += 0.5 * width * (around[2] - around[0]) / max(around.sum(), 1)
-        inside = np.abs(d - centre) <= width
-        shift[mine] = float(np.median(d[inside]))
-        matched[(j, p)] = int(inside.sum())
-    return shift, matched
 
 
 def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
@@ -486,7 +131,7 @@ def fit_with_breaks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray
     -------
     ClockFit
         Where no break was found the fit of :func:`~sblsim.models.sync.clocks.fit_clocks` itself; else one row per
-        clock segment, with :attr:`~sblsim.models.sync.clocks.ClockFit.site`, ``span``, ``clock`` and ``breaks``.
+        clock segment, with :attr:`~sblsim.models.sync.clock_fit.ClockFit.site`, ``span``, ``clock`` and ``breaks``.
 
     Raises
     ------
@@ -664,5 +309,4 @@ def _measured(fit: ClockFit, found: dict) -> ClockBreak:
                       instant, 0.5 * abs(t1 - t0), found["statistic"], found.get("part"))
 
 
-__all__ = ["ClockBreak", "MAX_BREAKS", "MIN_SIDE", "PART_BIN", "SPIKE", "THRESHOLD", "fit_with_breaks",
-           "offset_samples", "part_shifts", "scan"]
+__all__ = ["ClockBreak", "MAX_BREAKS", "THRESHOLD", "fit_with_breaks"]

@@ -45,10 +45,10 @@ What is chosen here, and why:
 * sparse: the emission times are eliminated (each is in its own arrivals' rows only: a diagonal block), leaving the
   knots' normal equations (receivers × bins), assembled with :mod:`scipy.sparse`; the reweighting's solves by
   :func:`scipy.sparse.linalg.splu`, the last one with the sigmas densely (Cholesky and the inverse) up to
-  :data:`DENSE_LIMIT` unknowns and beyond by :func:`selected_inverse`: in time order the knots' normal equations
-  are block tridiagonal (an edge's receivers couple to the next edges' only), so the inverse's entries the sigmas
-  need (each knot's variance, its covariance with the next edge's) cost blocks × block³, not unknowns³ (a month
-  of 70 receivers: 50,000 knots).
+  :data:`DENSE_LIMIT` unknowns and beyond by :func:`~sblsim.models.sync.selected_inversion.selected_inverse`: in
+  time order the knots' normal equations are block tridiagonal (an edge's receivers couple to the next edges' only),
+  so the inverse's entries the sigmas need (each knot's variance, its covariance with the next edge's) cost
+  blocks × block³, not unknowns³ (a month of 70 receivers: 50,000 knots).
 """
 
 from __future__ import annotations
@@ -59,12 +59,14 @@ from time import perf_counter
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-import scipy.sparse.csgraph
 import scipy.sparse.linalg
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.selected_inversion import SelectedCovariance, selected_inverse
 
-#: The most unknowns whose covariance is a dense inverse (2000² doubles, 32 MB); beyond, :func:`selected_inverse`.
+#: The most unknowns whose covariance is a dense inverse (2000² doubles, 32 MB); beyond,
+#: :func:`~sblsim.models.sync.selected_inversion.selected_inverse`.
 DENSE_LIMIT = 2000
 #: Student-t degrees of freedom of the reweighting, and the rejection threshold [standardised residuals].
 NU = 3.0
@@ -73,81 +75,6 @@ REJECT = 4.0
 MIN_SCALE = 1e-6
 #: A steady clock's drift prior, as a share of the drift prior's sigma (``fit_clocks``'s ``steady``).
 STEADY = 1e-3
-
-
-def group_emissions(tag: np.ndarray, time: np.ndarray, gap: np.ndarray) -> np.ndarray:
-    """The emission each arrival belongs to: a tag's arrivals (at every receiver) sorted by time, a new emission
-    where the next arrival is more than the tag's ``gap`` later.
-
-    Parameters
-    ----------
-    tag : numpy.ndarray
-        (n,) int, the tag's index.
-    time : numpy.ndarray
-        (n,) [s] the arrival on its receiver's clock.
-    gap : numpy.ndarray
-        (tags,) [s] the largest spread of one emission's arrivals (a third of the tag's burst interval: the
-        receivers' clocks may differ by up to that).
-
-    Returns
-    -------
-    numpy.ndarray
-        (n,) int, the emission's index, numbered by tag, then time.
-    """
-    order = np.lexsort((time, tag))
-    t, g = time[order], tag[order]
-    new = np.ones(len(t), bool)
-    new[1:] = (g[1:] != g[:-1]) | (np.diff(t) > gap[g[1:]])
-    emission = np.empty(len(t), np.int64)
-    emission[order] = np.cumsum(new) - 1
-    return emission
-
-
-def later_duplicates(emission: np.ndarray, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
-    """(n,) bool: an arrival of an emission at a receiver that logged the same emission earlier (a multipath echo
-    or a false detection): only the first is kept."""
-    order = np.lexsort((time, receiver, emission))
-    e, r = emission[order], receiver[order]
-    dup = np.zeros(len(e), bool)
-    dup[1:] = (e[1:] == e[:-1]) & (r[1:] == r[:-1])
-    out = np.zeros(len(e), bool)
-    out[order] = dup
-    return out
-
-
-def sync_emissions(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, gap: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The sync-tag arrivals' emissions and which of them the clocks' fit takes: ``emission``
-    (:func:`group_emissions`), ``duplicate`` (:func:`later_duplicates`: a receiver's later arrival of one emission,
-    a multipath echo) and ``single`` (an emission heard by one receiver alone, its duplicates not counted: it ties
-    no clock to another), each (n,); the fit takes ``~duplicate & ~single``.
-
-    Parameters
-    ----------
-    tag, receiver : numpy.ndarray
-        (n,) int, each arrival's tag and receiver.
-    time : numpy.ndarray
-        (n,) [s] the arrival on its receiver's clock.
-    gap : numpy.ndarray
-        (tags,) [s] as :func:`group_emissions`'.
-    """
-    emission = group_emissions(tag, time, gap)
-    duplicate = later_duplicates(emission, receiver, time)
-    heard_by = np.bincount(emission[~duplicate], minlength=int(emission.max(initial=-1)) + 1)
-    return emission, duplicate, heard_by[emission] < 2
-
-
-def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, start: int) -> np.ndarray:
-    """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (the
-    connected components of the graph linking the receivers that hear one emission)."""
-    order = np.lexsort((receiver, emission))
-    e, r = emission[order], receiver[order]
-    same = np.flatnonzero(e[1:] == e[:-1])
-    graph = sp.csr_matrix((np.ones(len(same)), (r[same], r[same + 1])), shape=(n_receivers, n_receivers))
-    _, roots = scipy.sparse.csgraph.connected_components(graph, directed=False)
-    heard = np.zeros(n_receivers, bool)
-    heard[np.unique(r[np.r_[same, same + 1]])] = True
-    return (roots == roots[start]) & heard
 
 
 @dataclass
@@ -178,104 +105,6 @@ class Geometry:
     site: np.ndarray | None = None
 
 
-@dataclass
-class ClockFit:
-    """The synchronised clocks.
-
-    Attributes
-    ----------
-    edges : numpy.ndarray
-        (K+1,) [s] the bins' edges on the receivers' own clocks (relative to the caller's origin).
-    knots, knot_sigma : numpy.ndarray
-        (R, K+1) [s] each receiver's offset at each edge and its sigma (the reference receiver's 0 and 0; a
-        receiver not synchronised NaN).
-    drift, drift_sigma : numpy.ndarray
-        (R, K) [s/s] the drift in each bin and its sigma.
-    counts : numpy.ndarray
-        (R, K) int, the kept arrivals in each bin.
-    emission_time : numpy.ndarray
-        (E,) [s] each emission's time on the reference clock (NaN for an emission not used).
-    residual : numpy.ndarray
-        (n,) [s] each arrival's residual (NaN where not used).
-    standardised : numpy.ndarray
-        (n,) the residual over its receiver's scale and leverage.
-    kept : numpy.ndarray
-        (n,) bool, used and not rejected.
-    scale : numpy.ndarray
-        (R,) [s] each receiver's noise scale (its kept residuals' RMS, corrected for the leverage).
-    slowness, slowness_sigma : float or None
-        [s/m] the estimated slowness (1 / sound speed) and its sigma, None where it was given.
-    iterations : int
-    shift, shift_covariance : numpy.ndarray or None
-        (R, 2) [m] and (R, 2, 2) [m²] each receiver's horizontal shift from the table and its covariance (refined
-        positions: :class:`Geometry`), else None.
-    distance : numpy.ndarray or None
-        (n,) [m] with refined positions, each arrival's distance at the refined positions (NaN where not used).
-    site, span, clock, breaks : numpy.ndarray, numpy.ndarray, numpy.ndarray, list or None
-        Where a receiver's clock broke (:func:`sblsim.models.sync.breaks.fit_with_breaks`) the rows above are its
-        **clock segments**: ``site`` (R,) the receiver of each row, ``span`` (R, 2) [s] the times of the receiver's
-        own clock each row's offsets hold for (±inf open; between two segments a stretch neither holds: set aside),
-        ``clock`` (n,) each arrival's row (-1: in such a stretch, not fitted), ``breaks`` the
-        :class:`~sblsim.models.sync.breaks.ClockBreak` s; else None (one row per receiver).
-    part : numpy.ndarray or None
-        (R,) int, each row's **clock part** where a receiver's time went back in the file's order (a reset kept in
-        its logging order: the part of its rows from there, 1 first): a row holds for its part's times within its
-        ``span`` only (two parts may read the same times); None: every row part 1.
-    shift_covariance_all : numpy.ndarray or None
-        (2R, 2R) [m²] with refined positions, all the shifts' joint covariance (x then y per receiver; the
-        blocks of ``shift_covariance`` on its diagonal), else None.
-    """
-
-    edges: np.ndarray
-    knots: np.ndarray
-    knot_sigma: np.ndarray
-    drift: np.ndarray
-    drift_sigma: np.ndarray
-    counts: np.ndarray
-    emission_time: np.ndarray
-    residual: np.ndarray
-    standardised: np.ndarray
-    kept: np.ndarray
-    scale: np.ndarray
-    slowness: float | None
-    slowness_sigma: float | None
-    iterations: int
-    shift: np.ndarray | None = None
-    shift_covariance: np.ndarray | None = None
-    distance: np.ndarray | None = None
-    site: np.ndarray | None = None
-    span: np.ndarray | None = None
-    clock: np.ndarray | None = None
-    breaks: list | None = None
-    part: np.ndarray | None = None
-    shift_covariance_all: np.ndarray | None = None
-
-    def rows_at(self, receiver: np.ndarray, time: np.ndarray, part: np.ndarray | None = None) -> np.ndarray:
-        """(n,) int, the row of :attr:`knots` that holds ``receiver`` (n,) int's clock at its own ``time`` (n,)
-        [s] in its clock ``part`` (n,) int (default 1): the receiver itself where its clock never broke, else the
-        segment of that part whose :attr:`span` holds the time; -1 where none does (a stretch set aside at a
-        break)."""
-        receiver = np.asarray(receiver, np.int64)
-        if self.site is None:
-            return receiver.copy()
-        time = np.asarray(time, float)
-        part = np.ones(receiver.shape, np.int64) if part is None else np.asarray(part, np.int64)
-        own = np.ones(len(self.site), np.int64) if self.part is None else self.part
-        out = np.full(receiver.shape, -1, np.int64)
-        for row in range(len(self.site)):
-            hit = (receiver == self.site[row]) & (time >= self.span[row, 0]) & (time <= self.span[row, 1])
-            out[hit & (part == own[row])] = row
-        return out
-
-    def offset(self, receiver: np.ndarray, time: np.ndarray) -> np.ndarray:
-        """(n,) [s] the offset of ``receiver`` (n,) int at its own clock's ``time`` (n,) [s]: the knots
-        interpolated, extended beyond the edges with the end bin's drift."""
-        width = self.edges[1] - self.edges[0]
-        k = np.clip(np.floor((time - self.edges[0]) / width).astype(np.int64), 0, len(self.edges) - 2)
-        f = (time - self.edges[k]) / width
-        return self.knots[receiver, k] * (1 - f) + self.knots[receiver, k + 1] * f
-
-
 def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, distance: np.ndarray,
                slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray, reference: int,
                bin_width: float, drift_change: float = 1e-6, reject: float = REJECT, max_iterations: int = 20,
@@ -298,7 +127,8 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     used : numpy.ndarray
         (n,) bool, the arrivals to fit (not a later duplicate, at a synchronised receiver).
     synchronised : numpy.ndarray
-        (R,) bool, the receivers to synchronise (tied to the reference: :func:`connected`).
+        (R,) bool, the receivers to synchronise (tied to the reference:
+        :func:`~sblsim.models.sync.emissions.connected`).
     reference : int
         The reference receiver (its offset 0).
     bin_width : float
@@ -314,7 +144,8 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         kept arrivals' least squares only (a fit with some arrivals left out, e.g. a sync tag's).
     sigmas : bool
         Compute the offsets' and drifts' sigmas (a dense inverse up to :data:`DENSE_LIMIT` unknowns, beyond it the
-        selected inverse of the block-tridiagonal normal equations: :func:`selected_inverse`); else NaN.
+        selected inverse of the block-tridiagonal normal equations:
+        :func:`~sblsim.models.sync.selected_inversion.selected_inverse`); else NaN.
     geometry : Geometry, optional
         Refine the receivers' horizontal positions with the clocks, a prior of the survey's sigma at the table's
         positions (the module docstring); default the positions fixed. The shifts' covariance is always computed.
@@ -551,126 +382,6 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
                     shift_covariance_all=None if geometry is None else np.array(shift_cov))
 
 
-@dataclass
-class SelectedCovariance:
-    """The entries of the knots' covariance a fit reports: ``variance`` (knots,) [s²] each knot's, ``following``
-    (pairs,) [s²] the covariance of each pair asked for (a knot and the next edge's), ``border`` (b, b) the
-    unknowns after the knots' (slowness, shifts) among themselves."""
-
-    variance: np.ndarray
-    following: np.ndarray
-    border: np.ndarray
-
-
-def selected_inverse(S: sp.spmatrix, n_band: int, order: np.ndarray, rhs: np.ndarray, pairs: np.ndarray | None
-                     ) -> tuple[np.ndarray, SelectedCovariance]:
-    """Solve ``S x = rhs`` and the entries of ``S⁻¹`` a fit reports, without the dense inverse.
-
-    The first ``n_band`` unknowns (the knots), put in ``order`` (time order), make a block-tridiagonal matrix ``A``
-    (its blocks as wide as its bandwidth); the rest (a border ``b``: the slowness, the shifts) couple to all. ``A``
-    is factored block by block (``A = Uᵀ diag(Sᵢ) U``, ``U`` unit upper with ``U_{i,i+1} = Xᵢ = Sᵢ⁻¹ A_{i,i+1}``),
-    the border by its Schur complement ``G − Cᵀ A⁻¹ C``, and the inverse's diagonal blocks and first off-diagonal
-    blocks by the backward recursion ``Σ_{i,i+1} = −Xᵢ Σ_{i+1,i+1}``, ``Σ_{ii} = Sᵢ⁻¹ + Xᵢ Σ_{i+1,i+1} Xᵢᵀ`` (the
-    block form of Takahashi, Fagan & Chin 1973's selected inverse; the RTS smoother's covariance recursion), plus
-    ``Z Σ_bb Zᵀ`` for the border (``Z = A⁻¹ C``). Cost: blocks × block³ and memory two blocks per block, where the
-    dense inverse is unknowns³ and unknowns².
-
-    Parameters
-    ----------
-    S : scipy.sparse.spmatrix
-        (p, p) symmetric positive definite.
-    n_band : int
-        The banded unknowns (the first ``n_band``).
-    order : numpy.ndarray
-        (n_band,) int, the banded unknowns in the order that makes ``A`` banded (``order[new] = old``).
-    rhs : numpy.ndarray
-        (p,) the right-hand side.
-    pairs : numpy.ndarray or None
-        (P, 2) int, the pairs of banded unknowns (original indices) whose covariance is wanted; each pair within the
-        bandwidth in ``order``. None: the solution and the border's covariance only (no backward recursion; the
-        variances and pairs' covariances empty).
-
-    Returns
-    -------
-    (numpy.ndarray, SelectedCovariance)
-        The solution (p,) and the selected entries.
-    """
-    p = S.shape[0]
-    perm = np.r_[np.asarray(order, np.int64), np.arange(n_band, p)]
-    P = sp.csr_matrix(S)[perm][:, perm].tocsr()
-    A = P[:n_band, :n_band].tocoo()
-    m = max(int(np.max(np.abs(A.row - A.col), initial=0)), 1)
-    A = A.tocsr()
-    nb = -(-n_band // m)
-    edge = np.minimum(np.arange(nb + 1) * m, n_band)
-    blk = [slice(edge[i], edge[i + 1]) for i in range(nb)]
-    C = P[:n_band, n_band:].toarray()
-    G = P[n_band:, n_band:].toarray()
-    r = np.asarray(rhs, float)[perm]
-    factors, X = [], []
-    Si = A[blk[0], blk[0]].toarray()
-    for i in range(nb):
-        factor = scipy.linalg.cho_factor(Si, lower=True, check_finite=False)
-        factors.append(factor)
-        if i + 1 < nb:
-            upper = A[blk[i], blk[i + 1]].toarray()
-            X.append(scipy.linalg.cho_solve(factor, upper, check_finite=False))
-            Si = A[blk[i + 1], blk[i + 1]].toarray() - upper.T @ X[i]
-
-    def solve_band(R: np.ndarray) -> np.ndarray:
-        z = [R[b].copy() for b in blk]
-        for i in range(nb - 1):
-            z[i + 1] -= X[i].T @ z[i]
-        out = np.empty_like(R)
-        out[blk[-1]] = scipy.linalg.cho_solve(factors[-1], z[-1], check_finite=False)
-        for i in range(nb - 2, -1, -1):
-            out[blk[i]] = scipy.linalg.cho_solve(factors[i], z[i], check_finite=False) - X[i] @ out[blk[i + 1]]
-        return out
-
-    Z = solve_band(C)
-    border = np.linalg.inv(G - C.T @ Z) if p > n_band else np.zeros((0, 0))
-    ya = solve_band(r[:n_band])
-    xb = border @ (r[n_band:] - C.T @ ya)
-    x = np.empty(p)
-    x[perm] = np.r_[ya - Z @ xb, xb]
-    if pairs is None:
-        return x, SelectedCovariance(np.zeros(0), np.zeros(0), border)
-    # the selected inverse: where each original knot sits, and each pair's blocks
-    where = np.empty(n_band, np.int64)
-    where[perm[:n_band]] = np.arange(n_band)
-    a, b = where[pairs[:, 0]], where[pairs[:, 1]]
-    a, b = np.minimum(a, b), np.maximum(a, b)
-    if np.any(b // m - a // m > 1):
-        raise ModelError("sync: a covariance asked for outside the normal equations' band")
-    variance = np.empty(n_band)
-    following = np.empty(len(pairs))
-    by_block = np.argsort(a // m, kind="stable")
-    starts = np.searchsorted(a[by_block] // m, np.arange(nb + 1))
-    sigma_next = None
-    for i in range(nb - 1, -1, -1):
-        inverse = scipy.linalg.cho_solve(factors[i], np.eye(edge[i + 1] - edge[i]), check_finite=False)
-        if i + 1 < nb:
-            M = X[i] @ sigma_next
-            sigma_ii = inverse + M @ X[i].T
-            sigma_up = -M  # Σ_{i,i+1}
-        else:
-            sigma_ii, sigma_up = inverse, None
-        variance[blk[i]] = np.diag(sigma_ii)
-        mine = by_block[starts[i]:starts[i + 1]]
-        same = b[mine] // m == i
-        following[mine[same]] = sigma_ii[a[mine[same]] - edge[i], b[mine[same]] - edge[i]]
-        if (~same).any():
-            following[mine[~same]] = sigma_up[a[mine[~same]] - edge[i], b[mine[~same]] - edge[i + 1]]
-        sigma_next = sigma_ii
-    if p > n_band:  # the border's share: Z Σ_bb Zᵀ
-        ZS = Z @ border
-        variance += np.einsum("ij,ij->i", ZS, Z)
-        following += np.einsum("ij,ij->i", ZS[a], Z[b])
-    back = np.empty(n_band)
-    back[perm[:n_band]] = variance
-    return x, SelectedCovariance(back, following, border)
-
-
 def _prior(free: np.ndarray, base: np.ndarray, n_bins: int, p: int, sigma: float,
            steady: np.ndarray | None = None, ties: np.ndarray | None = None) -> sp.csr_matrix:
     """The knots' prior information: each free receiver's second differences of its knots, of sigma ``sigma``;
@@ -717,5 +428,4 @@ def _scales(residual: np.ndarray, one: np.ndarray, rec: np.ndarray, n_receivers:
     return np.maximum(np.where(np.isfinite(scale), scale, fallback), MIN_SCALE)
 
 
-__all__ = ["ClockFit", "DENSE_LIMIT", "Geometry", "NU", "REJECT", "STEADY", "SelectedCovariance", "connected",
-           "fit_clocks", "group_emissions", "later_duplicates", "selected_inverse", "sync_emissions"]
+__all__ = ["DENSE_LIMIT", "Geometry", "NU", "REJECT", "STEADY", "fit_clocks"]

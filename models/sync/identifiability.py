@@ -3,7 +3,7 @@
 
 A receiver's horizontal position refined with the clocks is the survey's (the prior, σ₀ per axis) updated by the
 sync tags' arrivals. Its posterior covariance (the fit's information with the prior's, inverted:
-:attr:`~sblsim.models.sync.clocks.ClockFit.shift_covariance_all`) says how much the arrivals added. Two things are
+:attr:`~sblsim.models.sync.clock_fit.ClockFit.shift_covariance_all`) says how much the arrivals added. Two things are
 left out before it is compared with the prior:
 
 * **the gauge**: a translation or a rotation of the whole array changes no distance, so the arrivals never

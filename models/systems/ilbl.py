@@ -19,7 +19,7 @@ state and the interval's drift as its drift, the std of the interval's random pa
 ``(max − min) / √12``) as the offset's process noise at each new ping, and the
 range at the emission epoch (:mod:`sblsim.models.receiver.core`); the paper's EKF and ``lsq`` have no such state
 and are refused. The bound is the ranging systems' bound with error states, the same process noise at each
-ping (:func:`sblsim.models.bound.error_bound_step`); the accuracy map is one ping heard by every receiver plus the
+ping (:func:`sblsim.models.error_bound.error_bound_step`); the accuracy map is one ping heard by every receiver plus the
 depth, the emission epoch removed as a nuisance parameter
 (:func:`sblsim.models.design.information.layout_information`).
 

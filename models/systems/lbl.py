@@ -24,9 +24,10 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from sblsim.models.declarations import ModelError, format_table
+from sblsim.models.declarations import ModelError
 from sblsim.models.systems import register
 from sblsim.models.systems.sbl import SBL, _layout_words
+from sblsim.models.table_text import format_table
 from sblsim.models.target.core import file_waypoints
 
 

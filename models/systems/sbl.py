@@ -9,7 +9,7 @@ the platform reference, which the waves move; the platform broadcasts
 TWTT); the receivers take ranges plus the depth
 (:class:`~sblsim.models.receiver.measurement.RangeDepthModel`); the bound and
 the accuracy map are the range bound of :mod:`sblsim.models.bound` (with error states where a run has
-error sources that are not white: :func:`sblsim.models.bound.error_bound_step`).
+error sources that are not white: :func:`sblsim.models.error_bound.error_bound_step`).
 
 References
 ----------
@@ -25,9 +25,10 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.bound import ERROR_FIXED, ERROR_STEPS, MODEL, bound_step, compiled_error_bound
+from sblsim.models.bound import MODEL, bound_step
 from sblsim.models.declarations import ModelError
 from sblsim.models.design.information import layout_values
+from sblsim.models.error_bound import ERROR_FIXED, ERROR_STEPS, compiled_error_bound
 from sblsim.models.platform.core import MAX_BEACONS, MIN_BEACONS
 from sblsim.models.platform.geometry import cross_offsets, layout_offsets, parse_offsets
 from sblsim.models.systems import System, register
@@ -99,8 +100,8 @@ class SBL(System):
         return bound_step()
 
     def bound_function(self):
-        """The bound with error states (:func:`sblsim.models.bound.compiled_error_bound`), stepped for a run that has
-        one (:meth:`own_bound`)."""
+        """The bound with error states (:func:`sblsim.models.error_bound.compiled_error_bound`), stepped for a run
+        that has one (:meth:`own_bound`)."""
         return compiled_error_bound()
 
     def own_bound(self, parameters: Mapping[str, float]) -> bool:

@@ -32,19 +32,10 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.component import Component
-from sblsim.models.declarations import (
-    SEED_PARAMETERS,
-    Column,
-    FileKey,
-    ModelError,
-    Table,
-    Variable,
-    format_table,
-    parse_table,
-    resolve_parameters,
-)
+from sblsim.models.declarations import SEED_PARAMETERS, Column, FileKey, ModelError, Table, Variable, resolve_parameters
 from sblsim.models.expressions import padded_rows, sample_due, switch
 from sblsim.models.program import ProgramBuilder, Stream
+from sblsim.models.table_text import format_table, parse_table
 from sblsim.models.target.trajectories import (
     OPEN_DURATION,
     read_trajectory_file,

@@ -23,7 +23,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from sblsim.models.declarations import ModelError, Table, check_entry, check_increasing
+from sblsim.models.declarations import ModelError, Table
+from sblsim.models.table_text import check_entry, check_increasing
 
 #: Simulated duration of the open-ended trajectories (spiral, random) [s].
 OPEN_DURATION = 100.0

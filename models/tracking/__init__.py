@@ -4,7 +4,10 @@
 * :mod:`~sblsim.models.tracking.fix`: the single-ping fix;
 * :mod:`~sblsim.models.tracking.calibration`: the sound speed fitted with the pings;
 * :mod:`~sblsim.models.tracking.schedule`: the field's ping types (stable, random and pseudo-random burst
-  intervals) as the time between successive pings, which the motion model's process noise follows;
+  intervals) as the time between successive pings, which the motion model's process noise follows; the type the
+  rows show (:mod:`~sblsim.models.tracking.ping_type`), a pseudo-random sequence aligned to them
+  (:mod:`~sblsim.models.tracking.burst_sequence`), the rows that cannot be pings set aside
+  (:mod:`~sblsim.models.tracking.strays`);
 * :mod:`~sblsim.models.tracking.ekf`, :mod:`~sblsim.models.tracking.filters`: the causal filters and the RTS
   smoother; :mod:`~sblsim.models.tracking.filter_consider`: the survey's and the speed's consider terms of their
   covariances;

@@ -42,6 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.burst_sequence import align_sequence
 
 #: The ping types, by the field's names.
 PING_TYPES = {"sbi": "stable burst interval", "rbi": "random burst interval",
@@ -52,23 +53,14 @@ GAP_FACTOR = 10.0
 GAP_MIN_S = 60.0
 #: The smallest emission-time step error of ``rbi`` and ``pbi`` steps [s] (a compact array's crossing time).
 MIN_STEP_SIGMA = 1e-3
-#: Most missed pings one step of a ``pbi`` sequence's alignment bridges.
-PBI_MAX_MISSED = 64
-#: The first steps over which every phase of a pseudo-random tag's sequence is tried (:func:`align_sequence`).
-PBI_PHASE_STEPS = 256
 #: A stable interval stated for a tag is refused where the rows' steps miss whole multiples of their best interval
 #: by more than this many crossing times (90 % of them; the inference calls a spread of 2 stable,
-#: :func:`infer_ping_type`), or by more than :data:`SBI_SHARE` of the interval (:func:`check_stable`).
+#: :func:`~sblsim.models.tracking.ping_type.infer_ping_type`), or by more than :data:`SBI_SHARE` of the interval
+#: (:func:`check_stable`).
 SBI_CROSSINGS = 4.0
 SBI_SHARE = 0.02
 #: The divisors of the typical step tried as the stable interval (a tag heard at every second ping or less).
 SBI_DIVISORS = (1, 2, 3, 4)
-#: The largest share of a record's heard rows a stated interval may set aside as strays (:func:`stray_rows`): more,
-#: and the detections contradict the interval as a whole (:func:`check_strays`). A raw recording's stray codes and
-#: collisions are a few per cent of its rows.
-STRAY_SHARE = 0.10
-#: The reason a row set aside carries (``quality_reason``, ``set_aside.csv``).
-SET_ASIDE_REASON = "set_aside_not_a_ping"
 
 
 @dataclass(frozen=True)
@@ -184,52 +176,6 @@ def crossing_time(receivers: np.ndarray, c: float) -> float:
     return max(span / c, MIN_STEP_SIGMA)
 
 
-@dataclass(frozen=True)
-class InferredType:
-    """What :func:`infer_ping_type` saw: the type, the typical step Δ [s], the spacing's bounds (2nd and 98th
-    percentiles of the single steps) [s] and the residual spread (the 90th percentile of the steps' distance to a
-    whole number of Δ) [s]."""
-
-    kind: str
-    interval: float
-    bounds: tuple[float, float]
-    spread: float
-
-
-def infer_ping_type(toa: np.ndarray, crossing: float) -> InferredType:
-    """The ping type the rows' first arrivals show: ``sbi`` when their steps lie within the array's crossing time
-    (the first arrival's travel time changes by less) of a whole number of the typical step, else ``rbi``.
-
-    Parameters
-    ----------
-    toa : ndarray, (m, n)
-        Times of arrival [s], NaN where not heard.
-    crossing : float
-        The array's crossing time [s] (:func:`crossing_time`).
-
-    Returns
-    -------
-    InferredType
-
-    Raises
-    ------
-    ModelError
-        As :func:`first_arrival_steps`, or if no two rows are apart in time.
-    """
-    d = first_arrival_steps(toa)
-    positive = d[d > 0]
-    if not len(positive):
-        raise ModelError("toa: no two pings are apart in time; allowed: rows of successive pings")
-    delta = float(np.median(positive))
-    n = np.maximum(np.round(d / delta), 1.0)
-    residual = np.abs(d - n * delta)
-    spread = float(np.percentile(residual, 90))
-    single = d[n == 1]
-    bounds = (float(np.percentile(single, 2)), float(np.percentile(single, 98))) if len(single) else (delta, delta)
-    kind = "sbi" if spread <= 2.0 * crossing else "rbi"
-    return InferredType(kind, delta, bounds, spread)
-
-
 def check_stable(toa: np.ndarray, crossing: float) -> None:
     """Refuse a stable burst interval (``sbi``) that the rows' first arrivals contradict: their steps are not whole
     multiples of one interval within the tolerance, ``max(SBI_CROSSINGS × crossing, SBI_SHARE × interval)`` for 90 %
@@ -298,11 +244,11 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
         The array's crossing time [s] (:func:`crossing_time`): the step error of ``rbi`` steps.
     bounds : (float, float), optional
         ``rbi``: the interval's (min, max) [s]; a step between successive heard rows shorter than ``min`` by more
-        than the crossing time is refused (set such rows aside first: :func:`stray_rows`); a row heard by nobody is
-        no ping and counts as no interval.
+        than the crossing time is refused (set such rows aside first:
+        :func:`~sblsim.models.tracking.strays.stray_rows`); a row heard by nobody is no ping and counts as no interval.
     sequence : ndarray, optional
-        ``pbi``: the intervals [s] in the tag's order, repeating (:func:`align_sequence`), aligned on the heard
-        rows' steps.
+        ``pbi``: the intervals [s] in the tag's order, repeating
+        (:func:`~sblsim.models.tracking.burst_sequence.align_sequence`), aligned on the heard rows' steps.
     source : str
         ``given`` or ``inferred`` (kept in the schedule).
 
@@ -358,8 +304,8 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
 def _check_shortest(toa: np.ndarray, low: float, crossing: float) -> None:
     """Refuse rows whose first arrivals come sooner than a random interval's min ``low`` [s] allows, less the
     crossing time [s], after the previous heard row. A row heard by nobody is no ping (its time is unknown): it
-    neither counts as an interval nor is checked. A caller that sets strays aside first (:func:`stray_rows`) leaves
-    none.
+    neither counts as an interval nor is checked. A caller that sets strays aside first
+    (:func:`~sblsim.models.tracking.strays.stray_rows`) leaves none.
 
     Raises
     ------
@@ -379,168 +325,5 @@ def _check_shortest(toa: np.ndarray, low: float, crossing: float) -> None:
                      "closer to the previous one (set aside first: stray_rows)")
 
 
-def stray_rows(toa: np.ndarray, shortest: float, crossing: float) -> np.ndarray:
-    """The rows that cannot be pings of a tag whose pings are at least ``shortest`` [s] apart: a stray code, a
-    collision, an echo beyond the grouping's window.
-
-    The heard rows are walked in time order against the last row kept: a row whose first arrival is less than
-    ``shortest − crossing`` after it (the first arrival's travel time changes by at most the crossing time) conflicts
-    with it, and of the two the row heard by more receivers is kept (a tie: the earlier), the other set aside. A row
-    heard by nobody is no ping (its time is unknown) and takes no part.
-
-    Parameters
-    ----------
-    toa : ndarray, (m, n)
-        Times of arrival [s], NaN where not heard; rows in time order.
-    shortest : float
-        The shortest interval between two pings [s] (``rbi``: its min; ``pbi``: the sequence's least).
-    crossing : float
-        The array's crossing time [s] (:func:`crossing_time`).
-
-    Returns
-    -------
-    ndarray of bool, (m,)
-        True where a row is set aside.
-    """
-    toa = np.asarray(toa, float)
-    first = first_arrivals(toa)
-    count = np.isfinite(toa).sum(axis=1)
-    heard = np.flatnonzero(np.isfinite(first))
-    stray = np.zeros(len(first), bool)
-    limit = shortest - crossing
-    if len(heard) < 2 or not (np.diff(first[heard]) < limit).any():
-        return stray
-    last = int(heard[0])
-    for k in heard[1:]:
-        if first[k] - first[last] >= limit:
-            last = int(k)
-        elif count[k] > count[last]:  # the row heard by more receivers is the ping
-            stray[last], last = True, int(k)
-        else:
-            stray[k] = True
-    return stray
-
-
-def check_strays(toa: np.ndarray, stray: np.ndarray, stated: str, shortest: float, force: bool = False,
-                 option: str = "--force-interval") -> str | None:
-    """Refuse a stated interval the rows contradict as a whole: more than :data:`STRAY_SHARE` of the heard rows set
-    aside by it (:func:`stray_rows`), where a few stray codes and collisions would be a few per cent.
-
-    Parameters
-    ----------
-    toa : ndarray, (m, n)
-        Times of arrival [s], NaN where not heard (before any row is set aside).
-    stray : ndarray of bool, (m,)
-        The rows :func:`stray_rows` sets aside.
-    stated : str
-        The interval as stated, for the message (e.g. ``"150:300 s"``).
-    shortest : float
-        Its shortest interval [s].
-    force : bool
-        Take the stated interval whatever the rows show: the message is returned, a warning, not raised.
-    option : str
-        How the caller spells the override.
-
-    Returns
-    -------
-    str or None
-        With ``force``, the line that says how much the stated interval sets aside where it is contradicted; else
-        None.
-
-    Raises
-    ------
-    ModelError
-        One line naming the stated interval, the steps the rows show and how many rows it would set aside.
-    """
-    first = first_arrivals(toa)
-    heard = np.flatnonzero(np.isfinite(first))
-    n_stray = int(np.asarray(stray, bool).sum())
-    if len(heard) < 3 or n_stray <= STRAY_SHARE * len(heard):
-        return None
-    steps = np.diff(first[heard])
-    low, high = np.percentile(steps, [5, 50])
-    seen = (f"the rows' first arrivals are {low:.4g} s apart or more (5th percentile; median {high:.4g} s, "
-            f"{int((steps < shortest).sum())} of {len(steps)} steps below {shortest:g} s)")
-    if force:
-        return (f"burst interval: {stated} stated ({option}) against {seen}: {n_stray} of {len(heard)} heard rows "
-                "set aside as no pings of it")
-    raise ModelError(f"burst interval: {stated} stated, but {seen}: it would set aside {n_stray} of {len(heard)} "
-                     f"heard rows (more than {STRAY_SHARE:.0%}); allowed: the tag's interval, or {option} to use it "
-                     "anyway")
-
-
-def align_sequence(steps: np.ndarray, sequence: np.ndarray, crossing: float) -> tuple[np.ndarray, np.ndarray]:
-    """A pseudo-random tag's interval sequence aligned to the rows' first-arrival steps.
-
-    Every phase of the (repeating) sequence is tried on the first :data:`PBI_PHASE_STEPS` steps: from it, each step
-    of the rows takes as many of the next intervals (1 to :data:`PBI_MAX_MISSED`: pings nobody heard) as bring their
-    sum nearest to the step; a step matches when that sum is within twice the crossing time. The phase with the most
-    matches there aligns the whole record (one pass, not one per phase: a long record's alignment in linear time),
-    and where that matches under half of the steps every phase is tried over the whole record.
-
-    Parameters
-    ----------
-    steps : ndarray, (k,)
-        The rows' first-arrival steps [s] (:func:`first_arrival_steps`).
-    sequence : ndarray, (L,)
-        The tag's intervals [s], positive.
-    crossing : float
-        The array's crossing time [s].
-
-    Returns
-    -------
-    durations : ndarray, (k,)
-        Each step's duration [s]: the sequence's sum where it matched, the first-arrival step elsewhere.
-    matched : ndarray of bool, (k,)
-
-    Raises
-    ------
-    ModelError
-        A sequence of non-positive or non-finite intervals, or one no phase of which matches half the steps.
-    """
-    if not (np.isfinite(sequence).all() and (sequence > 0).all()):
-        raise ModelError("burst sequence: allowed: positive intervals [s]")
-    L, tolerance = len(sequence), 2.0 * crossing
-    period, partial = float(sequence.sum()), np.r_[0.0, np.cumsum(sequence)]
-    mean = period / L
-
-    def elapsed(a: np.ndarray | int) -> np.ndarray:
-        """The sum of the first ``a`` intervals of the repeating sequence [s]."""
-        return (np.asarray(a) // L) * period + partial[np.asarray(a) % L]
-
-    ahead = np.arange(1, PBI_MAX_MISSED + 1)
-
-    def walk(phase: int, steps: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
-        """The steps aligned from ``phase``: the matches, the durations and which matched."""
-        j, durations, matched = phase, np.array(steps, float), np.zeros(len(steps), bool)
-        for k, d in enumerate(steps):
-            sums = elapsed(j + ahead) - elapsed(j)
-            r = int(np.argmin(np.abs(sums - d)))
-            if abs(sums[r] - d) <= tolerance:
-                durations[k], matched[k] = sums[r], True
-                j += r + 1
-            else:  # lost the sequence here: the nearest whole ping count by the mean interval
-                j += max(int(round(d / mean)), 1)
-        return int(matched.sum()), durations, matched
-
-    # the phase chosen on the first PBI_PHASE_STEPS steps (every phase tried there), then the whole record aligned
-    # from it; every phase over the whole record where that matches under half of the steps
-    steps = np.asarray(steps, float)
-    head = steps[:PBI_PHASE_STEPS]
-    phase = max(range(L), key=lambda f: (walk(f, head)[0], -f))
-    best = walk(phase, steps)
-    if len(steps) > PBI_PHASE_STEPS and best[0] < 0.5 * len(steps):
-        for other in range(L):
-            found = walk(other, steps)
-            if found[0] > best[0]:
-                best = found
-    if best[0] < 0.5 * len(steps):
-        raise ModelError(f"burst sequence: {max(best[0], 0)} of {len(steps)} steps match the sequence at its best "
-                         "phase; allowed: the tag's own sequence (its intervals in order)")
-    return best[1], best[2]
-
-
-__all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PBI_MAX_MISSED", "PBI_PHASE_STEPS", "PING_TYPES",
-           "SBI_CROSSINGS", "SBI_DIVISORS", "SBI_SHARE", "SET_ASIDE_REASON", "STRAY_SHARE", "InferredType",
-           "PingSchedule", "align_sequence", "build_schedule", "check_stable", "check_strays", "crossing_time",
-           "first_arrival_steps", "first_arrivals", "infer_ping_type", "stray_rows"]
+__all__ = ["GAP_FACTOR", "GAP_MIN_S", "MIN_STEP_SIGMA", "PING_TYPES", "SBI_CROSSINGS", "SBI_DIVISORS", "SBI_SHARE",
+           "PingSchedule", "build_schedule", "check_stable", "crossing_time", "first_arrival_steps", "first_arrivals"]

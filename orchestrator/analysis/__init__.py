@@ -125,7 +125,8 @@ from sblsim.orchestrator.analysis.report import (
     report_markdown,
 )
 from sblsim.orchestrator.analysis.tables import best_cell, tables
-from sblsim.orchestrator.campaign.study import Factor, StudyRecord
+from sblsim.orchestrator.campaign.study import Factor
+from sblsim.orchestrator.campaign.study_record import StudyRecord
 from sblsim.orchestrator.io.output import staged_directory
 
 

@@ -11,7 +11,9 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.errors import CampaignError
-from sblsim.orchestrator.campaign.study import Factor, StudyError, StudyRecord, level_value, read_record
+from sblsim.orchestrator.campaign.errors import StudyError
+from sblsim.orchestrator.campaign.study import Factor
+from sblsim.orchestrator.campaign.study_record import StudyRecord, level_value, read_record
 from sblsim.orchestrator.cosim.metrics import METRIC_NAMES
 
 METRICS = tuple(METRIC_NAMES) + tuple(f"instr_{m}" for m in METRIC_NAMES)
@@ -77,7 +79,7 @@ def infer_factors(runs: pd.DataFrame) -> list[Factor]:
 
 
 def load_campaign_study(directory: Path | str, runs: pd.DataFrame) -> tuple[StudyRecord, list[str]]:
-    """Read ``DIR/study.toml`` (:func:`sblsim.orchestrator.campaign.study.read_record`), or infer the study from
+    """Read ``DIR/study.toml`` (:func:`sblsim.orchestrator.campaign.study_record.read_record`), or infer the study from
     ``runs`` when it is missing.
 
     Returns

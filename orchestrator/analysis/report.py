@@ -15,7 +15,8 @@ import pandas as pd
 from sblsim.orchestrator.analysis.data import higher_is_better, response_unit
 from sblsim.orchestrator.analysis.fit import DIAGNOSTIC_COLUMNS, FitResult
 from sblsim.orchestrator.analysis.tables import best_cell
-from sblsim.orchestrator.campaign.study import Factor, StudyRecord
+from sblsim.orchestrator.campaign.study import Factor
+from sblsim.orchestrator.campaign.study_record import StudyRecord
 
 _METRIC_WORDS = {"e_x_mean": "mean e_x", "e_y_mean": "mean e_y", "e_z_mean": "mean e_z",
                  "e_tot_mean": "mean e_tot", "e_tot_rms": "RMS e_tot", "e_tot_std": "std of e_tot",

@@ -1,11 +1,16 @@
-"""The campaign's exceptions: :class:`CampaignError` (the error kind of :mod:`sblsim.models.errors`) and
-:class:`CampaignInterrupted` (an interruption, not an error: finished work is kept)."""
+"""The campaign's exceptions: :class:`CampaignError` (the error kind of :mod:`sblsim.models.errors`),
+:class:`StudyError` (an invalid study, a configuration error) and :class:`CampaignInterrupted` (an interruption, not
+an error: finished work is kept)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from sblsim.models.errors import CampaignError
+from sblsim.models.errors import CampaignError, ConfigError
+
+
+class StudyError(ConfigError):
+    """Invalid study; the message names the field and the allowed range."""
 
 
 class CampaignInterrupted(Exception):
@@ -16,4 +21,4 @@ class CampaignInterrupted(Exception):
         self.done, self.total, self.out = done, total, out
 
 
-__all__ = ["CampaignError", "CampaignInterrupted"]
+__all__ = ["CampaignError", "CampaignInterrupted", "StudyError"]

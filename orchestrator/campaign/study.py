@@ -22,9 +22,11 @@ seed::
 
 Design cell ``c`` is row ``c`` of the design matrix of pyDOE3 (``ff2n`` for
 the full factorial: the first factor changes slowest; ``fracfact_by_res`` or
-``fracfact`` for a fractional one), coded −1 (LOW) and +1 (HIGH). Every
+``fracfact`` for a fractional one), coded −1 (LOW) and +1 (HIGH): made by
+:mod:`sblsim.orchestrator.campaign.factorial`. Every
 value is validated against the declaration of its key before anything runs,
 so a bad level gets a one-line error naming the factor and the allowed range.
+A study as a campaign's results record it is :mod:`sblsim.orchestrator.campaign.study_record`'s.
 
 References
 ----------
@@ -50,7 +52,8 @@ import tomli_w
 from sblsim.models import RECEIVER_MODELS
 from sblsim.models.acoustics.channel.interface import FIXED_KEYS, SNR_KEYS
 from sblsim.models.declarations import ModelError, Variable, shown
-from sblsim.models.errors import ConfigError
+from sblsim.orchestrator.campaign.errors import StudyError
+from sblsim.orchestrator.campaign.factorial import design_matrix
 from sblsim.orchestrator.cosim.config import (
     BUILTIN_SCENARIOS,
     SECTIONS,
@@ -71,10 +74,6 @@ _FACTOR_KEYS = {"name", "key", "low", "high"}
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 #: Columns of ``runs.parquet`` besides the factors and the metrics (a factor may not take their names).
 RESULT_COLUMNS = ("scenario", "scenario_key", "cell", "replicate", "seed", "receiver")
-
-
-class StudyError(ConfigError):
-    """Invalid study; the message names the field and the allowed range."""
 
 
 @dataclass(frozen=True)
@@ -201,147 +200,6 @@ class Study:
         header = "# sblsim resolved study: scenarios, factors with their levels, the design matrix (row = cell).\n"
         return header + tomli_w.dumps(self.to_dict())
 
-
-@dataclass
-class StudyRecord:
-    """A study as its results record it (``study.toml`` of a campaign), or as inferred from ``runs.parquet``.
-
-    Unlike :class:`Study` it is not validated against the scenarios (they may
-    live on another machine); it is what the analysis needs.
-
-    Attributes
-    ----------
-    name : str
-    seed : int or None
-        Campaign seed.
-    replicates : int or None
-        Runs per design cell.
-    design : str
-        ``full``, ``fractional`` or ``unknown`` (inferred).
-    resolution : int
-        Resolution of a fractional design (0 otherwise).
-    generators : str
-        Generators of a fractional design.
-    scenarios : list of str
-    engine : str
-    factors : list of Factor
-        In design order.
-    inferred : bool
-        True when there was no ``study.toml``.
-    """
-
-    name: str
-    seed: int | None
-    replicates: int | None
-    design: str
-    resolution: int
-    generators: str
-    scenarios: list[str]
-    engine: str
-    factors: list[Factor]
-    inferred: bool = False
-
-
-def level_value(value: Any) -> float | str:
-    """A factor level as read from a file: a number, or the text of a text key (e.g. ``ekf-seq``)."""
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return float(value)
-
-
-def read_record(path: Path | str, name: str = "study", scenarios: list[str] | None = None) -> StudyRecord:
-    """Read a campaign's ``study.toml`` (the table :meth:`Study.to_dict` writes, with its ``[execution]``).
-
-    Parameters
-    ----------
-    path : path
-    name, scenarios
-        Defaults for a file that does not record them.
-
-    Raises
-    ------
-    StudyError
-        If the file cannot be parsed or an entry is malformed (one line naming the file).
-    """
-    path = Path(path)
-    try:
-        raw = tomlfile.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise StudyError(f"study.toml: cannot parse {str(path)!r} ({str(exc).splitlines()[0]})") from None
-    s = raw.get("study", {})
-    try:
-        factors = [Factor(name=str(f["name"]), key=str(f.get("key", "")), low=level_value(f["low"]),
-                          high=level_value(f["high"]), unit=str(f.get("unit", "")),
-                          description=str(f.get("description", "")))
-                   for f in raw.get("factors", [])]
-        return StudyRecord(name=str(s.get("name", name)), seed=int(s["seed"]) if "seed" in s else None,
-                           replicates=int(s["replicates"]) if "replicates" in s else None,
-                           design=str(s.get("design", "full")), resolution=int(s.get("resolution", 0)),
-                           generators=str(s.get("generators", "")),
-                           scenarios=[str(x) for x in s.get("scenarios", scenarios or [])],
-                           engine=str(raw.get("execution", {}).get("engine", s.get("engine", ""))),
-                           factors=factors)
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise StudyError(f"study.toml: invalid entry in {str(path)!r} ({type(exc).__name__}: {exc})") from None
-
-
-def full_factorial(k: int) -> np.ndarray:
-    """The coded 2-level full factorial of ``k`` factors, shape (2^k, k), in the rows of pyDOE3's ``ff2n`` (cell c's
-    factor j at +1 where bit k − 1 − j of c is set: the first factor varies slowest). Written here because pyDOE3's
-    import loads scipy.stats, half a second of every campaign's start for a table of signs;
-    ``tests/orchestrator/test_campaign.py`` compares it with ``ff2n``."""
-    cells = np.arange(2 ** k, dtype=np.int64)[:, None]
-    return np.where((cells >> np.arange(k - 1, -1, -1)) & 1, 1, -1).astype(np.int64)
-
-
-def design_matrix(k: int, design: str = "full", resolution: int = 0, generators: str = "") -> np.ndarray:
-    """Coded 2-level design matrix: the full factorial (:func:`full_factorial`, pyDOE3's rows) or pyDOE3's
-    fractional one.
-
-    Parameters
-    ----------
-    k : int
-        Number of factors.
-    design : {'full', 'fractional'}
-    resolution : int
-        Fractional: lowest resolution wanted (pyDOE3 ``fracfact_by_res``).
-    generators : str
-        Fractional: explicit generator string (pyDOE3 ``fracfact``, e.g.
-        ``"a b c abc"``); takes precedence over ``resolution``.
-
-    Returns
-    -------
-    ndarray of int, shape (cells, k)
-
-    Raises
-    ------
-    StudyError
-        If the design cannot be built.
-    """
-    if design == "full":
-        return full_factorial(k)
-    import pyDOE3  # here, not at the top: it imports scipy.stats (a second), which a campaign's workers never need
-
-    if generators:
-        words = generators.split()
-        if len(words) != k:
-            raise StudyError(f"study.generators: {len(words)} generators for {k} factors; give one per factor")
-        try:
-            matrix = pyDOE3.fracfact(generators)
-        except Exception as exc:  # pyDOE3 raises plain exceptions on bad strings
-            raise StudyError(f"study.generators: {generators!r} is not a valid generator string ({exc})") from None
-        return np.asarray(matrix).astype(np.int64)
-    if resolution < 3:
-        raise StudyError(f"study.resolution: {resolution} is outside the allowed range [3, {k}] "
-                         "(or give study.generators)")
-    try:
-        return np.asarray(pyDOE3.fracfact_by_res(k, resolution)).astype(np.int64)
-    except ValueError as exc:
-        raise StudyError(f"study.resolution: no 2-level design of resolution {resolution} for {k} factors "
-                         f"({exc})") from None
 
 
 def _check_type(table: dict, key: str, kinds: tuple[type, ...], what: str, where: str) -> Any:
@@ -556,3 +414,6 @@ def _check_scenarios(study: Study) -> None:
             raise StudyError(f"study.scenarios: {keys[key]!r} and {scenario!r} share run.scenario_key {key}; "
                              "give each scenario its own key (seed tree)")
         keys[key] = scenario
+
+
+__all__ = ["BUILTIN_STUDIES", "DESIGNS", "RESULT_COLUMNS", "Factor", "Study", "load_study", "study_source"]

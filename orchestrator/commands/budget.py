@@ -52,20 +52,20 @@ class BudgetResult:
     @property
     def table(self) -> pd.DataFrame:
         """``budget.csv``: one row per source (per compared value), the contributions [m²] and shares."""
-        from sblsim.orchestrator.montecarlo.budget import table
+        from sblsim.orchestrator.montecarlo.budget_outputs import table
 
         return table(self.budgets, self.compared[0] if self.compared else None)
 
     def markdown(self) -> str:
         """``budget.md``'s table."""
-        from sblsim.orchestrator.montecarlo.budget import markdown
+        from sblsim.orchestrator.montecarlo.budget_outputs import markdown
 
         return markdown(self.budgets, self.compared[0] if self.compared else None)
 
     def lines(self) -> list[str]:
         """What ``sblsim budget`` prints for each budget: one line per source, the floor, remainder, total
         and what to improve first."""
-        from sblsim.orchestrator.montecarlo.budget import advice, lines
+        from sblsim.orchestrator.montecarlo.budget_outputs import advice, lines
 
         out = []
         for b in self.budgets:
@@ -77,7 +77,7 @@ class BudgetResult:
 
     def plot(self) -> Figure:
         """The figure ``budget.png``."""
-        from sblsim.orchestrator.montecarlo.budget import plot
+        from sblsim.orchestrator.montecarlo.budget_outputs import plot
 
         return plot(self.budgets, self.title)
 
@@ -140,7 +140,8 @@ def _budget(source: str, items: list[str], seed: int | None, receiver: str | Non
             prepare: Callable[[], Path | None]) -> BudgetResult:
     """:func:`budget` (and ``sblsim budget``) after the checks of its arguments: each configuration and its
     switched-off ones resolved once, ``prepare()`` the output folder (None: nothing is written), run, write."""
-    from sblsim.orchestrator.montecarlo.budget import budgets, configurations, title, write
+    from sblsim.orchestrator.montecarlo.budget import budgets, configurations
+    from sblsim.orchestrator.montecarlo.budget_outputs import title, write
 
     configs = configurations(source, items, seed, receiver, chosen)  # every check before any output
     target = prepare()
@@ -175,7 +176,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim budget`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.montecarlo.budget import DEFAULT_REPLICATES, check_budget_replicates, write
+    from sblsim.orchestrator.montecarlo.budget import DEFAULT_REPLICATES, check_budget_replicates
+    from sblsim.orchestrator.montecarlo.budget_outputs import write
 
     check_seed_option(args.seed)
     replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates

@@ -5,7 +5,6 @@ work area at a site, each proposed design confirmed by Monte Carlo (:mod:`sblsim
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,9 +14,7 @@ from sblsim.models.declarations import shown
 from sblsim.orchestrator.commands.common import Progress
 from sblsim.orchestrator.commands.console import check_seed_option, output_folder, output_name
 from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.design.checks import is_telemetry
 from sblsim.orchestrator.io.arguments import check_count, check_seed, path_argument, prepare_out
-from sblsim.orchestrator.io.progress import Progress as ProgressBar
 from sblsim.orchestrator.io.progress import check_progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -63,7 +60,7 @@ class DesignResult:
     def table(self) -> pd.DataFrame:
         """``designs.csv``: every candidate searched, ranked."""
         from sblsim.orchestrator.design.output import table
-        from sblsim.orchestrator.design.telemetry import TelemetryRun
+        from sblsim.orchestrator.design.telemetry_search import TelemetryRun
 
         if isinstance(self.run, TelemetryRun):
             from sblsim.orchestrator.design.telemetry_output import table
@@ -78,7 +75,7 @@ class DesignResult:
             If no proposed design has that name.
         """
         from sblsim.orchestrator.design.output import scenario_text
-        from sblsim.orchestrator.design.telemetry import TelemetryRun
+        from sblsim.orchestrator.design.telemetry_search import TelemetryRun
 
         if isinstance(self.run, TelemetryRun):
             raise ConfigError("name: an ilbl design (a telemetry array) has no scenario file; its receivers are "
@@ -91,7 +88,7 @@ class DesignResult:
     def plot(self) -> dict[str, Figure]:
         """The figures by name: ``layout``, ``pareto``, ``convergence``."""
         from sblsim.orchestrator.design.output import figures
-        from sblsim.orchestrator.design.telemetry import TelemetryRun
+        from sblsim.orchestrator.design.telemetry_search import TelemetryRun
 
         if isinstance(self.run, TelemetryRun):
             from sblsim.orchestrator.design.telemetry_output import figures
@@ -150,6 +147,7 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
         computed or written).
     """
     from sblsim.orchestrator.design.effort import check_minutes
+    from sblsim.orchestrator.design.solve import solve
 
     seed = check_seed(seed)
     max_minutes = check_minutes(max_minutes)
@@ -164,8 +162,8 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
         raw.setdefault("search", {})["seed"] = seed
     if scenario is not None and not isinstance(scenario, Mapping):
         scenario = path_argument(scenario, "scenario", optional=False)
-    return _design(raw, scenario, workers, progress, lambda: prepare_out(out, force, "design.json", "design"),
-                   max_minutes)
+    return DesignResult(*solve(raw, scenario, workers, progress,
+                               lambda: prepare_out(out, force, "design.json", "design"), max_minutes))
 
 
 def _problem(problem: Any) -> dict:
@@ -179,73 +177,6 @@ def _problem(problem: Any) -> dict:
     if not isinstance(problem, (str, Path)):
         raise ConfigError(f"problem: expected a built-in design, a DESIGN.toml or a mapping, got {shown(problem)}")
     return read_problem(problem)
-
-
-def _design(raw: dict, scenario: Any, workers: int, progress: Any, prepare, max_minutes: float | None = None,
-            say=None, option: str = "max_minutes") -> DesignResult:
-    """:func:`design` (and ``sblsim design``) after the checks of its arguments: ``prepare()`` the output folder
-    (None: nothing written); the estimate checked against ``max_minutes`` (named ``option``) and told to ``say``
-    before the work starts."""
-    from sblsim.orchestrator.design.confirm import confirm
-    from sblsim.orchestrator.design.effort import check_effort, estimate
-    from sblsim.orchestrator.design.output import document, write
-    from sblsim.orchestrator.design.problem import check_problem
-    from sblsim.orchestrator.design.run import resolve, search_all
-
-    sections = check_problem(raw, scenario_given=scenario is not None)
-    if is_telemetry(sections):
-        if scenario is not None:
-            raise ConfigError(f"{'--scenario' if option == '--max-minutes' else 'scenario'}: an ilbl design (a "
-                              "telemetry array) reads no base scenario; allowed none (the site is [site.area] and "
-                              "[detection])")
-        return _telemetry(sections, progress, prepare, max_minutes, say, option)
-    start = time.perf_counter()
-    source = scenario if scenario is not None else sections["design"]["scenario"]
-    if scenario is not None:
-        sections["design"]["scenario"] = str(scenario) if not isinstance(scenario, Mapping) else "(a configuration)"
-    resolved = resolve(sections, source)
-    effort = estimate(resolved, workers)
-    check_effort(effort, max_minutes, option)
-    if say is not None:
-        say(f"{sections['design']['name']}: {effort.line()}")
-    target = prepare()
-    run = search_all(resolved, workers, progress, effort.layouts)
-    with ProgressBar(len(run.proposed), "monte carlo", "design", progress) as bar:
-        for proposal in run.proposed:
-            confirm(proposal, resolved)
-            bar.update(1)
-    seconds = time.perf_counter() - start
-    if target is not None:
-        write(run, target, seconds, effort)
-    return DesignResult(document(run, seconds, effort), run, target)
-
-
-def _telemetry(sections: dict, progress: Any, prepare, max_minutes: float | None, say, option: str
-               ) -> DesignResult:
-    """:func:`_design` of a telemetry array (``candidates.systems = ["ilbl"]``:
-    :mod:`~sblsim.orchestrator.design.telemetry`)."""
-    from sblsim.orchestrator.design import telemetry
-    from sblsim.orchestrator.design.effort import check_effort
-    from sblsim.orchestrator.design.telemetry_confirm import confirm
-    from sblsim.orchestrator.design.telemetry_output import document, write
-
-    start = time.perf_counter()
-    resolved = telemetry.resolve(sections)
-    effort = telemetry.estimate(resolved)
-    check_effort(effort, max_minutes, option)
-    if say is not None:
-        say(f"{sections['design']['name']}: {effort.line()}")
-    target = prepare()
-    with ProgressBar(effort.candidates, "design", "count", progress) as bar:
-        run = telemetry.search_all(resolved, bar.update)
-    with ProgressBar(len(run.proposed), "monte carlo", "design", progress) as bar:
-        for proposal in run.proposed:
-            confirm(proposal, resolved)
-            bar.update(1)
-    seconds = time.perf_counter() - start
-    if target is not None:
-        write(run, target, seconds, effort)
-    return DesignResult(document(run, seconds, effort), run, target)
 
 
 NAME = "design"
@@ -273,15 +204,16 @@ def main(args: argparse.Namespace) -> int:
     check_seed_option(args.seed)
     check_count(args.workers, "--workers", 1, MAX_WORKERS)
     from sblsim.orchestrator.design.effort import check_minutes
+    from sblsim.orchestrator.design.solve import solve
 
     max_minutes = check_minutes(args.max_minutes, "--max-minutes")
     raw = _problem(args.problem)
     if args.seed is not None:
         raw.setdefault("search", {})["seed"] = args.seed
     default = Path("results") / f"design_{output_name(args.problem)}"
-    result = _design(raw, args.scenario, args.workers, "auto",
-                     lambda: output_folder(args.out, default, args.force, "design.json", "design"), max_minutes,
-                     lambda line: print(line, flush=True), "--max-minutes")
+    result = DesignResult(*solve(raw, args.scenario, args.workers, "auto",
+                                 lambda: output_folder(args.out, default, args.force, "design.json", "design"),
+                                 max_minutes, lambda line: print(line, flush=True), "--max-minutes"))
     for record in result.designs:
         verdict = "meets" if record["meets"] else f"does not meet ({', '.join(f['part'] for f in record['fails'])})"
         p = record["predicted"]

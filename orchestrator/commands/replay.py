@@ -7,11 +7,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
-
-import numpy as np
+from typing import Any
 
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.commands.common import (
@@ -23,67 +20,16 @@ from sblsim.orchestrator.commands.common import (
 from sblsim.orchestrator.commands.console import FMU_DIR_HELP, output_folder, print_metrics
 from sblsim.orchestrator.cosim.config import MODEL_PREFIX, external_path
 from sblsim.orchestrator.cosim.engines import ENGINES
-from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
 from sblsim.orchestrator.io.arguments import path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.logs.replay_result import ReplayResult, _replay_plan
+from sblsim.orchestrator.tracks.format_options import refuse_toa_only, toa_arguments
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
-from sblsim.orchestrator.tracks.options import (
-    PING_TYPE_NAMES,
-    TOA_OPTIONS,
-    check_depth_sigma,
-    option_spelling,
-    toa_options,
-)
+from sblsim.orchestrator.tracks.options import PING_TYPE_NAMES, check_depth_sigma
 from sblsim.orchestrator.tracks.outputs import write
 from sblsim.orchestrator.tracks.replay import check_positioned
 from sblsim.orchestrator.tracks.report import tag_line, tags_line, track_lines
 from sblsim.orchestrator.tracks.track import MOTIONS, track
-
-if TYPE_CHECKING:  # the heavy modules are imported when a function runs
-    import pandas as pd
-    from matplotlib.figure import Figure
-
-
-@dataclass
-class ReplayResult:
-    """The outcome of :func:`replay`.
-
-    Attributes
-    ----------
-    config : Config
-        The configuration the receiver ran with.
-    source : str
-        Where that configuration came from.
-    engine : str
-    summary : dict
-        ``summary.json``: a run's keys (errors None without a truth track), ``log`` (what was read of the
-        log) and ``truth``.
-    timeseries : pandas.DataFrame
-        One row per macro step: ``time`` [s] on the log's clock, ``log_row``, the receiver's inputs and
-        outputs; with a truth track ``true_*`` [m], ``pcrb`` and the errors ``e_*`` [m].
-    out : Path or None
-    """
-
-    config: Config
-    source: str
-    engine: str
-    summary: dict[str, Any]
-    timeseries: pd.DataFrame
-    out: Path | None = None
-    _plan: Any = field(default=None, repr=False)
-
-    def plot(self) -> dict[str, Figure]:
-        """The figures of a run over the steps the truth track covers (empty without truth)."""
-        from sblsim.orchestrator.io.plots import run_figures
-
-        ts = self.timeseries
-        covered = ts[np.isfinite(ts["true_x"].to_numpy())] if "true_x" in ts else ts.iloc[:0]
-        if not len(covered):
-            return {}
-        receiver = self._plan.receiver_label if self._plan is not None else self.config.plan().receiver_label
-        if "replicate" not in covered:
-            covered = covered.assign(replicate=0)
-        return run_figures(covered, f"replay of {self.summary['log']['file']}, {receiver} ({self.engine})", receiver)
 
 
 def replay(log: str | Path, *, receiver: str | None = None, config: str | Path | None = None,
@@ -119,7 +65,7 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
     ConfigError, SblsimError
         A log or truth track that cannot be read (the message names the row and column), bad options.
     """
-    from sblsim.orchestrator.logs.replay import replay_config
+    from sblsim.orchestrator.logs.configuration import replay_config
 
     check_engine(engine)
     log = path_argument(log, "log", optional=False)
@@ -132,27 +78,6 @@ def replay(log: str | Path, *, receiver: str | None = None, config: str | Path |
     return _replay_plan(plan, source, log, truth, engine, fmu_dir,
                         lambda: prepare_out(out, force, "summary.json", "replay"))
 
-
-def _replay_plan(plan: RunPlan, source: str, log: Path, truth: Path | None, engine: str,
-                 fmu_dir: str | Path | None, prepare: Callable[[], Path | None]) -> ReplayResult:
-    """:func:`replay` of a plan (and ``sblsim replay``): read the log and the truth track, ``prepare()`` the
-    output folder (None: nothing is written), replay and write
-    (:func:`sblsim.orchestrator.logs.replay.replay_files`)."""
-    from sblsim.orchestrator.logs.replay import replay_files
-
-    result, target = replay_files(plan, log, truth, engine, fmu_dir, prepare)
-    return ReplayResult(Config(thaw(result.config)), source, result.engine, result.summary, result.timeseries,
-                        target, result.config)
-
-
-#: The options of ``--format toa`` (times of arrival) a log refuses, in the order the refusal names the first given;
-#: :data:`NUMBERS` are given when set (0 too), the others when true (a flag, a file, a text, a number other than 0).
-TOA_ONLY = ("receivers", "reference", "smooth", "sound_speed", "receivers_kept", "drop_detections", "seed",
-            "truth_sigma", "ping_type", "burst_interval", "burst_sequence", "force_interval", "acceleration_psd",
-            "sound_speed_file", "temperature", "salinity", "motion", "temperature_file", "water_depth", "workers",
-            "scheduler", "tag_depth", "depth_sigma", "survey_sigma", "toa_sigma", "crs", "frame", "time_origin")
-NUMBERS = {"seed", "truth_sigma", "acceleration_psd", "temperature", "salinity", "water_depth", "workers", "tag_depth",
-           "depth_sigma", "survey_sigma", "toa_sigma"}
 
 NAME = "replay"
 HELP = "run a receiver on a recorded log (docs/log-format.md)"
@@ -264,7 +189,7 @@ def main(args: argparse.Namespace) -> int:
     """``sblsim replay`` from its parsed arguments: its lines printed, its exit status returned."""
     if args.format in ("detections", "yaps", "vue", "fathom", "glatos", "otn"):  # raw detections: the tag's matrix
         # (sblsim toa), then tracked
-        from sblsim.orchestrator.sync.toa import replay_matrix
+        from sblsim.orchestrator.sync.replay_detections import replay_matrix
 
         with replay_matrix(args) as toa_args:
             return _main_toa(toa_args)
@@ -273,12 +198,9 @@ def main(args: argparse.Namespace) -> int:
                           "vue, fathom, glatos or otn (raw detections)")
     if args.format == "toa":
         return _main_toa(args)
-    given = [option_spelling(k) for k in TOA_ONLY
-             if (getattr(args, k) is not None if k in NUMBERS else getattr(args, k))]
-    if given:
-        raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
-                          "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
-    from sblsim.orchestrator.logs.replay import replay_config, replay_lines
+    refuse_toa_only(args)
+    from sblsim.orchestrator.logs.configuration import replay_config
+    from sblsim.orchestrator.logs.replay import replay_lines
 
     notes: list[str] = []
     plan, source = replay_config(args.log, args.config, args.receiver, args.overrides, notes)
@@ -334,25 +256,7 @@ def _main_tags(args: argparse.Namespace, options: dict[str, Any]) -> int:
 
 def _main_toa(args: argparse.Namespace) -> int:
     """``sblsim replay TOA_FILE --format toa``: the track's lines printed."""
-    if args.receivers is None:
-        raise ConfigError("--receivers: required with --format toa (the receivers' positions, a CSV or TOML file)")
-    other = [o for o, v in (("--receiver", args.receiver), ("--config", args.config), ("--set", args.overrides),
-                            ("--fmu-dir", args.fmu_dir)) if v]
-    if other or args.engine != "local":
-        raise ConfigError(f"{other[0] if other else '--engine'}: not used with --format toa; allowed: --receivers, "
-                          "--truth, --truth-sigma, --reference, --smooth, --sound-speed, --receivers-kept, "
-                          "--drop-detections, --seed, --ping-type, --burst-interval, --burst-sequence, "
-                          "--force-interval, "
-                          "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --temperature-file, "
-                          "--motion, --workers, --scheduler, --tag-depth, --depth-sigma, --survey-sigma, "
-                          "--water-depth, --toa-sigma, --crs, --frame, --time-origin, --out, --force")
-    if args.truth_sigma is not None and args.truth is None:
-        raise ConfigError("--truth-sigma: only with --truth (the truth's own error in the NEES against it)")
-    unset = {"drop_detections": 0.0, "seed": 0, "truth_sigma": 0.0}  # the defaults of options not given
-    options = toa_options(**{k: unset[k] if k in unset and getattr(args, k) is None else getattr(args, k)
-                             for k in TOA_OPTIONS}, spell=option_spelling)
-    if args.seed is not None and not options["drop"]:
-        raise ConfigError("--seed: only with --drop-detections (the seed of its draw)")
+    options = toa_arguments(args)
     if args.log.is_dir():
         return _main_tags(args, options)
     if args.workers is not None or args.scheduler is not None:

@@ -22,11 +22,13 @@ from sblsim.orchestrator.commands.console import (
     print_metrics,
 )
 from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.cosim.engines import ENGINES, close_handles, make_handles
+from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.master import ALGORITHMS
-from sblsim.orchestrator.cosim.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS, REACH_RATIO
-from sblsim.orchestrator.cosim.plan import Config, RunPlan, thaw
-from sblsim.orchestrator.cosim.ssp import read_ssp
+from sblsim.orchestrator.cosim.metrics import DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS
+from sblsim.orchestrator.cosim.plan import Config, thaw
+from sblsim.orchestrator.cosim.replicates import _simulate
+from sblsim.orchestrator.cosim.run_warnings import _run_warnings
+from sblsim.orchestrator.cosim.ssp_read import read_ssp
 from sblsim.orchestrator.io.arguments import check_count, path_argument, prepare_out
 from sblsim.orchestrator.io.output import check_writable, folder_name
 from sblsim.orchestrator.io.progress import check_progress
@@ -80,7 +82,8 @@ class RunResult:
     @property
     def summaries(self) -> list[dict[str, Any]]:
         """``summary.json`` of every replicate, in order."""
-        from sblsim.orchestrator.cosim.run import RunRecord, summary
+        from sblsim.orchestrator.cosim.run import RunRecord
+        from sblsim.orchestrator.cosim.run_output import summary
 
         r = self._result
         out = []
@@ -154,7 +157,7 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
     ConfigError, SblsimError
         Bad input of any kind (nothing is run or written).
     """
-    from sblsim.orchestrator.cosim.run import write_run
+    from sblsim.orchestrator.cosim.run_output import write_run
 
     plan = resolve_plan(config_or_scenario, seed, set)
     check_engine(engine)
@@ -168,26 +171,6 @@ def run(config_or_scenario: str | Path | Mapping, *, engine: str = "local", repl
     if target is not None:
         write_run(result, target)
     return _run_result(result, target)
-
-
-def _simulate(plan: RunPlan, engine: str, replicates: int = 1, fmu_dir: str | Path | None = None,
-              progress: Any = False, ssp: Any = None) -> Any:
-    """Simulate a plan's replicates ``run.replicate`` … (``sblsim run`` and :func:`run`); ``ssp``, an SSP
-    package read back (:func:`sblsim.orchestrator.cosim.ssp.read_ssp`: its plan is ``plan``), brings its connections
-    and, on the fmu engine, its FMUs."""
-    from sblsim.orchestrator.cosim.run import run as _run
-
-    handles, connections = None, None
-    if ssp is not None:
-        connections = ssp.connections
-        handles = make_handles(engine, None, plan.n_beacons, dict(plan.sources),
-                               fmu_files=ssp.fmu_files if engine == "fmu" else None)
-    try:
-        return _run(plan, engine, range(plan.replicate, plan.replicate + replicates), fmu_dir=fmu_dir,
-                    handles=handles, progress=progress, connections=connections)
-    finally:
-        if handles is not None:
-            close_handles(handles)
 
 
 def _run_result(result: Any, target: Path | None = None) -> RunResult:
@@ -230,7 +213,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim run`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.cosim.run import write_run
+    from sblsim.orchestrator.cosim.run_output import write_run
 
     check_seed_option(args.seed)
     if (args.scenario is None) == (args.ssp is None):
@@ -246,7 +229,7 @@ def main(args: argparse.Namespace) -> int:
         engine = args.engine or "local"
         plan = resolve_plan(args.scenario, args.seed, overrides)  # the run's one resolution
     if args.export_log is not None:
-        from sblsim.orchestrator.logs.receiver_log import check_export
+        from sblsim.orchestrator.logs.log_export import _check_export_apart, check_export
 
         check_export(args.export_log, args.force)
         check_writable(args.export_log.parent if str(args.export_log.parent) else Path("."), "--export-log")
@@ -260,7 +243,8 @@ def main(args: argparse.Namespace) -> int:
         check_folder(args.export_detections, args.force)
         check_writable(args.export_detections, "--export-detections")
     out = output_folder(args.out, Path("results") / folder_name(plan.scenario), args.force, "summary.json",
-                  "run", before=lambda out: _check_export_apart(args.export_log, out))
+                        "run", before=None if args.export_log is None else lambda out: _check_export_apart(
+                            args.export_log, out))
     if system is None:
         result = run(plan, engine=engine, fmu_dir=args.fmu_dir, progress="auto")
     else:  # the package's connections and, on the fmu engine, its FMUs
@@ -271,7 +255,7 @@ def main(args: argparse.Namespace) -> int:
         """The run's exports, written before its own files move into place: a failed one leaves no run folder."""
         try:
             if args.export_log is not None:
-                from sblsim.orchestrator.logs.receiver_log import export_log
+                from sblsim.orchestrator.logs.log_export import export_log
 
                 exported["log"] = export_log(result._result, args.export_log)
             if args.export_detections is not None:
@@ -304,65 +288,3 @@ def main(args: argparse.Namespace) -> int:
         print(f"  raw detections: {args.export_detections}/ (detections.csv: {len(export.detections) - sync} of the "
               f"tag T1, {sync} of the sync tags; hydrophones.csv; the truth in clocks.csv and truth.csv)")
     return 0
-
-
-#: The files ``sblsim run`` writes into its output folder that an ``--export-log`` file could replace.
-RUN_FILES = ("summary.json", "config.toml", "timeseries.parquet")
-
-
-def _check_export_apart(export: Path | None, out: Path) -> None:
-    """Refuse an ``--export-log`` file (or its truth track) that is one of the run's own files in ``out``.
-
-    Raises
-    ------
-    ModelError
-        Naming ``--export-log`` and the file.
-    """
-    if export is None:
-        return
-    from sblsim.orchestrator.logs.receiver_log import truth_path
-
-    folder = out.resolve()
-    for target in (export, truth_path(export)):
-        if target.resolve().parent == folder and target.name.lower() in RUN_FILES:
-            raise ModelError(f"--export-log: {str(target)!r} is the run's own {target.name} in --out {str(out)!r}; "
-                             "give the log another name or folder")
-
-
-def _run_warnings(s: dict, plan) -> list[str]:
-    """What a run's numbers do not say by themselves: a receiver that never made a fix, exchanges heard into the
-    next slot, and a diver beyond what the geometry serves (:func:`sblsim.orchestrator.cosim.metrics.run_flags`)."""
-    out = []
-    if s["updates"] == 0:
-        out.append(f"the {s['receiver']} receiver never made a fix: no slot of the run brought a range it used "
-                   "(every packet lost or gated); it has no estimate and its error metrics no value "
-                   "(summary.json: updates = 0)")
-    elif s["fix_steps"] == 0 and plan.latency_steps > 0:
-        # the record shows what the diver sees: the receiver's outputs receiver.latency late
-        latency = f"receiver.latency = {plan['receiver']['latency']:g} s"
-        if plan.latency_steps >= s["steps"]:
-            what = (f"{latency} is as long as the run: the diver never sees an output the receiver computed from a "
-                    f"packet (no recorded step has an estimate), though it used {s['updates']} ranges")
-        else:
-            what = (f"no multilateration fix reached the diver within the run (none was made, or {latency} delayed "
-                    "every one past its end)")
-        out.append(f"{what}; the instr_ metrics have no value (summary.json: fix_steps = 0 counts the steps the "
-                   "diver saw a fix)")
-    elif s["fix_steps"] == 0:
-        out.append("no multilateration fix was ever made (never ranges of three beacons): the instr_ metrics have "
-                   "no value, and a receiver that reports that fix (lsq) has no estimate "
-                   "(summary.json: fix_steps = 0)")
-    if s.get("slot_overrun"):
-        out.append(f"an exchange was still heard {s['slot_overrun']:.4g} s after its slot began (its last arrival, "
-                   f"multipath included), beyond simulation.sampling_time = {plan.sampling_time:g} s: the next "
-                   "slot's packet overlaps it, which the channel does not model; give a sampling time of at least "
-                   f"{s['slot_overrun']:.4g} s (summary.json: slot_overrun)")
-    if s["beyond_geometry"]:
-        spread = plan.horizontal_spread
-        ratio = f"{s['max_distance'] / spread:.0f} times" if spread > 0 else "infinitely many times"
-        bound = "n/a" if s["pcrb_rms"] is None else f"{s['pcrb_rms']:.3f}"
-        out.append(f"the diver went {s['max_distance']:.6g} m from the platform, {ratio} the beacons' horizontal "
-                   f"spread ({spread:.4g} m; the geometry serves up to {REACH_RATIO:g} times): the errors are the "
-                   f"system's real accuracy there (PCRB RMS {bound} m), not a divergence "
-                   "(summary.json: beyond_geometry)")
-    return out

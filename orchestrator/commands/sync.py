@@ -17,6 +17,7 @@ from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.sync.toa_console import say_warnings
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -87,14 +88,12 @@ class SyncResult:
         ConfigError
             A receiver that was not synchronised.
         """
-        names = self._outcome.receivers["receiver"].tolist()
         if receiver not in self.summary["synchronised"]:
             raise ConfigError(f"receiver: {receiver!r} was not synchronised; allowed: one of "
                               f"{', '.join(self.summary['synchronised'])}")
-        t = np.asarray(times, float) - self._outcome.origin
-        fit = self._outcome.fit
-        j = fit.rows_at(np.full(t.shape, names.index(receiver)), t)  # its clock segment where its clock broke
-        return np.where(j >= 0, t + self._outcome.origin - fit.offset(np.maximum(j, 0), t), np.nan)
+        from sblsim.orchestrator.sync.run import corrected_times
+
+        return corrected_times(self._outcome, receiver, times)
 
 
 def sync(detections: str | Path, *, receivers: str | Path, format: str | None = None,
@@ -164,8 +163,10 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
     flag_argument(refine_positions, "refine_positions")
     survey_sigma = _survey_sigma(survey_sigma, refine_positions, "survey_sigma")
     target = prepare_out(out, force, "sync.json", "synchronisation")
-    outcome = _synchronise(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference,
-                           refine_positions, survey_sigma, crs, frame)
+    from sblsim.orchestrator.sync.study_sync import synchronise_files
+
+    outcome = synchronise_files(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference,
+                                refine_positions, survey_sigma, crs, frame)
     if target is not None:
         from sblsim.orchestrator.sync.outputs import write
 
@@ -182,26 +183,6 @@ def _survey_sigma(value: Any, refine: bool, where: str) -> float:
         raise ConfigError(f"{where}: given without refining the positions; allowed: with "
                           f"{'--refine-positions' if where.startswith('--') else 'refine_positions=True'}")
     return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
-
-
-def _synchronise(detections: Path, receivers: Path, format: str | None, sound_speed: float | None,
-                 sound_speed_file: Path | None, bin_hours: float, reference: str | None,
-                 refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
-                 frame: str | None = None):
-    from sblsim.orchestrator.sync.declared import check_sync_positions
-    from sblsim.orchestrator.sync.detections import read_detections, read_sound_speed
-    from sblsim.orchestrator.sync.run import synchronise_study
-    from sblsim.orchestrator.telemetry.deployments import read_deployments
-
-    data = read_detections(detections, format)
-    deployments = read_deployments(receivers, crs, frame)
-    series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
-    outcome = synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
-                                refine_positions=refine_positions, survey_sigma=survey_sigma)
-    # the table's positions against the sync tags' clock-free travel times: kilometres or degrees refused
-    check_sync_positions(outcome.residuals, outcome.receivers, deployments.hydrophones(), deployments.source,
-                         sound_speed)
-    return outcome
 
 
 NAME = "sync"
@@ -240,13 +221,13 @@ def main(args: argparse.Namespace) -> int:
                                                                 "m/s")
     hours = real_argument(args.bin_hours, "--bin-hours", *BIN_HOURS, "h")
     survey = _survey_sigma(args.survey_sigma, args.refine_positions, "--survey-sigma")
-    outcome = _synchronise(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
-                           args.reference, args.refine_positions, survey, args.crs, args.frame)
+    from sblsim.orchestrator.sync.outputs import write
+    from sblsim.orchestrator.sync.study_sync import synchronise_files
+
+    outcome = synchronise_files(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
+                                args.reference, args.refine_positions, survey, args.crs, args.frame)
     out = output_folder(args.out, Path("results") / f"sync_{folder_name(args.detections.stem)}", args.force,
                         "sync.json", "synchronisation")
-    from sblsim.orchestrator.sync.outputs import write
-    from sblsim.orchestrator.sync.toa import say_warnings
-
     write(outcome, out)
     s = outcome.summary
     d = s["detections"]

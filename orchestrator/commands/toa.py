@@ -11,18 +11,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, text_argument
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.sync.toa_console import run_lines, say_warnings
+from sblsim.orchestrator.tracks.options import PING_TYPE_NAMES, ping_type_arguments
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import numpy as np
     import pandas as pd
 
-#: The detections' formats (None: read from the file's first line), and the ping types' names.
+#: The detections' formats (None: read from the file's first line).
 FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
-PING_TYPE_NAMES = tuple(PING_TYPES)
 
 
 @dataclass
@@ -108,15 +108,16 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
     receivers = path_argument(receivers, "receivers", optional=False)
     sync = path_argument(sync, "sync", optional=False)
     tag = text_argument(tag, "tag", optional=False)
-    from sblsim.orchestrator.sync.toa import build, check_ping_type
+    from sblsim.orchestrator.sync.toa import build
 
-    kind, interval, sequence = check_ping_type(ping_type, burst_interval, burst_sequence,
-                                               ("ping_type", "burst_interval", "burst_sequence"))
+    kind, interval, sequence = ping_type_arguments(ping_type, burst_interval, burst_sequence,
+                                                   ("ping_type", "burst_interval", "burst_sequence"), stated=True,
+                                                   example="60:120")
     target = prepare_out(out, force, "toa.txt", "times of arrival")
     outcome = build(detections, receivers, sync, tag, format, kind, interval, sequence, text_argument(crs, "crs"),
                     text_argument(frame, "frame"), flag_argument(force_interval, "force_interval"))
     if target is not None:
-        from sblsim.orchestrator.sync.toa import write_toa_folder
+        from sblsim.orchestrator.sync.matrix_files import write_toa_folder
 
         write_toa_folder(outcome, target)
     return ToaResult(outcome.toa, outcome.names, outcome.pings, outcome.summary, target)
@@ -158,15 +159,16 @@ def add_ping_type(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim toa`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.sync.toa import build, check_ping_type, run_lines, say_warnings
+    from sblsim.orchestrator.sync.toa import build
 
-    kind, interval, sequence = check_ping_type(args.ping_type, args.burst_interval, args.burst_sequence,
-                                               ("--ping-type", "--burst-interval", "--burst-sequence"))
+    kind, interval, sequence = ping_type_arguments(args.ping_type, args.burst_interval, args.burst_sequence,
+                                                   ("--ping-type", "--burst-interval", "--burst-sequence"),
+                                                   stated=True, example="60:120")
     outcome = build(args.detections, args.receivers, args.sync, args.tag, args.format, kind, interval, sequence,
                     args.crs, args.frame, args.force_interval)
     out = output_folder(args.out, Path("results") / f"toa_{folder_name(args.tag)}", args.force, "toa.txt",
                         "times of arrival")
-    from sblsim.orchestrator.sync.toa import write_toa_folder
+    from sblsim.orchestrator.sync.matrix_files import write_toa_folder
 
     write_toa_folder(outcome, out)
     for line in run_lines(outcome, str(out)):

@@ -6,36 +6,24 @@ own ping type, the tracks out in latitude, longitude and UTC (:mod:`sblsim.orche
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
 from sblsim.orchestrator.commands.common import add_water_arguments
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
-from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.io.arguments import names_argument, path_argument, prepare_out, real_argument, text_argument
-from sblsim.orchestrator.io.frames import check_crs, check_metric
-from sblsim.orchestrator.io.output import folder_name, staged_directory
-from sblsim.orchestrator.io.progress import ProgressSpec, check_progress, progress_of
-from sblsim.orchestrator.tracks.depth import water_line
+from sblsim.orchestrator.io.arguments import path_argument, prepare_out
+from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
+from sblsim.orchestrator.telemetry.study_options import FORMATS, _options
+from sblsim.orchestrator.telemetry.study_run import _run
 from sblsim.orchestrator.tracks.options import sound_speed_arguments, water_arguments
 from sblsim.orchestrator.tracks.outputs import figure
-from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE, noise_line
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
     from matplotlib.figure import Figure
-
-#: The detections' formats (None: read from the file's first line).
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
-#: The synchronisation's bins [h] and the sound speeds [m/s] taken.
-BIN_HOURS = (0.05, 168.0)
-SOUND_SPEED = (1300.0, 1700.0)
-#: The most worker processes.
-MAX_WORKERS = 256
 
 
 @dataclass
@@ -59,7 +47,7 @@ class StudyResult:
         ``study.json``: the files, the frame (its CRS and scale factor), the detections used and set aside (per
         reason and serial), the clocks, the tags, the notes.
     tracked : dict
-        Each tracked tag's own outcome (:class:`~sblsim.orchestrator.tracks.track.TrackOutcome`: ``track``,
+        Each tracked tag's own outcome (:class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`: ``track``,
         ``estimates`` (every estimator's rows), ``summary``), by tag.
     out : Path or None
     """
@@ -80,30 +68,6 @@ class StudyResult:
         for folder, outcome in self._outcome.outcomes.items():
             figures[f"track_{folder}"] = figure(outcome)
         return figures
-
-
-def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
-             medium: tuple, names: dict[str, str], toa_sigma: Any = None) -> dict[str, Any]:
-    """Every option of a study checked (``names``: how each is spelled where it was given), as
-    :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
-    if format is not None and format not in FORMATS:
-        raise ConfigError(f"{names['format']}: {str(format)[:40]!r}; allowed: {', '.join(FORMATS)} (or none: read "
-                          "from the file's first line)")
-    crs, frame = text_argument(crs, names["crs"]), text_argument(frame, names["frame"])
-    speed, series, temperature, salinity = medium
-    if workers is not None:
-        workers = int(real_argument(workers, names["workers"], 1, MAX_WORKERS, ""))
-    if scheduler is not None:
-        from sblsim.orchestrator.campaign.executors import check_address
-
-        scheduler = check_address(str(scheduler))
-    return {"format": format, "crs": None if crs is None else check_crs(crs, names["crs"]),
-            "frame": None if frame is None else check_metric(frame, names["frame"]),
-            "chosen": names_argument(tag, names["tag"], "transmitters (full IDs or ids)"), "sound_speed": speed,
-            "sound_speed_file": series, "temperature": temperature, "salinity": salinity,
-            "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
-            "scheduler": scheduler, "toa_sigma": None if toa_sigma is None else real_argument(
-                toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s")}
 
 
 def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | None = None,
@@ -197,76 +161,9 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     return _result(outcome, target)
 
 
-def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None, options: dict[str, Any],
-         target: Path | None, progress: ProgressSpec, lines: bool = False):
-    """The study run into ``target`` (all or nothing; a temporary folder where None), its progress reported."""
-    from sblsim.orchestrator.telemetry.outputs import write_study
-    from sblsim.orchestrator.telemetry.study import run_study
-
-    bar: list[Any] = []
-
-    def started(folders: list[str], summary: dict[str, Any]) -> None:
-        if lines:
-            for line in opening_lines(detections, summary, len(folders), options):
-                print(line, flush=True)
-        bar.append(progress_of(progress, len(folders), "tracking", "tag")[0])
-
-    def ended(row: dict[str, Any]) -> None:
-        if bar:
-            bar[0].update(1)
-
-    try:
-        if target is None:
-            with tempfile.TemporaryDirectory(prefix="sblsim-study-") as tmp:
-                return run_study(detections, receivers, tags, workdir=Path(tmp), sync=sync, started=started,
-                                 ended=ended, **options)
-        with staged_directory(target) as tmp:
-            outcome = run_study(detections, receivers, tags, workdir=tmp, sync=sync, started=started, ended=ended,
-                                **options)
-            if bar:
-                bar[0].close()
-            write_study(outcome, tmp)
-        return outcome
-    finally:
-        if bar:
-            bar[0].close()
-
-
 def _result(outcome, target: Path | None) -> StudyResult:
     return StudyResult(outcome.tracks, outcome.tags, outcome.deployments.written(), outcome.summary,
                        {outcome.matrices[f].summary["tag"]: o for f, o in outcome.outcomes.items()}, target, outcome)
-
-
-def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict[str, Any]) -> list[str]:
-    """The console's lines before the tracking: the detections, the frame, the clocks, the tags."""
-    d, r, c = s["detections"], s["receivers"], s["clocks"]
-    why = d["reasons"]
-    frame = s["frame"]
-    where = (f"frame {frame['name']} ({frame['crs']}, {frame['chosen']}; scale factor "
-             f"{frame.get('scale_factor', float('nan')):.5f})") if frame else \
-        "a local frame without a CRS (no lat/lon out)"
-    out = [f"study of {detections} ({d['format']}): {d['rows']} detections, {d['used']} used at {r['deployments']} "
-           f"deployments of {r['receivers']} receivers, {d['set_aside']} set aside ({why['outside_deployment']} "
-           f"outside a deployment, {why['receiver_not_in_table']} at serials not in the receivers file, "
-           f"{why['sync_tag_outside_deployment']} of sync tags out of the water); {d['first_utc']} to {d['last_utc']}",
-           f"  {where}"]
-    if c["source"] == "synchronised here":
-        out.append(f"  clocks synchronised here against {c['reference_receiver']}: {c['receivers']} receivers, median "
-                   f"|residual| {c['median_abs_residual_m']:.3g} m" + (f"; not synchronised: "
-                                                                      f"{', '.join(c['not_synchronised'])}"
-                                                                      if c["not_synchronised"] else ""))
-    elif c["source"] == "given":
-        out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
-    else:
-        out.append("  clocks taken as logged (no sync tag in the receivers file)")
-    if "toa_noise" in s:
-        out.append("  " + noise_line(s["toa_noise"]))
-    if s.get("water_depth"):
-        out.append("  " + water_line(s["water_depth"]))
-    where = "on " + options["scheduler"] if options["scheduler"] else \
-        f"in {min(options['workers'] or os.cpu_count() or 1, max(count, 1))} worker processes"
-    out.append(f"  tracking {count} tags {where}")
-    return out
 
 
 NAME = "track"

@@ -61,7 +61,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from sblsim.fmus import native
+from sblsim.fmus import compiled_metrics
 from sblsim.models.columns import LANE_FIELDS, LANE_METRIC_INPUTS, METRIC_INPUTS, METRIC_NAMES, RUN_METRICS
 
 #: A receiver has diverged when an estimate is not finite, or farther from the truth than this [m] and than
@@ -109,7 +109,7 @@ def run_metrics(columns: Mapping[str, np.ndarray], fixed: np.ndarray, arms: np.n
     limits = (NEES_95, DIVERGENCE_DISTANCE, DIVERGENCE_RATIO, DIVERGENCE_REJECTIONS)
     shape = np.shape(columns[METRIC_INPUTS[0]])
     none = np.broadcast_to(np.zeros(shape[1:]), shape)  # a lane not recorded: no packet on it (read in place)
-    values, bound = native.run_metrics([columns[name] for name in METRIC_INPUTS]
+    values, bound = compiled_metrics.run_metrics([columns[name] for name in METRIC_INPUTS]
                                        + [columns.get(name, none) for name in LANE_METRIC_INPUTS],
                                        fixed, arms, limits, with_bound, n_beacons=arms.shape[1])
     out = {name: values[:, k] for k, name in enumerate(RUN_METRICS)}

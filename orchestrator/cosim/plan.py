@@ -28,7 +28,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from sblsim.fmus.native import compiled_exact_points, compiled_family_levels, compiled_family_points
+from sblsim.fmus.compiled_functions import compiled_exact_points, compiled_family_levels, compiled_family_points
 from sblsim.models import MODELS, RECEIVERS
 from sblsim.models.errors import ConfigError, ModelError
 from sblsim.models.platform.geometry import transducer_span
@@ -357,7 +357,7 @@ def bound_parameters(cfg: Mapping[str, Mapping[str, Any]], system: System) -> di
     :meth:`~sblsim.models.systems.System.receiver_ties`); ``angle_sigma_deg``, the USBL
     direction-of-arrival std on the array's axis, ``platform.usbl_angle_sigma_deg``
     [deg] (floored at 1 mdeg, as the receivers' ``sigma_angle_deg``; the USBL bound,
-    :func:`sblsim.models.systems.usbl.pcrb`); the error states of the bound, the system's
+    :func:`sblsim.models.systems.usbl_bound.pcrb`); the error states of the bound, the system's
     :meth:`~sblsim.models.systems.System.bound_errors` (a Gauss-Markov GPS error then leaves the white
     variances); ``sigma_range`` and ``range_k``, the range law's σ₀ and k (``acoustics.range_k``: each bound adds
     :func:`sblsim.models.bound.law_variance` at the true range).

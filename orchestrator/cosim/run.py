@@ -1,26 +1,24 @@
-"""One scenario run: build the system on an engine, simulate, compute metrics, write results."""
+"""One scenario run, or a batch of runs stepped together: build the system on an engine, simulate, the record as the
+diver sees it (the receiver's latency), its metrics (:mod:`sblsim.orchestrator.cosim.record_metrics`) and its time
+series; the run's files are written by :mod:`sblsim.orchestrator.cosim.run_output`."""
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
-from sblsim.fmus import native
 from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.acoustics.channel.lanes import check_in_flight, lane_name, lane_of
-from sblsim.models.bound import FIXED
-from sblsim.models.columns import LANE_COLUMNS, LANE_METRIC_INPUTS, OPTIONAL_COLUMNS, TIMESERIES_COLUMNS, lane_source
+from sblsim.models.columns import LANE_COLUMNS, OPTIONAL_COLUMNS, TIMESERIES_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.cosim.config import receiver_label, to_toml, turnaround
+from sblsim.orchestrator.cosim.config import turnaround
 from sblsim.orchestrator.cosim.connections import (
     Connection,
     check_connections,
@@ -30,18 +28,9 @@ from sblsim.orchestrator.cosim.engines import close_handles, make_handles
 from sblsim.orchestrator.cosim.handles import DTYPES, ComponentHandle, cast_column
 from sblsim.orchestrator.cosim.limits import check_steps
 from sblsim.orchestrator.cosim.master import RecordBuffer, simulate
-from sblsim.orchestrator.cosim.metrics import (
-    METRIC_INPUTS,
-    bound_rms,
-    errors,
-    lane_slots,
-    new_pings,
-    run_flags,
-    run_metrics,
-    slots,
-)
+from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, errors
 from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, with_replicates
-from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.cosim.record_metrics import _lane_sources, _metrics
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec, progress_of
 
 #: A system's time series adds its own columns after :data:`TIMESERIES_COLUMNS`
@@ -377,98 +366,6 @@ def apply_latency(columns: dict[str, np.ndarray], steps: int) -> dict[str, np.nd
     return {k: (v[source] if k.startswith("receiver.") and k not in UNDELAYED else v) for k, v in columns.items()}
 
 
-#: The recorded outputs :func:`sblsim.orchestrator.cosim.metrics.run_flags` reads (all among the metrics' inputs).
-FLAG_INPUTS = ("packet_seq", "packet_valid", "beacon_id", "gated", "instr_valid", "true_x", "true_y")
-
-
-def _metrics(plans: Sequence[RunPlan], rec: dict, replicates: list[int],
-             with_bound: bool) -> tuple[pd.DataFrame, np.ndarray | None]:
-    """The metrics row of every run (and the PCRB per step) from the recorded floats, in one compiled pass
-    (the runs whose system steps a bound of its own, :func:`_system_bound`, take that one in place of the pass's
-    range bound: USBL's, or a ranging system's with error states)."""
-    dt = plans[0].sampling_time
-    parameters = [p.bound for p in plans]
-    fixed = np.array([[dt] + [p[k] for k in FIXED[1:]] for p in parameters])  # (B, 8)
-    arms = np.stack([p.lever_arms for p in plans], axis=0)  # (B, n, 3)
-    system = plans[0].system
-    own = np.array([system.own_bound(p) for p in parameters])  # the runs that step the system's own bound
-    lanes = _recorded_lanes(rec, _lane_sources({}))
-    values, bound = run_metrics({**{name: rec[TIMESERIES_COLUMNS[name]] for name in METRIC_INPUTS}, **lanes},
-                                fixed, arms, with_bound and not own.all())
-    if own.any():
-        chosen = np.flatnonzero(own)
-        theirs = _system_bound(system, rec, None if own.all() else chosen, dt, [parameters[i] for i in chosen],
-                               arms[chosen])
-        if with_bound:
-            bound = np.empty((theirs.shape[0], len(plans))) if bound is None else bound
-            bound[:, chosen] = theirs
-        values["pcrb_rms"] = np.asarray(values["pcrb_rms"], dtype=float).copy()
-        position = {kind: np.stack([np.asarray(rec[TIMESERIES_COLUMNS[f"{kind}_{a}"]], dtype=float)[:, chosen]
-                                    for a in "xyz"], axis=-1) for kind in ("true", "est")}
-        estimated = np.isfinite(errors(position["true"], position["est"])).all(axis=-1)  # the steps e_tot_rms takes
-        values["pcrb_rms"][chosen] = bound_rms(theirs, estimated)
-    spread = np.array([p.horizontal_spread for p in plans])
-    flags = run_flags({**{name: rec[TIMESERIES_COLUMNS[name]] for name in FLAG_INPUTS}, **lanes}, spread,
-                      arms.shape[1])
-    return pd.DataFrame({"replicate": replicates, **values, **flags}), bound
-
-
-def _system_bound(system, rec: dict, chosen: np.ndarray | None, dt: float, parameters: Sequence[dict],
-                  arms: np.ndarray) -> np.ndarray:
-    """The position PCRB (N, B) [m] of runs that step the system's own bound (USBL's,
-    :func:`sblsim.models.systems.usbl.pcrb`; a ranging system's with error states,
-    :func:`sblsim.models.bound.error_pcrb`), compiled (:func:`sblsim.fmus.native.system_pcrb`): its
-    per-run inputs :attr:`~sblsim.models.systems.System.bound_fixed` from the bound's parameters, its per-step
-    inputs :attr:`~sblsim.models.systems.System.bound_steps` from the record (``true_*``, the position the
-    packet carries, the transmitting beacon's lever arm ``arms`` (B, n, 3), the slot and whether the packet was
-    received, and the system's :attr:`~sblsim.models.systems.System.bound_columns`: USBL's attitude of the packet's
-    direction), of the runs ``chosen`` among the record's columns (None: all of them)."""
-    def column_of(source: str) -> np.ndarray:
-        values = np.asarray(rec[source], dtype=float)
-        return values if chosen is None else values[:, chosen]
-
-    column = {name: column_of(TIMESERIES_COLUMNS[name])
-              for name in ("true_x", "true_y", "true_z", "packet_seq", "packet_valid", "beacon_id", "beacon_x",
-                           "beacon_y", "beacon_z")}
-    received = (column["packet_valid"] > 0.5) & (np.rint(column["beacon_id"]) >= 1)
-    slot, fresh = slots(np.rint(column["packet_seq"]), received)
-    index = np.clip(np.rint(column["beacon_id"]).astype(int) - 1, 0, arms.shape[1] - 1)  # (N, B)
-    arm = arms[np.arange(arms.shape[0])[None, :], index]  # (N, B, 3): the transmitting beacon's
-    sources = {**{f"true_{a}": column[f"true_{a}"] for a in "xyz"},
-               **{f"{kind}_{a}": column[f"beacon_{a}"] for kind in ("transceiver", "beacon") for a in "xyz"},
-               **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": slot, "received": fresh,
-               **{name: column_of(source) for name, source in system.bound_columns.items() if source in rec}}
-    per_run = {"dt": np.full(len(parameters), dt), **{k: np.array([p[k] for p in parameters])
-                                                      for k in system.bound_fixed[1:]}}
-    fixed = np.ascontiguousarray(np.stack([per_run[k] for k in system.bound_fixed], axis=1))
-    # the later lanes of a delivery (recorded where a step delivered two packets): each lane's packet in place of
-    # lane 1's, at the same true position
-    recorded = _recorded_lanes(rec, _lane_sources(system.bound_columns))
-    lanes = {name: column_of(source) for name, source in _lane_sources(system.bound_columns).items()
-             if name in recorded}
-    lane_steps, lane_new = [], []
-    taken = lane_slots(lanes, arms.shape[1])
-    # the first packet of each ping of an inverted LBL, in the order the receivers take them (every lane's)
-    pinged = new_pings([column["packet_seq"]] + [lanes[f"lane{m}_packet_seq"] for m, _, _ in taken],
-                       [slot] + [new for _, new, _ in taken], arms.shape[1])
-    sources["new_ping"] = pinged[0]
-    for (m, new, heard), first in zip(taken, pinged[1:]):
-        on_lane = {name[len(f"lane{m}_"):]: values for name, values in lanes.items() if name.startswith(f"lane{m}_")}
-        index = np.clip(np.rint(on_lane["beacon_id"]).astype(int) - 1, 0, arms.shape[1] - 1)
-        arm = arms[np.arange(arms.shape[0])[None, :], index]
-        mine = {**sources, **{f"{kind}_{a}": on_lane[f"beacon_{a}"] for kind in ("transceiver", "beacon")
-                              for a in "xyz"},
-                **{f"arm_{a}": arm[..., k] for k, a in enumerate("xyz")}, "slot": new, "received": heard,
-                "new_ping": first, **{name: on_lane[name] for name in system.bound_columns if name in on_lane}}
-        lane_steps.append(np.stack([np.asarray(mine[k], dtype=float) for k in system.bound_steps], axis=-1))
-        lane_new.append(new)
-    steps = np.ascontiguousarray(np.stack([np.asarray(sources[k], dtype=float) for k in system.bound_steps],
-                                          axis=-1))
-    if not lane_steps:
-        return native.system_pcrb(arms.shape[1], fixed, steps)
-    return native.system_pcrb(arms.shape[1], fixed, steps, np.stack(lane_steps), np.stack(lane_new))
-
-
 def _lane_less(handles: Mapping[str, Any], n_beacons: int) -> set[str]:
     """The inputs of the later lanes of a delivery the run's receiver lacks (a user's FMU may have none of them:
     :func:`~sblsim.orchestrator.cosim.connections.check_interface`); empty for a receiver with them all."""
@@ -479,26 +376,6 @@ def _lane_less(handles: Mapping[str, Any], n_beacons: int) -> set[str]:
     wanted = {c.input for c in default_connections(n_beacons) if c.destination == "receiver"}
     return {name for name in wanted - inputs if lane_of(name)}
 
-
-def _recorded_lanes(rec: Mapping[str, np.ndarray], sources: Mapping[str, str]) -> dict[str, np.ndarray]:
-    """The lanes' columns (``sources``: name -> recorded output) of each later lane whose every column was recorded
-    (a run records them all where a step delivered two packets, lane 2's counter alone where not; a replay the
-    lanes it used)."""
-    out = {}
-    for m in range(2, LANES + 1):
-        mine = {name: source for name, source in sources.items() if name.startswith(f"lane{m}_")}
-        if mine and all(source in rec for source in mine.values()):
-            out.update({name: rec[source] for name, source in mine.items()})
-    return out
-
-
-def _lane_sources(own_columns: Mapping[str, str]) -> dict[str, str]:
-    """The recorded outputs of the later lanes of a delivery that the metrics (and a system's own bound, whose
-    columns of the packet are ``own_columns``: name -> source) read: lane column name -> ``component.variable``."""
-    out = {name: f"acoustics.{name}" for name in LANE_METRIC_INPUTS}
-    out.update({lane_name(m, name): lane_source(m, source) for m in range(2, LANES + 1)
-                for name, source in own_columns.items()})
-    return out
 
 
 #: The record that says whether a run used the later lanes of a delivery (lane 2 fills first).
@@ -538,63 +415,3 @@ def _timeseries(rec: dict, replicates: list[int], n_steps: int, bound: np.ndarra
         table[name] = est_err[..., k]
         table[f"instr_{name}"] = instr_err[..., k]
     return pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in table.items()})
-
-
-def summary(result: RunRecord) -> dict[str, Any]:
-    """``summary.json`` content of a single-replicate run (the keys the README lists); strict JSON: a metric
-    without a value (e.g. no instrumentation fix at all) is ``None`` (``null``), never NaN."""
-    row = result.metrics.iloc[0]
-    def value(k: str) -> Any:
-        if k in ("diverged", "beyond_geometry"):
-            return bool(row[k])
-        if k in ("updates", "fix_steps"):
-            return int(row[k])
-        return None if math.isnan(row[k]) else float(row[k])
-
-    out: dict[str, Any] = {k: value(k) for k in result.metrics.columns if k != "replicate"}
-    out.update(engine=result.engine, receiver=_label(result), seed=int(result.config["run"]["seed"]),
-               steps=int(result.steps),
-               scenario=result.config["run"]["scenario"], replicate=int(row["replicate"]),
-               duration=float(result.steps * result.config["simulation"]["sampling_time"]),
-               wall_time=round(result.wall_time, 3))
-    return out
-
-
-def _label(result: RunRecord) -> str:
-    """What figures and tables call the receiver of a result (its plan's label)."""
-    return result.plan.receiver_label if result.plan is not None else receiver_label(result.config)
-
-
-def write_run(result: RunRecord, out_dir: Path | str, then: Callable[[], object] | None = None) -> Path:
-    """Write ``summary.json``, ``config.toml``, ``timeseries.parquet`` and figures atomically.
-
-    Everything is written into a temporary directory beside ``out_dir`` and
-    moved into place only when complete, so an error leaves nothing
-    half-written.
-
-    Parameters
-    ----------
-    result : RunRecord
-    out_dir : path
-    then : callable, optional
-        What else the run writes (``sblsim run --export-log``'s log), called when the run's own files are written
-        and before they are moved into place: if it raises, ``out_dir`` is left as it was.
-
-    Returns
-    -------
-    Path
-        ``out_dir``.
-    """
-    from sblsim.orchestrator.io.plots import save_run_figures
-
-    out_dir = Path(out_dir)
-    with staged_directory(out_dir) as tmp:
-        (tmp / "summary.json").write_text(json.dumps(summary(result), indent=2, allow_nan=False) + "\n")
-        (tmp / "config.toml").write_text(to_toml(result.config))
-        result.timeseries.to_parquet(tmp / "timeseries.parquet", index=False)
-        receiver = _label(result)
-        save_run_figures(result.timeseries, tmp, title=f"{result.config['run']['scenario']}, {receiver} "
-                         f"({result.engine})", receiver=receiver)
-        if then is not None:
-            then()
-    return out_dir

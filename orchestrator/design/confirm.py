@@ -28,7 +28,8 @@ from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.models.design.criteria import ECHO_LIMIT
 from sblsim.orchestrator.cosim.plan import with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
-from sblsim.orchestrator.design.run import Design, Resolved, plan_of
+from sblsim.orchestrator.design.judgement import Design
+from sblsim.orchestrator.design.resolution import Resolved, plan_of
 from sblsim.orchestrator.maps import point_accuracy
 from sblsim.orchestrator.montecarlo.compare import compare
 

@@ -30,9 +30,10 @@ from dataclasses import dataclass
 from sblsim.models.design.information import slots_for
 from sblsim.models.errors import ConfigError
 from sblsim.models.systems import SYSTEMS
+from sblsim.orchestrator.design.candidates import Candidate, candidates
 from sblsim.orchestrator.design.confirm import PATH_SLOTS
 from sblsim.orchestrator.design.evaluate import TABLE_STEP
-from sblsim.orchestrator.design.run import Candidate, Resolved, candidates
+from sblsim.orchestrator.design.resolution import Resolved
 
 #: The longest a design may be estimated to take without the caller's ``max_minutes`` (``--max-minutes``) [min].
 MAX_MINUTES = 60.0

@@ -6,8 +6,8 @@ A candidate is judged by the Fisher information of one cycle at every work-area 
 weighted by the probability that it is heard and its noise grown with its SNR. A search evaluates thousands of
 layouts, so:
 
-* the layout function runs compiled (:func:`sblsim.fmus.native.compiled_layout`: the generated C of the same casadi
-  function, called on numpy arrays, a few hundred microseconds for a layout over 441 points), casadi's own
+* the layout function runs compiled (:func:`sblsim.fmus.compiled_functions.compiled_layout`: the generated C of the
+  same casadi function, called on numpy arrays, a few hundred microseconds for a layout over 441 points), casadi's own
   evaluation where no compiler is found;
 * the site's detection is tabulated once (:class:`Detection`): the site is range-independent, so what a
   transducer at the seafloor's depth makes of a vehicle at a work-area depth depends on their horizontal distance
@@ -22,7 +22,8 @@ from typing import Callable
 
 import numpy as np
 
-from sblsim.fmus.native import LAYOUT_CHUNK, compiled_layout
+from sblsim.fmus.compiled_functions import compiled_layout
+from sblsim.fmus.library_sources import LAYOUT_CHUNK
 from sblsim.models.design.criteria import judged_echo
 from sblsim.models.design.information import OUTPUTS, law_range_variance, layout_values, padded, slots_for
 from sblsim.models.target.core import Target

@@ -32,8 +32,10 @@ from sblsim.models.design.criteria import CRITERIA, ECHO_LIMIT
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import apply_overrides, read_source
 from sblsim.orchestrator.cosim.plan import thaw
+from sblsim.orchestrator.design.judgement import Design, pareto_front, quantiles, ranked
 from sblsim.orchestrator.design.keys import GRADES
-from sblsim.orchestrator.design.run import Design, DesignRun, pareto_front, plan_of, quantiles, ranked
+from sblsim.orchestrator.design.resolution import plan_of
+from sblsim.orchestrator.design.run import DesignRun
 from sblsim.orchestrator.io.output import staged_directory
 
 #: The columns of ``designs.csv``.
@@ -113,8 +115,8 @@ def summary(run: DesignRun) -> str:
 
 
 def table(run: DesignRun) -> pd.DataFrame:
-    """``designs.csv``: every candidate searched, ranked (:func:`~sblsim.orchestrator.design.run.ranked`: those that
-    meet, cheapest first; then by coverage and by how much they miss, the cheapest of the near ones first), with
+    """``designs.csv``: every candidate searched, ranked (:func:`~sblsim.orchestrator.design.judgement.ranked`: those
+    that meet, cheapest first; then by coverage and by how much they miss, the cheapest of the near ones first), with
     the parts each fails (``fails``)."""
     dimensions = run.resolved.sections["prescription"]["dimensions"]
     proposed = {id(d): d.name for d in run.proposed}

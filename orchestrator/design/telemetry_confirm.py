@@ -23,13 +23,9 @@ from sblsim.models.design import area as areas
 from sblsim.models.design import telemetry as tm
 from sblsim.models.tracking.ekf import TrackerSettings
 from sblsim.models.tracking.simulate import simulate_pings
-from sblsim.orchestrator.design.telemetry import (
-    PINGS_PER_REPLICATE,
-    TelemetryDesign,
-    TelemetryProblem,
-    fixed_pings,
-    sync_hearing,
-)
+from sblsim.orchestrator.design.telemetry import TelemetryProblem
+from sblsim.orchestrator.design.telemetry_judgement import TelemetryDesign, fixed_pings, sync_hearing
+from sblsim.orchestrator.design.telemetry_search import PINGS_PER_REPLICATE
 from sblsim.orchestrator.design.telemetry_tracking import SYNC_STREAM, track_path, track_synchronised
 
 #: The path's animal: its speed [m/s] and the standard deviation of its turn per ping [rad]; the positions of the

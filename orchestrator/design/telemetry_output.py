@@ -33,7 +33,8 @@ import pandas as pd
 from sblsim.models.design.area import spread
 from sblsim.orchestrator.design.area import area_origin
 from sblsim.orchestrator.design.keys import TELEMETRY
-from sblsim.orchestrator.design.telemetry import TelemetryDesign, TelemetryRun, ranked, sync_hearing
+from sblsim.orchestrator.design.telemetry_judgement import TelemetryDesign, ranked, sync_hearing
+from sblsim.orchestrator.design.telemetry_search import TelemetryRun
 from sblsim.orchestrator.io.frames import Frame, utm_zone
 from sblsim.orchestrator.io.output import staged_directory
 

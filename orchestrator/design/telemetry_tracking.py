@@ -25,7 +25,9 @@ from sblsim.models.acoustics.channel.pinger import RECEIVER_CLOCK_VARIABLES
 from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.receiver import toa_tracking as tt
-from sblsim.models.sync.clocks import ClockFit, connected, fit_clocks, sync_emissions
+from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.clocks import fit_clocks
+from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.simulate import draw_clocks, on_clocks, sync_tag_arrivals
 from sblsim.orchestrator.tracks.tracker import motion_model, ping_schedule, tracker_settings
 
@@ -199,7 +201,7 @@ def synchronised_toa(receivers: np.ndarray, toa: np.ndarray, hears: np.ndarray, 
     at each receiver emitting at intervals ``U(interval)`` from time 0 until a maximum interval after the tag's
     last arrival, each emission heard with ``hears`` (:func:`~sblsim.models.sync.simulate.sync_tag_arrivals`, the
     straight line at ``sound_speed``, timing noise ``sigma_toa``); the arrivals read on the clocks, grouped into
-    emissions (:func:`~sblsim.models.sync.clocks.group_emissions`, a third of the shortest interval), an emission
+    emissions (:func:`~sblsim.models.sync.emissions.group_emissions`, a third of the shortest interval), an emission
     heard by one receiver only left out and the clocks fitted (:func:`~sblsim.models.sync.clocks.fit_clocks`, the
     sound speed given, bins of ``bin_width``; the reference receiver 0, or the receiver with the most arrivals
     where 0 cannot be synchronised with the most, as ``sblsim sync`` chooses); then the tag's arrivals read on the
@@ -213,7 +215,7 @@ def synchronised_toa(receivers: np.ndarray, toa: np.ndarray, hears: np.ndarray, 
         (K, n) [s] the tag's arrivals in true time, NaN where not heard.
     hears : numpy.ndarray
         (n, n) [0–1], ``[i, j]`` the probability that receiver ``i`` hears the sync tag at receiver ``j``
-        (:func:`~sblsim.models.design.telemetry.sync_probabilities`).
+        (:func:`~sblsim.models.design.sync_graph.sync_probabilities`).
     sigma_toa : float
         [s] the sync arrivals' timing noise.
     sound_speed : float

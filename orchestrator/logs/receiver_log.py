@@ -1,5 +1,4 @@
-"""The receiver's log (docs/log-format.md): read from a recorder's file and written from a run
-(``sblsim run --export-log``).
+"""The receiver's log (docs/log-format.md): its columns and its reading from a recorder's file or an export.
 
 A log holds, per received packet, its epoch, the beacon
 id, the range (or the travel time), the beacon position the packet carried
@@ -7,48 +6,31 @@ and the depth reading; for USBL the direction of arrival. A row without a
 beacon id is a depth reading only (a slot whose packet was lost, or a depth
 sensor's sample). :func:`read_log` reads a CSV or Parquet log and decides
 what to do with every kind of flaw a real log has (:func:`read_log`,
-"Flaws"); :func:`export_log` writes a run's receiver inputs in that format, so
-that a replay of the export (:mod:`sblsim.orchestrator.logs.replay`) equals the run.
-
-A truth track (``time_s, n_m, e_m, d_m``, :func:`read_truth`) is written beside an exported log.
+"Flaws"); a run's export in that format is :mod:`sblsim.orchestrator.logs.log_export`'s, so
+that a replay of the export (:mod:`sblsim.orchestrator.logs.replay`) equals the run; a truth track is
+:mod:`sblsim.orchestrator.logs.truth_track`'s, the lowest range a channel measures
+:mod:`sblsim.orchestrator.logs.range_floor`'s.
 """
 
 from __future__ import annotations
 
-import io
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
 import numpy as np
-import pandas as pd
 
 from sblsim.models.acoustics.channel.component import Acoustics
-from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.systems import System
-from sblsim.orchestrator.cosim.config import (
-    to_toml,
-)
-from sblsim.orchestrator.cosim.metrics import new_on_lane
-from sblsim.orchestrator.cosim.plan import as_plan
-from sblsim.orchestrator.cosim.run import (
-    RunRecord,
-    _label,
-)
-from sblsim.orchestrator.io.output import write_together
 from sblsim.orchestrator.io.tables import (  # the hostile-safe table reading every log reader shares
-    CONFIG_PREFIX,
-    META_CONFIG,
-    META_TITLE,
     NUMBER,
-    SUFFIXES,
 )
 from sblsim.orchestrator.io.tables import columns as _columns
 from sblsim.orchestrator.io.tables import number as _number
 from sblsim.orchestrator.io.tables import read_table as _read_table
+from sblsim.orchestrator.logs.range_floor import range_floor
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
 FORMAT = 1
@@ -87,62 +69,7 @@ LOG_COLUMNS = {
     "doa_pitch_rad": ("rad", "USBL: the pitch with which the surface turned the direction into NED", "USBL"),
     "doa_yaw_rad": ("rad", "USBL: the yaw with which the surface turned the direction into NED", "USBL"),
 }
-#: The truth track's columns (time_s on the log's clock; N, E, D in the log's frame) [s, m, m, m].
-TRUTH_COLUMNS = ("time_s", "n_m", "e_m", "d_m")
 _PACKET_COLUMNS = ("beacon_n_m", "beacon_e_m", "beacon_d_m")
-#: How far below its distance a range's noise reaches, in its standard deviations (a Gaussian draw beyond 8 σ: one
-#: in 8e14): the margin of :func:`range_floor` [1].
-NOISE_SIGMAS = 8.0
-
-
-def range_floor(acoustics: Mapping[str, Any] | None) -> tuple[float, float, str]:
-    """The lowest range a configuration's channel measures (docs/log-format.md, "A range is a measurement").
-
-    A range is ``c`` times a measured time plus its noise: below 0 only by the noise (:data:`NOISE_SIGMAS` of
-    ``acoustics.sigma_range``, grown by ``range_k`` and, with detection by signal-to-noise, to its accuracy at an SNR
-    3 fluctuations below the detection threshold), by a two-way turnaround that jitters short (``turnaround_sigma``
-    > 0: down to ``c · turnaround / 2``) and by a one-way clock's drift (``clock_drift_ppm``, growing with the time
-    since the log's first row). An inverted LBL's pseudo-range (``ranging = "toa"``) has no such floor.
-
-    Parameters
-    ----------
-    acoustics : mapping or None
-        The configuration's ``[acoustics]`` (None: not known; the receiver's input range is taken).
-
-    Returns
-    -------
-    floor : float
-        The lowest range at the log's first row [m].
-    fall : float
-        How much lower it goes per second after the log's first row [m/s] (a one-way clock's drift).
-    reason : str
-        What makes the floor, for a refusal.
-    """
-    lowest = SIGNAL_RANGES["range"][0]
-    if acoustics is None or acoustics.get("ranging") == "toa":
-        return lowest, 0.0, "the receiver's input range"
-    c = float(acoustics.get("sound_speed_assumed", 1500.0))
-    sigma = float(acoustics.get("sigma_range", 0.0))
-    jitter = 0.0
-    two_way = acoustics.get("ranging") == "twtt"
-    if two_way and float(acoustics.get("turnaround_sigma", 0.0)) > 0.0:
-        jitter = c * float(acoustics.get("turnaround", 0.0)) / 2.0
-        sigma += float(acoustics.get("range_k", 0.0)) * jitter  # the noise where the jitter makes a range negative
-    if acoustics.get("detection") == "snr":
-        weakest = float(acoustics["detection_threshold"]) - 3.0 * float(acoustics["fluctuation"])
-        sigma *= max(1.0, 10.0 ** ((float(acoustics["reference_snr"]) - weakest) / 20.0))
-    margin = NOISE_SIGMAS * sigma
-    fall = abs(float(acoustics.get("clock_drift_ppm", 0.0))) * 1e-6 * c if not two_way else 0.0
-    parts = [f"{NOISE_SIGMAS:g} σ_r = {margin:.4g} m of range noise (acoustics.sigma_range = "
-             f"{float(acoustics.get('sigma_range', 0.0)):g} m)"]
-    if jitter:
-        parts.append(f"c · acoustics.turnaround / 2 = {jitter:.4g} m of turnaround jitter")
-    if fall:
-        parts.append(f"{fall:.3g} m per second of the log of clock drift (acoustics.clock_drift_ppm)")
-    ranging = "two-way" if two_way else "one-way"
-    return max(-(jitter + margin), lowest), fall, f"{ranging} ranging: " + " and ".join(parts)
-
-
 
 
 # --------------------------------------------------------------------------- the log
@@ -393,191 +320,5 @@ def _beacon(text: str, n_beacons: int) -> int:
     return int(value)
 
 
-def read_truth(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
-    """Read a truth track: ``time_s, n_m, e_m, d_m`` (CSV or Parquet), times strictly increasing.
 
-    Returns
-    -------
-    time : ndarray, shape (M,)
-        [s], M ≥ 2.
-    ned : ndarray, shape (M, 3)
-        [m].
-
-    Raises
-    ------
-    ModelError
-        ``--truth: ...`` naming the line: a missing column, a value that is not a finite number, a time
-        that does not increase, fewer than two rows.
-    """
-    path = Path(path)
-    table = _read_table(path, "--truth")
-    index = _columns(table, "--truth")
-    name = str(path)
-    missing = [c for c in TRUTH_COLUMNS if c not in index]
-    if missing:
-        raise ModelError(f"--truth: {name!r} has no column {missing[0]}; its columns: {','.join(table.header)}; "
-                         f"a truth track has the columns {','.join(TRUTH_COLUMNS)} (docs/log-format.md)")
-    values = np.empty((len(table.rows), 4))
-    p_lo, p_hi = SIGNAL_RANGES["position"]
-    for k, (where_short, cells) in enumerate(table.rows):
-        where = f"--truth: {name!r} {where_short}"
-        for j, column in enumerate(TRUTH_COLUMNS):
-            low, high = (-1e12, 1e12) if j == 0 else (p_lo, p_hi)
-            values[k, j] = _number(cells[index[column]], where, column, low, high)
-        if k and values[k, 0] <= values[k - 1, 0]:
-            raise ModelError(f"{where}: time_s {values[k, 0]:.10g} s does not come after the row before "
-                             f"({values[k - 1, 0]:.10g} s): a truth track's times must increase")
-    if len(values) < 2:
-        raise ModelError(f"--truth: {name!r} has {len(values)} row(s); a track needs at least two")
-    return values[:, 0], values[:, 1:]
-
-
-# --------------------------------------------------------------------------- export
-
-def truth_path(log_path: Path | str) -> Path:
-    """Where ``--export-log FILE`` writes the truth track: ``FILE``'s stem with ``_truth``, the same suffix."""
-    path = Path(log_path)
-    return path.with_name(f"{path.stem}_truth{path.suffix}")
-
-
-def check_export(path: Path, force: bool) -> None:
-    """Refuse an ``--export-log`` file before any work: a suffix other than .csv or .parquet, a directory,
-    or an existing log or truth file without ``force``.
-
-    Raises
-    ------
-    ModelError
-        Naming ``--export-log``.
-    """
-    if path.suffix.lower() not in SUFFIXES:
-        raise ModelError(f"--export-log: {str(path)!r} must end in .csv or .parquet")
-    for target in (path, truth_path(path)):
-        if target.is_dir():
-            raise ModelError(f"--export-log: {str(target)!r} is a directory")
-        if target.exists() and not force:
-            raise ModelError(f"--export-log: {str(target)!r} exists; add --force to replace it or choose another "
-                             "file")
-
-
-def log_frames(ts: pd.DataFrame, system: System | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """A run's time series (one replicate) as a log, one row per slot, and its truth track (every step).
-
-    A slot whose packet was lost is a depth-only row (``beacon_id`` missing); ``time_s`` is the packet's
-    epoch (``tx_time``), ``rx_time`` its arrival (the run's receiver used it at its first step reaching
-    that). The rows are in the order the receiver was given them (of arrival). Values are the receiver's
-    inputs as the run recorded them, with the columns the run's ``system`` adds
-    (:attr:`~sblsim.models.systems.System.log_columns`: USBL's direction of arrival).
-    """
-    parts = []  # per lane of a delivery: its new packets (step, lane, columns by lane 1's names)
-    for m in range(1, LANES + 1):
-        prefix = "" if m == 1 else f"lane{m}_"
-        if prefix + "packet_seq" not in ts:
-            break
-        seq = ts[prefix + "packet_seq"].to_numpy()
-        if m == 1:
-            new = (seq != np.concatenate([[0], seq[:-1]])) & (seq > 0)
-        else:
-            new = new_on_lane(seq)
-        steps = np.flatnonzero(new)
-        columns = {c[len(prefix):]: ts[c].to_numpy()[steps] for c in ts.columns if c.startswith(prefix)}
-        columns["depth"] = ts["depth"].to_numpy()[steps]
-        parts.append((steps, np.full(steps.size, m), columns))
-    order = np.lexsort((np.concatenate([p[1] for p in parts]), np.concatenate([p[0] for p in parts])))
-    slot = pd.DataFrame({name: np.concatenate([p[2][name] for p in parts])[order]
-                         for name in parts[0][2] if all(name in p[2] for p in parts)})
-    valid = slot["packet_valid"].to_numpy(bool)
-
-    def packet(column: str) -> np.ndarray:
-        return np.where(valid, slot[column].to_numpy(dtype=float), np.nan)
-
-    log = pd.DataFrame({"time_s": slot["tx_time"].to_numpy(dtype=float),
-                        **({"rx_time": slot["rx_time"].to_numpy(dtype=float)} if "rx_time" in slot else {}),
-                        "beacon_id": pd.array(np.where(valid, slot["beacon_id"].to_numpy(), 0), dtype="Int64"),
-                        "range_m": packet("range"), "beacon_n_m": packet("beacon_x"),
-                        "beacon_e_m": packet("beacon_y"), "beacon_d_m": packet("beacon_z"),
-                        "depth_m": slot["depth"].to_numpy(dtype=float)})
-    log.loc[~valid, "beacon_id"] = pd.NA
-    for column, source in (system.log_columns if system is not None else {}).items():
-        log[column] = packet(source)
-    truth = pd.DataFrame({"time_s": ts["time"].to_numpy(dtype=float), "n_m": ts["true_x"].to_numpy(dtype=float),
-                          "e_m": ts["true_y"].to_numpy(dtype=float), "d_m": ts["true_z"].to_numpy(dtype=float)})
-    return log, truth
-
-
-def _csv_text(frame: pd.DataFrame, comments: Sequence[str]) -> str:
-    """A frame as CSV text: numbers as Python writes them (they read back exactly), missing values empty."""
-    buffer = io.StringIO()
-    for line in comments:
-        buffer.write(f"{line}\n")
-    buffer.write(",".join(frame.columns) + "\n")
-    columns = [frame[c].to_numpy(dtype=object) for c in frame.columns]
-    for values in zip(*columns):
-        buffer.write(",".join("" if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v))
-                              else (repr(float(v)) if isinstance(v, (float, np.floating)) else str(v))
-                              for v in values) + "\n")
-    return buffer.getvalue()
-
-
-def export_log(result: RunRecord, path: Path | str) -> tuple[Path, Path]:
-    """Write a run's receiver inputs as a log (``path``) and its truth track beside it (:func:`truth_path`).
-
-    The log carries the run's resolved configuration (CSV: ``#%`` comment lines; Parquet: schema
-    metadata), which ``sblsim replay`` takes unless it is given ``--config``.
-
-    Returns
-    -------
-    (Path, Path)
-        The log and the truth track.
-
-    Raises
-    ------
-    ModelError
-        ``--export-log: ...`` when a write fails (a full disk): then neither file is replaced, nor is a folder
-        made for them left (:func:`sblsim.orchestrator.io.output.write_together`).
-    """
-    path = Path(path)
-    cfg = result.config
-    ts = result.timeseries
-    ts = ts[ts["replicate"] == ts["replicate"].iloc[0]]
-    plan = result.plan if result.plan is not None else as_plan(cfg)
-    log, truth = log_frames(ts, plan.system)
-    origin = (f"exported from: sblsim run {cfg['run']['scenario']} (seed {cfg['run']['seed']}, "
-              f"platform.system {cfg['platform']['system']}, receiver {_label(result)}, {result.engine} engine)")
-    config = to_toml(cfg)
-    lost = int(log["beacon_id"].isna().sum())
-    comments = [f"# {LOG_TITLE}",
-                "# columns, units and the replay's rules: docs/log-format.md; time_s is the packet's epoch, a row "
-                "without beacon_id a depth reading only",
-                f"# {origin}; {len(log)} slots, {lost} packets lost",
-                "# the run's resolved configuration, which `sblsim replay` uses unless given --config:",
-                *[f"{CONFIG_PREFIX}{line}" if line else CONFIG_PREFIX.rstrip() for line in config.splitlines()]]
-    target = truth_path(path)
-    if path.suffix.lower() == ".parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        def parquet(frame: pd.DataFrame, meta: dict[bytes, bytes]):
-            def write(tmp: Path) -> None:
-                table = pa.Table.from_pandas(frame, preserve_index=False)
-                pq.write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **meta}), tmp)
-            return write
-
-        writers = (parquet(log, {META_TITLE: LOG_TITLE.encode(), META_CONFIG: config.encode()}),
-                   parquet(truth, {META_TITLE: TRUTH_TITLE.encode()}))
-    else:
-        text = _csv_text(log, comments)
-        truth_text = _csv_text(truth, [f"# {TRUTH_TITLE}", f"# {origin}; the diver's true position at the end "
-                                       "of every step (N, E, D in the platform's frame)"])
-        writers = (lambda tmp: tmp.write_text(text, encoding="utf-8"),
-                   lambda tmp: tmp.write_text(truth_text, encoding="utf-8"))
-    try:  # the pair as one: both written, or neither replaced (nor a folder made for them left)
-        write_together(dict(zip((path, target), writers)))
-    except OSError as exc:  # e.g. a full disk
-        reason = os.strerror(exc.errno) if exc.errno else str(exc)
-        raise ModelError(f"--export-log: {reason}; neither the log nor its truth track was written ({str(path)!r} "
-                         "is as it was)") from None
-    return path, target
-
-
-__all__ = ["FORMAT", "LOG_COLUMNS", "Log", "NOISE_SIGMAS", "REORDER_WINDOW", "TRUTH_COLUMNS", "check_export",
-           "export_log", "log_config", "log_frames", "range_floor", "read_log", "read_truth", "truth_path"]
+__all__ = ["FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "log_config", "read_log"]

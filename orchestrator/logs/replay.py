@@ -1,30 +1,9 @@
 """``sblsim replay``: a receiver run on a recorded log (:mod:`sblsim.orchestrator.logs.receiver_log` reads it) as the
 master steps it in a run.
 
-Timing (the slot rule of the receivers, :func:`sblsim.models.receiver.slots.slot_due`).
-The replay runs on the grid of the configuration: macro steps of T =
-``simulation.sampling_time``, each of ``simulation.ekf_rate_ratio``
-communication steps of the receiver. It starts at the last multiple of T
-before the first row's time (``start_time``; an inverted LBL's log, whose first
-row is a ping's nominal epoch, a ping interval before it, where its run
-started) and ends with the macro step
-that reaches the last row's arrival. A row's arrival is its ``rx_time``
-(an exported log's: when the packet reached the diver), else its ``time_s``;
-rows are taken in the order of arrival. In each communication step
-``[t, t + Δt]`` the receiver is shown the newest row whose arrival the step's
-end has reached (``t + Δt ≥ rx_time − 1 ns``, the receiver's own slot test),
-so it uses each row in the step that reaches its arrival, as it uses a packet
-in a run (``tx_time`` is the row's ``time_s``).
-A row's arrival within its float resolution of a slot epoch k T is taken as that
-epoch (:func:`stamp_tolerance`), so that Unix-time stamps replay as times from 0.
-Rows that fall in one step are shown together on the lanes of a delivery, in
-order (the receiver takes them one after the other at the step's end, as the
-packets that arrive in one step of a run); beyond the
-:data:`~sblsim.models.acoustics.core.LANES` newest of them the others are
-skipped and counted (``same_step``). With ``simulation.master = "jacobi"`` a row is shown one macro step
-later, as the Jacobi master hands the receiver its inputs (so that the log
-of a Jacobi run replays to the run; the rows of the last macro step are then
-not used). The receiver's times are taken from the start time (a log with
+Which row the receiver is shown in each communication step, and where the replay starts and ends, is
+:mod:`sblsim.orchestrator.logs.schedule`'s (its "Timing"); the configuration it runs with,
+:mod:`sblsim.orchestrator.logs.configuration`'s. The receiver's times are taken from the start time (a log with
 Unix times runs as one starting near 0); the time series records them as
 the log has them. ``receiver.latency`` delays the receiver's recorded outputs
 as a run's (:func:`sblsim.orchestrator.cosim.run.apply_latency`).
@@ -36,337 +15,42 @@ have no truth and no errors (they are counted).
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import time
-import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
 
-from sblsim.models import RECEIVER_MODELS
 from sblsim.models.acoustics.channel.interface import LANES
 from sblsim.models.acoustics.channel.lanes import lane_name, lane_of
 from sblsim.models.acoustics.channel.pinger import ping_intervals
 from sblsim.models.columns import LANE_COLUMNS, lane_source
 from sblsim.models.declarations import ModelError
-from sblsim.models.receiver.slots import SLOT_SLACK
 from sblsim.models.systems import SYSTEMS
-from sblsim.orchestrator.cosim.config import (
-    BUILTIN_SCENARIOS,
-    EXTERNAL_PREFIX,
-    MODEL_PREFIX,
-    ConfigError,
-    apply_overrides,
-    check_receiver,
-    named_files,
-    parse_override,
-    read_source,
-    section_variables,
-    switch_receiver,
-    to_toml,
-)
+from sblsim.orchestrator.cosim.config import to_toml
 from sblsim.orchestrator.cosim.engines import close_handles, make_handles
 from sblsim.orchestrator.cosim.handles import DTYPES, cast_column
-from sblsim.orchestrator.cosim.limits import max_steps
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS, errors, slots
-from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, make_plan
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan
+from sblsim.orchestrator.cosim.record_metrics import _metrics
 from sblsim.orchestrator.cosim.run import (
     TIMESERIES_COLUMNS,
     UNDELAYED,
     RunRecord,
-    _metrics,
     merge_params,
-    summary,
 )
-from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.cosim.run_output import summary
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.logs.receiver_log import (
     Log,
-    log_config,
     read_log,
-    read_truth,
 )
-
-#: The scenario whose configuration a replay takes when neither ``--config`` nor the log gives one.
-DEFAULT_CONFIG = "semicircle"
-
-
-# --------------------------------------------------------------------------- the schedule
-
-@dataclass
-class Schedule:
-    """Which row the receiver is shown in each communication step (:func:`schedule`)."""
-
-    #: The replay's start time on the log's clock [s] (a multiple of T).
-    start: float
-    #: Macro steps.
-    steps: int
-    #: Rows shown in each communication step on the lanes of a delivery, shape (steps · ratio, LANES); −1: none.
-    fed: np.ndarray
-    #: Rows the time series records at each macro step (the last ones shown), shape (steps, LANES); −1: none.
-    shown: np.ndarray
-    #: The rows the receiver is shown (in order).
-    used: np.ndarray
-    #: Rows skipped because another row of the same step was used.
-    same_step: int
-    #: Rows not reached (a Jacobi replay: the rows of the last macro step).
-    not_reached: int
-    #: Each row's time from the start [s]: a time within :func:`stamp_tolerance` of a slot epoch k T is that epoch.
-    rel: np.ndarray = field(default_factory=lambda: np.zeros(0))
-
-
-def _step_ends(n_steps: int, T: float, ratio: int) -> np.ndarray:
-    """The end ``t + h`` of every communication step, computed as the master computes t and h."""
-    sub = T / ratio
-    k = np.repeat(np.arange(n_steps), ratio)
-    j = np.tile(np.arange(ratio), n_steps)
-    t = (0.0 + k * T) + j * sub
-    return t + sub
-
-
-def schedule(log: Log, T: float, ratio: int, jacobi: bool = False, lead: float = 0.0) -> Schedule:
-    """The replay's start, length and the row of every communication step (module docstring, "Timing"); ``lead``
-    [s]: how long before the first row's ``time_s`` less T the run started (an inverted LBL's: its pinger's
-    interval less T, its first ping's nominal epoch being an interval after the start).
-
-    Raises
-    ------
-    ModelError
-        When the log's span is more macro steps than fit in memory (naming its longest gap).
-    """
-    tol = stamp_tolerance(log, T)
-    first = float(np.min(log.transmit)) - lead  # the grid starts before the first transmission (the run's slot grid)
-    start = T * (math.ceil(first / T - max(1e-9, tol / T)) - 1)
-    rel = log.time - start
-    slot = 0.0 + np.rint(rel / T) * T  # the slot epochs k T as the channel computes them (t0 + k T, t0 = 0)
-    rel = np.where(np.abs(rel - slot) <= tol, slot, rel)
-    last = float(rel[-1])
-    steps = max(1, math.ceil(last / T - 1e-9))
-    most = max_steps(1, True)
-    if steps > most:
-        gap, where = log.longest_gap
-        raise ModelError(f"log: {str(log.path)!r} spans {log.time[-1] - log.time[0]:.6g} s, {steps} steps of "
-                         f"T = {T:g} s; at most {most} fit in memory here. Its longest gap is {gap:.6g} s, before "
-                         f"its {where} (a clock jump forward?): replay the rows before and from there as two logs, "
-                         "or give a larger simulation.sampling_time")
-    def end(n: int) -> float:  # the end of the last communication step of n macro steps, as the master has it
-        sub = T / ratio
-        return ((0.0 + (n - 1) * T) + (ratio - 1) * sub) + sub
-
-    while end(steps) < last - SLOT_SLACK:
-        steps += 1
-    while steps > 1 and end(steps - 1) >= last - SLOT_SLACK:
-        steps -= 1
-    ends = _step_ends(steps, T, ratio)
-    # newest row the end of each macro step has reached (the receiver's slot test, in its arithmetic): the rows the
-    # channel of a run delivers at its end, which the receiver then takes in its communication steps, each in the
-    # first that reaches its arrival (the Jacobi master hands them over a macro step later)
-    newest = np.searchsorted(rel - SLOT_SLACK, ends[ratio - 1::ratio], side="right") - 1
-    if jacobi:
-        newest = np.concatenate([[-1], newest[:-1]])
-    shown = np.full((steps, LANES), -1, dtype=np.int64)
-    previous = -1
-    for k, top in enumerate(newest):
-        if top > previous:  # the rows reached since, on the lanes in order (the newest LANES of them)
-            rows = np.arange(max(previous + 1, top + 1 - LANES), top + 1)
-            shown[k, :rows.size] = rows
-            previous = top
-        elif k:
-            shown[k] = shown[k - 1]  # the last delivery, held
-    fed = np.repeat(shown, ratio, axis=0)
-    used = np.unique(fed[fed >= 0])
-    if jacobi:  # the rows the end of the last macro step but one reached
-        reached = int(newest[-1] + 1)
-    else:
-        reached = len(rel)
-    return Schedule(start=start, steps=steps, fed=fed, shown=shown, used=used, same_step=reached - used.size,
-                    not_reached=len(rel) - reached, rel=rel)
-
-
-def stamp_tolerance(log: Log, T: float) -> float:
-    """How far a row's time may lie from a slot epoch and still be taken as it [s]: the slot test's slack
-    (:data:`sblsim.models.receiver.slots.SLOT_SLACK`), or four times the resolution of a float64 at the log's
-    times where that is coarser (Unix times near 1.7e9 s are resolved to 2.4e-7 s only).
-
-    Raises
-    ------
-    ModelError
-        When that resolution is coarser than a tenth of the sampling time.
-    """
-    largest = float(max(abs(log.time[0]), abs(log.time[-1])))
-    tol = max(SLOT_SLACK, 4.0 * float(np.spacing(largest)))
-    if tol > T / 10:
-        raise ModelError(f"log: {str(log.path)!r}: its times (up to {largest:.6g} s) are resolved to "
-                         f"{float(np.spacing(largest)):.3g} s only, too coarse for simulation.sampling_time = {T:g} s; "
-                         "subtract a start time from time_s")
-    return tol
-
-
-# --------------------------------------------------------------------------- configuration
-
-def replay_config(log_path: Path | str, config: str | None = None, receiver: str | None = None,
-                  overrides: Sequence[str] = (), notes: list[str] | None = None) -> tuple[RunPlan, str]:
-    """The plan of a replay's configuration (resolved once) and where it came from.
-
-    The source is ``config`` (a built-in scenario or a TOML file) when given, else the configuration an
-    exported log carries, else the built-in scenario :data:`DEFAULT_CONFIG`. A ``receiver`` (or a
-    ``--set receiver=...``) other than the configuration's takes the keys of the configuration's
-    ``[receiver]`` section that it declares and that were set (differ from the old receiver's default; the
-    keys it declares when the old receiver is not a built-in one, which is never imported to learn its
-    defaults), and its own defaults and ties for the rest (a resolved ``config.toml`` holds every key of its
-    receiver, e.g. the ekf's ``gate_probability = 1``, which is not a choice made for another receiver).
-
-    A log is data (:func:`_as_data`): of the configuration it carries only plain numbers and names are
-    used. A receiver it names as ``model:PATH.py`` or ``fmu:PATH`` is refused unless ``receiver`` replaces
-    it, and the files it names (:func:`sblsim.orchestrator.cosim.config.named_files`) are neither opened nor kept.
-
-    Parameters
-    ----------
-    notes : list of str, optional
-        Gets one line for every key of the log's configuration that was not used, and one for the receiver keys
-        of the configuration's receiver that ``receiver`` does not have.
-
-    Returns
-    -------
-    plan : RunPlan
-    source : str
-        What the configuration is, for the messages.
-
-    Raises
-    ------
-    ConfigError, ModelError
-        As :func:`sblsim.orchestrator.cosim.config.load_config`; a log's configuration that does not resolve, or
-        names a receiver program, is named as the log's.
-    """
-    overrides = list(overrides)
-    where = "--receiver" if receiver is not None else "simulation.receiver"
-    for item in overrides:
-        section, name, value = parse_override(item)
-        if (section, name) == ("simulation", "receiver") and receiver is None:
-            receiver = str(value)
-    if receiver is not None:
-        check_receiver(receiver, where)
-        overrides = [o for o in overrides if parse_override(o)[:2] != ("simulation", "receiver")]
-    embedded = "" if config is not None else log_config(log_path)
-    if config is not None:
-        raw = copy.deepcopy(read_source(config))
-        if str(config) in BUILTIN_SCENARIOS:
-            raw.setdefault("run", {})["scenario"] = str(config)
-        source = f"--config {config}"
-    elif embedded:
-        try:
-            raw = tomlfile.loads(embedded)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"log: the configuration {str(log_path)!r} carries is not valid TOML "
-                              f"({' '.join(str(exc).split())[:200]}); give --config") from None
-        given = {parse_override(o)[:2] for o in overrides}
-        said = _as_data(raw, str(log_path), receiver is not None, given)
-        if notes is not None:
-            notes.extend(said)
-        source = "the log's own (its run's configuration)"
-    else:
-        raw = copy.deepcopy(read_source(DEFAULT_CONFIG))
-        raw.setdefault("run", {})["scenario"] = DEFAULT_CONFIG
-        source = f"the built-in {DEFAULT_CONFIG} scenario's (the log carries none; --config to choose)"
-    if receiver is not None:
-        named = config if config is not None else None if embedded else DEFAULT_CONFIG
-        what = "the log's configuration's" if named is None else \
-            f"the {named} scenario's" if str(named) in BUILTIN_SCENARIOS else f"{named}'s"
-        said = _switch_receiver(raw, receiver, what)
-        if notes is not None:
-            notes.extend(said)
-    raw = apply_overrides(raw, overrides)
-    try:
-        cfg = make_plan(raw)
-    except ModelError as exc:
-        if embedded:
-            raise type(exc)(f"log: the configuration {str(log_path)!r} carries: {exc}; give --config") from None
-        raise
-    return cfg, source
-
-
-#: What a replay uses instead of a file a log's configuration names: (section, key) -> (key, value) to set.
-_INSTEAD = {("target", "trajectory_file"): ("trajectory", "semicircle"),
-            ("acoustics", "sound_speed_profile"): ("sound_speed_profile", "constant")}
-
-
-def _as_data(raw: dict, log: str, receiver_given: bool, given: set = frozenset()) -> list[str]:
-    """Make the configuration a log carries plain data, in place (:func:`replay_config`); returns the notes.
-
-    * ``simulation.receiver`` naming a program (``model:PATH.py``, ``fmu:PATH``: anything but a built-in
-      receiver) is refused, unless the user's ``--receiver`` replaces it (it is then never imported);
-    * a file named in a key declared to take one (:func:`sblsim.orchestrator.cosim.config.named_files`) is never
-      opened: a replay needs neither the diver's track nor the channel (the log holds what the receiver was
-      given), so ``target.trajectory = file`` becomes the semicircle (and the duration one pass of it) and the
-      channel's profile file a constant sound speed, said in a note; a file the receiver would read (its own
-      profile) is refused, unless the user's ``--set`` (``given``: its ``(section, key)`` pairs) replaces it.
-
-    Raises
-    ------
-    ConfigError
-        A receiver program without ``--receiver``, a file the receiver would read without ``--set``.
-    """
-    sim = raw.get("simulation")
-    value = sim.get("receiver") if isinstance(sim, dict) else None
-    if isinstance(value, str) and value not in RECEIVER_MODELS and not receiver_given:
-        kind = "a Python file" if value.startswith(MODEL_PREFIX) else "an FMU" if value.startswith(EXTERNAL_PREFIX) \
-            else "a receiver"
-        raise ConfigError(f"log: the configuration {log!r} carries names simulation.receiver = {value[:80]!r}, "
-                          f"{kind} a replay never imports or loads from a log; give --receiver (one of "
-                          f"{', '.join(RECEIVER_MODELS)}, or model:PATH.py or fmu:PATH of your own) or --config")
-    notes = []
-    for (section, key), (switch, instead) in _INSTEAD.items():
-        table = raw.get(section)
-        if not isinstance(table, dict) or key not in table:
-            continue
-        named = table[key]
-        if section == "target":
-            del table[key]
-            if not named:
-                continue
-            changed = f"{section}.{key} = ''"
-            if table.get("trajectory") == "file":
-                table["trajectory"] = instead
-                changed = f"{section}.{switch} = {instead!r}"
-                if isinstance(sim, dict):
-                    sim["duration"] = 0.0  # one pass of it: a replay's length is the log's
-        elif not named_files({section: {key: named}}):
-            continue
-        else:
-            table[key] = instead
-            changed = f"{section}.{switch} = {instead!r}"
-        notes.append(f"the log's configuration names a file in {section}.{key}, which a replay does not open (it "
-                     f"needs no {'diver track' if section == 'target' else 'sound-speed profile'}: the log holds "
-                     f"what the receiver was given); its config.toml has {changed}")
-    for section, key, _ in named_files(raw):
-        if (section, key) == ("simulation", "receiver"):
-            continue  # refused above, or replaced by --receiver
-        if (section, key) not in given:
-            raise ConfigError(f"log: the configuration {log!r} carries names a file in {section}.{key}, which a "
-                              f"replay never opens from a log; give --set {section}.{key}=... or --config")
-        del raw[section][key]  # the user's --set gives it
-    return notes
-
-
-def _switch_receiver(raw: dict, receiver: str, what: str) -> list[str]:
-    """Set ``simulation.receiver`` of a raw configuration, keeping the receiver keys that were chosen
-    (:func:`replay_config`): those the new receiver has (:func:`~sblsim.orchestrator.cosim.config.switch_receiver`,
-    every command's rule; its note returned) and that are not at the old receiver's default. A receiver that is
-    not a built-in one (a user's model or FMU, perhaps named by a log) is never imported to learn its defaults."""
-    sim = raw.get("simulation")
-    old = sim.get("receiver", "ekf") if isinstance(sim, dict) else "ekf"
-    notes = switch_receiver(raw, receiver, what)
-    if old == receiver or not isinstance(raw.get("receiver"), dict) or old not in RECEIVER_MODELS:
-        return notes
-    defaults = {v.name: v.start for v in section_variables("receiver", str(old))}
-    raw["receiver"] = {k: v for k, v in raw["receiver"].items() if not (k in defaults and v == defaults[k])}
-    return notes
-
+from sblsim.orchestrator.logs.schedule import schedule
+from sblsim.orchestrator.logs.truth_track import read_truth
 
 # --------------------------------------------------------------------------- the replay
 
@@ -456,7 +140,7 @@ def replay(log: Log, cfg: RunPlan | dict, engine: str = "local", fmu_dir: Path |
     Raises
     ------
     ModelError
-        A truth track that covers no step; as :func:`schedule` and
+        A truth track that covers no step; as :func:`~sblsim.orchestrator.logs.schedule.schedule` and
         :func:`sblsim.orchestrator.cosim.engines.make_handles`.
     """
     cfg = as_plan(cfg)
@@ -684,5 +368,4 @@ def replay_lines(summary: dict[str, Any], plan: RunPlan, source: str, log: Path,
     return lines, warnings
 
 
-__all__ = ["DEFAULT_CONFIG", "ReplayRecord", "Schedule", "replay", "replay_config", "replay_files", "replay_lines",
-           "schedule", "write_replay"]
+__all__ = ["ReplayRecord", "replay", "replay_files", "replay_lines", "write_replay"]

@@ -3,10 +3,10 @@
 For a configuration, the horizontal standard deviation (DRMS) of a position
 fix from one round of fresh ranges (one per beacon) plus the depth, from
 their Fisher information ``Σ_k H_kᵀ H_k / r_k`` over the rows of the
-measurement model (:func:`sblsim.models.bound.fisher_information`, H from the
+measurement model (:func:`sblsim.models.fisher.fisher_information`, H from the
 model's casadi Jacobian; the model is the receivers' ranges-plus-depth
 :class:`~sblsim.models.receiver.measurement.RangeDepthModel`, given to
-:func:`sblsim.models.bound.horizontal_std` as an object), on a
+:func:`sblsim.models.fisher.horizontal_std` as an object), on a
 grid around the platform at the diver's depth: the platform level at its
 mean heading, its reference at the origin, the beacons at their lever arms,
 with the configured range noise, GPS, IMU and depth-sensor errors
@@ -21,7 +21,7 @@ seafloor transponders (their positions, :func:`~sblsim.models.platform.geometry.
 with the survey error in place of the GPS and no attitude term
 (:func:`~sblsim.orchestrator.cosim.plan.bound_parameters`). USBL maps one packet
 of slant range, azimuth and elevation from the transceiver plus the depth
-(:func:`sblsim.models.systems.usbl.horizontal_std`), with the receivers' R:
+(:func:`sblsim.models.systems.usbl_map.horizontal_std`), with the receivers' R:
 ``σ_r²`` for the range, ``σ_a² = (σ_θ / max(cos φ, 0.1))² + σ_att²`` for each
 angle (φ the line of sight's angle off the vertical), plus the transceiver
 position's error ``σ_b² = σ_GPS² + (σ_att h)²`` per axis along the range and

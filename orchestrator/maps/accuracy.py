@@ -132,7 +132,7 @@ def accuracy_map(cfg: RunPlan | dict, east: np.ndarray, north: np.ndarray, model
     model : RangeDepthModel, optional
         The measurement model whose Fisher information is mapped (default the
         receivers'; its context is the beacons, its motion model the state layout).
-        Not used for a system whose packet is not ranges (USBL: :func:`sblsim.models.systems.usbl.horizontal_std`).
+        Not used for a system whose packet is not ranges (USBL: :func:`sblsim.models.systems.usbl_map.horizontal_std`).
     depth : float, optional
         The diver's depth [m]; default :func:`diver_depth`.
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from sblsim.fmus.native import compiled_family_levels
+from sblsim.fmus.compiled_functions import compiled_family_levels
 from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.models.acoustics.detection import direct_first, packet_probability
 from sblsim.models.acoustics.sonar import accuracy_scale

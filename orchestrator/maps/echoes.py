@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from sblsim.fmus.native import compiled_family_levels
+from sblsim.fmus.compiled_functions import compiled_family_levels
 from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.models.acoustics.detection import first_shares
-from sblsim.models.acoustics.rays import profile_arrays, ray_bending, slant_range
+from sblsim.models.acoustics.ray_inversion import ray_bending, slant_range
+from sblsim.models.acoustics.rays import profile_arrays
 from sblsim.models.acoustics.sound_speed import PROFILE
 from sblsim.orchestrator.cosim.plan import RunPlan
 
@@ -30,9 +31,9 @@ def echo_spread(plan: RunPlan, points: np.ndarray, bound: dict, sigma, echo: np.
     times and the reply's grazing angle at the transceiver as its elevation. The receiver processes it as a
     direct arrival: the range is the channel's assumed speed times that travel time, which a receiver with a
     measured profile (``sound_speed_model = profile``) turns into the slant range of the direct eigenray of that
-    time (:func:`~sblsim.models.acoustics.rays.slant_range`) and whose elevation it turns by the direct eigenray's
-    bending (:func:`~sblsim.models.acoustics.rays.ray_bending`), each where the direct eigenray exists
-    (:func:`~sblsim.models.receiver.profile.profile_range`). That places the diver at a point ``seen`` along its
+    time (:func:`~sblsim.models.acoustics.ray_inversion.slant_range`) and whose elevation it turns by the direct
+    eigenray's bending (:func:`~sblsim.models.acoustics.ray_inversion.ray_bending`), each where the direct eigenray
+    exists (:func:`~sblsim.models.receiver.profile.profile_range`). That places the diver at a point ``seen`` along its
     azimuth, and the fix of that packet with the diver's own depth reading is off by
     :meth:`~sblsim.models.systems.usbl.USBL.seen_offsets`. The direct pair's offset is 0 (the map's geometry);
     the mean square is over the other pairs with their probabilities. Computed at up to :data:`ECHO_DISTANCES`

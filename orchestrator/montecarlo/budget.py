@@ -30,114 +30,36 @@ configuration equals the configured one) contributes exactly 0 and is not
 run (``off in this configuration``); a source the system does not use (the
 survey error of an SBL) runs and contributes exactly 0, every run unchanged
 (``no effect``).
+
+The sources and their switches are :mod:`sblsim.orchestrator.montecarlo.error_sources`'; a budget's printed
+lines, tables, figure and files :mod:`sblsim.orchestrator.montecarlo.budget_outputs`'.
 """
 
 from __future__ import annotations
 
 import math
-import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.cosim.config import (
-    ConfigError,
-    parse_override,
-    scenario_system,
-    to_toml,
-)
+from sblsim.orchestrator.cosim.config import scenario_system
 from sblsim.orchestrator.cosim.limits import check_replicates
 from sblsim.orchestrator.cosim.master import RecordBuffer
-from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, load_plan, make_plan, thaw, with_replicates
+from sblsim.orchestrator.cosim.plan import RunPlan, as_plan, load_plan, with_replicates
 from sblsim.orchestrator.cosim.run import run_batch
 from sblsim.orchestrator.cosim.systems import compared
-from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
-
-#: Error source -> (what it is, the ``--set`` overrides that switch it off). A value ``{section.key}`` is that
-#: key's value in the configured (all-on) configuration.
-SOURCES: dict[str, tuple[str, tuple[str, ...]]] = {
-    "gps": ("GPS error of the platform position", ("platform.gps_sigma=0",)),
-    "imu_noise": ("IMU attitude noise", ("platform.imu_sigma_deg=0",)),
-    "imu_bias": ("IMU attitude bias and gyro-bias drift", ("platform.imu_bias_deg=0", "platform.imu_gyro_bias=0")),
-    "imu_scale_misalignment": ("IMU scale factor and axis misalignment",
-                               ("platform.imu_scale_factor_ppm=0", "platform.imu_misalignment_deg=0")),
-    "waves": ("wave motion of the platform (Beaufort sea state)", ("platform.beaufort=0",)),
-    "range_noise": ("white range noise (with its growth with range, acoustics.range_k)",
-                    ("acoustics.sigma_range=0", "acoustics.range_k=0")),
-    "sound_speed": ("true sound speed other than the assumed one",
-                    ("acoustics.sound_speed_profile=constant",
-                     "acoustics.sound_speed_true={acoustics.sound_speed_assumed}")),
-    "clock_drift": ("receiver clock drift", ("acoustics.clock_drift_ppm=0",)),
-    "moving_ocean": ("the moving ocean: the sound speed's smooth change in time (nadir total delay)",
-                     ("acoustics.ntd_sigma_ppm=0",)),
-    "multipath": ("multipath: ranges from a reflected path (outliers, or the surface and sea-floor eigenrays)",
-                  ("acoustics.outlier_pct=0", "acoustics.water_depth=0")),
-    "ambient_noise": ("ambient noise: arrivals missed and timing and angle noise grown below the reference SNR",
-                      ("acoustics.source_level=250",)),
-    "packet_loss": ("lost packets", ("acoustics.loss_pct=0",)),
-    "depth_sensor": ("depth-sensor noise", ("target.depth_sigma=0",)),
-    "survey": ("LBL transponders' survey error", ("platform.survey_sigma=0",)),
-    "installation": ("transducer installation error", ("platform.installation_sigma=0",)),
-    "turnaround_jitter": ("two-way ranging: turnaround jitter", ("acoustics.turnaround_sigma=0",)),
-    "ping_jitter": ("inverted LBL: the pinger's interval jitter (its emission epochs a random walk)",
-                    ("acoustics.ping_jitter=0",)),
-    "usbl_angle": ("USBL direction-of-arrival noise", ("platform.usbl_angle_sigma_deg=0",)),
-    "usbl_misalignment": ("USBL array misalignment", ("platform.usbl_misalignment_deg=0",)),
-    "latency": ("the receiver's processing latency (the diver sees an older estimate)", ("receiver.latency=0",)),
-    "profile_error": ("profile error: the receiver's sound-speed profile other than the true one",
-                      ("receiver.sound_speed_profile=acoustics",)),
-}
-#: Sources that exist only for a receiver that ranges with its own profile (``receiver.sound_speed_profile`` not
-#: ``assumed``): a receiver of the single assumed speed has them off (its error is the ``sound_speed`` source).
-PROFILE_SOURCES = frozenset({"profile_error"})
-#: Sources that exist only with detection by signal-to-noise (``acoustics.detection = "snr"``); a source level
-#: of 250 dB re 1 µPa at 1 m hears every eigenray there is, at the configured accuracy.
-SNR_SOURCES = frozenset({"ambient_noise"})
+from sblsim.orchestrator.montecarlo.error_sources import SOURCES, _switches
 
 DEFAULT_REPLICATES = 500
 #: Status of a source in a budget.
 ON, NO_EFFECT, OFF = "on", "no effect", "off in this configuration"
 COLUMNS = ("source", "description", "status", "contribution", "se", "share", "rms")
-
-_REFERENCE = re.compile(r"^\{(\w+)\.(\w+)\}$")
-
-
-def switched_off(cfg: RunPlan | dict[str, dict], overrides: Sequence[str]) -> RunPlan:
-    """The plan of the configuration ``cfg`` with ``overrides`` applied and its receiver kept.
-
-    The overrides go into a copy of the resolved configuration, whose plan is
-    made (:func:`~sblsim.orchestrator.cosim.plan.make_plan`: it is resolved again, once): every receiver key is then
-    given, so no tie retunes the
-    receiver (its R stays the configured one, e.g. when ``acoustics.sigma_range``
-    is 0); only a receiver key an override names changes.
-
-    Raises
-    ------
-    ConfigError
-        If an override names a key the configuration does not have, or a value outside its range.
-    """
-    raw = thaw(cfg)
-    receiver = dict(cfg["receiver"])
-    for item in overrides:
-        section, name, value = parse_override(item)
-        if section not in raw or name not in raw[section]:
-            raise ConfigError(f"{section}.{name}: not a key of this configuration")
-        if isinstance(value, str) and _REFERENCE.match(value):
-            ref_section, ref_name = _REFERENCE.match(value).groups()
-            value = cfg[ref_section][ref_name]
-        raw[section][name] = value
-        if section == "receiver":
-            receiver[name] = value
-    out = make_plan(raw)
-    if out["receiver"] != receiver or out["simulation"] != cfg["simulation"]:  # the ties above: never
-        raise ModelError("budget: switching a source off changed the receiver or the simulation settings")
-    return out
 
 
 @dataclass
@@ -193,12 +115,6 @@ class Budget:
             if not np.mean(gap) > 2.0 * _se(gap):
                 out.append(str(name))
         return out
-
-
-def _pm(value: float, se: float, total: float, spec: str = ".3g") -> str:
-    """``value ± se`` [m²]; a standard error at rounding level (below 1e-12 of the total) shows as 0."""
-    shown = 0.0 if abs(se) <= 1e-12 * abs(total) else se
-    return f"{value:{spec}} ± {shown:.2g}"
 
 
 def _se(values: np.ndarray) -> float:
@@ -297,37 +213,6 @@ def _no_estimate(label: str, plan: RunPlan, what: str, metrics: pd.DataFrame) ->
             "written")
 
 
-#: The switched-off plans of the plans of this process's budgets, by the plan's id: (plan, switches); each plan's
-#: switches are made once (:func:`configurations` checks them, :func:`budgets` counts and runs them).
-_SWITCHED: dict[int, tuple[RunPlan, tuple[dict[str, RunPlan], RunPlan]]] = {}
-_KEEP = 64
-
-
-def _switches(cfg: RunPlan) -> tuple[dict[str, RunPlan], RunPlan]:
-    """Each source's switched-off plan, and the floor's (every source off): made once per plan."""
-    kept = _SWITCHED.get(id(cfg))
-    if kept is not None and kept[0] is cfg:
-        return kept[1]
-    names = {name: _overrides(cfg, name, overrides) for name, (_, overrides) in SOURCES.items()}
-    off = {name: switched_off(cfg, overrides) for name, overrides in names.items()}
-    switches = off, switched_off(cfg, [o for overrides in names.values() for o in overrides])
-    if len(_SWITCHED) >= _KEEP:
-        _SWITCHED.pop(next(iter(_SWITCHED)))
-    _SWITCHED[id(cfg)] = (cfg, switches)
-    return switches
-
-
-def _overrides(cfg: RunPlan, name: str, overrides: tuple[str, ...]) -> tuple[str, ...]:
-    """The overrides that switch the source ``name`` off in ``cfg``: none (the source is off) for a profile
-    source of a receiver that ranges with the single assumed speed (or declares no profile), and for a source of
-    detection by signal-to-noise with fixed detection."""
-    if name in PROFILE_SOURCES and cfg["receiver"].get("sound_speed_profile", "assumed") == "assumed":
-        return ()
-    if name in SNR_SOURCES and cfg["acoustics"]["detection"] != "snr":
-        return ()
-    return overrides
-
-
 def planned(cfg: RunPlan | dict[str, dict]) -> int:
     """How many configurations a budget of ``cfg`` runs: all on, the floor and each source that is on, the
     same configuration once."""
@@ -388,202 +273,6 @@ def budgets(configs: Sequence[tuple[str, RunPlan]], replicates: int = DEFAULT_RE
         return [budget(cfg, replicates, label, bar, records) for label, cfg in configs]
 
 
-def lines(b: Budget) -> list[str]:
-    """The printed lines of a budget: one per source, largest first, then the floor, remainder and total."""
-    width = max(len(n) for n in b.table["source"]) + 1
 
-    def share(value: float) -> str:
-        return f"{100 * value / b.total:5.1f} %" if b.total > 0 else "   n/a"
-
-    out = []
-    for r in b.table.itertuples():
-        if r.status == OFF:
-            out.append(f"  {r.source + ':':<{width}} off in this configuration")
-        elif r.status == NO_EFFECT:
-            out.append(f"  {r.source + ':':<{width}} 0 (no effect: every run unchanged)")
-        else:
-            out.append(f"  {r.source + ':':<{width}} {_pm(r.contribution, r.se, b.total)} m² "
-                       f"({share(r.contribution)}), RMS {r.rms:.3f} m")
-    out.append(f"  {'floor:':<{width}} {_pm(b.floor, b.floor_se, b.total)} m² ({share(b.floor)}): the receiver "
-               "with every source off")
-    out.append(f"  {'remainder:':<{width}} {_pm(b.remainder, b.remainder_se, b.total)} m² ({share(b.remainder)}): "
-               "interactions")
-    out.append(f"  {'total:':<{width}} {_pm(b.total, b.total_se, b.total)} m² (RMS e_tot {math.sqrt(b.total):.3f} m)")
-    return out
-
-
-def advice(b: Budget) -> str:
-    """One sentence: which source to improve first."""
-    first = b.first()
-    if not first:
-        return ("No source contributes more than twice its standard error: the error is the receiver's floor "
-                "and the interactions (or more replicates are needed).")
-    rows = [b.table[b.table["source"] == n].iloc[0] for n in first]
-    if len(rows) == 1:
-        return (f"Improve {first[0]} ({rows[0]['description']}) first: switched off, it removes "
-                f"{100 * rows[0]['share']:.0f} % of the mean squared error.")
-    named = ", ".join(f"{r['source']} ({100 * r['share']:.0f} %)" for r in rows[:-1])
-    return (f"Improve {named} or {rows[-1]['source']} ({100 * rows[-1]['share']:.0f} %) first: their contributions "
-            "to the mean squared error are equal within two standard errors of their paired difference.")
-
-
-def table(budgets: Sequence[Budget], key: str | None = None) -> pd.DataFrame:
-    """The rows of ``budget.csv``: every source, then floor, remainder and total (with the compared value
-    first when ``key`` is given)."""
-    frames = []
-    for b in budgets:
-        extra = pd.DataFrame([
-            {"source": "floor", "description": "every source off", "status": "", "contribution": b.floor,
-             "se": b.floor_se},
-            {"source": "remainder", "description": "interactions", "status": "", "contribution": b.remainder,
-             "se": b.remainder_se},
-            {"source": "total", "description": "every source on", "status": "", "contribution": b.total,
-             "se": b.total_se}])
-        extra["share"] = extra["contribution"] / b.total if b.total > 0 else math.nan
-        extra["rms"] = np.sqrt(np.maximum(extra["contribution"], 0.0))
-        frame = pd.concat([b.table, extra], ignore_index=True)
-        if key is not None:
-            frame.insert(0, key, b.label.split(" = ", 1)[1])
-        frames.append(frame)
-    return pd.concat(frames, ignore_index=True)
-
-
-def _cell(row: Any, total: float) -> str:
-    if row["status"] == OFF:
-        return "off"
-    if row["status"] == NO_EFFECT:
-        return "0 (no effect)"
-    return f"{_pm(row['contribution'], row['se'], total)} ({100 * row['contribution'] / total:.1f} %)"
-
-
-def markdown(budgets: Sequence[Budget], key: str | None = None) -> str:
-    """The budget as Markdown: one table (a column per compared value), the total, floor and remainder, and
-    which source to improve first."""
-    if len(budgets) == 1:
-        b = budgets[0]
-        lines_ = ["| source | what | contribution [m²] (± se) | share | RMS [m] |", "|---|---|---|---|---|"]
-        for _, r in b.table.iterrows():
-            if r["status"] == ON:
-                value = _pm(r["contribution"], r["se"], b.total, ".4g")
-                lines_.append(f"| {r['source']} | {r['description']} | {value} | {100 * r['share']:.1f} % "
-                              f"| {r['rms']:.3f} |")
-            else:
-                lines_.append(f"| {r['source']} | {r['description']} | {r['status']} | 0 % | 0 |")
-        lines_ += ["", *_summary(b), "", advice(b)]
-        return "\n".join(lines_) + "\n"
-    order = _order(budgets)
-    head = "| source | " + " | ".join(b.label.split(" = ", 1)[1] for b in budgets) + " |"
-    lines_ = [f"Contribution to the MSE [m²] (± se) and share, per {key}:", "", head,
-              "|---|" + "---|" * len(budgets)]
-    for name in order:
-        cells = [_cell(b.table[b.table["source"] == name].iloc[0], b.total) for b in budgets]
-        lines_.append(f"| {name} | " + " | ".join(cells) + " |")
-    for what, attr in (("floor", "floor"), ("remainder", "remainder"), ("total", "total")):
-        cells = [_pm(getattr(b, attr), getattr(b, attr + "_se"), b.total)
-                 + (f" ({100 * getattr(b, attr) / b.total:.1f} %)" if what != "total" else
-                    f" (RMS {math.sqrt(b.total):.3f} m)") for b in budgets]
-        lines_.append(f"| **{what}** | " + " | ".join(cells) + " |")
-    lines_.append("")
-    lines_ += [f"{b.label}: {advice(b)}" for b in budgets]
-    return "\n".join(lines_) + "\n"
-
-
-def _summary(b: Budget) -> list[str]:
-    share = (lambda v: f"{100 * v / b.total:.1f} %") if b.total > 0 else (lambda v: "n/a")
-    return [f"* total: {_pm(b.total, b.total_se, b.total, '.4g')} m² (RMS e_tot {math.sqrt(b.total):.3f} m), every "
-            "source on",
-            f"* floor: {_pm(b.floor, b.floor_se, b.total, '.4g')} m² ({share(b.floor)}), every source off: the "
-            "receiver's own lag, start-up and the staleness of held ranges",
-            f"* remainder: {_pm(b.remainder, b.remainder_se, b.total, '.4g')} m² ({share(b.remainder)}): "
-            "interactions, total − floor − Σ contributions"]
-
-
-def _order(budgets: Sequence[Budget]) -> list[str]:
-    """The sources, by their largest share in any budget (the ones off everywhere last)."""
-    best: dict[str, float] = {}
-    for b in budgets:
-        for _, r in b.table.iterrows():
-            share = r["share"] if r["status"] == ON and math.isfinite(r["share"]) else -1.0
-            best[r["source"]] = max(best.get(r["source"], -1.0), share)
-    return sorted(best, key=lambda n: -best[n])
-
-
-def plot(budgets: Sequence[Budget], title: str):
-    """Horizontal bars of the shares of the total MSE (± 2 se), the floor and the remainder, one panel per
-    budget."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    order = [n for n in _order(budgets)
-             if any(b.table.loc[b.table["source"] == n, "status"].iloc[0] == ON for b in budgets)]
-    names = [*order, "remainder", "floor"]
-    fig, axes = plt.subplots(1, len(budgets), figsize=(4.2 * len(budgets) + 2.0, 0.35 * len(names) + 1.8),
-                             squeeze=False, sharey=True)
-    y = np.arange(len(names))[::-1]
-    for ax, b in zip(axes[0], budgets):
-        scale = 100.0 / b.total if b.total > 0 else math.nan
-        values, errors, colors, notes = [], [], [], []
-        for n in names:
-            if n in ("remainder", "floor"):
-                values.append(getattr(b, n) * scale)
-                errors.append(2.0 * getattr(b, f"{n}_se") * scale)
-                colors.append("0.6")
-                notes.append(f"{values[-1]:.1f} %")
-            else:
-                r = b.table[b.table["source"] == n].iloc[0]
-                values.append(r["contribution"] * scale)
-                errors.append(2.0 * r["se"] * scale)
-                colors.append("tab:red")
-                notes.append(f"{values[-1]:.1f} %" if r["status"] == ON else {OFF: "off"}.get(r["status"], r["status"]))
-        ax.barh(y, values, xerr=errors, color=colors, capsize=3, alpha=0.85)
-        for k, (value, error, note) in enumerate(zip(values, errors, notes)):
-            if math.isfinite(value):
-                ax.annotate(note, (max(value, 0.0) + error, y[k]), textcoords="offset points", xytext=(4, -3),
-                            fontsize=7, color="k" if note.endswith("%") else "0.5")
-        ax.margins(x=0.12)
-        ax.axvline(0.0, color="k", lw=0.8)
-        ax.set_yticks(y, names)
-        ax.set_xlabel("share of the total MSE [%] (± 2 se)")
-        ax.set_title(f"{b.label}\ntotal {b.total:.3g} m² (RMS {math.sqrt(b.total):.3f} m)", fontsize=9)
-        ax.grid(True, axis="x", alpha=0.3)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    return fig
-
-
-def _config_name(b: Budget, many: bool) -> str:
-    if not many:
-        return "config.toml"
-    value = re.sub(r"[^A-Za-z0-9._-]", "_", b.label.split(" = ", 1)[1])
-    return f"config_{value}.toml"
-
-
-def write(budgets: Sequence[Budget], out: Path | str, title: str, key: str | None = None) -> Path:
-    """Write ``budget.csv``, ``budget.md``, ``budget.png`` and the all-on configuration (``config.toml``, or
-    ``config_VALUE.toml`` per compared value) into ``out`` atomically; return ``out``."""
-    import matplotlib.pyplot as plt
-
-    with staged_directory(out) as tmp:
-        table(budgets, key).to_csv(tmp / "budget.csv", index=False)
-        (tmp / "budget.md").write_text(f"{title}\n\n{markdown(budgets, key)}", encoding="utf-8")
-        fig = plot(budgets, title)
-        fig.savefig(tmp / "budget.png", dpi=120, bbox_inches="tight")
-        plt.close(fig)
-        for b in budgets:
-            (tmp / _config_name(b, key is not None)).write_text(to_toml(b.config), encoding="utf-8")
-    return Path(out)
-
-
-def title(scenario: str, budgets: Sequence[Budget], overrides: Sequence[str] = ()) -> str:
-    """The heading of a budget's outputs: scenario, receiver, replicates, seed and overrides."""
-    cfg = budgets[0].config
-    receivers = sorted({b.config.receiver_label for b in budgets})
-    return (f"{scenario}: error budget of the {', '.join(receivers)} receiver, {budgets[0].replicates} replicates "
-            f"per configuration, seed {cfg['run']['seed']}" + (f", {' '.join(overrides)}" if overrides else ""))
-
-
-__all__ = ["COLUMNS", "DEFAULT_REPLICATES", "SOURCES", "Budget", "advice", "budget",
-           "budgets", "check_budget_replicates", "configurations", "lines", "markdown", "planned", "plot",
-           "switched_off", "table", "title", "write"]
+__all__ = ["COLUMNS", "DEFAULT_REPLICATES", "Budget", "budget", "budgets", "check_budget_replicates",
+           "configurations", "planned"]

@@ -3,7 +3,10 @@
 * :mod:`~sblsim.orchestrator.surveys.log`: sblsim's calibration survey log and its hostile-safe reader;
 * :mod:`~sblsim.orchestrator.surveys.xie`: survey A's text format (Xie et al. 2023);
 * :mod:`~sblsim.orchestrator.surveys.gnatss`: survey B's files (GNATSS's ``pxp_tt`` and
-  ``POS_FREED_TRANS_TWTT``, site NCL1);
+  ``POS_FREED_TRANS_TWTT``, site NCL1) joined into the log; the files read by
+  :mod:`~sblsim.orchestrator.surveys.gnatss_files`, the site by :mod:`~sblsim.orchestrator.surveys.gnatss_site`,
+  with its local east/north/up frame (:mod:`~sblsim.orchestrator.surveys.local_frame`) and harmonic-mean sound
+  speeds (:mod:`~sblsim.orchestrator.surveys.harmonic_mean`);
 * :mod:`~sblsim.orchestrator.surveys.calibrate`: ``sblsim calibrate``'s entry point, which re-exports what four
   modules hold: :mod:`~sblsim.orchestrator.surveys.settings` (the solver's settings),
   :mod:`~sblsim.orchestrator.surveys.survey` (a survey's definition, the built-in TOML files in this folder: the

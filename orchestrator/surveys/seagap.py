@@ -46,7 +46,7 @@ from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.calibration.boxin import lever_enu
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import csv_cells, number, read_lines
-from sblsim.orchestrator.surveys.gnatss import J2000_POSIX, J2000_RANGE
+from sblsim.orchestrator.surveys.gnatss_files import J2000_POSIX, J2000_RANGE
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
 
 #: The files of a SeaGap folder: role -> the names it may have (one of them, not two).

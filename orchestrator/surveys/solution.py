@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from sblsim.fmus.native import compiled_exact_points
+from sblsim.fmus.compiled_functions import compiled_exact_points
 from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import (
     RUNNING_AGREEMENT_SIGMA,
@@ -31,7 +31,7 @@ from sblsim.models.calibration.ocean import bases_of
 from sblsim.models.calibration.perturbation import effective_scale
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
-from sblsim.orchestrator.surveys.gnatss import harmonic_mean_speed
+from sblsim.orchestrator.surveys.harmonic_mean import harmonic_mean_speed
 from sblsim.orchestrator.surveys.settings import SEARCH_KEYS, _instant
 from sblsim.orchestrator.surveys.survey import Survey
 
@@ -90,7 +90,7 @@ def leg_model(survey: Survey) -> tuple[LegModel | None, np.ndarray | None]:
     :class:`~sblsim.models.calibration.StraightRay` at each transponder's harmonic mean of the profile from
     ``harmonic_mean_start_depth_m`` to its depth (:attr:`Survey.depth_m`, or ``surface_u_m`` less its Up), the
     model's
-    :func:`~sblsim.orchestrator.surveys.gnatss.harmonic_mean_speed`; ``propagation = "ray"``:
+    :func:`~sblsim.orchestrator.surveys.harmonic_mean.harmonic_mean_speed`; ``propagation = "ray"``:
     :class:`~sblsim.models.calibration.EigenRay` through the profile (its solve compiled in the local engine's
     library when a C compiler can build it; else evaluated by casadi, some 15 times slower).
 

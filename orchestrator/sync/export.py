@@ -41,7 +41,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.simulate import draw_clocks, on_clocks, sync_tag_arrivals
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.io.output import write_together
-from sblsim.orchestrator.logs.receiver_log import log_frames
+from sblsim.orchestrator.logs.log_export import log_frames
 
 #: The files' time of the run's t = 0 [s since 1970-01-01 UTC] (2024-01-01 00:00:00 UTC).
 EPOCH = 1_704_067_200

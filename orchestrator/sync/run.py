@@ -11,6 +11,10 @@ With ``refine_positions`` the receivers' horizontal positions are refined with t
 sigma at the table's positions: :class:`sblsim.models.sync.clocks.Geometry`), written as ``positions.csv``, and each
 sync tag's leave-one-out fixes are compared with its receiver's position refined **without that tag's arrivals**
 (from the other tags its receiver hears, and the prior), their NEES with the two covariances summed.
+
+The tables are made by their own modules: ``sync_tags.csv`` by :mod:`.sync_tags`, ``positions.csv`` by
+:mod:`.refined_positions`, ``offsets.csv`` and ``sync.json`` by :mod:`.clock_tables`; a study's files are
+synchronised by :mod:`.study_sync`.
 """
 
 from __future__ import annotations
@@ -21,20 +25,20 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.spatial import Delaunay
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.breaks import fit_with_breaks, part_shifts
-from sblsim.models.sync.clocks import ClockFit, Geometry, connected, fit_clocks, sync_emissions
-from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, Identifiability, identify
+from sblsim.models.sync.breaks import fit_with_breaks
+from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.clock_parts import part_shifts
+from sblsim.models.sync.clocks import Geometry
+from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.noise import receiver_noise
-from sblsim.models.sync.pings import largest_travel_time
-from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
-from sblsim.models.sync.resolution import resolution_warning
 from sblsim.orchestrator.sync import segments
+from sblsim.orchestrator.sync.clock_tables import _offsets, _summary
 from sblsim.orchestrator.sync.detections import Detections, reset_line
+from sblsim.orchestrator.sync.refined_positions import _identify, _positions
+from sblsim.orchestrator.sync.sync_tags import _sync_tags
 from sblsim.orchestrator.sync.transmitters import match
-from sblsim.orchestrator.telemetry.deployments import assign
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
 MIN_BIN_ARRIVALS = 5
@@ -63,6 +67,16 @@ class SyncOutcome:
     fit: ClockFit = field(repr=False)
     origin: float = 0.0
     positions: pd.DataFrame | None = None
+
+
+def corrected_times(outcome: SyncOutcome, receiver: str, times: Any) -> np.ndarray:
+    """Times logged by ``receiver`` (a synchronised receiver's serial) [s since 1970 UTC on its clock] on the
+    reference receiver's clock (NaN where its clock broke: a time between two of its clock segments, set aside)."""
+    names = outcome.receivers["receiver"].tolist()
+    t = np.asarray(times, float) - outcome.origin
+    fit = outcome.fit
+    j = fit.rows_at(np.full(t.shape, names.index(receiver)), t)  # its clock segment where its clock broke
+    return np.where(j >= 0, t + outcome.origin - fit.offset(np.maximum(j, 0), t), np.nan)
 
 
 def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) -> np.ndarray:
@@ -378,216 +392,6 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
 
 
-def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: np.ndarray,
-               identified: Identifiability, tag_names: list[str]) -> pd.DataFrame:
-    """``positions.csv``: each receiver's refined horizontal position, the table's, the shift and its sigmas; a
-    receiver the sync tags do not determine (``identified``; in the fit at the survey's prior like the others) or
-    not synchronised keeps the table's (``refined`` false, its ``reason``; its sigmas NaN); ``sigma_ratio`` and
-    ``sigma_ratio_without`` its posterior sigma in the array's shape over the survey's, with every sync tag and the
-    worst with one left out (``worst_tag``)."""
-    refined = linked & identified.determined
-    shift = np.where(refined[:, None], fit.shift, 0.0)
-    cov = fit.shift_covariance
-    ratio, without = identified.ratio, identified.ratio_without
-    heard = [tag_names[i] for i in identified.tags] if identified.tags is not None else []
-    worst = np.array([heard[k] if 0 <= k < len(heard) else "" for k in identified.worst], dtype=object)
-    reason = np.where(~linked, "not synchronised", np.where(
-        ~(ratio < identified.threshold),
-        [f"its posterior sigma {r:.2f} of the survey's (needs < {identified.threshold:g})" for r in ratio],
-        np.where(~(without < identified.threshold),
-                 [f"determined only with sync tag {t} (without it {r:.2f} of the survey's, needs < "
-                  f"{identified.threshold:g})"
-                  for t, r in zip(worst, without, strict=True)], "")))
-    return pd.DataFrame({
-        "serial": names, "x_m": positions[:, 0] + shift[:, 0], "y_m": positions[:, 1] + shift[:, 1],
-        "table_x_m": positions[:, 0], "table_y_m": positions[:, 1], "shift_x_m": shift[:, 0],
-        "shift_y_m": shift[:, 1], "shift_m": np.hypot(shift[:, 0], shift[:, 1]),
-        "sigma_x_m": np.where(refined, np.sqrt(cov[:, 0, 0]), np.nan),
-        "sigma_y_m": np.where(refined, np.sqrt(cov[:, 1, 1]), np.nan),
-        "correlation_xy": np.where(refined, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
-        "refined": refined, "reason": np.where(refined, "", reason), "sigma_ratio": ratio,
-        "sigma_ratio_without": without, "worst_tag": worst})
-
-
-def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowness, used, start, width, n_rows: int,
-                 geometry: Geometry | None, site, steady) -> tuple[ClockFit, np.ndarray] | None:
-    """The clocks fitted without sync tag ``i``'s arrivals (the kept arrivals and scales of ``fit``; with
-    ``geometry`` the positions refined from ``fit``'s) and the clock rows still synchronised; None where they
-    cannot be fitted without it."""
-    without = used & (tag != i)
-    still = connected(c[without], emission[without], n_rows, start)
-    loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma, fit.shift, site)
-    try:
-        this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width, keep=fit.kept,
-                          scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
-    except ModelError:
-        return None
-    return this, still
-
-
-def _identify(fit: ClockFit, args: tuple, geometry: Geometry, positions: np.ndarray, names: list[str],
-              tag_names: list[str], linked: np.ndarray, survey_sigma: float
-              ) -> tuple[Identifiability, dict[int, tuple[ClockFit, np.ndarray] | None]]:
-    """The identifiability test of the refined positions (:func:`sblsim.models.sync.identifiability.identify`)
-    on ``fit`` and on its fits with each sync tag heard left out (returned too, by tag, for the leave-one-out).
-
-    Raises
-    ------
-    ModelError
-        No receiver's position determined (a sparse sync array): the refinement refused in one line.
-    """
-    receiver, tag, emission, time, distance, slowness, used, start, width = args
-    rows, site = segments.clock_rows(fit, receiver)
-    ok = used & (rows >= 0)
-    steady = None if len(site) == len(names) else site == start
-    heard = [int(i) for i in np.unique(tag[ok])]
-    fits = {i: _fit_without(i, fit, rows, tag, emission, time, distance, slowness, ok, start, width, len(site),
-                            geometry, site, steady) for i in heard}
-    identified = identify(positions[:, :2], fit.shift_covariance_all, survey_sigma, linked,
-                          [None if f is None else f[0].shift_covariance_all for f in fits.values()])
-    identified = Identifiability(identified.ratio, identified.ratio_without, identified.worst, identified.determined,
-                                 identified.threshold, np.array(heard, np.int64))
-    if not identified.determined.any():
-        worst = np.fmax(identified.ratio, np.nan_to_num(identified.ratio_without, nan=1.0))
-        best = int(np.argmin(np.where(linked, worst, np.inf)))
-        raise ModelError(
-            f"refine positions: the {len(heard)} sync tags heard among {len(names)} receivers determine no "
-            f"receiver's position (the best, {names[best]}, has a posterior sigma {worst[best]:.2f} of the "
-            f"survey's with a sync tag left out; needed: < {MAX_SIGMA_RATIO:g}, i.e. 3 sync tags not on one line "
-            "heard by a receiver with any one left out: 4 or more around the array); allowed: the table's positions "
-            "(without refining them)")
-    return identified, fits
-
-
-def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.ndarray, origin: float
-             ) -> pd.DataFrame:
-    """``offsets.csv``: one row per synchronised receiver (per clock row: ``linked`` (rows,)) and bin; where a
-    receiver's clock broke, its segments' rows each, with ``segment``, ``clock_from`` and ``clock_to``
-    (:func:`~sblsim.orchestrator.sync.segments.segment_columns`)."""
-    rows = []
-    edges = fit.edges + origin
-    site, number = segments.clock_rows(fit, np.zeros(0, np.int64))[1], segments.segment_numbers(fit)
-    order = sorted(np.flatnonzero(linked), key=lambda j: (site[j], number[j]))  # a receiver's segments together
-    for j in order:
-        for k in range(len(edges) - 1):
-            rows.append((names[site[j]], k, edges[k], edges[k + 1], fit.knots[j, k], fit.knot_sigma[j, k],
-                         fit.knots[j, k + 1], fit.knot_sigma[j, k + 1], fit.drift[j, k], fit.drift_sigma[j, k],
-                         int(fit.counts[j, k]), bool(bridged[j, k])))
-    table = pd.DataFrame(rows, columns=["receiver", "bin", "start", "end", "offset_start_s", "offset_start_sigma_s",
-                                        "offset_end_s", "offset_end_sigma_s", "drift", "drift_sigma", "arrivals",
-                                        "bridged"])
-    for key, values in (segments.segment_columns(fit, origin) or {}).items():
-        table[key] = np.repeat(values[order], len(edges) - 1)
-    return table
-
-
-def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
-               positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
-               geometry: Geometry | None = None, clock: np.ndarray | None = None,
-               site: np.ndarray | None = None, fits: dict | None = None,
-               table_sigma: float | None = None) -> pd.DataFrame:
-    """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
-    arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
-    its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
-    arrivals (``truth_x_m``, ``truth_y_m``, its sigma ``truth_sigma_m``; the NEES with the fix's covariance and
-    that position's summed: two estimates from disjoint arrivals), the error against the table beside it
-    (``table_error_m``).
-
-    Each fix is robust and checked (:func:`~sblsim.models.sync.positions.position_emissions`): the statistics are
-    over the trusted fixes (``fixes``); ``fixes_unchecked`` (no redundancy: the arrivals fitted exactly, nothing to
-    check them), ``fixes_failed`` (the overall test failed with a redundancy of 1: an outlier not identifiable) and
-    ``fixes_ambiguous`` (a rejected arrival could be swapped for a kept one) are counted beside them,
-    ``fixes_scaled`` the fixes whose covariance the a-posteriori variance factor scaled, ``arrivals_rejected`` the
-    arrivals the trusted fixes rejected, ``median_redundancy`` theirs. The clock fit's own rejections of the tag's
-    arrivals are not carried into its fixes: that fit saw the tag at its known
-    position, so its rejections would use the position the fixes are checked against.
-
-    Where a receiver's clock broke, ``clock`` (n,) is each arrival's clock row and ``site`` each row's receiver
-    (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row. ``fits``: the fits without
-    each tag already made (:func:`_fit_without`, by tag). ``table_sigma`` [m]: without ``geometry``, the table's
-    horizontal sigma per axis, summed into the NEES's covariance (the survey's stated error)."""
-    dim = positions.shape[1]
-    rows = []
-    c = receiver if clock is None else clock
-    steady = None if site is None or len(site) == len(names) else site == start
-    knot_sigma = segments.receiver_sigmas(fit, len(names))
-    for i, name in enumerate(tag_names):
-        home = tag_home[i]
-        mine = (tag == i) & used & linked[c] & (receiver != home)
-        if mine.sum() < dim + 2:
-            continue
-        this = fit
-        if leave_one_out:
-            got = fits[i] if fits is not None and i in fits else _fit_without(
-                i, fit, c, tag, emission, time, distance, slowness, used, start, width, len(linked), geometry,
-                None if clock is None else site, steady)
-            if got is None:
-                notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
-                continue
-            this, still = got
-            mine &= still[c]
-        rows_e = np.flatnonzero(mine)
-        ems, local = np.unique(emission[rows_e], return_inverse=True)
-        arrival = np.full((len(ems), len(names)), np.nan)
-        arrival[local, receiver[rows_e]] = time[rows_e] - this.offset(c[rows_e], time[rows_e])
-        s = np.full(len(ems), this.slowness if slowness is None else np.nan)
-        if slowness is not None:
-            s = np.bincount(local, slowness[rows_e]) / np.bincount(local)
-        sigma = segments.receiver_values(np.where(np.isfinite(this.scale), this.scale, 1e-3), fit, len(names))
-        known = np.isfinite(knot_sigma)
-        offset_sigma = np.array([np.median(knot_sigma[j][known[j]]) if known[j].any() else 0.0
-                                 for j in range(len(names))])
-        sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
-        where = positions
-        truth_cov = np.zeros((dim, dim))
-        if geometry is None and table_sigma is not None:
-            truth_cov[:2, :2] = table_sigma ** 2 * np.eye(2)
-        if geometry is not None:  # the receivers where the fit without this tag puts them
-            where = positions.copy()
-            where[:, :2] += this.shift
-            truth_cov[:2, :2] = this.shift_covariance[home]
-            ranging = np.nanmedian(s) * np.sqrt(np.trace(this.shift_covariance, axis1=1, axis2=2) / 2)
-            sigma = np.sqrt(sigma ** 2 + ranging ** 2)
-        fixes = position_emissions(arrival, where, sigma, s)
-        ok = fixes.ok
-        if not ok.any():
-            continue
-        truth = where[home]
-        error = fixes.position[ok] - truth
-        error_m = np.linalg.norm(error, axis=1)
-        own_sigma = np.sqrt(np.trace(fixes.covariance[ok], axis1=1, axis2=2))
-        nees = np.einsum("ek,ekl,el->e", error, np.linalg.inv(fixes.covariance[ok] + truth_cov), error)
-        heard = np.flatnonzero(fixes.used[ok].any(axis=0))
-        mean = np.median(fixes.position[ok], axis=0)
-        rows.append({"tag": name, "receiver": names[home], "x_m": truth[0], "y_m": truth[1],
-                     "emissions": len(ems), "fixes": int(ok.sum()), "receivers_used": len(heard),
-                     "median_error_m": float(np.median(error_m)), "median_sigma_m": float(np.median(own_sigma)),
-                     "rms_error_m": float(np.sqrt(np.mean(error_m ** 2))),
-                     "p90_error_m": float(np.percentile(error_m, 90)), "nees_mean": float(np.mean(nees)),
-                     "nees_median": float(np.median(nees)), "median_x_m": mean[0], "median_y_m": mean[1],
-                     "median_position_error_m": float(np.linalg.norm(mean - truth)),
-                     "inside_array": _inside(truth, where[heard]), "leave_one_out": leave_one_out})
-        if geometry is not None:
-            rows[-1].update({"x_m": positions[home, 0], "y_m": positions[home, 1], "truth_x_m": truth[0],
-                             "truth_y_m": truth[1], "truth_sigma_m": float(np.sqrt(np.trace(truth_cov))),
-                             "table_error_m": float(np.median(np.linalg.norm(fixes.position[ok] - positions[home],
-                                                                             axis=1)))})
-        rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
-                         "fixes_failed": int((fixes.status == FAILED).sum()),
-                         "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
-                         "fixes_scaled": int((fixes.variance_factor[ok] > 1).sum()),
-                         "arrivals_rejected": int(fixes.rejected[ok].sum()),
-                         "median_redundancy": float(np.median(fixes.redundancy[ok]))})
-    columns = ["tag", "receiver", "x_m", "y_m", "emissions", "fixes", "receivers_used", "median_error_m",
-               "median_sigma_m", "rms_error_m", "p90_error_m", "nees_mean", "nees_median", "median_x_m", "median_y_m",
-               "median_position_error_m", "inside_array", "leave_one_out"]
-    if geometry is not None:
-        columns += ["truth_x_m", "truth_y_m", "truth_sigma_m", "table_error_m"]
-    columns += ["fixes_unchecked", "fixes_failed", "fixes_ambiguous", "fixes_scaled", "arrivals_rejected",
-                "median_redundancy"]
-    return pd.DataFrame(rows, columns=columns)
-
-
 def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int], dict]:
     """The reader's resets (:attr:`~sblsim.orchestrator.sync.detections.Detections.clock_resets`) by the
     synchronisation's receiver and the clock part each starts (a study's receiver is its serial's deployment)."""
@@ -599,121 +403,4 @@ def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int],
             if (r["receiver"], r["clock_part"]) in named}
 
 
-def _inside(point: np.ndarray, points: np.ndarray) -> bool:
-    """Whether ``point`` is inside the convex hull of ``points`` (horizontally)."""
-    try:
-        return bool(Delaunay(points[:, :2]).find_simplex(point[:2]) >= 0)
-    except Exception:  # fewer than three points, or all on a line
-        return False
-
-
-def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged, residuals,
-             sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections, dim, wall) -> dict[str, Any]:
-    """``sync.json``: the model, per receiver and bin the offset, drift and their sigmas, and the diagnostics."""
-    per_receiver = {}
-    edges = (fit.edges + origin).tolist()
-    for j, name in enumerate(names):
-        mine = receiver == j
-        fitted = mine & used
-        kept = fit.kept & mine
-        entry: dict[str, Any] = {
-            "synchronised": bool(linked[j]), "reference": j == start, "arrivals": int(mine.sum()),
-            "used": int(fitted.sum()), "kept": int(kept.sum()),
-            "rejected_share": float(1 - kept.sum() / fitted.sum()) if fitted.sum() else None,
-            "multipath": int((duplicate & mine).sum()),
-            "sync_tags_heard": sorted({tag_names[i] for i in np.unique(tag[fitted])}),
-        }
-        if linked[j]:
-            r = residuals.loc[residuals["kept"].to_numpy() & mine]
-            entry.update({
-                "noise_scale_s": float(fit.scale[j]),
-                "median_abs_residual_m": float(np.median(np.abs(r["residual_m"]))) if len(r) else None,
-                "median_abs_residual_s": float(np.median(np.abs(r["residual_s"]))) if len(r) else None,
-                "bins_bridged": int(bridged[j].sum()),
-                "offset_s": fit.knots[j].tolist(), "offset_sigma_s": _finite(fit.knot_sigma[j]),
-                "drift": fit.drift[j].tolist(), "drift_sigma": _finite(fit.drift_sigma[j])})
-        per_receiver[name] = entry
-    speed = {"source": speed_source}
-    if speed_source == "given":
-        speed["sound_speed_m_s"] = sound_speed
-    elif speed_source == "estimated":
-        speed["sound_speed_m_s"] = 1.0 / fit.slowness
-        speed["sound_speed_sigma_m_s"] = fit.slowness_sigma / fit.slowness ** 2 if fit.slowness_sigma else None
-    loo = {}
-    if len(sync_tags):
-        inside = sync_tags[sync_tags["inside_array"]]
-        loo = {"median_error_m": float(sync_tags["median_error_m"].median()),
-               "tags": int(len(sync_tags)), "nees_mean_inside": float(inside["nees_mean"].mean())
-               if len(inside) else None,
-               "nees_median_inside": float(inside["nees_median"].median()) if len(inside) else None,
-               "median_sigma_m": float(sync_tags["median_sigma_m"].median()),
-               "fixes": int(sync_tags["fixes"].sum()), "fixes_unchecked": int(sync_tags["fixes_unchecked"].sum()),
-               "fixes_failed": int(sync_tags["fixes_failed"].sum()),
-               "fixes_ambiguous": int(sync_tags["fixes_ambiguous"].sum()),
-               "fix_model": "robust (Student-t IRLS from several starts, then Baarda's data snooping and the overall "
-                            "test at a test size of 0.001: Baarda 1968); a fix without redundancy is unchecked, not "
-                            "counted"}
-    kept = residuals["kept"].to_numpy()
-    return {
-        "model": "piecewise-linear clock offset per receiver, continuous across time bins (drift constant in a bin), "
-                 "the reference receiver fixed, sync-tag emission times unknown; robust IRLS (Student-t, nu=3) then "
-                 "arrivals beyond 4 sigma rejected (Baktoft et al. 2017, Sci. Rep. 7:14294; YAPS's sync model)",
-        "detections": {"file": detections.source, "format": detections.format, "rows": int(len(detections.frame)),
-                       "sync_arrivals": int(len(receiver)), "used": int(used.sum()), "kept": int(kept.sum()),
-                       "multipath": int(duplicate.sum()), "single_receiver": int(single.sum()),
-                       "ignored_columns": detections.ignored_columns},
-        "reference_receiver": names[start], "bin_hours": bin_hours, "bin_edges": edges, "dimensions": dim,
-        "sound_speed": speed, "receivers": per_receiver,
-        "synchronised": [n for j, n in enumerate(names) if linked[j]],
-        "not_synchronised": [n for j, n in enumerate(names) if not linked[j]],
-        "median_abs_residual_m": float(np.median(np.abs(residuals.loc[kept, "residual_m"]))) if kept.any() else None,
-        "sync_tags": loo, "iterations": fit.iterations, "notes": notes, "wall_time_s": wall,
-    }
-
-
-def _finite(values: np.ndarray) -> list[float | None]:
-    return [float(v) if np.isfinite(v) else None for v in values]
-
-
-def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None) -> str | None:
-    """One line where the detections' times are rounded too coarsely for the array
-    (:func:`sblsim.models.sync.resolution.resolution_warning`; ``hydrophones``' ``x``, ``y``, ``z`` [m] give the
-    largest travel time at ``sound_speed`` [m/s], 1,480 m/s where not known), else None."""
-    speed = sound_speed or 1480.0
-    xyz = np.nan_to_num(hydrophones[["x", "y", "z"]].to_numpy(float))  # a depth not given: the horizontal alone
-    return resolution_warning(detections.frame["time"].to_numpy(float), largest_travel_time(xyz, speed), speed,
-                              f"detections {detections.source!r}")
-
-
-def synchronise_study(detections: Detections, deployments, sound_speed: float | None = None,
-                      series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
-                      reference: str | None = None, **options: Any) -> SyncOutcome:
-    """:func:`synchronise` on a study's receivers (a
-    :class:`~sblsim.orchestrator.telemetry.deployments.Deployments`): each detection at its deployment first (the
-    others set aside, counted in ``summary["set_aside"]``), the frame and the deployments in
-    ``summary["receivers_file"]``, and the refined positions (``positions.csv``) in latitude and longitude too where
-    the frame is known; ``options`` as :func:`synchronise` takes them.
-
-    Raises
-    ------
-    ModelError
-        As :func:`synchronise`, or no detection inside a deployment.
-    """
-    assigned = assign(detections, deployments)
-    outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
-                          **options)
-    outcome.summary["set_aside"] = assigned.set_aside
-    outcome.summary["receivers_file"] = deployments.summary()
-    line = rounding_warning(assigned.detections, assigned.hydrophones, outcome.summary["sound_speed"].get(
-        "sound_speed_m_s"))
-    if line:  # times rounded so coarsely that the clocks and every position from them are poor
-        outcome.summary.setdefault("warnings", []).append(line)
-    frame = deployments.frame
-    if outcome.positions is not None and frame is not None:
-        outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),
-                                                                             outcome.positions["y_m"].to_numpy())
-    return outcome
-
-
-__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "rounding_warning", "synchronise",
-           "synchronise_study"]
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "corrected_times", "synchronise"]

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from sblsim.models.sync.clocks import ClockFit
+from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.orchestrator.io.times import iso_utc
 
 

@@ -37,8 +37,10 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
-from sblsim.orchestrator.sync.run import rounding_warning, synchronise
+from sblsim.orchestrator.sync.run import synchronise
+from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.transmitters import match
 from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
 from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
@@ -71,7 +73,7 @@ class StudyOutcome:
     summary : dict
         ``study.json``.
     outcomes : dict
-        Each tracked tag's :class:`~sblsim.orchestrator.tracks.track.TrackOutcome`, by its folder's name.
+        Each tracked tag's :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, by its folder's name.
     matrices : dict
         Each tag's :class:`~sblsim.orchestrator.sync.toa.ToaOutcome`, by its folder's name.
     sync : SyncOutcome or None
@@ -91,14 +93,6 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
             series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
     """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
     synchronisation made here (or None)."""
-    from sblsim.orchestrator.sync.toa import (
-        logged_clocks,
-        offsets_clocks,
-        read_clocks,
-        read_positions,
-        with_positions,
-    )
-
     table = assigned.hydrophones
     if sync_dir is not None:
         clocks = read_clocks(sync_dir)
@@ -339,7 +333,7 @@ def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
 def _write_matrix(matrix, folder: Path, notes: list[str]) -> None:
     """A tag's ``toa.txt`` (with its depth per ping where the sensor gives one and the receivers are in 3-D),
     ``receivers.csv``, ``pings.csv`` and ``toa.json``."""
-    from sblsim.orchestrator.sync.toa import sensor_depth, write_matrix
+    from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 
     folder.mkdir(parents=True, exist_ok=True)
     depth, note = sensor_depth(matrix)

@@ -44,7 +44,7 @@ TAG_COLUMNS = ("tag", "status", "reason", "pings", "set_aside", "positioned", "f
 @dataclass
 class TagsOutcome:
     """What :func:`track_tags` returns: ``table`` (``tags.csv``: :data:`TAG_COLUMNS`, one row per tag, in the
-    files' order) and ``outcomes`` (tag name → its :class:`~sblsim.orchestrator.tracks.track.TrackOutcome`, the
+    files' order) and ``outcomes`` (tag name → its :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, the
     tracked tags only)."""
 
     table: Any  # pandas.DataFrame
@@ -106,7 +106,7 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
     """Track each job ``(name, toa_path, receivers_path, options)`` (:func:`track_tag`, each with its own options) in
     worker processes (``workers``, default the CPU count; 1: one after another in this process) or on a Dask
     scheduler's workers; ``ended(name, result)`` called as each ends. Returns name → the
-    :class:`~sblsim.orchestrator.tracks.track.TrackOutcome`, or the one line of its refusal."""
+    :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, or the one line of its refusal."""
     results: dict[str, Any] = {}
 
     def done(name: str, result) -> None:

@@ -2,12 +2,13 @@
 the sound speed and the water, the motion model, the ping type, the tag's depth and the receivers' survey error, the
 receivers' CRS and the time origin, each refused in one line naming the argument as the caller spells it, its value
 and the allowed range; returned as :func:`~sblsim.orchestrator.tracks.track.track`'s keyword arguments
-(:func:`toa_options`).
+(:func:`toa_options`). The ping type's check is ``sblsim toa``'s too (:func:`ping_type_arguments`' ``stated``).
 """
 
 from __future__ import annotations
 
 import inspect
+import os
 from pathlib import Path
 from typing import Any, Callable
 
@@ -121,17 +122,26 @@ def medium_arguments(sound_speed: Any, sound_speed_file: Any, temperature: Any, 
     return speed, series, temperature, salinity, motion, acceleration_psd
 
 
-def burst_interval_argument(value: Any, where: str) -> tuple[float, float] | None:
-    """A random burst interval: None, ``"MIN:MAX"`` [s] or a pair of numbers, 0.1 ≤ MIN ≤ MAX ≤ 86,400 s."""
+def burst_interval_argument(value: Any, where: str, example: str = "20:40", any_pair: bool = False
+                            ) -> tuple[float, float] | None:
+    """A random burst interval: None, ``"MIN:MAX"`` [s] or a pair of numbers, 0.1 ≤ MIN ≤ MAX ≤ 86,400 s.
+
+    ``example`` is the refusal's example interval [s] (as the caller's help gives one); with ``any_pair`` the pair
+    may be any two items :class:`float` reads (a refusal then names the value itself, whatever its type).
+
+    Raises
+    ------
+    ConfigError
+        A value that is not such an interval (one line naming ``where``, the value and the allowed range).
+    """
     if value is None:
         return None
-    allowed = f"MIN:MAX [s] with {BURST_LIMITS[0]:g} <= MIN <= MAX <= {BURST_LIMITS[1]:g}, e.g. 20:40"
-    if isinstance(value, str):
-        parts = value.split(":")
+    allowed = f"MIN:MAX [s] with {BURST_LIMITS[0]:g} <= MIN <= MAX <= {BURST_LIMITS[1]:g}, e.g. {example}"
+    if isinstance(value, str) or any_pair:
         try:
-            pair = tuple(float(p) for p in parts)
-        except ValueError:
-            raise ConfigError(f"{where}: {value[:40]!r}; allowed: {allowed}") from None
+            pair = tuple(float(p) for p in (value.split(":") if isinstance(value, str) else value))
+        except (TypeError, ValueError):
+            raise ConfigError(f"{where}: {str(value)[:40]!r}; allowed: {allowed}") from None
     elif isinstance(value, (list, tuple)):
         pair = tuple(value)
     else:
@@ -142,18 +152,47 @@ def burst_interval_argument(value: Any, where: str) -> tuple[float, float] | Non
     return float(pair[0]), float(pair[1])
 
 
-def ping_type_arguments(ping_type: Any, burst_interval: Any, burst_sequence: Any, names: tuple[str, str, str]
+def burst_sequence_argument(value: Any, where: str, stated: bool = False) -> Path | None:
+    """A pseudo-random tag's intervals file: None, a text or a path (:func:`path_argument`; with ``stated`` any
+    text or path, refused only for its type, as ``sblsim toa`` takes it).
+
+    Raises
+    ------
+    ConfigError
+        A value that is not a file (one line naming ``where``).
+    """
+    if not stated:
+        return path_argument(value, where)
+    if value is not None and not isinstance(value, (str, os.PathLike)):
+        raise ConfigError(f"{where}: {type(value).__name__}; allowed: a file (a text or a path)")
+    return None if value is None else Path(value)
+
+
+def ping_type_arguments(ping_type: Any, burst_interval: Any, burst_sequence: Any, names: tuple[str, str, str], *,
+                        stated: bool = False, example: str = "20:40"
                         ) -> tuple[str | None, tuple[float, float] | None, Path | None]:
-    """The ping type's arguments checked together (``names``: how the three are called where they were given)."""
+    """The ping type's arguments checked together (``names``: how the three are called where they were given):
+    the tracking's (a burst interval or sequence may come without a ping type: the type is then inferred), or with
+    ``stated`` ``sblsim toa``'s (a times-of-arrival matrix's echo limit is its stated interval: a burst interval or
+    sequence only with its ping type named, :func:`burst_interval_argument`'s ``any_pair``, the refusals worded as
+    that command words them); ``example`` the burst interval's refusal's example [s].
+
+    Raises
+    ------
+    ConfigError
+        A ping type not known, a burst interval or sequence refused or given with another ping type, pbi without
+        its sequence (one line).
+    """
     if ping_type is not None and ping_type not in PING_TYPE_NAMES:
         raise ConfigError(f"{names[0]}: {str(ping_type)[:40]!r}; allowed: {', '.join(PING_TYPE_NAMES)}")
-    interval = burst_interval_argument(burst_interval, names[1])
-    sequence = path_argument(burst_sequence, names[2])
-    if interval is not None and ping_type not in (None, "rbi"):
-        raise ConfigError(f"{names[1]}: only with a random burst interval ({names[0]} rbi)")
-    if sequence is not None and ping_type not in (None, "pbi"):
-        raise ConfigError(f"{names[2]}: only with a pseudo-random burst interval ({names[0]} pbi)")
-    if interval is not None and sequence is not None:
+    interval = burst_interval_argument(burst_interval, names[1], example, any_pair=stated)
+    sequence = burst_sequence_argument(burst_sequence, names[2], stated)
+    for given, name, kind, what in ((interval, names[1], "rbi", "a random burst interval"),
+                                    (sequence, names[2], "pbi", "a pseudo-random burst interval")):
+        if given is not None and ping_type != kind and (stated or ping_type is not None):
+            raise ConfigError(f"{name}: only with {names[0]} {kind} ({what})" if stated
+                              else f"{name}: only with {what} ({names[0]} {kind})")
+    if interval is not None and sequence is not None:  # (stated: one of them refused above)
         raise ConfigError(f"{names[1]}: not with {names[2]} (one ping type: rbi or pbi)")
     if ping_type == "pbi" and sequence is None:
         raise ConfigError(f"{names[0]} pbi: needs {names[2]} (the tag's intervals [s], one per row)")
@@ -169,7 +208,8 @@ def geometry_arguments(tag_depth: Any, depth_sigma: Any, survey_sigma: Any, name
     ConfigError
         A value outside its range (one line).
     """
-    from sblsim.orchestrator.tracks.toa import DEPTH_RANGE, SURVEY_SIGMA_RANGE
+    from sblsim.orchestrator.tracks.receivers_file import SURVEY_SIGMA_RANGE
+    from sblsim.orchestrator.tracks.toa import DEPTH_RANGE
 
     return {"fixed_depth": None if tag_depth is None else real_argument(tag_depth, names[0], *DEPTH_RANGE, "m"),
             "depth_sigma": DEPTH_SIGMA if depth_sigma is None else real_argument(depth_sigma, names[1], 0.0, 100.0,

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from sblsim.orchestrator.io.output import staged_directory
-from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, TrackOutcome
+from sblsim.orchestrator.tracks.outcome import ESTIMATOR_NAMES, TrackOutcome
 
 
 def scale_bar(ax, extent: float) -> None:

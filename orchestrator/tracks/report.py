@@ -9,8 +9,8 @@ from typing import Any, Sequence
 
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.tracks.depth import prior_line
+from sblsim.orchestrator.tracks.outcome import ESTIMATOR_NAMES, TrackOutcome
 from sblsim.orchestrator.tracks.speed import replaced_line
-from sblsim.orchestrator.tracks.track import ESTIMATOR_NAMES, TrackOutcome
 from sblsim.orchestrator.tracks.tracker import noise_line
 
 

@@ -120,10 +120,11 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                       sigma_toa: float | np.ndarray = SIGMA_TOA, temperature_path: Path | None = None,
                       water: Water | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
-    given; else a measured series (``series_path``, :func:`~sblsim.orchestrator.tracks.toa.read_sound_speed_series`)
-    whose median is the reference speed and to which each ping's arrivals are rescaled
-    (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`); else calibrated from the pings
-    (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); where its standard error is above
+    given; else a measured series (``series_path``,
+    :func:`~sblsim.orchestrator.tracks.time_series.read_sound_speed_series`) whose median is the reference speed and
+    to which each ping's arrivals are rescaled (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`);
+    else calibrated from the pings (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); where its
+    standard error is above
     :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` (the array determines it only weakly), combined by inverse
     variance with the fallback and its spread (:func:`~sblsim.models.tracking.sound_speed.fallback_prior`:
     ``temperature`` [°C] and ``salinity`` (practical), else the stated default; a calibration 5.6 m/s uncertain is far
@@ -160,7 +161,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
         return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | speed_check(
             toa, positions, sound_speed, depth, depth_sigma, sigma_toa)
     if series_path is not None:
-        from sblsim.orchestrator.tracks.toa import read_sound_speed_series
+        from sblsim.orchestrator.tracks.time_series import read_sound_speed_series
 
         return _series_speed(toa, positions, read_sound_speed_series(series_path, time_origin), series_path,
                              "sound speed file", sigma_toa)

@@ -4,16 +4,19 @@ written to a folder (:mod:`.outputs`).
 
 The track is the robust smoother's rows (``smooth``: every ping from the tracker's start), else the causal EKF's;
 the other estimators are kept beside it. Before tracking, the array may be thinned (``receivers_kept``: the other
-receivers' columns not used) and a share of the detections removed at random (``drop_detections``, seeded); the
-ping type and the steps between the pings are found (:func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`), the
-motion model's noise estimated (:func:`~sblsim.orchestrator.tracks.tracker.motion_model`), the sound speed taken
-(:mod:`.speed`), and each estimate checked against its own data (the ``quality`` column).
+receivers' columns not used) and a share of the detections removed at random (``drop_detections``, seeded:
+:mod:`.thinning`); the ping type and the steps between the pings are found
+(:func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`), the motion model's noise estimated
+(:func:`~sblsim.orchestrator.tracks.tracker.motion_model`), the sound speed taken
+(:mod:`.speed`), and each estimate checked against its own data (the ``quality`` column). A stationary tag's one
+position is :mod:`.stationary`'s, the consider terms' pieces :mod:`.consider`'s, the check for two tags under one
+id :mod:`.two_tags`' and the outcome's shape :mod:`.outcome`'s.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -28,10 +31,11 @@ from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.depth import check_given_depth
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.receivers import receiver_residuals
-from sblsim.models.tracking.twins import MAX_SPEED, two_places
+from sblsim.models.tracking.strays import SET_ASIDE_REASON
 from sblsim.orchestrator.io.frames import frame_summary
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
+from sblsim.orchestrator.tracks.consider import _plus, survey_sigmas
 from sblsim.orchestrator.tracks.depth import (
     check_water_depth,
     depth_term,
@@ -40,22 +44,20 @@ from sblsim.orchestrator.tracks.depth import (
     tag_depth,
     undetermined_depth,
 )
+from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
+from sblsim.orchestrator.tracks.stationary import stationary_consider, stationary_track
+from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
 from sblsim.orchestrator.tracks.tracker import (
     DEPTH_SIGMA,
-    SIGMA_TOA,
     motion_model,
     ping_schedule,
     set_aside,
     toa_noise,
     tracker_settings,
 )
-
-#: The estimators, in the order of the outputs, and their names in words (the console, the figure).
-ESTIMATOR_NAMES = {"stationary": "stationary fix", "robust": "robust smoother", "rts": "RTS smoother",
-                   "ekf": "EKF (causal)", "ekf-seq": "sequential EKF (causal)", "ukf": "UKF (causal)",
-                   "fix": "single-ping fix", "reference": "reference"}
+from sblsim.orchestrator.tracks.two_tags import _one_tag
 
 
 def _with_reason(reason: pd.Series, name: str) -> pd.Series:
@@ -69,15 +71,8 @@ def _reason_counts(reason: pd.Series) -> dict[str, int]:
     return {str(k): int(v) for k, v in named.value_counts().items()}
 
 
-ESTIMATORS = ("stationary", "robust", "rts", "ekf", "ekf-seq", "ukf", "fix")
-
-
-#: The keys of ``score.json`` for the track (the issue's names), before the further ones.
-SCORE_KEYS = ("n_pings", "n_fixed", "mean_m", "median_m", "rms_m", "p90_m", "p95_m", "nees", "lag_s")
-
-
 #: The motion models of ``--motion``: a moving tag (the filters and smoothers), or a stationary one (one position for
-#: all pings, :func:`stationary_track`).
+#: all pings, :func:`~sblsim.orchestrator.tracks.stationary.stationary_track`).
 MOTIONS = ("moving", "stationary")
 
 
@@ -87,144 +82,6 @@ MAX_DROP = 0.99
 
 #: The largest truth error per axis ``--truth-sigma`` takes [m].
 MAX_TRUTH_SIGMA = 100.0
-
-
-@dataclass
-class TrackOutcome:
-    """The outcome of :func:`track`: ``track`` (the track's rows, ``track.csv``), ``estimates`` (every estimator's
-    rows, ``estimates.csv``), ``errors`` (``errors.csv``, None without a truth), ``score`` (``score.json``, None
-    without a truth), ``summary`` (how the run went, ``summary.json``), ``bound`` (``bound.csv``, None without a
-    truth), ``truth`` (the truth track as read, rows ``t, x, y[, z]``, for the figure; None without one),
-    ``array`` (the receivers used: their names and positions (k, dim) [m], for the figure) and ``set_aside`` (the
-    rows the stated interval sets aside as no pings, ``set_aside.csv``; None where no interval is stated)."""
-
-    track: Any  # pandas.DataFrame
-    estimates: Any  # pandas.DataFrame
-    errors: Any  # pandas.DataFrame or None
-    score: dict[str, Any] | None
-    summary: dict[str, Any]
-    bound: Any = None  # pandas.DataFrame or None (bound.csv)
-    truth: np.ndarray | None = None
-    array: tuple[list[str], np.ndarray] | None = None
-    set_aside: Any = None  # pandas.DataFrame or None (set_aside.csv)
-
-
-def _usable(toa_matrix, receivers, kept: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """The TOA columns matched to the receivers (by the header's names, else by order), those without a position,
-    never heard or (``kept`` given) not kept dropped: times (m, k), positions (k, dim), names (k)."""
-    if toa_matrix.names is not None:
-        missing = [n for n in toa_matrix.names if n not in receivers.names]
-        if missing:
-            raise ModelError(f"toa: the receiver {missing[0]!r} of the header is not in the receivers file")
-        order = [receivers.names.index(n) for n in toa_matrix.names]
-    else:
-        if toa_matrix.toa.shape[1] != len(receivers.names):
-            raise ModelError(f"toa: {toa_matrix.toa.shape[1]} columns and {len(receivers.names)} receivers; allowed: "
-                             "one column per receiver, in the receivers file's order (or a header of their names)")
-        order = list(range(len(receivers.names)))
-    positions = receivers.positions[order]
-    keep = np.isfinite(positions).all(axis=1) & np.isfinite(toa_matrix.toa).any(axis=0)
-    if kept is not None:
-        unknown = [n for n in kept if n not in receivers.names]
-        if unknown:
-            shown = ", ".join(receivers.names[:40]) + (", ..." if len(receivers.names) > 40 else "")
-            raise ModelError(f"receivers_kept: {unknown[0][:40]!r} is not a receiver; allowed: names of the "
-                             f"receivers file ({shown})")
-        keep &= np.array([receivers.names[k] in kept for k in order])
-    if keep.sum() < positions.shape[1] + 1:
-        raise ModelError(f"receivers: {int(keep.sum())} receivers with a position heard a ping" +
-                         (" among those kept" if kept is not None else "") +
-                         f"; allowed: at least {positions.shape[1] + 1}")
-    return toa_matrix.toa[:, keep], positions[keep], [receivers.names[k] for k, ok in zip(order, keep) if ok]
-
-
-def drop_detections(toa: np.ndarray, share: float, seed: int) -> tuple[np.ndarray, int]:
-    """``toa`` (m, n) [s] with each detection removed (NaN) with probability ``share``, drawn by
-    ``numpy.random.default_rng(seed)`` (one uniform number per cell, heard or not); returns the matrix and the
-    number of detections removed."""
-    if share <= 0:
-        return toa, 0
-    gone = np.isfinite(toa) & (np.random.default_rng(seed).random(toa.shape) < share)
-    return np.where(gone, np.nan, toa), int(gone.sum())
-
-
-def _plus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
-    """Two terms of a reported covariance summed, either None (absent)."""
-    return b if a is None else a if b is None else a + b
-
-
-def survey_sigmas(receivers, names: Sequence[str], one: float | None) -> np.ndarray | None:
-    """Each used receiver's survey error [m] (len(names),): its ``sigma_m`` in the receivers file, else ``one``
-    (one value for the receivers without), else 0; None where none is given (the positions taken as exact)."""
-    given = np.full(len(names), np.nan) if receivers.sigma is None else \
-        receivers.sigma[[receivers.names.index(n) for n in names]]
-    if one is not None:
-        given = np.where(np.isfinite(given), given, one)
-    return None if not np.isfinite(given).any() else np.nan_to_num(given)
-
-
-def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray,
-                     sigma_toa: float | np.ndarray = SIGMA_TOA):
-    """A stationary tag's pooled fix (:func:`~sblsim.models.tracking.stationary.stationary_fix`) from the median of
-    its single-ping fixes ``fixes`` (m, dim) [m], else the receivers' centroid; ``sigma_toa`` the timing noise [s]
-    (one, or each receiver's).
-
-    Raises
-    ------
-    ModelError
-        Too few receivers heard it (one line).
-    """
-    from sblsim.models.tracking.stationary import stationary_fix
-
-    finite = np.isfinite(fixes).all(axis=1)
-    start = np.median(fixes[finite], axis=0) if finite.any() else positions.mean(axis=0)
-    return stationary_fix(toa, positions, c, sigma_toa, start)
-
-
-def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled, survey: np.ndarray | None,
-                        speed_sigma: float | None, sigma_toa: float | np.ndarray = SIGMA_TOA,
-                        clock_sigma: np.ndarray | None = None) -> np.ndarray | None:
-    """A stationary tag's pooled position's consider covariance (dim, dim) [m²] of the errors pooling does not
-    average: the receivers' survey ``survey`` (n,) [m per axis], the sound speed's ``speed_sigma`` [m/s] and the
-    receivers' clock offsets' ``clock_sigma`` (n,) [s] (a synchronisation's own uncertainty of each receiver's offset,
-    NaN where not known: taken as 0), each a constant bias of one receiver's arrivals
-    (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`); None where none is known."""
-    from sblsim.models.tracking.stationary import bias_sensitivity
-
-    clock = None if clock_sigma is None else np.nan_to_num(np.asarray(clock_sigma, float), nan=0.0)
-    if survey is None and not speed_sigma and (clock is None or not clock.any()):
-        return None
-    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
-    B = np.zeros((len(positions), len(positions)))
-    if survey is not None:  # a still tag's range to receiver i is off by u_i · δr_i, of variance σ_i² (|u_i| = 1)
-        B += np.diag(np.asarray(survey, float) ** 2 / c**2)
-    if clock is not None:  # receiver i's arrivals all off by its offset's error, independent between receivers
-        B += np.diag(clock**2)
-    if speed_sigma:  # the travel time ρ_i / c off by −ρ_i δc / c² at every receiver at once
-        rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
-        B += float(speed_sigma) ** 2 * np.outer(rho, rho) / c**4
-    return S @ B @ S.T
-
-
-def _one_tag(toa_path: Path, fixes: np.ndarray, emissions: np.ndarray, covariances: np.ndarray,
-             trusted: np.ndarray) -> None:
-    """Refuse a times-of-arrival matrix whose trusted single-ping fixes jump between two places as no animal moves:
-    two tags under one transmitter id (:func:`~sblsim.models.tracking.twins.two_places`), named by the file's stem.
-
-    Raises
-    ------
-    ModelError
-        One line naming the transmitter, the two places, the jumps and what is allowed.
-    """
-    found = two_places(fixes[trusted], emissions[trusted], covariances[trusted])
-    if found is None:
-        return
-    (x0, y0), (x1, y1) = found.centres
-    raise ModelError(f"transmitter {Path(toa_path).stem}: looks like two tags, at ({x0:.0f}, {y0:.0f}) m and "
-                     f"({x1:.0f}, {y1:.0f}) m, {found.separation:.0f} m apart ({found.shares[0]:.0%} and "
-                     f"{found.shares[1]:.0%} of {found.fixes} trusted fixes): {found.jumps} of {found.steps} steps "
-                     f"between consecutive fixes are faster than {MAX_SPEED:g} m/s; allowed: one tag's pings (two "
-                     "tags sharing an id: split its detections by place or by receiver)")
 
 
 def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, reference_path: Path | None = None,
@@ -241,14 +98,15 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
-    ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as :func:`survey_sigmas` takes
-    ``survey_sigma``; ``truth_sigma`` [m] the truth's own error per horizontal axis in the NEES (:func:`score`);
+    ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as
+    :func:`~sblsim.orchestrator.tracks.consider.survey_sigmas` takes ``survey_sigma``; ``truth_sigma`` [m] the truth's
+    own error per horizontal axis in the NEES (:func:`~sblsim.orchestrator.tracks.scoring.score`);
     ``ping_type``, ``burst_interval`` as :func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`,
     ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
     (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
     [m²/s³] (None: estimated from the pings by EM, :mod:`sblsim.models.tracking.motion_noise`); ``crs`` and ``frame``
-    as :func:`~sblsim.orchestrator.tracks.toa.read_receivers` takes them (receivers with a CRS: every row gains
-    ``lat``, ``lon`` [° WGS 84], a truth may be in latitude and longitude); ``time_origin`` [s since 1970 UTC] the
+    as :func:`~sblsim.orchestrator.tracks.receivers_file.read_receivers` takes them (receivers with a CRS: every row
+    gains ``lat``, ``lon`` [° WGS 84], a truth may be in latitude and longitude); ``time_origin`` [s since 1970 UTC] the
     UTC time of the TOA file's zero (every row gains ``epoch_s`` and ``time_utc``, a truth or a sound-speed series
     may be in absolute times); ``other_filters`` False leaves out the causal filters the track does not need (the
     sequential EKF and the UKF, run beside for comparison: half the time of a track); ``toa_sigma`` [s] the timing
@@ -271,7 +129,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     from sblsim.models.tracking.smoother_covariance import consider_covariance
     from sblsim.models.tracking.stationary import PERMUTATIONS
     from sblsim.models.tracking.stationary import moved as tag_moved
-    from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
+    from sblsim.orchestrator.tracks.receivers_file import read_receivers
+    from sblsim.orchestrator.tracks.time_series import read_track
+    from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_toa
 
     start = time.perf_counter()
     matrix = read_toa(toa_path)
@@ -482,7 +342,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 frame.loc[at, [k for k in frame.columns if k not in ("estimator", "ping")]] = np.nan
                 frame.loc[at, "receivers_heard"] = 0
                 frame.loc[at, "quality"] = "flagged"
-                frame.loc[at, "quality_reason"] = ps.SET_ASIDE_REASON
+                frame.loc[at, "quality_reason"] = SET_ASIDE_REASON
                 frame["receivers_heard"] = frame["receivers_heard"].astype(int)
                 flagged[estimator] = int((frame["quality"] == "flagged").sum())
     estimates = pd.concat(frames.values(), ignore_index=True)
@@ -542,7 +402,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                        **({} if err3 is None else {"error_3d_m": err3})}))
 
         for estimator, frame in frames.items():
-            kept = (frame["quality_reason"] != ps.SET_ASIDE_REASON).to_numpy()  # a row set aside is no estimate
+            kept = (frame["quality_reason"] != SET_ASIDE_REASON).to_numpy()  # a row set aside is no estimate
             scored(estimator, frame["ping"].to_numpy()[kept], frame["time"].to_numpy()[kept],
                    frame[columns].to_numpy()[kept], covariances[estimator][kept], frame["quality"].to_numpy()[kept])
         if reference is not None:
@@ -578,8 +438,7 @@ def _set_aside_table(toa: np.ndarray, stray: np.ndarray, names: list[str], time_
     heard = np.isfinite(toa[rows])
     return pd.DataFrame(table | {"receivers_heard": heard.sum(axis=1),
                                  "heard": [";".join(n for n, h in zip(names, row) if h) for row in heard],
-                                 "reason": ps.SET_ASIDE_REASON})
+                                 "reason": SET_ASIDE_REASON})
 
 
-__all__ = ["ESTIMATORS", "ESTIMATOR_NAMES", "MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "SCORE_KEYS", "TrackOutcome",
-           "drop_detections", "stationary_track", "survey_sigmas", "track"]
+__all__ = ["MAX_DROP", "MAX_TRUTH_SIGMA", "MOTIONS", "track"]

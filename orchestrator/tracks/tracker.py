@@ -12,6 +12,8 @@ import numpy as np
 
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
+from sblsim.models.tracking.ping_type import infer_ping_type
+from sblsim.models.tracking.strays import SET_ASIDE_REASON, check_strays, stray_rows
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
 #: by their median absolute deviation, 0.15 ms by their standard deviation), where nothing else is known: neither
@@ -92,7 +94,7 @@ def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: s
     ``rbi``, ``pbi``), else the one the first arrivals' spacing shows (``rbi`` when ``burst_interval`` (min, max)
     [s] is given, ``pbi`` when ``burst_sequence`` (the intervals [s]) is), and what was seen of the spacing."""
     crossing = ps.crossing_time(positions, settings.sound_speed)
-    seen = ps.infer_ping_type(toa, crossing)
+    seen = infer_ping_type(toa, crossing)
     kind = ping_type or ("pbi" if burst_sequence is not None else "rbi" if burst_interval is not None else seen.kind)
     source = "given" if (ping_type or burst_interval is not None or burst_sequence is not None) else "inferred"
     interval = settings.interval if kind == "sbi" else float(np.mean(burst_interval)) if burst_interval else \
@@ -107,11 +109,11 @@ def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_inte
               burst_sequence: np.ndarray | None = None, force: bool = False, option: str = "--force-interval"
               ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], str | None]:
     """The rows of ``toa`` (m, n) [s] that cannot be pings of the stated schedule, set aside
-    (:func:`~sblsim.models.tracking.schedule.stray_rows`): a random interval's min (``burst_interval`` (min, max)
+    (:func:`~sblsim.models.tracking.strays.stray_rows`): a random interval's min (``burst_interval`` (min, max)
     [s]) or a pseudo-random sequence's least (``burst_sequence`` [s]), at the crossing time of the receivers
     ``positions`` (n, dim) [m] at ``fastest`` [m/s], the fastest sound speed allowed (the shortest crossing: a row
     kept here is kept by the schedule at any speed). A stated interval the rows contradict as a whole is refused
-    (:func:`~sblsim.models.tracking.schedule.check_strays`), or with ``force`` taken and said.
+    (:func:`~sblsim.models.tracking.strays.check_strays`), or with ``force`` taken and said.
 
     Returns
     -------
@@ -137,13 +139,13 @@ def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_inte
     else:
         return toa, stray, {"shortest_s": None, "rows": [], "count": 0, "forced": False}, None
     crossing = ps.crossing_time(positions, fastest)
-    stray = ps.stray_rows(toa, shortest, crossing)
-    warning = ps.check_strays(toa, stray, stated, shortest, force, option)
+    stray = stray_rows(toa, shortest, crossing)
+    warning = check_strays(toa, stray, stated, shortest, force, option)
     out = toa.copy()
     out[stray] = np.nan
     rows = np.flatnonzero(stray)
     return out, stray, {"shortest_s": shortest, "rows": [int(k) for k in rows], "count": int(len(rows)),
-                        "forced": warning is not None, "reason": ps.SET_ASIDE_REASON}, warning
+                        "forced": warning is not None, "reason": SET_ASIDE_REASON}, warning
 
 
 def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fixes, acceleration_psd: float | None):

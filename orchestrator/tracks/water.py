@@ -22,7 +22,8 @@ from sblsim.models.tracking.sound_speed import TEMPERATURE_RANGE
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.sync.cells import named, numbers, read_text, shown_header, text_table
-from sblsim.orchestrator.tracks.toa import ABSOLUTE_TIME_NAMES, MAX_TIME
+from sblsim.orchestrator.tracks.input_rows import MAX_TIME
+from sblsim.orchestrator.tracks.time_series import ABSOLUTE_TIME_NAMES
 
 #: The largest temperature file read [bytes] and the most rows: a logger every 30 s for a year is 1.05 million rows.
 MAX_TEMPERATURE_BYTES = 64 * 2**20

@@ -11,12 +11,14 @@ from __future__ import annotations
 import re
 
 from sblsim.fmus.codegen import C_DIR, model_record, write_sources
+from sblsim.fmus.compiled_metrics import metrics_sizes, system_bound_sizes
 from sblsim.fmus.contract import CONTRACT, contract_header, contract_tables
-from sblsim.fmus.native import VECTORS, load, metrics_sizes, system_bound_sizes
+from sblsim.fmus.native import VECTORS, load
 from sblsim.models import MODELS
-from sblsim.models.bound import ERROR_MOTION, FIXED, bound_step
+from sblsim.models.bound import FIXED, bound_step
 from sblsim.models.columns import LANE_METRIC_INPUTS
 from sblsim.models.declarations import SEED_NAMES
+from sblsim.models.error_bound import ERROR_MOTION
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.metrics import METRIC_INPUTS, RUN_METRICS
 

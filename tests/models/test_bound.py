@@ -1,4 +1,4 @@
-"""The accuracy limit (models/bound.py) against independent computations.
+"""The accuracy limit (models/bound.py, error_bound.py, fisher.py) against independent computations.
 
 * Linear-Gaussian case: with the measurement Jacobians fixed along a given
   path, the system is linear and Gaussian, and the PCRB recursion must equal
@@ -26,7 +26,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
 
-from sblsim.models.bound import effective_range_variance, fix_information, horizontal_std, pcrb, pcrb_inputs
+from sblsim.models.bound import effective_range_variance, pcrb, pcrb_inputs
+from sblsim.models.fisher import fix_information, horizontal_std
 from tests.models.test_receiver_filterpy import phi, white_noise_q
 
 EPS = 1e-6
@@ -194,11 +195,11 @@ def np_error_range(position, beacon, arm, errors, clock):
 
 
 def test_the_bound_with_error_states_equals_an_augmented_kalman_filter_and_the_plain_bound_without_them():
-    """The ranging bound with error states (models/bound.py error_pcrb) against FilterPy's KalmanFilter with the
+    """The ranging bound with error states (models/error_bound.py error_pcrb) against FilterPy's KalmanFilter with the
     augmented state (a Gauss-Markov GPS error, the clock's offset and drift, a constant attitude error, the offset's
     random step of an inverted LBL's ping jitter at each new ping), its range row by central differences of the
     numpy range; with every error prior 0 it is the plain bound bit for bit."""
-    from sblsim.models.bound import ERROR_FIXED, error_pcrb
+    from sblsim.models.error_bound import ERROR_FIXED, error_pcrb
 
     truth, slot, received, beacons, arms, fixed = case()
     n, b = slot.shape
@@ -246,8 +247,8 @@ def test_the_bound_with_error_states_equals_an_augmented_kalman_filter_and_the_p
 def test_the_compiled_bound_with_error_states_is_the_reference_one():
     """The ranging interface's library steps the bound with error states in C (the runs with such errors);
     casadi's virtual machine is the reference."""
-    from sblsim.fmus import native
-    from sblsim.models.bound import ERROR_FIXED, error_pcrb
+    from sblsim.fmus import compiled_metrics
+    from sblsim.models.error_bound import ERROR_FIXED, error_pcrb
 
     truth, slot, received, beacons, arms, fixed = case(seed=8, n=200)
     b = slot.shape[1]
@@ -256,7 +257,8 @@ def test_the_compiled_bound_with_error_states_is_the_reference_one():
     new_ping = np.random.default_rng(9).random(slot.shape) < 0.3
     columns = np.stack([np.broadcast_to({**fixed, **errors}[k], (b,)) for k in ERROR_FIXED], axis=1)
     steps = np.concatenate([truth, beacons, arms, slot[..., None], received[..., None], new_ping[..., None]], axis=-1)
-    np.testing.assert_allclose(native.system_pcrb(4, columns, steps), error_pcrb(columns, steps), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(compiled_metrics.system_pcrb(4, columns, steps), error_pcrb(columns, steps), rtol=1e-12,
+                               atol=0)
 
 
 def test_range_direction_fisher_information_through_the_generic_map_function():
@@ -266,7 +268,7 @@ def test_range_direction_fisher_information_through_the_generic_map_function():
     straight below the transceiver."""
     import casadi as ca
 
-    from sblsim.models.bound import model_horizontal_std, position_information
+    from sblsim.models.fisher import model_horizontal_std, position_information
     from sblsim.models.receiver.range_direction import RangeDirectionModel
 
     model = RangeDirectionModel()
@@ -315,13 +317,13 @@ def usbl_case(seed=4, n=200, b=3):
 
 
 def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_and_direction_cosines():
-    """The USBL bound (models/systems/usbl.py pcrb) against FilterPy's KalmanFilter covariance of the augmented state
-    (the third run's GPS error and attitude error as states) with the linearized range and direction-cosine rows
+    """The USBL bound (models/systems/usbl_bound.py pcrb) against FilterPy's KalmanFilter covariance of the augmented
+    state (the third run's GPS error and attitude error as states) with the linearized range and direction-cosine rows
     at the true position (central differences of the numpy h, scipy's rotations) and their full R written out
     here: ``diag(σ_r², σ_u², σ_u²) + σ_b² H_b H_bᵀ + σ_att² H_θ H_θᵀ`` (σ_b² the transceiver position's variance
     per axis, σ_att² the attitude's per Euler angle)."""
-    from sblsim.models.systems.usbl import pcrb as usbl_pcrb
-    from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
+    from sblsim.models.systems.usbl_bound import pcrb as usbl_pcrb
+    from sblsim.models.systems.usbl_bound import pcrb_inputs as usbl_pcrb_inputs
     from tests.models.test_measurement_models import central, np_range_direction
 
     truth, slot, received, transceivers, attitudes, fixed = usbl_case()
@@ -365,13 +367,13 @@ def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_and_direction_co
 def test_the_compiled_usbl_bound_is_the_reference_one():
     """The USBL interface's library steps the USBL bound in C (what runs use); casadi's virtual machine is the
     reference: equal to round-off on random tracks, packets, losses, attitudes and transceiver motion."""
-    from sblsim.fmus import native
-    from sblsim.models.systems.usbl import pcrb as usbl_pcrb
-    from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
+    from sblsim.fmus import compiled_metrics
+    from sblsim.models.systems.usbl_bound import pcrb as usbl_pcrb
+    from sblsim.models.systems.usbl_bound import pcrb_inputs as usbl_pcrb_inputs
 
     truth, slot, received, transceivers, attitudes, fixed = usbl_case(seed=11)
     fixed = {**fixed, "sigma_range": np.array([0.1, 0.2, 0.05]), "range_k": np.array([0.0, 0.01, 0.002])}
     fixed, steps = usbl_pcrb_inputs(truth, slot, received, transceivers, attitudes, **fixed)
     reference = usbl_pcrb(fixed, steps)
-    np.testing.assert_allclose(native.system_pcrb(1, fixed, steps), reference, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(compiled_metrics.system_pcrb(1, fixed, steps), reference, rtol=1e-12, atol=0)
     assert np.ptp(reference[-1]) > 0  # the runs differ: each is stepped with its own inputs

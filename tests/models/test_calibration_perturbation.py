@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from sblsim.fmus.native import compiled_exact_points
+from sblsim.fmus.compiled_functions import compiled_exact_points
 from sblsim.models.calibration import EigenRay, Perturbation, Replies, StraightRay, ocean, select, solve
 from sblsim.models.calibration.perturbation import basis, uniform_knots
 from sblsim.models.declarations import ModelError

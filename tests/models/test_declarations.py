@@ -11,16 +11,9 @@ import numpy as np
 import pytest
 
 from sblsim.models.component import Component
-from sblsim.models.declarations import (
-    Column,
-    ModelError,
-    Table,
-    Variable,
-    format_table,
-    parse_table,
-    resolve_parameters,
-)
+from sblsim.models.declarations import Column, ModelError, Table, Variable, resolve_parameters
 from sblsim.models.platform import Platform
+from sblsim.models.table_text import format_table, parse_table
 from sblsim.models.target import Target
 from sblsim.models.target.core import WAYPOINTS
 

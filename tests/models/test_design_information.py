@@ -5,7 +5,7 @@ themselves.
 * ``layout_information``: ``J = Σ_i q_i g_i g_iᵀ / σ_i² + e_z e_zᵀ / σ_d²`` with ``g_i = (p − b_i)/‖p − b_i‖`` and
   ``σ_i² = σ_noise,i² + σ_att² ‖a_i × g_i‖²`` (a small rotation δθ moves a transducer at lever arm a by δθ × a),
   the DRMS, its 3-D form and ``log det J``, for random layouts, weights and noises; with every weight 1 it is the
-  map's function of one round of ranges (:func:`sblsim.models.bound.fix_information`) bit for bit; a transducer of
+  map's function of one round of ranges (:func:`sblsim.models.fisher.fix_information`) bit for bit; a transducer of
   weight 0 adds nothing, and padding a layout to more slots changes no bit.
 * The closed forms (Bishop et al., Automatica 46(3), 2010): a regular polygon of N range sensors in the plane and a
   regular ring of N transponders at √2 h below a point give the determinants and traces the formulas give, and the
@@ -19,7 +19,6 @@ import math
 import numpy as np
 import pytest
 
-from sblsim.models.bound import horizontal_std
 from sblsim.models.design import (
     RING_ELEVATION_DEG,
     RING_RADIUS_RATIO,
@@ -32,6 +31,7 @@ from sblsim.models.design import (
     ring_crb_trace,
     ring_determinant,
 )
+from sblsim.models.fisher import horizontal_std
 
 
 def _numpy_information(points, beacons, arms, heard, noise, attitude, depth_variance):

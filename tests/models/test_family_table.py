@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from sblsim.fmus.native import compiled_family_levels, compiled_family_points
+from sblsim.fmus.compiled_functions import compiled_family_levels, compiled_family_points
 from sblsim.models.acoustics import detection, ray_tables, rays
 from sblsim.models.acoustics.sound_speed import munk_table, profile_table
 from tests.models.test_rays import _tabulated

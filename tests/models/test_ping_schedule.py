@@ -1,5 +1,6 @@
-"""The ping types as the steps between the rows of a TOA matrix (models/tracking/schedule.py), against the pings a
-simulation emitted: the type seen, each step's duration, the gaps, a pseudo-random sequence aligned."""
+"""The ping types as the steps between the rows of a TOA matrix (models/tracking/schedule.py, ping_type.py,
+burst_sequence.py), against the pings a simulation emitted: the type seen, each step's duration, the gaps, a
+pseudo-random sequence aligned."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import pytest
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking.burst_sequence import PBI_PHASE_STEPS, align_sequence
+from sblsim.models.tracking.ping_type import infer_ping_type
 
 RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
 SETTINGS = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=2.0, acceleration_psd=1e-4)
@@ -34,7 +37,7 @@ def test_the_crossing_time_is_the_array_s_largest_distance_over_the_speed():
 @pytest.mark.parametrize("kind", ["sbi", "rbi", "pbi"])
 def test_the_type_seen_in_the_first_arrivals(kind):
     toa, _, emissions = pings(kind)
-    seen = ps.infer_ping_type(toa, crossing())
+    seen = infer_ping_type(toa, crossing())
     assert seen.kind == ("sbi" if kind == "sbi" else "rbi")  # a sequence looks random without its table
     steps = np.diff(emissions)
     assert seen.interval == pytest.approx(np.median(steps), abs=crossing())
@@ -111,8 +114,8 @@ def test_a_long_pseudo_random_record_is_aligned_from_its_first_steps_phase(seed)
     heard = rng.random(2000) > 0.2
     heard[1:6] = False
     steps = np.diff(emissions[heard])
-    durations, matched = ps.align_sequence(steps + rng.normal(0.0, 0.01, len(steps)), sequence, 0.17)
-    assert matched.all() and len(steps) > ps.PBI_PHASE_STEPS
+    durations, matched = align_sequence(steps + rng.normal(0.0, 0.01, len(steps)), sequence, 0.17)
+    assert matched.all() and len(steps) > PBI_PHASE_STEPS
     assert np.allclose(durations, steps, rtol=0, atol=1e-9)
 
 

@@ -12,6 +12,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.sync.pings import CONTRADICTED_SHARE, interval_seen
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking.strays import STRAY_SHARE, check_strays, stray_rows
 
 RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
 SETTINGS = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=30.0, acceleration_psd=1e-4)
@@ -47,7 +48,7 @@ def test_stray_rows_are_set_aside_and_real_ones_kept_over_20_seeds():
     found = strays = kept = real = 0
     for seed in range(20):
         toa, inserted = with_strays(seed)
-        aside = ps.stray_rows(toa, BOUNDS[0], crossing())
+        aside = stray_rows(toa, BOUNDS[0], crossing())
         found += int((aside & inserted).sum())
         strays += int(inserted.sum())
         kept += int((~aside & ~inserted).sum())
@@ -55,7 +56,7 @@ def test_stray_rows_are_set_aside_and_real_ones_kept_over_20_seeds():
         # the rows left are a schedule the bounds accept (no refusal), and no more than the share allowed is aside
         ps.build_schedule(np.where(aside[:, None], np.nan, toa), "rbi", 30.0, SETTINGS.jitter,
                           SETTINGS.interval_drift, ps.crossing_time(RECEIVERS, 1480.0), bounds=BOUNDS)
-        assert ps.check_strays(toa, aside, "20:40 s", BOUNDS[0]) is None
+        assert check_strays(toa, aside, "20:40 s", BOUNDS[0]) is None
     assert strays > 60 and found / strays >= 0.95, (found, strays)
     assert kept / real >= 0.99, (kept, real)
 
@@ -67,9 +68,9 @@ def test_of_two_conflicting_rows_the_one_heard_by_more_receivers_is_kept():
     toa[2, :2] = [29.0, 29.01]  # preceded by a louder stray at 24 s: ping 2 is 5 s after it
     toa[3] = [24.0, 24.01, 24.02]
     toa = toa[np.argsort(np.nanmin(toa, axis=1))]  # 0, 5, 24 (three receivers), 29 (two)
-    assert ps.stray_rows(toa, 20.0, 0.01).tolist() == [False, True, False, True]
+    assert stray_rows(toa, 20.0, 0.01).tolist() == [False, True, False, True]
     tie = np.array([[0.0], [5.0], [30.0]])
-    assert ps.stray_rows(tie, 20.0, 0.01).tolist() == [False, True, False]  # a tie: the earlier kept
+    assert stray_rows(tie, 20.0, 0.01).tolist() == [False, True, False]  # a tie: the earlier kept
 
 
 def test_blank_rows_between_pings_are_no_pings_and_not_refused():
@@ -84,10 +85,10 @@ def test_blank_rows_between_pings_are_no_pings_and_not_refused():
     schedule = ps.build_schedule(toa, "rbi", 600.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(),
                                  bounds=(540.0, 660.0))
     assert schedule.steps()[62] == pytest.approx(330.5) and schedule.steps()[63] == pytest.approx(330.5)
-    assert not ps.stray_rows(toa, 540.0, crossing()).any()
+    assert not stray_rows(toa, 540.0, crossing()).any()
     # a row heard only 330 s after a ping is still no ping of it
     toa[63, 0] = np.nanmin(toa[62]) + 330.0
-    assert np.flatnonzero(ps.stray_rows(toa, 540.0, crossing())).tolist() == [63]
+    assert np.flatnonzero(stray_rows(toa, 540.0, crossing())).tolist() == [63]
     with pytest.raises(ModelError, match="rows 63 and 64 are 330.000 s apart"):
         ps.build_schedule(toa, "rbi", 600.0, SETTINGS.jitter, SETTINGS.interval_drift, crossing(),
                           bounds=(540.0, 660.0))
@@ -101,7 +102,7 @@ def test_a_pseudo_random_sequence_stays_aligned_across_a_stray_set_aside():
     stray = np.full((1, len(RECEIVERS)), np.nan)
     stray[0, 2] = np.nanmin(toa[50]) + 4.0
     matrix = np.insert(toa, 51, stray, axis=0)
-    aside = ps.stray_rows(matrix, sequence.min(), crossing())
+    aside = stray_rows(matrix, sequence.min(), crossing())
     assert np.flatnonzero(aside).tolist() == [51]
     blanked = np.where(aside[:, None], np.nan, matrix)
     schedule = ps.build_schedule(blanked, "pbi", 30.0, 1e-3, SETTINGS.interval_drift,
@@ -115,17 +116,17 @@ def test_a_pseudo_random_sequence_stays_aligned_across_a_stray_set_aside():
 
 def test_an_interval_the_rows_contradict_is_refused_in_one_line_and_taken_with_force():
     toa, inserted = with_strays(7)
-    aside = ps.stray_rows(toa, 30.0, crossing())  # the tag pings every 20-40 s: stated 30:60
-    assert aside.sum() > ps.STRAY_SHARE * len(toa)
+    aside = stray_rows(toa, 30.0, crossing())  # the tag pings every 20-40 s: stated 30:60
+    assert aside.sum() > STRAY_SHARE * len(toa)
     with pytest.raises(ModelError) as error:
-        ps.check_strays(toa, aside, "30:60 s", 30.0)
+        check_strays(toa, aside, "30:60 s", 30.0)
     message = str(error.value)
     assert message.startswith("burst interval: 30:60 s stated, but the rows' first arrivals are"), message
     assert "\n" not in message
     steps = np.diff(np.nanmin(toa, axis=1))
     assert f"{int((steps < 30.0).sum())} of {len(steps)} steps below 30 s" in message
     assert f"set aside {int(aside.sum())} of {len(toa)} heard rows" in message and "--force-interval" in message
-    warning = ps.check_strays(toa, aside, "30:60 s", 30.0, force=True)
+    warning = check_strays(toa, aside, "30:60 s", 30.0, force=True)
     assert warning is not None and f"{int(aside.sum())} of {len(toa)} heard rows set aside" in warning
 
 

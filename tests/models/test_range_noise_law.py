@@ -22,7 +22,7 @@ from sblsim.models.receiver import ekf
 from sblsim.models.receiver.measurement import POSITION_INDEX, RangeDepthModel
 from sblsim.models.receiver.multilateration import fix_covariance, law_weight, weights
 from sblsim.models.receiver.range_direction import RangeDirectionModel
-from sblsim.models.systems import usbl
+from sblsim.models.systems import usbl_packet
 from tests.helpers import Core
 
 CONF = 0.999
@@ -138,9 +138,9 @@ def test_r_of_the_usbl_packet_follows_the_law_at_the_predicted_slant_range():
     x[list(POSITION_INDEX)] = (250.0, 120.0, 180.0)
     r_hat = np.linalg.norm(np.array([250.0, 120.0, 180.0]) - transceiver)
     p = dict(sigma_range=SIGMA0, range_k=K, sigma_angle_deg=0.2)
-    R = _numbers(usbl.covariance(ca.DM(x), (ca.DM(transceiver), ca.DM(attitude)), p, RangeDirectionModel()))
+    R = _numbers(usbl_packet.covariance(ca.DM(x), (ca.DM(transceiver), ca.DM(attitude)), p, RangeDirectionModel()))
     assert math.isclose(R[0, 0], law(r_hat) ** 2, rel_tol=1e-12)
     assert math.isclose(R[1, 1], math.radians(0.2) ** 2, rel_tol=1e-12)
-    constant = _numbers(usbl.covariance(ca.DM(x), (ca.DM(transceiver), ca.DM(attitude)),
+    constant = _numbers(usbl_packet.covariance(ca.DM(x), (ca.DM(transceiver), ca.DM(attitude)),
                                         dict(sigma_range=SIGMA0, sigma_angle_deg=0.2), RangeDirectionModel()))
     assert constant[0, 0] == SIGMA0 ** 2

@@ -14,7 +14,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from sblsim.models.acoustics import ray_tables, rays
+from sblsim.models.acoustics import ray_integrals, ray_tables, rays
 from sblsim.models.acoustics.sound_speed import munk_speed, munk_table, profile_table
 
 #: A strongly refracting table: a surface duct over a sharp thermocline, then the deep increase.
@@ -87,11 +87,12 @@ def test_the_layers_a_ray_does_not_cross_change_no_sum():
     rng = np.random.default_rng(5)
     sym = [ca.SX.sym(n) for n in ("q", "fold", "cref", "u1", "v1", "u2", "v2", "z0", "z1", "c0", "c1")]
     q, fold, cref, u1, v1, u2, v2, z0, z1, c0, c1 = sym
-    p1, p2 = rays._piece(q, cref, u1, v1, z0, z1, c0, c1), rays._piece(q, cref, u2, v2, z0, z1, c0, c1)
+    p1 = ray_integrals._piece(q, cref, u1, v1, z0, z1, c0, c1)
+    p2 = ray_integrals._piece(q, cref, u2, v2, z0, z1, c0, c1)
     w2 = ca.if_else(ca.logic_or(fold > 0.5, q < 0), 2.0, 0.0)
     x, t, f, arc = (a + w2 * b for a, b in zip(p1, p2))
-    every = {rays._layers(): ca.Function("every", sym, [x, t, ca.jacobian(x, q)]),
-             rays._tube(): ca.Function("every_tube", sym, [f, ca.jacobian(f, q), arc])}
+    every = {ray_integrals._layers(): ca.Function("every", sym, [x, t, ca.jacobian(x, q)]),
+             ray_integrals._tube(): ca.Function("every_tube", sym, [f, ca.jacobian(f, q), arc])}
     for table in (np.array([[0, 1510], [30, 1508], [60, 1495], [100, 1489], [300, 1487.0]]),
                   profile_table("ctd:NCL1", "", 15.0, 35.0)):
         nodes, speeds = rays.profile_arrays(table)
@@ -317,10 +318,10 @@ _SOLVED: dict[tuple, tuple] = {}
 def _eigenrays(name):
     """:func:`rays.eigenray_families` at the site ``name``, each geometry solved once per test session: as the
     channel evaluates them, compiled in the local engine's library (the first four outputs of
-    :func:`~sblsim.fmus.native.compiled_family_points`: casadi's own evaluation took 15 s of Munk's and
+    :func:`~sblsim.fmus.compiled_functions.compiled_family_points`: casadi's own evaluation took 15 s of Munk's and
     of the strong table's 25 s), checked equal to casadi's evaluation of :func:`rays.eigenray_families` at every
     16th geometry."""
-    from sblsim.fmus.native import compiled_family_points
+    from sblsim.fmus.compiled_functions import compiled_family_points
 
     model = rays.eigenray_families()
     compiled = compiled_family_points()
@@ -357,7 +358,7 @@ def _compare_with_bellhop(name, solve):
     compared, worst = [0, 0, 0], [0.0, 0.0, 0.0]
     ducted, ducted_worst = 0, 0.0  # surface-reflected eigenrays that also turn (leaving and arriving the same way)
     mismatched, other_ray, separatrix = [], [], []
-    speed = rays._speed()
+    speed = ray_integrals._speed()
     for zs in sources:
         arrivals = _bellhop_arrivals(name)[zs]
         seps = _separatrices(table, zs)
@@ -564,7 +565,7 @@ TABLE_CASES = [("munk", 0.0, (0.0, 2.5, 4.0, 6.0, 2.0, 28.0), 0.8),
 def test_the_eigenray_table_holds_the_exact_solve(name, depth, bounds, share):
     """Inside the box, the channel's lookup equals the exact solve within 1 µs and 1e-5 rad with the same path,
     at random geometries (the table answers a share of them; the exact solve the rest)."""
-    from sblsim.fmus.native import compiled_exact_points
+    from sblsim.fmus.compiled_functions import compiled_exact_points
 
     table = _table(name)
     columns = ray_tables.eigenray_table(table, depth, bounds, compiled_exact_points())
@@ -618,7 +619,7 @@ def test_an_isovelocity_table_is_the_straight_line():
 def test_the_compiled_builder_is_the_model():
     """The table built with the exact solve compiled in the local engine's library equals the one built by casadi
     itself."""
-    from sblsim.fmus.native import compiled_exact_points
+    from sblsim.fmus.compiled_functions import compiled_exact_points
 
     compiled = compiled_exact_points()
     if compiled is None:

@@ -6,7 +6,7 @@ tube + Francois-Garrison absorption × path length + the boundary's loss), from 
 ``TL_j = SL − SNR_j − (NL − DI)`` (the sonar equation solved for TL, NL from the same Wenz terms); the families
 are summed incoherently, ``TL = −10 log10 Σ_j 10^(−TL_j/10)``. Bellhop's is run type 'I' (geometric beams) with
 the same profile, the same sea floor as an acousto-elastic half-space without shear (density, compressional speed,
-attenuation in dB/λ of :data:`~sblsim.models.acoustics.sonar.BOTTOMS`), a vacuum surface (Beaufort 0: no
+attenuation in dB/λ of :data:`~sblsim.models.acoustics.boundary_loss.BOTTOMS`), a vacuum surface (Beaufort 0: no
 roughness loss) and the channel's volume attenuation (Francois-Garrison over the water column at the cast's
 temperatures, given at every point of Bellhop's profile), at 12 kHz.
 
@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sblsim.fmus.native import compiled_family_levels
-from sblsim.models.acoustics import sonar
+from sblsim.fmus.compiled_functions import compiled_family_levels
+from sblsim.models.acoustics import ambient_noise, boundary_loss, volume_absorption
 from sblsim.models.acoustics.channel.component import Acoustics
 from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.models.acoustics.sound_speed import PROFILE
@@ -74,17 +74,18 @@ def _site(name):
         sources = np.column_stack([np.zeros_like(x), np.zeros_like(x), np.full_like(x, source)])
         receivers = np.column_stack([x, np.zeros_like(x), zr])
         levels = site_levels(parameters, sources, receivers, compiled_family_levels())
-        noise = sonar.noise_level(FREQUENCY, values["bandwidth"], sonar.wind_speed(0), values["shipping"])
+        noise = ambient_noise.noise_level(FREQUENCY, values["bandwidth"], ambient_noise.wind_speed(0),
+                                          values["shipping"])
         family = values["source_level"] - levels["snr"] - (noise - values["directivity_index"])
         with np.errstate(divide="ignore"):  # no eigenray at all: an infinite loss
             ours = -10.0 * np.log10(np.sum(np.where(levels["valid"] > 0.5, 10.0 ** (-family / 10.0), 0.0), axis=1))
-        bottom = sonar.BOTTOMS[section["bottom"]]
+        bottom = boundary_loss.BOTTOMS[section["bottom"]]
         depth = section["water_depth"]
         # the channel's absorption: Francois-Garrison over the water column at the cast's temperatures; Bellhop
         # takes that value at every point of its profile
         rows = PROFILE.rows(parameters, "sound_speed_rows")
-        assert parameters["absorption"] == sonar.water_column_absorption(FREQUENCY, rows, TEMPERATURE, SALINITY,
-                                                                         depth)
+        assert parameters["absorption"] == volume_absorption.water_column_absorption(FREQUENCY, rows, TEMPERATURE,
+                                                                                     SALINITY, depth)
         theirs = _bellhop_tl(rows, source, depths, ranges, depth,
                              (bottom.density_ratio, bottom.speed, bottom.attenuation), FREQUENCY,
                              parameters["absorption"])

@@ -26,7 +26,7 @@ import pytest
 from scipy.optimize import brentq
 from scipy.stats import norm
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import ambient_noise, boundary_loss, sonar, volume_absorption
 from sblsim.models.errors import ModelError
 from sblsim.models.platform.waves import WAVE_HEIGHT, WIND_SPEED
 
@@ -60,7 +60,7 @@ def _bellhop_absorption(frequency, temperature, salinity, depth, ph):
 
 @pytest.mark.parametrize("case", CASES)
 def test_absorption_matches_bellhop_francois_garrison(case):
-    ours = sonar.absorption(*case)
+    ours = volume_absorption.absorption(*case)
     reference = _bellhop_absorption(*case)
     assert ours == pytest.approx(reference, rel=0.01)
 
@@ -78,21 +78,21 @@ def _ainslie_mccolm(frequency, temperature, salinity, depth, ph):
 
 @pytest.mark.parametrize("case", CASES)
 def test_absorption_within_ten_percent_of_ainslie_mccolm(case):
-    assert 1000.0 * sonar.absorption(*case) == pytest.approx(_ainslie_mccolm(*case), rel=0.10)
+    assert 1000.0 * volume_absorption.absorption(*case) == pytest.approx(_ainslie_mccolm(*case), rel=0.10)
 
 
 def test_absorption_symbolic_equals_float_on_both_branches():
     x = ca.SX.sym("x", 5)
-    f = ca.Function("alpha", [x], [sonar.absorption(x[0], x[1], x[2], x[3], x[4])])
+    f = ca.Function("alpha", [x], [volume_absorption.absorption(x[0], x[1], x[2], x[3], x[4])])
     for case in CASES:
-        assert float(f(case)) == pytest.approx(sonar.absorption(*case), rel=1e-14)
-    assert isinstance(sonar.absorption(25e3, 10.0, 35.0, 0.0), float)
+        assert float(f(case)) == pytest.approx(volume_absorption.absorption(*case), rel=1e-14)
+    assert isinstance(volume_absorption.absorption(25e3, 10.0, 35.0, 0.0), float)
     # the pure-water term switches at 20 °C: 3.964e-4 − ... above, the cold polynomial at 20 °C exactly
     cold = 4.937e-4 - 2.59e-5 * 20 + 9.11e-7 * 400 - 1.5e-8 * 8000
     warm = 3.964e-4 - 1.146e-5 * 20.001 + 1.45e-7 * 20.001**2 - 6.5e-10 * 20.001**3
-    at_1mhz = sonar.absorption(1e6, 20.0, 0.0, 0.0) * 1000  # S = 0: only pure water is left
+    at_1mhz = volume_absorption.absorption(1e6, 20.0, 0.0, 0.0) * 1000  # S = 0: only pure water is left
     assert at_1mhz == pytest.approx(cold * 1e6, rel=1e-12)
-    assert sonar.absorption(1e6, 20.001, 0.0, 0.0) * 1000 == pytest.approx(warm * 1e6, rel=1e-12)
+    assert volume_absorption.absorption(1e6, 20.001, 0.0, 0.0) * 1000 == pytest.approx(warm * 1e6, rel=1e-12)
 
 
 # ------------------------------------------------------------------ ambient noise
@@ -100,8 +100,8 @@ def test_absorption_symbolic_equals_float_on_both_branches():
 
 def test_noise_terms_slopes_and_limits():
     f_lo, f_hi = 1e5, 1e6  # one decade, far above the knees at 0.03 and 0.4 kHz
-    lo = sonar.noise_components(f_lo, 4.4, 0.5)
-    hi = sonar.noise_components(f_hi, 4.4, 0.5)
+    lo = ambient_noise.noise_components(f_lo, 4.4, 0.5)
+    hi = ambient_noise.noise_components(f_hi, 4.4, 0.5)
     slopes = [h - low for h, low in zip(hi, lo)]
     assert slopes[0] == pytest.approx(-30.0, abs=1e-9)  # turbulence: −30 dB/decade exactly
     assert slopes[3] == pytest.approx(20.0, abs=1e-9)  # thermal: +20 dB/decade exactly
@@ -110,12 +110,13 @@ def test_noise_terms_slopes_and_limits():
     assert slopes[2] == pytest.approx(20.0 - 40.0 * math.log10(1000.4 / 100.4), abs=1e-9)
     assert slopes[2] == pytest.approx(-20.0, abs=0.1)  # wind tends to 20 − 40
     # shipping: 20 dB from none to heavy; wind: 7.5 (√w2 − √w1)
-    assert sonar.noise_components(3e3, 4.4, 1.0)[1] - sonar.noise_components(3e3, 4.4, 0.0)[1] == pytest.approx(20)
+    assert (ambient_noise.noise_components(3e3, 4.4, 1.0)[1] - ambient_noise.noise_components(3e3, 4.4, 0.0)[1]
+            == pytest.approx(20))
     w1, w2 = 2.5, 12.3
-    assert (sonar.noise_components(3e3, w2, 0.5)[2] - sonar.noise_components(3e3, w1, 0.5)[2]
+    assert (ambient_noise.noise_components(3e3, w2, 0.5)[2] - ambient_noise.noise_components(3e3, w1, 0.5)[2]
             == pytest.approx(7.5 * (math.sqrt(w2) - math.sqrt(w1))))
     # values at 1 kHz written out: log f = 0
-    t, s, w, th = sonar.noise_components(1e3, 4.0, 0.5)
+    t, s, w, th = ambient_noise.noise_components(1e3, 4.0, 0.5)
     assert (t, th) == (pytest.approx(17.0), pytest.approx(-15.0))
     assert s == pytest.approx(40.0 - 60.0 * math.log10(1.03))
     assert w == pytest.approx(50.0 + 15.0 - 40.0 * math.log10(1.4))
@@ -125,16 +126,16 @@ def test_noise_terms_slopes_and_limits():
 @pytest.mark.parametrize("wind", WIND_SPEED)
 @pytest.mark.parametrize("shipping", [0.0, 0.5, 1.0])
 def test_noise_sum_between_largest_and_largest_plus_6db(frequency, wind, shipping):
-    levels = sonar.noise_components(frequency, wind, shipping)
-    total = sonar.noise_spectrum_level(frequency, wind, shipping)
+    levels = ambient_noise.noise_components(frequency, wind, shipping)
+    total = ambient_noise.noise_spectrum_level(frequency, wind, shipping)
     assert max(levels) <= total <= max(levels) + 10.0 * math.log10(4.0) + 1e-12
     assert total == pytest.approx(10.0 * np.log10(np.sum(10.0 ** (np.array(levels) / 10.0))), abs=1e-10)
 
 
 def test_noise_level_adds_the_band():
     for bandwidth in (1.0, 100.0, 5e3):
-        assert (sonar.noise_level(25e3, bandwidth, 4.4, 0.5) - sonar.noise_spectrum_level(25e3, 4.4, 0.5)
-                == pytest.approx(10.0 * math.log10(bandwidth), abs=1e-12))
+        band = ambient_noise.noise_level(25e3, bandwidth, 4.4, 0.5) - ambient_noise.noise_spectrum_level(25e3, 4.4, 0.5)
+        assert band == pytest.approx(10.0 * math.log10(bandwidth), abs=1e-12)
 
 
 @pytest.mark.parametrize("centre", [10e3, 25e3, 50e3])
@@ -142,14 +143,14 @@ def test_noise_level_adds_the_band():
 def test_noise_level_of_a_band_within_005_db_of_the_integrated_spectrum(centre, wind):
     """docs/model.md: for B/f_c = 0.2 the centre's spectrum level stands for the band within 0.05 dB."""
     f = np.linspace(0.9 * centre, 1.1 * centre, 2001)
-    power = np.array([10.0 ** (sonar.noise_spectrum_level(x, wind, 0.5) / 10.0) for x in f])
+    power = np.array([10.0 ** (ambient_noise.noise_spectrum_level(x, wind, 0.5) / 10.0) for x in f])
     integrated = 10.0 * np.log10(np.trapezoid(power, f))
-    assert abs(integrated - sonar.noise_level(centre, 0.2 * centre, wind, 0.5)) < 0.05
+    assert abs(integrated - ambient_noise.noise_level(centre, 0.2 * centre, wind, 0.5)) < 0.05
 
 
 def test_beaufort_tables_are_the_platforms():
-    assert [sonar.wind_speed(b) for b in range(9)] == list(WIND_SPEED)
-    assert [sonar.wave_height(b) for b in range(9)] == list(WAVE_HEIGHT)
+    assert [ambient_noise.wind_speed(b) for b in range(9)] == list(WIND_SPEED)
+    assert [boundary_loss.wave_height(b) for b in range(9)] == list(WAVE_HEIGHT)
 
 
 # ------------------------------------------------------------------ bottom
@@ -165,13 +166,13 @@ def _numpy_bottom_loss(grazing, density_ratio, speed_ratio, attenuation):
     return -20.0 * np.log10(np.abs(r))
 
 
-@pytest.mark.parametrize("name", sorted(sonar.BOTTOMS))
+@pytest.mark.parametrize("name", sorted(boundary_loss.BOTTOMS))
 def test_bottom_loss_matches_numpy_complex(name):
-    row = sonar.BOTTOMS[name]
+    row = boundary_loss.BOTTOMS[name]
     for water in (1480.0, 1500.0, 1530.0):
         for grazing in np.radians([0.01, 0.5, 2.0, 10.0, 17.0, 24.0, 25.0, 33.0, 45.0, 60.0, 75.0, 89.9, 90.0]):
             expected = _numpy_bottom_loss(grazing, row.density_ratio, row.speed / water, row.attenuation)
-            ours = sonar.bottom_loss(float(grazing), name, water)
+            ours = boundary_loss.bottom_loss(float(grazing), name, water)
             assert ours == pytest.approx(expected, abs=1e-9)
             assert ours >= 0.0
 
@@ -180,39 +181,40 @@ def test_bottom_loss_lossless_limits():
     m, nu = 1.9, 1.1
     critical = math.acos(1.0 / nu)
     for grazing in np.linspace(0.0, critical - 1e-6, 25):
-        assert sonar.half_space_loss(float(grazing), m, nu, 0.0) == pytest.approx(0.0, abs=1e-9)
+        assert boundary_loss.half_space_loss(float(grazing), m, nu, 0.0) == pytest.approx(0.0, abs=1e-9)
     normal = -20.0 * math.log10(abs((m * nu - 1.0) / (m * nu + 1.0)))
-    assert sonar.half_space_loss(math.pi / 2, m, nu, 0.0) == pytest.approx(normal, rel=1e-12)
-    assert sonar.half_space_loss(critical + 0.05, m, nu, 0.0) > 0.1  # energy leaves above the critical angle
+    assert boundary_loss.half_space_loss(math.pi / 2, m, nu, 0.0) == pytest.approx(normal, rel=1e-12)
+    assert boundary_loss.half_space_loss(critical + 0.05, m, nu, 0.0) > 0.1  # energy leaves above the critical angle
     # attenuation takes energy also below it
-    assert sonar.half_space_loss(critical / 2, m, nu, 0.8) > 0.1
+    assert boundary_loss.half_space_loss(critical / 2, m, nu, 0.8) > 0.1
     # a bottom like the water reflects nothing at normal incidence: R = 0 (infinite loss, finite number)
-    assert sonar.half_space_loss(math.pi / 2, 1.0, 1.0, 0.0) > 100.0
+    assert boundary_loss.half_space_loss(math.pi / 2, 1.0, 1.0, 0.0) > 100.0
 
 
 def test_bottom_loss_symbolic_equals_float():
     g, m, nu, a = (ca.SX.sym(n) for n in ("g", "m", "nu", "a"))
-    f = ca.Function("bl", [g, m, nu, a], [sonar.half_space_loss(g, m, nu, a)])
-    for row in sonar.BOTTOMS.values():
+    f = ca.Function("bl", [g, m, nu, a], [boundary_loss.half_space_loss(g, m, nu, a)])
+    for row in boundary_loss.BOTTOMS.values():
         for grazing in (0.0, 0.1, 0.5, 1.2, math.pi / 2):
-            expected = sonar.half_space_loss(grazing, row.density_ratio, row.speed / 1500.0, row.attenuation)
+            expected = boundary_loss.half_space_loss(grazing, row.density_ratio, row.speed / 1500.0, row.attenuation)
             assert float(f(grazing, row.density_ratio, row.speed / 1500.0, row.attenuation)) == pytest.approx(
                 expected, abs=1e-12)
 
 
 def test_bottom_table_names_and_errors():
-    assert {"mud", "sand", "gravel", "rock"} <= set(sonar.BOTTOMS)
-    assert sonar.BOTTOMS["mud"] == sonar.BOTTOMS["clay"] and sonar.BOTTOMS["rock"] == sonar.BOTTOMS["limestone"]
-    assert sonar.bottom_parameters("sand") == (1.9, 1.1, 0.8)
-    assert sonar.bottom_parameters((1.8, 1600.0, 0.5), 1600.0) == (1.8, 1.0, 0.5)
+    assert {"mud", "sand", "gravel", "rock"} <= set(boundary_loss.BOTTOMS)
+    bottoms = boundary_loss.BOTTOMS
+    assert bottoms["mud"] == bottoms["clay"] and bottoms["rock"] == bottoms["limestone"]
+    assert boundary_loss.bottom_parameters("sand") == (1.9, 1.1, 0.8)
+    assert boundary_loss.bottom_parameters((1.8, 1600.0, 0.5), 1600.0) == (1.8, 1.0, 0.5)
     with pytest.raises(ModelError, match=r"^acoustics.bottom: unknown bottom 'lava' \(allowed: clay, .*rock\)$"):
-        sonar.bottom_loss(0.3, "lava")
+        boundary_loss.bottom_loss(0.3, "lava")
     for bad, field in (((0.0, 1600.0, 0.5), "density ratio"), ((1.8, -1.0, 0.5), "speed"),
                        ((1.8, 1600.0, -0.1), "attenuation"), ((1.8, float("nan"), 0.5), "speed")):
         with pytest.raises(ModelError, match=f"^acoustics.bottom: {field}"):
-            sonar.bottom_parameters(bad)
+            boundary_loss.bottom_parameters(bad)
     with pytest.raises(ModelError, match="^acoustics.bottom"):
-        sonar.bottom_parameters((1.0, 2.0))
+        boundary_loss.bottom_parameters((1.0, 2.0))
 
 
 def _bellhop_bottom_arrivals(row, ranges, depth=100.0, zs=50.0):
@@ -233,7 +235,7 @@ def test_bottom_loss_matches_bellhop(name):
     """|R| = (bottom-bounce amplitude × its path length) / (direct amplitude × range) in isovelocity water:
     Bellhop's beams of one eigenray summed (equal delays), source and receiver at 50 m in 100 m of water."""
     ranges = [100.0, 200.0, 300.0, 500.0, 800.0, 1200.0, 2000.0]
-    arrivals = _bellhop_bottom_arrivals(sonar.BOTTOMS[name], ranges)
+    arrivals = _bellhop_bottom_arrivals(boundary_loss.BOTTOMS[name], ranges)
     for r in ranges:
         here = arrivals[arrivals.range_m == r]
         bounce_length = math.hypot(r, 100.0)
@@ -245,7 +247,7 @@ def test_bottom_loss_matches_bellhop(name):
         direct = amplitude(here[(here.top_bounces == 0) & (here.bottom_bounces == 0)], r)
         bounce = amplitude(here[(here.top_bounces == 0) & (here.bottom_bounces == 1)], bounce_length)
         bellhop = -20.0 * math.log10(bounce * bounce_length / (direct * r))
-        assert sonar.bottom_loss(math.atan2(100.0, r), name) == pytest.approx(bellhop, abs=0.1), r
+        assert boundary_loss.bottom_loss(math.atan2(100.0, r), name) == pytest.approx(bellhop, abs=0.1), r
 
 
 # ------------------------------------------------------------------ surface
@@ -256,14 +258,14 @@ def test_surface_loss_rayleigh_roughness():
     sigma = h / 4.0
     k = 2.0 * math.pi * f / 1500.0
     expected = -20.0 * math.log10(math.exp(-2.0 * (k * sigma * math.sin(grazing)) ** 2))
-    assert sonar.surface_loss(grazing, f, h) == pytest.approx(expected, rel=1e-12)
-    assert sonar.surface_loss(0.0, f, h) == 0.0  # grazing: the specular path keeps its energy
-    assert sonar.surface_loss(grazing, f, 0.0) == 0.0  # a flat sea
+    assert boundary_loss.surface_loss(grazing, f, h) == pytest.approx(expected, rel=1e-12)
+    assert boundary_loss.surface_loss(0.0, f, h) == 0.0  # grazing: the specular path keeps its energy
+    assert boundary_loss.surface_loss(grazing, f, 0.0) == 0.0  # a flat sea
     # quadratic in frequency and in wave height
-    assert sonar.surface_loss(grazing, 2 * f, h) == pytest.approx(4.0 * expected, rel=1e-12)
-    assert sonar.surface_loss(grazing, f, 2 * h) == pytest.approx(4.0 * expected, rel=1e-12)
-    assert sonar.surface_loss(grazing, f, h, limit=30.0) == 30.0
-    assert sonar.surface_loss(grazing, 1e3, 0.1, limit=30.0) < 30.0
+    assert boundary_loss.surface_loss(grazing, 2 * f, h) == pytest.approx(4.0 * expected, rel=1e-12)
+    assert boundary_loss.surface_loss(grazing, f, 2 * h) == pytest.approx(4.0 * expected, rel=1e-12)
+    assert boundary_loss.surface_loss(grazing, f, h, limit=30.0) == 30.0
+    assert boundary_loss.surface_loss(grazing, 1e3, 0.1, limit=30.0) < 30.0
 
 
 # ------------------------------------------------------------------ sonar equation, detection, accuracy
@@ -341,13 +343,13 @@ def test_hand_worked_detection_range():
         digits = len(doc[key].split(".")[1]) if "." in doc[key] else 0
         assert abs(float(doc[key]) - value) <= 0.5 * 10.0**-digits + 1e-12 * abs(value), (key, doc[key], value)
     # the module gives the same terms and range
-    assert 1000 * sonar.absorption(25e3, t, sal, d, ph) == pytest.approx(alpha, rel=1e-12)
-    assert sonar.noise_level(25e3, bandwidth, sonar.wind_speed(3), s_) == pytest.approx(nl, abs=1e-10)
-    found = sonar.detection_range(25e3, bandwidth, sl, di, dt, sonar.wind_speed(3), s_, t, sal, d, ph)
+    assert 1000 * volume_absorption.absorption(25e3, t, sal, d, ph) == pytest.approx(alpha, rel=1e-12)
+    assert ambient_noise.noise_level(25e3, bandwidth, ambient_noise.wind_speed(3), s_) == pytest.approx(nl, abs=1e-10)
+    found = sonar.detection_range(25e3, bandwidth, sl, di, dt, ambient_noise.wind_speed(3), s_, t, sal, d, ph)
     assert found == pytest.approx(r, rel=1e-8)
     assert found == pytest.approx(float(doc["range"]), rel=0.05)
     # SNR at that range is the threshold
-    tl = 20 * math.log10(found) + sonar.absorption(25e3, t, sal, d, ph) * found
+    tl = 20 * math.log10(found) + volume_absorption.absorption(25e3, t, sal, d, ph) * found
     assert sonar.snr(sl, tl, nl, di) == pytest.approx(dt, abs=1e-6)
 
 

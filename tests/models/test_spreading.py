@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sblsim.models.acoustics import rays
+from sblsim.models.acoustics import rays, spreading_loss
 from sblsim.models.acoustics.sound_speed import munk_table
 
 #: The strongly refracting table of tests/models/test_rays.py: a surface duct over a sharp thermocline.
@@ -200,7 +200,7 @@ def test_spreading_against_solve_ivp(name, zs, zr, x):
         miss, hits, want = _ivp_spreading(table, zs, zr, x, out[1][k], depth)
         assert abs(miss) < 0.05 and hits == [[], [0], [1]][k]  # the integration follows the same eigenray
         image = np.hypot(x, [zr - zs, zs + zr, 2 * depth - zs - zr][k])
-        if 20 * np.log10(image) - want > rays.CAUSTIC_GAIN - 1.0:
+        if 20 * np.log10(image) - want > spreading_loss.CAUSTIC_GAIN - 1.0:
             continue
         print(f"{name} {zs} {zr} {x} family {k + 1}: ours {out[4][k]:.4f} dB, integrated {want:.4f} dB")
         assert out[4][k] == pytest.approx(want, abs=0.5)
@@ -221,7 +221,7 @@ def test_surface_duct_spreading_against_solve_ivp(zs, zr, x):
     miss, hits, want = _ivp_spreading(STRONG, zs, zr, x, out[1][1], depth)
     assert abs(miss) < 0.05 and hits == [0]
     image = np.hypot(x, zs + zr)
-    assert 20 * np.log10(image) - want < rays.CAUSTIC_GAIN - 1.0
+    assert 20 * np.log10(image) - want < spreading_loss.CAUSTIC_GAIN - 1.0
     assert out[4][1] == pytest.approx(want, abs=0.01)
     assert image < out[5][1] < image + 2.0
 
@@ -290,10 +290,10 @@ def _site(name):
     """Bellhop's TL and our families' outputs at the site ``name`` (computed once per session).
 
     Ours are the families as the channel evaluates them, compiled in the local engine's library
-    (:func:`~sblsim.fmus.native.compiled_family_points`: casadi's own evaluation takes over a minute for the grid),
-    checked equal to :func:`rays.eigenray_paths` evaluated by casadi itself at every 97th point of the grid."""
+    (:func:`~sblsim.fmus.compiled_functions.compiled_family_points`: casadi's own evaluation takes over a minute for the
+    grid), checked equal to :func:`rays.eigenray_paths` evaluated by casadi itself at every 97th point of the grid."""
     if name not in _BELLHOP:
-        from sblsim.fmus.native import compiled_family_points
+        from sblsim.fmus.compiled_functions import compiled_family_points
 
         table, depth, bottom, source, depths, ranges = BELLHOP_SITES[name]
         theirs = _bellhop_tl(table, source, depths, ranges, depth, bottom)
@@ -331,8 +331,8 @@ def _compare_with_bellhop(name, offset=0.0):
     # the mask: Bellhop's TL jumping between neighbours, and our tube capped at a caustic
     jumps = _jumps(theirs)
     image = np.hypot(x, np.array([zr - source, zr + source, 2 * depth - source - zr]))
-    capped = np.any((valid > 0) & (np.abs(spreading - offset - (20 * np.log10(image) - rays.CAUSTIC_GAIN)) < 1e-9),
-                    axis=0).reshape(theirs.shape)
+    cap = 20 * np.log10(image) - spreading_loss.CAUSTIC_GAIN
+    capped = np.any((valid > 0) & (np.abs(spreading - offset - cap) < 1e-9), axis=0).reshape(theirs.shape)
     keep = (jumps <= JUMP) & ~capped & np.isfinite(theirs)
     error = np.abs(ours - theirs)[keep]
     return int(keep.sum()), int((~keep).sum()), float(error.max()), float(np.median(error))

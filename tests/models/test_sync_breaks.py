@@ -11,8 +11,10 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from sblsim.models.sync.breaks import THRESHOLD, fit_with_breaks, scan
-from sblsim.models.sync.clocks import connected, fit_clocks, sync_emissions
+from sblsim.models.sync.breaks import THRESHOLD, fit_with_breaks
+from sblsim.models.sync.change_points import scan
+from sblsim.models.sync.clocks import fit_clocks
+from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.simulate import simulate_sync
 
 N, HOURS = 8, 6.0

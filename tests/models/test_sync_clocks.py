@@ -10,15 +10,10 @@ import scipy.sparse as sp
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync import clocks
-from sblsim.models.sync.clocks import (
-    Geometry,
-    connected,
-    fit_clocks,
-    group_emissions,
-    later_duplicates,
-    selected_inverse,
-)
+from sblsim.models.sync.clocks import Geometry, fit_clocks
+from sblsim.models.sync.emissions import connected, group_emissions, later_duplicates
 from sblsim.models.sync.positions import position_emissions
+from sblsim.models.sync.selected_inversion import selected_inverse
 from sblsim.models.sync.simulate import simulate_sync
 
 

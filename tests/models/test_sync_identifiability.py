@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.clocks import Geometry, connected, fit_clocks, group_emissions, later_duplicates
+from sblsim.models.sync.clocks import Geometry, fit_clocks
+from sblsim.models.sync.emissions import connected, group_emissions, later_duplicates
 from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, identify, shape_sigma_ratio
 from sblsim.models.sync.simulate import simulate_sync
 

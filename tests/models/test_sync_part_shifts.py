@@ -1,4 +1,4 @@
-"""A later clock part's coarse shift (:func:`sblsim.models.sync.breaks.part_shifts`) where the sync tag pings at a
+"""A later clock part's coarse shift (:func:`sblsim.models.sync.clock_parts.part_shifts`) where the sync tag pings at a
 steady interval: the differences pile up at the true shift and again at every multiple of the interval, so the
 step the receiver's time went back by in the file's order (the shift less the time it heard nothing) decides."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sblsim.models.sync.breaks import part_shifts
+from sblsim.models.sync.clock_parts import part_shifts
 
 
 def _study(jump: float, interval: float = 600.0, pings: int = 400, seed: int = 0):

@@ -16,8 +16,9 @@ import pytest
 from scipy import stats
 from scipy.integrate import solve_ivp
 
-from sblsim.models.declarations import ModelError, parse_table
+from sblsim.models.declarations import ModelError
 from sblsim.models.philox import normals, uniforms
+from sblsim.models.table_text import parse_table
 from sblsim.models.target import Target, natural_duration, start_state
 from sblsim.models.target.core import MAX_WAYPOINTS, WAYPOINTS
 from sblsim.models.target.trajectories import OPEN_DURATION, read_trajectory_file

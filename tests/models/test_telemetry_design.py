@@ -23,6 +23,7 @@ from shapely.geometry import Point, Polygon
 
 from sblsim.models.design import area as ar
 from sblsim.models.design import information
+from sblsim.models.design import sync_graph as sg
 from sblsim.models.design import telemetry as tm
 from sblsim.models.design.detection_curve import DetectionCurve
 from sblsim.models.errors import ModelError
@@ -203,7 +204,7 @@ CURVE = DetectionCurve.logistic(150.0, 0.05)  # 0.92 at 100 m, 0.08 at 200 m
 
 
 def _sync(receivers, p=0.8):
-    return tm.sync_coverage(tm.sync_probabilities(np.asarray(receivers, float), CURVE.probability), p)
+    return sg.sync_coverage(sg.sync_probabilities(np.asarray(receivers, float), CURVE.probability), p)
 
 
 def test_a_square_whose_receivers_all_hear_each_other_is_synchronised():
@@ -231,10 +232,10 @@ def test_two_clusters_out_of_range_are_two_components():
 
 def test_layouts_are_judged_at_once_and_one_way_hearing_links_two_clocks():
     layouts = np.array([[[0, 0], [80, 0], [40, 60]], [[0, 0], [80, 0], [900, 0]]], float)
-    s = tm.sync_coverage(tm.sync_probabilities(layouts, CURVE.probability), 0.8)
+    s = sg.sync_coverage(sg.sync_probabilities(layouts, CURVE.probability), 0.8)
     np.testing.assert_array_equal(s.connected, [True, False])
     q = np.array([[0, 0.9, 0], [0, 0, 0.9], [0, 0, 0]])  # 0 hears 1, 1 hears 2: a chain one way
-    assert bool(tm.sync_coverage(q, 0.8).connected)
+    assert bool(sg.sync_coverage(q, 0.8).connected)
 
 
 # --- study areas -----------------------------------------------------------------------------------------------

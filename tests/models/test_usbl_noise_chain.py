@@ -1,15 +1,15 @@
 """The USBL packet's R, its least-squares fix and its map against independent computations.
 
-* R (:func:`sblsim.models.systems.usbl.covariance`) against a Monte Carlo of the channel's own noise chain,
+* R (:func:`sblsim.models.systems.usbl_packet.covariance`) against a Monte Carlo of the channel's own noise chain,
   written here in numpy and scipy (not with the model's casadi): the array tilted by the waves and turned to its
   heading measures the direction cosines of the line of sight across its two axes with their noise, its
   mounting misalignment drawn per sample; the IMU measures the attitude with its noise, the surface broadcasts
   the transceiver at the GPS position (with its error) plus the lever arm turned by the IMU's attitude; the
   receiver predicts the packet from what was broadcast. The covariance of the residual ``z − h`` straight below
   the transceiver, 45° and 85° off the vertical is within 10 % of R there.
-* The packet's least-squares fix with the depth (:func:`sblsim.models.systems.usbl.packet_fix`) equals
+* The packet's least-squares fix with the depth (:func:`sblsim.models.systems.usbl_fix.packet_fix`) equals
   scipy's ``least_squares`` on the same weighted residuals.
-* The map's covariance of one packet plus the depth (:func:`sblsim.models.systems.usbl.fix_information`) is the
+* The map's covariance of one packet plus the depth (:func:`sblsim.models.systems.usbl_map.fix_information`) is the
   inverse of the bound's information of the same packet (the bound's step from a wide prior, whose information
   is taken off): the map and the bound use one R; straight below the transceiver the map is finite and keeps the
   GPS error (DRMS ≥ √2 σ_GPS).
@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from sblsim.models.systems import usbl
+from sblsim.models.systems import usbl_bound, usbl_fix, usbl_map, usbl_packet
 from tests.models.test_measurement_models import np_range_direction, np_rotation
 
 #: The platform's attitude (roll and pitch of the waves, the heading) [rad] and the transceiver's lever arm [m].
@@ -57,7 +57,7 @@ def chain(p, n, seed=0):
 def receivers_covariance(p):
     """The receivers' R (one packet's fix: the misalignment's prior in it) at ``p`` with the nominal context."""
     x, b, att = ca.SX.sym("x", 3), ca.SX.sym("b", 3), ca.SX.sym("att", 3)
-    R = usbl.covariance(x, (b, att), P, usbl.POSITION_MODEL, states=False)
+    R = usbl_packet.covariance(x, (b, att), P, usbl_packet.POSITION_MODEL, states=False)
     return np.array(ca.Function("R", [x, b, att], [R])(p, np_rotation(PLATFORM) @ ARM, PLATFORM))
 
 
@@ -86,7 +86,7 @@ def test_the_packet_fix_is_scipys_least_squares():
         u = {"range": z[0], "doa_x": z[1], "doa_y": z[2], "beacon_x": b[0], "beacon_y": b[1], "beacon_z": b[2],
              "azimuth": math.atan2(n[1], n[0]), "elevation": math.atan2(n[2], math.hypot(n[0], n[1])),
              **{f"doa_{a}": v for a, v in zip(("roll", "pitch", "yaw"), att)}}
-        point, covariance, rss = (np.array(v) for v in ca.Function("fix", [], list(usbl.packet_fix(
+        point, covariance, rss = (np.array(v) for v in ca.Function("fix", [], list(usbl_fix.packet_fix(
             {k: ca.SX(v) for k, v in u.items()}, P, ca.SX(depth)))).call([]))
         polar = b + z[0] * n  # the documented start, where the weights are taken
 
@@ -107,7 +107,7 @@ def test_the_packet_fix_is_scipys_least_squares():
 
 def receivers_covariance_at(p, b, att):
     x, bs, a = ca.SX.sym("x", 3), ca.SX.sym("b", 3), ca.SX.sym("att", 3)
-    R = usbl.covariance(x, (bs, a), P, usbl.POSITION_MODEL, states=False)
+    R = usbl_packet.covariance(x, (bs, a), P, usbl_packet.POSITION_MODEL, states=False)
     return np.array(ca.Function("R", [x, bs, a], [R])(p, b, att))
 
 
@@ -118,8 +118,8 @@ PRIOR = 1e4
 def one_packet_bound(position, transceiver, attitude, fixed):
     """The bound's step (the receivers' H and R of one USBL packet plus the depth) from a wide prior with no
     process noise and no error states: the information about the position it adds, ``B_pos⁻¹ − I / PRIOR``."""
-    step = usbl.bound_step()
-    n = usbl.BOUND_MODEL.motion.state_size
+    step = usbl_bound.bound_step()
+    n = usbl_bound.BOUND_MODEL.motion.state_size
     prior = np.diag([PRIOR] * 6 + [0.0] * (n - 6)).reshape(-1)
     B = np.array(step(prior, 1e-12, 0.0, 0.0, position, transceiver, attitude, fixed["range_variance"],
                       fixed["position_variance"], fixed["angle_sigma_deg"], fixed["attitude_variance"],
@@ -131,7 +131,7 @@ def one_packet_bound(position, transceiver, attitude, fixed):
 def test_the_map_is_the_bounds_information_of_one_packet_and_finite_below_the_transceiver(gps):
     fixed = {"range_variance": 0.01, "position_variance": gps ** 2 + (math.radians(1.0) * 1.0) ** 2,
              "angle_sigma_deg": 0.5, "attitude_variance": math.radians(1.0) ** 2, "depth_variance": 1e-4}
-    f = usbl.fix_information()
+    f = usbl_map.fix_information()
     transceiver, level = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 0.3])
     for d in ([15.0, 0.0, 4.0], [-3.0, 2.0, 20.0], [40.0, -30.0, 2.0], [0.0, 0.0, 6.0], [1.0, 1.0, 400.0]):
         position = transceiver + np.asarray(d)
@@ -141,7 +141,7 @@ def test_the_map_is_the_bounds_information_of_one_packet_and_finite_below_the_tr
         bound = np.linalg.inv(information)
         assert drms.item() == pytest.approx(math.sqrt(bound[0, 0] + bound[1, 1]), rel=1e-6)
     # straight below the transceiver and near it: finite, continuous, the transceiver's error kept
-    below = [usbl.horizontal_std(transceiver + [[dn, 0.0, 4.0]], transceiver, *fixed.values())[0]
+    below = [usbl_map.horizontal_std(transceiver + [[dn, 0.0, 4.0]], transceiver, *fixed.values())[0]
              for dn in (0.0, 1e-6, 0.5)]
     assert np.isfinite(below).all() and min(below) >= math.sqrt(2 * fixed["position_variance"]) * (1 - 1e-12)
     assert below[0] == pytest.approx(below[1], rel=1e-9)
@@ -149,7 +149,7 @@ def test_the_map_is_the_bounds_information_of_one_packet_and_finite_below_the_tr
     perfect = {**fixed, "range_variance": 1e-12, "position_variance": gps ** 2, "angle_sigma_deg": 1e-3,
                "attitude_variance": 0.0}
     points = np.array([[n, e, 5.0] for n in (-30.0, -0.5, 0.0, 1e-7, 3.0, 30.0) for e in (-20.0, 0.0, 0.5, 25.0)])
-    drms = usbl.horizontal_std(points, transceiver, *perfect.values())
+    drms = usbl_map.horizontal_std(points, transceiver, *perfect.values())
     # (to 1e-4 near the vertical, where the map is the fix's own error over its errors' draws: nadir_fix_rms)
     assert np.isfinite(drms).all() and np.all(drms >= math.sqrt(2.0) * gps * (1 - 1e-4))
     assert drms.min() == pytest.approx(math.sqrt(2.0) * gps, rel=1e-3)

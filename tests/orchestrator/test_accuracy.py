@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sblsim.models.bound import horizontal_std
+from sblsim.models.fisher import horizontal_std
 from sblsim.models.platform.geometry import lever_arms
 from sblsim.orchestrator.analysis import compute
 from sblsim.orchestrator.campaign import run_campaign
@@ -188,7 +188,7 @@ def test_a_campaign_with_the_receiver_as_a_factor_runs_and_analyses(tmp_path):
 def test_a_factor_on_a_receiver_key_is_checked_against_each_receiver_of_the_study():
     study = json.loads(json.dumps(STUDY))
     study["factors"].append({"name": "alpha", "key": "receiver.alpha", "low": 0.5, "high": 1.0})
-    from sblsim.orchestrator.campaign.study import StudyError
+    from sblsim.orchestrator.campaign.errors import StudyError
 
     with pytest.raises(StudyError, match="factors.alpha.key: 'receiver.alpha' is not a parameter of the ekf receiver"):
         load_study(study)

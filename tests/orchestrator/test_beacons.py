@@ -20,7 +20,8 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.cosim.ssp import export_ssp, read_ssp
+from sblsim.orchestrator.cosim.ssp import export_ssp
+from sblsim.orchestrator.cosim.ssp_read import read_ssp
 from sblsim.orchestrator.maps import accuracy_map
 from tests.fmus_tests.test_fmi_semantics import finite_but_the_estimate_before_a_fix
 from tests.helpers import share_compiled_objects

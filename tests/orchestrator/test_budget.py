@@ -19,12 +19,11 @@ from sblsim.orchestrator.montecarlo.budget import (
     NO_EFFECT,
     OFF,
     ON,
-    SOURCES,
     budget,
     configurations,
     planned,
-    switched_off,
 )
+from sblsim.orchestrator.montecarlo.error_sources import SOURCES, switched_off
 
 SHORT = "simulation.duration=20"
 

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from sblsim.fmus.native import compiled_exact_points
+from sblsim.fmus.compiled_functions import compiled_exact_points
 from sblsim.models.acoustics.sound_speed import profile_table
 from sblsim.models.calibration import EigenRay, solve
 from sblsim.orchestrator.cli import main

@@ -23,7 +23,8 @@ import pytest
 import tomli_w
 
 from sblsim.orchestrator.campaign import plan, run_campaign
-from sblsim.orchestrator.campaign.study import design_matrix, full_factorial, load_study
+from sblsim.orchestrator.campaign.factorial import design_matrix, full_factorial
+from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.run import run
@@ -459,7 +460,7 @@ def test_the_full_factorial_is_pydoe3s():
         np.testing.assert_array_equal(full_factorial(k), pyDOE3.ff2n(k))
         assert full_factorial(k).dtype == np.int64
     assert "pyDOE3" not in subprocess.run(
-        [sys.executable, "-c", "import sys; from sblsim.orchestrator.campaign.study import design_matrix; "
+        [sys.executable, "-c", "import sys; from sblsim.orchestrator.campaign.factorial import design_matrix; "
                                "design_matrix(7); print(sorted(m for m in sys.modules if m.startswith('pyDOE3')))"],
         capture_output=True, text=True, check=True).stdout
 

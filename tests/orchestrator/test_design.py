@@ -45,7 +45,8 @@ from sblsim.orchestrator.cosim.run import run_batch, with_replicates
 from sblsim.orchestrator.design.area import Area
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import check_problem
-from sblsim.orchestrator.design.run import resolve, search_all
+from sblsim.orchestrator.design.resolution import resolve
+from sblsim.orchestrator.design.run import search_all
 from sblsim.orchestrator.design.search import Objective, optimise_free, optimise_ring
 from sblsim.orchestrator.maps import packet_probabilities, point_accuracy, range_echo_spread
 
@@ -412,7 +413,7 @@ def test_areas_to_avoid_that_leave_no_room_are_refused_and_every_proposed_transp
 
 def test_room_outside_the_areas_to_avoid_is_found_by_its_grid():
     """A strip 1 m wide left between two areas is room; the same strip closed is not."""
-    from sblsim.orchestrator.design.run import room
+    from sblsim.orchestrator.design.resolution import room
 
     region = Area(centre=(0.0, 0.0), radius=50.0)
     west = Area(vertices=np.array([[-60.0, -60.0], [60.0, -60.0], [60.0, -0.5], [-60.0, -0.5]]))
@@ -470,7 +471,8 @@ def test_a_key_the_site_does_not_read_is_refused_by_design_and_noted_from_a_scen
 
 
 def _design_of(coverage, drms, availability, cost, order, feasible=True, cycle=1.0, echo=None):
-    from sblsim.orchestrator.design.run import Candidate, Design
+    from sblsim.orchestrator.design.candidates import Candidate
+    from sblsim.orchestrator.design.judgement import Design
 
     values = {"drms": np.asarray(drms, float), "availability": np.asarray(availability, float),
               "echo": np.zeros(len(drms)) if echo is None else np.asarray(echo, float)}
@@ -482,7 +484,7 @@ def test_what_fails_is_named_with_by_how_much():
     """Twenty points: their DRMS at the 90th percentile (the search's criterion: the virtual index 19 · 0.9 = 17.1
     rounded up, the 19th smallest, a point without a fix counting as infinite) and the availability at the 10th
     (17.1's mirror 1.9 rounded down: the 2nd smallest), against the prescription, by hand."""
-    from sblsim.orchestrator.design.run import shortfalls
+    from sblsim.orchestrator.design.judgement import shortfalls
 
     drms = np.r_[np.linspace(0.05, 0.2, 19), np.nan]
     availability = np.r_[0.5, 0.6, np.full(18, 0.9)]
@@ -504,7 +506,7 @@ def test_what_fails_is_named_with_by_how_much():
 def test_among_designs_that_do_not_meet_the_cheapest_of_the_nearest_is_first():
     """The same coverage: a costlier design nearer by 0.25 mm in 0.1 m is not ranked over a cheaper one; one
     nearer by 20 % is."""
-    from sblsim.orchestrator.design.run import ranked, shortfalls
+    from sblsim.orchestrator.design.judgement import ranked, shortfalls
 
     prescription = {"drms_m": 0.1, "coverage_pct": 95.0, "availability_pct": 0.0, "update_interval_s": 0.0}
     designs = []

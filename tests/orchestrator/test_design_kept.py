@@ -23,8 +23,9 @@ import sblsim
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
+from sblsim.orchestrator.design.judgement import shortfalls
 from sblsim.orchestrator.design.problem import check_problem
-from sblsim.orchestrator.design.run import plan_of, resolve, shortfalls
+from sblsim.orchestrator.design.resolution import plan_of, resolve
 from sblsim.orchestrator.design.search import Objective
 from tests.helpers import problem_with as _with
 
@@ -118,7 +119,8 @@ def test_the_transponder_added_to_two_in_place_is_no_worse_than_a_brute_force_ov
     search's own) no worse than the best of every place of a 2 m grid over the seafloor region."""
     problem = _with(LBL, candidates={"transponders": [3, 3]}, search={"criterion": "a-optimal"})
     r = resolve(check_problem(problem), "semicircle")
-    from sblsim.orchestrator.design.run import Searcher, candidates
+    from sblsim.orchestrator.design.candidates import candidates
+    from sblsim.orchestrator.design.searcher import Searcher
 
     (candidate,) = candidates(r)
     design = Searcher(r).search(candidate)

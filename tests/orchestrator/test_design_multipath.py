@@ -13,7 +13,7 @@ from sblsim.models.errors import ConfigError
 from sblsim.models.tracking import starts
 from sblsim.orchestrator.design import telemetry_confirm
 from sblsim.orchestrator.design.problem import check_problem, read_problem
-from sblsim.orchestrator.design.telemetry import TelemetryDesign, judge, resolve
+from sblsim.orchestrator.design.telemetry import resolve
 from sblsim.orchestrator.design.telemetry_confirm import (
     MULTIPATH_STREAM,
     _heard,
@@ -21,6 +21,7 @@ from sblsim.orchestrator.design.telemetry_confirm import (
     path_check,
     static_check,
 )
+from sblsim.orchestrator.design.telemetry_judgement import TelemetryDesign, judge
 from tests.helpers import problem_with
 from tests.orchestrator.test_design_telemetry import SMALL  # the small L-shaped lake, a logistic curve
 

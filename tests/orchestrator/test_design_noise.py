@@ -23,11 +23,12 @@ from sblsim.models.design.criteria import (
 from sblsim.models.design.information import layout_values
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design import telemetry as telemetry_design
-from sblsim.orchestrator.design import telemetry_confirm
+from sblsim.orchestrator.design import telemetry_confirm, telemetry_judgement
+from sblsim.orchestrator.design.candidates import layout_items
 from sblsim.orchestrator.design.evaluate import NO_DEPTH_SIGMA, LayoutEvaluator, Levels, judged, problem_items
 from sblsim.orchestrator.design.keys import TELEMETRY
 from sblsim.orchestrator.design.problem import check_problem
-from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
+from sblsim.orchestrator.design.resolution import plan_of, resolve
 from sblsim.orchestrator.maps import diver_depth, point_accuracy
 from tests.helpers import problem_with as _with
 
@@ -120,8 +121,8 @@ def test_the_ilbl_design_with_the_law_is_an_independent_fisher_computation():
     n, radius = 6, 100.0
     angle = 2.0 * np.pi * np.arange(n) / n
     receivers = np.column_stack([150.0 + radius * np.cos(angle), 150.0 + radius * np.sin(angle)])
-    design = telemetry_design.TelemetryDesign(n, float(n), receivers, 0.0)
-    telemetry_design.judge(design, problem, np.random.default_rng(0))
+    design = telemetry_judgement.TelemetryDesign(n, float(n), receivers, 0.0)
+    telemetry_judgement.judge(design, problem, np.random.default_rng(0))
     sigma0 = 1480.0 * 1e-4
     for j, point in enumerate(problem.points):
         d = np.linalg.norm(point - receivers, axis=1)
@@ -156,8 +157,8 @@ def test_the_ilbl_confirmation_with_the_law_agrees_with_the_prediction():
     n = 6
     angle = 2.0 * np.pi * np.arange(n) / n + 0.3
     receivers = np.column_stack([150.0 + 100.0 * np.cos(angle), 150.0 + 100.0 * np.sin(angle)])
-    design = telemetry_design.TelemetryDesign(n, float(n), receivers, 0.0)
-    telemetry_design.judge(design, problem, np.random.default_rng(0))
+    design = telemetry_judgement.TelemetryDesign(n, float(n), receivers, 0.0)
+    telemetry_judgement.judge(design, problem, np.random.default_rng(0))
     index = int(np.argmin(np.linalg.norm(problem.points - 150.0, axis=1)))
     row = telemetry_confirm.static_check(design, problem, "median", index, np.random.default_rng(11))
     assert row["fixes"] >= 900

@@ -12,7 +12,8 @@ import pytest
 
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.design.area import Area
-from sblsim.orchestrator.design.run import _sampling_items, shortfalls
+from sblsim.orchestrator.design.judgement import shortfalls
+from sblsim.orchestrator.design.slot_period import _sampling_items
 
 
 @pytest.mark.parametrize("period", [3.0, 20.5187, 30.0, 7.0])

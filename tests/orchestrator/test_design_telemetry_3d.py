@@ -15,7 +15,9 @@ import pytest
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.design import telemetry as t
 from sblsim.orchestrator.design import telemetry_confirm as tc
+from sblsim.orchestrator.design import telemetry_judgement as tj
 from sblsim.orchestrator.design import telemetry_output as out
+from sblsim.orchestrator.design import telemetry_search as ts
 from sblsim.orchestrator.design.keys import TELEMETRY
 from sblsim.orchestrator.design.problem import check_problem
 
@@ -71,8 +73,8 @@ def test_the_3d_prediction_equals_an_independent_fisher_computation(sensor, dime
     problem = t.resolve(check_problem(_with(POND, work_area={"depth_sensor": sensor},
                                             prescription={"dimensions": dimensions})))
     assert problem.points.shape == (2 * 25, 3) and set(problem.points[:, 2]) == {4.0, 10.0}
-    design = t.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
-    t.judge(design, problem, np.random.default_rng(0))
+    design = tj.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
+    tj.judge(design, problem, np.random.default_rng(0))
     depth_sigma = 0.3 if sensor else None
     horizontal = dimensions == "horizontal"
     sigma = np.full(len(LAYOUT), 1480.0 * 1e-4)
@@ -93,8 +95,8 @@ def test_the_3d_prediction_equals_an_independent_fisher_computation(sensor, dime
         assert design.fixable[j] == pytest.approx(weight, rel=1e-9)
     # the depth sensor helps the horizontal fix: the depth and the emission trade against each other without it
     if not sensor:
-        with_sensor = t.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
-        t.judge(with_sensor, t.resolve(check_problem(_with(POND, prescription={"dimensions": dimensions}))),
+        with_sensor = tj.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
+        tj.judge(with_sensor, t.resolve(check_problem(_with(POND, prescription={"dimensions": dimensions}))),
                 np.random.default_rng(0))
         assert np.all(with_sensor.drms_expected < design.drms_expected)
 
@@ -103,7 +105,7 @@ def test_the_receivers_stay_in_the_water_at_their_stated_depths():
     """The searched layouts' receivers lie in the water at ``candidates.receiver_depth_m`` in turn; a receiver in
     place keeps its own depth (or takes the first where it has none)."""
     problem = t.resolve(check_problem(_with(POND, candidates={"existing_m": "20 20 7; 80 80"})))
-    run = t.search_all(problem)
+    run = ts.search_all(problem)
     assert len(run.searched) >= 2
     for design in run.searched:
         assert t.within(problem, design.receivers) and design.receivers.shape[1] == 3
@@ -159,8 +161,8 @@ def test_the_3d_monte_carlo_agrees_with_the_prediction(sensor):
     problem = t.resolve(check_problem(_with(POND, work_area={"depth_sensor": sensor},
                                             prescription={"fix_receivers": 4 if sensor else 5},
                                             monte_carlo={"replicates": 40})))
-    design = t.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
-    t.judge(design, problem, np.random.default_rng(0))
+    design = tj.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
+    tj.judge(design, problem, np.random.default_rng(0))
     tc.confirm(design, problem)
     assert len(design.monte_carlo) == 2
     for row in design.monte_carlo:
@@ -173,8 +175,8 @@ def test_the_3d_walk_is_tracked_in_3d():
     """The walk at the work area's depths, fixed in 3-D and tracked by the replay tracker with the sensor's
     readings: a finite track, its error small against the pond, the simulated DRMS near the predicted."""
     problem = t.resolve(check_problem(_with(POND, monte_carlo={"path": True, "sync_clocks": False})))
-    design = t.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
-    t.judge(design, problem, np.random.default_rng(0))
+    design = tj.TelemetryDesign(len(LAYOUT), 0.0, LAYOUT, 0.0)
+    tj.judge(design, problem, np.random.default_rng(0))
     row = tc.path_check(design, problem, np.random.default_rng(1))
     assert row["tracked_pings"] > 100 and np.isfinite(row["tracked_rms_m"]) and row["tracked_rms_m"] < 1.0, row
     assert 0.85 <= row["ratio"] <= 1.15, row
@@ -191,7 +193,7 @@ def test_the_planar_case_is_unchanged():
     b = t.resolve(check_problem(_with(planar, detection={"depth_sigma_m": 5.0})))
     docs = []
     for problem in (a, b):
-        run = t.search_all(problem)
+        run = ts.search_all(problem)
         for design in run.proposed:
             tc.confirm(design, problem)
         docs.append(json.loads(json.dumps(out.document(run), allow_nan=True)))
@@ -201,9 +203,9 @@ def test_the_planar_case_is_unchanged():
     flat = t.resolve(check_problem(_with(POND, work_area={"depths_m": [0.0]},
                                          candidates={"receiver_depth_m": [0.0]})))
     layout = LAYOUT * [1, 1, 0] + [0.5, 0.5, 0.0]  # off the work area's points: no receiver at a tag's place
-    two, three = t.TelemetryDesign(6, 0.0, layout[:, :2], 0.0), t.TelemetryDesign(6, 0.0, layout, 0.0)
-    t.judge(two, a, np.random.default_rng(0))
-    t.judge(three, flat, np.random.default_rng(0))
+    two, three = tj.TelemetryDesign(6, 0.0, layout[:, :2], 0.0), tj.TelemetryDesign(6, 0.0, layout, 0.0)
+    tj.judge(two, a, np.random.default_rng(0))
+    tj.judge(three, flat, np.random.default_rng(0))
     np.testing.assert_allclose(three.drms_fixed, two.drms_fixed, rtol=1e-9)
     np.testing.assert_allclose(three.drms_expected, two.drms_expected, rtol=1e-9)
     np.testing.assert_allclose(three.positioning_yield, two.positioning_yield, rtol=1e-12)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import sblsim
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import ambient_noise, volume_absorption
 from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.cosim.plan import load_plan
@@ -176,6 +176,6 @@ def test_sonar_terms_reach_the_channel():
     src, rec = np.array([[0.0, 0.0, 2.0]]), np.array([[300.0, 400.0, 50.0]])
     snr = site_levels(params, src, rec)["snr"][0, 0]
     r = float(np.linalg.norm(rec - src))
-    alpha = sonar.absorption(30000.0, 15.0, 35.0, 0.0)
-    noise = sonar.noise_level(30000.0, 6000.0, sonar.wind_speed(4), 0.3)
+    alpha = volume_absorption.absorption(30000.0, 15.0, 35.0, 0.0)
+    noise = ambient_noise.noise_level(30000.0, 6000.0, ambient_noise.wind_speed(4), 0.3)
     assert snr == pytest.approx(185.0 - 20 * math.log10(r) - alpha * r - (noise - 3.0), abs=1e-6)

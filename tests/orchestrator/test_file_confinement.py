@@ -113,7 +113,7 @@ def test_a_scenario_files_absolute_path_is_refused_and_the_same_file_on_the_comm
 
 @pytest.mark.parametrize("name", ["offsets.csv", "positions.csv"])
 def test_a_sync_folders_table_linked_out_of_it_is_refused_unopened(tmp_path, private, name):
-    from sblsim.orchestrator.sync.toa import read_clocks, read_positions
+    from sblsim.orchestrator.sync.clocks import read_clocks, read_positions
 
     folder = tmp_path / "sync"
     folder.mkdir()
@@ -158,7 +158,8 @@ def test_the_rule_takes_what_the_folder_holds_and_nothing_else(tmp_path):
 
 
 def test_a_study_files_scenario_outside_its_folder_is_refused_unopened(tmp_path, private):
-    from sblsim.orchestrator.campaign.study import StudyError, load_study
+    from sblsim.orchestrator.campaign.errors import StudyError
+    from sblsim.orchestrator.campaign.study import load_study
 
     scenario = private["outline.csv"].with_name("s.toml")
     scenario.write_text("[simulation]\nduration = 1.0\n")

@@ -1,7 +1,7 @@
 """What a hostile tester found refused unclearly, or not at all: each a one-line refusal (exit 2, nothing written) or
 a clear message.
 
-* a log's range below what the configuration's channel measures (orchestrator/logs/receiver_log.py);
+* a log's range below what the configuration's channel measures (orchestrator/logs/receiver_log.py, range_floor.py);
 * a times-of-arrival record in which no ping can be positioned (orchestrator/tracks/replay.py);
 * ``sblsim run --export-log`` whose export fails: the run's folder goes with it (orchestrator/commands/run.py);
 * a budget whose receiver heard nothing (orchestrator/montecarlo/budget.py);
@@ -31,8 +31,9 @@ from sblsim.orchestrator.cosim.connections import ConnectionMismatch, check_inte
 from sblsim.orchestrator.cosim.plan import load_plan
 from sblsim.orchestrator.design.problem import check_problem
 from sblsim.orchestrator.io import output, plots
-from sblsim.orchestrator.logs import receiver_log
-from sblsim.orchestrator.logs.receiver_log import range_floor, read_log
+from sblsim.orchestrator.logs import log_export
+from sblsim.orchestrator.logs.range_floor import range_floor
+from sblsim.orchestrator.logs.receiver_log import read_log
 from tests.helpers import problem_with
 from tests.orchestrator.test_design_telemetry import SMALL  # the small L-shaped lake, a range test's curve
 
@@ -127,7 +128,7 @@ def test_a_run_whose_log_export_fails_leaves_no_run_folder(tmp_path, capsys, mon
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return output.write_together({path: fail for path in writers}, parents)
 
-    monkeypatch.setattr(receiver_log, "write_together", full)
+    monkeypatch.setattr(log_export, "write_together", full)
     # the figures stand for themselves (one file, not matplotlib's seconds): the run's folder has them all the same
     monkeypatch.setattr(plots, "save_run_figures", lambda ts, folder, **kw: (folder / "figure.png").write_bytes(b"."))
     out, log = tmp_path / "runs" / "o", tmp_path / "logs" / "log.csv"

@@ -14,6 +14,7 @@ import pytest
 
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking import schedule as ps
+from sblsim.models.tracking.strays import SET_ASIDE_REASON
 from sblsim.orchestrator.cli import main
 
 RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
@@ -56,12 +57,12 @@ def test_stray_rows_are_set_aside_listed_and_kept_in_the_track_with_their_reason
     out = capsys.readouterr().out
     listed = pd.read_csv(tmp_path / "out" / "set_aside.csv")
     assert listed["ping"].tolist() == np.flatnonzero(inserted).tolist()  # every stray, and nothing else
-    assert listed["receivers_heard"].tolist() == [1] * 4 and set(listed["reason"]) == {ps.SET_ASIDE_REASON}
+    assert listed["receivers_heard"].tolist() == [1] * 4 and set(listed["reason"]) == {SET_ASIDE_REASON}
     assert np.allclose(listed["time"], np.nanmin(matrix[inserted], axis=1), atol=1e-9)
     assert "4 rows set aside as no pings of the tag's schedule" in out, out
     track = pd.read_csv(tmp_path / "out" / "track.csv")
     assert len(track) == len(matrix)  # the robust smoother's rows: one per row of the matrix, the numbering kept
-    aside = (track["quality_reason"] == ps.SET_ASIDE_REASON).to_numpy()
+    aside = (track["quality_reason"] == SET_ASIDE_REASON).to_numpy()
     assert np.array_equal(aside, inserted) and track.loc[aside, ["x", "y", "time"]].isna().all().all()
     assert track.loc[~aside, ["x", "y"]].notna().all().all()
 

@@ -21,7 +21,7 @@ from sblsim.models.systems import SYSTEMS, System
 from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import RunPlan, load_plan, make_plan, thaw
-from sblsim.orchestrator.montecarlo.budget import SOURCES
+from sblsim.orchestrator.montecarlo.error_sources import SOURCES
 
 SHORT = ["simulation.duration=2"]
 
@@ -189,7 +189,7 @@ def test_a_map_resolves_each_configuration_once(counted):
 
 
 def test_a_replay_is_resolved_once(counted, tmp_path):
-    from sblsim.orchestrator.logs.receiver_log import export_log
+    from sblsim.orchestrator.logs.log_export import export_log
 
     result = sblsim.run("semicircle", seed=1, set=SHORT)
     log, truth = export_log(result._result, tmp_path / "log.csv")

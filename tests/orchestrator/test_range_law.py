@@ -15,11 +15,12 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import as_plan
 from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
+from sblsim.orchestrator.design.candidates import layout_items
 from sblsim.orchestrator.design.evaluate import LayoutEvaluator, Levels
 from sblsim.orchestrator.design.problem import check_problem, read_problem
-from sblsim.orchestrator.design.run import layout_items, plan_of, resolve
+from sblsim.orchestrator.design.resolution import plan_of, resolve
 from sblsim.orchestrator.maps import point_accuracy
-from sblsim.orchestrator.montecarlo.budget import SOURCES, switched_off
+from sblsim.orchestrator.montecarlo.error_sources import SOURCES, switched_off
 from tests.helpers import problem_with
 
 #: The scenarios' fixed-detection, straight-path variants: an LBL of 250 m radius with a vehicle at 150 m depth

@@ -24,12 +24,12 @@ from sblsim.models.target.core import WAYPOINTS
 from sblsim.models.target.trajectories import MAX_LINE_CHARS, read_trajectory_file
 from sblsim.orchestrator.design import area_file
 from sblsim.orchestrator.io import tables
-from sblsim.orchestrator.logs import receiver_log
+from sblsim.orchestrator.logs import receiver_log, truth_track
 from sblsim.orchestrator.sync import detections
-from sblsim.orchestrator.sync.toa import read_clocks
+from sblsim.orchestrator.sync.clocks import read_clocks
 from sblsim.orchestrator.telemetry.deployments import read_deployments
 from sblsim.orchestrator.telemetry.tag_sheet import read_tag_sheet
-from sblsim.orchestrator.tracks import toa
+from sblsim.orchestrator.tracks import input_rows, receivers_file, time_series, toa
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -118,15 +118,17 @@ READERS = {
     "tag sheet": (read_tag_sheet, "tags.csv", "transmitter,role,name", "4555,animal,cod", (tables, "MAX_CELLS")),
     "sound speed": (detections.read_sound_speed, "ss.csv", "epo,sound_speed_m_s", "1587877200,1421.3",
                     (tables, "MAX_CELLS")),
-    "toa matrix": (toa.read_toa, "toa.csv", "H1,H2", "1.5,2.5", (toa, "MAX_TOA_CELLS")),
-    "toa receivers": (toa.read_receivers, "hyd.csv", "hydrophone,x_m,y_m", "H1,0,0", (toa, "MAX_TOA_CELLS")),
-    "truth track": (lambda p: toa.read_track(p, "truth"), "gps.csv", "x,y,t", "1,2,0.5", (toa, "MAX_TOA_CELLS")),
-    "sound-speed series": (toa.read_sound_speed_series, "c.csv", "time_s,sound_speed_m_s", "0,1480",
-                           (toa, "MAX_TOA_CELLS")),
-    "burst sequence": (toa.read_burst_sequence, "b.csv", "interval_s,note", "1.5,a", (toa, "MAX_TOA_CELLS")),
+    "toa matrix": (toa.read_toa, "toa.csv", "H1,H2", "1.5,2.5", (input_rows, "MAX_TOA_CELLS")),
+    "toa receivers": (receivers_file.read_receivers, "hyd.csv", "hydrophone,x_m,y_m", "H1,0,0",
+                      (input_rows, "MAX_TOA_CELLS")),
+    "truth track": (lambda p: time_series.read_track(p, "truth"), "gps.csv", "x,y,t", "1,2,0.5",
+                    (input_rows, "MAX_TOA_CELLS")),
+    "sound-speed series": (time_series.read_sound_speed_series, "c.csv", "time_s,sound_speed_m_s", "0,1480",
+                           (input_rows, "MAX_TOA_CELLS")),
+    "burst sequence": (toa.read_burst_sequence, "b.csv", "interval_s,note", "1.5,a", (input_rows, "MAX_TOA_CELLS")),
     "log": (lambda p: receiver_log.read_log(p, 1), "log.csv", "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,"
             "beacon_d_m,depth_m", "0.1,1,7.7,1.1,-0.1,1.2,2.0", (tables, "MAX_CELLS")),
-    "log truth": (receiver_log.read_truth, "truth.csv", "time_s,n_m,e_m,d_m", "0.1,-4.9,-5.0,2.0",
+    "log truth": (truth_track.read_truth, "truth.csv", "time_s,n_m,e_m,d_m", "0.1,-4.9,-5.0,2.0",
                   (tables, "MAX_CELLS")),
 }
 
@@ -134,7 +136,7 @@ READERS = {
 @pytest.mark.parametrize("reader", READERS)
 def test_a_line_of_too_many_cells_is_refused_naming_the_count(tmp_path, reader):
     read, name, header, row, (module, _) = READERS[reader]
-    most = toa.MAX_ROW_CELLS if module is toa else tables.MAX_LINE_CELLS
+    most = input_rows.MAX_ROW_CELLS if module is input_rows else tables.MAX_LINE_CELLS
     text = f"{header}\n{row}\n{row}{',' * most}\n{row}\n"
     path = _write(tmp_path, name, text)
     cells = _cells(text)[2]
@@ -196,7 +198,7 @@ def test_a_parquet_log_is_refused_from_its_metadata(tmp_path, monkeypatch):
     monkeypatch.setattr(tables, "MAX_CELLS", 100)
     long = tmp_path / "long.parquet"
     pd.DataFrame({"time_s": range(30), "n_m": 0.0, "e_m": 0.0, "d_m": 0.0}).to_parquet(long)
-    assert "holds 30 rows of 4 columns; allowed at most 512 columns and 100 cells" in _refusal(receiver_log.read_truth,
+    assert "holds 30 rows of 4 columns; allowed at most 512 columns and 100 cells" in _refusal(truth_track.read_truth,
                                                                                                  long)
 
 

@@ -1,6 +1,6 @@
 """A receiver that ranges with its own sound-speed profile (``receiver.sound_speed_profile``).
 
-* The travel time → slant range conversion (:func:`sblsim.models.acoustics.rays.slant_range`) inverts a linear
+* The travel time → slant range conversion (:func:`sblsim.models.acoustics.ray_inversion.slant_range`) inverts a linear
   gradient's closed-form travel time, ``τ = arccosh(1 + g² R² / (2 c₁ c₂)) / |g|`` (the circular arc between two
   points; Jensen et al. ch. 3), to the geometric range, and the eigenray travel times of the deep NCL1 cast to
   below 1 cm at about 1 km slant range, where the single assumed speed is metres off.
@@ -23,13 +23,15 @@ import numpy as np
 import pytest
 
 from sblsim.models import MODELS, RECEIVERS
-from sblsim.models.acoustics.rays import eigenray_families, first_arrival, profile_arrays, ray_bending, slant_range
+from sblsim.models.acoustics.ray_inversion import ray_bending, slant_range
+from sblsim.models.acoustics.rays import eigenray_families, first_arrival, profile_arrays
 from sblsim.models.acoustics.sound_speed import PROFILE, profile_table
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run, run_batch, with_replicates
-from sblsim.orchestrator.montecarlo.budget import OFF, ON, SOURCES, budget
+from sblsim.orchestrator.montecarlo.budget import OFF, ON, budget
+from sblsim.orchestrator.montecarlo.error_sources import SOURCES
 
 #: The 1000 m site: four transponders on the seafloor on an 800 m circle, two-way ranging, eigenrays through the
 #: Munk profile; the random walk near the surface (slant ranges about 1.3 km), 100 s at a 0.5 s sampling time.

@@ -118,7 +118,8 @@ def test_bad_receiver_values_are_refused(tmp_path):
 
 
 def test_a_users_receiver_travels_in_the_ssp_package(user_fmu, fmu_dir, tmp_path):
-    from sblsim.orchestrator.cosim.ssp import export_ssp, read_ssp
+    from sblsim.orchestrator.cosim.ssp import export_ssp
+    from sblsim.orchestrator.cosim.ssp_read import read_ssp
 
     cfg = load_config("semicircle", [f"receiver=fmu:{user_fmu}", *SHORT], seed=3)
     path = export_ssp(cfg, tmp_path / "user.ssp", fmu_dir)

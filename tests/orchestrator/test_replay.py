@@ -24,8 +24,11 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config, to_toml
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.logs.receiver_log import export_log, read_log, read_truth, truth_path
-from sblsim.orchestrator.logs.replay import replay, replay_config
+from sblsim.orchestrator.logs.configuration import replay_config
+from sblsim.orchestrator.logs.log_export import export_log, truth_path
+from sblsim.orchestrator.logs.receiver_log import read_log
+from sblsim.orchestrator.logs.replay import replay
+from sblsim.orchestrator.logs.truth_track import read_truth
 
 TOL = 1e-9  # [m]
 #: The receiver's outputs compared with the run's.
@@ -500,7 +503,8 @@ def test_the_readme_table_2_comparison_is_what_the_replays_give(tmp_path):
 
 
 def test_the_log_format_document_lists_every_column():
-    from sblsim.orchestrator.logs.receiver_log import LOG_COLUMNS, TRUTH_COLUMNS
+    from sblsim.orchestrator.logs.receiver_log import LOG_COLUMNS
+    from sblsim.orchestrator.logs.truth_track import TRUTH_COLUMNS
 
     text = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
     for name in [*LOG_COLUMNS, *TRUTH_COLUMNS]:

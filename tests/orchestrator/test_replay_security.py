@@ -23,7 +23,9 @@ import tomli_w
 
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.logs.receiver_log import CONFIG_PREFIX, META_CONFIG, export_log, log_config
+from sblsim.orchestrator.io.tables import CONFIG_PREFIX, META_CONFIG
+from sblsim.orchestrator.logs.log_export import export_log
+from sblsim.orchestrator.logs.receiver_log import log_config
 
 #: The log's two formats where a test is the same property read by another reader: the Parquet run in the slow tier
 #: (the fast tier keeps every property once, on the CSV; the tests of both formats that stay fast read Parquet too).

@@ -22,7 +22,7 @@ import pytest
 import tomli_w
 from scipy.stats import norm
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import ambient_noise, volume_absorption
 from sblsim.models.acoustics.channel.site_levels import site_levels
 from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cosim.config import load_config
@@ -76,9 +76,10 @@ def expected_detected(plan) -> float:
     levels = site_levels(plan.component_parameters("acoustics"), arms, np.tile(DIVER, (len(arms), 1)))
     r = np.linalg.norm(arms - DIVER, axis=1)
     depths = np.linspace(0.0, a["water_depth"], 1001)  # the water column's mean: its pressure terms vary with depth
-    alpha = float(np.mean([sonar.absorption(a["frequency"], a["temperature"], a["salinity"], d) for d in depths]))
-    noise = sonar.noise_level(a["frequency"], a["bandwidth"], sonar.wind_speed(plan["platform"]["beaufort"]),
-                              a["shipping"])
+    alpha = float(np.mean([volume_absorption.absorption(a["frequency"], a["temperature"], a["salinity"], d)
+                           for d in depths]))
+    noise = ambient_noise.noise_level(a["frequency"], a["bandwidth"],
+                                      ambient_noise.wind_speed(plan["platform"]["beaufort"]), a["shipping"])
     direct = a["source_level"] - (20.0 * np.log10(r) + alpha * r) - (noise - a["directivity_index"])
     np.testing.assert_allclose(levels["snr"][:, 0], direct, atol=1e-6)  # the channel's direct SNR is the equation's
     snr = np.column_stack([direct, levels["snr"][:, 1:]])

@@ -17,7 +17,8 @@ from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.connections import default_connections
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.cosim.ssp import SspError, export_ssp, read_ssp, validate_ssp
+from sblsim.orchestrator.cosim.ssp import SspError, export_ssp, validate_ssp
+from sblsim.orchestrator.cosim.ssp_read import read_ssp
 
 
 @pytest.fixture(scope="module")

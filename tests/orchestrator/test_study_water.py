@@ -23,7 +23,8 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.telemetry.deployments import read_deployments
 from sblsim.orchestrator.telemetry.simulate import simulate_study
-from sblsim.orchestrator.tracks.toa import read_receivers, read_toa
+from sblsim.orchestrator.tracks.receivers_file import read_receivers
+from sblsim.orchestrator.tracks.toa import read_toa
 
 #: The receivers' depth [m] and each one's bottom [m] (20, 22, ... m).
 INSTRUMENT = 5.0

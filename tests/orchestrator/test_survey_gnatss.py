@@ -19,14 +19,12 @@ from sblsim.orchestrator.io import tables
 from sblsim.orchestrator.surveys import gnatss
 from sblsim.orchestrator.surveys.gnatss import (
     community_editing,
-    ecef_to_enu,
-    enu_rotation,
-    geodetic_to_enu,
     read_gnatss,
     read_ncl1,
-    read_site,
     straight_ray_residuals,
 )
+from sblsim.orchestrator.surveys.gnatss_site import read_site
+from sblsim.orchestrator.surveys.local_frame import ecef_to_enu, enu_rotation, geodetic_to_enu
 from sblsim.orchestrator.surveys.log import LOG_COLUMNS, check_frame
 
 PXP, POS, SITE = gnatss.ncl1_paths()

@@ -18,7 +18,7 @@ import sblsim
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.simulate import simulate_sync
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.sync.toa import offsets_clocks, read_clocks
+from sblsim.orchestrator.sync.clocks import offsets_clocks, read_clocks
 
 #: The files' time of τ = 0 [s since 1970 UTC], the timing noise [s] and the array.
 EPOCH = 1_700_000_000

@@ -19,7 +19,7 @@ from sblsim.orchestrator import cli
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
 from sblsim.orchestrator.cosim.systems import describe_defaults, parse_systems, system_overrides
-from sblsim.orchestrator.logs.receiver_log import log_frames
+from sblsim.orchestrator.logs.log_export import log_frames
 from sblsim.orchestrator.maps import system_line
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,7 +1,7 @@
 """The three positioning systems (SBL, LBL, USBL) in runs: the accuracy limit, two-way ranging, per-run errors and
 the two engines.
 
-* The bound (``pcrb_rms``; USBL: range, azimuth and elevation, :func:`sblsim.models.systems.usbl.pcrb`) on
+* The bound (``pcrb_rms``; USBL: range, azimuth and elevation, :func:`sblsim.models.systems.usbl_bound.pcrb`) on
   ``random-walk``, a trajectory drawn from the receivers' motion model, with only white error sources: ``ekf-seq``
   reaches it and no receiver beats it beyond the sampling error.
 * TWTT cancels a clock drift that ruins OWTT; the turnaround jitter enters the range as ``c σ / 2``.
@@ -22,9 +22,9 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from sblsim.models.platform.geometry import platform_offsets
-from sblsim.models.systems.usbl import FIXED as USBL_FIXED
-from sblsim.models.systems.usbl import pcrb as usbl_pcrb
-from sblsim.models.systems.usbl import pcrb_inputs as usbl_pcrb_inputs
+from sblsim.models.systems.usbl_bound import FIXED as USBL_FIXED
+from sblsim.models.systems.usbl_bound import pcrb as usbl_pcrb
+from sblsim.models.systems.usbl_bound import pcrb_inputs as usbl_pcrb_inputs
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.connections import default_connections
 from sblsim.orchestrator.cosim.engines import close_handles, make_handles

@@ -10,7 +10,9 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import csv_cells, read_table
-from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_receivers, read_toa, read_track
+from sblsim.orchestrator.tracks.receivers_file import read_receivers
+from sblsim.orchestrator.tracks.time_series import read_track
+from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_toa
 
 RECEIVERS = ('# the array, surveyed\nname,x_m,y_m,z_m,status\n"H1, north pier",10.5,-3,-2,ok\nH2,0,20,-2,"ok, '
              're-surveyed"\n"H3 ""old""",-12,4,-3,ok\n')

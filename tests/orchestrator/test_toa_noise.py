@@ -15,7 +15,7 @@ import pytest
 import sblsim
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.sync.toa import read_clocks
+from sblsim.orchestrator.sync.clocks import read_clocks
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 from sblsim.orchestrator.tracks.tracker import SIGMA_TOA
 

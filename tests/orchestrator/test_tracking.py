@@ -15,7 +15,9 @@ import sblsim
 from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking.quality import REASONS
-from sblsim.orchestrator.tracks.toa import read_receivers, read_toa, read_track
+from sblsim.orchestrator.tracks.receivers_file import read_receivers
+from sblsim.orchestrator.tracks.time_series import read_track
+from sblsim.orchestrator.tracks.toa import read_toa
 
 # the recording is in the repository (tests and docs), not in the wheel
 DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
@@ -332,7 +334,7 @@ def test_no_lag_is_searched_against_a_truth_that_does_not_move():
 
 
 def test_drop_detections_is_seeded_and_takes_its_share():
-    from sblsim.orchestrator.tracks.track import drop_detections
+    from sblsim.orchestrator.tracks.thinning import drop_detections
 
     toa = read_toa(DATA / "toa.txt").toa
     heard = np.isfinite(toa)
@@ -613,7 +615,7 @@ def test_consistent_fixes_restart_holds_the_thinned_track(full):
     of the same tracker without that rule (the disagreement rule of 5 receivers alone)."""
     import dataclasses
 
-    from sblsim.orchestrator.tracks.track import _usable
+    from sblsim.orchestrator.tracks.thinning import _usable
     from sblsim.orchestrator.tracks.tracker import AGREE_AFTER, SIGMA_TOA, tracker_settings
 
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
@@ -661,7 +663,7 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
             assert rms < 3.0 and p95 < 5.0 and rms < rms_rts / 2 and p95 < p95_rts / 2, figures
             assert result.score["estimator"] == "robust" and np.isclose(result.score["rms_m"], rms, rtol=1e-12)
     # without the graduated start: from the fixes' own track and the RTS smoother's alone
-    from sblsim.orchestrator.tracks.track import _usable
+    from sblsim.orchestrator.tracks.thinning import _usable
     from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, tracker_settings
 
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)

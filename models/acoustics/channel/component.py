@@ -16,7 +16,7 @@ from typing import Any, Callable, Mapping
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import volume_absorption
 from sblsim.models.acoustics.channel.exchange import _slot
 from sblsim.models.acoustics.channel.interface import (
     _ANGLE_NOISE,
@@ -83,11 +83,12 @@ from sblsim.models.acoustics.sound_speed import (
     profile_table,
 )
 from sblsim.models.component import Component
-from sblsim.models.declarations import SEED_PARAMETERS, Variable, format_table, signal_range
+from sblsim.models.declarations import SEED_PARAMETERS, Variable, signal_range
 from sblsim.models.expressions import get_row, sample_due
 from sblsim.models.platform.core import USBL_ATTITUDES, attitude_variables, beacon_names, beacon_variables
 from sblsim.models.program import ProgramBuilder, Stream
 from sblsim.models.systems import interface_system
+from sblsim.models.table_text import format_table
 
 
 @lru_cache(maxsize=32)
@@ -235,7 +236,7 @@ class Acoustics(Component):
         out.update(BURSTS.values(burst_sequence(values.get("burst_sequence", "")), "burst_sequence_rows"))
         # volume absorption at the signal's frequency in the site's own water (the column's mean, each depth at
         # the temperature its cast gives)
-        out["absorption"] = sonar.water_column_absorption(
+        out["absorption"] = volume_absorption.water_column_absorption(
             values.get("frequency", 25000.0), rows, values.get("temperature", 15.0), values.get("salinity", 35.0),
             values.get("water_depth", 0.0))
         return out

@@ -17,7 +17,7 @@ The random streams of the channel (``_CHANNEL_UNIFORM`` … ``_PING_JITTER``, th
 
 from __future__ import annotations
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics import boundary_loss
 from sblsim.models.acoustics.detection import NO_SNR
 from sblsim.models.acoustics.ray_tables import FAMILY_TABLE, RAY_BOUNDS, RAY_TABLE, RAY_TABLE_ROWS
 from sblsim.models.declarations import Variable, signal_range
@@ -171,7 +171,7 @@ DETECTION_VARIABLES: tuple[Variable, ...] = (
              min=0.0, max=40.0),
     Variable("shipping", "parameter", "Real", 0.5, "1", "snr: shipping activity of the ambient noise (Wenz)",
              min=0.0, max=1.0),
-    Variable("bottom", "parameter", "String", "sand", choices=tuple(sonar.BOTTOMS),
+    Variable("bottom", "parameter", "String", "sand", choices=tuple(boundary_loss.BOTTOMS),
              description="snr: sea-floor type of the bottom reflection (fluid half-space, docs/model.md)"),
     Variable("reference_snr", "parameter", "Real", 20.0, "dB",
              "snr: the SNR at which sigma_range and the USBL angle sigma hold (below it they grow as the "

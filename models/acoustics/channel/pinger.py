@@ -34,9 +34,10 @@ import casadi as ca
 import numpy as np
 
 from sblsim.models.acoustics.channel.interface import ARRIVAL_SLACK, TOA
-from sblsim.models.declarations import Column, Table, Variable, parse_table, shown
+from sblsim.models.declarations import Column, Table, Variable, shown
 from sblsim.models.errors import ModelError
 from sblsim.models.expressions import cumulative_sum, get_row
+from sblsim.models.table_text import parse_table
 
 #: The pinger's types (Baktoft et al. 2017, YAPS's names; the tracker's, :mod:`sblsim.models.tracking.schedule`): a
 #: stable burst interval (``sbi``: every ``ping_interval``, plus a uniform jitter), a random one (``rbi``: each

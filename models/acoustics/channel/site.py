@@ -12,7 +12,8 @@ from typing import Any, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from sblsim.models.acoustics import sonar
+from sblsim.models.acoustics.ambient_noise import noise_level, wind_speed
+from sblsim.models.acoustics.boundary_loss import BOTTOMS, wave_height
 from sblsim.models.declarations import Variable
 from sblsim.models.expressions import lookup
 
@@ -21,16 +22,16 @@ def site_numbers(p: Mapping[str, Any]) -> Any:
     """The site's numbers (:data:`~sblsim.models.acoustics.detection.SITE`) from the channel's parameters ``p``
     (by name; casadi symbols or numbers): the ambient noise over the signal's band from the Beaufort number's
     wind and the shipping (Wenz), the probable wave height of the Beaufort number, the sea floor's row of
-    :data:`~sblsim.models.acoustics.sonar.BOTTOMS` (``p["bottom"]`` its index).
+    :data:`~sblsim.models.acoustics.boundary_loss.BOTTOMS` (``p["bottom"]`` its index).
 
     Returns
     -------
     casadi.SX or casadi.DM, shape (len(SITE), 1)
     """
-    floor = [lookup(p["bottom"], [sonar.BOTTOMS[name][j] for name in sonar.BOTTOMS]) for j in range(3)]
-    noise = sonar.noise_level(p["frequency"], p["bandwidth"], sonar.wind_speed(p["beaufort"]), p["shipping"])
+    floor = [lookup(p["bottom"], [BOTTOMS[name][j] for name in BOTTOMS]) for j in range(3)]
+    noise = noise_level(p["frequency"], p["bandwidth"], wind_speed(p["beaufort"]), p["shipping"])
     return ca.vertcat(p["source_level"], p["detection_threshold"], p["directivity_index"], p["fluctuation"],
-                      p["frequency"], p["absorption"], noise, sonar.wave_height(p["beaufort"]), *floor)
+                      p["frequency"], p["absorption"], noise, wave_height(p["beaufort"]), *floor)
 
 
 def site_from(declared: Sequence[Variable], parameters: Mapping[str, Any]) -> tuple[dict[str, Any], np.ndarray]:

@@ -11,7 +11,8 @@ import json
 from pathlib import Path
 
 from sblsim.orchestrator.cosim.config import BUILTIN_SCENARIOS, load_config
-from sblsim.orchestrator.cosim.run import run, summary
+from sblsim.orchestrator.cosim.run import run
+from sblsim.orchestrator.cosim.run_output import summary
 
 HERE = Path(__file__).resolve().parent
 

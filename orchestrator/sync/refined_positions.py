@@ -1,0 +1,82 @@
+"""The receivers' horizontal positions refined with the clocks (``sblsim sync --refine-positions``): only where
+the sync tags determine them (:func:`_identify`, :func:`sblsim.models.sync.identifiability.identify`, with each sync
+tag left out too), as ``positions.csv`` (:func:`_positions`); a network adjustment with a priori information at the
+table's positions (Tapley, Schutz & Born 2004, ch. 4).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.clocks import Geometry
+from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, Identifiability, identify
+from sblsim.orchestrator.sync import segments
+from sblsim.orchestrator.sync.sync_tags import _fit_without
+
+
+def _identify(fit: ClockFit, args: tuple, geometry: Geometry, positions: np.ndarray, names: list[str],
+              tag_names: list[str], linked: np.ndarray, survey_sigma: float
+              ) -> tuple[Identifiability, dict[int, tuple[ClockFit, np.ndarray] | None]]:
+    """The identifiability test of the refined positions (:func:`sblsim.models.sync.identifiability.identify`)
+    on ``fit`` and on its fits with each sync tag heard left out (returned too, by tag, for the leave-one-out).
+
+    Raises
+    ------
+    ModelError
+        No receiver's position determined (a sparse sync array): the refinement refused in one line.
+    """
+    receiver, tag, emission, time, distance, slowness, used, start, width = args
+    rows, site = segments.clock_rows(fit, receiver)
+    ok = used & (rows >= 0)
+    steady = None if len(site) == len(names) else site == start
+    heard = [int(i) for i in np.unique(tag[ok])]
+    fits = {i: _fit_without(i, fit, rows, tag, emission, time, distance, slowness, ok, start, width, len(site),
+                            geometry, site, steady) for i in heard}
+    identified = identify(positions[:, :2], fit.shift_covariance_all, survey_sigma, linked,
+                          [None if f is None else f[0].shift_covariance_all for f in fits.values()])
+    identified = Identifiability(identified.ratio, identified.ratio_without, identified.worst, identified.determined,
+                                 identified.threshold, np.array(heard, np.int64))
+    if not identified.determined.any():
+        worst = np.fmax(identified.ratio, np.nan_to_num(identified.ratio_without, nan=1.0))
+        best = int(np.argmin(np.where(linked, worst, np.inf)))
+        raise ModelError(
+            f"refine positions: the {len(heard)} sync tags heard among {len(names)} receivers determine no "
+            f"receiver's position (the best, {names[best]}, has a posterior sigma {worst[best]:.2f} of the "
+            f"survey's with a sync tag left out; needed: < {MAX_SIGMA_RATIO:g}, i.e. 3 sync tags not on one line "
+            "heard by a receiver with any one left out: 4 or more around the array); allowed: the table's positions "
+            "(without refining them)")
+    return identified, fits
+
+
+def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: np.ndarray,
+               identified: Identifiability, tag_names: list[str]) -> pd.DataFrame:
+    """``positions.csv``: each receiver's refined horizontal position, the table's, the shift and its sigmas; a
+    receiver the sync tags do not determine (``identified``; in the fit at the survey's prior like the others) or
+    not synchronised keeps the table's (``refined`` false, its ``reason``; its sigmas NaN); ``sigma_ratio`` and
+    ``sigma_ratio_without`` its posterior sigma in the array's shape over the survey's, with every sync tag and the
+    worst with one left out (``worst_tag``)."""
+    refined = linked & identified.determined
+    shift = np.where(refined[:, None], fit.shift, 0.0)
+    cov = fit.shift_covariance
+    ratio, without = identified.ratio, identified.ratio_without
+    heard = [tag_names[i] for i in identified.tags] if identified.tags is not None else []
+    worst = np.array([heard[k] if 0 <= k < len(heard) else "" for k in identified.worst], dtype=object)
+    reason = np.where(~linked, "not synchronised", np.where(
+        ~(ratio < identified.threshold),
+        [f"its posterior sigma {r:.2f} of the survey's (needs < {identified.threshold:g})" for r in ratio],
+        np.where(~(without < identified.threshold),
+                 [f"determined only with sync tag {t} (without it {r:.2f} of the survey's, needs < "
+                  f"{identified.threshold:g})"
+                  for t, r in zip(worst, without, strict=True)], "")))
+    return pd.DataFrame({
+        "serial": names, "x_m": positions[:, 0] + shift[:, 0], "y_m": positions[:, 1] + shift[:, 1],
+        "table_x_m": positions[:, 0], "table_y_m": positions[:, 1], "shift_x_m": shift[:, 0],
+        "shift_y_m": shift[:, 1], "shift_m": np.hypot(shift[:, 0], shift[:, 1]),
+        "sigma_x_m": np.where(refined, np.sqrt(cov[:, 0, 0]), np.nan),
+        "sigma_y_m": np.where(refined, np.sqrt(cov[:, 1, 1]), np.nan),
+        "correlation_xy": np.where(refined, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
+        "refined": refined, "reason": np.where(refined, "", reason), "sigma_ratio": ratio,
+        "sigma_ratio_without": without, "worst_tag": worst})

@@ -1,0 +1,92 @@
+"""``sblsim sync`` on a study's files: the raw detections, the receivers' deployments and a sound-speed series read,
+each detection put at its deployment and the clocks synchronised (:func:`synchronise_study`, on
+:func:`~sblsim.orchestrator.sync.run.synchronise`), the detections' time resolution checked against the array
+(:func:`rounding_warning`) and the table's positions against the sync tags' clock-free travel times
+(:func:`synchronise_files`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.sync.pings import largest_travel_time
+from sblsim.models.sync.resolution import resolution_warning
+from sblsim.orchestrator.sync.declared import check_sync_positions
+from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
+from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
+from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
+
+
+def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None) -> str | None:
+    """One line where the detections' times are rounded too coarsely for the array
+    (:func:`sblsim.models.sync.resolution.resolution_warning`; ``hydrophones``' ``x``, ``y``, ``z`` [m] give the
+    largest travel time at ``sound_speed`` [m/s], 1,480 m/s where not known), else None."""
+    speed = sound_speed or 1480.0
+    xyz = np.nan_to_num(hydrophones[["x", "y", "z"]].to_numpy(float))  # a depth not given: the horizontal alone
+    return resolution_warning(detections.frame["time"].to_numpy(float), largest_travel_time(xyz, speed), speed,
+                              f"detections {detections.source!r}")
+
+
+def synchronise_study(detections: Detections, deployments, sound_speed: float | None = None,
+                      series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
+                      reference: str | None = None, **options: Any) -> SyncOutcome:
+    """:func:`synchronise` on a study's receivers (a
+    :class:`~sblsim.orchestrator.telemetry.deployments.Deployments`): each detection at its deployment first (the
+    others set aside, counted in ``summary["set_aside"]``), the frame and the deployments in
+    ``summary["receivers_file"]``, and the refined positions (``positions.csv``) in latitude and longitude too where
+    the frame is known; ``options`` as :func:`synchronise` takes them.
+
+    Raises
+    ------
+    ModelError
+        As :func:`synchronise`, or no detection inside a deployment.
+    """
+    assigned = assign(detections, deployments)
+    outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
+                          **options)
+    outcome.summary["set_aside"] = assigned.set_aside
+    outcome.summary["receivers_file"] = deployments.summary()
+    line = rounding_warning(assigned.detections, assigned.hydrophones, outcome.summary["sound_speed"].get(
+        "sound_speed_m_s"))
+    if line:  # times rounded so coarsely that the clocks and every position from them are poor
+        outcome.summary.setdefault("warnings", []).append(line)
+    frame = deployments.frame
+    if outcome.positions is not None and frame is not None:
+        outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),
+                                                                             outcome.positions["y_m"].to_numpy())
+    return outcome
+
+
+def synchronise_files(detections: Path, receivers: Path, format: str | None, sound_speed: float | None,
+                      sound_speed_file: Path | None, bin_hours: float, reference: str | None,
+                      refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
+                      frame: str | None = None) -> SyncOutcome:
+    """``sblsim sync``'s synchronisation from its files (:func:`sblsim.orchestrator.commands.sync.sync`'s arguments,
+    checked): the detections read (in ``format``; None: from the file's first line), the deployments (in ``crs``,
+    projected to ``frame``) and the sound-speed series where given, synchronised (:func:`synchronise_study`), then
+    the table's positions checked against the sync tags' clock-free travel times
+    (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`).
+
+    Raises
+    ------
+    ModelError, ConfigError
+        One line: a file refused by its reader, a synchronisation that cannot be made, the table's positions in
+        kilometres or degrees.
+    """
+    data = read_detections(detections, format)
+    deployments = read_deployments(receivers, crs, frame)
+    series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
+    outcome = synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
+                                refine_positions=refine_positions, survey_sigma=survey_sigma)
+    # the table's positions against the sync tags' clock-free travel times: kilometres or degrees refused
+    check_sync_positions(outcome.residuals, outcome.receivers, deployments.hydrophones(), deployments.source,
+                         sound_speed)
+    return outcome
+
+
+
+__all__ = ["rounding_warning", "synchronise_files", "synchronise_study"]

@@ -1,0 +1,148 @@
+"""``sblsim sync``'s ``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers'
+synchronised arrivals, with the clocks fitted without its arrivals (:func:`_fit_without`, leave-one-out), against its
+known position (:func:`_sync_tags`; the fixes :func:`sblsim.models.sync.positions.position_emissions`'s).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import Delaunay
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.clocks import Geometry, fit_clocks
+from sblsim.models.sync.emissions import connected
+from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
+from sblsim.orchestrator.sync import segments
+
+
+def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
+               positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
+               geometry: Geometry | None = None, clock: np.ndarray | None = None,
+               site: np.ndarray | None = None, fits: dict | None = None,
+               table_sigma: float | None = None) -> pd.DataFrame:
+    """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
+    arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
+    its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
+    arrivals (``truth_x_m``, ``truth_y_m``, its sigma ``truth_sigma_m``; the NEES with the fix's covariance and
+    that position's summed: two estimates from disjoint arrivals), the error against the table beside it
+    (``table_error_m``).
+
+    Each fix is robust and checked (:func:`~sblsim.models.sync.positions.position_emissions`): the statistics are
+    over the trusted fixes (``fixes``); ``fixes_unchecked`` (no redundancy: the arrivals fitted exactly, nothing to
+    check them), ``fixes_failed`` (the overall test failed with a redundancy of 1: an outlier not identifiable) and
+    ``fixes_ambiguous`` (a rejected arrival could be swapped for a kept one) are counted beside them,
+    ``fixes_scaled`` the fixes whose covariance the a-posteriori variance factor scaled, ``arrivals_rejected`` the
+    arrivals the trusted fixes rejected, ``median_redundancy`` theirs. The clock fit's own rejections of the tag's
+    arrivals are not carried into its fixes: that fit saw the tag at its known
+    position, so its rejections would use the position the fixes are checked against.
+
+    Where a receiver's clock broke, ``clock`` (n,) is each arrival's clock row and ``site`` each row's receiver
+    (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row. ``fits``: the fits without
+    each tag already made (:func:`_fit_without`, by tag). ``table_sigma`` [m]: without ``geometry``, the table's
+    horizontal sigma per axis, summed into the NEES's covariance (the survey's stated error)."""
+    dim = positions.shape[1]
+    rows = []
+    c = receiver if clock is None else clock
+    steady = None if site is None or len(site) == len(names) else site == start
+    knot_sigma = segments.receiver_sigmas(fit, len(names))
+    for i, name in enumerate(tag_names):
+        home = tag_home[i]
+        mine = (tag == i) & used & linked[c] & (receiver != home)
+        if mine.sum() < dim + 2:
+            continue
+        this = fit
+        if leave_one_out:
+            got = fits[i] if fits is not None and i in fits else _fit_without(
+                i, fit, c, tag, emission, time, distance, slowness, used, start, width, len(linked), geometry,
+                None if clock is None else site, steady)
+            if got is None:
+                notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
+                continue
+            this, still = got
+            mine &= still[c]
+        rows_e = np.flatnonzero(mine)
+        ems, local = np.unique(emission[rows_e], return_inverse=True)
+        arrival = np.full((len(ems), len(names)), np.nan)
+        arrival[local, receiver[rows_e]] = time[rows_e] - this.offset(c[rows_e], time[rows_e])
+        s = np.full(len(ems), this.slowness if slowness is None else np.nan)
+        if slowness is not None:
+            s = np.bincount(local, slowness[rows_e]) / np.bincount(local)
+        sigma = segments.receiver_values(np.where(np.isfinite(this.scale), this.scale, 1e-3), fit, len(names))
+        known = np.isfinite(knot_sigma)
+        offset_sigma = np.array([np.median(knot_sigma[j][known[j]]) if known[j].any() else 0.0
+                                 for j in range(len(names))])
+        sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
+        where = positions
+        truth_cov = np.zeros((dim, dim))
+        if geometry is None and table_sigma is not None:
+            truth_cov[:2, :2] = table_sigma ** 2 * np.eye(2)
+        if geometry is not None:  # the receivers where the fit without this tag puts them
+            where = positions.copy()
+            where[:, :2] += this.shift
+            truth_cov[:2, :2] = this.shift_covariance[home]
+            ranging = np.nanmedian(s) * np.sqrt(np.trace(this.shift_covariance, axis1=1, axis2=2) / 2)
+            sigma = np.sqrt(sigma ** 2 + ranging ** 2)
+        fixes = position_emissions(arrival, where, sigma, s)
+        ok = fixes.ok
+        if not ok.any():
+            continue
+        truth = where[home]
+        error = fixes.position[ok] - truth
+        error_m = np.linalg.norm(error, axis=1)
+        own_sigma = np.sqrt(np.trace(fixes.covariance[ok], axis1=1, axis2=2))
+        nees = np.einsum("ek,ekl,el->e", error, np.linalg.inv(fixes.covariance[ok] + truth_cov), error)
+        heard = np.flatnonzero(fixes.used[ok].any(axis=0))
+        mean = np.median(fixes.position[ok], axis=0)
+        rows.append({"tag": name, "receiver": names[home], "x_m": truth[0], "y_m": truth[1],
+                     "emissions": len(ems), "fixes": int(ok.sum()), "receivers_used": len(heard),
+                     "median_error_m": float(np.median(error_m)), "median_sigma_m": float(np.median(own_sigma)),
+                     "rms_error_m": float(np.sqrt(np.mean(error_m ** 2))),
+                     "p90_error_m": float(np.percentile(error_m, 90)), "nees_mean": float(np.mean(nees)),
+                     "nees_median": float(np.median(nees)), "median_x_m": mean[0], "median_y_m": mean[1],
+                     "median_position_error_m": float(np.linalg.norm(mean - truth)),
+                     "inside_array": _inside(truth, where[heard]), "leave_one_out": leave_one_out})
+        if geometry is not None:
+            rows[-1].update({"x_m": positions[home, 0], "y_m": positions[home, 1], "truth_x_m": truth[0],
+                             "truth_y_m": truth[1], "truth_sigma_m": float(np.sqrt(np.trace(truth_cov))),
+                             "table_error_m": float(np.median(np.linalg.norm(fixes.position[ok] - positions[home],
+                                                                             axis=1)))})
+        rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
+                         "fixes_failed": int((fixes.status == FAILED).sum()),
+                         "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
+                         "fixes_scaled": int((fixes.variance_factor[ok] > 1).sum()),
+                         "arrivals_rejected": int(fixes.rejected[ok].sum()),
+                         "median_redundancy": float(np.median(fixes.redundancy[ok]))})
+    columns = ["tag", "receiver", "x_m", "y_m", "emissions", "fixes", "receivers_used", "median_error_m",
+               "median_sigma_m", "rms_error_m", "p90_error_m", "nees_mean", "nees_median", "median_x_m", "median_y_m",
+               "median_position_error_m", "inside_array", "leave_one_out"]
+    if geometry is not None:
+        columns += ["truth_x_m", "truth_y_m", "truth_sigma_m", "table_error_m"]
+    columns += ["fixes_unchecked", "fixes_failed", "fixes_ambiguous", "fixes_scaled", "arrivals_rejected",
+                "median_redundancy"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowness, used, start, width, n_rows: int,
+                 geometry: Geometry | None, site, steady) -> tuple[ClockFit, np.ndarray] | None:
+    """The clocks fitted without sync tag ``i``'s arrivals (the kept arrivals and scales of ``fit``; with
+    ``geometry`` the positions refined from ``fit``'s) and the clock rows still synchronised; None where they
+    cannot be fitted without it."""
+    without = used & (tag != i)
+    still = connected(c[without], emission[without], n_rows, start)
+    loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma, fit.shift, site)
+    try:
+        this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width, keep=fit.kept,
+                          scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
+    except ModelError:
+        return None
+    return this, still
+
+
+def _inside(point: np.ndarray, points: np.ndarray) -> bool:
+    """Whether ``point`` is inside the convex hull of ``points`` (horizontally)."""
+    try:
+        return bool(Delaunay(points[:, :2]).find_simplex(point[:2]) >= 0)
+    except Exception:  # fewer than three points, or all on a line
+        return False

@@ -1,0 +1,48 @@
+"""The options of a telemetry study (``sblsim track``, :func:`sblsim.track`) checked, each refused in one line naming
+it as the caller spells it, the value and the allowed range: returned as
+:func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.io.arguments import names_argument, real_argument, text_argument
+from sblsim.orchestrator.io.frames import check_crs, check_metric
+from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE
+
+#: The detections' formats (None: read from the file's first line).
+FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
+#: The synchronisation's bins [h] and the sound speeds [m/s] taken.
+BIN_HOURS = (0.05, 168.0)
+SOUND_SPEED = (1300.0, 1700.0)
+#: The most worker processes.
+MAX_WORKERS = 256
+
+
+def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
+             medium: tuple, names: dict[str, str], toa_sigma: Any = None) -> dict[str, Any]:
+    """Every option of a study checked (``names``: how each is spelled where it was given), as
+    :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
+    if format is not None and format not in FORMATS:
+        raise ConfigError(f"{names['format']}: {str(format)[:40]!r}; allowed: {', '.join(FORMATS)} (or none: read "
+                          "from the file's first line)")
+    crs, frame = text_argument(crs, names["crs"]), text_argument(frame, names["frame"])
+    speed, series, temperature, salinity = medium
+    if workers is not None:
+        workers = int(real_argument(workers, names["workers"], 1, MAX_WORKERS, ""))
+    if scheduler is not None:
+        from sblsim.orchestrator.campaign.executors import check_address
+
+        scheduler = check_address(str(scheduler))
+    return {"format": format, "crs": None if crs is None else check_crs(crs, names["crs"]),
+            "frame": None if frame is None else check_metric(frame, names["frame"]),
+            "chosen": names_argument(tag, names["tag"], "transmitters (full IDs or ids)"), "sound_speed": speed,
+            "sound_speed_file": series, "temperature": temperature, "salinity": salinity,
+            "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
+            "scheduler": scheduler, "toa_sigma": None if toa_sigma is None else real_argument(
+                toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s")}
+
+
+__all__ = ["BIN_HOURS", "FORMATS", "MAX_WORKERS", "SOUND_SPEED"]

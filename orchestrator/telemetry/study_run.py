@@ -1,0 +1,49 @@
+"""A telemetry study run for ``sblsim track`` and :func:`sblsim.track`: into its folder, all or nothing (staged; a
+temporary folder where none is asked for), its progress reported (a bar as the tags end, and on the console the
+study's opening lines: :mod:`.study_report`).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.progress import ProgressSpec, progress_of
+from sblsim.orchestrator.telemetry.study_report import opening_lines
+
+
+def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None, options: dict[str, Any],
+         target: Path | None, progress: ProgressSpec, lines: bool = False):
+    """The study run into ``target`` (all or nothing; a temporary folder where None), its progress reported."""
+    from sblsim.orchestrator.telemetry.outputs import write_study
+    from sblsim.orchestrator.telemetry.study import run_study
+
+    bar: list[Any] = []
+
+    def started(folders: list[str], summary: dict[str, Any]) -> None:
+        if lines:
+            for line in opening_lines(detections, summary, len(folders), options):
+                print(line, flush=True)
+        bar.append(progress_of(progress, len(folders), "tracking", "tag")[0])
+
+    def ended(row: dict[str, Any]) -> None:
+        if bar:
+            bar[0].update(1)
+
+    try:
+        if target is None:
+            with tempfile.TemporaryDirectory(prefix="sblsim-study-") as tmp:
+                return run_study(detections, receivers, tags, workdir=Path(tmp), sync=sync, started=started,
+                                 ended=ended, **options)
+        with staged_directory(target) as tmp:
+            outcome = run_study(detections, receivers, tags, workdir=tmp, sync=sync, started=started, ended=ended,
+                                **options)
+            if bar:
+                bar[0].close()
+            write_study(outcome, tmp)
+        return outcome
+    finally:
+        if bar:
+            bar[0].close()
