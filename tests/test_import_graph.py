@@ -5,6 +5,8 @@ import only where it defers a heavy library."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -365,3 +367,14 @@ def test_a_campaign_worker_loads_no_statistics_or_plotting():
     campaign's process)."""
     assert not _heavy_at_load("sblsim.orchestrator.campaign.worker") & {"scipy.stats", "pyDOE3", "matplotlib"}
     assert "pyDOE3" in {m for m, _, nested in IMPORTS["sblsim.orchestrator.campaign.factorial"] if nested}
+
+
+def test_the_command_line_loads_no_heavy_library_at_start():
+    """What ``sblsim --help`` loads, in a fresh interpreter (the static check above reads each module's own imports,
+    not the packages above an imported module, whose ``__init__`` runs first: a command importing
+    ``campaign.study`` at load once pulled in pandas through ``campaign/__init__.py``)."""
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import sys; import sblsim.orchestrator.cli; "
+                               "print(sorted({m.split('.')[0] for m in sys.modules}))"],
+        capture_output=True, text=True, check=True).stdout
+    assert not {"pandas", "matplotlib", "statsmodels", "dask", "pyarrow", "scipy"} & set(ast.literal_eval(loaded))

@@ -35,8 +35,9 @@ from sblsim.orchestrator.campaign.manifest import MANIFEST, read_manifest, verif
 from sblsim.orchestrator.campaign.merge import collect
 from sblsim.orchestrator.campaign.plan import DEFAULT_BATCH, Chunk, batch_key, cell_configs, plan
 from sblsim.orchestrator.campaign.runner import CampaignRecord, run_campaign
+from sblsim.orchestrator.campaign.study import Study, load_study
 from sblsim.orchestrator.campaign.worker import run_chunk
 
 __all__ = ["CampaignError", "CampaignInterrupted", "CampaignRecord", "Chunk", "DEFAULT_BATCH", "LOCAL_CLUSTER",
-           "MANIFEST", "batch_key", "cell_configs", "close_client", "collect", "connect", "plan", "read_manifest",
-           "run_campaign", "run_chunk", "verify_chunk"]
+           "MANIFEST", "Study", "batch_key", "cell_configs", "close_client", "collect", "connect", "load_study", "plan",
+           "read_manifest", "run_campaign", "run_chunk", "verify_chunk"]

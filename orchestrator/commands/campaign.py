@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sblsim.models.declarations import shown
-from sblsim.orchestrator.campaign.study import Study, load_study
 from sblsim.orchestrator.commands.analyze import AnalysisResult, analyze, analyze_folder
 from sblsim.orchestrator.commands.common import Progress, check_engine
 from sblsim.orchestrator.commands.console import interrupted_status
@@ -24,7 +23,7 @@ from sblsim.orchestrator.io.arguments import check_integer, check_seed, flag_arg
 from sblsim.orchestrator.io.output import check_writable, folder_name
 from sblsim.orchestrator.io.progress import check_progress
 
-if TYPE_CHECKING:  # the heavy modules are imported when a function runs
+if TYPE_CHECKING:  # the heavy modules are imported when a function runs (the campaign package's: pandas)
     import pandas as pd
 
 
@@ -101,7 +100,7 @@ def campaign(study: str | Path | Mapping, out: str | Path, *, seed: int | None =
     sblsim.orchestrator.campaign.CampaignInterrupted
         On Ctrl-C: the finished chunks are kept (``resume=True`` finishes).
     """
-    from sblsim.orchestrator.campaign import run_campaign
+    from sblsim.orchestrator.campaign import Study, load_study, run_campaign
 
     seed = check_seed(seed)
     check_engine(engine)
@@ -158,7 +157,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim campaign`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.campaign import CampaignInterrupted
+    from sblsim.orchestrator.campaign import CampaignInterrupted, load_study
 
     study = load_study(args.study, seed=args.seed)
     out = args.out or Path("results") / folder_name(study.name)
