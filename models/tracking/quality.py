@@ -39,13 +39,21 @@ checked against what the same data say without the motion model:
   thin array's pings heard by two receivers), or on a reflection that pings of three receivers fit exactly, with
   a small covariance of its own: nothing in the data checks it there.
 
+Another estimator of the same pings (a filter, the RTS smoother, the single-ping fixes beside the robust smoother's
+track) is checked against the **track** too (:func:`off_the_track`): where the track's row is ``ok`` and the two
+disagree beyond the χ² gate :data:`FIX_GATE` of their own covariances summed (the errors common to both, the survey's
+and the sound speed's, left out), the one that explains fewer of the ping's arrivals is off; the track, which passed
+every check above, is kept where they tie, and where the other row's own arrivals do not check it (none to spare: its
+dim + 1 arrivals are fitted exactly, a reflection among them too, so that it explains them all). A filter that kept
+a reflection is metres off with a covariance of decimetres, and nothing else in its ping says so.
+
 A ping that fails is ``flagged``; a ping where a filter started again (a restart, a new segment after a gap) is
 ``restart``; the rest ``ok``. A track kilometres from every fix is never ``ok``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -67,7 +75,7 @@ QUALITY = ("ok", "restart", "flagged")
 #: reason's name in the tables (module docstring).
 REASONS = (("stretch", "off_trusted_fixes"), ("alone", "off_a_trusted_fix"), ("reach", "out_of_reach"),
            ("speed", "too_fast"), ("uncertain", "placed_less_well_than_a_fix"), ("unverified", "unverified"),
-           ("unplaced", "no_position"))
+           ("unplaced", "no_position"), ("track", "off_the_track"))
 
 
 @dataclass(frozen=True)
@@ -78,8 +86,9 @@ class Quality:
     fixes), ``speed`` (a jump faster than :data:`MAX_SPEED`), ``uncertain`` (a horizontal DRMS of its own above
     :data:`TRUSTED_FIX_DRMS`, or not finite), ``unverified`` (not checked by its own measurements and beyond the motion
     model's reach of a trusted fix: module docstring), ``alone`` (off a trusted fix that explains more of its ping's
-    arrivals, its own measurements not checking it), ``unplaced`` (no finite position). A flagged row has one of
-    these reasons at least (:attr:`reason`)."""
+    arrivals, its own measurements not checking it), ``unplaced`` (no finite position), ``track`` (another
+    estimator's row off the track's, :func:`off_the_track`; None where not checked). A flagged row has one of these
+    reasons at least (:attr:`reason`)."""
 
     quality: np.ndarray
     fix: np.ndarray
@@ -90,6 +99,7 @@ class Quality:
     unverified: np.ndarray
     alone: np.ndarray
     unplaced: np.ndarray
+    track: np.ndarray | None = None
 
     @property
     def flagged(self) -> int:
@@ -100,7 +110,8 @@ class Quality:
     def reason(self) -> np.ndarray:
         """(m,) of str: each flagged row's reasons (:data:`REASONS`' names, joined by ``;``), ``""`` for a row not
         flagged."""
-        return reasons(self.quality == "flagged", {name: getattr(self, field) for field, name in REASONS})
+        return reasons(self.quality == "flagged", {name: getattr(self, field) for field, name in REASONS
+                                                   if getattr(self, field) is not None})
 
 
 def reasons(flagged: np.ndarray, why: dict[str, np.ndarray]) -> np.ndarray:
@@ -340,5 +351,47 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     return Quality(quality.astype(str), fix_bad, stretch, reach, speed, uncertain, unverified, alone, ~finite)
 
 
+def off_the_track(positions: np.ndarray, covariances: np.ndarray, explained: np.ndarray, track: np.ndarray,
+                  track_covariances: np.ndarray, track_explained: np.ndarray, track_ok: np.ndarray,
+                  known_depth: np.ndarray | None = None) -> np.ndarray:
+    """Which rows of another estimator of the same pings are off the track (module docstring): the track's row
+    ``ok``, the two beyond the χ² gate :data:`FIX_GATE` of their covariances summed, and the track explaining at
+    least as many of the ping's arrivals (:func:`explained`), or the row's own arrivals not checking it (none to
+    spare beyond its dim + 1, a depth it was given counted as one more).
+
+    Parameters
+    ----------
+    positions, track : ndarray, (m, ≥2)
+        The estimator's rows and the track's at the same pings [m] (NaN where none); the horizontal position taken.
+    covariances, track_covariances : ndarray, (m, ≥2, ≥2)
+        Their own covariances [m²], without the terms common to both (the survey's, the sound speed's).
+    explained, track_explained : ndarray of int, (m,)
+        The arrivals of each ping that agree with the row and with the track's row.
+    track_ok : ndarray of bool, (m,)
+        Where the track's row is ``ok``.
+    known_depth : ndarray of bool, (m,), optional
+        The rows that were given the tag's depth (as :func:`check_track`'s). Default: none.
+
+    Returns
+    -------
+    ndarray of bool, (m,)
+    """
+    p, q = np.asarray(positions, float)[:, :2], np.asarray(track, float)[:, :2]
+    P, Q = np.asarray(covariances, float)[:, :2, :2], np.asarray(track_covariances, float)[:, :2, :2]
+    both = np.isfinite(p).all(axis=1) & np.isfinite(q).all(axis=1) & np.isfinite(P + Q).all(axis=(1, 2))
+    d2 = np.full(len(p), np.inf)
+    d2[both] = _distance2(p[both] - q[both], P[both] + Q[both])
+    unchecked = _to_spare(np.asarray(explained), known_depth, np.asarray(positions).shape[1]) < 1
+    return (np.asarray(track_ok, bool) & both & ~(d2 <= FIX_GATE)
+            & ((np.asarray(track_explained) >= np.asarray(explained)) | unchecked))
+
+
+def with_track(quality: Quality, off: np.ndarray) -> Quality:
+    """``quality`` with the rows ``off`` the track (:func:`off_the_track`, (m,) bool) flagged for it."""
+    off = np.asarray(off, bool)
+    marks = np.where(off, "flagged", quality.quality).astype(str)
+    return replace(quality, quality=marks, track=off)
+
+
 __all__ = ["EXPLAINED_SIGMAS", "FIX_GATE", "FIX_SLACK", "MAX_SPEED", "QUALITY", "REASONS", "TRUSTED_FIX_DRMS",
-           "Quality", "check_track", "explained", "reasons", "trusted_fixes"]
+           "Quality", "check_track", "explained", "off_the_track", "reasons", "trusted_fixes", "with_track"]

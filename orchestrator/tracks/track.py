@@ -245,12 +245,20 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         ``consider`` (the consider terms: the receivers' survey, the sound speed, the depth's prior) added, which
         its own-uncertainty limit takes too."""
         reported = cov if consider is None else cov + consider[:, :dim, :dim]
+        agree = qa.explained(toa[ping], positions, p, c, sigma)
         checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
-                                 explained=qa.explained(toa[ping], positions, p, c, sigma),
-                                 fix_used=fix_explained[ping], reported=reported,
+                                 explained=agree, fix_used=fix_explained[ping], reported=reported,
                                  acceleration_psd=None if stationary else settings.acceleration_psd,
                                  known_depth=None if depth_known is None else depth_known[ping])
+        if estimator == "robust":  # the track the other estimators' rows are checked against
+            track_rows.update(ping=ping, p=p, cov=cov, agree=agree, ok=checked.quality == "ok")
+        elif track_rows:  # another estimator's rows off the track where it is ok (qa.off_the_track)
+            at = np.searchsorted(track_rows["ping"], ping).clip(0, len(track_rows["ping"]) - 1)
+            on = track_rows["ping"][at] == ping
+            checked = qa.with_track(checked, on & qa.off_the_track(
+                p, cov, agree, track_rows["p"][at], track_rows["cov"][at], track_rows["agree"][at],
+                track_rows["ok"][at] & on, None if depth_known is None else depth_known[ping]))
         cov = reported
         with np.errstate(invalid="ignore"):
             # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0
@@ -263,6 +271,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         flagged[estimator] = checked.flagged
 
     robust = None
+    track_rows: dict[str, np.ndarray] = {}  # the robust track's pings, places, covariances, arrivals and marks
     if stationary:
         pooled = stationary_track(toa, positions, c, fx, sigma)
         kp = np.flatnonzero(np.isfinite(pooled.emissions))

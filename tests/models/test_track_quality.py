@@ -326,3 +326,33 @@ def test_an_estimates_own_measurements_check_it_with_one_to_spare_its_depth_coun
                               explained=heard, fix_used=fix_used, acceleration_psd=q)
         assert flat.unverified.tolist() == expected_rows(heard, 2).tolist()
         assert flat.unverified[stretch].any() != checked
+
+
+def test_a_filter_row_off_the_track_is_flagged_where_the_track_explains_as_much():
+    """Another estimator's rows against the robust track (qa.off_the_track): a filter that kept a reflection at ten
+    pings sits 4 m off with a covariance of decimetres; its rows there are flagged ``off_the_track`` where the track
+    explains as many arrivals or more (counted by qa.explained, independently of the gate), and nowhere else; the
+    gate against a direct solve of the summed covariances."""
+    toa, truth, emissions, fx, fc, _, trusted = simulated(seed=3)
+    cov = np.repeat((0.05 ** 2 * np.eye(2))[None], len(truth), axis=0)
+    filtered = truth.copy()
+    off = np.arange(20, 30)
+    filtered[off, 0] += 4.0
+    ours = qa.explained(toa, RECEIVERS, filtered, C, SIGMA)
+    theirs = qa.explained(toa, RECEIVERS, truth, C, SIGMA)
+    assert (theirs[off] > ours[off]).all()  # the reflection's rows explain fewer arrivals
+    track_ok = np.ones(len(truth), bool)
+    found = qa.off_the_track(filtered, cov, ours, truth, cov, theirs, track_ok)
+    d2 = np.array([e @ np.linalg.solve(2 * c, e) for e, c in zip(filtered[:, :2] - truth[:, :2], cov)])
+    assert np.array_equal(found, d2 > qa.FIX_GATE)
+    assert np.array_equal(np.flatnonzero(found), off)
+    # the track not ok there, or the filter explaining more: not flagged; a tie keeps the track
+    assert not qa.off_the_track(filtered, cov, ours, truth, cov, theirs, ~track_ok).any()
+    assert not qa.off_the_track(filtered, cov, theirs + 1, truth, cov, theirs, track_ok).any()
+    assert np.array_equal(qa.off_the_track(filtered, cov, theirs, truth, cov, theirs, track_ok), found)
+    # within the gate of large covariances: not off
+    assert not qa.off_the_track(filtered, 1e4 * cov, ours, truth, cov, theirs, track_ok).any()
+    checked = qa.with_track(check(toa, filtered, emissions, fx, fc, trusted, cov), found)
+    assert (checked.quality[off] == "flagged").all()
+    assert all("off_the_track" in why.split(";") for why in checked.reason[off])
+    assert not any("off_the_track" in why for why in np.delete(checked.reason, off))

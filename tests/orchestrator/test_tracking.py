@@ -680,3 +680,23 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
     used = thin.summary["robust_smoother"]
     assert used["start"] == "graduated" and used["cost"] < plain.cost
     assert np.sqrt(np.mean(e_plain**2)) > thin_rms and np.percentile(e_plain, 95) > 5.0
+
+
+def test_another_estimator_s_rows_off_the_robust_track_are_flagged(full):
+    """A filter's, the RTS smoother's or a fix's row off the robust smoother's track where that row is ``ok``
+    (models/tracking/quality.off_the_track) is flagged ``off_the_track``, never a row of the track itself; on the
+    full array those rows are far from the GPS, the ones left ``ok`` near it (an independent scoring)."""
+    gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
+    est = full.estimates
+    why = est["quality_reason"].fillna("").str.split(";")
+    off = why.map(lambda reasons: "off_the_track" in reasons)
+    assert off.any() and not off[est["estimator"] == "robust"].any()
+    assert (est.loc[off, "quality"] == "flagged").all()
+    robust = est[est["estimator"] == "robust"].set_index("ping")["quality"]
+    assert (robust.reindex(est.loc[off, "ping"]).to_numpy() == "ok").all()
+    others = est[est["estimator"].isin(["rts", "ekf", "ekf-seq", "ukf"])]
+    flagged_off = others[off[others.index]]
+    kept = others[others["quality"] == "ok"]
+    e_off = gps_errors(flagged_off["time"].to_numpy(), flagged_off["x"].to_numpy(), flagged_off["y"].to_numpy(), gps)
+    e_ok = gps_errors(kept["time"].to_numpy(), kept["x"].to_numpy(), kept["y"].to_numpy(), gps)
+    assert np.median(e_off) > 3 * np.median(e_ok)
