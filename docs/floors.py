@@ -111,15 +111,15 @@ def house() -> tuple[dict[int, dict[str, tuple[int, int]]], Counter]:
 
 
 def table(rooms: dict[int, dict[str, tuple[int, int]]], arrows: Counter) -> str:
-    """The floors as text: rooms, modules, lines, imports down to the floors below and up (none in a sound house)."""
+    """The floors as text: their rooms, modules and imports up (none in a sound house); the lines and the imports
+    down, which every change moves, are the picture's."""
     lines = []
     for floor, (title, _) in enumerate(FLOORS):
         found = rooms[floor]
-        down = sum(n for (a, b), n in arrows.items() if a == floor and b > floor)
         up = sum(n for (a, b), n in arrows.items() if a == floor and b < floor)
         plural = "" if len(found) == 1 else "s"
-        lines.append(f"{title}: {len(found)} room{plural}, {sum(m for m, _ in found.values())} modules, "
-                     f"{sum(n for _, n in found.values())} lines; {down} imports down, {up} up")
+        lines.append(f"{title}: {len(found)} room{plural} ({', '.join(found)}), "
+                     f"{sum(m for m, _ in found.values())} modules; {up} imports up")
     return "\n".join(lines)
 
 
