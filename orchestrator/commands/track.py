@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 from sblsim.orchestrator.commands.common import add_water_arguments
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
-from sblsim.orchestrator.io.arguments import path_argument, prepare_out
+from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.telemetry.study_options import FORMATS, _options
@@ -77,7 +77,8 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
           salinity: float | None = None, bin_hours: float = 1.0, workers: int | None = None,
           scheduler: str | None = None, toa_sigma: float | None = None,
           temperature_file: str | Path | None = None, water_depth: float | None = None,
-          out: str | Path | None = None, force: bool = False, progress: ProgressSpec = False) -> StudyResult:
+          force_interval: bool = False, out: str | Path | None = None, force: bool = False,
+          progress: ProgressSpec = False) -> StudyResult:
     """Track every tag of a telemetry study: ``sblsim track`` (docs/telemetry.md).
 
     Parameters
@@ -128,6 +129,10 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
         The water's depth [m] in (0, 11000], which bounds each tag's depth (the deployments' depths needed); default
         the deepest ``bottom_depth`` of the deployments that heard the tag, where the deployments give it
         (``summary["water_depth"]``).
+    force_interval : bool
+        Take a tag's stated interval (the sheet's) where its detections contradict it as a whole: a note says how
+        many detections it drops; without it such a tag is a refused row of ``tags.csv`` naming the interval its
+        detections show.
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``tracks.geojson``, ``map.png``, ``sync/``, a folder per tag), all or nothing.
@@ -156,6 +161,7 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
                        {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma")},
                        toa_sigma) | water_arguments(temperature_file, water_depth, ("temperature_file", "water_depth"))
+    options["force_interval"] = flag_argument(force_interval, "force_interval")
     target = prepare_out(out, force, "study.json", "study")
     outcome = _run(detections, receivers, tags, sync, options, target, progress)
     return _result(outcome, target)
@@ -207,6 +213,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="worker processes in [1, 256] (default: the CPU count)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="a Dask scheduler (tcp://HOST:PORT, or local) whose workers track the tags")
+    p.add_argument("--force-interval", action="store_true",
+                   help="take a tag's stated interval (the sheet's) where its detections contradict it as a whole "
+                        "(that tag refused otherwise); a note says how many detections it drops")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/study_DETECTIONS)")
     p.add_argument("--force", action="store_true", help="replace an earlier study in --out")
 
@@ -220,6 +229,7 @@ def main(args: argparse.Namespace) -> int:
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
                                                                        "workers", "toa_sigma")}, args.toa_sigma) \
         | water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
+    options["force_interval"] = args.force_interval
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
                         "study.json", "study")
     outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)

@@ -157,7 +157,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
               bin_hours: float = 1.0, workers: int | None = None, scheduler: str | None = None,
               toa_sigma: float | None = None, started: Callable[[list[str], dict[str, Any]], None] | None = None,
               ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
-              water_depth: float | None = None) -> StudyOutcome:
+              water_depth: float | None = None, force_interval: bool = False) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -196,6 +196,10 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         [m] the water's depth bounding every tag's depth (the deployments' depths needed); default each tag's the
         deepest ``bottom_depth`` of the deployments that heard it, where the deployments give it
         (:func:`~sblsim.orchestrator.tracks.depth.bottom_water_depth`; ``summary["water_depth"]`` says which).
+    force_interval : bool
+        Take each tag's stated interval (the sheet's) where its detections contradict it as a whole (said in a note
+        with the detections it drops); else that tag is a refused row of ``tags.csv`` saying so
+        (:func:`~sblsim.orchestrator.sync.toa.build_toa`).
 
     Returns
     -------
@@ -257,7 +261,9 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                     list(spec.burst_interval), "interval_s": spec.interval,
                     "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
             matrix = build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
-                               spec.shortest_interval(), kind)
+                               spec.shortest_interval(), kind, force_interval)
+            if matrix.summary.get("interval_warning"):
+                notes.append(f"tag {key}: {matrix.summary['interval_warning']}")
             _write_matrix(matrix, workdir / folder, notes)
             matrices[folder] = matrix
             folders[name] = folder
@@ -267,6 +273,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
                        "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
                        "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
                        "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
+                       "force_interval": force_interval,
                        "temperature_path": None if temperature_path is None else Path(temperature_path).absolute()}
             if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                 options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),

@@ -219,3 +219,29 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
         else:
             assert read.names == ["1623", "1626"] and np.allclose(read.depth, expected, equal_nan=True) and not notes
         assert np.allclose(read.toa, toa, equal_nan=True)
+
+
+def test_a_sheet_s_interval_the_detections_contradict_is_said_and_taken_with_force_interval(study, tmp_path):
+    """The rbi tag (100-200 s) stated as 300-600 s on the sheet: its row of tags.csv refused naming the interval its
+    detections show (no silent drop of its pings as echoes); with ``force_interval`` (``--force-interval``) it is
+    tracked and a note says how many detections the stated interval drops."""
+    _, files, _, folder = study
+    sheet = pd.read_csv(files["tags"])
+    rbi = sheet.index[(sheet["ping_type"] == "rbi") & (sheet["role"] == "animal")][0]
+    sheet.loc[rbi, ["min_delay", "max_delay"]] = [300, 600]
+    wrong = tmp_path / "tags.csv"
+    sheet.to_csv(wrong, index=False)
+    name = sheet.loc[rbi, "transmitter"]
+    common = dict(receivers=files["deployments"], tags=wrong, tag=name, sync=folder / "out" / "sync", workers=1)
+    refused = sblsim.track(files["detections"], **common)
+    row = refused.tags.iloc[0]
+    assert row["status"] == "refused" and "300:600 s stated, but the detections' steps" in row["reason"]
+    low, high = (float(v) for v in row["reason"].split(" show ")[1].split(" s ")[0].split("-"))
+    assert 90 <= low and high <= 210  # the tag's own 100-200 s
+    assert "--force-interval" in row["reason"]
+    forced = sblsim.track(files["detections"], force_interval=True, **common)
+    assert forced.tags.iloc[0]["status"] == "tracked"
+    said = [note for note in forced.summary["notes"] if "taken (--force-interval)" in note]
+    assert len(said) == 1 and said[0].startswith(f"tag {forced.tags.iloc[0]['tag']}:")
+    with pytest.raises(sblsim.ConfigError, match="^force_interval: 'yes' is not True or False$"):
+        sblsim.track(files["detections"], force_interval="yes", **common)
