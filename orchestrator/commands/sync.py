@@ -79,21 +79,23 @@ class SyncResult:
 
         return figures(self._outcome)
 
-    def correct(self, receiver: str, times: Any) -> Any:
-        """Times logged by ``receiver`` [s since 1970 UTC on its clock] on the reference receiver's clock (NaN where
-        its clock broke: a time between two of its clock segments, set aside).
+    def correct(self, receiver: str, times: Any, part: int = 1) -> Any:
+        """Times logged by ``receiver`` [s since 1970 UTC on its clock] in its clock ``part`` (the detections'
+        ``clock_part``: 1 before its time first went back in the file's order, 2 after, ...) on the reference
+        receiver's clock (NaN where its clock broke: a time between two of its clock segments, set aside, or a time
+        outside the part's span).
 
         Raises
         ------
         ConfigError
-            A receiver that was not synchronised.
+            A receiver that was not synchronised, a part it does not have (one line naming its parts).
         """
         if receiver not in self.summary["synchronised"]:
             raise ConfigError(f"receiver: {receiver!r} was not synchronised; allowed: one of "
                               f"{', '.join(self.summary['synchronised'])}")
         from sblsim.orchestrator.sync.run import corrected_times
 
-        return corrected_times(self._outcome, receiver, times)
+        return corrected_times(self._outcome, receiver, times, part)
 
 
 def sync(detections: str | Path, *, receivers: str | Path, format: str | None = None,

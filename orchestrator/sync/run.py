@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.declarations import ModelError, shown
+from sblsim.models.errors import ConfigError
 from sblsim.models.sync.breaks import fit_with_breaks
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clock_parts import part_shifts
@@ -69,13 +70,25 @@ class SyncOutcome:
     positions: pd.DataFrame | None = None
 
 
-def corrected_times(outcome: SyncOutcome, receiver: str, times: Any) -> np.ndarray:
-    """Times logged by ``receiver`` (a synchronised receiver's serial) [s since 1970 UTC on its clock] on the
-    reference receiver's clock (NaN where its clock broke: a time between two of its clock segments, set aside)."""
+def corrected_times(outcome: SyncOutcome, receiver: str, times: Any, part: Any = 1) -> np.ndarray:
+    """Times logged by ``receiver`` (a synchronised receiver's serial) [s since 1970 UTC on its clock] in its clock
+    ``part`` (the detections' ``clock_part``, 1 first) on the reference receiver's clock (NaN where its clock broke:
+    a time between two of its clock segments, set aside, or outside the part's span).
+
+    Raises
+    ------
+    ConfigError
+        A part the receiver does not have (one line naming its parts).
+    """
     names = outcome.receivers["receiver"].tolist()
     t = np.asarray(times, float) - outcome.origin
     fit = outcome.fit
-    j = fit.rows_at(np.full(t.shape, names.index(receiver)), t)  # its clock segment where its clock broke
+    k = names.index(receiver)
+    parts = [1] if fit.site is None or fit.part is None else sorted({int(p) for p in fit.part[fit.site == k]})
+    if isinstance(part, (bool, np.bool_)) or not isinstance(part, (int, np.integer)) or int(part) not in parts:
+        raise ConfigError(f"part: {shown(part)} is not a clock part of receiver {receiver}; allowed: "
+                          f"{', '.join(map(str, parts))} (the detections' clock_part)")
+    j = fit.rows_at(np.full(t.shape, k), t, np.full(t.shape, int(part)))  # its part's segment where its clock broke
     return np.where(j >= 0, t + outcome.origin - fit.offset(np.maximum(j, 0), t), np.nan)
 
 

@@ -150,3 +150,25 @@ def _plain(folder: Path) -> Path:
     path = folder / "plain.csv"
     path.write_text("epo,frac,tag,serial\n100,0.5,7,A\n99,0.1,7,B\n100,0.4995,7,A\n101,0,7,A\n")  # back 0.5 ms
     return path
+
+
+def test_a_time_logged_after_a_reset_is_corrected_in_its_clock_part(tmp_path):
+    """``SyncResult.correct(receiver, times, part)``: R2's readings of T1's arrivals an hour after its −20 s reset,
+    corrected in clock part 2, are the true arrivals on R0's clock (the simulation's) within three times the timing
+    noise; read as part 1 (the default), the clock before the reset, they come out the reset's 20 s early (NaN outside
+its span); a part R2 does not have refused in one line."""
+    import sblsim
+
+    sim, truth, _ = _study(tmp_path, -20.0)
+    result = sblsim.sync(tmp_path / "d.csv", receivers=tmp_path / "h.csv", sound_speed=1480.0, reference="R0")
+    tau = truth[:, 2][np.isfinite(truth[:, 2])]
+    tau = tau[tau > AT + 3600.0]
+    logged = sim.reading(np.full(len(tau), 2), tau) + EPOCH
+    expected = tau + sim.offset0[0] + sim.drift[0] * tau
+    assert len(tau) > 20
+    assert np.abs(result.correct("R2", logged, part=2) - EPOCH - expected).max() < 3 * NOISE
+    as_first = result.correct("R2", logged) - EPOCH - expected  # read on the clock before the reset: 20 s early
+    as_first = as_first[np.isfinite(as_first)]
+    assert len(as_first) and np.allclose(as_first, -20.0, atol=0.01)
+    with pytest.raises(sblsim.ConfigError, match=r"^part: 3 is not a clock part of receiver R2; allowed: 1, 2 "):
+        result.correct("R2", logged, part=3)
