@@ -176,11 +176,12 @@ def crossing_time(receivers: np.ndarray, c: float) -> float:
     return max(span / c, MIN_STEP_SIGMA)
 
 
-def check_stable(toa: np.ndarray, crossing: float) -> None:
+def check_stable(toa: np.ndarray, crossing: float) -> float | None:
     """Refuse a stable burst interval (``sbi``) that the rows' first arrivals contradict: their steps are not whole
     multiples of one interval within the tolerance, ``max(SBI_CROSSINGS × crossing, SBI_SHARE × interval)`` for 90 %
     of them, at the best of the typical step divided by :data:`SBI_DIVISORS` (a tag heard at every second ping or
-    less has a typical step of several intervals), each refined by least squares on its whole numbers.
+    less has a typical step of several intervals), each refined by least squares on its whole numbers over the steps
+    within the tolerance of them (a stray row's two part-steps left out).
 
     Parameters
     ----------
@@ -188,6 +189,12 @@ def check_stable(toa: np.ndarray, crossing: float) -> None:
         Times of arrival [s], NaN where not heard.
     crossing : float
         The array's crossing time [s] (:func:`crossing_time`): how much the first arrival's travel time may change.
+
+    Returns
+    -------
+    float or None
+        The stable interval the steps fit [s] (least squares on their whole numbers); None where fewer than three
+        steps say anything.
 
     Raises
     ------
@@ -198,18 +205,22 @@ def check_stable(toa: np.ndarray, crossing: float) -> None:
     d = first_arrival_steps(toa)
     positive = d[d > 0]
     if len(positive) < 3:
-        return
+        return None
     typical = float(np.median(positive))
     best = (np.inf, typical, np.inf)
     for k in SBI_DIVISORS:
         delta = typical / k
         n = np.maximum(np.round(d / delta), 1.0)
-        delta = float(np.sum(n * d) / np.sum(n * n))  # the interval that fits these whole numbers best
+        # the interval that fits these whole numbers best, from the steps within the tolerance of them (a stray row
+        # splits a step into two that are no multiples: left in, they pull the interval off the pings' own)
+        near = np.abs(d - n * delta) <= max(SBI_CROSSINGS * crossing, SBI_SHARE * delta)
+        fit = near if near.sum() >= 3 else np.ones_like(near)
+        delta = float(np.sum(n[fit] * d[fit]) / np.sum(n[fit] * n[fit]))
         n = np.maximum(np.round(d / delta), 1.0)
         spread = float(np.percentile(np.abs(d - n * delta), 90))
         tolerance = max(SBI_CROSSINGS * crossing, SBI_SHARE * delta)
         if spread <= tolerance:
-            return
+            return delta
         if spread / tolerance < best[0]:
             best = (spread / tolerance, delta, spread)
     n = np.maximum(np.round(d / typical), 1.0)

@@ -152,7 +152,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     # fitted to them; a stated interval the rows contradict as a whole refused (or, forced, said)
     read = toa
     toa, stray, aside, aside_warning = set_aside(toa, positions, tt.SOUND_SPEED_RANGE[1], burst_interval,
-                                                 burst_sequence, force_interval)
+                                                 burst_sequence, force_interval, stable=ping_type == "sbi")
     if truth is not None:
         first = ps.first_arrivals(toa)
         span = (float(np.nanmin(first)), float(np.nanmax(first))) if np.isfinite(first).any() else (np.nan, np.nan)
@@ -429,8 +429,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                "thirds": bound_thirds(bound, errors)}
     summary["wall_time_s"] = time.perf_counter() - start
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth, (names, positions),
-                        _set_aside_table(read, stray, names, time_origin) if burst_interval is not None or
-                        burst_sequence is not None else None)
+                        _set_aside_table(read, stray, names, time_origin) if aside["shortest_s"] is not None
+                        else None)
 
 
 def _set_aside_table(toa: np.ndarray, stray: np.ndarray, names: list[str], time_origin: float | None):

@@ -125,3 +125,35 @@ def test_a_tags_table_counts_the_set_aside_rows_apart(tmp_path, record):
     assert row["set_aside"] == inserted.sum() == (~estimated).sum()
     assert row["positioned"] == estimated.sum() == len(matrix) - inserted.sum()
     assert row["flagged"] == int((track["quality"][estimated] == "flagged").sum())
+
+
+@pytest.mark.parametrize("seed", [5, 6, 7])
+def test_a_stable_interval_s_strays_are_set_aside_too(tmp_path, capsys, seed):
+    """A stable-interval tag (``--ping-type sbi``, 30 s, 2 % of its pings missed at every receiver) with 3 % stray
+    codes between its pings (each at one receiver): every stray set aside, every real ping kept (the rows against
+    the simulation's own record of which are which); the same record without strays: nothing set aside."""
+    settings = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=30.0, acceleration_psd=1e-4)
+    rng = np.random.default_rng(seed)
+    toa, _, _ = tt.simulate_pings(RECEIVERS, 300, settings, rng, speed=0.3, detection=0.9, ping_type="sbi")
+    toa = toa[np.isfinite(toa).any(axis=1)]
+    first = np.nanmin(toa, axis=1)
+    count = int(0.03 * len(toa))
+    rows = np.full((count, len(RECEIVERS)), np.nan)
+    for row, a in zip(rows, rng.choice(len(toa) - 1, count, replace=False)):
+        row[rng.integers(len(RECEIVERS))] = rng.uniform(first[a] + 1.0, first[a + 1] - 1.0)
+    matrix = np.vstack([toa, rows])
+    inserted = np.r_[np.zeros(len(toa), bool), np.ones(count, bool)]
+    order = np.argsort(np.nanmin(matrix, axis=1))
+    matrix, inserted = matrix[order], inserted[order]
+    pd.DataFrame({"name": NAMES, "x_m": RECEIVERS[:, 0], "y_m": RECEIVERS[:, 1]}).to_csv(tmp_path / "r.csv",
+                                                                                       index=False)
+    for name, data in (("strays", matrix), ("plain", toa)):
+        pd.DataFrame(data, columns=NAMES).to_csv(tmp_path / f"{name}.csv", index=False, na_rep="NA",
+                                                 float_format="%.9f")
+        assert main(["replay", str(tmp_path / f"{name}.csv"), "--format", "toa", "--receivers", str(tmp_path / "r.csv"),
+                     "--sound-speed", "1480", "--ping-type", "sbi", "--out", str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    listed = pd.read_csv(tmp_path / "strays" / "set_aside.csv")
+    assert listed["ping"].tolist() == np.flatnonzero(inserted).tolist()
+    assert not (tmp_path / "plain" / "set_aside.csv").exists() or pd.read_csv(
+        tmp_path / "plain" / "set_aside.csv").empty
