@@ -152,7 +152,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     # fitted to them; a stated interval the rows contradict as a whole refused (or, forced, said)
     read = toa
     toa, stray, aside, aside_warning = set_aside(toa, positions, tt.SOUND_SPEED_RANGE[1], burst_interval,
-                                                 burst_sequence, force_interval, stable=ping_type == "sbi")
+                                                 burst_sequence, force_interval, stable=ping_type == "sbi",
+                                                 slowest=tt.SOUND_SPEED_RANGE[0])
     if truth is not None:
         first = ps.first_arrivals(toa)
         span = (float(np.nanmin(first)), float(np.nanmax(first))) if np.isfinite(first).any() else (np.nan, np.nan)

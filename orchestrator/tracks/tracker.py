@@ -107,12 +107,14 @@ def ping_schedule(toa: np.ndarray, positions: np.ndarray, settings, ping_type: s
 
 def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_interval: tuple[float, float] | None = None,
               burst_sequence: np.ndarray | None = None, force: bool = False, option: str = "--force-interval",
-              stable: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, Any], str | None]:
+              stable: bool = False, slowest: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], str | None]:
     """The rows of ``toa`` (m, n) [s] that cannot be pings of the stated schedule, set aside
     (:func:`~sblsim.models.tracking.strays.stray_rows`): a random interval's min (``burst_interval`` (min, max)
     [s]), a pseudo-random sequence's least (``burst_sequence`` [s]) or, for a stable interval stated (``stable``:
-    ``--ping-type sbi``), the interval its steps fit (:func:`~sblsim.models.tracking.schedule.check_stable`, which
-    refuses one they contradict) less its tolerance, at the crossing time of the receivers
+    ``--ping-type sbi``), the interval its steps fit (:func:`~sblsim.models.tracking.schedule.check_stable` at the
+    crossing time of ``slowest`` [m/s], the slowest sound speed allowed: it refuses one they contradict at any speed)
+    less its tolerance, at the crossing time of the receivers
     ``positions`` (n, dim) [m] at ``fastest`` [m/s], the fastest sound speed allowed (the shortest crossing: a row
     kept here is kept by the schedule at any speed). A stated interval the rows contradict as a whole is refused
     (:func:`~sblsim.models.tracking.strays.check_strays`), or with ``force`` taken and said.
@@ -134,7 +136,10 @@ def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_inte
     """
     stray = np.zeros(len(toa), bool)
     crossing = ps.crossing_time(positions, fastest)
-    interval = ps.check_stable(toa, crossing) if stable and burst_interval is None and burst_sequence is None else None
+    # the stable interval the steps fit, checked as leniently as any speed allows (the schedule's check, at the
+    # tracker's speed, is the one that refuses)
+    interval = ps.check_stable(toa, crossing * fastest / (slowest or fastest)) \
+        if stable and burst_interval is None and burst_sequence is None else None
     if interval is not None:  # the shortest first-arrival step of two pings: the interval less its tolerance
         shortest = interval - max(ps.SBI_CROSSINGS * crossing, ps.SBI_SHARE * interval) + crossing
         stated = f"a stable interval of {interval:.4g} s (its pings' steps)"
