@@ -1,7 +1,8 @@
-"""The rule the structure tests of a split room share: a room's modules read bottom up, each importing only the
+"""The rules the structure tests of a split room share: a room's modules read bottom up, each importing only the
 ones before it in a stated order (tests/models/test_channel_package.py, test_receiver_modules.py,
-tests/orchestrator/test_config_modules.py, test_design_problem_modules.py, test_engine_modules.py,
-test_maps_modules.py)."""
+tests/orchestrator/test_config_modules.py, test_design_problem_modules.py, test_design_run_modules.py,
+test_engine_modules.py, test_maps_modules.py), what each defines, and no module longer than a limit
+(tests/test_module_sizes.py, tests/orchestrator/test_thin_commands.py)."""
 
 from __future__ import annotations
 
@@ -37,6 +38,20 @@ def out_of_order(texts: dict[str, str], order: tuple[str, ...], package: str, fa
             if module in later or (forbidden and module.startswith(forbidden)):
                 wrong.append((name, module))
     return sorted(set(wrong))
+
+
+def top_level_definitions(source: str) -> set[str]:
+    """The functions and classes a module's own top-level statements define."""
+    return {node.name for node in ast.parse(source).body if isinstance(node, (ast.FunctionDef, ast.ClassDef))}
+
+
+def longer_than(folder: Path, limit: int, allowed: dict[str, int] | None = None) -> dict[str, int]:
+    """Every ``.py`` file under ``folder`` with more lines than ``limit`` (or than its own cap in ``allowed``): its
+    path relative to ``folder`` -> lines."""
+    allowed = {} if allowed is None else allowed
+    lines = {str(path.relative_to(folder)): len(path.read_text(encoding="utf-8").splitlines())
+             for path in sorted(folder.rglob("*.py"))}
+    return {name: n for name, n in lines.items() if n > allowed.get(name, limit)}
 
 
 def top_level_names(source: str) -> set[str]:

@@ -12,6 +12,7 @@ from pathlib import Path
 import sblsim.fmus
 import sblsim.models
 import sblsim.orchestrator
+from tests.module_order import longer_than
 
 #: The most lines a module of the package may have (its docstring included).
 LIMIT = 500
@@ -20,16 +21,9 @@ ROOT_MODULES = {"__init__.py", "api.py", "cli.py"}
 FOLDERS = [Path(package.__file__).parent for package in (sblsim.models, sblsim.orchestrator, sblsim.fmus)]
 
 
-def longer_than(folder: Path, limit: int = LIMIT) -> dict[str, int]:
-    """Every ``.py`` file under ``folder`` with more than ``limit`` lines: its path relative to ``folder`` -> lines."""
-    lines = {str(path.relative_to(folder)): len(path.read_text(encoding="utf-8").splitlines())
-             for path in sorted(folder.rglob("*.py"))}
-    return {name: n for name, n in lines.items() if n > limit}
-
-
 def test_no_module_of_the_package_is_longer_than_the_limit():
     assert sum(len(list(folder.rglob("*.py"))) for folder in FOLDERS) > 200  # the package's modules are found
-    assert {folder.name: longer_than(folder) for folder in FOLDERS} == {folder.name: {} for folder in FOLDERS}
+    assert {folder.name: longer_than(folder, LIMIT) for folder in FOLDERS} == {folder.name: {} for folder in FOLDERS}
 
 
 def test_the_orchestrator_s_root_holds_no_work_module():
@@ -41,4 +35,4 @@ def test_the_limit_can_fail(tmp_path):
     (tmp_path / "room").mkdir()
     (tmp_path / "room" / "short.py").write_text("x = 1\n" * LIMIT)
     (tmp_path / "room" / "long.py").write_text("x = 1\n" * (LIMIT + 1))
-    assert longer_than(tmp_path) == {str(Path("room") / "long.py"): LIMIT + 1}
+    assert longer_than(tmp_path, LIMIT) == {str(Path("room") / "long.py"): LIMIT + 1}

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 from sblsim.orchestrator.commands.common import add_water_arguments
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
-from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out
+from sblsim.orchestrator.io.arguments import path_argument, prepare_out
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.telemetry.study_options import FORMATS, _options
@@ -159,9 +159,10 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
     medium = sound_speed_arguments(sound_speed, sound_speed_file, temperature, salinity,
                                    ("sound_speed", "sound_speed_file", "temperature", "salinity"), temperature_file)
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
-                       {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma")},
-                       toa_sigma) | water_arguments(temperature_file, water_depth, ("temperature_file", "water_depth"))
-    options["force_interval"] = flag_argument(force_interval, "force_interval")
+                       {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma",
+                                       "force_interval")},
+                       toa_sigma, force_interval) | water_arguments(temperature_file, water_depth,
+                                                                    ("temperature_file", "water_depth"))
     target = prepare_out(out, force, "study.json", "study")
     outcome = _run(detections, receivers, tags, sync, options, target, progress)
     return _result(outcome, target)
@@ -227,9 +228,9 @@ def main(args: argparse.Namespace) -> int:
                                    args.temperature_file, "--temperature-file")
     options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
-                                                                       "workers", "toa_sigma")}, args.toa_sigma) \
+                                                                       "workers", "toa_sigma", "force_interval")},
+                       args.toa_sigma, args.force_interval) \
         | water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
-    options["force_interval"] = args.force_interval
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
                         "study.json", "study")
     outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)

@@ -34,6 +34,7 @@ from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
 from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.noise import receiver_noise
+from sblsim.orchestrator.io.arguments import whole
 from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.clock_tables import _offsets, _summary
 from sblsim.orchestrator.sync.detections import Detections, reset_line
@@ -85,10 +86,11 @@ def corrected_times(outcome: SyncOutcome, receiver: str, times: Any, part: Any =
     fit = outcome.fit
     k = names.index(receiver)
     parts = [1] if fit.site is None or fit.part is None else sorted({int(p) for p in fit.part[fit.site == k]})
-    if isinstance(part, (bool, np.bool_)) or not isinstance(part, (int, np.integer)) or int(part) not in parts:
+    number = whole(part)
+    if number not in parts:
         raise ConfigError(f"part: {shown(part)} is not a clock part of receiver {receiver}; allowed: "
                           f"{', '.join(map(str, parts))} (the detections' clock_part)")
-    j = fit.rows_at(np.full(t.shape, k), t, np.full(t.shape, int(part)))  # its part's segment where its clock broke
+    j = fit.rows_at(np.full(t.shape, k), t, np.full(t.shape, number))  # its part's segment where its clock broke
     return np.where(j >= 0, t + outcome.origin - fit.offset(np.maximum(j, 0), t), np.nan)
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.io.arguments import names_argument, real_argument, text_argument
+from sblsim.orchestrator.io.arguments import flag_argument, names_argument, real_argument, text_argument
 from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE
 
@@ -22,7 +22,8 @@ MAX_WORKERS = 256
 
 
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
-             medium: tuple, names: dict[str, str], toa_sigma: Any = None) -> dict[str, Any]:
+             medium: tuple, names: dict[str, str], toa_sigma: Any = None, force_interval: Any = False
+             ) -> dict[str, Any]:
     """Every option of a study checked (``names``: how each is spelled where it was given), as
     :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
     if format is not None and format not in FORMATS:
@@ -42,7 +43,8 @@ def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, worker
             "sound_speed_file": series, "temperature": temperature, "salinity": salinity,
             "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
             "scheduler": scheduler, "toa_sigma": None if toa_sigma is None else real_argument(
-                toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s")}
+                toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s"),
+            "force_interval": flag_argument(force_interval, names["force_interval"])}
 
 
 __all__ = ["BIN_HOURS", "FORMATS", "MAX_WORKERS", "SOUND_SPEED"]

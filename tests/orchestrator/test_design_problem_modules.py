@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import sblsim.orchestrator.design as design
-from tests.module_order import out_of_order
+from tests.module_order import out_of_order, top_level_definitions
 from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.orchestrator.design"
@@ -22,10 +22,6 @@ SOURCES = module_sources(ROOT, ORDER)
 def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     """(module, imported) pairs breaking the order: one of ``ORDER`` not before the importer."""
     return out_of_order(sources, ORDER, PACKAGE)
-
-
-def _functions(source: str) -> set[str]:
-    return {node.name for node in ast.parse(source).body if isinstance(node, (ast.FunctionDef, ast.ClassDef))}
 
 
 def test_each_module_imports_only_the_modules_before_it():
@@ -45,7 +41,7 @@ def test_no_module_is_a_chapter(name):
 
 
 def test_the_reading_module_reads_and_checks_each_key_only():
-    assert _functions(SOURCES["problem"]) == {"read_problem", "check_problem", "_value", "_checked",
+    assert top_level_definitions(SOURCES["problem"]) == {"read_problem", "check_problem", "_value", "_checked",
                                               "_nested_sections"}
     declared = {node.target.id for node in ast.parse(SOURCES["keys"]).body if isinstance(node, ast.AnnAssign)}
     assert "DESIGN_KEYS" in declared  # the declarations live in keys

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import sblsim.orchestrator.design as design
-from tests.module_order import out_of_order
+from tests.module_order import out_of_order, top_level_definitions
 from tests.module_order import sources as module_sources
 
 PACKAGE = "sblsim.orchestrator.design"
@@ -34,10 +34,6 @@ def _wrong(sources: dict[str, str]) -> list[tuple[str, str]]:
     return out_of_order({name: _spelled_out(text) for name, text in sources.items()}, ORDER, PACKAGE)
 
 
-def _functions(source: str) -> set[str]:
-    return {node.name for node in ast.parse(source).body if isinstance(node, (ast.FunctionDef, ast.ClassDef))}
-
-
 def test_each_module_imports_only_the_modules_before_it():
     assert _wrong(SOURCES) == []
 
@@ -55,11 +51,12 @@ def test_no_module_is_a_chapter(name):
 
 
 def test_each_job_is_in_its_module():
-    assert {"resolve", "room", "plan_of"} <= _functions(SOURCES["resolution"])
-    assert {"Candidate", "candidates"} <= _functions(SOURCES["candidates"])
-    assert {"Design", "shortfalls", "ranked", "pareto_front"} <= _functions(SOURCES["judgement"])
-    assert _functions(SOURCES["run"]) >= {"search_all"} and "Searcher" in _functions(SOURCES["searcher"])
-    assert {"Tag", "tag_of"} == _functions(SOURCES["telemetry_tag"])
-    assert {"judge", "fixed_pings"} <= _functions(SOURCES["telemetry_judgement"])
-    assert {"search_all", "search_count", "estimate"} <= _functions(SOURCES["telemetry_search"])
-    assert _functions(SOURCES["solve"]) == {"solve", "solve_telemetry"}
+    assert {"resolve", "room", "plan_of"} <= top_level_definitions(SOURCES["resolution"])
+    assert {"Candidate", "candidates"} <= top_level_definitions(SOURCES["candidates"])
+    assert {"Design", "shortfalls", "ranked", "pareto_front"} <= top_level_definitions(SOURCES["judgement"])
+    assert "search_all" in top_level_definitions(SOURCES["run"])
+    assert "Searcher" in top_level_definitions(SOURCES["searcher"])
+    assert {"Tag", "tag_of"} == top_level_definitions(SOURCES["telemetry_tag"])
+    assert {"judge", "fixed_pings"} <= top_level_definitions(SOURCES["telemetry_judgement"])
+    assert {"search_all", "search_count", "estimate"} <= top_level_definitions(SOURCES["telemetry_search"])
+    assert top_level_definitions(SOURCES["solve"]) == {"solve", "solve_telemetry"}

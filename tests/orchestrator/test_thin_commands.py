@@ -10,6 +10,7 @@ import pytest
 
 import sblsim
 import sblsim.orchestrator.commands
+from tests.module_order import longer_than
 
 #: The most lines a command's module may have.
 LIMIT = 300
@@ -18,10 +19,9 @@ NOT_YET: dict[str, int] = {}
 
 
 def too_long(folder: Path, limit: int = LIMIT, allowed: dict[str, int] | None = None) -> dict[str, int]:
-    """The modules of ``folder`` longer than ``limit`` lines (or than their own cap in ``allowed``): name -> lines."""
-    allowed = NOT_YET if allowed is None else allowed
-    lines = {path.name: len(path.read_text(encoding="utf-8").splitlines()) for path in sorted(folder.glob("*.py"))}
-    return {name: n for name, n in lines.items() if n > allowed.get(name, limit)}
+    """The modules of ``folder`` (it has no subfolders) longer than ``limit`` lines (or than their own cap in
+    ``allowed``, default :data:`NOT_YET`): name -> lines."""
+    return longer_than(folder, limit, NOT_YET if allowed is None else allowed)
 
 
 def test_no_command_module_is_longer_than_the_limit():
