@@ -202,7 +202,9 @@ def check_stable(toa: np.ndarray, crossing: float) -> float | None:
         One line naming the stated type, the range of the steps the pings show, their misfit and what is allowed;
         as :func:`first_arrival_steps`.
     """
-    d = first_arrival_steps(toa)
+    first_arrival_steps(toa)  # the rows in time order
+    first = first_arrivals(toa)
+    d = np.diff(first[np.isfinite(first)])  # between heard rows: a row heard by nobody is missed or set aside
     positive = d[d > 0]
     if len(positive) < 3:
         return None
@@ -282,7 +284,7 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
     if kind == "sbi" and source == "given":
         check_stable(toa, crossing)
     if kind == "sbi":
-        n = np.maximum(np.round(d / interval), 1.0)
+        n = _stable_counts(toa, d, interval)
         count, offset, te, dr = n, zeros, jitter * np.sqrt(n), drift * np.sqrt(n)
     elif kind == "rbi":
         if bounds is not None:
@@ -310,6 +312,21 @@ def build_schedule(toa: np.ndarray, kind: str, interval: float, jitter: float, d
     typical = float(np.median(steps)) if len(steps) else interval
     gaps = tuple(int(k) for k in np.flatnonzero(steps > max(GAP_FACTOR * typical, GAP_MIN_S)))
     return PingSchedule(kind, float(interval), count, offset, te, dr, bounds, gaps, source)
+
+
+def _stable_counts(toa: np.ndarray, d: np.ndarray, interval: float) -> np.ndarray:
+    """A stable interval's pings elapsed per row step (m − 1,): between two heard rows, the whole number of
+    ``interval`` [s] their first arrivals are apart (at least 1), shared evenly by the row steps between them (a row
+    heard by nobody between, a missed ping or a row set aside, splits the count, not adds to it); before the first
+    heard row and after the last, each row step's own (``d`` [s], :func:`first_arrival_steps`)."""
+    n = np.maximum(np.round(d / interval), 1.0)
+    first = first_arrivals(toa)
+    heard = np.flatnonzero(np.isfinite(first))
+    rows = np.diff(heard)
+    whole = np.maximum(np.round(np.diff(first[heard]) / interval), 1.0)
+    for a, r, w in zip(heard[:-1][rows > 1], rows[rows > 1], whole[rows > 1]):
+        n[a:a + r] = w / r
+    return n
 
 
 def _check_shortest(toa: np.ndarray, low: float, crossing: float) -> None:

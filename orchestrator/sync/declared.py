@@ -1,7 +1,7 @@
 """What a user declares about a telemetry study, checked against its detections at the first command that sees
 both: the receivers' positions against the sync tags' travel times (``sblsim sync``:
 :mod:`sblsim.models.sync.scale`), and against the spread of one tag's arrivals (``sblsim toa``); a stated stable
-burst interval against the tag's pings (``sblsim toa``: :func:`sblsim.models.tracking.schedule.check_stable`).
+burst interval against the tag's pings (``sblsim toa``: :func:`sblsim.models.tracking.strays.stable_interval`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.pings import group_pings
 from sblsim.models.sync.scale import check_scale, distance_scale, double_differences, looks_like_degrees
-from sblsim.models.tracking.schedule import check_stable
+from sblsim.models.tracking.strays import stable_interval
 from sblsim.orchestrator.sync.transmitters import match
 
 #: The sound speed the scale check takes where none is given [m/s] (the check allows a factor of ten).
@@ -82,7 +82,7 @@ def check_matrix(toa: np.ndarray, positions: np.ndarray, shortest: float, crossi
     """A tag's times-of-arrival matrix against what was declared: the receivers' positions (its arrivals grouped
     again with a window of a quarter of the ``shortest`` interval [s], at most :data:`PROBE_WINDOW`, whatever the
     table says: :func:`check_arrival_spread`) and a stable burst interval stated (``ping_type`` ``sbi``:
-    :func:`~sblsim.models.tracking.schedule.check_stable`).
+    :func:`~sblsim.models.tracking.strays.stable_interval`: its stray rows set aside).
 
     Parameters
     ----------
@@ -102,7 +102,7 @@ def check_matrix(toa: np.ndarray, positions: np.ndarray, shortest: float, crossi
     Raises
     ------
     ModelError
-        One line (:func:`check_arrival_spread`, :func:`~sblsim.models.tracking.schedule.check_stable`).
+        One line (:func:`check_arrival_spread`, :func:`~sblsim.models.tracking.strays.stable_interval`).
     """
     toa = np.asarray(toa, float)
     ping, receiver = np.nonzero(np.isfinite(toa))
@@ -113,7 +113,7 @@ def check_matrix(toa: np.ndarray, positions: np.ndarray, shortest: float, crossi
     spreads = (by.max() - by.min())[by.size() >= 2].to_numpy()
     check_arrival_spread(spreads, crossing, tolerance, source, positions[:, 0], positions[:, 1])
     if ping_type == "sbi" and len(toa) > 1:
-        check_stable(toa, crossing)
+        stable_interval(toa, crossing)
 
 
 def check_arrival_spread(spreads: np.ndarray, crossing: float, tolerance: float, source: str,

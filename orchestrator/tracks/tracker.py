@@ -13,7 +13,7 @@ import numpy as np
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.models.tracking.ping_type import infer_ping_type
-from sblsim.models.tracking.strays import SET_ASIDE_REASON, check_strays, stray_rows
+from sblsim.models.tracking.strays import SET_ASIDE_REASON, check_strays, stable_interval, stray_rows
 
 #: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
 #: by their median absolute deviation, 0.15 ms by their standard deviation), where nothing else is known: neither
@@ -112,7 +112,7 @@ def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_inte
     """The rows of ``toa`` (m, n) [s] that cannot be pings of the stated schedule, set aside
     (:func:`~sblsim.models.tracking.strays.stray_rows`): a random interval's min (``burst_interval`` (min, max)
     [s]), a pseudo-random sequence's least (``burst_sequence`` [s]) or, for a stable interval stated (``stable``:
-    ``--ping-type sbi``), the interval its steps fit (:func:`~sblsim.models.tracking.schedule.check_stable` at the
+    ``--ping-type sbi``), the interval its steps fit (:func:`~sblsim.models.tracking.strays.stable_interval` at the
     crossing time of ``slowest`` [m/s], the slowest sound speed allowed: it refuses one they contradict at any speed)
     less its tolerance, at the crossing time of the receivers
     ``positions`` (n, dim) [m] at ``fastest`` [m/s], the fastest sound speed allowed (the shortest crossing: a row
@@ -138,7 +138,7 @@ def set_aside(toa: np.ndarray, positions: np.ndarray, fastest: float, burst_inte
     crossing = ps.crossing_time(positions, fastest)
     # the stable interval the steps fit, checked as leniently as any speed allows (the schedule's check, at the
     # tracker's speed, is the one that refuses)
-    interval = ps.check_stable(toa, crossing * fastest / (slowest or fastest)) \
+    interval = stable_interval(toa, crossing * fastest / (slowest or fastest))[0] \
         if stable and burst_interval is None and burst_sequence is None else None
     if interval is not None:  # the shortest first-arrival step of two pings: the interval less its tolerance
         shortest = interval - max(ps.SBI_CROSSINGS * crossing, ps.SBI_SHARE * interval) + crossing

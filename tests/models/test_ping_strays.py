@@ -1,6 +1,9 @@
 """Detections that cannot be pings set aside by the tag's schedule, not refused (issue 87): stray codes inserted into
 simulated random-interval records, found against the rows known to be inserted; rows heard by nobody are no pings;
 a stated interval the rows (or a receiver's detections) contradict as a whole refused in one line, taken with force.
+Stray detections a few per cent of the detections (each a row of its own: many more of the rows) in a dense array,
+at every ping type: set aside, the stated interval not refused, a stable interval found through them and its pings
+counted right across the rows set aside; a wrong interval, or a random one stated stable, still refused.
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.sync.pings import CONTRADICTED_SHARE, interval_seen
 from sblsim.models.tracking import schedule as ps
-from sblsim.models.tracking.strays import STRAY_SHARE, check_strays, stray_rows
+from sblsim.models.tracking.strays import STRAY_SHARE, check_strays, pinglike, stable_interval, stray_rows
 
 RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
 SETTINGS = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=30.0, acceleration_psd=1e-4)
@@ -147,3 +150,76 @@ def test_a_receiver_s_steps_contradict_a_stated_shortest_interval():
     assert not right.contradicted and right.below <= CONTRADICTED_SHARE * right.steps
     wrong = interval_seen(receiver, time, 0.2, 150.0)
     assert wrong.contradicted and 55.0 < wrong.low < 70.0 and 110.0 < wrong.high <= 120.5
+
+
+def with_stray_detections(seed: int, kind: str, share: float = 0.03, n: int = 300, interval: float = 30.0,
+                          sequence: np.ndarray | None = None):
+    """A simulated record in a dense array (each ping heard by each receiver with probability 0.8) with stray
+    detections ``share`` of its detections: each a row of its own at a uniform time in the record, heard by one
+    receiver; returns the matrix in time order, which rows were inserted, and the pings' emission times [s]."""
+    rng = np.random.default_rng(seed)
+    settings = tt.TrackerSettings(sound_speed=1480.0, sigma_toa=1e-4, interval=interval, acceleration_psd=1e-4)
+    toa, _, emissions = tt.simulate_pings(RECEIVERS, n, settings, rng, speed=0.3, detection=0.8, ping_type=kind,
+                                          burst_interval=BOUNDS, burst_sequence=sequence)
+    heard = np.isfinite(toa).any(axis=1)
+    toa, emissions = toa[heard], emissions[heard]
+    first = np.nanmin(toa, axis=1)
+    k = int(round(share * np.isfinite(toa).sum()))
+    rows = np.full((k, len(RECEIVERS)), np.nan)
+    rows[np.arange(k), rng.integers(0, len(RECEIVERS), k)] = rng.uniform(first[0], first[-1], k)
+    matrix = np.vstack([toa, rows])
+    inserted = np.r_[np.zeros(len(toa), bool), np.ones(k, bool)]
+    order = np.argsort(np.nanmin(matrix, axis=1), kind="stable")
+    return matrix[order], inserted[order], emissions
+
+
+@pytest.mark.parametrize("kind", ["rbi", "pbi"])
+def test_stray_detections_of_a_dense_array_are_set_aside_not_refused(kind):
+    """3 % of the detections stray: about 12 % of the rows, beyond the share of rows a wrong interval may set aside,
+    but heard once where pings are heard by several: set aside, the interval kept."""
+    sequence = np.array([22.0, 37.0, 29.0, 31.0, 25.0, 39.0, 21.0, 33.0])
+    shortest = BOUNDS[0] if kind == "rbi" else sequence.min()
+    found = strays = kept = real = 0
+    for seed in range(10):
+        toa, inserted, _ = with_stray_detections(seed, kind, sequence=sequence)
+        aside = stray_rows(toa, shortest, crossing())
+        assert inserted.sum() > STRAY_SHARE * len(toa)  # more stray rows than a count of rows would allow
+        like, out_of, dense = pinglike(toa, aside)
+        assert dense and like == int((aside & (np.isfinite(toa).sum(axis=1) >= 2)).sum())
+        assert check_strays(toa, aside, "stated", shortest) is None
+        found += int((aside & inserted).sum())
+        strays += int(inserted.sum())
+        kept += int((~aside & ~inserted).sum())
+        real += int((~inserted).sum())
+    assert found / strays >= 0.95 and kept / real >= 0.99, (found, strays, kept, real)
+
+
+def test_a_stable_interval_is_found_through_its_strays_and_its_pings_counted_across_them():
+    found = strays = kept = real = 0
+    for seed in range(10):
+        toa, inserted, emissions = with_stray_detections(seed, "sbi", interval=30.0)
+        with pytest.raises(ModelError, match="not whole multiples of one interval"):
+            ps.check_stable(toa, crossing())  # the strays' part-steps hide the interval from all rows' steps
+        interval, aside = stable_interval(toa, crossing())
+        assert interval == pytest.approx(30.0, abs=0.05)
+        found += int((aside & inserted).sum())
+        strays += int(inserted.sum())
+        kept += int((~aside & ~inserted).sum())
+        real += int((~inserted).sum())
+        # the schedule on the rows kept counts the pings elapsed: a row set aside splits a step's count, not adds
+        schedule = ps.build_schedule(np.where(aside[:, None], np.nan, toa), "sbi", interval, SETTINGS.jitter,
+                                     SETTINGS.interval_drift, crossing())
+        assert schedule.count.sum() == pytest.approx(np.round((emissions[-1] - emissions[0]) / 30.0))
+    assert found / strays >= 0.95 and kept / real >= 0.99, (found, strays, kept, real)
+
+
+def test_a_random_interval_stated_stable_is_still_refused_and_a_sparse_record_counts_every_row():
+    toa, _, _ = with_stray_detections(3, "rbi")
+    with pytest.raises(ModelError, match="ping type sbi: .* not whole multiples of one interval"):
+        stable_interval(toa, crossing())
+    # one receiver: no row is heard twice, so every row set aside counts (a wrong interval is refused as before)
+    single = toa[:, :1][np.isfinite(toa[:, 0])]
+    aside = stray_rows(single, 30.0, crossing())
+    assert pinglike(single, aside) == (int(aside.sum()), len(single), False)
+    with pytest.raises(ModelError, match="more than 10%"):
+        check_strays(single, aside, "30:60 s", 30.0)
