@@ -142,7 +142,8 @@ def _to_spare(count: np.ndarray, known_depth: np.ndarray | None, dim: int) -> np
 
 
 def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarray, heard: np.ndarray,
-                  chi2: np.ndarray, dim: int, known_depth: np.ndarray | None = None) -> np.ndarray:
+                  chi2: np.ndarray, dim: int, known_depth: np.ndarray | None = None,
+                  protection: np.ndarray | None = None) -> np.ndarray:
     """Which single-ping fixes are trusted (module docstring).
 
     Parameters
@@ -161,6 +162,10 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     known_depth : ndarray of bool, (m,), optional
         The pings whose depth was one more measurement of the fix (a depth-sensor reading, a depth given or a prior:
         :func:`~sblsim.models.tracking.fix.fix_pings`): counted with its arrivals, as the fix counts it.
+    protection : ndarray, (m,), optional
+        Each fix's horizontal protection level [m] (:func:`~sblsim.models.tracking.integrity.protection_levels`):
+        a fix one faulty arrival could move by more than :data:`TRUSTED_FIX_DRMS` unseen is not trusted; NaN where
+        not assessed.
 
     Returns
     -------
@@ -176,7 +181,8 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     passes = np.where(finite, chi2, np.inf) <= chi2_dist.ppf(0.999, dof)
     with np.errstate(invalid="ignore"):
         spread = np.sqrt(np.trace(covariances[:, :dim, :dim], axis1=1, axis2=2))
-    return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS)
+    protected = True if protection is None else ~(np.asarray(protection, float) > TRUSTED_FIX_DRMS)
+    return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS) & protected
 
 
 def explained(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, c: float,

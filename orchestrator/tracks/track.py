@@ -30,6 +30,7 @@ from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.depth import check_given_depth
 from sblsim.models.tracking.geometry import check_array
+from sblsim.models.tracking.integrity import protection_levels
 from sblsim.models.tracking.receivers import receiver_residuals
 from sblsim.models.tracking.strays import SET_ASIDE_REASON
 from sblsim.orchestrator.io.frames import frame_summary
@@ -224,7 +225,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                    for name, kind in tt.CAUSAL_TRACKERS.items()
                    if name != "ekf" and other_filters}  # the EKF's record is the RTS's
     depth_known = None if depth is None else np.isfinite(depth)  # a measurement of each fix and row where given
-    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known)
+    # a fix one reflection could move by more than a trusted fix's limit while its own test passes is no reference
+    protection = np.where(depth_known if depth_known is not None else False, np.nan,
+                          protection_levels(positions, fx, fused, c, sigma))
+    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known, protection)
     fix_explained = qa.explained(toa, positions, fx, c, sigma)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}
