@@ -6,6 +6,11 @@ The truth of a receiver's clock: its time ``r = τ + a + b τ`` at the true time
 τ + Δ`` from then on; ``Δ < 0`` its time goes back). The offsets :func:`sblsim.models.sync.clocks.fit_clocks`
 estimates are on the reference receiver's clock; :meth:`SimulatedSync.offset` gives that truth for any receiver at
 its own clock's times.
+
+The rows come in each receiver's order (receiver by receiver), and within a receiver by its clock's times
+(``order="clock"``, the default) or by the true times (``order="logging"``: the order a receiver logs them and writes
+them to its file, where a reset's readings after it follow those before it however their times compare; without a
+jump back the two are the same).
 """
 
 from __future__ import annotations
@@ -13,6 +18,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from sblsim.models.declarations import ModelError, shown
+
+#: The rows' orders within a receiver (``order`` of :func:`simulate_sync` and :func:`tag_detections`).
+ORDERS = ("clock", "logging")
 
 
 @dataclass
@@ -28,7 +38,8 @@ class SimulatedSync:
     receiver, tag : numpy.ndarray
         (n,) int, each detection's receiver and sync tag.
     time : numpy.ndarray
-        (n,) [s] on the receiver's clock; the rows in each receiver's order of logging.
+        (n,) [s] on the receiver's clock; the rows receiver by receiver, each's by its clock's time or in its order
+        of logging (``order`` of :func:`simulate_sync`).
     emission : numpy.ndarray
         (n,) int, the true emission of each detection.
     echo : numpy.ndarray
@@ -91,7 +102,7 @@ def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, sid
                   detection_range: float = 700.0, offset: float = 2.0, drift: float = 20e-6,
                   interval: tuple[float, float] = (540.0, 660.0), noise: float = 0.15e-3, p_detect: float = 0.9,
                   echo_share: float = 0.0, sound_speed: float = 1480.0,
-                  jump: tuple[int, float, float] | None = None) -> SimulatedSync:
+                  jump: tuple[int, float, float] | None = None, order: str = "clock") -> SimulatedSync:
     """Simulate sync-tag detections (the module docstring).
 
     Parameters
@@ -119,11 +130,20 @@ def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, sid
     jump : (int, float, float), optional
         One receiver's clock jump: the receiver, the true time [s] and the size [s] (the module docstring); the
         draws are the same with it or without.
+    order : str
+        Each receiver's rows by its clock's times (``"clock"``) or by the true times, as it logs them
+        (``"logging"``: after a jump back its times go back once, at the jump); :data:`ORDERS`.
 
     Returns
     -------
     SimulatedSync
+
+    Raises
+    ------
+    ModelError
+        An ``order`` not in :data:`ORDERS`.
     """
+    _check(order)
     rng = np.random.default_rng(seed)
     positions = rng.uniform(0, side, (n_receivers, 2))
     offset0 = rng.uniform(-offset, offset, n_receivers)
@@ -157,18 +177,19 @@ def simulate_sync(n_receivers: int = 20, hours: float = 24.0, seed: int = 0, sid
     if jump is not None:
         after = (rec == jump[0]) & (tau >= jump[1])
         clock = clock + np.where(after, jump[2], 0.0)
-    order = np.lexsort((clock, rec))
-    return SimulatedSync(positions, offset0, drifts, rec[order], tag[order], clock[order], emission[order],
-                         echo[order], sound_speed, None if jump is None else (int(jump[0]), float(jump[1]),
-                                                                              float(jump[2])),
-                         None if after is None else after[order])
+    rows = np.lexsort((clock if order == "clock" else tau, rec))
+    return SimulatedSync(positions, offset0, drifts, rec[rows], tag[rows], clock[rows], emission[rows],
+                         echo[rows], sound_speed, None if jump is None else (int(jump[0]), float(jump[1]),
+                                                                            float(jump[2])),
+                         None if after is None else after[rows])
 
 
 @dataclass
 class TagDetections:
     """A tag's pings as raw detections on the receivers' own clocks (:func:`tag_detections`): ``receiver``,
-    ``time`` [s] (the receiver's clock), ``ping`` (the simulator's row) and ``echo`` (a multipath copy), each (n,), in
-    each receiver's order of logging."""
+    ``time`` [s] (the receiver's clock), ``ping`` (the simulator's row) and ``echo`` (a multipath copy), each (n,),
+    receiver by receiver, each's by its clock's time or in its order of logging (``order`` of
+    :func:`tag_detections`)."""
 
     receiver: np.ndarray
     time: np.ndarray
@@ -177,16 +198,25 @@ class TagDetections:
 
 
 def tag_detections(toa: np.ndarray, offset0: np.ndarray, drift: np.ndarray, rng: np.random.Generator,
-                   echo_share: float = 0.0, echo_delay: tuple[float, float] = (0.5e-3, 50e-3)) -> TagDetections:
+                   echo_share: float = 0.0, echo_delay: tuple[float, float] = (0.5e-3, 50e-3),
+                   order: str = "clock") -> TagDetections:
     """A times-of-arrival matrix in true time (e.g. :func:`sblsim.models.tracking.simulate.simulate_pings`'s) as
     the receivers log it: each arrival ``τ`` read on receiver ``j``'s clock as ``τ + a_j + b_j τ`` (the module
     docstring's clocks: ``offset0`` (R,) [s], ``drift`` (R,) [s/s]); a share ``echo_share`` of the arrivals followed
-    by a multipath echo ``U(echo_delay)`` [s] later on the same receiver.
+    by a multipath echo ``U(echo_delay)`` [s] later on the same receiver; each receiver's rows by its clock's times
+    (``order="clock"``) or by the true times, as it logs them (``"logging"``; the same here, its clock never going
+    back: :data:`ORDERS`).
 
     Returns
     -------
     TagDetections
+
+    Raises
+    ------
+    ModelError
+        An ``order`` not in :data:`ORDERS`.
     """
+    _check(order)
     ping, rec = np.nonzero(np.isfinite(toa))
     tau = toa[ping, rec]
     echo = np.zeros(len(tau), bool)
@@ -196,8 +226,14 @@ def tag_detections(toa: np.ndarray, offset0: np.ndarray, drift: np.ndarray, rng:
         tau = np.r_[tau, tau[pick] + rng.uniform(*echo_delay, pick.sum())]
         echo = np.r_[echo, np.ones(pick.sum(), bool)]
     clock = tau + offset0[rec] + drift[rec] * tau
-    order = np.lexsort((clock, rec))
-    return TagDetections(rec[order], clock[order], ping[order], echo[order])
+    rows = np.lexsort((clock if order == "clock" else tau, rec))
+    return TagDetections(rec[rows], clock[rows], ping[rows], echo[rows])
+
+
+def _check(order: str) -> None:
+    """Refuse an ``order`` not in :data:`ORDERS` in one line."""
+    if order not in ORDERS:
+        raise ModelError(f"order: {shown(order)} is not a rows' order; allowed: {', '.join(ORDERS)}")
 
 
 def draw_clocks(n_receivers: int, offset: float, drift: float, rng: np.random.Generator,
@@ -261,5 +297,5 @@ def on_clocks(receiver: np.ndarray, tau: np.ndarray, offset0: np.ndarray, drift:
     return tau + offset0[receiver] + drift[receiver] * tau
 
 
-__all__ = ["SimulatedSync", "TagDetections", "draw_clocks", "on_clocks", "simulate_sync", "sync_tag_arrivals",
+__all__ = ["ORDERS", "SimulatedSync", "TagDetections", "draw_clocks", "on_clocks", "simulate_sync", "sync_tag_arrivals",
            "tag_detections"]

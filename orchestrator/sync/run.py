@@ -33,6 +33,7 @@ from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
 from sblsim.models.sync.emissions import connected, sync_emissions
+from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.noise import receiver_noise
 from sblsim.orchestrator.io.arguments import whole
 from sblsim.orchestrator.sync import segments
@@ -320,6 +321,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     # row a receiver's (its first segment) or a later segment's, `rows` each arrival's (-1 set aside at a break)
     fit = fit_with_breaks(receiver, emission, time, distance, slowness, used, linked, start, width, tag,
                           geometry=geometry, timings=timings, part=part)
+    # a break within a few arrivals of a clock's end (too near to fit a segment): its times from there set aside
+    fit, ends = cut_ends(fit, receiver, emission, time, distance, slowness, used, tag)
     identified = fits = None
     if refine_positions:  # refined only where the sync tags determine the positions; else refused
         args = (receiver, tag, emission, time, distance, slowness, used, start, width)
@@ -374,6 +377,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         # its entry's offsets and drifts are its first segment's; offsets.csv has every segment's
         mine = summary["receivers"][entry["receiver"]]
         mine["clock_segments"] = max(mine.get("clock_segments", 1), entry["segment_after"])
+    for end in ends:  # each break too near a clock's end named in one line
+        summary.setdefault("warnings", []).append(segments.end_line(end, names, origin))
     fitted = {(e["reset"]["receiver"], e["reset"]["line"]) for e in summary["clock_breaks"] if e.get("reset")}
     for reset in detections.clock_resets:  # a reset no fit split (no sync-tag arrival after it, or not at a receiver)
         if (reset["receiver"], reset["line"]) not in fitted:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from sblsim.models.sync.clock_fit import ClockFit
+from sblsim.models.sync.end_breaks import EndBreak
 from sblsim.orchestrator.io.times import iso_utc
 
 
@@ -152,5 +153,19 @@ def break_line(entry: dict[str, Any]) -> str:
             f"its own times from {aside[0][11:23]} to {aside[1][11:23]} set aside")
 
 
-__all__ = ["break_line", "breaks_summary", "clock_rows", "receiver_sigmas", "receiver_values", "segment_columns",
-           "segment_numbers"]
+def end_line(end: EndBreak, names: list[str], origin: float) -> str:
+    """One console line naming a break too near a clock's end (or start) to fit a segment
+    (:func:`~sblsim.models.sync.end_breaks.cut_ends`): the receiver, the break's instant (UTC, on the reference
+    clock), the jump and its sigma, the arrivals beyond it and the receiver's own times set aside."""
+    how = "jumped ahead" if end.size >= 0 else "went back"
+    where, side = ("start", "before") if end.at_start else ("end", "after")
+    when = iso_utc([end.time + origin])[0][:19]
+    bound = iso_utc([(end.aside_to if end.at_start else end.aside_from) + origin])[0][:23]
+    aside = f"up to {bound} set aside" if end.at_start else f"from {bound} on set aside"
+    return (f"clock break: receiver {names[end.receiver]} {how} {abs(end.size):.6g} s ± {end.size_sigma * 1e3:.2g} ms "
+            f"at {when}Z (within {end.time_within:.0f} s), {end.arrivals} sync-tag arrivals {side} it: too near its "
+            f"clock's {where} to fit a segment; its own times {aside}")
+
+
+__all__ = ["break_line", "breaks_summary", "clock_rows", "end_line", "receiver_sigmas", "receiver_values",
+           "segment_columns", "segment_numbers"]

@@ -131,3 +131,31 @@ def test_segments_that_overlap_are_refused_in_one_line(tmp_path):
     clocks = read_clocks(folder)
     assert clocks.receivers == ["A"] and clocks.rows(np.zeros(3, np.int64), t0 + np.array([0.0, 120.0, 200.0])
                                                      ).tolist() == [0, -1, 1]
+
+
+def test_a_jump_near_the_records_end_said_in_one_line_and_set_aside(tmp_path, capsys):
+    """R2's clock goes back 20 s with 5 of its sync-tag arrivals after it (too few to fit a segment): one warning
+    line names R2, says it went back 20 s, the 5 arrivals and that its times from there are set aside; those 5
+    arrivals (and no other) are ``clock break`` in residuals.csv; offsets.csv's R2 clock holds up to its last
+    reading before the jump less the 20 s its clock went back (the readings both clocks make set aside)."""
+    sim, _ = _study(tmp_path, (2, 0.0, 0.0))
+    tau = np.sort(sim.true_time(sim.receiver, sim.time)[sim.receiver == 2])
+    at = 0.5 * (tau[-6] + tau[-5])
+    sim, _ = _study(tmp_path, (2, at, -20.0))
+    capsys.readouterr()
+    assert main(["sync", str(tmp_path / "d.csv"), "--receivers", str(tmp_path / "h.csv"), "--sound-speed",
+                 str(sim.sound_speed), "--reference", "R0", "--out", str(tmp_path / "sync")]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if "clock break" in line]
+    said = re.search(r"receiver R2 went back ([0-9.]+) s .* 5 sync-tag arrivals after it: too near its clock's end "
+                     r"to fit a segment; its own times from .* set aside", lines[0]) if len(lines) == 1 else None
+    assert said and abs(float(said[1]) - 20.0) < 1e-3, lines
+    residuals = pd.read_csv(tmp_path / "sync" / "residuals.csv")
+    aside = residuals["reason"] == "clock break"
+    assert (residuals.loc[aside, "receiver"] == "R2").all() and aside.sum() == 5
+    assert (residuals.loc[aside, "time"] > EPOCH + sim.reading(np.array([2]), np.array([at]))[0] - 20.0 - 1).all()
+    # offsets.csv: R2's clock holds up to its last reading before the jump less the 20 s (then read again after it)
+    offsets = pd.read_csv(tmp_path / "sync" / "offsets.csv")
+    (to,) = offsets.loc[offsets["receiver"] == "R2", "clock_to"].unique()
+    last = EPOCH + sim.time[(sim.receiver == 2) & ~sim.after].max()
+    assert last - 20.0 - 2e-3 <= to <= last - 20.0 + 2e-3 < EPOCH + sim.time[(sim.receiver == 2) & sim.after].min()
+    assert offsets.loc[offsets["receiver"] != "R2", "clock_to"].isna().all()

@@ -172,3 +172,48 @@ its span); a part R2 does not have refused in one line."""
     assert len(as_first) and np.allclose(as_first, -20.0, atol=0.01)
     with pytest.raises(sblsim.ConfigError, match=r"^part: 3 is not a clock part of receiver R2; allowed: 1, 2 "):
         result.correct("R2", logged, part=3)
+
+
+def test_the_simulators_logging_order_goes_back_once_and_is_read_as_a_reset(tmp_path, capsys):
+    """``simulate_sync(order="logging")`` with R2's clock going back 20 s: R2's times go back exactly once, at its
+    first row after the jump (the truth's ``after``), by the jump less the true time between the two rows on its
+    clock; every other receiver's never; the default order is the same rows by clock time; an unknown order
+    refused in one line. Written in that order, the reader makes R2's rows from there its clock part 2, and
+    ``sblsim sync`` names the reset with the file's line and fits it as a 20 s jump back."""
+    plain = simulate_sync(n_receivers=N, hours=HOURS, seed=21, side=700.0, noise=NOISE, interval=(60.0, 120.0))
+    heard = np.sort(plain.true_time(plain.receiver, plain.time)[plain.receiver == 2])
+    k = np.flatnonzero((heard[:-1] > AT) & (np.diff(heard) < 10.0))[0]  # two of R2's rows < 10 s apart: it goes back
+    at = 0.5 * (heard[k] + heard[k + 1])
+    sim = simulate_sync(n_receivers=N, hours=HOURS, seed=21, side=700.0, noise=NOISE, interval=(60.0, 120.0),
+                        jump=(2, at, -20.0), order="logging")
+    for j in range(N):
+        back = np.flatnonzero(np.diff(sim.time[sim.receiver == j]) < 0)
+        if j != 2:
+            assert len(back) == 0
+            continue
+        after = sim.after[sim.receiver == 2]
+        (k,) = back
+        assert not after[k] and after[k + 1] and after[k + 1:].all()
+        tau = sim.true_time(sim.receiver, sim.time, sim.after)[sim.receiver == 2]
+        step = np.diff(sim.time[sim.receiver == 2])[k]
+        assert step == pytest.approx(-20.0 + (tau[k + 1] - tau[k]) * (1 + sim.drift[2]), abs=1e-9)
+    default = simulate_sync(n_receivers=N, hours=HOURS, seed=21, side=700.0, noise=NOISE, interval=(60.0, 120.0),
+                            jump=(2, at, -20.0))
+    by_clock = np.lexsort((sim.time, sim.receiver))
+    assert np.array_equal(default.time, sim.time[by_clock]) and np.array_equal(default.tag, sim.tag[by_clock])
+    with pytest.raises(ModelError, match=r"^order: 'file' is not a rows' order; allowed: clock, logging$"):
+        simulate_sync(n_receivers=3, hours=0.5, order="file")
+    epo = np.floor(sim.time + EPOCH).astype(np.int64)
+    names = np.array([f"R{j}" for j in range(N)])
+    pd.DataFrame({"epo": epo, "frac": [f"{v:.9f}" for v in np.clip(sim.time + EPOCH - epo, 0, 0.999999999)],
+                  "tag": [f"S{i}" for i in sim.tag], "serial": names[sim.receiver]}).to_csv(tmp_path / "d.csv",
+                                                                                            index=False)
+    pd.DataFrame({"serial": names, "sync_tag": [f"S{j}" for j in range(N)], "x_m": sim.positions[:, 0],
+                  "y_m": sim.positions[:, 1]}).to_csv(tmp_path / "h.csv", index=False)
+    first = int(np.flatnonzero(sim.after)[0]) + 2  # the header is line 1
+    (reset,) = read_detections(tmp_path / "d.csv").clock_resets
+    assert reset["receiver"] == "R2" and reset["line"] == first and reset["clock_part"] == 2
+    lines = [line for line in _sync(tmp_path, capsys) if "clock" in line]
+    assert len(lines) == 1 and "receiver R2" in lines[0] and f"at line {first} " in lines[0], lines
+    fitted = re.search(r"fitted: it went back ([0-9.e+]+) s", lines[0])
+    assert fitted and abs(float(fitted[1]) - 20.0) < 1e-3
