@@ -210,8 +210,9 @@ def add_water_arguments(p: argparse.ArgumentParser, prefix: str = "", times: str
     begins their help (where they hold), ``times`` says the file's time column, ``depth`` where the depth may come
     from without the option."""
     p.add_argument("--temperature-file", type=Path, default=None, metavar="CSV",
-                   help=f"{prefix}a water-temperature series ({times}; temperature_c [°C]) made the sound speed by "
-                        "TEOS-10 at --salinity")
+                   help=f"{prefix}a water-temperature series ({times}; temperature_c [°C]), or the receivers' own "
+                        "records (their Fathom CSV or VUE receiver events, in UTC), made the sound speed by TEOS-10 at "
+                        "--salinity")
     p.add_argument("--water-depth", type=float, default=None, metavar="M",
                    help=f"{prefix}the water's depth [m] (receivers with z_m): the tag's depth kept within the water "
                         f"column, at mid-water where the receivers lie in one plane{depth}")

@@ -122,9 +122,10 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
         The timing noise of every time of arrival [s] in [1e-6, 1]; default each receiver's from the
         synchronisation's residuals (``offsets.csv``'s ``toa_sigma_s``), else 0.15 ms (``summary["toa_noise"]``).
     temperature_file : str or Path, optional
-        A water-temperature series (``time_utc`` or ``epo`` in UTC, ``temperature_c`` [°C]) made each tag's sound
-        speed by TEOS-10 at ``salinity`` (:mod:`sblsim.orchestrator.tracks.water`); not with ``sound_speed``,
-        ``sound_speed_file`` or ``temperature``.
+        A water-temperature series (``time_utc`` or ``epo`` in UTC, ``temperature_c`` [°C]), or the receivers' own
+        records (their Fathom CSV or VUE receiver events: :mod:`sblsim.orchestrator.tracks.receiver_temperature`),
+        made each tag's sound speed by TEOS-10 at ``salinity`` (:mod:`sblsim.orchestrator.tracks.water`); not with
+        ``sound_speed``, ``sound_speed_file`` or ``temperature``.
     water_depth : float, optional
         The water's depth [m] in (0, 11000], which bounds each tag's depth (the deployments' depths needed); default
         the deepest ``bottom_depth`` of the deployments that heard the tag, where the deployments give it

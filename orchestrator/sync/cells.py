@@ -34,13 +34,14 @@ def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int) -> M
 
 
 def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int | None = None, *,
-              max_cells: int | None = None, max_line_cells: int | None = None) -> str:
+              max_cells: int | None = None, max_line_cells: int | None = None, fallback: str | None = None) -> str:
     """A regular file's text, refused before it is read whole when it is larger than ``max_bytes`` or holds more
     than ``max_rows`` lines and 1,000 besides, and before it is decoded when a line is longer than
     :data:`~sblsim.orchestrator.io.tables.MAX_LINE_BYTES` or holds more than ``max_line_cells`` cells (its commas and
     one), or its lines more than ``max_cells`` cells in all (:func:`~sblsim.orchestrator.io.tables.check_cells`);
     UTF-8 (a byte-order mark dropped), no NUL byte. With ``prefix``, only the file's first ``prefix`` bytes (a
-    character cut at the end dropped), its size not checked, its lines' cells checked.
+    character cut at the end dropped), its size not checked, its lines' cells checked. With ``fallback`` (an
+    encoding: ``"latin-1"``, as Windows exports write a ``°``), a text that is not UTF-8 is decoded in it instead.
 
     Parameters
     ----------
@@ -49,6 +50,9 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
     max_cells, max_line_cells : int, optional
         The most cells the table and one of its lines hold [1]; default
         :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`, :data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS`.
+    fallback : str, optional
+        The encoding a text that is not UTF-8 is read in (one that decodes every byte, ``"latin-1"``); default
+        none: such a text refused.
 
     Raises
     ------
@@ -67,20 +71,23 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         if nul >= 0:
             raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
         check_cells(head, name, what, max_line_cells=max_line_cells, max_cells=max_cells)
-        return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else _decoded(head, name, what)
+        return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else \
+            _decoded(head, name, what, fallback)
     data = read_bounded(path, what, max_bytes, max_rows + 1000,
                         lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows),
                         max_line_cells=max_line_cells, max_cells=max_cells)
     nul = data.find(b"\0")
     if nul >= 0:
         raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
-    return _decoded(data, name, what)
+    return _decoded(data, name, what, fallback)
 
 
-def _decoded(data: bytes, name: str, what: str) -> str:
+def _decoded(data: bytes, name: str, what: str, fallback: str | None = None) -> str:
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
+        if fallback is not None:
+            return data.decode(fallback)
         raise ModelError(f"{what}: {name!r} is not UTF-8 text (byte {exc.start})") from None
 
 

@@ -189,7 +189,9 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
         raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
     path, what = Path(path), "detections"
     name = str(path)
-    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)
+    # a Windows export in Latin-1 (VUE writes a temperature tag's unit as °C in it) read, not refused
+    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS,
+                     fallback="latin-1")
     if format is None:
         format = _format_of(text[:65536].split("\n", 1)[0].rstrip("\r"), name)
     if format == "fathom":

@@ -76,28 +76,45 @@ def fathom_records(text: str, name: str, what: str, max_rows: int, max_cells: in
         One line: a first line that is not Fathom's, no ``DET_DESC`` line, a record pandas cannot parse, a table of
         too many cells.
     """
+    tables = fathom_tables(text, name, what, FATHOM_RECORDS, max_rows, max_cells)
+    if "DET" not in tables:
+        raise ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom "
+                         "CSV holding detection records")
+    header, body, lines = tables["DET"]
+    if "DET_SENS" in tables:
+        body.attrs["sensors"] = tables["DET_SENS"]
+    return header, body, lines
+
+
+def fathom_tables(text: str, name: str, what: str, records: tuple[str, ...], max_rows: int,
+                  max_cells: int | None = None) -> dict[str, tuple[list[str], pd.DataFrame, list[int]]]:
+    """A Fathom CSV's records of the types ``records``, each type's as a table
+    (:func:`~sblsim.orchestrator.sync.cells.text_table`: its first ``<TYPE>_DESC`` line the header; each row's line
+    in the file), by type; a type without a ``_DESC`` line is left out. The lines are chosen by their first field
+    (a regular expression): the other types' lines are skipped unread. Each table is refused before pandas parses it
+    where it would hold more than ``max_cells`` cells [1] (default :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`).
+
+    Raises
+    ------
+    ModelError
+        One line: a first line that is not Fathom's, a record pandas cannot parse, a table of too many rows or cells.
+    """
     if not text.lstrip('"').startswith(FATHOM_MARK):
         raise ModelError(f"{what}: {name!r}: a Fathom CSV starts with the line {FATHOM_MARK},…; allowed: the file "
                          "Fathom (or vdat.exe) wrote, unchanged")
     newlines = np.fromiter((m.start() for m in re.finditer("\n", text)), np.int64)
     tables = {}
-    for record in FATHOM_RECORDS:
+    for record in records:
         chosen = list(re.finditer(rf'^"?{record}(?:_DESC)?"?,[^\n]*', text, flags=re.M))
         descs = [m for m in chosen if m.group(0).lstrip('"').startswith(f"{record}_DESC")]
         if not descs:
-            if record == "DET":
-                raise ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom "
-                                 "CSV holding detection records")
             continue
         rows = [m for m in chosen if m not in descs]
         lines = (np.searchsorted(newlines, [descs[0].start()] + [m.start() for m in rows]) + 1).tolist()
         table = "\n".join([descs[0].group(0).rstrip("\r")] + [m.group(0).rstrip("\r") for m in rows]) + "\n"
         header, body, numbered = text_table(table, name, what, max_rows, first_line=0, max_cells=max_cells)
         tables[record] = (header, body, [lines[k] for k in numbered])
-    header, body, lines = tables["DET"]
-    if "DET_SENS" in tables:
-        body.attrs["sensors"] = tables["DET_SENS"]
-    return header, body, lines
+    return tables
 
 
 def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
@@ -216,5 +233,5 @@ def otn(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what
         "station": ("station",)})
 
 
-__all__ = ["FATHOM_MARK", "FATHOM_RECORDS", "fathom", "fathom_records", "format_of", "glatos", "otn",
-           "sensor_columns"]
+__all__ = ["FATHOM_MARK", "FATHOM_RECORDS", "fathom", "fathom_records", "fathom_tables", "format_of", "glatos",
+           "otn", "sensor_columns"]

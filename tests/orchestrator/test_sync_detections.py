@@ -76,6 +76,16 @@ def test_a_vue_export_with_milliseconds_and_a_sensor_value(tmp_path):
     assert set(d.ignored_columns) == {"Transmitter Name", "Transmitter Serial", "Latitude", "Longitude"}
 
 
+def test_a_vue_export_written_in_latin_1_is_read_with_its_degree_sign(tmp_path):
+    """VUE on Windows writes its export in Latin-1: a temperature tag's unit °C is the byte 0xB0, no UTF-8."""
+    path = tmp_path / "vue.csv"
+    path.write_bytes(VUE.replace("12.5,m,", "12.5,°C,").encode("latin-1"))
+    assert b"\xb0C" in path.read_bytes()
+    f = read_detections(path, "vue").frame
+    assert f["sensor_unit"].tolist() == ["°C", "", ""] and f["sensor_value"].iloc[0] == 12.5
+    assert f["receiver"].tolist() == ["128355", "128356", "480001"]
+
+
 def test_a_vue_export_in_a_time_zone_is_converted_to_utc(tmp_path):
     path = tmp_path / "vue.csv"
     path.write_text(VUE.replace("(UTC)", "(UTC+02:00)"))
