@@ -142,8 +142,7 @@ def _to_spare(count: np.ndarray, known_depth: np.ndarray | None, dim: int) -> np
 
 
 def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarray, heard: np.ndarray,
-                  chi2: np.ndarray, dim: int, known_depth: np.ndarray | None = None,
-                  protection: np.ndarray | None = None) -> np.ndarray:
+                  chi2: np.ndarray, dim: int, known_depth: np.ndarray | None = None) -> np.ndarray:
     """Which single-ping fixes are trusted (module docstring).
 
     Parameters
@@ -162,11 +161,6 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     known_depth : ndarray of bool, (m,), optional
         The pings whose depth was one more measurement of the fix (a depth-sensor reading, a depth given or a prior:
         :func:`~sblsim.models.tracking.fix.fix_pings`): counted with its arrivals, as the fix counts it.
-    protection : ndarray, (m,), optional
-        Each fix's horizontal protection level [m] (:func:`~sblsim.models.tracking.integrity.protection_levels`):
-        a fix one faulty arrival could move by more than :data:`TRUSTED_FIX_DRMS` unseen is not trusted; NaN where
-        not assessed.
-
     Returns
     -------
     ndarray of bool, (m,)
@@ -181,8 +175,7 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     passes = np.where(finite, chi2, np.inf) <= chi2_dist.ppf(0.999, dof)
     with np.errstate(invalid="ignore"):
         spread = np.sqrt(np.trace(covariances[:, :dim, :dim], axis1=1, axis2=2))
-    protected = True if protection is None else ~(np.asarray(protection, float) > TRUSTED_FIX_DRMS)
-    return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS) & protected
+    return finite & redundant & passes & (np.nan_to_num(spread, nan=np.inf) <= TRUSTED_FIX_DRMS)
 
 
 def explained(toa: np.ndarray, receivers: np.ndarray, positions: np.ndarray, c: float,
@@ -230,7 +223,8 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
                 fix_covariances: np.ndarray, trusted: np.ndarray, restarts: np.ndarray | None = None,
                 max_speed: float = MAX_SPEED, explained: np.ndarray | None = None,
                 fix_used: np.ndarray | None = None, reported: np.ndarray | None = None,
-                acceleration_psd: float | None = None, known_depth: np.ndarray | None = None) -> Quality:
+                acceleration_psd: float | None = None, known_depth: np.ndarray | None = None,
+                fix_protection: np.ndarray | None = None) -> Quality:
     """Each estimate of a track checked against the trusted single-ping fixes, the physical speed and its own
     uncertainty (module docstring), on the horizontal position.
 
@@ -269,6 +263,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
         measurement beside the arrivals that agree with them, as :func:`trusted_fixes` counts it. An estimate's own
         measurements check it with dim + 2 (one to spare, as a trusted fix's): in 3-D five arrivals, or four and
         its depth; in 2-D four arrivals. Default: none given.
+    fix_protection : ndarray, (m,), optional
+        Each fix's horizontal protection level [m] (:func:`~sblsim.models.tracking.integrity.protection_levels`): a
+        fix that one faulty arrival could have put as far from the estimate as it is, unseen by its own test, does
+        not count against it (NaN: not assessed, it counts). Default: every disagreeing fix counts.
 
     Returns
     -------
@@ -294,7 +292,10 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
     k = np.flatnonzero(trusted)
     if len(k):
         d2 = _distance2(p[k] - fx[k], P[k] + C[k])
-        near = np.linalg.norm(p[k] - fx[k], axis=1) <= FIX_SLACK
+        apart = np.linalg.norm(p[k] - fx[k], axis=1)
+        near = apart <= FIX_SLACK
+        if fix_protection is not None:  # a fix one reflection could have put there unseen refutes nothing there
+            near |= np.asarray(fix_protection, float)[k] >= apart
         fix_bad[k] = ~((d2 <= FIX_GATE) | near)
         if explained is not None and fix_used is not None:
             ours, theirs = np.asarray(explained)[k], np.asarray(fix_used)[k]
@@ -359,7 +360,7 @@ def check_track(times: np.ndarray, positions: np.ndarray, covariances: np.ndarra
 
 def off_the_track(positions: np.ndarray, covariances: np.ndarray, explained: np.ndarray, track: np.ndarray,
                   track_covariances: np.ndarray, track_explained: np.ndarray, track_ok: np.ndarray,
-                  known_depth: np.ndarray | None = None) -> np.ndarray:
+                  known_depth: np.ndarray | None = None, protection: np.ndarray | None = None) -> np.ndarray:
     """Which rows of another estimator of the same pings are off the track (module docstring): the track's row
     ``ok``, the two beyond the χ² gate :data:`FIX_GATE` of their covariances summed, and the track explaining at
     least as many of the ping's arrivals (:func:`explained`), or the row's own arrivals not checking it (none to
@@ -377,6 +378,11 @@ def off_the_track(positions: np.ndarray, covariances: np.ndarray, explained: np.
         Where the track's row is ``ok``.
     known_depth : ndarray of bool, (m,), optional
         The rows that were given the tag's depth (as :func:`check_track`'s). Default: none.
+    protection : ndarray, (m,), optional
+        The rows' horizontal protection levels [m] where they are single-ping fixes
+        (:func:`~sblsim.models.tracking.integrity.protection_levels`): a row one faulty arrival could have put as far
+        from the track as it is, unseen by its own test, is off however many arrivals it explains (a reflection it
+        kept explains itself). Default: none assessed.
 
     Returns
     -------
@@ -388,6 +394,9 @@ def off_the_track(positions: np.ndarray, covariances: np.ndarray, explained: np.
     d2 = np.full(len(p), np.inf)
     d2[both] = _distance2(p[both] - q[both], P[both] + Q[both])
     unchecked = _to_spare(np.asarray(explained), known_depth, np.asarray(positions).shape[1]) < 1
+    if protection is not None:  # one fault could have put the row there unseen: its arrivals do not check it
+        with np.errstate(invalid="ignore"):
+            unchecked |= np.asarray(protection, float) >= np.linalg.norm(p - q, axis=1)
     return (np.asarray(track_ok, bool) & both & ~(d2 <= FIX_GATE)
             & ((np.asarray(track_explained) >= np.asarray(explained)) | unchecked))
 

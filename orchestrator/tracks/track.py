@@ -225,10 +225,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                    for name, kind in tt.CAUSAL_TRACKERS.items()
                    if name != "ekf" and other_filters}  # the EKF's record is the RTS's
     depth_known = None if depth is None else np.isfinite(depth)  # a measurement of each fix and row where given
-    # a fix one reflection could move by more than a trusted fix's limit while its own test passes is no reference
+    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known)
+    # how far one reflection could move each fix unseen by its own test: a fix that far from a row refutes nothing
     protection = np.where(depth_known if depth_known is not None else False, np.nan,
                           protection_levels(positions, fx, fused, c, sigma))
-    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known, protection)
     fix_explained = qa.explained(toa, positions, fx, c, sigma)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}
@@ -255,7 +255,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                  None if restarts is None else np.isin(ping, restarts),
                                  explained=agree, fix_used=fix_explained[ping], reported=reported,
                                  acceleration_psd=None if stationary else settings.acceleration_psd,
-                                 known_depth=None if depth_known is None else depth_known[ping])
+                                 known_depth=None if depth_known is None else depth_known[ping],
+                                 fix_protection=protection[ping])
         if estimator == "robust":  # the track the other estimators' rows are checked against
             track_rows.update(ping=ping, p=p, cov=cov, agree=agree, ok=checked.quality == "ok")
         elif track_rows:  # another estimator's rows off the track where it is ok (qa.off_the_track)
@@ -263,7 +264,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             on = track_rows["ping"][at] == ping
             checked = qa.with_track(checked, on & qa.off_the_track(
                 p, cov, agree, track_rows["p"][at], track_rows["cov"][at], track_rows["agree"][at],
-                track_rows["ok"][at] & on, None if depth_known is None else depth_known[ping]))
+                track_rows["ok"][at] & on, None if depth_known is None else depth_known[ping],
+                protection[ping] if estimator == "fix" else None))
         cov = reported
         with np.errstate(invalid="ignore"):
             # a negative variance (a covariance broken by round-off) is no sigma: NaN, never a confident 0

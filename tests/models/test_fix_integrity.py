@@ -1,7 +1,8 @@
 """A single-ping fix's protection level (RAIM: the largest horizontal error one faulty arrival leaves unseen by the
 fix's own χ² test) against an independent computation: each arrival biased until scipy's nonlinear least-squares
 fix of the ping just reaches the test's threshold, and the fix's move measured; a fix with no redundant arrival
-unprotected; a fix one reflection could move beyond a trusted fix's limit not trusted."""
+unprotected; a fix one reflection could have put as far from the track as it is refutes nothing there and is itself
+off the track, however many arrivals it explains."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2 as chi2_dist
 
 from sblsim.models.tracking.integrity import TEST_PROBABILITY, protection_levels
-from sblsim.models.tracking.quality import TRUSTED_FIX_DRMS, trusted_fixes
+from sblsim.models.tracking.quality import TRUSTED_FIX_DRMS, check_track, off_the_track
 
 C = 1480.0
 SIGMA = 2e-4
@@ -55,7 +56,7 @@ def test_the_protection_level_is_the_largest_move_one_fault_leaves_unseen(tag):
     assert level == pytest.approx(_undetected_move(receivers, tag), rel=0.02)
 
 
-def test_a_weak_geometry_is_unprotected_and_not_trusted_where_a_strong_one_is():
+def test_a_weak_geometry_is_unprotected_where_a_strong_one_is_protected():
     strong = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 80.0], [0.0, 80.0]])
     weak = np.array([[0.0, 0.0], [40.0, 0.5], [80.0, -0.5], [120.0, 0.3]])  # near one line, the tag beside it
     tags = np.array([[50.0, 40.0], [60.0, 300.0]])
@@ -64,12 +65,27 @@ def test_a_weak_geometry_is_unprotected_and_not_trusted_where_a_strong_one_is():
     small = protection_levels(weak, tags[1][None], np.ones((1, 4), bool), C, SMALL)[0]
     assert small == pytest.approx(_undetected_move(weak, tags[1]), rel=0.02)
     assert levels[1] == pytest.approx(small * SIGMA / SMALL)  # the level scales with the timing noise
-    # a fix that passes every other test, trusted only where it is protected
-    covariance = np.repeat(np.eye(2)[None] * 0.01, 2, axis=0)
-    ok = trusted_fixes(tags, covariance, np.array([4, 4]), np.array([4, 4]), np.array([0.5, 0.5]), 2, None,
-                       np.array(levels))
-    assert ok.tolist() == [True, False]
-    assert trusted_fixes(tags, covariance, np.array([4, 4]), np.array([4, 4]), np.array([0.5, 0.5]), 2).all()
+
+
+def test_a_fix_one_reflection_could_have_put_that_far_refutes_nothing_and_is_off_the_track():
+    """Three pings, the track 30 m from a trusted fix at the middle one that explains more of its arrivals (the
+    track's three there fitted exactly, unchecked by them): off that fix unless the fix's protection level reaches
+    30 m; and the fix, off the track only where it does."""
+    t = np.array([0.0, 2.0, 4.0])
+    track = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    fixes = track + [[0.0, 0.0], [0.0, 30.0], [0.0, 0.0]]
+    small = np.repeat(np.eye(2)[None] * 0.04, 3, axis=0)
+    explained, fix_used = np.array([6, 3, 6]), np.array([6, 6, 6])
+
+    def flagged(protection):
+        return check_track(t, track, small, fixes, small, np.ones(3, bool), explained=explained, fix_used=fix_used,
+                           fix_protection=protection).quality.tolist()
+
+    assert flagged(None) == ["ok", "flagged", "ok"] and flagged(np.array([1.0, 12.0, 1.0]))[1] == "flagged"
+    assert flagged(np.array([1.0, 45.0, 1.0])) == ["ok", "ok", "ok"]
+    off = [off_the_track(fixes, small, fix_used, track, small, explained, np.ones(3, bool), None, protection)[1]
+           for protection in (None, np.array([1.0, 12.0, 1.0]), np.array([1.0, 45.0, 1.0]))]
+    assert off == [False, False, True]  # the fix explains more: off only where one fault could have put it there
 
 
 def test_a_fix_with_no_arrival_to_spare_or_none_at_all_is_unprotected_or_unassessed():
