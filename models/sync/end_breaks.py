@@ -16,7 +16,9 @@ run's first are passed over. The row's :attr:`~sblsim.models.sync.clock_fit.Cloc
 good arrival (widened by the shift where the time went back: the readings the jumped clock may make there; and by
 :data:`AGREE` sigmas), so that a time beyond it is in no segment (set aside, as between two segments at a break),
 and the run's arrivals are put on no clock row (``clock`` -1). The fit itself is unchanged: those arrivals were
-rejected. Units: seconds [s] throughout.
+rejected. The same runs (:func:`end_runs`) of fewer than :data:`~sblsim.models.sync.change_points.MIN_SIDE` are left
+out of the change-point search before it (:func:`~sblsim.models.sync.breaks.fit_with_breaks`). Units: seconds [s]
+throughout.
 """
 
 from __future__ import annotations
@@ -105,19 +107,8 @@ def cut_ends(fit: ClockFit, receiver: np.ndarray, emission: np.ndarray, time: np
     receiver = np.asarray(receiver, np.int64)
     rows = receiver if fit.clock is None else fit.clock
     z = offset_samples(fit, rows, emission, time, distance, slowness, used)
-    found = []
-    for row in np.flatnonzero(np.isfinite(fit.knots[:, 0])):
-        idx = np.flatnonzero((rows == row) & np.isfinite(z))
-        idx = idx[np.argsort(time[idx], kind="stable")]
-        kept = fit.kept[idx]
-        if kept.sum() < MIN_SIDE:
-            continue
-        sigma = max(1.4826 * float(np.median(np.abs(z[idx[kept]] - np.median(z[idx[kept]])))), MIN_SCALE)
-        for at_start in (False, True):
-            order = idx[::-1] if not at_start else idx
-            run = _run(order, fit.kept, z, time, tag, sigma, at_start)
-            if run is not None:
-                found.append((_described(fit, int(row), at_start, *run, z, time, tag, sigma), run[0]))
+    found = [(_described(fit, row, at_start, run, good, z, time, tag, sigma), run)
+             for row, at_start, run, good, sigma in end_runs(fit, rows, z, time, tag)]
     if not found:
         return fit, []
     found, runs = [b for b, _ in found], [r for _, r in found]
@@ -132,6 +123,42 @@ def cut_ends(fit: ClockFit, receiver: np.ndarray, emission: np.ndarray, time: np
         outside = (time < span[b.row, 0]) | (time > span[b.row, 1])
         clock[(clock == b.row) & outside & ~fit.kept] = -1  # (a kept one there: fitted, where the time went back)
     return replace(fit, site=site, span=span, clock=clock, breaks=[] if fit.breaks is None else fit.breaks), found
+
+
+def end_runs(fit: ClockFit, rows: np.ndarray, z: np.ndarray, time: np.ndarray, tag: np.ndarray
+             ) -> list[tuple[int, bool, np.ndarray, int, float]]:
+    """Each clock row's runs of arrivals beyond a break near its end (or start) (the module docstring's check).
+
+    Parameters
+    ----------
+    fit : ClockFit
+        The clocks fitted (its ``kept`` and ``knots``).
+    rows, tag : numpy.ndarray
+        (n,) int, each arrival's clock row (-1 on none) and sync tag.
+    z, time : numpy.ndarray
+        (n,) [s] each arrival's offset sample (:func:`~sblsim.models.sync.change_points.offset_samples`, NaN where
+        it has none) and its time on its receiver's clock.
+
+    Returns
+    -------
+    list of (int, bool, numpy.ndarray, int, float)
+        Per run: its clock row, whether it is at the row's start, its arrivals (indices), the good arrival next to
+        them and [s] the row's samples' robust sigma.
+    """
+    out = []
+    for row in np.flatnonzero(np.isfinite(fit.knots[:, 0])):
+        idx = np.flatnonzero((rows == row) & np.isfinite(z))
+        idx = idx[np.argsort(time[idx], kind="stable")]
+        kept = fit.kept[idx]
+        if kept.sum() < MIN_SIDE:
+            continue
+        sigma = max(1.4826 * float(np.median(np.abs(z[idx[kept]] - np.median(z[idx[kept]])))), MIN_SCALE)
+        for at_start in (False, True):
+            order = idx[::-1] if not at_start else idx
+            run = _run(order, fit.kept, z, time, tag, sigma, at_start)
+            if run is not None:
+                out.append((int(row), at_start, run[0], run[1], sigma))
+    return out
 
 
 def _run(order: np.ndarray, kept: np.ndarray, z: np.ndarray, time: np.ndarray, tag: np.ndarray, sigma: float,
@@ -186,4 +213,4 @@ def _described(fit: ClockFit, row: int, at_start: bool, run: np.ndarray, good: i
                     0.5 * abs(edge[1] - edge[0]), *aside)
 
 
-__all__ = ["AGREE", "EndBreak", "LEVEL", "MIN_END", "cut_ends"]
+__all__ = ["AGREE", "EndBreak", "LEVEL", "MIN_END", "cut_ends", "end_runs"]

@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from sblsim.models.sync.breaks import THRESHOLD, fit_with_breaks
+from sblsim.models.sync.breaks import THRESHOLD, _bounds, fit_with_breaks
 from sblsim.models.sync.change_points import scan
 from sblsim.models.sync.clocks import fit_clocks
 from sblsim.models.sync.emissions import connected, sync_emissions
@@ -148,3 +148,28 @@ def test_the_jump_scan_is_the_explicit_least_squares():
     assert found["size"] == pytest.approx(size, rel=1e-6)
     assert found["statistic"] == pytest.approx(np.sqrt(drop / (rest / (n - 7 - 1))), rel=1e-5)
     assert abs(size - 2e-3) < 0.2e-3
+
+
+@pytest.mark.parametrize("before, after, size, stretch", [
+    ((10.0, 20.0, 300.0), (310.0, 350.0, 400.0), 0.5, (300.0, 310.0)),  # ahead: from the last before to the first after
+    ((10.0, 20.0, 300.0), (281.0, 350.0, 400.0), -20.0, (280.0, 301.0)),  # back 20 s: the readings both clocks make
+    ((10.0, 20.0, 300.0), (100.0, 150.0, 400.0), -1e-3, (100.0, 300.0)),  # interleaved beyond the jump (the boats')
+])
+def test_the_stretch_set_aside_at_a_break_is_never_inverted(before, after, size, stretch):
+    """A break's stretch set aside (its two segments' spans) against the readings either segment may make: after
+    a jump ahead, from the last arrival put before it to the first after; after the time went back 20 s, widened by
+    the jump on both sides; where the arrivals the fit put in the two segments interleave in time far beyond a jump
+    of 1 ms (the last before at 300 s, the first after at 100 s: the boats' spurious split printed its stretch "from
+    21:15:09 to 21:11:33"), the whole interleave, in order; the receiver's other arrivals by their times (-1 in it)."""
+    rest = (5.0, 200.0, 500.0)
+    time = np.array(before + after + rest)
+    rows = np.array([0, 0, 0, 1, 1, 1, 0, 0, 0])
+    classified = np.arange(9) < 6
+    span = [[-np.inf, np.inf], [np.nan, np.inf]]
+    entry = {"receiver": 0, "before": 0, "after": 1}
+    _bounds(entry, rows, np.zeros(9, np.int64), time, classified, size, span, np.ones(9, bool))
+    assert (entry["last"], entry["first"]) == (max(before), min(after))
+    assert span[0][1] == pytest.approx(stretch[0]) and span[1][0] == pytest.approx(stretch[1])
+    assert span[0][1] <= span[1][0]
+    expected = [0 if t <= stretch[0] else 1 if t >= stretch[1] else -1 for t in rest]
+    assert rows[6:].tolist() == expected and rows[:6].tolist() == [0, 0, 0, 1, 1, 1]

@@ -20,10 +20,13 @@ N, HOURS, SEED, RECEIVER, BEYOND = 8, 6.0, 11, 4, 5
 
 
 @lru_cache(maxsize=None)
-def _fit(seed: int, jump: tuple[int, float, float] | None = None, hours: float = HOURS):
+def _fit(seed: int, jump: tuple[int, float, float] | None = None, hours: float = HOURS,
+         interval: tuple[float, float] = (540.0, 660.0)):
     """A simulated array of :data:`N` receivers (clocks ±2 s, ±20 ppm, 0.15 ms of timing noise, 3 % multipath
-    echoes), the clocks fitted with their breaks against receiver 0, then cut at their ends (:func:`cut_ends`)."""
-    sim = simulate_sync(n_receivers=N, hours=hours, seed=seed, side=800.0, echo_share=0.03, jump=jump)
+    echoes, sync tags every ``interval`` [s]), the clocks fitted with their breaks against receiver 0, then cut at
+    their ends (:func:`cut_ends`)."""
+    sim = simulate_sync(n_receivers=N, hours=hours, seed=seed, side=800.0, echo_share=0.03, jump=jump,
+                        interval=interval)
     origin = np.floor(sim.time.min())
     t = sim.time - origin
     emission, duplicate, single = sync_emissions(sim.tag, sim.receiver, t, np.full(N, 180.0))
@@ -36,10 +39,10 @@ def _fit(seed: int, jump: tuple[int, float, float] | None = None, hours: float =
     return sim, origin, t, used, fit, cut, ends
 
 
-def _jump_time(at_start: bool) -> float:
+def _jump_time(at_start: bool, seed: int = SEED, interval: tuple[float, float] = (540.0, 660.0)) -> float:
     """[s] a true time with :data:`BEYOND` of :data:`RECEIVER`'s used arrivals after it (before it at the start),
     midway between two of its arrivals (the jump-free simulation's: the draws are the same with a jump)."""
-    sim, _, _, used, *_ = _fit(SEED)
+    sim, _, _, used, *_ = _fit(seed, interval=interval)
     tau = np.sort(sim.true_time(sim.receiver, sim.time)[used & (sim.receiver == RECEIVER)])
     k = BEYOND if at_start else len(tau) - BEYOND
     return float(0.5 * (tau[k - 1] + tau[k]))
@@ -86,6 +89,23 @@ def test_a_jump_near_a_clocks_end_found_and_the_arrivals_beyond_it_set_aside(at_
         moved = size * (1 + sim.drift[0]) / (1 + sim.drift[row]) if at_start and row == RECEIVER else 0.0
         sigma = np.hypot(cut.knot_sigma[row, hold], clean.knot_sigma[row, hold])
         assert (np.abs(cut.knots[row, hold] - clean.knots[row, hold] - moved) <= 2 * sigma + 1e-9).all(), row
+
+
+@pytest.mark.parametrize("seed, size", [(0, 0.5), (1, 0.5), (2, 0.5), (1, -20.0), (2, 5e-3)])
+def test_the_arrivals_beyond_a_jump_near_the_end_pull_no_split_from_the_search(seed, size):
+    """A denser array (sync tags every 200 to 300 s: ~20 arrivals an hour at a receiver) whose receiver jumps with
+    5 of its arrivals after it: those 5, rejected by the fit, would pull the change-point search's best gap to its
+    10 samples from the end (before, on each of these: a split there, its later segment 5 to 9 arrivals; on the boats
+    data a spurious one of 1 ms, 40 min before a real jump of 0.5 s); they are left out of the search, so no clock is
+    split, the end's check finds the one break, its size within 3 of its sigmas and 1 ms of the truth, and sets
+    aside exactly the arrivals beyond it."""
+    dense = (200.0, 300.0)
+    sim, _, _, used, fit, cut, ends = _fit(seed, (RECEIVER, _jump_time(False, seed, dense), size), interval=dense)
+    assert fit.breaks is None
+    (end,) = ends
+    assert end.receiver == RECEIVER and not end.at_start and end.arrivals == BEYOND
+    assert abs(end.size - size) <= min(3 * end.size_sigma, 1e-3)
+    assert np.array_equal(used & (cut.clock < 0), used & sim.after & (sim.receiver == RECEIVER))
 
 
 def test_no_clock_cut_without_a_jump_on_20_seeds():
