@@ -129,3 +129,29 @@ def problem_with(problem: Mapping[str, Mapping[str, Any]], **changes: Mapping[st
     for section, values in changes.items():
         out.setdefault(section, {}).update(values)
     return out
+
+
+def simulated_clocks(n: int, hours: float, seed: int, jump: tuple[int, float, float] | None = None,
+                     interval: tuple[float, float] = (540.0, 660.0), **options):
+    """A simulated sync array of ``n`` receivers over ``hours`` h (:func:`sblsim.models.sync.simulate.simulate_sync`:
+    clocks ±2 s and ±20 ppm, 0.15 ms of timing noise, 3 % multipath echoes, sync tags every ``interval`` [s], one
+    clock's ``jump``), its emissions grouped and its clocks fitted with their breaks against receiver 0
+    (:func:`sblsim.models.sync.breaks.fit_with_breaks`, ``options`` passed on). Returns the simulation, the time
+    origin [s], the times from it, the arrivals used, the emissions, distances [m] and slownesses [s/m], and the
+    fit."""
+    from sblsim.models.sync.breaks import fit_with_breaks
+    from sblsim.models.sync.emissions import connected, sync_emissions
+    from sblsim.models.sync.simulate import simulate_sync
+
+    sim = simulate_sync(n_receivers=n, hours=hours, seed=seed, side=800.0, echo_share=0.03, jump=jump,
+                        interval=interval)
+    origin = np.floor(sim.time.min())
+    t = sim.time - origin
+    emission, duplicate, single = sync_emissions(sim.tag, sim.receiver, t, np.full(n, 180.0))
+    used = ~duplicate & ~single
+    distance = np.linalg.norm(sim.positions[sim.tag] - sim.positions[sim.receiver], axis=1)
+    linked = connected(sim.receiver[used], emission[used], n, 0)
+    slowness = np.full(len(t), 1 / sim.sound_speed)
+    fit = fit_with_breaks(sim.receiver, emission, t, distance, slowness, used, linked, 0, 3600.0, sim.tag,
+                          **options)
+    return sim, origin, t, used, emission, distance, slowness, fit

@@ -11,29 +11,20 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from sblsim.models.sync.breaks import THRESHOLD, _bounds, fit_with_breaks
+from sblsim.models.sync.breaks import THRESHOLD, _bounds
 from sblsim.models.sync.change_points import scan
 from sblsim.models.sync.clocks import fit_clocks
 from sblsim.models.sync.emissions import connected, sync_emissions
-from sblsim.models.sync.simulate import simulate_sync
+from tests.helpers import simulated_clocks
 
 N, HOURS = 8, 6.0
 
 
 @lru_cache(maxsize=None)
 def _fit(seed: int, jump: tuple[int, float, float] | None = None, threshold: float = THRESHOLD):
-    """A simulated array of :data:`N` receivers over :data:`HOURS` h (its clocks ±2 s and ±20 ppm, 0.15 ms of
-    timing noise, 3 % multipath echoes), the clocks fitted with their breaks against receiver 0."""
-    sim = simulate_sync(n_receivers=N, hours=HOURS, seed=seed, side=800.0, echo_share=0.03, jump=jump)
-    origin = np.floor(sim.time.min())
-    t = sim.time - origin
-    emission, duplicate, single = sync_emissions(sim.tag, sim.receiver, t, np.full(N, 180.0))
-    used = ~duplicate & ~single
-    distance = np.linalg.norm(sim.positions[sim.tag] - sim.positions[sim.receiver], axis=1)
-    linked = connected(sim.receiver[used], emission[used], N, 0)
-    slowness = np.full(len(t), 1 / sim.sound_speed)
-    fit = fit_with_breaks(sim.receiver, emission, t, distance, slowness, used, linked, 0, 3600.0, sim.tag,
-                          threshold=threshold)
+    """A simulated array of :data:`N` receivers over :data:`HOURS` h (:func:`tests.helpers.simulated_clocks`), the
+    clocks fitted with their breaks against receiver 0."""
+    sim, origin, t, used, *_, fit = simulated_clocks(N, HOURS, seed, jump, threshold=threshold)
     return sim, origin, t, used, fit
 
 

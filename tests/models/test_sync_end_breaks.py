@@ -11,10 +11,8 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from sblsim.models.sync.breaks import fit_with_breaks
-from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
-from sblsim.models.sync.simulate import simulate_sync
+from tests.helpers import simulated_clocks
 
 N, HOURS, SEED, RECEIVER, BEYOND = 8, 6.0, 11, 4, 5
 
@@ -22,19 +20,10 @@ N, HOURS, SEED, RECEIVER, BEYOND = 8, 6.0, 11, 4, 5
 @lru_cache(maxsize=None)
 def _fit(seed: int, jump: tuple[int, float, float] | None = None, hours: float = HOURS,
          interval: tuple[float, float] = (540.0, 660.0)):
-    """A simulated array of :data:`N` receivers (clocks ±2 s, ±20 ppm, 0.15 ms of timing noise, 3 % multipath
-    echoes, sync tags every ``interval`` [s]), the clocks fitted with their breaks against receiver 0, then cut at
-    their ends (:func:`cut_ends`)."""
-    sim = simulate_sync(n_receivers=N, hours=hours, seed=seed, side=800.0, echo_share=0.03, jump=jump,
-                        interval=interval)
-    origin = np.floor(sim.time.min())
-    t = sim.time - origin
-    emission, duplicate, single = sync_emissions(sim.tag, sim.receiver, t, np.full(N, 180.0))
-    used = ~duplicate & ~single
-    distance = np.linalg.norm(sim.positions[sim.tag] - sim.positions[sim.receiver], axis=1)
-    linked = connected(sim.receiver[used], emission[used], N, 0)
-    slowness = np.full(len(t), 1 / sim.sound_speed)
-    fit = fit_with_breaks(sim.receiver, emission, t, distance, slowness, used, linked, 0, 3600.0, sim.tag)
+    """A simulated array of :data:`N` receivers (:func:`tests.helpers.simulated_clocks`: sync tags every
+    ``interval`` [s]), the clocks fitted with their breaks against receiver 0, then cut at their ends
+    (:func:`cut_ends`)."""
+    sim, origin, t, used, emission, distance, slowness, fit = simulated_clocks(N, hours, seed, jump, interval)
     cut, ends = cut_ends(fit, sim.receiver, emission, t, distance, slowness, used, sim.tag)
     return sim, origin, t, used, fit, cut, ends
 
