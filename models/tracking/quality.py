@@ -14,7 +14,10 @@ checked against what the same data say without the motion model:
   (:func:`explained`) is taken as right: the track is off at that ping when the fix explains more arrivals than the
   track, else the fix is off (a multipath arrival it kept). An estimate its own measurements do not check (none to
   spare, below) agrees with no fix beyond :data:`FIX_SLACK`, however large its covariance, and is flagged there on
-  its own;
+  its own. A fix that one faulty arrival could have put as far from the estimate as it is, unseen by its own χ² test
+  (its horizontal protection level: :mod:`sblsim.models.tracking.integrity`), refutes nothing there: a fix of dim + 2
+  arrivals in a weak geometry absorbs a reflection by tens of metres with a χ² that passes, and explains the
+  reflection with the rest;
 * one ping where the track is off, between pings where it agrees, may be multipath the fix and the track read
   differently: from two successive trusted fixes where the track is off, with no agreeing fix between, the whole
   stretch is lost (to the end of the record where no agreeing fix follows, from its start where none precedes);
@@ -44,7 +47,8 @@ track) is checked against the **track** too (:func:`off_the_track`): where the t
 disagree beyond the χ² gate :data:`FIX_GATE` of their own covariances summed (the errors common to both, the survey's
 and the sound speed's, left out), the one that explains fewer of the ping's arrivals is off; the track, which passed
 every check above, is kept where they tie, and where the other row's own arrivals do not check it (none to spare: its
-dim + 1 arrivals are fitted exactly, a reflection among them too, so that it explains them all). A filter that kept
+dim + 1 arrivals are fitted exactly, a reflection among them too, so that it explains them all; or, a single-ping
+fix, one faulty arrival could have put it as far from the track unseen). A filter that kept
 a reflection is metres off with a covariance of decimetres, and nothing else in its ping says so.
 
 A ping that fails is ``flagged``; a ping where a filter started again (a restart, a new segment after a gap) is
@@ -161,6 +165,7 @@ def trusted_fixes(positions: np.ndarray, covariances: np.ndarray, used: np.ndarr
     known_depth : ndarray of bool, (m,), optional
         The pings whose depth was one more measurement of the fix (a depth-sensor reading, a depth given or a prior:
         :func:`~sblsim.models.tracking.fix.fix_pings`): counted with its arrivals, as the fix counts it.
+
     Returns
     -------
     ndarray of bool, (m,)
