@@ -30,6 +30,7 @@ import numpy as np
 from sblsim.models.sync.change_points import MIN_SIDE, offset_samples
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clocks import MIN_SCALE
+from sblsim.models.sync.noise import MAD_FACTOR
 
 #: The fewest consecutive rejected arrivals at a clock's end taken as a break there.
 MIN_END = 3
@@ -152,7 +153,7 @@ def end_runs(fit: ClockFit, rows: np.ndarray, z: np.ndarray, time: np.ndarray, t
         kept = fit.kept[idx]
         if kept.sum() < MIN_SIDE:
             continue
-        sigma = max(1.4826 * float(np.median(np.abs(z[idx[kept]] - np.median(z[idx[kept]])))), MIN_SCALE)
+        sigma = max(MAD_FACTOR * float(np.median(np.abs(z[idx[kept]] - np.median(z[idx[kept]])))), MIN_SCALE)
         for at_start in (False, True):
             order = idx[::-1] if not at_start else idx
             run = _run(order, fit.kept, z, time, tag, sigma, at_start)

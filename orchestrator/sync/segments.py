@@ -132,9 +132,7 @@ def breaks_summary(fit: ClockFit, names: list[str], origin: float,
 def break_line(entry: dict[str, Any]) -> str:
     """One console line naming a break (an entry of :func:`breaks_summary`)."""
     size = entry["size_s"]
-    how = "jumped ahead" if size >= 0 else "went back"
-    sigma = entry["size_sigma_s"]
-    sigma_text = f" ± {sigma * 1e3:.2g} ms" if sigma is not None and np.isfinite(sigma) else ""
+    jump = _jump(size, entry["size_sigma_s"])
     when = (f"at {entry['time_utc'][:19]}Z (within {entry['within_s']:.0f} s)" if entry["time_utc"] else
             f"after its time {entry['last_before_s'] or np.nan:.3f} s")
     split = (f"its clock split there (segments {entry['segment_before']} and {entry['segment_after']})"
@@ -144,12 +142,11 @@ def break_line(entry: dict[str, Any]) -> str:
         said = (f"its time goes back {-reset['step_s']:.6g} s at line {reset['line']} (its clock from "
                 f"{iso_utc([reset['before_s']])[0][:23]} to {iso_utc([reset['after_s']])[0][:23]} UTC)" if reset else
                 f"its time goes back in the file's order (clock part {entry['clock_part']})")
-        fitted = (f"; fitted: it {how} {abs(size):.6g} s{sigma_text} {when}" if np.isfinite(size) and
-                  entry["time_utc"] else "")
+        fitted = f"; fitted: it {jump} {when}" if np.isfinite(size) and entry["time_utc"] else ""
         return (f"clock break: receiver {entry['receiver']}: {said}: a new clock segment{fitted}; {split}, each "
                 "detection in its part's segment by the file's order")
     aside = iso_utc([entry["set_aside_from_s"], entry["set_aside_to_s"]])
-    return (f"clock break: receiver {entry['receiver']} {how} {abs(size):.6g} s{sigma_text} {when}; {split}, "
+    return (f"clock break: receiver {entry['receiver']} {jump} {when}; {split}, "
             f"its own times from {aside[0][11:23]} to {aside[1][11:23]} set aside")
 
 
@@ -157,14 +154,21 @@ def end_line(end: EndBreak, names: list[str], origin: float) -> str:
     """One console line naming a break too near a clock's end (or start) to fit a segment
     (:func:`~sblsim.models.sync.end_breaks.cut_ends`): the receiver, the break's instant (UTC, on the reference
     clock), the jump and its sigma, the arrivals beyond it and the receiver's own times set aside."""
-    how = "jumped ahead" if end.size >= 0 else "went back"
     where, side = ("start", "before") if end.at_start else ("end", "after")
     when = iso_utc([end.time + origin])[0][:19]
     bound = iso_utc([(end.aside_to if end.at_start else end.aside_from) + origin])[0][:23]
     aside = f"up to {bound} set aside" if end.at_start else f"from {bound} on set aside"
-    return (f"clock break: receiver {names[end.receiver]} {how} {abs(end.size):.6g} s ± {end.size_sigma * 1e3:.2g} ms "
-            f"at {when}Z (within {end.time_within:.0f} s), {end.arrivals} sync-tag arrivals {side} it: too near its "
+    return (f"clock break: receiver {names[end.receiver]} {_jump(end.size, end.size_sigma)} at {when}Z (within "
+            f"{end.time_within:.0f} s), {end.arrivals} sync-tag arrivals {side} it: too near its "
             f"clock's {where} to fit a segment; its own times {aside}")
+
+
+def _jump(size: float, sigma: float | None) -> str:
+    """A break's jump as its lines say it: ``jumped ahead`` or ``went back``, its size [s] and its sigma (in ms,
+    where known)."""
+    how = "jumped ahead" if size >= 0 else "went back"
+    said = f" ± {sigma * 1e3:.2g} ms" if sigma is not None and np.isfinite(sigma) else ""
+    return f"{how} {abs(size):.6g} s{said}"
 
 
 __all__ = ["break_line", "breaks_summary", "clock_rows", "end_line", "receiver_sigmas", "receiver_values",
