@@ -102,7 +102,7 @@ def inverted_lbl_cells(seeds: int, late: float) -> dict[str, dict[str, float]]:
 
     from sblsim.models.receiver import toa_bound as tb
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.receivers_file import read_receivers
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
 
     receivers = read_receivers(Path(__file__).resolve().parents[1] / "data" / "lake-hald" / "hydrophones.csv").positions
     receivers = receivers[np.isfinite(receivers).all(axis=1)]  # H14 failed

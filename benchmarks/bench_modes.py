@@ -40,7 +40,8 @@ def smoother(toa: np.ndarray, receivers: np.ndarray, settings) -> tuple:
     """The robust smoother of the record with the delay term (module docstring; :func:`robust_track` without the
     search of its other modes): its track (:class:`RobustTrack`), its schedule and its settings."""
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, ping_schedule, tracker_settings
+    from sblsim.models.tracking.timing import SIGMA_TOA
+    from sblsim.orchestrator.tracks.tracker import ping_schedule, tracker_settings
 
     fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, settings.sound_speed, SIGMA_TOA)
     told = replace(tracker_settings(settings.sound_speed, fe), acceleration_psd=settings.acceleration_psd,

@@ -113,7 +113,7 @@ def inputs(sim: Simulated, table: np.ndarray | None = None):
     positions, default the truth)."""
     import pandas as pd
 
-    from sblsim.orchestrator.sync.detections import Detections
+    from sblsim.orchestrator.readers.detections import Detections
 
     names = np.array([f"R{j}" for j in range(len(sim.positions))], dtype=object)
     tags = np.array([f"S{j}" for j in range(len(sim.positions))], dtype=object)

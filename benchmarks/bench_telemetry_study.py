@@ -92,7 +92,7 @@ def run(receivers: int, tags: int, days: float, redeployed: int, seed: int, work
 def _bound(folder: Path, truth: pd.DataFrame, result, tag) -> dict:
     """A tag tracked again with its truth (epoch seconds on the study's UTC): its RMS error over the smoothing
     bound's RMS along the true track."""
-    from sblsim.orchestrator.telemetry.tag_sheet import read_tag_sheet, spec_for
+    from sblsim.orchestrator.readers.tag_sheet import read_tag_sheet, spec_for
     from sblsim.orchestrator.tracks.track import track
 
     path = folder / "truth.csv"

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sblsim.orchestrator.readers.tag_sheet import read_tag_sheet, spec_for
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 from sblsim.orchestrator.telemetry.study import run_study
-from sblsim.orchestrator.telemetry.tag_sheet import read_tag_sheet, spec_for
 from sblsim.orchestrator.tracks.track import track
 
 #: The scenarios' timing noise per receiver [s], from the receiver's index.

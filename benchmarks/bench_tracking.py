@@ -67,10 +67,11 @@ def measure(repeats: int, kept: str | None = None, warm: bool = True) -> dict:
     timed after a first, untimed run."""
     import sblsim
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.receivers_file import read_receivers
+    from sblsim.models.tracking.timing import SIGMA_TOA
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.readers.toa_matrix import read_toa
     from sblsim.orchestrator.tracks.thinning import _usable
-    from sblsim.orchestrator.tracks.toa import read_toa
-    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, tracker_settings
+    from sblsim.orchestrator.tracks.tracker import tracker_settings
 
     def replay():
         return sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",

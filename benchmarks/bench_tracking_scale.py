@@ -58,7 +58,7 @@ def simulate(n_pings: int, seed: int = 0, multipath: tuple[float, float] | None 
     ``multipath`` (share [1], mean excess path [m]): the late arrivals drawn as the design's walk draws them
     (:func:`~sblsim.orchestrator.design.telemetry_confirm.multipath_delays`) in place of the 1 % of 2 to 20 ms."""
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA
+    from sblsim.models.tracking.timing import SIGMA_TOA
 
     angles = np.arange(8) * np.pi / 4
     receivers = RADIUS_M * np.c_[np.cos(angles), np.sin(angles)]
@@ -88,7 +88,8 @@ def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelerati
     high-water mark over them), ``peak_reset`` (whether it was reset before) and ``robust`` (the
     :class:`RobustTrack`)."""
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, ping_schedule, tracker_settings
+    from sblsim.models.tracking.timing import SIGMA_TOA
+    from sblsim.orchestrator.tracks.tracker import ping_schedule, tracker_settings
 
     reset = reset_peak()
     start, cpu = time.perf_counter(), time.process_time()
@@ -108,7 +109,8 @@ def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelerati
 def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> float:
     """The EKF with the RTS smoother on the same pings, from the same fixes and schedule [s] (their time alone)."""
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, ping_schedule, tracker_settings
+    from sblsim.models.tracking.timing import SIGMA_TOA
+    from sblsim.orchestrator.tracks.tracker import ping_schedule, tracker_settings
 
     fx, fe, fc, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
     settings = replace(tracker_settings(sound_speed, fe), acceleration_psd=acceleration_psd)

@@ -216,6 +216,42 @@ def test_an_orchestrator_layer_imports_only_the_layers_below_it(layer):
     assert wrong == []
 
 
+#: A study's pipeline, upstream first: the readers (every file a user brings) -> the clocks (sync) -> the tracks ->
+#: the study (telemetry). A room imports only the rooms before it here (and anything outside the pipeline it may).
+PIPELINE = tuple(f"sblsim.orchestrator.{room}" for room in ("readers", "sync", "tracks", "telemetry"))
+
+
+def _pipeline_wrong(read: dict[str, list[tuple[str, int, bool]]]) -> list[tuple[str, str, int]]:
+    """The arrows (at any depth) from a room of :data:`PIPELINE` to a room after it."""
+    wrong = []
+    for k, room in enumerate(PIPELINE):
+        later = PIPELINE[k + 1:]
+        for name in (n for n in read if _in(n, room)):
+            for module, line, _ in read[name]:
+                own = _own(module)
+                if own and any(_in(own, other) for other in later):
+                    wrong.append((name, own, line))
+    return sorted(wrong)
+
+
+def test_the_study_pipeline_runs_one_way():
+    """readers -> sync -> tracks -> telemetry: no arrow back (the readers know no clock, the clocks no tracker)."""
+    wrong = _pipeline_wrong(IMPORTS)
+    for name, module, line in wrong:
+        print(f"{MODULES[name]}:{line}: {name} imports {module}")
+    assert wrong == []
+    assert len([n for n in MODULES if _in(n, PIPELINE[0])]) >= 20  # the readers are one room
+
+
+def test_the_pipeline_rule_can_fail():
+    """An arrow from the readers to the clocks, or from the clocks to the tracker, is seen."""
+    read = {"sblsim.orchestrator.readers.vue": [("sblsim.orchestrator.sync.run", 3, False)],
+            "sblsim.orchestrator.sync.run": [("sblsim.orchestrator.tracks.tracker", 5, True),
+                                             ("sblsim.orchestrator.readers.cells", 6, False)]}
+    assert _pipeline_wrong(read) == [("sblsim.orchestrator.readers.vue", "sblsim.orchestrator.sync.run", 3),
+                                     ("sblsim.orchestrator.sync.run", "sblsim.orchestrator.tracks.tracker", 5)]
+
+
 #: The commands (orchestrator/commands/: one module per command, its function, result, arguments and main), the
 #: modules they share, and the one command that runs another (campaign's --analyze and CampaignResult.analyze).
 COMMANDS = "sblsim.orchestrator.commands"

@@ -189,7 +189,7 @@ def main(args: argparse.Namespace) -> int:
     """``sblsim replay`` from its parsed arguments: its lines printed, its exit status returned."""
     if args.format in ("detections", "yaps", "vue", "fathom", "glatos", "otn"):  # raw detections: the tag's matrix
         # (sblsim toa), then tracked
-        from sblsim.orchestrator.sync.replay_detections import replay_matrix
+        from sblsim.orchestrator.tracks.replay_detections import replay_matrix
 
         with replay_matrix(args) as toa_args:
             return _main_toa(toa_args)

@@ -1,5 +1,5 @@
 """``sblsim sync`` and ``sblsim.sync``: the receivers' clocks of a telemetry array synchronised from its sync tags
-(the raw detections read by :mod:`sblsim.orchestrator.sync.detections`, the model of :mod:`sblsim.models.sync`).
+(the raw detections read by :mod:`sblsim.orchestrator.readers.detections`, the model of :mod:`sblsim.models.sync`).
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
         an OTN detection extract.
     receivers : str or Path
         The receivers: ``serial, sync_tag, x_m, y_m[, z_m]`` (or ``x, y, z``), or a study's deployments (``lat``,
-        ``lon``, dates, GLATOS and OTN names: :mod:`sblsim.orchestrator.telemetry.deployments`).
+        ``lon``, dates, GLATOS and OTN names: :mod:`sblsim.orchestrator.readers.deployments`).
     format : str, optional
         ``yaps``, ``vue``, ``fathom``, ``glatos`` or ``otn``; default read from the file's first line.
     sound_speed : float, optional

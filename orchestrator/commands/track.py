@@ -92,7 +92,7 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
         ``instrument_depth``, ``transmitter`` for a co-located sync tag), or ``serial, sync_tag, x_m, y_m``.
     tags : str or Path, optional
         The tag sheet (``transmitter``, ``ping_type``, ``min_delay``, ``max_delay``, ``role``, sensor columns:
-        :mod:`sblsim.orchestrator.telemetry.tag_sheet`). Without one every detected tag that is not a sync tag is
+        :mod:`sblsim.orchestrator.readers.tag_sheet`). Without one every detected tag that is not a sync tag is
         tracked, its ping type inferred.
     tag : str or sequence of str, optional
         Only these transmitters (full IDs or ids; a text separated by commas, or a list).
@@ -123,8 +123,8 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
         synchronisation's residuals (``offsets.csv``'s ``toa_sigma_s``), else 0.15 ms (``summary["toa_noise"]``).
     temperature_file : str or Path, optional
         A water-temperature series (``time_utc`` or ``epo`` in UTC, ``temperature_c`` [°C]), or the receivers' own
-        records (their Fathom CSV or VUE receiver events: :mod:`sblsim.orchestrator.tracks.receiver_temperature`),
-        made each tag's sound speed by TEOS-10 at ``salinity`` (:mod:`sblsim.orchestrator.tracks.water`); not with
+        records (their Fathom CSV or VUE receiver events: :mod:`sblsim.orchestrator.readers.receiver_temperature`),
+        made each tag's sound speed by TEOS-10 at ``salinity`` (:mod:`sblsim.orchestrator.readers.water`); not with
         ``sound_speed``, ``sound_speed_file`` or ``temperature``.
     water_depth : float, optional
         The water's depth [m] in (0, 11000], which bounds each tag's depth (the deployments' depths needed); default

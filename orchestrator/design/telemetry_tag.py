@@ -10,7 +10,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from sblsim.models.errors import ConfigError, ModelError
-from sblsim.orchestrator.tracks.toa import read_burst_sequence
+from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
 
 #: A random-interval tag's burst interval where ``tag.burst_interval_s`` is empty [s]: the worked case's
 #: (``lake-hald-array``), the one the confirmation simulated before the tag was a key.
@@ -51,7 +51,7 @@ class Tag:
 
 def tag_of(section: Mapping[str, Any]) -> Tag:
     """The tag of a checked ``[tag]`` section (its keys checked together by the problem); a ``pbi`` tag's
-    sequence read from its file (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`, the tracker's
+    sequence read from its file (:func:`~sblsim.orchestrator.readers.burst_sequence.read_burst_sequence`, the tracker's
     ``--burst-sequence`` reader: bounded, one line naming the file and line where a row is bad).
 
     Raises

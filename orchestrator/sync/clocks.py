@@ -32,9 +32,12 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.paths import inside
-from sblsim.orchestrator.sync.detections import IDENTIFIER, MAX_COORDINATE, MAX_EPOCH, _numbers, _pattern, _table
-from sblsim.orchestrator.tracks.tracker import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
+from sblsim.orchestrator.readers.cells import numbers as _numbers
+from sblsim.orchestrator.readers.cells import pattern as _pattern
+from sblsim.orchestrator.readers.hydrophones import table as _table
+from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_EPOCH
 
 #: The most rows of ``offsets.csv`` read (receivers × bins) and the largest offset [s] it may hold.
 MAX_OFFSET_ROWS = 1_000_000
@@ -92,7 +95,7 @@ class Clocks:
 def read_clocks(folder: Path | str) -> Clocks:
     """Read ``offsets.csv`` of a synchronisation's folder (``receiver``, ``bin``, ``start``, ``end``,
     ``offset_start_s``, ``offset_end_s``, and where it has one ``toa_sigma_s``, a receiver's timing noise [s] in
-    :data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`, the same on each of its rows, and ``clock_sigma_s``,
+    :data:`~sblsim.models.tracking.timing.TOA_SIGMA_RANGE`, the same on each of its rows, and ``clock_sigma_s``,
     its clock offset's own uncertainty [s] in [0, 1], likewise; other columns ignored).
 
     Raises

@@ -13,7 +13,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.pings import group_pings
 from sblsim.models.sync.scale import check_scale, distance_scale, double_differences, looks_like_degrees
 from sblsim.models.tracking.strays import stable_interval
-from sblsim.orchestrator.sync.transmitters import match
+from sblsim.orchestrator.readers.transmitters import match
 
 #: The sound speed the scale check takes where none is given [m/s] (the check allows a factor of ten).
 NOMINAL_SOUND_SPEED = 1480.0

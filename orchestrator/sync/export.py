@@ -1,6 +1,6 @@
 """An inverted LBL's run as the raw detections of a telemetry array (``sblsim run --export-detections DIR``): what
 its hydrophones would log on their own clocks, with a sync tag at each, in the YAPS tables ``sblsim sync`` and
-``sblsim toa`` read (:mod:`~sblsim.orchestrator.sync.detections`), and the truth to check them against.
+``sblsim toa`` read (:mod:`~sblsim.orchestrator.readers.detections`), and the truth to check them against.
 
 * **The clocks**: hydrophone ``j`` reads the true time τ (the run's time) as ``τ + a_j + b_j τ``
   (:func:`sblsim.models.sync.simulate.on_clocks`), ``a_j`` uniform in ±``acoustics.receiver_clock_offset`` [s] and

@@ -13,8 +13,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.readers.toa_matrix import DEPTH_COLUMN
 from sblsim.orchestrator.sync.toa import ToaOutcome, header_line
-from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN
 
 
 def sensor_depth(outcome: ToaOutcome) -> tuple[np.ndarray | None, str | None]:

@@ -36,12 +36,12 @@ from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.noise import receiver_noise
 from sblsim.orchestrator.io.arguments import whole
+from sblsim.orchestrator.readers.detections import Detections, reset_line
+from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.clock_tables import _offsets, _summary
-from sblsim.orchestrator.sync.detections import Detections, reset_line
 from sblsim.orchestrator.sync.refined_positions import _identify, _positions
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
-from sblsim.orchestrator.sync.transmitters import match
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
 MIN_BIN_ARRIVALS = 5
@@ -127,9 +127,9 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     Parameters
     ----------
     detections : Detections
-        The raw detections (:func:`~sblsim.orchestrator.sync.detections.read_detections`).
+        The raw detections (:func:`~sblsim.orchestrator.readers.detections.read_detections`).
     hydrophones : pandas.DataFrame
-        The receivers (:func:`~sblsim.orchestrator.sync.detections.read_hydrophones`).
+        The receivers (:func:`~sblsim.orchestrator.readers.hydrophones.read_hydrophones`).
     sound_speed : float, optional
         [m/s] a constant sound speed.
     series : (numpy.ndarray, numpy.ndarray), optional
@@ -413,7 +413,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
 
 
 def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int], dict]:
-    """The reader's resets (:attr:`~sblsim.orchestrator.sync.detections.Detections.clock_resets`) by the
+    """The reader's resets (:attr:`~sblsim.orchestrator.readers.detections.Detections.clock_resets`) by the
     synchronisation's receiver and the clock part each starts (a study's receiver is its serial's deployment)."""
     if not detections.clock_resets or "clock_part" not in sync:
         return {}

@@ -9,7 +9,7 @@ stretch between the last sync-tag arrival before the break and the first after i
 time went back) is in neither: a detection there is set aside.
 
 Where a receiver's time went back in the file's order (a reset kept in its logging order: the reader's clock parts,
-:attr:`~sblsim.orchestrator.sync.detections.Detections.clock_resets`), each part's segments are numbered after the
+:attr:`~sblsim.orchestrator.readers.detections.Detections.clock_resets`), each part's segments are numbered after the
 part before's, ``offsets.csv`` says each segment's part (``clock_part``), and a detection takes the segment of its
 own part (the detections' ``clock_part`` column) that holds its time: two parts may read the same times, nothing is
 set aside at such a break.

@@ -15,10 +15,12 @@ import pandas as pd
 
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import resolution_warning
+from sblsim.orchestrator.readers.assign import assign
+from sblsim.orchestrator.readers.deployments import read_deployments
+from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 from sblsim.orchestrator.sync.declared import check_sync_positions
-from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
 from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
-from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
 
 
 def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None) -> str | None:
@@ -35,7 +37,7 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
                       series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                       reference: str | None = None, **options: Any) -> SyncOutcome:
     """:func:`synchronise` on a study's receivers (a
-    :class:`~sblsim.orchestrator.telemetry.deployments.Deployments`): each detection at its deployment first (the
+    :class:`~sblsim.orchestrator.readers.deployments.Deployments`): each detection at its deployment first (the
     others set aside, counted in ``summary["set_aside"]``), the frame and the deployments in
     ``summary["receivers_file"]``, and the refined positions (``positions.csv``) in latitude and longitude too where
     the frame is known; ``options`` as :func:`synchronise` takes them.

@@ -37,13 +37,15 @@ from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.readers.assign import assign
+from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
+from sblsim.orchestrator.readers.deployments import read_deployments
+from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
+from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.limits import IDENTIFIER
 from sblsim.orchestrator.sync.clocks import Clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.declared import check_matrix
-from sblsim.orchestrator.sync.detections import FORMATS as DETECTION_FORMATS
-from sblsim.orchestrator.sync.detections import IDENTIFIER, Detections, read_detections
 from sblsim.orchestrator.sync.study_sync import rounding_warning
-from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
-from sblsim.orchestrator.tracks.toa import read_burst_sequence
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
@@ -88,9 +90,9 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     Parameters
     ----------
     detections : Detections
-        The raw detections (:func:`~sblsim.orchestrator.sync.detections.read_detections`).
+        The raw detections (:func:`~sblsim.orchestrator.readers.detections.read_detections`).
     hydrophones : pandas.DataFrame
-        The receivers (:func:`~sblsim.orchestrator.sync.detections.read_hydrophones`).
+        The receivers (:func:`~sblsim.orchestrator.readers.hydrophones.read_hydrophones`).
     clocks : Clocks
         The synchronisation (:func:`~sblsim.orchestrator.sync.clocks.read_clocks`).
     tag : str
@@ -256,7 +258,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
           interval: tuple[float, float] | None, sequence: Path | None, crs: str | None = None,
           frame: str | None = None, force_interval: bool = False):
     """Read the files and build the tag's matrix (:func:`build_toa`): :class:`ToaOutcome`. The receivers are a
-    study's deployments (:func:`~sblsim.orchestrator.telemetry.deployments.read_deployments`, in ``crs``, projected
+    study's deployments (:func:`~sblsim.orchestrator.readers.deployments.read_deployments`, in ``crs``, projected
     to ``frame``), each detection at its deployment (the others set aside: ``summary["set_aside"]``); a stated
     interval the detections contradict refused unless ``force_interval`` (then a warning).
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from sblsim.orchestrator.tracks.tracker import SIGMA_TOA
+from sblsim.models.tracking.timing import SIGMA_TOA
 
 
 def run_lines(outcome, where: str) -> list[str]:

@@ -3,7 +3,7 @@ detection exports and a tag sheet in; every tag tracked with its own ping type, 
 latitude, longitude and UTC.
 
 1. The deployments are read and projected (:mod:`.deployments`), the detections read in any export
-   (:func:`~sblsim.orchestrator.sync.detections.read_detections`) and each put at its deployment, those outside one
+   (:func:`~sblsim.orchestrator.readers.detections.read_detections`) and each put at its deployment, those outside one
    set aside and counted (:func:`~.deployments.assign`); the tag sheet is read (:mod:`.tag_sheet`).
 2. The clocks: a synchronisation's folder given (``sync``: its ``offsets.csv``, its refined positions where it has
    them); else synchronised here, once, from the deployments' sync tags
@@ -11,7 +11,7 @@ latitude, longitude and UTC.
    (the receivers' times synchronised already: said).
 3. The tags: those named (``tags``), else the sheet's animal and reference tags, else every detected tag that is not
    a sync tag. Each is found among the detections by its full ID or id
-   (:func:`~sblsim.orchestrator.sync.transmitters.match`); its depth per detection from its sensor values and the
+   (:func:`~sblsim.orchestrator.readers.transmitters.match`); its depth per detection from its sensor values and the
    sheet's slope and intercept; its times-of-arrival matrix built with the ping type the sheet states
    (:func:`~sblsim.orchestrator.sync.toa.build_toa`) and written into the tag's folder; then every matrix tracked
    (:func:`~sblsim.orchestrator.tracks.track.track`, the robust smoother's rows the track, a reference tag as
@@ -37,17 +37,21 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.readers.assign import assign
+from sblsim.orchestrator.readers.deployments import Deployments, read_deployments
+from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.sound_speed import read_sound_speed
+from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
+from sblsim.orchestrator.readers.transmitters import match
+from sblsim.orchestrator.readers.water import read_temperature_series
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
-from sblsim.orchestrator.sync.detections import Detections, read_detections, read_sound_speed
+from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.study_sync import rounding_warning
-from sblsim.orchestrator.sync.transmitters import match
-from sblsim.orchestrator.telemetry.deployments import Deployments, assign, read_deployments
-from sblsim.orchestrator.telemetry.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
+from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
 from sblsim.orchestrator.tracks.tracker import toa_noise
-from sblsim.orchestrator.tracks.water import read_temperature_series
 
 #: The columns of ``tags.csv``.
 TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
@@ -134,7 +138,7 @@ def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Det
 
 
 def _found(name: str, detected, ambiguous: str | None = None) -> str | None:
-    """The detected tag ``name`` stands for (:func:`~sblsim.orchestrator.sync.transmitters.match`), None where none;
+    """The detected tag ``name`` stands for (:func:`~sblsim.orchestrator.readers.transmitters.match`), None where none;
     a name two code spaces share is ``ambiguous`` (None: not found)."""
     try:
         return match(name, detected)
@@ -190,7 +194,7 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     ended : callable, optional
         Called with each tracked tag's ``tags.csv`` row as its tracking ends.
     temperature_path : Path, optional
-        A water-temperature series in UTC times (:func:`~sblsim.orchestrator.tracks.water.read_temperature_series`,
+        A water-temperature series in UTC times (:func:`~sblsim.orchestrator.readers.water.read_temperature_series`,
         read here first), made each tag's sound speed by TEOS-10 at ``salinity``.
     water_depth : float, optional
         [m] the water's depth bounding every tag's depth (the deployments' depths needed); default each tag's the
@@ -211,8 +215,6 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         A file refused by its reader, no detection inside a deployment, a synchronisation that cannot be made
         (one line). A tag that cannot be tracked is a row of ``tags.csv``.
     """
-    from sblsim.orchestrator.sync.toa import build_toa
-
     begun = clock.perf_counter()
     notes: list[str] = []
     deployments = read_deployments(receivers, crs, frame)
@@ -340,8 +342,6 @@ def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
 def _write_matrix(matrix, folder: Path, notes: list[str]) -> None:
     """A tag's ``toa.txt`` (with its depth per ping where the sensor gives one and the receivers are in 3-D),
     ``receivers.csv``, ``pings.csv`` and ``toa.json``."""
-    from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
-
     folder.mkdir(parents=True, exist_ok=True)
     depth, note = sensor_depth(matrix)
     if note:

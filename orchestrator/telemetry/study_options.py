@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from sblsim.models.tracking.timing import TOA_SIGMA_RANGE
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, names_argument, real_argument, text_argument
 from sblsim.orchestrator.io.frames import check_crs, check_metric
-from sblsim.orchestrator.tracks.tracker import TOA_SIGMA_RANGE
 
 #: The detections' formats (None: read from the file's first line).
 FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")

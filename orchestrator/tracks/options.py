@@ -17,6 +17,7 @@ import numpy as np
 from sblsim.models.errors import ConfigError
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.models.tracking.sound_speed import SALINITY_RANGE, TEMPERATURE_RANGE
+from sblsim.models.tracking.timing import TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.arguments import (
     MAX_SEED,
     check_seed,
@@ -30,7 +31,7 @@ from sblsim.orchestrator.io.frames import check_crs, check_metric
 from sblsim.orchestrator.io.times import parse_instant
 from sblsim.orchestrator.tracks.depth import MAX_WATER_DEPTH
 from sblsim.orchestrator.tracks.track import MAX_DROP, MAX_TRUTH_SIGMA, MOTIONS
-from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, TOA_SIGMA_RANGE
+from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
 
 #: What ``receivers_kept`` names, as its refusals say.
 RECEIVER_NAMES = "receiver names of the receivers file"
@@ -208,8 +209,8 @@ def geometry_arguments(tag_depth: Any, depth_sigma: Any, survey_sigma: Any, name
     ConfigError
         A value outside its range (one line).
     """
-    from sblsim.orchestrator.tracks.receivers_file import SURVEY_SIGMA_RANGE
-    from sblsim.orchestrator.tracks.toa import DEPTH_RANGE
+    from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
+    from sblsim.orchestrator.readers.toa_matrix import DEPTH_RANGE
 
     return {"fixed_depth": None if tag_depth is None else real_argument(tag_depth, names[0], *DEPTH_RANGE, "m"),
             "depth_sigma": DEPTH_SIGMA if depth_sigma is None else real_argument(depth_sigma, names[1], 0.0, 100.0,
@@ -235,7 +236,7 @@ def place_arguments(crs: Any, frame: Any, time_origin: Any, names: tuple[str, st
 
 def toa_sigma_argument(value: Any, where: str) -> float | None:
     """The timing noise given [s] checked (None: not given), in
-    :data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`.
+    :data:`~sblsim.models.tracking.timing.TOA_SIGMA_RANGE`.
 
     Raises
     ------
@@ -257,7 +258,7 @@ def check_depth_sigma(toa: Path, tag_depth: Any, depth_sigma: Any, names: tuple[
     """
     if depth_sigma is None or tag_depth is not None or Path(toa).is_dir():
         return
-    from sblsim.orchestrator.tracks.toa import read_toa
+    from sblsim.orchestrator.readers.toa_matrix import read_toa
 
     if read_toa(toa).depth is None:
         raise ConfigError(f"{names[1]}: {float(depth_sigma):g} m has no effect: no depth of the tag is given (no "

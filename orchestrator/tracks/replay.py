@@ -107,7 +107,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         A water-temperature series (a file key): a time column (``time_s`` on the times of arrival's base, or ISO
         8601 / epoch seconds in UTC with ``time_origin``) and ``temperature_c`` [°C] under a header, made the sound
         speed by TEOS-10 at ``salinity`` (needed with it) and taken as a measured series
-        (:mod:`sblsim.orchestrator.tracks.water`). Not with ``sound_speed``, ``sound_speed_file``, ``temperature``.
+        (:mod:`sblsim.orchestrator.readers.water`). Not with ``sound_speed``, ``sound_speed_file``, ``temperature``.
     water_depth : float, optional
         The water's depth [m] in (0, 11000] (receivers with ``z_m``, none below it): the tag's depth is held within
         the water column (a prior over it), at mid-water where the receivers lie in one plane.

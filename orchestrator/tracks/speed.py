@@ -15,7 +15,8 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking import sound_speed as ss
-from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA, SIGMA_TOA
+from sblsim.models.tracking.timing import SIGMA_TOA
+from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
 
 #: A given sound speed is said to disagree with the pings where their own calibration, determined to
 #: :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` or better, lies more than this many of its standard errors
@@ -121,7 +122,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                       water: Water | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
     given; else a measured series (``series_path``,
-    :func:`~sblsim.orchestrator.tracks.time_series.read_sound_speed_series`) whose median is the reference speed and
+    :func:`~sblsim.orchestrator.readers.time_series.read_sound_speed_series`) whose median is the reference speed and
     to which each ping's arrivals are rescaled (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`);
     else calibrated from the pings (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed`); where its
     standard error is above
@@ -133,7 +134,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     A given speed is checked against the pings' own calibration (:func:`speed_check`: said, not replaced). A series
     in absolute times is taken to the times of arrival's base by ``time_origin`` [s since 1970 UTC]. ``sigma_toa``
     [s]: the arrivals' timing noise in the fits (one, or each receiver's (n,)). A temperature series
-    (``temperature_path``, :func:`~sblsim.orchestrator.tracks.water.read_temperature_series`) is made a measured
+    (``temperature_path``, :func:`~sblsim.orchestrator.readers.water.read_temperature_series`) is made a measured
     series by TEOS-10 at ``salinity`` (practical) in the ``water`` (:class:`Water`: the depth and position of the
     pressure and the absolute salinity), which also places the fallback and the speeds the stated water can have: a
     calibration outside them is replaced by the water's own speed (:data:`REPLACED_SOURCE`).
@@ -142,7 +143,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
 
     water = Water() if water is None else water
     if temperature_path is not None:
-        from sblsim.orchestrator.tracks.water import read_temperature_series
+        from sblsim.orchestrator.readers.water import read_temperature_series
 
         if salinity is None:
             raise ModelError("temperature file: needs the water's salinity (practical: 0 for fresh water, about 35 "
@@ -161,7 +162,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
         return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | speed_check(
             toa, positions, sound_speed, depth, depth_sigma, sigma_toa)
     if series_path is not None:
-        from sblsim.orchestrator.tracks.time_series import read_sound_speed_series
+        from sblsim.orchestrator.readers.time_series import read_sound_speed_series
 
         return _series_speed(toa, positions, read_sound_speed_series(series_path, time_origin), series_path,
                              "sound speed file", sigma_toa)

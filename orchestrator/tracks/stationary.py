@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sblsim.orchestrator.tracks.tracker import SIGMA_TOA
+from sblsim.models.tracking.timing import SIGMA_TOA
 
 
 def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray,

@@ -104,15 +104,15 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     own error per horizontal axis in the NEES (:func:`~sblsim.orchestrator.tracks.scoring.score`);
     ``ping_type``, ``burst_interval`` as :func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`,
     ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
-    (:func:`~sblsim.orchestrator.tracks.toa.read_burst_sequence`); ``acceleration_psd`` the motion model's ``q``
+    (:mod:`~sblsim.orchestrator.readers.burst_sequence`); ``acceleration_psd`` the motion model's ``q``
     [m²/s³] (None: estimated from the pings by EM, :mod:`sblsim.models.tracking.motion_noise`); ``crs`` and ``frame``
-    as :func:`~sblsim.orchestrator.tracks.receivers_file.read_receivers` takes them (receivers with a CRS: every row
+    as :func:`~sblsim.orchestrator.readers.receivers_file.read_receivers` takes them (receivers with a CRS: every row
     gains ``lat``, ``lon`` [° WGS 84], a truth may be in latitude and longitude); ``time_origin`` [s since 1970 UTC] the
     UTC time of the TOA file's zero (every row gains ``epoch_s`` and ``time_utc``, a truth or a sound-speed series
     may be in absolute times); ``other_filters`` False leaves out the causal filters the track does not need (the
     sequential EKF and the UKF, run beside for comparison: half the time of a track); ``toa_sigma`` [s] the timing
     noise of every arrival (None: each receiver's ``toa_sigma_s`` in the receivers file, as ``sblsim toa`` writes it
-    from a synchronisation's residuals, else :data:`~sblsim.orchestrator.tracks.tracker.SIGMA_TOA`:
+    from a synchronisation's residuals, else :data:`~sblsim.models.tracking.timing.SIGMA_TOA`:
     :func:`~sblsim.orchestrator.tracks.tracker.toa_noise`, ``summary["toa_noise"]``), in every estimator's
     measurement covariance and in the sound speed's calibration; ``temperature_path`` a water-temperature series made
     the sound speed by TEOS-10 at ``salinity`` (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`);
@@ -130,9 +130,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     from sblsim.models.tracking.smoother_covariance import consider_covariance
     from sblsim.models.tracking.stationary import PERMUTATIONS
     from sblsim.models.tracking.stationary import moved as tag_moved
-    from sblsim.orchestrator.tracks.receivers_file import read_receivers
-    from sblsim.orchestrator.tracks.time_series import read_track
-    from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_toa
+    from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.readers.time_series import read_track
+    from sblsim.orchestrator.readers.toa_matrix import read_toa
 
     start = time.perf_counter()
     matrix = read_toa(toa_path)

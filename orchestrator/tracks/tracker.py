@@ -1,7 +1,7 @@
 """The replay's tracker model: the timing noise and depth noise it assumes (the timing noise given, each receiver's
-from a synchronisation's residuals, else :data:`SIGMA_TOA`: :func:`toa_noise`), its settings
-(:class:`~sblsim.models.tracking.ekf.TrackerSettings`), the steps between the pings (:func:`ping_schedule`: the ping
-type given or inferred) and the motion model's noise (:func:`motion_model`: given, or estimated by EM)."""
+from a synchronisation's residuals, else :data:`~sblsim.models.tracking.timing.SIGMA_TOA`: :func:`toa_noise`), its
+settings (:class:`~sblsim.models.tracking.ekf.TrackerSettings`), the steps between the pings (:func:`ping_schedule`:
+the ping type given or inferred) and the motion model's noise (:func:`motion_model`: given, or estimated by EM)."""
 
 from __future__ import annotations
 
@@ -14,18 +14,7 @@ from sblsim.models.tracking import schedule as ps
 from sblsim.models.tracking.motion_noise import estimate_acceleration_psd
 from sblsim.models.tracking.ping_type import infer_ping_type
 from sblsim.models.tracking.strays import SET_ASIDE_REASON, check_strays, stable_interval, stray_rows
-
-#: The standard deviation of a time of arrival the tracker assumes [s] (Lake Hald's single-ping residuals: 0.13 ms
-#: by their median absolute deviation, 0.15 ms by their standard deviation), where nothing else is known: neither
-#: given (``--toa-sigma``) nor a synchronisation's per receiver (a receivers file's ``toa_sigma_s``).
-SIGMA_TOA = 1.5e-4
-
-#: The timing noise a user may give, and a receivers file's ``toa_sigma_s`` may hold [s]: a microsecond to a second.
-TOA_SIGMA_RANGE = (1e-6, 1.0)
-#: A receiver's clock offset's own uncertainty a synchronisation's ``offsets.csv`` and a receivers file's
-#: ``clock_sigma_s`` may hold [s] (0 at the reference receiver): a stationary tag's consider term.
-CLOCK_SIGMA_RANGE = (0.0, 1.0)
-
+from sblsim.models.tracking.timing import SIGMA_TOA
 
 #: Consecutive mutually consistent single-ping fixes of dim + 2 receivers, all outside the prediction, that restart
 #: a lost EKF (:class:`~sblsim.models.tracking.ekf.TrackerSettings` ``agree_after``).
@@ -42,7 +31,7 @@ def toa_noise(given: float | None, per_receiver: np.ndarray | None, names: list[
     """The timing noise the tracker takes [s], and what was done (``summary.json``'s ``toa_noise``): ``given``
     (``--toa-sigma``, one for every receiver) where given; else each receiver's own, ``per_receiver`` (len(names),)
     [s] (a receivers file's ``toa_sigma_s``: what a synchronisation measured, NaN where a receiver has none, which
-    takes the others' median, said); else :data:`SIGMA_TOA`, assumed (said)."""
+    takes the others' median, said); else :data:`~sblsim.models.tracking.timing.SIGMA_TOA`, assumed (said)."""
     if given is not None:
         return given, {"source": "given", "sigma_s": given}
     known = None if per_receiver is None else np.asarray(per_receiver, float)
@@ -75,7 +64,8 @@ def noise_line(info: dict[str, Any], option: str = "--toa-sigma") -> str:
 
 def tracker_settings(sound_speed: float, emissions: np.ndarray, sigma_toa: float | np.ndarray = SIGMA_TOA):
     """The replay's tracker (:class:`~sblsim.models.tracking.ekf.TrackerSettings`) at ``sound_speed``
-    [m/s]: the timing noise ``sigma_toa`` [s] (one, or each receiver's (n,); default :data:`SIGMA_TOA`), the ping
+    [m/s]: the timing noise ``sigma_toa`` [s] (one, or each receiver's (n,); default
+    :data:`~sblsim.models.tracking.timing.SIGMA_TOA`), the ping
     interval the median step of the single-ping fixes' emission
     times ``emissions`` (m,) [s] (NaN where no fix; 2 s when no two consecutive pings have one), and a lost filter
     restarted on :data:`AGREE_AFTER` consecutive consistent fixes of dim + 2 receivers too (an array of few
@@ -181,5 +171,5 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         "converged": found.converged, "history": list(found.history)}
 
 
-__all__ = ["AGREE_AFTER", "CLOCK_SIGMA_RANGE", "DEPTH_SIGMA", "SIGMA_TOA", "TOA_SIGMA_RANGE", "motion_model",
+__all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "motion_model",
            "noise_line", "ping_schedule", "set_aside", "toa_noise", "tracker_settings"]

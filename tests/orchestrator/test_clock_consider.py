@@ -14,10 +14,10 @@ import pytest
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking.stationary import stationary_fix
+from sblsim.orchestrator.readers.receivers_file import read_receivers
 from sblsim.orchestrator.sync.clocks import read_clocks
 from sblsim.orchestrator.sync.matrix_files import write_matrix
 from sblsim.orchestrator.sync.toa import ToaOutcome
-from sblsim.orchestrator.tracks.receivers_file import read_receivers
 from sblsim.orchestrator.tracks.stationary import stationary_consider
 from sblsim.orchestrator.tracks.track import track
 

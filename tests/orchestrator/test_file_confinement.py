@@ -125,7 +125,7 @@ def test_a_sync_folders_table_linked_out_of_it_is_refused_unopened(tmp_path, pri
 
 
 def test_a_tag_sheets_sequence_outside_its_folder_is_refused_unopened(tmp_path, private):
-    from sblsim.orchestrator.telemetry.tag_sheet import read_tag_sheet
+    from sblsim.orchestrator.readers.tag_sheet import read_tag_sheet
 
     user = tmp_path / "user"
     user.mkdir()

@@ -1,7 +1,8 @@
 """An inverted LBL's run as raw detections (``sblsim run --export-detections DIR``,
 :mod:`sblsim.orchestrator.sync.export`): the hydrophones' own clocks and their sync tags, checked against the run.
 
-* The tag's detections read back by the project's reader (:func:`~sblsim.orchestrator.sync.detections.read_detections`)
+* The tag's detections read back by the project's reader
+  (:func:`~sblsim.orchestrator.readers.detections.read_detections`)
   are the run's delivered packets, ``tx_time + range / c_assumed``, read on the clocks of ``clocks.csv`` (computed
   here from the time series, every lane, not through the export's own log frames); the sync tags' arrivals at each
   pair of hydrophones differ by the straight ray's travel time; the clocks within their keys' bounds, drawn from the
@@ -26,7 +27,8 @@ from sblsim.models.acoustics.channel.lanes import lane_name
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run_batch
-from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones
+from sblsim.orchestrator.readers.detections import read_detections
+from sblsim.orchestrator.readers.hydrophones import read_hydrophones
 from sblsim.orchestrator.sync.export import EPOCH, detections_of, export_detections
 
 ILBL = ["platform.system=ilbl", "platform.layout=circle", "platform.baseline=100", "platform.beacons=4",

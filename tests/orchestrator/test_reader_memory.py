@@ -25,11 +25,14 @@ from sblsim.models.target.trajectories import MAX_LINE_CHARS, read_trajectory_fi
 from sblsim.orchestrator.design import area_file
 from sblsim.orchestrator.io import tables
 from sblsim.orchestrator.logs import receiver_log, truth_track
-from sblsim.orchestrator.sync import detections
+from sblsim.orchestrator.readers import detections, input_rows, receivers_file, time_series
+from sblsim.orchestrator.readers import toa_matrix as toa
+from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
+from sblsim.orchestrator.readers.deployments import read_deployments
+from sblsim.orchestrator.readers.hydrophones import read_hydrophones
+from sblsim.orchestrator.readers.sound_speed import read_sound_speed
+from sblsim.orchestrator.readers.tag_sheet import read_tag_sheet
 from sblsim.orchestrator.sync.clocks import read_clocks
-from sblsim.orchestrator.telemetry.deployments import read_deployments
-from sblsim.orchestrator.telemetry.tag_sheet import read_tag_sheet
-from sblsim.orchestrator.tracks import input_rows, receivers_file, time_series, toa
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -111,12 +114,12 @@ READERS = {
                    "1693519201,0.06,7953,1623", (detections, "MAX_DETECTION_CELLS")),
     "detections sniffed": (lambda p: detections.read_detections(p, None), "det.csv", "epo,frac,tag,serial",
                            "1693519201,0.06,7953,1623", (detections, "MAX_DETECTION_CELLS")),
-    "receivers": (detections.read_hydrophones, "rx.csv", "serial,sync_tag,x_m,y_m", "1623,,1.5,2.5",
+    "receivers": (read_hydrophones, "rx.csv", "serial,sync_tag,x_m,y_m", "1623,,1.5,2.5",
                   (tables, "MAX_CELLS")),
     "deployments": (read_deployments, "dep.csv", "ins_serial_no,transmitter,deploy_lat,deploy_long",
                     "1623,,60.38,5.33", (tables, "MAX_CELLS")),
     "tag sheet": (read_tag_sheet, "tags.csv", "transmitter,role,name", "4555,animal,cod", (tables, "MAX_CELLS")),
-    "sound speed": (detections.read_sound_speed, "ss.csv", "epo,sound_speed_m_s", "1587877200,1421.3",
+    "sound speed": (read_sound_speed, "ss.csv", "epo,sound_speed_m_s", "1587877200,1421.3",
                     (tables, "MAX_CELLS")),
     "toa matrix": (toa.read_toa, "toa.csv", "H1,H2", "1.5,2.5", (input_rows, "MAX_TOA_CELLS")),
     "toa receivers": (receivers_file.read_receivers, "hyd.csv", "hydrophone,x_m,y_m", "H1,0,0",
@@ -125,7 +128,7 @@ READERS = {
                     (input_rows, "MAX_TOA_CELLS")),
     "sound-speed series": (time_series.read_sound_speed_series, "c.csv", "time_s,sound_speed_m_s", "0,1480",
                            (input_rows, "MAX_TOA_CELLS")),
-    "burst sequence": (toa.read_burst_sequence, "b.csv", "interval_s,note", "1.5,a", (input_rows, "MAX_TOA_CELLS")),
+    "burst sequence": (read_burst_sequence, "b.csv", "interval_s,note", "1.5,a", (input_rows, "MAX_TOA_CELLS")),
     "log": (lambda p: receiver_log.read_log(p, 1), "log.csv", "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,"
             "beacon_d_m,depth_m", "0.1,1,7.7,1.1,-0.1,1.2,2.0", (tables, "MAX_CELLS")),
     "log truth": (truth_track.read_truth, "truth.csv", "time_s,n_m,e_m,d_m", "0.1,-4.9,-5.0,2.0",
@@ -179,7 +182,7 @@ def test_a_first_row_spanning_lines_and_a_padded_table_are_counted_as_pandas_wou
     text = f'serial,"x\ny",{names[0]},"p\nq",{names[1]}\n1,2\n'  # each line at most 302 cells, the row 603
     width = len(next(csv.reader(io.StringIO(text))))  # the csv module's reading of the first row
     assert width > tables.MAX_LINE_CELLS >= max(_cells(text))
-    message = _refusal(detections.read_hydrophones, _write(tmp_path, "rx.csv", text))
+    message = _refusal(read_hydrophones, _write(tmp_path, "rx.csv", text))
     assert f"its first row holds {width:,} cells; allowed at most {tables.MAX_LINE_CELLS:,} cells a row" in message
     # a short row is padded to the header's cells: the table pandas would build, not the file's cells, is bounded
     monkeypatch.setattr(tables, "MAX_CELLS", 2000)
@@ -187,7 +190,7 @@ def test_a_first_row_spanning_lines_and_a_padded_table_are_counted_as_pandas_wou
     text = header + "\n" + "1\n" * 50
     assert sum(_cells(text)) <= 2000 < 51 * 100 == len(pd.read_csv(io.StringIO(text), header=None).stack(
         future_stack=True))
-    message = _refusal(detections.read_hydrophones, _write(tmp_path, "padded.csv", text))
+    message = _refusal(read_hydrophones, _write(tmp_path, "padded.csv", text))
     assert "holds 51 lines of 100 cells" in message and "allowed at most 2,000 cells in a table" in message
 
 

@@ -16,8 +16,8 @@ import pytest
 
 import sblsim
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.readers.water import read_temperature_series
 from sblsim.orchestrator.telemetry.simulate import simulate_study
-from sblsim.orchestrator.tracks.water import read_temperature_series
 
 ORIGIN = pd.Timestamp("2021-04-20T17:00:00Z").timestamp()
 HEAD = ["Device Time (UTC)", "Time", "Time Offset (h)", "Time Correction (s)", "Model", "Serial Number"]
@@ -177,7 +177,7 @@ def test_a_study_tracked_with_its_own_fathom_records(tmp_path):
 def test_a_receivers_export_is_read_once_per_file_as_it_is(tmp_path, monkeypatch):
     """Each tag of a study takes the series: the export (the detections file, hundreds of megabytes) read once, and
     again when it changes."""
-    from sblsim.orchestrator.tracks import water
+    from sblsim.orchestrator.readers import water
 
     path = tmp_path / "fathom.csv"
     path.write_text(_fathom())

@@ -197,10 +197,10 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
     """A depth sensor's raw values converted by the sheet's slope and intercept (a value in metres kept), and the
     depth per ping written into the matrix the tracker reads (a ``depth_m`` column, the receivers' serials numbers
     kept as the header) only where the receivers have depths; in 2-D it is said in a note and left out."""
+    from sblsim.orchestrator.readers.tag_sheet import TagSpec
+    from sblsim.orchestrator.readers.toa_matrix import read_toa
     from sblsim.orchestrator.sync.toa import ToaOutcome
     from sblsim.orchestrator.telemetry.study import _tag_detections, _write_matrix
-    from sblsim.orchestrator.telemetry.tag_sheet import TagSpec
-    from sblsim.orchestrator.tracks.toa import read_toa
 
     spec = TagSpec("A69-9002-1", sensor="depth", slope=0.5, intercept=-1.0)
     mine = pd.DataFrame({"sensor_value": [10.0, 4.5, np.nan], "sensor_unit": ["ADC", "m", ""]})

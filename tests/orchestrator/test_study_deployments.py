@@ -1,5 +1,5 @@
-"""A study's receivers as the field keeps them (:mod:`sblsim.orchestrator.telemetry.deployments`) and its tag sheet
-(:mod:`sblsim.orchestrator.telemetry.tag_sheet`): the projection to the study's frame against pyproj called here (to
+"""A study's receivers as the field keeps them (:mod:`sblsim.orchestrator.readers.deployments`) and its tag sheet
+(:mod:`sblsim.orchestrator.readers.tag_sheet`): the projection to the study's frame against pyproj called here (to
 the millimetre and back), the UTM zone of the array's centre, GLATOS and OTN deployment sheets, one serial at two
 stations (a redeployment), each detection at its deployment and those outside set aside and counted, a sync tag
 redeployed with its receiver; the tag sheet's ping types, sensors and files; bad input refused in one line."""
@@ -15,9 +15,10 @@ from pyproj import Transformer
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.sync.detections import Detections
-from sblsim.orchestrator.telemetry.deployments import assign, read_deployments
-from sblsim.orchestrator.telemetry.tag_sheet import read_tag_sheet
+from sblsim.orchestrator.readers.assign import assign
+from sblsim.orchestrator.readers.deployments import read_deployments
+from sblsim.orchestrator.readers.detections import Detections
+from sblsim.orchestrator.readers.tag_sheet import read_tag_sheet
 
 LAT, LON = 60.3816, 5.3387  # the boats array's place (Norway), in UTM zone 31N
 

@@ -1,5 +1,5 @@
-"""The detection exports a telemetry study brings (:mod:`sblsim.orchestrator.sync.exports`,
-:mod:`sblsim.orchestrator.sync.detections`), each on a file laid out as its vendor's or network's documentation
+"""The detection exports a telemetry study brings (:mod:`sblsim.orchestrator.readers.fathom`,
+:mod:`sblsim.orchestrator.readers.detections`), each on a file laid out as its vendor's or network's documentation
 shows it (Fathom's interleaved record types with their ``_DESC`` lines, glatos's ``vdat_csv_schema`` columns; the
 GLATOS and OTN extracts' column names; VUE with ISO times, a byte-order mark and short rows), read against an
 independent parse (the csv module and datetime); the format read from the first line; full transmitter IDs (one id
@@ -16,8 +16,8 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import iso_utc, parse_instant, utc_seconds
-from sblsim.orchestrator.sync.detections import read_detections, sniff_format
-from sblsim.orchestrator.sync.transmitters import match
+from sblsim.orchestrator.readers.detections import read_detections, sniff_format
+from sblsim.orchestrator.readers.transmitters import match
 
 
 def _epoch(text: str) -> float:

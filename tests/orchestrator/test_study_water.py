@@ -21,10 +21,10 @@ import sblsim
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.io.times import iso_utc
-from sblsim.orchestrator.telemetry.deployments import read_deployments
+from sblsim.orchestrator.readers.deployments import read_deployments
+from sblsim.orchestrator.readers.receivers_file import read_receivers
+from sblsim.orchestrator.readers.toa_matrix import read_toa
 from sblsim.orchestrator.telemetry.simulate import simulate_study
-from sblsim.orchestrator.tracks.receivers_file import read_receivers
-from sblsim.orchestrator.tracks.toa import read_toa
 
 #: The receivers' depth [m] and each one's bottom [m] (20, 22, ... m).
 INSTRUMENT = 5.0

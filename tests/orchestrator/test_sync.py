@@ -297,7 +297,7 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     leave-one-out NEES inside the array, averaged over the tags of each seed, is 2-D's 2 over the seeds (the
     project's rule for a consistent estimator, NEES / dimension in [0.75, 2.25]: NEES in [1.5, 4.5]), and the fixes'
     errors against the simulated positions recomputed here agree with the table's median error."""
-    from sblsim.orchestrator.sync.detections import Detections
+    from sblsim.orchestrator.readers.detections import Detections
     from sblsim.orchestrator.sync.run import synchronise
 
     means = []

@@ -16,7 +16,7 @@ import pytest
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.simulate import simulate_sync
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.sync.detections import MAX_CLOCK_RESETS, read_detections
+from sblsim.orchestrator.readers.detections import MAX_CLOCK_RESETS, read_detections
 
 #: The files' time of τ = 0 [s since 1970 UTC], the timing noise [s], the array and the reset's true time [s] (the
 #: first gap of R2's detections under 10 s after it).

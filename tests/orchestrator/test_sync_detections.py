@@ -1,4 +1,4 @@
-"""The raw-detection readers of ``sblsim sync`` (:mod:`sblsim.orchestrator.sync.detections`) against independent
+"""The raw-detection readers of ``sblsim sync`` (:mod:`sblsim.orchestrator.readers.detections`) against independent
 parses: the boats files by the csv module and numpy.genfromtxt, a VUE export written here by its dates computed with
 datetime; hostile files refused in one line; a receiver clock going back reported, not sorted."""
 
@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.sync import detections as reader
-from sblsim.orchestrator.sync.detections import read_detections, read_hydrophones, read_sound_speed, reset_line
+from sblsim.orchestrator.readers import detections as reader
+from sblsim.orchestrator.readers.detections import read_detections, reset_line
+from sblsim.orchestrator.readers.hydrophones import read_hydrophones
+from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 
 BOATS = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 

@@ -1,4 +1,4 @@
-"""The tracking readers' tables parsed by a CSV parser (orchestrator/tracks/toa.py, orchestrator/io/tables.py): a
+"""The tracking readers' tables parsed by a CSV parser (readers/toa_matrix.py, io/tables.py): a
 quoted cell may hold the separator, a ragged row is refused naming its line (as an editor numbers it, comments and
 blank lines counted) and its number of cells, a quote left open names its line."""
 
@@ -10,9 +10,10 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import csv_cells, read_table
-from sblsim.orchestrator.tracks.receivers_file import read_receivers
-from sblsim.orchestrator.tracks.time_series import read_track
-from sblsim.orchestrator.tracks.toa import read_burst_sequence, read_toa
+from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
+from sblsim.orchestrator.readers.receivers_file import read_receivers
+from sblsim.orchestrator.readers.time_series import read_track
+from sblsim.orchestrator.readers.toa_matrix import read_toa
 
 RECEIVERS = ('# the array, surveyed\nname,x_m,y_m,z_m,status\n"H1, north pier",10.5,-3,-2,ok\nH2,0,20,-2,"ok, '
              're-surveyed"\n"H3 ""old""",-12,4,-3,ok\n')

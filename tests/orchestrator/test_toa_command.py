@@ -129,8 +129,8 @@ def test_the_shortest_interval_inferred_and_the_replay_reads_the_matrix(tmp_path
                    out=tmp_path / "out")
     assert r.summary["shortest_interval_source"] == "inferred" and 15 < r.summary["shortest_interval_s"] < 20
     assert r.toa.shape == truth.shape and r.summary["detections"]["multipath"] == d.echo.sum()
-    from sblsim.orchestrator.tracks.receivers_file import read_receivers
-    from sblsim.orchestrator.tracks.toa import read_toa
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.readers.toa_matrix import read_toa
 
     matrix, table = read_toa(tmp_path / "out" / "toa.txt"), read_receivers(tmp_path / "out" / "receivers.csv")
     assert matrix.names == names == table.names and np.allclose(table.positions, positions, atol=1e-4)
@@ -274,9 +274,9 @@ def test_a_depth_sensors_readings_reach_the_tracker_in_3d_and_are_said_left_out_
     """``sblsim toa``'s ``toa.txt`` takes the readings in metres (``pings``' ``depth_m``) as its first column where
     the receivers are in 3-D (what ``replay --format toa`` reads as the tag's depth), the same values per ping;
     in 2-D none, and a note says they stay in ``pings.csv``; without readings neither."""
+    from sblsim.orchestrator.readers.toa_matrix import DEPTH_COLUMN
     from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_toa_folder
     from sblsim.orchestrator.sync.toa import ToaOutcome
-    from sblsim.orchestrator.tracks.toa import DEPTH_COLUMN
 
     reading = np.array([3.0, np.nan, 4.5])
     toa = np.array([[0.1, 0.2], [10.1, np.nan], [20.3, 20.2]])

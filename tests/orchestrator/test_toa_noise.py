@@ -13,11 +13,11 @@ import pandas as pd
 import pytest
 
 import sblsim
+from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.sync.clocks import read_clocks
 from sblsim.orchestrator.telemetry.simulate import simulate_study
-from sblsim.orchestrator.tracks.tracker import SIGMA_TOA
 
 #: Each simulated receiver's timing noise [s]: 0.1 ms, one receiver ten times that, one 0.5 ms and one 2 ms.
 NOISE = np.full(12, 1e-4)

@@ -15,9 +15,9 @@ import sblsim
 from sblsim.models.errors import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking.quality import REASONS
-from sblsim.orchestrator.tracks.receivers_file import read_receivers
-from sblsim.orchestrator.tracks.time_series import read_track
-from sblsim.orchestrator.tracks.toa import read_toa
+from sblsim.orchestrator.readers.receivers_file import read_receivers
+from sblsim.orchestrator.readers.time_series import read_track
+from sblsim.orchestrator.readers.toa_matrix import read_toa
 
 # the recording is in the repository (tests and docs), not in the wheel
 DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
@@ -615,8 +615,9 @@ def test_consistent_fixes_restart_holds_the_thinned_track(full):
     of the same tracker without that rule (the disagreement rule of 5 receivers alone)."""
     import dataclasses
 
+    from sblsim.models.tracking.timing import SIGMA_TOA
     from sblsim.orchestrator.tracks.thinning import _usable
-    from sblsim.orchestrator.tracks.tracker import AGREE_AFTER, SIGMA_TOA, tracker_settings
+    from sblsim.orchestrator.tracks.tracker import AGREE_AFTER, tracker_settings
 
     gps = np.genfromtxt(DATA / "gps.txt", skip_header=1)
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
@@ -663,8 +664,9 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
             assert rms < 3.0 and p95 < 5.0 and rms < rms_rts / 2 and p95 < p95_rts / 2, figures
             assert result.score["estimator"] == "robust" and np.isclose(result.score["rms_m"], rms, rtol=1e-12)
     # without the graduated start: from the fixes' own track and the RTS smoother's alone
+    from sblsim.models.tracking.timing import SIGMA_TOA
     from sblsim.orchestrator.tracks.thinning import _usable
-    from sblsim.orchestrator.tracks.tracker import SIGMA_TOA, tracker_settings
+    from sblsim.orchestrator.tracks.tracker import tracker_settings
 
     toa, positions, _ = _usable(read_toa(DATA / "toa.txt"), read_receivers(DATA / "hydrophones.csv"), THINNED)
     c = full.summary["sound_speed"]["sound_speed_m_s"]

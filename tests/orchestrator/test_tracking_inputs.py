@@ -1,4 +1,4 @@
-"""The tracker's inputs beyond the times of arrival (orchestrator/tracks/toa.py, track.py): a ``depth_m`` column of
+"""The tracker's inputs beyond the times of arrival (readers/toa_matrix.py, tracks/track.py): a ``depth_m`` column of
 the tag's depth readings, the receivers' ``sigma_m`` survey errors, read against independent parses and carried to
 the track; and their refusals."""
 
@@ -13,8 +13,8 @@ import pytest
 
 import sblsim
 from sblsim.models.receiver import toa_tracking as tt
-from sblsim.orchestrator.tracks.receivers_file import read_receivers
-from sblsim.orchestrator.tracks.toa import read_toa
+from sblsim.orchestrator.readers.receivers_file import read_receivers
+from sblsim.orchestrator.readers.toa_matrix import read_toa
 
 R3 = np.array([[0.0, 0.0, -2.0], [200.0, 0.0, -15.0], [200.0, 150.0, -4.0], [0.0, 150.0, -20.0], [100.0, 75.0, -8.0],
                [60.0, 140.0, -3.0], [140.0, 20.0, -12.0], [30.0, 80.0, -6.0]])

@@ -14,9 +14,9 @@ from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking import quality as qa
 from sblsim.models.tracking import schedule as ps
+from sblsim.orchestrator.readers.receivers_file import read_receivers
+from sblsim.orchestrator.readers.toa_matrix import read_toa
 from sblsim.orchestrator.tracks import variants
-from sblsim.orchestrator.tracks.receivers_file import read_receivers
-from sblsim.orchestrator.tracks.toa import read_toa
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
 

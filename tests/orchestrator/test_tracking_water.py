@@ -1,4 +1,4 @@
-"""The water the replay takes (orchestrator/tracks/water.py, speed.py, depth.py): a temperature series made the sound
+"""The water the replay takes (orchestrator/readers/water.py, speed.py, depth.py): a temperature series made the sound
 speed by TEOS-10 (against gsw called here and the file parsed here by pandas), a calibration the stated water cannot
 have replaced by the water's own speed and said in one line, the depth of a tag among receivers in one plane held and
 said, within the water column where its depth is given; and their refusals, one line each."""
@@ -16,7 +16,7 @@ import pytest
 import sblsim
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.cli import main
-from sblsim.orchestrator.tracks.water import read_temperature_series
+from sblsim.orchestrator.readers.water import read_temperature_series
 
 #: 8 receivers over 150 x 120 m; in a 2 m bay 1.1-1.8 m deep (one plane).
 FLAT = np.array([[0.0, 0.0], [150.0, 0.0], [150.0, 120.0], [0.0, 120.0], [75.0, 60.0], [40.0, 110.0],

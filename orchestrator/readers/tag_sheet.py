@@ -30,10 +30,10 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.io.paths import inside
-from sblsim.orchestrator.sync.cells import named, numbers, pattern, read_text, refuse, shown_header, text_table
-from sblsim.orchestrator.sync.detections import MAX_DETECTION_BYTES
-from sblsim.orchestrator.sync.transmitters import TRANSMITTER
-from sblsim.orchestrator.tracks.toa import BURST_RANGE, read_burst_sequence
+from sblsim.orchestrator.readers.burst_sequence import BURST_RANGE, read_burst_sequence
+from sblsim.orchestrator.readers.cells import named, numbers, pattern, read_text, refuse, shown_header, text_table
+from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
+from sblsim.orchestrator.readers.transmitters import TRANSMITTER
 
 #: The most transmitters a sheet lists.
 MAX_TAGS = 10_000

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Iterator
 
 from sblsim.orchestrator.cosim.config import ConfigError
-from sblsim.orchestrator.sync.detections import FORMATS as DETECTION_FORMATS
+from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 from sblsim.orchestrator.sync.toa import build
 from sblsim.orchestrator.sync.toa_console import run_lines, say_warnings

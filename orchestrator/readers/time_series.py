@@ -22,8 +22,8 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.frames import Frame, check_latlon
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.tracks.input_rows import MAX_COORDINATE, MAX_TIME, _numbers, _rows, _stripped
-from sblsim.orchestrator.tracks.receivers_file import LATITUDE, LONGITUDE
+from sblsim.orchestrator.readers.input_rows import MAX_COORDINATE, MAX_TIME, _numbers, _rows, _stripped
+from sblsim.orchestrator.readers.receivers_file import LATITUDE, LONGITUDE
 
 #: The time columns whose numbers are absolute times (seconds since 1970-01-01 UTC), not on the TOA file's base.
 ABSOLUTE_TIME_NAMES = ("epo", "epoch", "epoch_s", "time_utc", "timestamp", "datetime", "date_time")

@@ -21,7 +21,7 @@ id (:mod:`.transmitters`): one id in two code spaces is two tags.
 The receivers (hydrophones) table: ``serial``, ``sync_tag`` (the id of the sync tag at that receiver, empty for
 none), ``x``, ``y`` [, ``z``] or ``x_m``, ``y_m`` [, ``z_m``] [m] in a local metric frame; an ``idx`` column is
 ignored (:func:`read_hydrophones`; a study's deployment tables, in latitude and longitude, with dates:
-:mod:`sblsim.orchestrator.telemetry.deployments`). The sound-speed series: ``epo`` [s] and ``sound_speed_m_s`` (or
+:mod:`sblsim.orchestrator.readers.deployments`). The sound-speed series: ``epo`` [s] and ``sound_speed_m_s`` (or
 ``ss``) [m/s], other columns ignored (:func:`read_sound_speed`).
 
 Each file must be a regular file (a FIFO or a device is refused before it is opened), is read to at most
@@ -42,7 +42,6 @@ sorted by tag). Every error is one line naming the file, its line or column and 
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,30 +49,12 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.times import iso_utc, utc_seconds
-from sblsim.orchestrator.sync import exports
-from sblsim.orchestrator.sync.cells import column, numbers, pattern, read_text, refuse, shown_header, text_table
-from sblsim.orchestrator.sync.transmitters import TRANSMITTER, match, split
+from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.readers import fathom, glatos, otn, vue, yaps
+from sblsim.orchestrator.readers.cells import read_text, text_table
+from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
+from sblsim.orchestrator.readers.transmitters import match
 
-#: The largest file read [bytes] and the most rows (detections; receivers; points of a sound-speed series).
-MAX_DETECTION_BYTES = 256 * 2**20
-MAX_DETECTIONS = 3_000_000
-MAX_HYDROPHONES = 1000
-MAX_SERIES = 1_000_000
-#: The most cells a detections file holds [1]: 3 million detections of 11 cells (a VUE export has 10 columns, a
-#: Fathom DET record about 20, a GLATOS or OTN extract about 30 in rows a few hundred bytes long); a table of as many
-#: cells of one character each is parsed in about 0.9 GiB.
-MAX_DETECTION_CELLS = 2**25
-#: The allowed times [s since 1970-01-01 UTC] (to the year 2286), coordinates [m] and sound speeds [m/s].
-MAX_EPOCH = 10_000_000_000
-MAX_COORDINATE = 1e7
-SOUND_SPEED_RANGE = (1300.0, 1700.0)
-#: A receiver's serial or a tag's id: letters, digits, ``. _ -``, 1 to 40 characters, a letter or digit first.
-IDENTIFIER = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,39}")
-_INTEGER = re.compile(r"[0-9]{1,11}")
-_VUE_ZONE = re.compile(r"date and time \(utc(?:([+-])([0-9]{2}):?([0-9]{2}))?\)")
-#: The VUE export's columns (lower case) this reader uses; the others of the export are ignored.
-VUE_COLUMNS = ("receiver", "transmitter", "sensor value", "sensor unit", "station name")
 #: The formats of :func:`read_detections`.
 FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
 #: A receiver's time going back in the file's order by at most this much [s] is taken as rows logged within one
@@ -117,28 +98,29 @@ class Detections:
 
     def tag(self, given: str) -> str | None:
         """The detected tag a user's name stands for (a full ID, or an id where it is unique:
-        :func:`~sblsim.orchestrator.sync.transmitters.match`), None where none."""
+        :func:`~sblsim.orchestrator.readers.transmitters.match`), None where none."""
         return match(given, self.frame["tag"].unique())
-
-
-# --------------------------------------------------------------------------- the text of a table
-
-def _table(path: Path, what: str, max_rows: int) -> tuple[list[str], pd.DataFrame, list[int]]:
-    """A CSV file's header (stripped) and its rows as text cells, with each row's line in the file (1: the header);
-    blank lines skipped: :func:`~sblsim.orchestrator.sync.cells.read_text` (at most :data:`MAX_DETECTION_BYTES` bytes
-    and ``max_rows`` rows) and :func:`~sblsim.orchestrator.sync.cells.text_table`."""
-    return text_table(read_text(path, what, MAX_DETECTION_BYTES, max_rows), str(path), what, max_rows)
-
-
-#: The cell checks, under the names the readers of this package import them by.
-_pattern, _numbers, _column, _refuse = pattern, numbers, column, refuse
 
 
 # --------------------------------------------------------------------------- detections
 
+def format_of(first: str) -> str | None:
+    """The export a file's first line shows (``fathom``, ``vue``, ``glatos``, ``otn``), None for none of them."""
+    lower = first.lower()
+    if first.lstrip('"').startswith(fathom.FATHOM_MARK):
+        return "fathom"
+    if "date and time (utc" in lower:
+        return "vue"
+    if "detection_timestamp_utc" in lower:
+        return "glatos"
+    if "datecollectedutc" in lower or "datecollected" in lower:
+        return "otn"
+    return None
+
+
 def _format_of(first: str, name: str) -> str:
     """The format a detections file's first line shows (:func:`sniff_format`)."""
-    found = exports.format_of(first)
+    found = format_of(first)
     if found is not None:
         return found
     header = text_table(first + "\n", name, "detections", 1)[0] if first.strip() else []
@@ -195,14 +177,14 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     if format is None:
         format = _format_of(text[:65536].split("\n", 1)[0].rstrip("\r"), name)
     if format == "fathom":
-        header, body, lines = exports.fathom_records(text, name, what, MAX_DETECTIONS, MAX_DETECTION_CELLS)
+        header, body, lines = fathom.fathom_records(text, name, what, MAX_DETECTIONS, MAX_DETECTION_CELLS)
     else:
         header, body, lines = text_table(text, name, what, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)
     del text
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no detections")
-    reader = {"yaps": _yaps, "vue": _vue, "fathom": exports.fathom, "glatos": exports.glatos,
-              "otn": exports.otn}[format]
+    reader = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos,
+              "otn": otn.otn}[format]
     frame, used = reader(header, body, lines, name, what)
     if "line" not in frame:  # a reader that adds rows of its own (Fathom's sensor records) gives their lines
         frame["line"] = np.asarray(lines, np.int64)
@@ -210,77 +192,6 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     resets = clock_parts(frame, name, what)
     ignored = [h for k, h in enumerate(header) if k not in used and h]
     return Detections(frame, name, format, ignored, resets)
-
-
-def _yaps(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
-          ) -> tuple[pd.DataFrame, set[int]]:
-    index = {key: _column(header, (key,)) for key in ("epo", "frac", "ts", "tag", "serial", "species")}
-    timed = (index["epo"] is not None and index["frac"] is not None) or index["ts"] is not None
-    missing = [key for key in ("tag", "serial") if index[key] is None] + ([] if timed else ["epo and frac (or ts)"])
-    if missing:
-        raise ModelError(f"{what}: {name!r}: the header needs the columns epo, frac, tag, serial (or ts, tag, serial: "
-                         f"YAPS); {', '.join(missing)} missing, got {shown_header(header)}")
-    if index["epo"] is not None and index["frac"] is not None:
-        epo = _pattern(body[index["epo"]], _INTEGER, what, name, lines, "epo",
-                       f"whole seconds since 1970-01-01 UTC in [0, {MAX_EPOCH}]")
-        seconds = epo.astype(np.int64).to_numpy()
-        if (seconds > MAX_EPOCH).any():
-            k = int(np.flatnonzero(seconds > MAX_EPOCH)[0])
-            raise _refuse(what, name, lines[k], "epo", epo.iloc[k], f"whole seconds in [0, {MAX_EPOCH}]")
-        frac = _numbers(body[index["frac"]], what, name, lines, "frac", 0.0, 1.0, high_open=True, unit="s")
-        time = seconds + frac
-        used = {index["epo"], index["frac"]}
-    else:
-        time = utc_seconds(body[index["ts"]], f"{what}: {name!r}", lines, header[index["ts"]])
-        used = set()
-    if index["ts"] is not None:
-        used.add(index["ts"])
-    tag = _pattern(body[index["tag"]], IDENTIFIER, what, name, lines, "tag",
-                   "an id of 1 to 40 letters, digits, '.', '_' or '-'")
-    serial = _pattern(body[index["serial"]], IDENTIFIER, what, name, lines, "serial",
-                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'")
-    frame = pd.DataFrame({"receiver": serial.to_numpy(), "tag": tag.to_numpy(), "code_space": "", "time": time,
-                          "sensor_value": np.full(len(body), np.nan), "sensor_unit": ""})
-    used |= {index["tag"], index["serial"]}
-    if index["species"] is not None:
-        frame["species"] = body[index["species"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
-        used.add(index["species"])
-    return frame, used
-
-
-#: A receiver as VUE names it: ``MODEL-SERIAL`` (``VR2W-128355``), or the serial alone.
-RECEIVER = re.compile(r"(?:[A-Za-z0-9._]{1,20}-)?[A-Za-z0-9._]{1,40}")
-
-
-def _vue(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
-         ) -> tuple[pd.DataFrame, set[int]]:
-    lower = [h.lower() for h in header]
-    when = next((k for k, h in enumerate(lower) if h.startswith("date and time")), None)
-    zone = _VUE_ZONE.fullmatch(lower[when]) if when is not None else None
-    index = {key: (lower.index(key) if key in lower else None) for key in VUE_COLUMNS}
-    missing = [key for key in ("receiver", "transmitter") if index[key] is None]
-    if zone is None or missing:
-        raise ModelError(f"{what}: {name!r}: a VUE export needs the columns 'Date and Time (UTC)' (or 'Date and "
-                         f"Time (UTC+hh:mm)'), 'Receiver' and 'Transmitter'; "
-                         f"{'the date column' if zone is None else ', '.join(missing)} not found")
-    seconds = utc_seconds(body[when], f"{what}: {name!r}", lines, header[when])
-    if zone.group(1):
-        shift = (int(zone.group(2)) * 3600 + int(zone.group(3)) * 60) * (1 if zone.group(1) == "+" else -1)
-        seconds = seconds - shift  # local time = UTC + shift
-    receiver = _pattern(body[index["receiver"]], RECEIVER, what, name, lines, header[index["receiver"]],
-                        "a receiver as MODEL-SERIAL, e.g. VR2W-128355")
-    parts = receiver.str.rpartition("-")
-    transmitter = _pattern(body[index["transmitter"]], TRANSMITTER, what, name, lines, header[index["transmitter"]],
-                           "a transmitter as CODESPACE-ID, e.g. A69-1602-59335")
-    frame = pd.DataFrame({"receiver": parts[2].to_numpy(), "tag": transmitter.to_numpy(),
-                          "code_space": [split(t)[0] for t in transmitter], "time": seconds})
-    frame["sensor_value"], frame["sensor_unit"] = exports.sensor_columns(
-        body, index["sensor value"], index["sensor unit"], header, lines, name, what)
-    frame["receiver_model"] = parts[0].to_numpy()
-    if index["station name"] is not None:
-        frame["station"] = body[index["station name"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
-    used = {when} | {k for k in index.values() if k is not None}
-    return frame, used
 
 
 def clock_parts(frame: pd.DataFrame, name: str, what: str) -> list[dict]:
@@ -335,92 +246,5 @@ def reset_line(reset: dict) -> str:
             f"(its clock from {before} to {after} UTC): a new clock segment (part {reset['clock_part']})")
 
 
-# --------------------------------------------------------------------------- receivers, sound speed
-
-def read_hydrophones(path: Path | str) -> pd.DataFrame:
-    """Read the receivers (hydrophones): ``serial``, ``sync_tag`` (empty: none), ``x``/``x_m``, ``y``/``y_m``
-    [, ``z``/``z_m``] [m]; ``idx`` ignored.
-
-    Returns
-    -------
-    pandas.DataFrame
-        ``receiver`` (str), ``sync_tag`` (str, ``""`` for none), ``x``, ``y``, ``z`` [m] (``z`` NaN where the
-        file gives no depths), in the file's order.
-
-    Raises
-    ------
-    ModelError
-        One line: a missing column, a bad serial or id, a coordinate outside [-1e7, 1e7] m, a serial or sync tag
-        given twice.
-    """
-    path, what = Path(path), "receivers"
-    name = str(path)
-    header, body, lines = _table(path, what, MAX_HYDROPHONES)
-    if not len(body):
-        raise ModelError(f"{what}: {name!r} holds a header and no receivers")
-    serial = _column(header, ("serial", "receiver", "name"))
-    sync = _column(header, ("sync_tag",))
-    axes = [_column(header, (f"{a}_m", a)) for a in "xyz"]
-    if serial is None or axes[0] is None or axes[1] is None:
-        raise ModelError(f"{what}: {name!r}: the header needs serial, x_m and y_m (or x, y) columns, optionally "
-                         f"sync_tag and z_m; got {','.join(h[:20] for h in header[:12])}")
-    receivers = _pattern(body[serial], IDENTIFIER, what, name, lines, header[serial],
-                         "a serial of 1 to 40 letters, digits, '.', '_' or '-'")
-    if sync is not None:
-        tags = body[sync].astype(str).str.strip()
-        given = (tags != "").to_numpy()
-        _pattern(tags[given], IDENTIFIER, what, name, [lines[k] for k in np.flatnonzero(given)], header[sync],
-                 "a tag id of 1 to 40 letters, digits, '.', '_' or '-', or empty")
-    else:
-        tags = pd.Series([""] * len(body))
-    frame = pd.DataFrame({"receiver": receivers.to_numpy(), "sync_tag": tags.to_numpy()})
-    for axis, k in zip("xyz", axes):
-        frame[axis] = np.nan if k is None else _numbers(body[k], what, name, lines, header[k], -MAX_COORDINATE,
-                                                        MAX_COORDINATE, unit="m")
-    twice = frame["receiver"][frame["receiver"].duplicated()]
-    if len(twice):
-        raise ModelError(f"{what}: {name!r}: receiver {twice.iloc[0]} is given twice")
-    tags = frame["sync_tag"][frame["sync_tag"] != ""]
-    if tags.duplicated().any():
-        raise ModelError(f"{what}: {name!r}: sync tag {tags[tags.duplicated()].iloc[0]} is at two receivers; "
-                         "allowed: one receiver per sync tag")
-    return frame
-
-
-def read_sound_speed(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
-    """Read a sound-speed series: ``epo`` (or ``time``) [s since 1970-01-01 UTC], increasing, and
-    ``sound_speed_m_s`` (or ``ss``) [m/s] in :data:`SOUND_SPEED_RANGE`; other columns ignored.
-
-    Returns
-    -------
-    times, speeds : numpy.ndarray
-        (m,) [s] and (m,) [m/s].
-
-    Raises
-    ------
-    ModelError
-        One line naming the file, the line and column and the allowed range.
-    """
-    path, what = Path(path), "sound speed"
-    name = str(path)
-    header, body, lines = _table(path, what, MAX_SERIES)
-    t, c = _column(header, ("epo", "time", "time_s")), _column(header, ("sound_speed_m_s", "ss", "sound_speed"))
-    if t is None or c is None:
-        raise ModelError(f"{what}: {name!r}: the header needs epo (or time) and sound_speed_m_s (or ss) columns; got "
-                         f"{','.join(h[:20] for h in header[:12])}")
-    if not len(body):
-        raise ModelError(f"{what}: {name!r} holds a header and no rows")
-    times = _numbers(body[t], what, name, lines, header[t], 0.0, float(MAX_EPOCH), unit="s")
-    speeds = _numbers(body[c], what, name, lines, header[c], *SOUND_SPEED_RANGE, unit="m/s")
-    steps = np.diff(times)
-    if (steps <= 0).any():
-        k = int(np.flatnonzero(steps <= 0)[0]) + 1
-        raise ModelError(f"{what}: {name!r} line {lines[k]}: the time {times[k]:.10g} s does not increase; allowed: "
-                         "times in increasing order")
-    return times, speeds
-
-
-__all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "IDENTIFIER", "MAX_CLOCK_RESETS", "MAX_DETECTIONS",
-           "MAX_DETECTION_BYTES", "MAX_DETECTION_CELLS", "MAX_EPOCH", "MAX_HYDROPHONES", "MAX_SERIES",
-           "SOUND_SPEED_RANGE", "clock_parts", "read_detections", "read_hydrophones", "read_sound_speed",
-           "reset_line"]
+__all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "MAX_CLOCK_RESETS", "clock_parts", "format_of",
+           "read_detections", "reset_line", "sniff_format"]

@@ -21,6 +21,10 @@ from sblsim.models.declarations import ModelError
 FULL_ID = re.compile(r"(?:[A-Za-z0-9._]{1,20}-){1,3}[A-Za-z0-9._]{1,40}")
 #: A transmitter as a user or a file may name it: a full ID, or an id alone.
 TRANSMITTER = re.compile(r"(?:[A-Za-z0-9._]{1,20}-){0,3}[A-Za-z0-9._]{1,40}")
+#: A code space alone (``A69-1602``).
+CODE_SPACE = re.compile(r"[A-Za-z0-9._]{1,20}(?:-[A-Za-z0-9._]{1,20}){0,2}")
+#: A transmitter's id alone.
+TAG_ID = re.compile(r"[A-Za-z0-9._]{1,40}")
 
 
 def split(name: str) -> tuple[str, str]:
@@ -54,4 +58,4 @@ def match(given: str, tags: Iterable[str]) -> str | None:
     return found[0] if found else None
 
 
-__all__ = ["FULL_ID", "TRANSMITTER", "full_ids", "match", "split"]
+__all__ = ["CODE_SPACE", "FULL_ID", "TAG_ID", "TRANSMITTER", "full_ids", "match", "split"]

@@ -1,5 +1,5 @@
 """A water-temperature series (a logger's record) read for the tracker's sound speed: a CSV of times and in-situ
-temperatures [°C] under a header, read as hostile input (:mod:`sblsim.orchestrator.sync.cells`: bounded in bytes and
+temperatures [°C] under a header, read as hostile input (:mod:`sblsim.orchestrator.readers.cells`: bounded in bytes and
 rows, parsed by pandas into text cells, every cell checked, a refusal one line naming the file, its line and column and
 what is allowed).
 
@@ -12,8 +12,8 @@ made a speed by TEOS-10 at the stated salinity (:func:`sblsim.models.tracking.so
 
 The receivers' own temperature records are read as well, the file recognised by its first line: a Fathom (VDAT) CSV
 (its TEMP, TEMP_STATS and DIAG records' ambient temperature) or a VUE receiver-events export (its temperature events),
-several receivers averaged (:mod:`sblsim.orchestrator.tracks.receiver_temperature`); their times are UTC, read within
-the detections' limits (:data:`~sblsim.orchestrator.sync.detections.MAX_DETECTION_BYTES`). A file that is not UTF-8
+several receivers averaged (:mod:`sblsim.orchestrator.readers.receiver_temperature`); their times are UTC, read within
+the detections' limits (:data:`~sblsim.orchestrator.readers.limits.MAX_DETECTION_BYTES`). A file that is not UTF-8
 is read as Latin-1 (a Windows export's ``°C``).
 """
 
@@ -28,11 +28,11 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.sound_speed import TEMPERATURE_RANGE
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.sync.cells import named, numbers, read_text, shown_header, text_table
-from sblsim.orchestrator.sync.detections import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
-from sblsim.orchestrator.tracks.input_rows import MAX_TIME
-from sblsim.orchestrator.tracks.receiver_temperature import FALLBACK_ENCODING, receiver_kind, receiver_temperatures
-from sblsim.orchestrator.tracks.time_series import ABSOLUTE_TIME_NAMES
+from sblsim.orchestrator.readers.cells import named, numbers, read_text, shown_header, text_table
+from sblsim.orchestrator.readers.input_rows import MAX_TIME
+from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
+from sblsim.orchestrator.readers.receiver_temperature import FALLBACK_ENCODING, receiver_kind, receiver_temperatures
+from sblsim.orchestrator.readers.time_series import ABSOLUTE_TIME_NAMES
 
 #: The largest temperature file read [bytes] and the most rows: a logger every 30 s for a year is 1.05 million rows.
 MAX_TEMPERATURE_BYTES = 64 * 2**20
@@ -42,7 +42,7 @@ FIRST_LINE_BYTES = 65536
 #: The time column's names: on the times of arrival's base where its cells are numbers (``time`` too), else absolute.
 RELATIVE_TIME_NAMES = ("time_s", "t", "t_s", "time")
 ABSOLUTE_NAMES = ABSOLUTE_TIME_NAMES + ("date_and_time", "date_time_utc", "time_utc_s")
-#: The temperature column's names (:func:`~sblsim.orchestrator.sync.cells.normal_name`: case, spaces and a unit in
+#: The temperature column's names (:func:`~sblsim.orchestrator.readers.cells.normal_name`: case, spaces and a unit in
 #: brackets do not matter).
 TEMPERATURE_NAMES = ("temperature_c", "temperature", "temp_c", "temp", "water_temperature", "water_temperature_c",
                      "temperature_degc", "temp_degc", "t_c")

@@ -1,11 +1,11 @@
 """The receivers' own temperature records as a water-temperature series: the file a study's user already holds, read
-for the tracker's sound speed (:func:`sblsim.orchestrator.tracks.water.read_temperature_series` recognises it by its
+for the tracker's sound speed (:func:`sblsim.orchestrator.readers.water.read_temperature_series` recognises it by its
 first line).
 
 * **Fathom (VDAT) CSV** (first line ``VEMCO DATA LOG,<format version>,...``; the record types and columns of
   glatos's ``vdat_csv_schema``, formats 1.0.0 and 2.0.0): the records ``TEMP`` (``Ambient (deg C)``),
   ``TEMP_STATS`` (``Ambient Mean (deg C)``) and ``DIAG`` (``Ambient Temperature (deg C)``), each type's columns
-  given by its ``<TYPE>_DESC`` line (:func:`~sblsim.orchestrator.sync.exports.fathom_tables`; the other types'
+  given by its ``<TYPE>_DESC`` line (:func:`~sblsim.orchestrator.readers.fathom.fathom_tables`; the other types'
   lines, the detections among them, skipped unread). The water's (ambient) temperature is taken, never the
   receiver's ``Internal (deg C)``; the time is ``Time`` (Fathom's corrected UTC) where the cell holds one, else
   ``Device Time (UTC)``; the receiver is ``Serial Number``. An empty temperature cell is no record.
@@ -30,8 +30,8 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.sound_speed import TEMPERATURE_RANGE
 from sblsim.orchestrator.io.times import EPOCH, ISO_TIME, utc_seconds
-from sblsim.orchestrator.sync.cells import column, numbers, refuse, shown_header, text_table
-from sblsim.orchestrator.sync.exports import FATHOM_MARK, fathom_tables
+from sblsim.orchestrator.readers.cells import column, numbers, refuse, shown_header, text_table
+from sblsim.orchestrator.readers.fathom import FATHOM_MARK, fathom_tables
 
 #: The Fathom record types holding the water's temperature, and each one's column of it (case ignored).
 FATHOM_TEMPERATURE_RECORDS = ("TEMP", "TEMP_STATS", "DIAG")

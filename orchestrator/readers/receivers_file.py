@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.frames import (
     CHOSEN_INPUT,
     Frame,
@@ -28,8 +29,7 @@ from sblsim.orchestrator.io.frames import (
     transform,
 )
 from sblsim.orchestrator.io.tables import number
-from sblsim.orchestrator.tracks.input_rows import MAX_COORDINATE, MAX_RECEIVERS, MISSING, _lines, _rows, _stripped
-from sblsim.orchestrator.tracks.tracker import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
+from sblsim.orchestrator.readers.input_rows import MAX_COORDINATE, MAX_RECEIVERS, MISSING, _lines, _rows, _stripped
 
 
 @dataclass
@@ -64,8 +64,8 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
     TOML file
     (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``] [, ``sigma_m``]); ``sigma_m`` the survey's standard
     deviation per axis [m] (:data:`SURVEY_SIGMA_RANGE`), ``toa_sigma_s`` the receiver's timing noise [s]
-    (:data:`~sblsim.orchestrator.tracks.tracker.TOA_SIGMA_RANGE`; empty: not known), ``clock_sigma_s`` its clock
-    offset's own uncertainty [s] (:data:`~sblsim.orchestrator.tracks.tracker.CLOCK_SIGMA_RANGE`; empty: not known).
+    (:data:`~sblsim.models.tracking.timing.TOA_SIGMA_RANGE`; empty: not known), ``clock_sigma_s`` its clock
+    offset's own uncertainty [s] (:data:`~sblsim.models.tracking.timing.CLOCK_SIGMA_RANGE`; empty: not known).
     A receiver whose coordinates
     are empty is kept without a position (its column of the TOA matrix is not used). Latitude and longitude (WGS 84,
     or the geographic ``crs``) are projected to ``frame`` (a metric CRS; default the UTM zone of their centre); x and

@@ -1,0 +1,147 @@
+"""The detection exports of Innovasea's Fathom software, read into the table of
+:func:`sblsim.orchestrator.readers.detections.read_detections` (which reads the text, bounded, and calls these).
+
+**Fathom (VDAT) CSV** (the export of Innovasea's current receivers: HR2, VR2Tx, VR2AR, NexTrak; glatos's
+``vdat_csv_schema`` lists its record types and columns): a first line ``VEMCO DATA LOG,<format version>,<writer>``,
+then record types interleaved, each line's first field naming its type, each type's columns given once by a
+``<TYPE>_DESC`` line. The ``DET`` records are the detections: ``Device Time (UTC)`` (the receiver's own clock,
+before Fathom's corrections: what the clocks' synchronisation needs), ``Serial Number``, ``Model``, ``Full ID``
+(the transmitter), ``Raw Data`` (a sensor tag's raw value, format 2) or ``Sensor Value`` and ``Sensor Unit``
+(format 1), ``Station Name``; the ``DET_SENS`` records (format 2) give a sensor detection's converted ``Sensor
+Value`` and ``Sensor Unit``: where one is also a ``DET`` record (the same time, receiver and transmitter) its
+value is that detection's, else it is a detection of its own. Only these record types are parsed: the lines of
+the others are skipped unread by their first field (a regular expression selects the lines; pandas parses them).
+
+Times are ISO 8601 (UTC unless a zone is given) or epoch seconds (:mod:`sblsim.orchestrator.io.times`), the fraction
+of a second kept. Each transmitter is its full ID (code space and id): one id in two code spaces is two tags.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.times import utc_seconds
+from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table
+from sblsim.orchestrator.readers.sensors import sensor_columns
+from sblsim.orchestrator.readers.transmitters import TAG_ID, TRANSMITTER, split
+
+#: Fathom's first line.
+FATHOM_MARK = "VEMCO DATA LOG"
+#: The Fathom record types read: the detections and the sensor detections.
+FATHOM_RECORDS = ("DET", "DET_SENS")
+
+
+def fathom_records(text: str, name: str, what: str, max_rows: int, max_cells: int | None = None
+                   ) -> tuple[list[str], pd.DataFrame, list[int]]:
+    """A Fathom CSV's ``DET`` records as a table (:func:`~sblsim.orchestrator.readers.cells.text_table`: the
+    ``DET_DESC`` line its header, each row's line in the file), the ``DET_SENS`` records' table attached as
+    ``body.attrs["sensors"]`` (header, body, lines) where there are any. Each record type's table is refused before
+    pandas parses it where it would hold more than ``max_cells`` cells [1] (its lines times its ``_DESC`` line's
+    cells; default :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`; the file's own lines are counted as it is
+    read).
+
+    Raises
+    ------
+    ModelError
+        One line: a first line that is not Fathom's, no ``DET_DESC`` line, a record pandas cannot parse, a table of
+        too many cells.
+    """
+    tables = fathom_tables(text, name, what, FATHOM_RECORDS, max_rows, max_cells)
+    if "DET" not in tables:
+        raise ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom "
+                         "CSV holding detection records")
+    header, body, lines = tables["DET"]
+    if "DET_SENS" in tables:
+        body.attrs["sensors"] = tables["DET_SENS"]
+    return header, body, lines
+
+
+def fathom_tables(text: str, name: str, what: str, records: tuple[str, ...], max_rows: int,
+                  max_cells: int | None = None) -> dict[str, tuple[list[str], pd.DataFrame, list[int]]]:
+    """A Fathom CSV's records of the types ``records``, each type's as a table
+    (:func:`~sblsim.orchestrator.readers.cells.text_table`: its first ``<TYPE>_DESC`` line the header; each row's line
+    in the file), by type; a type without a ``_DESC`` line is left out. The lines are chosen by their first field
+    (a regular expression): the other types' lines are skipped unread. Each table is refused before pandas parses it
+    where it would hold more than ``max_cells`` cells [1] (default :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`).
+
+    Raises
+    ------
+    ModelError
+        One line: a first line that is not Fathom's, a record pandas cannot parse, a table of too many rows or cells.
+    """
+    if not text.lstrip('"').startswith(FATHOM_MARK):
+        raise ModelError(f"{what}: {name!r}: a Fathom CSV starts with the line {FATHOM_MARK},…; allowed: the file "
+                         "Fathom (or vdat.exe) wrote, unchanged")
+    newlines = np.fromiter((m.start() for m in re.finditer("\n", text)), np.int64)
+    tables = {}
+    for record in records:
+        chosen = list(re.finditer(rf'^"?{record}(?:_DESC)?"?,[^\n]*', text, flags=re.M))
+        descs = [m for m in chosen if m.group(0).lstrip('"').startswith(f"{record}_DESC")]
+        if not descs:
+            continue
+        rows = [m for m in chosen if m not in descs]
+        lines = (np.searchsorted(newlines, [descs[0].start()] + [m.start() for m in rows]) + 1).tolist()
+        table = "\n".join([descs[0].group(0).rstrip("\r")] + [m.group(0).rstrip("\r") for m in rows]) + "\n"
+        header, body, numbered = text_table(table, name, what, max_rows, first_line=0, max_cells=max_cells)
+        tables[record] = (header, body, [lines[k] for k in numbered])
+    return tables
+
+
+def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+                  ) -> tuple[pd.DataFrame, set[int]]:
+    """One Fathom record type's rows as detections (receiver, tag, code space, time, sensor value and unit, model,
+    station) and the columns used."""
+    index = {key: column(header, (key,)) for key in ("device time (utc)", "serial number", "full id", "model",
+                                                     "raw data", "sensor value", "sensor unit", "station name")}
+    shown = {"device time (utc)": "Device Time (UTC)", "serial number": "Serial Number", "full id": "Full ID"}
+    missing = [shown[key] for key in shown if index[key] is None]
+    if missing:
+        raise ModelError(f"{what}: {name!r}: Fathom's {header[0] or 'DET_DESC'} line needs the columns Device Time "
+                         f"(UTC), Serial Number and Full ID; {', '.join(missing)} missing, got {shown_header(header)}")
+    time = utc_seconds(body[index["device time (utc)"]], f"{what}: {name!r}", lines, "Device Time (UTC)")
+    serial = pattern(body[index["serial number"]], TAG_ID, what, name, lines, "Serial Number",
+                     "a receiver's serial of 1 to 40 letters, digits, '.' or '_'")
+    tag = pattern(body[index["full id"]], TRANSMITTER, what, name, lines, "Full ID",
+                  "a transmitter's full ID CODESPACE-ID, e.g. A69-1602-4555")
+    frame = pd.DataFrame({"receiver": serial.to_numpy(), "tag": tag.to_numpy(),
+                          "code_space": [split(t)[0] for t in tag], "time": time})
+    if index["sensor value"] is not None:
+        frame["sensor_value"], frame["sensor_unit"] = sensor_columns(
+            body, index["sensor value"], index["sensor unit"], header, lines, name, what)
+    else:  # format 2's DET: a sensor tag's raw value
+        frame["sensor_value"], _ = sensor_columns(body, index["raw data"], None, header, lines, name, what)
+        frame["sensor_unit"] = np.where(np.isfinite(frame["sensor_value"].to_numpy(float)), "raw", "")
+    frame["receiver_model"] = "" if index["model"] is None else \
+        body[index["model"]].astype(str).str.strip().str.slice(0, 40).to_numpy()
+    if index["station name"] is not None:
+        frame["station"] = body[index["station name"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
+    return frame, {k for k in index.values() if k is not None} | {0}
+
+
+def fathom(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+           ) -> tuple[pd.DataFrame, set[int]]:
+    """Fathom's ``DET`` records (and ``DET_SENS``: the module docstring) as detections, in the file's order, with
+    their lines in the file (``line``)."""
+    frame, used = _fathom_table(header, body, lines, name, what)
+    frame["line"] = lines
+    sensors = body.attrs.get("sensors")
+    if sensors is not None:
+        extra, _ = _fathom_table(*sensors, name, what)
+        extra["line"] = sensors[2]
+        keys = ["time", "receiver", "tag"]
+        both = frame.reset_index().merge(extra[keys + ["sensor_value", "sensor_unit"]], on=keys, how="inner",
+                                         suffixes=("", "_sens")).drop_duplicates("index")
+        at = both["index"].to_numpy()
+        frame.loc[at, "sensor_value"] = both["sensor_value_sens"].to_numpy()
+        frame.loc[at, "sensor_unit"] = both["sensor_unit_sens"].to_numpy()
+        alone = extra.merge(frame[keys], on=keys, how="left", indicator=True)
+        alone = alone[alone["_merge"] == "left_only"].drop(columns="_merge")
+        frame = pd.concat([frame, alone], ignore_index=True).sort_values("line", kind="stable")
+    return frame.reset_index(drop=True), used
+
+
+__all__ = ["FATHOM_MARK", "FATHOM_RECORDS", "fathom", "fathom_records", "fathom_tables"]
