@@ -22,6 +22,8 @@ from pathlib import Path
 
 import pytest
 
+from sblsim.orchestrator.io.manifest import write_manifest
+
 BIG = "1" + "0" * 400
 LOG_HEADER = "time_s,beacon_id,range_m,beacon_n_m,beacon_e_m,beacon_d_m,depth_m\n"
 #: Parquet logs (name -> schema metadata: the configuration an exported log carries).
@@ -461,6 +463,9 @@ def _prepare(folder: Path) -> None:
         path.write_text(text)
     with zipfile.ZipFile(folder / "emptyfmus" / "sblsim_platform.fmu.bak", "w"):
         pass
+    for name in FILES:  # the earlier results are sblsim's own (their folders' manifests say so)
+        if name.startswith("earlier_"):
+            write_manifest(folder / Path(name).parent, [Path(name).name])
     import pyarrow as pa
     import pyarrow.parquet as pq
 

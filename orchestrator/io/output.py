@@ -10,9 +10,10 @@ import stat
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.manifest import refuse_foreign, write_manifest
 
 try:
     import fcntl
@@ -96,7 +97,9 @@ def folder_name(name: str, fallback: str = "run") -> str:
 def staged_directory(out: Path | str) -> Iterator[Path]:
     """A staging folder beside ``out`` whose files replace those of the same name in ``out`` on success.
 
-    Files of ``out`` with other names are kept. If the body raises, nothing
+    Files of ``out`` with other names are kept; a file of the same name that sblsim did not write (no earlier run's
+    own output: :mod:`sblsim.orchestrator.io.manifest`) is never replaced: the whole write is refused before anything
+    moves, and the entries moved in are recorded in the folder's manifest. If the body raises, nothing
     in ``out`` changes (a new ``out`` is not even created) and the staging
     folder is removed. The staging folder's name holds this process's id,
     so that the folders of a killed process are found and removed the next
@@ -115,6 +118,9 @@ def staged_directory(out: Path | str) -> Iterator[Path]:
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", dir=out.parent))
         try:
             yield tmp
+            names = [item.name for item in tmp.iterdir()]
+            if out.exists():  # never a file sblsim did not write: refused before anything is replaced
+                refuse_foreign(out, names, "out")
             out.mkdir(exist_ok=True)
             for item in list(tmp.iterdir()):
                 target = out / item.name
@@ -122,6 +128,7 @@ def staged_directory(out: Path | str) -> Iterator[Path]:
                 if item.is_dir() and target.is_dir() and not target.is_symlink():
                     os.replace(target, tmp / f".old.{item.name}")
                 os.replace(item, target)
+            write_manifest(out, names)
             done = True
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -285,9 +292,12 @@ class OutputLock:
 
 
 
-def check_output(out: Path, force: bool, marker: str, what: str, where: str = "--out") -> None:
-    """Refuse an output directory that cannot be written, or that holds an earlier result (its ``marker``
-    file) unless ``force``: before any work.
+def check_output(out: Path, force: bool, marker: str, what: str, where: str = "--out",
+                 writes: Iterable[str] = ()) -> None:
+    """Refuse an output directory that cannot be written, that holds a file of the output's names (``marker`` and
+    ``writes``) that sblsim did not write (:func:`~sblsim.orchestrator.io.manifest.refuse_foreign`: an input, say,
+    with or without ``force``), or that holds an earlier result (its ``marker`` file) unless ``force``: before any
+    work.
 
     Raises
     ------
@@ -296,6 +306,8 @@ def check_output(out: Path, force: bool, marker: str, what: str, where: str = "-
     """
     out = Path(out)
     check_writable(out, where)
+    if out.is_dir():
+        refuse_foreign(out, [marker, *writes], where)
     if (out / marker).exists() and not force:
         hint = ("add --force to replace it or choose another --out" if where.startswith("--")
                 else f"pass force=True to replace it or choose another {where}")

@@ -17,6 +17,7 @@ import pytest
 from sblsim.models import MODELS
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config
+from sblsim.orchestrator.io.manifest import MANIFEST
 from tests.helpers import start_for_signals
 
 SUMMARY_METRICS = ("e_x_mean", "e_y_mean", "e_z_mean", "e_tot_mean", "e_tot_rms", "e_tot_std")
@@ -69,7 +70,7 @@ def short_run(tmp_path_factory):
 @pytest.mark.slow
 def test_run_writes_all_outputs(short_run):
     base, out, proc = short_run
-    expected = {"summary.json", "config.toml", "timeseries.parquet", *FIGURES}
+    expected = {"summary.json", "config.toml", "timeseries.parquet", MANIFEST, *FIGURES}
     assert {p.name for p in out.iterdir()} == expected
     for name in FIGURES:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

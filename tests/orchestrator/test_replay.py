@@ -24,6 +24,7 @@ from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import load_config, to_toml
 from sblsim.orchestrator.cosim.plan import make_plan
 from sblsim.orchestrator.cosim.run import run
+from sblsim.orchestrator.io.manifest import MANIFEST
 from sblsim.orchestrator.logs.configuration import replay_config
 from sblsim.orchestrator.logs.log_export import export_log, truth_path
 from sblsim.orchestrator.logs.receiver_log import read_log
@@ -279,7 +280,7 @@ def test_replay_command_writes_the_outputs_of_a_run(exported, capsys):
     assert "receiver ekf-seq" in printed and "99 rows, 99 used" in printed and "e_tot mean" in printed
     names = {p.name for p in out.iterdir()}
     assert names == {"summary.json", "config.toml", "timeseries.parquet", "trajectory_xy.png", "trajectory_3d.png",
-                     "errors.png", "error_bounds.png"}
+                     "errors.png", "error_bounds.png", MANIFEST}
     s = json.loads((out / "summary.json").read_text())
     assert s["receiver"] == "ekf-seq" and s["steps"] == 100 and s["e_tot_mean"] > 0
     assert s["log"]["file"] == "h.csv" and s["truth"] == {"steps": 100, "steps_without": 0}
@@ -310,7 +311,7 @@ def test_replay_without_truth_writes_the_track(exported, capsys):
     assert main(["replay", str(exported / "h.csv"), "--out", str(out)]) == 0
     assert "no truth track" in capsys.readouterr().out
     assert {p.name for p in out.iterdir()} == {"summary.json", "config.toml", "timeseries.parquet",
-                                               "trajectory_xy.png"}
+                                               "trajectory_xy.png", MANIFEST}
     s = json.loads((out / "summary.json").read_text())
     assert s["e_tot_mean"] is None and s["nees_mean"] is None and s["diverged"] is None and s["truth"] is None
     assert s["updates"] > 0 and s["nis_mean"] > 0

@@ -12,6 +12,7 @@ import pytest
 
 import sblsim
 from sblsim.models.receiver import toa_tracking as tt
+from sblsim.orchestrator.io.manifest import MANIFEST
 from sblsim.orchestrator.tracks.variants import write_toa
 
 RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])
@@ -47,7 +48,8 @@ def test_each_tag_is_tracked_as_alone_and_a_refused_file_is_a_row(tmp_path):
         assert table.loc[f"tag{k}", "pings"] == 60 and table.loc[f"tag{k}", "positioned"] == len(alone.track)
     written = pd.read_csv(tmp_path / "out" / "tags.csv")
     assert list(written["tag"]) == list(result.table["tag"])
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["tag0", "tag1", "tag2", "tags.csv"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(
+        [MANIFEST, "tag0", "tag1", "tag2", "tags.csv"])
     assert (tmp_path / "out" / "tag1" / "track.csv").is_file()
 
 
