@@ -104,6 +104,20 @@ def _width(text: str, name: str, what: str) -> int | None:
         return None
 
 
+def _spanned(frame: pd.DataFrame, text: str) -> np.ndarray | int:
+    """The lines before each row of ``frame`` that quoted cells spanning lines took (a legal line break inside a
+    quoted cell): 0 where the text has as many line breaks as rows (none spans), else per row the line breaks in the
+    cells of the rows before it, so that a row's line is the file's line, as an editor numbers it."""
+    breaks = text.count("\n") + text.count("\r") - text.count("\r\n")
+    if breaks <= len(frame):  # one line break a row at most: none inside a cell
+        return 0
+    inside = np.zeros(len(frame), np.int64)
+    for k in frame.columns:
+        cells = frame[k]
+        inside += (cells.str.count("\r\n|\r|\n")).to_numpy(np.int64)
+    return np.concatenate([[0], np.cumsum(inside)[:-1]])
+
+
 def text_table(text: str, name: str, what: str, max_rows: int, first_line: int = 1, *, max_cells: int | None = None,
                max_line_cells: int | None = None) -> tuple[list[str], pd.DataFrame, list[int]]:
     """A CSV text's header (stripped) and its rows as text cells (pandas, every cell a str; a short row padded with
@@ -141,7 +155,7 @@ def text_table(text: str, name: str, what: str, max_rows: int, first_line: int =
     blank = np.ones(len(frame), bool)
     for k in frame.columns:  # column by column: no copy of the whole table
         blank &= (frame[k].str.strip() == "").to_numpy(bool)
-    lines = np.flatnonzero(~blank) + first_line
+    lines = (np.arange(len(frame)) + first_line + _spanned(frame, text))[~blank]
     if blank.any():
         frame = frame[~blank]
     if not len(frame):

@@ -25,7 +25,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table
+from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table, too_large
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import TAG_ID, TRANSMITTER, split
 
@@ -63,10 +63,15 @@ def fathom_records(text: str, name: str, what: str, max_rows: int, max_cells: in
 def fathom_tables(text: str, name: str, what: str, records: tuple[str, ...], max_rows: int,
                   max_cells: int | None = None) -> dict[str, tuple[list[str], pd.DataFrame, list[int]]]:
     """A Fathom CSV's records of the types ``records``, each type's as a table
-    (:func:`~sblsim.orchestrator.readers.cells.text_table`: its first ``<TYPE>_DESC`` line the header; each row's line
-    in the file), by type; a type without a ``_DESC`` line is left out. The lines are chosen by their first field
-    (a regular expression): the other types' lines are skipped unread. Each table is refused before pandas parses it
-    where it would hold more than ``max_cells`` cells [1] (default :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`).
+    (:func:`~sblsim.orchestrator.readers.cells.text_table`; each row's line in the file), by type; a type without a
+    ``_DESC`` line is left out. Every ``<TYPE>_DESC`` line defines the columns of the records of its type that
+    follow it, until the next one (two exports concatenated, the second's columns in another order, are each read
+    under their own header); the table's header is the first ``_DESC``'s columns, then any new ones of the later,
+    each record's cells under its own header's names (case ignored; a column a header lacks: empty). The lines are
+    chosen by their first field (a regular expression; a quoted cell may span lines): the other types' lines are
+    skipped unread. Each header's rows are refused before pandas parses them where they would hold more than
+    ``max_cells`` cells [1] (default :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`), and a type of more than
+    ``max_rows`` rows in all.
 
     Raises
     ------
@@ -79,15 +84,36 @@ def fathom_tables(text: str, name: str, what: str, records: tuple[str, ...], max
     newlines = np.fromiter((m.start() for m in re.finditer("\n", text)), np.int64)
     tables = {}
     for record in records:
-        chosen = list(re.finditer(rf'^"?{record}(?:_DESC)?"?,[^\n]*', text, flags=re.M))
-        descs = [m for m in chosen if m.group(0).lstrip('"').startswith(f"{record}_DESC")]
-        if not descs:
+        chosen = list(re.finditer(rf'^"?{record}(?:_DESC)?"?,(?:[^"\n]+|"[^"]*")*[^\n]*', text, flags=re.M))
+        is_desc = [m.group(0).lstrip('"').startswith(f"{record}_DESC") for m in chosen]
+        if not any(is_desc):
             continue
-        rows = [m for m in chosen if m not in descs]
-        lines = (np.searchsorted(newlines, [descs[0].start()] + [m.start() for m in rows]) + 1).tolist()
-        table = "\n".join([descs[0].group(0).rstrip("\r")] + [m.group(0).rstrip("\r") for m in rows]) + "\n"
-        header, body, numbered = text_table(table, name, what, max_rows, first_line=0, max_cells=max_cells)
-        tables[record] = (header, body, [lines[k] for k in numbered])
+        first = is_desc.index(True)  # records before the first header have no columns: not read
+        headers, bodies, lines = [], [], []
+        for k in range(first, len(chosen)):
+            if is_desc[k]:
+                headers.append(chosen[k])
+                bodies.append([])
+            else:
+                bodies[-1].append(chosen[k])
+        if sum(len(b) for b in bodies) > max_rows:
+            raise too_large(name, what, f"has {sum(len(b) for b in bodies):,} {record} records", 2**62, max_rows)
+        combined: list[str] = []
+        known: list[str] = []
+        parts = []
+        for desc, rows in zip(headers, bodies):
+            table = "\n".join([desc.group(0).rstrip("\r")] + [m.group(0).rstrip("\r") for m in rows]) + "\n"
+            header, body, _ = text_table(table, name, what, max_rows, first_line=0, max_cells=max_cells)
+            keys = [h.lower() or f"#{j}" for j, h in enumerate(header)]  # an unnamed column by its place
+            for h, key in zip(header, keys):
+                if key not in known:
+                    known.append(key)
+                    combined.append(h)
+            body.columns = [known.index(key) for key in keys[:body.shape[1]]]
+            parts.append(body)
+            lines.extend((np.searchsorted(newlines, [m.start() for m in rows]) + 1).tolist())
+        body = pd.concat(parts, ignore_index=True).reindex(columns=range(len(combined)), fill_value="")
+        tables[record] = (combined, body.fillna(""), lines)
     return tables
 
 
