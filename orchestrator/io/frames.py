@@ -29,6 +29,9 @@ WGS84 = "EPSG:4326"
 CHOSEN_UTM = "the UTM zone of the array's centre"
 CHOSEN_GIVEN = "given"
 CHOSEN_INPUT = "the CRS the positions were given in"
+#: The largest departure from 1 of a frame's point scale factor over the array [1] (0.1 %: a UTM zone's is 0.04 % on
+#: its central meridian and 0.1 % at its edges; Web Mercator's is 80 % at 56° N).
+MAX_SCALE_ERROR = 1e-3
 
 
 def _crs(text: str, where: str):
@@ -169,18 +172,59 @@ def frame_summary(frame: Frame | None, x: np.ndarray, y: np.ndarray) -> dict[str
     return frame.summary(float(lat[0]), float(lon[0]))
 
 
-def frame_for(lat: np.ndarray, lon: np.ndarray, given: str | None = None) -> Frame:
-    """The frame of points given as WGS 84 latitude and longitude: ``given`` (a metric CRS) or the UTM zone of
-    their centre (the middle of their extent).
+def scale_range(crs: str, lat: np.ndarray, lon: np.ndarray) -> tuple[float, float]:
+    """The smallest and largest point scale factor [1] of a projected CRS at points given as WGS 84 latitude and
+    longitude [°] (pyproj's ``Proj.get_factors``: the meridional and the parallel scale, equal in a conformal
+    projection such as UTM or Mercator): every distance in the CRS is between these times the distance on the
+    ground there (Snyder 1987, *Map Projections: A Working Manual*, USGS Professional Paper 1395, §4)."""
+    from pyproj import Proj
+
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    factors = Proj(_crs(crs, "frame")).get_factors(np.asarray(lon, float)[ok], np.asarray(lat, float)[ok])
+    scales = np.concatenate([np.atleast_1d(factors.meridional_scale), np.atleast_1d(factors.parallel_scale)])
+    scales = scales[np.isfinite(scales)]
+    if not len(scales):
+        return float("nan"), float("nan")
+    return float(scales.min()), float(scales.max())
+
+
+def check_scale(crs: str, lat: np.ndarray, lon: np.ndarray, where: str) -> None:
+    """Refuse a metric frame whose scale over the points (:func:`scale_range`) is not within
+    :data:`MAX_SCALE_ERROR` of 1: its metres are not the ground's, and every range by sound would disagree with the
+    positions by that factor (Web Mercator's is 1.8 at 56° N).
 
     Raises
     ------
     ModelError
-        ``given`` not a projected metric CRS; no finite point.
+        One line naming the frame, its scale over the points and a frame that fits them.
     """
-    if given is not None:
-        return Frame(check_metric(given, "frame"), CHOSEN_GIVEN)
+    low, high = scale_range(crs, lat, lon)
+    if np.isfinite([low, high]).all() and max(abs(low - 1.0), abs(high - 1.0)) <= MAX_SCALE_ERROR:
+        return
     ok = np.isfinite(lat) & np.isfinite(lon)
+    centre = ((np.min(lat[ok]) + np.max(lat[ok])) / 2, (np.min(lon[ok]) + np.max(lon[ok])) / 2) if ok.any() else None
+    suggestion = f" such as the UTM zone of the array ({utm_zone(*centre)})" if centre is not None else ""
+    shown = f"{low:.6g}" if np.isclose(low, high, rtol=0, atol=5e-7) else f"{low:.6g} to {high:.6g}"
+    raise ModelError(f"{where}: {crs[:40]} ({_crs(crs, where).name}) scales distances by {shown} over the array; "
+                     f"allowed: a metric frame whose scale there is within {MAX_SCALE_ERROR:.1%} of 1,{suggestion}")
+
+
+def frame_for(lat: np.ndarray, lon: np.ndarray, given: str | None = None) -> Frame:
+    """The frame of points given as WGS 84 latitude and longitude: ``given`` (a metric CRS whose scale over the
+    points is within :data:`MAX_SCALE_ERROR` of 1: :func:`check_scale`) or the UTM zone of their centre (the middle
+    of their extent).
+
+    Raises
+    ------
+    ModelError
+        ``given`` not a projected metric CRS, or one that distorts distances over the points; no finite point.
+    """
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    if given is not None:
+        frame = Frame(check_metric(given, "frame"), CHOSEN_GIVEN)
+        if ok.any():
+            check_scale(frame.crs, np.asarray(lat, float), np.asarray(lon, float), "frame")
+        return frame
     if not ok.any():
         raise ModelError("frame: no position to choose a frame from; allowed: positions with latitude and longitude")
     centre_lat = (np.min(lat[ok]) + np.max(lat[ok])) / 2
@@ -199,5 +243,6 @@ def check_latlon(lat: np.ndarray, lon: np.ndarray, where: str, lines: list[int] 
                          "coordinates need --crs)")
 
 
-__all__ = ["CHOSEN_GIVEN", "CHOSEN_INPUT", "CHOSEN_UTM", "Frame", "WGS84", "check_crs", "check_latlon",
-           "check_metric", "frame_for", "frame_summary", "is_geographic", "transform", "utm_zone"]
+__all__ = ["CHOSEN_GIVEN", "CHOSEN_INPUT", "CHOSEN_UTM", "Frame", "MAX_SCALE_ERROR", "WGS84", "check_crs",
+           "check_latlon", "check_metric", "check_scale", "frame_for", "frame_summary", "is_geographic", "scale_range",
+           "transform", "utm_zone"]
