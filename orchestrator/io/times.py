@@ -31,8 +31,11 @@ ISO_TIME = re.compile(r"[0-9]{4}-[0-9]{2}-[0-9]{2}"
                       r"(?: ?(?:Z|UTC|[+-][0-9]{2}(?::?[0-9]{2})?))?")
 #: Epoch seconds: a plain decimal number (no exponent, no sign: 1970 onwards).
 EPOCH = re.compile(r"[0-9]{1,11}(?:\.[0-9]{0,9})?")
-#: The times allowed [s since 1970-01-01 UTC]: to the year 2286.
-MAX_EPOCH = 10_000_000_000
+#: The latest time allowed [s since 1970-01-01 UTC]: 2262-04-11T23:47:16Z, the latest whole second pandas' timestamps
+#: (nanoseconds in 64 bits) hold, which every time read and written passes through.
+MAX_EPOCH = 9_223_372_036
+#: The times allowed, as a refusal says them.
+TIME_SPAN = "a time from 1970-01-01 to 2262-04-11T23:47:16 (UTC: the latest a 64-bit nanosecond timestamp holds)"
 #: What a refusal names as allowed.
 ALLOWED = ("an ISO 8601 time (2023-08-31T21:15:42.123Z; UTC unless a zone is given) or epoch seconds "
            "(1693516542.123)")
@@ -41,6 +44,15 @@ ALLOWED = ("an ISO 8601 time (2023-08-31T21:15:42.123Z; UTC unless a zone is giv
 def _refuse(where: str, line: int, column: str, text: str, allowed: str = ALLOWED) -> ModelError:
     shown = text if len(text) <= 40 else text[:40] + "..."
     return ModelError(f"{where} line {line} column {column}: {shown!r} is not allowed; allowed: {allowed}")
+
+
+def _exists(date: str) -> bool:
+    """Whether an ISO 8601 date (``YYYY-MM-DD``) exists, whatever its year (numpy's days reach far beyond pandas')."""
+    try:
+        np.datetime64(date, "D")
+    except ValueError:
+        return False
+    return True
 
 
 def is_epoch(cells: pd.Series) -> bool:
@@ -76,7 +88,7 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
     ------
     ModelError
         One line naming the file, the line and the column: a cell neither form, an ISO time that does not exist
-        (``2023-02-30``), a column mixing the forms, a time before 1970 or after 2286.
+        (``2023-02-30``), a column mixing the forms, a time outside :data:`TIME_SPAN`.
     """
     import pandas as pd
 
@@ -103,14 +115,16 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
         bad = stamps.isna().to_numpy(bool)
         if bad.any():
             k = int(given.index[np.flatnonzero(bad)[0]])
-            raise _refuse(where, lines[k], column, text[k], "a date and time that exists (ISO 8601)")
+            late = int(text[k][:4]) >= 2262 and _exists(text[k][:10])  # a real date beyond the span
+            raise _refuse(where, lines[k], column, text[k],
+                          TIME_SPAN if late else "a date and time that exists (ISO 8601)")
         nanoseconds = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)
         whole, rest = np.divmod(nanoseconds, 1_000_000_000)
         values = whole.astype(float) + rest / 1e9
     outside = (values < 0) | (values > MAX_EPOCH) | ~np.isfinite(values)
     if outside.any():
         k = int(given.index[np.flatnonzero(outside)[0]])
-        raise _refuse(where, lines[k], column, text[k], "a time from 1970 to 2286 (UTC)")
+        raise _refuse(where, lines[k], column, text[k], TIME_SPAN)
     seconds[~empty] = values
     return seconds
 
@@ -151,4 +165,5 @@ def parse_instant(value: str | float | int, where: str) -> float:
         raise ModelError(f"{where}: {text[:40]!r} is not allowed; allowed: {ALLOWED}") from None
 
 
-__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "is_epoch", "iso_utc", "parse_instant", "utc_seconds"]
+__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "TIME_SPAN", "is_epoch", "iso_utc", "parse_instant",
+           "utc_seconds"]

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import re
 
+from sblsim.orchestrator.io.times import MAX_EPOCH
+
 #: The largest file read [bytes] and the most rows (detections; receivers; points of a sound-speed series).
 MAX_DETECTION_BYTES = 256 * 2**20
 MAX_DETECTIONS = 3_000_000
@@ -14,12 +16,12 @@ MAX_SERIES = 1_000_000
 #: Fathom DET record about 20, a GLATOS or OTN extract about 30 in rows a few hundred bytes long); a table of as many
 #: cells of one character each is parsed in about 0.9 GiB.
 MAX_DETECTION_CELLS = 2**25
-#: The allowed times [s since 1970-01-01 UTC] (to the year 2286), coordinates [m] and sound speeds [m/s].
-MAX_EPOCH = 10_000_000_000
+#: The allowed coordinates [m] and sound speeds [m/s] (the latest time:
+#: :data:`~sblsim.orchestrator.io.times.MAX_EPOCH`).
 MAX_COORDINATE = 1e7
 SOUND_SPEED_RANGE = (1300.0, 1700.0)
 #: A receiver's serial or a tag's id: letters, digits, ``. _ -``, 1 to 40 characters, a letter or digit first.
 IDENTIFIER = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,39}")
 
-__all__ = ["IDENTIFIER", "MAX_COORDINATE", "MAX_DETECTIONS", "MAX_DETECTION_BYTES", "MAX_DETECTION_CELLS", "MAX_EPOCH",
-           "MAX_HYDROPHONES", "MAX_SERIES", "SOUND_SPEED_RANGE"]
+__all__ = ["IDENTIFIER", "MAX_COORDINATE", "MAX_DETECTIONS", "MAX_DETECTION_BYTES", "MAX_DETECTION_CELLS",
+           "MAX_EPOCH", "MAX_HYDROPHONES", "MAX_SERIES", "SOUND_SPEED_RANGE"]

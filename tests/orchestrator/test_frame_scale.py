@@ -57,3 +57,4 @@ def test_the_study_refuses_web_mercator_before_any_work(tmp_path):
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "EPSG:3857" in lines[0] and "scales distances by" in lines[0]
     assert not (tmp_path / "out").exists()
+
