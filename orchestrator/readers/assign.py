@@ -14,7 +14,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.detections import Detections
-from sblsim.orchestrator.readers.transmitters import match
+from sblsim.orchestrator.readers.transmitters import match, split
 
 #: The reasons a detection is set aside, in :attr:`Assigned.set_aside`'s keys.
 SET_ASIDE = ("receiver_not_in_table", "outside_deployment", "sync_tag_outside_deployment")
@@ -46,10 +46,11 @@ def assign(detections: Detections, deployments: Deployments) -> Assigned:
     serial = frame["receiver"].to_numpy(dtype=object)
     time = frame["time"].to_numpy(float)
     where = np.full(len(frame), -1, np.int64)
-    known = np.isin(serial, table["serial"].to_numpy(dtype=object))
-    for s, rows in table.groupby("serial", sort=False).groups.items():
+    known = pd.Series(serial).isin(set(table["serial"])).to_numpy()
+    at = pd.Series(serial).groupby(serial, sort=False).indices  # each serial's rows: the sheet's others cost nothing
+    for s, rows in table[table["serial"].isin(list(at))].groupby("serial", sort=False).groups.items():
         part = table.loc[rows].sort_values("start")
-        mine = np.flatnonzero(serial == s)
+        mine = at[s]
         k = np.searchsorted(part["start"].to_numpy(float), time[mine], side="right") - 1
         inside = (k >= 0) & (time[mine] <= part["end"].to_numpy(float)[np.clip(k, 0, None)])
         where[mine[inside]] = np.asarray(part.index)[k[inside]]
@@ -60,18 +61,25 @@ def assign(detections: Detections, deployments: Deployments) -> Assigned:
     # each sync tag as the detections name it, and per deployment where it was deployed more than once
     tags = renamed["tag"].to_numpy(dtype=object).copy()
     detected = frame["tag"].unique()
+    of_tag = pd.Series(tags).groupby(tags, sort=False).indices
     stray = np.zeros(len(frame), bool)
-    carried = table[table["sync_tag"] != ""]
-    for given, rows in carried.groupby("sync_tag", sort=False).groups.items():
-        key = match(given, detected) or given
-        part = carried.loc[rows].sort_values("start")
-        mine = np.flatnonzero(tags == key)
-        k = np.searchsorted(part["start"].to_numpy(float), time[mine], side="right") - 1
-        inside = (k >= 0) & (time[mine] <= part["end"].to_numpy(float)[np.clip(k, 0, None)])
+    carried = table[table["sync_tag"] != ""].sort_values(["sync_tag", "start"], kind="stable")
+    given = carried["sync_tag"].to_numpy(dtype=object)
+    ids = {split(t)[1] for t in detected}  # a sync tag none of whose ids is detected stands for itself
+    key = {g: (match(g, detected) if split(g)[1] in ids else None) or g for g in pd.unique(given)}
+    base = np.asarray([key[g] for g in given], dtype=object)
+    size = carried.groupby("sync_tag", sort=False)["sync_tag"].transform("size").to_numpy()
+    rank = carried.groupby("sync_tag", sort=False).cumcount().to_numpy() + 1
+    labels = np.where(size > 1, base + "." + rank.astype(str), base).astype(object)
+    hydrophones.loc[np.asarray(carried.index), "sync_tag"] = labels
+    for g, at in pd.Series(np.arange(len(carried))).groupby(given, sort=False).indices.items():
+        mine = of_tag.get(key[g])  # only the sync tags detected: the sheet's others cost nothing
+        if mine is None:
+            continue
+        k = np.searchsorted(carried["start"].to_numpy(float)[at], time[mine], side="right") - 1
+        inside = (k >= 0) & (time[mine] <= carried["end"].to_numpy(float)[at][np.clip(k, 0, None)])
         stray[mine[~inside]] = True
-        labels = [key] if len(part) == 1 else [f"{key}.{j + 1}" for j in range(len(part))]
-        tags[mine[inside]] = np.asarray(labels, dtype=object)[k[inside]]
-        hydrophones.loc[np.asarray(part.index), "sync_tag"] = labels
+        tags[mine[inside]] = labels[at][k[inside]]
     keep = (where >= 0) & ~stray
     kept = renamed.assign(tag=tags)[keep].reset_index(drop=True)
     if not len(kept):

@@ -30,7 +30,7 @@ recovery, between two, or at a serial the table does not list are set aside and 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.frames import (
     CHOSEN_INPUT,
+    CHOSEN_UTM,
     Frame,
     check_crs,
     check_latlon,
@@ -93,12 +94,16 @@ class Deployments:
         The file read.
     notes : list of str
         What the reader decided that a user should know (columns ignored, depths partly given).
+    sheet : pandas.DataFrame or None
+        Where these are the deployments in use of a larger sheet (:meth:`restricted`): every deployment of it as
+        :meth:`written` gives them, in this frame, with the columns the restriction added (``used``, ...).
     """
 
     table: pd.DataFrame
     frame: Frame | None
     source: str
     notes: list[str] = field(default_factory=list)
+    sheet: pd.DataFrame | None = None
 
     def hydrophones(self) -> pd.DataFrame:
         """The receivers as the clocks' synchronisation and the times-of-arrival matrix take them: ``receiver``,
@@ -110,14 +115,22 @@ class Deployments:
         t = self.table
         lat, lon = t["lat"].to_numpy(float), t["lon"].to_numpy(float)
         centre = (float(np.nanmean(lat)), float(np.nanmean(lon))) if np.isfinite(lat).any() else (None, None)
-        return {"file": self.source, "deployments": int(len(t)), "receivers": int(t["serial"].nunique()),
-                "redeployed": sorted(t.loc[t["serial"].duplicated(), "serial"].unique().tolist()),
-                "frame": None if self.frame is None else self.frame.summary(*centre),
-                "notes": list(self.notes)}
+        out = {"file": self.source, "deployments": int(len(t)), "receivers": int(t["serial"].nunique()),
+               "redeployed": sorted(t.loc[t["serial"].duplicated(), "serial"].unique().tolist()),
+               "frame": None if self.frame is None else self.frame.summary(*centre),
+               "notes": list(self.notes)}
+        if self.sheet is not None and "not_used" in self.sheet:  # the sheet's deployments not used, per cause
+            causes = self.sheet.loc[self.sheet["not_used"] != "", "not_used"].value_counts()
+            out |= {"in_sheet": int(len(self.sheet)), "used": int(len(t)),
+                    "not_used": {"count": int(causes.sum())} | {str(k): int(v) for k, v in causes.items()}}
+        return out
 
     def written(self) -> pd.DataFrame:
         """``receivers.csv``: each deployment's name, serial, station, sync tag, position in the frame and in
-        latitude and longitude, depth and dates (ISO 8601 UTC, empty where open)."""
+        latitude and longitude, depth and dates (ISO 8601 UTC, empty where open); every deployment of the sheet
+        where these are those in use of it (:attr:`sheet`)."""
+        if self.sheet is not None:
+            return self.sheet.copy()
         t = self.table
         out = pd.DataFrame({"receiver": t["receiver"], "serial": t["serial"], "station": t["station"],
                             "sync_tag": t["sync_tag"], "x_m": t["x"], "y_m": t["y"], "z_m": t["z"],
@@ -127,6 +140,52 @@ class Deployments:
             out[f"{key}_utc"] = iso_utc(np.where(np.isfinite(values), values, np.nan))
         out["bottom_depth_m"] = t["bottom_depth"]
         return out
+
+    def restricted(self, keep: np.ndarray, columns: dict[str, np.ndarray] | None = None) -> Deployments:
+        """The deployments ``keep`` as a study's array, in a frame chosen over them alone.
+
+        Where the frame was chosen automatically (the UTM zone of the centre: :func:`frame_for`), it is chosen
+        again over the kept deployments' latitudes and longitudes and, where that zone differs, x and y are
+        projected to it; a frame given, or the CRS the positions were given in, is kept with its x and y.
+
+        Parameters
+        ----------
+        keep : numpy.ndarray
+            (n,) bool over :attr:`table`'s rows.
+        columns : dict of str to numpy.ndarray, optional
+            Each (n,): columns added to :attr:`sheet` (``used``, the cause of a deployment not used, ...).
+
+        Returns
+        -------
+        Deployments
+            The kept rows (index 0..k-1), their frame, and as :attr:`sheet` every row of this table as
+            :meth:`written` gives it in that frame (x, y [m] empty for a deployment the frame cannot hold), with
+            ``columns``.
+
+        Raises
+        ------
+        ModelError
+            No deployment kept.
+        """
+        keep = np.asarray(keep, bool)
+        if not keep.any():
+            raise ModelError(f"receivers: no deployment of {self.source!r} is in use; allowed: deployments that "
+                             "logged the detections")
+        table, frame = self.table, self.frame
+        if frame is not None and frame.chosen == CHOSEN_UTM and not keep.all():
+            lat, lon = table["lat"].to_numpy(float), table["lon"].to_numpy(float)
+            chosen = frame_for(lat[keep], lon[keep])
+            if chosen.crs != frame.crs:
+                x, y = np.full(len(table), np.nan), np.full(len(table), np.nan)
+                x[keep], y[keep] = chosen.from_latlon(lat[keep], lon[keep])
+                try:  # the others where pyproj can hold them in that zone
+                    x[~keep], y[~keep] = chosen.from_latlon(lat[~keep], lon[~keep])
+                except ModelError:
+                    pass
+                table = table.assign(x=x, y=y)
+            frame = chosen
+        sheet = replace(self, table=table, frame=frame, sheet=None).written().assign(**(columns or {}))
+        return Deployments(table[keep].reset_index(drop=True), frame, self.source, list(self.notes), sheet)
 
 
 def _index(header: list[str]) -> dict[str, int | None]:

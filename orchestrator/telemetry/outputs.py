@@ -11,29 +11,55 @@ synchronisation made (``sync/``, as ``sblsim sync`` writes it) and one folder pe
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sblsim.orchestrator.readers.in_water import SAID
 from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry.study import StudyOutcome
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
+#: The characters of a line of the text beside the map; a receiver's label's offsets from it [pt], tried in turn.
+PANEL_WIDTH = 46
+LABEL_CORNERS = ((3, 3), (3, -3), (-3, 3), (-3, -3))
+
+
+def _heard(outcome: StudyOutcome) -> dict[str, list[str]]:
+    """Each tracked tag's receivers: the deployments whose column of its times-of-arrival matrix holds an arrival."""
+    out = {}
+    for folder in outcome.outcomes:
+        matrix = outcome.matrices[folder]
+        heard = np.isfinite(matrix.toa).any(axis=0)
+        out[str(matrix.summary["tag"])] = [n for n, h in zip(matrix.names, heard) if h]
+    return out
+
 
 def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
-    """The receivers and the tracks as a GeoJSON FeatureCollection (RFC 7946: WGS 84 longitude, latitude); None
-    where the positions have no CRS."""
+    """The receivers used and the tracks as a GeoJSON FeatureCollection (RFC 7946: WGS 84 longitude, latitude);
+    None where the positions have no CRS. A receiver is a point with its deployment's fields, ``used`` (true),
+    its kept ``detections`` and ``tags_tracked`` (the tracked tags it heard, separated by commas); a track is a
+    line of its rows not flagged."""
     table = outcome.deployments.written()
+    if "used" in table:
+        table = table[table["used"].to_numpy(bool)]
     if outcome.deployments.frame is None or not np.isfinite(table["lat"].to_numpy(float)).all():
         return None
+    by_receiver: dict[str, list[str]] = {}
+    for tag, names in _heard(outcome).items():
+        for name in names:
+            by_receiver.setdefault(name, []).append(tag)
     features = []
-    for row in table.itertuples(index=False):
-        features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": [row.lon, row.lat]},
-                         "properties": {"kind": "receiver", "receiver": row.receiver, "serial": row.serial,
-                                        "station": row.station, "sync_tag": row.sync_tag,
-                                        "start_utc": row.start_utc, "end_utc": row.end_utc}})
+    for row in table.to_dict("records"):
+        features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": [row["lon"], row["lat"]]},
+                         "properties": {"kind": "receiver", "receiver": row["receiver"], "serial": row["serial"],
+                                        "station": row["station"], "sync_tag": row["sync_tag"],
+                                        "start_utc": row["start_utc"], "end_utc": row["end_utc"], "used": True,
+                                        "detections": int(row.get("detections", 0)),
+                                        "tags_tracked": ",".join(by_receiver.get(row["receiver"], []))}})
     for tag, rows in outcome.tracks.groupby("tag", sort=False):
         ok = rows[(rows["quality"] != "flagged") & rows["lat"].notna()]
         if len(ok) < 2:
@@ -48,32 +74,179 @@ def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
     return {"type": "FeatureCollection", "features": plain(features)}
 
 
-def study_map(outcome: StudyOutcome):
-    """Every tag's track (the rows not flagged) over the receivers in the frame, with a scale bar (matplotlib)."""
+def _short(reason: str) -> str:
+    """A refusal's reason as the map's panel lists it: its part before the allowed values, in two lines at most."""
+    text = str(reason).split("; allowed:")[0].strip() or "no reason given"
+    lines = textwrap.wrap(text, PANEL_WIDTH - 2)
+    return "\n  ".join(lines[:2]) + ("…" if len(lines) > 2 else "")
+
+
+def _panel(outcome: StudyOutcome, labelled: tuple[int, int], lines_free: int) -> str:
+    """The text beside the map, under its legend: the deployments used and not, the receivers labelled, each tag
+    not tracked with the short reason (as many as ``lines_free`` lines hold, then their count)."""
+    s = outcome.deployments.summary()
+    lines = [f"deployments: {s['deployments']:,} used" + (f" of {s['in_sheet']:,}" if "in_sheet" in s else "")]
+    for cause, count in s.get("not_used", {}).items():
+        if cause != "count":
+            lines.append(f"  not used, {SAID.get(cause, cause)}: {count:,}")
+    if labelled[0] < labelled[1]:
+        lines += [f"receivers labelled: {labelled[0]} of {labelled[1]}", "  (the others' labels would overlap)"]
+    tags = outcome.tags
+    refused = tags[tags["status"] != "tracked"]
+    lines += ["", f"tags not tracked: {len(refused)} of {len(tags)}" if len(refused) else "every tag tracked"]
+    room = lines_free - len(lines)
+    for k, row in enumerate(refused.itertuples(index=False)):
+        entry = f"{row.tag if isinstance(row.tag, str) and row.tag else row.transmitter}: {_short(row.reason)}"
+        height = entry.count("\n") + 1
+        if height + (k + 1 < len(refused)) > room:  # a line kept for the rest's count
+            lines.append(f"… and {len(refused) - k} more (tags.csv)")
+            break
+        lines.append(entry)
+        room -= height
+    return "\n".join(lines)
+
+
+def _north(ax, frame, x: float, y: float) -> list:
+    """A north arrow in the lower left, pointing to true north at the frame's point ``x``, ``y`` [m] (the grid's
+    convergence there, by pyproj); its artists."""
+    lat, lon = frame.to_latlon(np.array([x]), np.array([y]))
+    nx, ny = frame.from_latlon(lat + 0.01, lon)
+    angle = np.arctan2(nx[0] - x, ny[0] - y)
+    from matplotlib.transforms import ScaledTranslation
+
+    length = 22.0  # [pt], its tail in the corner
+    tip = ax.transAxes + ScaledTranslation(length * np.sin(angle) / 72, length * np.cos(angle) / 72,
+                                           ax.figure.dpi_scale_trans)
+    arrow = ax.annotate("", xy=(0.04, 0.035), xycoords=tip,
+                        xytext=(-length * np.sin(angle), -length * np.cos(angle)), textcoords="offset points",
+                        arrowprops={"arrowstyle": "-|>", "color": "k", "lw": 1.2})
+    label = ax.annotate("N", xy=(0.04, 0.035), xycoords=tip, xytext=(4 * np.sin(angle), 4 * np.cos(angle)),
+                        textcoords="offset points", ha="center", va="bottom", fontsize=9, weight="bold")
+    return [arrow, label]
+
+
+def _thin_labels(ax, renderer, texts: list, fixed: list) -> int:
+    """Each receiver's label (in ``texts``' order: the most detections first) put at the first of its corners
+    (upper right, lower right, upper left, lower left) where it stays inside the map and overlaps no label put
+    before, no receiver's marker and none of the ``fixed`` artists (the scale bar, the north arrow), by their
+    extents as matplotlib draws them; removed where none is free. The count kept."""
+    from matplotlib.transforms import Bbox
+
+    half = 2.5 / 72 * ax.figure.dpi  # a marker's half width [px]
+    markers = [Bbox([[x - half, y - half], [x + half, y + half]])
+               for x, y in ax.transData.transform(np.array([t.xy for t in texts]).reshape(-1, 2))]
+    kept = [a.get_window_extent(renderer) for a in fixed]
+    occupied, inside = len(kept), ax.get_window_extent(renderer)
+    for k, text in enumerate(texts):
+        text.set_visible(True)
+        for dx, dy in LABEL_CORNERS:
+            text.xyann = (dx, dy)
+            text.set(ha="left" if dx > 0 else "right", va="bottom" if dy > 0 else "top")
+            box = text.get_window_extent(renderer).expanded(1.05, 1.1)
+            within = inside.x0 <= box.x0 and box.x1 <= inside.x1 and inside.y0 <= box.y0 and box.y1 <= inside.y1
+            if within and not any(box.overlaps(other) for other in kept) and \
+                    not any(box.overlaps(m) for j, m in enumerate(markers) if j != k):
+                kept.append(box)
+                break
+        else:
+            text.remove()
+    return len(kept) - occupied
+
+
+def _used(outcome: StudyOutcome):
+    """The receivers used (``receivers.csv``'s rows with ``used``), the most detections first."""
+    table = outcome.deployments.written()
+    if "used" in table:
+        table = table[table["used"].to_numpy(bool)]
+    if "detections" in table:
+        table = table.sort_values("detections", ascending=False, kind="stable")
+    return table.reset_index(drop=True)
+
+
+def _draw(ax, outcome: StudyOutcome, table, origin: tuple[float, float]) -> list:
+    """The receivers used (filled where they heard a tag tracked), each tracked tag's rows not flagged and, for
+    up to ten tags, its receivers ringed in its colour; the receivers' labels (returned)."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(10, 8))
-    table = outcome.deployments.table
-    ax.plot(table["x"], table["y"], "^", color="k", ms=7, label="receivers", zorder=3)
-    for name, x, y in table[["receiver", "x", "y"]].itertuples(index=False):
-        ax.annotate(name, (x, y), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    heard = _heard(outcome)
+    rx, ry = table["x_m"].to_numpy(float) - origin[0], table["y_m"].to_numpy(float) - origin[1]
+    hearing = table["receiver"].isin(set().union(*heard.values()) if heard else set()).to_numpy()
+    for mask, style, said in ((hearing, {"color": "k"}, "receivers used, heard a tag tracked"),
+                              (~hearing, {"mfc": "none", "mec": "0.3"}, "receivers used, heard no tag tracked")):
+        if mask.any():
+            ax.plot(rx[mask], ry[mask], "^", ms=6, zorder=3, label=f"{said} ({int(mask.sum())})", **style)
     colours = plt.get_cmap("tab10").colors
-    tags = list(outcome.tracks.groupby("tag", sort=False))
+    ok = outcome.tracks[outcome.tracks["quality"] != "flagged"]
+    tags = list(ok.groupby("tag", sort=False))
+    every = outcome.tracks.groupby("tag", sort=False).size()
+    ringed = len(tags) <= len(colours)
+    position = dict(zip(table["receiver"], zip(rx, ry)))
     for k, (tag, rows) in enumerate(tags):
-        ok = rows[rows["quality"] != "flagged"]
-        ax.plot(ok["x"], ok["y"], ".-", ms=2, lw=0.4, color=colours[k % len(colours)], alpha=0.8,
-                label=f"{tag} ({len(ok)} of {len(rows)} rows)" if len(tags) <= 20 else None)
+        colour = colours[k % len(colours)]
+        ax.plot(rows["x"] - origin[0], rows["y"] - origin[1], ".-", ms=2, lw=0.5, color=colour, alpha=0.85,
+                label=f"{tag}: {len(rows)} of {every[tag]} rows, its receivers ringed" if ringed else None)
+        if ringed:
+            points = np.array([position[n] for n in heard.get(tag, []) if n in position]).reshape(-1, 2)
+            ax.plot(points[:, 0], points[:, 1], "o", mfc="none", mec=colour, ms=10 + 3.5 * k, mew=1.0, zorder=2)
+    return [ax.annotate(str(name), (x, y), fontsize=6, xytext=(3, 3), textcoords="offset points", zorder=4,
+                        visible=False) for name, x, y in zip(table["receiver"], rx, ry)]  # shown where they fit
+
+
+def study_map(outcome: StudyOutcome):
+    """The study on a map (matplotlib): the receivers used, each tracked tag's track (its rows not flagged) and its
+    receivers ringed in its colour, labels that do not overlap (the most detections first), a scale bar and a
+    north arrow, axes as offsets in metres in the frame from a round origin, the frame and the counts in the
+    title (as the console gives them); beside it the legend, the deployments used and not and each tag not
+    tracked with its reason."""
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    table = _used(outcome)
+    ok = outcome.tracks[outcome.tracks["quality"] != "flagged"]
+    xs = np.r_[table["x_m"].to_numpy(float), ok["x"].to_numpy(float)]
+    ys = np.r_[table["y_m"].to_numpy(float), ok["y"].to_numpy(float)]
+    finite = np.isfinite(xs) & np.isfinite(ys)
+    spans = (np.ptp(xs[finite]), np.ptp(ys[finite])) if finite.any() else (0.0, 0.0)
+    width = 7.0 * float(np.clip(spans[0] / spans[1] if spans[1] > 0 else 1.0, 0.75, 1.6))  # the data's shape
+    fig, (ax, side) = plt.subplots(1, 2, figsize=(width + 4.2, 8), width_ratios=(width, 3.6))
+    origin = tuple(float(np.floor(np.min(v[finite]) / 1000.0) * 1000.0) if finite.any() else 0.0 for v in (xs, ys))
+    texts = _draw(ax, outcome, table, origin)
     ax.ticklabel_format(useOffset=False, style="plain")
-    ax.set(aspect="equal", xlabel="x (east) [m]", ylabel="y (north) [m]")
+    ax.xaxis.set_major_locator(MaxNLocator(max(3, int(width / 1.1))))
+    ax.tick_params(labelsize=7)
+    if finite.any():  # a band below the receivers for the north arrow and the scale bar
+        span = max(max(spans), 1.0)
+        ax.set(xlim=(np.min(xs[finite]) - origin[0] - 0.05 * span, np.max(xs[finite]) - origin[0] + 0.05 * span),
+               ylim=(np.min(ys[finite]) - origin[1] - 0.16 * span, np.max(ys[finite]) - origin[1] + 0.05 * span))
     frame = outcome.summary.get("frame")
-    ax.set_title(f"{len(tags)} tags tracked (rows not flagged)" + (f"; {frame['name']} ({frame['crs']})" if frame
-                                                                     else "; a local frame without a CRS"), fontsize=9)
-    x = np.r_[table["x"].to_numpy(float), outcome.tracks["x"].to_numpy(float)]
-    y = np.r_[table["y"].to_numpy(float), outcome.tracks["y"].to_numpy(float)]
-    ok = np.isfinite(x) & np.isfinite(y)
-    scale_bar(ax, max(np.ptp(x[ok]), np.ptp(y[ok])) if ok.any() else float("nan"))
-    ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
+    crs = f" ({frame['crs']})" if frame else ""
+    ax.set(aspect="equal", xlabel=f"x [m] east of {origin[0]:,.0f}{crs}",
+           ylabel=f"y [m] north of {origin[1]:,.0f}{crs}")
+    s = outcome.deployments.summary()
+    tracked = int((outcome.tags["status"] == "tracked").sum())
+    fig.suptitle(f"{tracked} of {len(outcome.tags)} tags tracked (rows not flagged); {s['deployments']:,} of "
+                 f"{s.get('in_sheet', s['deployments']):,} deployments used\n"
+                 + (f"frame {frame['name']} ({frame['crs']}, {frame['chosen']})" if frame else
+                    "a local frame without a CRS (no north)"), fontsize=9, x=0.01, ha="left")
+    scale_bar(ax, max(spans) if finite.any() else float("nan"))
+    fixed = list(ax.artists)
+    if outcome.deployments.frame is not None and len(table):
+        fixed += _north(ax, outcome.deployments.frame, float(np.nanmean(table["x_m"])),
+                        float(np.nanmean(table["y_m"])))
+    side.axis("off")
+    legend = side.legend(*ax.get_legend_handles_labels(), loc="upper left", fontsize=7, borderaxespad=0)
+    for _ in range(2):  # the second with the ticks and the aspect the first draw settled
+        fig.tight_layout()
+        fig.canvas.draw()
+    box, own = ax.get_position(), side.get_position()  # the panel beside the map, level with its top
+    side.set_position([own.x0, box.y0, own.width, box.height])
+    renderer = fig.canvas.get_renderer()
+    kept = _thin_labels(ax, renderer, texts, fixed)
+    below = side.transAxes.inverted().transform(legend.get_window_extent(renderer))[0, 1] - 0.02
+    line = 6.5 * 1.25 / 72 * fig.dpi  # a line of the panel's text [px]
+    free = int(below * side.get_window_extent(renderer).height / line)
+    side.text(0, below, _panel(outcome, (kept, len(texts)), free), transform=side.transAxes, va="top",
+              ha="left", fontsize=6.5, family="monospace")
     return fig
 
 

@@ -40,6 +40,7 @@ from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import Deployments, read_deployments
 from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
 from sblsim.orchestrator.readers.transmitters import match
@@ -223,8 +224,12 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     if temperature_path is not None:  # refused here in one line, not once per tag
         read_temperature_series(temperature_path, 0.0, absolute=True)
-    bottom, water_info = _water(deployments, water_depth, notes)
     assigned = assign(data, deployments)
+    array = in_water(data, assigned, deployments)  # the deployments that logged the study: the array from here on
+    deployments, assigned = array.deployments, array.assigned
+    if array.line():
+        notes.append(array.line())
+    bottom, water_info = _water(deployments, water_depth, notes)
     detected = assigned.detections.frame["tag"].unique()
     sync_tags = set(assigned.hydrophones["sync_tag"]) - {""}
     if sheet is not None:
