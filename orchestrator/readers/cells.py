@@ -22,7 +22,8 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io import tables
-from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, NUMBER, check_cells, read_bounded, regular_file
+from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, NUMBER, check_cells, read_bounded
+from sblsim.orchestrator.readers.binary import not_text, refuse_log
 
 #: The options every table is parsed with (each cell a str, none taken as missing; blank lines kept as rows).
 _CSV = dict(header=None, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, engine="c",
@@ -39,8 +40,10 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
     than ``max_rows`` lines and 1,000 besides, and before it is decoded when a line is longer than
     :data:`~sblsim.orchestrator.io.tables.MAX_LINE_BYTES` or holds more than ``max_line_cells`` cells (its commas and
     one), or its lines more than ``max_cells`` cells in all (:func:`~sblsim.orchestrator.io.tables.check_cells`);
-    UTF-8 (a byte-order mark dropped), no NUL byte. With ``prefix``, only the file's first ``prefix`` bytes (a
-    character cut at the end dropped), its size not checked, its lines' cells checked. With ``fallback`` (an
+    UTF-8 (a byte-order mark dropped), no NUL byte; a receiver's binary log (VRL, VDAT: :mod:`.binary`) refused
+    first, by its extension or first bytes, in a line naming its CSV export. With ``prefix``, only the file's first
+    ``prefix`` bytes (a character cut at the end dropped), its size not checked, its lines' cells checked. With
+    ``fallback`` (an
     encoding: ``"latin-1"``, as Windows exports write a ``°``), a text that is not UTF-8 is decoded in it instead.
 
     Parameters
@@ -60,8 +63,8 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         One line naming the file and the limit or the fault (with the count: the bytes, lines or cells).
     """
     name = str(path)
+    refuse_log(Path(path), what)  # a receiver's binary log: named, with the export that makes its CSV
     if prefix is not None:
-        regular_file(path, what)
         try:
             with open(path, "rb") as handle:
                 head = handle.read(prefix)
@@ -69,7 +72,7 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
             raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
         nul = head.find(b"\0")
         if nul >= 0:
-            raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
+            raise not_text(name, what, head, nul)
         check_cells(head, name, what, max_line_cells=max_line_cells, max_cells=max_cells)
         return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else \
             _decoded(head, name, what, fallback)
@@ -78,7 +81,7 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
                         max_line_cells=max_line_cells, max_cells=max_cells)
     nul = data.find(b"\0")
     if nul >= 0:
-        raise ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
+        raise not_text(name, what, data, nul)
     return _decoded(data, name, what, fallback)
 
 
