@@ -12,10 +12,12 @@ Two parts, added in quadrature (independent errors):
   of a receiver whose arrivals are often late). The residuals are about the sync tags' known positions: a receiver
   whose position is metres off has residuals of metres, which its arrivals of a tag will have too. An arrival whose
   leverage is one (its residual 0 whatever its error: the fit cannot check it) is left out;
-* the **clock's own uncertainty**: the root mean square of the receiver's offset sigmas at the bins' edges (the
-  reference receiver's is 0). An offset's error is common to the arrivals of a bin; taken here as each arrival's
-  own, it counts fully in a single ping's fix and over-counts in a smoother that averages the pings of a bin; it is
-  small wherever the receiver hears the sync tags well.
+* the **clock's own uncertainty**: the root mean square of the receiver's offset sigma where its arrivals are (at
+  each arrival's time, the variance interpolated linearly between the bin's two edges; the reference receiver's is
+  0): a bin the record barely enters, whose far edge the fit extrapolates to (its sigma large), weighs by the
+  arrivals in it, not as a bin (without the arrivals' times: the RMS over the edges). An offset's error is common to
+  the arrivals of a bin; taken here as each arrival's own, it counts fully in a single ping's fix and over-counts in
+  a smoother that averages the pings of a bin; it is small wherever the receiver hears the sync tags well.
 
 A receiver with fewer than :data:`MIN_ARRIVALS` residuals takes the others' median noise (``measured`` False).
 
@@ -50,7 +52,8 @@ class ReceiverNoise:
 
 
 def receiver_noise(receiver: np.ndarray, corrected: np.ndarray, knot_sigma: np.ndarray,
-                   synchronised: np.ndarray) -> ReceiverNoise:
+                   synchronised: np.ndarray, time: np.ndarray | None = None,
+                   edges: np.ndarray | None = None) -> ReceiverNoise:
     """Each receiver's timing noise (the module docstring).
 
     Parameters
@@ -64,6 +67,10 @@ def receiver_noise(receiver: np.ndarray, corrected: np.ndarray, knot_sigma: np.n
     knot_sigma : ndarray, (R, K + 1)
         Each receiver's offset sigma at each bin edge [s] (0 for the reference receiver; NaN where not computed).
     synchronised : ndarray of bool, (R,)
+    time : ndarray, (n,), optional
+        Each arrival's time on the fit's base [s]; with ``edges``, the clock's part is taken where the arrivals are.
+    edges : ndarray, (K + 1,), optional
+        The bins' edges on the same base [s].
 
     Returns
     -------
@@ -84,10 +91,29 @@ def receiver_noise(receiver: np.ndarray, corrected: np.ndarray, knot_sigma: np.n
     knots = np.asarray(knot_sigma, float)
     finite = np.isfinite(knots)
     clock = np.sqrt((np.where(finite, knots, 0.0) ** 2).sum(axis=1) / np.maximum(finite.sum(axis=1), 1))
+    if time is not None and edges is not None:
+        where = _at_arrivals(receiver, np.asarray(time, float), knots, np.asarray(edges, float), count)
+        clock = np.where(np.isfinite(where), where, clock)
     clock = np.where(synchronised, clock, np.nan)
     sigma = np.clip(np.hypot(noise, clock), *NOISE_RANGE)
     return ReceiverNoise(np.where(synchronised & np.isfinite(noise), sigma, np.nan), noise, clock, arrivals,
                          measured)
+
+
+def _at_arrivals(receiver: np.ndarray, time: np.ndarray, knots: np.ndarray, edges: np.ndarray, count: int
+                 ) -> np.ndarray:
+    """(R,) [s] each receiver's RMS offset sigma at its arrivals' times (the variance interpolated between the two
+    edges of each arrival's bin; an edge without a sigma takes the other's); NaN for a receiver with none."""
+    width = len(edges) - 1
+    k = np.clip(np.searchsorted(edges, time, side="right") - 1, 0, max(width - 1, 0))
+    f = np.clip((time - edges[k]) / np.maximum(edges[np.minimum(k + 1, width)] - edges[k], 1e-300), 0.0, 1.0)
+    left, right = knots[receiver, k] ** 2, knots[receiver, np.minimum(k + 1, width)] ** 2
+    left, right = np.where(np.isfinite(left), left, right), np.where(np.isfinite(right), right, left)
+    variance = (1 - f) * left + f * right
+    ok = np.isfinite(variance) & np.isfinite(time)
+    total = np.bincount(receiver[ok], weights=variance[ok], minlength=count)
+    n = np.bincount(receiver[ok], minlength=count)
+    return np.where(n > 0, np.sqrt(total / np.maximum(n, 1)), np.nan)
 
 
 __all__ = ["MAD_FACTOR", "MIN_ARRIVALS", "NOISE_RANGE", "ReceiverNoise", "receiver_noise"]

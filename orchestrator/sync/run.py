@@ -356,7 +356,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     offsets = _offsets(fit, names, synced, bridged, origin)
     # each receiver's timing noise (its residuals' robust scale and its clock's sigma), for the tracker
     noise = receiver_noise(receiver, fit.standardised * fit.scale[np.maximum(rows, 0)],
-                           segments.receiver_sigmas(fit, n_receivers), linked)
+                           segments.receiver_sigmas(fit, n_receivers), linked, time, fit.edges)
     if np.isfinite(noise.sigma[linked]).all():  # (none where no receiver has residuals enough to measure it)
         offsets["toa_sigma_s"] = noise.sigma[[names.index(r) for r in offsets["receiver"]]]
         # its clock offset's own uncertainty beside it: a bias common to all its arrivals of a still tag, which
