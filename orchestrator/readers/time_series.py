@@ -38,11 +38,17 @@ def _same_width(rows: list[tuple[int, list[str]]], header: list[str], name: str,
                          f"({','.join(header)[:80]}); allowed: {len(header)} cells a row")
 
 
+#: How long before the times of arrival's origin [s] a time column's numbers may start and still be taken as epoch
+#: seconds (a truth logged from a day before the first ping).
+EPOCH_MARGIN = 86_400.0
+
+
 def _times(rows: list[tuple[int, list[str]]], k: int, header: list[str], name: str, what: str,
            origin: float | None) -> np.ndarray | None:
     """The time column ``k`` of ``rows`` on the times of arrival's base [s] where it holds absolute times (ISO 8601
-    text, or numbers under a name of :data:`ABSOLUTE_TIME_NAMES`): less ``origin``; None where it holds numbers on
-    that base already (the caller checks them).
+    text, numbers under a name of :data:`ABSOLUTE_TIME_NAMES`, or, where ``origin`` [s since 1970] is known, numbers
+    none of which is before it by more than :data:`EPOCH_MARGIN`: epoch seconds as logged): less ``origin``; None
+    where it holds numbers on that base already (the caller checks them).
 
     Raises
     ------
@@ -51,7 +57,10 @@ def _times(rows: list[tuple[int, list[str]]], k: int, header: list[str], name: s
     """
     cells = [cells[k].strip() for _, cells in rows]
     if header[k] not in ABSOLUTE_TIME_NAMES and all(NUMBER.fullmatch(c) for c in cells):
-        return None
+        if origin is None or not cells or min(float(c) for c in cells) < origin - EPOCH_MARGIN:
+            return None
+        # numbers from (about) the times of arrival's own origin on: epoch seconds (the base's numbers are a study's
+        # span, far below an origin after 1970 + EPOCH_MARGIN)
     seconds = utc_seconds(cells, f"{what}: {name!r}", [line for line, _ in rows], header[k])
     if origin is None:
         raise ModelError(f"{what}: {name!r}: its times are absolute (UTC: ISO 8601 or {header[k]}) and the times of "
