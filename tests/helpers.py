@@ -155,3 +155,51 @@ def simulated_clocks(n: int, hours: float, seed: int, jump: tuple[int, float, fl
     fit = fit_with_breaks(sim.receiver, emission, t, distance, slowness, used, linked, 0, 3600.0, sim.tag,
                           **options)
     return sim, origin, t, used, emission, distance, slowness, fit
+
+
+def check_tag_rows(tags, tracks, given: Sequence[Any] = ()) -> None:
+    """Issue 96's invariant on a study's ``tags.csv`` (``tags``) and ``tracks.csv`` (``tracks``), every tag: its
+    pings positioned, set aside or not positioned (counts, summing to its pings, the not positioned counted by
+    reason); ``tracked`` only with a row positioned, and then its rows in ``tracks.csv`` those positioned (finite
+    ``x``, ``y``) and those set aside; any other tag refused with a reason code the study declares and a reason,
+    and no row of it in ``tracks.csv``; every option a reason names one ``sblsim track`` has, and every path one of
+    ``given`` (the files the study was given)."""
+    import argparse
+    import re
+
+    import pandas as pd
+
+    from sblsim.models.tracking.strays import SET_ASIDE_REASON
+    from sblsim.orchestrator.commands.track import add_arguments
+    from sblsim.orchestrator.telemetry.census import REASON_CODES
+    from sblsim.orchestrator.telemetry.study import TAG_COLUMNS
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    options = {o for action in parser._actions for o in action.option_strings}
+    paths = {str(p) for p in given}
+    assert list(tags.columns) == list(TAG_COLUMNS)
+    assert len(tags) and tags["tag"].fillna(tags["transmitter"]).is_unique
+    for row in tags.itertuples(index=False):
+        counts = [row.pings, row.positioned, row.set_aside, row.not_positioned]
+        assert all(float(c).is_integer() and c >= 0 for c in counts), row
+        assert row.pings == row.positioned + row.set_aside + row.not_positioned, row
+        why = "" if pd.isna(row.not_positioned_why) else str(row.not_positioned_why)
+        parts = [part.rsplit(" ", 1) for part in why.split("; ") if part]
+        assert sum(int(n) for _, n in parts) == row.not_positioned, row
+        mine = tracks[tracks["tag"].astype(str) == str(row.tag)]
+        reason = "" if pd.isna(row.reason) else str(row.reason)
+        if row.status == "tracked":
+            assert row.positioned >= 1 and reason == "" and not (isinstance(row.reason_code, str) and row.reason_code)
+            placed = mine[["x", "y"]].notna().all(axis=1)
+            assert int(placed.sum()) == row.positioned, row
+            assert int((mine["quality_reason"] == SET_ASIDE_REASON).sum()) == row.set_aside, row
+            assert 0 <= row.flagged <= row.positioned
+        else:
+            assert row.status == "refused" and row.positioned == 0 and len(mine) == 0, row
+            assert row.reason_code in REASON_CODES and reason, row
+        for option in re.findall(r"(?<![\w-])--[a-z][a-z-]*", reason):
+            assert option in options, (option, reason)
+        for path in re.findall(r"'(/[^']*)'", reason):
+            assert path in paths, (path, reason)
+    assert set(tracks["tag"].astype(str)) == set(tags.loc[tags["status"] == "tracked", "tag"].astype(str))

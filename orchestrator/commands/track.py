@@ -17,6 +17,7 @@ from sblsim.orchestrator.io.arguments import path_argument, prepare_out
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.telemetry.study_options import FORMATS, _options
+from sblsim.orchestrator.telemetry.study_report import closing_line, tag_lines
 from sblsim.orchestrator.telemetry.study_run import _run
 from sblsim.orchestrator.tracks.options import sound_speed_arguments, water_arguments
 from sblsim.orchestrator.tracks.outputs import figure
@@ -235,24 +236,14 @@ def main(args: argparse.Namespace) -> int:
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
                         "study.json", "study")
     outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
-    table = outcome.tags
-    for row in table.itertuples(index=False):
-        if row.status == "tracked":
-            aside = f"{row.set_aside} set aside (set_aside.csv), " if row.set_aside else ""
-            print(f"  {row.tag}: {row.pings} pings, {aside}{row.positioned} positioned, {row.flagged} flagged, "
-                  f"median σ {row.median_sigma_m:.2g} m, ping type {row.ping_type} (the sheet: "
-                  f"{row.ping_type_stated}), sound speed {row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}), "
-                  f"{row.first_utc} to {row.last_utc}")
-        else:
-            print(f"sblsim: warning: tag {row.transmitter} not tracked: {row.reason}", file=sys.stderr)
+    for line, warning in tag_lines(outcome.tags):
+        print(line, file=sys.stderr if warning else sys.stdout)
     for note in outcome.summary["notes"]:
         print(f"note: {note}", file=sys.stderr)
-    tracked = table[table["status"] == "tracked"]
-    print(f"  {len(tracked)} of {len(table)} tags tracked, {int(tracked['flagged'].sum())} of "
-          f"{int(tracked['positioned'].sum())} rows flagged, in {outcome.summary['wall_time_s']:.1f} s; written to "
-          f"{out}/ (tracks.csv, tags.csv, receivers.csv, study.json, "
-          f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, "
-          f"{'sync/, ' if outcome.sync is not None else ''}a folder per tag)")
+    print(closing_line(outcome.tags, outcome.summary["wall_time_s"], out,
+                       f"tracks.csv, tags.csv, receivers.csv, study.json, "
+                       f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, "
+                       f"{'sync/, ' if outcome.sync is not None else ''}a folder per tag"))
     return 0
 
 

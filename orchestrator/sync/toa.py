@@ -32,7 +32,9 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.at_once import heard_at_once
 from sblsim.models.sync.pings import build_pings, inferred_shortest, interval_seen, largest_travel_time
+from sblsim.models.sync.resolution import time_quantum
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.tables import NUMBER
@@ -55,6 +57,9 @@ FORMATS = DETECTION_FORMATS
 #: The sensor units given a column name of their own in ``pings.csv`` (others: ``sensor_<unit>``).
 SENSOR_COLUMNS = {"m": "depth_m", "°c": "temperature_c", "c": "temperature_c", "m/s²": "acceleration_m_s2",
                   "m/s2": "acceleration_m_s2"}
+#: How ``sblsim toa`` takes a tag's interval and a contradicted one anyway, as its refusals name them (a command
+#: that takes them otherwise passes its own to :func:`build_toa`).
+OPTION_NAMES = {"interval": "--ping-type rbi --burst-interval MIN:MAX", "force_interval": "--force-interval"}
 
 
 @dataclass
@@ -82,9 +87,37 @@ def tags_present(detections: Detections, limit: int = 8) -> str:
     return ", ".join(f"{t} ({n})" for t, n in counts.head(limit).items())
 
 
+def on_the_clocks(use: pd.DataFrame, clocks: Clocks, synced: dict[str, int]) -> tuple[np.ndarray, np.ndarray,
+                                                                                      np.ndarray]:
+    """Detections at synchronised receivers on the reference clock: each detection's clock segment (-1 between two
+    segments, a clock break), whether it lies within the synchronised span (extended by one bin) on a segment, and
+    its time less its receiver's offset there [s].
+
+    Parameters
+    ----------
+    use : pandas.DataFrame
+        The detections (``receiver``, ``time`` [s since 1970 UTC], ``clock_part`` where a receiver's time went back
+        in the file's order), every receiver in ``synced``.
+    clocks : Clocks
+    synced : dict
+        Each synchronised receiver's row of ``clocks``.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (n,) int the segments, (n,) bool inside, (n,) [s] the synchronised times.
+    """
+    raw = use["time"].to_numpy(float)
+    part = use["clock_part"].to_numpy(np.int64) if "clock_part" in use else None  # a reset in the file's order
+    j_sync = clocks.rows(use["receiver"].map(synced).to_numpy(np.int64), raw, part)  # -1: between two segments
+    width = float(np.max(np.diff(clocks.edges)))
+    inside = (raw >= clocks.edges[0] - width) & (raw <= clocks.edges[-1] + width) & (j_sync >= 0)
+    return j_sync, inside, raw - clocks.offset(np.maximum(j_sync, 0), raw)
+
+
 def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks, tag: str,
               shortest: float | None = None, ping_type: dict[str, Any] | None = None,
-              force_interval: bool = False) -> ToaOutcome:
+              force_interval: bool = False, options: dict[str, str] | None = None) -> ToaOutcome:
     """One tag's times-of-arrival matrix (the module docstring).
 
     Parameters
@@ -105,7 +138,12 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     force_interval : bool
         Take a ``shortest`` the detections contradict as a whole
         (:func:`~sblsim.models.sync.pings.interval_seen`), said in ``summary["interval_warning"]`` with the
-        detections it drops; refused without.
+        detections it drops; refused without. The stated interval is judged against the steps between the pings
+        heard by ``dim + 1`` receivers or more at once (:func:`~sblsim.models.sync.at_once.heard_at_once`): a
+        detection heard alone (a stray code, a time rounded apart from its ping's) does not contradict it.
+    options : dict, optional
+        How the command that runs takes the tag's interval (``interval``) and a contradicted one anyway
+        (``force_interval``), as the refusals name them; default :data:`OPTION_NAMES`, ``sblsim toa``'s.
 
     Returns
     -------
@@ -142,12 +180,8 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     if not len(use):
         raise ModelError(f"tag: {tag!r} is detected only at receivers that are not synchronised or not in the "
                          f"receivers table ({', '.join(sorted(set(mine['receiver']))[:10])})")
-    raw = use["time"].to_numpy(float)
-    part = use["clock_part"].to_numpy(np.int64) if "clock_part" in use else None  # a reset in the file's order
-    j_sync = clocks.rows(use["receiver"].map(synced).to_numpy(np.int64), raw, part)  # -1: between two segments
-    width = float(np.max(np.diff(clocks.edges)))
-    inside = (raw >= clocks.edges[0] - width) & (raw <= clocks.edges[-1] + width) & (j_sync >= 0)
-    times = raw - clocks.offset(np.maximum(j_sync, 0), raw)
+    names = OPTION_NAMES | (options or {})
+    j_sync, inside, times = on_the_clocks(use, clocks, synced)
     receiver = use["receiver"].map(column).to_numpy(np.int64)
     window = largest_travel_time(positions, SLOWEST_SOUND_SPEED) + TOLERANCE
     source = "given"
@@ -155,22 +189,28 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         shortest = inferred_shortest(receiver[inside], times[inside], window)
         source = "inferred"
         if shortest is None:
-            raise ModelError(f"tag: {tag!r} has too few successive detections at one receiver to show its shortest "
-                             "burst interval; allowed: give it (--ping-type rbi --burst-interval MIN:MAX)")
-    seen = interval_seen(receiver[inside], times[inside], window, shortest) if source == "given" else None
+            raise ModelError(f"tag: {tag!r} has too few successive detections at its receivers to show its shortest "
+                             f"burst interval; allowed: give it ({names['interval']})")
+    seen = None
+    if source == "given":  # judged on the pings heard at once (the times' rounding added to the tolerance)
+        at_once = heard_at_once(receiver[inside], times[inside], positions, SLOWEST_SOUND_SPEED,
+                                TOLERANCE + time_quantum(use["time"].to_numpy(float)))
+        rich = at_once.detections_heard_by(dim + 1)
+        seen = interval_seen(receiver[inside][rich], times[inside][rich], window, shortest)
     said = None
     if seen is not None and seen.contradicted:  # said before the echo limit drops the detections
         given = (ping_type or {}).get("burst_interval_s")
         stated = f"{given[0]:g}:{given[1]:g} s" if given else f"a shortest interval of {shortest:g} s"
         said = (f"burst interval: {stated} stated, but the detections' steps at one receiver show "
                 f"{seen.low:.0f}-{seen.high:.0f} s ({seen.below} of {seen.steps} steps below {shortest:g} s less the "
-                f"{window:.3g} s window)")
+                f"{window:.3g} s window, between pings heard by {dim + 1} receivers or more at once)")
         if not force_interval:
-            raise ModelError(f"{said}; allowed: the tag's interval, or --force-interval to use it anyway")
+            raise ModelError(f"{said}; allowed: the tag's interval ({names['interval']}), or "
+                             f"{names['force_interval']} to use it anyway")
     pings = build_pings(receiver[inside], times[inside], len(columns), window, shortest)
     if said is not None:
-        said += (f"; taken (--force-interval): {int(pings.echo.sum())} of {int(inside.sum())} detections dropped as "
-                 "multipath echoes by it")
+        said += (f"; taken ({names['force_interval']}): {int(pings.echo.sum())} of {int(inside.sum())} detections "
+                 "dropped as multipath echoes by it")
     toa = pings.toa
     order = np.argsort(np.nanmin(toa, axis=1), kind="stable")  # rows by first arrival (they are already)
     toa = toa[order]
@@ -296,5 +336,5 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     return outcome
 
 
-__all__ = ["FORMATS", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build", "build_toa",
-           "header_line", "tags_present"]
+__all__ = ["FORMATS", "OPTION_NAMES", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build",
+           "build_toa", "header_line", "on_the_clocks", "tags_present"]

@@ -12,12 +12,15 @@ latitude, longitude and UTC.
 3. The tags: those named (``tags``), else the sheet's animal and reference tags, else every detected tag that is not
    a sync tag. Each is found among the detections by its full ID or id
    (:func:`~sblsim.orchestrator.readers.transmitters.match`); its depth per detection from its sensor values and the
-   sheet's slope and intercept; its times-of-arrival matrix built with the ping type the sheet states
-   (:func:`~sblsim.orchestrator.sync.toa.build_toa`) and written into the tag's folder; then every matrix tracked
+   sheet's slope and intercept; counted before anything is asked of its schedule (:mod:`.census`: a tag one receiver,
+   too few at once or whole seconds on unsynchronised clocks cannot position is a row saying so, with its counts);
+   its times-of-arrival matrix built with the ping type the sheet states
+   (:func:`~sblsim.orchestrator.sync.toa.build_toa`), a column per receiver that heard it, and written into the
+   tag's folder; then every matrix tracked
    (:func:`~sblsim.orchestrator.tracks.track.track`, the robust smoother's rows the track, a reference tag as
    stationary; of the causal filters only the EKF the smoothers start from) in worker processes or on a Dask
    scheduler (:func:`~sblsim.orchestrator.tracks.many.run_tracks`). A tag that cannot be tracked is a row saying
-   why; the others finish.
+   why; the others finish. Every ping of a tag is counted once in its row (:mod:`.tag_rows`).
 4. The tracks together (``tracks.csv``: ``tag``, ``time_utc``, ``epoch_s``, ``lat``, ``lon``, ``x``, ``y``,
    ``sigma_x``, ``sigma_y``, ``quality``, ...), a row per tag (``tags.csv``), the deployments (``receivers.csv``)
    and the summary (``study.json``): :mod:`.outputs`.
@@ -26,6 +29,7 @@ latitude, longitude and UTC.
 from __future__ import annotations
 
 import json
+import os
 import time as clock
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -50,14 +54,20 @@ from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
+from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
+from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
 from sblsim.orchestrator.tracks.tracker import toa_noise
 
-#: The columns of ``tags.csv``.
-TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason", "detections",
-               "pings", "set_aside", "positioned", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
-               "sound_speed_m_s", "sound_speed_source", "first_utc", "last_utc", "folder", "wall_time_s")
+#: The columns of ``tags.csv``: a tag's ``pings`` are always ``positioned`` + ``set_aside`` + ``not_positioned``
+#: (``not_positioned_why``: the count of each reason), ``status`` ``tracked`` only with a row positioned, else
+#: ``refused`` with its ``reason_code`` (:data:`~sblsim.orchestrator.telemetry.census.REASON_CODES`) and ``reason``.
+TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason_code", "reason",
+               "detections", "receivers", "pings", "pings_at_once", "positioned", "set_aside", "not_positioned",
+               "not_positioned_why", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
+               "sound_speed_m_s", "sound_speed_source", "time_resolution_s", "first_utc", "last_utc", "folder",
+               "wall_time_s")
 #: The columns of ``tracks.csv`` (``z`` and ``sigma_z`` after ``y`` and ``sigma_y`` in 3-D).
 TRACK_COLUMNS = ("tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "receivers_heard",
                  "quality", "quality_reason")
@@ -107,7 +117,7 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
         return clocks, table, {"source": "given", "folder": str(sync_dir), "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
-    if (table["sync_tag"] != "").any():
+    if (table["sync_tag"] != "").any() and len(table) > 1:
         outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours)
         s = outcome.summary
         notes.extend(s.get("warnings", []))  # each clock break found, in one line
@@ -118,10 +128,13 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
             "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
             "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
     times = assigned.detections.frame["time"].to_numpy(float)
-    notes.append("no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
+    alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
+    notes.append("one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
+                 "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
                  "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
     return logged_clocks(table["receiver"].tolist(), float(np.floor(times.min())), float(np.ceil(times.max()))), \
-        table, {"source": "as logged (no sync tag)", "receivers": int(len(table)), "not_synchronised": []}, None
+        table, {"source": "as logged (one receiver)" if alone else "as logged (no sync tag)",
+                "receivers": int(len(table)), "not_synchronised": []}, None
 
 
 def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Detections,
@@ -252,9 +265,11 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
     groups = assigned.detections.frame.groupby("tag", sort=False).groups
     rows: dict[str, dict[str, Any]] = {}
     jobs, matrices, folders = [], {}, {}
+    logged = clocks_info["source"].startswith("as logged")
     for name, spec in asked:
         row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
-               "ping_type_stated": spec.described(), "status": "refused", "reason": "", "detections": 0}
+               "ping_type_stated": spec.described(), "status": "refused", "reason": "", "reason_code": "",
+               **unpositioned(0)}
         try:
             key = match(name, detected)
             if key is None:
@@ -263,14 +278,23 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
             if folder in folders.values():
                 raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
             mine = _tag_detections(assigned.detections.frame.loc[groups[key]], spec)
-            row |= {"tag": key, "detections": int(len(mine))}
+            counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
+            row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
+                    "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
+            found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary")
+            if found is not None:
+                rows[name] = row | {"reason_code": found[0], "reason": found[1]} | unpositioned(
+                    counted.pings, counted.at_once, found[0])
+                continue
             kind = {"type": spec.ping_type, "burst_interval_s": None if spec.burst_interval is None else
                     list(spec.burst_interval), "interval_s": spec.interval,
                     "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
-            matrix = build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
-                               spec.shortest_interval(), kind, force_interval)
+            matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
+                                              spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
             if matrix.summary.get("interval_warning"):
                 notes.append(f"tag {key}: {matrix.summary['interval_warning']}")
+            heard = np.isfinite(matrix.toa).sum(axis=1)
+            row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
             _write_matrix(matrix, workdir / folder, notes)
             matrices[folder] = matrix
             folders[name] = folder
@@ -289,7 +313,8 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
             jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
             row["folder"] = folder
         except ModelError as exc:
-            row["reason"] = str(exc)
+            code = code_of(str(exc))
+            row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"], code)
         rows[name] = row
     summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
     summary["toa_noise"] = noise_info
@@ -302,16 +327,21 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
 
     def done(folder: str, result) -> None:
         name = by_folder[folder]
-        rows[name] |= _tracked(result, clock.perf_counter() - tick)
+        if isinstance(result, str):  # a staging folder is no path the user gave: the tag's folder in the study's
+            result = result.replace(str(workdir) + os.sep, "")
+        rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
         if ended is not None:
             ended(rows[name])
 
     results = run_tracks(jobs, workers, scheduler, done) if jobs else {}
-    outcomes = {f: r for f, r in results.items() if not isinstance(r, str)}
+    # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
+    outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
     table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
     tracks = combined_tracks(outcomes, matrices)
     summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
-                       "refused": int((table_tags["status"] == "refused").sum())}
+                       "refused": int((table_tags["status"] == "refused").sum()),
+                       "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
+                                   if k}}
     summary["wall_time_s"] = clock.perf_counter() - begun
     return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced)
 
@@ -354,28 +384,6 @@ def _write_matrix(matrix, folder: Path, notes: list[str]) -> None:
     write_matrix(matrix, folder, depth)
     matrix.pings.to_csv(folder / "pings.csv", index=False, float_format="%.9f")
     (folder / "toa.json").write_text(json.dumps(matrix.summary, indent=2, allow_nan=False) + "\n")
-
-
-def _tracked(result, elapsed: float) -> dict[str, Any]:
-    """A tag's ``tags.csv`` fields from its tracking's outcome (or the one line of its refusal)."""
-    if isinstance(result, str):
-        return {"status": "refused", "reason": result, "wall_time_s": elapsed}
-    s = result.summary
-    main = s["track"]
-    track = result.track
-    aside = int(s.get("set_aside", {}).get("count", 0))  # rows no ping of the tag's schedule: no estimate
-    positioned, flagged = int(len(track)) - aside, int(s["flagged"].get(main, 0)) - aside
-    sigma = np.hypot(track["sigma_x"].to_numpy(float), track["sigma_y"].to_numpy(float))
-    ok = (track["quality"] != "flagged").to_numpy() & np.isfinite(sigma)
-    times = track["epoch_s"].to_numpy(float) if "epoch_s" in track else np.array([])
-    return {"status": "tracked", "reason": "", "pings": s["pings"], "set_aside": aside, "positioned": positioned,
-            "flagged": flagged,
-            "share_flagged": flagged / positioned if positioned else 0.0,
-            "median_sigma_m": float(np.median(sigma[ok])) if ok.any() else float("nan"),
-            "ping_type": s["ping_type"]["type"], "track": main,
-            "sound_speed_m_s": s["sound_speed"]["sound_speed_m_s"], "sound_speed_source": s["sound_speed"]["source"],
-            "first_utc": iso_utc(times[:1])[0] if len(times) else "",
-            "last_utc": iso_utc(times[-1:])[0] if len(times) else "", "wall_time_s": s["wall_time_s"]}
 
 
 def combined_tracks(outcomes: dict[str, Any], matrices: dict[str, Any]) -> pd.DataFrame:

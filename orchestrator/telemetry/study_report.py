@@ -32,6 +32,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
                                                                       if c["not_synchronised"] else ""))
     elif c["source"] == "given":
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
+    elif "one receiver" in c["source"]:
+        out.append("  clock taken as logged (one receiver: no other to synchronise it against)")
     else:
         out.append("  clocks taken as logged (no sync tag in the receivers file)")
     if "toa_noise" in s:
@@ -44,4 +46,57 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
     return out
 
 
-__all__ = ["opening_lines"]
+#: The refused tags the console names one by one (the others counted by reason; every one is a row of tags.csv).
+MAX_REFUSED_LINES = 10
+
+
+def _plural(n: int, word: str) -> str:
+    """``1 ping``, ``1,204 pings``: a count as a count."""
+    return f"{int(n):,} {word}{'' if int(n) == 1 else 's'}"
+
+
+def tag_line(row: Any) -> str:
+    """The console's line of a tracked tag (``row``: its row of ``tags.csv``): its pings positioned, set aside and
+    not positioned, the rows flagged, the median σ of the rows not flagged, the ping type and sound speed taken,
+    its first and last row's time."""
+    aside = f"{int(row.set_aside):,} set aside (set_aside.csv), " if row.set_aside else ""
+    unplaced = f"{int(row.not_positioned):,} not positioned ({row.not_positioned_why}), " if row.not_positioned else ""
+    sigma = f"median σ {row.median_sigma_m:.2g} m" if row.median_sigma_m == row.median_sigma_m else \
+        "every row flagged: no median σ"
+    span = f", {row.first_utc} to {row.last_utc}" if row.first_utc and row.last_utc else ""
+    return (f"  {row.tag}: {_plural(row.pings, 'ping')}, {int(row.positioned):,} positioned, {aside}{unplaced}"
+            f"{int(row.flagged):,} flagged, {sigma}, ping type {row.ping_type} (the sheet: {row.ping_type_stated}), "
+            f"sound speed {row.sound_speed_m_s:.1f} m/s ({row.sound_speed_source}){span}")
+
+
+def tag_lines(table: Any) -> list[tuple[str, bool]]:
+    """The console's lines of a study's tags (``table``: ``tags.csv``), each with whether it is a warning for
+    standard error: a line per tracked tag (:func:`tag_line`), a warning per refused tag (its reason), the first
+    :data:`MAX_REFUSED_LINES` of them, the others counted by ``reason_code``."""
+    lines: list[tuple[str, bool]] = []
+    refused = table[table["status"] != "tracked"]
+    for row in table.itertuples(index=False):
+        if row.status == "tracked":
+            lines.append((tag_line(row), False))
+    for row in refused.head(MAX_REFUSED_LINES).itertuples(index=False):
+        lines.append((f"sblsim: warning: tag {row.transmitter} not tracked ({row.reason_code}): {row.reason}", True))
+    rest = refused.iloc[MAX_REFUSED_LINES:]
+    if len(rest):
+        codes = ", ".join(f"{code} {n:,}" for code, n in rest["reason_code"].value_counts().items())
+        lines.append((f"sblsim: warning: {_plural(len(rest), 'more tag')} not tracked ({codes}): their reasons are "
+                      "in tags.csv (reason_code, reason)", True))
+    return lines
+
+
+def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
+    """The console's last line: the tags tracked and refused by reason (``table``: ``tags.csv``), their rows
+    positioned and flagged, the time, and the files written to ``out`` (``files``: their names)."""
+    tracked = table[table["status"] == "tracked"]
+    codes = table.loc[table["status"] != "tracked", "reason_code"].value_counts()
+    why = f" (not tracked: {', '.join(f'{code} {n:,}' for code, n in codes.items())})" if len(codes) else ""
+    return (f"  {int(len(tracked)):,} of {_plural(len(table), 'tag')} tracked{why}, {int(tracked['flagged'].sum()):,} "
+            f"of the {_plural(tracked['positioned'].sum(), 'row')} positioned flagged, in {seconds:.1f} s; written to "
+            f"{out}/ ({files})")
+
+
+__all__ = ["MAX_REFUSED_LINES", "closing_line", "opening_lines", "tag_line", "tag_lines"]

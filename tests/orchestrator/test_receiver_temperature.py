@@ -18,6 +18,7 @@ import sblsim
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers.water import read_temperature_series
 from sblsim.orchestrator.telemetry.simulate import simulate_study
+from tests.helpers import check_tag_rows
 
 ORIGIN = pd.Timestamp("2021-04-20T17:00:00Z").timestamp()
 HEAD = ["Device Time (UTC)", "Time", "Time Offset (h)", "Time Correction (s)", "Model", "Serial Number"]
@@ -162,6 +163,7 @@ def test_a_study_tracked_with_its_own_fathom_records(tmp_path):
     assert ",9.5,10.0" in files["detections"].read_text()  # TEMP records: ambient 9.5, internal 10.0 °C
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
                           temperature_file=files["detections"], salinity=35, workers=1)
+    check_tag_rows(result.tags, result.tracks)
     assert (result.tags["status"] == "tracked").all() and len(result.tracked) == 2
     for outcome in result.tracked.values():
         speed = outcome.summary["sound_speed"]

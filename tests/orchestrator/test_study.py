@@ -19,6 +19,7 @@ from pyproj import Transformer
 import sblsim
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.telemetry.simulate import simulate_study
+from tests.helpers import check_tag_rows
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -33,6 +34,7 @@ def study(tmp_path_factory):
     sim.write(folder / "fathom", "fathom")
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
                           out=folder / "out", workers=1)
+    check_tag_rows(result.tags, result.tracks, [str(p) for p in files.values()])
     return sim, files, result, folder
 
 
@@ -124,6 +126,7 @@ def test_the_same_tracks_from_the_fathom_export(study, tmp_path):
     _, files, result, folder = study
     other = sblsim.track(folder / "fathom" / "detections.csv", receivers=files["deployments"], tags=files["tags"],
                          workers=1)
+    check_tag_rows(other.tags, other.tracks)
     assert other.summary["detections"]["format"] == "fathom"
     pd.testing.assert_frame_equal(other.tracks, result.tracks, check_exact=False, rtol=0, atol=1e-6)
 
@@ -132,9 +135,11 @@ def test_a_tag_never_detected_is_a_row_saying_so(study):
     _, files, _, _ = study
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
                           tag="1000,A69-1602-9999", workers=1)
+    check_tag_rows(result.tags, result.tracks, [str(p) for p in files.values()])
     rows = result.tags.set_index("transmitter")
     assert rows.loc["1000", "status"] == "tracked" and rows.loc["1000", "tag"] == "A69-1602-1000"
-    assert rows.loc["A69-1602-9999", "status"] == "refused"
+    assert rows.loc["A69-1602-9999", "status"] == "refused" and rows.loc["A69-1602-9999", "reason_code"] == \
+        "never_detected"
     assert "never detected" in rows.loc["A69-1602-9999", "reason"]
 
 
@@ -186,6 +191,7 @@ def test_the_boats_study_from_its_lat_lon_deployments_and_tag_sheet(tmp_path):
     assert np.max(np.hypot(x - table["x_m"].astype(float), y - table["y_m"].astype(float))) < 1e-3
     result = sblsim.track(data / "detections.csv", receivers=data / "deployments.csv", tags=data / "tags.csv",
                           out=tmp_path / "study")
+    check_tag_rows(result.tags, result.tracks)
     assert result.tags["status"].tolist() == ["tracked", "tracked"]
     assert result.tags["tag"].tolist() == ["4555", "7953"]
     alone = sblsim.sync(data / "detections.csv", receivers=data / "deployments.csv")
@@ -234,12 +240,15 @@ def test_a_sheet_s_interval_the_detections_contradict_is_said_and_taken_with_for
     name = sheet.loc[rbi, "transmitter"]
     common = dict(receivers=files["deployments"], tags=wrong, tag=name, sync=folder / "out" / "sync", workers=1)
     refused = sblsim.track(files["detections"], **common)
+    check_tag_rows(refused.tags, refused.tracks, [str(files["detections"]), str(wrong)])
     row = refused.tags.iloc[0]
+    assert row["reason_code"] == "interval_contradicted"
     assert row["status"] == "refused" and "300:600 s stated, but the detections' steps" in row["reason"]
     low, high = (float(v) for v in row["reason"].split(" show ")[1].split(" s ")[0].split("-"))
     assert 90 <= low and high <= 210  # the tag's own 100-200 s
     assert "--force-interval" in row["reason"]
     forced = sblsim.track(files["detections"], force_interval=True, **common)
+    check_tag_rows(forced.tags, forced.tracks)
     assert forced.tags.iloc[0]["status"] == "tracked"
     said = [note for note in forced.summary["notes"] if "taken (--force-interval)" in note]
     assert len(said) == 1 and said[0].startswith(f"tag {forced.tags.iloc[0]['tag']}:")

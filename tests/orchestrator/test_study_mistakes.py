@@ -14,6 +14,7 @@ import pytest
 
 import sblsim
 from sblsim.orchestrator.telemetry.simulate import simulate_study, vue_text
+from tests.helpers import check_tag_rows
 
 SYNC_KEPT = 3
 RESET_S = -20.0
@@ -45,6 +46,7 @@ def _run(folder, mistakes: bool):
     files["detections"].write_text(vue_text(d.reset_index(drop=True)))
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
                           out=folder / "out", workers=1)
+    check_tag_rows(result.tags, result.tracks)
     return sim, result, victim
 
 

@@ -25,6 +25,7 @@ from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.receivers_file import read_receivers
 from sblsim.orchestrator.readers.toa_matrix import read_toa
 from sblsim.orchestrator.telemetry.simulate import simulate_study
+from tests.helpers import check_tag_rows
 
 #: The receivers' depth [m] and each one's bottom [m] (20, 22, ... m).
 INSTRUMENT = 5.0
@@ -66,6 +67,8 @@ def test_water_depth_and_temperature_file_reach_the_tracker(study, capsys):
     printed = capsys.readouterr().out
     assert "water depth 30 m (given, --water-depth)" in printed
     tags = pd.read_csv(out / "tags.csv", dtype=str)
+    check_tag_rows(pd.read_csv(out / "tags.csv", dtype={"tag": str}), pd.read_csv(out / "tracks.csv",
+                                                                                   dtype={"tag": str}))
     assert tags["status"].tolist() == ["tracked"]
     summary = json.loads((out / tags["folder"].iloc[0] / "summary.json").read_text())
     depth = summary["depth"]
@@ -87,6 +90,7 @@ def test_each_tag_takes_the_deepest_bottom_of_its_receivers(study):
     files, folder, tag, table = study
     out = folder / "bottom"
     result = sblsim.track(files["detections"], receivers=files["deployments"], tag=tag, workers=1, out=out)
+    check_tag_rows(result.tags, result.tracks)
     assert result.tags["status"].tolist() == ["tracked"]
     where = out / result.tags["folder"].iloc[0]
     names = read_receivers(where / "receivers.csv").names
